@@ -1,0 +1,42 @@
+"""Shared input checks: trace-time structure errors and run-time value errors."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+
+def is_concrete(x) -> bool:
+    try:
+        np.asarray(x)
+    except Exception:
+        return False
+    return True
+
+
+def check_finite(name: str, x):
+    """Raise (eagerly when concrete, via ``eqx.error_if`` when traced) if x has NaN/inf."""
+    x = jnp.asarray(x)
+    if is_concrete(x):
+        arr = np.asarray(x)
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            idx = np.argwhere(bad)[0]
+            raise ValueError(
+                f"{name} must be finite; found {arr[tuple(idx)]} at index {tuple(idx)}"
+            )
+        return x
+    return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{name} must be finite (found NaN or inf)")
+
+
+def check_positive(name: str, x, unit: str = ""):
+    """Raise if any element of x is not strictly positive (and finite)."""
+    x = check_finite(name, x)
+    if is_concrete(x):
+        arr = np.asarray(x)
+        if (arr <= 0).any():
+            idx = np.argwhere(arr <= 0)[0]
+            raise ValueError(
+                f"{name} must be > 0{(' ' + unit) if unit else ''}; got {arr[tuple(idx)]}"
+            )
+        return x
+    return eqx.error_if(x, jnp.any(x <= 0), f"{name} must be > 0 {unit}".rstrip())

@@ -1,0 +1,151 @@
+"""Rate, temperature and acceleration profiles (piecewise-linear in time)."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import check_finite, is_concrete
+from .units import DEG, DEG_PER_S
+
+
+def _f(x):
+    return jnp.asarray(x, dtype=float)
+
+
+class Profile(eqx.Module):
+    """What the bench does to the gyro: one run (one segment of a plan).
+
+    Rate, temperature and specific force are piecewise-linear between the knots `t`.
+
+    **Arguments:**
+
+    - `t`: knot times [s], shape (N,), N ≥ 2, strictly increasing.
+    - `rate`: inertial rate of the case about the sensitive axis [rad/s], shape (N,).
+    - `temperature`: resonator temperature [°C], shape (N,).
+    - `accel`: specific force along case axes x, y, z [g], shape (N, 3).
+    - `wave_angle0`: initial electrical wave angle [rad].
+    """
+
+    t: jax.Array = eqx.field(converter=_f)
+    rate: jax.Array = eqx.field(converter=_f)
+    temperature: jax.Array = eqx.field(converter=_f)
+    accel: jax.Array = eqx.field(converter=_f)
+    wave_angle0: jax.Array = eqx.field(converter=_f, default=0.0)
+
+    def __check_init__(self):
+        n = self.t.shape[-1] if self.t.ndim else 0
+        if self.t.ndim != 1 or n < 2:
+            raise ValueError(
+                f"Profile.t must have shape (N,) with N >= 2 knots; got {self.t.shape}"
+            )
+        for name in ("rate", "temperature"):
+            if getattr(self, name).shape != (n,):
+                raise ValueError(
+                    f"Profile.{name} must have the shape of Profile.t, ({n},); "
+                    f"got {getattr(self, name).shape}"
+                )
+        if self.accel.shape != (n, 3):
+            raise ValueError(f"Profile.accel must have shape ({n}, 3) [g]; got {self.accel.shape}")
+        if self.wave_angle0.shape != ():
+            raise ValueError(
+                f"Profile.wave_angle0 must be a scalar [rad]; got {self.wave_angle0.shape}"
+            )
+        for name in ("t", "rate", "temperature", "accel", "wave_angle0"):
+            check_finite(f"Profile.{name}", getattr(self, name))
+        if is_concrete(self.t):
+            t = np.asarray(self.t)
+            bad = np.nonzero(np.diff(t) <= 0)[0]
+            if bad.size:
+                i = int(bad[0]) + 1
+                raise ValueError(
+                    f"Profile.t must be strictly increasing; t[{i}] = {t[i]} follows "
+                    f"t[{i - 1}] = {t[i - 1]} (unsorted or duplicate time)"
+                )
+
+    @classmethod
+    def constant_rate(
+        cls,
+        rate_dps: float,
+        duration_s: float,
+        temperature_c: float = 20.0,
+        wave_angle0_deg: float = 0.0,
+        accel_g=(0.0, 0.0, 0.0),
+    ) -> Profile:
+        """A run at constant rate `rate_dps` [°/s] for `duration_s` [s] at `temperature_c` [°C],
+        starting at electrical wave angle `wave_angle0_deg` [°], under specific force
+        `accel_g` [g] (case axes x, y, z)."""
+        t = jnp.array([0.0, 1.0]) * _f(duration_s)
+        one = jnp.ones(2)
+        return cls(
+            t=t,
+            rate=one * _f(rate_dps) * DEG_PER_S,
+            temperature=one * _f(temperature_c),
+            accel=jnp.ones((2, 1)) * _f(accel_g)[None, :],
+            wave_angle0=_f(wave_angle0_deg) * DEG,
+        )
+
+    @classmethod
+    def static(
+        cls,
+        duration_s: float,
+        temperature_c: float = 20.0,
+        wave_angle0_deg: float = 0.0,
+        accel_g=(0.0, 0.0, 0.0),
+    ) -> Profile:
+        """A static run (zero rate); arguments as [`Profile.constant_rate`][hrgjax.Profile.constant_rate]."""
+        return cls.constant_rate(0.0, duration_s, temperature_c, wave_angle0_deg, accel_g)
+
+    @classmethod
+    def piecewise(
+        cls,
+        t_s,
+        rate_dps,
+        temperature_c,
+        accel_g=None,
+        wave_angle0_deg: float = 0.0,
+    ) -> Profile:
+        """A profile from knot arrays in bench units: times [s], rates [°/s],
+        temperatures [°C] and optionally specific force [g], shape (N, 3)."""
+        t = _f(t_s)
+        rate = jnp.broadcast_to(_f(rate_dps), t.shape) * DEG_PER_S
+        temp = jnp.broadcast_to(_f(temperature_c), t.shape)
+        acc = jnp.zeros(t.shape + (3,)) if accel_g is None else _f(accel_g)
+        return cls(
+            t=t, rate=rate, temperature=temp, accel=acc, wave_angle0=_f(wave_angle0_deg) * DEG
+        )
+
+    @property
+    def duration(self):
+        """Run length [s]."""
+        return self.t[-1] - self.t[0]
+
+    def _interp(self, t, values):
+        return jnp.interp(t, self.t, values)
+
+    def rate_at(self, t):
+        """Rate [rad/s] at time t [s]."""
+        return self._interp(t, self.rate)
+
+    def temperature_at(self, t):
+        """Temperature [°C] at time t [s]."""
+        return self._interp(t, self.temperature)
+
+    def accel_at(self, t):
+        """Specific force [g], shape (3,), at time t [s]."""
+        return jax.vmap(lambda col: self._interp(t, col), in_axes=1)(self.accel)
+
+    def rate_derivative_at(self, t):
+        """Angular acceleration [rad/s²] at time t [s] (slope of the current segment)."""
+        i = jnp.clip(jnp.searchsorted(self.t, t, side="right") - 1, 0, self.t.shape[0] - 2)
+        return (self.rate[i + 1] - self.rate[i]) / (self.t[i + 1] - self.t[i])
+
+    def table_angle_at(self, t):
+        """Table angle ∫Ω dt since t[0] [rad] (exact for the piecewise-linear rate)."""
+        seg = 0.5 * (self.rate[1:] + self.rate[:-1]) * jnp.diff(self.t)
+        cum = jnp.concatenate([jnp.zeros(1), jnp.cumsum(seg)])
+        i = jnp.clip(jnp.searchsorted(self.t, t, side="right") - 1, 0, self.t.shape[0] - 2)
+        dt = t - self.t[i]
+        return cum[i] + self.rate[i] * dt + 0.5 * self.rate_derivative_at(t) * dt**2

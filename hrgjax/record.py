@@ -1,0 +1,76 @@
+"""`Record`: what a simulation returns."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from .units import DEG, DEG_PER_S
+
+
+class Record(eqx.Module):
+    """Simulated gyro output on the output grid (SI; angles electrical).
+
+    Batched records (from `jax.vmap`) carry leading batch axes on every field.
+    """
+
+    t: jax.Array
+    """Time [s]."""
+    wave_angle: jax.Array
+    """Measured wave angle, unwrapped [rad, electrical]: readout errors and noise included."""
+    amplitude: jax.Array
+    """Estimated principal amplitude (readout units)."""
+    quadrature: jax.Array
+    """Estimated quadrature amplitude (readout units)."""
+    table_angle: jax.Array
+    """Table (case) angle ∫Ω dt [rad]."""
+    table_rate: jax.Array
+    """Table rate [rad/s]."""
+    temperature: jax.Array
+    """Resonator temperature [°C]."""
+    accel: jax.Array
+    """Specific force along case axes [g], shape (..., n, 3)."""
+    true_wave_angle: jax.Array
+    """True pattern angle, no readout error or noise [rad, electrical]."""
+    frequency: jax.Array
+    """PLL reference frequency ω_r [rad/s]."""
+    drive: jax.Array
+    """AGC effort: force amplitude F (force drive) or pump depth h (parametric)."""
+    quadrature_force: jax.Array
+    """Quadrature-loop effort f_qc."""
+    k_e: jax.Array
+    """Angular gain k_e at each sample (temperature laws evaluated)."""
+    run: jax.Array
+    """Run id."""
+
+    def to_data(self):
+        """The record as [`hrgjax.MeasuredData`][] in the units of the data contract.
+
+        A batched record becomes consecutive runs numbered 0, 1, … in row-major order.
+        """
+        from .data import MeasuredData
+
+        t = np.asarray(self.t)
+        batch = t.shape[:-1]
+        n = t.shape[-1]
+        flat = lambda x: np.asarray(x, dtype=float).reshape(-1)
+        if batch:
+            runs = np.repeat(np.arange(int(np.prod(batch))), n)
+        else:
+            runs = np.full(n, int(np.asarray(self.run)))
+        acc = np.asarray(self.accel, dtype=float).reshape(-1, 3)
+        cols = {
+            "time_s": flat(t),
+            "run": runs.astype(np.int64),
+            "temperature_c": flat(self.temperature),
+            "table_rate_dps": flat(self.table_rate) / DEG_PER_S,
+            "table_angle_deg": flat(self.table_angle) / DEG,
+            "wave_angle_deg": flat(self.wave_angle) / DEG,
+            "amplitude": flat(self.amplitude),
+            "quadrature": flat(self.quadrature),
+            "accel_x_g": acc[:, 0],
+            "accel_y_g": acc[:, 1],
+            "accel_z_g": acc[:, 2],
+        }
+        return MeasuredData(cols)

@@ -1,0 +1,131 @@
+r"""Slow-variable (averaged) vector field, PHYSICS.md §3.2, with the loops closed.
+
+State $\mathbf y = (a, q, \theta, \varphi, I_\varphi, I_{\rm agc}, I_q)$: principal and
+quadrature amplitudes, electrical wave angle, phase relative to the reference, and the three
+loop integrators. The forces of the loops are formed from *estimates* of the measured
+demodulated signals, then projected on the true pattern frame, so readout errors act on the
+dynamics exactly as in the full model.
+
+$$\dot a = -\tfrac a\tau - \tfrac12\Delta(\tfrac1\tau)c_\tau a - \tfrac12\Delta\omega s_\omega q
+  - \tfrac{f_{as}}{2\omega} + \tfrac{\omega h}4\sin\beta\,a$$
+$$\dot q = -\tfrac q\tau + \tfrac12\Delta(\tfrac1\tau)c_\tau q + \tfrac12\Delta\omega s_\omega a
+  + \tfrac{f_{qc}}{2\omega} - \tfrac{\omega h}4\sin\beta\,q$$
+$$\dot\theta = -k_e\Omega + \tfrac12\Delta(\tfrac1\tau)s_\tau P - \tfrac12\Delta\omega c_\omega\Pi
+  + \tfrac{qf_{ac}-af_{qs}}{2\omega(a^2-q^2)} - \tfrac{\chi aq}{4\omega} + \tfrac{\omega h}4\cos\beta\,\Pi$$
+$$\dot\varphi = (\omega-\omega_r) + \tfrac{k_e^2\Omega^2}{2\omega} + \tfrac12\Delta\omega c_\omega P
+  - \tfrac12\Delta(\tfrac1\tau)s_\tau\Pi + \tfrac{qf_{qs}-af_{ac}}{2\omega(a^2-q^2)}
+  + \tfrac{3\chi(a^2+q^2)}{8\omega} - \tfrac{\omega h}4\cos\beta\,P$$
+
+with $\beta = 2(\gamma-\varphi)$, $P = (a^2+q^2)/(a^2-q^2)$, $\Pi = 2aq/(a^2-q^2)$.
+$\Omega$ here is the equivalent input rate: table rate + rate bias + g-sensitivity · f.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from .control import (
+    drive_vectors,
+    integrator_rates,
+    loop_outputs,
+    pump_phase,
+    steady_integrators,
+)
+from .readout import estimate, from_pendulum
+
+N_STATE = 7
+
+
+def input_rate(gyro, profile, t):
+    """Equivalent input rate [rad/s]: table rate + rate bias + g-sensitivity · specific force."""
+    return profile.rate_at(t) + gyro.rate_bias + gyro.g_sensitivity @ profile.accel_at(t)
+
+
+def pattern_forces(u, v, phi, theta):
+    """Pattern-frame force coefficients $(f_{ac}, f_{as}, f_{qc}, f_{qs})$ at the true phase
+    ψ = ψ_r + φ from electrode-frame $\\mathbf u\\cos\\psi_r + \\mathbf v\\sin\\psi_r$."""
+    cp, sp = jnp.cos(phi), jnp.sin(phi)
+    big_u = u * cp - v * sp
+    big_v = u * sp + v * cp
+    e_a = jnp.stack([jnp.cos(theta), jnp.sin(theta)])
+    e_q = jnp.stack([-jnp.sin(theta), jnp.cos(theta)])
+    return e_a @ big_u, e_a @ big_v, e_q @ big_u, e_q @ big_v
+
+
+def measured_estimates(gyro, a, q, theta, phi):
+    """What the electronics estimate from the pendulum state, through the pickoff errors."""
+    demod = from_pendulum(a, q, theta, phi).transform(gyro.readout.matrix())
+    return estimate(demod, theta_branch=theta)
+
+
+def averaged_vector_field(t, y, args):
+    """Right-hand side of the averaged model; `args = (gyro, profile)`."""
+    gyro, profile = args
+    g = gyro.at(profile.temperature_at(t))
+    res, ctl = g.resonator, g.control
+    omega_in = input_rate(g, profile, t)
+    if ctl.ideal:
+        d_theta = -res.k_e * omega_in + 0.5 * res.delta_inv_tau * jnp.sin(
+            2 * (y[0] - res.theta_tau)
+        )
+        return d_theta[None]
+
+    a, q, theta, phi = y[0], y[1], y[2], y[3]
+    est = measured_estimates(g, a, q, theta, phi)
+    loops = loop_outputs(ctl, res.omega, est, y[4:7])
+    u, v = drive_vectors(ctl, loops, est.theta)
+    f_ac, f_as, f_qc, f_qs = pattern_forces(u, v, phi, theta)
+
+    w = res.omega
+    ct, st = jnp.cos(2 * (theta - res.theta_tau)), jnp.sin(2 * (theta - res.theta_tau))
+    cw, sw = jnp.cos(2 * (theta - res.theta_omega)), jnp.sin(2 * (theta - res.theta_omega))
+    d2 = a**2 - q**2
+    big_p = (a**2 + q**2) / d2
+    big_pi = 2 * a * q / d2
+    beta = 2 * (pump_phase(ctl) - phi)
+    pump = w * loops.pump / 4
+
+    da = (
+        -a / res.tau
+        - 0.5 * res.delta_inv_tau * ct * a
+        - 0.5 * res.delta_omega * sw * q
+        - f_as / (2 * w)
+        + pump * jnp.sin(beta) * a
+    )
+    dq = (
+        -q / res.tau
+        + 0.5 * res.delta_inv_tau * ct * q
+        + 0.5 * res.delta_omega * sw * a
+        + f_qc / (2 * w)
+        - pump * jnp.sin(beta) * q
+    )
+    dtheta = (
+        -res.k_e * omega_in
+        + 0.5 * res.delta_inv_tau * st * big_p
+        - 0.5 * res.delta_omega * cw * big_pi
+        + (q * f_ac - a * f_qs) / (2 * w * d2)
+        - res.chi * a * q / (4 * w)
+        + pump * jnp.cos(beta) * big_pi
+    )
+    dphi = (
+        (w - loops.omega_r)
+        + (res.k_e * omega_in) ** 2 / (2 * w)
+        + 0.5 * res.delta_omega * cw * big_p
+        - 0.5 * res.delta_inv_tau * st * big_pi
+        + (q * f_qs - a * f_ac) / (2 * w * d2)
+        + 3 * res.chi * (a**2 + q**2) / (8 * w)
+        - pump * jnp.cos(beta) * big_p
+    )
+    d_int = integrator_rates(ctl, w, est)
+    return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int])
+
+
+def averaged_initial_state(gyro, profile):
+    """Start on the slow manifold: a = a₀, q = 0, φ = 0, loop integrators at steady state."""
+    g = gyro.at(profile.temperature[0])
+    theta0 = profile.wave_angle0
+    if g.control.ideal:
+        return theta0[None]
+    a0 = g.control.amplitude
+    integ = steady_integrators(g.control, g.resonator, a0, theta0)
+    return jnp.concatenate([jnp.stack([a0, 0.0 * a0, theta0, 0.0 * a0]), integ])

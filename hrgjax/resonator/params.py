@@ -1,0 +1,128 @@
+"""Resonator parameters and their temperature laws."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._checks import check_positive, is_concrete
+from ..units import T_REF_C
+
+
+def _as_float(x):
+    return jnp.asarray(x, dtype=float)
+
+
+class TemperatureLaw(eqx.Module):
+    r"""A parameter that depends on temperature.
+
+    $$p(T) = (p_0 + p_1\,\Delta T + p_2\,\Delta T^2)\,e^{\lambda\,\Delta T},
+    \qquad \Delta T = T - T_{\rm ref}$$
+
+    Linear and quadratic laws set ``lam = 0``; an exponential law sets ``p1 = p2 = 0``.
+
+    **Arguments:**
+
+    - `p0`: value at the reference temperature (in the unit of the parameter it replaces).
+    - `p1`, `p2`: linear [unit/°C] and quadratic [unit/°C²] coefficients.
+    - `lam`: exponential rate [1/°C].
+    - `t_ref`: reference temperature [°C] (20 °C by default).
+    """
+
+    p0: jax.Array = eqx.field(converter=_as_float)
+    p1: jax.Array = eqx.field(converter=_as_float, default=0.0)
+    p2: jax.Array = eqx.field(converter=_as_float, default=0.0)
+    lam: jax.Array = eqx.field(converter=_as_float, default=0.0)
+    t_ref: jax.Array = eqx.field(converter=_as_float, default=T_REF_C)
+
+    def __call__(self, temperature_c):
+        """Evaluate the law at `temperature_c` [°C]."""
+        dt = jnp.asarray(temperature_c, dtype=float) - self.t_ref
+        return (self.p0 + self.p1 * dt + self.p2 * dt**2) * jnp.exp(self.lam * dt)
+
+
+def _param(x):
+    return x if isinstance(x, TemperatureLaw) else _as_float(x)
+
+
+def evaluate_at(tree, temperature_c):
+    """Replace every `TemperatureLaw` leaf of a pytree by its value at `temperature_c` [°C]."""
+    is_law = lambda x: isinstance(x, TemperatureLaw)
+    return jax.tree_util.tree_map(
+        lambda x: x(temperature_c) if is_law(x) else x, tree, is_leaf=is_law
+    )
+
+
+class Resonator(eqx.Module):
+    r"""The n = 2 mode pair of a hemispherical resonator (PHYSICS.md §2).
+
+    Equation of motion in the pendulum (electrical) plane, $\mathbf z = (x, y)$:
+
+    $$\ddot{\mathbf z} + \mathbf D\dot{\mathbf z} + \mathbf K\mathbf z
+    + 2k_e\Omega\,\mathbf J\dot{\mathbf z} + k_e\dot\Omega\,\mathbf J\mathbf z
+    + \chi|\mathbf z|^2\mathbf z - \omega^2 h\cos(2\psi_r+2\gamma)\mathbf z = \mathbf f$$
+
+    with $\mathbf D = \tfrac2\tau\mathbf I + \Delta(1/\tau)\mathbf A(\theta_\tau)$ and
+    $\mathbf K = \omega^2\mathbf I + \omega\Delta\omega\,\mathbf A(\theta_\omega)$. All angles
+    are **electrical** ($\theta = 2\theta_m$).
+
+    Any field may be a [`hrgjax.TemperatureLaw`][]; [`Resonator.at`][hrgjax.Resonator.at]
+    evaluates them at a temperature.
+
+    **Arguments:**
+
+    - `omega`: mean natural angular frequency ω [rad/s] (> 0).
+    - `tau`: mean amplitude decay time τ [s], $2/\tau = 1/\tau_1 + 1/\tau_2$ (> 0).
+    - `k_e`: electrical angular gain $k_e = 2K$ (Bryan factor K ≈ 0.277 → 0.554).
+    - `delta_omega`: frequency split Δω [rad/s], $\omega_1^2-\omega_2^2 = 2\omega\Delta\omega$.
+    - `theta_omega`: electrical angle of the ω₁ axis [rad].
+    - `delta_inv_tau`: damping anisotropy $\Delta(1/\tau) = 1/\tau_1 - 1/\tau_2$ [1/s].
+    - `theta_tau`: electrical angle of the τ₁ (more damped if Δ(1/τ) > 0) axis [rad].
+    - `chi`: isotropic cubic stiffness χ [rad²/s² per (readout unit)²].
+    """
+
+    omega: jax.Array | TemperatureLaw = eqx.field(converter=_param)
+    tau: jax.Array | TemperatureLaw = eqx.field(converter=_param)
+    k_e: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.554)
+    delta_omega: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    theta_omega: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    delta_inv_tau: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    theta_tau: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    chi: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+
+    def __check_init__(self):
+        for name in ("omega", "tau"):
+            value = getattr(self, name)
+            if not isinstance(value, TemperatureLaw) and is_concrete(value):
+                check_positive(f"Resonator.{name}", value, "[rad/s]" if name == "omega" else "[s]")
+        for name in ("k_e", "delta_omega", "theta_omega", "delta_inv_tau", "theta_tau", "chi"):
+            value = getattr(self, name)
+            if not isinstance(value, TemperatureLaw) and is_concrete(value):
+                from .._checks import check_finite
+
+                check_finite(f"Resonator.{name}", value)
+
+    def at(self, temperature_c) -> Resonator:
+        """This resonator with every temperature law evaluated at `temperature_c` [°C].
+
+        Traceable: `jax.vmap(res.at)(temperatures)` gives a batch of resonators.
+        """
+        return evaluate_at(self, temperature_c)
+
+    @property
+    def damping_matrix(self):
+        r"""$\mathbf D = \tfrac2\tau\mathbf I + \Delta(1/\tau)\mathbf A(\theta_\tau)$ [1/s]."""
+        return 2.0 / self.tau * jnp.eye(2) + self.delta_inv_tau * _a_matrix(self.theta_tau)
+
+    @property
+    def stiffness_matrix(self):
+        r"""$\mathbf K = \omega^2\mathbf I + \omega\Delta\omega\,\mathbf A(\theta_\omega)$ [1/s²]."""
+        return self.omega**2 * jnp.eye(2) + self.omega * self.delta_omega * _a_matrix(
+            self.theta_omega
+        )
+
+
+def _a_matrix(beta):
+    c, s = jnp.cos(2 * beta), jnp.sin(2 * beta)
+    return jnp.stack([jnp.stack([c, s]), jnp.stack([s, -c])])

@@ -1,0 +1,146 @@
+r"""Demodulation and readout errors (PHYSICS.md §3.3, §4.7, §5).
+
+The pickoffs read $\mathbf z_m = (\mathbf I + \mathbf E)\mathbf z$. Each channel is
+demodulated against the reference phase $\psi_r$ into in-phase/quadrature components
+$x = C_x\cos\psi_r + S_x\sin\psi_r$ (likewise y), from which
+
+$$E = C_x^2+S_x^2+C_y^2+S_y^2,\quad Q = 2(C_xS_y - C_yS_x),\quad
+R = C_x^2+S_x^2-C_y^2-S_y^2,\quad S = 2(C_xC_y + S_xS_y)$$
+
+and the whole-angle estimates $\hat\theta = \tfrac12\operatorname{atan2}(S, R)$,
+$\hat a = \tfrac12(\sqrt{E+Q}+\sqrt{E-Q})$, $\hat q = \tfrac12(\sqrt{E+Q}-\sqrt{E-Q})$.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .params import TemperatureLaw, _param
+
+
+class Readout(eqx.Module):
+    r"""Pickoff (readout) errors: the matrix $\mathbf E$ in $\mathbf z_m = (\mathbf I+\mathbf E)\mathbf z$.
+
+    $$\mathbf E = \begin{pmatrix} g & c \\ c - 2\varepsilon_m & -g\end{pmatrix}$$
+
+    To first order (PHYSICS.md §4.7) the estimated angle is
+    $\hat\theta - \theta = -g\sin2\theta + (c-\varepsilon_m)\cos2\theta - \varepsilon_m$
+    and the scale factor $\mathrm{SF}(\theta) = 1 - 2g\cos2\theta - 2(c - \varepsilon_m)\sin2\theta$:
+    period 180° of electrical wave angle. The loops are steered by $\hat\theta$, so the same
+    errors also act on the drive (PHYSICS.md §4.4).
+
+    **Arguments:**
+
+    - `gain_mismatch`: g, relative gain difference of the x (0°) and y (45°) pickoffs.
+    - `cross_talk`: c, symmetric cross-coupling between the channels.
+    - `misalignment`: $\varepsilon_m$ [rad, mechanical], misplacement of the 45° pickoff.
+    """
+
+    gain_mismatch: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    cross_talk: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    misalignment: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+
+    def matrix(self):
+        """The pickoff matrix $\\mathbf I + \\mathbf E$ (evaluate temperature laws first)."""
+        g, c, m = self.gain_mismatch, self.cross_talk, self.misalignment
+        return jnp.stack([jnp.stack([1.0 + g, c]), jnp.stack([c - 2.0 * m, 1.0 - g])])
+
+
+class Demodulated(eqx.Module):
+    """Demodulated in-phase (C) and quadrature (S) components of the x and y pickoffs."""
+
+    cx: jax.Array
+    sx: jax.Array
+    cy: jax.Array
+    sy: jax.Array
+
+    def transform(self, matrix) -> Demodulated:
+        """Apply a 2×2 pickoff matrix to the (x, y) channels."""
+        cx, cy = matrix @ jnp.stack([self.cx, self.cy])
+        sx, sy = matrix @ jnp.stack([self.sx, self.sy])
+        return Demodulated(cx, sx, cy, sy)
+
+    def eqrs(self):
+        """Lynch's (E, Q, R, S) (PHYSICS.md §3.3)."""
+        cx, sx, cy, sy = self.cx, self.sx, self.cy, self.sy
+        e = cx**2 + sx**2 + cy**2 + sy**2
+        q = 2.0 * (cx * sy - cy * sx)
+        r = cx**2 + sx**2 - cy**2 - sy**2
+        s = 2.0 * (cx * cy + sx * sy)
+        return e, q, r, s
+
+
+def from_pendulum(a, q, theta, phi) -> Demodulated:
+    r"""Demodulated components of $x = a\cos\theta\cos\psi - q\sin\theta\sin\psi$,
+    $y = a\sin\theta\cos\psi + q\cos\theta\sin\psi$ against $\psi_r = \psi - \varphi$."""
+    ct, st, cp, sp = jnp.cos(theta), jnp.sin(theta), jnp.cos(phi), jnp.sin(phi)
+    return Demodulated(
+        cx=a * ct * cp - q * st * sp,
+        sx=-a * ct * sp - q * st * cp,
+        cy=a * st * cp + q * ct * sp,
+        sy=-a * st * sp + q * ct * cp,
+    )
+
+
+def from_signals(z, zdot, psi_r, omega) -> Demodulated:
+    r"""Instantaneous (ideal quadrature) demodulation of displacement and velocity:
+    $C = x\cos\psi_r - (\dot x/\omega)\sin\psi_r$, $S = x\sin\psi_r + (\dot x/\omega)\cos\psi_r$."""
+    c, s = jnp.cos(psi_r), jnp.sin(psi_r)
+    v = zdot / omega
+    return Demodulated(
+        cx=z[0] * c - v[0] * s,
+        sx=z[0] * s + v[0] * c,
+        cy=z[1] * c - v[1] * s,
+        sy=z[1] * s + v[1] * c,
+    )
+
+
+class Estimates(eqx.Module):
+    """What the electronics know: estimated angle, amplitude, quadrature, phase error."""
+
+    theta: jax.Array
+    """Estimated electrical wave angle [rad] (branch chosen by the caller)."""
+    amplitude: jax.Array
+    quadrature: jax.Array
+    phase: jax.Array
+    """Phase of the antinode oscillation relative to the reference [rad]."""
+    energy: jax.Array
+
+
+def _wrap_half_pi(x):
+    """Wrap an angle to [-π/2, π/2)."""
+    return (x + jnp.pi / 2) % jnp.pi - jnp.pi / 2
+
+
+def estimate(demod: Demodulated, theta_branch=None) -> Estimates:
+    r"""Whole-angle estimates from measured demodulated components.
+
+    $\tfrac12\operatorname{atan2}(S, R)$ fixes the angle only modulo π. With `theta_branch`
+    (a continuous angle near the truth, e.g. the averaged model's state) the estimate is
+    unwrapped next to it; without it the branch is chosen so that the antinode in-phase
+    component is positive, which keeps the drive in phase with the velocity as the pattern
+    passes ±90°.
+    """
+    e, q, r, s = demod.eqrs()
+    raw = 0.5 * jnp.arctan2(s, r)
+    c_vec = jnp.stack([demod.cx, demod.cy])
+    s_vec = jnp.stack([demod.sx, demod.sy])
+    if theta_branch is None:
+        c_a = jnp.cos(raw) * demod.cx + jnp.sin(raw) * demod.cy
+        theta = raw + jnp.where(c_a < 0, jnp.pi, 0.0)
+    else:
+        theta = theta_branch + _wrap_half_pi(raw - theta_branch)
+    e_a = jnp.stack([jnp.cos(theta), jnp.sin(theta)])
+    c_a = e_a @ c_vec
+    s_a = e_a @ s_vec
+    root_p = jnp.sqrt(jnp.maximum(e + q, 0.0))
+    root_m = jnp.sqrt(jnp.maximum(e - q, 0.0))
+    return Estimates(
+        theta=theta,
+        amplitude=0.5 * (root_p + root_m),
+        quadrature=0.5 * (root_p - root_m),
+        phase=jnp.arctan2(-s_a, c_a),
+        energy=e,
+    )

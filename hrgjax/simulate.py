@@ -1,0 +1,219 @@
+"""`simulate`: drive a gyro with a profile and read what the electronics would read."""
+
+from __future__ import annotations
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import is_concrete
+from ._x64 import require_x64
+from .gyro import Gyro
+from .noise import draw_run_bias, rate_noise_angle
+from .profiles import Profile
+from .record import Record
+from .resonator.averaged import (
+    averaged_initial_state,
+    averaged_vector_field,
+    measured_estimates,
+)
+from .resonator.control import loop_outputs, steady_integrators
+from .resonator.full import full_estimates, full_initial_state, full_vector_field
+
+MODELS = ("averaged", "full")
+
+
+def _default_solver(model):
+    return diffrax.Tsit5() if model == "averaged" else diffrax.Dopri8()
+
+
+def output_times(profile: Profile, dt_out: float):
+    """Output grid t[0], t[0] + dt_out, … up to the end of the profile (inclusive)."""
+    if not is_concrete(profile.t):
+        raise ValueError(
+            "simulate needs concrete profile knot times to build the output grid from dt_out; "
+            "under jax.vmap over profiles with traced times pass `ts=` explicitly"
+        )
+    t = np.asarray(profile.t)
+    if not (np.isfinite(dt_out) and dt_out > 0):
+        raise ValueError(f"dt_out must be a positive number of seconds; got {dt_out}")
+    n = int(np.floor((t[-1] - t[0]) / dt_out + 1e-9)) + 1
+    return jnp.asarray(t[0] + dt_out * np.arange(n), dtype=float)
+
+
+@eqx.filter_jit
+def _solve(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0):
+    if model == "averaged":
+        y0 = averaged_initial_state(gyro, profile)
+        field, args = averaged_vector_field, (gyro, profile)
+    else:
+        y0, omega_scale = full_initial_state(gyro, profile)
+        field, args = full_vector_field, (gyro, profile, omega_scale)
+    controller = diffrax.PIDController(rtol=rtol, atol=atol)
+    if profile.t.shape[0] > 2:
+        controller = diffrax.ClipStepSizeController(controller, jump_ts=profile.t[1:-1])
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        solver,
+        t0=profile.t[0],
+        t1=profile.t[-1],
+        dt0=dt0,
+        y0=y0,
+        args=args,
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        throw=True,
+    )
+    ys = eqx.error_if(sol.ys, ~jnp.all(jnp.isfinite(sol.ys)), "simulate: non-finite state")
+    if model == "averaged":
+        return _read_averaged(gyro, profile, ts, ys), sol.stats["num_steps"]
+    return _read_full(gyro, profile, ts, ys, omega_scale), sol.stats["num_steps"]
+
+
+def _read_averaged(gyro, profile, ts, ys):
+    def one(t, y):
+        g = gyro.at(profile.temperature_at(t))
+        ctl = g.control
+        if ctl.ideal:
+            a0 = ctl.amplitude
+            est = measured_estimates(g, a0, 0.0 * a0, y[0], 0.0 * a0)
+            integ = steady_integrators(ctl, g.resonator, a0, y[0])
+            true_theta = y[0]
+        else:
+            est = measured_estimates(g, y[0], y[1], y[2], y[3])
+            integ = y[4:7]
+            true_theta = y[2]
+        loops = loop_outputs(ctl, g.resonator.omega, est, integ)
+        return est, true_theta, loops
+
+    return jax.vmap(one)(ts, ys)
+
+
+def _unwrap_pi(theta, near):
+    """Unwrap an angle defined modulo π; put the first sample within π/2 of `near`."""
+    u = 0.5 * jnp.unwrap(2.0 * theta)
+    return u + jnp.pi * jnp.round((near - u[0]) / jnp.pi)
+
+
+def _read_full(gyro, profile, ts, ys, omega_scale):
+    def one(t, y):
+        g = gyro.at(profile.temperature_at(t))
+        est = full_estimates(g, y, omega_scale)
+        true = full_estimates(g, y, omega_scale, readout=False)
+        loops = loop_outputs(g.control, g.resonator.omega, est, y[5:8])
+        return est, true.theta, loops
+
+    est, true_theta, loops = jax.vmap(one)(ts, ys)
+    true_theta = _unwrap_pi(true_theta, profile.wave_angle0)
+    theta = _unwrap_pi(est.theta, true_theta[0])
+    return eqx.tree_at(lambda e: e.theta, est, theta), true_theta, loops
+
+
+def simulate(
+    gyro: Gyro,
+    profile: Profile,
+    model: str = "averaged",
+    *,
+    key: jax.Array | None = None,
+    bias_key: jax.Array | None = None,
+    dt_out: float = 0.1,
+    ts=None,
+    rtol: float = 1e-8,
+    atol: float = 1e-10,
+    max_steps: int | None = None,
+    solver: diffrax.AbstractSolver | None = None,
+    run: int = 0,
+) -> Record:
+    """Simulate a whole-angle HRG driven by a profile.
+
+    **Arguments:**
+
+    - `gyro`: the [`hrgjax.Gyro`][] (e.g. `hg.presets.tvg3_like()`).
+    - `profile`: the [`hrgjax.Profile`][] of rate, temperature and specific force.
+    - `model`: `"averaged"` (slow variables, PHYSICS.md §3; long runs and fits) or `"full"`
+      (carrier-resolving, PHYSICS.md §2; short windows).
+    - `key`: PRNG key; required when `gyro.noise` is not `None`. Deterministic for a key.
+    - `bias_key`: key of the switch-on bias; give the same one to several runs to simulate
+      segments of one switch-on (defaults to a split of `key`).
+    - `dt_out`: output interval [s]; or `ts`, explicit output times [s] within the profile.
+    - `rtol`, `atol`, `max_steps`, `solver`: diffrax settings (Tsit5 for averaged, Dopri8 for
+      full by default).
+    - `run`: integer run id written to the record.
+
+    **Returns:** a [`hrgjax.Record`][].
+
+    **Raises:** `RuntimeError` without float64; `ValueError` for a bad model name, a missing
+    key or a bad output grid; a solver failure (max steps, non-finite state) raises too.
+    """
+    require_x64("hrgjax.simulate")
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {MODELS}; got {model!r}")
+    if not isinstance(gyro, Gyro):
+        raise TypeError(f"gyro must be an hrgjax.Gyro; got {type(gyro).__name__}")
+    if not isinstance(profile, Profile):
+        raise TypeError(f"profile must be an hrgjax.Profile; got {type(profile).__name__}")
+    if gyro.noise is not None and key is None:
+        raise ValueError(
+            "this gyro has noise: pass key=jax.random.key(…), or use gyro.without_noise()"
+        )
+    if ts is None:
+        ts = output_times(profile, dt_out)
+    else:
+        ts = jnp.asarray(ts, dtype=float)
+        if ts.ndim != 1 or ts.shape[0] < 1:
+            raise ValueError(f"ts must be a 1-D array of output times [s]; got shape {ts.shape}")
+        if is_concrete(ts):
+            arr, knots = np.asarray(ts), np.asarray(profile.t)
+            if np.any(np.diff(arr) <= 0):
+                raise ValueError("ts must be strictly increasing (unsorted or duplicate time)")
+            if arr[0] < knots[0] or arr[-1] > knots[-1]:
+                raise ValueError(
+                    f"ts must lie within the profile [{knots[0]}, {knots[-1]}] s; "
+                    f"got [{arr[0]}, {arr[-1]}]"
+                )
+    if max_steps is None:
+        max_steps = 2**16 if model == "averaged" else 2**20
+    solver = _default_solver(model) if solver is None else solver
+    dt0 = 1e-2 if model == "averaged" else 1e-5
+    (est, true_theta, loops), _ = _solve(
+        model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0
+    )
+
+    theta = est.theta
+    amplitude, quadrature = est.amplitude, est.quadrature
+    k_e = jax.vmap(lambda t: gyro.at(profile.temperature_at(t)).resonator.k_e)(ts)
+    if gyro.noise is not None:
+        k_rate, k_white, k_amp, k_bias = jax.random.split(key, 4)
+        k_bias = k_bias if bias_key is None else bias_key
+        nz = gyro.noise
+        rate_angle = rate_noise_angle(k_rate, ts, nz)
+        run_bias = draw_run_bias(k_bias, nz)
+        theta = (
+            theta
+            - k_e * (rate_angle + run_bias * (ts - ts[0]))
+            + nz.angle_white * jax.random.normal(k_white, ts.shape)
+        )
+        amp_noise = nz.amplitude_white * gyro.control.amplitude
+        ka, kq = jax.random.split(k_amp)
+        amplitude = amplitude + amp_noise * jax.random.normal(ka, ts.shape)
+        quadrature = quadrature + amp_noise * jax.random.normal(kq, ts.shape)
+
+    return Record(
+        t=ts,
+        wave_angle=theta,
+        amplitude=amplitude,
+        quadrature=quadrature,
+        table_angle=jax.vmap(profile.table_angle_at)(ts),
+        table_rate=jax.vmap(profile.rate_at)(ts),
+        temperature=jax.vmap(profile.temperature_at)(ts),
+        accel=jax.vmap(profile.accel_at)(ts),
+        true_wave_angle=true_theta,
+        frequency=loops.omega_r,
+        drive=loops.force if gyro.control.drive == "force" else loops.pump,
+        quadrature_force=loops.quad_force,
+        k_e=k_e,
+        run=jnp.asarray(run),
+    )

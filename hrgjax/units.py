@@ -1,0 +1,57 @@
+"""Units and named conversions.
+
+hrgjax works in SI inside (rad, s, rad/s, m/s², °C for temperature). The data format and
+the CLI speak degrees, degrees per hour and g; every conversion happens through the names
+below so that a unit mistake has one place to live.
+"""
+
+import math
+
+DEG = math.pi / 180.0
+"""One degree in radians."""
+ARCSEC = DEG / 3600.0
+"""One arc-second in radians."""
+HOUR = 3600.0
+"""One hour in seconds."""
+DEG_PER_S = DEG
+"""One degree per second in rad/s."""
+DEG_PER_H = DEG / HOUR
+"""One degree per hour in rad/s (4.848e-6)."""
+DEG_PER_SQRT_H = DEG / math.sqrt(HOUR)
+"""One degree per root hour (angle random walk) in rad/√s."""
+G0 = 9.80665
+"""Standard gravity [m/s²]."""
+EARTH_RATE = 7.292115e-5
+"""Earth's rotation rate (WGS-84) [rad/s]."""
+T_REF_C = 20.0
+"""Reference temperature of temperature laws and of the reduced model [°C]."""
+
+
+def deg(x):
+    """Degrees → radians."""
+    return x * DEG
+
+
+def to_deg(x):
+    """Radians → degrees."""
+    return x / DEG
+
+
+def dph(x):
+    """Degrees per hour → rad/s."""
+    return x * DEG_PER_H
+
+
+def to_dph(x):
+    """rad/s → degrees per hour."""
+    return x / DEG_PER_H
+
+
+def dps(x):
+    """Degrees per second → rad/s."""
+    return x * DEG_PER_S
+
+
+def to_dps(x):
+    """rad/s → degrees per second."""
+    return x / DEG_PER_S
