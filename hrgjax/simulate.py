@@ -44,15 +44,18 @@ def output_times(profile: Profile, dt_out: float):
 
 
 @eqx.filter_jit
-def _solve(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0):
+def _solve(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0, fixed, quadrature0):
     if model == "averaged":
-        y0 = averaged_initial_state(gyro, profile)
+        y0 = averaged_initial_state(gyro, profile, quadrature0)
         field, args = averaged_vector_field, (gyro, profile)
     else:
-        y0, omega_scale = full_initial_state(gyro, profile)
+        y0, omega_scale = full_initial_state(gyro, profile, quadrature0)
         field, args = full_vector_field, (gyro, profile, omega_scale)
-    controller = diffrax.PIDController(rtol=rtol, atol=atol)
-    if profile.t.shape[0] > 2:
+    if fixed:
+        controller = diffrax.ConstantStepSize()
+    else:
+        controller = diffrax.PIDController(rtol=rtol, atol=atol)
+    if profile.t.shape[0] > 2 and not fixed:
         controller = diffrax.ClipStepSizeController(controller, jump_ts=profile.t[1:-1])
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field),
@@ -125,6 +128,8 @@ def simulate(
     atol: float = 1e-10,
     max_steps: int | None = None,
     solver: diffrax.AbstractSolver | None = None,
+    fixed_step: float | None = None,
+    quadrature0: float = 0.0,
     run: int = 0,
 ) -> Record:
     """Simulate a whole-angle HRG driven by a profile.
@@ -141,6 +146,8 @@ def simulate(
     - `dt_out`: output interval [s]; or `ts`, explicit output times [s] within the profile.
     - `rtol`, `atol`, `max_steps`, `solver`: diffrax settings (Tsit5 for averaged, Dopri8 for
       full by default).
+    - `fixed_step`: integrate with this constant step [s] instead of adaptive steps.
+    - `quadrature0`: initial quadrature amplitude q₀ (readout units; a₀ is the AGC set point).
     - `run`: integer run id written to the record.
 
     **Returns:** a [`hrgjax.Record`][].
@@ -177,9 +184,19 @@ def simulate(
     if max_steps is None:
         max_steps = 2**16 if model == "averaged" else 2**20
     solver = _default_solver(model) if solver is None else solver
-    dt0 = 1e-2 if model == "averaged" else 1e-5
+    dt0 = fixed_step if fixed_step is not None else (1e-2 if model == "averaged" else 1e-5)
     (est, true_theta, loops), _ = _solve(
-        model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0
+        model,
+        gyro,
+        profile,
+        ts,
+        solver,
+        rtol,
+        atol,
+        max_steps,
+        dt0,
+        fixed_step is not None,
+        jnp.asarray(quadrature0, dtype=float),
     )
 
     theta = est.theta

@@ -120,12 +120,12 @@ def averaged_vector_field(t, y, args):
     return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int])
 
 
-def averaged_initial_state(gyro, profile):
-    """Start on the slow manifold: a = a₀, q = 0, φ = 0, loop integrators at steady state."""
+def averaged_initial_state(gyro, profile, quadrature0=0.0):
+    """Start on the slow manifold: a = a₀, q = q₀, φ = 0, loop integrators at steady state."""
     g = gyro.at(profile.temperature[0])
     theta0 = profile.wave_angle0
     if g.control.ideal:
         return theta0[None]
     a0 = g.control.amplitude
     integ = steady_integrators(g.control, g.resonator, a0, theta0)
-    return jnp.concatenate([jnp.stack([a0, 0.0 * a0, theta0, 0.0 * a0]), integ])
+    return jnp.concatenate([jnp.stack([a0, quadrature0 + 0.0 * a0, theta0, 0.0 * a0]), integ])

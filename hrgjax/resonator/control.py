@@ -39,6 +39,9 @@ class Control(eqx.Module):
     - `ideal`: loops held perfectly at their set points (a = a₀, q = 0, φ = 0). The averaged
       model then integrates only the wave angle; the full model uses the PI loops.
     - `forcer_gain_mismatch`: relative gain difference of the x and y forcers.
+    - `enabled`: `False` for a free-running resonator (see [`Control.free`][hrgjax.Control.free]).
+
+    A loop with bandwidth 0 holds its effort at the initial steady-state value (open loop).
     """
 
     amplitude: jax.Array = eqx.field(converter=_param, default=1.0)
@@ -49,6 +52,13 @@ class Control(eqx.Module):
     quadrature_bandwidth: jax.Array = eqx.field(converter=_param, default=2.0)
     ideal: bool = eqx.field(static=True, default=False)
     forcer_gain_mismatch: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    enabled: bool = eqx.field(static=True, default=True)
+
+    @classmethod
+    def free(cls, amplitude=1.0) -> Control:
+        """No loops: no forces, no pump, reference at ω (free oscillation or decay from
+        amplitude `amplitude`)."""
+        return cls(amplitude=amplitude, enabled=False)
 
     def __check_init__(self):
         if self.drive not in DRIVES:
@@ -91,6 +101,8 @@ def loop_outputs(control: Control, omega, est, integrators) -> LoopOutputs:
     i_pll, i_agc, i_quad = integrators
     agc = kp_a * (control.amplitude - est.amplitude) + i_agc
     zero = jnp.zeros_like(agc)
+    if not control.enabled:
+        return LoopOutputs(omega_r=omega + zero, force=zero, pump=zero, quad_force=zero)
     return LoopOutputs(
         omega_r=omega + kp_p * est.phase + i_pll,
         force=agc if control.drive == "force" else zero,
@@ -102,6 +114,8 @@ def loop_outputs(control: Control, omega, est, integrators) -> LoopOutputs:
 def integrator_rates(control: Control, omega, est):
     """Time derivatives of the loop integrators."""
     (_, ki_p), (_, ki_a), (_, ki_q) = loop_gains(control, omega)
+    if not control.enabled:
+        return jnp.zeros(3) * est.phase
     return jnp.stack(
         [
             ki_p * est.phase,
@@ -139,6 +153,8 @@ def steady_integrators(control: Control, res, a, theta):
     or $h = 4[\\dots]/\\omega$; quadrature: $f_{qc} = -\\omega\\Delta\\omega\\,a\\sin2(\\theta-\\theta_\\omega)$;
     PLL: $\\omega_r = \\omega + \\tfrac12\\Delta\\omega\\cos2(\\theta-\\theta_\\omega)$.
     """
+    if not control.enabled:
+        return jnp.zeros(3) * a
     loss = 1.0 / res.tau + 0.5 * res.delta_inv_tau * jnp.cos(2 * (theta - res.theta_tau))
     if control.drive == "force":
         i_agc = 2.0 * res.omega * a * loss / jnp.cos(control.excitation_phase)

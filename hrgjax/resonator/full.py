@@ -26,9 +26,15 @@ _J = jnp.array([[0.0, -1.0], [1.0, 0.0]])
 
 
 def full_estimates(gyro, y, omega_scale, readout=True):
-    """Estimates from the full state (through the pickoff errors when `readout`)."""
+    """Estimates from the full state (through the pickoff errors when `readout`).
+
+    The velocity channel is scaled by the PLL's tracked frequency ω + I_φ (the frequency
+    the resonator actually oscillates at in lock): scaling by the mean ω instead leaves a 2ω
+    ripple of relative size (ω_r − ω)/ω in the estimates, which the loops' proportional
+    gains would rectify into a bias of the efforts.
+    """
     z, zdot = y[0:2], y[2:4] * omega_scale
-    demod = from_signals(z, zdot, y[4], gyro.resonator.omega)
+    demod = from_signals(z, zdot, y[4], gyro.resonator.omega + y[5])
     if readout:
         demod = demod.transform(gyro.readout.matrix())
     return estimate(demod)
@@ -62,7 +68,7 @@ def full_vector_field(t, y, args):
     return jnp.concatenate([zdot, zddot / omega_scale, loops.omega_r[None], d_int])
 
 
-def full_initial_state(gyro, profile):
+def full_initial_state(gyro, profile, quadrature0=0.0):
     """x = a₀cosθ₀, y = a₀sinθ₀ at ψ_r = 0, with the velocity of a pattern already precessing
     at −k_eΩ (no start transient); loop integrators at steady state."""
     g = gyro.at(profile.temperature[0])
@@ -70,7 +76,8 @@ def full_initial_state(gyro, profile):
     a0 = g.control.amplitude
     th = profile.wave_angle0
     z0 = a0 * jnp.stack([jnp.cos(th), jnp.sin(th)])
-    zdot0 = -res.k_e * input_rate(g, profile, profile.t[0]) * (_J @ z0)
+    q_vel = quadrature0 * res.omega * jnp.stack([-jnp.sin(th), jnp.cos(th)])
+    zdot0 = -res.k_e * input_rate(g, profile, profile.t[0]) * (_J @ z0) + q_vel
     integ = steady_integrators(g.control, res, a0, th)
     omega_scale = res.omega
     return jnp.concatenate([z0, zdot0 / omega_scale, jnp.zeros(1), integ]), omega_scale

@@ -1,0 +1,215 @@
+"""PHYSICS.md §8 checks C1–C11 against the carrier-resolving model."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import OMEGA, bryan_factor, local_rate, resonator, slope
+
+import hrgjax as hg
+
+
+def free(res):
+    return hg.Gyro(res, control=hg.Control.free())
+
+
+def sim(gyro, prof, **kw):
+    kw.setdefault("dt_out", 0.05)
+    return hg.simulate(gyro, prof, model="full", **kw)
+
+
+def test_c1_bryan_factor():
+    assert bryan_factor(2) == pytest.approx(0.2770, abs=5e-4)
+    assert bryan_factor(3) == pytest.approx(0.1622, abs=5e-4)
+
+
+def test_c2_ideal_precession_any_rate():
+    """θ = θ₀ − k_e∫Ω for a rate ramp; E constant; Q stays 0."""
+    res = resonator(tau=1e9)
+    prof = hg.Profile.piecewise([0.0, 1.0, 2.0], [0.0, 60.0, -30.0], 20.0, wave_angle0_deg=20.0)
+    rec = sim(free(res), prof)
+    expect = prof.wave_angle0 - 0.554 * rec.table_angle
+    np.testing.assert_allclose(rec.wave_angle, expect, atol=2e-4)
+    assert np.ptp(np.asarray(rec.amplitude)) < 1e-3
+    # Q stays 0 to first order: what the instantaneous demodulator sees is the precessing
+    # pattern's own angular momentum, 2(xẏ − yẋ)/ω ≤ 2k_e|Ω|a²/ω, an O(Ω/ω) term.
+    bound = 0.554 * np.abs(np.asarray(rec.table_rate)) / OMEGA
+    assert np.all(np.abs(np.asarray(rec.quadrature)) <= 1.01 * bound + 1e-7)
+
+
+def test_c2_frequency_shift_with_rotation():
+    """Oscillation frequency √(ω² + k_e²Ω²): the PLL settles on it."""
+    res = resonator()
+    rate = 200.0  # °/s
+    prof = hg.Profile.constant_rate(rate, 6.0, wave_angle0_deg=0.0)
+    rec = sim(hg.Gyro(res), prof, dt_out=0.5)
+    w = 0.554 * np.deg2rad(rate)
+    assert rec.frequency[-1] == pytest.approx(np.sqrt(OMEGA**2 + w**2), rel=0, abs=2e-3)
+
+
+def test_c3_damping_anisotropy_free_decay_closed_form():
+    d, th_tau, th0 = 0.02, 0.3, 0.9
+    res = resonator(tau=30.0, delta_inv_tau=d, theta_tau=th_tau)
+    prof = hg.Profile.static(8.0, wave_angle0_deg=np.rad2deg(th0))
+    rec = sim(free(res), prof)
+    expect = th_tau + np.arctan(np.tan(th0 - th_tau) * np.exp(d * np.asarray(rec.t)))
+    np.testing.assert_allclose(rec.wave_angle, expect, atol=3e-4)
+    energy = np.asarray(rec.amplitude) ** 2 + np.asarray(rec.quadrature) ** 2
+    dlog = slope(rec.t[:5], np.log(energy[:5]))
+    assert dlog == pytest.approx(-2 / 30.0 - d * np.cos(2 * (th0 - th_tau)), rel=2e-2)
+
+
+@pytest.mark.parametrize(
+    "rate_over_threshold",
+    [0.5, 1.6],
+    ids=["locked", "adler"],
+)
+def test_c4_lock_in_and_adler(rate_over_threshold):
+    """Below threshold the pattern locks at sin2(θ*−θτ) = 2k_eΩ/Δ(1/τ); above, Adler's law."""
+    d, th_tau = 0.2, 0.1
+    res = resonator(tau=1e3, delta_inv_tau=d, theta_tau=th_tau)
+    omega_in = rate_over_threshold * 0.5 * d / 0.554
+    prof = hg.Profile.constant_rate(np.rad2deg(omega_in), 40.0, wave_angle0_deg=70.0)
+    rec = sim(hg.Gyro(res), prof, dt_out=0.25)
+    th = np.asarray(rec.true_wave_angle)
+    if rate_over_threshold < 1:
+        s = np.sin(2 * (th[-1] - th_tau))
+        assert s == pytest.approx(2 * 0.554 * omega_in / d, abs=2e-3)
+        assert np.cos(2 * (th[-1] - th_tau)) < 0
+    else:
+        t = np.asarray(rec.t)
+        # mean rate over whole periods of the Adler beat
+        mean_rate = -np.sqrt((0.554 * omega_in) ** 2 - (0.5 * d) ** 2)
+        period = np.pi / abs(mean_rate)
+        k = int((t[-1] - t[0] - 5) // period)
+        i0 = np.searchsorted(t, 5.0)
+        i1 = np.searchsorted(t, 5.0 + k * period)
+        # interpolate the end of the last whole period
+        th_end = np.interp(5.0 + k * period, t, th)
+        measured = (th_end - th[i0]) / (k * period)
+        assert i1 > i0 and measured == pytest.approx(mean_rate, rel=5e-3)
+
+
+def test_c5_split_beat():
+    """No damping, no control: θ oscillates between θ₀ and 2θ_ω − θ₀ with period 2π/Δω."""
+    dw, th_w, th0 = 1.0, 0.2, 0.6
+    res = resonator(tau=1e9, delta_omega=dw, theta_omega=th_w)
+    prof = hg.Profile.static(2 * np.pi / dw, wave_angle0_deg=np.rad2deg(th0))
+    rec = sim(free(res), prof, dt_out=0.02)
+    th = np.asarray(rec.wave_angle)
+    assert th.max() == pytest.approx(th0, abs=3e-3)
+    assert th.min() == pytest.approx(2 * th_w - th0, abs=3e-3)
+    assert th[-1] == pytest.approx(th0, abs=3e-3)
+    a, q = np.asarray(rec.amplitude), np.asarray(rec.quadrature)
+    big_q = 2 * a * q
+    np.testing.assert_allclose(
+        big_q, np.sin(2 * (th0 - th_w)) * np.sin(dw * np.asarray(rec.t)), atol=3e-3
+    )
+
+
+def test_c6_eqrs_linear_system_and_invariant():
+    """Demodulated E, Q, R, S of the full model follow the 4×4 linear system of §3.3."""
+    from hrgjax.resonator.readout import from_pendulum
+
+    d, th_t, dw, th_w, omg = 0.05, 0.4, 0.3, -0.2, 0.1
+    res = resonator(tau=20.0, delta_inv_tau=d, theta_tau=th_t, delta_omega=dw, theta_omega=th_w)
+    prof = hg.Profile.constant_rate(np.rad2deg(omg), 4.0, wave_angle0_deg=25.0)
+    rec = sim(free(res), prof, dt_out=0.5)
+    demod = jax.vmap(lambda a, q, th: from_pendulum(a, q, th, 0.0))(
+        rec.amplitude, rec.quadrature, rec.wave_angle
+    )
+    eqrs = np.stack(jax.vmap(lambda dm: jnp.stack(dm.eqrs()))(demod))
+    assert np.max(np.abs(eqrs[:, 0] ** 2 - (eqrs[:, 1:] ** 2).sum(1))) < 1e-12
+    c2t, s2t, c2w, s2w = np.cos(2 * th_t), np.sin(2 * th_t), np.cos(2 * th_w), np.sin(2 * th_w)
+    kw = 0.554 * omg
+    m = np.array(
+        [
+            [-2 / 20, 0, -d * c2t, -d * s2t],
+            [0, -2 / 20, -dw * s2w, dw * c2w],
+            [-d * c2t, dw * s2w, -2 / 20, 2 * kw],
+            [-d * s2t, -dw * c2w, -2 * kw, -2 / 20],
+        ]
+    )
+    from scipy.linalg import expm
+
+    pred = np.stack([expm(m * t) @ eqrs[0] for t in np.asarray(rec.t)])
+    np.testing.assert_allclose(eqrs, pred, atol=2e-3)
+
+
+def test_c7_force_response_through_loop_efforts():
+    """Steady loop efforts follow ȧ = −f_as/2ω and q̇ = f_qc/2ω: F = 2ωa(1/τ + ½Δ(1/τ)cos2(θ−θτ))
+    and f_qc = −ωΔω a sin2(θ−θω)."""
+    d, th_t, dw, th_w = 0.02, 0.3, 0.05, -0.4
+    res = resonator(tau=30.0, delta_inv_tau=d, theta_tau=th_t, delta_omega=dw, theta_omega=th_w)
+    prof = hg.Profile.static(8.0, wave_angle0_deg=50.0)
+    rec = sim(hg.Gyro(res, control=hg.Control(agc_bandwidth=3.0, quadrature_bandwidth=3.0)), prof)
+    th = np.asarray(rec.true_wave_angle)[-1]
+    f_expect = 2 * OMEGA * (1 / 30.0 + 0.5 * d * np.cos(2 * (th - th_t)))
+    assert rec.drive[-1] == pytest.approx(f_expect, rel=2e-3)
+    fq_expect = -OMEGA * dw * np.sin(2 * (th - th_w))
+    assert rec.quadrature_force[-1] == pytest.approx(fq_expect, rel=1e-2)
+
+
+def test_c8_isotropic_duffing():
+    """θ̇ = −χaq/(4ω); frequency shift 3χ(a²+q²)/(8ω)."""
+    chi, q0 = 400.0, 0.1
+    res = resonator(tau=1e9, chi=chi)
+    prof = hg.Profile.static(3.0, wave_angle0_deg=10.0)
+    rec = sim(free(res), prof, quadrature0=q0, dt_out=0.1)
+    a, q = np.asarray(rec.amplitude), np.asarray(rec.quadrature)
+    rate = slope(rec.t, rec.wave_angle)
+    assert rate == pytest.approx(np.mean(-chi * a * q / (4 * OMEGA)), rel=2e-2)
+    # frequency: closed PLL on the same resonator (quadrature nulled, q = 0)
+    rec2 = sim(hg.Gyro(res), hg.Profile.static(6.0), dt_out=0.5)
+    shift = rec2.frequency[-1] - OMEGA
+    assert shift == pytest.approx(3 * chi / (8 * OMEGA), rel=2e-2)
+
+
+def test_c9_parametric_pump_threshold_and_quadrature_damping():
+    """With the pump held at h = 4/(ωτ) = 2/Q (AGC open) the amplitude neither grows nor
+    decays, and the quadrature decays at ωh/4 + 1/τ = 2/τ."""
+    tau = 20.0
+    res = resonator(tau=tau)
+    ctl = hg.Control(drive="parametric", agc_bandwidth=0.0, quadrature_bandwidth=0.0)
+    prof = hg.Profile.static(6.0, wave_angle0_deg=30.0)
+    rec = sim(hg.Gyro(res, control=ctl), prof, quadrature0=0.05, dt_out=0.1)
+    assert rec.drive[0] == pytest.approx(4 / (OMEGA * tau), rel=1e-9)
+    q = np.asarray(rec.quadrature)
+    assert slope(rec.t, np.log(q)) == pytest.approx(-2 / tau, rel=2e-2)
+    a = np.asarray(rec.amplitude)
+    assert abs(slope(rec.t, np.log(a))) < 2e-3 / tau
+
+
+def test_c10_pickoff_gain_mismatch_closed_loop():
+    """Gain mismatch diag(1+g, 1−g), force AGC steered by the estimate: θ̇ = −(g/τ) sin 2θ."""
+    g, tau = 0.005, 10.0
+    res = resonator(tau=tau)
+    gyro = hg.Gyro(res, readout=hg.Readout(gain_mismatch=g))
+    thetas = np.deg2rad([20.0, 45.0, 70.0])
+    prof = hg.Profile.static(4.0)
+    recs = jax.vmap(lambda th: sim(gyro, eqx_set(prof, th)))(jnp.asarray(thetas))
+    for i, th in enumerate(thetas):
+        rate = slope(recs.t[i], recs.true_wave_angle[i])
+        assert rate == pytest.approx(-(g / tau) * np.sin(2 * th), rel=1.5e-2)
+    # readout: θ_est − θ = −g sin 2θ
+    err = np.asarray(recs.wave_angle[:, 0] - recs.true_wave_angle[:, 0])
+    np.testing.assert_allclose(err, -g * np.sin(2 * thetas), atol=2 * g**2)
+
+
+def test_c11_excitation_phase_error():
+    """AGC phase error γ_e with quadrature q: θ̇ = −aq/(a²−q²)·tan γ_e/τ (instantaneous)."""
+    ge, tau = 0.3, 10.0
+    res = resonator(tau=tau)
+    ctl = hg.Control(excitation_phase=ge, quadrature_bandwidth=0.0, pll_bandwidth=3.0)
+    rec = sim(hg.Gyro(res, control=ctl), hg.Profile.static(3.0, wave_angle0_deg=10.0),
+              quadrature0=0.05, dt_out=0.1)
+    a, q = np.asarray(rec.amplitude)[1:-1], np.asarray(rec.quadrature)[1:-1]
+    rate = local_rate(rec.t, rec.wave_angle)
+    expect = -a * q / (a**2 - q**2) * np.tan(ge) / tau
+    np.testing.assert_allclose(rate, expect, rtol=3e-2)
+
+
+def eqx_set(prof, theta):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda p: p.wave_angle0, prof, theta)
