@@ -5,6 +5,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .noise import Noise
 from .resonator.control import Control
@@ -13,8 +14,9 @@ from .resonator.readout import Readout
 
 
 def _vector3(x):
-    x = jnp.broadcast_to(jnp.asarray(x, dtype=float), (3,)) if jnp.ndim(x) == 0 else x
-    x = jnp.asarray(x, dtype=float)
+    x = jnp.asarray(np.asarray(x) if isinstance(x, list | tuple) else x, dtype=float)
+    if x.ndim == 0:
+        x = jnp.broadcast_to(x, (3,))
     if x.shape[-1:] != (3,):
         raise ValueError(f"Gyro.g_sensitivity must have shape (3,) [rad/s per g]; got {x.shape}")
     return x

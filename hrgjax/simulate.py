@@ -17,6 +17,7 @@ from .record import Record
 from .resonator.averaged import (
     averaged_initial_state,
     averaged_vector_field,
+    input_rate,
     measured_estimates,
 )
 from .resonator.control import loop_outputs, steady_integrators
@@ -104,8 +105,9 @@ def _unwrap_pi(theta, near):
 def _read_full(gyro, profile, ts, ys, omega_scale):
     def one(t, y):
         g = gyro.at(profile.temperature_at(t))
-        est = full_estimates(g, y, omega_scale)
-        true = full_estimates(g, y, omega_scale, readout=False)
+        omega_in = input_rate(g, profile, t)
+        est = full_estimates(g, y, omega_scale, omega_in)
+        true = full_estimates(g, y, omega_scale, omega_in, readout=False)
         loops = loop_outputs(g.control, g.resonator.omega, est, y[5:8])
         return est, true.theta, loops
 

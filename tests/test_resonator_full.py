@@ -31,10 +31,7 @@ def test_c2_ideal_precession_any_rate():
     expect = prof.wave_angle0 - 0.554 * rec.table_angle
     np.testing.assert_allclose(rec.wave_angle, expect, atol=2e-4)
     assert np.ptp(np.asarray(rec.amplitude)) < 1e-3
-    # Q stays 0 to first order: what the instantaneous demodulator sees is the precessing
-    # pattern's own angular momentum, 2(xẏ − yẋ)/ω ≤ 2k_e|Ω|a²/ω, an O(Ω/ω) term.
-    bound = 0.554 * np.abs(np.asarray(rec.table_rate)) / OMEGA
-    assert np.all(np.abs(np.asarray(rec.quadrature)) <= 1.01 * bound + 1e-7)
+    assert np.max(np.abs(np.asarray(rec.quadrature))) < 1e-5
 
 
 def test_c2_frequency_shift_with_rotation():
@@ -201,8 +198,12 @@ def test_c11_excitation_phase_error():
     ge, tau = 0.3, 10.0
     res = resonator(tau=tau)
     ctl = hg.Control(excitation_phase=ge, quadrature_bandwidth=0.0, pll_bandwidth=3.0)
-    rec = sim(hg.Gyro(res, control=ctl), hg.Profile.static(3.0, wave_angle0_deg=10.0),
-              quadrature0=0.05, dt_out=0.1)
+    rec = sim(
+        hg.Gyro(res, control=ctl),
+        hg.Profile.static(3.0, wave_angle0_deg=10.0),
+        quadrature0=0.05,
+        dt_out=0.1,
+    )
     a, q = np.asarray(rec.amplitude)[1:-1], np.asarray(rec.quadrature)[1:-1]
     rate = local_rate(rec.t, rec.wave_angle)
     expect = -a * q / (a**2 - q**2) * np.tan(ge) / tau

@@ -25,8 +25,14 @@ N_STATE = 8
 _J = jnp.array([[0.0, -1.0], [1.0, 0.0]])
 
 
-def full_estimates(gyro, y, omega_scale, readout=True):
-    """Estimates from the full state (through the pickoff errors when `readout`).
+def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
+    r"""Estimates from the full state (through the pickoff errors when `readout`).
+
+    Emulates a low-pass demodulator of the displacement signals, which does not see the
+    kinematic angular momentum $k_e\Omega E/\omega$ of a precessing pattern: the velocity is
+    taken relative to the frame precessing at $-k_e\Omega$ ($\dot{\mathbf z} + k_e\Omega\mathbf J\mathbf z$).
+    Without this the quadrature loop would null a fake $q = -k_e\Omega a/2\omega$ by creating
+    real quadrature.
 
     The velocity channel is scaled by the PLL's tracked frequency ω + I_φ (the frequency
     the resonator actually oscillates at in lock): scaling by the mean ω instead leaves a 2ω
@@ -34,6 +40,7 @@ def full_estimates(gyro, y, omega_scale, readout=True):
     gains would rectify into a bias of the efforts.
     """
     z, zdot = y[0:2], y[2:4] * omega_scale
+    zdot = zdot + gyro.resonator.k_e * omega_in * (_J @ z)
     demod = from_signals(z, zdot, y[4], gyro.resonator.omega + y[5])
     if readout:
         demod = demod.transform(gyro.readout.matrix())
@@ -47,12 +54,12 @@ def full_vector_field(t, y, args):
     res, ctl = g.resonator, g.control
     z, zdot = y[0:2], y[2:4] * omega_scale
     psi_r = y[4]
-    est = full_estimates(g, y, omega_scale)
+    omega_in = input_rate(g, profile, t)
+    est = full_estimates(g, y, omega_scale, omega_in)
     loops = loop_outputs(ctl, res.omega, est, y[5:8])
     u, v = drive_vectors(ctl, loops, est.theta)
     force = u * jnp.cos(psi_r) + v * jnp.sin(psi_r)
 
-    omega_in = input_rate(g, profile, t)
     omega_dot = profile.rate_derivative_at(t)
     pump = res.omega**2 * loops.pump * jnp.cos(2 * psi_r + 2 * pump_phase(ctl))
     zddot = (

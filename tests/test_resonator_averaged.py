@@ -1,0 +1,161 @@
+"""Averaged model: agreement with the full model, reduced forms of PHYSICS.md §10,
+gradients, vmap and compilation behaviour."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import OMEGA, resonator, slope
+
+import hrgjax as hg
+from hrgjax.units import DEG
+
+THETAS = jnp.deg2rad(jnp.array([5.0, 35.0, 65.0, 95.0, 125.0, 155.0]))
+DEFECTS = {
+    "damping_anisotropy": dict(delta_inv_tau=0.01, theta_tau=0.3),
+    "frequency_split": dict(delta_omega=0.02, theta_omega=-0.2),
+    "nonlinearity": dict(chi=300.0),
+    "all": dict(delta_inv_tau=0.01, theta_tau=0.3, delta_omega=0.02, theta_omega=-0.2, chi=300.0),
+}
+
+
+def _rates(gyro, model):
+    prof = hg.Profile.constant_rate(2.0, 3.0, wave_angle0_deg=0.0)
+
+    def one(th):
+        p = eqx.tree_at(lambda p: p.wave_angle0, prof, th)
+        return hg.simulate(gyro, p, model=model, dt_out=0.25)
+
+    recs = jax.vmap(one)(THETAS)
+    return np.array([slope(recs.t[i], recs.true_wave_angle[i]) for i in range(len(THETAS))])
+
+
+@pytest.mark.parametrize("defect", list(DEFECTS))
+def test_averaged_matches_full_loops_closed(defect):
+    """Pattern-angle rate within 1 % of the defect rate over a grid of θ, loops closed
+    (force AGC with an excitation-phase error and a readout gain mismatch to couple q)."""
+    res = resonator(tau=20.0, **DEFECTS[defect])
+    gyro = hg.Gyro(
+        res,
+        control=hg.Control(excitation_phase=0.05),
+        readout=hg.Readout(gain_mismatch=0.002),
+    )
+    full = _rates(gyro, "full")
+    avg = _rates(gyro, "averaged")
+    table = -0.554 * 2.0 * DEG
+    defect_rate = np.max(np.abs(full - table))
+    assert defect_rate > 2e-5
+    np.testing.assert_allclose(avg, full, atol=0.01 * defect_rate)
+
+
+def test_averaged_matches_full_parametric_drive():
+    res = resonator(tau=20.0, **DEFECTS["all"])
+    gyro = hg.Gyro(res, control=hg.Control(drive="parametric", excitation_phase=0.05))
+    full, avg = _rates(gyro, "full"), _rates(gyro, "averaged")
+    defect_rate = np.max(np.abs(full + 0.554 * 2.0 * DEG))
+    np.testing.assert_allclose(avg, full, atol=0.01 * defect_rate)
+
+
+@pytest.fixture(scope="module")
+def ideal_rates():
+    """Drift of the ideal-loop averaged model over a grid of θ, temperatures frozen."""
+
+    def run(gyro, theta, rate_dps=0.0, accel_z=0.0):
+        prof = hg.Profile.constant_rate(rate_dps, 10.0, accel_g=(0.0, 0.0, accel_z))
+        prof = eqx.tree_at(lambda p: p.wave_angle0, prof, theta)
+        rec = hg.simulate(gyro, prof, dt_out=1.0)
+        return rec
+
+    return jax.vmap(run, in_axes=(None, 0, None, None))
+
+
+def test_reduced_damping_anisotropy_bias_gain_accel(ideal_rates):
+    """θ̇ = −k_e(Ω + b + G a_z) + d sin2(θ−θτ), d = ½Δ(1/τ) (§10 nominal + acceleration)."""
+    res = resonator(delta_inv_tau=2e-5, theta_tau=0.4)
+    gyro = eqx.tree_at(
+        lambda g: (g.rate_bias, g.g_sensitivity),
+        hg.presets.ideal(res),
+        (jnp.asarray(3e-6), jnp.array([0.0, 0.0, 2e-6])),
+    )
+    recs = ideal_rates(gyro, THETAS, 1.0, 0.5)
+    rates = np.array([slope(recs.t[i], recs.wave_angle[i]) for i in range(len(THETAS))])
+    th = np.asarray(recs.wave_angle[:, 5])
+    expect = -0.554 * (DEG + 3e-6 + 0.5 * 2e-6) + 1e-5 * np.sin(2 * (th - 0.4))
+    # tolerance: curvature of sin2(θ−θτ) over the 10-s fit window (≈ 0.1 % of d)
+    np.testing.assert_allclose(rates, expect, rtol=0, atol=2e-8)
+
+
+def test_reduced_drive_gain_mismatch():
+    """Forcer gain mismatch g with force AGC: θ̇ = −(g/τ) sin 2θ (§10 drive_gain_mismatch)."""
+    g, tau = 0.004, 20.0
+    gyro = hg.Gyro(resonator(tau=tau), control=hg.Control(forcer_gain_mismatch=g))
+    rates = _rates(gyro, "averaged") + 0.554 * 2.0 * DEG
+    th = np.asarray(THETAS) - 0.554 * 2.0 * DEG * 1.5
+    np.testing.assert_allclose(rates, -(g / tau) * np.sin(2 * th), rtol=2e-2, atol=1e-7)
+
+
+def test_reduced_readout_gain_mismatch():
+    """θ_meas − θ = ½ε₁ sin2θ + ½ε₂ cos2θ with ε₁ = −2g, ε₂ = 2(c − ε_m) (§10 readout)."""
+    g, c, m = 3e-3, 1e-3, 4e-4
+    gyro = hg.presets.ideal(resonator())
+    gyro = eqx.tree_at(lambda gy: gy.readout, gyro, hg.Readout(g, c, m))
+    prof = hg.Profile.constant_rate(30.0, 6.0)
+    rec = hg.simulate(gyro, prof, dt_out=0.05)
+    th = np.asarray(rec.true_wave_angle)
+    err = np.asarray(rec.wave_angle) - th
+    expect = -g * np.sin(2 * th) + (c - m) * np.cos(2 * th) - m
+    np.testing.assert_allclose(err, expect, atol=3 * (g**2 + c**2))
+
+
+def test_frequency_split_and_nonlinearity_instantaneous_laws():
+    """With q ≠ 0 (quadrature loop open): θ̇ = −½Δω cos2(θ−θω)·2aq/(a²−q²) − χaq/(4ω)."""
+    dw, thw, chi = 0.01, 0.3, 200.0
+    res = resonator(tau=1e6, delta_omega=dw, theta_omega=thw, chi=chi)
+    gyro = hg.Gyro(res, control=hg.Control.free())
+    rec = hg.simulate(
+        gyro, hg.Profile.static(4.0, wave_angle0_deg=5.0), quadrature0=0.02, dt_out=0.1
+    )
+    th, a, q = (np.asarray(x) for x in (rec.wave_angle, rec.amplitude, rec.quadrature))
+    t = np.asarray(rec.t)
+    rate = (th[2:] - th[:-2]) / (t[2:] - t[:-2])
+    pi_ = 2 * a * q / (a**2 - q**2)
+    expect = -0.5 * dw * np.cos(2 * (th - thw)) * pi_ - chi * a * q / (4 * OMEGA)
+    np.testing.assert_allclose(rate, expect[1:-1], rtol=1e-3, atol=1e-9)
+
+
+def test_grad_matches_finite_differences():
+    """∂(final wave angle)/∂(Δ(1/τ), θτ, k_e) through diffrax == central differences."""
+    base = resonator(delta_inv_tau=0.02, theta_tau=0.3)
+    prof = hg.Profile.constant_rate(3.0, 5.0, wave_angle0_deg=20.0)
+    gyro = hg.Gyro(base)
+
+    def loss(p):
+        r = eqx.tree_at(lambda r: (r.delta_inv_tau, r.theta_tau, r.k_e), base, tuple(p))
+        g = eqx.tree_at(lambda g: g.resonator, gyro, r)
+        return hg.simulate(g, prof, dt_out=5.0, rtol=1e-11, atol=1e-13).wave_angle[-1]
+
+    p0 = jnp.array([0.02, 0.3, 0.554])
+    grad = jax.grad(loss)(p0)
+    h = jnp.array([1e-6, 1e-6, 1e-6])
+    fd = jnp.stack(
+        [(loss(p0.at[i].add(h[i])) - loss(p0.at[i].add(-h[i]))) / (2 * h[i]) for i in range(3)]
+    )
+    np.testing.assert_allclose(grad, fd, rtol=1e-5)
+    assert np.all(np.abs(grad) > 0)
+
+
+def test_vmap_equals_loop_and_no_recompile():
+    from hrgjax.simulate import _solve
+
+    gyro = hg.presets.tvg3_like(noise=False)
+    temps = jnp.array([-40.0, 10.0, 60.0])
+    run = lambda T: hg.simulate(gyro, hg.Profile.static(30.0, T, 10.0), dt_out=5.0).wave_angle
+    batched = jax.vmap(run)(temps)
+    before = _solve._cached._cache_size()
+    looped = jnp.stack([run(T) for T in temps])
+    after_first = _solve._cached._cache_size()
+    _ = run(jnp.asarray(20.0))
+    assert _solve._cached._cache_size() == after_first
+    assert after_first <= before + 1
+    np.testing.assert_allclose(batched, looped, rtol=0, atol=1e-12)
