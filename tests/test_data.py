@@ -1,0 +1,105 @@
+"""Measured-data contract: round trips and validation."""
+
+import numpy as np
+import pytest
+
+import hrgjax as hg
+
+
+def table(n=5, **extra):
+    cols = {
+        "time_s": np.arange(n) * 0.1,
+        "run": np.zeros(n, dtype=int),
+        "temperature_c": np.full(n, 20.0),
+        "table_rate_dps": np.full(n, 5.0),
+        "wave_angle_deg": np.linspace(0, 1, n) * np.pi,
+    }
+    cols.update(extra)
+    return cols
+
+
+@pytest.fixture(scope="module")
+def record():
+    gyro = hg.presets.tvg3_like()
+    prof = hg.Profile.constant_rate(5.0, 2.0, temperature_c=-10.0, wave_angle0_deg=12.5)
+    import jax
+
+    return hg.simulate(gyro, prof, key=jax.random.key(3), dt_out=0.1)
+
+
+@pytest.mark.parametrize("ext", ["csv", "nc"])
+def test_round_trip_exact(record, tmp_path, ext):
+    data = record.to_data()
+    path = data.save(tmp_path / f"run.{ext}")
+    back = hg.load(path)
+    assert back == data
+    for k in data.names:
+        assert np.array_equal(back[k], data[k]), k
+
+
+def test_record_units(record):
+    data = record.to_data()
+    np.testing.assert_allclose(data["wave_angle_deg"], np.rad2deg(record.wave_angle))
+    np.testing.assert_allclose(data["table_rate_dps"], 5.0)
+    np.testing.assert_allclose(data["table_angle_deg"], 5.0 * np.asarray(record.t))
+    assert set(hg.data.REQUIRED) <= set(data.names)
+
+
+def test_absent_optional_columns_are_derived_not_added():
+    cols = table()
+    del cols["run"]
+    d = hg.MeasuredData(cols)
+    assert "run" not in d.names and "table_angle_deg" not in d.names
+    np.testing.assert_array_equal(d.run, 0)
+    np.testing.assert_allclose(d.table_angle_deg, 5.0 * np.arange(5) * 0.1)
+
+
+def test_runs_may_restart_time():
+    cols = table(6)
+    cols["run"] = np.array([0, 0, 0, 1, 1, 1])
+    cols["time_s"] = np.array([0.0, 1.0, 2.0, 0.0, 1.0, 2.0])
+    d = hg.MeasuredData(cols)
+    assert [len(r) for r in d.runs()] == [3, 3]
+
+
+def test_input_arrays_not_altered():
+    cols = table()
+    before = {k: v.copy() for k, v in cols.items()}
+    hg.MeasuredData(cols)
+    for k in cols:
+        assert np.array_equal(cols[k], before[k])
+
+
+BAD = [
+    ("missing", lambda c: c.pop("wave_angle_deg"), "wave_angle_deg"),
+    ("unknown", lambda c: c.update(wave_angel_deg=np.zeros(5)), "wave_angel_deg"),
+    ("nan", lambda c: c["temperature_c"].__setitem__(3, np.nan), "temperature_c.*row 3"),
+    ("inf", lambda c: c["table_rate_dps"].__setitem__(1, np.inf), "table_rate_dps.*row 1"),
+    ("unsorted", lambda c: c["time_s"].__setitem__(2, 0.05), "time_s.*row 2"),
+    ("duplicate", lambda c: c["time_s"].__setitem__(2, 0.1), "time_s.*row 2"),
+    ("length", lambda c: c.update(temperature_c=np.zeros(4)), "temperature_c.*4 rows"),
+    ("run-float", lambda c: c.update(run=np.array([0, 0, 0.5, 1, 1])), "run.*integers"),
+    ("2d", lambda c: c.update(amplitude=np.zeros((5, 2))), "amplitude.*1-D"),
+]
+
+
+@pytest.mark.parametrize("name,mutate,match", BAD, ids=[b[0] for b in BAD])
+def test_bad_data_named(name, mutate, match):
+    cols = {k: np.array(v, dtype=float) for k, v in table().items()}
+    mutate(cols)
+    with pytest.raises(ValueError, match=match):
+        hg.MeasuredData(cols)
+
+
+def test_extra_columns_allowed_when_asked():
+    d = hg.MeasuredData(table(note=np.zeros(5)), allow_extra=True)
+    assert "note" in d.names
+
+
+def test_csv_errors(tmp_path):
+    p = tmp_path / "bad.csv"
+    p.write_text("time_s,temperature_c,table_rate_dps,wave_angle_deg\n0,20,5,abc\n")
+    with pytest.raises(ValueError, match="wave_angle_deg.*row 0"):
+        hg.load(p)
+    with pytest.raises(ValueError, match="extension"):
+        hg.load(tmp_path / "x.txt")
