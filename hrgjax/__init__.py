@@ -1,5 +1,8 @@
 """hrgjax: differentiable simulation and fitting of HRGs, FOGs and INS errors in JAX."""
 
+from . import calibration as calibration
+from . import data as data
+from . import noise as noise
 from . import presets as presets
 from . import units as units
 from .allan import adev as adev

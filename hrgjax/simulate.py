@@ -174,7 +174,7 @@ def simulate(
         ts = jnp.asarray(ts, dtype=float)
         if ts.ndim != 1 or ts.shape[0] < 1:
             raise ValueError(f"ts must be a 1-D array of output times [s]; got shape {ts.shape}")
-        if is_concrete(ts):
+        if is_concrete(ts) and is_concrete(profile.t):
             arr, knots = np.asarray(ts), np.asarray(profile.t)
             if np.any(np.diff(arr) <= 0):
                 raise ValueError("ts must be strictly increasing (unsorted or duplicate time)")

@@ -1,0 +1,128 @@
+"""Bench plans (seed 000's design) and running them on a simulated gyro."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..data import MeasuredData
+from ..gyro import Gyro
+from ..profiles import Profile
+from ..simulate import simulate
+
+SEED_TEMPERATURES = tuple(float(t) for t in range(-40, 61, 10))
+"""−40…+60 °C in 10 °C steps."""
+SEED_ANGLES = tuple(float(a) for a in range(-90, 91, 10))
+"""Wave angle −90…+90° in 10° steps (electrical)."""
+
+
+class Plan(eqx.Module):
+    """A list of dwell points: each is one run at constant rate and temperature.
+
+    **Arguments:**
+
+    - `temperature_c`: temperature of each point [°C], shape (P,).
+    - `wave_angle0_deg`: initial electrical wave angle of each point [°], shape (P,).
+    - `rate_dps`: table rate of each point [°/s], shape (P,).
+    - `duration_s`: length of every run [s] (static: one output grid for the whole plan).
+    - `dt_out`: output interval [s].
+    """
+
+    temperature_c: jax.Array
+    wave_angle0_deg: jax.Array
+    rate_dps: jax.Array
+    duration_s: float = eqx.field(static=True)
+    dt_out: float = eqx.field(static=True, default=1.0)
+
+    def __check_init__(self):
+        shapes = {a.shape for a in (self.temperature_c, self.wave_angle0_deg, self.rate_dps)}
+        if len(shapes) != 1 or len(next(iter(shapes))) != 1:
+            raise ValueError(
+                "Plan.temperature_c, wave_angle0_deg and rate_dps must be 1-D of equal length; "
+                f"got {[a.shape for a in (self.temperature_c, self.wave_angle0_deg, self.rate_dps)]}"
+            )
+        if not self.duration_s > 0 or not self.dt_out > 0:
+            raise ValueError("Plan.duration_s and Plan.dt_out must be > 0 [s]")
+
+    @property
+    def size(self) -> int:
+        return int(self.temperature_c.shape[0])
+
+    def profiles(self) -> Profile:
+        """A batch of profiles, one per point (leading axis P)."""
+        one = lambda T, a, w: Profile.constant_rate(w, self.duration_s, T, a)
+        return jax.vmap(one)(self.temperature_c, self.wave_angle0_deg, self.rate_dps)
+
+
+def _grid(temps, angles, rate, duration, dt_out):
+    tt, aa = np.meshgrid(np.asarray(temps, float), np.asarray(angles, float), indexing="ij")
+    return Plan(
+        temperature_c=jnp.asarray(tt.ravel()),
+        wave_angle0_deg=jnp.asarray(aa.ravel()),
+        rate_dps=jnp.full(tt.size, float(rate)),
+        duration_s=float(duration),
+        dt_out=float(dt_out),
+    )
+
+
+def static_plan(
+    temperatures_c=SEED_TEMPERATURES,
+    angles_deg=SEED_ANGLES,
+    duration_s: float = 180.0,
+    dt_out: float = 1.0,
+) -> Plan:
+    """Seed 000's drift calibration: static gyro, every (temperature, wave angle) for 3 min."""
+    return _grid(temperatures_c, angles_deg, 0.0, duration_s, dt_out)
+
+
+def rotation_plan(
+    temperatures_c=SEED_TEMPERATURES,
+    angles_deg=SEED_ANGLES,
+    rate_dps: float = 5.0,
+    duration_s: float = 180.0,
+    dt_out: float = 0.5,
+) -> Plan:
+    """Seed 000's scale-factor calibration: rotation at 5 °/s from each grid point."""
+    return _grid(temperatures_c, angles_deg, rate_dps, duration_s, dt_out)
+
+
+def seed_plan(quick: bool = False) -> tuple[Plan, Plan]:
+    """The seed's static and 5 °/s plans; `quick` keeps 3 temperatures and 60-s runs."""
+    if quick:
+        temps, dur = (-40.0, 20.0, 60.0), 60.0
+        return static_plan(temps, duration_s=dur), rotation_plan(temps, duration_s=dur)
+    return static_plan(), rotation_plan()
+
+
+def run_plan(
+    gyro: Gyro,
+    plan: Plan,
+    *,
+    key: jax.Array | None = None,
+    bias_key: jax.Array | None = None,
+    model: str = "averaged",
+    first_run: int = 0,
+) -> MeasuredData:
+    """Simulate every point of `plan` in one `vmap` and return the data (one run per point,
+    numbered from `first_run`). All points share one switch-on (`bias_key`), as on a bench."""
+    profiles = plan.profiles()
+    ts = jnp.asarray(np.arange(int(round(plan.duration_s / plan.dt_out)) + 1) * plan.dt_out)
+    if gyro.noise is not None:
+        if key is None:
+            raise ValueError("this gyro has noise: pass key=jax.random.key(…)")
+        k_points, k_bias = jax.random.split(key)
+        bias_key = k_bias if bias_key is None else bias_key
+        keys = jax.random.split(k_points, plan.size)
+        rec = jax.vmap(
+            lambda p, k: simulate(gyro, p, model=model, key=k, bias_key=bias_key, ts=ts)
+        )(profiles, keys)
+    else:
+        rec = jax.vmap(lambda p: simulate(gyro, p, model=model, ts=ts))(profiles)
+    data = rec.to_data()
+    if first_run:
+        cols = data.columns
+        cols["run"] = cols["run"] + first_run
+        data = MeasuredData(cols)
+    return data
