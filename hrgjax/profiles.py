@@ -122,8 +122,31 @@ class Profile(eqx.Module):
         """Run length [s]."""
         return self.t[-1] - self.t[0]
 
+    def _segment(self, t):
+        """Index i of the segment [t_i, t_{i+1}] holding t and the fraction along it.
+
+        Two-knot profiles (constant rate, static, one ramp) need no search."""
+        n = self.t.shape[0]
+        if n == 2:
+            i = 0
+        else:
+            i = jnp.clip(jnp.searchsorted(self.t, t, side="right") - 1, 0, n - 2)
+        t0, t1 = self.t[i], self.t[i + 1]
+        return i, t0, t1 - t0
+
+    def sample(self, t):
+        """Rate [rad/s], its derivative [rad/s²], temperature [°C] and specific force [g]
+        at time t [s], with one segment look-up (clamped outside the knots)."""
+        i, t0, length = self._segment(t)
+        frac = jnp.clip((t - t0) / length, 0.0, 1.0)
+        lerp = lambda v: v[i] + (v[i + 1] - v[i]) * frac
+        rate_dot = (self.rate[i + 1] - self.rate[i]) / length
+        return lerp(self.rate), rate_dot, lerp(self.temperature), lerp(self.accel)
+
     def _interp(self, t, values):
-        return jnp.interp(t, self.t, values)
+        i, t0, length = self._segment(t)
+        frac = jnp.clip((t - t0) / length, 0.0, 1.0)
+        return values[i] + (values[i + 1] - values[i]) * frac
 
     def rate_at(self, t):
         """Rate [rad/s] at time t [s]."""
@@ -135,17 +158,18 @@ class Profile(eqx.Module):
 
     def accel_at(self, t):
         """Specific force [g], shape (3,), at time t [s]."""
-        return jax.vmap(lambda col: self._interp(t, col), in_axes=1)(self.accel)
+        return self._interp(t, self.accel)
 
     def rate_derivative_at(self, t):
         """Angular acceleration [rad/s²] at time t [s] (slope of the current segment)."""
-        i = jnp.clip(jnp.searchsorted(self.t, t, side="right") - 1, 0, self.t.shape[0] - 2)
-        return (self.rate[i + 1] - self.rate[i]) / (self.t[i + 1] - self.t[i])
+        i, _, length = self._segment(t)
+        return (self.rate[i + 1] - self.rate[i]) / length
 
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since t[0] [rad] (exact for the piecewise-linear rate)."""
         seg = 0.5 * (self.rate[1:] + self.rate[:-1]) * jnp.diff(self.t)
         cum = jnp.concatenate([jnp.zeros(1), jnp.cumsum(seg)])
-        i = jnp.clip(jnp.searchsorted(self.t, t, side="right") - 1, 0, self.t.shape[0] - 2)
-        dt = t - self.t[i]
-        return cum[i] + self.rate[i] * dt + 0.5 * self.rate_derivative_at(t) * dt**2
+        i, t0, length = self._segment(t)
+        dt = t - t0
+        slope = (self.rate[i + 1] - self.rate[i]) / length
+        return cum[i] + self.rate[i] * dt + 0.5 * slope * dt**2

@@ -41,6 +41,10 @@ def input_rate(gyro, profile, t):
     return profile.rate_at(t) + gyro.rate_bias + gyro.g_sensitivity @ profile.accel_at(t)
 
 
+def _input(gyro, rate, accel):
+    return rate + gyro.rate_bias + gyro.g_sensitivity @ accel
+
+
 def pattern_forces(u, v, phi, theta):
     """Pattern-frame force coefficients $(f_{ac}, f_{as}, f_{qc}, f_{qs})$ at the true phase
     ψ = ψ_r + φ from electrode-frame $\\mathbf u\\cos\\psi_r + \\mathbf v\\sin\\psi_r$."""
@@ -61,9 +65,10 @@ def measured_estimates(gyro, a, q, theta, phi):
 def averaged_vector_field(t, y, args):
     """Right-hand side of the averaged model; `args = (gyro, profile)`."""
     gyro, profile = args
-    g = gyro.at(profile.temperature_at(t))
+    rate, _, temperature, accel = profile.sample(t)
+    g = gyro.at(temperature)
     res, ctl = g.resonator, g.control
-    omega_in = input_rate(g, profile, t)
+    omega_in = _input(g, rate, accel)
     if ctl.ideal:
         d_theta = -res.k_e * omega_in + 0.5 * res.delta_inv_tau * jnp.sin(
             2 * (y[0] - res.theta_tau)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .averaged import input_rate
+from .averaged import _input, input_rate
 from .control import (
     drive_vectors,
     integrator_rates,
@@ -50,18 +50,22 @@ def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
 def full_vector_field(t, y, args):
     """Right-hand side of the full model; `args = (gyro, profile, omega_scale)`."""
     gyro, profile, omega_scale = args
-    g = gyro.at(profile.temperature_at(t))
+    rate, omega_dot, temperature, accel = profile.sample(t)
+    g = gyro.at(temperature)
     res, ctl = g.resonator, g.control
     z, zdot = y[0:2], y[2:4] * omega_scale
     psi_r = y[4]
-    omega_in = input_rate(g, profile, t)
-    est = full_estimates(g, y, omega_scale, omega_in)
-    loops = loop_outputs(ctl, res.omega, est, y[5:8])
-    u, v = drive_vectors(ctl, loops, est.theta)
-    force = u * jnp.cos(psi_r) + v * jnp.sin(psi_r)
-
-    omega_dot = profile.rate_derivative_at(t)
-    pump = res.omega**2 * loops.pump * jnp.cos(2 * psi_r + 2 * pump_phase(ctl))
+    omega_in = _input(g, rate, accel)
+    if ctl.enabled:
+        est = full_estimates(g, y, omega_scale, omega_in)
+        loops = loop_outputs(ctl, res.omega, est, y[5:8])
+        u, v = drive_vectors(ctl, loops, est.theta)
+        force = u * jnp.cos(psi_r) + v * jnp.sin(psi_r)
+        pump = res.omega**2 * loops.pump * jnp.cos(2 * psi_r + 2 * pump_phase(ctl))
+        d_int = integrator_rates(ctl, res.omega, est)
+        omega_r = loops.omega_r
+    else:
+        force, pump, d_int, omega_r = 0.0 * z, 0.0, jnp.zeros(3), res.omega
     zddot = (
         force
         - res.damping_matrix @ zdot
@@ -71,8 +75,7 @@ def full_vector_field(t, y, args):
         - res.chi * (z @ z) * z
         + pump * z
     )
-    d_int = integrator_rates(ctl, res.omega, est)
-    return jnp.concatenate([zdot, zddot / omega_scale, loops.omega_r[None], d_int])
+    return jnp.concatenate([zdot, zddot / omega_scale, jnp.reshape(omega_r, (1,)), d_int])
 
 
 def full_initial_state(gyro, profile, quadrature0=0.0):
