@@ -24,6 +24,7 @@ from .resonator.control import loop_outputs, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field
 
 MODELS = ("averaged", "full")
+AVERAGED_CHECKPOINTS = 256
 
 
 def _default_solver(model):
@@ -45,7 +46,9 @@ def output_times(profile: Profile, dt_out: float):
 
 
 @eqx.filter_jit
-def _solve(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0, fixed, quadrature0):
+def _solve(
+    model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0, fixed, quadrature0, adjoint
+):
     if model == "averaged":
         y0 = averaged_initial_state(gyro, profile, quadrature0)
         field, args = averaged_vector_field, (gyro, profile)
@@ -69,6 +72,7 @@ def _solve(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0, fixed, 
         saveat=diffrax.SaveAt(ts=ts),
         stepsize_controller=controller,
         max_steps=max_steps,
+        adjoint=adjoint,
         throw=True,
     )
     ys = eqx.error_if(sol.ys, ~jnp.all(jnp.isfinite(sol.ys)), "simulate: non-finite state")
@@ -132,6 +136,7 @@ def simulate(
     solver: diffrax.AbstractSolver | None = None,
     fixed_step: float | None = None,
     quadrature0: float = 0.0,
+    adjoint: diffrax.AbstractAdjoint | None = None,
     run: int = 0,
 ) -> Record:
     """Simulate a whole-angle HRG driven by a profile.
@@ -150,6 +155,9 @@ def simulate(
       full by default).
     - `fixed_step`: integrate with this constant step [s] instead of adaptive steps.
     - `quadrature0`: initial quadrature amplitude q₀ (readout units; a₀ is the AGC set point).
+    - `adjoint`: how reverse-mode gradients pass through the solve (default: recursive
+      checkpointing with 256 checkpoints for the averaged model, so memory stays bounded
+      and little is recomputed; diffrax's default for the full model).
     - `run`: integer run id written to the record.
 
     **Returns:** a [`hrgjax.Record`][].
@@ -186,6 +194,10 @@ def simulate(
     if max_steps is None:
         max_steps = 2**16 if model == "averaged" else 2**20
     solver = _default_solver(model) if solver is None else solver
+    if adjoint is None:
+        adjoint = diffrax.RecursiveCheckpointAdjoint(
+            checkpoints=AVERAGED_CHECKPOINTS if model == "averaged" else None
+        )
     dt0 = fixed_step if fixed_step is not None else (1e-2 if model == "averaged" else 1e-5)
     (est, true_theta, loops), _ = _solve(
         model,
@@ -199,6 +211,7 @@ def simulate(
         dt0,
         fixed_step is not None,
         jnp.asarray(quadrature0, dtype=float),
+        adjoint,
     )
 
     theta = est.theta
