@@ -24,6 +24,7 @@ lint: $(STAMP)
 
 docs: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[docs]"
+	$(BIN)/python docs/make_figures.py
 	$(BIN)/mkdocs build --strict --site-dir out/site
 
 bench: $(STAMP)

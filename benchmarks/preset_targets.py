@@ -33,8 +33,12 @@ def main():
 
     def ripple(T):
         duration = 200.0 / (K_E * 5.0)
-        rec = hg.simulate(gyro, hg.Profile.constant_rate(5.0, duration, T), key=jax.random.key(1),
-                          dt_out=duration / 400)
+        rec = hg.simulate(
+            gyro,
+            hg.Profile.constant_rate(5.0, duration, T),
+            key=jax.random.key(1),
+            dt_out=duration / 400,
+        )
         th, t = np.asarray(rec.wave_angle), np.asarray(rec.t)
         lin = np.polyval(np.polyfit(t, th, 1), t)
         m = np.stack([np.ones_like(t), t, np.sin(2 * lin), np.cos(2 * lin)], 1)

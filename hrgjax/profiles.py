@@ -166,7 +166,7 @@ class Profile(eqx.Module):
         return (self.rate[i + 1] - self.rate[i]) / length
 
     def table_angle_at(self, t):
-        """Table angle ∫Ω dt since t[0] [rad] (exact for the piecewise-linear rate)."""
+        """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""
         seg = 0.5 * (self.rate[1:] + self.rate[:-1]) * jnp.diff(self.t)
         cum = jnp.concatenate([jnp.zeros(1), jnp.cumsum(seg)])
         i, t0, length = self._segment(t)

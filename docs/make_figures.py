@@ -1,0 +1,83 @@
+"""Figures for the docs, written to docs/figures/ (git-ignored): `make docs` runs this first."""
+
+import os
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import matplotlib  # noqa: E402
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+import hrgjax as hg  # noqa: E402
+
+HERE = os.path.join(os.path.dirname(__file__), "figures")
+
+
+def full_vs_averaged():
+    res = hg.Resonator(
+        omega=2 * np.pi * 40,
+        tau=20.0,
+        delta_inv_tau=0.02,
+        theta_tau=0.3,
+        delta_omega=0.05,
+        theta_omega=-0.3,
+    )
+    gyro = hg.Gyro(res, readout=hg.Readout(gain_mismatch=0.005))
+    prof = hg.Profile.constant_rate(1.0, 20.0, wave_angle0_deg=10.0)
+    full = hg.simulate(gyro, prof, model="full", dt_out=0.05)
+    avg = hg.simulate(gyro, prof, model="averaged", dt_out=0.05)
+    fig, (a, b) = plt.subplots(2, 1, figsize=(7, 5), sharex=True, constrained_layout=True)
+    ideal = np.deg2rad(10.0) - 0.554 * np.asarray(full.table_angle)
+    a.plot(full.t, np.rad2deg(full.wave_angle - ideal), label="full (carrier resolved)")
+    a.plot(avg.t, np.rad2deg(avg.wave_angle - ideal), "--", label="averaged")
+    a.set_ylabel("wave angle − ideal [°]")
+    a.legend()
+    b.plot(full.t, np.rad2deg(full.wave_angle - avg.wave_angle) * 3600)
+    b.set_ylabel("full − averaged [″]")
+    b.set_xlabel("time [s]")
+    fig.savefig(os.path.join(HERE, "full_vs_averaged.png"), dpi=110)
+    plt.close(fig)
+
+
+def allan():
+    gyro = hg.presets.tvg3_like(temperature_laws=False)
+    rec = hg.simulate(gyro, hg.Profile.static(20000.0), key=jax.random.key(0), dt_out=1.0)
+    rate = -np.diff(np.asarray(rec.wave_angle)) / 0.554 / hg.units.DEG_PER_H
+    rate -= rate.mean()
+    taus, dev = hg.allan_deviation(rate, 1.0)
+    fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
+    ax.loglog(taus, dev, "o-")
+    ax.set_xlabel("τ [s]")
+    ax.set_ylabel("overlapping Allan deviation [°/h]")
+    ax.grid(which="both", alpha=0.3)
+    fig.savefig(os.path.join(HERE, "allan.png"), dpi=110)
+    plt.close(fig)
+
+
+def presets():
+    from hrgjax.calibration import scale_factor_vs_angle, seed_plan, static_drift
+    from hrgjax.plots import drift_and_scale_factor
+
+    gyro = hg.presets.tvg3_like()
+    static, rotation = seed_plan()
+    key = jax.random.key(0)
+    d = hg.calibration.run_plan(gyro, static, key=key)
+    r = hg.calibration.run_plan(gyro, rotation, key=jax.random.fold_in(key, 1))
+    drift_and_scale_factor(
+        static_drift(d),
+        scale_factor_vs_angle(r),
+        os.path.join(HERE, "tvg3_drift_sf.png"),
+        "tvg3_like()",
+    )
+
+
+if __name__ == "__main__":
+    os.makedirs(HERE, exist_ok=True)
+    full_vs_averaged()
+    allan()
+    presets()
+    print(f"wrote figures to {HERE}")
