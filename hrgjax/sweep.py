@@ -46,7 +46,9 @@ def sweep(fn, **grids):
         flat = {n: jnp.concatenate([v, jnp.repeat(v[-1:], pad)]) for n, v in flat.items()}
         sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
         flat = jax.device_put(flat, sharding)
-        out = jax.jit(call)(flat)
+        # No outer jit: fn may build profiles from concrete constants (their output grid must
+        # stay concrete); the compiled solves inside partition the sharded batch themselves.
+        out = call(flat)
         return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
     out = call(flat)
     return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), out)

@@ -1,0 +1,82 @@
+"""Convergence order of the full model against an exact solution, and sharded sweeps."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import diffrax
+import jax
+import numpy as np
+import pytest
+from helpers import OMEGA, resonator
+
+import hrgjax as hg
+from hrgjax.resonator.full import full_initial_state, full_vector_field
+
+
+def exact(t, z0, c):
+    """z = R(−ct) z₀ cos(ω′t), ω′ = √(ω² + c²), c = k_eΩ: exact for z̈ + 2cJż + ω²z = 0."""
+    wp = np.sqrt(OMEGA**2 + c**2)
+    a = -c * t
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    return rot @ z0 * np.cos(wp * t)
+
+
+def test_full_model_convergence_order():
+    rate = 30.0
+    gyro = hg.Gyro(resonator(tau=1e12), control=hg.Control.free())
+    prof = hg.Profile.constant_rate(rate, 0.5, wave_angle0_deg=25.0)
+    y0, scale = full_initial_state(gyro, prof)
+    t1 = 0.5
+    z_true = exact(t1, np.asarray(y0[:2]), 0.554 * np.deg2rad(rate))
+
+    @jax.jit
+    def solve(dt):
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(full_vector_field),
+            diffrax.Tsit5(),
+            0.0,
+            t1,
+            dt,
+            y0,
+            args=(gyro, prof, scale),
+            stepsize_controller=diffrax.ConstantStepSize(),
+            max_steps=100_000,
+        )
+        return sol.ys[-1, :2]
+
+    steps = np.array([1000, 1414, 2000, 2828, 4000])
+    errors = np.array([np.max(np.abs(np.asarray(solve(t1 / n)) - z_true)) for n in steps])
+    order = np.polyfit(np.log(t1 / steps), np.log(errors), 1)[0]
+    assert errors[-1] < 1e-6
+    assert order == pytest.approx(5.0, abs=0.3)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="uses XLA_FLAGS in a subprocess")
+def test_sweep_sharded_equals_single_device():
+    """With 4 forced CPU devices the sharded sweep equals the unsharded result exactly."""
+    code = textwrap.dedent(
+        """
+        import jax
+        jax.config.update("jax_enable_x64", True)
+        import jax.numpy as jnp, numpy as np
+        import hrgjax as hg
+        assert jax.device_count() == 4
+        gyro = hg.presets.tvg3_like(noise=False)
+        def f(temperature_c, rate_dps):
+            prof = hg.Profile.constant_rate(rate_dps, 5.0, temperature_c)
+            return hg.simulate(gyro, prof, dt_out=5.0).wave_angle[-1]
+        T, W = jnp.array([-40.0, 0.0, 60.0]), jnp.array([0.1, 5.0])
+        out = hg.sweep(f, temperature_c=T, rate_dps=W)
+        ref = jax.vmap(lambda t: jax.vmap(lambda w: f(t, w))(W))(T)
+        np.save(__import__("sys").argv[1], np.stack([np.asarray(out), np.asarray(ref)]))
+        """
+    )
+    out = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"sweep_{os.getpid()}.npy")
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    subprocess.run([sys.executable, "-c", code, out], check=True, env=env, timeout=300)
+    sharded, single = np.load(out)
+    os.remove(out)
+    assert sharded.shape == (3, 2)
+    np.testing.assert_array_equal(sharded, single)
