@@ -37,8 +37,8 @@ def main():
     fd = (fwd(up) - fwd(dn)) / (2 * h)
     rel = abs(float(g.delta_inv_tau) - float(fd)) / abs(float(fd))
     assert rel < 1e-3, rel
-    t_f = best_of(lambda: fwd(params), 5)
-    t_g = best_of(lambda: grad(params), 5)
+    t_f = best_of(lambda: fwd(params), 15)
+    t_g = best_of(lambda: grad(params), 15)
     print(f"machine: {machine()}")
     print(
         f"loss over {plan.size} rotation runs × 60 s (averaged model, loops closed); "
