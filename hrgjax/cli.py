@@ -57,6 +57,7 @@ def _run_plans(gyro, plans, seed: int):
 
 
 def cmd_simulate(args) -> int:
+    """`hrgjax simulate`: run a bench plan on a preset gyro and write the data."""
     _setup()
     from .calibration import rotation_plan, seed_plan, static_plan
 
@@ -75,6 +76,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_demo(args) -> int:
+    """`hrgjax demo`: the seed's static and 5 °/s plans on tvg3_like(), data and plot."""
     _setup()
     import numpy as np
 
@@ -104,6 +106,7 @@ def cmd_demo(args) -> int:
 
 
 def main(argv=None) -> int:
+    """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
     parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
 

@@ -108,6 +108,7 @@ class MeasuredData:
 
     @property
     def names(self) -> list[str]:
+        """Column names, in the order given."""
         return list(self._columns)
 
     def __len__(self) -> int:

@@ -54,4 +54,5 @@ class Gyro(eqx.Module):
 
     @property
     def k_e(self):
+        """The resonator's angular gain k_e (a temperature law if it has one)."""
         return self.resonator.k_e

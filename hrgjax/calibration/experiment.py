@@ -48,6 +48,7 @@ class Plan(eqx.Module):
 
     @property
     def size(self) -> int:
+        """Number of points (runs) in the plan."""
         return int(self.temperature_c.shape[0])
 
     def profiles(self) -> Profile:

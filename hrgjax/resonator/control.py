@@ -65,6 +65,7 @@ class Control(eqx.Module):
             raise ValueError(f"Control.drive must be one of {DRIVES}; got {self.drive!r}")
 
     def forcer_matrix(self):
+        """Forcer gain matrix diag(1 + g, 1 − g) applied to the electrode-frame force."""
         g = self.forcer_gain_mismatch
         return jnp.stack([jnp.stack([1.0 + g, 0.0 * g]), jnp.stack([0.0 * g, 1.0 - g])])
 
