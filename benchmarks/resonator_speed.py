@@ -59,33 +59,23 @@ def main():
     compile_s, rec = first_call(run)
     jax_s = best_of(run, 5)
 
-    from hrgjax.resonator.full import full_initial_state
-    from hrgjax.simulate import _solve
-
-    y0, _ = full_initial_state(gyro, prof)
     import diffrax
 
-    (_, _, _), steps = _solve(
-        "full", gyro, prof, ts, diffrax.Dopri8(), RTOL, ATOL, 2**20, 1e-5, False, np.float64(0.0)
+    from hrgjax.resonator.full import full_initial_state, full_vector_field
+
+    y0, scale = full_initial_state(gyro, prof)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(full_vector_field),
+        diffrax.Dopri8(),
+        0.0,
+        DURATION,
+        1e-5,
+        y0,
+        args=(gyro, prof, scale),
+        stepsize_controller=diffrax.PIDController(rtol=RTOL, atol=ATOL),
+        max_steps=2**20,
     )
-
-    def jax_final():
-        import jax
-
-        sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(hg.resonator.full.full_vector_field),
-            diffrax.Dopri8(),
-            0.0,
-            DURATION,
-            1e-5,
-            y0,
-            args=(gyro, prof, OMEGA),
-            stepsize_controller=diffrax.PIDController(rtol=RTOL, atol=ATOL),
-            max_steps=2**20,
-        )
-        return jax.numpy.asarray(sol.ys[-1])
-
-    y_jax = np.asarray(jax_final())
+    y_jax, steps = np.asarray(sol.ys[-1]), int(sol.stats["num_steps"])
     rhs = numpy_rhs()
     print(f"machine: {machine()}")
     print(
