@@ -52,6 +52,26 @@ def main():
     )
     assert np.isfinite(float(value))
 
+    import diffrax
+
+    print("other adjoints (gradient / forward):")
+    for name, adjoint, steps in [
+        ("RecursiveCheckpointAdjoint(16)", diffrax.RecursiveCheckpointAdjoint(16), None),
+        ("BacksolveAdjoint", diffrax.BacksolveAdjoint(), None),
+        ("DirectAdjoint (max_steps 1024)", diffrax.DirectAdjoint(), 1024),
+    ]:
+
+        def loss_a(params, adjoint=adjoint, steps=steps):
+            res = eqx.combine(params, static)
+            g = eqx.tree_at(lambda g: g.resonator, gyro, res)
+            sim = lambda p: hg.simulate(g, p, ts=ts, adjoint=adjoint, max_steps=steps)
+            return jnp.mean((jax.vmap(sim)(profiles).wave_angle - target) ** 2)
+
+        grad_a = jax.jit(jax.grad(loss_a))
+        jax.block_until_ready(grad_a(params))
+        ratio = best_of(lambda g=grad_a: g(params), 5) / t_f
+        print(f"  {name:32s} {ratio:.2f}×")
+
 
 if __name__ == "__main__":
     main()
