@@ -214,3 +214,19 @@ def eqx_set(prof, theta):
     import equinox as eqx
 
     return eqx.tree_at(lambda p: p.wave_angle0, prof, theta)
+
+
+def test_bias_and_acceleration_sensitivity_full_model():
+    """§10 `bias` and `acceleration_sensitivity` on the full model: θ̇ = −k_e(Ω + b + G·f)."""
+    import equinox as eqx
+
+    b, gz = 2e-3, 1e-3
+    gyro = eqx.tree_at(
+        lambda g: (g.rate_bias, g.g_sensitivity),
+        hg.Gyro(resonator(tau=1e9)),
+        (jnp.asarray(b), jnp.array([0.0, 0.0, gz])),
+    )
+    prof = hg.Profile.constant_rate(1.0, 4.0, wave_angle0_deg=15.0, accel_g=(0.3, 0.2, 0.5))
+    rec = sim(gyro, prof, dt_out=0.25)
+    expect = -0.554 * (np.deg2rad(1.0) + b + 0.5 * gz)
+    assert slope(rec.t, rec.wave_angle) == pytest.approx(expect, rel=1e-5)
