@@ -36,13 +36,14 @@ from .readout import estimate, from_pendulum
 N_STATE = 7
 
 
-def input_rate(gyro, profile, t):
-    """Equivalent input rate [rad/s]: table rate + rate bias + g-sensitivity · specific force."""
-    return profile.rate_at(t) + gyro.rate_bias + gyro.g_sensitivity @ profile.accel_at(t)
-
-
 def _input(gyro, rate, accel):
     return rate + gyro.rate_bias + gyro.g_sensitivity @ accel
+
+
+def input_rate(gyro, profile, t):
+    """Equivalent input rate [rad/s]: table rate + rate bias + g-sensitivity · specific force."""
+    rate, _, _, accel = profile.sample(t)
+    return _input(gyro, rate, accel)
 
 
 def pattern_forces(u, v, phi, theta):
