@@ -1,32 +1,217 @@
-"""Reduction of bench data to drift and scale factor per point."""
+r"""Reduction of bench data to rates per window: drift and scale factor per point.
+
+Every run is cut into windows (a static run is one window; a rotation run is cut into
+windows of `window_s`). In each window the wave-angle slope is fitted by least squares and
+turned into the **measured equivalent input rate** with the nominal angular gain:
+
+$$\Omega_{\rm meas} = -\frac{1}{k_{e,\rm nom}}\,\frac{d\theta_{\rm meas}}{dt}.$$
+
+Drift is $D = \Omega_{\rm meas} - \Omega_{\rm table}$ on static windows; the scale factor is
+$\mathrm{SF} = (\Omega_{\rm meas} - D(\theta, T))/\Omega_{\rm table}$ on rotation windows.
+
+Standard errors use **batch means**: the window is split into `batches` equal parts, the slope
+of each part is fitted, a linear trend over the parts is removed (a smooth change of the
+rate within the window is systematic, e.g. the scale-factor ripple while the pattern turns),
+and the error is the residual scatter over √batches. Noise that is
+correlated over less than a batch (white angle noise, angle random walk) is counted
+correctly; noise correlated over much longer (a Gauss–Markov bias with a 10-min correlation
+time) acts as a slowly varying offset and shows up as scatter between runs instead.
+"""
 
 from __future__ import annotations
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ..data import MeasuredData
+from ..presets import K_BRYAN
+
+K_E_NOMINAL = 2 * K_BRYAN
+"""Nominal angular gain k_e = 2K = 0.554 used to turn wave-angle rates into input rates."""
 
 
-def static_drift(data: MeasuredData, k_e: float = 0.554):
+def window_slopes(t, theta, n_windows: int, batches: int = 0):
+    r"""Least-squares slopes of `theta` over `n_windows` equal consecutive windows of samples.
+
+    Traceable (JAX arrays): the physical fit applies it to simulated angles exactly as
+    [`reduce`][hrgjax.calibration.reduce] applies it to measured ones.
+
+    **Arguments:**
+
+    - `t`, `theta`: shape (N,) sample times [s] and angles (any unit); N must be a multiple
+      of `n_windows`.
+    - `n_windows`: number of windows.
+    - `batches`: if ≥ 3, also return batch-means standard errors of each window's slope.
+
+    **Returns:** `(slope, t_mid, theta_mean)` each of shape (n_windows,), plus `stderr` when
+    `batches ≥ 3`.
+    """
+    return _window_stats(jnp, t, theta, n_windows, batches)
+
+
+def _window_stats(xp, t, theta, n_windows, batches):
+    n = t.shape[0] // n_windows
+    if n * n_windows != t.shape[0]:
+        raise ValueError(f"{t.shape[0]} samples do not split into {n_windows} equal windows")
+    tw = t.reshape(n_windows, n)
+    yw = theta.reshape(n_windows, n)
+    slope, tm, ym = _slope(xp, tw, yw)
+    if batches < 3:
+        return slope, tm, ym
+    nb = n // batches
+    tb = tw[:, : nb * batches].reshape(n_windows, batches, nb)
+    yb = yw[:, : nb * batches].reshape(n_windows, batches, nb)
+    sb, _, _ = _slope(xp, tb, yb)
+    # A smooth change of rate within the window (the scale-factor ripple as the pattern turns)
+    # is systematic, not noise: remove a linear trend over the batches before the scatter.
+    idx = xp.broadcast_to(xp.arange(batches, dtype=sb.dtype), sb.shape)
+    trend, _, mean = _slope(xp, idx, sb)
+    resid = sb - mean[..., None] - trend[..., None] * (idx - (batches - 1) / 2)
+    stderr = xp.sqrt(xp.sum(resid**2, axis=-1) / (batches - 2) / batches)
+    return slope, tm, ym, stderr
+
+
+def _slope(xp, t, y):
+    tm = xp.mean(t, axis=-1, keepdims=True)
+    ym = xp.mean(y, axis=-1, keepdims=True)
+    dt = t - tm
+    slope = xp.sum(dt * (y - ym), axis=-1) / xp.sum(dt * dt, axis=-1)
+    return slope, tm[..., 0], ym[..., 0]
+
+
+class RateWindows(eqx.Module):
+    """Reduced bench data: one entry per window (static run = one window).
+
+    All fields have shape (W,). Angles are electrical [°], rates [°/s], temperatures [°C].
+
+    - `run`: run id of the window; `start`, `stop`: sample index range in the run.
+    - `t_mid`: mean time of the window [s]; `duration`: its length [s].
+    - `temperature_c`, `table_rate_dps`: window means.
+    - `wave_angle_deg`: mean measured wave angle over the window.
+    - `rate_dps`: measured equivalent input rate −(dθ/dt)/k_e,nom.
+    - `stderr_dps`: batch-means standard error of `rate_dps`.
+    - `k_e`: the nominal angular gain used.
+    """
+
+    run: np.ndarray
+    start: np.ndarray
+    stop: np.ndarray
+    t_mid: np.ndarray
+    duration: np.ndarray
+    temperature_c: np.ndarray
+    table_rate_dps: np.ndarray
+    wave_angle_deg: np.ndarray
+    rate_dps: np.ndarray
+    stderr_dps: np.ndarray
+    k_e: float = eqx.field(static=True)
+
+    @property
+    def static(self) -> np.ndarray:
+        """Mask of windows with the table at rest."""
+        return self.table_rate_dps == 0.0
+
+    @property
+    def drift_dph(self) -> np.ndarray:
+        """Measured rate minus table rate [°/h] (the drift on static windows)."""
+        return (self.rate_dps - self.table_rate_dps) * 3600.0
+
+    def select(self, mask) -> RateWindows:
+        """The windows where `mask` is true."""
+        mask = np.asarray(mask, bool)
+        return jax.tree_util.tree_map(lambda x: np.asarray(x)[mask], self)
+
+    def __len__(self) -> int:
+        return int(np.asarray(self.run).shape[0])
+
+
+def _window_layout(r: MeasuredData, window_s: float | None) -> tuple[int, int]:
+    """(number of windows, samples per window) of one run; a static run is one window and
+    samples past the last whole window are left out of the windows (not of the data)."""
+    t = r["time_s"]
+    if len(t) < 4:
+        raise ValueError(
+            f"run {int(r.run[0])} has {len(t)} samples; reduction needs at least 4 per window"
+        )
+    if bool(np.all(r["table_rate_dps"] == 0.0)) or window_s is None:
+        return 1, len(t)
+    n = max(int(round(window_s / float(np.median(np.diff(t))))), 4)
+    n_win = len(t) // n
+    return (1, len(t)) if n_win == 0 else (n_win, n)
+
+
+def reduce(
+    data: MeasuredData,
+    k_e: float = K_E_NOMINAL,
+    window_s: float | None = 10.0,
+    batches: int = 5,
+) -> RateWindows:
+    """Reduce bench data to windows (see the module docstring).
+
+    **Arguments:**
+
+    - `data`: [`hrgjax.MeasuredData`][]; each run is either static (table rate 0 throughout)
+      or moving.
+    - `k_e`: nominal angular gain used for the conversion to input rate.
+    - `window_s`: window length for moving runs [s]; `None` keeps each run whole.
+    - `batches`: batch count for the standard errors (≥ 3).
+
+    **Returns:** [`RateWindows`][hrgjax.calibration.RateWindows].
+
+    **Raises:** `ValueError` for `k_e ≤ 0`, `batches < 3`, `window_s ≤ 0` or a run too short.
+    """
+    if not (np.isfinite(k_e) and k_e > 0):
+        raise ValueError(f"k_e must be a positive angular gain; got {k_e}")
+    if batches < 3:
+        raise ValueError(f"batches must be ≥ 3 for a standard error; got {batches}")
+    if window_s is not None and not window_s > 0:
+        raise ValueError(f"window_s must be a positive number of seconds or None; got {window_s}")
+    cols: dict[str, list] = {k: [] for k in RateWindows.__dataclass_fields__ if k != "k_e"}
+    for r in data.runs():
+        t, th = r["time_s"], r["wave_angle_deg"]
+        temp, rate = r["temperature_c"], r["table_rate_dps"]
+        n_win, n = _window_layout(r, window_s)
+        nb = min(batches, n // 2)
+        if nb < 3:
+            raise ValueError(f"run {int(r.run[0])}: windows of {n} samples are too short")
+        m = n_win * n
+        slope, tm, ym, se = _window_stats(np, t[:m], th[:m], n_win, nb)
+        starts = np.arange(n_win) * n
+        cols["run"].append(np.full(n_win, int(r.run[0])))
+        cols["start"].append(starts)
+        cols["stop"].append(starts + n)
+        cols["t_mid"].append(tm)
+        cols["duration"].append(t[starts + n - 1] - t[starts])
+        cols["temperature_c"].append(temp[:m].reshape(n_win, n).mean(axis=1))
+        cols["table_rate_dps"].append(rate[:m].reshape(n_win, n).mean(axis=1))
+        cols["wave_angle_deg"].append(ym)
+        cols["rate_dps"].append(-slope / k_e)
+        cols["stderr_dps"].append(se / k_e)
+    arrays = {k: np.concatenate(v) for k, v in cols.items()}
+    return RateWindows(**arrays, k_e=float(k_e))
+
+
+def static_drift(data: MeasuredData, k_e: float = K_E_NOMINAL):
     """Drift of each static run as equivalent input rate [°/h]: −(wave-angle slope)/k_e minus
     the table rate; with the run's temperature [°C] and mean wave angle [°].
 
-    **Returns:** dict of arrays `temperature_c`, `wave_angle_deg`, `drift_dph`, `run`.
+    **Returns:** dict of arrays `temperature_c`, `wave_angle_deg`, `drift_dph`,
+    `stderr_dph`, `run`.
     """
-    out = {"temperature_c": [], "wave_angle_deg": [], "drift_dph": [], "run": []}
-    for r in data.runs():
-        t, th = r["time_s"], r["wave_angle_deg"]
-        slope = np.polyfit(t - t.mean(), th, 1)[0]
-        rate = -slope / k_e - np.mean(r["table_rate_dps"])
-        out["drift_dph"].append(rate * 3600.0)
-        out["temperature_c"].append(np.mean(r["temperature_c"]))
-        out["wave_angle_deg"].append(np.mean(th))
-        out["run"].append(int(r.run[0]))
-    return {k: np.asarray(v) for k, v in out.items()}
+    w = reduce(data, k_e, window_s=None)
+    w = w.select(w.static)
+    return {
+        "temperature_c": w.temperature_c,
+        "wave_angle_deg": w.wave_angle_deg,
+        "drift_dph": w.drift_dph,
+        "stderr_dph": w.stderr_dps * 3600.0,
+        "run": w.run,
+    }
 
 
 def scale_factor_vs_angle(
-    data: MeasuredData, k_e: float = 0.554, window_s: float = 2.0, bin_deg: float = 10.0
+    data: MeasuredData, k_e: float = K_E_NOMINAL, window_s: float = 2.0, bin_deg: float = 10.0
 ):
     """Local scale factor of rotation runs vs wave angle (folded to [−90°, 90°)), binned.
 
@@ -66,4 +251,17 @@ def scale_factor_vs_angle(
     }
 
 
-__all__ = ["static_drift", "scale_factor_vs_angle"]
+def fold_angle(theta_deg):
+    """Fold an electrical wave angle [°] to [−90°, 90°) (the drift and SF period is 180°)."""
+    return (np.asarray(theta_deg) + 90.0) % 180.0 - 90.0
+
+
+__all__ = [
+    "K_E_NOMINAL",
+    "RateWindows",
+    "fold_angle",
+    "reduce",
+    "scale_factor_vs_angle",
+    "static_drift",
+    "window_slopes",
+]

@@ -1,0 +1,148 @@
+r"""The interface every compensator implements, and the correction it implies.
+
+A compensator models what the gyro reports when it is not told the truth, as functions of the
+measured electrical wave angle θ and temperature T:
+
+- the drift $D(\theta, T)$: measured equivalent input rate at rest [rad/s];
+- the scale factor $\mathrm{SF}(\theta, T)$: measured over true rate, drift removed.
+
+With the nominal angular gain $k_{e,\rm nom}$ the measured rate is
+$\Omega_{\rm meas} = -\dot\theta_{\rm meas}/k_{e,\rm nom} = \mathrm{SF}\,\Omega + D$, so the
+compensated rate is
+
+$$\hat\Omega = \frac{-\dot\theta_{\rm meas}/k_{e,\rm nom} - D(\theta,T)}{\mathrm{SF}(\theta,T)}.$$
+"""
+
+from __future__ import annotations
+
+import abc
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..data import MeasuredData
+from ..units import DEG
+from .reduce import RateWindows, reduce
+
+CORRECTED_COLUMNS = {
+    "rate_corrected_dps": "equivalent input rate after compensation [°/s]",
+    "angle_corrected_deg": "case rotation angle since the start of the run [°]",
+}
+"""Columns that `correct` adds to the data."""
+
+
+class AbstractCompensator(eqx.Module):
+    """Base class: subclasses give `drift` and `scale_factor`; correction is shared.
+
+    Subclasses also hold `k_e` (the nominal angular gain, static) and implement `fit`, which
+    returns a new fitted object.
+    """
+
+    k_e: eqx.AbstractVar[float]
+
+    @abc.abstractmethod
+    def drift(self, theta, temperature_c):
+        """Drift D(θ, T): equivalent input rate at rest [rad/s]; θ electrical [rad], T [°C]."""
+
+    @abc.abstractmethod
+    def scale_factor(self, theta, temperature_c):
+        """Scale factor SF(θ, T) (1 = nominal); θ electrical [rad], T [°C]."""
+
+    def corrected_rate(self, theta, theta_dot, temperature_c):
+        """Compensated equivalent input rate [rad/s] from the measured wave angle θ [rad],
+        its rate θ̇ [rad/s] and temperature [°C] (module docstring)."""
+        measured = -theta_dot / self.k_e
+        return (measured - self.drift(theta, temperature_c)) / self.scale_factor(
+            theta, temperature_c
+        )
+
+    def drift_dph(self, theta_deg, temperature_c) -> np.ndarray:
+        """`drift` in the bench's units: θ [°] in, drift [°/h] out (NumPy)."""
+        th = jnp.asarray(theta_deg, dtype=float) * DEG
+        tc = jnp.broadcast_to(jnp.asarray(temperature_c, dtype=float), th.shape)
+        out = jax.vmap(self.drift)(th.ravel(), tc.ravel()).reshape(th.shape)
+        return np.asarray(out) / DEG * 3600.0
+
+    def scale_factor_at(self, theta_deg, temperature_c) -> np.ndarray:
+        """`scale_factor` with θ in degrees (NumPy)."""
+        th = jnp.asarray(theta_deg, dtype=float) * DEG
+        tc = jnp.broadcast_to(jnp.asarray(temperature_c, dtype=float), th.shape)
+        return np.asarray(jax.vmap(self.scale_factor)(th.ravel(), tc.ravel())).reshape(th.shape)
+
+    def correct(self, data: MeasuredData) -> MeasuredData:
+        """Compensate every run of `data`.
+
+        Each sample interval gives θ̇ = Δθ/Δt at the mid-interval angle and temperature; the
+        compensated rate of the interval is integrated (exactly, as a sum) into
+        `angle_corrected_deg`, which starts at 0 in each run. `rate_corrected_dps` at a sample
+        is the mean of its neighbouring intervals (one-sided at the ends).
+
+        **Returns:** a new [`hrgjax.MeasuredData`][] with the input columns unchanged plus
+        `rate_corrected_dps` and `angle_corrected_deg`.
+
+        **Raises:** `ValueError` if the data already have those columns or a run has fewer than
+        two samples.
+        """
+        for name in CORRECTED_COLUMNS:
+            if name in data:
+                raise ValueError(f"data already has a {name!r} column; correct raw data")
+        rate_out = np.empty(len(data))
+        angle_out = np.empty(len(data))
+        for idx in data.run_indices():
+            if idx.size < 2:
+                raise ValueError(f"run {int(data.run[idx[0]])} has one sample; need ≥ 2")
+            t = data["time_s"][idx]
+            th = data["wave_angle_deg"][idx] * DEG
+            temp = data["temperature_c"][idx]
+            interval = np.asarray(
+                _interval_rates(self, jnp.asarray(t), jnp.asarray(th), jnp.asarray(temp))
+            )
+            dt = np.diff(t)
+            angle = np.concatenate([[0.0], np.cumsum(interval * dt)])
+            rate = np.empty(idx.size)
+            rate[0], rate[-1] = interval[0], interval[-1]
+            rate[1:-1] = 0.5 * (interval[1:] + interval[:-1])
+            rate_out[idx] = rate / DEG
+            angle_out[idx] = angle / DEG
+        cols = data.columns
+        cols["rate_corrected_dps"] = rate_out
+        cols["angle_corrected_deg"] = angle_out
+        return MeasuredData(cols, allow_extra=True)
+
+
+@eqx.filter_jit
+def _interval_rates(comp, t, theta, temperature):
+    dt = jnp.diff(t)
+    mid = 0.5 * (theta[1:] + theta[:-1])
+    tmid = 0.5 * (temperature[1:] + temperature[:-1])
+    return jax.vmap(comp.corrected_rate)(mid, jnp.diff(theta) / dt, tmid)
+
+
+def as_windows(data, k_e: float, window_s: float | None = 10.0) -> RateWindows:
+    """Accept bench data or already reduced windows (checked for the same k_e)."""
+    if isinstance(data, RateWindows):
+        if data.k_e != k_e:
+            raise ValueError(f"windows were reduced with k_e = {data.k_e}, compensator has {k_e}")
+        return data
+    if isinstance(data, MeasuredData):
+        return reduce(data, k_e, window_s=window_s)
+    raise TypeError(f"expected MeasuredData or RateWindows; got {type(data).__name__}")
+
+
+def split_targets(windows: RateWindows):
+    """Static and moving windows; a clear error when either kind is missing."""
+    static = windows.select(windows.static)
+    moving = windows.select(~windows.static)
+    if len(static) == 0:
+        raise ValueError(
+            "calibration data have no static runs (table_rate_dps = 0 throughout a run): "
+            "the drift cannot be fitted"
+        )
+    if len(moving) == 0:
+        raise ValueError(
+            "calibration data have no rotation runs (non-zero table_rate_dps): the scale "
+            "factor cannot be fitted; add rotation runs (e.g. calibration.rotation_plan)"
+        )
+    return static, moving

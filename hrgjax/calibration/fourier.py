@@ -1,0 +1,156 @@
+r"""`FourierCompensator`: the seed's base algorithm and its temperature-polynomial variant.
+
+$$D(\theta, T) = \sum_{k=0}^{K}\tau^k\Big[c_{k0} + \sum_{n=1}^{N} c_{k,2n-1}\cos 2n\theta
++ c_{k,2n}\sin 2n\theta\Big],\qquad \tau = (T - T_{\rm ref})/50\,°C,$$
+
+and SF(θ, T) in the same basis. Electrical θ: the harmonics 2nθ have period 180°/n. The seed's
+base algorithm is K = 0 fitted only on the points at the fit temperature (+20 °C); the
+variant with `temperature_degree=K ≥ 1` fits all temperatures by weighted linear least
+squares.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..units import DEG, T_REF_C
+from ._compensator import AbstractCompensator, as_windows, split_targets
+from .reduce import K_E_NOMINAL, RateWindows
+
+T_SCALE = 50.0
+"""Temperature scale of the polynomial basis [°C]."""
+
+
+def _angle_basis(theta, harmonics: int, xp=jnp):
+    cols = [xp.ones_like(theta)]
+    for n in range(1, harmonics + 1):
+        cols += [xp.cos(2 * n * theta), xp.sin(2 * n * theta)]
+    return xp.stack(cols, axis=-1)
+
+
+def _temperature_basis(temperature_c, degree: int, t_ref: float, xp=jnp):
+    x = (temperature_c - t_ref) / T_SCALE
+    return xp.stack([x**k for k in range(degree + 1)], axis=-1)
+
+
+class FourierCompensator(AbstractCompensator):
+    """Fourier series in wave angle, optionally polynomial in temperature.
+
+    **Arguments:**
+
+    - `harmonics`: N, number of 2nθ harmonics (2: terms in 2θ and 4θ).
+    - `temperature_degree`: K; `None` is the seed's base algorithm (no temperature
+      dependence, fitted at `fit_temperature_c` only).
+    - `fit_temperature_c`, `tolerance_c`: for the base algorithm, the points used are those
+      within `tolerance_c` of `fit_temperature_c` [°C].
+    - `k_e`: nominal angular gain.
+    - `drift_coef`, `sf_coef`: fitted coefficients, shape (K+1, 2N+1) (drift in rad/s);
+      `None` before `fit`.
+    """
+
+    harmonics: int = eqx.field(static=True, default=2)
+    temperature_degree: int | None = eqx.field(static=True, default=None)
+    fit_temperature_c: float = eqx.field(static=True, default=T_REF_C)
+    tolerance_c: float = eqx.field(static=True, default=1.0)
+    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    drift_coef: jax.Array | None = None
+    sf_coef: jax.Array | None = None
+
+    def __check_init__(self):
+        if self.harmonics < 1:
+            raise ValueError(f"harmonics must be ≥ 1; got {self.harmonics}")
+        if self.temperature_degree is not None and self.temperature_degree < 0:
+            raise ValueError(
+                f"temperature_degree must be None or ≥ 0; got {self.temperature_degree}"
+            )
+
+    @property
+    def _degree(self) -> int:
+        return 0 if self.temperature_degree is None else self.temperature_degree
+
+    @property
+    def name(self) -> str:
+        """Short label used in tables."""
+        if self.temperature_degree is None:
+            return f"Fourier @{self.fit_temperature_c:+.0f}°C"
+        return f"Fourier+T^{self.temperature_degree}"
+
+    def _basis(self, theta, temperature_c, xp=jnp):
+        a = _angle_basis(theta, self.harmonics, xp)
+        t = _temperature_basis(temperature_c, self._degree, self.fit_temperature_c, xp)
+        return (t[..., :, None] * a[..., None, :]).reshape(*a.shape[:-1], -1)
+
+    def _require_fitted(self, coef):
+        if coef is None:
+            raise ValueError("this FourierCompensator is not fitted; use comp = comp.fit(data)")
+
+    def drift(self, theta, temperature_c):
+        self._require_fitted(self.drift_coef)
+        return self._basis(theta, temperature_c) @ self.drift_coef.ravel()
+
+    def scale_factor(self, theta, temperature_c):
+        self._require_fitted(self.sf_coef)
+        return self._basis(theta, temperature_c) @ self.sf_coef.ravel()
+
+    def fit(self, data, window_s: float | None = 10.0) -> FourierCompensator:
+        """Fit drift on static windows, then SF on rotation windows with that drift removed.
+
+        **Arguments:**
+
+        - `data`: [`hrgjax.MeasuredData`][] or reduced
+          [`RateWindows`][hrgjax.calibration.RateWindows].
+        - `window_s`: rotation-run window for the reduction [s].
+
+        **Returns:** a new fitted `FourierCompensator`.
+
+        **Raises:** `ValueError` without static or rotation runs, with no points near the fit
+        temperature (base algorithm), or with fewer points than coefficients.
+        """
+        static, moving = split_targets(as_windows(data, self.k_e, window_s))
+        if self.temperature_degree is None:
+            static = _near(static, self.fit_temperature_c, self.tolerance_c, "static")
+            moving = _near(moving, self.fit_temperature_c, self.tolerance_c, "rotation")
+        th_s = static.wave_angle_deg * DEG
+        drift = (static.rate_dps - static.table_rate_dps) * DEG
+        d_coef = _lstsq(self._basis(th_s, static.temperature_c, np), drift, "drift")
+        fitted = eqx.tree_at(
+            lambda c: c.drift_coef,
+            self,
+            jnp.asarray(d_coef.reshape(self._degree + 1, -1)),
+            is_leaf=lambda x: x is None,
+        )
+        th_m = moving.wave_angle_deg * DEG
+        d_m = np.asarray(fitted.drift(jnp.asarray(th_m), jnp.asarray(moving.temperature_c)))
+        sf = (moving.rate_dps * DEG - d_m) / (moving.table_rate_dps * DEG)
+        s_coef = _lstsq(self._basis(th_m, moving.temperature_c, np), sf, "scale factor")
+        return eqx.tree_at(
+            lambda c: c.sf_coef,
+            fitted,
+            jnp.asarray(s_coef.reshape(self._degree + 1, -1)),
+            is_leaf=lambda x: x is None,
+        )
+
+
+def _near(w: RateWindows, temperature_c: float, tol: float, kind: str) -> RateWindows:
+    mask = np.abs(w.temperature_c - temperature_c) <= tol
+    if not np.any(mask):
+        raise ValueError(
+            f"no {kind} calibration points within {tol} °C of the fit temperature "
+            f"{temperature_c} °C (have {np.unique(np.round(w.temperature_c, 2))} °C)"
+        )
+    return w.select(mask)
+
+
+def _lstsq(basis, y, what: str):
+    """Ordinary least squares: the batch-means errors of single windows are too noisy to
+    weight by, and windows of one kind have equal length."""
+    if basis.shape[0] < basis.shape[1]:
+        raise ValueError(
+            f"{what}: {basis.shape[0]} calibration points for {basis.shape[1]} coefficients; "
+            "add points or lower harmonics / temperature_degree"
+        )
+    coef, *_ = np.linalg.lstsq(basis, y, rcond=None)
+    return coef

@@ -1,0 +1,330 @@
+r"""`MLPCompensator`: the seed's neural compensator (one hidden layer, Rprop).
+
+Two `eqx.nn.MLP`s with one tanh hidden layer, 30 neurons for the drift and 20 for the scale
+factor (MISSION.md §1), map (wave angle, temperature) to D and SF. Inputs and outputs are
+normalised; the angle enters either as the seed did (`encoding="angle"`: θ folded to
+[−90°, 90°) and scaled to [−1, 1)) or, by default, periodically (`encoding="periodic"`:
+cos 2θ, sin 2θ), which makes the 180° period exact and removes the seam at ±90°.
+
+Training is full-batch resilient backpropagation (`optax.rprop`) inside one `lax.scan`:
+
+- `mode="reduced"`: on the reduced targets (drift on static windows; then SF on rotation
+  windows with that drift removed), as in the seed;
+- `mode="end_to_end"`: starting from the reduced fit, both networks are trained on the
+  **angle error** of every run: the compensated rate is integrated with diffrax along the
+  recorded wave angle, and the loss is the error against the table angle at every window
+  edge; gradients flow through the solve (see [`end_to_end_loss`][hrgjax.calibration.mlp.end_to_end_loss]).
+"""
+
+from __future__ import annotations
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from ..data import MeasuredData
+from ..units import DEG
+from ._compensator import AbstractCompensator, as_windows, split_targets
+from .reduce import K_E_NOMINAL
+
+ENCODINGS = ("periodic", "angle")
+MODES = ("reduced", "end_to_end")
+
+
+class MLPCompensator(AbstractCompensator):
+    """Neural drift and scale-factor model (module docstring).
+
+    **Arguments:**
+
+    - `drift_width`, `sf_width`: hidden neurons (30 and 20 in the seed).
+    - `encoding`: `"periodic"` (cos 2θ, sin 2θ, T) or `"angle"` (folded θ, T; the seed's).
+    - `steps`: Rprop iterations for the reduced fit; `e2e_steps` for end-to-end training.
+    - `k_e`: nominal angular gain.
+    - `drift_net`, `sf_net`, and the normalisation (`t_centre`, `t_scale` [°C];
+      `drift_offset`, `drift_scale` [rad/s]; `sf_offset`, `sf_scale`): set by `fit`.
+    """
+
+    drift_width: int = eqx.field(static=True, default=30)
+    sf_width: int = eqx.field(static=True, default=20)
+    encoding: str = eqx.field(static=True, default="periodic")
+    steps: int = eqx.field(static=True, default=1000)
+    e2e_steps: int = eqx.field(static=True, default=200)
+    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    drift_net: eqx.nn.MLP | None = None
+    sf_net: eqx.nn.MLP | None = None
+    t_centre: jax.Array = eqx.field(converter=jnp.asarray, default=20.0)
+    t_scale: jax.Array = eqx.field(converter=jnp.asarray, default=50.0)
+    drift_offset: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
+    drift_scale: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
+    sf_offset: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
+    sf_scale: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
+
+    def __check_init__(self):
+        if self.encoding not in ENCODINGS:
+            raise ValueError(f"encoding must be one of {ENCODINGS}; got {self.encoding!r}")
+        if self.drift_width < 1 or self.sf_width < 1 or self.steps < 1:
+            raise ValueError("drift_width, sf_width and steps must be ≥ 1")
+
+    @property
+    def name(self) -> str:
+        """Short label used in tables."""
+        return "MLP"
+
+    @property
+    def in_size(self) -> int:
+        """Number of network inputs (3 periodic, 2 seed-style)."""
+        return 3 if self.encoding == "periodic" else 2
+
+    def features(self, theta, temperature_c):
+        """Normalised network input for one point: θ [rad, electrical], T [°C]."""
+        tn = (temperature_c - self.t_centre) / self.t_scale
+        if self.encoding == "periodic":
+            return jnp.stack([jnp.cos(2 * theta), jnp.sin(2 * theta), tn])
+        folded = (theta + jnp.pi / 2) % jnp.pi - jnp.pi / 2
+        return jnp.stack([folded / (jnp.pi / 2), tn])
+
+    def drift(self, theta, temperature_c):
+        if self.drift_net is None:
+            raise ValueError("this MLPCompensator is not fitted; use comp = comp.fit(data, key=…)")
+        x = self.features(theta, temperature_c)
+        return self.drift_offset + self.drift_scale * self.drift_net(x)
+
+    def scale_factor(self, theta, temperature_c):
+        if self.sf_net is None:
+            raise ValueError("this MLPCompensator is not fitted; use comp = comp.fit(data, key=…)")
+        x = self.features(theta, temperature_c)
+        return self.sf_offset + self.sf_scale * self.sf_net(x)
+
+    def init(self, key: jax.Array) -> MLPCompensator:
+        """Fresh untrained networks (weights from `key`)."""
+        kd, ks = jax.random.split(key)
+        make = lambda w, k: eqx.nn.MLP(self.in_size, "scalar", w, 1, jnp.tanh, key=k)
+        return eqx.tree_at(
+            lambda c: (c.drift_net, c.sf_net),
+            self,
+            (make(self.drift_width, kd), make(self.sf_width, ks)),
+            is_leaf=lambda x: x is None,
+        )
+
+    def fit(
+        self,
+        data,
+        *,
+        key: jax.Array,
+        mode: str = "reduced",
+        window_s: float | None = 10.0,
+        raw: MeasuredData | None = None,
+    ) -> MLPCompensator:
+        """Train both networks.
+
+        **Arguments:**
+
+        - `data`: [`hrgjax.MeasuredData`][] or [`RateWindows`][hrgjax.calibration.RateWindows]
+          (for `mode="end_to_end"` the raw samples are needed: pass `MeasuredData`, or the
+          windows plus `raw=`).
+        - `key`: PRNG key of the initial weights.
+        - `mode`: `"reduced"` or `"end_to_end"` (module docstring).
+        - `window_s`: rotation-run window of the reduction [s].
+
+        **Returns:** a new fitted `MLPCompensator`.
+        """
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
+        windows = as_windows(data, self.k_e, window_s)
+        static, moving = split_targets(windows)
+        comp = self.init(key)
+        temps = np.concatenate([static.temperature_c, moving.temperature_c])
+        comp = eqx.tree_at(
+            lambda c: (c.t_centre, c.t_scale),
+            comp,
+            (
+                jnp.asarray(0.5 * (temps.max() + temps.min())),
+                jnp.asarray(max(0.5 * (temps.max() - temps.min()), 1.0)),
+            ),
+        )
+        x_s = jax.vmap(comp.features)(
+            jnp.asarray(static.wave_angle_deg * DEG), jnp.asarray(static.temperature_c)
+        )
+        d = (static.rate_dps - static.table_rate_dps) * DEG
+        d_off, d_scale = float(np.mean(d)), float(max(np.std(d), 1e-12))
+        net = train_rprop(comp.drift_net, x_s, jnp.asarray((d - d_off) / d_scale), self.steps)
+        comp = eqx.tree_at(
+            lambda c: (c.drift_net, c.drift_offset, c.drift_scale),
+            comp,
+            (net, jnp.asarray(d_off), jnp.asarray(d_scale)),
+        )
+        th_m = jnp.asarray(moving.wave_angle_deg * DEG)
+        tc_m = jnp.asarray(moving.temperature_c)
+        d_m = np.asarray(jax.vmap(comp.drift)(th_m, tc_m))
+        sf = (moving.rate_dps * DEG - d_m) / (moving.table_rate_dps * DEG)
+        s_off, s_scale = float(np.mean(sf)), float(max(np.std(sf), 1e-12))
+        x_m = jax.vmap(comp.features)(th_m, tc_m)
+        net = train_rprop(comp.sf_net, x_m, jnp.asarray((sf - s_off) / s_scale), self.steps)
+        comp = eqx.tree_at(
+            lambda c: (c.sf_net, c.sf_offset, c.sf_scale),
+            comp,
+            (net, jnp.asarray(s_off), jnp.asarray(s_scale)),
+        )
+        if mode == "end_to_end":
+            samples = raw if raw is not None else data
+            if not isinstance(samples, MeasuredData):
+                raise ValueError("mode='end_to_end' needs the raw samples: pass raw=MeasuredData")
+            comp = train_end_to_end(comp, samples, window_s or 10.0, self.e2e_steps)
+        return comp
+
+
+@eqx.filter_jit
+def train_rprop(net, x, y, steps: int, learning_rate: float = 1e-2):
+    """Full-batch Rprop on the mean squared error of `net(x) − y`.
+
+    **Arguments:** `net` (a callable Module), `x` shape (n, d), `y` shape (n,), `steps`.
+
+    **Returns:** the trained network.
+    """
+    params, static = eqx.partition(net, eqx.is_inexact_array)
+    opt = optax.rprop(learning_rate)
+
+    def loss(p):
+        model = eqx.combine(p, static)
+        return jnp.mean((jax.vmap(model)(x) - y) ** 2)
+
+    def step(carry, _):
+        p, state = carry
+        grads = jax.grad(loss)(p)
+        updates, state = opt.update(grads, state, p)
+        return (optax.apply_updates(p, updates), state), None
+
+    (params, _), _ = jax.lax.scan(step, (params, opt.init(params)), None, length=steps)
+    return eqx.combine(params, static)
+
+
+class AngleRuns(eqx.Module):
+    """Runs of equal length stacked for end-to-end training (leading axis = run).
+
+    `t`, `theta` [rad], `temperature_c`, `table_angle` [rad]: shape (R, N); `checkpoints`:
+    sample indices (C,) where the angle error enters the loss; `weight`: (R,) per-run weight.
+    """
+
+    t: jax.Array
+    theta: jax.Array
+    temperature_c: jax.Array
+    table_angle: jax.Array
+    checkpoints: jax.Array
+    weight: jax.Array
+
+
+def _run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
+    groups: dict[tuple[int, bool], list] = {}
+    for r in data.runs():
+        static = bool(np.all(r["table_rate_dps"] == 0.0))
+        groups.setdefault((len(r), static), []).append(r)
+    out = []
+    for (n, _static), runs in sorted(groups.items()):
+        t = np.stack([r["time_s"] for r in runs])
+        dt = float(np.median(np.diff(t[0])))
+        step = max(int(round(window_s / dt)), 1)
+        cps = np.arange(step, n, step)
+        cps = cps if cps.size else np.array([n - 1])
+        table = np.stack([r.table_angle_deg for r in runs]) * DEG
+        out.append(
+            AngleRuns(
+                t=jnp.asarray(t),
+                theta=jnp.asarray(np.stack([r["wave_angle_deg"] for r in runs]) * DEG),
+                temperature_c=jnp.asarray(np.stack([r["temperature_c"] for r in runs])),
+                table_angle=jnp.asarray(table - table[:, :1]),
+                checkpoints=jnp.asarray(cps),
+                weight=jnp.ones(len(runs)),
+            )
+        )
+    return out
+
+
+def integrate_compensated(comp: AbstractCompensator, t, theta, temperature_c, ts):
+    r"""Case angle [rad] from the compensated rate, integrated with diffrax along the record.
+
+    The wave angle and temperature are linearly interpolated between samples
+    (`diffrax.LinearInterpolation`), so θ̇ is Δθ/Δt inside each sample interval; Heun's
+    method with steps on the sample grid then integrates
+    $\dot\psi = \hat\Omega(\theta(t), \dot\theta(t), T(t))$ exactly for piecewise-linear data
+    up to the curvature of $1/\mathrm{SF}$ and $D$ within an interval.
+
+    **Returns:** ψ at `ts` (ψ = 0 at t[0]).
+    """
+    path = diffrax.LinearInterpolation(ts=t, ys=jnp.stack([theta, temperature_c], axis=-1))
+
+    def field(s, psi, args):
+        th, tc = path.evaluate(s)
+        dth = path.derivative(s)[0]
+        return comp.corrected_rate(th, dth, tc)
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        diffrax.Heun(),
+        t0=t[0],
+        t1=t[-1],
+        dt0=None,
+        y0=jnp.zeros(()),
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.StepTo(ts=t),
+        max_steps=t.shape[0],
+        adjoint=diffrax.RecursiveCheckpointAdjoint(),
+    )
+    return sol.ys
+
+
+def end_to_end_loss(comp: AbstractCompensator, runs: AngleRuns):
+    """Mean squared angle error [rad²] at the checkpoints of every run, weighted by run."""
+
+    def one(t, th, tc, table, w):
+        psi = integrate_compensated(comp, t, th, tc, t[runs.checkpoints])
+        return w * jnp.mean((psi - table[runs.checkpoints]) ** 2)
+
+    return jnp.mean(
+        jax.vmap(one)(runs.t, runs.theta, runs.temperature_c, runs.table_angle, runs.weight)
+    )
+
+
+def train_end_to_end(
+    comp: MLPCompensator, data: MeasuredData, window_s: float, steps: int
+) -> MLPCompensator:
+    """Rprop on the summed end-to-end loss of all run groups, each normalised by its value at
+    the start (static and rotation runs then weigh alike)."""
+    groups = _run_groups(data, window_s)
+    scales = [float(end_to_end_loss(comp, g)) for g in groups]
+    scales = [s if s > 0 else 1.0 for s in scales]
+    return _e2e_scan(comp, groups, jnp.asarray(scales), steps)
+
+
+@eqx.filter_jit
+def _e2e_scan(comp, groups, scales, steps):
+    params, static = eqx.partition(comp, _trainable(comp))
+    opt = optax.rprop(1e-3)
+
+    def loss(p):
+        c = eqx.combine(p, static)
+        return sum(end_to_end_loss(c, g) / s for g, s in zip(groups, scales, strict=True))
+
+    def step(carry, _):
+        p, state = carry
+        grads = jax.grad(loss)(p)
+        updates, state = opt.update(grads, state, p)
+        return (optax.apply_updates(p, updates), state), None
+
+    (params, _), _ = jax.lax.scan(step, (params, opt.init(params)), None, length=steps)
+    return eqx.combine(params, static)
+
+
+def _trainable(comp):
+    """Filter spec: the network weights train, the normalisation stays."""
+    spec = jax.tree_util.tree_map(lambda _: False, comp)
+    return eqx.tree_at(
+        lambda c: (c.drift_net, c.sf_net),
+        spec,
+        (
+            jax.tree_util.tree_map(eqx.is_inexact_array, comp.drift_net),
+            jax.tree_util.tree_map(eqx.is_inexact_array, comp.sf_net),
+        ),
+    )

@@ -1,0 +1,411 @@
+r"""`PhysicalCompensator`: the grey box — resonator temperature laws fitted through the simulator.
+
+The model gyro is the averaged simulator with the loops closed ideally (amplitude held,
+quadrature nulled; PHYSICS.md §10) and these laws, ΔT = T − 20 °C:
+
+| parameter | law | fitted |
+|---|---|---|
+| angular gain | $k_e(T) = k_{e0}(1 + \kappa\,\Delta T)$ | $k_{e0}$, κ [1/°C] |
+| rate bias | $b_0 + b_1\Delta T + b_2\Delta T^2$ | [rad/s], [rad/s/°C], [rad/s/°C²] |
+| damping anisotropy | $\Delta(1/\tau)(T) = d_0\,e^{\lambda\Delta T}$ | $d_0$ [1/s], λ [1/°C] |
+| damping axis | $\theta_\tau(T) = \theta_{\tau0} + \theta_{\tau1}\Delta T$ | [rad], [rad/°C] (electrical) |
+| readout gain mismatch | $g(T) = g_0 + g_1\Delta T$ | [–], [1/°C] |
+| readout cross-talk | $c$ | [–] |
+
+`fit` simulates every calibration run (same times, rates, temperatures, measured initial
+angle) and reduces the simulated wave angle with the same window slopes as the measured one;
+Levenberg–Marquardt (`optimistix`) minimises the weighted rate residuals. Weights are the
+residual scatter of each kind of window (static, moving), re-estimated after a first pass;
+the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced χ².
+
+The compensator's D and SF follow from the fitted gyro itself: the readout map
+$\theta\mapsto\hat\theta$ is inverted at the measured angle, the rest-state pattern rate comes
+from the averaged vector field, and $\mathrm{SF} = (d\hat\theta/d\theta)\,k_e(T)/k_{e,\rm nom}$.
+"""
+
+from __future__ import annotations
+
+import math
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .._x64 import require_x64
+from ..data import MeasuredData
+from ..gyro import Gyro
+from ..profiles import Profile
+from ..resonator.averaged import averaged_vector_field, measured_estimates
+from ..resonator.control import Control
+from ..resonator.params import Resonator, TemperatureLaw
+from ..resonator.readout import Readout
+from ..simulate import simulate
+from ..units import DEG, DEG_PER_H, T_REF_C
+from ._compensator import AbstractCompensator, split_targets
+from .reduce import K_E_NOMINAL, _window_layout, reduce, window_slopes
+
+PARAMETERS = (
+    ("k_e0", "", 1e-4),
+    ("k_e_tc", "1/°C", 1e-6),
+    ("bias0", "rad/s", 0.01 * DEG_PER_H),
+    ("bias1", "rad/s/°C", 1e-4 * DEG_PER_H),
+    ("bias2", "rad/s/°C²", 1e-6 * DEG_PER_H),
+    ("delta_inv_tau0", "1/s", 0.01 * DEG_PER_H),
+    ("delta_inv_tau_lam", "1/°C", 1e-3),
+    ("theta_tau0", "rad", 1e-2),
+    ("theta_tau1", "rad/°C", 1e-4),
+    ("gain_mismatch0", "", 1e-5),
+    ("gain_mismatch1", "1/°C", 1e-7),
+    ("cross_talk", "", 1e-5),
+)
+"""Fitted parameters: (name, unit, typical uncertainty used to scale the LM problem)."""
+NAMES = tuple(p[0] for p in PARAMETERS)
+_SCALE = np.array([p[2] for p in PARAMETERS])
+
+
+def model_gyro(values, k_nominal: float = K_E_NOMINAL) -> Gyro:
+    """The ideal-loop model gyro of the parameter vector `values` (order of `PARAMETERS`)."""
+    v = {name: values[i] for i, name in enumerate(NAMES)}
+    law = lambda p0, p1=0.0, p2=0.0, lam=0.0: TemperatureLaw(p0, p1, p2, lam, T_REF_C)
+    res = Resonator(
+        omega=2 * math.pi * 5000.0,
+        tau=640.0,
+        k_e=law(v["k_e0"], v["k_e0"] * v["k_e_tc"]),
+        delta_inv_tau=law(v["delta_inv_tau0"], lam=v["delta_inv_tau_lam"]),
+        theta_tau=law(v["theta_tau0"], v["theta_tau1"]),
+    )
+    readout = Readout(
+        gain_mismatch=law(v["gain_mismatch0"], v["gain_mismatch1"]), cross_talk=v["cross_talk"]
+    )
+    return Gyro(
+        resonator=res,
+        control=Control(ideal=True),
+        readout=readout,
+        rate_bias=law(v["bias0"], v["bias1"], v["bias2"]),
+    )
+
+
+def _readout_angle(gyro_t: Gyro, theta):
+    a0 = gyro_t.control.amplitude
+    return measured_estimates(gyro_t, a0, 0.0 * a0, theta, 0.0 * a0).theta
+
+
+def true_angle(gyro_t: Gyro, theta_meas, iterations: int = 4):
+    """Invert the readout map at one temperature: θ with θ̂(θ) = `theta_meas` [rad]."""
+    theta = theta_meas
+    for _ in range(iterations):
+        theta = theta - (_readout_angle(gyro_t, theta) - theta_meas)
+    return theta
+
+
+class PhysicalCompensator(AbstractCompensator):
+    """Grey-box compensator (module docstring).
+
+    **Arguments:**
+
+    - `k_e`: nominal angular gain of the data reduction.
+    - `values`: fitted parameters in the order of
+      [`PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] (SI); `None` before `fit`.
+    - `covariance`: their covariance; `stats`: fit statistics as pairs (see `fit_stats`).
+    - `window_s`: rotation-run window [s]; `max_steps`: LM step limit.
+    """
+
+    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    window_s: float = eqx.field(static=True, default=10.0)
+    max_steps: int = eqx.field(static=True, default=64)
+    values: jax.Array | None = None
+    covariance: jax.Array | None = None
+    stats: tuple = eqx.field(static=True, default=())
+
+    @property
+    def fit_stats(self) -> dict:
+        """χ²/dof, residual RMS of static and moving windows [°/h], LM steps, window count."""
+        return dict(self.stats)
+
+    @property
+    def name(self) -> str:
+        """Short label used in tables."""
+        return "physical"
+
+    def gyro(self) -> Gyro:
+        """The fitted model gyro (ideal loops, fitted laws)."""
+        if self.values is None:
+            raise ValueError("this PhysicalCompensator is not fitted; use comp = comp.fit(data)")
+        return model_gyro(self.values, self.k_e)
+
+    def parameters(self) -> dict[str, tuple[float, float]]:
+        """{name: (value, standard error)} in SI units."""
+        err = np.sqrt(np.diag(np.asarray(self.covariance)))
+        return {
+            n: (float(v), float(e))
+            for n, v, e in zip(NAMES, np.asarray(self.values), err, strict=True)
+        }
+
+    def _derivatives(self, theta_meas, temperature_c):
+        g = self.gyro().at(temperature_c)
+        theta = true_angle(g, theta_meas)
+        slope = jax.jvp(lambda th: _readout_angle(g, th), (theta,), (jnp.ones_like(theta),))[1]
+        rest = Profile.static(1.0, temperature_c)
+        theta_dot = averaged_vector_field(0.0, theta[None], (g, rest))[0]
+        return slope, theta_dot, g.resonator.k_e
+
+    def drift(self, theta, temperature_c):
+        slope, theta_dot, _ = self._derivatives(theta, temperature_c)
+        return -slope * theta_dot / self.k_e
+
+    def scale_factor(self, theta, temperature_c):
+        slope, _, k_e = self._derivatives(theta, temperature_c)
+        return slope * k_e / self.k_e
+
+    def equations(self) -> str:
+        """The fitted laws with 1σ uncertainties, as text."""
+        p = self.parameters()
+        f = lambda n, s=1.0, fmt=".4g": f"{p[n][0] * s:{fmt}} ± {p[n][1] * s:.2g}"
+        lines = [
+            f"k_e(T)      = {f('k_e0', 1, '.6f')} · (1 + ({f('k_e_tc', 1e6)}) ppm/°C · ΔT)",
+            f"bias(T)     = {f('bias0', 1 / DEG_PER_H)} + ({f('bias1', 1 / DEG_PER_H)}) ΔT"
+            f" + ({f('bias2', 1 / DEG_PER_H)}) ΔT²   [°/h]",
+            f"Δ(1/τ)(T)   = {f('delta_inv_tau0')} 1/s · exp(({f('delta_inv_tau_lam')}) ΔT)",
+            f"θ_τ(T)      = {f('theta_tau0', 1 / DEG)}° + ({f('theta_tau1', 1 / DEG)})°/°C · ΔT",
+            f"g(T)        = {f('gain_mismatch0', 100)} % + ({f('gain_mismatch1', 100)}) %/°C · ΔT",
+            f"cross-talk  = {f('cross_talk', 100)} %",
+        ]
+        return "\n".join(lines)
+
+    def fit(self, data: MeasuredData, initial=None) -> PhysicalCompensator:
+        """Fit the laws to bench data by Levenberg–Marquardt through the averaged simulator.
+
+        **Arguments:**
+
+        - `data`: [`hrgjax.MeasuredData`][] with static and rotation runs (the raw samples
+          are needed: the simulator reproduces each run).
+        - `initial`: optional starting values (order of `PARAMETERS`); by default they come
+          from harmonic fits of the reduced drift and scale factor at each temperature.
+
+        **Returns:** a new fitted `PhysicalCompensator` (values, covariance, stats).
+
+        **Raises:** `RuntimeError` without float64; `ValueError` without static or rotation
+        runs.
+        """
+        require_x64("PhysicalCompensator.fit")
+        if not isinstance(data, MeasuredData):
+            raise TypeError("PhysicalCompensator.fit needs MeasuredData (the raw samples)")
+        windows = reduce(data, self.k_e, window_s=self.window_s)
+        split_targets(windows)
+        groups = _groups(data, self.window_s, self.k_e)
+        x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
+        # Weights: the residual scatter of each kind of window at the starting values (the
+        # harmonic start is close), re-estimated after the fit for the covariance.
+        res = _residual_by_kind(groups, x0, self.k_e)
+        sigma = {k: _robust_rms(r) for k, r in res.items()}
+        values, steps = _lm(groups, x0, sigma, self.k_e, self.max_steps)
+        res = _residual_by_kind(groups, values, self.k_e)
+        sigma = {k: float(np.sqrt(np.mean(r**2))) for k, r in res.items()}
+        jac = _jacobian(groups, values, sigma, self.k_e) * _SCALE
+        r = np.concatenate([res[k] / sigma[k] for k in (True, False)])
+        dof = max(r.size - len(NAMES), 1)
+        chi2 = float(r @ r) / dof
+        cov = np.linalg.inv(jac.T @ jac) * chi2 * np.outer(_SCALE, _SCALE)
+        stats = {
+            "chi2_per_dof": chi2,
+            "static_rms_dph": sigma[True] / DEG * 3600,
+            "moving_rms_dph": sigma[False] / DEG * 3600,
+            "lm_steps": int(steps),
+            "n_windows": int(r.size),
+        }
+        return PhysicalCompensator(
+            k_e=self.k_e,
+            window_s=self.window_s,
+            max_steps=self.max_steps,
+            values=jnp.asarray(values),
+            covariance=jnp.asarray(cov),
+            stats=tuple(stats.items()),
+        )
+
+
+class _Group(eqx.Module):
+    """Runs of one length and window layout, stacked for one vmap."""
+
+    t: jax.Array  # (R, N)
+    theta0: jax.Array  # (R,) measured initial angle [rad]
+    knots: jax.Array  # (K,) sample indices of the profile knots
+    rate: jax.Array  # (R, K) [rad/s]
+    temperature: jax.Array  # (R, K) [°C]
+    accel: jax.Array  # (R, K, 3) [g]
+    measured: jax.Array  # (R, W) window rates [rad/s]
+    n_windows: int = eqx.field(static=True)
+    static: bool = eqx.field(static=True)
+
+
+def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
+    buckets: dict[tuple, list] = {}
+    for r in data.runs():
+        n_win, n = _window_layout(r, window_s)
+        static = bool(np.all(r["table_rate_dps"] == 0.0))
+        buckets.setdefault((len(r), n_win, n, static), []).append(r)
+    out = []
+    for (length, n_win, n, static), runs in sorted(buckets.items()):
+        knots = np.unique(np.concatenate([np.arange(0, length, n), [length - 1]]))
+        m = n_win * n
+        t = np.stack([r["time_s"] for r in runs])
+        th = np.stack([r["wave_angle_deg"] for r in runs]) * DEG
+        slopes = np.stack(
+            [
+                window_slopes(jnp.asarray(a[:m]), jnp.asarray(b[:m]), n_win)[0]
+                for a, b in zip(t, th, strict=True)
+            ]
+        )
+        acc = np.zeros((len(runs), knots.size, 3))
+        for i, r in enumerate(runs):
+            for j, axis in enumerate("xyz"):
+                if f"accel_{axis}_g" in r:
+                    acc[i, :, j] = r[f"accel_{axis}_g"][knots]
+        out.append(
+            _Group(
+                t=jnp.asarray(t),
+                theta0=jnp.asarray(th[:, 0]),
+                knots=jnp.asarray(knots),
+                rate=jnp.asarray(np.stack([r["table_rate_dps"][knots] for r in runs]) * DEG),
+                temperature=jnp.asarray(np.stack([r["temperature_c"][knots] for r in runs])),
+                accel=jnp.asarray(acc),
+                measured=jnp.asarray(-slopes / k_e),
+                n_windows=n_win,
+                static=static,
+            )
+        )
+    return out
+
+
+def _simulated_rates(group: _Group, values, k_e: float):
+    gyro = model_gyro(values)
+    m = (group.t.shape[1] // group.n_windows) * group.n_windows
+
+    def one(t, theta0, rate, temp, acc):
+        theta_start = true_angle(gyro.at(temp[0]), theta0)
+        prof = Profile(
+            t=t[group.knots], rate=rate, temperature=temp, accel=acc, wave_angle0=theta_start
+        )
+        rec = simulate(gyro, prof, ts=t, adjoint=diffrax.ForwardMode(), rtol=1e-9, atol=1e-12)
+        slope = window_slopes(t[:m], rec.wave_angle[:m], group.n_windows)[0]
+        return -slope / k_e
+
+    return jax.vmap(one)(group.t, group.theta0, group.rate, group.temperature, group.accel)
+
+
+def _weighted_residual(x, args):
+    groups, x0, sigma, k_e = args
+    values = x0 + x * _SCALE
+    parts = [
+        ((g.measured - _simulated_rates(g, values, k_e)) / sigma[g.static]).ravel() for g in groups
+    ]
+    return jnp.concatenate(parts)
+
+
+@eqx.filter_jit
+def _lm_solve(groups, x0, sigma, k_e, max_steps):
+    # The problem is scaled so that one unit of x is about one standard error: stopping at
+    # 1e-4 of that is far below anything the data can tell.
+    solver = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4)
+    sol = optx.least_squares(
+        _weighted_residual,
+        solver,
+        jnp.zeros(len(NAMES)),
+        args=(groups, x0, sigma, k_e),
+        max_steps=max_steps,
+        throw=True,
+    )
+    return x0 + sol.value * _SCALE, sol.stats["num_steps"]
+
+
+def _lm(groups, x0, sigma, k_e, max_steps):
+    values, steps = _lm_solve(groups, jnp.asarray(x0), sigma, k_e, max_steps)
+    return np.asarray(values), int(steps)
+
+
+@eqx.filter_jit
+def _residual_jit(groups, values, k_e):
+    return [g.measured - _simulated_rates(g, values, k_e) for g in groups]
+
+
+def _robust_rms(r) -> float:
+    """RMS from the median absolute deviation (insensitive to a few outliers at the start)."""
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def _residual_by_kind(groups, values, k_e):
+    res = _residual_jit(groups, jnp.asarray(values), k_e)
+    out = {True: [], False: []}
+    for g, r in zip(groups, res, strict=True):
+        out[g.static].append(np.asarray(r).ravel())
+    return {k: np.concatenate(v) if v else np.zeros(0) for k, v in out.items()}
+
+
+@eqx.filter_jit
+def _jacobian_jit(groups, values, sigma, k_e):
+    zero = jnp.zeros(len(NAMES))
+    fn = lambda x: _weighted_residual(x, (groups, values, sigma, k_e))
+    return jax.jacfwd(fn)(zero) / jnp.asarray(_SCALE)
+
+
+def _jacobian(groups, values, sigma, k_e):
+    return np.asarray(_jacobian_jit(groups, jnp.asarray(values), sigma, k_e))
+
+
+def initial_values(windows, k_e: float = K_E_NOMINAL) -> np.ndarray:
+    """Starting values from per-temperature harmonic fits of reduced drift and SF."""
+    static, moving = split_targets(windows)
+    temps = np.unique(np.round(static.temperature_c, 6))
+    amp, phase, offset = [], [], []
+    for temp in temps:
+        m = np.abs(static.temperature_c - temp) < 1e-6
+        th = static.wave_angle_deg[m] * DEG
+        d = (static.rate_dps[m] - static.table_rate_dps[m]) * DEG
+        basis = np.stack([np.ones_like(th), np.cos(2 * th), np.sin(2 * th)], axis=1)
+        c0, c, s = np.linalg.lstsq(basis, d, rcond=None)[0]
+        amp.append(2 * k_e * math.hypot(c, s))
+        phase.append(0.5 * math.atan2(c, -s))
+        offset.append(c0)
+    dt = temps - T_REF_C
+    phase = 0.5 * np.unwrap(2 * np.asarray(phase))
+    deg = min(len(temps) - 1, 2)
+    bias = np.polyfit(dt, offset, deg)[::-1] if len(temps) > 1 else np.array([offset[0]])
+    bias = np.concatenate([bias, np.zeros(3 - bias.size)])
+    if len(temps) > 1:
+        lam, log_d0 = np.polyfit(dt, np.log(np.maximum(amp, 1e-30)), 1)
+        th1, th0 = np.polyfit(dt, phase, 1)
+    else:
+        lam, log_d0, th1, th0 = 0.0, math.log(max(amp[0], 1e-30)), 0.0, phase[0]
+    mt = np.unique(np.round(moving.temperature_c, 6))
+    s0, gains, cross = [], [], []
+    for temp in mt:
+        m = np.abs(moving.temperature_c - temp) < 1e-6
+        th = moving.wave_angle_deg[m] * DEG
+        sf = moving.rate_dps[m] / moving.table_rate_dps[m]
+        basis = np.stack([np.ones_like(th), np.cos(2 * th), np.sin(2 * th)], axis=1)
+        a0, ac, asn = np.linalg.lstsq(basis, sf, rcond=None)[0]
+        s0.append(a0)
+        gains.append(-ac / (2 * a0))
+        cross.append(-asn / (2 * a0))
+    dtm = mt - T_REF_C
+    if len(mt) > 1:
+        kt, k0 = np.polyfit(dtm, np.asarray(s0) * k_e, 1)
+        g1, g0 = np.polyfit(dtm, gains, 1)
+    else:
+        kt, k0, g1, g0 = 0.0, s0[0] * k_e, 0.0, gains[0]
+    return np.array(
+        [
+            k0,
+            kt / k0,
+            *(bias / k0 * k_e),
+            math.exp(log_d0),
+            lam,
+            th0,
+            th1,
+            g0,
+            g1,
+            float(np.mean(cross)),
+        ]
+    )
