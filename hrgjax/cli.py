@@ -11,10 +11,20 @@ PRESETS = ("tvg3", "ideal")
 
 
 def _setup():
+    """float64 on; JAX's persistent compilation cache in ~/.cache/hrgjax (set
+    HRGJAX_JAX_CACHE=0 to switch it off) so a second run does not compile again."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    if os.environ.get("HRGJAX_JAX_CACHE", "1") != "0":
+        base = os.environ.get("XDG_CACHE_HOME", os.path.join(os.path.expanduser("~"), ".cache"))
+        jax.config.update("jax_compilation_cache_dir", os.path.join(base, "hrgjax", "jax"))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     return jax
+
+
+def _say(t0):
+    return lambda msg: print(f"  [{time.perf_counter() - t0:6.1f} s] {msg}", flush=True)
 
 
 def _gyro(name: str, noise: bool = True):
@@ -31,7 +41,7 @@ def _run_plans(gyro, plans, seed: int):
     import jax
 
     from .calibration import run_plan
-    from .data import MeasuredData
+    from .data import concat
 
     key = jax.random.key(seed)
     bias_key = jax.random.fold_in(key, 1)
@@ -48,12 +58,7 @@ def _run_plans(gyro, plans, seed: int):
         )
         parts.append(data)
         first += plan.size
-    if len(parts) == 1:
-        return parts[0]
-    import numpy as np
-
-    cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0].names}
-    return MeasuredData(cols)
+    return parts[0] if len(parts) == 1 else concat(parts)
 
 
 def cmd_simulate(args) -> int:
@@ -76,32 +81,153 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """`hrgjax demo`: the seed's static and 5 °/s plans on tvg3_like(), data and plot."""
+    """`hrgjax demo`: seed 000's whole calibration study on tvg3_like()."""
+    _setup()
+    import jax
+
+    from .calibration import export_json, format_table, run_study, save_compensator
+    from .calibration.evaluate import SEED_TABLE
+    from .plots import compensation_residuals, drift_and_scale_factor, error_vs_temperature
+
+    os.makedirs(args.out, exist_ok=True)
+    mode = "quick" if args.quick else "full"
+    print(f"hrgjax demo ({mode}): seed 000's calibration study on the built-in TVG-3-like gyro")
+    t0 = time.perf_counter()
+    study = run_study(key=jax.random.key(args.seed), quick=args.quick, progress=_say(t0))
+    print()
+    print(format_table(study.table))
+    print("times [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in study.timings.items()))
+    phys = study.compensators.get("physical")
+    if phys is not None:
+        print("\nphysical fit (1σ):\n" + phys.equations())
+    written = [study.calibration.save(os.path.join(args.out, "calibration.csv"))]
+    from .calibration import scale_factor_vs_angle, static_drift
+
+    written.append(
+        drift_and_scale_factor(
+            static_drift(study.calibration),
+            scale_factor_vs_angle(study.calibration),
+            os.path.join(args.out, "drift_scale_factor.png"),
+            "hrgjax: tvg3_like() bench data",
+        )
+    )
+    written.append(
+        compensation_residuals(
+            study.windows,
+            study.compensators,
+            os.path.join(args.out, "drift_residuals.png"),
+            "static drift and what each compensator leaves",
+        )
+    )
+    written.append(
+        error_vs_temperature(
+            study.table, os.path.join(args.out, "error_vs_temperature.png"), SEED_TABLE
+        )
+    )
+    for label, comp in study.compensators.items():
+        if label == "raw":
+            continue
+        stem = os.path.join(args.out, "model_" + "".join(c if c.isalnum() else "_" for c in label))
+        written.append(save_compensator(comp, stem.rstrip("_") + ".eqx"))
+        written.append(export_json(comp, stem.rstrip("_") + ".json"))
+    print(f"\ntotal {time.perf_counter() - t0:.1f} s; wrote:")
+    for w in written:
+        print(f"  {w}")
+    return 0
+
+
+METHODS = ("fourier", "mlp", "physical")
+
+
+def _load_data(path, allow_extra):
+    import hrgjax as hg
+
+    try:
+        return hg.load(path, allow_extra=allow_extra)
+    except (OSError, ValueError) as err:
+        raise SystemExit(f"hrgjax: cannot read {path}: {err}") from None
+
+
+def cmd_calibrate(args) -> int:
+    """`hrgjax calibrate DATA --method …`: fit a compensator to bench data."""
+    _setup()
+    import jax
+    import numpy as np
+
+    from .calibration import (
+        FourierCompensator,
+        MLPCompensator,
+        PhysicalCompensator,
+        export_json,
+        reduce,
+        save_compensator,
+    )
+
+    data = _load_data(args.data, args.allow_extra)
+    t0 = time.perf_counter()
+    say = _say(t0)
+    windows = reduce(data, k_e=args.k_e, window_s=args.window)
+    n_static = len(np.unique(windows.run[windows.static]))
+    n_moving = len(np.unique(windows.run[~windows.static]))
+    temps = np.unique(np.round(windows.temperature_c, 2))
+    print(
+        f"hrgjax calibrate: {args.data}: {n_static} static and {n_moving} rotation runs, "
+        f"{len(windows)} windows, temperatures {temps.tolist()} °C"
+    )
+    try:
+        if args.method == "fourier":
+            degree = None if args.temperature_degree < 0 else args.temperature_degree
+            comp = FourierCompensator(
+                harmonics=args.harmonics, temperature_degree=degree, k_e=args.k_e
+            ).fit(windows)
+        elif args.method == "mlp":
+            say(f"training the MLP ({args.mode})")
+            comp = MLPCompensator(k_e=args.k_e).fit(
+                windows, key=jax.random.key(args.seed), mode=args.mode, raw=data
+            )
+        else:
+            say("fitting the physical model through the simulator (Levenberg–Marquardt)")
+            comp = PhysicalCompensator(k_e=args.k_e, window_s=args.window).fit(data)
+    except ValueError as err:
+        raise SystemExit(f"hrgjax calibrate: {err}") from None
+    say("fitted")
+    static = windows.select(windows.static)
+    resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c)
+    print("  in-sample drift residual RMS per temperature [°/h]:")
+    for T in np.unique(static.temperature_c):
+        r = resid[static.temperature_c == T]
+        print(f"    {T:+7.1f} °C  {np.sqrt(np.mean(r**2)):.4f}")
+    if args.method == "physical":
+        print(comp.equations())
+    out = save_compensator(comp, args.out)
+    js = export_json(comp, args.json or os.path.splitext(args.out)[0] + ".json")
+    print(f"wrote {out}\nwrote {js}")
+    return 0
+
+
+def cmd_correct(args) -> int:
+    """`hrgjax correct DATA --model model.eqx`: compensate data with a fitted compensator."""
     _setup()
     import numpy as np
 
-    from .calibration import scale_factor_vs_angle, seed_plan, static_drift
-    from .plots import drift_and_scale_factor
+    from .calibration import load_compensator, run_errors
 
-    os.makedirs(args.out, exist_ok=True)
-    print("hrgjax demo: seed 000 bench plans on the built-in TVG-3-like gyro")
-    gyro = _gyro("tvg3")
-    static, rotation = seed_plan(quick=args.quick)
-    static_data = _run_plans(gyro, [static], args.seed)
-    rotation_data = _run_plans(gyro, [rotation], args.seed + 1)
-    p1 = static_data.save(os.path.join(args.out, "static.csv"))
-    p2 = rotation_data.save(os.path.join(args.out, "rotation.csv"))
-    drift = static_drift(static_data)
-    sf = scale_factor_vs_angle(rotation_data)
-    png = drift_and_scale_factor(
-        drift, sf, os.path.join(args.out, "drift_scale_factor.png"), "hrgjax: tvg3_like()"
-    )
-    print("\n  temperature  drift p-p [°/h]  SF ripple [%]")
-    for T in np.unique(drift["temperature_c"]):
-        d = drift["drift_dph"][drift["temperature_c"] == T]
-        row = sf["scale_factor"][np.argmin(np.abs(sf["temperature_c"] - T))]
-        print(f"  {T:+8.0f} °C  {np.ptp(d):14.2f}  {50 * np.ptp(row):12.3f}")
-    print(f"\nwrote {p1}\nwrote {p2}\nwrote {png}")
+    data = _load_data(args.data, args.allow_extra)
+    try:
+        comp = load_compensator(args.model)
+        out = comp.correct(data)
+    except (OSError, ValueError) as err:
+        raise SystemExit(f"hrgjax correct: {err}") from None
+    e = run_errors(comp, data)
+    print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
+    if np.any(e["static"]):
+        d = e["drift_error_dph"][e["static"]]
+        print(f"  static runs: residual rate RMS {np.sqrt(np.mean(d**2)):.4f} °/h")
+    if np.any(~e["static"]):
+        a = e["angle_error_deg"][~e["static"]]
+        print(f"  moving runs: end-of-run angle error RMS {np.sqrt(np.mean(a**2)):.4f}°")
+    path = out.save(args.out)
+    print(f"wrote {len(out)} rows with rate_corrected_dps, angle_corrected_deg to {path}")
     return 0
 
 
@@ -112,9 +238,37 @@ def main(argv=None) -> int:
 
     p = sub.add_parser("demo", help="main job on the built-in gyro")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--quick", action="store_true", help="3 temperatures, 60-s runs")
+    p.add_argument("--quick", action="store_true", help="3 temperatures, short runs (< 1 min)")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("calibrate", help="fit a compensator to bench data (CSV or NetCDF)")
+    p.add_argument("data", help="data file in the MeasuredData contract")
+    p.add_argument("--method", default="fourier", choices=METHODS)
+    p.add_argument("--out", default="out/model.eqx", help="compensator file (.eqx)")
+    p.add_argument("--json", default=None, help="JSON export (default: beside --out)")
+    p.add_argument("--k-e", type=float, default=0.554, help="nominal angular gain k_e")
+    p.add_argument("--window", type=float, default=10.0, help="rotation-run window [s]")
+    p.add_argument(
+        "--mode", default="reduced", choices=("reduced", "end_to_end"), help="MLP training mode"
+    )
+    p.add_argument("--harmonics", type=int, default=2, help="Fourier harmonics of 2θ")
+    p.add_argument(
+        "--temperature-degree",
+        type=int,
+        default=-1,
+        help="Fourier: polynomial degree in T (-1 = seed's base algorithm at +20 °C)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed (MLP weights)")
+    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    p.set_defaults(func=cmd_calibrate)
+
+    p = sub.add_parser("correct", help="compensate data with a fitted compensator")
+    p.add_argument("data", help="data file in the MeasuredData contract")
+    p.add_argument("--model", required=True, help="compensator file from `calibrate` (.eqx)")
+    p.add_argument("--out", default="out/corrected.csv", help="output CSV or .nc")
+    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    p.set_defaults(func=cmd_correct)
 
     p = sub.add_parser("simulate", help="simulate a bench plan on a preset gyro")
     p.add_argument("--preset", default="tvg3", choices=PRESETS)

@@ -189,6 +189,29 @@ class MeasuredData:
         return cls({k: ds[k].values for k in ds.data_vars}, allow_extra=allow_extra)
 
 
+def concat(parts: list[MeasuredData]) -> MeasuredData:
+    """Stack datasets row-wise (e.g. a static and a rotation plan of one bench session).
+
+    **Raises:** `ValueError` if the parts have different columns or share a run id.
+    """
+    if not parts:
+        raise ValueError("concat needs at least one dataset")
+    names = parts[0].names
+    seen: set[int] = set()
+    for p in parts:
+        if p.names != names:
+            raise ValueError(f"cannot concat datasets with columns {names} and {p.names}")
+        ids = set(np.unique(p.run).tolist())
+        if ids & seen:
+            raise ValueError(
+                f"run ids {sorted(ids & seen)[:5]} occur in more than one part; "
+                "renumber them (e.g. run_plan(..., first_run=…))"
+            )
+        seen |= ids
+    cols = {k: np.concatenate([p[k] for p in parts]) for k in names}
+    return MeasuredData(cols, allow_extra=True)
+
+
 def _import_xarray():
     try:
         import xarray as xr

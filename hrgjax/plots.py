@@ -54,3 +54,85 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def compensation_residuals(windows, compensators: dict, path: str, title: str = "") -> str:
+    """Static drift vs wave angle per temperature (first panel) and what is left after each
+    compensator (one panel each); saves `path`.
+
+    **Arguments:** `windows`, the reduced calibration data
+    ([`RateWindows`][hrgjax.calibration.RateWindows]); `compensators`, {label: fitted
+    compensator}.
+    """
+    plt = _plt()
+    static = windows.select(windows.static)
+    labels = [k for k in compensators if k != "raw"]
+    fig, axes = plt.subplots(
+        1,
+        1 + len(labels),
+        figsize=(3.4 * (1 + len(labels)), 3.6),
+        constrained_layout=True,
+        sharex=True,
+    )
+    temps = np.unique(static.temperature_c)
+    cmap = plt.get_cmap("coolwarm")
+    norm = lambda T: (T - temps.min()) / max(np.ptp(temps), 1e-9)
+    panels = [("measured drift", None)] + [(lab, compensators[lab]) for lab in labels]
+    for ax, (name, comp) in zip(np.atleast_1d(axes), panels, strict=True):
+        for T in temps:
+            m = static.temperature_c == T
+            ang = static.wave_angle_deg[m]
+            y = static.drift_dph[m]
+            if comp is not None:
+                y = y - comp.drift_dph(ang, T)
+            order = np.argsort(ang)
+            ax.plot(
+                ang[order], y[order], "o-", ms=2, lw=1, color=cmap(norm(T)), label=f"{T:+.0f} °C"
+            )
+        ax.set_title(name if comp is None else f"residual: {name}", fontsize=9)
+        ax.set_xlabel("wave angle [° el.]")
+        ax.grid(alpha=0.3)
+    np.atleast_1d(axes)[0].set_ylabel("drift [°/h]")
+    np.atleast_1d(axes)[0].legend(fontsize=6, ncol=2)
+    if title:
+        fig.suptitle(title)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def error_vs_temperature(table: dict, path: str, seed: dict | None = None) -> str:
+    """Test errors vs temperature per method (log scale), seed 000's figures as stars.
+
+    `table` is [`accuracy_table`][hrgjax.calibration.accuracy_table]'s output; `seed` its
+    `SEED_TABLE`."""
+    plt = _plt()
+    keys = [
+        ("static_drift_dph", "static drift error [°/h]"),
+        ("angle_error_deg", "angle error after the 5 °/s run [°]"),
+        ("max_angle_error_deg", "largest angle error during the run [°]"),
+    ]
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4), constrained_layout=True)
+    for ax, (key, ylabel) in zip(axes, keys, strict=True):
+        for label, rows in table.items():
+            temps = sorted(rows[key])
+            ax.semilogy(temps, [rows[key][t] for t in temps], "o-", ms=3, label=label)
+        if seed and key in seed:
+            for i, (name, marker) in enumerate((("seed Fourier", "*"), ("seed MLP", "P"))):
+                pts = seed[key]
+                ax.semilogy(
+                    list(pts),
+                    [v[i] for v in pts.values()],
+                    marker,
+                    ms=11,
+                    ls="none",
+                    color="k",
+                    label=name,
+                )
+        ax.set_xlabel("temperature [°C]")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=7)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

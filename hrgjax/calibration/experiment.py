@@ -58,6 +58,15 @@ class Plan(eqx.Module):
 
 
 def _grid(temps, angles, rate, duration, dt_out):
+    for name, values, unit in (("temperatures_c", temps, "°C"), ("angles_deg", angles, "°")):
+        arr = np.asarray(values, float).ravel()
+        if arr.size == 0:
+            raise ValueError(f"plan {name} is empty; give at least one value [{unit}]")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"plan {name} must be finite [{unit}]; got {arr.tolist()}")
+        uniq, counts = np.unique(arr, return_counts=True)
+        if np.any(counts > 1):
+            raise ValueError(f"plan {name} has duplicates {uniq[counts > 1].tolist()} [{unit}]")
     tt, aa = np.meshgrid(np.asarray(temps, float), np.asarray(angles, float), indexing="ij")
     return Plan(
         temperature_c=jnp.asarray(tt.ravel()),
@@ -95,6 +104,27 @@ def seed_plan(quick: bool = False) -> tuple[Plan, Plan]:
         temps, dur = (-40.0, 20.0, 60.0), 60.0
         return static_plan(temps, duration_s=dur), rotation_plan(temps, duration_s=dur)
     return static_plan(), rotation_plan()
+
+
+TEST_ANGLES = tuple(float(a) for a in range(-90, 91, 5))
+"""Test grid of the seed: wave angle −90…+90° in 5° steps."""
+
+
+def test_plan(quick: bool = False, rate_dps: float = 5.0) -> tuple[Plan, Plan]:
+    """The seed's test grid: static and 5 °/s runs at 5° steps, 5 min per point.
+
+    `quick` keeps −40, +20, +60 °C, 15° steps and 2-min runs."""
+    if quick:
+        temps, angles, dur = (-40.0, 20.0, 60.0), tuple(range(-90, 91, 15)), 120.0
+    else:
+        temps, angles, dur = SEED_TEMPERATURES, TEST_ANGLES, 300.0
+    return (
+        static_plan(temps, angles, duration_s=dur),
+        rotation_plan(temps, angles, rate_dps=rate_dps, duration_s=dur),
+    )
+
+
+test_plan.__test__ = False  # not a pytest test
 
 
 def run_plan(

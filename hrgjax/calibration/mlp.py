@@ -222,11 +222,12 @@ def _run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
         static = bool(np.all(r["table_rate_dps"] == 0.0))
         groups.setdefault((len(r), static), []).append(r)
     out = []
-    for (n, _static), runs in sorted(groups.items()):
+    for (n, static), runs in sorted(groups.items()):
         t = np.stack([r["time_s"] for r in runs])
         dt = float(np.median(np.diff(t[0])))
         step = max(int(round(window_s / dt)), 1)
-        cps = np.arange(step, n, step)
+        # As in the reduction: a static run is one window, a moving run is cut into windows.
+        cps = np.arange(step, n, step) if not static else np.array([n - 1])
         cps = cps if cps.size else np.array([n - 1])
         table = np.stack([r.table_angle_deg for r in runs]) * DEG
         out.append(
@@ -276,11 +277,20 @@ def integrate_compensated(comp: AbstractCompensator, t, theta, temperature_c, ts
 
 
 def end_to_end_loss(comp: AbstractCompensator, runs: AngleRuns):
-    """Mean squared angle error [rad²] at the checkpoints of every run, weighted by run."""
+    r"""Mean squared angle error [rad²] over the windows between checkpoints, weighted by run.
+
+    For each run the compensated case angle ψ(t) is integrated through diffrax
+    ([`integrate_compensated`][hrgjax.calibration.mlp.integrate_compensated]); the error of a
+    window is (ψ(t_{k+1}) − ψ(t_k)) − (A(t_{k+1}) − A(t_k)), A the table angle. Window
+    increments, not the accumulated angle, keep the noise of different windows independent
+    (the accumulated angle error is a random walk that would weight early windows more).
+    """
+    cps = jnp.concatenate([jnp.zeros(1, dtype=runs.checkpoints.dtype), runs.checkpoints])
 
     def one(t, th, tc, table, w):
-        psi = integrate_compensated(comp, t, th, tc, t[runs.checkpoints])
-        return w * jnp.mean((psi - table[runs.checkpoints]) ** 2)
+        psi = integrate_compensated(comp, t, th, tc, t[cps])
+        err = jnp.diff(psi) - jnp.diff(table[cps])
+        return w * jnp.mean(err**2)
 
     return jnp.mean(
         jax.vmap(one)(runs.t, runs.theta, runs.temperature_c, runs.table_angle, runs.weight)

@@ -1,0 +1,149 @@
+r"""Accuracy tables of seed 000 (MISSION.md §1), computed on a test grid.
+
+How each figure is computed (state of the art is to say it exactly):
+
+- **Static drift error** at a temperature: for every static test run, the compensated case
+  angle after the run divided by its duration is the run's mean residual rate [°/h] (the
+  table is at rest, so any rate is error). The figure is the RMS of these over the test
+  wave angles at that temperature.
+- **Angle error after rotation**: for every rotation test run (5 °/s for 5 min), the
+  compensated case angle at the end minus the table angle turned [°]. The figure is the RMS
+  over the test wave angles at that temperature.
+- **Largest angle error during rotation** (ours, not in the seed): the largest
+  |compensated − table| angle over the whole run, RMS over the test wave angles. The end-of-run
+  error averages the 180°-periodic errors over whole turns of the pattern; this one does not.
+
+"Raw" applies no compensation: the nominal angular gain k_e,nom only.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..data import MeasuredData
+from ._compensator import AbstractCompensator
+from .reduce import K_E_NOMINAL
+
+SEED_TABLE = {
+    "static_drift_dph": {-40.0: (1.28, 0.054), 60.0: (0.51, 0.043)},
+    "angle_error_deg": {-40.0: (1.4, 0.06), 60.0: (0.7, 0.07)},
+}
+"""Seed 000's figures, (Fourier base algorithm, neural network), by temperature [°C]."""
+
+
+class NoCompensation(AbstractCompensator):
+    """The raw gyro: D = 0, SF = 1 (only the nominal angular gain)."""
+
+    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+
+    @property
+    def name(self) -> str:
+        """Short label used in tables."""
+        return "raw"
+
+    def drift(self, theta, temperature_c):
+        return jnp.zeros_like(theta)
+
+    def scale_factor(self, theta, temperature_c):
+        return jnp.ones_like(theta)
+
+
+def run_errors(comp: AbstractCompensator, data: MeasuredData):
+    """Per-run errors of a compensator on test data.
+
+    **Returns:** dict of arrays, one entry per run: `run`, `temperature_c`,
+    `wave_angle0_deg`, `static` (bool), `drift_error_dph` (static runs; NaN otherwise),
+    `angle_error_deg` and `max_angle_error_deg` (moving runs; NaN otherwise).
+    """
+    out = comp.correct(data)
+    rows = {k: [] for k in ("run", "temperature_c", "wave_angle0_deg", "static")}
+    rows["drift_error_dph"], rows["angle_error_deg"], rows["max_angle_error_deg"] = [], [], []
+    table = data.table_angle_deg
+    for idx in data.run_indices():
+        t = data["time_s"][idx]
+        static = bool(np.all(data["table_rate_dps"][idx] == 0.0))
+        angle = out["angle_corrected_deg"][idx]
+        turned = table[idx][-1] - table[idx][0]
+        rows["run"].append(int(data.run[idx[0]]))
+        rows["temperature_c"].append(float(np.mean(data["temperature_c"][idx])))
+        rows["wave_angle0_deg"].append(float(data["wave_angle_deg"][idx[0]]))
+        rows["static"].append(static)
+        duration = t[-1] - t[0]
+        rows["drift_error_dph"].append(angle[-1] / duration * 3600.0 if static else np.nan)
+        rows["angle_error_deg"].append(np.nan if static else angle[-1] - turned)
+        track = np.max(np.abs(angle - (table[idx] - table[idx][0])))
+        rows["max_angle_error_deg"].append(np.nan if static else track)
+    return {k: np.asarray(v) for k, v in rows.items()}
+
+
+def _rms_by_temperature(temps, values, at):
+    out = {}
+    for temp in at:
+        m = np.isclose(temps, temp) & np.isfinite(values)
+        out[float(temp)] = float(np.sqrt(np.mean(values[m] ** 2))) if np.any(m) else np.nan
+    return out
+
+
+def accuracy_table(
+    compensators: dict[str, AbstractCompensator],
+    data: MeasuredData,
+    temperatures_c=None,
+):
+    """The seed's accuracy table for several compensators.
+
+    **Arguments:**
+
+    - `compensators`: {label: fitted compensator}.
+    - `data`: test data with static and/or rotation runs.
+    - `temperatures_c`: temperatures to tabulate (default: all in the data).
+
+    **Returns:** {label: {"static_drift_dph": {T: RMS}, "angle_error_deg": {T: RMS},
+    "max_angle_error_deg": {T: RMS}}} (module docstring for the definitions).
+    """
+    if temperatures_c is None:
+        temperatures_c = np.unique(np.round(data["temperature_c"], 6))
+    table = {}
+    for label, comp in compensators.items():
+        e = run_errors(comp, data)
+        table[label] = {
+            "static_drift_dph": _rms_by_temperature(
+                e["temperature_c"], e["drift_error_dph"], temperatures_c
+            ),
+            "angle_error_deg": _rms_by_temperature(
+                e["temperature_c"], e["angle_error_deg"], temperatures_c
+            ),
+            "max_angle_error_deg": _rms_by_temperature(
+                e["temperature_c"], e["max_angle_error_deg"], temperatures_c
+            ),
+        }
+    return table
+
+
+def format_table(table, temperatures_c=(-40.0, 20.0, 60.0)) -> str:
+    """Text table of [`accuracy_table`][hrgjax.calibration.accuracy_table] with seed 000's
+    figures beside ours."""
+    labels = list(table)
+    lines = []
+    for key, title, unit in (
+        ("static_drift_dph", "static drift error, RMS over test angles", "°/h"),
+        ("angle_error_deg", "angle error at the end of the 5 °/s runs, RMS over test angles", "°"),
+        ("max_angle_error_deg", "largest angle error during the 5 °/s runs (ours)", "°"),
+    ):
+        lines.append(f"{title} [{unit}]")
+        head = f"{'T [°C]':>7} " + " ".join(f"{lab:>14}" for lab in labels)
+        head += f" {'seed Fourier':>13} {'seed MLP':>9}"
+        lines.append(head)
+        for temp in temperatures_c:
+            row = f"{temp:>7.0f} " + " ".join(
+                f"{table[lab][key].get(float(temp), np.nan):>14.4g}" for lab in labels
+            )
+            seed = SEED_TABLE.get(key, {}).get(float(temp))
+            if seed:
+                row += f" {seed[0]:>13.3g} {seed[1]:>9.3g}"
+            elif key in SEED_TABLE:
+                row += f" {'≈ equal':>13}"
+            lines.append(row)
+        lines.append("")
+    return "\n".join(lines)

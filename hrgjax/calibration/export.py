@@ -1,0 +1,213 @@
+"""Saving compensators: `.eqx` (equinox serialisation) and a plain JSON for embedded code.
+
+`.eqx` files start with one JSON line (class and hyperparameters, enough to rebuild the
+skeleton) followed by `eqx.tree_serialise_leaves` of the fitted module.
+
+The JSON export lists every number a C program needs, in SI units, with the formula in
+words; [`load_json`][hrgjax.calibration.load_json] rebuilds the same compensator from it (the
+round trip is tested).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .evaluate import NoCompensation
+from .fourier import T_SCALE, FourierCompensator
+from .mlp import MLPCompensator
+from .physical import NAMES, PhysicalCompensator
+
+FORMAT_VERSION = 1
+_CLASSES = {
+    c.__name__: c for c in (FourierCompensator, MLPCompensator, PhysicalCompensator, NoCompensation)
+}
+
+
+def _hyper(comp) -> dict:
+    if isinstance(comp, FourierCompensator):
+        return {
+            "harmonics": comp.harmonics,
+            "temperature_degree": comp.temperature_degree,
+            "fit_temperature_c": comp.fit_temperature_c,
+            "tolerance_c": comp.tolerance_c,
+            "k_e": comp.k_e,
+        }
+    if isinstance(comp, MLPCompensator):
+        return {
+            "drift_width": comp.drift_width,
+            "sf_width": comp.sf_width,
+            "encoding": comp.encoding,
+            "steps": comp.steps,
+            "e2e_steps": comp.e2e_steps,
+            "k_e": comp.k_e,
+        }
+    if isinstance(comp, PhysicalCompensator):
+        return {
+            "k_e": comp.k_e,
+            "window_s": comp.window_s,
+            "max_steps": comp.max_steps,
+            "stats": [list(p) for p in comp.stats],
+        }
+    if isinstance(comp, NoCompensation):
+        return {"k_e": comp.k_e}
+    raise TypeError(f"cannot save a {type(comp).__name__}")
+
+
+def _skeleton(name: str, hyper: dict):
+    cls = _CLASSES[name]
+    if cls is FourierCompensator:
+        k = (hyper["temperature_degree"] or 0) + 1
+        shape = (k, 2 * hyper["harmonics"] + 1)
+        return cls(**hyper, drift_coef=jnp.zeros(shape), sf_coef=jnp.zeros(shape))
+    if cls is MLPCompensator:
+        return cls(**hyper).init(jax.random.key(0))
+    if cls is PhysicalCompensator:
+        stats = tuple(tuple(p) for p in hyper.pop("stats"))
+        n = len(NAMES)
+        return cls(**hyper, stats=stats, values=jnp.zeros(n), covariance=jnp.zeros((n, n)))
+    return cls(**hyper)
+
+
+def save_compensator(comp, path: str | os.PathLike) -> str:
+    """Write a fitted compensator to `path` (`.eqx`); returns the path."""
+    path = os.fspath(path)
+    d = os.path.dirname(path)
+    if d:
+        os.makedirs(d, exist_ok=True)
+    header = {"class": type(comp).__name__, "hyper": _hyper(comp), "format": FORMAT_VERSION}
+    with open(path, "wb") as fh:
+        fh.write((json.dumps(header) + "\n").encode())
+        eqx.tree_serialise_leaves(fh, comp)
+    return path
+
+
+def load_compensator(path: str | os.PathLike):
+    """Read a compensator written by [`save_compensator`][hrgjax.calibration.save_compensator].
+
+    **Raises:** `ValueError` if the file is not an hrgjax compensator.
+    """
+    with open(path, "rb") as fh:
+        try:
+            header = json.loads(fh.readline().decode())
+            name = header["class"]
+        except (ValueError, KeyError, UnicodeDecodeError):
+            raise ValueError(
+                f"{path}: not an hrgjax compensator (.eqx from save_compensator)"
+            ) from None
+        if name not in _CLASSES:
+            raise ValueError(f"{path}: unknown compensator class {name!r}")
+        return eqx.tree_deserialise_leaves(fh, _skeleton(name, header["hyper"]))
+
+
+def _mlp_layers(net: eqx.nn.MLP) -> list[dict]:
+    return [
+        {"weight": np.asarray(layer.weight).tolist(), "bias": np.asarray(layer.bias).tolist()}
+        for layer in net.layers
+    ]
+
+
+def to_json_dict(comp) -> dict:
+    """Everything a C implementation needs, as plain lists and numbers (SI units)."""
+    base = {
+        "format": FORMAT_VERSION,
+        "class": type(comp).__name__,
+        "k_e_nominal": comp.k_e,
+        "units": {
+            "theta": "rad, electrical wave angle as measured",
+            "temperature": "degC",
+            "drift": "rad/s equivalent input rate",
+        },
+        "correction": "rate = (-dtheta_dt / k_e_nominal - drift(theta, T)) / sf(theta, T)",
+    }
+    if isinstance(comp, FourierCompensator):
+        base.update(
+            formula="x = (T - t_ref)/t_scale; f = sum_k x^k * (c[k][0] + "
+            "sum_n c[k][2n-1] cos(2n theta) + c[k][2n] sin(2n theta))",
+            t_ref=comp.fit_temperature_c,
+            t_scale=T_SCALE,
+            harmonics=comp.harmonics,
+            drift_coef=np.asarray(comp.drift_coef).tolist(),
+            sf_coef=np.asarray(comp.sf_coef).tolist(),
+            hyper=_hyper(comp),
+        )
+    elif isinstance(comp, MLPCompensator):
+        base.update(
+            formula="input = [cos 2theta, sin 2theta, (T - t_centre)/t_scale] (periodic) or "
+            "[fold(theta)/(pi/2), (T - t_centre)/t_scale] (angle); h = tanh(W0 input + b0); "
+            "out = W1 h + b1; drift = drift_offset + drift_scale*out_drift; "
+            "sf = sf_offset + sf_scale*out_sf",
+            encoding=comp.encoding,
+            activation="tanh",
+            t_centre=float(comp.t_centre),
+            t_scale=float(comp.t_scale),
+            drift_offset=float(comp.drift_offset),
+            drift_scale=float(comp.drift_scale),
+            sf_offset=float(comp.sf_offset),
+            sf_scale=float(comp.sf_scale),
+            drift_layers=_mlp_layers(comp.drift_net),
+            sf_layers=_mlp_layers(comp.sf_net),
+            hyper=_hyper(comp),
+        )
+    elif isinstance(comp, PhysicalCompensator):
+        base.update(
+            formula="see hrgjax.calibration.physical: ideal-loop averaged HRG with these laws",
+            parameters={n: float(v) for n, v in zip(NAMES, np.asarray(comp.values), strict=True)},
+            covariance=np.asarray(comp.covariance).tolist(),
+            hyper=_hyper(comp),
+        )
+    else:
+        base["hyper"] = _hyper(comp)
+    return base
+
+
+def export_json(comp, path: str | os.PathLike) -> str:
+    """Write [`to_json_dict`][hrgjax.calibration.export.to_json_dict] to `path`."""
+    path = os.fspath(path)
+    d = os.path.dirname(path)
+    if d:
+        os.makedirs(d, exist_ok=True)
+    with open(path, "w") as fh:
+        json.dump(to_json_dict(comp), fh, indent=1)
+    return path
+
+
+def load_json(path: str | os.PathLike):
+    """Rebuild the compensator from its JSON export."""
+    with open(path) as fh:
+        d = json.load(fh)
+    name = d.get("class")
+    if name not in _CLASSES:
+        raise ValueError(f"{path}: unknown compensator class {name!r}")
+    comp = _skeleton(name, dict(d["hyper"]))
+    f64 = lambda x: jnp.asarray(x, dtype=float)
+    if name == "FourierCompensator":
+        return eqx.tree_at(
+            lambda c: (c.drift_coef, c.sf_coef), comp, (f64(d["drift_coef"]), f64(d["sf_coef"]))
+        )
+    if name == "MLPCompensator":
+        for net, key in (
+            (lambda c: c.drift_net, "drift_layers"),
+            (lambda c: c.sf_net, "sf_layers"),
+        ):
+            layers = d[key]
+            comp = eqx.tree_at(
+                lambda c, net=net: [
+                    leaf for lay in net(c).layers for leaf in (lay.weight, lay.bias)
+                ],
+                comp,
+                [f64(x) for lay in layers for x in (lay["weight"], lay["bias"])],
+            )
+        names = ("t_centre", "t_scale", "drift_offset", "drift_scale", "sf_offset", "sf_scale")
+        return eqx.tree_at(
+            lambda c: [getattr(c, n) for n in names], comp, [f64(d[n]) for n in names]
+        )
+    if name == "PhysicalCompensator":
+        values = f64([d["parameters"][n] for n in NAMES])
+        return eqx.tree_at(lambda c: (c.values, c.covariance), comp, (values, f64(d["covariance"])))
+    return comp

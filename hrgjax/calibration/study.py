@@ -1,0 +1,126 @@
+"""The whole study of seed 000 in one call: bench plans → reduction → compensators → table."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import jax
+import numpy as np
+
+from ..data import MeasuredData, concat
+from ..gyro import Gyro
+from ..presets import tvg3_like
+from ._compensator import AbstractCompensator
+from .evaluate import NoCompensation, accuracy_table
+from .experiment import run_plan, seed_plan, test_plan
+from .fourier import FourierCompensator
+from .mlp import MLPCompensator
+from .physical import PhysicalCompensator
+from .reduce import RateWindows, reduce
+
+METHODS = ("fourier", "fourier_t", "mlp", "mlp_e2e", "physical")
+"""Compensators the study fits: seed base algorithm, its temperature-polynomial variant,
+the MLP on reduced targets, the MLP trained end to end, and the physical grey box."""
+
+
+class Study:
+    """Results of [`run_study`][hrgjax.calibration.run_study].
+
+    Attributes: `calibration` and `test` ([`hrgjax.MeasuredData`][]), `windows` (the reduced
+    calibration data), `compensators` ({label: fitted compensator}, "raw" first), `table`
+    (see [`accuracy_table`][hrgjax.calibration.accuracy_table]), `timings` ({step: seconds}).
+    """
+
+    def __init__(self, calibration, test, windows, compensators, table, timings):
+        self.calibration: MeasuredData = calibration
+        self.test: MeasuredData = test
+        self.windows: RateWindows = windows
+        self.compensators: dict[str, AbstractCompensator] = compensators
+        self.table: dict[str, Any] = table
+        self.timings: dict[str, float] = timings
+
+
+def bench_session(
+    gyro: Gyro, plans, *, key: jax.Array, bias_key: jax.Array, first_run: int = 0
+) -> MeasuredData:
+    """Run several plans in one switch-on (shared `bias_key`), runs numbered consecutively."""
+    parts = []
+    for i, plan in enumerate(plans):
+        parts.append(
+            run_plan(
+                gyro, plan, key=jax.random.fold_in(key, i), bias_key=bias_key, first_run=first_run
+            )
+        )
+        first_run += plan.size
+    return concat(parts)
+
+
+def run_study(
+    gyro: Gyro | None = None,
+    *,
+    key: jax.Array,
+    quick: bool = False,
+    methods=METHODS,
+    progress=None,
+) -> Study:
+    """Simulate the bench campaign on `gyro`, fit every compensator, tabulate the test errors.
+
+    The calibration plans ([`seed_plan`][hrgjax.calibration.seed_plan]) and the test grid
+    ([`test_plan`][hrgjax.calibration.test_plan]) run in **one switch-on** (one run bias, as
+    in one bench campaign) with independent noise.
+
+    **Arguments:**
+
+    - `gyro`: the gyro to calibrate (default `presets.tvg3_like()`).
+    - `key`: PRNG key (noise, switch-on bias, network weights).
+    - `quick`: 3 temperatures and short runs (the demo's `--quick`).
+    - `methods`: subset of [`METHODS`][hrgjax.calibration.study.METHODS].
+    - `progress`: optional callable `progress(message)`.
+
+    **Returns:** a [`Study`][hrgjax.calibration.Study].
+    """
+    unknown = set(methods) - set(METHODS)
+    if unknown:
+        raise ValueError(f"unknown methods {sorted(unknown)}; choose from {METHODS}")
+    say = progress or (lambda _msg: None)
+    gyro = tvg3_like() if gyro is None else gyro
+    k_cal, k_test, k_bias, k_net = jax.random.split(key, 4)
+    timings = {}
+
+    t0 = time.perf_counter()
+    say("simulating the calibration plans")
+    cal = bench_session(gyro, seed_plan(quick), key=k_cal, bias_key=k_bias)
+    n_cal = len(np.unique(cal.run))
+    say("simulating the test grid")
+    test = bench_session(gyro, test_plan(quick), key=k_test, bias_key=k_bias, first_run=n_cal)
+    timings["simulate"] = time.perf_counter() - t0
+
+    windows = reduce(cal)
+    comps: dict[str, AbstractCompensator] = {"raw": NoCompensation()}
+    fits = {
+        "fourier": ("Fourier @+20°C", lambda: FourierCompensator().fit(windows)),
+        "fourier_t": (
+            "Fourier+T",
+            lambda: FourierCompensator(temperature_degree=2 if quick else 3).fit(windows),
+        ),
+        "mlp": ("MLP", lambda: MLPCompensator().fit(windows, key=k_net)),
+        "mlp_e2e": (
+            "MLP end-to-end",
+            lambda: MLPCompensator(e2e_steps=100 if quick else 200).fit(
+                windows, key=k_net, mode="end_to_end", raw=cal
+            ),
+        ),
+        "physical": ("physical", lambda: PhysicalCompensator().fit(cal)),
+    }
+    for m in methods:
+        label, fit = fits[m]
+        say(f"fitting {label}")
+        t0 = time.perf_counter()
+        comps[label] = fit()
+        timings[f"fit {label}"] = time.perf_counter() - t0
+    say("evaluating on the test grid")
+    t0 = time.perf_counter()
+    table = accuracy_table(comps, test)
+    timings["evaluate"] = time.perf_counter() - t0
+    return Study(cal, test, windows, comps, table, timings)
