@@ -19,7 +19,7 @@ def _setup():
     if os.environ.get("HRGJAX_JAX_CACHE", "1") != "0":
         base = os.environ.get("XDG_CACHE_HOME", os.path.join(os.path.expanduser("~"), ".cache"))
         jax.config.update("jax_compilation_cache_dir", os.path.join(base, "hrgjax", "jax"))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
     return jax
 
 

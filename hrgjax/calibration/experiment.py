@@ -98,11 +98,21 @@ def rotation_plan(
     return _grid(temperatures_c, angles_deg, rate_dps, duration_s, dt_out)
 
 
+QUICK_TEMPERATURES = (-40.0, 20.0, 60.0)
+"""Temperatures of the quick plans [°C]."""
+QUICK_DURATION = 120.0
+"""Run length of the quick plans [s] (calibration and test alike: one compiled simulator)."""
+
+
 def seed_plan(quick: bool = False) -> tuple[Plan, Plan]:
-    """The seed's static and 5 °/s plans; `quick` keeps 3 temperatures and 60-s runs."""
+    """The seed's static and 5 °/s plans; `quick` keeps 3 temperatures and 2-min runs,
+    sampled every 0.5 s."""
     if quick:
-        temps, dur = (-40.0, 20.0, 60.0), 60.0
-        return static_plan(temps, duration_s=dur), rotation_plan(temps, duration_s=dur)
+        temps, dur = QUICK_TEMPERATURES, QUICK_DURATION
+        return (
+            static_plan(temps, duration_s=dur, dt_out=0.5),
+            rotation_plan(temps, duration_s=dur),
+        )
     return static_plan(), rotation_plan()
 
 
@@ -113,18 +123,33 @@ TEST_ANGLES = tuple(float(a) for a in range(-90, 91, 5))
 def test_plan(quick: bool = False, rate_dps: float = 5.0) -> tuple[Plan, Plan]:
     """The seed's test grid: static and 5 °/s runs at 5° steps, 5 min per point.
 
-    `quick` keeps −40, +20, +60 °C, 15° steps and 2-min runs."""
+    `quick` keeps −40, +20, +60 °C, 15° steps and 2-min runs sampled every 0.5 s."""
     if quick:
-        temps, angles, dur = (-40.0, 20.0, 60.0), tuple(range(-90, 91, 15)), 120.0
+        temps, angles, dur = QUICK_TEMPERATURES, tuple(range(-90, 91, 15)), QUICK_DURATION
+        dt_static = 0.5
     else:
-        temps, angles, dur = SEED_TEMPERATURES, TEST_ANGLES, 300.0
+        temps, angles, dur, dt_static = SEED_TEMPERATURES, TEST_ANGLES, 300.0, 1.0
     return (
-        static_plan(temps, angles, duration_s=dur),
+        static_plan(temps, angles, duration_s=dur, dt_out=dt_static),
         rotation_plan(temps, angles, rate_dps=rate_dps, duration_s=dur),
     )
 
 
 test_plan.__test__ = False  # not a pytest test
+
+
+CHUNK = 32
+"""Runs simulated per compiled call: every plan with the same run length and output interval
+reuses one compiled simulator, whatever its number of points."""
+
+
+@eqx.filter_jit
+def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
+    if keys is None:
+        return jax.vmap(lambda p: simulate(gyro, p, model=model, ts=ts))(profiles)
+    return jax.vmap(lambda p, k: simulate(gyro, p, model=model, key=k, bias_key=bias_key, ts=ts))(
+        profiles, keys
+    )
 
 
 def run_plan(
@@ -136,21 +161,41 @@ def run_plan(
     model: str = "averaged",
     first_run: int = 0,
 ) -> MeasuredData:
-    """Simulate every point of `plan` in one `vmap` and return the data (one run per point,
-    numbered from `first_run`). All points share one switch-on (`bias_key`), as on a bench."""
+    """Simulate every point of `plan` and return the data (one run per point, numbered from
+    `first_run`). All points share one switch-on (`bias_key`), as on a bench.
+
+    Points are simulated with `vmap` in chunks of [`CHUNK`][hrgjax.calibration.experiment.CHUNK]
+    (the last one padded), so plans of any size share one compiled simulator.
+    """
     profiles = plan.profiles()
     ts = jnp.asarray(np.arange(int(round(plan.duration_s / plan.dt_out)) + 1) * plan.dt_out)
+    keys = None
     if gyro.noise is not None:
         if key is None:
             raise ValueError("this gyro has noise: pass key=jax.random.key(…)")
         k_points, k_bias = jax.random.split(key)
         bias_key = k_bias if bias_key is None else bias_key
         keys = jax.random.split(k_points, plan.size)
-        rec = jax.vmap(
-            lambda p, k: simulate(gyro, p, model=model, key=k, bias_key=bias_key, ts=ts)
-        )(profiles, keys)
-    else:
-        rec = jax.vmap(lambda p: simulate(gyro, p, model=model, ts=ts))(profiles)
+    size = plan.size
+    chunk = min(CHUNK, size)
+    n_pad = -size % chunk
+    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], n_pad, axis=0)]) if n_pad else x
+    profiles = jax.tree_util.tree_map(pad, profiles)
+    keys = None if keys is None else pad(keys)
+    parts = []
+    for start in range(0, size + n_pad, chunk):
+        take = lambda x, s=start: x[s : s + chunk]
+        parts.append(
+            _simulate_chunk(
+                gyro,
+                jax.tree_util.tree_map(take, profiles),
+                None if keys is None else take(keys),
+                bias_key,
+                ts,
+                model,
+            )
+        )
+    rec = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:size], *parts)
     data = rec.to_data()
     if first_run:
         cols = data.columns

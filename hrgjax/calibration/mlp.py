@@ -302,16 +302,15 @@ def train_end_to_end(
 ) -> MLPCompensator:
     """Rprop on the summed end-to-end loss of all run groups, each normalised by its value at
     the start (static and rotation runs then weigh alike)."""
-    groups = _run_groups(data, window_s)
-    scales = [float(end_to_end_loss(comp, g)) for g in groups]
-    scales = [s if s > 0 else 1.0 for s in scales]
-    return _e2e_scan(comp, groups, jnp.asarray(scales), steps)
+    return _e2e_scan(comp, _run_groups(data, window_s), steps)
 
 
 @eqx.filter_jit
-def _e2e_scan(comp, groups, scales, steps):
+def _e2e_scan(comp, groups, steps):
     params, static = eqx.partition(comp, _trainable(comp))
     opt = optax.rprop(1e-3)
+    scales = [end_to_end_loss(comp, g) for g in groups]
+    scales = [jnp.where(s > 0, s, 1.0) for s in scales]
 
     def loss(p):
         c = eqx.combine(p, static)
