@@ -321,6 +321,7 @@ def _lm_solve(groups, x0, sigma, k_e, max_steps):
 
 
 def _lm(groups, x0, sigma, k_e, max_steps):
+    sigma = {k: jnp.asarray(v) for k, v in sigma.items()}  # traced, not static: no recompiles
     values, steps = _lm_solve(groups, jnp.asarray(x0), sigma, k_e, max_steps)
     return np.asarray(values), int(steps)
 
@@ -347,10 +348,11 @@ def _residual_by_kind(groups, values, k_e):
 def _jacobian_jit(groups, values, sigma, k_e):
     zero = jnp.zeros(len(NAMES))
     fn = lambda x: _weighted_residual(x, (groups, values, sigma, k_e))
-    return jax.jacfwd(fn)(zero) / jnp.asarray(_SCALE)
+    return jax.jacfwd(fn)(zero) / jnp.asarray(_SCALE)[None, :]
 
 
 def _jacobian(groups, values, sigma, k_e):
+    sigma = {k: jnp.asarray(v) for k, v in sigma.items()}
     return np.asarray(_jacobian_jit(groups, jnp.asarray(values), sigma, k_e))
 
 

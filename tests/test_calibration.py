@@ -1,0 +1,402 @@
+"""Calibration study (issue 3): reduction, compensators, correction, export, bad input.
+
+Oracles: exact harmonic laws on synthetic windows, analytic LSQ-slope variance of a random
+walk, exact integration of a known drift, finite differences, Monte-Carlo coverage of the
+physical fit's covariance.
+"""
+
+import json
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hrgjax as hg
+from hrgjax.calibration import (
+    FourierCompensator,
+    MLPCompensator,
+    NoCompensation,
+    PhysicalCompensator,
+    RateWindows,
+    export_json,
+    load_compensator,
+    load_json,
+    reduce,
+    run_plan,
+    save_compensator,
+    static_plan,
+)
+from hrgjax.calibration import mlp as mlp_module
+from hrgjax.calibration import physical
+from hrgjax.calibration.reduce import K_E_NOMINAL, window_slopes
+from hrgjax.units import DEG, DEG_PER_H, DEG_PER_SQRT_H
+
+K = K_E_NOMINAL
+TEMPS = np.array([-40.0, -10.0, 20.0, 40.0, 60.0])
+ANGLES = np.arange(-90.0, 90.0, 10.0)
+
+
+def true_drift(theta, temp):
+    """A smooth 180°-periodic drift law [rad/s]: amplitude, phase and offset vary with T."""
+    amp = 1.5 * DEG_PER_H * np.exp(-0.016 * (temp - 20.0))
+    phase = (25.0 + 0.16 * (temp - 20.0)) * DEG
+    return 0.3 * DEG_PER_H + 0.005 * DEG_PER_H * (temp - 20) - amp * np.sin(2 * (theta - phase))
+
+
+def true_sf(theta, temp):
+    g = 0.0046 - 9.6e-5 * (temp - 20.0)
+    return 1.0 - 2 * g * np.cos(2 * theta)
+
+
+def synthetic_windows(noise_dph=0.0, seed=0):
+    """Exact reduced targets on a (T, θ) grid: static drift and 5 °/s rotation windows."""
+    rng = np.random.default_rng(seed)
+    tt, aa = np.meshgrid(TEMPS, ANGLES, indexing="ij")
+    tt, aa = tt.ravel(), aa.ravel()
+    n = tt.size
+    th = aa * DEG
+    drift = true_drift(th, tt) + noise_dph * DEG_PER_H * rng.standard_normal(n)
+    rot = 5.0 * DEG
+    moving = true_sf(th, tt) * rot + true_drift(th, tt)
+
+    def windows(rate, table):
+        return dict(
+            temperature_c=tt,
+            table_rate_dps=np.full(n, table),
+            wave_angle_deg=aa,
+            rate_dps=rate / DEG,
+            stderr_dps=np.full(n, 1e-6),
+        )
+
+    s, m = windows(drift, 0.0), windows(moving, 5.0)
+    cols = {k: np.concatenate([s[k], m[k]]) for k in s}
+    idx = np.arange(2 * n)
+    return RateWindows(
+        run=idx,
+        start=np.zeros(2 * n, int),
+        stop=np.full(2 * n, 10),
+        t_mid=np.full(2 * n, 5.0),
+        duration=np.full(2 * n, 10.0),
+        **cols,
+        k_e=K,
+    )
+
+
+@pytest.fixture(scope="module")
+def exact_windows():
+    return synthetic_windows()
+
+
+# --- reduction -------------------------------------------------------------------------
+
+
+def test_window_slopes_exact_on_lines():
+    t = jnp.linspace(0.0, 9.9, 100)
+    y = jnp.concatenate([2.0 * t[:50] + 1.0, -3.0 * t[50:]])
+    slope, tm, ym = window_slopes(t, y, 2)
+    np.testing.assert_allclose(slope, [2.0, -3.0], rtol=1e-12)
+    np.testing.assert_allclose(tm, [np.mean(t[:50]), np.mean(t[50:])])
+
+
+def test_batch_means_error_matches_random_walk_scatter():
+    """Angle random walk: the reported error must match the real scatter of the slope, which
+    the white-noise LSQ formula underestimates several times."""
+    rng = np.random.default_rng(1)
+    n, dt, reps = 600, 0.5, 400
+    t = np.arange(n) * dt
+    walk = np.cumsum(rng.standard_normal((reps, n)), axis=1) * np.sqrt(dt)
+    slopes, errs, naive = [], [], []
+    for y in walk:
+        s, _, _, e = window_slopes(jnp.asarray(t), jnp.asarray(y), 1, 6)
+        slopes.append(float(s[0]))
+        errs.append(float(e[0]))
+        resid = y - np.polyval(np.polyfit(t, y, 1), t)
+        naive.append(np.sqrt(np.sum(resid**2) / (n - 2) / np.sum((t - t.mean()) ** 2)))
+    scatter = np.std(slopes)
+    # LSQ slope of a unit random walk over T: variance 6/(5T) (continuous limit).
+    np.testing.assert_allclose(scatter, np.sqrt(6 / (5 * n * dt)), rtol=0.1)
+    assert 0.75 < np.sqrt(np.mean(np.square(errs))) / scatter < 1.35
+    assert np.mean(naive) < scatter / 3
+
+
+def test_reduce_static_run_slope_and_units():
+    t = np.arange(0.0, 60.0, 1.0)
+    drift_dph = 2.0
+    theta = 10.0 - K * drift_dph / 3600.0 * t
+    data = hg.MeasuredData(
+        dict(
+            time_s=t,
+            temperature_c=np.full(t.size, 20.0),
+            table_rate_dps=np.zeros(t.size),
+            wave_angle_deg=theta,
+        )
+    )
+    w = reduce(data)
+    assert len(w) == 1 and w.static[0]
+    np.testing.assert_allclose(w.drift_dph, [drift_dph], rtol=1e-9)
+    np.testing.assert_allclose(w.wave_angle_deg, [np.mean(theta)])
+
+
+def test_reduce_rejects_bad_arguments():
+    data = hg.MeasuredData(
+        dict(
+            time_s=np.arange(3.0),
+            temperature_c=np.zeros(3),
+            table_rate_dps=np.zeros(3),
+            wave_angle_deg=np.zeros(3),
+        )
+    )
+    with pytest.raises(ValueError, match="at least 4"):
+        reduce(data)
+    with pytest.raises(ValueError, match="k_e"):
+        reduce(data, k_e=-1.0)
+
+
+# --- compensators on exact targets -------------------------------------------------------
+
+
+def test_fourier_base_recovers_pure_harmonic_at_fit_temperature(exact_windows):
+    comp = FourierCompensator().fit(exact_windows)
+    th = np.linspace(-90, 90, 37)
+    np.testing.assert_allclose(
+        comp.drift_dph(th, 20.0), true_drift(th * DEG, 20.0) / DEG_PER_H, atol=1e-9
+    )
+    np.testing.assert_allclose(comp.scale_factor_at(th, 20.0), true_sf(th * DEG, 20.0), atol=1e-9)
+    # No temperature dependence: at −40 °C it still predicts the +20 °C curve.
+    np.testing.assert_allclose(comp.drift_dph(th, -40.0), comp.drift_dph(th, 20.0))
+
+
+def test_fourier_leaves_only_noise_on_periodic_drift():
+    noisy = synthetic_windows(noise_dph=0.01, seed=3)
+    comp = FourierCompensator(temperature_degree=4).fit(noisy)
+    st = noisy.select(noisy.static)
+    resid = st.drift_dph - comp.drift_dph(st.wave_angle_deg, st.temperature_c)
+    dof = resid.size - 5 * 5
+    chi2 = np.sum((resid / 0.01) ** 2) / dof
+    assert 0.7 < chi2 < 1.4  # residual is the injected noise, nothing systematic
+
+
+def test_mlp_fits_smooth_laws(exact_windows):
+    comp = MLPCompensator(steps=3000).fit(exact_windows, key=jax.random.key(0))
+    th = np.linspace(-90, 90, 73)
+    for temp in (-40.0, 20.0, 60.0):
+        truth = true_drift(th * DEG, temp) / DEG_PER_H
+        err = comp.drift_dph(th, temp) - truth
+        assert np.sqrt(np.mean(err**2)) < 0.01 * 3.9  # < 1 % of the −40 °C peak-to-peak
+        sf_err = comp.scale_factor_at(th, temp) - true_sf(th * DEG, temp)
+        assert np.max(np.abs(sf_err)) < 5e-4
+
+
+def test_mlp_periodic_encoding_is_exactly_periodic(exact_windows):
+    comp = MLPCompensator(steps=50).fit(exact_windows, key=jax.random.key(1))
+    np.testing.assert_allclose(comp.drift_dph([-90.0], 0.0), comp.drift_dph([90.0], 0.0))
+    seed_style = MLPCompensator(steps=50, encoding="angle").fit(
+        exact_windows, key=jax.random.key(1)
+    )
+    assert seed_style.in_size == 2
+
+
+def test_physical_drift_and_sf_match_reduced_laws():
+    """D and SF of the physical compensator equal PHYSICS.md §4.1/§4.7 for a known gyro."""
+    v = dict(zip(physical.NAMES, np.zeros(len(physical.NAMES)), strict=True))
+    v.update(
+        k_e0=K * 1.001,
+        bias0=0.3 * DEG_PER_H,
+        delta_inv_tau0=4e-6,
+        theta_tau0=0.4,
+        gain_mismatch0=2e-3,
+    )
+    values = jnp.asarray([v[n] for n in physical.NAMES])
+    comp = PhysicalCompensator(values=values, covariance=jnp.eye(values.size))
+    th_true = np.linspace(-1.5, 1.5, 13)
+    th_meas = th_true - 2e-3 * np.sin(2 * th_true)  # readout, first order (PHYSICS §4.7)
+    d = np.asarray(jax.vmap(lambda a: comp.drift(a, 20.0))(jnp.asarray(th_meas)))
+    sf = np.asarray(jax.vmap(lambda a: comp.scale_factor(a, 20.0))(jnp.asarray(th_meas)))
+    slope = 1 - 2 * 2e-3 * np.cos(2 * th_true)
+    pattern_rate = -v["k_e0"] * v["bias0"] + 0.5 * 4e-6 * np.sin(2 * (th_true - 0.4))
+    np.testing.assert_allclose(d, -slope * pattern_rate / K, rtol=2e-5, atol=1e-12)
+    np.testing.assert_allclose(sf, slope * v["k_e0"] / K, rtol=1e-5)
+
+
+# --- correction ----------------------------------------------------------------------------
+
+
+def _run(rate_dps, drift_dph, n=101, dt=0.5, theta0=20.0, run=0):
+    t = np.arange(n) * dt
+    theta = theta0 - K * (rate_dps + drift_dph / 3600.0) * t
+    return dict(
+        time_s=t,
+        run=np.full(n, run),
+        temperature_c=np.full(n, 20.0),
+        table_rate_dps=np.full(n, rate_dps),
+        wave_angle_deg=theta,
+    )
+
+
+def test_correct_removes_a_known_constant_drift():
+    parts = [_run(0.0, 1.5, run=0), _run(5.0, 1.5, run=1)]
+    data = hg.MeasuredData({k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
+    comp = FourierCompensator(harmonics=1)
+    coef = jnp.zeros((1, 3))
+    comp = eqx.tree_at(
+        lambda c: (c.drift_coef, c.sf_coef),
+        comp,
+        (coef.at[0, 0].set(1.5 * DEG_PER_H), coef.at[0, 0].set(1.0)),
+        is_leaf=lambda x: x is None,
+    )
+    out = comp.correct(data)
+    np.testing.assert_allclose(out["angle_corrected_deg"], data.table_angle_deg, atol=1e-9)
+    np.testing.assert_allclose(out["rate_corrected_dps"], data["table_rate_dps"], atol=1e-9)
+    raw = NoCompensation().correct(data)
+    assert abs(raw["angle_corrected_deg"][100] - 1.5 / 3600 * 50) < 1e-9
+    assert out.names[: len(data.names)] == data.names  # input columns kept unchanged
+    with pytest.raises(ValueError, match="already has"):
+        comp.correct(out)
+
+
+# --- end-to-end training -------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def small_runs():
+    parts = [_run(0.0, 2.0, n=41, run=0), _run(5.0, 2.0, n=41, run=1, theta0=-30.0)]
+    data = hg.MeasuredData({k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
+    return data, mlp_module._run_groups(data, window_s=5.0)
+
+
+def test_integrate_compensated_is_exact_for_linear_data(small_runs):
+    data, groups = small_runs
+    comp = NoCompensation()
+    g = groups[0]
+    psi = mlp_module.integrate_compensated(comp, g.t[0], g.theta[0], g.temperature_c[0], g.t[0])
+    expected = -(g.theta[0] - g.theta[0][0]) / K
+    np.testing.assert_allclose(psi, expected, rtol=1e-10, atol=1e-14)
+
+
+def test_end_to_end_gradient_matches_finite_differences(small_runs):
+    _, groups = small_runs
+    comp = MLPCompensator(drift_width=4, sf_width=3).init(jax.random.key(2))
+    comp = eqx.tree_at(lambda c: (c.drift_scale, c.sf_scale), comp, (1e-5, 1e-3))
+
+    def loss(shift):
+        c = eqx.tree_at(lambda c: c.drift_offset, comp, comp.drift_offset + shift)
+        c = eqx.tree_at(lambda c: c.sf_net.layers[0].bias, c, c.sf_net.layers[0].bias + shift)
+        return sum(mlp_module.end_to_end_loss(c, g) for g in groups)
+
+    grad = jax.grad(loss)(0.0)
+    h = 1e-7
+    fd = (loss(h) - loss(-h)) / (2 * h)
+    assert np.isfinite(grad)
+    np.testing.assert_allclose(grad, fd, rtol=1e-5)
+
+
+# --- physical fit: coverage of the reported uncertainties ---------------------------------
+
+
+def test_physical_fit_recovers_injected_damping_within_uncertainty():
+    truth = dict(zip(physical.NAMES, np.zeros(len(physical.NAMES)), strict=True))
+    truth.update(
+        k_e0=K,
+        bias0=0.2 * DEG_PER_H,
+        delta_inv_tau0=3e-6,
+        delta_inv_tau_lam=-0.015,
+        theta_tau0=0.45,
+        theta_tau1=0.003,
+        gain_mismatch0=3e-3,
+        gain_mismatch1=-6e-5,
+    )
+    values = jnp.asarray([truth[n] for n in physical.NAMES])
+    noise = hg.Noise(
+        angle_white=1.0 / 3600 * DEG,
+        angle_random_walk=0.002 * DEG_PER_SQRT_H,
+        bias_instability=0.0,
+        correlation_time=600.0,
+        run_bias=0.0,
+    )
+    gyro = eqx.tree_at(
+        lambda g: g.noise, physical.model_gyro(values), noise, is_leaf=lambda x: x is None
+    )
+    temps, angles = (-40.0, 20.0, 60.0), tuple(range(-90, 90, 30))
+    static = static_plan(temps, angles, duration_s=60.0, dt_out=0.5)
+    rotation = hg.calibration.rotation_plan(temps, angles, duration_s=60.0, dt_out=0.5)
+    hits = {"delta_inv_tau0": 0, "theta_tau0": 0}
+    seeds = 20
+    for seed in range(seeds):
+        key = jax.random.key(100 + seed)
+        d1 = run_plan(gyro, static, key=key, bias_key=key)
+        d2 = run_plan(gyro, rotation, key=jax.random.fold_in(key, 1), first_run=static.size)
+        data = hg.data.concat([d1, d2])
+        fit = PhysicalCompensator().fit(data)
+        params = fit.parameters()
+        for name in hits:
+            value, err = params[name]
+            hits[name] += abs(value - truth[name]) < 2 * err
+    # 2σ covers 95 % of seeds when the errors are right; require ≥ 90 %.
+    assert hits["delta_inv_tau0"] >= 0.9 * seeds, hits
+    assert hits["theta_tau0"] >= 0.9 * seeds, hits
+
+
+# --- export ---------------------------------------------------------------------------------
+
+
+def test_export_round_trips(tmp_path, exact_windows):
+    th = np.linspace(-90, 90, 7)
+    comps = [
+        FourierCompensator(temperature_degree=2).fit(exact_windows),
+        MLPCompensator(steps=20).fit(exact_windows, key=jax.random.key(3)),
+        PhysicalCompensator(
+            values=jnp.asarray(physical.initial_values(exact_windows)),
+            covariance=jnp.eye(len(physical.NAMES)),
+        ),
+    ]
+    for i, comp in enumerate(comps):
+        ref = (comp.drift_dph(th, -10.0), comp.scale_factor_at(th, -10.0))
+        back = load_compensator(save_compensator(comp, tmp_path / f"m{i}.eqx"))
+        js = export_json(comp, tmp_path / f"m{i}.json")
+        with open(js) as fh:
+            assert json.load(fh)["class"] == type(comp).__name__
+        for other in (back, load_json(js)):
+            assert type(other) is type(comp)
+            np.testing.assert_array_equal(other.drift_dph(th, -10.0), ref[0])
+            np.testing.assert_array_equal(other.scale_factor_at(th, -10.0), ref[1])
+    (tmp_path / "bad.eqx").write_text("not a model")
+    with pytest.raises(ValueError, match="not an hrgjax compensator"):
+        load_compensator(tmp_path / "bad.eqx")
+
+
+# --- bad input ------------------------------------------------------------------------------
+
+
+def test_bad_plans_are_refused():
+    with pytest.raises(ValueError, match="temperatures_c is empty"):
+        static_plan([], [0.0])
+    with pytest.raises(ValueError, match="duplicates"):
+        static_plan([20.0, 20.0], [0.0, 10.0])
+    with pytest.raises(ValueError, match="angles_deg is empty"):
+        hg.calibration.rotation_plan([20.0], [])
+
+
+def test_missing_rotation_runs_for_scale_factor(exact_windows):
+    static_only = exact_windows.select(exact_windows.static)
+    for comp in (FourierCompensator(), MLPCompensator(steps=5)):
+        with pytest.raises(ValueError, match="no rotation runs"):
+            comp.fit(static_only, key=jax.random.key(0)) if isinstance(
+                comp, MLPCompensator
+            ) else comp.fit(static_only)
+    moving_only = exact_windows.select(~exact_windows.static)
+    with pytest.raises(ValueError, match="no static runs"):
+        FourierCompensator().fit(moving_only)
+
+
+def test_fourier_base_needs_points_at_fit_temperature(exact_windows):
+    with pytest.raises(ValueError, match="within 1.0 °C of the fit temperature 25"):
+        FourierCompensator(fit_temperature_c=25.0).fit(exact_windows)
+
+
+def test_unfitted_compensators_say_so():
+    with pytest.raises(ValueError, match="not fitted"):
+        FourierCompensator().drift_dph([0.0], 20.0)
+    with pytest.raises(ValueError, match="not fitted"):
+        MLPCompensator().drift_dph([0.0], 20.0)
