@@ -1,6 +1,7 @@
 """The command line: simulate writes contract data; demo --quick makes its outputs."""
 
 import numpy as np
+import pytest
 
 import hrgjax as hg
 from hrgjax.cli import main
@@ -16,11 +17,75 @@ def test_simulate_writes_loadable_csv(tmp_path, capsys):
     assert str(out) in capsys.readouterr().out
 
 
-def test_demo_quick(tmp_path):
+def test_demo_quick_runs_the_study(tmp_path, capsys):
     assert main(["demo", "--quick", "--out", str(tmp_path)]) == 0
-    for name in ("static.csv", "rotation.csv", "drift_scale_factor.png"):
+    for name in (
+        "calibration.csv",
+        "drift_scale_factor.png",
+        "drift_residuals.png",
+        "error_vs_temperature.png",
+        "model_MLP.eqx",
+        "model_physical.json",
+    ):
         assert (tmp_path / name).stat().st_size > 0
-    drift = hg.calibration.static_drift(hg.load(tmp_path / "static.csv"))
-    cold = drift["drift_dph"][drift["temperature_c"] == -40.0]
-    hot = drift["drift_dph"][drift["temperature_c"] == 60.0]
-    assert np.ptp(cold) > 3 * np.ptp(hot)
+    out = capsys.readouterr().out
+    assert "seed Fourier" in out and "physical" in out
+    # The seed's headline: neural and physical compensation ≥ 10× better than the +20 °C
+    # Fourier baseline at −40 °C (static drift error on the test grid).
+    rows = {
+        line.split()[0]: line.split()
+        for line in out.split("static drift error")[1].split("angle error")[0].splitlines()
+        if line.strip().startswith("-40")
+    }
+    cold = [float(x) for x in rows["-40"][1:7]]
+    raw, fourier, _, mlp, _, phys = cold
+    assert raw > 0.5 and fourier > 0.3
+    assert fourier / mlp >= 10 and fourier / phys >= 10
+
+
+def _bench_csv(tmp_path):
+    out = tmp_path / "bench.csv"
+    args = ["simulate", "--plan", "seed", "--quick", "--out", str(out)]
+    assert main(args) == 0
+    return out
+
+
+def test_calibrate_and_correct_on_user_data(tmp_path, capsys):
+    data_path = _bench_csv(tmp_path)
+    model = tmp_path / "fourier.eqx"
+    argv = ["calibrate", str(data_path), "--method", "fourier", "--temperature-degree", "2"]
+    assert main(argv + ["--out", str(model)]) == 0
+    assert model.exists() and (tmp_path / "fourier.json").exists()
+    corrected = tmp_path / "corrected.csv"
+    assert main(["correct", str(data_path), "--model", str(model), "--out", str(corrected)]) == 0
+    out = hg.load(corrected, allow_extra=True)
+    assert {"rate_corrected_dps", "angle_corrected_deg"} <= set(out.names)
+    data = hg.load(data_path)
+    assert out["wave_angle_deg"].tolist() == data["wave_angle_deg"].tolist()
+    # Static runs: the drift (±1.7 °/h raw at −40 °C) is compensated down to the noise.
+    residual = []
+    for idx in out.run_indices():
+        if np.all(data["table_rate_dps"][idx] == 0):
+            t = out["time_s"][idx]
+            residual.append(out["angle_corrected_deg"][idx][-1] / (t[-1] - t[0]) * 3600)
+    raw_drift = hg.calibration.static_drift(data)["drift_dph"]
+    assert np.sqrt(np.mean(np.square(raw_drift))) > 0.5
+    assert np.sqrt(np.mean(np.square(residual))) < 0.08
+    raw = capsys.readouterr().out
+    assert "residual rate RMS" in raw and str(corrected) in raw
+
+
+def test_calibrate_reports_missing_rotation_runs(tmp_path):
+    out = tmp_path / "static.csv"
+    assert main(["simulate", "--plan", "static", "--duration", "6", "--out", str(out)]) == 0
+    with pytest.raises(SystemExit, match="no rotation runs"):
+        main(["calibrate", str(out), "--method", "fourier"])
+
+
+def test_correct_reports_bad_model_file(tmp_path):
+    data_path = tmp_path / "d.csv"
+    assert main(["simulate", "--plan", "static", "--duration", "6", "--out", str(data_path)]) == 0
+    bad = tmp_path / "m.eqx"
+    bad.write_text("nonsense")
+    with pytest.raises(SystemExit, match="not an hrgjax compensator"):
+        main(["correct", str(data_path), "--model", str(bad)])
