@@ -75,9 +75,22 @@ def presets():
     )
 
 
+def calibration():
+    from hrgjax.calibration import run_study
+    from hrgjax.calibration.evaluate import SEED_TABLE
+    from hrgjax.plots import compensation_residuals, error_vs_temperature
+
+    study = run_study(key=jax.random.key(0), quick=True)
+    compensation_residuals(
+        study.windows, study.compensators, os.path.join(HERE, "calibration_residuals.png")
+    )
+    error_vs_temperature(study.table, os.path.join(HERE, "calibration_errors.png"), SEED_TABLE)
+
+
 if __name__ == "__main__":
     os.makedirs(HERE, exist_ok=True)
     full_vs_averaged()
     allan()
     presets()
+    calibration()
     print(f"wrote figures to {HERE}")
