@@ -248,7 +248,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/model.eqx", help="compensator file (.eqx)")
     p.add_argument("--json", default=None, help="JSON export (default: beside --out)")
     p.add_argument("--k-e", type=float, default=0.554, help="nominal angular gain k_e")
-    p.add_argument("--window", type=float, default=10.0, help="rotation-run window [s]")
+    p.add_argument("--window", type=float, default=3.0, help="rotation-run window [s]")
     p.add_argument(
         "--mode", default="reduced", choices=("reduced", "end_to_end"), help="MLP training mode"
     )

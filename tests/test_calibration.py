@@ -23,13 +23,13 @@ from hrgjax.calibration import (
     export_json,
     load_compensator,
     load_json,
+    physical,
     reduce,
     run_plan,
     save_compensator,
     static_plan,
 )
 from hrgjax.calibration import mlp as mlp_module
-from hrgjax.calibration import physical
 from hrgjax.calibration.reduce import K_E_NOMINAL, window_slopes
 from hrgjax.units import DEG, DEG_PER_H, DEG_PER_SQRT_H
 
@@ -273,6 +273,25 @@ def test_integrate_compensated_is_exact_for_linear_data(small_runs):
     psi = mlp_module.integrate_compensated(comp, g.t[0], g.theta[0], g.temperature_c[0], g.t[0])
     expected = -(g.theta[0] - g.theta[0][0]) / K
     np.testing.assert_allclose(psi, expected, rtol=1e-10, atol=1e-14)
+
+
+def test_integrate_compensated_equals_correct(small_runs, exact_windows):
+    """Two methods, one answer: diffrax along the record and `correct`'s interval sum, for a
+    compensator whose D and SF vary with the wave angle."""
+    data, groups = small_runs
+    comp = FourierCompensator(temperature_degree=1).fit(exact_windows)
+    angle = comp.correct(data)["angle_corrected_deg"]
+    for g in groups:
+        for i in range(g.t.shape[0]):
+            psi = mlp_module.integrate_compensated(
+                comp, g.t[i], g.theta[i], g.temperature_c[i], g.t[i]
+            )
+            idx = [
+                ix
+                for ix in data.run_indices()
+                if np.allclose(data["wave_angle_deg"][ix] * DEG, g.theta[i])
+            ][0]
+            np.testing.assert_allclose(np.asarray(psi) / DEG, angle[idx], rtol=1e-10, atol=1e-12)
 
 
 def test_end_to_end_gradient_matches_finite_differences(small_runs):

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..data import MeasuredData
 from ..units import DEG
-from .reduce import RateWindows, reduce
+from .reduce import WINDOW_S, RateWindows, reduce
 
 CORRECTED_COLUMNS = {
     "rate_corrected_dps": "equivalent input rate after compensation [°/s]",
@@ -120,7 +120,7 @@ def _interval_rates(comp, t, theta, temperature):
     return jax.vmap(comp.corrected_rate)(mid, jnp.diff(theta) / dt, tmid)
 
 
-def as_windows(data, k_e: float, window_s: float | None = 10.0) -> RateWindows:
+def as_windows(data, k_e: float, window_s: float | None = WINDOW_S) -> RateWindows:
     """Accept bench data or already reduced windows (checked for the same k_e)."""
     if isinstance(data, RateWindows):
         if data.k_e != k_e:

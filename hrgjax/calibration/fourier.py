@@ -18,7 +18,7 @@ import numpy as np
 
 from ..units import DEG, T_REF_C
 from ._compensator import AbstractCompensator, as_windows, split_targets
-from .reduce import K_E_NOMINAL, RateWindows
+from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows
 
 T_SCALE = 50.0
 """Temperature scale of the polynomial basis [°C]."""
@@ -95,7 +95,7 @@ class FourierCompensator(AbstractCompensator):
         self._require_fitted(self.sf_coef)
         return self._basis(theta, temperature_c) @ self.sf_coef.ravel()
 
-    def fit(self, data, window_s: float | None = 10.0) -> FourierCompensator:
+    def fit(self, data, window_s: float | None = WINDOW_S) -> FourierCompensator:
         """Fit drift on static windows, then SF on rotation windows with that drift removed.
 
         **Arguments:**

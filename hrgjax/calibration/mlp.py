@@ -28,7 +28,7 @@ import optax
 from ..data import MeasuredData
 from ..units import DEG
 from ._compensator import AbstractCompensator, as_windows, split_targets
-from .reduce import K_E_NOMINAL
+from .reduce import K_E_NOMINAL, WINDOW_S
 
 ENCODINGS = ("periodic", "angle")
 MODES = ("reduced", "end_to_end")
@@ -115,7 +115,7 @@ class MLPCompensator(AbstractCompensator):
         *,
         key: jax.Array,
         mode: str = "reduced",
-        window_s: float | None = 10.0,
+        window_s: float | None = WINDOW_S,
         raw: MeasuredData | None = None,
     ) -> MLPCompensator:
         """Train both networks.
@@ -172,7 +172,7 @@ class MLPCompensator(AbstractCompensator):
             samples = raw if raw is not None else data
             if not isinstance(samples, MeasuredData):
                 raise ValueError("mode='end_to_end' needs the raw samples: pass raw=MeasuredData")
-            comp = train_end_to_end(comp, samples, window_s or 10.0, self.e2e_steps)
+            comp = train_end_to_end(comp, samples, window_s or WINDOW_S, self.e2e_steps)
         return comp
 
 
@@ -247,10 +247,12 @@ def integrate_compensated(comp: AbstractCompensator, t, theta, temperature_c, ts
     r"""Case angle [rad] from the compensated rate, integrated with diffrax along the record.
 
     The wave angle and temperature are linearly interpolated between samples
-    (`diffrax.LinearInterpolation`), so θ̇ is Δθ/Δt inside each sample interval; Heun's
-    method with steps on the sample grid then integrates
-    $\dot\psi = \hat\Omega(\theta(t), \dot\theta(t), T(t))$ exactly for piecewise-linear data
-    up to the curvature of $1/\mathrm{SF}$ and $D$ within an interval.
+    (`diffrax.LinearInterpolation`), so θ̇ is Δθ/Δt inside each sample interval. The midpoint
+    method with steps on the sample grid evaluates
+    $\dot\psi = \hat\Omega(\theta(t), \dot\theta(t), T(t))$ strictly inside each interval, at
+    its middle — the same rule as [`correct`][hrgjax.calibration.AbstractCompensator.correct].
+    (A method that evaluates at the sample times would pair each θ with the θ̇ of a
+    neighbouring interval and shift the fitted ripple by half a sample.)
 
     **Returns:** ψ at `ts` (ψ = 0 at t[0]).
     """
@@ -263,7 +265,7 @@ def integrate_compensated(comp: AbstractCompensator, t, theta, temperature_c, ts
 
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field),
-        diffrax.Heun(),
+        diffrax.Midpoint(),
         t0=t[0],
         t1=t[-1],
         dt0=None,
