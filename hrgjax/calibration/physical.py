@@ -197,14 +197,10 @@ class PhysicalCompensator(AbstractCompensator):
         split_targets(windows)
         groups = _groups(data, self.window_s, self.k_e)
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
-        # Weights: the residual scatter of each kind of window at the starting values (the
-        # harmonic start is close), re-estimated after the fit for the covariance.
-        res = _residual_by_kind(groups, x0, self.k_e)
-        sigma = {k: _robust_rms(r) for k, r in res.items()}
-        values, steps = _lm(groups, x0, sigma, self.k_e, self.max_steps)
-        res = _residual_by_kind(groups, values, self.k_e)
-        sigma = {k: float(np.sqrt(np.mean(r**2))) for k, r in res.items()}
-        jac = _jacobian(groups, values, sigma, self.k_e) * _SCALE
+        values, steps, res, sigma, jac = _fit(groups, jnp.asarray(x0), self.k_e, self.max_steps)
+        values, steps, jac = np.asarray(values), int(steps), np.asarray(jac) * _SCALE
+        res = {k: np.asarray(v) for k, v in res.items()}
+        sigma = {k: float(v) for k, v in sigma.items()}
         r = np.concatenate([res[k] / sigma[k] for k in (True, False)])
         dof = max(r.size - len(NAMES), 1)
         chi2 = float(r @ r) / dof
@@ -305,55 +301,40 @@ def _weighted_residual(x, args):
 
 
 @eqx.filter_jit
-def _lm_solve(groups, x0, sigma, k_e, max_steps):
+def _fit(groups, x0, k_e, max_steps):
+    """Weights, Levenberg–Marquardt, final residuals and Jacobian in one compiled program.
+
+    Weights: the residual scatter of each kind of window (static, moving) at the starting
+    values (robust: median absolute deviation; the harmonic start is close), re-estimated
+    after the fit for the covariance."""
+
+    def by_kind(values):
+        res = [g.measured - _simulated_rates(g, values, k_e) for g in groups]
+        return {
+            kind: jnp.concatenate(
+                [r.ravel() for g, r in zip(groups, res, strict=True) if g.static == kind]
+            )
+            for kind in (True, False)
+        }
+
+    r0 = by_kind(x0)
+    sigma0 = {k: 1.4826 * jnp.median(jnp.abs(r - jnp.median(r))) for k, r in r0.items()}
     # The problem is scaled so that one unit of x is about one standard error: stopping at
     # 1e-4 of that is far below anything the data can tell.
-    solver = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4)
     sol = optx.least_squares(
         _weighted_residual,
-        solver,
+        optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4),
         jnp.zeros(len(NAMES)),
-        args=(groups, x0, sigma, k_e),
+        args=(groups, x0, sigma0, k_e),
         max_steps=max_steps,
         throw=True,
     )
-    return x0 + sol.value * _SCALE, sol.stats["num_steps"]
-
-
-def _lm(groups, x0, sigma, k_e, max_steps):
-    sigma = {k: jnp.asarray(v) for k, v in sigma.items()}  # traced, not static: no recompiles
-    values, steps = _lm_solve(groups, jnp.asarray(x0), sigma, k_e, max_steps)
-    return np.asarray(values), int(steps)
-
-
-@eqx.filter_jit
-def _residual_jit(groups, values, k_e):
-    return [g.measured - _simulated_rates(g, values, k_e) for g in groups]
-
-
-def _robust_rms(r) -> float:
-    """RMS from the median absolute deviation (insensitive to a few outliers at the start)."""
-    return float(1.4826 * np.median(np.abs(r - np.median(r))))
-
-
-def _residual_by_kind(groups, values, k_e):
-    res = _residual_jit(groups, jnp.asarray(values), k_e)
-    out = {True: [], False: []}
-    for g, r in zip(groups, res, strict=True):
-        out[g.static].append(np.asarray(r).ravel())
-    return {k: np.concatenate(v) if v else np.zeros(0) for k, v in out.items()}
-
-
-@eqx.filter_jit
-def _jacobian_jit(groups, values, sigma, k_e):
-    zero = jnp.zeros(len(NAMES))
-    fn = lambda x: _weighted_residual(x, (groups, values, sigma, k_e))
-    return jax.jacfwd(fn)(zero) / jnp.asarray(_SCALE)[None, :]
-
-
-def _jacobian(groups, values, sigma, k_e):
-    sigma = {k: jnp.asarray(v) for k, v in sigma.items()}
-    return np.asarray(_jacobian_jit(groups, jnp.asarray(values), sigma, k_e))
+    values = x0 + sol.value * _SCALE
+    r1 = by_kind(values)
+    sigma1 = {k: jnp.sqrt(jnp.mean(r**2)) for k, r in r1.items()}
+    fn = lambda x: _weighted_residual(x, (groups, values, sigma1, k_e))
+    jac = jax.jacfwd(fn)(jnp.zeros(len(NAMES))) / jnp.asarray(_SCALE)[None, :]
+    return values, sol.stats["num_steps"], r1, sigma1, jac
 
 
 def initial_values(windows, k_e: float = K_E_NOMINAL) -> np.ndarray:
