@@ -36,7 +36,7 @@ from hrgjax.calibration import (
     seed_plan,
     test_plan,
 )
-from hrgjax.calibration.mlp import train_rprop
+from hrgjax.calibration.mlp import bin_targets, train_rprop
 from hrgjax.calibration.study import bench_session
 from hrgjax.noise import draw_run_bias
 from hrgjax.units import DEG, DEG_PER_H
@@ -151,15 +151,22 @@ def main(quick: bool):
     x_s = jax.vmap(mlp.features)(
         jnp.asarray(moving.wave_angle_deg * DEG), jnp.asarray(moving.temperature_c)
     )
-    y_s = jnp.asarray(moving.rate_dps / moving.table_rate_dps)
-    y_s = (y_s - jnp.mean(y_s)) / jnp.std(y_s)
-    print("\nRprop training, 1000 full-batch steps (seed: 3.1 s drift, 0.8 s scale factor)")
+    th_b, tc_b, sf_b = bin_targets(
+        moving.wave_angle_deg * DEG,
+        moving.temperature_c,
+        moving.rate_dps / moving.table_rate_dps,
+        mlp.bin_deg,
+    )
+    x_s = jax.vmap(mlp.features)(jnp.asarray(th_b), jnp.asarray(tc_b))
+    y_s = jnp.asarray((sf_b - np.mean(sf_b)) / np.std(sf_b))
+    steps = mlp.steps
+    print(f"\nRprop training, {steps} full-batch steps (seed: 3.1 s drift, 0.8 s scale factor)")
     for name, net, x, y in (
         ("drift (30 hidden)", mlp.drift_net, x_d, y_d),
         ("scale factor (20)", mlp.sf_net, x_s, y_s),
     ):
-        compile_s, _ = first_call(lambda net=net, x=x, y=y: train_rprop(net, x, y, 1000))
-        run_s = best_of(lambda net=net, x=x, y=y: train_rprop(net, x, y, 1000), repeat=3)
+        compile_s, _ = first_call(lambda net=net, x=x, y=y: train_rprop(net, x, y, steps))
+        run_s = best_of(lambda net=net, x=x, y=y: train_rprop(net, x, y, steps), repeat=3)
         print(
             f"  {name:>18}: {x.shape[0]} points, {run_s * 1e3:.0f} ms after compile "
             f"(compile + first run {compile_s:.2f} s); target ≤ 100 ms"

@@ -96,6 +96,10 @@ def cmd_demo(args) -> int:
     study = run_study(key=jax.random.key(args.seed), quick=args.quick, progress=_say(t0))
     print()
     print(format_table(study.table))
+    if study.ins is not None:
+        from .calibration.ins_impact import format_ins_table
+
+        print(format_ins_table(study.ins) + "\n")
     print("times [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in study.timings.items()))
     phys = study.compensators.get("physical")
     if phys is not None:

@@ -420,3 +420,25 @@ def test_unfitted_compensators_say_so():
         FourierCompensator().drift_dph([0.0], 20.0)
     with pytest.raises(ValueError, match="not fitted"):
         MLPCompensator().drift_dph([0.0], 20.0)
+
+
+# --- INS impact (minimal Schuler model) ------------------------------------------------------
+
+
+def test_schuler_channel_matches_closed_form():
+    """PHYSICS.md §12: a constant level gyro bias ε gives δp = Rε(t − sin(ω_s t)/ω_s) and
+    δv = Rε(1 − cos ω_s t)."""
+    from hrgjax.calibration.ins_impact import EARTH_RADIUS, GRAVITY, schuler_errors
+
+    t = jnp.linspace(0.0, 3600.0, 361)
+    eps = 1e-7
+    dv, dp = schuler_errors(t, jnp.full(t.shape, eps), jnp.zeros(t.shape))
+    ws = np.sqrt(GRAVITY / EARTH_RADIUS)
+    tn = np.asarray(t)
+    np.testing.assert_allclose(
+        dp[:, 0], EARTH_RADIUS * eps * (tn - np.sin(ws * tn) / ws), rtol=1e-6, atol=1e-6
+    )
+    np.testing.assert_allclose(
+        dv[:, 0], EARTH_RADIUS * eps * (1 - np.cos(ws * tn)), rtol=1e-6, atol=1e-9
+    )
+    np.testing.assert_allclose(dp[:, 1], 0.0, atol=1e-12)

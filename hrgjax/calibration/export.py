@@ -44,6 +44,8 @@ def _hyper(comp) -> dict:
             "sf_width": comp.sf_width,
             "encoding": comp.encoding,
             "steps": comp.steps,
+            "learning_rate": comp.learning_rate,
+            "bin_deg": comp.bin_deg,
             "e2e_steps": comp.e2e_steps,
             "k_e": comp.k_e,
         }

@@ -42,6 +42,10 @@ class MLPCompensator(AbstractCompensator):
     - `drift_width`, `sf_width`: hidden neurons (30 and 20 in the seed).
     - `encoding`: `"periodic"` (cos 2θ, sin 2θ, T) or `"angle"` (folded θ, T; the seed's).
     - `steps`: Rprop iterations for the reduced fit; `e2e_steps` for end-to-end training.
+    - `learning_rate`: Rprop's initial step size.
+    - `bin_deg`: the scale-factor targets are averaged in cells of one temperature and
+      `bin_deg` of wave angle (the seed's grid: one target per point); the cell's input is
+      the circular mean of its windows' angles.
     - `k_e`: nominal angular gain.
     - `drift_net`, `sf_net`, and the normalisation (`t_centre`, `t_scale` [°C];
       `drift_offset`, `drift_scale` [rad/s]; `sf_offset`, `sf_scale`): set by `fit`.
@@ -50,7 +54,9 @@ class MLPCompensator(AbstractCompensator):
     drift_width: int = eqx.field(static=True, default=30)
     sf_width: int = eqx.field(static=True, default=20)
     encoding: str = eqx.field(static=True, default="periodic")
-    steps: int = eqx.field(static=True, default=1000)
+    steps: int = eqx.field(static=True, default=3000)
+    learning_rate: float = eqx.field(static=True, default=1e-3)
+    bin_deg: float = eqx.field(static=True, default=5.0)
     e2e_steps: int = eqx.field(static=True, default=200)
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
     drift_net: eqx.nn.MLP | None = None
@@ -150,7 +156,9 @@ class MLPCompensator(AbstractCompensator):
         )
         d = (static.rate_dps - static.table_rate_dps) * DEG
         d_off, d_scale = float(np.mean(d)), float(max(np.std(d), 1e-12))
-        net = train_rprop(comp.drift_net, x_s, jnp.asarray((d - d_off) / d_scale), self.steps)
+        net = train_rprop(
+            comp.drift_net, x_s, jnp.asarray((d - d_off) / d_scale), self.steps, self.learning_rate
+        )
         comp = eqx.tree_at(
             lambda c: (c.drift_net, c.drift_offset, c.drift_scale),
             comp,
@@ -160,9 +168,12 @@ class MLPCompensator(AbstractCompensator):
         tc_m = jnp.asarray(moving.temperature_c)
         d_m = np.asarray(jax.vmap(comp.drift)(th_m, tc_m))
         sf = (moving.rate_dps * DEG - d_m) / (moving.table_rate_dps * DEG)
+        th_b, tc_b, sf = bin_targets(np.asarray(th_m), moving.temperature_c, sf, self.bin_deg)
         s_off, s_scale = float(np.mean(sf)), float(max(np.std(sf), 1e-12))
-        x_m = jax.vmap(comp.features)(th_m, tc_m)
-        net = train_rprop(comp.sf_net, x_m, jnp.asarray((sf - s_off) / s_scale), self.steps)
+        x_m = jax.vmap(comp.features)(jnp.asarray(th_b), jnp.asarray(tc_b))
+        net = train_rprop(
+            comp.sf_net, x_m, jnp.asarray((sf - s_off) / s_scale), self.steps, self.learning_rate
+        )
         comp = eqx.tree_at(
             lambda c: (c.sf_net, c.sf_offset, c.sf_scale),
             comp,
@@ -176,8 +187,25 @@ class MLPCompensator(AbstractCompensator):
         return comp
 
 
+def bin_targets(theta, temperature_c, value, bin_deg: float):
+    """Average `value` in cells of equal temperature and `bin_deg` of wave angle (period 180°).
+
+    **Returns:** `(theta, temperature_c, value)` per non-empty cell; θ [rad] is the circular
+    mean (in 2θ) of the cell's angles.
+    """
+    folded = (np.degrees(theta) + 90.0) % 180.0
+    cell_angle = np.floor(folded / bin_deg).astype(int)
+    temps, t_idx = np.unique(np.round(temperature_c, 6), return_inverse=True)
+    keys = t_idx * (int(np.ceil(180.0 / bin_deg)) + 1) + cell_angle
+    uniq, inv = np.unique(keys, return_inverse=True)
+    count = np.bincount(inv)
+    mean = lambda x: np.bincount(inv, weights=x) / count
+    th = 0.5 * np.arctan2(mean(np.sin(2 * theta)), mean(np.cos(2 * theta)))
+    return th, mean(temperature_c), mean(value)
+
+
 @eqx.filter_jit
-def train_rprop(net, x, y, steps: int, learning_rate: float = 1e-2):
+def train_rprop(net, x, y, steps: int, learning_rate: float = 1e-3):
     """Full-batch Rprop on the mean squared error of `net(x) − y`.
 
     **Arguments:** `net` (a callable Module), `x` shape (n, d), `y` shape (n,), `steps`.

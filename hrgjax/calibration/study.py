@@ -15,6 +15,7 @@ from ._compensator import AbstractCompensator
 from .evaluate import NoCompensation, accuracy_table
 from .experiment import run_plan, seed_plan, test_plan
 from .fourier import FourierCompensator
+from .ins_impact import Flight, ins_impact
 from .mlp import MLPCompensator
 from .physical import PhysicalCompensator
 from .reduce import RateWindows, reduce
@@ -29,16 +30,28 @@ class Study:
 
     Attributes: `calibration` and `test` ([`hrgjax.MeasuredData`][]), `windows` (the reduced
     calibration data), `compensators` ({label: fitted compensator}, "raw" first), `table`
-    (see [`accuracy_table`][hrgjax.calibration.accuracy_table]), `timings` ({step: seconds}).
+    (see [`accuracy_table`][hrgjax.calibration.accuracy_table]), `ins` (navigation errors per
+    compensator, see [`ins_impact`][hrgjax.calibration.ins_impact.ins_impact]; `None` when
+    skipped), `timings` ({step: seconds}).
     """
 
-    def __init__(self, calibration, test, windows, compensators, table, timings):
+    def __init__(self, calibration, test, windows, compensators, table, timings, ins=None):
         self.calibration: MeasuredData = calibration
         self.test: MeasuredData = test
         self.windows: RateWindows = windows
         self.compensators: dict[str, AbstractCompensator] = compensators
         self.table: dict[str, Any] = table
         self.timings: dict[str, float] = timings
+        self.ins = ins
+
+
+FLIGHTS = (
+    Flight(heading_deg=40.0, wave_angle_x_deg=30.0, wave_angle_y_deg=-55.0),
+    Flight(heading_deg=130.0, wave_angle_x_deg=-20.0, wave_angle_y_deg=70.0),
+    Flight(heading_deg=250.0, wave_angle_x_deg=80.0, wave_angle_y_deg=5.0),
+)
+"""The 1-h flights of the INS-impact step: IMU warming from −40 °C to +20 °C (20-min time
+constant), three headings and wave-angle pairs."""
 
 
 def bench_session(
@@ -62,6 +75,7 @@ def run_study(
     key: jax.Array,
     quick: bool = False,
     methods=METHODS,
+    ins: bool = True,
     progress=None,
 ) -> Study:
     """Simulate the bench campaign on `gyro`, fit every compensator, tabulate the test errors.
@@ -76,6 +90,8 @@ def run_study(
     - `key`: PRNG key (noise, switch-on bias, network weights).
     - `quick`: 3 temperatures and short runs (the demo's `--quick`).
     - `methods`: subset of [`METHODS`][hrgjax.calibration.study.METHODS].
+    - `ins`: also fly [`FLIGHTS`][hrgjax.calibration.study.FLIGHTS] (one in quick mode) and
+      report the navigation errors with each compensator.
     - `progress`: optional callable `progress(message)`.
 
     **Returns:** a [`Study`][hrgjax.calibration.Study].
@@ -123,4 +139,13 @@ def run_study(
     t0 = time.perf_counter()
     table = accuracy_table(comps, test)
     timings["evaluate"] = time.perf_counter() - t0
-    return Study(cal, test, windows, comps, table, timings)
+    nav = None
+    if ins:
+        say("flying the INS-impact flights")
+        t0 = time.perf_counter()
+        flights = FLIGHTS[:1] if quick else FLIGHTS
+        nav = ins_impact(
+            comps, gyro, list(flights), key=jax.random.fold_in(k_test, 99), bias_key=k_bias
+        )
+        timings["INS impact"] = time.perf_counter() - t0
+    return Study(cal, test, windows, comps, table, timings, nav)

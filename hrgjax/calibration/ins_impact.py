@@ -1,0 +1,168 @@
+r"""What compensation buys in navigation: a minimal strapdown error model (seed 000 §INS).
+
+A deliberately small model, to be replaced by `hrgjax.ins` (the INS issue) when it lands:
+level flight at constant heading ψ, two level HRGs along the body axes x (forward) and y
+(right), each with its own wave angle, in an IMU that warms up during the flight. Each
+gyro's residual rate error after compensation, $\varepsilon_x, \varepsilon_y$, is rotated to
+north and east and drives one Schuler channel each (Earth-rate coupling neglected, as in the
+classical single-channel closed forms of PHYSICS.md §12):
+
+$$\delta\dot v = g\,\phi,\qquad \dot\phi = -\frac{\delta v}{R} + \varepsilon,\qquad
+\delta\dot p = \delta v,$$
+
+so a constant ε gives $\delta p = R\varepsilon\,(t - \sin\omega_s t/\omega_s)$, $\omega_s=\sqrt{g/R}$.
+The reported figures are the horizontal velocity and position error magnitudes after the
+flight.
+"""
+
+from __future__ import annotations
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._x64 import require_x64
+from ..data import MeasuredData, concat
+from ..gyro import Gyro
+from ..profiles import Profile
+from ..simulate import simulate
+from ..units import DEG
+from ._compensator import AbstractCompensator
+
+EARTH_RADIUS = 6_378_137.0
+"""WGS-84 equatorial radius [m]."""
+GRAVITY = 9.80665
+"""Standard gravity [m/s²]."""
+
+
+def schuler_errors(t, eps_north, eps_east):
+    r"""Integrate the two Schuler channels (module docstring) with diffrax.
+
+    **Arguments:** `t` [s] shape (N,); `eps_north`, `eps_east`: gyro error about the north and
+    east axes [rad/s] at `t` (linearly interpolated between samples).
+
+    **Returns:** `(velocity_error, position_error)` [m/s], [m], each shape (N, 2) for the
+    (east, north) channels: a north-axis gyro error drives the east channel and vice versa.
+    """
+    path = diffrax.LinearInterpolation(ts=t, ys=jnp.stack([eps_north, eps_east], axis=-1))
+
+    def field(s, y, args):
+        dv, phi, _ = y[0:2], y[2:4], y[4:6]
+        eps = path.evaluate(s)
+        return jnp.concatenate([GRAVITY * phi, -dv / EARTH_RADIUS + eps, dv])
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        diffrax.Tsit5(),
+        t0=t[0],
+        t1=t[-1],
+        dt0=None,
+        y0=jnp.zeros(6),
+        saveat=diffrax.SaveAt(ts=t),
+        stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9, jump_ts=t),
+        max_steps=16 * t.shape[0],
+    )
+    return sol.ys[:, 0:2], sol.ys[:, 4:6]
+
+
+class Flight(eqx.Module):
+    """A level flight for the INS-impact study.
+
+    **Arguments:** `duration_s` [s]; `heading_deg` (clockwise from north); `wave_angle_x_deg`,
+    `wave_angle_y_deg`: initial wave angles of the two level gyros [° electrical];
+    `temperature_start_c`, `temperature_end_c` [°C] and `warmup_s` [s]: IMU temperature
+    $T(t) = T_{end} + (T_{start} - T_{end})e^{-t/t_w}$; `dt_out` [s].
+    """
+
+    duration_s: float = eqx.field(static=True, default=3600.0)
+    heading_deg: float = eqx.field(static=True, default=40.0)
+    wave_angle_x_deg: float = eqx.field(static=True, default=30.0)
+    wave_angle_y_deg: float = eqx.field(static=True, default=-55.0)
+    temperature_start_c: float = eqx.field(static=True, default=-40.0)
+    temperature_end_c: float = eqx.field(static=True, default=20.0)
+    warmup_s: float = eqx.field(static=True, default=1200.0)
+    dt_out: float = eqx.field(static=True, default=1.0)
+
+    def temperature(self, t):
+        """IMU temperature [°C] at `t` [s]."""
+        return self.temperature_end_c + (
+            self.temperature_start_c - self.temperature_end_c
+        ) * np.exp(-np.asarray(t) / self.warmup_s)
+
+
+def fly(gyro: Gyro, flight: Flight, *, key: jax.Array, bias_key: jax.Array) -> MeasuredData:
+    """Records of the two level gyros (runs 0 = x, 1 = y) during `flight` (table rate 0)."""
+    require_x64("calibration.ins_impact.fly")
+    knots = np.linspace(0.0, flight.duration_s, 61)
+    ts = jnp.asarray(np.arange(0.0, flight.duration_s + 1e-9, flight.dt_out))
+    parts = []
+    for i, angle in enumerate((flight.wave_angle_x_deg, flight.wave_angle_y_deg)):
+        prof = Profile.piecewise(knots, 0.0, flight.temperature(knots), wave_angle0_deg=angle)
+        rec = simulate(gyro, prof, key=jax.random.fold_in(key, i), bias_key=bias_key, ts=ts, run=i)
+        parts.append(rec.to_data())
+    return concat(parts)
+
+
+def navigation_errors(comp: AbstractCompensator, records: MeasuredData, flight: Flight):
+    """Velocity and position error magnitudes [m/s], [m] at the end of `flight` when the level
+    gyros' outputs are compensated with `comp` (rates in `records` from [`fly`][hrgjax.calibration.ins_impact.fly])."""
+    out = comp.correct(records)
+    idx = records.run_indices()
+    t = records["time_s"][idx[0]]
+    eps_x = out["rate_corrected_dps"][idx[0]] * DEG  # true rate is 0: all of it is error
+    eps_y = out["rate_corrected_dps"][idx[1]] * DEG
+    psi = flight.heading_deg * DEG
+    eps_n = np.cos(psi) * eps_x - np.sin(psi) * eps_y
+    eps_e = np.sin(psi) * eps_x + np.cos(psi) * eps_y
+    dv, dp = schuler_errors(jnp.asarray(t), jnp.asarray(eps_n), jnp.asarray(eps_e))
+    return float(jnp.linalg.norm(dv[-1])), float(jnp.linalg.norm(dp[-1]))
+
+
+def ins_impact(
+    compensators: dict[str, AbstractCompensator],
+    gyro: Gyro,
+    flights: list[Flight],
+    *,
+    key: jax.Array,
+    bias_key: jax.Array,
+):
+    """Navigation errors after each flight for each compensator.
+
+    **Returns:** {label: {"velocity_error_mps": [per flight], "position_error_km": [...]}}.
+    """
+    records = [
+        fly(gyro, f, key=jax.random.fold_in(key, i), bias_key=bias_key)
+        for i, f in enumerate(flights)
+    ]
+    table = {}
+    for label, comp in compensators.items():
+        errs = [navigation_errors(comp, r, f) for r, f in zip(records, flights, strict=True)]
+        table[label] = {
+            "velocity_error_mps": [e[0] for e in errs],
+            "position_error_km": [e[1] / 1000 for e in errs],
+        }
+    return table
+
+
+SEED_INS = {"velocity_error_mps": ((16, 26), (6, 8)), "position_error_km": ((79, 82), (14, 28))}
+"""Seed 000 (An-72 flight data, 1 h): (baseline range, neural range)."""
+
+
+def format_ins_table(table) -> str:
+    """Text table of [`ins_impact`][hrgjax.calibration.ins_impact.ins_impact] with the seed's
+    ranges."""
+    lines = ["navigation error after the flight (min–max over flights)"]
+    lines.append(f"{'method':>16} {'velocity [m/s]':>16} {'position [km]':>16}")
+    for label, row in table.items():
+        v, p = row["velocity_error_mps"], row["position_error_km"]
+        lines.append(f"{label:>16} {min(v):7.2f}–{max(v):<7.2f} {min(p):8.2f}–{max(p):<7.2f}")
+    sv, sp = SEED_INS["velocity_error_mps"], SEED_INS["position_error_km"]
+    lines.append(
+        f"{'seed baseline':>16} {sv[0][0]:7.0f}–{sv[0][1]:<7.0f} {sp[0][0]:8.0f}–{sp[0][1]:<7.0f}"
+    )
+    lines.append(
+        f"{'seed neural':>16} {sv[1][0]:7.0f}–{sv[1][1]:<7.0f} {sp[1][0]:8.0f}–{sp[1][1]:<7.0f}"
+    )
+    return "\n".join(lines)
