@@ -5,7 +5,8 @@ points, 3 min static and 3 min at 5 °/s) and test grid (11 × 37 points, 5 min)
 test grid without noise as the systematic truth. Prints:
 
 1. the accuracy table (static drift error, end-of-run angle error, largest angle error) for
-   raw, Fourier @+20 °C, Fourier+T³, MLP (reduced), MLP (end-to-end), physical;
+   raw, Fourier @+20 °C, Fourier+T³, MLP (reduced), MLP (end-to-end), physical, and the
+   navigation errors after three 1-h flights (minimal Schuler model, seed: An-72 data);
 2. MLP systematic residual: drift vs the noise-free truth as % of its peak-to-peak, and the
    scale factor in % (targets ≤ 1 % and ≤ 0.05 %);
 3. the ≥ 10× improvement over the +20 °C Fourier baseline at −40 °C;
@@ -37,7 +38,8 @@ from hrgjax.calibration import (
     test_plan,
 )
 from hrgjax.calibration.mlp import bin_targets, train_rprop
-from hrgjax.calibration.study import bench_session
+from hrgjax.calibration.ins_impact import format_ins_table, ins_impact
+from hrgjax.calibration.study import FLIGHTS, bench_session
 from hrgjax.noise import draw_run_bias
 from hrgjax.units import DEG, DEG_PER_H
 
@@ -80,6 +82,13 @@ def main(quick: bool):
         "fit wall times incl. compile [s]: "
         + ", ".join(f"{k} {v:.1f}" for k, v in fit_times.items())
     )
+
+    t0 = time.perf_counter()
+    nav = ins_impact(
+        comps, gyro, list(FLIGHTS), key=jax.random.fold_in(k_test, 99), bias_key=k_bias
+    )
+    print(format_ins_table(nav))
+    print(f"(3 flights of 1 h, IMU warming −40 → +20 °C; {time.perf_counter() - t0:.1f} s)")
 
     # --- 2. systematic residual against the noise-free truth -----------------------------
     tw = reduce(truth)

@@ -442,3 +442,22 @@ def test_schuler_channel_matches_closed_form():
         dv[:, 0], EARTH_RADIUS * eps * (1 - np.cos(ws * tn)), rtol=1e-6, atol=1e-9
     )
     np.testing.assert_allclose(dp[:, 1], 0.0, atol=1e-12)
+
+
+def test_physical_compensates_the_apparent_rate_of_a_temperature_ramp():
+    """A readout mismatch that changes with temperature moves the measured angle while the
+    temperature changes (rate ∝ Ṫ, PHYSICS.md §4.7 with g(T)); knowing the readout, the
+    physical compensator removes it; a compensator fitted at constant temperatures cannot."""
+    v = dict(zip(physical.NAMES, np.zeros(len(physical.NAMES)), strict=True))
+    v.update(k_e0=K, gain_mismatch0=4e-3, gain_mismatch1=-1e-4, delta_inv_tau0=2e-6)
+    values = jnp.asarray([v[n] for n in physical.NAMES])
+    comp = PhysicalCompensator(values=values, covariance=jnp.eye(values.size))
+    prof = hg.Profile.piecewise([0.0, 300.0], 0.0, [-40.0, -10.0], wave_angle0_deg=30.0)
+    rec = hg.simulate(physical.model_gyro(values), prof, dt_out=1.0)
+    data = rec.to_data()
+    out = comp.correct(data)
+    ramp = 0.1 * (-1e-4) * np.sin(np.radians(60.0)) / K / DEG * 3600  # (dg/dT)Ṫ sin2θ/k_e
+    raw = NoCompensation().correct(data)["rate_corrected_dps"] * 3600
+    drift_only = -0.5 * 2e-6 * np.sin(2 * np.asarray(rec.true_wave_angle)) / K / DEG * 3600
+    assert abs(np.mean(raw - drift_only) - ramp) < 0.1 * abs(ramp)  # the effect is there
+    np.testing.assert_allclose(out["rate_corrected_dps"] * 3600, 0.0, atol=2e-4)

@@ -10,7 +10,13 @@ With the nominal angular gain $k_{e,\rm nom}$ the measured rate is
 $\Omega_{\rm meas} = -\dot\theta_{\rm meas}/k_{e,\rm nom} = \mathrm{SF}\,\Omega + D$, so the
 compensated rate is
 
-$$\hat\Omega = \frac{-\dot\theta_{\rm meas}/k_{e,\rm nom} - D(\theta,T)}{\mathrm{SF}(\theta,T)}.$$
+$$\hat\Omega = \frac{-(\dot\theta_{\rm meas} - s_T\,\dot T)/k_{e,\rm nom} - D(\theta,T)}
+{\mathrm{SF}(\theta,T)}.$$
+
+$s_T = \partial\hat\theta/\partial T$ is the readout's temperature sensitivity at a fixed true
+angle: when the pickoff errors change with temperature, the measured angle moves while the
+pattern does not (an apparent rate proportional to $\dot T$). Only a model that knows the
+readout can supply it (the physical compensator); the others take $s_T = 0$.
 """
 
 from __future__ import annotations
@@ -50,10 +56,16 @@ class AbstractCompensator(eqx.Module):
     def scale_factor(self, theta, temperature_c):
         """Scale factor SF(θ, T) (1 = nominal); θ electrical [rad], T [°C]."""
 
-    def corrected_rate(self, theta, theta_dot, temperature_c):
+    def readout_temperature_sensitivity(self, theta, temperature_c):
+        """s_T = ∂θ̂/∂T [rad/°C] at the measured angle θ [rad] and temperature [°C]; zero unless
+        the compensator models the readout."""
+        return jnp.zeros_like(theta)
+
+    def corrected_rate(self, theta, theta_dot, temperature_c, temperature_rate=0.0):
         """Compensated equivalent input rate [rad/s] from the measured wave angle θ [rad],
-        its rate θ̇ [rad/s] and temperature [°C] (module docstring)."""
-        measured = -theta_dot / self.k_e
+        its rate θ̇ [rad/s], temperature [°C] and its rate [°C/s] (module docstring)."""
+        s_t = self.readout_temperature_sensitivity(theta, temperature_c)
+        measured = -(theta_dot - s_t * temperature_rate) / self.k_e
         return (measured - self.drift(theta, temperature_c)) / self.scale_factor(
             theta, temperature_c
         )
@@ -74,7 +86,8 @@ class AbstractCompensator(eqx.Module):
     def correct(self, data: MeasuredData) -> MeasuredData:
         """Compensate every run of `data`.
 
-        Each sample interval gives θ̇ = Δθ/Δt at the mid-interval angle and temperature; the
+        Each sample interval gives θ̇ = Δθ/Δt (and Ṫ = ΔT/Δt) at the mid-interval angle and
+        temperature; the
         compensated rate of the interval is integrated (exactly, as a sum) into
         `angle_corrected_deg`, which starts at 0 in each run. `rate_corrected_dps` at a sample
         is the mean of its neighbouring intervals (one-sided at the ends).
@@ -117,7 +130,9 @@ def _interval_rates(comp, t, theta, temperature):
     dt = jnp.diff(t)
     mid = 0.5 * (theta[1:] + theta[:-1])
     tmid = 0.5 * (temperature[1:] + temperature[:-1])
-    return jax.vmap(comp.corrected_rate)(mid, jnp.diff(theta) / dt, tmid)
+    return jax.vmap(comp.corrected_rate)(
+        mid, jnp.diff(theta) / dt, tmid, jnp.diff(temperature) / dt
+    )
 
 
 def as_windows(data, k_e: float, window_s: float | None = WINDOW_S) -> RateWindows:

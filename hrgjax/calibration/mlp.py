@@ -288,8 +288,8 @@ def integrate_compensated(comp: AbstractCompensator, t, theta, temperature_c, ts
 
     def field(s, psi, args):
         th, tc = path.evaluate(s)
-        dth = path.derivative(s)[0]
-        return comp.corrected_rate(th, dth, tc)
+        dth, dtc = path.derivative(s)
+        return comp.corrected_rate(th, dth, tc, dtc)
 
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field),

@@ -21,6 +21,9 @@ the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the
 The compensator's D and SF follow from the fitted gyro itself: the readout map
 $\theta\mapsto\hat\theta$ is inverted at the measured angle, the rest-state pattern rate comes
 from the averaged vector field, and $\mathrm{SF} = (d\hat\theta/d\theta)\,k_e(T)/k_{e,\rm nom}$.
+It also knows $\partial\hat\theta/\partial T$, the apparent rate a changing readout mismatch
+gives while the temperature changes, which the empirical compensators cannot learn from bench
+data taken at constant temperatures.
 """
 
 from __future__ import annotations
@@ -151,6 +154,12 @@ class PhysicalCompensator(AbstractCompensator):
         rest = Profile.static(1.0, temperature_c)
         theta_dot = averaged_vector_field(0.0, theta[None], (g, rest))[0]
         return slope, theta_dot, g.resonator.k_e
+
+    def readout_temperature_sensitivity(self, theta, temperature_c):
+        gyro = self.gyro()
+        true = true_angle(gyro.at(temperature_c), theta)
+        meas = lambda temp: _readout_angle(gyro.at(temp), true)
+        return jax.jvp(meas, (temperature_c,), (jnp.ones_like(temperature_c),))[1]
 
     def drift(self, theta, temperature_c):
         slope, theta_dot, _ = self._derivatives(theta, temperature_c)
