@@ -37,8 +37,8 @@ from hrgjax.calibration import (
     seed_plan,
     test_plan,
 )
-from hrgjax.calibration.mlp import bin_targets, train_rprop
 from hrgjax.calibration.ins_impact import format_ins_table, ins_impact
+from hrgjax.calibration.mlp import bin_targets, train_rprop
 from hrgjax.calibration.study import FLIGHTS, bench_session
 from hrgjax.noise import draw_run_bias
 from hrgjax.units import DEG, DEG_PER_H
