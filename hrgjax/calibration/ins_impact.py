@@ -37,6 +37,7 @@ GRAVITY = 9.80665
 """Standard gravity [m/s²]."""
 
 
+@jax.jit
 def schuler_errors(t, eps_north, eps_east):
     r"""Integrate the two Schuler channels (module docstring) with diffrax.
 
