@@ -131,9 +131,10 @@ def cmd_demo(args) -> int:
     for label, comp in study.compensators.items():
         if label == "raw":
             continue
-        stem = os.path.join(args.out, "model_" + "".join(c if c.isalnum() else "_" for c in label))
-        written.append(save_compensator(comp, stem.rstrip("_") + ".eqx"))
-        written.append(export_json(comp, stem.rstrip("_") + ".json"))
+        slug = "_".join("".join(c if c.isalnum() else " " for c in label.lower()).split())
+        stem = os.path.join(args.out, "model_" + slug)
+        written.append(save_compensator(comp, stem + ".eqx"))
+        written.append(export_json(comp, stem + ".json"))
     print(f"\ntotal {time.perf_counter() - t0:.1f} s; wrote:")
     for w in written:
         print(f"  {w}")

@@ -24,7 +24,8 @@ def test_demo_quick_runs_the_study(tmp_path, capsys):
         "drift_scale_factor.png",
         "drift_residuals.png",
         "error_vs_temperature.png",
-        "model_MLP.eqx",
+        "model_mlp.eqx",
+        "model_fourier_20_c.json",
         "model_physical.json",
     ):
         assert (tmp_path / name).stat().st_size > 0

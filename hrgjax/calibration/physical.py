@@ -48,7 +48,7 @@ from ..resonator.readout import Readout
 from ..simulate import simulate
 from ..units import DEG, DEG_PER_H, T_REF_C
 from ._compensator import AbstractCompensator, split_targets
-from .reduce import K_E_NOMINAL, _window_layout, reduce, window_slopes
+from .reduce import K_E_NOMINAL, _window_layout, _window_stats, reduce, window_slopes
 
 PARAMETERS = (
     ("k_e0", "", 1e-4),
@@ -232,7 +232,8 @@ class PhysicalCompensator(AbstractCompensator):
 
 
 class _Group(eqx.Module):
-    """Runs of one length and window layout, stacked for one vmap."""
+    """Runs of one length, stacked for one vmap of the simulator. Static runs are reduced as
+    one window, moving runs as `n_windows` windows."""
 
     t: jax.Array  # (R, N)
     theta0: jax.Array  # (R,) measured initial angle [rad]
@@ -240,29 +241,35 @@ class _Group(eqx.Module):
     rate: jax.Array  # (R, K) [rad/s]
     temperature: jax.Array  # (R, K) [°C]
     accel: jax.Array  # (R, K, 3) [g]
-    measured: jax.Array  # (R, W) window rates [rad/s]
+    measured_static: jax.Array  # (Rs, 1) window rates [rad/s]
+    measured_moving: jax.Array  # (Rm, W)
+    static_idx: tuple = eqx.field(static=True)
+    moving_idx: tuple = eqx.field(static=True)
     n_windows: int = eqx.field(static=True)
-    static: bool = eqx.field(static=True)
 
 
 def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
-    buckets: dict[tuple, list] = {}
+    buckets: dict[int, list] = {}
     for r in data.runs():
-        n_win, n = _window_layout(r, window_s)
-        static = bool(np.all(r["table_rate_dps"] == 0.0))
-        buckets.setdefault((len(r), n_win, n, static), []).append(r)
+        buckets.setdefault(len(r), []).append(r)
     out = []
-    for (length, n_win, n, static), runs in sorted(buckets.items()):
+    for length, runs in sorted(buckets.items()):
+        static = [bool(np.all(r["table_rate_dps"] == 0.0)) for r in runs]
+        layouts = {
+            _window_layout(r, window_s) for r, st in zip(runs, static, strict=True) if not st
+        }
+        if len(layouts) > 1:
+            raise ValueError(
+                f"moving runs of {length} samples have different sampling; resample them alike"
+            )
+        n_win, n = layouts.pop() if layouts else (1, length)
         knots = np.unique(np.concatenate([np.arange(0, length, n), [length - 1]]))
-        m = n_win * n
         t = np.stack([r["time_s"] for r in runs])
         th = np.stack([r["wave_angle_deg"] for r in runs]) * DEG
-        slopes = np.stack(
-            [
-                window_slopes(jnp.asarray(a[:m]), jnp.asarray(b[:m]), n_win)[0]
-                for a, b in zip(t, th, strict=True)
-            ]
-        )
+        s_idx = tuple(i for i, st in enumerate(static) if st)
+        m_idx = tuple(i for i, st in enumerate(static) if not st)
+        m = n_win * n
+
         acc = np.zeros((len(runs), knots.size, 3))
         for i, r in enumerate(runs):
             for j, axis in enumerate("xyz"):
@@ -276,17 +283,28 @@ def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
                 rate=jnp.asarray(np.stack([r["table_rate_dps"][knots] for r in runs]) * DEG),
                 temperature=jnp.asarray(np.stack([r["temperature_c"][knots] for r in runs])),
                 accel=jnp.asarray(acc),
-                measured=jnp.asarray(-slopes / k_e),
+                measured_static=jnp.asarray(-_slopes(t, th, s_idx, 1, length) / k_e),
+                measured_moving=jnp.asarray(-_slopes(t, th, m_idx, n_win, m) / k_e),
+                static_idx=s_idx,
+                moving_idx=m_idx,
                 n_windows=n_win,
-                static=static,
             )
         )
     return out
 
 
+def _slopes(t, theta, idx, windows, samples):
+    """Window slopes of the runs `idx` (NumPy; the same formula as `window_slopes`)."""
+    if not idx:
+        return np.zeros((0, windows))
+    return np.stack(
+        [_window_stats(np, t[i, :samples], theta[i, :samples], windows, 0)[0] for i in idx]
+    )
+
+
 def _simulated_rates(group: _Group, values, k_e: float):
+    """Simulated window rates (static (Rs, 1), moving (Rm, W)) [rad/s] of one group."""
     gyro = model_gyro(values)
-    m = (group.t.shape[1] // group.n_windows) * group.n_windows
 
     def one(t, theta0, rate, temp, acc):
         theta_start = true_angle(gyro.at(temp[0]), theta0)
@@ -294,19 +312,36 @@ def _simulated_rates(group: _Group, values, k_e: float):
             t=t[group.knots], rate=rate, temperature=temp, accel=acc, wave_angle0=theta_start
         )
         rec = simulate(gyro, prof, ts=t, adjoint=diffrax.ForwardMode(), rtol=1e-9, atol=1e-12)
-        slope = window_slopes(t[:m], rec.wave_angle[:m], group.n_windows)[0]
-        return -slope / k_e
+        return rec.wave_angle
 
-    return jax.vmap(one)(group.t, group.theta0, group.rate, group.temperature, group.accel)
+    theta = jax.vmap(one)(group.t, group.theta0, group.rate, group.temperature, group.accel)
+    n = group.t.shape[1]
+    m = (n // group.n_windows) * group.n_windows
+    s_idx, m_idx = np.asarray(group.static_idx, int), np.asarray(group.moving_idx, int)
+    static = jax.vmap(lambda t, th: window_slopes(t, th, 1)[0])(group.t[s_idx], theta[s_idx])
+    moving = jax.vmap(lambda t, th: window_slopes(t[:m], th[:m], group.n_windows)[0])(
+        group.t[m_idx], theta[m_idx]
+    )
+    return -static / k_e, -moving / k_e
+
+
+def _residuals(groups, values, k_e):
+    """{True: static residuals, False: moving residuals} [rad/s], measured − simulated."""
+    sims = [_simulated_rates(g, values, k_e) for g in groups]
+    return {
+        True: jnp.concatenate(
+            [(g.measured_static - s[0]).ravel() for g, s in zip(groups, sims, strict=True)]
+        ),
+        False: jnp.concatenate(
+            [(g.measured_moving - s[1]).ravel() for g, s in zip(groups, sims, strict=True)]
+        ),
+    }
 
 
 def _weighted_residual(x, args):
     groups, x0, sigma, k_e = args
-    values = x0 + x * _SCALE
-    parts = [
-        ((g.measured - _simulated_rates(g, values, k_e)) / sigma[g.static]).ravel() for g in groups
-    ]
-    return jnp.concatenate(parts)
+    res = _residuals(groups, x0 + x * _SCALE, k_e)
+    return jnp.concatenate([res[True] / sigma[True], res[False] / sigma[False]])
 
 
 @eqx.filter_jit
@@ -317,16 +352,7 @@ def _fit(groups, x0, k_e, max_steps):
     values (robust: median absolute deviation; the harmonic start is close), re-estimated
     after the fit for the covariance."""
 
-    def by_kind(values):
-        res = [g.measured - _simulated_rates(g, values, k_e) for g in groups]
-        return {
-            kind: jnp.concatenate(
-                [r.ravel() for g, r in zip(groups, res, strict=True) if g.static == kind]
-            )
-            for kind in (True, False)
-        }
-
-    r0 = by_kind(x0)
+    r0 = _residuals(groups, x0, k_e)
     sigma0 = {k: 1.4826 * jnp.median(jnp.abs(r - jnp.median(r))) for k, r in r0.items()}
     # The problem is scaled so that one unit of x is about one standard error: stopping at
     # 1e-4 of that is far below anything the data can tell.
@@ -339,7 +365,7 @@ def _fit(groups, x0, k_e, max_steps):
         throw=True,
     )
     values = x0 + sol.value * _SCALE
-    r1 = by_kind(values)
+    r1 = _residuals(groups, values, k_e)
     sigma1 = {k: jnp.sqrt(jnp.mean(r**2)) for k, r in r1.items()}
     fn = lambda x: _weighted_residual(x, (groups, values, sigma1, k_e))
     jac = jax.jacfwd(fn)(jnp.zeros(len(NAMES))) / jnp.asarray(_SCALE)[None, :]
