@@ -233,7 +233,8 @@ class AngleRuns(eqx.Module):
     """Runs of equal length stacked for end-to-end training (leading axis = run).
 
     `t`, `theta` [rad], `temperature_c`, `table_angle` [rad]: shape (R, N); `checkpoints`:
-    sample indices (C,) where the angle error enters the loss; `weight`: (R,) per-run weight.
+    sample indices (C,) bounding the windows of moving runs (the last one is N − 1);
+    `static`: (R,) true for runs at rest, which count as one window, as in the reduction.
     """
 
     t: jax.Array
@@ -241,22 +242,19 @@ class AngleRuns(eqx.Module):
     temperature_c: jax.Array
     table_angle: jax.Array
     checkpoints: jax.Array
-    weight: jax.Array
+    static: jax.Array
 
 
 def _run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
-    groups: dict[tuple[int, bool], list] = {}
+    groups: dict[int, list] = {}
     for r in data.runs():
-        static = bool(np.all(r["table_rate_dps"] == 0.0))
-        groups.setdefault((len(r), static), []).append(r)
+        groups.setdefault(len(r), []).append(r)
     out = []
-    for (n, static), runs in sorted(groups.items()):
+    for n, runs in sorted(groups.items()):
         t = np.stack([r["time_s"] for r in runs])
         dt = float(np.median(np.diff(t[0])))
         step = max(int(round(window_s / dt)), 1)
-        # As in the reduction: a static run is one window, a moving run is cut into windows.
-        cps = np.arange(step, n, step) if not static else np.array([n - 1])
-        cps = cps if cps.size else np.array([n - 1])
+        cps = np.unique(np.concatenate([np.arange(step, n, step), [n - 1]]))
         table = np.stack([r.table_angle_deg for r in runs]) * DEG
         out.append(
             AngleRuns(
@@ -265,7 +263,7 @@ def _run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
                 temperature_c=jnp.asarray(np.stack([r["temperature_c"] for r in runs])),
                 table_angle=jnp.asarray(table - table[:, :1]),
                 checkpoints=jnp.asarray(cps),
-                weight=jnp.ones(len(runs)),
+                static=jnp.asarray([bool(np.all(r["table_rate_dps"] == 0.0)) for r in runs]),
             )
         )
     return out
@@ -306,32 +304,43 @@ def integrate_compensated(comp: AbstractCompensator, t, theta, temperature_c, ts
     return sol.ys
 
 
-def end_to_end_loss(comp: AbstractCompensator, runs: AngleRuns):
-    r"""Mean squared angle error [rad²] over the windows between checkpoints, weighted by run.
+def end_to_end_losses(comp: AbstractCompensator, runs: AngleRuns):
+    r"""Mean squared angle errors [rad²] of the static and of the moving runs of a group.
 
     For each run the compensated case angle ψ(t) is integrated through diffrax
-    ([`integrate_compensated`][hrgjax.calibration.mlp.integrate_compensated]); the error of a
-    window is (ψ(t_{k+1}) − ψ(t_k)) − (A(t_{k+1}) − A(t_k)), A the table angle. Window
-    increments, not the accumulated angle, keep the noise of different windows independent
-    (the accumulated angle error is a random walk that would weight early windows more).
+    ([`integrate_compensated`][hrgjax.calibration.mlp.integrate_compensated]). A moving run's
+    error is taken per window, (ψ(t_{k+1}) − ψ(t_k)) − (A(t_{k+1}) − A(t_k)) with A the table
+    angle: increments, not the accumulated angle, keep the noise of different windows
+    independent. A static run is one window, its error the angle at its end.
+
+    **Returns:** `(static_mse, moving_mse)` (0 for a kind the group does not have).
     """
     cps = jnp.concatenate([jnp.zeros(1, dtype=runs.checkpoints.dtype), runs.checkpoints])
 
-    def one(t, th, tc, table, w):
+    def one(t, th, tc, table, static):
         psi = integrate_compensated(comp, t, th, tc, t[cps])
         err = jnp.diff(psi) - jnp.diff(table[cps])
-        return w * jnp.mean(err**2)
+        return jnp.where(static, jnp.sum(err) ** 2, jnp.mean(err**2))
 
-    return jnp.mean(
-        jax.vmap(one)(runs.t, runs.theta, runs.temperature_c, runs.table_angle, runs.weight)
-    )
+    per_run = jax.vmap(one)(runs.t, runs.theta, runs.temperature_c, runs.table_angle, runs.static)
+    n_static = jnp.sum(runs.static.astype(per_run.dtype))
+    n_moving = runs.static.shape[0] - n_static
+    static = jnp.sum(jnp.where(runs.static, per_run, 0.0)) / jnp.maximum(n_static, 1.0)
+    moving = jnp.sum(jnp.where(runs.static, 0.0, per_run)) / jnp.maximum(n_moving, 1.0)
+    return static, moving
+
+
+def end_to_end_loss(comp: AbstractCompensator, runs: AngleRuns):
+    """Sum of the two [`end_to_end_losses`][hrgjax.calibration.mlp.end_to_end_losses] [rad²]."""
+    static, moving = end_to_end_losses(comp, runs)
+    return static + moving
 
 
 def train_end_to_end(
     comp: MLPCompensator, data: MeasuredData, window_s: float, steps: int
 ) -> MLPCompensator:
-    """Rprop on the summed end-to-end loss of all run groups, each normalised by its value at
-    the start (static and rotation runs then weigh alike)."""
+    """Rprop on the end-to-end losses of all runs: the static and the moving runs' mean squared
+    errors, each normalised by its value at the start, so both kinds weigh alike."""
     return _e2e_scan(comp, _run_groups(data, window_s), steps)
 
 
@@ -339,12 +348,15 @@ def train_end_to_end(
 def _e2e_scan(comp, groups, steps):
     params, static = eqx.partition(comp, _trainable(comp))
     opt = optax.rprop(1e-3)
-    scales = [end_to_end_loss(comp, g) for g in groups]
-    scales = [jnp.where(s > 0, s, 1.0) for s in scales]
+    # Static and moving runs weigh alike: each kind is normalised by its starting loss.
+    start = [end_to_end_losses(comp, g) for g in groups]
+    scale_s = jnp.maximum(sum(a for a, _ in start), 1e-300)
+    scale_m = jnp.maximum(sum(b for _, b in start), 1e-300)
 
     def loss(p):
         c = eqx.combine(p, static)
-        return sum(end_to_end_loss(c, g) / s for g, s in zip(groups, scales, strict=True))
+        parts = [end_to_end_losses(c, g) for g in groups]
+        return sum(a for a, _ in parts) / scale_s + sum(b for _, b in parts) / scale_m
 
     def step(carry, _):
         p, state = carry
