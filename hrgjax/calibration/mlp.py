@@ -213,20 +213,25 @@ def train_rprop(net, x, y, steps: int, learning_rate: float = 1e-3):
     **Returns:** the trained network.
     """
     params, static = eqx.partition(net, eqx.is_inexact_array)
-    opt = optax.rprop(learning_rate)
 
     def loss(p):
         model = eqx.combine(p, static)
         return jnp.mean((jax.vmap(model)(x) - y) ** 2)
 
+    return eqx.combine(_rprop(loss, params, steps, learning_rate), static)
+
+
+def _rprop(loss, params, steps: int, learning_rate: float):
+    """`steps` full-batch Rprop updates of `params` on `loss`, in one `lax.scan`."""
+    opt = optax.rprop(learning_rate)
+
     def step(carry, _):
         p, state = carry
-        grads = jax.grad(loss)(p)
-        updates, state = opt.update(grads, state, p)
+        updates, state = opt.update(jax.grad(loss)(p), state, p)
         return (optax.apply_updates(p, updates), state), None
 
     (params, _), _ = jax.lax.scan(step, (params, opt.init(params)), None, length=steps)
-    return eqx.combine(params, static)
+    return params
 
 
 class AngleRuns(eqx.Module):
@@ -347,7 +352,6 @@ def train_end_to_end(
 @eqx.filter_jit
 def _e2e_scan(comp, groups, steps):
     params, static = eqx.partition(comp, _trainable(comp))
-    opt = optax.rprop(1e-3)
     # Static and moving runs weigh alike: each kind is normalised by its starting loss.
     start = [end_to_end_losses(comp, g) for g in groups]
     scale_s = jnp.maximum(sum(a for a, _ in start), 1e-300)
@@ -358,14 +362,7 @@ def _e2e_scan(comp, groups, steps):
         parts = [end_to_end_losses(c, g) for g in groups]
         return sum(a for a, _ in parts) / scale_s + sum(b for _, b in parts) / scale_m
 
-    def step(carry, _):
-        p, state = carry
-        grads = jax.grad(loss)(p)
-        updates, state = opt.update(grads, state, p)
-        return (optax.apply_updates(p, updates), state), None
-
-    (params, _), _ = jax.lax.scan(step, (params, opt.init(params)), None, length=steps)
-    return eqx.combine(params, static)
+    return eqx.combine(_rprop(loss, params, steps, 1e-3), static)
 
 
 def _trainable(comp):
