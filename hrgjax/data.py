@@ -20,6 +20,8 @@ COLUMNS: dict[str, str] = {
     "accel_x_g": "specific force along case x [g]",
     "accel_y_g": "specific force along case y [g]",
     "accel_z_g": "specific force along case z (sensitive axis) [g]",
+    "rate_corrected_dps": "equivalent input rate after compensation [°/s] (`hrgjax correct`)",
+    "angle_corrected_deg": "case rotation angle since the start of the run [°] (`hrgjax correct`)",
 }
 """Known columns and their meaning (units in brackets)."""
 REQUIRED = ("time_s", "temperature_c", "table_rate_dps", "wave_angle_deg")
