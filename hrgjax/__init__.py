@@ -2,6 +2,7 @@
 
 from . import calibration as calibration
 from . import data as data
+from . import discovery as discovery
 from . import noise as noise
 from . import presets as presets
 from . import units as units

@@ -1,0 +1,11 @@
+"""Model-discrepancy workflow (find, name, add, shrink): the effect catalogue so far."""
+
+from .effects import CATALOGUE as CATALOGUE
+from .effects import NOMINAL as NOMINAL
+from .effects import Covariates as Covariates
+from .effects import Effect as Effect
+from .effects import Param as Param
+from .effects import null_params as null_params
+from .effects import pattern_rate as pattern_rate
+from .effects import rate_term as rate_term
+from .effects import readout_term as readout_term

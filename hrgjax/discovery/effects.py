@@ -1,0 +1,335 @@
+r"""The effect catalogue of PHYSICS.md §10: named terms of the reduced wave-angle model.
+
+$$\dot\theta = \sum_{\text{rate terms}} f_e(p_e;\,\mathbf c),\qquad
+\theta_{\rm meas} = \theta + \sum_{\text{readout terms}} g_e(p_e;\,\theta) + \text{noise},$$
+
+θ the electrical wave angle [rad], $\mathbf c$ the covariates
+([`Covariates`][hrgjax.discovery.effects.Covariates]). Every term is exactly zero at its null
+parameters (all zeros); magnitude/axis pairs are Cartesian so the null is a point, not a
+circle. The names are the contract (DESIGN.md); each entry also records what it looks like,
+what it is confused with and which experiment tells them apart (DISCOVERY.md §2.3).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ..units import DEG_PER_H, T_REF_C
+
+NOMINAL = ("bias", "angular_gain", "damping_anisotropy")
+"""The nominal model `base` (DESIGN.md)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Param:
+    """One parameter of an effect: name, unit, a typical size (so optimisers see O(1)
+    numbers) and whether it is regular (defined under the null)."""
+
+    name: str
+    unit: str
+    scale: float
+    regular: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class Effect:
+    """A catalogue entry (DISCOVERY.md §2.3).
+
+    - `name`: contract name; `title`: words; `where`: `"rate"` (adds to θ̇) or `"readout"`
+      (adds to the measured angle).
+    - `params`: its [`Param`][hrgjax.discovery.effects.Param]s (null = all zero, except
+      nonregular ones, which only matter when the regular ones are non-zero).
+    - `needs`: covariates the term reads; `signature`, `aliases`, `discriminate`: how it shows,
+      what it is confused with, and the experiment that separates them.
+    """
+
+    name: str
+    title: str
+    where: str
+    params: tuple[Param, ...]
+    needs: tuple[str, ...]
+    signature: str
+    aliases: tuple[str, ...] = ()
+    discriminate: str = ""
+
+    @property
+    def size(self) -> int:
+        """Number of parameters."""
+        return len(self.params)
+
+
+class Covariates(eqx.Module):
+    """What the terms may read, per sample (arrays of one shape, or scalars).
+
+    - `theta`: electrical wave angle [rad]; `rate`: table rate about the sensitive axis [rad/s].
+    - `temperature` [°C], `temperature_rate` [°C/s], `temperature_lagged`: the temperature
+      after a first-order lag (for `thermal_lag`) [°C].
+    - `amplitude`, `quadrature`: a and q [readout units] (0 when the data lack them).
+    - `accel_z`: specific force along the sensitive axis [g]; `t_run`: time since the run
+      started [s].
+    """
+
+    theta: jax.Array
+    rate: jax.Array = 0.0
+    temperature: jax.Array = T_REF_C
+    temperature_rate: jax.Array = 0.0
+    temperature_lagged: jax.Array = T_REF_C
+    amplitude: jax.Array = 1.0
+    quadrature: jax.Array = 0.0
+    accel_z: jax.Array = 0.0
+    t_run: jax.Array = 0.0
+
+
+_H = DEG_PER_H  # 1 °/h in rad/s: the natural size of a drift term
+
+
+def _e(name, title, where, params, needs, signature, aliases=(), discriminate=""):
+    return Effect(
+        name,
+        title,
+        where,
+        tuple(Param(*p) for p in params),
+        tuple(needs),
+        signature,
+        tuple(aliases),
+        discriminate,
+    )
+
+
+CATALOGUE: dict[str, Effect] = {
+    e.name: e
+    for e in (
+        _e(
+            "angular_gain",
+            "angular gain k_e (nominal)",
+            "rate",
+            [("k_e", "", 1e-3)],
+            ["rate"],
+            "wave angle turns at −k_e·Ω",
+        ),
+        _e(
+            "bias",
+            "constant drift (nominal)",
+            "rate",
+            [("b", "rad/s", _H)],
+            [],
+            "constant pattern rate",
+        ),
+        _e(
+            "damping_anisotropy",
+            "damping anisotropy Δ(1/τ), axis θ_τ (nominal)",
+            "rate",
+            [("d_c", "rad/s", _H), ("d_s", "rad/s", _H)],
+            ["theta"],
+            "180°-periodic drift in θ, independent of q and Ω",
+            ("drive_gain_mismatch", "readout_gain_mismatch"),
+            "vary Ω: a rate term's angle error falls as 1/Ω, a readout error does not",
+        ),
+        _e(
+            "bias_temperature",
+            "drift offset varying with T",
+            "rate",
+            [("b1", "rad/s/°C", 0.01 * _H), ("b2", "rad/s/°C²", 1e-4 * _H)],
+            ["temperature"],
+            "offset tracking T, the same at every θ",
+            ("thermal_lag", "warmup_transient"),
+            "reversed temperature ramps; repeated runs",
+        ),
+        _e(
+            "angular_gain_temperature",
+            "angular gain varying with T",
+            "rate",
+            [("kappa_T", "1/°C", 1e-5)],
+            ["rate", "temperature"],
+            "rate error ∝ Ω·(T − T₀)",
+            ("rate_scale_factor",),
+            "rotate at several T",
+        ),
+        _e(
+            "rate_scale_factor",
+            "scale factor varying with rate",
+            "rate",
+            [("kappa_Omega", "s²", 1e-3)],
+            ["rate"],
+            "rate error ∝ Ω³",
+            ("angular_gain_temperature",),
+            "several rates at one temperature",
+        ),
+        _e(
+            "damping_anisotropy_temperature",
+            "damping anisotropy varying with T",
+            "rate",
+            [("d_c1", "rad/s/°C", 0.01 * _H), ("d_s1", "rad/s/°C", 0.01 * _H)],
+            ["theta", "temperature"],
+            "180° drift pattern whose amplitude and phase change with T (seed: 3.5→0.7 °/h, 16°)",
+            ("bias_temperature",),
+            "several wave angles at each temperature",
+        ),
+        _e(
+            "frequency_split",
+            "frequency split Δω, axis θ_ω, with residual quadrature",
+            "rate",
+            [("f_c", "rad/s", 1e-3), ("f_s", "rad/s", 1e-3)],
+            ["theta", "amplitude", "quadrature"],
+            "drift ∝ q/a with a 180° pattern",
+            ("nonlinearity", "excitation_phase"),
+            "offset the quadrature set-point",
+        ),
+        _e(
+            "excitation_phase",
+            "excitation phase error γ_e with quadrature",
+            "rate",
+            [("p_gamma", "1/s", 1e-5)],
+            ["amplitude", "quadrature"],
+            "drift ∝ q/a, independent of θ",
+            ("frequency_split", "nonlinearity"),
+            "change the drive level",
+        ),
+        _e(
+            "nonlinearity",
+            "Duffing nonlinearity with quadrature",
+            "rate",
+            [("c_chi", "1/s per unit²", 1e-3)],
+            ["amplitude", "quadrature"],
+            "drift ∝ a·q, independent of θ",
+            ("excitation_phase", "frequency_split"),
+            "change the amplitude set-point",
+        ),
+        _e(
+            "drive_gain_mismatch",
+            "drive (forcer) gain mismatch",
+            "rate",
+            [("p_g", "rad/s", _H)],
+            ["theta"],
+            "180° drift pattern with its axis at 0°/90°",
+            ("damping_anisotropy",),
+            "electrode swap / mode reversal",
+        ),
+        _e(
+            "thermal_rate",
+            "drift proportional to the temperature rate",
+            "rate",
+            [("c_Tdot", "rad/s per °C/s", 10 * _H)],
+            ["temperature_rate"],
+            "offset that flips sign with the ramp direction",
+            ("thermal_lag",),
+            "vary the ramp rate",
+        ),
+        _e(
+            "thermal_lag",
+            "drift following a lagged temperature",
+            "rate",
+            [("b_L", "rad/s/°C", 0.01 * _H), ("tau_th", "s", 300.0, False)],
+            ["temperature_lagged"],
+            "bias-vs-T loop (hysteresis) over a temperature cycle",
+            ("bias_temperature", "thermal_rate"),
+            "a fast temperature step",
+        ),
+        _e(
+            "warmup_transient",
+            "decaying drift after switch-on",
+            "rate",
+            [("b_w", "rad/s", _H), ("tau_w", "s", 600.0, False)],
+            ["t_run"],
+            "offset decaying from the start of each run",
+            ("bias_temperature",),
+            "several switch-ons at one temperature",
+        ),
+        _e(
+            "acceleration_sensitivity",
+            "drift ∝ specific force along the axis",
+            "rate",
+            [("G", "rad/s per g", 0.01 * _H)],
+            ["accel_z"],
+            "offset tracking a_z",
+            (),
+            "turn the gyro over (±g)",
+        ),
+        _e(
+            "readout_gain_mismatch",
+            "pickoff gain mismatch / cross-talk",
+            "readout",
+            [("eps_1", "", 1e-3), ("eps_2", "", 1e-3)],
+            ["theta"],
+            "bounded 180° angle error; SF(θ) = 1 + ε₁cos2θ − ε₂sin2θ",
+            ("damping_anisotropy",),
+            "vary Ω: the angle error does not grow with time",
+        ),
+    )
+}
+"""Every effect by contract name (PHYSICS.md §10)."""
+
+
+def rate_term(name: str, p, c: Covariates):
+    """Pattern-rate contribution [rad/s] of effect `name` with parameters `p` (shape (q,),
+    order of its `params`) at covariates `c`."""
+    th, dt = c.theta, c.temperature - T_REF_C
+    s2, c2 = jnp.sin(2 * th), jnp.cos(2 * th)
+    q_over_a = c.quadrature / c.amplitude
+    terms = {
+        "angular_gain": lambda: -p[0] * c.rate,
+        "bias": lambda: p[0] + 0.0 * th,
+        "damping_anisotropy": lambda: p[0] * s2 - p[1] * c2,
+        "bias_temperature": lambda: p[0] * dt + p[1] * dt**2,
+        "damping_anisotropy_temperature": lambda: (p[0] * s2 - p[1] * c2) * dt,
+        "frequency_split": lambda: -q_over_a * (p[0] * c2 + p[1] * s2),
+        "excitation_phase": lambda: -q_over_a * p[0],
+        "nonlinearity": lambda: -p[0] * c.amplitude * c.quadrature,
+        "drive_gain_mismatch": lambda: -p[0] * s2,
+        "thermal_rate": lambda: p[0] * c.temperature_rate,
+        "thermal_lag": lambda: p[0] * (c.temperature_lagged - T_REF_C),
+        "warmup_transient": lambda: p[0] * jnp.exp(-c.t_run / p[1]),
+        "acceleration_sensitivity": lambda: p[0] * c.accel_z,
+    }
+    if name in ("angular_gain_temperature", "rate_scale_factor"):
+        raise ValueError(f"{name} scales the angular gain: use rate_term_with_gain")
+    if name not in terms:
+        raise ValueError(f"{name!r} is not a rate term; rate terms: {sorted(terms)}")
+    return terms[name]() + 0.0 * th
+
+
+def rate_term_with_gain(name: str, p, c: Covariates, k_e):
+    """The two terms that scale the angular gain k_e: `angular_gain_temperature`
+    (−k_e κ_T (T − T₀) Ω) and `rate_scale_factor` (−k_e κ_Ω Ω³) [rad/s]."""
+    if name == "angular_gain_temperature":
+        return -k_e * p[0] * (c.temperature - T_REF_C) * c.rate
+    if name == "rate_scale_factor":
+        return -k_e * p[0] * c.rate**3
+    raise ValueError(f"{name!r} does not scale the angular gain")
+
+
+def readout_term(name: str, p, c: Covariates):
+    """Measured-angle offset [rad] of a readout effect (`readout_gain_mismatch`)."""
+    if name != "readout_gain_mismatch":
+        raise ValueError(f"{name!r} is not a readout term")
+    return 0.5 * p[0] * jnp.sin(2 * c.theta) + 0.5 * p[1] * jnp.cos(2 * c.theta)
+
+
+def pattern_rate(params: dict, c: Covariates):
+    """θ̇ [rad/s] of the superset model: the sum of every rate term in `params`
+    ({effect name: parameter array}); `angular_gain` must be present."""
+    if "angular_gain" not in params:
+        raise ValueError("params must contain 'angular_gain' (the k_e of −k_e·Ω)")
+    k_e = params["angular_gain"][0]
+    total = 0.0 * c.theta
+    for name, p in params.items():
+        effect = CATALOGUE[name]
+        if effect.where != "rate":
+            continue
+        if name in ("angular_gain_temperature", "rate_scale_factor"):
+            total = total + rate_term_with_gain(name, p, c, k_e)
+        else:
+            total = total + rate_term(name, p, c)
+    return total
+
+
+def null_params(names) -> dict:
+    """{name: parameters at the null} for the given effects: regular parameters 0,
+    nonregular ones (time constants) at their typical size, where they have no effect."""
+    return {
+        n: jnp.asarray([0.0 if p.regular else p.scale for p in CATALOGUE[n].params]) for n in names
+    }

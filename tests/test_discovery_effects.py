@@ -1,0 +1,180 @@
+"""Effect catalogue (issue 4, PHYSICS.md §10): contract names, exact nulls, and each term
+against the simulator's own physics where the simulator has the mechanism."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hrgjax as hg
+from hrgjax.discovery import CATALOGUE, NOMINAL, Covariates, null_params, pattern_rate
+from hrgjax.discovery.effects import rate_term, rate_term_with_gain, readout_term
+from hrgjax.resonator.averaged import averaged_vector_field
+from hrgjax.units import DEG, DEG_PER_H
+
+CONTRACT = {
+    "bias_temperature",
+    "angular_gain_temperature",
+    "rate_scale_factor",
+    "damping_anisotropy_temperature",
+    "frequency_split",
+    "excitation_phase",
+    "nonlinearity",
+    "drive_gain_mismatch",
+    "thermal_rate",
+    "thermal_lag",
+    "warmup_transient",
+    "acceleration_sensitivity",
+    "readout_gain_mismatch",
+}
+K_E = 0.554
+THETA = jnp.linspace(-1.5, 1.5, 11)
+
+
+def test_catalogue_has_exactly_the_contract_names():
+    assert set(CATALOGUE) == CONTRACT | set(NOMINAL)
+    for name, effect in CATALOGUE.items():
+        assert effect.where in ("rate", "readout"), name
+        assert all(p.scale > 0 for p in effect.params), name
+        assert set(effect.aliases) <= set(CATALOGUE), name
+
+
+def _covariates(key):
+    k = jax.random.split(key, 8)
+    n = 16
+    return Covariates(
+        theta=jax.random.uniform(k[0], (n,), minval=-3, maxval=3),
+        rate=jax.random.normal(k[1], (n,)),
+        temperature=jax.random.uniform(k[2], (n,), minval=-40, maxval=60),
+        temperature_rate=jax.random.normal(k[3], (n,)),
+        temperature_lagged=jax.random.uniform(k[4], (n,), minval=-40, maxval=60),
+        amplitude=1.0 + 0.1 * jax.random.uniform(k[5], (n,)),
+        quadrature=0.01 * jax.random.normal(k[6], (n,)),
+        accel_z=jax.random.normal(k[7], (n,)),
+        t_run=jnp.linspace(0.0, 600.0, n),
+    )
+
+
+def test_every_term_is_exactly_zero_at_its_null(key):
+    c = _covariates(key)
+    nulls = null_params([n for n in CATALOGUE if n != "angular_gain"])
+    for name, p in nulls.items():
+        effect = CATALOGUE[name]
+        if effect.where == "readout":
+            out = readout_term(name, p, c)
+        elif name in ("angular_gain_temperature", "rate_scale_factor"):
+            out = rate_term_with_gain(name, p, c, K_E)
+        else:
+            out = rate_term(name, p, c)
+        np.testing.assert_array_equal(out, 0.0, err_msg=name)
+    # The superset at its null is the nominal −k_e·Ω alone.
+    params = {"angular_gain": jnp.asarray([K_E])} | {
+        n: p for n, p in nulls.items() if CATALOGUE[n].where == "rate"
+    }
+    np.testing.assert_allclose(pattern_rate(params, c), -K_E * c.rate, rtol=1e-15, atol=0)
+
+
+def _ideal_rate(gyro, temperature=20.0, theta=THETA, accel=(0.0, 0.0, 0.0)):
+    """Pattern rate of the ideal-loop averaged model at rest, straight from its vector field."""
+    prof = hg.Profile.static(1.0, temperature, accel_g=accel)
+    return jax.vmap(lambda th: averaged_vector_field(0.0, th[None], (gyro, prof))[0])(theta)
+
+
+def _ideal(**res_kw):
+    base = dict(omega=2 * np.pi * 5000.0, tau=640.0, k_e=K_E)
+    base.update(res_kw)
+    return hg.presets.ideal(hg.Resonator(**base))
+
+
+def test_damping_anisotropy_and_its_temperature_law_match_the_simulator():
+    d0, slope_d, th0 = 4e-6, -3e-8, 0.4
+    gyro = _ideal(delta_inv_tau=hg.TemperatureLaw(d0, slope_d), theta_tau=th0)
+    for temp in (20.0, -40.0):
+        dt = temp - 20.0
+        p0 = jnp.asarray([0.5 * d0 * np.cos(2 * th0), 0.5 * d0 * np.sin(2 * th0)])
+        p1 = jnp.asarray([0.5 * slope_d * np.cos(2 * th0), 0.5 * slope_d * np.sin(2 * th0)])
+        c = Covariates(theta=THETA, temperature=jnp.asarray(temp))
+        term = rate_term("damping_anisotropy", p0, c)
+        term = term + rate_term("damping_anisotropy_temperature", p1, c)
+        np.testing.assert_allclose(_ideal_rate(gyro, temp), term, rtol=1e-12, atol=1e-20)
+        assert dt == 0.0 or not np.allclose(term, rate_term("damping_anisotropy", p0, c))
+
+
+def test_bias_terms_and_acceleration_match_the_simulator():
+    b0, b1, b2 = 0.3 * DEG_PER_H, 0.005 * DEG_PER_H, 1e-4 * DEG_PER_H
+    g_z = 0.01 * DEG_PER_H
+    gyro = eqx.tree_at(
+        lambda g: (g.rate_bias, g.g_sensitivity),
+        _ideal(),
+        (hg.TemperatureLaw(b0, b1, b2), jnp.asarray([0.0, 0.0, g_z])),
+    )
+    temp, a_z = -30.0, 0.7
+    c = Covariates(theta=THETA, temperature=jnp.asarray(temp), accel_z=jnp.asarray(a_z))
+    term = (
+        rate_term("bias", jnp.asarray([-K_E * b0]), c)
+        + rate_term("bias_temperature", jnp.asarray([-K_E * b1, -K_E * b2]), c)
+        + rate_term("acceleration_sensitivity", jnp.asarray([-K_E * g_z]), c)
+    )
+    sim = _ideal_rate(gyro, temp, accel=(0.0, 0.0, a_z))
+    np.testing.assert_allclose(sim, term, rtol=1e-12)
+
+
+def test_angular_gain_temperature_matches_a_k_e_law():
+    kappa = 2e-5
+    gyro = _ideal(k_e=hg.TemperatureLaw(K_E, K_E * kappa))
+    temp, omega = 50.0, 5.0 * DEG
+    prof = hg.Profile.constant_rate(5.0, 1.0, temp)
+    sim = averaged_vector_field(0.0, jnp.zeros(1), (gyro, prof))[0]
+    c = Covariates(theta=jnp.asarray(0.0), rate=jnp.asarray(omega), temperature=jnp.asarray(temp))
+    term = -K_E * omega + rate_term_with_gain(
+        "angular_gain_temperature", jnp.asarray([kappa]), c, K_E
+    )
+    np.testing.assert_allclose(sim, term, rtol=1e-14)
+
+
+@pytest.mark.parametrize("q", [1e-3, -2e-3])
+def test_split_and_nonlinearity_terms_match_the_free_vector_field(q):
+    """PHYSICS §4.3, §4.5: to first order in q/a the averaged θ̇ is
+    −Δω (q/a) cos2(θ − θ_ω) − χ a q /(4ω)."""
+    omega, dw, th_w, chi = 2 * np.pi * 5000.0, 2 * np.pi * 5e-4, 0.2, 5000.0
+    res = hg.Resonator(omega=omega, tau=640.0, k_e=K_E, delta_omega=dw, theta_omega=th_w, chi=chi)
+    gyro = hg.Gyro(res, control=hg.Control.free())
+    prof = hg.Profile.static(1.0)
+    a = 1.0
+
+    def theta_dot(th):
+        y = jnp.stack([a, q, th, 0.0, 0.0, 0.0, 0.0])
+        return averaged_vector_field(0.0, y, (gyro, prof))[2]
+
+    sim = jax.vmap(theta_dot)(THETA)
+    c = Covariates(theta=THETA, amplitude=jnp.asarray(a), quadrature=jnp.asarray(q))
+    split = jnp.asarray([dw * np.cos(2 * th_w), dw * np.sin(2 * th_w)])
+    term = rate_term("frequency_split", split, c) + rate_term(
+        "nonlinearity", jnp.asarray([chi / (4 * omega)]), c
+    )
+    # First order in q/a: the neglected part is O((q/a)²) relative.
+    np.testing.assert_allclose(sim, term, rtol=10 * q**2, atol=1e-12)
+
+
+def test_readout_term_matches_the_simulated_readout():
+    g = 3e-3
+    gyro = eqx.tree_at(lambda gy: gy.readout, _ideal(), hg.Readout(gain_mismatch=g))
+    prof = hg.Profile.constant_rate(5.0, 60.0, 20.0, wave_angle0_deg=10.0)
+    rec = hg.simulate(gyro, prof, dt_out=1.0)
+    c = Covariates(theta=rec.true_wave_angle)
+    term = readout_term("readout_gain_mismatch", jnp.asarray([-2 * g, 0.0]), c)
+    err = rec.wave_angle - rec.true_wave_angle
+    # First order in g (PHYSICS §4.7): the remainder is O(g²).
+    np.testing.assert_allclose(err, term, atol=2 * g**2)
+    assert np.max(np.abs(err)) > 0.5 * g
+
+
+def test_unknown_or_misused_names_are_refused():
+    c = Covariates(theta=THETA)
+    with pytest.raises(ValueError, match="not a rate term"):
+        rate_term("readout_gain_mismatch", jnp.zeros(2), c)
+    with pytest.raises(ValueError, match="not a readout term"):
+        readout_term("bias", jnp.zeros(1), c)
+    with pytest.raises(ValueError, match="angular_gain"):
+        pattern_rate({"bias": jnp.zeros(1)}, c)
