@@ -1,4 +1,4 @@
-"""Model-discrepancy workflow (find, name, add, shrink): the effect catalogue so far."""
+"""Model-discrepancy workflow (find, name, add, shrink): catalogue and dwell-grid search."""
 
 from .effects import CATALOGUE as CATALOGUE
 from .effects import NOMINAL as NOMINAL
@@ -9,3 +9,5 @@ from .effects import null_params as null_params
 from .effects import pattern_rate as pattern_rate
 from .effects import rate_term as rate_term
 from .effects import readout_term as readout_term
+from .search import discover as discover
+from .search import noise_model as noise_model
