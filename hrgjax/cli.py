@@ -236,6 +236,42 @@ def cmd_correct(args) -> int:
     return 0
 
 
+def cmd_discover(args) -> int:
+    """`hrgjax discover DATA`: name the effect missing from the nominal model."""
+    _setup()
+    from .discovery import NOMINAL, discover
+    from .discovery.report import plot_report, write_json
+
+    if args.nominal != "base":
+        raise SystemExit(f"hrgjax discover: unknown --nominal {args.nominal!r}; choose 'base'")
+    data = _load_data(args.data, args.allow_extra)
+    try:
+        report = discover(data, nominal=NOMINAL, k_e=args.k_e)
+    except ValueError as err:
+        raise SystemExit(f"hrgjax discover: {err}") from None
+    print(f"hrgjax discover: {args.data}")
+    print(f"  verdict: {report['verdict']}; missing effect: {report['missing_effect']}")
+    if report["accepted"][1:]:
+        print(f"  also accepted: {', '.join(report['accepted'][1:])}")
+    print(
+        f"  held-out gap {report['gap_before']:.4g} → {report['gap_after']:.4g} °/h "
+        f"(noise floor {report['noise_floor']:.4g} °/h)"
+    )
+    if report["structure_left"]:
+        print("  structure is left above the noise floor that no catalogue effect explains")
+    print("  screening (score, p, ΔBIC, aliasing):")
+    for r in report["screening"][:6]:
+        print(
+            f"    {r['effect']:>32} {r['score']:12.4g} {r['p_value']:9.2g} "
+            f"{r['delta_bic']:10.4g} {r['aliasing']:6.2f}"
+        )
+    if args.json:
+        print(f"wrote {write_json(report, args.json)}")
+    if args.plot:
+        print(f"wrote {plot_report(data, report, args.plot, k_e=args.k_e)}")
+    return 0
+
+
 def main(argv=None) -> int:
     """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
     parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__)
@@ -274,6 +310,15 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/corrected.csv", help="output CSV or .nc")
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     p.set_defaults(func=cmd_correct)
+
+    p = sub.add_parser("discover", help="name the effect missing from the nominal model")
+    p.add_argument("data", help="dwell-grid data in the MeasuredData contract")
+    p.add_argument("--nominal", default="base", help="nominal model (base)")
+    p.add_argument("--json", default=None, help="write the report here (JSON)")
+    p.add_argument("--plot", default=None, help="write the report figure here (PNG)")
+    p.add_argument("--k-e", type=float, default=0.554, help="nominal angular gain k_e")
+    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    p.set_defaults(func=cmd_discover)
 
     p = sub.add_parser("simulate", help="simulate a bench plan on a preset gyro")
     p.add_argument("--preset", default="tvg3", choices=PRESETS)

@@ -90,3 +90,20 @@ def test_correct_reports_bad_model_file(tmp_path):
     bad.write_text("nonsense")
     with pytest.raises(SystemExit, match="not an hrgjax compensator"):
         main(["correct", str(data_path), "--model", str(bad)])
+
+
+def test_discover_writes_the_contract_report(tmp_path, capsys):
+    data_path = _bench_csv(tmp_path)
+    js, png = tmp_path / "report.json", tmp_path / "report.png"
+    assert main(["discover", str(data_path), "--json", str(js), "--plot", str(png)]) == 0
+    import json
+
+    with open(js) as fh:
+        report = json.load(fh)
+    keys = ["missing_effect", "ranking", "gap_before", "gap_after", "noise_floor", "metric"]
+    assert list(report)[:6] == keys
+    # tvg3_like's pickoff gain mismatch is by far the largest thing the nominal model lacks.
+    assert report["missing_effect"] == "readout_gain_mismatch"
+    assert report["gap_after"] < report["gap_before"]
+    assert png.stat().st_size > 0
+    assert "missing effect: readout_gain_mismatch" in capsys.readouterr().out

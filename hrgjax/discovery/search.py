@@ -12,8 +12,8 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    ([`score`][hrgjax.discovery.dwell.score]); p-values from χ²_q.
 5. **Refit** the best candidates with the model; **accept** the best one only if its p-value
    passes Bonferroni at `alpha`, its ΔBIC exceeds `min_delta_bic`, it is identifiable (aliasing
-   index < 0.9) and it shrinks the held-out gap by at least `min_gap_reduction`. Repeat for a
-   second or third effect.
+   index < 0.9), it lowers the held-out whitened χ² by more than `min_heldout_gain` and does
+   not widen the held-out gap. Repeat for a second or third effect.
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
    equivalent-input-rate residual [°/h]; the noise floor is what noise alone gives it.
 """
@@ -93,7 +93,7 @@ def discover(
     holdout_every: int = 4,
     alpha: float = 0.01,
     min_delta_bic: float = 10.0,
-    min_gap_reduction: float = 0.2,
+    min_heldout_gain: float = 10.0,
     max_effects: int = 3,
 ) -> dict:
     """Name the effect missing from `nominal` in dwell-grid `data` (module docstring).
@@ -105,7 +105,8 @@ def discover(
     - `catalogue`: candidate names (default: every effect the data can carry).
     - `k_e`: nominal angular gain; `window_s`: moving-run window [s].
     - `holdout_every`: hold out every n-th run; `alpha`, `min_delta_bic`,
-      `min_gap_reduction`, `max_effects`: the acceptance rule.
+      `min_heldout_gain` (drop of the held-out whitened χ²), `max_effects`: the acceptance
+      rule.
 
     **Returns:** the report dict (DESIGN.md "Discovery report" keys plus `verdict`,
     `accepted`, `parameters`, `noise`, `split`).
@@ -147,7 +148,8 @@ def discover(
             if r["p_value"] < alpha / max(len(cands), 1)
             and r["delta_bic"] > min_delta_bic
             and r["aliasing"] < 0.9
-            and r["gap_after"] < (1.0 - min_gap_reduction) * current["gap"]
+            and r["heldout_gain"] > min_heldout_gain
+            and r["gap_after"] <= current["gap"]
         ]
         if not ok:
             break
@@ -178,12 +180,24 @@ def discover(
         "noise_floor": floor,
         "metric": METRIC,
         "verdict": verdict,
+        "structure_left": bool(current["gap"] > 2.0 * floor),
         "accepted": accepted,
         "ambiguous_with": ambiguous,
         "discriminate": {n: CATALOGUE[n].discriminate for n in accepted + ambiguous},
         "parameters": current["parameters"],
         "screening": [
-            {k: r[k] for k in ("effect", "score", "p_value", "delta_bic", "aliasing", "gap_after")}
+            {
+                k: r[k]
+                for k in (
+                    "effect",
+                    "score",
+                    "p_value",
+                    "delta_bic",
+                    "aliasing",
+                    "heldout_gain",
+                    "gap_after",
+                )
+            }
             for r in ranking
         ],
         "noise": {
@@ -257,6 +271,8 @@ def _fit(model, c, y, sigma, train, w, held, k_e):
     g, labels = dwell.design(model, c, k_e)
     beta, r, cov = dwell.wls(g[train], y[train], sigma[train])
     resid = y - g @ beta
+    held_mask = np.isin(w.run, held)
+    heldout_chi2 = float(np.sum((resid[held_mask] / sigma[held_mask]) ** 2))
     err = np.sqrt(np.diag(cov))
     params = {}
     for (name, j), b, e in zip(labels, beta, err, strict=True):
@@ -267,6 +283,7 @@ def _fit(model, c, y, sigma, train, w, held, k_e):
         "j": g[train] / sigma[train][:, None],
         "chi2": float(r @ r),
         "gap": _gap(resid, w, held, k_e),
+        "heldout_chi2": heldout_chi2,
         "parameters": params,
         "model": list(model),
     }
@@ -293,6 +310,7 @@ def _screen(current, cands, model, c, sigma, train, y, w, held, k_e):
                 "delta_bic": float(lam - q * math.log(n)),
                 "aliasing": alias,
                 "gap_after": refit["gap"],
+                "heldout_gain": current["heldout_chi2"] - refit["heldout_chi2"],
                 "params": {
                     k: v["value"] for k, v in refit["parameters"][name].items() if k in names
                 },
