@@ -35,3 +35,23 @@ def bryan_factor(n, points=20001):
     num = np.trapezoid(2 * h * v * da, phi)
     den = n * np.trapezoid((u**2 + v**2 + w**2) * da, phi)
     return abs(num / den)
+
+
+def noisy_model_gyro(values):
+    """The physical compensator's ideal-loop model gyro for `values`, with 1″ white angle noise
+    and 0.002 °/√h angle random walk (no bias instability, no switch-on bias)."""
+    import equinox as eqx
+
+    from hrgjax.calibration import physical
+    from hrgjax.units import DEG, DEG_PER_SQRT_H
+
+    noise = hg.Noise(
+        angle_white=1.0 / 3600 * DEG,
+        angle_random_walk=0.002 * DEG_PER_SQRT_H,
+        bias_instability=0.0,
+        correlation_time=600.0,
+        run_bias=0.0,
+    )
+    return eqx.tree_at(
+        lambda g: g.noise, physical.model_gyro(values), noise, is_leaf=lambda x: x is None
+    )

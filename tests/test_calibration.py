@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import noisy_model_gyro
 
 import hrgjax as hg
 from hrgjax.calibration import (
@@ -31,7 +32,7 @@ from hrgjax.calibration import (
 )
 from hrgjax.calibration import mlp as mlp_module
 from hrgjax.calibration.reduce import K_E_NOMINAL, window_slopes
-from hrgjax.units import DEG, DEG_PER_H, DEG_PER_SQRT_H
+from hrgjax.units import DEG, DEG_PER_H
 
 K = K_E_NOMINAL
 TEMPS = np.array([-40.0, -10.0, 20.0, 40.0, 60.0])
@@ -328,16 +329,7 @@ def test_physical_fit_recovers_injected_damping_within_uncertainty():
         gain_mismatch1=-6e-5,
     )
     values = jnp.asarray([truth[n] for n in physical.NAMES])
-    noise = hg.Noise(
-        angle_white=1.0 / 3600 * DEG,
-        angle_random_walk=0.002 * DEG_PER_SQRT_H,
-        bias_instability=0.0,
-        correlation_time=600.0,
-        run_bias=0.0,
-    )
-    gyro = eqx.tree_at(
-        lambda g: g.noise, physical.model_gyro(values), noise, is_leaf=lambda x: x is None
-    )
+    gyro = noisy_model_gyro(values)
     temps, angles = (-40.0, 20.0, 60.0), tuple(range(-90, 90, 30))
     static = static_plan(temps, angles, duration_s=60.0, dt_out=0.5)
     rotation = hg.calibration.rotation_plan(temps, angles, duration_s=60.0, dt_out=0.5)

@@ -1,17 +1,17 @@
 """Discovery on dwell-grid data: the score statistic's law, a hidden effect named, a null
 left alone, bad input refused."""
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import noisy_model_gyro
 
 import hrgjax as hg
 from hrgjax.calibration import physical, rotation_plan, run_plan, static_plan
 from hrgjax.discovery import dwell
 from hrgjax.discovery.search import discover
-from hrgjax.units import DEG, DEG_PER_H, DEG_PER_SQRT_H
+from hrgjax.units import DEG_PER_H
 
 K = 0.554
 
@@ -46,16 +46,7 @@ def _truth(**kw):
 
 
 def _bench(values, seed):
-    noise = hg.Noise(
-        angle_white=1.0 / 3600 * DEG,
-        angle_random_walk=0.002 * DEG_PER_SQRT_H,
-        bias_instability=0.0,
-        correlation_time=600.0,
-        run_bias=0.0,
-    )
-    gyro = eqx.tree_at(
-        lambda g: g.noise, physical.model_gyro(values), noise, is_leaf=lambda x: x is None
-    )
+    gyro = noisy_model_gyro(values)
     temps, angles = (-40.0, -10.0, 20.0, 40.0, 60.0), tuple(range(-90, 90, 20))
     key = jax.random.key(seed)
     a = run_plan(gyro, static_plan(temps, angles, 60.0, 0.5), key=key, bias_key=key)
