@@ -89,3 +89,18 @@ def test_discover_refuses_bad_input():
     few = hg.MeasuredData({k: v[data.run < 3] for k, v in data.columns.items()})
     with pytest.raises(ValueError, match="at least 8 runs"):
         discover(few)
+
+
+def test_generator_base_is_the_nominal_physics_and_injects_by_name():
+    from hrgjax.discovery.generate import GENERATED, base_gyro, inject
+
+    base = base_gyro(noise=False)
+    assert base.control.ideal and float(base.readout.gain_mismatch) == 0.0
+    for effect in GENERATED:
+        g = inject(base, effect, 1e-3)
+        assert g != base, effect
+    assert inject(base, None, 0.0) is base
+    hot = inject(base, "bias_temperature", 0.01).at(60.0)
+    np.testing.assert_allclose(hot.rate_bias - base.rate_bias, 0.01 * 40 * DEG_PER_H)
+    with pytest.raises(ValueError, match="cannot generate 'thermal_rate'"):
+        inject(base, "thermal_rate", 1.0)
