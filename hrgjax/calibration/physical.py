@@ -70,7 +70,7 @@ NAMES = tuple(p[0] for p in PARAMETERS)
 _SCALE = np.array([p[2] for p in PARAMETERS])
 
 
-def model_gyro(values, k_nominal: float = K_E_NOMINAL) -> Gyro:
+def model_gyro(values) -> Gyro:
     """The ideal-loop model gyro of the parameter vector `values` (order of `PARAMETERS`)."""
     v = {name: values[i] for i, name in enumerate(NAMES)}
     law = lambda p0, p1=0.0, p2=0.0, lam=0.0: TemperatureLaw(p0, p1, p2, lam, T_REF_C)
@@ -138,7 +138,7 @@ class PhysicalCompensator(AbstractCompensator):
         """The fitted model gyro (ideal loops, fitted laws)."""
         if self.values is None:
             raise ValueError("this PhysicalCompensator is not fitted; use comp = comp.fit(data)")
-        return model_gyro(self.values, self.k_e)
+        return model_gyro(self.values)
 
     def parameters(self) -> dict[str, tuple[float, float]]:
         """{name: (value, standard error)} in SI units."""

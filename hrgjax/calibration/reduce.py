@@ -257,15 +257,9 @@ def scale_factor_vs_angle(
     }
 
 
-def fold_angle(theta_deg):
-    """Fold an electrical wave angle [°] to [−90°, 90°) (the drift and SF period is 180°)."""
-    return (np.asarray(theta_deg) + 90.0) % 180.0 - 90.0
-
-
 __all__ = [
     "K_E_NOMINAL",
     "RateWindows",
-    "fold_angle",
     "reduce",
     "scale_factor_vs_angle",
     "static_drift",
