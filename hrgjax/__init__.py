@@ -15,6 +15,7 @@ from .allan import ohdev as ohdev
 from .allan import totdev as totdev
 from .data import MeasuredData as MeasuredData
 from .data import load as load
+from .gyro import DriftTerms as DriftTerms
 from .gyro import Gyro as Gyro
 from .noise import Noise as Noise
 from .profiles import Profile as Profile

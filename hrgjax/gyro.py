@@ -7,10 +7,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_positive, is_concrete
 from .noise import Noise
 from .resonator.control import Control
 from .resonator.params import Resonator, TemperatureLaw, _param, evaluate_at
 from .resonator.readout import Readout
+from .units import T_REF_C
 
 
 def _vector3(x):
@@ -20,6 +22,54 @@ def _vector3(x):
     if x.shape[-1:] != (3,):
         raise ValueError(f"Gyro.g_sensitivity must have shape (3,) [rad/s per g]; got {x.shape}")
     return x
+
+
+class DriftTerms(eqx.Module):
+    r"""Drift mechanisms beyond bias and g-sensitivity, as equivalent input rate [rad/s]
+    (added to the table rate, like `Gyro.rate_bias`).
+
+    $$\Omega_{\rm in} \mathrel{+}= c_{\dot T}\,\dot T + b_L\,(T_i - T_0)
+    + b_w\,e^{-(t-t_0)/\tau_w} + \kappa_\Omega\,\Omega^3,\qquad
+    \dot T_i = (T - T_i)/\tau_{th},\; T_i(t_0) = T(t_0)$$
+
+    with $t_0$ the start of the run (switch-on) and $T_0$ = 20 °C. The lagged temperature is
+    exact for the profile's piecewise-linear temperature
+    ([`Profile.lagged_temperature_at`][hrgjax.Profile.lagged_temperature_at]). They are
+    the physical side of the catalogue's `thermal_rate`, `thermal_lag`, `warmup_transient`
+    and `rate_scale_factor` (PHYSICS.md §10: the catalogue term is −k_e times these).
+
+    **Arguments:**
+
+    - `temperature_rate`: $c_{\dot T}$ [rad/s per °C/s].
+    - `lag`: $b_L$ [rad/s per °C]; `lag_time`: $\tau_{th}$ [s] (> 0).
+    - `warmup`: $b_w$ [rad/s]; `warmup_time`: $\tau_w$ [s] (> 0).
+    - `rate_cubic`: $\kappa_\Omega$ [s²] (a rate-dependent scale factor 1 + κ_Ω Ω²).
+    """
+
+    temperature_rate: jax.Array = eqx.field(converter=_param, default=0.0)
+    lag: jax.Array = eqx.field(converter=_param, default=0.0)
+    lag_time: jax.Array = eqx.field(converter=_param, default=300.0)
+    warmup: jax.Array = eqx.field(converter=_param, default=0.0)
+    warmup_time: jax.Array = eqx.field(converter=_param, default=600.0)
+    rate_cubic: jax.Array = eqx.field(converter=_param, default=0.0)
+
+    def __check_init__(self):
+        for name in ("lag_time", "warmup_time"):
+            value = getattr(self, name)
+            if not isinstance(value, TemperatureLaw) and is_concrete(value):
+                check_positive(f"DriftTerms.{name}", value, "s")
+
+    def input_rate(self, profile, t):
+        """The added equivalent input rate [rad/s] at time t [s] of `profile`."""
+        rate, _, temperature, _ = profile.sample(t)
+        t_dot = profile.temperature_rate_at(t)
+        lagged = profile.lagged_temperature_at(t, self.lag_time)
+        return (
+            self.temperature_rate * t_dot
+            + self.lag * (lagged - T_REF_C)
+            + self.warmup * jnp.exp(-(t - profile.t[0]) / self.warmup_time)
+            + self.rate_cubic * rate**3
+        )
 
 
 class Gyro(eqx.Module):
@@ -35,6 +85,8 @@ class Gyro(eqx.Module):
       `TemperatureLaw`).
     - `g_sensitivity`: drift per specific force along case axes x, y, z, equivalent input rate
       [rad/s per g], shape (3,).
+    - `drift_terms`: further drift mechanisms ([`hrgjax.DriftTerms`][]: temperature rate,
+      thermal lag, warm-up, rate-cubic scale factor), or `None`.
     """
 
     resonator: Resonator
@@ -43,6 +95,7 @@ class Gyro(eqx.Module):
     noise: Noise | None = None
     rate_bias: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
     g_sensitivity: jax.Array = eqx.field(converter=_vector3, default=0.0)
+    drift_terms: DriftTerms | None = None
 
     def at(self, temperature_c) -> Gyro:
         """This gyro with every temperature law evaluated at `temperature_c` [°C]."""

@@ -165,6 +165,34 @@ class Profile(eqx.Module):
         i, _, length = self._segment(t)
         return (self.rate[i + 1] - self.rate[i]) / length
 
+    def temperature_rate_at(self, t):
+        """Temperature rate dT/dt [°C/s] at time t [s] (slope of the current segment)."""
+        i, _, length = self._segment(t)
+        return (self.temperature[i + 1] - self.temperature[i]) / length
+
+    def lagged_temperature_at(self, t, tau):
+        r"""First-order lagged temperature $T_i(t)$ [°C], $\dot T_i = (T - T_i)/\tau$,
+        starting in equilibrium, $T_i(t_0) = T(t_0)$; `tau` [s] > 0.
+
+        Exact for the piecewise-linear temperature: on a segment of slope s,
+        $T_i(t) = T(t) - s\tau + (T_i(t_k) - T(t_k) + s\tau)\,e^{-(t-t_k)/\tau}$."""
+        temp, h = self.temperature, jnp.diff(self.t)
+        slope = jnp.diff(temp) / h
+
+        def step(lag, k):
+            nxt = (
+                temp[k + 1]
+                - slope[k] * tau
+                + (lag - temp[k] + slope[k] * tau) * jnp.exp(-h[k] / tau)
+            )
+            return nxt, lag
+
+        _, at_knots = jax.lax.scan(step, temp[0], jnp.arange(h.shape[0]))
+        i, t0, _ = self._segment(t)
+        dt = jnp.clip(t - t0, 0.0, None)
+        s = slope[i]
+        return temp[i] + s * dt - s * tau + (at_knots[i] - temp[i] + s * tau) * jnp.exp(-dt / tau)
+
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""
         seg = 0.5 * (self.rate[1:] + self.rate[:-1]) * jnp.diff(self.t)

@@ -102,5 +102,5 @@ def test_generator_base_is_the_nominal_physics_and_injects_by_name():
     assert inject(base, None, 0.0) is base
     hot = inject(base, "bias_temperature", 0.01).at(60.0)
     np.testing.assert_allclose(hot.rate_bias - base.rate_bias, 0.01 * 40 * DEG_PER_H)
-    with pytest.raises(ValueError, match="cannot generate 'thermal_rate'"):
-        inject(base, "thermal_rate", 1.0)
+    with pytest.raises(ValueError, match="cannot generate 'acceleration_sensitivity'"):
+        inject(base, "acceleration_sensitivity", 1.0)

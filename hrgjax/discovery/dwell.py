@@ -21,6 +21,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.scipy.special import gammaincc
 
 from ..calibration.reduce import RateWindows
 from ..units import DEG
@@ -100,3 +101,8 @@ def score(r: np.ndarray, j: np.ndarray, g: np.ndarray):
         return 0.0, 1.0, np.zeros(g.shape[1])
     step = np.linalg.solve(gram, g_t.T @ r)
     return float(r @ g_t @ step), float(alias), step
+
+
+def chi2_sf(x: float, dof: int) -> float:
+    """Upper tail probability of χ²_dof at x."""
+    return float(gammaincc(dof / 2.0, jnp.asarray(max(x, 0.0) / 2.0)))

@@ -13,32 +13,56 @@ put back through the gyro's own parameters, at a chosen size:
 | `bias_temperature` | slope [°/h/°C] | rate bias + slope·ΔT |
 | `angular_gain_temperature` | κ_T [1/°C] | k_e(T) = k_e(1 + κ_T ΔT) |
 | `readout_gain_mismatch` | g [–] | pickoff gain mismatch g |
+| `thermal_rate` | c [°/h per °C/min] | `DriftTerms.temperature_rate` |
+| `thermal_lag` | b_L [°/h/°C], τ_th = 600 s | `DriftTerms.lag`, `lag_time` |
+| `warmup_transient` | b_w [°/h], τ_w = 600 s | `DriftTerms.warmup`, `warmup_time` |
+| `rate_scale_factor` | relative scale-factor change at 100 °/s | `DriftTerms.rate_cubic` |
 
-Effects without a mechanism in the simulator yet (thermal rate and lag, warm-up, rate scale
-factor) and those needing a quadrature offset or ±g orientations are not generated yet.
+The last four change the gyro's equivalent input rate (the catalogue term is −k_e times it).
+Dwell grids ([`hidden_effect_dataset`][hrgjax.discovery.generate.hidden_effect_dataset]) cannot
+show the thermal and warm-up effects — their temperature is constant and they share one
+switch-on — so those come as continuous records
+([`continuous_dataset`][hrgjax.discovery.generate.continuous_dataset]): temperature ramps up and
+down at two speeds, static and slowly turning, each run its own switch-on. The quadrature
+effects need a quadrature set-point offset and `acceleration_sensitivity` needs ±g
+orientations; neither is generated yet.
 """
 
 from __future__ import annotations
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
+import numpy as np
 
 from ..calibration.experiment import rotation_plan, run_plan, static_plan
 from ..data import MeasuredData, concat
-from ..gyro import Gyro
+from ..gyro import DriftTerms, Gyro
 from ..presets import tvg3_like
+from ..profiles import Profile
 from ..resonator.control import Control
 from ..resonator.params import TemperatureLaw
 from ..resonator.readout import Readout
-from ..units import DEG_PER_H
+from ..simulate import simulate
+from ..units import DEG, DEG_PER_H
 
 GENERATED = (
     "damping_anisotropy_temperature",
     "bias_temperature",
     "angular_gain_temperature",
     "readout_gain_mismatch",
+    "thermal_rate",
+    "thermal_lag",
+    "warmup_transient",
+    "rate_scale_factor",
 )
 """Effects the generator can hide."""
+DWELL_EFFECTS = GENERATED[:4] + ("rate_scale_factor",)
+"""Effects a dwell grid shows (`rate_scale_factor` needs `rates_dps` with two rates)."""
+CONTINUOUS_EFFECTS = GENERATED[:7]
+"""Effects the continuous records show."""
+LAG_TIME_S = 600.0
+"""Time constant of the generated thermal lag and warm-up [s]."""
 
 TEMPERATURES = (-40.0, -15.0, 10.0, 35.0, 60.0)
 ANGLES = tuple(float(a) for a in range(-90, 90, 20))
@@ -66,6 +90,16 @@ def inject(gyro: Gyro, effect: str | None, size: float) -> Gyro:
         return eqx.tree_at(lambda g: g.resonator.k_e, gyro, law)
     if effect == "readout_gain_mismatch":
         return eqx.tree_at(lambda g: g.readout, gyro, Readout(gain_mismatch=size))
+    drift = {
+        "thermal_rate": lambda: DriftTerms(temperature_rate=size * DEG_PER_H * 60.0),
+        "thermal_lag": lambda: DriftTerms(lag=size * DEG_PER_H, lag_time=LAG_TIME_S),
+        "warmup_transient": lambda: DriftTerms(warmup=size * DEG_PER_H, warmup_time=LAG_TIME_S),
+        "rate_scale_factor": lambda: DriftTerms(rate_cubic=size / (100.0 * DEG) ** 2),
+    }
+    if effect in drift:
+        return eqx.tree_at(
+            lambda g: g.drift_terms, gyro, drift[effect](), is_leaf=lambda x: x is None
+        )
     raise ValueError(f"cannot generate {effect!r} yet; choose from {GENERATED} or None")
 
 
@@ -77,13 +111,66 @@ def hidden_effect_dataset(
     duration_s: float = 60.0,
     temperatures_c=TEMPERATURES,
     angles_deg=ANGLES,
+    rates_dps=(5.0,),
 ) -> MeasuredData:
-    """A dwell-grid bench session (static and 5 °/s runs at every temperature × angle, one
-    switch-on) of the base gyro with `effect` hidden at `size`."""
+    """A dwell-grid bench session (static runs and runs at each of `rates_dps` at every
+    temperature × angle, one switch-on) of the base gyro with `effect` hidden at `size`."""
     gyro = inject(base_gyro(), effect, size)
     k_static, k_rot, k_bias = jax.random.split(key, 3)
     static = static_plan(temperatures_c, angles_deg, duration_s=duration_s, dt_out=0.5)
-    rotation = rotation_plan(temperatures_c, angles_deg, duration_s=duration_s)
-    a = run_plan(gyro, static, key=k_static, bias_key=k_bias)
-    b = run_plan(gyro, rotation, key=k_rot, bias_key=k_bias, first_run=static.size)
-    return concat([a, b])
+    parts = [run_plan(gyro, static, key=k_static, bias_key=k_bias)]
+    first = static.size
+    for rate, k in zip(rates_dps, jax.random.split(k_rot, len(rates_dps)), strict=True):
+        rotation = rotation_plan(temperatures_c, angles_deg, rate, duration_s=duration_s)
+        parts.append(run_plan(gyro, rotation, key=k, bias_key=k_bias, first_run=first))
+        first += rotation.size
+    return concat(parts)
+
+
+RAMPS = (
+    # (start °C, end °C, ramp length s, table rate °/s, initial wave angle °)
+    (-20.0, 40.0, 2400.0, 0.0, 0.0),
+    (40.0, -20.0, 2400.0, 2.0, 0.0),
+    (-20.0, 40.0, 600.0, 0.0, 45.0),
+    (40.0, -20.0, 600.0, 2.0, 30.0),
+    (0.0, 60.0, 1200.0, 0.0, -30.0),
+    (60.0, 0.0, 1200.0, 2.0, 60.0),
+)
+"""The continuous runs: a 600-s hold, a ramp, a hold to the end; static or turning."""
+
+
+def ramp_profiles(duration_s: float = 3600.0, ramps=RAMPS) -> Profile:
+    """The continuous runs of [`RAMPS`][hrgjax.discovery.generate.RAMPS] as one batched
+    [`hrgjax.Profile`][] (leading axis = run)."""
+    hold = 600.0
+    profs = []
+    for t_a, t_b, ramp, rate, angle in ramps:
+        if hold + ramp >= duration_s:
+            raise ValueError(f"duration_s must exceed {hold + ramp} s for a {ramp}-s ramp")
+        t = [0.0, hold, hold + ramp, duration_s]
+        profs.append(Profile.piecewise(t, [rate] * 4, [t_a, t_a, t_b, t_b], wave_angle0_deg=angle))
+    return jax.tree_util.tree_map(lambda *x: jnp.stack(x), *profs)
+
+
+@eqx.filter_jit
+def _simulate_runs(gyro, profiles, keys, ts):
+    return jax.vmap(lambda p, k: simulate(gyro, p, key=k, ts=ts))(profiles, keys)
+
+
+def continuous_dataset(
+    effect: str | None,
+    size: float,
+    *,
+    key: jax.Array,
+    duration_s: float = 3600.0,
+    dt_out: float = 1.0,
+    ramps=RAMPS,
+) -> MeasuredData:
+    """Continuous records of the base gyro with `effect` hidden at `size`: one run per entry
+    of `ramps` (temperature ramps up and down at two speeds, static or turning at 2 °/s),
+    each its own switch-on."""
+    gyro = inject(base_gyro(), effect, size)
+    profiles = ramp_profiles(duration_s, ramps)
+    ts = jnp.asarray(np.arange(int(round(duration_s / dt_out)) + 1) * dt_out)
+    keys = jax.random.split(key, len(ramps))
+    return _simulate_runs(gyro, profiles, keys, ts).to_data()

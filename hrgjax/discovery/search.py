@@ -22,17 +22,20 @@ from __future__ import annotations
 
 import math
 
-import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import gammaincc
 
 from ..calibration.reduce import K_E_NOMINAL, WINDOW_S, RateWindows, reduce
 from ..data import MeasuredData
+from ..noise import Noise
 from ..units import DEG, DEG_PER_H
 from . import dwell
+from .continuous import BLOCK_S, ContinuousProblem, is_dwell, noise_from_gyro
+from .continuous import noise_model as continuous_noise
 from .effects import CATALOGUE, NOMINAL
 
 METRIC = "rms_run_mean_rate_residual_dph"
+OPTIONAL = {"amplitude": "amplitude", "quadrature": "quadrature", "accel_z": "accel_z_g"}
+"""Covariates read from optional data columns."""
 NEEDS_CONTINUOUS = ("thermal_rate", "thermal_lag", "warmup_transient")
 """Effects a dwell grid (constant temperature per run, fresh runs) cannot reveal."""
 
@@ -41,8 +44,7 @@ def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
     """Per-window means of the optional columns, and which covariates the data carry."""
     extra: dict[str, list] = {"t_run": []}
     have = set()
-    optional = {"amplitude": "amplitude", "quadrature": "quadrature", "accel_z": "accel_z_g"}
-    for key, col in optional.items():
+    for key, col in OPTIONAL.items():
         if col in data:
             extra[key] = []
             have.add(key)
@@ -50,26 +52,26 @@ def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
     for run, a, b, tm in zip(w.run, w.start, w.stop, w.t_mid, strict=True):
         idx = starts[int(run)]
         extra["t_run"].append(tm - data["time_s"][idx[0]])
-        for key, col in optional.items():
+        for key, col in OPTIONAL.items():
             if key in extra:
                 extra[key].append(float(np.mean(data[col][idx[a:b]])))
     return {k: np.asarray(v) for k, v in extra.items()}, have
 
 
-def candidates_for(have: set, nominal=NOMINAL) -> list[str]:
-    """Catalogue effects the data can reveal, given the covariates they carry."""
+def candidates_for(have: set, nominal=NOMINAL, continuous: bool = False) -> list[str]:
+    """Catalogue effects the data can reveal, given the covariates they carry (and, for
+    dwell grids, without the effects that need changing temperature or fresh switch-ons)."""
     out = []
     for name, effect in CATALOGUE.items():
-        if name in nominal or name in NEEDS_CONTINUOUS:
+        if name in nominal or (name in NEEDS_CONTINUOUS and not continuous):
             continue
-        needs = set(effect.needs) - {"theta", "rate", "temperature"}
+        derived = {"theta", "rate", "temperature"}
+        if continuous:  # read off the temperature and time columns of the record
+            derived |= {"temperature_rate", "temperature_lagged", "t_run"}
+        needs = set(effect.needs) - derived
         if needs <= have:
             out.append(name)
     return out
-
-
-def _chi2_sf(x: float, dof: int) -> float:
-    return float(gammaincc(dof / 2.0, jnp.asarray(max(x, 0.0) / 2.0)))
 
 
 def _gap(resid, w: RateWindows, runs, k_e):
@@ -90,56 +92,71 @@ def discover(
     catalogue=None,
     k_e: float = K_E_NOMINAL,
     window_s: float = WINDOW_S,
-    holdout_every: int = 4,
+    holdout_every: int | None = None,
     alpha: float = 0.01,
     min_delta_bic: float = 10.0,
     min_heldout_gain: float = 10.0,
     max_effects: int = 3,
+    shape: str = "auto",
+    noise: Noise | None = None,
+    block_s: float = BLOCK_S,
 ) -> dict:
-    """Name the effect missing from `nominal` in dwell-grid `data` (module docstring).
+    """Name the effect missing from `nominal` in `data` (module docstring).
 
     **Arguments:**
 
-    - `data`: [`hrgjax.MeasuredData`][] of dwell runs (static and/or constant-rate).
+    - `data`: [`hrgjax.MeasuredData`][]: dwell runs (static and/or constant rate, constant
+      temperature) or continuous records (ramps, rate profiles).
     - `nominal`: effect names of the starting model (default `base`).
     - `catalogue`: candidate names (default: every effect the data can carry).
-    - `k_e`: nominal angular gain; `window_s`: moving-run window [s].
-    - `holdout_every`: hold out every n-th run; `alpha`, `min_delta_bic`,
-      `min_heldout_gain` (drop of the held-out whitened χ²), `max_effects`: the acceptance
-      rule.
+    - `k_e`: nominal angular gain; `window_s`: moving-run window of dwell data [s].
+    - `holdout_every`: hold out every n-th run (default 4 for dwell grids, 3 for continuous
+      records); `alpha`, `min_delta_bic`, `min_heldout_gain` (drop of the held-out whitened
+      χ²), `max_effects`: the acceptance rule.
+    - `shape`: `"auto"` (dwell when every run holds its rate and temperature), `"dwell"` or
+      `"continuous"`.
+    - `noise`: a known [`hrgjax.Noise`][] for continuous records (default: estimated from the
+      data's zero-rate stretches, run-to-run bias from the baseline fit).
+    - `block_s`: block length of the continuous increments [s].
 
     **Returns:** the report dict (DESIGN.md "Discovery report" keys plus `verdict`,
-    `accepted`, `parameters`, `noise`, `split`).
+    `accepted`, `parameters`, `noise`, `split`, `shape`).
 
-    **Raises:** `ValueError` for unknown effect names or too few runs to hold any out.
+    **Raises:** `ValueError` for unknown effect names, a bad `shape`, or too few runs to hold
+    any out; `RuntimeError` when a continuous fit does not converge.
     """
     unknown = [n for n in list(nominal) + list(catalogue or []) if n not in CATALOGUE]
     if unknown:
         raise ValueError(f"unknown effect(s) {unknown}; catalogue: {sorted(CATALOGUE)}")
     if "angular_gain" not in nominal:
         raise ValueError("the nominal model must contain 'angular_gain'")
-    w = reduce(data, k_e, window_s=window_s)
-    extra, have = _window_extras(data, w)
-    c = dwell.covariates(w, extra)
-    y = dwell.target(w, k_e)
-    runs = np.unique(w.run)
-    if runs.size < 2 * holdout_every:
+    if shape not in SHAPES:
+        raise ValueError(f"shape must be one of {SHAPES}; got {shape!r}")
+    if shape == "auto":
+        shape = "dwell" if is_dwell(data) else "continuous"
+    if holdout_every is None:
+        holdout_every = 4 if shape == "dwell" else 3
+    runs = np.unique(data.run)
+    need = 2 * holdout_every if shape == "dwell" else max(holdout_every, 2)
+    if holdout_every < 2 or runs.size < need:
         raise ValueError(
-            f"discover needs at least {2 * holdout_every} runs to hold some out; got {runs.size}"
+            f"discover needs at least {need} runs to hold every {holdout_every}-th out "
+            f"(holdout_every >= 2); got {runs.size} runs"
         )
     held = runs[holdout_every - 1 :: holdout_every]
-    train = ~np.isin(w.run, held)
-    cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal)
+    if shape == "dwell":
+        problem = DwellProblem(data, k_e, window_s, held)
+    else:
+        problem = _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s)
+    cands = list(catalogue) if catalogue is not None else problem.candidates(nominal)
     cands = [n for n in cands if n not in nominal]
 
     model = list(nominal)
-    sigma, nm = _noise_scale(data, w, k_e)
-    base = _fit(model, c, y, sigma, train, w, held, k_e)
-    gap_before = base["gap"]
-    floor = _floor(sigma, w, held, k_e)
+    base = problem.fit(model)
+    gap_before, floor = base["gap"], problem.floor()
     accepted, ranking, current = [], [], base
     for _ in range(max_effects):
-        rows = _screen(current, cands, model, c, sigma, train, y, w, held, k_e)
+        rows = problem.screen(current, cands, model)
         if not ranking:
             ranking = rows
         ok = [
@@ -149,7 +166,7 @@ def discover(
             and r["delta_bic"] > min_delta_bic
             and r["aliasing"] < 0.9
             and r["heldout_gain"] > min_heldout_gain
-            and r["gap_after"] <= current["gap"]
+            and r["gap_after"] <= current["gap"] + floor
         ]
         if not ok:
             break
@@ -157,10 +174,12 @@ def discover(
         accepted.append(best["effect"])
         model.append(best["effect"])
         cands.remove(best["effect"])
-        current = _fit(model, c, y, sigma, train, w, held, k_e)
+        current = problem.after_accept(best["refit"])
+    floor = problem.floor()  # σ_b may have been re-estimated at the final model
+    left = problem.structure_left(current, floor)
     if accepted:
         verdict = "found"
-    elif gap_before > 2.0 * floor:
+    elif problem.structure_left(base, floor):
         verdict = "unexplained"
     else:
         verdict = "none"
@@ -180,38 +199,89 @@ def discover(
         "noise_floor": floor,
         "metric": METRIC,
         "verdict": verdict,
-        "structure_left": bool(current["gap"] > 2.0 * floor),
+        "structure_left": bool(left),
         "accepted": accepted,
         "ambiguous_with": ambiguous,
         "discriminate": {n: CATALOGUE[n].discriminate for n in accepted + ambiguous},
         "parameters": current["parameters"],
-        "screening": [
-            {
-                k: r[k]
-                for k in (
-                    "effect",
-                    "score",
-                    "p_value",
-                    "delta_bic",
-                    "aliasing",
-                    "heldout_gain",
-                    "gap_after",
-                )
-            }
-            for r in ranking
-        ],
-        "noise": {
-            "angle_white_arcsec": None
-            if nm["angle_white"] is None
-            else nm["angle_white"] / DEG * 3600,
-            "angle_random_walk_dph_per_sqrt_h": None
-            if nm["angle_random_walk"] is None
-            else nm["angle_random_walk"] / k_e / DEG * 60,
-            "sigma_static_dph": _sigma_dph(sigma, w.static, k_e),
-            "sigma_moving_dph": _sigma_dph(sigma, ~w.static, k_e),
-        },
+        "screening": [{k: r[k] for k in SCREEN_KEYS} for r in ranking],
+        "noise": problem.noise_report(),
         "split": {"train_runs": int(runs.size - held.size), "heldout_runs": int(held.size)},
+        "shape": shape,
     }
+
+
+SHAPES = ("auto", "dwell", "continuous")
+SCREEN_KEYS = ("effect", "score", "p_value", "delta_bic", "aliasing", "heldout_gain", "gap_after")
+
+
+def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s):
+    """Build the continuous problem over the superset (nominal + candidates); without a known
+    noise model, estimate it and then the run-to-run bias from the baseline's run means."""
+    have = {k for k, col in OPTIONAL.items() if col in data}
+    cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
+    names = list(nominal) + [n for n in cands if n not in nominal]
+    known = noise is not None
+    nz = noise_from_gyro(noise, k_e) if known else continuous_noise(data)
+    problem = ContinuousProblem(data, names, k_e, held, nz, block_s)
+    problem.have = have
+    problem.noise_known = known
+    if not known:
+        problem.estimate_run_bias(problem.fit(list(nominal))["z"])
+    return problem
+
+
+class DwellProblem:
+    """Dwell-grid discovery: window rates as weighted linear regression (module docstring)."""
+
+    def __init__(self, data, k_e, window_s, held):
+        self.k_e, self.held = k_e, held
+        self.w = w = reduce(data, k_e, window_s=window_s)
+        extra, self.have = _window_extras(data, w)
+        self.c = dwell.covariates(w, extra)
+        self.y = dwell.target(w, k_e)
+        self.train = ~np.isin(w.run, held)
+        self.sigma, self.nm = _noise_scale(data, w, k_e)
+
+    def candidates(self, nominal):
+        return candidates_for(self.have, nominal)
+
+    def fit(self, model):
+        return _fit(model, self.c, self.y, self.sigma, self.train, self.w, self.held, self.k_e)
+
+    def floor(self):
+        return _floor(self.sigma, self.w, self.held, self.k_e)
+
+    def after_accept(self, fit):
+        return fit
+
+    def structure_left(self, fit, floor):
+        """The held-out gap is more than twice the noise floor."""
+        return fit["gap"] > 2.0 * floor
+
+    def screen(self, current, cands, model):
+        return _screen(
+            current,
+            cands,
+            model,
+            self.c,
+            self.sigma,
+            self.train,
+            self.y,
+            self.w,
+            self.held,
+            self.k_e,
+        )
+
+    def noise_report(self):
+        nm, k_e, w = self.nm, self.k_e, self.w
+        white, arw = nm["angle_white"], nm["angle_random_walk"]
+        return {
+            "angle_white_arcsec": None if white is None else white / DEG * 3600,
+            "angle_random_walk_dph_per_sqrt_h": None if arw is None else arw / k_e / DEG * 60,
+            "sigma_static_dph": _sigma_dph(self.sigma, w.static, k_e),
+            "sigma_moving_dph": _sigma_dph(self.sigma, ~w.static, k_e),
+        }
 
 
 def _sigma_dph(sigma, mask, k_e):
@@ -306,7 +376,7 @@ def _screen(current, cands, model, c, sigma, train, y, w, held, k_e):
             {
                 "effect": name,
                 "score": float(s),
-                "p_value": _chi2_sf(s, q),
+                "p_value": dwell.chi2_sf(s, q),
                 "delta_bic": float(lam - q * math.log(n)),
                 "aliasing": alias,
                 "gap_after": refit["gap"],
@@ -314,6 +384,7 @@ def _screen(current, cands, model, c, sigma, train, y, w, held, k_e):
                 "params": {
                     k: v["value"] for k, v in refit["parameters"][name].items() if k in names
                 },
+                "refit": refit,
             }
         )
     rows.sort(key=lambda r: -r["score"])

@@ -36,14 +36,18 @@ from .readout import estimate, from_pendulum
 N_STATE = 7
 
 
-def _input(gyro, rate, accel):
-    return rate + gyro.rate_bias + gyro.g_sensitivity @ accel
+def _input(gyro, profile, t, rate, accel):
+    omega = rate + gyro.rate_bias + gyro.g_sensitivity @ accel
+    if gyro.drift_terms is not None:
+        omega = omega + gyro.drift_terms.input_rate(profile, t)
+    return omega
 
 
 def input_rate(gyro, profile, t):
-    """Equivalent input rate [rad/s]: table rate + rate bias + g-sensitivity · specific force."""
+    """Equivalent input rate [rad/s]: table rate + rate bias + g-sensitivity · specific force
+    (+ the gyro's [`DriftTerms`][hrgjax.DriftTerms])."""
     rate, _, _, accel = profile.sample(t)
-    return _input(gyro, rate, accel)
+    return _input(gyro, profile, t, rate, accel)
 
 
 def pattern_forces(u, v, phi, theta):
@@ -69,7 +73,7 @@ def averaged_vector_field(t, y, args):
     rate, _, temperature, accel = profile.sample(t)
     g = gyro.at(temperature)
     res, ctl = g.resonator, g.control
-    omega_in = _input(g, rate, accel)
+    omega_in = _input(g, profile, t, rate, accel)
     if ctl.ideal:
         d_theta = -res.k_e * omega_in + 0.5 * res.delta_inv_tau * jnp.sin(
             2 * (y[0] - res.theta_tau)

@@ -55,7 +55,7 @@ def full_vector_field(t, y, args):
     res, ctl = g.resonator, g.control
     z, zdot = y[0:2], y[2:4] * omega_scale
     psi_r = y[4]
-    omega_in = _input(g, rate, accel)
+    omega_in = _input(g, profile, t, rate, accel)
     if ctl.enabled:
         est = full_estimates(g, y, omega_scale, omega_in)
         loops = loop_outputs(ctl, res.omega, est, y[5:8])

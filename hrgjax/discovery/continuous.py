@@ -1,0 +1,635 @@
+r"""Discovery on continuous records (DISCOVERY.md §2.2 b): output-error fits through diffrax.
+
+A continuous record is any run whose temperature or rate changes (ramps, rate profiles,
+warm-ups). Nothing is differentiated from noisy data: the model's wave angle is *simulated*
+— the reduced equation of PHYSICS.md §10 with every catalogue term in
+[`pattern_rate`][hrgjax.discovery.effects.pattern_rate], solved by diffrax from the run's first
+measured angle with the run's own rate and temperature samples as covariates — and compared
+with the measured angle at block boundaries every `block_s` seconds:
+
+$$r_k = \bigl(\theta_{\rm meas}(t_{k+1}) - \theta_{\rm meas}(t_k)\bigr)
+      - \bigl(\hat\theta(t_{k+1}) - \hat\theta(t_k)\bigr),$$
+
+increments, so the unknown initial angle drops out. Under the noise model (white angle noise
+σ_w, angle random walk N, a first-order Gauss–Markov rate (σ_GM, T_c)) the increments of one
+run have the exact covariance
+
+$$\Sigma_{kl} = \sigma_w^2(2\delta_{kl} - \delta_{|k-l|,1}) + N^2\Delta\,\delta_{kl}
+ + C_{\rm GM}(k,l) + \sigma_b^2\Delta^2,$$
+
+$C_{\rm GM}(k,k) = 2\sigma^2T_c(\Delta - T_c(1-e^{-\Delta/T_c}))$,
+$C_{\rm GM}(k,l) = \sigma^2T_c^2(1-e^{-\Delta/T_c})^2e^{-(|k-l|-1)\Delta/T_c}$, and the residual is
+whitened by its Cholesky factor. Each run is its own switch-on: its constant bias
+(run-to-run repeatability, spread σ_b) is a random effect, $\sigma_b^2\Delta^2$ added to every
+element of Σ, with σ_b estimated from the scatter of the run means at the current model and
+re-estimated after each accepted effect. Sensitivities to every parameter — fitted or still at its
+null — are forward-mode derivatives through the solve (`diffrax.ForwardMode`, `jax.jacfwd`);
+fits are `optimistix.LevenbergMarquardt`. Nonregular time constants (`thermal_lag`'s τ_th,
+`warmup_transient`'s τ_w) are scanned on a grid; the score test then takes the best grid
+point and pays for the grid in its Bonferroni level.
+"""
+
+from __future__ import annotations
+
+import math
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ..data import MeasuredData
+from ..units import DEG, DEG_PER_H
+from . import dwell
+from .effects import CATALOGUE, Covariates, pattern_rate, readout_term
+
+BLOCK_S = 10.0
+"""Default block length of the increments [s]."""
+STEP_S = 5.0
+"""Solver step [s]: Tsit5 steps on the samples nearest every `STEP_S` (covariates are
+interpolated between samples, so the steps land on their corners)."""
+REFIT_TOP = 3
+"""Candidates refitted in full per screening pass (the short list)."""
+TAU_GRID = (30.0, 100.0, 300.0, 1000.0, 3000.0)
+"""Grid of nonregular time constants scanned in screening [s]."""
+GM_TIMES = (30.0, 100.0, 300.0, 1000.0, 3000.0)
+"""Correlation times tried for the Gauss–Markov part of the noise model [s]."""
+
+
+def is_dwell(data: MeasuredData) -> bool:
+    """True when every run holds its temperature and table rate constant (a dwell grid)."""
+    for idx in data.run_indices():
+        for col in ("temperature_c", "table_rate_dps"):
+            v = data[col][idx]
+            if np.ptp(v) > 1e-9 * max(1.0, float(np.max(np.abs(v)))):
+                return False
+    return True
+
+
+# ---------------------------------------------------------------- parameter layout
+
+
+class Layout:
+    """The superset parameter vector: every parameter of `names` in scaled units
+    (value / scale), so optimisers see O(1) numbers."""
+
+    def __init__(self, names):
+        self.names = tuple(names)
+        self.slices, self.scales, self.regular, start = {}, [], [], 0
+        for n in self.names:
+            ps = CATALOGUE[n].params
+            self.slices[n] = slice(start, start + len(ps))
+            self.scales += [p.scale for p in ps]
+            self.regular += [p.regular for p in ps]
+            start += len(ps)
+        self.size = start
+        self.scale = np.asarray(self.scales)
+
+    def __hash__(self):
+        return hash(self.names)
+
+    def __eq__(self, other):
+        return isinstance(other, Layout) and other.names == self.names
+
+    def null(self, k_e):
+        """Scaled vector at the null (nonregular parameters at their typical size), with
+        the angular gain at `k_e`."""
+        z = np.asarray([0.0 if r else 1.0 for r in self.regular])
+        if "angular_gain" in self.slices:
+            z[self.slices["angular_gain"].start] = k_e / self.scale[self.slices["angular_gain"]][0]
+        return z
+
+    def unpack(self, z):
+        """{effect: physical parameters} from a scaled vector."""
+        p = z * jnp.asarray(self.scale)
+        return {n: p[s] for n, s in self.slices.items()}
+
+    def index(self, name, which=None):
+        """Positions of an effect's (regular, or all) parameters in the vector."""
+        s = self.slices[name]
+        idx = range(s.start, s.stop)
+        return [i for i in idx if which is None or self.regular[i] == which]
+
+
+# ---------------------------------------------------------------- runs and the model
+
+
+class Runs(eqx.Module):
+    """Runs of one length, stacked: samples, covariates and block boundaries."""
+
+    t: jax.Array  # (R, n) time [s]
+    theta: jax.Array  # (R, n) measured wave angle [rad]
+    rate: jax.Array  # (R, n) table rate [rad/s]
+    temp: jax.Array  # (R, n) temperature [°C]
+    accel: jax.Array  # (R, n) specific force along the axis [g]
+    amp: jax.Array
+    quad: jax.Array
+    bidx: jax.Array  # (K+1,) sample indices of the block boundaries
+    steps: jax.Array  # sample indices of the solver's steps
+    whiten: jax.Array  # (R, K, K) L⁻¹ of each run's increment covariance
+    run: tuple = eqx.field(static=True)  # run ids
+
+
+def _lagged(t, temp, tau):
+    """First-order lag of the piecewise-linear temperature at the samples (exact)."""
+    h = jnp.diff(t)
+    slope = jnp.diff(temp) / h
+
+    def step(lag, k):
+        decay = jnp.exp(-h[k] / tau)
+        nxt = temp[k + 1] - slope[k] * tau + (lag - temp[k] + slope[k] * tau) * decay
+        return nxt, nxt
+
+    _, rest = jax.lax.scan(step, temp[0], jnp.arange(h.shape[0]))
+    return jnp.concatenate([temp[:1], rest])
+
+
+def _one_run(layout: Layout, z, t, theta, rate, temp, accel, amp, quad, bidx, steps):
+    """Model wave angle (with readout terms) at the block boundaries of one run."""
+    params = layout.unpack(z)
+    rate_params = {n: p for n, p in params.items() if CATALOGUE[n].where == "rate"}
+    if "thermal_lag" in params:
+        lagged = _lagged(t, temp, params["thermal_lag"][1])
+    else:
+        lagged = temp
+    n = t.shape[0]
+
+    def field(s, y, args):
+        i = jnp.clip(jnp.searchsorted(t, s, side="right") - 1, 0, n - 2)
+        h = t[i + 1] - t[i]
+        f = jnp.clip((s - t[i]) / h, 0.0, 1.0)
+        lerp = lambda v: v[i] + (v[i + 1] - v[i]) * f
+        c = Covariates(
+            theta=y,
+            rate=lerp(rate),
+            temperature=lerp(temp),
+            temperature_rate=(temp[i + 1] - temp[i]) / h,
+            temperature_lagged=lerp(lagged),
+            amplitude=lerp(amp),
+            quadrature=lerp(quad),
+            accel_z=lerp(accel),
+            t_run=s - t[0],
+        )
+        return pattern_rate(rate_params, c)
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        diffrax.Tsit5(),
+        t0=t[0],
+        t1=t[-1],
+        dt0=None,
+        y0=theta[0],
+        saveat=diffrax.SaveAt(ts=t[bidx]),
+        stepsize_controller=diffrax.StepTo(ts=t[steps]),
+        adjoint=diffrax.ForwardMode(),
+        max_steps=None,
+    )
+    out = sol.ys
+    if "readout_gain_mismatch" in params:
+        c = Covariates(theta=out)
+        out = out + readout_term("readout_gain_mismatch", params["readout_gain_mismatch"], c)
+    return out
+
+
+def _increments(layout, z, g: Runs):
+    model = jax.vmap(lambda *a: _one_run(layout, z, *a, g.bidx, g.steps))(
+        g.t, g.theta, g.rate, g.temp, g.accel, g.amp, g.quad
+    )
+    return jnp.diff(model, axis=1)
+
+
+def _measured(g: Runs):
+    return jnp.diff(g.theta[:, g.bidx], axis=1)
+
+
+def _whitened(layout, z, groups):
+    """Whitened increment residuals of every run of every group, concatenated."""
+    out = []
+    for g in groups:
+        r = _measured(g) - _increments(layout, z, g)
+        out.append(jnp.einsum("rkl,rl->rk", g.whiten, r).ravel())
+    return jnp.concatenate(out)
+
+
+_whitened_jit = eqx.filter_jit(_whitened)
+
+
+@eqx.filter_jit
+def _residual_and_jacobian(layout, z, basis, groups):
+    """Whitened residual at `z` and its forward-mode derivative along the columns of
+    `basis` (P, m): the sensitivities to m chosen parameters."""
+    fn = lambda u: _whitened(layout, z + basis @ u, groups)
+    u0 = jnp.zeros(basis.shape[1])
+    return fn(u0), jax.jacfwd(fn)(u0)
+
+
+@eqx.filter_jit
+def _raw_residuals(layout, z, groups):
+    """Unwhitened increment residuals per group [rad], shape (R, K) each."""
+    return [_measured(g) - _increments(layout, z, g) for g in groups]
+
+
+@eqx.filter_jit
+def _lm(layout, basis, z0, groups):
+    """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`."""
+    fn = lambda u, _: _whitened(layout, z0 + basis @ u, groups)
+    sol = optx.least_squares(
+        fn,
+        optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
+        jnp.zeros(basis.shape[1]),
+        max_steps=64,
+        throw=False,
+    )
+    return z0 + basis @ sol.value, sol.result == optx.RESULTS.successful
+
+
+# ---------------------------------------------------------------- noise model
+
+
+def _gm_increment_cov(sigma, tc, delta, k):
+    """Covariance of the block integrals of a Gauss–Markov rate (module docstring)."""
+    lag = np.abs(np.subtract.outer(np.arange(k), np.arange(k)))
+    e = math.exp(-delta / tc)
+    off = sigma**2 * tc**2 * (1 - e) ** 2 * np.exp(-(np.maximum(lag, 1) - 1) * delta / tc)
+    diag = 2 * sigma**2 * tc * (delta - tc * (1 - e))
+    return np.where(lag == 0, diag, off)
+
+
+def increment_covariance(noise: dict, delta: float, k: int) -> np.ndarray:
+    """Covariance (K, K) of K block increments of length `delta` [s] (module docstring);
+    `noise` holds `angle_white` [rad], `angle_random_walk` [rad/√s], `gm_sigma` [rad/s],
+    `gm_time` [s] and `run_bias` [rad/s] (all angles electrical)."""
+    sw, n = noise["angle_white"], noise["angle_random_walk"]
+    lag = np.abs(np.subtract.outer(np.arange(k), np.arange(k)))
+    cov = sw**2 * np.where(lag == 0, 2.0, np.where(lag == 1, -1.0, 0.0))
+    cov = cov + np.where(lag == 0, n**2 * delta, 0.0)
+    if noise.get("gm_sigma", 0.0) > 0:
+        cov = cov + _gm_increment_cov(noise["gm_sigma"], noise["gm_time"], delta, k)
+    return cov + noise.get("run_bias", 0.0) ** 2 * delta**2
+
+
+def _d2_variance(tau, sw, n, sigma, tc):
+    """Variance of the lag-τ second difference of the angle under the noise model."""
+    var = 6 * sw**2 + 2 * n**2 * tau
+    if sigma > 0:
+        e = np.exp(-tau / tc)
+        var = var + 4 * sigma**2 * tc * (tau - tc * (1 - e)) - 2 * sigma**2 * tc**2 * (1 - e) ** 2
+    return var
+
+
+def noise_model(data: MeasuredData, max_lag_s: float = 1024.0) -> dict:
+    r"""White angle noise, angle random walk and a Gauss–Markov rate from the zero-rate
+    stretches of every run.
+
+    Lag-τ second differences θ(t+τ) − 2θ(t) + θ(t−τ) remove a run's angle and its drift
+    rate; their variance under the model is
+    $6\sigma_w^2 + 2N^2\tau + 4\sigma^2T_c(\tau - T_c(1-e^{-\tau/T_c}))
+    - 2\sigma^2T_c^2(1-e^{-\tau/T_c})^2$. Non-negative least squares (relative errors) over
+    τ = 1, 2, 4, … ≤ `max_lag_s` (and a quarter of the stretch) for each T_c of
+    [`GM_TIMES`][hrgjax.discovery.continuous.GM_TIMES] keeps the best. A drift that changes
+    quickly (a ramp starting) also shows in long lags, so this errs on the side of more noise.
+
+    **Returns:** `{"angle_white", "angle_random_walk", "gm_sigma", "gm_time", "run_bias": 0}`.
+
+    **Raises:** `ValueError` when no run has a zero-rate stretch of at least 16 samples.
+    """
+    taus, var, counts = [], [], []
+    for idx in data.run_indices():
+        still = data["table_rate_dps"][idx] == 0.0
+        # longest zero-rate stretch of the run
+        edges = np.flatnonzero(np.diff(np.r_[0, still.astype(int), 0]))
+        spans = edges.reshape(-1, 2)
+        if spans.size == 0:
+            continue
+        a, b = max(spans, key=lambda s: s[1] - s[0])
+        if b - a < 16:
+            continue
+        th = data["wave_angle_deg"][idx][a:b] * DEG
+        dt = float(np.median(np.diff(data["time_s"][idx][a:b])))
+        k = 1
+        while k * dt <= max_lag_s and k <= (b - a) // 4:
+            d2 = th[2 * k :] - 2 * th[k:-k] + th[: -2 * k]
+            taus.append(k * dt)
+            var.append(np.mean(d2**2))
+            counts.append(d2.size / k)  # roughly independent samples
+            k *= 2
+    if not taus:
+        raise ValueError(
+            "continuous discovery needs a zero-rate stretch (table_rate_dps == 0) of at least "
+            "16 samples in some run to estimate the noise, or pass noise="
+        )
+    taus, var = np.asarray(taus), np.asarray(var)
+    best = None
+    for tc in GM_TIMES:
+        basis = np.stack(
+            [_d2_variance(taus, 1.0, 0.0, 0.0, tc), _d2_variance(taus, 0.0, 1.0, 0.0, tc)]
+            + [_d2_variance(taus, 0.0, 0.0, 1.0, tc)],
+            axis=1,
+        )
+        coef = _nnls(basis / var[:, None], np.ones_like(var))
+        cost = float(np.sum((basis @ coef / var - 1.0) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, tc, coef)
+    _, tc, coef = best
+    return {
+        "angle_white": float(np.sqrt(coef[0])),
+        "angle_random_walk": float(np.sqrt(coef[1])),
+        "gm_sigma": float(np.sqrt(coef[2])),
+        "gm_time": float(tc),
+        "run_bias": 0.0,
+    }
+
+
+def _nnls(a, b, iters=200):
+    """Small non-negative least squares (projected active set over 3 columns)."""
+    best, best_cost = np.zeros(a.shape[1]), np.inf
+    m = a.shape[1]
+    for mask in range(1, 2**m):
+        cols = [j for j in range(m) if mask >> j & 1]
+        x, *_ = np.linalg.lstsq(a[:, cols], b, rcond=None)
+        if np.all(x >= 0):
+            full = np.zeros(m)
+            full[cols] = x
+            cost = float(np.sum((a @ full - b) ** 2))
+            if cost < best_cost:
+                best, best_cost = full, cost
+    return best
+
+
+def noise_from_gyro(noise, k_e: float) -> dict:
+    """The noise dict of a known [`hrgjax.Noise`][]: its equivalent-input-rate parts scaled
+    by the angular gain `k_e` to pattern-angle units."""
+    return {
+        "angle_white": float(noise.angle_white),
+        "angle_random_walk": k_e * float(noise.angle_random_walk),
+        "gm_sigma": k_e * float(noise.bias_instability),
+        "gm_time": float(noise.correlation_time),
+        "run_bias": k_e * float(noise.run_bias),
+    }
+
+
+# ---------------------------------------------------------------- the problem
+
+
+def _block_index(n, m):
+    idx = np.arange(0, n, m)
+    if idx[-1] != n - 1:
+        idx = np.r_[idx, n - 1]
+    return idx
+
+
+class ContinuousProblem:
+    """Everything `discover` needs on continuous records: fits, screening and the gap
+    (the same interface as the dwell-grid problem)."""
+
+    def __init__(self, data, names, k_e, held, noise, block_s=BLOCK_S):
+        self.data, self.k_e, self.block_s = data, k_e, block_s
+        self.layout = Layout(names)
+        self.held = set(int(r) for r in held)
+        self.noise = dict(noise)
+        self.z_null = self.layout.null(k_e)
+        self._build()
+
+    # -- data ----------------------------------------------------------------
+    def _build(self):
+        d = self.data
+        by_len: dict[int, list[np.ndarray]] = {}
+        for idx in d.run_indices():
+            by_len.setdefault(idx.size, []).append(idx)
+        self.train_groups, self.held_groups = [], []
+        for n, runs in sorted(by_len.items()):
+            for is_held in (False, True):
+                sel = [i for i in runs if (int(d.run[i[0]]) in self.held) == is_held]
+                if sel:
+                    group = self._group(sel, n)
+                    (self.held_groups if is_held else self.train_groups).append(group)
+
+    def _group(self, runs, n):
+        d = self.data
+        dt = float(np.median(np.diff(d["time_s"][runs[0]])))
+        m = max(1, int(round(self.block_s / dt)))
+        bidx = _block_index(n, m)
+        steps = _block_index(n, max(1, int(round(STEP_S / dt))))
+        col = lambda name, default: np.stack(
+            [d[name][i] if name in d else np.full(n, default) for i in runs]
+        )
+        t = col("time_s", 0.0)
+        whiten = []
+        for i in range(len(runs)):
+            spans = np.diff(t[i][bidx])
+            delta = float(np.median(spans))
+            cov = increment_covariance(self.noise, delta, bidx.size - 1)
+            whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
+        return Runs(
+            t=jnp.asarray(t),
+            theta=jnp.asarray(col("wave_angle_deg", 0.0) * DEG),
+            rate=jnp.asarray(col("table_rate_dps", 0.0) * DEG),
+            temp=jnp.asarray(col("temperature_c", 20.0)),
+            accel=jnp.asarray(col("accel_z_g", 0.0)),
+            amp=jnp.asarray(col("amplitude", 1.0)),
+            quad=jnp.asarray(col("quadrature", 0.0)),
+            bidx=jnp.asarray(bidx),
+            steps=jnp.asarray(steps),
+            whiten=jnp.asarray(np.stack(whiten)),
+            run=tuple(int(d.run[i[0]]) for i in runs),
+        )
+
+    def estimate_run_bias(self, z):
+        """Set the run-to-run bias spread σ_b [rad/s] from the scatter of every run's mean
+        rate residual at the fit `z`, less what the rest of the noise gives it, and rebuild
+        the whitening."""
+        rates = self.run_rates(z, self.train_groups + self.held_groups)
+        means = np.asarray(list(rates.values()))
+        self.noise["run_bias"] = 0.0
+        noise_var = self.floor(every=True) ** 2
+        spread = np.var(means, ddof=1) if means.size > 1 else 0.0
+        self.noise["run_bias"] = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_e
+        self._build()
+
+    def after_accept(self, fit):
+        """Re-estimate σ_b at the new model (unless the noise was given) and refit."""
+        if not self.noise_known:
+            self.estimate_run_bias(fit["z"])
+            fit = self.fit(fit["model"], z0=fit["z"])
+        return fit
+
+    noise_known = False
+
+    def structure_left(self, fit, floor=None, alpha=1e-3):
+        """True when the held-out whitened χ² is too large for its degrees of freedom
+        (p < `alpha`)."""
+        dof = sum(int(g.bidx.shape[0]) - 2 for g in self.held_groups for _ in g.run)
+        return dwell.chi2_sf(fit["heldout_chi2"], max(dof, 1)) < alpha
+
+    # -- fits ----------------------------------------------------------------
+    def _free(self, model):
+        """Regular parameters of `model` are free; nonregular ones stay where they are."""
+        free = np.zeros(self.layout.size, bool)
+        for n in model:
+            free[self.layout.index(n, which=True)] = True
+        return free
+
+    def _basis(self, names):
+        """(P, m) columns picking the regular parameters of `names`."""
+        idx = [i for n in names for i in self.layout.index(n, which=True)]
+        return np.eye(self.layout.size)[:, idx], idx
+
+    def fit(self, model, z0=None):
+        """Fit the regular parameters of `model` (effect names) on the training runs from
+        `z0`; the rest of the superset stays where it is (at its null by default).
+        Returns the fit dict used by `discover`."""
+        z0 = self.z_null if z0 is None else np.asarray(z0)
+        basis, idx = self._basis(model)
+        z, ok = _lm(self.layout, jnp.asarray(basis), jnp.asarray(z0), self.train_groups)
+        if not bool(ok):
+            raise RuntimeError(f"continuous discovery: the fit of {model} did not converge")
+        z = np.asarray(z)
+        r, j = _residual_and_jacobian(
+            self.layout, jnp.asarray(z), jnp.asarray(basis), self.train_groups
+        )
+        r, j = np.asarray(r), np.asarray(j)
+        err = np.sqrt(np.clip(np.diag(np.linalg.pinv(j.T @ j)), 0.0, None))
+        held_r = self.heldout_residuals(z)
+        params = {}
+        for i, e in zip(idx, err, strict=True):
+            name = next(n for n in model if i in self.layout.index(n))
+            pname = CATALOGUE[name].params[i - self.layout.slices[name].start].name
+            params.setdefault(name, {})[pname] = {
+                "value": float(z[i] * self.layout.scale[i]),
+                "std": float(e * self.layout.scale[i]),
+            }
+        return {
+            "z": z,
+            "r": r,
+            "j": j,
+            "chi2": float(r @ r),
+            "gap": self.gap(z),
+            "heldout_chi2": float(held_r @ held_r),
+            "parameters": params,
+            "model": list(model),
+        }
+
+    def heldout_residuals(self, z):
+        """Whitened increment residuals of the held-out runs."""
+        if not self.held_groups:
+            return np.zeros(0)
+        return np.asarray(_whitened_jit(self.layout, jnp.asarray(z), self.held_groups))
+
+    def run_rates(self, z, groups):
+        """Run-mean equivalent-input-rate residual of every run in `groups` [°/h]."""
+        out = {}
+        raw = _raw_residuals(self.layout, jnp.asarray(z), groups)
+        for g, r in zip(groups, raw, strict=True):
+            span = np.asarray(g.t[:, g.bidx[-1]] - g.t[:, g.bidx[0]])
+            means = -np.asarray(r).sum(axis=1) / (self.k_e * span) / DEG_PER_H
+            out.update(zip(g.run, means, strict=True))
+        return out
+
+    def gap(self, z):
+        """RMS over held-out runs of the run-mean rate residual [°/h] (DESIGN.md)."""
+        rates = self.run_rates(z, self.held_groups)
+        return float(np.sqrt(np.mean(np.square(list(rates.values())))))
+
+    def floor(self, every=False):
+        """What noise alone gives the gap: RMS over held-out runs (`every`: all runs) of the
+        standard deviation of the run-mean rate [°/h]."""
+        var = []
+        for g in self.held_groups + (self.train_groups if every else []):
+            k = int(g.bidx.shape[0]) - 1
+            for i in range(len(g.run)):
+                span = float(g.t[i, g.bidx[-1]] - g.t[i, g.bidx[0]])
+                cov = increment_covariance(self.noise, span / k, k)
+                var.append(cov.sum() / (self.k_e * span) ** 2)
+        return float(np.sqrt(np.mean(var))) / DEG_PER_H
+
+    # -- interface shared with the dwell problem ------------------------------
+    have: set = set()
+
+    def candidates(self, nominal):
+        """Every effect of the superset that is not nominal."""
+        return [n for n in self.layout.names if n not in nominal]
+
+    def noise_report(self):
+        """The noise model in report units."""
+        nz, k_e = self.noise, self.k_e
+        return {
+            "angle_white_arcsec": nz["angle_white"] / DEG * 3600,
+            "angle_random_walk_dph_per_sqrt_h": nz["angle_random_walk"] / k_e / DEG * 60,
+            "gauss_markov_dph": nz["gm_sigma"] / k_e / DEG_PER_H,
+            "gauss_markov_time_s": nz["gm_time"],
+            "run_bias_dph": nz["run_bias"] / k_e / DEG_PER_H,
+        }
+
+    # -- screening -----------------------------------------------------------
+    def _columns(self, current, name, tau=None):
+        """Whitened model sensitivities to `name`'s regular parameters at the current fit
+        (with its nonregular parameter at `tau`)."""
+        z = current["z"].copy()
+        nonreg = self.layout.index(name, which=False)
+        if nonreg and tau is not None:
+            z[nonreg[0]] = tau / self.layout.scale[nonreg[0]]
+        basis, _ = self._basis([name])
+        _, jac = _residual_and_jacobian(
+            self.layout, jnp.asarray(z), jnp.asarray(basis), self.train_groups
+        )
+        return -np.asarray(jac), z
+
+    def screen(self, current, cands, model, top=REFIT_TOP, liberal=0.01):
+        """Score test of every candidate; refit of the `top` best-scoring identifiable ones
+        whose score p-value is below `liberal` (ΔBIC and held-out gain from the refit; the
+        others keep the score's ΔBIC approximation and no held-out gain). Best first."""
+        n = current["r"].size
+        rows = []
+        for name in cands:
+            grid = TAU_GRID if self.layout.index(name, which=False) else (None,)
+            best = None
+            for tau in grid:
+                g, z = self._columns(current, name, tau)
+                if not np.any(g):
+                    continue
+                s, alias, step = dwell.score(current["r"], current["j"], g)
+                if best is None or s > best[0]:
+                    best = (s, alias, step, z, tau)
+            if best is None:
+                continue
+            s, alias, step, z, tau = best
+            q = len(self.layout.index(name, which=True)) + (tau is not None)
+            rows.append(
+                {
+                    "effect": name,
+                    "score": float(s),
+                    "p_value": min(1.0, dwell.chi2_sf(s, q - (tau is not None)) * len(grid)),
+                    "aliasing": alias,
+                    "delta_bic": float(s - q * math.log(n)),
+                    "gap_after": current["gap"],
+                    "heldout_gain": 0.0,
+                    "params": {} if tau is None else {CATALOGUE[name].params[1].name: tau},
+                    "refit": None,
+                    "_start": (z, step),
+                }
+            )
+        rows.sort(key=lambda r: -r["score"])
+        short = [r for r in rows if r["aliasing"] < 0.9 and r["p_value"] < liberal][:top]
+        for row in short:
+            name, (z, step) = row["effect"], row["_start"]
+            z_start = z.copy()
+            z_start[self.layout.index(name, which=True)] += step
+            try:
+                refit = self.fit(model + [name], z0=z_start)
+            except RuntimeError:
+                continue
+            q = len(CATALOGUE[name].params)
+            row.update(
+                delta_bic=float(current["chi2"] - refit["chi2"] - q * math.log(n)),
+                gap_after=refit["gap"],
+                heldout_gain=current["heldout_chi2"] - refit["heldout_chi2"],
+                refit=refit,
+            )
+            row["params"] = {
+                k: v["value"] for k, v in refit["parameters"].get(name, {}).items()
+            } | row["params"]
+        for row in rows:
+            del row["_start"]
+        return rows
