@@ -48,8 +48,10 @@ from .effects import CATALOGUE, Covariates, pattern_rate, readout_term
 BLOCK_S = 10.0
 """Default block length of the increments [s]."""
 STEP_S = 5.0
-"""Solver step [s]: Tsit5 steps on the samples nearest every `STEP_S` (covariates are
-interpolated between samples, so the steps land on their corners)."""
+"""Solver step [s]: Bogacki–Shampine (3rd order) steps on the samples nearest every
+`STEP_S`. The covariates are interpolated between samples, so their corners fall on step
+ends; Bosh3's solution weights no stage at the step's end (FSAL), so a corner never leaks
+into the step before it (Tsit5's sixth stage, at the end with weight 2.3, would)."""
 REFIT_TOP = 3
 """Candidates refitted in full per screening pass (the short list)."""
 TAU_GRID = (30.0, 100.0, 300.0, 1000.0, 3000.0)
@@ -176,7 +178,7 @@ def _one_run(layout: Layout, z, t, theta, rate, temp, accel, amp, quad, bidx, st
 
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field),
-        diffrax.Tsit5(),
+        diffrax.Bosh3(),
         t0=t[0],
         t1=t[-1],
         dt0=None,
@@ -280,8 +282,8 @@ def _d2_variance(tau, sw, n, sigma, tc):
 
 
 def noise_model(data: MeasuredData, max_lag_s: float = 1024.0) -> dict:
-    r"""White angle noise, angle random walk and a Gauss–Markov rate from the zero-rate
-    stretches of every run.
+    r"""White angle noise, angle random walk and a Gauss–Markov rate from the stretches of
+    every run where the table is still and the temperature holds.
 
     Lag-τ second differences θ(t+τ) − 2θ(t) + θ(t−τ) remove a run's angle and its drift
     rate; their variance under the model is
@@ -289,36 +291,34 @@ def noise_model(data: MeasuredData, max_lag_s: float = 1024.0) -> dict:
     - 2\sigma^2T_c^2(1-e^{-\tau/T_c})^2$. Non-negative least squares (relative errors) over
     τ = 1, 2, 4, … ≤ `max_lag_s` (and a quarter of the stretch) for each T_c of
     [`GM_TIMES`][hrgjax.discovery.continuous.GM_TIMES] keeps the best. A drift that changes
-    quickly (a ramp starting) also shows in long lags, so this errs on the side of more noise.
+    within a hold (a warm-up) also shows in long lags, so this errs on the side of more noise.
 
     **Returns:** `{"angle_white", "angle_random_walk", "gm_sigma", "gm_time", "run_bias": 0}`.
 
-    **Raises:** `ValueError` when no run has a zero-rate stretch of at least 16 samples.
+    **Raises:** `ValueError` when no run has such a stretch of at least 16 samples.
     """
-    taus, var, counts = [], [], []
+    taus, var = [], []
     for idx in data.run_indices():
-        still = data["table_rate_dps"][idx] == 0.0
-        # longest zero-rate stretch of the run
-        edges = np.flatnonzero(np.diff(np.r_[0, still.astype(int), 0]))
-        spans = edges.reshape(-1, 2)
-        if spans.size == 0:
-            continue
-        a, b = max(spans, key=lambda s: s[1] - s[0])
-        if b - a < 16:
-            continue
-        th = data["wave_angle_deg"][idx][a:b] * DEG
-        dt = float(np.median(np.diff(data["time_s"][idx][a:b])))
-        k = 1
-        while k * dt <= max_lag_s and k <= (b - a) // 4:
-            d2 = th[2 * k :] - 2 * th[k:-k] + th[: -2 * k]
-            taus.append(k * dt)
-            var.append(np.mean(d2**2))
-            counts.append(d2.size / k)  # roughly independent samples
-            k *= 2
+        temp = data["temperature_c"][idx]
+        steady = np.r_[np.diff(temp) == 0.0, True] & np.r_[True, np.diff(temp) == 0.0]
+        still = (data["table_rate_dps"][idx] == 0.0) & steady
+        edges = np.flatnonzero(np.diff(np.r_[0, still.astype(int), 0])).reshape(-1, 2)
+        for a, b in edges:
+            if b - a < 16:
+                continue
+            th = data["wave_angle_deg"][idx][a:b] * DEG
+            dt = float(np.median(np.diff(data["time_s"][idx][a:b])))
+            k = 1
+            while k * dt <= max_lag_s and k <= (b - a) // 4:
+                d2 = th[2 * k :] - 2 * th[k:-k] + th[: -2 * k]
+                taus.append(k * dt)
+                var.append(np.mean(d2**2))
+                k *= 2
     if not taus:
         raise ValueError(
-            "continuous discovery needs a zero-rate stretch (table_rate_dps == 0) of at least "
-            "16 samples in some run to estimate the noise, or pass noise="
+            "continuous discovery needs a stretch of at least 16 samples with the table still "
+            "(table_rate_dps == 0) and the temperature constant to estimate the noise; or pass "
+            "noise=hrgjax.Noise(...)"
         )
     taus, var = np.asarray(taus), np.asarray(var)
     best = None

@@ -154,7 +154,9 @@ def ramp_profiles(duration_s: float = 3600.0, ramps=RAMPS) -> Profile:
 
 @eqx.filter_jit
 def _simulate_runs(gyro, profiles, keys, ts):
-    return jax.vmap(lambda p, k: simulate(gyro, p, key=k, ts=ts))(profiles, keys)
+    return jax.vmap(lambda p, k: simulate(gyro, p, key=k, ts=ts, rtol=1e-11, atol=1e-12))(
+        profiles, keys
+    )
 
 
 def continuous_dataset(
