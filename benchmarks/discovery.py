@@ -1,14 +1,21 @@
-"""Discovery on dwell-grid data: recovery, false positives and gap shrink (issue 4 targets).
+"""Discovery: recovery, false positives and gap shrink on both data shapes (issue 4 targets).
 
-Datasets from `hrgjax.discovery.generate` (default gyro reduced to the nominal physics, with
-its noise: white angle noise, ARW, Gauss–Markov bias instability, switch-on bias — coloured),
-5 temperatures × 9 wave angles × 60 s, static and 5 °/s. The acceptance thresholds are the
-library defaults, fixed before this run; seeds here (1000+) were not used to choose them.
+Datasets from `hrgjax.discovery.generate`: the default gyro reduced to the nominal physics,
+with its noise (white angle noise, ARW, Gauss–Markov bias instability, switch-on bias —
+coloured), one effect put back through the gyro's own parameters.
 
-Prints per effect: recovery of the right name, gap before / after / noise floor, and for the
-null datasets the false-positive rate; wall time per dataset. Wilson 95 % intervals.
+- Dwell grids: 5 temperatures × 9 wave angles × 60 s, static and 5 °/s (and 100 °/s for the
+  rate-dependent scale factor, which one rate cannot show); one switch-on.
+- Continuous records: six 1-h runs, temperature ramps up and down at two speeds, static or
+  turning at 2 °/s, each its own switch-on; 1-s samples.
 
-Usage: `.venv/bin/python benchmarks/discovery.py [--quick]`.
+The acceptance thresholds are the library defaults, fixed before this run; the seeds here
+(1000+, 5000+, 7000+, 9000+) were not used to choose them. Prints per effect: recovery of
+the right name (Wilson 95 % interval), how often the runner-up was flagged as ambiguous,
+median gap before / after / noise floor [°/h]; for the nulls the false-positive rate; wall
+time per dataset.
+
+Usage: `.venv/bin/python benchmarks/discovery.py [--quick] [--dwell-only|--continuous-only]`.
 """
 
 import math
@@ -20,13 +27,22 @@ import numpy as np
 from _common import machine
 
 from hrgjax.discovery import discover
-from hrgjax.discovery.generate import GENERATED, hidden_effect_dataset
+from hrgjax.discovery.generate import continuous_dataset, hidden_effect_dataset
 
-SIZES = {
-    "damping_anisotropy_temperature": -0.04,
-    "bias_temperature": 0.02,
-    "angular_gain_temperature": 1e-5,
-    "readout_gain_mismatch": 2e-3,
+DWELL = {  # effect: (size, rates)
+    "damping_anisotropy_temperature": (-0.04, (5.0,)),
+    "bias_temperature": (0.02, (5.0,)),
+    "angular_gain_temperature": (1e-5, (5.0,)),
+    "readout_gain_mismatch": (2e-3, (5.0,)),
+    "rate_scale_factor": (1e-4, (5.0, 100.0)),
+}
+CONTINUOUS = {
+    "thermal_rate": 0.05,  # °/h per °C/min
+    "thermal_lag": 0.01,  # °/h/°C, τ = 600 s
+    "warmup_transient": 0.3,  # °/h, τ = 600 s
+    "bias_temperature": 0.002,  # °/h/°C
+    "angular_gain_temperature": 2e-6,  # 1/°C
+    "damping_anisotropy_temperature": -0.01,  # 1/°C (exponential law)
 }
 
 
@@ -40,47 +56,96 @@ def wilson(k, n, z=1.96):
     return c - h, c + h
 
 
-def main(quick: bool):
-    n_each, n_null = (4, 8) if quick else (15, 50)
-    print(f"machine: {machine()}; {n_each} datasets per effect, {n_null} nulls")
-    times = []
+HEADER = (
+    f"{'hidden effect':>32} {'right name':>12} {'95 % CI':>14} {'ambig.':>6} "
+    f"{'gap before':>10} {'after':>7} {'floor':>7} {'after/floor':>11}"
+)
+
+
+def _row(label, hits, ambiguous, n, before, after, floor):
+    lo, hi = wilson(hits, n)
+    ratio = np.median(np.asarray(after) / np.asarray(floor))
     print(
-        f"{'hidden effect':>32} {'right name':>12} {'95 % CI':>15} {'gap before':>11} "
-        f"{'after':>7} {'floor':>7} {'after/floor':>11}"
+        f"{label:>32} {hits:>5}/{n:<6} [{lo:.2f}, {hi:.2f}] {ambiguous:>6} "
+        f"{np.median(before):10.3f} {np.median(after):7.3f} {np.median(floor):7.3f} "
+        f"{ratio:11.2f}",
+        flush=True,
     )
-    for effect in GENERATED:
-        hits, before, after, floor = 0, [], [], []
+
+
+def _suite(name, effects, make, n_each, n_null, null_seed, totals):
+    print(f"\n## {name}\n{HEADER}")
+    times = []
+    for effect, size in effects.items():
+        hits, amb, before, after, floor = 0, 0, [], [], []
         for i in range(n_each):
-            key = jax.random.key(1000 + 97 * i + len(effect))
-            data = hidden_effect_dataset(effect, SIZES[effect], key=key)
+            data = make(effect, size, jax.random.key(1000 + 97 * i + len(effect)))
             t0 = time.perf_counter()
             rep = discover(data)
             times.append(time.perf_counter() - t0)
             hits += rep["missing_effect"] == effect
+            amb += bool(rep["ambiguous_with"])
             before.append(rep["gap_before"])
             after.append(rep["gap_after"])
             floor.append(rep["noise_floor"])
-        lo, hi = wilson(hits, n_each)
-        print(
-            f"{effect:>32} {hits:>5}/{n_each:<6} [{lo:.2f}, {hi:.2f}] "
-            f"{np.median(before):11.3f} {np.median(after):7.3f} {np.median(floor):7.3f} "
-            f"{np.median(np.asarray(after) / np.asarray(floor)):11.2f}"
+        totals["hits"] += hits
+        totals["n"] += n_each
+        _row(
+            f"{effect} ({size if np.isscalar(size) else size[0]})",
+            hits,
+            amb,
+            n_each,
+            before,
+            after,
+            floor,
         )
     fp = 0
     for i in range(n_null):
-        data = hidden_effect_dataset(None, 0.0, key=jax.random.key(5000 + i))
+        data = make(None, None, jax.random.key(null_seed + i))
         t0 = time.perf_counter()
         rep = discover(data)
         times.append(time.perf_counter() - t0)
         fp += rep["missing_effect"] is not None
+    totals["fp"] += fp
+    totals["nulls"] += n_null
     lo, hi = wilson(fp, n_null)
     print(f"{'null (nothing hidden)':>32} false positives {fp}/{n_null} [{lo:.2f}, {hi:.2f}]")
     print(
         f"discover wall time per dataset (after the first): median "
         f"{np.median(times[1:]):.2f} s, max {np.max(times[1:]):.2f} s"
     )
+
+
+def _dwell(effect, size, key):
+    if effect is None:
+        return hidden_effect_dataset(None, 0.0, key=key)
+    value, rates = size
+    return hidden_effect_dataset(effect, value, key=key, rates_dps=rates)
+
+
+def _continuous(effect, size, key):
+    return continuous_dataset(effect, 0.0 if size is None else size, key=key)
+
+
+def main(quick: bool, which: str):
+    totals = dict(hits=0, n=0, fp=0, nulls=0)
+    print(f"machine: {machine()}")
+    if which in ("both", "dwell"):
+        n_each, n_null = (3, 6) if quick else (12, 40)
+        _suite("dwell grids", DWELL, _dwell, n_each, n_null, 5000, totals)
+    if which in ("both", "continuous"):
+        n_each, n_null = (2, 3) if quick else (8, 16)
+        _suite("continuous records", CONTINUOUS, _continuous, n_each, n_null, 9000, totals)
+    lo, hi = wilson(totals["hits"], totals["n"])
+    flo, fhi = wilson(totals["fp"], totals["nulls"])
+    print(
+        f"\nall: right name {totals['hits']}/{totals['n']} [{lo:.2f}, {hi:.2f}]; "
+        f"false positives {totals['fp']}/{totals['nulls']} [{flo:.2f}, {fhi:.2f}]"
+    )
     print("targets: recovery ≥ 95 %, false positives ≤ 5 %, gap after ≤ 1.3× floor")
 
 
 if __name__ == "__main__":
-    main("--quick" in sys.argv)
+    which = "dwell" if "--dwell-only" in sys.argv else "both"
+    which = "continuous" if "--continuous-only" in sys.argv else which
+    main("--quick" in sys.argv, which)

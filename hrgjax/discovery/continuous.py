@@ -611,7 +611,7 @@ class ContinuousProblem:
                 }
             )
         rows.sort(key=lambda r: -r["score"])
-        short = [r for r in rows if r["aliasing"] < 0.9 and r["p_value"] < liberal][:top]
+        short = [r for r in rows if r["aliasing"] < 0.999 and r["p_value"] < liberal][:top]
         for row in short:
             name, (z, step) = row["effect"], row["_start"]
             z_start = z.copy()

@@ -11,7 +11,8 @@ $$S_c = r^\top\tilde G_c(\tilde G_c^\top\tilde G_c)^{-1}\tilde G_c^\top r,\qquad
 
 in whitened units, χ²_q under the null. The readout terms enter through
 $\dot\theta_{\rm meas} = (1+\varepsilon_1\cos2\theta-\varepsilon_2\sin2\theta)\,\dot\theta$,
-linearised at the nominal rate −k_e,nom Ω; `angular_gain_temperature` and
+linearised at the nominal rate −k_e,nom Ω; a window in which the pattern sweeps an arc x
+sees every 2θ harmonic times [`window_gain`][hrgjax.discovery.effects.window_gain](x); `angular_gain_temperature` and
 `rate_scale_factor` likewise at k_e,nom. Nonregular time constants are held at their typical
 size here.
 """
@@ -30,7 +31,8 @@ from .effects import CATALOGUE, Covariates, rate_term, rate_term_with_gain
 
 def covariates(w: RateWindows, extra: dict | None = None) -> Covariates:
     """Covariates of each window: mean angle [rad], table rate [rad/s], temperature [°C];
-    `extra` may give `amplitude`, `quadrature`, `accel_z`, `t_run` per window."""
+    `extra` may give `amplitude`, `quadrature`, `accel_z`, `t_run` and `harmonic_gain`
+    (the window average of a 2θ harmonic) per window."""
     extra = extra or {}
     kw = {k: jnp.asarray(v) for k, v in extra.items()}
     return Covariates(
@@ -51,7 +53,8 @@ def columns(name: str, c: Covariates, k_e: float) -> np.ndarray:
         nominal = -k_e * c.rate
 
         def fn(p):
-            return nominal * (p[0] * jnp.cos(2 * c.theta) - p[1] * jnp.sin(2 * c.theta))
+            harmonic = p[0] * jnp.cos(2 * c.theta) - p[1] * jnp.sin(2 * c.theta)
+            return nominal * c.harmonic_gain * harmonic
 
     elif name in ("angular_gain_temperature", "rate_scale_factor"):
 

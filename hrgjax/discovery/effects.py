@@ -71,6 +71,9 @@ class Covariates(eqx.Module):
     - `amplitude`, `quadrature`: a and q [readout units] (0 when the data lack them).
     - `accel_z`: specific force along the sensitive axis [g]; `t_run`: time since the run
       started [s].
+    - `harmonic_gain`: factor on every 2θ harmonic (1 for an instantaneous rate; the
+      window average $3(\sin x - x\cos x)/x^3$ for a least-squares slope over a window in
+      which θ sweeps ±x/2 around its mean, see [`window_gain`][hrgjax.discovery.effects.window_gain]).
     """
 
     theta: jax.Array
@@ -82,6 +85,20 @@ class Covariates(eqx.Module):
     quadrature: jax.Array = 0.0
     accel_z: jax.Array = 0.0
     t_run: jax.Array = 0.0
+    harmonic_gain: jax.Array = 1.0
+
+
+def window_gain(x):
+    r"""What a least-squares slope over a window sees of a 2θ harmonic when θ sweeps
+    uniformly across the window by `x` [rad] (x = θ_end − θ_start):
+    $F(x) = 3(\sin x - x\cos x)/x^3$ (F(0) = 1; the slope's parabolic weights averaged
+    over the sweep). It applies alike to a rate term ∝ sin 2θ and to the slope of a readout
+    offset ∝ sin 2θ."""
+    x = jnp.abs(jnp.asarray(x, dtype=float))
+    small = x < 1e-3
+    xs = jnp.where(small, 1.0, x)
+    exact = 3.0 * (jnp.sin(xs) - xs * jnp.cos(xs)) / xs**3
+    return jnp.where(small, 1.0 - x**2 / 10.0, exact)
 
 
 _H = DEG_PER_H  # 1 °/h in rad/s: the natural size of a drift term
@@ -268,7 +285,7 @@ def rate_term(name: str, p, c: Covariates):
     """Pattern-rate contribution [rad/s] of effect `name` with parameters `p` (shape (q,),
     order of its `params`) at covariates `c`."""
     th, dt = c.theta, c.temperature - T_REF_C
-    s2, c2 = jnp.sin(2 * th), jnp.cos(2 * th)
+    s2, c2 = c.harmonic_gain * jnp.sin(2 * th), c.harmonic_gain * jnp.cos(2 * th)
     q_over_a = c.quadrature / c.amplitude
     terms = {
         "angular_gain": lambda: -p[0] * c.rate,

@@ -12,7 +12,8 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    ([`score`][hrgjax.discovery.dwell.score]); p-values from χ²_q.
 5. **Refit** the best candidates with the model; **accept** the best one only if its p-value
    passes Bonferroni at `alpha`, its ΔBIC exceeds `min_delta_bic`, it is identifiable (aliasing
-   index < 0.9), it lowers the held-out whitened χ² by more than `min_heldout_gain` and does
+   index < `max_aliasing`: what is left of its signature once the model has absorbed what
+   it can is still more than 0.1 %, and the score test says that rest is significant), it lowers the held-out whitened χ² by more than `min_heldout_gain` and does
    not widen the held-out gap. Repeat for a second or third effect.
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
    equivalent-input-rate residual [°/h]; the noise floor is what noise alone gives it.
@@ -31,7 +32,7 @@ from ..units import DEG, DEG_PER_H
 from . import dwell
 from .continuous import BLOCK_S, ContinuousProblem, is_dwell, noise_from_gyro
 from .continuous import noise_model as continuous_noise
-from .effects import CATALOGUE, NOMINAL
+from .effects import CATALOGUE, NOMINAL, window_gain
 
 METRIC = "rms_run_mean_rate_residual_dph"
 OPTIONAL = {"amplitude": "amplitude", "quadrature": "quadrature", "accel_z": "accel_z_g"}
@@ -42,7 +43,7 @@ NEEDS_CONTINUOUS = ("thermal_rate", "thermal_lag", "warmup_transient")
 
 def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
     """Per-window means of the optional columns, and which covariates the data carry."""
-    extra: dict[str, list] = {"t_run": []}
+    extra: dict[str, list] = {"t_run": [], "harmonic_gain": []}
     have = set()
     for key, col in OPTIONAL.items():
         if col in data:
@@ -52,6 +53,8 @@ def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
     for run, a, b, tm in zip(w.run, w.start, w.stop, w.t_mid, strict=True):
         idx = starts[int(run)]
         extra["t_run"].append(tm - data["time_s"][idx[0]])
+        arc = np.ptp(data["wave_angle_deg"][idx[a:b]]) * DEG if b - a > 1 else 0.0
+        extra["harmonic_gain"].append(float(window_gain(arc)))
         for key, col in OPTIONAL.items():
             if key in extra:
                 extra[key].append(float(np.mean(data[col][idx[a:b]])))
@@ -97,6 +100,7 @@ def discover(
     min_delta_bic: float = 10.0,
     min_heldout_gain: float = 10.0,
     max_effects: int = 3,
+    max_aliasing: float = 0.999,
     shape: str = "auto",
     noise: Noise | None = None,
     block_s: float = BLOCK_S,
@@ -112,7 +116,8 @@ def discover(
     - `k_e`: nominal angular gain; `window_s`: moving-run window of dwell data [s].
     - `holdout_every`: hold out every n-th run (default 4 for dwell grids, 3 for continuous
       records); `alpha`, `min_delta_bic`, `min_heldout_gain` (drop of the held-out whitened
-      χ²), `max_effects`: the acceptance rule.
+      χ²), `max_effects`, `max_aliasing` (the largest share of a candidate's signature the
+      fitted model may already absorb): the acceptance rule.
     - `shape`: `"auto"` (dwell when every run holds its rate and temperature), `"dwell"` or
       `"continuous"`.
     - `noise`: a known [`hrgjax.Noise`][] for continuous records (default: estimated from the
@@ -164,7 +169,7 @@ def discover(
             for r in rows
             if r["p_value"] < alpha / max(len(cands), 1)
             and r["delta_bic"] > min_delta_bic
-            and r["aliasing"] < 0.9
+            and r["aliasing"] < max_aliasing
             and r["heldout_gain"] > min_heldout_gain
             and r["gap_after"] <= current["gap"] + floor
         ]
