@@ -87,10 +87,22 @@ def calibration():
     error_vs_temperature(study.table, os.path.join(HERE, "calibration_errors.png"), SEED_TABLE)
 
 
+def discovery():
+    from hrgjax.discovery import discover
+    from hrgjax.discovery.generate import continuous_dataset, hidden_effect_dataset
+    from hrgjax.discovery.report import plot_report
+
+    data = hidden_effect_dataset("damping_anisotropy_temperature", -0.04, key=jax.random.key(0))
+    plot_report(data, discover(data), os.path.join(HERE, "discovery_dwell.png"))
+    data = continuous_dataset("thermal_lag", 0.01, key=jax.random.key(0))
+    plot_report(data, discover(data), os.path.join(HERE, "discovery_continuous.png"))
+
+
 if __name__ == "__main__":
     os.makedirs(HERE, exist_ok=True)
     full_vs_averaged()
     allan()
     presets()
     calibration()
+    discovery()
     print(f"wrote figures to {HERE}")

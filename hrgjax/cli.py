@@ -246,11 +246,13 @@ def cmd_discover(args) -> int:
         raise SystemExit(f"hrgjax discover: unknown --nominal {args.nominal!r}; choose 'base'")
     data = _load_data(args.data, args.allow_extra)
     try:
-        report = discover(data, nominal=NOMINAL, k_e=args.k_e)
-    except ValueError as err:
+        report = discover(data, nominal=NOMINAL, k_e=args.k_e, shape=args.shape)
+    except (ValueError, RuntimeError) as err:
         raise SystemExit(f"hrgjax discover: {err}") from None
-    print(f"hrgjax discover: {args.data}")
+    print(f"hrgjax discover: {args.data} ({report['shape']} data)")
     print(f"  verdict: {report['verdict']}; missing effect: {report['missing_effect']}")
+    if report["ambiguous_with"]:
+        print(f"  hard to tell apart from: {', '.join(report['ambiguous_with'])}")
     if report["accepted"][1:]:
         print(f"  also accepted: {', '.join(report['accepted'][1:])}")
     print(
@@ -312,8 +314,14 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_correct)
 
     p = sub.add_parser("discover", help="name the effect missing from the nominal model")
-    p.add_argument("data", help="dwell-grid data in the MeasuredData contract")
+    p.add_argument("data", help="dwell-grid or continuous data in the MeasuredData contract")
     p.add_argument("--nominal", default="base", help="nominal model (base)")
+    p.add_argument(
+        "--shape",
+        default="auto",
+        choices=("auto", "dwell", "continuous"),
+        help="data shape (auto: dwell when every run holds its rate and temperature)",
+    )
     p.add_argument("--json", default=None, help="write the report here (JSON)")
     p.add_argument("--plot", default=None, help="write the report figure here (PNG)")
     p.add_argument("--k-e", type=float, default=0.554, help="nominal angular gain k_e")

@@ -1,4 +1,5 @@
-"""Model-discrepancy workflow (find, name, add, shrink): catalogue and dwell-grid search."""
+"""Model-discrepancy workflow (find, name, add, shrink): the effect catalogue and the search
+on dwell grids and continuous records."""
 
 from .effects import CATALOGUE as CATALOGUE
 from .effects import NOMINAL as NOMINAL
@@ -9,5 +10,6 @@ from .effects import null_params as null_params
 from .effects import pattern_rate as pattern_rate
 from .effects import rate_term as rate_term
 from .effects import readout_term as readout_term
+from .effects import window_gain as window_gain
 from .search import discover as discover
 from .search import noise_model as noise_model

@@ -527,14 +527,25 @@ class ContinuousProblem:
             out.update(zip(g.run, means, strict=True))
         return out
 
+    def raw_residuals(self, z, groups=None):
+        """Unwhitened increment residuals [rad], one (R, K) array per group (default: the
+        training runs)."""
+        groups = self.train_groups if groups is None else groups
+        return [np.asarray(r) for r in _raw_residuals(self.layout, jnp.asarray(z), groups)]
+
     def gap(self, z):
-        """RMS over held-out runs of the run-mean rate residual [°/h] (DESIGN.md)."""
+        """RMS over held-out runs of the run-mean rate residual [°/h] (DESIGN.md); NaN
+        without held-out runs."""
+        if not self.held_groups:
+            return float("nan")
         rates = self.run_rates(z, self.held_groups)
         return float(np.sqrt(np.mean(np.square(list(rates.values())))))
 
     def floor(self, every=False):
         """What noise alone gives the gap: RMS over held-out runs (`every`: all runs) of the
         standard deviation of the run-mean rate [°/h]."""
+        if not (self.held_groups or every):
+            return float("nan")
         var = []
         for g in self.held_groups + (self.train_groups if every else []):
             k = int(g.bidx.shape[0]) - 1

@@ -63,7 +63,7 @@ class Effect:
 
 
 class Covariates(eqx.Module):
-    """What the terms may read, per sample (arrays of one shape, or scalars).
+    r"""What the terms may read, per sample (arrays of one shape, or scalars).
 
     - `theta`: electrical wave angle [rad]; `rate`: table rate about the sensitive axis [rad/s].
     - `temperature` [°C], `temperature_rate` [°C/s], `temperature_lagged`: the temperature

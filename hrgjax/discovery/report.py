@@ -10,7 +10,7 @@ import numpy as np
 
 from ..calibration.reduce import K_E_NOMINAL, WINDOW_S, reduce
 from ..data import MeasuredData
-from ..units import DEG_PER_H
+from ..units import DEG, DEG_PER_H
 from . import dwell
 from .effects import NOMINAL
 
@@ -52,11 +52,17 @@ def plot_report(
     k_e: float = K_E_NOMINAL,
     window_s: float = WINDOW_S,
 ) -> str:
-    """Static-window residual vs wave angle per temperature, before (nominal) and after (with
-    the accepted effects); the screening scores; the gap before/after against the floor."""
+    """The report as one figure: residuals before (nominal) and after (with the accepted
+    effects) — for dwell grids the static-window drift vs wave angle per temperature, for
+    continuous records the angle residual of every run vs time —, the screening scores, and
+    the gap before/after against the noise floor."""
     from ..plots import _plt
 
     plt = _plt()
+    if report.get("shape") == "continuous":
+        fig, axes = plt.subplots(1, 4, figsize=(17, 3.8), constrained_layout=True)
+        _continuous_panels(axes, data, report, nominal, k_e)
+        return _finish(fig, axes, report, path, plt)
     w = reduce(data, k_e, window_s=window_s)
     from .search import _noise_scale, _window_extras
 
@@ -92,6 +98,38 @@ def plot_report(
         ax.set_ylabel("static drift residual [°/h]")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=6, ncol=2)
+    return _finish(fig, axes, report, path, plt)
+
+
+def _continuous_panels(axes, data, report, nominal, k_e):
+    """Angle residual (measured − model) of every run vs time, each run's own constant rate
+    (its switch-on bias) removed, before and after."""
+    from .continuous import ContinuousProblem, noise_model
+
+    names = list(nominal) + [n for n in report["accepted"] if n not in nominal]
+    problem = ContinuousProblem(data, names, k_e, held=[], noise=noise_model(data))
+    groups = problem.train_groups
+    for ax, model, title in (
+        (axes[0], list(nominal), "angle residual, nominal model"),
+        (axes[1], names, "angle residual, with accepted effects"),
+    ):
+        z = problem.fit(model)["z"]
+        raw = problem.raw_residuals(z)
+        for g, r in zip(groups, raw, strict=True):
+            tb = np.asarray(g.t[:, g.bidx])
+            for i, run in enumerate(g.run):
+                t = tb[i] - tb[i, 0]
+                cum = np.concatenate([[0.0], np.cumsum(np.asarray(r[i]))])
+                cum = cum - np.polyval(np.polyfit(t, cum, 1), t)
+                ax.plot(t / 60, cum / DEG * 3600, lw=1, label=f"run {run}")
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("time in run [min]")
+        ax.set_ylabel("angle residual, run's mean rate removed [″]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=6, ncol=2)
+
+
+def _finish(fig, axes, report, path, plt):
     rows = report["screening"]
     axes[2].barh([r["effect"] for r in rows][::-1], [max(r["score"], 1e-3) for r in rows][::-1])
     axes[2].set_xscale("log")

@@ -17,6 +17,11 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    not widen the held-out gap. Repeat for a second or third effect.
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
    equivalent-input-rate residual [°/h]; the noise floor is what noise alone gives it.
+   Verdicts: `found`; `ambiguous` (a rival passes the same rule with nearly the same ΔBIC);
+   `none`; `unexplained` (nothing accepted, yet the held-out residual is above the noise).
+
+Continuous records (some run changes its temperature or rate) go through the same steps
+with the model simulated by diffrax ([`continuous`][hrgjax.discovery.continuous.ContinuousProblem]).
 """
 
 from __future__ import annotations
@@ -101,6 +106,7 @@ def discover(
     min_heldout_gain: float = 10.0,
     max_effects: int = 3,
     max_aliasing: float = 0.999,
+    ambiguity_bic: float = 6.0,
     shape: str = "auto",
     noise: Noise | None = None,
     block_s: float = BLOCK_S,
@@ -117,7 +123,10 @@ def discover(
     - `holdout_every`: hold out every n-th run (default 4 for dwell grids, 3 for continuous
       records); `alpha`, `min_delta_bic`, `min_heldout_gain` (drop of the held-out whitened
       χ²), `max_effects`, `max_aliasing` (the largest share of a candidate's signature the
-      fitted model may already absorb): the acceptance rule.
+      fitted model may already absorb): the acceptance rule. `ambiguity_bic`: a first-round
+      rival that passes the same rule with a ΔBIC within this of the winner's makes the
+      verdict `ambiguous` (the winner stays `missing_effect`; rivals in `ambiguous_with`,
+      the separating experiments in `discriminate`).
     - `shape`: `"auto"` (dwell when every run holds its rate and temperature), `"dwell"` or
       `"continuous"`.
     - `noise`: a known [`hrgjax.Noise`][] for continuous records (default: estimated from the
@@ -160,19 +169,22 @@ def discover(
     base = problem.fit(model)
     gap_before, floor = base["gap"], problem.floor()
     accepted, ranking, current = [], [], base
+    n_cands = len(cands)
+
+    def passes(r, fit):
+        return (
+            r["p_value"] < alpha / max(n_cands, 1)
+            and r["delta_bic"] > min_delta_bic
+            and r["aliasing"] < max_aliasing
+            and r["heldout_gain"] > min_heldout_gain
+            and r["gap_after"] <= fit["gap"] + floor
+        )
+
     for _ in range(max_effects):
         rows = problem.screen(current, cands, model)
         if not ranking:
             ranking = rows
-        ok = [
-            r
-            for r in rows
-            if r["p_value"] < alpha / max(len(cands), 1)
-            and r["delta_bic"] > min_delta_bic
-            and r["aliasing"] < max_aliasing
-            and r["heldout_gain"] > min_heldout_gain
-            and r["gap_after"] <= current["gap"] + floor
-        ]
+        ok = [r for r in rows if passes(r, current)]
         if not ok:
             break
         best = ok[0]
@@ -188,12 +200,21 @@ def discover(
         verdict = "unexplained"
     else:
         verdict = "none"
-    first = ranking[0] if ranking else None
-    ambiguous = [
-        r["effect"]
-        for r in ranking[1:]
-        if first is not None and accepted and r["score"] > 0.8 * first["score"]
-    ]
+    ambiguous = []
+    if accepted:
+        # first-round rivals that pass the same rule and whose evidence is not decisively
+        # weaker (ΔBIC within `ambiguity_bic`, "strong" on the Kass–Raftery scale)
+        win = next(r for r in ranking if r["effect"] == accepted[0])
+        ambiguous = [
+            r["effect"]
+            for r in ranking
+            if r is not win
+            and r["refit"] is not None
+            and passes(r, base)
+            and win["delta_bic"] - r["delta_bic"] < ambiguity_bic
+        ]
+        if ambiguous:
+            verdict = "ambiguous"
     return {
         "missing_effect": accepted[0] if accepted else None,
         "ranking": [
