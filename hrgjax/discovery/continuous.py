@@ -241,7 +241,7 @@ def _lm(layout, basis, z0, groups):
         fn,
         optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
         jnp.zeros(basis.shape[1]),
-        max_steps=64,
+        max_steps=256,
         throw=False,
     )
     return z0 + basis @ sol.value, sol.result == optx.RESULTS.successful
@@ -557,6 +557,7 @@ class ContinuousProblem:
 
     # -- interface shared with the dwell problem ------------------------------
     have: set = set()
+    gap_guard = False  # the run-mean gap is set by the switch-on bias: judge on χ² only
 
     def candidates(self, nominal):
         """Every effect of the superset that is not nominal."""
