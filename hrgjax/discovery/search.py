@@ -14,8 +14,7 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    passes Bonferroni at `alpha`, its ΔBIC exceeds `min_delta_bic`, it is identifiable (aliasing
    index < `max_aliasing`: what is left of its signature once the model has absorbed what
    it can is still more than 0.1 %, and the score test says that rest is significant), it lowers the held-out whitened χ² by more than `min_heldout_gain` and does
-   widen the held-out gap by more than the noise floor (dwell grids only). Repeat for a
-   second or third effect.
+   widen the held-out gap (dwell grids only). Repeat for a second or third effect.
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
    equivalent-input-rate residual [°/h]; the noise floor is what noise alone gives it.
    Verdicts: `found`; `ambiguous` (a rival passes the same rule with nearly the same ΔBIC);
@@ -178,7 +177,7 @@ def discover(
             and r["delta_bic"] > min_delta_bic
             and r["aliasing"] < max_aliasing
             and r["heldout_gain"] > min_heldout_gain
-            and (not problem.gap_guard or r["gap_after"] <= fit["gap"] + floor)
+            and (not problem.gap_guard or r["gap_after"] <= fit["gap"])
         )
 
     for _ in range(max_effects):
@@ -261,7 +260,7 @@ def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s):
 class DwellProblem:
     """Dwell-grid discovery: window rates as weighted linear regression (module docstring)."""
 
-    gap_guard = True  # an accepted effect must not widen the held-out gap by > the floor
+    gap_guard = True  # an accepted effect must not widen the held-out gap
 
     def __init__(self, data, k_e, window_s, held):
         self.k_e, self.held = k_e, held
