@@ -493,6 +493,13 @@ class ContinuousProblem:
         err = np.sqrt(np.clip(np.diag(np.linalg.pinv(j.T @ j)), 0.0, None))
         held_r = self.heldout_residuals(z)
         params = {}
+        for n in model:  # nonregular parameters: where the scan put them, no error bar
+            for i in self.layout.index(n, which=False):
+                pname = CATALOGUE[n].params[i - self.layout.slices[n].start].name
+                params.setdefault(n, {})[pname] = {
+                    "value": float(z[i] * self.layout.scale[i]),
+                    "std": None,
+                }
         for i, e in zip(idx, err, strict=True):
             name = next(n for n in model if i in self.layout.index(n))
             pname = CATALOGUE[name].params[i - self.layout.slices[name].start].name
@@ -526,6 +533,17 @@ class ContinuousProblem:
             means = -np.asarray(r).sum(axis=1) / (self.k_e * span) / DEG_PER_H
             out.update(zip(g.run, means, strict=True))
         return out
+
+    def start_from(self, parameters, names):
+        """Scaled vector at the null with a report's `parameters` of effects `names` put in."""
+        z = self.z_null.copy()
+        for name, ps in parameters.items():
+            if name not in self.layout.slices or name not in names:
+                continue
+            for i, p in zip(self.layout.index(name), CATALOGUE[name].params, strict=True):
+                if p.name in ps:
+                    z[i] = ps[p.name]["value"] / self.layout.scale[i]
+        return z
 
     def raw_residuals(self, z, groups=None):
         """Unwhitened increment residuals [rad], one (R, K) array per group (default: the
@@ -588,6 +606,22 @@ class ContinuousProblem:
         )
         return -np.asarray(jac), z
 
+    def _refine_tau(self, current, name, tried, best):
+        """Parabola through the best grid point of the score and its neighbours in log τ;
+        keep its vertex when it scores higher (still inside the grid)."""
+        i = [b[4] for b in tried].index(best[4])
+        if i == 0 or i == len(tried) - 1:
+            return best
+        x = np.log([tried[j][4] for j in (i - 1, i, i + 1)])
+        y = [tried[j][0] for j in (i - 1, i, i + 1)]
+        a, b, _ = np.polyfit(x, y, 2)
+        if a >= 0:
+            return best
+        tau = float(np.exp(np.clip(-b / (2 * a), x[0], x[2])))
+        g, z = self._columns(current, name, tau)
+        s, alias, step = dwell.score(current["r"], current["j"], g)
+        return (s, alias, step, z, tau) if s > best[0] else best
+
     def screen(self, current, cands, model, top=REFIT_TOP, liberal=0.01):
         """Score test of every candidate; refit of the `top` best-scoring identifiable ones
         whose score p-value is below `liberal` (ΔBIC and held-out gain from the refit; the
@@ -596,16 +630,16 @@ class ContinuousProblem:
         rows = []
         for name in cands:
             grid = TAU_GRID if self.layout.index(name, which=False) else (None,)
-            best = None
+            tried = []
             for tau in grid:
                 g, z = self._columns(current, name, tau)
-                if not np.any(g):
-                    continue
-                s, alias, step = dwell.score(current["r"], current["j"], g)
-                if best is None or s > best[0]:
-                    best = (s, alias, step, z, tau)
-            if best is None:
+                if np.any(g):
+                    tried.append((*dwell.score(current["r"], current["j"], g), z, tau))
+            if not tried:
                 continue
+            best = max(tried, key=lambda b: b[0])
+            if best[4] is not None:
+                best = self._refine_tau(current, name, tried, best)
             s, alias, step, z, tau = best
             q = len(self.layout.index(name, which=True)) + (tau is not None)
             rows.append(

@@ -113,7 +113,7 @@ def _continuous_panels(axes, data, report, nominal, k_e):
         (axes[0], list(nominal), "angle residual, nominal model"),
         (axes[1], names, "angle residual, with accepted effects"),
     ):
-        z = problem.fit(model)["z"]
+        z = problem.fit(model, z0=problem.start_from(report["parameters"], model))["z"]
         raw = problem.raw_residuals(z)
         for g, r in zip(groups, raw, strict=True):
             tb = np.asarray(g.t[:, g.bidx])
