@@ -164,6 +164,10 @@ def test_continuous_known_noise_and_bad_shape(thermal_rate_report):
     data = _short(None, 0.0, 5)
     with pytest.raises(ValueError, match="shape must be one of"):
         discover(data, shape="ramp")
+    with pytest.raises(ValueError, match="block_s must be a positive"):
+        discover(data, block_s=0.0)
+    with pytest.raises(TypeError, match="noise must be an hrgjax.Noise"):
+        discover(data, noise={"angle_white": 1e-6})
     few = hg.MeasuredData({k: v[data.run < 2] for k, v in data.columns.items()})
     with pytest.raises(ValueError, match="at least 3 runs"):
         discover(few)

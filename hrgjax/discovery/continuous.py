@@ -342,7 +342,7 @@ def noise_model(data: MeasuredData, max_lag_s: float = 1024.0) -> dict:
     }
 
 
-def _nnls(a, b, iters=200):
+def _nnls(a, b):
     """Small non-negative least squares (projected active set over 3 columns)."""
     best, best_cost = np.zeros(a.shape[1]), np.inf
     m = a.shape[1]
@@ -574,7 +574,6 @@ class ContinuousProblem:
         return float(np.sqrt(np.mean(var))) / DEG_PER_H
 
     # -- interface shared with the dwell problem ------------------------------
-    have: set = set()
     gap_guard = False  # the run-mean gap is set by the switch-on bias: judge on χ² only
 
     def candidates(self, nominal):

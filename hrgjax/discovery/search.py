@@ -146,6 +146,10 @@ def discover(
         raise ValueError("the nominal model must contain 'angular_gain'")
     if shape not in SHAPES:
         raise ValueError(f"shape must be one of {SHAPES}; got {shape!r}")
+    if not (np.isfinite(block_s) and block_s > 0):
+        raise ValueError(f"block_s must be a positive number of seconds; got {block_s}")
+    if noise is not None and not isinstance(noise, Noise):
+        raise TypeError(f"noise must be an hrgjax.Noise or None; got {type(noise).__name__}")
     if shape == "auto":
         shape = "dwell" if is_dwell(data) else "continuous"
     if holdout_every is None:
@@ -250,7 +254,6 @@ def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s):
     known = noise is not None
     nz = noise_from_gyro(noise, k_e) if known else continuous_noise(data)
     problem = ContinuousProblem(data, names, k_e, held, nz, block_s)
-    problem.have = have
     problem.noise_known = known
     if not known:
         problem.estimate_run_bias(problem.fit(list(nominal))["z"])
