@@ -137,6 +137,11 @@ def test_continuous_names_a_hidden_thermal_rate(thermal_rate_report):
     fit = rep["parameters"]["thermal_rate"]["c_Tdot"]
     assert abs(fit["value"] - truth) < 4 * fit["std"]
     assert rep["ranking"][0]["effect"] == "thermal_rate"
+    # the evidence repeats: refitted on each training run alone, every run agrees
+    cons = rep["consistency"]["thermal_rate"]
+    assert len(cons["per_run"]) == 4 and cons["dof"] >= 2
+    for run in cons["per_run"].values():
+        assert run["c_Tdot"] == pytest.approx(truth, rel=0.05)
 
 
 def test_continuous_null_says_nothing_is_missing():

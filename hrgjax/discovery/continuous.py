@@ -373,6 +373,13 @@ def noise_from_gyro(noise, k_e: float) -> dict:
 # ---------------------------------------------------------------- the problem
 
 
+def _take(g: Runs, i: int) -> Runs:
+    """Run `i` of a group, as a group of one."""
+    per_run = ("t", "theta", "rate", "temp", "accel", "amp", "quad", "whiten")
+    kw = {f: getattr(g, f)[i : i + 1] for f in per_run}
+    return Runs(**kw, bidx=g.bidx, steps=g.steps, run=(g.run[i],))
+
+
 def _block_index(n, m):
     idx = np.arange(0, n, m)
     if idx[-1] != n - 1:
@@ -533,6 +540,40 @@ class ContinuousProblem:
             means = -np.asarray(r).sum(axis=1) / (self.k_e * span) / DEG_PER_H
             out.update(zip(g.run, means, strict=True))
         return out
+
+    def consistency(self, fit, name):
+        r"""Per-run consistency of an accepted effect (DISCOVERY.md §2.1, "evidence must
+        repeat"): its regular parameters refitted on each training run alone (the rest held at
+        the pooled fit), and the χ² of the per-run values about the pooled one,
+        $\sum_i (p_i-\bar p)^\top C_i^{+}(p_i-\bar p)$ on Σ rank C_i − q degrees of freedom
+        (a run that does not excite the effect adds nothing).
+
+        **Returns:** `{"p_value", "dof", "per_run": {run: {param: value}}}`."""
+        basis, idx = self._basis([name])
+        z0 = jnp.asarray(fit["z"])
+        stat, dof, per_run = 0.0, -len(idx), {}
+        names = [p.name for p in CATALOGUE[name].params if p.regular]
+        for g in self.train_groups:
+            for i, run in enumerate(g.run):
+                one = _take(g, i)
+                z, ok = _lm(self.layout, jnp.asarray(basis), z0, [one])
+                if not bool(ok):
+                    continue
+                _, j = _residual_and_jacobian(self.layout, z, jnp.asarray(basis), [one])
+                j = np.asarray(j)
+                info = j.T @ j
+                rank = np.linalg.matrix_rank(info, tol=1e-9 * max(np.trace(info), 1e-300))
+                d = np.asarray(z)[idx] - fit["z"][idx]
+                stat += float(d @ info @ d)
+                dof += int(rank)
+                per_run[int(run)] = {
+                    n: float(v * sc)
+                    for n, v, sc in zip(
+                        names, np.asarray(z)[idx], self.layout.scale[idx], strict=True
+                    )
+                }
+        p = dwell.chi2_sf(stat, dof) if dof > 0 else None
+        return {"p_value": p, "dof": max(dof, 0), "per_run": per_run}
 
     def start_from(self, parameters, names):
         """Scaled vector at the null with a report's `parameters` of effects `names` put in."""

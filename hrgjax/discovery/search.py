@@ -134,7 +134,8 @@ def discover(
     - `block_s`: block length of the continuous increments [s].
 
     **Returns:** the report dict (DESIGN.md "Discovery report" keys plus `verdict`,
-    `accepted`, `parameters`, `noise`, `split`, `shape`).
+    `accepted`, `parameters`, `consistency` (continuous records: per-run refits of each
+    accepted effect and their χ² p-value), `noise`, `split`, `shape`).
 
     **Raises:** `ValueError` for unknown effect names, a bad `shape`, or too few runs to hold
     any out; `RuntimeError` when a continuous fit does not converge.
@@ -235,6 +236,7 @@ def discover(
         "discriminate": {n: CATALOGUE[n].discriminate for n in accepted + ambiguous},
         "parameters": current["parameters"],
         "screening": [{k: r[k] for k in SCREEN_KEYS} for r in ranking],
+        "consistency": {n: problem.consistency(current, n) for n in accepted},
         "noise": problem.noise_report(),
         "split": {"train_runs": int(runs.size - held.size), "heldout_runs": int(held.size)},
         "shape": shape,
@@ -285,6 +287,10 @@ class DwellProblem:
 
     def after_accept(self, fit):
         return fit
+
+    def consistency(self, fit, name):
+        """Not defined on dwell grids (one run is one grid point)."""
+        return None
 
     def structure_left(self, fit, floor):
         """The held-out gap is more than twice the noise floor."""
