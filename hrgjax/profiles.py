@@ -15,6 +15,22 @@ def _f(x):
     return jnp.asarray(x, dtype=float)
 
 
+def lag_at_knots(t, values, tau):
+    r"""First-order lag $\dot y = (x - y)/\tau$ of a piecewise-linear signal x (`values` at
+    strictly increasing knots `t`), starting at $y(t_0) = x(t_0)$: y at every knot (exact).
+    On a segment of slope s, $y_{k+1} = x_{k+1} - s\tau + (y_k - x_k + s\tau)e^{-h_k/\tau}$."""
+    h = jnp.diff(t)
+    slope = jnp.diff(values) / h
+
+    def step(y, k):
+        decay = jnp.exp(-h[k] / tau)
+        nxt = values[k + 1] - slope[k] * tau + (y - values[k] + slope[k] * tau) * decay
+        return nxt, nxt
+
+    _, rest = jax.lax.scan(step, values[0], jnp.arange(h.shape[0]))
+    return jnp.concatenate([values[:1], rest])
+
+
 class Profile(eqx.Module):
     """What the bench does to the gyro: one run (one segment of a plan).
 
@@ -176,18 +192,9 @@ class Profile(eqx.Module):
 
         Exact for the piecewise-linear temperature: on a segment of slope s,
         $T_i(t) = T(t) - s\tau + (T_i(t_k) - T(t_k) + s\tau)\,e^{-(t-t_k)/\tau}$."""
-        temp, h = self.temperature, jnp.diff(self.t)
-        slope = jnp.diff(temp) / h
-
-        def step(lag, k):
-            nxt = (
-                temp[k + 1]
-                - slope[k] * tau
-                + (lag - temp[k] + slope[k] * tau) * jnp.exp(-h[k] / tau)
-            )
-            return nxt, lag
-
-        _, at_knots = jax.lax.scan(step, temp[0], jnp.arange(h.shape[0]))
+        temp = self.temperature
+        slope = jnp.diff(temp) / jnp.diff(self.t)
+        at_knots = lag_at_knots(self.t, temp, tau)
         i, t0, _ = self._segment(t)
         dt = jnp.clip(t - t0, 0.0, None)
         s = slope[i]

@@ -41,6 +41,7 @@ import numpy as np
 import optimistix as optx
 
 from ..data import MeasuredData
+from ..profiles import lag_at_knots
 from ..units import DEG, DEG_PER_H
 from . import dwell
 from .effects import CATALOGUE, Covariates, pattern_rate, readout_term
@@ -134,26 +135,12 @@ class Runs(eqx.Module):
     run: tuple = eqx.field(static=True)  # run ids
 
 
-def _lagged(t, temp, tau):
-    """First-order lag of the piecewise-linear temperature at the samples (exact)."""
-    h = jnp.diff(t)
-    slope = jnp.diff(temp) / h
-
-    def step(lag, k):
-        decay = jnp.exp(-h[k] / tau)
-        nxt = temp[k + 1] - slope[k] * tau + (lag - temp[k] + slope[k] * tau) * decay
-        return nxt, nxt
-
-    _, rest = jax.lax.scan(step, temp[0], jnp.arange(h.shape[0]))
-    return jnp.concatenate([temp[:1], rest])
-
-
 def _one_run(layout: Layout, z, t, theta, rate, temp, accel, amp, quad, bidx, steps):
     """Model wave angle (with readout terms) at the block boundaries of one run."""
     params = layout.unpack(z)
     rate_params = {n: p for n, p in params.items() if CATALOGUE[n].where == "rate"}
     if "thermal_lag" in params:
-        lagged = _lagged(t, temp, params["thermal_lag"][1])
+        lagged = lag_at_knots(t, temp, params["thermal_lag"][1])
     else:
         lagged = temp
     n = t.shape[0]
@@ -213,9 +200,6 @@ def _whitened(layout, z, groups):
         r = _measured(g) - _increments(layout, z, g)
         out.append(jnp.einsum("rkl,rl->rk", g.whiten, r).ravel())
     return jnp.concatenate(out)
-
-
-_whitened_jit = eqx.filter_jit(_whitened)
 
 
 @eqx.filter_jit
@@ -498,7 +482,8 @@ class ContinuousProblem:
         )
         r, j = np.asarray(r), np.asarray(j)
         err = np.sqrt(np.clip(np.diag(np.linalg.pinv(j.T @ j)), 0.0, None))
-        held_r = self.heldout_residuals(z)
+        held_raw = self.raw_residuals(z, self.held_groups)
+        held_r = self._whiten(held_raw, self.held_groups)
         params = {}
         for n in model:  # nonregular parameters: where the scan put them, no error bar
             for i in self.layout.index(n, which=False):
@@ -519,27 +504,33 @@ class ContinuousProblem:
             "r": r,
             "j": j,
             "chi2": float(r @ r),
-            "gap": self.gap(z),
+            "gap": self._gap(held_raw),
             "heldout_chi2": float(held_r @ held_r),
             "parameters": params,
             "model": list(model),
         }
 
-    def heldout_residuals(self, z):
-        """Whitened increment residuals of the held-out runs."""
-        if not self.held_groups:
-            return np.zeros(0)
-        return np.asarray(_whitened_jit(self.layout, jnp.asarray(z), self.held_groups))
+    @staticmethod
+    def _whiten(raw, groups):
+        """Whitened residuals (concatenated) from per-group raw increment residuals."""
+        out = [
+            np.einsum("rkl,rl->rk", np.asarray(g.whiten), r).ravel()
+            for g, r in zip(groups, raw, strict=True)
+        ]
+        return np.concatenate(out) if out else np.zeros(0)
 
-    def run_rates(self, z, groups):
-        """Run-mean equivalent-input-rate residual of every run in `groups` [°/h]."""
+    def _run_means(self, raw, groups):
+        """Run-mean equivalent-input-rate residual [°/h] of every run, from raw residuals."""
         out = {}
-        raw = _raw_residuals(self.layout, jnp.asarray(z), groups)
         for g, r in zip(groups, raw, strict=True):
             span = np.asarray(g.t[:, g.bidx[-1]] - g.t[:, g.bidx[0]])
             means = -np.asarray(r).sum(axis=1) / (self.k_e * span) / DEG_PER_H
             out.update(zip(g.run, means, strict=True))
         return out
+
+    def run_rates(self, z, groups):
+        """Run-mean equivalent-input-rate residual of every run in `groups` [°/h]."""
+        return self._run_means(self.raw_residuals(z, groups), groups)
 
     def consistency(self, fit, name):
         r"""Per-run consistency of an accepted effect (DISCOVERY.md §2.1, "evidence must
@@ -595,9 +586,12 @@ class ContinuousProblem:
     def gap(self, z):
         """RMS over held-out runs of the run-mean rate residual [°/h] (DESIGN.md); NaN
         without held-out runs."""
+        return self._gap(self.raw_residuals(z, self.held_groups))
+
+    def _gap(self, held_raw):
         if not self.held_groups:
             return float("nan")
-        rates = self.run_rates(z, self.held_groups)
+        rates = self._run_means(held_raw, self.held_groups)
         return float(np.sqrt(np.mean(np.square(list(rates.values())))))
 
     def floor(self, every=False):
