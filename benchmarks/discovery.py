@@ -15,7 +15,11 @@ the right name (Wilson 95 % interval), how often the runner-up was flagged as am
 median gap before / after / noise floor [°/h]; for the nulls the false-positive rate; wall
 time per dataset.
 
-Usage: `.venv/bin/python benchmarks/discovery.py [--quick] [--dwell-only|--continuous-only]`.
+Also: two effects hidden together (both must be accepted), and out-of-catalogue traps (an
+effect hidden but not a candidate: "unexplained" is right, any name is a wrong diagnosis).
+
+Usage: `.venv/bin/python benchmarks/discovery.py [--quick]
+[--dwell-only|--continuous-only|--pairs-only]`.
 """
 
 import math
@@ -116,6 +120,51 @@ def _suite(name, effects, make, n_each, n_null, null_seed, totals):
     )
 
 
+PAIRS = (  # two effects hidden together in dwell grids
+    {"damping_anisotropy_temperature": -0.04, "bias_temperature": 0.02},
+    {"angular_gain_temperature": 1e-5, "readout_gain_mismatch": 2e-3},
+)
+
+
+def _pairs_and_traps(n_each: int):
+    """Two hidden effects (both must be accepted), and out-of-catalogue traps: one effect
+    hidden but left out of the candidates (the right answer is "unexplained"; a name is a
+    wrong diagnosis)."""
+    from hrgjax.discovery.search import candidates_for
+
+    print(f"\n## dwell grids: two hidden effects\n{'hidden pair':>58} {'both found':>11}  verdicts")
+    for pair in PAIRS:
+        both, verdicts = 0, []
+        for i in range(n_each):
+            data = hidden_effect_dataset(pair, key=jax.random.key(3000 + 31 * i))
+            rep = discover(data)
+            both += set(pair) <= set(rep["accepted"])
+            verdicts.append(rep["verdict"])
+        lo, hi = wilson(both, n_each)
+        label = " + ".join(pair)
+        print(f"{label:>58} {both:>4}/{n_each:<3} [{lo:.2f}, {hi:.2f}]  {_count(verdicts)}")
+    print(
+        f"\n## dwell grids: hidden effect left out of the catalogue\n"
+        f"{'hidden (not a candidate)':>32} {'unexplained':>12} {'named instead':>40}"
+    )
+    for effect, (size, rates) in DWELL.items():
+        named, unexplained = [], 0
+        for i in range(n_each):
+            data = hidden_effect_dataset(
+                effect, size, key=jax.random.key(4000 + 37 * i), rates_dps=rates
+            )
+            rest = [n for n in candidates_for(set()) if n != effect]
+            rep = discover(data, catalogue=rest)
+            unexplained += rep["verdict"] == "unexplained"
+            if rep["missing_effect"] is not None:
+                named.append(rep["missing_effect"])
+        print(f"{effect:>32} {unexplained:>5}/{n_each:<6} {_count(named):>40}")
+
+
+def _count(items):
+    return ", ".join(f"{k} ×{items.count(k)}" for k in sorted(set(items))) or "-"
+
+
 def _dwell(effect, size, key):
     if effect is None:
         return hidden_effect_dataset(None, 0.0, key=key)
@@ -130,6 +179,10 @@ def _continuous(effect, size, key):
 def main(quick: bool, which: str):
     totals = dict(hits=0, n=0, fp=0, nulls=0)
     print(f"machine: {machine()}")
+    if which in ("both", "pairs"):
+        _pairs_and_traps(3 if quick else 10)
+        if which == "pairs":
+            return
     if which in ("both", "dwell"):
         n_each, n_null = (3, 6) if quick else (12, 40)
         _suite("dwell grids", DWELL, _dwell, n_each, n_null, 5000, totals)
@@ -148,4 +201,5 @@ def main(quick: bool, which: str):
 if __name__ == "__main__":
     which = "dwell" if "--dwell-only" in sys.argv else "both"
     which = "continuous" if "--continuous-only" in sys.argv else which
+    which = "pairs" if "--pairs-only" in sys.argv else which
     main("--quick" in sys.argv, which)

@@ -3,6 +3,8 @@
 from . import calibration as calibration
 from . import data as data
 from . import discovery as discovery
+from . import ins as ins
+from . import kalman as kalman
 from . import noise as noise
 from . import presets as presets
 from . import units as units

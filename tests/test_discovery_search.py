@@ -72,6 +72,25 @@ def test_hidden_temperature_dependent_damping_is_named():
     assert rep["metric"] == "rms_run_mean_rate_residual_dph"
 
 
+def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
+    from hrgjax.discovery.generate import hidden_effect_dataset
+    from hrgjax.discovery.search import candidates_for
+
+    pair = {"damping_anisotropy_temperature": -0.04, "bias_temperature": 0.02}
+    data = hidden_effect_dataset(pair, key=jax.random.key(1))
+    rep = discover(data)
+    assert set(pair) <= set(rep["accepted"]), rep["screening"][:3]
+    assert rep["missing_effect"] in pair
+    assert rep["gap_after"] < 0.5 * rep["gap_before"]
+    # out of catalogue: with the hidden effect not among the candidates the verdict is
+    # "unexplained", not a wrong name
+    data = hidden_effect_dataset("damping_anisotropy_temperature", -0.04, key=jax.random.key(2))
+    rest = [n for n in candidates_for(set()) if n != "damping_anisotropy_temperature"]
+    rep = discover(data, catalogue=rest)
+    assert rep["missing_effect"] is None and rep["verdict"] == "unexplained"
+    assert rep["structure_left"]
+
+
 def test_null_dataset_names_nothing():
     rep = discover(_bench(_truth(), seed=4))
     assert rep["missing_effect"] is None
@@ -102,5 +121,10 @@ def test_generator_base_is_the_nominal_physics_and_injects_by_name():
     assert inject(base, None, 0.0) is base
     hot = inject(base, "bias_temperature", 0.01).at(60.0)
     np.testing.assert_allclose(hot.rate_bias - base.rate_bias, 0.01 * 40 * DEG_PER_H)
+    both = inject(base, {"thermal_rate": 0.05, "warmup_transient": 0.3})
+    assert float(both.drift_terms.temperature_rate) == float(
+        inject(base, "thermal_rate", 0.05).drift_terms.temperature_rate
+    )
+    np.testing.assert_allclose(both.drift_terms.warmup, 0.3 * DEG_PER_H)
     with pytest.raises(ValueError, match="cannot generate 'acceleration_sensitivity'"):
         inject(base, "acceleration_sensitivity", 1.0)

@@ -74,9 +74,16 @@ def base_gyro(noise: bool = True) -> Gyro:
     return eqx.tree_at(lambda g: (g.readout, g.control), g, (Readout(), Control(ideal=True)))
 
 
-def inject(gyro: Gyro, effect: str | None, size: float) -> Gyro:
-    """`gyro` with `effect` put in at `size` (table in the module docstring); `None` = null."""
+def inject(gyro: Gyro, effect, size: float = 0.0) -> Gyro:
+    """`gyro` with `effect` put in at `size` (table in the module docstring).
+
+    `effect` is a name, `None` (the null: `gyro` unchanged) or a mapping `{name: size}` to
+    hide several effects at once (a pair, say); `size` is then ignored."""
     if effect is None:
+        return gyro
+    if not isinstance(effect, str):
+        for name, value in dict(effect).items():
+            gyro = inject(gyro, name, value)
         return gyro
     res = gyro.resonator
     if effect == "damping_anisotropy_temperature":
@@ -91,21 +98,26 @@ def inject(gyro: Gyro, effect: str | None, size: float) -> Gyro:
     if effect == "readout_gain_mismatch":
         return eqx.tree_at(lambda g: g.readout, gyro, Readout(gain_mismatch=size))
     drift = {
-        "thermal_rate": lambda: DriftTerms(temperature_rate=size * DEG_PER_H * 60.0),
-        "thermal_lag": lambda: DriftTerms(lag=size * DEG_PER_H, lag_time=LAG_TIME_S),
-        "warmup_transient": lambda: DriftTerms(warmup=size * DEG_PER_H, warmup_time=LAG_TIME_S),
-        "rate_scale_factor": lambda: DriftTerms(rate_cubic=size / (100.0 * DEG) ** 2),
+        "thermal_rate": {"temperature_rate": size * DEG_PER_H * 60.0},
+        "thermal_lag": {"lag": size * DEG_PER_H, "lag_time": LAG_TIME_S},
+        "warmup_transient": {"warmup": size * DEG_PER_H, "warmup_time": LAG_TIME_S},
+        "rate_scale_factor": {"rate_cubic": size / (100.0 * DEG) ** 2},
     }
     if effect in drift:
+        old = gyro.drift_terms if gyro.drift_terms is not None else DriftTerms()
+        fields = {f: getattr(old, f) for f in DRIFT_FIELDS} | drift[effect]
         return eqx.tree_at(
-            lambda g: g.drift_terms, gyro, drift[effect](), is_leaf=lambda x: x is None
+            lambda g: g.drift_terms, gyro, DriftTerms(**fields), is_leaf=lambda x: x is None
         )
     raise ValueError(f"cannot generate {effect!r} yet; choose from {GENERATED} or None")
 
 
+DRIFT_FIELDS = ("temperature_rate", "lag", "lag_time", "warmup", "warmup_time", "rate_cubic")
+
+
 def hidden_effect_dataset(
-    effect: str | None,
-    size: float,
+    effect,
+    size: float = 0.0,
     *,
     key: jax.Array,
     duration_s: float = 60.0,
@@ -114,7 +126,9 @@ def hidden_effect_dataset(
     rates_dps=(5.0,),
 ) -> MeasuredData:
     """A dwell-grid bench session (static runs and runs at each of `rates_dps` at every
-    temperature × angle, one switch-on) of the base gyro with `effect` hidden at `size`."""
+    temperature × angle, one switch-on) of the base gyro with `effect` hidden at `size`
+    (`effect` as in [`inject`][hrgjax.discovery.generate.inject]: a name, `None` or a
+    mapping `{name: size}`)."""
     gyro = inject(base_gyro(), effect, size)
     k_static, k_rot, k_bias = jax.random.split(key, 3)
     static = static_plan(temperatures_c, angles_deg, duration_s=duration_s, dt_out=0.5)
@@ -160,8 +174,8 @@ def _simulate_runs(gyro, profiles, keys, ts):
 
 
 def continuous_dataset(
-    effect: str | None,
-    size: float,
+    effect,
+    size: float = 0.0,
     *,
     key: jax.Array,
     duration_s: float = 3600.0,
@@ -170,7 +184,7 @@ def continuous_dataset(
 ) -> MeasuredData:
     """Continuous records of the base gyro with `effect` hidden at `size`: one run per entry
     of `ramps` (temperature ramps up and down at two speeds, static or turning at 2 °/s),
-    each its own switch-on."""
+    each its own switch-on. `effect` as in [`inject`][hrgjax.discovery.generate.inject]."""
     gyro = inject(base_gyro(), effect, size)
     profiles = ramp_profiles(duration_s, ramps)
     ts = jnp.asarray(np.arange(int(round(duration_s / dt_out)) + 1) * dt_out)

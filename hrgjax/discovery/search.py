@@ -13,8 +13,11 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
 5. **Refit** the best candidates with the model; **accept** the best one only if its p-value
    passes Bonferroni at `alpha`, its ΔBIC exceeds `min_delta_bic`, it is identifiable (aliasing
    index < `max_aliasing`: what is left of its signature once the model has absorbed what
-   it can is still more than 0.1 %, and the score test says that rest is significant), it lowers the held-out whitened χ² by more than `min_heldout_gain` and does
-   widen the held-out gap (dwell grids only). Repeat for a second or third effect.
+   it can is still more than 0.1 %, and the score test says that rest is significant), it
+   lowers the held-out whitened χ² by more than `min_heldout_gain`, it does not widen the
+   held-out gap (dwell grids only), and (continuous records) its parameters refitted
+   on each training run alone agree with the pooled fit (per-run consistency χ², p ≥
+   `min_consistency`). Repeat for a second or third effect.
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
    equivalent-input-rate residual [°/h]; the noise floor is what noise alone gives it.
    Verdicts: `found`; `ambiguous` (a rival passes the same rule with nearly the same ΔBIC);
@@ -107,6 +110,7 @@ def discover(
     max_effects: int = 3,
     max_aliasing: float = 0.999,
     ambiguity_bic: float = 6.0,
+    min_consistency: float = 1e-3,
     shape: str = "auto",
     noise: Noise | None = None,
     block_s: float = BLOCK_S,
@@ -126,7 +130,9 @@ def discover(
       fitted model may already absorb): the acceptance rule. `ambiguity_bic`: a first-round
       rival that passes the same rule with a ΔBIC within this of the winner's makes the
       verdict `ambiguous` (the winner stays `missing_effect`; rivals in `ambiguous_with`,
-      the separating experiments in `discriminate`).
+      the separating experiments in `discriminate`). `min_consistency`: continuous records
+      only, the smallest p-value of the per-run consistency χ² an accepted effect may have
+      (its parameters refitted on each training run alone must agree with the pooled fit).
     - `shape`: `"auto"` (dwell when every run holds its rate and temperature), `"dwell"` or
       `"continuous"`.
     - `noise`: a known [`hrgjax.Noise`][] for continuous records (default: estimated from the
@@ -176,6 +182,13 @@ def discover(
     accepted, ranking, current = [], [], base
     n_cands = len(cands)
 
+    def consistent(r):
+        """Per-run agreement of the candidate's refit (computed once, only when needed)."""
+        if "consistency" not in r:
+            r["consistency"] = problem.consistency(r["refit"], r["effect"])
+        c = r["consistency"]
+        return c is None or c["p_value"] is None or c["p_value"] >= min_consistency
+
     def passes(r, fit):
         return (
             r["p_value"] < alpha / max(n_cands, 1)
@@ -183,6 +196,7 @@ def discover(
             and r["aliasing"] < max_aliasing
             and r["heldout_gain"] > min_heldout_gain
             and (not problem.gap_guard or r["gap_after"] <= fit["gap"])
+            and consistent(r)
         )
 
     for _ in range(max_effects):

@@ -1,0 +1,153 @@
+r"""WGS-84 constants, normal gravity, radii of curvature and Earth rate (PHYSICS.md §12).
+
+Navigation frame: NED (north, east, down). Latitude `lat` and longitude in radians, height
+`h` in metres above the ellipsoid. Every function is plain `jax.numpy` (jit / vmap / grad).
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+
+A = 6_378_137.0
+"""WGS-84 semi-major axis [m]."""
+FLATTENING = 1.0 / 298.257223563
+"""WGS-84 flattening."""
+B = A * (1.0 - FLATTENING)
+"""WGS-84 semi-minor axis [m]."""
+E2 = FLATTENING * (2.0 - FLATTENING)
+"""First eccentricity squared (6.69437999014e-3)."""
+OMEGA_IE = 7.292115e-5
+"""Earth rotation rate [rad/s] (15.04107 °/h)."""
+GAMMA_E = 9.7803253359
+"""Normal gravity at the equator [m/s²]."""
+GAMMA_P = 9.8321849378
+"""Normal gravity at the poles [m/s²]."""
+GM = 3.986004418e14
+"""Earth's gravitational constant [m³/s²]."""
+K_SOMIGLIANA = B * GAMMA_P / (A * GAMMA_E) - 1.0
+"""Somigliana's constant k = bγ_p/(aγ_e) − 1."""
+M_GRAVITY = OMEGA_IE**2 * A**2 * B / GM
+"""m = ω²a²b/GM of the free-air height correction."""
+G0 = 9.80665
+"""Standard gravity [m/s²] (for the classical Schuler figures)."""
+SCHULER_PERIOD = 2.0 * math.pi * math.sqrt(A / G0)
+"""Schuler period 2π√(a/g) [s] (84.45 min)."""
+
+
+def gravity(lat, h=0.0):
+    r"""Normal gravity magnitude γ(φ, h) [m/s²]: Somigliana's closed form on the ellipsoid,
+
+    $$\gamma_0 = \gamma_e\frac{1 + k\sin^2\varphi}{\sqrt{1 - e^2\sin^2\varphi}},$$
+
+    with the second-order free-air correction
+    $\gamma = \gamma_0\,[1 - \tfrac{2}{a}(1 + f + m - 2f\sin^2\varphi)h + \tfrac{3}{a^2}h^2]$
+    (NIMA TR8350.2 eq. 4-3). γ(45°, 0) = 9.806197769 m/s²."""
+    s2 = jnp.sin(lat) ** 2
+    g0 = GAMMA_E * (1.0 + K_SOMIGLIANA * s2) / jnp.sqrt(1.0 - E2 * s2)
+    corr = 1.0 - 2.0 / A * (1.0 + FLATTENING + M_GRAVITY - 2.0 * FLATTENING * s2) * h
+    return g0 * (corr + 3.0 / A**2 * h**2)
+
+
+def radii(lat):
+    r"""Meridian and prime-vertical radii of curvature $(R_M, R_N)$ [m]:
+    $R_N = a/\sqrt{1-e^2\sin^2\varphi}$, $R_M = R_N(1-e^2)/(1-e^2\sin^2\varphi)$."""
+    w = 1.0 - E2 * jnp.sin(lat) ** 2
+    r_n = A / jnp.sqrt(w)
+    return r_n * (1.0 - E2) / w, r_n
+
+
+def earth_rate_ned(lat):
+    r"""Earth rate in NED, $\omega_{ie}^n = \omega_{ie}(\cos\varphi, 0, -\sin\varphi)$ [rad/s]."""
+    return OMEGA_IE * jnp.stack([jnp.cos(lat), jnp.zeros_like(lat), -jnp.sin(lat)], axis=-1)
+
+
+def transport_rate_ned(lat, h, v_ned):
+    r"""Transport rate $\omega_{en}^n = (v_E/(R_N+h), -v_N/(R_M+h), -v_E\tan\varphi/(R_N+h))$
+    [rad/s] for velocity `v_ned` [m/s] (shape (..., 3))."""
+    r_m, r_n = radii(lat)
+    v_n, v_e = v_ned[..., 0], v_ned[..., 1]
+    return jnp.stack([v_e / (r_n + h), -v_n / (r_m + h), -v_e * jnp.tan(lat) / (r_n + h)], axis=-1)
+
+
+def gravity_ned(lat, h=0.0):
+    """Normal gravity vector in NED, (0, 0, γ) [m/s²] (plumb-line gravity, centrifugal
+    included)."""
+    g = gravity(lat, h)
+    z = jnp.zeros_like(g)
+    return jnp.stack([z, z, g], axis=-1)
+
+
+class Earth(eqx.Module):
+    """The Earth model of the navigation equations: the WGS-84 ellipsoid with Somigliana
+    gravity (default), or a sphere of radius `radius` with gravity `g`·(R/(R+h))² — the
+    textbook model behind the classical Schuler figures of PHYSICS.md §12.
+
+    **Arguments:** `radius` [m] and `g` [m/s²], both `None` for WGS-84 or both set;
+    `rate`: rotation rate [rad/s] (default ω_ie; 0 gives the classical single-channel
+    models with Earth-rate coupling removed)."""
+
+    radius: float | None = eqx.field(static=True, default=None)
+    g: float | None = eqx.field(static=True, default=None)
+    rate: float = eqx.field(static=True, default=OMEGA_IE)
+
+    def __check_init__(self):
+        if (self.radius is None) != (self.g is None):
+            raise ValueError("Earth: give both radius and g (a sphere) or neither (WGS-84)")
+        for name in ("radius", "g"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v > 0):
+                raise ValueError(f"Earth.{name} must be a positive number; got {v}")
+        if not (math.isfinite(self.rate) and self.rate >= 0):
+            raise ValueError(f"Earth.rate must be >= 0 rad/s; got {self.rate}")
+
+    def earth_rate(self, lat):
+        """Earth rate in NED [rad/s] (see [`earth_rate_ned`][hrgjax.ins.constants.earth_rate_ned])."""
+        return earth_rate_ned(lat) * (self.rate / OMEGA_IE)
+
+    def radii(self, lat):
+        """$(R_M, R_N)$ [m] (equal on the sphere)."""
+        if self.radius is None:
+            return radii(lat)
+        r = jnp.full_like(jnp.asarray(lat, float), self.radius)
+        return r, r
+
+    def gravity(self, lat, h=0.0):
+        """Gravity magnitude [m/s²] at latitude `lat` [rad] and height `h` [m]."""
+        if self.radius is None:
+            return gravity(lat, h)
+        return self.g * (self.radius / (self.radius + h)) ** 2 + 0.0 * lat
+
+    def gravity_ned(self, lat, h=0.0):
+        """Gravity vector (0, 0, γ) in NED [m/s²]."""
+        g = self.gravity(lat, h)
+        z = jnp.zeros_like(g)
+        return jnp.stack([z, z, g], axis=-1)
+
+    def transport_rate(self, lat, h, v_ned):
+        r"""$\omega_{en}^n$ [rad/s] (see [`transport_rate_ned`][hrgjax.ins.constants.transport_rate_ned])."""
+        r_m, r_n = self.radii(lat)
+        v_n, v_e = v_ned[..., 0], v_ned[..., 1]
+        return jnp.stack(
+            [v_e / (r_n + h), -v_n / (r_m + h), -v_e * jnp.tan(lat) / (r_n + h)], axis=-1
+        )
+
+    def position_rate(self, lat, h, v_ned):
+        r"""$(\dot\varphi, \dot\lambda, \dot h) = (v_N/(R_M+h),\; v_E/((R_N+h)\cos\varphi),\; -v_D)$."""
+        r_m, r_n = self.radii(lat)
+        return jnp.stack(
+            [
+                v_ned[..., 0] / (r_m + h),
+                v_ned[..., 1] / ((r_n + h) * jnp.cos(lat)),
+                -v_ned[..., 2],
+            ],
+            axis=-1,
+        )
+
+
+WGS84 = Earth()
+"""The WGS-84 ellipsoid with Somigliana gravity."""
+SPHERE = Earth(radius=A, g=G0)
+"""A sphere of radius a with g = 9.80665 m/s² (the classical Schuler figures)."""

@@ -1,0 +1,270 @@
+r"""The strapdown φ-angle error model in NED (Titterton & Weston ch. 12; Groves ch. 14).
+
+State (9): position error $\delta r = (\delta\varphi, \delta\lambda, \delta h)$ [rad, rad, m],
+velocity error $\delta v^n$ [m/s] and the attitude error φ [rad] of the computed
+body-to-NED matrix, $\hat C_b^n = (I - [\phi\times])C_b^n$. With gyro error $\delta\omega_{ib}^b$
+and accelerometer error $\delta f^b$ (measured − true, body frame):
+
+$$\begin{aligned}
+\dot\phi &= -\omega_{in}^n\times\phi + \delta\omega_{in}^n - C_b^n\,\delta\omega_{ib}^b,\\
+\delta\dot v^n &= f^n\times\phi + C_b^n\,\delta f^b - (2\omega_{ie}^n+\omega_{en}^n)\times\delta v^n
+ - (2\delta\omega_{ie}^n+\delta\omega_{en}^n)\times v^n + \delta g^n,\\
+\delta\dot r &= \delta\big(\dot\varphi, \dot\lambda, \dot h\big)(\varphi, h, v^n),
+\end{aligned}$$
+
+where every δ(·) of a navigation quantity (Earth and transport rate, gravity, position rate)
+is its exact directional derivative, taken by `jax.jvp` of the same function the trajectory
+uses — no hand-linearised term to get wrong. The augmented model (15 states) appends
+constant gyro and accelerometer biases.
+
+- [`error_rate`][hrgjax.ins.strapdown.error_rate] — the vector field at one trajectory point.
+- [`error_matrices`][hrgjax.ins.strapdown.error_matrices] — F, and the gyro and accelerometer
+  input matrices, along a trajectory.
+- [`propagate`][hrgjax.ins.strapdown.propagate] — deterministic error histories driven by
+  any gyro / accelerometer error time series (diffrax), e.g. hrgjax's simulated HRG output.
+- [`discretise`][hrgjax.ins.strapdown.discretise], [`covariance`][hrgjax.ins.strapdown.covariance],
+  [`monte_carlo`][hrgjax.ins.strapdown.monte_carlo] — exact (Van Loan) discretisation of the
+  15-state model with white sensor noise; propagated covariance and vmapped Monte Carlo.
+"""
+
+from __future__ import annotations
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._x64 import require_x64
+from ..kalman import van_loan
+from .constants import Earth
+from .trajectory import Trajectory
+
+STATES = ("dlat", "dlon", "dh", "dv_n", "dv_e", "dv_d", "phi_n", "phi_e", "phi_d")
+"""Names of the 9 error states, in order."""
+BIAS_STATES = ("bg_x", "bg_y", "bg_z", "ba_x", "ba_y", "ba_z")
+"""The 6 bias states of the augmented model (body frame)."""
+
+
+def error_rate(earth: Earth, lat, h, v, c_bn, f_ned, dx, dgyro, daccel, altitude_aided=False):
+    """Time derivative of the 9 error states `dx` at one trajectory point (module
+    docstring), for body-frame gyro error `dgyro` [rad/s] and accelerometer error
+    `daccel` [m/s²]. `altitude_aided=True` holds δh and δv_D at zero (perfect altitude
+    aiding: the free vertical channel diverges with time constant √(R/2g) ≈ 570 s)."""
+    dr, dv, phi = dx[0:3], dx[3:6], dx[6:9]
+    tangent = (dr[0], dr[2], dv)
+
+    def rates(lat, h, v):
+        w_ie = earth.earth_rate(lat)
+        w_en = earth.transport_rate(lat, h, v)
+        return earth.position_rate(lat, h, v), w_ie + w_en, 2.0 * w_ie + w_en
+
+    (_, w_in, w_cor), (d_pos, dw_in, dw_cor) = jax.jvp(rates, (lat, h, v), tangent)
+    _, dg = jax.jvp(earth.gravity_ned, (lat, h), (dr[0], dr[2]))
+    dphi = -jnp.cross(w_in, phi) + dw_in - c_bn @ dgyro
+    ddv = jnp.cross(f_ned, phi) + c_bn @ daccel - jnp.cross(w_cor, dv) - jnp.cross(dw_cor, v) + dg
+    if altitude_aided:
+        d_pos, ddv = d_pos.at[2].set(0.0), ddv.at[2].set(0.0)
+    return jnp.concatenate([d_pos, ddv, dphi])
+
+
+def _point(traj: Trajectory, i):
+    return traj.lat[i], traj.h[i], traj.v_ned[i], traj.c_bn[i], traj.f_ned[i]
+
+
+def _matrices_at(earth, aided, lat, h, v, c_bn, f_ned):
+    fn = lambda dx, dg, da: error_rate(earth, lat, h, v, c_bn, f_ned, dx, dg, da, aided)
+    z9, z3 = jnp.zeros(9), jnp.zeros(3)
+    return jax.jacfwd(fn, argnums=(0, 1, 2))(z9, z3, z3)
+
+
+def error_matrices(traj: Trajectory, altitude_aided: bool = False):
+    """(F (N, 9, 9), G_gyro (N, 9, 3), G_accel (N, 9, 3)) along `traj`: the error rate is
+    `F dx + G_gyro dgyro + G_accel daccel`."""
+    return jax.vmap(lambda *p: _matrices_at(traj.earth, altitude_aided, *p))(
+        traj.lat, traj.h, traj.v_ned, traj.c_bn, traj.f_ned
+    )
+
+
+def augmented(f, gg, ga):
+    """The 15-state matrix with constant gyro and accelerometer biases appended."""
+    top = jnp.concatenate([f, gg, ga], axis=-1)
+    bottom = jnp.zeros(f.shape[:-2] + (6, 15))
+    return jnp.concatenate([top, bottom], axis=-2)
+
+
+def position_metres(traj: Trajectory, dx):
+    """Position errors (north, east, down) [m] from error states `dx` (N, ≥3) on `traj`."""
+    r_m, r_n = traj.earth.radii(traj.lat)
+    return jnp.stack(
+        [
+            dx[..., 0] * (r_m + traj.h),
+            dx[..., 1] * (r_n + traj.h) * jnp.cos(traj.lat),
+            -dx[..., 2],
+        ],
+        axis=-1,
+    )
+
+
+def _check_series(name, x, n):
+    if x is None:
+        return jnp.zeros((n, 3))
+    x = jnp.asarray(x, float)
+    if x.shape == (3,):
+        return jnp.broadcast_to(x, (n, 3))
+    if x.shape != (n, 3):
+        raise ValueError(
+            f"{name} must have shape (3,) or ({n}, 3) (one row per trajectory "
+            f"sample); got {x.shape}"
+        )
+    return x
+
+
+def propagate(
+    traj: Trajectory,
+    dx0=None,
+    gyro_error=None,
+    accel_error=None,
+    *,
+    altitude_aided: bool = False,
+    rtol: float = 1e-10,
+    atol: float = 1e-12,
+    max_steps: int | None = None,
+):
+    """Error history along `traj` driven by body-frame sensor errors (module docstring),
+    integrated by diffrax (Tsit5, adaptive; trajectory and errors linearly interpolated
+    between samples, steps stopped at every sample).
+
+    **Arguments:** `dx0` (9,) initial errors (default 0); `gyro_error` [rad/s] and
+    `accel_error` [m/s²], each (3,) constant or (N, 3) sampled on `traj.t`;
+    `altitude_aided` (see [`error_rate`][hrgjax.ins.strapdown.error_rate]).
+
+    **Returns:** (N, 9) error states at `traj.t` (names in `STATES`; see
+    [`position_metres`][hrgjax.ins.strapdown.position_metres]).
+
+    **Raises:** `ValueError` for wrongly shaped inputs; `RuntimeError` (from the solver) when
+    it runs out of steps."""
+    require_x64("ins.strapdown.propagate")
+    n = traj.t.shape[0]
+    dx0 = jnp.zeros(9) if dx0 is None else jnp.asarray(dx0, float)
+    if dx0.shape != (9,):
+        raise ValueError(f"dx0 must have shape (9,) (states {STATES}); got {dx0.shape}")
+    eg = _check_series("gyro_error", gyro_error, n)
+    ea = _check_series("accel_error", accel_error, n)
+    return _propagate(traj, dx0, eg, ea, altitude_aided, rtol, atol, max_steps or 64 * n)
+
+
+@eqx.filter_jit
+def _propagate(traj, dx0, eg, ea, aided, rtol, atol, max_steps):
+    ys = (traj.lat, traj.h, traj.v_ned, traj.c_bn, traj.f_ned, eg, ea)
+    path = diffrax.LinearInterpolation(ts=traj.t, ys=ys)
+
+    def field(t, dx, args):
+        lat, h, v, c, f, g, a = path.evaluate(t)
+        return error_rate(traj.earth, lat, h, v, c, f, dx, g, a, aided)
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        diffrax.Tsit5(),
+        t0=traj.t[0],
+        t1=traj.t[-1],
+        dt0=None,
+        y0=dx0,
+        saveat=diffrax.SaveAt(ts=traj.t),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=traj.t),
+        max_steps=max_steps,
+    )
+    return sol.ys
+
+
+class ImuErrors(eqx.Module):
+    """Random IMU errors for covariance analysis and Monte Carlo (body frame, per axis).
+
+    **Arguments:** `gyro_bias` [rad/s] and `accel_bias` [m/s²]: standard deviations of
+    random constant biases; `arw` [rad/√s] and `vrw` [m/s/√s]: white-noise spectral
+    densities (angle and velocity random walk)."""
+
+    gyro_bias: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
+    accel_bias: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
+    arw: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
+    vrw: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
+
+    def bias_covariance(self):
+        """6×6 covariance of the bias states."""
+        v = jnp.concatenate(
+            [jnp.broadcast_to(self.gyro_bias, (3,)), jnp.broadcast_to(self.accel_bias, (3,))]
+        )
+        return jnp.diag(v**2)
+
+
+def discretise(traj: Trajectory, imu: ImuErrors, altitude_aided: bool = False):
+    r"""Exact discretisation of the 15-state model between trajectory samples: for each step
+    k → k+1, $\Phi_k = e^{F\,\Delta t}$ and $Q_{d,k}$ (Van Loan) with F at the step's midpoint
+    (the mean of the two samples' matrices) and the white noise entering through the gyro and
+    accelerometer input matrices. **Returns** `(Phi (N−1, 15, 15), Qd (N−1, 15, 15))`."""
+    f, gg, ga = error_matrices(traj, altitude_aided)
+    fa = augmented(f, gg, ga)
+    fm = 0.5 * (fa[1:] + fa[:-1])
+    g15 = lambda g: jnp.concatenate([g, jnp.zeros(g.shape[:-2] + (6, 3))], axis=-2)
+    ggm, gam = g15(0.5 * (gg[1:] + gg[:-1])), g15(0.5 * (ga[1:] + ga[:-1]))
+    arw = jnp.broadcast_to(imu.arw, (3,)) ** 2
+    vrw = jnp.broadcast_to(imu.vrw, (3,)) ** 2
+    q = jnp.einsum("nij,j,nkj->nik", ggm, arw, ggm) + jnp.einsum("nij,j,nkj->nik", gam, vrw, gam)
+    dt = jnp.diff(traj.t)
+    return jax.vmap(van_loan)(fm, q, dt)
+
+
+def initial_covariance(imu: ImuErrors, p0_nav=None):
+    """15×15 initial covariance: `p0_nav` (9×9, default 0) and the bias covariance."""
+    p = jnp.zeros((15, 15)).at[9:, 9:].set(imu.bias_covariance())
+    return p if p0_nav is None else p.at[:9, :9].set(jnp.asarray(p0_nav))
+
+
+@jax.jit
+def covariance(phi, qd, p0):
+    """Propagated covariance $P_{k+1} = \\Phi_k P_k \\Phi_k^\\top + Q_{d,k}$; (N, 15, 15)."""
+
+    def step(p, fq):
+        f, q = fq
+        p = f @ p @ f.T + q
+        p = 0.5 * (p + p.T)
+        return p, p
+
+    _, ps = jax.lax.scan(step, p0, (phi, qd))
+    return jnp.concatenate([p0[None], ps])
+
+
+def monte_carlo(phi, qd, p0, key, n_runs: int):
+    r"""`n_runs` sample error histories of the discretised model, vmapped: $x_0 \sim N(0, P_0)$
+    (biases drawn once per run), $x_{k+1} = \Phi_k x_k + L_k w_k$ with $L_kL_k^\top = Q_{d,k}$.
+
+    **Returns:** (n_runs, N, 15)."""
+    require_x64("ins.strapdown.monte_carlo")
+    return _monte_carlo(phi, qd, p0, key, n_runs)
+
+
+def _chol(m):
+    """Cholesky factor of a PSD matrix that may be singular (eigen-decomposition)."""
+    w, v = jnp.linalg.eigh(m)
+    return v * jnp.sqrt(jnp.clip(w, 0.0))[None, :]
+
+
+@eqx.filter_jit
+def _monte_carlo(phi, qd, p0, key, n_runs):
+    ls = jax.vmap(_chol)(qd)
+    l0 = _chol(p0)
+    n = p0.shape[0]
+
+    def one(k):
+        k0, kw = jax.random.split(k)
+        x0 = l0 @ jax.random.normal(k0, (n,))
+        w = jax.random.normal(kw, (phi.shape[0], n))
+
+        def step(x, inp):
+            f, lq, wk = inp
+            x = f @ x + lq @ wk
+            return x, x
+
+        _, xs = jax.lax.scan(step, x0, (phi, ls, w))
+        return jnp.concatenate([x0[None], xs])
+
+    return jax.vmap(one)(jax.random.split(key, n_runs))

@@ -1,0 +1,240 @@
+r"""Trajectories for the INS error models: stationary, constant velocity, turns, a 1-hour
+flight ([`flight`][hrgjax.ins.trajectory.flight]).
+
+A [`Trajectory`][hrgjax.ins.trajectory.Trajectory] holds, on a time grid, everything the
+strapdown error model needs — latitude, longitude, height, NED velocity, the body-to-NED
+attitude matrix and the specific force in NED — consistent with the navigation equations
+$\dot v^n = f^n - (2\omega_{ie}^n + \omega_{en}^n)\times v^n + g^n$. Its
+[`imu`][hrgjax.ins.trajectory.Trajectory.imu] method gives the ideal body-frame IMU outputs.
+Body frame FRD (x forward, y right, z down); heading clockwise from north.
+
+Builders run once in NumPy (they are set-up, not traced) and return JAX arrays.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..units import DEG
+from .constants import WGS84, Earth
+
+
+def euler_to_dcm(roll, pitch, heading):
+    r"""Body (FRD)-to-NED matrix $C_b^n$ from roll, pitch, heading [rad] (3-2-1 order)."""
+    cr, sr = jnp.cos(roll), jnp.sin(roll)
+    cp, sp = jnp.cos(pitch), jnp.sin(pitch)
+    ch, sh = jnp.cos(heading), jnp.sin(heading)
+    return jnp.stack(
+        [
+            jnp.stack([cp * ch, -cr * sh + sr * sp * ch, sr * sh + cr * sp * ch], -1),
+            jnp.stack([cp * sh, cr * ch + sr * sp * sh, -sr * ch + cr * sp * sh], -1),
+            jnp.stack([-sp, sr * cp, cr * cp], -1),
+        ],
+        -2,
+    )
+
+
+def dcm_to_euler(c):
+    """(roll, pitch, heading) [rad] of a body-to-NED matrix (heading in (−π, π])."""
+    roll = jnp.arctan2(c[..., 2, 1], c[..., 2, 2])
+    pitch = -jnp.arcsin(jnp.clip(c[..., 2, 0], -1.0, 1.0))
+    heading = jnp.arctan2(c[..., 1, 0], c[..., 0, 0])
+    return roll, pitch, heading
+
+
+class Trajectory(eqx.Module):
+    """A reference trajectory on a time grid (module docstring).
+
+    **Fields:** `t` (N,) [s]; `lat`, `lon` (N,) [rad]; `h` (N,) [m]; `v_ned` (N, 3) [m/s];
+    `c_bn` (N, 3, 3) body-to-NED; `f_ned` (N, 3) specific force [m/s²]; `earth` (static)."""
+
+    t: jax.Array
+    lat: jax.Array
+    lon: jax.Array
+    h: jax.Array
+    v_ned: jax.Array
+    c_bn: jax.Array
+    f_ned: jax.Array
+    earth: Earth = eqx.field(static=True, default=WGS84)
+
+    def __check_init__(self):
+        t = np.asarray(self.t)
+        if t.ndim == 1 and (t.size < 2 or np.any(np.diff(t) <= 0)):
+            raise ValueError("Trajectory.t must hold at least 2 strictly increasing times")
+
+    @property
+    def attitude(self):
+        """(roll, pitch, heading) [rad], each (N,)."""
+        return dcm_to_euler(self.c_bn)
+
+    def imu(self):
+        r"""Ideal IMU outputs along the trajectory: specific force $f^b = C_n^b f^n$ and
+        angular rate $\omega_{ib}^b = C_n^b(\omega_{ie}^n + \omega_{en}^n) + \omega_{nb}^b$,
+        with $\omega_{nb}^b$ from central differences of $C_b^n$. **Returns** `(f_b, w_b)`,
+        each (N, 3)."""
+        c_nb = jnp.swapaxes(self.c_bn, -1, -2)
+        f_b = jnp.einsum("nij,nj->ni", c_nb, self.f_ned)
+        w_in = self.earth.earth_rate(self.lat) + self.earth.transport_rate(
+            self.lat, self.h, self.v_ned
+        )
+        c = np.asarray(self.c_bn)
+        dc = np.gradient(c, np.asarray(self.t), axis=0)
+        skew = np.einsum("nji,njk->nik", c, dc)  # C_nb Ċ_bn = [ω_nb^b ×]
+        w_nb = np.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], axis=-1)
+        return f_b, jnp.einsum("nij,nj->ni", c_nb, w_in) + jnp.asarray(w_nb)
+
+
+def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None):
+    """Integrate position from speed, heading and flight-path angle (trapezoid on the grid)
+    and derive velocity, attitude (coordinated turns) and specific force."""
+    v = np.stack(
+        [
+            speed * np.cos(gamma) * np.cos(heading),
+            speed * np.cos(gamma) * np.sin(heading),
+            -speed * np.sin(gamma),
+        ],
+        axis=-1,
+    )
+    n = t.size
+    lat, lon, h = np.empty(n), np.empty(n), np.empty(n)
+    lat[0], lon[0], h[0] = lat0, lon0, h0
+    for i in range(n - 1):  # Heun step of the position equations
+        dt = t[i + 1] - t[i]
+        r0 = np.asarray(earth.position_rate(lat[i], h[i], v[i]))
+        pred = (lat[i] + dt * r0[0], h[i] + dt * r0[2])
+        r1 = np.asarray(earth.position_rate(pred[0], pred[1], v[i + 1]))
+        lat[i + 1] = lat[i] + 0.5 * dt * (r0[0] + r1[0])
+        lon[i + 1] = lon[i] + 0.5 * dt * (r0[1] + r1[1])
+        h[i + 1] = h[i] + 0.5 * dt * (r0[2] + r1[2])
+    vdot = np.gradient(v, t, axis=0)
+    w = 2 * np.asarray(earth.earth_rate(lat)) + np.asarray(earth.transport_rate(lat, h, v))
+    g = np.asarray(earth.gravity_ned(lat, h))
+    f = vdot + np.cross(w, v) - g
+    if roll is None:  # coordinated turn: tan φ = V ψ̇ / g
+        roll = np.arctan2(speed * np.gradient(np.unwrap(heading), t), g[:, 2])
+    c = euler_to_dcm(jnp.asarray(roll), jnp.asarray(gamma), jnp.asarray(heading))
+    arr = jnp.asarray
+    return Trajectory(arr(t), arr(lat), arr(lon), arr(h), arr(v), c, arr(f), earth)
+
+
+def _grid(duration_s, dt):
+    if not (np.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s must be > 0 s; got {duration_s}")
+    if not (np.isfinite(dt) and 0 < dt <= duration_s):
+        raise ValueError(f"dt must be in (0, duration_s]; got {dt}")
+    return np.arange(int(round(duration_s / dt)) + 1) * dt
+
+
+def stationary(
+    lat_deg: float,
+    lon_deg: float = 0.0,
+    h: float = 0.0,
+    *,
+    heading_deg: float = 0.0,
+    pitch_deg: float = 0.0,
+    roll_deg: float = 0.0,
+    duration_s: float = 3600.0,
+    dt: float = 1.0,
+    earth: Earth = WGS84,
+) -> Trajectory:
+    """A vehicle at rest at (`lat_deg`, `lon_deg`, `h`) with the given attitude [°]."""
+    t = _grid(duration_s, dt)
+    n = t.size
+    full = lambda x: np.full(n, x)
+    return _from_kinematics(
+        t,
+        lat_deg * DEG,
+        lon_deg * DEG,
+        h,
+        full(0.0),
+        full(heading_deg * DEG),
+        full(pitch_deg * DEG),
+        earth,
+        roll=full(roll_deg * DEG),
+    )
+
+
+def constant_velocity(
+    lat_deg: float,
+    lon_deg: float = 0.0,
+    h: float = 0.0,
+    *,
+    speed: float = 90.0,
+    heading_deg: float = 90.0,
+    duration_s: float = 3600.0,
+    dt: float = 1.0,
+    earth: Earth = WGS84,
+) -> Trajectory:
+    """Level flight at `speed` [m/s] on a constant heading [°, clockwise from north] (a rhumb
+    line)."""
+    t = _grid(duration_s, dt)
+    n = t.size
+    return _from_kinematics(
+        t,
+        lat_deg * DEG,
+        lon_deg * DEG,
+        h,
+        np.full(n, float(speed)),
+        np.full(n, heading_deg * DEG),
+        np.zeros(n),
+        earth,
+    )
+
+
+def segments(
+    lat_deg: float,
+    lon_deg: float,
+    h: float,
+    legs,
+    *,
+    speed0: float = 0.0,
+    heading0_deg: float = 0.0,
+    dt: float = 1.0,
+    earth: Earth = WGS84,
+) -> Trajectory:
+    """A trajectory from legs `(duration_s, accel m/s², turn rate °/s, climb rate m/s)`, each
+    held constant over its leg: speed and heading integrate, the flight-path angle is
+    asin(climb/speed), turns are coordinated."""
+    legs = [tuple(float(x) for x in leg) for leg in legs]
+    if not legs or any(len(leg) != 4 or leg[0] <= 0 for leg in legs):
+        raise ValueError("legs: a non-empty list of (duration_s > 0, accel, turn_dps, climb)")
+    t = _grid(sum(leg[0] for leg in legs), dt)
+    edges = np.cumsum([0.0] + [leg[0] for leg in legs])
+    idx = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(legs) - 1)
+    acc, turn, climb = (np.asarray([leg[k] for leg in legs])[idx] for k in (1, 2, 3))
+    speed = speed0 + np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * np.diff(t))])
+    if np.any(speed < 0):
+        raise ValueError("legs: the speed would become negative")
+    heading = (
+        heading0_deg * DEG
+        + np.concatenate([[0.0], np.cumsum(0.5 * (turn[1:] + turn[:-1]) * np.diff(t))]) * DEG
+    )
+    gamma = np.where(speed > 1.0, np.arcsin(np.clip(climb / np.maximum(speed, 1.0), -1, 1)), 0.0)
+    return _from_kinematics(t, lat_deg * DEG, lon_deg * DEG, h, speed, heading, gamma, earth)
+
+
+def flight(
+    lat_deg: float = 45.0,
+    lon_deg: float = 30.0,
+    *,
+    dt: float = 1.0,
+    earth: Earth = WGS84,
+) -> Trajectory:
+    """A 1-hour flight: take-off run and climb to 200 m/s, cruise north-east, a 90° turn to
+    the right, cruise, a 180° turn to the left, cruise, a shallow descent (3600 s)."""
+    legs = [
+        (100.0, 2.0, 0.0, 0.0),  # take-off run to 200 m/s
+        (300.0, 0.0, 0.0, 15.0),  # climb 4.5 km
+        (1000.0, 0.0, 0.0, 0.0),  # cruise
+        (45.0, 0.0, 2.0, 0.0),  # 90° right turn
+        (800.0, 0.0, 0.0, 0.0),
+        (60.0, 0.0, -3.0, 0.0),  # 180° left turn
+        (995.0, 0.0, 0.0, 0.0),
+        (300.0, 0.0, 0.0, -10.0),  # descent
+    ]
+    return segments(
+        lat_deg, lon_deg, 100.0, legs, speed0=0.0, heading0_deg=45.0, dt=dt, earth=earth
+    )

@@ -1,0 +1,244 @@
+"""INS: WGS-84 constants, Kalman utilities and the strapdown error model against the oracles
+of PHYSICS.md §12, closed forms and a nonlinear mechanisation."""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hrgjax import kalman
+from hrgjax.ins import constants as C
+from hrgjax.ins import strapdown as sd
+from hrgjax.ins import trajectory as tr
+
+DEG = np.pi / 180
+
+
+def test_wgs84_constants_and_gravity():
+    assert C.E2 == pytest.approx(6.69437999014e-3, rel=1e-11)
+    np.testing.assert_allclose(C.gravity(45 * DEG), 9.806197769, rtol=1e-10)
+    np.testing.assert_allclose(C.gravity(0.0), C.GAMMA_E, rtol=1e-12)
+    np.testing.assert_allclose(C.gravity(90 * DEG), C.GAMMA_P, rtol=1e-12)
+    # free-air gradient ≈ −3.086e-6 s⁻² at mid latitude
+    dg = jax.grad(C.gravity, argnums=1)(45 * DEG, 0.0)
+    np.testing.assert_allclose(dg, -3.086e-6, rtol=2e-3)
+    r_m, r_n = C.radii(0.0)
+    np.testing.assert_allclose([r_m, r_n], [C.A * (1 - C.E2), C.A], rtol=1e-12)
+    assert C.SCHULER_PERIOD / 60 == pytest.approx(84.45, abs=0.01)
+    assert 2 * np.pi / C.OMEGA_IE / 3600 == pytest.approx(23.934, abs=1e-3)
+    with pytest.raises(ValueError, match="both radius and g"):
+        C.Earth(radius=1.0)
+
+
+def test_van_loan_matches_the_closed_form_and_the_lyapunov_identity():
+    dt, q = 10.0, np.diag([1.0, 3.0])
+    phi, qd = kalman.van_loan(jnp.array([[0.0, 1.0], [0.0, 0.0]]), jnp.asarray(q), dt)
+    np.testing.assert_allclose(phi, [[1, dt], [0, 1]], atol=1e-12)
+    want = dt * np.array([[1 + 3 * dt**2 / 3, 3 * dt / 2], [3 * dt / 2, 3]])
+    np.testing.assert_allclose(qd, want, rtol=1e-12)
+    rng = np.random.default_rng(1)
+    f = rng.normal(size=(4, 4)) * 0.3
+    b = rng.normal(size=(4, 4))
+    qq = b @ b.T
+    phi, qd = kalman.van_loan(jnp.asarray(f), jnp.asarray(qq), 0.7)
+    lyap = f @ qd + qd @ f.T + qq - phi @ qq @ phi.T
+    np.testing.assert_allclose(lyap, 0.0, atol=1e-11)
+    # ZOH input: a constant input u over dt moves x by ∫e^{Fs}ds B u
+    phi2, gam = kalman.discretise_input(jnp.array([[0.0, 1.0], [0.0, 0.0]]), jnp.ones((2, 1)), dt)
+    np.testing.assert_allclose(gam[:, 0], [dt + dt**2 / 2, dt], rtol=1e-12)
+
+
+def test_one_state_filter_reaches_the_riccati_steady_state():
+    q, r = 0.2, 1.5  # random walk x_{k+1} = x_k + w, z = x + v
+    steady_prior = (q + np.sqrt(q * q + 4 * q * r)) / 2
+    steady_post = steady_prior * r / (steady_prior + r)
+    zs = jnp.asarray(np.random.default_rng(0).normal(size=(200, 1)))
+    prior = kalman.Gaussian(jnp.zeros(1), jnp.eye(1) * 10.0)
+    one = jnp.eye(1)
+    xs, ps, _ = kalman.kalman_filter(prior, one, q * one, one, r * one, zs)
+    np.testing.assert_allclose(ps[-1, 0, 0], steady_post, rtol=1e-10)
+    # the mean is the scalar recursion x ← x + k (z − x) with k = P⁻/(P⁻ + r)
+    x, p = 0.0, 10.0
+    for z in np.asarray(zs[:, 0]):
+        p += q
+        k = p / (p + r)
+        x, p = x + k * (z - x), (1 - k) * p
+    np.testing.assert_allclose(xs[-1, 0], x, rtol=1e-10)
+
+
+def test_filter_log_likelihood_is_the_joint_gaussian_density():
+    rng = np.random.default_rng(2)
+    phi = jnp.array([[1.0, 0.5], [0.0, 0.9]])
+    qd = jnp.array([[0.1, 0.02], [0.02, 0.05]])
+    h = jnp.array([[1.0, 0.0]])
+    r = jnp.array([[0.3]])
+    p0 = jnp.eye(2)
+    zs = jnp.asarray(rng.normal(size=(6, 1)))
+    _, _, ll = kalman.kalman_filter(kalman.Gaussian(jnp.zeros(2), p0), phi, qd, h, r, zs)
+    # joint covariance of z_1..z_K from the state covariances and cross terms
+    k = 6
+    phis = [np.linalg.matrix_power(np.asarray(phi), i) for i in range(k + 1)]
+    pk = [None] * (k + 1)
+    p = np.asarray(p0)
+    for i in range(1, k + 1):
+        p = np.asarray(phi) @ p @ np.asarray(phi).T + np.asarray(qd)
+        pk[i] = p
+    cov = np.zeros((k, k))
+    for i in range(1, k + 1):
+        for j in range(i, k + 1):
+            cij = (np.asarray(h) @ phis[j - i] @ pk[i] @ np.asarray(h).T)[0, 0]
+            cov[i - 1, j - 1] = cov[j - 1, i - 1] = cij
+    cov += np.eye(k) * 0.3
+    z = np.asarray(zs[:, 0])
+    want = -0.5 * (z @ np.linalg.solve(cov, z) + np.linalg.slogdet(cov)[1] + k * np.log(2 * np.pi))
+    np.testing.assert_allclose(ll, want, rtol=1e-10)
+
+
+def _periods(traj):
+    f, _, _ = sd.error_matrices(traj)
+    keep = [0, 1, 3, 4, 6, 7, 8]  # horizontal model: no δh, δv_D
+    ev = np.linalg.eigvals(np.asarray(f[0])[np.ix_(keep, keep)])
+    assert np.max(np.abs(ev.real)) < 1e-12  # undamped
+    w = np.sort(np.abs(ev.imag))
+    assert w[0] < 1e-12  # the longitude mode
+    return 2 * np.pi / w[1::2]
+
+
+def test_stationary_error_model_eigen_periods_at_45_degrees():
+    periods = _periods(tr.stationary(45.0, duration_s=10.0, earth=C.SPHERE))
+    np.testing.assert_allclose(periods / 60, [1436.07, 88.04, 81.02], rtol=1e-4)
+    np.testing.assert_allclose(periods[0] / 3600, 23.934, rtol=1e-4)
+
+
+def test_moving_east_eigen_periods():
+    """Moving east at 90 m/s at 30°: the exact linearisation's Earth mode is the nav frame's
+    inertial rotation rate ω_ie + λ̇ (an inertially fixed misalignment seen from the moving
+    frame). PHYSICS.md §12 quotes 21.64 h, 87.57 and 81.48 min: those are what the model
+    gives when the latitude derivative of the transport rate (v_E sec²φ/R δφ) is dropped
+    (checked below); the nonlinear mechanisation (next test) sides with the exact model."""
+    traj = tr.constant_velocity(30.0, speed=90.0, heading_deg=90.0, duration_s=10.0, earth=C.SPHERE)
+    periods = _periods(traj)
+    lam_dot = 90.0 / (C.A * np.cos(30 * DEG))
+    np.testing.assert_allclose(periods[0], 2 * np.pi / (C.OMEGA_IE + lam_dot), rtol=1e-9)
+    np.testing.assert_allclose(periods[1:] / 60, [87.595, 81.512], rtol=1e-4)
+    # the quoted figures: the same model without ∂ω_en/∂φ
+    f = np.array(sd.error_matrices(traj)[0][0])
+    dw = np.array([0.0, 0.0, -90.0 / C.A / np.cos(30 * DEG) ** 2])  # ∂ω_en/∂φ
+    f[6:9, 0] -= dw  # from δω_in in the attitude equation
+    f[3:6, 0] += np.cross(dw, np.asarray(traj.v_ned[0]))  # and from δω_en × v
+    keep = [0, 1, 3, 4, 6, 7, 8]
+    w = np.sort(np.abs(np.linalg.eigvals(f[np.ix_(keep, keep)]).imag))[1::2]
+    np.testing.assert_allclose(2 * np.pi / w[0] / 3600, 21.64, rtol=2e-4)
+    np.testing.assert_allclose(2 * np.pi / w[1] / 60, 87.57, rtol=2e-4)
+    np.testing.assert_allclose(2 * np.pi / w[2] / 60, 81.48, rtol=3e-4)
+
+
+def _mechanise(traj, c0, hours):
+    """Nonlinear NED mechanisation with altitude held (aided), driven by the ideal IMU output
+    of a constant-velocity trajectory (constant in the body frame)."""
+    earth = traj.earth
+    f_b, w_b = (x[0] for x in traj.imu())
+    h = traj.h[0]
+
+    def field(t, y, args):
+        lat, lon, v, c = y[0], y[1], y[2:5], y[5:14].reshape(3, 3)
+        w_ie, w_en = earth.earth_rate(lat), earth.transport_rate(lat, h, v)
+        skew = lambda w: jnp.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+        dc = c @ skew(w_b) - skew(w_ie + w_en) @ c
+        dv = c @ f_b - jnp.cross(2 * w_ie + w_en, v) + earth.gravity_ned(lat, h)
+        dv = dv.at[2].set(0.0)
+        pos = earth.position_rate(lat, h, v)
+        return jnp.concatenate([pos[:2], dv, dc.reshape(9)])
+
+    y0 = jnp.concatenate([jnp.stack([traj.lat[0], traj.lon[0]]), traj.v_ned[0], c0.reshape(9)])
+    ts = jnp.linspace(0.0, hours * 3600.0, 61)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        diffrax.Tsit5(),
+        0.0,
+        ts[-1],
+        None,
+        y0,
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=1e-12, atol=1e-14),
+        max_steps=200_000,
+    )
+    return ts, sol.ys
+
+
+def test_linear_model_matches_the_nonlinear_mechanisation():
+    """Moving east at 90 m/s at 30° for 12 h from a 1-mrad heading error and 0.2-mrad tilt:
+    the difference of two nonlinear runs equals the linear model (second-order small)."""
+    hours = 12.0
+    traj = tr.constant_velocity(
+        30.0, speed=90.0, heading_deg=90.0, duration_s=hours * 3600, dt=60.0, earth=C.SPHERE
+    )
+    phi = jnp.array([2e-4, -1e-4, 1e-3])
+    skew = jnp.array([[0, -phi[2], phi[1]], [phi[2], 0, -phi[0]], [-phi[1], phi[0], 0]])
+    c_true = traj.c_bn[0]
+    ts, y_true = _mechanise(traj, c_true, hours)
+    _, y_err = _mechanise(traj, (jnp.eye(3) - skew) @ c_true, hours)
+    dx = sd.propagate(traj, jnp.zeros(9).at[6:].set(phi), altitude_aided=True)
+    idx = np.searchsorted(np.asarray(traj.t), np.asarray(ts))
+    lin = np.asarray(dx)[idx]
+    d = np.asarray(y_err - y_true)
+    for k, j in ((0, 0), (1, 1), (2, 3), (3, 4)):  # δlat, δlon, δv_N, δv_E
+        scale = np.max(np.abs(lin[:, j]))
+        np.testing.assert_allclose(d[:, k], lin[:, j], atol=3e-3 * scale)
+    # (the model behind 21.64 h would be 0.37 rad out of phase in its Earth mode by 12 h)
+
+
+def test_single_channel_closed_forms_without_earth_rate():
+    earth = C.Earth(radius=C.A, g=C.G0, rate=0.0)
+    traj = tr.stationary(0.0, duration_s=7200.0, dt=60.0, earth=earth)
+    t = np.asarray(traj.t)
+    ws = np.sqrt(C.G0 / C.A)
+    # initial tilt δθ about east: north position R δθ (1 − cos ω_s t)
+    dx = np.asarray(sd.propagate(traj, jnp.zeros(9).at[7].set(1e-4), altitude_aided=True))
+    north = np.asarray(sd.position_metres(traj, jnp.asarray(dx)))[:, 0]
+    np.testing.assert_allclose(np.abs(north), C.A * 1e-4 * (1 - np.cos(ws * t)), atol=1e-6)
+    # accelerometer bias ∇ along north (body x = north): R ∇/g (1 − cos ω_s t), peak 2R∇/g
+    nab = 1e-3
+    dx = sd.propagate(traj, accel_error=jnp.array([nab, 0.0, 0.0]), altitude_aided=True)
+    north = np.asarray(sd.position_metres(traj, dx))[:, 0]
+    np.testing.assert_allclose(north, C.A * nab / C.G0 * (1 - np.cos(ws * t)), atol=1e-6)
+    assert 2 * C.A * nab / C.G0 == pytest.approx(1300.7, abs=1.0)  # "1297 m" with R ≈ 6.36e6
+    # level gyro bias ε about north (body x): east position ∓R ε (t − sin(ω_s t)/ω_s)
+    eps = 1e-7
+    dx = sd.propagate(traj, gyro_error=jnp.array([eps, 0.0, 0.0]), altitude_aided=True)
+    east = np.asarray(sd.position_metres(traj, dx))[:, 1]
+    np.testing.assert_allclose(np.abs(east), C.A * eps * (t - np.sin(ws * t) / ws), atol=1e-6)
+    # initial velocity error δv₀ north: δv₀ sin(ω_s t)/ω_s
+    dx = sd.propagate(traj, jnp.zeros(9).at[3].set(0.1), altitude_aided=True)
+    north = np.asarray(sd.position_metres(traj, dx))[:, 0]
+    np.testing.assert_allclose(north, 0.1 * np.sin(ws * t) / ws, atol=1e-6)
+
+
+def test_north_gyro_bias_grows_longitude_at_r_eps_cos2_lat():
+    """1e-7 rad/s north gyro bias at 30°: long-term east error ≈ R ε_N cos²φ = 1.72 km/h."""
+    period = 2 * np.pi / C.OMEGA_IE
+    traj = tr.stationary(30.0, duration_s=2 * period, dt=period / 360, earth=C.SPHERE)
+    dx = sd.propagate(traj, gyro_error=jnp.array([1e-7, 0.0, 0.0]), altitude_aided=True)
+    east = np.asarray(sd.position_metres(traj, dx))[:, 1]
+    rate = abs(east[-1]) / (2 * period) * 3600  # over whole Earth periods: the mean growth
+    assert rate == pytest.approx(C.A * 1e-7 * np.cos(30 * DEG) ** 2 * 3600, rel=0.005)
+    assert rate / 1000 == pytest.approx(1.72, abs=0.01)
+
+
+def test_monte_carlo_covariance_matches_the_propagated_covariance():
+    traj = tr.stationary(45.0, duration_s=1800.0, dt=10.0)
+    imu = sd.ImuErrors(gyro_bias=1e-7, accel_bias=1e-3, arw=1e-6, vrw=1e-4)
+    phi, qd = sd.discretise(traj, imu, altitude_aided=True)
+    p0 = sd.initial_covariance(imu, jnp.diag(jnp.array([0, 0, 0, 0.01, 0.01, 0, 1e-8, 1e-8, 1e-6])))
+    ps = sd.covariance(phi, qd, p0)
+    xs = sd.monte_carlo(phi, qd, p0, jax.random.key(3), 4000)
+    emp = np.var(np.asarray(xs[:, -1]), axis=0)
+    want = np.diag(np.asarray(ps[-1]))
+    keep = [0, 1, 3, 4, 6, 7, 8]
+    # 4000 samples: relative standard error of a variance √(2/n) = 2.2 %
+    np.testing.assert_allclose(emp[keep], want[keep], rtol=0.1)
+    with pytest.raises(ValueError, match="gyro_error must have shape"):
+        sd.propagate(traj, gyro_error=jnp.zeros((5, 3)))
+    with pytest.raises(ValueError, match="dt must be"):
+        tr.stationary(45.0, duration_s=10.0, dt=-1.0)
