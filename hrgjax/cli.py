@@ -274,6 +274,45 @@ def cmd_discover(args) -> int:
     return 0
 
 
+def cmd_align(args) -> int:
+    """`hrgjax align IMU_LOG`: stationary coarse + fine alignment of a strapdown IMU log."""
+    _setup()
+    import json
+    from pathlib import Path
+
+    from .ins.alignment import align, load_psins
+
+    if args.format != "psins":
+        raise SystemExit(f"hrgjax align: unknown --format {args.format!r}; choose 'psins'")
+    try:
+        log = load_psins(args.imu_log)
+        result = align(log, coarse_s=args.coarse, step_s=args.step)
+    except (ValueError, FileNotFoundError) as err:
+        raise SystemExit(f"hrgjax align: {err}") from None
+    out = result.to_json()
+    span = float(log.t[-1] - log.t[0])
+    print(f"hrgjax align: {args.imu_log} ({log.t.shape[0]} samples, {span:.0f} s)")
+    c = out["coarse"]
+    print(
+        f"  coarse ({args.coarse:g} s): heading {c['heading_deg']:.3f}°, pitch "
+        f"{c['pitch_deg']:.3f}°, roll {c['roll_deg']:.3f}°"
+    )
+    for k in ("heading", "pitch", "roll"):
+        print(f"  {k:>7}: {out[k + '_deg']:9.4f}° ± {out[k + '_std_deg']:.4f}° (1σ)")
+    if log.header_attitude_deg is not None:
+        print(f"  file header heading: {log.header_attitude_deg[2]:.2f}° (clockwise from north)")
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(out, indent=2))
+        print(f"wrote {path}")
+    if args.plot:
+        from .plots import alignment_figure
+
+        print(f"wrote {alignment_figure(result, args.plot, log.header_attitude_deg)}")
+    return 0
+
+
 def main(argv=None) -> int:
     """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
     parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__)
@@ -327,6 +366,15 @@ def main(argv=None) -> int:
     p.add_argument("--k-e", type=float, default=0.554, help="nominal angular gain k_e")
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     p.set_defaults(func=cmd_discover)
+
+    p = sub.add_parser("align", help="stationary coarse + fine alignment of an IMU log")
+    p.add_argument("imu_log", help="IMU log file")
+    p.add_argument("--format", default="psins", help="log format (psins)")
+    p.add_argument("--json", default=None, help="write heading/pitch/roll (+ _std_deg) here")
+    p.add_argument("--plot", default=None, help="write the convergence figure here (PNG)")
+    p.add_argument("--coarse", type=float, default=60.0, help="coarse-alignment span [s]")
+    p.add_argument("--step", type=float, default=1.0, help="Kalman filter step [s]")
+    p.set_defaults(func=cmd_align)
 
     p = sub.add_parser("simulate", help="simulate a bench plan on a preset gyro")
     p.add_argument("--preset", default="tvg3", choices=PRESETS)

@@ -136,3 +136,48 @@ def error_vs_temperature(table: dict, path: str, seed: dict | None = None) -> st
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def alignment_figure(result, path: str, header_attitude_deg=None) -> str:
+    """Heading, pitch and roll during fine alignment with their 1σ bands
+    ([`AlignmentResult`][hrgjax.ins.alignment.AlignmentResult]); the file header's attitude
+    as a dashed line when given. **Returns** the path written."""
+    plt = _plt()
+    t = np.asarray(result.t) - float(result.t[0])
+    hist, std = np.asarray(result.history_deg), np.asarray(result.std_history_deg)
+    fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+    names = ("heading", "pitch", "roll")
+    for k, ax in enumerate(axes):
+        ax.plot(t / 60, hist[:, k], lw=1.2, label="fine alignment")
+        ax.fill_between(t / 60, hist[:, k] - std[:, k], hist[:, k] + std[:, k], alpha=0.25,
+                        label="±1σ (filter)")  # fmt: skip
+        if header_attitude_deg is not None:
+            ref = header_attitude_deg[{0: 2, 1: 0, 2: 1}[k]]
+            ax.axhline(ref, ls="--", color="k", lw=0.8, label="file header")
+        final = hist[-1, k]
+        pad = max(4 * std[-1, k], 0.05)
+        ax.set_ylim(final - 10 * pad, final + 10 * pad)
+        ax.set_ylabel(f"{names[k]} [°]")
+    axes[0].legend(loc="lower right", fontsize=8)
+    axes[-1].set_xlabel("time [min]")
+    fig.suptitle("Stationary alignment: coarse start, Kalman fine alignment")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def schuler_figure(t, position_m: dict, path: str) -> str:
+    """Position-error histories [m] (label → (N,) array) against time [s]."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for label, y in position_m.items():
+        ax.plot(np.asarray(t) / 3600, np.asarray(y), label=label)
+    ax.set_xlabel("time [h]")
+    ax.set_ylabel("position error [m]")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -142,7 +142,7 @@ def _mechanise(traj, c0, hours):
     h = traj.h[0]
 
     def field(t, y, args):
-        lat, lon, v, c = y[0], y[1], y[2:5], y[5:14].reshape(3, 3)
+        lat, v, c = y[0], y[2:5], y[5:14].reshape(3, 3)
         w_ie, w_en = earth.earth_rate(lat), earth.transport_rate(lat, h, v)
         skew = lambda w: jnp.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
         dc = c @ skew(w_b) - skew(w_ie + w_en) @ c

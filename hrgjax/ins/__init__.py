@@ -3,4 +3,6 @@ models, and stationary initial alignment (MISSION.md §2–§3, PHYSICS.md §12)
 
 from . import constants as constants
 from . import strapdown as strapdown
+from . import alignment as alignment
+from . import platform as platform
 from . import trajectory as trajectory

@@ -1,0 +1,324 @@
+r"""Stationary initial alignment of a strapdown IMU: coarse (analytic levelling +
+gyrocompassing) then fine (Kalman filter on zero velocity), and the PSINS log loader.
+
+Frames: navigation NED, body FRD (x forward, y right, z down); heading clockwise from north.
+
+**Coarse** ([`coarse_align`][hrgjax.ins.alignment.coarse_align]): the mean specific force
+and angular rate over the first `coarse_s` seconds against their NED values
+$f^n = (0, 0, -g)$, $\omega_{ie}^n = \omega_{ie}(\cos\varphi, 0, -\sin\varphi)$, by TRIAD.
+
+**Fine** ([`fine_align`][hrgjax.ins.alignment.fine_align]): the attitude and velocity are
+integrated from the increments; every `step_s` a 12-state Kalman filter — velocity error,
+attitude error φ, gyro and accelerometer biases, the stationary φ-angle model of
+[`strapdown`][hrgjax.ins.strapdown] discretised by Van Loan — takes the computed velocity as
+a measurement of its error (the vehicle is at rest) and its estimate is fed back (attitude,
+velocity, biases) and reset. East gyro bias and level accelerometer biases are
+unobservable, so the attitude converges to the analytic limits of PHYSICS.md §12
+($\phi_E = -\nabla_N/g$, $\phi_N = \nabla_E/g$,
+$\phi_D = \varepsilon_E/(\omega_{ie}\cos\varphi) - (\nabla_E/g)\tan\varphi$).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._x64 import require_x64
+from ..kalman import Gaussian, update, van_loan
+from ..units import ARCSEC, DEG, DEG_PER_H
+from .constants import OMEGA_IE, WGS84, earth_rate_ned
+from .strapdown import _matrices_at, augmented
+from .trajectory import dcm_to_euler
+
+
+class ImuLog(eqx.Module):
+    """An IMU record as increments in the body frame (FRD).
+
+    **Fields:** `t` (N,) [s] (end of each increment); `dtheta` (N, 3) [rad]; `dvel` (N, 3)
+    [m/s]; `lat`, `lon` [rad], `h` [m]; `header_attitude_deg`: (pitch, roll, heading) from
+    the file, heading clockwise from north (or `None`)."""
+
+    t: jax.Array
+    dtheta: jax.Array
+    dvel: jax.Array
+    lat: float = eqx.field(static=True)
+    lon: float = eqx.field(static=True, default=0.0)
+    h: float = eqx.field(static=True, default=0.0)
+    header_attitude_deg: tuple | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        t = np.asarray(self.t)
+        for name in ("dtheta", "dvel"):
+            a = np.asarray(getattr(self, name))
+            if a.shape != (t.size, 3):
+                raise ValueError(f"ImuLog.{name} must have shape ({t.size}, 3); got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(
+                    f"ImuLog.{name} must be finite (row {np.argwhere(~np.isfinite(a))[0, 0]})"
+                )
+        d = np.diff(t)
+        if np.any(d <= 0):
+            raise ValueError(
+                f"ImuLog.t must be strictly increasing (row {int(np.argmax(d <= 0)) + 1})"
+            )
+        if not -math.pi / 2 <= self.lat <= math.pi / 2:
+            raise ValueError(f"ImuLog.lat must be in [-π/2, π/2] rad; got {self.lat}")
+
+    @property
+    def dt(self) -> float:
+        """Median sampling interval [s]."""
+        return float(np.median(np.diff(np.asarray(self.t))))
+
+
+def load_psins(path) -> ImuLog:
+    """Read a PSINS-format text IMU log (`../shared/data/README.md`): `%` comments, three
+    header lines (attitude [°] and velocity; lat [°], lon [°], h [m], t0 [s], interval [ms],
+    g; increment units: gyro [arcsec] ×3, accelerometer [µg·s] ×3), then one line of six
+    integer increments per sample, axes right–forward–up. Returned in FRD with the heading
+    converted from PSINS's counter-clockwise yaw to clockwise from north.
+
+    **Raises:** `ValueError` naming the line for a malformed header or sample row."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no IMU log at {path}")
+    lines = [
+        ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("%")
+    ]
+    if len(lines) < 4:
+        raise ValueError(
+            f"{path}: a PSINS log needs 3 header lines and samples; got {len(lines)} lines"
+        )
+    head = []
+    for k in range(3):
+        try:
+            vals = [float(x) for x in lines[k].replace(",", " ").split()]
+        except ValueError as err:
+            raise ValueError(f"{path}: header line {k + 1} is not numeric: {lines[k]!r}") from err
+        if len(vals) != 6:
+            raise ValueError(f"{path}: header line {k + 1} must hold 6 numbers; got {len(vals)}")
+        head.append(vals)
+    (pitch, roll, yaw, *_), (lat, lon, h, t0, dt_ms, g), units = head
+    if not dt_ms > 0:
+        raise ValueError(f"{path}: the sampling interval (header line 2, field 5) must be > 0 ms")
+    try:
+        raw = np.loadtxt(lines[3:], dtype=float, ndmin=2)
+    except ValueError as err:
+        raise ValueError(f"{path}: sample rows must hold 6 numbers each ({err})") from err
+    if raw.shape[1] != 6:
+        raise ValueError(f"{path}: sample rows must hold 6 numbers; got {raw.shape[1]}")
+    gyro_rfu = raw[:, :3] * np.asarray(units[:3]) * ARCSEC
+    acc_rfu = raw[:, 3:] * np.asarray(units[3:]) * 1e-6 * g
+    rfu_to_frd = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    n = raw.shape[0]
+    t = t0 + dt_ms * 1e-3 * np.arange(1, n + 1)
+    return ImuLog(
+        jnp.asarray(t),
+        jnp.asarray(gyro_rfu @ rfu_to_frd.T),
+        jnp.asarray(acc_rfu @ rfu_to_frd.T),
+        lat * DEG,
+        lon * DEG,
+        h,
+        (pitch, roll, -yaw),
+    )
+
+
+def coarse_align(f_b, w_b, lat):
+    """Body-to-NED matrix from the mean specific force `f_b` [m/s²] and angular rate `w_b`
+    [rad/s] of a stationary IMU at latitude `lat` [rad] (TRIAD)."""
+    f_n = jnp.array([0.0, 0.0, -1.0])
+    w_n = earth_rate_ned(lat)
+
+    def triad(f, w):
+        a = f / jnp.linalg.norm(f)
+        b = jnp.cross(f, w)
+        b = b / jnp.linalg.norm(b)
+        return jnp.stack([a, b, jnp.cross(a, b)], axis=-1)
+
+    return triad(f_n, w_n) @ triad(f_b, w_b).T
+
+
+def _skew(w):
+    z = jnp.zeros_like(w[0])
+    return jnp.array([[z, -w[2], w[1]], [w[2], z, -w[0]], [-w[1], w[0], z]])
+
+
+def _rotation(v):
+    """exp([v×]) (Rodrigues)."""
+    a2 = v @ v
+    a = jnp.sqrt(a2 + 1e-300)
+    small = a2 < 1e-12
+    s = jnp.where(small, 1.0 - a2 / 6.0, jnp.sin(a) / a)
+    c = jnp.where(small, 0.5 - a2 / 24.0, (1.0 - jnp.cos(a)) / (a2 + 1e-300))
+    k = _skew(v)
+    return jnp.eye(3) + s * k + c * (k @ k)
+
+
+class AlignmentResult(eqx.Module):
+    """Attitude after alignment and its history.
+
+    **Fields:** `heading_deg` (clockwise from north), `pitch_deg`, `roll_deg` and their
+    `*_std_deg` (1σ); `t` (K,) [s] and `history_deg` (K, 3) (heading, pitch, roll),
+    `std_history_deg` (K, 3); `coarse_deg` (heading, pitch, roll) of the coarse stage;
+    `biases`: estimated gyro [rad/s] and accelerometer [m/s²] biases (6,); `c_bn`: the
+    final body-to-NED matrix."""
+
+    heading_deg: float
+    pitch_deg: float
+    roll_deg: float
+    heading_std_deg: float
+    pitch_std_deg: float
+    roll_std_deg: float
+    t: jax.Array
+    history_deg: jax.Array
+    std_history_deg: jax.Array
+    coarse_deg: tuple
+    biases: jax.Array
+    c_bn: jax.Array
+
+    def to_json(self) -> dict:
+        """The DESIGN.md keys (and the coarse result)."""
+        keys = ("heading", "pitch", "roll")
+        out = {f"{k}_deg": float(getattr(self, f"{k}_deg")) for k in keys}
+        out |= {f"{k}_std_deg": float(getattr(self, f"{k}_std_deg")) for k in keys}
+        out["coarse"] = dict(
+            zip((f"{k}_deg" for k in keys), map(float, self.coarse_deg), strict=True)
+        )
+        return out
+
+
+def _euler_deg(c):
+    roll, pitch, heading = dcm_to_euler(c)
+    return jnp.stack([jnp.mod(heading / DEG, 360.0), pitch / DEG, roll / DEG])
+
+
+def _euler_std(c, p_phi):
+    """1σ of (heading, pitch, roll) [°] for attitude error covariance `p_phi` (φ = rotation
+    of the computed frame, C_true = (I + [φ×]) C)."""
+    jac = jax.jacfwd(lambda phi: jnp.stack(dcm_to_euler(_rotation(phi) @ c)[::-1]))(jnp.zeros(3))
+    cov = jac @ p_phi @ jac.T
+    return jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0)) / DEG
+
+
+def fine_align(
+    log: ImuLog,
+    c0,
+    *,
+    step_s: float = 1.0,
+    start_s: float = 0.0,
+    arw: float = 0.01 * DEG / 60.0,
+    vrw: float = 1e-4,
+    velocity_noise: float = 0.01,
+    gyro_bias_std: float = 0.05 * DEG_PER_H,
+    accel_bias_std: float = 1e-3,
+    attitude_std_deg=(0.5, 0.5, 5.0),
+):
+    """Kalman fine alignment from the body-to-NED start `c0` (module docstring).
+
+    **Arguments:** `step_s`: filter step [s] (increments summed over it); `start_s`: time
+    from the log's start at which the fine stage begins; `arw` [rad/√s], `vrw` [m/s/√s]:
+    sensor white noise; `velocity_noise` [m/s]: measurement noise of the zero-velocity
+    update (sway of a parked vehicle); bias and initial attitude standard deviations (level,
+    level, heading) [°].
+
+    **Returns:** `(t (K,), C_bn (K, 3, 3), P (K, 12, 12), biases (6,))`."""
+    dt = log.dt
+    m = max(1, int(round(step_s / dt)))
+    i0 = int(round(start_s / dt))
+    n_blocks = (log.t.shape[0] - i0) // m
+    if n_blocks < 2:
+        raise ValueError(f"the log is too short for fine alignment with step_s={step_s}")
+    sl = slice(i0, i0 + n_blocks * m)
+    dth = log.dtheta[sl].reshape(n_blocks, m, 3).sum(1)
+    dv = log.dvel[sl].reshape(n_blocks, m, 3).sum(1)
+    t = log.t[sl].reshape(n_blocks, m)[:, -1]
+    return _fine(
+        jnp.asarray(c0), dth, dv, t, jnp.asarray(m * dt), log.lat, log.h,
+        jnp.asarray([arw, vrw, velocity_noise, gyro_bias_std, accel_bias_std]),
+        jnp.asarray(attitude_std_deg) * DEG,
+    )  # fmt: skip
+
+
+@eqx.filter_jit
+def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std):
+    arw, vrw, vnoise, bg_std, ba_std = (noise[i] for i in range(5))
+    lat_a, h_a = jnp.asarray(lat), jnp.asarray(h)
+    g_n = WGS84.gravity_ned(lat_a, h_a)
+    w_ie = earth_rate_ned(lat_a)
+    z3 = jnp.zeros(3)
+
+    def model(c):
+        f_n = -g_n
+        f, gg, ga = _matrices_at(WGS84, False, lat_a, h_a, z3, c, f_n)
+        fa = augmented(f, gg, ga)[3:, 3:]  # drop the (known) position states
+        gw = jnp.concatenate([gg[3:], jnp.zeros((6, 3))])
+        aw = jnp.concatenate([ga[3:], jnp.zeros((6, 3))])
+        q = arw**2 * gw @ gw.T + vrw**2 * aw @ aw.T
+        return van_loan(fa, q, h_step)
+
+    p0 = jnp.diag(
+        jnp.concatenate(
+            [jnp.full(3, 0.1) ** 2, att_std**2, jnp.full(3, bg_std**2), jnp.full(3, ba_std**2)]
+        )
+    )
+    hm = jnp.zeros((3, 12)).at[:, :3].set(jnp.eye(3))
+    r = jnp.eye(3) * vnoise**2
+
+    def step(carry, inp):
+        c, v, bias, p = carry
+        dth_k, dv_k = inp
+        dth_k = dth_k - bias[:3] * h_step
+        dv_k = dv_k - bias[3:] * h_step
+        c_new = _rotation(-w_ie * h_step) @ c @ _rotation(dth_k)
+        c_mid = 0.5 * (c + c_new)
+        v = v + c_mid @ dv_k + (g_n - 2.0 * jnp.cross(w_ie, v)) * h_step
+        phi_k, qd = model(c_new)
+        prior = Gaussian(jnp.zeros(12), phi_k @ p @ phi_k.T + qd)
+        post, _, _, _ = update(prior, v, hm, r)
+        x = post.x
+        c_new = _rotation(x[3:6]) @ c_new  # C ← (I + [φ×]) Ĉ
+        v = v - x[:3]
+        bias = bias + x[6:]
+        return (c_new, v, bias, post.P), (c_new, post.P)
+
+    (_, _, bias, _), (cs, ps) = jax.lax.scan(step, (c0, z3, jnp.zeros(6), p0), (dth, dv))
+    return t, cs, ps, bias
+
+
+def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
+    """Coarse alignment on the first `coarse_s` seconds, then fine alignment over the whole
+    log from that start (module docstring; `fine_kw` go to
+    [`fine_align`][hrgjax.ins.alignment.fine_align]).
+
+    **Raises:** `ValueError` when the log is shorter than `coarse_s` or not stationary
+    enough to level (specific force far from g)."""
+    require_x64("ins.alignment.align")
+    dt = log.dt
+    n = int(round(coarse_s / dt))
+    if not (coarse_s > 0) or n > log.t.shape[0] or n < 1:
+        raise ValueError(
+            f"coarse_s must be in (0, {float(log.t[-1] - log.t[0]):.0f}] s; got {coarse_s}"
+        )
+    f_b = jnp.sum(log.dvel[:n], 0) / (n * dt)
+    w_b = jnp.sum(log.dtheta[:n], 0) / (n * dt)
+    g = float(WGS84.gravity(log.lat, log.h))
+    if abs(float(jnp.linalg.norm(f_b)) - g) > 0.05 * g:
+        raise ValueError(
+            f"mean specific force {float(jnp.linalg.norm(f_b)):.3f} m/s² over the first "
+            f"{coarse_s} s is not g ({g:.3f}): is the IMU stationary, are the units right?"
+        )
+    c0 = coarse_align(f_b, w_b, log.lat)
+    coarse = tuple(float(x) for x in _euler_deg(c0))
+    t, cs, ps, bias = fine_align(log, c0, start_s=0.0, **fine_kw)
+    hist = jax.vmap(_euler_deg)(cs)
+    std = jax.vmap(_euler_std)(cs, ps[:, 3:6, 3:6])
+    last, s = np.asarray(hist[-1]), np.asarray(std[-1])
+    return AlignmentResult(
+        float(last[0]), float(last[1]), float(last[2]),
+        float(s[0]), float(s[1]), float(s[2]),
+        t, hist, std, coarse, bias, cs[-1],
+    )  # fmt: skip

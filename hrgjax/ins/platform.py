@@ -1,0 +1,237 @@
+r"""The platform INS error model of seed 002, eqs. (1)–(6), with information faults.
+
+One INS has 17 states (geographic trihedron ENH, equatorial trihedron ξ₃η₃ζ₃):
+
+| # | state | meaning |
+|---|---|---|
+| 0–3 | δs_N, δV_N, α_x, Δa_y | north channel: displacement [m], velocity [m/s], vertical error [rad], "north" accelerometer error [rad = g-units] |
+| 4–7 | δs_E, δV_E, α_y, Δa_x | east channel |
+| 8–10 | δs_H, δV_H, Δa_z | vertical channel |
+| 11–13 | δ_ξ, δ_ζ, δ_η | equatorial-trihedron errors [rad] |
+| 14–16 | Δω_ξ, Δω_ζ, Δω_η | gyro drifts [rad/s] |
+
+$$\begin{aligned}
+\delta\dot V_N &= g\alpha_x + g\,u_{a,y}e_{a,y} + g\Delta a_y, &
+\dot\alpha_x &= -\delta V_N/R + \dot\delta_\xi,\\
+\delta\dot V_E &= -g\alpha_y + g\,u_{a,x}e_{a,x} + g\Delta a_x, &
+\dot\alpha_y &= \delta V_E/R + \dot\delta_y,\quad \delta_y = -\delta_\zeta\sin\varphi + \delta_\eta\cos\varphi,\\
+\delta\dot V_H &= g\Delta a_z + g\,u_{a,z}e_{a,z}, &
+\dot\delta_\xi &= -u\,\delta_\zeta + \Delta\omega_\xi + u_\xi e_{\omega,\xi},\\
+\dot\delta_\zeta &= u\,\delta_\xi + \Delta\omega_\zeta + u_\zeta e_{\omega,\zeta}, &
+\dot\delta_\eta &= \Delta\omega_\eta + u_\eta e_{\omega,\eta},
+\end{aligned}$$
+
+$\delta\dot s = \delta V$ per channel, $\Delta\dot a = -\Delta a/\tau_a + g_a w$,
+$\Delta\dot\omega = -\Delta\omega/\tau_r + g_r w$ (first-order Markov; here parameterised by
+their stationary standard deviations σ, $g = \sigma\sqrt{2/\tau}$), u = Earth rate. Navigation
+errors, eq. (6): latitude $\delta\varphi = -\alpha_x + \delta_\xi$, departure
+$\delta w = \delta\lambda\cos\varphi = \alpha_y - \delta_y$, heading
+$\alpha_z = \alpha_y\tan\varphi + \delta_\zeta/\cos\varphi$.
+
+Notes on the seed's OCR: eq. (2)'s Markov line reads "Δα̇_x" and its force term "gΔα_z"
+(both the east accelerometer error Δa_x), eq. (3) lacks the g of "gΔa_z", eq. (1) prints
+"ΔV̈_N" for $\delta\dot V_N$, and eq. (6)'s heading ends in a stray "1/cos φ" — the
+ζ-axis term $\delta_\zeta/\cos\varphi$ (the vertical component of the equatorial
+trihedron's error, $\delta_\eta\sin\varphi + \delta_\zeta\cos\varphi = \delta_y\tan\varphi +
+\delta_\zeta/\cos\varphi$, plus $\delta\lambda\sin\varphi$). A specific force beyond
+gravity (the thesis's 3 g and 10 g manoeuvres) adds the cross-coupling $f\times p$ with
+$p = (\alpha_x, \alpha_y, \alpha_z)$ about (E, N, H).
+
+Faults ("information faults"): constant magnitudes e switched on at `t_fault` (u = 1 from
+the first sample at or after it). Stochastic simulation is the exact discretisation of the
+linear SDE (Van Loan), driven by explicit PRNG keys; `vmap` over keys for Monte Carlo.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._x64 import require_x64
+from ..kalman import discretise_input, van_loan
+from .constants import A, G0, OMEGA_IE
+
+STATES = (
+    "ds_n", "dv_n", "alpha_x", "da_y",
+    "ds_e", "dv_e", "alpha_y", "da_x",
+    "ds_h", "dv_h", "da_z",
+    "d_xi", "d_zeta", "d_eta",
+    "dw_xi", "dw_zeta", "dw_eta",
+)  # fmt: skip
+"""The 17 states of one INS, in order."""
+FAULTS = ("accel_x", "accel_y", "accel_z", "gyro_xi", "gyro_zeta", "gyro_eta")
+"""Sensors a fault can hit: accelerometers along E (x), N (y), H (z); gyros of ξ, ζ, η."""
+NAV = ("dlat", "departure", "heading")
+"""Navigation-parameter errors of eq. (6) [rad]."""
+
+_I = {name: i for i, name in enumerate(STATES)}
+
+
+class PlatformINS(eqx.Module):
+    """Parameters of one platform INS (module docstring). All SI; angles in rad.
+
+    **Arguments:** `lat` [rad]; `tau_a`, `tau_r` [s]: correlation times of the accelerometer
+    and gyro errors; `accel_sigma` [g-units, i.e. rad] and `gyro_sigma` [rad/s]: their
+    stationary standard deviations (nominal 1e-7 as in the thesis); `specific_force`
+    (3,) [m/s²]: specific force beyond gravity in (E, N, H) (0 for a stationary object);
+    `g`, `radius`, `earth_rate`."""
+
+    lat: jax.Array = eqx.field(converter=jnp.asarray, default=0.7853981633974483)
+    tau_a: jax.Array = eqx.field(converter=jnp.asarray, default=3600.0)
+    tau_r: jax.Array = eqx.field(converter=jnp.asarray, default=3600.0)
+    accel_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=1e-7)
+    gyro_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=1e-7)
+    specific_force: jax.Array = eqx.field(converter=jnp.asarray, default=(0.0, 0.0, 0.0))
+    g: float = eqx.field(static=True, default=G0)
+    radius: float = eqx.field(static=True, default=A)
+    earth_rate: float = eqx.field(static=True, default=OMEGA_IE)
+
+    def matrices(self):
+        """`(F (17, 17), B (17, 6), G (17, 6))`: dynamics, fault input (per unit fault in
+        `FAULTS` order) and unit white-noise input (accelerometers x, y, z; gyros ξ, ζ, η)."""
+        i, g, r, u = _I, self.g, self.radius, self.earth_rate
+        s, c = jnp.sin(self.lat), jnp.cos(self.lat)
+        f = jnp.zeros((17, 17))
+        b = jnp.zeros((17, 6))
+        # equatorial trihedron rates as rows (state part, fault part)
+        xi_dot = jnp.zeros(17).at[i["d_zeta"]].set(-u).at[i["dw_xi"]].set(1.0)
+        zeta_dot = jnp.zeros(17).at[i["d_xi"]].set(u).at[i["dw_zeta"]].set(1.0)
+        eta_dot = jnp.zeros(17).at[i["dw_eta"]].set(1.0)
+        y_dot = -s * zeta_dot + c * eta_dot
+        bx = jnp.zeros(6).at[3].set(1.0)
+        bz = jnp.zeros(6).at[4].set(1.0)
+        by = -s * bz + c * jnp.zeros(6).at[5].set(1.0)
+        # heading error α_z = α_y tan φ + δ_ζ / cos φ as a row
+        alpha_z = jnp.zeros(17).at[i["alpha_y"]].set(s / c).at[i["d_zeta"]].set(1.0 / c)
+        fe, fn, fh = self.specific_force[0], self.specific_force[1], self.specific_force[2]
+        # north channel
+        f = f.at[i["ds_n"], i["dv_n"]].set(1.0)
+        f = f.at[i["dv_n"], i["alpha_x"]].add(g + fh).at[i["dv_n"], i["da_y"]].set(g)
+        f = f.at[i["dv_n"]].add(-fe * alpha_z)
+        b = b.at[i["dv_n"], 1].set(g)
+        f = f.at[i["alpha_x"]].set(xi_dot).at[i["alpha_x"], i["dv_n"]].add(-1.0 / r)
+        b = b.at[i["alpha_x"]].set(bx)
+        # east channel
+        f = f.at[i["ds_e"], i["dv_e"]].set(1.0)
+        f = f.at[i["dv_e"], i["alpha_y"]].add(-(g + fh)).at[i["dv_e"], i["da_x"]].set(g)
+        f = f.at[i["dv_e"]].add(fn * alpha_z)
+        b = b.at[i["dv_e"], 0].set(g)
+        f = f.at[i["alpha_y"]].set(y_dot).at[i["alpha_y"], i["dv_e"]].add(1.0 / r)
+        b = b.at[i["alpha_y"]].set(by)
+        # vertical channel
+        f = f.at[i["ds_h"], i["dv_h"]].set(1.0).at[i["dv_h"], i["da_z"]].set(g)
+        f = f.at[i["dv_h"], i["alpha_y"]].add(fe).at[i["dv_h"], i["alpha_x"]].add(-fn)
+        b = b.at[i["dv_h"], 2].set(g)
+        # equatorial trihedron
+        f = f.at[i["d_xi"]].set(xi_dot).at[i["d_zeta"]].set(zeta_dot).at[i["d_eta"]].set(eta_dot)
+        b = b.at[i["d_xi"], 3].set(1.0).at[i["d_zeta"], 4].set(1.0).at[i["d_eta"], 5].set(1.0)
+        # first-order Markov sensor errors
+        noise = jnp.zeros((17, 6))
+        for k, name in enumerate(("da_x", "da_y", "da_z")):
+            f = f.at[i[name], i[name]].set(-1.0 / self.tau_a)
+            noise = noise.at[i[name], k].set(self.accel_sigma * jnp.sqrt(2.0 / self.tau_a))
+        for k, name in enumerate(("dw_xi", "dw_zeta", "dw_eta")):
+            f = f.at[i[name], i[name]].set(-1.0 / self.tau_r)
+            noise = noise.at[i[name], 3 + k].set(self.gyro_sigma * jnp.sqrt(2.0 / self.tau_r))
+        return f, b, noise
+
+    def navigation_errors(self, x):
+        """Eq. (6): `(..., 3)` latitude error, departure δλ cos φ and heading error [rad]
+        from states `x` (..., 17)."""
+        s, c = jnp.sin(self.lat), jnp.cos(self.lat)
+        i = _I
+        dy = -x[..., i["d_zeta"]] * s + x[..., i["d_eta"]] * c
+        dlat = -x[..., i["alpha_x"]] + x[..., i["d_xi"]]
+        dep = x[..., i["alpha_y"]] - dy
+        head = x[..., i["alpha_y"]] * s / c + x[..., i["d_zeta"]] / c
+        return jnp.stack([dlat, dep, head], axis=-1)
+
+    def stationary_covariance(self):
+        """17×17 covariance with the Markov sensor errors at their stationary variance and
+        every navigation error zero (the state just after alignment)."""
+        d = jnp.zeros(17)
+        for name in ("da_x", "da_y", "da_z"):
+            d = d.at[_I[name]].set(self.accel_sigma**2)
+        for name in ("dw_xi", "dw_zeta", "dw_eta"):
+            d = d.at[_I[name]].set(self.gyro_sigma**2)
+        return jnp.diag(d)
+
+    def discretise(self, dt):
+        r"""Exact discretisation over `dt`: `(Phi, Gamma, Qd)` — transition, zero-order-hold
+        fault input and process-noise covariance."""
+        f, b, noise = self.matrices()
+        phi, qd = van_loan(f, noise @ noise.T, dt)
+        _, gam = discretise_input(f, b, dt)
+        return phi, gam, qd
+
+
+class Fault(eqx.Module):
+    """An information fault: magnitudes `e` (6,) in `FAULTS` order (accelerometers in
+    g-units, gyros in rad/s) switched on at `t_fault` [s]."""
+
+    e: jax.Array = eqx.field(converter=jnp.asarray, default=(0.0,) * 6)
+    t_fault: jax.Array = eqx.field(converter=jnp.asarray, default=jnp.inf)
+
+    @classmethod
+    def on(cls, sensor: str, size: float, t_fault: float) -> Fault:
+        """A single fault of `size` in `sensor` (one of `FAULTS`) from `t_fault`."""
+        if sensor not in FAULTS:
+            raise ValueError(f"unknown sensor {sensor!r}; choose from {FAULTS}")
+        return cls(jnp.zeros(6).at[FAULTS.index(sensor)].set(size), t_fault)
+
+
+def simulate(
+    ins: PlatformINS,
+    *,
+    dt: float,
+    n_steps: int,
+    key: jax.Array | None,
+    fault: Fault | None = None,
+    x0=None,
+):
+    """Simulate one platform INS (module docstring).
+
+    **Arguments:** `dt` [s], `n_steps`; `key`: PRNG key for the sensor noise (`None`: the
+    noise-free response); `fault`; `x0` (17,) initial state (default: Markov sensor errors
+    drawn from their stationary law when `key` is given, else 0).
+
+    **Returns:** `(t (n+1,), x (n+1, 17), nav (n+1, 3))`."""
+    require_x64("ins.platform.simulate")
+    if not (dt > 0):
+        raise ValueError(f"dt must be > 0 s; got {dt}")
+    if int(n_steps) < 1:
+        raise ValueError(f"n_steps must be >= 1; got {n_steps}")
+    fault = Fault() if fault is None else fault
+    return _simulate(ins, jnp.asarray(float(dt)), int(n_steps), key, fault, x0)
+
+
+def _sqrtm(m):
+    w, v = jnp.linalg.eigh(m)
+    return v * jnp.sqrt(jnp.clip(w, 0.0))[None, :]
+
+
+@eqx.filter_jit
+def _simulate(ins, dt, n_steps, key, fault, x0):
+    phi, gam, qd = ins.discretise(dt)
+    t = jnp.arange(n_steps + 1, dtype=dt.dtype) * dt
+    if key is None:
+        x0 = jnp.zeros(17) if x0 is None else jnp.asarray(x0)
+        w = jnp.zeros((n_steps, 17))
+        lq = jnp.zeros((17, 17))
+    else:
+        k0, kw = jax.random.split(key)
+        if x0 is None:
+            x0 = _sqrtm(ins.stationary_covariance()) @ jax.random.normal(k0, (17,))
+        w = jax.random.normal(kw, (n_steps, 17))
+        lq = _sqrtm(qd)
+    on = (t[:-1] >= fault.t_fault).astype(t.dtype)
+
+    def step(x, inp):
+        wk, uk = inp
+        x = phi @ x + gam @ (fault.e * uk) + lq @ wk
+        return x, x
+
+    _, xs = jax.lax.scan(step, x0, (w, on))
+    xs = jnp.concatenate([x0[None], xs])
+    return t, xs, ins.navigation_errors(xs)

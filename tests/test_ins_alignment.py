@@ -1,0 +1,171 @@
+"""INS: stationary alignment (analytic limits, the real PSINS log), the PSINS loader, the
+`hrgjax align` CLI and the platform error model of seed 002 with faults."""
+
+import json
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hrgjax.cli import main
+from hrgjax.ins import alignment as al
+from hrgjax.ins import constants as C
+from hrgjax.ins import platform as pf
+from hrgjax.ins import trajectory as tr
+
+DEG = np.pi / 180
+PSINS = Path(__file__).resolve().parents[2] / "shared" / "data" / "psins_lasergyro.imu"
+
+
+def _stationary_log(lat, eps_n, nab_n, duration_s=1800.0):
+    traj = tr.stationary(
+        lat, heading_deg=30.0, pitch_deg=2.0, roll_deg=-1.0, duration_s=duration_s, dt=1.0
+    )
+    f_b, w_b = traj.imu()
+    c = np.asarray(traj.c_bn[0])
+    dth = np.asarray(w_b[1:]) + c.T @ eps_n
+    dv = np.asarray(f_b[1:]) + c.T @ nab_n
+    return al.ImuLog(traj.t[1:], jnp.asarray(dth), jnp.asarray(dv), lat * DEG), c
+
+
+def test_alignment_converges_to_the_analytic_limits():
+    """Injected biases: the attitude error converges to φ_E = −∇_N/g, φ_N = ∇_E/g,
+    φ_D = ε_E/(ω_ie cos φ) − (∇_E/g) tan φ (PHYSICS.md §12)."""
+    lat = 45.0
+    eps = np.array([0.005, 0.01, 0.02]) * DEG / 3600  # N, E, D gyro bias [rad/s]
+    nab = np.array([1.0, -0.5, 2.0]) * 1e-3 * C.G0  # accelerometer bias [m/s²]
+    log, c = _stationary_log(lat, eps, nab)
+    r = al.align(log, arw=1e-4 * DEG / 60, vrw=1e-5, velocity_noise=1e-3)
+    m = np.eye(3) - np.asarray(r.c_bn) @ c.T  # = [φ×] for Ĉ = (I − [φ×]) C
+    phi = np.array([m[2, 1], m[0, 2], m[1, 0]])
+    g = float(C.gravity(lat * DEG))
+    want = [nab[1] / g, -nab[0] / g, eps[1] / (C.OMEGA_IE * np.cos(lat * DEG)) - nab[1] / g]
+    np.testing.assert_allclose(phi, want, rtol=0.01)
+    # 0.01 °/h east drift at 45° alone → 0.0539° heading
+    assert np.degrees(eps[1] / (C.OMEGA_IE * np.cos(lat * DEG))) == pytest.approx(0.0539, abs=1e-4)
+    # the estimate's uncertainty shrinks; heading std ends at the unobservable floor
+    std = np.asarray(r.std_history_deg)
+    assert std[-1, 0] < 0.2 * std[0, 0]
+    floor = np.degrees(0.05 * DEG / 3600 / (C.OMEGA_IE * np.cos(lat * DEG)))
+    assert r.heading_std_deg == pytest.approx(floor, rel=0.1)
+
+
+def test_coarse_alignment_is_exact_for_ideal_data():
+    log, c = _stationary_log(30.0, np.zeros(3), np.zeros(3), duration_s=120.0)
+    f_b = jnp.mean(log.dvel, 0)
+    w_b = jnp.mean(log.dtheta, 0)
+    np.testing.assert_allclose(al.coarse_align(f_b, w_b, 30 * DEG), c, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def psins_log():
+    if not PSINS.is_file():
+        pytest.skip(f"the shared PSINS log is not at {PSINS}")
+    return al.load_psins(PSINS)
+
+
+def test_psins_loader_reads_the_real_log(psins_log):
+    log = psins_log
+    assert log.t.shape[0] == 184718
+    assert log.dt == pytest.approx(0.01, rel=1e-9)
+    assert log.header_attitude_deg[2] == pytest.approx(90.6)  # −90.6° CCW → clockwise
+    g = float(C.gravity(log.lat))
+    f = np.asarray(jnp.sum(log.dvel, 0)) / float(log.t[-1] - log.t[0] + log.dt)
+    assert np.linalg.norm(f) == pytest.approx(g, rel=2e-3)
+    assert f[2] < 0  # FRD: the specific force at rest points up, −z
+    w = np.asarray(jnp.sum(log.dtheta, 0)) / float(log.t[-1] - log.t[0] + log.dt)
+    assert np.linalg.norm(w) == pytest.approx(C.OMEGA_IE, rel=0.05)
+
+
+def test_alignment_on_the_real_psins_log(psins_log):
+    """`../shared/data/README.md`: heading within 2.5° of the header's +90.6° and within three
+    of its own standard deviations; the uncertainty shrinks with time; small tilt."""
+    r = al.align(psins_log)
+    assert abs(r.heading_deg - 90.6) < 2.5
+    assert abs(r.heading_deg - 90.6) < 3 * r.heading_std_deg
+    std = np.asarray(r.std_history_deg[:, 0])
+    assert std[-1] < std[len(std) // 10] < std[0]
+    assert abs(r.pitch_deg) < 2 and abs(r.roll_deg) < 2
+
+
+def test_align_cli_writes_the_design_keys(psins_log, tmp_path, capsys):
+    out = tmp_path / "a.json"
+    assert main(["align", str(PSINS), "--format", "psins", "--json", str(out)]) == 0
+    rep = json.loads(out.read_text())
+    for k in ("heading", "pitch", "roll"):
+        assert isinstance(rep[f"{k}_deg"], float) and rep[f"{k}_std_deg"] > 0
+    assert "heading" in capsys.readouterr().out
+    bad = tmp_path / "bad.imu"
+    bad.write_text("% x\n0 0 0 0 0 0\n34 108 0 0 10 9.8\n1 1 1 1 1 1\n1 2 3\n")
+    with pytest.raises(SystemExit, match="6 numbers"):
+        main(["align", str(bad)])
+    with pytest.raises(SystemExit, match="format"):
+        main(["align", str(PSINS), "--format", "csv"])
+
+
+def test_imu_log_refuses_bad_input():
+    t = jnp.arange(1.0, 4.0)
+    with pytest.raises(ValueError, match=r"dtheta must have shape \(3, 3\)"):
+        al.ImuLog(t, jnp.zeros((3, 2)), jnp.zeros((3, 3)), 0.5)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        al.ImuLog(jnp.array([1.0, 1.0, 2.0]), jnp.zeros((3, 3)), jnp.zeros((3, 3)), 0.5)
+    with pytest.raises(ValueError, match="finite"):
+        al.ImuLog(t, jnp.zeros((3, 3)).at[1, 1].set(jnp.nan), jnp.zeros((3, 3)), 0.5)
+    log, _ = _stationary_log(30.0, np.zeros(3), np.zeros(3), duration_s=120.0)
+    with pytest.raises(ValueError, match="not g"):
+        al.align(al.ImuLog(log.t, log.dtheta, log.dvel * 2.0, log.lat))
+
+
+# -- platform INS (seed 002) --------------------------------------------------------------
+
+
+def test_platform_accelerometer_fault_step_response():
+    ins = pf.PlatformINS(lat=45 * DEG)
+    e, tf = 3e-7, 600.0
+    t, x, _ = pf.simulate(ins, dt=1.0, n_steps=7200, key=None, fault=pf.Fault.on("accel_y", e, tf))
+    ws = np.sqrt(C.G0 / C.A)
+    tau = np.clip(np.asarray(t) - tf, 0.0, None)
+    want = C.A * e * (1 - np.cos(ws * tau))  # north displacement R e (1 − cos ω_s τ)
+    np.testing.assert_allclose(x[:, 0], want, atol=1e-9 * C.A * e * 2)
+    np.testing.assert_allclose(x[:, 1], e * np.sqrt(C.G0 * C.A) * np.sin(ws * tau), atol=1e-11)
+
+
+def test_platform_gyro_fault_turns_with_earth_rate():
+    """A ξ-gyro fault e: δ_ξ = e sin(uτ)/u, δ_ζ = e(1 − cos uτ)/u (eq. 4, u = ω_ie)."""
+    ins = pf.PlatformINS(lat=45 * DEG)
+    e, tf = 1e-7, 100.0
+    t, x, nav = pf.simulate(
+        ins, dt=10.0, n_steps=2000, key=None, fault=pf.Fault.on("gyro_xi", e, tf)
+    )
+    u = C.OMEGA_IE
+    tau = np.clip(np.asarray(t) - tf, 0.0, None)
+    np.testing.assert_allclose(x[:, 11], e * np.sin(u * tau) / u, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(x[:, 12], e * (1 - np.cos(u * tau)) / u, rtol=1e-9, atol=1e-15)
+    # latitude error δφ = −α_x + δ_ξ integrates δV_N/R
+    dv = np.asarray(x[:, 1])
+    lat_err = np.concatenate([[0.0], np.cumsum(0.5 * (dv[1:] + dv[:-1]) * 10.0)]) / C.A
+    np.testing.assert_allclose(nav[:, 0], lat_err, atol=2e-3 * np.max(np.abs(lat_err)))
+
+
+def test_platform_before_the_fault_equals_no_fault_and_is_deterministic():
+    ins = pf.PlatformINS(lat=30 * DEG)
+    key = jax.random.key(5)
+    fault = pf.Fault.on("accel_x", 2e-7, 1000.0)
+    _, x0, _ = pf.simulate(ins, dt=1.0, n_steps=2000, key=key)
+    _, x1, _ = pf.simulate(ins, dt=1.0, n_steps=2000, key=key, fault=fault)
+    _, x2, _ = pf.simulate(ins, dt=1.0, n_steps=2000, key=key, fault=fault)
+    np.testing.assert_array_equal(x0[:1001], x1[:1001])
+    np.testing.assert_array_equal(x1, x2)
+    assert not np.allclose(x0[1500:], x1[1500:])
+    # Schuler period of the north channel and the stationary Markov variance
+    f, _, _ = ins.matrices()
+    w = np.abs(np.linalg.eigvals(np.asarray(f)[np.ix_([0, 1, 2], [0, 1, 2])]).imag).max()
+    assert 2 * np.pi / w == pytest.approx(C.SCHULER_PERIOD, rel=1e-12)
+    xs = jax.vmap(lambda k: pf.simulate(ins, dt=60.0, n_steps=200, key=k)[1][-1])(
+        jax.random.split(key, 2000)
+    )
+    np.testing.assert_allclose(np.std(np.asarray(xs[:, 3])), 1e-7, rtol=0.08)  # Δa_y
+    with pytest.raises(ValueError, match="unknown sensor"):
+        pf.Fault.on("gyro_q", 1.0, 0.0)
