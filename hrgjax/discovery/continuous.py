@@ -537,12 +537,16 @@ class ContinuousProblem:
         repeat"): its regular parameters refitted on each training run alone (the rest held at
         the pooled fit), and the χ² of the per-run values about the pooled one,
         $\sum_i (p_i-\bar p)^\top C_i^{+}(p_i-\bar p)$ on Σ rank C_i − q degrees of freedom
-        (a run that does not excite the effect adds nothing).
+        (a run that does not excite the effect adds nothing), and the share of exciting runs
+        whose own estimate points the same way as the pooled one ($p_i^\top C_i^{+}\bar p > 0$:
+        the effect repeats, with its sign, run after run). The χ² also rejects a right effect
+        whose catalogue law is only approximately right (a linear law fitted to an exponential
+        one differs between runs covering different temperatures); the sign agreement does not.
 
-        **Returns:** `{"p_value", "dof", "per_run": {run: {param: value}}}`."""
+        **Returns:** `{"p_value", "dof", "agreement", "per_run": {run: {param: value}}}`."""
         basis, idx = self._basis([name])
         z0 = jnp.asarray(fit["z"])
-        stat, dof, per_run = 0.0, -len(idx), {}
+        stat, dof, per_run, agree, exciting = 0.0, -len(idx), {}, 0, 0
         names = [p.name for p in CATALOGUE[name].params if p.regular]
         for g in self.train_groups:
             for i, run in enumerate(g.run):
@@ -557,6 +561,9 @@ class ContinuousProblem:
                 d = np.asarray(z)[idx] - fit["z"][idx]
                 stat += float(d @ info @ d)
                 dof += int(rank)
+                if rank > 0:
+                    exciting += 1
+                    agree += float(np.asarray(z)[idx] @ info @ fit["z"][idx]) > 0
                 per_run[int(run)] = {
                     n: float(v * sc)
                     for n, v, sc in zip(
@@ -564,7 +571,8 @@ class ContinuousProblem:
                     )
                 }
         p = dwell.chi2_sf(stat, dof) if dof > 0 else None
-        return {"p_value": p, "dof": max(dof, 0), "per_run": per_run}
+        share = agree / exciting if exciting else None
+        return {"p_value": p, "dof": max(dof, 0), "agreement": share, "per_run": per_run}
 
     def start_from(self, parameters, names):
         """Scaled vector at the null with a report's `parameters` of effects `names` put in."""

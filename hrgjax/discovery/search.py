@@ -15,9 +15,10 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    index < `max_aliasing`: what is left of its signature once the model has absorbed what
    it can is still more than 0.1 %, and the score test says that rest is significant), it
    lowers the held-out whitened χ² by more than `min_heldout_gain`, it does not widen the
-   held-out gap (dwell grids only), and (continuous records) its parameters refitted
-   on each training run alone agree with the pooled fit (per-run consistency χ², p ≥
-   `min_consistency`). Repeat for a second or third effect.
+   held-out gap (dwell grids only), and (continuous records) it repeats run by run: its
+   parameters refitted on each training run alone point the same way as the pooled fit in
+   at least `min_agreement` of the runs that excite it (the χ² of their scatter is reported
+   in `consistency`). Repeat for a second or third effect.
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
    equivalent-input-rate residual [°/h]; the noise floor is what noise alone gives it.
    Verdicts: `found`; `ambiguous` (a rival passes the same rule with nearly the same ΔBIC);
@@ -110,7 +111,7 @@ def discover(
     max_effects: int = 3,
     max_aliasing: float = 0.999,
     ambiguity_bic: float = 6.0,
-    min_consistency: float = 1e-3,
+    min_agreement: float = 0.75,
     shape: str = "auto",
     noise: Noise | None = None,
     block_s: float = BLOCK_S,
@@ -130,9 +131,9 @@ def discover(
       fitted model may already absorb): the acceptance rule. `ambiguity_bic`: a first-round
       rival that passes the same rule with a ΔBIC within this of the winner's makes the
       verdict `ambiguous` (the winner stays `missing_effect`; rivals in `ambiguous_with`,
-      the separating experiments in `discriminate`). `min_consistency`: continuous records
-      only, the smallest p-value of the per-run consistency χ² an accepted effect may have
-      (its parameters refitted on each training run alone must agree with the pooled fit).
+      the separating experiments in `discriminate`). `min_agreement`: continuous records
+      only, the smallest share of the training runs that excite an effect in which its
+      parameters, refitted on that run alone, point the same way as the pooled fit.
     - `shape`: `"auto"` (dwell when every run holds its rate and temperature), `"dwell"` or
       `"continuous"`.
     - `noise`: a known [`hrgjax.Noise`][] for continuous records (default: estimated from the
@@ -187,7 +188,7 @@ def discover(
         if "consistency" not in r:
             r["consistency"] = problem.consistency(r["refit"], r["effect"])
         c = r["consistency"]
-        return c is None or c["p_value"] is None or c["p_value"] >= min_consistency
+        return c is None or c["agreement"] is None or c["agreement"] >= min_agreement
 
     def passes(r, fit):
         return (
