@@ -98,6 +98,38 @@ def discovery():
     plot_report(data, discover(data), os.path.join(HERE, "discovery_continuous.png"))
 
 
+def ins():
+    import jax.numpy as jnp
+
+    from hrgjax.ins import alignment, strapdown, trajectory
+    from hrgjax.ins.constants import SPHERE
+    from hrgjax.plots import alignment_figure, schuler_figure
+
+    traj = trajectory.stationary(45.0, duration_s=4 * 3600.0, dt=30.0, earth=SPHERE)
+    runs = {
+        "initial tilt 0.1 mrad about east → north error": (
+            jnp.zeros(9).at[7].set(1e-4),
+            None,
+            None,
+        ),
+        "accelerometer bias 0.1 mg north → north error": (None, None, jnp.array([9.8e-4, 0, 0])),
+        "gyro bias 0.01 °/h about north → east error": (None, jnp.array([4.85e-8, 0, 0]), None),
+    }
+    pos = {}
+    for label, (dx0, g, a) in runs.items():
+        dx = strapdown.propagate(traj, dx0, g, a, altitude_aided=True)
+        axis = 1 if "east error" in label else 0
+        pos[label] = strapdown.position_metres(traj, dx)[:, axis]
+    schuler_figure(traj.t, pos, os.path.join(HERE, "ins_schuler.png"))
+    data = os.path.join(
+        os.path.dirname(__file__), "..", "..", "shared", "data", "psins_lasergyro.imu"
+    )
+    if os.path.isfile(data):
+        log = alignment.load_psins(data)
+        alignment_figure(alignment.align(log), os.path.join(HERE, "ins_alignment.png"),
+                         log.header_attitude_deg)  # fmt: skip
+
+
 if __name__ == "__main__":
     os.makedirs(HERE, exist_ok=True)
     full_vs_averaged()
@@ -105,4 +137,5 @@ if __name__ == "__main__":
     presets()
     calibration()
     discovery()
+    ins()
     print(f"wrote figures to {HERE}")

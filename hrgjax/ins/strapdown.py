@@ -233,13 +233,17 @@ def covariance(phi, qd, p0):
     return jnp.concatenate([p0[None], ps])
 
 
-def monte_carlo(phi, qd, p0, key, n_runs: int):
+def monte_carlo(phi, qd, p0, key, n_runs: int, every: int = 1):
     r"""`n_runs` sample error histories of the discretised model, vmapped: $x_0 \sim N(0, P_0)$
     (biases drawn once per run), $x_{k+1} = \Phi_k x_k + L_k w_k$ with $L_kL_k^\top = Q_{d,k}$.
+    `every`: keep every `every`-th state (it must divide the number of steps) to bound memory.
 
-    **Returns:** (n_runs, N, 15)."""
+    **Returns:** (n_runs, N_steps/every + 1, 15)."""
     require_x64("ins.strapdown.monte_carlo")
-    return _monte_carlo(phi, qd, p0, key, n_runs)
+    steps = phi.shape[0]
+    if every < 1 or steps % every:
+        raise ValueError(f"every must be a positive divisor of the {steps} steps; got {every}")
+    return _monte_carlo(phi, qd, p0, key, n_runs, every)
 
 
 def _chol(m):
@@ -249,10 +253,12 @@ def _chol(m):
 
 
 @eqx.filter_jit
-def _monte_carlo(phi, qd, p0, key, n_runs):
+def _monte_carlo(phi, qd, p0, key, n_runs, every):
     ls = jax.vmap(_chol)(qd)
     l0 = _chol(p0)
     n = p0.shape[0]
+    blocks = phi.shape[0] // every
+    shape = lambda a: a.reshape((blocks, every) + a.shape[1:])
 
     def one(k):
         k0, kw = jax.random.split(k)
@@ -261,10 +267,13 @@ def _monte_carlo(phi, qd, p0, key, n_runs):
 
         def step(x, inp):
             f, lq, wk = inp
-            x = f @ x + lq @ wk
+            return f @ x + lq @ wk, None
+
+        def block(x, inp):
+            x, _ = jax.lax.scan(step, x, inp)
             return x, x
 
-        _, xs = jax.lax.scan(step, x0, (phi, ls, w))
+        _, xs = jax.lax.scan(block, x0, (shape(phi), shape(ls), shape(w)))
         return jnp.concatenate([x0[None], xs])
 
     return jax.vmap(one)(jax.random.split(key, n_runs))

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..units import DEG
-from .constants import WGS84, Earth
+from .constants import A, E2, WGS84, Earth
 
 
 def euler_to_dcm(roll, pitch, heading):
@@ -101,11 +101,20 @@ def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None)
     n = t.size
     lat, lon, h = np.empty(n), np.empty(n), np.empty(n)
     lat[0], lon[0], h[0] = lat0, lon0, h0
+
+    def rate(la, hh, vv):  # position rate in NumPy (set-up speed)
+        if earth.radius is None:
+            w = 1.0 - E2 * np.sin(la) ** 2
+            r_n = A / np.sqrt(w)
+            r_m = r_n * (1.0 - E2) / w
+        else:
+            r_m = r_n = earth.radius
+        return vv[0] / (r_m + hh), vv[1] / ((r_n + hh) * np.cos(la)), -vv[2]
+
     for i in range(n - 1):  # Heun step of the position equations
         dt = t[i + 1] - t[i]
-        r0 = np.asarray(earth.position_rate(lat[i], h[i], v[i]))
-        pred = (lat[i] + dt * r0[0], h[i] + dt * r0[2])
-        r1 = np.asarray(earth.position_rate(pred[0], pred[1], v[i + 1]))
+        r0 = rate(lat[i], h[i], v[i])
+        r1 = rate(lat[i] + dt * r0[0], h[i] + dt * r0[2], v[i + 1])
         lat[i + 1] = lat[i] + 0.5 * dt * (r0[0] + r1[0])
         lon[i + 1] = lon[i] + 0.5 * dt * (r0[1] + r1[1])
         h[i + 1] = h[i] + 0.5 * dt * (r0[2] + r1[2])
