@@ -31,7 +31,7 @@ import numpy as np
 from .._x64 import require_x64
 from ..kalman import Gaussian, update, van_loan
 from ..units import ARCSEC, DEG, DEG_PER_H
-from .constants import OMEGA_IE, WGS84, earth_rate_ned
+from .constants import WGS84, earth_rate_ned
 from .strapdown import _matrices_at, augmented
 from .trajectory import dcm_to_euler
 

@@ -50,7 +50,7 @@ import jax.numpy as jnp
 
 from .._x64 import require_x64
 from ..kalman import discretise_input, van_loan
-from .constants import A, G0, OMEGA_IE
+from .constants import G0, OMEGA_IE, A
 
 STATES = (
     "ds_n", "dv_n", "alpha_x", "da_y",

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..units import DEG
-from .constants import A, E2, WGS84, Earth
+from .constants import E2, WGS84, A, Earth
 
 
 def euler_to_dcm(roll, pitch, heading):
