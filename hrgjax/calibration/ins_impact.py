@@ -1,18 +1,17 @@
-r"""What compensation buys in navigation: a minimal strapdown error model (seed 000 §INS).
+r"""What compensation buys in navigation (seed 000 §INS).
 
-A deliberately small model, to be replaced by `hrgjax.ins` (the INS issue) when it lands:
-level flight at constant heading ψ, two level HRGs along the body axes x (forward) and y
-(right), each with its own wave angle, in an IMU that warms up during the flight. Each
-gyro's residual rate error after compensation, $\varepsilon_x, \varepsilon_y$, is rotated to
-north and east and drives one Schuler channel each (Earth-rate coupling neglected, as in the
-classical single-channel closed forms of PHYSICS.md §12):
-
-$$\delta\dot v = g\,\phi,\qquad \dot\phi = -\frac{\delta v}{R} + \varepsilon,\qquad
-\delta\dot p = \delta v,$$
-
-so a constant ε gives $\delta p = R\varepsilon\,(t - \sin\omega_s t/\omega_s)$, $\omega_s=\sqrt{g/R}$.
-The reported figures are the horizontal velocity and position error magnitudes after the
+Level flight at constant speed and heading ψ, two level HRGs along the body axes x
+(forward) and y (right), each with its own wave angle, in an IMU that warms up during the
+flight. Each gyro's residual rate error after compensation, $\varepsilon_x, \varepsilon_y$,
+drives the strapdown φ-angle error model of [`hrgjax.ins.strapdown`][hrgjax.ins.strapdown]
+along the flight (WGS-84, Earth-rate and transport-rate coupling, altitude aided). The
+reported figures are the horizontal velocity and position error magnitudes after the
 flight.
+
+[`schuler_errors`][hrgjax.calibration.ins_impact.schuler_errors] keeps the classical
+two-channel model (Earth-rate coupling neglected, PHYSICS.md §12) for comparison:
+$\delta\dot v = g\,\phi$, $\dot\phi = -\delta v/R + \varepsilon$, $\delta\dot p = \delta v$,
+so a constant ε gives $\delta p = R\varepsilon\,(t - \sin\omega_s t/\omega_s)$.
 """
 
 from __future__ import annotations
@@ -74,7 +73,8 @@ class Flight(eqx.Module):
     **Arguments:** `duration_s` [s]; `heading_deg` (clockwise from north); `wave_angle_x_deg`,
     `wave_angle_y_deg`: initial wave angles of the two level gyros [° electrical];
     `temperature_start_c`, `temperature_end_c` [°C] and `warmup_s` [s]: IMU temperature
-    $T(t) = T_{end} + (T_{start} - T_{end})e^{-t/t_w}$; `dt_out` [s].
+    $T(t) = T_{end} + (T_{start} - T_{end})e^{-t/t_w}$; `dt_out` [s]; `speed_mps` [m/s] and
+    `lat_deg` [°] (start) of the level flight.
     """
 
     duration_s: float = eqx.field(static=True, default=3600.0)
@@ -85,6 +85,20 @@ class Flight(eqx.Module):
     temperature_end_c: float = eqx.field(static=True, default=20.0)
     warmup_s: float = eqx.field(static=True, default=1200.0)
     dt_out: float = eqx.field(static=True, default=1.0)
+    speed_mps: float = eqx.field(static=True, default=200.0)
+    lat_deg: float = eqx.field(static=True, default=45.0)
+
+    def trajectory(self):
+        """The flight as an [`hrgjax.ins.trajectory.Trajectory`][hrgjax.ins.trajectory.Trajectory]."""
+        from ..ins.trajectory import constant_velocity
+
+        return constant_velocity(
+            self.lat_deg,
+            speed=self.speed_mps,
+            heading_deg=self.heading_deg,
+            duration_s=self.duration_s,
+            dt=self.dt_out,
+        )
 
     def temperature(self, t):
         """IMU temperature [°C] at `t` [s]."""
@@ -106,19 +120,28 @@ def fly(gyro: Gyro, flight: Flight, *, key: jax.Array, bias_key: jax.Array) -> M
     return concat(parts)
 
 
-def navigation_errors(comp: AbstractCompensator, records: MeasuredData, flight: Flight):
-    """Velocity and position error magnitudes [m/s], [m] at the end of `flight` when the level
-    gyros' outputs are compensated with `comp` (rates in `records` from [`fly`][hrgjax.calibration.ins_impact.fly])."""
+def navigation_errors(
+    comp: AbstractCompensator, records: MeasuredData, flight: Flight, trajectory=None
+):
+    """Horizontal velocity and position error magnitudes [m/s], [m] at the end of `flight`
+    when the level gyros' outputs are compensated with `comp` (rates in `records` from
+    [`fly`][hrgjax.calibration.ins_impact.fly]); `trajectory`: `flight.trajectory()`, if
+    already built."""
+    from ..ins.strapdown import position_metres, propagate
+
     out = comp.correct(records)
     idx = records.run_indices()
-    t = records["time_s"][idx[0]]
     eps_x = out["rate_corrected_dps"][idx[0]] * DEG  # true rate is 0: all of it is error
     eps_y = out["rate_corrected_dps"][idx[1]] * DEG
-    psi = flight.heading_deg * DEG
-    eps_n = np.cos(psi) * eps_x - np.sin(psi) * eps_y
-    eps_e = np.sin(psi) * eps_x + np.cos(psi) * eps_y
-    dv, dp = schuler_errors(jnp.asarray(t), jnp.asarray(eps_n), jnp.asarray(eps_e))
-    return float(jnp.linalg.norm(dv[-1])), float(jnp.linalg.norm(dp[-1]))
+    traj = flight.trajectory() if trajectory is None else trajectory
+    if traj.t.shape[0] != eps_x.shape[0]:
+        raise ValueError(
+            f"the records hold {eps_x.shape[0]} samples per gyro, the flight {traj.t.shape[0]}"
+        )
+    gyro_error = jnp.stack([jnp.asarray(eps_x), jnp.asarray(eps_y), jnp.zeros(eps_x.shape)], -1)
+    dx = propagate(traj, gyro_error=gyro_error, altitude_aided=True, rtol=1e-8, atol=1e-10)
+    dp = position_metres(traj, dx)[-1, :2]
+    return float(jnp.linalg.norm(dx[-1, 3:5])), float(jnp.linalg.norm(dp))
 
 
 def ins_impact(
@@ -138,8 +161,12 @@ def ins_impact(
         for i, f in enumerate(flights)
     ]
     table = {}
+    trajs = [f.trajectory() for f in flights]
     for label, comp in compensators.items():
-        errs = [navigation_errors(comp, r, f) for r, f in zip(records, flights, strict=True)]
+        errs = [
+            navigation_errors(comp, r, f, tr)
+            for r, f, tr in zip(records, flights, trajs, strict=True)
+        ]
         table[label] = {
             "velocity_error_mps": [e[0] for e in errs],
             "position_error_km": [e[1] / 1000 for e in errs],
