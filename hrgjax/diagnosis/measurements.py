@@ -1,0 +1,56 @@
+r"""Diagnosis measurements of seed 002: pairwise differences between the INS of a complex.
+
+For navigation parameters $z_i^k$ of INS i at step k (sampling step Δt):
+
+- eq. (7), second differences over Δt² (gyro faults in ξ, ζ and the geographic-trihedron
+  faults):
+  $$\Delta z_{ij}^k = \frac{z_i^k - 2z_i^{k-1} + z_i^{k-2}}{\Delta t^2}
+   - \frac{z_j^k - 2z_j^{k-1} + z_j^{k-2}}{\Delta t^2};$$
+- eq. (8), differences of first differences over Δt² (η-axis faults, on the departure):
+  $$\Delta\dot w_{ij}^k = \frac{(z_i^k - z_i^{k-1}) - (z_j^k - z_j^{k-1})}{\Delta t^2}.$$
+
+The true motion is common to all INS and cancels; what is left are the INS errors.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import jax.numpy as jnp
+
+
+def pairs(n_ins: int = 3) -> tuple[tuple[int, int], ...]:
+    """Index pairs (i, j), i < j, of a complex of `n_ins` INS: (0,1), (0,2), (1,2) for three."""
+    if n_ins < 2:
+        raise ValueError(f"a complex needs at least 2 INS; got {n_ins}")
+    return tuple(itertools.combinations(range(n_ins), 2))
+
+
+def _check(z, dt, k_min):
+    z = jnp.asarray(z)
+    if z.ndim < 2:
+        raise ValueError(
+            f"z must have shape (..., n_ins, K) (INS axis second to last); got {z.shape}"
+        )
+    if z.shape[-1] < k_min:
+        raise ValueError(f"z needs at least {k_min} time steps; got {z.shape[-1]}")
+    if not dt > 0:
+        raise ValueError(f"dt must be > 0 s; got {dt}")
+    return z
+
+
+def second_difference_pairs(z, dt: float):
+    """Eq. (7) for every pair: `z` (..., n_ins, K) → (..., n_pairs, K − 2), pairs in the order
+    of [`pairs`][hrgjax.diagnosis.measurements.pairs]; step k of the output is step k + 2 of
+    the input."""
+    z = _check(z, dt, 3)
+    d2 = (z[..., 2:] - 2.0 * z[..., 1:-1] + z[..., :-2]) / dt**2
+    return jnp.stack([d2[..., i, :] - d2[..., j, :] for i, j in pairs(z.shape[-2])], axis=-2)
+
+
+def first_difference_pairs(z, dt: float):
+    """Eq. (8) for every pair: `z` (..., n_ins, K) → (..., n_pairs, K − 1); step k of the
+    output is step k + 1 of the input."""
+    z = _check(z, dt, 2)
+    d1 = (z[..., 1:] - z[..., :-1]) / dt**2
+    return jnp.stack([d1[..., i, :] - d1[..., j, :] for i, j in pairs(z.shape[-2])], axis=-2)
