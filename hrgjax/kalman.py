@@ -60,6 +60,14 @@ def discretise_input(F, B, dt):
     return e[:n, :n], e[:n, n:]
 
 
+def psd_factor(m):
+    r"""A factor L with $LL^\top = M$ of a symmetric positive semi-definite M that may be
+    singular (eigen-decomposition, negative round-off clipped): what samples
+    $N(0, M) = L\,N(0, I)$ need where Cholesky would fail on a zero-variance state."""
+    w, v = jnp.linalg.eigh(m)
+    return v * jnp.sqrt(jnp.clip(w, 0.0))[None, :]
+
+
 def predict(g: Gaussian, phi, qd, u=None) -> Gaussian:
     r"""Time update $x \leftarrow \Phi x (+u)$, $P \leftarrow \Phi P \Phi^\top + Q_d$."""
     x = phi @ g.x if u is None else phi @ g.x + u

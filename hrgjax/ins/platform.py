@@ -49,7 +49,7 @@ import jax
 import jax.numpy as jnp
 
 from .._x64 import require_x64
-from ..kalman import discretise_input, van_loan
+from ..kalman import discretise_input, psd_factor, van_loan
 from .constants import G0, OMEGA_IE, A
 
 STATES = (
@@ -206,11 +206,6 @@ def simulate(
     return _simulate(ins, jnp.asarray(float(dt)), int(n_steps), key, fault, x0)
 
 
-def _sqrtm(m):
-    w, v = jnp.linalg.eigh(m)
-    return v * jnp.sqrt(jnp.clip(w, 0.0))[None, :]
-
-
 @eqx.filter_jit
 def _simulate(ins, dt, n_steps, key, fault, x0):
     phi, gam, qd = ins.discretise(dt)
@@ -222,9 +217,9 @@ def _simulate(ins, dt, n_steps, key, fault, x0):
     else:
         k0, kw = jax.random.split(key)
         if x0 is None:
-            x0 = _sqrtm(ins.stationary_covariance()) @ jax.random.normal(k0, (17,))
+            x0 = psd_factor(ins.stationary_covariance()) @ jax.random.normal(k0, (17,))
         w = jax.random.normal(kw, (n_steps, 17))
-        lq = _sqrtm(qd)
+        lq = psd_factor(qd)
     on = (t[:-1] >= fault.t_fault).astype(t.dtype)
 
     def step(x, inp):

@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 
 from .._x64 import require_x64
-from ..kalman import van_loan
+from ..kalman import psd_factor, van_loan
 from .constants import Earth
 from .trajectory import Trajectory
 
@@ -65,10 +65,6 @@ def error_rate(earth: Earth, lat, h, v, c_bn, f_ned, dx, dgyro, daccel, altitude
     if altitude_aided:
         d_pos, ddv = d_pos.at[2].set(0.0), ddv.at[2].set(0.0)
     return jnp.concatenate([d_pos, ddv, dphi])
-
-
-def _point(traj: Trajectory, i):
-    return traj.lat[i], traj.h[i], traj.v_ned[i], traj.c_bn[i], traj.f_ned[i]
 
 
 def _matrices_at(earth, aided, lat, h, v, c_bn, f_ned):
@@ -246,16 +242,10 @@ def monte_carlo(phi, qd, p0, key, n_runs: int, every: int = 1):
     return _monte_carlo(phi, qd, p0, key, n_runs, every)
 
 
-def _chol(m):
-    """Cholesky factor of a PSD matrix that may be singular (eigen-decomposition)."""
-    w, v = jnp.linalg.eigh(m)
-    return v * jnp.sqrt(jnp.clip(w, 0.0))[None, :]
-
-
 @eqx.filter_jit
 def _monte_carlo(phi, qd, p0, key, n_runs, every):
-    ls = jax.vmap(_chol)(qd)
-    l0 = _chol(p0)
+    ls = jax.vmap(psd_factor)(qd)
+    l0 = psd_factor(p0)
     n = p0.shape[0]
     blocks = phi.shape[0] // every
     shape = lambda a: a.reshape((blocks, every) + a.shape[1:])
