@@ -76,7 +76,7 @@ class ImuLog(eqx.Module):
 
 
 def load_psins(path) -> ImuLog:
-    """Read a PSINS-format text IMU log (`../shared/data/README.md`): `%` comments, three
+    """Read a PSINS-format text IMU log (provenance in `tests/data/README.md`): `%` comments, three
     header lines (attitude [°] and velocity; lat [°], lon [°], h [m], t0 [s], interval [ms],
     g; increment units: gyro [arcsec] ×3, accelerometer [µg·s] ×3), then one line of six
     integer increments per sample, axes right–forward–up. Returned in FRD with the heading
