@@ -8,6 +8,8 @@ r"""Kalman-filter building blocks shared by alignment, the INS error models and 
   by Cholesky (never inverted), the covariance re-symmetrised — returning the innovation's
   Gaussian log-likelihood (what a multiple-model filter bank needs).
 - [`kalman_filter`][hrgjax.kalman.kalman_filter]: the whole pass as one `lax.scan`.
+- [`steady_state`][hrgjax.kalman.steady_state]: the converged gain of a time-invariant
+  model (Riccati iteration), for filters that must run at millions of steps per second.
 
 All functions are pure `jax.numpy`: jit, vmap (over Monte Carlo runs or a bank of models)
 and grad work. A missing measurement is a step with `mask=False`.
@@ -118,3 +120,28 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None):
 
     _, (xs, ps, ll) = jax.lax.scan(step, prior, (phis, qds, zs, mask))
     return xs, ps, jnp.sum(ll)
+
+
+def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
+    r"""Converged prior covariance, gain and innovation covariance of a time-invariant model,
+    by iterating the Riccati recursion (predict, then the Joseph update) `n_iter` times from
+    `p0`. With them a filter step is $x \leftarrow \Phi x$, $x \leftarrow x + K(z - Hx)$,
+    and the innovation log-likelihood uses the fixed $S$.
+
+    **Returns:** `(P_prior (n, n), K (n, m), S (m, m))`."""
+    eye = jnp.eye(phi.shape[0])
+
+    def step(p, _):
+        pp = phi @ p @ phi.T + qd
+        s = h @ pp @ h.T + r
+        k = cho_solve(cho_factor(0.5 * (s + s.T), lower=True), h @ pp).T
+        ikh = eye - k @ h
+        p = ikh @ pp @ ikh.T + k @ r @ k.T
+        return 0.5 * (p + p.T), None
+
+    p, _ = jax.lax.scan(step, jnp.asarray(p0), None, length=n_iter)
+    pp = phi @ p @ phi.T + qd
+    s = h @ pp @ h.T + r
+    s = 0.5 * (s + s.T)
+    k = cho_solve(cho_factor(s, lower=True), h @ pp).T
+    return 0.5 * (pp + pp.T), k, s

@@ -65,6 +65,10 @@ def test_one_state_filter_reaches_the_riccati_steady_state():
         k = p / (p + r)
         x, p = x + k * (z - x), (1 - k) * p
     np.testing.assert_allclose(xs[-1, 0], x, rtol=1e-10)
+    p_ss, k_ss, s_ss = kalman.steady_state(one, q * one, one, r * one, one * 10.0, 500)
+    np.testing.assert_allclose(p_ss[0, 0], steady_prior, rtol=1e-12)
+    np.testing.assert_allclose(k_ss[0, 0], steady_prior / (steady_prior + r), rtol=1e-12)
+    np.testing.assert_allclose(s_ss[0, 0], steady_prior + r, rtol=1e-12)
 
 
 def test_filter_log_likelihood_is_the_joint_gaussian_density():
