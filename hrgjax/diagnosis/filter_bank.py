@@ -34,7 +34,10 @@ class Bank(eqx.Module):
     **Fields:** `phi` (M, n, n), `qd` (M, n, n), `h` (M, m, n), `r` (M, m, m), `x0` (M, n),
     `p0` (M, n, n); `log_trans` (M, M): log of the hypothesis transition matrix $p^{ji}$
     (row j = from, column i = to); `z_offset` (M, m): a known measurement offset per
-    hypothesis, z = H x + offset + v (what a hypothesis predicts beyond its states)."""
+    hypothesis, z = H x + offset + v (what a hypothesis predicts beyond its states);
+    `reset` (M, n) bool: states that belong to a hypothesis alone (a fault's size) and
+    restart from that hypothesis's prior (`x0`, `p0`) when the interacting bank enters it
+    from another one — the fault's onset."""
 
     phi: jax.Array
     qd: jax.Array
@@ -44,12 +47,14 @@ class Bank(eqx.Module):
     p0: jax.Array
     log_trans: jax.Array
     z_offset: jax.Array
+    reset: jax.Array
 
     @classmethod
-    def build(cls, models, switch_prob: float = 0.0, z_offsets=None):
+    def build(cls, models, switch_prob: float = 0.0, z_offsets=None, reset=None):
         """From a list of `(phi, qd, h, r, x0, p0)` tuples (and optional `z_offsets`, one (m,)
-        per model); hypotheses stay put with probability 1 − `switch_prob` per step and
-        otherwise move to any other one uniformly."""
+        per model, and `reset` masks, one (n,) per model); hypotheses stay put with
+        probability 1 − `switch_prob` per step and otherwise move to any other one
+        uniformly."""
         m = len(models)
         if m < 1:
             raise ValueError("a bank needs at least one model")
@@ -69,7 +74,14 @@ class Bank(eqx.Module):
             offs = jnp.stack([jnp.asarray(o, float) for o in z_offsets])
             if offs.shape != (m, parts[2].shape[1]):
                 raise ValueError(f"z_offsets must be {m} vectors of length {parts[2].shape[1]}")
-        return cls(*parts, log_trans, offs)
+        n = parts[0].shape[1]
+        if reset is None:
+            mask = jnp.zeros((m, n), bool)
+        else:
+            mask = jnp.stack([jnp.asarray(x, bool) for x in reset])
+            if mask.shape != (m, n):
+                raise ValueError(f"reset must be {m} masks of length {n}")
+        return cls(*parts, log_trans, offs, mask)
 
     @property
     def size(self) -> int:
@@ -82,15 +94,23 @@ def _normalise(lp, log_floor):
     return lp - logsumexp(lp)
 
 
-def _mix(gs: Gaussian, lp_prev, log_trans):
+def _mix(gs: Gaussian, lp_prev, bank: Bank):
     """IMM mixing: each filter starts from the mixture of all filters' estimates weighted by
-    the probability of having come from them."""
-    lw = lp_prev[:, None] + log_trans  # (from j, to i)
+    the probability of having come from them; a component coming from another hypothesis
+    has the target's own (`reset`) states at the target's prior."""
+    lw = lp_prev[:, None] + bank.log_trans  # (from j, to i)
     lw = lw - logsumexp(lw, axis=0, keepdims=True)
     w = jnp.exp(lw)  # columns sum to 1
-    x = jnp.einsum("ji,jn->in", w, gs.x)
-    d = gs.x[None, :, :] - x[:, None, :]  # (to i, from j, n)
-    p = jnp.einsum("ji,jnk->ink", w, gs.P) + jnp.einsum("ji,ijn,ijk->ink", w, d, d)
+    m = bank.size
+    other = ~jnp.eye(m, dtype=bool)  # (to i, from j)
+    r = bank.reset[:, None, :] & other[:, :, None]  # (i, j, n)
+    xs = jnp.where(r, bank.x0[:, None, :], gs.x[None, :, :])  # component (i, j)
+    rr = r[..., :, None] | r[..., None, :]
+    both = r[..., :, None] & r[..., None, :]
+    ps = jnp.where(rr, jnp.where(both, bank.p0[:, None], 0.0), gs.P[None, :])
+    x = jnp.einsum("ji,ijn->in", w, xs)
+    d = xs - x[:, None, :]
+    p = jnp.einsum("ji,ijnk->ink", w, ps) + jnp.einsum("ji,ijn,ijk->ink", w, d, d)
     return Gaussian(x, p)
 
 
@@ -202,7 +222,7 @@ def _run(bank, zs, log_floor, lp0, threshold, interacting):
     def step(carry, z):
         gs, lp = carry
         if interacting:
-            gs = _mix(gs, lp, bank.log_trans)
+            gs = _mix(gs, lp, bank)
         gs, ll = step_one(gs, bank.phi, bank.qd, bank.h, bank.r, bank.z_offset, z)
         lp = _probabilities(lp, ll, bank.log_trans, log_floor)
         return (gs, lp), (lp, gs.x)
