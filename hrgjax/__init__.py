@@ -5,6 +5,7 @@ from . import data as data
 from . import discovery as discovery
 from . import ins as ins
 from . import kalman as kalman
+from . import nn as nn
 from . import noise as noise
 from . import presets as presets
 from . import units as units

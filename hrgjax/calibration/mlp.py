@@ -23,9 +23,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from ..data import MeasuredData
+from ..nn.train import rprop
 from ..units import DEG
 from ._compensator import AbstractCompensator, as_windows, split_targets
 from .reduce import K_E_NOMINAL, WINDOW_S
@@ -222,16 +222,8 @@ def train_rprop(net, x, y, steps: int, learning_rate: float = 1e-3):
 
 
 def _rprop(loss, params, steps: int, learning_rate: float):
-    """`steps` full-batch Rprop updates of `params` on `loss`, in one `lax.scan`."""
-    opt = optax.rprop(learning_rate)
-
-    def step(carry, _):
-        p, state = carry
-        updates, state = opt.update(jax.grad(loss)(p), state, p)
-        return (optax.apply_updates(p, updates), state), None
-
-    (params, _), _ = jax.lax.scan(step, (params, opt.init(params)), None, length=steps)
-    return params
+    """`steps` full-batch Rprop updates of `params` on `loss` ([`hrgjax.nn.train.rprop`][hrgjax.nn.train.rprop])."""
+    return rprop(loss, params, steps, learning_rate)
 
 
 class AngleRuns(eqx.Module):
