@@ -16,7 +16,6 @@ r"""A navigation complex of identical platform INS (seed 002) and its fault-diag
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -181,16 +180,3 @@ def _state_scale(phi, qd, p0, steps: int = 200):
     p, _ = jax.lax.scan(step, p0, None, length=steps)
     sd = jnp.sqrt(jnp.clip(jnp.diag(p), 0.0))
     return jnp.maximum(sd, 1e-6 * jnp.max(sd) + 1e-300)
-
-
-class Scenario(eqx.Module):
-    """A diagnosis scenario: `sensor`, fault size `e`, faulty INS `fault_ins`, fault time
-    `t_fault` [s], `duration_s`, `dt` [s], and the INS parameters `ins`."""
-
-    sensor: str = eqx.field(static=True, default="accel_y")
-    e: float = eqx.field(static=True, default=3e-7)
-    fault_ins: int = eqx.field(static=True, default=1)
-    t_fault: float = eqx.field(static=True, default=100.0)
-    duration_s: float = eqx.field(static=True, default=400.0)
-    dt: float = eqx.field(static=True, default=1.0)
-    ins: PlatformINS = PlatformINS()
