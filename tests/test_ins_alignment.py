@@ -167,3 +167,11 @@ def test_platform_before_the_fault_equals_no_fault_and_is_deterministic():
     np.testing.assert_allclose(np.std(np.asarray(xs[:, 3])), 1e-7, rtol=0.08)  # Δa_y
     with pytest.raises(ValueError, match="unknown sensor"):
         pf.Fault.on("gyro_q", 1.0, 0.0)
+    with pytest.raises(ValueError, match=r"tau_a must be > 0 s"):
+        pf.PlatformINS(tau_a=0.0)
+    with pytest.raises(ValueError, match="gyro_sigma must be finite"):
+        pf.PlatformINS(gyro_sigma=-1e-7)
+    with pytest.raises(ValueError, match="lat must be"):
+        pf.PlatformINS(lat=2.0)
+    with pytest.raises(ValueError, match="specific_force must have shape"):
+        pf.PlatformINS(specific_force=(0.0, 9.8))

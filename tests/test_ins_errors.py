@@ -246,6 +246,8 @@ def test_monte_carlo_covariance_matches_the_propagated_covariance():
         sd.propagate(traj, gyro_error=jnp.zeros((5, 3)))
     with pytest.raises(ValueError, match="dt must be"):
         tr.stationary(45.0, duration_s=10.0, dt=-1.0)
+    with pytest.raises(ValueError, match="arw must be finite"):
+        sd.ImuErrors(arw=-1.0)
 
 
 def test_error_propagation_is_differentiable():

@@ -47,7 +47,9 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from .._checks import check_positive, is_concrete
 from .._x64 import require_x64
 from ..kalman import discretise_input, psd_factor, van_loan
 from .constants import G0, OMEGA_IE, A
@@ -86,6 +88,21 @@ class PlatformINS(eqx.Module):
     g: float = eqx.field(static=True, default=G0)
     radius: float = eqx.field(static=True, default=A)
     earth_rate: float = eqx.field(static=True, default=OMEGA_IE)
+
+    def __check_init__(self):
+        check_positive("PlatformINS.tau_a", self.tau_a, "s")
+        check_positive("PlatformINS.tau_r", self.tau_r, "s")
+        for name in ("accel_sigma", "gyro_sigma"):
+            v = getattr(self, name)
+            if is_concrete(v) and not (np.all(np.isfinite(v)) and np.all(np.asarray(v) >= 0)):
+                raise ValueError(f"PlatformINS.{name} must be finite and >= 0; got {v}")
+        if is_concrete(self.lat) and not np.all(np.abs(np.asarray(self.lat)) < np.pi / 2):
+            raise ValueError(f"PlatformINS.lat must be in (-π/2, π/2) rad; got {self.lat}")
+        if is_concrete(self.specific_force) and np.shape(self.specific_force) != (3,):
+            raise ValueError(
+                f"PlatformINS.specific_force must have shape (3,) (E, N, H); got "
+                f"{np.shape(self.specific_force)}"
+            )
 
     def matrices(self):
         """`(F (17, 17), B (17, 6), G (17, 6))`: dynamics, fault input (per unit fault in

@@ -33,7 +33,9 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from .._checks import is_concrete
 from .._x64 import require_x64
 from ..kalman import psd_factor, van_loan
 from .constants import Earth
@@ -183,6 +185,16 @@ class ImuErrors(eqx.Module):
     accel_bias: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
     arw: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
     vrw: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
+
+    def __check_init__(self):
+        for name in ("gyro_bias", "accel_bias", "arw", "vrw"):
+            v = getattr(self, name)
+            if is_concrete(v) and not (np.all(np.isfinite(v)) and np.all(np.asarray(v) >= 0)):
+                raise ValueError(f"ImuErrors.{name} must be finite and >= 0 (a 1σ); got {v}")
+            if np.ndim(v) > 1 or np.size(v) not in (1, 3):
+                raise ValueError(
+                    f"ImuErrors.{name} must be a scalar or 3 values; got shape {np.shape(v)}"
+                )
 
     def bias_covariance(self):
         """6×6 covariance of the bias states."""
