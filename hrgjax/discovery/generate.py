@@ -30,6 +30,8 @@ orientations; neither is generated yet.
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -112,7 +114,7 @@ def inject(gyro: Gyro, effect, size: float = 0.0) -> Gyro:
     raise ValueError(f"cannot generate {effect!r} yet; choose from {GENERATED} or None")
 
 
-DRIFT_FIELDS = ("temperature_rate", "lag", "lag_time", "warmup", "warmup_time", "rate_cubic")
+DRIFT_FIELDS = tuple(f.name for f in dataclasses.fields(DriftTerms))
 
 
 def hidden_effect_dataset(

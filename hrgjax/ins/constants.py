@@ -66,18 +66,14 @@ def earth_rate_ned(lat):
 
 def transport_rate_ned(lat, h, v_ned):
     r"""Transport rate $\omega_{en}^n = (v_E/(R_N+h), -v_N/(R_M+h), -v_E\tan\varphi/(R_N+h))$
-    [rad/s] for velocity `v_ned` [m/s] (shape (..., 3))."""
-    r_m, r_n = radii(lat)
-    v_n, v_e = v_ned[..., 0], v_ned[..., 1]
-    return jnp.stack([v_e / (r_n + h), -v_n / (r_m + h), -v_e * jnp.tan(lat) / (r_n + h)], axis=-1)
+    [rad/s] for velocity `v_ned` [m/s] (shape (..., 3)), on WGS-84."""
+    return WGS84.transport_rate(lat, h, v_ned)
 
 
 def gravity_ned(lat, h=0.0):
     """Normal gravity vector in NED, (0, 0, γ) [m/s²] (plumb-line gravity, centrifugal
     included)."""
-    g = gravity(lat, h)
-    z = jnp.zeros_like(g)
-    return jnp.stack([z, z, g], axis=-1)
+    return WGS84.gravity_ned(lat, h)
 
 
 class Earth(eqx.Module):

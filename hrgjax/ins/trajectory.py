@@ -102,7 +102,7 @@ def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None)
     lat, lon, h = np.empty(n), np.empty(n), np.empty(n)
     lat[0], lon[0], h[0] = lat0, lon0, h0
 
-    def rate(la, hh, vv):  # position rate in NumPy (set-up speed)
+    def rate(la, hh, vv):  # Earth.position_rate in NumPy: a jnp call per step is 4× slower
         if earth.radius is None:
             w = 1.0 - E2 * np.sin(la) ** 2
             r_n = A / np.sqrt(w)
