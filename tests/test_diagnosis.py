@@ -91,25 +91,24 @@ def test_bank_refuses_bad_settings():
         fb.Bank.build(_toy(2), z_offsets=[jnp.zeros(2), jnp.zeros(2)])
 
 
-def test_steady_state_bank_equals_the_full_bank_started_at_the_steady_state():
+def test_gain_schedule_bank_equals_the_full_independent_bank():
+    """The covariance recursion does not depend on the data: the bank run with gains
+    computed ahead is the full bank, step for step, and batched runs equal single ones."""
     rng = np.random.default_rng(4)
     offsets = [jnp.zeros(1), jnp.ones(1)]
-    models = _toy(2, q=1e-3, p_level=1e-2)
-    sb = fb.SteadyBank.from_bank(fb.Bank.build(models, switch_prob=1e-3, z_offsets=offsets))
-    # the full bank started at the converged posterior covariance has the same gain at once
-    phi, qd, h, r, x0, _ = models[0]
-    pp, k, _ = kalman.steady_state(phi, qd, h, r, jnp.eye(1), 4000)
-    post = (jnp.eye(1) - k @ h) @ pp @ (jnp.eye(1) - k @ h).T + k @ r @ k.T
-    full = fb.Bank.build([(phi, qd, h, r, x0, post)] * 2, switch_prob=1e-3, z_offsets=offsets)
+    bank = fb.Bank.build(_toy(2, q=1e-3, p_level=1e-2), switch_prob=1e-3, z_offsets=offsets)
     truth = np.r_[np.zeros(400), np.ones(400)]
     zs = jnp.asarray((truth + rng.normal(size=800) * 0.2)[:, None])
-    p_full, d_full, _ = fb.run_bank(full, zs)
-    p_ss, d_ss = fb.run_steady(sb, zs)
-    np.testing.assert_allclose(p_ss, p_full, rtol=1e-9, atol=1e-12)
-    np.testing.assert_array_equal(d_ss, d_full)
-    # batched runs give the same as one at a time
-    pb, _ = fb.run_steady(sb, jnp.stack([zs, zs[::-1]]))
-    np.testing.assert_allclose(pb[0], p_ss, rtol=1e-12)
+    p_full, d_full, _ = fb.run_bank(bank, zs)
+    for n_steps in (800, 200):  # the whole run, or a converged tail held
+        gb = fb.GainBank.from_bank(bank, n_steps)
+        p_g, d_g = fb.run_gains(gb, zs)
+        np.testing.assert_allclose(p_g, p_full, rtol=1e-8, atol=1e-12)
+        np.testing.assert_array_equal(d_g, d_full)
+    pb, _ = fb.run_gains(gb, jnp.stack([zs, zs[::-1]]))
+    np.testing.assert_allclose(pb[0], p_g, rtol=1e-12)
+    with pytest.raises(ValueError, match="zs must have shape"):
+        fb.run_gains(gb, jnp.zeros(5))
 
 
 @pytest.fixture(scope="module")

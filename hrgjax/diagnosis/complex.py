@@ -8,7 +8,8 @@ r"""A navigation complex of identical platform INS (seed 002) and its fault-diag
   (so a fault e in an accelerometer reads as e).
 - [`fault_bank`][hrgjax.diagnosis.complex.fault_bank]: hypotheses S0 (healthy) and S_i
   (fault in INS i) for one sensor, as a [`Bank`][hrgjax.diagnosis.filter_bank.Bank] over the
-  exact discretisation of the complex: every INS's 17 states, one fault state per INS (a
+  exact discretisation of the complex: every INS's states that reach the measured
+  parameter ([`relevant_states`][hrgjax.diagnosis.complex.relevant_states]), one fault state per INS (a
   random walk, coupled into its INS only under its hypothesis) and the last two increments
   of the navigation parameter, so that eqs. (7)–(8) are exactly linear in the state. The
   filters use the independent pairs (0, 1), (0, 2).
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._x64 import require_x64
 from ..ins.platform import FAULTS, NAV, Fault, PlatformINS, _simulate
@@ -101,7 +103,7 @@ def fault_bank(
 ) -> Bank:
     r"""The hypothesis bank S0 … S_n for faults in `sensor` (module docstring).
 
-    Each INS carries, besides its 17 states, the increment $u_k = c(x_k - x_{k-1})$ of the
+    Each INS carries, besides its states that reach the parameter, the increment $u_k = c(x_k - x_{k-1})$ of the
     navigation parameter $c\,x$ and the previous increment, so eq. (7) is
     $(u_k - u_{k-1})/\Delta t^2$ and eq. (8) is $u_k/\Delta t^2$ — exact for the discrete
     model, including the two-step onset of a fault, and well conditioned (increments cancel
@@ -118,49 +120,59 @@ def fault_bank(
     col = FAULTS.index(sensor)
     phi1, gam1, qd1 = ins.discretise(dt)
     c = jax.jacfwd(ins.navigation_errors)(jnp.zeros(17))[NAV.index(param)]  # (17,)
-    n1 = 19  # 17 states, increment u_k, previous increment u_{k-1}
-    n = n_ins * n1 + n_ins  # + one fault state per INS
-    i_f = n_ins * n1
+    keep = relevant_states(ins, c)
+    ns = len(keep)
+    phi1, qd1 = phi1[keep][:, keep], qd1[keep][:, keep]
+    gam1, c = gam1[keep, col], c[keep]
+    p_ins = ins.stationary_covariance()[keep][:, keep]
+    n1 = ns + 2  # the INS's states, increment u_k, previous increment u_{k-1}
+    n = (n_ins - 1) * n1 + n_ins  # n − 1 differences, one fault state per INS
+    i_f = (n_ins - 1) * n1
     # one INS: [x; u; u_prev] ← [Φ x; c(Φ − I) x; u] (+ noise [w; c w])
     blk = jnp.zeros((n1, n1))
-    blk = blk.at[:17, :17].set(phi1).at[17, :17].set(c @ (phi1 - jnp.eye(17))).at[18, 17].set(1.0)
-    gq = jnp.zeros((n1, 17)).at[:17].set(jnp.eye(17)).at[17].set(c)
+    blk = blk.at[:ns, :ns].set(phi1).at[ns, :ns].set(c @ (phi1 - jnp.eye(ns)))
+    blk = blk.at[ns + 1, ns].set(1.0)
+    gq = jnp.zeros((n1, ns)).at[:ns].set(jnp.eye(ns)).at[ns].set(c)
     blk_q = gq @ qd1 @ gq.T
-    blk_g = jnp.zeros(n1).at[:17].set(gam1[:, col]).at[17].set(c @ gam1[:, col])
+    blk_g = jnp.zeros(n1).at[:ns].set(gam1).at[ns].set(c @ gam1)
     scale = ins.radius / ins.g / dt**2
-    row1 = jnp.zeros(n1).at[17].set(scale)
+    row1 = jnp.zeros(n1).at[ns].set(scale)
     if kind == "second":
-        row1 = row1.at[18].set(-scale)
-    base = jnp.zeros((n, n))
-    q = jnp.zeros((n, n))
-    p0 = jnp.zeros((n, n))
-    rows = []
-    for i in range(n_ins):
-        s = slice(i * n1, (i + 1) * n1)
-        base = base.at[s, s].set(blk).at[i_f + i, i_f + i].set(1.0)
-        q = q.at[s, s].set(blk_q)
-        p0 = p0.at[i * n1 : i * n1 + 17, i * n1 : i * n1 + 17].set(ins.stationary_covariance())
-        rows.append(jnp.zeros(n).at[s].set(row1))
-    h = jnp.stack([rows[0] - rows[1], rows[0] - rows[2]])
-    r = jnp.eye(2) * meas_sigma**2
+        row1 = row1.at[ns + 1].set(-scale)
+    # the filters carry the differences d_j = x_0 − x_j (j = 1 … n−1), not the INS errors:
+    # the pairwise measurements never see the complex's common error, which is undamped
+    # (Schuler and Earth-rate oscillators driven by noise) and would grow without bound in
+    # the filters' covariance. cov(w_0 − w_j, w_0 − w_k) = (1 + δ_jk) Q.
+    nd = n_ins - 1
+    mix = jnp.ones((nd, nd)) + jnp.eye(nd)
+    base = jnp.zeros((n, n)).at[:i_f, :i_f].set(jnp.kron(jnp.eye(nd), blk))
+    base = base.at[i_f:, i_f:].set(jnp.eye(n_ins))
+    q = jnp.zeros((n, n)).at[:i_f, :i_f].set(jnp.kron(mix, blk_q))
+    p_blk = jnp.zeros((n1, n1)).at[:ns, :ns].set(p_ins)
+    p0 = jnp.zeros((n, n)).at[:i_f, :i_f].set(jnp.kron(mix, p_blk))
+    h = jnp.kron(jnp.eye(nd), row1[None, :])
+    h = jnp.concatenate([h, jnp.zeros((nd, n_ins))], axis=1)
+    r = jnp.eye(nd) * meas_sigma**2
     models, reset = [], []
     for hyp in range(n_ins + 1):
         phi, qd, p = base, q, p0
         reset.append(jnp.zeros(n, bool).at[i_f + hyp - 1].set(hyp > 0))
         if hyp > 0:
             i = hyp - 1
-            phi = phi.at[i * n1 : (i + 1) * n1, i_f + i].set(blk_g)
+            # a fault in INS 0 enters every difference with +1, one in INS j only d_j, −1
+            sign = jnp.full(nd, 1.0) if i == 0 else -jnp.eye(nd)[i - 1]
+            phi = phi.at[:i_f, i_f + i].set(jnp.kron(sign, blk_g))
             qd = qd.at[i_f + i, i_f + i].set(fault_walk**2)
             p = p.at[i_f + i, i_f + i].set(fault_sigma**2)
         models.append((phi, qd, p))
-    # the states span metres to 1e-10 rad: filter in units of each state's own spread (an
+    # the states span m/s to 1e-10 rad: filter in units of each state's own spread (an
     # exact change of variables x = T x'), so the covariance keeps its definiteness
     t = _state_scale(base, q, p0 + jnp.diag(jnp.zeros(n).at[i_f:].set(fault_sigma**2)))
     ti = 1.0 / t
     # the increments before the first measurement are unknown: one spread each
-    for i in range(n_ins):
-        for j in (17, 18):
-            k = i * n1 + j
+    for d in range(nd):
+        for j in (ns, ns + 1):
+            k = d * n1 + j
             models = [(f, qq, pp.at[k, k].set(t[k] ** 2)) for f, qq, pp in models]
     scaled = [
         (ti[:, None] * f * t[None, :], ti[:, None] * qq * ti[None, :], h * t[None, :], r,
@@ -168,6 +180,23 @@ def fault_bank(
         for f, qq, pp in models
     ]  # fmt: skip
     return Bank.build(scaled, switch_prob=switch_prob, reset=reset)
+
+
+def relevant_states(ins: PlatformINS, c) -> np.ndarray:
+    """Indices of the states of one INS that the navigation parameter `c @ x` depends on:
+    the smallest set that holds the states `c` reads and every state that drives one of
+    them (through the nonzero pattern of F). The rest (positions, the vertical channel, and
+    the other level channel when there is no horizontal specific force) never reach the
+    measurement; the set's dynamics are autonomous, so dropping the rest is exact, and it
+    keeps unobservable unstable states (position, height) out of the filters' Riccati
+    recursion, where their growing variance would cost the covariance its definiteness."""
+    f = np.asarray(ins.matrices()[0]) != 0.0
+    keep = np.asarray(c) != 0.0
+    while True:
+        grown = keep | f[keep].any(axis=0)
+        if np.array_equal(grown, keep):
+            return np.flatnonzero(keep)
+        keep = grown
 
 
 def _state_scale(phi, qd, p0, steps: int = 200):

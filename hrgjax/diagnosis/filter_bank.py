@@ -23,9 +23,10 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.scipy.linalg import cho_factor, cho_solve
 from jax.scipy.special import logsumexp
 
-from ..kalman import LOG_2PI, Gaussian, predict, steady_state, update
+from ..kalman import LOG_2PI, Gaussian, predict, update
 
 
 class Bank(eqx.Module):
@@ -94,16 +95,28 @@ def _normalise(lp, log_floor):
     return lp - logsumexp(lp)
 
 
+def _mix_weights(lp_prev, bank: Bank):
+    """Mixing weights w[j, i] = P(came from j | now in i) and, per (to i, from j), the mask of
+    states that restart at the target's prior."""
+    lw = lp_prev[:, None] + bank.log_trans  # (from j, to i)
+    lw = lw - logsumexp(lw, axis=0, keepdims=True)
+    other = ~jnp.eye(bank.size, dtype=bool)  # (to i, from j)
+    return jnp.exp(lw), bank.reset[:, None, :] & other[:, :, None]
+
+
+def _mix_means(x, lp_prev, bank: Bank):
+    """The means of `_mix` alone: the steady-state IMM (gains fixed, so the covariances are not
+    mixed)."""
+    w, r = _mix_weights(lp_prev, bank)
+    xs = jnp.where(r, bank.x0[:, None, :], x[None, :, :])
+    return jnp.einsum("ji,ijn->in", w, xs)
+
+
 def _mix(gs: Gaussian, lp_prev, bank: Bank):
     """IMM mixing: each filter starts from the mixture of all filters' estimates weighted by
     the probability of having come from them; a component coming from another hypothesis
     has the target's own (`reset`) states at the target's prior."""
-    lw = lp_prev[:, None] + bank.log_trans  # (from j, to i)
-    lw = lw - logsumexp(lw, axis=0, keepdims=True)
-    w = jnp.exp(lw)  # columns sum to 1
-    m = bank.size
-    other = ~jnp.eye(m, dtype=bool)  # (to i, from j)
-    r = bank.reset[:, None, :] & other[:, :, None]  # (i, j, n)
+    w, r = _mix_weights(lp_prev, bank)  # w columns sum to 1; r (i, j, n)
     xs = jnp.where(r, bank.x0[:, None, :], gs.x[None, :, :])  # component (i, j)
     rr = r[..., :, None] | r[..., None, :]
     both = r[..., :, None] & r[..., None, :]
@@ -159,56 +172,134 @@ def _decide(lps, threshold):
     return probs, jnp.where(decided, best, -1)
 
 
-class SteadyBank(eqx.Module):
-    """A [`Bank`][hrgjax.diagnosis.filter_bank.Bank] with each filter's converged gain
-    (time-invariant models): a step costs two matrix–vector products per hypothesis, so
-    Monte Carlo over runs reaches millions of filter steps per second.
+class GainBank(eqx.Module):
+    """A [`Bank`][hrgjax.diagnosis.filter_bank.Bank] with its filters' gains computed ahead.
 
-    **Fields:** `bank`; `gain` (M, n, m); `s_inv` (M, m, m) and `logdet` (M,) of the
-    converged innovation covariance."""
+    The covariance recursion of a linear-Gaussian filter does not depend on the data, so
+    the gain $K_k$ and innovation covariance $S_k$ of every step are the same for every
+    Monte Carlo run: compute them once (`n_steps` of them; afterwards the last is held,
+    which for a time-invariant model is the converged gain), and a run costs a few
+    matrix–vector products per hypothesis and step. For the independent bank this is
+    exact.
+
+    The interacting bank (IMM) mixes covariances too, which depends on the data; its
+    gain-schedule form keeps the one thing that matters for a fault's onset: a hypothesis
+    with `reset` states (a fault's size) restarts them at its prior when it is entered. So
+    each such hypothesis also has an *onset* schedule — the recursion started from the
+    healthy filter's converged covariance with its reset states at their prior — indexed
+    by the number of steps it has been the most probable hypothesis (0 while it is not,
+    when it is re-entered from the leading one at every step). The estimates are mixed
+    exactly; the covariances are those of the schedules.
+
+    **Fields:** `bank`; `gain` (M, L, n, m), `s_inv` (M, L, m, m) and `logdet` (M, L):
+    the schedule from `p0`; `onset_gain`, `onset_s_inv`, `onset_logdet`: the onset
+    schedules."""
 
     bank: Bank
     gain: jax.Array
     s_inv: jax.Array
     logdet: jax.Array
+    onset_gain: jax.Array
+    onset_s_inv: jax.Array
+    onset_logdet: jax.Array
+    warmup: int = eqx.field(static=True)
 
     @classmethod
-    def from_bank(cls, bank: Bank, n_iter: int = 4000):
-        """Converge every filter's Riccati recursion from its `p0`
-        ([`steady_state`][hrgjax.kalman.steady_state])."""
-        _, k, s = jax.vmap(lambda *a: steady_state(*a, n_iter))(
-            bank.phi, bank.qd, bank.h, bank.r, bank.p0
-        )
-        s_inv = jnp.linalg.inv(s)
-        s_inv = 0.5 * (s_inv + jnp.swapaxes(s_inv, -1, -2))
-        return cls(bank, k, s_inv, jnp.linalg.slogdet(s)[1])
+    def from_bank(cls, bank: Bank, n_steps: int, healthy: int = 0, warmup: int = 50):
+        """Run every filter's covariance recursion from its `p0` for `n_steps` steps, and
+        the onset recursions from the covariance of hypothesis `healthy` after them. The
+        interacting bank uses the plain schedules for the first `warmup` steps (the
+        filters' start-up transient, common to all hypotheses) and the onset schedules
+        after."""
+        n_steps = int(n_steps)
+        if n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1; got {n_steps}")
+        run = jax.vmap(lambda *a: _gains(*a, n_steps))
+        k, s, p_end = run(bank.phi, bank.qd, bank.h, bank.r, bank.p0)
+        both = bank.reset[:, :, None] | bank.reset[:, None, :]
+        diag = bank.reset[:, :, None] & bank.reset[:, None, :]
+        p_on = jnp.where(both, jnp.where(diag, bank.p0, 0.0), p_end[healthy][None])
+        k_on, s_on, _ = run(bank.phi, bank.qd, bank.h, bank.r, p_on)
+        if not 0 <= int(warmup) <= n_steps:
+            raise ValueError(f"warmup must be in [0, n_steps]; got {warmup}")
+        return cls(bank, k, *_inv_logdet(s), k_on, *_inv_logdet(s_on), int(warmup))
 
 
-def run_steady(sb: SteadyBank, zs, *, floor: float = 1e-6, prior=None, threshold: float = 0.9):
-    """[`run_bank`][hrgjax.diagnosis.filter_bank.run_bank] with the converged gains (no
-    covariance recursion; the filters start at their `x0`). `zs` (K, m), or (B, K, m) for a
-    batch of runs. **Returns** `(probabilities, decisions)` with the leading shape of `zs`."""
-    lp0, log_floor = _start(sb.bank.size, floor, prior)
+def _inv_logdet(s):
+    s_inv = jnp.linalg.inv(s)
+    return 0.5 * (s_inv + jnp.swapaxes(s_inv, -1, -2)), jnp.linalg.slogdet(s)[1]
+
+
+def _gains(phi, qd, h, r, p0, n_steps):
+    """Gains and innovation covariances of `n_steps` filter steps from `p0`, and the last
+    posterior covariance."""
+
+    def step(p, _):
+        g = predict(Gaussian(jnp.zeros(p.shape[0]), p), phi, qd)
+        s = h @ g.P @ h.T + r
+        s = 0.5 * (s + s.T)
+        k = cho_solve(cho_factor(s, lower=True), h @ g.P).T
+        post = update(g, jnp.zeros(h.shape[0]), h, r)[0]
+        return post.P, (k, s)
+
+    p, (k, s) = jax.lax.scan(step, jnp.asarray(p0), None, length=n_steps)
+    return k, s, p
+
+
+def run_gains(
+    gb: GainBank,
+    zs,
+    *,
+    floor: float = 1e-6,
+    prior=None,
+    threshold: float = 0.9,
+    interacting: bool = False,
+):
+    """[`run_bank`][hrgjax.diagnosis.filter_bank.run_bank] with the gain schedules of `gb`
+    (no covariance recursion; see [`GainBank`][hrgjax.diagnosis.filter_bank.GainBank]).
+    `zs` (K, m), or (B, K, m) for a batch of runs. **Returns** `(probabilities,
+    decisions)` with the leading shape of `zs`."""
+    lp0, log_floor = _start(gb.bank.size, floor, prior)
     zs = jnp.asarray(zs, float)
-    fn = lambda z: _run_steady(sb, z, log_floor, lp0, jnp.asarray(threshold))
+    if zs.ndim not in (2, 3):
+        raise ValueError(f"zs must have shape (K, m) or (runs, K, m); got {zs.shape}")
+    fn = lambda z: _run_gains(gb, z, log_floor, lp0, jnp.asarray(threshold), interacting)
     return fn(zs) if zs.ndim == 2 else jax.vmap(fn)(zs)
 
 
 @eqx.filter_jit
-def _run_steady(sb, zs, log_floor, lp0, threshold):
-    b = sb.bank
+def _run_gains(gb, zs, log_floor, lp0, threshold, interacting):
+    b = gb.bank
     m = b.h.shape[1]
+    last = gb.gain.shape[1] - 1
+    hyp = jnp.arange(b.size)
+    has_onset = jnp.any(b.reset, axis=1) & interacting
 
-    def step(carry, z):
-        x, lp = carry
+    def step(carry, inp):
+        x, lp, lead = carry
+        z, k = inp
+        onset = has_onset & (k >= gb.warmup)
+        i = jnp.where(onset, jnp.minimum(lead, last), jnp.minimum(k, last))
+        pick = lambda on, plain: jnp.where(
+            onset.reshape((-1,) + (1,) * (on.ndim - 2)), on[hyp, i], plain[hyp, i]
+        )
+        gain = pick(gb.onset_gain, gb.gain)
+        s_inv = pick(gb.onset_s_inv, gb.s_inv)
+        logdet = pick(gb.onset_logdet, gb.logdet)
+        if interacting:
+            x = _mix_means(x, lp, b)
         x = jnp.einsum("hij,hj->hi", b.phi, x)
         nu = z[None, :] - b.z_offset - jnp.einsum("hij,hj->hi", b.h, x)
-        x = x + jnp.einsum("hij,hj->hi", sb.gain, nu)
-        ll = -0.5 * (jnp.einsum("hi,hij,hj->h", nu, sb.s_inv, nu) + sb.logdet + m * LOG_2PI)
+        x = x + jnp.einsum("hij,hj->hi", gain, nu)
+        ll = -0.5 * (jnp.einsum("hi,hij,hj->h", nu, s_inv, nu) + logdet + m * LOG_2PI)
         lp = _probabilities(lp, ll, b.log_trans, log_floor)
-        return (x, lp), lp
+        leading = hyp == jnp.argmax(lp)
+        lead = jnp.where(leading, lead + 1, 0)
+        return (x, lp, lead), lp
 
-    _, lps = jax.lax.scan(step, (b.x0, _normalise(lp0, log_floor)), zs)
+    steps = jnp.arange(zs.shape[0])
+    lead0 = jnp.zeros(b.size, steps.dtype)
+    _, lps = jax.lax.scan(step, (b.x0, _normalise(lp0, log_floor), lead0), (zs, steps))
     return _decide(lps, threshold)
 
 
