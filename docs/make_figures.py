@@ -130,6 +130,15 @@ def ins():
                          log.header_attitude_deg)  # fmt: skip
 
 
+def diagnosis():
+    from hrgjax.diagnosis.compare import compare
+    from hrgjax.plots import diagnosis_figure
+
+    res = compare("stationary", key=jax.random.key(0), n_faulty=3, n_healthy=1, traces=True,
+                  predictor_steps=10)  # fmt: skip
+    diagnosis_figure(res["traces"], os.path.join(HERE, "diagnosis_stationary.png"), "stationary")
+
+
 if __name__ == "__main__":
     os.makedirs(HERE, exist_ok=True)
     full_vs_averaged()
@@ -138,4 +147,5 @@ if __name__ == "__main__":
     calibration()
     discovery()
     ins()
+    diagnosis()
     print(f"wrote figures to {HERE}")

@@ -313,6 +313,39 @@ def cmd_align(args) -> int:
     return 0
 
 
+def cmd_diagnose(args) -> int:
+    """`hrgjax diagnose`: every seed-002 diagnosis method on one scenario, in one table."""
+    _setup()
+    import json
+    from pathlib import Path
+
+    import jax
+
+    from .diagnosis.compare import METHODS, compare, table
+
+    methods = METHODS if args.methods is None else tuple(args.methods.split(","))
+    try:
+        result = compare(
+            args.scenario, key=jax.random.key(args.seed), n_faulty=args.runs,
+            n_healthy=max(args.runs // 2, 1), methods=methods, traces=bool(args.plot),
+        )  # fmt: skip
+    except ValueError as err:
+        raise SystemExit(f"hrgjax diagnose: {err}") from None
+    print(f"hrgjax diagnose: scenario {args.scenario}")
+    print(table(result))
+    traces = result.pop("traces", None)
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result, indent=2))
+        print(f"wrote {path}")
+    if args.plot:
+        from .plots import diagnosis_figure
+
+        print(f"wrote {diagnosis_figure(traces, args.plot, title=result['scenario'])}")
+    return 0
+
+
 def main(argv=None) -> int:
     """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
     parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__)
@@ -375,6 +408,16 @@ def main(argv=None) -> int:
     p.add_argument("--coarse", type=float, default=60.0, help="coarse-alignment span [s]")
     p.add_argument("--step", type=float, default=1.0, help="Kalman filter step [s]")
     p.set_defaults(func=cmd_align)
+
+    p = sub.add_parser("diagnose", help="three-INS fault diagnosis: every method, one table")
+    p.add_argument("--scenario", default="stationary",
+                   choices=("stationary", "accel3g", "accel10g", "gyro"))  # fmt: skip
+    p.add_argument("--json", default=None, help="write the table (methods[...]) here")
+    p.add_argument("--plot", default=None, help="write decision traces of one run here (PNG)")
+    p.add_argument("--runs", type=int, default=12, help="faulty Monte Carlo runs (default 12)")
+    p.add_argument("--methods", default=None, help="comma-separated subset of the methods")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    p.set_defaults(func=cmd_diagnose)
 
     p = sub.add_parser("simulate", help="simulate a bench plan on a preset gyro")
     p.add_argument("--preset", default="tvg3", choices=PRESETS)

@@ -181,3 +181,30 @@ def schuler_figure(t, position_m: dict, path: str) -> str:
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def diagnosis_figure(traces: dict, path: str, title: str = "") -> str:
+    """Decision traces like seed 002's Figs. 6–7: each method's decided state (0 = S0,
+    i = fault in INS i) around the fault onset of one run
+    ([`compare`][hrgjax.diagnosis.compare.compare] with `traces=True`). **Returns** the
+    path written."""
+    plt = _plt()
+    t = np.asarray(traces["t_s"])
+    t_f = float(traces["t_fault_s"])
+    names = [k for k in traces if k not in ("t_s", "truth", "t_fault_s")]
+    sel = (t >= t_f - 60) & (t <= t_f + 240)
+    fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.1 * len(names) + 1), sharex=True,
+                             squeeze=False)  # fmt: skip
+    for ax, name in zip(axes[:, 0], names, strict=True):
+        ax.step(t[sel] - t_f, np.asarray(traces[name])[sel], where="post", lw=1.2)
+        ax.axhline(traces["truth"], color="k", ls=":", lw=0.8)
+        ax.set_yticks(range(4), ["S0", "S1", "S2", "S3"])
+        ax.set_ylim(-0.3, 3.3)
+        ax.set_ylabel(name, rotation=0, ha="right", va="center", fontsize=8)
+        ax.axvline(0.0, color="r", lw=0.8)
+    axes[-1, 0].set_xlabel("time from the fault onset [s]")
+    fig.suptitle(f"Decided state, {title} (dotted: the faulty INS; red: onset)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -1,6 +1,9 @@
 """Network building blocks shared by the calibration, diagnosis and FOG work: tapped-delay
-inputs, probabilistic neural networks, and full-batch Rprop training."""
+inputs, multilayer perceptrons, probabilistic neural networks, self-organising maps, and
+full-batch Rprop training."""
 
+from . import mlp as mlp
 from . import pnn as pnn
+from . import som as som
 from . import tapped_delay as tapped_delay
 from . import train as train

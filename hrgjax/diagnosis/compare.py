@@ -1,0 +1,317 @@
+r"""Every diagnosis method of seed 002 on the same simulated data, in one table (the thesis's
+Tables 1–3).
+
+A [`Scenario`][hrgjax.diagnosis.compare.Scenario] fixes the INS (latitude, specific force),
+the faulty sensor, the fault sizes and the onset time. [`compare`][hrgjax.diagnosis.compare.compare]
+simulates Monte Carlo complexes for it — faulty runs (the fault in INS 1, 2, 3 in turn, its
+size uniform in the scenario's range) and healthy runs — trains the neural detectors on
+separate healthy runs (their own keys) with onsets added by linearity, runs every method,
+and scores it:
+
+- `detection_time_s`: median over the faulty runs of the time from the onset `t_fault` to
+  the first measurement at which the method names the faulty INS (`null` if none did; the
+  first measurement a fault changes comes one step after it);
+- `detected`: share of faulty runs in which it did, within the run;
+- `false_alarm_rate`: share of the steps without a fault (healthy runs, and faulty runs
+  before the onset), after the first `warmup_s`, on which a fault is named;
+- `wrong_diagnosis_rate`: share of the steps after the onset on which a wrong INS is named;
+- `step_cost_s`: wall time per measurement step and run, with the runs batched (`vmap`) —
+  compile time excluded.
+
+The filter banks are built on the model of the object at rest (seed 002's design; in the
+manoeuvre scenarios the specific force is not in their model) and start with probability
+0.97 on S0. Measurements carry white noise of `meas_sigma` (R/g-scaled units, as the filters assume;
+the thesis's are noise-free).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._x64 import require_x64
+from ..ins.constants import G0
+from ..ins.platform import Fault, PlatformINS
+from . import neural as nl
+from .complex import fault_bank, measurements, simulate_complex
+from .filter_bank import GainBank, run_bank, run_gains
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    """One diagnosis scenario: the faulty `sensor`, fault `sizes` (low, high) in sensor units,
+        onset `t_fault` [s], run length `duration` [s], step `dt` [s], specific force beyond
+        gravity `specific_force` (E, N, H) [m/s²] — from `manoeuvre_start` [s] on if given (the
+    object is stationary before), else throughout — and the thesis's figures for it."""
+
+    name: str
+    sensor: str = "accel_y"
+    sizes: tuple[float, float] = (1.5e-7, 3e-7)
+    t_fault: float = 3700.0
+    duration: float = 4000.0
+    dt: float = 1.0
+    specific_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    manoeuvre_start: float | None = None
+    thesis: str = ""
+
+    def ins(self) -> PlatformINS:
+        """The INS at the start (stationary when there is a manoeuvre)."""
+        if self.manoeuvre_start is None:
+            return self.ins_after()
+        return PlatformINS()
+
+    def ins_after(self) -> PlatformINS:
+        """The INS under `specific_force`."""
+        return PlatformINS(specific_force=jnp.asarray(self.specific_force, float))
+
+    def manoeuvre(self):
+        if self.manoeuvre_start is None:
+            return None
+        return (self.manoeuvre_start, self.ins_after())
+
+
+SCENARIOS = {
+    "stationary": Scenario(
+        "stationary", thesis="accelerometer faults 1.5–3e-7 detected in ≈ 1 s by every method"
+    ),
+    "accel3g": Scenario(
+        "accel3g",
+        specific_force=(3 * G0, 0.0, 0.0),
+        thesis="3 g east: MLP methods 1–12 s; filter bank 13–77 s or a false alarm",
+    ),
+    "accel10g": Scenario(
+        "accel10g",
+        specific_force=(10 * G0, 0.0, 0.0),
+        thesis="10 g east: MLP methods 1–12 s; filter bank 13–77 s or a false alarm",
+    ),
+    "gyro": Scenario(
+        "gyro", sensor="gyro_xi", thesis="gyro faults in the ξ/ζ axes detected in 112–214 s"
+    ),
+}
+"""The scenarios of `hrgjax diagnose --scenario`."""
+
+METHODS = (
+    "filter_bank",
+    "filter_bank_full",
+    "pnn_bank",
+    "pnn_direct",
+    "som",
+    "mlp_classifier",
+    "mlp_predictor",
+)
+"""Method names of the comparison table."""
+
+
+def _measure(ins, sc: Scenario, keys, meas_sigma, fault_ins=None, sizes=None):
+    n_steps = int(round(sc.duration / sc.dt))
+
+    def one(key, i, e):
+        k_sim, k_noise = jax.random.split(key)
+        if i is None:
+            _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim,
+                                      manoeuvre=sc.manoeuvre())  # fmt: skip
+        else:
+            f = Fault.on(sc.sensor, 1.0, sc.t_fault)
+            f = Fault(f.e * e, f.t_fault)
+            _, nav = _faulty(ins, sc, n_steps, k_sim, i, f)
+        z = measurements(nav, sc.dt, sc.sensor, ins)
+        return z + meas_sigma * jax.random.normal(k_noise, z.shape)
+
+    if fault_ins is None:
+        return jax.jit(jax.vmap(lambda k: one(k, None, 0.0)))(keys)
+    outs = [one(k, int(i), e) for k, i, e in zip(keys, fault_ins, sizes, strict=True)]
+    return jnp.stack(outs)
+
+
+def _faulty(ins, sc, n_steps, key, i, fault):
+    return simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=key, fault_ins=i, fault=fault,
+                            manoeuvre=sc.manoeuvre())  # fmt: skip
+
+
+def _timed(fn, *args):
+    out = jax.block_until_ready(fn(*args))  # compile (and warm)
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    return out, time.perf_counter() - t0
+
+
+def _score(states, truth, onset_k, k0, dt, t_fault):
+    """states (R, K) decided INS (0 none, i = INS i); truth (R,) faulty INS (0 healthy)."""
+    states = np.asarray(states)
+    r, k = states.shape
+    steps = np.arange(k)
+    post = (truth[:, None] > 0) & (steps[None, :] >= onset_k)
+    quiet = ~post & (steps[None, :] >= k0)
+    named = states > 0
+    fa = float(named[quiet].mean())
+    wrong = named & (states != truth[:, None])
+    wd = float(wrong[post].mean()) if post.any() else 0.0
+    times = []
+    for run in np.flatnonzero(truth > 0):
+        hit = np.flatnonzero((states[run] == truth[run]) & (steps >= onset_k))
+        if hit.size:
+            times.append((hit[0] + 2) * dt - t_fault)
+    n_faulty = int((truth > 0).sum())
+    det = float(np.median(times)) if times else None
+    return {
+        "detection_time_s": det,
+        "detection_time_max_s": float(np.max(times)) if times else None,
+        "detected": len(times) / max(n_faulty, 1),
+        "false_alarm_rate": fa,
+        "wrong_diagnosis_rate": wd,
+    }
+
+
+def compare(
+    scenario: str | Scenario = "stationary",
+    *,
+    key: jax.Array | None = None,
+    n_faulty: int = 12,
+    n_healthy: int = 6,
+    n_train: int = 8,
+    meas_sigma: float = 1e-9,
+    warmup_s: float = 50.0,
+    methods=METHODS,
+    n_windows: int = 4000,
+    n_predictor: int = 400,
+    predictor_steps: int = 30,
+    traces: bool = False,
+    confirm: int = 3,
+):
+    """Run `methods` on `scenario` (module docstring). **Returns** a dict with `scenario`,
+    `thesis`, `methods` (one dict per method: `name` and the scores, `train_s`) and, with
+    `traces=True`, `traces`: time [s] and each method's decided INS on the first faulty run
+    (for [`diagnosis_figure`][hrgjax.plots.diagnosis_figure]).
+
+    The neural detectors name an onset, and [`latch`][hrgjax.diagnosis.neural.latch] holds
+    it once it has been named on `confirm` consecutive steps (an onset stays in the 20-tap
+    window for 18 steps, so this costs `confirm` − 1 steps of delay and filters isolated
+    misclassifications, which would otherwise latch a false alarm for the rest of a run).
+    `n_windows`: training windows (half with an onset); `n_predictor`, `predictor_steps`:
+    samples per hypothesis and Levenberg–Marquardt steps of the predictors."""
+    require_x64("diagnosis.compare")
+    sc = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
+    unknown = set(methods) - set(METHODS)
+    if unknown:
+        raise ValueError(f"unknown methods {sorted(unknown)}; choose from {METHODS}")
+    key = jax.random.key(0) if key is None else key
+    k_test, k_healthy, k_train, k_win, k_nn, k_sizes = jax.random.split(key, 6)
+    ins = sc.ins()
+    n_ins = 3
+    truth = np.r_[np.arange(n_faulty) % n_ins + 1, np.zeros(n_healthy, int)]
+    sizes = np.asarray(jax.random.uniform(k_sizes, (n_faulty,), minval=sc.sizes[0],
+                                          maxval=sc.sizes[1]))  # fmt: skip
+    z_f = _measure(ins, sc, jax.random.split(k_test, n_faulty), meas_sigma, truth[:n_faulty] - 1,
+                   sizes)  # fmt: skip
+    z_h = _measure(ins, sc, jax.random.split(k_healthy, n_healthy), meas_sigma)
+    zs = jnp.concatenate([z_f, z_h])
+    k_len = zs.shape[1]
+    # measurement k is navigation step k + 2; the fault acts from step ceil(t/dt) + 1
+    onset_k = int(np.ceil(sc.t_fault / sc.dt)) + 1 - 2
+    k0 = int(round(warmup_s / sc.dt))
+    rows, trace = [], {"t_s": (np.arange(k_len) + 2) * sc.dt}
+
+    def add(name, states, cost, train_s):
+        row = {"name": name, **_score(states, truth, onset_k, k0, sc.dt, sc.t_fault)}
+        row["step_cost_s"] = cost / (zs.shape[0] * k_len)
+        row["train_s"] = train_s
+        rows.append(row)
+        trace[name] = np.asarray(states[0])
+
+    bank_needed = {"filter_bank", "filter_bank_full"} & set(methods)
+    # the complex starts healthy: most of the prior on S0 (with a uniform prior the IMM can
+    # settle on a fault hypothesis during the start-up transient and hold it)
+    prior = jnp.r_[1.0 - 0.01 * n_ins, jnp.full(n_ins, 0.01)]
+    if bank_needed:
+        t0 = time.perf_counter()
+        bank = fault_bank(ins, sc.sensor, sc.dt, meas_sigma=meas_sigma, switch_prob=1e-4)
+        build_s = time.perf_counter() - t0
+    if "filter_bank" in methods:
+        t0 = time.perf_counter()
+        gb = GainBank.from_bank(bank, min(k_len, 1000))
+        gb_s = time.perf_counter() - t0
+        run = jax.jit(lambda z: run_gains(gb, z, interacting=True, prior=prior)[1])
+        dec, cost = _timed(run, zs)
+        add("filter_bank", np.maximum(np.asarray(dec), 0), cost, build_s + gb_s)
+    if "filter_bank_full" in methods:
+        run = jax.jit(jax.vmap(lambda z: run_bank(bank, z, interacting=True, prior=prior)[1]))
+        dec, cost = _timed(run, zs)
+        add("filter_bank_full", np.maximum(np.asarray(dec), 0), cost, build_s)
+
+    neural = [m for m in methods if m not in ("filter_bank", "filter_bank_full")]
+    if neural:
+        z_tr = _measure(ins, sc, jax.random.split(k_train, n_train), meas_sigma)
+        z_va = _measure(ins, sc, jax.random.split(jax.random.fold_in(k_train, 1), 2), meas_sigma)
+        tmpl = nl.onset_templates(sc.ins_after(), sc.sensor, sc.dt, n_ins=n_ins)
+        kw1, kw2 = jax.random.split(k_win)
+        x, y = nl.classifier_set(*nl.training_windows(z_tr, tmpl, kw1, n_windows, sizes=sc.sizes))
+        xv, yv = nl.classifier_set(*nl.training_windows(z_va, tmpl, kw2, n_windows // 2,
+                                                        sizes=sc.sizes))  # fmt: skip
+        keys = dict(zip(neural, jax.random.split(k_nn, len(neural)), strict=True))
+        for name in neural:
+            t0 = time.perf_counter()
+            det = _train(name, x, y, xv, yv, z_tr, tmpl, sc, keys[name], n_predictor,
+                         predictor_steps, n_ins)  # fmt: skip
+            train_s = time.perf_counter() - t0
+            run = jax.jit(jax.vmap(lambda z, det=det: nl.stream_classes(det, z)))
+            cls, cost = _timed(run, zs)
+            add(name, nl.latch(cls, confirm), cost, train_s)
+    out = {"scenario": sc.name, "sensor": sc.sensor, "thesis": sc.thesis, "methods": rows}
+    out["setup"] = {
+        "fault_sizes": list(sc.sizes), "t_fault_s": sc.t_fault, "duration_s": sc.duration,
+        "dt_s": sc.dt, "nominal_sensor_error": float(ins.accel_sigma),
+        "specific_force_mps2": list(sc.specific_force), "n_faulty": n_faulty,
+        "n_healthy": n_healthy, "meas_sigma": meas_sigma, "device": jax.devices()[0].device_kind,
+    }  # fmt: skip
+    if traces:
+        out["traces"] = trace
+        out["traces"]["truth"] = int(truth[0])
+        out["traces"]["t_fault_s"] = sc.t_fault
+    return out
+
+
+def _train(name, x, y, xv, yv, z_tr, tmpl, sc, key, n_predictor, predictor_steps, n_ins):
+    n_cls = n_ins + 1
+    if name in ("pnn_bank", "pnn_direct"):
+        cls = nl.PNNBank if name == "pnn_bank" else nl.PNNDirect
+        return nl.choose_sigma(cls, x, y, xv, yv, n_cls)
+    if name == "som":
+        return nl.SOMDetector.fit(x, y, n_cls, key=key)
+    if name == "mlp_classifier":
+        return nl.MLPClassifier.fit(x, y, n_cls, key=key, steps=1000)
+    if name == "mlp_predictor":
+        sets = []
+        for h, k in zip(range(n_cls), jax.random.split(key, n_cls + 1)[1:], strict=True):
+            t = tmpl if h == 0 else tmpl[h - 1 : h]
+            w, _, _ = nl.training_windows(z_tr, t, k, n_predictor, sizes=sc.sizes,
+                                          p_fault=0.0 if h == 0 else 1.0,
+                                          onset_at_end=True)  # fmt: skip
+            sets.append(nl.predictor_set(w))
+        return nl.MLPPredictor.fit(sets, key=key, max_steps=predictor_steps)
+    raise ValueError(f"unknown method {name!r}")
+
+
+def table(result) -> str:
+    """The comparison as a markdown table."""
+    lines = [
+        f"Scenario {result['scenario']} (fault in {result['sensor']}, sizes "
+        f"{result['setup']['fault_sizes'][0]:.2g}–{result['setup']['fault_sizes'][1]:.2g}, "
+        f"nominal sensor error {result['setup']['nominal_sensor_error']:.0e})",
+        f"Thesis: {result['thesis']}",
+        "",
+        "| method | detection time [s] (median / max) | detected | false alarms | wrong "
+        "diagnoses | cost per step [s] |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in result["methods"]:
+        dt = "–" if r["detection_time_s"] is None else (
+            f"{r['detection_time_s']:.0f} / {r['detection_time_max_s']:.0f}")  # fmt: skip
+        lines.append(
+            f"| {r['name']} | {dt} | {r['detected']:.0%} | {r['false_alarm_rate']:.2%} | "
+            f"{r['wrong_diagnosis_rate']:.2%} | {r['step_cost_s']:.1e} |"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,311 @@
+r"""Neural fault detectors of seed 002 (§3 of the thesis), trained on simulated complexes.
+
+All detectors look at the last `taps` = 20 pairwise measurements
+([`complex.measurements`][hrgjax.diagnosis.complex.measurements]) and name the *transition*
+S0 → S_i (the onset of a fault in INS i) or none; [`latch`][hrgjax.diagnosis.neural.latch]
+turns these into the state trace S0 … S_n the thesis plots (a fault, once named, stays).
+A window's level, trend and curvature carry no information about a fault — they are dominated by each
+INS's own Markov and Schuler errors, and a window long after an onset looks like a healthy
+INS with a larger drift — so the inputs are the window's shape with its level, trend and curvature
+removed (second differences less their mean), in units of the nominal sensor error
+([`features`][hrgjax.diagnosis.neural.features]).
+
+Training data come from the simulator: healthy complexes (their own keys), with fault
+onsets added by linearity — the error model is linear, so a complex with a fault of size e
+in INS i is the healthy one plus e times the noise-free unit response
+([`onset_templates`][hrgjax.diagnosis.neural.onset_templates]) — at random positions and
+sizes ([`training_windows`][hrgjax.diagnosis.neural.training_windows]).
+
+Detectors (each has `classify(x) → (N,)` onset classes, 0 = none):
+
+- [`PNNBank`][hrgjax.diagnosis.neural.PNNBank]: one two-class probabilistic neural network
+  per transition S0 → S_i (alg. 3.1.1);
+- [`PNNDirect`][hrgjax.diagnosis.neural.PNNDirect]: one PNN over all classes (alg. 3.1.2);
+- [`SOMDetector`][hrgjax.diagnosis.neural.SOMDetector]: a Kohonen map, self-organised,
+  then labelled (alg. 3.2.1);
+- [`MLPClassifier`][hrgjax.diagnosis.neural.MLPClassifier]: one tapped-delay MLP per fault
+  state, 20 and 10 tanh hidden units, sigmoid output, Rprop (alg. 3.4.1);
+- [`MLPPredictor`][hrgjax.diagnosis.neural.MLPPredictor]: one MLP per hypothesis (50 tanh
+  hidden, linear output) predicting the next measurement, trained by Levenberg–Marquardt
+  (optimistix); the hypothesis with the least residual wins (alg. 3.3.1).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import optimistix as optx
+
+from ..ins.platform import Fault, PlatformINS, _simulate
+from ..nn.mlp import MLP
+from ..nn.pnn import PNN
+from ..nn.som import SOM
+from ..nn.tapped_delay import windows
+from ..nn.train import train_module
+from .complex import measurements
+
+TAPS = 20
+"""Tapped-delay length of seed 002's networks."""
+
+
+def features(w, unit: float = 1e-7):
+    """Detector inputs from measurement windows `w` (..., taps, m): second differences along
+    the window minus their mean (level, trend and curvature removed), over `unit`, flattened
+    → (..., (taps − 2)·m)."""
+    w = jnp.asarray(w, float)
+    d = jnp.diff(w, n=2, axis=-2)
+    d = (d - jnp.mean(d, axis=-2, keepdims=True)) / unit
+    return d.reshape(*d.shape[:-2], -1)
+
+
+def onset_templates(
+    ins: PlatformINS, sensor: str, dt: float, *, n_ins: int = 3, length: int = TAPS + 1
+):
+    """The noise-free measurements after a unit fault (sensor units) in each INS, from the
+    first measurement it changes: `(n_ins, length, m)`."""
+    lead = 4
+    fault = Fault.on(sensor, 1.0, lead * dt)
+    _, _, nav1 = _simulate(ins, jnp.asarray(float(dt)), length + lead + 4, None, fault, None)
+    out = []
+    for i in range(n_ins):
+        nav = jnp.zeros((n_ins,) + nav1.shape).at[i].set(nav1)
+        z = np.asarray(measurements(nav, dt, sensor, ins, pairs=tuple(range(n_ins - 1))))
+        k_on = int(np.argmax(np.any(z != 0.0, axis=-1)))
+        out.append(z[k_on : k_on + length])
+    return jnp.asarray(np.stack(out))
+
+
+def training_windows(
+    z_healthy,
+    templates,
+    key: jax.Array,
+    n: int,
+    *,
+    sizes: tuple[float, float],
+    p_fault: float = 0.5,
+    taps: int = TAPS,
+    onset_at_end: bool = False,
+):
+    """`n` windows of `taps` + 1 measurements cut from healthy complexes `z_healthy`
+    (runs, K, m); a share `p_fault` carries a fault onset in INS i (uniform) of size
+    U(`sizes`) at window position q (uniform in 1 … taps, or `taps` — the last sample — with
+    `onset_at_end`). **Returns** `(windows (n, taps+1,
+    m), fault class (n,) 0 = none, onset position q (n,), 0 where none)`."""
+    z = jnp.asarray(z_healthy, float)
+    if z.ndim != 3 or z.shape[1] < taps + 1:
+        raise ValueError(f"z_healthy must be (runs, K >= {taps + 1}, m); got {z.shape}")
+    runs, k_len, m = z.shape
+    n_ins = templates.shape[0]
+    kr, kp, kf, kc, kq, ks = jax.random.split(key, 6)
+    r = jax.random.randint(kr, (n,), 0, runs)
+    p = jax.random.randint(kp, (n,), 0, k_len - taps)
+    idx = p[:, None] + jnp.arange(taps + 1)[None, :]
+    w = z[r[:, None], idx]
+    faulty = jax.random.uniform(kf, (n,)) < p_fault
+    c = jnp.where(faulty, jax.random.randint(kc, (n,), 1, n_ins + 1), 0)
+    q = jax.random.randint(kq, (n,), taps if onset_at_end else 1, taps + 1)
+    q = jnp.where(faulty, q, 0)
+    e = jax.random.uniform(ks, (n,), minval=sizes[0], maxval=sizes[1])
+    # template sample j lands at window position q + j
+    j = jnp.arange(taps + 1)[None, :] - q[:, None]
+    tmpl = templates[jnp.maximum(c - 1, 0)[:, None], jnp.clip(j, 0, templates.shape[1] - 1)]
+    add = jnp.where(((j >= 0) & faulty[:, None])[..., None], tmpl, 0.0)
+    return w + e[:, None, None] * add, c, q
+
+
+def classifier_set(w, c, q, unit: float = 1e-7):
+    """Classifier inputs and labels from [`training_windows`][hrgjax.diagnosis.neural.training_windows]:
+    the features of the last `taps` samples, labelled with the fault class (an onset at any
+    position 1 … taps changes them: the fault's first sample, half a step under the
+    zero-order hold, is at position q)."""
+    del q
+    return features(w[:, 1:], unit), jnp.asarray(c)
+
+
+def latch(classes, confirm: int = 1):
+    """State trace from per-step onset classes (..., K): S0 until a nonzero class has been
+    named on `confirm` consecutive steps, that class from then on (faults do not clear).
+    `confirm` > 1 trades that many steps of detection delay for immunity to isolated
+    misclassifications, which a latched decision would otherwise keep for good."""
+    c = jnp.asarray(classes)
+    if int(confirm) < 1:
+        raise ValueError(f"confirm must be >= 1; got {confirm}")
+    ok = c != 0
+    for lag in range(1, int(confirm)):
+        same = jnp.concatenate([jnp.zeros(c.shape[:-1] + (lag,), bool),
+                                c[..., lag:] == c[..., :-lag]], axis=-1)  # fmt: skip
+        ok = ok & same
+    first = jnp.argmax(ok, axis=-1)
+    any_ = jnp.any(ok, axis=-1)
+    val = jnp.take_along_axis(c, first[..., None], axis=-1)
+    k = jnp.arange(c.shape[-1]).reshape((1,) * (c.ndim - 1) + (-1,))
+    return jnp.where(any_[..., None] & (k >= first[..., None]), val, 0)
+
+
+def _scores_to_class(p_fault, threshold):
+    """(N, n_faults) posterior of each fault class → class (0 when none passes)."""
+    best = jnp.argmax(p_fault, axis=-1)
+    top = jnp.max(p_fault, axis=-1)
+    return jnp.where(top > threshold, best + 1, 0)
+
+
+class PNNDirect(eqx.Module):
+    """One PNN over the classes none, onset in INS 1 … n (alg. 3.1.2); a fault class is named
+    when its posterior exceeds `threshold`."""
+
+    pnn: PNN
+    threshold: float = eqx.field(static=True, default=0.9)
+
+    @classmethod
+    def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
+        return cls(PNN.fit(x, y, n_classes, sigma), threshold)
+
+    def classify(self, x):
+        ls = jax.vmap(self.pnn.log_scores)(jnp.asarray(x, float))
+        post = jax.nn.softmax(ls, axis=-1)
+        return _scores_to_class(post[:, 1:], self.threshold)
+
+
+class PNNBank(eqx.Module):
+    """One two-class PNN per transition S0 → S_i (alg. 3.1.1); the transition whose 'yes'
+    posterior is largest, if above `threshold`."""
+
+    pnns: list[PNN]
+    threshold: float = eqx.field(static=True, default=0.9)
+
+    @classmethod
+    def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
+        y = jnp.asarray(y)
+        pnns = [PNN.fit(x, (y == i).astype(int), 2, sigma) for i in range(1, n_classes)]
+        return cls(pnns, threshold)
+
+    def classify(self, x):
+        x = jnp.asarray(x, float)
+        yes = [jax.nn.softmax(jax.vmap(p.log_scores)(x), axis=-1)[:, 1] for p in self.pnns]
+        return _scores_to_class(jnp.stack(yes, axis=-1), self.threshold)
+
+
+class SOMDetector(eqx.Module):
+    """A labelled Kohonen map (alg. 3.2.1)."""
+
+    som: SOM
+
+    @classmethod
+    def fit(cls, x, y, n_classes: int, *, key, shape=(10, 10), steps: int = 20000):
+        som = SOM.train(x, shape, key=key, steps=steps)
+        return cls(som.label(x, y, n_classes))
+
+    def classify(self, x):
+        return self.som.predict(x)
+
+
+class MLPClassifier(eqx.Module):
+    """One tapped-delay MLP per fault state, hidden 20 and 10 (tanh), sigmoid output
+    (alg. 3.4.1), trained with Rprop on the cross-entropy; the largest output above
+    `threshold` names the class. (The networks are stored up to their output's logit; the
+    sigmoid is applied in [`outputs`][hrgjax.diagnosis.neural.MLPClassifier.outputs].)"""
+
+    nets: list[MLP]
+    threshold: float = eqx.field(static=True, default=0.5)
+
+    @classmethod
+    def fit(cls, x, y, n_classes: int, *, key, hidden=(20, 10), steps: int = 1000,
+            threshold=0.5):  # fmt: skip
+        x, y = jnp.asarray(x, float), jnp.asarray(y)
+        nets = []
+        for i, k in zip(range(1, n_classes), jax.random.split(key, n_classes - 1), strict=True):
+            net = MLP((x.shape[1], *hidden, 1), key=k)
+            target = (y == i).astype(x.dtype)
+
+            def loss(m, target=target):
+                logit = jax.vmap(m)(x)[:, 0]
+                return jnp.mean(optax.sigmoid_binary_cross_entropy(logit, target))
+
+            nets.append(train_module(net, loss, steps, learning_rate=0.01, max_step=0.5))
+        return cls(nets, threshold)
+
+    def outputs(self, x):
+        """Sigmoid output of every network: (N, n_faults)."""
+        x = jnp.asarray(x, float)
+        return jax.nn.sigmoid(jnp.stack([jax.vmap(n)(x)[:, 0] for n in self.nets], axis=-1))
+
+    def classify(self, x):
+        return _scores_to_class(self.outputs(x), self.threshold)
+
+
+def predictor_set(w, unit: float = 1e-7):
+    """Predictor inputs and targets from windows (n, taps+1, m): the features of the first
+    `taps` samples, and the last sample's second difference less the input's mean second
+    difference, over `unit`."""
+    w = jnp.asarray(w, float)
+    head = w[:, :-1]
+    mean_d2 = jnp.mean(jnp.diff(head, n=2, axis=-2), axis=-2)
+    return features(head, unit), (w[:, -1] - 2.0 * w[:, -2] + w[:, -3] - mean_d2) / unit
+
+
+class MLPPredictor(eqx.Module):
+    """One MLP per hypothesis (S0: no onset; S_i: an onset in INS i at the predicted sample),
+    50 tanh hidden units and a linear output, predicting the
+    next measurement step (alg. 3.3.1); trained by Levenberg–Marquardt. At each step the
+    hypothesis with the least residual sum over the channels is the onset class."""
+
+    nets: list[MLP]
+
+    @classmethod
+    def fit(cls, sets, *, key, hidden: int = 50, max_steps: int = 60):
+        """`sets`: one `(x (n, d), y (n, m))` per hypothesis, S0 first."""
+        nets = []
+        for (x, y), k in zip(sets, jax.random.split(key, len(sets)), strict=True):
+            net = MLP((x.shape[1], hidden, y.shape[1]), key=k)
+            nets.append(_levenberg_marquardt(net, jnp.asarray(x), jnp.asarray(y), max_steps))
+        return cls(nets)
+
+    def residuals(self, x, y):
+        """Squared residual of each hypothesis's prediction: (n, M)."""
+        return jnp.stack([jnp.sum((jax.vmap(n)(x) - y) ** 2, axis=-1) for n in self.nets], axis=-1)
+
+    def classify_pairs(self, x, y):
+        """Onset class from inputs `x` and the measured next step `y`."""
+        return jnp.argmin(self.residuals(x, y), axis=-1)
+
+
+def _levenberg_marquardt(net, x, y, max_steps):
+    params, static = eqx.partition(net, eqx.is_inexact_array)
+
+    def resid(p, _):
+        m = eqx.combine(p, static)
+        return (jax.vmap(m)(x) - y).reshape(-1)
+
+    solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-9)
+    sol = optx.least_squares(resid, solver, params, max_steps=max_steps, throw=False)
+    return eqx.combine(sol.value, static)
+
+
+def stream_classes(detector, z, unit: float = 1e-7, taps: int = TAPS):
+    """Per-step onset classes of `detector` over one run's measurements `z` (K, m) → (K,)
+    (0 for the first steps, before a full window)."""
+    z = jnp.asarray(z, float)
+    if isinstance(detector, MLPPredictor):
+        w = windows(z, taps + 1).reshape(-1, taps + 1, z.shape[1])
+        x, y = predictor_set(w, unit)
+        c = detector.classify_pairs(x, y)
+        return jnp.concatenate([jnp.zeros(taps, c.dtype), c])
+    w = windows(z, taps).reshape(-1, taps, z.shape[1])
+    c = detector.classify(features(w, unit))
+    return jnp.concatenate([jnp.zeros(taps - 1, c.dtype), c])
+
+
+def choose_sigma(cls, x, y, xv, yv, n_classes: int, grid=(0.1, 0.2, 0.5, 1.0, 2.0, 5.0)):
+    """Fit `cls` ([`PNNBank`][hrgjax.diagnosis.neural.PNNBank] or
+    [`PNNDirect`][hrgjax.diagnosis.neural.PNNDirect]) with each kernel width of `grid` and
+    keep the one most accurate on the validation set `xv`, `yv`."""
+    best, best_acc = None, -1.0
+    for s in grid:
+        det = cls.fit(x, y, n_classes, s)
+        acc = float(jnp.mean(det.classify(xv) == jnp.asarray(yv)))
+        if acc > best_acc:
+            best, best_acc = det, acc
+    return best

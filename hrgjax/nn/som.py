@@ -1,0 +1,95 @@
+r"""Kohonen self-organising map: a grid of prototype vectors trained without labels, then
+labelled (the thesis's alg. 3.2.1).
+
+Training (Kohonen 1982), one sample per step drawn with an explicit key: the best-matching
+unit $b = \arg\min_j \lVert x - w_j\rVert$, then every unit moves towards the sample,
+
+$$w_j \leftarrow w_j + \alpha(t)\,\exp\!\left(-\frac{\lVert r_j - r_b\rVert^2}
+{2\sigma(t)^2}\right)(x - w_j),$$
+
+with the learning rate $\alpha$ and the neighbourhood radius $\sigma$ (in grid units)
+decaying exponentially from their start to their end values. Labelling: each unit takes the
+majority label of the training samples it wins (a unit that wins none takes the overall
+majority); a sample is classified by its best-matching unit's label."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+
+class SOM(eqx.Module):
+    """A trained map: `weights` (units, d), `grid` (units, 2) unit positions, `labels`
+    (units,) int (−1 before [`label`][hrgjax.nn.som.SOM.label])."""
+
+    weights: jax.Array
+    grid: jax.Array
+    labels: jax.Array
+
+    @classmethod
+    def train(
+        cls,
+        x,
+        shape: tuple[int, int],
+        *,
+        key: jax.Array,
+        steps: int = 20000,
+        rate: tuple[float, float] = (0.5, 0.01),
+        radius: tuple[float, float] | None = None,
+    ) -> SOM:
+        """Self-organise a `shape` grid on samples `x` (n, d): prototypes start at random
+        samples; `rate` and `radius` (default: half the grid's larger side → 0.5) decay
+        geometrically over `steps`."""
+        x = jnp.asarray(x, float)
+        if x.ndim != 2 or x.shape[0] < 1:
+            raise ValueError(f"x must have shape (n, d); got {x.shape}")
+        rows, cols = int(shape[0]), int(shape[1])
+        if rows < 1 or cols < 1:
+            raise ValueError(f"shape must be two positive ints; got {shape}")
+        if radius is None:
+            radius = (max(rows, cols) / 2.0, 0.5)
+        grid = jnp.stack(
+            jnp.meshgrid(jnp.arange(rows, dtype=x.dtype), jnp.arange(cols, dtype=x.dtype),
+                         indexing="ij"), axis=-1,
+        ).reshape(-1, 2)  # fmt: skip
+        k0, k1 = jax.random.split(key)
+        w0 = x[jax.random.choice(k0, x.shape[0], (rows * cols,), replace=x.shape[0] < rows * cols)]
+        picks = jax.random.randint(k1, (int(steps),), 0, x.shape[0])
+        frac = jnp.arange(int(steps), dtype=x.dtype) / max(int(steps) - 1, 1)
+        alpha = rate[0] * (rate[1] / rate[0]) ** frac
+        sigma = radius[0] * (radius[1] / radius[0]) ** frac
+        w = _self_organise(w0, grid, x[picks], alpha, sigma)
+        return cls(w, grid, jnp.full(rows * cols, -1))
+
+    def winners(self, x):
+        """Best-matching unit of each sample of `x` (n, d) → (n,)."""
+        x = jnp.asarray(x, float)
+        d2 = jnp.sum((x[:, None, :] - self.weights[None, :, :]) ** 2, axis=-1)
+        return jnp.argmin(d2, axis=-1)
+
+    def label(self, x, y, n_classes: int) -> SOM:
+        """Label each unit by the majority class of the samples `x` (n, d), `y` (n,) it
+        wins."""
+        win = self.winners(x)
+        y = jnp.asarray(y)
+        counts = jnp.zeros((self.weights.shape[0], n_classes)).at[win, y].add(1.0)
+        overall = jnp.argmax(jnp.bincount(y, length=n_classes))
+        labels = jnp.where(counts.sum(-1) > 0, jnp.argmax(counts, -1), overall)
+        return eqx.tree_at(lambda s: s.labels, self, labels)
+
+    def predict(self, x):
+        """Class of each sample of `x` (n, d) → (n,): its best-matching unit's label."""
+        return self.labels[self.winners(x)]
+
+
+@jax.jit
+def _self_organise(w0, grid, samples, alpha, sigma):
+    def step(w, inp):
+        x, a, s = inp
+        b = jnp.argmin(jnp.sum((w - x[None, :]) ** 2, axis=-1))
+        h = jnp.exp(-jnp.sum((grid - grid[b][None, :]) ** 2, axis=-1) / (2.0 * s**2))
+        return w + (a * h)[:, None] * (x[None, :] - w), None
+
+    w, _ = jax.lax.scan(step, w0, (samples, alpha, sigma))
+    return w

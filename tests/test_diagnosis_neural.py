@@ -1,0 +1,116 @@
+"""Seed 002's neural detectors and the method comparison, on a small stationary complex."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hrgjax.diagnosis import compare as cp
+from hrgjax.diagnosis import complex as cx
+from hrgjax.diagnosis import neural as nl
+from hrgjax.ins.platform import PlatformINS
+
+SIZES = (1.5e-7, 3e-7)
+
+
+def _healthy(ins, key, runs, k_len):
+    keys = jax.random.split(key, runs)
+    sim = lambda k: cx.simulate_complex(ins, dt=1.0, n_steps=k_len + 2, key=k)[1]
+    z = jax.vmap(lambda k: cx.measurements(sim(k), 1.0, "accel_y", ins))(keys)
+    return z + 1e-9 * jax.random.normal(jax.random.fold_in(key, 1), z.shape)
+
+
+@pytest.fixture(scope="module")
+def data():
+    ins = PlatformINS()
+    tmpl = nl.onset_templates(ins, "accel_y", 1.0)
+    z_tr = _healthy(ins, jax.random.key(1), 3, 400)
+    z_te = _healthy(ins, jax.random.key(2), 2, 400)  # held out: its own keys
+    tr = nl.classifier_set(*nl.training_windows(z_tr, tmpl, jax.random.key(3), 600, sizes=SIZES))
+    te = nl.classifier_set(*nl.training_windows(z_te, tmpl, jax.random.key(4), 600, sizes=SIZES))
+    return tmpl, z_tr, z_te, tr, te
+
+
+def test_onset_templates_follow_eq7_and_the_pair_signs(data):
+    """A unit north-accelerometer fault makes R/g·δφ'' step by the fault (half of it in the
+    step it starts, the zero-order hold); INS 1 shows in both pairs, INS 2/3 in one with −."""
+    tmpl = np.asarray(data[0])
+    # (the Schuler loop bends the step by (ω_s t)²/2 ≈ 3e-6 within 2 s)
+    np.testing.assert_allclose(tmpl[0, :3], [[0.5, 0.5], [1, 1], [1, 1]], atol=1e-5)
+    np.testing.assert_allclose(tmpl[1, :3], [[-0.5, 0], [-1, 0], [-1, 0]], atol=1e-5)
+    np.testing.assert_allclose(tmpl[2, :3], [[0, -0.5], [0, -1], [0, -1]], atol=1e-5)
+
+
+def _chance(y):
+    return np.bincount(np.asarray(y)).max() / len(y)
+
+
+def test_every_neural_detector_beats_chance_on_held_out_windows(data):
+    _, z_tr, z_te, (x, y), (xt, yt) = data
+    chance = _chance(yt)
+    dets = {
+        "pnn_bank": nl.choose_sigma(nl.PNNBank, x, y, x[:200], y[:200], 4),
+        "pnn_direct": nl.choose_sigma(nl.PNNDirect, x, y, x[:200], y[:200], 4),
+        "som": nl.SOMDetector.fit(x, y, 4, key=jax.random.key(5), steps=5000),
+        "mlp": nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6), steps=600),
+    }
+    for name, det in dets.items():
+        acc = float(jnp.mean(det.classify(xt) == yt))
+        assert acc > chance + 0.25, (name, acc, chance)
+
+
+def test_training_is_deterministic_for_a_key_and_differs_across_keys(data):
+    _, _, _, (x, y), _ = data
+    a = nl.SOMDetector.fit(x, y, 4, key=jax.random.key(5), steps=2000)
+    b = nl.SOMDetector.fit(x, y, 4, key=jax.random.key(5), steps=2000)
+    c = nl.SOMDetector.fit(x, y, 4, key=jax.random.key(9), steps=2000)
+    np.testing.assert_array_equal(a.som.weights, b.som.weights)
+    assert not np.allclose(a.som.weights, c.som.weights)
+    m1 = nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6), steps=20)
+    m2 = nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6), steps=20)
+    np.testing.assert_array_equal(m1.nets[0].layers[0].weight, m2.nets[0].layers[0].weight)
+
+
+def test_predictor_bank_names_the_onset_by_least_residual(data):
+    tmpl, z_tr, z_te, _, _ = data
+    sets = []
+    for h, k in zip(range(4), jax.random.split(jax.random.key(7), 4), strict=True):
+        t = tmpl if h == 0 else tmpl[h - 1 : h]
+        w, _, _ = nl.training_windows(z_tr, t, k, 120, sizes=SIZES, p_fault=float(h > 0),
+                                      onset_at_end=True)  # fmt: skip
+        sets.append(nl.predictor_set(w))
+    pred = nl.MLPPredictor.fit(sets, key=jax.random.key(8), max_steps=8)
+    w, c, _ = nl.training_windows(z_te, tmpl, jax.random.key(10), 400, sizes=SIZES,
+                                  onset_at_end=True)  # fmt: skip
+    acc = float(jnp.mean(pred.classify_pairs(*nl.predictor_set(w)) == c))
+    assert acc > _chance(c) + 0.25, acc
+
+
+def test_latch_holds_the_first_named_fault():
+    c = jnp.array([[0, 0, 2, 0, 1, 0], [0, 0, 0, 0, 0, 0]])
+    np.testing.assert_array_equal(nl.latch(c), [[0, 0, 2, 2, 2, 2], [0] * 6])
+    # confirmation: a class must repeat on consecutive steps before it latches
+    c2 = jnp.array([0, 3, 0, 1, 1, 0, 2, 2, 2])
+    np.testing.assert_array_equal(nl.latch(c2, 2), [0, 0, 0, 0, 1, 1, 1, 1, 1])
+    np.testing.assert_array_equal(nl.latch(c2, 3), [0] * 8 + [2])
+
+
+def test_compare_scores_every_method_on_one_short_scenario():
+    """End to end on a short stationary scenario: the table's keys, and the filter bank and
+    the MLP classifier name the faulty INS within 1 s of the onset — the classifier's
+    latch then takes two more steps of confirmation — with no false alarm."""
+    sc = cp.Scenario("short", t_fault=300.0, duration=400.0)
+    res = cp.compare(sc, key=jax.random.key(3), n_faulty=3, n_healthy=1, n_train=2,
+                     methods=("filter_bank", "mlp_classifier"), n_windows=600,
+                     traces=True)  # fmt: skip
+    rows = {r["name"]: r for r in res["methods"]}
+    for r in rows.values():
+        assert {"name", "detection_time_s", "false_alarm_rate", "wrong_diagnosis_rate",
+                "step_cost_s"} <= set(r)  # fmt: skip
+        limit = 1.0 if r["name"] == "filter_bank" else 3.0
+        assert r["detected"] == 1.0 and r["detection_time_max_s"] <= limit, r
+        assert r["false_alarm_rate"] == 0.0 and r["wrong_diagnosis_rate"] < 0.05, r
+    assert res["traces"]["filter_bank"].shape == res["traces"]["t_s"].shape
+    assert "| filter_bank |" in cp.table(res)
+    with pytest.raises(ValueError, match="unknown methods"):
+        cp.compare(sc, methods=("nope",))
