@@ -18,9 +18,10 @@ and scores it:
 - `step_cost_s`: wall time per measurement step and run, with the runs batched (`vmap`) —
   compile time excluded.
 
-The filter banks are built on the model of the object at rest (seed 002's design; in the
-manoeuvre scenarios the specific force is not in their model) and start with probability
-0.97 on S0. Measurements carry white noise of `meas_sigma` (R/g-scaled units, as the filters assume;
+The filter banks are built on the scenario's model (specific force included) and start
+with probability 0.97 on S0; `filter_bank_rest` (scenarios with a specific force only) is
+the gain-schedule bank built for the object at rest, run on the accelerated data — the
+model mismatch a bank designed for one regime meets in another. Measurements carry white noise of `meas_sigma` (R/g-scaled units, as the filters assume;
 the thesis's are noise-free).
 """
 
@@ -97,6 +98,7 @@ SCENARIOS = {
 METHODS = (
     "filter_bank",
     "filter_bank_full",
+    "filter_bank_rest",
     "pnn_bank",
     "pnn_direct",
     "som",
@@ -237,12 +239,21 @@ def compare(
         run = jax.jit(lambda z: run_gains(gb, z, interacting=True, prior=prior)[1])
         dec, cost = _timed(run, zs)
         add("filter_bank", np.maximum(np.asarray(dec), 0), cost, build_s + gb_s)
+    if "filter_bank_rest" in methods and any(f != 0.0 for f in sc.specific_force):
+        t0 = time.perf_counter()
+        rest = fault_bank(PlatformINS(), sc.sensor, sc.dt, meas_sigma=meas_sigma,
+                          switch_prob=1e-4)  # fmt: skip
+        gb_rest = GainBank.from_bank(rest, min(k_len, 1000))
+        rest_s = time.perf_counter() - t0
+        run = jax.jit(lambda z: run_gains(gb_rest, z, interacting=True, prior=prior)[1])
+        dec, cost = _timed(run, zs)
+        add("filter_bank_rest", np.maximum(np.asarray(dec), 0), cost, rest_s)
     if "filter_bank_full" in methods:
         run = jax.jit(jax.vmap(lambda z: run_bank(bank, z, interacting=True, prior=prior)[1]))
         dec, cost = _timed(run, zs)
         add("filter_bank_full", np.maximum(np.asarray(dec), 0), cost, build_s)
 
-    neural = [m for m in methods if m not in ("filter_bank", "filter_bank_full")]
+    neural = [m for m in methods if not m.startswith("filter_bank")]
     if neural:
         z_tr = _measure(ins, sc, jax.random.split(k_train, n_train), meas_sigma)
         z_va = _measure(ins, sc, jax.random.split(jax.random.fold_in(k_train, 1), 2), meas_sigma)
@@ -260,6 +271,7 @@ def compare(
             run = jax.jit(jax.vmap(lambda z, det=det: nl.stream_classes(det, z)))
             cls, cost = _timed(run, zs)
             add(name, nl.latch(cls, confirm), cost, train_s)
+    rows.sort(key=lambda r: METHODS.index(r["name"]))
     out = {"scenario": sc.name, "sensor": sc.sensor, "thesis": sc.thesis, "methods": rows}
     out["setup"] = {
         "fault_sizes": list(sc.sizes), "t_fault_s": sc.t_fault, "duration_s": sc.duration,

@@ -188,11 +188,10 @@ def fault_bank(
     # exact change of variables x = T x'), so the covariance keeps its definiteness
     t = _state_scale(base, q, p0 + jnp.diag(jnp.zeros(n).at[i_f:].set(fault_sigma**2)))
     ti = 1.0 / t
-    # the increments before the first measurement are unknown: one spread each
-    for d in range(nd):
-        for j in (ns, ns + 1):
-            k = d * n1 + j
-            models = [(f, qq, pp.at[k, k].set(t[k] ** 2)) for f, qq, pp in models]
+    # `p0` is the complex at the first navigation sample (navigation errors zero, sensor
+    # errors stationary, increments zero); measurement 0 is taken two samples later, so the
+    # filters start one prediction on (their first step predicts the second)
+    models = [(f, qq, f @ pp @ f.T + qq) for f, qq, pp in models]
     scaled = [
         (ti[:, None] * f * t[None, :], ti[:, None] * qq * ti[None, :], h * t[None, :], r,
          jnp.zeros(n), ti[:, None] * pp * ti[None, :])
