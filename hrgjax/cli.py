@@ -274,11 +274,20 @@ def cmd_discover(args) -> int:
     return 0
 
 
+def _write_json(obj: dict, path: str) -> str:
+    """Write `obj` as indented JSON at `path` (folders made); returns the path."""
+    import json
+    from pathlib import Path
+
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(obj, indent=2))
+    return str(p)
+
+
 def cmd_align(args) -> int:
     """`hrgjax align IMU_LOG`: stationary coarse + fine alignment of a strapdown IMU log."""
     _setup()
-    import json
-    from pathlib import Path
 
     from .ins.alignment import align, load_psins
 
@@ -302,10 +311,7 @@ def cmd_align(args) -> int:
     if log.header_attitude_deg is not None:
         print(f"  file header heading: {log.header_attitude_deg[2]:.2f}° (clockwise from north)")
     if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(out, indent=2))
-        print(f"wrote {path}")
+        print(f"wrote {_write_json(out, args.json)}")
     if args.plot:
         from .plots import alignment_figure
 
@@ -316,8 +322,6 @@ def cmd_align(args) -> int:
 def cmd_diagnose(args) -> int:
     """`hrgjax diagnose`: every seed-002 diagnosis method on one scenario, in one table."""
     _setup()
-    import json
-    from pathlib import Path
 
     import jax
 
@@ -328,6 +332,7 @@ def cmd_diagnose(args) -> int:
         result = compare(
             args.scenario, key=jax.random.key(args.seed), n_faulty=args.runs,
             n_healthy=max(args.runs // 2, 1), methods=methods, traces=bool(args.plot),
+            log=lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True),
         )  # fmt: skip
     except ValueError as err:
         raise SystemExit(f"hrgjax diagnose: {err}") from None
@@ -335,10 +340,7 @@ def cmd_diagnose(args) -> int:
     print(table(result))
     traces = result.pop("traces", None)
     if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result, indent=2))
-        print(f"wrote {path}")
+        print(f"wrote {_write_json(result, args.json)}")
     if args.plot:
         from .plots import diagnosis_figure
 

@@ -77,11 +77,11 @@ def test_predictor_bank_names_the_onset_by_least_residual(data):
     for h, k in zip(range(4), jax.random.split(jax.random.key(7), 4), strict=True):
         t = tmpl if h == 0 else tmpl[h - 1 : h]
         w, _, _ = nl.training_windows(z_tr, t, k, 120, sizes=SIZES, p_fault=float(h > 0),
-                                      onset_at_end=True)  # fmt: skip
+                                      onset_within_last=3)  # fmt: skip
         sets.append(nl.predictor_set(w))
     pred = nl.MLPPredictor.fit(sets, key=jax.random.key(8), max_steps=8)
     w, c, _ = nl.training_windows(z_te, tmpl, jax.random.key(10), 400, sizes=SIZES,
-                                  onset_at_end=True)  # fmt: skip
+                                  onset_within_last=3)  # fmt: skip
     acc = float(jnp.mean(pred.classify_pairs(*nl.predictor_set(w)) == c))
     assert acc > _chance(c) + 0.25, acc
 
@@ -114,3 +114,27 @@ def test_compare_scores_every_method_on_one_short_scenario():
     assert "| filter_bank |" in cp.table(res)
     with pytest.raises(ValueError, match="unknown methods"):
         cp.compare(sc, methods=("nope",))
+    with pytest.raises(ValueError, match="unknown scenario"):
+        cp.compare("moon")
+    with pytest.raises(ValueError, match="t_fault"):
+        cp.compare(cp.Scenario("late", t_fault=500.0, duration=400.0))
+
+
+def test_diagnose_cli_writes_the_design_keys(tmp_path, capsys):
+    import json
+
+    from hrgjax.cli import main
+
+    out = tmp_path / "diag.json"
+    args = ["diagnose", "--scenario", "stationary", "--methods", "filter_bank", "--runs", "1",
+            "--json", str(out)]  # fmt: skip
+    assert main(args) == 0
+    rows = json.loads(out.read_text())["methods"]
+    assert [r["name"] for r in rows] == ["filter_bank"]
+    assert {"detection_time_s", "false_alarm_rate", "wrong_diagnosis_rate", "step_cost_s"} <= set(
+        rows[0]
+    )
+    assert rows[0]["detection_time_s"] == 1.0 and rows[0]["false_alarm_rate"] == 0.0
+    assert "| filter_bank |" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="unknown methods"):
+        main(["diagnose", "--methods", "filter_bank,bogus", "--runs", "1"])

@@ -183,6 +183,7 @@ def compare(
     predictor_steps: int = 30,
     traces: bool = False,
     confirm: int = 3,
+    log=None,
 ):
     """Run `methods` on `scenario` (module docstring). **Returns** a dict with `scenario`,
     `thesis`, `methods` (one dict per method: `name` and the scores, `train_s`) and, with
@@ -194,9 +195,16 @@ def compare(
     window for 18 steps, so this costs `confirm` − 1 steps of delay and filters isolated
     misclassifications, which would otherwise latch a false alarm for the rest of a run).
     `n_windows`: training windows (half with an onset); `n_predictor`, `predictor_steps`:
-    samples per hypothesis and Levenberg–Marquardt steps of the predictors."""
+    samples per hypothesis and Levenberg–Marquardt steps of the predictors; `log`: called with
+    a line of progress before each stage (the CLI prints them)."""
     require_x64("diagnosis.compare")
+    if isinstance(scenario, str) and scenario not in SCENARIOS:
+        raise ValueError(f"unknown scenario {scenario!r}; choose from {tuple(SCENARIOS)}")
     sc = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
+    if not 0.0 < sc.t_fault < sc.duration:
+        raise ValueError(f"t_fault must be inside (0, duration={sc.duration}) s; got {sc.t_fault}")
+    if int(n_faulty) < 1 or int(n_healthy) < 0 or int(n_train) < 1:
+        raise ValueError("n_faulty and n_train must be >= 1 and n_healthy >= 0")
     unknown = set(methods) - set(METHODS)
     if unknown:
         raise ValueError(f"unknown methods {sorted(unknown)}; choose from {METHODS}")
@@ -217,6 +225,8 @@ def compare(
     k0 = int(round(warmup_s / sc.dt))
     rows, trace = [], {"t_s": (np.arange(k_len) + 2) * sc.dt}
 
+    say = log or (lambda _msg: None)
+
     def add(name, states, cost, train_s):
         row = {"name": name, **_score(states, truth, onset_k, k0, sc.dt, sc.t_fault)}
         row["step_cost_s"] = cost / (zs.shape[0] * k_len)
@@ -229,6 +239,7 @@ def compare(
     # settle on a fault hypothesis during the start-up transient and hold it)
     prior = jnp.r_[1.0 - 0.01 * n_ins, jnp.full(n_ins, 0.01)]
     if bank_needed:
+        say("building the filter bank")
         t0 = time.perf_counter()
         bank = fault_bank(ins, sc.sensor, sc.dt, meas_sigma=meas_sigma, switch_prob=1e-4)
         build_s = time.perf_counter() - t0
@@ -264,6 +275,7 @@ def compare(
                                                         sizes=sc.sizes))  # fmt: skip
         keys = dict(zip(neural, jax.random.split(k_nn, len(neural)), strict=True))
         for name in neural:
+            say(f"training and running {name}")
             t0 = time.perf_counter()
             det = _train(name, x, y, xv, yv, z_tr, tmpl, sc, keys[name], n_predictor,
                          predictor_steps, n_ins)  # fmt: skip
@@ -301,7 +313,7 @@ def _train(name, x, y, xv, yv, z_tr, tmpl, sc, key, n_predictor, predictor_steps
             t = tmpl if h == 0 else tmpl[h - 1 : h]
             w, _, _ = nl.training_windows(z_tr, t, k, n_predictor, sizes=sc.sizes,
                                           p_fault=0.0 if h == 0 else 1.0,
-                                          onset_at_end=True)  # fmt: skip
+                                          onset_within_last=3)  # fmt: skip
             sets.append(nl.predictor_set(w))
         return nl.MLPPredictor.fit(sets, key=key, max_steps=predictor_steps)
     raise ValueError(f"unknown method {name!r}")

@@ -87,12 +87,12 @@ def training_windows(
     sizes: tuple[float, float],
     p_fault: float = 0.5,
     taps: int = TAPS,
-    onset_at_end: bool = False,
+    onset_within_last: int | None = None,
 ):
     """`n` windows of `taps` + 1 measurements cut from healthy complexes `z_healthy`
     (runs, K, m); a share `p_fault` carries a fault onset in INS i (uniform) of size
-    U(`sizes`) at window position q (uniform in 1 … taps, or `taps` — the last sample — with
-    `onset_at_end`). **Returns** `(windows (n, taps+1,
+    U(`sizes`) at window position q (uniform in 1 … taps, or over the last
+    `onset_within_last` positions). **Returns** `(windows (n, taps+1,
     m), fault class (n,) 0 = none, onset position q (n,), 0 where none)`."""
     z = jnp.asarray(z_healthy, float)
     if z.ndim != 3 or z.shape[1] < taps + 1:
@@ -106,7 +106,8 @@ def training_windows(
     w = z[r[:, None], idx]
     faulty = jax.random.uniform(kf, (n,)) < p_fault
     c = jnp.where(faulty, jax.random.randint(kc, (n,), 1, n_ins + 1), 0)
-    q = jax.random.randint(kq, (n,), taps if onset_at_end else 1, taps + 1)
+    lo = 1 if onset_within_last is None else taps + 1 - int(onset_within_last)
+    q = jax.random.randint(kq, (n,), max(lo, 1), taps + 1)
     q = jnp.where(faulty, q, 0)
     e = jax.random.uniform(ks, (n,), minval=sizes[0], maxval=sizes[1])
     # template sample j lands at window position q + j
@@ -247,7 +248,8 @@ def predictor_set(w, unit: float = 1e-7):
 
 
 class MLPPredictor(eqx.Module):
-    """One MLP per hypothesis (S0: no onset; S_i: an onset in INS i at the predicted sample),
+    """One MLP per hypothesis (S0: no onset; S_i: an onset in INS i at the predicted sample
+    or one or two samples before it — the span of its signature in the second differences),
     50 tanh hidden units and a linear output, predicting the
     next measurement step (alg. 3.3.1); trained by Levenberg–Marquardt. At each step the
     hypothesis with the least residual sum over the channels is the onset class."""
