@@ -161,3 +161,46 @@ def test_three_ins_bank_names_the_faulty_ins_within_seconds(accel_bank):
         cx.measurements(nav0, 1.0, "accel_z", ins)
     with pytest.raises(ValueError, match="both fault and fault_ins"):
         cx.simulate_complex(ins, dt=1.0, n_steps=10, key=jax.random.key(0), fault_ins=1)
+
+
+@pytest.mark.parametrize("g_east", [0.0, 10.0])
+def test_healthy_filter_is_consistent_from_the_first_step(g_east):
+    """The S0 filter's model is the simulator's: on healthy data (with the measurement noise
+    it assumes) its normalised innovations squared average m = 2, from the first steps on
+    and under 10 g — the check that caught the filters starting one step early."""
+    from hrgjax.diagnosis import complex as cx
+    from hrgjax.ins.platform import PlatformINS
+
+    ins = PlatformINS(specific_force=jnp.array([g_east * 9.80665, 0.0, 0.0]))
+    bank = cx.fault_bank(ins, "accel_y", 1.0, meas_sigma=1e-9)
+    nis = []
+    for seed in range(4):
+        _, nav = cx.simulate_complex(ins, dt=1.0, n_steps=302, key=jax.random.key(seed))
+        z = cx.measurements(nav, 1.0, "accel_y", ins)
+        z = z + 1e-9 * jax.random.normal(jax.random.key(100 + seed), z.shape)
+
+        def step(g, zk):
+            g, nu, s, _ = kalman.update(kalman.predict(g, bank.phi[0], bank.qd[0]), zk,
+                                        bank.h[0], bank.r[0])  # fmt: skip
+            return g, nu @ jnp.linalg.solve(s, nu)
+
+        _, q = jax.lax.scan(step, kalman.Gaussian(bank.x0[0], bank.p0[0]), z)
+        nis.append(np.asarray(q))
+    nis = np.stack(nis)
+    assert 1.7 < nis.mean() < 2.3, nis.mean()  # sampling σ of the mean ≈ 0.08
+    assert nis[:, :5].max() < 16.0, nis[:, :5]  # no start-up outlier (χ²₂ tail 3e-4)
+
+
+def test_relevant_states_are_the_ones_that_reach_the_parameter():
+    from hrgjax.diagnosis import complex as cx
+    from hrgjax.ins.platform import STATES, PlatformINS
+
+    def names(ins, row):
+        c = jax.jacfwd(ins.navigation_errors)(jnp.zeros(17))[row]
+        return {STATES[i] for i in cx.relevant_states(ins, c)}
+
+    north = {"dv_n", "alpha_x", "da_y", "d_xi", "d_zeta", "dw_xi", "dw_zeta"}
+    assert names(PlatformINS(), 0) == north
+    east = {"dv_e", "alpha_y", "da_x", "dw_eta"}
+    accelerated = PlatformINS(specific_force=jnp.array([30.0, 0.0, 0.0]))
+    assert names(accelerated, 0) == north | east  # the heading error couples in
