@@ -183,16 +183,16 @@ def schuler_figure(t, position_m: dict, path: str) -> str:
     return path
 
 
-def diagnosis_figure(traces: dict, path: str, title: str = "") -> str:
+def diagnosis_figure(traces: dict, path: str, title: str = "", span=(-20.0, 40.0)) -> str:
     """Decision traces like seed 002's Figs. 6–7: each method's decided state (0 = S0,
     i = fault in INS i) around the fault onset of one run
-    ([`compare`][hrgjax.diagnosis.compare.compare] with `traces=True`). **Returns** the
-    path written."""
+    ([`compare`][hrgjax.diagnosis.compare.compare] with `traces=True`), over `span` [s]
+    around the onset. **Returns** the path written."""
     plt = _plt()
     t = np.asarray(traces["t_s"])
     t_f = float(traces["t_fault_s"])
     names = [k for k in traces if k not in ("t_s", "truth", "t_fault_s")]
-    sel = (t >= t_f - 60) & (t <= t_f + 240)
+    sel = (t >= t_f + span[0]) & (t <= t_f + span[1])
     fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.1 * len(names) + 1), sharex=True,
                              squeeze=False)  # fmt: skip
     for ax, name in zip(axes[:, 0], names, strict=True):
