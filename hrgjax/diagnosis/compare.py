@@ -292,7 +292,8 @@ def compare(
         "n_healthy": n_healthy, "meas_sigma": meas_sigma, "device": jax.devices()[0].device_kind,
     }  # fmt: skip
     if traces:
-        out["traces"] = trace
+        order = ["t_s"] + [m for m in METHODS if m in trace]
+        out["traces"] = {k: trace[k] for k in order}
         out["traces"]["truth"] = int(truth[0])
         out["traces"]["t_fault_s"] = sc.t_fault
     return out
