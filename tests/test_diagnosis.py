@@ -89,6 +89,17 @@ def test_bank_refuses_bad_settings():
         fb.Bank.build(_toy(1), switch_prob=1.0)
     with pytest.raises(ValueError, match="z_offsets"):
         fb.Bank.build(_toy(2), z_offsets=[jnp.zeros(2), jnp.zeros(2)])
+    with pytest.raises(ValueError, match="n_steps"):
+        fb.GainBank.from_bank(bank, 0)
+    from hrgjax.diagnosis import complex as cx
+    from hrgjax.ins.platform import PlatformINS
+
+    with pytest.raises(ValueError, match="meas_sigma must be > 0"):
+        cx.fault_bank(PlatformINS(), "accel_y", 1.0, meas_sigma=0.0)
+    with pytest.raises(ValueError, match="dt must be > 0"):
+        cx.fault_bank(PlatformINS(), "accel_y", -1.0)
+    with pytest.raises(ValueError, match="no diagnosis channel"):
+        cx.fault_bank(PlatformINS(), "accel_z", 1.0)
 
 
 def test_gain_schedule_bank_equals_the_full_independent_bank():

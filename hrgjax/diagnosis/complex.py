@@ -8,11 +8,12 @@ r"""A navigation complex of identical platform INS (seed 002) and its fault-diag
   (so a fault e in an accelerometer reads as e).
 - [`fault_bank`][hrgjax.diagnosis.complex.fault_bank]: hypotheses S0 (healthy) and S_i
   (fault in INS i) for one sensor, as a [`Bank`][hrgjax.diagnosis.filter_bank.Bank] over the
-  exact discretisation of the complex: every INS's states that reach the measured
-  parameter ([`relevant_states`][hrgjax.diagnosis.complex.relevant_states]), one fault state per INS (a
-  random walk, coupled into its INS only under its hypothesis) and the last two increments
-  of the navigation parameter, so that eqs. (7)–(8) are exactly linear in the state. The
-  filters use the independent pairs (0, 1), (0, 2).
+  exact discretisation of the complex. Its state is the differences x₀ − x_j of the INS
+  states that reach the measured parameter
+  ([`relevant_states`][hrgjax.diagnosis.complex.relevant_states]), each with the last two
+  increments of its parameter (so eqs. (7)–(8) are exactly linear in the state), and one
+  fault state per INS (a random walk, coupled into the differences only under its
+  hypothesis). The filters use the independent pairs (0, 1), (0, 2), …
 """
 
 from __future__ import annotations
@@ -122,12 +123,15 @@ def fault_bank(
 ) -> Bank:
     r"""The hypothesis bank S0 … S_n for faults in `sensor` (module docstring).
 
-    Each INS carries, besides its states that reach the parameter, the increment $u_k = c(x_k - x_{k-1})$ of the
+    Each difference of INS states carries the increment $u_k = c(x_k - x_{k-1})$ of the
     navigation parameter $c\,x$ and the previous increment, so eq. (7) is
     $(u_k - u_{k-1})/\Delta t^2$ and eq. (8) is $u_k/\Delta t^2$ — exact for the discrete
     model, including the two-step onset of a fault, and well conditioned (increments cancel
     to $O(\omega\Delta t)$, where lagged values of the parameter itself would cancel to
-    $O(\omega^2\Delta t^2)$ and lose the covariance's definiteness).
+    $O(\omega^2\Delta t^2)$ and lose the covariance's definiteness). The filters' prior is
+    the complex one step after the aligned state (navigation errors zero, sensor errors
+    stationary): measurement 0 spans navigation samples 0–2, so its filter step predicts
+    sample 2.
 
     **Arguments:** `fault_sigma`: prior standard deviation of a fault's size (sensor units:
     g-units for accelerometers, rad/s for gyros); `fault_walk`: its random-walk step
@@ -136,6 +140,15 @@ def fault_bank(
     noise-free, a small value keeps the innovation covariance regular; `switch_prob`:
     hypothesis transition probability per step."""
     param, kind = _channel(sensor)
+    if int(n_ins) < 2:
+        raise ValueError(f"n_ins must be >= 2; got {n_ins}")
+    if not dt > 0:
+        raise ValueError(f"dt must be > 0 s; got {dt}")
+    for name, v in (("fault_sigma", fault_sigma), ("meas_sigma", meas_sigma)):
+        if not v > 0:
+            raise ValueError(f"{name} must be > 0; got {v}")
+    if not fault_walk >= 0:
+        raise ValueError(f"fault_walk must be >= 0; got {fault_walk}")
     col = FAULTS.index(sensor)
     phi1, gam1, qd1 = ins.discretise(dt)
     c = jax.jacfwd(ins.navigation_errors)(jnp.zeros(17))[NAV.index(param)]  # (17,)
