@@ -2,7 +2,9 @@
 
 from . import calibration as calibration
 from . import data as data
+from . import diagnosis as diagnosis
 from . import discovery as discovery
+from . import fog as fog
 from . import ins as ins
 from . import kalman as kalman
 from . import nn as nn

@@ -1,7 +1,8 @@
 """Network building blocks shared by the calibration, diagnosis and FOG work: tapped-delay
-inputs, multilayer perceptrons, probabilistic neural networks, self-organising maps, and
+inputs, multilayer perceptrons, Elman recurrent networks, probabilistic neural networks, self-organising maps, and
 full-batch Rprop training."""
 
+from . import elman as elman
 from . import mlp as mlp
 from . import pnn as pnn
 from . import som as som

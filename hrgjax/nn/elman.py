@@ -1,0 +1,50 @@
+r"""Elman recurrent network (Elman 1990): a tanh hidden layer whose context is its own previous
+state,
+
+$$h_t = \tanh(W_x x_t + W_h h_{t-1} + b), \qquad y_t = W_y h_t + c,$$
+
+run over a sequence by one `lax.scan` (PHYSICS.md §12). With $W_h = 0$ it is a one-hidden-
+layer MLP applied at each step; the context is what lets it model an error with memory."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+
+class Elman(eqx.Module):
+    """An Elman network `in_size → hidden_size (tanh, with context) → out_size (linear)`.
+
+    Call on a sequence `xs` (T, in_size) → `ys` (T, out_size); `h0` (hidden_size,) is the
+    initial context (zeros by default). [`step`][hrgjax.nn.elman.Elman.step] advances one
+    sample."""
+
+    w_x: eqx.nn.Linear
+    w_h: eqx.nn.Linear
+    w_y: eqx.nn.Linear
+    hidden_size: int = eqx.field(static=True)
+
+    def __init__(self, in_size: int, hidden_size: int, out_size: int, *, key: jax.Array):
+        if min(int(in_size), int(hidden_size), int(out_size)) < 1:
+            raise ValueError(
+                f"sizes must be positive; got in={in_size}, hidden={hidden_size}, out={out_size}"
+            )
+        kx, kh, ky = jax.random.split(key, 3)
+        self.w_x = eqx.nn.Linear(in_size, hidden_size, key=kx)
+        self.w_h = eqx.nn.Linear(hidden_size, hidden_size, use_bias=False, key=kh)
+        self.w_y = eqx.nn.Linear(hidden_size, out_size, key=ky)
+        self.hidden_size = int(hidden_size)
+
+    def step(self, h, x):
+        """One sample: context `h` (hidden,), input `x` (in,) → `(h_new, y)`."""
+        h = jnp.tanh(self.w_x(x) + self.w_h(h))
+        return h, self.w_y(h)
+
+    def __call__(self, xs, h0=None):
+        xs = jnp.asarray(xs)
+        if xs.ndim != 2:
+            raise ValueError(f"xs must have shape (T, in_size); got {xs.shape}")
+        h0 = jnp.zeros(self.hidden_size, xs.dtype) if h0 is None else jnp.asarray(h0)
+        _, ys = jax.lax.scan(lambda h, x: self.step(h, x), h0, xs)
+        return ys
