@@ -99,3 +99,29 @@ def test_gradients_through_the_scan_match_finite_differences(elman):
     eps = 1e-6
     fd = (loss(w + eps * d) - loss(w - eps * d)) / (2 * eps)
     np.testing.assert_allclose(jnp.sum(g * d), fd, rtol=1e-7)
+
+
+def test_psd_peak_finds_a_known_tone_and_matches_scipy():
+    from scipy.signal import welch
+
+    from hrgjax.fog import spectrum
+
+    fs, t = 200.0, np.arange(0, 40.0, 1 / 200.0)
+    rng = np.random.default_rng(0)
+    for f0, amp in ((10.0, 0.5 * 9.80665), (37.3, 1.0 * 9.80665)):
+        x = amp * np.sin(2 * np.pi * f0 * t + 0.3) + rng.normal(size=t.size) * 0.2
+        f, p = spectrum.psd(jnp.asarray(x), fs, nperseg=1024)
+        fr, pr = welch(x, fs, window="hann", nperseg=1024, detrend="constant")
+        np.testing.assert_allclose(f, fr)
+        np.testing.assert_allclose(p, pr, rtol=1e-10, atol=1e-12 * pr.max())
+        freq, a = spectrum.tone(jnp.asarray(x), fs, nperseg=1024)
+        assert abs(float(freq) - f0) < 0.05 * (fs / 1024)  # 5 % of a bin
+        assert abs(float(a) / amp - 1.0) < 0.01
+    # Parseval: white noise of variance σ² has ∫P df = σ²
+    w = rng.normal(size=2**15) * 0.7
+    f, p = spectrum.psd(jnp.asarray(w), fs, nperseg=512)
+    assert abs(float(jnp.sum(p) * (f[1] - f[0])) / 0.49 - 1.0) < 0.03
+    with pytest.raises(ValueError, match="fs must be > 0"):
+        spectrum.psd(jnp.asarray(w), 0.0)
+    with pytest.raises(ValueError, match="x must be finite"):
+        spectrum.psd(jnp.asarray(w).at[3].set(jnp.nan), fs)
