@@ -45,9 +45,8 @@ from .filter_bank import GainBank, run_bank, run_gains
 @dataclasses.dataclass(frozen=True)
 class Scenario:
     """One diagnosis scenario: the faulty `sensor`, fault `sizes` (low, high) in sensor units,
-        onset `t_fault` [s], run length `duration` [s], step `dt` [s], specific force beyond
-        gravity `specific_force` (E, N, H) [m/s²] — from `manoeuvre_start` [s] on if given (the
-    object is stationary before), else throughout — and the thesis's figures for it."""
+    onset `t_fault` [s], run length `duration` [s], step `dt` [s], specific force beyond
+    gravity `specific_force` (E, N, H) [m/s²] throughout, and the thesis's figures for it."""
 
     name: str
     sensor: str = "accel_y"
@@ -56,23 +55,11 @@ class Scenario:
     duration: float = 4000.0
     dt: float = 1.0
     specific_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    manoeuvre_start: float | None = None
     thesis: str = ""
 
     def ins(self) -> PlatformINS:
-        """The INS at the start (stationary when there is a manoeuvre)."""
-        if self.manoeuvre_start is None:
-            return self.ins_after()
-        return PlatformINS()
-
-    def ins_after(self) -> PlatformINS:
-        """The INS under `specific_force`."""
+        """The INS of the scenario (under `specific_force`)."""
         return PlatformINS(specific_force=jnp.asarray(self.specific_force, float))
-
-    def manoeuvre(self):
-        if self.manoeuvre_start is None:
-            return None
-        return (self.manoeuvre_start, self.ins_after())
 
 
 SCENARIOS = {
@@ -114,12 +101,12 @@ def _measure(ins, sc: Scenario, keys, meas_sigma, fault_ins=None, sizes=None):
     def one(key, i, e):
         k_sim, k_noise = jax.random.split(key)
         if i is None:
-            _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim,
-                                      manoeuvre=sc.manoeuvre())  # fmt: skip
+            _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim)
         else:
             f = Fault.on(sc.sensor, 1.0, sc.t_fault)
             f = Fault(f.e * e, f.t_fault)
-            _, nav = _faulty(ins, sc, n_steps, k_sim, i, f)
+            _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim, fault_ins=i,
+                                      fault=f)  # fmt: skip
         z = measurements(nav, sc.dt, sc.sensor, ins)
         return z + meas_sigma * jax.random.normal(k_noise, z.shape)
 
@@ -127,11 +114,6 @@ def _measure(ins, sc: Scenario, keys, meas_sigma, fault_ins=None, sizes=None):
         return jax.jit(jax.vmap(lambda k: one(k, None, 0.0)))(keys)
     outs = [one(k, int(i), e) for k, i, e in zip(keys, fault_ins, sizes, strict=True)]
     return jnp.stack(outs)
-
-
-def _faulty(ins, sc, n_steps, key, i, fault):
-    return simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=key, fault_ins=i, fault=fault,
-                            manoeuvre=sc.manoeuvre())  # fmt: skip
 
 
 def _timed(fn, *args):
@@ -268,7 +250,7 @@ def compare(
     if neural:
         z_tr = _measure(ins, sc, jax.random.split(k_train, n_train), meas_sigma)
         z_va = _measure(ins, sc, jax.random.split(jax.random.fold_in(k_train, 1), 2), meas_sigma)
-        tmpl = nl.onset_templates(sc.ins_after(), sc.sensor, sc.dt, n_ins=n_ins)
+        tmpl = nl.onset_templates(ins, sc.sensor, sc.dt, n_ins=n_ins)
         kw1, kw2 = jax.random.split(k_win)
         x, y = nl.classifier_set(*nl.training_windows(z_tr, tmpl, kw1, n_windows, sizes=sc.sizes))
         xv, yv = nl.classifier_set(*nl.training_windows(z_va, tmpl, kw2, n_windows // 2,

@@ -47,11 +47,8 @@ def simulate_complex(
     n_ins: int = 3,
     fault_ins: int | None = None,
     fault: Fault | None = None,
-    manoeuvre: tuple[float, PlatformINS] | None = None,
 ):
     """Simulate `n_ins` identical INS with independent noise; `fault` hits INS `fault_ins`.
-    `manoeuvre=(t_start, ins_after)`: from `t_start` [s] (rounded to a step) on, the complex
-    follows `ins_after` (e.g. the same INS under a specific force), continuing from its state.
 
     **Returns:** `(t (K+1,), nav (n_ins, K+1, 3))` navigation errors (latitude, departure,
     heading) [rad]."""
@@ -66,24 +63,8 @@ def simulate_complex(
         e = e.at[fault_ins].set(fault.e)
     faults = Fault(e, jnp.full(n_ins, fault.t_fault))
     keys = jax.random.split(key, n_ins)
-    dt_ = jnp.asarray(float(dt))
-    if manoeuvre is None:
-        run = lambda k, f: _simulate(ins, dt_, int(n_steps), k, f, None)
-        t, _, nav = jax.vmap(run)(keys, faults)
-        return t[0], nav
-    t_start, ins_after = manoeuvre
-    n1 = int(round(t_start / dt))
-    if not 0 < n1 < int(n_steps):
-        raise ValueError(f"manoeuvre start must fall inside the run (0, {n_steps * dt}) s")
-
-    def run(k, f):
-        k1, k2 = jax.random.split(k)
-        t1, x1, nav1 = _simulate(ins, dt_, n1, k1, f, None)
-        f2 = Fault(f.e, f.t_fault - n1 * dt_)
-        t2, _, nav2 = _simulate(ins_after, dt_, int(n_steps) - n1, k2, f2, x1[-1])
-        return jnp.concatenate([t1, t2[1:] + t1[-1]]), jnp.concatenate([nav1, nav2[1:]])
-
-    t, nav = jax.vmap(run)(keys, faults)
+    run = lambda k, f: _simulate(ins, jnp.asarray(float(dt)), int(n_steps), k, f, None)
+    t, _, nav = jax.vmap(run)(keys, faults)
     return t[0], nav
 
 
