@@ -62,6 +62,21 @@ class TriadCalibration(eqx.Module):
     bias_std: jax.Array
     residual_std: jax.Array
 
+    @classmethod
+    def known(cls, angles, scale=None, bias=None) -> TriadCalibration:
+        """A model set by hand (standard errors zero): `angles` (6,) [rad], `scale` (3,)
+        and `bias` (3,) (zeros by default)."""
+        angles = jnp.asarray(angles, float)
+        if angles.shape != (6,):
+            raise ValueError(f"angles must have shape (6,) in order {ANGLES}; got {angles.shape}")
+        scale = jnp.zeros(3) if scale is None else jnp.asarray(scale, float)
+        bias = jnp.zeros(3) if bias is None else jnp.asarray(bias, float)
+        for name, x in (("scale", scale), ("bias", bias)):
+            if x.shape != (3,):
+                raise ValueError(f"{name} must have shape (3,); got {x.shape}")
+        z3 = jnp.zeros(3)
+        return cls(angles, scale, bias, jnp.zeros(6), z3, z3, z3)
+
     def sensor(self, b):
         """Sensor outputs (..., 3) for body-frame inputs `b` (..., 3)."""
         m = (1.0 + self.scale)[:, None] * sensor_from_body(self.angles)

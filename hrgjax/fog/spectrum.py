@@ -14,9 +14,11 @@ power-weighted mean frequency of the lobe."""
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .._checks import check_finite
+from ..units import G0
 
 
 def psd(x, fs: float, nperseg: int | None = None):
@@ -62,3 +64,55 @@ def tone(x, fs: float, nperseg: int | None = None, lobe: int = 3):
     power = jnp.sum(jnp.where(near, p, 0.0)) * df
     freq = jnp.sum(jnp.where(near, p * f, 0.0)) / jnp.sum(jnp.where(near, p, 0.0))
     return freq, jnp.sqrt(2.0 * power)
+
+
+def _tone_window(x, fs, lobe):
+    """`tone` of one window (a single Hann segment), without input checks (for vmap)."""
+    n = x.shape[-1]
+    f, p = psd(x, fs, n)
+    df = f[1] - f[0]
+    k = jnp.argmax(p[1:]) + 1
+    bins = jnp.arange(p.shape[-1])
+    near = (jnp.abs(bins - k) <= lobe) & (bins > 0)
+    pw = jnp.where(near, p, 0.0)
+    power = jnp.sum(pw) * df
+    return jnp.sum(pw * f) / jnp.sum(pw), jnp.sqrt(2.0 * power)
+
+
+def vibration_features(
+    accel, fs: float, window_s: float = 1.0, axis=None, min_amp_g: float = 0.05, lobe: int = 3
+):
+    """The patent's vibration features, window by window: frequency [Hz] and amplitude [g] of
+    the tone in the misalignment-compensated specific force `accel` (N, 3) [m/s²] along the
+    vibration direction, from each window's PSD ([`tone`][hrgjax.fog.spectrum.tone] on one
+    Hann segment of `window_s`, resolution 1/`window_s` Hz).
+
+    `axis` (3,): the direction to analyse; by default the body axis with the largest AC
+    power over the record (the patent's "sensitive vibration direction"). A window whose
+    amplitude is below `min_amp_g` is at rest: its features are (0, 0) — the frequency of a
+    noise peak means nothing. **Returns** (K, 2), K = N // (window_s·fs)."""
+    a = check_finite("accel", accel)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"accel must have shape (N, 3) [m/s²]; got {a.shape}")
+    if not fs > 0:
+        raise ValueError(f"fs must be > 0 Hz; got {fs}")
+    m = int(round(window_s * fs))
+    k = a.shape[0] // m
+    if m < 8 or k < 1:
+        raise ValueError(
+            f"window_s·fs must be >= 8 samples and the record at least one window; got "
+            f"window {m} samples, record {a.shape[0]}"
+        )
+    if axis is None:
+        var = jnp.var(a, axis=0)
+        u = jnp.zeros(3, a.dtype).at[jnp.argmax(var)].set(1.0)
+    else:
+        u = jnp.asarray(axis, a.dtype)
+        if u.shape != (3,):
+            raise ValueError(f"axis must have shape (3,); got {u.shape}")
+        u = u / jnp.linalg.norm(u)
+    x = (a[: k * m] @ u).reshape(k, m)
+    f, amp = jax.vmap(lambda w: _tone_window(w, fs, lobe))(x)
+    amp = amp / G0
+    on = amp >= min_amp_g
+    return jnp.stack([jnp.where(on, f, 0.0), jnp.where(on, amp, 0.0)], axis=-1)

@@ -1,0 +1,359 @@
+r"""Vibration-error compensation of a strapdown FOG IMU (seed 003, steps 3–5).
+
+**Samples.** [`training_set`][hrgjax.fog.compensation.training_set] runs the IMU on the table
+over a grid of conditions (f, A), each as rest → vibration → rest, and again at rest with
+other noise; per window of `window_s` it keeps the vibration features (f, A) from the
+misalignment-compensated accelerometers' PSD
+([`vibration_features`][hrgjax.fog.spectrum.vibration_features]) and the vibration-error
+sample, vibrating − static gyro output mapped to the body frame
+([`error_samples`][hrgjax.fog.vibration.error_samples]).
+
+**Networks.** A [`VibrationCompensator`][hrgjax.fog.compensation.VibrationCompensator] holds
+one of the patent's 2–7–1 networks (inputs f, A; 7 tanh hidden units; linear output) per
+body axis: an [`Elman`][hrgjax.nn.elman.Elman] network, whose context carries the error's
+memory, or, as the baseline without memory, an [`MLP`][hrgjax.nn.mlp.MLP] of the same size.
+[`fit`][hrgjax.fog.compensation.fit] trains it with Adam (optax) on mini-batches of whole
+sequences, `epochs` passes (the patent's ~120);
+[`fit_end_to_end`][hrgjax.fog.compensation.fit_end_to_end] trains it instead through the
+IMU output: the loss is the compensated raw gyro output (prediction mapped to sensor axes and
+subtracted) against the static model's reference, without forming the samples.
+
+**Compensation.** [`compensate`][hrgjax.fog.compensation.compensate] predicts the body-frame
+error window by window, maps it back to sensor axes by diag(1+k)(I+E) and subtracts it from
+the raw gyro output (held over each window); [`align_record`][hrgjax.fog.compensation.align_record]
+then runs the coarse + fine alignment of [`ins.alignment`][hrgjax.ins.alignment] on the
+misalignment-compensated outputs. [`heading_limit_deg`][hrgjax.fog.compensation.heading_limit_deg]
+is the analytic heading error set by the remaining east drift (PHYSICS.md §12).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .._x64 import require_x64
+from ..ins import alignment as _al
+from ..ins.constants import OMEGA_IE, WGS84, earth_rate_ned
+from ..nn.elman import Elman
+from ..nn.mlp import MLP
+from ..units import DEG, DEG_PER_H
+from .spectrum import vibration_features
+from .vibration import (
+    FogImu,
+    VibrationRecord,
+    VibrationSchedule,
+    error_samples,
+    simulate,
+    to_body,
+    to_sensor,
+    window_means,
+)
+
+KINDS = ("elman", "mlp")
+
+
+class VibrationCompensator(eqx.Module):
+    """Per-axis vibration-error networks. Call on features (K, 2) [Hz, g] → body-frame gyro
+    error (K, 3) [rad/s]. **Fields:** `net`: three stacked 2–`hidden`–1 networks (Elman or
+    MLP); `x_scale` (2,) [Hz, g] and `y_scale` [rad/s]: input and output normalisation;
+    `kind`: "elman" or "mlp"."""
+
+    net: eqx.Module
+    x_scale: jax.Array
+    y_scale: jax.Array
+    kind: str = eqx.field(static=True)
+    warmup: int = eqx.field(static=True)
+
+    def __init__(
+        self, kind: str = "elman", *, key: jax.Array, hidden: int = 7, x_scale=(25.0, 1.0),
+        y_scale: float = 0.2 * DEG_PER_H, warmup: int = 30,
+        recurrent_init: float = 0.5,
+    ):  # fmt: skip
+        if kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
+        keys = jax.random.split(key, 3)
+        if kind == "elman":
+            net = eqx.filter_vmap(lambda k: Elman(2, hidden, 1, key=k))(keys)
+            # context weights start at ρ·I (a leaky memory), which trains faster and more
+            # reliably than the random start for an error with a time constant of many windows
+            w_h = jnp.broadcast_to(recurrent_init * jnp.eye(hidden), (3, hidden, hidden))
+            self.net = eqx.tree_at(lambda n: n.w_h.weight, net, w_h)
+        else:
+            self.net = eqx.filter_vmap(lambda k: MLP((2, hidden, 1), key=k))(keys)
+        self.x_scale = jnp.asarray(x_scale, float)
+        self.y_scale = jnp.asarray(y_scale, float)
+        self.kind = kind
+        self.warmup = int(warmup)
+
+    def normalised(self, features):
+        """Network outputs (K, 3) in units of `y_scale`."""
+        x = jnp.asarray(features) / self.x_scale.reshape(1, 2)
+        if self.kind == "elman":
+            # the context starts where rest leaves it: the record is assumed to start from
+            # rest (`warmup` steps at zero features first, discarded)
+            warm = jnp.zeros((self.warmup, 2), x.dtype)
+            y = eqx.filter_vmap(lambda n: n(jnp.concatenate([warm, x]))[self.warmup :])(self.net)
+        else:
+            y = eqx.filter_vmap(lambda n: jax.vmap(n)(x))(self.net)
+        return jnp.transpose(y[..., 0])
+
+    def __call__(self, features):
+        f = jnp.asarray(features)
+        if f.ndim != 2 or f.shape[1] != 2:
+            raise ValueError(
+                f"features must have shape (K, 2) = (frequency Hz, amplitude g); got {f.shape}"
+            )
+        return self.normalised(f) * self.y_scale
+
+
+class TrainingSet(eqx.Module):
+    """Sequences of window features and targets. **Fields:** `features` (S, K, 2) [Hz, g];
+    `samples` (S, K, 3) [rad/s]: the patent's vibration-error samples (vibrating − static,
+    body frame; noisy); `truth` (S, K, 3) [rad/s]: the noise-free error, body frame;
+    `raw` (S, K, 3) [rad/s]: window means of the raw vibrating gyro output, sensor axes;
+    `reference` (3,) [rad/s]: the static model's output at the test attitude, sensor axes;
+    `conditions` (S, 2): the (f, A) of each sequence; `window_s` (static)."""
+
+    features: jax.Array
+    samples: jax.Array
+    truth: jax.Array
+    raw: jax.Array
+    reference: jax.Array
+    conditions: jax.Array
+    window_s: float = eqx.field(static=True)
+
+
+def grid(freqs_hz, amps_g, exclude=()):
+    """All (f, A) pairs of two lists, less `exclude` — e.g. the held-out test conditions."""
+    ex = {(float(f), float(a)) for f, a in exclude}
+    return [
+        (float(f), float(a)) for f in freqs_hz for a in amps_g if (float(f), float(a)) not in ex
+    ]
+
+
+def training_set(
+    imu: FogImu, conditions, *, key: jax.Array, fs: float = 200.0, window_s: float = 2.0,
+    lead_s: float = 20.0, on_s: float = 200.0, off_s: float = 100.0, lat_deg: float = 45.0,
+    attitude_deg=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0),
+) -> TrainingSet:  # fmt: skip
+    """Simulate one rest → (f, A) → rest sequence per condition of `conditions` (list of
+    (f [Hz], A [g])) and a static record with independent noise, and cut both into windows
+    (module docstring)."""
+    require_x64("fog.compensation.training_set")
+    conditions = [(float(f), float(a)) for f, a in conditions]
+    if not conditions:
+        raise ValueError("conditions must list at least one (frequency Hz, amplitude g) pair")
+    feats, samples, truths, raws = [], [], [], []
+    keys = jax.random.split(key, 2 * len(conditions))
+    for i, (f, a) in enumerate(conditions):
+        sch = VibrationSchedule.on_off([(f, a)], on_s, off_s, lead_s, axis)
+        rest = VibrationSchedule.constant(0.0, 0.0, sch.duration_s, axis)
+        kw = dict(fs=fs, lat_deg=lat_deg, attitude_deg=attitude_deg)
+        vib = simulate(imu, sch, key=keys[2 * i], **kw)
+        st = simulate(imu, rest, key=keys[2 * i + 1], **kw)
+        feats.append(vibration_features(to_body(imu.accel, vib.accel), fs, window_s, axis))
+        samples.append(error_samples(imu, vib, st, window_s))
+        truths.append(to_body(imu.gyro, window_means(vib.gyro_error, fs, window_s)))
+        raws.append(window_means(vib.gyro, fs, window_s))
+    ref = _reference(imu, vib)
+    return TrainingSet(
+        jnp.stack(feats), jnp.stack(samples), jnp.stack(truths), jnp.stack(raws), ref,
+        jnp.asarray(conditions), float(window_s),
+    )  # fmt: skip
+
+
+def _reference(imu: FogImu, rec: VibrationRecord):
+    """Static model output (3,) [rad/s, sensor axes] at the record's attitude: M ω_b + β."""
+    w_b = rec.c_bn.T @ earth_rate_ned(jnp.asarray(rec.lat))
+    return imu.gyro.sensor(w_b)
+
+
+def _train(comp, loss_fn, n_seq, *, epochs, batch_size, learning_rate, key, eval_fns):
+    """Adam over shuffled mini-batches of sequences; history of each `eval_fns` per epoch."""
+    if epochs < 1 or batch_size < 1:
+        raise ValueError(f"epochs and batch_size must be >= 1; got {epochs}, {batch_size}")
+    batch_size = min(batch_size, n_seq)
+    n_batches = n_seq // batch_size
+    params, static = eqx.partition(comp, eqx.is_inexact_array)
+    # the normalisation constants are not trained
+    params = eqx.tree_at(lambda c: (c.x_scale, c.y_scale), params, replace=(None, None))
+    scales = (comp.x_scale, comp.y_scale)
+
+    def rebuild(p):
+        c = eqx.combine(p, static)
+        return eqx.tree_at(
+            lambda c: (c.x_scale, c.y_scale), c, replace=scales, is_leaf=lambda x: x is None
+        )
+
+    total = epochs * n_batches
+    opt = optax.chain(
+        optax.clip_by_global_norm(1.0),
+        optax.adam(
+            optax.warmup_cosine_decay_schedule(
+                0.0, learning_rate, total // 20 + 1, total, learning_rate * 0.02
+            )
+        ),
+    )
+
+    @jax.jit
+    def run(params, key):
+        def epoch(carry, k):
+            p, state = carry
+            order = jax.random.permutation(k, n_seq)[: n_batches * batch_size]
+
+            def step(carry, idx):
+                p, state = carry
+                g = jax.grad(lambda p: loss_fn(rebuild(p), idx))(p)
+                updates, state = opt.update(g, state, p)
+                return (optax.apply_updates(p, updates), state), None
+
+            (p, state), _ = jax.lax.scan(step, (p, state), order.reshape(n_batches, batch_size))
+            c = rebuild(p)
+            return (p, state), jnp.stack([f(c) for f in eval_fns])
+
+        (p, _), hist = jax.lax.scan(
+            epoch, (params, opt.init(params)), jax.random.split(key, epochs)
+        )
+        return p, hist
+
+    p, hist = run(params, key)
+    return rebuild(p), hist
+
+
+def fit(
+    comp: VibrationCompensator, train: TrainingSet, *, key: jax.Array, epochs: int = 120,
+    batch_size: int = 2, learning_rate: float | None = None, test: TrainingSet | None = None,
+):  # fmt: skip
+    """Train `comp` on the vibration-error samples of `train` (mean squared error in units of
+    `y_scale`). **Returns** `(trained, history)`: `history` has the per-epoch `train` loss
+    and, with `test`, the `test` loss and RMSE against the noise-free truth [rad/s]."""
+    require_x64("fog.compensation.fit")
+    x, y = train.features, train.samples
+
+    def loss(c, idx):
+        pred = jax.vmap(c.normalised)(x[idx])
+        return jnp.mean((pred - y[idx] / c.y_scale) ** 2)
+
+    return _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate)
+
+
+def fit_end_to_end(
+    comp: VibrationCompensator, imu: FogImu, train: TrainingSet, *, key: jax.Array,
+    epochs: int = 120, batch_size: int = 2, learning_rate: float | None = None,
+    test: TrainingSet | None = None,
+):  # fmt: skip
+    """Train `comp` through the IMU output: the loss is the compensated raw gyro output —
+    window means, prediction mapped to sensor axes by the gyro triad's model and subtracted —
+    against the static model's reference output, in units of `y_scale`. No static record and
+    no error samples are formed. **Returns** `(trained, history)` as [`fit`][hrgjax.fog.compensation.fit]."""
+    require_x64("fog.compensation.fit_end_to_end")
+    x, raw, ref = train.features, train.raw, train.reference
+
+    def loss(c, idx):
+        pred = jax.vmap(c)(x[idx])
+        resid = raw[idx] - to_sensor(imu.gyro, pred) - ref.reshape(1, 1, 3)
+        return jnp.mean((resid / c.y_scale) ** 2)
+
+    return _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate)
+
+
+LEARNING_RATE = {"elman": 1e-2, "mlp": 5e-2}
+"""Default peak learning rates, the best of (1e-2, 2e-2, 5e-2) for each kind on the default
+IMU's grid (`benchmarks/vibration.py --scan`)."""
+
+
+def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
+    if learning_rate is None:
+        learning_rate = LEARNING_RATE[comp.kind]
+    n = train.features.shape[0]
+    all_idx = jnp.arange(n)
+    evals = [lambda c: loss(c, all_idx)]
+    if test is not None:
+        evals += [
+            lambda c: jnp.mean(
+                (jax.vmap(c.normalised)(test.features) - test.samples / c.y_scale) ** 2
+            ),
+            lambda c: rmse(c, test),
+        ]
+    trained, hist = _train(
+        comp, loss, n, epochs=epochs, batch_size=batch_size, learning_rate=learning_rate,
+        key=key, eval_fns=evals,
+    )  # fmt: skip
+    history = {"train": hist[:, 0]}
+    if test is not None:
+        history |= {"test": hist[:, 1], "test_rmse": hist[:, 2]}
+    return trained, history
+
+
+def rmse(comp: VibrationCompensator | None, data: TrainingSet):
+    """RMS over sequences, windows and axes of prediction − noise-free error [rad/s];
+    `comp=None` is no compensation (the error itself)."""
+    pred = 0.0 if comp is None else jax.vmap(comp)(data.features)
+    return jnp.sqrt(jnp.mean((pred - data.truth) ** 2))
+
+
+def compensate(
+    comp: VibrationCompensator, imu: FogImu, record: VibrationRecord, *, window_s=2.0, axis=None
+):
+    """Raw gyro output (N, 3) [rad/s, sensor axes] less the predicted vibration error:
+    features from the misalignment-compensated accelerometers, the prediction per window
+    mapped to sensor axes and held over its window (the last window's prediction covers a
+    partial tail). **Returns** `(gyro (N, 3), prediction (K, 3) body frame)`."""
+    feats = vibration_features(to_body(imu.accel, record.accel), record.fs, window_s, axis)
+    pred = comp(feats)
+    m = int(round(window_s * record.fs))
+    n = record.gyro.shape[0]
+    held = jnp.repeat(to_sensor(imu.gyro, pred), m, axis=0)
+    tail = n - held.shape[0]
+    if tail > 0:
+        held = jnp.concatenate([held, jnp.repeat(held[-1:], tail, axis=0)])
+    return record.gyro - held, pred
+
+
+def imu_log(imu: FogImu, record: VibrationRecord, gyro=None) -> _al.ImuLog:
+    """The record as an [`ImuLog`][hrgjax.ins.alignment.ImuLog] (body-frame increments):
+    installation misalignment and scale compensated by the triad models' linear part (the
+    patent's step 2); biases stay in (the alignment's business). `gyro` replaces the raw
+    gyro output (e.g. the vibration-compensated one)."""
+    g = record.gyro if gyro is None else jnp.asarray(gyro)
+    dt = 1.0 / record.fs
+    return _al.ImuLog(
+        record.t + dt, to_body(imu.gyro, g) * dt, to_body(imu.accel, record.accel) * dt,
+        record.lat,
+    )  # fmt: skip
+
+
+def align_record(imu: FogImu, record: VibrationRecord, gyro=None, *, coarse_s=60.0, **fine_kw):
+    """Coarse + fine alignment ([`align`][hrgjax.ins.alignment.align]) of the record (raw, or
+    with `gyro` replacing its gyro output). **Returns** `(result, errors)`: the
+    [`AlignmentResult`][hrgjax.ins.alignment.AlignmentResult] and the errors
+    (heading, pitch, roll) [°] against the true attitude, heading wrapped to ±180°."""
+    log = imu_log(imu, record, gyro)
+    fine_kw.setdefault("velocity_noise", 0.05)
+    res = _al.align(log, coarse_s=coarse_s, **fine_kw)
+    truth = np.asarray(_al._euler_deg(record.c_bn))
+    est = np.array([res.heading_deg, res.pitch_deg, res.roll_deg])
+    err = est - truth
+    err[0] = (err[0] + 180.0) % 360.0 - 180.0
+    return res, err
+
+
+def heading_limit_deg(eps_body, nabla_body, c_bn, lat):
+    """Analytic stationary heading error [°] (estimate − truth) set by a constant body-frame
+    gyro drift `eps_body` [rad/s] and accelerometer bias `nabla_body` [m/s²]:
+    $\\delta\\psi = -\\varepsilon_E/(\\omega_{ie}\\cos\\varphi) + (\\nabla_E/g)\\tan\\varphi$
+    (PHYSICS.md §12, $\\delta\\psi = -\\phi_D$)."""
+    c = jnp.asarray(c_bn)
+    eps_e = (c @ jnp.asarray(eps_body))[1]
+    nab_e = (c @ jnp.asarray(nabla_body))[1]
+    g = WGS84.gravity(jnp.asarray(lat), jnp.asarray(0.0))
+    return float((-eps_e / (OMEGA_IE * jnp.cos(lat)) + nab_e / g * jnp.tan(lat)) / DEG)
+
+
+__all__ = [
+    "KINDS", "VibrationCompensator", "TrainingSet", "grid", "training_set", "fit",
+    "fit_end_to_end", "rmse", "compensate", "imu_log", "align_record", "heading_limit_deg",
+]  # fmt: skip
