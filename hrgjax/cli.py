@@ -348,6 +348,37 @@ def cmd_diagnose(args) -> int:
     return 0
 
 
+def cmd_vibration(args) -> int:
+    """`hrgjax vibration`: the seed-003 pipeline on one scenario (hrgjax.fog.study)."""
+    _setup()
+
+    import jax
+
+    from .fog.study import SCENARIOS, run, table
+
+    if args.scenario not in SCENARIOS:
+        raise SystemExit(
+            f"hrgjax vibration: unknown scenario {args.scenario!r}; known: {tuple(SCENARIOS)}"
+        )
+    try:
+        result = run(
+            args.scenario, key=jax.random.key(args.seed), epochs=args.epochs,
+            log=lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True),
+        )  # fmt: skip
+    except ValueError as err:
+        raise SystemExit(f"hrgjax vibration: {err}") from None
+    figures = result.pop("_figures")
+    print("hrgjax vibration")
+    print(table(result))
+    if args.json:
+        print(f"wrote {_write_json(result, args.json)}")
+    if args.plot:
+        from .plots import vibration_figure
+
+        print(f"wrote {vibration_figure(figures, args.plot)}")
+    return 0
+
+
 def main(argv=None) -> int:
     """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
     parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__)
@@ -420,6 +451,15 @@ def main(argv=None) -> int:
     p.add_argument("--methods", default=None, help="comma-separated subset of the methods")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_diagnose)
+
+    p = sub.add_parser("vibration", help="FOG IMU vibration compensation (Elman) and alignment")
+    p.add_argument("--scenario", default="10hz_1g", help="10hz_1g, 10hz_0.5g or on_off")
+    p.add_argument("--json", default=None, help="write heading errors and RMSEs here (JSON)")
+    p.add_argument("--plot", default=None, help="write the PSD/training/alignment figure (PNG)")
+    p.add_argument("--epochs", type=int, default=1000,
+                   help="training epochs (default 1000; the patent's 120 under-train)")  # fmt: skip
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    p.set_defaults(func=cmd_vibration)
 
     p = sub.add_parser("simulate", help="simulate a bench plan on a preset gyro")
     p.add_argument("--preset", default="tvg3", choices=PRESETS)

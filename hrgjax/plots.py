@@ -208,3 +208,54 @@ def diagnosis_figure(traces: dict, path: str, title: str = "", span=(-20.0, 40.0
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def vibration_figure(figures: dict, path: str) -> str:
+    """The seed-003 figures (patent Figs. 5–9) from
+    [`fog.study.run`][hrgjax.fog.study.run]'s `"_figures"`: the compensated z accelerometer
+    under vibration and its PSD against rest; the training curves; the held-out prediction
+    of the east-equivalent (y) gyro's error; the heading during alignment, raw and
+    compensated. **Returns** the path written."""
+    plt = _plt()
+    fig, ax = plt.subplots(2, 3, figsize=(14, 7))
+    t, a = figures["t"], figures["accel_z_g"]
+    t0 = figures.get("vibration_start_s", 0.0)
+    sel = (t >= t0) & (t < t0 + 1.0)
+    ax[0, 0].plot(t[sel], a[sel], lw=0.8)
+    ax[0, 0].set(xlabel="time [s]", ylabel="body z specific force [g]",
+                 title="accelerometer z, first second of vibration")  # fmt: skip
+    ax[0, 1].semilogy(figures["psd_f"], figures["psd"], label="vibrating", lw=0.8)
+    ax[0, 1].semilogy(figures["psd_f"], figures["psd_rest"], label="at rest", lw=0.8)
+    ax[0, 1].set(xlabel="frequency [Hz]", ylabel="PSD [g²/Hz]", title="PSD (Welch)")
+    ax[0, 1].legend()
+    for name, h in figures["history"].items():
+        ax[0, 2].semilogy(h["train"], label=f"{name} train")
+        if "test_rmse" in h:
+            ax[0, 2].semilogy(h["test_rmse"] / 4.84813681109536e-06, ls="--",
+                              label=f"{name} held-out RMSE [°/h]")  # fmt: skip
+    ax[0, 2].set(xlabel="epoch", ylabel="loss (normalised) / RMSE", title="training")
+    ax[0, 2].legend(fontsize=7)
+    w = figures["window_s"]
+    for i, (f, amp) in enumerate(figures["test_conditions"][:2]):
+        axx = ax[1, i]
+        truth = figures["test_truth"][i, :, 1]
+        tt = np.arange(truth.size) * w
+        axx.plot(tt, truth, "k", lw=1.5, label="true error")
+        for name, p in figures["test_pred"].items():
+            axx.plot(tt, p[i, :, 1], lw=1, label=name)
+        axx.set(xlabel="time [s]", ylabel="y gyro vibration error [°/h]",
+                title=f"held out: {f:g} Hz, {amp:g} g")  # fmt: skip
+        axx.legend(fontsize=7)
+    true_h = figures["true_heading"]
+    for name, h in figures["align_heading"].items():
+        err = (h - true_h + 180.0) % 360.0 - 180.0
+        ax[1, 2].plot(figures["align_t"], err, lw=1, label=name)
+    ax[1, 2].axhline(figures["limit"]["remaining_drift"], color="k", ls=":",
+                     label="limit, remaining drift")  # fmt: skip
+    ax[1, 2].set(xlabel="time [s]", ylabel="heading error [°]",
+                 title=f"alignment, {figures['scenario']}", ylim=(-3, 3))  # fmt: skip
+    ax[1, 2].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

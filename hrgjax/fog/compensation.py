@@ -137,15 +137,18 @@ def grid(freqs_hz, amps_g, exclude=()):
 def training_set(
     imu: FogImu, conditions, *, key: jax.Array, fs: float = 200.0, window_s: float = 2.0,
     lead_s: float = 20.0, on_s: float = 200.0, off_s: float = 100.0, lat_deg: float = 45.0,
-    attitude_deg=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0),
+    attitude_deg=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0), model: FogImu | None = None,
 ) -> TrainingSet:  # fmt: skip
     """Simulate one rest → (f, A) → rest sequence per condition of `conditions` (list of
     (f [Hz], A [g])) and a static record with independent noise, and cut both into windows
-    (module docstring)."""
+    (module docstring). `imu` is the true IMU; `model` is the IMU as the user knows it (its
+    triad models, e.g. from [`calibrated`][hrgjax.fog.study.calibrated]), which maps the
+    outputs to the body frame (default: `imu` itself)."""
     require_x64("fog.compensation.training_set")
     conditions = [(float(f), float(a)) for f, a in conditions]
     if not conditions:
         raise ValueError("conditions must list at least one (frequency Hz, amplitude g) pair")
+    proc = imu if model is None else model
     feats, samples, truths, raws = [], [], [], []
     keys = jax.random.split(key, 2 * len(conditions))
     for i, (f, a) in enumerate(conditions):
@@ -154,11 +157,11 @@ def training_set(
         kw = dict(fs=fs, lat_deg=lat_deg, attitude_deg=attitude_deg)
         vib = simulate(imu, sch, key=keys[2 * i], **kw)
         st = simulate(imu, rest, key=keys[2 * i + 1], **kw)
-        feats.append(vibration_features(to_body(imu.accel, vib.accel), fs, window_s, axis))
-        samples.append(error_samples(imu, vib, st, window_s))
-        truths.append(to_body(imu.gyro, window_means(vib.gyro_error, fs, window_s)))
+        feats.append(vibration_features(to_body(proc.accel, vib.accel), fs, window_s, axis))
+        samples.append(error_samples(proc, vib, st, window_s))
+        truths.append(to_body(proc.gyro, window_means(vib.gyro_error, fs, window_s)))
         raws.append(window_means(vib.gyro, fs, window_s))
-    ref = _reference(imu, vib)
+    ref = _reference(proc, vib)
     return TrainingSet(
         jnp.stack(feats), jnp.stack(samples), jnp.stack(truths), jnp.stack(raws), ref,
         jnp.asarray(conditions), float(window_s),
