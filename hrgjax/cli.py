@@ -361,9 +361,12 @@ def cmd_vibration(args) -> int:
             f"hrgjax vibration: unknown scenario {args.scenario!r}; known: {tuple(SCENARIOS)}"
         )
     try:
+        quick = dict(freqs_hz=(5.0, 10.0, 20.0), amps_g=(0.25, 0.75, 1.25, 1.5), fs=100.0)
         result = run(
-            args.scenario, key=jax.random.key(args.seed), epochs=args.epochs,
+            args.scenario, key=jax.random.key(args.seed),
+            epochs=min(args.epochs, 300) if args.quick else args.epochs,
             log=lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True),
+            **(quick if args.quick else {}),
         )  # fmt: skip
     except ValueError as err:
         raise SystemExit(f"hrgjax vibration: {err}") from None
@@ -458,6 +461,11 @@ def main(argv=None) -> int:
     p.add_argument("--plot", default=None, help="write the PSD/training/alignment figure (PNG)")
     p.add_argument("--epochs", type=int, default=1000,
                    help="training epochs (default 1000; the patent's 120 under-train)")  # fmt: skip
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="12-condition grid, 100 Hz, ≤ 300 epochs (a smoke run, < 1 min)",
+    )
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_vibration)
 

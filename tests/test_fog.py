@@ -125,3 +125,194 @@ def test_psd_peak_finds_a_known_tone_and_matches_scipy():
         spectrum.psd(jnp.asarray(w), 0.0)
     with pytest.raises(ValueError, match="x must be finite"):
         spectrum.psd(jnp.asarray(w).at[3].set(jnp.nan), fs)
+
+
+# --- vibration table, error model, features, compensation, alignment (seed 003) ---------
+
+from hrgjax.fog import compensation as cp  # noqa: E402
+from hrgjax.fog import vibration as vb  # noqa: E402
+from hrgjax.fog.spectrum import vibration_features  # noqa: E402
+from hrgjax.units import G0  # noqa: E402
+
+
+def _quiet(imu):
+    """The IMU without sensor noise."""
+    return eqx.tree_at(lambda m: (m.arw, m.vrw), imu, (jnp.asarray(0.0), jnp.asarray(0.0)))
+
+
+@pytest.fixture(scope="module")
+def imu():
+    return vb.default_imu()
+
+
+def test_vibration_error_follows_its_memory_law_and_steady_surface(imu):
+    """Noise-free: the gyro error after switch-on rises as ε_ss(1 − e^{−t/τ}) (window means,
+    the periodic part averaging out over whole cycles), decays as e^{−t/τ} after switch-off;
+    |H|² is 1 at DC and Q² at resonance; the accelerometers rectify K₂(A g)²/2."""
+    vib = imu.vibration
+    assert float(vib.coil_gain(0.0)) == pytest.approx(1.0)
+    assert float(vib.coil_gain(vib.f_res)) == pytest.approx(float(vib.q_res) ** 2)
+    q = _quiet(imu)
+    f, a, on, off = 10.0, 1.0, 100.0, 60.0
+    rec = vb.simulate(q, vb.VibrationSchedule([on, off], [f, 0.0], [a, 0.0]), fs=200.0,
+                      key=jax.random.key(0))  # fmt: skip
+    w = 1.0
+    m = np.asarray(vb.window_means(rec.gyro_error, rec.fs, w))
+    tau, ss = float(vib.tau_s), np.asarray(vib.steady(f, a))
+    t_mid = (np.arange(m.shape[0]) + 0.5) * w
+
+    def window_avg(fn, t0, t1):  # exact mean of the first-order response over a window
+        return (fn(t1) - fn(t0)) / (t1 - t0)
+
+    rise = np.array([window_avg(lambda t: t + tau * np.exp(-t / tau), t - 0.5, t + 0.5)
+                     for t in t_mid[: int(on)]])  # fmt: skip
+    np.testing.assert_allclose(m[: int(on)], rise[:, None] * ss[None, :],
+                               atol=1e-3 * np.abs(ss).max())  # fmt: skip
+    ss_end = 1.0 - np.exp(-on / tau)
+    decay = np.array([window_avg(lambda t: -tau * np.exp(-t / tau), t - 0.5, t + 0.5)
+                      for t in t_mid[int(on):] - on])  # fmt: skip
+    np.testing.assert_allclose(m[int(on):], ss_end * decay[:, None] * ss[None, :],
+                               atol=1e-3 * np.abs(ss).max())  # fmt: skip
+    # accelerometer rectification along z, through the triad's z row
+    st = vb.simulate(q, vb.VibrationSchedule([on + off], [0.0], [0.0]), fs=200.0,
+                     key=jax.random.key(1))  # fmt: skip
+    n = int(on * 200)
+    d = np.asarray(jnp.mean(rec.accel[:n] - st.accel[:n], axis=0))
+    mz = np.asarray(q.accel.sensor(jnp.array([0.0, 0.0, 1.0])) - q.accel.bias)
+    want = np.asarray(vib.accel_k2) * (a * G0 * mz) ** 2 / 2
+    np.testing.assert_allclose(d, want, rtol=1e-3, atol=1e-9)
+
+
+def test_features_find_the_table_condition_and_rest(imu):
+    sch = vb.VibrationSchedule([10.0, 20.0, 10.0], [0.0, 12.5, 0.0], [0.0, 0.8, 0.0])
+    rec = vb.simulate(imu, sch, fs=200.0, key=jax.random.key(2))
+    feats = np.asarray(vibration_features(vb.to_body(imu.accel, rec.accel), rec.fs, 2.0))
+    assert feats.shape == (20, 2)
+    np.testing.assert_array_equal(feats[:5], 0.0)
+    np.testing.assert_array_equal(feats[-5:], 0.0)
+    np.testing.assert_allclose(feats[5:15, 0], 12.5, atol=0.05)
+    np.testing.assert_allclose(feats[5:15, 1], 0.8, rtol=0.01)
+
+
+def test_error_samples_are_the_body_frame_error_without_noise(imu):
+    """The patent's sample (vibrating − static, orthogonal frame) is exactly the true error
+    in body axes when the sensors are quiet; with noise its scatter is √2·ARW/√window."""
+    q = _quiet(imu)
+    sch = vb.VibrationSchedule.on_off([(20.0, 1.0)], 30.0, 20.0, 10.0)
+    rest = vb.VibrationSchedule.constant(0.0, 0.0, sch.duration_s)
+    args = dict(fs=200.0, key=jax.random.key(3))
+    s = vb.error_samples(q, vb.simulate(q, sch, **args), vb.simulate(q, rest, **args), 2.0)
+    truth = vb.to_body(q.gyro, vb.window_means(vb.simulate(q, sch, **args).gyro_error, 200.0, 2.0))
+    np.testing.assert_allclose(s, truth, atol=1e-15)
+    noisy = vb.error_samples(imu, vb.simulate(imu, rest, **args),
+                             vb.simulate(imu, rest, fs=200.0, key=jax.random.key(4)), 2.0)  # fmt: skip
+    sd = float(jnp.std(noisy))
+    assert sd == pytest.approx(np.sqrt(2) * float(imu.arw) / np.sqrt(2.0), rel=0.2)
+
+
+def test_alignment_reaches_the_analytic_limits_raw_and_with_the_error_removed(imu):
+    """Raw: the heading error is the analytic one for the static plus mean vibration drift;
+    with the true vibration error removed it is the remaining (static) drift's."""
+    rec = vb.simulate(imu, vb.VibrationSchedule.constant(10.0, 1.0, 600.0), fs=100.0,
+                      key=jax.random.key(5))  # fmt: skip
+    kw = dict(arw=float(imu.arw), vrw=float(imu.vrw))
+    _, raw = cp.align_record(imu, rec, **kw)
+    _, perfect = cp.align_record(imu, rec, rec.gyro - rec.gyro_error, **kw)
+    eps = vb.to_body(imu.gyro, imu.gyro.bias)
+    nab = vb.to_body(imu.accel, imu.accel.bias)
+    vib = vb.to_body(imu.gyro, jnp.mean(rec.gyro_error[rec.t.shape[0] // 2 :], axis=0))
+    lim_raw = cp.heading_limit_deg(eps + vib, nab, rec.c_bn, rec.lat)
+    lim = cp.heading_limit_deg(eps, nab, rec.c_bn, rec.lat)
+    assert abs(lim_raw) > 1.0 and abs(lim) < 0.1  # the vibration dominates
+    assert raw[0] == pytest.approx(lim_raw, rel=0.05)
+    assert perfect[0] == pytest.approx(lim, abs=0.03)
+    # tilt: φ_E = −∇_N/g, φ_N = ∇_E/g — well under 0.01° for these biases, raw or not
+    assert np.all(np.abs(raw[1:]) < 0.01) and np.all(np.abs(perfect[1:]) < 0.01)
+
+
+@pytest.fixture(scope="module")
+def memory_sets(imu):
+    """Quiet training sets with the error's memory (τ = 20 s) and without (τ = 0.1 s)."""
+    kw = dict(fs=100.0, window_s=2.0, lead_s=10, on_s=100, off_s=60, key=jax.random.key(6))
+    conds = cp.grid([5.0, 20.0], [0.5, 1.0])
+    out = {}
+    for tau in (20.0, 0.1):
+        m = eqx.tree_at(lambda m: m.vibration.tau_s, imu, jnp.asarray(tau))
+        out[tau] = cp.training_set(m, conds, **kw)
+    return out
+
+
+def test_elman_beats_the_mlp_where_the_error_has_memory_and_only_there(memory_sets):
+    """Same 2–7–1 size and training: with τ = 20 s the Elman network's RMSE is well under
+    the MLP's (which can only map (f, A) to a value); with τ = 0.1 s the two are alike."""
+    r = {}
+    for tau, data in memory_sets.items():
+        for kind in cp.KINDS:
+            c = cp.VibrationCompensator(kind, key=jax.random.key(11))
+            c, hist = cp.fit(c, data, key=jax.random.key(0), epochs=300)
+            assert hist["train"][-1] < 0.2 * hist["train"][0]
+            r[tau, kind] = float(cp.rmse(c, data))
+        assert max(r[tau, "elman"], r[tau, "mlp"]) < 0.5 * float(cp.rmse(None, data))
+    assert r[20.0, "elman"] < 0.4 * r[20.0, "mlp"]
+    assert r[0.1, "mlp"] < 1.5 * r[0.1, "elman"] and r[0.1, "mlp"] < 0.3 * r[20.0, "mlp"]
+
+
+def test_end_to_end_training_and_compensation_remove_the_error(imu, memory_sets):
+    """Trained through the IMU output (no samples formed), the Elman network compensates a
+    record: the compensated gyro's window means are closer to the static output."""
+    data = memory_sets[20.0]
+    c = cp.VibrationCompensator("elman", key=jax.random.key(12))
+    c, _ = cp.fit_end_to_end(c, imu, data, key=jax.random.key(1), epochs=300)
+    assert float(cp.rmse(c, data)) < 0.25 * float(cp.rmse(None, data))
+    q = _quiet(imu)
+    rec = vb.simulate(q, vb.VibrationSchedule.on_off([(20.0, 1.0)], 100, 60, 10), fs=100.0,
+                      key=jax.random.key(7))  # fmt: skip
+    g, pred = cp.compensate(c, q, rec, window_s=2.0)
+    assert pred.shape == (85, 3)
+    ref = cp._reference(q, rec).reshape(1, 3)
+    before = vb.window_means(rec.gyro, 100.0, 2.0) - ref
+    after = vb.window_means(g, 100.0, 2.0) - ref
+    assert float(jnp.sqrt(jnp.mean(after**2))) < 0.25 * float(jnp.sqrt(jnp.mean(before**2)))
+
+
+def test_vibration_inputs_are_checked(imu):
+    with pytest.raises(ValueError, match="durations_s must be > 0"):
+        vb.VibrationSchedule([0.0], [10.0], [1.0])
+    with pytest.raises(ValueError, match="amp_g is in g"):
+        vb.VibrationSchedule([1.0], [10.0], [9.8 * 10])
+    with pytest.raises(ValueError, match="Nyquist"):
+        vb.simulate(imu, vb.VibrationSchedule.constant(60.0, 1.0, 1.0), fs=100.0,
+                    key=jax.random.key(0))  # fmt: skip
+    with pytest.raises(ValueError, match="tau_s must be > 0"):
+        eqx.tree_at(lambda m: m.tau_s, imu.vibration, jnp.asarray(-1.0)).__check_init__()
+    with pytest.raises(ValueError, match=r"features must have shape \(K, 2\)"):
+        cp.VibrationCompensator("elman", key=jax.random.key(0))(jnp.zeros((4, 3)))
+    with pytest.raises(ValueError, match="kind must be one of"):
+        cp.VibrationCompensator("lstm", key=jax.random.key(0))
+    with pytest.raises(ValueError, match=r"accel must have shape \(N, 3\)"):
+        vibration_features(jnp.zeros((100, 2)), 100.0)
+
+
+def test_vibration_cli_writes_the_design_keys_and_compensation_helps(tmp_path, capsys):
+    """`hrgjax vibration --quick`: the DESIGN keys; the compensated heading is nearer the
+    remaining-drift limit than the raw one; every network beats no compensation."""
+    import json
+
+    from hrgjax.cli import main
+
+    out, png = tmp_path / "vib.json", tmp_path / "vib.png"
+    assert main(["vibration", "--quick", "--json", str(out), "--plot", str(png)]) == 0
+    r = json.loads(out.read_text())
+    assert {"raw", "compensated"} <= set(r["heading_error_deg"])
+    assert {"elman", "mlp", "none"} <= set(r["prediction_rmse"])
+    lim = r["heading_limit_deg"]["remaining_drift"]
+    h = r["heading_error_deg"]
+    assert abs(h["compensated"] - lim) < 0.5 * abs(h["raw"] - lim)
+    assert h["raw"] == pytest.approx(r["heading_limit_deg"]["raw"], abs=0.1)
+    assert max(r["prediction_rmse"][k] for k in ("elman", "mlp")) < r["prediction_rmse"]["none"]
+    assert r["features"]["freq_hz"] == pytest.approx(10.0, abs=0.05)
+    assert r["features"]["amp_g"] == pytest.approx(1.0, rel=0.01)
+    assert png.stat().st_size > 10_000
+    assert "| compensated |" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="unknown scenario"):
+        main(["vibration", "--scenario", "20hz"])

@@ -192,14 +192,15 @@ def _train(comp, loss_fn, n_seq, *, epochs, batch_size, learning_rate, key, eval
         )
 
     total = epochs * n_batches
-    opt = optax.chain(
-        optax.clip_by_global_norm(1.0),
-        optax.adam(
-            optax.warmup_cosine_decay_schedule(
-                0.0, learning_rate, total // 20 + 1, total, learning_rate * 0.02
-            )
-        ),
-    )
+    warm = total // 20 + 1
+
+    def schedule(count):  # linear warm-up, cosine decay to 2 % (dtype-explicit)
+        c = jnp.asarray(count).astype(comp.y_scale.dtype)
+        frac = jnp.clip((c - warm) / max(total - warm, 1), 0.0, 1.0)
+        decay = learning_rate * (0.02 + 0.98 * 0.5 * (1.0 + jnp.cos(jnp.pi * frac)))
+        return jnp.where(c < warm, learning_rate * c / warm, decay)
+
+    opt = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(schedule))
 
     @jax.jit
     def run(params, key):
@@ -222,7 +223,10 @@ def _train(comp, loss_fn, n_seq, *, epochs, batch_size, learning_rate, key, eval
         )
         return p, hist
 
-    p, hist = run(params, key)
+    # optax's Adam bias correction mixes int and float: trace it under standard promotion
+    # whatever the caller's setting
+    with jax.numpy_dtype_promotion("standard"):
+        p, hist = run(params, key)
     return rebuild(p), hist
 
 

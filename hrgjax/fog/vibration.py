@@ -166,7 +166,7 @@ class VibrationError(eqx.Module):
         """Steady rectified gyro drift ε_ss (..., 3) [rad/s] at `freq_hz`, `amp_g` (...)."""
         u = jnp.asarray(amp_g) ** 2 * self.coil_gain(freq_hz)
         sat = u / (1.0 + u / self.a_sat_g**2)
-        return sat[..., None] * self.rectification
+        return sat[..., None] * self.rectification.reshape((1,) * sat.ndim + (3,))
 
 
 class FogImu(eqx.Module):
@@ -273,7 +273,7 @@ def simulate(
         lat_deg * DEG, c_bn,
     )  # fmt: skip
     return VibrationRecord(
-        jnp.arange(freq.size) / fs, gyro, accel, err, jnp.asarray(freq), jnp.asarray(amp),
+        jnp.asarray(np.arange(freq.size) / fs), gyro, accel, err, jnp.asarray(freq), jnp.asarray(amp),
         c_bn, float(fs), lat_deg * DEG,
     )  # fmt: skip
 
