@@ -139,6 +139,14 @@ def diagnosis():
     diagnosis_figure(res["traces"], os.path.join(HERE, "diagnosis_stationary.png"), "stationary")
 
 
+def vibration():
+    from hrgjax.fog.study import run
+    from hrgjax.plots import vibration_figure
+
+    res = run("on_off", key=jax.random.key(0))
+    vibration_figure(res["_figures"], os.path.join(HERE, "fog_vibration.png"))
+
+
 if __name__ == "__main__":
     os.makedirs(HERE, exist_ok=True)
     full_vs_averaged()
@@ -148,4 +156,5 @@ if __name__ == "__main__":
     discovery()
     ins()
     diagnosis()
+    vibration()
     print(f"wrote figures to {HERE}")

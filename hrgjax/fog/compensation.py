@@ -289,6 +289,11 @@ def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
         comp, loss, n, epochs=epochs, batch_size=batch_size, learning_rate=learning_rate,
         key=key, eval_fns=evals,
     )  # fmt: skip
+    if not bool(jnp.all(jnp.isfinite(hist[:, 0]))):
+        bad = int(jnp.argmax(~jnp.isfinite(hist[:, 0])))
+        raise RuntimeError(
+            f"training diverged: the loss is not finite from epoch {bad} (lower learning_rate)"
+        )
     history = {"train": hist[:, 0]}
     if test is not None:
         history |= {"test": hist[:, 1], "test_rmse": hist[:, 2]}
