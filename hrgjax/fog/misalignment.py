@@ -77,16 +77,21 @@ class TriadCalibration(eqx.Module):
         z3 = jnp.zeros(3)
         return cls(angles, scale, bias, jnp.zeros(6), z3, z3, z3)
 
+    @property
+    def matrix(self):
+        """The linear part M = diag(1 + scale)(I + E) (3, 3): sensor = M body + bias."""
+        return (1.0 + self.scale)[:, None] * sensor_from_body(self.angles)
+
     def sensor(self, b):
         """Sensor outputs (..., 3) for body-frame inputs `b` (..., 3)."""
-        m = (1.0 + self.scale)[:, None] * sensor_from_body(self.angles)
+        m = self.matrix
         b = jnp.asarray(b)
         return b @ m.T + self.bias.reshape((1,) * (b.ndim - 1) + (3,))
 
     def body(self, s):
         """Compensated body-frame values (..., 3) from sensor outputs `s` (..., 3): bias
         removed, scale divided out, misalignment undone (exact inverse of the model)."""
-        m = (1.0 + self.scale)[:, None] * sensor_from_body(self.angles)
+        m = self.matrix
         s = jnp.asarray(s)
         d = s - self.bias.reshape((1,) * (s.ndim - 1) + (3,))
         return d @ jnp.linalg.inv(m).T

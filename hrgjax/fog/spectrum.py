@@ -56,27 +56,18 @@ def tone(x, fs: float, nperseg: int | None = None, lobe: int = 3):
     peak (DC excluded), the power within ±`lobe` bins of it (the Hann main lobe is ±2)."""
     if jnp.ndim(x) != 1:
         raise ValueError(f"x must have shape (N,); got {jnp.shape(x)}")
-    f, p = psd(x, fs, nperseg)
-    df = f[1] - f[0]
-    k = jnp.argmax(p[1:]) + 1
-    bins = jnp.arange(p.shape[-1])
-    near = (jnp.abs(bins - k) <= lobe) & (bins > 0)
-    power = jnp.sum(jnp.where(near, p, 0.0)) * df
-    freq = jnp.sum(jnp.where(near, p * f, 0.0)) / jnp.sum(jnp.where(near, p, 0.0))
-    return freq, jnp.sqrt(2.0 * power)
+    return _peak(*psd(x, fs, nperseg), lobe)
 
 
-def _tone_window(x, fs, lobe):
-    """`tone` of one window (a single Hann segment), without input checks (for vmap)."""
-    n = x.shape[-1]
-    f, p = psd(x, fs, n)
+def _peak(f, p, lobe):
+    """Power-weighted frequency and amplitude √(2·power) of the main lobe around the PSD
+    peak (DC excluded)."""
     df = f[1] - f[0]
     k = jnp.argmax(p[1:]) + 1
     bins = jnp.arange(p.shape[-1])
     near = (jnp.abs(bins - k) <= lobe) & (bins > 0)
     pw = jnp.where(near, p, 0.0)
-    power = jnp.sum(pw) * df
-    return jnp.sum(pw * f) / jnp.sum(pw), jnp.sqrt(2.0 * power)
+    return jnp.sum(pw * f) / jnp.sum(pw), jnp.sqrt(2.0 * jnp.sum(pw) * df)
 
 
 def vibration_features(
@@ -112,7 +103,7 @@ def vibration_features(
             raise ValueError(f"axis must have shape (3,); got {u.shape}")
         u = u / jnp.linalg.norm(u)
     x = (a[: k * m] @ u).reshape(k, m)
-    f, amp = jax.vmap(lambda w: _tone_window(w, fs, lobe))(x)
+    f, amp = jax.vmap(lambda w: _peak(*psd(w, fs, m), lobe))(x)
     amp = amp / G0
     on = amp >= min_amp_g
     return jnp.stack([jnp.where(on, f, 0.0), jnp.where(on, amp, 0.0)], axis=-1)

@@ -47,7 +47,7 @@ from .._x64 import require_x64
 from ..ins.constants import WGS84, earth_rate_ned
 from ..ins.trajectory import euler_to_dcm
 from ..units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0
-from .misalignment import TriadCalibration, misalignment_matrix
+from .misalignment import TriadCalibration
 
 ARCMIN = DEG / 60.0
 
@@ -299,7 +299,7 @@ def _run(imu, freq, amp, axis, fs, key, lat, c_bn):
     w_s = w_s + imu.arw * math.sqrt(fs) * jax.random.normal(kg, (n, 3))
     f_body = ones * f_b.reshape(1, 3) + a_vib.reshape(n, 1) * axis.reshape(1, 3)
     a_s = imu.accel.sensor(f_body)
-    a_along = a_vib.reshape(n, 1) * (imu.accel.sensor(axis) - imu.accel.bias).reshape(1, 3)
+    a_along = a_vib.reshape(n, 1) * (imu.accel.matrix @ axis).reshape(1, 3)
     a_s = a_s + vib.accel_k2.reshape(1, 3) * a_along**2
     a_s = a_s + imu.vrw * math.sqrt(fs) * jax.random.normal(ka, (n, 3))
     return w_s, a_s, err
@@ -335,11 +335,9 @@ def error_samples(imu: FogImu, vibrating: VibrationRecord, static: VibrationReco
 def to_body(calib: TriadCalibration, s):
     """Sensor-axis increments `s` (..., 3) → body frame by the linear part of the triad model,
     (diag(1+k)(I+E))⁻¹ (no bias: for differences and errors)."""
-    m = (1.0 + calib.scale)[:, None] * (jnp.eye(3) + misalignment_matrix(calib.angles))
-    return jnp.asarray(s) @ jnp.linalg.inv(m).T
+    return jnp.asarray(s) @ jnp.linalg.inv(calib.matrix).T
 
 
 def to_sensor(calib: TriadCalibration, b):
     """Body-frame errors `b` (..., 3) → sensor axes, diag(1+k)(I+E) b (no bias)."""
-    m = (1.0 + calib.scale)[:, None] * (jnp.eye(3) + misalignment_matrix(calib.angles))
-    return jnp.asarray(b) @ m.T
+    return jnp.asarray(b) @ calib.matrix.T
