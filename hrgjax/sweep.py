@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 
-def sweep(fn, **grids):
+def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids):
     """Evaluate `fn(**point)` on the Cartesian product of 1-D grids.
 
     `hg.sweep(fn, temperature_c=jnp.linspace(-40, 60, 11), rate_dps=jnp.array([0.1, 5, 400]))`
@@ -18,6 +18,11 @@ def sweep(fn, **grids):
     **Arguments:**
 
     - `fn`: a function of keyword arguments returning a pytree of arrays.
+    - `chunk_size`: evaluate the flattened grid `chunk_size` points at a time (rounded up to
+      a multiple of the device count), each chunk's result moved to host memory — for grids
+      whose batch does not fit the devices at once. Every chunk has the same shape (the last
+      is padded), so `fn` compiles once. `None`: the whole grid in one batch.
+    - `progress`: show a progress bar over the chunks on stderr (tqdm when installed).
     - `**grids`: 1-D arrays, one per keyword.
     """
     if not grids:
@@ -39,16 +44,60 @@ def sweep(fn, **grids):
     total = int(np.prod(shape))
     devices = jax.devices()
     call = jax.vmap(lambda kw: fn(**kw))
-    if len(devices) > 1:
-        from jax.sharding import Mesh, NamedSharding, PartitionSpec
+    if chunk_size is None:
+        out = _batch(call, flat, devices)
+    else:
+        if int(chunk_size) < 1:
+            raise ValueError(f"chunk_size must be a positive number of points; got {chunk_size}")
+        chunk = -(-int(chunk_size) // len(devices)) * len(devices)
+        n_chunks = -(-total // chunk)
+        flat = _pad(flat, n_chunks * chunk - total)
+        parts = []
+        for i in _progress(range(n_chunks), progress):
+            part = {n: v[i * chunk : (i + 1) * chunk] for n, v in flat.items()}
+            parts.append(jax.device_get(_batch(call, part, devices)))
+        out = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
+    return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
 
-        pad = (-total) % len(devices)
-        flat = {n: jnp.concatenate([v, jnp.repeat(v[-1:], pad)]) for n, v in flat.items()}
-        sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
-        flat = jax.device_put(flat, sharding)
-        # No outer jit: fn may build profiles from concrete constants (their output grid must
-        # stay concrete); the compiled solves inside partition the sharded batch themselves.
-        out = call(flat)
-        return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
-    out = call(flat)
-    return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), out)
+
+def _pad(flat, pad):
+    """Repeat the last point `pad` times (results for padding are dropped)."""
+    if pad == 0:
+        return flat
+    return {n: jnp.concatenate([v, jnp.repeat(v[-1:], pad)]) for n, v in flat.items()}
+
+
+def _batch(call, flat, devices):
+    """`call` on one flat batch, sharded over `devices` when there are several (the result
+    may be padded at the end)."""
+    if len(devices) == 1:
+        return call(flat)
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    total = next(iter(flat.values())).shape[0]
+    flat = _pad(flat, (-total) % len(devices))
+    sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
+    flat = jax.device_put(flat, sharding)
+    # No outer jit: fn may build profiles from concrete constants (their output grid must
+    # stay concrete); the compiled solves inside partition the sharded batch themselves.
+    return call(flat)
+
+
+def _progress(it, show: bool):
+    if not show:
+        return it
+    try:
+        from tqdm.auto import tqdm
+
+        return tqdm(it, desc="sweep", unit="chunk")
+    except ImportError:
+        import sys
+
+        def plain():
+            n = len(it)
+            for i, x in enumerate(it):
+                print(f"\rsweep: chunk {i + 1}/{n}", end="", file=sys.stderr, flush=True)
+                yield x
+            print(file=sys.stderr)
+
+        return plain()
