@@ -115,13 +115,13 @@ def run(
     test = cp.training_set(true_imu, held_out, key=k_te, **kw)
 
     nets, hist, train_s = {}, {}, {}
-    for label, kind, fit in (
-        ("elman", "elman", cp.fit),
-        ("mlp", "mlp", cp.fit),
-        ("elman_end_to_end", "elman", None),
+    for label, kind, fit, k_net in (
+        ("elman", "elman", cp.fit, k_e),
+        ("mlp", "mlp", cp.fit, k_m),
+        ("elman_end_to_end", "elman", None, k_x),
     ):
         log(f"training: {label}, {epochs} epochs")
-        c = cp.VibrationCompensator(kind, key={"elman": k_e, "mlp": k_m}.get(label, k_x))
+        c = cp.VibrationCompensator(kind, key=k_net)
         t0 = time.perf_counter()
         if fit is None:
             c, h = cp.fit_end_to_end(c, est, train, key=k_fit, epochs=epochs, test=test)

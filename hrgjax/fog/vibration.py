@@ -150,7 +150,7 @@ class VibrationError(eqx.Module):
             x = getattr(self, name)
             try:
                 v = float(x)
-            except Exception:  # traced (vmap/grad over parameters): checked by the caller
+            except Exception:  # traced (vmap/grad over parameters): values not checkable
                 continue
             if not v > 0:
                 raise ValueError(
