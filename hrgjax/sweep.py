@@ -15,6 +15,12 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids)
     outputs with leading shape `(11, 3)` (keyword order). When several devices are visible
     the flattened batch is sharded over them (padded to a multiple of the device count).
 
+    Under JAX's multi-process runtime (every process has called `jax.distributed.initialize()`
+    and then runs the same `sweep` on the same grids), each process evaluates one contiguous
+    block of the flattened grid on its own local devices, with no communication while `fn`
+    runs; the blocks are then gathered, so every process returns the whole result, as host
+    (NumPy) arrays, equal to a one-process run. See docs/scaling.md.
+
     **Arguments:**
 
     - `fn`: a function of keyword arguments returning a pytree of arrays.
@@ -22,7 +28,8 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids)
       a multiple of the device count), each chunk's result moved to host memory — for grids
       whose batch does not fit the devices at once. Every chunk has the same shape (the last
       is padded), so `fn` compiles once. `None`: the whole grid in one batch.
-    - `progress`: show a progress bar over the chunks on stderr (tqdm when installed).
+    - `progress`: show a progress bar over the chunks on stderr (tqdm when installed; on
+      process 0 only when there are several).
     - `**grids`: 1-D arrays, one per keyword.
     """
     if not grids:
@@ -42,22 +49,44 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids)
     mesh = jnp.meshgrid(*arrays, indexing="ij")
     flat = {n: m.reshape(-1) for n, m in zip(names, mesh, strict=True)}
     total = int(np.prod(shape))
-    devices = jax.devices()
     call = jax.vmap(lambda kw: fn(**kw))
-    if chunk_size is None:
-        out = _batch(call, flat, devices)
+    if chunk_size is not None and int(chunk_size) < 1:
+        raise ValueError(f"chunk_size must be a positive number of points; got {chunk_size}")
+    n_proc, rank = jax.process_count(), jax.process_index()
+    if n_proc == 1:
+        out = _local(call, flat, chunk_size, progress)
     else:
-        if int(chunk_size) < 1:
-            raise ValueError(f"chunk_size must be a positive number of points; got {chunk_size}")
-        chunk = -(-int(chunk_size) // len(devices)) * len(devices)
-        n_chunks = -(-total // chunk)
-        flat = _pad(flat, n_chunks * chunk - total)
-        parts = []
-        for i in _progress(range(n_chunks), progress):
-            part = {n: v[i * chunk : (i + 1) * chunk] for n, v in flat.items()}
-            parts.append(jax.device_get(_batch(call, part, devices)))
-        out = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
+        # Multi-process (jax.distributed): every process holds the same grid, evaluates
+        # one contiguous block of it on its own devices, and the blocks are gathered.
+        per = -(-total // n_proc)
+        flat = _pad(flat, per * n_proc - total)
+        mine = {n: v[rank * per : (rank + 1) * per] for n, v in flat.items()}
+        out = _local(call, mine, chunk_size, progress and rank == 0)
+        out = jax.tree_util.tree_map(lambda x: _gather(np.asarray(x)[:per]), out)
     return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
+
+
+def _local(call, flat, chunk_size, progress):
+    """`call` over a flat batch on this process's devices, whole or in chunks."""
+    devices = jax.local_devices()
+    if chunk_size is None:
+        return _batch(call, flat, devices)
+    total = next(iter(flat.values())).shape[0]
+    chunk = -(-int(chunk_size) // len(devices)) * len(devices)
+    n_chunks = -(-total // chunk)
+    flat = _pad(flat, n_chunks * chunk - total)
+    parts = []
+    for i in _progress(range(n_chunks), progress):
+        part = {n: v[i * chunk : (i + 1) * chunk] for n, v in flat.items()}
+        parts.append(jax.device_get(_batch(call, part, devices)))
+    return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
+
+
+def _gather(block):
+    """Concatenate every process's equally long block, in process order, on every process."""
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.process_allgather(block, tiled=True))
 
 
 def _pad(flat, pad):
