@@ -1,11 +1,18 @@
-"""Shared benchmark helpers: x64 on, timing with warm-up and block_until_ready."""
+"""Shared benchmark helpers: x64 on, timing with warm-up and block_until_ready, and `report`,
+which prints a figure and, under `benchmarks/run_all.py`, records it for the summary."""
 
+import atexit
+import json
+import os
 import platform
 import time
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+_FIGURES: list[dict] = []
+_SINK = os.environ.get("HRGJAX_BENCH_OUT")  # set by run_all.py: where the figures go
 
 
 def machine() -> str:
@@ -28,3 +35,30 @@ def first_call(fn):
     t0 = time.perf_counter()
     out = jax.block_until_ready(fn())
     return time.perf_counter() - t0, out
+
+
+def report(figure: str, value, unit: str, comparison: str = "", ratio=None, target: str = ""):
+    """One headline figure: printed now, and kept for `run_all.py`'s summary.
+
+    `comparison` names what `ratio` compares (e.g. "gradient / forward", "vs scipy RK45");
+    `target` is the issue's target in words ("≤ 2×"), empty where there is none."""
+    row = {
+        "figure": figure,
+        "value": None if value is None else float(value),
+        "unit": unit,
+        "comparison": comparison,
+        "ratio": None if ratio is None else float(ratio),
+        "target": target,
+    }
+    _FIGURES.append(row)
+    extra = f"  [{comparison}: {ratio:.3g}]" if ratio is not None else ""
+    print(f"FIGURE {figure}: {value:.6g} {unit}{extra}" + (f"  target {target}" if target else ""))
+
+
+def _write():
+    if _SINK and _FIGURES:
+        with open(_SINK, "w") as f:
+            json.dump(_FIGURES, f, indent=2)
+
+
+atexit.register(_write)

@@ -28,7 +28,7 @@ import time
 
 import jax
 import numpy as np
-from _common import machine
+from _common import machine, report
 
 from hrgjax.discovery import discover
 from hrgjax.discovery.generate import continuous_dataset, hidden_effect_dataset
@@ -196,6 +196,19 @@ def main(quick: bool, which: str):
         f"false positives {totals['fp']}/{totals['nulls']} [{flo:.2f}, {fhi:.2f}]"
     )
     print("targets: recovery ≥ 95 %, false positives ≤ 5 %, gap after ≤ 1.3× floor")
+    if totals["n"]:
+        report(
+            "discovery: hidden effect named right",
+            100 * totals["hits"] / totals["n"],
+            "%",
+            target="≥ 95 %",
+        )
+        report(
+            "discovery: false positives on null data",
+            100 * totals["fp"] / totals["nulls"],
+            "%",
+            target="≤ 5 %",
+        )
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ the targets of PHYSICS.md §11 (the same measurements tests/test_presets.py asse
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import machine
+from _common import machine, report
 
 import hrgjax as hg
 from hrgjax.units import DEG_PER_H
@@ -83,6 +83,8 @@ def main():
     ]
     for name, value, target in rows:
         print(f"  {name:40s} {value:>10s}   target {target}")
+        label, unit = name.rsplit(" [", 1)
+        report(f"tvg3_like {label}", float(value), unit.rstrip("]"), target=target)
 
 
 if __name__ == "__main__":

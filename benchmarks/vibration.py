@@ -18,7 +18,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from _common import machine
+from _common import machine, report
 
 from hrgjax.fog import compensation as cp
 from hrgjax.fog import study
@@ -129,6 +129,17 @@ def main():
                              if np.ptp(v) > 0 else f"{v.mean():+.3f}")  # fmt: skip
             print(f"| {name} | " + " | ".join(cells) + " |")
         print()
+        rmse = {n: np.mean([r["prediction_rmse_dph"][n] for r in runs]) for n in ("elman", "mlp")}
+        none = np.mean([r["prediction_rmse_dph"]["none"] for r in runs])
+        for n, v in rmse.items():
+            report(f"{n} held-out prediction RMSE, {epochs} epochs", v, "°/h",
+                   "uncompensated / this", none / v, "Elman best")  # fmt: skip
+        for name in records:
+            raw_h = np.mean([r["heading_error_deg"][name]["raw"] for r in runs])
+            comp = np.mean([r["heading_error_deg"][name]["elman"] for r in runs])
+            report(f"{name}: heading error after Elman compensation, {epochs} epochs", comp,
+                   "°", "raw / compensated (magnitudes)", abs(raw_h) / abs(comp),
+                   f"toward the limit {limit:+.3f}°")  # fmt: skip
     out["heading_limit_deg"] = limit
     Path("out").mkdir(exist_ok=True)
     Path("out/vibration.json").write_text(json.dumps(out, indent=2))

@@ -1,0 +1,162 @@
+"""`hg.sweep` across devices: a 10 000-member temperature × rate sweep of the averaged model
+and a batch of full-model (carrier-resolving) runs, on 1, 2 and 4 devices.
+
+On a CPU the devices are forced (`--xla_force_host_platform_device_count`), each count in its
+own process; they share this machine's cores, so the honest ceiling is the core count
+(2× on the 2-core development machine). On a GPU the same sweeps run on the GPU and, side
+by side in the same run, on this machine's CPU (one process each). Every configuration's
+result is compared with the one-device CPU result.
+
+Usage: `.venv/bin/python benchmarks/sweep_scaling.py [--quick]`.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+QUICK = "--quick" in sys.argv
+N_T, N_W = (20, 25) if QUICK else (100, 100)  # temperature × rate members
+DURATION_S = 60.0  # averaged-model run length [s]
+FULL_MEMBERS, FULL_S = 8, 0.02  # full-model batch and run length [s]
+
+
+def child(out_path):
+    """Run both sweeps on this process's devices; write timings and results."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    from _common import machine
+
+    import hrgjax as hg
+
+    gyro = hg.presets.tvg3_like(noise=False)
+
+    def averaged(temperature_c, rate_dps):
+        prof = hg.Profile.constant_rate(rate_dps, DURATION_S, temperature_c)
+        return hg.simulate(gyro, prof, dt_out=DURATION_S).wave_angle[-1]
+
+    def full(rate_dps):
+        prof = hg.Profile.constant_rate(rate_dps, FULL_S, 20.0)
+        return hg.simulate(gyro, prof, "full", dt_out=FULL_S).wave_angle[-1]
+
+    T = jnp.linspace(-40.0, 60.0, N_T)
+    W = jnp.logspace(-1.0, np.log10(400.0), N_W)
+    R = jnp.linspace(1.0, 100.0, FULL_MEMBERS)
+    res = {
+        "machine": machine(),
+        "devices": jax.device_count(),
+        "kind": jax.devices()[0].device_kind,
+        "platform": jax.devices()[0].platform,
+    }
+    for name, run in (
+        ("averaged", lambda: hg.sweep(averaged, temperature_c=T, rate_dps=W)),
+        ("full", lambda: hg.sweep(full, rate_dps=R)),
+    ):
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(run())
+        first = time.perf_counter() - t0
+        walls = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            out = jax.block_until_ready(run())
+            walls.append(time.perf_counter() - t0)
+        res[name] = {"first_s": first, "wall_s": min(walls)}
+        np.save(f"{out_path}.{name}.npy", np.asarray(out))
+    with open(out_path, "w") as f:
+        json.dump(res, f)
+
+
+def spawn(devices, platform, tmp):
+    path = os.path.join(tmp, f"{platform}{devices}.json")
+    env = dict(os.environ, JAX_PLATFORMS=platform)
+    if platform == "cpu":
+        env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
+    subprocess.run([sys.executable, __file__, "--child", path], env=env, check=True)
+    import numpy as np
+
+    res = json.load(open(path))
+    for name in ("averaged", "full"):
+        res[name]["result"] = np.load(f"{path}.{name}.npy")
+    return res
+
+
+def main():
+    from _common import report  # imports jax without starting a backend here
+
+    # The parent never starts a backend (a GPU one would take the memory the children need).
+    probe = "import jax; print(jax.default_backend())"
+    backend = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    gpu = backend.stdout.strip() == "gpu"
+    n_avg = N_T * N_W
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = {f"cpu×{n}": spawn(n, "cpu", tmp) for n in (1, 2, 4)}
+        if gpu:
+            runs["gpu"] = spawn(1, "cuda", tmp)
+    base = runs["cpu×1"]
+    print(f"machine: {base['machine']}")
+    print(
+        f"averaged: {N_T} temperatures × {N_W} rates = {n_avg} runs of {DURATION_S:.0f} s;"
+        f" full: {FULL_MEMBERS} runs of {FULL_S} s at 5 kHz"
+    )
+    print(
+        f"{'config':>8} {'averaged [s]':>13} {'runs/s':>9} {'speed-up':>9} {'max |Δ| [rad]':>14}"
+        f" {'full [s]':>9} {'sim s/s':>8} {'speed-up':>9} {'compile+1st [s]':>16}"
+    )
+    for name, r in runs.items():
+        a, f = r["averaged"], r["full"]
+        da = float(abs(a["result"] - base["averaged"]["result"]).max())
+        df = float(abs(f["result"] - base["full"]["result"]).max())
+        print(
+            f"{name:>8} {a['wall_s']:13.3f} {n_avg / a['wall_s']:9.0f} "
+            f"{base['averaged']['wall_s'] / a['wall_s']:8.2f}× {max(da, df):14.1e} "
+            f"{f['wall_s']:9.3f} {FULL_MEMBERS * FULL_S / f['wall_s']:8.3f} "
+            f"{base['full']['wall_s'] / f['wall_s']:8.2f}× {a['first_s']:8.1f} / {f['first_s']:.1f}"
+        )
+        assert da < 1e-12 and df < 1e-9, (name, da, df)
+    kind = runs["cpu×1"]["kind"]
+    for n in (2, 4):
+        r = runs[f"cpu×{n}"]
+        report(
+            f"averaged sweep ({n_avg} runs), {n} forced CPU devices",
+            n_avg / r["averaged"]["wall_s"],
+            "runs/s",
+            f"speed-up vs 1 {kind} device",
+            base["averaged"]["wall_s"] / r["averaged"]["wall_s"],
+            f"≤ {os.cpu_count()}× (cores)",
+        )
+        report(
+            f"full-model batch ({FULL_MEMBERS} runs), {n} forced CPU devices",
+            FULL_MEMBERS * FULL_S / r["full"]["wall_s"],
+            "simulated s per s",
+            f"speed-up vs 1 {kind} device",
+            base["full"]["wall_s"] / r["full"]["wall_s"],
+        )
+    if gpu:
+        g = runs["gpu"]
+        report(
+            f"averaged sweep ({n_avg} runs) on {g['kind']}",
+            n_avg / g["averaged"]["wall_s"],
+            "runs/s",
+            "speed-up vs 1 CPU device",
+            base["averaged"]["wall_s"] / g["averaged"]["wall_s"],
+        )
+        report(
+            f"full-model batch ({FULL_MEMBERS} runs) on {g['kind']}",
+            FULL_MEMBERS * FULL_S / g["full"]["wall_s"],
+            "simulated s per s",
+            "speed-up vs 1 CPU device",
+            base["full"]["wall_s"] / g["full"]["wall_s"],
+        )
+
+
+if __name__ == "__main__":
+    if "--child" in sys.argv:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+        child(sys.argv[sys.argv.index("--child") + 1])
+    else:
+        main()
