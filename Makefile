@@ -28,7 +28,7 @@ docs: $(STAMP)
 	$(BIN)/mkdocs build --strict --site-dir out/site
 
 bench: $(STAMP)
-	for f in benchmarks/*.py; do $(BIN)/python $$f || exit 1; done
+	$(BIN)/python benchmarks/run_all.py
 
 clean:
 	rm -rf out .pytest_cache site

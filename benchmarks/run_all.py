@@ -69,9 +69,10 @@ def environment():
     return env
 
 
-def run(name, quick, timeout, logs):
-    """One script in its own process; its figures, status and wall time."""
-    args = QUICK_ARGS.get(name, []) if quick else []
+def run(script: Path, args: list[str], timeout: float, logs: Path):
+    """One script in its own process: its status and wall time, and the figures it reported
+    through `_common.report` (tagged with the script's name)."""
+    name = script.stem
     with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
         sink = f.name
     env = dict(os.environ, HRGJAX_BENCH_OUT=sink)
@@ -80,7 +81,7 @@ def run(name, quick, timeout, logs):
     with open(log, "w") as fh:
         try:
             proc = subprocess.run(
-                [sys.executable, str(HERE / f"{name}.py"), *args],
+                [sys.executable, str(script), *args],
                 cwd=ROOT,
                 env=env,
                 stdout=fh,
@@ -89,7 +90,7 @@ def run(name, quick, timeout, logs):
             )
             status = "ok" if proc.returncode == 0 else f"failed (exit {proc.returncode})"
         except subprocess.TimeoutExpired:
-            status = f"timed out after {timeout:.0f} s"
+            status = f"timed out after {timeout:g} s"
     wall = time.perf_counter() - t0
     try:
         figures = json.loads(Path(sink).read_text() or "[]")
@@ -99,13 +100,8 @@ def run(name, quick, timeout, logs):
     for fig in figures:
         fig["script"] = name
         fig["quick"] = bool(args)
-    return {
-        "script": name,
-        "status": status,
-        "wall_s": round(wall, 1),
-        "args": args,
-        "log": str(log.relative_to(ROOT)),
-    }, figures
+    return {"script": name, "status": status, "wall_s": round(wall, 1), "args": args,
+            "log": str(log)}, figures  # fmt: skip
 
 
 def markdown(summary):
@@ -150,7 +146,8 @@ def main(argv=None):
     summary = {"environment": environment(), "quick": a.quick, "scripts": [], "figures": []}
     for name in names:
         print(f"{name} …", end=" ", flush=True)
-        status, figures = run(name, a.quick, a.timeout, logs)
+        args = QUICK_ARGS.get(name, []) if a.quick else []
+        status, figures = run(HERE / f"{name}.py", args, a.timeout, logs)
         print(f"{status['status']} in {status['wall_s']} s, {len(figures)} figures", flush=True)
         summary["scripts"].append(status)
         summary["figures"].extend(figures)

@@ -20,7 +20,7 @@ import time
 QUICK = "--quick" in sys.argv
 N_T, N_W = (20, 25) if QUICK else (100, 100)  # temperature × rate members
 DURATION_S = 60.0  # averaged-model run length [s]
-FULL_MEMBERS, FULL_S = 8, 0.02  # full-model batch and run length [s]
+FULL_MEMBERS, FULL_S = (16 if QUICK else 64), 0.02  # full-model batch, run length [s]
 
 
 def child(out_path):
@@ -59,7 +59,7 @@ def child(out_path):
         out = jax.block_until_ready(run())
         first = time.perf_counter() - t0
         walls = []
-        for _ in range(3):
+        for _ in range(3 if QUICK or name == "full" else 1):
             t0 = time.perf_counter()
             out = jax.block_until_ready(run())
             walls.append(time.perf_counter() - t0)
@@ -74,7 +74,8 @@ def spawn(devices, platform, tmp):
     env = dict(os.environ, JAX_PLATFORMS=platform)
     if platform == "cpu":
         env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
-    subprocess.run([sys.executable, __file__, "--child", path], env=env, check=True)
+    args = [sys.executable, __file__, "--child", path] + (["--quick"] if QUICK else [])
+    subprocess.run(args, env=env, check=True)
     import numpy as np
 
     res = json.load(open(path))
@@ -102,20 +103,23 @@ def main():
         f" full: {FULL_MEMBERS} runs of {FULL_S} s at 5 kHz"
     )
     print(
-        f"{'config':>8} {'averaged [s]':>13} {'runs/s':>9} {'speed-up':>9} {'max |Δ| [rad]':>14}"
+        f"{'config':>8} {'averaged [s]':>13} {'runs/s':>9} {'speed-up':>9} {'max rel. Δ':>11}"
         f" {'full [s]':>9} {'sim s/s':>8} {'speed-up':>9} {'compile+1st [s]':>16}"
     )
     for name, r in runs.items():
         a, f = r["averaged"], r["full"]
-        da = float(abs(a["result"] - base["averaged"]["result"]).max())
-        df = float(abs(f["result"] - base["full"]["result"]).max())
+        da, df = (
+            float(abs(x["result"] - b["result"]).max() / abs(b["result"]).max())
+            for x, b in ((a, base["averaged"]), (f, base["full"]))
+        )
         print(
             f"{name:>8} {a['wall_s']:13.3f} {n_avg / a['wall_s']:9.0f} "
-            f"{base['averaged']['wall_s'] / a['wall_s']:8.2f}× {max(da, df):14.1e} "
+            f"{base['averaged']['wall_s'] / a['wall_s']:8.2f}× {max(da, df):11.1e} "
             f"{f['wall_s']:9.3f} {FULL_MEMBERS * FULL_S / f['wall_s']:8.3f} "
             f"{base['full']['wall_s'] / f['wall_s']:8.2f}× {a['first_s']:8.1f} / {f['first_s']:.1f}"
         )
-        assert da < 1e-12 and df < 1e-9, (name, da, df)
+        # CPU: equal up to rounding; GPU: another libm, adaptive steps, within the tolerances
+        assert max(da, df) < (1e-12 if name.startswith("cpu") else 1e-6), (name, da, df)
     kind = runs["cpu×1"]["kind"]
     for n in (2, 4):
         r = runs[f"cpu×{n}"]

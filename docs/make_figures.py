@@ -9,6 +9,7 @@ jax.config.update("jax_enable_x64", True)
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -147,6 +148,51 @@ def vibration():
     vibration_figure(res["_figures"], os.path.join(HERE, "fog_vibration.png"))
 
 
+def adjoint_memory():
+    """Peak memory (XLA's account of the compiled program) of the forward run and of its
+    gradient against run length; the full table is benchmarks/adjoint_memory.py's."""
+    import diffrax
+    import equinox as eqx
+
+    gyro = hg.presets.tvg3_like(noise=False)
+    params, static = eqx.partition(gyro.resonator, eqx.is_inexact_array)
+
+    def peak(fn):
+        m = jax.jit(fn).lower(params).compile().memory_analysis()
+        return (m.temp_size_in_bytes + m.argument_size_in_bytes + m.output_size_in_bytes) / 1e3
+
+    lengths = np.array([225.0, 900.0, 3600.0, 7200.0])
+    rows = []
+    for length in lengths:
+        prof = hg.Profile.piecewise([0.0, length], [5.0, 5.0], [-40.0, 20.0])
+
+        def loss(p, adjoint=None, final=False, prof=prof, length=length):
+            g = eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(p, static))
+            kw = {"ts": jnp.array([0.0, length])} if final else {"dt_out": 1.0}
+            return jnp.mean(hg.simulate(g, prof, adjoint=adjoint, **kw).wave_angle ** 2)
+
+        store_all = diffrax.RecursiveCheckpointAdjoint(int(6 * length))  # > steps (5.1/s)
+        rows.append([
+            peak(loss),
+            peak(jax.grad(loss)),
+            peak(jax.grad(lambda p, a=store_all, loss=loss: loss(p, a))),
+            peak(jax.grad(lambda p, loss=loss: loss(p, final=True))),
+        ])  # fmt: skip
+    rows = np.array(rows)
+    fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
+    h = lengths / 3600
+    ax.loglog(h, rows[:, 0], "o-", label="forward, 1-s outputs")
+    ax.loglog(h, rows[:, 1], "s-", label="gradient, 256 checkpoints (default)")
+    ax.loglog(h, rows[:, 2], "^--", label="gradient, every step stored")
+    ax.loglog(h, rows[:, 3], "d:", label="gradient, final-angle loss")
+    ax.set_xlabel("run length [h]")
+    ax.set_ylabel("peak memory [kB]")
+    ax.set_title("averaged model, warm-up run: memory against length")
+    ax.legend(fontsize=8)
+    fig.savefig(os.path.join(HERE, "adjoint_memory.png"), dpi=120)
+    plt.close(fig)
+
+
 if __name__ == "__main__":
     os.makedirs(HERE, exist_ok=True)
     full_vs_averaged()
@@ -157,4 +203,5 @@ if __name__ == "__main__":
     ins()
     diagnosis()
     vibration()
+    adjoint_memory()
     print(f"wrote figures to {HERE}")
