@@ -51,8 +51,9 @@ def report(figure: str, value, unit: str, comparison: str = "", ratio=None, targ
         "target": target,
     }
     _FIGURES.append(row)
-    extra = f"  [{comparison}: {ratio:.3g}]" if ratio is not None else ""
-    print(f"FIGURE {figure}: {value:.6g} {unit}{extra}" + (f"  target {target}" if target else ""))
+    shown = "n/a" if value is None else f"{float(value):.6g}"
+    extra = f"  [{comparison}: {float(ratio):.3g}]" if ratio is not None else ""
+    print(f"FIGURE {figure}: {shown} {unit}{extra}" + (f"  target {target}" if target else ""))
 
 
 def _write():
