@@ -27,7 +27,7 @@ import numpy as np
 from _common import best_of, machine, report
 
 import hrgjax as hg
-from hrgjax.simulate import _solve, output_times
+from hrgjax.simulate import AVERAGED_CHECKPOINTS, _default_solver, _solve, output_times
 
 QUICK = "--quick" in sys.argv
 LENGTHS = (225.0, 900.0, 3600.0) if QUICK else (225.0, 450.0, 900.0, 1800.0, 3600.0, 7200.0)
@@ -38,22 +38,22 @@ def profile(length):
 
 
 def n_steps(gyro, prof, ts):
-    """Accepted steps of the default solve (the step loop's length)."""
-    sim = _solve(
-        "averaged",
-        gyro,
-        prof,
-        ts,
-        diffrax.Tsit5(),
-        1e-8,
-        1e-10,
-        2**16,
-        1e-2,
-        False,
-        jnp.asarray(0.0),
-        diffrax.RecursiveCheckpointAdjoint(256),
-    )
-    return int(sim[1])
+    """Accepted steps of `simulate`'s default solve (the step loop's length)."""
+    adjoint = diffrax.RecursiveCheckpointAdjoint(AVERAGED_CHECKPOINTS)
+    solver, zero = _default_solver("averaged"), jnp.asarray(0.0)
+    args = (1e-8, 1e-10, 2**16, 1e-2, False, zero, adjoint)  # rtol, atol, max_steps, dt0, …
+    return int(_solve("averaged", gyro, prof, ts, solver, *args)[1])
+
+
+def make_loss(gyro, static, prof, ts):
+    """Mean square wave angle at `ts` as a function of the resonator's array parameters."""
+
+    def loss(params, adjoint=None, max_steps=None):
+        g = eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(params, static))
+        r = hg.simulate(g, prof, ts=ts, adjoint=adjoint, max_steps=max_steps)
+        return jnp.mean(r.wave_angle**2)
+
+    return loss
 
 
 def peak_bytes(fn, params):
@@ -86,19 +86,15 @@ def main():
         for kind in ("dt_out", "final"):
             ts = output_times(prof, 1.0) if kind == "dt_out" else jnp.array([0.0, length])
             steps = n_steps(gyro, prof, ts)
-
-            def loss(params, adjoint=None, max_steps=None, ts=ts, prof=prof):
-                g = eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(params, static))
-                r = hg.simulate(g, prof, ts=ts, adjoint=adjoint, max_steps=max_steps)
-                return jnp.mean(r.wave_angle**2)
+            loss = make_loss(gyro, static, prof, ts)
 
             fwd = peak_bytes(loss, params)
             grad = peak_bytes(jax.grad(loss), params)
             store_all = peak_bytes(
-                jax.grad(lambda p, n=steps: loss(p, diffrax.RecursiveCheckpointAdjoint(n), n)),
+                jax.grad(lambda p, n=steps, f=loss: f(p, diffrax.RecursiveCheckpointAdjoint(n), n)),
                 params,
             )
-            back = peak_bytes(jax.grad(lambda p: loss(p, diffrax.BacksolveAdjoint())), params)
+            back = peak_bytes(jax.grad(lambda p, f=loss: f(p, diffrax.BacksolveAdjoint())), params)
             rows[length, kind] = (steps, fwd, grad, store_all, back)
             print(
                 f"{length:7.0f}s {steps:6d} {kind:>6} {fwd / 1e3:8.1f}kB {grad / 1e3:8.1f}kB "
@@ -138,12 +134,7 @@ def main():
 
     # Time against memory on the 1-hour run: the number of checkpoints is the dial.
     prof = profile(3600.0)
-    ts = output_times(prof, 1.0)
-
-    def loss(params, adjoint=None, max_steps=None):
-        g = eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(params, static))
-        r = hg.simulate(g, prof, ts=ts, adjoint=adjoint, max_steps=max_steps)
-        return jnp.mean(r.wave_angle**2)
+    loss = make_loss(gyro, static, prof, output_times(prof, 1.0))
 
     f = jax.jit(loss)
     jax.block_until_ready(f(params))
