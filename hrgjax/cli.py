@@ -11,15 +11,15 @@ PRESETS = ("tvg3", "ideal")
 
 
 def _setup():
-    """float64 on; JAX's persistent compilation cache in ~/.cache/hrgjax (set
-    HRGJAX_JAX_CACHE=0 to switch it off) so a second run does not compile again."""
+    """float64 on, and the persistent compile cache (hrgjax.enable_cache: $HRGJAX_CACHE_DIR,
+    else $XDG_CACHE_HOME/hrgjax, else ~/.cache/hrgjax; HRGJAX_NO_CACHE=1 switches it off),
+    so a second run loads what the first compiled."""
     import jax
 
+    from ._cache import enable_cache
+
     jax.config.update("jax_enable_x64", True)
-    if os.environ.get("HRGJAX_JAX_CACHE", "1") != "0":
-        base = os.environ.get("XDG_CACHE_HOME", os.path.join(os.path.expanduser("~"), ".cache"))
-        jax.config.update("jax_compilation_cache_dir", os.path.join(base, "hrgjax", "jax"))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
+    enable_cache()
     return jax
 
 

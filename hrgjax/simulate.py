@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_concrete
+from ._compiled import first_failure, program, tracing_callback_free
 from ._x64 import require_x64
 from .gyro import Gyro
 from .noise import draw_run_bias, rate_noise_angle
@@ -45,10 +46,38 @@ def output_times(profile: Profile, dt_out: float):
     return jnp.asarray(t[0] + dt_out * np.arange(n), dtype=float)
 
 
-@eqx.filter_jit
+def _solver_failure(out):
+    """Host check of `_solve`'s output: the solver's own message, else a non-finite state."""
+    _, _, result, finite = out
+    message = first_failure(result, diffrax.RESULTS)
+    if message is not None:
+        return f"simulate: the ODE solver failed: {message}"
+    if not np.all(np.asarray(finite)):
+        return "simulate: the state became NaN or inf (check the gyro's parameters)"
+    return None
+
+
+@program(check=_solver_failure)
 def _solve(
-    model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0, fixed, quadrature0, adjoint
+    model,
+    gyro,
+    profile,
+    ts,
+    solver,
+    rtol,
+    atol,
+    max_steps,
+    dt0,
+    fixed,
+    quadrature0,
+    adjoint,
+    key=None,
+    bias_key=None,
+    run=0,
 ):
+    """The whole of `simulate` after its input checks, as one compiled program: the solve,
+    the readout, the noise and the record. Returns (Record, accepted steps, solver result,
+    whether the state stayed finite)."""
     if model == "averaged":
         y0 = averaged_initial_state(gyro, profile, quadrature0)
         field, args = averaged_vector_field, (gyro, profile)
@@ -73,12 +102,61 @@ def _solve(
         stepsize_controller=controller,
         max_steps=max_steps,
         adjoint=adjoint,
-        throw=True,
+        throw=False,
     )
-    ys = eqx.error_if(sol.ys, ~jnp.all(jnp.isfinite(sol.ys)), "simulate: non-finite state")
+    finite = jnp.all(jnp.isfinite(sol.ys))
+    ys = sol.ys
+    if not tracing_callback_free():
+        # Under a caller's own trace the checks stay inside the program, as diffrax's
+        # throw=True would put them; otherwise the host raises after the call.
+        ys = sol.result.error_if(ys, sol.result != diffrax.RESULTS.successful)
+        ys = eqx.error_if(ys, ~finite, "simulate: non-finite state")
     if model == "averaged":
-        return _read_averaged(gyro, profile, ts, ys), sol.stats["num_steps"]
-    return _read_full(gyro, profile, ts, ys, omega_scale), sol.stats["num_steps"]
+        read = _read_averaged(gyro, profile, ts, ys)
+    else:
+        read = _read_full(gyro, profile, ts, ys, omega_scale)
+    rec = _record(gyro, profile, ts, read, key, bias_key, run)
+    return rec, sol.stats["num_steps"], sol.result, finite
+
+
+def _record(gyro, profile, ts, read, key, bias_key, run):
+    """The Record of a solve: readout estimates plus the gyro's noise (when it has any)."""
+    est, true_theta, loops = read
+    theta = est.theta
+    amplitude, quadrature = est.amplitude, est.quadrature
+    k_e = jax.vmap(lambda t: gyro.at(profile.temperature_at(t)).resonator.k_e)(ts)
+    if gyro.noise is not None:
+        k_rate, k_white, k_amp, k_bias = jax.random.split(key, 4)
+        k_bias = k_bias if bias_key is None else bias_key
+        nz = gyro.noise
+        rate_angle = rate_noise_angle(k_rate, ts, nz)
+        run_bias = draw_run_bias(k_bias, nz)
+        theta = (
+            theta
+            - k_e * (rate_angle + run_bias * (ts - ts[0]))
+            + nz.angle_white * jax.random.normal(k_white, ts.shape)
+        )
+        amp_noise = nz.amplitude_white * gyro.control.amplitude
+        ka, kq = jax.random.split(k_amp)
+        amplitude = amplitude + amp_noise * jax.random.normal(ka, ts.shape)
+        quadrature = quadrature + amp_noise * jax.random.normal(kq, ts.shape)
+
+    return Record(
+        t=ts,
+        wave_angle=theta,
+        amplitude=amplitude,
+        quadrature=quadrature,
+        table_angle=jax.vmap(profile.table_angle_at)(ts),
+        table_rate=jax.vmap(profile.rate_at)(ts),
+        temperature=jax.vmap(profile.temperature_at)(ts),
+        accel=jax.vmap(profile.accel_at)(ts),
+        true_wave_angle=true_theta,
+        frequency=loops.omega_r,
+        drive=loops.force if gyro.control.drive == "force" else loops.pump,
+        quadrature_force=loops.quad_force,
+        k_e=k_e,
+        run=run,
+    )
 
 
 def _read_averaged(gyro, profile, ts, ys):
@@ -165,6 +243,45 @@ def simulate(
     **Raises:** `RuntimeError` without float64; `ValueError` for a bad model name, a missing
     key or a bad output grid; a solver failure (max steps, non-finite state) raises too.
     """
+    rec, _, _, _ = _simulate(
+        gyro,
+        profile,
+        model,
+        key=key,
+        bias_key=bias_key,
+        dt_out=dt_out,
+        ts=ts,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        solver=solver,
+        fixed_step=fixed_step,
+        quadrature0=quadrature0,
+        adjoint=adjoint,
+        run=run,
+    )
+    return rec
+
+
+def _simulate(
+    gyro: Gyro,
+    profile: Profile,
+    model: str = "averaged",
+    *,
+    key: jax.Array | None = None,
+    bias_key: jax.Array | None = None,
+    dt_out: float = 0.1,
+    ts=None,
+    rtol: float = 1e-8,
+    atol: float = 1e-10,
+    max_steps: int | None = None,
+    solver: diffrax.AbstractSolver | None = None,
+    fixed_step: float | None = None,
+    quadrature0: float = 0.0,
+    adjoint: diffrax.AbstractAdjoint | None = None,
+    run: int = 0,
+):
+    """`simulate` returning (Record, accepted steps, solver result, finite flag)."""
     require_x64("hrgjax.simulate")
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}; got {model!r}")
@@ -199,7 +316,7 @@ def simulate(
             checkpoints=AVERAGED_CHECKPOINTS if model == "averaged" else None
         )
     dt0 = fixed_step if fixed_step is not None else (1e-2 if model == "averaged" else 1e-5)
-    (est, true_theta, loops), _ = _solve(
+    return _solve(
         model,
         gyro,
         profile,
@@ -212,40 +329,7 @@ def simulate(
         fixed_step is not None,
         jnp.asarray(quadrature0, dtype=float),
         adjoint,
-    )
-
-    theta = est.theta
-    amplitude, quadrature = est.amplitude, est.quadrature
-    k_e = jax.vmap(lambda t: gyro.at(profile.temperature_at(t)).resonator.k_e)(ts)
-    if gyro.noise is not None:
-        k_rate, k_white, k_amp, k_bias = jax.random.split(key, 4)
-        k_bias = k_bias if bias_key is None else bias_key
-        nz = gyro.noise
-        rate_angle = rate_noise_angle(k_rate, ts, nz)
-        run_bias = draw_run_bias(k_bias, nz)
-        theta = (
-            theta
-            - k_e * (rate_angle + run_bias * (ts - ts[0]))
-            + nz.angle_white * jax.random.normal(k_white, ts.shape)
-        )
-        amp_noise = nz.amplitude_white * gyro.control.amplitude
-        ka, kq = jax.random.split(k_amp)
-        amplitude = amplitude + amp_noise * jax.random.normal(ka, ts.shape)
-        quadrature = quadrature + amp_noise * jax.random.normal(kq, ts.shape)
-
-    return Record(
-        t=ts,
-        wave_angle=theta,
-        amplitude=amplitude,
-        quadrature=quadrature,
-        table_angle=jax.vmap(profile.table_angle_at)(ts),
-        table_rate=jax.vmap(profile.rate_at)(ts),
-        temperature=jax.vmap(profile.temperature_at)(ts),
-        accel=jax.vmap(profile.accel_at)(ts),
-        true_wave_angle=true_theta,
-        frequency=loops.omega_r,
-        drive=loops.force if gyro.control.drive == "force" else loops.pump,
-        quadrature_force=loops.quad_force,
-        k_e=k_e,
-        run=jnp.asarray(run),
+        key,
+        bias_key,
+        jnp.asarray(run),
     )

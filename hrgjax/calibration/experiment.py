@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_finite, is_concrete
+from .._compiled import first_failure, program
 from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
-from ..simulate import simulate
+from ..simulate import _simulate
+from ..units import DEG, DEG_PER_S
 
 SEED_TEMPERATURES = tuple(float(t) for t in range(-40, 61, 10))
 """−40…+60 °C in 10 °C steps."""
@@ -54,7 +58,26 @@ class Plan(eqx.Module):
     def profiles(self) -> Profile:
         """A batch of profiles, one per point (leading axis P)."""
         one = lambda T, a, w: Profile.constant_rate(w, self.duration_s, T, a)
-        return jax.vmap(one)(self.temperature_c, self.wave_angle0_deg, self.rate_dps)
+        fields = (self.temperature_c, self.wave_angle0_deg, self.rate_dps)
+        if not all(is_concrete(x) for x in fields):
+            return jax.vmap(one)(*fields)
+        # Concrete plan: build the batch on the host (checked here), not by an eager vmap
+        # of the constructor, which would compile its checks for every plan size.
+        temp, angle, rate = (np.asarray(x, dtype=float) for x in fields)
+        for name, x in zip(("temperature_c", "wave_angle0_deg", "rate_dps"), fields, strict=True):
+            check_finite(f"Plan.{name}", x)
+        ones = np.ones((self.size, 2))
+        return eqx.tree_at(
+            lambda p: (p.t, p.rate, p.temperature, p.accel, p.wave_angle0),
+            one(0.0, 0.0, 0.0),
+            (
+                jnp.asarray(ones * np.array([0.0, self.duration_s])),
+                jnp.asarray(ones * rate[:, None] * DEG_PER_S),
+                jnp.asarray(ones * temp[:, None]),
+                jnp.zeros((self.size, 2, 3)),
+                jnp.asarray(angle * DEG),
+            ),
+        )
 
 
 def _grid(temps, angles, rate, duration, dt_out):
@@ -143,13 +166,23 @@ CHUNK = 32
 reuses one compiled simulator, whatever its number of points."""
 
 
-@eqx.filter_jit
+def _chunk_failure(out):
+    rec, result, finite = out
+    message = first_failure(result, diffrax.RESULTS)
+    if message is None and not np.all(np.asarray(finite)):
+        message = "the state became NaN or inf (check the gyro's parameters)"
+    return None if message is None else f"run_plan: simulating a plan point failed: {message}"
+
+
+@program(check=_chunk_failure)
 def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
+    def one(p, k):
+        rec, _, result, finite = _simulate(gyro, p, model, key=k, bias_key=bias_key, ts=ts)
+        return rec, result, finite
+
     if keys is None:
-        return jax.vmap(lambda p: simulate(gyro, p, model=model, ts=ts))(profiles)
-    return jax.vmap(lambda p, k: simulate(gyro, p, model=model, key=k, bias_key=bias_key, ts=ts))(
-        profiles, keys
-    )
+        return jax.vmap(lambda p: one(p, None))(profiles)
+    return jax.vmap(one)(profiles, keys)
 
 
 def run_plan(
@@ -185,16 +218,15 @@ def run_plan(
     parts = []
     for start in range(0, size + n_pad, chunk):
         take = lambda x, s=start: x[s : s + chunk]
-        parts.append(
-            _simulate_chunk(
-                gyro,
-                jax.tree_util.tree_map(take, profiles),
-                None if keys is None else take(keys),
-                bias_key,
-                ts,
-                model,
-            )
+        rec, _, _ = _simulate_chunk(
+            gyro,
+            jax.tree_util.tree_map(take, profiles),
+            None if keys is None else take(keys),
+            bias_key,
+            ts,
+            model,
         )
+        parts.append(rec)
     rec = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:size], *parts)
     data = rec.to_data()
     if first_run:
