@@ -54,7 +54,10 @@ class _AtomicStore:
         except FileNotFoundError:
             return None
         except OSError as err:
-            warnings.warn(f"hrgjax: cannot read compile-cache entry {f.name} ({err}); compiling")
+            warnings.warn(
+                f"hrgjax: cannot read compile-cache entry {f.name} ({err}); compiling",
+                stacklevel=2,
+            )
             return None
         if not _intact(value):
             warnings.warn(

@@ -134,3 +134,18 @@ def first_failure(result, enumeration) -> str | None:
         return None
     item = eqx.tree_at(lambda r: r._value, result, jnp.asarray(codes[bad[0]]))
     return enumeration[item]
+
+
+def bucket_size(n: int, smallest: int = 64) -> int:
+    """The padded length for `n` items: the next power of two ≥ max(n, `smallest`), so that
+    inputs of any size meet one of a few compiled shapes (at most 2× the work)."""
+    return max(int(smallest), 1 << max(int(n) - 1, 0).bit_length())
+
+
+def bucket_pad(x, size: int, axis: int = 0):
+    """`x` (NumPy) padded along `axis` to `size` by repeating its last entry (padding gives
+    finite, ignorable results)."""
+    x = np.asarray(x)
+    pad = [(0, 0)] * x.ndim
+    pad[axis] = (0, size - x.shape[axis])
+    return np.pad(x, pad, mode="edge")

@@ -55,3 +55,33 @@ def noisy_model_gyro(values):
     return eqx.tree_at(
         lambda g: g.noise, physical.model_gyro(values), noise, is_leaf=lambda x: x is None
     )
+
+
+class CompileCounter:
+    """Counts JAX traces and XLA compiles (jax.monitoring events) while active:
+    `with CompileCounter() as c: …; c.compiles, c.traces`."""
+
+    _active: list = []
+    _registered = False
+
+    def __enter__(self):
+        import jax.monitoring
+
+        if not CompileCounter._registered:
+            jax.monitoring.register_event_duration_secs_listener(CompileCounter._listen)
+            CompileCounter._registered = True
+        self.compiles, self.traces, self.names = 0, 0, []
+        CompileCounter._active.append(self)
+        return self
+
+    def __exit__(self, *exc):
+        CompileCounter._active.remove(self)
+
+    @staticmethod
+    def _listen(event, duration, **kwargs):
+        for c in CompileCounter._active:
+            if event == "/jax/core/compile/backend_compile_duration":
+                c.compiles += 1
+                c.names.append(kwargs.get("fun_name"))
+            elif event == "/jax/core/compile/jaxpr_trace_duration":
+                c.traces += 1

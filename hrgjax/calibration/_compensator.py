@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import bucket_pad, bucket_size, program
 from ..data import MeasuredData
 from ..units import DEG
 from .reduce import WINDOW_S, RateWindows, reduce
@@ -101,22 +102,38 @@ class AbstractCompensator(eqx.Module):
         for name in CORRECTED_COLUMNS:
             if name in data:
                 raise ValueError(f"data already has a {name!r} column; correct raw data")
-        rate_out = np.empty(len(data))
-        angle_out = np.empty(len(data))
-        for idx in data.run_indices():
+        runs = data.run_indices()
+        for idx in runs:
             if idx.size < 2:
                 raise ValueError(f"run {int(data.run[idx[0]])} has one sample; need ≥ 2")
-            t = data["time_s"][idx]
-            th = data["wave_angle_deg"][idx] * DEG
-            temp = data["temperature_c"][idx]
-            interval = np.asarray(
-                _interval_rates(self, jnp.asarray(t), jnp.asarray(th), jnp.asarray(temp))
-            )
-            dt = np.diff(t)
-            angle = np.concatenate([[0.0], np.cumsum(interval * dt)])
+        # Every interval of every run in one compiled call, padded to a bucketed length so
+        # data of any size reuse a few compiled programs.
+        t = data["time_s"]
+        th = data["wave_angle_deg"] * DEG
+        temp = data["temperature_c"]
+        first = np.concatenate([idx[:-1] for idx in runs])
+        second = np.concatenate([idx[1:] for idx in runs])
+        dt = t[second] - t[first]
+        inputs = (
+            0.5 * (th[second] + th[first]),
+            (th[second] - th[first]) / dt,
+            0.5 * (temp[second] + temp[first]),
+            (temp[second] - temp[first]) / dt,
+        )
+        n = first.size
+        padded = [jnp.asarray(bucket_pad(x, bucket_size(n))) for x in inputs]
+        interval = np.asarray(_interval_rates(self, *padded))[:n]
+        rate_out = np.empty(len(data))
+        angle_out = np.empty(len(data))
+        start = 0
+        for idx in runs:
+            m = idx.size - 1
+            rate_iv, dt_iv = interval[start : start + m], dt[start : start + m]
+            start += m
+            angle = np.concatenate([[0.0], np.cumsum(rate_iv * dt_iv)])
             rate = np.empty(idx.size)
-            rate[0], rate[-1] = interval[0], interval[-1]
-            rate[1:-1] = 0.5 * (interval[1:] + interval[:-1])
+            rate[0], rate[-1] = rate_iv[0], rate_iv[-1]
+            rate[1:-1] = 0.5 * (rate_iv[1:] + rate_iv[:-1])
             rate_out[idx] = rate / DEG
             angle_out[idx] = angle / DEG
         cols = data.columns
@@ -125,14 +142,11 @@ class AbstractCompensator(eqx.Module):
         return MeasuredData(cols, allow_extra=True)
 
 
-@eqx.filter_jit
-def _interval_rates(comp, t, theta, temperature):
-    dt = jnp.diff(t)
-    mid = 0.5 * (theta[1:] + theta[:-1])
-    tmid = 0.5 * (temperature[1:] + temperature[:-1])
-    return jax.vmap(comp.corrected_rate)(
-        mid, jnp.diff(theta) / dt, tmid, jnp.diff(temperature) / dt
-    )
+@program
+def _interval_rates(comp, theta_mid, theta_dot, temperature_mid, temperature_dot):
+    """Compensated input rate of each interval [rad/s] from its mid angle [rad], angle rate
+    [rad/s], mid temperature [°C] and temperature rate [°C/s]."""
+    return jax.vmap(comp.corrected_rate)(theta_mid, theta_dot, temperature_mid, temperature_dot)
 
 
 def as_windows(data, k_e: float, window_s: float | None = WINDOW_S) -> RateWindows:

@@ -6,7 +6,8 @@ normalised; the angle enters either as the seed did (`encoding="angle"`: θ fold
 [−90°, 90°) and scaled to [−1, 1)) or, by default, periodically (`encoding="periodic"`:
 cos 2θ, sin 2θ), which makes the 180° period exact and removes the seam at ±90°.
 
-Training is full-batch resilient backpropagation (`optax.rprop`) inside one `lax.scan`:
+Training is full-batch resilient backpropagation (`optax.rprop`), run as equal blocks of one
+compiled `lax.scan` with a progress bar between blocks:
 
 - `mode="reduced"`: on the reduced targets (drift on static windows; then SF on rotation
   windows with that drift removed), as in the seed;
@@ -24,8 +25,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import program
 from ..data import MeasuredData
-from ..nn.train import rprop
+from ..nn.train import rprop_with_progress
 from ..units import DEG
 from ._compensator import AbstractCompensator, as_windows, split_targets
 from .reduce import K_E_NOMINAL, WINDOW_S
@@ -157,7 +159,12 @@ class MLPCompensator(AbstractCompensator):
         d = (static.rate_dps - static.table_rate_dps) * DEG
         d_off, d_scale = float(np.mean(d)), float(max(np.std(d), 1e-12))
         net = train_rprop(
-            comp.drift_net, x_s, jnp.asarray((d - d_off) / d_scale), self.steps, self.learning_rate
+            comp.drift_net,
+            x_s,
+            jnp.asarray((d - d_off) / d_scale),
+            self.steps,
+            self.learning_rate,
+            desc="MLP drift",
         )
         comp = eqx.tree_at(
             lambda c: (c.drift_net, c.drift_offset, c.drift_scale),
@@ -172,7 +179,12 @@ class MLPCompensator(AbstractCompensator):
         s_off, s_scale = float(np.mean(sf)), float(max(np.std(sf), 1e-12))
         x_m = jax.vmap(comp.features)(jnp.asarray(th_b), jnp.asarray(tc_b))
         net = train_rprop(
-            comp.sf_net, x_m, jnp.asarray((sf - s_off) / s_scale), self.steps, self.learning_rate
+            comp.sf_net,
+            x_m,
+            jnp.asarray((sf - s_off) / s_scale),
+            self.steps,
+            self.learning_rate,
+            desc="MLP scale factor",
         )
         comp = eqx.tree_at(
             lambda c: (c.sf_net, c.sf_offset, c.sf_scale),
@@ -204,26 +216,25 @@ def bin_targets(theta, temperature_c, value, bin_deg: float):
     return th, mean(temperature_c), mean(value)
 
 
-@eqx.filter_jit
-def train_rprop(net, x, y, steps: int, learning_rate: float = 1e-3):
-    """Full-batch Rprop on the mean squared error of `net(x) − y`.
+def train_rprop(net, x, y, steps: int, learning_rate: float = 1e-3, *, desc: str = "MLP"):
+    """Full-batch Rprop on the mean squared error of `net(x) − y`, with a progress bar.
 
-    **Arguments:** `net` (a callable Module), `x` shape (n, d), `y` shape (n,), `steps`.
+    **Arguments:** `net` (a callable Module), `x` shape (n, d), `y` shape (n,), `steps`,
+    `learning_rate` (Rprop's initial step), `desc` (the progress bar's label).
 
     **Returns:** the trained network.
     """
     params, static = eqx.partition(net, eqx.is_inexact_array)
-
-    def loss(p):
-        model = eqx.combine(p, static)
-        return jnp.mean((jax.vmap(model)(x) - y) ** 2)
-
-    return eqx.combine(_rprop(loss, params, steps, learning_rate), static)
+    params, _ = rprop_with_progress(
+        _mse_loss, params, (static, x, y), steps, learning_rate, desc=desc
+    )
+    return eqx.combine(params, static)
 
 
-def _rprop(loss, params, steps: int, learning_rate: float):
-    """`steps` full-batch Rprop updates of `params` on `loss` ([`hrgjax.nn.train.rprop`][hrgjax.nn.train.rprop])."""
-    return rprop(loss, params, steps, learning_rate)
+def _mse_loss(params, data):
+    static, x, y = data
+    model = eqx.combine(params, static)
+    return jnp.mean((jax.vmap(model)(x) - y) ** 2)
 
 
 class AngleRuns(eqx.Module):
@@ -338,23 +349,29 @@ def train_end_to_end(
 ) -> MLPCompensator:
     """Rprop on the end-to-end losses of all runs: the static and the moving runs' mean squared
     errors, each normalised by its value at the start, so both kinds weigh alike."""
-    return _e2e_scan(comp, _run_groups(data, window_s), steps)
-
-
-@eqx.filter_jit
-def _e2e_scan(comp, groups, steps):
+    groups = _run_groups(data, window_s)
     params, static = eqx.partition(comp, _trainable(comp))
-    # Static and moving runs weigh alike: each kind is normalised by its starting loss.
+    scales = _e2e_scales(comp, groups)
+    params, _ = rprop_with_progress(
+        _e2e_loss, params, (static, groups, scales), steps, 1e-3, desc="MLP end-to-end"
+    )
+    return eqx.combine(params, static)
+
+
+@program
+def _e2e_scales(comp, groups):
+    """The starting static and moving losses (each kind's normalisation)."""
     start = [end_to_end_losses(comp, g) for g in groups]
     scale_s = jnp.maximum(sum(a for a, _ in start), 1e-300)
     scale_m = jnp.maximum(sum(b for _, b in start), 1e-300)
+    return scale_s, scale_m
 
-    def loss(p):
-        c = eqx.combine(p, static)
-        parts = [end_to_end_losses(c, g) for g in groups]
-        return sum(a for a, _ in parts) / scale_s + sum(b for _, b in parts) / scale_m
 
-    return eqx.combine(_rprop(loss, params, steps, 1e-3), static)
+def _e2e_loss(params, data):
+    static, groups, (scale_s, scale_m) = data
+    c = eqx.combine(params, static)
+    parts = [end_to_end_losses(c, g) for g in groups]
+    return sum(a for a, _ in parts) / scale_s + sum(b for _, b in parts) / scale_m
 
 
 def _trainable(comp):

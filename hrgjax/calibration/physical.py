@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._compiled import all_finite, first_failure, program, tracing_callback_free
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
@@ -207,7 +208,7 @@ class PhysicalCompensator(AbstractCompensator):
         split_targets(windows)
         groups = _groups(data, self.window_s, self.k_e)
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
-        values, steps, res, sigma, jac = _fit(groups, jnp.asarray(x0), self.k_e, self.max_steps)
+        values, steps, res, sigma, jac, _ = _fit(groups, jnp.asarray(x0), self.k_e, self.max_steps)
         values, steps, jac = np.asarray(values), int(steps), np.asarray(jac) * _SCALE
         res = {k: np.asarray(v) for k, v in res.items()}
         sigma = {k: float(v) for k, v in sigma.items()}
@@ -345,7 +346,17 @@ def _weighted_residual(x, args):
     return jnp.concatenate([res[True] / sigma[True], res[False] / sigma[False]])
 
 
-@eqx.filter_jit
+def _fit_failure(out):
+    values, _, _, _, _, result = out
+    message = first_failure(result, optx.RESULTS)
+    if message is not None:
+        return f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}"
+    if not all_finite(values):
+        return "PhysicalCompensator.fit: the simulator gave NaN or inf during the fit"
+    return None
+
+
+@program(check=_fit_failure)
 def _fit(groups, x0, k_e, max_steps):
     """Weights, Levenberg–Marquardt, final residuals and Jacobian in one compiled program.
 
@@ -363,11 +374,13 @@ def _fit(groups, x0, k_e, max_steps):
         jnp.zeros(len(NAMES)),
         args=(groups, x0, sigma0, k_e),
         max_steps=max_steps,
-        throw=True,
+        throw=False,
     )
     values = x0 + sol.value * _SCALE
+    if not tracing_callback_free():
+        values = sol.result.error_if(values, sol.result != optx.RESULTS.successful)
     r1 = _residuals(groups, values, k_e)
     sigma1 = {k: jnp.sqrt(jnp.mean(r**2)) for k, r in r1.items()}
     fn = lambda x: _weighted_residual(x, (groups, values, sigma1, k_e))
     jac = jax.jacfwd(fn)(jnp.zeros(len(NAMES))) / jnp.asarray(_SCALE)[None, :]
-    return values, sol.stats["num_steps"], r1, sigma1, jac
+    return values, sol.stats["num_steps"], r1, sigma1, jac, sol.result

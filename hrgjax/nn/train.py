@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import optax
+
+from .._compiled import all_finite, program
+from .._progress import bar
 
 
 def rprop(loss, params, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0):
@@ -28,3 +32,69 @@ def train_module(module, loss, steps: int, learning_rate: float = 1e-3, max_step
     params, static = eqx.partition(module, eqx.is_inexact_array)
     trained = rprop(lambda p: loss(eqx.combine(p, static)), params, steps, learning_rate, max_step)
     return eqx.combine(trained, static)
+
+
+def _block_length(steps: int, blocks: int = 20) -> int:
+    """The largest divisor of `steps` that is at most steps/blocks (≥ 1): every block has the
+    same length, so one compiled block serves the whole run."""
+    target = max(steps // blocks, 1)
+    return max(d for d in range(1, target + 1) if steps % d == 0)
+
+
+def _finite_training(out):
+    if not all_finite(out):
+        return (
+            "training diverged: the loss or the weights became NaN or inf (a solve inside the "
+            "loss failed, or the learning rate is too large)"
+        )
+    return None
+
+
+@program(check=_finite_training)
+def _rprop_block(loss_fn, params, state, data, length: int, learning_rate, max_step):
+    opt = optax.rprop(learning_rate, max_step_size=max_step)
+
+    def step(carry, _):
+        p, s = carry
+        value, grad = jax.value_and_grad(loss_fn)(p, data)
+        updates, s = opt.update(grad, s, p)
+        return (optax.apply_updates(p, updates), s), value
+
+    (params, state), losses = jax.lax.scan(step, (params, state), None, length=length)
+    return params, state, losses
+
+
+def rprop_with_progress(
+    loss_fn,
+    params,
+    data,
+    steps: int,
+    learning_rate: float = 1e-3,
+    max_step: float = 50.0,
+    *,
+    desc: str = "training",
+):
+    """[`rprop`][hrgjax.nn.train.rprop] run as equal blocks of compiled steps, with a
+    progress bar showing the loss between blocks.
+
+    `loss_fn(params, data)` must be a module-level function (not a fresh closure), so that
+    its compiled block is reused by every later call with the same shapes. The updates are
+    exactly those of `rprop(lambda p: loss_fn(p, data), params, steps, …)`.
+
+    **Returns:** `(params, losses)`: the trained parameters and the loss before each step,
+    shape (steps,).
+
+    **Raises:** `RuntimeError` when the loss or the weights become non-finite.
+    """
+    state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
+    length = _block_length(int(steps))
+    losses = []
+    with bar(int(steps), desc) as progress:
+        for _ in range(int(steps) // length):
+            params, state, chunk = _rprop_block(
+                loss_fn, params, state, data, length, learning_rate, max_step
+            )
+            losses.append(chunk)
+            progress.update(length)
+            progress.set_postfix_str(f"loss {float(chunk[-1]):.4g}")
+    return params, jnp.concatenate(losses)
