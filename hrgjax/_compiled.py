@@ -149,3 +149,27 @@ def bucket_pad(x, size: int, axis: int = 0):
     pad = [(0, 0)] * x.ndim
     pad[axis] = (0, size - x.shape[axis])
     return np.pad(x, pad, mode="edge")
+
+
+def keep_result_check(value, result):
+    """Inside a program: under a caller's own trace, raise `result`'s failure from inside the
+    program (as a solver's `throw=True` would); in our callback-free programs leave it to
+    the host check. Returns `value`."""
+    if tracing_callback_free():
+        return value
+    return result.error_if(value, result != result._enumeration.successful)
+
+
+def solver_check(what: str, enumeration=None):
+    """A `check` for programs returning `(…, result)`: the solver's failure message, else
+    any non-finite floating output, names `what`."""
+
+    def check(out):
+        import diffrax
+
+        message = first_failure(out[-1], enumeration or diffrax.RESULTS)
+        if message is not None:
+            return f"{what}: the solver failed: {message}"
+        return finite_check(what)(out[:-1])
+
+    return check

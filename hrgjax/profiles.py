@@ -15,6 +15,16 @@ def _f(x):
     return jnp.asarray(x, dtype=float)
 
 
+def _eager(fn, *args):
+    """`fn(*args)`, computed eagerly when every argument is concrete: knot times built from
+    Python numbers stay concrete inside `jax.jit` (and `hg.sweep`, which jits), so the
+    output grid `simulate` derives from them can be built there."""
+    if all(is_concrete(a) for a in args):
+        with jax.ensure_compile_time_eval():
+            return fn(*args)
+    return fn(*args)
+
+
 def lag_at_knots(t, values, tau):
     r"""First-order lag $\dot y = (x - y)/\tau$ of a piecewise-linear signal x (`values` at
     strictly increasing knots `t`), starting at $y(t_0) = x(t_0)$: y at every knot (exact).
@@ -93,7 +103,7 @@ class Profile(eqx.Module):
         """A run at constant rate `rate_dps` [°/s] for `duration_s` [s] at `temperature_c` [°C],
         starting at electrical wave angle `wave_angle0_deg` [°], under specific force
         `accel_g` [g] (case axes x, y, z)."""
-        t = jnp.array([0.0, 1.0]) * _f(duration_s)
+        t = _eager(lambda d: jnp.array([0.0, 1.0]) * _f(d), duration_s)
         one = jnp.ones(2)
         return cls(
             t=t,
@@ -125,7 +135,7 @@ class Profile(eqx.Module):
     ) -> Profile:
         """A profile from knot arrays in bench units: times [s], rates [°/s],
         temperatures [°C] and optionally specific force [g], shape (N, 3)."""
-        t = _f(t_s)
+        t = _eager(_f, t_s)
         rate = jnp.broadcast_to(_f(rate_dps), t.shape) * DEG_PER_S
         temp = jnp.broadcast_to(_f(temperature_c), t.shape)
         acc = jnp.zeros(t.shape + (3,)) if accel_g is None else _f(accel_g)

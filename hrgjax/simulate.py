@@ -36,8 +36,11 @@ def output_times(profile: Profile, dt_out: float):
     """Output grid t[0], t[0] + dt_out, … up to the end of the profile (inclusive)."""
     if not is_concrete(profile.t):
         raise ValueError(
-            "simulate needs concrete profile knot times to build the output grid from dt_out; "
-            "under jax.vmap over profiles with traced times pass `ts=` explicitly"
+            "simulate needs concrete profile knot times to build its output grid from dt_out, "
+            "but they are traced values here: an outer jax.jit (hg.sweep jits too) or a vmap "
+            "over the profile's times makes them abstract (jax.vmap over temperature or rate "
+            "alone does not). Build the profile's times from Python numbers, or pass the "
+            "output times explicitly with ts=."
         )
     t = np.asarray(profile.t)
     if not (np.isfinite(dt_out) and dt_out > 0):

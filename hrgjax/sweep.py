@@ -2,18 +2,27 @@
 
 from __future__ import annotations
 
+import weakref
+
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+_BATCHED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids):
     """Evaluate `fn(**point)` on the Cartesian product of 1-D grids.
 
     `hg.sweep(fn, temperature_c=jnp.linspace(-40, 60, 11), rate_dps=jnp.array([0.1, 5, 400]))`
-    calls `fn(temperature_c=…, rate_dps=…)` for every pair in one `jax.vmap` and returns
-    outputs with leading shape `(11, 3)` (keyword order). When several devices are visible
-    the flattened batch is sharded over them (padded to a multiple of the device count).
+    calls `fn(temperature_c=…, rate_dps=…)` for every pair in one `jax.jit(jax.vmap(…))` and
+    returns outputs with leading shape `(11, 3)` (keyword order). The compiled batch is kept
+    per `fn`: a second sweep of the same function on grids of the same sizes compiles
+    nothing. When several devices are visible the flattened batch is sharded over them
+    (padded to a multiple of the device count).
+
+    `fn` runs under `jax.jit`: build profiles from Python numbers (their knot times stay
+    concrete, so `simulate` can derive its output grid) or pass `ts=` to `simulate`.
 
     Under JAX's multi-process runtime (every process has called `jax.distributed.initialize()`
     and then runs the same `sweep` on the same grids), each process evaluates one contiguous
@@ -49,7 +58,7 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids)
     mesh = jnp.meshgrid(*arrays, indexing="ij")
     flat = {n: m.reshape(-1) for n, m in zip(names, mesh, strict=True)}
     total = int(np.prod(shape))
-    call = jax.vmap(lambda kw: fn(**kw))
+    call = _batched(fn)
     if chunk_size is not None and int(chunk_size) < 1:
         raise ValueError(f"chunk_size must be a positive number of points; got {chunk_size}")
     n_proc, rank = jax.process_count(), jax.process_index()
@@ -64,6 +73,21 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids)
         out = _local(call, mine, chunk_size, progress and rank == 0)
         out = jax.tree_util.tree_map(lambda x: _gather(np.asarray(x)[:per]), out)
     return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
+
+
+def _batched(fn):
+    """`jax.jit(jax.vmap(fn))` on a dict of keyword arrays, one per `fn` (kept while `fn`
+    lives), so repeated sweeps of one function reuse its compiled batch."""
+    try:
+        return _BATCHED[fn]
+    except (KeyError, TypeError):
+        pass
+    call = jax.jit(jax.vmap(lambda kw: fn(**kw)))
+    try:
+        _BATCHED[fn] = call
+    except TypeError:  # not weak-referenceable (a builtin): compiled per sweep
+        pass
+    return call
 
 
 def _local(call, flat, chunk_size, progress):
@@ -107,8 +131,6 @@ def _batch(call, flat, devices):
     flat = _pad(flat, (-total) % len(devices))
     sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
     flat = jax.device_put(flat, sharding)
-    # No outer jit: fn may build profiles from concrete constants (their output grid must
-    # stay concrete); the compiled solves inside partition the sharded batch themselves.
     return call(flat)
 
 

@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import keep_result_check, program, solver_check
 from .._x64 import require_x64
 from ..data import MeasuredData, concat
 from ..gyro import Gyro
@@ -36,7 +37,6 @@ GRAVITY = 9.80665
 """Standard gravity [m/s²]."""
 
 
-@jax.jit
 def schuler_errors(t, eps_north, eps_east):
     r"""Integrate the two Schuler channels (module docstring) with diffrax.
 
@@ -45,7 +45,14 @@ def schuler_errors(t, eps_north, eps_east):
 
     **Returns:** `(velocity_error, position_error)` [m/s], [m], each shape (N, 2) for the
     (east, north) channels: a north-axis gyro error drives the east channel and vice versa.
+
+    **Raises:** `RuntimeError` when the solver fails.
     """
+    return _schuler(t, eps_north, eps_east)[:2]
+
+
+@program(check=solver_check("schuler_errors"))
+def _schuler(t, eps_north, eps_east):
     path = diffrax.LinearInterpolation(ts=t, ys=jnp.stack([eps_north, eps_east], axis=-1))
 
     def field(s, y, args):
@@ -63,8 +70,10 @@ def schuler_errors(t, eps_north, eps_east):
         saveat=diffrax.SaveAt(ts=t),
         stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9, jump_ts=t),
         max_steps=16 * t.shape[0],
+        throw=False,
     )
-    return sol.ys[:, 0:2], sol.ys[:, 4:6]
+    ys = keep_result_check(sol.ys, sol.result)
+    return ys[:, 0:2], ys[:, 4:6], sol.result
 
 
 class Flight(eqx.Module):

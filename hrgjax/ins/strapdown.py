@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import is_concrete
+from .._compiled import keep_result_check, program, solver_check
 from .._x64 import require_x64
 from ..kalman import psd_factor, van_loan
 from .constants import Earth
@@ -148,10 +149,10 @@ def propagate(
         raise ValueError(f"dx0 must have shape (9,) (states {STATES}); got {dx0.shape}")
     eg = _check_series("gyro_error", gyro_error, n)
     ea = _check_series("accel_error", accel_error, n)
-    return _propagate(traj, dx0, eg, ea, altitude_aided, rtol, atol, max_steps or 64 * n)
+    return _propagate(traj, dx0, eg, ea, altitude_aided, rtol, atol, max_steps or 64 * n)[0]
 
 
-@eqx.filter_jit
+@program(check=solver_check("ins.strapdown.propagate"))
 def _propagate(traj, dx0, eg, ea, aided, rtol, atol, max_steps):
     ys = (traj.lat, traj.h, traj.v_ned, traj.c_bn, traj.f_ned, eg, ea)
     path = diffrax.LinearInterpolation(ts=traj.t, ys=ys)
@@ -170,8 +171,9 @@ def _propagate(traj, dx0, eg, ea, aided, rtol, atol, max_steps):
         saveat=diffrax.SaveAt(ts=traj.t),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=traj.t),
         max_steps=max_steps,
+        throw=False,
     )
-    return sol.ys
+    return keep_result_check(sol.ys, sol.result), sol.result
 
 
 class ImuErrors(eqx.Module):
