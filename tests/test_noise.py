@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import resonator
+from helpers import CompileCounter, resonator
 
 import hrgjax as hg
 from hrgjax.units import DEG_PER_H, DEG_PER_SQRT_H
@@ -33,6 +33,23 @@ def test_allan_errors():
         hg.oadev(NBS14, 0)
     with pytest.raises(ValueError, match="kind"):
         hg.allan_deviation(NBS14, 1.0, kind="fancy")
+
+
+@pytest.mark.parametrize("kind", ["adev", "oadev", "mdev", "hdev", "ohdev", "totdev"])
+def test_allan_curve_equals_each_factor_and_compiles_once(kind):
+    """The one-program curve (m a run-time value) equals the per-m definitions, and new
+    factors of the same count compile nothing."""
+    rng = np.random.default_rng(3)
+    y = rng.normal(size=600) + 0.05 * np.cumsum(rng.normal(size=600))
+    ms = [1, 3, 8, 21, 34]
+    taus, dev = hg.allan_deviation(y, 0.5, ms=ms, kind=kind)
+    each = [float(getattr(hg, kind)(y, m, 0.5)) for m in ms]
+    np.testing.assert_allclose(dev, each, rtol=1e-12)
+    np.testing.assert_allclose(taus, 0.5 * np.asarray(ms))
+    other = [2, 5, 9, 17, 40]
+    with CompileCounter() as c:
+        hg.allan_deviation(y, 0.5, ms=other, kind=kind)
+    assert c.compiles == 0, c.names
 
 
 def _rate_from_record(rec):
