@@ -3,19 +3,20 @@
 JAX does not write a program that calls back into Python to its on-disk cache (the callback
 is a pointer into the running process). Equinox's `error_if` — used by hrgjax, diffrax and
 optimistix for run-time checks — is such a callback, so every program with a check in it
-compiled afresh in every process. `program` fixes that for our own entry points:
+compiled afresh in every process. `program` fixes that for our own entry points: the
+function is always traced with equinox's checks in their NaN form (no callback: a failed
+check poisons its value), and its failures come out as values — a solver's result code, a
+NaN — that a `Check` inspects after the call:
 
-- called with concrete arrays (the usual case: a script, the CLI), the function is traced
-  with equinox's checks in their NaN form (no callback; a failed check poisons its value),
-  the compiled program is cacheable, and `check(output)` turns a failure into the usual
-  one-line Python error after the call;
-- called under someone else's `jit`/`vmap`/`grad` trace, the function is traced exactly as
-  before (checks raise from inside the program), so nothing changes for the caller;
-- called while one of our programs is being traced, it joins that program's mode and the
-  outer program's check sees the failure.
+- on concrete outputs (a script, the CLI), `Check.host` raises the usual one-line Python
+  error;
+- under a caller's own `jit`/`vmap`/`grad` trace, `Check.traced` puts an `eqx.error_if` on
+  the outputs, in the caller's program, so the caller sees the same error as before;
+- while one of our programs is itself being traced, nothing is added: the outermost
+  program's check sees the failure.
 
-The two modes are two separate `eqx.filter_jit` functions, so a trace of one is never
-reused by the other.
+While our programs trace, equinox's error checks also go to a private compiled-check cache,
+so a check traced here in NaN form is never reused by code that expects it to raise.
 """
 
 from __future__ import annotations
@@ -29,14 +30,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-try:  # the trace-time switch of equinox's error_if (a module global read at trace time)
+try:  # equinox's trace-time switch of error_if, and its compiled-check cache
     import equinox._errors as _eqx_errors
 
-    _CAN_SWITCH = hasattr(_eqx_errors, "EQX_ON_ERROR")
-except ImportError:  # pragma: no cover - a future equinox
-    _eqx_errors, _CAN_SWITCH = None, False
+    _CAN_SWITCH = hasattr(_eqx_errors, "EQX_ON_ERROR") and hasattr(
+        _eqx_errors, "branched_error_if_impl_jit"
+    )
+    _PRIVATE_CHECKS = eqx.filter_jit(_eqx_errors.branched_error_if_impl) if _CAN_SWITCH else None
+except ImportError:  # pragma: no cover - a future equinox: programs keep their callbacks
+    _eqx_errors, _CAN_SWITCH, _PRIVATE_CHECKS = None, False, None
 
 _state = threading.local()
+_switch = threading.Lock()
 
 
 def tracing_callback_free() -> bool:
@@ -48,15 +53,21 @@ def tracing_callback_free() -> bool:
 def _callback_free():
     depth = getattr(_state, "depth", 0)
     _state.depth = depth + 1
-    old = _eqx_errors.EQX_ON_ERROR if _CAN_SWITCH else None
-    if _CAN_SWITCH:
+    if depth or not _CAN_SWITCH:
+        try:
+            yield
+        finally:
+            _state.depth = depth
+        return
+    with _switch:
+        old = _eqx_errors.EQX_ON_ERROR, _eqx_errors.branched_error_if_impl_jit
         _eqx_errors.EQX_ON_ERROR = "nan"
-    try:
-        yield
-    finally:
-        if _CAN_SWITCH:
-            _eqx_errors.EQX_ON_ERROR = old
-        _state.depth = depth
+        _eqx_errors.branched_error_if_impl_jit = _PRIVATE_CHECKS
+        try:
+            yield
+        finally:
+            _eqx_errors.EQX_ON_ERROR, _eqx_errors.branched_error_if_impl_jit = old
+            _state.depth = depth
 
 
 def _is_traced(tree) -> bool:
@@ -71,57 +82,103 @@ def all_finite(tree) -> bool:
     return True
 
 
-def finite_check(what: str):
-    """A `check` for `program`: a non-finite floating output is an error naming `what`."""
+def _traced_all_finite(tree):
+    leaves = jax.tree_util.tree_leaves(tree)
+    flags = [jnp.all(jnp.isfinite(x)) for x in leaves if eqx.is_inexact_array(x)]
+    return jnp.all(jnp.stack(flags)) if flags else jnp.asarray(True)
 
-    def check(out):
-        if not all_finite(out):
-            return (
-                f"{what} produced NaN or inf (a solver failed or an input is out of its "
-                "range); check the inputs, or run under jax.jit to see the failing check"
-            )
+
+class Check:
+    """What `program` checks on its outputs: every floating output is finite; with
+    `result_index`, the solver result (a diffrax or optimistix `RESULTS` item) at that
+    position of the output tuple must be successful first."""
+
+    def __init__(
+        self, what: str, *, result_index: int | None = None, enumeration=None, nonfinite=None
+    ):
+        self.what = what
+        self.result_index = result_index
+        self.enumeration = enumeration
+        self.nonfinite = nonfinite
+
+    def _split(self, out):
+        if self.result_index is None:
+            return out, None
+        rest = tuple(x for i, x in enumerate(out) if i != self.result_index % len(out))
+        return rest, out[self.result_index]
+
+    def _enumeration(self):
+        if self.enumeration is not None:
+            return self.enumeration
+        import diffrax
+
+        return diffrax.RESULTS
+
+    def _nonfinite(self) -> str:
+        if self.nonfinite:
+            return self.nonfinite
+        return (
+            f"{self.what} produced NaN or inf (a solver failed or an input is out of its "
+            "range); check the inputs"
+        )
+
+    def host(self, out) -> str | None:
+        """The error message for concrete outputs, or None."""
+        values, result = self._split(out)
+        if result is not None:
+            message = first_failure(result, self._enumeration())
+            if message is not None:
+                return f"{self.what}: the solver failed: {message}"
+        return None if all_finite(values) else self._nonfinite()
+
+    def traced(self, out):
+        """The outputs with the same checks as `eqx.error_if`s in the caller's trace."""
+        values, result = self._split(out)
+        if result is not None:
+            out = result.error_if(out, result != result._enumeration.successful)
+        return eqx.error_if(out, ~_traced_all_finite(values), self._nonfinite())
+
+
+class Unchecked(Check):
+    """No check: the caller inspects the outputs itself."""
+
+    def __init__(self):
+        super().__init__("")
+
+    def host(self, out):
         return None
 
-    return check
+    def traced(self, out):
+        return out
 
 
-def program(fn=None, *, check=None, error=RuntimeError):
-    """Decorate `fn` as a compiled program (see the module docstring).
+def program(fn=None, *, check: Check | None = None, error=RuntimeError):
+    """Decorate `fn` as a compiled, callback-free program (module docstring).
 
     **Arguments:**
 
-    - `check`: `check(output) -> str | None`, run on the host on concrete outputs; a string
-      is raised as `error(string)`. Default: every floating output must be finite.
-    - `error`: the exception type raised.
+    - `check`: a [`Check`][hrgjax._compiled.Check]; default: every floating output finite.
+    - `error`: the exception type raised on the host.
     """
     if fn is None:
         return functools.partial(program, check=check, error=error)
-    check = finite_check(fn.__name__.lstrip("_")) if check is None else check
-    plain = eqx.filter_jit(fn)
-
-    @functools.wraps(fn)
-    def _callback_free_fn(*args, **kwargs):
-        return fn(*args, **kwargs)
-
-    quiet = eqx.filter_jit(_callback_free_fn)
+    check = Check(fn.__name__.lstrip("_")) if check is None else check
+    compiled = eqx.filter_jit(fn)
 
     @functools.wraps(fn)
     def call(*args, **kwargs):
         if tracing_callback_free():
-            out = quiet(*args, **kwargs)
-        elif _is_traced((args, kwargs)):
-            return plain(*args, **kwargs)
-        else:
-            with _callback_free():
-                out = quiet(*args, **kwargs)
-        if not _is_traced(out):
-            message = check(out)
-            if message:
-                raise error(message)
+            return compiled(*args, **kwargs)
+        with _callback_free():
+            out = compiled(*args, **kwargs)
+        if _is_traced(out):
+            return check.traced(out)
+        message = check.host(out)
+        if message:
+            raise error(message)
         return out
 
-    call.plain = plain
-    call.callback_free = quiet
+    call.compiled = compiled
     return call
 
 
@@ -149,27 +206,3 @@ def bucket_pad(x, size: int, axis: int = 0):
     pad = [(0, 0)] * x.ndim
     pad[axis] = (0, size - x.shape[axis])
     return np.pad(x, pad, mode="edge")
-
-
-def keep_result_check(value, result):
-    """Inside a program: under a caller's own trace, raise `result`'s failure from inside the
-    program (as a solver's `throw=True` would); in our callback-free programs leave it to
-    the host check. Returns `value`."""
-    if tracing_callback_free():
-        return value
-    return result.error_if(value, result != result._enumeration.successful)
-
-
-def solver_check(what: str, enumeration=None):
-    """A `check` for programs returning `(…, result)`: the solver's failure message, else
-    any non-finite floating output, names `what`."""
-
-    def check(out):
-        import diffrax
-
-        message = first_failure(out[-1], enumeration or diffrax.RESULTS)
-        if message is not None:
-            return f"{what}: the solver failed: {message}"
-        return finite_check(what)(out[:-1])
-
-    return check

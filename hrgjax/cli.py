@@ -384,8 +384,17 @@ def cmd_vibration(args) -> int:
 
 def main(argv=None) -> int:
     """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
-    parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--quiet",
+        action="store_true",
+        default=argparse.SUPPRESS,  # before or after the command; neither overrides the other
+        help="no progress bars (they are off without a terminal)",
+    )
+    parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__, parents=[common])
     sub = parser.add_subparsers(dest="command", required=True)
+    add_parser = sub.add_parser
+    sub.add_parser = lambda *a, **k: add_parser(*a, parents=[common], **k)
 
     p = sub.add_parser("demo", help="main job on the built-in gyro")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
@@ -480,6 +489,8 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_simulate)
 
     args = parser.parse_args(argv)
+    if getattr(args, "quiet", False):
+        os.environ["HRGJAX_QUIET"] = "1"
     return args.func(args)
 
 

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_concrete
-from ._compiled import first_failure, program, tracing_callback_free
+from ._compiled import Check, program
 from ._x64 import require_x64
 from .gyro import Gyro
 from .noise import draw_run_bias, rate_noise_angle
@@ -49,18 +49,7 @@ def output_times(profile: Profile, dt_out: float):
     return jnp.asarray(t[0] + dt_out * np.arange(n), dtype=float)
 
 
-def _solver_failure(out):
-    """Host check of `_solve`'s output: the solver's own message, else a non-finite state."""
-    _, _, result, finite = out
-    message = first_failure(result, diffrax.RESULTS)
-    if message is not None:
-        return f"simulate: the ODE solver failed: {message}"
-    if not np.all(np.asarray(finite)):
-        return "simulate: the state became NaN or inf (check the gyro's parameters)"
-    return None
-
-
-@program(check=_solver_failure)
+@program(check=Check("simulate", result_index=2))
 def _solve(
     model,
     gyro,
@@ -79,8 +68,8 @@ def _solve(
     run=0,
 ):
     """The whole of `simulate` after its input checks, as one compiled program: the solve,
-    the readout, the noise and the record. Returns (Record, accepted steps, solver result,
-    whether the state stayed finite)."""
+    the readout, the noise and the record. Returns (Record, accepted steps, solver result);
+    a failed solve or a NaN record raises after the call (`Check`)."""
     if model == "averaged":
         y0 = averaged_initial_state(gyro, profile, quadrature0)
         field, args = averaged_vector_field, (gyro, profile)
@@ -107,19 +96,13 @@ def _solve(
         adjoint=adjoint,
         throw=False,
     )
-    finite = jnp.all(jnp.isfinite(sol.ys))
     ys = sol.ys
-    if not tracing_callback_free():
-        # Under a caller's own trace the checks stay inside the program, as diffrax's
-        # throw=True would put them; otherwise the host raises after the call.
-        ys = sol.result.error_if(ys, sol.result != diffrax.RESULTS.successful)
-        ys = eqx.error_if(ys, ~finite, "simulate: non-finite state")
     if model == "averaged":
         read = _read_averaged(gyro, profile, ts, ys)
     else:
         read = _read_full(gyro, profile, ts, ys, omega_scale)
     rec = _record(gyro, profile, ts, read, key, bias_key, run)
-    return rec, sol.stats["num_steps"], sol.result, finite
+    return rec, sol.stats["num_steps"], sol.result
 
 
 def _record(gyro, profile, ts, read, key, bias_key, run):
@@ -246,7 +229,7 @@ def simulate(
     **Raises:** `RuntimeError` without float64; `ValueError` for a bad model name, a missing
     key or a bad output grid; a solver failure (max steps, non-finite state) raises too.
     """
-    rec, _, _, _ = _simulate(
+    rec, _, _ = _simulate(
         gyro,
         profile,
         model,
@@ -284,7 +267,7 @@ def _simulate(
     adjoint: diffrax.AbstractAdjoint | None = None,
     run: int = 0,
 ):
-    """`simulate` returning (Record, accepted steps, solver result, finite flag)."""
+    """`simulate` returning (Record, accepted steps, solver result)."""
     require_x64("hrgjax.simulate")
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}; got {model!r}")

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_finite, is_concrete
-from .._compiled import first_failure, program
+from .._compiled import Check, program
+from .._progress import bar
 from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
@@ -166,19 +166,11 @@ CHUNK = 32
 reuses one compiled simulator, whatever its number of points."""
 
 
-def _chunk_failure(out):
-    rec, result, finite = out
-    message = first_failure(result, diffrax.RESULTS)
-    if message is None and not np.all(np.asarray(finite)):
-        message = "the state became NaN or inf (check the gyro's parameters)"
-    return None if message is None else f"run_plan: simulating a plan point failed: {message}"
-
-
-@program(check=_chunk_failure)
+@program(check=Check("run_plan (simulating a plan point)", result_index=1))
 def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
     def one(p, k):
-        rec, _, result, finite = _simulate(gyro, p, model, key=k, bias_key=bias_key, ts=ts)
-        return rec, result, finite
+        rec, _, result = _simulate(gyro, p, model, key=k, bias_key=bias_key, ts=ts)
+        return rec, result
 
     if keys is None:
         return jax.vmap(lambda p: one(p, None))(profiles)
@@ -216,17 +208,19 @@ def run_plan(
     profiles = jax.tree_util.tree_map(pad, profiles)
     keys = None if keys is None else pad(keys)
     parts = []
-    for start in range(0, size + n_pad, chunk):
-        take = lambda x, s=start: x[s : s + chunk]
-        rec, _, _ = _simulate_chunk(
-            gyro,
-            jax.tree_util.tree_map(take, profiles),
-            None if keys is None else take(keys),
-            bias_key,
-            ts,
-            model,
-        )
-        parts.append(rec)
+    with bar(size, f"simulating {size} runs", unit="run") as progress:
+        for start in range(0, size + n_pad, chunk):
+            take = lambda x, s=start: x[s : s + chunk]
+            rec, _ = _simulate_chunk(
+                gyro,
+                jax.tree_util.tree_map(take, profiles),
+                None if keys is None else take(keys),
+                bias_key,
+                ts,
+                model,
+            )
+            parts.append(rec)
+            progress.update(min(chunk, size - start))
     rec = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:size], *parts)
     data = rec.to_data()
     if first_run:

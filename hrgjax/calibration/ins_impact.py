@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compiled import keep_result_check, program, solver_check
+from .._compiled import Check, program
 from .._x64 import require_x64
 from ..data import MeasuredData, concat
 from ..gyro import Gyro
@@ -51,7 +51,7 @@ def schuler_errors(t, eps_north, eps_east):
     return _schuler(t, eps_north, eps_east)[:2]
 
 
-@program(check=solver_check("schuler_errors"))
+@program(check=Check("schuler_errors", result_index=2))
 def _schuler(t, eps_north, eps_east):
     path = diffrax.LinearInterpolation(ts=t, ys=jnp.stack([eps_north, eps_east], axis=-1))
 
@@ -72,8 +72,7 @@ def _schuler(t, eps_north, eps_east):
         max_steps=16 * t.shape[0],
         throw=False,
     )
-    ys = keep_result_check(sol.ys, sol.result)
-    return ys[:, 0:2], ys[:, 4:6], sol.result
+    return sol.ys[:, 0:2], sol.ys[:, 4:6], sol.result
 
 
 class Flight(eqx.Module):

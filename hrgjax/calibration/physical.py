@@ -37,7 +37,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._compiled import all_finite, first_failure, program, tracing_callback_free
+from .._compiled import Check, first_failure, program
+from .._least_squares import least_squares
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
@@ -208,7 +209,7 @@ class PhysicalCompensator(AbstractCompensator):
         split_targets(windows)
         groups = _groups(data, self.window_s, self.k_e)
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
-        values, steps, res, sigma, jac, _ = _fit(groups, jnp.asarray(x0), self.k_e, self.max_steps)
+        values, steps, res, sigma, jac = _fit(groups, jnp.asarray(x0), self.k_e, self.max_steps)
         values, steps, jac = np.asarray(values), int(steps), np.asarray(jac) * _SCALE
         res = {k: np.asarray(v) for k, v in res.items()}
         sigma = {k: float(v) for k, v in sigma.items()}
@@ -346,41 +347,42 @@ def _weighted_residual(x, args):
     return jnp.concatenate([res[True] / sigma[True], res[False] / sigma[False]])
 
 
-def _fit_failure(out):
-    values, _, _, _, _, result = out
-    message = first_failure(result, optx.RESULTS)
-    if message is not None:
-        return f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}"
-    if not all_finite(values):
-        return "PhysicalCompensator.fit: the simulator gave NaN or inf during the fit"
-    return None
-
-
-@program(check=_fit_failure)
-def _fit(groups, x0, k_e, max_steps):
-    """Weights, Levenberg–Marquardt, final residuals and Jacobian in one compiled program.
-
-    Weights: the residual scatter of each kind of window (static, moving) at the starting
-    values (robust: median absolute deviation; the harmonic start is close), re-estimated
-    after the fit for the covariance."""
-
+@program(check=Check("PhysicalCompensator.fit (starting residuals)"))
+def _start_weights(groups, x0, k_e):
+    """Weights of the fit: the residual scatter of each kind of window (static, moving) at
+    the starting values (robust: median absolute deviation; the harmonic start is close)."""
     r0 = _residuals(groups, x0, k_e)
-    sigma0 = {k: 1.4826 * jnp.median(jnp.abs(r - jnp.median(r))) for k, r in r0.items()}
-    # The problem is scaled so that one unit of x is about one standard error: stopping at
-    # 1e-4 of that is far below anything the data can tell.
-    sol = optx.least_squares(
-        _weighted_residual,
-        optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4),
-        jnp.zeros(len(NAMES)),
-        args=(groups, x0, sigma0, k_e),
-        max_steps=max_steps,
-        throw=False,
-    )
-    values = x0 + sol.value * _SCALE
-    if not tracing_callback_free():
-        values = sol.result.error_if(values, sol.result != optx.RESULTS.successful)
+    return {k: 1.4826 * jnp.median(jnp.abs(r - jnp.median(r))) for k, r in r0.items()}
+
+
+@program(check=Check("PhysicalCompensator.fit (final residuals and Jacobian)"))
+def _finish(groups, x0, x, k_e):
+    """Fitted values, their residuals, the re-estimated weights and the scaled Jacobian."""
+    values = x0 + x * _SCALE
     r1 = _residuals(groups, values, k_e)
     sigma1 = {k: jnp.sqrt(jnp.mean(r**2)) for k, r in r1.items()}
     fn = lambda x: _weighted_residual(x, (groups, values, sigma1, k_e))
     jac = jax.jacfwd(fn)(jnp.zeros(len(NAMES))) / jnp.asarray(_SCALE)[None, :]
-    return values, sol.stats["num_steps"], r1, sigma1, jac, sol.result
+    return values, r1, sigma1, jac
+
+
+def _fit(groups, x0, k_e, max_steps):
+    """Weights, Levenberg–Marquardt (one compiled step at a time, with a progress bar),
+    final residuals and Jacobian; the weights are re-estimated after the fit for the
+    covariance."""
+    sigma0 = _start_weights(groups, x0, k_e)
+    # The problem is scaled so that one unit of x is about one standard error: stopping at
+    # 1e-4 of that is far below anything the data can tell.
+    x, steps, result = least_squares(
+        _weighted_residual,
+        optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4),
+        jnp.zeros(len(NAMES)),
+        (groups, x0, sigma0, k_e),
+        max_steps=max_steps,
+        desc="physical fit (Levenberg–Marquardt)",
+    )
+    message = first_failure(result, optx.RESULTS)
+    if message is not None:
+        raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
+    values, r1, sigma1, jac = _finish(groups, x0, x, k_e)
+    return values, steps, r1, sigma1, jac

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import is_concrete
-from .._compiled import keep_result_check, program, solver_check
+from .._compiled import Check, program
 from .._x64 import require_x64
 from ..kalman import psd_factor, van_loan
 from .constants import Earth
@@ -152,7 +152,7 @@ def propagate(
     return _propagate(traj, dx0, eg, ea, altitude_aided, rtol, atol, max_steps or 64 * n)[0]
 
 
-@program(check=solver_check("ins.strapdown.propagate"))
+@program(check=Check("ins.strapdown.propagate", result_index=1))
 def _propagate(traj, dx0, eg, ea, aided, rtol, atol, max_steps):
     ys = (traj.lat, traj.h, traj.v_ned, traj.c_bn, traj.f_ned, eg, ea)
     path = diffrax.LinearInterpolation(ts=traj.t, ys=ys)
@@ -173,7 +173,7 @@ def _propagate(traj, dx0, eg, ea, aided, rtol, atol, max_steps):
         max_steps=max_steps,
         throw=False,
     )
-    return keep_result_check(sol.ys, sol.result), sol.result
+    return sol.ys, sol.result
 
 
 class ImuErrors(eqx.Module):

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from .._compiled import all_finite, program
+from .._compiled import Check, program
 from .._progress import bar
 
 
@@ -41,16 +41,13 @@ def _block_length(steps: int, blocks: int = 20) -> int:
     return max(d for d in range(1, target + 1) if steps % d == 0)
 
 
-def _finite_training(out):
-    if not all_finite(out):
-        return (
-            "training diverged: the loss or the weights became NaN or inf (a solve inside the "
-            "loss failed, or the learning rate is too large)"
-        )
-    return None
-
-
-@program(check=_finite_training)
+@program(
+    check=Check(
+        "training",
+        nonfinite="training diverged: the loss or the weights became NaN or inf (a solve "
+        "inside the loss failed, or the learning rate is too large)",
+    )
+)
 def _rprop_block(loss_fn, params, state, data, length: int, learning_rate, max_step):
     opt = optax.rprop(learning_rate, max_step_size=max_step)
 
