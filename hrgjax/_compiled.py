@@ -36,9 +36,17 @@ try:  # equinox's trace-time switch of error_if, and its compiled-check cache
     _CAN_SWITCH = hasattr(_eqx_errors, "EQX_ON_ERROR") and hasattr(
         _eqx_errors, "branched_error_if_impl_jit"
     )
-    _PRIVATE_CHECKS = eqx.filter_jit(_eqx_errors.branched_error_if_impl) if _CAN_SWITCH else None
 except ImportError:  # pragma: no cover - a future equinox: programs keep their callbacks
-    _eqx_errors, _CAN_SWITCH, _PRIVATE_CHECKS = None, False, None
+    _eqx_errors, _CAN_SWITCH = None, False
+
+
+def _private_check(*args, **kwargs):
+    # A function of our own: equinox keys its compiled functions by the function wrapped,
+    # so this one's traces (NaN form) are kept apart from equinox's own (raising form).
+    return _eqx_errors.branched_error_if_impl(*args, **kwargs)
+
+
+_PRIVATE_CHECKS = eqx.filter_jit(_private_check) if _CAN_SWITCH else None
 
 _state = threading.local()
 _switch = threading.Lock()

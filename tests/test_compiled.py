@@ -1,0 +1,68 @@
+"""Callback-free programs: host errors, errors under a caller's trace, no leak of the NaN
+form of a check into code that expects it to raise, and the stepwise least squares."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import pytest
+
+from hrgjax._checks import check_finite
+from hrgjax._compiled import bucket_pad, bucket_size, program
+from hrgjax._least_squares import least_squares
+
+
+@program
+def _doubled(x):
+    return 2.0 * check_finite("probe", x)
+
+
+def test_program_raises_on_the_host_and_under_a_callers_trace():
+    np.testing.assert_array_equal(_doubled(jnp.ones(3)), 2.0 * np.ones(3))
+    bad = jnp.array([1.0, jnp.nan, 1.0])
+    with pytest.raises(RuntimeError, match="doubled produced NaN or inf"):
+        _doubled(bad)
+    with pytest.raises(Exception, match="doubled produced NaN or inf"):
+        jax.jit(_doubled)(bad).block_until_ready()
+    with pytest.raises(Exception, match="doubled produced NaN or inf"):
+        jax.vmap(_doubled)(bad[None]).block_until_ready()
+
+
+def test_a_check_traced_inside_a_program_still_raises_outside():
+    """The same check (message and shapes) traced in NaN form inside a program is not
+    reused by code outside our programs, which expects it to raise."""
+    _doubled(jnp.ones(3))
+    bad = jnp.array([[1.0, jnp.nan, 1.0]])
+    with pytest.raises(Exception, match="probe must be finite"):
+        jax.vmap(lambda x: check_finite("probe", x))(bad)
+    with pytest.raises(Exception, match="probe must be finite"):
+        jax.jit(lambda x: check_finite("probe", x))(bad[0]).block_until_ready()
+
+
+def _rosenbrock(y, args):
+    a, b = args
+    return jnp.stack([a * (y[0] - 1.0), b * (y[1] - y[0] ** 2), y[2] - 0.3 * y[0]])
+
+
+def test_stepwise_least_squares_takes_optimistix_steps():
+    solver = optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
+    args = (jnp.asarray(1.0), jnp.asarray(10.0))
+    y0 = jnp.array([-1.2, 1.0, 0.0])
+    ref = optx.least_squares(_rosenbrock, solver, y0, args=args, max_steps=200, throw=False)
+    y, steps, result = least_squares(_rosenbrock, solver, y0, args, max_steps=200)
+    np.testing.assert_array_equal(y, ref.value)
+    assert steps == int(ref.stats["num_steps"]) and int(result._value) == 0
+    _, steps, result = least_squares(_rosenbrock, solver, y0, args, max_steps=3)
+    assert steps == 3 and result == optx.RESULTS.nonlinear_max_steps_reached
+
+
+def test_buckets():
+    assert [bucket_size(n) for n in (1, 64, 65, 1000, 1024, 1025)] == [
+        64,
+        64,
+        128,
+        1024,
+        1024,
+        2048,
+    ]
+    np.testing.assert_array_equal(bucket_pad(np.array([1.0, 2.0]), 4), [1.0, 2.0, 2.0, 2.0])
