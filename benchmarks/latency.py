@@ -76,7 +76,12 @@ _FIRST_CALL = textwrap.dedent(
     import time, jax
     jax.config.update("jax_enable_x64", True)
     import hrgjax as hg
-    hg.enable_cache()
+    if hasattr(hg, "enable_cache"):
+        hg.enable_cache()
+    else:  # an hrgjax before the cache API: JAX's own cache, as its CLI did
+        import os
+        jax.config.update("jax_compilation_cache_dir", os.environ["XDG_CACHE_HOME"] + "/jax")
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
     gyro = hg.presets.tvg3_like()
     prof = hg.Profile.constant_rate(5.0, 60.0, -40.0, 30.0)
     t0 = time.perf_counter()
@@ -93,6 +98,8 @@ _FIRST_CALL = textwrap.dedent(
 
 
 def main():
+    if "--only-sweep-allan" in sys.argv:  # for a side-by-side run on an older checkout
+        return sweep_and_allan("--quick" in sys.argv)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one repeat per timing")
     parser.add_argument("--full-demo", action="store_true", help="also time the full demo")
@@ -100,7 +107,11 @@ def main():
     repeat = 1 if args.quick else 3
     work = Path(tempfile.mkdtemp(prefix="hrgjax-latency-"))
     env = {k: v for k, v in os.environ.items() if not k.startswith("HRGJAX_")}
-    env.update(HRGJAX_CACHE_DIR=str(work / "cache"), HRGJAX_QUIET="1")
+    env.update(
+        HRGJAX_CACHE_DIR=str(work / "cache"),
+        XDG_CACHE_HOME=str(work / "cache"),  # where an older hrgjax kept its cache
+        HRGJAX_QUIET="1",
+    )
     try:
         base, _ = timed(
             [sys.executable, "-c", "import jax, diffrax, equinox, optax, optimistix"], env, 3
@@ -157,9 +168,11 @@ def sweep_and_allan(quick):
 
     gyro = hg.presets.tvg3_like(noise=False)
 
+    ts = jnp.linspace(0.0, 20.0, 5)  # explicit output times: jit-able in any hrgjax version
+
     def final_angle(temperature_c, rate_dps):
         prof = hg.Profile.constant_rate(rate_dps, 20.0, temperature_c)
-        return hg.simulate(gyro, prof, dt_out=5.0).wave_angle[-1]
+        return hg.simulate(gyro, prof, ts=ts).wave_angle[-1]
 
     n = 8 if quick else 20
     grids = dict(temperature_c=jnp.linspace(-40.0, 60.0, n), rate_dps=jnp.linspace(0.1, 50.0, n))

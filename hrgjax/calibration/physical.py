@@ -347,30 +347,27 @@ def _weighted_residual(x, args):
     return jnp.concatenate([res[True] / sigma[True], res[False] / sigma[False]])
 
 
-@program(check=Check("PhysicalCompensator.fit (starting residuals)"))
-def _start_weights(groups, x0, k_e):
-    """Weights of the fit: the residual scatter of each kind of window (static, moving) at
-    the starting values (robust: median absolute deviation; the harmonic start is close)."""
-    r0 = _residuals(groups, x0, k_e)
-    return {k: 1.4826 * jnp.median(jnp.abs(r - jnp.median(r))) for k, r in r0.items()}
-
-
-@program(check=Check("PhysicalCompensator.fit (final residuals and Jacobian)"))
-def _finish(groups, x0, x, k_e):
-    """Fitted values, their residuals, the re-estimated weights and the scaled Jacobian."""
-    values = x0 + x * _SCALE
-    r1 = _residuals(groups, values, k_e)
-    sigma1 = {k: jnp.sqrt(jnp.mean(r**2)) for k, r in r1.items()}
-    fn = lambda x: _weighted_residual(x, (groups, values, sigma1, k_e))
-    jac = jax.jacfwd(fn)(jnp.zeros(len(NAMES))) / jnp.asarray(_SCALE)[None, :]
-    return values, r1, sigma1, jac
+@program(check=Check("PhysicalCompensator.fit (residuals and Jacobian)"))
+def _residuals_jacobian(groups, values, k_e):
+    """Residuals {True: static, False: moving} [rad/s] at `values` and their Jacobians with
+    respect to the scaled parameters x (values + x·scale). One program serves the start
+    (weights) and the end (covariance) of the fit."""
+    fn = lambda x: _residuals(groups, values + x * _SCALE, k_e)
+    return fn(jnp.zeros(len(NAMES))), jax.jacfwd(fn)(jnp.zeros(len(NAMES)))
 
 
 def _fit(groups, x0, k_e, max_steps):
     """Weights, Levenberg–Marquardt (one compiled step at a time, with a progress bar),
-    final residuals and Jacobian; the weights are re-estimated after the fit for the
-    covariance."""
-    sigma0 = _start_weights(groups, x0, k_e)
+    final residuals and Jacobian.
+
+    Weights: the residual scatter of each kind of window (static, moving) at the starting
+    values (robust: median absolute deviation; the harmonic start is close), re-estimated
+    after the fit for the covariance."""
+    r0, _ = _residuals_jacobian(groups, x0, k_e)
+    sigma0 = {}
+    for kind, r in r0.items():
+        r = np.asarray(r)
+        sigma0[kind] = jnp.asarray(1.4826 * np.median(np.abs(r - np.median(r))))
     # The problem is scaled so that one unit of x is about one standard error: stopping at
     # 1e-4 of that is far below anything the data can tell.
     x, steps, result = least_squares(
@@ -384,5 +381,8 @@ def _fit(groups, x0, k_e, max_steps):
     message = first_failure(result, optx.RESULTS)
     if message is not None:
         raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
-    values, r1, sigma1, jac = _finish(groups, x0, x, k_e)
-    return values, steps, r1, sigma1, jac
+    values = x0 + x * _SCALE
+    r1, jac1 = _residuals_jacobian(groups, values, k_e)
+    sigma1 = {k: jnp.sqrt(jnp.mean(r**2)) for k, r in r1.items()}
+    jac = jnp.concatenate([jac1[True] / sigma1[True], jac1[False] / sigma1[False]])
+    return values, steps, r1, sigma1, jac / jnp.asarray(_SCALE)[None, :]
