@@ -113,7 +113,7 @@ def enable_cache(path: str | os.PathLike | None = None) -> Path | None:
 
     **Arguments:**
 
-    - `path`: the cache folder; default [`cache_dir`][hrgjax._cache.cache_dir]
+    - `path`: the cache folder; default `hrgjax._cache.cache_dir()`
       (`$HRGJAX_CACHE_DIR`, else `$XDG_CACHE_HOME/hrgjax`, else `~/.cache/hrgjax`).
       Programs are kept in its `xla/` sub-folder.
 
