@@ -74,7 +74,8 @@ def least_squares(fn, solver, y0, args, *, max_steps: int, desc: str = "least sq
     f_struct = jax.ShapeDtypeStruct(out_struct.shape, out_struct.dtype)
     dynamic, done, result = _start(solver, wrapped, y0, args, f_struct)
     y, steps = y0, 0
-    with bar(max_steps, desc) as progress:
+    # No total: the solver stops when it converges, usually long before max_steps.
+    with bar(None, desc) as progress:
         while not bool(done) and int(result._value) == 0 and steps < max_steps:
             y, dynamic, done, result, cost = _step(solver, wrapped, y, args, dynamic, f_struct)
             steps += 1
