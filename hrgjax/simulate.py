@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import inspect
+
 import diffrax
 import equinox as eqx
 import jax
@@ -229,45 +231,20 @@ def simulate(
     **Raises:** `RuntimeError` without float64; `ValueError` for a bad model name, a missing
     key or a bad output grid; a solver failure (max steps, non-finite state) raises too.
     """
-    rec, _, _ = _simulate(
-        gyro,
-        profile,
-        model,
-        key=key,
-        bias_key=bias_key,
-        dt_out=dt_out,
-        ts=ts,
-        rtol=rtol,
-        atol=atol,
-        max_steps=max_steps,
-        solver=solver,
-        fixed_step=fixed_step,
-        quadrature0=quadrature0,
-        adjoint=adjoint,
-        run=run,
-    )
-    return rec
+    options = {k: v for k, v in locals().items() if k not in ("gyro", "profile", "model")}
+    return _simulate(gyro, profile, model, **options)[0]
 
 
-def _simulate(
-    gyro: Gyro,
-    profile: Profile,
-    model: str = "averaged",
-    *,
-    key: jax.Array | None = None,
-    bias_key: jax.Array | None = None,
-    dt_out: float = 0.1,
-    ts=None,
-    rtol: float = 1e-8,
-    atol: float = 1e-10,
-    max_steps: int | None = None,
-    solver: diffrax.AbstractSolver | None = None,
-    fixed_step: float | None = None,
-    quadrature0: float = 0.0,
-    adjoint: diffrax.AbstractAdjoint | None = None,
-    run: int = 0,
-):
-    """`simulate` returning (Record, accepted steps, solver result)."""
+def _simulate(gyro, profile, model="averaged", **options):
+    """`simulate` returning (Record, accepted steps, solver result); `options` are
+    `simulate`'s keyword arguments, defaults taken from its signature."""
+    unknown = set(options) - set(_OPTIONS)
+    if unknown:
+        raise TypeError(f"simulate got unknown keyword arguments {sorted(unknown)}")
+    o = {**_OPTIONS, **options}
+    key, bias_key, dt_out, ts = o["key"], o["bias_key"], o["dt_out"], o["ts"]
+    rtol, atol, max_steps, solver = o["rtol"], o["atol"], o["max_steps"], o["solver"]
+    fixed_step, quadrature0, adjoint = o["fixed_step"], o["quadrature0"], o["adjoint"]
     require_x64("hrgjax.simulate")
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}; got {model!r}")
@@ -317,5 +294,13 @@ def _simulate(
         adjoint,
         key,
         bias_key,
-        jnp.asarray(run),
+        jnp.asarray(o["run"]),
     )
+
+
+_OPTIONS = {
+    name: p.default
+    for name, p in inspect.signature(simulate).parameters.items()
+    if p.kind is inspect.Parameter.KEYWORD_ONLY
+}
+"""`simulate`'s keyword arguments and their defaults (one source for `_simulate`)."""

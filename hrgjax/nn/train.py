@@ -16,15 +16,9 @@ def rprop(loss, params, steps: int, learning_rate: float = 1e-3, max_step: float
     `params` on the scalar `loss(params)`, in one `lax.scan`; `learning_rate` is the initial
     step size, `max_step` the largest one (a sigmoid/tanh network saturates, and stops
     learning, when a weight's step grows too large). **Returns** the parameters."""
-    opt = optax.rprop(learning_rate, max_step_size=max_step)
-
-    def step(carry, _):
-        p, state = carry
-        updates, state = opt.update(jax.grad(loss)(p), state, p)
-        return (optax.apply_updates(p, updates), state), None
-
-    (params, _), _ = jax.lax.scan(step, (params, opt.init(params)), None, length=steps)
-    return params
+    state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
+    scan = _rprop_scan(lambda p, _: loss(p), params, state, None, steps, learning_rate, max_step)
+    return scan[0]
 
 
 def train_module(module, loss, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0):
@@ -41,14 +35,9 @@ def _block_length(steps: int, blocks: int = 20) -> int:
     return max(d for d in range(1, target + 1) if steps % d == 0)
 
 
-@program(
-    check=Check(
-        "training",
-        nonfinite="training diverged: the loss or the weights became NaN or inf (a solve "
-        "inside the loss failed, or the learning rate is too large)",
-    )
-)
-def _rprop_block(loss_fn, params, state, data, length: int, learning_rate, max_step):
+def _rprop_scan(loss_fn, params, state, data, length: int, learning_rate, max_step):
+    """`length` Rprop updates from optimiser `state` in one `lax.scan` on
+    `loss_fn(params, data)`: (params, state, the loss before each update)."""
     opt = optax.rprop(learning_rate, max_step_size=max_step)
 
     def step(carry, _):
@@ -59,6 +48,17 @@ def _rprop_block(loss_fn, params, state, data, length: int, learning_rate, max_s
 
     (params, state), losses = jax.lax.scan(step, (params, state), None, length=length)
     return params, state, losses
+
+
+_rprop_block = program(
+    _rprop_scan,
+    check=Check(
+        "training",
+        nonfinite="training diverged: the loss or the weights became NaN or inf (a solve "
+        "inside the loss failed, or the learning rate is too large)",
+    ),
+)
+"""`_rprop_scan` as a compiled program (one per loss function and shapes)."""
 
 
 def rprop_with_progress(
