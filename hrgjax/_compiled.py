@@ -30,6 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from hrgjax import _export
+
 try:  # equinox's trace-time switch of error_if, and its compiled-check cache
     import equinox._errors as _eqx_errors
 
@@ -160,17 +162,20 @@ class Unchecked(Check):
         return out
 
 
-def program(fn=None, *, check: Check | None = None, error=RuntimeError):
+def program(fn=None, *, check: Check | None = None, error=RuntimeError, export=True):
     """Decorate `fn` as a compiled, callback-free program (module docstring).
 
     **Arguments:**
 
     - `check`: a [`Check`][hrgjax._compiled.Check]; default: every floating output finite.
     - `error`: the exception type raised on the host.
+    - `export`: keep the traced program with `jax.export` when the compile cache is on
+      (`hrgjax._export`), so a later process skips tracing it.
     """
     if fn is None:
-        return functools.partial(program, check=check, error=error)
+        return functools.partial(program, check=check, error=error, export=export)
     check = Check(fn.__name__.lstrip("_")) if check is None else check
+    name = f"{fn.__module__}.{fn.__qualname__}"
     compiled = eqx.filter_jit(fn)
 
     @functools.wraps(fn)
@@ -178,7 +183,11 @@ def program(fn=None, *, check: Check | None = None, error=RuntimeError):
         if tracing_callback_free():
             return compiled(*args, **kwargs)
         with _callback_free():
-            out = compiled(*args, **kwargs)
+            out = _export.NONE
+            if export and not _is_traced((args, kwargs)):
+                out = _export.call(name, fn, args, kwargs)
+            if out is _export.NONE:
+                out = compiled(*args, **kwargs)
         if _is_traced(out):
             return check.traced(out)
         message = check.host(out)

@@ -61,17 +61,22 @@ def _step(solver, fn, y, args, dynamic, f_struct):
     return new_y, eqx.filter(new_state, eqx.is_array), done, result, cost
 
 
-def least_squares(fn, solver, y0, args, *, max_steps: int, desc: str = "least squares"):
+def least_squares(
+    fn, solver, y0, args, *, max_steps: int, desc: str = "least squares", f_struct=None
+):
     """Minimise ½‖fn(y, args)‖² with an optimistix least-squares `solver` from `y0`.
 
     `fn` must be a module-level function (a fresh closure would compile anew each call).
+    `f_struct`: the residuals' `jax.ShapeDtypeStruct` when the caller knows it (saves
+    tracing `fn` once to find it).
 
     **Returns:** `(y, steps, result)`: the solution, the number of steps taken and an
     `optimistix.RESULTS` item (`nonlinear_max_steps_reached` when `max_steps` ran out).
     """
     wrapped = _WithAux(fn)
-    out_struct = jax.eval_shape(fn, y0, args)
-    f_struct = jax.ShapeDtypeStruct(out_struct.shape, out_struct.dtype)
+    if f_struct is None:
+        out_struct = jax.eval_shape(fn, y0, args)
+        f_struct = jax.ShapeDtypeStruct(out_struct.shape, out_struct.dtype)
     dynamic, done, result = _start(solver, wrapped, y0, args, f_struct)
     y, steps = y0, 0
     # No total: the solver stops when it converges, usually long before max_steps.

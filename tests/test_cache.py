@@ -18,14 +18,20 @@ _RUN = textwrap.dedent(
     """
     import sys, warnings
     import jax
+    import jax.monitoring
     jax.config.update("jax_enable_x64", True)
     import numpy as np
     import hrgjax as hg
+    traced = []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda e, d, **k: traced.append(k.get("fun_name"))
+        if e.endswith("jaxpr_trace_duration") else None)
     print("cache:", hg.enable_cache())
     gyro = hg.presets.tvg3_like()
     rec = hg.simulate(gyro, hg.Profile.constant_rate(2.0, 4.0, -10.0, 20.0),
                       key=jax.random.key(3), dt_out=0.5)
     np.save(sys.argv[1], np.stack([rec.wave_angle, rec.amplitude, rec.quadrature]))
+    print("simulator traced:", sum(f in ("_solve", "flat") for f in traced))
     """
 )
 
@@ -48,22 +54,32 @@ def test_cache_on_off_and_damaged_entries_give_identical_results(tmp_path):
     folder = tmp_path / "cache"
     off, log = _run(tmp_path / "off.npy", HRGJAX_NO_CACHE="1")
     assert "cache: None" in log
+    assert "simulator traced: 1" in log  # the traced path
     cold, log = _run(tmp_path / "cold.npy", HRGJAX_CACHE_DIR=str(folder))
+    assert "simulator traced: 1" in log  # traced once, to export it
     entries = sorted((folder / "xla").glob("*-cache"))
-    # The whole simulate program is kept: it carries no host callback.
-    assert any(e.name.startswith("jit__solve-") for e in entries), [e.name for e in entries]
-    warm, _ = _run(tmp_path / "warm.npy", HRGJAX_CACHE_DIR=str(folder))
+    # The whole simulate program is kept, traced and lowered (jax.export) and compiled:
+    # it carries no host callback.
+    exported = sorted((folder / "export").glob("*.exported"))
+    assert len(exported) == 1, exported
+    assert any(e.name.startswith("jit_call-") for e in entries), [e.name for e in entries]
+    warm, log = _run(tmp_path / "warm.npy", HRGJAX_CACHE_DIR=str(folder))
+    assert "simulator traced: 0" in log  # the exported program: no trace in a new process
     sizes = {e.name: e.stat().st_size for e in entries}
-    for e in entries:  # truncate every entry: each is dropped with a warning and rebuilt
+    for e in entries + exported:  # truncate every entry: each is dropped and rebuilt
         e.write_bytes(e.read_bytes()[: max(e.stat().st_size // 3, 1)])
     damaged, log = _run(tmp_path / "damaged.npy", HRGJAX_CACHE_DIR=str(folder))
     assert "damaged compile-cache entry" in log
+    assert "damaged exported program" in log
     rebuilt = {e.name: e for e in (folder / "xla").glob("*-cache")}
     assert set(rebuilt) == set(sizes)  # every damaged entry was written anew, whole
     assert all(_intact(e.read_bytes()) for e in rebuilt.values())
+    assert exported[0].stat().st_size > sizes[entries[0].name] // 1000  # written anew
+    # Traced, exported and reloaded programs give the same bits.
     for result in (cold, warm, damaged):
         np.testing.assert_array_equal(result, off)
-    assert not list((folder / "xla").glob(".tmp-*"))  # no half-written entries left
+    for sub in ("xla", "export"):  # no half-written entries left
+        assert not list((folder / sub).glob(".tmp-*"))
 
 
 def test_cache_folder_resolution(monkeypatch, tmp_path):
@@ -113,3 +129,39 @@ def test_package_names_resolve_lazily():
     assert {"simulate", "Profile", "presets", "enable_cache"} <= set(dir(hg))
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         hg.nope  # noqa: B018
+
+
+def _user_function(x):
+    return x
+
+
+def test_export_keys_spell_out_static_values_and_refuse_unknown_code():
+    """A program is exported only when its key pins everything its trace depends on."""
+    from hrgjax import _export
+    from hrgjax.calibration import mlp
+
+    key = lambda *args: _export._signature("p", *jax.tree_util.tree_flatten((args, {})))
+    x = np.zeros(3)
+    # Static values and array shapes, dtypes and weak types all enter the key.
+    assert key(x, 1.0)[0] != key(x, 2.0)[0]
+    assert key(x, 1.0)[0] != key(np.zeros(4), 1.0)[0]
+    assert key(x, 1.0)[0] != key(x.astype(np.float32), 1.0)[0]
+    assert key(x, 1.0)[0] == key(np.ones(3), 1.0)[0]  # values of arrays do not
+    assert key(jax.numpy.asarray(1.0), "a")[0] != key(jax.numpy.asarray(1.0, float), "a")[0]
+    # hrgjax's and its libraries' functions have stable names; a closure is as stable as what
+    # it captured; the user's own code (which the source hash cannot see) is refused.
+    assert key(mlp._e2e_loss) is not None and key(jax.numpy.tanh) is not None
+    assert key(jax.nn.relu) is not None
+    assert key(_user_function) is None
+    assert key(lambda v: v) is None
+    captured = np.ones(2)
+    assert _export._token(lambda: captured) is None
+    assert key(hg.presets.tvg3_like()) is not None
+
+    class Mine(hg.TemperatureLaw):  # a subclass of the user's: not hrgjax's code
+        pass
+
+    assert key(Mine(1.0)) is None
+    # Key arrays cross the boundary as their key data.
+    _, dynamic, impls = key(jax.random.key(0))
+    assert dynamic == (0,) and impls[0] is not None

@@ -377,6 +377,7 @@ def _fit(groups, x0, k_e, max_steps):
         (groups, x0, sigma0, k_e),
         max_steps=max_steps,
         desc="physical fit (Levenberg–Marquardt)",
+        f_struct=jax.ShapeDtypeStruct((sum(r.size for r in r0.values()),), r0[True].dtype),
     )
     message = first_failure(result, optx.RESULTS)
     if message is not None:
