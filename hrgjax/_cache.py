@@ -115,7 +115,8 @@ def enable_cache(path: str | os.PathLike | None = None) -> Path | None:
 
     - `path`: the cache folder; default `hrgjax._cache.cache_dir()`
       (`$HRGJAX_CACHE_DIR`, else `$XDG_CACHE_HOME/hrgjax`, else `~/.cache/hrgjax`).
-      Programs are kept in its `xla/` sub-folder.
+      Compiled programs are kept in its `xla/` sub-folder; hrgjax's own programs also in
+      traced form (`jax.export`) in `export/`, so a later process skips tracing them.
 
     **Returns:** the folder of compiled programs, or `None` when `HRGJAX_NO_CACHE=1` switches
     the cache off.

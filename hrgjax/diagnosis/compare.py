@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._progress import bar
 from .._x64 import require_x64
 from ..ins.constants import G0
 from ..ins.platform import Fault, PlatformINS
@@ -112,7 +113,11 @@ def _measure(ins, sc: Scenario, keys, meas_sigma, fault_ins=None, sizes=None):
 
     if fault_ins is None:
         return jax.jit(jax.vmap(lambda k: one(k, None, 0.0)))(keys)
-    outs = [one(k, int(i), e) for k, i, e in zip(keys, fault_ins, sizes, strict=True)]
+    outs = []
+    with bar(len(keys), "simulating faulty runs", unit="run") as progress:
+        for k, i, e in zip(keys, fault_ins, sizes, strict=True):
+            outs.append(one(k, int(i), e))
+            progress.update(1)
     return jnp.stack(outs)
 
 

@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._progress import bar
 from ..data import MeasuredData
 from ..profiles import lag_at_knots
 from ..units import DEG, DEG_PER_H
@@ -670,7 +671,10 @@ class ContinuousProblem:
         others keep the score's ΔBIC approximation and no held-out gain). Best first."""
         n = current["r"].size
         rows = []
+        progress = bar(len(cands), f"screening {len(cands)} candidates", unit="effect")
         for name in cands:
+            progress.set_postfix_str(name)
+            progress.update(1)
             grid = TAU_GRID if self.layout.index(name, which=False) else (None,)
             tried = []
             for tau in grid:
@@ -698,10 +702,14 @@ class ContinuousProblem:
                     "_start": (z, step),
                 }
             )
+        progress.close()
         rows.sort(key=lambda r: -r["score"])
         short = [r for r in rows if r["aliasing"] < 0.999 and r["p_value"] < liberal][:top]
+        progress = bar(len(short), f"refitting the {len(short)} best", unit="fit")
         for row in short:
             name, (z, step) = row["effect"], row["_start"]
+            progress.set_postfix_str(name)
+            progress.update(1)
             z_start = z.copy()
             z_start[self.layout.index(name, which=True)] += step
             try:
@@ -718,6 +726,7 @@ class ContinuousProblem:
             row["params"] = {
                 k: v["value"] for k, v in refit["parameters"].get(name, {}).items()
             } | row["params"]
+        progress.close()
         for row in rows:
             del row["_start"]
         return rows

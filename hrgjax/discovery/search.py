@@ -34,6 +34,7 @@ import math
 
 import numpy as np
 
+from .._progress import bar
 from ..calibration.reduce import K_E_NOMINAL, WINDOW_S, RateWindows, reduce
 from ..data import MeasuredData
 from ..noise import Noise
@@ -414,30 +415,36 @@ def _fit(model, c, y, sigma, train, w, held, k_e):
 def _screen(current, cands, model, c, sigma, train, y, w, held, k_e):
     n = int(np.sum(train))
     rows = []
-    for name in cands:
-        g = dwell.columns(name, c, k_e)
-        if not np.any(g[train]):
-            continue
-        gw = g[train] / sigma[train][:, None]
-        s, alias, step = dwell.score(current["r"], current["j"], gw)
-        q = g.shape[1]
-        refit = _fit(model + [name], c, y, sigma, train, w, held, k_e)
-        lam = current["chi2"] - refit["chi2"]
-        names = [p.name for p in CATALOGUE[name].params if p.regular]
-        rows.append(
-            {
-                "effect": name,
-                "score": float(s),
-                "p_value": dwell.chi2_sf(s, q),
-                "delta_bic": float(lam - q * math.log(n)),
-                "aliasing": alias,
-                "gap_after": refit["gap"],
-                "heldout_gain": current["heldout_chi2"] - refit["heldout_chi2"],
-                "params": {
-                    k: v["value"] for k, v in refit["parameters"][name].items() if k in names
-                },
-                "refit": refit,
-            }
-        )
+    with bar(len(cands), f"screening {len(cands)} candidates", unit="effect") as progress:
+        for name in cands:
+            progress.set_postfix_str(name)
+            row = _screen_one(name, current, model, c, sigma, train, y, w, held, k_e, n)
+            progress.update(1)
+            if row is not None:
+                rows.append(row)
     rows.sort(key=lambda r: -r["score"])
     return rows
+
+
+def _screen_one(name, current, model, c, sigma, train, y, w, held, k_e, n):
+    """Score test and refit of one candidate (None when it leaves the training data alone)."""
+    g = dwell.columns(name, c, k_e)
+    if not np.any(g[train]):
+        return None
+    gw = g[train] / sigma[train][:, None]
+    s, alias, step = dwell.score(current["r"], current["j"], gw)
+    q = g.shape[1]
+    refit = _fit(model + [name], c, y, sigma, train, w, held, k_e)
+    lam = current["chi2"] - refit["chi2"]
+    names = [p.name for p in CATALOGUE[name].params if p.regular]
+    return {
+        "effect": name,
+        "score": float(s),
+        "p_value": dwell.chi2_sf(s, q),
+        "delta_bic": float(lam - q * math.log(n)),
+        "aliasing": alias,
+        "gap_after": refit["gap"],
+        "heldout_gain": current["heldout_chi2"] - refit["heldout_chi2"],
+        "params": {k: v["value"] for k, v in refit["parameters"][name].items() if k in names},
+        "refit": refit,
+    }
