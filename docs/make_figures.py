@@ -1,7 +1,8 @@
 """Figures for the docs, written to docs/figures/ (git-ignored): `make docs` runs this first.
 
-`python docs/make_figures.py [NAME …]` makes all figures, or only the named ones (function
-names below), printing each as it goes; the compile cache is on, so a second run is faster."""
+`python docs/make_figures.py [--jobs N] [NAME …]` makes all figures, or only the named ones
+(function names below), N at a time in separate processes, printing each as it is done; the
+compile cache is on, so a second run is faster."""
 
 import os
 
@@ -196,31 +197,50 @@ def adjoint_memory():
     plt.close(fig)
 
 
-FIGURES = (
-    full_vs_averaged,
-    allan,
-    presets,
+FIGURES = (  # longest first, so that the workers finish together
     calibration,
     discovery,
-    ins,
-    diagnosis,
     vibration,
+    diagnosis,
     adjoint_memory,
+    presets,
+    full_vs_averaged,
+    allan,
+    ins,
 )
 
 
-if __name__ == "__main__":
-    import sys
+def _make(name: str) -> float:
+    """Make one figure (in a worker process); its wall time [s]."""
     import time
 
     os.makedirs(HERE, exist_ok=True)
-    hg.enable_cache()  # a second `make docs` loads what the first compiled
-    only = set(sys.argv[1:])
-    todo = [f for f in FIGURES if not only or f.__name__ in only]
+    hg.enable_cache()  # shared by the workers; a second `make docs` loads what the first compiled
+    t0 = time.perf_counter()
+    globals()[name]()
+    return time.perf_counter() - t0
+
+
+if __name__ == "__main__":
+    import argparse
+    import multiprocessing
+    import time
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="figures to make (default: all)")
+    parser.add_argument(
+        "--jobs", type=int, default=min(os.cpu_count() or 1, 4),
+        help="figures made at once, each in its own process (default: cores, at most 4)",
+    )  # fmt: skip
+    args = parser.parse_args()
+    todo = [f.__name__ for f in FIGURES if not args.names or f.__name__ in args.names]
     start = time.perf_counter()
-    for i, make in enumerate(todo, 1):
-        print(f"[{i}/{len(todo)}] {make.__name__} …", end=" ", flush=True)
-        t0 = time.perf_counter()
-        make()
-        print(f"{time.perf_counter() - t0:.1f} s", flush=True)
+    print(f"making {len(todo)} figures, {args.jobs} at a time", flush=True)
+    # Each figure in a fresh process (spawned: JAX does not survive a fork), longest first.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=max(args.jobs, 1), mp_context=context) as pool:
+        jobs = {pool.submit(_make, name): name for name in todo}
+        for done, job in enumerate(as_completed(jobs), 1):
+            print(f"[{done}/{len(todo)}] {jobs[job]}: {job.result():.1f} s", flush=True)
     print(f"wrote figures to {HERE} in {time.perf_counter() - start:.0f} s")
