@@ -226,6 +226,8 @@ def _signature(name: str, leaves, treedef):
                 return None
             parts.append(token)
     key = hashlib.sha256("\n".join(parts).encode()).hexdigest()[:40]
+    if os.environ.get("HRGJAX_EXPORT_DUMP"):
+        Path(os.environ["HRGJAX_EXPORT_DUMP"], f"{name}-{key}.txt").write_text("\n".join(parts))
     return key, tuple(dynamic), tuple(impls)
 
 
@@ -248,8 +250,9 @@ def _export(fn, leaves, treedef, dynamic, impls):
         # constants of the trace and are kept as they are.
         slots, n = [], 0
         for o in out_leaves:
-            slots.append(_Slot(n) if isinstance(o, jax.Array) else o)
-            n += isinstance(o, jax.Array)
+            is_array = isinstance(o, jax.Array)
+            slots.append(_Slot(n, bool(o.aval.weak_type)) if is_array else o)
+            n += is_array
         out_box.append(jax.tree_util.tree_unflatten(out_tree, slots))
         return arrays
 
@@ -271,13 +274,31 @@ def _export(fn, leaves, treedef, dynamic, impls):
 
 
 class _Slot:
-    """The position of an array among an exported program's outputs."""
+    """The position of an array among an exported program's outputs, and whether the traced
+    program gave it a weak type (serialisation drops weak types; they are restored, so that
+    what a caller passes on has the same type as from the traced program)."""
 
-    def __init__(self, index: int):
-        self.index = index
+    def __init__(self, index: int, weak: bool = False):
+        self.index, self.weak = index, weak
 
     def __repr__(self):
-        return f"_Slot({self.index})"
+        return f"_Slot({self.index}, weak={self.weak})"
+
+
+def _runner(exported, slots):
+    weak = {s.index for s in slots if s.weak}
+
+    def run(*values):
+        out = exported.call(*values)
+        return [_weakened(x) if i in weak else x for i, x in enumerate(out)]
+
+    return jax.jit(run)
+
+
+def _weakened(x):
+    from jax._src.lax import lax as lax_internal  # no public way to set a weak type
+
+    return lax_internal._convert_element_type(x, x.dtype, weak_type=True)
 
 
 def _write(path: Path, exported, template) -> None:
@@ -376,11 +397,15 @@ def call(name: str, fn, args, kwargs):
                 _write_refusal(refused, f"{type(err).__name__}: {err}")
                 return _NONE
             _write(path, *stored)
+            # Run what later processes will load (serialisation drops weak types, so the
+            # program compiled from it differs from the in-memory one's): one compile, kept.
+            stored = (jax.export.deserialize(bytearray(stored[0].serialize())), stored[1])
         exported, template = stored
         leaves_t, tree = jax.tree_util.tree_flatten(
             template, is_leaf=lambda x: isinstance(x, _Slot)
         )
-        entry = _memo[key] = (jax.jit(exported.call), leaves_t, tree)
+        slots = [x for x in leaves_t if isinstance(x, _Slot)]
+        entry = _memo[key] = (_runner(exported, slots), leaves_t, tree)
     runner, leaves_t, tree = entry
     values = [
         leaves[i] if impl is None else jax.random.key_data(leaves[i])

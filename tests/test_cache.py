@@ -62,7 +62,7 @@ def test_cache_on_off_and_damaged_entries_give_identical_results(tmp_path):
     # it carries no host callback.
     exported = sorted((folder / "export").glob("*.exported"))
     assert len(exported) == 1, exported
-    assert any(e.name.startswith("jit_call-") for e in entries), [e.name for e in entries]
+    assert any(e.name.startswith("jit_run-") for e in entries), [e.name for e in entries]
     warm, log = _run(tmp_path / "warm.npy", HRGJAX_CACHE_DIR=str(folder))
     assert "simulator traced: 0" in log  # the exported program: no trace in a new process
     sizes = {e.name: e.stat().st_size for e in entries}

@@ -204,9 +204,14 @@ def run_plan(
     size = plan.size
     chunk = min(CHUNK, size)
     n_pad = -size % chunk
-    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], n_pad, axis=0)]) if n_pad else x
-    profiles = jax.tree_util.tree_map(pad, profiles)
-    keys = None if keys is None else pad(keys)
+    # Padding and chunking on the host where the plan is concrete (no eager device ops).
+    xp = np if all(is_concrete(x) for x in jax.tree_util.tree_leaves(profiles)) else jnp
+    pad_np = lambda x, xp=xp: xp.concatenate([x, xp.repeat(x[-1:], n_pad, axis=0)])
+    profiles = jax.tree_util.tree_map(
+        lambda x: pad_np(xp.asarray(x)) if n_pad else xp.asarray(x), profiles
+    )
+    if keys is not None and n_pad:
+        keys = jnp.concatenate([keys, jnp.repeat(keys[-1:], n_pad, axis=0)])
     parts = []
     with bar(size, f"simulating {size} runs", unit="run") as progress:
         for start in range(0, size + n_pad, chunk):
@@ -221,7 +226,8 @@ def run_plan(
             )
             parts.append(rec)
             progress.update(min(chunk, size - start))
-    rec = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs)[:size], *parts)
+    join = lambda *xs: (np if xp is np else jnp).concatenate(xs)[:size]
+    rec = jax.tree_util.tree_map(join, *parts)
     data = rec.to_data()
     if first_run:
         cols = data.columns
