@@ -73,16 +73,22 @@ class AbstractCompensator(eqx.Module):
 
     def drift_dph(self, theta_deg, temperature_c) -> np.ndarray:
         """`drift` in the bench's units: θ [°] in, drift [°/h] out (NumPy)."""
-        th = jnp.asarray(theta_deg, dtype=float) * DEG
-        tc = jnp.broadcast_to(jnp.asarray(temperature_c, dtype=float), th.shape)
-        out = jax.vmap(self.drift)(th.ravel(), tc.ravel()).reshape(th.shape)
-        return np.asarray(out) / DEG * 3600.0
+        return self._pointwise("drift", theta_deg, temperature_c) / DEG * 3600.0
 
     def scale_factor_at(self, theta_deg, temperature_c) -> np.ndarray:
         """`scale_factor` with θ in degrees (NumPy)."""
-        th = jnp.asarray(theta_deg, dtype=float) * DEG
-        tc = jnp.broadcast_to(jnp.asarray(temperature_c, dtype=float), th.shape)
-        return np.asarray(jax.vmap(self.scale_factor)(th.ravel(), tc.ravel())).reshape(th.shape)
+        return self._pointwise("scale_factor", theta_deg, temperature_c)
+
+    def _pointwise(self, which: str, theta_deg, temperature_c) -> np.ndarray:
+        """`which` ("drift" or "scale_factor") at every (θ [°], T [°C]) pair, as NumPy: one
+        compiled program per compensator type and padded size (powers of two)."""
+        th = np.asarray(theta_deg, dtype=float) * DEG
+        tc = np.broadcast_to(np.asarray(temperature_c, dtype=float), th.shape)
+        n = th.size
+        size = bucket_size(n)
+        pad = lambda x: jnp.asarray(bucket_pad(x.ravel(), size))
+        out = np.asarray(_pointwise(self, which, pad(th), pad(tc)))[:n]
+        return out.reshape(th.shape)
 
     def correct(self, data: MeasuredData) -> MeasuredData:
         """Compensate every run of `data`.
@@ -140,6 +146,12 @@ class AbstractCompensator(eqx.Module):
         cols["rate_corrected_dps"] = rate_out
         cols["angle_corrected_deg"] = angle_out
         return MeasuredData(cols, allow_extra=True)
+
+
+@program
+def _pointwise(comp, which, theta, temperature_c):
+    """`comp.<which>` [rad/s or dimensionless] at each θ [rad] and T [°C]."""
+    return jax.vmap(getattr(comp, which))(theta, temperature_c)
 
 
 @program
