@@ -226,13 +226,7 @@ def _signature(name: str, leaves, treedef):
                 return None
             parts.append(token)
     key = hashlib.sha256("\n".join(parts).encode()).hexdigest()[:40]
-    if os.environ.get("HRGJAX_EXPORT_DUMP"):
-        Path(os.environ["HRGJAX_EXPORT_DUMP"], f"{name}-{key}.txt").write_text("\n".join(parts))
     return key, tuple(dynamic), tuple(impls)
-
-
-class _NotExportable(Exception):
-    pass
 
 
 def _export(fn, leaves, treedef, dynamic, impls):
