@@ -8,11 +8,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import check_finite, is_concrete
+from ._compiled import device
 from .units import DEG, DEG_PER_S
 
 
 def _f(x):
-    return jnp.asarray(x, dtype=float)
+    if isinstance(x, jax.Array):  # a jax value or a tracer
+        return jnp.asarray(x, dtype=float)
+    # Host values: a copy, not `jnp.asarray`'s small compiled program per new shape; concrete
+    # even inside `jax.jit` (knot times must stay concrete there, see `_eager`).
+    with jax.ensure_compile_time_eval():
+        return device(x, float)
 
 
 def _eager(fn, *args):
@@ -103,6 +109,17 @@ class Profile(eqx.Module):
         """A run at constant rate `rate_dps` [°/s] for `duration_s` [s] at `temperature_c` [°C],
         starting at electrical wave angle `wave_angle0_deg` [°], under specific force
         `accel_g` [g] (case axes x, y, z)."""
+        args = (rate_dps, duration_s, temperature_c, wave_angle0_deg, accel_g)
+        if not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(args)):
+            # Python / NumPy numbers: build on the host (no eager device programs).
+            one, h = np.ones(2), lambda x: np.asarray(x, dtype=float)
+            return cls(
+                t=np.array([0.0, 1.0]) * h(duration_s),
+                rate=one * h(rate_dps) * DEG_PER_S,
+                temperature=one * h(temperature_c),
+                accel=np.ones((2, 1)) * h(accel_g)[None, :],
+                wave_angle0=h(wave_angle0_deg) * DEG,
+            )
         t = _eager(lambda d: jnp.array([0.0, 1.0]) * _f(d), duration_s)
         one = jnp.ones(2)
         return cls(
@@ -135,6 +152,16 @@ class Profile(eqx.Module):
     ) -> Profile:
         """A profile from knot arrays in bench units: times [s], rates [°/s],
         temperatures [°C] and optionally specific force [g], shape (N, 3)."""
+        args = (t_s, rate_dps, temperature_c, accel_g, wave_angle0_deg)
+        if not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(args)):
+            t = np.asarray(t_s, dtype=float)  # host values: built on the host
+            return cls(
+                t=t,
+                rate=np.broadcast_to(np.asarray(rate_dps, dtype=float), t.shape) * DEG_PER_S,
+                temperature=np.broadcast_to(np.asarray(temperature_c, dtype=float), t.shape),
+                accel=np.zeros(t.shape + (3,)) if accel_g is None else accel_g,
+                wave_angle0=np.asarray(wave_angle0_deg, dtype=float) * DEG,
+            )
         t = _eager(_f, t_s)
         rate = jnp.broadcast_to(_f(rate_dps), t.shape) * DEG_PER_S
         temp = jnp.broadcast_to(_f(temperature_c), t.shape)

@@ -66,3 +66,30 @@ def test_buckets():
         2048,
     ]
     np.testing.assert_array_equal(bucket_pad(np.array([1.0, 2.0]), 4), [1.0, 2.0, 2.0, 2.0])
+
+
+def test_host_values_reach_the_device_without_eager_programs():
+    """`device` and the profile constructors on host values copy instead of staging a small
+    XLA program per new shape (what made a warm `demo --quick` spend seconds compiling),
+    and give what `jnp.asarray` and the traced constructors give."""
+    import hrgjax as hg
+    from hrgjax._compiled import device
+    from helpers import CompileCounter
+
+    x = np.linspace(0.0, 1.0, 37)  # shapes no other test uses
+    knots, temps = np.linspace(0.0, 10.0, 41), np.linspace(-40.0, 20.0, 41)
+    with CompileCounter() as c:
+        on_device = device(x)
+        prof = hg.Profile.constant_rate(5.0, 37.0, -12.0, 33.0, (0.0, 0.1, 1.0))
+        piece = hg.Profile.piecewise(knots, 2.0, temps, wave_angle0_deg=7.0)
+    assert (c.compiles, c.traces) == (0, 0), c.names
+    assert isinstance(on_device, jax.Array) and on_device.dtype == jnp.asarray(x).dtype
+    np.testing.assert_array_equal(on_device, x)
+    # the same constructors with a traced argument take the jnp path: same values
+    traced = jax.jit(lambda r: hg.Profile.constant_rate(r, 37.0, -12.0, 33.0, (0.0, 0.1, 1.0)))
+    for a, b in zip(jax.tree_util.tree_leaves(prof), jax.tree_util.tree_leaves(traced(5.0))):
+        np.testing.assert_allclose(a, b, rtol=1e-15)
+    np.testing.assert_array_equal(piece.t, knots)
+    np.testing.assert_array_equal(piece.temperature, temps)
+    np.testing.assert_allclose(piece.rate, np.full(41, np.deg2rad(2.0)), rtol=1e-15)
+    assert piece.accel.shape == (41, 3) and float(piece.wave_angle0) == np.deg2rad(7.0)

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compiled import bucket_pad, bucket_size, program
+from .._compiled import bucket_pad, bucket_size, device, program
 from ..data import MeasuredData
 from ..units import DEG
 from .reduce import WINDOW_S, RateWindows, reduce
@@ -86,7 +86,7 @@ class AbstractCompensator(eqx.Module):
         tc = np.broadcast_to(np.asarray(temperature_c, dtype=float), th.shape)
         n = th.size
         size = bucket_size(n)
-        pad = lambda x: jnp.asarray(bucket_pad(x.ravel(), size))
+        pad = lambda x: device(bucket_pad(x.ravel(), size))
         out = np.asarray(_pointwise(self, which, pad(th), pad(tc)))[:n]
         return out.reshape(th.shape)
 
@@ -127,7 +127,7 @@ class AbstractCompensator(eqx.Module):
             (temp[second] - temp[first]) / dt,
         )
         n = first.size
-        padded = [jnp.asarray(bucket_pad(x, bucket_size(n))) for x in inputs]
+        padded = [device(bucket_pad(x, bucket_size(n))) for x in inputs]
         interval = np.asarray(_interval_rates(self, *padded))[:n]
         rate_out = np.empty(len(data))
         angle_out = np.empty(len(data))

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_finite, is_concrete
-from .._compiled import Check, program
+from .._compiled import Check, device, program
 from .._progress import bar
 from ..data import MeasuredData
 from ..gyro import Gyro
@@ -71,11 +71,11 @@ class Plan(eqx.Module):
             lambda p: (p.t, p.rate, p.temperature, p.accel, p.wave_angle0),
             one(0.0, 0.0, 0.0),
             (
-                jnp.asarray(ones * np.array([0.0, self.duration_s])),
-                jnp.asarray(ones * rate[:, None] * DEG_PER_S),
-                jnp.asarray(ones * temp[:, None]),
-                jnp.zeros((self.size, 2, 3)),
-                jnp.asarray(angle * DEG),
+                device(ones * np.array([0.0, self.duration_s])),
+                device(ones * rate[:, None] * DEG_PER_S),
+                device(ones * temp[:, None]),
+                device(np.zeros((self.size, 2, 3))),
+                device(angle * DEG),
             ),
         )
 
@@ -92,9 +92,9 @@ def _grid(temps, angles, rate, duration, dt_out):
             raise ValueError(f"plan {name} has duplicates {uniq[counts > 1].tolist()} [{unit}]")
     tt, aa = np.meshgrid(np.asarray(temps, float), np.asarray(angles, float), indexing="ij")
     return Plan(
-        temperature_c=jnp.asarray(tt.ravel()),
-        wave_angle0_deg=jnp.asarray(aa.ravel()),
-        rate_dps=jnp.full(tt.size, float(rate)),
+        temperature_c=device(tt.ravel()),
+        wave_angle0_deg=device(aa.ravel()),
+        rate_dps=device(np.full(tt.size, float(rate))),
         duration_s=float(duration),
         dt_out=float(dt_out),
     )
@@ -193,7 +193,7 @@ def run_plan(
     (the last one padded), so plans of any size share one compiled simulator.
     """
     profiles = plan.profiles()
-    ts = jnp.asarray(np.arange(int(round(plan.duration_s / plan.dt_out)) + 1) * plan.dt_out)
+    ts = device(np.arange(int(round(plan.duration_s / plan.dt_out)) + 1) * plan.dt_out)
     keys = None
     if gyro.noise is not None:
         if key is None:
@@ -210,16 +210,22 @@ def run_plan(
     profiles = jax.tree_util.tree_map(
         lambda x: pad_np(xp.asarray(x)) if n_pad else xp.asarray(x), profiles
     )
-    if keys is not None and n_pad:
-        keys = jnp.concatenate([keys, jnp.repeat(keys[-1:], n_pad, axis=0)])
+    starts = range(0, size + n_pad, chunk)
+    if keys is not None and xp is np:  # key data padded and sliced on the host too
+        impl, data = jax.random.key_impl(keys), np.asarray(jax.random.key_data(keys))
+        data = pad_np(data) if n_pad else data
+        keys = [jax.random.wrap_key_data(device(data[s : s + chunk]), impl=impl) for s in starts]
+    elif keys is not None:
+        keys = jnp.concatenate([keys, jnp.repeat(keys[-1:], n_pad, axis=0)]) if n_pad else keys
+        keys = [keys[s : s + chunk] for s in starts]
     parts = []
     with bar(size, f"simulating {size} runs", unit="run") as progress:
-        for start in range(0, size + n_pad, chunk):
+        for i, start in enumerate(starts):
             take = lambda x, s=start: x[s : s + chunk]
             rec, _ = _simulate_chunk(
                 gyro,
                 jax.tree_util.tree_map(take, profiles),
-                None if keys is None else take(keys),
+                None if keys is None else keys[i],
                 bias_key,
                 ts,
                 model,

@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import device
 from ..units import DEG, T_REF_C
 from ._compensator import AbstractCompensator, as_windows, split_targets
 from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows
@@ -119,17 +120,17 @@ class FourierCompensator(AbstractCompensator):
         fitted = eqx.tree_at(
             lambda c: c.drift_coef,
             self,
-            jnp.asarray(d_coef.reshape(self._degree + 1, -1)),
+            device(d_coef.reshape(self._degree + 1, -1)),
             is_leaf=lambda x: x is None,
         )
         th_m = moving.wave_angle_deg * DEG
-        d_m = np.asarray(fitted.drift(jnp.asarray(th_m), jnp.asarray(moving.temperature_c)))
+        d_m = self._basis(th_m, moving.temperature_c, np) @ d_coef
         sf = (moving.rate_dps * DEG - d_m) / (moving.table_rate_dps * DEG)
         s_coef = _lstsq(self._basis(th_m, moving.temperature_c, np), sf, "scale factor")
         return eqx.tree_at(
             lambda c: c.sf_coef,
             fitted,
-            jnp.asarray(s_coef.reshape(self._degree + 1, -1)),
+            device(s_coef.reshape(self._degree + 1, -1)),
             is_leaf=lambda x: x is None,
         )
 

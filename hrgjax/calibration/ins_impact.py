@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compiled import Check, program
+from .._compiled import Check, device, program
 from .._x64 import require_x64
 from ..data import MeasuredData, concat
 from ..gyro import Gyro
@@ -119,7 +119,7 @@ def fly(gyro: Gyro, flight: Flight, *, key: jax.Array, bias_key: jax.Array) -> M
     """Records of the two level gyros (runs 0 = x, 1 = y) during `flight` (table rate 0)."""
     require_x64("calibration.ins_impact.fly")
     knots = np.linspace(0.0, flight.duration_s, 61)
-    ts = jnp.asarray(np.arange(0.0, flight.duration_s + 1e-9, flight.dt_out))
+    ts = device(np.arange(0.0, flight.duration_s + 1e-9, flight.dt_out))
     parts = []
     for i, angle in enumerate((flight.wave_angle_x_deg, flight.wave_angle_y_deg)):
         prof = Profile.piecewise(knots, 0.0, flight.temperature(knots), wave_angle0_deg=angle)
@@ -135,7 +135,7 @@ def navigation_errors(
     when the level gyros' outputs are compensated with `comp` (rates in `records` from
     [`fly`][hrgjax.calibration.ins_impact.fly]); `trajectory`: `flight.trajectory()`, if
     already built."""
-    from ..ins.strapdown import position_metres, propagate
+    from ..ins.strapdown import propagate
 
     out = comp.correct(records)
     idx = records.run_indices()
@@ -146,10 +146,21 @@ def navigation_errors(
         raise ValueError(
             f"the records hold {eps_x.shape[0]} samples per gyro, the flight {traj.t.shape[0]}"
         )
-    gyro_error = jnp.stack([jnp.asarray(eps_x), jnp.asarray(eps_y), jnp.zeros(eps_x.shape)], -1)
+    gyro_error = device(np.stack([eps_x, eps_y, np.zeros(eps_x.shape)], -1))
     dx = propagate(traj, gyro_error=gyro_error, altitude_aided=True, rtol=1e-8, atol=1e-10)
-    dp = position_metres(traj, dx)[-1, :2]
-    return float(jnp.linalg.norm(dx[-1, 3:5])), float(jnp.linalg.norm(dp))
+    velocity, position = _final_errors(traj, dx)
+    return float(velocity), float(position)
+
+
+@program
+def _final_errors(traj, dx):
+    """Horizontal velocity [m/s] and position [m] error magnitudes at the last state (one
+    compiled program, not a handful of eager operations)."""
+    from ..ins.strapdown import position_metres
+
+    end = jax.tree_util.tree_map(lambda x: x[-1:], traj)
+    dp = position_metres(end, dx[-1:])[-1, :2]
+    return jnp.linalg.norm(dx[-1, 3:5]), jnp.linalg.norm(dp)
 
 
 def ins_impact(

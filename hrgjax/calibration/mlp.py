@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compiled import program
+from .._compiled import device, program
 from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
@@ -85,13 +85,17 @@ class MLPCompensator(AbstractCompensator):
         """Number of network inputs (3 periodic, 2 seed-style)."""
         return 3 if self.encoding == "periodic" else 2
 
-    def features(self, theta, temperature_c):
-        """Normalised network input for one point: θ [rad, electrical], T [°C]."""
-        tn = (temperature_c - self.t_centre) / self.t_scale
+    def features(self, theta, temperature_c, xp=jnp):
+        """Normalised network input for one point: θ [rad, electrical], T [°C] (or, with
+        `xp=np`, for NumPy arrays of points: shape (..., `in_size`))."""
+        centre, scale = self.t_centre, self.t_scale
+        if xp is np:  # NumPy throughout (a jax scalar would turn the arithmetic eager-jax)
+            centre, scale = float(centre), float(scale)
+        tn = (temperature_c - centre) / scale
         if self.encoding == "periodic":
-            return jnp.stack([jnp.cos(2 * theta), jnp.sin(2 * theta), tn])
-        folded = (theta + jnp.pi / 2) % jnp.pi - jnp.pi / 2
-        return jnp.stack([folded / (jnp.pi / 2), tn])
+            return xp.stack([xp.cos(2 * theta), xp.sin(2 * theta), tn], axis=-1)
+        folded = (theta + xp.pi / 2) % xp.pi - xp.pi / 2
+        return xp.stack([folded / (xp.pi / 2), tn], axis=-1)
 
     def drift(self, theta, temperature_c):
         if self.drift_net is None:
@@ -144,23 +148,20 @@ class MLPCompensator(AbstractCompensator):
         static, moving = split_targets(windows)
         comp = self.init(key)
         temps = np.concatenate([static.temperature_c, moving.temperature_c])
+        # Host arithmetic (NumPy) between the compiled training programs: eager jnp would
+        # stage a small XLA program per operation and shape.
+        t_centre = 0.5 * (temps.max() + temps.min())
+        t_scale = max(0.5 * (temps.max() - temps.min()), 1.0)
         comp = eqx.tree_at(
-            lambda c: (c.t_centre, c.t_scale),
-            comp,
-            (
-                jnp.asarray(0.5 * (temps.max() + temps.min())),
-                jnp.asarray(max(0.5 * (temps.max() - temps.min()), 1.0)),
-            ),
+            lambda c: (c.t_centre, c.t_scale), comp, (device(t_centre), device(t_scale))
         )
-        x_s = jax.vmap(comp.features)(
-            jnp.asarray(static.wave_angle_deg * DEG), jnp.asarray(static.temperature_c)
-        )
+        x_s = comp.features(static.wave_angle_deg * DEG, static.temperature_c, np)
         d = (static.rate_dps - static.table_rate_dps) * DEG
         d_off, d_scale = float(np.mean(d)), float(max(np.std(d), 1e-12))
         net = train_rprop(
             comp.drift_net,
-            x_s,
-            jnp.asarray((d - d_off) / d_scale),
+            device(x_s),
+            device((d - d_off) / d_scale),
             self.steps,
             self.learning_rate,
             desc="MLP drift",
@@ -168,19 +169,18 @@ class MLPCompensator(AbstractCompensator):
         comp = eqx.tree_at(
             lambda c: (c.drift_net, c.drift_offset, c.drift_scale),
             comp,
-            (net, jnp.asarray(d_off), jnp.asarray(d_scale)),
+            (net, device(d_off), device(d_scale)),
         )
-        th_m = jnp.asarray(moving.wave_angle_deg * DEG)
-        tc_m = jnp.asarray(moving.temperature_c)
-        d_m = np.asarray(jax.vmap(comp.drift)(th_m, tc_m))
+        th_m = moving.wave_angle_deg * DEG
+        d_m = comp._pointwise("drift", moving.wave_angle_deg, moving.temperature_c)
         sf = (moving.rate_dps * DEG - d_m) / (moving.table_rate_dps * DEG)
-        th_b, tc_b, sf = bin_targets(np.asarray(th_m), moving.temperature_c, sf, self.bin_deg)
+        th_b, tc_b, sf = bin_targets(th_m, moving.temperature_c, sf, self.bin_deg)
         s_off, s_scale = float(np.mean(sf)), float(max(np.std(sf), 1e-12))
-        x_m = jax.vmap(comp.features)(jnp.asarray(th_b), jnp.asarray(tc_b))
+        x_m = comp.features(th_b, tc_b, np)
         net = train_rprop(
             comp.sf_net,
-            x_m,
-            jnp.asarray((sf - s_off) / s_scale),
+            device(x_m),
+            device((sf - s_off) / s_scale),
             self.steps,
             self.learning_rate,
             desc="MLP scale factor",
@@ -188,7 +188,7 @@ class MLPCompensator(AbstractCompensator):
         comp = eqx.tree_at(
             lambda c: (c.sf_net, c.sf_offset, c.sf_scale),
             comp,
-            (net, jnp.asarray(s_off), jnp.asarray(s_scale)),
+            (net, device(s_off), device(s_scale)),
         )
         if mode == "end_to_end":
             samples = raw if raw is not None else data
@@ -265,12 +265,12 @@ def _run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
         table = np.stack([r.table_angle_deg for r in runs]) * DEG
         out.append(
             AngleRuns(
-                t=jnp.asarray(t),
-                theta=jnp.asarray(np.stack([r["wave_angle_deg"] for r in runs]) * DEG),
-                temperature_c=jnp.asarray(np.stack([r["temperature_c"] for r in runs])),
-                table_angle=jnp.asarray(table - table[:, :1]),
-                checkpoints=jnp.asarray(cps),
-                static=jnp.asarray([bool(np.all(r["table_rate_dps"] == 0.0)) for r in runs]),
+                t=device(t),
+                theta=device(np.stack([r["wave_angle_deg"] for r in runs]) * DEG),
+                temperature_c=device(np.stack([r["temperature_c"] for r in runs])),
+                table_angle=device(table - table[:, :1]),
+                checkpoints=device(cps),
+                static=device([bool(np.all(r["table_rate_dps"] == 0.0)) for r in runs]),
             )
         )
     return out

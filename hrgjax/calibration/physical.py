@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._compiled import Check, first_failure, program
+from .._compiled import Check, device, first_failure, program
 from .._least_squares import least_squares
 from .._x64 import require_x64
 from ..data import MeasuredData
@@ -209,7 +209,7 @@ class PhysicalCompensator(AbstractCompensator):
         split_targets(windows)
         groups = _groups(data, self.window_s, self.k_e)
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
-        values, steps, res, sigma, jac = _fit(groups, jnp.asarray(x0), self.k_e, self.max_steps)
+        values, steps, res, sigma, jac = _fit(groups, device(x0), self.k_e, self.max_steps)
         values, steps, jac = np.asarray(values), int(steps), np.asarray(jac) * _SCALE
         res = {k: np.asarray(v) for k, v in res.items()}
         sigma = {k: float(v) for k, v in sigma.items()}
@@ -228,8 +228,8 @@ class PhysicalCompensator(AbstractCompensator):
             k_e=self.k_e,
             window_s=self.window_s,
             max_steps=self.max_steps,
-            values=jnp.asarray(values),
-            covariance=jnp.asarray(cov),
+            values=device(values),
+            covariance=device(cov),
             stats=tuple(stats.items()),
         )
 
@@ -280,14 +280,14 @@ def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
                     acc[i, :, j] = r[f"accel_{axis}_g"][knots]
         out.append(
             _Group(
-                t=jnp.asarray(t),
-                theta0=jnp.asarray(th[:, 0]),
-                knots=jnp.asarray(knots),
-                rate=jnp.asarray(np.stack([r["table_rate_dps"][knots] for r in runs]) * DEG),
-                temperature=jnp.asarray(np.stack([r["temperature_c"][knots] for r in runs])),
-                accel=jnp.asarray(acc),
-                measured_static=jnp.asarray(-_slopes(t, th, s_idx, 1, length) / k_e),
-                measured_moving=jnp.asarray(-_slopes(t, th, m_idx, n_win, m) / k_e),
+                t=device(t),
+                theta0=device(th[:, 0]),
+                knots=device(knots),
+                rate=device(np.stack([r["table_rate_dps"][knots] for r in runs]) * DEG),
+                temperature=device(np.stack([r["temperature_c"][knots] for r in runs])),
+                accel=device(acc),
+                measured_static=device(-_slopes(t, th, s_idx, 1, length) / k_e),
+                measured_moving=device(-_slopes(t, th, m_idx, n_win, m) / k_e),
                 static_idx=s_idx,
                 moving_idx=m_idx,
                 n_windows=n_win,
@@ -367,13 +367,13 @@ def _fit(groups, x0, k_e, max_steps):
     sigma0 = {}
     for kind, r in r0.items():
         r = np.asarray(r)
-        sigma0[kind] = jnp.asarray(1.4826 * np.median(np.abs(r - np.median(r))))
+        sigma0[kind] = device(1.4826 * np.median(np.abs(r - np.median(r))))
     # The problem is scaled so that one unit of x is about one standard error: stopping at
     # 1e-4 of that is far below anything the data can tell.
     x, steps, result = least_squares(
         _weighted_residual,
         optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4),
-        jnp.zeros(len(NAMES)),
+        device(np.zeros(len(NAMES))),
         (groups, x0, sigma0, k_e),
         max_steps=max_steps,
         desc="physical fit (Levenberg–Marquardt)",
@@ -382,8 +382,12 @@ def _fit(groups, x0, k_e, max_steps):
     message = first_failure(result, optx.RESULTS)
     if message is not None:
         raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
-    values = x0 + x * _SCALE
-    r1, jac1 = _residuals_jacobian(groups, values, k_e)
-    sigma1 = {k: jnp.sqrt(jnp.mean(r**2)) for k, r in r1.items()}
-    jac = jnp.concatenate([jac1[True] / sigma1[True], jac1[False] / sigma1[False]])
-    return values, steps, r1, sigma1, jac / jnp.asarray(_SCALE)[None, :]
+    # Host arithmetic between the compiled programs (eager jnp would compile each operation).
+    values = np.asarray(x0) + np.asarray(x) * _SCALE
+    r1, jac1 = _residuals_jacobian(groups, device(values), k_e)
+    r1 = {k: np.asarray(r) for k, r in r1.items()}
+    sigma1 = {k: np.sqrt(np.mean(r**2)) for k, r in r1.items()}
+    jac = np.concatenate(
+        [np.asarray(jac1[True]) / sigma1[True], np.asarray(jac1[False]) / sigma1[False]]
+    )
+    return values, steps, r1, sigma1, jac / np.asarray(_SCALE)[None, :]

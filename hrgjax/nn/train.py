@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
+import numpy as np
 import optax
 
-from .._compiled import Check, program
+from .._compiled import Check, device, program
 from .._progress import bar
 
 
@@ -91,7 +91,7 @@ def rprop_with_progress(
             params, state, chunk = _rprop_block(
                 loss_fn, params, state, data, length, learning_rate, max_step
             )
-            losses.append(chunk)
+            losses.append(np.asarray(chunk))  # on the host: no eager device programs
             progress.update(length)
-            progress.set_postfix_str(f"loss {float(chunk[-1]):.4g}")
-    return params, jnp.concatenate(losses)
+            progress.set_postfix_str(f"loss {float(losses[-1][-1]):.4g}")
+    return params, device(np.concatenate(losses))
