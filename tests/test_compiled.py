@@ -72,9 +72,10 @@ def test_host_values_reach_the_device_without_eager_programs():
     """`device` and the profile constructors on host values copy instead of staging a small
     XLA program per new shape (what made a warm `demo --quick` spend seconds compiling),
     and give what `jnp.asarray` and the traced constructors give."""
+    from helpers import CompileCounter
+
     import hrgjax as hg
     from hrgjax._compiled import device
-    from helpers import CompileCounter
 
     x = np.linspace(0.0, 1.0, 37)  # shapes no other test uses
     knots, temps = np.linspace(0.0, 10.0, 41), np.linspace(-40.0, 20.0, 41)
@@ -87,7 +88,8 @@ def test_host_values_reach_the_device_without_eager_programs():
     np.testing.assert_array_equal(on_device, x)
     # the same constructors with a traced argument take the jnp path: same values
     traced = jax.jit(lambda r: hg.Profile.constant_rate(r, 37.0, -12.0, 33.0, (0.0, 0.1, 1.0)))
-    for a, b in zip(jax.tree_util.tree_leaves(prof), jax.tree_util.tree_leaves(traced(5.0))):
+    leaves = jax.tree_util.tree_leaves
+    for a, b in zip(leaves(prof), leaves(traced(5.0)), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-15)
     np.testing.assert_array_equal(piece.t, knots)
     np.testing.assert_array_equal(piece.temperature, temps)
