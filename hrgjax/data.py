@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import csv
+import numbers
 import os
+import re
 from collections.abc import Iterator, Mapping
 
 import numpy as np
+
+from ._io import atomic_path, atomic_write
 
 COLUMNS: dict[str, str] = {
     "time_s": "time [s], strictly increasing within a run",
@@ -27,13 +31,21 @@ COLUMNS: dict[str, str] = {
 REQUIRED = ("time_s", "temperature_c", "table_rate_dps", "wave_angle_deg")
 """Columns every dataset must have."""
 
+_NUMBER = re.compile(
+    r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:nan|inf|infinity)", re.IGNORECASE
+)
+"""A number as the CSV reader accepts it: decimal or scientific notation, or nan/inf (which
+the validation then names); no thousands separators or underscores."""
+_INTEGER = re.compile(r"[+-]?\d+")
+
 
 class MeasuredData:
     """A measured (or simulated) gyro record in the units of the data contract.
 
-    One row per sample; columns are 1-D float arrays (``run`` is integer). The data are
-    validated on construction and never altered: an absent ``run`` reads as all zeros and an
-    absent ``table_angle_deg`` as the per-run integral of the rate, without adding columns.
+    One row per sample; columns are 1-D float arrays (``run`` is integer; extra columns kept
+    with `allow_extra` may also hold text). The data are validated on construction and never
+    altered: an absent ``run`` reads as all zeros and an absent ``table_angle_deg`` as the
+    per-run integral of the rate, without adding columns.
 
     **Arguments:**
 
@@ -41,8 +53,11 @@ class MeasuredData:
     - `allow_extra`: keep columns not in [`hrgjax.data.COLUMNS`][] (otherwise an error).
 
     **Raises:** `ValueError` naming the column (and first bad row) for a missing required
-    column, an unknown column, mismatched lengths, non-numeric, NaN or infinite values,
-    a non-integer run id, or time that does not strictly increase within a run.
+    column, an unknown column, mismatched lengths, values that are not real numbers (text in
+    a contract column, booleans, complex numbers, dates or durations), NaN or infinite
+    values, integers too large to hold exactly, a run id that is not an exactly representable
+    integer, or time that does not strictly increase within a run (checked run by run, also
+    when the rows of several runs are interleaved).
     """
 
     def __init__(self, columns: Mapping[str, object], allow_extra: bool = False):
@@ -60,48 +75,21 @@ class MeasuredData:
         cols: dict[str, np.ndarray] = {}
         n = None
         for name, value in columns.items():
-            arr = np.asarray(value)
-            if arr.ndim != 1:
-                raise ValueError(
-                    f"column {name!r} must be 1-D (one value per row); got shape {arr.shape}"
-                )
+            if not isinstance(name, str):
+                raise ValueError(f"column names must be strings; got {name!r}")
+            arr = _column(name, value)
             if n is None:
                 n = arr.shape[0]
             elif arr.shape[0] != n:
                 raise ValueError(
                     f"column {name!r} has {arr.shape[0]} rows but 'time_s'/the first column has {n}"
                 )
-            try:
-                farr = arr.astype(float)
-            except (TypeError, ValueError):
-                raise ValueError(f"column {name!r} must be numeric") from None
-            bad = np.nonzero(~np.isfinite(farr))[0]
-            if bad.size:
-                i = int(bad[0])
-                raise ValueError(f"column {name!r} has a non-finite value ({farr[i]}) at row {i}")
-            if name == "run":
-                if np.any(farr != np.round(farr)):
-                    i = int(np.nonzero(farr != np.round(farr))[0][0])
-                    raise ValueError(f"column 'run' must hold integers; row {i} has {farr[i]}")
-                arr = farr.astype(np.int64)
-            else:
-                arr = farr
-            arr = arr.copy()
             arr.setflags(write=False)
             cols[name] = arr
         if n == 0:
             raise ValueError("the data have no rows")
         self._columns = cols
-        t, run = cols["time_s"], self.run
-        same = run[1:] == run[:-1]
-        bad = np.nonzero(same & (np.diff(t) <= 0))[0]
-        if bad.size:
-            i = int(bad[0]) + 1
-            raise ValueError(
-                f"column 'time_s' must strictly increase within a run; row {i} "
-                f"(time {t[i]}, run {run[i]}) does not follow row {i - 1} (time {t[i - 1]}) "
-                "— unsorted or duplicate time stamp"
-            )
+        _check_time(cols["time_s"], self.run)
 
     @property
     def columns(self) -> dict[str, np.ndarray]:
@@ -169,26 +157,166 @@ class MeasuredData:
             yield MeasuredData({k: v[idx] for k, v in self._columns.items()}, allow_extra=True)
 
     def save(self, path: str | os.PathLike) -> str:
-        """Write CSV (``.csv``) or NetCDF (``.nc``); returns the path. Round trips are exact."""
+        """Write CSV (``.csv``) or NetCDF (``.nc``, with each column's ``units``); returns the
+        path. Round trips are exact. The file is written under a temporary name and renamed
+        when complete, so an interrupted save never leaves a partial file."""
         path = os.fspath(path)
         ext = os.path.splitext(path)[1].lower()
         if ext == ".csv":
-            _write_csv(self, path)
-        elif ext in (".nc", ".nc4", ".netcdf"):
-            self.to_xarray().to_netcdf(path, engine="h5netcdf")
+            with atomic_write(path, "w", newline="", encoding="utf-8") as fh:
+                _write_csv(self, fh)
+        elif ext in NETCDF_EXTENSIONS:
+            ds = self.to_xarray()
+            with atomic_path(path) as tmp:
+                ds.to_netcdf(tmp, engine="h5netcdf")
         else:
             raise ValueError(f"unknown data file extension {ext!r}; use .csv or .nc")
         return path
 
     def to_xarray(self):
-        """An `xarray.Dataset` with one variable per column along dimension ``sample``."""
+        """An `xarray.Dataset` with one variable per column along dimension ``sample``, each
+        contract column with its ``units`` attribute (UDUNITS spelling)."""
         xr = _import_xarray()
-        return xr.Dataset({k: ("sample", v) for k, v in self._columns.items()})
+        return xr.Dataset(
+            {
+                k: ("sample", v, {"units": UNITS[k][0]} if k in UNITS else {})
+                for k, v in self._columns.items()
+            }
+        )
 
     @classmethod
     def from_xarray(cls, ds, allow_extra: bool = False) -> MeasuredData:
-        """Build from an `xarray.Dataset` with 1-D variables."""
-        return cls({k: ds[k].values for k in ds.data_vars}, allow_extra=allow_extra)
+        """Build from an `xarray.Dataset` whose variables (and coordinates) are 1-D along one
+        dimension. A ``units`` attribute must agree with the column's unit
+        ([`hrgjax.data.UNITS`][]); ``time_s`` may also carry CF units ("seconds since …",
+        "minutes since …", …), converted to seconds; coordinates other than a plain sample
+        index are columns like any other (unknown ones need `allow_extra`)."""
+        return cls(_dataset_columns(ds, "the dataset"), allow_extra=allow_extra)
+
+
+MAX_EXACT_INTEGER = 2**53
+"""Largest integer magnitude a float64 holds exactly; larger run ids or integer values are
+refused rather than rounded."""
+
+
+def _column(name: str, value) -> np.ndarray:
+    """One column as a new array: float64 (``run``: int64; an extra column: float64 or text),
+    or a `ValueError` naming the column, the row and the expected form."""
+    arr = np.asarray(value)
+    if arr.ndim != 1:
+        raise ValueError(f"column {name!r} must be 1-D (one value per row); got shape {arr.shape}")
+    unit = _unit_hint(name)
+    kind = arr.dtype.kind
+    if kind in "Mm":
+        example = ", e.g. (t - t[0]) / np.timedelta64(1, 's')" if name == "time_s" else ""
+        raise ValueError(
+            f"column {name!r} holds {arr.dtype} values (dates or durations); give plain "
+            f"numbers in {unit}{example}"
+        )
+    if kind == "c":
+        raise ValueError(f"column {name!r} holds complex numbers; give real numbers in {unit}")
+    if kind == "b":
+        raise ValueError(
+            f"column {name!r} holds booleans; give numbers in {unit} (e.g. x.astype(float))"
+        )
+    if kind == "O":
+        arr = _from_objects(name, arr, unit)
+        kind = arr.dtype.kind
+    if kind in "US":
+        if name in COLUMNS:
+            bad = np.flatnonzero(_not_number(arr))
+            i = int(bad[0]) if bad.size else 0
+            raise ValueError(
+                f"column {name!r} must hold numbers in {unit}; row {i} has {arr[i]!r} (text)"
+            )
+        return np.array(arr, dtype=str)  # an extra text column, kept as text
+    if kind in "iu":
+        if name == "run":
+            top = np.iinfo(np.int64).max
+            if kind == "u" and np.any(arr > top):
+                i = int(np.flatnonzero(arr > top)[0])
+                raise ValueError(
+                    f"column 'run' row {i}: {arr[i]} exceeds the int64 range of run ids"
+                )
+            return arr.astype(np.int64)
+        big = np.flatnonzero((arr > MAX_EXACT_INTEGER) | (arr < -MAX_EXACT_INTEGER))
+        if big.size:
+            i = int(big[0])
+            raise ValueError(
+                f"column {name!r} row {i}: the integer {arr[i]} is too large to hold exactly as "
+                "a float64 (|x| > 2**53); give it as a float if rounding is intended"
+            )
+        return arr.astype(float)
+    if kind != "f":
+        raise ValueError(f"column {name!r} must hold numbers in {unit}; got dtype {arr.dtype}")
+    farr = arr.astype(float)
+    bad = np.flatnonzero(~np.isfinite(farr))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"column {name!r} has a non-finite value ({farr[i]}) at row {i}")
+    if name == "run":
+        frac = np.flatnonzero(farr != np.round(farr))
+        if frac.size:
+            i = int(frac[0])
+            raise ValueError(f"column 'run' must hold integers; row {i} has {farr[i]}")
+        big = np.flatnonzero(np.abs(farr) > MAX_EXACT_INTEGER)
+        if big.size:
+            i = int(big[0])
+            raise ValueError(
+                f"column 'run' row {i}: {farr[i]:.17g} is beyond 2**53, where floats no longer "
+                "hold every integer; give run ids as integers (int64) or smaller numbers"
+            )
+        return farr.astype(np.int64)
+    return farr
+
+
+def _from_objects(name: str, arr: np.ndarray, unit: str) -> np.ndarray:
+    """An object column (e.g. from pandas) as numbers or text, refusing a mixture."""
+    items = arr.tolist()
+    if all(isinstance(v, str) for v in items):
+        return np.array(items, dtype=str)
+    for i, v in enumerate(items):
+        if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
+            raise ValueError(
+                f"column {name!r} must hold numbers in {unit}; row {i} has {v!r} "
+                f"({type(v).__name__})"
+            )
+    if all(isinstance(v, numbers.Integral) for v in items):
+        try:
+            return np.array(items, dtype=np.int64)  # checked for exactness by the caller
+        except OverflowError:
+            i = next(i for i, v in enumerate(items) if abs(int(v)) > np.iinfo(np.int64).max)
+            raise ValueError(
+                f"column {name!r} row {i}: the integer {items[i]} exceeds the int64 range"
+            ) from None
+    return np.array(items, dtype=float)
+
+
+def _not_number(arr: np.ndarray) -> np.ndarray:
+    return np.array([_NUMBER.fullmatch(str(v).strip()) is None for v in arr], dtype=bool)
+
+
+def _unit_hint(name: str) -> str:
+    if name == "run":
+        return "[integer id]"
+    meaning = COLUMNS.get(name)
+    if meaning is None or "[" not in meaning:
+        return "the column's unit"
+    return meaning[meaning.rindex("[") : meaning.rindex("]") + 1]
+
+
+def _check_time(t: np.ndarray, run: np.ndarray) -> None:
+    """Time strictly increases within every run, wherever the run's rows are."""
+    order = np.argsort(run, kind="stable")
+    same = run[order][1:] == run[order][:-1]
+    bad = np.flatnonzero(same & (np.diff(t[order]) <= 0))
+    if bad.size:
+        i, j = int(order[bad[0] + 1]), int(order[bad[0]])
+        what = "duplicate time stamp" if t[i] == t[j] else "time goes backwards"
+        raise ValueError(
+            f"column 'time_s' must strictly increase within a run; row {i} (time {t[i]}, run "
+            f"{run[i]}) does not follow row {j} (time {t[j]}), the run's previous row — {what}"
+        )
 
 
 def concat(parts: list[MeasuredData]) -> MeasuredData:
@@ -224,45 +352,235 @@ def _import_xarray():
     return xr
 
 
-def _write_csv(data: MeasuredData, path: str) -> None:
+def _write_csv(data: MeasuredData, fh) -> None:
     cols = data.columns
     names = list(cols)
-    d = os.path.dirname(path)
-    if d:
-        os.makedirs(d, exist_ok=True)
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(names)
-        fmt = [(lambda v: str(int(v))) if cols[k].dtype.kind == "i" else repr for k in names]
-        for row in zip(*(cols[k].tolist() for k in names), strict=True):
-            w.writerow([f(v) for f, v in zip(fmt, row, strict=True)])
+    w = csv.writer(fh)
+    w.writerow(names)
+    kinds = [cols[k].dtype.kind for k in names]
+    fmt = [(lambda v: str(int(v))) if k == "i" else str if k in "US" else repr for k in kinds]
+    for row in zip(*(cols[k].tolist() for k in names), strict=True):
+        w.writerow([f(v) for f, v in zip(fmt, row, strict=True)])
+
+
+NETCDF_EXTENSIONS = (".nc", ".nc4", ".netcdf")
+"""File extensions read and written as NetCDF (HDF5, through h5netcdf)."""
+
+UNITS: dict[str, tuple[str, ...]] = {
+    "time_s": ("s", "second", "seconds", "sec"),
+    "run": ("1", "", "-", "count"),
+    "temperature_c": ("degC", "°C", "celsius", "degree_Celsius", "degrees_Celsius", "deg_C"),
+    "table_rate_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
+    "rate_corrected_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
+    "table_angle_deg": ("degree", "deg", "degrees", "°"),
+    "wave_angle_deg": ("degree", "deg", "degrees", "°"),
+    "angle_corrected_deg": ("degree", "deg", "degrees", "°"),
+    "accel_x_g": ("g", "g0", "standard_gravity"),
+    "accel_y_g": ("g", "g0", "standard_gravity"),
+    "accel_z_g": ("g", "g0", "standard_gravity"),
+}
+"""`units` attributes accepted on NetCDF variables (the first is the one written; compared
+without case or spaces). `amplitude`, `quadrature` and extra columns take any unit."""
+
+_CF_TIME = re.compile(r"\s*(\w+)\s+since\s+(.+)", re.IGNORECASE)
+_CF_FACTOR = {
+    "days": 86400.0, "day": 86400.0, "d": 86400.0,
+    "hours": 3600.0, "hour": 3600.0, "h": 3600.0, "hr": 3600.0,
+    "minutes": 60.0, "minute": 60.0, "min": 60.0,
+    "seconds": 1.0, "second": 1.0, "s": 1.0, "sec": 1.0,
+    "milliseconds": 1e-3, "millisecond": 1e-3, "ms": 1e-3,
+    "microseconds": 1e-6, "microsecond": 1e-6, "us": 1e-6,
+}  # fmt: skip
+
+
+def _norm_unit(u) -> str:
+    return "".join(str(u).split()).lower()
+
+
+def _dataset_columns(ds, where: str) -> dict[str, np.ndarray]:
+    """The columns of an xarray Dataset, every variable and coordinate checked (module
+    docstring of `from_xarray`)."""
+    columns: dict[str, np.ndarray] = {}
+    dims = set()
+    items = [(k, ds.data_vars[k]) for k in ds.data_vars]
+    # A coordinate is a column too, unless it is a plain sample index (0, 1, 2, …).
+    for k in ds.coords:
+        c = ds.coords[k]
+        if c.dims == (k,) and c.ndim == 1 and np.array_equal(c.values, np.arange(c.size)):
+            continue
+        items.append((k, c))
+    for name, var in items:
+        name = str(name)
+        if var.ndim != 1:
+            raise ValueError(
+                f"{where}: variable {name!r} has dimensions {var.dims}; every column must be "
+                "1-D along the one sample dimension"
+            )
+        dims.add(var.dims[0])
+        if len(dims) > 1:
+            raise ValueError(
+                f"{where}: variables lie along different dimensions {sorted(dims)}; every "
+                "column must be 1-D along the one sample dimension"
+            )
+        values = var.values
+        units = var.attrs.get("units", var.encoding.get("units"))
+        if units is not None:
+            values = _apply_units(name, values, units, where)
+        columns[name] = values
+    return columns
+
+
+def _apply_units(name: str, values, units, where: str):
+    """`values` in the contract's unit for `name`, given its `units` attribute: checked, and
+    for CF time units ("<unit> since <epoch>") converted to seconds (the epoch dropped)."""
+    if name == "time_s":
+        m = _CF_TIME.fullmatch(str(units))
+        if m:
+            factor = _CF_FACTOR.get(m.group(1).lower())
+            if factor is None:
+                raise ValueError(
+                    f"{where}: 'time_s' has CF units {units!r}; the unit before 'since' must be "
+                    f"one of {sorted(set(_CF_FACTOR))}"
+                )
+            if np.asarray(values).dtype.kind not in "iuf":
+                raise ValueError(f"{where}: 'time_s' with units {units!r} must hold numbers")
+            return np.asarray(values) * factor if factor != 1.0 else values
+    accepted = UNITS.get(name)
+    if accepted is None:  # amplitude, quadrature and extra columns: any unit
+        return values
+    if _norm_unit(units) not in {_norm_unit(u) for u in accepted}:
+        hint = " or CF '<unit> since <epoch>'" if name == "time_s" else ""
+        raise ValueError(
+            f"{where}: variable {name!r} has units {units!r}; the data contract wants "
+            f"{_unit_hint(name)} ({', '.join(repr(u) for u in accepted if u)}{hint})"
+        )
+    return values
 
 
 def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
-    """Load a CSV or NetCDF file in the data contract; validated like [`MeasuredData`][hrgjax.MeasuredData]."""
+    """Load a CSV or NetCDF file in the data contract; validated like
+    [`MeasuredData`][hrgjax.MeasuredData], errors naming the file, the column and the row (and
+    for CSV the line of the file).
+
+    CSV: UTF-8 (a byte-order mark is fine), a header row, comma-separated; lines starting with
+    ``#`` are comments; numbers in decimal or scientific notation (no thousands separators or
+    underscores); extra columns (with `allow_extra`) that are not all numbers are kept as
+    text. NetCDF: as [`MeasuredData.from_xarray`][hrgjax.MeasuredData.from_xarray]."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
-    if ext in (".nc", ".nc4", ".netcdf"):
-        xr = _import_xarray()
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
-            return MeasuredData.from_xarray(ds.load(), allow_extra=allow_extra)
+    if ext in NETCDF_EXTENSIONS:
+        return _load_netcdf(path, allow_extra)
     if ext != ".csv":
         raise ValueError(f"unknown data file extension {ext!r}; use .csv or .nc")
-    with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
-    if not rows:
+    columns, lines = _read_csv(path)
+    try:
+        return MeasuredData(columns, allow_extra=allow_extra)
+    except ValueError as err:
+        raise ValueError(f"{path}: {_with_line(str(err), lines)}") from None
+
+
+def _load_netcdf(path: str, allow_extra: bool) -> MeasuredData:
+    xr = _import_xarray()
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        ds = xr.open_dataset(
+            path, engine="h5netcdf", decode_times=False, decode_timedelta=False
+        ).load()
+    except Exception as err:  # h5py/h5netcdf raise many types for a damaged file
+        raise ValueError(
+            f"{path}: not a readable NetCDF (HDF5) file ({type(err).__name__}: {err})"
+        ) from None
+    with ds:
+        columns = _dataset_columns(ds, path)
+    try:
+        return MeasuredData(columns, allow_extra=allow_extra)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+def _with_line(message: str, lines: np.ndarray) -> str:
+    """Add the file's line number to a message naming a data row."""
+    m = re.search(r"\brow (\d+)\b", message)
+    if m is None or int(m.group(1)) >= lines.size:
+        return message
+    i = int(m.group(1))
+    return message[: m.end()] + f" (line {lines[i]} of the file)" + message[m.end() :]
+
+
+def _read_csv(path: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """(columns as parsed arrays, the file's line number of each data row)."""
+    line = [0]
+
+    def source(fh):
+        for i, text in enumerate(fh, 1):
+            line[0] = i
+            if text.lstrip().startswith("#"):
+                continue
+            yield text
+
+    header, rows, lines = None, [], []
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            for row in csv.reader(source(fh)):
+                if not row or all(not f.strip() for f in row):
+                    continue
+                if header is None:
+                    header = [h.strip() for h in row]
+                    continue
+                rows.append(row)
+                lines.append(line[0])
+    except UnicodeDecodeError as err:
+        raise ValueError(
+            f"{path}: line {line[0]}: not UTF-8 text ({err.reason}); save the file as UTF-8 CSV"
+        ) from None
+    except csv.Error as err:
+        raise ValueError(f"{path}: line {line[0]}: not a readable CSV row ({err})") from None
+    if header is None:
         raise ValueError(f"{path}: empty file (expected a header row)")
-    header = [h.strip() for h in rows[0]]
+    empty = [i for i, h in enumerate(header) if not h]
+    if empty:
+        raise ValueError(f"{path}: header field {empty[0] + 1} is empty; name every column")
     if len(set(header)) != len(header):
-        raise ValueError(f"{path}: duplicate column names in header {header}")
-    body = [r for r in rows[1:] if r]
-    cols: dict[str, list] = {h: [] for h in header}
-    for i, r in enumerate(body):
+        dup = sorted({h for h in header if header.count(h) > 1})
+        raise ValueError(f"{path}: duplicate column names {dup} in the header")
+    for r, ln in zip(rows, lines, strict=True):
         if len(r) != len(header):
-            raise ValueError(f"{path}: row {i} has {len(r)} fields, header has {len(header)}")
-        for h, v in zip(header, r, strict=True):
-            try:
-                cols[h].append(float(v))
-            except ValueError:
-                raise ValueError(f"{path}: column {h!r} row {i}: {v!r} is not a number") from None
-    return MeasuredData({h: np.asarray(v) for h, v in cols.items()}, allow_extra=allow_extra)
+            raise ValueError(f"{path}: line {ln} has {len(r)} fields, the header has {len(header)}")
+    fields = {h: [r[j] for r in rows] for j, h in enumerate(header)}
+    lines_arr = np.asarray(lines, dtype=np.int64)
+    return {h: _parse(path, h, v, lines_arr) for h, v in fields.items()}, lines_arr
+
+
+def _parse(path: str, name: str, values: list[str], lines: np.ndarray) -> np.ndarray:
+    """A CSV column's fields as numbers (run ids as exact integers); an extra column that is
+    not all numbers stays text."""
+    stripped = [v.strip() for v in values]
+    ok = [_NUMBER.fullmatch(v) is not None for v in stripped]
+    if not all(ok):
+        if name not in COLUMNS:
+            return np.array(values, dtype=str)
+        i = ok.index(False)
+        raise ValueError(
+            f"{path}: column {name!r} row {i} (line {lines[i]}): {values[i]!r} is not a number "
+            f"in {_unit_hint(name)}" + (" (empty field)" if not stripped[i] else "")
+        )
+    if name == "run" and all(_INTEGER.fullmatch(v) for v in stripped):
+        ints = [int(v) for v in stripped]
+        big = [i for i, v in enumerate(ints) if abs(v) > np.iinfo(np.int64).max]
+        if big:
+            i = big[0]
+            raise ValueError(
+                f"{path}: column 'run' row {i} (line {lines[i]}): {stripped[i]} exceeds the "
+                "int64 range of run ids"
+            )
+        return np.array(ints, dtype=np.int64)
+    if name in COLUMNS and name != "run" and any(_INTEGER.fullmatch(v) for v in stripped):
+        for i, v in enumerate(stripped):
+            if _INTEGER.fullmatch(v) and abs(int(v)) > MAX_EXACT_INTEGER:
+                raise ValueError(
+                    f"{path}: column {name!r} row {i} (line {lines[i]}): the integer {v} is too "
+                    "large to hold exactly as a float64; write it in scientific notation if "
+                    "rounding is intended"
+                )
+    return np.array([float(v) for v in stripped], dtype=float)
