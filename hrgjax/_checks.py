@@ -1,6 +1,7 @@
 """Shared input checks: trace-time structure errors and run-time value errors."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -14,8 +15,8 @@ def is_concrete(x) -> bool:
 
 
 def check_finite(name: str, x):
-    """Raise (eagerly when concrete, via ``eqx.error_if`` when traced) if x has NaN/inf."""
-    x = jnp.asarray(x)
+    """Raise (eagerly when concrete, via ``eqx.error_if`` when traced) if x has NaN/inf.
+    Returns `x` as a jax array."""
     if is_concrete(x):
         arr = np.asarray(x)
         bad = ~np.isfinite(arr)
@@ -24,8 +25,23 @@ def check_finite(name: str, x):
             raise ValueError(
                 f"{name} must be finite; found {arr[tuple(idx)]} at index {tuple(idx)}"
             )
-        return x
+        return x if isinstance(x, jax.Array) else jnp.asarray(x)
     return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{name} must be finite (found NaN or inf)")
+
+
+def check_nonnegative(name: str, x, unit: str = ""):
+    """Raise if any element of x is negative or not finite (concrete values only: a traced
+    value passes unchecked)."""
+    if not is_concrete(x):
+        return x
+    arr = np.asarray(x)
+    check_finite(name, arr)
+    if (arr < 0).any():
+        idx = np.argwhere(arr < 0)[0]
+        raise ValueError(
+            f"{name} must be >= 0{(' ' + unit) if unit else ''}; got {arr[tuple(idx)]}"
+        )
+    return x
 
 
 def check_positive(name: str, x, unit: str = ""):

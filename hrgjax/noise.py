@@ -13,7 +13,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .resonator.params import _param
+from ._checks import check_nonnegative, check_positive, is_concrete
+from .resonator.params import TemperatureLaw, _param
 
 
 class Noise(eqx.Module):
@@ -37,6 +38,34 @@ class Noise(eqx.Module):
     correlation_time: jax.Array = eqx.field(converter=_param, default=100.0)
     run_bias: jax.Array = eqx.field(converter=_param, default=0.0)
     amplitude_white: jax.Array = eqx.field(converter=_param, default=0.0)
+
+    def __check_init__(self):
+        for name in NONNEGATIVE:
+            value = getattr(self, name)
+            if not isinstance(value, TemperatureLaw) and is_concrete(value):
+                check_nonnegative(f"Noise.{name}", value, f"[{UNITS[name]}] (a standard deviation)")
+        value = self.correlation_time
+        if not isinstance(value, TemperatureLaw) and is_concrete(value):
+            check_positive("Noise.correlation_time", value, "[s]")
+
+
+NONNEGATIVE = (
+    "angle_white",
+    "angle_random_walk",
+    "bias_instability",
+    "run_bias",
+    "amplitude_white",
+)
+"""`Noise` fields that are standard deviations or densities (≥ 0)."""
+UNITS = {
+    "angle_white": "rad",
+    "angle_random_walk": "rad/√s",
+    "bias_instability": "rad/s",
+    "correlation_time": "s",
+    "run_bias": "rad/s",
+    "amplitude_white": "relative",
+}
+"""Units of the `Noise` fields."""
 
 
 def gauss_markov(key, ts, sigma, correlation_time):

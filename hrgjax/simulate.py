@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import numbers
 
 import diffrax
 import equinox as eqx
@@ -11,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_concrete
-from ._compiled import Check, program
+from ._compiled import Check, device, program
 from ._x64 import require_x64
 from .gyro import Gyro
 from .noise import draw_run_bias, rate_noise_angle
@@ -25,6 +26,7 @@ from .resonator.averaged import (
 )
 from .resonator.control import loop_outputs, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field
+from .resonator.params import TemperatureLaw
 
 MODELS = ("averaged", "full")
 AVERAGED_CHECKPOINTS = 256
@@ -45,10 +47,104 @@ def output_times(profile: Profile, dt_out: float):
             "output times explicitly with ts=."
         )
     t = np.asarray(profile.t)
-    if not (np.isfinite(dt_out) and dt_out > 0):
-        raise ValueError(f"dt_out must be a positive number of seconds; got {dt_out}")
-    n = int(np.floor((t[-1] - t[0]) / dt_out + 1e-9)) + 1
-    return jnp.asarray(t[0] + dt_out * np.arange(n), dtype=float)
+    if not _is_number(dt_out) or not (np.isfinite(dt_out) and dt_out > 0):
+        raise ValueError(f"dt_out must be a positive number of seconds; got {dt_out!r}")
+    span = float(t[-1] - t[0])
+    n = int(np.floor(span / dt_out + 1e-9)) + 1
+    if n > MAX_OUTPUT_SAMPLES:
+        raise ValueError(
+            f"dt_out={dt_out:g} s on a {span:g}-s profile gives {n:.3g} output samples, more "
+            f"than the {MAX_OUTPUT_SAMPLES:.0e} hrgjax allocates at once (≈ 100 bytes each); "
+            "choose a larger dt_out or split the profile into runs"
+        )
+    return device(t[0] + dt_out * np.arange(n))
+
+
+MAX_OUTPUT_SAMPLES = 50_000_000
+"""Largest output grid `simulate` builds from `dt_out` (checked before anything is
+allocated; pass `ts=` explicitly for more)."""
+
+
+def _is_number(x) -> bool:
+    """A concrete real scalar (Python, NumPy or jax), not a bool."""
+    if isinstance(x, bool) or not is_concrete(x) or np.ndim(x) != 0:
+        return False
+    return np.asarray(x).dtype.kind in "iuf"
+
+
+def _check_options(o) -> None:
+    """`simulate`'s numeric settings (concrete ones; a traced value passes unchecked)."""
+    for name in ("rtol", "atol"):
+        v = o[name]
+        if is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v) and float(v) > 0):
+            raise ValueError(f"{name} must be a positive number (a solver tolerance); got {v!r}")
+    v = o["max_steps"]
+    if v is not None and not (
+        isinstance(v, numbers.Integral) and not isinstance(v, bool) and v > 0
+    ):
+        raise ValueError(f"max_steps must be a positive integer or None; got {v!r}")
+    v = o["fixed_step"]
+    if v is not None and is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v) and v > 0):
+        raise ValueError(f"fixed_step must be a positive number of seconds or None; got {v!r}")
+    v = o["quadrature0"]
+    if is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v)):
+        raise ValueError(f"quadrature0 must be a finite number (readout units); got {v!r}")
+    v = o["run"]
+    if is_concrete(v):
+        arr = np.asarray(v)
+        if arr.ndim != 0 or arr.dtype.kind not in "iu" or isinstance(v, bool):
+            raise ValueError(f"run must be an integer run id (e.g. 3); got {v!r}")
+
+
+_LAW_LIMITS = {  # (path in the gyro, rule, unit) of the fields a temperature law must respect
+    "resonator.omega": ("> 0", "rad/s"),
+    "resonator.tau": ("> 0", "s"),
+    "drift_terms.lag_time": ("> 0", "s"),
+    "drift_terms.warmup_time": ("> 0", "s"),
+    "noise.correlation_time": ("> 0", "s"),
+    "noise.angle_white": (">= 0", "rad"),
+    "noise.angle_random_walk": (">= 0", "rad/√s"),
+    "noise.bias_instability": (">= 0", "rad/s"),
+    "noise.run_bias": (">= 0", "rad/s"),
+    "noise.amplitude_white": (">= 0", "relative"),
+}
+
+
+def _check_laws(gyro, profile) -> None:
+    """Every temperature law of `gyro` finite over the profile's temperatures, and decay
+    times, frequencies and noise levels of the right sign there (concrete values only)."""
+    if not is_concrete(profile.temperature):
+        return
+    temps = np.asarray(profile.temperature, dtype=float).ravel()
+    lo, hi = float(temps.min()), float(temps.max())
+    grid = np.unique(np.concatenate([temps, np.linspace(lo, hi, 257)]))
+    is_law = lambda x: isinstance(x, TemperatureLaw)
+    flat, _ = jax.tree_util.tree_flatten_with_path(gyro, is_leaf=is_law)
+    for path, law in flat:
+        if not is_law(law) or not all(is_concrete(x) for x in jax.tree_util.tree_leaves(law)):
+            continue
+        name = ".".join(str(getattr(p, "name", getattr(p, "key", p))) for p in path)
+        c = {
+            k: np.asarray(getattr(law, k), dtype=float) for k in ("p0", "p1", "p2", "lam", "t_ref")
+        }
+        if any(v.ndim for v in c.values()):
+            continue  # a batch of laws: checked member by member where it is evaluated
+        dt = grid - c["t_ref"]
+        with np.errstate(over="ignore", invalid="ignore"):
+            value = (c["p0"] + c["p1"] * dt + c["p2"] * dt**2) * np.exp(c["lam"] * dt)
+        rule, unit = _LAW_LIMITS.get(name, ("finite", ""))
+        bad = ~np.isfinite(value)
+        if rule == "> 0":
+            bad |= value <= 0
+        elif rule == ">= 0":
+            bad |= value < 0
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"the temperature law of gyro.{name} gives {value[i]:.6g} {unit} at "
+                f"{grid[i]:.4g} °C, inside the profile's temperatures [{lo:.4g}, {hi:.4g}] °C; "
+                f"it must be {rule} there".replace("  ", " ")
+            )
 
 
 @program(check=Check("simulate", result_index=2))
@@ -256,6 +352,8 @@ def _simulate(gyro, profile, model="averaged", **options):
         raise ValueError(
             "this gyro has noise: pass key=jax.random.key(…), or use gyro.without_noise()"
         )
+    _check_options(o)
+    _check_laws(gyro, profile)
     if ts is None:
         ts = output_times(profile, dt_out)
     else:
