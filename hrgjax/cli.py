@@ -8,6 +8,72 @@ import sys
 import time
 
 PRESETS = ("tvg3", "ideal")
+DATA_EXTENSIONS = (".csv", ".nc")
+PLOT_EXTENSIONS = (".png", ".pdf", ".svg")
+EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_INTERRUPTED = 2, 1, 130
+"""Exit statuses: bad input (a file, a column, an option), a failure during the work,
+Ctrl-C."""
+
+
+class UsageError(Exception):
+    """The command's input is bad; `main` prints the message and exits with status 2."""
+
+
+def _positive(kind, what):
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}; got {text!r}") from None
+        if not value > 0 or value != value or value in (float("inf"),):
+            raise argparse.ArgumentTypeError(f"expected {what} > 0; got {text}")
+        return value
+
+    return parse
+
+
+POSITIVE_SECONDS = _positive(float, "a number of seconds")
+POSITIVE_INT = _positive(int, "a whole number")
+POSITIVE_FLOAT = _positive(float, "a number")
+
+
+def _check_output(option: str, path, extensions=(), inputs=()) -> None:
+    """Refuse an output path before any work: wrong extension, a folder, an input file, or a
+    place that cannot be written."""
+    if path is None:
+        return
+    from ._io import same_file
+
+    ext = os.path.splitext(path)[1].lower()
+    if extensions and ext not in extensions:
+        raise UsageError(f"{option} {path}: the file name must end in {' or '.join(extensions)}")
+    if os.path.isdir(path):
+        raise UsageError(f"{option} {path} is a folder; give a file name")
+    for source in inputs:
+        if source and same_file(path, source):
+            raise UsageError(
+                f"{option} {path} is the input file {source}; write to another file "
+                "(hrgjax never overwrites its input)"
+            )
+    _check_folder(option, os.path.dirname(os.path.abspath(path)))
+
+
+def _check_folder(option: str, folder: str) -> None:
+    """The folder exists or can be made, and can be written."""
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise UsageError(f"{option}: {folder} is a file, not a folder")
+    d = folder
+    while not os.path.exists(d):
+        d = os.path.dirname(d)
+    if not os.path.isdir(d):
+        raise UsageError(f"{option}: cannot make the folder {folder}: {d} is a file")
+    if not os.access(d, os.W_OK | os.X_OK):
+        raise UsageError(f"{option}: cannot write in {d} (permission denied)")
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split())
+    return text or type(err).__name__
 
 
 def _setup():
@@ -34,7 +100,7 @@ def _gyro(name: str, noise: bool = True):
         return hg.presets.tvg3_like(noise=noise)
     if name == "ideal":
         return hg.presets.ideal(hg.presets.tvg3_like(temperature_laws=False).resonator)
-    raise SystemExit(f"unknown preset {name!r}; choose from {PRESETS}")
+    raise UsageError(f"unknown --preset {name!r}; choose from {PRESETS}")
 
 
 def _run_plans(gyro, plans, seed: int):
@@ -66,6 +132,7 @@ def cmd_simulate(args) -> int:
     _setup()
     from .calibration import rotation_plan, seed_plan, static_plan
 
+    _check_output("--out", args.out, DATA_EXTENSIONS)
     gyro = _gyro(args.preset, noise=not args.no_noise)
     if args.plan == "static":
         plans = [static_plan(duration_s=args.duration)]
@@ -89,6 +156,9 @@ def cmd_demo(args) -> int:
     from .calibration.evaluate import SEED_TABLE
     from .plots import compensation_residuals, drift_and_scale_factor, error_vs_temperature
 
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise UsageError(f"--out {args.out} is a file; give a folder for the demo's outputs")
+    _check_folder("--out", os.path.abspath(args.out))
     os.makedirs(args.out, exist_ok=True)
     mode = "quick" if args.quick else "full"
     print(f"hrgjax demo ({mode}): seed 000's calibration study on the built-in TVG-3-like gyro")
@@ -149,8 +219,10 @@ def _load_data(path, allow_extra):
 
     try:
         return hg.load(path, allow_extra=allow_extra)
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
     except (OSError, ValueError) as err:
-        raise SystemExit(f"hrgjax: cannot read {path}: {err}") from None
+        raise UsageError(f"cannot read {path}: {_one_line(err)}") from None
 
 
 def cmd_calibrate(args) -> int:
@@ -168,10 +240,16 @@ def cmd_calibrate(args) -> int:
         save_compensator,
     )
 
+    json_out = args.json or os.path.splitext(args.out)[0] + ".json"
+    _check_output("--out", args.out, (".eqx",), [args.data])
+    _check_output("--json", json_out, (".json",), [args.data])
     data = _load_data(args.data, args.allow_extra)
     t0 = time.perf_counter()
     say = _say(t0)
-    windows = reduce(data, k_e=args.k_e, window_s=args.window)
+    try:
+        windows = reduce(data, k_e=args.k_e, window_s=args.window)
+    except ValueError as err:
+        raise UsageError(f"{args.data}: {_one_line(err)}") from None
     n_static = len(np.unique(windows.run[windows.static]))
     n_moving = len(np.unique(windows.run[~windows.static]))
     temps = np.unique(np.round(windows.temperature_c, 2))
@@ -194,7 +272,7 @@ def cmd_calibrate(args) -> int:
             say("fitting the physical model through the simulator (Levenberg–Marquardt)")
             comp = PhysicalCompensator(k_e=args.k_e, window_s=args.window).fit(data)
     except ValueError as err:
-        raise SystemExit(f"hrgjax calibrate: {err}") from None
+        raise UsageError(_one_line(err)) from None
     say("fitted")
     static = windows.select(windows.static)
     resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c)
@@ -205,7 +283,7 @@ def cmd_calibrate(args) -> int:
     if args.method == "physical":
         print(comp.equations())
     out = save_compensator(comp, args.out)
-    js = export_json(comp, args.json or os.path.splitext(args.out)[0] + ".json")
+    js = export_json(comp, json_out)
     print(f"wrote {out}\nwrote {js}")
     return 0
 
@@ -217,12 +295,18 @@ def cmd_correct(args) -> int:
 
     from .calibration import load_compensator, run_errors
 
+    _check_output("--out", args.out, DATA_EXTENSIONS, [args.data, args.model])
     data = _load_data(args.data, args.allow_extra)
     try:
         comp = load_compensator(args.model)
-        out = comp.correct(data)
+    except FileNotFoundError:
+        raise UsageError(f"--model {args.model}: no such file") from None
     except (OSError, ValueError) as err:
-        raise SystemExit(f"hrgjax correct: {err}") from None
+        raise UsageError(_one_line(err)) from None
+    try:
+        out = comp.correct(data)
+    except ValueError as err:
+        raise UsageError(f"{args.data}: {_one_line(err)}") from None
     e = run_errors(comp, data)
     print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
     if np.any(e["static"]):
@@ -243,12 +327,14 @@ def cmd_discover(args) -> int:
     from .discovery.report import plot_report, write_json
 
     if args.nominal != "base":
-        raise SystemExit(f"hrgjax discover: unknown --nominal {args.nominal!r}; choose 'base'")
+        raise UsageError(f"unknown --nominal {args.nominal!r}; choose 'base'")
+    _check_output("--json", args.json, (".json",), [args.data])
+    _check_output("--plot", args.plot, PLOT_EXTENSIONS, [args.data])
     data = _load_data(args.data, args.allow_extra)
     try:
         report = discover(data, nominal=NOMINAL, k_e=args.k_e, shape=args.shape)
-    except (ValueError, RuntimeError) as err:
-        raise SystemExit(f"hrgjax discover: {err}") from None
+    except ValueError as err:
+        raise UsageError(f"{args.data}: {_one_line(err)}") from None
     print(f"hrgjax discover: {args.data} ({report['shape']} data)")
     print(f"  verdict: {report['verdict']}; missing effect: {report['missing_effect']}")
     if report["ambiguous_with"]:
@@ -277,12 +363,12 @@ def cmd_discover(args) -> int:
 def _write_json(obj: dict, path: str) -> str:
     """Write `obj` as indented JSON at `path` (folders made); returns the path."""
     import json
-    from pathlib import Path
 
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(obj, indent=2))
-    return str(p)
+    from ._io import atomic_write
+
+    with atomic_write(path, "w") as fh:
+        fh.write(json.dumps(obj, indent=2))
+    return str(path)
 
 
 def cmd_align(args) -> int:
@@ -292,12 +378,16 @@ def cmd_align(args) -> int:
     from .ins.alignment import align, load_psins
 
     if args.format != "psins":
-        raise SystemExit(f"hrgjax align: unknown --format {args.format!r}; choose 'psins'")
+        raise UsageError(f"unknown --format {args.format!r}; choose 'psins'")
+    _check_output("--json", args.json, (".json",), [args.imu_log])
+    _check_output("--plot", args.plot, PLOT_EXTENSIONS, [args.imu_log])
     try:
         log = load_psins(args.imu_log)
         result = align(log, coarse_s=args.coarse, step_s=args.step)
-    except (ValueError, FileNotFoundError) as err:
-        raise SystemExit(f"hrgjax align: {err}") from None
+    except FileNotFoundError:
+        raise UsageError(f"{args.imu_log}: no such file") from None
+    except ValueError as err:
+        raise UsageError(_one_line(err)) from None
     out = result.to_json()
     span = float(log.t[-1] - log.t[0])
     print(f"hrgjax align: {args.imu_log} ({log.t.shape[0]} samples, {span:.0f} s)")
@@ -328,6 +418,8 @@ def cmd_diagnose(args) -> int:
     from .diagnosis.compare import METHODS, compare, table
 
     methods = METHODS if args.methods is None else tuple(args.methods.split(","))
+    _check_output("--json", args.json, (".json",))
+    _check_output("--plot", args.plot, PLOT_EXTENSIONS)
     try:
         result = compare(
             args.scenario, key=jax.random.key(args.seed), n_faulty=args.runs,
@@ -335,7 +427,7 @@ def cmd_diagnose(args) -> int:
             log=lambda msg: print(f"  … {msg}", file=sys.stderr, flush=True),
         )  # fmt: skip
     except ValueError as err:
-        raise SystemExit(f"hrgjax diagnose: {err}") from None
+        raise UsageError(_one_line(err)) from None
     print(f"hrgjax diagnose: scenario {args.scenario}")
     print(table(result))
     traces = result.pop("traces", None)
@@ -357,9 +449,9 @@ def cmd_vibration(args) -> int:
     from .fog.study import SCENARIOS, run, table
 
     if args.scenario not in SCENARIOS:
-        raise SystemExit(
-            f"hrgjax vibration: unknown scenario {args.scenario!r}; known: {tuple(SCENARIOS)}"
-        )
+        raise UsageError(f"unknown --scenario {args.scenario!r}; known: {tuple(SCENARIOS)}")
+    _check_output("--json", args.json, (".json",))
+    _check_output("--plot", args.plot, PLOT_EXTENSIONS)
     try:
         quick = dict(freqs_hz=(5.0, 10.0, 20.0), amps_g=(0.25, 0.75, 1.25, 1.5), fs=100.0)
         result = run(
@@ -369,7 +461,7 @@ def cmd_vibration(args) -> int:
             **(quick if args.quick else {}),
         )  # fmt: skip
     except ValueError as err:
-        raise SystemExit(f"hrgjax vibration: {err}") from None
+        raise UsageError(_one_line(err)) from None
     figures = result.pop("_figures")
     print("hrgjax vibration")
     print(table(result))
@@ -391,6 +483,12 @@ def main(argv=None) -> int:
         default=argparse.SUPPRESS,  # before or after the command; neither overrides the other
         help="no progress bars (they are off without a terminal)",
     )
+    common.add_argument(
+        "--debug",
+        action="store_true",
+        default=argparse.SUPPRESS,
+        help="show the full traceback of an error (otherwise one line)",
+    )
     parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__, parents=[common])
     sub = parser.add_subparsers(dest="command", required=True)
     add_parser = sub.add_parser
@@ -407,12 +505,12 @@ def main(argv=None) -> int:
     p.add_argument("--method", default="fourier", choices=METHODS)
     p.add_argument("--out", default="out/model.eqx", help="compensator file (.eqx)")
     p.add_argument("--json", default=None, help="JSON export (default: beside --out)")
-    p.add_argument("--k-e", type=float, default=0.554, help="nominal angular gain k_e")
-    p.add_argument("--window", type=float, default=3.0, help="rotation-run window [s]")
+    p.add_argument("--k-e", type=POSITIVE_FLOAT, default=0.554, help="nominal angular gain k_e")
+    p.add_argument("--window", type=POSITIVE_SECONDS, default=3.0, help="rotation-run window [s]")
     p.add_argument(
         "--mode", default="reduced", choices=("reduced", "end_to_end"), help="MLP training mode"
     )
-    p.add_argument("--harmonics", type=int, default=2, help="Fourier harmonics of 2θ")
+    p.add_argument("--harmonics", type=POSITIVE_INT, default=2, help="Fourier harmonics of 2θ")
     p.add_argument(
         "--temperature-degree",
         type=int,
@@ -441,7 +539,7 @@ def main(argv=None) -> int:
     )
     p.add_argument("--json", default=None, help="write the report here (JSON)")
     p.add_argument("--plot", default=None, help="write the report figure here (PNG)")
-    p.add_argument("--k-e", type=float, default=0.554, help="nominal angular gain k_e")
+    p.add_argument("--k-e", type=POSITIVE_FLOAT, default=0.554, help="nominal angular gain k_e")
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     p.set_defaults(func=cmd_discover)
 
@@ -450,8 +548,10 @@ def main(argv=None) -> int:
     p.add_argument("--format", default="psins", help="log format (psins)")
     p.add_argument("--json", default=None, help="write heading/pitch/roll (+ _std_deg) here")
     p.add_argument("--plot", default=None, help="write the convergence figure here (PNG)")
-    p.add_argument("--coarse", type=float, default=60.0, help="coarse-alignment span [s]")
-    p.add_argument("--step", type=float, default=1.0, help="Kalman filter step [s]")
+    p.add_argument(
+        "--coarse", type=POSITIVE_SECONDS, default=60.0, help="coarse-alignment span [s]"
+    )
+    p.add_argument("--step", type=POSITIVE_SECONDS, default=1.0, help="Kalman filter step [s]")
     p.set_defaults(func=cmd_align)
 
     p = sub.add_parser("diagnose", help="three-INS fault diagnosis: every method, one table")
@@ -459,7 +559,9 @@ def main(argv=None) -> int:
                    choices=("stationary", "accel3g", "accel10g", "gyro"))  # fmt: skip
     p.add_argument("--json", default=None, help="write the table (methods[...]) here")
     p.add_argument("--plot", default=None, help="write decision traces of one run here (PNG)")
-    p.add_argument("--runs", type=int, default=12, help="faulty Monte Carlo runs (default 12)")
+    p.add_argument(
+        "--runs", type=POSITIVE_INT, default=12, help="faulty Monte Carlo runs (default 12)"
+    )
     p.add_argument("--methods", default=None, help="comma-separated subset of the methods")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_diagnose)
@@ -468,7 +570,7 @@ def main(argv=None) -> int:
     p.add_argument("--scenario", default="10hz_1g", help="10hz_1g, 10hz_0.5g or on_off")
     p.add_argument("--json", default=None, help="write heading errors and RMSEs here (JSON)")
     p.add_argument("--plot", default=None, help="write the PSD/training/alignment figure (PNG)")
-    p.add_argument("--epochs", type=int, default=1000,
+    p.add_argument("--epochs", type=POSITIVE_INT, default=1000,
                    help="training epochs (default 1000; the patent's 120 under-train)")  # fmt: skip
     p.add_argument(
         "--quick",
@@ -482,7 +584,7 @@ def main(argv=None) -> int:
     p.add_argument("--preset", default="tvg3", choices=PRESETS)
     p.add_argument("--plan", default="static", choices=("static", "rotation", "seed"))
     p.add_argument("--out", default="out/data.csv", help="CSV or .nc path")
-    p.add_argument("--duration", type=float, default=180.0, help="run length [s]")
+    p.add_argument("--duration", type=POSITIVE_SECONDS, default=180.0, help="run length [s]")
     p.add_argument("--quick", action="store_true", help="(seed plan) 3 temperatures, 60-s runs")
     p.add_argument("--no-noise", action="store_true", help="switch the gyro's noise off")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
@@ -491,7 +593,31 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if getattr(args, "quiet", False):
         os.environ["HRGJAX_QUIET"] = "1"
-    return args.func(args)
+    return _run(args)
+
+
+def _run(args) -> int:
+    """Run the command: a one-line error and exit status 2 for bad input, 1 for a failure
+    during the work, 130 on Ctrl-C (files are written atomically, so none is left half
+    written); `--debug` shows the traceback instead."""
+    name, debug = f"hrgjax {args.command}", getattr(args, "debug", False)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print(f"\n{name}: interrupted (no partial output files are left)", file=sys.stderr)
+        raise SystemExit(EXIT_INTERRUPTED) from None
+    except (UsageError, ValueError, TypeError, OSError) as err:
+        if debug:
+            raise
+        print(f"{name}: error: {_one_line(err)}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from None
+    except Exception as err:
+        if debug:
+            raise
+        print(f"{name}: failed: {_one_line(err)} (--debug shows the traceback)", file=sys.stderr)
+        raise SystemExit(EXIT_FAILURE) from None
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import numbers
 import os
 import re
@@ -519,21 +520,25 @@ def _read_csv(path: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
                 continue
             yield text
 
+    with open(path, "rb") as fh:
+        blob = fh.read()
+    try:
+        text = blob.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        at = blob[: err.start].count(b"\n") + 1
+        raise ValueError(
+            f"{path}: line {at}: not UTF-8 text ({err.reason}); save the file as UTF-8 CSV"
+        ) from None
     header, rows, lines = None, [], []
     try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            for row in csv.reader(source(fh)):
-                if not row or all(not f.strip() for f in row):
-                    continue
-                if header is None:
-                    header = [h.strip() for h in row]
-                    continue
-                rows.append(row)
-                lines.append(line[0])
-    except UnicodeDecodeError as err:
-        raise ValueError(
-            f"{path}: line {line[0]}: not UTF-8 text ({err.reason}); save the file as UTF-8 CSV"
-        ) from None
+        for row in csv.reader(source(io.StringIO(text, newline=""))):
+            if not row or all(not f.strip() for f in row):
+                continue
+            if header is None:
+                header = [h.strip() for h in row]
+                continue
+            rows.append(row)
+            lines.append(line[0])
     except csv.Error as err:
         raise ValueError(f"{path}: line {line[0]}: not a readable CSV row ({err})") from None
     if header is None:

@@ -16,6 +16,15 @@ def _plt():
     return plt
 
 
+def _save(fig, path, dpi: int) -> None:
+    """`fig.savefig` under a temporary name, renamed when complete (an interrupted save
+    leaves no partial image)."""
+    from ._io import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
+
+
 def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") -> str:
     """Drift [°/h] and scale factor vs wave angle, one curve per temperature; saves `path`.
 
@@ -51,7 +60,7 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
     ax2.grid(alpha=0.3)
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=120)
+    _save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -96,7 +105,7 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
     np.atleast_1d(axes)[0].legend(fontsize=6, ncol=2)
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=110)
+    _save(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -133,7 +142,7 @@ def error_vs_temperature(table: dict, path: str, seed: dict | None = None) -> st
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
-    fig.savefig(path, dpi=110)
+    _save(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -162,7 +171,7 @@ def alignment_figure(result, path: str, header_attitude_deg=None) -> str:
     axes[-1].set_xlabel("time [min]")
     fig.suptitle("Stationary alignment: coarse start, Kalman fine alignment")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    _save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -178,7 +187,7 @@ def schuler_figure(t, position_m: dict, path: str) -> str:
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    _save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -205,7 +214,7 @@ def diagnosis_figure(traces: dict, path: str, title: str = "", span=(-20.0, 40.0
     axes[-1, 0].set_xlabel("time from the fault onset [s]")
     fig.suptitle(f"Decided state, {title} (dotted: the faulty INS; red: onset)")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    _save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -256,6 +265,6 @@ def vibration_figure(figures: dict, path: str) -> str:
                  title=f"alignment, {figures['scenario']}", ylim=(-3, 3))  # fmt: skip
     ax[1, 2].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save(fig, path, dpi=110)
     plt.close(fig)
     return path

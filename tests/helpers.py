@@ -85,3 +85,24 @@ class CompileCounter:
                 c.names.append(kwargs.get("fun_name"))
             elif event == "/jax/core/compile/jaxpr_trace_duration":
                 c.traces += 1
+
+
+def cli_fails(argv, capsys, match, code=2):
+    """Run `hrgjax argv`, expect exit status `code` and one stderr line matching `match`;
+    returns that line."""
+    import re
+
+    from hrgjax.cli import main
+
+    capsys.readouterr()
+    try:
+        main(argv)
+    except SystemExit as stop:
+        status = stop.code
+    else:
+        status = 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == code, (status, err)
+    assert err, "no message on stderr"
+    assert re.search(match, err[-1]), err
+    return err[-1]

@@ -1,7 +1,7 @@
 """The command line: simulate writes contract data; demo --quick makes its outputs."""
 
 import numpy as np
-import pytest
+from helpers import cli_fails
 
 import hrgjax as hg
 from hrgjax.cli import main
@@ -76,20 +76,18 @@ def test_calibrate_and_correct_on_user_data(tmp_path, capsys):
     assert "residual rate RMS" in raw and str(corrected) in raw
 
 
-def test_calibrate_reports_missing_rotation_runs(tmp_path):
+def test_calibrate_reports_missing_rotation_runs(tmp_path, capsys):
     out = tmp_path / "static.csv"
     assert main(["simulate", "--plan", "static", "--duration", "6", "--out", str(out)]) == 0
-    with pytest.raises(SystemExit, match="no rotation runs"):
-        main(["calibrate", str(out), "--method", "fourier"])
+    cli_fails(["calibrate", str(out), "--method", "fourier"], capsys, "no rotation runs")
 
 
-def test_correct_reports_bad_model_file(tmp_path):
+def test_correct_reports_bad_model_file(tmp_path, capsys):
     data_path = tmp_path / "d.csv"
     assert main(["simulate", "--plan", "static", "--duration", "6", "--out", str(data_path)]) == 0
     bad = tmp_path / "m.eqx"
     bad.write_text("nonsense")
-    with pytest.raises(SystemExit, match="not an hrgjax compensator"):
-        main(["correct", str(data_path), "--model", str(bad)])
+    cli_fails(["correct", str(data_path), "--model", str(bad)], capsys, "not an hrgjax compensator")
 
 
 def test_discover_writes_the_contract_report(tmp_path, capsys):

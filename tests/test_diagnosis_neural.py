@@ -4,6 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import cli_fails
 
 from hrgjax.diagnosis import compare as cp
 from hrgjax.diagnosis import complex as cx
@@ -141,5 +142,5 @@ def test_diagnose_cli_writes_the_design_keys(tmp_path, capsys):
     )
     assert rows[0]["detection_time_s"] == 1.0 and rows[0]["false_alarm_rate"] == 0.0
     assert "| filter_bank |" in capsys.readouterr().out
-    with pytest.raises(SystemExit, match="unknown methods"):
-        main(["diagnose", "--methods", "filter_bank,bogus", "--runs", "1"])
+    cli_fails(["diagnose", "--methods", "filter_bank,bogus", "--runs", "1"], capsys,
+              "unknown methods")  # fmt: skip

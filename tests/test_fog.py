@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import cli_fails
 
 from hrgjax.fog import misalignment as mis
 from hrgjax.nn.elman import Elman
@@ -128,6 +129,7 @@ def test_psd_peak_finds_a_known_tone_and_matches_scipy():
 
 
 # --- vibration table, error model, features, compensation, alignment (seed 003) ---------
+
 
 from hrgjax.fog import compensation as cp  # noqa: E402
 from hrgjax.fog import vibration as vb  # noqa: E402
@@ -314,5 +316,4 @@ def test_vibration_cli_writes_the_design_keys_and_compensation_helps(tmp_path, c
     assert r["features"]["amp_g"] == pytest.approx(1.0, rel=0.01)
     assert png.stat().st_size > 10_000
     assert "| compensated |" in capsys.readouterr().out
-    with pytest.raises(SystemExit, match="unknown scenario"):
-        main(["vibration", "--scenario", "20hz"])
+    cli_fails(["vibration", "--scenario", "20hz"], capsys, "unknown --scenario")

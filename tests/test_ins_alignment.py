@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import cli_fails
 
 from hrgjax.cli import main
 from hrgjax.ins import alignment as al
@@ -97,10 +98,8 @@ def test_align_cli_writes_the_design_keys(psins_log, tmp_path, capsys):
     assert "heading" in capsys.readouterr().out
     bad = tmp_path / "bad.imu"
     bad.write_text("% x\n0 0 0 0 0 0\n34 108 0 0 10 9.8\n1 1 1 1 1 1\n1 2 3\n")
-    with pytest.raises(SystemExit, match="6 numbers"):
-        main(["align", str(bad)])
-    with pytest.raises(SystemExit, match="format"):
-        main(["align", str(PSINS), "--format", "csv"])
+    cli_fails(["align", str(bad)], capsys, "6 numbers")
+    cli_fails(["align", str(PSINS), "--format", "csv"], capsys, "format")
 
 
 def test_imu_log_refuses_bad_input():

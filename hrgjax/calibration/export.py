@@ -10,6 +10,8 @@ round trip is tested).
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
 import os
 
@@ -18,12 +20,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._io import atomic_write
 from .evaluate import NoCompensation
 from .fourier import T_SCALE, FourierCompensator
 from .mlp import MLPCompensator
 from .physical import NAMES, PhysicalCompensator
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""Version of the `.eqx` and JSON files (2: the `.eqx` header holds a length and SHA-256)."""
 _CLASSES = {
     c.__name__: c for c in (FourierCompensator, MLPCompensator, PhysicalCompensator, NoCompensation)
 }
@@ -77,34 +81,69 @@ def _skeleton(name: str, hyper: dict):
 
 
 def save_compensator(comp, path: str | os.PathLike) -> str:
-    """Write a fitted compensator to `path` (`.eqx`); returns the path."""
+    """Write a fitted compensator to `path` (`.eqx`); returns the path.
+
+    The file is one JSON header line (class, hyperparameters, format version, the payload's
+    length and SHA-256) and the equinox serialisation of the module; it is written under a
+    temporary name and renamed when complete."""
     path = os.fspath(path)
-    d = os.path.dirname(path)
-    if d:
-        os.makedirs(d, exist_ok=True)
-    header = {"class": type(comp).__name__, "hyper": _hyper(comp), "format": FORMAT_VERSION}
-    with open(path, "wb") as fh:
+    buf = io.BytesIO()
+    eqx.tree_serialise_leaves(buf, comp)
+    payload = buf.getvalue()
+    header = {
+        "class": type(comp).__name__,
+        "hyper": _hyper(comp),
+        "format": FORMAT_VERSION,
+        "bytes": len(payload),
+        "sha256": hashlib.sha256(payload).hexdigest(),
+    }
+    with atomic_write(path, "wb") as fh:
         fh.write((json.dumps(header) + "\n").encode())
-        eqx.tree_serialise_leaves(fh, comp)
+        fh.write(payload)
     return path
 
 
 def load_compensator(path: str | os.PathLike):
     """Read a compensator written by [`save_compensator`][hrgjax.calibration.save_compensator].
 
-    **Raises:** `ValueError` if the file is not an hrgjax compensator.
+    **Raises:** `ValueError` naming the file if it is not an hrgjax compensator, was written by
+    a newer hrgjax (format version), is truncated or damaged (length or checksum), or does not
+    match the class its header names.
     """
+    path = os.fspath(path)
     with open(path, "rb") as fh:
-        try:
-            header = json.loads(fh.readline().decode())
-            name = header["class"]
-        except (ValueError, KeyError, UnicodeDecodeError):
+        first, payload = fh.readline(), fh.read()
+    try:
+        header = json.loads(first.decode())
+        name, hyper, version = header["class"], header["hyper"], header.get("format", 1)
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError):
+        raise ValueError(
+            f"{path}: not an hrgjax compensator (.eqx from save_compensator)"
+        ) from None
+    if not isinstance(version, int) or version > FORMAT_VERSION:
+        raise ValueError(
+            f"{path}: compensator file format {version!r}; this hrgjax reads formats up to "
+            f"{FORMAT_VERSION} (update hrgjax)"
+        )
+    if name not in _CLASSES:
+        raise ValueError(
+            f"{path}: unknown compensator class {name!r}; known are {sorted(_CLASSES)}"
+        )
+    if version >= 2:  # format 1 (before the checksum) is read without one
+        if len(payload) != header.get("bytes"):
             raise ValueError(
-                f"{path}: not an hrgjax compensator (.eqx from save_compensator)"
-            ) from None
-        if name not in _CLASSES:
-            raise ValueError(f"{path}: unknown compensator class {name!r}")
-        return eqx.tree_deserialise_leaves(fh, _skeleton(name, header["hyper"]))
+                f"{path}: truncated or damaged ({len(payload)} bytes of compensator data, the "
+                f"header says {header.get('bytes')})"
+            )
+        if hashlib.sha256(payload).hexdigest() != header.get("sha256"):
+            raise ValueError(f"{path}: damaged (checksum mismatch); save the compensator again")
+    try:
+        return eqx.tree_deserialise_leaves(io.BytesIO(payload), _skeleton(name, dict(hyper)))
+    except Exception as err:  # a hand-edited header: shapes or fields do not match
+        raise ValueError(
+            f"{path}: the data do not match a {name} with the header's hyperparameters "
+            f"({type(err).__name__}: {err})"
+        ) from None
 
 
 def _mlp_layers(net: eqx.nn.MLP) -> list[dict]:
@@ -171,10 +210,7 @@ def to_json_dict(comp) -> dict:
 def export_json(comp, path: str | os.PathLike) -> str:
     """Write [`to_json_dict`][hrgjax.calibration.export.to_json_dict] to `path`."""
     path = os.fspath(path)
-    d = os.path.dirname(path)
-    if d:
-        os.makedirs(d, exist_ok=True)
-    with open(path, "w") as fh:
+    with atomic_write(path, "w") as fh:
         json.dump(to_json_dict(comp), fh, indent=1)
     return path
 

@@ -300,14 +300,23 @@ def stream_classes(detector, z, unit: float = 1e-7, taps: int = TAPS):
     return jnp.concatenate([jnp.zeros(taps - 1, c.dtype), c])
 
 
+@eqx.filter_jit
+def _accuracy(det, x, y):
+    """Fraction of `x` that `det` classifies as `y` (one compiled program per detector type
+    and shapes: eagerly, the kernel matrices of every window against every centre are
+    materialised operation by operation)."""
+    return jnp.mean(det.classify(x) == y)
+
+
 def choose_sigma(cls, x, y, xv, yv, n_classes: int, grid=(0.1, 0.2, 0.5, 1.0, 2.0, 5.0)):
     """Fit `cls` ([`PNNBank`][hrgjax.diagnosis.neural.PNNBank] or
     [`PNNDirect`][hrgjax.diagnosis.neural.PNNDirect]) with each kernel width of `grid` and
     keep the one most accurate on the validation set `xv`, `yv`."""
     best, best_acc = None, -1.0
+    xv, yv = jnp.asarray(xv, float), jnp.asarray(yv)
     for s in grid:
         det = cls.fit(x, y, n_classes, s)
-        acc = float(jnp.mean(det.classify(xv) == jnp.asarray(yv)))
+        acc = float(_accuracy(det, xv, yv))
         if acc > best_acc:
             best, best_acc = det, acc
     return best

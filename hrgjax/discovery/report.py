@@ -38,7 +38,9 @@ def write_json(report: dict, path: str | os.PathLike) -> str:
         os.makedirs(d, exist_ok=True)
     first = ("missing_effect", "ranking", "gap_before", "gap_after", "noise_floor", "metric")
     ordered = {k: report[k] for k in first} | {k: v for k, v in report.items() if k not in first}
-    with open(path, "w") as fh:
+    from .._io import atomic_write
+
+    with atomic_write(path, "w") as fh:
         json.dump(_clean(ordered), fh, indent=1)
     return path
 
@@ -145,6 +147,8 @@ def _finish(fig, axes, report, path, plt):
     d = os.path.dirname(path)
     if d:
         os.makedirs(d, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    from ..plots import _save
+
+    _save(fig, path, dpi=110)
     plt.close(fig)
     return path
