@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import numbers
@@ -484,20 +485,50 @@ def _load_netcdf(path: str, allow_extra: bool) -> MeasuredData:
     xr = _import_xarray()
     if not os.path.isfile(path):
         raise FileNotFoundError(f"{path}: no such file")
-    try:
-        ds = xr.open_dataset(
-            path, engine="h5netcdf", decode_times=False, decode_timedelta=False
-        ).load()
-    except Exception as err:  # h5py/h5netcdf raise many types for a damaged file
-        raise ValueError(
-            f"{path}: not a readable NetCDF (HDF5) file ({type(err).__name__}: {err})"
-        ) from None
+    failure = None
+    with _quiet_h5netcdf_finalisers():
+        try:
+            ds = xr.open_dataset(
+                path, engine="h5netcdf", decode_times=False, decode_timedelta=False
+            ).load()
+        except Exception as err:  # h5py/h5netcdf raise many types for a damaged file
+            failure = (
+                f"{path}: not a readable NetCDF (HDF5) file ({type(err).__name__}: {_flat(err)})"
+            )
+    if failure is not None:
+        raise ValueError(failure)
     with ds:
         columns = _dataset_columns(ds, path)
     try:
         return MeasuredData(columns, allow_extra=allow_extra)
     except ValueError as err:
         raise ValueError(f"{path}: {err}") from None
+
+
+def _flat(err: BaseException) -> str:
+    return " ".join(str(err).split())
+
+
+@contextlib.contextmanager
+def _quiet_h5netcdf_finalisers():
+    """Silence the "Exception ignored in File.close" banner that h5netcdf's finaliser prints
+    for a file it failed to open (the error itself is reported, in one line); the half-opened
+    objects are collected before leaving."""
+    import gc
+    import sys
+
+    old = sys.unraisablehook
+
+    def hook(u):
+        if not str(getattr(getattr(u, "object", None), "__module__", "")).startswith("h5netcdf"):
+            old(u)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        gc.collect()
+        sys.unraisablehook = old
 
 
 def _with_line(message: str, lines: np.ndarray) -> str:

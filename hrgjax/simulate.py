@@ -147,7 +147,30 @@ def _check_laws(gyro, profile) -> None:
             )
 
 
-@program(check=Check("simulate", result_index=2))
+class _SimulateCheck(Check):
+    """`Check` that also says where a failed or non-finite simulation stopped: the first
+    output time whose sample is not finite (a vmapped batch: the first failing member)."""
+
+    def host(self, out):
+        message = super().host(out)
+        if message is None:
+            return None
+        rec = out[0]
+        t = np.asarray(rec.t)
+        bad = np.zeros(t.shape, bool)
+        for x in (rec.wave_angle, rec.amplitude, rec.quadrature, rec.true_wave_angle):
+            bad |= ~np.isfinite(np.asarray(x))
+        if bad.any():
+            at = tuple(int(i) for i in np.argwhere(bad)[0])
+            member = f" (batch member {at[:-1]})" if len(at) > 1 else ""
+            message = message.rstrip(". ") + (
+                f" (the outputs stop being finite at t = {t[at]:.6g} s{member}, "
+                f"sample {at[-1]} of {t.shape[-1]})"
+            )
+        return message
+
+
+@program(check=_SimulateCheck("simulate", result_index=2))
 def _solve(
     model,
     gyro,
