@@ -71,9 +71,8 @@ def _mutate_csv(rng, header, rows):
         rows.insert(i, list(rows[i]))
     elif kind == 3 and rows:  # a row cut short or lengthened
         i = rng.integers(len(rows))
-        rows[i] = (
-            rows[i][: rng.integers(0, len(rows[i]))] if rng.random() < 0.5 else rows[i] + ["1"]
-        )
+        cut = rng.integers(0, len(rows[i])) if rows[i] else 0
+        rows[i] = rows[i][:cut] if rng.random() < 0.5 else rows[i] + ["1"]
     elif kind == 4:  # header duplicated, dropped or misspelt
         c = rng.integers(len(header))
         choice = rng.integers(3)
