@@ -18,6 +18,10 @@ Each file ends in one of three outcomes:
 - **clear error**: a `ValueError` (or `FileNotFoundError`) of one line that names the file;
 - **other**: anything else (another exception type, a message over several lines, a round
   trip that changes the data). The target is 0; the script prints the first few.
+
+NetCDF files are loaded in a child process: libhdf5 can loop forever on a file whose metadata
+has flipped bits (no Python code can interrupt it), and such a file is counted as a
+**hang** after 30 s (reported, not hidden; it is a limit of libhdf5, see docs/data.md).
 """
 
 import argparse
@@ -195,6 +199,34 @@ def _outcome(path, folder):
     return ("loaded-equal", None) if again == data else ("other", "round trip changed the data")
 
 
+class _Worker:
+    """One child process that loads the NetCDF files, so that a file on which libhdf5 loops
+    (a flipped bit in its metadata can do that; no Python code can interrupt it) is counted
+    as a hang after `timeout` seconds instead of stopping the run."""
+
+    def __init__(self, timeout: float = 30.0):
+        import multiprocessing
+
+        self.timeout, self.context, self.pool = timeout, multiprocessing.get_context("spawn"), None
+
+    def outcome(self, path, folder):
+        import multiprocessing
+
+        if self.pool is None:
+            self.pool = self.context.Pool(1)
+        job = self.pool.apply_async(_outcome, (path, folder))
+        try:
+            return job.get(self.timeout)
+        except multiprocessing.TimeoutError:
+            self.pool.terminate()
+            self.pool = None
+            return "hang", f"libhdf5 did not return within {self.timeout:g} s"
+
+    def close(self):
+        if self.pool is not None:
+            self.pool.terminate()
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--csv", type=int, default=20_000, help="CSV files (default 20000)")
@@ -205,31 +237,37 @@ def main():
     t0 = time.perf_counter()
     counts = {}
     examples = []
+    worker = _Worker()
+    outcomes = ("loaded-equal", "clear error", "other", "hang")
     with tempfile.TemporaryDirectory() as folder:
         for kind, n in (("csv", args.csv), ("nc", args.nc)):
-            c = counts.setdefault(kind, {"loaded-equal": 0, "clear error": 0, "other": 0})
+            c = counts.setdefault(kind, dict.fromkeys(outcomes, 0))
             path = os.path.join(folder, f"fuzz.{kind}")
             with bar(n, f"fuzzing {kind}", unit="file") as progress:
-                for _ in range(n):
+                for i in range(n):
                     if kind == "csv":
                         with open(path, "wb") as fh:
                             fh.write(_csv_bytes(rng))
-                    elif not _nc_file(rng, path):  # the writer refused: not counted
-                        progress.update(1)
-                        continue
-                    outcome, why = _outcome(path, folder)
+                        outcome, why = _outcome(path, folder)
+                    else:
+                        path = os.path.join(folder, f"fuzz{i}.nc")  # a hung file stays open
+                        if not _nc_file(rng, path):  # the writer refused: not counted
+                            progress.update(1)
+                            continue
+                        outcome, why = worker.outcome(path, folder)
                     c[outcome] += 1
                     if why and len(examples) < 10:
                         examples.append(f"{kind}: {why}")
                     progress.update(1)
+    worker.close()
     print(f"fuzzed in {time.perf_counter() - t0:.0f} s")
-    print("| loader | files | loaded-equal | clear error | other |")
-    print("|---|---|---|---|---|")
+    print("| loader | files | loaded-equal | clear error | other | libhdf5 hang |")
+    print("|---|---|---|---|---|---|")
     for kind, c in counts.items():
         print(f"| {kind} | {sum(c.values())} | {c['loaded-equal']} | {c['clear error']} | "
-              f"{c['other']} |")  # fmt: skip
+              f"{c['other']} | {c['hang']} |")  # fmt: skip
     for e in examples:
-        print("  other:", e)
+        print("  not clear:", e)
     return 1 if any(c["other"] for c in counts.values()) else 0
 
 
