@@ -224,6 +224,12 @@ def _column(name: str, value) -> np.ndarray:
     if kind == "O":
         arr = _from_objects(name, arr, unit)
         kind = arr.dtype.kind
+    if kind == "S":  # bytes (a NetCDF char array): text, if it is UTF-8
+        try:
+            arr = np.char.decode(arr, "utf-8")
+        except UnicodeDecodeError:
+            raise ValueError(f"column {name!r} holds bytes that are not UTF-8 text") from None
+        kind = "U"
     if kind in "US":
         if name in COLUMNS:
             bad = np.flatnonzero(_not_number(arr))
@@ -277,6 +283,8 @@ def _from_objects(name: str, arr: np.ndarray, unit: str) -> np.ndarray:
     items = arr.tolist()
     if all(isinstance(v, str) for v in items):
         return np.array(items, dtype=str)
+    if all(isinstance(v, bytes) for v in items):
+        return np.array(items, dtype=bytes)  # decoded as UTF-8 by the caller
     for i, v in enumerate(items):
         if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
             raise ValueError(
