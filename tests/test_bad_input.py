@@ -370,7 +370,7 @@ def _check_outcome(path, tmp_dir):
 
 
 @settings(
-    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+    max_examples=950, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
 @given(
     header=st.lists(_NAMES, min_size=1, max_size=7),
@@ -391,7 +391,7 @@ def test_fuzzed_csv_loads_exactly_or_fails_clearly(tmp_path, header, rows, prefi
 
 
 @settings(
-    max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+    max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
 @given(
     n=st.integers(1, 5),
