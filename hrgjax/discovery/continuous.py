@@ -31,6 +31,7 @@ point and pays for the grid in its Bonferroni level.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import diffrax
@@ -40,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._compiled import Unchecked, program
 from .._progress import bar
 from ..data import MeasuredData
 from ..profiles import lag_at_knots
@@ -90,6 +92,9 @@ class Layout:
             start += len(ps)
         self.size = start
         self.scale = np.asarray(self.scales)
+
+    def __repr__(self):  # also the static value's key in the exported programs
+        return f"Layout({self.names!r})"
 
     def __hash__(self):
         return hash(self.names)
@@ -203,8 +208,30 @@ def _whitened(layout, z, groups):
     return jnp.concatenate(out)
 
 
-@eqx.filter_jit
+def _anonymous(groups):
+    """`groups` without their run ids: the ids are static fields, and a compiled program
+    keyed on them would be traced and compiled again for every run of the same length."""
+    return [dataclasses.replace(g, run=()) if g.run else g for g in groups]
+
+
 def _residual_and_jacobian(layout, z, basis, groups):
+    """Whitened residual at `z` and its forward-mode derivative along the columns of
+    `basis` (P, m): the sensitivities to m chosen parameters."""
+    return _residual_and_jacobian_compiled(layout, z, basis, _anonymous(groups))
+
+
+def _raw_residuals(layout, z, groups):
+    """Unwhitened increment residuals per group [rad], shape (R, K) each."""
+    return _raw_residuals_compiled(layout, z, _anonymous(groups))
+
+
+def _lm(layout, basis, z0, groups):
+    """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`."""
+    return _lm_compiled(layout, basis, z0, _anonymous(groups))
+
+
+@program(check=Unchecked())
+def _residual_and_jacobian_compiled(layout, z, basis, groups):
     """Whitened residual at `z` and its forward-mode derivative along the columns of
     `basis` (P, m): the sensitivities to m chosen parameters."""
     fn = lambda u: _whitened(layout, z + basis @ u, groups)
@@ -212,14 +239,14 @@ def _residual_and_jacobian(layout, z, basis, groups):
     return fn(u0), jax.jacfwd(fn)(u0)
 
 
-@eqx.filter_jit
-def _raw_residuals(layout, z, groups):
+@program(check=Unchecked())
+def _raw_residuals_compiled(layout, z, groups):
     """Unwhitened increment residuals per group [rad], shape (R, K) each."""
     return [_measured(g) - _increments(layout, z, g) for g in groups]
 
 
-@eqx.filter_jit
-def _lm(layout, basis, z0, groups):
+@program(check=Unchecked())
+def _lm_compiled(layout, basis, z0, groups):
     """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`."""
     fn = lambda u, _: _whitened(layout, z0 + basis @ u, groups)
     sol = optx.least_squares(
