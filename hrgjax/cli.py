@@ -7,6 +7,8 @@ import os
 import sys
 import time
 
+from .units import K_E_NOMINAL, WINDOW_S
+
 PRESETS = ("tvg3", "ideal")
 DATA_EXTENSIONS = (".csv", ".nc")
 PLOT_EXTENSIONS = (".png", ".pdf", ".svg")
@@ -505,8 +507,12 @@ def main(argv=None) -> int:
     p.add_argument("--method", default="fourier", choices=METHODS)
     p.add_argument("--out", default="out/model.eqx", help="compensator file (.eqx)")
     p.add_argument("--json", default=None, help="JSON export (default: beside --out)")
-    p.add_argument("--k-e", type=POSITIVE_FLOAT, default=0.554, help="nominal angular gain k_e")
-    p.add_argument("--window", type=POSITIVE_SECONDS, default=3.0, help="rotation-run window [s]")
+    p.add_argument(
+        "--k-e", type=POSITIVE_FLOAT, default=K_E_NOMINAL, help="nominal angular gain k_e"
+    )
+    p.add_argument(
+        "--window", type=POSITIVE_SECONDS, default=WINDOW_S, help="rotation-run window [s]"
+    )
     p.add_argument(
         "--mode", default="reduced", choices=("reduced", "end_to_end"), help="MLP training mode"
     )
@@ -539,7 +545,9 @@ def main(argv=None) -> int:
     )
     p.add_argument("--json", default=None, help="write the report here (JSON)")
     p.add_argument("--plot", default=None, help="write the report figure here (PNG)")
-    p.add_argument("--k-e", type=POSITIVE_FLOAT, default=0.554, help="nominal angular gain k_e")
+    p.add_argument(
+        "--k-e", type=POSITIVE_FLOAT, default=K_E_NOMINAL, help="nominal angular gain k_e"
+    )
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     p.set_defaults(func=cmd_discover)
 

@@ -9,10 +9,7 @@ from .noise import Noise
 from .resonator.control import Control
 from .resonator.params import Resonator, TemperatureLaw
 from .resonator.readout import Readout
-from .units import DEG, DEG_PER_H, DEG_PER_SQRT_H, T_REF_C
-
-K_BRYAN = 0.277
-"""Bryan factor of a thin hemisphere, n = 2 (PHYSICS.md §1.1)."""
+from .units import DEG, DEG_PER_H, DEG_PER_SQRT_H, K_BRYAN, T_REF_C
 
 
 def ideal(resonator: Resonator) -> Gyro:

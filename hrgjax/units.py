@@ -25,6 +25,15 @@ EARTH_RATE = 7.292115e-5
 """Earth's rotation rate (WGS-84) [rad/s]."""
 T_REF_C = 20.0
 """Reference temperature of temperature laws and of the reduced model [°C]."""
+K_BRYAN = 0.277
+"""Bryan factor of a thin hemisphere, n = 2 (PHYSICS.md §1.1)."""
+K_E_NOMINAL = 2 * K_BRYAN
+"""Nominal angular gain k_e = 2K = 0.554 used to turn wave-angle rates into input rates."""
+WINDOW_S = 3.0
+"""Default window of moving runs [s]. A window's slope averages the rate over the wave angles
+it spans: at 5 °/s a 10-s window spans 28° of wave angle and shrinks the fitted 2θ
+scale-factor ripple by about 4 % (enough to leave 0.016° after 2 min at −40 °C); 3 s spans
+8° and shrinks it by 0.35 %."""
 
 
 def deg(x):

@@ -165,7 +165,7 @@ def test_continuous_null_says_nothing_is_missing():
         assert v_est == pytest.approx(v_true, rel=0.2), tau
 
 
-def test_continuous_known_noise_and_bad_shape(thermal_rate_report):
+def test_continuous_known_noise_and_bad_shape():
     data = _short(None, 0.0, 5)
     with pytest.raises(ValueError, match="shape must be one of"):
         discover(data, shape="ramp")

@@ -346,7 +346,12 @@ def train_end_to_end(
     params, static = eqx.partition(comp, _trainable(comp))
     scales = _e2e_scales(comp, groups)
     params, _ = rprop_with_progress(
-        _e2e_loss, params, (static, groups, scales), steps, 1e-3, desc="MLP end-to-end"
+        _e2e_loss,
+        params,
+        (static, groups, scales),
+        steps,
+        comp.learning_rate,
+        desc="MLP end-to-end",
     )
     return eqx.combine(params, static)
 

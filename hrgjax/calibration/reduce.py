@@ -26,15 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..data import MeasuredData
-from ..presets import K_BRYAN
-
-K_E_NOMINAL = 2 * K_BRYAN
-"""Nominal angular gain k_e = 2K = 0.554 used to turn wave-angle rates into input rates."""
-WINDOW_S = 3.0
-"""Default window of moving runs [s]. A window's slope averages the rate over the wave angles
-it spans: at 5 °/s a 10-s window spans 28° of wave angle and shrinks the fitted 2θ
-scale-factor ripple by about 4 % (enough to leave 0.016° after 2 min at −40 °C); 3 s spans
-8° and shrinks it by 0.35 %."""
+from ..units import K_E_NOMINAL as K_E_NOMINAL
+from ..units import WINDOW_S as WINDOW_S
 
 
 def window_slopes(t, theta, n_windows: int, batches: int = 0):

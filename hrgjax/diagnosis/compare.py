@@ -195,7 +195,11 @@ def compare(
     unknown = set(methods) - set(METHODS)
     if unknown:
         raise ValueError(f"unknown methods {sorted(unknown)}; choose from {METHODS}")
-    key = jax.random.key(0) if key is None else key
+    if key is None:
+        raise ValueError(
+            "compare needs key=jax.random.key(…): the Monte Carlo runs, the training windows "
+            "and the networks' weights are drawn from it"
+        )
     k_test, k_healthy, k_train, k_win, k_nn, k_sizes = jax.random.split(key, 6)
     ins = sc.ins()
     n_ins = 3
