@@ -72,13 +72,22 @@ NAMES = tuple(p[0] for p in PARAMETERS)
 _SCALE = np.array([p[2] for p in PARAMETERS])
 
 
-def model_gyro(values) -> Gyro:
-    """The ideal-loop model gyro of the parameter vector `values` (order of `PARAMETERS`)."""
+MODEL_OMEGA = 2 * math.pi * 5000.0
+"""Mean natural angular frequency of the model gyro [rad/s] (not fitted: with ideal loops the
+averaged pattern rate does not depend on it)."""
+MODEL_TAU = 640.0
+"""Mean decay time of the model gyro [s] (not fitted: the ideal amplitude loop holds the
+amplitude whatever τ is; the damping *anisotropy* Δ(1/τ) is fitted)."""
+
+
+def model_gyro(values, omega: float = MODEL_OMEGA, tau: float = MODEL_TAU) -> Gyro:
+    """The ideal-loop model gyro of the parameter vector `values` (order of `PARAMETERS`),
+    with mean frequency `omega` [rad/s] and decay time `tau` [s]."""
     v = {name: values[i] for i, name in enumerate(NAMES)}
     law = lambda p0, p1=0.0, p2=0.0, lam=0.0: TemperatureLaw(p0, p1, p2, lam, T_REF_C)
     res = Resonator(
-        omega=2 * math.pi * 5000.0,
-        tau=640.0,
+        omega=omega,
+        tau=tau,
         k_e=law(v["k_e0"], v["k_e0"] * v["k_e_tc"]),
         delta_inv_tau=law(v["delta_inv_tau0"], lam=v["delta_inv_tau_lam"]),
         theta_tau=law(v["theta_tau0"], v["theta_tau1"]),
