@@ -478,6 +478,14 @@ def cmd_vibration(args) -> int:
 
 def main(argv=None) -> int:
     """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
+    args = build_parser().parse_args(argv)
+    if getattr(args, "quiet", False):
+        os.environ["HRGJAX_QUIET"] = "1"
+    return _run(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The `hrgjax` argument parser (every option with its help and default)."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--quiet",
@@ -491,22 +499,25 @@ def main(argv=None) -> int:
         default=argparse.SUPPRESS,
         help="show the full traceback of an error (otherwise one line)",
     )
-    parser = argparse.ArgumentParser(prog="hrgjax", description=__doc__, parents=[common])
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+    parser = argparse.ArgumentParser(
+        prog="hrgjax", description=__doc__, parents=[common], formatter_class=fmt
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     add_parser = sub.add_parser
-    sub.add_parser = lambda *a, **k: add_parser(*a, parents=[common], **k)
+    sub.add_parser = lambda *a, **k: add_parser(*a, parents=[common], formatter_class=fmt, **k)
 
     p = sub.add_parser("demo", help="main job on the built-in gyro")
-    p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
+    p.add_argument("--out", default="out/demo", help="output folder")
     p.add_argument("--quick", action="store_true", help="3 temperatures, short runs (< 1 min)")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("calibrate", help="fit a compensator to bench data (CSV or NetCDF)")
     p.add_argument("data", help="data file in the MeasuredData contract")
-    p.add_argument("--method", default="fourier", choices=METHODS)
+    p.add_argument("--method", default="fourier", choices=METHODS, help="compensator to fit")
     p.add_argument("--out", default="out/model.eqx", help="compensator file (.eqx)")
-    p.add_argument("--json", default=None, help="JSON export (default: beside --out)")
+    p.add_argument("--json", default=None, help="JSON export (None: beside --out)")
     p.add_argument(
         "--k-e", type=POSITIVE_FLOAT, default=K_E_NOMINAL, help="nominal angular gain k_e"
     )
@@ -564,12 +575,11 @@ def main(argv=None) -> int:
 
     p = sub.add_parser("diagnose", help="three-INS fault diagnosis: every method, one table")
     p.add_argument("--scenario", default="stationary",
-                   choices=("stationary", "accel3g", "accel10g", "gyro"))  # fmt: skip
+                   choices=("stationary", "accel3g", "accel10g", "gyro"),
+                   help="the INS's motion and the faulty sensor (hrgjax.diagnosis.compare)")  # fmt: skip
     p.add_argument("--json", default=None, help="write the table (methods[...]) here")
     p.add_argument("--plot", default=None, help="write decision traces of one run here (PNG)")
-    p.add_argument(
-        "--runs", type=POSITIVE_INT, default=12, help="faulty Monte Carlo runs (default 12)"
-    )
+    p.add_argument("--runs", type=POSITIVE_INT, default=12, help="faulty Monte Carlo runs")
     p.add_argument("--methods", default=None, help="comma-separated subset of the methods")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_diagnose)
@@ -579,7 +589,7 @@ def main(argv=None) -> int:
     p.add_argument("--json", default=None, help="write heading errors and RMSEs here (JSON)")
     p.add_argument("--plot", default=None, help="write the PSD/training/alignment figure (PNG)")
     p.add_argument("--epochs", type=POSITIVE_INT, default=1000,
-                   help="training epochs (default 1000; the patent's 120 under-train)")  # fmt: skip
+                   help="training epochs (the patent's 120 under-train)")  # fmt: skip
     p.add_argument(
         "--quick",
         action="store_true",
@@ -589,19 +599,30 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_vibration)
 
     p = sub.add_parser("simulate", help="simulate a bench plan on a preset gyro")
-    p.add_argument("--preset", default="tvg3", choices=PRESETS)
-    p.add_argument("--plan", default="static", choices=("static", "rotation", "seed"))
+    p.add_argument(
+        "--preset", default="tvg3", choices=PRESETS,
+        help="tvg3: the TVG-3-like gyro (temperature laws, closed loops, noise); ideal: its "
+        "resonator frozen at 20 °C with ideal loops, a perfect readout and no noise",
+    )  # fmt: skip
+    p.add_argument(
+        "--plan", default="static", choices=("static", "rotation", "seed"),
+        help="static: 11 temperatures × 19 wave angles at rest; rotation: the same at 5 °/s; "
+        "seed: both, as seed 000's bench",
+    )  # fmt: skip
     p.add_argument("--out", default="out/data.csv", help="CSV or .nc path")
-    p.add_argument("--duration", type=POSITIVE_SECONDS, default=180.0, help="run length [s]")
-    p.add_argument("--quick", action="store_true", help="(seed plan) 3 temperatures, 60-s runs")
+    p.add_argument(
+        "--duration", type=POSITIVE_SECONDS, default=180.0,
+        help="run length of the static and rotation plans [s] (the seed plan's are 180 s)",
+    )  # fmt: skip
+    p.add_argument(
+        "--quick", action="store_true",
+        help="(--plan seed) −40, +20, +60 °C × 19 wave angles, 120-s runs: 57 static and 57 "
+        "rotation runs",
+    )  # fmt: skip
     p.add_argument("--no-noise", action="store_true", help="switch the gyro's noise off")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_simulate)
-
-    args = parser.parse_args(argv)
-    if getattr(args, "quiet", False):
-        os.environ["HRGJAX_QUIET"] = "1"
-    return _run(args)
+    return parser
 
 
 def _run(args) -> int:

@@ -105,3 +105,24 @@ def test_discover_writes_the_contract_report(tmp_path, capsys):
     assert report["gap_after"] < report["gap_before"]
     assert png.stat().st_size > 0
     assert "missing effect: readout_gain_mismatch" in capsys.readouterr().out
+
+
+def test_every_option_has_help_and_its_default_is_shown():
+    """Walk every subcommand's parser (no JAX needed): each option has help text, and the
+    formatter prints the defaults."""
+    import argparse
+
+    from hrgjax.cli import build_parser
+
+    parser = build_parser()
+    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(subs.choices) >= {"demo", "simulate", "calibrate", "correct", "discover"}
+    for name, sub in subs.choices.items():
+        for action in sub._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            assert action.help, f"hrgjax {name} {action.option_strings or action.dest}: no help"
+        text = sub.format_help()
+        assert "(default:" in text, name
+    simulate = subs.choices["simulate"].format_help()
+    assert "57 static and 57 rotation runs" in " ".join(simulate.split())
