@@ -5,6 +5,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._checks import check_positive, is_concrete
 from ..units import T_REF_C
@@ -36,10 +37,17 @@ class TemperatureLaw(eqx.Module):
     lam: jax.Array = eqx.field(converter=_as_float, default=0.0)
     t_ref: jax.Array = eqx.field(converter=_as_float, default=T_REF_C)
 
-    def __call__(self, temperature_c):
-        """Evaluate the law at `temperature_c` [°C]."""
-        dt = jnp.asarray(temperature_c, dtype=float) - self.t_ref
-        return (self.p0 + self.p1 * dt + self.p2 * dt**2) * jnp.exp(self.lam * dt)
+    def __call__(self, temperature_c, xp=jnp):
+        """Evaluate the law at `temperature_c` [°C] (with `xp=np`, on the host: concrete
+        coefficients, NumPy arrays out)."""
+        if xp is jnp:
+            dt = jnp.asarray(temperature_c, dtype=float) - self.t_ref
+            return (self.p0 + self.p1 * dt + self.p2 * dt**2) * jnp.exp(self.lam * dt)
+        p0, p1, p2, lam, t_ref = (
+            np.asarray(x, dtype=float) for x in (self.p0, self.p1, self.p2, self.lam, self.t_ref)
+        )
+        dt = np.asarray(temperature_c, dtype=float) - t_ref
+        return (p0 + p1 * dt + p2 * dt**2) * np.exp(lam * dt)
 
 
 def _param(x):
