@@ -87,11 +87,11 @@ def _suite(name, effects, make, n_each, n_null, null_seed, totals):
             t0 = time.perf_counter()
             rep = discover(data)
             times.append(time.perf_counter() - t0)
-            hits += rep["missing_effect"] == effect
-            amb += bool(rep["ambiguous_with"])
-            before.append(rep["gap_before"])
-            after.append(rep["gap_after"])
-            floor.append(rep["noise_floor"])
+            hits += rep.missing_effect == effect
+            amb += bool(rep.ambiguous_with)
+            before.append(rep.gap_before)
+            after.append(rep.gap_after)
+            floor.append(rep.noise_floor)
         totals["hits"] += hits
         totals["n"] += n_each
         _row(
@@ -109,7 +109,7 @@ def _suite(name, effects, make, n_each, n_null, null_seed, totals):
         t0 = time.perf_counter()
         rep = discover(data)
         times.append(time.perf_counter() - t0)
-        fp += rep["missing_effect"] is not None
+        fp += rep.missing_effect is not None
     totals["fp"] += fp
     totals["nulls"] += n_null
     lo, hi = wilson(fp, n_null)
@@ -138,8 +138,8 @@ def _pairs_and_traps(n_each: int):
         for i in range(n_each):
             data = hidden_effect_dataset(pair, key=jax.random.key(3000 + 31 * i))
             rep = discover(data)
-            both += set(pair) <= set(rep["accepted"])
-            verdicts.append(rep["verdict"])
+            both += set(pair) <= set(rep.accepted)
+            verdicts.append(rep.verdict)
         lo, hi = wilson(both, n_each)
         label = " + ".join(pair)
         print(f"{label:>58} {both:>4}/{n_each:<3} [{lo:.2f}, {hi:.2f}]  {_count(verdicts)}")
@@ -155,9 +155,9 @@ def _pairs_and_traps(n_each: int):
             )
             rest = [n for n in candidates_for(set()) if n != effect]
             rep = discover(data, catalogue=rest)
-            unexplained += rep["verdict"] == "unexplained"
-            if rep["missing_effect"] is not None:
-                named.append(rep["missing_effect"])
+            unexplained += rep.verdict == "unexplained"
+            if rep.missing_effect is not None:
+                named.append(rep.missing_effect)
         print(f"{effect:>32} {unexplained:>5}/{n_each:<6} {_count(named):>40}")
 
 

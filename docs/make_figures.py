@@ -1,8 +1,12 @@
 """Figures for the docs, written to docs/figures/ (git-ignored): `make docs` runs this first.
 
-`python docs/make_figures.py [--jobs N] [NAME …]` makes all figures, or only the named ones
-(function names below), N at a time in separate processes, printing each as it is done; the
-compile cache is on, so a second run is faster."""
+`python docs/make_figures.py [--jobs N] [--fresh] [NAME …]` makes all figures, or only the
+named ones (function names below), N at a time in separate processes, printing each as it is
+done. Each figure's files are kept in hrgjax's cache (`<cache>/figures/<key>/<name>/`),
+keyed by the SHA-256 of this script, every source file of the package, the data file the
+figures read and the versions of JAX and its libraries: while none of those change, the
+figure is copied back instead of recomputed (`--fresh` or `HRGJAX_NO_CACHE=1` recompute). The
+compile cache is on too, so a figure whose code changed recompiles only what changed."""
 
 import os
 
@@ -20,6 +24,7 @@ import numpy as np  # noqa: E402
 import hrgjax as hg  # noqa: E402
 
 HERE = os.path.join(os.path.dirname(__file__), "figures")
+PSINS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "psins_lasergyro.imu")
 
 
 def full_vs_averaged():
@@ -95,12 +100,11 @@ def calibration():
 def discovery():
     from hrgjax.discovery import discover
     from hrgjax.discovery.generate import continuous_dataset, hidden_effect_dataset
-    from hrgjax.discovery.report import plot_report
 
     data = hidden_effect_dataset("damping_anisotropy_temperature", -0.04, key=jax.random.key(0))
-    plot_report(data, discover(data), os.path.join(HERE, "discovery_dwell.png"))
+    discover(data).plot(os.path.join(HERE, "discovery_dwell.png"))
     data = continuous_dataset("thermal_lag", 0.01, key=jax.random.key(0))
-    plot_report(data, discover(data), os.path.join(HERE, "discovery_continuous.png"))
+    discover(data).plot(os.path.join(HERE, "discovery_continuous.png"))
 
 
 def ins():
@@ -126,11 +130,8 @@ def ins():
         axis = 1 if "east error" in label else 0
         pos[label] = strapdown.position_metres(traj, dx)[:, axis]
     schuler_figure(traj.t, pos, os.path.join(HERE, "ins_schuler.png"))
-    data = os.path.join(
-        os.path.dirname(__file__), "..", "..", "shared", "data", "psins_lasergyro.imu"
-    )
-    if os.path.isfile(data):
-        log = alignment.load_psins(data)
+    if os.path.isfile(PSINS):
+        log = alignment.load_psins(PSINS)
         alignment_figure(alignment.align(log), os.path.join(HERE, "ins_alignment.png"),
                          log.header_attitude_deg)  # fmt: skip
 
@@ -163,29 +164,36 @@ def adjoint_memory():
 
     from hrgjax._compiled import _callback_free
 
-    def peak(fn):
+    def peak(fn, *args):
         # traced as hrgjax's own programs are (checks in NaN form, no host callback), so the
         # compile cache keeps them and a second `make docs` loads instead of compiling
         with _callback_free():
-            m = jax.jit(fn).lower(params).compile().memory_analysis()
+            m = jax.jit(fn).lower(params, *args).compile().memory_analysis()
         return (m.temp_size_in_bytes + m.argument_size_in_bytes + m.output_size_in_bytes) / 1e3
 
+    def final_loss(p, prof):
+        # the profile (its length included) is an argument: the gradient of the final angle is
+        # one program for every length, so its memory is measured once
+        g = eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(p, static))
+        ts = jnp.stack([prof.t[0], prof.t[-1]])
+        return jnp.mean(hg.simulate(g, prof, ts=ts).wave_angle ** 2)
+
     lengths = np.array([225.0, 900.0, 3600.0, 7200.0])
+    final = peak(jax.grad(final_loss), hg.Profile.piecewise([0.0, 1.0], [5.0, 5.0], [-40.0, 20.0]))
     rows = []
     for length in lengths:
         prof = hg.Profile.piecewise([0.0, length], [5.0, 5.0], [-40.0, 20.0])
 
-        def loss(p, adjoint=None, final=False, prof=prof, length=length):
+        def loss(p, adjoint=None, prof=prof):
             g = eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(p, static))
-            kw = {"ts": jnp.array([0.0, length])} if final else {"dt_out": 1.0}
-            return jnp.mean(hg.simulate(g, prof, adjoint=adjoint, **kw).wave_angle ** 2)
+            return jnp.mean(hg.simulate(g, prof, adjoint=adjoint, dt_out=1.0).wave_angle ** 2)
 
         store_all = diffrax.RecursiveCheckpointAdjoint(int(5.2 * length))  # ≥ steps (5.13/s)
         rows.append([
             peak(loss),
             peak(jax.grad(loss)),
             peak(jax.grad(lambda p, a=store_all, loss=loss: loss(p, a))),
-            peak(jax.grad(lambda p, loss=loss: loss(p, final=True))),
+            final,
         ])  # fmt: skip
     rows = np.array(rows)
     fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
@@ -215,15 +223,73 @@ FIGURES = (  # longest first, so that the workers finish together
 )
 
 
-def _make(name: str) -> float:
-    """Make one figure (in a worker process); its wall time [s]."""
+def _key() -> str:
+    """SHA-256 of what the figures depend on: this script, the package's sources, the data
+    file `ins` reads (its size and time: it is large) and the library versions."""
+    import hashlib
+    import importlib.metadata as md
+    from pathlib import Path
+
+    h = hashlib.sha256()
+    root = Path(__file__).resolve().parent.parent
+    files = [Path(__file__).resolve()] + sorted((root / "hrgjax").rglob("*.py"))
+    for f in files:
+        h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+    if os.path.isfile(PSINS):
+        st = os.stat(PSINS)
+        h.update(f"psins {st.st_size} {st.st_mtime_ns}".encode())
+    for lib in ("jax", "jaxlib", "equinox", "diffrax", "optax", "optimistix", "matplotlib"):
+        h.update(f"{lib}={md.version(lib)};".encode())
+    return h.hexdigest()[:24]
+
+
+def _stored(key: str, name: str):
+    """The cached folder of figure `name` under `key` (None when the cache is off)."""
+    from hrgjax._cache import cache_dir, cache_disabled
+
+    return None if cache_disabled() else cache_dir() / "figures" / key / name
+
+
+def _make(name: str, key: str, fresh: bool) -> tuple[float, bool]:
+    """Make one figure (in a worker process), or copy it from the cache: (wall time [s],
+    whether it came from the cache)."""
+    import shutil
+    import tempfile
     import time
 
-    os.makedirs(HERE, exist_ok=True)
-    hg.enable_cache()  # shared by the workers; a second `make docs` loads what the first compiled
+    global HERE
+    out = HERE
+    os.makedirs(out, exist_ok=True)
     t0 = time.perf_counter()
-    globals()[name]()
-    return time.perf_counter() - t0
+    stored = _stored(key, name)
+    if stored is not None and not fresh and (stored / "done").is_file():
+        for f in stored.iterdir():
+            if f.name != "done":
+                shutil.copy2(f, os.path.join(out, f.name))
+        return time.perf_counter() - t0, True
+    hg.enable_cache()  # shared by the workers; a second `make docs` loads what the first compiled
+    with tempfile.TemporaryDirectory() as tmp:
+        HERE = tmp  # the figure functions write to HERE: collect this figure's files alone
+        try:
+            globals()[name]()
+        finally:
+            HERE = out
+        made = sorted(os.listdir(tmp))
+        for f in made:
+            shutil.copy2(os.path.join(tmp, f), os.path.join(out, f))
+        if stored is not None:
+            try:
+                part = stored.with_name(f"{name}.{os.getpid()}.part")
+                shutil.rmtree(part, ignore_errors=True)
+                part.mkdir(parents=True)
+                for f in made:
+                    shutil.copy2(os.path.join(tmp, f), part / f)
+                (part / "done").write_text("\n".join(made))
+                shutil.rmtree(stored, ignore_errors=True)
+                os.replace(part, stored)
+            except OSError as err:  # a read-only or full cache costs the next run time only
+                print(f"could not cache {name}: {err}", flush=True)
+    return time.perf_counter() - t0, False
 
 
 if __name__ == "__main__":
@@ -238,14 +304,24 @@ if __name__ == "__main__":
         "--jobs", type=int, default=min(os.cpu_count() or 1, 4),
         help="figures made at once, each in its own process (default: cores, at most 4)",
     )  # fmt: skip
+    parser.add_argument("--fresh", action="store_true",
+                        help="recompute every figure (ignore the figure cache)")  # fmt: skip
     args = parser.parse_args()
-    todo = [f.__name__ for f in FIGURES if not args.names or f.__name__ in args.names]
+    known = [f.__name__ for f in FIGURES]
+    unknown = sorted(set(args.names) - set(known))
+    if unknown:
+        parser.error(f"unknown figure(s) {unknown}; choose from {known}")
+    todo = [n for n in known if not args.names or n in args.names]
     start = time.perf_counter()
-    print(f"making {len(todo)} figures, {args.jobs} at a time", flush=True)
+    key = _key()
+    print(f"making {len(todo)} figures, {args.jobs} at a time (figure cache key {key})",
+          flush=True)  # fmt: skip
     # Each figure in a fresh process (spawned: JAX does not survive a fork), longest first.
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(args.jobs, 1), mp_context=context) as pool:
-        jobs = {pool.submit(_make, name): name for name in todo}
+        jobs = {pool.submit(_make, name, key, args.fresh): name for name in todo}
         for done, job in enumerate(as_completed(jobs), 1):
-            print(f"[{done}/{len(todo)}] {jobs[job]}: {job.result():.1f} s", flush=True)
+            wall, cached = job.result()
+            how = "from the cache" if cached else "made"
+            print(f"[{done}/{len(todo)}] {jobs[job]}: {how}, {wall:.1f} s", flush=True)
     print(f"wrote figures to {HERE} in {time.perf_counter() - start:.0f} s")

@@ -326,7 +326,6 @@ def cmd_discover(args) -> int:
     """`hrgjax discover DATA`: name the effect missing from the nominal model."""
     _setup()
     from .discovery import NOMINAL, discover
-    from .discovery.report import plot_report, write_json
 
     if args.nominal != "base":
         raise UsageError(f"unknown --nominal {args.nominal!r}; choose 'base'")
@@ -334,31 +333,29 @@ def cmd_discover(args) -> int:
     _check_output("--plot", args.plot, PLOT_EXTENSIONS, [args.data])
     data = _load_data(args.data, args.allow_extra)
     try:
-        report = discover(data, nominal=NOMINAL, k_e=args.k_e, shape=args.shape)
+        found = discover(data, nominal=NOMINAL, k_e=args.k_e, shape=args.shape)
     except ValueError as err:
         raise UsageError(f"{args.data}: {_one_line(err)}") from None
-    print(f"hrgjax discover: {args.data} ({report['shape']} data)")
-    print(f"  verdict: {report['verdict']}; missing effect: {report['missing_effect']}")
-    if report["ambiguous_with"]:
-        print(f"  hard to tell apart from: {', '.join(report['ambiguous_with'])}")
-    if report["accepted"][1:]:
-        print(f"  also accepted: {', '.join(report['accepted'][1:])}")
-    print(
-        f"  held-out gap {report['gap_before']:.4g} → {report['gap_after']:.4g} °/h "
-        f"(noise floor {report['noise_floor']:.4g} °/h)"
-    )
-    if report["structure_left"]:
+    print(f"hrgjax discover: {args.data} ({found.shape} data)")
+    print(f"  verdict: {found.verdict}; missing effect: {found.missing_effect}")
+    if found.ambiguous_with:
+        print(f"  hard to tell apart from: {', '.join(found.ambiguous_with)}")
+    if found.accepted[1:]:
+        print(f"  also accepted: {', '.join(found.accepted[1:])}")
+    if found.structure_left:
         print("  structure is left above the noise floor that no catalogue effect explains")
+    print("  fitted model:")
+    print("\n".join("    " + line for line in found.equations().splitlines()[1:]))
     print("  screening (score, p, ΔBIC, aliasing):")
-    for r in report["screening"][:6]:
+    for r in found.screening[:6]:
         print(
             f"    {r['effect']:>32} {r['score']:12.4g} {r['p_value']:9.2g} "
             f"{r['delta_bic']:10.4g} {r['aliasing']:6.2f}"
         )
     if args.json:
-        print(f"wrote {write_json(report, args.json)}")
+        print(f"wrote {found.write_json(args.json)}")
     if args.plot:
-        print(f"wrote {plot_report(data, report, args.plot, k_e=args.k_e)}")
+        print(f"wrote {found.plot(args.plot)}")
     return 0
 
 

@@ -1,6 +1,7 @@
 """The command line: simulate writes contract data; demo --quick makes its outputs."""
 
 import numpy as np
+import pytest
 from helpers import cli_fails
 
 import hrgjax as hg
@@ -103,8 +104,18 @@ def test_discover_writes_the_contract_report(tmp_path, capsys):
     # tvg3_like's pickoff gain mismatch is by far the largest thing the nominal model lacks.
     assert report["missing_effect"] == "readout_gain_mismatch"
     assert report["gap_after"] < report["gap_before"]
+    # every parameter in user units, with its σ and unit (the readout mismatch in ppm)
+    for group in [report["parameters"]] + [{r["effect"]: r["params"]} for r in report["ranking"]]:
+        for params in group.values():
+            for p in params.values():
+                assert set(p) == {"value", "sigma", "unit"}, p
+    eps = report["parameters"]["readout_gain_mismatch"]["eps_1"]
+    model = report["model_parameters"]["readout_gain_mismatch"]["eps_1"]
+    assert eps["unit"] == "ppm" and eps["value"] == pytest.approx(1e6 * model["value"])
     assert png.stat().st_size > 0
-    assert "missing effect: readout_gain_mismatch" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "missing effect: readout_gain_mismatch" in out
+    assert "[readout_gain_mismatch]" in out and "ppm" in out  # the fitted model's equations
 
 
 def test_every_option_has_help_and_its_default_is_shown():

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import cli_fails
+from helpers import CompileCounter, cli_fails
 
 from hrgjax.diagnosis import compare as cp
 from hrgjax.diagnosis import complex as cx
@@ -80,7 +80,10 @@ def test_predictor_bank_names_the_onset_by_least_residual(data):
         w, _, _ = nl.training_windows(z_tr, t, k, 120, sizes=SIZES, p_fault=float(h > 0),
                                       onset_within_last=3)  # fmt: skip
         sets.append(nl.predictor_set(w))
-    pred = nl.MLPPredictor.fit(sets, key=jax.random.key(8), max_steps=8)
+    with CompileCounter() as compiles:
+        pred = nl.MLPPredictor.fit(sets, key=jax.random.key(8), max_steps=8)
+    # one Levenberg–Marquardt program for the four hypotheses (same shapes)
+    assert compiles.names.count("jit(least_squares)") == 1, compiles.names
     w, c, _ = nl.training_windows(z_te, tmpl, jax.random.key(10), 400, sizes=SIZES,
                                   onset_within_last=3)  # fmt: skip
     acc = float(jnp.mean(pred.classify_pairs(*nl.predictor_set(w)) == c))

@@ -130,15 +130,21 @@ def thermal_rate_report():
 
 def test_continuous_names_a_hidden_thermal_rate(thermal_rate_report):
     rep = thermal_rate_report
-    assert rep["shape"] == "continuous"
-    assert rep["missing_effect"] == "thermal_rate" and rep["verdict"] == "found"
+    assert rep.shape == "continuous"
+    assert rep.missing_effect == "thermal_rate" and rep.verdict == "found"
     # catalogue term = −k_e × the injected input-rate coefficient
     truth = -K_E * 0.15 * DEG_PER_H * 60.0
-    fit = rep["parameters"]["thermal_rate"]["c_Tdot"]
+    fit = rep.fit_parameters["thermal_rate"]["c_Tdot"]
     assert abs(fit["value"] - truth) < 4 * fit["std"]
-    assert rep["ranking"][0]["effect"] == "thermal_rate"
+    # reported in user units: the injected 0.15 °/h of input rate per °C/min, positive
+    user = rep.parameters["thermal_rate"]["c_Tdot"]
+    assert user["unit"] == "°/h per °C/min"
+    assert abs(user["value"] - 0.15) < 4 * user["sigma"]
+    assert rep.to_json()["parameters"]["thermal_rate"]["c_Tdot"] == pytest.approx(user)
+    assert "[thermal_rate]" in rep.equations()
+    assert rep.ranking[0]["effect"] == "thermal_rate"
     # the evidence repeats: refitted on each training run alone, every run agrees
-    cons = rep["consistency"]["thermal_rate"]
+    cons = rep.consistency["thermal_rate"]
     assert len(cons["per_run"]) == 4 and cons["dof"] >= 2
     for run in cons["per_run"].values():
         assert run["c_Tdot"] == pytest.approx(truth, rel=0.05)
@@ -147,9 +153,9 @@ def test_continuous_names_a_hidden_thermal_rate(thermal_rate_report):
 def test_continuous_null_says_nothing_is_missing():
     data = _short(None, 0.0, 4)
     rep = discover(data)
-    assert rep["missing_effect"] is None and rep["verdict"] == "none"
-    assert not rep["structure_left"]
-    noise = rep["noise"]
+    assert rep.missing_effect is None and rep.verdict == "none"
+    assert not rep.structure_left
+    noise = rep.noise
     # the preset's noise: 1″ white angle noise; its rate noise (ARW 0.002 °/√h, 0.003 °/h
     # Gauss–Markov) cannot be split in 25-min records, but their sum over a lag can
     assert 0.8 < noise["angle_white_arcsec"] < 1.2
@@ -177,5 +183,5 @@ def test_continuous_known_noise_and_bad_shape():
     with pytest.raises(ValueError, match="at least 3 runs"):
         discover(few)
     rep = discover(data, noise=generate.base_gyro().noise, catalogue=["thermal_rate"])
-    assert rep["noise"]["run_bias_dph"] == pytest.approx(0.2)
-    assert rep["missing_effect"] is None
+    assert rep.noise["run_bias_dph"] == pytest.approx(0.2)
+    assert rep.missing_effect is None

@@ -178,3 +178,31 @@ def test_unknown_or_misused_names_are_refused():
         readout_term("bias", jnp.zeros(1), c)
     with pytest.raises(ValueError, match="angular_gain"):
         pattern_rate({"bias": jnp.zeros(1)}, c)
+
+
+def test_user_units_read_as_the_input_rate_each_term_imitates():
+    from hrgjax.discovery.result import to_user_units
+
+    k_e = 0.554
+    c = Covariates(theta=jnp.asarray(0.3), rate=jnp.asarray(0.0), temperature=jnp.asarray(30.0))
+    # a +0.3 °/h bias of input rate is the pattern-rate term b = −k_e·0.3 °/h
+    b = float(rate_term("bias", jnp.asarray([-k_e * 0.3 * DEG_PER_H]), c))
+    user = to_user_units({"bias": {"b": {"value": b, "std": 0.01 * abs(b)}}}, k_e)["bias"]["b"]
+    assert user["unit"] == "°/h"
+    assert user["value"] == pytest.approx(0.3) and user["sigma"] == pytest.approx(0.003)
+    # b1 of the drift's temperature law: °/h per °C of input rate, at ΔT = 10 °C
+    p = jnp.asarray([1e-7, 0.0])
+    term = float(rate_term("bias_temperature", p, c))
+    u = to_user_units({"bias_temperature": {"b1": {"value": 1e-7}}}, k_e)["bias_temperature"]
+    assert u["b1"]["sigma"] is None
+    assert -term / k_e / DEG_PER_H == pytest.approx(u["b1"]["value"] * 10.0)
+    # scale-factor laws in ppm: Ω_apparent = Ω − term/k_e = Ω·(1 + ppm·1e-6·…)
+    omega = 10 * DEG
+    c = Covariates(theta=jnp.asarray(0.0), rate=jnp.asarray(omega), temperature=jnp.asarray(30.0))
+    for name, pname, p, factor in (
+        ("angular_gain_temperature", "kappa_T", 2e-5, 10.0),  # ΔT = 10 °C
+        ("rate_scale_factor", "kappa_Omega", 3e-4, 10.0**2),  # Ω² in (°/s)²
+    ):
+        term = float(rate_term_with_gain(name, jnp.asarray([p]), c, k_e))
+        ppm = to_user_units({name: {pname: {"value": p}}}, k_e)[name][pname]["value"]
+        assert omega - term / k_e == pytest.approx(omega * (1 + 1e-6 * ppm * factor), rel=1e-12)

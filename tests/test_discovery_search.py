@@ -63,13 +63,19 @@ def _bench(values, seed):
 def test_hidden_temperature_dependent_damping_is_named():
     data = _bench(_truth(delta_inv_tau_lam=-0.016, theta_tau1=0.0028), seed=3)
     rep = discover(data)
-    assert rep["missing_effect"] == "damping_anisotropy_temperature", rep["screening"][:3]
-    assert rep["verdict"] == "found"
-    assert rep["gap_before"] > 2 * rep["noise_floor"]
-    assert rep["gap_after"] < 1.3 * rep["noise_floor"]  # the target once it is added
-    assert 0.8 < rep["noise"]["angle_white_arcsec"] < 1.2  # injected: 1″
-    assert set(rep) >= {"missing_effect", "ranking", "gap_before", "gap_after", "noise_floor"}
-    assert rep["metric"] == "rms_run_mean_rate_residual_dph"
+    assert rep.missing_effect == "damping_anisotropy_temperature", rep.screening[:3]
+    assert rep.verdict == "found"
+    assert rep.gap_before > 2 * rep.noise_floor
+    assert rep.gap_after < 1.3 * rep.noise_floor  # the target once it is added
+    assert 0.8 < rep.noise["angle_white_arcsec"] < 1.2  # injected: 1″
+    assert set(rep.to_json()) >= {
+        "missing_effect",
+        "ranking",
+        "gap_before",
+        "gap_after",
+        "noise_floor",
+    }
+    assert rep.metric == "rms_run_mean_rate_residual_dph"
 
 
 def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
@@ -79,24 +85,24 @@ def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
     pair = {"damping_anisotropy_temperature": -0.04, "bias_temperature": 0.02}
     data = hidden_effect_dataset(pair, key=jax.random.key(1))
     rep = discover(data)
-    assert set(pair) <= set(rep["accepted"]), rep["screening"][:3]
-    assert rep["missing_effect"] in pair
-    assert rep["gap_after"] < 0.5 * rep["gap_before"]
+    assert set(pair) <= set(rep.accepted), rep.screening[:3]
+    assert rep.missing_effect in pair
+    assert rep.gap_after < 0.5 * rep.gap_before
     # out of catalogue: with the hidden effect not among the candidates the verdict is
     # "unexplained", not a wrong name
     data = hidden_effect_dataset("damping_anisotropy_temperature", -0.04, key=jax.random.key(2))
     rest = [n for n in candidates_for(set()) if n != "damping_anisotropy_temperature"]
     rep = discover(data, catalogue=rest)
-    assert rep["missing_effect"] is None and rep["verdict"] == "unexplained"
-    assert rep["structure_left"]
+    assert rep.missing_effect is None and rep.verdict == "unexplained"
+    assert rep.structure_left
 
 
 def test_null_dataset_names_nothing():
     rep = discover(_bench(_truth(), seed=4))
-    assert rep["missing_effect"] is None
-    assert rep["verdict"] == "none"
-    assert rep["gap_before"] < 2.0 * rep["noise_floor"]
-    assert rep["gap_after"] == rep["gap_before"]
+    assert rep.missing_effect is None
+    assert rep.verdict == "none"
+    assert rep.gap_before < 2.0 * rep.noise_floor
+    assert rep.gap_after == rep.gap_before
 
 
 def test_discover_refuses_bad_input():

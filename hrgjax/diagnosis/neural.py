@@ -274,15 +274,18 @@ class MLPPredictor(eqx.Module):
         return jnp.argmin(self.residuals(x, y), axis=-1)
 
 
+def _predictor_residuals(params, args):
+    static, x, y = args
+    return (jax.vmap(eqx.combine(params, static))(x) - y).reshape(-1)
+
+
 def _levenberg_marquardt(net, x, y, max_steps):
+    # one module-level residual with the data as arguments: optimistix compiles the solve
+    # once for all hypotheses of the same shapes (a closure per net compiled it per net)
     params, static = eqx.partition(net, eqx.is_inexact_array)
-
-    def resid(p, _):
-        m = eqx.combine(p, static)
-        return (jax.vmap(m)(x) - y).reshape(-1)
-
     solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-9)
-    sol = optx.least_squares(resid, solver, params, max_steps=max_steps, throw=False)
+    sol = optx.least_squares(_predictor_residuals, solver, params, (static, x, y),
+                             max_steps=max_steps, throw=False)  # fmt: skip
     return eqx.combine(sol.value, static)
 
 

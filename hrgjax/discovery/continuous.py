@@ -214,10 +214,27 @@ def _anonymous(groups):
     return [dataclasses.replace(g, run=()) if g.run else g for g in groups]
 
 
+def _width(m: int) -> int:
+    """Compiled basis width for m columns: 1, 2, 4, 8, then multiples of 8."""
+    return 1 << max(m - 1, 0).bit_length() if m <= 8 else -(-m // 8) * 8
+
+
+def _padded(basis):
+    """`basis` (P, m) with zero columns up to `_width(m)`: every fit and Jacobian of the
+    search then runs on a few compiled widths instead of one program per candidate's
+    parameter count. A zero column moves nothing: its Jacobian column is zero and its
+    Levenberg–Marquardt step is zero."""
+    basis = np.asarray(basis, float)
+    m = basis.shape[1]
+    return jnp.asarray(np.pad(basis, ((0, 0), (0, _width(m) - m)))), m
+
+
 def _residual_and_jacobian(layout, z, basis, groups):
     """Whitened residual at `z` and its forward-mode derivative along the columns of
     `basis` (P, m): the sensitivities to m chosen parameters."""
-    return _residual_and_jacobian_compiled(layout, z, basis, _anonymous(groups))
+    padded, m = _padded(basis)
+    r, j = _residual_and_jacobian_compiled(layout, jnp.asarray(z), padded, _anonymous(groups))
+    return r, j[:, :m]
 
 
 def _raw_residuals(layout, z, groups):
@@ -227,7 +244,8 @@ def _raw_residuals(layout, z, groups):
 
 def _lm(layout, basis, z0, groups):
     """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`."""
-    return _lm_compiled(layout, basis, z0, _anonymous(groups))
+    padded, _ = _padded(basis)
+    return _lm_compiled(layout, padded, jnp.asarray(z0), _anonymous(groups))
 
 
 @program(check=Unchecked())
@@ -501,13 +519,11 @@ class ContinuousProblem:
         Returns the fit dict used by `discover`."""
         z0 = self.z_null if z0 is None else np.asarray(z0)
         basis, idx = self._basis(model)
-        z, ok = _lm(self.layout, jnp.asarray(basis), jnp.asarray(z0), self.train_groups)
+        z, ok = _lm(self.layout, basis, jnp.asarray(z0), self.train_groups)
         if not bool(ok):
             raise RuntimeError(f"continuous discovery: the fit of {model} did not converge")
         z = np.asarray(z)
-        r, j = _residual_and_jacobian(
-            self.layout, jnp.asarray(z), jnp.asarray(basis), self.train_groups
-        )
+        r, j = _residual_and_jacobian(self.layout, jnp.asarray(z), basis, self.train_groups)
         r, j = np.asarray(r), np.asarray(j)
         err = np.sqrt(np.clip(np.diag(np.linalg.pinv(j.T @ j)), 0.0, None))
         held_raw = self.raw_residuals(z, self.held_groups)
@@ -579,10 +595,10 @@ class ContinuousProblem:
         for g in self.train_groups:
             for i, run in enumerate(g.run):
                 one = _take(g, i)
-                z, ok = _lm(self.layout, jnp.asarray(basis), z0, [one])
+                z, ok = _lm(self.layout, basis, z0, [one])
                 if not bool(ok):
                     continue
-                _, j = _residual_and_jacobian(self.layout, z, jnp.asarray(basis), [one])
+                _, j = _residual_and_jacobian(self.layout, z, basis, [one])
                 j = np.asarray(j)
                 info = j.T @ j
                 rank = np.linalg.matrix_rank(info, tol=1e-9 * max(np.trace(info), 1e-300))
@@ -612,6 +628,21 @@ class ContinuousProblem:
                 if p.name in ps:
                     z[i] = ps[p.name]["value"] / self.layout.scale[i]
         return z
+
+    def residuals(self, fit):
+        """What the figure draws of `fit`: every run's angle residual [″] against time in the
+        run [min], its mean rate removed (the switch-on bias), held-out runs marked."""
+        out = []
+        for groups, held in ((self.train_groups, False), (self.held_groups, True)):
+            for g, r in zip(groups, self.raw_residuals(fit["z"], groups), strict=True):
+                tb = np.asarray(g.t[:, g.bidx])
+                for i, run in enumerate(g.run):
+                    t = tb[i] - tb[i, 0]
+                    cum = np.concatenate([[0.0], np.cumsum(r[i])])
+                    cum = cum - np.polyval(np.polyfit(t, cum, 1), t)
+                    out.append({"run": int(run), "held": held, "t_min": t / 60,
+                                "angle_arcsec": cum / DEG * 3600})  # fmt: skip
+        return sorted(out, key=lambda d: d["run"])
 
     def raw_residuals(self, z, groups=None):
         """Unwhitened increment residuals [rad], one (R, K) array per group (default: the
@@ -671,10 +702,23 @@ class ContinuousProblem:
         if nonreg and tau is not None:
             z[nonreg[0]] = tau / self.layout.scale[nonreg[0]]
         basis, _ = self._basis([name])
-        _, jac = _residual_and_jacobian(
-            self.layout, jnp.asarray(z), jnp.asarray(basis), self.train_groups
-        )
+        _, jac = _residual_and_jacobian(self.layout, jnp.asarray(z), basis, self.train_groups)
         return -np.asarray(jac), z
+
+    def _shared_columns(self, current, names):
+        """`_columns` of every effect of `names` (no nonregular parameters) from one
+        Jacobian at the current fit: {name: (columns, z)}."""
+        if not names:
+            return {}
+        basis, idx = self._basis(names)
+        _, jac = _residual_and_jacobian(
+            self.layout, jnp.asarray(current["z"]), basis, self.train_groups
+        )
+        jac, pos, out = -np.asarray(jac), {i: k for k, i in enumerate(idx)}, {}
+        for name in names:
+            cols = [pos[i] for i in self.layout.index(name, which=True)]
+            out[name] = (jac[:, cols], current["z"].copy())
+        return out
 
     def _refine_tau(self, current, name, tried, best):
         """Parabola through the best grid point of the score and its neighbours in log τ;
@@ -698,6 +742,9 @@ class ContinuousProblem:
         others keep the score's ΔBIC approximation and no held-out gain). Best first."""
         n = current["r"].size
         rows = []
+        # the candidates without a nonregular parameter share one Jacobian at the current fit
+        regular = [c for c in cands if not self.layout.index(c, which=False)]
+        shared = self._shared_columns(current, regular)
         progress = bar(len(cands), f"screening {len(cands)} candidates", unit="effect")
         for name in cands:
             progress.set_postfix_str(name)
@@ -705,7 +752,7 @@ class ContinuousProblem:
             grid = TAU_GRID if self.layout.index(name, which=False) else (None,)
             tried = []
             for tau in grid:
-                g, z = self._columns(current, name, tau)
+                g, z = shared[name] if name in shared else self._columns(current, name, tau)
                 if np.any(g):
                     tried.append((*dwell.score(current["r"], current["j"], g), z, tau))
             if not tried:

@@ -18,7 +18,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..units import DEG_PER_H, T_REF_C
+from ..units import DEG, DEG_PER_H, T_REF_C
 
 NOMINAL = ("bias", "angular_gain", "damping_anisotropy")
 """The nominal model `base` (DESIGN.md)."""
@@ -26,13 +26,23 @@ NOMINAL = ("bias", "angular_gain", "damping_anisotropy")
 
 @dataclasses.dataclass(frozen=True)
 class Param:
-    """One parameter of an effect: name, unit, a typical size (so optimisers see O(1)
-    numbers) and whether it is regular (defined under the null)."""
+    """One parameter of an effect: `name`, model `unit`, a typical size `scale` (so
+    optimisers see O(1) numbers), whether it is `regular` (defined under the null), and how
+    a user reads it: `user_unit`, `user_factor` and `input_rate`. A pattern-rate parameter
+    (`input_rate=True`) is reported as the input rate it imitates: θ̇ = −k_e·Ω, so a term f
+    of the pattern rate reads as −f/k_e of input rate (°/h where f is in rad/s)."""
 
     name: str
     unit: str
     scale: float
     regular: bool = True
+    user_unit: str = ""
+    user_factor: float = 1.0
+    input_rate: bool = False
+
+    def user_scale(self, k_e: float) -> float:
+        """Factor from the model unit to `user_unit` at angular gain `k_e`."""
+        return self.user_factor * (-1.0 / k_e if self.input_rate else 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,6 +55,8 @@ class Effect:
       nonregular ones, which only matter when the regular ones are non-zero).
     - `needs`: covariates the term reads; `signature`, `aliases`, `discriminate`: how it shows,
       what it is confused with, and the experiment that separates them.
+    - `formula`: the term in user units, as the apparent input rate it adds (a readout term:
+      the angle it adds), with `{param}` where each parameter's value goes (ΔT = T − 20 °C).
     """
 
     name: str
@@ -55,6 +67,7 @@ class Effect:
     signature: str
     aliases: tuple[str, ...] = ()
     discriminate: str = ""
+    formula: str = ""
 
     @property
     def size(self) -> int:
@@ -104,16 +117,27 @@ def window_gain(x):
 _H = DEG_PER_H  # 1 °/h in rad/s: the natural size of a drift term
 
 
-def _e(name, title, where, params, needs, signature, aliases=(), discriminate=""):
+def _rate(name, unit, scale, user_unit, factor=1.0 / _H):
+    """A pattern-rate parameter reported as input rate (°/h by default)."""
+    return Param(name, unit, scale, True, user_unit, factor, True)
+
+
+def _plain(name, unit, scale, user_unit=None, factor=1.0, regular=True):
+    """A parameter reported in its own unit (times `factor`)."""
+    return Param(name, unit, scale, regular, unit if user_unit is None else user_unit, factor)
+
+
+def _e(name, title, where, params, needs, signature, aliases=(), discriminate="", formula=""):
     return Effect(
         name,
         title,
         where,
-        tuple(Param(*p) for p in params),
+        tuple(params),
         tuple(needs),
         signature,
         tuple(aliases),
         discriminate,
+        formula,
     )
 
 
@@ -124,157 +148,185 @@ CATALOGUE: dict[str, Effect] = {
             "angular_gain",
             "angular gain k_e (nominal)",
             "rate",
-            [("k_e", "", 1e-3)],
+            [_plain("k_e", "", 1e-3)],
             ["rate"],
             "wave angle turns at −k_e·Ω",
+            formula="θ̇ = −{k_e}·Ω (the angular gain)",
         ),
         _e(
             "bias",
             "constant drift (nominal)",
             "rate",
-            [("b", "rad/s", _H)],
+            [_rate("b", "rad/s", _H, "°/h")],
             [],
             "constant pattern rate",
+            formula="{b}",
         ),
         _e(
             "damping_anisotropy",
             "damping anisotropy Δ(1/τ), axis θ_τ (nominal)",
             "rate",
-            [("d_c", "rad/s", _H), ("d_s", "rad/s", _H)],
+            [_rate("d_c", "rad/s", _H, "°/h"), _rate("d_s", "rad/s", _H, "°/h")],
             ["theta"],
             "180°-periodic drift in θ, independent of q and Ω",
             ("drive_gain_mismatch", "readout_gain_mismatch"),
             "vary Ω: a rate term's angle error falls as 1/Ω, a readout error does not",
+            formula="{d_c}·sin 2θ − {d_s}·cos 2θ",
         ),
         _e(
             "bias_temperature",
             "drift offset varying with T",
             "rate",
-            [("b1", "rad/s/°C", 0.01 * _H), ("b2", "rad/s/°C²", 1e-4 * _H)],
+            [
+                _rate("b1", "rad/s/°C", 0.01 * _H, "°/h/°C"),
+                _rate("b2", "rad/s/°C²", 1e-4 * _H, "°/h/°C²"),
+            ],
             ["temperature"],
             "offset tracking T, the same at every θ",
             ("thermal_lag", "warmup_transient"),
             "reversed temperature ramps; repeated runs",
+            formula="{b1}·ΔT + {b2}·ΔT²",
         ),
         _e(
             "angular_gain_temperature",
             "angular gain varying with T",
             "rate",
-            [("kappa_T", "1/°C", 1e-5)],
+            [_plain("kappa_T", "1/°C", 1e-5, "ppm/°C", 1e6)],
             ["rate", "temperature"],
             "rate error ∝ Ω·(T − T₀)",
             ("rate_scale_factor",),
             "rotate at several T",
+            formula="{kappa_T}·ΔT · Ω (ppm of the rate)",
         ),
         _e(
             "rate_scale_factor",
             "scale factor varying with rate",
             "rate",
-            [("kappa_Omega", "s²", 1e-3)],
+            [_plain("kappa_Omega", "s²", 1e-3, "ppm/(°/s)²", 1e6 * DEG**2)],
             ["rate"],
             "rate error ∝ Ω³",
             ("angular_gain_temperature",),
             "several rates at one temperature",
+            formula="{kappa_Omega}·Ω² · Ω (Ω in °/s; ppm of the rate)",
         ),
         _e(
             "damping_anisotropy_temperature",
             "damping anisotropy varying with T",
             "rate",
-            [("d_c1", "rad/s/°C", 0.01 * _H), ("d_s1", "rad/s/°C", 0.01 * _H)],
+            [
+                _rate("d_c1", "rad/s/°C", 0.01 * _H, "°/h/°C"),
+                _rate("d_s1", "rad/s/°C", 0.01 * _H, "°/h/°C"),
+            ],
             ["theta", "temperature"],
             "180° drift pattern whose amplitude and phase change with T (seed: 3.5→0.7 °/h, 16°)",
             ("bias_temperature",),
             "several wave angles at each temperature",
+            formula="({d_c1}·sin 2θ − {d_s1}·cos 2θ)·ΔT",
         ),
         _e(
             "frequency_split",
             "frequency split Δω, axis θ_ω, with residual quadrature",
             "rate",
-            [("f_c", "rad/s", 1e-3), ("f_s", "rad/s", 1e-3)],
+            [
+                _rate("f_c", "rad/s", 1e-3, "°/h per unit q/a"),
+                _rate("f_s", "rad/s", 1e-3, "°/h per unit q/a"),
+            ],
             ["theta", "amplitude", "quadrature"],
             "drift ∝ q/a with a 180° pattern",
             ("nonlinearity", "excitation_phase"),
             "offset the quadrature set-point",
+            formula="−(q/a)·({f_c}·cos 2θ + {f_s}·sin 2θ)",
         ),
         _e(
             "excitation_phase",
             "excitation phase error γ_e with quadrature",
             "rate",
-            [("p_gamma", "1/s", 1e-5)],
+            [_rate("p_gamma", "1/s", 1e-5, "°/h per unit q/a")],
             ["amplitude", "quadrature"],
             "drift ∝ q/a, independent of θ",
             ("frequency_split", "nonlinearity"),
             "change the drive level",
+            formula="−{p_gamma}·(q/a)",
         ),
         _e(
             "nonlinearity",
             "Duffing nonlinearity with quadrature",
             "rate",
-            [("c_chi", "1/s per unit²", 1e-3)],
+            [_rate("c_chi", "1/s per unit²", 1e-3, "°/h per unit a·q")],
             ["amplitude", "quadrature"],
             "drift ∝ a·q, independent of θ",
             ("excitation_phase", "frequency_split"),
             "change the amplitude set-point",
+            formula="−{c_chi}·a·q",
         ),
         _e(
             "drive_gain_mismatch",
             "drive (forcer) gain mismatch",
             "rate",
-            [("p_g", "rad/s", _H)],
+            [_rate("p_g", "rad/s", _H, "°/h")],
             ["theta"],
             "180° drift pattern with its axis at 0°/90°",
             ("damping_anisotropy",),
             "electrode swap / mode reversal",
+            formula="−{p_g}·sin 2θ",
         ),
         _e(
             "thermal_rate",
             "drift proportional to the temperature rate",
             "rate",
-            [("c_Tdot", "rad/s per °C/s", 10 * _H)],
+            [_rate("c_Tdot", "rad/s per °C/s", 10 * _H, "°/h per °C/min", 1 / (60 * _H))],
             ["temperature_rate"],
             "offset that flips sign with the ramp direction",
             ("thermal_lag",),
             "vary the ramp rate",
+            formula="{c_Tdot}·dT/dt",
         ),
         _e(
             "thermal_lag",
             "drift following a lagged temperature",
             "rate",
-            [("b_L", "rad/s/°C", 0.01 * _H), ("tau_th", "s", 300.0, False)],
+            [
+                _rate("b_L", "rad/s/°C", 0.01 * _H, "°/h/°C"),
+                _plain("tau_th", "s", 300.0, regular=False),
+            ],
             ["temperature_lagged"],
             "bias-vs-T loop (hysteresis) over a temperature cycle",
             ("bias_temperature", "thermal_rate"),
             "a fast temperature step",
+            formula="{b_L}·(T_lag − 20 °C), T_lag: T through a first-order lag of {tau_th}",
         ),
         _e(
             "warmup_transient",
             "decaying drift after switch-on",
             "rate",
-            [("b_w", "rad/s", _H), ("tau_w", "s", 600.0, False)],
+            [_rate("b_w", "rad/s", _H, "°/h"), _plain("tau_w", "s", 600.0, regular=False)],
             ["t_run"],
             "offset decaying from the start of each run",
             ("bias_temperature",),
             "several switch-ons at one temperature",
+            formula="{b_w}·exp(−t_run/{tau_w})",
         ),
         _e(
             "acceleration_sensitivity",
             "drift ∝ specific force along the axis",
             "rate",
-            [("G", "rad/s per g", 0.01 * _H)],
+            [_rate("G", "rad/s per g", 0.01 * _H, "°/h/g")],
             ["accel_z"],
             "offset tracking a_z",
             (),
             "turn the gyro over (±g)",
+            formula="{G}·a_z",
         ),
         _e(
             "readout_gain_mismatch",
             "pickoff gain mismatch / cross-talk",
             "readout",
-            [("eps_1", "", 1e-3), ("eps_2", "", 1e-3)],
+            [_plain("eps_1", "", 1e-3, "ppm", 1e6), _plain("eps_2", "", 1e-3, "ppm", 1e6)],
             ["theta"],
             "bounded 180° angle error; SF(θ) = 1 + ε₁cos2θ − ε₂sin2θ",
             ("damping_anisotropy",),
             "vary Ω: the angle error does not grow with time",
+            formula="angle read out + ½·{eps_1}·sin 2θ + ½·{eps_2}·cos 2θ",
         ),
     )
 }

@@ -43,6 +43,7 @@ from . import dwell
 from .continuous import BLOCK_S, ContinuousProblem, is_dwell, noise_from_gyro
 from .continuous import noise_model as continuous_noise
 from .effects import CATALOGUE, NOMINAL, window_gain
+from .result import Discovery
 
 METRIC = "rms_run_mean_rate_residual_dph"
 OPTIONAL = {"amplitude": "amplitude", "quadrature": "quadrature", "accel_z": "accel_z_g"}
@@ -116,7 +117,7 @@ def discover(
     shape: str = "auto",
     noise: Noise | None = None,
     block_s: float = BLOCK_S,
-) -> dict:
+) -> Discovery:
     """Name the effect missing from `nominal` in `data` (module docstring).
 
     **Arguments:**
@@ -141,9 +142,12 @@ def discover(
       data's zero-rate stretches, run-to-run bias from the baseline fit).
     - `block_s`: block length of the continuous increments [s].
 
-    **Returns:** the report dict (DESIGN.md "Discovery report" keys plus `verdict`,
-    `accepted`, `parameters`, `consistency` (continuous records: per-run refits of each
-    accepted effect and their χ² p-value), `noise`, `split`, `shape`).
+    **Returns:** a [`Discovery`][hrgjax.discovery.result.Discovery]: the verdict, the
+    accepted effects with their parameters in user units (`.parameters`) and model units
+    (`.fit_parameters`), the screening table, the gaps and the noise floor, `consistency`
+    (continuous records: per-run refits of each accepted effect and their χ² p-value),
+    `noise`, `split`, `shape`; `.to_json()` (DESIGN.md's keys first), `.equations()`,
+    `.plot(path)`.
 
     **Raises:** `ValueError` for unknown effect names, a bad `shape`, or too few runs to hold
     any out; `RuntimeError` when a continuous fit does not converge.
@@ -236,27 +240,41 @@ def discover(
         ]
         if ambiguous:
             verdict = "ambiguous"
-    return {
-        "missing_effect": accepted[0] if accepted else None,
-        "ranking": [
+    return Discovery(
+        verdict=verdict,
+        missing_effect=accepted[0] if accepted else None,
+        accepted=tuple(accepted),
+        ambiguous_with=tuple(ambiguous),
+        discriminate={n: CATALOGUE[n].discriminate for n in accepted + ambiguous},
+        gap_before=gap_before,
+        gap_after=current["gap"],
+        noise_floor=floor,
+        metric=METRIC,
+        structure_left=bool(left),
+        fit_parameters=current["parameters"],
+        k_e=_fitted_k_e(current["parameters"], k_e),
+        ranking=tuple(
             {"effect": r["effect"], "score": r["score"], "params": r["params"]} for r in ranking
-        ],
-        "gap_before": gap_before,
-        "gap_after": current["gap"],
-        "noise_floor": floor,
-        "metric": METRIC,
-        "verdict": verdict,
-        "structure_left": bool(left),
-        "accepted": accepted,
-        "ambiguous_with": ambiguous,
-        "discriminate": {n: CATALOGUE[n].discriminate for n in accepted + ambiguous},
-        "parameters": current["parameters"],
-        "screening": [{k: r[k] for k in SCREEN_KEYS} for r in ranking],
-        "consistency": {n: problem.consistency(current, n) for n in accepted},
-        "noise": problem.noise_report(),
-        "split": {"train_runs": int(runs.size - held.size), "heldout_runs": int(held.size)},
-        "shape": shape,
-    }
+        ),
+        screening=tuple({k: r[k] for k in SCREEN_KEYS} for r in ranking),
+        consistency={n: problem.consistency(current, n) for n in accepted},
+        noise=problem.noise_report(),
+        split={"train_runs": int(runs.size - held.size), "heldout_runs": int(held.size)},
+        shape=shape,
+        residuals={"before": problem.residuals(base), "after": problem.residuals(current)},
+    )
+
+
+def _fitted_k_e(parameters: dict, k_e: float) -> float:
+    """The fitted angular gain where the data determine it (rotations: within 10 %), else
+    the nominal `k_e` (static data leave it free)."""
+    p = parameters.get("angular_gain", {}).get("k_e")
+    if p is None or not np.isfinite(p["value"]) or p["value"] <= 0:
+        return float(k_e)
+    std = p.get("std")
+    if std is None or not np.isfinite(std) or std > 0.1 * p["value"]:
+        return float(k_e)
+    return float(p["value"])
 
 
 SHAPES = ("auto", "dwell", "continuous")
@@ -325,6 +343,17 @@ class DwellProblem:
             self.held,
             self.k_e,
         )
+
+    def residuals(self, fit):
+        """What the figure draws of `fit`: every window's drift residual [°/h] (as input
+        rate) with its wave angle [°], temperature [°C] and whether it is static."""
+        w = self.w
+        return {
+            "wave_angle_deg": np.asarray(w.wave_angle_deg),
+            "temperature_c": np.asarray(w.temperature_c),
+            "static": np.asarray(w.static),
+            "drift_dph": -np.asarray(fit["resid"]) / self.k_e / DEG_PER_H,
+        }
 
     def noise_report(self):
         nm, k_e, w = self.nm, self.k_e, self.w
@@ -402,6 +431,7 @@ def _fit(model, c, y, sigma, train, w, held, k_e):
         pname = [p.name for p in CATALOGUE[name].params if p.regular][j]
         params.setdefault(name, {})[pname] = {"value": float(b), "std": float(e)}
     return {
+        "resid": resid,
         "r": r,
         "j": g[train] / sigma[train][:, None],
         "chi2": float(r @ r),

@@ -1,0 +1,206 @@
+"""What [`discover`][hrgjax.discovery.discover] returns: a
+[`Discovery`][hrgjax.discovery.result.Discovery], with the fitted parameters in the units a
+gyro engineer reads (°/h of input rate, ppm/°C, …) beside the model's own, the equations of
+the fitted model, its JSON report and its figure — drawn from the very fits it reports."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+from typing import Any
+
+import numpy as np
+
+from .effects import CATALOGUE, NOMINAL
+
+DESIGN_KEYS = ("missing_effect", "ranking", "gap_before", "gap_after", "noise_floor", "metric")
+"""The keys of DESIGN.md's discovery report, first in the JSON."""
+
+
+def _clean(x):
+    """JSON-safe copy: NumPy scalars to Python numbers, non-finite numbers to None."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(float(x)) else None
+    return x
+
+
+def to_user_units(parameters: dict, k_e: float) -> dict:
+    """`{effect: {param: {"value", "std"}}}` in model units → `{effect: {param: {"value",
+    "sigma", "unit"}}}` in user units at angular gain `k_e` (see
+    [`Param`][hrgjax.discovery.effects.Param]); a missing or `None` std stays `None`."""
+    out = {}
+    for name, ps in parameters.items():
+        spec = {p.name: p for p in CATALOGUE[name].params}
+        out[name] = {}
+        for pname, v in ps.items():
+            p = spec[pname]
+            f = p.user_scale(k_e)
+            std = v.get("std") if isinstance(v, dict) else None
+            value = v["value"] if isinstance(v, dict) else v
+            out[name][pname] = {
+                "value": float(value) * f,
+                "sigma": None if std is None else abs(f) * float(std),
+                "unit": p.user_unit,
+            }
+    return out
+
+
+def _number(v: dict) -> str:
+    """'0.301 ± 0.004 °/h' (three significant digits of the value)."""
+    unit = f" {v['unit']}" if v["unit"] else ""
+    if v["sigma"] is None:
+        return f"{v['value']:.4g}{unit}"
+    return f"({v['value']:.4g} ± {v['sigma']:.2g}){unit}"
+
+
+@dataclasses.dataclass(frozen=True)
+class Discovery:
+    """The outcome of [`discover`][hrgjax.discovery.discover] (immutable).
+
+    - `verdict`: `"found"`, `"ambiguous"`, `"none"` (nothing is missing) or `"unexplained"`
+      (structure is left that no catalogue effect explains); `missing_effect`: the first
+      accepted effect or `None`; `accepted`: every accepted effect, in order;
+      `ambiguous_with`, `discriminate`: rivals and the experiments that separate them.
+    - `gap_before`, `gap_after`, `noise_floor` [°/h]: the held-out gap (DESIGN.md) of the
+      nominal and the final model, and what noise alone gives it; `metric` names it;
+      `structure_left`: the final model still leaves significant structure.
+    - `fit_parameters`: the final model's parameters in model units
+      (`{effect: {param: {"value", "std"}}}`, rad/s of pattern rate, …); `parameters` (a
+      property) gives them in user units; `k_e`: the angular gain used for that conversion
+      (the fitted one when the model fits it).
+    - `ranking` (first-round candidates by score, with the refit's parameters in model units),
+      `screening` (their test statistics), `consistency` (continuous records: per-run
+      refits), `noise` (the noise model in report units), `split` (training and held-out
+      runs), `shape` (`"dwell"` or `"continuous"`).
+    - `residuals`: the residuals of the nominal (`"before"`) and the final (`"after"`) fit —
+      what [`plot`][hrgjax.discovery.result.Discovery.plot] draws.
+    """
+
+    verdict: str
+    missing_effect: str | None
+    accepted: tuple[str, ...]
+    ambiguous_with: tuple[str, ...]
+    discriminate: dict
+    gap_before: float
+    gap_after: float
+    noise_floor: float
+    metric: str
+    structure_left: bool
+    fit_parameters: dict
+    k_e: float
+    ranking: tuple[dict, ...]
+    screening: tuple[dict, ...]
+    consistency: dict
+    noise: dict
+    split: dict
+    shape: str
+    residuals: dict = dataclasses.field(repr=False, compare=False)
+
+    @property
+    def parameters(self) -> dict:
+        """The final model's parameters in user units: `{effect: {param: {"value", "sigma",
+        "unit"}}}` (a pattern-rate term as the input rate it imitates, °/h; gains in ppm)."""
+        return to_user_units(self.fit_parameters, self.k_e)
+
+    def to_json(self) -> dict:
+        """The report as a JSON-ready dict: DESIGN.md's keys first (`ranking` parameters and
+        `parameters` in user units, each `{"value", "sigma", "unit"}`), then the rest;
+        `model_parameters` keeps the fit in model units."""
+        ranking = [
+            {
+                "effect": r["effect"],
+                "score": r["score"],
+                "params": to_user_units({r["effect"]: r["params"]}, self.k_e)[r["effect"]],
+            }
+            for r in self.ranking
+        ]
+        out: dict[str, Any] = {
+            "missing_effect": self.missing_effect,
+            "ranking": ranking,
+            "gap_before": self.gap_before,
+            "gap_after": self.gap_after,
+            "noise_floor": self.noise_floor,
+            "metric": self.metric,
+            "units": {"gap_before": "°/h", "gap_after": "°/h", "noise_floor": "°/h"},
+            "verdict": self.verdict,
+            "structure_left": self.structure_left,
+            "accepted": list(self.accepted),
+            "ambiguous_with": list(self.ambiguous_with),
+            "discriminate": dict(self.discriminate),
+            "parameters": self.parameters,
+            "model_parameters": self.fit_parameters,
+            "angular_gain_k_e": self.k_e,
+            "screening": list(self.screening),
+            "consistency": self.consistency,
+            "noise": self.noise,
+            "split": self.split,
+            "shape": self.shape,
+        }
+        return _clean(out)
+
+    def write_json(self, path: str | os.PathLike) -> str:
+        """Write [`to_json`][hrgjax.discovery.result.Discovery.to_json] to `path`
+        (atomically); returns the path."""
+        from .._io import atomic_write
+
+        path = os.fspath(path)
+        d = os.path.dirname(path)
+        if d:
+            os.makedirs(d, exist_ok=True)
+        with atomic_write(path, "w") as fh:
+            json.dump(self.to_json(), fh, indent=1, ensure_ascii=False)
+        return path
+
+    def equations(self) -> str:
+        """The fitted model as equations in user units (as a fitted pysindy model prints):
+        the apparent input rate each effect adds, then the readout terms."""
+        user = self.parameters
+        lines = [f"verdict: {self.verdict}"]
+        if "angular_gain" in user:
+            lines.append(f"angular gain k_e = {_number(user['angular_gain']['k_e'])}")
+        rate, readout = [], []
+        nominal = [n for n in NOMINAL if n in user]
+        for name in nominal + [n for n in user if n not in nominal]:
+            ps = user[name]
+            if name == "angular_gain":
+                continue
+            effect = CATALOGUE[name]
+            text = effect.formula.format(**{k: _number(v) for k, v in ps.items()})
+            (readout if effect.where == "readout" else rate).append(f"{text}    [{name}]")
+        if rate:
+            lines.append("apparent input rate − table rate [°/h] =")
+            for i, t in enumerate(rate):
+                if i == 0:
+                    lines.append("    " + t)
+                else:  # a term written with a leading minus continues the sum with it
+                    lines.append("  − " + t[1:] if t.startswith("−") else "  + " + t)
+        if readout:
+            lines.append("readout:")
+            lines += ["    " + t for t in readout]
+        lines.append(
+            f"held-out gap {self.gap_before:.3g} → {self.gap_after:.3g} °/h "
+            f"(noise floor {self.noise_floor:.3g} °/h); ΔT = T − 20 °C, θ electrical"
+        )
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.equations()
+
+    def plot(self, path: str | os.PathLike) -> str:
+        """One figure of the report, from the reported fits: residuals of the nominal and of
+        the final model (dwell grids: the window drift against wave angle per temperature;
+        continuous records: each run's angle residual against time, held-out runs dashed),
+        the first-round scores and the gap against the noise floor. Returns the path."""
+        from .report import plot_discovery
+
+        return plot_discovery(self, os.fspath(path))
