@@ -342,7 +342,7 @@ def cmd_discover(args) -> int:
         print(f"  hard to tell apart from: {', '.join(found.ambiguous_with)}")
     if found.accepted[1:]:
         print(f"  also accepted: {', '.join(found.accepted[1:])}")
-    if found.structure_left:
+    if found.structure_left or found.verdict == "unexplained":
         print("  structure is left above the noise floor that no catalogue effect explains")
     print("  fitted model:")
     print("\n".join("    " + line for line in found.equations().splitlines()[1:]))

@@ -206,3 +206,26 @@ def test_user_units_read_as_the_input_rate_each_term_imitates():
         term = float(rate_term_with_gain(name, jnp.asarray([p]), c, k_e))
         ppm = to_user_units({name: {pname: {"value": p}}}, k_e)[name][pname]["value"]
         assert omega - term / k_e == pytest.approx(omega * (1 + 1e-6 * ppm * factor), rel=1e-12)
+
+
+def test_leftover_names_a_planted_shape_with_its_size_and_nothing_in_noise():
+    from hrgjax.discovery import leftover
+
+    rng = np.random.default_rng(0)
+    n, k_e, sigma = 600, 0.554, 1e-7  # window rates [rad/s] and their noise
+    theta = rng.uniform(-np.pi, np.pi, n)
+    cov = {"theta": theta, "dT": rng.uniform(-40, 40, n), "Tdot": np.zeros(n),
+           "rate": np.zeros(n), "accel_z": np.zeros(n), "t_run": np.zeros(n)}  # fmt: skip
+    cols = {k: g / sigma for k, g in leftover.columns(cov).items()}
+    assert "Ω" not in cols and "dT/dt" not in cols  # shapes the data cannot show are left out
+    j = np.ones((n, 1)) / sigma  # the fitted model: a bias
+    noise = rng.normal(size=n)
+    # 0.4 °/h of input rate as a 3θ harmonic with its axis at 10° el.: pattern rate −k_e·…
+    amp, axis = 0.4, np.deg2rad(10.0)
+    planted = -k_e * amp * DEG_PER_H * np.cos(3 * (theta - axis)) / sigma
+    left = leftover.describe(noise + planted, j, cols, k_e)
+    assert left["shape"] == "3θ" and left["significant"]
+    assert abs(left["size"] - amp) < 4 * left["sigma"] and left["unit"] == "°/h"
+    assert left["axis_deg"] == pytest.approx(10.0, abs=2.0)
+    assert "constant over temperature" in left["words"]
+    assert not leftover.describe(noise, j, cols, k_e)["significant"]

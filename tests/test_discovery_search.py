@@ -95,6 +95,11 @@ def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
     rep = discover(data, catalogue=rest)
     assert rep.missing_effect is None and rep.verdict == "unexplained"
     assert rep.structure_left
+    # what is left is named: a 2θ harmonic that grows with temperature, in °/h per °C
+    left = rep.leftover
+    assert left["shape"] == "2θ·ΔT" and left["significant"], left
+    assert left["unit"] == "°/h/°C" and "changes with temperature" in left["words"]
+    assert "left over: a 2θ harmonic" in rep.equations()
 
 
 def test_null_dataset_names_nothing():

@@ -45,8 +45,8 @@ from .._compiled import Unchecked, program
 from .._progress import bar
 from ..data import MeasuredData
 from ..profiles import lag_at_knots
-from ..units import DEG, DEG_PER_H
-from . import dwell
+from ..units import DEG, DEG_PER_H, T_REF_C
+from . import dwell, leftover
 from .effects import CATALOGUE, Covariates, pattern_rate, readout_term
 
 BLOCK_S = 10.0
@@ -643,6 +643,37 @@ class ContinuousProblem:
                     out.append({"run": int(run), "held": held, "t_min": t / 60,
                                 "angle_arcsec": cum / DEG * 3600})  # fmt: skip
         return sorted(out, key=lambda d: d["run"])
+
+    def leftover(self, fit):
+        """The strongest shape left in `fit`'s training residual
+        ([`describe`][hrgjax.discovery.leftover.describe]): each shape's columns are its
+        pattern rate at the block's mean covariates times the block's length, whitened as
+        the residual is."""
+        parts: dict[str, list] = {}
+        for g in self.train_groups:
+            b = np.asarray(g.bidx)
+            t, temp = np.asarray(g.t), np.asarray(g.temp)
+            for i in range(len(g.run)):
+                span = np.diff(t[i, b])
+
+                def mean(v, i=i, b=b):  # over each block's samples b[k] … b[k+1] − 1
+                    cs = np.concatenate([[0.0], np.cumsum(np.asarray(v)[i])])
+                    return (cs[b[1:]] - cs[b[:-1]]) / np.diff(b)
+
+                cov = {
+                    "theta": mean(g.theta),
+                    "dT": mean(g.temp) - T_REF_C,
+                    "Tdot": np.diff(temp[i, b]) / span,
+                    "rate": mean(g.rate),
+                    "accel_z": mean(g.accel),
+                    "t_run": 0.5 * (t[i, b[1:]] + t[i, b[:-1]]) - t[i, 0],
+                }
+                w = np.asarray(g.whiten[i])
+                for name, col in leftover.columns(cov, drop=False).items():
+                    parts.setdefault(name, []).append(w @ (col * span[:, None]))
+        cols = {k: np.concatenate(v) for k, v in parts.items()}
+        cols = {k: v for k, v in cols.items() if np.any(v)}
+        return leftover.describe(fit["r"], fit["j"], cols, self.k_e)
 
     def raw_residuals(self, z, groups=None):
         """Unwhitened increment residuals [rad], one (R, K) array per group (default: the

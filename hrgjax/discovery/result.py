@@ -84,6 +84,9 @@ class Discovery:
       runs), `shape` (`"dwell"` or `"continuous"`).
     - `residuals`: the residuals of the nominal (`"before"`) and the final (`"after"`) fit —
       what [`plot`][hrgjax.discovery.result.Discovery.plot] draws.
+    - `leftover`: the strongest shape the final fit leaves (a harmonic of θ, a covariate),
+      with its size in user units and its significance in words
+      ([`describe`][hrgjax.discovery.leftover.describe]); None when no shape can be tried.
     """
 
     verdict: str
@@ -105,6 +108,7 @@ class Discovery:
     split: dict
     shape: str
     residuals: dict = dataclasses.field(repr=False, compare=False)
+    leftover: dict | None = None
 
     @property
     def parameters(self) -> dict:
@@ -140,6 +144,7 @@ class Discovery:
             "parameters": self.parameters,
             "model_parameters": self.fit_parameters,
             "angular_gain_k_e": self.k_e,
+            "leftover": self.leftover,
             "screening": list(self.screening),
             "consistency": self.consistency,
             "noise": self.noise,
@@ -187,6 +192,8 @@ class Discovery:
         if readout:
             lines.append("readout:")
             lines += ["    " + t for t in readout]
+        if self.leftover is not None and (self.structure_left or self.verdict == "unexplained"):
+            lines.append(f"left over: {self.leftover['words']}")
         lines.append(
             f"held-out gap {self.gap_before:.3g} → {self.gap_after:.3g} °/h "
             f"(noise floor {self.noise_floor:.3g} °/h); ΔT = T − 20 °C, θ electrical"

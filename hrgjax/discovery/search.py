@@ -38,8 +38,8 @@ from .._progress import bar
 from ..calibration.reduce import K_E_NOMINAL, WINDOW_S, RateWindows, reduce
 from ..data import MeasuredData
 from ..noise import Noise
-from ..units import DEG, DEG_PER_H
-from . import dwell
+from ..units import DEG, DEG_PER_H, T_REF_C
+from . import dwell, leftover
 from .continuous import BLOCK_S, ContinuousProblem, is_dwell, noise_from_gyro
 from .continuous import noise_model as continuous_noise
 from .effects import CATALOGUE, NOMINAL, window_gain
@@ -262,6 +262,7 @@ def discover(
         split={"train_runs": int(runs.size - held.size), "heldout_runs": int(held.size)},
         shape=shape,
         residuals={"before": problem.residuals(base), "after": problem.residuals(current)},
+        leftover=problem.leftover(current),
     )
 
 
@@ -354,6 +355,22 @@ class DwellProblem:
             "static": np.asarray(w.static),
             "drift_dph": -np.asarray(fit["resid"]) / self.k_e / DEG_PER_H,
         }
+
+    def leftover(self, fit):
+        """The strongest shape left in `fit`'s training residual
+        ([`describe`][hrgjax.discovery.leftover.describe])."""
+        c, tr = self.c, self.train
+        full = lambda v: np.broadcast_to(np.asarray(v, float), tr.shape)[tr]
+        cov = {
+            "theta": full(c.theta),
+            "dT": full(c.temperature) - T_REF_C,
+            "Tdot": np.zeros(int(tr.sum())),
+            "rate": full(c.rate),
+            "accel_z": full(c.accel_z),
+            "t_run": full(c.t_run),
+        }
+        cols = {k: g / self.sigma[tr][:, None] for k, g in leftover.columns(cov).items()}
+        return leftover.describe(fit["r"], fit["j"], cols, self.k_e)
 
     def noise_report(self):
         nm, k_e, w = self.nm, self.k_e, self.w

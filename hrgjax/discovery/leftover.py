@@ -1,0 +1,151 @@
+r"""Name the shape of what a model leaves (DISCOVERY.md §2.1 "say I don't know", issue 19):
+the residual of the final fit tested against generic shapes of the pattern rate — harmonics
+1θ … 4θ of the electrical wave angle (constant, growing with ΔT = T − 20 °C, and in
+proportion to the rate Ω: a scale factor that varies with the wave angle), ΔT, ΔT²,
+dT/dt, the table rate Ω (and Ω·ΔT, Ω³), the specific force a_z and the time since switch-on.
+
+Each shape is a set of pattern-rate columns evaluated at the data's covariates (dwell
+windows, or the 10-s blocks of continuous records, where a shape's column is its value times
+the block's length: the angle it adds); its score statistic against the fitted model's
+whitened residual and Jacobian is the same test as the catalogue's screening
+([`score`][hrgjax.discovery.dwell.score]): χ²_q when nothing of that shape is left. The
+strongest shape is reported with its size in user units (the input rate it imitates) and
+its significance in words. The columns use each point's mean covariates: a 2θ harmonic on a
+window in which the pattern sweeps far (fast rotation) is seen smaller.
+"""
+
+from __future__ import annotations
+
+import math
+from statistics import NormalDist
+
+import numpy as np
+
+from ..units import DEG, DEG_PER_H, HOUR
+from . import dwell
+
+SHAPES = (
+    *(f"{k}θ" for k in (1, 2, 3, 4)),
+    *(f"{k}θ·ΔT" for k in (1, 2, 3, 4)),
+    *(f"{k}θ·Ω" for k in (1, 2, 3, 4)),
+    "ΔT",
+    "ΔT²",
+    "dT/dt",
+    "Ω",
+    "Ω·ΔT",
+    "Ω³",
+    "a_z",
+    "t_run",
+)
+"""The shapes tried, by name."""
+
+_SCALAR = {  # shape: (words, user unit, factor from pattern-rate coefficient per input)
+    "ΔT": ("a drift that follows temperature", "°/h/°C", 1 / DEG_PER_H),
+    "ΔT²": ("a drift curving with temperature", "°/h/°C²", 1 / DEG_PER_H),
+    "dT/dt": ("a drift that follows the temperature rate", "°/h per °C/min", 1 / (60 * DEG_PER_H)),
+    "Ω": ("a scale-factor error", "ppm", 1e6),
+    "Ω·ΔT": ("a scale factor changing with temperature", "ppm/°C", 1e6),
+    "Ω³": ("a scale factor changing with rate", "ppm/(°/s)²", 1e6 * DEG**2),
+    "a_z": ("a drift that follows the specific force along the axis", "°/h/g", 1 / DEG_PER_H),
+    "t_run": ("a drift changing with time since switch-on", "°/h per h", HOUR / DEG_PER_H),
+}
+
+
+def columns(cov: dict, drop: bool = True) -> dict[str, np.ndarray]:
+    """Pattern-rate columns (N, q) of every shape at covariates `cov` (arrays of N points:
+    `theta` [rad], `dT` [°C from 20 °C], `Tdot` [°C/s], `rate` [rad/s], `accel_z` [g],
+    `t_run` [s]); with `drop`, shapes whose columns vanish on these points are left out."""
+    th, dT = cov["theta"], cov["dT"]
+    out = {}
+    for k in (1, 2, 3, 4):
+        h = np.stack([np.cos(k * th), np.sin(k * th)], axis=-1)
+        out[f"{k}θ"] = h
+        out[f"{k}θ·ΔT"] = h * dT[:, None]
+        out[f"{k}θ·Ω"] = h * cov["rate"][:, None]
+    rate = cov["rate"]
+    scalar = {
+        "ΔT": dT,
+        "ΔT²": dT**2,
+        "dT/dt": cov["Tdot"],
+        "Ω": rate,
+        "Ω·ΔT": rate * dT,
+        "Ω³": rate**3,
+        "a_z": cov["accel_z"],
+        "t_run": cov["t_run"],
+    }
+    out |= {k: v[:, None] for k, v in scalar.items()}
+    return {k: np.asarray(v, float) for k, v in out.items() if np.any(v) or not drop}
+
+
+def _sigmas(p: float, s: float) -> float:
+    """Two-sided normal equivalent of a p-value (√S where p underflows)."""
+    if p <= 0.0 or not math.isfinite(p):
+        return math.sqrt(max(s, 0.0))
+    return -NormalDist().inv_cdf(min(p, 1.0) / 2.0) if p < 1.0 else 0.0
+
+
+def _size(shape: str, coef: np.ndarray, cov: np.ndarray, k_e: float) -> dict:
+    """Size of a shape's fitted coefficients (pattern rate) in user units, and words."""
+    f = -1.0 / k_e  # a pattern-rate term f imitates −f/k_e of input rate
+    if "θ" in shape:
+        k = int(shape[0])
+        per_t, per_rate = "·ΔT" in shape, "·Ω" in shape
+        unit, scale = ("ppm", 1e6) if per_rate else ("°/h/°C" if per_t else "°/h", 1 / DEG_PER_H)
+        a, b = f * coef * scale
+        amp = math.hypot(a, b)
+        # Jacobian of the amplitude for its σ
+        grad = np.array([a, b]) / max(amp, 1e-300) * abs(f) * scale
+        sigma = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
+        axis = math.degrees(math.atan2(b, a)) / k
+        if per_rate:
+            kind = f"a scale factor varying as {k}θ"
+        else:
+            kind = f"a {k}θ harmonic" + (" whose size changes with temperature" if per_t else "")
+        words = f"{kind} of {amp:.3g} {unit} (axis at {axis:.1f}° el.)"
+        return {"size": amp, "sigma": sigma, "unit": unit, "axis_deg": axis, "words": words}
+    what, unit, factor = _SCALAR[shape]
+    value = float(coef[0]) * factor * f  # Ω terms: Ω_apparent = Ω·(1 − c/k_e), so −c/k_e too
+    sigma = float(math.sqrt(max(cov[0, 0], 0.0))) * abs(factor * f)
+    return {"size": value, "sigma": sigma, "unit": unit, "words": f"{what}: {value:.3g} {unit}"}
+
+
+def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3) -> dict | None:
+    """The strongest shape left in the whitened residual `r` of a fit with whitened Jacobian
+    `j`, given each shape's whitened columns `cols`. **Returns** `{"shape", "words", "size",
+    "sigma", "unit", "score", "dof", "p_value", "sigmas", "significant", "runners_up"}`
+    (`significant`: p below `alpha` after a Bonferroni factor for the shapes tried; a
+    harmonic's `words` also say whether it changes with temperature), or None without
+    shapes."""
+    rows = []
+    for name, g in cols.items():
+        s, alias, step = dwell.score(r, j, g)
+        if alias >= 0.999:
+            continue
+        p = min(1.0, dwell.chi2_sf(s, g.shape[1]) * len(cols))
+        rows.append((s, name, g, step, p))
+    if not rows:
+        return None
+    rows.sort(key=lambda row: -row[0])
+    s, name, g, step, p = rows[0]
+    q_j, _ = np.linalg.qr(j)
+    g_t = g - q_j @ (q_j.T @ g)
+    cov = np.linalg.pinv(g_t.T @ g_t)
+    out = {"shape": name, **_size(name, step, cov, k_e)}
+    z = _sigmas(p, s)
+    significant = p < alpha
+    out["words"] += f", {z:.0f}σ" if significant else f", not significant ({z:.1f}σ)"
+    if significant and name.endswith("θ") and f"{name}·ΔT" in cols:
+        # does its size change with temperature? the ΔT partner, given the harmonic
+        jj = np.concatenate([j, g], axis=1)
+        s2, _, _ = dwell.score(r, jj, cols[f"{name}·ΔT"])
+        changes = dwell.chi2_sf(s2, 2) < alpha
+        out["words"] += ", changing with temperature" if changes else ", constant over temperature"
+    out |= {
+        "score": float(s),
+        "dof": int(g.shape[1]),
+        "p_value": float(p),
+        "sigmas": float(z),
+        "significant": bool(significant),
+        "runners_up": [{"shape": n, "score": float(sc)} for sc, n, *_ in rows[1:4]],
+    }
+    return out
