@@ -185,3 +185,25 @@ def test_continuous_known_noise_and_bad_shape():
     rep = discover(data, noise=generate.base_gyro().noise, catalogue=["thermal_rate"])
     assert rep.noise["run_bias_dph"] == pytest.approx(0.2)
     assert rep.missing_effect is None
+
+
+def test_runs_of_one_length_but_different_sample_intervals_are_not_stacked():
+    # a 721-sample ramp at 5 s and a 721-sample rotation at 0.1 s (one bench log) once
+    # shared one group, whose blocks were set from the first run's interval
+    n = 41
+    cols = {"time_s": [], "run": [], "wave_angle_deg": [], "temperature_c": [],
+            "table_rate_dps": []}  # fmt: skip
+    for run, dt in enumerate((5.0, 0.5, 5.0)):
+        cols["time_s"].append(np.arange(n) * dt)
+        cols["run"].append(np.full(n, run))
+        cols["wave_angle_deg"].append(np.zeros(n))
+        cols["temperature_c"].append(np.linspace(10.0, 30.0, n))
+        cols["table_rate_dps"].append(np.zeros(n))
+    data = hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
+    noise = continuous.noise_from_gyro(generate.base_gyro().noise, K_E)
+    problem = continuous.ContinuousProblem(data, ["bias", "angular_gain"], K_E, [], noise)
+    groups = {g.run: g for g in problem.train_groups}
+    assert set(groups) == {(0, 2), (1,)}
+    # 10-s blocks: every other sample at 5 s, every 20th at 0.5 s
+    assert np.diff(np.asarray(groups[(0, 2)].bidx))[0] == 2
+    assert np.diff(np.asarray(groups[(1,)].bidx))[0] == 20

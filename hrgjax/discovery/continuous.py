@@ -432,11 +432,15 @@ class ContinuousProblem:
     # -- data ----------------------------------------------------------------
     def _build(self):
         d = self.data
-        by_len: dict[int, list[np.ndarray]] = {}
+        # runs are stacked by length *and* sample interval: the blocks and solver steps are
+        # set in samples from the first run's interval (a 721-sample ramp at 5 s and a
+        # 721-sample rotation at 0.1 s must not share them)
+        by_len: dict[tuple[int, float], list[np.ndarray]] = {}
         for idx in d.run_indices():
-            by_len.setdefault(idx.size, []).append(idx)
+            dt = float(np.median(np.diff(d["time_s"][idx]))) if idx.size > 1 else 0.0
+            by_len.setdefault((idx.size, float(f"{dt:.9g}")), []).append(idx)
         self.train_groups, self.held_groups = [], []
-        for n, runs in sorted(by_len.items()):
+        for (n, _), runs in sorted(by_len.items()):
             for is_held in (False, True):
                 sel = [i for i in runs if (int(d.run[i[0]]) in self.held) == is_held]
                 if sel:

@@ -192,3 +192,33 @@ def continuous_dataset(
     ts = jnp.asarray(np.arange(int(round(duration_s / dt_out)) + 1) * dt_out)
     keys = jax.random.split(key, len(ramps))
     return _simulate_runs(gyro, profiles, keys, ts).to_data()
+
+
+BENCH_LOG_TEMPERATURES = (-40.0, -20.0, 0.0, 20.0, 40.0, 60.0)
+"""Temperatures of [`bench_log`][hrgjax.discovery.generate.bench_log] [°C]."""
+BENCH_LOG_ANGLES = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0)
+"""Wave angles of its static dwells [° el.]."""
+BENCH_LOG_RAMPS = RAMPS + ((-40.0, 60.0, 2400.0, 0.0, 15.0), (60.0, -40.0, 2400.0, 2.0, -15.0))
+"""Its eight temperature ramps (as [`RAMPS`][hrgjax.discovery.generate.RAMPS], plus the full
+range both ways)."""
+
+
+def bench_log(effect=None, size: float = 0.0, *, key: jax.Array) -> MeasuredData:
+    """One campaign's bench log of the base gyro with `effect` hidden at `size` (as in
+    [`inject`][hrgjax.discovery.generate.inject]), 62 runs in one dataset: 6 temperatures ×
+    7 wave angles of 180-s static dwells at 1 Hz (one switch-on), a +5 °/s and a −5 °/s
+    rotation of 72 s (one turn) at 10 Hz at each temperature, and eight 1-h temperature
+    ramps at 0.2 Hz, each its own switch-on — dwell runs and continuous records together."""
+    gyro = inject(base_gyro(), effect, size)
+    k_static, k_rot, k_bias, k_ramp = jax.random.split(key, 4)
+    temps, angles = BENCH_LOG_TEMPERATURES, BENCH_LOG_ANGLES
+    static = static_plan(temps, angles, duration_s=180.0, dt_out=1.0)
+    parts = [run_plan(gyro, static, key=k_static, bias_key=k_bias)]
+    first = static.size
+    for rate, k in zip((5.0, -5.0), jax.random.split(k_rot), strict=True):
+        rotation = rotation_plan(temps, (0.0,), rate, duration_s=72.0, dt_out=0.1)
+        parts.append(run_plan(gyro, rotation, key=k, bias_key=k_bias, first_run=first))
+        first += rotation.size
+    ramps = continuous_dataset(effect, size, key=k_ramp, dt_out=5.0, ramps=BENCH_LOG_RAMPS)
+    parts.append(MeasuredData({**ramps.columns, "run": ramps.run + first}))
+    return concat(parts)
