@@ -214,6 +214,24 @@ def cmd_demo(args) -> int:
 
 
 METHODS = ("fourier", "mlp", "physical")
+DIAGNOSIS_METHODS = (
+    "filter_bank", "filter_bank_full", "filter_bank_rest", "pnn_bank", "pnn_direct", "som",
+    "mlp_classifier", "mlp_predictor",
+)  # fmt: skip
+"""`hrgjax.diagnosis.compare.METHODS`, restated so that `--help` imports no JAX (a test
+checks that they agree)."""
+EXAMPLES = {
+    "demo": "hrgjax demo --quick --out out/demo",
+    "simulate": "hrgjax simulate --preset tvg3 --plan seed --quick --out out/bench.csv",
+    "calibrate": "hrgjax calibrate out/bench.csv --method fourier --out out/model.eqx "
+    "(bench.csv from the simulate example)",
+    "correct": "hrgjax correct out/bench.csv --model out/model.eqx --out out/corrected.csv",
+    "discover": "hrgjax discover out/bench.csv --json out/report.json --plot out/report.png",
+    "align": "hrgjax align psins_lasergyro.imu --json out/align.json --plot out/align.png",
+    "diagnose": "hrgjax diagnose --scenario stationary --runs 3 --methods filter_bank,pnn_direct",
+    "vibration": "hrgjax vibration --quick --json out/vib.json --plot out/vib.png",
+}
+"""One runnable example per command, shown at the end of `hrgjax CMD --help`."""
 
 
 def _load_data(path, allow_extra):
@@ -496,13 +514,18 @@ def build_parser() -> argparse.ArgumentParser:
         default=argparse.SUPPRESS,
         help="show the full traceback of an error (otherwise one line)",
     )
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+
+    class fmt(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+        """Defaults shown; the description and the example kept as written."""
+
     parser = argparse.ArgumentParser(
         prog="hrgjax", description=__doc__, parents=[common], formatter_class=fmt
     )
     sub = parser.add_subparsers(dest="command", required=True)
     add_parser = sub.add_parser
-    sub.add_parser = lambda *a, **k: add_parser(*a, parents=[common], formatter_class=fmt, **k)
+    sub.add_parser = lambda name, **k: add_parser(
+        name, parents=[common], formatter_class=fmt, epilog=f"example: {EXAMPLES[name]}", **k
+    )
 
     p = sub.add_parser("demo", help="main job on the built-in gyro")
     p.add_argument("--out", default="out/demo", help="output folder")
@@ -577,7 +600,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", default=None, help="write the table (methods[...]) here")
     p.add_argument("--plot", default=None, help="write decision traces of one run here (PNG)")
     p.add_argument("--runs", type=POSITIVE_INT, default=12, help="faulty Monte Carlo runs")
-    p.add_argument("--methods", default=None, help="comma-separated subset of the methods")
+    p.add_argument(
+        "--methods", default=None, metavar="M1,M2,…",
+        help=f"comma-separated subset of {', '.join(DIAGNOSIS_METHODS)} (None: all)",
+    )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_diagnose)
 

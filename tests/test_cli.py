@@ -135,5 +135,13 @@ def test_every_option_has_help_and_its_default_is_shown():
             assert action.help, f"hrgjax {name} {action.option_strings or action.dest}: no help"
         text = sub.format_help()
         assert "(default:" in text, name
+        # one example, on one line, that runs the command itself
+        assert f"\nexample: hrgjax {name} " in text, name
     simulate = subs.choices["simulate"].format_help()
     assert "57 static and 57 rotation runs" in " ".join(simulate.split())
+    # diagnose --methods lists the methods (restated in the CLI so that --help needs no JAX)
+    from hrgjax.cli import DIAGNOSIS_METHODS
+    from hrgjax.diagnosis.compare import METHODS
+
+    assert DIAGNOSIS_METHODS == METHODS
+    assert all(m in " ".join(subs.choices["diagnose"].format_help().split()) for m in METHODS)
