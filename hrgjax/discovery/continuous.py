@@ -215,18 +215,19 @@ def _anonymous(groups):
 
 
 def _width(m: int) -> int:
-    """Compiled basis width for m columns: 1, 2, 4, 8, then multiples of 8."""
-    return 1 << max(m - 1, 0).bit_length() if m <= 8 else -(-m // 8) * 8
+    """Compiled basis width for m columns: 4, 8, then multiples of 8 (one and two columns,
+    the common case, share the width-4 programs: a cold search compiles fewer of them)."""
+    return 4 if m <= 4 else 8 if m <= 8 else -(-m // 8) * 8
 
 
-def _padded(basis):
+def _padded(basis, minimum: int = 1):
     """`basis` (P, m) with zero columns up to `_width(m)`: every fit and Jacobian of the
     search then runs on a few compiled widths instead of one program per candidate's
     parameter count. A zero column moves nothing: its Jacobian column is zero and its
     Levenberg–Marquardt step is zero."""
     basis = np.asarray(basis, float)
     m = basis.shape[1]
-    return jnp.asarray(np.pad(basis, ((0, 0), (0, _width(m) - m)))), m
+    return jnp.asarray(np.pad(basis, ((0, 0), (0, _width(max(m, minimum)) - m)))), m
 
 
 def _residual_and_jacobian(layout, z, basis, groups):
@@ -244,8 +245,39 @@ def _raw_residuals(layout, z, groups):
 
 def _lm(layout, basis, z0, groups):
     """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`."""
-    padded, _ = _padded(basis)
+    padded, _ = _padded(basis, minimum=8)  # the nominal model's 4 and a candidate's 5–6
     return _lm_compiled(layout, padded, jnp.asarray(z0), _anonymous(groups))
+
+
+def _per_run(layout, basis, z0, group):
+    """Levenberg–Marquardt over the parameters picked by `basis` (P, m) on each run of
+    `group` alone, from `z0`: `(z (R, P), converged (R,), whitened Jacobian (R, n, m))`."""
+    padded, m = _padded(basis)
+    z, ok, j = _per_run_compiled(layout, padded, jnp.asarray(z0), _anonymous([group])[0])
+    return z, ok, j[..., :m]
+
+
+@program(check=Unchecked())
+def _per_run_compiled(layout, basis, z0, group):
+    """`_per_run`: one program for every run of a group (`vmap` over the runs)."""
+    per_run = ("t", "theta", "rate", "temp", "accel", "amp", "quad", "whiten")
+
+    def one(*arrays):
+        g = Runs(**{f: a[None] for f, a in zip(per_run, arrays, strict=True)},
+                 bidx=group.bidx, steps=group.steps, run=())  # fmt: skip
+        fn = lambda u, _: _whitened(layout, z0 + basis @ u, [g])
+        sol = optx.least_squares(
+            fn,
+            optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
+            jnp.zeros(basis.shape[1]),
+            max_steps=256,
+            throw=False,
+        )
+        z = z0 + basis @ sol.value
+        j = jax.jacfwd(lambda u: _whitened(layout, z + basis @ u, [g]))(jnp.zeros(basis.shape[1]))
+        return z, sol.result == optx.RESULTS.successful, j
+
+    return jax.vmap(one)(*(getattr(group, f) for f in per_run))
 
 
 @program(check=Unchecked())
@@ -403,13 +435,6 @@ def noise_from_gyro(noise, k_e: float) -> dict:
 # ---------------------------------------------------------------- the problem
 
 
-def _take(g: Runs, i: int) -> Runs:
-    """Run `i` of a group, as a group of one."""
-    per_run = ("t", "theta", "rate", "temp", "accel", "amp", "quad", "whiten")
-    kw = {f: getattr(g, f)[i : i + 1] for f in per_run}
-    return Runs(**kw, bidx=g.bidx, steps=g.steps, run=(g.run[i],))
-
-
 def _block_index(n, m):
     idx = np.arange(0, n, m)
     if idx[-1] != n - 1:
@@ -481,7 +506,8 @@ class ContinuousProblem:
         """Set the run-to-run bias spread σ_b [rad/s] from the scatter of every run's mean
         rate residual at the fit `z`, less what the rest of the noise gives it, and rebuild
         the whitening."""
-        rates = self.run_rates(z, self.train_groups + self.held_groups)
+        # the training and held-out runs apart: their residual programs exist already
+        rates = self.run_rates(z, self.train_groups) | self.run_rates(z, self.held_groups)
         means = np.asarray(list(rates.values()))
         self.noise["run_bias"] = 0.0
         noise_var = self.floor(every=True) ** 2
@@ -597,13 +623,11 @@ class ContinuousProblem:
         stat, dof, per_run, agree, exciting = 0.0, -len(idx), {}, 0, 0
         names = [p.name for p in CATALOGUE[name].params if p.regular]
         for g in self.train_groups:
+            zs, oks, js = (np.asarray(a) for a in _per_run(self.layout, basis, z0, g))
             for i, run in enumerate(g.run):
-                one = _take(g, i)
-                z, ok = _lm(self.layout, basis, z0, [one])
+                z, ok, j = zs[i], oks[i], js[i]
                 if not bool(ok):
                     continue
-                _, j = _residual_and_jacobian(self.layout, z, basis, [one])
-                j = np.asarray(j)
                 info = j.T @ j
                 rank = np.linalg.matrix_rank(info, tol=1e-9 * max(np.trace(info), 1e-300))
                 d = np.asarray(z)[idx] - fit["z"][idx]
@@ -743,16 +767,22 @@ class ContinuousProblem:
     def _shared_columns(self, current, names):
         """`_columns` of every effect of `names` (no nonregular parameters) from one
         Jacobian at the current fit: {name: (columns, z)}."""
-        if not names:
-            return {}
-        basis, idx = self._basis(names)
-        _, jac = _residual_and_jacobian(
-            self.layout, jnp.asarray(current["z"]), basis, self.train_groups
-        )
-        jac, pos, out = -np.asarray(jac), {i: k for k, i in enumerate(idx)}, {}
-        for name in names:
-            cols = [pos[i] for i in self.layout.index(name, which=True)]
-            out[name] = (jac[:, cols], current["z"].copy())
+        out, chunk = {}, []
+        for name in [*names, None]:  # in chunks of ≤ 8 columns: the refits' program width
+            width = sum(len(self.layout.index(n, which=True)) for n in chunk)
+            more = 0 if name is None else len(self.layout.index(name, which=True))
+            if chunk and (name is None or width + more > 8):
+                basis, idx = self._basis(chunk)
+                _, jac = _residual_and_jacobian(
+                    self.layout, jnp.asarray(current["z"]), basis, self.train_groups
+                )
+                jac, pos = -np.asarray(jac), {i: k for k, i in enumerate(idx)}
+                for n in chunk:
+                    cols = [pos[i] for i in self.layout.index(n, which=True)]
+                    out[n] = (jac[:, cols], current["z"].copy())
+                chunk = []
+            if name is not None:
+                chunk.append(name)
         return out
 
     def _refine_tau(self, current, name, tried, best):
