@@ -16,7 +16,8 @@ median gap before / after / noise floor [°/h]; for the nulls the false-positive
 time per dataset.
 
 Also: two effects hidden together (both must be accepted), and out-of-catalogue traps (an
-effect hidden but not a candidate: "unexplained" is right, any name is a wrong diagnosis).
+effect hidden but not a candidate: "unexplained" is right, any name is a wrong diagnosis; and
+the report's leftover shape should be the one the hidden effect leaves, `LEFTOVER`).
 
 Usage: `.venv/bin/python benchmarks/discovery.py [--quick]
 [--dwell-only|--continuous-only|--pairs-only]`.
@@ -146,9 +147,10 @@ def _pairs_and_traps(n_each: int):
     print(
         f"\n## dwell grids: hidden effect left out of the catalogue\n"
         f"{'hidden (not a candidate)':>32} {'unexplained':>12} {'named instead':>40}"
+        f"  {'leftover shape right':>20}"
     )
     for effect, (size, rates) in DWELL.items():
-        named, unexplained = [], 0
+        named, unexplained, shape_ok = [], 0, 0
         for i in range(n_each):
             data = hidden_effect_dataset(
                 effect, size, key=jax.random.key(4000 + 37 * i), rates_dps=rates
@@ -158,7 +160,21 @@ def _pairs_and_traps(n_each: int):
             unexplained += rep.verdict == "unexplained"
             if rep.missing_effect is not None:
                 named.append(rep.missing_effect)
-        print(f"{effect:>32} {unexplained:>5}/{n_each:<6} {_count(named):>40}")
+            left = rep.leftover
+            shape_ok += bool(left and left["significant"] and left["shape"] == LEFTOVER[effect])
+        print(
+            f"{effect:>32} {unexplained:>5}/{n_each:<6} {_count(named):>40}"
+            f"  {LEFTOVER[effect]:>8} {shape_ok:>3}/{n_each}"
+        )
+
+
+LEFTOVER = {  # the shape (hrgjax.discovery.leftover.SHAPES) each hidden effect leaves
+    "damping_anisotropy_temperature": "2θ·ΔT",
+    "bias_temperature": "ΔT",
+    "angular_gain_temperature": "Ω·ΔT",
+    "readout_gain_mismatch": "2θ·Ω",
+    "rate_scale_factor": "Ω³",
+}
 
 
 def _count(items):
