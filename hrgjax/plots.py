@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .units import DEG_PER_H
+
 
 def _plt():
     try:
@@ -76,18 +78,19 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
     plt = _plt()
     static = windows.select(windows.static)
     labels = [k for k in compensators if k != "raw"]
-    fig, axes = plt.subplots(
-        1,
-        1 + len(labels),
-        figsize=(3.4 * (1 + len(labels)), 3.6),
-        constrained_layout=True,
-        sharex=True,
-    )
+    n = 1 + len(labels)
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    # a grid, three panels a row: readable at 100 % (one row of six was 2244 × 396 px)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows),
+                             constrained_layout=True, sharex=True, squeeze=False)  # fmt: skip
     temps = np.unique(static.temperature_c)
     cmap = plt.get_cmap("coolwarm")
     norm = lambda T: (T - temps.min()) / max(np.ptp(temps), 1e-9)
     panels = [("measured drift", None)] + [(lab, compensators[lab]) for lab in labels]
-    for ax, (name, comp) in zip(np.atleast_1d(axes), panels, strict=True):
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    for ax, (name, comp) in zip(axes.ravel()[:n], panels, strict=True):
         for T in temps:
             m = static.temperature_c == T
             ang = static.wave_angle_deg[m]
@@ -98,11 +101,23 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
             ax.plot(
                 ang[order], y[order], "o-", ms=2, lw=1, color=cmap(norm(T)), label=f"{T:+.0f} °C"
             )
-        ax.set_title(name if comp is None else f"residual: {name}", fontsize=9)
+        ax.set_title(name if comp is None else f"residual: {name}", fontsize=10)
         ax.set_xlabel("wave angle [° el.]")
         ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].set_ylabel("drift [°/h]")
-    np.atleast_1d(axes)[0].legend(fontsize=6, ncol=2)
+    for r in range(rows):  # one y-label a row; the residual panels of a row share a scale
+        axes[r, 0].set_ylabel("drift [°/h]" if r == 0 else "residual drift [°/h]")
+        row = [ax for ax in axes[r] if ax.get_visible() and ax is not axes[0, 0]]
+        if len(row) > 1:
+            lo = min(ax.get_ylim()[0] for ax in row)
+            hi = max(ax.get_ylim()[1] for ax in row)
+            for ax in row:
+                ax.set_ylim(lo, hi)
+        for ax in row:
+            if ax is not axes[r, 0]:  # row 0: the first residual panel is labelled
+                ax.set_ylabel("residual drift [°/h]" if ax is row[0] and r == 0 else "")
+    # one legend for the figure: the colours mean the same temperature in every panel
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside right upper", fontsize=8, title="temperature")
     if title:
         fig.suptitle(title)
     _save(fig, path, dpi=110)
@@ -237,13 +252,18 @@ def vibration_figure(figures: dict, path: str) -> str:
     ax[0, 1].semilogy(figures["psd_f"], figures["psd_rest"], label="at rest", lw=0.8)
     ax[0, 1].set(xlabel="frequency [Hz]", ylabel="PSD [g²/Hz]", title="PSD (Welch)")
     ax[0, 1].legend()
-    for name, h in figures["history"].items():
-        ax[0, 2].semilogy(h["train"], label=f"{name} train")
+    # the normalised loss and the RMSE in °/h on their own axes (left and right)
+    rmse_ax = ax[0, 2].twinx()
+    lines = []
+    for i, (name, h) in enumerate(figures["history"].items()):
+        color = f"C{i}"
+        lines += ax[0, 2].semilogy(h["train"], color=color, label=f"{name}: training loss")
         if "test_rmse" in h:
-            ax[0, 2].semilogy(h["test_rmse"] / 4.84813681109536e-06, ls="--",
-                              label=f"{name} held-out RMSE [°/h]")  # fmt: skip
-    ax[0, 2].set(xlabel="epoch", ylabel="loss (normalised) / RMSE", title="training")
-    ax[0, 2].legend(fontsize=7)
+            lines += rmse_ax.semilogy(h["test_rmse"] / DEG_PER_H, color=color, ls="--",
+                                      label=f"{name}: held-out RMSE")  # fmt: skip
+    ax[0, 2].set(xlabel="epoch", ylabel="training loss (normalised)", title="training")
+    rmse_ax.set_ylabel("held-out RMSE [°/h] (dashed)")
+    ax[0, 2].legend(lines, [ln.get_label() for ln in lines], fontsize=7)
     w = figures["window_s"]
     for i, (f, amp) in enumerate(figures["test_conditions"][:2]):
         axx = ax[1, i]

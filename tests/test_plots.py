@@ -1,0 +1,87 @@
+"""The CLI's figures read at a glance (issue 23): checked on the matplotlib objects — every
+panel has a title and axis labels with units, a legend where it draws several curves, and no
+two quantities of different units share an axis."""
+
+import numpy as np
+import pytest
+
+from hrgjax import plots
+from hrgjax.calibration.reduce import RateWindows
+
+
+@pytest.fixture
+def figures(monkeypatch):
+    """The figures the plotting functions save, kept open for inspection."""
+    kept = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path, dpi: kept.append(fig))
+    monkeypatch.setattr(plots._plt(), "close", lambda fig=None: None)
+    return kept
+
+
+def _check(fig):
+    for ax in fig.axes:
+        if not ax.get_visible():
+            continue
+        twin = any(o is not ax and o.bbox.bounds == ax.bbox.bounds for o in fig.axes)
+        assert ax.get_title() or twin, "a panel without a title"
+        assert _unit(ax.get_xlabel()) or twin, f"x label without a unit: {ax.get_xlabel()!r}"
+        if ax.get_ylabel():
+            assert _unit(ax.get_ylabel()), f"y label without a unit: {ax.get_ylabel()!r}"
+        if len(ax.get_lines()) > 1 and not twin:  # its own legend, or the figure's
+            assert ax.get_legend() is not None or fig.legends, f"{ax.get_title()}: no legend"
+
+
+def _unit(label: str) -> bool:
+    """A unit in brackets, or a count / normalised quantity said in words."""
+    return "[" in label or label == "epoch" or "normalised" in label
+
+
+class _Flat:
+    def drift_dph(self, angle, temperature):
+        return 0.5 * np.sin(np.deg2rad(2 * angle)) + 0.01 * temperature
+
+
+def test_compensation_residuals_is_a_readable_grid(figures):
+    temps, angles = np.repeat([-40.0, 0.0, 40.0], 5), np.tile(np.linspace(-80, 80, 5), 3)
+    n = temps.size
+    drift = np.sin(np.deg2rad(2 * angles)) + 0.02 * temps  # °/h
+    w = RateWindows(run=np.arange(n), start=np.zeros(n, int), stop=np.full(n, 10),
+                    t_mid=np.full(n, 90.0), duration=np.full(n, 180.0), temperature_c=temps,
+                    table_rate_dps=np.zeros(n), wave_angle_deg=angles,
+                    rate_dps=drift / 3600.0, stderr_dps=np.full(n, 1e-5), k_e=0.554)  # fmt: skip
+    comps = {name: _Flat() for name in ("fourier", "mlp", "physical", "a", "b")}
+    plots.compensation_residuals(w, comps, "unused.png")
+    (fig,) = figures
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 6
+    width, height = fig.get_size_inches()
+    assert width / height < 2.0  # a grid, not one long row (was 20.4 × 3.6 in)
+    _check(fig)
+    residual = visible[1:3]  # the residual panels of a row share one scale
+    assert residual[0].get_ylim() == residual[1].get_ylim()
+
+
+def test_vibration_training_panel_keeps_loss_and_rmse_on_separate_axes(figures):
+    t = np.linspace(0.0, 10.0, 1001)
+    hist = {"elman": {"train": np.geomspace(1, 0.01, 50),
+                      "test_rmse": np.geomspace(1e-4, 1e-6, 50)},
+            "mlp": {"train": np.geomspace(1, 0.02, 50)}}  # fmt: skip
+    f = {
+        "t": t, "accel_z_g": np.sin(t), "vibration_start_s": 1.0,
+        "psd_f": np.linspace(1, 50, 50), "psd": np.ones(50), "psd_rest": np.full(50, 0.1),
+        "history": hist, "window_s": 2.0, "test_conditions": [(10.0, 1.0), (20.0, 0.5)],
+        "test_truth": np.zeros((2, 20, 3)), "test_pred": {"elman": np.zeros((2, 20, 3))},
+        "true_heading": np.zeros(30), "align_heading": {"raw": np.ones(30)},
+        "align_t": np.arange(30.0), "limit": {"remaining_drift": 0.1}, "scenario": "10hz_1g",
+    }  # fmt: skip
+    plots.vibration_figure(f, "unused.png")
+    (fig,) = figures
+    _check(fig)
+    training = [ax for ax in fig.axes if ax.get_title() == "training"]
+    assert len(training) == 1
+    twins = [ax for ax in fig.axes if ax is not training[0]
+             and ax.bbox.bounds == training[0].bbox.bounds]  # fmt: skip
+    assert len(twins) == 1
+    assert "normalised" in training[0].get_ylabel() and "°/h" in twins[0].get_ylabel()
+    # the loss curves on the left axis, the RMSE (°/h) on the right
+    assert len(training[0].get_lines()) == 2 and len(twins[0].get_lines()) == 1
