@@ -85,11 +85,11 @@ class Layout:
         self.names = tuple(names)
         self.slices, self.scales, self.regular, start = {}, [], [], 0
         for n in self.names:
-            ps = CATALOGUE[n].params
-            self.slices[n] = slice(start, start + len(ps))
-            self.scales += [p.scale for p in ps]
-            self.regular += [p.regular for p in ps]
-            start += len(ps)
+            effect = CATALOGUE[n]
+            self.slices[n] = slice(start, start + effect.size)
+            self.scales += [p.scale for p in effect.params]
+            self.regular += [p.regular for p in effect.params]
+            start += effect.size
         self.size = start
         self.scale = np.asarray(self.scales)
 
@@ -855,7 +855,7 @@ class ContinuousProblem:
                 refit = self.fit(model + [name], z0=z_start)
             except RuntimeError:
                 continue
-            q = len(CATALOGUE[name].params)
+            q = CATALOGUE[name].size
             row.update(
                 delta_bic=float(current["chi2"] - refit["chi2"] - q * math.log(n)),
                 gap_after=refit["gap"],
