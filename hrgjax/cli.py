@@ -571,8 +571,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--shape",
         default="auto",
-        choices=("auto", "dwell", "continuous"),
-        help="data shape (auto: dwell when every run holds its rate and temperature)",
+        choices=("auto", "dwell", "continuous", "mixed"),
+        help="data shape (auto: dwell when every run holds its rate and temperature, mixed "
+        "when some do: those as dwell windows, jointly with the continuous records)",
     )
     p.add_argument("--json", default=None, help="write the report here (JSON)")
     p.add_argument("--plot", default=None, help="write the report figure here (PNG)")

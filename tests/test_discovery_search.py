@@ -9,7 +9,7 @@ from helpers import noisy_model_gyro
 
 import hrgjax as hg
 from hrgjax.calibration import physical, rotation_plan, run_plan, static_plan
-from hrgjax.discovery import dwell
+from hrgjax.discovery import NOMINAL, continuous, dwell
 from hrgjax.discovery.search import discover
 from hrgjax.units import DEG_PER_H
 
@@ -139,3 +139,31 @@ def test_generator_base_is_the_nominal_physics_and_injects_by_name():
     np.testing.assert_allclose(both.drift_terms.warmup, 0.3 * DEG_PER_H)
     with pytest.raises(ValueError, match="cannot generate 'acceleration_sensitivity'"):
         inject(base, "acceleration_sensitivity", 1.0)
+
+
+def test_dwell_runs_as_window_rows_of_the_joint_problem_equal_the_dwell_search():
+    """A mixed log's dwell runs enter the continuous problem as the dwell search's window
+    rows: on dwell runs alone its Levenberg–Marquardt fit is the dwell search's weighted
+    least squares (the nominal model is linear), with the same σ, gap and floor."""
+    from hrgjax.discovery import generate, search
+    from hrgjax.units import K_E_NOMINAL, WINDOW_S
+
+    data = generate.hidden_effect_dataset(
+        None,
+        key=jax.random.key(5),
+        temperatures_c=(-20.0, 20.0, 60.0),
+        angles_deg=(-60.0, 0.0, 60.0),
+    )
+    runs = np.unique(data.run)
+    held = runs[2::3]
+    dwell = search.DwellProblem(data, K_E_NOMINAL, WINDOW_S, held)
+    joint = search._continuous_problem(data, NOMINAL, None, K_E_NOMINAL, held, None, 10.0, WINDOW_S)
+    assert not any(isinstance(g, continuous.Runs) for g in joint.train_groups)
+    a, b = dwell.fit(list(NOMINAL)), joint.fit(list(NOMINAL))
+    for name, ps in a["parameters"].items():
+        for p, v in ps.items():
+            w = b["parameters"][name][p]
+            assert w["value"] == pytest.approx(v["value"], rel=1e-7, abs=1e-6 * v["std"])
+            assert w["std"] == pytest.approx(v["std"], rel=1e-7)
+    assert b["gap"] == pytest.approx(a["gap"], rel=1e-7)
+    assert joint.floor() == pytest.approx(dwell.floor(), rel=1e-12)

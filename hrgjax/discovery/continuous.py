@@ -64,14 +64,21 @@ GM_TIMES = (30.0, 100.0, 300.0, 1000.0, 3000.0)
 """Correlation times tried for the Gauss–Markov part of the noise model [s]."""
 
 
+def dwell_runs(data: MeasuredData) -> set[int]:
+    """Ids of the runs that hold their temperature and table rate constant (dwell runs)."""
+    out = set()
+    for idx in data.run_indices():
+        if all(
+            np.ptp(v := data[col][idx]) <= 1e-9 * max(1.0, float(np.max(np.abs(v))))
+            for col in ("temperature_c", "table_rate_dps")
+        ):
+            out.add(int(data.run[idx[0]]))
+    return out
+
+
 def is_dwell(data: MeasuredData) -> bool:
     """True when every run holds its temperature and table rate constant (a dwell grid)."""
-    for idx in data.run_indices():
-        for col in ("temperature_c", "table_rate_dps"):
-            v = data[col][idx]
-            if np.ptp(v) > 1e-9 * max(1.0, float(np.max(np.abs(v)))):
-                return False
-    return True
+    return len(dwell_runs(data)) == len(np.unique(data.run))
 
 
 # ---------------------------------------------------------------- parameter layout
@@ -141,6 +148,29 @@ class Runs(eqx.Module):
     run: tuple = eqx.field(static=True)  # run ids
 
 
+class Windows(eqx.Module):
+    """The dwell runs of a mixed log (constant temperature and rate), as windows: measured
+    pattern rate `y` [rad/s], its standard error `sigma` [rad/s] and the window covariates
+    (as the dwell search has them); `run`: each window's run id."""
+
+    y: jax.Array
+    sigma: jax.Array
+    cov: Covariates
+    run: tuple = eqx.field(static=True)
+
+
+def _window_rate(layout: Layout, z, c: Covariates):
+    """Model pattern rate of each window [rad/s] (readout terms as the scale factor they
+    put on the measured rate: θ_meas = θ + ½ε₁ sin2θ + ½ε₂ cos2θ)."""
+    params = layout.unpack(z)
+    rate = pattern_rate({n: p for n, p in params.items() if CATALOGUE[n].where == "rate"}, c)
+    if "readout_gain_mismatch" in params:
+        e = params["readout_gain_mismatch"]
+        th = c.theta
+        rate = rate * (1.0 + c.harmonic_gain * (e[0] * jnp.cos(2 * th) - e[1] * jnp.sin(2 * th)))
+    return rate
+
+
 def _one_run(layout: Layout, z, t, theta, rate, temp, accel, amp, quad, bidx, steps):
     """Model wave angle (with readout terms) at the block boundaries of one run."""
     params = layout.unpack(z)
@@ -203,6 +233,9 @@ def _whitened(layout, z, groups):
     """Whitened increment residuals of every run of every group, concatenated."""
     out = []
     for g in groups:
+        if isinstance(g, Windows):
+            out.append((g.y - _window_rate(layout, z, g.cov)) / g.sigma)
+            continue
         r = _measured(g) - _increments(layout, z, g)
         out.append(jnp.einsum("rkl,rl->rk", g.whiten, r).ravel())
     return jnp.concatenate(out)
@@ -239,7 +272,8 @@ def _residual_and_jacobian(layout, z, basis, groups):
 
 
 def _raw_residuals(layout, z, groups):
-    """Unwhitened increment residuals per group [rad], shape (R, K) each."""
+    """Unwhitened increment residuals per group [rad], shape (R, K) each (window groups:
+    pattern-rate residuals [rad/s], shape (W,))."""
     return _raw_residuals_compiled(layout, z, _anonymous(groups))
 
 
@@ -292,7 +326,12 @@ def _residual_and_jacobian_compiled(layout, z, basis, groups):
 @program(check=Unchecked())
 def _raw_residuals_compiled(layout, z, groups):
     """Unwhitened increment residuals per group [rad], shape (R, K) each."""
-    return [_measured(g) - _increments(layout, z, g) for g in groups]
+    return [
+        g.y - _window_rate(layout, z, g.cov)
+        if isinstance(g, Windows)
+        else _measured(g) - _increments(layout, z, g)
+        for g in groups
+    ]
 
 
 @program(check=Unchecked())
@@ -446,8 +485,9 @@ class ContinuousProblem:
     """Everything `discover` needs on continuous records: fits, screening and the gap
     (the same interface as the dwell-grid problem)."""
 
-    def __init__(self, data, names, k_e, held, noise, block_s=BLOCK_S):
+    def __init__(self, data, names, k_e, held, noise, block_s=BLOCK_S, windows=None):
         self.data, self.k_e, self.block_s = data, k_e, block_s
+        self.windows = windows  # (Windows, held mask): the dwell runs of a mixed log
         self.layout = Layout(names)
         self.held = set(int(r) for r in held)
         self.noise = dict(noise)
@@ -461,10 +501,24 @@ class ContinuousProblem:
         # set in samples from the first run's interval (a 721-sample ramp at 5 s and a
         # 721-sample rotation at 0.1 s must not share them)
         by_len: dict[tuple[int, float], list[np.ndarray]] = {}
-        for idx in d.run_indices():
+        for idx in d.run_indices() if d is not None else []:  # None: windows only
             dt = float(np.median(np.diff(d["time_s"][idx]))) if idx.size > 1 else 0.0
             by_len.setdefault((idx.size, float(f"{dt:.9g}")), []).append(idx)
         self.train_groups, self.held_groups = [], []
+        if self.windows is not None:
+            w, held = self.windows
+            for mask, groups in ((~held, self.train_groups), (held, self.held_groups)):
+                if mask.any():
+                    n = int(mask.sum())
+                    pick = lambda a, mask=mask: jnp.asarray(np.asarray(a)[mask])
+                    # every covariate per window (a default scalar broadcast), so that the
+                    # compiled programs see arrays only
+                    cov = jax.tree_util.tree_map(
+                        lambda a, pick=pick, n=n: pick(a) if np.ndim(a) else jnp.full(n, a),
+                        w.cov,
+                    )
+                    groups.append(Windows(y=pick(w.y), sigma=pick(w.sigma), cov=cov,
+                                          run=tuple(np.asarray(w.run)[mask].tolist())))  # fmt: skip
         for (n, _), runs in sorted(by_len.items()):
             for is_held in (False, True):
                 sel = [i for i in runs if (int(d.run[i[0]]) in self.held) == is_held]
@@ -506,12 +560,19 @@ class ContinuousProblem:
         """Set the run-to-run bias spread σ_b [rad/s] from the scatter of every run's mean
         rate residual at the fit `z`, less what the rest of the noise gives it, and rebuild
         the whitening."""
-        # the training and held-out runs apart: their residual programs exist already
-        rates = self.run_rates(z, self.train_groups) | self.run_rates(z, self.held_groups)
+        # the training and held-out runs apart: their residual programs exist already;
+        # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
+        # one session, whose bias the shared `bias` parameter takes)
+        train = [g for g in self.train_groups if isinstance(g, Runs)]
+        held = [g for g in self.held_groups if isinstance(g, Runs)]
+        rates = self.run_rates(z, train) | self.run_rates(z, held)
         means = np.asarray(list(rates.values()))
         self.noise["run_bias"] = 0.0
-        noise_var = self.floor(every=True) ** 2
-        spread = np.var(means, ddof=1) if means.size > 1 else 0.0
+        if means.size < 2:  # nothing to estimate it from
+            self._build()
+            return
+        noise_var = self.floor(every=True, windows=False) ** 2
+        spread = np.var(means, ddof=1)
         self.noise["run_bias"] = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_e
         self._build()
 
@@ -527,7 +588,10 @@ class ContinuousProblem:
     def structure_left(self, fit, floor=None, alpha=1e-3):
         """True when the held-out whitened χ² is too large for its degrees of freedom
         (p < `alpha`)."""
-        dof = sum(int(g.bidx.shape[0]) - 2 for g in self.held_groups for _ in g.run)
+        dof = sum(
+            len(g.run) if isinstance(g, Windows) else (int(g.bidx.shape[0]) - 2) * len(g.run)
+            for g in self.held_groups
+        )
         return dwell.chi2_sf(fit["heldout_chi2"], max(dof, 1)) < alpha
 
     # -- fits ----------------------------------------------------------------
@@ -588,7 +652,9 @@ class ContinuousProblem:
     def _whiten(raw, groups):
         """Whitened residuals (concatenated) from per-group raw increment residuals."""
         out = [
-            np.einsum("rkl,rl->rk", np.asarray(g.whiten), r).ravel()
+            np.asarray(r) / np.asarray(g.sigma)
+            if isinstance(g, Windows)
+            else np.einsum("rkl,rl->rk", np.asarray(g.whiten), r).ravel()
             for g, r in zip(groups, raw, strict=True)
         ]
         return np.concatenate(out) if out else np.zeros(0)
@@ -597,6 +663,11 @@ class ContinuousProblem:
         """Run-mean equivalent-input-rate residual [°/h] of every run, from raw residuals."""
         out = {}
         for g, r in zip(groups, raw, strict=True):
+            if isinstance(g, Windows):  # the mean of the run's windows
+                runs, r = np.asarray(g.run), np.asarray(r)
+                for run in np.unique(runs):
+                    out[int(run)] = float(-np.mean(r[runs == run]) / self.k_e / DEG_PER_H)
+                continue
             span = np.asarray(g.t[:, g.bidx[-1]] - g.t[:, g.bidx[0]])
             means = -np.asarray(r).sum(axis=1) / (self.k_e * span) / DEG_PER_H
             out.update(zip(g.run, means, strict=True))
@@ -623,6 +694,8 @@ class ContinuousProblem:
         stat, dof, per_run, agree, exciting = 0.0, -len(idx), {}, 0, 0
         names = [p.name for p in CATALOGUE[name].params if p.regular]
         for g in self.train_groups:
+            if isinstance(g, Windows):  # a dwell run is one grid point: no per-run refit
+                continue
             zs, oks, js = (np.asarray(a) for a in _per_run(self.layout, basis, z0, g))
             for i, run in enumerate(g.run):
                 z, ok, j = zs[i], oks[i], js[i]
@@ -662,6 +735,7 @@ class ContinuousProblem:
         run [min], its mean rate removed (the switch-on bias), held-out runs marked."""
         out = []
         for groups, held in ((self.train_groups, False), (self.held_groups, True)):
+            groups = [g for g in groups if isinstance(g, Runs)]
             for g, r in zip(groups, self.raw_residuals(fit["z"], groups), strict=True):
                 tb = np.asarray(g.t[:, g.bidx])
                 for i, run in enumerate(g.run):
@@ -679,6 +753,16 @@ class ContinuousProblem:
         the residual is."""
         parts: dict[str, list] = {}
         for g in self.train_groups:
+            if isinstance(g, Windows):
+                c, n = g.cov, len(g.run)
+                full = lambda v, n=n: np.broadcast_to(np.asarray(v, float), (n,))
+                cov = {"theta": full(c.theta), "dT": full(c.temperature) - T_REF_C,
+                       "Tdot": np.zeros(n), "rate": full(c.rate), "accel_z": full(c.accel_z),
+                       "t_run": full(c.t_run)}  # fmt: skip
+                sigma = np.asarray(g.sigma)[:, None]
+                for name, col in leftover.columns(cov, drop=False).items():
+                    parts.setdefault(name, []).append(col / sigma)
+                continue
             b = np.asarray(g.bidx)
             t, temp = np.asarray(g.t), np.asarray(g.temp)
             for i in range(len(g.run)):
@@ -720,19 +804,25 @@ class ContinuousProblem:
         rates = self._run_means(held_raw, self.held_groups)
         return float(np.sqrt(np.mean(np.square(list(rates.values())))))
 
-    def floor(self, every=False):
-        """What noise alone gives the gap: RMS over held-out runs (`every`: all runs) of the
-        standard deviation of the run-mean rate [°/h]."""
+    def floor(self, every=False, windows=True):
+        """What noise alone gives the gap: RMS over held-out runs (`every`: all runs; without
+        `windows`, the continuous runs only) of the standard deviation of the run-mean rate
+        [°/h]."""
         if not (self.held_groups or every):
             return float("nan")
         var = []
         for g in self.held_groups + (self.train_groups if every else []):
+            if isinstance(g, Windows):
+                if windows:
+                    runs, inv = np.asarray(g.run), 1.0 / np.asarray(g.sigma) ** 2
+                    var += [1.0 / inv[runs == r].sum() / self.k_e**2 for r in np.unique(runs)]
+                continue
             k = int(g.bidx.shape[0]) - 1
             for i in range(len(g.run)):
                 span = float(g.t[i, g.bidx[-1]] - g.t[i, g.bidx[0]])
                 cov = increment_covariance(self.noise, span / k, k)
                 var.append(cov.sum() / (self.k_e * span) ** 2)
-        return float(np.sqrt(np.mean(var))) / DEG_PER_H
+        return float(np.sqrt(np.mean(var))) / DEG_PER_H if var else float("nan")
 
     # -- interface shared with the dwell problem ------------------------------
     gap_guard = False  # the run-mean gap is set by the switch-on bias: judge on χ² only

@@ -23,7 +23,7 @@ def plot_discovery(disc: Discovery, path: str) -> str:
         (axes[0, 0], "before", "residual,\nnominal model"),
         (axes[0, 1], "after", after),
     ):
-        if disc.shape == "continuous":
+        if disc.shape in ("continuous", "mixed"):  # a mixed log: its continuous records
             _continuous_panel(ax, disc.residuals[which])
         else:
             _dwell_panel(ax, disc.residuals[which], plt)

@@ -40,7 +40,7 @@ from ..data import MeasuredData
 from ..noise import Noise
 from ..units import DEG, DEG_PER_H, T_REF_C
 from . import dwell, leftover
-from .continuous import BLOCK_S, ContinuousProblem, is_dwell, noise_from_gyro
+from .continuous import BLOCK_S, ContinuousProblem, Windows, dwell_runs, noise_from_gyro
 from .continuous import noise_model as continuous_noise
 from .effects import CATALOGUE, NOMINAL, window_gain
 from .result import Discovery
@@ -136,8 +136,9 @@ def discover(
       the separating experiments in `discriminate`). `min_agreement`: continuous records
       only, the smallest share of the training runs that excite an effect in which its
       parameters, refitted on that run alone, point the same way as the pooled fit.
-    - `shape`: `"auto"` (dwell when every run holds its rate and temperature), `"dwell"` or
-      `"continuous"`.
+    - `shape`: `"auto"` (dwell when every run holds its rate and temperature, mixed when
+      some do), `"dwell"`, `"continuous"` or `"mixed"` (the dwell runs as the dwell search's
+      window rows, jointly with the other runs simulated as continuous records).
     - `noise`: a known [`hrgjax.Noise`][] for continuous records (default: estimated from the
       data's zero-rate stretches, run-to-run bias from the baseline fit).
     - `block_s`: block length of the continuous increments [s].
@@ -164,7 +165,9 @@ def discover(
     if noise is not None and not isinstance(noise, Noise):
         raise TypeError(f"noise must be an hrgjax.Noise or None; got {type(noise).__name__}")
     if shape == "auto":
-        shape = "dwell" if is_dwell(data) else "continuous"
+        n_dwell = len(dwell_runs(data))
+        n_runs = np.unique(data.run).size
+        shape = "dwell" if n_dwell == n_runs else "mixed" if n_dwell else "continuous"
     if holdout_every is None:
         holdout_every = 4 if shape == "dwell" else 3
     runs = np.unique(data.run)
@@ -178,7 +181,10 @@ def discover(
     if shape == "dwell":
         problem = DwellProblem(data, k_e, window_s, held)
     else:
-        problem = _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s)
+        problem = _continuous_problem(
+            data, nominal, catalogue, k_e, held, noise, block_s,
+            window_s if shape == "mixed" else None,
+        )  # fmt: skip
     cands = list(catalogue) if catalogue is not None else problem.candidates(nominal)
     cands = [n for n in cands if n not in nominal]
 
@@ -278,19 +284,35 @@ def _fitted_k_e(parameters: dict, k_e: float) -> float:
     return float(p["value"])
 
 
-SHAPES = ("auto", "dwell", "continuous")
+SHAPES = ("auto", "dwell", "continuous", "mixed")
 SCREEN_KEYS = ("effect", "score", "p_value", "delta_bic", "aliasing", "heldout_gain", "gap_after")
 
 
-def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s):
+def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s, window_s=None):
     """Build the continuous problem over the superset (nominal + candidates); without a known
-    noise model, estimate it and then the run-to-run bias from the baseline's run means."""
+    noise model, estimate it and then the run-to-run bias from the baseline's run means.
+    With `window_s` (a mixed log), the dwell runs join it as windows of that length (the
+    dwell search's regression rows) and only the other runs are simulated."""
     have = {k for k, col in OPTIONAL.items() if col in data}
     cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
     names = list(nominal) + [n for n in cands if n not in nominal]
     known = noise is not None
     nz = noise_from_gyro(noise, k_e) if known else continuous_noise(data)
-    problem = ContinuousProblem(data, names, k_e, held, nz, block_s)
+    windows, records = None, data
+    dwell_ids = np.asarray(sorted(dwell_runs(data))) if window_s is not None else []
+    if len(dwell_ids):
+        in_dwell = np.isin(data.run, dwell_ids)
+        part = lambda m: (
+            MeasuredData({k: v[m] for k, v in data.columns.items()}) if m.any() else None
+        )
+        sub, records = part(in_dwell), part(~in_dwell)
+        w = reduce(sub, k_e, window_s=window_s)
+        extra, _ = _window_extras(sub, w)
+        sigma, _ = _noise_scale(sub, w, k_e)
+        win = Windows(y=dwell.target(w, k_e), sigma=sigma, cov=dwell.covariates(w, extra),
+                      run=tuple(np.asarray(w.run).tolist()))  # fmt: skip
+        windows = (win, np.isin(w.run, held))
+    problem = ContinuousProblem(records, names, k_e, held, nz, block_s, windows=windows)
     problem.noise_known = known
     if not known:
         problem.estimate_run_bias(problem.fit(list(nominal))["z"])
