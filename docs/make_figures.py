@@ -210,16 +210,16 @@ def adjoint_memory():
     plt.close(fig)
 
 
-FIGURES = (  # longest first, so that the workers finish together
-    calibration,
-    discovery,
-    vibration,
+FIGURES = (  # longest first (cold, 2 cores), so that the workers finish together
     diagnosis,
     adjoint_memory,
+    vibration,
+    discovery,
+    calibration,
     presets,
+    ins,
     full_vs_averaged,
     allan,
-    ins,
 )
 
 
