@@ -299,28 +299,39 @@ def _per_run_compiled(layout, basis, z0, group):
     def one(*arrays):
         g = Runs(**{f: a[None] for f, a in zip(per_run, arrays, strict=True)},
                  bidx=group.bidx, steps=group.steps, run=())  # fmt: skip
-        fn = lambda u, _: _whitened(layout, z0 + basis @ u, [g])
-        sol = optx.least_squares(
-            fn,
-            optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
-            jnp.zeros(basis.shape[1]),
-            max_steps=256,
-            throw=False,
-        )
-        z = z0 + basis @ sol.value
-        j = jax.jacfwd(lambda u: _whitened(layout, z + basis @ u, [g]))(jnp.zeros(basis.shape[1]))
-        return z, sol.result == optx.RESULTS.successful, j
+        z, ok = _levenberg_marquardt(layout, basis, z0, [g])
+        return z, ok, _jacobian(layout, z, basis, [g])[1]
 
     return jax.vmap(one)(*(getattr(group, f) for f in per_run))
+
+
+def _jacobian(layout, z, basis, groups):
+    """Whitened residual at `z` and its forward-mode derivative along the columns of
+    `basis` (P, m) (traced; `_residual_and_jacobian` is the compiled entry point)."""
+    fn = lambda u: _whitened(layout, z + basis @ u, groups)
+    u0 = jnp.zeros(basis.shape[1])
+    return fn(u0), jax.jacfwd(fn)(u0)
+
+
+def _levenberg_marquardt(layout, basis, z0, groups):
+    """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`:
+    `(z, converged)` (traced; `_lm` is the compiled entry point)."""
+    fn = lambda u, _: _whitened(layout, z0 + basis @ u, groups)
+    sol = optx.least_squares(
+        fn,
+        optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
+        jnp.zeros(basis.shape[1]),
+        max_steps=256,
+        throw=False,
+    )
+    return z0 + basis @ sol.value, sol.result == optx.RESULTS.successful
 
 
 @program(check=Unchecked())
 def _residual_and_jacobian_compiled(layout, z, basis, groups):
     """Whitened residual at `z` and its forward-mode derivative along the columns of
     `basis` (P, m): the sensitivities to m chosen parameters."""
-    fn = lambda u: _whitened(layout, z + basis @ u, groups)
-    u0 = jnp.zeros(basis.shape[1])
-    return fn(u0), jax.jacfwd(fn)(u0)
+    return _jacobian(layout, z, basis, groups)
 
 
 @program(check=Unchecked())
@@ -337,15 +348,7 @@ def _raw_residuals_compiled(layout, z, groups):
 @program(check=Unchecked())
 def _lm_compiled(layout, basis, z0, groups):
     """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`."""
-    fn = lambda u, _: _whitened(layout, z0 + basis @ u, groups)
-    sol = optx.least_squares(
-        fn,
-        optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
-        jnp.zeros(basis.shape[1]),
-        max_steps=256,
-        throw=False,
-    )
-    return z0 + basis @ sol.value, sol.result == optx.RESULTS.successful
+    return _levenberg_marquardt(layout, basis, z0, groups)
 
 
 # ---------------------------------------------------------------- noise model

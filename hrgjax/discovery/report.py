@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from .result import Discovery
@@ -51,10 +49,7 @@ def plot_discovery(disc: Discovery, path: str) -> str:
     ax.set_ylabel("held-out gap [°/h]")
     ax.set_title(f"verdict: {disc.verdict}\nmissing effect: {disc.missing_effect}", fontsize=10)
     fig.suptitle(f"discovery on {disc.shape} data", fontsize=11)
-    d = os.path.dirname(path)
-    if d:
-        os.makedirs(d, exist_ok=True)
-    _save(fig, path, dpi=110)
+    _save(fig, path, dpi=110)  # makes the folder
     plt.close(fig)
     return path
 

@@ -159,10 +159,7 @@ class Discovery:
         from .._io import atomic_write
 
         path = os.fspath(path)
-        d = os.path.dirname(path)
-        if d:
-            os.makedirs(d, exist_ok=True)
-        with atomic_write(path, "w") as fh:
+        with atomic_write(path, "w") as fh:  # makes the folder
             json.dump(self.to_json(), fh, indent=1, ensure_ascii=False)
         return path
 
