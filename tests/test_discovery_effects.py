@@ -9,7 +9,7 @@ import pytest
 
 import hrgjax as hg
 from hrgjax.discovery import CATALOGUE, NOMINAL, Covariates, null_params, pattern_rate
-from hrgjax.discovery.effects import rate_term, rate_term_with_gain, readout_term
+from hrgjax.discovery.effects import rate_term, rate_term_with_gain, readout_angle, readout_term
 from hrgjax.resonator.averaged import averaged_vector_field
 from hrgjax.units import DEG, DEG_PER_H
 
@@ -28,12 +28,13 @@ CONTRACT = {
     "acceleration_sensitivity",
     "readout_gain_mismatch",
 }
+ADDED = {"readout_gain_mismatch_temperature", "loop_ripple"}  # DISCOVERY.md H9; issue 19
 K_E = 0.554
 THETA = jnp.linspace(-1.5, 1.5, 11)
 
 
 def test_catalogue_has_exactly_the_contract_names():
-    assert set(CATALOGUE) == CONTRACT | set(NOMINAL)
+    assert set(CATALOGUE) == CONTRACT | set(NOMINAL) | ADDED
     for name, effect in CATALOGUE.items():
         assert effect.where in ("rate", "readout"), name
         assert all(p.scale > 0 for p in effect.params), name
@@ -63,7 +64,7 @@ def test_every_term_is_exactly_zero_at_its_null(key):
         effect = CATALOGUE[name]
         if effect.where == "readout":
             out = readout_term(name, p, c)
-        elif name in ("angular_gain_temperature", "rate_scale_factor"):
+        elif effect.scales_gain:
             out = rate_term_with_gain(name, p, c, K_E)
         else:
             out = rate_term(name, p, c)
@@ -157,17 +158,29 @@ def test_split_and_nonlinearity_terms_match_the_free_vector_field(q):
     np.testing.assert_allclose(sim, term, rtol=10 * q**2, atol=1e-12)
 
 
-def test_readout_term_matches_the_simulated_readout():
-    g = 3e-3
-    gyro = eqx.tree_at(lambda gy: gy.readout, _ideal(), hg.Readout(gain_mismatch=g))
-    prof = hg.Profile.constant_rate(5.0, 60.0, 20.0, wave_angle0_deg=10.0)
+def test_readout_terms_match_the_simulated_readout_exactly():
+    # A gain mismatch that changes with T plus a cross-talk, read at −20 °C: the two readout
+    # terms' mismatch pairs add in the pickoff matrix and the atan form is exact (no O(g²)).
+    g0, g1, xt, temp = 3e-3, -1e-4, 1e-3, -20.0
+    law = hg.TemperatureLaw(g0, g1, 0.0, 0.0)
+    gyro = eqx.tree_at(
+        lambda gy: gy.readout, _ideal(), hg.Readout(gain_mismatch=law, cross_talk=xt)
+    )
+    prof = hg.Profile.constant_rate(5.0, 60.0, temp, wave_angle0_deg=10.0)
     rec = hg.simulate(gyro, prof, dt_out=1.0)
-    c = Covariates(theta=rec.true_wave_angle)
-    term = readout_term("readout_gain_mismatch", jnp.asarray([-2 * g, 0.0]), c)
+    c = Covariates(theta=rec.true_wave_angle, temperature=temp)
+    params = {
+        "readout_gain_mismatch": jnp.asarray([-2 * g0, 2 * xt]),  # at +20 °C
+        "readout_gain_mismatch_temperature": jnp.asarray([-2 * g1, 0.0]),
+    }
     err = rec.wave_angle - rec.true_wave_angle
-    # First order in g (PHYSICS §4.7): the remainder is O(g²).
-    np.testing.assert_allclose(err, term, atol=2 * g**2)
-    assert np.max(np.abs(err)) > 0.5 * g
+    np.testing.assert_allclose(err, readout_angle(params, c), rtol=0, atol=1e-12)
+    first = readout_term("readout_gain_mismatch", params["readout_gain_mismatch"], c)
+    first = first + readout_term(
+        "readout_gain_mismatch_temperature", params["readout_gain_mismatch_temperature"], c
+    )
+    assert np.max(np.abs(err - first)) > 1e-7  # the sum of separate terms is not the matrix
+    assert np.max(np.abs(err)) > 0.5 * g0
 
 
 def test_unknown_or_misused_names_are_refused():

@@ -32,6 +32,7 @@ point and pays for the grid in its Bonferroni level.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import diffrax
@@ -47,7 +48,7 @@ from ..data import MeasuredData
 from ..profiles import lag_at_knots
 from ..units import DEG, DEG_PER_H, T_REF_C
 from . import dwell, leftover
-from .effects import CATALOGUE, Covariates, pattern_rate, readout_term
+from .effects import CATALOGUE, Covariates, pattern_rate, readout_angle, window_rate
 
 BLOCK_S = 10.0
 """Default block length of the increments [s]."""
@@ -160,15 +161,10 @@ class Windows(eqx.Module):
 
 
 def _window_rate(layout: Layout, z, c: Covariates):
-    """Model pattern rate of each window [rad/s] (readout terms as the scale factor they
-    put on the measured rate: θ_meas = θ + ½ε₁ sin2θ + ½ε₂ cos2θ)."""
-    params = layout.unpack(z)
-    rate = pattern_rate({n: p for n, p in params.items() if CATALOGUE[n].where == "rate"}, c)
-    if "readout_gain_mismatch" in params:
-        e = params["readout_gain_mismatch"]
-        th = c.theta
-        rate = rate * (1.0 + c.harmonic_gain * (e[0] * jnp.cos(2 * th) - e[1] * jnp.sin(2 * th)))
-    return rate
+    """Model pattern rate of each dwell window [rad/s]
+    ([`window_rate`][hrgjax.discovery.effects.window_rate]: the readout terms to all
+    orders, as the dwell search's refinement)."""
+    return window_rate(layout.unpack(z), c)
 
 
 def _one_run(layout: Layout, z, t, theta, rate, temp, accel, amp, quad, bidx, steps):
@@ -212,9 +208,9 @@ def _one_run(layout: Layout, z, t, theta, rate, temp, accel, amp, quad, bidx, st
         max_steps=None,
     )
     out = sol.ys
-    if "readout_gain_mismatch" in params:
-        c = Covariates(theta=out)
-        out = out + readout_term("readout_gain_mismatch", params["readout_gain_mismatch"], c)
+    readouts = {n: p for n, p in params.items() if CATALOGUE[n].where == "readout"}
+    if readouts:
+        out = out + readout_angle(readouts, Covariates(theta=out, temperature=temp[bidx]))
     return out
 
 
@@ -749,11 +745,11 @@ class ContinuousProblem:
                                 "angle_arcsec": cum / DEG * 3600})  # fmt: skip
         return sorted(out, key=lambda d: d["run"])
 
-    def leftover(self, fit):
-        """The strongest shape left in `fit`'s training residual
-        ([`describe`][hrgjax.discovery.leftover.describe]): each shape's columns are its
-        pattern rate at the block's mean covariates times the block's length, whitened as
-        the residual is."""
+    @functools.cached_property
+    def shape_columns(self) -> dict:
+        """Whitened columns of the generic shapes ([`leftover.columns`][hrgjax.discovery.leftover.columns]):
+        each shape's pattern rate at a block's mean covariates times the block's length,
+        whitened as the residual is (dwell windows: divided by their σ)."""
         parts: dict[str, list] = {}
         for g in self.train_groups:
             if isinstance(g, Windows):
@@ -787,8 +783,12 @@ class ContinuousProblem:
                 for name, col in leftover.columns(cov, drop=False).items():
                     parts.setdefault(name, []).append(w @ (col * span[:, None]))
         cols = {k: np.concatenate(v) for k, v in parts.items()}
-        cols = {k: v for k, v in cols.items() if np.any(v)}
-        return leftover.describe(fit["r"], fit["j"], cols, self.k_e)
+        return {k: v for k, v in cols.items() if np.any(v)}
+
+    def leftover(self, fit):
+        """The strongest shape left in `fit`'s training residual
+        ([`describe`][hrgjax.discovery.leftover.describe])."""
+        return leftover.describe(fit["r"], fit["j"], self.shape_columns, self.k_e)
 
     def raw_residuals(self, z, groups=None):
         """Unwhitened increment residuals [rad], one (R, K) array per group (default: the

@@ -13,6 +13,7 @@ what it is confused with and which experiment tells them apart (DISCOVERY.md §2
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
@@ -57,6 +58,18 @@ class Effect:
       what it is confused with, and the experiment that separates them.
     - `formula`: the term in user units, as the apparent input rate it adds (a readout term:
       the angle it adds), with `{param}` where each parameter's value goes (ΔT = T − 20 °C).
+    - `term`: the term itself: `term(p, c, k_e)` → pattern rate [rad/s] for a rate term,
+      `term(p, c)` → the pickoff mismatch pair (ε₁, ε₂) it adds for a readout term (the
+      pairs of several readout terms add, then
+      [`pickoff_angle`][hrgjax.discovery.effects.pickoff_angle] gives the angle) (p in the order of `params`,
+      c the [`Covariates`][hrgjax.discovery.effects.Covariates]); `scales_gain`: the term
+      changes the angular gain (reads k_e); `on_dwell`: a dwell grid (constant temperature
+      per run, one switch-on) can reveal it; `shapes`: the generic shapes of
+      [`leftover.SHAPES`][hrgjax.discovery.leftover.SHAPES] the term is (on dwell windows),
+      so that a candidate is not taken for an uncovered shape it only partly imitates.
+
+    Adding an effect is one entry in `CATALOGUE`: the dwell regression, the continuous
+    simulation, the screening and the report all read it from here.
     """
 
     name: str
@@ -68,11 +81,39 @@ class Effect:
     aliases: tuple[str, ...] = ()
     discriminate: str = ""
     formula: str = ""
+    term: Callable | None = dataclasses.field(default=None, repr=False, compare=False)
+    scales_gain: bool = False
+    on_dwell: bool = True
+    shapes: tuple[str, ...] = ()
 
     @property
     def size(self) -> int:
         """Number of parameters."""
         return len(self.params)
+
+    def rate(self, p, c: Covariates, k_e):
+        """Pattern-rate contribution [rad/s] at parameters `p` (shape (q,), order of
+        `params`), covariates `c` and angular gain `k_e` (read only by the terms that scale
+        it: `scales_gain`)."""
+        if self.where != "rate":
+            raise ValueError(f"{self.name!r} is not a rate term")
+        return self.term(p, c, k_e) + 0.0 * c.theta
+
+    def readout(self, p, c: Covariates):
+        """Measured-angle offset [rad] of a readout term at parameters `p` and covariates
+        `c` (θ the true electrical angle), to all orders
+        ([`pickoff_angle`][hrgjax.discovery.effects.pickoff_angle])."""
+        if self.where != "readout":
+            raise ValueError(f"{self.name!r} is not a readout term")
+        return pickoff_angle(*self.term(p, c), c.theta)
+
+    def window_rate(self, p, c: Covariates, k_e):
+        """What the term adds to a dwell window's measured pattern rate [rad/s]: a rate
+        term itself; a readout term g(θ) through θ̇_meas = (1 + ∂g/∂θ)·θ̇, linearised at the
+        nominal rate −k_e·Ω and averaged over the window's arc (`c.harmonic_gain`)."""
+        if self.where == "rate":
+            return self.rate(p, c, k_e)
+        return -k_e * c.rate * c.harmonic_gain * readout_slope({self.name: p}, c)
 
 
 class Covariates(eqx.Module):
@@ -127,18 +168,40 @@ def _plain(name, unit, scale, user_unit=None, factor=1.0, regular=True):
     return Param(name, unit, scale, regular, unit if user_unit is None else user_unit, factor)
 
 
-def _e(name, title, where, params, needs, signature, aliases=(), discriminate="", formula=""):
+def _e(
+    name, title, where, params, needs, signature, aliases=(), discriminate="", formula="",
+    *, term, scales_gain=False, on_dwell=True, shapes=(),
+):  # fmt: skip
     return Effect(
-        name,
-        title,
-        where,
-        tuple(params),
-        tuple(needs),
-        signature,
-        tuple(aliases),
-        discriminate,
-        formula,
-    )
+        name, title, where, tuple(params), tuple(needs), signature, tuple(aliases),
+        discriminate, formula, term, scales_gain, on_dwell, tuple(shapes),
+    )  # fmt: skip
+
+
+def _dt(c):
+    return c.temperature - T_REF_C
+
+
+def _s2(c):
+    return c.harmonic_gain * jnp.sin(2 * c.theta)
+
+
+def _c2(c):
+    return c.harmonic_gain * jnp.cos(2 * c.theta)
+
+
+def _q_over_a(c):
+    return c.quadrature / c.amplitude
+
+
+def _loop_ripple(p, c, k_e):
+    r"""The closed loops' ripple on the true pattern rate (PHYSICS.md §4.7; measured on
+    `presets.tvg3_like()`: 3.1·10⁻⁵ of the rate, axis 2θ_ω, lagging as 2k_eΩ nears the
+    amplitude loop's 1 rad/s): $-k_e\Omega\,[r_c\cos(2\theta+\varphi) +
+    r_s\sin(2\theta+\varphi)]$, $\varphi = \arctan(2k_e\Omega/B)$."""
+    phi = jnp.arctan2(2.0 * k_e * c.rate, p[2])
+    ripple = p[0] * jnp.cos(2 * c.theta + phi) + p[1] * jnp.sin(2 * c.theta + phi)
+    return -k_e * c.rate * c.harmonic_gain * ripple
 
 
 CATALOGUE: dict[str, Effect] = {
@@ -152,6 +215,8 @@ CATALOGUE: dict[str, Effect] = {
             ["rate"],
             "wave angle turns at −k_e·Ω",
             formula="θ̇ = −{k_e}·Ω (the angular gain)",
+            term=lambda p, c, k: -p[0] * c.rate,
+            shapes=("Ω",),
         ),
         _e(
             "bias",
@@ -161,6 +226,7 @@ CATALOGUE: dict[str, Effect] = {
             [],
             "constant pattern rate",
             formula="{b}",
+            term=lambda p, c, k: p[0],
         ),
         _e(
             "damping_anisotropy",
@@ -172,6 +238,8 @@ CATALOGUE: dict[str, Effect] = {
             ("drive_gain_mismatch", "readout_gain_mismatch"),
             "vary Ω: a rate term's angle error falls as 1/Ω, a readout error does not",
             formula="{d_c}·sin 2θ − {d_s}·cos 2θ",
+            term=lambda p, c, k: p[0] * _s2(c) - p[1] * _c2(c),
+            shapes=("2θ",),
         ),
         _e(
             "bias_temperature",
@@ -186,6 +254,8 @@ CATALOGUE: dict[str, Effect] = {
             ("thermal_lag", "warmup_transient"),
             "reversed temperature ramps; repeated runs",
             formula="{b1}·ΔT + {b2}·ΔT²",
+            term=lambda p, c, k: p[0] * _dt(c) + p[1] * _dt(c) ** 2,
+            shapes=("ΔT", "ΔT²"),
         ),
         _e(
             "angular_gain_temperature",
@@ -197,6 +267,9 @@ CATALOGUE: dict[str, Effect] = {
             ("rate_scale_factor",),
             "rotate at several T",
             formula="{kappa_T}·ΔT · Ω (ppm of the rate)",
+            term=lambda p, c, k: -k * p[0] * _dt(c) * c.rate,
+            scales_gain=True,
+            shapes=("Ω·ΔT",),
         ),
         _e(
             "rate_scale_factor",
@@ -208,6 +281,9 @@ CATALOGUE: dict[str, Effect] = {
             ("angular_gain_temperature",),
             "several rates at one temperature",
             formula="{kappa_Omega}·Ω² · Ω (Ω in °/s; ppm of the rate)",
+            term=lambda p, c, k: -k * p[0] * c.rate**3,
+            scales_gain=True,
+            shapes=("Ω³",),
         ),
         _e(
             "damping_anisotropy_temperature",
@@ -222,6 +298,8 @@ CATALOGUE: dict[str, Effect] = {
             ("bias_temperature",),
             "several wave angles at each temperature",
             formula="({d_c1}·sin 2θ − {d_s1}·cos 2θ)·ΔT",
+            term=lambda p, c, k: (p[0] * _s2(c) - p[1] * _c2(c)) * _dt(c),
+            shapes=("2θ·ΔT",),
         ),
         _e(
             "frequency_split",
@@ -236,6 +314,7 @@ CATALOGUE: dict[str, Effect] = {
             ("nonlinearity", "excitation_phase"),
             "offset the quadrature set-point",
             formula="−(q/a)·({f_c}·cos 2θ + {f_s}·sin 2θ)",
+            term=lambda p, c, k: -_q_over_a(c) * (p[0] * _c2(c) + p[1] * _s2(c)),
         ),
         _e(
             "excitation_phase",
@@ -247,6 +326,7 @@ CATALOGUE: dict[str, Effect] = {
             ("frequency_split", "nonlinearity"),
             "change the drive level",
             formula="−{p_gamma}·(q/a)",
+            term=lambda p, c, k: -_q_over_a(c) * p[0],
         ),
         _e(
             "nonlinearity",
@@ -258,6 +338,7 @@ CATALOGUE: dict[str, Effect] = {
             ("excitation_phase", "frequency_split"),
             "change the amplitude set-point",
             formula="−{c_chi}·a·q",
+            term=lambda p, c, k: -p[0] * c.amplitude * c.quadrature,
         ),
         _e(
             "drive_gain_mismatch",
@@ -269,6 +350,8 @@ CATALOGUE: dict[str, Effect] = {
             ("damping_anisotropy",),
             "electrode swap / mode reversal",
             formula="−{p_g}·sin 2θ",
+            term=lambda p, c, k: -p[0] * _s2(c),
+            shapes=("2θ",),
         ),
         _e(
             "thermal_rate",
@@ -280,6 +363,9 @@ CATALOGUE: dict[str, Effect] = {
             ("thermal_lag",),
             "vary the ramp rate",
             formula="{c_Tdot}·dT/dt",
+            term=lambda p, c, k: p[0] * c.temperature_rate,
+            on_dwell=False,
+            shapes=("dT/dt",),
         ),
         _e(
             "thermal_lag",
@@ -294,6 +380,8 @@ CATALOGUE: dict[str, Effect] = {
             ("bias_temperature", "thermal_rate"),
             "a fast temperature step",
             formula="{b_L}·(T_lag − 20 °C), T_lag: T through a first-order lag of {tau_th}",
+            term=lambda p, c, k: p[0] * (c.temperature_lagged - T_REF_C),
+            on_dwell=False,
         ),
         _e(
             "warmup_transient",
@@ -305,6 +393,9 @@ CATALOGUE: dict[str, Effect] = {
             ("bias_temperature",),
             "several switch-ons at one temperature",
             formula="{b_w}·exp(−t_run/{tau_w})",
+            term=lambda p, c, k: p[0] * jnp.exp(-c.t_run / p[1]),
+            on_dwell=False,
+            shapes=("t_run",),
         ),
         _e(
             "acceleration_sensitivity",
@@ -316,6 +407,8 @@ CATALOGUE: dict[str, Effect] = {
             (),
             "turn the gyro over (±g)",
             formula="{G}·a_z",
+            term=lambda p, c, k: p[0] * c.accel_z,
+            shapes=("a_z",),
         ),
         _e(
             "readout_gain_mismatch",
@@ -327,6 +420,45 @@ CATALOGUE: dict[str, Effect] = {
             ("damping_anisotropy",),
             "vary Ω: the angle error does not grow with time",
             formula="angle read out + ½·{eps_1}·sin 2θ + ½·{eps_2}·cos 2θ",
+            term=lambda p, c: (p[0], p[1]),
+            shapes=("2θ·Ω",),
+        ),
+        _e(
+            "readout_gain_mismatch_temperature",
+            "pickoff gain mismatch varying with T (scale-factor ripple ∝ T)",
+            "readout",
+            [
+                _plain("eps_1T", "1/°C", 1e-4, "ppm/°C", 1e6),
+                _plain("eps_2T", "1/°C", 1e-4, "ppm/°C", 1e6),
+            ],
+            ["theta", "temperature"],
+            "scale-factor ripple ∝ cos 2θ whose size tracks T (seed: 1.3 % at 0 °C → 0.15 % at "
+            "+60 °C); on a ramp an apparent rate ∝ Ṫ·sin 2θ",
+            ("readout_gain_mismatch", "loop_ripple"),
+            "rotations at several temperatures",
+            formula="angle read out + ½·({eps_1T}·sin 2θ + {eps_2T}·cos 2θ)·ΔT",
+            term=lambda p, c: (p[0] * _dt(c), p[1] * _dt(c)),
+        ),
+        _e(
+            "loop_ripple",
+            "closed-loop scale-factor ripple (frequency split through the control loops)",
+            "rate",
+            [
+                _plain("r_c", "", 1e-5, "ppm", 1e6),
+                _plain("r_s", "", 1e-5, "ppm", 1e6),
+                _plain("loop_bw", "rad/s", 1.0, regular=False),
+            ],
+            ["theta", "rate", "rates"],
+            "scale-factor ripple ∝ Ω·cos 2(θ − θ_ω) on the true pattern rate whose axis lags "
+            "by atan(2k_eΩ/B) as the rate grows past the loops' bandwidth B; zero at rest",
+            ("readout_gain_mismatch", "readout_gain_mismatch_temperature"),
+            "rotate at rates below and above the loop bandwidth (the ripple's axis turns with Ω; "
+            "a readout ripple's does not)",
+            formula="({r_c}·cos(2θ+φ) + {r_s}·sin(2θ+φ))·Ω, φ = atan(2k_eΩ/{loop_bw}) "
+            "(ppm of the rate)",
+            term=_loop_ripple,
+            scales_gain=True,
+            shapes=("2θ·Ω",),
         ),
     )
 }
@@ -334,65 +466,115 @@ CATALOGUE: dict[str, Effect] = {
 
 
 def rate_term(name: str, p, c: Covariates):
-    """Pattern-rate contribution [rad/s] of effect `name` with parameters `p` (shape (q,),
-    order of its `params`) at covariates `c`."""
-    th, dt = c.theta, c.temperature - T_REF_C
-    s2, c2 = c.harmonic_gain * jnp.sin(2 * th), c.harmonic_gain * jnp.cos(2 * th)
-    q_over_a = c.quadrature / c.amplitude
-    terms = {
-        "angular_gain": lambda: -p[0] * c.rate,
-        "bias": lambda: p[0] + 0.0 * th,
-        "damping_anisotropy": lambda: p[0] * s2 - p[1] * c2,
-        "bias_temperature": lambda: p[0] * dt + p[1] * dt**2,
-        "damping_anisotropy_temperature": lambda: (p[0] * s2 - p[1] * c2) * dt,
-        "frequency_split": lambda: -q_over_a * (p[0] * c2 + p[1] * s2),
-        "excitation_phase": lambda: -q_over_a * p[0],
-        "nonlinearity": lambda: -p[0] * c.amplitude * c.quadrature,
-        "drive_gain_mismatch": lambda: -p[0] * s2,
-        "thermal_rate": lambda: p[0] * c.temperature_rate,
-        "thermal_lag": lambda: p[0] * (c.temperature_lagged - T_REF_C),
-        "warmup_transient": lambda: p[0] * jnp.exp(-c.t_run / p[1]),
-        "acceleration_sensitivity": lambda: p[0] * c.accel_z,
-    }
-    if name in ("angular_gain_temperature", "rate_scale_factor"):
+    """Pattern-rate contribution [rad/s] of rate effect `name` with parameters `p` (shape
+    (q,), order of its `params`) at covariates `c` (the terms that scale the angular gain:
+    [`rate_term_with_gain`][hrgjax.discovery.effects.rate_term_with_gain])."""
+    effect = _effect(name)
+    if effect.scales_gain:
         raise ValueError(f"{name} scales the angular gain: use rate_term_with_gain")
-    if name not in terms:
-        raise ValueError(f"{name!r} is not a rate term; rate terms: {sorted(terms)}")
-    return terms[name]() + 0.0 * th
+    if effect.where != "rate":
+        rates = sorted(n for n, e in CATALOGUE.items() if e.where == "rate" and not e.scales_gain)
+        raise ValueError(f"{name!r} is not a rate term; rate terms: {rates}")
+    return effect.rate(p, c, None)
 
 
 def rate_term_with_gain(name: str, p, c: Covariates, k_e):
-    """The two terms that scale the angular gain k_e: `angular_gain_temperature`
-    (−k_e κ_T (T − T₀) Ω) and `rate_scale_factor` (−k_e κ_Ω Ω³) [rad/s]."""
-    if name == "angular_gain_temperature":
-        return -k_e * p[0] * (c.temperature - T_REF_C) * c.rate
-    if name == "rate_scale_factor":
-        return -k_e * p[0] * c.rate**3
-    raise ValueError(f"{name!r} does not scale the angular gain")
+    """A term that scales the angular gain k_e [rad/s]: `angular_gain_temperature`
+    (−k_e κ_T (T − T₀) Ω), `rate_scale_factor` (−k_e κ_Ω Ω³), `loop_ripple`."""
+    effect = _effect(name)
+    if not effect.scales_gain:
+        raise ValueError(f"{name!r} does not scale the angular gain")
+    return effect.rate(p, c, k_e)
 
 
 def readout_term(name: str, p, c: Covariates):
-    """Measured-angle offset [rad] of a readout effect (`readout_gain_mismatch`)."""
-    if name != "readout_gain_mismatch":
+    """Measured-angle offset [rad] of readout effect `name` (`readout_gain_mismatch`,
+    `readout_gain_mismatch_temperature`) at covariates `c`."""
+    effect = _effect(name)
+    if effect.where != "readout":
         raise ValueError(f"{name!r} is not a readout term")
-    return 0.5 * p[0] * jnp.sin(2 * c.theta) + 0.5 * p[1] * jnp.cos(2 * c.theta)
+    return effect.readout(p, c)
+
+
+def _effect(name: str) -> Effect:
+    if name not in CATALOGUE:
+        raise ValueError(f"unknown effect {name!r}; the catalogue: {sorted(CATALOGUE)}")
+    return CATALOGUE[name]
 
 
 def pattern_rate(params: dict, c: Covariates):
     """θ̇ [rad/s] of the superset model: the sum of every rate term in `params`
-    ({effect name: parameter array}); `angular_gain` must be present."""
+    ({effect name: parameter array}; readout terms are skipped); `angular_gain` must be
+    present."""
     if "angular_gain" not in params:
         raise ValueError("params must contain 'angular_gain' (the k_e of −k_e·Ω)")
     k_e = params["angular_gain"][0]
     total = 0.0 * c.theta
     for name, p in params.items():
-        effect = CATALOGUE[name]
-        if effect.where != "rate":
-            continue
-        if name in ("angular_gain_temperature", "rate_scale_factor"):
-            total = total + rate_term_with_gain(name, p, c, k_e)
-        else:
-            total = total + rate_term(name, p, c)
+        effect = _effect(name)
+        if effect.where == "rate":
+            total = total + effect.rate(p, c, k_e)
+    return total
+
+
+def pickoff_angle(eps_1, eps_2, theta):
+    r"""θ_meas − θ [rad] of pickoffs with the mismatch pair (ε₁, ε₂) at the true electrical
+    angle θ, exactly: the pickoff matrix I + E with E = ½[[−ε₁, ε₂], [ε₂, ε₁]] (a gain
+    mismatch g = −ε₁/2, a cross-talk c = ε₂/2) reads
+    $\Delta = \operatorname{atan2}(u,\ 1+v)$, $u = 	frac12(arepsilon_1\sin2	heta +
+    arepsilon_2\cos2	heta)$, $v = 	frac12(arepsilon_2\sin2	heta - arepsilon_1\cos2	heta)$
+    — to first order ½ε₁ sin 2θ + ½ε₂ cos 2θ, plus (ε₁² + ε₂²)/8-sized 4θ terms."""
+    s2, c2 = jnp.sin(2 * theta), jnp.cos(2 * theta)
+    u = 0.5 * (eps_1 * s2 + eps_2 * c2)
+    v = 0.5 * (eps_2 * s2 - eps_1 * c2)
+    return jnp.arctan2(u, 1.0 + v)
+
+
+def readout_angle(params: dict, c: Covariates):
+    """θ_meas − θ [rad] of the readout terms in `params` (rate terms are skipped): their
+    mismatch pairs add in the pickoff matrix, then
+    [`pickoff_angle`][hrgjax.discovery.effects.pickoff_angle]."""
+    e1, e2, any_ = 0.0, 0.0, False
+    for name, p in params.items():
+        effect = _effect(name)
+        if effect.where == "readout":
+            d1, d2 = effect.term(p, c)
+            e1, e2, any_ = e1 + d1, e2 + d2, True
+    return pickoff_angle(e1, e2, c.theta) if any_ else 0.0 * c.theta
+
+
+def readout_slope(params: dict, c: Covariates):
+    """∂(θ_meas − θ)/∂θ of the readout terms in `params` at covariates `c` [–]: the relative
+    scale-factor change they put on a turning pattern."""
+    f = lambda th: readout_angle(params, eqx.tree_at(lambda x: x.theta, c, th))
+    theta = jnp.asarray(c.theta, dtype=float)
+    return jax.jvp(f, (theta,), (jnp.ones_like(theta),))[1]
+
+
+def window_rate(params: dict, c: Covariates, k_e=None):
+    """A dwell window's measured pattern rate [rad/s] under the model `params` ({effect:
+    full parameter array}), to all orders in the readout terms: the true angle solves
+    θ + g(θ) = θ_meas (`c.theta`, fixed point), the rate terms read it, and the readout's
+    slope scales the whole rate, θ̇_meas = (1 + ∂g/∂θ)·θ̇ (averaged over the window's arc:
+    `c.harmonic_gain`). The terms that scale the angular gain read `k_e` (default: the
+    model's own `angular_gain`). Its Jacobian at the null is the dwell regression's design
+    ([`Effect.window_rate`][hrgjax.discovery.effects.Effect.window_rate])."""
+    if k_e is None:
+        if "angular_gain" not in params:
+            raise ValueError("params must contain 'angular_gain' (the k_e of −k_e·Ω)")
+        k_e = params["angular_gain"][0]
+    readouts = {n: p for n, p in params.items() if _effect(n).where == "readout"}
+    theta = c.theta
+    for _ in range(4 if readouts else 0):  # |∂g/∂θ| ≲ 0.03: ~1.5 digits a pass
+        theta = c.theta - readout_angle(readouts, eqx.tree_at(lambda x: x.theta, c, theta))
+    ct = eqx.tree_at(lambda x: x.theta, c, theta) if readouts else c
+    total = 0.0 * c.theta
+    for name, p in params.items():
+        effect = _effect(name)
+        if effect.where == "rate":
+            total = total + effect.rate(p, ct, k_e)
+    if readouts:
+        total = total * (1.0 + c.harmonic_gain * readout_slope(readouts, ct))
     return total
 
 

@@ -109,6 +109,24 @@ def _size(shape: str, coef: np.ndarray, cov: np.ndarray, k_e: float) -> dict:
     return {"size": value, "sigma": sigma, "unit": unit, "words": f"{what}: {value:.3g} {unit}"}
 
 
+def scores(r, j, cols: dict[str, np.ndarray]) -> dict[str, tuple[float, int]]:
+    """`{shape: (score S, degrees of freedom q)}` of every shape in `cols` (whitened columns)
+    against the whitened residual `r` of a fit with whitened Jacobian `j` — the screening's
+    score test, one QR of `j` for all; shapes the model already spans are left out."""
+    q_j, _ = np.linalg.qr(j)
+    out = {}
+    for name, g in cols.items():
+        g_t = g - q_j @ (q_j.T @ g)
+        gram = g_t.T @ g_t
+        if 1.0 - np.sum(g_t**2) / max(np.sum(g**2), 1e-300) >= 0.999:
+            continue
+        if np.linalg.matrix_rank(gram, tol=1e-10 * max(np.trace(gram), 1e-300)) < g.shape[1]:
+            continue
+        u = g_t.T @ r
+        out[name] = (float(u @ np.linalg.solve(gram, u)), int(g.shape[1]))
+    return out
+
+
 def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3) -> dict | None:
     """The strongest shape left in the whitened residual `r` of a fit with whitened Jacobian
     `j`, given each shape's whitened columns `cols`. **Returns** `{"shape", "words", "size",

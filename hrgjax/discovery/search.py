@@ -30,6 +30,7 @@ with the model simulated by diffrax ([`continuous`][hrgjax.discovery.continuous.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -48,8 +49,15 @@ from .result import Discovery
 METRIC = "rms_run_mean_rate_residual_dph"
 OPTIONAL = {"amplitude": "amplitude", "quadrature": "quadrature", "accel_z": "accel_z_g"}
 """Covariates read from optional data columns."""
-NEEDS_CONTINUOUS = ("thermal_rate", "thermal_lag", "warmup_transient")
+NEEDS_CONTINUOUS = tuple(n for n, e in CATALOGUE.items() if not e.on_dwell)
 """Effects a dwell grid (constant temperature per run, fresh runs) cannot reveal."""
+
+
+def _rates_in(data: MeasuredData) -> set:
+    """`{"rates"}` when the data turn the table at two or more distinct non-zero speeds
+    (what separates a rate-dependent ripple from a readout ripple), else the empty set."""
+    speeds = np.unique(np.round(np.abs(np.asarray(data["table_rate_dps"])), 6))
+    return {"rates"} if np.count_nonzero(speeds) >= 2 else set()
 
 
 def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
@@ -60,6 +68,7 @@ def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
         if col in data:
             extra[key] = []
             have.add(key)
+    have |= _rates_in(data)
     starts = {int(data.run[idx[0]]): idx for idx in data.run_indices()}
     for run, a, b, tm in zip(w.run, w.start, w.stop, w.t_mid, strict=True):
         idx = starts[int(run)]
@@ -74,7 +83,8 @@ def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
 
 def candidates_for(have: set, nominal=NOMINAL, continuous: bool = False) -> list[str]:
     """Catalogue effects the data can reveal, given the covariates they carry (and, for
-    dwell grids, without the effects that need changing temperature or fresh switch-ons)."""
+    dwell grids, without the effects that need changing temperature or fresh switch-ons;
+    `"rates"` in `have`: the table turns at two or more speeds)."""
     out = []
     for name, effect in CATALOGUE.items():
         if name in nominal or (name in NEEDS_CONTINUOUS and not continuous):
@@ -110,7 +120,7 @@ def discover(
     alpha: float = 0.01,
     min_delta_bic: float = 10.0,
     min_heldout_gain: float = 10.0,
-    max_effects: int = 3,
+    max_effects: int = 6,
     max_aliasing: float = 0.999,
     ambiguity_bic: float = 6.0,
     min_agreement: float = 0.75,
@@ -208,11 +218,13 @@ def discover(
             and r["aliasing"] < max_aliasing
             and r["heldout_gain"] > min_heldout_gain
             and (not problem.gap_guard or r["gap_after"] <= fit["gap"])
+            and r.get("outshone_by") is None
             and consistent(r)
         )
 
     for _ in range(max_effects):
         rows = problem.screen(current, cands, model)
+        _mark_outshone(rows, problem, current, model + cands, min_delta_bic)
         if not ranking:
             ranking = rows
         ok = [r for r in rows if passes(r, current)]
@@ -285,7 +297,30 @@ def _fitted_k_e(parameters: dict, k_e: float) -> float:
 
 
 SHAPES = ("auto", "dwell", "continuous", "mixed")
-SCREEN_KEYS = ("effect", "score", "p_value", "delta_bic", "aliasing", "heldout_gain", "gap_after")
+SCREEN_KEYS = (
+    "effect", "score", "p_value", "delta_bic", "aliasing", "heldout_gain", "gap_after",
+    "outshone_by",
+)  # fmt: skip
+
+
+def _mark_outshone(rows, problem, fit, available, margin):
+    """Set each screening row's `outshone_by`: the generic shape
+    ([`leftover.SHAPES`][hrgjax.discovery.leftover.SHAPES]) that no available effect is,
+    and that explains the residual better than the candidate by more than `margin` in BIC
+    (S − q·ln n) — the candidate then imitates only part of something out of the catalogue
+    (a readout ripple that matches a temperature-dependent drift on the rotation runs but
+    not at rest), and is not accepted; else None."""
+    covered = {sh for n in available for sh in CATALOGUE[n].shapes}
+    scores = leftover.scores(fit["r"], fit["j"], problem.shape_columns)
+    log_n = math.log(max(len(fit["r"]), 2))
+    best, best_bic = None, -math.inf
+    for name, (sc, q) in scores.items():
+        if name not in covered and sc - q * log_n > best_bic:
+            best, best_bic = name, sc - q * log_n
+    for r in rows:
+        q = sum(p.regular for p in CATALOGUE[r["effect"]].params)
+        lead = best_bic - (r["score"] - q * log_n)
+        r["outshone_by"] = best if best is not None and lead > margin else None
 
 
 def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s, window_s=None):
@@ -293,7 +328,7 @@ def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s, win
     noise model, estimate it and then the run-to-run bias from the baseline's run means.
     With `window_s` (a mixed log), the dwell runs join it as windows of that length (the
     dwell search's regression rows) and only the other runs are simulated."""
-    have = {k for k, col in OPTIONAL.items() if col in data}
+    have = {k for k, col in OPTIONAL.items() if col in data} | _rates_in(data)
     cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
     names = list(nominal) + [n for n in cands if n not in nominal]
     known = noise is not None
@@ -378,9 +413,10 @@ class DwellProblem:
             "drift_dph": -np.asarray(fit["resid"]) / self.k_e / DEG_PER_H,
         }
 
-    def leftover(self, fit):
-        """The strongest shape left in `fit`'s training residual
-        ([`describe`][hrgjax.discovery.leftover.describe])."""
+    @functools.cached_property
+    def shape_columns(self) -> dict:
+        """Whitened columns of the generic shapes on the training windows
+        ([`leftover.columns`][hrgjax.discovery.leftover.columns])."""
         c, tr = self.c, self.train
         full = lambda v: np.broadcast_to(np.asarray(v, float), tr.shape)[tr]
         cov = {
@@ -391,8 +427,12 @@ class DwellProblem:
             "accel_z": full(c.accel_z),
             "t_run": full(c.t_run),
         }
-        cols = {k: g / self.sigma[tr][:, None] for k, g in leftover.columns(cov).items()}
-        return leftover.describe(fit["r"], fit["j"], cols, self.k_e)
+        return {k: g / self.sigma[tr][:, None] for k, g in leftover.columns(cov).items()}
+
+    def leftover(self, fit):
+        """The strongest shape left in `fit`'s training residual
+        ([`describe`][hrgjax.discovery.leftover.describe])."""
+        return leftover.describe(fit["r"], fit["j"], self.shape_columns, self.k_e)
 
     def noise_report(self):
         nm, k_e, w = self.nm, self.k_e, self.w
@@ -462,6 +502,14 @@ def _fit(model, c, y, sigma, train, w, held, k_e):
     g, labels = dwell.design(model, c, k_e)
     beta, r, cov = dwell.wls(g[train], y[train], sigma[train])
     resid = y - g @ beta
+    if any(CATALOGUE[n].where == "readout" for n in model):
+        # The readout terms' higher orders, where they matter (a 1 % ripple at 5 °/s).
+        beta2, f, jac = dwell.refine(model, beta, c, y, sigma, train, k_e)
+        if np.max(np.abs(f - g @ beta2) / sigma) > 0.1:
+            beta, g = beta2, jac
+            resid = y - f
+            r = resid[train] / sigma[train]
+            cov = dwell.covariance(g[train] / sigma[train][:, None])
     held_mask = np.isin(w.run, held)
     heldout_chi2 = float(np.sum((resid[held_mask] / sigma[held_mask]) ** 2))
     err = np.sqrt(np.diag(cov))
