@@ -167,3 +167,41 @@ def test_dwell_runs_as_window_rows_of_the_joint_problem_equal_the_dwell_search()
             assert w["std"] == pytest.approx(v["std"], rel=1e-7)
     assert b["gap"] == pytest.approx(a["gap"], rel=1e-7)
     assert joint.floor() == pytest.approx(dwell.floor(), rel=1e-12)
+
+
+def test_the_default_gyros_own_bench_data_end_near_their_floor():
+    # The default gyro, all its laws, closed loops and noise, on the seed's plan at three
+    # temperatures: the search names what the preset has — the readout's gain mismatch and
+    # its temperature law (the scale-factor ripple 1.3 % → 0.15 %), the damping anisotropy's
+    # temperature law, the bias law — and ends near its noise floor.
+    gyro = hg.presets.tvg3_like()
+    temps, angles = (-40.0, 20.0, 60.0), tuple(np.arange(-90.0, 91.0, 10.0))
+    key = jax.random.key(5)
+    bias_key = jax.random.fold_in(key, 1)
+    parts, first = [], 0
+    for i, plan in enumerate(
+        (static_plan(temps, angles, 120.0), rotation_plan(temps, angles, duration_s=120.0))
+    ):
+        parts.append(
+            run_plan(
+                gyro, plan, key=jax.random.fold_in(key, 10 + i), bias_key=bias_key, first_run=first
+            )
+        )
+        first += plan.size
+    rep = discover(hg.data.concat(parts))
+    named = {"readout_gain_mismatch", "readout_gain_mismatch_temperature",
+             "damping_anisotropy_temperature", "bias_temperature"}  # fmt: skip
+    assert named <= set(rep.accepted), rep.accepted
+    assert rep.gap_before > 30 * rep.noise_floor
+    assert rep.gap_after < 2.0 * rep.noise_floor, (rep.gap_after, rep.noise_floor)
+    # the preset's laws (presets.tvg3_like): g(T) = g₂₀ + g′·ΔT, ε₁ = −2g; the loops'
+    # ripple (≈ 30 ppm, the same cos 2θ at one rate) joins ε₁ at 20 °C
+    g_slope = (0.0015 - 0.013) / 2 / 60.0
+    g20 = 0.013 / 2 + g_slope * 20.0
+    p = rep.parameters
+    eps_t = p["readout_gain_mismatch_temperature"]["eps_1T"]
+    assert eps_t["unit"] == "ppm/°C"
+    assert eps_t["value"] == pytest.approx(-2e6 * g_slope, rel=0.005)
+    eps = p["readout_gain_mismatch"]["eps_1"]["value"]
+    assert abs(eps - (-2e6 * g20)) < 60.0  # ppm; |ε₁| ≈ 9167 ppm
+    assert p["bias_temperature"]["b1"]["value"] == pytest.approx(0.005, abs=0.0005)  # °/h/°C

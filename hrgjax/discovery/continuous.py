@@ -932,6 +932,11 @@ class ContinuousProblem:
                     "params": {} if tau is None else {CATALOGUE[name].params[1].name: tau},
                     "refit": None,
                     "_start": (z, step),
+                    "_columns": (
+                        (lambda g=g: g)
+                        if tau is None
+                        else (lambda name=name, tau=tau: self._columns(current, name, tau)[0])
+                    ),  # fmt: skip
                 }
             )
         progress.close()

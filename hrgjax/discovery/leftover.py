@@ -1,6 +1,6 @@
 r"""Name the shape of what a model leaves (DISCOVERY.md §2.1 "say I don't know", issue 19):
 the residual of the final fit tested against generic shapes of the pattern rate — harmonics
-1θ … 4θ of the electrical wave angle (constant, growing with ΔT = T − 20 °C, and in
+1θ … 4θ of the electrical wave angle (constant, growing with ΔT = T − 20 °C or with ΔT², and in
 proportion to the rate Ω: a scale factor that varies with the wave angle), ΔT, ΔT²,
 dT/dt, the table rate Ω (and Ω·ΔT, Ω³), the specific force a_z and the time since switch-on.
 
@@ -27,6 +27,7 @@ from . import dwell
 SHAPES = (
     *(f"{k}θ" for k in (1, 2, 3, 4)),
     *(f"{k}θ·ΔT" for k in (1, 2, 3, 4)),
+    *(f"{k}θ·ΔT²" for k in (1, 2, 3, 4)),
     *(f"{k}θ·Ω" for k in (1, 2, 3, 4)),
     "ΔT",
     "ΔT²",
@@ -61,6 +62,7 @@ def columns(cov: dict, drop: bool = True) -> dict[str, np.ndarray]:
         h = np.stack([np.cos(k * th), np.sin(k * th)], axis=-1)
         out[f"{k}θ"] = h
         out[f"{k}θ·ΔT"] = h * dT[:, None]
+        out[f"{k}θ·ΔT²"] = h * dT[:, None] ** 2
         out[f"{k}θ·Ω"] = h * cov["rate"][:, None]
     rate = cov["rate"]
     scalar = {
@@ -89,8 +91,10 @@ def _size(shape: str, coef: np.ndarray, cov: np.ndarray, k_e: float) -> dict:
     f = -1.0 / k_e  # a pattern-rate term f imitates −f/k_e of input rate
     if "θ" in shape:
         k = int(shape[0])
-        per_t, per_rate = "·ΔT" in shape, "·Ω" in shape
-        unit, scale = ("ppm", 1e6) if per_rate else ("°/h/°C" if per_t else "°/h", 1 / DEG_PER_H)
+        per_t2, per_rate = "·ΔT²" in shape, "·Ω" in shape
+        per_t = "·ΔT" in shape and not per_t2
+        unit = "°/h/°C²" if per_t2 else "°/h/°C" if per_t else "°/h"
+        unit, scale = ("ppm", 1e6) if per_rate else (unit, 1 / DEG_PER_H)
         a, b = f * coef * scale
         amp = math.hypot(a, b)
         # Jacobian of the amplitude for its σ
@@ -100,7 +104,10 @@ def _size(shape: str, coef: np.ndarray, cov: np.ndarray, k_e: float) -> dict:
         if per_rate:
             kind = f"a scale factor varying as {k}θ"
         else:
-            kind = f"a {k}θ harmonic" + (" whose size changes with temperature" if per_t else "")
+            kind = f"a {k}θ harmonic" + (
+                " whose size curves with temperature" if per_t2
+                else " whose size changes with temperature" if per_t else ""
+            )  # fmt: skip
         words = f"{kind} of {amp:.3g} {unit} (axis at {axis:.1f}° el.)"
         return {"size": amp, "sigma": sigma, "unit": unit, "axis_deg": axis, "words": words}
     what, unit, factor = _SCALAR[shape]
