@@ -504,6 +504,7 @@ class ContinuousProblem:
             dt = float(np.median(np.diff(d["time_s"][idx]))) if idx.size > 1 else 0.0
             by_len.setdefault((idx.size, float(f"{dt:.9g}")), []).append(idx)
         self.train_groups, self.held_groups = [], []
+        self.__dict__.pop("shape_columns", None)  # whitened as the groups are: rebuild
         if self.windows is not None:
             w, held = self.windows
             for mask, groups in ((~held, self.train_groups), (held, self.held_groups)):
