@@ -160,12 +160,12 @@ def test_dwell_runs_as_window_rows_of_the_joint_problem_equal_the_dwell_search()
     joint = search._continuous_problem(data, NOMINAL, None, K_E_NOMINAL, held, None, 10.0, WINDOW_S)
     assert not any(isinstance(g, continuous.Runs) for g in joint.train_groups)
     a, b = dwell.fit(list(NOMINAL)), joint.fit(list(NOMINAL))
-    for name, ps in a["parameters"].items():
+    for name, ps in a.parameters.items():
         for p, v in ps.items():
-            w = b["parameters"][name][p]
+            w = b.parameters[name][p]
             assert w["value"] == pytest.approx(v["value"], rel=1e-7, abs=1e-6 * v["std"])
             assert w["std"] == pytest.approx(v["std"], rel=1e-7)
-    assert b["gap"] == pytest.approx(a["gap"], rel=1e-7)
+    assert b.gap == pytest.approx(a.gap, rel=1e-7)
     assert joint.floor() == pytest.approx(dwell.floor(), rel=1e-12)
 
 

@@ -49,6 +49,7 @@ from ..profiles import lag_at_knots
 from ..units import DEG, DEG_PER_H, T_REF_C
 from . import dwell, leftover
 from .effects import CATALOGUE, Covariates, pattern_rate, readout_angle, window_rate
+from .problem import AbstractProblem, Fit
 
 BLOCK_S = 10.0
 """Default block length of the increments [s]."""
@@ -480,7 +481,7 @@ def _block_index(n, m):
     return idx
 
 
-class ContinuousProblem:
+class ContinuousProblem(AbstractProblem):
     """Everything `discover` needs on continuous records: fits, screening and the gap
     (the same interface as the dwell-grid problem)."""
 
@@ -579,8 +580,8 @@ class ContinuousProblem:
     def after_accept(self, fit):
         """Re-estimate σ_b at the new model (unless the noise was given) and refit."""
         if not self.noise_known:
-            self.estimate_run_bias(fit["z"])
-            fit = self.fit(fit["model"], z0=fit["z"])
+            self.estimate_run_bias(fit.z)
+            fit = self.fit(list(fit.model), z0=fit.z)
         return fit
 
     noise_known = False
@@ -592,7 +593,7 @@ class ContinuousProblem:
             len(g.run) if isinstance(g, Windows) else (int(g.bidx.shape[0]) - 2) * len(g.run)
             for g in self.held_groups
         )
-        return dwell.chi2_sf(fit["heldout_chi2"], max(dof, 1)) < alpha
+        return dwell.chi2_sf(fit.heldout_chi2, max(dof, 1)) < alpha
 
     # -- fits ----------------------------------------------------------------
     def _free(self, model):
@@ -610,7 +611,7 @@ class ContinuousProblem:
     def fit(self, model, z0=None):
         """Fit the regular parameters of `model` (effect names) on the training runs from
         `z0`; the rest of the superset stays where it is (at its null by default).
-        Returns the fit dict used by `discover`."""
+        **Returns:** a [`Fit`][hrgjax.discovery.problem.Fit]."""
         z0 = self.z_null if z0 is None else np.asarray(z0)
         basis, idx = self._basis(model)
         z, ok = _lm(self.layout, basis, jnp.asarray(z0), self.train_groups)
@@ -619,7 +620,7 @@ class ContinuousProblem:
         z = np.asarray(z)
         r, j = _residual_and_jacobian(self.layout, jnp.asarray(z), basis, self.train_groups)
         r, j = np.asarray(r), np.asarray(j)
-        err = np.sqrt(np.clip(np.diag(np.linalg.pinv(j.T @ j)), 0.0, None))
+        err = np.sqrt(np.diag(dwell.covariance(j)))
         held_raw = self.raw_residuals(z, self.held_groups)
         held_r = self._whiten(held_raw, self.held_groups)
         params = {}
@@ -637,16 +638,16 @@ class ContinuousProblem:
                 "value": float(z[i] * self.layout.scale[i]),
                 "std": float(e * self.layout.scale[i]),
             }
-        return {
-            "z": z,
-            "r": r,
-            "j": j,
-            "chi2": float(r @ r),
-            "gap": self._gap(held_raw),
-            "heldout_chi2": float(held_r @ held_r),
-            "parameters": params,
-            "model": list(model),
-        }
+        return Fit(
+            model=tuple(model),
+            parameters=params,
+            r=r,
+            j=j,
+            chi2=float(r @ r),
+            heldout_chi2=float(held_r @ held_r),
+            gap=self._gap(held_raw),
+            z=z,
+        )
 
     @staticmethod
     def _whiten(raw, groups):
@@ -690,7 +691,7 @@ class ContinuousProblem:
 
         **Returns:** `{"p_value", "dof", "agreement", "per_run": {run: {param: value}}}`."""
         basis, idx = self._basis([name])
-        z0 = jnp.asarray(fit["z"])
+        z0 = jnp.asarray(fit.z)
         stat, dof, per_run, agree, exciting = 0.0, -len(idx), {}, 0, 0
         names = [p.name for p in CATALOGUE[name].params if p.regular]
         for g in self.train_groups:
@@ -703,12 +704,12 @@ class ContinuousProblem:
                     continue
                 info = j.T @ j
                 rank = np.linalg.matrix_rank(info, tol=1e-9 * max(np.trace(info), 1e-300))
-                d = np.asarray(z)[idx] - fit["z"][idx]
+                d = np.asarray(z)[idx] - fit.z[idx]
                 stat += float(d @ info @ d)
                 dof += int(rank)
                 if rank > 0:
                     exciting += 1
-                    agree += float(np.asarray(z)[idx] @ info @ fit["z"][idx]) > 0
+                    agree += float(np.asarray(z)[idx] @ info @ fit.z[idx]) > 0
                 per_run[int(run)] = {
                     n: float(v * sc)
                     for n, v, sc in zip(
@@ -736,7 +737,7 @@ class ContinuousProblem:
         out = []
         for groups, held in ((self.train_groups, False), (self.held_groups, True)):
             groups = [g for g in groups if isinstance(g, Runs)]
-            for g, r in zip(groups, self.raw_residuals(fit["z"], groups), strict=True):
+            for g, r in zip(groups, self.raw_residuals(fit.z, groups), strict=True):
                 tb = np.asarray(g.t[:, g.bidx])
                 for i, run in enumerate(g.run):
                     t = tb[i] - tb[i, 0]
@@ -789,7 +790,7 @@ class ContinuousProblem:
     def leftover(self, fit):
         """The strongest shape left in `fit`'s training residual
         ([`describe`][hrgjax.discovery.leftover.describe])."""
-        return leftover.describe(fit["r"], fit["j"], self.shape_columns, self.k_e)
+        return leftover.describe(fit.r, fit.j, self.shape_columns, self.k_e)
 
     def raw_residuals(self, z, groups=None):
         """Unwhitened increment residuals [rad], one (R, K) array per group (default: the
@@ -850,7 +851,7 @@ class ContinuousProblem:
     def _columns(self, current, name, tau=None):
         """Whitened model sensitivities to `name`'s regular parameters at the current fit
         (with its nonregular parameter at `tau`)."""
-        z = current["z"].copy()
+        z = current.z.copy()
         nonreg = self.layout.index(name, which=False)
         if nonreg and tau is not None:
             z[nonreg[0]] = tau / self.layout.scale[nonreg[0]]
@@ -868,12 +869,12 @@ class ContinuousProblem:
             if chunk and (name is None or width + more > 8):
                 basis, idx = self._basis(chunk)
                 _, jac = _residual_and_jacobian(
-                    self.layout, jnp.asarray(current["z"]), basis, self.train_groups
+                    self.layout, jnp.asarray(current.z), basis, self.train_groups
                 )
                 jac, pos = -np.asarray(jac), {i: k for k, i in enumerate(idx)}
                 for n in chunk:
                     cols = [pos[i] for i in self.layout.index(n, which=True)]
-                    out[n] = (jac[:, cols], current["z"].copy())
+                    out[n] = (jac[:, cols], current.z.copy())
                 chunk = []
             if name is not None:
                 chunk.append(name)
@@ -892,14 +893,14 @@ class ContinuousProblem:
             return best
         tau = float(np.exp(np.clip(-b / (2 * a), x[0], x[2])))
         g, z = self._columns(current, name, tau)
-        s, alias, step = dwell.score(current["r"], current["j"], g)
+        s, alias, step = dwell.score(current.r, current.j, g)
         return (s, alias, step, z, tau) if s > best[0] else best
 
     def screen(self, current, cands, model, top=REFIT_TOP, liberal=0.01):
         """Score test of every candidate; refit of the `top` best-scoring identifiable ones
         whose score p-value is below `liberal` (ΔBIC and held-out gain from the refit; the
         others keep the score's ΔBIC approximation and no held-out gain). Best first."""
-        n = current["r"].size
+        n = current.r.size
         rows = []
         # the candidates without a nonregular parameter share one Jacobian at the current fit
         regular = [c for c in cands if not self.layout.index(c, which=False)]
@@ -913,7 +914,7 @@ class ContinuousProblem:
             for tau in grid:
                 g, z = shared[name] if name in shared else self._columns(current, name, tau)
                 if np.any(g):
-                    tried.append((*dwell.score(current["r"], current["j"], g), z, tau))
+                    tried.append((*dwell.score(current.r, current.j, g), z, tau))
             if not tried:
                 continue
             best = max(tried, key=lambda b: b[0])
@@ -928,7 +929,7 @@ class ContinuousProblem:
                     "p_value": min(1.0, dwell.chi2_sf(s, q - (tau is not None)) * len(grid)),
                     "aliasing": alias,
                     "delta_bic": float(s - q * math.log(n)),
-                    "gap_after": current["gap"],
+                    "gap_after": current.gap,
                     "heldout_gain": 0.0,
                     "params": {} if tau is None else {CATALOGUE[name].params[1].name: tau},
                     "refit": None,
@@ -956,13 +957,13 @@ class ContinuousProblem:
                 continue
             q = CATALOGUE[name].size
             row.update(
-                delta_bic=float(current["chi2"] - refit["chi2"] - q * math.log(n)),
-                gap_after=refit["gap"],
-                heldout_gain=current["heldout_chi2"] - refit["heldout_chi2"],
+                delta_bic=float(current.chi2 - refit.chi2 - q * math.log(n)),
+                gap_after=refit.gap,
+                heldout_gain=current.heldout_chi2 - refit.heldout_chi2,
                 refit=refit,
             )
             row["params"] = {
-                k: v["value"] for k, v in refit["parameters"].get(name, {}).items()
+                k: v["value"] for k, v in refit.parameters.get(name, {}).items()
             } | row["params"]
         progress.close()
         for row in rows:

@@ -1,4 +1,6 @@
-r"""Discovery on dwell-grid data (DISCOVERY.md §2.2 a): the catalogue as regressor columns.
+r"""Discovery on dwell-grid data (DISCOVERY.md §2.2 a): the catalogue as regressor columns,
+and [`DwellProblem`][hrgjax.discovery.dwell.DwellProblem], the dwell-grid side of
+[`AbstractProblem`][hrgjax.discovery.problem.AbstractProblem].
 
 Each window of a dwell run (static or constant rate, constant temperature) gives a measured
 pattern rate $y = \dot\theta_{\rm meas} = -k_{e,\rm nom}\,\Omega_{\rm meas}$ [rad/s]. Around the
@@ -20,15 +22,20 @@ size here.
 from __future__ import annotations
 
 import functools
+import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaincc
 
-from ..calibration.reduce import RateWindows
-from ..units import DEG
-from .effects import CATALOGUE, Covariates, window_rate
+from .._progress import bar
+from ..calibration.reduce import RateWindows, reduce
+from ..data import MeasuredData
+from ..units import DEG, DEG_PER_H, T_REF_C
+from . import leftover
+from .effects import CATALOGUE, Covariates, window_gain, window_rate
+from .problem import OPTIONAL, AbstractProblem, Fit, candidates_for, rates_in
 
 
 def covariates(w: RateWindows, extra: dict | None = None) -> Covariates:
@@ -161,3 +168,263 @@ def score(r: np.ndarray, j: np.ndarray, g: np.ndarray):
 def chi2_sf(x: float, dof: int) -> float:
     """Upper tail probability of χ²_dof at x."""
     return float(gammaincc(dof / 2.0, jnp.asarray(max(x, 0.0) / 2.0)))
+
+
+# -- the dwell-grid problem ----------------------------------------------------
+
+
+def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
+    """Per-window means of the optional columns (and `t_run`, the 2θ `harmonic_gain` and the
+    `arc` [rad] the pattern sweeps), and which covariates the data carry."""
+    extra: dict[str, list] = {"t_run": [], "harmonic_gain": [], "arc": []}
+    have = set()
+    for key, col in OPTIONAL.items():
+        if col in data:
+            extra[key] = []
+            have.add(key)
+    have |= rates_in(data)
+    starts = {int(data.run[idx[0]]): idx for idx in data.run_indices()}
+    for run, a, b, tm in zip(w.run, w.start, w.stop, w.t_mid, strict=True):
+        idx = starts[int(run)]
+        extra["t_run"].append(tm - data["time_s"][idx[0]])
+        arc = np.ptp(data["wave_angle_deg"][idx[a:b]]) * DEG if b - a > 1 else 0.0
+        extra["harmonic_gain"].append(float(window_gain(arc)))
+        extra["arc"].append(arc)
+        for key, col in OPTIONAL.items():
+            if key in extra:
+                extra[key].append(float(np.mean(data[col][idx[a:b]])))
+    return {k: np.asarray(v) for k, v in extra.items()}, have
+
+
+def _gap(resid, w: RateWindows, runs, k_e):
+    """RMS over `runs` of the run-mean equivalent-input-rate residual [°/h]."""
+    means = [np.mean(resid[w.run == r]) for r in runs]
+    return float(np.sqrt(np.mean(np.square(means)))) / k_e / DEG_PER_H
+
+
+def _floor(sigma, w: RateWindows, runs, k_e):
+    var = [np.mean(sigma[w.run == r] ** 2) / np.sum(w.run == r) for r in runs]
+    return float(np.sqrt(np.mean(var))) / k_e / DEG_PER_H
+
+
+class DwellProblem(AbstractProblem):
+    """Dwell-grid discovery (module docstring): every run's windows
+    ([`reduce`][hrgjax.calibration.reduce]) give rates [rad/s of pattern rate], fitted by
+    weighted least squares on the catalogue's columns (Gauss–Newton on the exact window rate
+    where readout terms are in the model), with each window's σ from the static runs' noise.
+
+    **Arguments:** `data` ([`hrgjax.MeasuredData`][] of dwell runs), `k_e` (nominal angular
+    gain), `window_s` (window length [s]), `held` (held-out run ids).
+    """
+
+    gap_guard = True  # an accepted effect must not widen the held-out gap
+
+    def __init__(self, data, k_e, window_s, held):
+        self.k_e, self.held = k_e, held
+        self.w = w = reduce(data, k_e, window_s=window_s)
+        extra, self.have = _window_extras(data, w)
+        self.arc = extra.pop("arc")
+        self.c = covariates(w, extra)
+        self.y = target(w, k_e)
+        self.train = ~np.isin(w.run, held)
+        self.sigma, self.nm = _noise_scale(data, w, k_e)
+
+    def candidates(self, nominal):
+        return candidates_for(self.have, nominal)
+
+    def fit(self, model):
+        return _fit(model, self.c, self.y, self.sigma, self.train, self.w, self.held, self.k_e)
+
+    def floor(self):
+        return _floor(self.sigma, self.w, self.held, self.k_e)
+
+    def after_accept(self, fit):
+        return fit
+
+    def consistency(self, fit, name):
+        """Not defined on dwell grids (one run is one grid point)."""
+        return None
+
+    def structure_left(self, fit, floor):
+        """The held-out gap is more than twice the noise floor."""
+        return fit.gap > 2.0 * floor
+
+    def screen(self, current, cands, model):
+        return _screen(
+            current,
+            cands,
+            model,
+            self.c,
+            self.sigma,
+            self.train,
+            self.y,
+            self.w,
+            self.held,
+            self.k_e,
+        )
+
+    def residuals(self, fit):
+        """What the figure draws of `fit`: every window's drift residual [°/h] (as input
+        rate) with its wave angle [°], temperature [°C] and whether it is static."""
+        w = self.w
+        return {
+            "wave_angle_deg": np.asarray(w.wave_angle_deg),
+            "temperature_c": np.asarray(w.temperature_c),
+            "static": np.asarray(w.static),
+            "drift_dph": -np.asarray(fit.resid) / self.k_e / DEG_PER_H,
+        }
+
+    @functools.cached_property
+    def shape_columns(self) -> dict:
+        """Whitened columns of the generic shapes on the training windows
+        ([`leftover.columns`][hrgjax.discovery.leftover.columns])."""
+        c, tr = self.c, self.train
+        full = lambda v: np.broadcast_to(np.asarray(v, float), tr.shape)[tr]
+        cov = {
+            "theta": full(c.theta),
+            "dT": full(c.temperature) - T_REF_C,
+            "Tdot": np.zeros(int(tr.sum())),
+            "rate": full(c.rate),
+            "accel_z": full(c.accel_z),
+            "t_run": full(c.t_run),
+            "arc": self.arc[tr],
+        }
+        return {k: g / self.sigma[tr][:, None] for k, g in leftover.columns(cov).items()}
+
+    def leftover(self, fit):
+        """The strongest shape left in `fit`'s training residual
+        ([`describe`][hrgjax.discovery.leftover.describe])."""
+        return leftover.describe(fit.r, fit.j, self.shape_columns, self.k_e)
+
+    def noise_report(self):
+        nm, k_e, w = self.nm, self.k_e, self.w
+        white, arw = nm["angle_white"], nm["angle_random_walk"]
+        return {
+            "angle_white_arcsec": None if white is None else white / DEG * 3600,
+            "angle_random_walk_dph_per_sqrt_h": None if arw is None else arw / k_e / DEG * 60,
+            "sigma_static_dph": _sigma_dph(self.sigma, w.static, k_e),
+            "sigma_moving_dph": _sigma_dph(self.sigma, ~w.static, k_e),
+        }
+
+
+def _sigma_dph(sigma, mask, k_e):
+    return float(np.median(sigma[mask])) / k_e / DEG_PER_H if np.any(mask) else None
+
+
+def noise_model(data: MeasuredData, max_lag: int = 64) -> dict:
+    r"""White angle noise σ_w [rad] and angle random walk N [rad/√s] from the static runs.
+
+    Lag-k second differences θ[i+k] − 2θ[i] + θ[i−k] remove a run's drift and have variance
+    $6\sigma_w^2 + 2N^2 k\,\Delta t$; a least-squares line over k = 1, 2, 4, … `max_lag` (at most
+    a quarter of the run) gives both.
+    Static runs only: while the pattern turns, the smooth rate ripple would leak in.
+
+    **Returns:** `{"angle_white": σ_w, "angle_random_walk": N}` (`None` without static runs).
+    """
+    lags, var = [], []
+    for idx in data.run_indices():
+        if not np.all(data["table_rate_dps"][idx] == 0.0) or idx.size < 8:
+            continue
+        th = data["wave_angle_deg"][idx] * DEG
+        dt = float(np.median(np.diff(data["time_s"][idx])))
+        ks = [2**i for i in range(7) if 2**i <= min(max_lag, idx.size // 4)]
+        for k in ks:
+            d2 = th[2 * k :] - 2 * th[k:-k] + th[: -2 * k]
+            lags.append(k * dt)
+            var.append(np.mean(d2**2))
+    if not lags:
+        return {"angle_white": None, "angle_random_walk": None}
+    slope, icpt = np.polyfit(np.asarray(lags), np.asarray(var), 1)
+    return {
+        "angle_white": float(np.sqrt(max(icpt, 0.0) / 6.0)),
+        "angle_random_walk": float(np.sqrt(max(slope, 0.0) / 2.0)),
+    }
+
+
+def _noise_scale(data: MeasuredData, w: RateWindows, k_e):
+    """Standard error of each window's pattern rate [rad/s]: from the fitted white + random
+    walk model (exact least-squares slope variance for white noise, 6N²/5T for the walk);
+    windows of runs without a static reference fall back to their batch-means errors."""
+    nm = noise_model(data)
+    batch = k_e * DEG * w.stderr_dps
+    if nm["angle_white"] is None:
+        return batch, nm
+    sigma = np.empty(len(w))
+    times = {int(data.run[idx[0]]): data["time_s"][idx] for idx in data.run_indices()}
+    for i, (run, a, b) in enumerate(zip(w.run, w.start, w.stop, strict=True)):
+        t = times[int(run)][a:b]
+        span = t[-1] - t[0]
+        white = nm["angle_white"] ** 2 / np.sum((t - t.mean()) ** 2)
+        walk = 1.2 * nm["angle_random_walk"] ** 2 / max(span, 1e-12)
+        sigma[i] = np.sqrt(white + walk)
+    return sigma, nm
+
+
+def _fit(model, c, y, sigma, train, w, held, k_e):
+    g, labels = design(model, c, k_e)
+    beta, r, cov = wls(g[train], y[train], sigma[train])
+    resid = y - g @ beta
+    if any(CATALOGUE[n].where == "readout" for n in model):
+        # The readout terms' higher orders, where they matter (a 1 % ripple at 5 °/s).
+        beta2, f, jac = refine(model, beta, c, y, sigma, train, k_e)
+        if np.max(np.abs(f - g @ beta2) / sigma) > 0.1:
+            beta, g = beta2, jac
+            resid = y - f
+            r = resid[train] / sigma[train]
+            cov = covariance(g[train] / sigma[train][:, None])
+    held_mask = np.isin(w.run, held)
+    heldout_chi2 = float(np.sum((resid[held_mask] / sigma[held_mask]) ** 2))
+    err = np.sqrt(np.diag(cov))
+    params = {}
+    for (name, j), b, e in zip(labels, beta, err, strict=True):
+        pname = [p.name for p in CATALOGUE[name].params if p.regular][j]
+        params.setdefault(name, {})[pname] = {"value": float(b), "std": float(e)}
+    return Fit(
+        model=tuple(model),
+        parameters=params,
+        r=r,
+        j=g[train] / sigma[train][:, None],
+        chi2=float(r @ r),
+        heldout_chi2=heldout_chi2,
+        gap=_gap(resid, w, held, k_e),
+        resid=resid,
+    )
+
+
+def _screen(current, cands, model, c, sigma, train, y, w, held, k_e):
+    n = int(np.sum(train))
+    rows = []
+    with bar(len(cands), f"screening {len(cands)} candidates", unit="effect") as progress:
+        for name in cands:
+            progress.set_postfix_str(name)
+            row = _screen_one(name, current, model, c, sigma, train, y, w, held, k_e, n)
+            progress.update(1)
+            if row is not None:
+                rows.append(row)
+    rows.sort(key=lambda r: -r["score"])
+    return rows
+
+
+def _screen_one(name, current, model, c, sigma, train, y, w, held, k_e, n):
+    """Score test and refit of one candidate (None when it leaves the training data alone)."""
+    g = columns(name, c, k_e)
+    if not np.any(g[train]):
+        return None
+    gw = g[train] / sigma[train][:, None]
+    s, alias, step = score(current.r, current.j, gw)
+    q = g.shape[1]
+    refit = _fit(model + [name], c, y, sigma, train, w, held, k_e)
+    lam = current.chi2 - refit.chi2
+    names = [p.name for p in CATALOGUE[name].params if p.regular]
+    return {
+        "effect": name,
+        "score": float(s),
+        "p_value": chi2_sf(s, q),
+        "delta_bic": float(lam - q * math.log(n)),
+        "aliasing": alias,
+        "gap_after": refit.gap,
+        "heldout_gain": current.heldout_chi2 - refit.heldout_chi2,
+        "params": {k: v["value"] for k, v in refit.parameters[name].items() if k in names},
+        "refit": refit,
+        "_columns": lambda: gw,
+    }

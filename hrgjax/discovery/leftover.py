@@ -10,8 +10,8 @@ the block's length: the angle it adds); its score statistic against the fitted m
 whitened residual and Jacobian is the same test as the catalogue's screening
 ([`score`][hrgjax.discovery.dwell.score]): χ²_q when nothing of that shape is left. The
 strongest shape is reported with its size in user units (the input rate it imitates) and
-its significance in words. The columns use each point's mean covariates: a 2θ harmonic on a
-window in which the pattern sweeps far (fast rotation) is seen smaller.
+its significance in words. The columns use each point's mean covariates; on dwell windows a
+kθ harmonic is seen through the window's sweep, as the catalogue's 2θ terms are.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import numpy as np
 
 from ..units import DEG, DEG_PER_H, HOUR
 from . import dwell
+from .effects import window_gain
 
 SHAPES = (
     *(f"{k}θ" for k in (1, 2, 3, 4)),
@@ -55,11 +56,17 @@ _SCALAR = {  # shape: (words, user unit, factor from pattern-rate coefficient pe
 def columns(cov: dict, drop: bool = True) -> dict[str, np.ndarray]:
     """Pattern-rate columns (N, q) of every shape at covariates `cov` (arrays of N points:
     `theta` [rad], `dT` [°C from 20 °C], `Tdot` [°C/s], `rate` [rad/s], `accel_z` [g],
-    `t_run` [s]); with `drop`, shapes whose columns vanish on these points are left out."""
+    `t_run` [s], and optionally `arc` [rad]: the arc the pattern sweeps in a dwell window,
+    through which a slope sees a kθ harmonic times
+    [`window_gain`][hrgjax.discovery.effects.window_gain](k·arc/2)); with `drop`, shapes whose
+    columns vanish on these points are left out."""
     th, dT = cov["theta"], cov["dT"]
+    arc = cov.get("arc")
     out = {}
     for k in (1, 2, 3, 4):
         h = np.stack([np.cos(k * th), np.sin(k * th)], axis=-1)
+        if arc is not None:  # a window's slope sees kθ through its sweep (window_gain)
+            h = h * np.asarray(window_gain(0.5 * k * np.asarray(arc)))[:, None]
         out[f"{k}θ"] = h
         out[f"{k}θ·ΔT"] = h * dT[:, None]
         out[f"{k}θ·ΔT²"] = h * dT[:, None] ** 2

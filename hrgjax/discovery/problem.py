@@ -1,0 +1,131 @@
+"""The shared interface of the two data shapes the search works on (issue 19, "one typed
+core"): an immutable [`Fit`][hrgjax.discovery.problem.Fit] and
+[`AbstractProblem`][hrgjax.discovery.problem.AbstractProblem], implemented by the dwell-grid
+regression ([`DwellProblem`][hrgjax.discovery.dwell.DwellProblem]) and by the continuous
+records, alone or with a mixed log's dwell windows
+([`ContinuousProblem`][hrgjax.discovery.continuous.ContinuousProblem]).
+[`discover`][hrgjax.discovery.discover] only talks to this interface.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+
+import numpy as np
+
+from ..data import MeasuredData
+from .effects import CATALOGUE, NOMINAL
+
+
+@dataclasses.dataclass(frozen=True)
+class Fit:
+    """One fitted model (immutable).
+
+    - `model`: the effect names fitted; `parameters`: `{effect: {param: {"value", "std"}}}`
+      in model units (rad/s of pattern rate, …).
+    - `r`, `j`: the whitened training residual (N,) and Jacobian (N, p) — what the score
+      tests and the leftover shapes read.
+    - `chi2` = r·r; `heldout_chi2`: the whitened χ² of the held-out runs; `gap`: the
+      held-out gap [°/h] (DESIGN.md).
+    - `resid`: dwell grids, every window's rate residual [rad/s] (None otherwise);
+      `z`: continuous records, the scaled parameter vector (None otherwise).
+    """
+
+    model: tuple[str, ...]
+    parameters: dict
+    r: np.ndarray = dataclasses.field(repr=False)
+    j: np.ndarray = dataclasses.field(repr=False)
+    chi2: float
+    heldout_chi2: float
+    gap: float
+    resid: np.ndarray | None = dataclasses.field(default=None, repr=False)
+    z: np.ndarray | None = dataclasses.field(default=None, repr=False)
+
+
+class AbstractProblem(abc.ABC):
+    """What [`discover`][hrgjax.discovery.discover] needs of a data shape: its candidates,
+    fits of a model, the screening of candidates against a fit, the gap's noise floor, the
+    leftover shapes, and the report's pieces. `gap_guard`: an accepted effect must not widen
+    the held-out gap (dwell grids, whose held-out runs are as quiet as the training ones)."""
+
+    gap_guard: bool = False
+    k_e: float
+
+    @abc.abstractmethod
+    def candidates(self, nominal) -> list[str]:
+        """Catalogue effects these data can reveal, beyond `nominal`."""
+
+    @abc.abstractmethod
+    def fit(self, model) -> Fit:
+        """Fit the effects `model` (names) on the training runs."""
+
+    @abc.abstractmethod
+    def floor(self) -> float:
+        """What noise alone gives the held-out gap [°/h]."""
+
+    @abc.abstractmethod
+    def screen(self, fit: Fit, cands, model) -> list[dict]:
+        """Score test (and refit) of every candidate against `fit`, best first: rows with
+        `effect`, `score`, `p_value`, `delta_bic`, `aliasing`, `heldout_gain`, `gap_after`,
+        `params`, `refit` (a `Fit` or None) and `_columns` (the candidate's whitened
+        columns, when called)."""
+
+    def after_accept(self, fit: Fit) -> Fit:
+        """The fit to go on from once `fit`'s last effect is accepted (default: itself)."""
+        return fit
+
+    @abc.abstractmethod
+    def structure_left(self, fit: Fit, floor: float | None = None) -> bool:
+        """Whether `fit` leaves significant structure in the held-out runs."""
+
+    def consistency(self, fit: Fit, name: str) -> dict | None:
+        """Per-run agreement of effect `name` in `fit` (None where it does not apply)."""
+        return None
+
+    @abc.abstractmethod
+    def residuals(self, fit: Fit) -> dict:
+        """What the report's figure draws of `fit`."""
+
+    @property
+    @abc.abstractmethod
+    def shape_columns(self) -> dict[str, np.ndarray]:
+        """Whitened columns of the generic leftover shapes on the training data."""
+
+    @abc.abstractmethod
+    def leftover(self, fit: Fit) -> dict | None:
+        """The strongest shape `fit` leaves."""
+
+    @abc.abstractmethod
+    def noise_report(self) -> dict:
+        """The noise model, in report units."""
+
+
+OPTIONAL = {"amplitude": "amplitude", "quadrature": "quadrature", "accel_z": "accel_z_g"}
+"""Covariates read from optional data columns."""
+NEEDS_CONTINUOUS = tuple(n for n, e in CATALOGUE.items() if not e.on_dwell)
+"""Effects a dwell grid (constant temperature per run, fresh runs) cannot reveal."""
+
+
+def rates_in(data: MeasuredData) -> set:
+    """`{"rates"}` when the data turn the table at two or more distinct non-zero speeds
+    (what separates a rate-dependent ripple from a readout ripple), else the empty set."""
+    speeds = np.unique(np.round(np.abs(np.asarray(data["table_rate_dps"])), 6))
+    return {"rates"} if np.count_nonzero(speeds) >= 2 else set()
+
+
+def candidates_for(have: set, nominal=NOMINAL, continuous: bool = False) -> list[str]:
+    """Catalogue effects the data can reveal, given the covariates they carry (and, for
+    dwell grids, without the effects that need changing temperature or fresh switch-ons;
+    `"rates"` in `have`: the table turns at two or more speeds)."""
+    out = []
+    for name, effect in CATALOGUE.items():
+        if name in nominal or (name in NEEDS_CONTINUOUS and not continuous):
+            continue
+        derived = {"theta", "rate", "temperature"}
+        if continuous:  # read off the temperature and time columns of the record
+            derived |= {"temperature_rate", "temperature_lagged", "t_run"}
+        needs = set(effect.needs) - derived
+        if needs <= have:
+            out.append(name)
+    return out
