@@ -364,11 +364,12 @@ def cmd_discover(args) -> int:
         print("  structure is left above the noise floor that no catalogue effect explains")
     print("  fitted model:")
     print("\n".join("    " + line for line in found.equations().splitlines()[1:]))
-    print("  screening (score, p, ΔBIC, aliasing):")
+    print("  screening (score, p, ΔBIC, aliasing; a shape that outshines the candidate):")
     for r in found.screening[:6]:
+        outshone = f"  outshone by {r['outshone_by']}" if r.get("outshone_by") else ""
         print(
             f"    {r['effect']:>32} {r['score']:12.4g} {r['p_value']:9.2g} "
-            f"{r['delta_bic']:10.4g} {r['aliasing']:6.2f}"
+            f"{r['delta_bic']:10.4g} {r['aliasing']:6.2f}{outshone}"
         )
     if args.json:
         print(f"wrote {found.write_json(args.json)}")

@@ -95,6 +95,10 @@ def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
     rep = discover(data, catalogue=rest)
     assert rep.missing_effect is None and rep.verdict == "unexplained"
     assert rep.structure_left
+    # the readout's temperature law would match the drift on the rotation runs (not at
+    # rest): it is refused as outshone by the uncovered shape it only imitates
+    row = next(r for r in rep.screening if r["effect"] == "readout_gain_mismatch_temperature")
+    assert row["outshone_by"] == "2θ·ΔT", row
     # what is left is named: a 2θ harmonic that grows with temperature, in °/h per °C
     left = rep.leftover
     assert left["shape"] == "2θ·ΔT" and left["significant"], left
