@@ -4,7 +4,8 @@ The base gyro is the default one reduced to the nominal model's physics:
 `presets.tvg3_like(temperature_laws=False)` (every law frozen at +20 °C) with a perfect readout
 and ideal loops, so its drift is bias + damping anisotropy, with the preset's noise. (With the
 preset's real loops the base is not null: at 5 °/s the closed loops add a 2θ ripple of 3·10⁻⁵
-to the true rate, which the search rightly flags as a scale-factor ripple.) One effect is then
+to the true rate — the catalogue's `loop_ripple`, which at one rate reads as
+`readout_gain_mismatch`.) One effect is then
 put back through the gyro's own parameters, at a chosen size:
 
 | effect | size means | how it is injected |
