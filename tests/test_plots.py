@@ -85,3 +85,34 @@ def test_vibration_training_panel_keeps_loss_and_rmse_on_separate_axes(figures):
     assert "normalised" in training[0].get_ylabel() and "°/h" in twins[0].get_ylabel()
     # the loss curves on the left axis, the RMSE (°/h) on the right
     assert len(training[0].get_lines()) == 2 and len(twins[0].get_lines()) == 1
+
+
+def test_a_mixed_logs_discovery_figure_draws_records_and_dwell_runs(figures):
+    from hrgjax.discovery.report import plot_discovery
+    from hrgjax.discovery.result import Discovery
+
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 60.0, 50)
+    records = [{"run": i, "held": i == 2, "t_min": t, "angle_arcsec": rng.normal(size=t.size)}
+               for i in range(3)]  # fmt: skip
+    n = 40
+    windows = {"wave_angle_deg": np.tile(np.linspace(-90, 90, 10), 4),
+               "temperature_c": np.repeat([-20.0, 0.0, 20.0, 40.0], 10),
+               "static": np.arange(n) % 2 == 0, "drift_dph": rng.normal(size=n)}  # fmt: skip
+    res = {"records": records, "windows": windows}
+    screen = {"effect": "bias_temperature", "score": 50.0, "p_value": 1e-9, "delta_bic": 40.0,
+              "aliasing": 0.1, "heldout_gain": 30.0, "gap_after": 0.2, "outshone_by": None}  # fmt: skip
+    disc = Discovery(
+        verdict="found", missing_effect="bias_temperature", accepted=("bias_temperature",),
+        ambiguous_with=(), discriminate={}, gap_before=0.5, gap_after=0.2, noise_floor=0.15,
+        metric="rms_run_mean_rate_residual_dph", structure_left=False, fit_parameters={},
+        k_e=0.554, ranking=(), screening=(screen,), consistency={}, noise={}, split={},
+        shape="mixed", residuals={"before": res, "after": res},
+    )  # fmt: skip
+    plot_discovery(disc, "unused.png")
+    (fig,) = figures
+    assert len(fig.axes) == 6  # records, dwell runs (before | after), candidates | gap
+    titles = [ax.get_title() for ax in fig.axes]
+    assert sum("continuous records" in s for s in titles) == 2
+    assert sum("dwell runs" in s for s in titles) == 2
+    _check(fig)

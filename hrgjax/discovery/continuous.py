@@ -733,7 +733,8 @@ class ContinuousProblem(AbstractProblem):
 
     def residuals(self, fit):
         """What the figure draws of `fit`: every run's angle residual [″] against time in the
-        run [min], its mean rate removed (the switch-on bias), held-out runs marked."""
+        run [min], its mean rate removed (the switch-on bias), held-out runs marked; a mixed
+        log's as `{"records": …, "windows": …}` with its dwell windows' drift residuals."""
         out = []
         for groups, held in ((self.train_groups, False), (self.held_groups, True)):
             groups = [g for g in groups if isinstance(g, Runs)]
@@ -745,7 +746,26 @@ class ContinuousProblem(AbstractProblem):
                     cum = cum - np.polyval(np.polyfit(t, cum, 1), t)
                     out.append({"run": int(run), "held": held, "t_min": t / 60,
                                 "angle_arcsec": cum / DEG * 3600})  # fmt: skip
-        return sorted(out, key=lambda d: d["run"])
+        out = sorted(out, key=lambda d: d["run"])
+        if self.windows is None:
+            return out
+        return {"records": out, "windows": self._window_residuals(fit)}
+
+    def _window_residuals(self, fit):
+        """A mixed log's dwell windows as the dwell figure draws them: drift residual [°/h]
+        (as input rate), wave angle [° el.], temperature [°C], static or not."""
+        parts = []
+        for groups in (self.train_groups, self.held_groups):
+            groups = [g for g in groups if isinstance(g, Windows)]
+            for g, r in zip(groups, self.raw_residuals(fit.z, groups), strict=True):
+                parts.append((g.cov, np.asarray(r)))
+        col = lambda f: np.concatenate([np.broadcast_to(np.asarray(f(c), float), r.shape) for c, r in parts])
+        return {
+            "wave_angle_deg": col(lambda c: c.theta) / DEG,
+            "temperature_c": col(lambda c: c.temperature),
+            "static": col(lambda c: c.rate) == 0.0,
+            "drift_dph": -np.concatenate([r for _, r in parts]) / self.k_e / DEG_PER_H,
+        }
 
     @functools.cached_property
     def shape_columns(self) -> dict:

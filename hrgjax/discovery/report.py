@@ -15,24 +15,35 @@ def plot_discovery(disc: Discovery, path: str) -> str:
     from ..plots import _plt, _save
 
     plt = _plt()
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), constrained_layout=True)
+    mixed = isinstance(disc.residuals["before"], dict)  # records and dwell windows
+    fig, axes = plt.subplots(3 if mixed else 2, 2, figsize=(11, 11 if mixed else 7.5),
+                             constrained_layout=True)  # fmt: skip
     after = "residual, with\n" + (", ".join(disc.accepted) if disc.accepted else "no effect added")
-    for ax, which, title in (
-        (axes[0, 0], "before", "residual,\nnominal model"),
-        (axes[0, 1], "after", after),
-    ):
-        if disc.shape in ("continuous", "mixed"):  # a mixed log: its continuous records
-            _continuous_panel(ax, disc.residuals[which])
-        else:
-            _dwell_panel(ax, disc.residuals[which], plt)
-        ax.set_title(title, fontsize=10)
-        ax.grid(alpha=0.3)
-    # one y-range for both residual panels, so that the shrink reads at a glance
-    lo = min(axes[0, 0].get_ylim()[0], axes[0, 1].get_ylim()[0])
-    hi = max(axes[0, 0].get_ylim()[1], axes[0, 1].get_ylim()[1])
-    for ax in axes[0]:
-        ax.set_ylim(lo, hi)
-    axes[0, 0].legend(fontsize=7, ncol=2)
+    panels = []  # (row, draw, residuals key)
+    if mixed:
+        panels += [(0, _continuous_panel, "records"), (1, _dwell_panel, "windows")]
+    elif disc.shape in ("continuous", "mixed"):
+        panels += [(0, _continuous_panel, None)]
+    else:
+        panels += [(0, _dwell_panel, None)]
+    for row, draw, part in panels:
+        for ax, which, title in (
+            (axes[row, 0], "before", "residual,\nnominal model"),
+            (axes[row, 1], "after", after),
+        ):
+            res = disc.residuals[which] if part is None else disc.residuals[which][part]
+            draw(ax, res, plt)
+            what = {"records": " (continuous records)", "windows": " (dwell runs)"}.get(part, "")
+            ax.set_title(title + what, fontsize=10)
+            ax.grid(alpha=0.3)
+        # one y-range for both residual panels, so that the shrink reads at a glance
+        lo = min(axes[row, 0].get_ylim()[0], axes[row, 1].get_ylim()[0])
+        hi = max(axes[row, 0].get_ylim()[1], axes[row, 1].get_ylim()[1])
+        for ax in axes[row]:
+            ax.set_ylim(lo, hi)
+        for ax in axes[row]:  # the same runs / temperatures in both
+            ax.legend(fontsize=7, ncol=2)
+    axes = axes[-2:]  # the bottom row: candidates and the gap
 
     rows = list(disc.screening)
     ax = axes[1, 0]
@@ -47,6 +58,7 @@ def plot_discovery(disc: Discovery, path: str) -> str:
     ax.bar(["before", "after", "noise floor"], [disc.gap_before, disc.gap_after, disc.noise_floor],
            color=["tab:red", "tab:green", "tab:gray"])  # fmt: skip
     ax.set_ylabel("held-out gap [°/h]")
+    ax.set_xlabel("model [nominal | with the accepted effects | noise alone]")
     ax.set_title(f"verdict: {disc.verdict}\nmissing effect: {disc.missing_effect}", fontsize=10)
     fig.suptitle(f"discovery on {disc.shape} data", fontsize=11)
     _save(fig, path, dpi=110)  # makes the folder
@@ -68,7 +80,7 @@ def _dwell_panel(ax, res, plt):
     ax.set_ylabel("static drift residual [°/h]")
 
 
-def _continuous_panel(ax, res):
+def _continuous_panel(ax, res, plt=None):
     """Each run's angle residual against time (its mean rate removed), held-out dashed."""
     for run in res:
         ax.plot(run["t_min"], run["angle_arcsec"], "--" if run["held"] else "-", lw=1,
