@@ -73,14 +73,14 @@ def design(names, c: Covariates, k_e: float) -> tuple[np.ndarray, list[tuple[str
     return np.concatenate(blocks, axis=1), labels
 
 
-def _split(names, beta):
+def _split(names, beta, every=False):
     """{effect: full parameter vector} from the regular parameters `beta` in `design` order
-    (nonregular ones at their typical size)."""
+    (nonregular ones at their typical size), or from every parameter (`every`)."""
     out, i = {}, 0
     for n in names:
         full = []
         for p in CATALOGUE[n].params:
-            if p.regular:
+            if p.regular or every:
                 full.append(beta[i])
                 i += 1
             else:
@@ -89,19 +89,37 @@ def _split(names, beta):
     return out
 
 
-def model_rate(names, beta, c: Covariates, k_e: float):
+def model_rate(names, beta, c: Covariates, k_e: float, every: bool = False):
     """A window's measured pattern rate [rad/s] under the model `names` at parameters
-    `beta` (the order of `design`), to all orders in the readout terms
-    ([`window_rate`][hrgjax.discovery.effects.window_rate]; the terms that scale the angular
-    gain read the nominal `k_e`, as in `design`, which is this function's Jacobian at the
-    null)."""
-    return window_rate(_split(names, beta), c, k_e)
+    `beta` (the order of `design`; with `every`, all parameters, nonregular ones too), to
+    all orders in the readout terms ([`window_rate`][hrgjax.discovery.effects.window_rate];
+    the terms that scale the angular gain read the nominal `k_e`, as in `design`, which is
+    this function's Jacobian at the null)."""
+    return window_rate(_split(names, beta, every), c, k_e)
 
 
-@functools.lru_cache(maxsize=64)
-def _model_and_jacobian(names: tuple):
-    f = lambda beta, c, k_e: model_rate(names, beta, c, k_e)
-    return jax.jit(lambda beta, c, k_e: (f(beta, c, k_e), jax.jacfwd(f)(beta, c, k_e)))
+_SUPERSET = tuple(CATALOGUE)
+
+
+def _positions(names) -> np.ndarray:
+    """Where `design`'s regular parameters of `names` sit in the whole catalogue's vector."""
+    where, i = {}, 0
+    for n in _SUPERSET:
+        for p in CATALOGUE[n].params:
+            where[(n, p.name)] = i
+            i += 1
+    return np.asarray(
+        [where[(n, p.name)] for n in names for p in CATALOGUE[n].params if p.regular]
+    )
+
+
+@jax.jit
+def _model_and_jacobian(full, c, k_e):
+    """The window rate over the whole catalogue (effects outside the model at their null,
+    where their terms vanish exactly) and its Jacobian: one program per data shape for
+    every model the search tries."""
+    f = lambda v: model_rate(_SUPERSET, v, c, k_e, every=True)
+    return f(full), jax.jacfwd(f)(full)
 
 
 def refine(names, beta, c: Covariates, y, sigma, train, k_e: float, iterations: int = 3):
@@ -111,18 +129,23 @@ def refine(names, beta, c: Covariates, y, sigma, train, k_e: float, iterations: 
     a 2 % mismatch) is systematic, and a ripple of 1 % makes it visible at 5 °/s.
 
     **Returns:** `(beta, model rate, Jacobian)` at the refined parameters."""
-    fn = _model_and_jacobian(tuple(names))
+    at = _positions(names)
+    full = np.concatenate(
+        [[0.0 if p.regular else p.scale for p in CATALOGUE[n].params] for n in _SUPERSET]
+    )
     c = jax.tree.map(jnp.asarray, c)
-    beta = jnp.asarray(beta)
-    for _ in range(iterations):
-        f, jac = fn(beta, c, k_e)
-        f, jac = np.asarray(f), np.asarray(jac)
+    beta = np.asarray(beta, dtype=float)
+    for _ in range(iterations + 1):
+        full[at] = beta
+        f, jac = _model_and_jacobian(jnp.asarray(full), c, k_e)
+        f, jac = np.asarray(f), np.asarray(jac)[:, at]
+        if _ == iterations:
+            break
         jw = jac[train] / sigma[train][:, None]
         rw = (y[train] - f[train]) / sigma[train]
         step, *_ = np.linalg.lstsq(jw, rw, rcond=None)
         beta = beta + step
-    f, jac = fn(beta, c, k_e)
-    return np.asarray(beta), np.asarray(f), np.asarray(jac)
+    return beta, f, jac
 
 
 def target(w: RateWindows, k_e: float) -> np.ndarray:
