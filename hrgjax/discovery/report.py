@@ -15,7 +15,7 @@ def plot_discovery(disc: Discovery, path: str) -> str:
     from ..plots import _plt, _save
 
     plt = _plt()
-    mixed = isinstance(disc.residuals["before"], dict)  # records and dwell windows
+    mixed = "records" in disc.residuals["before"]  # a mixed log: records and dwell windows
     fig, axes = plt.subplots(3 if mixed else 2, 2, figsize=(11, 11 if mixed else 7.5),
                              constrained_layout=True)  # fmt: skip
     after = "residual, with\n" + (", ".join(disc.accepted) if disc.accepted else "no effect added")
