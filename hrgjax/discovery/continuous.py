@@ -31,6 +31,7 @@ point and pays for the grid in its Bonferroni level.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import math
@@ -485,8 +486,11 @@ class ContinuousProblem(AbstractProblem):
     """Everything `discover` needs on continuous records: fits, screening and the gap
     (the same interface as the dwell-grid problem)."""
 
-    def __init__(self, data, names, k_e, held, noise, block_s=BLOCK_S, windows=None):
+    def __init__(
+        self, data, names, k_e, held, noise, block_s=BLOCK_S, windows=None, noise_known=False
+    ):
         self.data, self.k_e, self.block_s = data, k_e, block_s
+        self.noise_known = noise_known  # the noise model was given: σ_b is not re-estimated
         self.windows = windows  # (Windows, held mask): the dwell runs of a mixed log
         self.layout = Layout(names)
         self.held = set(int(r) for r in held)
@@ -557,10 +561,10 @@ class ContinuousProblem(AbstractProblem):
             run=tuple(int(d.run[i[0]]) for i in runs),
         )
 
-    def estimate_run_bias(self, z):
-        """Set the run-to-run bias spread σ_b [rad/s] from the scatter of every run's mean
-        rate residual at the fit `z`, less what the rest of the noise gives it, and rebuild
-        the whitening."""
+    def with_run_bias(self, z) -> ContinuousProblem:
+        """A copy of this problem (which is left as it is) whose run-to-run bias spread σ_b
+        [rad/s] is set from the scatter of every run's mean rate residual at the fit `z`,
+        less what the rest of the noise gives it, with the whitening rebuilt."""
         # the training and held-out runs apart: their residual programs exist already;
         # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
         # one session, whose bias the shared `bias` parameter takes)
@@ -568,23 +572,23 @@ class ContinuousProblem(AbstractProblem):
         held = [g for g in self.held_groups if isinstance(g, Runs)]
         rates = self.run_rates(z, train) | self.run_rates(z, held)
         means = np.asarray(list(rates.values()))
-        self.noise["run_bias"] = 0.0
-        if means.size < 2:  # nothing to estimate it from
-            self._build()
-            return
-        noise_var = self.floor(every=True, windows=False) ** 2
-        spread = np.var(means, ddof=1)
-        self.noise["run_bias"] = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_e
-        self._build()
+        new = copy.copy(self)
+        new.noise = dict(self.noise, run_bias=0.0)
+        if means.size >= 2:  # else nothing to estimate it from
+            noise_var = new.floor(every=True, windows=False) ** 2
+            spread = np.var(means, ddof=1)
+            sigma_b = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_e
+            new.noise["run_bias"] = sigma_b
+        new._build()
+        return new
 
     def after_accept(self, fit):
-        """Re-estimate σ_b at the new model (unless the noise was given) and refit."""
-        if not self.noise_known:
-            self.estimate_run_bias(fit.z)
-            fit = self.fit(list(fit.model), z0=fit.z)
-        return fit
-
-    noise_known = False
+        """Re-estimate σ_b at the new model (unless the noise was given) and refit: a new
+        problem and its fit."""
+        if self.noise_known:
+            return self, fit
+        new = self.with_run_bias(fit.z)
+        return new, new.fit(list(fit.model), z0=fit.z)
 
     def structure_left(self, fit, floor=None, alpha=1e-3):
         """True when the held-out whitened χ² is too large for its degrees of freedom
@@ -759,7 +763,9 @@ class ContinuousProblem(AbstractProblem):
             groups = [g for g in groups if isinstance(g, Windows)]
             for g, r in zip(groups, self.raw_residuals(fit.z, groups), strict=True):
                 parts.append((g.cov, np.asarray(r)))
-        col = lambda f: np.concatenate([np.broadcast_to(np.asarray(f(c), float), r.shape) for c, r in parts])
+        col = lambda f: np.concatenate(
+            [np.broadcast_to(np.asarray(f(c), float), r.shape) for c, r in parts]
+        )
         return {
             "wave_angle_deg": col(lambda c: c.theta) / DEG,
             "temperature_c": col(lambda c: c.temperature),

@@ -108,9 +108,7 @@ def _positions(names) -> np.ndarray:
         for p in CATALOGUE[n].params:
             where[(n, p.name)] = i
             i += 1
-    return np.asarray(
-        [where[(n, p.name)] for n in names for p in CATALOGUE[n].params if p.regular]
-    )
+    return np.asarray([where[(n, p.name)] for n in names for p in CATALOGUE[n].params if p.regular])
 
 
 @jax.jit
@@ -262,7 +260,7 @@ class DwellProblem(AbstractProblem):
         return _floor(self.sigma, self.w, self.held, self.k_e)
 
     def after_accept(self, fit):
-        return fit
+        return self, fit
 
     def consistency(self, fit, name):
         """Not defined on dwell grids (one run is one grid point)."""

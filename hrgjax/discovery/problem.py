@@ -71,9 +71,11 @@ class AbstractProblem(abc.ABC):
         `params`, `refit` (a `Fit` or None) and `_columns` (the candidate's whitened
         columns, when called)."""
 
-    def after_accept(self, fit: Fit) -> Fit:
-        """The fit to go on from once `fit`'s last effect is accepted (default: itself)."""
-        return fit
+    def after_accept(self, fit: Fit) -> tuple[AbstractProblem, Fit]:
+        """The problem and the fit to go on from once `fit`'s last effect is accepted
+        (default: these; the continuous records re-estimate their run-to-run bias at the new
+        model and return a new problem — a problem never changes once built)."""
+        return self, fit
 
     @abc.abstractmethod
     def structure_left(self, fit: Fit, floor: float | None = None) -> bool:

@@ -181,7 +181,7 @@ def discover(
         accepted.append(best["effect"])
         model.append(best["effect"])
         cands.remove(best["effect"])
-        current = problem.after_accept(best["refit"])
+        problem, current = problem.after_accept(best["refit"])
     floor = problem.floor()  # σ_b may have been re-estimated at the final model
     left = problem.structure_left(current, floor)
     if accepted:
@@ -319,8 +319,7 @@ def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s, win
         win = Windows(y=dwell.target(w, k_e), sigma=sigma, cov=dwell.covariates(w, extra),
                       run=tuple(np.asarray(w.run).tolist()))  # fmt: skip
         windows = (win, np.isin(w.run, held))
-    problem = ContinuousProblem(records, names, k_e, held, nz, block_s, windows=windows)
-    problem.noise_known = known
+    problem = ContinuousProblem(records, names, k_e, held, nz, block_s, windows, known)
     if not known:
-        problem.estimate_run_bias(problem.fit(list(nominal)).z)
+        problem = problem.with_run_bias(problem.fit(list(nominal)).z)
     return problem
