@@ -173,10 +173,12 @@ def covariance(gw: np.ndarray) -> np.ndarray:
     return cov
 
 
-def score(r: np.ndarray, j: np.ndarray, g: np.ndarray):
+def score(r: np.ndarray, j: np.ndarray, g: np.ndarray, q_j: np.ndarray | None = None):
     """Score statistic S, aliasing index A and one-step estimate of a candidate with
-    whitened columns `g`, given the whitened residual `r` and fitted whitened Jacobian `j`."""
-    q_j, _ = np.linalg.qr(j)
+    whitened columns `g`, given the whitened residual `r` and fitted whitened Jacobian `j`
+    (`q_j`: its orthonormal basis, when several candidates share it)."""
+    if q_j is None:
+        q_j, _ = np.linalg.qr(j)
     g_t = g - q_j @ (q_j.T @ g)
     gram = g_t.T @ g_t
     alias = 1.0 - np.sum(g_t**2) / max(np.sum(g**2), 1e-300)

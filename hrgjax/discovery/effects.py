@@ -502,13 +502,15 @@ def _effect(name: str) -> Effect:
     return CATALOGUE[name]
 
 
-def pattern_rate(params: dict, c: Covariates):
+def pattern_rate(params: dict, c: Covariates, k_e=None):
     """θ̇ [rad/s] of the superset model: the sum of every rate term in `params`
-    ({effect name: parameter array}; readout terms are skipped); `angular_gain` must be
-    present."""
-    if "angular_gain" not in params:
-        raise ValueError("params must contain 'angular_gain' (the k_e of −k_e·Ω)")
-    k_e = params["angular_gain"][0]
+    ({effect name: parameter array}; readout terms are skipped). The terms that scale the
+    angular gain read `k_e` (default: the model's own `angular_gain`, which must then be
+    present)."""
+    if k_e is None:
+        if "angular_gain" not in params:
+            raise ValueError("params must contain 'angular_gain' (the k_e of −k_e·Ω)")
+        k_e = params["angular_gain"][0]
     total = 0.0 * c.theta
     for name, p in params.items():
         effect = _effect(name)
@@ -559,20 +561,12 @@ def window_rate(params: dict, c: Covariates, k_e=None):
     `c.harmonic_gain`). The terms that scale the angular gain read `k_e` (default: the
     model's own `angular_gain`). Its Jacobian at the null is the dwell regression's design
     ([`Effect.window_rate`][hrgjax.discovery.effects.Effect.window_rate])."""
-    if k_e is None:
-        if "angular_gain" not in params:
-            raise ValueError("params must contain 'angular_gain' (the k_e of −k_e·Ω)")
-        k_e = params["angular_gain"][0]
     readouts = {n: p for n, p in params.items() if _effect(n).where == "readout"}
     theta = c.theta
     for _ in range(4 if readouts else 0):  # |∂g/∂θ| ≲ 0.03: ~1.5 digits a pass
         theta = c.theta - readout_angle(readouts, eqx.tree_at(lambda x: x.theta, c, theta))
     ct = eqx.tree_at(lambda x: x.theta, c, theta) if readouts else c
-    total = 0.0 * c.theta
-    for name, p in params.items():
-        effect = _effect(name)
-        if effect.where == "rate":
-            total = total + effect.rate(p, ct, k_e)
+    total = pattern_rate(params, ct, k_e)
     if readouts:
         total = total * (1.0 + c.harmonic_gain * readout_slope(readouts, ct))
     return total

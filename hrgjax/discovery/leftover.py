@@ -130,14 +130,9 @@ def scores(r, j, cols: dict[str, np.ndarray]) -> dict[str, tuple[float, int]]:
     q_j, _ = np.linalg.qr(j)
     out = {}
     for name, g in cols.items():
-        g_t = g - q_j @ (q_j.T @ g)
-        gram = g_t.T @ g_t
-        if 1.0 - np.sum(g_t**2) / max(np.sum(g**2), 1e-300) >= 0.999:
-            continue
-        if np.linalg.matrix_rank(gram, tol=1e-10 * max(np.trace(gram), 1e-300)) < g.shape[1]:
-            continue
-        u = g_t.T @ r
-        out[name] = (float(u @ np.linalg.solve(gram, u)), int(g.shape[1]))
+        s, alias, _ = dwell.score(r, j, g, q_j)
+        if alias < 0.999:
+            out[name] = (s, int(g.shape[1]))
     return out
 
 
@@ -149,8 +144,9 @@ def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3)
     harmonic's `words` also say whether it changes with temperature), or None without
     shapes."""
     rows = []
+    q_j, _ = np.linalg.qr(j)
     for name, g in cols.items():
-        s, alias, step = dwell.score(r, j, g)
+        s, alias, step = dwell.score(r, j, g, q_j)
         if alias >= 0.999:
             continue
         p = min(1.0, dwell.chi2_sf(s, g.shape[1]) * len(cols))
@@ -159,7 +155,6 @@ def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3)
         return None
     rows.sort(key=lambda row: -row[0])
     s, name, g, step, p = rows[0]
-    q_j, _ = np.linalg.qr(j)
     g_t = g - q_j @ (q_j.T @ g)
     cov = np.linalg.pinv(g_t.T @ g_t)
     out = {"shape": name, **_size(name, step, cov, k_e)}

@@ -286,7 +286,7 @@ class _Outshone:
         jj = np.concatenate([j, *(self.cols[name] for _, name in stronger)], axis=1)
         q_j, _ = np.linalg.qr(jj)
         r_s = r - q_j @ (q_j.T @ r)
-        s_cond, _, _ = dwell.score(r_s, jj, row["_columns"]())
+        s_cond, _, _ = dwell.score(r_s, jj, row["_columns"](), q_j)
         # it is a part of them when it adds nothing beyond them, or keeps less than a tenth
         # of its own evidence (what it still adds is then their imperfections: the shapes
         # are generic, the windows' arc averaging and the exact law are not in them)
