@@ -95,3 +95,32 @@ def test_host_values_reach_the_device_without_eager_programs():
     np.testing.assert_array_equal(piece.temperature, temps)
     np.testing.assert_allclose(piece.rate, np.full(41, np.deg2rad(2.0)), rtol=1e-15)
     assert piece.accel.shape == (41, 3) and float(piece.wave_angle0) == np.deg2rad(7.0)
+
+
+_IMPORT_ALL_IN_A_TRACE = """
+import importlib, pkgutil, sys
+import jax
+import hrgjax
+
+def import_all(x):
+    for m in pkgutil.walk_packages(hrgjax.__path__, "hrgjax."):
+        importlib.import_module(m.name)
+    return x
+
+jax.jit(import_all)(1.0)
+print([f"{name}.{k}" for name, mod in list(sys.modules.items()) if name.startswith("hrgjax")
+       for k, v in vars(mod).items() if isinstance(v, (jax.Array, jax.core.Tracer))])
+"""
+
+
+def test_no_module_holds_a_jax_array_even_when_first_imported_inside_a_trace():
+    """hrgjax imports its modules on first use, which may be inside the user's `jit` (e.g.
+    `hg.simulate` first reached in a traced loss). A module-level JAX array would then be
+    a tracer leaked into a global (the docs build once failed this way: `full._J`) — and even
+    outside a trace it would fix its dtype at import. Module constants are NumPy."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _IMPORT_ALL_IN_A_TRACE], capture_output=True,
+                         text=True, check=True)  # fmt: skip
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -10,6 +10,7 @@ and the parametric pump acts at $2\psi_r + 2\gamma$.
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 from .averaged import _input, input_rate
 from .control import (
@@ -22,7 +23,7 @@ from .control import (
 from .readout import estimate, from_signals
 
 N_STATE = 8
-_J = jnp.array([[0.0, -1.0], [1.0, 0.0]])
+_J = np.array([[0.0, -1.0], [1.0, 0.0]])  # NumPy: a module constant must not be a JAX array
 
 
 def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
