@@ -13,6 +13,7 @@ import numpy as np
 
 from ._checks import is_concrete
 from ._compiled import Check, device, program
+from ._cost import report as report_cost
 from ._x64 import require_x64
 from .gyro import Gyro
 from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
@@ -386,6 +387,7 @@ def _simulate(gyro, profile, model="averaged", **options):
                     f"ts must lie within the profile [{knots[0]}, {knots[-1]}] s; "
                     f"got [{arr[0]}, {arr[-1]}]"
                 )
+    report_cost(gyro, profile, model)  # only while `sweep` probes what its members cost
     if max_steps is None:
         max_steps = 2**16 if model == "averaged" else 2**20
     solver = _default_solver(model) if solver is None else solver

@@ -8,10 +8,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _cost
+
 _BATCHED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_PROBES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids):
+def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="auto", **grids):
     """Evaluate `fn(**point)` on the Cartesian product of 1-D grids.
 
     `hg.sweep(fn, temperature_c=jnp.linspace(-40, 60, 11), rate_dps=jnp.array([0.1, 5, 400]))`
@@ -39,6 +42,18 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids)
       is padded), so `fn` compiles once. `None`: the whole grid in one batch.
     - `progress`: show a progress bar over the chunks on stderr (tqdm when installed; on
       process 0 only when there are several).
+    - `cost`: how members are ordered. An adaptive solver under `vmap` steps every member
+      until the slowest is done, so members of very different cost (rates from 0.1 to
+      400 °/s, say) waste most of a batch. `"auto"` (default): the solver steps each member
+      will take, estimated from the profile of the first `simulate` call in `fn`
+      (`hrgjax._cost`; `fn` is traced once more for it, no solve is compiled); the members are
+      sorted by it and run in chunks of similar cost — on a CPU the chunk size that
+      minimises the estimated time (one batch when the costs are alike), on an accelerator
+      one batch unless `chunk_size` is given. A callable `cost(**point)` → estimated cost per
+      point (NumPy, on the flattened grids) orders by your own estimate; `None` keeps the
+      grid order. Results always come back in the grid's order. Each member is computed by
+      the same program as unordered (one compiled chunk size), so ordered and unordered
+      results with the same `chunk_size` are equal to the last bit.
     - `**grids`: 1-D arrays, one per keyword.
     """
     if not grids:
@@ -61,9 +76,24 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids)
     call = _batched(fn)
     if chunk_size is not None and int(chunk_size) < 1:
         raise ValueError(f"chunk_size must be a positive number of points; got {chunk_size}")
+    if not (cost is None or callable(cost) or (isinstance(cost, str) and cost == "auto")):
+        raise ValueError(f'cost must be "auto", None or a callable cost(**point); got {cost!r}')
     n_proc, rank = jax.process_count(), jax.process_index()
     if n_proc == 1:
-        out = _local(call, flat, chunk_size, progress)
+        costs = _costs(fn, cost, flat)
+        if costs is None:
+            out = _local(call, flat, chunk_size, progress)
+        else:
+            devices = jax.local_devices()
+            order, chunk = _cost.plan(costs, len(devices), devices[0].platform, chunk_size)
+            if chunk >= total and chunk_size is None:
+                out = _local(call, flat, None, progress)  # one batch: the order is moot
+            else:
+                idx = jnp.asarray(order)
+                ordered = {n: v[idx] for n, v in flat.items()}
+                out = _local(call, ordered, chunk, progress)
+                back = np.argsort(order)
+                out = jax.tree_util.tree_map(lambda x: np.asarray(x)[:total][back], out)
     else:
         # Multi-process (jax.distributed): every process holds the same grid, evaluates
         # one contiguous block of it on its own devices, and the blocks are gathered.
@@ -73,6 +103,54 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, **grids)
         out = _local(call, mine, chunk_size, progress and rank == 0)
         out = jax.tree_util.tree_map(lambda x: _gather(np.asarray(x)[:per]), out)
     return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
+
+
+def _costs(fn, cost, flat):
+    """Estimated cost of every flat point (NumPy), or None to keep the grid order."""
+    if cost is None:
+        return None
+    if callable(cost):
+        c = np.asarray(cost(**{n: np.asarray(v) for n, v in flat.items()}), dtype=float)
+        n = next(iter(flat.values())).shape[0]
+        if c.shape != (n,) or not np.all(np.isfinite(c)):
+            raise ValueError(
+                f"cost(**point) must return {n} finite numbers, one per point; got shape {c.shape}"
+            )
+        return c
+    probe, state = _probe(fn)
+    if not state["simulates"]:
+        return None
+    c = np.asarray(probe(flat), dtype=float)
+    if not state["simulates"]:  # this trace found no simulate call
+        return None
+    return c if np.all(np.isfinite(c)) else None
+
+
+def _probe(fn):
+    """`(jax.jit(jax.vmap(…)), state)`: `fn` traced with the cost probe on (hrgjax._cost),
+    giving the first `simulate` call's estimated steps per point. Kept per `fn`;
+    `state["simulates"]` turns False once a trace has shown that `fn` calls no `simulate`."""
+    try:
+        return _PROBES[fn]
+    except (KeyError, TypeError):
+        pass
+    state = {"simulates": True}
+
+    def one(kw):
+        with _cost.probing():
+            try:
+                fn(**kw)
+            except _cost.Found as found:
+                return jnp.asarray(found.cost, dtype=float)
+        state["simulates"] = False
+        return jnp.zeros((), dtype=float)
+
+    entry = (jax.jit(jax.vmap(one)), state)
+    try:
+        _PROBES[fn] = entry
+    except TypeError:
+        pass
+    return entry
 
 
 def _batched(fn):

@@ -129,6 +129,7 @@ def test_text_extra_columns_are_kept_as_text_and_written_back(tmp_path, ext):
 
 
 def _nc(tmp_path, name="d.nc", coords=None, **attrs):
+    pytest.importorskip("h5netcdf", reason="netCDF needs the data extra")
     import xarray as xr
 
     var = lambda k, v: ("sample", v, attrs.get(k, {}))
@@ -405,6 +406,7 @@ def test_fuzzed_csv_loads_exactly_or_fails_clearly(tmp_path, header, rows, prefi
     units=st.sampled_from([None, "s", "seconds since 2001-01-01", "K", "degC", "weeks since 1"]),
 )
 def test_fuzzed_netcdf_loads_exactly_or_fails_clearly(tmp_path, n, dtypes, seed, units):
+    pytest.importorskip("h5netcdf", reason="netCDF needs the data extra")
     import xarray as xr
 
     rng = np.random.default_rng(seed)

@@ -77,7 +77,9 @@ def test_sweep_sharded_equals_single_device():
         """
     )
     out = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"sweep_{os.getpid()}.npy")
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    env = dict(
+        os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu"
+    )
     subprocess.run([sys.executable, "-c", code, out], check=True, env=env, timeout=300)
     sharded, chunked, single = np.load(out)
     os.remove(out)
@@ -133,7 +135,9 @@ def test_two_process_sweep_equals_one_process():
         port = s.getsockname()[1]
     tmp = os.environ.get("TMPDIR", "/tmp")
     outs = [os.path.join(tmp, f"sweep2p_{os.getpid()}_{r}.npy") for r in (0, 1)]
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    env = dict(
+        os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu"
+    )
     procs = [
         subprocess.Popen(
             [sys.executable, "-c", _TWO_PROCESS, str(r), str(port), outs[r]],
@@ -193,3 +197,46 @@ def test_chunked_sweep_equals_one_batch_and_reports_progress(capsys):
     assert "sweep" in capsys.readouterr().err
     with pytest.raises(ValueError, match="chunk_size must be a positive"):
         hg.sweep(f, a=a, b=b, chunk_size=0)
+
+
+def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
+    """Members of very different cost (rate innermost, shuffled) are sorted by the solver
+    steps `simulate` is estimated to take and chunked; results come back in the grid's order,
+    equal bit for bit to the unordered sweep with the same chunks (each member is computed by
+    the same program), and the estimate follows the steps the solver really takes."""
+    from hrgjax import _cost
+    from hrgjax.simulate import _simulate
+
+    gyro = hg.presets.tvg3_like(noise=False)
+
+    def f(temperature_c, rate_dps):
+        prof = hg.Profile.constant_rate(rate_dps, 10.0, temperature_c)
+        return hg.simulate(gyro, prof, dt_out=10.0).wave_angle[-1]
+
+    T, W = jnp.array([-40.0, 60.0]), jnp.array([400.0, 0.1, 100.0, 1.0, 20.0, 5.0])
+    tt, ww = (m.ravel() for m in jnp.meshgrid(T, W, indexing="ij"))
+    probe, state = hg.sweep.__globals__["_probe"](f)
+    costs = np.asarray(probe({"temperature_c": tt, "rate_dps": ww}))
+    assert state["simulates"]
+    order, chunk = _cost.plan(costs, 1, "cpu")
+    assert np.all(np.diff(np.abs(np.asarray(ww))[order]) >= 0)  # cheapest (slowest) first
+    assert 1 < chunk < 12  # 0.1 … 400 °/s: more steps wasted in one batch than chunks cost
+    # the estimate against the solver's accepted steps (10-s runs)
+    for w in (0.1, 5.0, 400.0):
+        prof = hg.Profile.constant_rate(w, 10.0, 20.0)
+        steps = int(_simulate(gyro, prof, dt_out=10.0)[1])
+        assert 0.5 < float(_cost.steps_estimate(gyro, prof)) / steps < 2.0, (w, steps)
+
+    plain = hg.sweep(f, cost=None, temperature_c=T, rate_dps=W, chunk_size=4)
+    ordered = hg.sweep(f, temperature_c=T, rate_dps=W, chunk_size=4)
+    reverse = hg.sweep(f, cost=lambda temperature_c, rate_dps: -rate_dps, temperature_c=T,
+                       rate_dps=W, chunk_size=4)  # fmt: skip
+    np.testing.assert_array_equal(ordered, plain)
+    np.testing.assert_array_equal(reverse, plain)
+    auto = hg.sweep(f, temperature_c=T, rate_dps=W)  # chunks of its own choosing
+    np.testing.assert_allclose(auto, plain, rtol=1e-12, atol=0)
+    assert float(auto[1, 0]) == pytest.approx(float(f(60.0, 400.0)), rel=1e-12)
+    with pytest.raises(ValueError, match="cost must be"):
+        hg.sweep(f, cost="fast", temperature_c=T, rate_dps=W)
+    with pytest.raises(ValueError, match="one per point"):
+        hg.sweep(f, cost=lambda **_: 1.0, temperature_c=T, rate_dps=W)

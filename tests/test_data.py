@@ -29,6 +29,10 @@ def record():
 
 @pytest.mark.parametrize("ext", ["csv", "nc"])
 def test_round_trip_exact(record, tmp_path, ext):
+    if ext == "nc":
+        pytest.importorskip(
+            "h5netcdf", reason="netCDF needs the data extra: pip install hrgjax[data]"
+        )
     data = record.to_data()
     path = data.save(tmp_path / f"run.{ext}")
     back = hg.load(path)

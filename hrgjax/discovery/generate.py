@@ -18,8 +18,9 @@ put back through the gyro's own parameters, at a chosen size:
 | `thermal_lag` | b_L [°/h/°C], τ_th = 600 s | `DriftTerms.lag`, `lag_time` |
 | `warmup_transient` | b_w [°/h], τ_w = 600 s | `DriftTerms.warmup`, `warmup_time` |
 | `rate_scale_factor` | relative scale-factor change at 100 °/s | `DriftTerms.rate_cubic` |
+| `loop_ripple` | frequency split Δω [rad/s] | the preset's closed loops, Δω at θ_ω = 10° el. |
 
-The last four change the gyro's equivalent input rate (the catalogue term is −k_e times it).
+The four drift terms change the gyro's equivalent input rate (the catalogue term is −k_e times it).
 Dwell grids ([`hidden_effect_dataset`][hrgjax.discovery.generate.hidden_effect_dataset]) cannot
 show the thermal and warm-up effects — their temperature is constant and they share one
 switch-on — so those come as continuous records
@@ -58,10 +59,12 @@ GENERATED = (
     "thermal_lag",
     "warmup_transient",
     "rate_scale_factor",
+    "loop_ripple",
 )
 """Effects the generator can hide."""
-DWELL_EFFECTS = GENERATED[:4] + ("rate_scale_factor",)
-"""Effects a dwell grid shows (`rate_scale_factor` needs `rates_dps` with two rates)."""
+DWELL_EFFECTS = GENERATED[:4] + ("rate_scale_factor", "loop_ripple")
+"""Effects a dwell grid shows (`rate_scale_factor` and `loop_ripple` need `rates_dps` with two
+rates: at one rate the ripple reads as `readout_gain_mismatch`)."""
 CONTINUOUS_EFFECTS = GENERATED[:7]
 """Effects the continuous records show."""
 LAG_TIME_S = 600.0
@@ -100,6 +103,11 @@ def inject(gyro: Gyro, effect, size: float = 0.0) -> Gyro:
         return eqx.tree_at(lambda g: g.resonator.k_e, gyro, law)
     if effect == "readout_gain_mismatch":
         return eqx.tree_at(lambda g: g.readout, gyro, Readout(gain_mismatch=size))
+    if effect == "loop_ripple":
+        loops = tvg3_like(temperature_laws=False, noise=False).control
+        return eqx.tree_at(
+            lambda g: (g.control, g.resonator.delta_omega), gyro, (loops, jnp.asarray(size))
+        )
     drift = {
         "thermal_rate": {"temperature_rate": size * DEG_PER_H * 60.0},
         "thermal_lag": {"lag": size * DEG_PER_H, "lag_time": LAG_TIME_S},

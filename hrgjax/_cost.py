@@ -1,0 +1,103 @@
+"""What a batched run will cost, known before it runs: the order of `sweep`'s members.
+
+An adaptive solver under `vmap` steps every member until the slowest is done, so a batch
+costs its most expensive member's steps times its size. `sweep` therefore estimates each
+member's cost first, sorts the members by it and runs them in chunks of similar cost.
+
+The estimate comes from `simulate` itself: `sweep` traces the user's function once more with
+a *probe* on; the first `simulate` call it reaches raises [`Found`][hrgjax._cost.Found] with
+[`steps_estimate`][hrgjax._cost.steps_estimate] of its profile, which ends the trace there (no
+solver is traced or compiled). A function that calls no `simulate` has no estimate and runs
+in the caller's order.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+
+import jax.numpy as jnp
+import numpy as np
+
+_PROBING = contextvars.ContextVar("hrgjax_cost_probe", default=False)
+
+STEPS_PER_S = (1.0, 25.0)
+"""Accepted steps per simulated second of the averaged model at the default tolerances:
+a + b·√|k_eΩ|max [k_eΩ in rad/s] (measured on `presets.tvg3_like()`, 60–180-s runs at
+0–400 °/s: 1.2 steps/s at rest, 5.2 at 5 °/s, 21.5 at 100 °/s, 54 at 400 °/s)."""
+
+CARRIER_STEPS = 10.0
+"""Steps per carrier cycle of the full (carrier-resolving) model, about."""
+
+
+class Found(Exception):
+    """Raised by `simulate` while probing: carries its (traced) cost estimate."""
+
+    def __init__(self, cost):
+        super().__init__("cost probe")
+        self.cost = cost
+
+
+@contextlib.contextmanager
+def probing():
+    """Within this block `simulate` raises [`Found`][hrgjax._cost.Found] instead of solving."""
+    token = _PROBING.set(True)
+    try:
+        yield
+    finally:
+        _PROBING.reset(token)
+
+
+def report(gyro, profile, model: str) -> None:
+    """Called by `simulate` before it solves: while probing, stop with the estimate."""
+    if _PROBING.get():
+        raise Found(steps_estimate(gyro, profile, model))
+
+
+def steps_estimate(gyro, profile, model: str = "averaged"):
+    """Expected solver steps of `simulate(gyro, profile, model)` (module docstring): the run's
+    length [s] times the steps per second of `STEPS_PER_S` (averaged) or of `CARRIER_STEPS`
+    per carrier cycle (full), at the largest precession rate |k_eΩ| of the profile."""
+    g = gyro.at(jnp.mean(profile.temperature))
+    duration = profile.t[-1] - profile.t[0]
+    precession = jnp.max(jnp.abs(g.resonator.k_e * profile.rate))
+    a, b = STEPS_PER_S
+    per_s = a + b * jnp.sqrt(precession)
+    if model != "averaged":
+        per_s = per_s + CARRIER_STEPS * jnp.abs(g.resonator.omega) / (2 * np.pi)
+    return duration * per_s
+
+
+OVERHEAD_MEMBERS = {"cpu": 6.0}
+"""The fixed cost of one batched solver step, in members' worth of per-member work:
+measured on 2 CPU cores, 47 µs per step plus 7.2 µs per member (averaged model). Accelerators
+run a step of any batch in about the time of one member: every other backend counts as
+10⁴, so there one batch is always chosen."""
+
+
+def plan(costs: np.ndarray, devices: int, backend: str, chunk_size: int | None = None):
+    """Order and chunk size for members of estimated `costs`: **returns** `(order, chunk)`,
+    `order` the permutation that sorts them by cost (stable, so equal costs keep the caller's
+    order) and `chunk` the members per batch — `chunk_size` rounded up to a multiple of
+    `devices`, or, when `None`, the size among the halvings of the whole batch that minimises
+    Σ_chunks max cost · (overhead + size)."""
+    costs = np.asarray(costs, dtype=float)
+    total = costs.size
+    order = np.argsort(costs, kind="stable")
+    per = lambda c: -(-int(c) // devices) * devices
+    if chunk_size is not None:
+        return order, per(chunk_size)
+    overhead = OVERHEAD_MEMBERS.get(backend, 1e4)
+    srt = costs[order]
+    best = None
+    c = per(total)
+    while True:
+        n = -(-total // c)
+        worst = srt[np.minimum(np.arange(1, n + 1) * c, total) - 1]
+        est = float(np.sum(worst)) * (overhead + c)
+        if best is None or est < 0.95 * best[0]:  # a smaller chunk must pay for itself
+            best = (est, c)
+        if c <= devices:
+            break
+        c = per(c // 2)
+    return order, best[1]
