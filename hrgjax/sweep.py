@@ -51,9 +51,10 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
       minimises the estimated time (one batch when the costs are alike), on an accelerator
       one batch unless `chunk_size` is given. A callable `cost(**point)` → estimated cost per
       point (NumPy, on the flattened grids) orders by your own estimate; `None` keeps the
-      grid order. Results always come back in the grid's order. Each member is computed by
-      the same program as unordered (one compiled chunk size), so ordered and unordered
-      results with the same `chunk_size` are equal to the last bit.
+      grid order. Results always come back in the grid's order, equal to the unordered ones to
+      round-off: each member is computed by the same compiled program, but XLA:CPU may round
+      a member by an ulp differently at another place in the batch, which the adaptive step
+      control carries to the end (measured ≤ 1e-14 relative in the wave angle).
     - `**grids`: 1-D arrays, one per keyword.
     """
     if not grids:

@@ -479,3 +479,25 @@ def test_physical_compensates_the_apparent_rate_of_a_temperature_ramp():
     drift_only = -0.5 * 2e-6 * np.sin(2 * np.asarray(rec.true_wave_angle)) / K / DEG * 3600
     assert abs(np.mean(raw - drift_only) - ramp) < 0.1 * abs(ramp)  # the effect is there
     np.testing.assert_allclose(out["rate_corrected_dps"] * 3600, 0.0, atol=2e-4)
+
+
+def test_run_plan_sorts_points_by_rate_and_returns_the_plans_order():
+    """A plan mixing 0.1 and 200 °/s points runs them sorted by |rate| (chunks of similar
+    cost) and gives the same data as in the plan's order, to round-off (XLA:CPU may round a
+    point by an ulp differently at another place in a chunk) — noise keys and run numbers
+    follow each point."""
+    from hrgjax.calibration import Plan
+
+    gyro = hg.presets.tvg3_like(temperature_laws=False)
+    n = 40  # more than one chunk of 32
+    rates = np.where(np.arange(n) % 3 == 0, 200.0, 0.1) * np.where(np.arange(n) % 2, 1, -1)
+    plan = Plan(jnp.linspace(-40.0, 60.0, n), jnp.linspace(-90.0, 90.0, n), jnp.asarray(rates),
+                duration_s=2.0, dt_out=1.0)  # fmt: skip
+    key = jax.random.key(5)
+    ordered = run_plan(gyro, plan, key=key)
+    plain = run_plan(gyro, plan, key=key, order_by_cost=False)
+    assert set(ordered.names) == set(plain.names)
+    for k in plain.names:
+        np.testing.assert_allclose(ordered[k], plain[k], rtol=1e-12, atol=1e-11, err_msg=k)
+    first = ordered.columns["table_rate_dps"][ordered.run == 0]
+    np.testing.assert_allclose(first, rates[0])
