@@ -40,6 +40,7 @@ DWELL = {  # effect: (size, rates)
     "angular_gain_temperature": (1e-5, (5.0,)),
     "readout_gain_mismatch": (2e-3, (5.0,)),
     "rate_scale_factor": (1e-4, (5.0, 100.0)),
+    "loop_ripple": (0.01, (5.0, 20.0)),  # Δω [rad/s] through the preset's closed loops
 }
 CONTINUOUS = {
     "thermal_rate": 0.05,  # °/h per °C/min
@@ -174,6 +175,7 @@ LEFTOVER = {  # the shape (hrgjax.discovery.leftover.SHAPES) each hidden effect 
     "angular_gain_temperature": "Ω·ΔT",
     "readout_gain_mismatch": "2θ·Ω",
     "rate_scale_factor": "Ω³",
+    "loop_ripple": "2θ·Ω",
 }
 
 

@@ -177,7 +177,10 @@ class Discovery:
             if name == "angular_gain":
                 continue
             effect = CATALOGUE[name]
-            text = effect.formula.format(**{k: _number(v) for k, v in ps.items()})
+            # a parameter the fit held (the loop bandwidth of a dwell fit) reads at its value
+            fields = {q.name: f"{q.scale:.4g} {q.unit} (held)" for q in effect.params}
+            fields.update({k: _number(v) for k, v in ps.items()})
+            text = effect.formula.format(**fields)
             (readout if effect.where == "readout" else rate).append(f"{text}    [{name}]")
         if rate:
             lines.append("apparent input rate − table rate [°/h] =")
