@@ -307,3 +307,27 @@ def test_loop_ripple_is_the_closed_loops_ripple_of_the_default_gyro():
         return coef[0]
 
     assert share(doubled) / share(base) == pytest.approx(2.0, rel=0.01)
+
+
+def test_equations_print_every_catalogue_effect_with_held_parameters():
+    """`Discovery.equations()` writes each accepted effect's formula in user units; a
+    parameter the fit held (not regular: `loop_ripple`'s bandwidth in a dwell fit) reads at
+    its held value instead of failing."""
+    from hrgjax.discovery.effects import CATALOGUE
+    from hrgjax.discovery.result import Discovery
+
+    fitted = {
+        name: {p.name: {"value": p.scale, "std": 0.1 * p.scale} for p in e.params if p.regular}
+        for name, e in CATALOGUE.items()
+    }
+    rep = Discovery(
+        verdict="found", missing_effect="loop_ripple", accepted=tuple(fitted),
+        ambiguous_with=(), discriminate={}, gap_before=1.0, gap_after=0.5, noise_floor=0.5,
+        metric="rms", structure_left=False, fit_parameters=fitted, k_e=0.554, ranking=(),
+        screening=(), consistency={}, noise={}, split={}, shape="dwell", residuals={},
+    )  # fmt: skip
+    text = rep.equations()
+    for name in CATALOGUE:
+        if name != "angular_gain":
+            assert f"[{name}]" in text, name
+    assert "1 rad/s (held)" in text and "{" not in text
