@@ -28,9 +28,11 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
     concrete, so `simulate` can derive its output grid) or pass `ts=` to `simulate`.
 
     Under JAX's multi-process runtime (every process has called `jax.distributed.initialize()`
-    and then runs the same `sweep` on the same grids), each process evaluates one contiguous
-    block of the flattened grid on its own local devices, with no communication while `fn`
-    runs; the blocks are then gathered, so every process returns the whole result, as host
+    and then runs the same `sweep` on the same grids), each process evaluates an equal share
+    of the flattened grid on its own local devices — one contiguous block, or, when the
+    members' costs are known (`cost`), the members sorted by cost and dealt round-robin, so
+    every process gets a like mix — with no communication while `fn` runs; the shares are
+    then gathered, so every process returns the whole result, as host
     (NumPy) arrays, equal to a one-process run. See docs/scaling.md.
 
     **Arguments:**
@@ -97,12 +99,30 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
                 out = jax.tree_util.tree_map(lambda x: np.asarray(x)[:total][back], out)
     else:
         # Multi-process (jax.distributed): every process holds the same grid, evaluates
-        # one contiguous block of it on its own devices, and the blocks are gathered.
+        # an equal share of it on its own devices, and the shares are gathered.
         per = -(-total // n_proc)
-        flat = _pad(flat, per * n_proc - total)
-        mine = {n: v[rank * per : (rank + 1) * per] for n, v in flat.items()}
-        out = _local(call, mine, chunk_size, progress and rank == 0)
-        out = jax.tree_util.tree_map(lambda x: _gather(np.asarray(x)[:per]), out)
+        costs = _costs(fn, cost, flat)  # the same on every process
+        if costs is None:
+            flat = _pad(flat, per * n_proc - total)
+            mine = {n: v[rank * per : (rank + 1) * per] for n, v in flat.items()}
+            out = _local(call, mine, chunk_size, progress and rank == 0)
+            out = jax.tree_util.tree_map(lambda x: _gather(np.asarray(x)[:per]), out)
+        else:
+            # Deal the members sorted by cost round-robin, so every process gets a like
+            # share of cheap and costly ones, already sorted within its block.
+            order = np.argsort(costs, kind="stable")
+            hands = [order[r::n_proc] for r in range(n_proc)]
+            idx = np.concatenate([np.r_[h, np.repeat(h[-1:], per - h.size)] for h in hands])
+            mine_idx = idx[rank * per : (rank + 1) * per]
+            devices = jax.local_devices()
+            _, chunk = _cost.plan(costs[mine_idx], len(devices), devices[0].platform, chunk_size)
+            mine = {n: v[jnp.asarray(mine_idx)] for n, v in flat.items()}
+            out = _local(call, mine, None if chunk >= per else chunk, progress and rank == 0)
+            out = jax.tree_util.tree_map(lambda x: _gather(np.asarray(x)[:per]), out)
+            real = np.concatenate([np.arange(h.size) + r * per for r, h in enumerate(hands)])
+            back = np.empty(total, dtype=int)
+            back[idx[real]] = real
+            out = jax.tree_util.tree_map(lambda x: np.asarray(x)[back], out)
     return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
 
 
