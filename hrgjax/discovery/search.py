@@ -169,7 +169,7 @@ def discover(
 
     for _ in range(max_effects):
         rows = problem.screen(current, cands, model)
-        check = _Outshone(problem, current, model + cands, min_delta_bic)
+        check = _Outshone(problem, current, model + cands, min_delta_bic, not accepted)
         for r in rows:
             r["_check"] = check
         if not ranking:
@@ -250,21 +250,26 @@ SCREEN_KEYS = (
 )  # fmt: skip
 
 
+DOMINANT = 10.0
+"""A candidate whose evidence (score less its BIC penalty) is under 1/`DOMINANT` of an
+uncovered generic shape's is refused (`_Outshone`)."""
+
+
 class _Outshone:
     """Whether a candidate only imitates part of something out of the catalogue: generic
     shapes ([`leftover.SHAPES`][hrgjax.discovery.leftover.SHAPES]) that no available effect
     is explain the residual better than the candidate (score test, BIC, by more than
-    `margin`), and once they are all fitted the candidate adds no more than `margin` or
-    keeps less than a tenth of its score (its score given them); the strongest of them is
-    reported. A
+    `margin`), and either — for the first effect named (`first`) — the strongest has
+    ≥ `DOMINANT` times its evidence, or, once they are all fitted, the candidate adds no more than `margin` or keeps less than a tenth of
+    its score (its score given them); the strongest of them is reported. A
     readout ripple that matches a temperature-dependent drift on the rotation runs but not
     at rest is such a part; a second true effect beside an imperfect first one is not (its
     score survives the shape)."""
 
-    def __init__(self, problem, fit, available, margin):
+    def __init__(self, problem, fit, available, margin, first=False):
         covered = {sh for n in available for sh in CATALOGUE[n].shapes}
         self.cols = {k: v for k, v in problem.shape_columns.items() if k not in covered}
-        self.fit, self.margin = fit, margin
+        self.fit, self.margin, self.first = fit, margin, first
         self.log_n = math.log(max(len(fit.r), 2))
         self.scores = leftover.scores(fit.r, fit.j, self.cols)
 
@@ -281,6 +286,12 @@ class _Outshone:
         )
         if not stronger:
             return None
+        if self.first and stronger[0][0] > DOMINANT * max(own, self.margin):
+            # the first effect named is dwarfed: what no candidate names has ≥ 10× its
+            # evidence, so it cannot be *the* missing effect, whatever it adds beside that
+            # shape (later rounds keep the rule below: there the leftover curvature of an
+            # accepted law may well dwarf a true small effect)
+            return stronger[0][1]
         # the candidate's score once every stronger uncovered shape is fitted too
         r, j = self.fit.r, self.fit.j
         jj = np.concatenate([j, *(self.cols[name] for _, name in stronger)], axis=1)
