@@ -104,6 +104,16 @@ def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
     assert left["shape"] == "2θ·ΔT" and left["significant"], left
     assert left["unit"] == "°/h/°C" and "changes with temperature" in left["words"]
     assert "left over: a 2θ harmonic" in rep.equations()
+    # dwarfed: a rate scale factor left out (rates 5 and 100 °/s). The readout ripple adds
+    # ΔBIC ≈ 20 on this draw even given the Ω³ shape, but Ω³ has a hundred times its evidence:
+    # the first effect named may not be a sliver beside what no candidate names
+    data = hidden_effect_dataset("rate_scale_factor", 1e-4, key=jax.random.key(4148),
+                                 rates_dps=(5.0, 100.0))  # fmt: skip
+    rest = [n for n in candidates_for(set()) if n != "rate_scale_factor"]
+    rep = discover(data, catalogue=rest)
+    assert rep.verdict == "unexplained" and rep.leftover["shape"] == "Ω³", rep.accepted
+    row = next(r for r in rep.screening if r["effect"] == "readout_gain_mismatch")
+    assert row["delta_bic"] > 10 and row["outshone_by"] == "Ω³", row
 
 
 def test_null_dataset_names_nothing():
