@@ -82,47 +82,45 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
     if not (cost is None or callable(cost) or (isinstance(cost, str) and cost == "auto")):
         raise ValueError(f'cost must be "auto", None or a callable cost(**point); got {cost!r}')
     n_proc, rank = jax.process_count(), jax.process_index()
-    if n_proc == 1:
-        costs = _costs(fn, cost, flat)
-        if costs is None:
-            out = _local(call, flat, chunk_size, progress)
-        else:
-            devices = jax.local_devices()
-            order, chunk = _cost.plan(costs, len(devices), devices[0].platform, chunk_size)
-            if chunk >= total and chunk_size is None:
-                out = _local(call, flat, None, progress)  # one batch: the order is moot
-            else:
-                idx = jnp.asarray(order)
-                ordered = {n: v[idx] for n, v in flat.items()}
-                out = _local(call, ordered, chunk, progress)
-                back = np.argsort(order)
-                out = jax.tree_util.tree_map(lambda x: np.asarray(x)[:total][back], out)
+    costs = _costs(fn, cost, flat)  # the same on every process
+    devices = jax.local_devices()
+    if costs is not None:
+        order = np.argsort(costs, kind="stable")
+        platform = devices[0].platform
+        if (
+            n_proc == 1
+            and chunk_size is None
+            and _cost.plan(costs, len(devices), platform)[1] >= total
+        ):
+            costs = None  # one batch on one process: the order is moot, keep the grid's
+    if n_proc == 1 and costs is None:
+        out = _local(call, flat, chunk_size, progress)
     else:
-        # Multi-process (jax.distributed): every process holds the same grid, evaluates
-        # an equal share of it on its own devices, and the shares are gathered.
+        # Several processes (jax.distributed) and/or members ordered by cost: each process
+        # evaluates an equal share of the grid on its own devices — contiguous blocks, or
+        # the members sorted by cost and dealt round-robin (every process a like mix, its
+        # share still sorted) — and the shares are gathered back into the grid's order.
         per = -(-total // n_proc)
-        costs = _costs(fn, cost, flat)  # the same on every process
         if costs is None:
-            flat = _pad(flat, per * n_proc - total)
-            mine = {n: v[rank * per : (rank + 1) * per] for n, v in flat.items()}
-            out = _local(call, mine, chunk_size, progress and rank == 0)
-            out = jax.tree_util.tree_map(lambda x: _gather(np.asarray(x)[:per]), out)
+            hands = [np.arange(r * per, min((r + 1) * per, total)) for r in range(n_proc)]
         else:
-            # Deal the members sorted by cost round-robin, so every process gets a like
-            # share of cheap and costly ones, already sorted within its block.
-            order = np.argsort(costs, kind="stable")
             hands = [order[r::n_proc] for r in range(n_proc)]
-            idx = np.concatenate([np.r_[h, np.repeat(h[-1:], per - h.size)] for h in hands])
-            mine_idx = idx[rank * per : (rank + 1) * per]
-            devices = jax.local_devices()
-            _, chunk = _cost.plan(costs[mine_idx], len(devices), devices[0].platform, chunk_size)
-            mine = {n: v[jnp.asarray(mine_idx)] for n, v in flat.items()}
-            out = _local(call, mine, None if chunk >= per else chunk, progress and rank == 0)
-            out = jax.tree_util.tree_map(lambda x: _gather(np.asarray(x)[:per]), out)
-            real = np.concatenate([np.arange(h.size) + r * per for r, h in enumerate(hands)])
-            back = np.empty(total, dtype=int)
-            back[idx[real]] = real
-            out = jax.tree_util.tree_map(lambda x: np.asarray(x)[back], out)
+        fill = lambda h: np.repeat(h[-1:] if h.size else [total - 1], per - h.size)
+        idx = np.concatenate([np.r_[h, fill(h)] for h in hands]).astype(int)
+        mine = idx[rank * per : (rank + 1) * per]
+        chunk = chunk_size
+        if costs is not None:
+            _, chunk = _cost.plan(costs[mine], len(devices), platform, chunk_size)
+            chunk = None if chunk >= per and chunk_size is None else chunk
+        pts = {n: v[jnp.asarray(mine)] for n, v in flat.items()}
+        out = _local(call, pts, chunk, progress and rank == 0)
+        out = jax.tree_util.tree_map(lambda x: np.asarray(x)[:per], out)
+        if n_proc > 1:
+            out = jax.tree_util.tree_map(_gather, out)
+        real = np.concatenate([np.arange(h.size) + r * per for r, h in enumerate(hands)])
+        back = np.empty(total, dtype=int)
+        back[idx[real]] = real
+        out = jax.tree_util.tree_map(lambda x: x[back], out)
     return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
 
 
@@ -151,42 +149,43 @@ def _probe(fn):
     """`(jax.jit(jax.vmap(…)), state)`: `fn` traced with the cost probe on (hrgjax._cost),
     giving the first `simulate` call's estimated steps per point. Kept per `fn`;
     `state["simulates"]` turns False once a trace has shown that `fn` calls no `simulate`."""
-    try:
-        return _PROBES[fn]
-    except (KeyError, TypeError):
-        pass
-    state = {"simulates": True}
 
-    def one(kw):
-        with _cost.probing():
-            try:
-                fn(**kw)
-            except _cost.Found as found:
-                return jnp.asarray(found.cost, dtype=float)
-        state["simulates"] = False
-        return jnp.zeros((), dtype=float)
+    def make():
+        state = {"simulates": True}
 
-    entry = (jax.jit(jax.vmap(one)), state)
-    try:
-        _PROBES[fn] = entry
-    except TypeError:
-        pass
-    return entry
+        def one(kw):
+            with _cost.probing():
+                try:
+                    fn(**kw)
+                except _cost.Found as found:
+                    return jnp.asarray(found.cost, dtype=float)
+            state["simulates"] = False
+            return jnp.zeros((), dtype=float)
+
+        return jax.jit(jax.vmap(one)), state
+
+    return _kept(_PROBES, fn, make)
 
 
 def _batched(fn):
     """`jax.jit(jax.vmap(fn))` on a dict of keyword arrays, one per `fn` (kept while `fn`
     lives), so repeated sweeps of one function reuse its compiled batch."""
+    return _kept(_BATCHED, fn, lambda: jax.jit(jax.vmap(lambda kw: fn(**kw))))
+
+
+def _kept(cache: weakref.WeakKeyDictionary, fn, make):
+    """`cache[fn]`, made by `make()` the first time; a `fn` that cannot be weakly referenced
+    (a builtin) gets a fresh one each sweep."""
     try:
-        return _BATCHED[fn]
+        return cache[fn]
     except (KeyError, TypeError):
         pass
-    call = jax.jit(jax.vmap(lambda kw: fn(**kw)))
+    value = make()
     try:
-        _BATCHED[fn] = call
-    except TypeError:  # not weak-referenceable (a builtin): compiled per sweep
+        cache[fn] = value
+    except TypeError:
         pass
-    return call
+    return value
 
 
 def _local(call, flat, chunk_size, progress):

@@ -216,9 +216,10 @@ def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
 
     T, W = jnp.array([-40.0, 60.0]), jnp.array([400.0, 0.1, 100.0, 1.0, 20.0, 5.0])
     tt, ww = (m.ravel() for m in jnp.meshgrid(T, W, indexing="ij"))
-    probe, state = hg.sweep.__globals__["_probe"](f)
-    costs = np.asarray(probe({"temperature_c": tt, "rate_dps": ww}))
-    assert state["simulates"]
+    from hrgjax.sweep import _costs
+
+    costs = _costs(f, "auto", {"temperature_c": tt, "rate_dps": ww})
+    assert costs is not None  # the probe reached simulate
     order, chunk = _cost.plan(costs, 1, "cpu")
     assert np.all(np.diff(np.abs(np.asarray(ww))[order]) >= 0)  # cheapest (slowest) first
     assert 1 < chunk < 12  # 0.1 … 400 °/s: more steps wasted in one batch than chunks cost
