@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import io
 import numbers
 import os
@@ -13,6 +14,7 @@ from collections.abc import Iterator, Mapping
 import numpy as np
 
 from ._io import atomic_path, atomic_write
+from .units import DEG
 
 COLUMNS: dict[str, str] = {
     "time_s": "time [s], strictly increasing within a run",
@@ -158,6 +160,20 @@ class MeasuredData:
         for idx in self.run_indices():
             yield MeasuredData({k: v[idx] for k, v in self._columns.items()}, allow_extra=True)
 
+    def stacked(self) -> list[RunStack]:
+        """The runs in SI, stacked: one [`RunStack`][hrgjax.data.RunStack] per (length,
+        sample interval), ordered by length then interval, runs in order of first appearance.
+
+        The one "group runs, stack, convert" view that calibration (physical fit, end-to-end
+        MLP training) and discovery (continuous records) build on; the data are not altered.
+        """
+        buckets: dict[tuple[int, float], list[np.ndarray]] = {}
+        t_all = self._columns["time_s"]
+        for idx in self.run_indices():
+            dt = float(np.median(np.diff(t_all[idx]))) if idx.size > 1 else 0.0
+            buckets.setdefault((idx.size, float(f"{dt:.9g}")), []).append(idx)
+        return [RunStack._of(self, rows) for _, rows in sorted(buckets.items())]
+
     def save(self, path: str | os.PathLike) -> str:
         """Write CSV (``.csv``) or NetCDF (``.nc``, with each column's ``units``); returns the
         path. Round trips are exact. The file is written under a temporary name and renamed
@@ -199,6 +215,80 @@ class MeasuredData:
 MAX_EXACT_INTEGER = 2**53
 """Largest integer magnitude a float64 holds exactly; larger run ids or integer values are
 refused rather than rounded."""
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class RunStack:
+    """Runs of one length and one sample interval, stacked in SI (leading axis = run).
+
+    Built by [`MeasuredData.stacked`][hrgjax.data.MeasuredData.stacked]; NumPy arrays, read
+    only. Angles are in rad (the wave angle electrical), rates in rad/s, specific force in g.
+
+    **Fields:**
+
+    - `run`: (R,) run ids; `rows`: (R, N) row indices into the dataset.
+    - `t`: (R, N) time [s]; `dt`: the first run's median sample interval [s].
+    - `wave_angle`: (R, N) measured wave angle [rad, electrical].
+    - `rate`: (R, N) reference rate [rad/s]; `table_angle`: (R, N) reference angle since the
+      start of each run [rad].
+    - `temperature`: (R, N) [°C].
+    - `accel`: (R, N, 3) specific force along case x, y, z [g] (absent axes read 0).
+    - `amplitude`, `quadrature`: (R, N) [readout units] (absent: 1 and 0).
+    - `static`: (R,) true for runs with the table at rest throughout.
+    """
+
+    run: np.ndarray
+    rows: np.ndarray
+    t: np.ndarray
+    dt: float
+    wave_angle: np.ndarray
+    rate: np.ndarray
+    table_angle: np.ndarray
+    temperature: np.ndarray
+    accel: np.ndarray
+    amplitude: np.ndarray
+    quadrature: np.ndarray
+    static: np.ndarray
+
+    def __len__(self) -> int:
+        return self.run.shape[0]
+
+    @property
+    def n_samples(self) -> int:
+        """Samples per run."""
+        return self.rows.shape[1]
+
+    @classmethod
+    def _of(cls, data: MeasuredData, rows: list[np.ndarray]) -> RunStack:
+        rows = np.stack(rows)
+        cols = data._columns
+        n = rows.shape[1]
+
+        def col(name, default):
+            return cols[name][rows] if name in cols else np.full(rows.shape, default)
+
+        table = data.table_angle_deg[rows] * DEG
+        rate = cols["table_rate_dps"][rows] * DEG
+        t = cols["time_s"][rows]
+        out = cls(
+            run=data.run[rows[:, 0]],
+            rows=rows,
+            t=t,
+            dt=float(np.median(np.diff(t[0]))) if n > 1 else 0.0,
+            wave_angle=cols["wave_angle_deg"][rows] * DEG,
+            rate=rate,
+            table_angle=table - table[:, :1],
+            temperature=cols["temperature_c"][rows],
+            accel=np.stack([col(f"accel_{a}_g", 0.0) for a in "xyz"], axis=-1),
+            amplitude=col("amplitude", 1.0),
+            quadrature=col("quadrature", 0.0),
+            static=np.all(rate == 0.0, axis=1),
+        )
+        for f in dataclasses.fields(out):
+            v = getattr(out, f.name)
+            if isinstance(v, np.ndarray):
+                v.setflags(write=False)
+        return out
 
 
 def _column(name: str, value) -> np.ndarray:

@@ -107,3 +107,47 @@ def test_csv_errors(tmp_path):
         hg.load(p)
     with pytest.raises(ValueError, match="extension"):
         hg.load(tmp_path / "x.txt")
+
+
+def test_stacked_runs_in_si():
+    """`stacked` groups runs by (length, interval), in SI, each row the dataset's own."""
+    rng = np.random.default_rng(3)
+    # runs 7 and 2 interleaved (same length and interval), run 5 longer, run 9 as long as 7
+    # but at a different interval: three stacks
+    t7, t2, t5, t9 = np.arange(6.0), np.arange(6.0) + 100, np.arange(8.0), np.arange(6.0) * 0.1
+    run = np.r_[[7, 2] * 6, [5] * 8, [9] * 6]
+    t = np.r_[np.ravel(np.c_[t7, t2]), t5, t9]
+    rate = np.r_[np.zeros(12), np.full(8, 2.0), np.full(6, -1.0)]
+    data = hg.MeasuredData(
+        {
+            "time_s": t,
+            "run": run,
+            "temperature_c": rng.normal(20, 5, t.size),
+            "table_rate_dps": rate,
+            "wave_angle_deg": rng.normal(0, 90, t.size),
+            "accel_z_g": rng.normal(1, 0.1, t.size),
+        }  # fmt: skip
+    )
+    before = {k: v.copy() for k, v in data.columns.items()}
+    stacks = data.stacked()
+    assert [s.run.tolist() for s in stacks] == [[9], [7, 2], [5]]  # by length, then interval
+    assert [s.dt for s in stacks] == pytest.approx([0.1, 1.0, 1.0])
+    assert [s.static.tolist() for s in stacks] == [[False], [True, True], [False]]
+    for s in stacks:
+        for i, r in enumerate(s.run):
+            idx = np.flatnonzero(data.run == r)
+            np.testing.assert_array_equal(s.rows[i], idx)
+            np.testing.assert_array_equal(s.t[i], data["time_s"][idx])
+            np.testing.assert_allclose(s.wave_angle[i], np.deg2rad(data["wave_angle_deg"][idx]))
+            np.testing.assert_allclose(s.rate[i], np.deg2rad(rate[idx]))
+            # the reference angle since the run's start: the trapezoid of the rate
+            np.testing.assert_allclose(
+                s.table_angle[i], np.deg2rad(rate[idx][0]) * (t[idx] - t[idx][0])
+            )
+            np.testing.assert_array_equal(s.accel[i, :, 2], data["accel_z_g"][idx])
+            assert not s.accel[i, :, :2].any()  # absent axes read 0
+            np.testing.assert_array_equal(s.amplitude[i], 1.0)
+        with pytest.raises(ValueError, match="read-only"):
+            s.t[0, 0] = 1.0
+    for k, v in before.items():
+        np.testing.assert_array_equal(data.columns[k], v)

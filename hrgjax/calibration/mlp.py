@@ -253,24 +253,19 @@ class AngleRuns(eqx.Module):
 
 
 def _run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
-    groups: dict[int, list] = {}
-    for r in data.runs():
-        groups.setdefault(len(r), []).append(r)
     out = []
-    for n, runs in sorted(groups.items()):
-        t = np.stack([r["time_s"] for r in runs])
-        dt = float(np.median(np.diff(t[0])))
-        step = max(int(round(window_s / dt)), 1)
+    for stack in data.stacked():
+        n = stack.n_samples
+        step = max(int(round(window_s / stack.dt)), 1)
         cps = np.unique(np.concatenate([np.arange(step, n, step), [n - 1]]))
-        table = np.stack([r.table_angle_deg for r in runs]) * DEG
         out.append(
             AngleRuns(
-                t=device(t),
-                theta=device(np.stack([r["wave_angle_deg"] for r in runs]) * DEG),
-                temperature_c=device(np.stack([r["temperature_c"] for r in runs])),
-                table_angle=device(table - table[:, :1]),
+                t=device(stack.t),
+                theta=device(stack.wave_angle),
+                temperature_c=device(stack.temperature),
+                table_angle=device(stack.table_angle),
                 checkpoints=device(cps),
-                static=device([bool(np.all(r["table_rate_dps"] == 0.0)) for r in runs]),
+                static=device(stack.static),
             )
         )
     return out

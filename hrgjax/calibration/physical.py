@@ -51,7 +51,7 @@ from ..simulate import simulate
 from ..units import DEG, DEG_PER_H, T_REF_C
 from ._compensator import AbstractCompensator, split_targets
 from ._physical_start import initial_values
-from .reduce import K_E_NOMINAL, _window_layout, _window_stats, reduce, window_slopes
+from .reduce import K_E_NOMINAL, _window_stats, reduce, window_slopes
 
 PARAMETERS = (
     ("k_e0", "", 1e-4),
@@ -261,42 +261,35 @@ class _Group(eqx.Module):
 
 
 def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
-    buckets: dict[int, list] = {}
-    for r in data.runs():
-        buckets.setdefault(len(r), []).append(r)
     out = []
-    for length, runs in sorted(buckets.items()):
-        static = [bool(np.all(r["table_rate_dps"] == 0.0)) for r in runs]
-        layouts = {
-            _window_layout(r, window_s) for r, st in zip(runs, static, strict=True) if not st
-        }
-        if len(layouts) > 1:
+    for stack in data.stacked():
+        length = stack.n_samples
+        if length < 4:
             raise ValueError(
-                f"moving runs of {length} samples have different sampling; resample them alike"
+                f"run {int(stack.run[0])} has {length} samples; reduction needs at least 4 "
+                "per window"
             )
-        n_win, n = layouts.pop() if layouts else (1, length)
+        # one layout per stack (its runs share length and interval), as `_window_layout`
+        n_win, n = 1, length
+        if not stack.static.all():
+            n = max(int(round(window_s / stack.dt)), 4)
+            n_win = length // n
+            if n_win == 0:
+                n_win, n = 1, length
         knots = np.unique(np.concatenate([np.arange(0, length, n), [length - 1]]))
-        t = np.stack([r["time_s"] for r in runs])
-        th = np.stack([r["wave_angle_deg"] for r in runs]) * DEG
-        s_idx = tuple(i for i, st in enumerate(static) if st)
-        m_idx = tuple(i for i, st in enumerate(static) if not st)
-        m = n_win * n
-
-        acc = np.zeros((len(runs), knots.size, 3))
-        for i, r in enumerate(runs):
-            for j, axis in enumerate("xyz"):
-                if f"accel_{axis}_g" in r:
-                    acc[i, :, j] = r[f"accel_{axis}_g"][knots]
+        t, th = stack.t, stack.wave_angle
+        s_idx = tuple(np.flatnonzero(stack.static).tolist())
+        m_idx = tuple(np.flatnonzero(~stack.static).tolist())
         out.append(
             _Group(
                 t=device(t),
                 theta0=device(th[:, 0]),
                 knots=device(knots),
-                rate=device(np.stack([r["table_rate_dps"][knots] for r in runs]) * DEG),
-                temperature=device(np.stack([r["temperature_c"][knots] for r in runs])),
-                accel=device(acc),
+                rate=device(stack.rate[:, knots]),
+                temperature=device(stack.temperature[:, knots]),
+                accel=device(stack.accel[:, knots]),
                 measured_static=device(-_slopes(t, th, s_idx, 1, length) / k_e),
-                measured_moving=device(-_slopes(t, th, m_idx, n_win, m) / k_e),
+                measured_moving=device(-_slopes(t, th, m_idx, n_win, n_win * n) / k_e),
                 static_idx=s_idx,
                 moving_idx=m_idx,
                 n_windows=n_win,

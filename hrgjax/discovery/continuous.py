@@ -500,14 +500,6 @@ class ContinuousProblem(AbstractProblem):
 
     # -- data ----------------------------------------------------------------
     def _build(self):
-        d = self.data
-        # runs are stacked by length *and* sample interval: the blocks and solver steps are
-        # set in samples from the first run's interval (a 721-sample ramp at 5 s and a
-        # 721-sample rotation at 0.1 s must not share them)
-        by_len: dict[tuple[int, float], list[np.ndarray]] = {}
-        for idx in d.run_indices() if d is not None else []:  # None: windows only
-            dt = float(np.median(np.diff(d["time_s"][idx]))) if idx.size > 1 else 0.0
-            by_len.setdefault((idx.size, float(f"{dt:.9g}")), []).append(idx)
         self.train_groups, self.held_groups = [], []
         self.__dict__.pop("shape_columns", None)  # whitened as the groups are: rebuild
         if self.windows is not None:
@@ -524,41 +516,38 @@ class ContinuousProblem(AbstractProblem):
                     )
                     groups.append(Windows(y=pick(w.y), sigma=pick(w.sigma), cov=cov,
                                           run=tuple(np.asarray(w.run)[mask].tolist())))  # fmt: skip
-        for (n, _), runs in sorted(by_len.items()):
-            for is_held in (False, True):
-                sel = [i for i in runs if (int(d.run[i[0]]) in self.held) == is_held]
-                if sel:
-                    group = self._group(sel, n)
-                    (self.held_groups if is_held else self.train_groups).append(group)
+        # runs are stacked by length *and* sample interval (`MeasuredData.stacked`): the
+        # blocks and solver steps are set in samples from the stack's interval (a 721-sample
+        # ramp at 5 s and a 721-sample rotation at 0.1 s must not share them)
+        for stack in self.data.stacked() if self.data is not None else []:  # None: windows only
+            held = np.isin(stack.run, list(self.held))
+            for mask, groups in ((~held, self.train_groups), (held, self.held_groups)):
+                if mask.any():
+                    groups.append(self._group(stack, mask))
 
-    def _group(self, runs, n):
-        d = self.data
-        dt = float(np.median(np.diff(d["time_s"][runs[0]])))
-        m = max(1, int(round(self.block_s / dt)))
+    def _group(self, stack, mask):
+        n = stack.n_samples
+        m = max(1, int(round(self.block_s / stack.dt)))
         bidx = _block_index(n, m)
-        steps = _block_index(n, max(1, int(round(STEP_S / dt))))
-        col = lambda name, default: np.stack(
-            [d[name][i] if name in d else np.full(n, default) for i in runs]
-        )
-        t = col("time_s", 0.0)
+        steps = _block_index(n, max(1, int(round(STEP_S / stack.dt))))
+        t = stack.t[mask]
         whiten = []
-        for i in range(len(runs)):
-            spans = np.diff(t[i][bidx])
-            delta = float(np.median(spans))
+        for ti in t:
+            delta = float(np.median(np.diff(ti[bidx])))
             cov = increment_covariance(self.noise, delta, bidx.size - 1)
             whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
         return Runs(
             t=jnp.asarray(t),
-            theta=jnp.asarray(col("wave_angle_deg", 0.0) * DEG),
-            rate=jnp.asarray(col("table_rate_dps", 0.0) * DEG),
-            temp=jnp.asarray(col("temperature_c", 20.0)),
-            accel=jnp.asarray(col("accel_z_g", 0.0)),
-            amp=jnp.asarray(col("amplitude", 1.0)),
-            quad=jnp.asarray(col("quadrature", 0.0)),
+            theta=jnp.asarray(stack.wave_angle[mask]),
+            rate=jnp.asarray(stack.rate[mask]),
+            temp=jnp.asarray(stack.temperature[mask]),
+            accel=jnp.asarray(stack.accel[mask][..., 2]),
+            amp=jnp.asarray(stack.amplitude[mask]),
+            quad=jnp.asarray(stack.quadrature[mask]),
             bidx=jnp.asarray(bidx),
             steps=jnp.asarray(steps),
             whiten=jnp.asarray(np.stack(whiten)),
-            run=tuple(int(d.run[i[0]]) for i in runs),
+            run=tuple(int(r) for r in stack.run[mask]),
         )
 
     def with_run_bias(self, z) -> ContinuousProblem:
