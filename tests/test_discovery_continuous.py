@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import hrgjax as hg
-from hrgjax.discovery import continuous, generate
+from hrgjax.discovery import NoiseModel, continuous, generate
+from hrgjax.discovery.noise import noise_model
 from hrgjax.discovery.search import discover
 from hrgjax.units import DEG, DEG_PER_H
 
@@ -88,7 +89,7 @@ def test_drift_terms_reject_non_positive_times():
 
 def test_gauss_markov_block_covariance_is_the_double_integral():
     sigma, tc, delta, k = 2.0, 30.0, 10.0, 4
-    cov = continuous._gm_increment_cov(sigma, tc, delta, k)
+    cov = NoiseModel(0.0, gm_sigma=sigma, gm_time=tc).increment_covariance(delta, k)
     s = (np.arange(4000) + 0.5) * (delta * k / 4000)
     kern = sigma**2 * np.exp(-np.abs(s[:, None] - s[None, :]) / tc)
     block = (s // delta).astype(int)
@@ -100,11 +101,58 @@ def test_gauss_markov_block_covariance_is_the_double_integral():
 
 
 def test_increment_covariance_white_and_walk():
-    cov = continuous.increment_covariance(
-        {"angle_white": 2.0, "angle_random_walk": 3.0, "run_bias": 0.5}, 4.0, 3
-    )
+    cov = NoiseModel(2.0, 3.0, run_bias=0.5).increment_covariance(4.0, 3)
     expected = np.array([[8 + 36, -4, 0], [-4, 8 + 36, -4], [0, -4, 8 + 36]]) + 0.25 * 16
     np.testing.assert_allclose(cov, expected)
+
+
+def test_one_noise_model_for_windows_and_blocks():
+    """The dwell windows' slope σ and the continuous blocks' increment covariance come from
+    one model: both agree with the angle covariance C(s, t) they are built from."""
+    nm = NoiseModel(2e-6, 3e-7, gm_sigma=4e-8, gm_time=80.0)
+    # block increments: D C Dᵀ of the angle at the block boundaries
+    delta, k = 7.0, 6
+    t = np.arange(k + 1) * delta
+    d = np.diff(np.eye(k + 1), axis=0)
+    np.testing.assert_allclose(
+        nm.increment_covariance(delta, k), d @ nm.angle_covariance(t) @ d.T, rtol=1e-9
+    )
+    # a window's least-squares slope: wᵀ C w (the O(n) walk sum against the dense form),
+    # uneven samples
+    t = np.cumsum(np.random.default_rng(0).uniform(0.2, 0.8, 90))
+    w = (t - t.mean()) / np.sum((t - t.mean()) ** 2)
+    assert nm.slope_sigma(t) ** 2 == pytest.approx(w @ nm.angle_covariance(t) @ w, rel=1e-10)
+    # the dense-sampling limits: 12σ_w²/(nT²) and 6N²/(5T)
+    t = np.linspace(0.0, 60.0, 6001)
+    assert NoiseModel(2e-6).slope_sigma(t) ** 2 == pytest.approx(
+        12 * 4e-12 / (6001 * 3600), rel=1e-3
+    )
+    assert NoiseModel(0.0, 3e-7).slope_sigma(t) ** 2 == pytest.approx(1.2 * 9e-14 / 60, rel=1e-3)
+    with pytest.raises(ValueError, match="NoiseModel.gm_time"):
+        NoiseModel(1e-6, gm_time=0.0)
+
+
+def test_noise_estimate_on_known_noise():
+    """White + random walk drawn directly (NumPy): the estimate finds both within their
+    sampling error and keeps the Gauss–Markov part out of 60-s dwells, where it cannot be
+    told from the walk; a temperature ramp is not a still stretch."""
+    rng = np.random.default_rng(7)
+    sw, n_arw, dt, n = 5e-6, 2e-6, 0.5, 240
+    runs = []
+    for r in range(40):
+        walk = np.cumsum(rng.normal(0, n_arw * np.sqrt(dt), n))
+        theta = walk + rng.normal(0, sw, n) + 1e-3 * np.arange(n) * dt  # + a drift rate
+        runs.append({"time_s": np.arange(n) * dt, "run": np.full(n, r),
+                     "wave_angle_deg": np.rad2deg(theta), "table_rate_dps": np.zeros(n),
+                     "temperature_c": 20.0 + 0.02 * rng.standard_normal(n)})  # fmt: skip
+    cat = lambda rs: hg.MeasuredData({k: np.concatenate([x[k] for x in rs]) for k in rs[0]})
+    est = NoiseModel.estimate(cat(runs))
+    assert est.angle_white == pytest.approx(sw, rel=0.05)
+    assert est.angle_random_walk == pytest.approx(n_arw, rel=0.15)
+    assert est.gm_sigma == 0.0
+    ramp = dict(runs[0], temperature_c=np.linspace(10.0, 40.0, n))
+    with pytest.raises(ValueError, match="still stretch"):
+        NoiseModel.estimate(cat([ramp]))
 
 
 SHORT_RAMPS = (
@@ -159,16 +207,10 @@ def test_continuous_null_says_nothing_is_missing():
     # the preset's noise: 1″ white angle noise; its rate noise (ARW 0.002 °/√h, 0.003 °/h
     # Gauss–Markov) cannot be split in 25-min records, but their sum over a lag can
     assert 0.8 < noise["angle_white_arcsec"] < 1.2
-    est = continuous.noise_model(data)
-    true = continuous.noise_from_gyro(generate.base_gyro().noise, K_E)
+    est = noise_model(data)
+    true = NoiseModel.from_gyro(generate.base_gyro().noise, K_E)
     for tau in (16.0, 64.0, 128.0):
-        v_est = continuous._d2_variance(
-            tau, est["angle_white"], est["angle_random_walk"], est["gm_sigma"], est["gm_time"]
-        )
-        v_true = continuous._d2_variance(
-            tau, true["angle_white"], true["angle_random_walk"], true["gm_sigma"], true["gm_time"]
-        )
-        assert v_est == pytest.approx(v_true, rel=0.2), tau
+        assert est.d2_variance(tau) == pytest.approx(true.d2_variance(tau), rel=0.2), tau
 
 
 def test_continuous_known_noise_and_bad_shape():
@@ -200,7 +242,7 @@ def test_runs_of_one_length_but_different_sample_intervals_are_not_stacked():
         cols["temperature_c"].append(np.linspace(10.0, 30.0, n))
         cols["table_rate_dps"].append(np.zeros(n))
     data = hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
-    noise = continuous.noise_from_gyro(generate.base_gyro().noise, K_E)
+    noise = NoiseModel.from_gyro(generate.base_gyro().noise, K_E)
     problem = continuous.ContinuousProblem(data, ["bias", "angular_gain"], K_E, [], noise)
     groups = {g.run: g for g in problem.train_groups}
     assert set(groups) == {(0, 2), (1,)}

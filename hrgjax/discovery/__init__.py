@@ -11,6 +11,7 @@ from .effects import pattern_rate as pattern_rate
 from .effects import rate_term as rate_term
 from .effects import readout_term as readout_term
 from .effects import window_gain as window_gain
+from .noise import NoiseModel as NoiseModel
 from .result import Discovery as Discovery
 from .search import discover as discover
 from .search import noise_model as noise_model

@@ -50,6 +50,7 @@ from ..profiles import lag_at_knots
 from ..units import DEG, DEG_PER_H, T_REF_C
 from . import dwell, leftover
 from .effects import CATALOGUE, Covariates, pattern_rate, readout_angle, window_rate
+from .noise import NoiseModel
 from .problem import AbstractProblem, Fit
 
 BLOCK_S = 10.0
@@ -63,9 +64,6 @@ REFIT_TOP = 3
 """Candidates refitted in full per screening pass (the short list)."""
 TAU_GRID = (30.0, 100.0, 300.0, 1000.0, 3000.0)
 """Grid of nonregular time constants scanned in screening [s]."""
-GM_TIMES = (30.0, 100.0, 300.0, 1000.0, 3000.0)
-"""Correlation times tried for the Gauss–Markov part of the noise model [s]."""
-
 
 def dwell_runs(data: MeasuredData) -> set[int]:
     """Ids of the runs that hold their temperature and table rate constant (dwell runs)."""
@@ -349,129 +347,6 @@ def _lm_compiled(layout, basis, z0, groups):
     return _levenberg_marquardt(layout, basis, z0, groups)
 
 
-# ---------------------------------------------------------------- noise model
-
-
-def _gm_increment_cov(sigma, tc, delta, k):
-    """Covariance of the block integrals of a Gauss–Markov rate (module docstring)."""
-    lag = np.abs(np.subtract.outer(np.arange(k), np.arange(k)))
-    e = math.exp(-delta / tc)
-    off = sigma**2 * tc**2 * (1 - e) ** 2 * np.exp(-(np.maximum(lag, 1) - 1) * delta / tc)
-    diag = 2 * sigma**2 * tc * (delta - tc * (1 - e))
-    return np.where(lag == 0, diag, off)
-
-
-def increment_covariance(noise: dict, delta: float, k: int) -> np.ndarray:
-    """Covariance (K, K) of K block increments of length `delta` [s] (module docstring);
-    `noise` holds `angle_white` [rad], `angle_random_walk` [rad/√s], `gm_sigma` [rad/s],
-    `gm_time` [s] and `run_bias` [rad/s] (all angles electrical)."""
-    sw, n = noise["angle_white"], noise["angle_random_walk"]
-    lag = np.abs(np.subtract.outer(np.arange(k), np.arange(k)))
-    cov = sw**2 * np.where(lag == 0, 2.0, np.where(lag == 1, -1.0, 0.0))
-    cov = cov + np.where(lag == 0, n**2 * delta, 0.0)
-    if noise.get("gm_sigma", 0.0) > 0:
-        cov = cov + _gm_increment_cov(noise["gm_sigma"], noise["gm_time"], delta, k)
-    return cov + noise.get("run_bias", 0.0) ** 2 * delta**2
-
-
-def _d2_variance(tau, sw, n, sigma, tc):
-    """Variance of the lag-τ second difference of the angle under the noise model."""
-    var = 6 * sw**2 + 2 * n**2 * tau
-    if sigma > 0:
-        e = np.exp(-tau / tc)
-        var = var + 4 * sigma**2 * tc * (tau - tc * (1 - e)) - 2 * sigma**2 * tc**2 * (1 - e) ** 2
-    return var
-
-
-def noise_model(data: MeasuredData, max_lag_s: float = 1024.0) -> dict:
-    r"""White angle noise, angle random walk and a Gauss–Markov rate from the stretches of
-    every run where the table is still and the temperature holds.
-
-    Lag-τ second differences θ(t+τ) − 2θ(t) + θ(t−τ) remove a run's angle and its drift
-    rate; their variance under the model is
-    $6\sigma_w^2 + 2N^2\tau + 4\sigma^2T_c(\tau - T_c(1-e^{-\tau/T_c}))
-    - 2\sigma^2T_c^2(1-e^{-\tau/T_c})^2$. Non-negative least squares (relative errors) over
-    τ = 1, 2, 4, … ≤ `max_lag_s` (and a quarter of the stretch) for each T_c of
-    [`GM_TIMES`][hrgjax.discovery.continuous.GM_TIMES] keeps the best. A drift that changes
-    within a hold (a warm-up) also shows in long lags, so this errs on the side of more noise.
-
-    **Returns:** `{"angle_white", "angle_random_walk", "gm_sigma", "gm_time", "run_bias": 0}`.
-
-    **Raises:** `ValueError` when no run has such a stretch of at least 16 samples.
-    """
-    taus, var = [], []
-    for idx in data.run_indices():
-        temp = data["temperature_c"][idx]
-        steady = np.r_[np.diff(temp) == 0.0, True] & np.r_[True, np.diff(temp) == 0.0]
-        still = (data["table_rate_dps"][idx] == 0.0) & steady
-        edges = np.flatnonzero(np.diff(np.r_[0, still.astype(int), 0])).reshape(-1, 2)
-        for a, b in edges:
-            if b - a < 16:
-                continue
-            th = data["wave_angle_deg"][idx][a:b] * DEG
-            dt = float(np.median(np.diff(data["time_s"][idx][a:b])))
-            k = 1
-            while k * dt <= max_lag_s and k <= (b - a) // 4:
-                d2 = th[2 * k :] - 2 * th[k:-k] + th[: -2 * k]
-                taus.append(k * dt)
-                var.append(np.mean(d2**2))
-                k *= 2
-    if not taus:
-        raise ValueError(
-            "continuous discovery needs a stretch of at least 16 samples with the table still "
-            "(table_rate_dps == 0) and the temperature constant to estimate the noise; or pass "
-            "noise=hrgjax.Noise(...)"
-        )
-    taus, var = np.asarray(taus), np.asarray(var)
-    best = None
-    for tc in GM_TIMES:
-        basis = np.stack(
-            [_d2_variance(taus, 1.0, 0.0, 0.0, tc), _d2_variance(taus, 0.0, 1.0, 0.0, tc)]
-            + [_d2_variance(taus, 0.0, 0.0, 1.0, tc)],
-            axis=1,
-        )
-        coef = _nnls(basis / var[:, None], np.ones_like(var))
-        cost = float(np.sum((basis @ coef / var - 1.0) ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, tc, coef)
-    _, tc, coef = best
-    return {
-        "angle_white": float(np.sqrt(coef[0])),
-        "angle_random_walk": float(np.sqrt(coef[1])),
-        "gm_sigma": float(np.sqrt(coef[2])),
-        "gm_time": float(tc),
-        "run_bias": 0.0,
-    }
-
-
-def _nnls(a, b):
-    """Small non-negative least squares (projected active set over 3 columns)."""
-    best, best_cost = np.zeros(a.shape[1]), np.inf
-    m = a.shape[1]
-    for mask in range(1, 2**m):
-        cols = [j for j in range(m) if mask >> j & 1]
-        x, *_ = np.linalg.lstsq(a[:, cols], b, rcond=None)
-        if np.all(x >= 0):
-            full = np.zeros(m)
-            full[cols] = x
-            cost = float(np.sum((a @ full - b) ** 2))
-            if cost < best_cost:
-                best, best_cost = full, cost
-    return best
-
-
-def noise_from_gyro(noise, k_e: float) -> dict:
-    """The noise dict of a known [`hrgjax.Noise`][]: its equivalent-input-rate parts scaled
-    by the angular gain `k_e` to pattern-angle units."""
-    return {
-        "angle_white": float(noise.angle_white),
-        "angle_random_walk": k_e * float(noise.angle_random_walk),
-        "gm_sigma": k_e * float(noise.bias_instability),
-        "gm_time": float(noise.correlation_time),
-        "run_bias": k_e * float(noise.run_bias),
-    }
-
-
 # ---------------------------------------------------------------- the problem
 
 
@@ -494,7 +369,9 @@ class ContinuousProblem(AbstractProblem):
         self.windows = windows  # (Windows, held mask): the dwell runs of a mixed log
         self.layout = Layout(names)
         self.held = set(int(r) for r in held)
-        self.noise = dict(noise)
+        if not isinstance(noise, NoiseModel):
+            raise TypeError(f"noise must be a NoiseModel; got {type(noise).__name__}")
+        self.noise = noise
         self.z_null = self.layout.null(k_e)
         self._build()
 
@@ -534,7 +411,7 @@ class ContinuousProblem(AbstractProblem):
         whiten = []
         for ti in t:
             delta = float(np.median(np.diff(ti[bidx])))
-            cov = increment_covariance(self.noise, delta, bidx.size - 1)
+            cov = self.noise.increment_covariance(delta, bidx.size - 1)
             whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
         return Runs(
             t=jnp.asarray(t),
@@ -562,12 +439,12 @@ class ContinuousProblem(AbstractProblem):
         rates = self.run_rates(z, train) | self.run_rates(z, held)
         means = np.asarray(list(rates.values()))
         new = copy.copy(self)
-        new.noise = dict(self.noise, run_bias=0.0)
+        new.noise = self.noise.replace(run_bias=0.0)
         if means.size >= 2:  # else nothing to estimate it from
             noise_var = new.floor(every=True, windows=False) ** 2
             spread = np.var(means, ddof=1)
             sigma_b = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_e
-            new.noise["run_bias"] = sigma_b
+            new.noise = new.noise.replace(run_bias=sigma_b)
         new._build()
         return new
 
@@ -840,7 +717,7 @@ class ContinuousProblem(AbstractProblem):
             k = int(g.bidx.shape[0]) - 1
             for i in range(len(g.run)):
                 span = float(g.t[i, g.bidx[-1]] - g.t[i, g.bidx[0]])
-                cov = increment_covariance(self.noise, span / k, k)
+                cov = self.noise.increment_covariance(span / k, k)
                 var.append(cov.sum() / (self.k_e * span) ** 2)
         return float(np.sqrt(np.mean(var))) / DEG_PER_H if var else float("nan")
 
@@ -853,14 +730,7 @@ class ContinuousProblem(AbstractProblem):
 
     def noise_report(self):
         """The noise model in report units."""
-        nz, k_e = self.noise, self.k_e
-        return {
-            "angle_white_arcsec": nz["angle_white"] / DEG * 3600,
-            "angle_random_walk_dph_per_sqrt_h": nz["angle_random_walk"] / k_e / DEG * 60,
-            "gauss_markov_dph": nz["gm_sigma"] / k_e / DEG_PER_H,
-            "gauss_markov_time_s": nz["gm_time"],
-            "run_bias_dph": nz["run_bias"] / k_e / DEG_PER_H,
-        }
+        return self.noise.report(self.k_e)
 
     # -- screening -----------------------------------------------------------
     def _columns(self, current, name, tau=None):

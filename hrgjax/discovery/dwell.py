@@ -35,6 +35,7 @@ from ..data import MeasuredData
 from ..units import DEG, DEG_PER_H, T_REF_C
 from . import leftover
 from .effects import CATALOGUE, Covariates, window_gain, window_rate
+from .noise import NoiseModel
 from .problem import OPTIONAL, AbstractProblem, Fit, candidates_for, rates_in
 
 
@@ -320,11 +321,10 @@ class DwellProblem(AbstractProblem):
         return leftover.describe(fit.r, fit.j, self.shape_columns, self.k_e)
 
     def noise_report(self):
-        nm, k_e, w = self.nm, self.k_e, self.w
-        white, arw = nm["angle_white"], nm["angle_random_walk"]
-        return {
-            "angle_white_arcsec": None if white is None else white / DEG * 3600,
-            "angle_random_walk_dph_per_sqrt_h": None if arw is None else arw / k_e / DEG * 60,
+        k_e, w = self.k_e, self.w
+        out = dict.fromkeys(NoiseModel(0.0).report(k_e)) if self.nm is None else self.nm.report(k_e)
+        out.pop("run_bias_dph")  # one switch-on: its bias is the fitted `bias`
+        return out | {
             "sigma_static_dph": _sigma_dph(self.sigma, w.static, k_e),
             "sigma_moving_dph": _sigma_dph(self.sigma, ~w.static, k_e),
         }
@@ -334,52 +334,25 @@ def _sigma_dph(sigma, mask, k_e):
     return float(np.median(sigma[mask])) / k_e / DEG_PER_H if np.any(mask) else None
 
 
-def noise_model(data: MeasuredData, max_lag: int = 64) -> dict:
-    r"""White angle noise σ_w [rad] and angle random walk N [rad/√s] from the static runs.
-
-    Lag-k second differences θ[i+k] − 2θ[i] + θ[i−k] remove a run's drift and have variance
-    $6\sigma_w^2 + 2N^2 k\,\Delta t$; a least-squares line over k = 1, 2, 4, … `max_lag` (at most
-    a quarter of the run) gives both.
-    Static runs only: while the pattern turns, the smooth rate ripple would leak in.
-
-    **Returns:** `{"angle_white": σ_w, "angle_random_walk": N}` (`None` without static runs).
-    """
-    lags, var = [], []
-    for idx in data.run_indices():
-        if not np.all(data["table_rate_dps"][idx] == 0.0) or idx.size < 8:
-            continue
-        th = data["wave_angle_deg"][idx] * DEG
-        dt = float(np.median(np.diff(data["time_s"][idx])))
-        ks = [2**i for i in range(7) if 2**i <= min(max_lag, idx.size // 4)]
-        for k in ks:
-            d2 = th[2 * k :] - 2 * th[k:-k] + th[: -2 * k]
-            lags.append(k * dt)
-            var.append(np.mean(d2**2))
-    if not lags:
-        return {"angle_white": None, "angle_random_walk": None}
-    slope, icpt = np.polyfit(np.asarray(lags), np.asarray(var), 1)
-    return {
-        "angle_white": float(np.sqrt(max(icpt, 0.0) / 6.0)),
-        "angle_random_walk": float(np.sqrt(max(slope, 0.0) / 2.0)),
-    }
-
-
 def _noise_scale(data: MeasuredData, w: RateWindows, k_e):
-    """Standard error of each window's pattern rate [rad/s]: from the fitted white + random
-    walk model (exact least-squares slope variance for white noise, 6N²/5T for the walk);
-    windows of runs without a static reference fall back to their batch-means errors."""
-    nm = noise_model(data)
-    batch = k_e * DEG * w.stderr_dps
-    if nm["angle_white"] is None:
-        return batch, nm
+    """Standard error of each window's pattern rate [rad/s]: the exact least-squares slope
+    error under the data's [`NoiseModel`][hrgjax.discovery.noise.NoiseModel] (estimated from
+    its still stretches); without a still stretch, the windows' batch-means errors.
+
+    **Returns:** (σ per window, the noise model or None)."""
+    try:
+        nm = NoiseModel.estimate(data)
+    except ValueError:
+        return k_e * DEG * w.stderr_dps, None
     sigma = np.empty(len(w))
     times = {int(data.run[idx[0]]): data["time_s"][idx] for idx in data.run_indices()}
+    seen: dict[tuple, float] = {}  # windows of one sampling share their σ
     for i, (run, a, b) in enumerate(zip(w.run, w.start, w.stop, strict=True)):
         t = times[int(run)][a:b]
-        span = t[-1] - t[0]
-        white = nm["angle_white"] ** 2 / np.sum((t - t.mean()) ** 2)
-        walk = 1.2 * nm["angle_random_walk"] ** 2 / max(span, 1e-12)
-        sigma[i] = np.sqrt(white + walk)
+        key = np.round(t - t[0], 9).tobytes()
+        if key not in seen:
+            seen[key] = nm.slope_sigma(t)
+        sigma[i] = seen[key]
     return sigma, nm
 
 

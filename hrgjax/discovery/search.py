@@ -3,9 +3,11 @@ r"""`discover`: find, name, add, shrink — on dwell-grid data (DISCOVERY.md §2
 Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
 
 1. **Split** by run: every `holdout_every`-th run is held out (never split within a run).
-2. **Noise model first**, before any drift model: white angle noise and angle random walk
-   from the static runs ([`noise_model`][hrgjax.discovery.dwell.noise_model]) give every
-   window's standard error, so the tests are in whitened units.
+2. **Noise model first**, before any drift model: one
+   [`NoiseModel`][hrgjax.discovery.noise.NoiseModel] (white angle noise, angle random walk,
+   a Gauss–Markov rate where the data can show it) estimated from every still stretch of the
+   log ([`noise_model`][hrgjax.discovery.noise.noise_model]) gives every window's standard
+   error and every continuous record's whitening, so the tests are in whitened units.
 3. **Baseline**: weighted least squares of the nominal model (`bias`, `angular_gain`,
    `damping_anisotropy`).
 4. **Screen** every other catalogue effect the data can carry with the exact score test
@@ -38,10 +40,10 @@ from ..calibration.reduce import K_E_NOMINAL, WINDOW_S, reduce
 from ..data import MeasuredData
 from ..noise import Noise
 from . import dwell, leftover
-from .continuous import BLOCK_S, ContinuousProblem, Windows, dwell_runs, noise_from_gyro
-from .continuous import noise_model as continuous_noise
-from .dwell import DwellProblem, _noise_scale, _window_extras, noise_model  # noqa: F401
+from .continuous import BLOCK_S, ContinuousProblem, Windows, dwell_runs
+from .dwell import DwellProblem, _noise_scale, _window_extras
 from .effects import CATALOGUE, NOMINAL
+from .noise import NoiseModel, noise_model  # noqa: F401
 from .problem import NEEDS_CONTINUOUS, OPTIONAL, candidates_for, rates_in  # noqa: F401
 from .result import Discovery
 
@@ -314,7 +316,7 @@ def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s, win
     cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
     names = list(nominal) + [n for n in cands if n not in nominal]
     known = noise is not None
-    nz = noise_from_gyro(noise, k_e) if known else continuous_noise(data)
+    nz = NoiseModel.from_gyro(noise, k_e) if known else NoiseModel.estimate(data)
     windows, records = None, data
     dwell_ids = np.asarray(sorted(dwell_runs(data))) if window_s is not None else []
     if len(dwell_ids):
