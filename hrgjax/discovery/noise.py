@@ -112,7 +112,7 @@ class NoiseModel:
 
     def increment_covariance(self, delta: float, k: int) -> np.ndarray:
         """Covariance (K, K) [rad²] of K consecutive block increments of length `delta` [s]
-        (module docstring of [`continuous`][hrgjax.discovery.continuous]), the run bias
+        (the whitening of [`ContinuousProblem`][hrgjax.discovery.continuous.ContinuousProblem]), the run bias
         included (each run its own switch-on)."""
         lag = np.abs(np.subtract.outer(np.arange(k), np.arange(k)))
         cov = self.angle_white**2 * np.where(lag == 0, 2.0, np.where(lag == 1, -1.0, 0.0))
