@@ -1,6 +1,9 @@
 """Effect catalogue (issue 4, PHYSICS.md §10): contract names, exact nulls, and each term
 against the simulator's own physics where the simulator has the mechanism."""
 
+import dataclasses
+import re
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -314,7 +317,7 @@ def test_equations_print_every_catalogue_effect_with_held_parameters():
     parameter the fit held (not regular: `loop_ripple`'s bandwidth in a dwell fit) reads at
     its held value instead of failing."""
     from hrgjax.discovery.effects import CATALOGUE
-    from hrgjax.discovery.result import Discovery
+    from hrgjax.discovery.result import Discovery, _signs
 
     fitted = {
         name: {p.name: {"value": p.scale, "std": 0.1 * p.scale} for p in e.params if p.regular}
@@ -331,3 +334,9 @@ def test_equations_print_every_catalogue_effect_with_held_parameters():
         if name != "angular_gain":
             assert f"[{name}]" in text, name
     assert "1 rad/s (held)" in text and "{" not in text
+    # negative values: one sign between terms, never '− (-x)' or '+ −x'
+    flipped = {n: {k: {"value": -v["value"], "std": v["std"]} for k, v in ps.items()}
+               for n, ps in fitted.items()}  # fmt: skip
+    for eq in (text, dataclasses.replace(rep, fit_parameters=flipped).equations()):
+        assert not re.search(r"[+−] (½·)?\(?[-−]", eq), eq
+    assert _signs("a − (-0.3 ± 0.1)·x + -2·y + ½·(-4 ± 1)") == "a + (0.3 ± 0.1)·x − 2·y − ½·(4 ± 1)"

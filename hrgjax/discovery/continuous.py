@@ -65,6 +65,7 @@ REFIT_TOP = 3
 TAU_GRID = (30.0, 100.0, 300.0, 1000.0, 3000.0)
 """Grid of nonregular time constants scanned in screening [s]."""
 
+
 def dwell_runs(data: MeasuredData) -> set[int]:
     """Ids of the runs that hold their temperature and table rate constant (dwell runs)."""
     out = set()

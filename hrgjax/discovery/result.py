@@ -9,6 +9,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 from typing import Any
 
 import numpy as np
@@ -61,6 +62,17 @@ def _number(v: dict) -> str:
     if v["sigma"] is None:
         return f"{v['value']:.4g}{unit}"
     return f"({v['value']:.4g} ± {v['sigma']:.2g}){unit}"
+
+
+_DOUBLE_SIGN = re.compile(r"([+−]) (½·)?(\(?)[-−]")
+
+
+def _signs(text: str) -> str:
+    """'a − (-0.3 ± 0.1)' → 'a + (0.3 ± 0.1)', '+ ½·(-x)' → '− ½·(x)': one sign between
+    terms."""
+    return _DOUBLE_SIGN.sub(
+        lambda m: ("−" if m[1] == "+" else "+") + " " + (m[2] or "") + m[3], text
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -180,15 +192,16 @@ class Discovery:
             # a parameter the fit held (the loop bandwidth of a dwell fit) reads at its value
             fields = {q.name: f"{q.scale:.4g} {q.unit} (held)" for q in effect.params}
             fields.update({k: _number(v) for k, v in ps.items()})
-            text = effect.formula.format(**fields)
+            text = _signs(effect.formula.format(**fields))
             (readout if effect.where == "readout" else rate).append(f"{text}    [{name}]")
         if rate:
             lines.append("apparent input rate − table rate [°/h] =")
             for i, t in enumerate(rate):
+                # a term written with a leading minus continues the sum with it
+                term = _signs("− " + t[1:] if t.startswith("−") else "+ " + t)
                 if i == 0:
-                    lines.append("    " + t)
-                else:  # a term written with a leading minus continues the sum with it
-                    lines.append("  − " + t[1:] if t.startswith("−") else "  + " + t)
+                    term = term[2:] if term.startswith("+") else "−" + term[2:]
+                lines.append(("    " if i == 0 else "  ") + term)
         if readout:
             lines.append("readout:")
             lines += ["    " + t for t in readout]
