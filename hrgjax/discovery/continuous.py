@@ -153,11 +153,13 @@ class Runs(eqx.Module):
 class Windows(eqx.Module):
     """The dwell runs of a mixed log (constant temperature and rate), as windows: measured
     pattern rate `y` [rad/s], its standard error `sigma` [rad/s] and the window covariates
-    (as the dwell search has them); `run`: each window's run id."""
+    (as the dwell search has them), `arc` [rad] the arc the pattern sweeps in each window (the
+    leftover shapes' window gain, as on dwell grids); `run`: each window's run id."""
 
     y: jax.Array
     sigma: jax.Array
     cov: Covariates
+    arc: jax.Array
     run: tuple = eqx.field(static=True)
 
 
@@ -392,8 +394,9 @@ class ContinuousProblem(AbstractProblem):
                         lambda a, pick=pick, n=n: pick(a) if np.ndim(a) else jnp.full(n, a),
                         w.cov,
                     )
+                    run = tuple(np.asarray(w.run)[mask].tolist())
                     groups.append(Windows(y=pick(w.y), sigma=pick(w.sigma), cov=cov,
-                                          run=tuple(np.asarray(w.run)[mask].tolist())))  # fmt: skip
+                                          arc=pick(w.arc), run=run))  # fmt: skip
         # runs are stacked by length *and* sample interval (`MeasuredData.stacked`): the
         # blocks and solver steps are set in samples from the stack's interval (a 721-sample
         # ramp at 5 s and a 721-sample rotation at 0.1 s must not share them)
@@ -652,7 +655,7 @@ class ContinuousProblem(AbstractProblem):
                 full = lambda v, n=n: np.broadcast_to(np.asarray(v, float), (n,))
                 cov = {"theta": full(c.theta), "dT": full(c.temperature) - T_REF_C,
                        "Tdot": np.zeros(n), "rate": full(c.rate), "accel_z": full(c.accel_z),
-                       "t_run": full(c.t_run)}  # fmt: skip
+                       "t_run": full(c.t_run), "arc": np.asarray(g.arc)}  # fmt: skip
                 sigma = np.asarray(g.sigma)[:, None]
                 for name, col in leftover.columns(cov, drop=False).items():
                     parts.setdefault(name, []).append(col / sigma)

@@ -344,6 +344,12 @@ def _noise_scale(data: MeasuredData, w: RateWindows, k_e):
         nm = NoiseModel.estimate(data)
     except ValueError:
         return k_e * DEG * w.stderr_dps, None
+    return window_sigma(nm, data, w), nm
+
+
+def window_sigma(nm: NoiseModel, data: MeasuredData, w: RateWindows) -> np.ndarray:
+    """Standard error [rad/s] of each window's pattern rate under the noise model `nm`: the
+    exact least-squares slope error over the window's samples."""
     sigma = np.empty(len(w))
     times = {int(data.run[idx[0]]): data["time_s"][idx] for idx in data.run_indices()}
     seen: dict[tuple, float] = {}  # windows of one sampling share their σ
@@ -353,7 +359,7 @@ def _noise_scale(data: MeasuredData, w: RateWindows, k_e):
         if key not in seen:
             seen[key] = nm.slope_sigma(t)
         sigma[i] = seen[key]
-    return sigma, nm
+    return sigma
 
 
 def _fit(model, c, y, sigma, train, w, held, k_e):

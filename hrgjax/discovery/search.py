@@ -41,7 +41,7 @@ from ..data import MeasuredData
 from ..noise import Noise
 from . import dwell, leftover
 from .continuous import BLOCK_S, ContinuousProblem, Windows, dwell_runs
-from .dwell import DwellProblem, _noise_scale, _window_extras
+from .dwell import DwellProblem, _window_extras
 from .effects import CATALOGUE, NOMINAL
 from .noise import NoiseModel, noise_model  # noqa: F401
 from .problem import NEEDS_CONTINUOUS, OPTIONAL, candidates_for, rates_in  # noqa: F401
@@ -327,10 +327,14 @@ def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s, win
         sub, records = part(in_dwell), part(~in_dwell)
         w = reduce(sub, k_e, window_s=window_s)
         extra, _ = _window_extras(sub, w)
-        extra.pop("arc")
-        sigma, _ = _noise_scale(sub, w, k_e)
-        win = Windows(y=dwell.target(w, k_e), sigma=sigma, cov=dwell.covariates(w, extra),
-                      run=tuple(np.asarray(w.run).tolist()))  # fmt: skip
+        arc = extra.pop("arc")
+        win = Windows(
+            y=dwell.target(w, k_e),
+            sigma=dwell.window_sigma(nz, sub, w),  # the one noise model of the whole log
+            cov=dwell.covariates(w, extra),
+            arc=arc,
+            run=tuple(np.asarray(w.run).tolist()),
+        )
         windows = (win, np.isin(w.run, held))
     problem = ContinuousProblem(records, names, k_e, held, nz, block_s, windows, known)
     if not known:
