@@ -175,7 +175,7 @@ LEFTOVER = {  # the shape (hrgjax.discovery.leftover.SHAPES) each hidden effect 
     "angular_gain_temperature": "Ω·ΔT",
     "readout_gain_mismatch": "2θ·Ω",
     "rate_scale_factor": "Ω³",
-    "loop_ripple": "2θ·Ω",
+    "loop_ripple": "2θ·Ω²",  # once the readout ripple takes the 2θ·Ω part: the loops' lag
 }
 
 

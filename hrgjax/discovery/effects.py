@@ -458,7 +458,7 @@ CATALOGUE: dict[str, Effect] = {
             "(ppm of the rate)",
             term=_loop_ripple,
             scales_gain=True,
-            shapes=("2θ·Ω",),
+            shapes=("2θ·Ω", "2θ·Ω²"),
         ),
     )
 }

@@ -1,7 +1,8 @@
 r"""Name the shape of what a model leaves (DISCOVERY.md §2.1 "say I don't know", issue 19):
 the residual of the final fit tested against generic shapes of the pattern rate — harmonics
 1θ … 4θ of the electrical wave angle (constant, growing with ΔT = T − 20 °C or with ΔT², and in
-proportion to the rate Ω: a scale factor that varies with the wave angle), ΔT, ΔT²,
+proportion to the rate Ω: a scale factor that varies with the wave angle; 2θ also with Ω²: a
+closed loop's lag turns a 2θ ripple's axis with the rate), ΔT, ΔT²,
 dT/dt, the table rate Ω (and Ω·ΔT, Ω³), the specific force a_z and the time since switch-on.
 
 Each shape is a set of pattern-rate columns evaluated at the data's covariates (dwell
@@ -30,6 +31,7 @@ SHAPES = (
     *(f"{k}θ·ΔT" for k in (1, 2, 3, 4)),
     *(f"{k}θ·ΔT²" for k in (1, 2, 3, 4)),
     *(f"{k}θ·Ω" for k in (1, 2, 3, 4)),
+    "2θ·Ω²",
     "ΔT",
     "ΔT²",
     "dT/dt",
@@ -71,6 +73,8 @@ def columns(cov: dict, drop: bool = True) -> dict[str, np.ndarray]:
         out[f"{k}θ·ΔT"] = h * dT[:, None]
         out[f"{k}θ·ΔT²"] = h * dT[:, None] ** 2
         out[f"{k}θ·Ω"] = h * cov["rate"][:, None]
+        if k == 2:  # a 2θ scale factor whose axis turns with the rate: a loop's lag
+            out["2θ·Ω²"] = h * cov["rate"][:, None] ** 2
     rate = cov["rate"]
     scalar = {
         "ΔT": dT,
@@ -99,16 +103,20 @@ def _size(shape: str, coef: np.ndarray, cov: np.ndarray, k_e: float) -> dict:
     if "θ" in shape:
         k = int(shape[0])
         per_t2, per_rate = "·ΔT²" in shape, "·Ω" in shape
+        per_rate2 = "·Ω²" in shape
         per_t = "·ΔT" in shape and not per_t2
         unit = "°/h/°C²" if per_t2 else "°/h/°C" if per_t else "°/h"
         unit, scale = ("ppm", 1e6) if per_rate else (unit, 1 / DEG_PER_H)
+        unit, scale = ("ppm/(°/s)", 1e6 * DEG) if per_rate2 else (unit, scale)
         a, b = f * coef * scale
         amp = math.hypot(a, b)
         # Jacobian of the amplitude for its σ
         grad = np.array([a, b]) / max(amp, 1e-300) * abs(f) * scale
         sigma = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
         axis = math.degrees(math.atan2(b, a)) / k
-        if per_rate:
+        if per_rate2:
+            kind = f"a scale factor varying as {k}θ that grows with the rate (a loop's lag)"
+        elif per_rate:
             kind = f"a scale factor varying as {k}θ"
         else:
             kind = f"a {k}θ harmonic" + (

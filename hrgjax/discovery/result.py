@@ -177,7 +177,9 @@ class Discovery:
 
     def equations(self) -> str:
         """The fitted model as equations in user units (as a fitted pysindy model prints):
-        the apparent input rate each effect adds, then the readout terms."""
+        the apparent input rate each effect adds, then the readout terms, and the leftover
+        shape where structure is left, the verdict is `unexplained` or the shape is
+        significant."""
         user = self.parameters
         lines = [f"verdict: {self.verdict}"]
         if "angular_gain" in user:
@@ -205,8 +207,11 @@ class Discovery:
         if readout:
             lines.append("readout:")
             lines += ["    " + t for t in readout]
-        if self.leftover is not None and (self.structure_left or self.verdict == "unexplained"):
-            lines.append(f"left over: {self.leftover['words']}")
+        left = self.leftover
+        if left is not None and (
+            self.structure_left or self.verdict == "unexplained" or left.get("significant")
+        ):  # a significant shape is worth a line even where the gap is at the floor
+            lines.append(f"left over: {left['words']}")
         lines.append(
             f"held-out gap {self.gap_before:.3g} → {self.gap_after:.3g} °/h "
             f"(noise floor {self.noise_floor:.3g} °/h); ΔT = T − 20 °C, θ electrical"

@@ -270,7 +270,15 @@ class _Outshone:
 
     def __init__(self, problem, fit, available, margin, first=False):
         covered = {sh for n in available for sh in CATALOGUE[n].shapes}
-        self.cols = {k: v for k, v in problem.shape_columns.items() if k not in covered}
+        cols = problem.shape_columns
+        self.cols = {k: v for k, v in cols.items() if k not in covered}
+        spanned = [cols[k] for k in covered if k in cols]
+        if spanned:  # a shape the covered ones span on these data is covered too (2θ·Ω²
+            # is 2θ·Ω where the table turns at one rate)
+            u, sv, _ = np.linalg.svd(np.concatenate(spanned, axis=1), full_matrices=False)
+            q = u[:, sv > sv[0] * 1e-10]  # their span (a rank-deficient set adds nothing)
+            left = lambda v: np.linalg.norm(v - q @ (q.T @ v)) / max(np.linalg.norm(v), 1e-300)
+            self.cols = {k: v for k, v in self.cols.items() if left(v) > 1e-3}
         self.fit, self.margin, self.first = fit, margin, first
         self.log_n = math.log(max(len(fit.r), 2))
         self.scores = leftover.scores(fit.r, fit.j, self.cols)
