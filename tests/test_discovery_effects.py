@@ -245,6 +245,16 @@ def test_leftover_names_a_planted_shape_with_its_size_and_nothing_in_noise():
     assert left["axis_deg"] == pytest.approx(10.0, abs=2.0)
     assert "constant over temperature" in left["words"]
     assert not leftover.describe(noise, j, cols, k_e)["significant"]
+    # a loop's lag: a 2θ scale factor growing with the rate, 2 ppm per °/s at two rates, the
+    # model holding the 2θ·Ω ripple and a scale factor — named 2θ·Ω² with its size
+    rate = np.deg2rad(rng.choice([-20.0, -5.0, 5.0, 20.0], n))
+    cols = {k: g / sigma for k, g in leftover.columns(dict(cov, rate=rate)).items()}
+    j = np.concatenate([j, cols["2θ·Ω"], cols["Ω"]], axis=1)
+    sf = 2e-6 * np.rad2deg(rate) * np.cos(2 * (theta - axis))  # input-rate scale factor
+    left = leftover.describe(noise - k_e * sf * rate / sigma, j, cols, k_e)
+    assert left["shape"] == "2θ·Ω²" and left["unit"] == "ppm/(°/s)"
+    assert abs(left["size"] - 2.0) < 4 * left["sigma"] and "loop's lag" in left["words"]
+    assert left["axis_deg"] == pytest.approx(10.0, abs=3.0)
 
 
 def test_loop_ripple_is_the_closed_loops_ripple_of_the_default_gyro():

@@ -219,3 +219,25 @@ def test_the_default_gyros_own_bench_data_end_near_their_floor():
     eps = p["readout_gain_mismatch"]["eps_1"]["value"]
     assert abs(eps - (-2e6 * g20)) < 60.0  # ppm; |ε₁| ≈ 9167 ppm
     assert p["bias_temperature"]["b1"]["value"] == pytest.approx(0.005, abs=0.0005)  # °/h/°C
+
+
+def test_shapes_the_available_effects_span_count_as_covered():
+    """At one table rate 2θ·Ω² is 2θ·Ω: with the readout ripple available (it covers 2θ·Ω)
+    neither may outshine a candidate; at two rates 2θ·Ω² is a shape of its own."""
+    from types import SimpleNamespace
+
+    from hrgjax.discovery import leftover
+    from hrgjax.discovery.search import _Outshone
+
+    rng = np.random.default_rng(1)
+    n = 200
+    theta = rng.uniform(-np.pi, np.pi, n)
+    for rates, kept in (((0.0, 5.0), False), ((0.0, 5.0, 20.0), True)):
+        cov = {"theta": theta, "dT": rng.uniform(-40, 40, n), "Tdot": np.zeros(n),
+               "rate": np.deg2rad(rng.choice(rates, n)), "accel_z": np.zeros(n),
+               "t_run": np.zeros(n)}  # fmt: skip
+        problem = SimpleNamespace(shape_columns=leftover.columns(cov))
+        fit = SimpleNamespace(r=rng.normal(size=n), j=np.ones((n, 1)))
+        out = _Outshone(problem, fit, ["readout_gain_mismatch"], margin=2.0)
+        assert "2θ·Ω" not in out.cols and ("2θ·Ω²" in out.cols) == kept, rates
+        assert "ΔT" in out.cols
