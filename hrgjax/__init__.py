@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 __version__ = "0.1.0"
 
 _SUBMODULES = (
+    "allan",
     "calibration",
     "data",
     "diagnosis",
@@ -86,6 +87,7 @@ sys.modules[__name__].__class__ = _Package
 
 
 if TYPE_CHECKING:  # what static tools (type checkers, mkdocstrings) read
+    from . import allan as allan
     from . import calibration as calibration
     from . import data as data
     from . import diagnosis as diagnosis

@@ -11,7 +11,11 @@ rate ramp $R\tau/\sqrt2$.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import math
+import numbers
+from statistics import NormalDist
 
 import jax
 import jax.numpy as jnp
@@ -229,3 +233,406 @@ _AT_M = {
     "ohdev": _ohdev_m,
     "totdev": _totdev_m,
 }
+
+
+# ---------------------------------------------------------------------------------------
+# Allan statistics: τ grids, term counts, noise identification, EDF and intervals
+
+KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
+"""The deviations [`deviation`][hrgjax.allan.deviation] computes."""
+ONE_SIGMA = 0.6826894921370859
+"""erf(1/√2): the ±1σ confidence level, the default of `ci`."""
+
+
+@dataclasses.dataclass(frozen=True)
+class AllanResult:
+    """A deviation curve with its uncertainty (NumPy arrays, one entry per τ).
+
+    - `kind`: the deviation (one of [`KINDS`][hrgjax.allan.KINDS]); `ci`: the confidence level.
+    - `taus` [s]; `m`: averaging factors (τ = m/rate_hz).
+    - `dev`: the deviation [rate unit; tdev: rate unit × s, an angle];
+      `dev_low`, `dev_high`: the χ² interval at level `ci` (NIST SP 1065 eq. 45).
+    - `edf`: equivalent degrees of freedom (Greenhall–Riley; totdev: SP 1065 Table 7).
+    - `n_terms`: the number of differences each estimate averages.
+    - `alpha`: the power-law noise identified at each τ, the exponent α of the rate PSD
+      S_y(f) ∝ f^α: 2 white angle (phase) noise, 1 flicker angle, 0 white rate (angle random
+      walk), −1 flicker rate (bias instability), −2 rate random walk (lag-1 autocorrelation,
+      Riley & Greenhall 2004).
+    """
+
+    kind: str
+    ci: float
+    taus: np.ndarray
+    m: np.ndarray
+    dev: np.ndarray
+    dev_low: np.ndarray
+    dev_high: np.ndarray
+    edf: np.ndarray
+    n_terms: np.ndarray
+    alpha: np.ndarray
+
+
+def deviation(
+    y,
+    rate_hz: float,
+    kind: str = "oadev",
+    taus="octave",
+    data: str = "rate",
+    ci: float = ONE_SIGMA,
+) -> AllanResult:
+    r"""An Allan-family deviation with confidence intervals, as allantools and Stable32
+    compute it.
+
+    **Arguments:**
+
+    - `y`: the samples (1-D): rates (`data="rate"`, e.g. °/h) or angles (`data="phase"`, e.g.
+      °), taken at `rate_hz` [Hz].
+    - `kind`: one of [`KINDS`][hrgjax.allan.KINDS] (tdev = τ·mdev/√3, in angle units).
+    - `taus`: `"octave"` (m = 1, 2, 4, …), `"decade"` (1, 2, 4, 10, 20, 40, …), `"all"`
+      (every m) or τ values in seconds (rounded to the nearest m, duplicates dropped, as
+      allantools does). Factors whose estimate would average fewer than 2 terms are left
+      out (allantools' and Stable32's limit).
+    - `ci`: confidence level of the interval (default ±1σ, 0.683).
+
+    One compiled program per kind and data length serves every τ grid (factors are run-time
+    values, padded to a power-of-two count), so a new grid compiles nothing.
+
+    **Returns:** an [`AllanResult`][hrgjax.allan.AllanResult].
+
+    **Raises:** `ValueError` naming the argument for an unknown kind or data type, a
+    non-positive rate, non-finite samples, a `ci` outside (0, 1), or data too short for any τ.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {list(KINDS)}; got {kind!r}")
+    if data not in ("rate", "phase"):
+        raise ValueError(f"data must be 'rate' or 'phase'; got {data!r}")
+    if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
+    if not (0.0 < ci < 1.0):
+        raise ValueError(f"ci must be a confidence level in (0, 1); got {ci!r}")
+    y = np.asarray(y, dtype=float)
+    if y.ndim != 1 or y.size < 3:
+        raise ValueError(f"y must be 1-D with at least 3 samples; got shape {y.shape}")
+    if not np.all(np.isfinite(y)):
+        raise ValueError(f"y has a non-finite value at index {int(np.argmin(np.isfinite(y)))}")
+    tau0 = 1.0 / float(rate_hz)
+    if data == "phase":
+        x = y - y[0]
+        rate = np.diff(y) / tau0
+    else:
+        rate = y
+        x = np.concatenate([[0.0], np.cumsum(y) * tau0])
+    n_phase = x.size
+    m = _factors(taus, rate_hz, n_phase)
+    n_terms = np.asarray([_n_terms(kind, int(k), n_phase) for k in m], dtype=int)
+    m, n_terms = m[n_terms > 1], n_terms[n_terms > 1]
+    if m.size == 0:
+        raise ValueError(
+            f"y: {y.size} samples are too few for {kind} at any of the τ asked (taus={taus!r})"
+        )
+    base = "mdev" if kind == "tdev" else kind
+    # one program for every grid of ≤ 32 τ (octave grids up to 2³² samples), powers of two
+    # beyond
+    pad = max(32, 1 << int(math.ceil(math.log2(m.size))))
+    ms = np.concatenate([m, np.full(pad - m.size, m[-1])])
+    dev = np.asarray(_curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base))
+    dev = dev[: m.size]
+    taus_s = m * tau0
+    if kind == "tdev":
+        dev = dev * taus_s / math.sqrt(3.0)
+    dmax = 3 if kind in ("hdev", "ohdev") else 2
+    alpha = noise_id(x, m, dmax=dmax)
+    edf = np.asarray([_edf(kind, int(a), int(k), n_phase) for a, k in zip(alpha, m, strict=True)])
+    low, high = confidence_interval(dev, edf, ci)
+    return AllanResult(
+        kind=kind, ci=float(ci), taus=taus_s, m=m, dev=dev, dev_low=low, dev_high=high,
+        edf=edf, n_terms=n_terms, alpha=alpha,
+    )  # fmt: skip
+
+
+def _factors(taus, rate_hz: float, n_phase: int) -> np.ndarray:
+    """Averaging factors of a τ grid (allantools' `tau_generator`), sorted and unique."""
+    if isinstance(taus, str):
+        if taus == "all":
+            m = np.arange(1, n_phase + 1, dtype=float)
+        elif taus == "octave":
+            m = 2.0 ** np.arange(int(math.floor(math.log2(n_phase))) + 1)
+        elif taus == "decade":
+            m = np.asarray(
+                [
+                    c * 10.0**k
+                    for k in range(int(math.floor(math.log10(n_phase))) + 1)
+                    for c in (1, 2, 4)
+                ]  # fmt: skip
+            )
+        else:
+            raise ValueError(
+                f"taus must be 'octave', 'decade', 'all' or τ values in seconds; got {taus!r}"
+            )
+    else:
+        t = np.asarray(taus, dtype=float).ravel()
+        if t.size == 0 or not np.all(np.isfinite(t)):
+            raise ValueError(f"taus must be finite τ values in seconds; got {taus!r}")
+        m = np.round(t * rate_hz)
+    m = m[(m > 0) & (m < n_phase)]
+    return np.unique(m).astype(int)
+
+
+def _n_terms(kind: str, m: int, n: int) -> int:
+    """Differences averaged by `kind` at factor m over n phase points (allantools' `ns`)."""
+    if kind == "adev":
+        return max(0, -(-(n - 2 * m) // m))
+    if kind == "hdev":
+        return max(0, -(-(n - 3 * m) // m))
+    if kind == "oadev":
+        return max(0, n - 2 * m)
+    if kind == "ohdev":
+        return max(0, n - 3 * m)
+    if kind in ("mdev", "tdev"):
+        return max(0, n - 3 * m + 1)
+    return n - 2 if m <= n - 1 else 0  # totdev: every point, the record reflected
+
+
+def noise_id(x, m, dmax: int = 2) -> np.ndarray:
+    """The power-law noise α (rate PSD ∝ f^α) at each factor `m` of phase (angle) samples
+    `x`, by the lag-1 autocorrelation method (Riley & Greenhall 2004, as allantools'
+    `autocorr_noise_id` with `dmin=0`): the phase decimated by m, a quadratic removed,
+    differenced until ρ = r₁/(1 + r₁) < 0.25 or `dmax` times; α = 2 − 2d − round(2ρ). Where
+    fewer than 30 decimated points are left, the α of the largest factor that had them is
+    carried on (allantools stops there). **Returns:** an int array."""
+    x = np.asarray(x, dtype=float)
+    out, last = [], None
+    for k in np.asarray(m, dtype=int):
+        z = x[:: int(k)]
+        if z.size < 30:
+            if last is None:
+                raise ValueError(
+                    f"x: {x.size} samples leave {z.size} at m = {k}; noise identification needs 30"
+                )
+            out.append(last)
+            continue
+        t = np.arange(z.size, dtype=float)
+        z = z - np.polyval(np.polyfit(t, z, 2), t)
+        d = 0
+        while True:
+            zc = z - z.mean()
+            r1 = float(np.dot(zc[:-1], zc[1:]) / np.dot(zc, zc))
+            rho = r1 / (1.0 + r1)
+            if rho < 0.25 or d >= dmax:
+                break
+            z = np.diff(z)
+            d += 1
+        last = int(-round(2 * rho) - 2 * d) + 2
+        out.append(last)
+    return np.asarray(out, dtype=int)
+
+
+# -- equivalent degrees of freedom (Greenhall & Riley, "Uncertainty of stability variances
+# based on finite differences", PTTI 2003; NIST SP 1065 Table 7 for totdev)
+
+
+def _sw(t, alpha):
+    """Eq. 7: the generalised autocovariance of the noise, up to a constant."""
+    t = abs(t)
+    if alpha % 2 == 0:  # α = 2: −|t|; 0, −2, −4: |t|^(3−α)
+        return -t if alpha == 2 else t ** (3 - alpha)
+    return 0.0 if t == 0 else t ** (3 - alpha) * math.log(t)  # α odd: t^(3−α)·ln|t|
+
+
+def _sx(t, f, alpha):
+    """Eq. 8: the filter of factor F (F = ∞: its limit)."""
+    if math.isinf(f):
+        return _sw(t, alpha + 2)
+    return f * f * (2 * _sw(t, alpha) - _sw(t - 1.0 / f, alpha) - _sw(t + 1.0 / f, alpha))
+
+
+_BINOMIAL = {1: (2, -1), 2: (6, -4, 1), 3: (20, -15, 6, -1)}
+
+
+def _sz(t, f, alpha, d):
+    """Eq. 9: the d-th difference."""
+    c = _BINOMIAL[d]
+    return c[0] * _sx(t, f, alpha) + sum(
+        c[k] * (_sx(t - k, f, alpha) + _sx(t + k, f, alpha)) for k in range(1, d + 1)
+    )
+
+
+def _basic_sum(j, m_terms, s, f, alpha, d):
+    """Eq. 10."""
+    total = _sz(0, f, alpha, d) ** 2 + (1 - j / m_terms) * _sz(j / s, f, alpha, d) ** 2
+    return total + sum(
+        2 * (1 - k / m_terms) * _sz(k / s, f, alpha, d) ** 2 for k in range(1, int(j))
+    )
+
+
+_TABLE1 = {  # modified variances, (a0, a1) by α (rows) and d = 1, 2, 3
+    2: ((2 / 3, 1 / 3), (7 / 9, 1 / 2), (22 / 25, 2 / 3)),
+    1: ((0.840, 0.345), (0.997, 0.616), (1.141, 0.843)),
+    0: ((1.079, 0.368), (1.033, 0.607), (1.184, 0.848)),
+    -1: (None, (1.048, 0.534), (1.180, 0.816)),
+    -2: (None, (1.302, 0.535), (1.175, 0.777)),
+    -3: (None, None, (1.194, 0.703)),
+    -4: (None, None, (1.489, 0.702)),
+}
+_TABLE2 = {  # unmodified variances
+    2: ((3 / 2, 1 / 2), (35 / 18, 1.0), (231 / 100, 3 / 2)),
+    1: ((78.6, 25.2), (790.0, 410.0), (9950.0, 6520.0)),
+    0: ((2 / 3, 1 / 6), (2 / 3, 1 / 3), (7 / 9, 1 / 2)),
+    -1: (None, (0.852, 0.375), (0.997, 0.617)),
+    -2: (None, (1.079, 0.368), (1.033, 0.607)),
+    -3: (None, None, (1.053, 0.553)),
+    -4: (None, None, (1.302, 0.535)),
+}
+_TABLE3 = {1: (6.0, 4.0), 2: (15.23, 12.0), 3: (47.8, 40.0)}  # flicker phase, unmodified
+
+
+def edf_greenhall(alpha: int, d: int, m: int, n: int, overlapping: bool, modified: bool):
+    """Equivalent degrees of freedom of a d-th difference variance at factor `m` over `n`
+    phase points for power-law noise α (Greenhall & Riley 2003, eqs. 10–13 and Tables 1–3;
+    d = 2 Allan, 3 Hadamard; `modified`: mdev/tdev; `overlapping`: stride 1).
+
+    **Raises:** `ValueError` where the variance does not converge (α + 2d ≤ 1) or the data
+    are shorter than the filter."""
+    if alpha + 2 * d <= 1:
+        raise ValueError(f"alpha = {alpha} needs alpha + 2d > 1 (d = {d})")
+    f = 1 if modified else int(m)
+    s = int(m) if overlapping else 1
+    length = m / f + m * d
+    if n < length:
+        raise ValueError(f"n = {n} phase points are fewer than the filter's {length:g}")
+    m_terms = 1 + math.floor(s * (n - length) / m)
+    j = min(m_terms, (d + 1) * s)
+    j_max = 100
+    r = m_terms / s
+    if modified:
+        if j <= j_max:
+            return _sz(0, 1, alpha, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, 1, alpha, d)
+        if r > d + 1:
+            a0, a1 = _TABLE1[alpha][d - 1]
+            return 1.0 / ((a0 - a1 / r) / r)
+        mp = j_max / r
+        return _sz(0, 1, alpha, d) ** 2 * j_max / _basic_sum(j_max, j_max, mp, 1, alpha, d)
+    if alpha <= 0:
+        if j <= j_max:
+            fp = m if m * (d + 1) <= j_max else math.inf
+            return _sz(0, fp, alpha, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, fp, alpha, d)
+        if r > d + 1:
+            a0, a1 = _TABLE2[alpha][d - 1]
+            return 1.0 / ((a0 - a1 / r) / r)
+        mp = j_max / r
+        return (
+            _sz(0, math.inf, alpha, d) ** 2
+            * j_max
+            / _basic_sum(j_max, j_max, mp, math.inf, alpha, d)
+        )
+    if alpha == 1:
+        if j <= j_max:
+            return _sz(0, m, 1, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, m, 1, d)
+        b0, b1 = _TABLE3[d]
+        if r > d + 1:
+            a0, a1 = _TABLE2[1][d - 1]
+            return (b0 + b1 * math.log(m)) ** 2 * r / (a0 - a1 / r)
+        mp = j_max / r
+        return (b0 + b1 * math.log(m)) ** 2 * j_max / _basic_sum(j_max, j_max, mp, mp, 1, d)
+    # α = 2, unmodified: eq. 13's limit where the estimate has more than d + 1 terms, else
+    # the basic sum itself
+    if math.ceil(r) > d:
+        a0 = math.comb(4 * d, 2 * d) / math.comb(2 * d, d) ** 2
+        return 1.0 / ((a0 - (d / 2.0) / r) / m_terms)
+    return _sz(0, m, 2, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, m, 2, d)
+
+
+def edf_totdev(alpha: int, m: int, n: int) -> float:
+    """EDF of the total deviation: b·N/m − c (NIST SP 1065 Table 7) for α = 0, −1, −2; other
+    noises the (N−1)-point approximations of Stein (1985)."""
+    table7 = {0: (1.50, 0.0), -1: (1.17, 0.22), -2: (0.93, 0.36)}
+    if alpha in table7:
+        b, c = table7[alpha]
+        return b * n / m - c
+    if alpha == 2:
+        return (n + 1) * (n - 2 * m) / (2 * (n - m))
+    if alpha == 1:
+        return math.exp(
+            math.sqrt(math.log((n - 1) / (2 * m)) * math.log((2 * m + 1) * (n - 1) / 4))
+        )
+    return float(n - 1)
+
+
+def _edf(kind: str, alpha: int, m: int, n: int) -> float:
+    if kind == "totdev":
+        return edf_totdev(alpha, m, n)
+    d = 3 if kind in ("hdev", "ohdev") else 2
+    alpha = max(alpha, 2 - 2 * d)  # the variance converges for α > 1 − 2d
+    return edf_greenhall(
+        alpha, d, m, n, overlapping=kind in ("oadev", "ohdev", "mdev", "tdev"),
+        modified=kind in ("mdev", "tdev"),
+    )  # fmt: skip
+
+
+def confidence_interval(dev, edf, ci: float = ONE_SIGMA):
+    """χ² interval (low, high) of deviations `dev` with `edf` degrees of freedom at level
+    `ci`: σ²·edf/χ²(1 − p) … σ²·edf/χ²(p), p = (1 − ci)/2 (NIST SP 1065 eq. 45)."""
+    dev, edf = np.asarray(dev, dtype=float), np.asarray(edf, dtype=float)
+    p = min(ci, 1 - ci) / 2
+    lo = np.vectorize(lambda k: chi2_ppf(1 - p, k))(edf)
+    hi = np.vectorize(lambda k: chi2_ppf(p, k))(edf)
+    return dev * np.sqrt(edf / lo), dev * np.sqrt(edf / hi)
+
+
+def _gammainc(a: float, x: float) -> float:
+    """Regularised lower incomplete gamma P(a, x) (series below a + 1, continued fraction
+    above; float64 whatever JAX's precision)."""
+    if x <= 0:
+        return 0.0
+    log_front = a * math.log(x) - x - math.lgamma(a)
+    if x < a + 1:
+        term = total = 1.0 / a
+        k = a
+        for _ in range(10_000):
+            k += 1
+            term *= x / k
+            total += term
+            if abs(term) < abs(total) * 1e-17:
+                break
+        return total * math.exp(log_front)
+    tiny = 1e-300  # modified Lentz for Q(a, x)
+    b = x + 1 - a
+    c, dd = 1 / tiny, 1 / b
+    h = dd
+    for i in range(1, 10_000):
+        an = -i * (i - a)
+        b += 2
+        dd = an * dd + b
+        dd = tiny if abs(dd) < tiny else dd
+        c = b + an / c
+        c = tiny if abs(c) < tiny else c
+        dd = 1 / dd
+        delta = dd * c
+        h *= delta
+        if abs(delta - 1) < 1e-16:
+            break
+    return 1.0 - math.exp(log_front) * h
+
+
+def chi2_ppf(q: float, k: float) -> float:
+    """The q-quantile of the χ² distribution with k (> 0, real) degrees of freedom."""
+    a = 0.5 * k
+    # Wilson–Hilferty start, then safeguarded Newton on P(k/2, x/2) = q
+    z = NormalDist().inv_cdf(q)
+    x = max(k * (1 - 2 / (9 * k) + z * math.sqrt(2 / (9 * k))) ** 3, 1e-8)
+    lo, hi = 0.0, math.inf
+    for _ in range(200):
+        f = _gammainc(a, 0.5 * x) - q
+        if f > 0:
+            hi = x
+        else:
+            lo = x
+        pdf = math.exp((a - 1) * math.log(0.5 * x) - 0.5 * x - math.lgamma(a)) * 0.5
+        step = f / pdf if pdf > 0 else math.inf
+        new = x - step
+        if not (lo < new < hi):
+            new = 0.5 * (lo + hi) if math.isfinite(hi) else 2 * x
+        if abs(new - x) <= 1e-15 * x:
+            return new
+        x = new
+    return x

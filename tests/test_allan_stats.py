@@ -1,0 +1,131 @@
+"""Allan statistics (issue 21, scope 1): deviations with τ grids, term counts, noise
+identification, Greenhall–Riley EDF and χ² intervals — against allantools (a test-only
+dependency), scipy's χ² quantiles, and power-law noises of known type."""
+
+import math
+
+import numpy as np
+import pytest
+from helpers import CompileCounter
+
+import hrgjax as hg
+from hrgjax import allan
+
+RNG = np.random.default_rng(11)
+Y = RNG.normal(size=3000) + 0.01 * np.cumsum(RNG.normal(size=3000))  # white + walk, rate
+X = np.concatenate([[0.0], np.cumsum(Y)])  # its phase at 1 Hz
+
+
+def kasdin(alpha, n, rng):
+    """Power-law phase noise with rate PSD ∝ f^α (Kasdin & Walter 1992: the phase's
+    exponent is b = α − 2), by the FFT filter of its impulse response."""
+    h = np.ones(n)
+    k = np.arange(1, n)
+    h[1:] = np.cumprod((-(alpha - 2) / 2.0 + k - 1) / k)
+    w = np.zeros(2 * n)
+    w[:n] = rng.normal(size=n)
+    return np.fft.irfft(np.fft.rfft(w) * np.fft.rfft(np.r_[h, np.zeros(n)]))[:n]
+
+
+@pytest.mark.parametrize("kind", allan.KINDS)
+def test_deviation_equals_allantools(kind):
+    at = pytest.importorskip("allantools")
+    for taus in ("octave", "decade", [1.0, 2.4, 7.0, 7.2, 100.0, 1e6]):
+        r = allan.deviation(Y, 1.0, kind=kind, taus=taus)
+        t, dev, _, ns = getattr(at, kind)(Y, rate=1.0, data_type="freq", taus=taus)
+        np.testing.assert_array_equal(r.taus, t)  # the same τ kept, the same limits on m
+        np.testing.assert_allclose(r.dev, dev, rtol=1e-10)
+        np.testing.assert_array_equal(r.n_terms, ns)
+    if kind == "totdev":
+        return
+    d = 3 if kind in ("hdev", "ohdev") else 2
+    rows = zip(r.m, r.alpha, r.edf, r.dev, r.dev_low, r.dev_high, strict=True)
+    for m, a, edf, dev, lo, hi in rows:
+        if X[:: int(m)].size >= 30:  # where allantools can identify the noise
+            assert a == at.autocorr_noise_id(X, int(m), data_type="phase", dmax=d)[0], m
+        ref = at.edf_greenhall(
+            alpha=max(int(a), 2 - 2 * d), d=d, m=int(m), N=X.size,
+            overlapping=kind in ("oadev", "ohdev", "mdev", "tdev"),
+            modified=kind in ("mdev", "tdev"),
+        )  # fmt: skip
+        assert edf == pytest.approx(ref, rel=1e-9), m
+        lo_ref, hi_ref = at.confidence_interval(dev, ref)
+        assert lo == pytest.approx(lo_ref, rel=1e-9) and hi == pytest.approx(hi_ref, rel=1e-9)
+
+
+def test_edf_greenhall_every_case_equals_allantools():
+    """Every α and d, modified or not, overlapping or not, short records (the basic sum),
+    long ones (Tables 1–3) and the J_max branch between."""
+    at = pytest.importorskip("allantools")
+    for d in (2, 3):
+        for alpha in range(2 - 2 * d + 1, 3):
+            for m, n in ((1, 50), (4, 1000), (16, 100), (64, 1_000_000), (3, 1_000_000)):
+                for ov, mod in ((False, False), (True, False), (True, True)):
+                    if alpha == 2 and not mod and not ov and n / m < d + 2:
+                        continue
+                    ours = allan.edf_greenhall(alpha, d, m, n, overlapping=ov, modified=mod)
+                    ref = at.edf_greenhall(alpha, d, m, n, overlapping=ov, modified=mod)
+                    assert ours == pytest.approx(ref, rel=1e-9), (alpha, d, m, n, ov, mod)
+
+
+def test_chi2_quantiles_equal_scipy():
+    stats = pytest.importorskip("scipy.stats")
+    for k in (0.3, 1.0, 2.7, 10.0, 123.4, 5e4):
+        for q in (0.001, 0.1587, 0.5, 0.8413, 0.999):
+            assert allan.chi2_ppf(q, k) == pytest.approx(stats.chi2.ppf(q, k), rel=1e-10)
+
+
+@pytest.mark.parametrize("alpha", [2, 1, 0, -1, -2])
+def test_noise_identification_names_the_five_power_laws(alpha):
+    """Exact where the decimated record is long (m = 1, 4: ≥ 4 096 points); within one of
+    the truth on 256 points, where flicker noise, half-way between integer slopes, is read
+    as its neighbour in some draws (as allantools reads it)."""
+    x = kasdin(alpha, 2**14, np.random.default_rng(100 + alpha))
+    got = allan.noise_id(x, [1, 4, 16, 64])
+    assert list(got[:2]) == [alpha, alpha] and np.all(np.abs(got - alpha) <= 1), got
+    try:
+        import allantools as at
+    except ImportError:
+        return
+    assert list(got) == [at.autocorr_noise_id(x, m, data_type="phase")[0] for m in (1, 4, 16, 64)]
+
+
+def test_interval_covers_the_truth_as_often_as_it_says():
+    """White rate noise of σ = 1 at 1 Hz: ADEV(τ) = 1/√τ. The ±1σ interval of oadev at
+    m = 16 over 1024 samples covers it in ≈ 68 % of 300 records."""
+    rng = np.random.default_rng(5)
+    hits = 0
+    for _ in range(300):
+        r = allan.deviation(rng.normal(size=1024), 1.0, taus=[16.0])
+        hits += r.dev_low[0] <= 0.25 <= r.dev_high[0]
+    assert 0.60 <= hits / 300 <= 0.76, hits
+
+
+def test_tdev_phase_input_and_one_program_for_every_grid():
+    r = allan.deviation(Y, 1.0, kind="mdev", taus="octave")
+    t = allan.deviation(X * 2.0, 0.5, kind="tdev", taus=r.taus * 2.0, data="phase")
+    # the same phase at half the rate: τ doubles, rates halve, tdev = τ·mdev/√3
+    np.testing.assert_allclose(t.dev, r.taus * 2.0 * (r.dev) / math.sqrt(3.0), rtol=1e-9)
+    with CompileCounter() as c:  # another grid of ≤ the same padded count: nothing compiles
+        allan.deviation(Y, 1.0, kind="mdev", taus=[3.0, 9.0, 27.0, 81.0, 243.0])
+    assert c.compiles == 0, c.names
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"kind": "avar"}, "kind must be one of"),
+        ({"data": "freq"}, "data must be 'rate' or 'phase'"),
+        ({"taus": "weekly"}, "taus must be 'octave'"),
+        ({"taus": [np.nan]}, "taus must be finite"),
+        ({"ci": 1.5}, "ci must be a confidence level"),
+        ({"rate_hz": 0.0}, "rate_hz must be a positive"),
+    ],
+)
+def test_bad_input_is_named(kwargs, match):
+    args = {"y": Y[:100], "rate_hz": 1.0} | kwargs
+    with pytest.raises(ValueError, match=match):
+        allan.deviation(**args)
+    with pytest.raises(ValueError, match="non-finite value at index 3"):
+        allan.deviation(np.r_[Y[:3], np.inf, Y[:10]], 1.0)
+    assert hg.allan.deviation is allan.deviation
