@@ -288,3 +288,40 @@ def vibration_figure(figures: dict, path: str) -> str:
     _save(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "") -> str:
+    """An Allan-family deviation with its confidence interval (error bars) and, given a
+    [`NoiseFit`][hrgjax.allan.NoiseFit], the fitted curve and each IEEE 952 term's slope
+    (quantization −1, ARW −½, bias instability 0, rate random walk +½, rate ramp +1).
+
+    - `result`: an [`AllanResult`][hrgjax.allan.AllanResult]; `unit`: the rate unit of the
+      samples (axis label). Returns `path`.
+    """
+    from .allan import NOISE_TERMS
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
+    t, d = np.asarray(result.taus), np.asarray(result.dev)
+    err = np.stack([d - np.asarray(result.dev_low), np.asarray(result.dev_high) - d])
+    ax.errorbar(t, d, yerr=err, fmt="o", ms=4, capsize=2, color="k",
+                label=f"{result.kind} ± {100 * result.ci:.1f} % interval")  # fmt: skip
+    if fit is not None:
+        grid = np.geomspace(t[0], t[-1], 200)
+        ax.loglog(grid, fit.adev(grid), "-", color="C3", lw=1.5, label="fitted IEEE 952 model")
+        for (name, sym, _, f), style in zip(
+            NOISE_TERMS, ("C0", "C1", "C2", "C4", "C5"), strict=True
+        ):
+            if fit.value[name] > 0:
+                ax.loglog(grid, fit.value[name] * np.sqrt(f(grid)), "--", color=style, lw=1,
+                          label=f"{name.replace('_', ' ')} {sym} = {fit.value[name]:.3g}")  # fmt: skip
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("averaging time τ [s]")
+    ax.set_ylabel(f"{result.kind} [{unit}]")
+    ax.set_title(title or f"{result.kind} with confidence intervals")
+    ax.grid(which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    _save(fig, path, dpi=110)
+    plt.close(fig)
+    return path

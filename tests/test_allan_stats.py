@@ -129,3 +129,42 @@ def test_bad_input_is_named(kwargs, match):
     with pytest.raises(ValueError, match="non-finite value at index 3"):
         allan.deviation(np.r_[Y[:3], np.inf, Y[:10]], 1.0)
     assert hg.allan.deviation is allan.deviation
+
+
+def test_fit_noise_recovers_the_ieee952_terms():
+    """On an exact Allan variance all five coefficients come back; on a simulated record of
+    white rate noise (N) and rate random walk (K) the two are found within their intervals
+    and the bias instability not at all."""
+    taus = 0.1 * 2.0 ** np.arange(16)
+    truth = {"quantization": 0.01, "angle_random_walk": 0.5, "bias_instability": 0.03,
+             "rate_random_walk": 0.002, "rate_ramp": 1e-5}  # fmt: skip
+    var = sum(truth[n] ** 2 * f(taus) for n, _, _, f in allan.NOISE_TERMS)
+    exact = allan.AllanResult(
+        kind="oadev", ci=allan.ONE_SIGMA, taus=taus, m=np.arange(16), dev=np.sqrt(var),
+        dev_low=None, dev_high=None, edf=np.full(16, 50.0), n_terms=None, alpha=None,
+    )  # fmt: skip
+    fit = allan.fit_noise(exact)
+    for name, value in truth.items():
+        assert fit.value[name] == pytest.approx(value, rel=1e-8), name
+    np.testing.assert_allclose(fit.adev(taus), np.sqrt(var), rtol=1e-10)
+
+    # six records: the intervals treat the τ points as independent (they are not quite), so
+    # count: N in all, K in ≥ 5, no bias instability (interval reaching 0) in ≥ 4
+    fs, n, arw, rrw = 10.0, 200_000, 0.5, 0.002
+    hits = {"angle_random_walk": 0, "rate_random_walk": 0, "bias_instability": 0}
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        y = arw * np.sqrt(fs) * rng.normal(size=n)
+        y += np.cumsum(rrw / np.sqrt(fs) * rng.normal(size=n))
+        terms = ("angle_random_walk", "bias_instability", "rate_random_walk")
+        fit = allan.fit_noise(allan.deviation(y, fs), terms=terms)
+        for name, value in (("angle_random_walk", arw), ("rate_random_walk", rrw)):
+            hits[name] += abs(fit.value[name] - value) < 3 * fit.sigma[name]
+            assert fit.low[name] < fit.value[name] < fit.high[name]
+        hits["bias_instability"] += fit.low["bias_instability"] == 0.0
+        assert fit.value["quantization"] == 0.0  # not asked for
+    assert hits == {"angle_random_walk": 6, "rate_random_walk": hits["rate_random_walk"],
+                    "bias_instability": hits["bias_instability"]}  # fmt: skip
+    assert hits["rate_random_walk"] >= 5 and hits["bias_instability"] >= 4, hits
+    with pytest.raises(ValueError, match="result.kind must be 'adev' or 'oadev'"):
+        allan.fit_noise(allan.deviation(Y, 1.0, kind="mdev"))

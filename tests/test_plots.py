@@ -116,3 +116,17 @@ def test_a_mixed_logs_discovery_figure_draws_records_and_dwell_runs(figures):
     assert sum("continuous records" in s for s in titles) == 2
     assert sum("dwell runs" in s for s in titles) == 2
     _check(fig)
+
+
+def test_allan_figure_reads_at_a_glance(figures):
+    from hrgjax import allan
+
+    rng = np.random.default_rng(0)
+    r = allan.deviation(rng.normal(size=4000) + 0.01 * np.cumsum(rng.normal(size=4000)), 1.0)
+    plots.allan_figure(r, "unused.png", fit=allan.fit_noise(r), unit="°/h")
+    (fig,) = figures
+    _check(fig)
+    (ax,) = fig.axes
+    assert ax.get_xscale() == "log" and ax.get_yscale() == "log"
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any("interval" in t for t in labels) and any("angle random walk" in t for t in labels)
