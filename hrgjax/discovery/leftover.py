@@ -131,13 +131,25 @@ def _size(shape: str, coef: np.ndarray, cov: np.ndarray, k_e: float) -> dict:
     return {"size": value, "sigma": sigma, "unit": unit, "words": f"{what}: {value:.3g} {unit}"}
 
 
+def _distinct(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """`cols` without 2θ·Ω² where the table turns at one rate (then it is 2θ·Ω, which
+    keeps the name)."""
+    lag, ripple = cols.get("2θ·Ω²"), cols.get("2θ·Ω")
+    if lag is None or ripple is None:
+        return cols
+    coef, *_ = np.linalg.lstsq(ripple, lag, rcond=None)
+    if np.linalg.norm(lag - ripple @ coef) > 1e-3 * np.linalg.norm(lag):
+        return cols
+    return {k: v for k, v in cols.items() if k != "2θ·Ω²"}
+
+
 def scores(r, j, cols: dict[str, np.ndarray]) -> dict[str, tuple[float, int]]:
     """`{shape: (score S, degrees of freedom q)}` of every shape in `cols` (whitened columns)
     against the whitened residual `r` of a fit with whitened Jacobian `j` — the screening's
     score test, one QR of `j` for all; shapes the model already spans are left out."""
     q_j, _ = np.linalg.qr(j)
     out = {}
-    for name, g in cols.items():
+    for name, g in _distinct(cols).items():
         s, alias, _ = dwell.score(r, j, g, q_j)
         if alias < 0.999:
             out[name] = (s, int(g.shape[1]))
@@ -153,6 +165,7 @@ def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3)
     shapes."""
     rows = []
     q_j, _ = np.linalg.qr(j)
+    cols = _distinct(cols)
     for name, g in cols.items():
         s, alias, step = dwell.score(r, j, g, q_j)
         if alias >= 0.999:
