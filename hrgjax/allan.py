@@ -149,12 +149,32 @@ def _curve(y, ms, tau0, kind):
     """Deviations of `kind` at every averaging factor in `ms` (a run-time integer array);
     `lax.map` keeps the memory at one factor's O(N)."""
     x = _phase(y, tau0)
-    return jax.lax.map(lambda m: _AT_M[kind](y, x, m, tau0), ms)
+    n = x.shape[0]
+    if kind == "totdev":  # the record reflected at both ends, built once for every m
+        j = jnp.arange(1, n - 1)
+        xp = jnp.concatenate([2 * x[0] - x[j][::-1], x, 2 * x[-1] - x[n - 1 - j]])
+    else:  # padded with its last value: x[i + k] is a contiguous slice for any k < n
+        xp = jnp.concatenate([x, jnp.full(n, x[-1])])
+
+    def step(last, m):
+        # a grid padded with repeats of its last factor: a repeat reuses the value (a real
+        # branch inside the scan, so the padding costs nothing)
+        value = jax.lax.cond(
+            m == last[0],
+            lambda: last[1],
+            lambda: _AT_M[kind](y, x, xp, m, tau0).astype(last[1].dtype),
+        )
+        return (m, value), value
+
+    init = (jnp.asarray(-1, ms.dtype), jnp.zeros((), x.dtype))
+    return jax.lax.scan(step, init, ms)[1]
 
 
 def _shifted(x, k):
-    """x[i + k] for every i (k a run-time integer), clamped at the end (masked by callers)."""
-    return x[jnp.minimum(jnp.arange(x.shape[0]) + k, x.shape[0] - 1)]
+    """x[i + k] for every i (k a run-time integer); past the end the last value repeats
+    (masked by callers). A contiguous slice of the padded array, not a gather."""
+    n = x.shape[0]
+    return jax.lax.dynamic_slice(jnp.concatenate([x, jnp.full(n, x[-1])]), (k,), (n,))
 
 
 def _masked_mean(v, count):
@@ -165,20 +185,24 @@ def _tau(m, tau0, like):
     return m.astype(like.dtype) * tau0
 
 
-def _oadev_m(y, x, m, tau0):
+def _slice(xp, k, n):
+    return jax.lax.dynamic_slice(xp, (k,), (n,))
+
+
+def _oadev_m(y, x, xp, m, tau0):
     n1 = x.shape[0]
     i = jnp.arange(n1)
-    d = _shifted(x, 2 * m) - 2 * _shifted(x, m) + x
+    d = _slice(xp, 2 * m, n1) - 2 * _slice(xp, m, n1) + x
     d = jnp.where(i + 2 * m < n1, d, 0.0)
     tau = _tau(m, tau0, d)
     return jnp.sqrt(_masked_mean(d**2, n1 - 2 * m) / (2 * tau**2))
 
 
-def _mdev_m(y, x, m, tau0):
+def _mdev_m(y, x, xp, m, tau0):
     n1 = x.shape[0]
     i = jnp.arange(n1)
     length = n1 - 2 * m
-    d = jnp.where(i < length, _shifted(x, 2 * m) - 2 * _shifted(x, m) + x, 0.0)
+    d = jnp.where(i < length, _slice(xp, 2 * m, n1) - 2 * _slice(xp, m, n1) + x, 0.0)
     c = jnp.concatenate([jnp.zeros(1), jnp.cumsum(d)])
     s = jnp.where(jnp.arange(n1 + 1) <= length - m, _shifted(c, m) - c, 0.0)
     tau = _tau(m, tau0, s)
@@ -194,35 +218,33 @@ def _block_means(y, m):
     return sums / m.astype(y.dtype), k
 
 
-def _adev_m(y, x, m, tau0):
+def _adev_m(y, x, xp, m, tau0):
     ybar, k = _block_means(y, m)
     j = jnp.arange(y.shape[0])
     d = jnp.where(j < k - 1, _shifted(ybar, 1) - ybar, 0.0)
     return jnp.sqrt(0.5 * _masked_mean(d**2, k - 1))
 
 
-def _hdev_m(y, x, m, tau0):
+def _hdev_m(y, x, xp, m, tau0):
     ybar, k = _block_means(y, m)
     j = jnp.arange(y.shape[0])
     d = jnp.where(j < k - 2, _shifted(ybar, 2) - 2 * _shifted(ybar, 1) + ybar, 0.0)
     return jnp.sqrt(_masked_mean(d**2, k - 2) / 6)
 
 
-def _ohdev_m(y, x, m, tau0):
+def _ohdev_m(y, x, xp, m, tau0):
     n1 = x.shape[0]
     i = jnp.arange(n1)
-    d = _shifted(x, 3 * m) - 3 * _shifted(x, 2 * m) + 3 * _shifted(x, m) - x
+    d = _slice(xp, 3 * m, n1) - 3 * _slice(xp, 2 * m, n1) + 3 * _slice(xp, m, n1) - x
     d = jnp.where(i + 3 * m < n1, d, 0.0)
     tau = _tau(m, tau0, d)
     return jnp.sqrt(_masked_mean(d**2, n1 - 3 * m) / (6 * tau**2))
 
 
-def _totdev_m(y, x, m, tau0):
+def _totdev_m(y, x, xs, m, tau0):
     n = x.shape[0]
-    j = jnp.arange(1, n - 1)
-    xs = jnp.concatenate([2 * x[0] - x[j][::-1], x, 2 * x[-1] - x[n - 1 - j]])
-    i = jnp.arange(1, n - 1) + (n - 2)
-    d = xs[i - m] - 2 * xs[i] + xs[i + m]
+    i0 = n - 1  # x[1] in the reflected record; the n − 2 inner points from there
+    d = _slice(xs, i0 - m, n - 2) - 2 * xs[i0 : i0 + n - 2] + _slice(xs, i0 + m, n - 2)
     tau = _tau(m, tau0, d)
     return jnp.sqrt(jnp.sum(d**2) / (2 * tau**2 * (n - 2)))
 
@@ -415,8 +437,7 @@ def noise_id(x, m, dmax: int = 2) -> np.ndarray:
                 )
             out.append(last)
             continue
-        t = np.arange(z.size, dtype=float)
-        z = z - np.polyval(np.polyfit(t, z, 2), t)
+        z = _detrend2(z)
         d = 0
         while True:
             zc = z - z.mean()
@@ -429,6 +450,19 @@ def noise_id(x, m, dmax: int = 2) -> np.ndarray:
         last = int(-round(2 * rho) - 2 * d) + 2
         out.append(last)
     return np.asarray(out, dtype=int)
+
+
+def _detrend2(z):
+    """z less its least-squares quadratic in the sample index (as `np.polyfit(t, z, 2)`), by
+    three orthogonal polynomials on the index: three passes instead of a Vandermonde solve."""
+    n = z.size
+    t = np.linspace(-1.0, 1.0, n)
+    p1 = t
+    p2 = t * t - np.dot(t, t) / n
+    out = z - z.mean()
+    for p in (p1, p2):
+        out = out - p * (np.dot(p, out) / np.dot(p, p))
+    return out
 
 
 # -- equivalent degrees of freedom (Greenhall & Riley, "Uncertainty of stability variances
@@ -589,16 +623,12 @@ def _gammainc(a: float, x: float) -> float:
     if x <= 0:
         return 0.0
     log_front = a * math.log(x) - x - math.lgamma(a)
-    if x < a + 1:
-        term = total = 1.0 / a
-        k = a
-        for _ in range(10_000):
-            k += 1
-            term *= x / k
-            total += term
-            if abs(term) < abs(total) * 1e-17:
-                break
-        return total * math.exp(log_front)
+    if x < a + 1 + 20 * math.sqrt(a):
+        # the series Σ xⁿ/(a(a+1)…(a+n)), summed at once: its terms fall off as
+        # exp(−n²/2a) past n ≈ x − a, so 10√x + (x − a) + 50 of them reach round-off
+        n = int(10 * math.sqrt(x) + max(x - a, 0.0) + 50)
+        terms = np.cumprod(x / (a + np.arange(1, n + 1)))
+        return float((1.0 + terms.sum()) / a * math.exp(log_front))
     tiny = 1e-300  # modified Lentz for Q(a, x)
     b = x + 1 - a
     c, dd = 1 / tiny, 1 / b
