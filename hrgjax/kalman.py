@@ -7,7 +7,12 @@ r"""Kalman-filter building blocks shared by alignment, the INS error models and 
   a numerically safe form — Joseph-form covariance update, the innovation covariance solved
   by Cholesky (never inverted), the covariance re-symmetrised — returning the innovation's
   Gaussian log-likelihood (what a multiple-model filter bank needs).
-- [`kalman_filter`][hrgjax.kalman.kalman_filter]: the whole pass as one `lax.scan`.
+- [`kalman_filter`][hrgjax.kalman.kalman_filter]: the whole pass as one `lax.scan`, control
+  input honoured; [`rts_smoother`][hrgjax.kalman.rts_smoother]: every state given all the
+  measurements.
+- [`extended_kalman_filter`][hrgjax.kalman.extended_kalman_filter] (Jacobians by
+  `jax.jacfwd`) and [`unscented_kalman_filter`][hrgjax.kalman.unscented_kalman_filter]
+  for nonlinear models, with the same log-likelihood convention.
 - [`steady_state`][hrgjax.kalman.steady_state]: the converged gain of a time-invariant
   model (Riccati iteration), for filters that must run at millions of steps per second.
 
@@ -87,7 +92,11 @@ def update(g: Gaussian, z, H, R, mask=True):
     **Returns:** `(posterior, innovation, S, loglik)` where `loglik` is
     $\log N(\nu; 0, S)$ of the innovation ν (0 when `mask` is False: no measurement, the
     prior is returned unchanged)."""
-    nu = z - H @ g.x
+    return _update_innovation(g, z - H @ g.x, H, R, mask)
+
+
+def _update_innovation(g: Gaussian, nu, H, R, mask=True):
+    """`update` given the innovation ν (linear: z − Hx; EKF: z − h(x)) and H."""
     s = H @ g.P @ H.T + R
     s = 0.5 * (s + s.T)
     c = cho_factor(s, lower=True)
@@ -101,24 +110,149 @@ def update(g: Gaussian, z, H, R, mask=True):
     return post, nu, s, jnp.where(mask, loglik, 0.0)
 
 
-def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None):
-    """Run predict → update over the measurements `zs` (K, m) with one `lax.scan`.
-
-    `phi`, `qd` are (n, n) or per-step (K, n, n) (the transition into step k); `H` (m, n),
-    `R` (m, m); `mask` (K,) marks steps that have a measurement.
-
-    **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
+def _steps(prior, phi, qd, zs, mask, us):
     k = zs.shape[0]
+    n = prior.x.shape[0]
     phis = jnp.broadcast_to(phi, (k,) + phi.shape[-2:])
     qds = jnp.broadcast_to(qd, (k,) + qd.shape[-2:])
     mask = jnp.ones(k, bool) if mask is None else jnp.asarray(mask)
+    us = jnp.zeros((k, n), prior.x.dtype) if us is None else jnp.broadcast_to(us, (k, n))
+    return phis, qds, mask, us
+
+
+def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
+    r"""Run predict → update over the measurements `zs` (K, m) with one `lax.scan`.
+
+    `phi`, `qd` are (n, n) or per-step (K, n, n) (the transition into step k); `H` (m, n),
+    `R` (m, m); `mask` (K,) marks steps that have a measurement; `us` (K, n): the control
+    input added in each step's prediction, $x_k = \Phi_k x_{k-1} + u_k$ (discretised with
+    [`discretise_input`][hrgjax.kalman.discretise_input]: u = Γ·input).
+
+    **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
+    phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
 
     def step(g, inp):
-        f, q, z, m = inp
-        g, _, _, ll = update(predict(g, f, q), z, H, R, m)
+        f, q, z, m, u = inp
+        g, _, _, ll = update(predict(g, f, q, u), z, H, R, m)
         return g, (g.x, g.P, ll)
 
-    _, (xs, ps, ll) = jax.lax.scan(step, prior, (phis, qds, zs, mask))
+    _, (xs, ps, ll) = jax.lax.scan(step, prior, (phis, qds, zs, mask, us))
+    return xs, ps, jnp.sum(ll)
+
+
+def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
+    r"""Rauch–Tung–Striebel smoother: the filter of
+    [`kalman_filter`][hrgjax.kalman.kalman_filter] forward, then backward
+    $C_k = P_{k|k}\Phi_{k+1}^	op P_{k+1|k}^{-1}$ (a Cholesky solve),
+    $x_{k|K} = x_{k|k} + C_k(x_{k+1|K} - x_{k+1|k})$,
+    $P_{k|K} = P_{k|k} + C_k(P_{k+1|K} - P_{k+1|k})C_k^	op$ — the posterior of every state
+    given all the measurements. Same arguments as the filter.
+
+    **Returns:** `(smoothed means (K, n), covariances (K, n, n), the filter's total
+    log-likelihood)`."""
+    phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
+
+    def forward(g, inp):
+        f, q, z, m, u = inp
+        pred = predict(g, f, q, u)
+        g, _, _, ll = update(pred, z, H, R, m)
+        return g, (g.x, g.P, pred.x, pred.P, ll)
+
+    _, (xf, pf, xp, pp, ll) = jax.lax.scan(forward, prior, (phis, qds, zs, mask, us))
+
+    def backward(nxt, inp):
+        x, p, x_pred, p_pred, f = inp  # filtered at k; predicted and Φ of step k + 1
+        c = cho_solve(cho_factor(p_pred, lower=True), f @ p).T  # P Φᵀ P_pred⁻¹
+        xs = x + c @ (nxt.x - x_pred)
+        ps = p + c @ (nxt.P - p_pred) @ c.T
+        g = Gaussian(xs, 0.5 * (ps + ps.T))
+        return g, (g.x, g.P)
+
+    last = Gaussian(xf[-1], pf[-1])
+    inputs = (xf[:-1], pf[:-1], xp[1:], pp[1:], phis[1:])
+    _, (xs, ps) = jax.lax.scan(backward, last, inputs, reverse=True)
+    return jnp.concatenate([xs, xf[-1:]]), jnp.concatenate([ps, pf[-1:]]), jnp.sum(ll)
+
+
+def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
+    """Extended Kalman filter: $x_k = f(x_{k-1}, u_k) + w$, $z_k = h(x_k) + v$, with the
+    Jacobians of `f` and `h` by `jax.jacfwd` at the current estimate; the update and the
+    log-likelihood as in [`update`][hrgjax.kalman.update] (innovation z − h(x̂)).
+
+    `f(x, u) -> x` and `h(x) -> z` (pure JAX functions); `qd` (n, n) or (K, n, n); `R` (m, m);
+    `us` (K, p) inputs passed to `f` (zeros (K, 0) when None). On a linear model it is the
+    Kalman filter.
+
+    **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
+    k = zs.shape[0]
+    qds = jnp.broadcast_to(qd, (k,) + qd.shape[-2:])
+    mask = jnp.ones(k, bool) if mask is None else jnp.asarray(mask)
+    us = jnp.zeros((k, 0), prior.x.dtype) if us is None else jnp.asarray(us)
+
+    def step(g, inp):
+        q, z, m, u = inp
+        fj = jax.jacfwd(f)(g.x, u)
+        p = fj @ g.P @ fj.T + q
+        pred = Gaussian(f(g.x, u), 0.5 * (p + p.T))
+        hj = jax.jacfwd(h)(pred.x)
+        g, _, _, ll = _update_innovation(pred, z - h(pred.x), hj, R, m)
+        return g, (g.x, g.P, ll)
+
+    _, (xs, ps, ll) = jax.lax.scan(step, prior, (qds, zs, mask, us))
+    return xs, ps, jnp.sum(ll)
+
+
+def sigma_points(g: Gaussian, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
+    """Scaled unscented sigma points (Van der Merwe): `(points (2n+1, n), mean weights,
+    covariance weights)`; λ = α²(n + κ) − n, points x ± columns of chol((n + λ)P)."""
+    n = g.x.shape[0]
+    lam = alpha**2 * (n + kappa) - n
+    root = jnp.linalg.cholesky((n + lam) * g.P)
+    pts = jnp.concatenate([g.x[None], g.x[None] + root.T, g.x[None] - root.T])
+    wm = jnp.full(2 * n + 1, 0.5 / (n + lam)).at[0].set(lam / (n + lam))
+    wc = wm.at[0].add(1 - alpha**2 + beta)
+    return pts, wm, wc
+
+
+def unscented_kalman_filter(
+    prior: Gaussian, f, qd, h, R, zs, mask=None, us=None, alpha=1.0, beta=2.0, kappa=0.0
+):
+    """Unscented Kalman filter: the same model and returns as
+    [`extended_kalman_filter`][hrgjax.kalman.extended_kalman_filter], moments propagated
+    through `f` and `h` by [`sigma_points`][hrgjax.kalman.sigma_points] instead of Jacobians
+    (exact for the mean of a quadratic). The log-likelihood is that of the innovation under
+    its unscented covariance."""
+    k = zs.shape[0]
+    qds = jnp.broadcast_to(qd, (k,) + qd.shape[-2:])
+    mask = jnp.ones(k, bool) if mask is None else jnp.asarray(mask)
+    us = jnp.zeros((k, 0), prior.x.dtype) if us is None else jnp.asarray(us)
+
+    def step(g, inp):
+        q, z, m, u = inp
+        pts, wm, wc = sigma_points(g, alpha, beta, kappa)
+        fx = jax.vmap(lambda x: f(x, u))(pts)
+        x = wm @ fx
+        dx = fx - x[None]
+        p = (wc[:, None] * dx).T @ dx + q
+        pred = Gaussian(x, 0.5 * (p + p.T))
+        pts, wm, wc = sigma_points(pred, alpha, beta, kappa)
+        hz = jax.vmap(h)(pts)
+        zhat = wm @ hz
+        dz, dxp = hz - zhat[None], pts - pred.x[None]
+        s = (wc[:, None] * dz).T @ dz + R
+        s = 0.5 * (s + s.T)
+        pxz = (wc[:, None] * dxp).T @ dz
+        c = cho_factor(s, lower=True)
+        gain = cho_solve(c, pxz.T).T
+        nu = z - zhat
+        xn = pred.x + gain @ nu
+        pn = pred.P - gain @ s @ gain.T
+        logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(c[0])))
+        ll = -0.5 * (nu @ cho_solve(c, nu) + logdet + nu.shape[0] * LOG_2PI)
+        g = Gaussian(jnp.where(m, xn, pred.x), jnp.where(m, 0.5 * (pn + pn.T), pred.P))
+        return g, (g.x, g.P, jnp.where(m, ll, 0.0))
+
+    _, (xs, ps, ll) = jax.lax.scan(step, prior, (qds, zs, mask, us))
     return xs, ps, jnp.sum(ll)
 
 

@@ -1,0 +1,102 @@
+"""Kalman smoother, EKF and UKF (issue 21, scope 5): against the batch Gaussian posterior,
+the linear filter, and exact moments of a quadratic."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hrgjax import kalman
+
+RNG = np.random.default_rng(2)
+K, N = 7, 2
+PHI = jnp.array([[1.0, 0.5], [0.0, 0.9]])
+QD = jnp.array([[0.02, 0.005], [0.005, 0.03]])
+H = jnp.array([[1.0, 0.0]])
+R = jnp.array([[0.3]])
+PRIOR = kalman.Gaussian(jnp.array([0.2, -0.1]), jnp.array([[1.0, 0.1], [0.1, 0.5]]))
+ZS = jnp.asarray(RNG.normal(size=(K, 1)))
+US = jnp.asarray(RNG.normal(size=(K, N)) * 0.1)
+MASK = jnp.array([True, True, False, True, True, False, True])
+
+
+def _batch_posterior():
+    """Every state x_1 … x_K and measurement jointly Gaussian: condition directly."""
+    phi, qd, h, r = (np.asarray(a) for a in (PHI, QD, H, R))
+    mean, cov = [], []
+    m, p = np.asarray(PRIOR.x), np.asarray(PRIOR.P)
+    # x_k = Φ^k x_0 + Σ Φ^(k−j) (u_j + w_j): build the linear map from (x0, w_1..w_K)
+    a = np.zeros((K * N, N * (K + 1)))
+    b = np.zeros(K * N)
+    for k in range(K):
+        for j in range(k + 1):
+            blk = np.linalg.matrix_power(phi, k - j)
+            a[k * N : (k + 1) * N, (j + 1) * N : (j + 2) * N] = blk
+            b[k * N : (k + 1) * N] += blk @ np.asarray(US[j])
+        a[k * N : (k + 1) * N, :N] = np.linalg.matrix_power(phi, k + 1)
+    src_cov = np.zeros((N * (K + 1),) * 2)
+    src_cov[:N, :N] = p
+    for j in range(1, K + 1):
+        src_cov[j * N : (j + 1) * N, j * N : (j + 1) * N] = qd
+    mean_x = a[:, :N] @ m + b
+    cov_x = a @ src_cov @ a.T
+    seen = [k for k in range(K) if bool(MASK[k])]
+    hh = np.zeros((len(seen), K * N))
+    for i, k in enumerate(seen):
+        hh[i, k * N : (k + 1) * N] = h[0]
+    s = hh @ cov_x @ hh.T + r[0, 0] * np.eye(len(seen))
+    gain = cov_x @ hh.T @ np.linalg.inv(s)
+    z = np.asarray(ZS)[seen, 0]
+    post_mean = mean_x + gain @ (z - hh @ mean_x)
+    post_cov = cov_x - gain @ hh @ cov_x
+    mean = post_mean.reshape(K, N)
+    cov = np.stack([post_cov[k * N : (k + 1) * N, k * N : (k + 1) * N] for k in range(K)])
+    # the measurements' marginal likelihood
+    innov = z - hh @ mean_x
+    loglik = -0.5 * (innov @ np.linalg.solve(s, innov) + np.linalg.slogdet(s)[1]
+                     + len(seen) * np.log(2 * np.pi))  # fmt: skip
+    return mean, cov, loglik
+
+
+def test_rts_smoother_is_the_batch_posterior():
+    xs, ps, ll = kalman.rts_smoother(PRIOR, PHI, QD, H, R, ZS, mask=MASK, us=US)
+    mean, cov, loglik = _batch_posterior()
+    np.testing.assert_allclose(xs, mean, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(ps, cov, rtol=1e-10, atol=1e-12)
+    assert float(ll) == pytest.approx(loglik, rel=1e-10)
+    # the filter's last estimate is the smoother's; the control input is honoured
+    xf, pf, llf = kalman.kalman_filter(PRIOR, PHI, QD, H, R, ZS, mask=MASK, us=US)
+    np.testing.assert_allclose(xf[-1], xs[-1], rtol=1e-12)
+    assert float(llf) == pytest.approx(float(ll), rel=1e-12)
+    x0, _, _ = kalman.kalman_filter(PRIOR, PHI, QD, H, R, ZS, mask=MASK)
+    assert not np.allclose(x0, xf)
+
+
+def test_ekf_and_ukf_are_the_kalman_filter_on_a_linear_model():
+    f = lambda x, u: PHI @ x + u
+    h = lambda x: H @ x
+    ref = kalman.kalman_filter(PRIOR, PHI, QD, H, R, ZS, mask=MASK, us=US)
+    for run in (kalman.extended_kalman_filter, kalman.unscented_kalman_filter):
+        got = run(PRIOR, f, QD, h, R, ZS, mask=MASK, us=US)
+        for a, b in zip(got, ref, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
+def test_ukf_moments_of_a_nonlinear_model():
+    """One prediction through f(x) = (x₀², x₀x₁ + sin x₁): the unscented mean is exact for
+    the quadratic part, and agrees with a Monte Carlo mean of the whole within its error;
+    the EKF's (the function at the mean) misses E[x₀²] by P₀₀."""
+    f = lambda x, u: jnp.stack([x[0] ** 2, x[0] * x[1] + jnp.sin(x[1])])
+    h = lambda x: x[:1]
+    none = jnp.array([False])
+    z0 = jnp.zeros((1, 1))
+    q = jnp.zeros((2, 2))
+    xs, _, _ = kalman.unscented_kalman_filter(PRIOR, f, q, h, R, z0, mask=none)
+    m, p = np.asarray(PRIOR.x), np.asarray(PRIOR.P)
+    assert float(xs[0, 0]) == pytest.approx(m[0] ** 2 + p[0, 0], rel=1e-12)
+    draws = jax.random.multivariate_normal(jax.random.key(0), PRIOR.x, PRIOR.P, (400_000,))
+    mc = jax.vmap(lambda x: f(x, None))(draws)
+    err = np.asarray(mc.std(axis=0)) / np.sqrt(draws.shape[0])
+    assert np.all(np.abs(np.asarray(xs[0]) - np.asarray(mc.mean(axis=0))) < 5 * err + 2e-3)
+    xe, _, _ = kalman.extended_kalman_filter(PRIOR, f, q, h, R, z0, mask=none)
+    assert float(xe[0, 0]) == pytest.approx(m[0] ** 2)
