@@ -209,27 +209,25 @@ def _mdev_m(y, x, xp, m, tau0):
     return jnp.sqrt(_masked_mean(s**2, length - m + 1) / (2 * m.astype(s.dtype) ** 2 * tau**2))
 
 
-def _block_means(y, m):
-    """Means of the blocks y[k m : (k+1) m], k < N // m (later entries are 0)."""
-    n = y.shape[0]
-    k = n // m
-    idx = jnp.arange(n)
-    sums = jax.ops.segment_sum(jnp.where(idx < k * m, y, 0.0), idx // m, num_segments=n)
-    return sums / m.astype(y.dtype), k
-
-
 def _adev_m(y, x, xp, m, tau0):
-    ybar, k = _block_means(y, m)
-    j = jnp.arange(y.shape[0])
-    d = jnp.where(j < k - 1, _shifted(ybar, 1) - ybar, 0.0)
-    return jnp.sqrt(0.5 * _masked_mean(d**2, k - 1))
+    # non-overlapping: the overlapping second differences of the phase at i = 0, m, 2m, …
+    n1 = x.shape[0]
+    i = jnp.arange(n1)
+    d = _slice(xp, 2 * m, n1) - 2 * _slice(xp, m, n1) + x
+    keep = (i + 2 * m < n1) & (i % m == 0)
+    d = jnp.where(keep, d, 0.0)
+    tau = _tau(m, tau0, d)
+    return jnp.sqrt(_masked_mean(d**2, jnp.sum(keep)) / (2 * tau**2))
 
 
 def _hdev_m(y, x, xp, m, tau0):
-    ybar, k = _block_means(y, m)
-    j = jnp.arange(y.shape[0])
-    d = jnp.where(j < k - 2, _shifted(ybar, 2) - 2 * _shifted(ybar, 1) + ybar, 0.0)
-    return jnp.sqrt(_masked_mean(d**2, k - 2) / 6)
+    n1 = x.shape[0]
+    i = jnp.arange(n1)
+    d = _slice(xp, 3 * m, n1) - 3 * _slice(xp, 2 * m, n1) + 3 * _slice(xp, m, n1) - x
+    keep = (i + 3 * m < n1) & (i % m == 0)
+    d = jnp.where(keep, d, 0.0)
+    tau = _tau(m, tau0, d)
+    return jnp.sqrt(_masked_mean(d**2, jnp.sum(keep)) / (6 * tau**2))
 
 
 def _ohdev_m(y, x, xp, m, tau0):
