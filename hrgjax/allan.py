@@ -359,14 +359,15 @@ def deviation(
     # beyond
     pad = max(32, 1 << int(math.ceil(math.log2(m.size))))
     ms = np.concatenate([m, np.full(pad - m.size, m[-1])])
-    dev = np.asarray(_curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base))
-    dev = dev[: m.size]
-    taus_s = m * tau0
-    if kind == "tdev":
-        dev = dev * taus_s / math.sqrt(3.0)
+    # JAX runs the curve asynchronously while NumPy identifies the noise and the EDF
+    pending = _curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base)
     dmax = 3 if kind in ("hdev", "ohdev") else 2
     alpha = noise_id(x, m, dmax=dmax)
     edf = np.asarray([_edf(kind, int(a), int(k), n_phase) for a, k in zip(alpha, m, strict=True)])
+    dev = np.asarray(pending)[: m.size]
+    taus_s = m * tau0
+    if kind == "tdev":
+        dev = dev * taus_s / math.sqrt(3.0)
     low, high = confidence_interval(dev, edf, ci)
     return AllanResult(
         kind=kind, ci=float(ci), taus=taus_s, m=m, dev=dev, dev_low=low, dev_high=high,
