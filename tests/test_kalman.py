@@ -100,3 +100,19 @@ def test_ukf_moments_of_a_nonlinear_model():
     assert np.all(np.abs(np.asarray(xs[0]) - np.asarray(mc.mean(axis=0))) < 5 * err + 2e-3)
     xe, _, _ = kalman.extended_kalman_filter(PRIOR, f, q, h, R, z0, mask=none)
     assert float(xe[0, 0]) == pytest.approx(m[0] ** 2)
+
+
+def test_smoother_and_ekf_vmap_over_records():
+    """A batch of records in one call equals one call per record."""
+    zs = jnp.asarray(RNG.normal(size=(3, K, 1)))
+    f = lambda x, u: PHI @ x + u
+    batch = jax.vmap(lambda z: kalman.rts_smoother(PRIOR, PHI, QD, H, R, z, us=US))(zs)
+    ekf = jax.vmap(
+        lambda z: kalman.extended_kalman_filter(PRIOR, f, QD, lambda x: H @ x, R, z, us=US)
+    )(zs)
+    for i in range(3):
+        one = kalman.rts_smoother(PRIOR, PHI, QD, H, R, zs[i], us=US)
+        np.testing.assert_allclose(batch[0][i], one[0], rtol=1e-12, atol=1e-14)
+        assert float(batch[2][i]) == pytest.approx(float(one[2]), rel=1e-12)
+        lin = kalman.kalman_filter(PRIOR, PHI, QD, H, R, zs[i], us=US)
+        np.testing.assert_allclose(ekf[0][i], lin[0], rtol=1e-9, atol=1e-12)
