@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._nnls import nnls as _nnls
 from ._x64 import require_x64
 
 
@@ -189,13 +190,21 @@ def _slice(xp, k, n):
     return jax.lax.dynamic_slice(xp, (k,), (n,))
 
 
-def _oadev_m(y, x, xp, m, tau0):
+def _difference_dev(y, x, xp, m, tau0, order, overlapping):
+    """Allan (`order` 2) or Hadamard (3) deviation at factor m from the phase's `order`-th
+    differences at lag m: every start (overlapping) or starts at multiples of m."""
     n1 = x.shape[0]
     i = jnp.arange(n1)
-    d = _slice(xp, 2 * m, n1) - 2 * _slice(xp, m, n1) + x
-    d = jnp.where(i + 2 * m < n1, d, 0.0)
+    if order == 2:
+        d = _slice(xp, 2 * m, n1) - 2 * _slice(xp, m, n1) + x
+    else:
+        d = _slice(xp, 3 * m, n1) - 3 * _slice(xp, 2 * m, n1) + 3 * _slice(xp, m, n1) - x
+    keep = i + order * m < n1
+    if not overlapping:
+        keep = keep & (i % m == 0)
+    d = jnp.where(keep, d, 0.0)
     tau = _tau(m, tau0, d)
-    return jnp.sqrt(_masked_mean(d**2, n1 - 2 * m) / (2 * tau**2))
+    return jnp.sqrt(_masked_mean(d**2, jnp.sum(keep)) / ((2 if order == 2 else 6) * tau**2))
 
 
 def _mdev_m(y, x, xp, m, tau0):
@@ -209,36 +218,6 @@ def _mdev_m(y, x, xp, m, tau0):
     return jnp.sqrt(_masked_mean(s**2, length - m + 1) / (2 * m.astype(s.dtype) ** 2 * tau**2))
 
 
-def _adev_m(y, x, xp, m, tau0):
-    # non-overlapping: the overlapping second differences of the phase at i = 0, m, 2m, …
-    n1 = x.shape[0]
-    i = jnp.arange(n1)
-    d = _slice(xp, 2 * m, n1) - 2 * _slice(xp, m, n1) + x
-    keep = (i + 2 * m < n1) & (i % m == 0)
-    d = jnp.where(keep, d, 0.0)
-    tau = _tau(m, tau0, d)
-    return jnp.sqrt(_masked_mean(d**2, jnp.sum(keep)) / (2 * tau**2))
-
-
-def _hdev_m(y, x, xp, m, tau0):
-    n1 = x.shape[0]
-    i = jnp.arange(n1)
-    d = _slice(xp, 3 * m, n1) - 3 * _slice(xp, 2 * m, n1) + 3 * _slice(xp, m, n1) - x
-    keep = (i + 3 * m < n1) & (i % m == 0)
-    d = jnp.where(keep, d, 0.0)
-    tau = _tau(m, tau0, d)
-    return jnp.sqrt(_masked_mean(d**2, jnp.sum(keep)) / (6 * tau**2))
-
-
-def _ohdev_m(y, x, xp, m, tau0):
-    n1 = x.shape[0]
-    i = jnp.arange(n1)
-    d = _slice(xp, 3 * m, n1) - 3 * _slice(xp, 2 * m, n1) + 3 * _slice(xp, m, n1) - x
-    d = jnp.where(i + 3 * m < n1, d, 0.0)
-    tau = _tau(m, tau0, d)
-    return jnp.sqrt(_masked_mean(d**2, n1 - 3 * m) / (6 * tau**2))
-
-
 def _totdev_m(y, x, xs, m, tau0):
     n = x.shape[0]
     i0 = n - 1  # x[1] in the reflected record; the n − 2 inner points from there
@@ -248,11 +227,11 @@ def _totdev_m(y, x, xs, m, tau0):
 
 
 _AT_M = {
-    "adev": _adev_m,
-    "oadev": _oadev_m,
+    "adev": functools.partial(_difference_dev, order=2, overlapping=False),
+    "oadev": functools.partial(_difference_dev, order=2, overlapping=True),
     "mdev": _mdev_m,
-    "hdev": _hdev_m,
-    "ohdev": _ohdev_m,
+    "hdev": functools.partial(_difference_dev, order=3, overlapping=False),
+    "ohdev": functools.partial(_difference_dev, order=3, overlapping=True),
     "totdev": _totdev_m,
 }
 
@@ -762,18 +741,3 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
         high[n] = math.sqrt(c + z * sc)
     chi2 = float(np.sum(((basis @ coef - var) * w) ** 2))
     return NoiseFit(value, sigma, low, high, chi2, int(t.size - np.count_nonzero(coef)))
-
-
-def _nnls(a, b):
-    """Non-negative least squares by every subset of the (≤ 5) columns."""
-    best, best_cost = np.zeros(a.shape[1]), np.inf
-    for mask in range(1, 2 ** a.shape[1]):
-        cols = [j for j in range(a.shape[1]) if mask >> j & 1]
-        x, *_ = np.linalg.lstsq(a[:, cols], b, rcond=None)
-        if np.all(x >= 0):
-            cost = float(np.sum((a[:, cols] @ x - b) ** 2))
-            if cost < best_cost:
-                best = np.zeros(a.shape[1])
-                best[cols] = x
-                best_cost = cost
-    return best

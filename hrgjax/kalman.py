@@ -174,6 +174,15 @@ def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     return jnp.concatenate([xs, xf[-1:]]), jnp.concatenate([ps, pf[-1:]]), jnp.sum(ll)
 
 
+def _nonlinear_steps(prior, qd, zs, mask, us):
+    """Per-step noise, measurement mask and inputs of the EKF/UKF (inputs (K, 0) when none)."""
+    k = zs.shape[0]
+    qds = jnp.broadcast_to(qd, (k,) + qd.shape[-2:])
+    mask = jnp.ones(k, bool) if mask is None else jnp.asarray(mask)
+    us = jnp.zeros((k, 0), prior.x.dtype) if us is None else jnp.asarray(us)
+    return qds, mask, us
+
+
 def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
     """Extended Kalman filter: $x_k = f(x_{k-1}, u_k) + w$, $z_k = h(x_k) + v$, with the
     Jacobians of `f` and `h` by `jax.jacfwd` at the current estimate; the update and the
@@ -184,10 +193,7 @@ def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None)
     Kalman filter.
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
-    k = zs.shape[0]
-    qds = jnp.broadcast_to(qd, (k,) + qd.shape[-2:])
-    mask = jnp.ones(k, bool) if mask is None else jnp.asarray(mask)
-    us = jnp.zeros((k, 0), prior.x.dtype) if us is None else jnp.asarray(us)
+    qds, mask, us = _nonlinear_steps(prior, qd, zs, mask, us)
 
     def step(g, inp):
         q, z, m, u = inp
@@ -222,10 +228,7 @@ def unscented_kalman_filter(
     through `f` and `h` by [`sigma_points`][hrgjax.kalman.sigma_points] instead of Jacobians
     (exact for the mean of a quadratic). The log-likelihood is that of the innovation under
     its unscented covariance."""
-    k = zs.shape[0]
-    qds = jnp.broadcast_to(qd, (k,) + qd.shape[-2:])
-    mask = jnp.ones(k, bool) if mask is None else jnp.asarray(mask)
-    us = jnp.zeros((k, 0), prior.x.dtype) if us is None else jnp.asarray(us)
+    qds, mask, us = _nonlinear_steps(prior, qd, zs, mask, us)
 
     def step(g, inp):
         q, z, m, u = inp

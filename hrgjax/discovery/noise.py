@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from .._nnls import nnls as _nnls
 from ..data import MeasuredData
 from ..units import DEG, DEG_PER_H
 
@@ -251,19 +252,3 @@ def _fit_d2(taus, var, n_eff, tc):
     if tc is None:
         coef = np.r_[coef, 0.0]
     return chi2, coef, tc
-
-
-def _nnls(a, b):
-    """Small non-negative least squares (every subset of the ≤ 3 columns)."""
-    best, best_cost = np.zeros(a.shape[1]), np.inf
-    m = a.shape[1]
-    for mask in range(1, 2**m):
-        cols = [j for j in range(m) if mask >> j & 1]
-        x, *_ = np.linalg.lstsq(a[:, cols], b, rcond=None)
-        if np.all(x >= 0):
-            full = np.zeros(m)
-            full[cols] = x
-            cost = float(np.sum((a @ full - b) ** 2))
-            if cost < best_cost:
-                best, best_cost = full, cost
-    return best
