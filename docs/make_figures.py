@@ -65,6 +65,21 @@ def allan():
                  title="default gyro at rest, 20 000 s at 1 Hz")  # fmt: skip
 
 
+def imu():
+    from hrgjax.plots import imu_session_figure
+
+    rng = np.random.default_rng(1)
+    truth = hg.imu.ImuCalibration.known(
+        accel_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)), accel_bias=[0.1, -0.05, 0.2],
+        gyro_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)),
+        gyro_bias=np.deg2rad([0.5, -0.3, 0.1]), gyro_g_sensitivity=rng.normal(0, 1e-4, (3, 3)),
+    )
+    data, _ = hg.imu.ferraris_session(truth, jax.random.key(0))
+    cal = hg.imu.ferraris(data)
+    imu_session_figure(data, hg.imu.detect_sections(data), os.path.join(HERE, "imu.png"),
+                       calibration=cal)  # fmt: skip
+
+
 def presets():
     from hrgjax.calibration import scale_factor_vs_angle, seed_plan, static_drift
     from hrgjax.plots import drift_and_scale_factor
@@ -219,6 +234,7 @@ FIGURES = (  # longest first (cold, 2 cores), so that the workers finish togethe
     ins,
     full_vs_averaged,
     allan,
+    imu,
 )
 
 

@@ -20,6 +20,7 @@ _SUBMODULES = (
     "diagnosis",
     "discovery",
     "fog",
+    "imu",
     "ins",
     "kalman",
     "nn",

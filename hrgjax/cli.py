@@ -214,6 +214,10 @@ def cmd_demo(args) -> int:
 
 
 METHODS = ("fourier", "mlp", "physical")
+GYRO_UNIT_NAMES = ("deg/s", "rad/s", "deg/h", "mrad/s")
+"""`imu-calibrate --gyro-unit` choices (a subset of hrgjax.imu.GYRO_UNITS)."""
+ACCEL_UNIT_NAMES = ("m/s^2", "g", "mg")
+"""`imu-calibrate --accel-unit` choices (a subset of hrgjax.imu.ACCEL_UNITS)."""
 DIAGNOSIS_METHODS = (
     "filter_bank", "filter_bank_full", "filter_bank_rest", "pnn_bank", "pnn_direct", "som",
     "mlp_classifier", "mlp_predictor",
@@ -230,6 +234,9 @@ EXAMPLES = {
     "align": "hrgjax align psins_lasergyro.imu --json out/align.json --plot out/align.png",
     "diagnose": "hrgjax diagnose --scenario stationary --runs 3 --methods filter_bank,pnn_direct",
     "vibration": "hrgjax vibration --quick --json out/vib.json --plot out/vib.png",
+    "imu-calibrate": "hrgjax imu-calibrate session.csv --sections sections.json --rate-hz 102.4 "
+    "--gyro-unit deg/s --accel-unit m/s^2 --turn-deg -360 --json out/imu_cal.json --plot "
+    "out/imu.png (a session with imucal's columns gyr_x … acc_z and its section-list JSON)",
 }
 """One runnable example per command, shown at the end of `hrgjax CMD --help`."""
 
@@ -492,6 +499,72 @@ def cmd_vibration(args) -> int:
     return 0
 
 
+def cmd_imu_calibrate(args) -> int:
+    """`hrgjax imu-calibrate LOG`: Ferraris calibration of a six-axis IMU session."""
+    _setup()
+    import numpy as np
+
+    from . import imu
+
+    _check_output("--json", args.json, (".json",), [args.log, args.sections])
+    _check_output("--plot", args.plot, PLOT_EXTENSIONS, [args.log])
+    _check_output("--write-sections", args.write_sections, (".json",), [args.log, args.sections])
+    columns = {"gyro": _three("--gyro-columns", args.gyro_columns),
+               "accel": _three("--accel-columns", args.accel_columns)}  # fmt: skip
+    if args.time_column:
+        columns["time"] = args.time_column
+    try:
+        data = imu.load(args.log, columns=columns, rate_hz=args.rate_hz,
+                        units={"gyro": args.gyro_unit, "accel": args.accel_unit})  # fmt: skip
+        if args.sections is None:
+            sections = imu.detect_sections(data)
+        else:
+            sections = imu.parse_sections(args.sections, len(data))
+        cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg)
+    except FileNotFoundError as err:
+        raise UsageError(_one_line(err)) from None
+    except ValueError as err:
+        raise UsageError(_one_line(err)) from None
+    span = float(data.time[-1] - data.time[0])
+    found = "found in the data" if args.sections is None else f"from {args.sections}"
+    print(f"hrgjax imu-calibrate: {args.log} ({len(data)} samples, {span:.0f} s at "
+          f"{data.rate_hz:g} Hz); sections {found}")  # fmt: skip
+    if args.sections is None:
+        for key, ranges in sections.items():
+            print(f"  {key:>5}: " + ", ".join(f"rows {s}–{e}" for s, e in ranges))
+    dps = np.rad2deg(1.0)
+
+    def rows(name, m, sd, scale=1.0, fmt="{:+.6f}"):
+        m, sd = np.atleast_2d(np.asarray(m) * scale), np.atleast_2d(np.asarray(sd) * scale)
+        for k, (r, e) in enumerate(zip(m, sd, strict=True)):
+            cells = "  ".join(f"{fmt.format(v)} ± {abs(x):.1e}" for v, x in zip(r, e, strict=True))
+            print(f"  {name if k == 0 else '':<22}{cells}")
+
+    print(f"  (± 1σ from {cal.sigma_source}; g = {cal.g:g} m/s², turns {list(cal.turn_deg)}°)")
+    rows("accel matrix M_a", cal.accel_matrix, cal.accel_matrix_std)
+    rows("accel bias [m/s²]", cal.accel_bias, cal.accel_bias_std, fmt="{:+.5f}")
+    rows("gyro matrix M_g", cal.gyro_matrix, cal.gyro_matrix_std)
+    rows("gyro bias [°/s]", cal.gyro_bias, cal.gyro_bias_std, dps, fmt="{:+.5f}")
+    rows("gyro g-sens [°/s/(m/s²)]", cal.gyro_g_sensitivity, cal.gyro_g_sensitivity_std, dps,
+         fmt="{:+.5f}")  # fmt: skip
+    if args.json:
+        print(f"wrote {cal.save(args.json)}")
+    if args.write_sections:
+        print(f"wrote {_write_json(imu.sections_to_json(sections), args.write_sections)}")
+    if args.plot:
+        from .plots import imu_session_figure
+
+        print(f"wrote {imu_session_figure(data, sections, args.plot, calibration=cal)}")
+    return 0
+
+
+def _three(option: str, text: str) -> list[str]:
+    names = [t.strip() for t in text.split(",")]
+    if len(names) != 3 or not all(names):
+        raise UsageError(f"{option} {text!r}: give three comma-separated column names (x,y,z)")
+    return names
+
+
 def main(argv=None) -> int:
     """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
     args = build_parser().parse_args(argv)
@@ -647,6 +720,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-noise", action="store_true", help="switch the gyro's noise off")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("imu-calibrate", help="Ferraris calibration of a six-axis IMU session (CSV)")
+    p.add_argument("log", help="CSV file, one row per sample")
+    p.add_argument(
+        "--sections", default=None,
+        help="JSON {\"x_p\": {\"start\": i, \"end\": j}, …} (rows, end excluded; keys x_p x_a y_p "
+        "y_a z_p z_a x_rot y_rot z_rot; a list of ranges per key for repeats); None: find them "
+        "in the data",
+    )  # fmt: skip
+    p.add_argument("--gyro-columns", default="gyr_x,gyr_y,gyr_z", help="gyro x,y,z columns")
+    p.add_argument("--accel-columns", default="acc_x,acc_y,acc_z", help="accel x,y,z columns")
+    p.add_argument("--time-column", default=None, help="time column [s] (None: use --rate-hz)")
+    p.add_argument("--rate-hz", type=POSITIVE_FLOAT, default=None,
+                   help="sample rate [Hz] (needed without --time-column)")  # fmt: skip
+    p.add_argument("--gyro-unit", default="deg/s", choices=tuple(GYRO_UNIT_NAMES),
+                   help="the file's gyro unit")  # fmt: skip
+    p.add_argument("--accel-unit", default="m/s^2", choices=tuple(ACCEL_UNIT_NAMES),
+                   help="the file's accelerometer unit (checked against the data)")  # fmt: skip
+    p.add_argument("--g", type=POSITIVE_FLOAT, default=9.81, help="local gravity [m/s²]")
+    p.add_argument("--turn-deg", type=float, default=360.0,
+                   help="angle of each turn [°], right-handed positive (imucal's clockwise "
+                   "hand turns: -360)")  # fmt: skip
+    p.add_argument("--json", default=None, help="write the calibration here (JSON, SI units)")
+    p.add_argument("--plot", default=None, help="write the session figure here (PNG)")
+    p.add_argument("--write-sections", default=None,
+                   help="write the sections used (found or given) here (JSON)")  # fmt: skip
+    p.set_defaults(func=cmd_imu_calibrate)
     return parser
 
 

@@ -325,3 +325,57 @@ def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "
     _save(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def imu_session_figure(data, sections, path: str, calibration=None, title: str = "") -> str:
+    """A six-axis IMU session on one time line: specific force [m/s²] and rate [°/s] per axis
+    with the Ferraris sections shaded and named; given a calibration, a third row shows
+    |a| − g on the static faces before and after it (what the calibration fixed).
+
+    - `data`: an [`ImuData`][hrgjax.imu.ImuData]; `sections`: `{key: [(start, end), …]}`
+      ([`parse_sections`][hrgjax.imu.sections.parse_sections]); `calibration`: an
+      [`ImuCalibration`][hrgjax.imu.ImuCalibration]. Returns `path`."""
+    from .imu.sections import FACES, parse_sections
+
+    plt = _plt()
+    sections = parse_sections(sections, len(data))
+    rows = 3 if calibration is not None else 2
+    fig, axes = plt.subplots(rows, 1, figsize=(9.0, 2.3 * rows + 0.6), sharex=True,
+                             constrained_layout=True)  # fmt: skip
+    t = np.asarray(data.time) - float(data.time[0])
+    for k, name in enumerate("xyz"):
+        axes[0].plot(t, data.accel[:, k], lw=0.8, color=f"C{k}", label=name)
+        axes[1].plot(t, np.rad2deg(data.gyro[:, k]), lw=0.8, color=f"C{k}", label=name)
+    for key, ranges in sections.items():
+        color = "0.85" if key in FACES else "#fde3c8"
+        for s, e in ranges:
+            for ax in axes[:2]:
+                ax.axvspan(t[s], t[e - 1], color=color, zorder=0)
+            axes[0].annotate(key, ((t[s] + t[e - 1]) / 2, 1.0), xycoords=("data", "axes fraction"),
+                             ha="center", va="bottom", fontsize=8)  # fmt: skip
+    axes[0].set_ylabel("specific force [m/s²]")
+    axes[1].set_ylabel("rate [°/s]")
+    axes[0].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8, title="sensor axis",
+                   title_fontsize=8)  # fmt: skip
+    if calibration is not None:
+        g = calibration.g
+        raw = np.full(t.shape, np.nan)
+        cal = np.full(t.shape, np.nan)
+        _, a_cal = calibration.correct(data.gyro, data.accel)
+        a_cal = np.asarray(a_cal)
+        for key in FACES:
+            for s, e in sections[key]:
+                raw[s:e] = np.linalg.norm(data.accel[s:e], axis=1) - g
+                cal[s:e] = np.linalg.norm(a_cal[s:e], axis=1) - g
+        axes[2].plot(t, raw, lw=0.8, color="0.5", label="raw")
+        axes[2].plot(t, cal, lw=0.8, color="C3", label="calibrated")
+        axes[2].axhline(0.0, color="k", lw=0.5)
+        axes[2].set_ylabel("|a| − g on faces [m/s²]")
+        axes[2].legend(fontsize=8)
+    axes[-1].set_xlabel("time [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    fig.suptitle(title or "Ferraris session: faces (grey) and turns (orange)", fontsize=11)
+    _save(fig, path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,378 @@
+"""`ImuData`: a six-axis IMU record (3-axis gyro + 3-axis accelerometer) in SI units, and
+`load` for CSV logs whose rows are samples.
+
+Inside, every record is SI: time [s], angular rate [rad/s], specific force [m/s²],
+temperature [°C]. The units of a file are declared when it is read (`units=`) and checked
+against what the data can tell: a record that is mostly at rest reads about one g of
+specific force, so an accelerometer declared in m/s² that reads ≈ 1 is in g (and the
+other way round) — an error, never a silent rescale."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ..units import DEG, G0
+
+GYRO_UNITS: dict[str, float] = {
+    "rad/s": 1.0,
+    "deg/s": DEG,
+    "dps": DEG,
+    "°/s": DEG,
+    "deg/h": DEG / 3600.0,
+    "°/h": DEG / 3600.0,
+    "mrad/s": 1e-3,
+}
+"""Angular-rate units `load` and `ImuData.from_arrays` accept, with their size in rad/s."""
+ACCEL_UNITS: dict[str, float] = {
+    "m/s^2": 1.0,
+    "m/s2": 1.0,
+    "m/s²": 1.0,
+    "g": G0,
+    "mg": 1e-3 * G0,
+}
+"""Specific-force units accepted, with their size in m/s² (g is standard gravity, 9.80665)."""
+AXES = ("x", "y", "z")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ImuData:
+    """A six-axis IMU record in SI units; arrays are read-only copies of the input.
+
+    **Fields:**
+
+    - `time` (N,) [s], strictly increasing (uniform `arange(N) / rate_hz` when the source
+      had no time column);
+    - `gyro` (N, 3) [rad/s], sensor axes x, y, z;
+    - `accel` (N, 3) [m/s²], specific force along the sensor axes (at rest and level, the
+      axis that points up reads +g);
+    - `temperature` (N,) [°C] or None;
+    - `rate_hz` [Hz]: the nominal sample rate (given, or 1 / median time step).
+
+    Build it in SI with `ImuData(time, gyro, accel, temperature, rate_hz)` (validated), from
+    arrays in other units with [`from_arrays`][hrgjax.imu.ImuData.from_arrays], or from a
+    CSV file with [`load`][hrgjax.imu.load].
+
+    **Raises:** `ValueError` naming the field (and the first bad row) for a wrong shape,
+    a value that is not finite, or a time that does not increase."""
+
+    time: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    temperature: np.ndarray | None = None
+    rate_hz: float | None = None
+
+    def __post_init__(self):
+        gyro = _triad("gyro", self.gyro)
+        accel = _triad("accel", self.accel)
+        n = gyro.shape[0]
+        if accel.shape[0] != n:
+            raise ValueError(
+                f"accel has {accel.shape[0]} samples, gyro has {n}; give one row per sample"
+            )
+        if n < 2:
+            raise ValueError(f"gyro: need at least 2 samples, got {n}")
+        time = _vector("time", self.time, n)
+        step = np.diff(time)
+        bad = np.flatnonzero(~(step > 0))
+        if bad.size:
+            i = int(bad[0]) + 1
+            raise ValueError(
+                f"time row {i}: {time[i]!r} s does not increase (row {i - 1}: {time[i - 1]!r} s); "
+                "time must be strictly increasing"
+            )
+        rate = self.rate_hz
+        if rate is None:
+            rate = 1.0 / float(np.median(step))
+        elif not (np.isfinite(rate) and rate > 0):
+            raise ValueError(
+                f"rate_hz must be a positive number of samples per second; got {rate!r}"
+            )
+        temp = None if self.temperature is None else _vector("temperature", self.temperature, n)
+        for name, value in (
+            ("time", time), ("gyro", gyro), ("accel", accel), ("temperature", temp),
+        ):  # fmt: skip
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "rate_hz", float(rate))
+
+    @classmethod
+    def from_arrays(
+        cls,
+        gyro,
+        accel,
+        *,
+        units: Mapping[str, str],
+        rate_hz: float | None = None,
+        time=None,
+        temperature=None,
+        check_units: bool = True,
+    ) -> ImuData:
+        """An `ImuData` from arrays in declared units.
+
+        **Arguments:** `gyro` (N, 3) and `accel` (N, 3) in `units["gyro"]` (one of
+        [`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], e.g. "deg/s") and `units["accel"]` (one of
+        [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS], e.g. "m/s^2" or "g"); `rate_hz` [Hz]
+        (needed without `time`); `time` (N,) [s]; `temperature` (N,) [°C]; `check_units`:
+        compare the declared accelerometer unit with the data's median |specific force|."""
+        gyro_unit, accel_unit = _declared(units)
+        g = _triad("gyro", gyro)
+        a = _triad("accel", accel)
+        if time is None:
+            if rate_hz is None:
+                raise ValueError("rate_hz: give the sample rate [Hz] when there is no time column")
+            rate_hz = _positive("rate_hz", rate_hz)
+            time = np.arange(g.shape[0]) / rate_hz
+        if check_units:
+            _check_accel_unit(a, accel_unit)
+        return cls(
+            time=time,
+            gyro=g * GYRO_UNITS[gyro_unit],
+            accel=a * ACCEL_UNITS[accel_unit],
+            temperature=temperature,
+            rate_hz=rate_hz,
+        )
+
+    def __len__(self) -> int:
+        return int(self.gyro.shape[0])
+
+    @property
+    def dt(self) -> np.ndarray:
+        """Each sample's time step (N,) [s]: the forward difference of `time`, the last
+        sample's the median step (1 / `rate_hz` for uniform data)."""
+        step = np.diff(self.time)
+        return np.append(step, np.median(step))
+
+    def rows(self, start: int, end: int) -> ImuData:
+        """The samples `start ≤ i < end` as a new record (read-only views)."""
+        n = len(self)
+        if not (0 <= start < end <= n):
+            raise ValueError(f"rows [{start}, {end}) are not inside the record's 0 … {n} samples")
+        t = None if self.temperature is None else self.temperature[start:end]
+        return ImuData(
+            self.time[start:end], self.gyro[start:end], self.accel[start:end], t, self.rate_hz
+        )
+
+    def __repr__(self) -> str:
+        span = float(self.time[-1] - self.time[0])
+        temp = "" if self.temperature is None else ", temperature"
+        return f"ImuData({len(self)} samples, {span:.1f} s at {self.rate_hz:g} Hz{temp})"
+
+    def save(self, path: str | os.PathLike) -> str:
+        """Write the record as CSV in SI units (columns `time_s`, `gyro_x_rad_s` … `gyro_z_rad_s`,
+        `accel_x_m_s2` … `accel_z_m_s2`, `temperature_c`), atomically; returns the path. Read
+        it back with `load(path, columns=SI_COLUMNS, units=SI_UNITS)`."""
+        from .._io import atomic_write
+
+        names = [SI_COLUMNS["time"], *SI_COLUMNS["gyro"], *SI_COLUMNS["accel"]]
+        cols = [self.time[:, None], self.gyro, self.accel]
+        if self.temperature is not None:
+            names.append("temperature_c")
+            cols.append(self.temperature[:, None])
+        table = np.concatenate(cols, axis=1)
+        with atomic_write(path, "w", newline="") as fh:
+            fh.write(",".join(names) + "\n")
+            np.savetxt(fh, table, delimiter=",", fmt="%.17g")
+        return os.fspath(path)
+
+
+SI_COLUMNS = {
+    "time": "time_s",
+    "gyro": ["gyro_x_rad_s", "gyro_y_rad_s", "gyro_z_rad_s"],
+    "accel": ["accel_x_m_s2", "accel_y_m_s2", "accel_z_m_s2"],
+}
+"""The column map of files written by [`ImuData.save`][hrgjax.imu.ImuData.save] (add
+`"temperature": "temperature_c"` for a record that has a temperature)."""
+SI_UNITS = {"gyro": "rad/s", "accel": "m/s^2"}
+"""The units of files written by [`ImuData.save`][hrgjax.imu.ImuData.save]."""
+
+
+def load(
+    path: str | os.PathLike,
+    columns: Mapping[str, object],
+    units: Mapping[str, str],
+    rate_hz: float | None = None,
+    check_units: bool = True,
+) -> ImuData:
+    """Read a six-axis IMU log from a CSV file whose rows are samples.
+
+    **Arguments:**
+
+    - `path`: CSV file (UTF-8, a header row, comma-separated; `#` lines are comments).
+    - `columns`: `{"gyro": [x, y, z column names], "accel": [x, y, z column names]}`, and
+      optionally `"time"` (a column in seconds) and `"temperature"` (°C). Other columns are
+      ignored.
+    - `units`: `{"gyro": "deg/s" | "rad/s" | …, "accel": "m/s^2" | "g" | …}`
+      ([`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS]).
+    - `rate_hz`: sample rate [Hz]; needed when there is no time column, otherwise
+      1 / median time step unless given.
+    - `check_units`: refuse an accelerometer unit the data contradict (see the module notes).
+
+    **Returns:** an [`ImuData`][hrgjax.imu.ImuData] in SI units.
+
+    **Raises:** `ValueError` naming the file, the column and the row (and the file's line)
+    for a missing column, text where a number belongs, or a value that is not finite."""
+    from ..data import _read_csv, _with_line
+
+    path = os.fspath(path)
+    if os.path.splitext(path)[1].lower() != ".csv":
+        raise ValueError(f"{path}: hg.imu.load reads .csv files")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{path}: no such file")
+    names = _column_map(columns)
+    _declared(units)
+    table, lines = _read_csv(path)
+    missing = [c for c in _all_names(names) if c not in table]
+    if missing:
+        raise ValueError(
+            f"{path}: column {missing[0]!r} (from columns=) is not in the file; its columns "
+            f"are {sorted(table)}"
+        )
+    got = {}
+    for c in _all_names(names):
+        col = table[c]
+        if col.dtype.kind not in "fiu":
+            bad = next(i for i, v in enumerate(col) if not _is_number(v))
+            raise ValueError(
+                _with_line(
+                    f"{path}: column {c!r} row {bad}: {str(col[bad])!r} is not a number", lines
+                )
+            )
+        col = col.astype(float)
+        bad = np.flatnonzero(~np.isfinite(col))
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(
+                _with_line(f"{path}: column {c!r} row {i}: {col[i]!r} is not finite", lines)
+            )
+        got[c] = col
+    try:
+        return ImuData.from_arrays(
+            np.stack([got[c] for c in names["gyro"]], axis=1),
+            np.stack([got[c] for c in names["accel"]], axis=1),
+            units=units,
+            rate_hz=rate_hz,
+            time=got[names["time"]] if "time" in names else None,
+            temperature=got[names["temperature"]] if "temperature" in names else None,
+            check_units=check_units,
+        )
+    except ValueError as err:
+        raise ValueError(f"{path}: {_with_line(str(err), lines)}") from None
+
+
+def _is_number(v) -> bool:
+    try:
+        float(v)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def _column_map(columns) -> dict:
+    if not isinstance(columns, Mapping):
+        raise ValueError(
+            'columns must be a mapping like {"gyro": ["gx", "gy", "gz"], "accel": ["ax", "ay", '
+            f'"az"], "time": "t"}}; got {type(columns).__name__}'
+        )
+    unknown = set(columns) - {"gyro", "accel", "time", "temperature"}
+    if unknown:
+        raise ValueError(
+            f"columns: unknown key {sorted(unknown)[0]!r}; keys are gyro, accel, time, temperature"
+        )
+    out = {}
+    for key in ("gyro", "accel"):
+        value = columns.get(key)
+        if isinstance(value, str) or not isinstance(value, Sequence) or len(value) != 3:
+            raise ValueError(f'columns["{key}"] must list 3 column names (x, y, z); got {value!r}')
+        out[key] = [str(v) for v in value]
+    for key in ("time", "temperature"):
+        if columns.get(key) is not None:
+            if not isinstance(columns[key], str):
+                raise ValueError(f'columns["{key}"] must be one column name; got {columns[key]!r}')
+            out[key] = columns[key]
+    flat = _all_names(out)
+    dup = sorted({c for c in flat if flat.count(c) > 1})
+    if dup:
+        raise ValueError(f"columns: {dup[0]!r} is mapped twice; give each quantity its own column")
+    return out
+
+
+def _all_names(names: dict) -> list[str]:
+    out = [*names["gyro"], *names["accel"]]
+    out += [names[k] for k in ("time", "temperature") if k in names]
+    return out
+
+
+def _declared(units) -> tuple[str, str]:
+    if not isinstance(units, Mapping) or set(units) - {"gyro", "accel"}:
+        raise ValueError(
+            'units must be a mapping {"gyro": "deg/s" | "rad/s", "accel": "m/s^2" | "g"}; '
+            f"got {units!r}"
+        )
+    out = []
+    for key, table in (("gyro", GYRO_UNITS), ("accel", ACCEL_UNITS)):
+        u = units.get(key)
+        if u not in table:
+            raise ValueError(f'units["{key}"] must be one of {list(table)}; got {u!r}')
+        out.append(u)
+    return out[0], out[1]
+
+
+def _triad(name: str, x) -> np.ndarray:
+    try:
+        a = np.array(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a numeric (N, 3) array") from None
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3) (axes x, y, z); got {a.shape}")
+    _finite(name, a)
+    a.flags.writeable = False
+    return a
+
+
+def _vector(name: str, x, n: int) -> np.ndarray:
+    try:
+        a = np.array(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a numeric (N,) array") from None
+    if a.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},) like gyro; got {a.shape}")
+    _finite(name, a)
+    a.flags.writeable = False
+    return a
+
+
+def _finite(name: str, a: np.ndarray) -> None:
+    bad = np.argwhere(~np.isfinite(a))
+    if bad.size:
+        i = tuple(int(k) for k in bad[0])
+        where = f"row {i[0]}" + (f", axis {AXES[i[1]]}" if len(i) > 1 else "")
+        raise ValueError(f"{name} {where}: {a[i]!r} is not finite")
+
+
+def _positive(name: str, x) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number; got {x!r}") from None
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a positive number; got {x!r}")
+    return v
+
+
+def _check_accel_unit(a: np.ndarray, unit: str) -> None:
+    """Refuse an accelerometer unit the data contradict: a record that is mostly at rest has
+    a median |specific force| of about one g."""
+    norm = float(np.median(np.linalg.norm(a, axis=1))) * ACCEL_UNITS[unit]
+    if 0.3 * G0 <= norm <= 3.0 * G0:
+        return
+    guess = min(ACCEL_UNITS, key=lambda u: abs(np.log(norm / ACCEL_UNITS[unit] * ACCEL_UNITS[u] / G0))
+                if norm > 0 else 0)  # fmt: skip
+    hint = f" (the data look like {guess!r})" if norm > 0 else ""
+    raise ValueError(
+        f'units["accel"] = {unit!r} makes the median |accel| {norm:.4g} m/s², not about one g '
+        f"(9.8 m/s²){hint}; declare the file's unit, or pass check_units=False for a record "
+        "that is not mostly at rest"
+    )

@@ -1,0 +1,199 @@
+"""Ferraris sections: which rows of a session are which static face or which turn.
+
+A Ferraris session holds the IMU still on each of its six faces — `x_p` (sensor x axis up,
+the x accelerometer reads +g), `x_a` (x down), `y_p`, `y_a`, `z_p`, `z_a` — and turns it once
+(360°) about each sensor axis — `x_rot`, `y_rot`, `z_rot`, each from the position with that
+axis up, so that gravity stays on the turning axis. Sections are half-open row ranges
+`[start, end)` (imucal's convention), given
+
+- as a mapping `{"x_p": {"start": 540, "end": 1271}, …}` (imucal's section-list JSON reads
+  as is), a key's value may also be `[start, end]` or a list of such ranges: repeated
+  positions, which give the calibration's standard errors from their scatter;
+- as the path of a JSON file holding that mapping;
+- or found in the data by [`detect_sections`][hrgjax.imu.detect_sections]."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+FACES = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
+"""Static faces: sensor axis up (`p`, that accelerometer reads +g) or down (`a`)."""
+TURNS = ("x_rot", "y_rot", "z_rot")
+"""One full turn about each sensor axis, that axis vertical."""
+SECTION_KEYS = FACES + TURNS
+"""Every key a Ferraris session needs."""
+
+Sections = dict[str, list[tuple[int, int]]]
+
+
+def parse_sections(sections, n_samples: int) -> Sections:
+    """Sections as `{key: [(start, end), …]}` (one or more half-open row ranges per key),
+    validated against a record of `n_samples` rows.
+
+    **Arguments:** `sections`: a mapping or the path of a JSON file (see the module notes);
+    `n_samples`: the record's length.
+
+    **Raises:** `ValueError` naming the key for a missing or unknown key, a range that is
+    not `{"start": i, "end": j}` / `[i, j]` with 0 ≤ i < j ≤ n_samples, or a face shorter
+    than 2 samples."""
+    where = "sections"
+    if isinstance(sections, str | os.PathLike):
+        where = os.fspath(sections)
+        if not os.path.isfile(where):
+            raise FileNotFoundError(f"{where}: no such file")
+        try:
+            with open(where, encoding="utf-8") as fh:
+                sections = json.load(fh)
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{where}: not JSON ({err.msg} at line {err.lineno})") from None
+    if not isinstance(sections, Mapping):
+        raise ValueError(
+            f'{where} must map the keys {", ".join(SECTION_KEYS)} to {{"start": i, "end": j}}; '
+            f"got {type(sections).__name__}"
+        )
+    unknown = sorted(set(sections) - set(SECTION_KEYS))
+    if unknown:
+        raise ValueError(f"{where}: unknown key {unknown[0]!r}; keys are {', '.join(SECTION_KEYS)}")
+    missing = [k for k in SECTION_KEYS if k not in sections]
+    if missing:
+        raise ValueError(
+            f"{where}: no section {missing[0]!r} (a Ferraris session needs {', '.join(SECTION_KEYS)}"
+            "; detect_sections finds them in the data)"
+        )
+    out: Sections = {}
+    for key in SECTION_KEYS:
+        value = sections[key]
+        ranges = value if _is_list_of_ranges(value) else [value]
+        if not ranges:
+            raise ValueError(f"{where}: {key!r} lists no range")
+        out[key] = [_range(where, key, r, n_samples) for r in ranges]
+    return out
+
+
+def _is_list_of_ranges(value) -> bool:
+    if isinstance(value, Mapping) or isinstance(value, str) or not isinstance(value, Sequence):
+        return False
+    return all(isinstance(v, Mapping) or (isinstance(v, Sequence) and not isinstance(v, str))
+               for v in value) and len(value) > 0 and not _is_pair(value)  # fmt: skip
+
+
+def _is_pair(value) -> bool:
+    return len(value) == 2 and all(isinstance(v, int | np.integer) for v in value)
+
+
+def _range(where: str, key: str, r, n: int) -> tuple[int, int]:
+    form = f'{{"start": i, "end": j}} or [i, j] with 0 <= i < j <= {n} (rows, end excluded)'
+    if isinstance(r, Mapping):
+        if set(r) - {"start", "end"} or "start" not in r or "end" not in r:
+            raise ValueError(f"{where}: {key!r} must be {form}; got {dict(r)!r}")
+        start, end = r["start"], r["end"]
+    elif isinstance(r, Sequence) and not isinstance(r, str) and len(r) == 2:
+        start, end = r
+    else:
+        raise ValueError(f"{where}: {key!r} must be {form}; got {r!r}")
+    ok = all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in (start, end))
+    if not ok or not (0 <= start < end <= n):
+        raise ValueError(f"{where}: {key!r} must be {form}; got [{start!r}, {end!r}]")
+    if key in FACES and end - start < 2:
+        raise ValueError(f"{where}: face {key!r} has {end - start} sample; need at least 2")
+    return int(start), int(end)
+
+
+def sections_to_json(sections: Sections) -> dict:
+    """Sections as JSON-ready `{key: {"start", "end"}}`, or a list of those for a key with
+    repeats (the form `parse_sections` reads)."""
+    out = {}
+    for key, ranges in sections.items():
+        rows = [{"start": int(s), "end": int(e)} for s, e in ranges]
+        out[key] = rows[0] if len(rows) == 1 else rows
+    return out
+
+
+def detect_sections(
+    data,
+    *,
+    min_static_s: float = 2.0,
+    motion_threshold_dps: float = 3.0,
+    window_s: float = 0.25,
+    trim_s: float = 0.2,
+    turn_tolerance_deg: float = 45.0,
+) -> Sections:
+    """Find the Ferraris sections of a session in its data.
+
+    Rest is where the gyro's rate (median over the record removed, moving mean over
+    `window_s`) stays below `motion_threshold_dps` [°/s] for at least `min_static_s` [s];
+    each rest, less `trim_s` [s] at both ends, is the face whose accelerometer axis carries
+    most of the specific force (at least 80 %, by sign `p` or `a`). Each stretch of motion
+    between two rests whose bias-corrected gyro integrates to a full turn (360° within
+    `turn_tolerance_deg`, at least 90 % of it about one axis) is that axis's `*_rot`, from
+    the end of the rest before to the start of the rest after; the rests on either side of
+    a turn count as a face only where no other rest holds that face. A face or a turn found
+    more than once is a repeat.
+
+    **Returns:** `{key: [(start, end), …]}` for every key of
+    [`SECTION_KEYS`][hrgjax.imu.sections.SECTION_KEYS].
+
+    **Raises:** `ValueError` listing the keys not found (with what was found), so that a
+    user can pass them by hand."""
+    n = len(data)
+    rate = data.rate_hz
+    gyro = np.asarray(data.gyro)
+    accel = np.asarray(data.accel)
+    w = max(int(round(window_s * rate)), 1)
+    rel = gyro - np.median(gyro, axis=0)
+    speed = _moving_mean(np.linalg.norm(rel, axis=1), w)
+    still = speed < np.deg2rad(motion_threshold_dps)
+    rests = [(s, e) for s, e in _runs(still) if e - s >= min_static_s * rate]
+    trim = int(round(trim_s * rate)) + w // 2
+    found: dict[str, list[tuple[int, int]]] = {k: [] for k in SECTION_KEYS}
+    rest_rows = [(s + trim, e - trim) for s, e in rests if e - s - 2 * trim >= 2]
+    beside_turn = set()
+    if rest_rows:
+        bias = np.median(np.concatenate([gyro[s:e] for s, e in rest_rows]), axis=0)
+        dt = data.dt
+        for j in range(len(rest_rows) - 1):
+            e0, s1 = rest_rows[j][1], rest_rows[j + 1][0]
+            turn = np.rad2deg(((gyro[e0:s1] - bias) * dt[e0:s1, None]).sum(axis=0))
+            i = int(np.argmax(np.abs(turn)))
+            full = abs(abs(turn[i]) - 360.0) <= turn_tolerance_deg
+            if full and abs(turn[i]) >= 0.9 * np.linalg.norm(turn):
+                found[f"{'xyz'[i]}_rot"].append((e0, s1))
+                beside_turn |= {j, j + 1}
+    faces: dict[str, list[tuple[int, bool]]] = {k: [] for k in FACES}
+    for j, (s, e) in enumerate(rest_rows):
+        f = accel[s:e].mean(axis=0)
+        i = int(np.argmax(np.abs(f)))
+        if abs(f[i]) >= 0.8 * np.linalg.norm(f):
+            faces[f"{'xyz'[i]}_{'p' if f[i] > 0 else 'a'}"].append((j, j in beside_turn))
+    for key, rows in faces.items():
+        # the rests that hold a turn's axis up count as that face only where no other does
+        keep = [j for j, beside in rows if not beside] or [j for j, _ in rows]
+        found[key] = [rest_rows[j] for j in keep]
+    missing = [k for k in SECTION_KEYS if not found[k]]
+    if missing:
+        have = {k: len(v) for k, v in found.items() if v}
+        raise ValueError(
+            f"detect_sections: found no {', '.join(missing)} in {n} samples (found {have}); "
+            "pass the sections by hand, or change min_static_s / motion_threshold_dps"
+        )
+    return found
+
+
+def _moving_mean(x: np.ndarray, w: int) -> np.ndarray:
+    if w <= 1:
+        return x
+    c = np.cumsum(np.concatenate([[0.0], x]))
+    half = w // 2
+    lo = np.clip(np.arange(x.size) - half, 0, x.size)
+    hi = np.clip(np.arange(x.size) - half + w, 0, x.size)
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Half-open ranges where `mask` is true."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))

@@ -1,0 +1,134 @@
+"""A simulated Ferraris session: a six-axis IMU with a known calibration, put on its six
+faces and turned once about each axis, with rigid-body kinematics between the positions.
+
+For rehearsing a bench procedure, testing detection and checking that a calibration's
+standard errors hold (the truth is known)."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+
+from .data import ImuData
+from .ferraris import ImuCalibration
+from .sections import FACES, TURNS, Sections
+
+_UP = np.array([0.0, 0.0, 1.0])
+
+
+def face_attitude(key: str) -> np.ndarray:
+    """Attitude C (3, 3) of face `key` ("x_p" … "z_a"): columns are the sensor axes in a
+    world frame with z up (sensor axis i up or down, the next axis east)."""
+    i, sign = "xyz".index(key[0]), 1.0 if key.endswith("_p") else -1.0
+    c = np.zeros((3, 3))
+    c[:, i] = sign * _UP
+    c[:, (i + 1) % 3] = [1.0, 0.0, 0.0]
+    c[:, (i + 2) % 3] = np.cross(c[:, i], c[:, (i + 1) % 3])
+    return c
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    a = axis / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+
+
+def _axis_angle(r: np.ndarray) -> tuple[np.ndarray, float]:
+    angle = float(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0)))
+    if angle < 1e-12:
+        return np.array([1.0, 0.0, 0.0]), 0.0
+    if np.pi - angle < 1e-6:
+        b = (r + np.eye(3)) / 2
+        i = int(np.argmax(np.diag(b)))
+        return b[:, i] / np.sqrt(b[i, i]), angle
+    v = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    return v / (2 * np.sin(angle)), angle
+
+
+def _turn(c0, axis, angle, n, rate_hz, g):
+    """Samples of a smooth turn of `angle` [rad] about the body `axis`, starting at rest in
+    attitude `c0` and ending at rest: rate (1 − cos) shaped, so that its n-sample rectangle
+    sum is exactly `angle`. Returns ω (n, 3) [rad/s], a (n, 3) [m/s²], final attitude."""
+    t = np.arange(n) / rate_hz
+    period = n / rate_hz
+    phi = angle * (t / period - np.sin(2 * np.pi * t / period) / (2 * np.pi))
+    dphi = angle / period * (1 - np.cos(2 * np.pi * t / period))
+    omega = dphi[:, None] * axis[None, :]
+    accel = np.stack([(c0 @ _rotation(axis, p)).T @ (g * _UP) for p in phi])
+    return omega, accel, c0 @ _rotation(axis, angle)
+
+
+def ferraris_session(
+    truth: ImuCalibration,
+    key: jax.Array,
+    *,
+    rate_hz: float = 100.0,
+    static_s: float = 6.0,
+    move_s: float = 2.0,
+    turn_s: float = 4.0,
+    repeats: int = 1,
+    gyro_noise: float = 1e-3,
+    accel_noise: float = 0.01,
+    g: float = 9.81,
+    turn_deg: float = 360.0,
+) -> tuple[ImuData, Sections]:
+    """Simulate a Ferraris session of an IMU whose sensors follow `truth`.
+
+    The IMU rests `static_s` [s] on each face x_p, x_a, y_p, y_a, z_p, z_a, then, for each
+    axis, goes to that axis's `p` face, rests `move_s`, turns `turn_deg` [°] about the axis
+    in `turn_s` [s] and rests `move_s`; between positions it rotates in `move_s` [s] about a
+    fixed body axis. The whole sequence runs `repeats` times. Noise: white, `gyro_noise`
+    [rad/s] and `accel_noise` [m/s²] per sample (σ), drawn from `key`.
+
+    **Returns:** `(data, sections)`: the record (`ImuData`, SI) and its true sections
+    (faces: the rests; turns: the turn with half of each neighbouring rest)."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be a positive integer; got {repeats!r}")
+    n_static, n_move, n_turn = (max(int(round(s * rate_hz)), 2) for s in (static_s, move_s, turn_s))
+    omega, accel = [], []
+    sections: Sections = {k: [] for k in (*FACES, *TURNS)}
+    count = 0
+    c = face_attitude("z_p")
+
+    def add(w, a):
+        nonlocal count
+        omega.append(w)
+        accel.append(a)
+        count += w.shape[0]
+
+    def rest(n):
+        a = c.T @ (g * _UP)
+        add(np.zeros((n, 3)), np.tile(a, (n, 1)))
+
+    def go_to(face):
+        nonlocal c
+        target = face_attitude(face)
+        axis, angle = _axis_angle(c.T @ target)
+        if angle == 0.0:
+            return
+        w, a, _ = _turn(c, axis, angle, n_move, rate_hz, g)
+        add(w, a)
+        c = target
+
+    for _ in range(repeats):
+        for face in FACES:
+            go_to(face)
+            start = count
+            rest(n_static)
+            sections[face].append((start, count))
+        for i, turn in enumerate(TURNS):
+            go_to(f"{'xyz'[i]}_p")
+            rest(n_move)
+            start = count - n_move // 2
+            w, a, c = _turn(c, np.eye(3)[i], np.deg2rad(turn_deg), n_turn, rate_hz, g)
+            add(w, a)
+            rest(n_move)
+            sections[turn].append((start, count - n_move + n_move // 2))
+    w_true = np.concatenate(omega)
+    a_true = np.concatenate(accel)
+    w_s, a_s = (np.asarray(x) for x in truth.sensor(w_true, a_true))
+    kg, ka = jax.random.split(key)
+    w_s = w_s + gyro_noise * np.asarray(jax.random.normal(kg, w_s.shape, dtype=float))
+    a_s = a_s + accel_noise * np.asarray(jax.random.normal(ka, a_s.shape, dtype=float))
+    data = ImuData(np.arange(count) / rate_hz, w_s, a_s, rate_hz=rate_hz)
+    return data, sections

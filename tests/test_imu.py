@@ -1,0 +1,309 @@
+"""Six-axis IMU data and the Ferraris calibration: against imucal (the peer library), a
+direct sample-by-sample implementation of the textbook formulas, a known truth (exact
+without noise, within 3σ with noise), and the file formats."""
+
+import json
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+import hrgjax as hg
+from hrgjax.imu import FACES, SECTION_KEYS, TURNS, ImuCalibration
+
+RATE = 100.0
+
+
+@pytest.fixture(scope="module")
+def truth():
+    rng = np.random.default_rng(1)
+    return ImuCalibration.known(
+        accel_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)),
+        accel_bias=rng.normal(0, 0.1, 3),
+        gyro_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)),
+        gyro_bias=rng.normal(0, 0.01, 3),
+        gyro_g_sensitivity=rng.normal(0, 1e-4, (3, 3)),
+    )
+
+
+@pytest.fixture(scope="module")
+def session(truth):
+    return hg.imu.ferraris_session(truth, jax.random.key(0), rate_hz=RATE)
+
+
+@pytest.fixture(scope="module")
+def fitted(session):
+    data, sections = session
+    return hg.imu.ferraris(data, sections)
+
+
+def test_noise_free_session_recovers_the_truth_exactly(truth):
+    data, sections = hg.imu.ferraris_session(
+        truth, jax.random.key(1), gyro_noise=0.0, accel_noise=0.0, turn_deg=-360.0
+    )
+    cal = hg.imu.ferraris(data, sections, turn_deg=-360.0)
+    np.testing.assert_allclose(cal.vector(), truth.vector(), rtol=0, atol=1e-12)
+    # calibrated, each face reads ±g on its axis and no rate
+    out = cal.apply(data)
+    for key in FACES:
+        s, e = sections[key][0]
+        i, sign = "xyz".index(key[0]), 1.0 if key.endswith("_p") else -1.0
+        np.testing.assert_allclose(
+            out.accel[s:e], np.tile(sign * 9.81 * np.eye(3)[i], (e - s, 1)), atol=1e-12
+        )
+        np.testing.assert_allclose(out.gyro[s:e], 0.0, atol=1e-13)
+    assert not np.shares_memory(out.gyro, data.gyro) and data.gyro.flags.writeable is False
+
+
+def test_noisy_session_within_three_sigma(truth, fitted):
+    assert fitted.sigma_source == "white noise"
+    z = (np.asarray(fitted.vector()) - np.asarray(truth.vector())) / np.sqrt(
+        np.diag(fitted.covariance)
+    )
+    assert np.all(np.abs(z) < 3.0), np.round(z, 2)
+    assert 0.6 < np.sqrt(np.mean(z**2)) < 1.5  # the σ are neither inflated nor too small
+    # the per-sample noise seen on the faces is the simulated one
+    np.testing.assert_allclose(fitted.noise_std, [1e-3] * 3 + [0.01] * 3, rtol=0.05)
+
+
+def test_equals_imucal(session, fitted):
+    """imucal 2.6 (FerrarisCalibration, gyro in °/s): M = K·R, biases, K_ga. The faces have
+    equal lengths, where imucal's gyro bias (mean of all face samples) equals ours (mean of
+    the three ± pair means)."""
+    imucal = pytest.importorskip("imucal")
+    data, sections = session
+    deg = np.rad2deg(1.0)
+
+    def region(kind, key):
+        s, e = sections[key][0]
+        return np.asarray(data.accel[s:e] if kind == "acc" else data.gyro[s:e] * deg)
+
+    regions = imucal.FerrarisSignalRegions(**{
+        f"{kind}_{key}": region(kind, key) for kind in ("acc", "gyr") for key in SECTION_KEYS
+    })  # fmt: skip
+    ref = imucal.FerrarisCalibration(grav=9.81, expected_angle=360.0).compute(
+        regions, sampling_rate_hz=RATE, from_acc_unit="m/s^2", from_gyr_unit="deg/s"
+    )
+    np.testing.assert_allclose(fitted.accel_matrix, ref.K_a @ ref.R_a, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(fitted.accel_bias, ref.b_a, rtol=1e-12)
+    np.testing.assert_allclose(fitted.gyro_matrix, ref.K_g @ ref.R_g, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(fitted.gyro_bias, ref.b_g / deg, rtol=1e-11)
+    np.testing.assert_allclose(fitted.gyro_g_sensitivity, ref.K_ga / deg, rtol=1e-10, atol=1e-16)
+    # and imucal's inverse applied to the session equals ours
+    acc_ref, gyr_ref = ref.calibrate(
+        np.asarray(data.accel), np.asarray(data.gyro) * deg, "m/s^2", "deg/s"
+    )
+    w, a = fitted.correct(data.gyro, data.accel)
+    np.testing.assert_allclose(a, acc_ref, atol=1e-11)
+    np.testing.assert_allclose(np.asarray(w) * deg, gyr_ref, atol=1e-10)
+
+
+def _textbook(data, sections, g, turn_deg):
+    """The Ferraris formulas sample by sample: face means, each axis's ± pair, every turn
+    sample corrected for bias and g-sensitivity (with the calibrated accelerometer) before
+    integration."""
+    acc = {k: data.accel[slice(*sections[k][0])].mean(0) for k in FACES}
+    gyr = {k: data.gyro[slice(*sections[k][0])].mean(0) for k in FACES}
+    m_a = np.zeros((3, 3))
+    b_a = np.zeros(3)
+    g_s = np.zeros((3, 3))
+    b_g = np.zeros(3)
+    for i, ax in enumerate("xyz"):
+        m_a[:, i] = (acc[f"{ax}_p"] - acc[f"{ax}_a"]) / (2 * g)
+        b_a[i] = (acc[f"{ax}_p"][i] + acc[f"{ax}_a"][i]) / 2
+        g_s[:, i] = (gyr[f"{ax}_p"] - gyr[f"{ax}_a"]) / (2 * g)
+        b_g += (gyr[f"{ax}_p"] + gyr[f"{ax}_a"]) / 6
+    m_g = np.zeros((3, 3))
+    inv_a = np.linalg.inv(m_a)
+    for i, key in enumerate(TURNS):
+        s, e = sections[key][0]
+        angle = np.zeros(3)
+        for k in range(s, e):
+            a_hat = inv_a @ (data.accel[k] - b_a)
+            angle += (data.gyro[k] - b_g - g_s @ a_hat) * (data.time[k + 1] - data.time[k])
+        m_g[:, i] = angle / np.deg2rad(turn_deg)
+    return m_a, b_a, m_g, b_g, g_s
+
+
+def test_equals_the_textbook_formulas_on_detected_sections(session):
+    """Detected sections have unequal lengths and the record an irregular clock: the
+    estimator still equals the formulas applied sample by sample."""
+    data0, _ = session
+    jitter = np.random.default_rng(3).uniform(-0.2, 0.2, len(data0)) / RATE
+    data = hg.imu.ImuData(data0.time + jitter, data0.gyro, data0.accel)
+    sections = hg.imu.detect_sections(data)
+    cal = hg.imu.ferraris(data, sections)
+    for got, want in zip(
+        (cal.accel_matrix, cal.accel_bias, cal.gyro_matrix, cal.gyro_bias, cal.gyro_g_sensitivity),
+        _textbook(data, sections, 9.81, 360.0),
+        strict=True,
+    ):
+        np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-15)
+    assert data.rate_hz == pytest.approx(RATE, rel=0.01)
+
+
+def test_detection_finds_the_true_sections(session):
+    data, true = session
+    found = hg.imu.detect_sections(data)
+    for key in SECTION_KEYS:
+        assert len(found[key]) == 1, (key, found[key])
+        (s, e), (ts, te) = found[key][0], true[key][0]
+        if key in FACES:  # inside the true rest, and most of it
+            assert ts <= s < e <= te and e - s > 0.8 * (te - ts)
+        else:  # the whole turn (true range: the turn ± half a rest) and nothing more
+            n_half = int(2.0 * RATE) // 2
+            assert ts < s <= ts + n_half and te - n_half <= e < te
+    cal = hg.imu.ferraris(data)  # sections found by itself
+    assert np.all(np.isfinite(cal.covariance))
+
+
+def test_repeats_give_standard_errors_like_the_noise(truth):
+    data, sections = hg.imu.ferraris_session(truth, jax.random.key(2), repeats=4, static_s=3.0)
+    assert all(len(sections[k]) == 4 for k in SECTION_KEYS)
+    cal = hg.imu.ferraris(data, sections)
+    assert cal.sigma_source == "repeats"
+    single = {k: v[:1] for k, v in sections.items()}
+    white = hg.imu.ferraris(data, single)
+    # 4 repeats: σ ≈ σ_white(one set) / 2 on average over the parameters
+    ratio = np.sqrt(np.diag(cal.covariance) / np.diag(white.covariance))
+    assert 0.3 < np.exp(np.mean(np.log(ratio))) < 0.8
+    z = (np.asarray(cal.vector()) - np.asarray(truth.vector())) / np.asarray(
+        np.sqrt(np.diag(white.covariance)) / 2
+    )
+    assert np.all(np.abs(z) < 4.0)
+
+
+def test_triad_form_and_model_round_trip(fitted):
+    for triad, m, b in ((fitted.accel_triad(), fitted.accel_matrix, fitted.accel_bias),
+                        (fitted.gyro_triad(), fitted.gyro_matrix, fitted.gyro_bias)):  # fmt: skip
+        np.testing.assert_allclose(triad.matrix, m, rtol=1e-13)  # exact decomposition
+        np.testing.assert_allclose(triad.bias, b)
+        assert np.all(triad.angles_std > 0) and np.all(triad.scale_std > 0)
+    rng = np.random.default_rng(0)
+    w, a = rng.normal(size=(5, 3)), rng.normal(size=(5, 3)) * 9.81
+    w2, a2 = fitted.correct(*fitted.sensor(w, a))
+    np.testing.assert_allclose(w2, w, atol=1e-12)
+    np.testing.assert_allclose(a2, a, atol=1e-12)
+    # differentiable: d(corrected ω)/d(gyro) = M_g⁻¹
+    jac = jax.jacfwd(lambda g: fitted.correct(g, a[0])[0])(w[0])
+    np.testing.assert_allclose(jac, np.linalg.inv(fitted.gyro_matrix), rtol=1e-12)
+
+
+def test_calibration_file_round_trip(fitted, tmp_path):
+    path = fitted.save(tmp_path / "cal.json")
+    obj = json.loads(Path(path).read_text())
+    assert obj["format"] == "hrgjax.imu_calibration"
+    assert {"accel_bias_m_s2", "gyro_bias_rad_s", "gyro_g_sensitivity_rad_s_per_m_s2"} <= set(obj)
+    back = hg.imu.load_calibration(path)
+    for name in ("accel_matrix", "accel_bias", "gyro_matrix", "gyro_bias", "gyro_g_sensitivity",
+                 "covariance", "noise_std"):  # fmt: skip
+        np.testing.assert_array_equal(getattr(back, name), getattr(fitted, name))
+    assert back.sigma_source == fitted.sigma_source and back.g == fitted.g
+    (tmp_path / "bad.json").write_text(json.dumps({**obj, "accel_bias_m_s2": [1, 2]}))
+    with pytest.raises(ValueError, match="'accel_bias_m_s2'.*shape"):
+        hg.imu.load_calibration(tmp_path / "bad.json")
+
+
+def _write_log(path, data, deg=True, g_units=True, time=True, extra=""):
+    gyro = np.rad2deg(data.gyro) if deg else data.gyro
+    accel = data.accel / 9.80665 if g_units else data.accel
+    cols = ([data.time[:, None]] if time else []) + [gyro, accel]
+    head = ("t," if time else "") + "gx,gy,gz,ax,ay,az"
+    np.savetxt(path, np.concatenate(cols, axis=1), delimiter=",", header=head, comments="",
+               fmt="%.17g")  # fmt: skip
+    if extra:
+        text = Path(path).read_text().splitlines()
+        text[3] = extra
+        Path(path).write_text("\n".join(text) + "\n")
+    return path
+
+
+COLS = {"gyro": ["gx", "gy", "gz"], "accel": ["ax", "ay", "az"], "time": "t"}
+
+
+def test_load_csv_with_declared_units(session, tmp_path):
+    data, _ = session
+    path = _write_log(tmp_path / "log.csv", data)
+    got = hg.imu.load(path, columns=COLS, units={"gyro": "deg/s", "accel": "g"})
+    np.testing.assert_allclose(got.gyro, data.gyro, rtol=1e-14, atol=1e-18)
+    np.testing.assert_allclose(got.accel, data.accel, rtol=1e-14)
+    np.testing.assert_array_equal(got.time, data.time)
+    assert got.rate_hz == pytest.approx(RATE)
+    # no time column: the rate makes one
+    path2 = _write_log(tmp_path / "notime.csv", data, deg=False, g_units=False, time=False)
+    cols = {"gyro": COLS["gyro"], "accel": COLS["accel"]}
+    got2 = hg.imu.load(path2, columns=cols, units={"gyro": "rad/s", "accel": "m/s^2"}, rate_hz=RATE)
+    np.testing.assert_allclose(got2.time, np.arange(len(data)) / RATE)
+    # SI files written by ImuData.save read back exactly
+    back = hg.imu.load(
+        data.save(tmp_path / "si.csv"), columns=hg.imu.SI_COLUMNS, units=hg.imu.SI_UNITS
+    )
+    np.testing.assert_array_equal(back.gyro, data.gyro)
+
+
+def test_bad_input_is_named(session, tmp_path):
+    data, sections = session
+    path = _write_log(tmp_path / "log.csv", data)
+    units = {"gyro": "deg/s", "accel": "g"}
+    with pytest.raises(ValueError, match=r"units\[\"accel\"\] = 'm/s\^2'.*look like 'g'"):
+        hg.imu.load(path, columns=COLS, units={"gyro": "deg/s", "accel": "m/s^2"})
+    with pytest.raises(ValueError, match=r"units\[\"gyro\"\] must be one of"):
+        hg.imu.load(path, columns=COLS, units={"gyro": "degrees", "accel": "g"})
+    with pytest.raises(ValueError, match="column 'wx' .*not in the file"):
+        hg.imu.load(path, columns={**COLS, "gyro": ["wx", "gy", "gz"]}, units=units)
+    with pytest.raises(ValueError, match=r"columns\[\"accel\"\] must list 3"):
+        hg.imu.load(path, columns={**COLS, "accel": ["ax", "ay"]}, units=units)
+    bad = _write_log(tmp_path / "bad.csv", data, extra="0.02,1,2,x,0,0,1")
+    with pytest.raises(
+        ValueError, match=r"column 'gz' row 2 \(line 4 of the file\): 'x' is not a number"
+    ):
+        hg.imu.load(bad, columns=COLS, units=units)
+    with pytest.raises(ValueError, match="time row 1: .* does not increase"):
+        hg.imu.ImuData(np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match=r"gyro must have shape \(N, 3\)"):
+        hg.imu.ImuData(np.arange(3.0), np.zeros((3, 2)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="no section 'z_rot'"):
+        hg.imu.ferraris(data, {k: v for k, v in sections.items() if k != "z_rot"})
+    with pytest.raises(ValueError, match=r"'x_p' must be .*0 <= i < j"):
+        hg.imu.ferraris(data, {**sections, "x_p": {"start": 10, "end": 10**6}})
+    with pytest.raises(ValueError, match="face 'x_a' .* x axis is not down"):
+        hg.imu.ferraris(data, {**sections, "x_a": sections["x_p"]})
+    with pytest.raises(
+        ValueError, match="turn 'x_rot' integrates to 35.*turn_deg is -360.*pass turn_deg=360"
+    ):
+        hg.imu.ferraris(data, sections, turn_deg=(-360.0, 360.0, 360.0))
+    rad_as_deg = hg.imu.ImuData(data.time, data.gyro * np.pi / 180, data.accel)
+    with pytest.raises(ValueError, match="turn 'x_rot' integrates to 6.2.*gyro unit"):
+        hg.imu.ferraris(rad_as_deg, sections)
+
+
+def test_sections_json_and_imucal_form(session, fitted, tmp_path):
+    data, sections = session
+    path = tmp_path / "sections.json"
+    path.write_text(json.dumps(hg.imu.sections_to_json(sections)))  # imucal's list form
+    cal = hg.imu.ferraris(data, str(path))
+    np.testing.assert_array_equal(cal.vector(), fitted.vector())
+    pairs = {k: [list(r) for r in v] for k, v in sections.items()}
+    np.testing.assert_array_equal(hg.imu.ferraris(data, pairs).vector(), fitted.vector())
+
+
+def test_cli_imu_calibrate(session, fitted, tmp_path, capsys):
+    from hrgjax.cli import main
+
+    data, sections = session
+    log = _write_log(tmp_path / "log.csv", data)
+    (tmp_path / "s.json").write_text(json.dumps(hg.imu.sections_to_json(sections)))
+    out = tmp_path / "cal.json"
+    rc = main(["imu-calibrate", str(log), "--sections", str(tmp_path / "s.json"), "--json", str(out),
+               "--gyro-columns", "gx,gy,gz", "--accel-columns", "ax,ay,az", "--time-column", "t",
+               "--gyro-unit", "deg/s", "--accel-unit", "g"])  # fmt: skip
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "gyro bias" in text and "accel matrix" in text
+    back = hg.imu.load_calibration(out)
+    np.testing.assert_allclose(back.vector(), fitted.vector(), rtol=1e-12, atol=1e-15)
+    with pytest.raises(SystemExit) as err:
+        main(["imu-calibrate", str(log), "--gyro-columns", "gx,gy", "--json", str(out)])
+    assert err.value.code == 2
+    assert "--gyro-columns" in capsys.readouterr().err
