@@ -101,7 +101,7 @@ def totdev(y, m: int = 1, tau0: float = 1.0):
     i = jnp.arange(1, n - 1) + off
     d = xs[i - m] - 2 * xs[i] + xs[i + m]
     tau = m * tau0
-    return jnp.sqrt(jnp.sum(d**2) / (2 * tau**2 * (n - 2)))
+    return jnp.sqrt(_sum(d**2) / (2 * tau**2 * (n - 2)))
 
 
 _KINDS = {
@@ -155,7 +155,7 @@ def _curve(y, ms, tau0, kind):
         j = jnp.arange(1, n - 1)
         xp = jnp.concatenate([2 * x[0] - x[j][::-1], x, 2 * x[-1] - x[n - 1 - j]])
     else:  # padded with its last value: x[i + k] is a contiguous slice for any k < n
-        xp = jnp.concatenate([x, jnp.full(n, x[-1])])
+        xp = jnp.concatenate([x, jnp.full(n + _LANES, x[-1])])
 
     def step(last, m):
         # a grid padded with repeats of its last factor: a repeat reuses the value (a real
@@ -178,8 +178,23 @@ def _shifted(x, k):
     return jax.lax.dynamic_slice(jnp.concatenate([x, jnp.full(n, x[-1])]), (k,), (n,))
 
 
+def _sum(v):
+    """Σ v over a 1-D array as 16 interleaved partial sums: XLA:CPU turns a plain reduction
+    into one serial chain of additions (latency-bound, ≈ 2 ns per element); 16 independent
+    accumulators vectorise, 5× faster on 10⁶ samples (the order of the additions differs
+    from `jnp.sum` at round-off)."""
+    n = v.shape[0]
+    pad = -n % _LANES
+    if pad:
+        v = jnp.concatenate([v, jnp.zeros(pad, v.dtype)])
+    return jnp.sum(jnp.sum(v.reshape(-1, _LANES), axis=0))
+
+
+_LANES = 16
+
+
 def _masked_mean(v, count):
-    return jnp.sum(v) / jnp.asarray(count).astype(v.dtype)
+    return _sum(v) / jnp.asarray(count).astype(v.dtype)
 
 
 def _tau(m, tau0, like):
@@ -192,19 +207,28 @@ def _slice(xp, k, n):
 
 def _difference_dev(y, x, xp, m, tau0, order, overlapping):
     """Allan (`order` 2) or Hadamard (3) deviation at factor m from the phase's `order`-th
-    differences at lag m: every start (overlapping) or starts at multiples of m."""
+    differences at lag m: every start (overlapping) or starts at multiples of m. The
+    differences run over a length rounded up to whole `_LANES` (the padded phase is long
+    enough) so that their sum vectorises without a copy."""
     n1 = x.shape[0]
-    i = jnp.arange(n1)
+    length = -(-n1 // _LANES) * _LANES
+    i = jnp.arange(length)
     if order == 2:
-        d = _slice(xp, 2 * m, n1) - 2 * _slice(xp, m, n1) + x
+        d = _slice(xp, 2 * m, length) - 2 * _slice(xp, m, length) + xp[:length]
     else:
-        d = _slice(xp, 3 * m, n1) - 3 * _slice(xp, 2 * m, n1) + 3 * _slice(xp, m, n1) - x
-    keep = i + order * m < n1
-    if not overlapping:
-        keep = keep & (i % m == 0)
+        d = (_slice(xp, 3 * m, length) - 3 * _slice(xp, 2 * m, length)
+             + 3 * _slice(xp, m, length) - xp[:length])  # fmt: skip
+    span = n1 - order * m  # starts i < span have all their points
+    keep = i < span
+    count = span
+    if not overlapping:  # starts at multiples of m: (i + ½)/m floors exactly (float, as
+        # integer division does not vectorise on XLA:CPU)
+        mf, fi = m.astype(d.dtype), i.astype(d.dtype)
+        keep = keep & (jnp.floor((fi + 0.5) * (1.0 / mf)) * mf == fi)
+        count = (span + m - 1) // m
     d = jnp.where(keep, d, 0.0)
     tau = _tau(m, tau0, d)
-    return jnp.sqrt(_masked_mean(d**2, jnp.sum(keep)) / ((2 if order == 2 else 6) * tau**2))
+    return jnp.sqrt(_masked_mean(d**2, count) / ((2 if order == 2 else 6) * tau**2))
 
 
 def _mdev_m(y, x, xp, m, tau0):
@@ -223,7 +247,7 @@ def _totdev_m(y, x, xs, m, tau0):
     i0 = n - 1  # x[1] in the reflected record; the n − 2 inner points from there
     d = _slice(xs, i0 - m, n - 2) - 2 * xs[i0 : i0 + n - 2] + _slice(xs, i0 + m, n - 2)
     tau = _tau(m, tau0, d)
-    return jnp.sqrt(jnp.sum(d**2) / (2 * tau**2 * (n - 2)))
+    return jnp.sqrt(_sum(d**2) / (2 * tau**2 * (n - 2)))
 
 
 _AT_M = {
