@@ -37,7 +37,8 @@ N_STATE = 7
 
 
 def _input(gyro, profile, t, rate, accel):
-    omega = rate + gyro.rate_bias + gyro.g_sensitivity @ accel
+    gs = gyro.g_sensitivity  # elementwise, not a 3-dot (a kernel of its own on XLA:CPU)
+    omega = rate + gyro.rate_bias + (gs[0] * accel[0] + gs[1] * accel[1] + gs[2] * accel[2])
     if gyro.drift_terms is not None:
         omega = omega + gyro.drift_terms.input_rate(profile, t)
     return omega

@@ -132,13 +132,13 @@ def drive_vectors(control: Control, loops: LoopOutputs, theta_est):
     The AGC force lies along the estimated antinode, the quadrature force along the
     estimated node; the forcer gain mismatch is applied last.
     """
-    e_a = jnp.stack([jnp.cos(theta_est), jnp.sin(theta_est)])
-    e_q = jnp.stack([-jnp.sin(theta_est), jnp.cos(theta_est)])
+    c, s = jnp.cos(theta_est), jnp.sin(theta_est)  # e_a = (c, s), e_q = (−s, c)
     g = control.excitation_phase if control.drive == "force" else 0.0
-    u = -loops.force * jnp.sin(g) * e_a + loops.quad_force * e_q
-    v = -loops.force * jnp.cos(g) * e_a
-    m = control.forcer_matrix()
-    return m @ u, m @ v
+    fs, fc, fq = -loops.force * jnp.sin(g), -loops.force * jnp.cos(g), loops.quad_force
+    gm = control.forcer_gain_mismatch  # the forcer matrix diag(1 + g, 1 − g), elementwise
+    u = jnp.stack([(1.0 + gm) * (fs * c - fq * s), (1.0 - gm) * (fs * s + fq * c)])
+    v = jnp.stack([(1.0 + gm) * fc * c, (1.0 - gm) * fc * s])
+    return u, v
 
 
 def pump_phase(control: Control):

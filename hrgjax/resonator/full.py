@@ -9,8 +9,9 @@ and the parametric pump acts at $2\psi_r + 2\gamma$.
 
 from __future__ import annotations
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .averaged import _input, input_rate
 from .control import (
@@ -23,7 +24,6 @@ from .control import (
 from .readout import estimate, from_signals
 
 N_STATE = 8
-_J = np.array([[0.0, -1.0], [1.0, 0.0]])  # NumPy: a module constant must not be a JAX array
 
 
 def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
@@ -41,7 +41,7 @@ def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
     gains would rectify into a bias of the efforts.
     """
     z, zdot = y[0:2], y[2:4] * omega_scale
-    zdot = zdot + gyro.resonator.k_e * omega_in * (_J @ z)
+    zdot = zdot + gyro.resonator.k_e * omega_in * _rot90(z)
     demod = from_signals(z, zdot, y[4], gyro.resonator.omega + y[5])
     if readout:
         demod = demod.transform(gyro.readout.matrix())
@@ -51,32 +51,89 @@ def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
 def full_vector_field(t, y, args):
     """Right-hand side of the full model; `args = (gyro, profile, omega_scale)`."""
     gyro, profile, omega_scale = args
+    g, omega_in, omega_dot = environment(gyro, profile, t)
+    return carrier_rhs(g, omega_in, omega_dot, y, omega_scale)
+
+
+def environment(gyro, profile, t):
+    """What the profile imposes at time t [s]: the gyro with its temperature laws evaluated,
+    the equivalent input rate Ω [rad/s] and the table's angular acceleration [rad/s²]."""
     rate, omega_dot, temperature, accel = profile.sample(t)
     g = gyro.at(temperature)
-    res, ctl = g.resonator, g.control
+    return g, _input(g, profile, t, rate, accel), omega_dot
+
+
+def carrier_rhs(g, omega_in, omega_dot, y, omega_scale):
+    """The full model's right-hand side for a gyro `g` whose temperature laws are evaluated,
+    the input rate `omega_in` [rad/s] and angular acceleration `omega_dot` [rad/s²]:
+    demodulation, loops, forces and the two-pendulum dynamics at state `y`."""
     z, zdot = y[0:2], y[2:4] * omega_scale
     psi_r = y[4]
-    omega_in = _input(g, profile, t, rate, accel)
-    if ctl.enabled:
-        est = full_estimates(g, y, omega_scale, omega_in)
-        loops = loop_outputs(ctl, res.omega, est, y[5:8])
-        u, v = drive_vectors(ctl, loops, est.theta)
-        force = u * jnp.cos(psi_r) + v * jnp.sin(psi_r)
-        pump = res.omega**2 * loops.pump * jnp.cos(2 * psi_r + 2 * pump_phase(ctl))
-        d_int = integrator_rates(ctl, res.omega, est)
-        omega_r = loops.omega_r
-    else:
-        force, pump, d_int, omega_r = 0.0 * z, 0.0, jnp.zeros(3), res.omega
-    zddot = (
+    eff = loop_efforts(g, omega_in, y, omega_scale)
+    force = eff.u * jnp.cos(psi_r) + eff.v * jnp.sin(psi_r)
+    pump = eff.pump * jnp.cos(2 * psi_r + eff.pump_phase2)
+    zddot = mechanics(g.resonator, omega_in, omega_dot, z, zdot, force, pump)
+    return jnp.concatenate([zdot, zddot / omega_scale, jnp.reshape(eff.omega_r, (1,)), eff.d_int])
+
+
+class LoopEfforts(eqx.Module):
+    r"""What the closed loops apply, from the demodulated state: the electrode force
+    $\mathbf u\cos\psi_r + \mathbf v\sin\psi_r$, the pump $P\cos(2\psi_r + 2\gamma)$ (`pump` = P
+    [1/s²], `pump_phase2` = 2γ), the integrators' rates `d_int` (3,) and the reference
+    frequency `omega_r` [rad/s]."""
+
+    u: jax.Array
+    v: jax.Array
+    pump: jax.Array
+    pump_phase2: jax.Array
+    d_int: jax.Array
+    omega_r: jax.Array
+
+
+def loop_efforts(g, omega_in, y, omega_scale) -> LoopEfforts:
+    """Demodulation and loop laws at state `y` (zero efforts for free-running control)."""
+    res, ctl = g.resonator, g.control
+    if not ctl.enabled:
+        zero = 0.0 * y[0]
+        return LoopEfforts(jnp.zeros(2), jnp.zeros(2), zero, zero, jnp.zeros(3), res.omega + zero)
+    est = full_estimates(g, y, omega_scale, omega_in)
+    loops = loop_outputs(ctl, res.omega, est, y[5:8])
+    u, v = drive_vectors(ctl, loops, est.theta)
+    return LoopEfforts(
+        u=u,
+        v=v,
+        pump=res.omega**2 * loops.pump,
+        pump_phase2=2 * pump_phase(ctl) + 0.0 * loops.pump,
+        d_int=integrator_rates(ctl, res.omega, est),
+        omega_r=loops.omega_r,
+    )
+
+
+def mechanics(res, omega_in, omega_dot, z, zdot, force, pump):
+    r"""The two-pendulum acceleration $\ddot{\mathbf z}$ (PHYSICS.md §2): electrode force, damping
+    and stiffness with their defects, Coriolis $-2k_e\Omega\mathbf J\dot{\mathbf z}$, angular
+    acceleration $-k_e\dot\Omega\mathbf J\mathbf z$, Duffing $-\chi|\mathbf z|^2\mathbf z$ and the
+    parametric pump (`pump` the factor multiplying z)."""
+    return (
         force
-        - res.damping_matrix @ zdot
-        - res.stiffness_matrix @ z
-        - 2 * res.k_e * omega_in * (_J @ zdot)
-        - res.k_e * omega_dot * (_J @ z)
-        - res.chi * (z @ z) * z
+        - _times(res.damping_matrix, zdot)
+        - _times(res.stiffness_matrix, z)
+        - 2 * res.k_e * omega_in * _rot90(zdot)
+        - res.k_e * omega_dot * _rot90(z)
+        - res.chi * (z[0] ** 2 + z[1] ** 2) * z
         + pump * z
     )
-    return jnp.concatenate([zdot, zddot / omega_scale, jnp.reshape(omega_r, (1,)), d_int])
+
+
+def _rot90(z):
+    """J z = (−z_y, z_x): a quarter turn of a 2-vector."""
+    return jnp.stack([-z[1], z[0]])
+
+
+def _times(m, z):
+    """m @ z for a 2 × 2 matrix, elementwise: a tiny dot is a kernel of its own on XLA:CPU
+    that does not fuse with the arithmetic around it (this runs at every stage)."""
+    return jnp.stack([m[0, 0] * z[0] + m[0, 1] * z[1], m[1, 0] * z[0] + m[1, 1] * z[1]])
 
 
 def full_initial_state(gyro, profile, quadrature0=0.0):
@@ -88,7 +145,7 @@ def full_initial_state(gyro, profile, quadrature0=0.0):
     th = profile.wave_angle0
     z0 = a0 * jnp.stack([jnp.cos(th), jnp.sin(th)])
     q_vel = quadrature0 * res.omega * jnp.stack([-jnp.sin(th), jnp.cos(th)])
-    zdot0 = -res.k_e * input_rate(g, profile, profile.t[0]) * (_J @ z0) + q_vel
+    zdot0 = -res.k_e * input_rate(g, profile, profile.t[0]) * _rot90(z0) + q_vel
     integ = steady_integrators(g.control, res, a0, th)
     omega_scale = res.omega
     return jnp.concatenate([z0, zdot0 / omega_scale, jnp.zeros(1), integ]), omega_scale

@@ -58,9 +58,16 @@ class Demodulated(eqx.Module):
 
     def transform(self, matrix) -> Demodulated:
         """Apply a 2×2 pickoff matrix to the (x, y) channels."""
-        cx, cy = matrix @ jnp.stack([self.cx, self.cy])
-        sx, sy = matrix @ jnp.stack([self.sx, self.sy])
-        return Demodulated(cx, sx, cy, sy)
+        # elementwise, not `matrix @ …`: a 2 × 2 dot is a kernel of its own on XLA:CPU,
+        # which does not fuse with the scalar arithmetic around it (the carrier-resolving
+        # model evaluates this at every stage)
+        m00, m01, m10, m11 = matrix[0, 0], matrix[0, 1], matrix[1, 0], matrix[1, 1]
+        return Demodulated(
+            cx=m00 * self.cx + m01 * self.cy,
+            sx=m00 * self.sx + m01 * self.sy,
+            cy=m10 * self.cx + m11 * self.cy,
+            sy=m10 * self.sx + m11 * self.sy,
+        )
 
     def eqrs(self):
         """Lynch's (E, Q, R, S) (PHYSICS.md §3.3)."""
@@ -125,16 +132,14 @@ def estimate(demod: Demodulated, theta_branch=None) -> Estimates:
     """
     e, q, r, s = demod.eqrs()
     raw = 0.5 * jnp.arctan2(s, r)
-    c_vec = jnp.stack([demod.cx, demod.cy])
-    s_vec = jnp.stack([demod.sx, demod.sy])
     if theta_branch is None:
         c_a = jnp.cos(raw) * demod.cx + jnp.sin(raw) * demod.cy
         theta = raw + jnp.where(c_a < 0, jnp.pi, 0.0)
     else:
         theta = theta_branch + _wrap_half_pi(raw - theta_branch)
-    e_a = jnp.stack([jnp.cos(theta), jnp.sin(theta)])
-    c_a = e_a @ c_vec
-    s_a = e_a @ s_vec
+    ct, st = jnp.cos(theta), jnp.sin(theta)
+    c_a = ct * demod.cx + st * demod.cy
+    s_a = ct * demod.sx + st * demod.sy
     root_p = jnp.sqrt(jnp.maximum(e + q, 0.0))
     root_m = jnp.sqrt(jnp.maximum(e - q, 0.0))
     return Estimates(
