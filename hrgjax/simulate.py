@@ -28,7 +28,7 @@ from .resonator.averaged import (
     input_rate,
     measured_estimates,
 )
-from .resonator.carrier import carrier_solve, steps_per_cycle
+from .resonator.carrier import carrier_solve, event_grid, steps_per_cycle
 from .resonator.control import loop_outputs, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field
 from .resonator.params import TemperatureLaw
@@ -443,8 +443,8 @@ def _simulate(gyro, profile, model="averaged", **options):
 
 
 def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
-    """Steps per output interval of the fixed-step carrier path: the longest interval over
-    `fixed_step` [s], or with "auto" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the
+    """Steps per interval of the fixed-step carrier path (between outputs and the profile's
+    knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the
     highest carrier frequency over the profile's temperatures (needs concrete values)."""
     ts_c = np.asarray(ts) if is_concrete(ts) else None
     if ts_c is None or not is_concrete(profile.t):
@@ -452,7 +452,8 @@ def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
             "the fixed-step carrier path needs concrete output times (ts or dt_out) and "
             "profile knots to choose its step count; they are traced here"
         )
-    spans = np.diff(np.concatenate([[float(np.asarray(profile.t)[0])], ts_c]))
+    knots = np.asarray(profile.t, dtype=float)
+    spans = np.diff(np.concatenate([knots[:1], event_grid(knots, ts_c, xp=np)]))
     longest = float(spans.max())
     if isinstance(fixed_step, str):
         if fixed_step != "auto":

@@ -3,8 +3,10 @@ fixed_step=…)`), built for speed on long runs and large batches.
 
 One step of length h:
 
-1. the profile is sampled once, at the step's midpoint (rate, angular acceleration,
-   temperature, specific force), and the temperature laws are evaluated there;
+1. the profile gives the table's mean rate and mean angular acceleration over the step
+   (exact across a knot of its piecewise-linear rate) and the specific force at the
+   step's midpoint; the temperature laws are evaluated at the ends of each chunk of
+   ≤ `CHUNK` steps and interpolated linearly in between;
 2. the electronics sample the state at the step's start: demodulation, the whole-angle
    estimates and the loop laws give the electrode force $\mathbf u\cos\psi_r + \mathbf v
    \sin\psi_r$, the pump depth and phase, the PLL frequency ω_r and the integrators' rates,
@@ -22,7 +24,9 @@ continuous demodulator by h/2 on average. With the loops at their steady state (
 and navigation runs hrgjax simulates) this changes nothing measurable; the tests hold the
 path to the adaptive solution of the same equations (`tests/test_carrier.py`).
 
-Output times: each interval between outputs takes the same number of equal steps, so a
+Output times: the steps run between the output times and the profile's knots (no step
+straddles a knot, where the rate's slope jumps); each such interval takes the same number of
+equal steps (the longest interval over the requested step, rounded up to equal chunks), so a
 uniform output grid is stepped uniformly. Reverse-mode gradients recompute each interval's
 steps from its start (checkpointing by chunks of at most `CHUNK` steps), so memory grows
 with the number of outputs, not of steps."""
@@ -95,12 +99,12 @@ def _has_laws(gyro) -> bool:
 
 def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
     """States (len(ts), 8) at the output times `ts` [s] (ts[0] ≥ the profile's start), each
-    interval from the previous output (the first from the profile's start) in `steps`
-    equal held-loop steps."""
-    t0 = profile.t[0]
-    starts = jnp.concatenate([jnp.reshape(t0, (1,)), ts[:-1]])
-    chunk = min(steps, CHUNK)
-    n_chunks = -(-steps // chunk)
+    interval of [`event_grid`][hrgjax.resonator.carrier.event_grid] (the first from the
+    profile's start) in `steps` equal held-loop steps."""
+    events = event_grid(profile.t, ts)
+    starts = jnp.concatenate([profile.t[:1], events[:-1]])
+    n_chunks = -(-steps // CHUNK)
+    chunk = -(-steps // n_chunks)  # equal chunks of ≤ CHUNK steps, adding < n_chunks steps
     steps = n_chunks * chunk
 
     laws = _has_laws(gyro)
@@ -110,30 +114,54 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
     def run_chunk(carry, k):
         y, t, h = carry
         first = t + (k * chunk).astype(h.dtype) * h
+        safe_h = jnp.where(h > 0, h, 1.0)  # an output at a knot leaves an empty interval
         if laws:  # evaluated at the chunk's ends and interpolated in between (module notes)
             g0 = gyro.at(profile.temperature_at(first))
             g1 = gyro.at(profile.temperature_at(first + chunk * h))
 
-        def one(i, yy):
-            frac = (i.astype(h.dtype) + 0.5) / chunk
-            g = (
-                jax.tree_util.tree_map(lambda a, b: a + (b - a) * frac, g0, g1)
-                if laws
-                else fixed_gyro
-            )
-            tm = first + (i.astype(h.dtype) + 0.5) * h
-            rate, omega_dot, _, accel = profile.sample(tm)
-            env = (g, _input(g, profile, tm, rate, accel), omega_dot)
-            return _step(env, omega_scale, yy, h)
+        def one(i, carry):
+            yy, angle0, rate0 = carry
+            fi = i.astype(h.dtype)
+            if laws:
+                g = jax.tree_util.tree_map(lambda a, b: a + (b - a) * (fi + 0.5) / chunk, g0, g1)
+            else:
+                g = fixed_gyro
+            t1 = first + (fi + 1.0) * h
+            angle1, rate1 = profile.table_angle_at(t1), profile.rate_at(t1)
+            tm = t1 - 0.5 * h
+            accel = profile.accel_at(tm)
+            # the table's mean rate and acceleration over the step: exact across a knot of
+            # the piecewise-linear rate, where a sample at the midpoint is not
+            mean_rate = (angle1 - angle0) / safe_h
+            env = (g, _input(g, profile, tm, mean_rate, accel), (rate1 - rate0) / safe_h)
+            return _step(env, omega_scale, yy, h), angle1, rate1
 
-        y = jax.lax.fori_loop(0, chunk, one, y)
+        start = (y, profile.table_angle_at(first), profile.rate_at(first))
+        y = jax.lax.fori_loop(0, chunk, one, start)[0]
         return (y, t, h), None
 
     def interval(y, span):
         start, end = span
         h = (end - start) / steps
-        (y, _, _), _ = jax.lax.scan(run_chunk, (y, start, h), jnp.arange(n_chunks))
+
+        def run(y):
+            return jax.lax.scan(run_chunk, (y, start, h), jnp.arange(n_chunks))[0][0]
+
+        # an empty interval (an output at the start or at a knot) takes no steps
+        y = jax.lax.cond(end > start, run, lambda y: y, y)
         return y, y
 
-    _, ys = jax.lax.scan(interval, y0, (starts, ts))
-    return ys
+    _, ys = jax.lax.scan(interval, y0, (starts, events))
+    # each output: the last event at its time (an output that is also a knot appears twice,
+    # the zero-length interval between them changes nothing)
+    at = jnp.searchsorted(events, ts, side="right") - 1
+    return ys[at]
+
+
+def event_grid(knots, ts, xp=jnp):
+    """The times the fixed-step path steps between: the output times and the profile's
+    interior knots (clipped into [knots[0], ts[-1]]), sorted — so that no step straddles a
+    knot, where the profile's rate has a kink and the fixed-step solution would lose its
+    order. `xp` = `jnp` (traced, static shapes) or `np`."""
+    inner = xp.clip(knots[1:-1], knots[0], ts[-1])
+    return xp.sort(xp.concatenate([ts, inner]))
