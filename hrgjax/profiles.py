@@ -237,6 +237,18 @@ class Profile(eqx.Module):
         s = slope[i]
         return temp[i] + s * dt - s * tau + (at_knots[i] - temp[i] + s * tau) * jnp.exp(-dt / tau)
 
+    def kinematics_at(self, t):
+        """Table angle since the first knot [rad], rate [rad/s] and specific force [g] (3,)
+        at time t [s], with one segment look-up (what a fixed step needs at its end)."""
+        seg = 0.5 * (self.rate[1:] + self.rate[:-1]) * jnp.diff(self.t)
+        cum = jnp.concatenate([jnp.zeros(1), jnp.cumsum(seg)])
+        i, t0, length = self._segment(t)
+        dt = t - t0
+        slope = (self.rate[i + 1] - self.rate[i]) / length
+        frac = jnp.clip(dt / length, 0.0, 1.0)
+        accel = self.accel[i] + (self.accel[i + 1] - self.accel[i]) * frac
+        return cum[i] + self.rate[i] * dt + 0.5 * slope * dt**2, self.rate[i] + slope * dt, accel
+
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""
         seg = 0.5 * (self.rate[1:] + self.rate[:-1]) * jnp.diff(self.t)

@@ -350,8 +350,9 @@ def simulate(
     - `fixed_step`: integrate with this constant step [s] instead of adaptive steps. For
       `model="full"` with the default solver this is the fixed-step carrier path
       (`hrgjax.resonator.carrier`: loops held over each step as a digital controller,
-      10–40× faster than adaptive stepping, docs/resonator.md); `"auto"` picks the step
-      from `rtol` and the carrier frequency (10 steps per cycle at rtol 1e-8).
+      5–15× faster than adaptive stepping, docs/resonator.md); `"auto"` picks the step
+      from `rtol` and the highest carrier frequency over the profile's temperatures (10
+      steps per cycle at rtol 1e-8; over −60 … 100 °C when those are traced).
     - `quadrature0`: initial quadrature amplitude q₀ (readout units; a₀ is the AGC set point).
     - `adjoint`: how reverse-mode gradients pass through the solve (default: recursive
       checkpointing with 256 checkpoints for the averaged model, so memory stays bounded
@@ -393,7 +394,11 @@ def _simulate(gyro, profile, model="averaged", **options):
     if ts is None:
         ts = output_times(profile, dt_out)
     else:
-        ts = jnp.asarray(ts, dtype=float)
+        if isinstance(ts, jax.Array):
+            ts = jnp.asarray(ts, dtype=float)
+        else:  # host values stay concrete under jit (the fixed-step path counts steps on them)
+            with jax.ensure_compile_time_eval():
+                ts = device(np.asarray(ts, dtype=float), float)
         if ts.ndim != 1 or ts.shape[0] < 1:
             raise ValueError(f"ts must be a 1-D array of output times [s]; got shape {ts.shape}")
         if is_concrete(ts) and is_concrete(profile.t):
@@ -446,12 +451,16 @@ def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
     """Steps per interval of the fixed-step carrier path (between outputs and the profile's
     knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the
     highest carrier frequency over the profile's temperatures (needs concrete values)."""
-    ts_c = np.asarray(ts) if is_concrete(ts) else None
-    if ts_c is None or not is_concrete(profile.t):
+    traced = [n for n, x in (("ts", ts), ("the profile's knot times", profile.t))
+              if not is_concrete(x)]  # fmt: skip
+    if traced:
         raise ValueError(
-            "the fixed-step carrier path needs concrete output times (ts or dt_out) and "
-            "profile knots to choose its step count; they are traced here"
+            f"the fixed-step carrier path chooses its step count from the output times and the "
+            f"profile's knot times, but {' and '.join(traced)} are traced here (inside jit or "
+            "hg.sweep): build them outside the traced function (a NumPy array or Python "
+            "numbers; Profile constructors keep Python durations concrete)"
         )
+    ts_c = np.asarray(ts)
     knots = np.asarray(profile.t, dtype=float)
     spans = np.diff(np.concatenate([knots[:1], event_grid(knots, ts_c, xp=np)]))
     longest = float(spans.max())
@@ -459,20 +468,27 @@ def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
         if fixed_step != "auto":
             raise ValueError(f'fixed_step must be seconds or "auto"; got {fixed_step!r}')
         res = gyro.resonator
-        temps = profile.temperature
-        if not (is_concrete(temps) and all(is_concrete(x) for x in jax.tree_util.tree_leaves(res))):
+        if not all(is_concrete(x) for x in jax.tree_util.tree_leaves(res)):
             raise ValueError(
-                'fixed_step="auto" needs a concrete gyro and profile (it reads the carrier '
-                "frequency); under jit or vmap give fixed_step in seconds"
+                'fixed_step="auto" reads the carrier frequency from the gyro, which is traced '
+                "here (a sweep over resonator parameters): give fixed_step in seconds"
             )
-        t = np.asarray(temps, dtype=float).ravel()
+        if is_concrete(profile.temperature):
+            t = np.asarray(profile.temperature, dtype=float).ravel()
+        else:  # temperatures traced (a sweep over them): the range a gyro is specified for
+            t = np.asarray(AUTO_STEP_TEMPERATURES_C)
         grid = np.linspace(t.min(), t.max(), 9)
-        omega = np.max(np.abs([np.max(np.asarray(res.at(x).omega)) for x in grid]))
+        with jax.ensure_compile_time_eval():  # concrete values, also under jit
+            omega = np.max(np.abs([np.max(np.asarray(res.at(x).omega)) for x in grid]))
         h = 2 * np.pi / (omega * steps_per_cycle(float(rtol)))
     else:
         h = float(fixed_step)
     return max(1, math.ceil(longest / h - 1e-9))
 
+
+AUTO_STEP_TEMPERATURES_C = (-60.0, 100.0)
+"""Temperatures [°C] whose highest carrier frequency sets `fixed_step="auto"` when the
+profile's temperatures are traced (inside `hg.sweep` over temperature)."""
 
 _OPTIONS = {
     name: p.default

@@ -3,9 +3,9 @@ fixed_step=…)`), built for speed on long runs and large batches.
 
 One step of length h:
 
-1. the profile gives the table's mean rate and mean angular acceleration over the step
-   (exact across a knot of its piecewise-linear rate) and the specific force at the
-   step's midpoint; the temperature laws are evaluated at the ends of each chunk of
+1. the profile gives the table's mean rate, angular acceleration and specific force over
+   the step (exact: the profile is piecewise linear and no step straddles a knot); the
+   temperature laws are evaluated at the ends of each chunk of
    ≤ `CHUNK` steps and interpolated linearly in between;
 2. the electronics sample the state at the step's start: demodulation, the whole-angle
    estimates and the loop laws give the electrode force $\mathbf u\cos\psi_r + \mathbf v
@@ -120,23 +120,23 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
             g1 = gyro.at(profile.temperature_at(first + chunk * h))
 
         def one(i, carry):
-            yy, angle0, rate0 = carry
+            yy, angle0, rate0, accel0 = carry
             fi = i.astype(h.dtype)
             if laws:
                 g = jax.tree_util.tree_map(lambda a, b: a + (b - a) * (fi + 0.5) / chunk, g0, g1)
             else:
                 g = fixed_gyro
             t1 = first + (fi + 1.0) * h
-            angle1, rate1 = profile.table_angle_at(t1), profile.rate_at(t1)
-            tm = t1 - 0.5 * h
-            accel = profile.accel_at(tm)
-            # the table's mean rate and acceleration over the step: exact across a knot of
-            # the piecewise-linear rate, where a sample at the midpoint is not
+            angle1, rate1, accel1 = profile.kinematics_at(t1)
+            # the table's mean rate, angular acceleration and specific force over the step
+            # (exact for the piecewise-linear profile: no step straddles a knot)
             mean_rate = (angle1 - angle0) / safe_h
-            env = (g, _input(g, profile, tm, mean_rate, accel), (rate1 - rate0) / safe_h)
-            return _step(env, omega_scale, yy, h), angle1, rate1
+            accel = 0.5 * (accel0 + accel1)
+            omega_in = _input(g, profile, t1 - 0.5 * h, mean_rate, accel)
+            env = (g, omega_in, (rate1 - rate0) / safe_h)
+            return _step(env, omega_scale, yy, h), angle1, rate1, accel1
 
-        start = (y, profile.table_angle_at(first), profile.rate_at(first))
+        start = (y, *profile.kinematics_at(first))
         y = jax.lax.fori_loop(0, chunk, one, start)[0]
         return (y, t, h), None
 
