@@ -10,7 +10,7 @@ import hrgjax
 
 API = (pathlib.Path(__file__).parent.parent / "docs" / "api.md").read_text(encoding="utf-8")
 DOCUMENTED = set(re.findall(r"^::: (hrgjax[\w.]*)", API, re.M))
-PACKAGES = ("calibration", "diagnosis", "discovery", "fog", "ins", "nn")
+PACKAGES = ("calibration", "diagnosis", "discovery", "fog", "imu", "ins", "nn")
 
 
 def _documented(obj, *paths):

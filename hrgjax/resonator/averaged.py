@@ -57,9 +57,14 @@ def pattern_forces(u, v, phi, theta):
     cp, sp = jnp.cos(phi), jnp.sin(phi)
     big_u = u * cp - v * sp
     big_v = u * sp + v * cp
-    e_a = jnp.stack([jnp.cos(theta), jnp.sin(theta)])
-    e_q = jnp.stack([-jnp.sin(theta), jnp.cos(theta)])
-    return e_a @ big_u, e_a @ big_v, e_q @ big_u, e_q @ big_v
+    c, s = jnp.cos(theta), jnp.sin(theta)  # e_a = (c, s), e_q = (−s, c); written out, as
+    # a 2-vector dot is an XLA:CPU kernel of its own (and so is its VJP)
+    return (
+        c * big_u[0] + s * big_u[1],
+        c * big_v[0] + s * big_v[1],
+        -s * big_u[0] + c * big_u[1],
+        -s * big_v[0] + c * big_v[1],
+    )
 
 
 def measured_estimates(gyro, a, q, theta, phi):
