@@ -240,14 +240,10 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
 
     **Raises:** `ValueError` naming the file and the field for a file of another format or
     a field of the wrong shape."""
+    from .._io import read_json
+
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"{path}: no such file")
-    try:
-        with open(path, encoding="utf-8") as fh:
-            obj = json.load(fh)
-    except json.JSONDecodeError as err:
-        raise ValueError(f"{path}: not JSON ({err.msg} at line {err.lineno})") from None
+    obj = read_json(path)
     if not isinstance(obj, dict) or obj.get("format") != FORMAT:
         raise ValueError(f'{path}: not an hrgjax IMU calibration (no "format": "{FORMAT}")')
     shapes = {

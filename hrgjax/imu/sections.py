@@ -14,11 +14,12 @@ axis up, so that gravity stays on the turning axis. Sections are half-open row r
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+
+from .._io import read_json
 
 FACES = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
 """Static faces: sensor axis up (`p`, that accelerometer reads +g) or down (`a`)."""
@@ -43,13 +44,7 @@ def parse_sections(sections, n_samples: int) -> Sections:
     where = "sections"
     if isinstance(sections, str | os.PathLike):
         where = os.fspath(sections)
-        if not os.path.isfile(where):
-            raise FileNotFoundError(f"{where}: no such file")
-        try:
-            with open(where, encoding="utf-8") as fh:
-                sections = json.load(fh)
-        except json.JSONDecodeError as err:
-            raise ValueError(f"{where}: not JSON ({err.msg} at line {err.lineno})") from None
+        sections = read_json(where)
     if not isinstance(sections, Mapping):
         raise ValueError(
             f'{where} must map the keys {", ".join(SECTION_KEYS)} to {{"start": i, "end": j}}; '
