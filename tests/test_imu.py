@@ -259,6 +259,16 @@ def test_bad_input_is_named(session, tmp_path):
         ValueError, match=r"column 'gz' row 2 \(line 4 of the file\): 'x' is not a number"
     ):
         hg.imu.load(bad, columns=COLS, units=units)
+    # errors found after the fast numeric read still name the file's line
+    text = Path(path).read_text().splitlines()
+    text[5] = text[4]  # row 4 (line 6 after a comment line) repeats row 3's time
+    (tmp_path / "dup.csv").write_text("# a comment\n" + "\n".join(text) + "\n")
+    with pytest.raises(ValueError, match=r"time row 4 \(line 7 of the file\)"):
+        hg.imu.load(tmp_path / "dup.csv", columns=COLS, units=units)
+    text[6] = text[6] + ",0.5"  # a row with more fields than the header
+    (tmp_path / "wide.csv").write_text("\n".join(text) + "\n")
+    with pytest.raises(ValueError, match="line 7 has 8 fields, the header has 7"):
+        hg.imu.load(tmp_path / "wide.csv", columns=COLS, units=units)
     with pytest.raises(ValueError, match="time row 1: .* does not increase"):
         hg.imu.ImuData(np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)))
     with pytest.raises(ValueError, match=r"gyro must have shape \(N, 3\)"):

@@ -214,7 +214,7 @@ def load(
 
     **Raises:** `ValueError` naming the file, the column and the row (and the file's line)
     for a missing column, text where a number belongs, or a value that is not finite."""
-    from ..data import _read_csv, _with_line
+    from ..data import _read_csv
 
     path = os.fspath(path)
     if os.path.splitext(path)[1].lower() != ".csv":
@@ -223,7 +223,22 @@ def load(
         raise FileNotFoundError(f"{path}: no such file")
     names = _column_map(columns)
     _declared(units)
+    fast = _fast_columns(path, _all_names(names))
+    if fast is not None:  # plain numeric columns: NumPy's C parser, 4× faster
+        try:
+            return _build(path, names, fast, None, units, rate_hz, check_units)
+        except ValueError:
+            pass  # read again below, so that the error names the file's line
     table, lines = _read_csv(path)
+    return _build(path, names, table, lines, units, rate_hz, check_units)
+
+
+def _build(path, names, table, lines, units, rate_hz, check_units) -> ImuData:
+    """`ImuData` from parsed columns; `lines` (the file's line of each row, or None) make the
+    errors name the line."""
+    from ..data import _with_line
+
+    where = (lambda m: m) if lines is None else (lambda m: _with_line(m, lines))
     missing = [c for c in _all_names(names) if c not in table]
     if missing:
         raise ValueError(
@@ -236,17 +251,13 @@ def load(
         if col.dtype.kind not in "fiu":
             bad = next(i for i, v in enumerate(col) if not _is_number(v))
             raise ValueError(
-                _with_line(
-                    f"{path}: column {c!r} row {bad}: {str(col[bad])!r} is not a number", lines
-                )
+                where(f"{path}: column {c!r} row {bad}: {str(col[bad])!r} is not a number")
             )
         col = col.astype(float)
         bad = np.flatnonzero(~np.isfinite(col))
         if bad.size:
             i = int(bad[0])
-            raise ValueError(
-                _with_line(f"{path}: column {c!r} row {i}: {col[i]!r} is not finite", lines)
-            )
+            raise ValueError(where(f"{path}: column {c!r} row {i}: {col[i]!r} is not finite"))
         got[c] = col
     try:
         return ImuData.from_arrays(
@@ -259,7 +270,32 @@ def load(
             check_units=check_units,
         )
     except ValueError as err:
-        raise ValueError(f"{path}: {_with_line(str(err), lines)}") from None
+        raise ValueError(f"{path}: {where(str(err))}") from None
+
+
+def _fast_columns(path: str, wanted: list[str]) -> dict[str, np.ndarray] | None:
+    """The `wanted` columns of a plain numeric CSV by `np.loadtxt`, or None when the file is
+    anything but plain (then the validating reader runs and names what is wrong)."""
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            skip = 0
+            for line in fh:
+                skip += 1
+                if line.strip() and not line.lstrip().startswith("#"):
+                    break
+            else:
+                return None
+        header = [h.strip() for h in line.rstrip("\r\n").split(",")]
+        if len(set(header)) != len(header) or any(w not in header for w in wanted):
+            return None
+        # every column, so that a row with more or fewer fields than the header is refused
+        data = np.loadtxt(path, delimiter=",", comments="#", skiprows=skip, ndmin=2,
+                          dtype=float, encoding="utf-8-sig")  # fmt: skip
+    except (ValueError, OSError, UnicodeDecodeError):
+        return None
+    if data.shape[0] == 0 or data.shape[1] != len(header):
+        return None
+    return {w: np.ascontiguousarray(data[:, header.index(w)]) for w in wanted}
 
 
 def _is_number(v) -> bool:
