@@ -351,12 +351,15 @@ def imu_session_figure(data, sections, path: str, calibration=None, title: str =
         for s, e in ranges:
             for ax in axes[:2]:
                 ax.axvspan(t[s], t[e - 1], color=color, zorder=0)
-            axes[0].annotate(key, ((t[s] + t[e - 1]) / 2, 1.0), xycoords=("data", "axes fraction"),
-                             ha="center", va="bottom", fontsize=8)  # fmt: skip
+            axes[0].annotate(key, ((t[s] + t[e - 1]) / 2, 0.97), xycoords=("data", "axes fraction"),
+                             ha="center", va="top", fontsize=8)  # fmt: skip
     axes[0].set_ylabel("specific force [m/s²]")
+    axes[0].set_title("accelerometers (raw), sections named", fontsize=10)
     axes[1].set_ylabel("rate [°/s]")
-    axes[0].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8, title="sensor axis",
-                   title_fontsize=8)  # fmt: skip
+    axes[1].set_title("gyros (raw)", fontsize=10)
+    handles, names = axes[0].get_legend_handles_labels()  # one legend: the same axes in both
+    fig.legend(handles, names, loc="outside right upper", fontsize=8, title="sensor axis",
+               title_fontsize=8)  # fmt: skip
     if calibration is not None:
         g = calibration.g
         raw = np.full(t.shape, np.nan)
@@ -371,9 +374,10 @@ def imu_session_figure(data, sections, path: str, calibration=None, title: str =
         axes[2].plot(t, cal, lw=0.8, color="C3", label="calibrated")
         axes[2].axhline(0.0, color="k", lw=0.5)
         axes[2].set_ylabel("|a| − g on faces [m/s²]")
+        axes[2].set_title("specific-force magnitude on the faces, before and after", fontsize=10)
         axes[2].legend(fontsize=8)
-    axes[-1].set_xlabel("time [s]")
     for ax in axes:
+        ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
     fig.suptitle(title or "Ferraris session: faces (grey) and turns (orange)", fontsize=11)
     _save(fig, path, dpi=110)

@@ -130,3 +130,21 @@ def test_allan_figure_reads_at_a_glance(figures):
     assert ax.get_xscale() == "log" and ax.get_yscale() == "log"
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert any("interval" in t for t in labels) and any("angle random walk" in t for t in labels)
+
+
+def test_imu_session_and_allan_figures_read_at_a_glance(figures):
+    import jax
+
+    import hrgjax as hg
+
+    truth = hg.imu.ImuCalibration.known(accel_bias=[0.1, -0.05, 0.2])
+    data, sections = hg.imu.ferraris_session(truth, jax.random.key(0), static_s=2.5,
+                                             move_s=1.0, turn_s=2.0, rate_hz=50.0)  # fmt: skip
+    cal = hg.imu.ferraris(data, sections)
+    plots.imu_session_figure(data, sections, "unused.png", calibration=cal)
+    y = np.random.default_rng(0).normal(size=4096)
+    result = hg.allan.deviation(y, 1.0)
+    plots.allan_figure(result, "unused.png", fit=hg.allan.fit_noise(result))
+    assert len(figures) == 2
+    for fig in figures:
+        _check(fig)
