@@ -9,6 +9,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 
+from .._x64 import require_x64
 from .data import ImuData
 from .ferraris import ImuCalibration
 from .sections import FACES, TURNS, Sections
@@ -82,6 +83,7 @@ def ferraris_session(
 
     **Returns:** `(data, sections)`: the record (`ImuData`, SI) and its true sections
     (faces: the rests; turns: the turn with half of each neighbouring rest)."""
+    require_x64("hg.imu.ferraris_session")
     if repeats < 1:
         raise ValueError(f"repeats must be a positive integer; got {repeats!r}")
     n_static, n_move, n_turn = (max(int(round(s * rate_hz)), 2) for s in (static_s, move_s, turn_s))
