@@ -251,9 +251,4 @@ class Profile(eqx.Module):
 
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""
-        seg = 0.5 * (self.rate[1:] + self.rate[:-1]) * jnp.diff(self.t)
-        cum = jnp.concatenate([jnp.zeros(1), jnp.cumsum(seg)])
-        i, t0, length = self._segment(t)
-        dt = t - t0
-        slope = (self.rate[i + 1] - self.rate[i]) / length
-        return cum[i] + self.rate[i] * dt + 0.5 * slope * dt**2
+        return self.kinematics_at(t)[0]

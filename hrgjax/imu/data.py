@@ -145,16 +145,6 @@ class ImuData:
         step = np.diff(self.time)
         return np.append(step, np.median(step))
 
-    def rows(self, start: int, end: int) -> ImuData:
-        """The samples `start ≤ i < end` as a new record (read-only views)."""
-        n = len(self)
-        if not (0 <= start < end <= n):
-            raise ValueError(f"rows [{start}, {end}) are not inside the record's 0 … {n} samples")
-        t = None if self.temperature is None else self.temperature[start:end]
-        return ImuData(
-            self.time[start:end], self.gyro[start:end], self.accel[start:end], t, self.rate_hz
-        )
-
     def __repr__(self) -> str:
         span = float(self.time[-1] - self.time[0])
         temp = "" if self.temperature is None else ", temperature"

@@ -316,8 +316,10 @@ def _estimate(stats, g, turn_rad):
     return _flat(m_a, b_a, m_g, b_g, gsens)
 
 
-_estimate_jit = jax.jit(_estimate)
-_jacobian_jit = jax.jit(jax.jacfwd(_estimate))
+# the estimates and their Jacobian in one compiled pass (the estimate is jacfwd's aux output)
+_estimate_and_jacobian = jax.jit(
+    jax.jacfwd(lambda s, g, turn: (_estimate(s, g, turn),) * 2, has_aux=True)
+)
 
 
 def _key_stats(data: ImuData, key: str, start: int, end: int) -> np.ndarray:
@@ -419,9 +421,9 @@ def ferraris(
         )
     stats, cov, noise_std, source = session_statistics(data, sections)
     _check_faces(stats, g)
-    params = np.asarray(_estimate_jit(jnp.asarray(stats), g, jnp.deg2rad(jnp.asarray(turns))))
+    jac, params = _estimate_and_jacobian(jnp.asarray(stats), g, jnp.deg2rad(jnp.asarray(turns)))
+    jac, params = np.asarray(jac), np.asarray(params)
     _check_turns(params, turns)
-    jac = np.asarray(_jacobian_jit(jnp.asarray(stats), g, jnp.deg2rad(jnp.asarray(turns))))
     p_cov = jac @ cov @ jac.T
     p = jnp.asarray(params)
     return ImuCalibration(

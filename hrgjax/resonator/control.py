@@ -135,9 +135,9 @@ def drive_vectors(control: Control, loops: LoopOutputs, theta_est):
     c, s = jnp.cos(theta_est), jnp.sin(theta_est)  # e_a = (c, s), e_q = (−s, c)
     g = control.excitation_phase if control.drive == "force" else 0.0
     fs, fc, fq = -loops.force * jnp.sin(g), -loops.force * jnp.cos(g), loops.quad_force
-    gm = control.forcer_gain_mismatch  # the forcer matrix diag(1 + g, 1 − g), elementwise
-    u = jnp.stack([(1.0 + gm) * (fs * c - fq * s), (1.0 - gm) * (fs * s + fq * c)])
-    v = jnp.stack([(1.0 + gm) * fc * c, (1.0 - gm) * fc * s])
+    m = control.forcer_matrix()  # diagonal: applied elementwise (no 2 × 2 dot kernel)
+    u = jnp.stack([m[0, 0] * (fs * c - fq * s), m[1, 1] * (fs * s + fq * c)])
+    v = jnp.stack([m[0, 0] * fc * c, m[1, 1] * fc * s])
     return u, v
 
 

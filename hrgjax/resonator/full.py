@@ -51,16 +51,9 @@ def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
 def full_vector_field(t, y, args):
     """Right-hand side of the full model; `args = (gyro, profile, omega_scale)`."""
     gyro, profile, omega_scale = args
-    g, omega_in, omega_dot = environment(gyro, profile, t)
-    return carrier_rhs(g, omega_in, omega_dot, y, omega_scale)
-
-
-def environment(gyro, profile, t):
-    """What the profile imposes at time t [s]: the gyro with its temperature laws evaluated,
-    the equivalent input rate Ω [rad/s] and the table's angular acceleration [rad/s²]."""
     rate, omega_dot, temperature, accel = profile.sample(t)
     g = gyro.at(temperature)
-    return g, _input(g, profile, t, rate, accel), omega_dot
+    return carrier_rhs(g, _input(g, profile, t, rate, accel), omega_dot, y, omega_scale)
 
 
 def carrier_rhs(g, omega_in, omega_dot, y, omega_scale):
@@ -103,7 +96,7 @@ def loop_efforts(g, omega_in, y, omega_scale) -> LoopEfforts:
         u=u,
         v=v,
         pump=res.omega**2 * loops.pump,
-        pump_phase2=2 * pump_phase(ctl) + 0.0 * loops.pump,
+        pump_phase2=2 * pump_phase(ctl),
         d_int=integrator_rates(ctl, res.omega, est),
         omega_r=loops.omega_r,
     )
