@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint docs bench clean
+.PHONY: demo test docs-test lint docs bench clean
 
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
@@ -19,6 +19,11 @@ demo: $(STAMP)
 # module-scoped fixtures compile once): 9½ min instead of 14 on the 2-core machine.
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n auto --dist loadfile
+
+# Every python block of docs/ at the size the page shows, the compile-bound ones included
+# (make test runs them at reduced sizes and lists the compile-bound ones as skipped).
+docs-test: $(STAMP)
+	HRGJAX_DOCS_FULL=1 $(BIN)/python -m pytest -q tests/test_docs_examples.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check hrgjax tests benchmarks
