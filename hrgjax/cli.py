@@ -134,8 +134,12 @@ def cmd_simulate(args) -> int:
     _setup()
     from .calibration import rotation_plan, seed_plan, static_plan
 
-    _check_output("--out", args.out, DATA_EXTENSIONS)
+    _check_output("--out", args.out, DATA_EXTENSIONS, inputs=(args.plan_file,))
     gyro = _gyro(args.preset, noise=not args.no_noise)
+    if args.plan_file is not None:
+        return _simulate_plan_file(args, gyro)
+    if args.plan is None:
+        args.plan = "static"
     if args.plan == "static":
         plans = [static_plan(duration_s=args.duration)]
     elif args.plan == "rotation":
@@ -144,6 +148,35 @@ def cmd_simulate(args) -> int:
         plans = list(seed_plan(quick=args.quick))
     print(f"hrgjax simulate: preset {args.preset}, plan {args.plan}")
     data = _run_plans(gyro, plans, args.seed)
+    path = data.save(args.out)
+    print(f"wrote {len(data)} rows ({len(data.run_indices())} runs) to {path}")
+    return 0
+
+
+def _simulate_plan_file(args, gyro) -> int:
+    import jax
+
+    from .calibration.design import load_plan, simulate_plan
+
+    if args.plan is not None:
+        raise UsageError("give either --plan or --plan-file, not both")
+    try:
+        plan, bench = load_plan(args.plan_file)
+    except (FileNotFoundError, ValueError) as err:
+        raise UsageError(f"--plan-file: {err}") from None
+    try:
+        bench.check(plan)
+    except ValueError as err:
+        raise UsageError(f"--plan-file {args.plan_file}: {err}") from None
+    hours = bench.breakdown_h(plan)
+    print(
+        f"hrgjax simulate: preset {args.preset}, plan file {args.plan_file}: {plan.size} "
+        f"segments, bench time {hours['total']:.2f} h (measuring {hours['measuring']:.2f} h)"
+    )
+    t0 = time.perf_counter()
+    key = jax.random.key(args.seed)
+    data = simulate_plan(gyro, plan, key=key, bias_key=jax.random.fold_in(key, 1))
+    print(f"  simulated {plan.size} segments in {time.perf_counter() - t0:.1f} s", flush=True)
     path = data.save(args.out)
     print(f"wrote {len(data)} rows ({len(data.run_indices())} runs) to {path}")
     return 0
@@ -703,9 +736,14 @@ def build_parser() -> argparse.ArgumentParser:
         "resonator frozen at 20 °C with ideal loops, a perfect readout and no noise",
     )  # fmt: skip
     p.add_argument(
-        "--plan", default="static", choices=("static", "rotation", "seed"),
-        help="static: 11 temperatures × 19 wave angles at rest; rotation: the same at 5 °/s; "
-        "seed: both, as seed 000's bench",
+        "--plan", default=None, choices=("static", "rotation", "seed"),
+        help="static (the default): 11 temperatures × 19 wave angles at rest; rotation: the "
+        "same at 5 °/s; seed: both, as seed 000's bench",
+    )  # fmt: skip
+    p.add_argument(
+        "--plan-file", default=None, metavar="PLAN.json",
+        help="a JSON bench plan (segments: static, rotation, ramp; see docs/design.md), "
+        "simulated as one switch-on, one run per segment; instead of --plan",
     )  # fmt: skip
     p.add_argument("--out", default="out/data.csv", help="CSV or .nc path")
     p.add_argument(

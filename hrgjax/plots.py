@@ -383,3 +383,61 @@ def imu_session_figure(data, sections, path: str, calibration=None, title: str =
     _save(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+_KIND_COLORS = {"static": "C0", "rotation": "C3", "ramp": "C2"}
+
+
+def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
+    """A bench plan on its time line: the chamber's temperature [°C] (top) and the wave
+    angle of each segment [° electrical] (bottom) against bench time [h], segments coloured
+    by kind, transitions (slew, soak, re-positioning) in grey.
+
+    - `plan`: a [`BenchPlan`][hrgjax.calibration.design.BenchPlan]; `bench`: a
+      [`BenchModel`][hrgjax.calibration.design.BenchModel] (default `BenchModel()`).
+      Returns `path`."""
+    from .calibration.design import BenchModel
+
+    bench = BenchModel() if bench is None else bench
+    plt = _plt()
+    tr = {k: np.asarray(v, float) for k, v in bench.transitions_s(plan).items()}
+    t0 = np.asarray(plan.temperature_c, float)
+    t1 = np.asarray(plan.temperature_end_c, float)
+    angle = np.asarray(plan.wave_angle_deg, float)
+    dur = np.asarray(plan.duration_s, float)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10.0, 5.6), sharex=True,
+                                   constrained_layout=True)  # fmt: skip
+    now, prev = 0.0, float(bench.start_temperature_c)
+    seen = set()
+    for i, kind in enumerate(plan.kind):
+        slew_end = now + tr["slew"][i]
+        start = slew_end + tr["settle"][i] + tr["reposition"][i]
+        h = lambda *x: np.array(x) / 3600.0
+        ax1.plot(h(now, slew_end, start), [prev, t0[i], t0[i]], color="0.6", lw=1.0,
+                 label="transition" if "transition" not in seen else None)  # fmt: skip
+        seen.add("transition")
+        label = kind if kind not in seen else None
+        seen.add(kind)
+        color = _KIND_COLORS[kind]
+        ax1.plot(h(start, start + dur[i]), [t0[i], t1[i]], color=color, lw=3.0, label=label,
+                 solid_capstyle="butt")  # fmt: skip
+        ax2.plot(h(start, start + dur[i]), [angle[i], angle[i]], color=color, lw=3.0,
+                 solid_capstyle="butt", marker="o", ms=2.5, markevery=[0])  # fmt: skip
+        now, prev = start + dur[i], t1[i]
+    hours = bench.breakdown_h(plan)
+    ax1.set_ylabel("chamber temperature [°C]")
+    ax1.set_title(
+        f"{plan.size} segments, bench time {hours['total']:.1f} h: measuring "
+        f"{hours['measuring']:.1f} h, slew {hours['slew']:.1f} h, soak {hours['settle']:.1f} h, "
+        f"re-positioning {hours['reposition']:.1f} h",
+        fontsize=10,
+    )
+    ax1.legend(fontsize=8, loc="best")
+    ax2.set_ylabel("wave angle [° el.]")
+    ax2.set_xlabel("bench time [h]")
+    for ax in (ax1, ax2):
+        ax.grid(alpha=0.3)
+    fig.suptitle(title or "bench plan", fontsize=11)
+    _save(fig, path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,6 +1,13 @@
 """The HRG calibration study of seed 000: plans, reduction, compensators, evaluation."""
 
 from ._compensator import AbstractCompensator as AbstractCompensator
+from .design import BenchModel as BenchModel
+from .design import BenchPlan as BenchPlan
+from .design import bench_time_h as bench_time_h
+from .design import load_plan as load_plan
+from .design import save_plan as save_plan
+from .design import seed_bench_plan as seed_bench_plan
+from .design import simulate_plan as simulate_plan
 from .evaluate import NoCompensation as NoCompensation
 from .evaluate import accuracy_table as accuracy_table
 from .evaluate import format_table as format_table

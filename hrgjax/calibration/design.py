@@ -1,0 +1,482 @@
+"""Bench plans as differentiable pytrees: segments, the bench-time model, plan files, and
+simulating a plan as one switch-on.
+
+A [`BenchPlan`][hrgjax.calibration.design.BenchPlan] is a sequence of segments in bench
+order, each of one kind:
+
+- **static** — table at rest at one temperature and wave angle for a duration;
+- **rotation** — the table turning at a constant rate, one temperature;
+- **ramp** — the chamber moving the temperature linearly from T₀ to T₁ over the duration
+  (the table at rest, or turning at `rate_dps`).
+
+Every continuous quantity (temperatures, wave angles, rates, durations) is an array leaf, so
+a plan can be differentiated, vmapped over and optimised; the kinds are static. A
+[`BenchModel`][hrgjax.calibration.design.BenchModel] turns a plan into bench time: the
+measuring time plus, between segments, the chamber's slew and soak and the table's
+re-positioning — smoothly, so that the bench time has a gradient with respect to the plan.
+
+Plan files (DESIGN.md's contract) are JSON::
+
+    {"segments": [
+       {"kind": "static", "temperature_c": -40.0, "wave_angle_deg": 0.0, "duration_s": 180.0},
+       {"kind": "rotation", "temperature_c": -40.0, "wave_angle_deg": 0.0, "rate_dps": 5.0,
+        "duration_s": 72.0},
+       {"kind": "ramp", "temperature_start_c": -40.0, "temperature_end_c": 60.0,
+        "wave_angle_deg": 30.0, "duration_s": 6000.0}],
+     "bench_time_h": 2.61,
+     "bench": {"slew_c_per_min": 1.0, "settle_s": 1800.0, "reposition_s": 60.0,
+               "start_temperature_c": 20.0}}
+
+`bench_time_h` (and the `bench` block it was computed with) is written for the reader; on
+loading, the bench time is computed again from the segments.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import is_concrete
+from .._compiled import device
+from .._io import read_json
+from .._progress import bar
+from ..data import MeasuredData
+from ..gyro import Gyro
+from ..profiles import Profile
+from ..units import DEG, DEG_PER_S
+from .experiment import CHUNK, SEED_ANGLES, SEED_TEMPERATURES, _simulate_chunk
+
+KINDS = ("static", "rotation", "ramp")
+"""The segment kinds."""
+
+DT_OUT = {"static": 1.0, "rotation": 0.5, "ramp": 1.0}
+"""Default output interval of each kind [s] (the seed's: static 1 s, rotation 0.5 s)."""
+
+_KEYS = {
+    "static": (("temperature_c", "wave_angle_deg", "duration_s"), ()),
+    "rotation": (("temperature_c", "wave_angle_deg", "rate_dps", "duration_s"), ()),
+    "ramp": (
+        ("temperature_start_c", "temperature_end_c", "wave_angle_deg", "duration_s"),
+        ("rate_dps",),
+    ),
+}
+_UNITS = {
+    "temperature_c": "°C",
+    "temperature_start_c": "°C",
+    "temperature_end_c": "°C",
+    "wave_angle_deg": "° electrical",
+    "rate_dps": "°/s",
+    "duration_s": "s",
+}
+
+
+class BenchPlan(eqx.Module):
+    """A bench session as a sequence of segments (static, rotation, ramp), in bench order.
+
+    **Arguments** (arrays of shape (S,), one entry per segment):
+
+    - `kind`: tuple of S names from `KINDS` (static: not differentiated).
+    - `temperature_c`: temperature at the segment's start [°C].
+    - `temperature_end_c`: temperature at its end [°C] (equal to `temperature_c` except for
+      ramps).
+    - `wave_angle_deg`: electrical wave angle at the segment's start [°].
+    - `rate_dps`: table rate [°/s] (0 for static segments; a ramp may turn).
+    - `duration_s`: length of the segment [s] (a ramp's rate of change is
+      (T₁ − T₀)/duration).
+
+    Build one with [`BenchPlan.from_segments`][hrgjax.calibration.design.BenchPlan.from_segments]
+    (the plan file's list of dicts), [`load_plan`][hrgjax.calibration.design.load_plan] or
+    [`seed_bench_plan`][hrgjax.calibration.design.seed_bench_plan].
+    """
+
+    kind: tuple[str, ...] = eqx.field(static=True)
+    temperature_c: jax.Array
+    temperature_end_c: jax.Array
+    wave_angle_deg: jax.Array
+    rate_dps: jax.Array
+    duration_s: jax.Array
+
+    def __check_init__(self):
+        if not isinstance(self.kind, tuple) or any(k not in KINDS for k in self.kind):
+            bad = (
+                [k for k in self.kind if k not in KINDS]
+                if isinstance(self.kind, tuple)
+                else [self.kind]
+            )
+            raise ValueError(f"BenchPlan.kind must be a tuple of {KINDS}; got {bad[:3]}")
+        n = len(self.kind)
+        if n == 0:
+            raise ValueError("BenchPlan needs at least one segment")
+        fields = self._fields()
+        for name, x in fields.items():
+            if getattr(x, "shape", None) != (n,):
+                raise ValueError(
+                    f"BenchPlan.{name} must have shape ({n},) (one value per segment); "
+                    f"got {getattr(x, 'shape', type(x).__name__)}"
+                )
+        if not all(is_concrete(x) for x in fields.values()):
+            return  # traced (under jit, grad, vmap): checked where it was built
+        v = {k: np.asarray(x, dtype=float) for k, x in fields.items()}
+        for name, x in v.items():
+            bad = np.flatnonzero(~np.isfinite(x))
+            if bad.size:
+                raise ValueError(f"BenchPlan.{name}[{bad[0]}] is {x[bad[0]]}; give a finite value")
+        bad = np.flatnonzero(v["duration_s"] <= 0)
+        if bad.size:
+            i = bad[0]
+            raise ValueError(f"segment {i} ({self.kind[i]}): duration_s must be > 0 [s]")
+        for i, k in enumerate(self.kind):
+            if k != "ramp" and v["temperature_end_c"][i] != v["temperature_c"][i]:
+                raise ValueError(
+                    f"segment {i} ({k}): temperature_end_c must equal temperature_c "
+                    "(only a ramp changes the temperature)"
+                )
+            if k == "static" and v["rate_dps"][i] != 0.0:
+                raise ValueError(f"segment {i} (static): rate_dps must be 0; use a rotation")
+            if k == "rotation" and v["rate_dps"][i] == 0.0:
+                raise ValueError(f"segment {i} (rotation): rate_dps must be non-zero [°/s]")
+
+    def _fields(self) -> dict[str, jax.Array]:
+        return {
+            "temperature_c": self.temperature_c,
+            "temperature_end_c": self.temperature_end_c,
+            "wave_angle_deg": self.wave_angle_deg,
+            "rate_dps": self.rate_dps,
+            "duration_s": self.duration_s,
+        }
+
+    @property
+    def size(self) -> int:
+        """Number of segments."""
+        return len(self.kind)
+
+    @property
+    def measuring_s(self) -> jax.Array:
+        """Total time of the segments themselves [s] (transitions excluded)."""
+        return jnp.sum(self.duration_s)
+
+    @classmethod
+    def from_segments(cls, segments: Sequence[Mapping], where: str = "segments") -> BenchPlan:
+        """A plan from the plan file's list of segment dicts (keys with units in their
+        names, as in the module docstring). Every error names the segment and the key."""
+        if isinstance(segments, (str, bytes)) or not isinstance(segments, Sequence):
+            raise ValueError(f"{where} must be a list of segment objects; got {type(segments)}")
+        if not segments:
+            raise ValueError(f"{where} is empty; give at least one segment")
+        cols: dict[str, list[float]] = {k: [] for k in cls._FIELDS}
+        kinds = []
+        for i, seg in enumerate(segments):
+            here = f"{where}[{i}]"
+            if not isinstance(seg, Mapping):
+                raise ValueError(f"{here} must be an object with a 'kind'; got {seg!r}")
+            kind = seg.get("kind")
+            if kind not in KINDS:
+                raise ValueError(f"{here}: 'kind' must be one of {KINDS}; got {kind!r}")
+            need, optional = _KEYS[kind]
+            for k in seg:
+                if k != "kind" and k not in need + optional:
+                    allowed = ", ".join(f"'{a}' [{_UNITS[a]}]" for a in need + optional)
+                    raise ValueError(f"{here} ({kind}): unknown key {k!r}; expected {allowed}")
+            for k in need:
+                if k not in seg:
+                    raise ValueError(f"{here} ({kind}): missing {k!r} [{_UNITS[k]}]")
+            val = {}
+            for k in need + optional:
+                if k not in seg:
+                    continue
+                x = seg[k]
+                if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                    raise ValueError(f"{here} ({kind}): {k!r} must be a finite number "
+                                     f"[{_UNITS[k]}]; got {x!r}")  # fmt: skip
+                val[k] = float(x)
+            t0 = val.get("temperature_c", val.get("temperature_start_c"))
+            cols["temperature_c"].append(t0)
+            cols["temperature_end_c"].append(val.get("temperature_end_c", t0))
+            cols["wave_angle_deg"].append(val["wave_angle_deg"])
+            cols["rate_dps"].append(val.get("rate_dps", 0.0))
+            cols["duration_s"].append(val["duration_s"])
+            kinds.append(kind)
+        try:
+            return cls(tuple(kinds), **{k: device(np.asarray(v)) for k, v in cols.items()})
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+
+    _FIELDS = ("temperature_c", "temperature_end_c", "wave_angle_deg", "rate_dps", "duration_s")
+
+    def segments(self) -> list[dict]:
+        """The plan file's list of segment dicts (host floats; keys with units)."""
+        v = {k: np.asarray(x, dtype=float) for k, x in self._fields().items()}
+        out = []
+        for i, k in enumerate(self.kind):
+            if k == "ramp":
+                seg = {"kind": k, "temperature_start_c": float(v["temperature_c"][i]),
+                       "temperature_end_c": float(v["temperature_end_c"][i])}  # fmt: skip
+            else:
+                seg = {"kind": k, "temperature_c": float(v["temperature_c"][i])}
+            seg["wave_angle_deg"] = float(v["wave_angle_deg"][i])
+            if k == "rotation" or (k == "ramp" and v["rate_dps"][i] != 0.0):
+                seg["rate_dps"] = float(v["rate_dps"][i])
+            seg["duration_s"] = float(v["duration_s"][i])
+            out.append(seg)
+        return out
+
+
+class BenchModel(eqx.Module):
+    """What a bench session costs besides measuring: the thermal chamber and the rate table.
+
+    Between consecutive segments (and before the first, from `start_temperature_c`) a
+    temperature change ΔT = T_start(next) − T_end(previous) costs
+
+    $$t(\\Delta T) = \\frac{|\\Delta T|_\\delta}{\\text{slew}}
+      + t_\\text{settle}\\,\\bigl(1 - e^{-(\\Delta T/T_s)^2}\\bigr) + t_\\text{reposition},$$
+
+    with |x|_δ = x·tanh(x/δ) (δ = 0.05 °C: |x| to 1e-15 beyond 2 °C, 0 at 0) and
+    T_s = `settle_scale_c`: a smooth
+    version of "slew at the chamber's rate, then soak until the gyro is at temperature", so
+    that the bench time has a gradient with respect to every temperature. Ramps run at their
+    own rate inside their duration (`check` refuses one faster than the chamber).
+
+    **Arguments:**
+
+    - `slew_c_per_min`: the chamber's fastest temperature change [°C/min] (1 °C/min).
+    - `settle_s`: soak after a temperature change, before measuring [s] (30 min).
+    - `reposition_s`: between any two segments: set the wave angle, start or stop the table,
+      check the loops [s] (1 min).
+    - `start_temperature_c`: where the chamber starts [°C] (20 °C).
+    - `settle_scale_c`: temperature change below which the soak shrinks [°C] (0.5 °C).
+    """
+
+    slew_c_per_min: float = 1.0
+    settle_s: float = 1800.0
+    reposition_s: float = 60.0
+    start_temperature_c: float = 20.0
+    settle_scale_c: float = 0.5
+
+    def __check_init__(self):
+        for name in ("slew_c_per_min", "settle_scale_c"):
+            x = getattr(self, name)
+            if is_concrete(x) and not float(x) > 0:
+                raise ValueError(f"BenchModel.{name} must be > 0; got {x}")
+        for name in ("settle_s", "reposition_s"):
+            x = getattr(self, name)
+            if is_concrete(x) and not float(x) >= 0:
+                raise ValueError(f"BenchModel.{name} must be ≥ 0 [s]; got {x}")
+
+    def transitions_s(self, plan: BenchPlan) -> dict[str, jax.Array]:
+        """Per-segment costs before each segment [s], shape (S,) each: `slew`, `settle`,
+        `reposition`."""
+        prev_end = jnp.concatenate(
+            [jnp.reshape(jnp.asarray(self.start_temperature_c, float), (1,)),
+             plan.temperature_end_c[:-1]]
+        )  # fmt: skip
+        dt = plan.temperature_c - prev_end
+        delta = 0.05
+        slew = dt * jnp.tanh(dt / delta) / self.slew_c_per_min * 60.0
+        settle = self.settle_s * (1.0 - jnp.exp(-((dt / self.settle_scale_c) ** 2)))
+        repos = jnp.broadcast_to(jnp.asarray(self.reposition_s, dtype=float), dt.shape)
+        return {"slew": slew, "settle": settle, "reposition": repos}
+
+    def bench_time_s(self, plan: BenchPlan) -> jax.Array:
+        """Bench time of the whole plan [s]: measuring plus every transition (differentiable
+        with respect to the plan and to this model)."""
+        parts = self.transitions_s(plan)
+        return plan.measuring_s + sum(jnp.sum(p) for p in parts.values())
+
+    def breakdown_h(self, plan: BenchPlan) -> dict[str, float]:
+        """Bench time split into measuring, slewing, settling and re-positioning [h]."""
+        parts = {"measuring": plan.measuring_s}
+        parts.update({k: jnp.sum(v) for k, v in self.transitions_s(plan).items()})
+        out = {k: float(v) / 3600.0 for k, v in parts.items()}
+        out["total"] = sum(out.values())
+        return out
+
+    def check(self, plan: BenchPlan) -> None:
+        """Raise `ValueError` naming the first ramp faster than the chamber can slew."""
+        rate = (
+            np.abs(np.asarray(plan.temperature_end_c) - np.asarray(plan.temperature_c))
+            / np.asarray(plan.duration_s)
+            * 60.0
+        )
+        for i, k in enumerate(plan.kind):
+            if k == "ramp" and rate[i] > float(self.slew_c_per_min) * (1 + 1e-12):
+                raise ValueError(
+                    f"segment {i} (ramp): {rate[i]:.3g} °C/min is faster than the chamber's "
+                    f"slew_c_per_min={float(self.slew_c_per_min):g}; lengthen duration_s"
+                )
+
+    def to_json(self) -> dict[str, float]:
+        return {
+            "slew_c_per_min": float(self.slew_c_per_min),
+            "settle_s": float(self.settle_s),
+            "reposition_s": float(self.reposition_s),
+            "start_temperature_c": float(self.start_temperature_c),
+            "settle_scale_c": float(self.settle_scale_c),
+        }
+
+
+def bench_time_h(plan: BenchPlan, bench: BenchModel | None = None) -> jax.Array:
+    """Bench time of `plan` [h] under `bench` (default `BenchModel()`)."""
+    return (BenchModel() if bench is None else bench).bench_time_s(plan) / 3600.0
+
+
+def seed_bench_plan(quick: bool = False, rate_dps: float = 5.0) -> BenchPlan:
+    """The seed's calibration plan as one bench session: at each temperature (−40 → +60 °C),
+    3-min static dwells at each wave angle (−90…+90° in 10° steps), then 3-min rotations at
+    `rate_dps` from each angle. `quick`: −40, +20, +60 °C and 2-min runs (as
+    `seed_plan(quick=True)`)."""
+    from .experiment import QUICK_DURATION, QUICK_TEMPERATURES
+
+    temps, dur = (QUICK_TEMPERATURES, QUICK_DURATION) if quick else (SEED_TEMPERATURES, 180.0)
+    segs = []
+    for t in temps:
+        for kind in ("static", "rotation"):
+            for a in SEED_ANGLES:
+                seg = {"kind": kind, "temperature_c": t, "wave_angle_deg": a, "duration_s": dur}
+                if kind == "rotation":
+                    seg["rate_dps"] = rate_dps
+                segs.append(seg)
+    return BenchPlan.from_segments(segs)
+
+
+def plan_to_json(plan: BenchPlan, bench: BenchModel | None = None) -> dict:
+    """The plan file's content: segments, `bench_time_h` and the `bench` model used."""
+    bench = BenchModel() if bench is None else bench
+    return {
+        "segments": plan.segments(),
+        "bench_time_h": float(bench_time_h(plan, bench)),
+        "bench": bench.to_json(),
+    }
+
+
+def save_plan(plan: BenchPlan, path: str | os.PathLike, bench: BenchModel | None = None):
+    """Write `plan` as a JSON plan file (atomically); returns the path."""
+    from .._io import atomic_write
+
+    with atomic_write(path, "w", encoding="utf-8") as fh:
+        fh.write(json.dumps(plan_to_json(plan, bench), indent=1) + "\n")
+    return os.fspath(path)
+
+
+def load_plan(path: str | os.PathLike) -> tuple[BenchPlan, BenchModel]:
+    """Read a JSON plan file: `(plan, bench)` — `bench` from its `"bench"` block where it
+    has one, else `BenchModel()`. Errors name the file, the segment and the key."""
+    doc = read_json(path)
+    where = f"{os.fspath(path)}"
+    if not isinstance(doc, dict) or "segments" not in doc:
+        raise ValueError(f"{where}: a plan file is an object with a 'segments' list")
+    unknown = set(doc) - {"segments", "bench_time_h", "bench"}
+    if unknown:
+        raise ValueError(
+            f"{where}: unknown key(s) {sorted(unknown)}; expected 'segments', "
+            "'bench_time_h', 'bench'"
+        )
+    plan = BenchPlan.from_segments(doc["segments"], where=f"{where}: segments")
+    bench = BenchModel()
+    if "bench" in doc:
+        b = doc["bench"]
+        fields = set(BenchModel().to_json())
+        if not isinstance(b, dict) or set(b) - fields:
+            raise ValueError(f"{where}: 'bench' must be an object with keys from {sorted(fields)}")
+        try:
+            bench = BenchModel(**{k: float(v) for k, v in b.items()})
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{where}: 'bench': {err}") from None
+    return plan, bench
+
+
+def _profiles(plan: BenchPlan, idx: np.ndarray) -> Profile:
+    """The segments `idx` as one batch of two-knot profiles (host arrays)."""
+    v = {k: np.asarray(x, dtype=float)[idx] for k, x in plan._fields().items()}
+    n = len(idx)
+    t = np.stack([np.zeros(n), v["duration_s"]], axis=1)
+    # One checked profile, its arrays replaced by the batch (as Plan.profiles: no eager vmap
+    # of the constructor); the batch's values were checked by BenchPlan.
+    return eqx.tree_at(
+        lambda p: (p.t, p.rate, p.temperature, p.accel, p.wave_angle0),
+        Profile.piecewise([0.0, 1.0], [0.0, 0.0], [0.0, 0.0]),
+        (
+            device(t),
+            device(np.repeat(v["rate_dps"][:, None], 2, axis=1) * DEG_PER_S),
+            device(np.stack([v["temperature_c"], v["temperature_end_c"]], axis=1)),
+            device(np.zeros((n, 2, 3))),
+            device(v["wave_angle_deg"] * DEG),
+        ),
+    )
+
+
+def simulate_plan(
+    gyro: Gyro,
+    plan: BenchPlan,
+    *,
+    key: jax.Array | None = None,
+    bias_key: jax.Array | None = None,
+    model: str = "averaged",
+    dt_out: Mapping[str, float] | None = None,
+) -> MeasuredData:
+    """Simulate every segment of `plan` on `gyro` as one bench session (one switch-on: the
+    run-to-run bias drawn once from `bias_key`); segment i is run i of the data.
+
+    Segments of equal length and output interval share one compiled simulator (vmapped in
+    chunks of `CHUNK`, as `run_plan`). `dt_out`: output interval per kind [s] (default
+    `DT_OUT`: static 1 s, rotation 0.5 s, ramp 1 s). Each segment gets its own noise key
+    (`jax.random.split(key, S)[i]`), so a segment's data do not depend on the others."""
+    if not all(is_concrete(x) for x in plan._fields().values()):
+        raise ValueError("simulate_plan needs a concrete plan (host values), not a traced one")
+    dts = dict(DT_OUT)
+    if dt_out is not None:
+        unknown = set(dt_out) - set(KINDS)
+        if unknown:
+            raise ValueError(f"dt_out keys must be from {KINDS}; got {sorted(unknown)}")
+        dts.update({k: float(v) for k, v in dt_out.items()})
+        if not all(v > 0 for v in dts.values()):
+            raise ValueError(f"dt_out values must be > 0 [s]; got {dts}")
+    keys = None
+    if gyro.noise is not None:
+        if key is None:
+            raise ValueError("this gyro has noise: pass key=jax.random.key(…)")
+        k_seg, k_bias = jax.random.split(key)
+        bias_key = k_bias if bias_key is None else bias_key
+        keys = np.asarray(jax.random.key_data(jax.random.split(k_seg, plan.size)))
+        impl = jax.random.key_impl(k_seg)
+    durations = np.asarray(plan.duration_s, dtype=float)
+    groups: dict[tuple[float, float], list[int]] = {}
+    for i, k in enumerate(plan.kind):
+        dt = dts[k]
+        n_out = round(durations[i] / dt)
+        if n_out < 1 or abs(n_out * dt - durations[i]) > 1e-9 * max(1.0, durations[i]):
+            raise ValueError(
+                f"segment {i} ({k}): duration_s={durations[i]:g} is not a whole number of "
+                f"dt_out={dt:g} s output intervals"
+            )
+        groups.setdefault((durations[i], dt), []).append(i)
+    per_segment: list[dict | None] = [None] * plan.size
+    with bar(plan.size, f"simulating {plan.size} segments", unit="segment") as progress:
+        for (dur, dt), members in groups.items():
+            idx = np.asarray(members)
+            ts = device(np.arange(round(dur / dt) + 1) * dt)
+            chunk = min(CHUNK, len(idx))
+            n_pad = -len(idx) % chunk
+            padded = np.concatenate([idx, np.repeat(idx[-1:], n_pad)])
+            for s in range(0, len(padded), chunk):
+                take = padded[s : s + chunk]
+                k = None
+                if keys is not None:
+                    k = jax.random.wrap_key_data(device(keys[take]), impl=impl)
+                rec, _ = _simulate_chunk(gyro, _profiles(plan, take), k, bias_key, ts, model)
+                cols = rec.to_data().columns
+                real = min(chunk, len(idx) - s)
+                for j in range(real):
+                    rows = cols["run"] == j
+                    seg = {c: v[rows] for c, v in cols.items()}
+                    seg["run"] = np.full(int(rows.sum()), take[j], dtype=np.int64)
+                    per_segment[take[j]] = seg
+                progress.update(real)
+    names = list(per_segment[0])
+    return MeasuredData({c: np.concatenate([s[c] for s in per_segment]) for c in names})

@@ -1,0 +1,171 @@
+"""Bench plans (issue 22, scope 1): segments as a pytree, the bench-time model against its
+formula and finite differences, plan files, simulating a plan as one switch-on."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import cli_fails
+
+import hrgjax as hg
+from hrgjax.calibration import design as d
+from hrgjax.cli import main
+
+SEGMENTS = [
+    {"kind": "static", "temperature_c": -20.0, "wave_angle_deg": 10.0, "duration_s": 20.0},
+    {"kind": "rotation", "temperature_c": -20.0, "wave_angle_deg": -30.0, "rate_dps": 5.0,
+     "duration_s": 10.0},
+    {"kind": "ramp", "temperature_start_c": -20.0, "temperature_end_c": -19.0,
+     "wave_angle_deg": 45.0, "duration_s": 20.0},
+]  # fmt: skip
+
+
+def _slew_settle(dt, bench):
+    """Independent transcription of BenchModel's transition cost [s] (numpy, per ΔT)."""
+    delta = 0.05
+    slew = dt * np.tanh(dt / delta) / bench.slew_c_per_min * 60.0
+    settle = bench.settle_s * (1.0 - np.exp(-((dt / bench.settle_scale_c) ** 2)))
+    return slew + settle + bench.reposition_s
+
+
+def test_seed_plan_costs_most_of_two_days_by_the_formula():
+    """The seed's 11 × 19 static and rotation points in bench order: 20.9 h of measuring,
+    one 60-°C cool-down from 20 °C then ten 10-°C steps (each ≈ 10 min slew + 30 min soak),
+    418 re-positionings — 36.0 h, as the formula written out by hand."""
+    plan, bench = d.seed_bench_plan(), d.BenchModel()
+    assert plan.size == 418 and plan.kind.count("rotation") == 209
+    steps = np.array([-60.0] + [10.0] * 10)
+    by_hand = 418 * 180.0 + np.sum(_slew_settle(steps, bench)) + (418 - 11) * 60.0
+    assert float(d.bench_time_h(plan)) * 3600 == pytest.approx(by_hand, rel=1e-12)
+    hours = bench.breakdown_h(plan)
+    assert hours["measuring"] == pytest.approx(20.9)
+    assert hours["settle"] == pytest.approx(5.5)  # 11 changes × 30 min
+    assert hours["slew"] == pytest.approx(160 / 60, rel=1e-14)  # 160 °C at 1 °C/min
+    assert hours["total"] == pytest.approx(sum(v for k, v in hours.items() if k != "total"))
+    quick = d.seed_bench_plan(quick=True)
+    assert quick.size == 2 * 3 * 19 and float(jnp.max(quick.duration_s)) == 120.0
+
+
+def test_bench_time_gradient_equals_finite_differences_and_the_analytic_slope():
+    """d(bench time)/d(plan) by jax.grad = central differences (1e-7) and, for durations,
+    exactly 1 s/s; for a temperature, f′(ΔT_i) − f′(ΔT_{i+1}) written out."""
+    rng = np.random.default_rng(0)
+    n = 6
+    t = rng.uniform(-40, 60, n)
+    cols = (t, t, rng.uniform(-90, 90, n), np.zeros(n), rng.uniform(60, 600, n))
+    plan = d.BenchPlan(("static",) * n, *(jnp.asarray(x) for x in cols))
+    bench = d.BenchModel(settle_scale_c=8.0)  # a scale that makes the soak term bend
+    f = lambda p: bench.bench_time_s(p)
+    g = jax.grad(f)(plan)
+    np.testing.assert_allclose(g.duration_s, 1.0, rtol=0, atol=1e-15)
+
+    def fd(i, h=1e-4):
+        up = lambda s: plan.__class__(plan.kind, plan.temperature_c.at[i].add(s),
+                                      plan.temperature_end_c.at[i].add(s), plan.wave_angle_deg,
+                                      plan.rate_dps, plan.duration_s)  # fmt: skip
+        return (float(f(up(h))) - float(f(up(-h)))) / (2 * h)
+
+    # a static segment's start and end temperature are one number: the total derivative
+    total = g.temperature_c + g.temperature_end_c
+    for i in range(n):
+        assert float(total[i]) == pytest.approx(fd(i), rel=1e-7, abs=1e-6)
+
+    def fprime(dt):
+        delta = 0.05
+        return ((np.tanh(dt / delta) + dt / delta * (1 - np.tanh(dt / delta) ** 2))
+                * 60.0 / bench.slew_c_per_min
+                + bench.settle_s * 2 * dt / bench.settle_scale_c**2
+                * np.exp(-((dt / bench.settle_scale_c) ** 2)))  # fmt: skip
+
+    temps = np.asarray(plan.temperature_c)
+    dts = np.diff(np.concatenate([[bench.start_temperature_c], temps]))
+    analytic = fprime(dts) - np.concatenate([fprime(dts[1:]), [0.0]])
+    np.testing.assert_allclose(total, analytic, rtol=1e-12, atol=1e-12)
+
+
+def test_plan_file_round_trip_and_every_bad_input_named(tmp_path):
+    plan = d.BenchPlan.from_segments(SEGMENTS)
+    bench = d.BenchModel(slew_c_per_min=2.0, settle_s=900.0)
+    path = d.save_plan(plan, tmp_path / "plan.json", bench)
+    doc = json.loads((tmp_path / "plan.json").read_text())
+    assert doc["segments"] == SEGMENTS  # the contract's keys, units in their names
+    assert doc["bench_time_h"] == pytest.approx(float(d.bench_time_h(plan, bench)))
+    back, bench_back = d.load_plan(path)
+    assert back.kind == plan.kind and bench_back == bench
+    for a, b in zip(jax.tree_util.tree_leaves(back), jax.tree_util.tree_leaves(plan), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+    def bad(segments, match, **doc):
+        f = tmp_path / "bad.json"
+        f.write_text(json.dumps({"segments": segments, **doc}))
+        with pytest.raises(ValueError, match=match):
+            d.load_plan(f)
+
+    s0 = SEGMENTS[0]
+    bad([{**s0, "kind": "hold"}], r"segments\[0\]: 'kind' must be one of")
+    bad(
+        [{k: v for k, v in s0.items() if k != "duration_s"}],
+        r"\[0\] \(static\): missing 'duration_s' \[s\]",
+    )
+    bad([{**s0, "temperature": 0.0}], r"unknown key 'temperature'; expected 'temperature_c' \[°C\]")
+    bad([{**s0, "rate_dps": 1.0}], r"unknown key 'rate_dps'")  # a static segment does not turn
+    bad(
+        [s0, {**SEGMENTS[1], "rate_dps": 0.0}], r"segment 1 \(rotation\): rate_dps must be non-zero"
+    )
+    bad([{**s0, "duration_s": -1.0}], r"segment 0 \(static\): duration_s must be > 0")
+    bad([{**s0, "wave_angle_deg": "ten"}], r"'wave_angle_deg' must be a finite number")
+    bad([], r"segments is empty")
+    bad([s0], r"unknown key\(s\) \['plan'\]", plan=1)
+    bad([s0], r"'bench' must be an object with keys", bench={"slew": 1.0})
+    bad([s0], r"slew_c_per_min must be > 0", bench={"slew_c_per_min": 0.0})
+    fast = d.BenchPlan.from_segments([{**SEGMENTS[2], "temperature_end_c": 40.0}])
+    with pytest.raises(ValueError, match=r"segment 0 \(ramp\): 180 °C/min is faster"):
+        d.BenchModel().check(fast)
+    with pytest.raises(ValueError, match=r"BenchPlan.temperature_c must have shape \(2,\)"):
+        d.BenchPlan(("static", "static"), *(jnp.zeros(3),) * 4, jnp.ones(3))  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def quiet():
+    return hg.presets.tvg3_like(noise=False)
+
+
+def test_each_segment_is_the_simulation_of_its_profile(quiet):
+    """Segment i is run i; each equals hg.simulate of its two-knot profile (static,
+    5 °/s rotation, 1-°C ramp) to 1e-10 rad; the columns carry the plan's values."""
+    plan = d.BenchPlan.from_segments(SEGMENTS)
+    data = d.simulate_plan(quiet, plan)
+    assert np.unique(data.run).tolist() == [0, 1, 2]
+    for i, s in enumerate(SEGMENTS):
+        rows = data.run == i
+        t0 = s.get("temperature_c", s.get("temperature_start_c"))
+        t1 = s.get("temperature_end_c", t0)
+        prof = hg.Profile.piecewise([0.0, s["duration_s"]], [s.get("rate_dps", 0.0)] * 2,
+                                    [t0, t1], wave_angle0_deg=s["wave_angle_deg"])  # fmt: skip
+        dt = d.DT_OUT[s["kind"]]
+        rec = hg.simulate(quiet, prof, ts=jnp.arange(0.0, s["duration_s"] + dt / 2, dt))
+        np.testing.assert_allclose(data["wave_angle_deg"][rows], np.rad2deg(rec.wave_angle),
+                                   rtol=0, atol=np.rad2deg(1e-10))  # fmt: skip
+        temp = data["temperature_c"][rows]
+        assert temp[0] == t0 and temp[-1] == pytest.approx(t1)
+        assert np.all(data["table_rate_dps"][rows] == s.get("rate_dps", 0.0))
+
+
+def test_simulate_plan_file_cli(tmp_path, quiet, capsys):
+    plan = d.BenchPlan.from_segments(SEGMENTS)  # its ramp: 3 °C/min
+    path = d.save_plan(plan, tmp_path / "plan.json", d.BenchModel(slew_c_per_min=5.0))
+    out = tmp_path / "data.csv"
+    args = ["simulate", "--plan-file", str(path), "--no-noise", "--out", str(out)]
+    assert main(args) == 0
+    data = hg.load(out)
+    assert np.unique(data.run).tolist() == [0, 1, 2]
+    assert "3 segments, bench time" in capsys.readouterr().out
+    slow = d.save_plan(plan, tmp_path / "slow.json")  # a 1-°C/min chamber cannot ramp it
+    cli_fails(["simulate", "--plan-file", str(slow), "--out", str(out)], capsys,
+              r"slow.json: segment 2 \(ramp\): 3 °C/min is faster than")  # fmt: skip
+    cli_fails(["simulate", "--plan-file", str(path), "--plan", "seed", "--out", str(out)],
+              capsys, "either --plan or --plan-file")  # fmt: skip
+    cli_fails(["simulate", "--plan-file", str(tmp_path / "none.json"), "--out", str(out)],
+              capsys, r"--plan-file: .*none.json: no such file")  # fmt: skip
