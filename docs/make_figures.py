@@ -65,6 +65,14 @@ def allan():
                  title="default gyro at rest, 20 000 s at 1 Hz")  # fmt: skip
 
 
+def bench_plan():
+    from hrgjax.calibration import design
+    from hrgjax.plots import plan_figure
+
+    plan_figure(design.seed_bench_plan(), os.path.join(HERE, "seed_plan.png"),
+                title="the seed's calibration plan as one bench session")  # fmt: skip
+
+
 def imu():
     from hrgjax.plots import imu_session_figure
 
@@ -235,6 +243,7 @@ FIGURES = (  # longest first (cold, 2 cores), so that the workers finish togethe
     full_vs_averaged,
     allan,
     imu,
+    bench_plan,
 )
 
 
