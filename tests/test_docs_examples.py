@@ -59,6 +59,10 @@ QUICK: dict[str, list[tuple[str, str]]] = {
         ("rate_dps=jnp.geomspace(0.1, 400.0, 64)", "rate_dps=jnp.geomspace(0.1, 400.0, 8)"),
     ],
     "noise.md": [("hg.Profile.static(20000.0)", "hg.Profile.static(2000.0)")],
+    "design.md": [
+        ('"temperature_end_c": 60.0', '"temperature_end_c": -30.0'),
+        ('"duration_s": 6000.0}', '"duration_s": 600.0}'),
+    ],
     "fog.md": [("epochs=300", "epochs=5"), ("600.0), fs=100.0", "120.0), fs=100.0")],
 }
 
