@@ -285,7 +285,7 @@ class BenchModel(eqx.Module):
 
     def bench_time_s(self, plan: BenchPlan) -> jax.Array:
         """Bench time of the whole plan [s]: measuring plus every transition (differentiable
-        with respect to the plan and to this model)."""
+        with respect to the plan's arrays)."""
         parts = self.transitions_s(plan)
         return plan.measuring_s + sum(jnp.sum(p) for p in parts.values())
 
