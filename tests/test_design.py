@@ -3,6 +3,7 @@ formula and finite differences, plan files, simulating a plan as one switch-on."
 
 import json
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -169,3 +170,113 @@ def test_simulate_plan_file_cli(tmp_path, quiet, capsys):
               capsys, "either --plan or --plan-file")  # fmt: skip
     cli_fails(["simulate", "--plan-file", str(tmp_path / "none.json"), "--out", str(out)],
               capsys, r"--plan-file: .*none.json: no such file")  # fmt: skip
+
+
+# --- the design criteria (scope 2) ---------------------------------------------------------
+
+IDEAL_READOUT = d.nominal_values().at[9:].set(0.0)  # gain mismatch and cross-talk off
+
+
+def test_measured_rate_is_the_ideal_loop_law_and_its_jacobian_is_finite_differences():
+    """With a perfect readout the measured rate is −k_e(Ω + b(T)) + ½Δ(1/τ)(T) sin 2(θ−θ_τ(T))
+    written out (PHYSICS.md §10), with no Ṫ term; with the preset's readout, jacfwd equals
+    central differences for all twelve parameters."""
+    v = np.asarray(IDEAL_READOUT)
+    theta, temp, omega = 0.7, -25.0, 5.0 * hg.units.DEG_PER_S
+    dt = temp - 20.0
+    bias = v[2] + v[3] * dt + v[4] * dt**2
+    law = 0.5 * v[5] * np.exp(v[6] * dt) * np.sin(2 * (theta - v[7] - v[8] * dt))
+    by_hand = -v[0] * (1 + v[1] * dt) * (omega + bias) + law
+    got = d.measured_rate(jnp.asarray(v), jnp.asarray(theta), jnp.asarray(temp), omega, 0.05)
+    assert float(got) == pytest.approx(by_hand, rel=1e-13)
+    values = d.nominal_values().at[11].set(2e-3)  # cross-talk on as well
+    f = jax.jit(lambda x: d.measured_rate(x, jnp.asarray(theta), jnp.asarray(temp), omega, 0.05))
+    jac = np.asarray(jax.jacfwd(f)(values))
+    for i in range(12):
+        h = 1e-6 * max(abs(float(values[i])), 1e-3)
+        fd = (float(f(values.at[i].add(h))) - float(f(values.at[i].add(-h)))) / (2 * h)
+        assert jac[i] == pytest.approx(fd, rel=1e-6, abs=1e-9 * abs(jac).max()), i
+
+
+def test_information_is_duration_over_noise_and_adds_over_a_split_segment():
+    """A static segment informs the bias as D k_e²/N² and its slope as D k_e² ΔT²/N²; a
+    rotation split in two halves (the second from where the first left the pattern) carries
+    the information of the whole."""
+    arw = 1e-5
+    static = d.BenchPlan.from_segments([SEGMENTS[0]])
+    info = np.asarray(d.information(static, IDEAL_READOUT, arw))
+    k_e, dur, dt = float(IDEAL_READOUT[0]), SEGMENTS[0]["duration_s"], -40.0
+    assert info[2, 2] == pytest.approx(dur * k_e**2 / arw**2, rel=1e-12)
+    assert info[3, 3] == pytest.approx(dur * k_e**2 * dt**2 / arw**2, rel=1e-12)
+    rot = {**SEGMENTS[1], "duration_s": 60.0}
+    half = {**rot, "duration_s": 30.0}
+    swept = -k_e * rot["rate_dps"] * 30.0  # electrical degrees turned in the first half
+    halves = d.BenchPlan.from_segments(
+        [half, {**half, "wave_angle_deg": half["wave_angle_deg"] + swept}]
+    )
+    whole = d.BenchPlan.from_segments([rot])
+    a = np.asarray(d.information(halves, IDEAL_READOUT, arw))
+    b = np.asarray(d.information(whole, IDEAL_READOUT, arw))
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+
+
+@pytest.fixture(scope="module")
+def small_plan():
+    segs = [{**SEGMENTS[0], "duration_s": 600.0}, {**SEGMENTS[1], "duration_s": 120.0},
+            {**SEGMENTS[2], "temperature_end_c": 40.0, "duration_s": 3600.0},
+            {**SEGMENTS[0], "temperature_c": 60.0, "wave_angle_deg": 60.0, "duration_s": 600.0}]  # fmt: skip
+    return d.BenchPlan.from_segments(segs)
+
+
+def test_criterion_gradient_equals_finite_differences(small_plan, kind="drift"):
+    """jax.grad of the criterion w.r.t. the plan = central differences (h = 0.01; rel 1e-5
+    of each entry or 1e-6 of the field's largest) in every temperature, wave angle and
+    duration (a static segment's two temperatures move together). A prior of one typical
+    uncertainty keeps the posterior well conditioned: the differences then resolve 1e-6."""
+    f = lambda p: float(d.criterion(p, kind, prior_scale=1.0))
+    g = jax.grad(lambda p: d.criterion(p, kind, prior_scale=1.0))(small_plan)
+
+    def moved(field, i, h):
+        p = small_plan
+        p = eqx.tree_at(lambda q: getattr(q, field), p, getattr(p, field).at[i].add(h))
+        if field == "temperature_c" and p.kind[i] != "ramp":
+            p = eqx.tree_at(lambda q: q.temperature_end_c, p, p.temperature_end_c.at[i].add(h))
+        return p
+
+    h = 0.01
+    for field in ("temperature_c", "wave_angle_deg", "duration_s"):
+        got = np.asarray(getattr(g, field))
+        if field == "temperature_c":
+            static = np.array([k != "ramp" for k in small_plan.kind])
+            got = got + np.where(static, np.asarray(g.temperature_end_c), 0.0)
+        for i in range(small_plan.size):
+            fd = (f(moved(field, i, h)) - f(moved(field, i, -h))) / (2 * h)
+            tol = 1e-5 * abs(fd) + 1e-6 * np.abs(got).max()
+            assert abs(got[i] - fd) <= tol, (field, i, got[i], fd)
+
+
+def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_variance():
+    """d, a and drift equal log det, trace and the grid RMS of (F + Λ)⁻¹ formed in numpy
+    from `information`; the posterior covariance is that inverse; a plan run twice has
+    twice the information, and with a negligible prior its drift error is 1/√2 (the seed's
+    quick plan identifies all twelve parameters)."""
+    from hrgjax.calibration.physical import _SCALE
+
+    plan = d.seed_bench_plan(quick=True)
+    f = np.asarray(d.information(plan))
+    a = f * _SCALE[:, None] * _SCALE[None, :] + np.eye(12) / 100.0**2
+    inv = np.linalg.inv(a)
+    assert float(d.criterion(plan, "d")) == pytest.approx(np.linalg.slogdet(inv)[1], rel=1e-9)
+    assert float(d.criterion(plan, "a")) == pytest.approx(np.trace(inv), rel=1e-7)
+    cov = np.asarray(d.posterior_covariance(plan))
+    np.testing.assert_allclose(cov, inv * _SCALE[:, None] * _SCALE[None, :], rtol=1e-6,
+                               atol=1e-9 * np.abs(cov).max())  # fmt: skip
+    fields = (plan.temperature_c, plan.temperature_end_c, plan.wave_angle_deg, plan.rate_dps,
+              plan.duration_s)  # fmt: skip
+    twice = d.BenchPlan(plan.kind * 2, *(jnp.concatenate([x, x]) for x in fields))
+    np.testing.assert_allclose(
+        d.information(twice), 2 * f, rtol=1e-12, atol=1e-12 * np.abs(f).max()
+    )
+    wide = dict(prior_scale=1e6)
+    one, two = (float(d.criterion(p, "drift", **wide)) for p in (plan, twice))
+    assert two / one == pytest.approx(2**-0.5, rel=1e-6)

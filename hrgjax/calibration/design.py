@@ -480,3 +480,213 @@ def simulate_plan(
                 progress.update(real)
     names = list(per_segment[0])
     return MeasuredData({c: np.concatenate([s[c] for s in per_segment]) for c in names})
+
+
+# --- What a plan teaches: Fisher information of the physical grey box ----------------------
+
+CRITERIA = ("drift", "d", "a")
+"""Design criteria: `drift` (RMS of the compensated static drift's standard deviation over
+the operating grid [°/h]), `d` (log-determinant of the scaled posterior covariance), `a`
+(trace of the scaled posterior covariance)."""
+
+OPERATING_TEMPERATURES = tuple(float(t) for t in range(-40, 61, 5))
+"""Temperatures of the `drift` criterion's operating grid [°C] (the seed's test range)."""
+OPERATING_ANGLES = tuple(float(a) for a in range(-90, 91, 5))
+"""Wave angles of its operating grid [° electrical] (the seed's 5° test steps)."""
+
+
+def _coefficients(x):
+    """(p0, p1, p2, lam) of a TemperatureLaw, or (x, 0, 0, 0) of a constant."""
+    from ..resonator.params import TemperatureLaw
+
+    if isinstance(x, TemperatureLaw):
+        return tuple(float(v) for v in (x.p0, x.p1, x.p2, x.lam))
+    return float(x), 0.0, 0.0, 0.0
+
+
+def nominal_values(gyro: Gyro | None = None) -> jax.Array:
+    """The physical grey box's parameter vector (order of
+    [`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS], SI) read from `gyro`'s
+    laws (default: `presets.tvg3_like()`): the point the design linearises about. Law terms
+    outside the grey box's family (a curvature of k_e, …) are left out."""
+    from ..presets import tvg3_like
+
+    g = tvg3_like() if gyro is None else gyro
+    res, ro = g.resonator, g.readout
+    ke = _coefficients(res.k_e)
+    bias = _coefficients(g.rate_bias)
+    dit = _coefficients(res.delta_inv_tau)
+    tht = _coefficients(res.theta_tau)
+    gm = _coefficients(ro.gain_mismatch)
+    ct = _coefficients(ro.cross_talk)
+    return jnp.asarray(
+        [ke[0], ke[1] / ke[0], bias[0], bias[1], bias[2], dit[0], dit[3], tht[0], tht[1],
+         gm[0], gm[1], ct[0]],
+        dtype=float,
+    )  # fmt: skip
+
+
+def pattern_arw(gyro: Gyro | None = None) -> float:
+    """Angle random walk of the measured pattern angle [rad/√s]: k_e × the gyro's ARW
+    (default gyro: 0.554 × 0.002 °/√h)."""
+    from ..presets import tvg3_like
+
+    g = tvg3_like() if gyro is None else gyro
+    if g.noise is None:
+        raise ValueError("the design needs a gyro with noise (its angle_random_walk)")
+    return float(_coefficients(g.resonator.k_e)[0]) * float(g.noise.angle_random_walk)
+
+
+def measured_rate(values, theta, temperature_c, rate, temperature_rate):
+    """Rate of the measured pattern angle [rad/s] of the grey box `values` at true pattern
+    angle `theta` [rad], temperature [°C], table rate `rate` [rad/s] and temperature rate
+    [°C/s]: dθ̂/dθ · θ̇ + ∂θ̂/∂T · Ṫ (ideal loops, PHYSICS.md §10; the averaged field and
+    the readout map of `physical.model_gyro`)."""
+    from ..resonator.averaged import averaged_vector_field
+    from .physical import _readout_angle, model_gyro
+
+    gyro = model_gyro(values)
+    g = gyro.at(temperature_c)
+    one = jnp.ones_like(theta)
+    slope = jax.jvp(lambda th: _readout_angle(g, th), (theta,), (one,))[1]
+    rest = Profile.static(1.0)
+    prof = eqx.tree_at(
+        lambda p: (p.rate, p.temperature),
+        rest,
+        (jnp.broadcast_to(rate, (2,)), jnp.broadcast_to(temperature_c, (2,))),
+    )
+    theta_dot = averaged_vector_field(0.0, theta[None], (gyro, prof))[0]
+    d_temp = jax.jvp(lambda temp: _readout_angle(gyro.at(temp), theta), (temperature_c,), (one,))[1]
+    return slope * theta_dot + d_temp * temperature_rate
+
+
+_NODES = 64
+
+
+def _segment_information(values, arw, t0, t1, angle_deg, rate_dps, duration, nodes):
+    """Fisher information (P, P) of one segment about `values`: the measured pattern rate
+    observed continuously through white rate noise of density `arw` [rad/√s], i.e.
+    ∫ g gᵀ dt / N² with g = ∂(measured rate)/∂values along the segment's path (θ turning at
+    −k_e Ω, T linear), by `nodes`-point Gauss–Legendre quadrature."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    s = (jnp.asarray(x) + 1.0) / 2.0  # 0…1
+    t = s * duration
+    temp_rate = (t1 - t0) / duration
+    temps = t0 + temp_rate * t
+    omega = rate_dps * DEG_PER_S
+    thetas = angle_deg * DEG - values[0] * omega * t
+    jac = jax.vmap(lambda th, T: jax.jacfwd(measured_rate)(values, th, T, omega, temp_rate))(
+        thetas, temps
+    )  # (nodes, P)
+    weights = jnp.asarray(w) / 2.0 * duration / arw**2
+    return jnp.einsum("n,np,nq->pq", weights, jac, jac)
+
+
+def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: int = _NODES):
+    """Fisher information matrix (P × P, P = 12) of `plan` about the physical grey box's
+    parameters ([`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] order, SI),
+    linearised at `values` (default `nominal_values()`), for white rate noise of density
+    `arw` on the measured pattern angle [rad/√s] (default `pattern_arw()`).
+
+    Each segment is observed through its measured pattern rate along its path: θ turning at
+    −k_e Ω from its wave angle, T moving linearly from start to end (a ramp's Ṫ reaches the
+    readout's temperature sensitivity ∂θ̂/∂T — what a static grid cannot see). The
+    Gauss–Markov rate and the switch-on bias are left out (the bias is fitted per session):
+    long dwells are predicted better than they calibrate. Differentiable with respect to the
+    plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
+    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    arw = pattern_arw() if arw is None else arw
+    return _information(plan, values, jnp.asarray(arw, dtype=float), nodes)
+
+
+@eqx.filter_jit
+def _information(plan, values, arw, nodes):
+    """`information`, compiled once per plan length."""
+    seg = jax.vmap(
+        lambda a, b, c, d, e: _segment_information(values, arw, a, b, c, d, e, nodes)
+    )(plan.temperature_c, plan.temperature_end_c, plan.wave_angle_deg, plan.rate_dps,
+      plan.duration_s)  # fmt: skip
+    return jnp.sum(seg, axis=0)
+
+
+def _precision_factor(plan, values, arw, prior_scale):
+    """Cholesky factor of the posterior precision in units of each parameter's typical
+    uncertainty, equilibrated to unit diagonal: `(L, d)` with A = diag(d) L Lᵀ diag(d)
+    (forming (F + Λ)⁻¹ explicitly loses ~cond·ε; triangular solves keep the criteria and
+    their gradients accurate)."""
+    from .physical import _SCALE
+
+    scale = jnp.asarray(_SCALE)
+    a = information(plan, values, arw) * scale[:, None] * scale[None, :]
+    a = a + jnp.eye(a.shape[0]) / prior_scale**2
+    d = jnp.sqrt(jnp.diagonal(a))
+    return jnp.linalg.cholesky(a / d[:, None] / d[None, :]), d
+
+
+def _scaled_solve(factor, h):
+    """Rows L⁻¹ diag(d)⁻¹ hᵢ for h (N, P) in scaled units: ‖row‖² = hᵢᵀ A⁻¹ hᵢ."""
+    import jax.scipy.linalg as jsl
+
+    chol, d = factor
+    return jsl.solve_triangular(chol, (h / d[None, :]).T, lower=True).T
+
+
+def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0):
+    """Linearised posterior covariance of the grey box's parameters after `plan` (P × P,
+    SI): (F + Λ)⁻¹ with F = [`information`][hrgjax.calibration.design.information] and a
+    weak Gaussian prior Λ of σ = `prior_scale` × each parameter's typical uncertainty
+    (`physical.PARAMETERS`), which keeps directions a plan does not see finite."""
+    from .physical import _SCALE
+
+    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    factor = _precision_factor(plan, values, arw, prior_scale)
+    w = _scaled_solve(factor, jnp.eye(len(_SCALE)))  # rows: L⁻¹ D⁻¹ e_i
+    scale = jnp.asarray(_SCALE)
+    return (w @ w.T) * scale[:, None] * scale[None, :]
+
+
+def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
+                temperatures_c=OPERATING_TEMPERATURES, angles_deg=OPERATING_ANGLES):  # fmt: skip
+    """Predicted standard deviation of the compensated static drift [°/h of input rate],
+    RMS over the operating grid (`temperatures_c` × `angles_deg`): √(mean hᵀ C h) with
+    h = ∂(static drift)/∂values and C the posterior covariance."""
+    from .physical import _SCALE
+
+    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    factor = _precision_factor(plan, values, arw, prior_scale)
+    tt, aa = np.meshgrid(np.asarray(temperatures_c, float), np.asarray(angles_deg, float))
+    from ..units import DEG_PER_H
+
+    def drift(v, theta, temp):  # input-rate units [rad/s], nominal gain
+        return measured_rate(v, theta, temp, 0.0, 0.0) / values[0]
+
+    h = jax.vmap(lambda th, T: jax.grad(drift)(values, th, T))(
+        jnp.asarray(aa.ravel() * DEG), jnp.asarray(tt.ravel())
+    )
+    z = _scaled_solve(factor, h * jnp.asarray(_SCALE)[None, :])
+    return jnp.sqrt(jnp.mean(jnp.sum(z**2, axis=-1))) / DEG_PER_H
+
+
+def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
+              prior_scale: float = 100.0):  # fmt: skip
+    """The design criterion of `plan` (smaller is better; differentiable with respect to the
+    plan's arrays): `drift` — [`drift_error`][hrgjax.calibration.design.drift_error] [°/h];
+    `d` — log det of the posterior covariance in units of each parameter's typical
+    uncertainty (D-optimal); `a` — its trace (A-optimal)."""
+    if kind not in CRITERIA:
+        raise ValueError(f"criterion kind must be one of {CRITERIA}; got {kind!r}")
+    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    arw = jnp.asarray(pattern_arw() if arw is None else arw, dtype=float)
+    return _criterion(plan, kind, values, arw, float(prior_scale))
+
+
+@eqx.filter_jit
+def _criterion(plan, kind, values, arw, prior_scale):
+    """`criterion`, compiled once per plan length and kind."""
+    if kind == "drift":
+        return drift_error(plan, values, arw, prior_scale)
+    chol, d = factor = _precision_factor(plan, values, arw, prior_scale)
+    if kind == "d":  # log det A⁻¹
+        return -2.0 * (jnp.sum(jnp.log(jnp.diagonal(chol))) + jnp.sum(jnp.log(d)))
+    w = _scaled_solve(factor, jnp.eye(d.shape[0]))
+    return jnp.sum(w**2)
