@@ -182,6 +182,66 @@ def _simulate_plan_file(args, gyro) -> int:
     return 0
 
 
+def _levels(text):
+    try:
+        out = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected whole numbers like 2,3,4; got {text!r}"
+        ) from None
+    if not out or min(out) < 1:
+        raise argparse.ArgumentTypeError(f"expected positive whole numbers; got {text!r}")
+    return out
+
+
+def cmd_design(args) -> int:
+    """`hrgjax design`: the bench plan that calibrates best within a bench-time budget."""
+    _setup()
+    import jax
+
+    from .calibration import design as d
+
+    _check_output("--out", args.out, (".json",))
+    _check_output("--plot", args.plot, (".png", ".pdf", ".svg"))
+    print(
+        f"hrgjax design: {args.budget_h:g} h of bench time, criterion {args.criterion}, "
+        f"levels {','.join(map(str, args.levels))}"
+    )
+    t0 = time.perf_counter()
+    result = d.design(
+        args.budget_h, criterion=args.criterion, levels=args.levels, statics=args.statics,
+        rotations=args.rotations, ramps=not args.no_ramps, steps=args.steps,
+        key=jax.random.key(args.seed),
+    )  # fmt: skip
+    took = time.perf_counter() - t0
+    unit = " °/h" if args.criterion == "drift" else ""
+    hours = result.bench.breakdown_h(result.plan)
+    print(f"  searched {len(result.search)} structures in {took:.1f} s:")
+    for n, v in result.search.items():
+        mark = "  <- chosen" if n == result.levels else ""
+        print(f"    {n} temperature levels: {args.criterion} {v:.4g}{unit}{mark}")
+    print(
+        f"  plan: {result.plan.size} segments, bench time {hours['total']:.2f} h (measuring "
+        f"{hours['measuring']:.2f} h, slew {hours['slew']:.2f} h, soak {hours['settle']:.2f} h, "
+        f"re-positioning {hours['reposition']:.2f} h)"
+    )
+    print("  predicted (ARW only, ideal-loop grey box; see docs/design.md):")
+    for name, plan in (("designed", result.plan), ("seed quick", d.seed_bench_plan(True)),
+                       ("seed", d.seed_bench_plan())):  # fmt: skip
+        value = float(d.criterion(plan, args.criterion))
+        print(f"    {name:10s} {float(d.bench_time_h(plan, result.bench)):6.2f} h  "
+              f"{args.criterion} {value:.4g}{unit}")  # fmt: skip
+    path = d.save_plan(result.plan, args.out, result.bench)
+    print(f"wrote {path}")
+    if args.plot is not None:
+        from .plots import plan_figure
+
+        plan_figure(result.plan, args.plot, result.bench,
+                    title=f"designed plan: {args.budget_h:g} h budget, {args.criterion}")  # fmt: skip
+        print(f"wrote {args.plot}")
+    return 0
+
+
 def cmd_demo(args) -> int:
     """`hrgjax demo`: seed 000's whole calibration study on tvg3_like()."""
     _setup()
@@ -267,6 +327,7 @@ EXAMPLES = {
     "align": "hrgjax align psins_lasergyro.imu --json out/align.json --plot out/align.png",
     "diagnose": "hrgjax diagnose --scenario stationary --runs 3 --methods filter_bank,pnn_direct",
     "vibration": "hrgjax vibration --quick --json out/vib.json --plot out/vib.png",
+    "design": "hrgjax design --budget-h 4 --out out/plan.json --plot out/plan.png",
     "imu-calibrate": "hrgjax imu-calibrate session.csv --sections sections.json --rate-hz 102.4 "
     "--gyro-unit deg/s --accel-unit m/s^2 --turn-deg -360 --json out/imu_cal.json --plot "
     "out/imu.png (a session with imucal's columns gyr_x … acc_z and its section-list JSON)",
@@ -758,6 +819,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-noise", action="store_true", help="switch the gyro's noise off")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser(
+        "design", help="design the bench plan that calibrates best within a bench-time budget"
+    )
+    p.add_argument(
+        "--budget-h", type=POSITIVE_FLOAT, required=True,
+        help="bench time available [h], transitions (slew, soak, re-positioning) included",
+    )  # fmt: skip
+    p.add_argument(
+        "--criterion", default="drift", choices=("drift", "d", "a"),
+        help="drift: predicted compensated static drift RMS over −40…+60 °C × all wave "
+        "angles [°/h]; d / a: D- / A-optimal (log det / trace of the posterior covariance)",
+    )  # fmt: skip
+    p.add_argument(
+        "--levels", type=_levels, default=(2, 3, 4, 5),
+        help="numbers of temperature levels to try, comma-separated",
+    )  # fmt: skip
+    p.add_argument("--statics", type=POSITIVE_INT, default=6,
+                   help="static segments per temperature level")  # fmt: skip
+    p.add_argument("--rotations", type=int, default=2,
+                   help="rotations at ±5 °/s per temperature level")  # fmt: skip
+    p.add_argument("--no-ramps", action="store_true",
+                   help="no measuring ramps between levels (slew and soak instead)")  # fmt: skip
+    p.add_argument("--steps", type=POSITIVE_INT, default=300,
+                   help="Adam steps per structure")  # fmt: skip
+    p.add_argument("--out", default="out/plan.json", help="plan file to write (JSON)")
+    p.add_argument("--plot", default=None, help="figure of the plan's time line (.png)")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed (start angles)")
+    p.set_defaults(func=cmd_design)
 
     p = sub.add_parser("imu-calibrate", help="Ferraris calibration of a six-axis IMU session (CSV)")
     p.add_argument("log", help="CSV file, one row per sample")

@@ -280,3 +280,28 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     wide = dict(prior_scale=1e6)
     one, two = (float(d.criterion(p, "drift", **wide)) for p in (plan, twice))
     assert two / one == pytest.approx(2**-0.5, rel=1e-6)
+
+
+def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, capsys):
+    """`hrgjax design`: the plan it writes is within the budget (transitions included),
+    loads and checks, its criterion is the one printed, and the search lowered the loss
+    from its start; bad budgets are refused."""
+    out, png = tmp_path / "plan.json", tmp_path / "plan.png"
+    argv = ["design", "--budget-h", "2.5", "--levels", "2", "--statics", "2", "--rotations",
+            "1", "--steps", "40", "--out", str(out), "--plot", str(png)]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    plan, bench = d.load_plan(out)
+    bench.check(plan)
+    assert float(d.bench_time_h(plan, bench)) <= 2.5 + 1e-9
+    assert plan.kind == ("static", "static", "rotation", "ramp", "static", "static", "rotation")
+    value = float(d.criterion(plan))
+    hours = float(d.bench_time_h(plan, bench))
+    assert f"{'designed':10s} {hours:6.2f} h  drift {value:.4g} °/h" in text
+    assert png.stat().st_size > 0
+    result = d.design(2.5, levels=(2,), statics=2, rotations=1, steps=40)
+    assert result.history[-1] < result.history[0] - 0.1  # log-criterion fell by > 10 %
+    assert result.value == pytest.approx(value, rel=1e-9)  # deterministic for a key
+    with pytest.raises(ValueError, match="budget_h=0.5 cannot hold this structure"):
+        d.design(0.5, levels=(2,), statics=2, rotations=1, steps=2)
+    cli_fails(["design", "--budget-h", "-1"], capsys, r"--budget-h: expected a number > 0")

@@ -690,3 +690,218 @@ def _criterion(plan, kind, values, arw, prior_scale):
         return -2.0 * (jnp.sum(jnp.log(jnp.diagonal(chol))) + jnp.sum(jnp.log(d)))
     w = _scaled_solve(factor, jnp.eye(d.shape[0]))
     return jnp.sum(w**2)
+
+
+# --- Searching plans: gradient descent under a bench-time budget ---------------------------
+
+CHAMBER_RANGE_C = (-40.0, 60.0)
+"""Temperatures a designed plan may use [°C] (the seed's operating range)."""
+MIN_STATIC_S = 60.0
+"""Shortest static segment a design makes [s] (one drift window)."""
+MIN_ROTATION_S = 72.0
+"""Shortest rotation [s] (one full turn at 5 °/s)."""
+DESIGN_RATE_DPS = 5.0
+"""Table rate of designed rotations [°/s] (the seed's; alternating in sign by level)."""
+
+
+class Design(eqx.Module):
+    """The result of [`design`][hrgjax.calibration.design.design].
+
+    - `plan`: the designed [`BenchPlan`][hrgjax.calibration.design.BenchPlan], within budget.
+    - `bench`: the [`BenchModel`][hrgjax.calibration.design.BenchModel] it was priced with.
+    - `criterion`, `value`: the criterion's name and its value for `plan` (drift: °/h).
+    - `bench_time_h`: the plan's bench time [h]; `levels`: its number of temperature levels.
+    - `search`: `{levels: value}` of every structure tried; `history`: the loss per step
+      of the chosen structure.
+    """
+
+    plan: BenchPlan
+    bench: BenchModel
+    criterion: str = eqx.field(static=True)
+    value: float = eqx.field(static=True)
+    bench_time_h: float = eqx.field(static=True)
+    levels: int = eqx.field(static=True)
+    search: dict = eqx.field(static=True)
+    history: tuple = eqx.field(static=True)
+
+
+def _structure(levels: int, statics: int, rotations: int, ramps: bool) -> tuple[str, ...]:
+    kinds = []
+    for k in range(levels):
+        kinds += ["static"] * statics + ["rotation"] * rotations
+        if ramps and k < levels - 1:
+            kinds.append("ramp")
+    return tuple(kinds)
+
+
+def _unpack(z, kinds, levels, statics, rotations, ramps, bench):
+    """The plan of the unconstrained parameters `z` (a dict of arrays)."""
+    lo, hi = CHAMBER_RANGE_C
+    temps = lo + (hi - lo) * jax.nn.sigmoid(z["level"])  # (K,)
+    per = statics + rotations
+    t0, t1, ang, rate, dur = [], [], [], [], []
+    for k in range(levels):
+        for j in range(per):
+            i = k * per + j
+            t0.append(temps[k])
+            t1.append(temps[k])
+            ang.append(z["angle"][i])
+            is_rot = j >= statics
+            sign = 1.0 if k % 2 == 0 else -1.0
+            rate.append(jnp.asarray(sign * DESIGN_RATE_DPS if is_rot else 0.0))
+            base = MIN_ROTATION_S if is_rot else MIN_STATIC_S
+            dur.append(base + jnp.exp(z["log_dur"][i]))
+        if ramps and k < levels - 1:
+            dtemp = jnp.abs(temps[k + 1] - temps[k])
+            slowest = dtemp / bench.slew_c_per_min * 60.0  # the chamber's fastest ramp [s]
+            t0.append(temps[k])
+            t1.append(temps[k + 1])
+            ang.append(z["ramp_angle"][k])
+            rate.append(jnp.asarray(0.0))
+            dur.append(jnp.maximum(slowest, 60.0) * (1.0 + jnp.exp(z["ramp_stretch"][k])))
+    stack = lambda xs: jnp.stack([jnp.asarray(x, dtype=float) for x in xs])
+    return BenchPlan(kinds, stack(t0), stack(t1), stack(ang), stack(rate), stack(dur))
+
+
+def _within_budget(plan: BenchPlan, bench: BenchModel, budget_s: float) -> BenchPlan:
+    """`plan` with its static and rotation durations shrunk (by one factor, not below the
+    minimum lengths) until its bench time is within `budget_s`."""
+    if float(bench.bench_time_s(plan)) <= budget_s:
+        return plan
+    kinds = np.array(plan.kind)
+    base = np.where(kinds == "rotation", MIN_ROTATION_S, MIN_STATIC_S)
+    dur = np.asarray(plan.duration_s, dtype=float)
+    free = kinds != "ramp"
+
+    def shrunk(s):
+        d = np.where(free, base + s * (dur - base), dur)
+        return eqx.tree_at(lambda p: p.duration_s, plan, device(d))
+
+    lo, hi = 0.0, 1.0
+    if float(bench.bench_time_s(shrunk(0.0))) > budget_s:
+        raise ValueError(
+            f"budget_h={budget_s / 3600:g} cannot hold this structure even at its shortest "
+            f"segments ({float(bench.bench_time_s(shrunk(0.0))) / 3600:.2f} h); raise the "
+            "budget or use fewer levels or segments"
+        )
+    for _ in range(60):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if float(bench.bench_time_s(shrunk(mid))) <= budget_s else (lo, mid)
+    return shrunk(lo)
+
+
+def _design_loss(z, values, arw, budget_s, args, criterion):
+    plan = _unpack(z, *args)
+    c = _criterion(plan, criterion, values, arw, 100.0)
+    c = jnp.log(c) if criterion != "d" else c
+    over = jax.nn.relu(args[-1].bench_time_s(plan) / budget_s - 1.0)
+    return c + 100.0 * over**2
+
+
+@eqx.filter_jit
+def _design_step(z, state, values, arw, budget_s, args, criterion, learning_rate):
+    """One Adam step of `design` (compiled once per structure, criterion and rate)."""
+    import optax
+
+    val, g = jax.value_and_grad(_design_loss)(z, values, arw, budget_s, args, criterion)
+    upd, state = optax.adam(learning_rate).update(g, state, z)
+    return optax.apply_updates(z, upd), state, val
+
+
+def design(
+    budget_h: float,
+    *,
+    criterion: str = "drift",
+    levels: Sequence[int] = (2, 3, 4, 5),
+    statics: int = 6,
+    rotations: int = 2,
+    ramps: bool = True,
+    bench: BenchModel | None = None,
+    steps: int = 300,
+    learning_rate: float = 0.05,
+    values=None,
+    arw: float | None = None,
+    key: jax.Array | None = None,
+) -> Design:
+    """The bench plan that, within `budget_h` hours of bench time (transitions included,
+    priced by `bench`), minimises `criterion` (`CRITERIA`; default `drift`).
+
+    **How.** A plan is a number of temperature levels; at each, `statics` static segments
+    and `rotations` rotations at ±5 °/s, and (with `ramps`) a ramp to the next level that
+    measures while the chamber moves (no slew or soak between levels then). Continuous
+    quantities — the level temperatures (within `CHAMBER_RANGE_C`), every wave angle and
+    duration, how much slower than the chamber each ramp runs — are optimised by Adam
+    (`steps`, `learning_rate`) on log(criterion) plus a quadratic penalty above the budget;
+    the number of levels by trying each of `levels` (a small discrete search). The result is
+    brought within the budget by shrinking its durations. `key` jitters the start angles.
+
+    **Returns:** a [`Design`][hrgjax.calibration.design.Design].
+    """
+    import optax
+
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {CRITERIA}; got {criterion!r}")
+    if not (isinstance(budget_h, (int, float)) and math.isfinite(budget_h) and budget_h > 0):
+        raise ValueError(f"budget_h must be a positive number of hours; got {budget_h!r}")
+    levels = tuple(int(k) for k in levels)
+    if not levels or min(levels) < 1:
+        raise ValueError(f"levels must be positive integers; got {levels}")
+    if statics < 1 or rotations < 0:
+        raise ValueError("statics must be ≥ 1 and rotations ≥ 0 per level")
+    bench = BenchModel() if bench is None else bench
+    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    arw_v = jnp.asarray(pattern_arw() if arw is None else arw, dtype=float)
+    budget_s = float(budget_h) * 3600.0
+    key = jax.random.key(0) if key is None else key
+    per = statics + rotations
+    best, search = None, {}
+    with bar(len(levels) * steps, f"designing a {budget_h:g}-h plan", unit="step") as progress:
+        for n_lev in levels:
+            kinds = _structure(n_lev, statics, rotations, ramps)
+            n_meas = n_lev * per
+            # start: levels spread over the range, angles spread over 180°, durations
+            # sharing what the transitions leave of the budget
+            spread = (np.arange(n_lev) + 0.5) / n_lev
+            trans = n_lev * (bench.settle_s + bench.reposition_s * per) + 6000.0
+            share = max(budget_s - trans, 0.3 * budget_s) / n_meas
+            angles = np.tile(np.linspace(-90.0, 90.0, per, endpoint=False), n_lev)
+            angles = angles + np.asarray(jax.random.uniform(key, angles.shape, maxval=5.0))
+            z = {
+                "level": jnp.asarray(np.log(spread / (1 - spread))),
+                "angle": jnp.asarray(angles),
+                "log_dur": jnp.full(n_meas, float(np.log(max(share - MIN_STATIC_S, 10.0)))),
+                "ramp_angle": jnp.zeros(max(n_lev - 1, 1)),
+                "ramp_stretch": jnp.zeros(max(n_lev - 1, 1)),
+            }
+            args = (kinds, n_lev, statics, rotations, ramps, bench)
+            opt = optax.adam(learning_rate)
+            history = []
+            budget = jnp.asarray(budget_s)
+            # optax's Adam bias correction mixes int and float: traced under standard
+            # promotion whatever the caller's setting
+            with jax.numpy_dtype_promotion("standard"):
+                state = opt.init(z)
+                for _ in range(steps):
+                    z, state, val = _design_step(
+                        z, state, values, arw_v, budget, args, criterion, learning_rate
+                    )
+                    history.append(float(val))
+                    progress.update(1)
+            plan = _within_budget(_unpack(z, *args), bench, budget_s)
+            plan = BenchPlan.from_segments(plan.segments())  # concrete, checked
+            value = float(_criterion(plan, criterion, values, arw_v, 100.0))
+            search[n_lev] = value
+            progress.set_postfix_str(f"{n_lev} levels: {value:.4g}")
+            if best is None or value < best[1]:
+                best = (plan, value, n_lev, tuple(history))
+    plan, value, n_lev, history = best
+    return Design(
+        plan=plan,
+        bench=bench,
+        criterion=criterion,
+        value=value,
+        bench_time_h=float(bench.bench_time_s(plan)) / 3600.0,
+        levels=n_lev,
+        search=search,
+        history=history,
+    )
