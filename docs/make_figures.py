@@ -73,14 +73,42 @@ def bench_plan():
                 title="the seed's calibration plan as one bench session")  # fmt: skip
 
 
+def design_budgets():
+    """Predicted compensated drift error vs bench time: plans designed within 3–36 h and the
+    seed's plans (the criterion `design` minimises; ARW only)."""
+    import matplotlib.pyplot as plt
+
+    from hrgjax.calibration import design
+
+    budgets = (3.0, 6.0, 12.0, 24.0, 36.0)
+    designed = [design.design(b) for b in budgets]
+    seeds = [design.seed_bench_plan(quick=True), design.seed_bench_plan()]
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    ax.loglog([r.bench_time_h for r in designed], [r.value for r in designed], "o-",
+              color="C2", label="designed (gradient search)")  # fmt: skip
+    ax.loglog([float(design.bench_time_h(p)) for p in seeds],
+              [float(design.criterion(p)) for p in seeds], "s", color="C3", ms=8,
+              label="seed plans (3 and 11 temperatures)")  # fmt: skip
+    ax.set_xlabel("bench time, transitions included [h]")
+    ax.set_ylabel("predicted compensated drift error [°/h]")
+    ax.set_title("accuracy vs bench time (prediction: ARW only, ideal-loop grey box)",
+                 fontsize=10)  # fmt: skip
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=9)
+    fig.savefig(os.path.join(HERE, "design_budgets.png"), dpi=110)
+    plt.close(fig)
+
+
 def imu():
     from hrgjax.plots import imu_session_figure
 
     rng = np.random.default_rng(1)
     truth = hg.imu.ImuCalibration.known(
-        accel_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)), accel_bias=[0.1, -0.05, 0.2],
+        accel_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)),
+        accel_bias=[0.1, -0.05, 0.2],
         gyro_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)),
-        gyro_bias=np.deg2rad([0.5, -0.3, 0.1]), gyro_g_sensitivity=rng.normal(0, 1e-4, (3, 3)),
+        gyro_bias=np.deg2rad([0.5, -0.3, 0.1]),
+        gyro_g_sensitivity=rng.normal(0, 1e-4, (3, 3)),
     )
     data, _ = hg.imu.ferraris_session(truth, jax.random.key(0))
     cal = hg.imu.ferraris(data)
@@ -244,6 +272,7 @@ FIGURES = (  # longest first (cold, 2 cores), so that the workers finish togethe
     allan,
     imu,
     bench_plan,
+    design_budgets,
 )
 
 

@@ -218,6 +218,9 @@ def cmd_design(args) -> int:
     hours = result.bench.breakdown_h(result.plan)
     print(f"  searched {len(result.search)} structures in {took:.1f} s:")
     for n, v in result.search.items():
+        if v is None:
+            print(f"    {n} temperature levels: does not fit the budget")
+            continue
         mark = "  <- chosen" if n == result.levels else ""
         print(f"    {n} temperature levels: {args.criterion} {v:.4g}{unit}{mark}")
     print(

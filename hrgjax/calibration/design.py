@@ -711,7 +711,8 @@ class Design(eqx.Module):
     - `bench`: the [`BenchModel`][hrgjax.calibration.design.BenchModel] it was priced with.
     - `criterion`, `value`: the criterion's name and its value for `plan` (drift: °/h).
     - `bench_time_h`: the plan's bench time [h]; `levels`: its number of temperature levels.
-    - `search`: `{levels: value}` of every structure tried; `history`: the loss per step
+    - `search`: `{levels: value}` of every structure tried (None: it cannot fit the
+      budget even at its shortest segments); `history`: the loss per step
       of the chosen structure.
     """
 
@@ -832,8 +833,9 @@ def design(
     quantities — the level temperatures (within `CHAMBER_RANGE_C`), every wave angle and
     duration, how much slower than the chamber each ramp runs — are optimised by Adam
     (`steps`, `learning_rate`) on log(criterion) plus a quadratic penalty above the budget;
-    the number of levels by trying each of `levels` (a small discrete search). The result is
-    brought within the budget by shrinking its durations. `key` jitters the start angles.
+    the number of levels by trying each of `levels` (a small discrete search; a structure
+    that cannot fit the budget is skipped, and `ValueError` says so when none fits). The
+    result is brought within the budget by shrinking its durations. `key` jitters the start angles.
 
     **Returns:** a [`Design`][hrgjax.calibration.design.Design].
     """
@@ -854,7 +856,7 @@ def design(
     budget_s = float(budget_h) * 3600.0
     key = jax.random.key(0) if key is None else key
     per = statics + rotations
-    best, search = None, {}
+    best, search, too_big = None, {}, None
     with bar(len(levels) * steps, f"designing a {budget_h:g}-h plan", unit="step") as progress:
         for n_lev in levels:
             kinds = _structure(n_lev, statics, rotations, ramps)
@@ -887,13 +889,20 @@ def design(
                     )
                     history.append(float(val))
                     progress.update(1)
-            plan = _within_budget(_unpack(z, *args), bench, budget_s)
+            try:
+                plan = _within_budget(_unpack(z, *args), bench, budget_s)
+            except ValueError as err:  # this structure cannot fit: try the others
+                search[n_lev] = None
+                too_big = err
+                continue
             plan = BenchPlan.from_segments(plan.segments())  # concrete, checked
             value = float(_criterion(plan, criterion, values, arw_v, 100.0))
             search[n_lev] = value
             progress.set_postfix_str(f"{n_lev} levels: {value:.4g}")
             if best is None or value < best[1]:
                 best = (plan, value, n_lev, tuple(history))
+    if best is None:
+        raise too_big
     plan, value, n_lev, history = best
     return Design(
         plan=plan,
