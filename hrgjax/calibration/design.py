@@ -47,6 +47,7 @@ from .._checks import is_concrete
 from .._compiled import device
 from .._io import read_json
 from .._progress import bar
+from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
@@ -427,6 +428,7 @@ def simulate_plan(
     chunks of `CHUNK`, as `run_plan`). `dt_out`: output interval per kind [s] (default
     `DT_OUT`: static 1 s, rotation 0.5 s, ramp 1 s). Each segment gets its own noise key
     (`jax.random.split(key, S)[i]`), so a segment's data do not depend on the others."""
+    require_x64("hrgjax.calibration.simulate_plan")
     if not all(is_concrete(x) for x in plan._fields().values()):
         raise ValueError("simulate_plan needs a concrete plan (host values), not a traced one")
     dts = dict(DT_OUT)
@@ -594,6 +596,7 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
     Gauss–Markov rate and the switch-on bias are left out (the bias is fitted per session):
     long dwells are predicted better than they calibrate. Differentiable with respect to the
     plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
+    require_x64("hrgjax.calibration.design.information")
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
     arw = pattern_arw() if arw is None else arw
     return _information(plan, values, jnp.asarray(arw, dtype=float), nodes)
@@ -841,6 +844,7 @@ def design(
     """
     import optax
 
+    require_x64("hrgjax.calibration.design.design")
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {CRITERIA}; got {criterion!r}")
     if not (isinstance(budget_h, (int, float)) and math.isfinite(budget_h) and budget_h > 0):
