@@ -51,7 +51,7 @@ from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
-from ..units import DEG, DEG_PER_S
+from ..units import DEG, DEG_PER_H, DEG_PER_S
 from .experiment import CHUNK, SEED_ANGLES, SEED_TEMPERATURES, _simulate_chunk
 
 KINDS = ("static", "rotation", "ramp")
@@ -658,7 +658,6 @@ def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
     factor = _precision_factor(plan, values, arw, prior_scale)
     tt, aa = np.meshgrid(np.asarray(temperatures_c, float), np.asarray(angles_deg, float))
-    from ..units import DEG_PER_H
 
     def drift(v, theta, temp):  # input-rate units [rad/s], nominal gain
         return measured_rate(v, theta, temp, 0.0, 0.0) / values[0]
