@@ -1,15 +1,29 @@
 import os
 
-# The test process keeps no compile cache on disk (the cache tests run their own processes
-# with their own folders); the CLI tests would otherwise fill the user's ~/.cache/hrgjax.
-os.environ.setdefault("HRGJAX_NO_CACHE", "1")
-
-import jax  # noqa: E402
-import pytest  # noqa: E402
+import jax
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _run_compile_cache(tmp_path_factory):
+    """One fresh compile-cache folder per test run, shared by the xdist workers and by the
+    processes the tests start (CLI, docs pages): a program one test compiled, the next loads,
+    as a user's second call does. Nothing from earlier runs is reused, and the user's
+    ~/.cache/hrgjax is never touched (test_cache runs its own processes with their own
+    folders, cold)."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    folder = root / "compile-cache"
+    os.environ["HRGJAX_CACHE_DIR"] = str(folder)
+    os.environ["HRGJAX_NO_CACHE"] = "0"
+    import hrgjax
+
+    hrgjax.enable_cache()
+    yield folder
 
 
 @pytest.fixture(scope="session")

@@ -184,15 +184,8 @@ def test_full_only_blocks_run_with_HRGJAX_DOCS_FULL(page, line, why):
     assert any(b["line"] == line for b in _script(page))
 
 
-@pytest.fixture(scope="module")
-def compile_cache(tmp_path_factory):
-    """One compile-cache folder for this run's pages (a fresh one: nothing from earlier
-    runs), so the programs several pages share are compiled once."""
-    return tmp_path_factory.mktemp("docs-compile-cache")
-
-
 @pytest.mark.parametrize("page", PAGES)
-def test_docs_page_runs(page, tmp_path, compile_cache):
+def test_docs_page_runs(page, tmp_path, _run_compile_cache):
     (tmp_path / "out").mkdir()
     (tmp_path / "tests").mkdir()
     (tmp_path / "tests" / "data").symlink_to(ROOT / "tests" / "data")
@@ -203,7 +196,7 @@ def test_docs_page_runs(page, tmp_path, compile_cache):
         MPLBACKEND="Agg",
         PYTHONPATH=str(ROOT),
         HRGJAX_NO_CACHE="0",
-        HRGJAX_CACHE_DIR=str(compile_cache),
+        HRGJAX_CACHE_DIR=str(_run_compile_cache),
     )
     t0 = time.perf_counter()
     proc = subprocess.run(
