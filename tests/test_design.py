@@ -295,6 +295,9 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     bench.check(plan)
     assert float(d.bench_time_h(plan, bench)) <= 2.5 + 1e-9
     assert plan.kind == ("static", "static", "rotation", "ramp", "static", "static", "rotation")
+    # whole seconds: a bench (and simulate_plan's whole output intervals) runs it as written
+    dur = np.asarray(plan.duration_s)
+    assert np.array_equal(dur, np.round(dur)) and dur.min() >= d.MIN_STATIC_S
     value = float(d.criterion(plan))
     hours = float(d.bench_time_h(plan, bench))
     assert f"{'designed':10s} {hours:6.2f} h  drift {value:.4g} °/h" in text

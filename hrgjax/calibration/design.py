@@ -793,6 +793,33 @@ def _within_budget(plan: BenchPlan, bench: BenchModel, budget_s: float) -> Bench
     return shrunk(lo)
 
 
+def _whole_seconds(plan: BenchPlan, bench: BenchModel, budget_s: float) -> BenchPlan:
+    """`plan` with durations a bench (and `simulate_plan`) can run: whole seconds — static
+    and rotation durations rounded down, a ramp's rounded up (so that it never outruns the
+    chamber) — and, should the ramps' extra seconds cross the budget, the longest static
+    segments a second shorter until it holds. Returns a concrete, checked plan."""
+    kinds = np.array(plan.kind)
+    ramp = kinds == "ramp"
+    dur = np.asarray(plan.duration_s, dtype=float)
+    dur = np.where(ramp, np.ceil(dur - 1e-9), np.floor(dur + 1e-9))
+
+    def build(d):
+        segs = plan.segments()
+        for seg, x in zip(segs, d):
+            seg["duration_s"] = float(x)
+        return BenchPlan.from_segments(segs)
+
+    out = build(dur)
+    for _ in range(8 * plan.size):
+        over = float(bench.bench_time_s(out)) - budget_s
+        if over <= 0.0:
+            break
+        longest = int(np.argmax(np.where(ramp, -np.inf, dur)))
+        dur[longest] -= max(1.0, float(np.ceil(over)))
+        out = build(dur)
+    return out
+
+
 def _design_loss(z, values, arw, budget_s, args, criterion):
     plan = _unpack(z, *args)
     c = _criterion(plan, criterion, values, arw, 100.0)
@@ -837,7 +864,10 @@ def design(
     (`steps`, `learning_rate`) on log(criterion) plus a quadratic penalty above the budget;
     the number of levels by trying each of `levels` (a small discrete search; a structure
     that cannot fit the budget is skipped, and `ValueError` says so when none fits). The
-    result is brought within the budget by shrinking its durations. `key` jitters the start angles.
+    result is brought within the budget by shrinking its durations, then to whole seconds
+    (static and rotation durations rounded down, ramps up), so that a bench — and
+    [`simulate_plan`][hrgjax.calibration.design.simulate_plan] — can run it as it is.
+    `key` jitters the start angles.
 
     **Returns:** a [`Design`][hrgjax.calibration.design.Design].
     """
@@ -898,7 +928,7 @@ def design(
                 search[n_lev] = None
                 too_big = err
                 continue
-            plan = BenchPlan.from_segments(plan.segments())  # concrete, checked
+            plan = _whole_seconds(plan, bench, budget_s)  # concrete, checked, runnable
             value = float(_criterion(plan, criterion, values, arw_v, 100.0))
             search[n_lev] = value
             progress.set_postfix_str(f"{n_lev} levels: {value:.4g}")
