@@ -201,10 +201,10 @@ def test_measured_rate_is_the_ideal_loop_law_and_its_jacobian_is_finite_differen
 def test_information_is_duration_over_noise_and_adds_over_a_split_segment():
     """A static segment informs the bias as D k_e²/N² and its slope as D k_e² ΔT²/N²; a
     rotation split in two halves (the second from where the first left the pattern) carries
-    the information of the whole."""
-    arw = 1e-5
+    the information of the whole (white noise alone: `gauss_markov=(0, 1)`)."""
+    arw, white = 1e-5, dict(gauss_markov=(0.0, 1.0))
     static = d.BenchPlan.from_segments([SEGMENTS[0]])
-    info = np.asarray(d.information(static, IDEAL_READOUT, arw))
+    info = np.asarray(d.information(static, IDEAL_READOUT, arw, **white))
     k_e, dur, dt = float(IDEAL_READOUT[0]), SEGMENTS[0]["duration_s"], -40.0
     assert info[2, 2] == pytest.approx(dur * k_e**2 / arw**2, rel=1e-12)
     assert info[3, 3] == pytest.approx(dur * k_e**2 * dt**2 / arw**2, rel=1e-12)
@@ -215,9 +215,26 @@ def test_information_is_duration_over_noise_and_adds_over_a_split_segment():
         [half, {**half, "wave_angle_deg": half["wave_angle_deg"] + swept}]
     )
     whole = d.BenchPlan.from_segments([rot])
-    a = np.asarray(d.information(halves, IDEAL_READOUT, arw))
-    b = np.asarray(d.information(whole, IDEAL_READOUT, arw))
+    a = np.asarray(d.information(halves, IDEAL_READOUT, arw, **white))
+    b = np.asarray(d.information(whole, IDEAL_READOUT, arw, **white))
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+
+
+@pytest.mark.parametrize("dur", [60.0, 600.0, 6000.0])
+def test_a_gauss_markov_rate_limits_what_a_long_dwell_tells_the_bias(dur):
+    """With a Gauss–Markov rate (σ, τ) on the pattern rate, a static segment informs the bias
+    as k_e² / var(mean rate) = k_e² / (N²/D + V(D)), V(D) = (2/D²) ∫₀ᴰ (D − u) σ² e^(−u/τ) du
+    the variance of the GM rate's mean (here by the trapezoid rule on a fine grid)."""
+    arw, sigma, tau = 1e-5, 3e-7, 600.0
+    plan = d.BenchPlan.from_segments([{**SEGMENTS[0], "duration_s": dur}])
+    info = np.asarray(d.information(plan, IDEAL_READOUT, arw, gauss_markov=(sigma, tau)))
+    u = np.linspace(0.0, dur, 200_001)
+    f = (dur - u) * sigma**2 * np.exp(-u / tau)
+    v = 2.0 / dur**2 * np.sum((f[1:] + f[:-1]) / 2 * np.diff(u))
+    k_e = float(IDEAL_READOUT[0])
+    assert info[2, 2] == pytest.approx(k_e**2 / (arw**2 / dur + v), rel=1e-8)
+    # and the longer the dwell, the more of its white-noise information the GM rate takes
+    assert info[2, 2] < dur * k_e**2 / arw**2
 
 
 @pytest.fixture(scope="module")

@@ -539,6 +539,45 @@ def pattern_arw(gyro: Gyro | None = None) -> float:
     return float(_coefficients(g.resonator.k_e)[0]) * float(g.noise.angle_random_walk)
 
 
+def pattern_gauss_markov(gyro: Gyro | None = None) -> tuple[float, float]:
+    """The gyro's Gauss–Markov rate (bias instability) on the measured pattern angle:
+    (σ [rad/s] = k_e × `noise.bias_instability`, correlation time [s]); default gyro:
+    0.554 × 0.003 °/h, 600 s."""
+    from ..presets import tvg3_like
+
+    g = tvg3_like() if gyro is None else gyro
+    if g.noise is None:
+        raise ValueError("the design needs a gyro with noise (its bias_instability)")
+    k_e = float(_coefficients(g.resonator.k_e)[0])
+    return k_e * float(g.noise.bias_instability), float(g.noise.correlation_time)
+
+
+def _noise(arw, gauss_markov) -> jax.Array:
+    """The design's noise vector [N, σ, τ]: pattern ARW [rad/√s], Gauss–Markov σ [rad/s]
+    and correlation time [s] (defaults: the default gyro's)."""
+    arw = pattern_arw() if arw is None else arw
+    sigma, tau = pattern_gauss_markov() if gauss_markov is None else gauss_markov
+    concrete = all(is_concrete(x) for x in (arw, sigma, tau))
+    if concrete and not (float(arw) > 0 and float(sigma) >= 0 and float(tau) > 0):
+        raise ValueError(
+            f"arw must be > 0 [rad/√s] and gauss_markov (σ ≥ 0 [rad/s], τ > 0 [s]); got "
+            f"arw={arw!r}, gauss_markov={(sigma, tau)!r}"
+        )
+    return jnp.asarray([arw, sigma, tau], dtype=float)
+
+
+def gauss_markov_discount(duration_s, arw, sigma, tau):
+    """Share of a segment's white-noise information left by a Gauss–Markov rate:
+    (N²/D) / (N²/D + V(D)), with V(D) = 2σ²τ/D · (1 − (τ/D)(1 − e^(−D/τ))) the variance of
+    the GM rate's mean over the segment's duration D [s] (N [rad/√s], σ [rad/s], τ [s]).
+    Exact for the mean rate of a static segment; for a rotation it treats the GM rate as an
+    extra error of each parameter's segment-average, which is what a slow bias is."""
+    x = duration_s / tau
+    # D·V/N² = 2σ²τ/N² · (1 − (1 − e^−x)/x), written with expm1 for short segments
+    excess = 2.0 * sigma**2 * tau / arw**2 * (1.0 + jnp.expm1(-x) / x)
+    return 1.0 / (1.0 + excess)
+
+
 def measured_rate(values, theta, temperature_c, rate, temperature_rate):
     """Rate of the measured pattern angle [rad/s] of the grey box `values` at true pattern
     angle `theta` [rad], temperature [°C], table rate `rate` [rad/s] and temperature rate
@@ -565,11 +604,13 @@ def measured_rate(values, theta, temperature_c, rate, temperature_rate):
 _NODES = 64
 
 
-def _segment_information(values, arw, t0, t1, angle_deg, rate_dps, duration, nodes):
+def _segment_information(values, noise, t0, t1, angle_deg, rate_dps, duration, nodes):
     """Fisher information (P, P) of one segment about `values`: the measured pattern rate
-    observed continuously through white rate noise of density `arw` [rad/√s], i.e.
+    observed continuously through white rate noise of density N = `noise[0]` [rad/√s], i.e.
     ∫ g gᵀ dt / N² with g = ∂(measured rate)/∂values along the segment's path (θ turning at
-    −k_e Ω, T linear), by `nodes`-point Gauss–Legendre quadrature."""
+    −k_e Ω, T linear), by `nodes`-point Gauss–Legendre quadrature; times the segment's
+    `gauss_markov_discount` (σ, τ = `noise[1:]`)."""
+    arw, sigma, tau = noise[0], noise[1], noise[2]
     x, w = np.polynomial.legendre.leggauss(nodes)
     s = (jnp.asarray(x) + 1.0) / 2.0  # 0…1
     t = s * duration
@@ -581,38 +622,43 @@ def _segment_information(values, arw, t0, t1, angle_deg, rate_dps, duration, nod
         thetas, temps
     )  # (nodes, P)
     weights = jnp.asarray(w) / 2.0 * duration / arw**2
+    weights = weights * gauss_markov_discount(duration, arw, sigma, tau)
     return jnp.einsum("n,np,nq->pq", weights, jac, jac)
 
 
-def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: int = _NODES):
+def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: int = _NODES,
+                gauss_markov: tuple[float, float] | None = None):  # fmt: skip
     """Fisher information matrix (P × P, P = 12) of `plan` about the physical grey box's
     parameters ([`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] order, SI),
     linearised at `values` (default `nominal_values()`), for white rate noise of density
-    `arw` on the measured pattern angle [rad/√s] (default `pattern_arw()`).
+    `arw` on the measured pattern angle [rad/√s] (default `pattern_arw()`) and a
+    Gauss–Markov rate `gauss_markov` = (σ [rad/s], τ [s]) on it (default
+    `pattern_gauss_markov()`; `(0.0, 1.0)` for white noise only).
 
     Each segment is observed through its measured pattern rate along its path: θ turning at
     −k_e Ω from its wave angle, T moving linearly from start to end (a ramp's Ṫ reaches the
     readout's temperature sensitivity ∂θ̂/∂T — what a static grid cannot see). The
-    Gauss–Markov rate and the switch-on bias are left out (the bias is fitted per session):
-    long dwells are predicted better than they calibrate. Differentiable with respect to the
+    Gauss–Markov rate discounts each segment's information by
+    [`gauss_markov_discount`][hrgjax.calibration.design.gauss_markov_discount] (a long dwell
+    averages white noise down, not a slow bias); the switch-on bias is left out (it is a
+    constant of the session: the fitted bias absorbs it). Differentiable with respect to the
     plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
     require_x64("hrgjax.calibration.design.information")
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    arw = pattern_arw() if arw is None else arw
-    return _information(plan, values, jnp.asarray(arw, dtype=float), nodes)
+    return _information(plan, values, _noise(arw, gauss_markov), nodes)
 
 
 @eqx.filter_jit
-def _information(plan, values, arw, nodes):
+def _information(plan, values, noise, nodes):
     """`information`, compiled once per plan length."""
     seg = jax.vmap(
-        lambda a, b, c, d, e: _segment_information(values, arw, a, b, c, d, e, nodes)
+        lambda a, b, c, d, e: _segment_information(values, noise, a, b, c, d, e, nodes)
     )(plan.temperature_c, plan.temperature_end_c, plan.wave_angle_deg, plan.rate_dps,
       plan.duration_s)  # fmt: skip
     return jnp.sum(seg, axis=0)
 
 
-def _precision_factor(plan, values, arw, prior_scale):
+def _precision_factor(plan, values, noise, prior_scale):
     """Cholesky factor of the posterior precision in units of each parameter's typical
     uncertainty, equilibrated to unit diagonal: `(L, d)` with A = diag(d) L Lᵀ diag(d)
     (forming (F + Λ)⁻¹ explicitly loses ~cond·ε; triangular solves keep the criteria and
@@ -620,7 +666,7 @@ def _precision_factor(plan, values, arw, prior_scale):
     from .physical import _SCALE
 
     scale = jnp.asarray(_SCALE)
-    a = information(plan, values, arw) * scale[:, None] * scale[None, :]
+    a = _information(plan, values, noise, _NODES) * scale[:, None] * scale[None, :]
     a = a + jnp.eye(a.shape[0]) / prior_scale**2
     d = jnp.sqrt(jnp.diagonal(a))
     return jnp.linalg.cholesky(a / d[:, None] / d[None, :]), d
@@ -634,7 +680,8 @@ def _scaled_solve(factor, h):
     return jsl.solve_triangular(chol, (h / d[None, :]).T, lower=True).T
 
 
-def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0):
+def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
+                         gauss_markov=None):  # fmt: skip
     """Linearised posterior covariance of the grey box's parameters after `plan` (P × P,
     SI): (F + Λ)⁻¹ with F = [`information`][hrgjax.calibration.design.information] and a
     weak Gaussian prior Λ of σ = `prior_scale` × each parameter's typical uncertainty
@@ -642,21 +689,29 @@ def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: fl
     from .physical import _SCALE
 
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    factor = _precision_factor(plan, values, arw, prior_scale)
+    factor = _precision_factor(plan, values, _noise(arw, gauss_markov), prior_scale)
     w = _scaled_solve(factor, jnp.eye(len(_SCALE)))  # rows: L⁻¹ D⁻¹ e_i
     scale = jnp.asarray(_SCALE)
     return (w @ w.T) * scale[:, None] * scale[None, :]
 
 
 def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
-                temperatures_c=OPERATING_TEMPERATURES, angles_deg=OPERATING_ANGLES):  # fmt: skip
+                temperatures_c=OPERATING_TEMPERATURES, angles_deg=OPERATING_ANGLES,
+                gauss_markov=None):  # fmt: skip
     """Predicted standard deviation of the compensated static drift [°/h of input rate],
     RMS over the operating grid (`temperatures_c` × `angles_deg`): √(mean hᵀ C h) with
-    h = ∂(static drift)/∂values and C the posterior covariance."""
+    h = ∂(static drift)/∂values and C the posterior covariance (noise arguments as
+    [`information`][hrgjax.calibration.design.information])."""
+    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    return _drift_error(plan, values, _noise(arw, gauss_markov), prior_scale,
+                        temperatures_c, angles_deg)  # fmt: skip
+
+
+def _drift_error(plan, values, noise, prior_scale, temperatures_c=OPERATING_TEMPERATURES,
+                 angles_deg=OPERATING_ANGLES):  # fmt: skip
     from .physical import _SCALE
 
-    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    factor = _precision_factor(plan, values, arw, prior_scale)
+    factor = _precision_factor(plan, values, noise, prior_scale)
     tt, aa = np.meshgrid(np.asarray(temperatures_c, float), np.asarray(angles_deg, float))
 
     def drift(v, theta, temp):  # input-rate units [rad/s], nominal gain
@@ -670,24 +725,24 @@ def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100
 
 
 def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
-              prior_scale: float = 100.0):  # fmt: skip
+              prior_scale: float = 100.0, gauss_markov=None):  # fmt: skip
     """The design criterion of `plan` (smaller is better; differentiable with respect to the
     plan's arrays): `drift` — [`drift_error`][hrgjax.calibration.design.drift_error] [°/h];
     `d` — log det of the posterior covariance in units of each parameter's typical
-    uncertainty (D-optimal); `a` — its trace (A-optimal)."""
+    uncertainty (D-optimal); `a` — its trace (A-optimal). Noise arguments as
+    [`information`][hrgjax.calibration.design.information]."""
     if kind not in CRITERIA:
         raise ValueError(f"criterion kind must be one of {CRITERIA}; got {kind!r}")
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    arw = jnp.asarray(pattern_arw() if arw is None else arw, dtype=float)
-    return _criterion(plan, kind, values, arw, float(prior_scale))
+    return _criterion(plan, kind, values, _noise(arw, gauss_markov), float(prior_scale))
 
 
 @eqx.filter_jit
-def _criterion(plan, kind, values, arw, prior_scale):
+def _criterion(plan, kind, values, noise, prior_scale):
     """`criterion`, compiled once per plan length and kind."""
     if kind == "drift":
-        return drift_error(plan, values, arw, prior_scale)
-    chol, d = factor = _precision_factor(plan, values, arw, prior_scale)
+        return _drift_error(plan, values, noise, prior_scale)
+    chol, d = factor = _precision_factor(plan, values, noise, prior_scale)
     if kind == "d":  # log det A⁻¹
         return -2.0 * (jnp.sum(jnp.log(jnp.diagonal(chol))) + jnp.sum(jnp.log(d)))
     w = _scaled_solve(factor, jnp.eye(d.shape[0]))
@@ -851,6 +906,7 @@ def design(
     learning_rate: float = 0.05,
     values=None,
     arw: float | None = None,
+    gauss_markov: tuple[float, float] | None = None,
     key: jax.Array | None = None,
 ) -> Design:
     """The bench plan that, within `budget_h` hours of bench time (transitions included,
@@ -864,6 +920,8 @@ def design(
     (`steps`, `learning_rate`) on log(criterion) plus a quadratic penalty above the budget;
     the number of levels by trying each of `levels` (a small discrete search; a structure
     that cannot fit the budget is skipped, and `ValueError` says so when none fits). The
+    `arw`, `gauss_markov`: the noise the criterion assumes (as
+    [`information`][hrgjax.calibration.design.information]; default the default gyro's). The
     result is brought within the budget by shrinking its durations, then to whole seconds
     (static and rotation durations rounded down, ramps up), so that a bench — and
     [`simulate_plan`][hrgjax.calibration.design.simulate_plan] — can run it as it is.
@@ -885,7 +943,7 @@ def design(
         raise ValueError("statics must be ≥ 1 and rotations ≥ 0 per level")
     bench = BenchModel() if bench is None else bench
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    arw_v = jnp.asarray(pattern_arw() if arw is None else arw, dtype=float)
+    arw_v = _noise(arw, gauss_markov)
     budget_s = float(budget_h) * 3600.0
     key = jax.random.key(0) if key is None else key
     per = statics + rotations
