@@ -94,8 +94,10 @@ def main():
     print()
     print(f"{a.seeds} Monte Carlo seeds per plan; drift error vs the noise-free truth on the "
           "seed's test grid [°/h]")  # fmt: skip
-    print("plan               bench [h]  predicted  compensator  achieved (RMS)  "
-          "achieved/predicted  seed spread  / seed plan's   wall [s]")
+    print(
+        "plan               bench [h]  predicted  compensator  achieved (RMS)  "
+        "achieved/predicted  seed spread  / seed plan's   wall [s]"
+    )
     ref = {k: np.sqrt(np.mean(v**2)) for k, v in rows[0][3].items()}
     for name, hours, pred, mc, took in rows:
         for comp, v in mc.items():

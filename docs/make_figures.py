@@ -75,7 +75,7 @@ def bench_plan():
 
 def design_budgets():
     """Predicted compensated drift error vs bench time: plans designed within 3–36 h and the
-    seed's plans (the criterion `design` minimises; ARW only)."""
+    seed's plans (the criterion `design` minimises: ARW and Gauss–Markov rate)."""
     import matplotlib.pyplot as plt
 
     from hrgjax.calibration import design
@@ -91,7 +91,7 @@ def design_budgets():
               label="seed plans (3 and 11 temperatures)")  # fmt: skip
     ax.set_xlabel("bench time, transitions included [h]")
     ax.set_ylabel("predicted compensated drift error [°/h]")
-    ax.set_title("accuracy vs bench time (prediction: ARW only, ideal-loop grey box)",
+    ax.set_title("accuracy vs bench time (prediction: ideal-loop grey box)",
                  fontsize=10)  # fmt: skip
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=9)

@@ -860,7 +860,7 @@ def _whole_seconds(plan: BenchPlan, bench: BenchModel, budget_s: float) -> Bench
 
     def build(d):
         segs = plan.segments()
-        for seg, x in zip(segs, d):
+        for seg, x in zip(segs, d, strict=True):
             seg["duration_s"] = float(x)
         return BenchPlan.from_segments(segs)
 
