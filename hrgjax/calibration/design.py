@@ -528,27 +528,28 @@ def nominal_values(gyro: Gyro | None = None) -> jax.Array:
     )  # fmt: skip
 
 
-def pattern_arw(gyro: Gyro | None = None) -> float:
-    """Angle random walk of the measured pattern angle [rad/√s]: k_e × the gyro's ARW
-    (default gyro: 0.554 × 0.002 °/√h)."""
+def _noisy(gyro: Gyro | None) -> tuple[Gyro, float]:
+    """`gyro` (default `presets.tvg3_like()`), checked to have noise, and its k_e."""
     from ..presets import tvg3_like
 
     g = tvg3_like() if gyro is None else gyro
     if g.noise is None:
-        raise ValueError("the design needs a gyro with noise (its angle_random_walk)")
-    return float(_coefficients(g.resonator.k_e)[0]) * float(g.noise.angle_random_walk)
+        raise ValueError("the design needs a gyro with noise (its Noise model)")
+    return g, float(_coefficients(g.resonator.k_e)[0])
+
+
+def pattern_arw(gyro: Gyro | None = None) -> float:
+    """Angle random walk of the measured pattern angle [rad/√s]: k_e × the gyro's ARW
+    (default gyro: 0.554 × 0.002 °/√h)."""
+    g, k_e = _noisy(gyro)
+    return k_e * float(g.noise.angle_random_walk)
 
 
 def pattern_gauss_markov(gyro: Gyro | None = None) -> tuple[float, float]:
     """The gyro's Gauss–Markov rate (bias instability) on the measured pattern angle:
     (σ [rad/s] = k_e × `noise.bias_instability`, correlation time [s]); default gyro:
     0.554 × 0.003 °/h, 600 s."""
-    from ..presets import tvg3_like
-
-    g = tvg3_like() if gyro is None else gyro
-    if g.noise is None:
-        raise ValueError("the design needs a gyro with noise (its bias_instability)")
-    k_e = float(_coefficients(g.resonator.k_e)[0])
+    g, k_e = _noisy(gyro)
     return k_e * float(g.noise.bias_instability), float(g.noise.correlation_time)
 
 
