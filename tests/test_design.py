@@ -154,6 +154,37 @@ def test_each_segment_is_the_simulation_of_its_profile(quiet):
         assert np.all(data["table_rate_dps"][rows] == s.get("rate_dps", 0.0))
 
 
+def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, monkeypatch):
+    """Runs of rare lengths share a compiled group padded to a ladder of lengths: every
+    window rate the fit simulates (static, 10-s rotation windows, 300-s ramp windows, the
+    ramp's last partial one) equals the unpadded layout's to 1e-6 °/h (the adaptive solver
+    steps differently towards a later end: 3e-8 °/h seen), and the padded tail adds no
+    residual."""
+    from hrgjax.calibration import physical
+
+    segs = [{**SEGMENTS[0], "duration_s": 70.0}, {**SEGMENTS[1], "duration_s": 40.0},
+            {**SEGMENTS[1], "duration_s": 44.0}, {**SEGMENTS[0], "duration_s": 74.0},
+            {**SEGMENTS[2], "temperature_end_c": -18.0, "duration_s": 400.0}]  # fmt: skip
+    data = d.simulate_plan(quiet, d.BenchPlan.from_segments(segs))
+    values = d.nominal_values()
+    residuals = eqx.filter_jit(physical._residuals)
+    out = {}
+    for shared in (1, 100):  # every length its own group / every run padded
+        monkeypatch.setattr(physical, "SHARED_LENGTH_RUNS", shared)
+        groups = physical._groups(data, 10.0, physical.K_E_NOMINAL)
+        weights = physical._weights(groups)
+        res = residuals(groups, values, physical.K_E_NOMINAL)
+        out[shared] = [np.asarray(res[k])[weights[k] > 0] / weights[k][weights[k] > 0]
+                       for k in (True, False)]  # fmt: skip
+        lengths = sorted(g.t.shape[1] for g in groups)
+        assert np.all(np.asarray(res[True])[weights[True] == 0] == 0.0)
+    assert lengths == [77, 91, 431]  # 71 and 75 samples → 77, 81 and 89 → 91, 401 → 431
+    # at rest: 2 statics, the ramp's 300-s window and its partial 100-s one; moving: 4 + 4
+    assert [r.size for r in out[1]] == [4, 8]
+    for a, b in zip(out[1], out[100], strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-6 * hg.units.DEG_PER_H)
+
+
 def test_simulate_plan_file_cli(tmp_path, quiet, capsys):
     plan = d.BenchPlan.from_segments(SEGMENTS)  # its ramp: 3 °C/min
     path = d.save_plan(plan, tmp_path / "plan.json", d.BenchModel(slew_c_per_min=5.0))
@@ -198,16 +229,38 @@ def test_measured_rate_is_the_ideal_loop_law_and_its_jacobian_is_finite_differen
         assert jac[i] == pytest.approx(fd, rel=1e-6, abs=1e-9 * abs(jac).max()), i
 
 
-def test_information_is_duration_over_noise_and_adds_over_a_split_segment():
-    """A static segment informs the bias as D k_e²/N² and its slope as D k_e² ΔT²/N²; a
+def ols_slope_variance(n, dt, arw, angle_white):
+    """Exact variance of a least-squares slope over n samples spaced dt of a random walk of
+    density `arw` plus white noise `angle_white` per sample: wᵀ C w (numpy)."""
+    t = np.arange(n) * dt
+    w = (t - t.mean()) / np.sum((t - t.mean()) ** 2)
+    # wᵀ min(tᵢ, tⱼ) w = Δt Σₖ (Σ_{i≥k} wᵢ)², k ≥ 1 (a random walk is a sum of increments)
+    tail = np.cumsum(w[::-1])[::-1][1:]
+    return float(arw**2 * dt * np.sum(tail**2) + angle_white**2 * np.sum(w**2))
+
+
+@pytest.mark.parametrize("samples, dt", [(20, 0.5), (61, 1.0), (301, 1.0)])
+def test_window_density_is_the_least_squares_slope_variance(samples, dt):
+    """`window_density`² / length = the exact variance of a window's least-squares slope
+    under angle random walk + white angle noise (the default gyro's: 1″ per sample)."""
+    arw, white = d.pattern_arw(), d.pattern_angle_white()
+    length = samples * dt
+    got = float(d.window_density(arw, white, samples, dt, length)) ** 2 / length
+    assert got == pytest.approx(ols_slope_variance(samples, dt, arw, white), rel=1e-10)
+
+
+def test_information_is_one_over_the_slope_variance_and_adds_over_a_split_segment():
+    """A static segment (one window) informs the bias as k_e²/var(slope) and its slope as
+    k_e² ΔT²/var(slope), var the exact least-squares slope variance of its samples; a
     rotation split in two halves (the second from where the first left the pattern) carries
-    the information of the whole (white noise alone: `gauss_markov=(0, 1)`)."""
-    arw, white = 1e-5, dict(gauss_markov=(0.0, 1.0))
+    the information of the whole (no Gauss–Markov rate: `gauss_markov=(0, 1)`)."""
+    arw, white, no_gm = 1e-5, 2e-6, dict(gauss_markov=(0.0, 1.0))
     static = d.BenchPlan.from_segments([SEGMENTS[0]])
-    info = np.asarray(d.information(static, IDEAL_READOUT, arw, **white))
+    info = np.asarray(d.information(static, IDEAL_READOUT, arw, angle_white=white, **no_gm))
     k_e, dur, dt = float(IDEAL_READOUT[0]), SEGMENTS[0]["duration_s"], -40.0
-    assert info[2, 2] == pytest.approx(dur * k_e**2 / arw**2, rel=1e-12)
-    assert info[3, 3] == pytest.approx(dur * k_e**2 * dt**2 / arw**2, rel=1e-12)
+    var = ols_slope_variance(round(dur) + 1, 1.0, arw, white)
+    assert info[2, 2] == pytest.approx(k_e**2 / var, rel=1e-10)
+    assert info[3, 3] / info[2, 2] == pytest.approx(dt**2, rel=1e-12)
     rot = {**SEGMENTS[1], "duration_s": 60.0}
     half = {**rot, "duration_s": 30.0}
     swept = -k_e * rot["rate_dps"] * 30.0  # electrical degrees turned in the first half
@@ -215,26 +268,30 @@ def test_information_is_duration_over_noise_and_adds_over_a_split_segment():
         [half, {**half, "wave_angle_deg": half["wave_angle_deg"] + swept}]
     )
     whole = d.BenchPlan.from_segments([rot])
-    a = np.asarray(d.information(halves, IDEAL_READOUT, arw, **white))
-    b = np.asarray(d.information(whole, IDEAL_READOUT, arw, **white))
+    a = np.asarray(d.information(halves, IDEAL_READOUT, arw, angle_white=white, **no_gm))
+    b = np.asarray(d.information(whole, IDEAL_READOUT, arw, angle_white=white, **no_gm))
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
 
 
 @pytest.mark.parametrize("dur", [60.0, 600.0, 6000.0])
 def test_a_gauss_markov_rate_limits_what_a_long_dwell_tells_the_bias(dur):
     """With a Gauss–Markov rate (σ, τ) on the pattern rate, a static segment informs the bias
-    as k_e² / var(mean rate) = k_e² / (N²/D + V(D)), V(D) = (2/D²) ∫₀ᴰ (D − u) σ² e^(−u/τ) du
-    the variance of the GM rate's mean (here by the trapezoid rule on a fine grid)."""
+    as k_e² / (var(slope) + V(D)), V(D) = (2/D²) ∫₀ᴰ (D − u) σ² e^(−u/τ) du the variance of
+    the GM rate's mean (here by the trapezoid rule on a fine grid), var(slope) the exact
+    least-squares slope variance of the white noises."""
     arw, sigma, tau = 1e-5, 3e-7, 600.0
     plan = d.BenchPlan.from_segments([{**SEGMENTS[0], "duration_s": dur}])
-    info = np.asarray(d.information(plan, IDEAL_READOUT, arw, gauss_markov=(sigma, tau)))
+    info = np.asarray(
+        d.information(plan, IDEAL_READOUT, arw, gauss_markov=(sigma, tau), angle_white=0.0)
+    )
     u = np.linspace(0.0, dur, 200_001)
     f = (dur - u) * sigma**2 * np.exp(-u / tau)
     v = 2.0 / dur**2 * np.sum((f[1:] + f[:-1]) / 2 * np.diff(u))
     k_e = float(IDEAL_READOUT[0])
-    assert info[2, 2] == pytest.approx(k_e**2 / (arw**2 / dur + v), rel=1e-8)
+    var = ols_slope_variance(round(dur) + 1, 1.0, arw, 0.0)
+    assert info[2, 2] == pytest.approx(k_e**2 / (var + v), rel=1e-8)
     # and the longer the dwell, the more of its white-noise information the GM rate takes
-    assert info[2, 2] < dur * k_e**2 / arw**2
+    assert info[2, 2] < k_e**2 / var
 
 
 @pytest.fixture(scope="module")

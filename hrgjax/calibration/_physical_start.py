@@ -11,10 +11,20 @@ from ._compensator import split_targets
 from .reduce import K_E_NOMINAL
 
 
+def _levels(temperature_c) -> np.ndarray:
+    """Temperatures (rounded to 1e-6 °C) held for at least 3 windows: a harmonic fit
+    (offset, cos 2θ, sin 2θ) needs 3. A ramp's windows each have a temperature of their own
+    and are left out (a minimum-norm fit of one point is no start)."""
+    temps, counts = np.unique(np.round(temperature_c, 6), return_counts=True)
+    held = temps[counts >= 3]
+    return held if held.size else temps
+
+
 def initial_values(windows, k_e: float = K_E_NOMINAL) -> np.ndarray:
-    """Starting values from per-temperature harmonic fits of reduced drift and SF."""
+    """Starting values from per-temperature harmonic fits of reduced drift and SF (at the
+    temperatures held for at least 3 windows of each kind)."""
     static, moving = split_targets(windows)
-    temps = np.unique(np.round(static.temperature_c, 6))
+    temps = _levels(static.temperature_c)
     amp, phase, offset = [], [], []
     for temp in temps:
         m = np.abs(static.temperature_c - temp) < 1e-6
@@ -35,7 +45,7 @@ def initial_values(windows, k_e: float = K_E_NOMINAL) -> np.ndarray:
         th1, th0 = np.polyfit(dt, phase, 1)
     else:
         lam, log_d0, th1, th0 = 0.0, math.log(max(amp[0], 1e-30)), 0.0, phase[0]
-    mt = np.unique(np.round(moving.temperature_c, 6))
+    mt = _levels(moving.temperature_c)
     s0, gains, cross = [], [], []
     for temp in mt:
         m = np.abs(moving.temperature_c - temp) < 1e-6

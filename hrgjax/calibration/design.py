@@ -553,18 +553,45 @@ def pattern_gauss_markov(gyro: Gyro | None = None) -> tuple[float, float]:
     return k_e * float(g.noise.bias_instability), float(g.noise.correlation_time)
 
 
-def _noise(arw, gauss_markov) -> jax.Array:
-    """The design's noise vector [N, σ, τ]: pattern ARW [rad/√s], Gauss–Markov σ [rad/s]
-    and correlation time [s] (defaults: the default gyro's)."""
+def pattern_angle_white(gyro: Gyro | None = None) -> float:
+    """White readout noise on the measured pattern angle [rad per sample]: the gyro's
+    `noise.angle_white` (default gyro: 1″)."""
+    g, _ = _noisy(gyro)
+    return float(g.noise.angle_white)
+
+
+def _noise(arw, gauss_markov, angle_white=None) -> jax.Array:
+    """The design's noise vector [N, σ, τ, σ_a]: pattern ARW [rad/√s], Gauss–Markov σ
+    [rad/s] and correlation time [s], white angle noise [rad per sample] (defaults: the
+    default gyro's)."""
     arw = pattern_arw() if arw is None else arw
     sigma, tau = pattern_gauss_markov() if gauss_markov is None else gauss_markov
-    concrete = all(is_concrete(x) for x in (arw, sigma, tau))
-    if concrete and not (float(arw) > 0 and float(sigma) >= 0 and float(tau) > 0):
+    angle_white = pattern_angle_white() if angle_white is None else angle_white
+    concrete = all(is_concrete(x) for x in (arw, sigma, tau, angle_white))
+    if concrete and not (
+        float(arw) > 0 and float(sigma) >= 0 and float(tau) > 0 and float(angle_white) >= 0
+    ):
         raise ValueError(
-            f"arw must be > 0 [rad/√s] and gauss_markov (σ ≥ 0 [rad/s], τ > 0 [s]); got "
-            f"arw={arw!r}, gauss_markov={(sigma, tau)!r}"
+            f"arw must be > 0 [rad/√s], gauss_markov (σ ≥ 0 [rad/s], τ > 0 [s]) and "
+            f"angle_white ≥ 0 [rad]; got arw={arw!r}, gauss_markov={(sigma, tau)!r}, "
+            f"angle_white={angle_white!r}"
         )
-    return jnp.asarray([arw, sigma, tau], dtype=float)
+    return jnp.asarray([arw, sigma, tau, angle_white], dtype=float)
+
+
+def window_density(arw, angle_white, samples, dt, length_s):
+    """Effective white rate-noise density [rad/√s] of the physical fit's window slopes: a
+    window of n = `samples` samples spaced Δt = `dt` [s] has least-squares slope variance
+    6(n² + 1)/(5n(n² − 1)) · N²/Δt (random walk of density N = `arw` [rad/√s]; → 6/5 of a
+    mean rate's N²/(nΔt) for long windows) + 12 σ_a²/(Δt² n(n² − 1)) (white angle noise
+    σ_a = `angle_white` [rad per sample]), both exact; × the length of segment the window
+    stands for (`length_s` [s]: nΔt for consecutive windows, the duration for a static
+    segment's one window), the density a continuous observation of the rate with the same
+    information would have."""
+    n = samples
+    m = n * (n**2 - 1.0)
+    var = 6.0 * (n**2 + 1.0) / (5.0 * m) * arw**2 / dt + 12.0 * angle_white**2 / (dt**2 * m)
+    return jnp.sqrt(var * length_s)
 
 
 def gauss_markov_discount(duration_s, arw, sigma, tau):
@@ -605,13 +632,31 @@ def measured_rate(values, theta, temperature_c, rate, temperature_rate):
 _NODES = 64
 
 
-def _segment_information(values, noise, t0, t1, angle_deg, rate_dps, duration, nodes):
+def _segment_windows(kind, t0, t1, rate_dps, duration):
+    """(samples, sample interval [s], length [s]) of the windows the physical fit reduces a
+    segment with (see `window_density`): moving — `PhysicalCompensator.window_s` (10 s);
+    a ramp at rest — ≈ `RAMP_WINDOW_S` (300 s) tiling it; static — the whole segment (one
+    window of duration/Δt + 1 samples); sampled at `DT_OUT` of its kind."""
+    from .physical import RAMP_WINDOW_S, PhysicalCompensator
+
+    dt = DT_OUT[kind]
+    moving = rate_dps != 0.0
+    ramp = t1 != t0
+    ramp_window = duration / jnp.maximum(jnp.round(duration / RAMP_WINDOW_S), 1.0)  # tiling
+    length = jnp.where(moving, PhysicalCompensator.window_s,
+                       jnp.where(ramp, ramp_window, duration))  # fmt: skip
+    samples = jnp.where(moving | ramp, length / dt, duration / dt + 1.0)
+    return samples, dt, length
+
+
+def _segment_information(values, noise, kind, t0, t1, angle_deg, rate_dps, duration, nodes):
     """Fisher information (P, P) of one segment about `values`: the measured pattern rate
-    observed continuously through white rate noise of density N = `noise[0]` [rad/√s], i.e.
-    ∫ g gᵀ dt / N² with g = ∂(measured rate)/∂values along the segment's path (θ turning at
-    −k_e Ω, T linear), by `nodes`-point Gauss–Legendre quadrature; times the segment's
-    `gauss_markov_discount` (σ, τ = `noise[1:]`)."""
-    arw, sigma, tau = noise[0], noise[1], noise[2]
+    observed through the physical fit's window slopes, i.e. ∫ g gᵀ dt / N_w² with
+    g = ∂(measured rate)/∂values along the segment's path (θ turning at −k_e Ω, T linear),
+    by `nodes`-point Gauss–Legendre quadrature, N_w the windows' `window_density`
+    (N, σ_a = `noise[0]`, `noise[3]`); times the segment's `gauss_markov_discount`
+    (σ, τ = `noise[1:3]`)."""
+    arw, sigma, tau, angle_white = noise[0], noise[1], noise[2], noise[3]
     x, w = np.polynomial.legendre.leggauss(nodes)
     s = (jnp.asarray(x) + 1.0) / 2.0  # 0…1
     t = s * duration
@@ -622,23 +667,32 @@ def _segment_information(values, noise, t0, t1, angle_deg, rate_dps, duration, n
     jac = jax.vmap(lambda th, T: jax.jacfwd(measured_rate)(values, th, T, omega, temp_rate))(
         thetas, temps
     )  # (nodes, P)
-    weights = jnp.asarray(w) / 2.0 * duration / arw**2
-    weights = weights * gauss_markov_discount(duration, arw, sigma, tau)
+    density = window_density(arw, angle_white, *_segment_windows(kind, t0, t1, rate_dps,
+                                                                 duration))  # fmt: skip
+    weights = jnp.asarray(w) / 2.0 * duration / density**2
+    weights = weights * gauss_markov_discount(duration, density, sigma, tau)
     return jnp.einsum("n,np,nq->pq", weights, jac, jac)
 
 
 def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: int = _NODES,
-                gauss_markov: tuple[float, float] | None = None):  # fmt: skip
+                gauss_markov: tuple[float, float] | None = None,
+                angle_white: float | None = None):  # fmt: skip
     """Fisher information matrix (P × P, P = 12) of `plan` about the physical grey box's
     parameters ([`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] order, SI),
     linearised at `values` (default `nominal_values()`), for white rate noise of density
     `arw` on the measured pattern angle [rad/√s] (default `pattern_arw()`) and a
     Gauss–Markov rate `gauss_markov` = (σ [rad/s], τ [s]) on it (default
-    `pattern_gauss_markov()`; `(0.0, 1.0)` for white noise only).
+    `pattern_gauss_markov()`; `(0.0, 1.0)` for white noise only) and white readout noise
+    `angle_white` on each sample of it [rad] (default `pattern_angle_white()`; 0 for none).
 
     Each segment is observed through its measured pattern rate along its path: θ turning at
     −k_e Ω from its wave angle, T moving linearly from start to end (a ramp's Ṫ reaches the
-    readout's temperature sensitivity ∂θ̂/∂T — what a static grid cannot see). The
+    readout's temperature sensitivity ∂θ̂/∂T — what a static grid cannot see) — through the
+    windows the physical fit reduces it with (a static segment whole, a rotation in 10-s
+    windows, a ramp in 300-s windows; samples every `DT_OUT`), whose least-squares slopes
+    have the noise density [`window_density`][hrgjax.calibration.design.window_density]:
+    the random walk's 6/5 and, for short windows, the readout noise (1″ per 0.5-s sample is
+    ≈ 14× the ARW's variance in a 10-s window). The
     Gauss–Markov rate discounts each segment's information by
     [`gauss_markov_discount`][hrgjax.calibration.design.gauss_markov_discount] (a long dwell
     averages white noise down, not a slow bias); the switch-on bias is left out (it is a
@@ -646,17 +700,23 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
     plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
     require_x64("hrgjax.calibration.design.information")
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    return _information(plan, values, _noise(arw, gauss_markov), nodes)
+    return _information(plan, values, _noise(arw, gauss_markov, angle_white), nodes)
 
 
 @eqx.filter_jit
 def _information(plan, values, noise, nodes):
-    """`information`, compiled once per plan length."""
-    seg = jax.vmap(
-        lambda a, b, c, d, e: _segment_information(values, noise, a, b, c, d, e, nodes)
-    )(plan.temperature_c, plan.temperature_end_c, plan.wave_angle_deg, plan.rate_dps,
-      plan.duration_s)  # fmt: skip
-    return jnp.sum(seg, axis=0)
+    """`information`, compiled once per plan length and kinds (one vmap per kind)."""
+    total = 0.0
+    for kind in KINDS:
+        idx = np.flatnonzero(np.asarray(plan.kind) == kind)
+        if idx.size == 0:
+            continue
+        one = lambda a, b, c, d, e, k=kind: _segment_information(values, noise, k, a, b, c, d,
+                                                                  e, nodes)  # fmt: skip
+        seg = jax.vmap(one)(plan.temperature_c[idx], plan.temperature_end_c[idx],
+                            plan.wave_angle_deg[idx], plan.rate_dps[idx], plan.duration_s[idx])  # fmt: skip
+        total = total + jnp.sum(seg, axis=0)
+    return total
 
 
 def _precision_factor(plan, values, noise, prior_scale):
@@ -682,7 +742,7 @@ def _scaled_solve(factor, h):
 
 
 def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
-                         gauss_markov=None):  # fmt: skip
+                         gauss_markov=None, angle_white=None):  # fmt: skip
     """Linearised posterior covariance of the grey box's parameters after `plan` (P × P,
     SI): (F + Λ)⁻¹ with F = [`information`][hrgjax.calibration.design.information] and a
     weak Gaussian prior Λ of σ = `prior_scale` × each parameter's typical uncertainty
@@ -690,7 +750,8 @@ def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: fl
     from .physical import _SCALE
 
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    factor = _precision_factor(plan, values, _noise(arw, gauss_markov), prior_scale)
+    factor = _precision_factor(plan, values, _noise(arw, gauss_markov, angle_white),
+                               prior_scale)  # fmt: skip
     w = _scaled_solve(factor, jnp.eye(len(_SCALE)))  # rows: L⁻¹ D⁻¹ e_i
     scale = jnp.asarray(_SCALE)
     return (w @ w.T) * scale[:, None] * scale[None, :]
@@ -698,13 +759,13 @@ def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: fl
 
 def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
                 temperatures_c=OPERATING_TEMPERATURES, angles_deg=OPERATING_ANGLES,
-                gauss_markov=None):  # fmt: skip
+                gauss_markov=None, angle_white=None):  # fmt: skip
     """Predicted standard deviation of the compensated static drift [°/h of input rate],
     RMS over the operating grid (`temperatures_c` × `angles_deg`): √(mean hᵀ C h) with
     h = ∂(static drift)/∂values and C the posterior covariance (noise arguments as
     [`information`][hrgjax.calibration.design.information])."""
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    return _drift_error(plan, values, _noise(arw, gauss_markov), prior_scale,
+    return _drift_error(plan, values, _noise(arw, gauss_markov, angle_white), prior_scale,
                         temperatures_c, angles_deg)  # fmt: skip
 
 
@@ -726,7 +787,7 @@ def _drift_error(plan, values, noise, prior_scale, temperatures_c=OPERATING_TEMP
 
 
 def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
-              prior_scale: float = 100.0, gauss_markov=None):  # fmt: skip
+              prior_scale: float = 100.0, gauss_markov=None, angle_white=None):  # fmt: skip
     """The design criterion of `plan` (smaller is better; differentiable with respect to the
     plan's arrays): `drift` — [`drift_error`][hrgjax.calibration.design.drift_error] [°/h];
     `d` — log det of the posterior covariance in units of each parameter's typical
@@ -735,7 +796,8 @@ def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
     if kind not in CRITERIA:
         raise ValueError(f"criterion kind must be one of {CRITERIA}; got {kind!r}")
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    return _criterion(plan, kind, values, _noise(arw, gauss_markov), float(prior_scale))
+    noise = _noise(arw, gauss_markov, angle_white)
+    return _criterion(plan, kind, values, noise, float(prior_scale))
 
 
 @eqx.filter_jit
@@ -908,6 +970,7 @@ def design(
     values=None,
     arw: float | None = None,
     gauss_markov: tuple[float, float] | None = None,
+    angle_white: float | None = None,
     key: jax.Array | None = None,
 ) -> Design:
     """The bench plan that, within `budget_h` hours of bench time (transitions included,
@@ -921,7 +984,7 @@ def design(
     (`steps`, `learning_rate`) on log(criterion) plus a quadratic penalty above the budget;
     the number of levels by trying each of `levels` (a small discrete search; a structure
     that cannot fit the budget is skipped, and `ValueError` says so when none fits). The
-    `arw`, `gauss_markov`: the noise the criterion assumes (as
+    `arw`, `gauss_markov`, `angle_white`: the noise the criterion assumes (as
     [`information`][hrgjax.calibration.design.information]; default the default gyro's). The
     result is brought within the budget by shrinking its durations, then to whole seconds
     (static and rotation durations rounded down, ramps up), so that a bench — and
@@ -944,7 +1007,7 @@ def design(
         raise ValueError("statics must be ≥ 1 and rotations ≥ 0 per level")
     bench = BenchModel() if bench is None else bench
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    arw_v = _noise(arw, gauss_markov)
+    arw_v = _noise(arw, gauss_markov, angle_white)
     budget_s = float(budget_h) * 3600.0
     key = jax.random.key(0) if key is None else key
     per = statics + rotations

@@ -14,9 +14,14 @@ quadrature nulled; PHYSICS.md §10) and these laws, ΔT = T − 20 °C:
 
 `fit` simulates every calibration run (same times, rates, temperatures, measured initial
 angle) and reduces the simulated wave angle with the same window slopes as the measured one;
-Levenberg–Marquardt (`optimistix`) minimises the weighted rate residuals. Weights are the
-residual scatter of each kind of window (static, moving), re-estimated after a first pass;
-the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced χ².
+Levenberg–Marquardt (`optimistix`) minimises the weighted rate residuals. A static run is one
+window, a rotation is cut into `window_s` windows and a ramp (table at rest, temperature
+moving) into `RAMP_WINDOW_S` windows, each a drift at its own temperature. Weights: the
+residual scatter of each kind of window (at rest, moving), an at-rest window of length L
+weighted by √(L / 60 s) (white rate noise: a long dwell tells more); the fit is repeated from
+its first solution when the scatter there balances the kinds differently, and the scatter is
+re-estimated at the end; the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$
+scaled by the reduced χ².
 
 The compensator's D and SF follow from the fitted gyro itself: the readout map
 $\theta\mapsto\hat\theta$ is inverted at the measured angle, the rest-state pattern rate comes
@@ -51,7 +56,7 @@ from ..simulate import simulate
 from ..units import DEG, DEG_PER_H, T_REF_C
 from ._compensator import AbstractCompensator, split_targets
 from ._physical_start import initial_values
-from .reduce import K_E_NOMINAL, _window_stats, reduce, window_slopes
+from .reduce import K_E_NOMINAL, reduce
 
 PARAMETERS = (
     ("k_e0", "", 1e-4),
@@ -137,7 +142,8 @@ class PhysicalCompensator(AbstractCompensator):
 
     @property
     def fit_stats(self) -> dict:
-        """χ²/dof, residual RMS of static and moving windows [°/h], LM steps, window count."""
+        """χ²/dof, residual RMS of at-rest (static and ramp) and moving windows [°/h], LM
+        steps, window count."""
         return dict(self.stats)
 
     @property
@@ -220,15 +226,17 @@ class PhysicalCompensator(AbstractCompensator):
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
         values, steps, res, sigma, jac = _fit(groups, device(x0), self.k_e, self.max_steps)
         values, steps, jac = np.asarray(values), int(steps), np.asarray(jac) * _SCALE
-        res = {k: np.asarray(v) for k, v in res.items()}
+        weights = _weights(groups)
+        res = {k: np.asarray(v)[weights[k] > 0] for k, v in res.items()}  # real windows only
         sigma = {k: float(v) for k, v in sigma.items()}
         r = np.concatenate([res[k] / sigma[k] for k in (True, False)])
         dof = max(r.size - len(NAMES), 1)
         chi2 = float(r @ r) / dof
         cov = np.linalg.inv(jac.T @ jac) * chi2 * np.outer(_SCALE, _SCALE)
+        rest = res[True] / weights[True][weights[True] > 0]  # the windows' rates, unweighted
         stats = {
             "chi2_per_dof": chi2,
-            "static_rms_dph": sigma[True] / DEG * 3600,
+            "static_rms_dph": float(np.sqrt(np.mean(rest**2))) / DEG * 3600,
             "moving_rms_dph": sigma[False] / DEG * 3600,
             "lm_steps": int(steps),
             "n_windows": int(r.size),
@@ -243,104 +251,239 @@ class PhysicalCompensator(AbstractCompensator):
         )
 
 
-class _Group(eqx.Module):
-    """Runs of one length, stacked for one vmap of the simulator. Static runs are reduced as
-    one window, moving runs as `n_windows` windows."""
+RAMP_WINDOW_S = 300.0
+"""Window of a ramp (table at rest, temperature moving) in the fit [s]: each window's slope
+is a drift at its own temperature, so a ramp is a temperature sweep, not one number. The
+windows tile the ramp: round(duration / 300 s) of them, at least one."""
+WEIGHT_WINDOW_S = 60.0
+"""Window length [s] the at-rest residual scatter is referred to: an at-rest window of
+length L is weighted by √(L / 60 s) / σ (white rate noise: variance ∝ 1/L)."""
 
-    t: jax.Array  # (R, N)
+
+SHARED_LENGTH_RUNS = 4
+"""A run length shared by at least this many runs (of one sample interval) gets a compiled
+group of its own; rarer lengths are padded up to a ladder of lengths ⌈2^(k/4)⌉ samples
+(steps ≤ 19 %) and share one — a plan of 44 different segment lengths compiles ≈ 10
+groups, not 44. The padded tail is simulated and masked out of every window."""
+
+
+def _ladder(n: int) -> int:
+    """Smallest ⌈2^(k/4)⌉ ≥ n."""
+    k = max(math.floor(4 * math.log2(n)) - 1, 0)
+    while math.ceil(2 ** (k / 4)) < n:
+        k += 1
+    return math.ceil(2 ** (k / 4))
+
+
+def _extend(x: np.ndarray, length: int, linear: bool) -> np.ndarray:
+    """(R, N, …) → (R, length, …): continued linearly from the last two samples (`linear`)
+    or held at the last."""
+    n = x.shape[1]
+    if n == length:
+        return x
+    k = np.arange(1, length - n + 1, dtype=float).reshape((1, -1) + (1,) * (x.ndim - 2))
+    step = x[:, -1:] - x[:, -2:-1] if linear else 0.0 * x[:, -1:]
+    return np.concatenate([x, x[:, -1:] + k * step], axis=1)
+
+
+def _knots(n: int, length: int, step: int, count: int) -> np.ndarray:
+    """`count` knot indices of a run of `n` samples padded to `length`: every `step` samples
+    and its last sample (so the profile on the run itself is the unpadded one), then as many
+    more as `count` asks, in the padded tail first, else in the widest gaps."""
+    knots = set(np.arange(0, n, step).tolist()) | {n - 1}
+    if length > n:
+        knots.add(length - 1)
+    while len(knots) < count:
+        k = np.array(sorted(knots))
+        gaps = np.diff(k)
+        tail = k[1:] > n - 1
+        pick = np.where(tail & (gaps > 1), gaps, 0)
+        if not pick.any():
+            pick = np.where(gaps > 1, gaps, 0)
+        i = int(np.argmax(pick))
+        knots.add(int(k[i] + gaps[i] // 2))
+    return np.array(sorted(knots))
+
+
+class _Group(eqx.Module):
+    """Runs of one padded length and sample interval, stacked for one vmap of the
+    simulator. Static runs are reduced as one window, moving runs as windows of `window_s`
+    (`n_move` samples), ramps (at rest, the temperature moving) as windows of
+    `RAMP_WINDOW_S` (`n_ramp` samples; the last may be partial); windows past a run's own
+    end carry zero weight."""
+
+    t: jax.Array  # (R, L) sample times [s], padded
     theta0: jax.Array  # (R,) measured initial angle [rad]
-    knots: jax.Array  # (K,) sample indices of the profile knots
+    t_knots: jax.Array  # (R, K) profile knots [s]
     rate: jax.Array  # (R, K) [rad/s]
     temperature: jax.Array  # (R, K) [°C]
     accel: jax.Array  # (R, K, 3) [g]
-    measured_static: jax.Array  # (Rs, 1) window rates [rad/s]
-    measured_moving: jax.Array  # (Rm, W)
+    measured_static: jax.Array  # (Rs,) window rates [rad/s]
+    static_mask: jax.Array  # (Rs, L) 1 on the run's own samples
+    static_weight: jax.Array  # (Rs,) √(window length / WEIGHT_WINDOW_S)
+    measured_moving: jax.Array  # (Rm, Wm)
+    moving_valid: jax.Array  # (Rm, Wm) 1 for whole windows inside the run
+    measured_ramp: jax.Array  # (Rr, Wr)
+    ramp_mask: jax.Array  # (Rr, L)
+    ramp_weight: jax.Array  # (Rr, Wr) √(window length / 60 s), 0 for windows < 4 samples
     static_idx: tuple = eqx.field(static=True)
     moving_idx: tuple = eqx.field(static=True)
-    n_windows: int = eqx.field(static=True)
+    ramp_idx: tuple = eqx.field(static=True)
+    n_move: int = eqx.field(static=True)
+    n_ramp: int = eqx.field(static=True)
+
+
+def _windows(xp, a, n: int, partial: bool):
+    """(R, L) → (R, W, n): consecutive windows of `n` samples; the samples past the last
+    whole window dropped, or (`partial`) kept in one more window padded with zeros."""
+    r, length = a.shape
+    w = -(-length // n) if partial else length // n
+    if w * n > length:
+        a = xp.concatenate([a, xp.zeros((r, w * n - length), dtype=a.dtype)], axis=1)
+    return a[:, : w * n].reshape(r, w, n)
+
+
+def _masked_slopes(xp, t, y, mask, n, partial=False):
+    """Least-squares slopes of `y` over consecutive windows of `n` samples of (R, L) arrays
+    (`_windows`), each over its samples with `mask` 1; (R, W). Windows without 2 such
+    samples give 0."""
+    t, y, m = (_windows(xp, a, n, partial) for a in (t, y, mask))
+    count = xp.sum(m, axis=-1)
+    safe = xp.maximum(count, 1.0)
+    tm = xp.sum(m * t, axis=-1, keepdims=True) / safe[..., None]
+    ym = xp.sum(m * y, axis=-1, keepdims=True) / safe[..., None]
+    dt = (t - tm) * m
+    den = xp.sum(dt * dt, axis=-1)
+    num = xp.sum(dt * (y - ym), axis=-1)
+    return xp.where(count >= 2, num / xp.where(count >= 2, den, 1.0), 0.0)
 
 
 def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
-    out = []
-    for stack in data.stacked():
-        length = stack.n_samples
-        if length < 4:
+    stacks = data.stacked()
+    for stack in stacks:
+        if stack.n_samples < 4:
             raise ValueError(
-                f"run {int(stack.run[0])} has {length} samples; reduction needs at least 4 "
-                "per window"
+                f"run {int(stack.run[0])} has {stack.n_samples} samples; reduction needs at "
+                "least 4 per window"
             )
-        # one layout per stack (its runs share length and interval), as `_window_layout`
-        n_win, n = 1, length
-        if not stack.static.all():
-            n = max(int(round(window_s / stack.dt)), 4)
-            n_win = length // n
-            if n_win == 0:
-                n_win, n = 1, length
-        knots = np.unique(np.concatenate([np.arange(0, length, n), [length - 1]]))
-        t, th = stack.t, stack.wave_angle
-        s_idx = tuple(np.flatnonzero(stack.static).tolist())
-        m_idx = tuple(np.flatnonzero(~stack.static).tolist())
-        out.append(
-            _Group(
-                t=device(t),
-                theta0=device(th[:, 0]),
-                knots=device(knots),
-                rate=device(stack.rate[:, knots]),
-                temperature=device(stack.temperature[:, knots]),
-                accel=device(stack.accel[:, knots]),
-                measured_static=device(-_slopes(t, th, s_idx, 1, length) / k_e),
-                measured_moving=device(-_slopes(t, th, m_idx, n_win, n_win * n) / k_e),
-                static_idx=s_idx,
-                moving_idx=m_idx,
-                n_windows=n_win,
-            )
+    buckets: dict[tuple[int, float], list] = {}
+    for stack in stacks:
+        n = stack.n_samples
+        # runs shorter than a moving window keep their length (reduced as one window)
+        short = n < max(int(round(window_s / stack.dt)), 4)
+        length = n if short or len(stack) >= SHARED_LENGTH_RUNS else _ladder(n)
+        buckets.setdefault((length, round(stack.dt, 9)), []).append(stack)
+    return [_group(stacks, length, window_s, k_e) for (length, _), stacks in buckets.items()]
+
+
+def _group(stacks, length: int, window_s: float, k_e: float) -> _Group:
+    """One `_Group` of `stacks` (same sample interval) padded to `length` samples."""
+    dt = stacks[0].dt
+    n_move = min(max(int(round(window_s / dt)), 4), length)
+    n_ramp = min(max(int(round(RAMP_WINDOW_S / dt)), 4), length)
+    rows = []  # per run: (n, t, theta, rate, temperature, accel, kind)
+    for st in stacks:
+        ramp = st.static & (np.ptp(st.temperature, axis=1) > 0.0)
+        kind = np.where(~st.static, "moving", np.where(ramp, "ramp", "static"))
+        ext = (
+            _extend(st.t, length, True),
+            _extend(st.wave_angle, length, False),
+            _extend(st.rate, length, False),
+            _extend(st.temperature, length, True),
+            _extend(st.accel, length, False),
         )
-    return out
-
-
-def _slopes(t, theta, idx, windows, samples):
-    """Window slopes of the runs `idx` (NumPy; the same formula as `window_slopes`)."""
-    if not idx:
-        return np.zeros((0, windows))
-    return np.stack(
-        [_window_stats(np, t[i, :samples], theta[i, :samples], windows, 0)[0] for i in idx]
+        rows += [(st.n_samples, *(a[i] for a in ext), kind[i]) for i in range(len(st))]
+    # knots: every window's start (the shortest window any run here is cut into) and the end
+    kinds = {r[-1] for r in rows}
+    step = min([length - 1] + [n_move] * ("moving" in kinds) + [n_ramp] * ("ramp" in kinds))
+    count = max(_knots(r[0], length, step, 0).size for r in rows)
+    knots = np.stack([_knots(r[0], length, step, count) for r in rows])
+    t = np.stack([r[1] for r in rows])
+    theta = np.stack([r[2] for r in rows])
+    n_of = np.array([r[0] for r in rows])
+    own = (np.arange(length)[None, :] < n_of[:, None]).astype(float)  # (R, L)
+    pick = lambda a: np.stack([r[a][k] for r, k in zip(rows, knots, strict=True)])
+    idx = {k: np.array([i for i, r in enumerate(rows) if r[-1] == k], int) for k in kinds}
+    idx = {k: idx.get(k, np.zeros(0, int)) for k in ("static", "moving", "ramp")}
+    s, m, r = idx["static"], idx["moving"], idx["ramp"]
+    # moving: whole windows inside the run (as `reduce`); ramps: windows tiling the run,
+    # the last partial one kept when it has ≥ 4 samples
+    n_whole = n_of[m] // n_move
+    moving_valid = (np.arange(length // n_move)[None, :] < n_whole[:, None]).astype(float)
+    in_win = _windows(np, own[r], n_ramp, True).sum(axis=-1)
+    ramp_weight = np.where(in_win >= 4, np.sqrt(np.maximum(in_win - 1, 0) * dt / WEIGHT_WINDOW_S),
+                           0.0)  # fmt: skip
+    slopes = lambda sel, mask, n, p=False: -_masked_slopes(np, t[sel], theta[sel], mask, n, p) / k_e
+    return _Group(
+        t=device(t),
+        theta0=device(theta[:, 0]),
+        t_knots=device(np.take_along_axis(t, knots, axis=1)),
+        rate=device(pick(3)),
+        temperature=device(pick(4)),
+        accel=device(pick(5)),
+        measured_static=device(slopes(s, own[s], length)[:, 0]),
+        static_mask=device(own[s]),
+        static_weight=device(np.sqrt((n_of[s] - 1) * dt / WEIGHT_WINDOW_S)),
+        measured_moving=device(slopes(m, own[m], n_move) * moving_valid),
+        moving_valid=device(moving_valid),
+        measured_ramp=device(slopes(r, own[r], n_ramp, True) * (ramp_weight > 0)),
+        ramp_mask=device(own[r]),
+        ramp_weight=device(ramp_weight),
+        static_idx=tuple(s.tolist()),
+        moving_idx=tuple(m.tolist()),
+        ramp_idx=tuple(r.tolist()),
+        n_move=n_move,
+        n_ramp=n_ramp,
     )
+
+
+def _weights(groups) -> dict:
+    """Host arrays in `_residuals`' order: {True: each at-rest residual's √(length / 60 s)
+    (0: no window), False: 1 for a moving window inside its run, else 0}."""
+    rest, moving = [], []
+    for g in groups:
+        rest += [np.asarray(g.static_weight), np.asarray(g.ramp_weight).ravel()]
+        moving += [np.asarray(g.moving_valid).ravel()]
+    return {True: np.concatenate(rest), False: np.concatenate(moving)}
 
 
 def _simulated_rates(group: _Group, values, k_e: float):
-    """Simulated window rates (static (Rs, 1), moving (Rm, W)) [rad/s] of one group."""
+    """Simulated window rates (static (Rs,), moving (Rm, Wm), ramp (Rr, Wr)) [rad/s] of one
+    group, reduced as the measured ones."""
     gyro = model_gyro(values)
 
-    def one(t, theta0, rate, temp, acc):
+    def one(t, theta0, t_knots, rate, temp, acc):
         theta_start = true_angle(gyro.at(temp[0]), theta0)
-        prof = Profile(
-            t=t[group.knots], rate=rate, temperature=temp, accel=acc, wave_angle0=theta_start
-        )
+        prof = Profile(t=t_knots, rate=rate, temperature=temp, accel=acc,
+                       wave_angle0=theta_start)  # fmt: skip
         rec = simulate(gyro, prof, ts=t, adjoint=diffrax.ForwardMode(), rtol=1e-9, atol=1e-12)
         return rec.wave_angle
 
-    theta = jax.vmap(one)(group.t, group.theta0, group.rate, group.temperature, group.accel)
-    n = group.t.shape[1]
-    m = (n // group.n_windows) * group.n_windows
-    s_idx, m_idx = np.asarray(group.static_idx, int), np.asarray(group.moving_idx, int)
-    static = jax.vmap(lambda t, th: window_slopes(t, th, 1)[0])(group.t[s_idx], theta[s_idx])
-    moving = jax.vmap(lambda t, th: window_slopes(t[:m], th[:m], group.n_windows)[0])(
-        group.t[m_idx], theta[m_idx]
-    )
-    return -static / k_e, -moving / k_e
+    theta = jax.vmap(one)(group.t, group.theta0, group.t_knots, group.rate, group.temperature,
+                          group.accel)  # fmt: skip
+    length = group.t.shape[1]
+
+    def slopes(idx, mask, n, partial=False):
+        idx = np.asarray(idx, int)
+        return -_masked_slopes(jnp, group.t[idx], theta[idx], mask, n, partial) / k_e
+
+    static = slopes(group.static_idx, group.static_mask, length)[:, 0]
+    moving_mask = jnp.ones((len(group.moving_idx), length))
+    moving = slopes(group.moving_idx, moving_mask, group.n_move) * group.moving_valid
+    ramp = slopes(group.ramp_idx, group.ramp_mask, group.n_ramp, True)
+    return static, moving, ramp
 
 
 def _residuals(groups, values, k_e):
-    """{True: static residuals, False: moving residuals} [rad/s], measured − simulated."""
+    """{True: at-rest residuals (static and ramp windows, each × √(length / 60 s)),
+    False: moving residuals} [rad/s], measured − simulated; 0 where there is no window."""
     sims = [_simulated_rates(g, values, k_e) for g in groups]
-    return {
-        True: jnp.concatenate(
-            [(g.measured_static - s[0]).ravel() for g, s in zip(groups, sims, strict=True)]
-        ),
-        False: jnp.concatenate(
-            [(g.measured_moving - s[1]).ravel() for g, s in zip(groups, sims, strict=True)]
-        ),
-    }
+    rest, moving = [], []
+    for g, (s, mv, r) in zip(groups, sims, strict=True):
+        rest += [(g.measured_static - s) * g.static_weight]
+        rest += [((g.measured_ramp - r) * g.ramp_weight).ravel()]
+        moving += [(g.measured_moving - mv).ravel()]
+    return {True: jnp.concatenate(rest), False: jnp.concatenate(moving)}
 
 
 def _weighted_residual(x, args):
@@ -358,37 +501,60 @@ def _residuals_jacobian(groups, values, k_e):
     return fn(jnp.zeros(len(NAMES))), jax.jacfwd(fn)(jnp.zeros(len(NAMES)))
 
 
+def _scatter(residuals, weights) -> dict:
+    """Robust scatter (1.4826 × median absolute deviation) of each kind of residual, over
+    the real windows (`_weights` > 0)."""
+    out = {}
+    for kind, r in residuals.items():
+        r = np.asarray(r)[weights[kind] > 0]
+        out[kind] = float(1.4826 * np.median(np.abs(r - np.median(r))))
+    return out
+
+
 def _fit(groups, x0, k_e, max_steps):
     """Weights, Levenberg–Marquardt (one compiled step at a time, with a progress bar),
     final residuals and Jacobian.
 
-    Weights: the residual scatter of each kind of window (static, moving) at the starting
-    values (robust: median absolute deviation; the harmonic start is close), re-estimated
-    after the fit for the covariance."""
+    Weights: the residual scatter of each kind of window (at rest, moving) at the starting
+    values (robust: median absolute deviation). When the scatter at the first solution
+    balances the two kinds differently (by more than 10 %: a start far from it, as from a
+    plan with few temperature levels), the fit runs again from there with the new weights
+    (only their ratio moves the optimum). Re-estimated at the end for the covariance."""
+    weights = _weights(groups)
     r0, _ = _residuals_jacobian(groups, x0, k_e)
-    sigma0 = {}
-    for kind, r in r0.items():
-        r = np.asarray(r)
-        sigma0[kind] = device(1.4826 * np.median(np.abs(r - np.median(r))))
-    # The problem is scaled so that one unit of x is about one standard error: stopping at
-    # 1e-4 of that is far below anything the data can tell.
-    x, steps, result = least_squares(
-        _weighted_residual,
-        optx.LevenbergMarquardt(rtol=1e-4, atol=1e-4),
-        device(np.zeros(len(NAMES))),
-        (groups, x0, sigma0, k_e),
-        max_steps=max_steps,
-        desc="physical fit (Levenberg–Marquardt)",
-        f_struct=jax.ShapeDtypeStruct((sum(r.size for r in r0.values()),), r0[True].dtype),
-    )
-    message = first_failure(result, optx.RESULTS)
-    if message is not None:
-        raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
-    # Host arithmetic between the compiled programs (eager jnp would compile each operation).
-    values = np.asarray(x0) + np.asarray(x) * _SCALE
-    r1, jac1 = _residuals_jacobian(groups, device(values), k_e)
+    sigma = _scatter(r0, weights)
+    f_struct = jax.ShapeDtypeStruct((sum(r.size for r in r0.values()),), r0[True].dtype)
+    x, steps = device(np.zeros(len(NAMES))), 0
+    for attempt in range(2):
+        # The problem is scaled so that one unit of x is about one standard error: stopping
+        # at 1e-4 of that is far below anything the data can tell. Absolute only: a
+        # tolerance relative to x stops a fit that started far (|x| in the hundreds) a
+        # fraction of a standard error short of the optimum.
+        x, n, result = least_squares(
+            _weighted_residual,
+            optx.LevenbergMarquardt(rtol=0.0, atol=1e-4),
+            x,
+            (groups, x0, {k: device(v) for k, v in sigma.items()}, k_e),
+            max_steps=max_steps,
+            desc="physical fit (Levenberg–Marquardt)",
+            f_struct=f_struct,
+        )
+        steps += n
+        message = first_failure(result, optx.RESULTS)
+        if message is not None:
+            raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
+        # Host arithmetic between the compiled programs (eager jnp would compile each op).
+        values = np.asarray(x0) + np.asarray(x) * _SCALE
+        r1, jac1 = _residuals_jacobian(groups, device(values), k_e)
+        new = _scatter(r1, weights)
+        balance = (new[True] / new[False]) / (sigma[True] / sigma[False])
+        if attempt == 1 or not (new[True] > 0 and new[False] > 0):
+            break
+        if abs(math.log(balance)) <= math.log(1.1):
+            break
+        sigma = new
     r1 = {k: np.asarray(r) for k, r in r1.items()}
-    sigma1 = {k: np.sqrt(np.mean(r**2)) for k, r in r1.items()}
+    sigma1 = {k: np.sqrt(np.mean(r[weights[k] > 0] ** 2)) for k, r in r1.items()}
     jac = np.concatenate(
         [np.asarray(jac1[True]) / sigma1[True], np.asarray(jac1[False]) / sigma1[False]]
     )
