@@ -163,7 +163,6 @@ def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, mon
     from hrgjax.calibration import physical
 
     segs = [{**SEGMENTS[0], "duration_s": 70.0}, {**SEGMENTS[1], "duration_s": 40.0},
-            {**SEGMENTS[1], "duration_s": 44.0}, {**SEGMENTS[0], "duration_s": 74.0},
             {**SEGMENTS[2], "temperature_end_c": -18.0, "duration_s": 400.0}]  # fmt: skip
     data = d.simulate_plan(quiet, d.BenchPlan.from_segments(segs))
     values = d.nominal_values()
@@ -178,9 +177,9 @@ def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, mon
                        for k in (True, False)]  # fmt: skip
         lengths = sorted(g.t.shape[1] for g in groups)
         assert np.all(np.asarray(res[True])[weights[True] == 0] == 0.0)
-    assert lengths == [77, 91, 431]  # 71 and 75 samples → 77, 81 and 89 → 91, 401 → 431
-    # at rest: 2 statics, the ramp's 300-s window and its partial 100-s one; moving: 4 + 4
-    assert [r.size for r in out[1]] == [4, 8]
+    assert lengths == [77, 91, 431]  # 71 samples → 77, 81 → 91, 401 → 431
+    # at rest: the static, the ramp's 300-s window and its partial 100-s one; moving: 4
+    assert [r.size for r in out[1]] == [3, 4]
     for a, b in zip(out[1], out[100], strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-6 * hg.units.DEG_PER_H)
 

@@ -392,10 +392,17 @@ def load_plan(path: str | os.PathLike) -> tuple[BenchPlan, BenchModel]:
     return plan, bench
 
 
-def _profiles(plan: BenchPlan, idx: np.ndarray) -> Profile:
-    """The segments `idx` as one batch of two-knot profiles (host arrays)."""
+def _profiles(plan: BenchPlan, idx: np.ndarray, length_s: float | None = None) -> Profile:
+    """The segments `idx` as one batch of two-knot profiles (host arrays); with `length_s`,
+    each runs on to that time [s] (rate held, temperature continuing its ramp)."""
     v = {k: np.asarray(x, dtype=float)[idx] for k, x in plan._fields().items()}
     n = len(idx)
+    if length_s is not None:
+        stretch = length_s / v["duration_s"]
+        v["temperature_end_c"] = v["temperature_c"] + stretch * (
+            v["temperature_end_c"] - v["temperature_c"]
+        )
+        v["duration_s"] = np.full(n, float(length_s))
     t = np.stack([np.zeros(n), v["duration_s"]], axis=1)
     # One checked profile, its arrays replaced by the batch (as Plan.profiles: no eager vmap
     # of the constructor); the batch's values were checked by BenchPlan.
@@ -425,9 +432,13 @@ def simulate_plan(
     run-to-run bias drawn once from `bias_key`); segment i is run i of the data.
 
     Segments of equal length and output interval share one compiled simulator (vmapped in
-    chunks of `CHUNK`, as `run_plan`). `dt_out`: output interval per kind [s] (default
+    chunks of `CHUNK`, as `run_plan`); a length fewer than `physical.SHARED_LENGTH_RUNS`
+    segments share is run on to the next of a ladder of lengths (steps ≤ 19 %: the rate
+    held, a ramp's temperature continuing) and cut back, so a plan of many different
+    durations compiles a few simulators. `dt_out`: output interval per kind [s] (default
     `DT_OUT`: static 1 s, rotation 0.5 s, ramp 1 s). Each segment gets its own noise key
-    (`jax.random.split(key, S)[i]`), so a segment's data do not depend on the others."""
+    (`jax.random.split(key, S)[i]`), so a segment's data do not depend on the other
+    segments' keys."""
     require_x64("hrgjax.calibration.simulate_plan")
     if not all(is_concrete(x) for x in plan._fields().values()):
         raise ValueError("simulate_plan needs a concrete plan (host values), not a traced one")
@@ -447,22 +458,34 @@ def simulate_plan(
         bias_key = k_bias if bias_key is None else bias_key
         keys = np.asarray(jax.random.key_data(jax.random.split(k_seg, plan.size)))
         impl = jax.random.key_impl(k_seg)
+    from .physical import SHARED_LENGTH_RUNS, _ladder
+
     durations = np.asarray(plan.duration_s, dtype=float)
-    groups: dict[tuple[float, float], list[int]] = {}
+    n_out = np.zeros(plan.size, dtype=int)
     for i, k in enumerate(plan.kind):
         dt = dts[k]
-        n_out = round(durations[i] / dt)
-        if n_out < 1 or abs(n_out * dt - durations[i]) > 1e-9 * max(1.0, durations[i]):
+        n_out[i] = round(durations[i] / dt)
+        if n_out[i] < 1 or abs(n_out[i] * dt - durations[i]) > 1e-9 * max(1.0, durations[i]):
             raise ValueError(
                 f"segment {i} ({k}): duration_s={durations[i]:g} is not a whole number of "
                 f"dt_out={dt:g} s output intervals"
             )
-        groups.setdefault((durations[i], dt), []).append(i)
+    # Lengths shared by a few segments get a compiled simulator each; rarer ones run on to a
+    # ladder of lengths (as the physical fit's groups) and are cut back: a designed plan of
+    # 44 different durations compiles ≈ 10 simulators.
+    exact: dict[tuple[int, float], int] = {}
+    for i, k in enumerate(plan.kind):
+        exact[(n_out[i], dts[k])] = exact.get((n_out[i], dts[k]), 0) + 1
+    groups: dict[tuple[int, float], list[int]] = {}
+    for i, k in enumerate(plan.kind):
+        n, dt = int(n_out[i]), dts[k]
+        samples = n + 1 if exact[(n, dt)] >= SHARED_LENGTH_RUNS else _ladder(n + 1)
+        groups.setdefault((samples, dt), []).append(i)
     per_segment: list[dict | None] = [None] * plan.size
     with bar(plan.size, f"simulating {plan.size} segments", unit="segment") as progress:
-        for (dur, dt), members in groups.items():
+        for (samples, dt), members in groups.items():
             idx = np.asarray(members)
-            ts = device(np.arange(round(dur / dt) + 1) * dt)
+            ts = device(np.arange(samples) * dt)
             chunk = min(CHUNK, len(idx))
             n_pad = -len(idx) % chunk
             padded = np.concatenate([idx, np.repeat(idx[-1:], n_pad)])
@@ -471,13 +494,14 @@ def simulate_plan(
                 k = None
                 if keys is not None:
                     k = jax.random.wrap_key_data(device(keys[take]), impl=impl)
-                rec, _ = _simulate_chunk(gyro, _profiles(plan, take), k, bias_key, ts, model)
+                profiles = _profiles(plan, take, (samples - 1) * dt)
+                rec, _ = _simulate_chunk(gyro, profiles, k, bias_key, ts, model)
                 cols = rec.to_data().columns
                 real = min(chunk, len(idx) - s)
                 for j in range(real):
-                    rows = cols["run"] == j
+                    rows = np.flatnonzero(cols["run"] == j)[: n_out[take[j]] + 1]
                     seg = {c: v[rows] for c, v in cols.items()}
-                    seg["run"] = np.full(int(rows.sum()), take[j], dtype=np.int64)
+                    seg["run"] = np.full(rows.size, take[j], dtype=np.int64)
                     per_segment[take[j]] = seg
                 progress.update(real)
     names = list(per_segment[0])
@@ -632,14 +656,13 @@ def measured_rate(values, theta, temperature_c, rate, temperature_rate):
 _NODES = 64
 
 
-def _segment_windows(kind, t0, t1, rate_dps, duration):
+def _segment_windows(dt, t0, t1, rate_dps, duration):
     """(samples, sample interval [s], length [s]) of the windows the physical fit reduces a
     segment with (see `window_density`): moving — `PhysicalCompensator.window_s` (10 s);
     a ramp at rest — ≈ `RAMP_WINDOW_S` (300 s) tiling it; static — the whole segment (one
     window of duration/Δt + 1 samples); sampled at `DT_OUT` of its kind."""
     from .physical import RAMP_WINDOW_S, PhysicalCompensator
 
-    dt = DT_OUT[kind]
     moving = rate_dps != 0.0
     ramp = t1 != t0
     ramp_window = duration / jnp.maximum(jnp.round(duration / RAMP_WINDOW_S), 1.0)  # tiling
@@ -649,7 +672,7 @@ def _segment_windows(kind, t0, t1, rate_dps, duration):
     return samples, dt, length
 
 
-def _segment_information(values, noise, kind, t0, t1, angle_deg, rate_dps, duration, nodes):
+def _segment_information(values, noise, dt, t0, t1, angle_deg, rate_dps, duration, nodes):
     """Fisher information (P, P) of one segment about `values`: the measured pattern rate
     observed through the physical fit's window slopes, i.e. ∫ g gᵀ dt / N_w² with
     g = ∂(measured rate)/∂values along the segment's path (θ turning at −k_e Ω, T linear),
@@ -667,7 +690,7 @@ def _segment_information(values, noise, kind, t0, t1, angle_deg, rate_dps, durat
     jac = jax.vmap(lambda th, T: jax.jacfwd(measured_rate)(values, th, T, omega, temp_rate))(
         thetas, temps
     )  # (nodes, P)
-    density = window_density(arw, angle_white, *_segment_windows(kind, t0, t1, rate_dps,
+    density = window_density(arw, angle_white, *_segment_windows(dt, t0, t1, rate_dps,
                                                                  duration))  # fmt: skip
     weights = jnp.asarray(w) / 2.0 * duration / density**2
     weights = weights * gauss_markov_discount(duration, density, sigma, tau)
@@ -705,18 +728,13 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
 
 @eqx.filter_jit
 def _information(plan, values, noise, nodes):
-    """`information`, compiled once per plan length and kinds (one vmap per kind)."""
-    total = 0.0
-    for kind in KINDS:
-        idx = np.flatnonzero(np.asarray(plan.kind) == kind)
-        if idx.size == 0:
-            continue
-        one = lambda a, b, c, d, e, k=kind: _segment_information(values, noise, k, a, b, c, d,
-                                                                  e, nodes)  # fmt: skip
-        seg = jax.vmap(one)(plan.temperature_c[idx], plan.temperature_end_c[idx],
-                            plan.wave_angle_deg[idx], plan.rate_dps[idx], plan.duration_s[idx])  # fmt: skip
-        total = total + jnp.sum(seg, axis=0)
-    return total
+    """`information`, compiled once per plan length and kinds."""
+    dt = jnp.asarray([DT_OUT[k] for k in plan.kind], dtype=float)  # each kind's sampling
+    seg = jax.vmap(
+        lambda *a: _segment_information(values, noise, *a, nodes)
+    )(dt, plan.temperature_c, plan.temperature_end_c, plan.wave_angle_deg, plan.rate_dps,
+      plan.duration_s)  # fmt: skip
+    return jnp.sum(seg, axis=0)
 
 
 def _precision_factor(plan, values, noise, prior_scale):

@@ -18,10 +18,10 @@ Levenberg–Marquardt (`optimistix`) minimises the weighted rate residuals. A st
 window, a rotation is cut into `window_s` windows and a ramp (table at rest, temperature
 moving) into `RAMP_WINDOW_S` windows, each a drift at its own temperature. Weights: the
 residual scatter of each kind of window (at rest, moving), an at-rest window of length L
-weighted by √(L / 60 s) (white rate noise: a long dwell tells more); the fit is repeated from
-its first solution when the scatter there balances the kinds differently, and the scatter is
-re-estimated at the end; the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$
-scaled by the reduced χ².
+weighted by √(L / 60 s) (white rate noise: a long dwell tells more), re-estimated after the
+fit; the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced
+χ². Starting values come from harmonic fits at each temperature held for at least three
+windows (a ramp's windows are not a level).
 
 The compensator's D and SF follow from the fitted gyro itself: the readout map
 $\theta\mapsto\hat\theta$ is inverted at the measured angle, the rest-state pattern rate comes
@@ -516,43 +516,30 @@ def _fit(groups, x0, k_e, max_steps):
     final residuals and Jacobian.
 
     Weights: the residual scatter of each kind of window (at rest, moving) at the starting
-    values (robust: median absolute deviation). When the scatter at the first solution
-    balances the two kinds differently (by more than 10 %: a start far from it, as from a
-    plan with few temperature levels), the fit runs again from there with the new weights
-    (only their ratio moves the optimum). Re-estimated at the end for the covariance."""
+    values (robust: median absolute deviation; the harmonic start is close), re-estimated
+    after the fit for the covariance."""
     weights = _weights(groups)
     r0, _ = _residuals_jacobian(groups, x0, k_e)
-    sigma = _scatter(r0, weights)
-    f_struct = jax.ShapeDtypeStruct((sum(r.size for r in r0.values()),), r0[True].dtype)
-    x, steps = device(np.zeros(len(NAMES))), 0
-    for attempt in range(2):
-        # The problem is scaled so that one unit of x is about one standard error: stopping
-        # at 1e-4 of that is far below anything the data can tell. Absolute only: a
-        # tolerance relative to x stops a fit that started far (|x| in the hundreds) a
-        # fraction of a standard error short of the optimum.
-        x, n, result = least_squares(
-            _weighted_residual,
-            optx.LevenbergMarquardt(rtol=0.0, atol=1e-4),
-            x,
-            (groups, x0, {k: device(v) for k, v in sigma.items()}, k_e),
-            max_steps=max_steps,
-            desc="physical fit (Levenberg–Marquardt)",
-            f_struct=f_struct,
-        )
-        steps += n
-        message = first_failure(result, optx.RESULTS)
-        if message is not None:
-            raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
-        # Host arithmetic between the compiled programs (eager jnp would compile each op).
-        values = np.asarray(x0) + np.asarray(x) * _SCALE
-        r1, jac1 = _residuals_jacobian(groups, device(values), k_e)
-        new = _scatter(r1, weights)
-        balance = (new[True] / new[False]) / (sigma[True] / sigma[False])
-        if attempt == 1 or not (new[True] > 0 and new[False] > 0):
-            break
-        if abs(math.log(balance)) <= math.log(1.1):
-            break
-        sigma = new
+    sigma = {k: device(v) for k, v in _scatter(r0, weights).items()}
+    # The problem is scaled so that one unit of x is about one standard error: stopping at
+    # 1e-4 of that is far below anything the data can tell. Absolute only: a tolerance
+    # relative to x stops a fit that started far (|x| in the hundreds) a fraction of a
+    # standard error short of the optimum.
+    x, steps, result = least_squares(
+        _weighted_residual,
+        optx.LevenbergMarquardt(rtol=0.0, atol=1e-4),
+        device(np.zeros(len(NAMES))),
+        (groups, x0, sigma, k_e),
+        max_steps=max_steps,
+        desc="physical fit (Levenberg–Marquardt)",
+        f_struct=jax.ShapeDtypeStruct((sum(r.size for r in r0.values()),), r0[True].dtype),
+    )
+    message = first_failure(result, optx.RESULTS)
+    if message is not None:
+        raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
+    # Host arithmetic between the compiled programs (eager jnp would compile each operation).
+    values = np.asarray(x0) + np.asarray(x) * _SCALE
+    r1, jac1 = _residuals_jacobian(groups, device(values), k_e)
     r1 = {k: np.asarray(r) for k, r in r1.items()}
     sigma1 = {k: np.sqrt(np.mean(r[weights[k] > 0] ** 2)) for k, r in r1.items()}
     jac = np.concatenate(
