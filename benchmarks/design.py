@@ -1,9 +1,10 @@
 """Experiment design (issue 22): plans designed by `hrgjax.calibration.design.design` within
 bench-time budgets of 4 h, 12 h (a third of the seed's) and 36 h (the seed's), beside the
 seed's plans, all priced by the default `BenchModel` and judged by the predicted
-compensated static-drift error (ARW and Gauss–Markov rate, ideal-loop grey box: the
-criterion `design` minimises). Prints, side by side in one run: bench time, predicted drift error, its ratio to
-the seed plan's, and the wall time of each design (target ≤ 5 min for 4 h on 2 cores).
+compensated static-drift error (ARW and readout angle noise through the physical fit's
+windows, Gauss–Markov rate, ideal-loop grey box: the criterion `design` minimises). Prints,
+side by side in one run: bench time, predicted drift error, its ratio to the seed plan's,
+and the wall time of each design (target ≤ 5 min for 4 h on 2 cores).
 
 `benchmarks/design_mc.py` checks the predictions by Monte Carlo calibrations.
 Usage: `.venv/bin/python benchmarks/design.py [BUDGET_H …]`.

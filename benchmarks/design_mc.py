@@ -12,8 +12,9 @@ bias added: a compensator calibrates it away with the rest). Prints per plan: be
 predicted drift error (`drift_error` on the same grid), achieved RMS over seeds and grid,
 their ratio (target: within 30 %), and the mean over seeds of the test grid's RMS.
 
-The first fit of each plan compiles its simulator for every distinct segment length (a
-designed 12-h plan: ≈ 26 lengths, ≈ 8 min on 2 cores); later seeds take seconds.
+The first seed of each plan compiles its simulators and the physical fit's groups (rare
+segment lengths share padded ones: a designed 12-h plan of 44 lengths ≈ 9 min on 2 cores, the
+seed plan ≈ 1 min); later seeds take seconds.
 Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …] [--no-mlp]`.
 """
 

@@ -75,7 +75,7 @@ def bench_plan():
 
 def design_budgets():
     """Predicted compensated drift error vs bench time: plans designed within 3–36 h and the
-    seed's plans (the criterion `design` minimises: ARW and Gauss–Markov rate)."""
+    seed's plans (the criterion `design` minimises: ARW, readout and Gauss–Markov noise)."""
     import matplotlib.pyplot as plt
 
     from hrgjax.calibration import design

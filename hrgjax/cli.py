@@ -228,7 +228,7 @@ def cmd_design(args) -> int:
         f"{hours['measuring']:.2f} h, slew {hours['slew']:.2f} h, soak {hours['settle']:.2f} h, "
         f"re-positioning {hours['reposition']:.2f} h)"
     )
-    print("  predicted (ARW and Gauss–Markov rate, ideal-loop grey box; see docs/design.md):")
+    print("  predicted (ARW, readout and Gauss–Markov noise, ideal-loop grey box; docs/design.md):")
     for name, plan in (("designed", result.plan), ("seed quick", d.seed_bench_plan(True)),
                        ("seed", d.seed_bench_plan())):  # fmt: skip
         value = float(d.criterion(plan, args.criterion))
