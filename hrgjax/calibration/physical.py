@@ -56,7 +56,7 @@ from ..simulate import simulate
 from ..units import DEG, DEG_PER_H, T_REF_C
 from ._compensator import AbstractCompensator, split_targets
 from ._physical_start import initial_values
-from .reduce import K_E_NOMINAL, reduce
+from .reduce import K_E_NOMINAL, _slope, reduce
 
 PARAMETERS = (
     ("k_e0", "", 1e-4),
@@ -254,7 +254,8 @@ class PhysicalCompensator(AbstractCompensator):
 RAMP_WINDOW_S = 300.0
 """Window of a ramp (table at rest, temperature moving) in the fit [s]: each window's slope
 is a drift at its own temperature, so a ramp is a temperature sweep, not one number. The
-windows tile the ramp: round(duration / 300 s) of them, at least one."""
+windows run from the ramp's start; the last, partial one is kept when it has ≥ 4 samples.
+(The design's criterion approximates them by round(duration / 300 s) equal windows.)"""
 WEIGHT_WINDOW_S = 60.0
 """Window length [s] the at-rest residual scatter is referred to: an at-rest window of
 length L is weighted by √(L / 60 s) / σ (white rate noise: variance ∝ 1/L)."""
@@ -345,17 +346,10 @@ def _windows(xp, a, n: int, partial: bool):
 
 def _masked_slopes(xp, t, y, mask, n, partial=False):
     """Least-squares slopes of `y` over consecutive windows of `n` samples of (R, L) arrays
-    (`_windows`), each over its samples with `mask` 1; (R, W). Windows without 2 such
-    samples give 0."""
+    (`_windows`), each over its samples with `mask` 1 (`reduce`'s slope); (R, W). Windows
+    without 2 such samples give 0."""
     t, y, m = (_windows(xp, a, n, partial) for a in (t, y, mask))
-    count = xp.sum(m, axis=-1)
-    safe = xp.maximum(count, 1.0)
-    tm = xp.sum(m * t, axis=-1, keepdims=True) / safe[..., None]
-    ym = xp.sum(m * y, axis=-1, keepdims=True) / safe[..., None]
-    dt = (t - tm) * m
-    den = xp.sum(dt * dt, axis=-1)
-    num = xp.sum(dt * (y - ym), axis=-1)
-    return xp.where(count >= 2, num / xp.where(count >= 2, den, 1.0), 0.0)
+    return _slope(xp, t, y, m)[0]
 
 
 def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:

@@ -71,11 +71,23 @@ def _window_stats(xp, t, theta, n_windows, batches):
     return slope, tm, ym, stderr
 
 
-def _slope(xp, t, y):
-    tm = xp.mean(t, axis=-1, keepdims=True)
-    ym = xp.mean(y, axis=-1, keepdims=True)
-    dt = t - tm
-    slope = xp.sum(dt * (y - ym), axis=-1) / xp.sum(dt * dt, axis=-1)
+def _slope(xp, t, y, mask=None):
+    """Least-squares slope, mean time and mean value along the last axis; with `mask`, over
+    the samples where it is 1 only (a window without 2 of them gets slope 0)."""
+    if mask is None:
+        tm = xp.mean(t, axis=-1, keepdims=True)
+        ym = xp.mean(y, axis=-1, keepdims=True)
+        dt = t - tm
+        slope = xp.sum(dt * (y - ym), axis=-1) / xp.sum(dt * dt, axis=-1)
+        return slope, tm[..., 0], ym[..., 0]
+    count = xp.sum(mask, axis=-1, keepdims=True)
+    safe = xp.maximum(count, 1.0)
+    tm = xp.sum(mask * t, axis=-1, keepdims=True) / safe
+    ym = xp.sum(mask * y, axis=-1, keepdims=True) / safe
+    dt = (t - tm) * mask
+    ok = count[..., 0] >= 2
+    den = xp.where(ok, xp.sum(dt * dt, axis=-1), 1.0)
+    slope = xp.where(ok, xp.sum(dt * (y - ym), axis=-1) / den, 0.0)
     return slope, tm[..., 0], ym[..., 0]
 
 
