@@ -16,9 +16,10 @@ demo: $(STAMP)
 	$(BIN)/hrgjax demo --out out/demo
 
 # Two test files at a time on two cores (pytest-xdist; each file stays in one worker, so its
-# module-scoped fixtures compile once): 9½ min instead of 14 on the 2-core machine.
+# module-scoped fixtures compile once): 9½ min instead of 14 on the 2-core machine. The 20
+# slowest tests are listed at the end, so every CI log shows where the time goes.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n auto --dist loadfile
+	$(BIN)/python -m pytest -q -n auto --dist loadfile --durations=20
 
 # Every python block of docs/ at the size the page shows, the compile-bound ones included
 # (make test runs them at reduced sizes and lists the compile-bound ones as skipped).
