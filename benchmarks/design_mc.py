@@ -8,19 +8,25 @@ independent keys, then calibrated — the physical grey box on every segment, th
 static and rotation windows (a ramp's apparent rate ∝ Ṫ is not something it models) — the
 compensated static drift is compared with the noise-free truth on the seed's test grid
 (11 temperatures × 37 wave angles, 5-min noise-free static runs, the session's switch-on
-bias added: a compensator calibrates it away with the rest). Prints per plan: bench time,
-predicted drift error (`drift_error` on the same grid), achieved RMS over seeds and grid,
-their ratio (target: within 30 %), and the mean over seeds of the test grid's RMS.
+bias added: a compensator calibrates it away with the rest). Then each calibration flies the
+three 1-h warm-up flights (`design.INS_FLIGHTS`, −40 → +20 °C) with the session's switch-on
+bias and no other noise — the flight's own ARW and Gauss–Markov rate do not depend on the
+plan, and the `ins` criterion leaves them out — and the horizontal position error at the end
+is compared with `ins_error`. Prints per plan and compensator: bench time, predicted drift
+and INS errors, achieved RMS over seeds (and grid / flights), their ratio (target: within
+30 %), the spread over seeds, and the ratio to the seed plan's.
 
 The first seed of each plan compiles its simulators and the physical fit's groups (rare
 segment lengths share padded ones: a designed 12-h plan of 44 lengths ≈ 9 min on 2 cores, the
 seed plan ≈ 1 min); later seeds take seconds.
-Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …] [--no-mlp]`.
+Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …]
+[--criterion drift|ins] [--no-mlp] [--no-ins]`.
 """
 
 import argparse
 import time
 
+import equinox as eqx
 import jax
 import numpy as np
 from _common import machine, report
@@ -28,7 +34,8 @@ from _common import machine, report
 import hrgjax as hg
 from hrgjax.calibration import MLPCompensator, PhysicalCompensator, reduce, run_plan, test_plan
 from hrgjax.calibration import design as d
-from hrgjax.noise import draw_run_bias
+from hrgjax.calibration.ins_impact import fly, navigation_errors
+from hrgjax.noise import Noise, draw_run_bias
 from hrgjax.units import DEG_PER_H
 
 
@@ -40,38 +47,56 @@ def truth_on_test_grid(gyro):
     return w.wave_angle_deg, w.temperature_c, w.drift_dph
 
 
-def monte_carlo(gyro, plan, seeds, truth, mlp=True):
-    """Per seed: achieved RMS of (compensated drift − truth) on the grid, per compensator."""
+def monte_carlo(gyro, plan, seeds, truth, mlp=True, ins=True):
+    """Per seed and compensator: achieved RMS of (compensated drift − truth) on the grid
+    [°/h] and, with `ins`, the RMS over `design.INS_FLIGHTS` of the position error [km]."""
     angles, temps, drift = truth
     ramps = np.flatnonzero(np.array(plan.kind) == "ramp")
-    out = {"physical": [], "MLP": []} if mlp else {"physical": []}
+    names = ("physical", "MLP") if mlp else ("physical",)
+    out = {n: {"drift": [], "ins": []} for n in names}
+    # the flights: the calibration session's switch-on bias, nothing else (see the docstring)
+    flying = eqx.tree_at(lambda g: g.noise, gyro, Noise(run_bias=gyro.noise.run_bias))
     for s in range(seeds):
         key = jax.random.fold_in(jax.random.key(2026), s)
         t0 = time.perf_counter()
         cal = d.simulate_plan(gyro, plan, key=key)
         # simulate_plan's switch-on: the second half of its key split
-        bias = float(draw_run_bias(jax.random.split(key)[1], gyro.noise)) / DEG_PER_H
-        target = drift + bias
+        bias_key = jax.random.split(key)[1]
+        target = drift + float(draw_run_bias(bias_key, gyro.noise)) / DEG_PER_H
         comps = {"physical": PhysicalCompensator().fit(cal)}
         if mlp:
             w = reduce(cal)
             comps["MLP"] = MLPCompensator().fit(
                 w.select(~np.isin(w.run, ramps)), key=jax.random.fold_in(key, 1)
             )
+        flights = []
+        if ins:
+            for i, f in enumerate(d.INS_FLIGHTS):
+                rec = fly(flying, f, key=jax.random.fold_in(key, 10 + i), bias_key=bias_key)
+                flights.append((f, rec))
         for name, comp in comps.items():
             err = comp.drift_dph(angles, temps) - target
-            out[name].append(float(np.sqrt(np.mean(err**2))))
+            out[name]["drift"].append(float(np.sqrt(np.mean(err**2))))
+            if ins:
+                pos = [navigation_errors(comp, rec, f)[1] / 1000.0 for f, rec in flights]
+                out[name]["ins"].append(float(np.sqrt(np.mean(np.square(pos)))))
         took = time.perf_counter() - t0
-        print(f"  seed {s}: " + ", ".join(f"{k} {v[-1]:.4f}" for k, v in out.items())
-              + f" °/h  ({took:.0f} s)", flush=True)  # fmt: skip
-    return {k: np.asarray(v) for k, v in out.items()}
+        line = ", ".join(
+            f"{k} {v['drift'][-1]:.4f} °/h" + (f" {v['ins'][-1]:.3f} km" if ins else "")
+            for k, v in out.items()
+        )
+        print(f"  seed {s}: {line}  ({took:.0f} s)", flush=True)
+    return {k: {m: np.asarray(x) for m, x in v.items() if x} for k, v in out.items()}
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--budgets", type=float, nargs="*", default=[12.0])
+    ap.add_argument("--criterion", choices=("drift", "ins"), default="drift",
+                    help="the criterion the plans are designed for")  # fmt: skip
     ap.add_argument("--no-mlp", action="store_true")
+    ap.add_argument("--no-ins", action="store_true", help="skip the warm-up flights")
     a = ap.parse_args()
     gyro = hg.presets.tvg3_like()
     print(f"machine: {machine()}")
@@ -81,33 +106,40 @@ def main():
     plans = [("seed", d.seed_bench_plan())]
     for budget in a.budgets:
         t0 = time.perf_counter()
-        result = d.design(budget)
-        print(f"designed {budget:g} h in {time.perf_counter() - t0:.0f} s: {result.levels} "
+        result = d.design(budget, criterion=a.criterion)
+        print(f"designed {budget:g} h ({a.criterion}) in {time.perf_counter() - t0:.0f} s: {result.levels} "
               f"levels, {result.plan.size} segments", flush=True)  # fmt: skip
-        plans.append((f"designed {budget:g} h", result.plan))
+        plans.append((f"designed {budget:g} h, {a.criterion}", result.plan))
     rows = []
     for name, plan in plans:
-        pred = float(d.drift_error(plan, temperatures_c=grid_t, angles_deg=grid_a))
-        print(f"{name}: {float(d.bench_time_h(plan)):.2f} h, predicted {pred:.4f} °/h", flush=True)
+        pred = {"drift": float(d.drift_error(plan, temperatures_c=grid_t, angles_deg=grid_a))}
+        if not a.no_ins:
+            pred["ins"] = float(d.ins_error(plan))
+        hours = float(d.bench_time_h(plan))
+        print(f"{name}: {hours:.2f} h, predicted " + ", ".join(f"{k} {v:.4g}" for k, v in
+              pred.items()), flush=True)  # fmt: skip
         t0 = time.perf_counter()
-        mc = monte_carlo(gyro, plan, a.seeds, truth, mlp=not a.no_mlp)
-        rows.append((name, float(d.bench_time_h(plan)), pred, mc, time.perf_counter() - t0))
+        mc = monte_carlo(gyro, plan, a.seeds, truth, mlp=not a.no_mlp, ins=not a.no_ins)
+        rows.append((name, hours, pred, mc, time.perf_counter() - t0))
     print()
-    print(f"{a.seeds} Monte Carlo seeds per plan; drift error vs the noise-free truth on the "
-          "seed's test grid [°/h]")  # fmt: skip
+    print(f"{a.seeds} Monte Carlo seeds per plan; drift: error vs the noise-free truth on the "
+          "seed's test grid [°/h]; ins: position error after the 1-h warm-up flights [km]")  # fmt: skip
     print(
-        "plan               bench [h]  predicted  compensator  achieved (RMS)  "
+        "plan                    bench [h]  error  predicted  compensator  achieved (RMS)  "
         "achieved/predicted  seed spread  / seed plan's   wall [s]"
     )
-    ref = {k: np.sqrt(np.mean(v**2)) for k, v in rows[0][3].items()}
+    ref = {(c, m): np.sqrt(np.mean(x**2)) for c, v in rows[0][3].items() for m, x in v.items()}
     for name, hours, pred, mc, took in rows:
         for comp, v in mc.items():
-            achieved = float(np.sqrt(np.mean(v**2)))
-            print(f"{name:18s} {hours:9.2f}  {pred:9.4f}  {comp:11s}  {achieved:14.4f}  "
-                  f"{achieved / pred:18.2f}  {np.std(v):11.4f}  {achieved / ref[comp]:13.2f}"
-                  f"  {took:9.0f}")  # fmt: skip
-            report(f"{name}: achieved drift error, {comp}", achieved, "°/h",
-                   "achieved / predicted", achieved / pred, "within 30 %")  # fmt: skip
+            for measure, x in v.items():
+                achieved = float(np.sqrt(np.mean(x**2)))
+                p = pred[measure]
+                print(f"{name:23s} {hours:9.2f}  {measure:5s}  {p:9.4g}  {comp:11s}  "
+                      f"{achieved:14.4g}  {achieved / p:18.2f}  {np.std(x):11.4g}  "
+                      f"{achieved / ref[comp, measure]:13.2f}  {took:9.0f}")  # fmt: skip
+                unit = "°/h" if measure == "drift" else "km"
+                report(f"{name}: achieved {measure} error, {comp}", achieved, unit,
+                       "achieved / predicted", achieved / p, "within 30 %")  # fmt: skip
 
 
 if __name__ == "__main__":

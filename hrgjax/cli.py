@@ -214,7 +214,7 @@ def cmd_design(args) -> int:
         key=jax.random.key(args.seed),
     )  # fmt: skip
     took = time.perf_counter() - t0
-    unit = " °/h" if args.criterion == "drift" else ""
+    unit = {"drift": " °/h", "ins": " km"}.get(args.criterion, "")
     hours = result.bench.breakdown_h(result.plan)
     print(f"  searched {len(result.search)} structures in {took:.1f} s:")
     for n, v in result.search.items():
@@ -831,9 +831,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="bench time available [h], transitions (slew, soak, re-positioning) included",
     )  # fmt: skip
     p.add_argument(
-        "--criterion", default="drift", choices=("drift", "d", "a"),
+        "--criterion", default="drift", choices=("drift", "ins", "d", "a"),
         help="drift: predicted compensated static drift RMS over −40…+60 °C × all wave "
-        "angles [°/h]; d / a: D- / A-optimal (log det / trace of the posterior covariance)",
+        "angles [°/h]; ins: predicted horizontal position error after a 1-h warm-up flight "
+        "(−40 → +20 °C) [km]; d / a: D- / A-optimal (log det / trace of the posterior "
+        "covariance)",
     )  # fmt: skip
     p.add_argument(
         "--levels", type=_levels, default=(2, 3, 4, 5),

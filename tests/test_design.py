@@ -381,3 +381,57 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     with pytest.raises(ValueError, match="budget_h=0.5 cannot hold this structure"):
         d.design(0.5, levels=(2,), statics=2, rotations=1, steps=2)
     cli_fails(["design", "--budget-h", "-1"], capsys, r"--budget-h: expected a number > 0")
+
+
+def test_ins_criterion_is_the_schuler_response_to_the_posterior_integrated_by_diffrax():
+    """The `ins` criterion against a second method: the compensated rate error of each level
+    gyro per unit error of each grey-box parameter along the warm-up flight (T(t) and Ṫ(t)
+    sampled every 5 s, h = ∂(measured rate)/∂values / k_e) drives `schuler_errors` (diffrax,
+    linear interpolation) — its end positions are M's entries (rel 1e-4); and
+    √tr(M C Mᵀ) with C = `posterior_covariance` is the criterion (rel 1e-4); over several
+    flights it is the RMS of the flights' errors (the default: the three warm-up flights,
+    whose sensitivity rows are each flight's own). A measuring
+    ramp only adds information, so it lowers the error (the gradient is `information`'s,
+    checked against finite differences above, through a constant M)."""
+    from hrgjax.calibration.ins_impact import schuler_errors
+    from hrgjax.units import DEG
+
+    plan = d.seed_bench_plan(quick=True)
+    flight = d.INS_FLIGHTS[0]
+    values = d.nominal_values()
+    t = np.arange(0.0, flight.duration_s + 1e-9, 5.0)
+    temp = flight.temperature(t)
+    temp_rate = -(flight.temperature_start_c - flight.temperature_end_c) / flight.warmup_s
+    temp_rate = temp_rate * np.exp(-t / flight.warmup_s)
+    rate = lambda v, th, tc, tr: d.measured_rate(v, th, tc, 0.0, tr) / values[0]
+    h = jax.jit(jax.vmap(jax.grad(rate), in_axes=(None, 0, 0, 0)))
+    ends = []
+    for angle in (flight.wave_angle_x_deg, flight.wave_angle_y_deg):
+        hs = np.asarray(h(values, jnp.full(t.shape, angle * DEG), jnp.asarray(temp),
+                          jnp.asarray(temp_rate)))  # fmt: skip
+        zero = jnp.zeros(t.shape)
+        ends.append([float(schuler_errors(jnp.asarray(t), jnp.asarray(col), zero)[1][-1, 0])
+                     for col in hs.T])  # fmt: skip
+    m_ode = np.asarray(ends)  # (2, P): the east channel of a north-axis error, per parameter
+    m = np.asarray(d.ins_sensitivity(values, flight))
+    np.testing.assert_allclose(np.abs(m_ode), np.abs(m), rtol=1e-4, atol=1e-4 * np.abs(m).max())
+    cov = np.asarray(d.posterior_covariance(plan))
+    predicted = np.sqrt(np.trace(m_ode @ cov @ m_ode.T)) / 1000.0
+    value = float(d.criterion(plan, "ins", flight=flight))
+    assert value == pytest.approx(predicted, rel=1e-4)
+    assert 0.05 < value < 5.0  # km: the seed plan's calibration, a 1-h flight
+    m_all = np.asarray(d.ins_sensitivity(values))  # default: the three flights, 6 rows
+    assert m_all.shape == (6, m.shape[1])
+    np.testing.assert_allclose(m_all[:2], m, rtol=1e-12)
+    per = [np.trace(m_all[i : i + 2] @ cov @ m_all[i : i + 2].T) for i in (0, 2, 4)]
+    default = float(d.criterion(plan, "ins"))
+    assert default == pytest.approx(np.sqrt(np.mean(per)) / 1000.0, rel=1e-4)
+
+    ramp = {"kind": "ramp", "temperature_start_c": -40.0, "temperature_end_c": 60.0,
+            "wave_angle_deg": 30.0, "duration_s": 6000.0}  # fmt: skip
+    more = d.BenchPlan.from_segments(plan.segments() + [ramp])
+    assert float(d.criterion(more, "ins")) < default
+    with pytest.raises(TypeError, match="flight must be an ins_impact.Flight .* got str"):
+        d.criterion(plan, "ins", flight="1h")
+    with pytest.raises(TypeError, match="flight must be an ins_impact.Flight .* got empty"):
+        d.criterion(plan, "ins", flight=())

@@ -53,6 +53,7 @@ from ..gyro import Gyro
 from ..profiles import Profile
 from ..units import DEG, DEG_PER_H, DEG_PER_S
 from .experiment import CHUNK, SEED_ANGLES, SEED_TEMPERATURES, _simulate_chunk
+from .ins_impact import FLIGHTS, Flight
 
 KINDS = ("static", "rotation", "ramp")
 """The segment kinds."""
@@ -510,10 +511,11 @@ def simulate_plan(
 
 # --- What a plan teaches: Fisher information of the physical grey box ----------------------
 
-CRITERIA = ("drift", "d", "a")
+CRITERIA = ("drift", "ins", "d", "a")
 """Design criteria: `drift` (RMS of the compensated static drift's standard deviation over
-the operating grid [°/h]), `d` (log-determinant of the scaled posterior covariance), `a`
-(trace of the scaled posterior covariance)."""
+the operating grid [°/h]), `ins` (RMS horizontal position error after a warm-up flight
+from the calibration's uncertainty [km]), `d` (log-determinant of the scaled posterior
+covariance), `a` (trace of the scaled posterior covariance)."""
 
 OPERATING_TEMPERATURES = tuple(float(t) for t in range(-40, 61, 5))
 """Temperatures of the `drift` criterion's operating grid [°C] (the seed's test range)."""
@@ -804,10 +806,106 @@ def _drift_error(plan, values, noise, prior_scale, temperatures_c=OPERATING_TEMP
     return jnp.sqrt(jnp.mean(jnp.sum(z**2, axis=-1))) / DEG_PER_H
 
 
+INS_FLIGHTS = FLIGHTS
+"""The `ins` criterion's default flights: the three 1-h warm-up flights of
+[`study.FLIGHTS`][hrgjax.calibration.study.FLIGHTS] (level at 200 m/s, the IMU warming from
+−40 °C to +20 °C with a 20-min time constant; wave-angle pairs 30°/−55°, −20°/70°, 80°/5°),
+so that a design does not specialise to one pair of wave angles."""
+
+
+def _flights(flight) -> tuple[Flight, ...]:
+    """`flight` (None, one `Flight` or a sequence of them) as a non-empty tuple of flights."""
+    if flight is None:
+        return INS_FLIGHTS
+    flights = (flight,) if isinstance(flight, Flight) else flight
+    try:
+        flights = tuple(flights)
+    except TypeError:
+        flights = (flights,)
+    if not flights or not all(isinstance(f, Flight) for f in flights):
+        bad = next((type(f).__name__ for f in flights if not isinstance(f, Flight)), "empty")
+        raise TypeError(
+            f"flight must be an ins_impact.Flight or a non-empty sequence of them; got {bad}"
+        )
+    return flights
+
+
+def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
+              flight=None, gauss_markov=None, angle_white=None):  # fmt: skip
+    r"""Predicted horizontal position error [km] at the end of `flight` (a
+    [`Flight`][hrgjax.calibration.ins_impact.Flight] or a sequence of them: RMS over the
+    flights; default `INS_FLIGHTS`, the three 1-h warm-up flights) from the physical
+    calibration's uncertainty after `plan`: each level gyro's compensated rate error along the flight is
+    ε(t) = h(t)ᵀ δv, with h = ∂(measured rate)/∂values at its wave angle, the flight's
+    temperature T(t) *and its rate* Ṫ(t) (the readout's temperature sensitivity, which only a
+    plan with ramps can calibrate); ε drives the classical Schuler channels (PHYSICS.md §12:
+    a rate error at time s moves the position at the end T by R(1 − cos ω_s(T − s))), so the
+    error is δp = M δv with M = R ∫ (1 − cos ω_s(T − s)) h(s)ᵀ ds per gyro, and its expected
+    squared length is tr(M C Mᵀ), C the posterior covariance (heading drops out: the two
+    gyros' errors rotate into north and east together). Gauss–Legendre quadrature over the
+    flight; noise arguments as [`information`][hrgjax.calibration.design.information].
+
+    What it leaves out, by design (none of it depends on the plan): the flight's own noise
+    (ARW, Gauss–Markov rate), the Earth-rate coupling of the full strapdown model
+    ([`ins_impact`][hrgjax.calibration.ins_impact.ins_impact] keeps both), and model error
+    outside the grey box's family."""
+    require_x64("hrgjax.calibration.design.ins_error")
+    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    return _ins_error(plan, values, _noise(arw, gauss_markov, angle_white), float(prior_scale),
+                      _flights(flight))  # fmt: skip
+
+
+def ins_sensitivity(values, flight=None, nodes: int = _NODES) -> jax.Array:
+    """M of [`ins_error`][hrgjax.calibration.design.ins_error] (2F × P for F flights, [m]
+    per SI unit of each parameter): the end-of-flight position error of each flight's x and
+    y gyros' channels per unit error of each grey-box parameter (classical Schuler response,
+    input-rate units at nominal gain)."""
+    values = jnp.asarray(values, dtype=float)
+    return _ins_sensitivity(values, _flights(flight), int(nodes))
+
+
+@eqx.filter_jit
+def _ins_sensitivity(values, flights, nodes=_NODES):
+    from .ins_impact import EARTH_RADIUS, GRAVITY
+
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    omega_s = math.sqrt(GRAVITY / EARTH_RADIUS)
+
+    def rate(v, theta, t, t_rate):  # input-rate units [rad/s], nominal gain
+        return measured_rate(v, theta, t, 0.0, t_rate) / values[0]
+
+    rows = []
+    for flight in flights:
+        length = float(flight.duration_s)
+        s = (x + 1.0) / 2.0 * length
+        tau = float(flight.warmup_s)
+        temp = jnp.asarray(flight.temperature(s))
+        temp_rate = (flight.temperature_end_c - flight.temperature_start_c) / tau
+        temp_rate = jnp.asarray(temp_rate * np.exp(-s / tau))
+        weights = w / 2.0 * length * EARTH_RADIUS * (1.0 - np.cos(omega_s * (length - s)))
+        for angle in (flight.wave_angle_x_deg, flight.wave_angle_y_deg):
+            theta = jnp.full(nodes, angle * DEG)
+            h = jax.vmap(jax.grad(rate), in_axes=(None, 0, 0, 0))(values, theta, temp, temp_rate)
+            rows.append(jnp.asarray(weights) @ h)  # (P,)
+    return jnp.stack(rows)
+
+
+def _ins_error(plan, values, noise, prior_scale, flights):
+    from .physical import _SCALE
+
+    factor = _precision_factor(plan, values, noise, prior_scale)
+    m = _ins_sensitivity(values, flights)
+    z = _scaled_solve(factor, m * jnp.asarray(_SCALE)[None, :])
+    return jnp.sqrt(jnp.sum(z**2) / len(flights)) / 1000.0
+
+
 def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
-              prior_scale: float = 100.0, gauss_markov=None, angle_white=None):  # fmt: skip
+              prior_scale: float = 100.0, gauss_markov=None, angle_white=None,
+              flight=None):  # fmt: skip
     """The design criterion of `plan` (smaller is better; differentiable with respect to the
     plan's arrays): `drift` — [`drift_error`][hrgjax.calibration.design.drift_error] [°/h];
+    `ins` — [`ins_error`][hrgjax.calibration.design.ins_error] after `flight` (one or a
+    sequence of flights; default `INS_FLIGHTS`) [km];
     `d` — log det of the posterior covariance in units of each parameter's typical
     uncertainty (D-optimal); `a` — its trace (A-optimal). Noise arguments as
     [`information`][hrgjax.calibration.design.information]."""
@@ -815,14 +913,16 @@ def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
         raise ValueError(f"criterion kind must be one of {CRITERIA}; got {kind!r}")
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
     noise = _noise(arw, gauss_markov, angle_white)
-    return _criterion(plan, kind, values, noise, float(prior_scale))
+    return _criterion(plan, kind, values, noise, float(prior_scale), _flights(flight))
 
 
 @eqx.filter_jit
-def _criterion(plan, kind, values, noise, prior_scale):
-    """`criterion`, compiled once per plan length and kind."""
+def _criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS):
+    """`criterion`, compiled once per plan length, kind (and flights, for `ins`)."""
     if kind == "drift":
         return _drift_error(plan, values, noise, prior_scale)
+    if kind == "ins":
+        return _ins_error(plan, values, noise, prior_scale, flights)
     chol, d = factor = _precision_factor(plan, values, noise, prior_scale)
     if kind == "d":  # log det A⁻¹
         return -2.0 * (jnp.sum(jnp.log(jnp.diagonal(chol))) + jnp.sum(jnp.log(d)))
@@ -847,7 +947,7 @@ class Design(eqx.Module):
 
     - `plan`: the designed [`BenchPlan`][hrgjax.calibration.design.BenchPlan], within budget.
     - `bench`: the [`BenchModel`][hrgjax.calibration.design.BenchModel] it was priced with.
-    - `criterion`, `value`: the criterion's name and its value for `plan` (drift: °/h).
+    - `criterion`, `value`: the criterion's name and its value for `plan` (drift: °/h; ins: km).
     - `bench_time_h`: the plan's bench time [h]; `levels`: its number of temperature levels.
     - `search`: `{levels: value}` of every structure tried (None: it cannot fit the
       budget even at its shortest segments); `history`: the loss per step
@@ -956,20 +1056,20 @@ def _whole_seconds(plan: BenchPlan, bench: BenchModel, budget_s: float) -> Bench
     return out
 
 
-def _design_loss(z, values, arw, budget_s, args, criterion):
+def _design_loss(z, values, arw, budget_s, args, criterion, flight):
     plan = _unpack(z, *args)
-    c = _criterion(plan, criterion, values, arw, 100.0)
+    c = _criterion(plan, criterion, values, arw, 100.0, flight)
     c = jnp.log(c) if criterion != "d" else c
     over = jax.nn.relu(args[-1].bench_time_s(plan) / budget_s - 1.0)
     return c + 100.0 * over**2
 
 
 @eqx.filter_jit
-def _design_step(z, state, values, arw, budget_s, args, criterion, learning_rate):
+def _design_step(z, state, values, arw, budget_s, args, criterion, flight, learning_rate):
     """One Adam step of `design` (compiled once per structure, criterion and rate)."""
     import optax
 
-    val, g = jax.value_and_grad(_design_loss)(z, values, arw, budget_s, args, criterion)
+    val, g = jax.value_and_grad(_design_loss)(z, values, arw, budget_s, args, criterion, flight)
     upd, state = optax.adam(learning_rate).update(g, state, z)
     return optax.apply_updates(z, upd), state, val
 
@@ -989,6 +1089,7 @@ def design(
     arw: float | None = None,
     gauss_markov: tuple[float, float] | None = None,
     angle_white: float | None = None,
+    flight: Flight | Sequence[Flight] | None = None,
     key: jax.Array | None = None,
 ) -> Design:
     """The bench plan that, within `budget_h` hours of bench time (transitions included,
@@ -1003,7 +1104,8 @@ def design(
     the number of levels by trying each of `levels` (a small discrete search; a structure
     that cannot fit the budget is skipped, and `ValueError` says so when none fits). The
     `arw`, `gauss_markov`, `angle_white`: the noise the criterion assumes (as
-    [`information`][hrgjax.calibration.design.information]; default the default gyro's). The
+    [`information`][hrgjax.calibration.design.information]; default the default gyro's);
+    `flight`: the `ins` criterion's flight or flights (default `INS_FLIGHTS`). The
     result is brought within the budget by shrinking its durations, then to whole seconds
     (static and rotation durations rounded down, ramps up), so that a bench — and
     [`simulate_plan`][hrgjax.calibration.design.simulate_plan] — can run it as it is.
@@ -1026,6 +1128,7 @@ def design(
     bench = BenchModel() if bench is None else bench
     values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
     arw_v = _noise(arw, gauss_markov, angle_white)
+    flight = _flights(flight)
     budget_s = float(budget_h) * 3600.0
     key = jax.random.key(0) if key is None else key
     per = statics + rotations
@@ -1058,7 +1161,7 @@ def design(
                 state = opt.init(z)
                 for _ in range(steps):
                     z, state, val = _design_step(
-                        z, state, values, arw_v, budget, args, criterion, learning_rate
+                        z, state, values, arw_v, budget, args, criterion, flight, learning_rate
                     )
                     history.append(float(val))
                     progress.update(1)
@@ -1069,7 +1172,7 @@ def design(
                 too_big = err
                 continue
             plan = _whole_seconds(plan, bench, budget_s)  # concrete, checked, runnable
-            value = float(_criterion(plan, criterion, values, arw_v, 100.0))
+            value = float(_criterion(plan, criterion, values, arw_v, 100.0, flight))
             search[n_lev] = value
             progress.set_postfix_str(f"{n_lev} levels: {value:.4g}")
             if best is None or value < best[1]:

@@ -115,6 +115,15 @@ class Flight(eqx.Module):
         ) * np.exp(-np.asarray(t) / self.warmup_s)
 
 
+FLIGHTS = (
+    Flight(heading_deg=40.0, wave_angle_x_deg=30.0, wave_angle_y_deg=-55.0),
+    Flight(heading_deg=130.0, wave_angle_x_deg=-20.0, wave_angle_y_deg=70.0),
+    Flight(heading_deg=250.0, wave_angle_x_deg=80.0, wave_angle_y_deg=5.0),
+)
+"""The 1-h flights of the INS-impact step: IMU warming from −40 °C to +20 °C (20-min time
+constant), three headings and wave-angle pairs."""
+
+
 def fly(gyro: Gyro, flight: Flight, *, key: jax.Array, bias_key: jax.Array) -> MeasuredData:
     """Records of the two level gyros (runs 0 = x, 1 = y) during `flight` (table rate 0)."""
     require_x64("calibration.ins_impact.fly")

@@ -15,7 +15,8 @@ from ._compensator import AbstractCompensator
 from .evaluate import NoCompensation, accuracy_table
 from .experiment import run_plan, seed_plan, test_plan
 from .fourier import FourierCompensator
-from .ins_impact import Flight, ins_impact
+from .ins_impact import FLIGHTS as FLIGHTS
+from .ins_impact import ins_impact
 from .mlp import MLPCompensator
 from .physical import PhysicalCompensator
 from .reduce import RateWindows, reduce
@@ -43,15 +44,6 @@ class Study:
         self.table: dict[str, Any] = table
         self.timings: dict[str, float] = timings
         self.ins = ins
-
-
-FLIGHTS = (
-    Flight(heading_deg=40.0, wave_angle_x_deg=30.0, wave_angle_y_deg=-55.0),
-    Flight(heading_deg=130.0, wave_angle_x_deg=-20.0, wave_angle_y_deg=70.0),
-    Flight(heading_deg=250.0, wave_angle_x_deg=80.0, wave_angle_y_deg=5.0),
-)
-"""The 1-h flights of the INS-impact step: IMU warming from −40 °C to +20 °C (20-min time
-constant), three headings and wave-angle pairs."""
 
 
 def bench_session(
