@@ -39,6 +39,16 @@ POSITIVE_INT = _positive(int, "a whole number")
 POSITIVE_FLOAT = _positive(float, "a number")
 
 
+def NONNEGATIVE_INT(text):  # noqa: N802 (an argparse type, named like the others)
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number ≥ 0; got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number ≥ 0; got {text}")
+    return value
+
+
 def _check_output(option: str, path, extensions=(), inputs=()) -> None:
     """Refuse an output path before any work: wrong extension, a folder, an input file, or a
     place that cannot be written."""
@@ -363,6 +373,7 @@ def cmd_calibrate(args) -> int:
         reduce,
         save_compensator,
     )
+    from .calibration.mlp import MIN_RAMP_RATE, RAMP_WINDOW_S
 
     json_out = args.json or os.path.splitext(args.out)[0] + ".json"
     _check_output("--out", args.out, (".eqx",), [args.data])
@@ -370,8 +381,9 @@ def cmd_calibrate(args) -> int:
     data = _load_data(args.data, args.allow_extra)
     t0 = time.perf_counter()
     say = _say(t0)
+    ramp_window = RAMP_WINDOW_S if args.method == "mlp" and args.st_width else None
     try:
-        windows = reduce(data, k_e=args.k_e, window_s=args.window)
+        windows = reduce(data, k_e=args.k_e, window_s=args.window, ramp_window_s=ramp_window)
     except ValueError as err:
         raise UsageError(f"{args.data}: {_one_line(err)}") from None
     n_static = len(np.unique(windows.run[windows.static]))
@@ -388,8 +400,8 @@ def cmd_calibrate(args) -> int:
                 harmonics=args.harmonics, temperature_degree=degree, k_e=args.k_e
             ).fit(windows)
         elif args.method == "mlp":
-            say(f"training the MLP ({args.mode})")
-            comp = MLPCompensator(k_e=args.k_e).fit(
+            say(f"training the MLP ({args.mode}{', with s_T' if args.st_width else ''})")
+            comp = MLPCompensator(k_e=args.k_e, st_width=args.st_width).fit(
                 windows, key=jax.random.key(args.seed), mode=args.mode, raw=data
             )
         else:
@@ -398,7 +410,7 @@ def cmd_calibrate(args) -> int:
     except ValueError as err:
         raise UsageError(_one_line(err)) from None
     say("fitted")
-    static = windows.select(windows.static)
+    static = windows.select(windows.static & (np.abs(windows.temperature_rate_cps) < MIN_RAMP_RATE))
     resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c)
     print("  in-sample drift residual RMS per temperature [°/h]:")
     for T in np.unique(static.temperature_c):
@@ -725,6 +737,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=-1,
         help="Fourier: polynomial degree in T (-1 = seed's base algorithm at +20 °C)",
     )
+    p.add_argument(
+        "--st-width", type=NONNEGATIVE_INT, default=0,
+        help="MLP: hidden neurons of the readout temperature-sensitivity network s_T(θ, T), "
+        "learnt from ramps (at rest, temperature moving); 0 = none, the seed's MLP",
+    )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="PRNG seed (MLP weights)")
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     p.set_defaults(func=cmd_calibrate)

@@ -52,7 +52,7 @@ def _hyper(comp) -> dict:
             "bin_deg": comp.bin_deg,
             "e2e_steps": comp.e2e_steps,
             "k_e": comp.k_e,
-        }
+        } | ({"st_width": comp.st_width} if comp.st_width else {})
     if isinstance(comp, PhysicalCompensator):
         return {
             "k_e": comp.k_e,
@@ -195,6 +195,16 @@ def to_json_dict(comp) -> dict:
             sf_layers=_mlp_layers(comp.sf_net),
             hyper=_hyper(comp),
         )
+        if comp.st_net is not None:
+            from .mlp import ST_RATE_REF
+
+            base.update(
+                correction="rate = (-(dtheta_dt - s_T(theta, T) * dT_dt) / k_e_nominal "
+                "- drift(theta, T)) / sf(theta, T)",
+                st_formula="s_T = drift_scale * k_e_nominal / st_rate_ref * out_st [rad/degC]",
+                st_rate_ref=ST_RATE_REF,
+                st_layers=_mlp_layers(comp.st_net),
+            )
     elif isinstance(comp, PhysicalCompensator):
         base.update(
             formula="see hrgjax.calibration.physical: ideal-loop averaged HRG with these laws",
@@ -232,7 +242,7 @@ def load_json(path: str | os.PathLike):
         for net, key in (
             (lambda c: c.drift_net, "drift_layers"),
             (lambda c: c.sf_net, "sf_layers"),
-        ):
+        ) + (((lambda c: c.st_net, "st_layers"),) if comp.st_net is not None else ()):
             layers = d[key]
             comp = eqx.tree_at(
                 lambda c, net=net: [

@@ -6,6 +6,14 @@ normalised; the angle enters either as the seed did (`encoding="angle"`: θ fold
 [−90°, 90°) and scaled to [−1, 1)) or, by default, periodically (`encoding="periodic"`:
 cos 2θ, sin 2θ), which makes the 180° period exact and removes the seam at ±90°.
 
+With `st_width > 0` a third network models the readout's temperature sensitivity
+s_T(θ, T) = ∂θ̂/∂T, the apparent rate −s_T Ṫ/k_e that a changing temperature adds (the
+term of [`corrected_rate`][hrgjax.calibration.AbstractCompensator.corrected_rate] that the
+seed's networks, and any bench at constant temperatures, cannot see). It is learnt jointly
+with the drift from the at-rest windows of **ramps** (the table at rest, the temperature
+moving: `reduce(…, ramp_window_s=RAMP_WINDOW_S)`), whose measured rate is
+D(θ, T) − s_T(θ, T) Ṫ/k_e; fitting it needs such data (`fit` says so when there is none).
+
 Training is full-batch resilient backpropagation (`optax.rprop`), run as equal blocks of one
 compiled `lax.scan` with a progress bar between blocks:
 
@@ -29,10 +37,17 @@ from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
 from ._compensator import AbstractCompensator, as_windows, split_targets
-from .reduce import K_E_NOMINAL, WINDOW_S
+from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, reduce
 
 ENCODINGS = ("periodic", "angle")
 MODES = ("reduced", "end_to_end")
+RAMP_WINDOW_S = 300.0
+"""Window of a ramp in `fit` with `st_width > 0` [s] (as the physical fit's)."""
+ST_RATE_REF = 1.0 / 60.0
+"""Temperature rate [°C/s] (1 °C/min) at which the s_T network's unit output moves the
+measured rate by one drift scale: s_T = drift_scale · k_e / ST_RATE_REF · st_net(x)."""
+MIN_RAMP_RATE = 1e-3
+"""Smallest |Ṫ| [°C/s] (0.06 °C/min) of a window that counts as a ramp's."""
 
 
 class MLPCompensator(AbstractCompensator):
@@ -48,7 +63,9 @@ class MLPCompensator(AbstractCompensator):
       `bin_deg` of wave angle (the seed's grid: one target per point); the cell's input is
       the circular mean of its windows' angles.
     - `k_e`: nominal angular gain.
-    - `drift_net`, `sf_net`, and the normalisation (`t_centre`, `t_scale` [°C];
+    - `st_width`: hidden neurons of the readout temperature-sensitivity network s_T(θ, T)
+      (0, the default: none, the seed's MLP; see the module docstring).
+    - `drift_net`, `sf_net`, `st_net`, and the normalisation (`t_centre`, `t_scale` [°C];
       `drift_offset`, `drift_scale` [rad/s]; `sf_offset`, `sf_scale`): set by `fit`.
     """
 
@@ -60,8 +77,10 @@ class MLPCompensator(AbstractCompensator):
     bin_deg: float = eqx.field(static=True, default=5.0)
     e2e_steps: int = eqx.field(static=True, default=200)
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    st_width: int = eqx.field(static=True, default=0)
     drift_net: eqx.nn.MLP | None = None
     sf_net: eqx.nn.MLP | None = None
+    st_net: eqx.nn.MLP | None = None
     t_centre: jax.Array = eqx.field(converter=jnp.asarray, default=20.0)
     t_scale: jax.Array = eqx.field(converter=jnp.asarray, default=50.0)
     drift_offset: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
@@ -74,11 +93,13 @@ class MLPCompensator(AbstractCompensator):
             raise ValueError(f"encoding must be one of {ENCODINGS}; got {self.encoding!r}")
         if self.drift_width < 1 or self.sf_width < 1 or self.steps < 1:
             raise ValueError("drift_width, sf_width and steps must be ≥ 1")
+        if self.st_width < 0:
+            raise ValueError(f"st_width must be ≥ 0 (0: no s_T network); got {self.st_width}")
 
     @property
     def name(self) -> str:
         """Short label used in tables."""
-        return "MLP"
+        return "MLP+Ṫ" if self.st_width else "MLP"
 
     @property
     def in_size(self) -> int:
@@ -109,16 +130,31 @@ class MLPCompensator(AbstractCompensator):
         x = self.features(theta, temperature_c)
         return self.sf_offset + self.sf_scale * self.sf_net(x)
 
+    def readout_temperature_sensitivity(self, theta, temperature_c):
+        """s_T(θ, T) [rad/°C] from the s_T network; zero without one (`st_width = 0`)."""
+        if self.st_net is None:
+            return jnp.zeros_like(theta)
+        x = self.features(theta, temperature_c)
+        return self.drift_scale * self.k_e / ST_RATE_REF * self.st_net(x)
+
     def init(self, key: jax.Array) -> MLPCompensator:
-        """Fresh untrained networks (weights from `key`)."""
-        kd, ks = jax.random.split(key)
+        """Fresh untrained networks (weights from `key`; the s_T network's output layer
+        starts at zero, so s_T = 0 until ramps teach it otherwise)."""
+        kd, ks, kt = jax.random.split(key, 3)
         make = lambda w, k: eqx.nn.MLP(self.in_size, "scalar", w, 1, jnp.tanh, key=k)
-        return eqx.tree_at(
+        comp = eqx.tree_at(
             lambda c: (c.drift_net, c.sf_net),
             self,
             (make(self.drift_width, kd), make(self.sf_width, ks)),
             is_leaf=lambda x: x is None,
         )
+        if not self.st_width:
+            return comp
+        st = make(self.st_width, kt)
+        last = st.layers[-1]
+        st = eqx.tree_at(lambda m: (m.layers[-1].weight, m.layers[-1].bias), st,
+                         (jnp.zeros_like(last.weight), jnp.zeros_like(last.bias)))  # fmt: skip
+        return eqx.tree_at(lambda c: c.st_net, comp, st, is_leaf=lambda x: x is None)
 
     def fit(
         self,
@@ -140,12 +176,24 @@ class MLPCompensator(AbstractCompensator):
         - `mode`: `"reduced"` or `"end_to_end"` (module docstring).
         - `window_s`: rotation-run window of the reduction [s].
 
+        With `st_width > 0` the drift and s_T networks are trained together on every at-rest
+        window, ramps cut into `RAMP_WINDOW_S` windows (windows given as `RateWindows` must
+        come from `reduce(…, ramp_window_s=…)`); `mode="end_to_end"` then refines the drift
+        and scale-factor networks with s_T held.
+
         **Returns:** a new fitted `MLPCompensator`.
+
+        **Raises:** `ValueError` for an unknown mode, data without static or rotation runs,
+        or, with `st_width > 0`, data without ramps.
         """
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
-        windows = as_windows(data, self.k_e, window_s)
+        if self.st_width and isinstance(data, MeasuredData):
+            windows = reduce(data, self.k_e, window_s=window_s, ramp_window_s=RAMP_WINDOW_S)
+        else:
+            windows = as_windows(data, self.k_e, window_s)
         static, moving = split_targets(windows)
+        u = _ramp_rates(static) if self.st_width else None
         comp = self.init(key)
         temps = np.concatenate([static.temperature_c, moving.temperature_c])
         # Host arithmetic (NumPy) between the compiled training programs: eager jnp would
@@ -158,14 +206,19 @@ class MLPCompensator(AbstractCompensator):
         x_s = comp.features(static.wave_angle_deg * DEG, static.temperature_c, np)
         d = (static.rate_dps - static.table_rate_dps) * DEG
         d_off, d_scale = float(np.mean(d)), float(max(np.std(d), 1e-12))
-        net = train_rprop(
-            comp.drift_net,
-            device(x_s),
-            device((d - d_off) / d_scale),
-            self.steps,
-            self.learning_rate,
-            desc="MLP drift",
-        )
+        y = device((d - d_off) / d_scale)
+        if u is None:
+            net = train_rprop(
+                comp.drift_net, device(x_s), y, self.steps, self.learning_rate, desc="MLP drift"
+            )
+        else:  # drift and s_T together: measured = D − s_T Ṫ/k_e (module docstring)
+            params, static_part = eqx.partition((comp.drift_net, comp.st_net), eqx.is_inexact_array)
+            params, _ = rprop_with_progress(
+                _drift_st_loss, params, (static_part, device(x_s), device(u), y), self.steps,
+                self.learning_rate, desc="MLP drift + s_T",
+            )  # fmt: skip
+            net, st_net = eqx.combine(params, static_part)
+            comp = eqx.tree_at(lambda c: c.st_net, comp, st_net)
         comp = eqx.tree_at(
             lambda c: (c.drift_net, c.drift_offset, c.drift_scale),
             comp,
@@ -196,6 +249,30 @@ class MLPCompensator(AbstractCompensator):
                 raise ValueError("mode='end_to_end' needs the raw samples: pass raw=MeasuredData")
             comp = train_end_to_end(comp, samples, window_s or WINDOW_S, self.e2e_steps)
         return comp
+
+
+def _ramp_rates(static: RateWindows) -> np.ndarray:
+    """Ṫ / ST_RATE_REF of each at-rest window, checked: the s_T network needs ramps."""
+    rate = static.temperature_rate_cps
+    if rate is None:
+        raise ValueError(
+            "st_width > 0 needs each window's temperature rate: pass MeasuredData, or windows "
+            "from reduce(data, ramp_window_s=RAMP_WINDOW_S)"
+        )
+    if not np.any(np.abs(rate) >= MIN_RAMP_RATE):
+        raise ValueError(
+            "st_width > 0 learns s_T from ramps (table at rest, temperature moving at ≥ "
+            f"{MIN_RAMP_RATE * 60:g} °C/min); the calibration data have none"
+        )
+    return np.asarray(rate, dtype=float) / ST_RATE_REF
+
+
+def _drift_st_loss(params, data):
+    """Mean squared error of D − s_T·Ṫ/k_e against the at-rest windows (normalised units)."""
+    static, x, u, y = data
+    drift_net, st_net = eqx.combine(params, static)
+    pred = jax.vmap(drift_net)(x) - u * jax.vmap(st_net)(x)
+    return jnp.mean((pred - y) ** 2)
 
 
 def bin_targets(theta, temperature_c, value, bin_deg: float):

@@ -103,6 +103,8 @@ class RateWindows(eqx.Module):
     - `rate_dps`: measured equivalent input rate −(dθ/dt)/k_e,nom.
     - `stderr_dps`: batch-means standard error of `rate_dps`.
     - `k_e`: the nominal angular gain used.
+    - `temperature_rate_cps`: least-squares slope of the temperature over the window [°C/s]
+      (None when the windows were built by hand).
     """
 
     run: np.ndarray
@@ -116,6 +118,7 @@ class RateWindows(eqx.Module):
     rate_dps: np.ndarray
     stderr_dps: np.ndarray
     k_e: float = eqx.field(static=True)
+    temperature_rate_cps: np.ndarray | None = None
 
     @property
     def static(self) -> np.ndarray:
@@ -136,15 +139,22 @@ class RateWindows(eqx.Module):
         return int(np.asarray(self.run).shape[0])
 
 
-def _window_layout(r: MeasuredData, window_s: float | None) -> tuple[int, int]:
-    """(number of windows, samples per window) of one run; a static run is one window and
-    samples past the last whole window are left out of the windows (not of the data)."""
+def _window_layout(
+    r: MeasuredData, window_s: float | None, ramp_window_s: float | None = None
+) -> tuple[int, int]:
+    """(number of windows, samples per window) of one run; a static run is one window (a ramp
+    — at rest, temperature moving — windows of `ramp_window_s` when given) and samples past
+    the last whole window are left out of the windows (not of the data)."""
     t = r["time_s"]
     if len(t) < 4:
         raise ValueError(
             f"run {int(r.run[0])} has {len(t)} samples; reduction needs at least 4 per window"
         )
-    if bool(np.all(r["table_rate_dps"] == 0.0)) or window_s is None:
+    if bool(np.all(r["table_rate_dps"] == 0.0)):
+        if ramp_window_s is None or np.ptp(r["temperature_c"]) == 0.0:
+            return 1, len(t)
+        window_s = ramp_window_s
+    elif window_s is None:
         return 1, len(t)
     n = max(int(round(window_s / float(np.median(np.diff(t))))), 4)
     n_win = len(t) // n
@@ -156,6 +166,7 @@ def reduce(
     k_e: float = K_E_NOMINAL,
     window_s: float | None = WINDOW_S,
     batches: int = 5,
+    ramp_window_s: float | None = None,
 ) -> RateWindows:
     """Reduce bench data to windows (see the module docstring).
 
@@ -167,6 +178,9 @@ def reduce(
     - `window_s`: window length for moving runs [s] (see
       [`WINDOW_S`][hrgjax.calibration.reduce.WINDOW_S]); `None` keeps each run whole.
     - `batches`: batch count for the standard errors (≥ 3).
+    - `ramp_window_s`: window length for ramps — runs at rest whose temperature moves [s]
+      (e.g. `physical.RAMP_WINDOW_S`, 300 s); `None` (default) keeps each ramp one window,
+      as every static run.
 
     **Returns:** [`RateWindows`][hrgjax.calibration.RateWindows].
 
@@ -176,13 +190,14 @@ def reduce(
         raise ValueError(f"k_e must be a positive angular gain; got {k_e}")
     if batches < 3:
         raise ValueError(f"batches must be ≥ 3 for a standard error; got {batches}")
-    if window_s is not None and not window_s > 0:
-        raise ValueError(f"window_s must be a positive number of seconds or None; got {window_s}")
+    for name, value in (("window_s", window_s), ("ramp_window_s", ramp_window_s)):
+        if value is not None and not value > 0:
+            raise ValueError(f"{name} must be a positive number of seconds or None; got {value}")
     cols: dict[str, list] = {k: [] for k in RateWindows.__dataclass_fields__ if k != "k_e"}
     for r in data.runs():
         t, th = r["time_s"], r["wave_angle_deg"]
         temp, rate = r["temperature_c"], r["table_rate_dps"]
-        n_win, n = _window_layout(r, window_s)
+        n_win, n = _window_layout(r, window_s, ramp_window_s)
         nb = min(batches, n // 2)
         if nb < 3:
             raise ValueError(f"run {int(r.run[0])}: windows of {n} samples are too short")
@@ -199,6 +214,8 @@ def reduce(
         cols["wave_angle_deg"].append(ym)
         cols["rate_dps"].append(-slope / k_e)
         cols["stderr_dps"].append(se / k_e)
+        cols["temperature_rate_cps"].append(_slope(np, t[:m].reshape(n_win, n),
+                                                   temp[:m].reshape(n_win, n))[0])  # fmt: skip
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     return RateWindows(**arrays, k_e=float(k_e))
 
