@@ -22,7 +22,9 @@ The first seed of each plan compiles its simulators and the physical fit's group
 segment lengths share padded ones: a designed 12-h plan of 44 lengths ≈ 9 min on 2 cores, the
 seed plan ≈ 1 min); later seeds take seconds.
 Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …]
-[--criterion drift|ins] [--no-mlp] [--no-ins]`.
+[--criterion drift|ins] [--model physical|empirical] [--levels 2 3 4 5] [--no-mlp]
+[--no-ins]`. The predictions printed are the physical grey box's (the `empirical` model's
+criterion is a surrogate's, for designing, not a prediction of an MLP's error).
 """
 
 import argparse
@@ -100,6 +102,10 @@ def main():
     ap.add_argument("--budgets", type=float, nargs="*", default=[12.0])
     ap.add_argument("--criterion", choices=("drift", "ins"), default="drift",
                     help="the criterion the plans are designed for")  # fmt: skip
+    ap.add_argument("--model", choices=d.MODELS, default="physical",
+                    help="the model the plans are designed for")  # fmt: skip
+    ap.add_argument("--levels", type=int, nargs="*", default=[2, 3, 4, 5],
+                    help="numbers of temperature levels the design tries")  # fmt: skip
     ap.add_argument("--no-mlp", action="store_true")
     ap.add_argument("--no-ins", action="store_true", help="skip the warm-up flights")
     a = ap.parse_args()
@@ -111,10 +117,11 @@ def main():
     plans = [("seed", d.seed_bench_plan())]
     for budget in a.budgets:
         t0 = time.perf_counter()
-        result = d.design(budget, criterion=a.criterion)
-        print(f"designed {budget:g} h ({a.criterion}) in {time.perf_counter() - t0:.0f} s: {result.levels} "
+        result = d.design(budget, criterion=a.criterion, model=a.model, levels=a.levels)
+        print(f"designed {budget:g} h ({a.criterion}, {a.model}) in {time.perf_counter() - t0:.0f} s: {result.levels} "
               f"levels, {result.plan.size} segments", flush=True)  # fmt: skip
-        plans.append((f"designed {budget:g} h, {a.criterion}", result.plan))
+        tag = a.criterion if a.model == "physical" else f"{a.criterion}/{a.model[:3]}"
+        plans.append((f"designed {budget:g} h, {tag}", result.plan))
     rows = []
     for name, plan in plans:
         pred = {"drift": float(d.drift_error(plan, temperatures_c=grid_t, angles_deg=grid_a))}

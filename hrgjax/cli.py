@@ -214,17 +214,19 @@ def cmd_design(args) -> int:
     _check_output("--out", args.out, (".json",))
     _check_output("--plot", args.plot, (".png", ".pdf", ".svg"))
     print(
-        f"hrgjax design: {args.budget_h:g} h of bench time, criterion {args.criterion}, "
-        f"levels {','.join(map(str, args.levels))}"
+        f"hrgjax design: {args.budget_h:g} h of bench time, criterion {args.criterion} "
+        f"({args.model} model), levels {','.join(map(str, args.levels))}"
     )
     t0 = time.perf_counter()
     result = d.design(
         args.budget_h, criterion=args.criterion, levels=args.levels, statics=args.statics,
-        rotations=args.rotations, ramps=not args.no_ramps, steps=args.steps,
+        rotations=args.rotations, ramps=not args.no_ramps, steps=args.steps, model=args.model,
         key=jax.random.key(args.seed),
     )  # fmt: skip
     took = time.perf_counter() - t0
     unit = {"drift": " °/h", "ins": " km"}.get(args.criterion, "")
+    if args.model != "physical":
+        unit += f" ({args.model} surrogate)"
     hours = result.bench.breakdown_h(result.plan)
     print(f"  searched {len(result.search)} structures in {took:.1f} s:")
     for n, v in result.search.items():
@@ -238,10 +240,11 @@ def cmd_design(args) -> int:
         f"{hours['measuring']:.2f} h, slew {hours['slew']:.2f} h, soak {hours['settle']:.2f} h, "
         f"re-positioning {hours['reposition']:.2f} h)"
     )
-    print("  predicted (ARW, readout and Gauss–Markov noise, ideal-loop grey box; docs/design.md):")
+    what = "ideal-loop grey box" if args.model == "physical" else f"{args.model} surrogate"
+    print(f"  predicted (ARW, readout and Gauss–Markov noise, {what}; docs/design.md):")
     for name, plan in (("designed", result.plan), ("seed quick", d.seed_bench_plan(True)),
                        ("seed", d.seed_bench_plan())):  # fmt: skip
-        value = float(d.criterion(plan, args.criterion))
+        value = float(d.criterion(plan, args.criterion, model=args.model))
         print(f"    {name:10s} {float(d.bench_time_h(plan, result.bench)):6.2f} h  "
               f"{args.criterion} {value:.4g}{unit}")  # fmt: skip
     path = d.save_plan(result.plan, args.out, result.bench)
@@ -866,6 +869,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no measuring ramps between levels (slew and soak instead)")  # fmt: skip
     p.add_argument("--steps", type=POSITIVE_INT, default=300,
                    help="Adam steps per structure")  # fmt: skip
+    p.add_argument(
+        "--model", default="physical", choices=("physical", "empirical"),
+        help="what the calibration will fit: physical (the grey box) or empirical (an MLP or "
+        "a Fourier fit: the plan must visit what the gyro will meet)",
+    )  # fmt: skip
     p.add_argument("--out", default="out/plan.json", help="plan file to write (JSON)")
     p.add_argument("--plot", default=None, help="figure of the plan's time line (.png)")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed (start angles)")

@@ -51,7 +51,7 @@ from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
-from ..units import DEG, DEG_PER_H, DEG_PER_S
+from ..units import DEG, DEG_PER_H, DEG_PER_S, K_E_NOMINAL
 from .experiment import CHUNK, SEED_ANGLES, SEED_TEMPERATURES, _simulate_chunk
 from .ins_impact import FLIGHTS, Flight
 
@@ -655,6 +655,127 @@ def measured_rate(values, theta, temperature_c, rate, temperature_rate):
     return slope * theta_dot + d_temp * temperature_rate
 
 
+# --- What the calibration fits: the physical grey box, or a surrogate of an empirical model ---
+
+
+class GreyBox(eqx.Module):
+    """The physical grey box as the design sees it: parameters
+    [`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] (SI), the measured rate
+    [`measured_rate`][hrgjax.calibration.design.measured_rate], k_e = `values[0]`, each
+    parameter's typical uncertainty `physical.PARAMETERS`' scale."""
+
+    name: str = eqx.field(static=True, default="physical")
+
+    def rate(self, values, theta, temperature_c, rate, temperature_rate):
+        """Rate of the measured pattern angle [rad/s] (`measured_rate`)."""
+        return measured_rate(values, theta, temperature_c, rate, temperature_rate)
+
+    def gain(self, values):
+        """k_e of `values` (the pattern turns at −k_e Ω)."""
+        return values[0]
+
+    def scale(self) -> jax.Array:
+        """Typical uncertainty of each parameter (SI): the prior is `prior_scale` × this."""
+        from .physical import _SCALE
+
+        return jnp.asarray(_SCALE)
+
+    def nominal(self) -> jax.Array:
+        """The linearisation point: `nominal_values()`."""
+        return nominal_values()
+
+
+class Empirical(eqx.Module):
+    r"""A linear surrogate of an *empirical* compensator (an MLP, a Fourier fit): what it
+    must learn from the bench, with no physics to carry it between points. The drift
+    D(θ, T) [rad/s], the scale factor's departure SF − 1 and the readout's temperature
+    sensitivity s_T(θ, T) [rad/°C] are each a sum of the products of
+    $1, \cos 2n	heta, \sin 2n	heta$ (n ≤ `harmonics`) and Legendre polynomials of
+    (T − 10 °C)/50 °C up to `degree`, and the measured pattern rate is
+    $-k_e(\mathrm{SF}\,\Omega + D) + s_T\dot T$ (k_e = `k_e`). Its coefficients have a
+    Gaussian prior of magnitude `drift_dph` [°/h], `scale_factor` and `st_rad_per_c`
+    [rad/°C] — the size of the default gyro's laws —, which is what keeps points the plan
+    does not visit uncertain: a design for this model must cover the temperatures and
+    angles the gyro will meet, and ramp at the angles where s_T shows. (`scale()` is 1/100
+    of these magnitudes, so that the criteria's default `prior_scale = 100` puts the prior
+    at them.) Linear: the linearisation point does not matter (`nominal()` is zero)."""
+
+    harmonics: int = eqx.field(static=True, default=2)
+    degree: int = eqx.field(static=True, default=5)
+    drift_dph: float = eqx.field(static=True, default=0.5)
+    scale_factor: float = eqx.field(static=True, default=0.01)
+    st_rad_per_c: float = eqx.field(static=True, default=1e-4)
+    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    name: str = eqx.field(static=True, default="empirical")
+
+    def __check_init__(self):
+        if self.harmonics < 0 or self.degree < 0:
+            raise ValueError(
+                f"Empirical: harmonics and degree must be ≥ 0; got {self.harmonics}, {self.degree}"
+            )
+
+    @property
+    def terms(self) -> int:
+        """Basis functions per law: (1 + 2 harmonics) × (degree + 1)."""
+        return (1 + 2 * self.harmonics) * (self.degree + 1)
+
+    def basis(self, theta, temperature_c):
+        """The `terms` basis functions at one (θ [rad], T [°C])."""
+        angle = [jnp.ones_like(theta)]
+        for n in range(1, self.harmonics + 1):
+            angle += [jnp.cos(2 * n * theta), jnp.sin(2 * n * theta)]
+        x = (temperature_c - 10.0) / 50.0
+        legendre = [jnp.ones_like(x), x]
+        for k in range(1, self.degree):  # Bonnet: (k+1)P_{k+1} = (2k+1)x P_k − k P_{k−1}
+            legendre.append(((2 * k + 1) * x * legendre[k] - k * legendre[k - 1]) / (k + 1))
+        return jnp.stack([a * p for a in angle for p in legendre[: self.degree + 1]])
+
+    def rate(self, values, theta, temperature_c, rate, temperature_rate):
+        """Rate of the measured pattern angle [rad/s]: −k_e(SF Ω + D) + s_T Ṫ."""
+        b = self.basis(theta, temperature_c)
+        n = self.terms
+        drift, sf, s_t = b @ values[:n], 1.0 + b @ values[n : 2 * n], b @ values[2 * n :]
+        return -self.k_e * (sf * rate + drift) + s_t * temperature_rate
+
+    def gain(self, values):
+        """The nominal k_e (the surrogate does not fit it)."""
+        return self.k_e
+
+    def scale(self) -> jax.Array:
+        """1/100 of each coefficient's prior magnitude: drift [rad/s], SF − 1, s_T [rad/°C]."""
+        n = self.terms
+        mags = (self.drift_dph * DEG_PER_H, self.scale_factor, self.st_rad_per_c)
+        return jnp.concatenate([jnp.full(n, m / 100.0) for m in mags])
+
+    def nominal(self) -> jax.Array:
+        """Zeros (a linear model)."""
+        return jnp.zeros(3 * self.terms)
+
+
+GREY_BOX = GreyBox()
+"""The physical grey box (the default model of every criterion)."""
+
+MODELS = ("physical", "empirical")
+"""What the calibration fits, by name: `physical` ([`GreyBox`][hrgjax.calibration.design.GreyBox])
+or `empirical` ([`Empirical`][hrgjax.calibration.design.Empirical]`()`); an `Empirical(...)`
+instance may be passed as well."""
+
+
+def _model(model):
+    """`model` (None, a name of `MODELS`, or a GreyBox / Empirical) as a model object."""
+    if model is None or model == "physical":
+        return GREY_BOX
+    if model == "empirical":
+        return Empirical()
+    if isinstance(model, (GreyBox, Empirical)):
+        return model
+    raise ValueError(f"model must be one of {MODELS} or an Empirical(...); got {model!r}")
+
+
+def _values(values, model):
+    return model.nominal() if values is None else jnp.asarray(values, dtype=float)
+
+
 _NODES = 64
 
 
@@ -674,7 +795,8 @@ def _segment_windows(dt, t0, t1, rate_dps, duration):
     return samples, dt, length
 
 
-def _segment_information(values, noise, dt, t0, t1, angle_deg, rate_dps, duration, nodes):
+def _segment_information(values, noise, dt, t0, t1, angle_deg, rate_dps, duration, nodes,
+                         model=GREY_BOX):  # fmt: skip
     """Fisher information (P, P) of one segment about `values`: the measured pattern rate
     observed through the physical fit's window slopes, i.e. ∫ g gᵀ dt / N_w² with
     g = ∂(measured rate)/∂values along the segment's path (θ turning at −k_e Ω, T linear),
@@ -688,8 +810,8 @@ def _segment_information(values, noise, dt, t0, t1, angle_deg, rate_dps, duratio
     temp_rate = (t1 - t0) / duration
     temps = t0 + temp_rate * t
     omega = rate_dps * DEG_PER_S
-    thetas = angle_deg * DEG - values[0] * omega * t
-    jac = jax.vmap(lambda th, T: jax.jacfwd(measured_rate)(values, th, T, omega, temp_rate))(
+    thetas = angle_deg * DEG - model.gain(values) * omega * t
+    jac = jax.vmap(lambda th, T: jax.jacfwd(model.rate)(values, th, T, omega, temp_rate))(
         thetas, temps
     )  # (nodes, P)
     density = window_density(arw, angle_white, *_segment_windows(dt, t0, t1, rate_dps,
@@ -701,10 +823,11 @@ def _segment_information(values, noise, dt, t0, t1, angle_deg, rate_dps, duratio
 
 def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: int = _NODES,
                 gauss_markov: tuple[float, float] | None = None,
-                angle_white: float | None = None):  # fmt: skip
+                angle_white: float | None = None, model=None):  # fmt: skip
     """Fisher information matrix (P × P, P = 12) of `plan` about the physical grey box's
-    parameters ([`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] order, SI),
-    linearised at `values` (default `nominal_values()`), for white rate noise of density
+    parameters ([`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] order, SI)
+    — or, with `model` (`MODELS`), about that model's — linearised at `values` (default
+    the model's `nominal()`: `nominal_values()`), for white rate noise of density
     `arw` on the measured pattern angle [rad/√s] (default `pattern_arw()`) and a
     Gauss–Markov rate `gauss_markov` = (σ [rad/s], τ [s]) on it (default
     `pattern_gauss_markov()`; `(0.0, 1.0)` for white noise only) and white readout noise
@@ -724,30 +847,29 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
     constant of the session: the fitted bias absorbs it). Differentiable with respect to the
     plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
     require_x64("hrgjax.calibration.design.information")
-    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
-    return _information(plan, values, _noise(arw, gauss_markov, angle_white), nodes)
+    model = _model(model)
+    values = _values(values, model)
+    return _information(plan, values, _noise(arw, gauss_markov, angle_white), nodes, model)
 
 
 @eqx.filter_jit
-def _information(plan, values, noise, nodes):
-    """`information`, compiled once per plan length and kinds."""
+def _information(plan, values, noise, nodes, model=GREY_BOX):
+    """`information`, compiled once per plan length, kinds and model."""
     dt = jnp.asarray([DT_OUT[k] for k in plan.kind], dtype=float)  # each kind's sampling
     seg = jax.vmap(
-        lambda *a: _segment_information(values, noise, *a, nodes)
+        lambda *a: _segment_information(values, noise, *a, nodes, model)
     )(dt, plan.temperature_c, plan.temperature_end_c, plan.wave_angle_deg, plan.rate_dps,
       plan.duration_s)  # fmt: skip
     return jnp.sum(seg, axis=0)
 
 
-def _precision_factor(plan, values, noise, prior_scale):
+def _precision_factor(plan, values, noise, prior_scale, model=GREY_BOX):
     """Cholesky factor of the posterior precision in units of each parameter's typical
     uncertainty, equilibrated to unit diagonal: `(L, d)` with A = diag(d) L Lᵀ diag(d)
     (forming (F + Λ)⁻¹ explicitly loses ~cond·ε; triangular solves keep the criteria and
     their gradients accurate)."""
-    from .physical import _SCALE
-
-    scale = jnp.asarray(_SCALE)
-    a = _information(plan, values, noise, _NODES) * scale[:, None] * scale[None, :]
+    scale = model.scale()
+    a = _information(plan, values, noise, _NODES, model) * scale[:, None] * scale[None, :]
     a = a + jnp.eye(a.shape[0]) / prior_scale**2
     d = jnp.sqrt(jnp.diagonal(a))
     return jnp.linalg.cholesky(a / d[:, None] / d[None, :]), d
@@ -762,47 +884,46 @@ def _scaled_solve(factor, h):
 
 
 def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
-                         gauss_markov=None, angle_white=None):  # fmt: skip
+                         gauss_markov=None, angle_white=None, model=None):  # fmt: skip
     """Linearised posterior covariance of the grey box's parameters after `plan` (P × P,
     SI): (F + Λ)⁻¹ with F = [`information`][hrgjax.calibration.design.information] and a
     weak Gaussian prior Λ of σ = `prior_scale` × each parameter's typical uncertainty
-    (`physical.PARAMETERS`), which keeps directions a plan does not see finite."""
-    from .physical import _SCALE
-
-    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    (`physical.PARAMETERS`; `model` as [`information`][hrgjax.calibration.design.information],
+    its `scale()`), which keeps directions a plan does not see finite."""
+    model = _model(model)
+    values = _values(values, model)
     factor = _precision_factor(plan, values, _noise(arw, gauss_markov, angle_white),
-                               prior_scale)  # fmt: skip
-    w = _scaled_solve(factor, jnp.eye(len(_SCALE)))  # rows: L⁻¹ D⁻¹ e_i
-    scale = jnp.asarray(_SCALE)
+                               prior_scale, model)  # fmt: skip
+    scale = model.scale()
+    w = _scaled_solve(factor, jnp.eye(scale.shape[0]))  # rows: L⁻¹ D⁻¹ e_i
     return (w @ w.T) * scale[:, None] * scale[None, :]
 
 
 def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
                 temperatures_c=OPERATING_TEMPERATURES, angles_deg=OPERATING_ANGLES,
-                gauss_markov=None, angle_white=None):  # fmt: skip
+                gauss_markov=None, angle_white=None, model=None):  # fmt: skip
     """Predicted standard deviation of the compensated static drift [°/h of input rate],
     RMS over the operating grid (`temperatures_c` × `angles_deg`): √(mean hᵀ C h) with
-    h = ∂(static drift)/∂values and C the posterior covariance (noise arguments as
-    [`information`][hrgjax.calibration.design.information])."""
-    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    h = ∂(static drift)/∂values and C the posterior covariance (noise arguments and `model`
+    as [`information`][hrgjax.calibration.design.information])."""
+    model = _model(model)
+    values = _values(values, model)
     return _drift_error(plan, values, _noise(arw, gauss_markov, angle_white), prior_scale,
-                        temperatures_c, angles_deg)  # fmt: skip
+                        temperatures_c, angles_deg, model)  # fmt: skip
 
 
 def _drift_error(plan, values, noise, prior_scale, temperatures_c=OPERATING_TEMPERATURES,
-                 angles_deg=OPERATING_ANGLES):  # fmt: skip
-    from .physical import _SCALE
-
-    factor = _precision_factor(plan, values, noise, prior_scale)
+                 angles_deg=OPERATING_ANGLES, model=GREY_BOX):  # fmt: skip
+    factor = _precision_factor(plan, values, noise, prior_scale, model)
     tt, aa = np.meshgrid(np.asarray(temperatures_c, float), np.asarray(angles_deg, float))
 
     def drift(v, theta, temp):  # input-rate units [rad/s], nominal gain
-        return measured_rate(v, theta, temp, 0.0, 0.0) / values[0]
+        return model.rate(v, theta, temp, 0.0, 0.0) / model.gain(values)
 
     h = jax.vmap(lambda th, T: jax.grad(drift)(values, th, T))(
         jnp.asarray(aa.ravel() * DEG), jnp.asarray(tt.ravel())
     )
-    z = _scaled_solve(factor, h * jnp.asarray(_SCALE)[None, :])
+    z = _scaled_solve(factor, h * model.scale()[None, :])
     return jnp.sqrt(jnp.mean(jnp.sum(z**2, axis=-1))) / DEG_PER_H
 
 
@@ -831,7 +952,7 @@ def _flights(flight) -> tuple[Flight, ...]:
 
 
 def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
-              flight=None, gauss_markov=None, angle_white=None):  # fmt: skip
+              flight=None, gauss_markov=None, angle_white=None, model=None):  # fmt: skip
     r"""Predicted horizontal position error [km] at the end of `flight` (a
     [`Flight`][hrgjax.calibration.ins_impact.Flight] or a sequence of them: RMS over the
     flights; default `INS_FLIGHTS`, the three 1-h warm-up flights) from the physical
@@ -843,36 +964,39 @@ def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0
     error is δp = M δv with M = R ∫ (1 − cos ω_s(T − s)) h(s)ᵀ ds per gyro, and its expected
     squared length is tr(M C Mᵀ), C the posterior covariance (heading drops out: the two
     gyros' errors rotate into north and east together). Gauss–Legendre quadrature over the
-    flight; noise arguments as [`information`][hrgjax.calibration.design.information].
+    flight; noise arguments and `model` as
+    [`information`][hrgjax.calibration.design.information].
 
     What it leaves out, by design (none of it depends on the plan): the flight's own noise
     (ARW, Gauss–Markov rate), the Earth-rate coupling of the full strapdown model
     ([`ins_impact`][hrgjax.calibration.ins_impact.ins_impact] keeps both), and model error
     outside the grey box's family."""
     require_x64("hrgjax.calibration.design.ins_error")
-    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    model = _model(model)
+    values = _values(values, model)
     return _ins_error(plan, values, _noise(arw, gauss_markov, angle_white), float(prior_scale),
-                      _flights(flight))  # fmt: skip
+                      _flights(flight), model)  # fmt: skip
 
 
-def ins_sensitivity(values, flight=None, nodes: int = _NODES) -> jax.Array:
+def ins_sensitivity(values=None, flight=None, nodes: int = _NODES, model=None) -> jax.Array:
     """M of [`ins_error`][hrgjax.calibration.design.ins_error] (2F × P for F flights, [m]
     per SI unit of each parameter): the end-of-flight position error of each flight's x and
     y gyros' channels per unit error of each grey-box parameter (classical Schuler response,
-    input-rate units at nominal gain)."""
-    values = jnp.asarray(values, dtype=float)
-    return _ins_sensitivity(values, _flights(flight), int(nodes))
+    input-rate units at nominal gain; `model` as
+    [`information`][hrgjax.calibration.design.information])."""
+    model = _model(model)
+    return _ins_sensitivity(_values(values, model), _flights(flight), int(nodes), model)
 
 
 @eqx.filter_jit
-def _ins_sensitivity(values, flights, nodes=_NODES):
+def _ins_sensitivity(values, flights, nodes=_NODES, model=GREY_BOX):
     from .ins_impact import EARTH_RADIUS, GRAVITY
 
     x, w = np.polynomial.legendre.leggauss(nodes)
     omega_s = math.sqrt(GRAVITY / EARTH_RADIUS)
 
     def rate(v, theta, t, t_rate):  # input-rate units [rad/s], nominal gain
-        return measured_rate(v, theta, t, 0.0, t_rate) / values[0]
+        return model.rate(v, theta, t, 0.0, t_rate) / model.gain(values)
 
     rows = []
     for flight in flights:
@@ -890,40 +1014,39 @@ def _ins_sensitivity(values, flights, nodes=_NODES):
     return jnp.stack(rows)
 
 
-def _ins_error(plan, values, noise, prior_scale, flights):
-    from .physical import _SCALE
-
-    factor = _precision_factor(plan, values, noise, prior_scale)
-    m = _ins_sensitivity(values, flights)
-    z = _scaled_solve(factor, m * jnp.asarray(_SCALE)[None, :])
+def _ins_error(plan, values, noise, prior_scale, flights, model=GREY_BOX):
+    factor = _precision_factor(plan, values, noise, prior_scale, model)
+    m = _ins_sensitivity(values, flights, _NODES, model)
+    z = _scaled_solve(factor, m * model.scale()[None, :])
     return jnp.sqrt(jnp.sum(z**2) / len(flights)) / 1000.0
 
 
 def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
               prior_scale: float = 100.0, gauss_markov=None, angle_white=None,
-              flight=None):  # fmt: skip
+              flight=None, model=None):  # fmt: skip
     """The design criterion of `plan` (smaller is better; differentiable with respect to the
     plan's arrays): `drift` — [`drift_error`][hrgjax.calibration.design.drift_error] [°/h];
     `ins` — [`ins_error`][hrgjax.calibration.design.ins_error] after `flight` (one or a
     sequence of flights; default `INS_FLIGHTS`) [km];
     `d` — log det of the posterior covariance in units of each parameter's typical
-    uncertainty (D-optimal); `a` — its trace (A-optimal). Noise arguments as
-    [`information`][hrgjax.calibration.design.information]."""
+    uncertainty (D-optimal); `a` — its trace (A-optimal). Noise arguments and `model` (what
+    the calibration fits: `MODELS`) as [`information`][hrgjax.calibration.design.information]."""
     if kind not in CRITERIA:
         raise ValueError(f"criterion kind must be one of {CRITERIA}; got {kind!r}")
-    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    model = _model(model)
+    values = _values(values, model)
     noise = _noise(arw, gauss_markov, angle_white)
-    return _criterion(plan, kind, values, noise, float(prior_scale), _flights(flight))
+    return _criterion(plan, kind, values, noise, float(prior_scale), _flights(flight), model)
 
 
 @eqx.filter_jit
-def _criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS):
-    """`criterion`, compiled once per plan length, kind (and flights, for `ins`)."""
+def _criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS, model=GREY_BOX):
+    """`criterion`, compiled once per plan length, kind, model (and flights, for `ins`)."""
     if kind == "drift":
-        return _drift_error(plan, values, noise, prior_scale)
+        return _drift_error(plan, values, noise, prior_scale, model=model)
     if kind == "ins":
-        return _ins_error(plan, values, noise, prior_scale, flights)
-    chol, d = factor = _precision_factor(plan, values, noise, prior_scale)
+        return _ins_error(plan, values, noise, prior_scale, flights, model)
+    chol, d = factor = _precision_factor(plan, values, noise, prior_scale, model)
     if kind == "d":  # log det A⁻¹
         return -2.0 * (jnp.sum(jnp.log(jnp.diagonal(chol))) + jnp.sum(jnp.log(d)))
     w = _scaled_solve(factor, jnp.eye(d.shape[0]))
@@ -952,6 +1075,7 @@ class Design(eqx.Module):
     - `search`: `{levels: value}` of every structure tried (None: it cannot fit the
       budget even at its shortest segments); `history`: the loss per step
       of the chosen structure.
+    - `model`: the name of the model the criterion was computed for (`MODELS`).
     """
 
     plan: BenchPlan
@@ -962,6 +1086,7 @@ class Design(eqx.Module):
     levels: int = eqx.field(static=True)
     search: dict = eqx.field(static=True)
     history: tuple = eqx.field(static=True)
+    model: str = eqx.field(static=True, default="physical")
 
 
 def _structure(levels: int, statics: int, rotations: int, ramps: bool) -> tuple[str, ...]:
@@ -1056,20 +1181,23 @@ def _whole_seconds(plan: BenchPlan, bench: BenchModel, budget_s: float) -> Bench
     return out
 
 
-def _design_loss(z, values, arw, budget_s, args, criterion, flight):
+def _design_loss(z, values, arw, budget_s, args, criterion, flight, model):
     plan = _unpack(z, *args)
-    c = _criterion(plan, criterion, values, arw, 100.0, flight)
+    c = _criterion(plan, criterion, values, arw, 100.0, flight, model)
     c = jnp.log(c) if criterion != "d" else c
     over = jax.nn.relu(args[-1].bench_time_s(plan) / budget_s - 1.0)
     return c + 100.0 * over**2
 
 
 @eqx.filter_jit
-def _design_step(z, state, values, arw, budget_s, args, criterion, flight, learning_rate):
-    """One Adam step of `design` (compiled once per structure, criterion and rate)."""
+def _design_step(z, state, values, arw, budget_s, args, criterion, flight, model,
+                 learning_rate):  # fmt: skip
+    """One Adam step of `design` (compiled once per structure, criterion, model and rate)."""
     import optax
 
-    val, g = jax.value_and_grad(_design_loss)(z, values, arw, budget_s, args, criterion, flight)
+    val, g = jax.value_and_grad(_design_loss)(
+        z, values, arw, budget_s, args, criterion, flight, model
+    )
     upd, state = optax.adam(learning_rate).update(g, state, z)
     return optax.apply_updates(z, upd), state, val
 
@@ -1090,6 +1218,7 @@ def design(
     gauss_markov: tuple[float, float] | None = None,
     angle_white: float | None = None,
     flight: Flight | Sequence[Flight] | None = None,
+    model: str | Empirical | None = None,
     key: jax.Array | None = None,
 ) -> Design:
     """The bench plan that, within `budget_h` hours of bench time (transitions included,
@@ -1105,7 +1234,9 @@ def design(
     that cannot fit the budget is skipped, and `ValueError` says so when none fits). The
     `arw`, `gauss_markov`, `angle_white`: the noise the criterion assumes (as
     [`information`][hrgjax.calibration.design.information]; default the default gyro's);
-    `flight`: the `ins` criterion's flight or flights (default `INS_FLIGHTS`). The
+    `flight`: the `ins` criterion's flight or flights (default `INS_FLIGHTS`); `model`: what
+    the calibration will fit (`MODELS`: `physical`, the default, or `empirical` — a plan for
+    an MLP or a Fourier fit, which have no physics to carry them between points). The
     result is brought within the budget by shrinking its durations, then to whole seconds
     (static and rotation durations rounded down, ramps up), so that a bench — and
     [`simulate_plan`][hrgjax.calibration.design.simulate_plan] — can run it as it is.
@@ -1126,7 +1257,8 @@ def design(
     if statics < 1 or rotations < 0:
         raise ValueError("statics must be ≥ 1 and rotations ≥ 0 per level")
     bench = BenchModel() if bench is None else bench
-    values = nominal_values() if values is None else jnp.asarray(values, dtype=float)
+    model = _model(model)
+    values = _values(values, model)
     arw_v = _noise(arw, gauss_markov, angle_white)
     flight = _flights(flight)
     budget_s = float(budget_h) * 3600.0
@@ -1160,9 +1292,8 @@ def design(
             with jax.numpy_dtype_promotion("standard"):
                 state = opt.init(z)
                 for _ in range(steps):
-                    z, state, val = _design_step(
-                        z, state, values, arw_v, budget, args, criterion, flight, learning_rate
-                    )
+                    z, state, val = _design_step(z, state, values, arw_v, budget, args,
+                                                 criterion, flight, model, learning_rate)  # fmt: skip
                     history.append(float(val))
                     progress.update(1)
             try:
@@ -1172,7 +1303,7 @@ def design(
                 too_big = err
                 continue
             plan = _whole_seconds(plan, bench, budget_s)  # concrete, checked, runnable
-            value = float(_criterion(plan, criterion, values, arw_v, 100.0, flight))
+            value = float(_criterion(plan, criterion, values, arw_v, 100.0, flight, model))
             search[n_lev] = value
             progress.set_postfix_str(f"{n_lev} levels: {value:.4g}")
             if best is None or value < best[1]:
@@ -1189,4 +1320,5 @@ def design(
         levels=n_lev,
         search=search,
         history=history,
+        model=model.name,
     )
