@@ -22,7 +22,7 @@ The first seed of each plan compiles its simulators and the physical fit's group
 segment lengths share padded ones: a designed 12-h plan of 44 lengths ≈ 9 min on 2 cores, the
 seed plan ≈ 1 min); later seeds take seconds.
 Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …]
-[--criterion drift|ins] [--model physical|empirical] [--levels 2 3 4 5] [--no-mlp]
+[--criterion drift|ins] [--model physical|empirical] [--levels 4 5 6 7] [--no-mlp]
 [--no-ins]`. The predictions printed are the physical grey box's (the `empirical` model's
 criterion is a surrogate's, for designing, not a prediction of an MLP's error).
 """
@@ -104,8 +104,8 @@ def main():
                     help="the criterion the plans are designed for")  # fmt: skip
     ap.add_argument("--model", choices=d.MODELS, default="physical",
                     help="the model the plans are designed for")  # fmt: skip
-    ap.add_argument("--levels", type=int, nargs="*", default=[2, 3, 4, 5],
-                    help="numbers of temperature levels the design tries")  # fmt: skip
+    ap.add_argument("--levels", type=int, nargs="*", default=None,
+                    help="numbers of temperature levels the design tries (default: per model)")  # fmt: skip
     ap.add_argument("--no-mlp", action="store_true")
     ap.add_argument("--no-ins", action="store_true", help="skip the warm-up flights")
     a = ap.parse_args()

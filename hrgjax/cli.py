@@ -213,13 +213,14 @@ def cmd_design(args) -> int:
 
     _check_output("--out", args.out, (".json",))
     _check_output("--plot", args.plot, (".png", ".pdf", ".svg"))
+    levels = d.DEFAULT_LEVELS[args.model] if args.levels is None else args.levels
     print(
         f"hrgjax design: {args.budget_h:g} h of bench time, criterion {args.criterion} "
-        f"({args.model} model), levels {','.join(map(str, args.levels))}"
+        f"({args.model} model), levels {','.join(map(str, levels))}"
     )
     t0 = time.perf_counter()
     result = d.design(
-        args.budget_h, criterion=args.criterion, levels=args.levels, statics=args.statics,
+        args.budget_h, criterion=args.criterion, levels=levels, statics=args.statics,
         rotations=args.rotations, ramps=not args.no_ramps, steps=args.steps, model=args.model,
         key=jax.random.key(args.seed),
     )  # fmt: skip
@@ -858,8 +859,9 @@ def build_parser() -> argparse.ArgumentParser:
         "covariance)",
     )  # fmt: skip
     p.add_argument(
-        "--levels", type=_levels, default=(2, 3, 4, 5),
-        help="numbers of temperature levels to try, comma-separated",
+        "--levels", type=_levels, default=None,
+        help="numbers of temperature levels to try, comma-separated (default 2,3,4,5; "
+        "4,5,6,7 with --model empirical)",
     )  # fmt: skip
     p.add_argument("--statics", type=POSITIVE_INT, default=6,
                    help="static segments per temperature level")  # fmt: skip

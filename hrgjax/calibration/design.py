@@ -1057,6 +1057,9 @@ def _criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS, mode
 
 CHAMBER_RANGE_C = (-40.0, 60.0)
 """Temperatures a designed plan may use [°C] (the seed's operating range)."""
+DEFAULT_LEVELS = {"physical": (2, 3, 4, 5), "empirical": (4, 5, 6, 7)}
+"""Numbers of temperature levels `design` tries by default, per model."""
+
 MIN_STATIC_S = 60.0
 """Shortest static segment a design makes [s] (one drift window)."""
 MIN_ROTATION_S = 72.0
@@ -1206,7 +1209,7 @@ def design(
     budget_h: float,
     *,
     criterion: str = "drift",
-    levels: Sequence[int] = (2, 3, 4, 5),
+    levels: Sequence[int] | None = None,
     statics: int = 6,
     rotations: int = 2,
     ramps: bool = True,
@@ -1230,7 +1233,9 @@ def design(
     quantities — the level temperatures (within `CHAMBER_RANGE_C`), every wave angle and
     duration, how much slower than the chamber each ramp runs — are optimised by Adam
     (`steps`, `learning_rate`) on log(criterion) plus a quadratic penalty above the budget;
-    the number of levels by trying each of `levels` (a small discrete search; a structure
+    the number of levels by trying each of `levels` (default `DEFAULT_LEVELS[model]`: 2–5
+    levels for the grey box, 4–7 for the empirical surrogate, which must visit more
+    temperatures; a small discrete search; a structure
     that cannot fit the budget is skipped, and `ValueError` says so when none fits). The
     `arw`, `gauss_markov`, `angle_white`: the noise the criterion assumes (as
     [`information`][hrgjax.calibration.design.information]; default the default gyro's);
@@ -1251,13 +1256,13 @@ def design(
         raise ValueError(f"criterion must be one of {CRITERIA}; got {criterion!r}")
     if not (isinstance(budget_h, (int, float)) and math.isfinite(budget_h) and budget_h > 0):
         raise ValueError(f"budget_h must be a positive number of hours; got {budget_h!r}")
-    levels = tuple(int(k) for k in levels)
+    model = _model(model)
+    levels = tuple(int(k) for k in (DEFAULT_LEVELS[model.name] if levels is None else levels))
     if not levels or min(levels) < 1:
         raise ValueError(f"levels must be positive integers; got {levels}")
     if statics < 1 or rotations < 0:
         raise ValueError("statics must be ≥ 1 and rotations ≥ 0 per level")
     bench = BenchModel() if bench is None else bench
-    model = _model(model)
     values = _values(values, model)
     arw_v = _noise(arw, gauss_markov, angle_white)
     flight = _flights(flight)
