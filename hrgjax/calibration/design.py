@@ -1057,6 +1057,11 @@ def _criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS, mode
 
 CHAMBER_RANGE_C = (-40.0, 60.0)
 """Temperatures a designed plan may use [°C] (the seed's operating range)."""
+ANGLE_UNIT_DEG = 20.0
+"""Unit of the wave angles in `design`'s optimiser [°]: Adam moves a parameter by about its
+learning rate per step, so in these units a wave angle can travel across its whole 180°
+period within a search (in degrees it could move ≈ 15°)."""
+
 DEFAULT_LEVELS = {"physical": (2, 3, 4, 5), "empirical": (4, 5, 6, 7)}
 """Numbers of temperature levels `design` tries by default, per model."""
 
@@ -1112,7 +1117,7 @@ def _unpack(z, kinds, levels, statics, rotations, ramps, bench):
             i = k * per + j
             t0.append(temps[k])
             t1.append(temps[k])
-            ang.append(z["angle"][i])
+            ang.append(ANGLE_UNIT_DEG * z["angle"][i])
             is_rot = j >= statics
             sign = 1.0 if k % 2 == 0 else -1.0
             rate.append(jnp.asarray(sign * DESIGN_RATE_DPS if is_rot else 0.0))
@@ -1123,7 +1128,7 @@ def _unpack(z, kinds, levels, statics, rotations, ramps, bench):
             slowest = dtemp / bench.slew_c_per_min * 60.0  # the chamber's fastest ramp [s]
             t0.append(temps[k])
             t1.append(temps[k + 1])
-            ang.append(z["ramp_angle"][k])
+            ang.append(ANGLE_UNIT_DEG * z["ramp_angle"][k])
             rate.append(jnp.asarray(0.0))
             dur.append(jnp.maximum(slowest, 60.0) * (1.0 + jnp.exp(z["ramp_stretch"][k])))
     stack = lambda xs: jnp.stack([jnp.asarray(x, dtype=float) for x in xs])
@@ -1281,11 +1286,13 @@ def design(
             share = max(budget_s - trans, 0.3 * budget_s) / n_meas
             angles = np.tile(np.linspace(-90.0, 90.0, per, endpoint=False), n_lev)
             angles = angles + np.asarray(jax.random.uniform(key, angles.shape, maxval=5.0))
+            n_ramp = max(n_lev - 1, 1)
+            ramp_angles = (np.arange(n_ramp) + 0.5) / n_ramp * 180.0 - 90.0  # spread too
             z = {
                 "level": jnp.asarray(np.log(spread / (1 - spread))),
-                "angle": jnp.asarray(angles),
+                "angle": jnp.asarray(angles / ANGLE_UNIT_DEG),
                 "log_dur": jnp.full(n_meas, float(np.log(max(share - MIN_STATIC_S, 10.0)))),
-                "ramp_angle": jnp.zeros(max(n_lev - 1, 1)),
+                "ramp_angle": jnp.asarray(ramp_angles / ANGLE_UNIT_DEG),
                 "ramp_stretch": jnp.zeros(max(n_lev - 1, 1)),
             }
             args = (kinds, n_lev, statics, rotations, ramps, bench)
