@@ -377,7 +377,8 @@ def cmd_calibrate(args) -> int:
         reduce,
         save_compensator,
     )
-    from .calibration.mlp import MIN_RAMP_RATE, RAMP_WINDOW_S
+    from .calibration.mlp import MIN_RAMP_RATE
+    from .calibration.reduce import RAMP_WINDOW_S
 
     json_out = args.json or os.path.splitext(args.out)[0] + ".json"
     _check_output("--out", args.out, (".eqx",), [args.data])

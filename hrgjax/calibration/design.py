@@ -955,8 +955,8 @@ def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0
               flight=None, gauss_markov=None, angle_white=None, model=None):  # fmt: skip
     r"""Predicted horizontal position error [km] at the end of `flight` (a
     [`Flight`][hrgjax.calibration.ins_impact.Flight] or a sequence of them: RMS over the
-    flights; default `INS_FLIGHTS`, the three 1-h warm-up flights) from the physical
-    calibration's uncertainty after `plan`: each level gyro's compensated rate error along the flight is
+    flights; default `INS_FLIGHTS`, the three 1-h warm-up flights) from the calibration's
+    uncertainty after `plan` (of the physical grey box unless `model` says otherwise): each level gyro's compensated rate error along the flight is
     ε(t) = h(t)ᵀ δv, with h = ∂(measured rate)/∂values at its wave angle, the flight's
     temperature T(t) *and its rate* Ṫ(t) (the readout's temperature sensitivity, which only a
     plan with ramps can calibrate); ε drives the classical Schuler channels (PHYSICS.md §12:
@@ -1002,10 +1002,8 @@ def _ins_sensitivity(values, flights, nodes=_NODES, model=GREY_BOX):
     for flight in flights:
         length = float(flight.duration_s)
         s = (x + 1.0) / 2.0 * length
-        tau = float(flight.warmup_s)
         temp = jnp.asarray(flight.temperature(s))
-        temp_rate = (flight.temperature_end_c - flight.temperature_start_c) / tau
-        temp_rate = jnp.asarray(temp_rate * np.exp(-s / tau))
+        temp_rate = jnp.asarray(flight.temperature_rate(s))
         weights = w / 2.0 * length * EARTH_RADIUS * (1.0 - np.cos(omega_s * (length - s)))
         for angle in (flight.wave_angle_x_deg, flight.wave_angle_y_deg):
             theta = jnp.full(nodes, angle * DEG)

@@ -114,6 +114,14 @@ class Flight(eqx.Module):
             self.temperature_start_c - self.temperature_end_c
         ) * np.exp(-np.asarray(t) / self.warmup_s)
 
+    def temperature_rate(self, t):
+        """Its rate of change Ṫ [°C/s] at `t` [s]."""
+        return (
+            (self.temperature_end_c - self.temperature_start_c)
+            / self.warmup_s
+            * np.exp(-np.asarray(t) / self.warmup_s)
+        )
+
 
 FLIGHTS = (
     Flight(heading_deg=40.0, wave_angle_x_deg=30.0, wave_angle_y_deg=-55.0),

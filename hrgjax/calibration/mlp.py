@@ -37,12 +37,10 @@ from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
 from ._compensator import AbstractCompensator, as_windows, split_targets
-from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, reduce
+from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, reduce
 
 ENCODINGS = ("periodic", "angle")
 MODES = ("reduced", "end_to_end")
-RAMP_WINDOW_S = 300.0
-"""Window of a ramp in `fit` with `st_width > 0` [s] (as the physical fit's)."""
 ST_RATE_REF = 1.0 / 60.0
 """Temperature rate [°C/s] (1 °C/min) at which the s_T network's unit output moves the
 measured rate by one drift scale: s_T = drift_scale · k_e / ST_RATE_REF · st_net(x)."""

@@ -57,6 +57,7 @@ from ..units import DEG, DEG_PER_H, T_REF_C
 from ._compensator import AbstractCompensator, split_targets
 from ._physical_start import initial_values
 from .reduce import K_E_NOMINAL, _slope, reduce
+from .reduce import RAMP_WINDOW_S as RAMP_WINDOW_S
 
 PARAMETERS = (
     ("k_e0", "", 1e-4),
@@ -251,11 +252,6 @@ class PhysicalCompensator(AbstractCompensator):
         )
 
 
-RAMP_WINDOW_S = 300.0
-"""Window of a ramp (table at rest, temperature moving) in the fit [s]: each window's slope
-is a drift at its own temperature, so a ramp is a temperature sweep, not one number. The
-windows run from the ramp's start; the last, partial one is kept when it has ≥ 4 samples.
-(The design's criterion approximates them by round(duration / 300 s) equal windows.)"""
 WEIGHT_WINDOW_S = 60.0
 """Window length [s] the at-rest residual scatter is referred to: an at-rest window of
 length L is weighted by √(L / 60 s) / σ (white rate noise: variance ∝ 1/L)."""

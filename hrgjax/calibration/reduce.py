@@ -29,6 +29,14 @@ from ..data import MeasuredData
 from ..units import K_E_NOMINAL as K_E_NOMINAL
 from ..units import WINDOW_S as WINDOW_S
 
+RAMP_WINDOW_S = 300.0
+"""Window of a ramp (table at rest, temperature moving) in the physical fit and the MLP's
+s_T training [s]: each window's slope is a drift at its own temperature, so a ramp is a
+temperature sweep, not one number. The physical fit's windows run from the ramp's start;
+the last, partial one is kept when it has ≥ 4 samples (`reduce(ramp_window_s=…)` keeps
+whole windows only). The design's criterion approximates them by round(duration / 300 s)
+equal windows."""
+
 
 def window_slopes(t, theta, n_windows: int, batches: int = 0):
     r"""Least-squares slopes of `theta` over `n_windows` equal consecutive windows of samples.
@@ -179,7 +187,7 @@ def reduce(
       [`WINDOW_S`][hrgjax.calibration.reduce.WINDOW_S]); `None` keeps each run whole.
     - `batches`: batch count for the standard errors (≥ 3).
     - `ramp_window_s`: window length for ramps — runs at rest whose temperature moves [s]
-      (e.g. `physical.RAMP_WINDOW_S`, 300 s); `None` (default) keeps each ramp one window,
+      (e.g. `RAMP_WINDOW_S`, 300 s); `None` (default) keeps each ramp one window,
       as every static run.
 
     **Returns:** [`RateWindows`][hrgjax.calibration.RateWindows].
@@ -281,6 +289,7 @@ def scale_factor_vs_angle(
 
 __all__ = [
     "K_E_NOMINAL",
+    "RAMP_WINDOW_S",
     "RateWindows",
     "reduce",
     "scale_factor_vs_angle",
