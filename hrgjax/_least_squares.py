@@ -6,6 +6,13 @@ for speed, but silent for minutes when every residual evaluation simulates a ben
 optimistix's own loop calls them) from Python: one compiled program per step, reused by
 every step and every later fit of the same shapes, and a progress bar with the cost between
 steps. The iterates are those of `optimistix.least_squares` with the same solver.
+
+`least_squares_with_jacobian` is the same loop for residuals whose Jacobian the caller
+computes in a compiled program of its own (a simulator's `jax.jacfwd`): the solver's step is
+handed, for the one point it evaluates (the state's `y_eval`), the residuals and Jacobian
+there, as the linear model r + J(y − y_eval) — exact at that point, with exactly that
+Jacobian. The solver's program then holds no simulator at all, and the expensive program is
+compiled once instead of twice (once in the caller, once inside the solver's step).
 """
 
 from __future__ import annotations
@@ -91,3 +98,53 @@ def least_squares(
     if not np.all([np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(y)]):
         result = optx.RESULTS.nonfinite
     return y, steps, result
+
+
+def _linear_model(y, args):
+    """r + J (y − y_eval): the residual function the solver sees in
+    `least_squares_with_jacobian` (evaluated by the solver at y_eval only)."""
+    r, jac, y_eval = args
+    return r + jac @ (y - y_eval)
+
+
+def least_squares_with_jacobian(
+    residuals_jacobian, solver, y0, *, max_steps: int, desc: str = "least squares"
+):
+    """Minimise ½‖r(y)‖² with an optimistix least-squares `solver` from `y0` (a 1-D array),
+    where `residuals_jacobian(y) -> (r, J)` gives the residuals (m,) and their Jacobian (m, n)
+    at `y` (host or device arrays; it is called once per solver step, at the point the step
+    evaluates).
+
+    The iterates are those of `least_squares` on r with the same solver, up to the round-off
+    between the caller's Jacobian and the one the solver would form.
+
+    **Returns:** `(y, steps, result, (r, J))`: the solution, the number of steps, an
+    `optimistix.RESULTS` item, and the residuals and Jacobian at the solution.
+    """
+    y0 = jnp.asarray(y0)
+    r, jac = residuals_jacobian(y0)
+    r, jac = jnp.asarray(r), jnp.asarray(jac)
+    wrapped = _WithAux(_linear_model)
+    f_struct = jax.ShapeDtypeStruct(r.shape, r.dtype)
+    args = (r, jac, y0)
+    dynamic, done, result = _start(solver, wrapped, y0, args, f_struct)
+    y, steps, at = y0, 0, (y0, r, jac)
+    with bar(None, desc) as progress:
+        while not bool(done) and int(result._value) == 0 and steps < max_steps:
+            y_eval = dynamic.y_eval
+            if not np.array_equal(np.asarray(y_eval), np.asarray(at[0])):
+                r, jac = residuals_jacobian(y_eval)
+                at = (y_eval, jnp.asarray(r), jnp.asarray(jac))
+            args = (at[1], at[2], at[0])
+            y, dynamic, done, result, cost = _step(solver, wrapped, y, args, dynamic, f_struct)
+            steps += 1
+            progress.update(1)
+            progress.set_postfix_str(f"χ²/2 {float(cost):.6g}")
+    if int(result._value) == 0 and not bool(done):
+        result = optx.RESULTS.nonlinear_max_steps_reached
+    if not np.all(np.isfinite(np.asarray(y))):
+        result = optx.RESULTS.nonfinite
+    if not np.array_equal(np.asarray(y), np.asarray(at[0])):
+        r, jac = residuals_jacobian(y)
+        at = (y, jnp.asarray(r), jnp.asarray(jac))
+    return y, steps, result, (at[1], at[2])

@@ -9,7 +9,7 @@ import pytest
 
 from hrgjax._checks import check_finite
 from hrgjax._compiled import bucket_pad, bucket_size, program
-from hrgjax._least_squares import least_squares
+from hrgjax._least_squares import least_squares, least_squares_with_jacobian
 
 
 @program
@@ -53,6 +53,30 @@ def test_stepwise_least_squares_takes_optimistix_steps():
     np.testing.assert_array_equal(y, ref.value)
     assert steps == int(ref.stats["num_steps"]) and int(result._value) == 0
     _, steps, result = least_squares(_rosenbrock, solver, y0, args, max_steps=3)
+    assert steps == 3 and result == optx.RESULTS.nonlinear_max_steps_reached
+
+
+def test_least_squares_fed_a_jacobian_takes_the_same_steps():
+    """The solver stepped on r + J(y − y_eval) from the caller's (r, J) at each point it
+    evaluates reaches optimistix's own solution in the same number of steps, and returns
+    the residuals and Jacobian at that solution."""
+    solver = optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
+    args = (jnp.asarray(1.0), jnp.asarray(10.0))
+    y0 = jnp.array([-1.2, 1.0, 0.0])
+    ref = optx.least_squares(_rosenbrock, solver, y0, args=args, max_steps=200, throw=False)
+    calls = []
+
+    def rj(y):
+        calls.append(np.asarray(y))
+        return _rosenbrock(y, args), jax.jacfwd(_rosenbrock)(y, args)
+
+    y, steps, result, (r, jac) = least_squares_with_jacobian(rj, solver, y0, max_steps=200)
+    np.testing.assert_allclose(y, ref.value, rtol=0, atol=1e-12)
+    assert steps == int(ref.stats["num_steps"]) and int(result._value) == 0
+    np.testing.assert_allclose(r, _rosenbrock(y, args), atol=1e-15)
+    np.testing.assert_allclose(jac, jax.jacfwd(_rosenbrock)(y, args), atol=1e-15)
+    assert len(calls) <= steps + 1  # one evaluation per step, none repeated
+    _, steps, result, _ = least_squares_with_jacobian(rj, solver, y0, max_steps=3)
     assert steps == 3 and result == optx.RESULTS.nonlinear_max_steps_reached
 
 

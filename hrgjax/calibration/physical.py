@@ -43,7 +43,7 @@ import numpy as np
 import optimistix as optx
 
 from .._compiled import Check, device, first_failure, program
-from .._least_squares import least_squares
+from .._least_squares import least_squares_with_jacobian
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
@@ -476,17 +476,11 @@ def _residuals(groups, values, k_e):
     return {True: jnp.concatenate(rest), False: jnp.concatenate(moving)}
 
 
-def _weighted_residual(x, args):
-    groups, x0, sigma, k_e = args
-    res = _residuals(groups, x0 + x * _SCALE, k_e)
-    return jnp.concatenate([res[True] / sigma[True], res[False] / sigma[False]])
-
-
 @program(check=Check("PhysicalCompensator.fit (residuals and Jacobian)"))
 def _residuals_jacobian(groups, values, k_e):
     """Residuals {True: static, False: moving} [rad/s] at `values` and their Jacobians with
-    respect to the scaled parameters x (values + x·scale). One program serves the start
-    (weights) and the end (covariance) of the fit."""
+    respect to the scaled parameters x (values + x·scale). The fit's one simulator program:
+    it serves the weights, every Levenberg–Marquardt step and the covariance."""
     fn = lambda x: _residuals(groups, values + x * _SCALE, k_e)
     return fn(jnp.zeros(len(NAMES))), jax.jacfwd(fn)(jnp.zeros(len(NAMES)))
 
@@ -507,30 +501,42 @@ def _fit(groups, x0, k_e, max_steps):
 
     Weights: the residual scatter of each kind of window (at rest, moving) at the starting
     values (robust: median absolute deviation; the harmonic start is close), re-estimated
-    after the fit for the covariance."""
+    after the fit for the covariance. The solver is optimistix's Levenberg–Marquardt, fed
+    the residuals and Jacobian of `_residuals_jacobian` at each point it evaluates
+    (`least_squares_with_jacobian`), so the simulator is compiled once per fit, not twice."""
     weights = _weights(groups)
-    r0, _ = _residuals_jacobian(groups, x0, k_e)
-    sigma = {k: device(v) for k, v in _scatter(r0, weights).items()}
+    x0 = np.asarray(x0)
+    at = {}  # host copies of the last evaluation: {True/False: residuals}, Jacobians
+
+    def weighted(x):
+        # Host arithmetic between the compiled programs (eager jnp would compile each op).
+        r, jac = _residuals_jacobian(groups, device(x0 + np.asarray(x) * _SCALE), k_e)
+        at["r"], at["jac"] = {k: np.asarray(v) for k, v in r.items()}, jac
+        if "sigma" not in at:  # the first call: at the starting values
+            at["sigma"] = _scatter(at["r"], weights)
+        sigma = at["sigma"]
+        kinds = (True, False)
+        r_w = np.concatenate([at["r"][k] / sigma[k] for k in kinds])
+        jac_w = np.concatenate([np.asarray(jac[k]) / sigma[k] for k in kinds])
+        return device(r_w), device(jac_w)
+
     # The problem is scaled so that one unit of x is about one standard error: stopping at
     # 1e-4 of that is far below anything the data can tell. Absolute only: a tolerance
     # relative to x stops a fit that started far (|x| in the hundreds) a fraction of a
     # standard error short of the optimum.
-    x, steps, result = least_squares(
-        _weighted_residual,
+    x, steps, result, _ = least_squares_with_jacobian(
+        weighted,
         optx.LevenbergMarquardt(rtol=0.0, atol=1e-4),
         device(np.zeros(len(NAMES))),
-        (groups, x0, sigma, k_e),
         max_steps=max_steps,
         desc="physical fit (Levenberg–Marquardt)",
-        f_struct=jax.ShapeDtypeStruct((sum(r.size for r in r0.values()),), r0[True].dtype),
     )
     message = first_failure(result, optx.RESULTS)
     if message is not None:
         raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
-    # Host arithmetic between the compiled programs (eager jnp would compile each operation).
-    values = np.asarray(x0) + np.asarray(x) * _SCALE
-    r1, jac1 = _residuals_jacobian(groups, device(values), k_e)
-    r1 = {k: np.asarray(r) for k, r in r1.items()}
+    values = x0 + np.asarray(x) * _SCALE
+    # `least_squares_with_jacobian` evaluated last at the solution: `at` holds it, unweighted.
+    r1, jac1 = at["r"], at["jac"]
     sigma1 = {k: np.sqrt(np.mean(r[weights[k] > 0] ** 2)) for k, r in r1.items()}
     jac = np.concatenate(
         [np.asarray(jac1[True]) / sigma1[True], np.asarray(jac1[False]) / sigma1[False]]
