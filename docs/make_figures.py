@@ -81,13 +81,13 @@ def design_budgets():
     from hrgjax.calibration import design
 
     budgets = (3.0, 6.0, 12.0, 24.0, 36.0)
-    designed = [design.design(b) for b in budgets]
+    designed = [design.design(b, criterion="drift") for b in budgets]
     seeds = [design.seed_bench_plan(quick=True), design.seed_bench_plan()]
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
     ax.loglog([r.bench_time_h for r in designed], [r.value for r in designed], "o-",
               color="C2", label="designed (gradient search)")  # fmt: skip
     ax.loglog([float(design.bench_time_h(p)) for p in seeds],
-              [float(design.criterion(p)) for p in seeds], "s", color="C3", ms=8,
+              [float(design.criterion(p, "drift")) for p in seeds], "s", color="C3", ms=8,
               label="seed plans (3 and 11 temperatures)")  # fmt: skip
     ax.set_xlabel("bench time, transitions included [h]")
     ax.set_ylabel("predicted compensated drift error [°/h]")

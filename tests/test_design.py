@@ -371,9 +371,10 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     # whole seconds: a bench (and simulate_plan's whole output intervals) runs it as written
     dur = np.asarray(plan.duration_s)
     assert np.array_equal(dur, np.round(dur)) and dur.min() >= d.MIN_STATIC_S
-    value = float(d.criterion(plan))
+    value, drift, warm = (float(v) for v in d.drift_warmup_error(plan, terms=True))
     hours = float(d.bench_time_h(plan, bench))
-    assert f"{'designed':10s} {hours:6.2f} h  drift {value:.4g} °/h" in text
+    assert (f"{'designed':10s} {hours:6.2f} h  drift+warmup {value:.4g} ° "
+            f"(drift {drift:.4g} °/h, warm-up {warm:.4g} °)") in text  # fmt: skip
     assert png.stat().st_size > 0
     result = d.design(2.5, levels=(2,), statics=2, rotations=1, steps=40)
     assert result.history[-1] < result.history[0] - 0.1  # log-criterion fell by > 10 %
@@ -435,3 +436,48 @@ def test_ins_criterion_is_the_schuler_response_to_the_posterior_integrated_by_di
         d.criterion(plan, "ins", flight="1h")
     with pytest.raises(TypeError, match="flight must be an ins_impact.Flight .* got empty"):
         d.criterion(plan, "ins", flight=())
+
+
+def test_warmup_criterion_is_the_integrated_rate_error_and_the_default_adds_the_drift():
+    """`warmup`: m = ∫ h(t) dt over the flight against the trapezoid rule on 1-s samples
+    (rel 1e-6; the Ṫ term is s_T·Ṫ, the ramp's own contribution); in a chamber held at one
+    temperature it is L·h(T) exactly; the criterion is √(tr(m C mᵀ) / 2) [°] (rel 1e-6), and
+    the default `drift+warmup` = √((drift · 1 h)² + warmup²) (rel 1e-9). A measuring ramp
+    lowers the warm-up error."""
+    from hrgjax.calibration.ins_impact import Flight
+    from hrgjax.units import DEG
+
+    plan = d.seed_bench_plan(quick=True)
+    flight = d.INS_FLIGHTS[1]
+    values = d.nominal_values()
+    t = np.arange(0.0, flight.duration_s + 1e-9, 1.0)
+    rate = lambda v, th, tc, tr: d.measured_rate(v, th, tc, 0.0, tr) / values[0]
+    h = jax.jit(jax.vmap(jax.grad(rate), in_axes=(None, 0, 0, 0)))
+    rows = []
+    for angle in (flight.wave_angle_x_deg, flight.wave_angle_y_deg):
+        hs = np.asarray(h(values, jnp.full(t.shape, angle * DEG), jnp.asarray(flight.temperature(t)),
+                          jnp.asarray(flight.temperature_rate(t))))  # fmt: skip
+        rows.append(np.trapezoid(hs, t, axis=0))
+    m_ref = np.asarray(rows)
+    m = np.asarray(d.warmup_sensitivity(values, flight))
+    np.testing.assert_allclose(m, m_ref, rtol=1e-6, atol=1e-6 * np.abs(m_ref).max())
+
+    held = Flight(temperature_start_c=20.0, temperature_end_c=20.0)
+    m_held = np.asarray(d.warmup_sensitivity(values, held))
+    h20 = np.asarray(h(values, jnp.asarray([held.wave_angle_x_deg * DEG]), jnp.asarray([20.0]),
+                       jnp.asarray([0.0])))[0]  # fmt: skip
+    np.testing.assert_allclose(m_held[0], held.duration_s * h20, rtol=1e-12,
+                               atol=1e-12 * np.abs(h20).max() * held.duration_s)  # fmt: skip
+
+    cov = np.asarray(d.posterior_covariance(plan))
+    warm = float(d.criterion(plan, "warmup", flight=flight))
+    assert warm == pytest.approx(np.sqrt(np.trace(m @ cov @ m.T) / 2) / DEG, rel=1e-6)
+    both = float(d.criterion(plan, flight=flight))  # the default kind
+    drift = float(d.criterion(plan, "drift"))
+    assert both == pytest.approx(np.hypot(drift * flight.duration_s / 3600.0, warm), rel=1e-9)
+    terms = [float(v) for v in d.drift_warmup_error(plan, flight=flight, terms=True)]
+    np.testing.assert_allclose(terms, [both, drift, warm], rtol=1e-12)
+    ramp = {"kind": "ramp", "temperature_start_c": -40.0, "temperature_end_c": 60.0,
+            "wave_angle_deg": 30.0, "duration_s": 6000.0}  # fmt: skip
+    more = d.BenchPlan.from_segments(plan.segments() + [ramp])
+    assert float(d.criterion(more, "warmup", flight=flight)) < warm

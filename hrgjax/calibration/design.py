@@ -511,11 +511,17 @@ def simulate_plan(
 
 # --- What a plan teaches: Fisher information of the physical grey box ----------------------
 
-CRITERIA = ("drift", "ins", "d", "a")
-"""Design criteria: `drift` (RMS of the compensated static drift's standard deviation over
-the operating grid [°/h]), `ins` (RMS horizontal position error after a warm-up flight
-from the calibration's uncertainty [km]), `d` (log-determinant of the scaled posterior
-covariance), `a` (trace of the scaled posterior covariance)."""
+CRITERIA = ("drift+warmup", "drift", "warmup", "ins", "d", "a")
+"""Design criteria: `drift+warmup` (the default: the wave-angle error an hour of operation
+leaves — the static drift's over the flight's length and the warm-up's own, in quadrature
+[°]), `drift` (RMS of the compensated static drift's standard deviation over the operating
+grid [°/h]), `warmup` (RMS wave-angle error at the end of the warm-up flights [°]), `ins`
+(RMS horizontal position error after the warm-up flights [km]), `d` (log-determinant of the
+scaled posterior covariance), `a` (trace of the scaled posterior covariance)."""
+
+CRITERION_UNITS = {"drift+warmup": "°", "drift": "°/h", "warmup": "°", "ins": "km", "d": "",
+                   "a": ""}  # fmt: skip
+"""The unit each criterion is printed in."""
 
 OPERATING_TEMPERATURES = tuple(float(t) for t in range(-40, 61, 5))
 """Temperatures of the `drift` criterion's operating grid [°C] (the seed's test range)."""
@@ -989,7 +995,10 @@ def ins_sensitivity(values=None, flight=None, nodes: int = _NODES, model=None) -
 
 
 @eqx.filter_jit
-def _ins_sensitivity(values, flights, nodes=_NODES, model=GREY_BOX):
+def _ins_sensitivity(values, flights, nodes=_NODES, model=GREY_BOX, schuler=True):
+    """M of `ins_sensitivity` (`schuler`), or of `warmup_sensitivity` (the plain integral of
+    the rate error over each flight: the end-of-flight wave-angle error per unit error of
+    each parameter [rad per SI unit])."""
     from .ins_impact import EARTH_RADIUS, GRAVITY
 
     x, w = np.polynomial.legendre.leggauss(nodes)
@@ -1004,12 +1013,74 @@ def _ins_sensitivity(values, flights, nodes=_NODES, model=GREY_BOX):
         s = (x + 1.0) / 2.0 * length
         temp = jnp.asarray(flight.temperature(s))
         temp_rate = jnp.asarray(flight.temperature_rate(s))
-        weights = w / 2.0 * length * EARTH_RADIUS * (1.0 - np.cos(omega_s * (length - s)))
+        weights = w / 2.0 * length
+        if schuler:
+            weights = weights * EARTH_RADIUS * (1.0 - np.cos(omega_s * (length - s)))
         for angle in (flight.wave_angle_x_deg, flight.wave_angle_y_deg):
             theta = jnp.full(nodes, angle * DEG)
             h = jax.vmap(jax.grad(rate), in_axes=(None, 0, 0, 0))(values, theta, temp, temp_rate)
             rows.append(jnp.asarray(weights) @ h)  # (P,)
     return jnp.stack(rows)
+
+
+def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
+                 flight=None, gauss_markov=None, angle_white=None, model=None):  # fmt: skip
+    r"""Predicted wave-angle (heading) error [°] at the end of `flight` (default
+    `INS_FLIGHTS`, the three 1-h warm-up flights; RMS over the flights and their x and y
+    gyros) from the calibration's uncertainty after `plan`: the compensated rate error
+    ε(t) = h(t)ᵀ δv of [`ins_error`][hrgjax.calibration.design.ins_error] — at the flight's
+    temperature T(t) *and* its rate Ṫ(t) — integrated over the flight, m = ∫ h(s)ᵀ ds, with
+    expected square mᵀ C m. What a gyro-compass or an attitude reference loses to the
+    warm-up, before any Schuler dynamics. Noise arguments and `model` as
+    [`information`][hrgjax.calibration.design.information]."""
+    require_x64("hrgjax.calibration.design.warmup_error")
+    model = _model(model)
+    values = _values(values, model)
+    return _warmup_error(plan, values, _noise(arw, gauss_markov, angle_white),
+                         float(prior_scale), _flights(flight), model)  # fmt: skip
+
+
+def warmup_sensitivity(values=None, flight=None, nodes: int = _NODES, model=None) -> jax.Array:
+    """m of [`warmup_error`][hrgjax.calibration.design.warmup_error] (2F × P for F flights,
+    [rad] per SI unit of each parameter): the end-of-flight wave-angle error of each flight's
+    x and y gyros per unit error of each parameter (input-rate units at nominal gain)."""
+    model = _model(model)
+    return _ins_sensitivity(_values(values, model), _flights(flight), int(nodes), model, False)
+
+
+def _warmup_error(plan, values, noise, prior_scale, flights, model=GREY_BOX):
+    factor = _precision_factor(plan, values, noise, prior_scale, model)
+    m = _ins_sensitivity(values, flights, _NODES, model, False)
+    z = _scaled_solve(factor, m * model.scale()[None, :])
+    return jnp.sqrt(jnp.sum(z**2) / (2 * len(flights))) / DEG
+
+
+def drift_warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
+                       flight=None, gauss_markov=None, angle_white=None, model=None,
+                       terms: bool = False):  # fmt: skip
+    r"""The default design criterion [°]: the wave-angle error an hour of operation leaves,
+    √((σ_drift · L)² + σ_warm-up²) — [`drift_error`][hrgjax.calibration.design.drift_error]
+    (RMS over the operating grid, °/h) acting for the flights' mean length L [h], and
+    [`warmup_error`][hrgjax.calibration.design.warmup_error] (°) after `flight` (default
+    `INS_FLIGHTS`). The first rewards covering every temperature and angle, the second the
+    temperatures and rates of change a warm-up passes through. Arguments as `ins_error`;
+    `terms=True` returns `(total [°], drift [°/h], warm-up [°])` from one compiled program."""
+    require_x64("hrgjax.calibration.design.drift_warmup_error")
+    model = _model(model)
+    values = _values(values, model)
+    out = _drift_warmup_terms(plan, values, _noise(arw, gauss_markov, angle_white),
+                              float(prior_scale), _flights(flight), model)  # fmt: skip
+    return out if terms else out[0]
+
+
+def _drift_warmup_error(plan, values, noise, prior_scale, flights, model=GREY_BOX):
+    hours = float(np.mean([f.duration_s for f in flights])) / 3600.0
+    drift = _drift_error(plan, values, noise, prior_scale, model=model)
+    warm = _warmup_error(plan, values, noise, prior_scale, flights, model)
+    return jnp.sqrt((drift * hours) ** 2 + warm**2), drift, warm
+
+
+_drift_warmup_terms = eqx.filter_jit(_drift_warmup_error)
 
 
 def _ins_error(plan, values, noise, prior_scale, flights, model=GREY_BOX):
@@ -1019,11 +1090,14 @@ def _ins_error(plan, values, noise, prior_scale, flights, model=GREY_BOX):
     return jnp.sqrt(jnp.sum(z**2) / len(flights)) / 1000.0
 
 
-def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
+def criterion(plan: BenchPlan, kind: str = "drift+warmup", values=None, arw=None,
               prior_scale: float = 100.0, gauss_markov=None, angle_white=None,
               flight=None, model=None):  # fmt: skip
     """The design criterion of `plan` (smaller is better; differentiable with respect to the
-    plan's arrays): `drift` — [`drift_error`][hrgjax.calibration.design.drift_error] [°/h];
+    plan's arrays): `drift+warmup` (the default) —
+    [`drift_warmup_error`][hrgjax.calibration.design.drift_warmup_error] [°];
+    `drift` — [`drift_error`][hrgjax.calibration.design.drift_error] [°/h];
+    `warmup` — [`warmup_error`][hrgjax.calibration.design.warmup_error] [°];
     `ins` — [`ins_error`][hrgjax.calibration.design.ins_error] after `flight` (one or a
     sequence of flights; default `INS_FLIGHTS`) [km];
     `d` — log det of the posterior covariance in units of each parameter's typical
@@ -1040,8 +1114,12 @@ def criterion(plan: BenchPlan, kind: str = "drift", values=None, arw=None,
 @eqx.filter_jit
 def _criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS, model=GREY_BOX):
     """`criterion`, compiled once per plan length, kind, model (and flights, for `ins`)."""
+    if kind == "drift+warmup":
+        return _drift_warmup_error(plan, values, noise, prior_scale, flights, model)[0]
     if kind == "drift":
         return _drift_error(plan, values, noise, prior_scale, model=model)
+    if kind == "warmup":
+        return _warmup_error(plan, values, noise, prior_scale, flights, model)
     if kind == "ins":
         return _ins_error(plan, values, noise, prior_scale, flights, model)
     chol, d = factor = _precision_factor(plan, values, noise, prior_scale, model)
@@ -1076,7 +1154,8 @@ class Design(eqx.Module):
 
     - `plan`: the designed [`BenchPlan`][hrgjax.calibration.design.BenchPlan], within budget.
     - `bench`: the [`BenchModel`][hrgjax.calibration.design.BenchModel] it was priced with.
-    - `criterion`, `value`: the criterion's name and its value for `plan` (drift: °/h; ins: km).
+    - `criterion`, `value`: the criterion's name and its value for `plan` (unit:
+      `CRITERION_UNITS`).
     - `bench_time_h`: the plan's bench time [h]; `levels`: its number of temperature levels.
     - `search`: `{levels: value}` of every structure tried (None: it cannot fit the
       budget even at its shortest segments); `history`: the loss per step
@@ -1211,7 +1290,7 @@ def _design_step(z, state, values, arw, budget_s, args, criterion, flight, model
 def design(
     budget_h: float,
     *,
-    criterion: str = "drift",
+    criterion: str = "drift+warmup",
     levels: Sequence[int] | None = None,
     statics: int = 6,
     rotations: int = 2,
@@ -1228,7 +1307,7 @@ def design(
     key: jax.Array | None = None,
 ) -> Design:
     """The bench plan that, within `budget_h` hours of bench time (transitions included,
-    priced by `bench`), minimises `criterion` (`CRITERIA`; default `drift`).
+    priced by `bench`), minimises `criterion` (`CRITERIA`; default `drift+warmup`).
 
     **How.** A plan is a number of temperature levels; at each, `statics` static segments
     and `rotations` rotations at ±5 °/s, and (with `ramps`) a ramp to the next level that
