@@ -376,6 +376,43 @@ def test_physical_fit_recovers_injected_damping_within_uncertainty():
     assert hits["theta_tau0"] >= 0.9 * seeds, hits
 
 
+def test_residual_scatter_counts_each_kinds_degrees_of_freedom():
+    """Linear least squares: σ² = RSS/(n − p) is unbiased. With the parameters all carried by
+    one kind the per-kind estimate is exactly that; with two kinds sharing them it is
+    unbiased for each kind (Monte Carlo), where the plain RMS of the few at-rest rows is not."""
+    rng = np.random.default_rng(7)
+    n_rest, n_moving, p = 18, 60, 8
+    weights = {True: np.r_[np.ones(n_rest), 0.0, 0.0], False: np.ones(n_moving)}  # 2 padded
+    # (a) every parameter in the at-rest rows: classic RSS/(n − p), the other kind its RMS
+    j_rest = np.r_[rng.standard_normal((n_rest, p)), np.zeros((2, p))]
+    r_rest = np.r_[rng.standard_normal(n_rest), 0.0, 0.0]
+    r_rest = r_rest - j_rest @ np.linalg.lstsq(j_rest, r_rest, rcond=None)[0]  # a residual
+    r_moving = 3.0 * rng.standard_normal(n_moving)
+    jac = {True: j_rest, False: np.zeros((n_moving, p))}
+    sigma = physical._scatter_per_dof({True: r_rest, False: r_moving}, jac, weights)
+    assert sigma[True] == pytest.approx(np.sqrt(r_rest @ r_rest / (n_rest - p)), rel=1e-12)
+    assert sigma[False] == pytest.approx(np.sqrt(np.mean(r_moving**2)), rel=1e-12)
+    # (b) shared parameters, σ = 1 at rest and 5 moving: the per-kind σ² average to the truth
+    j_rest = np.r_[rng.standard_normal((n_rest, p)), np.zeros((2, p))]
+    j_moving = 0.3 * rng.standard_normal((n_moving, p))
+    jac = {True: j_rest, False: j_moving}
+    true_sigma = {True: 1.0, False: 5.0}
+    w = np.r_[j_rest[:n_rest] / 1.0, j_moving / 5.0]
+    est, rms = {True: [], False: []}, []
+    for _ in range(400):
+        e = {True: rng.standard_normal(n_rest), False: 5.0 * rng.standard_normal(n_moving)}
+        y = np.r_[e[True] / 1.0, e[False] / 5.0]
+        fit = np.r_[j_rest[:n_rest], j_moving] @ np.linalg.lstsq(w, y, rcond=None)[0]
+        res = {True: np.r_[e[True] - fit[:n_rest], 0.0, 0.0], False: e[False] - fit[n_rest:]}
+        s = physical._scatter_per_dof(res, jac, weights)
+        for k in est:
+            est[k].append(s[k] ** 2 / true_sigma[k] ** 2)
+        rms.append(np.mean(res[True][:n_rest] ** 2))
+    assert np.mean(est[True]) == pytest.approx(1.0, abs=0.06)  # 400 draws: ±0.03 (1 s.e.)
+    assert np.mean(est[False]) == pytest.approx(1.0, abs=0.03)
+    assert np.mean(rms) < 0.8  # the plain RMS at rest: (n − p_rest)/n ≈ 0.6 of σ²
+
+
 # --- export ---------------------------------------------------------------------------------
 
 

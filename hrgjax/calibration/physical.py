@@ -19,7 +19,7 @@ window, a rotation is cut into `window_s` windows and a ramp (table at rest, tem
 moving) into `RAMP_WINDOW_S` windows, each a drift at its own temperature. Weights: the
 residual scatter of each kind of window (at rest, moving), an at-rest window of length L
 weighted by √(L / 60 s) (white rate noise: a long dwell tells more), re-estimated after the
-fit; the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced
+fit with each kind's own degrees of freedom (`_scatter_per_dof`); the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced
 χ². Starting values come from harmonic fits at each temperature held for at least three
 windows (a ramp's windows are not a level).
 
@@ -495,6 +495,28 @@ def _scatter(residuals, weights) -> dict:
     return out
 
 
+def _scatter_per_dof(residuals, jac, weights, iterations: int = 4) -> dict:
+    """Residual scatter of each kind of window (at rest, moving) at the solution, each kind
+    with its own degrees of freedom: σ_k² = Σ r_k² / (n_k − p_k), where p_k is the sum of
+    the leverages (the hat matrix's diagonal of the σ-weighted Jacobian) over kind k's rows
+    (Σ_k p_k = the number of parameters). A plain RMS would take σ of a kind whose few
+    windows carry most of the parameters (the at-rest windows of a small plan) too small,
+    and every error bar with it. The leverages depend on the σ's: a few fixed-point
+    iterations from the RMS."""
+    kinds = (True, False)
+    real = {k: weights[k] > 0 for k in kinds}
+    r = {k: np.asarray(residuals[k])[real[k]] for k in kinds}
+    j = {k: np.asarray(jac[k])[real[k]] for k in kinds}
+    n = {k: r[k].size for k in kinds}
+    sigma = {k: np.sqrt(np.mean(r[k] ** 2)) for k in kinds}
+    for _ in range(iterations):
+        q, _ = np.linalg.qr(np.concatenate([j[k] / sigma[k] for k in kinds]))
+        leverage = np.sum(q**2, axis=1)
+        p = {True: leverage[: n[True]].sum(), False: leverage[n[True] :].sum()}
+        sigma = {k: np.sqrt(np.sum(r[k] ** 2) / max(n[k] - p[k], 1.0)) for k in kinds}
+    return sigma
+
+
 def _fit(groups, x0, k_e, max_steps):
     """Weights, Levenberg–Marquardt (one compiled step at a time, with a progress bar),
     final residuals and Jacobian.
@@ -537,7 +559,7 @@ def _fit(groups, x0, k_e, max_steps):
     values = x0 + np.asarray(x) * _SCALE
     # `least_squares_with_jacobian` evaluated last at the solution: `at` holds it, unweighted.
     r1, jac1 = at["r"], at["jac"]
-    sigma1 = {k: np.sqrt(np.mean(r[weights[k] > 0] ** 2)) for k, r in r1.items()}
+    sigma1 = _scatter_per_dof(r1, {k: np.asarray(v) for k, v in jac1.items()}, weights)
     jac = np.concatenate(
         [np.asarray(jac1[True]) / sigma1[True], np.asarray(jac1[False]) / sigma1[False]]
     )
