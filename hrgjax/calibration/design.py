@@ -1368,7 +1368,9 @@ def design(
             z = {
                 "level": jnp.asarray(np.log(spread / (1 - spread))),
                 "angle": jnp.asarray(angles / ANGLE_UNIT_DEG),
-                "log_dur": jnp.full(n_meas, float(np.log(max(share - MIN_STATIC_S, 10.0)))),
+                # a strongly typed start (jnp.full of a Python float is weakly typed, Adam's
+                # first update is not: the step would compile twice per structure)
+                "log_dur": jnp.full(n_meas, np.log(max(share - MIN_STATIC_S, 10.0)), dtype=float),
                 "ramp_angle": jnp.asarray(ramp_angles / ANGLE_UNIT_DEG),
                 "ramp_stretch": jnp.zeros(max(n_lev - 1, 1)),
             }
