@@ -38,12 +38,22 @@ def main():
     from _common import machine, report
 
     print(f"machine: {machine()}")
-    print(f"design({a.budget_h:g}) as a fresh process's first call: {wall} s; criterion "
-          f"{value} (drift+warmup [°]), {levels} levels chosen of {structures} structures")
-    print(f"Adam-step programs compiled: {steps} (one per structure: {structures}); "
-          f"XLA compiles in all: {compiles}")
-    report(f"first design({a.budget_h:g}) in a fresh process", float(wall), "s",
-           "Adam-step compiles per structure", int(steps) / int(structures), "1")
+    print(
+        f"design({a.budget_h:g}) as a fresh process's first call: {wall} s; criterion "
+        f"{value} (drift+warmup [°]), {levels} levels chosen of {structures} structures"
+    )
+    print(
+        f"Adam-step programs compiled: {steps} (one per structure: {structures}); "
+        f"XLA compiles in all: {compiles}"
+    )
+    report(
+        f"first design({a.budget_h:g}) in a fresh process",
+        float(wall),
+        "s",
+        "Adam-step compiles per structure",
+        int(steps) / int(structures),
+        "1",
+    )
 
 
 if __name__ == "__main__":
