@@ -155,7 +155,7 @@ def test_each_segment_is_the_simulation_of_its_profile(quiet):
 
 
 def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, monkeypatch):
-    """Runs of rare lengths share a compiled group padded to a ladder of lengths: every
+    """Runs of rare lengths share a compiled group padded to a power of two of samples: every
     window rate the fit simulates (static, 10-s rotation windows, 300-s ramp windows, the
     ramp's last partial one) equals the unpadded layout's to 1e-6 °/h (the adaptive solver
     steps differently towards a later end: 3e-8 °/h seen), and the padded tail adds no
@@ -177,7 +177,7 @@ def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, mon
                        for k in (True, False)]  # fmt: skip
         lengths = sorted(g.t.shape[1] for g in groups)
         assert np.all(np.asarray(res[True])[weights[True] == 0] == 0.0)
-    assert lengths == [77, 91, 431]  # 71 samples → 77, 81 → 91, 401 → 431
+    assert lengths == [128, 128, 512]  # 71 samples → 128, 81 (0.5 s) → 128, 401 → 512
     # at rest: the static, the ramp's 300-s window and its partial 100-s one; moving: 4
     assert [r.size for r in out[1]] == [3, 4]
     for a, b in zip(out[1], out[100], strict=True):

@@ -434,7 +434,7 @@ def simulate_plan(
 
     Segments of equal length and output interval share one compiled simulator (vmapped in
     chunks of `CHUNK`, as `run_plan`); a length fewer than `physical.SHARED_LENGTH_RUNS`
-    segments share is run on to the next of a ladder of lengths (steps ≤ 19 %: the rate
+    segments share is run on to the next power of two of samples (the rate
     held, a ramp's temperature continuing) and cut back, so a plan of many different
     durations compiles a few simulators. `dt_out`: output interval per kind [s] (default
     `DT_OUT`: static 1 s, rotation 0.5 s, ramp 1 s). Each segment gets its own noise key
@@ -472,8 +472,8 @@ def simulate_plan(
                 f"dt_out={dt:g} s output intervals"
             )
     # Lengths shared by a few segments get a compiled simulator each; rarer ones run on to a
-    # ladder of lengths (as the physical fit's groups) and are cut back: a designed plan of
-    # 44 different durations compiles ≈ 10 simulators.
+    # power of two of samples (as the physical fit's groups) and are cut back: a designed
+    # plan of 44 different durations compiles 5 simulators.
     exact: dict[tuple[int, float], int] = {}
     for i, k in enumerate(plan.kind):
         exact[(n_out[i], dts[k])] = exact.get((n_out[i], dts[k]), 0) + 1
