@@ -19,8 +19,9 @@ window, a rotation is cut into `window_s` windows and a ramp (table at rest, tem
 moving) into `RAMP_WINDOW_S` windows, each a drift at its own temperature. Weights: the
 residual scatter of each kind of window (at rest, moving), an at-rest window of length L
 weighted by √(L / 60 s) (white rate noise: a long dwell tells more), re-estimated after the
-fit with each kind's own degrees of freedom (`_scatter_per_dof`); the parameter covariance is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced
-χ². Starting values come from harmonic fits at each temperature held for at least three
+fit with each kind's own degrees of freedom (`_scatter_per_dof`); the parameter covariance
+is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced χ² (≈ 1 with those weights).
+Starting values come from harmonic fits at each temperature held for at least three
 windows (a ramp's windows are not a level).
 
 The compensator's D and SF follow from the fitted gyro itself: the readout map
@@ -509,6 +510,8 @@ def _scatter_per_dof(residuals, jac, weights, iterations: int = 4) -> dict:
     j = {k: np.asarray(jac[k])[real[k]] for k in kinds}
     n = {k: r[k].size for k in kinds}
     sigma = {k: np.sqrt(np.mean(r[k] ** 2)) for k in kinds}
+    if not all(np.isfinite(s) and s > 0 for s in sigma.values()):
+        return sigma  # noise-free (or degenerate) data: nothing to correct
     for _ in range(iterations):
         q, _ = np.linalg.qr(np.concatenate([j[k] / sigma[k] for k in kinds]))
         leverage = np.sum(q**2, axis=1)
