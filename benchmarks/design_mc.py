@@ -19,10 +19,12 @@ and INS errors, achieved RMS over seeds (and grid / flights), their ratio (targe
 30 %), the spread over seeds, and the ratio to the seed plan's.
 
 The first seed of each plan compiles its simulators and the physical fit's groups (rare
-segment lengths share padded ones: a designed 12-h plan of 44 lengths ≈ 9 min on 2 cores, the
-seed plan ≈ 1 min); later seeds take seconds.
+segment lengths share padded ones: a designed 12-h plan of 44 lengths ≈ 1 min on 2 cores, the
+seed plan ≈ 1 min); later seeds take seconds. With the flights, each calibration's end-of-flight
+wave-angle errors (the compensated rate integrated over each flight) are compared with the
+`warmup` criterion, and with the drift as `drift+warmup` (the default design criterion).
 Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …]
-[--criterion drift|ins] [--model physical|empirical] [--levels 4 5 6 7] [--no-mlp]
+[--criterion drift|ins|drift+warmup] [--model physical|empirical] [--levels 4 5 6 7] [--no-mlp]
 [--no-ins]`. The predictions printed are the physical grey box's (the `empirical` model's
 criterion is a surrogate's, for designing, not a prediction of an MLP's error).
 """
@@ -51,6 +53,14 @@ def truth_on_test_grid(gyro):
     return w.wave_angle_deg, w.temperature_c, w.drift_dph
 
 
+def warmup_angles(comp, rec):
+    """Each level gyro's wave-angle error at the end of a flight [°]: its compensated rate
+    (the true rate is 0) integrated over the flight (trapezoid on the 1-s samples)."""
+    rate = comp.correct(rec)["rate_corrected_dps"]
+    t = np.asarray(rec["time_s"])
+    return [float(np.trapezoid(rate[i], t[i])) for i in rec.run_indices()[:2]]
+
+
 def monte_carlo(gyro, plan, seeds, truth, mlp=True, ins=True):
     """Per seed and compensator: achieved RMS of (compensated drift − truth) on the grid
     [°/h] and, with `ins`, the RMS over `design.INS_FLIGHTS` of the position error [km]."""
@@ -58,7 +68,8 @@ def monte_carlo(gyro, plan, seeds, truth, mlp=True, ins=True):
     ramps = np.flatnonzero(np.array(plan.kind) == "ramp")
     names = ("physical", "MLP", "MLP+Ṫ") if mlp and ramps.size else ("physical", "MLP")
     names = names if mlp else ("physical",)
-    out = {n: {"drift": [], "ins": []} for n in names}
+    out = {n: {"drift": [], "ins": [], "warmup": [], "drift+warmup": []} for n in names}
+    hours = float(np.mean([f.duration_s for f in d.INS_FLIGHTS])) / 3600.0
     # the flights: the calibration session's switch-on bias, nothing else (see the docstring)
     flying = eqx.tree_at(lambda g: g.noise, gyro, Noise(run_bias=gyro.noise.run_bias))
     for s in range(seeds):
@@ -87,6 +98,10 @@ def monte_carlo(gyro, plan, seeds, truth, mlp=True, ins=True):
             if ins:
                 pos = [navigation_errors(comp, rec, f)[1] / 1000.0 for f, rec in flights]
                 out[name]["ins"].append(float(np.sqrt(np.mean(np.square(pos)))))
+                warm = [a for _, rec in flights for a in warmup_angles(comp, rec)]
+                out[name]["warmup"].append(float(np.sqrt(np.mean(np.square(warm)))))
+                combined = np.hypot(out[name]["drift"][-1] * hours, out[name]["warmup"][-1])
+                out[name]["drift+warmup"].append(float(combined))
         took = time.perf_counter() - t0
         line = ", ".join(
             f"{k} {v['drift'][-1]:.4f} °/h" + (f" {v['ins'][-1]:.3f} km" if ins else "")
@@ -100,7 +115,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--budgets", type=float, nargs="*", default=[12.0])
-    ap.add_argument("--criterion", choices=("drift", "ins"), default="drift",
+    ap.add_argument("--criterion", choices=("drift", "ins", "drift+warmup"), default="drift",
                     help="the criterion the plans are designed for")  # fmt: skip
     ap.add_argument("--model", choices=d.MODELS, default="physical",
                     help="the model the plans are designed for")  # fmt: skip
@@ -127,6 +142,9 @@ def main():
         pred = {"drift": float(d.drift_error(plan, temperatures_c=grid_t, angles_deg=grid_a))}
         if not a.no_ins:
             pred["ins"] = float(d.ins_error(plan))
+            pred["warmup"] = float(d.warmup_error(plan))
+            hours_f = float(np.mean([f.duration_s for f in d.INS_FLIGHTS])) / 3600.0
+            pred["drift+warmup"] = float(np.hypot(pred["drift"] * hours_f, pred["warmup"]))
         hours = float(d.bench_time_h(plan))
         print(f"{name}: {hours:.2f} h, predicted " + ", ".join(f"{k} {v:.4g}" for k, v in
               pred.items()), flush=True)  # fmt: skip
@@ -137,7 +155,7 @@ def main():
     print(f"{a.seeds} Monte Carlo seeds per plan; drift: error vs the noise-free truth on the "
           "seed's test grid [°/h]; ins: position error after the 1-h warm-up flights [km]")  # fmt: skip
     print(
-        "plan                    bench [h]  error  predicted  compensator  achieved (RMS)  "
+        "plan                    bench [h]  error         predicted  compensator  achieved (RMS)  "
         "achieved/predicted  seed spread  / seed plan's   wall [s]"
     )
     # the seed plan's errors; MLP+Ṫ (no ramps in the seed plan to train it) against its MLP
@@ -150,10 +168,10 @@ def main():
                 base = ref.get((comp, measure), ref.get(("MLP", measure), np.nan))
                 # the predictions are the grey box's: a ratio only for the physical fit
                 ratio = f"{achieved / p:18.2f}" if comp == "physical" else f"{'—':>18s}"
-                print(f"{name:23s} {hours:9.2f}  {measure:5s}  {p:9.4g}  {comp:11s}  "
+                print(f"{name:23s} {hours:9.2f}  {measure:12s}  {p:9.4g}  {comp:11s}  "
                       f"{achieved:14.4g}  {ratio}  {np.std(x):11.4g}  "
                       f"{achieved / base:13.2f}  {took:9.0f}")  # fmt: skip
-                unit = "°/h" if measure == "drift" else "km"
+                unit = {"drift": "°/h", "ins": "km"}.get(measure, "°")
                 if comp == "physical":
                     report(f"{name}: achieved {measure} error, {comp}", achieved, unit,
                            "achieved / predicted", achieved / p, "within 30 %")  # fmt: skip
