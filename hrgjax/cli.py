@@ -214,6 +214,7 @@ def cmd_design(args) -> int:
     _check_output("--out", args.out, (".json",))
     _check_output("--plot", args.plot, (".png", ".pdf", ".svg"))
     levels = d.DEFAULT_LEVELS[args.model] if args.levels is None else args.levels
+    lr = d.DEFAULT_LEARNING_RATE if args.learning_rate is None else args.learning_rate
     print(
         f"hrgjax design: {args.budget_h:g} h of bench time, criterion {args.criterion} "
         f"({args.model} model), levels {','.join(map(str, levels))}"
@@ -222,7 +223,7 @@ def cmd_design(args) -> int:
     result = d.design(
         args.budget_h, criterion=args.criterion, levels=levels, statics=args.statics,
         rotations=args.rotations, ramps=not args.no_ramps, steps=args.steps, model=args.model,
-        key=jax.random.key(args.seed),
+        learning_rate=lr, key=jax.random.key(args.seed),
     )  # fmt: skip
     took = time.perf_counter() - t0
     unit = d.CRITERION_UNITS[args.criterion]
@@ -882,6 +883,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no measuring ramps between levels (slew and soak instead)")  # fmt: skip
     p.add_argument("--steps", type=POSITIVE_INT, default=300,
                    help="Adam steps per structure")  # fmt: skip
+    p.add_argument("--learning-rate", type=POSITIVE_FLOAT, default=None,
+                   help="Adam's learning rate (default: design.DEFAULT_LEARNING_RATE = 0.3)")  # fmt: skip
     p.add_argument(
         "--model", default="physical", choices=("physical", "empirical"),
         help="what the calibration will fit: physical (the grey box) or empirical (an MLP or "

@@ -361,7 +361,8 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     from its start; bad budgets are refused."""
     out, png = tmp_path / "plan.json", tmp_path / "plan.png"
     argv = ["design", "--budget-h", "2.5", "--levels", "2", "--statics", "2", "--rotations",
-            "1", "--steps", "40", "--out", str(out), "--plot", str(png)]  # fmt: skip
+            "1", "--steps", "40", "--learning-rate", str(d.DEFAULT_LEARNING_RATE), "--out", str(out),
+            "--plot", str(png)]  # fmt: skip
     with CompileCounter() as c:
         assert main(argv) == 0
     # one Adam-step program per structure: a weakly typed start compiled it twice (0 where
@@ -386,6 +387,8 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     with pytest.raises(ValueError, match="budget_h=0.5 cannot hold this structure"):
         d.design(0.5, levels=(2,), statics=2, rotations=1, steps=2)
     cli_fails(["design", "--budget-h", "-1"], capsys, r"--budget-h: expected a number > 0")
+    cli_fails(["design", "--budget-h", "2", "--learning-rate", "0"], capsys,
+              r"--learning-rate: expected a number > 0")  # fmt: skip
 
 
 def test_ins_criterion_is_the_schuler_response_to_the_posterior_integrated_by_diffrax():

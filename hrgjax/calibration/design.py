@@ -1143,6 +1143,13 @@ DEFAULT_LEVELS = {"physical": (2, 3, 4, 5), "empirical": (4, 5, 6, 7)}
 
 MIN_STATIC_S = 60.0
 """Shortest static segment a design makes [s] (one drift window)."""
+
+DEFAULT_LEARNING_RATE = 0.3
+"""Adam's default learning rate in `design` (on log(criterion), level temperatures in logits,
+angles in units of `ANGLE_UNIT_DEG`, log durations). Was 0.05 up to 2026-11-25: 300 steps
+were then not enough — the empirical surrogate's `ins` design at 36 h reached 28 km where 0.3
+reaches 11 km (6 and 7 levels: 28/47 → 18/11 km), and the grey box's 12-h `drift+warmup`
+design 0.00255 → 0.00247 ° (`benchmarks/README.md`, design section)."""
 MIN_ROTATION_S = 72.0
 """Shortest rotation [s] (one full turn at 5 °/s)."""
 DESIGN_RATE_DPS = 5.0
@@ -1297,7 +1304,7 @@ def design(
     ramps: bool = True,
     bench: BenchModel | None = None,
     steps: int = 300,
-    learning_rate: float = 0.05,
+    learning_rate: float = DEFAULT_LEARNING_RATE,
     values=None,
     arw: float | None = None,
     gauss_markov: tuple[float, float] | None = None,
@@ -1314,7 +1321,8 @@ def design(
     measures while the chamber moves (no slew or soak between levels then). Continuous
     quantities — the level temperatures (within `CHAMBER_RANGE_C`), every wave angle and
     duration, how much slower than the chamber each ramp runs — are optimised by Adam
-    (`steps`, `learning_rate`) on log(criterion) plus a quadratic penalty above the budget;
+    (`steps`, `learning_rate`: default `DEFAULT_LEARNING_RATE`) on log(criterion) plus a
+    quadratic penalty above the budget;
     the number of levels by trying each of `levels` (default `DEFAULT_LEVELS[model]`: 2–5
     levels for the grey box, 4–7 for the empirical surrogate, which must visit more
     temperatures; a small discrete search; a structure
