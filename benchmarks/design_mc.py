@@ -53,6 +53,11 @@ def truth_on_test_grid(gyro):
     return w.wave_angle_deg, w.temperature_c, w.drift_dph
 
 
+FLIGHT_H = float(np.mean([f.duration_s for f in d.INS_FLIGHTS])) / 3600.0
+"""Mean warm-up flight length [h]: the hour the drift acts for in `drift+warmup` (as the
+criterion's)."""
+
+
 def warmup_angles(comp, rec):
     """Each level gyro's wave-angle error at the end of a flight [°]: its compensated rate
     (the true rate is 0) integrated over the flight (trapezoid on the 1-s samples)."""
@@ -69,7 +74,6 @@ def monte_carlo(gyro, plan, seeds, truth, mlp=True, ins=True):
     names = ("physical", "MLP", "MLP+Ṫ") if mlp and ramps.size else ("physical", "MLP")
     names = names if mlp else ("physical",)
     out = {n: {"drift": [], "ins": [], "warmup": [], "drift+warmup": []} for n in names}
-    hours = float(np.mean([f.duration_s for f in d.INS_FLIGHTS])) / 3600.0
     # the flights: the calibration session's switch-on bias, nothing else (see the docstring)
     flying = eqx.tree_at(lambda g: g.noise, gyro, Noise(run_bias=gyro.noise.run_bias))
     for s in range(seeds):
@@ -100,7 +104,7 @@ def monte_carlo(gyro, plan, seeds, truth, mlp=True, ins=True):
                 out[name]["ins"].append(float(np.sqrt(np.mean(np.square(pos)))))
                 warm = [a for _, rec in flights for a in warmup_angles(comp, rec)]
                 out[name]["warmup"].append(float(np.sqrt(np.mean(np.square(warm)))))
-                combined = np.hypot(out[name]["drift"][-1] * hours, out[name]["warmup"][-1])
+                combined = np.hypot(out[name]["drift"][-1] * FLIGHT_H, out[name]["warmup"][-1])
                 out[name]["drift+warmup"].append(float(combined))
         took = time.perf_counter() - t0
         line = ", ".join(
@@ -143,8 +147,7 @@ def main():
         if not a.no_ins:
             pred["ins"] = float(d.ins_error(plan))
             pred["warmup"] = float(d.warmup_error(plan))
-            hours_f = float(np.mean([f.duration_s for f in d.INS_FLIGHTS])) / 3600.0
-            pred["drift+warmup"] = float(np.hypot(pred["drift"] * hours_f, pred["warmup"]))
+            pred["drift+warmup"] = float(np.hypot(pred["drift"] * FLIGHT_H, pred["warmup"]))
         hours = float(d.bench_time_h(plan))
         print(f"{name}: {hours:.2f} h, predicted " + ", ".join(f"{k} {v:.4g}" for k, v in
               pred.items()), flush=True)  # fmt: skip
