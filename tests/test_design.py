@@ -384,6 +384,9 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     result = d.design(2.5, levels=(2,), statics=2, rotations=1, steps=40)
     assert result.history[-1] < result.history[0] - 0.1  # log-criterion fell by > 10 %
     assert result.value == pytest.approx(value, rel=1e-9)  # deterministic for a key
+    for bad in (dict(learning_rate=-0.1), dict(learning_rate=float("nan")), dict(steps=0)):
+        with pytest.raises(ValueError, match=f"^{next(iter(bad))} must be"):
+            d.design(2.5, levels=(2,), **bad)
     with pytest.raises(ValueError, match="budget_h=0.5 cannot hold this structure"):
         d.design(0.5, levels=(2,), statics=2, rotations=1, steps=2)
     cli_fails(["design", "--budget-h", "-1"], capsys, r"--budget-h: expected a number > 0")

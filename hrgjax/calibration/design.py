@@ -1352,6 +1352,10 @@ def design(
         raise ValueError(f"levels must be positive integers; got {levels}")
     if statics < 1 or rotations < 0:
         raise ValueError("statics must be ≥ 1 and rotations ≥ 0 per level")
+    if not (isinstance(learning_rate, (int, float)) and 0 < learning_rate < math.inf):
+        raise ValueError(f"learning_rate must be a positive number; got {learning_rate!r}")
+    if not (isinstance(steps, int) and steps >= 1):
+        raise ValueError(f"steps must be a whole number ≥ 1; got {steps!r}")
     bench = BenchModel() if bench is None else bench
     values = _values(values, model)
     arw_v = _noise(arw, gauss_markov, angle_white)
