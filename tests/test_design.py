@@ -47,6 +47,15 @@ def test_seed_plan_costs_most_of_two_days_by_the_formula():
     assert hours["total"] == pytest.approx(sum(v for k, v in hours.items() if k != "total"))
     quick = d.seed_bench_plan(quick=True)
     assert quick.size == 2 * 3 * 19 and float(jnp.max(quick.duration_s)) == 120.0
+    # the same grid with 1-min dwells: 418 × 2 min less measuring, the transitions unchanged
+    short = d.seed_bench_plan(duration_s=60.0)
+    assert short.segments()[5] == {**plan.segments()[5], "duration_s": 60.0}
+    assert bench.breakdown_h(short)["measuring"] == pytest.approx(20.9 / 3)
+    saved = float(d.bench_time_h(plan) - d.bench_time_h(short))
+    assert saved == pytest.approx(418 * 120.0 / 3600, rel=1e-12)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="duration_s must be a positive run length"):
+            d.seed_bench_plan(duration_s=bad)
 
 
 def test_bench_time_gradient_equals_finite_differences_and_the_analytic_slope():

@@ -328,14 +328,21 @@ def bench_time_h(plan: BenchPlan, bench: BenchModel | None = None) -> jax.Array:
     return (BenchModel() if bench is None else bench).bench_time_s(plan) / 3600.0
 
 
-def seed_bench_plan(quick: bool = False, rate_dps: float = 5.0) -> BenchPlan:
+def seed_bench_plan(
+    quick: bool = False, rate_dps: float = 5.0, duration_s: float | None = None
+) -> BenchPlan:
     """The seed's calibration plan as one bench session: at each temperature (−40 → +60 °C),
     3-min static dwells at each wave angle (−90…+90° in 10° steps), then 3-min rotations at
-    `rate_dps` from each angle. `quick`: −40, +20, +60 °C and 2-min runs (as
-    `seed_plan(quick=True)`)."""
+    `rate_dps` [°/s] from each angle. `quick`: −40, +20, +60 °C and 2-min runs (as
+    `seed_plan(quick=True)`). `duration_s`: every run's length [s] instead (the same grid
+    with shorter or longer dwells)."""
     from .experiment import QUICK_DURATION, QUICK_TEMPERATURES
 
     temps, dur = (QUICK_TEMPERATURES, QUICK_DURATION) if quick else (SEED_TEMPERATURES, 180.0)
+    if duration_s is not None:
+        if not (np.isfinite(duration_s) and duration_s > 0):
+            raise ValueError(f"duration_s must be a positive run length [s]; got {duration_s}")
+        dur = float(duration_s)
     segs = []
     for t in temps:
         for kind in ("static", "rotation"):
