@@ -121,6 +121,8 @@ def rms_ratio(x, y=None):
     None, the standard error of RMS(x) relative to itself."""
     x2 = np.asarray(x) ** 2
     n, mx = x2.size, x2.mean()
+    if n < 2:  # one seed: no spread to estimate
+        return (1.0 if y is None else float(np.sqrt(mx / np.mean(np.square(y))))), float("nan")
     if y is None:
         return 1.0, 0.5 * np.std(x2, ddof=1) / (np.sqrt(n) * mx)
     y2 = np.asarray(y) ** 2
