@@ -1,7 +1,10 @@
 """Time to the first calibration of a designed plan: simulate it, fit the physical model —
 both compiling in a fresh process — with rare run lengths padded to a ladder of
-⌈2^(k/4)⌉ samples (before, kept here as `_ladder_before`) vs to powers of two (after,
-`physical._ladder`). Fewer, longer groups: fewer programs to compile, a little more to run.
+⌈2^(k/4)⌉ samples (`before`, kept here as `_ladder_before`), to powers of two (`pow2`,
+`physical._ladder`), and to powers of two with `simulate_plan`'s neighbouring lengths run as
+one where a compile costs more than the extra steps (`merged`, the default:
+`design._simulation_groups`). Fewer, longer groups: fewer programs to compile, a little more
+to run.
 
 The plan: `design(12.0)` (5 levels, 44 segments of many lengths; ≈ 2 min to design), or
 `--plan-file`. Each variant runs in its own process with the compile cache off, on the same
@@ -42,6 +45,8 @@ def child(plan_path, variant, out_path):
 
     if variant == "before":
         physical._ladder = _ladder_before  # simulate_plan imports it from physical per call
+    if variant in ("before", "pow2"):
+        d.MERGED_STEPS_MAX = 0  # no two lengths merged
     plan, _ = d.load_plan(plan_path)
     gyro = hg.presets.tvg3_like()
     t0 = time.perf_counter()
@@ -77,7 +82,7 @@ def main():
         d.save_plan(result.plan, plan_path, result.bench)
     env = {**os.environ, "HRGJAX_NO_CACHE": "1"}
     res = {}
-    for variant in ("before", "after"):
+    for variant in ("before", "pow2", "merged"):
         out = os.path.join(tmp, f"{variant}.json")
         code = (f"import sys; sys.path.insert(0, {os.path.dirname(__file__)!r}); "
                 f"import plan_first_calibration as m; m.child({plan_path!r}, {variant!r}, {out!r})")  # fmt: skip
@@ -85,31 +90,31 @@ def main():
                        stderr=subprocess.DEVNULL)  # fmt: skip
         with open(out) as f:
             res[variant] = json.load(f)
-    b, f = res["before"], res["after"]
     import numpy as np
 
-    diff = float(np.max(np.abs(np.subtract(b["wave"], f["wave"]))))
-    vb, vf = np.asarray(b["values"]), np.asarray(f["values"])
-    rel = float(np.max(np.abs(vb - vf) / np.maximum(np.abs(vb), 1e-300)))
+    b = res["before"]
     print(f"machine: {machine()}")
-    print(
-        f"plan: {plan_path}; simulated wave angle max diff {diff:.1e}°; fitted values max "
-        f"rel. diff {rel:.1e}"
-    )
+    print(f"plan: {plan_path}")
+    for name in ("pow2", "merged"):
+        f = res[name]
+        diff = float(np.max(np.abs(np.subtract(b["wave"], f["wave"]))))
+        vb, vf = np.asarray(b["values"]), np.asarray(f["values"])
+        rel = float(np.max(np.abs(vb - vf) / np.maximum(np.abs(vb), 1e-300)))
+        print(f"{name} vs before: simulated wave angle max diff {diff:.1e}°; fitted values "
+              f"max rel. diff {rel:.1e}")  # fmt: skip
     print(f"{'':8s} {'groups':>6} {'simulate [s]':>12} {'fit [s]':>8} {'first [s]':>9} "
           f"{'2nd seed: simulate, fit [s]':>28}")  # fmt: skip
     for name, r in res.items():
         print(f"{name:8s} {r['groups']:6d} {r['simulate']:12.1f} {r['fit']:8.1f} "
               f"{r['simulate'] + r['fit']:9.1f} {r['simulate2']:14.2f}, {r['fit2']:.2f}")  # fmt: skip
     first = lambda r: r["simulate"] + r["fit"]
-    report(
-        "first simulate_plan + physical fit of a designed 12-h plan",
-        first(f),
-        "s",
-        "after / before",
-        first(f) / first(b),
-        "",
-    )
+    p, m = res["pow2"], res["merged"]
+    report("first simulate_plan + physical fit of a designed 12-h plan", first(m), "s",
+           "merged / before", first(m) / first(b))  # fmt: skip
+    report("first simulate_plan of a designed 12-h plan", m["simulate"], "s",
+           "merged / powers of two alone", m["simulate"] / p["simulate"])  # fmt: skip
+    report("a later simulate_plan of the plan", m["simulate2"], "s",
+           "merged / powers of two alone", m["simulate2"] / p["simulate2"])  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -193,6 +193,47 @@ def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, mon
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-6 * hg.units.DEG_PER_H)
 
 
+def test_simulation_groups_merge_lengths_where_a_compile_costs_more(monkeypatch):
+    """simulate_plan's groups partition the segments; each runs at least as long as its
+    longest member; the seed plan keeps its two exact lengths; rare nearby rotation lengths
+    share one simulator; the full model's (whose steps are dear) are not merged; a dear
+    compile merges every length of one output interval up to the guard on estimated steps."""
+    segs = [
+        {
+            "kind": "rotation",
+            "temperature_c": 20.0,
+            "wave_angle_deg": 0.0,
+            "rate_dps": 5.0,
+            "duration_s": dur,
+        }
+        for dur in [121.0] * 4 + [122.0] * 4 + [128.0] * 2
+    ]
+    segs += [{"kind": "static", "temperature_c": 20.0, "wave_angle_deg": 0.0,
+              "duration_s": dur} for dur in (700.0, 1500.0, 3000.0)]  # fmt: skip
+    plan = d.BenchPlan.from_segments(segs)
+
+    def groups(plan, model="averaged"):
+        dts = dict(d.DT_OUT)
+        n_out = [round(float(t) / dts[k]) for t, k in zip(plan.duration_s, plan.kind, strict=True)]
+        out = d._simulation_groups(plan, n_out, dts, model)
+        members = sorted(m for v in out.values() for m in v)
+        assert members == list(range(plan.size))  # each segment exactly once
+        for (samples, dt), v in out.items():
+            assert all(samples >= n_out[m] + 1 and dts[plan.kind[m]] == dt for m in v)
+        return {k: len(v) for k, v in out.items()}
+
+    assert groups(d.seed_bench_plan()) == {(361, 0.5): 209, (181, 1.0): 209}
+    merged = groups(plan)
+    assert merged[(512, 0.5)] == 10 and len(merged) < 6
+    units = {(243, 0.5): 4, (245, 0.5): 4, (512, 0.5): 2, (1024, 1.0): 1, (2048, 1.0): 1,
+             (4096, 1.0): 1}  # fmt: skip
+    assert groups(plan, "full") == units
+    monkeypatch.setattr(d, "SIMULATOR_COMPILE_S", 1e6)  # compiling dear: one group per dt
+    assert groups(plan) == {(512, 0.5): 10, (4096, 1.0): 3}
+    monkeypatch.setattr(d, "MERGED_STEPS_MAX", 2000)  # but never past the step guard
+    assert groups(plan) == {(512, 0.5): 10, (1024, 1.0): 1, (2048, 1.0): 1, (4096, 1.0): 1}
+
+
 def test_simulate_plan_file_cli(tmp_path, quiet, capsys):
     plan = d.BenchPlan.from_segments(SEGMENTS)  # its ramp: 3 °C/min
     path = d.save_plan(plan, tmp_path / "plan.json", d.BenchModel(slew_c_per_min=5.0))

@@ -427,6 +427,91 @@ def _profiles(plan: BenchPlan, idx: np.ndarray, length_s: float | None = None) -
     )
 
 
+SIMULATOR_COMPILE_S = 3.5
+"""Seconds one batched simulator of `simulate_plan` takes to compile (averaged model, 2-core
+CPU: 3.1–4.8 s measured) — what running two groups of segment lengths as one saves, against
+the steps the shorter segments then run on for (`_simulation_groups`)."""
+
+STEP_S = (47e-6, 7.2e-6)
+"""Seconds per batched solver step of the averaged model: fixed + per member (2-core CPU, as
+`hrgjax._cost.OVERHEAD_MEMBERS`)."""
+
+
+RUNS_PER_COMPILE = 4.0
+"""How many times a plan is simulated per compile, as `_simulation_groups` weighs run time
+against compile time (a study simulates a plan a few times; a Monte Carlo, many)."""
+
+MERGED_STEPS_MAX = 2**13
+"""Estimated solver steps beyond which `_simulation_groups` merges no further (the averaged
+model's `max_steps` is 2¹⁶)."""
+
+
+def _chunk(members: int) -> int:
+    """Batch size for a group of `members` segments: a power of two up to `CHUNK`, so that
+    groups of one length and different sizes share a compiled simulator."""
+    from .physical import _ladder
+
+    return min(CHUNK, _ladder(members))
+
+
+def _simulation_groups(plan, n_out, dts, model) -> dict[tuple[int, float], list[int]]:
+    """Segments grouped by output samples and interval: `{(samples, dt): [segment, …]}`.
+
+    A length at least `physical.SHARED_LENGTH_RUNS` segments share is a group of its own; a
+    rarer one is padded to the next power of two of samples. Then, per output interval,
+    neighbouring groups (sorted by length) are merged where the estimated steps the shorter
+    segments run on for cost less than compiling another simulator: a partition of the
+    sorted groups by dynamic programming on compile (`SIMULATOR_COMPILE_S`) + run time
+    (`STEP_S`, steps by `hrgjax._cost.STEPS_PER_S` at the group's largest rate). Padded
+    segments are run on (rate held, a ramp's temperature continuing) and cut back. A designed
+    12-h plan: 7 groups → 3, its first `simulate_plan` in a fresh process 36.7 → 20.7 s, a
+    later one 0.4 → 0.9 s (`benchmarks/plan_first_calibration.py`). The full model's steps
+    are far dearer than a compile: its groups stay apart."""
+    from .._cost import STEPS_PER_S
+    from .physical import SHARED_LENGTH_RUNS, _ladder
+
+    exact: dict[tuple[int, float], int] = {}
+    for i, k in enumerate(plan.kind):
+        exact[(int(n_out[i]), dts[k])] = exact.get((int(n_out[i]), dts[k]), 0) + 1
+    units: dict[tuple[int, float], list[int]] = {}
+    for i, k in enumerate(plan.kind):
+        n, dt = int(n_out[i]), dts[k]
+        samples = n + 1 if exact[(n, dt)] >= SHARED_LENGTH_RUNS else _ladder(n + 1)
+        units.setdefault((samples, dt), []).append(i)
+    if model != "averaged":
+        return units
+    rate = np.abs(np.asarray(plan.rate_dps, dtype=float)) * DEG_PER_S * K_E_NOMINAL
+    a, b = STEPS_PER_S
+    groups: dict[tuple[int, float], list[int]] = {}
+    for dt in sorted({dt for _, dt in units}):
+        keys = sorted(u for u in units if u[1] == dt)
+
+        # cost[i][j]: units i..j−1 as one group, run to the longest (units[j−1])
+        def cost(i, j, keys=keys, dt=dt):
+            members = [m for u in keys[i:j] for m in units[u]]
+            seconds = (keys[j - 1][0] - 1) * dt
+            steps = seconds * (a + b * math.sqrt(float(np.max(rate[members]))))
+            if j - i > 1 and steps > MERGED_STEPS_MAX:
+                return math.inf  # far from simulate's max_steps, whatever the estimate's error
+            chunk = _chunk(len(members))
+            chunks = -(-len(members) // chunk)
+            run = chunks * steps * (STEP_S[0] + chunk * STEP_S[1])
+            return SIMULATOR_COMPILE_S + RUNS_PER_COMPILE * run
+
+        best, cut = [0.0] + [math.inf] * len(keys), [0] * (len(keys) + 1)
+        for j in range(1, len(keys) + 1):
+            for i in range(j):
+                c = best[i] + cost(i, j)
+                if c < best[j]:
+                    best[j], cut[j] = c, i
+        j = len(keys)
+        while j > 0:
+            i = cut[j]
+            groups[keys[j - 1]] = [m for u in keys[i:j] for m in units[u]]
+            j = i
+    return groups
+
+
 def simulate_plan(
     gyro: Gyro,
     plan: BenchPlan,
@@ -440,10 +525,11 @@ def simulate_plan(
     run-to-run bias drawn once from `bias_key`); segment i is run i of the data.
 
     Segments of equal length and output interval share one compiled simulator (vmapped in
-    chunks of `CHUNK`, as `run_plan`); a length fewer than `physical.SHARED_LENGTH_RUNS`
-    segments share is run on to the next power of two of samples (the rate
-    held, a ramp's temperature continuing) and cut back, so a plan of many different
-    durations compiles a few simulators. `dt_out`: output interval per kind [s] (default
+    chunks of up to `CHUNK`, as `run_plan`); a length fewer than
+    `physical.SHARED_LENGTH_RUNS` segments share is run on to the next power of two of
+    samples (the rate held, a ramp's temperature continuing) and cut back, and neighbouring
+    lengths are run as one where compiling another simulator would cost more than the
+    extra steps, so a plan of many different durations compiles a few simulators. `dt_out`: output interval per kind [s] (default
     `DT_OUT`: static 1 s, rotation 0.5 s, ramp 1 s). Each segment gets its own noise key
     (`jax.random.split(key, S)[i]`), so a segment's data do not depend on the other
     segments' keys."""
@@ -466,7 +552,6 @@ def simulate_plan(
         bias_key = k_bias if bias_key is None else bias_key
         keys = np.asarray(jax.random.key_data(jax.random.split(k_seg, plan.size)))
         impl = jax.random.key_impl(k_seg)
-    from .physical import SHARED_LENGTH_RUNS, _ladder
 
     durations = np.asarray(plan.duration_s, dtype=float)
     n_out = np.zeros(plan.size, dtype=int)
@@ -478,23 +563,13 @@ def simulate_plan(
                 f"segment {i} ({k}): duration_s={durations[i]:g} is not a whole number of "
                 f"dt_out={dt:g} s output intervals"
             )
-    # Lengths shared by a few segments get a compiled simulator each; rarer ones run on to a
-    # power of two of samples (as the physical fit's groups) and are cut back: a designed
-    # plan of 44 different durations compiles 5 simulators.
-    exact: dict[tuple[int, float], int] = {}
-    for i, k in enumerate(plan.kind):
-        exact[(n_out[i], dts[k])] = exact.get((n_out[i], dts[k]), 0) + 1
-    groups: dict[tuple[int, float], list[int]] = {}
-    for i, k in enumerate(plan.kind):
-        n, dt = int(n_out[i]), dts[k]
-        samples = n + 1 if exact[(n, dt)] >= SHARED_LENGTH_RUNS else _ladder(n + 1)
-        groups.setdefault((samples, dt), []).append(i)
+    groups = _simulation_groups(plan, n_out, dts, model)
     per_segment: list[dict | None] = [None] * plan.size
     with bar(plan.size, f"simulating {plan.size} segments", unit="segment") as progress:
         for (samples, dt), members in groups.items():
             idx = np.asarray(members)
             ts = device(np.arange(samples) * dt)
-            chunk = min(CHUNK, len(idx))
+            chunk = _chunk(len(idx))
             n_pad = -len(idx) % chunk
             padded = np.concatenate([idx, np.repeat(idx[-1:], n_pad)])
             for s in range(0, len(padded), chunk):
