@@ -1,9 +1,9 @@
 """Time to the first calibration of a designed plan: simulate it, fit the physical model —
 both compiling in a fresh process — with rare run lengths padded to a ladder of
 ⌈2^(k/4)⌉ samples (`before`, kept here as `_ladder_before`), to powers of two (`pow2`,
-`physical._ladder`), and to powers of two with `simulate_plan`'s neighbouring lengths run as
-one where a compile costs more than the extra steps (`merged`, the default:
-`design._simulation_groups`). Fewer, longer groups: fewer programs to compile, a little more
+`physical._ladder`), and to powers of two with neighbouring lengths run as one where a compile costs more than the
+extra steps (`merged`, the default: `design._simulation_groups` for `simulate_plan`,
+`physical._merged` for the fit). Fewer, longer groups: fewer programs to compile, a little more
 to run.
 
 The plan: `design(12.0)` (5 levels, 44 segments of many lengths; ≈ 2 min to design), or
@@ -47,6 +47,7 @@ def child(plan_path, variant, out_path):
         physical._ladder = _ladder_before  # simulate_plan imports it from physical per call
     if variant in ("before", "pow2"):
         d.MERGED_STEPS_MAX = 0  # no two lengths merged
+        physical._merged = lambda buckets, short: [(k[0], v) for k, v in buckets.items()]
     plan, _ = d.load_plan(plan_path)
     gyro = hg.presets.tvg3_like()
     t0 = time.perf_counter()
@@ -62,6 +63,7 @@ def child(plan_path, variant, out_path):
     with open(out_path, "w") as f:
         json.dump({"simulate": t1 - t0, "fit": t2 - t1, "simulate2": t3 - t2, "fit2": t4 - t3,
                    "groups": groups, "values": np.asarray(fit.values).tolist(),
+                   "sigma": np.sqrt(np.diag(np.asarray(fit.covariance))).tolist(),
                    "wave": np.asarray(data["wave_angle_deg"]).tolist()}, f)  # fmt: skip
 
 
@@ -100,8 +102,9 @@ def main():
         diff = float(np.max(np.abs(np.subtract(b["wave"], f["wave"]))))
         vb, vf = np.asarray(b["values"]), np.asarray(f["values"])
         rel = float(np.max(np.abs(vb - vf) / np.maximum(np.abs(vb), 1e-300)))
+        sig = float(np.max(np.abs(vb - vf) / np.asarray(b["sigma"])))
         print(f"{name} vs before: simulated wave angle max diff {diff:.1e}°; fitted values "
-              f"max rel. diff {rel:.1e}")  # fmt: skip
+              f"max rel. diff {rel:.1e}, max {sig:.1e} of their standard errors")  # fmt: skip
     print(f"{'':8s} {'groups':>6} {'simulate [s]':>12} {'fit [s]':>8} {'first [s]':>9} "
           f"{'2nd seed: simulate, fit [s]':>28}")  # fmt: skip
     for name, r in res.items():

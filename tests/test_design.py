@@ -164,7 +164,8 @@ def test_each_segment_is_the_simulation_of_its_profile(quiet):
 
 
 def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, monkeypatch):
-    """Runs of rare lengths share a compiled group padded to a power of two of samples: every
+    """Runs of rare lengths share a compiled group padded to a power of two of samples, and
+    neighbouring lengths one group where that is cheaper than compiling another: every
     window rate the fit simulates (static, 10-s rotation windows, 300-s ramp windows, the
     ramp's last partial one) equals the unpadded layout's to 1e-6 °/h (the adaptive solver
     steps differently towards a later end: 3e-8 °/h seen), and the padded tail adds no
@@ -176,20 +177,26 @@ def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, mon
     data = d.simulate_plan(quiet, d.BenchPlan.from_segments(segs))
     values = d.nominal_values()
     residuals = eqx.filter_jit(physical._residuals)
-    out = {}
-    for shared in (1, 100):  # every length its own group / every run padded
+    out, lengths = {}, {}
+    merged = physical._merged
+    apart = lambda buckets, short: [(k[0], v) for k, v in buckets.items()]  # noqa: E731
+    # every length its own group / every run padded and lengths merged (as the default does)
+    for shared, merge in ((1, apart), (100, merged)):
         monkeypatch.setattr(physical, "SHARED_LENGTH_RUNS", shared)
+        monkeypatch.setattr(physical, "_merged", merge)
         groups = physical._groups(data, 10.0, physical.K_E_NOMINAL)
         weights = physical._weights(groups)
         res = residuals(groups, values, physical.K_E_NOMINAL)
-        out[shared] = [np.asarray(res[k])[weights[k] > 0] / weights[k][weights[k] > 0]
-                       for k in (True, False)]  # fmt: skip
-        lengths = sorted(g.t.shape[1] for g in groups)
+        key = (shared, merge is merged)
+        out[key] = [np.asarray(res[k])[weights[k] > 0] / weights[k][weights[k] > 0]
+                    for k in (True, False)]  # fmt: skip
+        lengths[key] = sorted(g.t.shape[1] for g in groups)
         assert np.all(np.asarray(res[True])[weights[True] == 0] == 0.0)
-    assert lengths == [128, 128, 512]  # 71 samples → 128, 81 (0.5 s) → 128, 401 → 512
+    # 71 samples → 128, 81 (0.5 s) → 128, 401 → 512, and the 1-s ones merged: 71 → 512
+    assert lengths[(1, False)] == [71, 81, 401] and lengths[(100, True)] == [128, 512]
     # at rest: the static, the ramp's 300-s window and its partial 100-s one; moving: 4
-    assert [r.size for r in out[1]] == [3, 4]
-    for a, b in zip(out[1], out[100], strict=True):
+    assert [r.size for r in out[(1, False)]] == [3, 4]
+    for a, b in zip(out[(1, False)], out[(100, True)], strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-6 * hg.units.DEG_PER_H)
 
 

@@ -467,8 +467,7 @@ def _simulation_groups(plan, n_out, dts, model) -> dict[tuple[int, float], list[
     12-h plan: 7 groups → 3, its first `simulate_plan` in a fresh process 36.7 → 20.7 s, a
     later one 0.4 → 0.9 s (`benchmarks/plan_first_calibration.py`). The full model's steps
     are far dearer than a compile: its groups stay apart."""
-    from .._cost import STEPS_PER_S
-    from .physical import SHARED_LENGTH_RUNS, _ladder
+    from .physical import SHARED_LENGTH_RUNS, _ladder, _partition, steps_estimate
 
     exact: dict[tuple[int, float], int] = {}
     for i, k in enumerate(plan.kind):
@@ -480,35 +479,22 @@ def _simulation_groups(plan, n_out, dts, model) -> dict[tuple[int, float], list[
         units.setdefault((samples, dt), []).append(i)
     if model != "averaged":
         return units
-    rate = np.abs(np.asarray(plan.rate_dps, dtype=float)) * DEG_PER_S * K_E_NOMINAL
-    a, b = STEPS_PER_S
+    rate = np.abs(np.asarray(plan.rate_dps, dtype=float)) * DEG_PER_S
     groups: dict[tuple[int, float], list[int]] = {}
     for dt in sorted({dt for _, dt in units}):
         keys = sorted(u for u in units if u[1] == dt)
 
-        # cost[i][j]: units i..j−1 as one group, run to the longest (units[j−1])
-        def cost(i, j, keys=keys, dt=dt):
+        def cost(i, j, keys=keys, dt=dt):  # units i..j−1 as one group, run to the longest
             members = [m for u in keys[i:j] for m in units[u]]
-            seconds = (keys[j - 1][0] - 1) * dt
-            steps = seconds * (a + b * math.sqrt(float(np.max(rate[members]))))
-            if j - i > 1 and steps > MERGED_STEPS_MAX:
+            steps = steps_estimate((keys[j - 1][0] - 1) * dt, float(np.max(rate[members])))
+            if steps > MERGED_STEPS_MAX:
                 return math.inf  # far from simulate's max_steps, whatever the estimate's error
             chunk = _chunk(len(members))
-            chunks = -(-len(members) // chunk)
-            run = chunks * steps * (STEP_S[0] + chunk * STEP_S[1])
+            run = -(-len(members) // chunk) * steps * (STEP_S[0] + chunk * STEP_S[1])
             return SIMULATOR_COMPILE_S + RUNS_PER_COMPILE * run
 
-        best, cut = [0.0] + [math.inf] * len(keys), [0] * (len(keys) + 1)
-        for j in range(1, len(keys) + 1):
-            for i in range(j):
-                c = best[i] + cost(i, j)
-                if c < best[j]:
-                    best[j], cut[j] = c, i
-        j = len(keys)
-        while j > 0:
-            i = cut[j]
+        for i, j in _partition(len(keys), cost):
             groups[keys[j - 1]] = [m for u in keys[i:j] for m in units[u]]
-            j = i
     return groups
 
 

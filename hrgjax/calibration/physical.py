@@ -265,12 +265,52 @@ share one — a plan of 44 different segment lengths compiles 5 groups, not 44. 
 tail is simulated and masked out of every window: it costs run time (≤ 2×, on a simulator
 that runs in seconds) and saves compiling (about 3–4 s per group for the simulator, more
 for the fit's Jacobian program: a 12-h designed plan's first calibration 109–119 → 58–65 s;
-`benchmarks/README.md`)."""
+`benchmarks/README.md`). Neighbouring lengths are then run as one group where that is
+cheaper than compiling another (`_merged`: 7 groups → 5, first fit 50.6 → 34.2 s)."""
+
+
+FIT_COMPILE_S = 6.0
+"""Seconds one group adds to compiling the fit's residual-and-Jacobian program (2-core CPU: a
+12-h designed plan's 7 groups ≈ 42 s) — what running two groups of run lengths as one saves
+(`_merged`)."""
+
+FIT_EVALUATIONS = 20.0
+"""Residual-and-Jacobian evaluations a fit makes per compile, as `_merged` weighs them."""
+
+FIT_STEP_S = (100e-6, 60e-6)
+"""Seconds per step of a group's forward-mode Jacobian (fixed + per run): the tangents of
+every parameter ride along (2-core CPU, estimated)."""
 
 
 def _ladder(n: int) -> int:
     """Smallest power of two ≥ n."""
     return 1 << max(int(n) - 1, 0).bit_length()
+
+
+def _partition(count: int, cost) -> list[tuple[int, int]]:
+    """The cheapest split of `count` items (in their order) into contiguous runs `[i, j)`,
+    by dynamic programming on `cost(i, j)` (`math.inf`: not allowed; single items always
+    are). Groups of sorted run lengths: each run of them shares one compiled program."""
+    best, cut = [0.0] + [math.inf] * count, [0] * (count + 1)
+    for j in range(1, count + 1):
+        for i in range(j):
+            c = best[i] + (cost(i, j) if j - i > 1 else min(cost(i, j), 1e300))
+            if c < best[j]:
+                best[j], cut[j] = c, i
+    out, j = [], count
+    while j > 0:
+        out.append((cut[j], j))
+        j = cut[j]
+    return out[::-1]
+
+
+def steps_estimate(seconds: float, rate_rad_s: float) -> float:
+    """Accepted steps of the averaged model over `seconds` at a table rate [rad/s]
+    (`hrgjax._cost.STEPS_PER_S` at the nominal angular gain)."""
+    from .._cost import STEPS_PER_S
+
+    a, b = STEPS_PER_S
+    return seconds * (a + b * math.sqrt(abs(rate_rad_s) * K_E_NOMINAL))
 
 
 def _extend(x: np.ndarray, length: int, linear: bool) -> np.ndarray:
@@ -358,13 +398,43 @@ def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
                 "least 4 per window"
             )
     buckets: dict[tuple[int, float], list] = {}
+    short: set[tuple[int, float]] = set()
     for stack in stacks:
         n = stack.n_samples
         # runs shorter than a moving window keep their length (reduced as one window)
-        short = n < max(int(round(window_s / stack.dt)), 4)
-        length = n if short or len(stack) >= SHARED_LENGTH_RUNS else _ladder(n)
-        buckets.setdefault((length, round(stack.dt, 9)), []).append(stack)
-    return [_group(stacks, length, window_s, k_e) for (length, _), stacks in buckets.items()]
+        is_short = n < max(int(round(window_s / stack.dt)), 4)
+        length = n if is_short or len(stack) >= SHARED_LENGTH_RUNS else _ladder(n)
+        key = (length, round(stack.dt, 9))
+        buckets.setdefault(key, []).append(stack)
+        if is_short:
+            short.add(key)
+    return [_group(stacks, length, window_s, k_e) for length, stacks in _merged(buckets, short)]
+
+
+def _merged(buckets, short) -> list[tuple[int, list]]:
+    """Buckets of one sample interval, sorted by length, run as one group (padded to the
+    longest) where compiling another group's simulator and Jacobian (`FIT_COMPILE_S`) costs
+    more than the steps the shorter runs are simulated on for over a fit's evaluations
+    (`FIT_EVALUATIONS`, each with its tangents); runs shorter than a window stay apart."""
+    out = []
+    for dt in sorted({dt for _, dt in buckets}):
+        keys = sorted(k for k in buckets if k[1] == dt)
+
+        def cost(i, j, keys=keys, dt=dt):
+            if any(k in short for k in keys[i:j]) and j - i > 1:
+                return math.inf
+            stacks = [st for k in keys[i:j] for st in buckets[k]]
+            rows = sum(len(st) for st in stacks)
+            rate = max(float(np.max(np.abs(st.rate))) for st in stacks)
+            steps = steps_estimate((keys[j - 1][0] - 1) * dt, rate)
+            if steps > 2**13:
+                return math.inf
+            run = steps * (FIT_STEP_S[0] + rows * FIT_STEP_S[1])
+            return FIT_COMPILE_S + FIT_EVALUATIONS * run
+
+        for i, j in _partition(len(keys), cost):
+            out.append((keys[j - 1][0], [st for k in keys[i:j] for st in buckets[k]]))
+    return out
 
 
 def _group(stacks, length: int, window_s: float, k_e: float) -> _Group:
