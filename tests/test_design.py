@@ -200,6 +200,33 @@ def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, mon
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-6 * hg.units.DEG_PER_H)
 
 
+def test_partition_is_the_cheapest_split_by_brute_force():
+    """The dynamic programme behind the merged groups returns, for random costs (some
+    forbidden), a split into contiguous runs that costs what the cheapest of all 2^(n−1)
+    splits costs."""
+    import itertools
+    import math
+
+    from hrgjax.calibration.physical import _partition
+
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 5, 7):
+        table = rng.uniform(1, 10, (n + 1, n + 1))
+        forbidden = rng.uniform(size=(n + 1, n + 1)) < 0.2
+
+        def cost(i, j, table=table, forbidden=forbidden):
+            return math.inf if j - i > 1 and forbidden[i, j] else table[i, j]
+
+        parts = _partition(n, cost)
+        assert [a for a, _ in parts] == [0] + [b for _, b in parts[:-1]] and parts[-1][1] == n
+        brute = min(
+            sum(cost(a, b) for a, b in itertools.pairwise((0, *cuts, n)))
+            for k in range(n)
+            for cuts in itertools.combinations(range(1, n), k)
+        )
+        assert sum(cost(a, b) for a, b in parts) == pytest.approx(brute, rel=1e-12)
+
+
 def test_simulation_groups_merge_lengths_where_a_compile_costs_more(monkeypatch):
     """simulate_plan's groups partition the segments; each runs at least as long as its
     longest member; the seed plan keeps its two exact lengths; rare nearby rotation lengths

@@ -464,9 +464,9 @@ def _simulation_groups(plan, n_out, dts, model) -> dict[tuple[int, float], list[
     sorted groups by dynamic programming on compile (`SIMULATOR_COMPILE_S`) + run time
     (`STEP_S`, steps by `hrgjax._cost.STEPS_PER_S` at the group's largest rate). Padded
     segments are run on (rate held, a ramp's temperature continuing) and cut back. A designed
-    12-h plan: 7 groups → 3, its first `simulate_plan` in a fresh process 36.7 → 20.7 s, a
-    later one 0.4 → 0.9 s (`benchmarks/plan_first_calibration.py`). The full model's steps
-    are far dearer than a compile: its groups stay apart."""
+    12-h plan: 7 groups → 3, its first `simulate_plan` in a fresh process 35–38 → 16 s, a
+    later one 0.5–0.6 → 0.8–0.9 s (`benchmarks/plan_first_calibration.py`). The full
+    model's steps are far dearer than a compile: its groups stay apart."""
     from .physical import SHARED_LENGTH_RUNS, _ladder, _partition, steps_estimate
 
     exact: dict[tuple[int, float], int] = {}
@@ -487,7 +487,7 @@ def _simulation_groups(plan, n_out, dts, model) -> dict[tuple[int, float], list[
         def cost(i, j, keys=keys, dt=dt):  # units i..j−1 as one group, run to the longest
             members = [m for u in keys[i:j] for m in units[u]]
             steps = steps_estimate((keys[j - 1][0] - 1) * dt, float(np.max(rate[members])))
-            if steps > MERGED_STEPS_MAX:
+            if j - i > 1 and steps > MERGED_STEPS_MAX:
                 return math.inf  # far from simulate's max_steps, whatever the estimate's error
             chunk = _chunk(len(members))
             run = -(-len(members) // chunk) * steps * (STEP_S[0] + chunk * STEP_S[1])
@@ -515,8 +515,9 @@ def simulate_plan(
     `physical.SHARED_LENGTH_RUNS` segments share is run on to the next power of two of
     samples (the rate held, a ramp's temperature continuing) and cut back, and neighbouring
     lengths are run as one where compiling another simulator would cost more than the
-    extra steps, so a plan of many different durations compiles a few simulators. `dt_out`: output interval per kind [s] (default
-    `DT_OUT`: static 1 s, rotation 0.5 s, ramp 1 s). Each segment gets its own noise key
+    extra steps, so a plan of many different durations compiles a few simulators.
+    `dt_out`: output interval per kind [s] (default `DT_OUT`: static 1 s, rotation 0.5 s,
+    ramp 1 s). Each segment gets its own noise key
     (`jax.random.split(key, S)[i]`), so a segment's data do not depend on the other
     segments' keys."""
     require_x64("hrgjax.calibration.simulate_plan")

@@ -277,6 +277,9 @@ FIT_COMPILE_S = 6.0
 FIT_EVALUATIONS = 20.0
 """Residual-and-Jacobian evaluations a fit makes per compile, as `_merged` weighs them."""
 
+FIT_MERGED_STEPS_MAX = 2**13
+"""Estimated solver steps beyond which `_merged` merges no further."""
+
 FIT_STEP_S = (100e-6, 60e-6)
 """Seconds per step of a group's forward-mode Jacobian (fixed + per run): the tangents of
 every parameter ride along (2-core CPU, estimated)."""
@@ -289,12 +292,13 @@ def _ladder(n: int) -> int:
 
 def _partition(count: int, cost) -> list[tuple[int, int]]:
     """The cheapest split of `count` items (in their order) into contiguous runs `[i, j)`,
-    by dynamic programming on `cost(i, j)` (`math.inf`: not allowed; single items always
-    are). Groups of sorted run lengths: each run of them shares one compiled program."""
+    by dynamic programming on `cost(i, j)` (`math.inf`: not allowed; a single item's cost
+    must be finite). Groups of sorted run lengths: each run of them shares one compiled
+    program."""
     best, cut = [0.0] + [math.inf] * count, [0] * (count + 1)
     for j in range(1, count + 1):
         for i in range(j):
-            c = best[i] + (cost(i, j) if j - i > 1 else min(cost(i, j), 1e300))
+            c = best[i] + cost(i, j)
             if c < best[j]:
                 best[j], cut[j] = c, i
     out, j = [], count
@@ -427,7 +431,7 @@ def _merged(buckets, short) -> list[tuple[int, list]]:
             rows = sum(len(st) for st in stacks)
             rate = max(float(np.max(np.abs(st.rate))) for st in stacks)
             steps = steps_estimate((keys[j - 1][0] - 1) * dt, rate)
-            if steps > 2**13:
+            if j - i > 1 and steps > FIT_MERGED_STEPS_MAX:
                 return math.inf
             run = steps * (FIT_STEP_S[0] + rows * FIT_STEP_S[1])
             return FIT_COMPILE_S + FIT_EVALUATIONS * run
