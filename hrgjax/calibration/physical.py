@@ -266,23 +266,26 @@ tail is simulated and masked out of every window: it costs run time (≤ 2×, on
 that runs in seconds) and saves compiling (about 3–4 s per group for the simulator, more
 for the fit's Jacobian program: a 12-h designed plan's first calibration 109–119 → 58–65 s;
 `benchmarks/README.md`). Neighbouring lengths are then run as one group where that is
-cheaper than compiling another (`_merged`: 7 groups → 5, first fit 50.6 → 34.2 s)."""
+cheaper than compiling another (`_merged`: 7 groups → 3, first fit 49.0 → 21.4 s)."""
 
 
 FIT_COMPILE_S = 6.0
 """Seconds one group adds to compiling the fit's residual-and-Jacobian program (2-core CPU: a
-12-h designed plan's 7 groups ≈ 42 s) — what running two groups of run lengths as one saves
-(`_merged`)."""
+12-h designed plan's 7, 5 and 2 groups 45.7, 29.7 and 15.5 s) — what running two groups of
+run lengths as one saves (`_merged`)."""
 
-FIT_EVALUATIONS = 20.0
-"""Residual-and-Jacobian evaluations a fit makes per compile, as `_merged` weighs them."""
+FIT_EVALUATIONS = 40.0
+"""Residual-and-Jacobian evaluations per compile, as `_merged` weighs them against compiling:
+a fit makes ≈ 12 (its Levenberg–Marquardt steps, the weights, the covariance); this counts
+three fits per session."""
 
 FIT_MERGED_STEPS_MAX = 2**13
 """Estimated solver steps beyond which `_merged` merges no further."""
 
-FIT_STEP_S = (100e-6, 60e-6)
-"""Seconds per step of a group's forward-mode Jacobian (fixed + per run): the tangents of
-every parameter ride along (2-core CPU, estimated)."""
+FIT_STEP_S = (1e-6, 1.5e-6)
+"""Seconds per solver step of one evaluation of a group's residuals and Jacobian, fixed + per
+run (2-core CPU, fitted to a 12-h designed plan's layouts of 7, 5 and 2 groups: 99, 91 and
+435 ms per evaluation)."""
 
 
 def _ladder(n: int) -> int:
