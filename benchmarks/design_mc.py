@@ -19,8 +19,9 @@ and INS errors, achieved RMS over seeds (and grid / flights), their ratio (targe
 30 %), the spread over seeds, and the ratio to the seed plan's.
 
 The first seed of each plan compiles its simulators and the physical fit's groups (rare
-segment lengths share padded ones: a designed 12-h plan of 44 lengths ≈ 1 min on 2 cores, the
-seed plan ≈ 1 min); later seeds take seconds. With the flights, each calibration's end-of-flight
+segment lengths share padded ones, neighbouring lengths merged: a designed 12-h plan of 44
+lengths ≈ 40 s on 2 cores, `plan_first_calibration.py`; the seed plan ≈ 1 min); later seeds
+take seconds. With the flights, each calibration's end-of-flight
 wave-angle errors (the compensated rate integrated over each flight) are compared with the
 `warmup` criterion, and with the drift as `drift+warmup` (the default design criterion).
 Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …]
