@@ -54,23 +54,32 @@ def report(gyro, profile, model: str) -> None:
         raise Found(steps_estimate(gyro, profile, model))
 
 
+def steps_per_s(precession):
+    """Accepted steps per simulated second of the averaged model at precession rate
+    |k_eΩ| [rad/s] (`STEPS_PER_S`); a float or an array, traced or not."""
+    a, b = STEPS_PER_S
+    return a + b * precession**0.5
+
+
 def steps_estimate(gyro, profile, model: str = "averaged"):
     """Expected solver steps of `simulate(gyro, profile, model)` (module docstring): the run's
     length [s] times the steps per second of `STEPS_PER_S` (averaged) or of `CARRIER_STEPS`
     per carrier cycle (full), at the largest precession rate |k_eΩ| of the profile."""
     g = gyro.at(jnp.mean(profile.temperature))
     duration = profile.t[-1] - profile.t[0]
-    precession = jnp.max(jnp.abs(g.resonator.k_e * profile.rate))
-    a, b = STEPS_PER_S
-    per_s = a + b * jnp.sqrt(precession)
+    per_s = steps_per_s(jnp.max(jnp.abs(g.resonator.k_e * profile.rate)))
     if model != "averaged":
         per_s = per_s + CARRIER_STEPS * jnp.abs(g.resonator.omega) / (2 * np.pi)
     return duration * per_s
 
 
+CPU_STEP_S = (47e-6, 7.2e-6)
+"""Seconds per batched solver step of the averaged model on a CPU: fixed + per member
+(measured on 2 cores)."""
+
 OVERHEAD_MEMBERS = {"cpu": 6.0}
 """The fixed cost of one batched solver step, in members' worth of per-member work:
-measured on 2 CPU cores, 47 µs per step plus 7.2 µs per member (averaged model). Accelerators
+`CPU_STEP_S`, 47 µs per step plus 7.2 µs per member (averaged model). Accelerators
 run a step of any batch in about the time of one member: every other backend counts as
 10⁴, so there one batch is always chosen."""
 

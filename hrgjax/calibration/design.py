@@ -429,13 +429,10 @@ def _profiles(plan: BenchPlan, idx: np.ndarray, length_s: float | None = None) -
 
 SIMULATOR_COMPILE_S = 3.5
 """Seconds one batched simulator of `simulate_plan` takes to compile (averaged model, 2-core
-CPU: 3.1–4.8 s measured) — what running two groups of segment lengths as one saves, against
-the steps the shorter segments then run on for (`_simulation_groups`)."""
-
-STEP_S = (47e-6, 7.2e-6)
-"""Seconds per batched solver step of the averaged model: fixed + per member (2-core CPU, as
-`hrgjax._cost.OVERHEAD_MEMBERS`)."""
-
+CPU: `benchmarks/plan_first_calibration.py`'s first simulation of a 12-h plan in 7 groups
+39.0 s, in 3 groups 17.6 s, ≈ 5 s a group with its first run) — what running two groups of
+segment lengths as one saves, against the steps the shorter segments then run on for
+(`_simulation_groups`; steps cost `hrgjax._cost.CPU_STEP_S`)."""
 
 RUNS_PER_COMPILE = 4.0
 """How many times a plan is simulated per compile, as `_simulation_groups` weighs run time
@@ -462,11 +459,12 @@ def _simulation_groups(plan, n_out, dts, model) -> dict[tuple[int, float], list[
     neighbouring groups (sorted by length) are merged where the estimated steps the shorter
     segments run on for cost less than compiling another simulator: a partition of the
     sorted groups by dynamic programming on compile (`SIMULATOR_COMPILE_S`) + run time
-    (`STEP_S`, steps by `hrgjax._cost.STEPS_PER_S` at the group's largest rate). Padded
+    (`_cost.CPU_STEP_S`, steps by `physical.steps_estimate` at the group's largest rate). Padded
     segments are run on (rate held, a ramp's temperature continuing) and cut back. A designed
     12-h plan: 7 groups → 3, its first `simulate_plan` in a fresh process 35–38 → 16 s, a
     later one 0.5–0.6 → 0.8–0.9 s (`benchmarks/plan_first_calibration.py`). The full
     model's steps are far dearer than a compile: its groups stay apart."""
+    from .._cost import CPU_STEP_S
     from .physical import SHARED_LENGTH_RUNS, _ladder, _partition, steps_estimate
 
     exact: dict[tuple[int, float], int] = {}
@@ -490,7 +488,7 @@ def _simulation_groups(plan, n_out, dts, model) -> dict[tuple[int, float], list[
             if j - i > 1 and steps > MERGED_STEPS_MAX:
                 return math.inf  # far from simulate's max_steps, whatever the estimate's error
             chunk = _chunk(len(members))
-            run = -(-len(members) // chunk) * steps * (STEP_S[0] + chunk * STEP_S[1])
+            run = -(-len(members) // chunk) * steps * (CPU_STEP_S[0] + chunk * CPU_STEP_S[1])
             return SIMULATOR_COMPILE_S + RUNS_PER_COMPILE * run
 
         for i, j in _partition(len(keys), cost):

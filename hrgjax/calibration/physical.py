@@ -270,9 +270,9 @@ cheaper than compiling another (`_merged`: 7 groups → 3, first fit 49.0 → 21
 
 
 FIT_COMPILE_S = 6.0
-"""Seconds one group adds to compiling the fit's residual-and-Jacobian program (2-core CPU: a
-12-h designed plan's 7, 5 and 2 groups 45.7, 29.7 and 15.5 s) — what running two groups of
-run lengths as one saves (`_merged`)."""
+"""Seconds one group adds to compiling the fit's residual-and-Jacobian program (2-core CPU,
+`benchmarks/fit_group_layouts.py`: a 12-h designed plan's 7, 3 and 2 groups 46.8, 22.4 and
+16.1 s) — what running two groups of run lengths as one saves (`_merged`)."""
 
 FIT_EVALUATIONS = 40.0
 """Residual-and-Jacobian evaluations per compile, as `_merged` weighs them against compiling:
@@ -284,8 +284,8 @@ FIT_MERGED_STEPS_MAX = 2**13
 
 FIT_STEP_S = (1e-6, 1.5e-6)
 """Seconds per solver step of one evaluation of a group's residuals and Jacobian, fixed + per
-run (2-core CPU, fitted to a 12-h designed plan's layouts of 7, 5 and 2 groups: 99, 91 and
-435 ms per evaluation)."""
+run (2-core CPU, fitted to a 12-h designed plan's layouts of 7 and 2 groups; measured by
+`benchmarks/fit_group_layouts.py`: 80, 131 and 410 ms per evaluation for 7, 3 and 2)."""
 
 
 def _ladder(n: int) -> int:
@@ -313,11 +313,10 @@ def _partition(count: int, cost) -> list[tuple[int, int]]:
 
 def steps_estimate(seconds: float, rate_rad_s: float) -> float:
     """Accepted steps of the averaged model over `seconds` at a table rate [rad/s]
-    (`hrgjax._cost.STEPS_PER_S` at the nominal angular gain)."""
-    from .._cost import STEPS_PER_S
+    (`hrgjax._cost.steps_per_s` at the nominal angular gain)."""
+    from .._cost import steps_per_s
 
-    a, b = STEPS_PER_S
-    return seconds * (a + b * math.sqrt(abs(rate_rad_s) * K_E_NOMINAL))
+    return seconds * steps_per_s(abs(rate_rad_s) * K_E_NOMINAL)
 
 
 def _extend(x: np.ndarray, length: int, linear: bool) -> np.ndarray:
