@@ -1,0 +1,148 @@
+"""Two ways tried to cheapen the gradient of `gradient_cost.py`'s loss (19 rotation runs ×
+60 s, 8 resonator parameters), neither adopted — kept so that the figures in
+benchmarks/README.md can be rerun:
+
+1. **Parameters per member.** Under `vmap(lambda p: simulate(gyro, p))`, the shared gyro's
+   cotangents must be summed over the batch; made per member before the solve (here: the
+   parameters broadcast to the batch and vmapped with the profiles), the sums could move out
+   of the step loop. Compared: the fusions (XLA:CPU kernels) in each compiled while-loop
+   body, and gradient times, the variants interleaved.
+2. **Tsit5 with its stages written out.** diffrax runs a Runge–Kutta step's stages in an
+   inner checkpointed loop; `UnrolledTsit5` (below; diffrax's tableau and interpolation)
+   writes the seven stages out. Compared: forward and gradient times against diffrax's.
+
+Usage: `.venv/bin/python benchmarks/gradient_trials.py` (≈ 3 min on 2 cores).
+"""
+
+import re
+from typing import ClassVar
+
+import diffrax
+import equinox as eqx
+import equinox.internal as eqxi
+import jax
+import jax.numpy as jnp
+from _common import best_of, machine, report
+from diffrax._solver.tsit5 import _tsit5_tableau, _Tsit5Interpolation
+
+import hrgjax as hg
+
+_A = [tuple(float(x) for x in row) for row in _tsit5_tableau.a_lower]
+_B = tuple(float(x) for x in _tsit5_tableau.b_sol)
+_E = tuple(float(x) for x in _tsit5_tableau.b_error)
+_C = tuple(float(x) for x in _tsit5_tableau.c)
+
+
+def _combine(coeffs, ks, start=None):
+    out = start
+    for c, k in zip(coeffs, ks, strict=False):
+        if c != 0.0:
+            out = c * k if out is None else out + c * k
+    return out
+
+
+class UnrolledTsit5(diffrax.AbstractAdaptiveSolver):
+    """Tsitouras 5(4) with its stages written out (FSAL; diffrax's dense output)."""
+
+    term_structure: ClassVar = diffrax.AbstractTerm
+    interpolation_cls: ClassVar = _Tsit5Interpolation
+
+    def order(self, terms):
+        return 5
+
+    def init(self, terms, t0, t1, y0, args):
+        return terms.vf(t0, y0, args)
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        f0 = jax.lax.cond(eqxi.unvmap_any(made_jump), lambda: terms.vf(t0, y0, args),
+                          lambda: solver_state)  # fmt: skip
+        dt = terms.contr(t0, t1)
+        ks = [terms.prod(f0, dt)]
+        for i, row in enumerate(_A[:-1]):
+            ks.append(terms.vf_prod(t0 + _C[i] * dt, _combine(row, ks, y0), args, dt))
+        y1 = _combine(_B, ks, y0)
+        f1 = terms.vf(t1, y1, args)
+        ks.append(terms.prod(f1, dt))
+        dense = dict(y0=y0, y1=y1, k=jnp.stack(ks))
+        return y1, _combine(_E, ks), dense, f1, diffrax.RESULTS.successful
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+
+def loop_fusions(compiled) -> list[int]:
+    """Fusions in each while-loop body of a compiled program's HLO."""
+    text = compiled.as_text()
+    bodies = set(re.findall(r"body=%?([\w.\-]+)", text))
+    out = []
+    for comp in re.split(r"\n(?=\S.*\{\n)", text):
+        if comp.split()[0].lstrip("%") in bodies:
+            out.append(len(re.findall(r"=\s*\S+\s+fusion\(", comp)))
+    return sorted(out)
+
+
+def main():
+    gyro = hg.presets.tvg3_like(noise=False, temperature_laws=False)
+    plan = hg.calibration.rotation_plan((20.0,), duration_s=60.0)
+    ts = jnp.arange(0.0, 60.0 + 0.5, 1.0)
+    profiles = plan.profiles()
+    n = plan.size
+    target = jax.vmap(lambda p: hg.simulate(gyro, p, ts=ts).wave_angle)(profiles) + 1e-4
+    params, static = eqx.partition(gyro.resonator, eqx.is_inexact_array)
+
+    def with_params(p):
+        return eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(p, static))
+
+    def loss(params, solver=None):
+        g = with_params(params)
+        out = jax.vmap(lambda p: hg.simulate(g, p, ts=ts, solver=solver).wave_angle)(profiles)
+        return jnp.mean((out - target) ** 2)
+
+    def loss_per_member(params):
+        per = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n, *x.shape)), params)
+        one = lambda q, p: hg.simulate(with_params(q), p, ts=ts).wave_angle  # noqa: E731
+        return jnp.mean((jax.vmap(one)(per, profiles) - target) ** 2)
+
+    print(f"machine: {machine()}")
+    fwd = jax.jit(loss)
+    grads = {"shared": jax.jit(jax.grad(loss)), "per member": jax.jit(jax.grad(loss_per_member))}
+    g_ref = grads["shared"](params)
+    for name, g in grads.items():
+        diff = jax.tree_util.tree_map(lambda a, b: float(abs(a - b) / abs(a)), g(params), g_ref)
+        fusions = loop_fusions(g.lower(params).compile())
+        print(f"{name:10s}: fusions per while-loop body {fusions}; gradient vs shared, max rel. "
+              f"diff {max(jax.tree_util.tree_leaves(diff)):.1e}")  # fmt: skip
+    print("interleaved timings (best of 11 each), gradient / forward:")
+    ratios = {name: [] for name in grads}
+    for rep in range(3):
+        t_f = best_of(lambda: fwd(params), 11)
+        line = []
+        for name, g in grads.items():
+            t_g = best_of(lambda g=g: g(params), 11)
+            ratios[name].append(t_g / t_f)
+            line.append(f"{name} {t_g * 1e3:.1f} ms ({t_g / t_f:.2f}×)")
+        print(f"  run {rep}: forward {t_f * 1e3:.1f} ms; " + "; ".join(line))
+    for name, r in ratios.items():
+        report(f"gradient / forward, parameters {name}", min(r), "×", "worst of 3 runs", max(r))
+
+    fwd_u = jax.jit(lambda p: loss(p, UnrolledTsit5()))
+    grad_u = jax.jit(jax.grad(lambda p: loss(p, UnrolledTsit5())))
+    print(f"loss: diffrax Tsit5 {float(fwd(params)):.6e}, unrolled {float(fwd_u(params)):.6e}")
+    print("interleaved timings (best of 11 each):")
+    f_ratio, g_ratio = [], []
+    for rep in range(3):
+        tf0, tf1 = best_of(lambda: fwd(params), 11), best_of(lambda: fwd_u(params), 11)
+        tg0 = best_of(lambda: grads["shared"](params), 11)
+        tg1 = best_of(lambda: grad_u(params), 11)
+        f_ratio.append(tf1 / tf0)
+        g_ratio.append(tg1 / tg0)
+        print(f"  run {rep}: forward {tf0 * 1e3:.1f} → {tf1 * 1e3:.1f} ms ({tf1 / tf0:.2f}×), "
+              f"gradient {tg0 * 1e3:.1f} → {tg1 * 1e3:.1f} ms ({tg1 / tg0:.2f}×)")  # fmt: skip
+    report("forward, Tsit5 stages written out", min(f_ratio), "×", "/ diffrax Tsit5, worst",
+           max(f_ratio))  # fmt: skip
+    report("gradient, Tsit5 stages written out", min(g_ratio), "×", "/ diffrax Tsit5, worst",
+           max(g_ratio))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
