@@ -1,0 +1,145 @@
+"""The GPU beside the same machine's CPU, batch by batch (issue 20): where does each pay?
+
+Each backend runs in its own process: the GPU (one device) and the CPU with one forced device
+per core (`hg.sweep` shards a batch over them, so the CPU side uses every core). Per backend:
+
+- averaged model, 60-s runs at rates 0.1–400 °/s × temperatures −40…60 °C through `hg.sweep`,
+  batches of 64, 1 024 and 10 000 members;
+- one averaged run of 180 s at 10 °/s (`simulate` under `eqx.filter_jit`, one device);
+- the full (carrier-resolving) model: one run of 0.05 s on fixed steps, and batches of 256
+  runs of 0.05 s (rates 0.1–400 °/s) on fixed steps and adaptive (Dopri8).
+
+Printed: compile + first call and the best later call, the GPU / CPU speed-up of each row and
+the largest difference between the backends' results (relative to the largest value).
+Without a GPU only the CPU column is printed.
+
+Usage: `.venv/bin/python benchmarks/gpu_backend.py [--quick]` (`--quick`: smaller batches,
+to check the script).
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+QUICK = "--quick" in sys.argv
+AVG_SIZES = ((4, 16), (8, 32)) if QUICK else ((4, 16), (16, 64), (100, 100))  # T × rate
+FULL_MEMBERS = 16 if QUICK else 256
+FULL_S, AVG_S, SINGLE_S = 0.05, 60.0, 180.0  # run lengths [s]
+
+
+def child(out_path):
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    from _common import best_of, first_call, machine
+
+    import hrgjax as hg
+
+    gyro = hg.presets.tvg3_like(noise=False)
+    rows, results = {}, {}
+
+    def timed(name, fn, repeat=3):
+        repeat = 1 if "10000" in name else repeat  # the CPU side takes ~10 s a call
+        first, value = first_call(fn)
+        rows[name] = {"first_s": first, "wall_s": best_of(fn, repeat)}
+        results[name] = np.asarray(jax.tree_util.tree_leaves(value)[0]).ravel()
+        print(f"  {name}: {rows[name]['wall_s']:.4f} s (first {first:.1f} s)", flush=True)
+
+    def averaged(temperature_c, rate_dps):
+        prof = hg.Profile.constant_rate(rate_dps, AVG_S, temperature_c)
+        return hg.simulate(gyro, prof, dt_out=AVG_S).wave_angle[-1]
+
+    for n_t, n_w in AVG_SIZES:
+        T = jnp.linspace(-40.0, 60.0, n_t)
+        W = jnp.geomspace(0.1, 400.0, n_w)
+        timed(f"averaged × {n_t * n_w}", lambda T=T, W=W: hg.sweep(averaged, temperature_c=T,
+                                                                    rate_dps=W))  # fmt: skip
+
+    single = eqx.filter_jit(
+        lambda g, rate: hg.simulate(g, hg.Profile.constant_rate(rate, SINGLE_S, 20.0)).wave_angle
+    )
+    timed("averaged, one run of 180 s", lambda: single(gyro, jnp.asarray(10.0)), repeat=5)
+
+    ts = np.array([FULL_S])
+
+    def full(rate_dps, fixed):
+        prof = hg.Profile.constant_rate(rate_dps, FULL_S, wave_angle0_deg=10.0)
+        kw = {"fixed_step": "auto"} if fixed else {}
+        return hg.simulate(gyro, prof, "full", ts=ts, **kw).wave_angle[-1]
+
+    one_full = eqx.filter_jit(lambda rate: full(rate, True))
+    timed("full, one run of 0.05 s, fixed steps", lambda: one_full(jnp.asarray(10.0)))
+    R = jnp.geomspace(0.1, 400.0, FULL_MEMBERS)
+    for fixed in (True, False):
+        f = lambda rate_dps, fixed=fixed: full(rate_dps, fixed)  # noqa: E731
+        name = f"full × {FULL_MEMBERS}, {'fixed steps' if fixed else 'adaptive'}"
+        timed(name, lambda f=f: hg.sweep(f, rate_dps=R), repeat=2)
+
+    dev = jax.devices()[0]
+    meta = {"machine": machine(), "platform": dev.platform, "kind": dev.device_kind,
+            "devices": jax.device_count()}  # fmt: skip
+    with open(out_path, "w") as fh:
+        json.dump({"meta": meta, "rows": rows}, fh)
+    np.savez(out_path + ".npz", **{str(i): v for i, v in enumerate(results.values())})
+
+
+def spawn(platform, tmp):
+    path = os.path.join(tmp, f"{platform}.json")
+    env = dict(os.environ, JAX_PLATFORMS=platform)
+    if platform == "cpu":
+        env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={os.cpu_count()}"
+    print(f"{platform}:", flush=True)
+    args = [sys.executable, __file__, "--child", path] + (["--quick"] if QUICK else [])
+    subprocess.run(args, env=env, check=True)
+    import numpy as np
+
+    res = json.load(open(path))
+    arrays = np.load(path + ".npz")
+    res["results"] = [arrays[str(i)] for i in range(len(arrays.files))]
+    return res
+
+
+def main():
+    from _common import report
+
+    probe = "import jax; print(jax.default_backend())"
+    backend = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    gpu = backend.stdout.strip() == "gpu"
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = {"cpu": spawn("cpu", tmp)}
+        if gpu:
+            runs["gpu"] = spawn("cuda", tmp)
+    cpu = runs["cpu"]
+    for name, r in runs.items():
+        print(f"{name}: {r['meta']['machine']}")
+    head = f"{'run':42s} {'CPU [s]':>9} {'(first)':>8}"
+    if gpu:
+        head += f" {'GPU [s]':>9} {'(first)':>8} {'GPU/CPU':>8} {'max rel. Δ':>11}"
+    print(head)
+    for i, (name, c) in enumerate(cpu["rows"].items()):
+        line = f"{name:42s} {c['wall_s']:9.4f} {c['first_s']:8.1f}"
+        if gpu:
+            g = runs["gpu"]["rows"][name]
+            a, b = cpu["results"][i], runs["gpu"]["results"][i]
+            delta = float(np.max(np.abs(a - b)) / np.max(np.abs(a)))
+            speed = c["wall_s"] / g["wall_s"]
+            line += f" {g['wall_s']:9.4f} {g['first_s']:8.1f} {speed:7.2f}× {delta:11.1e}"
+            report(f"{name} on {runs['gpu']['meta']['kind']}", g["wall_s"], "s",
+                   f"speed-up vs {cpu['meta']['devices']} CPU cores", speed)  # fmt: skip
+        print(line)
+
+
+if __name__ == "__main__":
+    import numpy as np
+
+    if "--child" in sys.argv:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+        child(sys.argv[sys.argv.index("--child") + 1])
+    else:
+        main()
