@@ -22,7 +22,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 
 QUICK = "--quick" in sys.argv
 AVG_SIZES = ((4, 16), (8, 32)) if QUICK else ((4, 16), (16, 64), (100, 100))  # T × rate
