@@ -257,9 +257,10 @@ def _export(fn, leaves, treedef, dynamic, impls):
         specs.append(jax.ShapeDtypeStruct(np.shape(x), x.dtype, weak_type=weak))
     # The key pins the exact jax and jaxlib versions, so custom calls (LAPACK's) need no
     # compatibility across versions: "ALL" lifts jax.export's check for them.
+    # No `platforms=`: jax.export's default is this process's lowering platform ("cuda" or
+    # "rocm" on a GPU, where `jax.default_backend()` says "gpu", which export refuses).
     exported = jax.export.export(
         jax.jit(flat),
-        platforms=[jax.default_backend()],
         disabled_checks=[jax.export.DisabledSafetyCheck.custom_call("ALL")],
     )(*specs)
     template = out_box[0]
