@@ -365,6 +365,10 @@ def call(name: str, fn, args, kwargs):
     where = folder()
     if where is None or jax.config.jax_disable_jit or not _can_serialise():
         return _NONE
+    # Inside `jax.default_device(...)` (say the CPU of a GPU machine) the call must run where
+    # the caller put it, but a program is exported for the default backend's platform: trace.
+    if jax.config.jax_default_device is not None:
+        return _NONE
     if not _trusted_module(fn):  # code the source hash does not cover
         return _NONE
     leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))

@@ -165,3 +165,19 @@ def test_export_keys_spell_out_static_values_and_refuse_unknown_code():
     # Key arrays cross the boundary as their key data.
     _, dynamic, impls = key(jax.random.key(0))
     assert dynamic == (0,) and impls[0] is not None
+
+
+def test_exported_programs_are_bypassed_inside_a_default_device_context():
+    """`jax.default_device(cpu)` on a GPU machine must run the call on the CPU, but an exported
+    program is for the default backend's platform: inside such a context the call traces."""
+    from hrgjax import _export
+
+    hg.enable_cache()
+    x = jax.numpy.linspace(0.0, 1.0, 5)
+    out = _export.call("sin", jax.numpy.sin, (x,), {})
+    assert out is not _export._NONE  # exported (the suite runs with the cache on)
+    np.testing.assert_array_equal(out, np.sin(np.asarray(x)))
+    with jax.default_device(jax.devices("cpu")[0]):
+        assert _export.call("sin", jax.numpy.sin, (x,), {}) is _export._NONE
+        rec = hg.simulate(hg.presets.tvg3_like(noise=False), hg.Profile.constant_rate(2.0, 1.0))
+    assert rec.wave_angle.shape == (11,)
