@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# The test suite on a GPU machine in one call, its log kept even when cut off:
+#   bash benchmarks/on_gpu.sh [pytest args]   (log in $OUT/tests.log, else out/tests.log;
+#   PYTHON, TEST_S (time limit, s) and WORKERS override python3, 420 and 14)
+# Test-only packages the machine lacks (allantools, imucal, h5netcdf) travel as wheels in
+# .whl/ (see the device tool's notes); without them those tests are skipped.
+set -u
+if ls .whl/*.whl > /dev/null 2>&1; then
+  "${PYTHON:-python3}" -m pip install -q --no-index --no-deps --no-compile --target /tmp/site .whl/*.whl \
+    && export PYTHONPATH=/tmp/site:${PYTHONPATH:-}
+fi
+export PYTHONPATH=$PWD:${PYTHONPATH:-} PYTHONUNBUFFERED=1
+export XLA_PYTHON_CLIENT_PREALLOCATE=false  # many workers share one GPU
+log=${OUT:-out}/tests.log
+mkdir -p "$(dirname "$log")"
+# -v: one line per test as it ends, so a run cut off by its time limit still names its failures.
+timeout "${TEST_S:-420}" "${PYTHON:-python3}" -m pytest -v -n "${WORKERS:-14}" --dist loadfile \
+  -p no:cacheprovider --durations=15 "$@" > "$log" 2>&1
+echo "pytest exit $?"
+grep -E " (FAILED|ERROR) " "$log" | sed 's/^\[gw[0-9]*\] *\[ *[0-9]*%\] *//' | sort -u
+tail -3 "$log"
