@@ -23,29 +23,38 @@ import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 from _common import best_of, machine, report
-from diffrax._solver.tsit5 import _tsit5_tableau, _Tsit5Interpolation
 
 import hrgjax as hg
 
-_A = [tuple(float(x) for x in row) for row in _tsit5_tableau.a_lower]
-_B = tuple(float(x) for x in _tsit5_tableau.b_sol)
-_E = tuple(float(x) for x in _tsit5_tableau.b_error)
-_C = tuple(float(x) for x in _tsit5_tableau.c)
+_TABLEAU = diffrax.Tsit5.tableau
+_A = tuple(tuple(float(x) for x in row) for row in _TABLEAU.a_lower)
+_B = tuple(float(x) for x in _TABLEAU.b_sol)
+_E = tuple(float(x) for x in _TABLEAU.b_error)
+_C = tuple(float(x) for x in _TABLEAU.c)
 
 
 def _combine(coeffs, ks, start=None):
-    out = start
-    for c, k in zip(coeffs, ks, strict=False):
-        if c != 0.0:
-            out = c * k if out is None else out + c * k
-    return out
+    """start + Σ coeffs[i] · ks[i] over pytrees, skipping zero coefficients."""
+    terms = [(c, k) for c, k in zip(coeffs, ks, strict=False) if c != 0.0]
+
+    def leaf(s, *k):
+        out = s
+        for (c, _), x in zip(terms, k, strict=True):
+            out = c * x if out is None else out + c * x
+        return out
+
+    if start is None:
+        return jax.tree.map(lambda *k: leaf(None, *k), *[k for _, k in terms])
+    return jax.tree.map(leaf, start, *[k for _, k in terms])
 
 
 class UnrolledTsit5(diffrax.AbstractAdaptiveSolver):
-    """Tsitouras 5(4) with its stages written out (FSAL; diffrax's dense output)."""
+    """Tsitouras' 5(4) Runge–Kutta pair, diffrax's `Tsit5` with the stages written out: a
+    drop-in for `diffrax.Tsit5()` on ODE terms (same tableau, error estimate, FSAL handling and
+    dense output; diffrax's public `Tsit5.tableau` and `Tsit5.interpolation_cls`)."""
 
     term_structure: ClassVar = diffrax.AbstractTerm
-    interpolation_cls: ClassVar = _Tsit5Interpolation
+    interpolation_cls: ClassVar = diffrax.Tsit5.interpolation_cls
 
     def order(self, terms):
         return 5
@@ -54,16 +63,18 @@ class UnrolledTsit5(diffrax.AbstractAdaptiveSolver):
         return terms.vf(t0, y0, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        # After a jump in the vector field (a profile knot) the last stage of the previous
+        # step is stale: evaluate afresh, as diffrax's FSAL solvers do.
         f0 = jax.lax.cond(eqxi.unvmap_any(made_jump), lambda: terms.vf(t0, y0, args),
                           lambda: solver_state)  # fmt: skip
         dt = terms.contr(t0, t1)
         ks = [terms.prod(f0, dt)]
-        for i, row in enumerate(_A[:-1]):
+        for i, row in enumerate(_A[:-1]):  # the last row is b (FSAL): y1 below
             ks.append(terms.vf_prod(t0 + _C[i] * dt, _combine(row, ks, y0), args, dt))
         y1 = _combine(_B, ks, y0)
         f1 = terms.vf(t1, y1, args)
         ks.append(terms.prod(f1, dt))
-        dense = dict(y0=y0, y1=y1, k=jnp.stack(ks))
+        dense = dict(y0=y0, y1=y1, k=jax.tree.map(lambda *k: jnp.stack(k), *ks))
         return y1, _combine(_E, ks), dense, f1, diffrax.RESULTS.successful
 
     def func(self, terms, t0, y0, args):
