@@ -92,6 +92,16 @@ def device(x, dtype=None) -> jax.Array:
     return jax.device_put(np.asarray(x, dtype=dtype))
 
 
+def _top_level() -> bool:
+    """Whether no trace is active (no caller's jit/vmap/grad around this call, even one whose
+    inputs are all closed-over constants); False where this JAX cannot tell."""
+    try:
+        from jax._src.core import trace_state_clean
+    except ImportError:  # pragma: no cover - a future JAX
+        return False
+    return trace_state_clean()
+
+
 def _is_traced(tree) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
@@ -174,7 +184,23 @@ class Unchecked(Check):
         return out
 
 
-def program(fn=None, *, check: Check | None = None, error=RuntimeError, export=True):
+def single_run_device():
+    """Where an eager single simulation runs: the CPU when JAX's default backend is an
+    accelerator and the caller has chosen no device (`jax.default_device`), else None (JAX's
+    default). One trajectory steps sequentially, each step a few small kernels: beside an
+    NVIDIA H200 its 16-core host ran one averaged 180-s run in 11 ms against the GPU's 2.2 s,
+    a full-model run 25× faster (benchmarks/gpu_backend.py, docs/scaling.md)."""
+    if jax.config.jax_default_device is not None or jax.default_backend() == "cpu":
+        return None
+    try:
+        return jax.devices("cpu")[0]
+    except RuntimeError:  # JAX_PLATFORMS without the CPU
+        return None
+
+
+def program(
+    fn=None, *, check: Check | None = None, error=RuntimeError, export=True, single_run=False
+):
     """Decorate `fn` as a compiled, callback-free program (module docstring).
 
     **Arguments:**
@@ -183,9 +209,13 @@ def program(fn=None, *, check: Check | None = None, error=RuntimeError, export=T
     - `error`: the exception type raised on the host.
     - `export`: keep the traced program with `jax.export` when the compile cache is on
       (`hrgjax._export`), so a later process skips tracing it.
+    - `single_run`: `fn` is one sequential trajectory: an eager call (not under the caller's
+      own trace) runs on `single_run_device()`.
     """
     if fn is None:
-        return functools.partial(program, check=check, error=error, export=export)
+        return functools.partial(
+            program, check=check, error=error, export=export, single_run=single_run
+        )
     check = Check(fn.__name__.lstrip("_")) if check is None else check
     name = f"{fn.__module__}.{fn.__qualname__}"
     compiled = eqx.filter_jit(fn)
@@ -194,9 +224,12 @@ def program(fn=None, *, check: Check | None = None, error=RuntimeError, export=T
     def call(*args, **kwargs):
         if tracing_callback_free():
             return compiled(*args, **kwargs)
-        with _callback_free():
+        traced = _is_traced((args, kwargs))
+        device = single_run_device() if single_run and _top_level() else None
+        place = contextlib.nullcontext() if device is None else jax.default_device(device)
+        with _callback_free(), place:
             out = _export.NONE
-            if export and not _is_traced((args, kwargs)):
+            if export and not traced:
                 out = _export.call(name, fn, args, kwargs)
             if out is _export.NONE:
                 out = compiled(*args, **kwargs)

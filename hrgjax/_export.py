@@ -229,7 +229,26 @@ def _signature(name: str, leaves, treedef):
     return key, tuple(dynamic), tuple(impls)
 
 
-def _export(fn, leaves, treedef, dynamic, impls):
+def _default_platform() -> str:
+    """The platform JAX lowers for by default ("cpu", "cuda", "rocm", "tpu"; not
+    `jax.default_backend()`, which says "gpu")."""
+    default = getattr(jax.export, "default_export_platform", None)
+    return default() if default is not None else jax.default_backend()
+
+
+def _platform() -> str | None:
+    """The platform this call will run on: the default one, or "cpu" inside
+    `jax.default_device(a CPU device)` (`hrgjax._compiled` runs single simulations there on an
+    accelerator's machine); None inside `jax.default_device` of another device, whose call is
+    traced rather than exported."""
+    device = jax.config.jax_default_device
+    if device is None:
+        return _default_platform()
+    name = device if isinstance(device, str) else device.platform
+    return "cpu" if name == "cpu" else None
+
+
+def _export(fn, leaves, treedef, dynamic, impls, platform):
     out_box = []
 
     def flat(*values):
@@ -257,10 +276,11 @@ def _export(fn, leaves, treedef, dynamic, impls):
         specs.append(jax.ShapeDtypeStruct(np.shape(x), x.dtype, weak_type=weak))
     # The key pins the exact jax and jaxlib versions, so custom calls (LAPACK's) need no
     # compatibility across versions: "ALL" lifts jax.export's check for them.
-    # No `platforms=`: jax.export's default is this process's lowering platform ("cuda" or
-    # "rocm" on a GPU, where `jax.default_backend()` says "gpu", which export refuses).
+    # A lowering platform ("cuda" on a GPU, where `jax.default_backend()` says "gpu", which
+    # the exported program's call then refuses).
     exported = jax.export.export(
         jax.jit(flat),
+        platforms=[platform],
         disabled_checks=[jax.export.DisabledSafetyCheck.custom_call("ALL")],
     )(*specs)
     template = out_box[0]
@@ -365,9 +385,8 @@ def call(name: str, fn, args, kwargs):
     where = folder()
     if where is None or jax.config.jax_disable_jit or not _can_serialise():
         return _NONE
-    # Inside `jax.default_device(...)` (say the CPU of a GPU machine) the call must run where
-    # the caller put it, but a program is exported for the default backend's platform: trace.
-    if jax.config.jax_default_device is not None:
+    platform = _platform()
+    if platform is None:  # inside `jax.default_device(an accelerator)`: trace
         return _NONE
     if not _trusted_module(fn):  # code the source hash does not cover
         return _NONE
@@ -376,6 +395,8 @@ def call(name: str, fn, args, kwargs):
     if signature is None:
         return _NONE
     key, dynamic, impls = signature
+    if platform != _default_platform():  # the CPU of an accelerator's machine
+        key = f"{key}-{platform}"
     if key in _refused:
         return _NONE
     entry = _memo.get(key)
@@ -389,7 +410,7 @@ def call(name: str, fn, args, kwargs):
         if stored is None:
             _log.debug("%s: exporting %s", name, key)
             try:
-                stored = _export(fn, leaves, treedef, dynamic, impls)
+                stored = _export(fn, leaves, treedef, dynamic, impls, platform)
             except Exception as err:  # not exportable (an effect, a custom call): trace
                 _log.debug("%s: not exported (%s: %s)", name, type(err).__name__, err)
                 _refused.add(key)

@@ -172,7 +172,7 @@ class _SimulateCheck(Check):
         return message
 
 
-@program(check=_SimulateCheck("simulate", result_index=2))
+@program(check=_SimulateCheck("simulate", result_index=2), single_run=True)
 def _solve(
     model,
     gyro,
@@ -360,6 +360,12 @@ def simulate(
     - `run`: integer run id written to the record.
 
     **Returns:** a [`hrgjax.Record`][].
+
+    **Where it runs:** called outside any `jit`/`vmap`/`grad`, on a machine whose default JAX
+    backend is an accelerator, the run goes to the CPU (one trajectory steps sequentially,
+    and a GPU's kernel launches make that tens to hundreds of times slower; docs/scaling.md).
+    Inside `jax.default_device(...)` it runs where that says; under a trace (`hg.sweep`,
+    your own `jit`/`vmap`) JAX places the batch as usual.
 
     **Raises:** `RuntimeError` without float64; `ValueError` for a bad model name, a missing
     key or a bad output grid; a solver failure (max steps, non-finite state) raises too.

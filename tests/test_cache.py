@@ -167,17 +167,45 @@ def test_export_keys_spell_out_static_values_and_refuse_unknown_code():
     assert dynamic == (0,) and impls[0] is not None
 
 
-def test_exported_programs_are_bypassed_inside_a_default_device_context():
-    """`jax.default_device(cpu)` on a GPU machine must run the call on the CPU, but an exported
-    program is for the default backend's platform: inside such a context the call traces."""
-    from hrgjax import _export
+def test_single_simulations_run_on_the_cpu_beside_an_accelerator(monkeypatch):
+    """Where an accelerator is JAX's default backend, an eager `simulate` (one sequential
+    trajectory) runs on the CPU, its program exported for the CPU; under the caller's own
+    trace, or inside the caller's `jax.default_device`, placement is left to the caller. Here
+    the accelerator is pretended (`jax.default_backend` says "gpu"); the CPU machine runs the
+    rest for real."""
+    from hrgjax import _compiled, _export
 
-    hg.enable_cache()
-    x = jax.numpy.linspace(0.0, 1.0, 5)
-    out = _export.call("sin", jax.numpy.sin, (x,), {})
-    assert out is not _export._NONE  # exported (the suite runs with the cache on)
-    np.testing.assert_array_equal(out, np.sin(np.asarray(x)))
-    with jax.default_device(jax.devices("cpu")[0]):
-        assert _export.call("sin", jax.numpy.sin, (x,), {}) is _export._NONE
-        rec = hg.simulate(hg.presets.tvg3_like(noise=False), hg.Profile.constant_rate(2.0, 1.0))
-    assert rec.wave_angle.shape == (11,)
+    gyro, prof = hg.presets.tvg3_like(noise=False), hg.Profile.constant_rate(2.0, 1.0)
+    plain = hg.simulate(gyro, prof)
+    seen = []
+    real_call = _export.call
+
+    def spy(name, fn, args, kwargs):
+        seen.append((jax.config.jax_default_device, _export._platform()))
+        return real_call(name, fn, args, kwargs)
+
+    monkeypatch.setattr(_export, "call", spy)
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    cpu = jax.devices("cpu")[0]
+    assert _compiled.single_run_device() == cpu
+    rec = hg.simulate(gyro, prof)
+    assert seen == [(cpu, "cpu")]
+    np.testing.assert_array_equal(rec.wave_angle, plain.wave_angle)
+    # Under a jit whose inputs are all closed over, and inside the caller's own choice of
+    # device, nothing is moved.
+    asked = []
+    real_device = _compiled.single_run_device
+    monkeypatch.setattr(_compiled, "single_run_device", lambda: asked.append(1) or real_device())
+    hg.simulate(gyro, prof)
+    assert len(asked) == 1
+    jax.jit(lambda: hg.simulate(gyro, prof).wave_angle)()
+    jax.vmap(lambda r: hg.simulate(gyro, hg.Profile.constant_rate(r, 1.0)).wave_angle)(
+        jax.numpy.array([1.0, 2.0])
+    )
+    assert len(asked) == 1
+    with jax.default_device("cpu"):
+        assert _compiled.single_run_device() is None
+    # A default device that is not a CPU is traced, not exported (its platform is unknown to
+    # the exported program).
+    with jax.default_device("gpu"):
+        assert _export._platform() is None
