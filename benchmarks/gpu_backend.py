@@ -5,7 +5,9 @@ per core (`hg.sweep` shards a batch over them, so the CPU side uses every core).
 
 - averaged model, 60-s runs at rates 0.1–400 °/s × temperatures −40…60 °C through `hg.sweep`,
   batches of 64, 1 024 and 10 000 members;
-- one averaged run of 180 s at 10 °/s (`simulate` under `eqx.filter_jit`, one device);
+- one averaged run of 180 s at 10 °/s: `simulate` under `eqx.filter_jit` with 0.1-s outputs
+  and with one output (a GPU waits on the device at every iteration of diffrax's saving
+  loop), and `hg.simulate` called eagerly (hrgjax puts it on the CPU beside an accelerator);
 - the full (carrier-resolving) model: one run of 0.05 s on fixed steps, and batches of 256
   runs of 0.05 s (rates 0.1–400 °/s) on fixed steps and adaptive (Dopri8).
 
@@ -62,6 +64,16 @@ def child(out_path):
         lambda g, rate: hg.simulate(g, hg.Profile.constant_rate(rate, SINGLE_S, 20.0)).wave_angle
     )
     timed("averaged, one run of 180 s", lambda: single(gyro, jnp.asarray(10.0)), repeat=5)
+    one_out = eqx.filter_jit(
+        lambda g, rate: (
+            hg.simulate(
+                g, hg.Profile.constant_rate(rate, SINGLE_S, 20.0), dt_out=SINGLE_S
+            ).wave_angle
+        )
+    )
+    timed("  the same, one output", lambda: one_out(gyro, jnp.asarray(10.0)), repeat=5)
+    prof = hg.Profile.constant_rate(10.0, SINGLE_S, 20.0)
+    timed("  the same, eager hg.simulate", lambda: hg.simulate(gyro, prof).wave_angle, repeat=5)
 
     ts = np.array([FULL_S])
 
