@@ -63,3 +63,14 @@ def _write():
 
 
 atexit.register(_write)
+
+
+def child_or_main(child, main):
+    """A script that runs parts of itself in child processes (`--child OUT`, one backend or
+    device count each): `child(OUT)` in a child, `main()` in the parent."""
+    import sys
+
+    if "--child" in sys.argv:
+        child(sys.argv[sys.argv.index("--child") + 1])
+    else:
+        main()

@@ -25,6 +25,8 @@ import subprocess
 import sys
 import tempfile
 
+import numpy as np
+
 QUICK = "--quick" in sys.argv
 AVG_SIZES = ((4, 16), (8, 32)) if QUICK else ((4, 16), (16, 64), (100, 100))  # T × rate
 FULL_MEMBERS = 16 if QUICK else 256
@@ -145,12 +147,6 @@ def main():
 
 
 if __name__ == "__main__":
-    import numpy as np
+    from _common import child_or_main
 
-    if "--child" in sys.argv:
-        import jax
-
-        jax.config.update("jax_enable_x64", True)
-        child(sys.argv[sys.argv.index("--child") + 1])
-    else:
-        main()
+    child_or_main(child, main)

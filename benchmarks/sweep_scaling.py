@@ -195,10 +195,6 @@ def main():
 
 
 if __name__ == "__main__":
-    if "--child" in sys.argv:
-        import jax
+    from _common import child_or_main
 
-        jax.config.update("jax_enable_x64", True)
-        child(sys.argv[sys.argv.index("--child") + 1])
-    else:
-        main()
+    child_or_main(child, main)
