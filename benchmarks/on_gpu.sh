@@ -3,7 +3,12 @@
 #   bash benchmarks/on_gpu.sh [pytest args]   (log in $OUT/tests.log, else out/tests.log;
 #   PYTHON, TEST_S (time limit, s) and WORKERS override python3, 420 and 14)
 # Test-only packages the machine lacks (allantools, imucal, h5netcdf) travel as wheels in
-# .whl/ (see the device tool's notes); without them those tests are skipped.
+# .whl/ (name .whl in the call's carry); without them those tests are skipped. Fetch them here:
+#   echo /.whl/ >> .git/info/exclude
+#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 \
+#     --implementation cp --platform manylinux2014_x86_64 -d .whl \
+#     allantools==2024.6 imucal==2.6.0 h5netcdf==1.8.2
+# The benchmark beside it: python3 benchmarks/gpu_backend.py (≈ 3.5 min on an H200).
 set -u
 if ls .whl/*.whl > /dev/null 2>&1; then
   "${PYTHON:-python3}" -m pip install -q --no-index --no-deps --no-compile --target /tmp/site .whl/*.whl \
