@@ -22,7 +22,9 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
     returns outputs with leading shape `(11, 3)` (keyword order). The compiled batch is kept
     per `fn`: a second sweep of the same function on grids of the same sizes compiles
     nothing. When several devices are visible the flattened batch is sharded over them
-    (padded to a multiple of the device count).
+    (padded to a multiple of the device count). The batch runs on JAX's default backend — an
+    accelerator where there is one (measured on an H200: 2.7× its host's 16 cores at 64 members,
+    23.5× at 10 000), unlike a single eager `simulate`, which goes to the CPU there.
 
     `fn` runs under `jax.jit`: build profiles from Python numbers (their knot times stay
     concrete, so `simulate` can derive its output grid) or pass `ts=` to `simulate`.
