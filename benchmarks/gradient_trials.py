@@ -1,5 +1,5 @@
-"""Two ways tried to cheapen the gradient of `gradient_cost.py`'s loss (19 rotation runs ×
-60 s, 8 resonator parameters), neither adopted — kept so that the figures in
+"""Three ways tried to cheapen the gradient of `gradient_cost.py`'s loss (19 rotation runs ×
+60 s, 8 resonator parameters), none adopted — kept so that the figures in
 benchmarks/README.md can be rerun:
 
 1. **Parameters per member.** Under `vmap(lambda p: simulate(gyro, p))`, the shared gyro's
@@ -10,8 +10,13 @@ benchmarks/README.md can be rerun:
 2. **Tsit5 with its stages written out.** diffrax runs a Runge–Kutta step's stages in an
    inner checkpointed loop; `UnrolledTsit5` (below; diffrax's tableau and interpolation)
    writes the seven stages out. Compared: forward and gradient times against diffrax's.
+3. **Parameters packed** (`--packed`, run alone): the gyro's inexact leaves passed into the
+   solve as one vector and unpacked inside the vector field, so that a stage's parameter
+   cotangents could leave as one array rather than a kernel per parameter. The solve is
+   written here with diffrax (averaged model, Tsit5, the default adjoint), packed and not.
 
-Usage: `.venv/bin/python benchmarks/gradient_trials.py` (≈ 3 min on 2 cores).
+Usage: `.venv/bin/python benchmarks/gradient_trials.py` (trials 1 and 2, ≈ 3 min on 2 cores);
+`... gradient_trials.py --packed` (trial 3, ≈ 1 min).
 """
 
 import re
@@ -155,5 +160,65 @@ def main():
            max(g_ratio))  # fmt: skip
 
 
+def packed():
+    from jax.flatten_util import ravel_pytree
+
+    from hrgjax.resonator.averaged import averaged_initial_state, averaged_vector_field
+
+    gyro = hg.presets.tvg3_like(noise=False, temperature_laws=False)
+    profiles = hg.calibration.rotation_plan((20.0,), duration_s=60.0).profiles()
+    ts = jnp.arange(0.0, 60.0 + 0.5, 1.0)
+
+    def solve(g, prof, pack):
+        if pack:
+            dyn, static = eqx.partition(g, eqx.is_inexact_array)
+            flat, unravel = ravel_pytree(dyn)
+            field = lambda t, y, a: averaged_vector_field(  # noqa: E731
+                t, y, (eqx.combine(unravel(a[0]), static), a[1])
+            )
+            args = (flat, prof)
+        else:
+            field, args = averaged_vector_field, (g, prof)
+        controller = diffrax.PIDController(rtol=1e-8, atol=1e-10)  # as simulate's
+        if prof.t.shape[0] > 2:
+            controller = diffrax.ClipStepSizeController(controller, jump_ts=prof.t[1:-1])
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field), diffrax.Tsit5(), prof.t[0], prof.t[-1], 1e-2,
+            averaged_initial_state(g, prof, 0.0), args=args, saveat=diffrax.SaveAt(ts=ts),
+            stepsize_controller=controller, max_steps=2**16,
+            adjoint=diffrax.RecursiveCheckpointAdjoint(256),
+        )  # fmt: skip
+        return sol.ys[:, 2]
+
+    target = jax.vmap(lambda p: solve(gyro, p, False))(profiles) + 1e-4
+    params, static = eqx.partition(gyro.resonator, eqx.is_inexact_array)
+
+    def loss(params, pack):
+        g = eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(params, static))
+        return jnp.mean((jax.vmap(lambda p: solve(g, p, pack))(profiles) - target) ** 2)
+
+    print(f"machine: {machine()}")
+    fns = {}
+    for pack in (False, True):
+        fns[pack] = (jax.jit(lambda p, pack=pack: loss(p, pack)),
+                     jax.jit(jax.grad(lambda p, pack=pack: loss(p, pack))))  # fmt: skip
+    g0, g1 = (ravel_pytree(fns[pack][1](params))[0] for pack in (False, True))
+    print(
+        f"gradients packed vs not: max rel. diff {float(jnp.max(jnp.abs(g1 - g0) / jnp.abs(g0))):.1e}"
+    )
+    ratios = {False: [], True: []}
+    for rep in range(3):  # interleaved
+        for pack, (f, g) in fns.items():
+            t_f, t_g = best_of(lambda f=f: f(params), 11), best_of(lambda g=g: g(params), 11)
+            ratios[pack].append(t_g / t_f)
+            print(f"  run {rep}, {'packed' if pack else 'as leaves'}: forward {t_f * 1e3:.1f} ms, "
+                  f"gradient {t_g * 1e3:.1f} ms ({t_g / t_f:.2f}×)")  # fmt: skip
+    for pack, r in ratios.items():
+        name = "packed" if pack else "as leaves"
+        report(f"gradient / forward, parameters {name}", min(r), "×", "worst of 3 runs", max(r))
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+
+    packed() if "--packed" in sys.argv else main()
