@@ -336,7 +336,9 @@ def test_information_is_one_over_the_slope_variance_and_adds_over_a_split_segmen
     """A static segment (one window) informs the bias as k_e²/var(slope) and its slope as
     k_e² ΔT²/var(slope), var the exact least-squares slope variance of its samples; a
     rotation split in two halves (the second from where the first left the pattern) carries
-    the information of the whole (no Gauss–Markov rate: `gauss_markov=(0, 1)`)."""
+    the information of the whole (no Gauss–Markov rate: `gauss_markov=(0, 1)`); a plan's
+    information is the sum of its segments' alone (statics take one quadrature node, the
+    others 64, all in one vmapped Jacobian: no point is counted against another segment)."""
     arw, white, no_gm = 1e-5, 2e-6, dict(gauss_markov=(0.0, 1.0))
     static = d.BenchPlan.from_segments([SEGMENTS[0]])
     info = np.asarray(d.information(static, IDEAL_READOUT, arw, angle_white=white, **no_gm))
@@ -354,6 +356,10 @@ def test_information_is_one_over_the_slope_variance_and_adds_over_a_split_segmen
     a = np.asarray(d.information(halves, IDEAL_READOUT, arw, angle_white=white, **no_gm))
     b = np.asarray(d.information(whole, IDEAL_READOUT, arw, angle_white=white, **no_gm))
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+    mixed = d.BenchPlan.from_segments(SEGMENTS)
+    alone = sum(np.asarray(d.information(d.BenchPlan.from_segments([s]))) for s in SEGMENTS)
+    total = np.asarray(d.information(mixed))
+    np.testing.assert_allclose(total, alone, rtol=1e-12, atol=1e-12 * np.abs(total).max())
 
 
 @pytest.mark.parametrize("dur", [60.0, 600.0, 6000.0])

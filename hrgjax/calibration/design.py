@@ -868,30 +868,31 @@ def _segment_windows(dt, t0, t1, rate_dps, duration):
     return samples, dt, length
 
 
-def _segment_information(values, noise, dt, t0, t1, angle_deg, rate_dps, duration, nodes,
-                         model=GREY_BOX):  # fmt: skip
-    """Fisher information (P, P) of one segment about `values`: the measured pattern rate
-    observed through the physical fit's window slopes, i.e. ∫ g gᵀ dt / N_w² with
-    g = ∂(measured rate)/∂values along the segment's path (θ turning at −k_e Ω, T linear),
-    by `nodes`-point Gauss–Legendre quadrature, N_w the windows' `window_density`
-    (N, σ_a = `noise[0]`, `noise[3]`); times the segment's `gauss_markov_discount`
-    (σ, τ = `noise[1:3]`)."""
+def _segment_weights(noise, dt, t0, t1, rate_dps, duration):
+    """Per segment: 1/N_w² × the segment's `gauss_markov_discount` × its length [s] — the
+    factor of its quadrature weights (N_w the windows' `window_density` with N, σ_a =
+    `noise[0]`, `noise[3]`; σ, τ = `noise[1:3]`)."""
     arw, sigma, tau, angle_white = noise[0], noise[1], noise[2], noise[3]
-    x, w = np.polynomial.legendre.leggauss(nodes)
-    s = (jnp.asarray(x) + 1.0) / 2.0  # 0…1
-    t = s * duration
-    temp_rate = (t1 - t0) / duration
-    temps = t0 + temp_rate * t
-    omega = rate_dps * DEG_PER_S
-    thetas = angle_deg * DEG - model.gain(values) * omega * t
-    jac = jax.vmap(lambda th, T: jax.jacfwd(model.rate)(values, th, T, omega, temp_rate))(
-        thetas, temps
-    )  # (nodes, P)
     density = window_density(arw, angle_white, *_segment_windows(dt, t0, t1, rate_dps,
                                                                  duration))  # fmt: skip
-    weights = jnp.asarray(w) / 2.0 * duration / density**2
-    weights = weights * gauss_markov_discount(duration, density, sigma, tau)
-    return jnp.einsum("n,np,nq->pq", weights, jac, jac)
+    return duration / density**2 * gauss_markov_discount(duration, density, sigma, tau)
+
+
+def _quadrature_points(kinds, nodes):
+    """(segment index, position s ∈ [0, 1] along the segment, weight summing to 1 per
+    segment) of every quadrature point of a plan of `kinds`: `nodes`-point Gauss–Legendre
+    along rotations and ramps, one point for a static segment — its path is one point (θ
+    and T constant, Ω = Ṫ = 0), so its integrand is constant and one node integrates it
+    exactly, as it does its derivatives with respect to the plan (linear in the node's
+    position; a one-point rule is exact to degree 1)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    seg, pos, wt = [], [], []
+    for i, k in enumerate(kinds):
+        static = k == "static"
+        seg.append(np.full(1 if static else nodes, i))
+        pos.append(np.array([0.5]) if static else (x + 1.0) / 2.0)
+        wt.append(np.array([1.0]) if static else w / 2.0)
+    return np.concatenate(seg), np.concatenate(pos), np.concatenate(wt)
 
 
 def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: int = _NODES,
@@ -905,6 +906,8 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
     Gauss–Markov rate `gauss_markov` = (σ [rad/s], τ [s]) on it (default
     `pattern_gauss_markov()`; `(0.0, 1.0)` for white noise only) and white readout noise
     `angle_white` on each sample of it [rad] (default `pattern_angle_white()`; 0 for none).
+    `nodes`: Gauss–Legendre points along each rotation and ramp (a static segment's path
+    is one point, which one node integrates exactly).
 
     Each segment is observed through its measured pattern rate along its path: θ turning at
     −k_e Ω from its wave angle, T moving linearly from start to end (a ramp's Ṫ reaches the
@@ -927,13 +930,26 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
 
 @eqx.filter_jit
 def _information(plan, values, noise, nodes, model=GREY_BOX):
-    """`information`, compiled once per plan length, kinds and model."""
+    """`information`, compiled once per plan length, kinds and model: each segment observed
+    through its measured pattern rate, ∫ g gᵀ dt / N_w² with g = ∂(measured rate)/∂values
+    along its path (θ turning at −k_e Ω, T linear) — every quadrature point of every
+    segment (`_quadrature_points`) in one vmapped Jacobian, so that the program holds one
+    copy of the rate's derivative."""
     dt = jnp.asarray([DT_OUT[k] for k in plan.kind], dtype=float)  # each kind's sampling
-    seg = jax.vmap(
-        lambda *a: _segment_information(values, noise, *a, nodes, model)
-    )(dt, plan.temperature_c, plan.temperature_end_c, plan.wave_angle_deg, plan.rate_dps,
-      plan.duration_s)  # fmt: skip
-    return jnp.sum(seg, axis=0)
+    t0, t1, angle, rate, duration = (plan.temperature_c, plan.temperature_end_c,
+                                     plan.wave_angle_deg, plan.rate_dps, plan.duration_s)  # fmt: skip
+    seg_w = _segment_weights(noise, dt, t0, t1, rate, duration)
+    seg, pos, wt = _quadrature_points(plan.kind, nodes)
+    at = lambda x: x[seg]  # noqa: E731  (each point's segment's value)
+    t = jnp.asarray(pos) * at(duration)
+    temp_rate = (at(t1) - at(t0)) / at(duration)
+    omega = at(rate) * DEG_PER_S
+    thetas = at(angle) * DEG - model.gain(values) * omega * t
+    temps = at(t0) + temp_rate * t
+    jac = jax.vmap(lambda th, T, om, tr: jax.jacfwd(model.rate)(values, th, T, om, tr))(
+        thetas, temps, omega, temp_rate
+    )  # (points, P)
+    return jnp.einsum("n,np,nq->pq", jnp.asarray(wt) * at(seg_w), jac, jac)
 
 
 def _precision_factor(plan, values, noise, prior_scale, model=GREY_BOX):
