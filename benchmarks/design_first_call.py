@@ -1,6 +1,7 @@
 """Time to a designed plan in a fresh process: `design(budget)` as the session's first call,
 compiling included, and how many times it compiled the Adam-step program (one per
-structure is right). Runs in a subprocess with the persistent compilation cache off.
+structure is right); then a second `design(budget)` in the same process (another key: the
+compiled programs reused). Runs in a subprocess with the persistent compilation cache off.
 
 Usage: `.venv/bin/python benchmarks/design_first_call.py [--budget-h 12]`. To compare two
 versions of the code, run it on each, back to back on one machine (benchmarks/README.md)."""
@@ -23,6 +24,9 @@ r = d.design({budget})
 dt = time.perf_counter() - t0
 print(f"RESULT {{dt:.1f}} {{r.value:.8g}} {{r.levels}} {{len(r.search)}} "
       f"{{names.count('jit(_design_step)')}} {{len(names)}}")
+t0 = time.perf_counter()
+r = d.design({budget}, key=jax.random.key(1))
+print(f"SECOND {{time.perf_counter() - t0:.1f}} {{r.value:.8g}}")
 """
 
 
@@ -34,6 +38,7 @@ def main():
     out = subprocess.run([sys.executable, "-c", CHILD.format(budget=a.budget_h)], env=env,
                          capture_output=True, text=True, check=True).stdout  # fmt: skip
     line = next(x for x in out.splitlines() if x.startswith("RESULT"))
+    second, second_value = next(x for x in out.splitlines() if x.startswith("SECOND")).split()[1:]
     wall, value, levels, structures, steps, compiles = line.split()[1:]
     from _common import machine, report
 
@@ -41,6 +46,9 @@ def main():
     print(
         f"design({a.budget_h:g}) as a fresh process's first call: {wall} s; criterion "
         f"{value} (drift+warmup [°]), {levels} levels chosen of {structures} structures"
+    )
+    print(
+        f"a second design({a.budget_h:g}) in that process (key 1): {second} s; criterion {second_value}"
     )
     print(
         f"Adam-step programs compiled: {steps} (one per structure: {structures}); "
