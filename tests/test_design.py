@@ -135,6 +135,9 @@ def test_plan_file_round_trip_and_every_bad_input_named(tmp_path):
         d.BenchModel().check(fast)
     with pytest.raises(ValueError, match=r"BenchPlan.temperature_c must have shape \(2,\)"):
         d.BenchPlan(("static", "static"), *(jnp.zeros(3),) * 4, jnp.ones(3))  # fmt: skip
+    for bad in (0, 1, 8.0, True):
+        with pytest.raises(ValueError, match=r"^nodes must be a whole number ≥ 2 .* got"):
+            d.information(plan, nodes=bad)
 
 
 @pytest.fixture(scope="module")

@@ -905,8 +905,10 @@ def _quadrature_points(kinds, nodes):
     seg, code, pos, wt = [], [], [], []
 
     def add(i, c, s, ws):
-        seg.append(np.full(len(s), i)), code.append(np.full(len(s), c))
-        pos.append(np.asarray(s, float)), wt.append(np.asarray(ws, float))
+        seg.append(np.full(len(s), i))
+        code.append(np.full(len(s), c))
+        pos.append(np.asarray(s, float))
+        wt.append(np.asarray(ws, float))
 
     for i, k in enumerate(kinds):
         if k == "static":
@@ -948,6 +950,8 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
     constant of the session: the fitted bias absorbs it). Differentiable with respect to the
     plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
     require_x64("hrgjax.calibration.design.information")
+    if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 2:
+        raise ValueError(f"nodes must be a whole number ≥ 2 (quadrature points); got {nodes!r}")
     model = _model(model)
     values = _values(values, model)
     return _information(plan, values, _noise(arw, gauss_markov, angle_white), nodes, model)
@@ -969,7 +973,7 @@ def _information(plan, values, noise, nodes, model=GREY_BOX):
     d, omega = at(duration), at(rate) * DEG_PER_S
     k_e = model.gain(values)
     # a rotation's period of the integrand, T_π = π / (k_e |Ω|), and its whole periods m
-    # (1 and 0 where a point is not a rotation's: no division by a zero rate)
+    # (computed with Ω = 1 for the other points, which do not use them: no division by 0)
     turning = jnp.asarray(code != _ALONG)
     period = jnp.pi / (k_e * jnp.abs(jnp.where(turning, omega, 1.0)))
     whole = jnp.floor(d / period)
