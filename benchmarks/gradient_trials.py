@@ -15,8 +15,18 @@ benchmarks/README.md can be rerun:
    cotangents could leave as one array rather than a kernel per parameter. The solve is
    written here with diffrax (averaged model, Tsit5, the default adjoint), packed and not.
 
+4. **The floor** (`--floor`, run alone): how fast could the gradient be with a perfect
+   vector-field VJP? The same solve with the closed-loop vector field wrapped in a
+   `jax.custom_vjp` whose backward pass is nearly free (cotangent `1e-3 · ct` for the state,
+   `Σ ct` for one resonator leaf, nothing else: a wrong gradient, timed only), against plain autodiff;
+   on the 19 × 60-s loss and on the 1-h warm-up run of `adjoint_memory.py` (one trajectory,
+   temperature laws on). What is left is diffrax's: the forward, its recomputation in the
+   reverse pass (recursive checkpointing re-runs each step to differentiate it) and the
+   Runge–Kutta step's and the output interpolation's own VJPs. A hand-written VJP of the
+   vector field cannot take the ratio below that.
+
 Usage: `.venv/bin/python benchmarks/gradient_trials.py` (trials 1 and 2, ≈ 3 min on 2 cores);
-`... gradient_trials.py --packed` (trial 3, ≈ 1 min).
+`... gradient_trials.py --packed` (trial 3, ≈ 1 min); `... --floor` (trial 4, ≈ 2 min).
 """
 
 import re
@@ -218,7 +228,94 @@ def packed():
         report(f"gradient / forward, parameters {name}", min(r), "×", "worst of 3 runs", max(r))
 
 
+def _free_vjp_field():
+    """The averaged vector field with a nearly free, deliberately wrong VJP (trial 4)."""
+    from hrgjax.resonator.averaged import averaged_vector_field
+
+    @jax.custom_vjp
+    def core(t, y, k, args):
+        return averaged_vector_field(t, y, args)
+
+    def fwd(t, y, k, args):
+        return averaged_vector_field(t, y, args), k
+
+    def bwd(k, ct):
+        return None, 1e-3 * ct, jnp.sum(ct) + 0.0 * k, None
+
+    core.defvjp(fwd, bwd)
+
+    def field(t, y, args):
+        gyro, prof = args
+        k = jax.tree.leaves(gyro.resonator)[0]  # the one leaf given a (wrong) cotangent
+        return core(t, y, k, (jax.lax.stop_gradient(gyro), prof))
+
+    return field
+
+
+def floor():
+    from hrgjax.resonator.averaged import averaged_initial_state, averaged_vector_field
+
+    def solve(g, prof, ts, free):
+        field = _free_vjp_field() if free else averaged_vector_field
+        controller = diffrax.PIDController(rtol=1e-8, atol=1e-10)  # as simulate's
+        if prof.t.shape[0] > 2:
+            controller = diffrax.ClipStepSizeController(controller, jump_ts=prof.t[1:-1])
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field), diffrax.Tsit5(), prof.t[0], prof.t[-1], 1e-2,
+            averaged_initial_state(g, prof, 0.0), args=(g, prof), saveat=diffrax.SaveAt(ts=ts),
+            stepsize_controller=controller, max_steps=2**16,
+            adjoint=diffrax.RecursiveCheckpointAdjoint(256),
+        )  # fmt: skip
+        return sol.ys[:, 2]
+
+    cases = {
+        "19 runs × 60 s (gradient_cost.py)": (
+            hg.presets.tvg3_like(noise=False, temperature_laws=False),
+            hg.calibration.rotation_plan((20.0,), duration_s=60.0).profiles(),
+            jnp.arange(0.0, 60.0 + 0.5, 1.0),
+        ),
+        "1-h warm-up, one run (adjoint_memory.py)": (
+            hg.presets.tvg3_like(noise=False),
+            jax.tree.map(lambda x: x[None], hg.Profile.piecewise([0.0, 3600.0], [5.0, 5.0],
+                                                                 [-40.0, 20.0])),
+            jnp.arange(0.0, 3600.0 + 0.5, 1.0),
+        ),
+    }  # fmt: skip
+    print(f"machine: {machine()}")
+    for name, (gyro, profiles, ts) in cases.items():
+        params, static = eqx.partition(gyro.resonator, eqx.is_inexact_array)
+
+        def loss(params, free, gyro=gyro, static=static, profiles=profiles, ts=ts):
+            g = eqx.tree_at(lambda g: g.resonator, gyro, eqx.combine(params, static))
+            return jnp.mean(jax.vmap(lambda p: solve(g, p, ts, free))(profiles) ** 2)
+
+        fns = {
+            free: (jax.jit(lambda p, free=free: loss(p, free)),
+                   jax.jit(jax.grad(lambda p, free=free: loss(p, free))))
+            for free in (False, True)
+        }  # fmt: skip
+        for f, g in fns.values():
+            jax.block_until_ready((f(params), g(params)))
+        ratios = {False: [], True: []}
+        print(name)
+        for rep in range(3):  # interleaved
+            for free, (f, g) in fns.items():
+                t_f, t_g = best_of(lambda f=f: f(params), 11), best_of(lambda g=g: g(params), 11)
+                ratios[free].append(t_g / t_f)
+                label = "free vector-field VJP" if free else "autodiff (as simulate)"
+                print(f"  run {rep}, {label:22s}: forward {t_f * 1e3:6.1f} ms, "
+                      f"gradient {t_g * 1e3:6.1f} ms ({t_g / t_f:.2f}×)")  # fmt: skip
+        for free, r in ratios.items():
+            label = "free vector-field VJP" if free else "autodiff"
+            report(f"{name}: gradient / forward, {label}", min(r), "×", "worst of 3 runs", max(r))
+
+
 if __name__ == "__main__":
     import sys
 
-    packed() if "--packed" in sys.argv else main()
+    if "--packed" in sys.argv:
+        packed()
+    elif "--floor" in sys.argv:
+        floor()
+    else:
+        main()
