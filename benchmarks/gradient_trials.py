@@ -300,7 +300,10 @@ def floor():
         print(name)
         for rep in range(3):  # interleaved
             for free, (f, g) in fns.items():
-                t_f, t_g = best_of(lambda f=f: f(params), 11), best_of(lambda g=g: g(params), 11)
+                t_f, t_g = (
+                    best_of(lambda f=f, p=params: f(p), 11),
+                    best_of(lambda g=g, p=params: g(p), 11),
+                )
                 ratios[free].append(t_g / t_f)
                 label = "free vector-field VJP" if free else "autodiff (as simulate)"
                 print(f"  run {rep}, {label:22s}: forward {t_f * 1e3:6.1f} ms, "
