@@ -340,7 +340,8 @@ def test_information_is_one_over_the_slope_variance_and_adds_over_a_split_segmen
     k_e² ΔT²/var(slope), var the exact least-squares slope variance of its samples; a
     rotation split in two halves (the second from where the first left the pattern) carries
     the information of the whole (no Gauss–Markov rate: `gauss_markov=(0, 1)`), and an
-    hour's rotation that of its ten 6-min pieces; a plan's
+    hour's rotation that of its ten 6-min pieces, an hour's turning ramp that of its sixty
+    1-min pieces; a plan's
     information is the sum of its segments' alone (statics take one quadrature node, the
     others 64, all in one vmapped Jacobian: no point is counted against another segment)."""
     arw, white, no_gm = 1e-5, 2e-6, dict(gauss_markov=(0.0, 1.0))
@@ -372,6 +373,21 @@ def test_information_is_one_over_the_slope_variance_and_adds_over_a_split_segmen
     b = np.asarray(d.information(d.BenchPlan.from_segments([hour]), IDEAL_READOUT, arw,
                                  angle_white=white, **no_gm))  # fmt: skip
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+    # a ramp that turns: an hour's warm-up at 5 °/s, −40 → +20 °C, carries the information
+    # of its sixty 1-min pieces (166° electrical each, one panel each; the hour takes 57
+    # panels — one, as before, was 29 % off)
+    warm = {"kind": "ramp", "temperature_start_c": -40.0, "temperature_end_c": 20.0,
+            "wave_angle_deg": 30.0, "rate_dps": 5.0, "duration_s": 3600.0}  # fmt: skip
+    k_e = float(d.nominal_values()[0])
+    pieces = d.BenchPlan.from_segments(
+        [{**warm, "temperature_start_c": -40.0 + i, "temperature_end_c": -39.0 + i,
+          "wave_angle_deg": 30.0 - k_e * 5.0 * 60.0 * i, "duration_s": 60.0} for i in range(60)]
+    )  # fmt: skip
+    assert d._ramp_panels(pieces) is None
+    a = np.asarray(d.information(pieces, **no_gm))
+    b = np.asarray(d.information(d.BenchPlan.from_segments([warm]), **no_gm))
+    scale = np.sqrt(np.outer(np.diag(b), np.diag(b)))
+    np.testing.assert_allclose(a / scale, b / scale, rtol=0, atol=1e-9)
     mixed = d.BenchPlan.from_segments(SEGMENTS)
     alone = sum(np.asarray(d.information(d.BenchPlan.from_segments([s]))) for s in SEGMENTS)
     total = np.asarray(d.information(mixed))
