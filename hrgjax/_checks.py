@@ -14,6 +14,21 @@ def is_concrete(x) -> bool:
     return True
 
 
+def concrete_value(x) -> np.ndarray | None:
+    """`x` as a NumPy array when its value is known on the host — a concrete array, or a
+    tracer of an eager transformation (`jax.grad` outside `jit` carries the primal value) —
+    else None (under `jit`)."""
+    if is_concrete(x):
+        return np.asarray(x)
+    try:  # JAX's own unwrapping of value-carrying tracers (private: guarded)
+        from jax._src.core import to_concrete_value
+
+        value = to_concrete_value(x)
+    except Exception:
+        return None
+    return None if value is None else np.asarray(value)
+
+
 def check_finite(name: str, x):
     """Raise (eagerly when concrete, via ``eqx.error_if`` when traced) if x has NaN/inf.
     Returns `x` as a jax array."""

@@ -388,6 +388,12 @@ def test_information_is_one_over_the_slope_variance_and_adds_over_a_split_segmen
     b = np.asarray(d.information(d.BenchPlan.from_segments([warm]), **no_gm))
     scale = np.sqrt(np.outer(np.diag(b), np.diag(b)))
     np.testing.assert_allclose(a / scale, b / scale, rtol=0, atol=1e-9)
+    # the panels are counted from the plan's numbers, which `jax.grad` carries (`jit` not)
+    counted = []
+    jax.grad(lambda p: counted.append(d._ramp_panels(p)) or 0.0)(pieces)
+    jax.grad(lambda p: counted.append(d._ramp_panels(p)) or 0.0)(d.BenchPlan.from_segments([warm]))
+    jax.jit(lambda p: counted.append(d._ramp_panels(p)) or 0.0)(d.BenchPlan.from_segments([warm]))
+    assert counted == [None, (57,), None]
     mixed = d.BenchPlan.from_segments(SEGMENTS)
     alone = sum(np.asarray(d.information(d.BenchPlan.from_segments([s]))) for s in SEGMENTS)
     total = np.asarray(d.information(mixed))
@@ -424,12 +430,13 @@ def small_plan():
 
 
 def test_criterion_gradient_equals_finite_differences(small_plan, kind="drift"):
-    """jax.grad of the criterion w.r.t. the plan = central differences (h = 0.01; rel 1e-5
+    """jax.grad of the criterion w.r.t. the plan (jitted) = central differences (h = 0.01; rel 1e-5
     of each entry or 1e-6 of the field's largest) in every temperature, wave angle and
     duration (a static segment's two temperatures move together). A prior of one typical
     uncertainty keeps the posterior well conditioned: the differences then resolve 1e-6."""
     f = lambda p: float(d.criterion(p, kind, prior_scale=1.0))
-    g = jax.grad(lambda p: d.criterion(p, kind, prior_scale=1.0))(small_plan)
+    # under jax.jit, with the default gyro's values and noise (constants of the program)
+    g = jax.jit(jax.grad(lambda p: d.criterion(p, kind, prior_scale=1.0)))(small_plan)
 
     def moved(field, i, h):
         p = small_plan

@@ -43,7 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import concrete_value, is_concrete
 from .._compiled import device
 from .._io import read_json
 from .._progress import bar
@@ -663,9 +663,10 @@ def _noise(arw, gauss_markov, angle_white=None) -> jax.Array:
     """The design's noise vector [N, σ, τ, σ_a]: pattern ARW [rad/√s], Gauss–Markov σ
     [rad/s] and correlation time [s], white angle noise [rad per sample] (defaults: the
     default gyro's)."""
-    arw = pattern_arw() if arw is None else arw
-    sigma, tau = pattern_gauss_markov() if gauss_markov is None else gauss_markov
-    angle_white = pattern_angle_white() if angle_white is None else angle_white
+    with jax.ensure_compile_time_eval():  # the defaults: host numbers even under jax.jit
+        arw = pattern_arw() if arw is None else arw
+        sigma, tau = pattern_gauss_markov() if gauss_markov is None else gauss_markov
+        angle_white = pattern_angle_white() if angle_white is None else angle_white
     concrete = all(is_concrete(x) for x in (arw, sigma, tau, angle_white))
     if concrete and not (
         float(arw) > 0 and float(sigma) >= 0 and float(tau) > 0 and float(angle_white) >= 0
@@ -846,7 +847,12 @@ def _model(model):
 
 
 def _values(values, model):
-    return model.nominal() if values is None else jnp.asarray(values, dtype=float)
+    """`values` as an array, or the model's nominal values — read from the default gyro's
+    laws on the host even under `jax.jit` (its numbers are constants of the program)."""
+    if values is None:
+        with jax.ensure_compile_time_eval():
+            return model.nominal()
+    return jnp.asarray(values, dtype=float)
 
 
 _NODES = 64
@@ -890,14 +896,18 @@ was 29 % off) — `_ramp_panels`."""
 
 
 def _ramp_panels(plan, nodes=_NODES):
-    """Gauss–Legendre panels per segment of a concrete `plan` (a tuple, static), or None
-    where every segment takes one (or the plan's arrays are traced: then one panel each).
+    """Gauss–Legendre panels per segment of `plan` (a tuple, static), or None where every
+    segment takes one — or the plan's rates and durations are unknown on the host (traced by
+    `jit`: then one panel each; `jax.grad` alone carries the values).
     A ramp that turns sweeps at most |Ω| D of electrical angle (k_e < 1): it gets
     ⌈|Ω| D / (`nodes` · `SWEEP_PER_NODE_DEG`)⌉ panels. Rotations need none (their rule is
     exact at any length), statics one node."""
-    if "ramp" not in plan.kind or not all(is_concrete(x) for x in (plan.rate_dps, plan.duration_s)):
+    if "ramp" not in plan.kind:
         return None
-    swept = np.abs(np.asarray(plan.rate_dps, float)) * np.asarray(plan.duration_s, float)
+    rate, duration = concrete_value(plan.rate_dps), concrete_value(plan.duration_s)
+    if rate is None or duration is None:
+        return None
+    swept = np.abs(rate.astype(float)) * duration.astype(float)
     per_panel = nodes * SWEEP_PER_NODE_DEG
     panels = tuple(
         max(1, math.ceil(float(a) / per_panel)) if k == "ramp" else 1
@@ -964,8 +974,8 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
     which one node integrates exactly; a rotation is whole periods of its π-periodic
     integrand plus a remainder, exact at any length; a ramp that turns takes panels of
     `nodes` points, each sweeping at most `nodes` × `SWEEP_PER_NODE_DEG` — counted from the
-    plan's numbers, so under a trace (`jax.grad` with respect to the plan) a ramp takes one
-    panel, accurate while it sweeps less than that — `_quadrature_points`).
+    plan's numbers (as `jax.grad` carries them), so under `jax.jit` with the plan traced a
+    ramp takes one panel, accurate while it sweeps less than that — `_quadrature_points`).
 
     Each segment is observed through its measured pattern rate along its path: θ turning at
     −k_e Ω from its wave angle, T moving linearly from start to end (a ramp's Ṫ reaches the
