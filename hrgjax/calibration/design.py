@@ -610,9 +610,7 @@ def nominal_values(gyro: Gyro | None = None) -> jax.Array:
     [`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS], SI) read from `gyro`'s
     laws (default: `presets.tvg3_like()`): the point the design linearises about. Law terms
     outside the grey box's family (a curvature of k_e, …) are left out."""
-    from ..presets import tvg3_like
-
-    g = tvg3_like() if gyro is None else gyro
+    g = _default_gyro() if gyro is None else gyro
     res, ro = g.resonator, g.readout
     ke = _coefficients(res.k_e)
     bias = _coefficients(g.rate_bias)
@@ -627,11 +625,18 @@ def nominal_values(gyro: Gyro | None = None) -> jax.Array:
     )  # fmt: skip
 
 
-def _noisy(gyro: Gyro | None) -> tuple[Gyro, float]:
-    """`gyro` (default `presets.tvg3_like()`), checked to have noise, and its k_e."""
+def _default_gyro() -> Gyro:
+    """`presets.tvg3_like()`, its numbers on the host even inside a trace (`jax.jit` of a
+    criterion with the default values and noise: they are constants of the program)."""
     from ..presets import tvg3_like
 
-    g = tvg3_like() if gyro is None else gyro
+    with jax.ensure_compile_time_eval():
+        return tvg3_like()
+
+
+def _noisy(gyro: Gyro | None) -> tuple[Gyro, float]:
+    """`gyro` (default `presets.tvg3_like()`), checked to have noise, and its k_e."""
+    g = _default_gyro() if gyro is None else gyro
     if g.noise is None:
         raise ValueError("the design needs a gyro with noise (its Noise model)")
     return g, float(_coefficients(g.resonator.k_e)[0])
@@ -663,10 +668,9 @@ def _noise(arw, gauss_markov, angle_white=None) -> jax.Array:
     """The design's noise vector [N, σ, τ, σ_a]: pattern ARW [rad/√s], Gauss–Markov σ
     [rad/s] and correlation time [s], white angle noise [rad per sample] (defaults: the
     default gyro's)."""
-    with jax.ensure_compile_time_eval():  # the defaults: host numbers even under jax.jit
-        arw = pattern_arw() if arw is None else arw
-        sigma, tau = pattern_gauss_markov() if gauss_markov is None else gauss_markov
-        angle_white = pattern_angle_white() if angle_white is None else angle_white
+    arw = pattern_arw() if arw is None else arw
+    sigma, tau = pattern_gauss_markov() if gauss_markov is None else gauss_markov
+    angle_white = pattern_angle_white() if angle_white is None else angle_white
     concrete = all(is_concrete(x) for x in (arw, sigma, tau, angle_white))
     if concrete and not (
         float(arw) > 0 and float(sigma) >= 0 and float(tau) > 0 and float(angle_white) >= 0
@@ -847,12 +851,7 @@ def _model(model):
 
 
 def _values(values, model):
-    """`values` as an array, or the model's nominal values — read from the default gyro's
-    laws on the host even under `jax.jit` (its numbers are constants of the program)."""
-    if values is None:
-        with jax.ensure_compile_time_eval():
-            return model.nominal()
-    return jnp.asarray(values, dtype=float)
+    return model.nominal() if values is None else jnp.asarray(values, dtype=float)
 
 
 _NODES = 64
