@@ -80,6 +80,36 @@ def test_each_drift_term_alone_gives_its_formula(quiet):
     np.testing.assert_allclose(th, -K_E * (omega + kappa * omega**3) * TS, rtol=1e-9)
 
 
+def test_the_fits_fixed_step_solve_is_diffrax_bosh3_with_its_dense_output():
+    """`continuous._bosh3_path` (a `lax.scan`) = `diffrax.diffeqsolve` with `Bosh3`,
+    `StepTo` and `SaveAt(ts)` — uneven steps, save times on step ends and inside steps —
+    and so are their forward-mode derivatives (what the fits differentiate)."""
+    from hrgjax.discovery.continuous import _bosh3_path
+
+    steps = jnp.asarray(np.cumsum(np.r_[0.0, np.random.default_rng(1).uniform(0.5, 2.0, 30)]))
+    save = jnp.asarray(np.r_[steps[0], np.sort(np.random.default_rng(2).uniform(
+        float(steps[0]), float(steps[-1]), 12)), steps[7], steps[-1]])  # fmt: skip
+    save = jnp.sort(save)
+
+    def field(p):
+        return lambda t, y, _: -p[0] * jnp.sin(y) + p[1] * jnp.cos(0.3 * t) + 1e-2 * t
+
+    def ours(p):
+        return _bosh3_path(field(p), steps, 0.4, save)
+
+    def theirs(p):
+        return diffrax.diffeqsolve(
+            diffrax.ODETerm(field(p)), diffrax.Bosh3(), steps[0], steps[-1], None, 0.4,
+            saveat=diffrax.SaveAt(ts=save), stepsize_controller=diffrax.StepTo(ts=steps),
+            adjoint=diffrax.ForwardMode(), max_steps=None,
+        ).ys  # fmt: skip
+
+    p = jnp.array([0.7, 0.2])
+    np.testing.assert_allclose(ours(p), theirs(p), rtol=1e-13, atol=1e-14)
+    np.testing.assert_allclose(jax.jacfwd(ours)(p), jax.jacfwd(theirs)(p), rtol=1e-12,
+                               atol=1e-14)  # fmt: skip
+
+
 def test_drift_terms_reject_non_positive_times():
     with pytest.raises(ValueError, match="DriftTerms.lag_time must be > 0"):
         hg.DriftTerms(lag=1.0, lag_time=0.0)

@@ -27,7 +27,7 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    `none`; `unexplained` (nothing accepted, yet the held-out residual is above the noise).
 
 Continuous records (some run changes its temperature or rate) go through the same steps
-with the model simulated by diffrax ([`continuous`][hrgjax.discovery.continuous.ContinuousProblem]).
+with the model simulated ([`continuous`][hrgjax.discovery.continuous.ContinuousProblem]).
 """
 
 from __future__ import annotations
