@@ -211,8 +211,9 @@ def _bosh3_path(field, steps, y0, save_t):
     saveat=SaveAt(ts=save_t))` computes (the same tableau, FSAL last stage and dense output,
     a save time on a step's end taken from the step before; equal to round-off), as one
     `lax.scan`: a fit traces this solve several times per program (Levenberg–Marquardt,
-    `jax.jacfwd`, `vmap` over runs), and diffrax's general loop cost ≈ 1.5 s to trace each
-    time, a scan step a few milliseconds."""
+    `jax.jacfwd`, `vmap` over runs); one run's model traced in 1.6 s through diffrax's
+    general loop, 0.8 s as this scan, and runs faster (benchmarks/README.md, the bench log's
+    `discover`)."""
     f0 = field(steps[0], y0, None)
 
     def step(carry, ends):
