@@ -461,7 +461,8 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     """d, a and drift equal log det, trace and the grid RMS of (F + Λ)⁻¹ formed in numpy
     from `information`; the posterior covariance is that inverse; a plan run twice has
     twice the information, and with a negligible prior its drift error is 1/√2 (the seed's
-    quick plan identifies all twelve parameters)."""
+    quick plan identifies all twelve parameters); the information summed in chunks (a
+    concrete plan) is the traced plan's."""
     from hrgjax.calibration.physical import _SCALE
 
     plan = d.seed_bench_plan(quick=True)
@@ -481,6 +482,15 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     )
     wide = dict(prior_scale=1e6)
     one, two = (float(d.criterion(p, "drift", **wide)) for p in (plan, twice))
+    # a concrete plan's information is summed in fixed-size chunks of points (every plan
+    # meets one compiled Jacobian, every criterion one program): a plan of a new structure
+    # (the first 40 segments) compiles neither again; a traced plan's (jit) is the same
+    part = d.BenchPlan(plan.kind[:40], *(x[:40] for x in fields))
+    with CompileCounter() as c:
+        assert np.isfinite(float(d.criterion(part, "drift", **wide)))
+    assert "jit(_weighted_information)" not in c.names and "jit(_criterion)" not in c.names
+    np.testing.assert_allclose(jax.jit(d.information)(plan), f, rtol=1e-12,
+                               atol=1e-12 * np.abs(f).max())  # fmt: skip
     assert two / one == pytest.approx(2**-0.5, rel=1e-6)
 
 

@@ -994,8 +994,11 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
         raise ValueError(f"nodes must be a whole number ≥ 2 (quadrature points); got {nodes!r}")
     model = _model(model)
     values = _values(values, model)
-    return _information(plan, values, _noise(arw, gauss_markov, angle_white), nodes, model,
-                        _ramp_panels(plan, nodes))  # fmt: skip
+    noise = _noise(arw, gauss_markov, angle_white)
+    source, panels = _source(plan, values, noise, model, nodes)
+    if not isinstance(source, BenchPlan):
+        return source
+    return _information(plan, values, noise, nodes, model, panels)
 
 
 @eqx.filter_jit
@@ -1005,6 +1008,60 @@ def _information(plan, values, noise, nodes, model=GREY_BOX, panels=None):
     along its path (θ turning at −k_e Ω, T linear) — every quadrature point of every
     segment (`_quadrature_points`) in one vmapped Jacobian, so that the program holds one
     copy of the rate's derivative."""
+    weight, *path = _path_points(plan, values, noise, nodes, model, panels)
+    return _weighted_information(values, model, weight, *path)
+
+
+def _weighted_information(values, model, weight, thetas, temps, omega, temp_rate):
+    """Σ wᵢ gᵢ gᵀᵢ over points (θ, T, Ω, Ṫ), g = ∂(measured rate)/∂values."""
+    jac = jax.vmap(lambda th, T, om, tr: jax.jacfwd(model.rate)(values, th, T, om, tr))(
+        thetas, temps, omega, temp_rate
+    )  # (points, P)
+    return jnp.einsum("n,np,nq->pq", weight, jac, jac)
+
+
+INFORMATION_CHUNK = 1024
+"""Quadrature points per call of the information's compiled Jacobian on a concrete plan
+(`_information_chunked`): every plan, whatever its length and kinds, meets one program."""
+
+
+_chunk_information = eqx.filter_jit(_weighted_information)
+_path_points_compiled = eqx.filter_jit(lambda *a: _path_points(*a))
+
+
+def _information_chunked(plan, values, noise, model=GREY_BOX, panels=None, nodes=_NODES):
+    """`_information` of a concrete plan (values and noise concrete too): the
+    points' weights and paths by a small program per plan structure, then their Jacobians
+    `INFORMATION_CHUNK` points at a time (padded with weight 0) by one program for every
+    plan — a criterion of a new plan then compiles nothing large (`hrgjax design` compares
+    three plans of different structures; each cost ≈ 4 s of compiling before)."""
+    points = [np.asarray(x) for x in _path_points_compiled(plan, values, noise, nodes, model,
+                                                            panels)]  # fmt: skip
+    n = points[0].shape[0]
+    m = -(-n // INFORMATION_CHUNK) * INFORMATION_CHUNK
+    points = [np.pad(x, (0, m - n)) for x in points]  # padding: weight 0, θ = T = Ω = 0
+    total = None
+    for i in range(0, m, INFORMATION_CHUNK):
+        part = _chunk_information(values, model, *(device(x[i : i + INFORMATION_CHUNK])
+                                                    for x in points))  # fmt: skip
+        total = part if total is None else total + part
+    return total
+
+
+def _source(plan, values, noise, model=GREY_BOX, nodes=_NODES):
+    """What the criteria read the plan through: its information matrix, chunked
+    (`_information_chunked`), where the plan, values and noise are concrete; else the plan
+    itself (traced: `jax.jit`, `jax.grad` with respect to it — `_information` inline)."""
+    panels = _ramp_panels(plan, nodes)
+    if all(is_concrete(x) for x in (*plan._fields().values(), values, noise)):
+        return _information_chunked(plan, values, noise, model, panels, nodes), None
+    return plan, panels
+
+
+def _path_points(plan, values, noise, nodes, model=GREY_BOX, panels=None):
+    """Every quadrature point of `plan` (`_quadrature_points`): its weight (quadrature
+    weight × span × its segment's 1/N_w² and Gauss–Markov discount) and its path point
+    (θ [rad], T [°C], Ω [rad/s], Ṫ [°C/s])."""
     dt = jnp.asarray([DT_OUT[k] for k in plan.kind], dtype=float)  # each kind's sampling
     t0, t1, angle, rate, duration = (plan.temperature_c, plan.temperature_end_c,
                                      plan.wave_angle_deg, plan.rate_dps, plan.duration_s)  # fmt: skip
@@ -1029,19 +1086,19 @@ def _information(plan, values, noise, nodes, model=GREY_BOX, panels=None):
     # its two, so that the path stays periodic in every direction a gradient takes (the
     # derivative splits equally between temperature_c and temperature_end_c, as a static's)
     temps = jnp.where(turning, 0.5 * (at(t0) + at(t1)), at(t0) + temp_rate * t)
-    jac = jax.vmap(lambda th, T, om, tr: jax.jacfwd(model.rate)(values, th, T, om, tr))(
-        thetas, temps, omega, temp_rate
-    )  # (points, P)
-    return jnp.einsum("n,np,nq->pq", wt * span * at(seg_w), jac, jac)
+    return wt * span * at(seg_w), thetas, temps, omega, temp_rate
 
 
 def _precision_factor(plan, values, noise, prior_scale, model=GREY_BOX, panels=None):
     """Cholesky factor of the posterior precision in units of each parameter's typical
     uncertainty, equilibrated to unit diagonal: `(L, d)` with A = diag(d) L Lᵀ diag(d)
     (forming (F + Λ)⁻¹ explicitly loses ~cond·ε; triangular solves keep the criteria and
-    their gradients accurate)."""
+    their gradients accurate). `plan`: a plan, or its information matrix (`_source`)."""
     scale = model.scale()
-    a = _information(plan, values, noise, _NODES, model, panels)
+    if isinstance(plan, BenchPlan):
+        a = _information(plan, values, noise, _NODES, model, panels)
+    else:
+        a = plan
     a = a * scale[:, None] * scale[None, :]
     a = a + jnp.eye(a.shape[0]) / prior_scale**2
     d = jnp.sqrt(jnp.diagonal(a))
@@ -1065,8 +1122,9 @@ def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: fl
     its `scale()`), which keeps directions a plan does not see finite."""
     model = _model(model)
     values = _values(values, model)
-    factor = _precision_factor(plan, values, _noise(arw, gauss_markov, angle_white),
-                               prior_scale, model, _ramp_panels(plan))  # fmt: skip
+    noise = _noise(arw, gauss_markov, angle_white)
+    source, panels = _source(plan, values, noise, model)
+    factor = _precision_factor(source, values, noise, prior_scale, model, panels)
     scale = model.scale()
     w = _scaled_solve(factor, jnp.eye(scale.shape[0]))  # rows: L⁻¹ D⁻¹ e_i
     return (w @ w.T) * scale[:, None] * scale[None, :]
@@ -1081,8 +1139,9 @@ def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100
     as [`information`][hrgjax.calibration.design.information])."""
     model = _model(model)
     values = _values(values, model)
-    return _drift_error(plan, values, _noise(arw, gauss_markov, angle_white), prior_scale,
-                        temperatures_c, angles_deg, model, _ramp_panels(plan))  # fmt: skip
+    source, panels = _source(plan, values, noise := _noise(arw, gauss_markov, angle_white), model)
+    return _drift_error(source, values, noise, prior_scale, temperatures_c, angles_deg, model,
+                        panels)  # fmt: skip
 
 
 def _drift_error(plan, values, noise, prior_scale, temperatures_c=OPERATING_TEMPERATURES,
@@ -1147,8 +1206,8 @@ def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0
     require_x64("hrgjax.calibration.design.ins_error")
     model = _model(model)
     values = _values(values, model)
-    return _ins_error(plan, values, _noise(arw, gauss_markov, angle_white), float(prior_scale),
-                      _flights(flight), model, _ramp_panels(plan))  # fmt: skip
+    source, panels = _source(plan, values, noise := _noise(arw, gauss_markov, angle_white), model)
+    return _ins_error(source, values, noise, float(prior_scale), _flights(flight), model, panels)
 
 
 def ins_sensitivity(values=None, flight=None, nodes: int = _NODES, model=None) -> jax.Array:
@@ -1213,9 +1272,9 @@ def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 10
     require_x64("hrgjax.calibration.design.warmup_error")
     model = _model(model)
     values = _values(values, model)
-    return _warmup_error(plan, values, _noise(arw, gauss_markov, angle_white),
-                         float(prior_scale), _flights(flight), model,
-                         _ramp_panels(plan))  # fmt: skip
+    source, panels = _source(plan, values, noise := _noise(arw, gauss_markov, angle_white), model)
+    return _warmup_error(source, values, noise, float(prior_scale), _flights(flight), model,
+                         panels)  # fmt: skip
 
 
 def warmup_sensitivity(values=None, flight=None, nodes: int = _NODES, model=None) -> jax.Array:
@@ -1246,9 +1305,9 @@ def drift_warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: floa
     require_x64("hrgjax.calibration.design.drift_warmup_error")
     model = _model(model)
     values = _values(values, model)
-    out = _drift_warmup_terms(plan, values, _noise(arw, gauss_markov, angle_white),
-                              float(prior_scale), _flights(flight), model,
-                              _ramp_panels(plan))  # fmt: skip
+    source, panels = _source(plan, values, noise := _noise(arw, gauss_markov, angle_white), model)
+    out = _drift_warmup_terms(source, values, noise, float(prior_scale), _flights(flight), model,
+                              panels)  # fmt: skip
     return out if terms else out[0]
 
 
@@ -1288,8 +1347,9 @@ def criterion(plan: BenchPlan, kind: str = "drift+warmup", values=None, arw=None
     model = _model(model)
     values = _values(values, model)
     noise = _noise(arw, gauss_markov, angle_white)
-    return _criterion(plan, kind, values, noise, float(prior_scale), _flights(flight), model,
-                      _ramp_panels(plan))  # fmt: skip
+    source, panels = _source(plan, values, noise, model)
+    return _criterion(source, kind, values, noise, float(prior_scale), _flights(flight), model,
+                      panels)  # fmt: skip
 
 
 @eqx.filter_jit
@@ -1589,7 +1649,9 @@ def design(
                 too_big = err
                 continue
             plan = _whole_seconds(plan, bench, budget_s)  # concrete, checked, runnable
-            value = float(_criterion(plan, criterion, values, arw_v, 100.0, flight, model))
+            source, panels = _source(plan, values, arw_v, model)
+            value = float(_criterion(source, criterion, values, arw_v, 100.0, flight, model,
+                                     panels))  # fmt: skip
             search[n_lev] = value
             progress.set_postfix_str(f"{n_lev} levels: {value:.4g}")
             if best is None or value < best[1]:
