@@ -1026,7 +1026,6 @@ INFORMATION_CHUNK = 1024
 
 
 _chunk_information = eqx.filter_jit(_weighted_information)
-_path_points_compiled = eqx.filter_jit(lambda *a: _path_points(*a))
 
 
 def _information_chunked(plan, values, noise, model=GREY_BOX, panels=None, nodes=_NODES):
@@ -1087,6 +1086,9 @@ def _path_points(plan, values, noise, nodes, model=GREY_BOX, panels=None):
     # derivative splits equally between temperature_c and temperature_end_c, as a static's)
     temps = jnp.where(turning, 0.5 * (at(t0) + at(t1)), at(t0) + temp_rate * t)
     return wt * span * at(seg_w), thetas, temps, omega, temp_rate
+
+
+_path_points_compiled = eqx.filter_jit(_path_points)
 
 
 def _precision_factor(plan, values, noise, prior_scale, model=GREY_BOX, panels=None):
