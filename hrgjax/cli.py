@@ -7,7 +7,7 @@ import os
 import sys
 import time
 
-from .units import K_E_NOMINAL, WINDOW_S
+from .units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
 
 PRESETS = ("tvg3", "ideal")
 DATA_EXTENSIONS = (".csv", ".nc")
@@ -395,6 +395,8 @@ def cmd_calibrate(args) -> int:
     t0 = time.perf_counter()
     say = _say(t0)
     ramp_window = RAMP_WINDOW_S if args.method == "mlp" and args.st_width else None
+    if args.window is None:  # each method's own default, as its Python class has it
+        args.window = PHYSICAL_WINDOW_S if args.method == "physical" else WINDOW_S
     try:
         windows = reduce(data, k_e=args.k_e, window_s=args.window, ramp_window_s=ramp_window)
     except ValueError as err:
@@ -493,9 +495,15 @@ def cmd_discover(args) -> int:
         print("  structure is left above the noise floor that no catalogue effect explains")
     print("  fitted model:")
     print("\n".join("    " + line for line in found.equations().splitlines()[1:]))
-    print("  screening (score, p, ΔBIC, aliasing; a shape that outshines the candidate):")
+    print(
+        "  screening, first round — each candidate against the nominal model alone (score, p, "
+        "ΔBIC, aliasing; a shape that outshines it there):"
+    )
     for r in found.screening[:6]:
         outshone = f"  outshone by {r['outshone_by']}" if r.get("outshone_by") else ""
+        if r["effect"] in found.accepted:
+            round_ = found.accepted.index(r["effect"]) + 1
+            outshone = "  accepted" + (f" (round {round_})" if round_ > 1 else "")
         print(
             f"    {r['effect']:>32} {r['score']:12.4g} {r['p_value']:9.2g} "
             f"{r['delta_bic']:10.4g} {r['aliasing']:6.2f}{outshone}"
@@ -738,7 +746,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--k-e", type=POSITIVE_FLOAT, default=K_E_NOMINAL, help="nominal angular gain k_e"
     )
     p.add_argument(
-        "--window", type=POSITIVE_SECONDS, default=WINDOW_S, help="rotation-run window [s]"
+        "--window",
+        type=POSITIVE_SECONDS,
+        default=None,
+        help=f"rotation-run window [s] (None: {WINDOW_S:g} s for fourier and mlp, "
+        f"{PHYSICAL_WINDOW_S:g} s for physical, as the Python classes)",
     )
     p.add_argument(
         "--mode", default="reduced", choices=("reduced", "end_to_end"), help="MLP training mode"

@@ -34,6 +34,11 @@ WINDOW_S = 3.0
 it spans: at 5 °/s a 10-s window spans 28° of wave angle and shrinks the fitted 2θ
 scale-factor ripple by about 4 % (enough to leave 0.016° after 2 min at −40 °C); 3 s spans
 8° and shrinks it by 0.35 %."""
+PHYSICAL_WINDOW_S = 10.0
+"""Default window of moving runs for the physical grey box [s] (API, CLI and docs alike). It
+reduces the simulated wave angle with the same windows as the measured one, so a window's
+arc averaging biases nothing there, and 10-s windows carry ≈ 3× less white angle noise per
+window than 3-s ones (the fitted parameters' σ are ≈ 3× smaller)."""
 
 
 def deg(x):

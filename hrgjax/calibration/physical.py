@@ -54,7 +54,7 @@ from ..resonator.control import Control
 from ..resonator.params import Resonator, TemperatureLaw
 from ..resonator.readout import Readout
 from ..simulate import simulate
-from ..units import DEG, DEG_PER_H, T_REF_C
+from ..units import DEG, DEG_PER_H, PHYSICAL_WINDOW_S, T_REF_C
 from ._compensator import AbstractCompensator, split_targets
 from ._physical_start import initial_values
 from .reduce import K_E_NOMINAL, _slope, reduce
@@ -132,11 +132,13 @@ class PhysicalCompensator(AbstractCompensator):
     - `values`: fitted parameters in the order of
       [`PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] (SI); `None` before `fit`.
     - `covariance`: their covariance; `stats`: fit statistics as pairs (see `fit_stats`).
-    - `window_s`: rotation-run window [s]; `max_steps`: LM step limit.
+    - `window_s`: rotation-run window [s] (default
+      [`PHYSICAL_WINDOW_S`][hrgjax.units.PHYSICAL_WINDOW_S], 10 s, as the CLI's); `max_steps`:
+      LM step limit.
     """
 
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
-    window_s: float = eqx.field(static=True, default=10.0)
+    window_s: float = eqx.field(static=True, default=PHYSICAL_WINDOW_S)
     max_steps: int = eqx.field(static=True, default=64)
     values: jax.Array | None = None
     covariance: jax.Array | None = None

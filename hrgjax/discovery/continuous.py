@@ -522,6 +522,9 @@ class ContinuousProblem(AbstractProblem):
                 params.setdefault(n, {})[pname] = {
                     "value": float(z[i] * self.layout.scale[i]),
                     "std": None,
+                    "why_no_sigma": "a time constant scanned on a grid "
+                    f"({', '.join(f'{t:g}' for t in TAU_GRID)} s, refined by a parabola in "
+                    "log τ) and held there: the fit's other σ are given at it",
                 }
         for i, e in zip(idx, err, strict=True):
             name = next(n for n in model if i in self.layout.index(n))
@@ -749,6 +752,17 @@ class ContinuousProblem(AbstractProblem):
     def candidates(self, nominal):
         """Every effect of the superset that is not nominal."""
         return [n for n in self.layout.names if n not in nominal]
+
+    def row_classes(self):
+        """Training rows by class: a mixed log's static (1) and moving (0) dwell windows,
+        the continuous records' whitened blocks (2)."""
+        out = []
+        for g in self.train_groups:
+            if isinstance(g, Windows):
+                out.append((np.broadcast_to(np.asarray(g.cov.rate), (len(g.run),)) == 0.0) * 1)
+            else:
+                out.append(np.full(len(g.run) * int(g.whiten.shape[1]), 2))
+        return np.concatenate(out) if out else None
 
     def noise_report(self):
         """The noise model in report units."""

@@ -320,6 +320,11 @@ class DwellProblem(AbstractProblem):
         ([`describe`][hrgjax.discovery.leftover.describe])."""
         return leftover.describe(fit.r, fit.j, self.shape_columns, self.k_e)
 
+    def row_classes(self):
+        """Static (1) and moving (0) training windows: their σ come from different parts of
+        the noise model."""
+        return np.asarray(self.w.static)[self.train].astype(int)
+
     def noise_report(self):
         k_e, w = self.k_e, self.w
         out = dict.fromkeys(NoiseModel(0.0).report(k_e)) if self.nm is None else self.nm.report(k_e)

@@ -98,6 +98,12 @@ class AbstractProblem(abc.ABC):
     def leftover(self, fit: Fit) -> dict | None:
         """The strongest shape `fit` leaves."""
 
+    def row_classes(self) -> np.ndarray | None:
+        """An integer class per training row of a fit's whitened residual (rows whose noise
+        level is read together: static and moving windows, continuous blocks), or None for
+        one class ([`honest`][hrgjax.discovery.trust.honest])."""
+        return None
+
     @abc.abstractmethod
     def noise_report(self) -> dict:
         """The noise model, in report units."""

@@ -53,14 +53,19 @@ def to_user_units(parameters: dict, k_e: float) -> dict:
                 "sigma": None if std is None else abs(f) * float(std),
                 "unit": p.user_unit,
             }
+            if isinstance(v, dict) and v.get("std_model"):  # the structure left's share
+                out[name][pname]["sigma_model"] = abs(f) * float(v["std_model"])
+            if isinstance(v, dict) and v.get("why_no_sigma"):
+                out[name][pname]["why_no_sigma"] = v["why_no_sigma"]
     return out
 
 
 def _number(v: dict) -> str:
-    """'0.301 ± 0.004 °/h' (three significant digits of the value)."""
+    """'0.301 ± 0.004 °/h' (three significant digits of the value); a value without σ says
+    so ('600 s (scanned, no σ)')."""
     unit = f" {v['unit']}" if v["unit"] else ""
     if v["sigma"] is None:
-        return f"{v['value']:.4g}{unit}"
+        return f"{v['value']:.4g}{unit}" + (" (scanned, no σ)" if v.get("why_no_sigma") else "")
     return f"({v['value']:.4g} ± {v['sigma']:.2g}){unit}"
 
 
@@ -99,6 +104,9 @@ class Discovery:
     - `leftover`: the strongest shape the final fit leaves (a harmonic of θ, a covariate),
       with its size in user units and its significance in words
       ([`describe`][hrgjax.discovery.leftover.describe]); None when no shape can be tried.
+    - `uncertainty`: what the parameters' σ are ([`honest`][hrgjax.discovery.trust.honest]:
+      the noise level read from the fit's residual, the structure left fitted beside the
+      model and its pull added): `{"noise_scale", "shapes", "basis"}`.
     """
 
     verdict: str
@@ -121,6 +129,7 @@ class Discovery:
     shape: str
     residuals: dict = dataclasses.field(repr=False, compare=False)
     leftover: dict | None = None
+    uncertainty: dict | None = None
 
     @property
     def parameters(self) -> dict:
@@ -157,6 +166,8 @@ class Discovery:
             "model_parameters": self.fit_parameters,
             "angular_gain_k_e": self.k_e,
             "leftover": self.leftover,
+            "uncertainty": self.uncertainty,
+            "gap_note": self.gap_note(),
             "screening": list(self.screening),
             "consistency": self.consistency,
             "noise": self.noise,
@@ -216,7 +227,29 @@ class Discovery:
             f"held-out gap {self.gap_before:.3g} → {self.gap_after:.3g} °/h "
             f"(noise floor {self.noise_floor:.3g} °/h); ΔT = T − 20 °C, θ electrical"
         )
+        why = self.gap_note()
+        if why:
+            lines.append(why)
+        if self.uncertainty:
+            lines.append("± are 1σ: " + self.uncertainty["basis"])
         return "\n".join(lines)
+
+    def gap_note(self) -> str | None:
+        """Why the held-out gap rose although effects were accepted (None when it did not):
+        on continuous records it is the RMS of the held-out runs' mean rate residuals, set by
+        each run's switch-on bias (the floor), and the acceptance is judged on the held-out
+        whitened χ², which the bias is part of."""
+        if not self.accepted or not self.gap_after > self.gap_before:
+            return None
+        rise = self.gap_after - self.gap_before
+        return (
+            f"note: the held-out gap rose by {rise:.3g} °/h although "
+            f"{', '.join(self.accepted)} {'was' if len(self.accepted) == 1 else 'were'} "
+            f"accepted: the gap is a few held-out runs' mean rates, whose switch-on biases "
+            f"alone give it {self.noise_floor:.3g} °/h (the floor; the rise is "
+            f"{rise / max(self.noise_floor, 1e-300):.2g}× it); effects are accepted on the "
+            "held-out whitened χ², which weighs that bias as noise"
+        )
 
     def __str__(self) -> str:
         return self.equations()

@@ -39,7 +39,7 @@ import numpy as np
 from ..calibration.reduce import K_E_NOMINAL, WINDOW_S, reduce
 from ..data import MeasuredData
 from ..noise import Noise
-from . import dwell, leftover
+from . import dwell, leftover, trust
 from .continuous import BLOCK_S, ContinuousProblem, Windows, dwell_runs
 from .dwell import DwellProblem, _window_extras
 from .effects import CATALOGUE, NOMINAL
@@ -192,6 +192,7 @@ def discover(
         verdict = "unexplained"
     else:
         verdict = "none"
+    parameters, uncertainty = trust.honest(current, problem.shape_columns, problem.row_classes())
     ambiguous = []
     if accepted:
         # first-round rivals that pass the same rule and whose evidence is not decisively
@@ -218,8 +219,8 @@ def discover(
         noise_floor=floor,
         metric=METRIC,
         structure_left=bool(left),
-        fit_parameters=current.parameters,
-        k_e=_fitted_k_e(current.parameters, k_e),
+        fit_parameters=parameters,
+        k_e=_fitted_k_e(parameters, k_e),
         ranking=tuple(
             {"effect": r["effect"], "score": r["score"], "params": r["params"]} for r in ranking
         ),
@@ -230,6 +231,7 @@ def discover(
         shape=shape,
         residuals={"before": problem.residuals(base), "after": problem.residuals(current)},
         leftover=problem.leftover(current),
+        uncertainty=uncertainty,
     )
 
 

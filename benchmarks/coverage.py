@@ -1,0 +1,183 @@
+"""Do hrgjax's error bars cover the truth? Monte Carlo with known truth (issue 43).
+
+For each workflow: datasets simulated with known parameters, the workflow run as a user runs
+it, and every reported ± compared with the truth: the share of truths within ±1σ and ±2σ
+(nominal 68 % and 95 %), the RMS of the standardised errors z = (value − truth)/σ (nominal 1)
+and the parameter with the largest mean z. Targets (issue 43): 68 ± 8 % / ≥ 90 %, z-RMS
+0.8–1.25, no parameter's mean z beyond 2.
+
+Workflows:
+
+- `discover`, one hidden effect: dwell grids of the default gyro reduced to the nominal
+  physics with a bias–temperature slope of 0.02 °/h/°C hidden
+  (`hrgjax.discovery.generate.hidden_effect_dataset`, its coloured noise and switch-on bias).
+  Truths: the slope b1 = 0.02 °/h/°C, the curvature b2 = 0, the angular gain k_e.
+- `discover`, two effects, one outside the catalogue: the same with an apparent input rate
+  of 0.5 °/h · cos 4θ added to the measured wave angle (integrated along each run's own
+  path) — structure the model cannot name, which pulls the slope.
+- Ferraris (`benchmarks/coverage_ferraris.py`, when present): white and random-walk sensor
+  noise.
+- The physical grey box (`--physical`): the quick seed plan on the default gyro (real closed
+  loops, temperature laws) against the gyro's true laws.
+
+"Before" is the textbook σ ((JᵀJ)⁻¹ of the noise model's whitening, kept in the report as
+`std_textbook`); "after" is what `discover` now reports
+([`honest`][hrgjax.discovery.trust.honest]), both from the same fits in one run.
+
+Usage: `.venv/bin/python benchmarks/coverage.py [--quick] [--physical] [--n N]`.
+"""
+
+import argparse
+import sys
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+from _common import machine, report  # noqa: E402
+
+from hrgjax.data import MeasuredData  # noqa: E402
+from hrgjax.discovery import discover  # noqa: E402
+from hrgjax.discovery.generate import base_gyro, hidden_effect_dataset  # noqa: E402
+from hrgjax.units import DEG  # noqa: E402
+
+SLOPE = 0.02  # °/h/°C
+FOUR_THETA = 0.5  # °/h
+
+
+def add_four_theta(data: MeasuredData, amp_dph: float, k_e: float) -> MeasuredData:
+    """`data` with an apparent input rate `amp_dph`·cos 4θ [°/h] added to its wave angle,
+    integrated (trapezoid) along each run's own measured angle: a drift outside the catalogue."""
+    cols = dict(data.columns)
+    theta, t, run = np.asarray(cols["wave_angle_deg"], float), cols["time_s"], data.run
+    out = theta.copy()
+    for r in np.unique(run):
+        m = np.flatnonzero(run == r)
+        rate = -k_e * amp_dph * np.cos(4 * theta[m] * DEG) / 3600.0  # pattern °/s
+        inc = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t[m]))])
+        out[m] = theta[m] + inc
+    cols["wave_angle_deg"] = out
+    return MeasuredData(cols)
+
+
+def summarise(z: dict[str, list]) -> dict:
+    """Pooled coverage of standardised errors `{parameter: [z, …]}`."""
+    allz = np.concatenate([np.asarray(v, float) for v in z.values()])
+    means = {k: float(np.mean(v)) for k, v in z.items()}
+    worst = max(means.items(), key=lambda kv: abs(kv[1]))
+    return {
+        "within_1sigma": float(np.mean(np.abs(allz) < 1)),
+        "within_2sigma": float(np.mean(np.abs(allz) < 2)),
+        "z_rms": float(np.sqrt(np.mean(allz**2))),
+        "worst_mean_z": worst,
+        "n": int(allz.size),
+    }
+
+
+def discover_coverage(n: int, four_theta: float = 0.0, seed0: int = 1000) -> tuple[dict, dict]:
+    """(before, after) coverage of discover's b1, b2 and k_e over `n` dwell grids."""
+    k_e = float(base_gyro(noise=False).k_e)
+    truth = {("bias_temperature", "b1"): SLOPE, ("bias_temperature", "b2"): 0.0,
+             ("angular_gain", "k_e"): k_e}  # fmt: skip
+    before, after = {}, {}
+    shapes = {}
+    for s in range(n):
+        data = hidden_effect_dataset("bias_temperature", SLOPE, key=jax.random.key(seed0 + s))
+        if four_theta:
+            data = add_four_theta(data, four_theta, k_e)
+        found = discover(data)
+        user = found.parameters
+        raw = found.fit_parameters
+        for shape in found.uncertainty["shapes"]:
+            shapes[shape] = shapes.get(shape, 0) + 1
+        for (name, p), value in truth.items():
+            if name not in user:
+                continue
+            v, scale = user[name][p], abs(user[name][p]["value"] / raw[name][p]["value"])
+            if name == "angular_gain":
+                scale = 1.0
+            key = f"{name}.{p}"
+            old = raw[name][p].get("std_textbook", raw[name][p]["std"]) * scale
+            before.setdefault(key, []).append((v["value"] - value) / old)
+            after.setdefault(key, []).append((v["value"] - value) / v["sigma"])
+        print(f"  dataset {s}: {found.verdict} {list(found.accepted)}, "
+              f"shapes fitted beside: {found.uncertainty['shapes']}", flush=True)  # fmt: skip
+    return summarise(before), summarise(after), shapes
+
+
+def _row(name, res):
+    w = res["worst_mean_z"]
+    return (
+        f"{name:<44} {100 * res['within_1sigma']:6.0f} % {100 * res['within_2sigma']:6.0f} % "
+        f"{res['z_rms']:7.2f}   {w[0]} {w[1]:+.2f}   (n = {res['n']})"
+    )
+
+
+def physical_coverage(n: int) -> dict:
+    """z of the physical grey box's parameters against the default gyro's true laws, over
+    `n` seeds of the quick seed plan (CLI defaults)."""
+    from hrgjax.calibration import PhysicalCompensator, run_plan, seed_plan
+    from hrgjax.calibration.design import nominal_values
+    from hrgjax.calibration.physical import NAMES
+    from hrgjax.data import concat
+    from hrgjax.presets import tvg3_like
+
+    gyro = tvg3_like()
+    truth = np.asarray(nominal_values(gyro))  # the preset's laws in the grey box's terms
+    z = {}
+    for s in range(n):
+        key = jax.random.key(2000 + s)
+        static, rotation = seed_plan(quick=True)
+        a = run_plan(gyro, static, key=key, bias_key=key)
+        b = run_plan(gyro, rotation, key=jax.random.fold_in(key, 1), bias_key=key,
+                     first_run=static.size)  # fmt: skip
+        data = concat([a, b])
+        comp = PhysicalCompensator().fit(data)
+        p = comp.parameters()
+        for i, name in enumerate(NAMES):
+            v, e = p[name]
+            if e > 0 and np.isfinite(e) and np.isfinite(truth[i]):
+                z.setdefault(name, []).append((v - truth[i]) / e)
+        print(f"  seed {s}: fitted", flush=True)
+    return summarise(z)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="6 datasets per workflow")
+    ap.add_argument("--n", type=int, default=None, help="datasets per workflow")
+    ap.add_argument("--physical", action="store_true", help="also the physical grey box")
+    args = ap.parse_args(argv)
+    n = args.n or (6 if args.quick else 20)
+    print(f"coverage.py on {machine()}, {n} datasets per workflow")
+    t0 = time.perf_counter()
+    rows = []
+    b1, a1, _ = discover_coverage(n)
+    rows += [("discover, one effect — before (textbook σ)", b1),
+             ("discover, one effect — after", a1)]  # fmt: skip
+    b2, a2, shapes = discover_coverage(n, FOUR_THETA)
+    rows += [("discover, + 4θ outside the catalogue — before", b2),
+             ("discover, + 4θ outside the catalogue — after", a2)]  # fmt: skip
+    print(f"  shapes fitted beside the model with 4θ hidden: {shapes}")
+    try:
+        from coverage_ferraris import ferraris_coverage
+    except ImportError:
+        ferraris_coverage = None
+    if ferraris_coverage is not None:
+        for noise in ("white", "random_walk"):
+            rows.append((f"Ferraris, {noise} noise", ferraris_coverage(n, noise, 0)))
+    if args.physical:
+        rows.append(("physical grey box, quick seed plan", physical_coverage(min(n, 8))))
+    print(f"\n{'workflow':<44} {'±1σ':>8} {'±2σ':>8} {'z-RMS':>7}   worst mean z")
+    for name, res in rows:
+        print(_row(name, res))
+    for name, res in rows:
+        report(f"z-RMS, {name}", res["z_rms"], "", target="0.8–1.25")
+    print(f"\n{time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

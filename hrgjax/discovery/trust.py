@@ -1,0 +1,146 @@
+r"""Error bars that cover the truth (issue 43): the σ `discover` reports for the final model.
+
+A fit's textbook covariance $(J^\top J)^{-1}$ (in whitened units) is right only when the
+whitening is right and the model is. Neither holds off the paved path: the noise model is read
+from short still stretches (a 60-s dwell cannot tell its angle random walk from white noise,
+and the windows' σ swing by 2–4× between sessions), and a model with structure left is
+biased by it. Two corrections, both from the fit's own residual:
+
+1. **Noise scale** (Birge ratio). Each class of rows (static and moving dwell windows,
+   continuous blocks) has its whitened residual's mean square $s_g^2 = \sum r_g^2/(n_g -
+   p\,n_g/n)$; the rows are re-weighted by $1/s_g$ before the covariance is formed — the
+   noise level the data show, not the one the noise model guessed (feasible weighted least
+   squares). A class with fewer than `MIN_ROWS` rows keeps its whitening.
+2. **Structure left** (model uncertainty). The generic shapes of
+   [`leftover`][hrgjax.discovery.leftover] that are still significant (Bonferroni over the
+   shapes tried, p < `alpha`) are fitted beside the model, strongest first, up to
+   `MAX_SHAPES`; each parameter's σ is then the augmented fit's (wider: it no longer borrows
+   what the shapes take) plus its shift $\delta$ when they are fitted:
+   $\sigma = s\,[(A^\top A)^{-1}]_{ii}^{1/2} + |\delta_i|$, $A = [J\;G]$. The reported value
+   stays the named model's, so its error is the noise's plus the pull: added linearly, the
+   ±1σ interval holds the truth at least as often as the noise alone would put it there
+   when δ is the pull (added in quadrature, a pull much larger than the noise would sit at
+   the interval's edge, half the time outside). A parameter the leftover pulls is reported
+   with that pull in its σ, never with a confident, wrong one.
+
+The corrected σ replace `std` in the fit's parameters; the untouched textbook value is kept
+as `std_textbook`, the shift as `std_model`, and [`uncertainty`][hrgjax.discovery.trust.uncertainty]
+says in words what was done. `benchmarks/coverage.py` measures how often the truth falls
+within ±1σ and ±2σ.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+
+from . import dwell, leftover
+from .effects import CATALOGUE
+
+MAX_SHAPES = 3
+"""The most leftover shapes fitted beside the model for its model uncertainty."""
+MIN_ROWS = 30
+"""Fewest rows of a class whose noise scale is read from its own residual."""
+
+
+def _regular(model) -> list[tuple[str, str]]:
+    """(effect, parameter) of each column of a fit's Jacobian: the regular parameters in model
+    order (the order both data shapes build their Jacobian in)."""
+    return [(n, p.name) for n in model for p in CATALOGUE[n].params if p.regular]
+
+
+def _noise_scale(r, p, classes):
+    """Per-row noise scale s (N,) from each class's residual mean square (module docstring)."""
+    n = r.size
+    s = np.ones(n)
+    if classes is None:
+        classes = np.zeros(n, int)
+    for c in np.unique(classes):
+        m = classes == c
+        n_g = int(m.sum())
+        dof = n_g - p * n_g / n
+        if n_g >= MIN_ROWS and dof > 0:
+            s[m] = math.sqrt(float(r[m] @ r[m]) / dof)
+    return s
+
+
+def _shapes_left(r, j, cols, alpha):
+    """Significant leftover shapes, strongest first, each chosen given the ones before."""
+    chosen, jj, rr = [], j, r
+    cols = leftover._distinct(cols)
+    for _ in range(MAX_SHAPES):
+        scores = leftover.scores(rr, jj, {k: v for k, v in cols.items() if k not in chosen})
+        if not scores:
+            break
+        name, (s, q) = max(scores.items(), key=lambda kv: kv[1][0])
+        if min(1.0, dwell.chi2_sf(s, q) * len(cols)) >= alpha:
+            break
+        chosen.append(name)
+        jj = np.concatenate([jj, cols[name]], axis=1)
+        beta, *_ = np.linalg.lstsq(jj, r, rcond=None)
+        rr = r - jj @ beta
+    return chosen
+
+
+def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
+    """The fit's parameters with error bars that cover the truth (module docstring).
+
+    **Arguments:** `fit` (a [`Fit`][hrgjax.discovery.problem.Fit]), `shape_columns` (the
+    problem's whitened generic-shape columns on the training rows), `classes` (an integer
+    class per training row — static / moving windows — or None for one class), `alpha`
+    (significance of a leftover shape).
+
+    **Returns:** `(parameters, info)`: a copy of `fit.parameters` whose `std` are the
+    corrected ones (`std_textbook` and `std_model` beside them), and `info` =
+    `{"noise_scale": {class: s}, "shapes": [names], "basis": words}`.
+    """
+    r, j = np.asarray(fit.r, float), np.asarray(fit.j, float)
+    labels = _regular(fit.model)
+    params = copy.deepcopy(fit.parameters)
+    if j.ndim != 2 or j.shape[1] != len(labels) or r.size <= j.shape[1]:
+        return params, {"noise_scale": {}, "shapes": [], "basis": "textbook (no correction)"}
+    n, p = j.shape
+    cols = {k: v for k, v in shape_columns.items() if v.shape[0] == n}
+    s = _noise_scale(r, p, classes)
+    for _ in range(2):  # the shapes judged at the noise level the data show, and back
+        shapes = _shapes_left(r / s, j / s[:, None], {k: v / s[:, None] for k, v in cols.items()},
+                              alpha)  # fmt: skip
+        a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
+        step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
+        s = _noise_scale(r - a @ step, a.shape[1], classes)  # the noise the shapes leave
+    a, rs = a / s[:, None], r / s
+    step, *_ = np.linalg.lstsq(a, rs, rcond=None)
+    cov = dwell.covariance(a)[:p, :p]
+    old = np.sqrt(np.diag(dwell.covariance(j)))
+    shift = step[:p] if shapes else np.zeros(p)
+    for i, (name, pname) in enumerate(labels):
+        entry = params[name][pname]
+        std = entry.get("std")
+        if std is None or not np.isfinite(std) or not np.isfinite(old[i]) or old[i] == 0:
+            continue
+        unit = std / old[i]  # Jacobian column → model units
+        stat = math.sqrt(max(cov[i, i], 0.0)) * unit
+        model = abs(float(shift[i])) * unit
+        entry["std_textbook"] = std
+        entry["std_model"] = model
+        entry["std"] = stat + model
+    scale = {}
+    for c in np.unique(classes) if classes is not None else [0]:
+        m = classes == c if classes is not None else slice(None)
+        scale[int(c)] = float(np.median(s[m]))
+    words = (
+        "noise level from the fit's residual (×"
+        + ", ×".join(f"{v:.2g}" for v in scale.values())
+        + " of the noise model's σ)"
+    )
+    if shapes:
+        words += "; structure left (" + ", ".join(shapes) + ") fitted beside the model, "
+        words += "each parameter's shift when it is fitted added to its σ"
+    return params, {"noise_scale": scale, "shapes": shapes, "basis": words}
+
+
+def uncertainty(info: dict) -> str:
+    """One line saying what the reported ± are."""
+    return "± 1σ: " + info.get("basis", "textbook")

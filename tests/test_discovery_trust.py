@@ -1,0 +1,84 @@
+"""Error bars of discover's final model (issue 43): a linear dwell-like toy with known truth,
+a wrong noise level and a shape left out of the model — the corrected σ cover the truth, the
+textbook σ do not (both measured on the same draws)."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hrgjax.discovery import dwell, leftover, trust
+from hrgjax.discovery.effects import Covariates
+from hrgjax.discovery.problem import Fit
+from hrgjax.units import DEG, DEG_PER_H
+
+K = 0.554
+MODEL = ["bias", "angular_gain", "damping_anisotropy", "bias_temperature"]
+
+
+@pytest.fixture(scope="module")
+def grid():
+    """A dwell grid's windows: 5 temperatures × 7 angles over 120° (the set turned by 6° from
+    one temperature to the next, as a bench's may be), at rest and at 5 °/s."""
+    temps = np.repeat([-40.0, -15.0, 10.0, 35.0, 60.0], 7)
+    theta = (np.tile(np.arange(-60.0, 61.0, 20.0), 5) + np.repeat(np.arange(5) * 6.0, 7)) * DEG
+    theta, temps = np.r_[theta, theta], np.r_[temps, temps]
+    rate = np.r_[np.zeros(35), np.full(35, 5.0 * DEG)]
+    c = Covariates(theta=jnp.asarray(theta), rate=jnp.asarray(rate),
+                   temperature=jnp.asarray(temps), temperature_lagged=jnp.asarray(temps))  # fmt: skip
+    g, _ = dwell.design(MODEL, c, K)
+    z = np.zeros(theta.size)
+    cov = {"theta": theta, "dT": temps - 20.0, "Tdot": z, "rate": rate, "accel_z": z,
+           "t_run": z}  # fmt: skip
+    return g, leftover.columns(cov), (rate == 0).astype(int)
+
+
+def _draws(grid, sigma_true, sigma_assumed, four_theta, n=200, seed=0):
+    """z-scores (textbook, corrected) of the ΔT slope b1 over `n` noisy draws."""
+    g, shapes, classes = grid
+    rng = np.random.default_rng(seed)
+    truth = np.zeros(g.shape[1])
+    truth[0], truth[1], truth[-2] = 0.3 * DEG_PER_H, K, -K * 0.02 * DEG_PER_H  # b1
+    sig = np.full(g.shape[0], sigma_assumed)
+    z_old, z_new = [], []
+    for _ in range(n):
+        y = (
+            g @ truth
+            + four_theta * shapes["4θ"][:, 0]
+            + sigma_true * rng.standard_normal(g.shape[0])
+        )
+        beta, r, cov = dwell.wls(g, y, sig)
+        std = np.sqrt(np.diag(cov))
+        params = {}
+        for (name, pname), b, e in zip(trust._regular(MODEL), beta, std, strict=True):
+            params.setdefault(name, {})[pname] = {"value": b, "std": e}
+        fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
+        cols = {k: v / sig[:, None] for k, v in shapes.items()}
+        new, info = trust.honest(fit, cols, classes)
+        b1 = new["bias_temperature"]["b1"]
+        err = b1["value"] - truth[-2]
+        z_old.append(err / b1["std_textbook"])
+        z_new.append(err / b1["std"])
+    return np.asarray(z_old), np.asarray(z_new), info
+
+
+def test_a_wrong_noise_level_is_read_from_the_residual(grid):
+    """The noise model says σ/3: the textbook z spread is 3, the corrected one 1."""
+    s = 0.01 * DEG_PER_H
+    old, new, info = _draws(grid, s, s / 3, 0.0)
+    assert 2.5 < np.sqrt(np.mean(old**2)) < 3.5
+    assert 0.85 < np.sqrt(np.mean(new**2)) < 1.15
+    assert 0.58 < np.mean(np.abs(new) < 1) < 0.80 and np.mean(np.abs(new) < 2) > 0.92
+    assert info["shapes"] == [] and all(2.2 < v < 3.8 for v in info["noise_scale"].values())
+
+
+def test_structure_left_widens_the_error_bar_by_its_pull(grid):
+    """A 4θ drift the model lacks pulls b1 (cos 4θ over each temperature's angle set differs
+    from one temperature to the next, so it leaks into the ΔT slope) and is named as the
+    structure left; the textbook σ is many times too confident, the corrected one covers."""
+    s = 0.01 * DEG_PER_H
+    old, new, info = _draws(grid, s, s, 0.5 * DEG_PER_H * K, n=100, seed=1)
+    assert np.sqrt(np.mean(old**2)) > 10  # 22 on these draws
+    assert info["shapes"][0] == "4θ", info
+    assert np.sqrt(np.mean(new**2)) < 1.25
+    assert np.mean(np.abs(new) < 2) > 0.9
+    assert "structure left (4θ" in info["basis"]
