@@ -387,6 +387,7 @@ def cmd_calibrate(args) -> int:
     )
     from .calibration.mlp import MIN_RAMP_RATE
     from .calibration.reduce import RAMP_WINDOW_S
+    from .units import group_temperatures
 
     json_out = args.json or os.path.splitext(args.out)[0] + ".json"
     _check_output("--out", args.out, (".eqx",), [args.data])
@@ -401,7 +402,7 @@ def cmd_calibrate(args) -> int:
         raise UsageError(f"{args.data}: {_one_line(err)}") from None
     n_static = len(np.unique(windows.run[windows.static]))
     n_moving = len(np.unique(windows.run[~windows.static]))
-    temps = np.unique(np.round(windows.temperature_c, 2))
+    temps = np.unique(np.round(group_temperatures(windows.temperature_c), 2))
     print(
         f"hrgjax calibrate: {args.data}: {n_static} static and {n_moving} rotation runs, "
         f"{len(windows)} windows, temperatures {temps.tolist()} °C"
@@ -426,8 +427,9 @@ def cmd_calibrate(args) -> int:
     static = windows.select(windows.static & (np.abs(windows.temperature_rate_cps) < MIN_RAMP_RATE))
     resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c)
     print("  in-sample drift residual RMS per temperature [°/h]:")
-    for T in np.unique(static.temperature_c):
-        r = resid[static.temperature_c == T]
+    groups = group_temperatures(static.temperature_c)  # one row per temperature
+    for T in np.unique(groups):
+        r = resid[groups == T]
         print(f"    {T:+7.1f} °C  {np.sqrt(np.mean(r**2)):.4f}")
     if args.method == "physical":
         print(comp.equations())
