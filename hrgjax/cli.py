@@ -224,10 +224,12 @@ def cmd_design(args) -> int:
         args.budget_h, criterion=args.criterion, levels=levels, statics=args.statics,
         rotations=args.rotations, ramps=not args.no_ramps, steps=args.steps, model=args.model,
         learning_rate=lr, key=jax.random.key(args.seed),
+        temperature_step=args.temperature_step, angle_step=args.angle_step,
+        time_step=args.time_step, rate_step=args.rate_step,
     )  # fmt: skip
     took = time.perf_counter() - t0
     unit = d.CRITERION_UNITS[args.criterion]
-    unit = f" {unit}" if unit else ""
+    unit = bare = f" {unit}" if unit else ""
     if args.model != "physical":
         unit += f" ({args.model} surrogate)"
     hours = result.bench.breakdown_h(result.plan)
@@ -243,6 +245,13 @@ def cmd_design(args) -> int:
         f"{hours['measuring']:.2f} h, slew {hours['slew']:.2f} h, soak {hours['settle']:.2f} h, "
         f"re-positioning {hours['reposition']:.2f} h)"
     )
+    change = (result.value / result.optimised_value - 1.0) * 100.0
+    print(
+        f"  rounded for the bench: {args.temperature_step:g} °C, {args.angle_step:g}° electrical "
+        f"within (−90°, 90°], {args.time_step:g} s, {args.rate_step:g} °/s\n"
+        f"    {args.criterion} {result.optimised_value:.6g}{bare} optimised → "
+        f"{result.value:.6g}{bare} as rounded ({change:+.2f} %)"
+    )
     what = "ideal-loop grey box" if args.model == "physical" else f"{args.model} surrogate"
     print(f"  predicted (ARW, readout and Gauss–Markov noise, {what}; docs/design.md):")
     for name, plan in (("designed", result.plan), ("seed quick", d.seed_bench_plan(True)),
@@ -256,7 +265,7 @@ def cmd_design(args) -> int:
             value = float(d.criterion(plan, args.criterion, model=args.model))
         print(f"    {name:10s} {float(d.bench_time_h(plan, result.bench)):6.2f} h  "
               f"{args.criterion} {value:.4g}{unit}{parts}")  # fmt: skip
-    path = d.save_plan(result.plan, args.out, result.bench)
+    path = result.save(args.out)  # the rounded plan, both criterion values, the resolution
     print(f"wrote {path}")
     if args.plot is not None:
         from .plots import plan_figure
@@ -387,6 +396,7 @@ def cmd_calibrate(args) -> int:
     )
     from .calibration.mlp import MIN_RAMP_RATE
     from .calibration.reduce import RAMP_WINDOW_S
+    from .units import group_temperatures
 
     json_out = args.json or os.path.splitext(args.out)[0] + ".json"
     _check_output("--out", args.out, (".eqx",), [args.data])
@@ -403,7 +413,7 @@ def cmd_calibrate(args) -> int:
         raise UsageError(f"{args.data}: {_one_line(err)}") from None
     n_static = len(np.unique(windows.run[windows.static]))
     n_moving = len(np.unique(windows.run[~windows.static]))
-    temps = np.unique(np.round(windows.temperature_c, 2))
+    temps = np.unique(np.round(group_temperatures(windows.temperature_c), 2))
     print(
         f"hrgjax calibrate: {args.data}: {n_static} static and {n_moving} rotation runs, "
         f"{len(windows)} windows, temperatures {temps.tolist()} °C"
@@ -428,8 +438,9 @@ def cmd_calibrate(args) -> int:
     static = windows.select(windows.static & (np.abs(windows.temperature_rate_cps) < MIN_RAMP_RATE))
     resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c)
     print("  in-sample drift residual RMS per temperature [°/h]:")
-    for T in np.unique(static.temperature_c):
-        r = resid[static.temperature_c == T]
+    groups = group_temperatures(static.temperature_c)  # one row per temperature
+    for T in np.unique(groups):
+        r = resid[groups == T]
         print(f"    {T:+7.1f} °C  {np.sqrt(np.mean(r**2)):.4f}")
     if args.method == "physical":
         print(comp.equations())
@@ -902,6 +913,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="what the calibration will fit: physical (the grey box) or empirical (an MLP or "
         "a Fourier fit: the plan must visit what the gyro will meet)",
     )  # fmt: skip
+    p.add_argument("--temperature-step", type=POSITIVE_FLOAT, default=0.1,
+                   help="the bench's temperature resolution [°C]: the plan's temperatures "
+                   "are rounded to it (default 0.1)")  # fmt: skip
+    p.add_argument("--angle-step", type=POSITIVE_FLOAT, default=0.1,
+                   help="wave-angle resolution [° electrical]: angles are wrapped to "
+                   "(−90°, 90°] and rounded to it (default 0.1)")  # fmt: skip
+    p.add_argument("--time-step", type=POSITIVE_FLOAT, default=1.0,
+                   help="duration resolution [s] (default 1: whole seconds; static and "
+                   "rotation durations rounded down, ramps up)")  # fmt: skip
+    p.add_argument("--rate-step", type=POSITIVE_FLOAT, default=0.01,
+                   help="table-rate resolution [°/s] (default 0.01)")  # fmt: skip
     p.add_argument("--out", default="out/plan.json", help="plan file to write (JSON)")
     p.add_argument("--plot", default=None, help="figure of the plan's time line (.png)")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed (start angles)")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .units import DEG_PER_H
+from .units import DEG_PER_H, group_temperatures
 
 
 def _plt():
@@ -35,11 +35,12 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
     """
     plt = _plt()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
-    temps = np.unique(drift["temperature_c"])
+    groups = group_temperatures(drift["temperature_c"])  # one curve per temperature
+    temps = np.unique(groups)
     cmap = plt.get_cmap("coolwarm")
     norm = lambda T: (T - temps.min()) / max(np.ptp(temps), 1e-9)
     for T in temps:
-        m = drift["temperature_c"] == T
+        m = groups == T
         order = np.argsort(drift["wave_angle_deg"][m])
         ax1.plot(
             drift["wave_angle_deg"][m][order],
@@ -84,7 +85,8 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
     # a grid, three panels a row: readable at 100 % (one row of six was 2244 × 396 px)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows),
                              constrained_layout=True, sharex=True, squeeze=False)  # fmt: skip
-    temps = np.unique(static.temperature_c)
+    groups = group_temperatures(static.temperature_c)  # one curve per temperature
+    temps = np.unique(groups)
     cmap = plt.get_cmap("coolwarm")
     norm = lambda T: (T - temps.min()) / max(np.ptp(temps), 1e-9)
     panels = [("measured drift", None)] + [(lab, compensators[lab]) for lab in labels]
@@ -92,11 +94,11 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
         ax.set_visible(False)
     for ax, (name, comp) in zip(axes.ravel()[:n], panels, strict=True):
         for T in temps:
-            m = static.temperature_c == T
+            m = groups == T
             ang = static.wave_angle_deg[m]
             y = static.drift_dph[m]
-            if comp is not None:
-                y = y - comp.drift_dph(ang, T)
+            if comp is not None:  # at each window's own temperature, not the group's
+                y = y - comp.drift_dph(ang, static.temperature_c[m])
             order = np.argsort(ang)
             ax.plot(
                 ang[order], y[order], "o-", ms=2, lw=1, color=cmap(norm(T)), label=f"{T:+.0f} °C"

@@ -69,3 +69,42 @@ def dps(x):
 def to_dps(x):
     """rad/s → degrees per second."""
     return x / DEG_PER_S
+
+
+TEMPERATURE_TOLERANCE_C = 0.05
+"""Temperatures closer than this are one temperature in a report [°C]: half the bench
+resolution a designed plan is rounded to (0.1 °C), far above the last-bit differences
+that a temperature column's arithmetic leaves (2.6 and 2.6000000000000001 °C)."""
+
+
+def group_temperatures(values, tol: float = TEMPERATURE_TOLERANCE_C):
+    """The report group of each temperature in `values` [°C]: the median of its group's
+    values, one number per group, so that `np.unique` of the result lists each temperature
+    once and `labels == T` selects its members.
+
+    Groups are formed greedily from the coldest value: a group takes every value within
+    `tol` [°C] of its coldest member, and the next value starts the next group — so a group
+    spans at most `tol`, and values further apart than `tol` are never merged (a slow ramp's
+    values are not chained into one group). NaN stays NaN.
+
+    **Arguments:** `values`, temperatures [°C] (any shape); `tol`, the width of a group
+    [°C] (≥ 0; 0 groups equal values only).
+
+    **Returns:** float array of `values`' shape, each value's group temperature [°C].
+    """
+    import numpy as np
+
+    if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol >= 0):
+        raise ValueError(f"tol must be a finite number ≥ 0 [°C]; got {tol!r}")
+    x = np.asarray(values, dtype=float)
+    flat = x.ravel()
+    labels = np.full(flat.shape, np.nan)
+    finite = np.flatnonzero(np.isfinite(flat))
+    order = finite[np.argsort(flat[finite], kind="stable")]
+    ordered = flat[order]
+    start = 0
+    while start < order.size:
+        stop = int(np.searchsorted(ordered, ordered[start] + tol, side="right"))
+        labels[order[start:stop]] = np.median(ordered[start:stop])
+        start = stop
+    return labels.reshape(x.shape)

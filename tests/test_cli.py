@@ -83,6 +83,31 @@ def test_calibrate_reports_missing_rotation_runs(tmp_path, capsys):
     cli_fails(["calibrate", str(out), "--method", "fourier"], capsys, "no rotation runs")
 
 
+def test_calibrate_table_shows_each_temperature_once(tmp_path, capsys):
+    """Runs at 2.6 °C whose temperatures differ in the last bits (a temperature column's
+    arithmetic) make one row of the in-sample table, not three (issue 43)."""
+    cols = {k: [] for k in ("time_s", "run", "temperature_c", "table_rate_dps", "wave_angle_deg")}
+    t = np.arange(0.0, 60.1, 0.1)
+    for T in (2.6, np.nextafter(2.6, 3.0), 2.6 + 3e-15, 20.0):
+        for angle in np.arange(-90.0, 90.0, 20.0):
+            for rate in (0.0, 5.0):
+                drift = 0.3 * np.sin(np.radians(2 * angle)) / 3600.0  # input rate [°/s]
+                for name, x in (("time_s", t), ("run", len(cols["run"])), ("temperature_c", T),
+                                ("table_rate_dps", rate),
+                                ("wave_angle_deg", angle - 0.554 * (rate + drift) * t)):  # fmt: skip
+                    cols[name].append(np.broadcast_to(x, t.shape))
+    path = hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()}).save(
+        tmp_path / "jitter.csv"
+    )
+    argv = ["calibrate", str(path), "--method", "fourier", "--temperature-degree", "0",
+            "--out", str(tmp_path / "f.eqx")]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "temperatures [2.6, 20.0] °C" in out
+    table = out.split("per temperature [°/h]:")[1]
+    assert table.count("+2.6 °C") == 1 and table.count("+20.0 °C") == 1
+
+
 def test_correct_reports_bad_model_file(tmp_path, capsys):
     data_path = tmp_path / "d.csv"
     assert main(["simulate", "--plan", "static", "--duration", "6", "--out", str(data_path)]) == 0

@@ -140,6 +140,157 @@ def test_plan_file_round_trip_and_every_bad_input_named(tmp_path):
             d.information(plan, nodes=bad)
 
 
+# A plan as the search leaves it (issue 43): temperatures and angles to the last bit, wave
+# angles anywhere, a ramp a little faster than the chamber once its ends are rounded.
+RAW = [
+    {"kind": "static", "temperature_c": -39.4150101746599, "wave_angle_deg": -167.2,
+     "duration_s": 119.7},
+    {"kind": "rotation", "temperature_c": -39.4150101746599, "wave_angle_deg": 270.04,
+     "rate_dps": 4.996, "duration_s": 113.2},
+    {"kind": "ramp", "temperature_start_c": -39.4150101746599,
+     "temperature_end_c": 42.464998885560334, "wave_angle_deg": -89.97, "duration_s": 4912.9},
+    {"kind": "static", "temperature_c": 42.464998885560334, "wave_angle_deg": 89.96,
+     "duration_s": 600.4},
+    {"kind": "rotation", "temperature_c": 42.464998885560334, "wave_angle_deg": -90.0,
+     "rate_dps": -0.004, "duration_s": 72.0},
+]  # fmt: skip
+
+
+def _on_grid(x, step):
+    k = np.asarray(x) / step
+    return np.allclose(k, np.round(k), rtol=0, atol=1e-9)
+
+
+def test_round_plan_puts_every_number_on_the_bench_grid_idempotently():
+    """Temperatures to 0.1 °C, wave angles wrapped to (−90°, 90°] and to 0.1°, rates to
+    0.01 °/s, durations to whole seconds (ramps up, never faster than the chamber); each
+    float prints as written; a rounded plan rounds to itself; other steps and a budget."""
+    plan, bench = d.BenchPlan.from_segments(RAW), d.BenchModel()
+    out = d.round_plan(plan, bench)
+    segs = out.segments()
+    assert [s.get("temperature_c", s.get("temperature_start_c")) for s in segs] == [
+        -39.4, -39.4, -39.4, 42.5, 42.5]  # fmt: skip
+    assert segs[2]["temperature_end_c"] == 42.5  # a ramp still ends at its level
+    # −167.2 ≡ 12.8; 270.04 ≡ 90.04 ≡ −89.96 → 90.0 (the edge, the same wave); −90 → +90
+    assert [s["wave_angle_deg"] for s in segs] == [12.8, 90.0, 90.0, 90.0, 90.0]
+    assert segs[1]["rate_dps"] == 5.0 and segs[4]["rate_dps"] == -0.01  # a rotation turns
+    # static/rotation down; the ramp's 81.9 °C at 1 °C/min need 4914 s, more than 4913
+    assert [s["duration_s"] for s in segs] == [119.0, 113.0, 4914.0, 600.0, 72.0]
+    bench.check(out)
+    for seg in segs:  # the shortest repr: −39.4, not −39.400000000000006
+        for k, x in seg.items():
+            if k != "kind":
+                assert repr(x) == repr(round(x, 2)), (k, x)
+    again = d.round_plan(out, bench)
+    for a, b in zip(jax.tree_util.tree_leaves(again), jax.tree_util.tree_leaves(out),
+                    strict=True):  # fmt: skip
+        np.testing.assert_array_equal(a, b)
+    # random plans, other steps (0.7° does not divide 180°: the nearest point inside)
+    rng = np.random.default_rng(1)
+    n = 200
+    t = rng.uniform(-40, 60, n)
+    angles = np.concatenate([rng.uniform(-400, 400, n - 8),
+                             [-90.0, 90.0, -89.96, 89.96, 180.0, -180.0, 269.99, -270.05]])  # fmt: skip
+    cols = (t, t, angles, np.zeros(n), rng.uniform(60, 600, n))
+    plan = d.BenchPlan(("static",) * n, *(jnp.asarray(x) for x in cols))
+    for steps in (dict(temperature_step=0.1, angle_step=0.1, time_step=1.0),
+                  dict(temperature_step=0.25, angle_step=0.7, time_step=5.0),
+                  dict(temperature_step=1.0, angle_step=0.05, time_step=0.5)):  # fmt: skip
+        out = d.round_plan(plan, bench, **steps)
+        a = np.asarray(out.wave_angle_deg)
+        assert np.all((a > -90.0) & (a <= 90.0))
+        gap = np.abs(np.mod(a - angles + 90.0, 180.0) - 90.0)  # the same wave, to a step
+        edge = (180.0 - 2 * (90.0 // steps["angle_step"]) * steps["angle_step"]) / 2  # 0.4°
+        assert gap.max() <= max(steps["angle_step"] / 2, edge) + 1e-9
+        assert _on_grid(a, steps["angle_step"])
+        assert _on_grid(out.temperature_c, steps["temperature_step"])
+        assert np.abs(np.asarray(out.temperature_c) - t).max() <= steps["temperature_step"] / 2
+        assert _on_grid(out.duration_s, steps["time_step"])
+        again = d.round_plan(out, bench, **steps)
+        for f in ("temperature_c", "wave_angle_deg", "duration_s"):
+            np.testing.assert_array_equal(getattr(again, f), getattr(out, f))
+    # a budget: the longest static segments give up whole steps until it holds
+    plan = d.BenchPlan.from_segments(RAW)
+    budget = float(d.bench_time_h(d.round_plan(plan, bench), bench)) - 0.01
+    fit = d.round_plan(plan, bench, budget_h=budget)
+    assert float(d.bench_time_h(fit, bench)) <= budget
+    assert fit.segments()[3]["duration_s"] == 600.0 - 36.0  # 0.01 h off the longest
+    with pytest.raises(ValueError, match=r"budget_h=1: the plan rounded .* cannot be short"):
+        d.round_plan(plan, bench, budget_h=1.0)
+    for name, unit in (("temperature_step", "°C"), ("angle_step", "° electrical"),
+                       ("time_step", "s"), ("rate_step", "°/s")):  # fmt: skip
+        for bad in (0.0, -0.1, float("nan")):
+            with pytest.raises(
+                ValueError, match=rf"^{name} must be a finite number > 0 \[{unit}\]"
+            ):
+                d.round_plan(plan, **{name: bad})
+
+
+def test_criterion_and_information_are_periodic_in_180_degrees_of_wave_angle():
+    """Every modelled effect the design sees is a harmonic of 2θ electrical (PHYSICS.md §1),
+    which is what lets `round_plan` wrap the angles: the information (grey box and
+    empirical surrogate) and a criterion of a plan — static, rotation, a ramp at rest and
+    one that turns — equal the plan's with every wave angle ±180° to round-off. A term in θ
+    alone would break it; 90° (the other harmonic's half-period) does change them. (Every
+    criterion of a concrete plan is a function of its information; `d` compiles in < 1 s,
+    the default's flights in ≈ 6 s: the design CLI test checks the default on its plan.)"""
+    segs = [{**SEGMENTS[0], "duration_s": 600.0}, {**SEGMENTS[1], "duration_s": 120.0},
+            {**SEGMENTS[2], "temperature_end_c": 40.0, "duration_s": 3600.0},
+            {**SEGMENTS[2], "temperature_start_c": 40.0, "temperature_end_c": 20.0,
+             "wave_angle_deg": 70.0, "rate_dps": 2.0, "duration_s": 2400.0}]  # fmt: skip
+    plan = d.BenchPlan.from_segments(segs)
+    shifted = lambda s: eqx.tree_at(lambda q: q.wave_angle_deg, plan, plan.wave_angle_deg + s)
+    for model in ("physical", "empirical"):
+        f0 = np.asarray(d.information(plan, model=model))
+        for s in (180.0, -180.0):
+            np.testing.assert_allclose(d.information(shifted(s), model=model), f0, rtol=0,
+                                       atol=1e-13 * np.abs(f0).max())  # fmt: skip
+    c0 = float(d.criterion(plan, "d"))
+    for s in (180.0, -180.0):
+        assert float(d.criterion(shifted(s), "d")) == pytest.approx(c0, rel=1e-11)
+    assert abs(float(d.criterion(shifted(90.0), "d")) - c0) > 1e-3
+    quarter = np.asarray(d.information(shifted(90.0)))
+    assert np.abs(quarter - np.asarray(d.information(plan))).max() > 1e-3 * np.abs(quarter).max()
+
+
+def test_plan_file_keeps_the_rounded_values_and_both_criteria_and_old_files_load(tmp_path):
+    """save_plan with the criterion and resolution blocks writes the rounded numbers as
+    they print (−39.4) and load_plan gives them back exactly; a file without the new
+    blocks (the contract's) loads as before; bad blocks are named."""
+    bench = d.BenchModel()
+    plan = d.round_plan(d.BenchPlan.from_segments(RAW), bench)
+    criterion = {"kind": "drift+warmup", "model": "physical", "unit": "°",
+                 "optimised": 0.0194, "rounded": 0.01943}  # fmt: skip
+    resolution = {"temperature_c": 0.1, "wave_angle_deg": 0.1, "duration_s": 1.0,
+                  "rate_dps": 0.01}  # fmt: skip
+    path = d.save_plan(plan, tmp_path / "plan.json", bench, criterion=criterion,
+                       resolution=resolution)  # fmt: skip
+    text = (tmp_path / "plan.json").read_text(encoding="utf-8")
+    assert '"temperature_c": -39.4,' in text and '"unit": "°"' in text
+    assert "00000" not in text.split('"bench_time_h"')[0]  # segments print as written
+    doc = json.loads(text)
+    assert doc["segments"] == plan.segments() and doc["criterion"] == criterion
+    assert doc["resolution"] == resolution
+    assert doc["bench_time_h"] == float(d.bench_time_h(plan, bench))  # of the rounded plan
+    back, _ = d.load_plan(path)
+    for a, b in zip(jax.tree_util.tree_leaves(back), jax.tree_util.tree_leaves(plan), strict=True):
+        np.testing.assert_array_equal(a, b)
+    old = tmp_path / "old.json"  # the contract's keys alone, as before issue 43
+    old.write_text(json.dumps({"segments": RAW, "bench_time_h": 3.15}))
+    back, bench_back = d.load_plan(old)
+    assert back.segments() == RAW and bench_back == d.BenchModel()
+    for block, match in (
+        ({"criterion": {**criterion, "rounded": "small"}}, r"'criterion': 'rounded' must be"),
+        ({"criterion": {"kind": "drift"}}, r"'criterion' must be an object with keys"),
+        ({"resolution": {"temperature_c": 0.0}}, r"'temperature_c' must be a step > 0 \[°C\]"),
+        ({"resolution": {"angle": 0.1}}, r"'resolution' must be an object with keys from"),
+    ):
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps({"segments": RAW, **block}))
+        with pytest.raises(ValueError, match=match):
+            d.load_plan(bad)
+
+
 @pytest.fixture(scope="module")
 def quiet():
     return hg.presets.tvg3_like(noise=False)
@@ -512,17 +663,38 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     bench.check(plan)
     assert float(d.bench_time_h(plan, bench)) <= 2.5 + 1e-9
     assert plan.kind == ("static", "static", "rotation", "ramp", "static", "static", "rotation")
-    # whole seconds: a bench (and simulate_plan's whole output intervals) runs it as written
+    # rounded for the bench: whole seconds (a bench and simulate_plan's whole output
+    # intervals run it as written), 0.1 °C, 0.1° electrical within (−90°, 90°]
     dur = np.asarray(plan.duration_s)
     assert np.array_equal(dur, np.round(dur)) and dur.min() >= d.MIN_STATIC_S
+    angles = np.asarray(plan.wave_angle_deg)
+    assert np.all((angles > -90.0) & (angles <= 90.0)) and _on_grid(angles, 0.1)
+    assert _on_grid(plan.temperature_c, 0.1) and _on_grid(plan.temperature_end_c, 0.1)
     value, drift, warm = (float(v) for v in d.drift_warmup_error(plan, terms=True))
     hours = float(d.bench_time_h(plan, bench))
     assert (f"{'designed':10s} {hours:6.2f} h  drift+warmup {value:.4g} ° "
             f"(drift {drift:.4g} °/h, warm-up {warm:.4g} °)") in text  # fmt: skip
+    # both criteria printed and stored: the search's plan and the plan as rounded (this one)
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    crit = doc["criterion"]
+    assert crit["kind"] == "drift+warmup" and crit["unit"] == "°"
+    assert crit["rounded"] == pytest.approx(value, rel=1e-9)
+    assert f"{crit['optimised']:.6g} ° optimised → {crit['rounded']:.6g} ° as rounded" in text
+    assert doc["resolution"] == {"temperature_c": 0.1, "wave_angle_deg": 0.1, "duration_s": 1.0,
+                                 "rate_dps": 0.01}  # fmt: skip
+    assert doc["bench_time_h"] == hours  # of the rounded plan
+    # the default criterion does not see 180° of wave angle (what the wrap relies on)
+    turned = eqx.tree_at(lambda q: q.wave_angle_deg, plan, plan.wave_angle_deg + 180.0)
+    assert float(d.criterion(turned)) == pytest.approx(value, rel=1e-11)
     assert png.stat().st_size > 0
     result = d.design(2.5, levels=(2,), statics=2, rotations=1, steps=40)
     assert result.history[-1] < result.history[0] - 0.1  # log-criterion fell by > 10 %
     assert result.value == pytest.approx(value, rel=1e-9)  # deterministic for a key
+    assert result.optimised_value == pytest.approx(crit["optimised"], rel=1e-9)
+    assert result.optimised_value == pytest.approx(
+        float(d.criterion(result.optimised_plan)), rel=1e-9
+    )
+    assert abs(result.value / result.optimised_value - 1.0) < 0.01  # the bench's resolution
     for bad in (dict(learning_rate=-0.1), dict(learning_rate=float("nan")), dict(steps=0)):
         with pytest.raises(ValueError, match=f"^{next(iter(bad))} must be"):
             d.design(2.5, levels=(2,), **bad)
@@ -531,6 +703,9 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     cli_fails(["design", "--budget-h", "-1"], capsys, r"--budget-h: expected a number > 0")
     cli_fails(["design", "--budget-h", "2", "--learning-rate", "0"], capsys,
               r"--learning-rate: expected a number > 0")  # fmt: skip
+    for option in ("--temperature-step", "--angle-step", "--time-step", "--rate-step"):
+        cli_fails(["design", "--budget-h", "2", option, "0"], capsys,
+                  rf"{option}: expected a number > 0; got 0")  # fmt: skip
 
 
 def test_ins_criterion_is_the_schuler_response_to_the_posterior_integrated_by_diffrax():

@@ -44,6 +44,7 @@ class _Flat:
 def test_compensation_residuals_is_a_readable_grid(figures):
     temps, angles = np.repeat([-40.0, 0.0, 40.0], 5), np.tile(np.linspace(-80, 80, 5), 3)
     n = temps.size
+    temps = temps + 1e-13 * np.arange(n)  # last-bit differences: one curve per temperature
     drift = np.sin(np.deg2rad(2 * angles)) + 0.02 * temps  # °/h
     w = RateWindows(run=np.arange(n), start=np.zeros(n, int), stop=np.full(n, 10),
                     t_mid=np.full(n, 90.0), duration=np.full(n, 180.0), temperature_c=temps,
@@ -59,6 +60,8 @@ def test_compensation_residuals_is_a_readable_grid(figures):
     _check(fig)
     residual = visible[1:3]  # the residual panels of a row share one scale
     assert residual[0].get_ylim() == residual[1].get_ylim()
+    (legend,) = fig.legends
+    assert [x.get_text() for x in legend.get_texts()] == ["-40 °C", "+0 °C", "+40 °C"]
 
 
 def test_vibration_training_panel_keeps_loss_and_rmse_on_separate_axes(figures):
@@ -97,7 +100,7 @@ def test_a_mixed_logs_discovery_figure_draws_records_and_dwell_runs(figures):
                for i in range(3)]  # fmt: skip
     n = 40
     windows = {"wave_angle_deg": np.tile(np.linspace(-90, 90, 10), 4),
-               "temperature_c": np.repeat([-20.0, 0.0, 20.0, 40.0], 10),
+               "temperature_c": np.repeat([-20.0, 0.0, 20.0, 40.0], 10) + 1e-13 * np.arange(n),
                "static": np.arange(n) % 2 == 0, "drift_dph": rng.normal(size=n)}  # fmt: skip
     res = {"records": records, "windows": windows}
     screen = {"effect": "bias_temperature", "score": 50.0, "p_value": 1e-9, "delta_bic": 40.0,
@@ -116,6 +119,10 @@ def test_a_mixed_logs_discovery_figure_draws_records_and_dwell_runs(figures):
     assert sum("continuous records" in s for s in titles) == 2
     assert sum("dwell runs" in s for s in titles) == 2
     _check(fig)
+    for ax in fig.axes:  # a temperature once in each legend, whatever its last bits
+        if "dwell runs" in ax.get_title():
+            labels = [x.get_text() for x in ax.get_legend().get_texts()]
+            assert labels == ["-20 °C", "+0 °C", "+20 °C", "+40 °C"]
 
 
 def test_allan_figure_reads_at_a_glance(figures):

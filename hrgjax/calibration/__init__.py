@@ -5,6 +5,7 @@ from .design import BenchModel as BenchModel
 from .design import BenchPlan as BenchPlan
 from .design import bench_time_h as bench_time_h
 from .design import load_plan as load_plan
+from .design import round_plan as round_plan
 from .design import save_plan as save_plan
 from .design import seed_bench_plan as seed_bench_plan
 from .design import simulate_plan as simulate_plan

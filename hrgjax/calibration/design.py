@@ -37,6 +37,7 @@ import json
 import math
 import os
 from collections.abc import Mapping, Sequence
+from decimal import Decimal
 
 import equinox as eqx
 import jax
@@ -354,38 +355,98 @@ def seed_bench_plan(
     return BenchPlan.from_segments(segs)
 
 
-def plan_to_json(plan: BenchPlan, bench: BenchModel | None = None) -> dict:
-    """The plan file's content: segments, `bench_time_h` and the `bench` model used."""
+_CRITERION_KEYS = ("kind", "model", "unit", "optimised", "rounded")
+
+
+def plan_to_json(plan: BenchPlan, bench: BenchModel | None = None, *,
+                 criterion: Mapping | None = None, resolution: Mapping | None = None) -> dict:  # fmt: skip
+    """The plan file's content: segments, `bench_time_h` (computed from `plan`, as it is)
+    and the `bench` model used; with `criterion` (a designed plan's: `kind`, `model`,
+    `unit`, `optimised` — the search's plan — and `rounded` — this one; as
+    `Design.criterion_json`) and `resolution` (the steps the plan was rounded to, by
+    segment key: `temperature_c` [°C], `wave_angle_deg` [° electrical], `duration_s` [s],
+    `rate_dps` [°/s]), those blocks too."""
     bench = BenchModel() if bench is None else bench
-    return {
+    doc = {
         "segments": plan.segments(),
         "bench_time_h": float(bench_time_h(plan, bench)),
         "bench": bench.to_json(),
     }
+    if criterion is not None:
+        doc["criterion"] = _criterion_block(criterion, "criterion")
+    if resolution is not None:
+        doc["resolution"] = _resolution_block(resolution, "resolution")
+    return doc
 
 
-def save_plan(plan: BenchPlan, path: str | os.PathLike, bench: BenchModel | None = None):
-    """Write `plan` as a JSON plan file (atomically); returns the path."""
+def _criterion_block(block, where: str) -> dict:
+    """A plan file's `"criterion"` block, checked: `kind` (`CRITERIA`), `model`, `unit`
+    (strings), `optimised` and `rounded` (finite numbers)."""
+    if not isinstance(block, Mapping) or set(block) != set(_CRITERION_KEYS):
+        raise ValueError(f"{where} must be an object with keys {list(_CRITERION_KEYS)}")
+    if block["kind"] not in CRITERIA:
+        raise ValueError(f"{where}: 'kind' must be one of {CRITERIA}; got {block['kind']!r}")
+    for k in ("model", "unit"):
+        if not isinstance(block[k], str):
+            raise ValueError(f"{where}: {k!r} must be a string; got {block[k]!r}")
+    for k in ("optimised", "rounded"):
+        x = block[k]
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            raise ValueError(f"{where}: {k!r} must be a finite number; got {x!r}")
+    return {k: block[k] if k in ("kind", "model", "unit") else float(block[k])
+            for k in _CRITERION_KEYS}  # fmt: skip
+
+
+def _resolution_block(block, where: str) -> dict:
+    """A plan file's `"resolution"` block, checked: steps > 0 by segment key."""
+    keys = tuple(RESOLUTION_KEYS.values())
+    if not isinstance(block, Mapping) or not block or set(block) - set(keys):
+        raise ValueError(f"{where} must be an object with keys from {list(keys)}")
+    out = {}
+    for k in keys:
+        if k in block:
+            x = block[k]
+            if (
+                isinstance(x, bool)
+                or not isinstance(x, (int, float))
+                or not (math.isfinite(x) and x > 0)
+            ):
+                raise ValueError(f"{where}: {k!r} must be a step > 0 [{_UNITS[k]}]; got {x!r}")
+            out[k] = float(x)
+    return out
+
+
+def save_plan(plan: BenchPlan, path: str | os.PathLike, bench: BenchModel | None = None, *,
+              criterion: Mapping | None = None, resolution: Mapping | None = None):  # fmt: skip
+    """Write `plan` as a JSON plan file (atomically; `criterion`, `resolution`: the blocks
+    of `plan_to_json`); returns the path."""
     from .._io import atomic_write
 
+    doc = plan_to_json(plan, bench, criterion=criterion, resolution=resolution)
     with atomic_write(path, "w", encoding="utf-8") as fh:
-        fh.write(json.dumps(plan_to_json(plan, bench), indent=1) + "\n")
+        fh.write(json.dumps(doc, indent=1, ensure_ascii=False) + "\n")
     return os.fspath(path)
 
 
 def load_plan(path: str | os.PathLike) -> tuple[BenchPlan, BenchModel]:
     """Read a JSON plan file: `(plan, bench)` — `bench` from its `"bench"` block where it
-    has one, else `BenchModel()`. Errors name the file, the segment and the key."""
+    has one, else `BenchModel()`. A designed plan's `"criterion"` and `"resolution"` blocks
+    (`plan_to_json`) are checked and otherwise left to the reader; files without them load
+    as before. Errors name the file, the segment and the key."""
     doc = read_json(path)
     where = f"{os.fspath(path)}"
     if not isinstance(doc, dict) or "segments" not in doc:
         raise ValueError(f"{where}: a plan file is an object with a 'segments' list")
-    unknown = set(doc) - {"segments", "bench_time_h", "bench"}
+    unknown = set(doc) - {"segments", "bench_time_h", "bench", "criterion", "resolution"}
     if unknown:
         raise ValueError(
             f"{where}: unknown key(s) {sorted(unknown)}; expected 'segments', "
-            "'bench_time_h', 'bench'"
+            "'bench_time_h', 'bench', 'criterion', 'resolution'"
         )
+    if "criterion" in doc:
+        _criterion_block(doc["criterion"], f"{where}: 'criterion'")
+    if "resolution" in doc:
+        _resolution_block(doc["resolution"], f"{where}: 'resolution'")
     plan = BenchPlan.from_segments(doc["segments"], where=f"{where}: segments")
     bench = BenchModel()
     if "bench" in doc:
@@ -398,6 +459,182 @@ def load_plan(path: str | os.PathLike) -> tuple[BenchPlan, BenchModel]:
         except (TypeError, ValueError) as err:
             raise ValueError(f"{where}: 'bench': {err}") from None
     return plan, bench
+
+
+# --- A plan as a bench can run it: rounded to the bench's resolution ----------------------
+
+TEMPERATURE_STEP_C = 0.1
+"""Default resolution of a bench plan's temperatures [°C] (`round_plan`): a chamber's
+set-point step."""
+ANGLE_STEP_DEG = 0.1
+"""Default resolution of its wave angles [° electrical] (`round_plan`)."""
+TIME_STEP_S = 1.0
+"""Default resolution of its durations [s] (`round_plan`): whole seconds, which
+`simulate_plan`'s default output intervals (1 s, 0.5 s) divide."""
+RATE_STEP_DPS = 0.01
+"""Default resolution of its table rates [°/s] (`round_plan`): a rate table's set-point
+step (a designed plan's rotations run at ±5 °/s, on it)."""
+
+RESOLUTION_KEYS = {"temperature_step": "temperature_c", "angle_step": "wave_angle_deg",
+                   "time_step": "duration_s", "rate_step": "rate_dps"}  # fmt: skip
+"""`round_plan`'s step arguments and the plan-file key each one quantises (the unit is in the
+key: °C, ° electrical, s, °/s) — the keys of a plan file's `"resolution"` block."""
+
+
+def _decimals(step: float) -> int:
+    """Decimal places of `step` as written (0.1 → 1, 0.25 → 2, 5.0 → 0)."""
+    exponent = Decimal(repr(float(step))).normalize().as_tuple().exponent
+    return max(0, -int(exponent))
+
+
+def quantise(values, step: float, direction: str = "nearest") -> np.ndarray:
+    """`values` on the grid of `step` (same unit), rounded `direction` (`"nearest"`,
+    `"down"` or `"up"`; a value on the grid — to 1e-9 of a step — stays there), and written
+    with the step's decimals, so that the floats print as a bench sheet would (−39.4, not
+    −39.400000000000006). Idempotent. Host arrays (numpy)."""
+    if not (isinstance(step, (int, float)) and math.isfinite(step) and step > 0):
+        raise ValueError(f"step must be a finite number > 0; got {step!r}")
+    k = np.asarray(values, dtype=float) / step
+    if direction == "nearest":
+        k = np.round(k)
+    elif direction == "down":
+        k = np.floor(k + 1e-9)
+    elif direction == "up":
+        k = np.ceil(k - 1e-9)
+    else:
+        raise ValueError(f"direction must be 'nearest', 'down' or 'up'; got {direction!r}")
+    return np.round(k * step, _decimals(step)) + 0.0  # + 0.0: no −0.0 in a plan file
+
+
+def wrap_wave_angle(angle_deg):
+    """Electrical wave angles [°] wrapped to (−90°, 90°]: the same standing wave (θ and
+    θ + 180° electrical differ by the amplitude's sign, which the phase absorbs) and the
+    same drift, every modelled defect being a harmonic of 2θ (PHYSICS.md §1, "Angle
+    periodicities"). Host arrays (numpy)."""
+    a = np.asarray(angle_deg, dtype=float)
+    return 90.0 - np.mod(90.0 - a, 180.0)
+
+
+def _wave_angle_grid(angle_deg, step: float) -> np.ndarray:
+    """The point of the grid k·`step` inside (−90°, 90°] nearest to each angle [°
+    electrical] modulo 180° (the same wave): −89.97° → +90.0° at 0.1° steps, −167.2° →
+    12.8°; a step that does not divide 180° has no point on one of the edges and takes the
+    nearest one inside."""
+    a = wrap_wave_angle(angle_deg)
+    k_min = math.floor(-90.0 / step + 1e-9) + 1
+    k_max = math.floor(90.0 / step + 1e-9)
+    below = np.clip(np.floor(a / step), k_min, k_max)
+    candidates = np.stack([below, np.clip(below + 1, k_min, k_max), np.full_like(a, k_min),
+                           np.full_like(a, k_max)])  # fmt: skip
+    distance = np.abs(np.mod(candidates * step - a + 90.0, 180.0) - 90.0)  # modulo 180°
+    best = np.take_along_axis(candidates, np.argmin(distance, axis=0)[None], axis=0)[0]
+    return quantise(best * step, step)
+
+
+def _step(name: str, value, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not (math.isfinite(value) and value > 0):  # fmt: skip
+        raise ValueError(f"{name} must be a finite number > 0 [{unit}]; got {value!r}")
+    return float(value)
+
+
+def round_plan(
+    plan: BenchPlan,
+    bench: BenchModel | None = None,
+    *,
+    temperature_step: float = TEMPERATURE_STEP_C,
+    angle_step: float = ANGLE_STEP_DEG,
+    time_step: float = TIME_STEP_S,
+    rate_step: float = RATE_STEP_DPS,
+    budget_h: float | None = None,
+) -> BenchPlan:
+    """`plan` as a bench can run it: every number on the bench's resolution.
+
+    - **temperatures** (a static segment's or rotation's, a ramp's start and end) to the
+      nearest `temperature_step` [°C] (0.1 °C) — equal temperatures stay equal, so a
+      ramp still starts where its level is;
+    - **wave angles** wrapped to (−90°, 90°] electrical (`wrap_wave_angle`: the same
+      wave, the same drift) and to the nearest `angle_step` [° electrical] (0.1°) inside
+      that range, modulo 180° (−89.97° → +90.0°);
+    - **table rates** to the nearest `rate_step` [°/s] (0.01 °/s; a rotation keeps at
+      least one step, in its own sense);
+    - **durations** to `time_step` [s] (1 s): static segments and rotations down, ramps up
+      and never shorter than the chamber (`bench`, default `BenchModel()`) needs for their
+      rounded temperature change — so that a ramp never outruns it; a segment keeps at
+      least one step;
+    - with `budget_h` [h]: should the ramps' extra time (or the rounded temperatures'
+      transitions) cross the budget, the longest static segment or rotation is shortened by
+      whole steps until the bench time holds; `ValueError` if it cannot.
+
+    Every value is written with its step's decimals (`quantise`: −39.4, not
+    −39.400000000000006). Rounding is idempotent: a rounded plan rounds to itself. A
+    `time_step` that is not a whole number of seconds gives durations `simulate_plan`'s
+    default output intervals (1 s static and ramp, 0.5 s rotation) may not divide.
+
+    **Returns:** a concrete, checked [`BenchPlan`][hrgjax.calibration.design.BenchPlan].
+
+    **Raises:** `ValueError` naming a step that is not a finite number > 0, or the budget.
+    """
+    bench = BenchModel() if bench is None else bench
+    temperature_step = _step("temperature_step", temperature_step, "°C")
+    angle_step = _step("angle_step", angle_step, "° electrical")
+    time_step = _step("time_step", time_step, "s")
+    rate_step = _step("rate_step", rate_step, "°/s")
+    if not all(is_concrete(x) for x in plan._fields().values()):
+        raise ValueError("round_plan needs a concrete plan (host values), not a traced one")
+    v = {k: np.asarray(x, dtype=float) for k, x in plan._fields().items()}
+    kinds = np.array(plan.kind)
+    ramp = kinds == "ramp"
+    t0 = quantise(v["temperature_c"], temperature_step)
+    t1 = quantise(v["temperature_end_c"], temperature_step)
+    angle = _wave_angle_grid(v["wave_angle_deg"], angle_step)
+    rate = quantise(v["rate_dps"], rate_step)
+    turning = v["rate_dps"] != 0.0
+    rate = np.where(turning & (rate == 0.0), np.sign(v["rate_dps"]) * rate_step, rate)
+    rate = np.where(kinds == "static", 0.0, rate)
+    chamber_s = np.abs(t1 - t0) / float(bench.slew_c_per_min) * 60.0
+    dur = np.where(
+        ramp,
+        np.maximum(quantise(v["duration_s"], time_step, "up"),
+                   quantise(chamber_s, time_step, "up")),
+        quantise(v["duration_s"], time_step, "down"),
+    )  # fmt: skip
+    dur = np.maximum(dur, time_step)
+
+    def build(durations):
+        segs = []
+        for i, k in enumerate(plan.kind):
+            if k == "ramp":
+                seg = {"kind": k, "temperature_start_c": float(t0[i]),
+                       "temperature_end_c": float(t1[i])}  # fmt: skip
+            else:
+                seg = {"kind": k, "temperature_c": float(t0[i])}
+            seg["wave_angle_deg"] = float(angle[i])
+            if k == "rotation" or (k == "ramp" and rate[i] != 0.0):
+                seg["rate_dps"] = float(rate[i])
+            seg["duration_s"] = float(durations[i])
+            segs.append(seg)
+        return BenchPlan.from_segments(segs)
+
+    out = build(dur)
+    if budget_h is None:
+        return out
+    budget_s = float(budget_h) * 3600.0
+    for _ in range(8 * plan.size):
+        over = float(bench.bench_time_s(out)) - budget_s
+        if over <= 0.0:
+            return out
+        longest = int(np.argmax(np.where(ramp, -np.inf, dur)))
+        cut = max(time_step, float(quantise(over, time_step, "up")))
+        if ramp[longest] or dur[longest] - cut < time_step:
+            break
+        dur[longest] = quantise(dur[longest] - cut, time_step)
+        out = build(dur)
+    raise ValueError(
+        f"budget_h={float(budget_h):g}: the plan rounded to the bench's resolution takes "
+        f"{float(bench.bench_time_s(out)) / 3600:.4f} h and its static segments and rotations "
+        "cannot be shortened to fit; raise the budget or use a finer time_step"
+    )
 
 
 def _profiles(plan: BenchPlan, idx: np.ndarray, length_s: float | None = None) -> Profile:
@@ -1404,14 +1641,21 @@ DESIGN_RATE_DPS = 5.0
 class Design(eqx.Module):
     """The result of [`design`][hrgjax.calibration.design.design].
 
-    - `plan`: the designed [`BenchPlan`][hrgjax.calibration.design.BenchPlan], within budget.
+    - `plan`: the designed [`BenchPlan`][hrgjax.calibration.design.BenchPlan], within budget
+      and rounded to the bench's resolution (`round_plan`): what the bench runs.
     - `bench`: the [`BenchModel`][hrgjax.calibration.design.BenchModel] it was priced with.
-    - `criterion`, `value`: the criterion's name and its value for `plan` (unit:
+    - `criterion`, `value`: the criterion's name and its value for `plan`, as rounded (unit:
       `CRITERION_UNITS`).
-    - `bench_time_h`: the plan's bench time [h]; `levels`: its number of temperature levels.
-    - `search`: `{levels: value}` of every structure tried (None: it cannot fit the
-      budget even at its shortest segments); `history`: the loss per step
-      of the chosen structure.
+    - `optimised_plan`, `optimised_value`: the plan as the search left it (within budget,
+      before rounding) and its criterion — what the rounding cost is `value` −
+      `optimised_value`.
+    - `resolution`: the steps `plan` was rounded to, by plan-file key (`RESOLUTION_KEYS`:
+      `temperature_c` [°C], `wave_angle_deg` [° electrical], `duration_s` [s], `rate_dps`
+      [°/s]).
+    - `bench_time_h`: `plan`'s bench time [h]; `levels`: its number of temperature levels.
+    - `search`: `{levels: value}` of every structure tried, as rounded (None: it cannot fit
+      the budget even at its shortest segments); `history`: the loss per step of the chosen
+      structure.
     - `model`: the name of the model the criterion was computed for (`MODELS`).
     """
 
@@ -1424,6 +1668,28 @@ class Design(eqx.Module):
     search: dict = eqx.field(static=True)
     history: tuple = eqx.field(static=True)
     model: str = eqx.field(static=True, default="physical")
+    optimised_plan: BenchPlan | None = None
+    optimised_value: float = eqx.field(static=True, default=math.nan)
+    resolution: dict = eqx.field(static=True, default_factory=dict)
+
+    def criterion_json(self) -> dict:
+        """The plan file's `"criterion"` block: `kind`, `model`, `unit`, `optimised` (the
+        search's plan) and `rounded` (the plan written)."""
+        return {"kind": self.criterion, "model": self.model,
+                "unit": CRITERION_UNITS[self.criterion],
+                "optimised": float(self.optimised_value), "rounded": float(self.value)}  # fmt: skip
+
+    def to_json(self) -> dict:
+        """The plan file's content: `plan_to_json` of `plan` with the `"criterion"` and
+        `"resolution"` blocks."""
+        return plan_to_json(self.plan, self.bench, criterion=self.criterion_json(),
+                            resolution=self.resolution)  # fmt: skip
+
+    def save(self, path: str | os.PathLike) -> str:
+        """Write the rounded plan as a JSON plan file with its two criterion values and its
+        resolution (atomically); returns the path. `load_plan` reads it."""
+        return save_plan(self.plan, path, self.bench, criterion=self.criterion_json(),
+                         resolution=self.resolution)  # fmt: skip
 
 
 def _structure(levels: int, statics: int, rotations: int, ramps: bool) -> tuple[str, ...]:
@@ -1491,33 +1757,6 @@ def _within_budget(plan: BenchPlan, bench: BenchModel, budget_s: float) -> Bench
     return shrunk(lo)
 
 
-def _whole_seconds(plan: BenchPlan, bench: BenchModel, budget_s: float) -> BenchPlan:
-    """`plan` with durations a bench (and `simulate_plan`) can run: whole seconds — static
-    and rotation durations rounded down, a ramp's rounded up (so that it never outruns the
-    chamber) — and, should the ramps' extra seconds cross the budget, the longest static
-    segments a second shorter until it holds. Returns a concrete, checked plan."""
-    kinds = np.array(plan.kind)
-    ramp = kinds == "ramp"
-    dur = np.asarray(plan.duration_s, dtype=float)
-    dur = np.where(ramp, np.ceil(dur - 1e-9), np.floor(dur + 1e-9))
-
-    def build(d):
-        segs = plan.segments()
-        for seg, x in zip(segs, d, strict=True):
-            seg["duration_s"] = float(x)
-        return BenchPlan.from_segments(segs)
-
-    out = build(dur)
-    for _ in range(8 * plan.size):
-        over = float(bench.bench_time_s(out)) - budget_s
-        if over <= 0.0:
-            break
-        longest = int(np.argmax(np.where(ramp, -np.inf, dur)))
-        dur[longest] -= max(1.0, float(np.ceil(over)))
-        out = build(dur)
-    return out
-
-
 def _design_loss(z, values, arw, budget_s, args, criterion, flight, model):
     plan = _unpack(z, *args)
     c = _criterion(plan, criterion, values, arw, 100.0, flight, model)
@@ -1557,6 +1796,10 @@ def design(
     flight: Flight | Sequence[Flight] | None = None,
     model: str | Empirical | None = None,
     key: jax.Array | None = None,
+    temperature_step: float = TEMPERATURE_STEP_C,
+    angle_step: float = ANGLE_STEP_DEG,
+    time_step: float = TIME_STEP_S,
+    rate_step: float = RATE_STEP_DPS,
 ) -> Design:
     """The bench plan that, within `budget_h` hours of bench time (transitions included,
     priced by `bench`), minimises `criterion` (`CRITERIA`; default `drift+warmup`).
@@ -1577,9 +1820,15 @@ def design(
     `flight`: the `ins` criterion's flight or flights (default `INS_FLIGHTS`); `model`: what
     the calibration will fit (`MODELS`: `physical`, the default, or `empirical` — a plan for
     an MLP or a Fourier fit, which have no physics to carry them between points). The
-    result is brought within the budget by shrinking its durations, then to whole seconds
-    (static and rotation durations rounded down, ramps up), so that a bench — and
-    [`simulate_plan`][hrgjax.calibration.design.simulate_plan] — can run it as it is.
+    result is brought within the budget by shrinking its durations, then rounded to the
+    bench's resolution by [`round_plan`][hrgjax.calibration.design.round_plan] —
+    temperatures to `temperature_step` [°C] (0.1 °C), wave angles wrapped to (−90°, 90°]
+    electrical and to `angle_step` [° electrical] (0.1°), durations to `time_step` [s]
+    (whole seconds: static and rotation durations down, ramps up), table rates to
+    `rate_step` [°/s] (0.01 °/s) — within the budget still, so that a bench — and
+    [`simulate_plan`][hrgjax.calibration.design.simulate_plan] — can run it as it is; the
+    criterion is computed again for the rounded plan (`Design.value`, beside the search's
+    `Design.optimised_value`), and the structures are compared as rounded.
     `key` jitters the start angles.
 
     **Returns:** a [`Design`][hrgjax.calibration.design.Design].
@@ -1602,6 +1851,10 @@ def design(
     if not (isinstance(steps, int) and steps >= 1):
         raise ValueError(f"steps must be a whole number ≥ 1; got {steps!r}")
     bench = BenchModel() if bench is None else bench
+    steps_by_key = {"temperature_step": (temperature_step, "°C"),
+                    "angle_step": (angle_step, "° electrical"), "time_step": (time_step, "s"),
+                    "rate_step": (rate_step, "°/s")}  # fmt: skip
+    rounding = {name: _step(name, x, unit) for name, (x, unit) in steps_by_key.items()}
     values = _values(values, model)
     arw_v = _noise(arw, gauss_markov, angle_white)
     flight = _flights(flight)
@@ -1609,6 +1862,11 @@ def design(
     key = jax.random.key(0) if key is None else key
     per = statics + rotations
     best, search, too_big = None, {}, None
+
+    def _value(plan):  # the criterion of a concrete plan (its information, chunked)
+        source, panels = _source(plan, values, arw_v, model)
+        return float(_criterion(source, criterion, values, arw_v, 100.0, flight, model, panels))
+
     with bar(len(levels) * steps, f"designing a {budget_h:g}-h plan", unit="step") as progress:
         for n_lev in levels:
             kinds = _structure(n_lev, statics, rotations, ramps)
@@ -1645,22 +1903,21 @@ def design(
                     history.append(float(val))
                     progress.update(1)
             try:
-                plan = _within_budget(_unpack(z, *args), bench, budget_s)
+                optimised = _within_budget(_unpack(z, *args), bench, budget_s)
+                # concrete, checked, runnable: the bench's resolution, within the budget
+                plan = round_plan(optimised, bench, budget_h=budget_s / 3600.0, **rounding)
             except ValueError as err:  # this structure cannot fit: try the others
                 search[n_lev] = None
                 too_big = err
                 continue
-            plan = _whole_seconds(plan, bench, budget_s)  # concrete, checked, runnable
-            source, panels = _source(plan, values, arw_v, model)
-            value = float(_criterion(source, criterion, values, arw_v, 100.0, flight, model,
-                                     panels))  # fmt: skip
+            optimised_value, value = _value(optimised), _value(plan)
             search[n_lev] = value
             progress.set_postfix_str(f"{n_lev} levels: {value:.4g}")
             if best is None or value < best[1]:
-                best = (plan, value, n_lev, tuple(history))
+                best = (plan, value, n_lev, tuple(history), optimised, optimised_value)
     if best is None:
         raise too_big
-    plan, value, n_lev, history = best
+    plan, value, n_lev, history, optimised, optimised_value = best
     return Design(
         plan=plan,
         bench=bench,
@@ -1671,4 +1928,7 @@ def design(
         search=search,
         history=history,
         model=model.name,
+        optimised_plan=optimised,
+        optimised_value=optimised_value,
+        resolution={RESOLUTION_KEYS[k]: v for k, v in rounding.items()},
     )

@@ -28,6 +28,7 @@ import numpy as np
 from ..data import MeasuredData
 from ..units import K_E_NOMINAL as K_E_NOMINAL
 from ..units import WINDOW_S as WINDOW_S
+from ..units import group_temperatures
 
 RAMP_WINDOW_S = 300.0
 """Window of a ramp (table at rest, temperature moving) in the physical fit and the MLP's
@@ -253,13 +254,15 @@ def scale_factor_vs_angle(
 
     SF = (Δθ_meas/Δt)/(−k_e Ω_table) over windows of `window_s`, relative to its run mean.
 
-    **Returns:** dict `temperature_c` (T,), `wave_angle_deg` (B,), `scale_factor` (T, B).
+    **Returns:** dict `temperature_c` (T,), `wave_angle_deg` (B,), `scale_factor` (T, B):
+    one row per temperature (runs' mean temperatures grouped by
+    [`group_temperatures`][hrgjax.units.group_temperatures]).
     """
     temps = []
     rows = []
     edges = np.arange(-90.0, 90.0 + bin_deg / 2, bin_deg)
     centres = 0.5 * (edges[1:] + edges[:-1])
-    by_temp: dict[float, list] = {}
+    run_temps, run_parts = [], []
     for r in data.runs():
         w = r["table_rate_dps"]
         if np.all(w == 0):
@@ -269,9 +272,11 @@ def scale_factor_vs_angle(
         sf = (th[step:] - th[:-step]) / (t[step:] - t[:-step]) / (-k_e * w[step:])
         mid = 0.5 * (th[step:] + th[:-step])
         folded = (mid + 90.0) % 180.0 - 90.0
-        by_temp.setdefault(round(float(np.mean(r["temperature_c"])), 6), []).append(
-            (folded, sf / np.mean(sf))
-        )
+        run_temps.append(float(np.mean(r["temperature_c"])))
+        run_parts.append((folded, sf / np.mean(sf)))
+    by_temp: dict[float, list] = {}  # one row per temperature, last-bit differences merged
+    for temp, part in zip(group_temperatures(run_temps), run_parts, strict=True):
+        by_temp.setdefault(float(temp), []).append(part)
     for temp, parts in sorted(by_temp.items()):
         ang = np.concatenate([p[0] for p in parts])
         sf = np.concatenate([p[1] for p in parts])

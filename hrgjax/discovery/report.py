@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..units import group_temperatures
 from .result import Discovery
 
 
@@ -68,11 +69,12 @@ def plot_discovery(disc: Discovery, path: str) -> str:
 
 def _dwell_panel(ax, res, plt):
     """Static-window drift residual against wave angle, one line per temperature."""
-    temps = np.unique(res["temperature_c"][res["static"]])
+    groups = group_temperatures(res["temperature_c"])  # one line per temperature
+    temps = np.unique(groups[res["static"]])
     cmap = plt.get_cmap("coolwarm")
     span = max(float(np.ptp(temps)), 1e-9) if temps.size else 1.0
     for T in temps:
-        m = res["static"] & (res["temperature_c"] == T)
+        m = res["static"] & (groups == T)
         order = np.argsort(res["wave_angle_deg"][m])
         ax.plot(res["wave_angle_deg"][m][order], res["drift_dph"][m][order], "o-", ms=2, lw=1,
                 color=cmap((T - temps.min()) / span), label=f"{T:+.0f} °C")  # fmt: skip
