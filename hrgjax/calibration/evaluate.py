@@ -14,6 +14,12 @@ How each figure is computed (state of the art is to say it exactly):
   error averages the 180°-periodic errors over whole turns of the pattern; this one does not.
 
 "Raw" applies no compensation: the nominal angular gain k_e,nom only.
+
+These figures keep the test session's constant offset. On a session in another switch-on
+than the calibration's it is the change of switch-on bias, the same for every compensator,
+and it hides what the compensation leaves: [`compare`][hrgjax.calibration.compare]
+(`hrgjax compare`, `hrgjax correct`) states it apart, with its σ, and tabulates the figures
+after it (`hrgjax.calibration.session`); `offset_dph` below takes a given offset off.
 """
 
 from __future__ import annotations

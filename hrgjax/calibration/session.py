@@ -18,10 +18,15 @@ $$b = \frac{\sum_i T_i r_i}{\sum_i T_i}, \qquad
 \sigma_b^2 = \frac{n}{n-1}\,\frac{\sum_i T_i^2 (r_i - b)^2}{(\sum_i T_i)^2}$$
 
 ($s/\sqrt n$ when the runs are equally long; σ is unknown, NaN, with one static run). The
-σ treats the runs' residuals as independent: what the compensation leaves at one wave angle
-and temperature recurs at the same point of another session, so σ says how well *this* grid
-pins the constant, not how the offset would scatter between sessions (that is the switch-on
-bias repeatability, the size of $b$ itself).
+σ is this session's part only: it treats the runs' residuals as independent (what the
+compensation leaves at a wave angle and temperature is counted as scatter, so σ errs
+large), and it leaves out the error of the constant each compensator brings from its own
+calibration, the same on every test session. Against the simulator's change of switch-on
+bias Δb (`benchmarks/session_offset.py`, 12 quick seed sessions against one calibration,
+Fourier+T²): offset − Δb scattered 0.0026 °/h about its mean against a mean σ of
+0.0034 °/h, and that mean, the calibration's part, was +0.0007 °/h (+0.0041 °/h with another
+calibration session): comparable to σ. What σ does not say is how the offset would scatter
+between switch-ons: that is the bias repeatability, the size of $b$ itself.
 
 **One offset for the session.** Every compensator sees the same switch-on, so one value is
 taken off all of them: the offset measured with the compensator whose static runs scatter
@@ -371,7 +376,8 @@ class Comparison:
         if self.offset.estimated:
             lines.append(
                 "  (duration-weighted mean compensated rate of the static runs, taken off every "
-                "compensator below)"
+                "compensator below;\n   σ: this session's run-to-run scatter, without the error "
+                "of the constant a compensator brings from its calibration)"
             )
         if len(self.labels) > 1:
             lines.append("  each compensator's own mean rate at rest:")
