@@ -31,6 +31,7 @@ QUICK_ARGS = {  # scripts with a reduced size, and how to ask for it
     "diagnosis": ["--quick"],
     "discovery": ["--quick"],
     "ins_errors": ["--runs", "200"],
+    "session_offset": ["--sessions", "4"],
     "sweep_scaling": ["--quick"],
     "vibration": ["--quick"],
 }

@@ -134,8 +134,9 @@ def presets():
 
 
 def calibration():
-    from hrgjax.calibration import run_study
+    from hrgjax.calibration import compare, run_study, test_plan
     from hrgjax.calibration.evaluate import SEED_TABLE
+    from hrgjax.calibration.study import bench_session
     from hrgjax.plots import compensation_residuals, error_vs_temperature
 
     study = run_study(key=jax.random.key(0), quick=True, ins=False)  # the figures need no flights
@@ -143,6 +144,12 @@ def calibration():
         study.windows, study.compensators, os.path.join(HERE, "calibration_residuals.png")
     )
     error_vs_temperature(study.table, os.path.join(HERE, "calibration_errors.png"), SEED_TABLE)
+    # the test grid again in another switch-on: its offset apart from what is left
+    second = bench_session(hg.presets.tvg3_like(), test_plan(True), key=jax.random.key(43),
+                           bias_key=jax.random.key(42))  # fmt: skip
+    compare(study.compensators, second, name="the test grid in another switch-on").plot(
+        os.path.join(HERE, "calibration_second_session.png")
+    )
 
 
 def discovery():

@@ -356,7 +356,12 @@ EXAMPLES = {
     "simulate": "hrgjax simulate --preset tvg3 --plan seed --quick --out out/bench.csv",
     "calibrate": "hrgjax calibrate out/bench.csv --method fourier --out out/model.eqx "
     "(bench.csv from the simulate example)",
-    "correct": "hrgjax correct out/bench.csv --model out/model.eqx --out out/corrected.csv",
+    "correct": "hrgjax correct out/test.csv --model out/model.eqx --out out/corrected.csv "
+    "--plot out/corrected.png (test.csv: a second session, e.g. the simulate example with "
+    "--seed 1)",
+    "compare": "hrgjax compare out/test.csv --models out/model.eqx out/mlp.eqx --json "
+    "out/compare.json --plot out/compare.png (models from calibrate on out/bench.csv, "
+    "test.csv from the simulate example with --seed 1: another switch-on)",
     "discover": "hrgjax discover out/bench.csv --json out/report.json --plot out/report.png",
     "align": "hrgjax align psins_lasergyro.imu --json out/align.json --plot out/align.png",
     "diagnose": "hrgjax diagnose --scenario stationary --runs 3 --methods filter_bank,pnn_direct",
@@ -450,35 +455,124 @@ def cmd_calibrate(args) -> int:
     return 0
 
 
+def _load_model(option: str, path: str):
+    """A compensator file, or a one-line error naming `option` and the file."""
+    from .calibration import load_compensator
+
+    try:
+        return load_compensator(path)
+    except FileNotFoundError:
+        raise UsageError(f"{option} {path}: no such file") from None
+    except IsADirectoryError:
+        raise UsageError(f"{option} {path} is a folder; give a compensator file (.eqx)") from None
+    except (OSError, ValueError) as err:
+        raise UsageError(f"{option}: {_one_line(err)}") from None
+
+
+def _report(result, args) -> None:
+    """Print a comparison and write its --json and --plot (atomically); say where."""
+    print(result.format(by_wave_angle=not args.no_angles), end="")
+    if args.json:
+        print(f"wrote {result.write_json(args.json)}")
+    if args.plot:
+        print(f"wrote {result.plot(args.plot)}")
+
+
 def cmd_correct(args) -> int:
-    """`hrgjax correct DATA --model model.eqx`: compensate data with a fitted compensator."""
+    """`hrgjax correct DATA --model model.eqx`: compensate data with a fitted compensator, and
+    report the session's offset and what the compensation leaves after it."""
     _setup()
     import numpy as np
 
-    from .calibration import load_compensator, run_errors
+    from .calibration import compare_corrected, corrected_run_errors
 
-    _check_output("--out", args.out, DATA_EXTENSIONS, [args.data, args.model])
+    inputs = [args.data, args.model]
+    _check_output("--out", args.out, DATA_EXTENSIONS, inputs)
+    _check_output("--json", args.json, (".json",), inputs)
+    _check_output("--plot", args.plot, PLOT_EXTENSIONS, inputs)
+    comp = _load_model("--model", args.model)
     data = _load_data(args.data, args.allow_extra)
-    try:
-        comp = load_compensator(args.model)
-    except FileNotFoundError:
-        raise UsageError(f"--model {args.model}: no such file") from None
-    except (OSError, ValueError) as err:
-        raise UsageError(_one_line(err)) from None
     try:
         out = comp.correct(data)
     except ValueError as err:
         raise UsageError(f"{args.data}: {_one_line(err)}") from None
-    e = run_errors(comp, data)
+    e = corrected_run_errors(out)
     print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
     if np.any(e["static"]):
         d = e["drift_error_dph"][e["static"]]
-        print(f"  static runs: residual rate RMS {np.sqrt(np.mean(d**2)):.4f} °/h")
+        print(f"  static runs: residual rate RMS {np.sqrt(np.mean(d**2)):.4f} °/h (offset kept)")
     if np.any(~e["static"]):
         a = e["angle_error_deg"][~e["static"]]
-        print(f"  moving runs: end-of-run angle error RMS {np.sqrt(np.mean(a**2)):.4f}°")
+        print(
+            f"  moving runs: end-of-run angle error RMS {np.sqrt(np.mean(a**2)):.4f}° (offset kept)"
+        )
+    label = comp.name
+    result = compare_corrected(
+        {label: out}, names={label: label}, files={label: args.model},
+        temperature_bin_c=args.temperature_bin, angle_bin_deg=args.angle_bin, data=args.data,
+    )  # fmt: skip
+    print()
+    _report(result, args)
     path = out.save(args.out)
     print(f"wrote {len(out)} rows with rate_corrected_dps, angle_corrected_deg to {path}")
+    return 0
+
+
+def _labels(comps, paths) -> list[str]:
+    """Each compensator's name; where names repeat, the name and the file's stem (the path
+    as given where stems repeat too)."""
+    names = [c.name for c in comps]
+    stems = [os.path.splitext(os.path.basename(p))[0] for p in paths]
+    labels = [n if names.count(n) == 1 else f"{n} ({s})" for n, s in zip(names, stems, strict=True)]
+    return [
+        lab if labels.count(lab) == 1 else f"{n} ({p})"
+        for lab, n, p in zip(labels, names, paths, strict=True)
+    ]
+
+
+def cmd_compare(args) -> int:
+    """`hrgjax compare TEST --models a.eqx b.eqx …`: several compensators on one test
+    session, the session's offset apart (hrgjax.calibration.compare)."""
+    _setup()
+    from ._io import same_file
+    from .calibration import compare
+
+    inputs = [args.data, *args.models]
+    _check_output("--json", args.json, (".json",), inputs)
+    _check_output("--plot", args.plot, PLOT_EXTENSIONS, inputs)
+    for i, a in enumerate(args.models):
+        for b in args.models[:i]:
+            if same_file(a, b):
+                raise UsageError(f"--models: {b} and {a} are the same file; give each once")
+    comps = [_load_model("--models", path) for path in args.models]
+    labels = _labels(comps, args.models)
+    offset_from = args.offset_from
+    if offset_from is not None:
+        by_file = [lab for lab, p in zip(labels, args.models, strict=True) if p == offset_from]
+        if by_file:
+            offset_from = by_file[0]
+        elif offset_from not in labels:
+            raise UsageError(
+                f"--offset-from {args.offset_from!r}: give one of the --models files or a label "
+                f"({', '.join(labels)})"
+            )
+    data = _load_data(args.data, args.allow_extra)
+    try:
+        result = compare(
+            dict(zip(labels, comps, strict=True)), data,
+            files=dict(zip(labels, args.models, strict=True)), offset_from=offset_from,
+            temperature_bin_c=args.temperature_bin, angle_bin_deg=args.angle_bin, name=args.data,
+        )  # fmt: skip
+    except ValueError as err:
+        raise UsageError(f"{args.data}: {_one_line(err)}") from None
+    n = result.counts()
+    print(
+        f"hrgjax compare: {args.data} ({n['static']} static, {n['rotation']} rotation runs), "
+        f"{len(labels)} compensators: "
+        + ", ".join(f"{lab} ({p})" for lab, p in zip(labels, args.models, strict=True))
+    )
+    print()
+    _report(result, args)
     return 0
 
 
@@ -782,12 +876,49 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     p.set_defaults(func=cmd_calibrate)
 
-    p = sub.add_parser("correct", help="compensate data with a fitted compensator")
+    def evaluation_options(p):
+        p.add_argument("--json", default=None,
+                       help="write the offset and the residual tables here (JSON; layout in "
+                       "docs/calibration.md)")  # fmt: skip
+        p.add_argument("--plot", default=None,
+                       help="write the figure of the residuals after the offset per "
+                       "temperature and wave angle here (.png, .pdf, .svg)")  # fmt: skip
+        p.add_argument("--temperature-bin", type=POSITIVE_FLOAT, default=1.0,
+                       help="runs are grouped by mean temperature rounded to a multiple of "
+                       "this [°C]")  # fmt: skip
+        p.add_argument("--angle-bin", type=POSITIVE_FLOAT, default=5.0,
+                       help="runs are grouped by start wave angle rounded to a multiple of "
+                       "this [° electrical]")  # fmt: skip
+        p.add_argument("--no-angles", action="store_true",
+                       help="print the tables per temperature only (the JSON and the figure "
+                       "keep the wave angles)")  # fmt: skip
+        p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+
+    p = sub.add_parser(
+        "correct",
+        help="compensate data with a fitted compensator; report the session's offset and the "
+        "residual after it",
+    )
     p.add_argument("data", help="data file in the MeasuredData contract")
     p.add_argument("--model", required=True, help="compensator file from `calibrate` (.eqx)")
     p.add_argument("--out", default="out/corrected.csv", help="output CSV or .nc")
-    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    evaluation_options(p)
     p.set_defaults(func=cmd_correct)
+
+    p = sub.add_parser(
+        "compare",
+        help="several compensators on one test session: the session's offset, then per "
+        "temperature and wave angle what each leaves",
+    )
+    p.add_argument("data", help="test session in the MeasuredData contract (static and/or "
+                   "rotation runs)")  # fmt: skip
+    p.add_argument("--models", required=True, nargs="+", metavar="MODEL.eqx",
+                   help="compensator files from `calibrate` (.eqx), one or more")  # fmt: skip
+    p.add_argument("--offset-from", default=None, metavar="MODEL",
+                   help="the compensator (its file or label) whose mean rate at rest is the "
+                   "session's offset (None: the one whose static runs scatter least)")  # fmt: skip
+    evaluation_options(p)
+    p.set_defaults(func=cmd_compare)
 
     p = sub.add_parser("discover", help="name the effect missing from the nominal model")
     p.add_argument("data", help="dwell-grid or continuous data in the MeasuredData contract")

@@ -443,3 +443,76 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     _save(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def session_figure(comparison, path: str, title: str = "") -> str:
+    """Compensators on one session, after its offset: the static residual [°/h] (top row)
+    and the rotation runs' end-of-run angle error [°] (bottom row), RMS per temperature
+    (left, seed 000's figures as black stars and crosses) and per start wave angle (right),
+    one marker and colour per compensator; the session's offset ± σ in a text box. A row
+    for a kind of run the session lacks is left out; saves `path`.
+
+    `comparison` is a [`Comparison`][hrgjax.calibration.Comparison]."""
+    from .calibration.evaluate import SEED_TABLE
+
+    plt = _plt()
+    counts = comparison.counts()
+    rows = [
+        (key, ylabel, seed)
+        for key, ylabel, seed, n in (
+            (
+                "static_residual_dph",
+                "static residual after the offset [°/h]",
+                "static_drift_dph",
+                counts["static"],
+            ),
+            (
+                "angle_error_deg",
+                "end-of-run angle error after the offset [°]",
+                "angle_error_deg",
+                counts["rotation"],
+            ),
+        )  # fmt: skip
+        if n
+    ]
+    fig, axes = plt.subplots(len(rows), 2, figsize=(11, 3.6 * len(rows) + 0.8),
+                             constrained_layout=True, squeeze=False)  # fmt: skip
+    markers = "osD^vP X<>"
+    colours = plt.get_cmap("tab10")
+    for r, (key, ylabel, seed) in enumerate(rows):
+        for c, by in enumerate(("temperature", "wave_angle")):
+            ax = axes[r, c]
+            values = []
+            for i, lab in enumerate(comparison.labels):
+                fig_ = comparison.figure(lab, key, by)
+                xs = np.array(sorted(fig_))
+                ys = np.array([fig_[x] for x in xs])
+                values.extend(ys[np.isfinite(ys) & (ys > 0)])
+                ax.plot(xs, ys, marker=markers[i % len(markers)], ls="-", lw=1, ms=5,
+                        color=colours(i % 10), label=lab)  # fmt: skip
+            if by == "temperature":
+                for j, (name, marker) in enumerate((("seed Fourier", "*"), ("seed MLP", "x"))):
+                    pts = SEED_TABLE[seed]
+                    ax.plot(list(pts), [v[j] for v in pts.values()], marker, ms=10, ls="none",
+                            color="k", label=name)  # fmt: skip
+                    values.extend(v[j] for v in pts.values())
+                ax.set_xlabel("temperature [°C]")
+            else:
+                ax.set_xlabel("start wave angle [° electrical]")
+            if values and max(values) > 30 * min(values):
+                ax.set_yscale("log")
+            ax.set_ylabel(ylabel if c == 0 else "")
+            ax.set_title(("RMS over wave angles" if by == "temperature" else
+                          "RMS over temperatures"), fontsize=9)  # fmt: skip
+            ax.grid(alpha=0.3, which="both")
+    handles, names = axes[0, 0].get_legend_handles_labels()  # the same in every panel
+    fig.legend(handles, names, loc="outside lower center", fontsize=8, ncol=min(len(names), 4))
+    off = comparison.offset
+    head = title or f"{comparison.data or 'test session'}: what the compensation leaves"
+    text = f"session offset{' (with ' + off.source + ')' if off.source else ''}: {off}"
+    if off.estimated:
+        text += ", taken off every compensator"
+    fig.suptitle(f"{head}\n{text}", fontsize=10)
+    _save(fig, path, dpi=110)
+    plt.close(fig)
+    return path

@@ -57,6 +57,65 @@ def noisy_model_gyro(values):
     )
 
 
+def session_drift(theta, temp):
+    """A 180°-periodic drift law [rad/s] whose offset, amplitude and phase change with T
+    (°C): one cos 2θ, sin 2θ pair; θ [rad], T [°C]."""
+    from hrgjax.units import DEG, DEG_PER_H
+
+    amp = 1.5 * DEG_PER_H * np.exp(-0.016 * (temp - 20.0))
+    phase = (25.0 + 0.16 * (temp - 20.0)) * DEG
+    return 0.3 * DEG_PER_H + 0.005 * DEG_PER_H * (temp - 20) - amp * np.sin(2 * (theta - phase))
+
+
+def session_scale_factor(theta, temp):
+    """Scale factor 1 − 2g(T)·cos 2θ of the closed-form session (θ [rad], T [°C])."""
+    return 1.0 - 2 * (0.0046 - 9.6e-5 * (temp - 20.0)) * np.cos(2 * theta)
+
+
+SESSION_ANGLES = (-90.0, -60.0, -30.0, 0.0, 30.0, 60.0)
+"""Start wave angles of the closed-form session [°]: whole periods of 2θ, so a constant rate
+divided by the scale factor averages to itself."""
+
+
+def closed_form_session(bias_dph=0.0, temps=(-40.0, 20.0, 60.0), angles=SESSION_ANGLES,
+                        duration_s=60.0, dt=0.5, rate_dps=5.0):  # fmt: skip
+    """A bench session with no noise: a static run and a `rate_dps` rotation from every
+    (temperature, start angle), the wave angle integrated (RK4, 8 steps a sample) from
+    θ̇ = −k_e,nom (SF(θ, T)·Ω + D(θ, T) + b), b = `bias_dph` the session's switch-on bias
+    (added to the measured rate, as `simulate` adds it)."""
+    from hrgjax.units import DEG, DEG_PER_H, K_E_NOMINAL
+
+    tt, aa = np.meshgrid(np.asarray(temps, float), np.asarray(angles, float), indexing="ij")
+    temp = np.concatenate([tt.ravel(), tt.ravel()])
+    rate = np.concatenate([np.zeros(tt.size), np.full(tt.size, rate_dps)]) * DEG
+    theta = np.concatenate([aa.ravel(), aa.ravel()]) * DEG
+    t = np.arange(int(round(duration_s / dt)) + 1) * dt
+
+    def f(th):
+        b = bias_dph * DEG_PER_H
+        return -K_E_NOMINAL * (session_scale_factor(th, temp) * rate + session_drift(th, temp) + b)
+
+    out, h = [theta], dt / 8
+    for _ in t[1:]:
+        for _ in range(8):
+            k1 = f(theta)
+            k2 = f(theta + h / 2 * k1)
+            k3 = f(theta + h / 2 * k2)
+            k4 = f(theta + h * k3)
+            theta = theta + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        out.append(theta)
+    n_runs, n = temp.size, t.size
+    return hg.MeasuredData(
+        {
+            "time_s": np.tile(t, n_runs),
+            "run": np.repeat(np.arange(n_runs), n),
+            "temperature_c": np.repeat(temp, n),
+            "table_rate_dps": np.repeat(rate / DEG, n),
+            "wave_angle_deg": np.stack(out, axis=1).ravel() / DEG,
+        }
+    )
+
+
 class CompileCounter:
     """Counts JAX traces and XLA compiles (jax.monitoring events) while active:
     `with CompileCounter() as c: …; c.compiles, c.traces`."""

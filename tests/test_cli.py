@@ -170,3 +170,101 @@ def test_every_option_has_help_and_its_default_is_shown():
 
     assert DIAGNOSIS_METHODS == METHODS
     assert all(m in " ".join(subs.choices["diagnose"].format_help().split()) for m in METHODS)
+
+
+@pytest.fixture(scope="module")
+def two_sessions(tmp_path_factory):
+    """Closed-form calibration and test sessions (the test one with a 0.43 °/h switch-on
+    bias more), a Fourier fitted by `hrgjax calibrate` on the first and the raw gyro."""
+    from helpers import closed_form_session
+
+    from hrgjax.calibration import NoCompensation, save_compensator
+
+    folder = tmp_path_factory.mktemp("sessions")
+    cal, test = folder / "cal.csv", folder / "test.csv"
+    closed_form_session(0.0).save(cal)
+    closed_form_session(0.43).save(test)
+    fourier = folder / "fourier.eqx"
+    argv = ["calibrate", str(cal), "--method", "fourier", "--harmonics", "1"]
+    assert main(argv + ["--temperature-degree", "2", "--out", str(fourier), "--quiet"]) == 0
+    raw = save_compensator(NoCompensation(), folder / "raw.eqx")
+    return folder, test, fourier, raw
+
+
+def test_compare_round_trip_equals_the_python_evaluation(two_sessions, tmp_path, capsys):
+    import json
+    import shutil
+
+    from hrgjax.calibration import compare, load_compensator
+
+    folder, test, fourier, raw = two_sessions
+    again = tmp_path / "again.eqx"  # the same compensator under another name: labels differ
+    shutil.copy(fourier, again)
+    js, png = tmp_path / "out" / "cmp.json", tmp_path / "out" / "cmp.png"
+    models = [str(fourier), str(raw), str(again)]
+    capsys.readouterr()
+    argv = ["compare", str(test), "--models", *models, "--json", str(js), "--plot", str(png)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert f"wrote {js}" in out and f"wrote {png}" in out and png.stat().st_size > 0
+    assert "session offset with Fourier+T^2 (fourier): +0.43" in out
+    with open(js, encoding="utf-8") as fh:
+        report = json.load(fh)
+    labels = ["Fourier+T^2 (fourier)", "raw", "Fourier+T^2 (again)"]
+    assert [c["label"] for c in report["compensators"]] == labels
+    assert [c["file"] for c in report["compensators"]] == models
+    comps = {lab: load_compensator(p) for lab, p in zip(labels, models, strict=True)}
+    ours = compare(comps, hg.load(test))
+    assert report["offset_dph"]["value"] == pytest.approx(ours.offset.value_dph, rel=1e-10)
+    assert report["offset_dph"]["sigma"] == pytest.approx(ours.offset.sigma_dph, rel=1e-10)
+    for c in report["compensators"]:
+        for key in ("static_residual_dph", "angle_error_deg", "max_angle_error_deg"):
+            for by, got in (("temperature", c[key]), ("wave_angle", c["by_wave_angle"][key])):
+                want = ours.figure(c["label"], key, by)
+                assert list(got) == [f"{g:g}" for g in want]
+                np.testing.assert_allclose(list(got.values()), list(want.values()), rtol=1e-10)
+        table = ours.before_offset()[c["label"]]
+        for key, got in c["before_offset"].items():
+            np.testing.assert_allclose(list(got.values()), list(table[key].values()), rtol=1e-10)
+    # --offset-from by file; the raw gyro's own mean rate (mean drift + bias) is then removed
+    js2 = tmp_path / "raw.json"
+    argv = ["compare", str(test), "--models", str(fourier), str(raw), "--offset-from", str(raw)]
+    assert main(argv + ["--json", str(js2), "--no-angles"]) == 0
+    with open(js2, encoding="utf-8") as fh:
+        assert json.load(fh)["offset_dph"]["from"] == "raw"
+    assert "by start wave angle" not in capsys.readouterr().out
+
+
+def test_compare_and_correct_refuse_bad_input(two_sessions, tmp_path, capsys):
+    import shutil
+
+    folder, test, fourier, raw = two_sessions
+    as_json = tmp_path / "model.json"  # a compensator file that happens to end in .json
+    shutil.copy(fourier, as_json)
+    base = ["compare", str(test), "--models"]
+    cli_fails(base + [str(as_json), "--json", str(as_json)], capsys, "--json .* is the input file")
+    cli_fails(base + [str(fourier), "--plot", str(tmp_path / "f.txt")], capsys, "--plot .*must end")
+    cli_fails(base + [str(tmp_path / "no.eqx")], capsys, r"--models .*no\.eqx: no such file")
+    bad = tmp_path / "bad.eqx"
+    bad.write_text("nonsense")
+    cli_fails(base + [str(bad)], capsys, "--models: .*not an hrgjax compensator")
+    cli_fails(base + [str(fourier), str(fourier)], capsys, "--models: .* the same file")
+    cli_fails(base + [str(fourier), "--offset-from", "x"], capsys, "--offset-from 'x'")
+    cli_fails(["compare", str(tmp_path / "none.csv"), "--models", str(fourier)], capsys,
+              "none.csv: no such file")  # fmt: skip
+    cli_fails(["correct", str(test), "--model", str(fourier), "--out", str(test)], capsys,
+              "--out .* is the input file")  # fmt: skip
+    cli_fails(["correct", str(test), "--model", str(fourier), "--plot", str(fourier)], capsys,
+              "--plot .*must end")  # fmt: skip
+
+
+def test_correct_reports_the_offset_and_draws_it(two_sessions, tmp_path, capsys):
+    folder, test, fourier, raw = two_sessions
+    png, out = tmp_path / "c.png", tmp_path / "c.csv"
+    capsys.readouterr()
+    argv = ["correct", str(test), "--model", str(fourier), "--out", str(out), "--plot", str(png)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "residual rate RMS 0.43" in text and "(offset kept)" in text
+    assert "session offset with Fourier+T^2: +0.43" in text and "seed Fourier" in text
+    assert f"wrote {png}" in text and png.stat().st_size > 0 and out.exists()

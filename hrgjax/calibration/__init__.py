@@ -11,6 +11,7 @@ from .design import seed_bench_plan as seed_bench_plan
 from .design import simulate_plan as simulate_plan
 from .evaluate import NoCompensation as NoCompensation
 from .evaluate import accuracy_table as accuracy_table
+from .evaluate import corrected_run_errors as corrected_run_errors
 from .evaluate import format_table as format_table
 from .evaluate import run_errors as run_errors
 from .experiment import Plan as Plan
@@ -30,5 +31,10 @@ from .reduce import RateWindows as RateWindows
 from .reduce import reduce as reduce
 from .reduce import scale_factor_vs_angle as scale_factor_vs_angle
 from .reduce import static_drift as static_drift
+from .session import Comparison as Comparison
+from .session import Offset as Offset
+from .session import compare as compare
+from .session import compare_corrected as compare_corrected
+from .session import session_offset as session_offset
 from .study import Study as Study
 from .study import run_study as run_study

@@ -14,6 +14,12 @@ How each figure is computed (state of the art is to say it exactly):
   error averages the 180°-periodic errors over whole turns of the pattern; this one does not.
 
 "Raw" applies no compensation: the nominal angular gain k_e,nom only.
+
+These figures keep the test session's constant offset. On a session in another switch-on
+than the calibration's it is the change of switch-on bias, the same for every compensator,
+and it hides what the compensation leaves: [`compare`][hrgjax.calibration.compare]
+(`hrgjax compare`, `hrgjax correct`) states it apart, with its σ, and tabulates the figures
+after it (`hrgjax.calibration.session`); `offset_dph` below takes a given offset off.
 """
 
 from __future__ import annotations
@@ -50,27 +56,63 @@ class NoCompensation(AbstractCompensator):
         return jnp.ones_like(theta)
 
 
-def run_errors(comp: AbstractCompensator, data: MeasuredData):
+def run_errors(comp: AbstractCompensator, data: MeasuredData, *, offset_dph: float = 0.0):
     """Per-run errors of a compensator on test data.
 
-    **Returns:** dict of arrays, one entry per run: `run`, `temperature_c`,
-    `wave_angle0_deg`, `static` (bool), `drift_error_dph` (static runs; NaN otherwise),
-    `angle_error_deg` and `max_angle_error_deg` (moving runs; NaN otherwise).
+    **Arguments:**
+
+    - `comp`: the fitted compensator.
+    - `data`: test data (static and/or moving runs), not yet corrected.
+    - `offset_dph`: a constant rate [°/h] taken off the compensated rate before the errors
+      are formed (a session's offset, see
+      [`session_offset`][hrgjax.calibration.session_offset]); 0 leaves them as measured.
+
+    **Returns:** dict of arrays, one entry per run (see
+    [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors]).
     """
-    out = comp.correct(data)
-    rows = {k: [] for k in ("run", "temperature_c", "wave_angle0_deg", "static")}
-    rows["drift_error_dph"], rows["angle_error_deg"], rows["max_angle_error_deg"] = [], [], []
-    table = data.table_angle_deg
-    for idx in data.run_indices():
-        t = data["time_s"][idx]
-        static = bool(np.all(data["table_rate_dps"][idx] == 0.0))
-        angle = out["angle_corrected_deg"][idx]
+    return corrected_run_errors(comp.correct(data), offset_dph=offset_dph)
+
+
+def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
+    r"""Per-run errors of data already compensated (the output of
+    [`AbstractCompensator.correct`][hrgjax.calibration.AbstractCompensator.correct], or a file
+    written by `hrgjax correct`).
+
+    With $b$ = `offset_dph` taken off the compensated rate, for a run of duration $T$ whose
+    compensated case angle is $\hat\phi(t)$ (0 at its start) and table angle $\phi(t)$:
+
+    - static runs (table rate 0 throughout): `drift_error_dph` $= \hat\phi(T)/T - b$ [°/h];
+    - moving runs: `angle_error_deg` $= \hat\phi(T) - b\,T - \Delta\phi$ [°] and
+      `max_angle_error_deg` $= \max_t |\hat\phi(t) - b\,(t - t_0) - (\phi(t) - \phi(t_0))|$ [°]
+      ($b$ converted to °/s).
+
+    **Returns:** dict of arrays, one entry per run: `run`, `temperature_c` (the run's mean
+    [°C]), `wave_angle0_deg` (measured wave angle at the run's start [° electrical]),
+    `duration_s` [s], `static` (bool), `drift_error_dph` (static runs; NaN otherwise),
+    `angle_error_deg` and `max_angle_error_deg` (moving runs; NaN otherwise).
+
+    **Raises:** `ValueError` if `corrected` has no `angle_corrected_deg` column.
+    """
+    if "angle_corrected_deg" not in corrected:
+        raise ValueError(
+            "data have no angle_corrected_deg column; compensate them first (comp.correct(data) "
+            "or hrgjax correct)"
+        )
+    names = ("run", "temperature_c", "wave_angle0_deg", "duration_s", "static")
+    rows = {k: [] for k in names + ("drift_error_dph", "angle_error_deg", "max_angle_error_deg")}
+    table = corrected.table_angle_deg
+    offset_dps = float(offset_dph) / 3600.0
+    for idx in corrected.run_indices():
+        t = corrected["time_s"][idx]
+        static = bool(np.all(corrected["table_rate_dps"][idx] == 0.0))
+        angle = corrected["angle_corrected_deg"][idx] - offset_dps * (t - t[0])
         turned = table[idx][-1] - table[idx][0]
-        rows["run"].append(int(data.run[idx[0]]))
-        rows["temperature_c"].append(float(np.mean(data["temperature_c"][idx])))
-        rows["wave_angle0_deg"].append(float(data["wave_angle_deg"][idx[0]]))
-        rows["static"].append(static)
         duration = t[-1] - t[0]
+        rows["run"].append(int(corrected.run[idx[0]]))
+        rows["temperature_c"].append(float(np.mean(corrected["temperature_c"][idx])))
+        rows["wave_angle0_deg"].append(float(corrected["wave_angle_deg"][idx[0]]))
+        rows["duration_s"].append(float(duration))
+        rows["static"].append(static)
         rows["drift_error_dph"].append(angle[-1] / duration * 3600.0 if static else np.nan)
         rows["angle_error_deg"].append(np.nan if static else angle[-1] - turned)
         track = np.max(np.abs(angle - (table[idx] - table[idx][0])))

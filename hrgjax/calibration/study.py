@@ -20,6 +20,7 @@ from .ins_impact import ins_impact
 from .mlp import MLPCompensator
 from .physical import PhysicalCompensator
 from .reduce import RateWindows, reduce
+from .session import Comparison, compare
 
 METHODS = ("fourier", "fourier_t", "mlp", "mlp_e2e", "physical")
 """Compensators the study fits: seed base algorithm, its temperature-polynomial variant,
@@ -44,6 +45,12 @@ class Study:
         self.table: dict[str, Any] = table
         self.timings: dict[str, float] = timings
         self.ins = ins
+
+    def compare(self, data: MeasuredData | None = None) -> Comparison:
+        """The study's compensators on `data` (default: its test grid, run in the
+        calibration's switch-on, so the offset is zero within σ and `before_offset()` is
+        `table`), the session's offset apart: [`compare`][hrgjax.calibration.compare]."""
+        return compare(self.compensators, self.test if data is None else data)
 
 
 def bench_session(

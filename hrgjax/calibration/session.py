@@ -1,0 +1,523 @@
+r"""Compensators on a bench session of their own: the session's offset apart from what the
+compensation leaves.
+
+A gyro switched on again starts with a new switch-on bias: a constant equivalent input rate,
+the same at every temperature and wave angle, that no compensator fitted on another session
+can know. On such a session every compensator's static residual is that change of bias
+(≈ 0.43 °/h on two `hrgjax simulate --plan seed --quick` sessions, seeds 0 and 1) and says
+nothing about the compensation. This module states the offset once, with its error, and
+tabulates what each compensator leaves after it.
+
+**The offset.** With a compensator, each static run $i$ of the session (table at rest
+throughout, duration $T_i$) gives its mean compensated rate $r_i$ [°/h] (its
+`drift_error_dph`, [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors]). The
+offset is their duration-weighted mean and its σ the standard error from the run-to-run
+scatter,
+
+$$b = \frac{\sum_i T_i r_i}{\sum_i T_i}, \qquad
+\sigma_b^2 = \frac{n}{n-1}\,\frac{\sum_i T_i^2 (r_i - b)^2}{(\sum_i T_i)^2}$$
+
+($s/\sqrt n$ when the runs are equally long; σ is unknown, NaN, with one static run). The
+σ is this session's part only: it treats the runs' residuals as independent (what the
+compensation leaves at a wave angle and temperature is counted as scatter, so σ errs
+large), and it leaves out the error of the constant each compensator brings from its own
+calibration, the same on every test session. Against the simulator's change of switch-on
+bias Δb (`benchmarks/session_offset.py`, 12 quick seed sessions against one calibration,
+Fourier+T²): offset − Δb scattered 0.0026 °/h about its mean against a mean σ of
+0.0034 °/h, and that mean, the calibration's part, was +0.0007 °/h (+0.0041 °/h with another
+calibration session): comparable to σ. What σ does not say is how the offset would scatter
+between switch-ons: that is the bias repeatability, the size of $b$ itself.
+
+**One offset for the session.** Every compensator sees the same switch-on, so one value is
+taken off all of them: the offset measured with the compensator whose static runs scatter
+least (the smallest $\sigma_b$: it explains the grid best), or with the one named by
+`offset_from`. Each compensator's own $b$ is reported too; its difference from the session's
+is a constant error of that compensator (raw data: the mean drift). Removing one offset from
+all keeps the comparison fair: a compensator that has a constant error keeps it.
+
+**After the offset** ([`corrected_run_errors`][hrgjax.calibration.corrected_run_errors] with
+`offset_dph = b`): a static run's residual is $r_i - b$ [°/h]; a rotation run's end-of-run
+angle error loses the angle the offset turns in the run, $b\,T_i$ (the compensated rate is
+integrated over the run, so a constant rate $b$ adds $b\,T_i$ to its angle, whatever the
+table does), and its largest angle error is taken after $b\,(t - t_0)$ is removed at every
+sample.
+
+**Groups.** A run's temperature is its mean temperature rounded to the nearest multiple of
+`temperature_bin_c` (1 °C), its wave angle its measured start angle rounded to the nearest
+multiple of `angle_bin_deg` (5°: the seed's grids are multiples of 5°, and the readout's
+error at a run's start, ≤ 0.6° on `tvg3_like()`, stays inside the bin). Each figure is the
+RMS over the runs of a group: per temperature over the wave angles (the seed's accuracy
+table, [`accuracy_table`][hrgjax.calibration.accuracy_table]), per wave angle over the
+temperatures. The **figure of merit** of a compensator is the RMS over every static run
+(°/h) and every rotation run (°) after the offset.
+
+**Agreement with the study.** [`run_study`][hrgjax.calibration.run_study] runs its test grid
+in the calibration's switch-on (one `bias_key`), so its compensators carry that bias and the
+test grid's offset is zero within σ; its `study.table` is this module's `before_offset`
+(the same numbers: `compare(study.compensators, study.test)`). On a second session
+the offset is the change of switch-on bias between the sessions, and the residuals after it
+are what the same-session table shows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from typing import Any
+
+import numpy as np
+
+from ..data import MeasuredData
+from ._compensator import AbstractCompensator
+from .evaluate import SEED_TABLE, corrected_run_errors
+
+UNIT = {"static_residual_dph": "°/h", "angle_error_deg": "°", "max_angle_error_deg": "°"}
+"""The figures [`Comparison`][hrgjax.calibration.Comparison] tabulates and their units:
+static residual rate after the offset, end-of-run angle error of rotation runs after it, and
+the largest angle error during a rotation run after it."""
+_ERROR_KEY = {
+    "static_residual_dph": "drift_error_dph",
+    "angle_error_deg": "angle_error_deg",
+    "max_angle_error_deg": "max_angle_error_deg",
+}
+_SEED_KEY = {"static_residual_dph": "static_drift_dph", "angle_error_deg": "angle_error_deg"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Offset:
+    """A session's constant rate (module docstring): `value_dph` [°/h], `sigma_dph` (its 1σ
+    standard error [°/h]; NaN with one static run), `n_runs` (static runs used; 0: not
+    estimated, nothing removed), `source` (label of the compensator it was measured with)."""
+
+    value_dph: float
+    sigma_dph: float
+    n_runs: int
+    source: str = ""
+
+    @property
+    def estimated(self) -> bool:
+        """Whether the session had static runs to measure it."""
+        return self.n_runs > 0
+
+    def to_json(self) -> dict:
+        """`{"value", "sigma", "unit", "n_static_runs", "from"}` (σ `null` when unknown)."""
+        sigma = self.sigma_dph if math.isfinite(self.sigma_dph) else None
+        return {
+            "value": float(self.value_dph),
+            "sigma": None if sigma is None else float(sigma),
+            "unit": "°/h",
+            "n_static_runs": int(self.n_runs),
+            "from": self.source,
+        }
+
+    def __str__(self) -> str:
+        if not self.estimated:
+            return "not estimated (no static runs): the angle errors include it"
+        if not math.isfinite(self.sigma_dph):
+            return f"{self.value_dph:+.4f} °/h (σ unknown: one static run)"
+        runs = "run" if self.n_runs == 1 else "runs"
+        return f"{self.value_dph:+.4f} ± {self.sigma_dph:.4f} °/h (1σ, {self.n_runs} static {runs})"
+
+
+def session_offset(errors: dict, source: str = "") -> Offset:
+    """The session's offset from per-run errors taken with no offset removed.
+
+    **Arguments:**
+
+    - `errors`: [`run_errors`][hrgjax.calibration.run_errors] or
+      [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors] output
+      (`offset_dph=0`).
+    - `source`: label of the compensator, kept in the result.
+
+    **Returns:** an [`Offset`][hrgjax.calibration.Offset]: the duration-weighted mean of the
+    static runs' mean compensated rates [°/h] and its standard error from their scatter
+    (module docstring); value 0 and `n_runs` 0 when there are no static runs.
+    """
+    static = np.asarray(errors["static"], dtype=bool)
+    rate = np.asarray(errors["drift_error_dph"], dtype=float)[static]
+    weight = np.asarray(errors["duration_s"], dtype=float)[static]
+    n = int(rate.size)
+    if n == 0:
+        return Offset(0.0, math.nan, 0, source)
+    total = float(np.sum(weight))
+    value = float(np.sum(weight * rate) / total)
+    if n == 1:
+        return Offset(value, math.nan, 1, source)
+    var = n / (n - 1) * float(np.sum(weight**2 * (rate - value) ** 2)) / total**2
+    return Offset(value, math.sqrt(var), n, source)
+
+
+def _bins(values, width):
+    """Nearest multiples of `width` (a whole-looking float, `-0.0` made `0.0`)."""
+    return np.round(np.asarray(values, dtype=float) / width) * width + 0.0
+
+
+def _rms_groups(keys, values):
+    """{key: RMS of the finite values with that key} over the sorted unique keys (NaN where
+    a group has none)."""
+    out = {}
+    for k in np.unique(keys):
+        v = values[(keys == k) & np.isfinite(values)]
+        out[float(k)] = float(np.sqrt(np.mean(v**2))) if v.size else math.nan
+    return out
+
+
+def _rms(values):
+    v = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(v**2))) if v.size else math.nan
+
+
+def _num(x):
+    """JSON number: NaN and ±inf as null."""
+    return float(x) if math.isfinite(x) else None
+
+
+def _keyed(d: dict) -> dict:
+    """{T or θ: value} → {"-40": value}: JSON keys as the shortest decimal."""
+    return {f"{k:g}": _num(v) for k, v in d.items()}
+
+
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    """Compensators on one session (module docstring for every definition); from
+    [`compare`][hrgjax.calibration.compare] or
+    [`compare_corrected`][hrgjax.calibration.compare_corrected].
+
+    - `labels`: the compensators' labels, in order; `names` ({label: compensator name}),
+      `files` ({label: file or None}).
+    - `offset`: the session's [`Offset`][hrgjax.calibration.Offset], removed from every
+      compensator; `own_offsets`: {label: the offset measured with that compensator}.
+    - `errors` ({label: per-run errors, offset kept}) and `residuals` ({label: per-run
+      errors after the offset}), as [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors]
+      returns them.
+    - `temperature_bin_c` [°C], `angle_bin_deg` [°]: the group widths; `data`: the session's
+      name (a file) or None.
+    """
+
+    labels: tuple[str, ...]
+    names: dict
+    files: dict
+    offset: Offset
+    own_offsets: dict
+    errors: dict = dataclasses.field(repr=False)
+    residuals: dict = dataclasses.field(repr=False)
+    temperature_bin_c: float = 1.0
+    angle_bin_deg: float = 5.0
+    data: str | None = None
+
+    def _keys(self, label, by):
+        e = self.residuals[label]
+        if by == "temperature":
+            return _bins(e["temperature_c"], self.temperature_bin_c)
+        if by == "wave_angle":
+            return _bins(e["wave_angle0_deg"], self.angle_bin_deg)
+        raise ValueError(f"by must be 'temperature' or 'wave_angle'; got {by!r}")
+
+    def figure(self, label: str, key: str, by: str = "temperature", after: bool = True) -> dict:
+        """RMS of one figure per group: {T [°C] or θ [°]: RMS}.
+
+        **Arguments:** `label` (a compensator's), `key` (one of
+        [`UNIT`][hrgjax.calibration.session.UNIT]'s: `static_residual_dph` [°/h],
+        `angle_error_deg` [°], `max_angle_error_deg` [°]), `by` (`"temperature"`: RMS over the
+        wave angles at each temperature; `"wave_angle"`: over the temperatures at each start
+        angle), `after` (False: the offset kept, as `accuracy_table`).
+        """
+        if key not in _ERROR_KEY:
+            raise ValueError(f"key must be one of {tuple(_ERROR_KEY)}; got {key!r}")
+        e = (self.residuals if after else self.errors)[label]
+        return _rms_groups(self._keys(label, by), e[_ERROR_KEY[key]])
+
+    def figure_of_merit(self, label: str) -> dict:
+        """{"static_residual_dph": RMS over every static run [°/h], "angle_error_deg": RMS
+        over every rotation run's end-of-run error [°]}, after the offset (NaN: no such runs)."""
+        e = self.residuals[label]
+        return {
+            "static_residual_dph": _rms(e["drift_error_dph"]),
+            "angle_error_deg": _rms(e["angle_error_deg"]),
+        }
+
+    def before_offset(self) -> dict:
+        """The seed's accuracy table with the offset kept, in
+        [`accuracy_table`][hrgjax.calibration.accuracy_table]'s layout (the same numbers on
+        whole-degree temperatures): {label: {"static_drift_dph" | "angle_error_deg" |
+        "max_angle_error_deg": {T: RMS}}}."""
+        return {
+            lab: {
+                "static_drift_dph": self.figure(lab, "static_residual_dph", after=False),
+                "angle_error_deg": self.figure(lab, "angle_error_deg", after=False),
+                "max_angle_error_deg": self.figure(lab, "max_angle_error_deg", after=False),
+            }
+            for lab in self.labels
+        }
+
+    @property
+    def temperatures_c(self) -> list[float]:
+        """Temperature groups of the session [°C], sorted."""
+        keys = np.concatenate([self._keys(lab, "temperature") for lab in self.labels])
+        return [float(k) for k in np.unique(keys)]
+
+    @property
+    def wave_angles_deg(self) -> list[float]:
+        """Start wave-angle groups of the session [° electrical], sorted."""
+        keys = np.concatenate([self._keys(lab, "wave_angle") for lab in self.labels])
+        return [float(k) for k in np.unique(keys)]
+
+    def counts(self) -> dict:
+        """{"static": static runs, "rotation": moving runs} of the session."""
+        e = self.errors[self.labels[0]]
+        n_static = int(np.sum(e["static"]))
+        return {"static": n_static, "rotation": int(e["static"].size - n_static)}
+
+    def to_json(self) -> dict:
+        """The comparison as JSON-ready data (NaN as `null`; temperatures and angles as keys
+        written `"-40"`, `"15"`):
+
+        ```
+        {"data": "test.csv" | null,
+         "offset_dph": {"value", "sigma", "unit": "°/h", "n_static_runs", "from"},
+         "temperature_bin_c", "angle_bin_deg",
+         "runs": {"static": n, "rotation": n},
+         "compensators": [
+           {"label", "name", "file",
+            "own_offset_dph": {"value", "sigma", "unit", "n_static_runs", "from"},
+            "static_residual_dph": {T: RMS over wave angles, after the offset},
+            "angle_error_deg": {T: …}, "max_angle_error_deg": {T: …},
+            "by_wave_angle": {"static_residual_dph": {θ: RMS over temperatures},
+                              "angle_error_deg": {θ: …}, "max_angle_error_deg": {θ: …}},
+            "figure_of_merit": {"static_residual_dph", "angle_error_deg"},
+            "before_offset": {"static_drift_dph": {T: …}, "angle_error_deg": {T: …},
+                              "max_angle_error_deg": {T: …}}}],
+         "seed_figures": {"static_residual_dph" | "angle_error_deg":
+                          {T: {"fourier", "mlp"}}},
+         "units": {"static_residual_dph": "°/h", "angle_error_deg": "°", …}}
+        ```
+
+        `seed_figures` are seed 000's published figures
+        ([`SEED_TABLE`][hrgjax.calibration.evaluate.SEED_TABLE]: its Fourier base algorithm
+        and its network), to read beside each temperature's figures.
+        """
+        comps = []
+        for lab in self.labels:
+            by_angle = {k: _keyed(self.figure(lab, k, "wave_angle")) for k in UNIT}
+            before = {
+                k: _keyed(v) for k, v in self.before_offset()[lab].items()
+            }  # accuracy_table's keys
+            comps.append(
+                {
+                    "label": lab,
+                    "name": self.names[lab],
+                    "file": self.files.get(lab),
+                    "own_offset_dph": self.own_offsets[lab].to_json(),
+                    **{k: _keyed(self.figure(lab, k)) for k in UNIT},
+                    "by_wave_angle": by_angle,
+                    "figure_of_merit": {k: _num(v) for k, v in self.figure_of_merit(lab).items()},
+                    "before_offset": before,
+                }
+            )
+        seed = {
+            ours: {f"{t:g}": {"fourier": v[0], "mlp": v[1]} for t, v in SEED_TABLE[k].items()}
+            for ours, k in _SEED_KEY.items()
+        }
+        return {
+            "data": self.data,
+            "offset_dph": self.offset.to_json(),
+            "temperature_bin_c": self.temperature_bin_c,
+            "angle_bin_deg": self.angle_bin_deg,
+            "runs": self.counts(),
+            "compensators": comps,
+            "seed_figures": seed,
+            "units": dict(UNIT),
+        }
+
+    def write_json(self, path: str | os.PathLike) -> str:
+        """Write [`to_json`][hrgjax.calibration.Comparison.to_json] to `path` (atomically,
+        folders made); returns the path."""
+        import json
+
+        from .._io import atomic_write
+
+        with atomic_write(path, "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(self.to_json(), indent=2, ensure_ascii=False))
+        return os.fspath(path)
+
+    def _table(self, key, by, title):
+        unit = UNIT[key]
+        head = "T [°C]" if by == "temperature" else "θ [°]"
+        seed = SEED_TABLE.get(_SEED_KEY.get(key, ""), {}) if by == "temperature" else {}
+        width = max(12, *(len(lab) + 1 for lab in self.labels))
+        figures = {lab: self.figure(lab, key, by) for lab in self.labels}
+        groups = self.temperatures_c if by == "temperature" else self.wave_angles_deg
+        rows = [f"{title} [{unit}]"]
+        w0 = 16 if by == "temperature" else 7  # room for "all, offset kept"
+        line = f"{head:>{w0}} " + " ".join(f"{lab:>{width}}" for lab in self.labels)
+        rows.append(line + (f" {'seed Fourier':>13} {'seed MLP':>9}" if seed else ""))
+        for g in groups:
+            row = f"{g:>{w0}g} " + " ".join(
+                f"{figures[lab].get(g, math.nan):>{width}.4g}" for lab in self.labels
+            )
+            if g in seed:
+                row += f" {seed[g][0]:>13.3g} {seed[g][1]:>9.3g}"
+            rows.append(row)
+        if by == "temperature":  # every run, after the offset and with it kept
+            for name, e in (("all", self.residuals), ("all, offset kept", self.errors)):
+                cells = (_rms(e[lab][_ERROR_KEY[key]]) for lab in self.labels)
+                rows.append(f"{name:>{w0}} " + " ".join(f"{v:>{width}.4g}" for v in cells))
+        return rows
+
+    def format(self, by_wave_angle: bool = True) -> str:
+        """The comparison as text: the offset, then per temperature (with seed 000's figures
+        beside) and, with `by_wave_angle`, per start wave angle, the static residual [°/h]
+        and the rotation runs' end-of-run angle error [°] after the offset; tables of kinds of
+        run the session lacks are left out."""
+        counts = self.counts()
+        src = f" with {self.offset.source}" if self.offset.source else ""
+        lines = [f"session offset{src}: {self.offset}"]
+        if self.offset.estimated:
+            lines.append(
+                "  (duration-weighted mean compensated rate of the static runs, taken off every "
+                "compensator below;\n   σ: this session's run-to-run scatter, without the error "
+                "of the constant a compensator brings from its calibration)"
+            )
+        if len(self.labels) > 1:
+            lines.append("  each compensator's own mean rate at rest:")
+            for lab in self.labels:
+                lines.append(f"    {lab:<{max(map(len, self.labels))}}  {self.own_offsets[lab]}")
+        lines.append("")
+        tables = []
+        if counts["static"]:
+            tables.append(("static_residual_dph", "temperature",
+                           "static residual after the offset, RMS over wave angles"))  # fmt: skip
+        if counts["rotation"]:
+            tables.append(("angle_error_deg", "temperature",
+                           "end-of-run angle error of the rotation runs after the offset "
+                           "(offset × duration removed), RMS over wave angles"))  # fmt: skip
+        if by_wave_angle and counts["static"]:
+            tables.append(("static_residual_dph", "wave_angle",
+                           "static residual after the offset by start wave angle, RMS over "
+                           "temperatures"))  # fmt: skip
+        if by_wave_angle and counts["rotation"]:
+            tables.append(("angle_error_deg", "wave_angle",
+                           "end-of-run angle error after the offset by start wave angle, RMS "
+                           "over temperatures"))  # fmt: skip
+        for key, by, title in tables:
+            lines += self._table(key, by, title) + [""]
+        return "\n".join(lines).rstrip() + "\n"
+
+    def __str__(self) -> str:
+        return self.format()
+
+    def plot(self, path: str | os.PathLike, title: str = "") -> str:
+        """Figure of the residuals after the offset per temperature and per wave angle, one
+        marker and colour per compensator, the offset in a text box
+        ([`session_figure`][hrgjax.plots.session_figure]); returns the path."""
+        from ..plots import session_figure
+
+        return session_figure(self, os.fspath(path), title=title)
+
+
+def compare_corrected(
+    corrected: dict[str, MeasuredData],
+    *,
+    names: dict | None = None,
+    files: dict | None = None,
+    offset_from: str | None = None,
+    temperature_bin_c: float = 1.0,
+    angle_bin_deg: float = 5.0,
+    data: str | None = None,
+) -> Comparison:
+    """Compare compensators from their compensated data of one session.
+
+    **Arguments:**
+
+    - `corrected`: {label: the session compensated by that compensator} (the output of
+      [`correct`][hrgjax.calibration.AbstractCompensator.correct], or a file written by
+      `hrgjax correct`); every entry holds the same runs.
+    - `names`, `files`: {label: compensator name}, {label: its file} (default: the label,
+      None).
+    - `offset_from`: the label whose offset is the session's (default: the one with the
+      smallest σ; module docstring).
+    - `temperature_bin_c` [°C], `angle_bin_deg` [°]: group widths (module docstring).
+    - `data`: the session's name, kept for reports.
+
+    **Returns:** a [`Comparison`][hrgjax.calibration.Comparison].
+
+    **Raises:** `ValueError` when `corrected` is empty, `offset_from` is not a label, a bin
+    width is not > 0, or the entries do not hold the same runs.
+    """
+    labels = tuple(corrected)
+    if not labels:
+        raise ValueError("give at least one compensator")
+    for name, width in (("temperature_bin_c", temperature_bin_c), ("angle_bin_deg", angle_bin_deg)):
+        if not width > 0 or not math.isfinite(width):
+            raise ValueError(f"{name} must be a number > 0; got {width}")
+    if offset_from is not None and offset_from not in labels:
+        raise ValueError(f"offset_from {offset_from!r} is not one of the labels {list(labels)}")
+    errors = {lab: corrected_run_errors(corrected[lab]) for lab in labels}
+    first = errors[labels[0]]
+    for lab in labels[1:]:
+        if not np.array_equal(errors[lab]["run"], first["run"]):
+            raise ValueError(f"{lab!r}: compensated data hold other runs than {labels[0]!r}'s")
+    own = {lab: session_offset(errors[lab], lab) for lab in labels}
+    if offset_from is None:
+        sig = [own[lab].sigma_dph for lab in labels]
+        offset_from = labels[int(np.argmin(sig))] if np.any(np.isfinite(sig)) else labels[0]
+    offset = own[offset_from]
+    residuals = {
+        lab: corrected_run_errors(corrected[lab], offset_dph=offset.value_dph) for lab in labels
+    }
+    return Comparison(
+        labels=labels,
+        names={lab: (names or {}).get(lab, lab) for lab in labels},
+        files={lab: (files or {}).get(lab) for lab in labels},
+        offset=offset,
+        own_offsets=own,
+        errors=errors,
+        residuals=residuals,
+        temperature_bin_c=float(temperature_bin_c),
+        angle_bin_deg=float(angle_bin_deg),
+        data=data,
+    )
+
+
+def compare(
+    compensators: dict[str, AbstractCompensator],
+    data: MeasuredData,
+    *,
+    files: dict | None = None,
+    offset_from: str | None = None,
+    temperature_bin_c: float = 1.0,
+    angle_bin_deg: float = 5.0,
+    name: str | None = None,
+) -> Comparison:
+    """Several compensators on one test session: the session's offset, and per temperature
+    and wave angle what each compensator leaves after it (module docstring).
+
+    **Arguments:**
+
+    - `compensators`: {label: fitted compensator}.
+    - `data`: the session (static and/or rotation runs), not yet corrected.
+    - `files`: {label: the compensator's file}, kept for reports.
+    - `offset_from`, `temperature_bin_c` [°C], `angle_bin_deg` [°]: as in
+      [`compare_corrected`][hrgjax.calibration.compare_corrected].
+    - `name`: the session's name (a file), kept for reports.
+
+    **Returns:** a [`Comparison`][hrgjax.calibration.Comparison]; its
+    `before_offset()` equals [`accuracy_table`][hrgjax.calibration.accuracy_table]`(compensators,
+    data)` on whole-degree temperatures.
+    """
+    corrected = {lab: comp.correct(data) for lab, comp in compensators.items()}
+    return compare_corrected(
+        corrected,
+        names={lab: _name(comp) for lab, comp in compensators.items()},
+        files=files,
+        offset_from=offset_from,
+        temperature_bin_c=temperature_bin_c,
+        angle_bin_deg=angle_bin_deg,
+        data=name,
+    )
+
+
+def _name(comp: Any) -> str:
+    name = getattr(comp, "name", None)
+    return name if isinstance(name, str) else type(comp).__name__
