@@ -38,10 +38,12 @@ propagation (`jax.jacfwd` of the estimator) of those sums' covariance, formed as
   source is "white noise" alone. The biases are then those at the session's start (its
   earliest section's first row).
 
-Monte Carlo with known truth (`benchmarks/coverage_ferraris.py`, docs/imu.md) puts 68–71 %
-of the truths within ±1σ and ≥ 92 % within ±2σ with white noise and with a random walk of
-the biases; the white-noise σ alone covered 42 % / 68 % under the random walk. Not
-covered: face tilts (inexact flips), which the accelerometer's q absorbs only in part."""
+Monte Carlo with known truth (`benchmarks/coverage_ferraris.py`, docs/imu.md: 200 sessions)
+puts 65.6–71.8 % of the truths within ±1σ and 92.8–96.4 % within ±2σ with white noise, a
+random walk and a Gauss–Markov drift of the biases; the white-noise σ alone covered 39.8 %
+and 67.5 % under the random walk. Not covered: the repeats' σ (Student-t with R − 1
+degrees of freedom, and blind to the drift common to all repeats); face tilts (inexact
+flips), which the accelerometers' q absorbs only in part."""
 
 from __future__ import annotations
 
