@@ -22,15 +22,34 @@ original method — a tactical or navigation-grade gyro needs a rate table and n
   $\hat a_k = M_a^{-1}(a_{s,k} - b_a)$, which gives M_g column by column.
 
 Everything is a function of each section's sums, so the standard errors follow by linear
-propagation (`jax.jacfwd` of the estimator) of those sums' covariance: from the scatter of
-repeated positions where a key has ≥ 2 repeats, else from white noise of the per-sample
-scatter on the static faces (a lower bound when the faces are not exact or the noise is
-not white)."""
+propagation (`jax.jacfwd` of the estimator) of those sums' covariance, formed as follows
+(`sigma_source` names the parts used):
+
+- **"repeats"**: a key with ≥ 2 ranges contributes the scatter of its repeats / R (which
+  holds whatever changes when the IMU is put down again);
+- **"white noise"**: a key with one range, white noise of the static faces' per-sample
+  scatter (σ²/n for a face mean, σ²ΣΔt² for a turn's sums);
+- **"bias drift"**: where every key has one range, an in-run random walk of each
+  channel's bias from the session's start, q² min(s − t₀, t − t₀), propagated exactly
+  into every section sum (`hrgjax.imu._drift`); q (one for the gyros, one for the
+  accelerometers, `bias_walk`) is the maximum-likelihood value given the twelve
+  combinations of face means that vanish for any calibration (each channel's three ±
+  pair sums are equal) — zero where the faces agree within the white noise, when the
+  source is "white noise" alone. The biases are then those at the session's start (its
+  earliest section's first row).
+
+Monte Carlo with known truth (`benchmarks/coverage_ferraris.py`, docs/imu.md: 200 sessions)
+puts 65.6–71.8 % of the truths within ±1σ and 92.8–96.4 % within ±2σ with white noise, a
+random walk and a Gauss–Markov drift of the biases; the white-noise σ alone covered 39.8 %
+and 67.5 % under the random walk. Not covered: the repeats' σ (Student-t with R − 1
+degrees of freedom, and blind to the drift common to all repeats); face tilts (inexact
+flips), which the accelerometers' q absorbs only in part."""
 
 from __future__ import annotations
 
 import json
 import os
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -40,6 +59,7 @@ import numpy as np
 from .._x64 import require_x64
 from ..fog.misalignment import _IDX, TriadCalibration
 from ..units import DEG
+from ._drift import walk_intensity, walk_kernel
 from .data import ImuData
 from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections
 
@@ -63,8 +83,10 @@ class ImuCalibration(eqx.Module):
     [`PARAMETERS`][hrgjax.imu.ferraris.PARAMETERS] order (zeros when set by hand);
     `noise_std` (6,): per-sample white-noise σ of the gyros [rad/s] and the accelerometers
     [m/s²] seen on the static faces; `g` [m/s²] and `turn_deg` (3,) [°] the session's
-    references; `sigma_source` ("repeats", "white noise", "repeats and white noise" or
-    "none").
+    references; `sigma_source` ("repeats", "white noise", "white noise and bias drift",
+    "repeats and white noise" or "none": see the module notes); `bias_walk` (2,) or None:
+    the in-run random walk of the biases the session showed, gyros [rad/s/√s] and
+    accelerometers [m/s²/√s] (None when set by hand).
 
     Standard errors: `accel_matrix_std`, `accel_bias_std`, `gyro_matrix_std`, `gyro_bias_std`,
     `gyro_g_sensitivity_std`; the six-angle form of
@@ -81,6 +103,7 @@ class ImuCalibration(eqx.Module):
     g: float = eqx.field(static=True, default=9.81)
     turn_deg: tuple[float, float, float] = eqx.field(static=True, default=(360.0, 360.0, 360.0))
     sigma_source: str = eqx.field(static=True, default="none")
+    bias_walk: jax.Array | None = None
 
     @classmethod
     def known(
@@ -192,6 +215,7 @@ class ImuCalibration(eqx.Module):
             return np.asarray(x).tolist()
 
         acc, gyr = self.accel_triad(), self.gyro_triad()
+        walk = [0.0, 0.0] if self.bias_walk is None else lst(self.bias_walk)
         return {
             "format": FORMAT,
             "version": 1,
@@ -216,6 +240,10 @@ class ImuCalibration(eqx.Module):
             "g_m_s2": self.g,
             "turn_deg": list(self.turn_deg),
             "sigma_source": self.sigma_source,
+            "bias_walk": {
+                "gyro_rad_s_per_sqrt_s": walk[0],
+                "accel_m_s2_per_sqrt_s": walk[1],
+            },
             "six_angle_form": {
                 "angle_order": ["xy", "xz", "yx", "yz", "zx", "zy"],
                 "accel_scale": lst(acc.scale),
@@ -266,11 +294,15 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
     noise_std = jnp.asarray(
         [*noise.get("gyro_rad_s", [0.0] * 3), *noise.get("accel_m_s2", [0.0] * 3)]
     )
+    walk = obj.get("bias_walk", {})
+    bias_walk = jnp.asarray(
+        [walk.get("gyro_rad_s_per_sqrt_s", 0.0), walk.get("accel_m_s2_per_sqrt_s", 0.0)]
+    )
     return ImuCalibration(
         got["accel_matrix"], got["accel_bias_m_s2"], got["gyro_matrix"], got["gyro_bias_rad_s"],
         got["gyro_g_sensitivity_rad_s_per_m_s2"], got["covariance"], noise_std,
         g=float(obj.get("g_m_s2", 9.81)), turn_deg=tuple(float(t) for t in obj.get("turn_deg", [360.0] * 3)),
-        sigma_source=str(obj.get("sigma_source", "none")),
+        sigma_source=str(obj.get("sigma_source", "none")), bias_walk=bias_walk,
     )  # fmt: skip
 
 
@@ -334,7 +366,23 @@ def session_statistics(data: ImuData, sections: Sections):
     """The section statistics the estimator needs: `(stats (57,), covariance (57, 57),
     noise_std (6,), sigma_source)`. A key with repeats contributes the mean of its repeats'
     statistics; its covariance is their scatter / R where R ≥ 2, else white noise of the
-    static faces' per-sample scatter (σ²/n for a face mean, σ²ΣΔt² for a turn's sums)."""
+    static faces' per-sample scatter (σ²/n for a face mean, σ²ΣΔt² for a turn's sums) plus,
+    where every key has one range, the in-run bias drift that the faces' disagreement shows
+    (a random walk of the biases from the record's start, see `hrgjax.imu._drift`)."""
+    got = _statistics(data, sections)
+    return got.stats, got.white + got.drift, got.noise_std, got.source
+
+
+class _Statistics(NamedTuple):
+    stats: np.ndarray  # (57,)
+    white: np.ndarray  # (57, 57): repeats' scatter or white noise
+    drift: np.ndarray  # (57, 57): the bias random walk's part (zeros where not estimated)
+    noise_std: np.ndarray  # (6,): per-sample σ, gyro xyz then accel xyz
+    bias_walk: np.ndarray  # (2,): q of the gyros [rad/s/√s] and the accelerometers [m/s²/√s]
+    source: str
+
+
+def _statistics(data: ImuData, sections: Sections) -> _Statistics:
     stats = np.zeros(N_STATS)
     cov = np.zeros((N_STATS, N_STATS))
     # per-sample noise: deviations of every face sample from its own range's mean
@@ -371,8 +419,49 @@ def session_statistics(data: ImuData, sections: Sections):
                 block[:3, :3], block[3:6, 3:6] = c_g * sum_dt2, c_a * sum_dt2
             sources.add("white noise")
         cov[at : at + width, at : at + width] = block
-    source = " and ".join(sorted(sources, reverse=False)) if sources else "none"
-    return stats, cov, noise_std, source
+    drift, walk = np.zeros((N_STATS, N_STATS)), np.zeros(2)
+    if "repeats" not in sources:
+        drift, walk = _drift_covariance(data, sections, stats, cov)
+        if np.any(walk > 0):
+            sources.add("bias drift")
+    source = " and ".join(s for s in ("repeats", "white noise", "bias drift") if s in sources)
+    return _Statistics(stats, cov, drift, noise_std, walk, source or "none")
+
+
+def _drift_covariance(data: ImuData, sections: Sections, stats: np.ndarray, white: np.ndarray):
+    """The statistics' covariance from a random walk of the biases (one intensity for the
+    gyros, one for the accelerometers) estimated from the faces' ± pair sums, and the two
+    intensities q [unit/√s]."""
+    dt = data.dt
+    pieces = [[(s, e, np.full(e - s, 1.0 / (e - s)) if key in FACES else dt[s:e], 1.0)]
+              for key in SECTION_KEYS for s, e in sections[key][:1]]  # fmt: skip
+    origin = min(s for ranges in sections.values() for s, _ in ranges)
+    per_key = walk_kernel(data.time, pieces, origin)  # the same for every channel
+    kernels = [np.zeros((N_STATS, N_STATS)) for _ in range(2)]  # gyro, accel
+    for c in range(3):
+        for sensor, (face_at, turn_at) in enumerate(((3 + c, c), (c, 3 + c))):
+            idx = [_FACE_AT[k] + face_at for k in FACES] + [_TURN_AT[k] + turn_at for k in TURNS]
+            kernels[sensor][np.ix_(idx, idx)] = per_key
+    walk = np.zeros(2)
+    for sensor, (kernel, offset) in enumerate(zip(kernels, (3, 0), strict=True)):
+        contrasts = _pair_contrasts(offset)
+        q2 = walk_intensity(contrasts @ stats, contrasts @ white
+                            @ contrasts.T, contrasts @ kernel @ contrasts.T)  # fmt: skip
+        walk[sensor] = np.sqrt(q2)
+    return walk[0] ** 2 * kernels[0] + walk[1] ** 2 * kernels[1], walk
+
+
+def _pair_contrasts(offset: int) -> np.ndarray:
+    """(6, 57): for each channel c of the sensor at `offset` in a face's six numbers (0:
+    accel, 3: gyro), the x pair sum minus the y pair sum and y minus z (zero without
+    noise for any calibration)."""
+    out = np.zeros((6, N_STATS))
+    for c in range(3):
+        pair = np.zeros((3, N_STATS))
+        for i in range(3):
+            pair[i, [12 * i + offset + c, 12 * i + 6 + offset + c]] = 1.0
+        out[2 * c], out[2 * c + 1] = pair[0] - pair[1], pair[1] - pair[2]
+    return out
 
 
 def ferraris(
@@ -419,7 +508,8 @@ def ferraris(
         raise ValueError(
             f"turn_deg must be a non-zero angle [°] or three of them; got {turn_deg!r}"
         )
-    stats, cov, noise_std, source = session_statistics(data, sections)
+    got = _statistics(data, sections)
+    stats, cov = got.stats, got.white + got.drift
     _check_faces(stats, g)
     jac, params = _estimate_and_jacobian(jnp.asarray(stats), g, jnp.deg2rad(jnp.asarray(turns)))
     jac, params = np.asarray(jac), np.asarray(params)
@@ -428,8 +518,9 @@ def ferraris(
     p = jnp.asarray(params)
     return ImuCalibration(
         p[:9].reshape(3, 3), p[9:12], p[12:21].reshape(3, 3), p[21:24], p[24:33].reshape(3, 3),
-        jnp.asarray((p_cov + p_cov.T) / 2), jnp.asarray(noise_std), g=g,
-        turn_deg=tuple(float(t) for t in turns), sigma_source=source,
+        jnp.asarray((p_cov + p_cov.T) / 2), jnp.asarray(got.noise_std), g=g,
+        turn_deg=tuple(float(t) for t in turns), sigma_source=got.source,
+        bias_walk=jnp.asarray(got.bias_walk),
     )  # fmt: skip
 
 

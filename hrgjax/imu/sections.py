@@ -39,8 +39,9 @@ def parse_sections(sections, n_samples: int) -> Sections:
     `n_samples`: the record's length.
 
     **Raises:** `ValueError` naming the key for a missing or unknown key, a range that is
-    not `{"start": i, "end": j}` / `[i, j]` with 0 ≤ i < j ≤ n_samples, or a face shorter
-    than 2 samples."""
+    not `{"start": i, "end": j}` / `[i, j]` with 0 ≤ i < j ≤ n_samples, a face shorter
+    than 2 samples, or a key whose ranges repeat or overlap (a repeat must be another
+    stretch of the record: the same rows twice would fake a repeat whose scatter is 0)."""
     where = "sections"
     if isinstance(sections, str | os.PathLike):
         where = os.fspath(sections)
@@ -66,7 +67,25 @@ def parse_sections(sections, n_samples: int) -> Sections:
         if not ranges:
             raise ValueError(f"{where}: {key!r} lists no range")
         out[key] = [_range(where, key, r, n_samples) for r in ranges]
+        _check_repeats(where, key, out[key])
     return out
+
+
+def _check_repeats(where: str, key: str, ranges: list[tuple[int, int]]) -> None:
+    """A key's repeats must be other stretches of the record: a range listed twice, or two
+    that share rows, would count the same samples as two positions (their scatter, the
+    standard errors, shrinks toward zero)."""
+    order = sorted(ranges)
+    for (s0, e0), (s1, e1) in zip(order, order[1:], strict=False):
+        if s1 < e0:
+            what = "lists the range" if (s0, e0) == (s1, e1) else "lists overlapping ranges"
+            twice = (
+                f"[{s0}, {e0}] twice" if (s0, e0) == (s1, e1) else f"[{s0}, {e0}] and [{s1}, {e1}]"
+            )
+            raise ValueError(
+                f"{where}: {key!r} {what} {twice}: repeats must be separate row ranges "
+                f"[[i1, j1], [i2, j2], …] with j1 <= i2 (list a position once)"
+            )
 
 
 def _is_list_of_ranges(value) -> bool:

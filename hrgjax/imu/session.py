@@ -59,6 +59,25 @@ def _turn(c0, axis, angle, n, rate_hz, g):
     return omega, accel, c0 @ _rotation(axis, angle)
 
 
+def _bias_drift(key, n: int, rate_hz: float, walk: np.ndarray, tau_s: float | None) -> np.ndarray:
+    """(n, 6) bias drift, zero on the first sample: a random walk of intensity `walk` (6,)
+    [unit/√s] per channel, or a first-order Gauss–Markov process with that driving noise
+    and correlation time `tau_s` [s] (exact discretisation)."""
+    dt = 1.0 / rate_hz
+    eps = np.asarray(jax.random.normal(key, (n - 1, 6), dtype=float))
+    if tau_s is None:
+        steps = walk * np.sqrt(dt) * eps
+        return np.concatenate([np.zeros((1, 6)), np.cumsum(steps, axis=0)])
+    if not (np.isfinite(tau_s) and tau_s > 0):
+        raise ValueError(f"drift_tau_s must be a positive time [s] or None; got {tau_s!r}")
+    phi = np.exp(-dt / tau_s)
+    step = walk * np.sqrt(tau_s / 2 * (1 - phi**2))
+    out = np.zeros((n, 6))
+    for k in range(1, n):
+        out[k] = phi * out[k - 1] + step * eps[k - 1]
+    return out
+
+
 def ferraris_session(
     truth: ImuCalibration,
     key: jax.Array,
@@ -72,6 +91,9 @@ def ferraris_session(
     accel_noise: float = 0.01,
     g: float = 9.81,
     turn_deg: float = 360.0,
+    gyro_walk: float = 0.0,
+    accel_walk: float = 0.0,
+    drift_tau_s: float | None = None,
 ) -> tuple[ImuData, Sections]:
     """Simulate a Ferraris session of an IMU whose sensors follow `truth`.
 
@@ -79,7 +101,12 @@ def ferraris_session(
     axis, goes to that axis's `p` face, rests `move_s`, turns `turn_deg` [°] about the axis
     in `turn_s` [s] and rests `move_s`; between positions it rotates in `move_s` [s] about a
     fixed body axis. The whole sequence runs `repeats` times. Noise: white, `gyro_noise`
-    [rad/s] and `accel_noise` [m/s²] per sample (σ), drawn from `key`.
+    [rad/s] and `accel_noise` [m/s²] per sample (σ), drawn from `key`; and, where
+    `gyro_walk` [rad/s/√s] or `accel_walk` [m/s²/√s] is set, an in-run drift of every
+    channel's bias: a random walk of that intensity (`drift_tau_s` None), or a first-order
+    Gauss–Markov process with that driving noise and correlation time `drift_tau_s` [s]
+    (steady-state σ = walk·√(τ/2)). The drift is zero at the session's start (the first
+    face's first row), so that `truth`'s biases are those at the start of the session.
 
     **Returns:** `(data, sections)`: the record (`ImuData`, SI) and its true sections
     (faces: the rests; turns: the turn with half of each neighbouring rest)."""
@@ -129,8 +156,13 @@ def ferraris_session(
     w_true = np.concatenate(omega)
     a_true = np.concatenate(accel)
     w_s, a_s = (np.asarray(x) for x in truth.sensor(w_true, a_true))
-    kg, ka = jax.random.split(key)
+    kg, ka, kd = jax.random.split(key, 3)
     w_s = w_s + gyro_noise * np.asarray(jax.random.normal(kg, w_s.shape, dtype=float))
     a_s = a_s + accel_noise * np.asarray(jax.random.normal(ka, a_s.shape, dtype=float))
+    if gyro_walk or accel_walk:
+        walk = np.repeat([float(gyro_walk), float(accel_walk)], 3)
+        drift = _bias_drift(kd, count, rate_hz, walk, drift_tau_s)
+        drift = drift - drift[sections[FACES[0]][0][0]]
+        w_s, a_s = w_s + drift[:, :3], a_s + drift[:, 3:]
     data = ImuData(np.arange(count) / rate_hz, w_s, a_s, rate_hz=rate_hz)
     return data, sections

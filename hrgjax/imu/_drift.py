@@ -1,0 +1,109 @@
+r"""In-run bias drift in a Ferraris session's statistics: the covariance a random walk of
+each channel's bias adds to the section sums, and its intensity estimated from the
+session's own redundancy.
+
+**Model.** Each of the six channels (gyro x, y, z; accelerometer x, y, z) reads its signal
+plus white noise plus a bias that wanders as a random walk $\beta(t)$ from zero at the
+session's start $t_0$ (the first row of its earliest section): $\mathrm{Cov}(\beta(s),
+\beta(t)) = q^2 \min(s - t_0, t - t_0)$, q [unit/√s] one intensity for the gyros and one
+for the accelerometers. A section statistic is a weighted sum of one channel's samples,
+$S = \sum_k w_k x_k$ (a face mean: $w_k = 1/n$; a turn's sum: $w_k = \Delta t_k$), so that
+
+$$\mathrm{Cov}(S_i, S_j) \mathrel{+}= q^2 \sum_k\sum_l w_{ik} w_{jl} \min(t_k - t_0, t_l - t_0)
+  = q^2 \int_0^\infty W_i(u)\,W_j(u)\,du,$$
+
+$W_i(u) = \sum_{t_k - t_0 > u} w_{ik}$ the weight of the samples after u (piecewise
+constant between samples: the integral is an exact finite sum).
+
+**Estimate of q².** Twelve combinations of the face means vanish for any calibration: for
+each channel, the three ± pair sums ($u^+_i + u^-_i = 2 b_a$, $w^+_i + w^-_i = 2 b_g$ for
+i = x, y, z) are equal — two contrasts per channel, six per sensor. Their covariance is
+$A + q^2 B$ (A from the white noise, B from the kernel above); q² is their maximum
+likelihood value (restricted likelihood: the contrasts are free of the parameters),
+zero when the faces agree within the white noise."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def walk_kernel(time: np.ndarray, items: list[list[tuple[int, int, np.ndarray, float]]],
+                origin: int = 0) -> np.ndarray:  # fmt: skip
+    """$\\sum_k\\sum_l w_{ik} w_{jl}\\min(t_k - t_0, t_l - t_0)$ for every pair of
+    statistics of one channel, $t_0$ the time of row `origin` (no piece starts before it).
+
+    **Arguments:** `time` (N,) [s]; `items`: per statistic, its pieces `(start, end, w,
+    factor)` — rows [start, end) with weights `w` (end − start,) times `factor` (a key's
+    repeats are pieces of one statistic).
+
+    **Returns:** the (m, m) kernel [weight² · s]."""
+    tau = np.asarray(time, float) - float(time[origin])
+    m = len(items)
+    out = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            out[i, j] = out[j, i] = sum(
+                fi * fj * _pair(tau, si, ei, wi, sj, ej, wj)
+                for si, ei, wi, fi in items[i]
+                for sj, ej, wj, fj in items[j]
+            )
+    return out
+
+
+def _pair(tau, s1, e1, w1, s2, e2, w2) -> float:
+    """∫ W₁ W₂ du for two weighted row ranges: W(u) on (τ_{m-1}, τ_m] is the weight of rows
+    ≥ m; both are constant (their totals) up to the earlier start and W₁W₂ = 0 from the
+    earlier end on."""
+    if e1 <= s2 or e2 <= s1:  # one range before the other: min(τ_k, τ_l) is the earlier's τ
+        (sa, ea, wa), wb = ((s1, e1, w1), w2) if e1 <= s2 else ((s2, e2, w2), w1)
+        return float(wa @ tau[sa:ea]) * float(np.sum(wb))
+    tail1 = np.cumsum(w1[::-1])[::-1]
+    tail2 = np.cumsum(w2[::-1])[::-1]
+    lo, hi = min(s1, s2), min(e1, e2)
+    total = tail1[0] * tail2[0] * tau[lo]
+    if hi > lo + 1:
+        rows = np.arange(lo + 1, hi)
+        step = tau[rows] - tau[rows - 1]
+        t1 = np.where(rows <= s1, tail1[0], tail1[np.clip(rows - s1, 0, e1 - s1 - 1)])
+        t2 = np.where(rows <= s2, tail2[0], tail2[np.clip(rows - s2, 0, e2 - s2 - 1)])
+        t1 = np.where(rows < e1, t1, 0.0)
+        t2 = np.where(rows < e2, t2, 0.0)
+        total += float(np.sum(step * t1 * t2))
+    return float(total)
+
+
+def walk_intensity(residual: np.ndarray, white: np.ndarray, walk: np.ndarray) -> float:
+    """Maximum-likelihood q² ≥ 0 of `residual` (r,) ~ N(0, `white` + q² `walk`) (both
+    (r, r)); 0 where the white part is singular (noise-free data) or the residual fits
+    the white noise alone."""
+    try:
+        chol = np.linalg.cholesky(white)
+    except np.linalg.LinAlgError:
+        return 0.0
+    y = np.linalg.solve(chol, residual)
+    b = np.linalg.solve(chol, np.linalg.solve(chol, walk).T)
+    lam, vec = np.linalg.eigh((b + b.T) / 2)
+    lam = np.clip(lam, 0.0, None)
+    z2 = (vec.T @ y) ** 2
+    if lam.max() <= 0 or not np.all(np.isfinite(z2)):
+        return 0.0
+
+    def loglik(theta):
+        v = 1.0 + theta * lam
+        return -0.5 * float(np.sum(np.log(v) + z2 / v))
+
+    # θλ from 1e-4 to 1e6 on a log grid, then golden-section refinement around the best
+    grid = np.concatenate([[0.0], np.logspace(-4, 6, 81) / lam.max()])
+    values = [loglik(t) for t in grid]
+    best = int(np.argmax(values))
+    if best == 0:
+        return 0.0
+    a, b_ = grid[best - 1], grid[min(best + 1, grid.size - 1)]
+    ratio = (np.sqrt(5.0) - 1) / 2
+    for _ in range(60):
+        c, d = b_ - ratio * (b_ - a), a + ratio * (b_ - a)
+        if loglik(c) >= loglik(d):
+            b_ = d
+        else:
+            a = c
+    return float((a + b_) / 2)
