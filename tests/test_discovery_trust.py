@@ -82,3 +82,22 @@ def test_structure_left_widens_the_error_bar_by_its_pull(grid):
     assert np.sqrt(np.mean(new**2)) < 1.25
     assert np.mean(np.abs(new) < 2) > 0.9
     assert "structure left (4θ" in info["basis"]
+
+
+def test_run_bias_does_not_absorb_an_effect_that_follows_a_run_covariate():
+    """Ramps up and down with a c·Ṫ drift: their run means scatter by ±c·Ṫ. That scatter is
+    regressed on the runs' mean Ṫ before σ_b is read from it (issue 43: the run-to-run bias
+    took 2.3 °/h from a thermal-rate term); a pure switch-on scatter is left whole."""
+    from scipy import stats
+
+    from hrgjax.discovery.continuous import _f_sf, _follows_covariate
+
+    assert abs(_f_sf(3.0, 1, 10) - stats.f.sf(3.0, 1, 10)) < 1e-9
+    rng = np.random.default_rng(0)
+    t_dot = np.array([1.0, -1.0, 2.0, -2.0, 0.5, -0.5, 1.0, -1.0]) / 60  # °C/s
+    x = np.stack([t_dot, np.zeros(8), rng.normal(size=8)], axis=1)  # Ṫ, Ω (none), a_z
+    bias = 0.1 * rng.standard_normal(8)  # °/h
+    resid, k = _follows_covariate(bias + 2.0 * 60 * t_dot, x)  # + 2 °/h per °C/min
+    assert k == 2 and np.std(resid) < 0.15  # the slope taken out, the bias left
+    resid, k = _follows_covariate(bias, x)
+    assert k == 1 and np.allclose(resid, bias - bias.mean())

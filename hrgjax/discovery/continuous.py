@@ -41,6 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jax.scipy.special import betainc
 
 from .._compiled import Unchecked, program
 from .._progress import bar
@@ -452,7 +453,12 @@ class ContinuousProblem(AbstractProblem):
     def with_run_bias(self, z) -> ContinuousProblem:
         """A copy of this problem (which is left as it is) whose run-to-run bias spread σ_b
         [rad/s] is set from the scatter of every run's mean rate residual at the fit `z`,
-        less what the rest of the noise gives it, with the whitening rebuilt."""
+        less what the rest of the noise gives it, with the whitening rebuilt. A scatter that
+        follows a run's covariate (its mean dT/dt, table rate or specific force: an effect
+        constant along each ramp, say c·Ṫ) is not a switch-on bias: the covariate that
+        explains the run means significantly (F-test, p < `RUN_COVARIATE_ALPHA`) is
+        regressed out first, so the noise model cannot absorb the effect that the screening
+        is to find ([`_follows_covariate`][hrgjax.discovery.continuous._follows_covariate])."""
         # the training and held-out runs apart: their residual programs exist already;
         # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
         # one session, whose bias the shared `bias` parameter takes)
@@ -464,7 +470,10 @@ class ContinuousProblem(AbstractProblem):
         new.noise = self.noise.replace(run_bias=0.0)
         if means.size >= 2:  # else nothing to estimate it from
             noise_var = new.floor(every=True, windows=False) ** 2
-            spread = np.var(means, ddof=1)
+            covs = _run_covariates(train + held)
+            x = np.asarray([covs[r] for r in rates])
+            resid, k = _follows_covariate(means, x)
+            spread = float(resid @ resid) / max(means.size - k, 1)
             sigma_b = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_e
             new.noise = new.noise.replace(run_bias=sigma_b)
         new._build()
@@ -890,3 +899,58 @@ class ContinuousProblem(AbstractProblem):
         for row in rows:
             del row["_start"]
         return rows
+
+
+RUN_COVARIATE_ALPHA = 0.01
+"""Significance at which a run covariate is taken to explain the run means' scatter
+(`with_run_bias`)."""
+
+
+def _run_covariates(groups) -> dict[int, np.ndarray]:
+    """Per continuous run: its mean dT/dt [°C/s] (end − start over the span), mean table
+    rate [rad/s] and mean specific force along the axis [g]."""
+    out = {}
+    for g in groups:
+        t, temp = np.asarray(g.t), np.asarray(g.temp)
+        rate, accel = np.asarray(g.rate), np.asarray(g.accel)
+        b0, b1 = int(g.bidx[0]), int(g.bidx[-1])
+        for i, run in enumerate(g.run):
+            span = t[i, b1] - t[i, b0]
+            t_dot = (temp[i, b1] - temp[i, b0]) / span if span > 0 else 0.0
+            out[int(run)] = np.array(
+                [t_dot, np.mean(rate[i, b0 : b1 + 1]), np.mean(accel[i, b0 : b1 + 1])]
+            )
+    return out
+
+
+def _f_sf(f: float, d1: int, d2: int) -> float:
+    """Upper tail probability of the F(d1, d2) distribution at `f`."""
+    if not f > 0:
+        return 1.0
+    return float(betainc(0.5 * d2, 0.5 * d1, d2 / (d2 + d1 * f)))
+
+
+def _follows_covariate(means: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, int]:
+    """The run means less their mean and less the run covariates (columns of `x`) that
+    explain them significantly, chosen one at a time (F-test at `RUN_COVARIATE_ALPHA`);
+    **returns** `(residual, columns fitted)` (the intercept counts)."""
+    n = means.size
+    cols = [np.ones(n)]
+    cands = [x[:, i] for i in range(x.shape[1]) if np.ptp(x[:, i]) > 0]
+
+    def rss(a):
+        coef, *_ = np.linalg.lstsq(np.stack(a, axis=1), means, rcond=None)
+        r = means - np.stack(a, axis=1) @ coef
+        return float(r @ r), r
+
+    base, resid = rss(cols)
+    while cands and n - len(cols) - 1 > 1:
+        trials = [(rss(cols + [c]), i) for i, c in enumerate(cands)]
+        (new, r), i = min(trials, key=lambda t: t[0][0])
+        dof = n - len(cols) - 1
+        f = (base - new) / max(new / dof, 1e-300)
+        if _f_sf(f, 1, dof) >= RUN_COVARIATE_ALPHA:
+            break
+        cols.append(cands.pop(i))
+        base, resid = new, r
+    return resid, len(cols)
