@@ -203,6 +203,10 @@ class PhysicalCompensator(AbstractCompensator):
             f"θ_τ(T)      = {f('theta_tau0', 1 / DEG)}° + ({f('theta_tau1', 1 / DEG)})°/°C · ΔT",
             f"g(T)        = {f('gain_mismatch0', 100)} % + ({f('gain_mismatch1', 100)}) %/°C · ΔT",
             f"cross-talk  = {f('cross_talk', 100)} %",
+            "± 1σ of the ideal-loop model. A real gyro's closed loops add a 2θ ripple ∝ Ω that, "
+            "at one rotation rate, this model reads as readout gain mismatch and cross-talk "
+            "(and k_e to ppm): g and cross-talk are effective values for the calibration's "
+            "rate (docs/calibration.md, 'How far to trust the error bars').",
         ]
         return "\n".join(lines)
 
