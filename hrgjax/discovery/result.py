@@ -53,19 +53,16 @@ def to_user_units(parameters: dict, k_e: float) -> dict:
                 "sigma": None if std is None else abs(f) * float(std),
                 "unit": p.user_unit,
             }
-            if isinstance(v, dict) and v.get("std_model"):  # the structure left's share
-                out[name][pname]["sigma_model"] = abs(f) * float(v["std_model"])
-            if isinstance(v, dict) and v.get("why_no_sigma"):
-                out[name][pname]["why_no_sigma"] = v["why_no_sigma"]
+
     return out
 
 
-def _number(v: dict) -> str:
-    """'0.301 ± 0.004 °/h' (three significant digits of the value); a value without σ says
-    so ('600 s (scanned, no σ)')."""
+def _number(v: dict, scanned: bool = False) -> str:
+    """'0.301 ± 0.004 °/h' (three significant digits of the value); a `scanned` value
+    without σ says so ('600 s (scanned, no σ)')."""
     unit = f" {v['unit']}" if v["unit"] else ""
     if v["sigma"] is None:
-        return f"{v['value']:.4g}{unit}" + (" (scanned, no σ)" if v.get("why_no_sigma") else "")
+        return f"{v['value']:.4g}{unit}" + (" (scanned, no σ)" if scanned else "")
     return f"({v['value']:.4g} ± {v['sigma']:.2g}){unit}"
 
 
@@ -106,7 +103,9 @@ class Discovery:
       ([`describe`][hrgjax.discovery.leftover.describe]); None when no shape can be tried.
     - `uncertainty`: what the parameters' σ are ([`honest`][hrgjax.discovery.trust.honest]:
       the noise level read from the fit's residual, the structure left fitted beside the
-      model and its pull added): `{"noise_scale", "shapes", "basis"}`.
+      model and its pull added): `{"noise_scale", "shapes", "basis"}`; the JSON adds
+      `sigma_model` (`{"effect.param": the pull's share of σ}`, user units) and `no_sigma`
+      (`{"effect.param": why}`, a scanned time constant).
     """
 
     verdict: str
@@ -166,7 +165,7 @@ class Discovery:
             "model_parameters": self.fit_parameters,
             "angular_gain_k_e": self.k_e,
             "leftover": self.leftover,
-            "uncertainty": self.uncertainty,
+            "uncertainty": self._uncertainty_json(),
             "gap_note": self.gap_note(),
             "screening": list(self.screening),
             "consistency": self.consistency,
@@ -204,7 +203,10 @@ class Discovery:
             effect = CATALOGUE[name]
             # a parameter the fit held (the loop bandwidth of a dwell fit) reads at its value
             fields = {q.name: f"{q.scale:.4g} {q.unit} (held)" for q in effect.params}
-            fields.update({k: _number(v) for k, v in ps.items()})
+            raw = self.fit_parameters.get(name, {})
+            fields.update(
+                {k: _number(v, bool(raw.get(k, {}).get("why_no_sigma"))) for k, v in ps.items()}
+            )
             text = _signs(effect.formula.format(**fields))
             (readout if effect.where == "readout" else rate).append(f"{text}    [{name}]")
         if rate:
@@ -233,6 +235,23 @@ class Discovery:
         if self.uncertainty:
             lines.append("± are 1σ: " + self.uncertainty["basis"])
         return "\n".join(lines)
+
+    def _uncertainty_json(self) -> dict | None:
+        """`uncertainty` with, in user units, each parameter's share of its σ that the
+        structure left puts there (`sigma_model`) and why a parameter has no σ (`no_sigma`);
+        `parameters` keeps DESIGN.md's `{"value", "sigma", "unit"}`."""
+        if self.uncertainty is None:
+            return None
+        model, none = {}, {}
+        for name, ps in self.fit_parameters.items():
+            spec = {p.name: p for p in CATALOGUE[name].params}
+            for pname, v in ps.items():
+                if v.get("std_model"):
+                    f = abs(spec[pname].user_scale(self.k_e))
+                    model[f"{name}.{pname}"] = f * float(v["std_model"])
+                if v.get("why_no_sigma"):
+                    none[f"{name}.{pname}"] = v["why_no_sigma"]
+        return {**self.uncertainty, "sigma_model": model, "no_sigma": none}
 
     def gap_note(self) -> str | None:
         """Why the held-out gap rose although effects were accepted (None when it did not):
