@@ -241,3 +241,19 @@ def test_shapes_the_available_effects_span_count_as_covered():
         out = _Outshone(problem, fit, ["readout_gain_mismatch"], margin=2.0)
         assert "2θ·Ω" not in out.cols and ("2θ·Ω²" in out.cols) == kept, rates
         assert "ΔT" in out.cols
+
+
+def test_a_near_tie_of_evidence_goes_to_the_simpler_effect_and_is_reported_ambiguous():
+    """At 10⁴ ppm a readout mismatch's ΔBIC (2.8·10⁸) trailed loop_ripple's (which adds a
+    scanned loop bandwidth) by 5·10⁻⁵ of itself — within what the catalogue's linearised
+    laws can resolve: the simpler effect is accepted; a clear lead still wins."""
+    from hrgjax.discovery.search import TIE_FRACTION, _simplest_of_the_tied, _tolerance
+
+    rows = [
+        {"effect": "loop_ripple", "delta_bic": 280353068.0},
+        {"effect": "readout_gain_mismatch", "delta_bic": 280339659.0},
+    ]
+    assert _simplest_of_the_tied(rows)["effect"] == "readout_gain_mismatch"
+    rows[1]["delta_bic"] = 280353068.0 * (1 - 2 * TIE_FRACTION)
+    assert _simplest_of_the_tied(rows)["effect"] == "loop_ripple"
+    assert _tolerance(10.0, 50.0) == 10.0 and _tolerance(10.0, 1e8) == 1e8 * TIE_FRACTION

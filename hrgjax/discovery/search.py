@@ -82,9 +82,11 @@ def discover(
       records); `alpha`, `min_delta_bic`, `min_heldout_gain` (drop of the held-out whitened
       χ²), `max_effects`, `max_aliasing` (the largest share of a candidate's signature the
       fitted model may already absorb): the acceptance rule. `ambiguity_bic`: a first-round
-      rival that passes the same rule with a ΔBIC within this of the winner's makes the
-      verdict `ambiguous` (the winner stays `missing_effect`; rivals in `ambiguous_with`,
-      the separating experiments in `discriminate`). `min_agreement`: continuous records
+      rival that passes the same rule with a ΔBIC within this (or within `TIE_FRACTION`
+      of the winner's ΔBIC, where that is more) of the winner's makes the verdict
+      `ambiguous` (the winner stays `missing_effect`; rivals in `ambiguous_with`, the
+      separating experiments in `discriminate`). Of candidates whose ΔBIC ties within
+      `TIE_FRACTION`, the one with the fewest parameters is accepted. `min_agreement`: continuous records
       only, the smallest share of the training runs that excite an effect in which its
       parameters, refitted on that run alone, point the same way as the pooled fit.
     - `shape`: `"auto"` (dwell when every run holds its rate and temperature, mixed when
@@ -179,7 +181,7 @@ def discover(
         ok = [r for r in rows if passes(r, current)]
         if not ok:
             break
-        best = ok[0]
+        best = _simplest_of_the_tied(ok)
         accepted.append(best["effect"])
         model.append(best["effect"])
         cands.remove(best["effect"])
@@ -204,7 +206,7 @@ def discover(
             if r is not win
             and r["refit"] is not None
             and passes(r, base)
-            and win["delta_bic"] - r["delta_bic"] < ambiguity_bic
+            and win["delta_bic"] - r["delta_bic"] < _tolerance(ambiguity_bic, win["delta_bic"])
         ]
         if ambiguous:
             verdict = "ambiguous"
@@ -254,6 +256,36 @@ SCREEN_KEYS = (
 )  # fmt: skip
 
 
+TIE_FRACTION = 1e-3
+"""Evidence (ΔBIC, a score less its BIC penalty) that differs by less than this share of
+itself cannot tell two descriptions apart: the catalogue's laws are linearised forms (a
+readout gain mismatch ε is exact to first order, its ε² part ≈ 10⁻⁴ of a 1 % mismatch's
+signature), so a large effect's evidence carries their approximations too. At 10⁴ ppm a
+readout mismatch's ΔBIC of 2.8·10⁸ trailed `loop_ripple`'s by 1.3·10⁴ (5·10⁻⁵ of it),
+and an absolute margin of 10 named the wrong one."""
+
+
+def _tolerance(margin: float, evidence: float) -> float:
+    """The margin two descriptions' evidence must differ by to be told apart: `margin`, or
+    `TIE_FRACTION` of the evidence where that is larger."""
+    return max(margin, TIE_FRACTION * abs(evidence))
+
+
+def _size(name: str) -> int:
+    """Parameters of a catalogue effect, the scanned (nonregular) ones included."""
+    return len(CATALOGUE[name].params)
+
+
+def _simplest_of_the_tied(rows: list[dict]) -> dict:
+    """The candidate to accept among `rows` (best score first) that pass the rule: of those
+    whose ΔBIC is within [`_tolerance`][hrgjax.discovery.search._tolerance] of the best,
+    the one with the fewest parameters (a scanned time constant counts), then the best
+    ΔBIC — parsimony where the evidence ties; the rest are reported as ambiguous rivals."""
+    top = max(r["delta_bic"] for r in rows)
+    tied = [r for r in rows if top - r["delta_bic"] < _tolerance(0.0, top)]
+    return min(tied, key=lambda r: (_size(r["effect"]), -r["delta_bic"]))
+
+
 DOMINANT = 10.0
 """A candidate whose evidence (score less its BIC penalty) is under 1/`DOMINANT` of an
 uncovered generic shape's is refused (`_Outshone`)."""
@@ -263,7 +295,8 @@ class _Outshone:
     """Whether a candidate only imitates part of something out of the catalogue: generic
     shapes ([`leftover.SHAPES`][hrgjax.discovery.leftover.SHAPES]) that no available effect
     is explain the residual better than the candidate (score test, BIC, by more than
-    `margin`), and either — for the first effect named (`first`) — the strongest has
+    `margin`, or `TIE_FRACTION` of the candidate's evidence: a named effect wins a
+    near-tie with a generic shape), and either — for the first effect named (`first`) — the strongest has
     ≥ `DOMINANT` times its evidence, or, once they are all fitted, the candidate adds no more than `margin` or keeps less than a tenth of
     its score (its score given them); the strongest of them is reported. A
     readout ripple that matches a temperature-dependent drift on the rotation runs but not
@@ -292,7 +325,7 @@ class _Outshone:
             (
                 (sc - q * self.log_n, name)
                 for name, (sc, q) in self.scores.items()
-                if sc - q * self.log_n - own > self.margin
+                if sc - q * self.log_n - own > _tolerance(self.margin, own)
             ),
             reverse=True,
         )
