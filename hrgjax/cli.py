@@ -606,8 +606,8 @@ def cmd_discover(args) -> int:
     )
     for r in found.screening[:6]:
         outshone = f"  outshone by {r['outshone_by']}" if r.get("outshone_by") else ""
-        if r["effect"] in found.accepted:
-            round_ = found.accepted.index(r["effect"]) + 1
+        if r.get("accepted_in_round"):
+            round_ = r["accepted_in_round"]
             outshone = "  accepted" + (f" (round {round_})" if round_ > 1 else "")
         print(
             f"    {r['effect']:>32} {r['score']:12.4g} {r['p_value']:9.2g} "

@@ -93,8 +93,9 @@ class Discovery:
       property) gives them in user units; `k_e`: the angular gain used for that conversion
       (the fitted one when the model fits it).
     - `ranking` (first-round candidates by score, with the refit's parameters in model units),
-      `screening` (their test statistics), `consistency` (continuous records: per-run
-      refits), `noise` (the noise model in report units), `split` (training and held-out
+      `screening` (their first-round test statistics, each row with `round` 1 and
+      `accepted_in_round`: the round in which the effect was accepted, or None),
+      `consistency` (continuous records: per-run refits), `noise` (the noise model in report units), `split` (training and held-out
       runs), `shape` (`"dwell"` or `"continuous"`).
     - `residuals`: the residuals of the nominal (`"before"`) and the final (`"after"`) fit —
       what [`plot`][hrgjax.discovery.result.Discovery.plot] draws.

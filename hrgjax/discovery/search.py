@@ -226,7 +226,16 @@ def discover(
         ranking=tuple(
             {"effect": r["effect"], "score": r["score"], "params": r["params"]} for r in ranking
         ),
-        screening=tuple({k: r.get(k) for k in SCREEN_KEYS} for r in ranking),
+        screening=tuple(
+            {k: r.get(k) for k in SCREEN_KEYS}
+            | {
+                "round": 1,  # every row is the first round's: each against the nominal model
+                "accepted_in_round": accepted.index(r["effect"]) + 1
+                if r["effect"] in accepted
+                else None,
+            }
+            for r in ranking
+        ),
         consistency={n: problem.consistency(current, n) for n in accepted},
         noise=problem.noise_report(),
         split={"train_runs": int(runs.size - held.size), "heldout_runs": int(held.size)},
