@@ -101,3 +101,46 @@ def test_run_bias_does_not_absorb_an_effect_that_follows_a_run_covariate():
     assert k == 2 and np.std(resid) < 0.15  # the slope taken out, the bias left
     resid, k = _follows_covariate(bias, x)
     assert k == 1 and np.allclose(resid, bias - bias.mean())
+
+
+def test_classes_with_different_noise_levels_get_the_sandwich_and_odd_input_is_safe(grid):
+    """Moving windows 3× noisier than the noise model says, static ones as it says: the
+    reported values keep the model's weights, so their σ is the sandwich, not s²(JᵀJ)⁻¹ of a
+    reweighted fit (too small by up to 2× on the reviewer's toy). A class whose residual is
+    exactly zero, or row classes of the wrong length, do not end in NaN or an IndexError."""
+    g, shapes, classes = grid
+    rng = np.random.default_rng(3)
+    s = 0.01 * DEG_PER_H
+    noise = np.where(classes == 0, 3 * s, s)  # classes: 1 static, 0 moving
+    sig = np.full(g.shape[0], s)
+    truth = np.zeros(g.shape[1])
+    truth[1] = K
+    z = []
+    for _ in range(300):
+        y = g @ truth + noise * rng.standard_normal(g.shape[0])
+        beta, r, cov = dwell.wls(g, y, sig)
+        params = {}
+        for (name, pname), b, e in zip(trust._regular(MODEL), beta, np.sqrt(np.diag(cov)),
+                                       strict=True):  # fmt: skip
+            params.setdefault(name, {})[pname] = {"value": b, "std": e}
+        fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
+        new, info = trust.honest(fit, {}, classes)
+        z.append([(new[n][p]["value"] - truth[i]) / new[n][p]["std"]
+                  for i, (n, p) in enumerate(trust._regular(MODEL))])  # fmt: skip
+    z = np.asarray(z)
+    assert np.all(np.abs(np.sqrt(np.mean(z**2, axis=0)) - 1) < 0.2), np.sqrt(np.mean(z**2, 0))
+    assert set(info["noise_scale"]) == {"moving windows", "static windows"}
+    r0 = np.where(classes == 1, 0.0, r)  # a class fitted exactly
+    fit0 = Fit(tuple(MODEL), params, r0, g / sig[:, None], float(r0 @ r0), 0.0, 0.0)
+    new, info = trust.honest(fit0, {}, classes)
+    assert all(np.isfinite(v["std"]) for ps in new.values() for v in ps.values())
+    with pytest.raises(ValueError, match="row classes"):
+        trust.honest(fit, {}, classes[:-1])
+
+
+def test_a_tie_at_infinite_evidence_still_names_one():
+    from hrgjax.discovery.search import _simplest_of_the_tied
+
+    rows = [{"effect": "loop_ripple", "delta_bic": np.inf},
+            {"effect": "readout_gain_mismatch", "delta_bic": 5.0}]  # fmt: skip
+    assert _simplest_of_the_tied(rows)["effect"] == "loop_ripple"

@@ -932,7 +932,8 @@ def _f_sf(f: float, d1: int, d2: int) -> float:
 
 def _follows_covariate(means: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, int]:
     """The run means less their mean and less the run covariates (columns of `x`) that
-    explain them significantly, chosen one at a time (F-test at `RUN_COVARIATE_ALPHA`);
+    explain them significantly, chosen one at a time (F-test at `RUN_COVARIATE_ALPHA`,
+    Bonferroni over the covariates still tried);
     **returns** `(residual, columns fitted)` (the intercept counts)."""
     n = means.size
     cols = [np.ones(n)]
@@ -949,7 +950,7 @@ def _follows_covariate(means: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, in
         (new, r), i = min(trials, key=lambda t: t[0][0])
         dof = n - len(cols) - 1
         f = (base - new) / max(new / dof, 1e-300)
-        if _f_sf(f, 1, dof) >= RUN_COVARIATE_ALPHA:
+        if _f_sf(f, 1, dof) >= RUN_COVARIATE_ALPHA / len(cands):  # the best of them
             break
         cols.append(cands.pop(i))
         base, resid = new, r

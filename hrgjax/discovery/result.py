@@ -267,7 +267,8 @@ class Discovery:
             f"{', '.join(self.accepted)} {'was' if len(self.accepted) == 1 else 'were'} "
             f"accepted: the gap is a few held-out runs' mean rates, whose switch-on biases "
             f"alone give it {self.noise_floor:.3g} °/h (the floor; the rise is "
-            f"{rise / max(self.noise_floor, 1e-300):.2g}× it); effects are accepted on the "
+            f"{rise / self.noise_floor if self.noise_floor > 0 else float('inf'):.2g}× it); "
+            "effects are accepted on the "
             "held-out whitened χ², which weighs that bias as noise"
         )
 

@@ -291,7 +291,11 @@ def _simplest_of_the_tied(rows: list[dict]) -> dict:
     the one with the fewest parameters (a scanned time constant counts), then the best
     ΔBIC — parsimony where the evidence ties; the rest are reported as ambiguous rivals."""
     top = max(r["delta_bic"] for r in rows)
-    tied = [r for r in rows if top - r["delta_bic"] < _tolerance(0.0, top)]
+    if math.isfinite(top):
+        tied = [r for r in rows if top - r["delta_bic"] <= _tolerance(0.0, top)]
+    else:  # infinite evidence ties only with itself
+        tied = [r for r in rows if r["delta_bic"] == top]
+    tied = tied or [max(rows, key=lambda r: r["delta_bic"])]
     return min(tied, key=lambda r: (_size(r["effect"]), -r["delta_bic"]))
 
 

@@ -8,15 +8,18 @@ biased by it. Two corrections, both from the fit's own residual:
 
 1. **Noise scale** (Birge ratio). Each class of rows (static and moving dwell windows,
    continuous blocks) has its whitened residual's mean square $s_g^2 = \sum r_g^2/(n_g -
-   p\,n_g/n)$; the rows are re-weighted by $1/s_g$ before the covariance is formed — the
-   noise level the data show, not the one the noise model guessed (feasible weighted least
-   squares). A class with fewer than `MIN_ROWS` rows keeps its whitening.
+   p\,n_g/n)$: the noise level the data show, not the one the noise model guessed. The
+   reported values keep the noise model's weights, so their variance is the sandwich
+   $(A^\top A)^{-1}A^\top \mathrm{diag}(s^2)A(A^\top A)^{-1}$ (which is $s^2(A^\top
+   A)^{-1}$ when one scale fits all rows). $s_g$ is read after the structure left (2.) is
+   fitted, and the shapes are judged at that level (twice round: a shape inflates the level
+   it is judged at). A class with fewer than `MIN_ROWS` rows keeps its whitening.
 2. **Structure left** (model uncertainty). The generic shapes of
    [`leftover`][hrgjax.discovery.leftover] that are still significant (Bonferroni over the
    shapes tried, p < `alpha`) are fitted beside the model, strongest first, up to
    `MAX_SHAPES`; each parameter's σ is then the augmented fit's (wider: it no longer borrows
    what the shapes take) plus its shift $\delta$ when they are fitted:
-   $\sigma = s\,[(A^\top A)^{-1}]_{ii}^{1/2} + |\delta_i|$, $A = [J\;G]$. The reported value
+   $\sigma = \sigma_{\rm sandwich} + |\delta_i|$, $A = [J\;G]$. The reported value
    stays the named model's, so its error is the noise's plus the pull: added linearly, the
    ±1σ interval holds the truth at least as often as the noise alone would put it there
    when δ is the pull (added in quadrature, a pull much larger than the noise would sit at
@@ -41,6 +44,9 @@ from .effects import CATALOGUE
 
 MAX_SHAPES = 3
 """The most leftover shapes fitted beside the model for its model uncertainty."""
+CLASS_NAMES = {0: "moving windows", 1: "static windows", 2: "continuous blocks"}
+"""What the row classes of [`row_classes`][hrgjax.discovery.problem.AbstractProblem.row_classes]
+are, for the report."""
 MIN_ROWS = 30
 """Fewest rows of a class whose noise scale is read from its own residual."""
 
@@ -61,9 +67,29 @@ def _noise_scale(r, p, classes):
         m = classes == c
         n_g = int(m.sum())
         dof = n_g - p * n_g / n
-        if n_g >= MIN_ROWS and dof > 0:
-            s[m] = math.sqrt(float(r[m] @ r[m]) / dof)
+        rss = float(r[m] @ r[m])
+        if n_g >= MIN_ROWS and dof > 0 and math.isfinite(rss) and rss > 0:
+            s[m] = math.sqrt(rss / dof)
     return s
+
+
+def _sandwich_diag(a, s, p):
+    """Variances of the first `p` coefficients of the least-squares fit on the whitened
+    columns `a` when row i's whitened noise has standard deviation `s[i]`:
+    diag of (AᵀA)⁻¹ Aᵀ diag(s²) A (AᵀA)⁻¹ (the fit keeps the noise model's weights; only the
+    noise level is read from the residual). Columns the data never excite: ∞."""
+    out = np.full(p, np.inf)
+    live = np.linalg.norm(a, axis=0) > 0
+    if not live.any():
+        return out
+    al = a[:, live]
+    c = dwell.covariance(al)
+    meat = (al * (s**2)[:, None]).T @ al
+    v = np.diag(c @ meat @ c)
+    where = np.flatnonzero(live)
+    keep = where < p
+    out[where[keep]] = np.maximum(v[keep], 0.0)
+    return out
 
 
 def _shapes_left(r, j, cols, alpha):
@@ -102,6 +128,8 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
     if j.ndim != 2 or j.shape[1] != len(labels) or r.size <= j.shape[1]:
         return params, {"noise_scale": {}, "shapes": [], "basis": "textbook (no correction)"}
     n, p = j.shape
+    if classes is not None and len(classes) != n:
+        raise ValueError(f"honest: {len(classes)} row classes for a residual of {n} rows")
     cols = {k: v for k, v in shape_columns.items() if v.shape[0] == n}
     s = _noise_scale(r, p, classes)
     for _ in range(2):  # the shapes judged at the noise level the data show, and back
@@ -110,9 +138,10 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
         a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
         step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
         s = _noise_scale(r - a @ step, a.shape[1], classes)  # the noise the shapes leave
-    a, rs = a / s[:, None], r / s
-    step, *_ = np.linalg.lstsq(a, rs, rcond=None)
-    cov = dwell.covariance(a)[:p, :p]
+    # the reported values are the noise model's weighted fit: the shift and the sandwich
+    # variance are that estimator's (with the shapes beside it), at the noise level s
+    step, *_ = np.linalg.lstsq(a, r, rcond=None)
+    var = _sandwich_diag(a, s, p)
     old = np.sqrt(np.diag(dwell.covariance(j)))
     shift = step[:p] if shapes else np.zeros(p)
     for i, (name, pname) in enumerate(labels):
@@ -121,18 +150,20 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
         if std is None or not np.isfinite(std) or not np.isfinite(old[i]) or old[i] == 0:
             continue
         unit = std / old[i]  # Jacobian column → model units
-        stat = math.sqrt(max(cov[i, i], 0.0)) * unit
+        if not np.isfinite(var[i]):
+            continue
+        stat = math.sqrt(var[i]) * unit
         model = abs(float(shift[i])) * unit
         entry["std_textbook"] = std
         entry["std_model"] = model
         entry["std"] = stat + model
     scale = {}
-    for c in np.unique(classes) if classes is not None else [0]:
+    for c in np.unique(classes) if classes is not None else [None]:
         m = classes == c if classes is not None else slice(None)
-        scale[int(c)] = float(np.median(s[m]))
+        scale[CLASS_NAMES.get(c, "all rows")] = float(np.median(s[m]))
     words = (
-        "noise level from the fit's residual (×"
-        + ", ×".join(f"{v:.2g}" for v in scale.values())
+        "noise level from the fit's residual ("
+        + ", ".join(f"{k} ×{v:.2g}" for k, v in scale.items())
         + " of the noise model's σ)"
     )
     if shapes:
