@@ -80,8 +80,11 @@ def summarise(z: dict[str, list]) -> dict:
     }
 
 
-def discover_coverage(n: int, four_theta: float = 0.0, seed0: int = 1000) -> tuple[dict, dict]:
-    """(before, after) coverage of discover's b1, b2 and k_e over `n` dwell grids."""
+def discover_coverage(
+    n: int, four_theta: float = 0.0, seed0: int = 1000
+) -> tuple[dict, dict, dict]:
+    """(before, after) coverage of discover's b1, b2 and k_e over `n` dwell grids, and how
+    often each leftover shape was fitted beside the model."""
     k_e = float(base_gyro(noise=False).k_e)
     truth = {("bias_temperature", "b1"): SLOPE, ("bias_temperature", "b2"): 0.0,
              ("angular_gain", "k_e"): k_e}  # fmt: skip

@@ -27,8 +27,8 @@ biased by it. Two corrections, both from the fit's own residual:
    with that pull in its σ, never with a confident, wrong one.
 
 The corrected σ replace `std` in the fit's parameters; the untouched textbook value is kept
-as `std_textbook`, the shift as `std_model`, and [`uncertainty`][hrgjax.discovery.trust.uncertainty]
-says in words what was done. `benchmarks/coverage.py` measures how often the truth falls
+as `std_textbook`, the shift as `std_model`, and the returned `basis` says in words what was
+done (the report's "± are 1σ: …" line). `benchmarks/coverage.py` measures how often the truth falls
 within ±1σ and ±2σ.
 """
 
@@ -170,8 +170,3 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
         words += "; structure left (" + ", ".join(shapes) + ") fitted beside the model, "
         words += "each parameter's shift when it is fitted added to its σ"
     return params, {"noise_scale": scale, "shapes": shapes, "basis": words}
-
-
-def uncertainty(info: dict) -> str:
-    """One line saying what the reported ± are."""
-    return "± 1σ: " + info.get("basis", "textbook")
