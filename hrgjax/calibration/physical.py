@@ -49,10 +49,11 @@ from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
-from ..resonator.averaged import averaged_vector_field, measured_estimates
+from ..resonator.averaged import averaged_vector_field, input_rate, measured_estimates
 from ..resonator.control import Control
 from ..resonator.params import Resonator, TemperatureLaw
 from ..resonator.readout import Readout
+from ..resonator.slow import reduced_rate
 from ..simulate import simulate
 from ..units import DEG, DEG_PER_H, PHYSICAL_WINDOW_S, T_REF_C
 from ._compensator import AbstractCompensator, split_targets
@@ -87,14 +88,96 @@ MODEL_TAU = 640.0
 amplitude whatever τ is; the damping *anisotropy* Δ(1/τ) is fitted)."""
 
 
-def model_gyro(values, omega: float = MODEL_OMEGA, tau: float = MODEL_TAU) -> Gyro:
-    """The ideal-loop model gyro of the parameter vector `values` (order of `PARAMETERS`),
-    with mean frequency `omega` [rad/s] and decay time `tau` [s]."""
+PLANT_RESONATOR = ("omega", "tau", "delta_omega", "theta_omega", "chi")
+"""What a plant (`PhysicalCompensator(plant=…)`) gives the grey box of its resonator, held
+fixed in the fit: mean frequency ω [rad/s], decay time τ [s], frequency split Δω [rad/s]
+and its axis θ_ω [rad, electrical], nonlinearity χ [rad²/s²] — each a number or a
+[`TemperatureLaw`][hrgjax.TemperatureLaw]. Of its loops it takes the whole `Control`."""
+
+_LAW_FIELDS = ("p0", "p1", "p2", "lam", "t_ref")
+
+
+def _as_law(x) -> TemperatureLaw:
+    if isinstance(x, TemperatureLaw):
+        return TemperatureLaw(*(getattr(x, f) for f in _LAW_FIELDS))
+    return TemperatureLaw(x)
+
+
+def known_plant(plant: Gyro | None) -> Gyro | None:
+    """The part of a gyro the grey box takes as known (`PLANT_RESONATOR` and the loops), in
+    one fixed layout (every such parameter a [`TemperatureLaw`][hrgjax.TemperatureLaw]) so a
+    fitted compensator saves and loads; `None` stays `None` (ideal loops).
+
+    **Raises:** `TypeError` for anything but a [`hrgjax.Gyro`][]; `ValueError` for a plant
+    whose loops are ideal or open (nothing for the grey box to model: give `plant=None`)."""
+    if plant is None:
+        return None
+    if not isinstance(plant, Gyro):
+        raise TypeError(f"plant must be a hrgjax.Gyro (its loops and resonator constants) or "
+                        f"None; got {type(plant).__name__}")  # fmt: skip
+    ctl = plant.control
+    if ctl.ideal or not ctl.enabled:
+        raise ValueError("plant.control: ideal or open loops have no lag to model; give "
+                         "plant=None for the ideal-loop grey box")  # fmt: skip
+    res = Resonator(**{f: _as_law(getattr(plant.resonator, f)) for f in PLANT_RESONATOR})
+    control = Control(
+        amplitude=ctl.amplitude,
+        drive=ctl.drive,
+        excitation_phase=_as_law(ctl.excitation_phase),
+        pll_bandwidth=ctl.pll_bandwidth,
+        agc_bandwidth=ctl.agc_bandwidth,
+        quadrature_bandwidth=ctl.quadrature_bandwidth,
+        forcer_gain_mismatch=_as_law(ctl.forcer_gain_mismatch),
+    )
+    return Gyro(resonator=res, control=control, readout=Readout(), noise=None)
+
+
+def plant_to_json(plant: Gyro | None) -> dict | None:
+    """A `known_plant` as JSON numbers (laws as [p0, p1, p2, λ, T_ref])."""
+    if plant is None:
+        return None
+    law = lambda x: [float(getattr(x, f)) for f in _LAW_FIELDS]
+    ctl = plant.control
+    return {
+        "resonator": {f: law(getattr(plant.resonator, f)) for f in PLANT_RESONATOR},
+        "control": {
+            "amplitude": float(ctl.amplitude),
+            "drive": ctl.drive,
+            "excitation_phase": law(ctl.excitation_phase),
+            "pll_bandwidth": float(ctl.pll_bandwidth),
+            "agc_bandwidth": float(ctl.agc_bandwidth),
+            "quadrature_bandwidth": float(ctl.quadrature_bandwidth),
+            "forcer_gain_mismatch": law(ctl.forcer_gain_mismatch),
+        },
+    }
+
+
+def plant_from_json(d: dict | None) -> Gyro | None:
+    """Inverse of `plant_to_json`."""
+    if d is None:
+        return None
+    law = lambda x: TemperatureLaw(*x)
+    c = dict(d["control"])
+    c["excitation_phase"] = law(c["excitation_phase"])
+    c["forcer_gain_mismatch"] = law(c["forcer_gain_mismatch"])
+    res = Resonator(**{f: law(d["resonator"][f]) for f in PLANT_RESONATOR})
+    return known_plant(Gyro(resonator=res, control=Control(**c), readout=Readout(), noise=None))
+
+
+def model_gyro(
+    values, omega: float = MODEL_OMEGA, tau: float = MODEL_TAU, plant: Gyro | None = None
+) -> Gyro:
+    """The model gyro of the parameter vector `values` (order of `PARAMETERS`): with ideal
+    loops, mean frequency `omega` [rad/s] and decay time `tau` [s]; or, given a `plant`
+    (`known_plant`), with the plant's resonator constants (`PLANT_RESONATOR`) and its PI
+    loops."""
     v = {name: values[i] for i, name in enumerate(NAMES)}
     law = lambda p0, p1=0.0, p2=0.0, lam=0.0: TemperatureLaw(p0, p1, p2, lam, T_REF_C)
+    known = {"omega": omega, "tau": tau}
+    if plant is not None:
+        known = {f: getattr(plant.resonator, f) for f in PLANT_RESONATOR}
     res = Resonator(
-        omega=omega,
-        tau=tau,
+        **known,
         k_e=law(v["k_e0"], v["k_e0"] * v["k_e_tc"]),
         delta_inv_tau=law(v["delta_inv_tau0"], lam=v["delta_inv_tau_lam"]),
         theta_tau=law(v["theta_tau0"], v["theta_tau1"]),
@@ -104,7 +187,7 @@ def model_gyro(values, omega: float = MODEL_OMEGA, tau: float = MODEL_TAU) -> Gy
     )
     return Gyro(
         resonator=res,
-        control=Control(ideal=True),
+        control=Control(ideal=True) if plant is None else plant.control,
         readout=readout,
         rate_bias=law(v["bias0"], v["bias1"], v["bias2"]),
     )
@@ -135,6 +218,13 @@ class PhysicalCompensator(AbstractCompensator):
     - `window_s`: rotation-run window [s] (default
       [`PHYSICAL_WINDOW_S`][hrgjax.units.PHYSICAL_WINDOW_S], 10 s, as the CLI's); `max_steps`:
       LM step limit.
+    - `plant`: `None` (default), the ideal-loop grey box: its gain mismatch, cross-talk and
+      (to ppm) k_e are *effective* values that hold the real loops' lag at the calibration's
+      rates. Or the gyro's known loops and resonator constants (a [`hrgjax.Gyro`][]; the
+      grey box keeps its `control` and `PLANT_RESONATOR` — ω, τ, Δω, θ_ω, χ — measured
+      elsewhere or from the design): the fit then models the PI loops' lag (`_loop_pull`)
+      and its parameters are the physical ones; the compensator's drift and scale factor
+      hold the loops ([`hrgjax.resonator.slow`][]).
     """
 
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
@@ -143,6 +233,7 @@ class PhysicalCompensator(AbstractCompensator):
     values: jax.Array | None = None
     covariance: jax.Array | None = None
     stats: tuple = eqx.field(static=True, default=())
+    plant: Gyro | None = eqx.field(default=None, converter=known_plant)
 
     @property
     def fit_stats(self) -> dict:
@@ -156,10 +247,11 @@ class PhysicalCompensator(AbstractCompensator):
         return "physical"
 
     def gyro(self) -> Gyro:
-        """The fitted model gyro (ideal loops, fitted laws)."""
+        """The fitted model gyro: fitted laws, with ideal loops (no `plant`) or the plant's
+        loops and resonator constants."""
         if self.values is None:
             raise ValueError("this PhysicalCompensator is not fitted; use comp = comp.fit(data)")
-        return model_gyro(self.values)
+        return model_gyro(self.values, plant=self.plant)
 
     def parameters(self) -> dict[str, tuple[float, float]]:
         """{name: (value, standard error)} in SI units."""
@@ -174,8 +266,15 @@ class PhysicalCompensator(AbstractCompensator):
         theta = true_angle(g, theta_meas)
         slope = jax.jvp(lambda th: _readout_angle(g, th), (theta,), (jnp.ones_like(theta),))[1]
         rest = Profile.static(1.0, temperature_c)
-        theta_dot = averaged_vector_field(0.0, theta[None], (g, rest))[0]
-        return slope, theta_dot, g.resonator.k_e
+        if self.plant is None:
+            theta_dot = averaged_vector_field(0.0, theta[None], (g, rest))[0]
+            return slope, theta_dot, g.resonator.k_e
+        # the PI loops on their slow manifold: the rest drift, and the gain −∂θ̇/∂Ω with
+        # the loops' lag (a 2θ ripple ∝ Ω) in it
+        rate = lambda w: reduced_rate(g, w, theta)
+        w0 = input_rate(g, rest, 0.0)
+        theta_dot, d_rate = jax.jvp(rate, (w0,), (jnp.ones_like(w0),))
+        return slope, theta_dot, -d_rate
 
     def readout_temperature_sensitivity(self, theta, temperature_c):
         gyro = self.gyro()
@@ -232,7 +331,16 @@ class PhysicalCompensator(AbstractCompensator):
         split_targets(windows)
         groups = _groups(data, self.window_s, self.k_e)
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
-        values, steps, res, sigma, jac = _fit(groups, device(x0), self.k_e, self.max_steps)
+        plant = known_plant(self.plant)
+        if plant is None:
+            values, steps, res, sigma, jac = _fit(groups, device(x0), self.k_e, self.max_steps)
+        else:
+            measured, values = groups, x0
+            for _ in range(LOOP_PASSES):
+                pull = _loop_pull(measured, device(values), self.k_e, plant)
+                groups = _less_pull(measured, pull)
+                values, steps, res, sigma, jac = _fit(groups, device(values), self.k_e,
+                                                      self.max_steps)  # fmt: skip
         values, steps, jac = np.asarray(values), int(steps), np.asarray(jac) * _SCALE
         weights = _weights(groups)
         res = {k: np.asarray(v)[weights[k] > 0] for k, v in res.items()}  # real windows only
@@ -256,6 +364,7 @@ class PhysicalCompensator(AbstractCompensator):
             values=device(values),
             covariance=device(cov),
             stats=tuple(stats.items()),
+            plant=plant,
         )
 
 
@@ -520,10 +629,10 @@ def _weights(groups) -> dict:
     return {True: np.concatenate(rest), False: np.concatenate(moving)}
 
 
-def _simulated_rates(group: _Group, values, k_e: float):
+def _simulated_rates(group: _Group, values, k_e: float, plant=None):
     """Simulated window rates (static (Rs,), moving (Rm, Wm), ramp (Rr, Wr)) [rad/s] of one
-    group, reduced as the measured ones."""
-    gyro = model_gyro(values)
+    group, reduced as the measured ones; ideal loops, or the `plant`'s PI loops."""
+    gyro = model_gyro(values, plant=plant)
 
     def one(t, theta0, t_knots, rate, temp, acc):
         theta_start = true_angle(gyro.at(temp[0]), theta0)
@@ -557,6 +666,38 @@ def _residuals(groups, values, k_e):
         rest += [((g.measured_ramp - r) * g.ramp_weight).ravel()]
         moving += [(g.measured_moving - mv).ravel()]
     return {True: jnp.concatenate(rest), False: jnp.concatenate(moving)}
+
+
+LOOP_PASSES = 2
+"""Times a fit with a plant computes the loops' pull (`_loop_pull`) and fits: at the starting
+values, then at the first fit's values (the pull is ≈ 3e-5 of the rate and changes with the
+fitted values at that order: a second pass leaves nothing the data can see)."""
+
+
+@program(check=Check("PhysicalCompensator.fit (the PI loops' pull)"))
+def _loop_pull(groups, values, k_e, plant):
+    """What the plant's PI loops add to every window rate (static, moving, ramp) [rad/s]
+    beyond the ideal-loop model at `values`: the same runs simulated both ways. Subtracted
+    from the measured rates, it lets the fit run the ideal-loop model (cheap: the PI loops
+    need ≈ 20× the solver steps) and still fit the physical parameters."""
+    out = []
+    for g in groups:
+        pi = _simulated_rates(g, values, k_e, plant)
+        ideal = _simulated_rates(g, values, k_e)
+        out.append(tuple(a - b for a, b in zip(pi, ideal, strict=True)))
+    return out
+
+
+def _less_pull(groups, pull):
+    """The groups with the loops' pull taken off their measured window rates."""
+    out = []
+    for g, (s, mv, r) in zip(groups, pull, strict=True):
+        out.append(eqx.tree_at(
+            lambda x: (x.measured_static, x.measured_moving, x.measured_ramp), g,
+            (g.measured_static - s, g.measured_moving - mv * g.moving_valid,
+             g.measured_ramp - r * (g.ramp_weight > 0)),
+        ))  # fmt: skip
+    return out
 
 
 @program(check=Check("PhysicalCompensator.fit (residuals and Jacobian)"))

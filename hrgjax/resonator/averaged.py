@@ -85,7 +85,13 @@ def averaged_vector_field(t, y, args):
             2 * (y[0] - res.theta_tau)
         )
         return d_theta[None]
+    return loop_field(g, omega_in, y)
 
+
+def loop_field(g, omega_in, y):
+    """The averaged model's right-hand side with the PI loops, for a gyro `g` already at its
+    temperature, equivalent input rate `omega_in` [rad/s] and state `y` (module docstring)."""
+    res, ctl = g.resonator, g.control
     a, q, theta, phi = y[0], y[1], y[2], y[3]
     est = measured_estimates(g, a, q, theta, phi)
     loops = loop_outputs(ctl, res.omega, est, y[4:7])
