@@ -410,6 +410,9 @@ def cmd_calibrate(args) -> int:
     t0 = time.perf_counter()
     say = _say(t0)
     ramp_window = RAMP_WINDOW_S if args.method == "mlp" and args.st_width else None
+    if args.plant is not None and args.method != "physical":
+        raise UsageError(f"--plant is for --method physical (the grey box); got --method "
+                         f"{args.method}")  # fmt: skip
     if args.window is None:  # each method's own default, as its Python class has it
         args.window = PHYSICAL_WINDOW_S if args.method == "physical" else WINDOW_S
     try:
@@ -436,7 +439,8 @@ def cmd_calibrate(args) -> int:
             )
         else:
             say("fitting the physical model through the simulator (Levenberg–Marquardt)")
-            comp = PhysicalCompensator(k_e=args.k_e, window_s=args.window).fit(data)
+            plant = None if args.plant is None else _gyro(args.plant, noise=False)
+            comp = PhysicalCompensator(k_e=args.k_e, window_s=args.window, plant=plant).fit(data)
     except ValueError as err:
         raise UsageError(_one_line(err)) from None
     say("fitted")
@@ -857,6 +861,12 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"rotation-run window [s] (None: {WINDOW_S:g} s for fourier and mlp, "
         f"{PHYSICAL_WINDOW_S:g} s for physical, as the Python classes)",
     )
+    p.add_argument(
+        "--plant", default=None, choices=("tvg3",),
+        help="physical: the gyro whose loops and resonator constants (ω, τ, Δω, θ_ω, χ) the "
+        "grey box models (their lag then leaves g, cross-talk and k_e physical); default: "
+        "ideal loops (those are effective values)",
+    )  # fmt: skip
     p.add_argument(
         "--mode", default="reduced", choices=("reduced", "end_to_end"), help="MLP training mode"
     )

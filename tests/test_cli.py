@@ -81,6 +81,8 @@ def test_calibrate_reports_missing_rotation_runs(tmp_path, capsys):
     out = tmp_path / "static.csv"
     assert main(["simulate", "--plan", "static", "--duration", "6", "--out", str(out)]) == 0
     cli_fails(["calibrate", str(out), "--method", "fourier"], capsys, "no rotation runs")
+    cli_fails(["calibrate", str(out), "--method", "fourier", "--plant", "tvg3"], capsys,
+              "--plant is for --method physical")  # fmt: skip
 
 
 def test_calibrate_table_shows_each_temperature_once(tmp_path, capsys):

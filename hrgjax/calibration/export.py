@@ -24,7 +24,7 @@ from .._io import atomic_write
 from .evaluate import NoCompensation
 from .fourier import T_SCALE, FourierCompensator
 from .mlp import MLPCompensator
-from .physical import NAMES, PhysicalCompensator
+from .physical import NAMES, PhysicalCompensator, plant_from_json, plant_to_json
 
 FORMAT_VERSION = 2
 """Version of the `.eqx` and JSON files (2: the `.eqx` header holds a length and SHA-256)."""
@@ -59,7 +59,8 @@ def _hyper(comp) -> dict:
             "window_s": comp.window_s,
             "max_steps": comp.max_steps,
             "stats": [list(p) for p in comp.stats],
-        }
+        } | ({"plant": plant_to_json(comp.plant), "sf_rate": comp.sf_rate}
+             if comp.plant is not None else {})  # fmt: skip
     if isinstance(comp, NoCompensation):
         return {"k_e": comp.k_e}
     raise TypeError(f"cannot save a {type(comp).__name__}")
@@ -75,8 +76,10 @@ def _skeleton(name: str, hyper: dict):
         return cls(**hyper).init(jax.random.key(0))
     if cls is PhysicalCompensator:
         stats = tuple(tuple(p) for p in hyper.pop("stats"))
+        plant = plant_from_json(hyper.pop("plant", None))
         n = len(NAMES)
-        return cls(**hyper, stats=stats, values=jnp.zeros(n), covariance=jnp.zeros((n, n)))
+        return cls(**hyper, stats=stats, values=jnp.zeros(n), covariance=jnp.zeros((n, n)),
+                   plant=plant)  # fmt: skip
     return cls(**hyper)
 
 
@@ -207,7 +210,8 @@ def to_json_dict(comp) -> dict:
             )
     elif isinstance(comp, PhysicalCompensator):
         base.update(
-            formula="see hrgjax.calibration.physical: ideal-loop averaged HRG with these laws",
+            formula="see hrgjax.calibration.physical: averaged HRG with these laws and "
+            + ("ideal loops" if comp.plant is None else "the PI loops of hyper.plant"),
             parameters={n: float(v) for n, v in zip(NAMES, np.asarray(comp.values), strict=True)},
             covariance=np.asarray(comp.covariance).tolist(),
             hyper=_hyper(comp),

@@ -225,6 +225,10 @@ class PhysicalCompensator(AbstractCompensator):
       elsewhere or from the design): the fit then models the PI loops' lag (`_loop_pull`)
       and its parameters are the physical ones; the compensator's drift and scale factor
       hold the loops ([`hrgjax.resonator.slow`][]).
+    - `sf_rate`: with a plant, the table rate [rad/s] at which the scale factor takes the
+      loops' lag — `fit` sets it to the calibration's mean rotation rate. The lag's 2θ
+      ripple turns its phase with the rate (by 2·atan(2k_eΩ/β): 5.5° at 5 °/s with 2 rad/s
+      loops), so one SF(θ, T) holds it exactly at one rate; 0: the slow-rate limit.
     """
 
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
@@ -234,6 +238,7 @@ class PhysicalCompensator(AbstractCompensator):
     covariance: jax.Array | None = None
     stats: tuple = eqx.field(static=True, default=())
     plant: Gyro | None = eqx.field(default=None, converter=known_plant)
+    sf_rate: float = eqx.field(static=True, default=0.0)
 
     @property
     def fit_stats(self) -> dict:
@@ -273,8 +278,11 @@ class PhysicalCompensator(AbstractCompensator):
         # the loops' lag (a 2θ ripple ∝ Ω) in it
         rate = lambda w: reduced_rate(g, w, theta)
         w0 = input_rate(g, rest, 0.0)
-        theta_dot, d_rate = jax.jvp(rate, (w0,), (jnp.ones_like(w0),))
-        return slope, theta_dot, -d_rate
+        if self.sf_rate == 0.0:
+            theta_dot, d_rate = jax.jvp(rate, (w0,), (jnp.ones_like(w0),))
+            return slope, theta_dot, -d_rate
+        theta_dot = rate(w0)
+        return slope, theta_dot, -(rate(w0 + self.sf_rate) - theta_dot) / self.sf_rate
 
     def readout_temperature_sensitivity(self, theta, temperature_c):
         gyro = self.gyro()
@@ -302,11 +310,20 @@ class PhysicalCompensator(AbstractCompensator):
             f"θ_τ(T)      = {f('theta_tau0', 1 / DEG)}° + ({f('theta_tau1', 1 / DEG)})°/°C · ΔT",
             f"g(T)        = {f('gain_mismatch0', 100)} % + ({f('gain_mismatch1', 100)}) %/°C · ΔT",
             f"cross-talk  = {f('cross_talk', 100)} %",
-            "± 1σ of the ideal-loop model. A real gyro's closed loops add a 2θ ripple ∝ Ω that, "
-            "at one rotation rate, this model reads as readout gain mismatch and cross-talk "
-            "(and k_e to ppm): g and cross-talk are effective values for the calibration's "
-            "rate (docs/calibration.md, 'How far to trust the error bars').",
         ]
+        if self.plant is None:
+            lines.append(
+                "± 1σ of the ideal-loop model. A real gyro's closed loops add a 2θ ripple ∝ Ω "
+                "that this model reads as readout gain mismatch and cross-talk (and k_e to "
+                "ppm): g and cross-talk are effective values; give the gyro's loops "
+                "(plant=, CLI --plant) for the physical ones (docs/calibration.md, 'How far "
+                "to trust the error bars')."
+            )
+        else:
+            lines.append(
+                "± 1σ of the model with the plant's PI loops (their lag modelled): physical "
+                "values, given the plant's loops, ω, τ, Δω, θ_ω and χ."
+            )
         return "\n".join(lines)
 
     def fit(self, data: MeasuredData, initial=None) -> PhysicalCompensator:
@@ -365,7 +382,15 @@ class PhysicalCompensator(AbstractCompensator):
             covariance=device(cov),
             stats=tuple(stats.items()),
             plant=plant,
+            sf_rate=0.0 if plant is None else _mean_rotation_rate(data),
         )
+
+
+def _mean_rotation_rate(data: MeasuredData) -> float:
+    """Mean table rate of the moving runs [rad/s] (0 without any)."""
+    rates = [float(np.mean(st.rate[i])) for st in data.stacked() for i in range(len(st))
+             if not st.static[i]]  # fmt: skip
+    return float(np.mean(rates)) if rates else 0.0
 
 
 WEIGHT_WINDOW_S = 60.0
@@ -695,7 +720,7 @@ def _less_pull(groups, pull):
         out.append(eqx.tree_at(
             lambda x: (x.measured_static, x.measured_moving, x.measured_ramp), g,
             (g.measured_static - s, g.measured_moving - mv * g.moving_valid,
-             g.measured_ramp - r * (g.ramp_weight > 0)),
+             g.measured_ramp - jnp.where(g.ramp_weight > 0, r, 0.0)),
         ))  # fmt: skip
     return out
 

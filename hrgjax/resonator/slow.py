@@ -95,8 +95,9 @@ def slow_manifold(g, omega_in, theta):
     loops; `omega_in`, the equivalent input rate [rad/s]; `theta`, the electrical wave angle
     [rad].
     """
+    theta = jnp.asarray(theta, dtype=jnp.result_type(float))
     n = SAMPLES
-    thetas = theta + jnp.arange(n) * (jnp.pi / n)
+    thetas = theta + (jnp.pi / n) * jnp.arange(n, dtype=jnp.result_type(float))
     h0, jac, rate = jax.vmap(lambda th: _at_rest(g, omega_in, th))(thetas)
     m = h0.shape[1]
     d = jnp.asarray(_D, dtype=h0.dtype)
@@ -108,4 +109,5 @@ def slow_manifold(g, omega_in, theta):
 
 def reduced_rate(g, omega_in, theta):
     """Wave-angle rate θ̇ [rad/s] with the loops on their slow manifold (`slow_manifold`)."""
+    theta = jnp.asarray(theta, dtype=jnp.result_type(float))
     return _fields(g, omega_in, slow_manifold(g, omega_in, theta), theta)[1]
