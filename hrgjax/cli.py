@@ -1099,12 +1099,49 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+INPUT_OPTIONS = ("data", "log", "imu_log", "sections", "model", "models", "plan_file",
+                 "offset_from")  # fmt: skip
+"""Argument names (dests) that name files a command reads."""
+OUTPUT_OPTIONS = ("out", "plot", "json", "write_sections")
+"""Argument names (dests) that name files a command writes."""
+
+
+def _option(dest: str) -> str:
+    return dest.upper() if dest in ("data", "log", "imu_log") else "--" + dest.replace("_", "-")
+
+
+def check_distinct_paths(args) -> None:
+    """Every output path differs from every input and from every other output, in every
+    command: a `--plot` or `--json` naming the input file would overwrite the user's data.
+    Inputs count where they are files (`--model` of `design` is a word, not a file).
+
+    **Raises:** `UsageError` naming the two options and the path."""
+    seen: dict[str, str] = {}
+    for dest in INPUT_OPTIONS:
+        value = getattr(args, dest, None)
+        for v in value if isinstance(value, list) else [value]:
+            if isinstance(v, str) and os.path.isfile(v):
+                seen.setdefault(os.path.realpath(v), _option(dest))
+    inputs = dict(seen)
+    for dest in OUTPUT_OPTIONS:
+        v = getattr(args, dest, None)
+        if not isinstance(v, str):
+            continue
+        real = os.path.realpath(v)
+        if real in seen:
+            what = "the input" if real in inputs else "the output"
+            raise UsageError(f"{_option(dest)} {v} is also {what} {seen[real]}; writing it "
+                             "would overwrite that file: give another path")  # fmt: skip
+        seen[real] = _option(dest)
+
+
 def _run(args) -> int:
     """Run the command: a one-line error and exit status 2 for bad input, 1 for a failure
     during the work, 130 on Ctrl-C (files are written atomically, so none is left half
     written); `--debug` shows the traceback instead."""
     name, debug = f"hrgjax {args.command}", getattr(args, "debug", False)
     try:
+        check_distinct_paths(args)
         return args.func(args)
     except KeyboardInterrupt:
         if debug:

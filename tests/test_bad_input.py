@@ -215,7 +215,10 @@ def eqx_file(tmp_path_factory):
     [
         (lambda b: b[:-9], "truncated or damaged"),
         (lambda b: b[:-3] + bytes([b[-3] ^ 0x10]) + b[-2:], "checksum mismatch"),
-        (lambda b: b.replace(b'"format": 2', b'"format": 9'), "format 9.*update hrgjax"),
+        (lambda b: b.replace(b'"format": 3', b'"format": 9'), "format 9.*update hrgjax"),
+        (lambda b: b.replace(b'"format": 3', b'"format": 1'), "carries a checksum but says"),
+        (lambda b: b.replace(b'"harmonics": 2', b'"harmonics": 1'), "edited .checksum mismatch"),
+        (lambda b: b.replace(b'"k_e": 0.554', b'"k_e": 0.654'), "checksum mismatch over the head"),
         (lambda b: b.replace(b"FourierCompensator", b"Bogus"), "unknown compensator class"),
         (lambda b: b"\x00\x01garbage", "not an hrgjax compensator"),
     ],
@@ -235,12 +238,13 @@ def test_a_header_of_another_class_is_named_not_a_traceback(eqx_file, tmp_path):
     import json
 
     from hrgjax.calibration import load_compensator
+    from hrgjax.calibration.export import checksum
 
     first, payload = Path(eqx_file).read_bytes().split(b"\n", 1)
     header = json.loads(first)
     header.update({"class": "PhysicalCompensator", "hyper": {"k_e": 0.554, "window_s": 3.0,
                    "max_steps": 5, "stats": []}})  # fmt: skip
-    header["sha256"] = hashlib.sha256(payload).hexdigest()
+    header["sha256"] = checksum(header, payload)
     bad = tmp_path / "other.eqx"
     bad.write_bytes(json.dumps(header).encode() + b"\n" + payload)
     with pytest.raises(ValueError, match="do not match a PhysicalCompensator"):
@@ -422,3 +426,22 @@ def test_fuzzed_netcdf_loads_exactly_or_fails_clearly(tmp_path, n, dtypes, seed,
     except Exception:  # a dtype h5netcdf cannot write: nothing to load
         return
     _check_outcome(str(path), str(tmp_path))
+
+
+def test_no_command_writes_over_its_inputs_or_its_other_outputs(tmp_path, capsys):
+    """Issue 44: `--plot S` naming the sections input, `--json X --write-sections X`, `--out`
+    naming the data: refused before any work, the file left as it was."""
+    sections = tmp_path / "sections.json"
+    sections.write_text("{}")
+    log = tmp_path / "imu.csv"
+    log.write_text("t,gyr_x\n0,0\n")
+    before = sections.read_bytes()
+    cli_fails(["imu-calibrate", str(log), "--sections", str(sections), "--plot", str(sections)],
+              capsys, r"--plot .* is also the input --sections")  # fmt: skip
+    assert sections.read_bytes() == before
+    out = tmp_path / "cal.json"
+    cli_fails(["imu-calibrate", str(log), "--json", str(out), "--write-sections", str(out)],
+              capsys, r"--write-sections .* is also the output --json")  # fmt: skip
+    cli_fails(["correct", str(log), "--model", "m.eqx", "--out", str(log)], capsys,
+              r"--out .* is also the input DATA")  # fmt: skip
+    assert log.read_text() == "t,gyr_x\n0,0\n"

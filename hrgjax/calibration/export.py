@@ -26,8 +26,9 @@ from .fourier import T_SCALE, FourierCompensator
 from .mlp import MLPCompensator
 from .physical import NAMES, PhysicalCompensator, plant_from_json, plant_to_json
 
-FORMAT_VERSION = 2
-"""Version of the `.eqx` and JSON files (2: the `.eqx` header holds a length and SHA-256)."""
+FORMAT_VERSION = 3
+"""Version of the `.eqx` and JSON files (2: the `.eqx` header holds the payload's length and
+SHA-256; 3: the SHA-256 covers the header too, so an edited hyperparameter is caught)."""
 _CLASSES = {
     c.__name__: c for c in (FourierCompensator, MLPCompensator, PhysicalCompensator, NoCompensation)
 }
@@ -83,6 +84,13 @@ def _skeleton(name: str, hyper: dict):
     return cls(**hyper)
 
 
+def checksum(header: dict, payload: bytes) -> str:
+    """SHA-256 (hex) of a `.eqx` file's header (all but its `sha256`, keys sorted) and
+    payload: what format 3 stores in `sha256`."""
+    head = {k: v for k, v in header.items() if k != "sha256"}
+    return hashlib.sha256(json.dumps(head, sort_keys=True).encode() + b"\n" + payload).hexdigest()
+
+
 def save_compensator(comp, path: str | os.PathLike) -> str:
     """Write a fitted compensator to `path` (`.eqx`); returns the path.
 
@@ -98,8 +106,8 @@ def save_compensator(comp, path: str | os.PathLike) -> str:
         "hyper": _hyper(comp),
         "format": FORMAT_VERSION,
         "bytes": len(payload),
-        "sha256": hashlib.sha256(payload).hexdigest(),
     }
+    header["sha256"] = checksum(header, payload)
     with atomic_write(path, "wb") as fh:
         fh.write((json.dumps(header) + "\n").encode())
         fh.write(payload)
@@ -132,14 +140,21 @@ def load_compensator(path: str | os.PathLike):
         raise ValueError(
             f"{path}: unknown compensator class {name!r}; known are {sorted(_CLASSES)}"
         )
+    if version < 2 and ("sha256" in header or "bytes" in header):
+        raise ValueError(f"{path}: damaged or edited: the header carries a checksum but says "
+                         f"format {version!r} (formats before 2 had none)")  # fmt: skip
     if version >= 2:  # format 1 (before the checksum) is read without one
         if len(payload) != header.get("bytes"):
             raise ValueError(
                 f"{path}: truncated or damaged ({len(payload)} bytes of compensator data, the "
                 f"header says {header.get('bytes')})"
             )
-        if hashlib.sha256(payload).hexdigest() != header.get("sha256"):
-            raise ValueError(f"{path}: damaged (checksum mismatch); save the compensator again")
+        # format 2's checksum covers the data; from 3 on the header as well
+        digest = hashlib.sha256(payload).hexdigest() if version == 2 else checksum(header, payload)
+        if digest != header.get("sha256"):
+            raise ValueError(f"{path}: damaged or edited (checksum mismatch over the "
+                             f"{'data' if version == 2 else 'header and data'}); save the "
+                             "compensator again")  # fmt: skip
     try:
         return eqx.tree_deserialise_leaves(io.BytesIO(payload), _skeleton(name, dict(hyper)))
     except Exception as err:  # a hand-edited header: shapes or fields do not match
