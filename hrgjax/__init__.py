@@ -25,6 +25,7 @@ _SUBMODULES = (
     "kalman",
     "nn",
     "noise",
+    "plausible",
     "presets",
     "units",
 )

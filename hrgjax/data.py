@@ -14,7 +14,8 @@ from collections.abc import Iterator, Mapping
 import numpy as np
 
 from ._io import atomic_path, atomic_write
-from .units import DEG
+from . import plausible
+from .units import DEG, K_E_NOMINAL
 
 COLUMNS: dict[str, str] = {
     "time_s": "time [s], strictly increasing within a run",
@@ -94,6 +95,12 @@ class MeasuredData:
             raise ValueError("the data have no rows")
         self._columns = cols
         _check_time(cols["time_s"], self.run)
+        for name in ("temperature_c", "table_rate_dps", "wave_angle_deg"):
+            plausible.check(f"column {name!r}", cols[name], name)
+        if "table_rate_dps" in cols:  # (required: always there)
+            moving = np.isin(self.run, np.unique(self.run[cols["table_rate_dps"] != 0.0]))
+            plausible.check_wave_angle_units(cols["wave_angle_deg"], self.table_angle_deg,
+                                             self.run, moving, K_E_NOMINAL)  # fmt: skip
 
     @property
     def columns(self) -> dict[str, np.ndarray]:

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import plausible
 from ._checks import check_finite, is_concrete
 from ._compiled import device
 from .units import DEG, DEG_PER_S
@@ -87,6 +88,7 @@ class Profile(eqx.Module):
             )
         for name in ("t", "rate", "temperature", "accel", "wave_angle0"):
             check_finite(f"Profile.{name}", getattr(self, name))
+        plausible.check("Profile.temperature", self.temperature, "temperature_c")
         if is_concrete(self.t):
             t = np.asarray(self.t)
             bad = np.nonzero(np.diff(t) <= 0)[0]

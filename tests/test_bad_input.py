@@ -316,7 +316,7 @@ def test_cli_refuses_outputs_before_any_work(tmp_path, capsys):
     model = tmp_path / "m.eqx"
     model.write_bytes(b"x")
     cli_fails(["correct", str(data), "--model", str(model), "--out", str(data)], capsys,
-              "--out .*bench.csv is the input file")  # fmt: skip
+              "--out .*bench.csv is also the input DATA")  # fmt: skip
     assert data.read_bytes() == before
     cli_fails(["simulate", "--out", str(tmp_path / "x.txt")], capsys, "must end in .csv or .nc")
     (tmp_path / "afile").write_text("")
@@ -445,3 +445,43 @@ def test_no_command_writes_over_its_inputs_or_its_other_outputs(tmp_path, capsys
     cli_fails(["correct", str(log), "--model", "m.eqx", "--out", str(log)], capsys,
               r"--out .* is also the input DATA")  # fmt: skip
     assert log.read_text() == "t,gyr_x\n0,0\n"
+
+
+def test_physically_impossible_numbers_are_refused_with_a_hint():
+    """Issue 44: −273 °C plans, kelvin temperature columns and radian wave angles are
+    refused, naming the field (and the unit they look like); `plausible.relaxed` widens a
+    range for a block of code."""
+    t = np.arange(0.0, 60.0, 0.5)
+    cols = dict(time_s=t, temperature_c=np.full(t.size, 20.0), table_rate_dps=np.full(t.size, 5.0),
+                wave_angle_deg=-0.554 * 5.0 * t)  # fmt: skip
+    hg.MeasuredData(cols)  # degrees, °C: fine
+    with pytest.raises(ValueError, match=r"'temperature_c' = 293.15 .* look like kelvin"):
+        hg.MeasuredData(cols | dict(temperature_c=np.full(t.size, 293.15)))
+    with pytest.raises(ValueError, match=r"'wave_angle_deg' turns -0.0096.* radians"):
+        hg.MeasuredData(cols | dict(wave_angle_deg=np.radians(cols["wave_angle_deg"])))
+    with pytest.raises(ValueError, match=r"Plan.temperature_c = -273 .* -100 … 150 °C"):
+        hg.calibration.static_plan((-273.0,), (0.0,), duration_s=10.0)
+    with pytest.raises(ValueError, match=r"Plan.wave_angle0_deg = 1e\+300"):
+        hg.calibration.static_plan((20.0,), (1e300,), duration_s=10.0)
+    with pytest.raises(ValueError, match=r"Plan.duration_s = 1e\+09"):
+        hg.calibration.static_plan((20.0,), (0.0,), duration_s=1e9)
+    with pytest.raises(ValueError, match=r"Profile.temperature = nan|must be finite"):
+        hg.Profile.static(10.0, np.nan)
+    with hg.plausible.relaxed(temperature_c=(-200.0, 200.0)):
+        hg.calibration.static_plan((-150.0,), (0.0,), duration_s=10.0)
+    with pytest.raises(ValueError, match="outside the plausible range"):  # restored
+        hg.calibration.static_plan((-150.0,), (0.0,), duration_s=10.0)
+
+
+def test_impossible_bench_plans_are_refused():
+    """Issue 44: a bench starting at NaN °C, a 1e9-h budget, a segment at +300 °C."""
+    from hrgjax.calibration import design
+
+    with pytest.raises(ValueError, match="BenchModel.start_temperature_c must be finite"):
+        design.BenchModel(start_temperature_c=float("nan"))
+    with pytest.raises(ValueError, match=r"budget_h \(as seconds\) = 3.6e\+12 .*30 days|2.592e\+06"):
+        design.design(1e9)
+    seg = dict(kind="static", temperature_c=300.0, wave_angle_deg=0.0,
+               duration_s=60.0)  # fmt: skip
+    with pytest.raises(ValueError, match=r"BenchPlan.temperature_c = 300 .* kelvin"):
+        design.BenchPlan.from_segments([seg])

@@ -44,6 +44,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import concrete_value, is_concrete
 from .._compiled import device
 from .._io import read_json
@@ -131,6 +132,12 @@ class BenchPlan(eqx.Module):
             bad = np.flatnonzero(~np.isfinite(x))
             if bad.size:
                 raise ValueError(f"BenchPlan.{name}[{bad[0]}] is {x[bad[0]]}; give a finite value")
+        for name, quantity in (("temperature_c", "temperature_c"),
+                               ("temperature_end_c", "temperature_c"),
+                               ("wave_angle_deg", "wave_angle_deg"),
+                               ("rate_dps", "table_rate_dps"),
+                               ("duration_s", "duration_s")):  # fmt: skip
+            plausible.check(f"BenchPlan.{name}", v[name], quantity)
         bad = np.flatnonzero(v["duration_s"] <= 0)
         if bad.size:
             i = bad[0]
@@ -271,6 +278,11 @@ class BenchModel(eqx.Module):
             x = getattr(self, name)
             if is_concrete(x) and not float(x) >= 0:
                 raise ValueError(f"BenchModel.{name} must be ≥ 0 [s]; got {x}")
+        x = self.start_temperature_c
+        if is_concrete(x):
+            if not math.isfinite(float(x)):
+                raise ValueError(f"BenchModel.start_temperature_c must be finite [°C]; got {x}")
+            plausible.check("BenchModel.start_temperature_c", x, "temperature_c")
 
     def transitions_s(self, plan: BenchPlan) -> dict[str, jax.Array]:
         """Per-segment costs before each segment [s], shape (S,) each: `slew`, `settle`,
@@ -1840,6 +1852,7 @@ def design(
         raise ValueError(f"criterion must be one of {CRITERIA}; got {criterion!r}")
     if not (isinstance(budget_h, (int, float)) and math.isfinite(budget_h) and budget_h > 0):
         raise ValueError(f"budget_h must be a positive number of hours; got {budget_h!r}")
+    plausible.check("budget_h (as seconds)", float(budget_h) * 3600.0, "duration_s")
     model = _model(model)
     levels = tuple(int(k) for k in (DEFAULT_LEVELS[model.name] if levels is None else levels))
     if not levels or min(levels) < 1:

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import check_finite, is_concrete
 from .._compiled import Check, device, program
 from .._progress import bar
@@ -49,6 +50,10 @@ class Plan(eqx.Module):
             )
         if not self.duration_s > 0 or not self.dt_out > 0:
             raise ValueError("Plan.duration_s and Plan.dt_out must be > 0 [s]")
+        plausible.check("Plan.duration_s", self.duration_s, "duration_s")
+        plausible.check("Plan.temperature_c", self.temperature_c, "temperature_c")
+        plausible.check("Plan.wave_angle0_deg", self.wave_angle0_deg, "wave_angle_deg")
+        plausible.check("Plan.rate_dps", self.rate_dps, "table_rate_dps")
 
     @property
     def size(self) -> int:
