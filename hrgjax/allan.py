@@ -337,6 +337,12 @@ def deviation(
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
     if not (0.0 < ci < 1.0):
         raise ValueError(f"ci must be a confidence level in (0, 1); got {ci!r}")
+    kind_of = np.asarray(y).dtype.kind
+    if kind_of in "cbOUSMm":
+        what = {"c": "complex numbers", "b": "booleans"}.get(kind_of, f"{np.asarray(y).dtype}")
+        if kind_of not in "O" or not all(isinstance(v, numbers.Real) and not isinstance(v, bool)
+                                         for v in np.ravel(y)):  # fmt: skip
+            raise ValueError(f"y holds {what}; give real numbers (rates or angles)")
     y = np.asarray(y, dtype=float)
     if y.ndim != 1 or y.size < 3:
         raise ValueError(f"y must be 1-D with at least 3 samples; got shape {y.shape}")
@@ -401,6 +407,8 @@ def _factors(taus, rate_hz: float, n_phase: int) -> np.ndarray:
         t = np.asarray(taus, dtype=float).ravel()
         if t.size == 0 or not np.all(np.isfinite(t)):
             raise ValueError(f"taus must be finite τ values in seconds; got {taus!r}")
+        if np.any(t <= 0):
+            raise ValueError(f"taus must be > 0 s; got {float(t[t <= 0][0]):g} in {taus!r}")
         m = np.round(t * rate_hz)
     m = m[(m > 0) & (m < n_phase)]
     return np.unique(m).astype(int)

@@ -127,9 +127,18 @@ def _check_laws(gyro, profile) -> None:
     is_law = lambda x: isinstance(x, TemperatureLaw)
     flat, _ = jax.tree_util.tree_flatten_with_path(gyro, is_leaf=is_law)
     for path, law in flat:
+        name = ".".join(str(getattr(p, "name", getattr(p, "key", p))) for p in path)
+        plain = not is_law(law) and is_concrete(law) and np.ndim(law) == 0
+        if plain and np.asarray(law).dtype.kind == "f":
+            # a plain value, checked here too: eqx.tree_at (as sweeps do) skips __init__
+            value, (rule, unit) = float(np.asarray(law)), _LAW_LIMITS.get(name, ("finite", ""))
+            ok = np.isfinite(value) and {"> 0": value > 0, ">= 0": value >= 0}.get(rule, True)
+            if not ok:
+                raise ValueError(f"gyro.{name} = {value:g} {unit}; it must be {rule}".replace(
+                    "  ", " "))  # fmt: skip
+            continue
         if not is_law(law) or not all(is_concrete(x) for x in jax.tree_util.tree_leaves(law)):
             continue
-        name = ".".join(str(getattr(p, "name", getattr(p, "key", p))) for p in path)
         if any(np.ndim(x) for x in jax.tree_util.tree_leaves(law)):
             continue  # a batch of laws: checked member by member where it is evaluated
         with np.errstate(over="ignore", invalid="ignore"):

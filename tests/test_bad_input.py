@@ -485,3 +485,21 @@ def test_impossible_bench_plans_are_refused():
                duration_s=60.0)  # fmt: skip
     with pytest.raises(ValueError, match=r"BenchPlan.temperature_c = 300 .* kelvin"):
         design.BenchPlan.from_segments([seg])
+
+
+def test_values_swapped_in_after_construction_are_checked_where_simulate_starts():
+    """Issue 44: `eqx.tree_at` (as sweeps do) skips the constructor's checks; `simulate`
+    names the field itself. Allan: complex samples and negative τ are refused."""
+    g = hg.presets.tvg3_like()
+    prof = hg.Profile.static(5.0, 20.0)
+    for where, value, match in (
+        (lambda g: g.noise.angle_random_walk, -1e-6, r"gyro.noise.angle_random_walk = -1e-06"),
+        (lambda g: g.noise.angle_white, np.nan, r"gyro.noise.angle_white = nan"),
+        (lambda g: g.resonator.k_e, np.nan, r"gyro.resonator.k_e|finite"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            hg.simulate(eqx.tree_at(where, g, value), prof, key=jax.random.key(0), dt_out=1.0)
+    with pytest.raises(ValueError, match="y holds complex numbers"):
+        hg.allan.deviation(np.ones(100) * (1 + 1j), rate_hz=1.0)
+    with pytest.raises(ValueError, match=r"taus must be > 0 s; got -1"):
+        hg.allan.deviation(np.ones(100), rate_hz=1.0, taus=[-1.0, 2.0])
