@@ -103,6 +103,22 @@ def _intact(value: bytes) -> bool:
 
 
 _enabled: Path | None = None
+_warned: set[Path] = set()
+
+
+def _unusable(folder: Path) -> str | None:
+    """Why `folder` cannot hold the cache (it cannot be made, or written), else None."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        return f"cannot make {folder}: {err.strerror or err}"
+    try:  # a real write: permissions alone do not say it (root, read-only mounts)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as err:
+        return f"{folder} is not writable: {err.strerror or err}"
+    return None
 
 
 def enable_cache(path: str | os.PathLike | None = None) -> Path | None:
@@ -134,7 +150,14 @@ def enable_cache(path: str | os.PathLike | None = None) -> Path | None:
     folder = (root / "xla").resolve()
     if _enabled == folder:
         return folder
-    folder.mkdir(parents=True, exist_ok=True)
+    problem = _unusable(folder)
+    if problem is not None:
+        if folder not in _warned:  # once per folder and process
+            _warned.add(folder)
+            warnings.warn(f"hrgjax: no compile cache ({problem}); running without it, "
+                          "compiling as usual (set HRGJAX_CACHE_DIR to a writable folder, or "
+                          "HRGJAX_NO_CACHE=1 to silence this)", stacklevel=2)  # fmt: skip
+        return None
     jax.config.update("jax_compilation_cache_dir", str(folder))
     # Small programs too: loading one (~ms) is cheaper than compiling it (~20–40 ms).
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)

@@ -6,6 +6,7 @@ import argparse
 import os
 import sys
 import time
+import warnings
 
 from .units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
 
@@ -88,6 +89,9 @@ def _one_line(err: BaseException) -> str:
     return text or type(err).__name__
 
 
+_python_warning = warnings.formatwarning
+
+
 def _setup():
     """float64 on, and the persistent compile cache (hrgjax.enable_cache: $HRGJAX_CACHE_DIR,
     else $XDG_CACHE_HOME/hrgjax, else ~/.cache/hrgjax; HRGJAX_NO_CACHE=1 switches it off),
@@ -97,8 +101,16 @@ def _setup():
     from ._cache import enable_cache
 
     jax.config.update("jax_enable_x64", True)
+    # hrgjax's own warnings (a cache it cannot use, a damaged entry) as one line each
+    warnings.formatwarning = _one_line_warning
     enable_cache()
     return jax
+
+
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    text = str(message)
+    return f"{text}\n" if text.startswith("hrgjax") else _python_warning(
+        message, category, filename, lineno, line)  # fmt: skip
 
 
 def _say(t0):
