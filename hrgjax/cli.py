@@ -1099,7 +1099,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the file's gyro unit")  # fmt: skip
     p.add_argument("--accel-unit", default="m/s^2", choices=tuple(ACCEL_UNIT_NAMES),
                    help="the file's accelerometer unit (checked against the data)")  # fmt: skip
-    p.add_argument("--g", type=POSITIVE_FLOAT, default=9.81, help="local gravity [m/s²]")
+    p.add_argument("--g", type=POSITIVE_FLOAT, default=9.81,
+                   help="local gravity [m/s²], 9.76–9.84 (the Earth's surface)")  # fmt: skip
     p.add_argument("--turn-deg", type=float, default=360.0,
                    help="angle of each turn [°], right-handed positive (imucal's clockwise "
                    "hand turns: -360)")  # fmt: skip

@@ -340,7 +340,7 @@ def test_bad_input_is_named(session, tmp_path):
     with pytest.raises(ValueError, match=r"'x_p' must be .*0 <= i < j"):
         hg.imu.ferraris(data, {**sections, "x_p": {"start": 10, "end": 10**6}})
     with pytest.raises(ValueError, match="face 'x_a' .* x axis is not down"):
-        hg.imu.ferraris(data, {**sections, "x_a": sections["x_p"]})
+        hg.imu.ferraris(data, {**sections, "x_a": sections["y_p"], "y_p": sections["x_a"]})
     with pytest.raises(
         ValueError, match="turn 'x_rot' integrates to 35.*turn_deg is -360.*pass turn_deg=360"
     ):
@@ -379,3 +379,108 @@ def test_cli_imu_calibrate(session, fitted, tmp_path, capsys):
         main(["imu-calibrate", str(log), "--gyro-columns", "gx,gy", "--json", str(out)])
     assert err.value.code == 2
     assert "--gyro-columns" in capsys.readouterr().err
+
+
+# --- issue 44: physically impossible input is refused, never calibrated --------------------
+def test_g_must_be_earths_and_agree_with_the_data(session, tmp_path, capsys):
+    """`--g 981` gave M_a ≈ 0.0100 and `--g 1e-3` M_a ≈ 9844, exit 0."""
+    from helpers import cli_fails
+
+    data, sections = session
+    cm, in_g = r" \(that is cm/s²\)", r" \(that is in units of g\)"
+    for g, hint in ((981.0, cm), (1e-3, ""), (1.0, in_g), (-9.81, "")):
+        with pytest.raises(ValueError, match=rf"^g = {g!r}{hint}: expected .* 9\.76–9\.84"):
+            hg.imu.ferraris(data, sections, g=g)
+    from hrgjax.imu.ferraris import G_RANGE_M_S2
+
+    assert G_RANGE_M_S2 == (9.76, 9.84)
+    # in range, but the static faces read 8 % more than g: refused, both numbers given
+    hot = hg.imu.ImuData(data.time, data.gyro, data.accel * 1.08)
+    match = (
+        r"g = 9.81 m/s² but the static faces read a mean \|specific force\| of 10\.\d+ m/s² "
+        r"\(8\.\d% apart, more than 5%\)"
+    )
+    with pytest.raises(ValueError, match=match):
+        hg.imu.ferraris(hot, sections)
+    log = _write_log(tmp_path / "log.csv", data)
+    (tmp_path / "s.json").write_text(json.dumps(hg.imu.sections_to_json(sections)))
+    argv = ["imu-calibrate", str(log), "--sections", str(tmp_path / "s.json"), "--gyro-columns",
+            "gx,gy,gz", "--accel-columns", "ax,ay,az", "--time-column", "t", "--gyro-unit",
+            "deg/s", "--accel-unit", "g"]  # fmt: skip
+    cli_fails([*argv, "--g", "981"], capsys, r"g = 981\.0 \(that is cm/s²\): expected")
+    cli_fails([*argv, "--g", "1e-3"], capsys, r"g = 0\.001: expected .* 9\.76–9\.84")
+
+
+def test_turn_sections_hold_one_turn_about_their_axis(session):
+    data, sections = session
+    (s, _), (e, _) = sections["x_rot"][0], sections["y_rot"][0]
+    # x_rot running on into the move to y_p: the diagonal alone (289°) passed
+    match = (
+        r"turn 'x_rot' integrates to \[289\.\d, -67\.\d, -71\.\d\]° about x, y, z: "
+        r"98\.\d° off its x axis, more than 10% of turn_deg"
+    )
+    with pytest.raises(ValueError, match=match):
+        hg.imu.ferraris(data, {**sections, "x_rot": [(s, e)]})
+    with pytest.raises(ValueError, match=r"turn_deg must be a non-zero angle .*; got \[360, 360\]"):
+        hg.imu.ferraris(data, sections, turn_deg=[360, 360])
+
+
+def test_sections_of_different_keys_must_not_overlap(session):
+    data, sections = session
+    (s, _), (_, e) = sections["x_rot"][0], sections["y_rot"][0]
+    with pytest.raises(ValueError, match=r"'x_rot' \[\d+, \d+\] and 'y_rot' \[\d+, \d+\] are "
+                       "overlapping rows: each section must be its own stretch"):  # fmt: skip
+        hg.imu.parse_sections({**sections, "x_rot": [s, e]}, len(data))
+    with pytest.raises(ValueError, match=r"'x_p' \[\d+, \d+\] and 'y_p' .* are the same rows"):
+        hg.imu.parse_sections({**sections, "y_p": sections["x_p"]}, len(data))
+    # one row shared
+    fs = sections["z_a"][0][0]
+    with pytest.raises(ValueError, match=r"'z_p' \[\d+, \d+\] and 'z_a' .* are overlapping rows"):
+        hg.imu.parse_sections({**sections, "z_p": [fs - 1, fs + 1]}, len(data))
+    # ranges that touch ([i, j) then [j, k)) are accepted
+    touch = {**sections, "x_a": [sections["x_p"][0][1], sections["x_a"][0][1]]}
+    assert hg.imu.parse_sections(touch, len(data))["x_a"][0][0] == sections["x_p"][0][1]
+
+
+def test_imu_arrays_complex_boolean_and_rate_are_refused(session):
+    data, _ = session
+    si = hg.imu.SI_UNITS
+    with pytest.raises(ValueError, match=r"^gyro is complex \(complex128\); give a real \(N, 3\)"):
+        hg.imu.ImuData.from_arrays(data.gyro + 1e-3j, data.accel, units=si, rate_hz=RATE)
+    with pytest.raises(ValueError, match=r"^accel is boolean \(True/False\); give a numeric"):
+        hg.imu.ImuData.from_arrays(data.gyro, data.accel > 0, units=si, rate_hz=RATE)
+    with pytest.raises(ValueError, match=r"^temperature is complex"):
+        hg.imu.ImuData(data.time, data.gyro, data.accel, temperature=np.zeros(len(data), complex))
+    with pytest.raises(ValueError, match="rate_hz must be a positive number; got True"):
+        hg.imu.ImuData.from_arrays(data.gyro, data.accel, units=si, rate_hz=True)
+    with pytest.raises(ValueError, match=r"^rate_hz = 5 Hz disagrees with the time column, whose "
+                       r"median step 0\.01 s is 100 Hz \(more than 1% apart\)"):  # fmt: skip
+        hg.imu.ImuData.from_arrays(data.gyro, data.accel, units=si, rate_hz=5, time=data.time)
+    ok = hg.imu.ImuData.from_arrays(data.gyro, data.accel, units=si, rate_hz=100.5, time=data.time)
+    assert ok.rate_hz == 100.5  # within 1 %: the declared rate is kept
+
+
+def test_negative_variance_is_named_not_nan(fitted, tmp_path):
+    import equinox as eqx
+
+    cov = np.asarray(fitted.covariance).copy()
+    cov[13, 13] = -1e-6
+    bad = eqx.tree_at(lambda c: c.covariance, fitted, jax.numpy.asarray(cov))
+    with pytest.raises(ValueError, match=r"covariance: the variance of gyro_matrix\[xy\] is -1e-"):
+        _ = bad.gyro_matrix_std
+    with pytest.raises(ValueError, match="variance of gyro angle xy is -1.01e-06, not a number"):
+        bad.gyro_triad()
+    assert np.all(np.isfinite(fitted.accel_matrix_std))  # a sound covariance is untouched
+    obj = fitted.to_json()
+    for field, value, match in (
+        ("covariance", cov.tolist(), r"'covariance' has the variance -1e-06 < 0 for gyro_matr"),
+        ("g_m_s2", -9.81, r"field 'g_m_s2' = -9.81: expected the local gravity in m/s²"),
+        ("turn_deg", [0, 0], r"field 'turn_deg' must be a non-zero angle .*; got \[0, 0\]"),
+        ("turn_deg", [360, 0, 360], r"field 'turn_deg' must be a non-zero angle"),
+        ("accel_matrix", np.zeros((3, 3)).tolist(), r"field 'accel_matrix' is singular"),
+        ("gyro_matrix", [[1, 0, 0], [1, 0, 0], [0, 0, 1]], r"field 'gyro_matrix' is singular"),
+        ("noise_std", {"gyro_rad_s": [-1, 0, 0]}, r"field 'noise_std' must be .* >= 0"),
+    ):  # fmt: skip
+        (tmp_path / "bad.json").write_text(json.dumps({**obj, field: value}))
+        with pytest.raises(ValueError, match=match):
+            hg.imu.load_calibration(tmp_path / "bad.json")

@@ -36,6 +36,8 @@ ACCEL_UNITS: dict[str, float] = {
 }
 """Specific-force units accepted, with their size in m/s² (g is standard gravity, 9.80665)."""
 AXES = ("x", "y", "z")
+RATE_TOLERANCE = 0.01
+"""How far (relative) a declared `rate_hz` may be from 1 / the time column's median step."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -57,7 +59,8 @@ class ImuData:
     CSV file with [`load`][hrgjax.imu.load].
 
     **Raises:** `ValueError` naming the field (and the first bad row) for a wrong shape,
-    a value that is not finite, or a time that does not increase."""
+    complex or boolean values, a value that is not finite, a time that does not increase,
+    or a `rate_hz` more than 1 % from the time column's (1 / median step)."""
 
     time: np.ndarray
     gyro: np.ndarray
@@ -85,12 +88,18 @@ class ImuData:
                 "time must be strictly increasing"
             )
         rate = self.rate_hz
+        step_rate = 1.0 / float(np.median(step))
         if rate is None:
-            rate = 1.0 / float(np.median(step))
-        elif not (np.isfinite(rate) and rate > 0):
-            raise ValueError(
-                f"rate_hz must be a positive number of samples per second; got {rate!r}"
-            )
+            rate = step_rate
+        else:
+            rate = _positive("rate_hz", rate, "number of samples per second")
+            if abs(rate / step_rate - 1.0) > RATE_TOLERANCE:
+                raise ValueError(
+                    f"rate_hz = {rate:g} Hz disagrees with the time column, whose median step "
+                    f"{float(np.median(step)):.6g} s is {step_rate:.6g} Hz (more than "
+                    f"{RATE_TOLERANCE:.0%} apart); give the time column's rate, or leave rate_hz "
+                    "out"
+                )
         temp = None if self.temperature is None else _vector("temperature", self.temperature, n)
         for name, value in (
             ("time", time), ("gyro", gyro), ("accel", accel), ("temperature", temp),
@@ -346,11 +355,28 @@ def _declared(units) -> tuple[str, str]:
     return out[0], out[1]
 
 
-def _triad(name: str, x) -> np.ndarray:
+def _real(name: str, x, form: str) -> np.ndarray:
+    """`x` as a float array; complex or boolean input is refused (casting would drop the
+    imaginary part, or read True as 1 of the declared unit)."""
     try:
-        a = np.array(x, dtype=float)
+        raw = np.asarray(x)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a numeric (N, 3) array") from None
+        raise ValueError(f"{name} must be a numeric {form} array") from None
+    if raw.dtype.kind == "c":
+        raise ValueError(
+            f"{name} is complex ({raw.dtype}); give a real {form} array (the imaginary part "
+            "would be dropped)"
+        )
+    if raw.dtype.kind == "b":
+        raise ValueError(f"{name} is boolean (True/False); give a numeric {form} array")
+    try:
+        return np.array(raw, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a numeric {form} array") from None
+
+
+def _triad(name: str, x) -> np.ndarray:
+    a = _real(name, x, "(N, 3)")
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"{name} must have shape (N, 3) (axes x, y, z); got {a.shape}")
     _finite(name, a)
@@ -359,10 +385,7 @@ def _triad(name: str, x) -> np.ndarray:
 
 
 def _vector(name: str, x, n: int) -> np.ndarray:
-    try:
-        a = np.array(x, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a numeric (N,) array") from None
+    a = _real(name, x, "(N,)")
     if a.shape != (n,):
         raise ValueError(f"{name} must have shape ({n},) like gyro; got {a.shape}")
     _finite(name, a)
@@ -378,13 +401,15 @@ def _finite(name: str, a: np.ndarray) -> None:
         raise ValueError(f"{name} {where}: {a[i]!r} is not finite")
 
 
-def _positive(name: str, x) -> float:
+def _positive(name: str, x, what: str = "number") -> float:
+    if isinstance(x, bool | np.bool_ | complex | np.complexfloating):
+        raise ValueError(f"{name} must be a positive {what}; got {x!r}")
     try:
         v = float(x)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number; got {x!r}") from None
+        raise ValueError(f"{name} must be a positive {what}; got {x!r}") from None
     if not (np.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be a positive number; got {x!r}")
+        raise ValueError(f"{name} must be a positive {what}; got {x!r}")
     return v
 
 

@@ -72,6 +72,19 @@ PARAMETERS = (
 )
 """Order of the 33 parameters in `ImuCalibration.covariance` (matrices row-major)."""
 FORMAT = "hrgjax.imu_calibration"
+G_RANGE_M_S2 = (9.76, 9.84)
+"""The local gravity `g` [m/s²] a Ferraris session may declare: the range of the Earth's
+surface (9.780 at the equator to 9.832 at the poles at sea level, about −3e-6 m/s² per m of
+height), with a margin. A g outside it is a unit slip (981 in cm/s², 1 in units of g) that
+would scale M_a by that factor without a word."""
+G_DATA_TOLERANCE = 0.05
+"""How far (relative) the declared `g` may be from the mean |specific force| the static
+faces read. The raw faces carry the accelerometers' scale errors (±3 % per axis is a common
+MEMS tolerance, and the six faces' mean averages them), so 5 % accepts any sensor worth
+calibrating and refuses a g or a unit that the data contradict."""
+TURN_OFF_AXIS = 0.1
+"""The most a turn section may integrate about the two other axes, as a fraction of its
+turn (a section spanning two turns, or a turn about the wrong axis, reads far more)."""
 
 
 class ImuCalibration(eqx.Module):
@@ -155,7 +168,8 @@ class ImuCalibration(eqx.Module):
     # ---- uncertainty -------------------------------------------------------------------
     def _std(self, lo: int, shape) -> jax.Array:
         n = int(np.prod(shape))
-        return jnp.sqrt(jnp.diag(self.covariance)[lo : lo + n]).reshape(shape)
+        var = jnp.diag(self.covariance)[lo : lo + n]
+        return _sqrt_variance(var, PARAMETERS[lo : lo + n]).reshape(shape)
 
     @property
     def accel_matrix_std(self) -> jax.Array:
@@ -202,7 +216,10 @@ class ImuCalibration(eqx.Module):
         cov = self.covariance[np.ix_(idx, idx)]
         x = self.vector()[idx]
         jac = jax.jacfwd(_six_angle)(x)
-        std = jnp.sqrt(jnp.diag(jac @ cov @ jac.T))
+        sensor = "accel" if m_at == 0 else "gyro"
+        names = [f"{sensor} angle {a}" for a in ("xy", "xz", "yx", "yz", "zx", "zy")]
+        names += [f"{sensor} scale {a}" for a in "xyz"] + [PARAMETERS[b_at + i] for i in range(3)]
+        std = _sqrt_variance(jnp.diag(jac @ cov @ jac.T), names)
         y = _six_angle(x)
         return TriadCalibration(y[:6], y[6:9], bias, std[:6], std[6:9], std[9:12], noise)
 
@@ -267,7 +284,9 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
     """Read a calibration written by [`ImuCalibration.save`][hrgjax.imu.ImuCalibration.save].
 
     **Raises:** `ValueError` naming the file and the field for a file of another format or
-    a field of the wrong shape."""
+    a field of the wrong shape, a singular `accel_matrix` or `gyro_matrix`, a negative
+    variance, a `g_m_s2` outside [`G_RANGE_M_S2`][hrgjax.imu.ferraris.G_RANGE_M_S2] or a
+    `turn_deg` that is not three non-zero angles."""
     from .._io import read_json
 
     path = os.fspath(path)
@@ -290,20 +309,91 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
         if x.shape != shape or not np.all(np.isfinite(x)):
             raise ValueError(f"{path}: field {key!r} must be finite numbers of shape {shape}")
         got[key] = jnp.asarray(x)
-    noise = obj.get("noise_std", {})
-    noise_std = jnp.asarray(
-        [*noise.get("gyro_rad_s", [0.0] * 3), *noise.get("accel_m_s2", [0.0] * 3)]
-    )
-    walk = obj.get("bias_walk", {})
-    bias_walk = jnp.asarray(
-        [walk.get("gyro_rad_s_per_sqrt_s", 0.0), walk.get("accel_m_s2_per_sqrt_s", 0.0)]
-    )
+    for key in ("accel_matrix", "gyro_matrix"):
+        sv = np.linalg.svd(np.asarray(got[key]), compute_uv=False)
+        if not sv[-1] > 1e-9 * sv[0]:
+            raise ValueError(
+                f"{path}: field {key!r} is singular (singular values "
+                f"{np.array2string(sv, precision=3)}): correct() inverts it; expected an "
+                "invertible scale-and-misalignment matrix, near the identity"
+            )
+    var = np.diag(np.asarray(got["covariance"]))
+    if np.any(var < 0):
+        i = int(np.flatnonzero(var < 0)[0])
+        raise ValueError(
+            f"{path}: field 'covariance' has the variance {var[i]:.3g} < 0 for {PARAMETERS[i]} "
+            f"(row {i}); expected a covariance with a non-negative diagonal"
+        )
+    noise_std = _nonnegative(path, "noise_std", obj.get("noise_std", {}),
+                             ("gyro_rad_s", "accel_m_s2"), 3)  # fmt: skip
+    bias_walk = _nonnegative(path, "bias_walk", obj.get("bias_walk", {}),
+                             ("gyro_rad_s_per_sqrt_s", "accel_m_s2_per_sqrt_s"), None)  # fmt: skip
+    g = _check_g(obj.get("g_m_s2", 9.81), f"{path}: field 'g_m_s2'")
+    turn_deg = _check_turn_deg(obj.get("turn_deg", [360.0] * 3), f"{path}: field 'turn_deg'")
     return ImuCalibration(
         got["accel_matrix"], got["accel_bias_m_s2"], got["gyro_matrix"], got["gyro_bias_rad_s"],
         got["gyro_g_sensitivity_rad_s_per_m_s2"], got["covariance"], noise_std,
-        g=float(obj.get("g_m_s2", 9.81)), turn_deg=tuple(float(t) for t in obj.get("turn_deg", [360.0] * 3)),
+        g=g, turn_deg=tuple(float(t) for t in turn_deg),
         sigma_source=str(obj.get("sigma_source", "none")), bias_walk=bias_walk,
     )  # fmt: skip
+
+
+def _sqrt_variance(var, names) -> jax.Array:
+    """Standard errors √var, refusing a negative variance (a damaged or hand-made covariance)
+    with its parameter's name instead of returning NaN; a negative of round-off size (1e-12
+    of the largest variance) is zero. Traced values (inside `jit`) are not checked."""
+    if isinstance(var, jax.core.Tracer):
+        return jnp.sqrt(var)
+    v = np.asarray(var, dtype=float)
+    tol = 1e-12 * float(np.max(np.abs(v[np.isfinite(v)]), initial=0.0))
+    bad = np.flatnonzero(~(v >= -tol))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"covariance: the variance of {names[i]} is {v[i]:.3g}, not a number >= 0, so it has "
+            "no standard error; the calibration's covariance must be symmetric positive "
+            "semi-definite (33 x 33, PARAMETERS order)"
+        )
+    return jnp.sqrt(jnp.maximum(jnp.asarray(var), 0.0))
+
+
+def _check_g(g, name: str = "g") -> float:
+    """The declared local gravity [m/s²] as a float, within `G_RANGE_M_S2`."""
+    lo, hi = G_RANGE_M_S2
+    form = f"the local gravity in m/s² on the Earth's surface, {lo}–{hi} (9.81 standard)"
+    if isinstance(g, bool | np.bool_ | str):
+        raise ValueError(f"{name} must be {form}; got {g!r}")
+    try:
+        v = float(g)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {form}; got {g!r}") from None
+    if not (np.isfinite(v) and lo <= v <= hi):
+        hint = ""
+        if lo <= v / 100.0 <= hi:
+            hint = " (that is cm/s²)"
+        elif 0.99 <= v <= 1.01:
+            hint = " (that is in units of g)"
+        raise ValueError(f"{name} = {g!r}{hint}: expected {form}")
+    return v
+
+
+def _nonnegative(path: str, field: str, value, keys, size) -> jax.Array:
+    """`{keys[0]: …, keys[1]: …}` of a calibration file as one vector of finite numbers >= 0
+    (each `size` numbers, or one where size is None); missing keys read 0."""
+    each = "[3 numbers]" if size else "a number"
+    form = "{" + ", ".join(f"{k!r}: {each}" for k in keys) + "} with finite values >= 0"
+    if not isinstance(value, dict):
+        raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}")
+    out = []
+    for k in keys:
+        try:
+            x = np.asarray(value.get(k, [0.0] * size if size else 0.0), dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}") from None
+        if x.shape != ((size,) if size else ()) or not np.all(np.isfinite(x) & (x >= 0)):
+            raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}")
+        out.append(np.atleast_1d(x))
+    return jnp.asarray(np.concatenate(out))
 
 
 def _row(v, like):
@@ -479,16 +569,21 @@ def ferraris(
       them with [`detect_sections`][hrgjax.imu.detect_sections]; a key may list repeated
       ranges (see [`parse_sections`][hrgjax.imu.sections.parse_sections]).
     - `g`: local gravity [m/s²] (9.81 as imucal; the local value, e.g. 9.8062 at 45° latitude
-      at sea level, makes M_a absolute).
+      at sea level, makes M_a absolute), within
+      [`G_RANGE_M_S2`][hrgjax.imu.ferraris.G_RANGE_M_S2].
     - `turn_deg`: the angle of each turn [°], one number or (x, y, z); positive is
       right-handed about the axis (counter-clockwise seen from above with the axis up);
       imucal's default clockwise hand turn is −360.
 
     **Returns:** an [`ImuCalibration`][hrgjax.imu.ImuCalibration] with standard errors.
 
-    **Raises:** `ValueError` for bad sections; for a turn whose measured angle has the other
-    sign than `turn_deg` or differs from it by more than a quarter turn (naming it); for
-    faces whose accelerometer readings do not put the ±g axis where the key says."""
+    **Raises:** `ValueError` for bad sections (overlapping keys included); for a `g` outside
+    [`G_RANGE_M_S2`][hrgjax.imu.ferraris.G_RANGE_M_S2] or more than `G_DATA_TOLERANCE` (5 %)
+    from the static faces' mean |specific force|; for a turn whose measured angle has the
+    other sign than `turn_deg` or differs from it by more than a quarter turn, or that
+    integrates more than `TURN_OFF_AXIS` (10 %) of its angle about the other two axes
+    (naming it); for faces whose accelerometer readings do not put the ±g axis where the
+    key says."""
     require_x64("hg.imu.ferraris")
     if not isinstance(data, ImuData):
         raise TypeError(
@@ -500,17 +595,12 @@ def ferraris(
         sections = detect_sections(data)
     else:
         sections = parse_sections(sections, len(data))
-    g = float(g)
-    if not (np.isfinite(g) and g > 0):
-        raise ValueError(f"g must be a positive acceleration [m/s^2]; got {g!r}")
-    turns = np.broadcast_to(np.asarray(turn_deg, dtype=float), (3,)).copy()
-    if not np.all(np.isfinite(turns) & (turns != 0)):
-        raise ValueError(
-            f"turn_deg must be a non-zero angle [°] or three of them; got {turn_deg!r}"
-        )
+    g = _check_g(g)
+    turns = _check_turn_deg(turn_deg, "turn_deg")
     got = _statistics(data, sections)
     stats, cov = got.stats, got.white + got.drift
     _check_faces(stats, g)
+    _check_gravity(stats, g)
     jac, params = _estimate_and_jacobian(jnp.asarray(stats), g, jnp.deg2rad(jnp.asarray(turns)))
     jac, params = np.asarray(jac), np.asarray(params)
     _check_turns(params, turns)
@@ -522,6 +612,33 @@ def ferraris(
         turn_deg=tuple(float(t) for t in turns), sigma_source=got.source,
         bias_walk=jnp.asarray(got.bias_walk),
     )  # fmt: skip
+
+
+def _check_turn_deg(turn_deg, name: str) -> np.ndarray:
+    """`turn_deg` (one angle or three) as (3,) non-zero finite angles [°]."""
+    form = "a non-zero angle [°] or three of them (x, y, z turns), e.g. 360 or -360"
+    try:
+        raw = np.asarray(turn_deg)
+        turns = np.array(raw, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {form}; got {turn_deg!r}") from None
+    if raw.dtype.kind not in "iuf" or turns.shape not in ((), (3,)):
+        raise ValueError(f"{name} must be {form}; got {turn_deg!r}")
+    turns = np.broadcast_to(turns, (3,)).copy()
+    if not np.all(np.isfinite(turns) & (turns != 0)):
+        raise ValueError(f"{name} must be {form}; got {turn_deg!r}")
+    return turns
+
+
+def _check_gravity(stats: np.ndarray, g: float) -> None:
+    """The declared g against the static faces' mean |specific force| (`G_DATA_TOLERANCE`)."""
+    read = float(np.mean([np.linalg.norm(stats[6 * i : 6 * i + 3]) for i in range(6)]))
+    if abs(read / g - 1.0) > G_DATA_TOLERANCE:
+        raise ValueError(
+            f"g = {g:g} m/s² but the static faces read a mean |specific force| of {read:.4g} "
+            f"m/s² ({abs(read / g - 1.0):.1%} apart, more than {G_DATA_TOLERANCE:.0%}); give "
+            "the local gravity [m/s²] and check the accelerometer unit and the sections"
+        )
 
 
 def _check_faces(stats: np.ndarray, g: float) -> None:
@@ -551,4 +668,13 @@ def _check_turns(params: np.ndarray, turns: np.ndarray) -> None:
             raise ValueError(
                 f"sections: turn {key!r} integrates to {measured:.1f}° about {key[0]} but "
                 f"turn_deg is {turns[i]:g}°{hint}"
+            )
+        angles = m_g[:, i] * turns[i]  # the turn's integral about x, y, z [°]
+        off = float(np.linalg.norm(np.delete(angles, i)))
+        if off > TURN_OFF_AXIS * abs(turns[i]):
+            raise ValueError(
+                f"sections: turn {key!r} integrates to {np.round(angles, 1).tolist()}° about "
+                f"x, y, z: {off:.1f}° off its {key[0]} axis, more than {TURN_OFF_AXIS:.0%} of "
+                f"turn_deg ({turns[i]:g}°); a turn section must hold one turn about its own "
+                "axis (check the section's rows)"
             )

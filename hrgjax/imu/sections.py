@@ -40,8 +40,9 @@ def parse_sections(sections, n_samples: int) -> Sections:
 
     **Raises:** `ValueError` naming the key for a missing or unknown key, a range that is
     not `{"start": i, "end": j}` / `[i, j]` with 0 ≤ i < j ≤ n_samples, a face shorter
-    than 2 samples, or a key whose ranges repeat or overlap (a repeat must be another
-    stretch of the record: the same rows twice would fake a repeat whose scatter is 0)."""
+    than 2 samples, a key whose ranges repeat or overlap (a repeat must be another
+    stretch of the record: the same rows twice would fake a repeat whose scatter is 0), or
+    ranges of two keys that share rows."""
     where = "sections"
     if isinstance(sections, str | os.PathLike):
         where = os.fspath(sections)
@@ -68,7 +69,25 @@ def parse_sections(sections, n_samples: int) -> Sections:
             raise ValueError(f"{where}: {key!r} lists no range")
         out[key] = [_range(where, key, r, n_samples) for r in ranges]
         _check_repeats(where, key, out[key])
+    _check_disjoint(where, out)
     return out
+
+
+def _check_disjoint(where: str, sections: Sections) -> None:
+    """Different keys must be different stretches of the record: the same rows cannot be
+    two faces, or a face and a turn, at once."""
+    rows = sorted((s, e, key) for key, ranges in sections.items() for s, e in ranges)
+    s0, e0, k0 = rows[0]
+    for s1, e1, k1 in rows[1:]:
+        if s1 < e0:  # (a key's own ranges are disjoint: _check_repeats)
+            same = "the same rows" if (s0, e0) == (s1, e1) else "overlapping rows"
+            raise ValueError(
+                f"{where}: {k0!r} [{s0}, {e0}] and {k1!r} [{s1}, {e1}] are {same}: each "
+                "section must be its own stretch of the record (ranges [i, j) of different "
+                "keys may touch but not overlap)"
+            )
+        if e1 > e0:
+            s0, e0, k0 = s1, e1, k1
 
 
 def _check_repeats(where: str, key: str, ranges: list[tuple[int, int]]) -> None:
