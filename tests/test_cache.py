@@ -209,3 +209,22 @@ def test_single_simulations_run_on_the_cpu_beside_an_accelerator(monkeypatch):
     # the exported program).
     with jax.default_device("gpu"):
         assert _export._platform() is None
+
+
+def test_an_unusable_cache_folder_warns_once_and_runs_without(tmp_path, monkeypatch):
+    """Issue 44: a cache path under a file (misplaced HRGJAX_CACHE_DIR) is one warning, then
+    no cache — never a stopped command."""
+    import warnings
+
+    from hrgjax import _cache
+
+    monkeypatch.setattr(_cache, "_warned", set())
+    monkeypatch.delenv("HRGJAX_NO_CACHE", raising=False)
+    blocker = tmp_path / "afile"
+    blocker.write_text("")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert _cache.enable_cache(blocker) is None
+        assert _cache.enable_cache(blocker) is None
+    lines = [str(w.message) for w in caught if "compile cache" in str(w.message)]
+    assert len(lines) == 1 and "running without it" in lines[0], lines
