@@ -244,7 +244,8 @@ def test_compare_and_correct_refuse_bad_input(two_sessions, tmp_path, capsys):
     as_json = tmp_path / "model.json"  # a compensator file that happens to end in .json
     shutil.copy(fourier, as_json)
     base = ["compare", str(test), "--models"]
-    cli_fails(base + [str(as_json), "--json", str(as_json)], capsys, "--json .* is the input file")
+    cli_fails(base + [str(as_json), "--json", str(as_json)], capsys,
+              "--json .* is also the input --models")  # fmt: skip
     cli_fails(base + [str(fourier), "--plot", str(tmp_path / "f.txt")], capsys, "--plot .*must end")
     cli_fails(base + [str(tmp_path / "no.eqx")], capsys, r"--models .*no\.eqx: no such file")
     bad = tmp_path / "bad.eqx"

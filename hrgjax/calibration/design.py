@@ -132,16 +132,16 @@ class BenchPlan(eqx.Module):
             bad = np.flatnonzero(~np.isfinite(x))
             if bad.size:
                 raise ValueError(f"BenchPlan.{name}[{bad[0]}] is {x[bad[0]]}; give a finite value")
+        bad = np.flatnonzero(v["duration_s"] <= 0)
+        if bad.size:
+            i = bad[0]
+            raise ValueError(f"segment {i} ({self.kind[i]}): duration_s must be > 0 [s]")
         for name, quantity in (("temperature_c", "temperature_c"),
                                ("temperature_end_c", "temperature_c"),
                                ("wave_angle_deg", "wave_angle_deg"),
                                ("rate_dps", "table_rate_dps"),
                                ("duration_s", "duration_s")):  # fmt: skip
             plausible.check(f"BenchPlan.{name}", v[name], quantity)
-        bad = np.flatnonzero(v["duration_s"] <= 0)
-        if bad.size:
-            i = bad[0]
-            raise ValueError(f"segment {i} ({self.kind[i]}): duration_s must be > 0 [s]")
         for i, k in enumerate(self.kind):
             if k != "ramp" and v["temperature_end_c"][i] != v["temperature_c"][i]:
                 raise ValueError(
