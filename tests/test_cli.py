@@ -256,9 +256,11 @@ def test_compare_and_correct_refuse_bad_input(two_sessions, tmp_path, capsys):
     cli_fails(["compare", str(tmp_path / "none.csv"), "--models", str(fourier)], capsys,
               "none.csv: no such file")  # fmt: skip
     cli_fails(["correct", str(test), "--model", str(fourier), "--out", str(test)], capsys,
-              "--out .* is the input file")  # fmt: skip
+              "--out .* is also the input DATA")  # fmt: skip
     cli_fails(["correct", str(test), "--model", str(fourier), "--plot", str(fourier)], capsys,
-              "--plot .*must end")  # fmt: skip
+              "--plot .* is also the input --model")  # fmt: skip
+    cli_fails(["correct", str(test), "--model", str(fourier), "--plot", str(tmp_path / "p.eqx")],
+              capsys, "--plot .*must end")  # fmt: skip
 
 
 def test_correct_reports_the_offset_and_draws_it(two_sessions, tmp_path, capsys):
