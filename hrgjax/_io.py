@@ -9,6 +9,7 @@ loads. The temporary file is removed when the write fails.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import tempfile
 
@@ -63,10 +64,32 @@ def read_json(path: str | os.PathLike):
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"{path}: no such file")
+    def number(text: str):
+        value = float(text)
+        if not math.isfinite(value):
+            raise ValueError(f"{path}: the number {text} is beyond float64's range (±1.8e308)")
+        return value
+
+    def constant(name: str):
+        raise ValueError(f"{path}: {name} is not a JSON number; give a finite number")
+
     try:
         with open(path, encoding="utf-8") as fh:
-            return json.load(fh)
+            return json.load(fh, parse_float=number, parse_int=_json_int(path),
+                             parse_constant=constant)  # fmt: skip
     except json.JSONDecodeError as err:
         raise ValueError(f"{path}: not JSON ({err.msg} at line {err.lineno})") from None
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not UTF-8 text; save the file as UTF-8 JSON") from None
+    except RecursionError:
+        raise ValueError(f"{path}: JSON nested too deeply to be an hrgjax file") from None
+
+
+def _json_int(path: str):
+    def parse(text: str):
+        if len(text.lstrip("-")) > 18:  # beyond int64: no hrgjax field holds such a count
+            raise ValueError(f"{path}: the integer {text[:24]}{'…' if len(text) > 24 else ''} "
+                             "is too large for any field (int64)")  # fmt: skip
+        return int(text)
+
+    return parse

@@ -503,3 +503,34 @@ def test_values_swapped_in_after_construction_are_checked_where_simulate_starts(
         hg.allan.deviation(np.ones(100) * (1 + 1j), rate_hz=1.0)
     with pytest.raises(ValueError, match=r"taus must be > 0 s; got -1"):
         hg.allan.deviation(np.ones(100), rate_hz=1.0, taus=[-1.0, 2.0])
+
+
+@pytest.mark.parametrize(
+    "text,match",
+    [
+        ('{"a": 1e400}', r"1e400 is beyond float64's range"),
+        ('{"a": 123456789012345678901234}', r"integer 1234567890123456789012.* too large"),
+        ('{"a": NaN}', r"NaN is not a JSON number"),
+        ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    ],
+)
+def test_json_numbers_python_cannot_hold_are_named(tmp_path, text, match):
+    """Issue 44: plan, sections and calibration JSON share one reader; what Python's own
+    json would turn into inf, a bignum or a RecursionError is a one-line error naming the
+    file."""
+    from hrgjax._io import read_json
+
+    f = tmp_path / "x.json"
+    f.write_text(text)
+    with pytest.raises(ValueError, match=match) as err:
+        read_json(f)
+    assert str(f) in str(err.value)
+
+
+def test_a_header_only_imu_csv_is_named_without_numpy_warnings(tmp_path, recwarn):
+    f = tmp_path / "h.csv"
+    f.write_text("t,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z\n")
+    with pytest.raises(ValueError, match=r"h.csv: gyro has 0 samples"):
+        hg.imu.load(f, {"gyro": ["gyr_x", "gyr_y", "gyr_z"], "accel": ["acc_x", "acc_y", "acc_z"]},
+                    {"gyro": "deg/s", "accel": "m/s^2"}, rate_hz=100.0)  # fmt: skip
+    assert not [w for w in recwarn if "numpy" in w.filename or "loadtxt" in str(w.message)]

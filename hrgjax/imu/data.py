@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -288,8 +289,10 @@ def _fast_columns(path: str, wanted: list[str]) -> dict[str, np.ndarray] | None:
         if len(set(header)) != len(header) or any(w not in header for w in wanted):
             return None
         # every column, so that a row with more or fewer fields than the header is refused
-        data = np.loadtxt(path, delimiter=",", comments="#", skiprows=skip, ndmin=2,
-                          dtype=float, encoding="utf-8-sig")  # fmt: skip
+        with warnings.catch_warnings():  # "input contained no data": named by _build
+            warnings.simplefilter("ignore", UserWarning)
+            data = np.loadtxt(path, delimiter=",", comments="#", skiprows=skip, ndmin=2,
+                              dtype=float, encoding="utf-8-sig")  # fmt: skip
     except (ValueError, OSError, UnicodeDecodeError):
         return None
     if data.shape[0] == 0 or data.shape[1] != len(header):
@@ -379,6 +382,9 @@ def _triad(name: str, x) -> np.ndarray:
     a = _real(name, x, "(N, 3)")
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"{name} must have shape (N, 3) (axes x, y, z); got {a.shape}")
+    if a.shape[0] < 2:
+        raise ValueError(f"{name} has {a.shape[0]} samples; a record needs at least 2 (a file "
+                         "with only its header holds none)")  # fmt: skip
     _finite(name, a)
     a.flags.writeable = False
     return a
