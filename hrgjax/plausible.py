@@ -115,3 +115,25 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
             f"an angle in radians would (−k_e·π/180 = {radians:.4g}; in degrees ≈ −k_e = "
             f"{-k_e:.4g}): give the wave angle in degrees (np.degrees)"
         )
+
+
+BYTES_PER_SAMPLE = 100
+"""Host and device memory one output sample of a simulated run takes, all fields [bytes]."""
+
+
+def check_size(what: str, samples: float, runs: int) -> None:
+    """Refuse, before anything is allocated, work whose output would exceed
+    `hrgjax.simulate.MAX_OUTPUT_SAMPLES` samples (set that constant higher to allow more),
+    with the estimate.
+
+    **Raises:** `ValueError`: "<what>: N runs hold S output samples (≈ M GiB) …"."""
+    from .simulate import MAX_OUTPUT_SAMPLES
+
+    if samples > MAX_OUTPUT_SAMPLES:
+        gib = samples * BYTES_PER_SAMPLE / 2**30
+        raise ValueError(
+            f"{what}: {runs} runs hold {samples:.3g} output samples (≈ {gib:.3g} GiB at "
+            f"≈ {BYTES_PER_SAMPLE} bytes each), more than the {MAX_OUTPUT_SAMPLES:.0e} hrgjax "
+            "allocates at once; split the plan, lengthen dt_out, or raise "
+            "hrgjax.simulate.MAX_OUTPUT_SAMPLES"
+        )

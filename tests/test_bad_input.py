@@ -534,3 +534,19 @@ def test_a_header_only_imu_csv_is_named_without_numpy_warnings(tmp_path, recwarn
         hg.imu.load(f, {"gyro": ["gyr_x", "gyr_y", "gyr_z"], "accel": ["acc_x", "acc_y", "acc_z"]},
                     {"gyro": "deg/s", "accel": "m/s^2"}, rate_hz=100.0)  # fmt: skip
     assert not [w for w in recwarn if "numpy" in w.filename or "loadtxt" in str(w.message)]
+
+
+def test_plans_too_large_to_hold_are_refused_before_any_work():
+    """Issue 44: the size is estimated from the plan before anything is allocated."""
+    from hrgjax.calibration import design
+
+    gyro = hg.presets.tvg3_like(noise=False)
+    seg = dict(kind="static", temperature_c=20.0, wave_angle_deg=0.0, duration_s=3600.0)
+    plan = design.BenchPlan.from_segments([seg] * 20_000)  # 20 000 h at 1 s: 7.2e7 samples
+    with pytest.raises(ValueError, match=r"simulate_plan: 20000 runs hold 7.2e\+07 output "
+                                         r"samples \(≈ 6.71 GiB"):  # fmt: skip
+        design.simulate_plan(gyro, plan)
+    big = hg.calibration.static_plan(tuple(np.linspace(-40.0, 60.0, 1000)), (0.0,),
+                                     duration_s=86400.0, dt_out=1.0)  # fmt: skip
+    with pytest.raises(ValueError, match=r"run_plan: 1000 runs hold 8.64e\+07"):
+        hg.calibration.run_plan(gyro, big)

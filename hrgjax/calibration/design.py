@@ -797,6 +797,7 @@ def simulate_plan(
                 f"segment {i} ({k}): duration_s={durations[i]:g} is not a whole number of "
                 f"dt_out={dt:g} s output intervals"
             )
+    plausible.check_size("simulate_plan", float(np.sum(n_out + 1)), plan.size)
     groups = _simulation_groups(plan, n_out, dts, model)
     per_segment: list[dict | None] = [None] * plan.size
     with bar(plan.size, f"simulating {plan.size} segments", unit="segment") as progress:

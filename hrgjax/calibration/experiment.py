@@ -205,8 +205,10 @@ def run_plan(
     measured ≤ 1e-14 relative in the wave angle, ≤ 5e-13 in amplitude and quadrature);
     `order_by_cost=False` keeps the plan's order.
     """
+    n_out = int(round(plan.duration_s / plan.dt_out)) + 1
+    plausible.check_size("run_plan", float(n_out) * plan.size, plan.size)
     profiles = plan.profiles()
-    ts = device(np.arange(int(round(plan.duration_s / plan.dt_out)) + 1) * plan.dt_out)
+    ts = device(np.arange(n_out) * plan.dt_out)
     keys = None
     if gyro.noise is not None:
         if key is None:
