@@ -550,3 +550,20 @@ def test_plans_too_large_to_hold_are_refused_before_any_work():
                                      duration_s=86400.0, dt_out=1.0)  # fmt: skip
     with pytest.raises(ValueError, match=r"run_plan: 1000 runs hold 8.64e\+07"):
         hg.calibration.run_plan(gyro, big)
+
+
+def test_a_failing_plan_names_its_point_and_segment():
+    """Issue 44: a solver failure inside a vmapped chunk names the plan point or the bench
+    segment (an absurd nonlinearity makes every solve give up)."""
+    from hrgjax.calibration import design
+
+    bad = eqx.tree_at(lambda g: g.resonator.chi, hg.presets.tvg3_like(noise=False), 1e12)
+    plan = hg.calibration.static_plan((0.0, 20.0), (30.0,), duration_s=20.0)
+    with pytest.raises(RuntimeError, match=r"^run_plan: point \d \(\d+ °C, 30°, 0 °/s\) failed: "
+                                           r"the solver failed"):  # fmt: skip
+        hg.calibration.run_plan(bad, plan)
+    seg = dict(kind="rotation", temperature_c=20.0, wave_angle_deg=0.0, rate_dps=5.0,
+               duration_s=20.0)  # fmt: skip
+    with pytest.raises(RuntimeError, match=r"^simulate_plan: segment 0 \(rotation, 20 °C, 5 °/s, "
+                                           r"20 s\) failed: the solver failed"):  # fmt: skip
+        design.simulate_plan(bad, design.BenchPlan.from_segments([seg]))

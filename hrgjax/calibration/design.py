@@ -813,7 +813,10 @@ def simulate_plan(
                 if keys is not None:
                     k = jax.random.wrap_key_data(device(keys[take]), impl=impl)
                 profiles = _profiles(plan, take, (samples - 1) * dt)
-                rec, _ = _simulate_chunk(gyro, profiles, k, bias_key, ts, model)
+                try:
+                    rec, _ = _simulate_chunk(gyro, profiles, k, bias_key, ts, model)
+                except RuntimeError as err:
+                    raise RuntimeError(_failed_segment(plan, take, str(err))) from None
                 cols = rec.to_data().columns
                 real = min(chunk, len(idx) - s)
                 for j in range(real):
@@ -824,6 +827,23 @@ def simulate_plan(
                 progress.update(real)
     names = list(per_segment[0])
     return MeasuredData({c: np.concatenate([s[c] for s in per_segment]) for c in names})
+
+
+def _failed_segment(plan: BenchPlan, take: np.ndarray, message: str) -> str:
+    """A simulator failure inside a chunk of segments `take`, with the segment named (the
+    simulator's message says which batch member failed)."""
+    import re
+
+    found = re.search(r"\(batch member \((\d+),?\)\)", message)
+    members = [int(take[int(found.group(1))])] if found else sorted(set(map(int, take)))
+    i = members[0]
+    what = (f"segment {i} ({plan.kind[i]}, {float(plan.temperature_c[i]):g} °C, "
+            f"{float(plan.rate_dps[i]):g} °/s, {float(plan.duration_s[i]):g} s)")  # fmt: skip
+    if not found and len(members) > 1:
+        what = f"one of segments {members[0]}…{members[-1]} (first: {what})"
+    detail = re.sub(r"\s*\(batch member \(\d+,?\)\)", "", message)
+    detail = detail.removeprefix("run_plan (simulating a plan point): ")
+    return f"simulate_plan: {what} failed: {detail}"
 
 
 # --- What a plan teaches: Fisher information of the physical grey box ----------------------

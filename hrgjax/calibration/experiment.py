@@ -171,7 +171,28 @@ CHUNK = 32
 reuses one compiled simulator, whatever its number of points."""
 
 
-@program(check=Check("run_plan (simulating a plan point)", result_index=1))
+class _ChunkCheck(Check):
+    """`Check` of a vmapped chunk that also says which member failed, as
+    "(batch member (j,))": the first whose solve failed or whose outputs are not finite."""
+
+    def host(self, out):
+        message = super().host(out)
+        if message is None:
+            return None
+        rec, result = out
+        bad = np.zeros(np.shape(rec.t)[0], bool)
+        try:
+            bad |= np.asarray(result._value) != self._enumeration().successful._value
+        except AttributeError:  # another JAX/diffrax layout: the outputs still tell
+            pass
+        for x in (rec.wave_angle, rec.amplitude, rec.quadrature):
+            bad |= ~np.all(np.isfinite(np.asarray(x)), axis=-1)
+        if bad.any():
+            message += f" (batch member ({int(np.flatnonzero(bad)[0])},))"
+        return message
+
+
+@program(check=_ChunkCheck("run_plan (simulating a plan point)", result_index=1))
 def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
     def one(p, k):
         rec, _, result = _simulate(gyro, p, model, key=k, bias_key=bias_key, ts=ts)
@@ -180,6 +201,22 @@ def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
     if keys is None:
         return jax.vmap(lambda p: one(p, None))(profiles)
     return jax.vmap(one)(profiles, keys)
+
+
+def _failed_point(plan: Plan, order, start: int, message: str) -> str:
+    """A chunk's failure with the plan point named (from the check's batch member)."""
+    import re
+
+    found = re.search(r"\(batch member \((\d+),?\)\)", message)
+    if found is None:
+        return message
+    j = min(start + int(found.group(1)), plan.size - 1)
+    i = int(order[j]) if order is not None else j
+    detail = re.sub(r"\s*\(batch member \(\d+,?\)\)", "", message)
+    detail = detail.removeprefix("run_plan (simulating a plan point): ")
+    return (f"run_plan: point {i} ({float(plan.temperature_c[i]):g} °C, "
+            f"{float(plan.wave_angle0_deg[i]):g}°, {float(plan.rate_dps[i]):g} °/s) failed: "
+            f"{detail}")  # fmt: skip
 
 
 def run_plan(
@@ -246,14 +283,17 @@ def run_plan(
     with bar(size, f"simulating {size} runs", unit="run") as progress:
         for i, start in enumerate(starts):
             take = lambda x, s=start: x[s : s + chunk]
-            rec, _ = _simulate_chunk(
-                gyro,
-                jax.tree_util.tree_map(take, profiles),
-                None if keys is None else keys[i],
-                bias_key,
-                ts,
-                model,
-            )
+            try:
+                rec, _ = _simulate_chunk(
+                    gyro,
+                    jax.tree_util.tree_map(take, profiles),
+                    None if keys is None else keys[i],
+                    bias_key,
+                    ts,
+                    model,
+                )
+            except RuntimeError as err:
+                raise RuntimeError(_failed_point(plan, order, start, str(err))) from None
             parts.append(rec)
             progress.update(min(chunk, size - start))
     join = lambda *xs: (np if xp is np else jnp).concatenate(xs)[:size]
