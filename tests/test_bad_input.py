@@ -567,3 +567,19 @@ def test_a_failing_plan_names_its_point_and_segment():
     with pytest.raises(RuntimeError, match=r"^simulate_plan: segment 0 \(rotation, 20 °C, 5 °/s, "
                                            r"20 s\) failed: the solver failed"):  # fmt: skip
         design.simulate_plan(bad, design.BenchPlan.from_segments([seg]))
+
+
+def test_discover_refuses_a_log_whose_wave_angle_never_moves():
+    """Issue 44: an all-constant log gave LAPACK's 'DLASCL parameter number 4' lines and
+    'SVD did not converge'; now one line before any fit."""
+    from hrgjax.discovery import discover
+
+    t = np.arange(0.0, 60.0, 1.0)
+    cols = {k: [] for k in ("time_s", "run", "temperature_c", "table_rate_dps", "wave_angle_deg")}
+    for run in range(12):
+        for k, v in (("time_s", t), ("run", run), ("temperature_c", 20.0),
+                     ("table_rate_dps", 0.0), ("wave_angle_deg", 10.0)):  # fmt: skip
+            cols[k].append(np.broadcast_to(v, t.shape))
+    data = hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
+    with pytest.raises(ValueError, match="'wave_angle_deg' never changes within a run"):
+        discover(data)

@@ -50,6 +50,23 @@ from .result import Discovery
 METRIC = "rms_run_mean_rate_residual_dph"
 
 
+def _check_informative(data: MeasuredData) -> None:
+    """Refuse a log with nothing to fit: a wave angle that never moves within any run (a
+    stuck or constant column — a live gyro's angle moves by its noise at least), or no table
+    rate and no temperature change at all (nothing separates the effects). Without this the
+    fit divides by a zero noise level and LAPACK prints its own lines before the error."""
+    wave, run = np.asarray(data["wave_angle_deg"], float), np.asarray(data.run)
+    order = np.argsort(run, kind="stable")
+    w, r = wave[order], run[order]
+    same = r[1:] == r[:-1]
+    if not np.any(same & (np.diff(w) != 0.0)):
+        raise ValueError(
+            f"column 'wave_angle_deg' never changes within a run (constant {wave[0]:g}° "
+            "throughout): a gyro's wave angle moves by its drift and noise at least; check "
+            "the column (a stuck or copied value)"
+        )
+
+
 def discover(
     data: MeasuredData,
     *,
@@ -117,6 +134,7 @@ def discover(
         raise ValueError(f"block_s must be a positive number of seconds; got {block_s}")
     if noise is not None and not isinstance(noise, Noise):
         raise TypeError(f"noise must be an hrgjax.Noise or None; got {type(noise).__name__}")
+    _check_informative(data)
     if shape == "auto":
         n_dwell = len(dwell_runs(data))
         n_runs = np.unique(data.run).size
