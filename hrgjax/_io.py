@@ -64,6 +64,7 @@ def read_json(path: str | os.PathLike):
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"{path}: no such file")
+
     def number(text: str):
         value = float(text)
         if not math.isfinite(value):

@@ -13,8 +13,8 @@ from collections.abc import Iterator, Mapping
 
 import numpy as np
 
-from ._io import atomic_path, atomic_write
 from . import plausible
+from ._io import atomic_path, atomic_write
 from .units import DEG, K_E_NOMINAL
 
 COLUMNS: dict[str, str] = {

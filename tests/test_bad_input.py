@@ -234,7 +234,6 @@ def test_damaged_compensator_files_are_named(eqx_file, tmp_path, damage, match):
 
 
 def test_a_header_of_another_class_is_named_not_a_traceback(eqx_file, tmp_path):
-    import hashlib
     import json
 
     from hrgjax.calibration import load_compensator
@@ -479,7 +478,9 @@ def test_impossible_bench_plans_are_refused():
 
     with pytest.raises(ValueError, match="BenchModel.start_temperature_c must be finite"):
         design.BenchModel(start_temperature_c=float("nan"))
-    with pytest.raises(ValueError, match=r"budget_h \(as seconds\) = 3.6e\+12 .*30 days|2.592e\+06"):
+    with pytest.raises(
+        ValueError, match=r"budget_h \(as seconds\) = 3.6e\+12 .*30 days|2.592e\+06"
+    ):
         design.design(1e9)
     seg = dict(kind="static", temperature_c=300.0, wave_angle_deg=0.0,
                duration_s=60.0)  # fmt: skip
@@ -583,3 +584,285 @@ def test_discover_refuses_a_log_whose_wave_angle_never_moves():
     data = hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
     with pytest.raises(ValueError, match="'wave_angle_deg' never changes within a run"):
         discover(data)
+
+
+# --- issue 44: fuzzed plan, sections and calibration files and IMU CSVs ----------------------
+#
+# Each file is a valid document with one mutation; the outcome must be "loaded" or a one-line
+# ValueError naming the file, with no warning printed (benchmarks/fuzz_loaders.py runs the same
+# families by the thousand: --plans, --sections, --calibrations, --imu).
+
+_JSON_JUNK = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**18), 10**18),
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.sampled_from(["", "abc", "1.5", "nan", "NaN", "inf", "-1", "0x1f"]),
+    st.lists(st.lists(st.integers(-3, 3), max_size=2), max_size=3),
+    st.dictionaries(st.sampled_from(["start", "end", "x"]), st.integers(-3, 3), max_size=2),
+)
+_RAW_JSON = ["NaN", "Infinity", "-Infinity", "1e400", "-1e400", "123456789012345678901234",
+             "[" * 3000 + "]" * 3000, "[" * 200 + "1" + "]" * 200, "1E+308", "-0"]  # fmt: skip
+_JSON_OPS = ["replace", "drop", "duplicate", "rename", "wrap", "negate", "huge", "text", "raw"]
+
+
+def _mutated_json(doc, path, op, value, raw):
+    """`doc`'s JSON text after `op` at the node `path` leads to (each index picks a key or an
+    item, modulo their number; an empty path or a leaf stops the walk: `op` then replaces the
+    whole document by `value`, a wrong type at the top level)."""
+    import copy
+    import json
+
+    doc = copy.deepcopy(doc)
+    parent, key, node = None, None, doc
+    for i in path:
+        if not isinstance(node, dict | list) or not node:
+            break
+        key = list(node)[i % len(node)] if isinstance(node, dict) else i % len(node)
+        parent, node = node, node[key]
+    if parent is None:
+        return json.dumps(value)
+    if op == "replace":
+        parent[key] = value
+    elif op == "drop":
+        del parent[key]
+    elif op == "duplicate":  # a list item twice, a key twice (the later one wins in JSON)
+        if isinstance(parent, list):
+            parent.insert(key, copy.deepcopy(node))
+        else:
+            text = json.dumps(parent)
+            parent.clear()
+            parent["\x00DUP\x00"] = None
+            return json.dumps(doc).replace(
+                '{"\\u0000DUP\\u0000": null}', text[:-1] + f", {json.dumps(key)}: "
+                f"{json.dumps(value)}}}" if len(text) > 2 else text)  # fmt: skip
+    elif op == "rename" and isinstance(parent, dict):
+        parent[key + "_"] = parent.pop(key)
+    elif op == "wrap":
+        parent[key] = [node]
+    elif op == "negate":
+        is_number = isinstance(node, int | float) and not isinstance(node, bool)
+        parent[key] = -node if is_number else -1
+    elif op == "huge":
+        parent[key] = 1e308 if isinstance(node, float) else 10**18
+    elif op == "text":
+        parent[key] = str(node)
+    elif op == "raw":
+        parent[key] = "\x00RAW\x00"
+        return json.dumps(doc).replace('"\\u0000RAW\\u0000"', raw)
+    return json.dumps(doc)
+
+
+def _loaded_or_named(load, path):
+    """Call `load(path)`: it loads, or raises a one-line ValueError naming `path`; no
+    other exception and no warning."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            load(path)
+        except ValueError as err:
+            text = str(err)
+            assert str(path) in text and "\n" not in text, text
+    assert not caught, [f"{w.category.__name__}: {w.message}" for w in caught]
+
+
+@pytest.fixture(scope="module")
+def documents():
+    """Valid plan, sections and calibration documents (one small Ferraris fit, reused)."""
+    from hrgjax.calibration import design
+    from hrgjax.imu.sections import sections_to_json
+
+    segs = design.seed_bench_plan(quick=True).segments()[::19]
+    segs.append({"kind": "ramp", "temperature_start_c": 20.0, "temperature_end_c": 25.0,
+                 "wave_angle_deg": 10.0, "rate_dps": 5.0, "duration_s": 600.0})  # fmt: skip
+    plan = design.plan_to_json(
+        design.BenchPlan.from_segments(segs),
+        resolution={"temperature_c": 0.1, "wave_angle_deg": 0.1, "duration_s": 1.0},
+    )
+    truth = hg.imu.ImuCalibration.known(gyro_bias=np.array([0.01, -0.02, 0.005]))
+    data, sections = hg.imu.ferraris_session(
+        truth, jax.random.key(0), rate_hz=20.0, repeats=2, static_s=3.0
+    )
+    cal = hg.imu.ferraris(data, sections)
+    return {"plan": plan, "sections": sections_to_json(sections), "n": len(data),
+            "calibration": cal.to_json()}  # fmt: skip
+
+
+def _json_loader(kind, n):
+    from hrgjax.calibration.design import load_plan
+
+    return {
+        "plan": load_plan,
+        "sections": lambda p: hg.imu.parse_sections(p, n),
+        "calibration": hg.imu.load_calibration,
+    }[kind]
+
+
+def test_the_valid_documents_load(documents, tmp_path):
+    import json
+
+    for kind in ("plan", "sections", "calibration"):
+        p = tmp_path / f"{kind}.json"
+        p.write_text(json.dumps(documents[kind]), encoding="utf-8")
+        _json_loader(kind, documents["n"])(p)
+
+
+@pytest.mark.parametrize("kind", ["plan", "sections", "calibration"])
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    path=st.lists(st.integers(0, 200), max_size=4),
+    op=st.sampled_from(_JSON_OPS),
+    value=_JSON_JUNK,
+    raw=st.sampled_from(_RAW_JSON),
+)
+def test_fuzzed_json_files_load_or_name_the_file(documents, tmp_path, kind, path, op, value, raw):
+    p = tmp_path / f"{kind}.json"
+    p.write_text(_mutated_json(documents[kind], path, op, value, raw), encoding="utf-8")
+    _loaded_or_named(_json_loader(kind, documents["n"]), p)
+
+
+IMU_HEADER = ["time_s", "gx", "gy", "gz", "ax", "ay", "az", "temperature_c"]
+IMU_COLUMNS = {"time": "time_s", "gyro": ["gx", "gy", "gz"], "accel": ["ax", "ay", "az"],
+               "temperature": "temperature_c"}  # fmt: skip
+_IMU_TEXT = ["", " ", "abc", "nan", "inf", "-inf", "1_000", "1,000", "1e", "1e400", "1e308",
+             "-1e308", "1e-320", "0x1f", "99999999999999999999999", "True", "½", "١٢", '"',
+             "\x00", "2024-01-01", "0"]  # fmt: skip
+_IMU_FIELDS = st.one_of(
+    st.sampled_from(_IMU_TEXT),
+    st.floats().map(repr),
+    st.integers(-(10**30), 10**30).map(str),
+)
+
+
+def _imu_rows(n):
+    rng = np.random.default_rng(0)
+    rows = []
+    for i in range(n):
+        g = rng.normal(0, 0.01, 3)
+        a = np.array([0.0, 0.0, 9.81]) + rng.normal(0, 0.01, 3)
+        rows.append([repr(i * 0.01), *map(repr, g.tolist()), *map(repr, a.tolist()), "20.5"])
+    return rows
+
+
+def _is_float(text):
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+@settings(
+    max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    n=st.integers(0, 8),
+    edits=st.lists(st.tuples(st.integers(0, 7), st.integers(0, 7), _IMU_FIELDS), max_size=3),
+    header=st.one_of(
+        st.none(), st.tuples(st.integers(0, 7), st.sampled_from(["drop", "dup", "typo"]))
+    ),
+    cut=st.one_of(st.none(), st.tuples(st.integers(0, 7), st.integers(0, 9))),
+    scale=st.one_of(st.none(), st.tuples(st.integers(0, 7), st.sampled_from([1e306, 1e-320]))),
+    units=st.sampled_from([{"gyro": "rad/s", "accel": "m/s^2"}, {"gyro": "deg/s", "accel": "g"}]),
+    truncate=st.one_of(st.none(), st.integers(0, 800)),
+    no_time=st.booleans(),
+)
+def test_fuzzed_imu_csv_loads_or_names_the_file(
+    tmp_path, n, edits, header, cut, scale, units, truncate, no_time
+):
+    """Text, empty fields, huge or tiny values, missing, duplicated or misspelt columns,
+    short or long rows, a truncated file, no time column (rate_hz given)."""
+    rows = _imu_rows(n)
+    names = list(IMU_HEADER)
+    for r, c, text in edits:
+        if rows:
+            rows[r % len(rows)][c] = text
+    if header is not None:
+        c, how = header
+        if how == "drop":
+            names.pop(c)
+        else:
+            names[c] = names[(c + 1) % 8] if how == "dup" else names[c] + "x"
+    if cut is not None and rows:
+        r, k = cut
+        rows[r % len(rows)] = (rows[r % len(rows)] + ["1"])[:k]
+    if scale is not None:
+        c, factor = scale
+        for row in rows:
+            if c < len(row) and _is_float(row[c]):
+                with np.errstate(all="ignore"):
+                    row[c] = repr(float(row[c]) * factor)
+    text = ",".join(names) + "\n" + "".join(",".join(r) + "\n" for r in rows)
+    blob = text.encode("utf-8")[:truncate]
+    p = tmp_path / "imu.csv"
+    p.write_bytes(blob)
+    columns = {k: v for k, v in IMU_COLUMNS.items() if not (no_time and k == "time")}
+    _loaded_or_named(
+        lambda path: hg.imu.load(path, columns, units, rate_hz=100.0 if no_time else None), p
+    )
+
+
+# what the fuzzing found (issue 44), each a one-line ValueError naming the file and the field
+
+
+def _imu_file(tmp_path, row1="0.01,0.01,0,0,0,0,9.81", times=None):
+    n = 4 if times is None else len(times)
+    rows = [f"{i * 0.01 if times is None else times[i]},0.01,0,0,0,0,9.81" for i in range(n)]
+    rows[1] = row1 if times is None else rows[1]
+    return _csv(tmp_path, "time_s,gx,gy,gz,ax,ay,az\n" + "\n".join(rows) + "\n", "imu.csv")
+
+
+@pytest.mark.parametrize(
+    "row1,times,units,match",
+    [  # "1_000": Python's float() reads it, the CSV reader does not: was a bare StopIteration
+        ("0.01,1_000,0,0,0,0,9.81", None, "m/s^2", "column 'gx' row 1 .*'1_000' is not a number"),
+        # 1e308 g is beyond float64 in m/s²: was NumPy's overflow warning, then 'not finite'
+        ("0.01,0.01,0,0,0,0,1e308", None, "g", "accel row 1.*axis z: 1e\\+308 g is beyond"),
+        # time steps of 1e-320 s: was loaded at 'inf Hz'
+        (None, [0, 1e-320, 2e-320, 3e-320], "m/s^2", "time: the median step .* no finite"),
+        # steps beyond 1.8e308 s: was NumPy's overflow warning
+        (None, [-1e308, 1e308], "m/s^2", "time: the median step inf s"),
+    ],
+)
+def test_imu_csv_fields_found_by_fuzzing_are_named(tmp_path, recwarn, row1, times, units, match):
+    p = _imu_file(tmp_path, row1, times)
+    cols = {"time": "time_s", "gyro": ["gx", "gy", "gz"], "accel": ["ax", "ay", "az"]}
+    with pytest.raises(ValueError, match=match) as err:
+        hg.imu.load(p, cols, {"gyro": "rad/s", "accel": units}, check_units=False)
+    assert str(err.value).startswith(str(p)) and "\n" not in str(err.value)
+    assert not recwarn.list, [str(w.message) for w in recwarn.list]
+
+
+@pytest.mark.parametrize(
+    "kind,edit,match",
+    [  # float() read these as numbers: "inf" gave an infinite settle time, true gave 1.0
+        ("plan", ("bench", "settle_s", "inf"), "'bench': 'settle_s' must be a finite number"),
+        ("plan", ("bench", "slew_c_per_min", True), "'bench': 'slew_c_per_min' must be a finite"),
+        ("plan", ("bench", "reposition_s", "60"), "'bench': 'reposition_s' must be a finite"),
+        # a matrix of booleans or text read as 1.0 / 1.5
+        ("calibration", ("accel_matrix", 0, [True, False, False]), "'accel_matrix' must be .*boo"),
+        ("calibration", ("gyro_bias_rad_s", 1, "0.01"), "'gyro_bias_rad_s' must be .*got text"),
+        ("calibration", ("noise_std", "gyro_rad_s", [True, True, True]), "'noise_std' must be"),
+        # any value was turned into text by str()
+        ("calibration", ("sigma_source", None, [1, 2]), "'sigma_source' must be text"),
+    ],
+)
+def test_json_fields_found_by_fuzzing_are_named(documents, tmp_path, kind, edit, match):
+    import copy
+    import json
+
+    doc = copy.deepcopy(documents[kind])
+    field, key, value = edit
+    if key is None:
+        doc[field] = value
+    else:
+        doc[field][key] = value
+    p = tmp_path / f"{kind}.json"
+    p.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(ValueError, match=match) as err:
+        _json_loader(kind, documents["n"])(p)
+    assert str(err.value).startswith(str(p)) and "\n" not in str(err.value)

@@ -466,6 +466,9 @@ def load_plan(path: str | os.PathLike) -> tuple[BenchPlan, BenchModel]:
         fields = set(BenchModel().to_json())
         if not isinstance(b, dict) or set(b) - fields:
             raise ValueError(f"{where}: 'bench' must be an object with keys from {sorted(fields)}")
+        for k, v in b.items():  # numbers only: float() would read "inf", "1e3" or true
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{where}: 'bench': {k!r} must be a finite number; got {v!r}")
         try:
             bench = BenchModel(**{k: float(v) for k, v in b.items()})
         except (TypeError, ValueError) as err:

@@ -80,16 +80,24 @@ class ImuData:
         if n < 2:
             raise ValueError(f"gyro: need at least 2 samples, got {n}")
         time = _vector("time", self.time, n)
-        step = np.diff(time)
+        with np.errstate(over="ignore"):  # steps beyond 1.8e308 s: inf, refused below
+            step = np.diff(time)
         bad = np.flatnonzero(~(step > 0))
         if bad.size:
             i = int(bad[0]) + 1
             raise ValueError(
-                f"time row {i}: {time[i]!r} s does not increase (row {i - 1}: {time[i - 1]!r} s); "
+                f"time row {i}: {float(time[i])!r} s does not increase (row {i - 1}: "
+                f"{float(time[i - 1])!r} s); "
                 "time must be strictly increasing"
             )
         rate = self.rate_hz
-        step_rate = 1.0 / float(np.median(step))
+        median = float(np.median(step))
+        step_rate = 1.0 / median if median > 1.0 / np.finfo(float).max else np.inf
+        if not (np.isfinite(step_rate) and step_rate > 0):
+            raise ValueError(
+                f"time: the median step {median:.6g} s gives no finite sample rate; time must be "
+                "in seconds"
+            )
         if rate is None:
             rate = step_rate
         else:
@@ -139,8 +147,8 @@ class ImuData:
             _check_accel_unit(a, accel_unit)
         return cls(
             time=time,
-            gyro=g * GYRO_UNITS[gyro_unit],
-            accel=a * ACCEL_UNITS[accel_unit],
+            gyro=_to_si("gyro", g, gyro_unit, GYRO_UNITS[gyro_unit], "rad/s"),
+            accel=_to_si("accel", a, accel_unit, ACCEL_UNITS[accel_unit], "m/s²"),
             temperature=temperature,
             rate_hz=rate_hz,
         )
@@ -213,7 +221,8 @@ def load(
     **Returns:** an [`ImuData`][hrgjax.imu.ImuData] in SI units.
 
     **Raises:** `ValueError` naming the file, the column and the row (and the file's line)
-    for a missing column, text where a number belongs, or a value that is not finite."""
+    for a missing column, text where a number belongs, a value that is not finite (or not
+    in SI units: 1e308 g), or a time column without a finite sample rate."""
     from ..data import _read_csv
 
     path = os.fspath(path)
@@ -249,7 +258,9 @@ def _build(path, names, table, lines, units, rate_hz, check_units) -> ImuData:
     for c in _all_names(names):
         col = table[c]
         if col.dtype.kind not in "fiu":
-            bad = next(i for i, v in enumerate(col) if not _is_number(v))
+            # the first field the CSV reader did not take as a number ("1_000", " ", "0x1f":
+            # Python's float() reads some of these, the reader does not)
+            bad = next((i for i, v in enumerate(col) if not _is_number(v)), 0)
             raise ValueError(
                 where(f"{path}: column {c!r} row {bad}: {str(col[bad])!r} is not a number")
             )
@@ -301,11 +312,10 @@ def _fast_columns(path: str, wanted: list[str]) -> dict[str, np.ndarray] | None:
 
 
 def _is_number(v) -> bool:
-    try:
-        float(v)
-    except (TypeError, ValueError):
-        return False
-    return True
+    """Whether a CSV field is a number as the CSV reader takes it (`data._NUMBER`)."""
+    from ..data import _NUMBER
+
+    return isinstance(v, str) and _NUMBER.fullmatch(v.strip()) is not None
 
 
 def _column_map(columns) -> dict:
@@ -404,7 +414,22 @@ def _finite(name: str, a: np.ndarray) -> None:
     if bad.size:
         i = tuple(int(k) for k in bad[0])
         where = f"row {i[0]}" + (f", axis {AXES[i[1]]}" if len(i) > 1 else "")
-        raise ValueError(f"{name} {where}: {a[i]!r} is not finite")
+        raise ValueError(f"{name} {where}: {float(a[i])!r} is not finite")
+
+
+def _to_si(name: str, a: np.ndarray, unit: str, factor: float, si: str) -> np.ndarray:
+    """`a` [unit] × `factor` in SI units, refusing a value that the conversion takes beyond
+    float64's range (1e308 g is not a number in m/s²) instead of an overflow warning."""
+    with np.errstate(over="ignore"):
+        out = a * factor
+    bad = np.argwhere(~np.isfinite(out))
+    if bad.size:
+        i = tuple(int(k) for k in bad[0])
+        raise ValueError(
+            f"{name} row {i[0]}, axis {AXES[i[1]]}: {float(a[i])!r} {unit} is beyond float64's "
+            f"range (±1.8e308) in {si}"
+        )
+    return out
 
 
 def _positive(name: str, x, what: str = "number") -> float:
@@ -422,7 +447,8 @@ def _positive(name: str, x, what: str = "number") -> float:
 def _check_accel_unit(a: np.ndarray, unit: str) -> None:
     """Refuse an accelerometer unit the data contradict: a record that is mostly at rest has
     a median |specific force| of about one g."""
-    norm = float(np.median(np.linalg.norm(a, axis=1))) * ACCEL_UNITS[unit]
+    with np.errstate(over="ignore"):  # |a| of a row beyond 1e154: inf, refused below
+        norm = float(np.median(np.linalg.norm(a, axis=1))) * ACCEL_UNITS[unit]
     if 0.3 * G0 <= norm <= 3.0 * G0:
         return
     guess = min(ACCEL_UNITS, key=lambda u: abs(np.log(norm / ACCEL_UNITS[unit] * ACCEL_UNITS[u] / G0))

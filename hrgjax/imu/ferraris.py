@@ -283,8 +283,8 @@ class ImuCalibration(eqx.Module):
 def load_calibration(path: str | os.PathLike) -> ImuCalibration:
     """Read a calibration written by [`ImuCalibration.save`][hrgjax.imu.ImuCalibration.save].
 
-    **Raises:** `ValueError` naming the file and the field for a file of another format or
-    a field of the wrong shape, a singular `accel_matrix` or `gyro_matrix`, a negative
+    **Raises:** `ValueError` naming the file and the field for a file of another format, a
+    field of the wrong shape or holding text or booleans where numbers belong, a singular `accel_matrix` or `gyro_matrix`, a negative
     variance, a `g_m_s2` outside [`G_RANGE_M_S2`][hrgjax.imu.ferraris.G_RANGE_M_S2] or a
     `turn_deg` that is not three non-zero angles."""
     from .._io import read_json
@@ -306,6 +306,9 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
             raise ValueError(f"{path}: field {key!r} is missing") from None
         except (TypeError, ValueError):
             raise ValueError(f"{path}: field {key!r} must be numbers of shape {shape}") from None
+        odd = _not_a_number(obj[key])  # text ("1.5") or booleans (true would read 1.0)
+        if odd is not None:
+            raise ValueError(f"{path}: field {key!r} must be numbers of shape {shape}; got {odd}")
         if x.shape != shape or not np.all(np.isfinite(x)):
             raise ValueError(f"{path}: field {key!r} must be finite numbers of shape {shape}")
         got[key] = jnp.asarray(x)
@@ -330,11 +333,14 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
                              ("gyro_rad_s_per_sqrt_s", "accel_m_s2_per_sqrt_s"), None)  # fmt: skip
     g = _check_g(obj.get("g_m_s2", 9.81), f"{path}: field 'g_m_s2'")
     turn_deg = _check_turn_deg(obj.get("turn_deg", [360.0] * 3), f"{path}: field 'turn_deg'")
+    source = obj.get("sigma_source", "none")
+    if not isinstance(source, str):
+        raise ValueError(f"{path}: field 'sigma_source' must be text; got {source!r}")
     return ImuCalibration(
         got["accel_matrix"], got["accel_bias_m_s2"], got["gyro_matrix"], got["gyro_bias_rad_s"],
         got["gyro_g_sensitivity_rad_s_per_m_s2"], got["covariance"], noise_std,
         g=g, turn_deg=tuple(float(t) for t in turn_deg),
-        sigma_source=str(obj.get("sigma_source", "none")), bias_walk=bias_walk,
+        sigma_source=source, bias_walk=bias_walk,
     )  # fmt: skip
 
 
@@ -377,6 +383,21 @@ def _check_g(g, name: str = "g") -> float:
     return v
 
 
+def _not_a_number(value) -> str | None:
+    """What a JSON value holds that is not a number (`"text"`, `"booleans"`, `None`), looking
+    through nested lists; None when every leaf is a number."""
+    stack = [value]
+    while stack:
+        x = stack.pop()
+        if isinstance(x, list | tuple):
+            stack.extend(x)
+        elif isinstance(x, bool):
+            return "booleans"
+        elif not isinstance(x, int | float):
+            return "text" if isinstance(x, str) else repr(x)[:40]
+    return None
+
+
 def _nonnegative(path: str, field: str, value, keys, size) -> jax.Array:
     """`{keys[0]: …, keys[1]: …}` of a calibration file as one vector of finite numbers >= 0
     (each `size` numbers, or one where size is None); missing keys read 0."""
@@ -387,10 +408,15 @@ def _nonnegative(path: str, field: str, value, keys, size) -> jax.Array:
     out = []
     for k in keys:
         try:
-            x = np.asarray(value.get(k, [0.0] * size if size else 0.0), dtype=float)
+            raw = value.get(k, [0.0] * size if size else 0.0)
+            x = np.asarray(raw, dtype=float)
         except (TypeError, ValueError):
             raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}") from None
-        if x.shape != ((size,) if size else ()) or not np.all(np.isfinite(x) & (x >= 0)):
+        if (
+            _not_a_number(raw) is not None  # text or booleans (true would read 1.0)
+            or x.shape != ((size,) if size else ())
+            or not np.all(np.isfinite(x) & (x >= 0))
+        ):
             raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}")
         out.append(np.atleast_1d(x))
     return jnp.asarray(np.concatenate(out))
