@@ -193,18 +193,22 @@ def _nc_file(rng, path):
     return True
 
 
+def _error_outcome(err: Exception, path: str):
+    """A one-line ValueError / FileNotFoundError naming the file is a clear error; anything
+    else escaped."""
+    text = str(err)
+    if isinstance(err, ValueError | FileNotFoundError) and path in text and "\n" not in text:
+        return "clear error", None
+    return "other", f"{type(err).__name__}: {text[:300]}"
+
+
 def _outcome(path, folder):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             data = hg.load(path, allow_extra=True)
-    except (ValueError, FileNotFoundError) as err:
-        text = str(err)
-        if path in text and "\n" not in text:
-            return "clear error", None
-        return "other", f"{type(err).__name__}: {text[:300]}"
     except Exception as err:  # noqa: BLE001 - counting what escapes is the point
-        return "other", f"{type(err).__name__}: {str(err)[:300]}"
+        return _error_outcome(err, path)
     again_path = os.path.join(folder, "again" + os.path.splitext(path)[1])
     try:
         again = hg.load(data.save(again_path), allow_extra=True)
@@ -284,13 +288,8 @@ def _json_outcome(load, path):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             load(path)
-    except (ValueError, FileNotFoundError) as err:
-        text = str(err)
-        if path in text and "\n" not in text:
-            return "clear error", None
-        return "other", f"{type(err).__name__}: {text[:300]}"
     except Exception as err:  # noqa: BLE001 - counting what escapes is the point
-        return "other", f"{type(err).__name__}: {str(err)[:300]}"
+        return _error_outcome(err, path)
     if caught:
         return "other", f"warning: {caught[0].category.__name__}: {str(caught[0].message)[:200]}"
     return "loaded", None

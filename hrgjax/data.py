@@ -97,8 +97,9 @@ class MeasuredData:
         _check_time(cols["time_s"], self.run)
         for name in ("temperature_c", "table_rate_dps", "wave_angle_deg"):
             plausible.check(f"column {name!r}", cols[name], name)
-        if "table_rate_dps" in cols:  # (required: always there)
-            moving = np.isin(self.run, np.unique(self.run[cols["table_rate_dps"] != 0.0]))
+        turning = cols["table_rate_dps"] != 0.0
+        if turning.any():  # the table angle (a per-run integral) only where the table turns
+            moving = np.isin(self.run, np.unique(self.run[turning]))
             plausible.check_wave_angle_units(cols["wave_angle_deg"], self.table_angle_deg,
                                              self.run, moving, K_E_NOMINAL)  # fmt: skip
 

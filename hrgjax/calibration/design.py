@@ -54,7 +54,7 @@ from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
 from ..units import DEG, DEG_PER_H, DEG_PER_S, K_E_NOMINAL
-from .experiment import CHUNK, SEED_ANGLES, SEED_TEMPERATURES, _simulate_chunk
+from .experiment import CHUNK, SEED_ANGLES, SEED_TEMPERATURES, _simulate_chunk, failed_member
 from .ins_impact import FLIGHTS, Flight
 
 KINDS = ("static", "rotation", "ramp")
@@ -835,17 +835,13 @@ def simulate_plan(
 def _failed_segment(plan: BenchPlan, take: np.ndarray, message: str) -> str:
     """A simulator failure inside a chunk of segments `take`, with the segment named (the
     simulator's message says which batch member failed)."""
-    import re
-
-    found = re.search(r"\(batch member \((\d+),?\)\)", message)
-    members = [int(take[int(found.group(1))])] if found else sorted(set(map(int, take)))
+    member, detail = failed_member(message)
+    members = [int(take[member])] if member is not None else sorted(set(map(int, take)))
     i = members[0]
     what = (f"segment {i} ({plan.kind[i]}, {float(plan.temperature_c[i]):g} °C, "
             f"{float(plan.rate_dps[i]):g} °/s, {float(plan.duration_s[i]):g} s)")  # fmt: skip
-    if not found and len(members) > 1:
+    if member is None and len(members) > 1:
         what = f"one of segments {members[0]}…{members[-1]} (first: {what})"
-    detail = re.sub(r"\s*\(batch member \(\d+,?\)\)", "", message)
-    detail = detail.removeprefix("run_plan (simulating a plan point): ")
     return f"simulate_plan: {what} failed: {detail}"
 
 

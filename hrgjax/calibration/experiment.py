@@ -192,7 +192,10 @@ class _ChunkCheck(Check):
         return message
 
 
-@program(check=_ChunkCheck("run_plan (simulating a plan point)", result_index=1))
+_CHUNK_WHAT = "run_plan (simulating a plan point)"
+
+
+@program(check=_ChunkCheck(_CHUNK_WHAT, result_index=1))
 def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
     def one(p, k):
         rec, _, result = _simulate(gyro, p, model, key=k, bias_key=bias_key, ts=ts)
@@ -203,17 +206,24 @@ def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
     return jax.vmap(one)(profiles, keys)
 
 
-def _failed_point(plan: Plan, order, start: int, message: str) -> str:
-    """A chunk's failure with the plan point named (from the check's batch member)."""
+def failed_member(message: str) -> tuple[int | None, str]:
+    """(the batch member a `_ChunkCheck` message names, or None; the message without that
+    note and without the chunk program's own prefix) — for callers that name the point."""
     import re
 
-    found = re.search(r"\(batch member \((\d+),?\)\)", message)
-    if found is None:
+    found = re.search(r"\s*\(batch member \((\d+),?\)\)", message)
+    detail = message if found is None else message.replace(found.group(0), "")
+    detail = detail.removeprefix(f"{_CHUNK_WHAT}: ")
+    return (None if found is None else int(found.group(1))), detail
+
+
+def _failed_point(plan: Plan, order, start: int, message: str) -> str:
+    """A chunk's failure with the plan point named (from the check's batch member)."""
+    member, detail = failed_member(message)
+    if member is None:
         return message
-    j = min(start + int(found.group(1)), plan.size - 1)
+    j = min(start + member, plan.size - 1)
     i = int(order[j]) if order is not None else j
-    detail = re.sub(r"\s*\(batch member \(\d+,?\)\)", "", message)
-    detail = detail.removeprefix("run_plan (simulating a plan point): ")
     return (f"run_plan: point {i} ({float(plan.temperature_c[i]):g} °C, "
             f"{float(plan.wave_angle0_deg[i]):g}°, {float(plan.rate_dps[i]):g} °/s) failed: "
             f"{detail}")  # fmt: skip

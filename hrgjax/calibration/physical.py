@@ -348,7 +348,7 @@ class PhysicalCompensator(AbstractCompensator):
         split_targets(windows)
         groups = _groups(data, self.window_s, self.k_e)
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
-        plant = known_plant(self.plant)
+        plant = self.plant  # normalised by the field's converter (known_plant)
         if plant is None:
             values, steps, res, sigma, jac = _fit(groups, device(x0), self.k_e, self.max_steps)
         else:
@@ -704,7 +704,8 @@ def _loop_pull(groups, values, k_e, plant):
     """What the plant's PI loops add to every window rate (static, moving, ramp) [rad/s]
     beyond the ideal-loop model at `values`: the same runs simulated both ways. Subtracted
     from the measured rates, it lets the fit run the ideal-loop model (cheap: the PI loops
-    need ≈ 20× the solver steps) and still fit the physical parameters."""
+    take ≈ 20× the ideal loops' time per run, `benchmarks/physical_plant.py`) and still fit the
+    physical parameters."""
     out = []
     for g in groups:
         pi = _simulated_rates(g, values, k_e, plant)

@@ -18,8 +18,8 @@ $\mathbf h_0$ the loops at rest, $\mathbf F(\mathbf h_0, \theta) = 0$ (Newton fr
 harmonic), solved by harmonic balance on `SAMPLES` angles θ + jπ/N with the spectral
 derivative. That holds the loops' lag to all orders in θ̇/β (β: the loop bandwidths) for a
 wave turning at the instant's rate: at 10 °/s on the default gyro, once the loops' transient
-has passed, its θ̇ equals the PI loops' to 1e-10 rad/s where the ideal loops miss 2.7e-6
-(`tests/test_loops_plant.py`).
+has passed, its θ̇ equals the PI loops' to within 1 % of what the ideal loops miss (the bound
+`tests/test_loops_plant.py` asserts; the ideal loops miss ≈ 3e-5 of the rate).
 
 What the lag is: a loop holds its error at zero only for a constant disturbance.
 While the wave turns, the quadrature the frequency split Δω drives varies as
