@@ -15,8 +15,9 @@ Printed: compile + first call and the best later call, the GPU / CPU speed-up of
 the largest difference between the backends' results (relative to the largest value).
 Without a GPU only the CPU column is printed.
 
-Usage: `.venv/bin/python benchmarks/gpu_backend.py [--quick]` (`--quick`: smaller batches,
-to check the script).
+Usage: `.venv/bin/python benchmarks/gpu_backend.py [--quick] [--no-large]` (`--quick`:
+smaller batches, to check the script; `--no-large`: without the 10 000-run sweep, whose CPU
+side takes about a minute — for a device lease that also runs the test suite).
 """
 
 import json
@@ -29,6 +30,8 @@ import numpy as np
 
 QUICK = "--quick" in sys.argv
 AVG_SIZES = ((4, 16), (8, 32)) if QUICK else ((4, 16), (16, 64), (100, 100))  # T × rate
+if "--no-large" in sys.argv:
+    AVG_SIZES = AVG_SIZES[:2]
 FULL_MEMBERS = 16 if QUICK else 256
 FULL_S, AVG_S, SINGLE_S = 0.05, 60.0, 180.0  # run lengths [s]
 
@@ -106,7 +109,8 @@ def spawn(platform, tmp):
     if platform == "cpu":
         env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={os.cpu_count()}"
     print(f"{platform}:", flush=True)
-    args = [sys.executable, __file__, "--child", path] + (["--quick"] if QUICK else [])
+    flags = [f for f in ("--quick", "--no-large") if f in sys.argv]
+    args = [sys.executable, __file__, "--child", path] + flags
     subprocess.run(args, env=env, check=True)
     import numpy as np
 
