@@ -1148,6 +1148,31 @@ def check_distinct_paths(args) -> None:
         seen[real] = _option(dest)
 
 
+# Commands whose work is a wide batch (a plan's runs, a design's points vmapped): they stay on
+# JAX's default backend. Every other command fits or follows one trajectory at a time.
+BATCH_COMMANDS = frozenset({"simulate", "design"})
+
+
+def _placement(command):
+    """Where a command runs: beside an accelerator, a command that is not a wide batch runs on
+    the CPU, as an eager `hg.simulate` does (`hrgjax._compiled.single_run_device`). Its
+    programs are sequential loops of small kernels: on an NVIDIA H200 the demo, a
+    calibration fit and discovery each took over 180 s (the per-test limit of
+    `benchmarks/on_gpu.sh`), where a 2-core CPU takes about a minute."""
+    import contextlib
+
+    if command in BATCH_COMMANDS:
+        return contextlib.nullcontext()
+    from ._compiled import single_run_device
+
+    device = single_run_device()
+    if device is None:
+        return contextlib.nullcontext()
+    import jax
+
+    return jax.default_device(device)
+
+
 def _run(args) -> int:
     """Run the command: a one-line error and exit status 2 for bad input, 1 for a failure
     during the work, 130 on Ctrl-C (files are written atomically, so none is left half
@@ -1155,7 +1180,8 @@ def _run(args) -> int:
     name, debug = f"hrgjax {args.command}", getattr(args, "debug", False)
     try:
         check_distinct_paths(args)
-        return args.func(args)
+        with _placement(args.command):
+            return args.func(args)
     except KeyboardInterrupt:
         if debug:
             raise

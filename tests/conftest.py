@@ -29,3 +29,15 @@ def _run_compile_cache(tmp_path_factory):
 @pytest.fixture(scope="session")
 def key():
     return jax.random.key(0)
+
+
+def pytest_runtest_logreport(report):
+    """With HRGJAX_FAILURE_LOG set (benchmarks/on_gpu.sh), each failure's last line is
+    appended to that file as it happens: a run cut off by its time limit (a device lease)
+    still says why each test failed, which pytest's summary at the end would not."""
+    path = os.environ.get("HRGJAX_FAILURE_LOG")
+    if path and report.failed and not os.environ.get("PYTEST_XDIST_WORKER"):  # once: the controller
+        lines = str(report.longrepr).strip().splitlines() or ["?"]
+        reason = " | ".join(ln[1:].strip() for ln in lines if ln.startswith("E ")) or lines[-1]
+        with open(path, "a") as fh:
+            fh.write(f"{report.nodeid} ({report.when}): {reason[:400]}\n")

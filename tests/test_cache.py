@@ -211,6 +211,35 @@ def test_single_simulations_run_on_the_cpu_beside_an_accelerator(monkeypatch):
         assert _export._platform() is None
 
 
+def test_cli_commands_that_follow_one_trajectory_run_on_the_cpu_beside_an_accelerator(
+    monkeypatch, tmp_path
+):
+    """On an H200 the demo, a calibration fit and discovery each outran 180 s (their loops
+    are launch-bound there); beside an accelerator the CLI runs every command that is not a
+    wide batch on the CPU, and leaves `simulate` and `design` (vmapped plans) on the
+    accelerator. The accelerator is pretended, as above."""
+    import argparse
+
+    from hrgjax import cli
+
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    cpu, seen = jax.devices("cpu")[0], {}
+
+    def func(args):
+        seen[args.command] = jax.config.jax_default_device
+        return 0
+
+    for command in ("demo", "calibrate", "discover", "simulate", "design"):
+        args = argparse.Namespace(command=command, func=func)
+        assert cli._run(args) == 0
+    assert seen == {"demo": cpu, "calibrate": cpu, "discover": cpu, "simulate": None,
+                    "design": None}  # fmt: skip
+    assert jax.config.jax_default_device is None  # restored after the command
+    monkeypatch.setattr(jax, "default_backend", lambda: "cpu")
+    cli._run(argparse.Namespace(command="demo", func=func))
+    assert seen["demo"] is None  # on a CPU machine nothing is placed
+
+
 def test_an_unusable_cache_folder_warns_once_and_runs_without(tmp_path, monkeypatch):
     """Issue 44: a cache path under a file (misplaced HRGJAX_CACHE_DIR) is one warning, then
     no cache — never a stopped command."""
