@@ -32,351 +32,44 @@ point and pays for the grid in its Bonferroni level.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import functools
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
-from jax.scipy.special import betainc
 
-from .._compiled import Unchecked, program
 from .._progress import bar
 from ..data import MeasuredData
-from ..profiles import lag_at_knots
 from ..units import DEG, DEG_PER_H, T_REF_C
-from . import dwell, leftover
-from .effects import CATALOGUE, Covariates, pattern_rate, readout_angle, window_rate
+from . import dwell, leftover, stats
+from .effects import CATALOGUE
 from .noise import NoiseModel
-from .problem import AbstractProblem, Fit
+from .problem import AbstractProblem, Fit, candidates_for, covariates_in, dwell_runs
+from .problem import is_dwell as is_dwell  # deprecated here (issue 45): see problem
+from .records import STEP_S as STEP_S  # deprecated here (issue 45): see records
+from .records import (
+    Layout,
+    Runs,
+    Windows,
+    fit_each_run,
+    lm,
+    raw_residuals,
+    residual_and_jacobian,
+    run_covariates,
+    stack_runs,
+    whiten,
+)  # fmt: skip
 
 BLOCK_S = 10.0
 """Default block length of the increments [s]."""
-STEP_S = 5.0
-"""Solver step [s]: Bogacki–Shampine (3rd order) steps on the samples nearest every
-`STEP_S`. The covariates are interpolated between samples, so their corners fall on step
-ends; Bosh3's solution weights no stage at the step's end (FSAL), so a corner never leaks
-into the step before it (Tsit5's sixth stage, at the end with weight 2.3, would)."""
 REFIT_TOP = 3
 """Candidates refitted in full per screening pass (the short list)."""
 TAU_GRID = (30.0, 100.0, 300.0, 1000.0, 3000.0)
 """Grid of nonregular time constants scanned in screening [s]."""
-
-
-def dwell_runs(data: MeasuredData) -> set[int]:
-    """Ids of the runs that hold their temperature and table rate constant (dwell runs)."""
-    out = set()
-    for idx in data.run_indices():
-        if all(
-            np.ptp(v := data[col][idx]) <= 1e-9 * max(1.0, float(np.max(np.abs(v))))
-            for col in ("temperature_c", "table_rate_dps")
-        ):
-            out.add(int(data.run[idx[0]]))
-    return out
-
-
-def is_dwell(data: MeasuredData) -> bool:
-    """True when every run holds its temperature and table rate constant (a dwell grid)."""
-    return len(dwell_runs(data)) == len(np.unique(data.run))
-
-
-# ---------------------------------------------------------------- parameter layout
-
-
-class Layout:
-    """The superset parameter vector: every parameter of `names` in scaled units
-    (value / scale), so optimisers see O(1) numbers."""
-
-    def __init__(self, names):
-        self.names = tuple(names)
-        self.slices, self.scales, self.regular, start = {}, [], [], 0
-        for n in self.names:
-            effect = CATALOGUE[n]
-            self.slices[n] = slice(start, start + effect.size)
-            self.scales += [p.scale for p in effect.params]
-            self.regular += [p.regular for p in effect.params]
-            start += effect.size
-        self.size = start
-        self.scale = np.asarray(self.scales)
-
-    def __repr__(self):  # also the static value's key in the exported programs
-        return f"Layout({self.names!r})"
-
-    def __hash__(self):
-        return hash(self.names)
-
-    def __eq__(self, other):
-        return isinstance(other, Layout) and other.names == self.names
-
-    def null(self, k_e):
-        """Scaled vector at the null (nonregular parameters at their typical size), with
-        the angular gain at `k_e`."""
-        z = np.asarray([0.0 if r else 1.0 for r in self.regular])
-        if "angular_gain" in self.slices:
-            z[self.slices["angular_gain"].start] = k_e / self.scale[self.slices["angular_gain"]][0]
-        return z
-
-    def unpack(self, z):
-        """{effect: physical parameters} from a scaled vector."""
-        p = z * jnp.asarray(self.scale)
-        return {n: p[s] for n, s in self.slices.items()}
-
-    def index(self, name, which=None):
-        """Positions of an effect's (regular, or all) parameters in the vector."""
-        s = self.slices[name]
-        idx = range(s.start, s.stop)
-        return [i for i in idx if which is None or self.regular[i] == which]
-
-
-# ---------------------------------------------------------------- runs and the model
-
-
-class Runs(eqx.Module):
-    """Runs of one length, stacked: samples, covariates and block boundaries."""
-
-    t: jax.Array  # (R, n) time [s]
-    theta: jax.Array  # (R, n) measured wave angle [rad]
-    rate: jax.Array  # (R, n) table rate [rad/s]
-    temp: jax.Array  # (R, n) temperature [°C]
-    accel: jax.Array  # (R, n) specific force along the axis [g]
-    amp: jax.Array
-    quad: jax.Array
-    bidx: jax.Array  # (K+1,) sample indices of the block boundaries
-    steps: jax.Array  # sample indices of the solver's steps
-    whiten: jax.Array  # (R, K, K) L⁻¹ of each run's increment covariance
-    run: tuple = eqx.field(static=True)  # run ids
-
-
-class Windows(eqx.Module):
-    """The dwell runs of a mixed log (constant temperature and rate), as windows: measured
-    pattern rate `y` [rad/s], its standard error `sigma` [rad/s] and the window covariates
-    (as the dwell search has them), `arc` [rad] the arc the pattern sweeps in each window (the
-    leftover shapes' window gain, as on dwell grids); `run`: each window's run id."""
-
-    y: jax.Array
-    sigma: jax.Array
-    cov: Covariates
-    arc: jax.Array
-    run: tuple = eqx.field(static=True)
-
-
-def _window_rate(layout: Layout, z, c: Covariates):
-    """Model pattern rate of each dwell window [rad/s]
-    ([`window_rate`][hrgjax.discovery.effects.window_rate]: the readout terms to all
-    orders, as the dwell search's refinement)."""
-    return window_rate(layout.unpack(z), c)
-
-
-def _one_run(layout: Layout, z, t, theta, rate, temp, accel, amp, quad, bidx, steps):
-    """Model wave angle (with readout terms) at the block boundaries of one run."""
-    params = layout.unpack(z)
-    rate_params = {n: p for n, p in params.items() if CATALOGUE[n].where == "rate"}
-    if "thermal_lag" in params:
-        lagged = lag_at_knots(t, temp, params["thermal_lag"][1])
-    else:
-        lagged = temp
-    n = t.shape[0]
-
-    def field(s, y, args):
-        i = jnp.clip(jnp.searchsorted(t, s, side="right") - 1, 0, n - 2)
-        h = t[i + 1] - t[i]
-        f = jnp.clip((s - t[i]) / h, 0.0, 1.0)
-        lerp = lambda v: v[i] + (v[i + 1] - v[i]) * f
-        c = Covariates(
-            theta=y,
-            rate=lerp(rate),
-            temperature=lerp(temp),
-            temperature_rate=(temp[i + 1] - temp[i]) / h,
-            temperature_lagged=lerp(lagged),
-            amplitude=lerp(amp),
-            quadrature=lerp(quad),
-            accel_z=lerp(accel),
-            t_run=s - t[0],
-        )
-        return pattern_rate(rate_params, c)
-
-    out = _bosh3_path(field, t[steps], theta[0], t[bidx])
-    readouts = {n: p for n, p in params.items() if CATALOGUE[n].where == "readout"}
-    if readouts:
-        out = out + readout_angle(readouts, Covariates(theta=out, temperature=temp[bidx]))
-    return out
-
-
-def _bosh3_path(field, steps, y0, save_t):
-    """Bogacki–Shampine (3rd order) from `y0` over the fixed steps `steps` (their ends),
-    the solution at `save_t` by each step's cubic Hermite interpolant — what
-    `diffrax.diffeqsolve(ODETerm(field), Bosh3(), stepsize_controller=StepTo(steps),
-    saveat=SaveAt(ts=save_t))` computes (the same tableau, FSAL last stage and dense output,
-    a save time on a step's end taken from the step before; equal to round-off), as one
-    `lax.scan`: a fit traces this solve several times per program (Levenberg–Marquardt,
-    `jax.jacfwd`, `vmap` over runs); one run's model traced in 1.6 s through diffrax's
-    general loop, 0.8 s as this scan, and runs faster (benchmarks/README.md, the bench log's
-    `discover`)."""
-    f0 = field(steps[0], y0, None)
-
-    def step(carry, ends):
-        y, k1 = carry
-        t0, t1 = ends
-        h = t1 - t0
-        k2 = field(t0 + 0.5 * h, y + 0.5 * h * k1, None)
-        k3 = field(t0 + 0.75 * h, y + 0.75 * h * k2, None)
-        y1 = y + h * (2 / 9 * k1 + 1 / 3 * k2 + 4 / 9 * k3)
-        k4 = field(t1, y1, None)  # FSAL: the next step's first stage
-        return (y1, k4), (y, y1, h * k1, h * k4)
-
-    _, (ya, yb, ka, kb) = jax.lax.scan(step, (y0, f0), (steps[:-1], steps[1:]))
-    j = jnp.clip(jnp.searchsorted(steps, save_t, side="left") - 1, 0, steps.shape[0] - 2)
-    s = (save_t - steps[j]) / (steps[j + 1] - steps[j])
-    y0s, y1s, k0, k1 = ya[j], yb[j], ka[j], kb[j]
-    a = k0 + k1 + 2 * y0s - 2 * y1s
-    b = -2 * k0 - k1 - 3 * y0s + 3 * y1s
-    return ((a * s + b) * s + k0) * s + y0s
-
-
-def _increments(layout, z, g: Runs):
-    model = jax.vmap(lambda *a: _one_run(layout, z, *a, g.bidx, g.steps))(
-        g.t, g.theta, g.rate, g.temp, g.accel, g.amp, g.quad
-    )
-    return jnp.diff(model, axis=1)
-
-
-def _measured(g: Runs):
-    return jnp.diff(g.theta[:, g.bidx], axis=1)
-
-
-def _whitened(layout, z, groups):
-    """Whitened increment residuals of every run of every group, concatenated."""
-    out = []
-    for g in groups:
-        if isinstance(g, Windows):
-            out.append((g.y - _window_rate(layout, z, g.cov)) / g.sigma)
-            continue
-        r = _measured(g) - _increments(layout, z, g)
-        out.append(jnp.einsum("rkl,rl->rk", g.whiten, r).ravel())
-    return jnp.concatenate(out)
-
-
-def _anonymous(groups):
-    """`groups` without their run ids: the ids are static fields, and a compiled program
-    keyed on them would be traced and compiled again for every run of the same length."""
-    return [dataclasses.replace(g, run=()) if g.run else g for g in groups]
-
-
-def _width(m: int) -> int:
-    """Compiled basis width for m columns: 4, 8, then multiples of 8 (one and two columns,
-    the common case, share the width-4 programs: a cold search compiles fewer of them)."""
-    return 4 if m <= 4 else 8 if m <= 8 else -(-m // 8) * 8
-
-
-def _padded(basis, minimum: int = 1):
-    """`basis` (P, m) with zero columns up to `_width(m)`: every fit and Jacobian of the
-    search then runs on a few compiled widths instead of one program per candidate's
-    parameter count. A zero column moves nothing: its Jacobian column is zero and its
-    Levenberg–Marquardt step is zero."""
-    basis = np.asarray(basis, float)
-    m = basis.shape[1]
-    return jnp.asarray(np.pad(basis, ((0, 0), (0, _width(max(m, minimum)) - m)))), m
-
-
-def _residual_and_jacobian(layout, z, basis, groups):
-    """Whitened residual at `z` and its forward-mode derivative along the columns of
-    `basis` (P, m): the sensitivities to m chosen parameters."""
-    padded, m = _padded(basis)
-    r, j = _residual_and_jacobian_compiled(layout, jnp.asarray(z), padded, _anonymous(groups))
-    return r, j[:, :m]
-
-
-def _raw_residuals(layout, z, groups):
-    """Unwhitened increment residuals per group [rad], shape (R, K) each (window groups:
-    pattern-rate residuals [rad/s], shape (W,))."""
-    return _raw_residuals_compiled(layout, z, _anonymous(groups))
-
-
-def _lm(layout, basis, z0, groups):
-    """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`."""
-    padded, _ = _padded(basis, minimum=8)  # the nominal model's 4 and a candidate's 5–6
-    return _lm_compiled(layout, padded, jnp.asarray(z0), _anonymous(groups))
-
-
-def _per_run(layout, basis, z0, group):
-    """Levenberg–Marquardt over the parameters picked by `basis` (P, m) on each run of
-    `group` alone, from `z0`: `(z (R, P), converged (R,), whitened Jacobian (R, n, m))`."""
-    padded, m = _padded(basis)
-    z, ok, j = _per_run_compiled(layout, padded, jnp.asarray(z0), _anonymous([group])[0])
-    return z, ok, j[..., :m]
-
-
-@program(check=Unchecked())
-def _per_run_compiled(layout, basis, z0, group):
-    """`_per_run`: one program for every run of a group (`vmap` over the runs)."""
-    per_run = ("t", "theta", "rate", "temp", "accel", "amp", "quad", "whiten")
-
-    def one(*arrays):
-        g = Runs(**{f: a[None] for f, a in zip(per_run, arrays, strict=True)},
-                 bidx=group.bidx, steps=group.steps, run=())  # fmt: skip
-        z, ok = _levenberg_marquardt(layout, basis, z0, [g])
-        return z, ok, _jacobian(layout, z, basis, [g])[1]
-
-    return jax.vmap(one)(*(getattr(group, f) for f in per_run))
-
-
-def _jacobian(layout, z, basis, groups):
-    """Whitened residual at `z` and its forward-mode derivative along the columns of
-    `basis` (P, m) (traced; `_residual_and_jacobian` is the compiled entry point)."""
-    fn = lambda u: _whitened(layout, z + basis @ u, groups)
-    u0 = jnp.zeros(basis.shape[1])
-    return fn(u0), jax.jacfwd(fn)(u0)
-
-
-def _levenberg_marquardt(layout, basis, z0, groups):
-    """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`:
-    `(z, converged)` (traced; `_lm` is the compiled entry point)."""
-    fn = lambda u, _: _whitened(layout, z0 + basis @ u, groups)
-    sol = optx.least_squares(
-        fn,
-        optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
-        jnp.zeros(basis.shape[1]),
-        max_steps=256,
-        throw=False,
-    )
-    return z0 + basis @ sol.value, sol.result == optx.RESULTS.successful
-
-
-@program(check=Unchecked())
-def _residual_and_jacobian_compiled(layout, z, basis, groups):
-    """Whitened residual at `z` and its forward-mode derivative along the columns of
-    `basis` (P, m): the sensitivities to m chosen parameters."""
-    return _jacobian(layout, z, basis, groups)
-
-
-@program(check=Unchecked())
-def _raw_residuals_compiled(layout, z, groups):
-    """Unwhitened increment residuals per group [rad], shape (R, K) each."""
-    return [
-        g.y - _window_rate(layout, z, g.cov)
-        if isinstance(g, Windows)
-        else _measured(g) - _increments(layout, z, g)
-        for g in groups
-    ]
-
-
-@program(check=Unchecked())
-def _lm_compiled(layout, basis, z0, groups):
-    """Levenberg–Marquardt over the parameters picked by `basis` (P, m), from `z0`."""
-    return _levenberg_marquardt(layout, basis, z0, groups)
-
-
-# ---------------------------------------------------------------- the problem
-
-
-def _block_index(n, m):
-    idx = np.arange(0, n, m)
-    if idx[-1] != n - 1:
-        idx = np.r_[idx, n - 1]
-    return idx
+RUN_COVARIATE_ALPHA = 0.01
+"""Significance at which a run covariate is taken to explain the run means' scatter
+(`with_run_bias`)."""
 
 
 class ContinuousProblem(AbstractProblem):
@@ -396,6 +89,44 @@ class ContinuousProblem(AbstractProblem):
         self.noise = noise
         self.z_null = self.layout.null(k_e)
         self._build()
+
+    @classmethod
+    def from_data(
+        cls, data, held, *, nominal, catalogue=None, k_e, window_s=None, noise=None,
+        block_s=BLOCK_S,
+    ) -> ContinuousProblem:  # fmt: skip
+        """The problem over the superset (`nominal` + candidates); without a known `noise`
+        (an [`hrgjax.Noise`][]), the noise model is estimated and then the run-to-run bias
+        from the baseline's run means. With `window_s` (a mixed log), the dwell runs join it
+        as windows of that length (the dwell search's regression rows,
+        [`rate_windows`][hrgjax.discovery.dwell.rate_windows]) and only the other runs are
+        simulated."""
+        have = covariates_in(data)
+        cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
+        names = list(nominal) + [n for n in cands if n not in nominal]
+        known = noise is not None
+        nz = NoiseModel.from_gyro(noise, k_e) if known else NoiseModel.estimate(data)
+        windows, records = None, data
+        dwell_ids = np.asarray(sorted(dwell_runs(data))) if window_s is not None else []
+        if len(dwell_ids):
+            in_dwell = np.isin(data.run, dwell_ids)
+            part = lambda m: (
+                MeasuredData({k: v[m] for k, v in data.columns.items()}) if m.any() else None
+            )
+            sub, records = part(in_dwell), part(~in_dwell)
+            w, y, cov, arc = dwell.rate_windows(sub, k_e, window_s)
+            win = Windows(
+                y=y,
+                sigma=dwell.window_sigma(nz, sub, w),  # the one noise model of the whole log
+                cov=cov,
+                arc=arc,
+                run=tuple(np.asarray(w.run).tolist()),
+            )
+            windows = (win, np.isin(w.run, held))
+        problem = cls(records, names, k_e, held, nz, block_s, windows, known)
+        if not known:
+            problem = problem.with_run_bias(problem.fit(list(nominal)).z)
+        return problem
 
     # -- data ----------------------------------------------------------------
     def _build(self):
@@ -423,32 +154,7 @@ class ContinuousProblem(AbstractProblem):
             held = np.isin(stack.run, list(self.held))
             for mask, groups in ((~held, self.train_groups), (held, self.held_groups)):
                 if mask.any():
-                    groups.append(self._group(stack, mask))
-
-    def _group(self, stack, mask):
-        n = stack.n_samples
-        m = max(1, int(round(self.block_s / stack.dt)))
-        bidx = _block_index(n, m)
-        steps = _block_index(n, max(1, int(round(STEP_S / stack.dt))))
-        t = stack.t[mask]
-        whiten = []
-        for ti in t:
-            delta = float(np.median(np.diff(ti[bidx])))
-            cov = self.noise.increment_covariance(delta, bidx.size - 1)
-            whiten.append(np.linalg.inv(np.linalg.cholesky(cov)))
-        return Runs(
-            t=jnp.asarray(t),
-            theta=jnp.asarray(stack.wave_angle[mask]),
-            rate=jnp.asarray(stack.rate[mask]),
-            temp=jnp.asarray(stack.temperature[mask]),
-            accel=jnp.asarray(stack.accel[mask][..., 2]),
-            amp=jnp.asarray(stack.amplitude[mask]),
-            quad=jnp.asarray(stack.quadrature[mask]),
-            bidx=jnp.asarray(bidx),
-            steps=jnp.asarray(steps),
-            whiten=jnp.asarray(np.stack(whiten)),
-            run=tuple(int(r) for r in stack.run[mask]),
-        )
+                    groups.append(stack_runs(stack, mask, self.noise, self.block_s))
 
     def with_run_bias(self, z) -> ContinuousProblem:
         """A copy of this problem (which is left as it is) whose run-to-run bias spread σ_b
@@ -458,7 +164,7 @@ class ContinuousProblem(AbstractProblem):
         constant along each ramp, say c·Ṫ) is not a switch-on bias: the covariate that
         explains the run means significantly (F-test, p < `RUN_COVARIATE_ALPHA`) is
         regressed out first, so the noise model cannot absorb the effect that the screening
-        is to find ([`_follows_covariate`][hrgjax.discovery.continuous._follows_covariate])."""
+        is to find ([`follows_covariate`][hrgjax.discovery.stats.follows_covariate])."""
         # the training and held-out runs apart: their residual programs exist already;
         # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
         # one session, whose bias the shared `bias` parameter takes)
@@ -470,9 +176,9 @@ class ContinuousProblem(AbstractProblem):
         new.noise = self.noise.replace(run_bias=0.0)
         if means.size >= 2:  # else nothing to estimate it from
             noise_var = new.floor(every=True, windows=False) ** 2
-            covs = _run_covariates(train + held)
+            covs = run_covariates(train + held)
             x = np.asarray([covs[r] for r in rates])
-            resid, k = _follows_covariate(means, x)
+            resid, k = stats.follows_covariate(means, x, RUN_COVARIATE_ALPHA)
             spread = float(resid @ resid) / max(means.size - k, 1)
             sigma_b = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_e
             new.noise = new.noise.replace(run_bias=sigma_b)
@@ -494,7 +200,7 @@ class ContinuousProblem(AbstractProblem):
             len(g.run) if isinstance(g, Windows) else (int(g.bidx.shape[0]) - 2) * len(g.run)
             for g in self.held_groups
         )
-        return dwell.chi2_sf(fit.heldout_chi2, max(dof, 1)) < alpha
+        return stats.chi2_sf(fit.heldout_chi2, max(dof, 1)) < alpha
 
     # -- fits ----------------------------------------------------------------
     def _free(self, model):
@@ -515,15 +221,15 @@ class ContinuousProblem(AbstractProblem):
         **Returns:** a [`Fit`][hrgjax.discovery.problem.Fit]."""
         z0 = self.z_null if z0 is None else np.asarray(z0)
         basis, idx = self._basis(model)
-        z, ok = _lm(self.layout, basis, jnp.asarray(z0), self.train_groups)
+        z, ok = lm(self.layout, basis, jnp.asarray(z0), self.train_groups)
         if not bool(ok):
             raise RuntimeError(f"continuous discovery: the fit of {model} did not converge")
         z = np.asarray(z)
-        r, j = _residual_and_jacobian(self.layout, jnp.asarray(z), basis, self.train_groups)
+        r, j = residual_and_jacobian(self.layout, jnp.asarray(z), basis, self.train_groups)
         r, j = np.asarray(r), np.asarray(j)
-        err = np.sqrt(np.diag(dwell.covariance(j)))
+        err = np.sqrt(np.diag(stats.covariance(j)))
         held_raw = self.raw_residuals(z, self.held_groups)
-        held_r = self._whiten(held_raw, self.held_groups)
+        held_r = whiten(held_raw, self.held_groups)
         params = {}
         for n in model:  # nonregular parameters: where the scan put them, no error bar
             for i in self.layout.index(n, which=False):
@@ -552,17 +258,6 @@ class ContinuousProblem(AbstractProblem):
             gap=self._gap(held_raw),
             z=z,
         )
-
-    @staticmethod
-    def _whiten(raw, groups):
-        """Whitened residuals (concatenated) from per-group raw increment residuals."""
-        out = [
-            np.asarray(r) / np.asarray(g.sigma)
-            if isinstance(g, Windows)
-            else np.einsum("rkl,rl->rk", np.asarray(g.whiten), r).ravel()
-            for g, r in zip(groups, raw, strict=True)
-        ]
-        return np.concatenate(out) if out else np.zeros(0)
 
     def _run_means(self, raw, groups):
         """Run-mean equivalent-input-rate residual [°/h] of every run, from raw residuals."""
@@ -597,11 +292,11 @@ class ContinuousProblem(AbstractProblem):
         basis, idx = self._basis([name])
         z0 = jnp.asarray(fit.z)
         stat, dof, per_run, agree, exciting = 0.0, -len(idx), {}, 0, 0
-        names = [p.name for p in CATALOGUE[name].params if p.regular]
+        names = CATALOGUE[name].regular_names
         for g in self.train_groups:
             if isinstance(g, Windows):  # a dwell run is one grid point: no per-run refit
                 continue
-            zs, oks, js = (np.asarray(a) for a in _per_run(self.layout, basis, z0, g))
+            zs, oks, js = (np.asarray(a) for a in fit_each_run(self.layout, basis, z0, g))
             for i, run in enumerate(g.run):
                 z, ok, j = zs[i], oks[i], js[i]
                 if not bool(ok):
@@ -620,7 +315,7 @@ class ContinuousProblem(AbstractProblem):
                         names, np.asarray(z)[idx], self.layout.scale[idx], strict=True
                     )
                 }
-        p = dwell.chi2_sf(stat, dof) if dof > 0 else None
+        p = stats.chi2_sf(stat, dof) if dof > 0 else None
         share = agree / exciting if exciting else None
         return {"p_value": p, "dof": max(dof, 0), "agreement": share, "per_run": per_run}
 
@@ -722,7 +417,7 @@ class ContinuousProblem(AbstractProblem):
         """Unwhitened increment residuals [rad], one (R, K) array per group (default: the
         training runs)."""
         groups = self.train_groups if groups is None else groups
-        return [np.asarray(r) for r in _raw_residuals(self.layout, jnp.asarray(z), groups)]
+        return [np.asarray(r) for r in raw_residuals(self.layout, jnp.asarray(z), groups)]
 
     def gap(self, z):
         """RMS over held-out runs of the run-mean rate residual [°/h] (DESIGN.md); NaN
@@ -786,7 +481,7 @@ class ContinuousProblem(AbstractProblem):
         if nonreg and tau is not None:
             z[nonreg[0]] = tau / self.layout.scale[nonreg[0]]
         basis, _ = self._basis([name])
-        _, jac = _residual_and_jacobian(self.layout, jnp.asarray(z), basis, self.train_groups)
+        _, jac = residual_and_jacobian(self.layout, jnp.asarray(z), basis, self.train_groups)
         return -np.asarray(jac), z
 
     def _shared_columns(self, current, names):
@@ -798,7 +493,7 @@ class ContinuousProblem(AbstractProblem):
             more = 0 if name is None else len(self.layout.index(name, which=True))
             if chunk and (name is None or width + more > 8):
                 basis, idx = self._basis(chunk)
-                _, jac = _residual_and_jacobian(
+                _, jac = residual_and_jacobian(
                     self.layout, jnp.asarray(current.z), basis, self.train_groups
                 )
                 jac, pos = -np.asarray(jac), {i: k for k, i in enumerate(idx)}
@@ -823,7 +518,7 @@ class ContinuousProblem(AbstractProblem):
             return best
         tau = float(np.exp(np.clip(-b / (2 * a), x[0], x[2])))
         g, z = self._columns(current, name, tau)
-        s, alias, step = dwell.score(current.r, current.j, g)
+        s, alias, step = stats.score(current.r, current.j, g)
         return (s, alias, step, z, tau) if s > best[0] else best
 
     def screen(self, current, cands, model, top=REFIT_TOP, liberal=0.01):
@@ -844,7 +539,7 @@ class ContinuousProblem(AbstractProblem):
             for tau in grid:
                 g, z = shared[name] if name in shared else self._columns(current, name, tau)
                 if np.any(g):
-                    tried.append((*dwell.score(current.r, current.j, g), z, tau))
+                    tried.append((*stats.score(current.r, current.j, g), z, tau))
             if not tried:
                 continue
             best = max(tried, key=lambda b: b[0])
@@ -856,7 +551,7 @@ class ContinuousProblem(AbstractProblem):
                 {
                     "effect": name,
                     "score": float(s),
-                    "p_value": min(1.0, dwell.chi2_sf(s, q - (tau is not None)) * len(grid)),
+                    "p_value": min(1.0, stats.chi2_sf(s, q - (tau is not None)) * len(grid)),
                     "aliasing": alias,
                     "delta_bic": float(s - q * math.log(n)),
                     "gap_after": current.gap,
@@ -899,59 +594,3 @@ class ContinuousProblem(AbstractProblem):
         for row in rows:
             del row["_start"]
         return rows
-
-
-RUN_COVARIATE_ALPHA = 0.01
-"""Significance at which a run covariate is taken to explain the run means' scatter
-(`with_run_bias`)."""
-
-
-def _run_covariates(groups) -> dict[int, np.ndarray]:
-    """Per continuous run: its mean dT/dt [°C/s] (end − start over the span), mean table
-    rate [rad/s] and mean specific force along the axis [g]."""
-    out = {}
-    for g in groups:
-        t, temp = np.asarray(g.t), np.asarray(g.temp)
-        rate, accel = np.asarray(g.rate), np.asarray(g.accel)
-        b0, b1 = int(g.bidx[0]), int(g.bidx[-1])
-        for i, run in enumerate(g.run):
-            span = t[i, b1] - t[i, b0]
-            t_dot = (temp[i, b1] - temp[i, b0]) / span if span > 0 else 0.0
-            out[int(run)] = np.array(
-                [t_dot, np.mean(rate[i, b0 : b1 + 1]), np.mean(accel[i, b0 : b1 + 1])]
-            )
-    return out
-
-
-def _f_sf(f: float, d1: int, d2: int) -> float:
-    """Upper tail probability of the F(d1, d2) distribution at `f`."""
-    if not f > 0:
-        return 1.0
-    return float(betainc(0.5 * d2, 0.5 * d1, d2 / (d2 + d1 * f)))
-
-
-def _follows_covariate(means: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, int]:
-    """The run means less their mean and less the run covariates (columns of `x`) that
-    explain them significantly, chosen one at a time (F-test at `RUN_COVARIATE_ALPHA`,
-    Bonferroni over the covariates still tried);
-    **returns** `(residual, columns fitted)` (the intercept counts)."""
-    n = means.size
-    cols = [np.ones(n)]
-    cands = [x[:, i] for i in range(x.shape[1]) if np.ptp(x[:, i]) > 0]
-
-    def rss(a):
-        coef, *_ = np.linalg.lstsq(np.stack(a, axis=1), means, rcond=None)
-        r = means - np.stack(a, axis=1) @ coef
-        return float(r @ r), r
-
-    base, resid = rss(cols)
-    while cands and n - len(cols) - 1 > 1:
-        trials = [(rss(cols + [c]), i) for i, c in enumerate(cands)]
-        (new, r), i = min(trials, key=lambda t: t[0][0])
-        dof = n - len(cols) - 1
-        f = (base - new) / max(new / dof, 1e-300)
-        if _f_sf(f, 1, dof) >= RUN_COVARIATE_ALPHA / len(cands):  # the best of them
-            break
-        cols.append(cands.pop(i))
-        base, resid = new, r
-    return resid, len(cols)

@@ -6,12 +6,9 @@ Each window of a dwell run (static or constant rate, constant temperature) gives
 pattern rate $y = \dot\theta_{\rm meas} = -k_{e,\rm nom}\,\Omega_{\rm meas}$ [rad/s]. Around the
 nominal model every catalogue term is linear in its parameters at the window's covariates
 (mean wave angle, table rate, temperature, …), so a model is a design matrix and the fit is
-weighted least squares; the score test of a candidate is then exact (DISCOVERY.md §2.4 S3):
-
-$$S_c = r^\top\tilde G_c(\tilde G_c^\top\tilde G_c)^{-1}\tilde G_c^\top r,\qquad
-\tilde G_c = (I-P)\,G_c,\quad P = J(J^\top J)^{-1}J^\top,$$
-
-in whitened units, χ²_q under the null. A readout term g(θ) enters through
+weighted least squares; the score test of a candidate
+([`score`][hrgjax.discovery.stats.score]) is then exact (DISCOVERY.md §2.4 S3), χ²_q under
+the null in whitened units. A readout term g(θ) enters through
 $\dot\theta_{\rm meas} = (1+\partial g/\partial\theta)\,\dot\theta$ (for the gain mismatch
 $1+\varepsilon_1\cos2\theta-\varepsilon_2\sin2\theta$), linearised at the nominal rate −k_e,nom Ω; a window in which the pattern sweeps an arc x
 sees every 2θ harmonic times [`window_gain`][hrgjax.discovery.effects.window_gain](x); `angular_gain_temperature` and
@@ -27,7 +24,6 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import gammaincc
 
 from .._progress import bar
 from ..calibration.reduce import RateWindows, reduce
@@ -36,7 +32,8 @@ from ..units import DEG, DEG_PER_H, T_REF_C
 from . import leftover
 from .effects import CATALOGUE, Covariates, window_gain, window_rate
 from .noise import NoiseModel
-from .problem import OPTIONAL, AbstractProblem, Fit, candidates_for, rates_in
+from .problem import OPTIONAL, AbstractProblem, Fit, candidates_for, covariates_in
+from .stats import chi2_sf, covariance, score, wls  # dwell.score etc.: deprecated, see stats
 
 
 def covariates(w: RateWindows, extra: dict | None = None) -> Covariates:
@@ -56,12 +53,8 @@ def covariates(w: RateWindows, extra: dict | None = None) -> Covariates:
 
 def columns(name: str, c: Covariates, k_e: float) -> np.ndarray:
     """Regressor columns (W, q) of effect `name`: ∂(window rate)/∂p at the null
-    ([`Effect.window_rate`][hrgjax.discovery.effects.Effect.window_rate])."""
-    effect = CATALOGUE[name]
-    p0 = jnp.asarray([0.0 if p.regular else p.scale for p in effect.params])
-    regular = np.asarray([p.regular for p in effect.params])
-    jac = np.asarray(jax.jacfwd(lambda p: effect.window_rate(p, c, k_e))(p0))
-    return jac[:, regular]
+    ([`Effect.columns`][hrgjax.discovery.effects.Effect.columns])."""
+    return CATALOGUE[name].columns(c, k_e)
 
 
 def design(names, c: Covariates, k_e: float) -> tuple[np.ndarray, list[tuple[str, int]]]:
@@ -152,61 +145,16 @@ def target(w: RateWindows, k_e: float) -> np.ndarray:
     return -k_e * w.rate_dps * DEG
 
 
-def wls(g: np.ndarray, y: np.ndarray, sigma: np.ndarray):
-    """Weighted least squares: `(beta, residual (whitened), covariance)`."""
-    gw, yw = g / sigma[:, None], y / sigma
-    beta, *_ = np.linalg.lstsq(gw, yw, rcond=None)
-    return beta, yw - gw @ beta, covariance(gw)
-
-
-def covariance(gw: np.ndarray) -> np.ndarray:
-    """(GᵀG)⁻¹ of whitened columns `gw`, with the columns scaled to unit norm first: the
-    catalogue's columns differ by ten orders of magnitude (q/a ~ 10⁻⁴ beside Ω), and an
-    unscaled pseudo-inverse would cut the small ones' variance to zero. A column the data
-    never excite (k_e on static runs alone) gets an infinite variance."""
-    norm = np.linalg.norm(gw, axis=0)
-    d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
-    gs = gw * d
-    cov = d[:, None] * np.linalg.pinv(gs.T @ gs, hermitian=True) * d[None, :]
-    idx = np.arange(cov.shape[0])
-    cov[idx, idx] = np.maximum(cov[idx, idx], 0.0)  # round-off below zero
-    cov[norm == 0, norm == 0] = np.inf  # a column the data never excite: undetermined
-    return cov
-
-
-def score(r: np.ndarray, j: np.ndarray, g: np.ndarray, q_j: np.ndarray | None = None):
-    """Score statistic S, aliasing index A and one-step estimate of a candidate with
-    whitened columns `g`, given the whitened residual `r` and fitted whitened Jacobian `j`
-    (`q_j`: its orthonormal basis, when several candidates share it)."""
-    if q_j is None:
-        q_j, _ = np.linalg.qr(j)
-    g_t = g - q_j @ (q_j.T @ g)
-    gram = g_t.T @ g_t
-    alias = 1.0 - np.sum(g_t**2) / max(np.sum(g**2), 1e-300)
-    if np.linalg.matrix_rank(gram, tol=1e-10 * max(np.trace(gram), 1e-300)) < g.shape[1]:
-        return 0.0, 1.0, np.zeros(g.shape[1])
-    step = np.linalg.solve(gram, g_t.T @ r)
-    return float(r @ g_t @ step), float(alias), step
-
-
-def chi2_sf(x: float, dof: int) -> float:
-    """Upper tail probability of χ²_dof at x."""
-    return float(gammaincc(dof / 2.0, jnp.asarray(max(x, 0.0) / 2.0)))
-
-
 # -- the dwell-grid problem ----------------------------------------------------
 
 
-def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
+def window_extras(data: MeasuredData, w: RateWindows) -> dict:
     """Per-window means of the optional columns (and `t_run`, the 2θ `harmonic_gain` and the
-    `arc` [rad] the pattern sweeps), and which covariates the data carry."""
+    `arc` [rad] the pattern sweeps)."""
     extra: dict[str, list] = {"t_run": [], "harmonic_gain": [], "arc": []}
-    have = set()
     for key, col in OPTIONAL.items():
         if col in data:
             extra[key] = []
-            have.add(key)
-    have |= rates_in(data)
     starts = {int(data.run[idx[0]]): idx for idx in data.run_indices()}
     for run, a, b, tm in zip(w.run, w.start, w.stop, w.t_mid, strict=True):
         idx = starts[int(run)]
@@ -217,7 +165,18 @@ def _window_extras(data: MeasuredData, w: RateWindows) -> tuple[dict, set]:
         for key, col in OPTIONAL.items():
             if key in extra:
                 extra[key].append(float(np.mean(data[col][idx[a:b]])))
-    return {k: np.asarray(v) for k, v in extra.items()}, have
+    return {k: np.asarray(v) for k, v in extra.items()}
+
+
+def rate_windows(data: MeasuredData, k_e: float, window_s: float):
+    """The dwell runs of `data` as windows of `window_s` [s]
+    ([`reduce`][hrgjax.calibration.reduce]): `(windows, measured pattern rate [rad/s],
+    covariates, arc [rad] the pattern sweeps in each)` — the rows of the dwell regression,
+    on dwell grids and in a mixed log alike."""
+    w = reduce(data, k_e, window_s=window_s)
+    extra = window_extras(data, w)
+    arc = extra.pop("arc")
+    return w, target(w, k_e), covariates(w, extra), arc
 
 
 def _gap(resid, w: RateWindows, runs, k_e):
@@ -245,13 +204,17 @@ class DwellProblem(AbstractProblem):
 
     def __init__(self, data, k_e, window_s, held):
         self.k_e, self.held = k_e, held
-        self.w = w = reduce(data, k_e, window_s=window_s)
-        extra, self.have = _window_extras(data, w)
-        self.arc = extra.pop("arc")
-        self.c = covariates(w, extra)
-        self.y = target(w, k_e)
+        w, self.y, self.c, self.arc = rate_windows(data, k_e, window_s)
+        self.w = w
+        self.have = covariates_in(data)
         self.train = ~np.isin(w.run, held)
         self.sigma, self.nm = _noise_scale(data, w, k_e)
+
+    @classmethod
+    def from_data(cls, data, held, *, nominal, catalogue, k_e, window_s, noise, block_s):
+        """The dwell problem of `data` (`nominal`, `catalogue`, `noise` and `block_s` are the
+        continuous records'; a dwell grid reads its noise from its static windows)."""
+        return cls(data, k_e, window_s, held)
 
     def candidates(self, nominal):
         return candidates_for(self.have, nominal)
@@ -384,7 +347,7 @@ def _fit(model, c, y, sigma, train, w, held, k_e):
     err = np.sqrt(np.diag(cov))
     params = {}
     for (name, j), b, e in zip(labels, beta, err, strict=True):
-        pname = [p.name for p in CATALOGUE[name].params if p.regular][j]
+        pname = CATALOGUE[name].regular_names[j]
         params.setdefault(name, {})[pname] = {"value": float(b), "std": float(e)}
     return Fit(
         model=tuple(model),
@@ -422,7 +385,7 @@ def _screen_one(name, current, model, c, sigma, train, y, w, held, k_e, n):
     q = g.shape[1]
     refit = _fit(model + [name], c, y, sigma, train, w, held, k_e)
     lam = current.chi2 - refit.chi2
-    names = [p.name for p in CATALOGUE[name].params if p.regular]
+    names = CATALOGUE[name].regular_names
     return {
         "effect": name,
         "score": float(s),

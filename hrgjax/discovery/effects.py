@@ -18,7 +18,12 @@ from collections.abc import Callable
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from ..gyro import DriftTerms
+from ..profiles import lag_at_knots
+from ..resonator.params import TemperatureLaw
+from ..resonator.readout import Readout
 from ..units import DEG, DEG_PER_H, T_REF_C
 
 NOMINAL = ("bias", "angular_gain", "damping_anisotropy")
@@ -67,9 +72,19 @@ class Effect:
       per run, one switch-on) can reveal it; `shapes`: the generic shapes of
       [`leftover.SHAPES`][hrgjax.discovery.leftover.SHAPES] the term is (on dwell windows),
       so that a candidate is not taken for an uncovered shape it only partly imitates.
+    - `record`: what the term reads of a whole continuous record before it is solved
+      (None: nothing beyond the samples): `record(p, t, samples)` → `{covariate: (n,)
+      samples}` replacing the record's own (`thermal_lag`: the temperature through its
+      first-order lag of τ_th), with `t` the record's times [s] and `samples` its sampled
+      covariates by [`Covariates`][hrgjax.discovery.effects.Covariates] name.
+    - `inject`: how the synthetic data put it into a gyro (None: not generated yet):
+      `inject(gyro, size)` → the [`hrgjax.Gyro`][] with the effect at `size`
+      ([`generate.inject`][hrgjax.discovery.generate.inject], whose docstring says what
+      `size` means for each effect).
 
-    Adding an effect is one entry in `CATALOGUE`: the dwell regression, the continuous
-    simulation, the screening and the report all read it from here.
+    Adding an effect is one entry in `CATALOGUE`: the dwell regression
+    ([`columns`][hrgjax.discovery.effects.Effect.columns]), the continuous simulation, the
+    screening, the report and the synthetic data all read it from here.
     """
 
     name: str
@@ -85,11 +100,24 @@ class Effect:
     scales_gain: bool = False
     on_dwell: bool = True
     shapes: tuple[str, ...] = ()
+    record: Callable | None = dataclasses.field(default=None, repr=False, compare=False)
+    inject: Callable | None = dataclasses.field(default=None, repr=False, compare=False)
 
     @property
     def size(self) -> int:
         """Number of parameters."""
         return len(self.params)
+
+    @property
+    def null(self):
+        """Parameters at the null: regular ones 0, nonregular ones (time constants) at their
+        typical size, where they have no effect."""
+        return jnp.asarray([0.0 if p.regular else p.scale for p in self.params])
+
+    @property
+    def regular_names(self) -> tuple[str, ...]:
+        """Names of the regular parameters (the fitted ones), in the order of `params`."""
+        return tuple(p.name for p in self.params if p.regular)
 
     def rate(self, p, c: Covariates, k_e):
         """Pattern-rate contribution [rad/s] at parameters `p` (shape (q,), order of
@@ -114,6 +142,15 @@ class Effect:
         if self.where == "rate":
             return self.rate(p, c, k_e)
         return -k_e * c.rate * c.harmonic_gain * readout_slope({self.name: p}, c)
+
+    def columns(self, c: Covariates, k_e) -> np.ndarray:
+        """The term's regressor columns (W, q) in the dwell regression: ∂(window rate)/∂p of
+        its regular parameters at the null
+        ([`window_rate`][hrgjax.discovery.effects.Effect.window_rate]) at the windows'
+        covariates `c`."""
+        regular = np.asarray([p.regular for p in self.params])
+        jac = np.asarray(jax.jacfwd(lambda p: self.window_rate(p, c, k_e))(self.null))
+        return jac[:, regular]
 
 
 class Covariates(eqx.Module):
@@ -170,12 +207,43 @@ def _plain(name, unit, scale, user_unit=None, factor=1.0, regular=True):
 
 def _e(
     name, title, where, params, needs, signature, aliases=(), discriminate="", formula="",
-    *, term, scales_gain=False, on_dwell=True, shapes=(),
+    *, term, scales_gain=False, on_dwell=True, shapes=(), record=None, inject=None,
 ):  # fmt: skip
     return Effect(
         name, title, where, tuple(params), tuple(needs), signature, tuple(aliases),
-        discriminate, formula, term, scales_gain, on_dwell, tuple(shapes),
+        discriminate, formula, term, scales_gain, on_dwell, tuple(shapes), record, inject,
     )  # fmt: skip
+
+
+LAG_TIME_S = 600.0
+"""Time constant of the generated thermal lag and warm-up [s]."""
+
+
+def _put(where, value):
+    """An injector: `gyro` with the leaf `where(gyro)` replaced by `value(gyro, size)`."""
+    return lambda gyro, size: eqx.tree_at(where, gyro, value(gyro, size))
+
+
+def _drift(fields):
+    """An injector: `gyro` with the [`DriftTerms`][hrgjax.gyro.DriftTerms] `fields(size)`
+    set (its other drift terms kept)."""
+
+    def inject(gyro, size):
+        old = gyro.drift_terms if gyro.drift_terms is not None else DriftTerms()
+        kept = {f.name: getattr(old, f.name) for f in dataclasses.fields(DriftTerms)}
+        new = DriftTerms(**(kept | fields(size)))
+        return eqx.tree_at(lambda g: g.drift_terms, gyro, new, is_leaf=lambda x: x is None)
+
+    return inject
+
+
+def _closed_loops(gyro, size):
+    """The preset's closed loops with a frequency split Δω = `size` [rad/s]."""
+    from ..presets import tvg3_like
+
+    loops = tvg3_like(temperature_laws=False, noise=False).control
+    where = lambda g: (g.control, g.resonator.delta_omega)
+    return eqx.tree_at(where, gyro, (loops, jnp.asarray(size)))
 
 
 def _dt(c):
@@ -256,6 +324,7 @@ CATALOGUE: dict[str, Effect] = {
             formula="{b1}·ΔT + {b2}·ΔT²",
             term=lambda p, c, k: p[0] * _dt(c) + p[1] * _dt(c) ** 2,
             shapes=("ΔT", "ΔT²"),
+            inject=_put(lambda g: g.rate_bias, lambda g, s: TemperatureLaw(g.rate_bias, s * _H)),
         ),
         _e(
             "angular_gain_temperature",
@@ -270,6 +339,10 @@ CATALOGUE: dict[str, Effect] = {
             term=lambda p, c, k: -k * p[0] * _dt(c) * c.rate,
             scales_gain=True,
             shapes=("Ω·ΔT",),
+            inject=_put(
+                lambda g: g.resonator.k_e,
+                lambda g, s: TemperatureLaw(g.resonator.k_e, g.resonator.k_e * s),
+            ),
         ),
         _e(
             "rate_scale_factor",
@@ -284,6 +357,7 @@ CATALOGUE: dict[str, Effect] = {
             term=lambda p, c, k: -k * p[0] * c.rate**3,
             scales_gain=True,
             shapes=("Ω³",),
+            inject=_drift(lambda s: {"rate_cubic": s / (100.0 * DEG) ** 2}),
         ),
         _e(
             "damping_anisotropy_temperature",
@@ -300,6 +374,10 @@ CATALOGUE: dict[str, Effect] = {
             formula="({d_c1}·sin 2θ − {d_s1}·cos 2θ)·ΔT",
             term=lambda p, c, k: (p[0] * _s2(c) - p[1] * _c2(c)) * _dt(c),
             shapes=("2θ·ΔT",),
+            inject=_put(
+                lambda g: g.resonator.delta_inv_tau,
+                lambda g, s: TemperatureLaw(g.resonator.delta_inv_tau, lam=s),
+            ),
         ),
         _e(
             "frequency_split",
@@ -366,6 +444,7 @@ CATALOGUE: dict[str, Effect] = {
             term=lambda p, c, k: p[0] * c.temperature_rate,
             on_dwell=False,
             shapes=("dT/dt",),
+            inject=_drift(lambda s: {"temperature_rate": s * _H * 60.0}),
         ),
         _e(
             "thermal_lag",
@@ -382,6 +461,10 @@ CATALOGUE: dict[str, Effect] = {
             formula="{b_L}·(T_lag − 20 °C), T_lag: T through a first-order lag of {tau_th}",
             term=lambda p, c, k: p[0] * (c.temperature_lagged - T_REF_C),
             on_dwell=False,
+            record=lambda p, t, samples: {
+                "temperature_lagged": lag_at_knots(t, samples["temperature"], p[1])
+            },
+            inject=_drift(lambda s: {"lag": s * _H, "lag_time": LAG_TIME_S}),
         ),
         _e(
             "warmup_transient",
@@ -396,6 +479,7 @@ CATALOGUE: dict[str, Effect] = {
             term=lambda p, c, k: p[0] * jnp.exp(-c.t_run / p[1]),
             on_dwell=False,
             shapes=("t_run",),
+            inject=_drift(lambda s: {"warmup": s * _H, "warmup_time": LAG_TIME_S}),
         ),
         _e(
             "acceleration_sensitivity",
@@ -422,6 +506,7 @@ CATALOGUE: dict[str, Effect] = {
             formula="angle read out + ½·{eps_1}·sin 2θ + ½·{eps_2}·cos 2θ",
             term=lambda p, c: (p[0], p[1]),
             shapes=("2θ·Ω",),
+            inject=_put(lambda g: g.readout, lambda g, s: Readout(gain_mismatch=s)),
         ),
         _e(
             "readout_gain_mismatch_temperature",
@@ -459,6 +544,7 @@ CATALOGUE: dict[str, Effect] = {
             term=_loop_ripple,
             scales_gain=True,
             shapes=("2θ·Ω", "2θ·Ω²"),
+            inject=_closed_loops,
         ),
     )
 }
@@ -575,6 +661,10 @@ def window_rate(params: dict, c: Covariates, k_e=None):
 def null_params(names) -> dict:
     """{name: parameters at the null} for the given effects: regular parameters 0,
     nonregular ones (time constants) at their typical size, where they have no effect."""
-    return {
-        n: jnp.asarray([0.0 if p.regular else p.scale for p in CATALOGUE[n].params]) for n in names
-    }
+    return {n: CATALOGUE[n].null for n in names}
+
+
+def regular_parameters(names) -> list[tuple[str, str]]:
+    """(effect, parameter) of each column of a fit's Jacobian: the regular parameters of the
+    effects `names`, in that order (the order both data shapes build their Jacobian in)."""
+    return [(n, p) for n in names for p in CATALOGUE[n].regular_names]

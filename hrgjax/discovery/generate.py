@@ -6,7 +6,9 @@ and ideal loops, so its drift is bias + damping anisotropy, with the preset's no
 preset's real loops the base is not null: at 5 °/s the closed loops add a 2θ ripple of 3·10⁻⁵
 to the true rate — the catalogue's `loop_ripple`, which at one rate reads as
 `readout_gain_mismatch`.) One effect is then
-put back through the gyro's own parameters, at a chosen size:
+put back through the gyro's own parameters, at a chosen size, by its catalogue entry's
+`inject` ([`Effect`][hrgjax.discovery.effects.Effect]: adding a generated effect is that one
+entry):
 
 | effect | size means | how it is injected |
 |---|---|---|
@@ -45,30 +47,19 @@ from ..gyro import DriftTerms, Gyro
 from ..presets import tvg3_like
 from ..profiles import Profile
 from ..resonator.control import Control
-from ..resonator.params import TemperatureLaw
 from ..resonator.readout import Readout
 from ..simulate import simulate
-from ..units import DEG, DEG_PER_H
+from .effects import CATALOGUE
+from .effects import LAG_TIME_S as LAG_TIME_S
 
-GENERATED = (
-    "damping_anisotropy_temperature",
-    "bias_temperature",
-    "angular_gain_temperature",
-    "readout_gain_mismatch",
-    "thermal_rate",
-    "thermal_lag",
-    "warmup_transient",
-    "rate_scale_factor",
-    "loop_ripple",
-)
-"""Effects the generator can hide."""
-DWELL_EFFECTS = GENERATED[:4] + ("rate_scale_factor", "loop_ripple")
+GENERATED = tuple(n for n, e in CATALOGUE.items() if e.inject is not None)
+"""Effects the generator can hide (those whose catalogue entry has an `inject`)."""
+DWELL_EFFECTS = tuple(n for n in GENERATED if CATALOGUE[n].on_dwell)
 """Effects a dwell grid shows (`rate_scale_factor` and `loop_ripple` need `rates_dps` with two
 rates: at one rate the ripple reads as `readout_gain_mismatch`)."""
-CONTINUOUS_EFFECTS = GENERATED[:7]
-"""Effects the continuous records show."""
-LAG_TIME_S = 600.0
-"""Time constant of the generated thermal lag and warm-up [s]."""
+CONTINUOUS_EFFECTS = tuple(n for n in GENERATED if n not in ("rate_scale_factor", "loop_ripple"))
+"""Effects the continuous records show (the ramps turn at one rate: not the two that need a
+second one)."""
 
 TEMPERATURES = (-40.0, -15.0, 10.0, 35.0, 60.0)
 ANGLES = tuple(float(a) for a in range(-90, 90, 20))
@@ -91,36 +82,9 @@ def inject(gyro: Gyro, effect, size: float = 0.0) -> Gyro:
         for name, value in dict(effect).items():
             gyro = inject(gyro, name, value)
         return gyro
-    res = gyro.resonator
-    if effect == "damping_anisotropy_temperature":
-        law = TemperatureLaw(res.delta_inv_tau, lam=size)
-        return eqx.tree_at(lambda g: g.resonator.delta_inv_tau, gyro, law)
-    if effect == "bias_temperature":
-        law = TemperatureLaw(gyro.rate_bias, size * DEG_PER_H)
-        return eqx.tree_at(lambda g: g.rate_bias, gyro, law)
-    if effect == "angular_gain_temperature":
-        law = TemperatureLaw(res.k_e, res.k_e * size)
-        return eqx.tree_at(lambda g: g.resonator.k_e, gyro, law)
-    if effect == "readout_gain_mismatch":
-        return eqx.tree_at(lambda g: g.readout, gyro, Readout(gain_mismatch=size))
-    if effect == "loop_ripple":
-        loops = tvg3_like(temperature_laws=False, noise=False).control
-        return eqx.tree_at(
-            lambda g: (g.control, g.resonator.delta_omega), gyro, (loops, jnp.asarray(size))
-        )
-    drift = {
-        "thermal_rate": {"temperature_rate": size * DEG_PER_H * 60.0},
-        "thermal_lag": {"lag": size * DEG_PER_H, "lag_time": LAG_TIME_S},
-        "warmup_transient": {"warmup": size * DEG_PER_H, "warmup_time": LAG_TIME_S},
-        "rate_scale_factor": {"rate_cubic": size / (100.0 * DEG) ** 2},
-    }
-    if effect in drift:
-        old = gyro.drift_terms if gyro.drift_terms is not None else DriftTerms()
-        fields = {f: getattr(old, f) for f in DRIFT_FIELDS} | drift[effect]
-        return eqx.tree_at(
-            lambda g: g.drift_terms, gyro, DriftTerms(**fields), is_leaf=lambda x: x is None
-        )
-    raise ValueError(f"cannot generate {effect!r} yet; choose from {GENERATED} or None")
+    if effect not in GENERATED:
+        raise ValueError(f"cannot generate {effect!r} yet; choose from {GENERATED} or None")
+    return CATALOGUE[effect].inject(gyro, size)
 
 
 DRIFT_FIELDS = tuple(f.name for f in dataclasses.fields(DriftTerms))

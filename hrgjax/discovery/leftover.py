@@ -9,7 +9,7 @@ Each shape is a set of pattern-rate columns evaluated at the data's covariates (
 windows, or the 10-s blocks of continuous records, where a shape's column is its value times
 the block's length: the angle it adds); its score statistic against the fitted model's
 whitened residual and Jacobian is the same test as the catalogue's screening
-([`score`][hrgjax.discovery.dwell.score]): χ²_q when nothing of that shape is left. The
+([`score`][hrgjax.discovery.stats.score]): χ²_q when nothing of that shape is left. The
 strongest shape is reported with its size in user units (the input rate it imitates) and
 its significance in words. The columns use each point's mean covariates; on dwell windows a
 kθ harmonic is seen through the window's sweep, as the catalogue's 2θ terms are.
@@ -23,7 +23,7 @@ from statistics import NormalDist
 import numpy as np
 
 from ..units import DEG, DEG_PER_H, HOUR
-from . import dwell
+from . import stats
 from .effects import window_gain
 
 SHAPES = (
@@ -131,7 +131,7 @@ def _size(shape: str, coef: np.ndarray, cov: np.ndarray, k_e: float) -> dict:
     return {"size": value, "sigma": sigma, "unit": unit, "words": f"{what}: {value:.3g} {unit}"}
 
 
-def _distinct(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def distinct(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """`cols` without 2θ·Ω² where the table turns at one rate (then it is 2θ·Ω, which
     keeps the name)."""
     lag, ripple = cols.get("2θ·Ω²"), cols.get("2θ·Ω")
@@ -149,8 +149,8 @@ def scores(r, j, cols: dict[str, np.ndarray]) -> dict[str, tuple[float, int]]:
     score test, one QR of `j` for all; shapes the model already spans are left out."""
     q_j, _ = np.linalg.qr(j)
     out = {}
-    for name, g in _distinct(cols).items():
-        s, alias, _ = dwell.score(r, j, g, q_j)
+    for name, g in distinct(cols).items():
+        s, alias, _ = stats.score(r, j, g, q_j)
         if alias < 0.999:
             out[name] = (s, int(g.shape[1]))
     return out
@@ -165,12 +165,12 @@ def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3)
     shapes."""
     rows = []
     q_j, _ = np.linalg.qr(j)
-    cols = _distinct(cols)
+    cols = distinct(cols)
     for name, g in cols.items():
-        s, alias, step = dwell.score(r, j, g, q_j)
+        s, alias, step = stats.score(r, j, g, q_j)
         if alias >= 0.999:
             continue
-        p = min(1.0, dwell.chi2_sf(s, g.shape[1]) * len(cols))
+        p = min(1.0, stats.chi2_sf(s, g.shape[1]) * len(cols))
         rows.append((s, name, g, step, p))
     if not rows:
         return None
@@ -185,8 +185,8 @@ def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3)
     if significant and name.endswith("θ") and f"{name}·ΔT" in cols:
         # does its size change with temperature? the ΔT partner, given the harmonic
         jj = np.concatenate([j, g], axis=1)
-        s2, _, _ = dwell.score(r, jj, cols[f"{name}·ΔT"])
-        changes = dwell.chi2_sf(s2, 2) < alpha
+        s2, _, _ = stats.score(r, jj, cols[f"{name}·ΔT"])
+        changes = stats.chi2_sf(s2, 2) < alpha
         out["words"] += ", changing with temperature" if changes else ", constant over temperature"
     out |= {
         "score": float(s),

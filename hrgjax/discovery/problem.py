@@ -4,7 +4,10 @@ core"): an immutable [`Fit`][hrgjax.discovery.problem.Fit] and
 regression ([`DwellProblem`][hrgjax.discovery.dwell.DwellProblem]) and by the continuous
 records, alone or with a mixed log's dwell windows
 ([`ContinuousProblem`][hrgjax.discovery.continuous.ContinuousProblem]).
-[`discover`][hrgjax.discovery.discover] only talks to this interface.
+[`discover`][hrgjax.discovery.discover] only talks to this interface: it picks the
+implementation by the data's shape and builds it with
+[`from_data`][hrgjax.discovery.problem.AbstractProblem.from_data]; everything after that
+(fits, screening, the gap, the leftover shapes, the report's pieces) is a method here.
 """
 
 from __future__ import annotations
@@ -51,6 +54,21 @@ class AbstractProblem(abc.ABC):
 
     gap_guard: bool = False
     k_e: float
+
+    @classmethod
+    @abc.abstractmethod
+    def from_data(
+        cls, data: MeasuredData, held, *, nominal, catalogue, k_e: float, window_s: float | None,
+        noise, block_s: float,
+    ) -> AbstractProblem:  # fmt: skip
+        """The problem of `data` with the runs `held` held out.
+
+        **Arguments:** `nominal` (effect names of the starting model), `catalogue` (the
+        candidates, or None for every effect the data can carry), `k_e` (nominal angular
+        gain), `window_s` (window length of the dwell runs [s]; None: a continuous problem
+        simulates every run, a mixed log's dwell runs included), `noise` (a known
+        [`hrgjax.Noise`][] for continuous records, or None: estimated from the data),
+        `block_s` (block length of the continuous increments [s])."""
 
     @abc.abstractmethod
     def candidates(self, nominal) -> list[str]:
@@ -111,6 +129,25 @@ class AbstractProblem(abc.ABC):
 
 OPTIONAL = {"amplitude": "amplitude", "quadrature": "quadrature", "accel_z": "accel_z_g"}
 """Covariates read from optional data columns."""
+
+
+def dwell_runs(data: MeasuredData) -> set[int]:
+    """Ids of the runs that hold their temperature and table rate constant (dwell runs)."""
+    out = set()
+    for idx in data.run_indices():
+        if all(
+            np.ptp(v := data[col][idx]) <= 1e-9 * max(1.0, float(np.max(np.abs(v))))
+            for col in ("temperature_c", "table_rate_dps")
+        ):
+            out.add(int(data.run[idx[0]]))
+    return out
+
+
+def is_dwell(data: MeasuredData) -> bool:
+    """True when every run holds its temperature and table rate constant (a dwell grid)."""
+    return len(dwell_runs(data)) == len(np.unique(data.run))
+
+
 NEEDS_CONTINUOUS = tuple(n for n, e in CATALOGUE.items() if not e.on_dwell)
 """Effects a dwell grid (constant temperature per run, fresh runs) cannot reveal."""
 
@@ -120,6 +157,13 @@ def rates_in(data: MeasuredData) -> set:
     (what separates a rate-dependent ripple from a readout ripple), else the empty set."""
     speeds = np.unique(np.round(np.abs(np.asarray(data["table_rate_dps"])), 6))
     return {"rates"} if np.count_nonzero(speeds) >= 2 else set()
+
+
+def covariates_in(data: MeasuredData) -> set:
+    """The covariates `data` carry beyond the wave angle, table rate, temperature and time:
+    the [`OPTIONAL`][hrgjax.discovery.problem.OPTIONAL] columns present, and `"rates"`
+    ([`rates_in`][hrgjax.discovery.problem.rates_in])."""
+    return {k for k, col in OPTIONAL.items() if col in data} | rates_in(data)
 
 
 def candidates_for(have: set, nominal=NOMINAL, continuous: bool = False) -> list[str]:

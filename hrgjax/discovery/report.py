@@ -1,18 +1,19 @@
 """The discovery report's figure, drawn from a [`Discovery`][hrgjax.discovery.result.Discovery]
-(its own fits: nothing is refitted here)."""
+(its own fits: nothing is refitted here). `Discovery.plot` calls it; this module reads the
+report's fields and imports nothing of `result`, so the two never import each other."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..units import group_temperatures
-from .result import Discovery
 
 
-def plot_discovery(disc: Discovery, path: str) -> str:
+def plot_discovery(disc, path: str) -> str:  # disc: a Discovery (not imported: module docstring)
     """The report as one figure (see [`Discovery.plot`][hrgjax.discovery.result.Discovery.plot]):
     residuals before and after in the top row, the first-round scores and the held-out gap
     against the noise floor beneath. Returns `path`."""
+    # plots._plt/_save are another module's privates: to be promoted in plots (issue 45)
     from ..plots import _plt, _save
 
     plt = _plt()

@@ -69,7 +69,7 @@ def _number(v: dict, scanned: bool = False) -> str:
 _DOUBLE_SIGN = re.compile(r"([+−]) (½·)?(\(?)[-−]")
 
 
-def _signs(text: str) -> str:
+def tidy_signs(text: str) -> str:
     """'a − (-0.3 ± 0.1)' → 'a + (0.3 ± 0.1)', '+ ½·(-x)' → '− ½·(x)': one sign between
     terms."""
     return _DOUBLE_SIGN.sub(
@@ -208,13 +208,13 @@ class Discovery:
             fields.update(
                 {k: _number(v, bool(raw.get(k, {}).get("why_no_sigma"))) for k, v in ps.items()}
             )
-            text = _signs(effect.formula.format(**fields))
+            text = tidy_signs(effect.formula.format(**fields))
             (readout if effect.where == "readout" else rate).append(f"{text}    [{name}]")
         if rate:
             lines.append("apparent input rate − table rate [°/h] =")
             for i, t in enumerate(rate):
                 # a term written with a leading minus continues the sum with it
-                term = _signs("− " + t[1:] if t.startswith("−") else "+ " + t)
+                term = tidy_signs("− " + t[1:] if t.startswith("−") else "+ " + t)
                 if i == 0:
                     term = term[2:] if term.startswith("+") else "−" + term[2:]
                 lines.append(("    " if i == 0 else "  ") + term)

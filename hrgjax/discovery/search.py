@@ -11,7 +11,7 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
 3. **Baseline**: weighted least squares of the nominal model (`bias`, `angular_gain`,
    `damping_anisotropy`).
 4. **Screen** every other catalogue effect the data can carry with the exact score test
-   ([`score`][hrgjax.discovery.dwell.score]); p-values from χ²_q.
+   ([`score`][hrgjax.discovery.stats.score]); p-values from χ²_q.
 5. **Refit** the best candidates with the model; **accept** the best one only if its p-value
    passes Bonferroni at `alpha`, its ΔBIC exceeds `min_delta_bic`, it is identifiable (aliasing
    index < `max_aliasing`: what is left of its signature once the model has absorbed what
@@ -28,6 +28,9 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
 
 Continuous records (some run changes its temperature or rate) go through the same steps
 with the model simulated ([`continuous`][hrgjax.discovery.continuous.ContinuousProblem]).
+Every step talks to the data through
+[`AbstractProblem`][hrgjax.discovery.problem.AbstractProblem] alone: the shape picks the
+implementation (`PROBLEMS`), which builds itself from the data.
 """
 
 from __future__ import annotations
@@ -36,15 +39,20 @@ import math
 
 import numpy as np
 
-from ..calibration.reduce import K_E_NOMINAL, WINDOW_S, reduce
+from ..calibration.reduce import K_E_NOMINAL, WINDOW_S
 from ..data import MeasuredData
 from ..noise import Noise
-from . import dwell, leftover, trust
-from .continuous import BLOCK_S, ContinuousProblem, Windows, dwell_runs
-from .dwell import DwellProblem, _window_extras
+from . import leftover, stats, trust
+from .continuous import BLOCK_S, ContinuousProblem
+from .dwell import DwellProblem
 from .effects import CATALOGUE, NOMINAL
-from .noise import NoiseModel, noise_model  # noqa: F401
-from .problem import NEEDS_CONTINUOUS, OPTIONAL, candidates_for, rates_in  # noqa: F401
+from .noise import NoiseModel as NoiseModel
+from .noise import noise_model as noise_model
+from .problem import NEEDS_CONTINUOUS as NEEDS_CONTINUOUS
+from .problem import OPTIONAL as OPTIONAL
+from .problem import AbstractProblem, dwell_runs
+from .problem import candidates_for as candidates_for
+from .problem import rates_in as rates_in
 from .result import Discovery
 
 METRIC = "rms_run_mean_rate_residual_dph"
@@ -149,13 +157,10 @@ def discover(
             f"(holdout_every >= 2); got {runs.size} runs"
         )
     held = runs[holdout_every - 1 :: holdout_every]
-    if shape == "dwell":
-        problem = DwellProblem(data, k_e, window_s, held)
-    else:
-        problem = _continuous_problem(
-            data, nominal, catalogue, k_e, held, noise, block_s,
-            window_s if shape == "mixed" else None,
-        )  # fmt: skip
+    problem: AbstractProblem = PROBLEMS[shape].from_data(
+        data, held, nominal=nominal, catalogue=catalogue, k_e=k_e, noise=noise,
+        block_s=block_s, window_s=None if shape == "continuous" else window_s,
+    )  # fmt: skip
     cands = list(catalogue) if catalogue is not None else problem.candidates(nominal)
     cands = [n for n in cands if n not in nominal]
 
@@ -191,7 +196,7 @@ def discover(
 
     for _ in range(max_effects):
         rows = problem.screen(current, cands, model)
-        check = _Outshone(problem, current, model + cands, min_delta_bic, not accepted)
+        check = Outshone(problem, current, model + cands, min_delta_bic, not accepted)
         for r in rows:
             r["_check"] = check
         if not ranking:
@@ -199,7 +204,7 @@ def discover(
         ok = [r for r in rows if passes(r, current)]
         if not ok:
             break
-        best = _simplest_of_the_tied(ok)
+        best = simplest_of_the_tied(ok)
         accepted.append(best["effect"])
         model.append(best["effect"])
         cands.remove(best["effect"])
@@ -224,7 +229,7 @@ def discover(
             if r is not win
             and r["refit"] is not None
             and passes(r, base)
-            and win["delta_bic"] - r["delta_bic"] < _tolerance(ambiguity_bic, win["delta_bic"])
+            and win["delta_bic"] - r["delta_bic"] < tolerance(ambiguity_bic, win["delta_bic"])
         ]
         if ambiguous:
             verdict = "ambiguous"
@@ -277,6 +282,11 @@ def _fitted_k_e(parameters: dict, k_e: float) -> float:
 
 
 SHAPES = ("auto", "dwell", "continuous", "mixed")
+PROBLEMS: dict[str, type[AbstractProblem]] = {
+    "dwell": DwellProblem, "continuous": ContinuousProblem, "mixed": ContinuousProblem,
+}  # fmt: skip
+"""The problem each data shape is (a mixed log: the continuous records with the dwell runs
+as windows)."""
 SCREEN_KEYS = (
     "effect", "score", "p_value", "delta_bic", "aliasing", "heldout_gain", "gap_after",
     "outshone_by",
@@ -292,7 +302,7 @@ readout mismatch's ΔBIC of 2.8·10⁸ trailed `loop_ripple`'s by 1.3·10⁴ (5�
 and an absolute margin of 10 named the wrong one."""
 
 
-def _tolerance(margin: float, evidence: float) -> float:
+def tolerance(margin: float, evidence: float) -> float:
     """The margin two descriptions' evidence must differ by to be told apart: `margin`, or
     `TIE_FRACTION` of the evidence where that is larger."""
     return max(margin, TIE_FRACTION * abs(evidence))
@@ -303,14 +313,14 @@ def _size(name: str) -> int:
     return len(CATALOGUE[name].params)
 
 
-def _simplest_of_the_tied(rows: list[dict]) -> dict:
+def simplest_of_the_tied(rows: list[dict]) -> dict:
     """The candidate to accept among `rows` (best score first) that pass the rule: of those
-    whose ΔBIC is within [`_tolerance`][hrgjax.discovery.search._tolerance] of the best,
+    whose ΔBIC is within [`tolerance`][hrgjax.discovery.search.tolerance] of the best,
     the one with the fewest parameters (a scanned time constant counts), then the best
     ΔBIC — parsimony where the evidence ties; the rest are reported as ambiguous rivals."""
     top = max(r["delta_bic"] for r in rows)
     if math.isfinite(top):
-        tied = [r for r in rows if top - r["delta_bic"] <= _tolerance(0.0, top)]
+        tied = [r for r in rows if top - r["delta_bic"] <= tolerance(0.0, top)]
     else:  # infinite evidence ties only with itself
         tied = [r for r in rows if r["delta_bic"] == top]
     tied = tied or [max(rows, key=lambda r: r["delta_bic"])]
@@ -319,10 +329,10 @@ def _simplest_of_the_tied(rows: list[dict]) -> dict:
 
 DOMINANT = 10.0
 """A candidate whose evidence (score less its BIC penalty) is under 1/`DOMINANT` of an
-uncovered generic shape's is refused (`_Outshone`)."""
+uncovered generic shape's is refused (`Outshone`)."""
 
 
-class _Outshone:
+class Outshone:
     """Whether a candidate only imitates part of something out of the catalogue: generic
     shapes ([`leftover.SHAPES`][hrgjax.discovery.leftover.SHAPES]) that no available effect
     is explain the residual better than the candidate (score test, BIC, by more than
@@ -356,7 +366,7 @@ class _Outshone:
             (
                 (sc - q * self.log_n, name)
                 for name, (sc, q) in self.scores.items()
-                if sc - q * self.log_n - own > _tolerance(self.margin, own)
+                if sc - q * self.log_n - own > tolerance(self.margin, own)
             ),
             reverse=True,
         )
@@ -373,44 +383,9 @@ class _Outshone:
         jj = np.concatenate([j, *(self.cols[name] for _, name in stronger)], axis=1)
         q_j, _ = np.linalg.qr(jj)
         r_s = r - q_j @ (q_j.T @ r)
-        s_cond, _, _ = dwell.score(r_s, jj, row["_columns"](), q_j)
+        s_cond, _, _ = stats.score(r_s, jj, row["_columns"](), q_j)
         # it is a part of them when it adds nothing beyond them, or keeps less than a tenth
         # of its own evidence (what it still adds is then their imperfections: the shapes
         # are generic, the windows' arc averaging and the exact law are not in them)
         part = s_cond - q_c * self.log_n < self.margin or s_cond < 0.1 * row["score"]
         return stronger[0][1] if part else None
-
-
-def _continuous_problem(data, nominal, catalogue, k_e, held, noise, block_s, window_s=None):
-    """Build the continuous problem over the superset (nominal + candidates); without a known
-    noise model, estimate it and then the run-to-run bias from the baseline's run means.
-    With `window_s` (a mixed log), the dwell runs join it as windows of that length (the
-    dwell search's regression rows) and only the other runs are simulated."""
-    have = {k for k, col in OPTIONAL.items() if col in data} | rates_in(data)
-    cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
-    names = list(nominal) + [n for n in cands if n not in nominal]
-    known = noise is not None
-    nz = NoiseModel.from_gyro(noise, k_e) if known else NoiseModel.estimate(data)
-    windows, records = None, data
-    dwell_ids = np.asarray(sorted(dwell_runs(data))) if window_s is not None else []
-    if len(dwell_ids):
-        in_dwell = np.isin(data.run, dwell_ids)
-        part = lambda m: (
-            MeasuredData({k: v[m] for k, v in data.columns.items()}) if m.any() else None
-        )
-        sub, records = part(in_dwell), part(~in_dwell)
-        w = reduce(sub, k_e, window_s=window_s)
-        extra, _ = _window_extras(sub, w)
-        arc = extra.pop("arc")
-        win = Windows(
-            y=dwell.target(w, k_e),
-            sigma=dwell.window_sigma(nz, sub, w),  # the one noise model of the whole log
-            cov=dwell.covariates(w, extra),
-            arc=arc,
-            run=tuple(np.asarray(w.run).tolist()),
-        )
-        windows = (win, np.isin(w.run, held))
-    problem = ContinuousProblem(records, names, k_e, held, nz, block_s, windows, known)
-    if not known:
-        problem = problem.with_run_bias(problem.fit(list(nominal)).z)
-    return problem

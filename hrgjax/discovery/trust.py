@@ -39,8 +39,8 @@ import math
 
 import numpy as np
 
-from . import dwell, leftover
-from .effects import CATALOGUE
+from . import leftover, stats
+from .effects import regular_parameters
 
 MAX_SHAPES = 3
 """The most leftover shapes fitted beside the model for its model uncertainty."""
@@ -49,12 +49,6 @@ CLASS_NAMES = {0: "moving windows", 1: "static windows", 2: "continuous blocks"}
 are, for the report."""
 MIN_ROWS = 30
 """Fewest rows of a class whose noise scale is read from its own residual."""
-
-
-def _regular(model) -> list[tuple[str, str]]:
-    """(effect, parameter) of each column of a fit's Jacobian: the regular parameters in model
-    order (the order both data shapes build their Jacobian in)."""
-    return [(n, p.name) for n in model for p in CATALOGUE[n].params if p.regular]
 
 
 def _noise_scale(r, p, classes):
@@ -83,7 +77,7 @@ def _sandwich_diag(a, s, p):
     if not live.any():
         return out
     al = a[:, live]
-    c = dwell.covariance(al)
+    c = stats.covariance(al)
     meat = (al * (s**2)[:, None]).T @ al
     v = np.diag(c @ meat @ c)
     where = np.flatnonzero(live)
@@ -95,13 +89,13 @@ def _sandwich_diag(a, s, p):
 def _shapes_left(r, j, cols, alpha):
     """Significant leftover shapes, strongest first, each chosen given the ones before."""
     chosen, jj, rr = [], j, r
-    cols = leftover._distinct(cols)
+    cols = leftover.distinct(cols)
     for _ in range(MAX_SHAPES):
         scores = leftover.scores(rr, jj, {k: v for k, v in cols.items() if k not in chosen})
         if not scores:
             break
         name, (s, q) = max(scores.items(), key=lambda kv: kv[1][0])
-        if min(1.0, dwell.chi2_sf(s, q) * len(cols)) >= alpha:
+        if min(1.0, stats.chi2_sf(s, q) * len(cols)) >= alpha:
             break
         chosen.append(name)
         jj = np.concatenate([jj, cols[name]], axis=1)
@@ -123,7 +117,7 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
     `{"noise_scale": {class: s}, "shapes": [names], "basis": words}`.
     """
     r, j = np.asarray(fit.r, float), np.asarray(fit.j, float)
-    labels = _regular(fit.model)
+    labels = regular_parameters(fit.model)
     params = copy.deepcopy(fit.parameters)
     if j.ndim != 2 or j.shape[1] != len(labels) or r.size <= j.shape[1]:
         return params, {"noise_scale": {}, "shapes": [], "basis": "textbook (no correction)"}
@@ -142,7 +136,7 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
     # variance are that estimator's (with the shapes beside it), at the noise level s
     step, *_ = np.linalg.lstsq(a, r, rcond=None)
     var = _sandwich_diag(a, s, p)
-    old = np.sqrt(np.diag(dwell.covariance(j)))
+    old = np.sqrt(np.diag(stats.covariance(j)))
     shift = step[:p] if shapes else np.zeros(p)
     for i, (name, pname) in enumerate(labels):
         entry = params[name][pname]
