@@ -81,10 +81,10 @@ def test_each_drift_term_alone_gives_its_formula(quiet):
 
 
 def test_the_fits_fixed_step_solve_is_diffrax_bosh3_with_its_dense_output():
-    """`continuous._bosh3_path` (a `lax.scan`) = `diffrax.diffeqsolve` with `Bosh3`,
+    """`records.bosh3_path` (a `lax.scan`) = `diffrax.diffeqsolve` with `Bosh3`,
     `StepTo` and `SaveAt(ts)` — uneven steps, save times on step ends and inside steps —
     and so are their forward-mode derivatives (what the fits differentiate)."""
-    from hrgjax.discovery.continuous import _bosh3_path
+    from hrgjax.discovery.records import bosh3_path
 
     steps = jnp.asarray(np.cumsum(np.r_[0.0, np.random.default_rng(1).uniform(0.5, 2.0, 30)]))
     save = jnp.asarray(np.r_[steps[0], np.sort(np.random.default_rng(2).uniform(
@@ -95,7 +95,7 @@ def test_the_fits_fixed_step_solve_is_diffrax_bosh3_with_its_dense_output():
         return lambda t, y, _: -p[0] * jnp.sin(y) + p[1] * jnp.cos(0.3 * t) + 1e-2 * t
 
     def ours(p):
-        return _bosh3_path(field(p), steps, 0.4, save)
+        return bosh3_path(field(p), steps, 0.4, save)
 
     def theirs(p):
         return diffrax.diffeqsolve(

@@ -327,7 +327,7 @@ def test_equations_print_every_catalogue_effect_with_held_parameters():
     parameter the fit held (not regular: `loop_ripple`'s bandwidth in a dwell fit) reads at
     its held value instead of failing."""
     from hrgjax.discovery.effects import CATALOGUE
-    from hrgjax.discovery.result import Discovery, _signs
+    from hrgjax.discovery.result import Discovery, tidy_signs
 
     fitted = {
         name: {p.name: {"value": p.scale, "std": 0.1 * p.scale} for p in e.params if p.regular}
@@ -349,4 +349,7 @@ def test_equations_print_every_catalogue_effect_with_held_parameters():
                for n, ps in fitted.items()}  # fmt: skip
     for eq in (text, dataclasses.replace(rep, fit_parameters=flipped).equations()):
         assert not re.search(r"[+−] (½·)?\(?[-−]", eq), eq
-    assert _signs("a − (-0.3 ± 0.1)·x + -2·y + ½·(-4 ± 1)") == "a + (0.3 ± 0.1)·x − 2·y − ½·(4 ± 1)"
+    assert (
+        tidy_signs("a − (-0.3 ± 0.1)·x + -2·y + ½·(-4 ± 1)")
+        == "a + (0.3 ± 0.1)·x − 2·y − ½·(4 ± 1)"
+    )

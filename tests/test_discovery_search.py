@@ -9,7 +9,7 @@ from helpers import noisy_model_gyro
 
 import hrgjax as hg
 from hrgjax.calibration import physical, rotation_plan, run_plan, static_plan
-from hrgjax.discovery import NOMINAL, continuous, dwell
+from hrgjax.discovery import NOMINAL, records, stats
 from hrgjax.discovery.search import discover
 from hrgjax.units import DEG_PER_H
 
@@ -32,7 +32,7 @@ def test_score_statistic_follows_chi2_and_its_noncentrality():
         for out, signal in ((null, 0.0), (alt, 1.0)):
             y = j @ np.array([0.3, 0.7]) + signal * g @ p_true + rng.standard_normal(n)
             beta, *_ = np.linalg.lstsq(j, y, rcond=None)
-            out.append(dwell.score(y - j @ beta, j, g)[0])
+            out.append(stats.score(y - j @ beta, j, g)[0])
     assert abs(np.mean(null) - 2.0) < 0.15
     assert abs(np.var(null) - 4.0) < 0.6
     assert abs(np.mean(alt) - (2.0 + lam)) < 0.1 * (2.0 + lam)
@@ -159,7 +159,9 @@ def test_dwell_runs_as_window_rows_of_the_joint_problem_equal_the_dwell_search()
     """A mixed log's dwell runs enter the continuous problem as the dwell search's window
     rows: on dwell runs alone its Levenberg–Marquardt fit is the dwell search's weighted
     least squares (the nominal model is linear), with the same σ, gap and floor."""
-    from hrgjax.discovery import generate, search
+    from hrgjax.discovery import generate
+    from hrgjax.discovery.continuous import ContinuousProblem
+    from hrgjax.discovery.dwell import DwellProblem
     from hrgjax.units import K_E_NOMINAL, WINDOW_S
 
     data = generate.hidden_effect_dataset(
@@ -170,9 +172,12 @@ def test_dwell_runs_as_window_rows_of_the_joint_problem_equal_the_dwell_search()
     )
     runs = np.unique(data.run)
     held = runs[2::3]
-    dwell = search.DwellProblem(data, K_E_NOMINAL, WINDOW_S, held)
-    joint = search._continuous_problem(data, NOMINAL, None, K_E_NOMINAL, held, None, 10.0, WINDOW_S)
-    assert not any(isinstance(g, continuous.Runs) for g in joint.train_groups)
+    dwell = DwellProblem(data, K_E_NOMINAL, WINDOW_S, held)
+    joint = ContinuousProblem.from_data(
+        data, held, nominal=NOMINAL, catalogue=None, k_e=K_E_NOMINAL, window_s=WINDOW_S,
+        noise=None, block_s=10.0,
+    )  # fmt: skip
+    assert not any(isinstance(g, records.Runs) for g in joint.train_groups)
     a, b = dwell.fit(list(NOMINAL)), joint.fit(list(NOMINAL))
     for name, ps in a.parameters.items():
         for p, v in ps.items():
@@ -227,7 +232,7 @@ def test_shapes_the_available_effects_span_count_as_covered():
     from types import SimpleNamespace
 
     from hrgjax.discovery import leftover
-    from hrgjax.discovery.search import _Outshone
+    from hrgjax.discovery.search import Outshone
 
     rng = np.random.default_rng(1)
     n = 200
@@ -238,7 +243,7 @@ def test_shapes_the_available_effects_span_count_as_covered():
                "t_run": np.zeros(n)}  # fmt: skip
         problem = SimpleNamespace(shape_columns=leftover.columns(cov))
         fit = SimpleNamespace(r=rng.normal(size=n), j=np.ones((n, 1)))
-        out = _Outshone(problem, fit, ["readout_gain_mismatch"], margin=2.0)
+        out = Outshone(problem, fit, ["readout_gain_mismatch"], margin=2.0)
         assert "2θ·Ω" not in out.cols and ("2θ·Ω²" in out.cols) == kept, rates
         assert "ΔT" in out.cols
 
@@ -247,13 +252,13 @@ def test_a_near_tie_of_evidence_goes_to_the_simpler_effect_and_is_reported_ambig
     """At 10⁴ ppm a readout mismatch's ΔBIC (2.8·10⁸) trailed loop_ripple's (which adds a
     scanned loop bandwidth) by 5·10⁻⁵ of itself — within what the catalogue's linearised
     laws can resolve: the simpler effect is accepted; a clear lead still wins."""
-    from hrgjax.discovery.search import TIE_FRACTION, _simplest_of_the_tied, _tolerance
+    from hrgjax.discovery.search import TIE_FRACTION, simplest_of_the_tied, tolerance
 
     rows = [
         {"effect": "loop_ripple", "delta_bic": 280353068.0},
         {"effect": "readout_gain_mismatch", "delta_bic": 280339659.0},
     ]
-    assert _simplest_of_the_tied(rows)["effect"] == "readout_gain_mismatch"
+    assert simplest_of_the_tied(rows)["effect"] == "readout_gain_mismatch"
     rows[1]["delta_bic"] = 280353068.0 * (1 - 2 * TIE_FRACTION)
-    assert _simplest_of_the_tied(rows)["effect"] == "loop_ripple"
-    assert _tolerance(10.0, 50.0) == 10.0 and _tolerance(10.0, 1e8) == 1e8 * TIE_FRACTION
+    assert simplest_of_the_tied(rows)["effect"] == "loop_ripple"
+    assert tolerance(10.0, 50.0) == 10.0 and tolerance(10.0, 1e8) == 1e8 * TIE_FRACTION

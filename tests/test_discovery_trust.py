@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hrgjax.discovery import dwell, leftover, trust
-from hrgjax.discovery.effects import Covariates
+from hrgjax.discovery import dwell, leftover, stats, trust
+from hrgjax.discovery.effects import Covariates, regular_parameters
 from hrgjax.discovery.problem import Fit
 from hrgjax.units import DEG, DEG_PER_H
 
@@ -46,10 +46,10 @@ def _draws(grid, sigma_true, sigma_assumed, four_theta, n=200, seed=0):
             + four_theta * shapes["4θ"][:, 0]
             + sigma_true * rng.standard_normal(g.shape[0])
         )
-        beta, r, cov = dwell.wls(g, y, sig)
+        beta, r, cov = stats.wls(g, y, sig)
         std = np.sqrt(np.diag(cov))
         params = {}
-        for (name, pname), b, e in zip(trust._regular(MODEL), beta, std, strict=True):
+        for (name, pname), b, e in zip(regular_parameters(MODEL), beta, std, strict=True):
             params.setdefault(name, {})[pname] = {"value": b, "std": e}
         fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
         cols = {k: v / sig[:, None] for k, v in shapes.items()}
@@ -90,16 +90,19 @@ def test_run_bias_does_not_absorb_an_effect_that_follows_a_run_covariate():
     took 2.3 °/h from a thermal-rate term); a pure switch-on scatter is left whole."""
     from scipy import stats
 
-    from hrgjax.discovery.continuous import _f_sf, _follows_covariate
+    from hrgjax.discovery.continuous import RUN_COVARIATE_ALPHA
+    from hrgjax.discovery.stats import f_sf, follows_covariate
 
-    assert abs(_f_sf(3.0, 1, 10) - stats.f.sf(3.0, 1, 10)) < 1e-9
+    assert abs(f_sf(3.0, 1, 10) - stats.f.sf(3.0, 1, 10)) < 1e-9
     rng = np.random.default_rng(0)
     t_dot = np.array([1.0, -1.0, 2.0, -2.0, 0.5, -0.5, 1.0, -1.0]) / 60  # °C/s
     x = np.stack([t_dot, np.zeros(8), rng.normal(size=8)], axis=1)  # Ṫ, Ω (none), a_z
     bias = 0.1 * rng.standard_normal(8)  # °/h
-    resid, k = _follows_covariate(bias + 2.0 * 60 * t_dot, x)  # + 2 °/h per °C/min
+    resid, k = follows_covariate(
+        bias + 2.0 * 60 * t_dot, x, RUN_COVARIATE_ALPHA
+    )  # + 2 °/h per °C/min
     assert k == 2 and np.std(resid) < 0.15  # the slope taken out, the bias left
-    resid, k = _follows_covariate(bias, x)
+    resid, k = follows_covariate(bias, x, RUN_COVARIATE_ALPHA)
     assert k == 1 and np.allclose(resid, bias - bias.mean())
 
 
@@ -118,15 +121,15 @@ def test_classes_with_different_noise_levels_get_the_sandwich_and_odd_input_is_s
     z = []
     for _ in range(300):
         y = g @ truth + noise * rng.standard_normal(g.shape[0])
-        beta, r, cov = dwell.wls(g, y, sig)
+        beta, r, cov = stats.wls(g, y, sig)
         params = {}
-        for (name, pname), b, e in zip(trust._regular(MODEL), beta, np.sqrt(np.diag(cov)),
+        for (name, pname), b, e in zip(regular_parameters(MODEL), beta, np.sqrt(np.diag(cov)),
                                        strict=True):  # fmt: skip
             params.setdefault(name, {})[pname] = {"value": b, "std": e}
         fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
         new, info = trust.honest(fit, {}, classes)
         z.append([(new[n][p]["value"] - truth[i]) / new[n][p]["std"]
-                  for i, (n, p) in enumerate(trust._regular(MODEL))])  # fmt: skip
+                  for i, (n, p) in enumerate(regular_parameters(MODEL))])  # fmt: skip
     z = np.asarray(z)
     assert np.all(np.abs(np.sqrt(np.mean(z**2, axis=0)) - 1) < 0.2), np.sqrt(np.mean(z**2, 0))
     assert set(info["noise_scale"]) == {"moving windows", "static windows"}
@@ -139,8 +142,8 @@ def test_classes_with_different_noise_levels_get_the_sandwich_and_odd_input_is_s
 
 
 def test_a_tie_at_infinite_evidence_still_names_one():
-    from hrgjax.discovery.search import _simplest_of_the_tied
+    from hrgjax.discovery.search import simplest_of_the_tied
 
     rows = [{"effect": "loop_ripple", "delta_bic": np.inf},
             {"effect": "readout_gain_mismatch", "delta_bic": 5.0}]  # fmt: skip
-    assert _simplest_of_the_tied(rows)["effect"] == "loop_ripple"
+    assert simplest_of_the_tied(rows)["effect"] == "loop_ripple"

@@ -99,7 +99,7 @@ class ContinuousProblem(AbstractProblem):
         (an [`hrgjax.Noise`][]), the noise model is estimated and then the run-to-run bias
         from the baseline's run means. With `window_s` (a mixed log), the dwell runs join it
         as windows of that length (the dwell search's regression rows,
-        [`rate_windows`][hrgjax.discovery.dwell.rate_windows]) and only the other runs are
+        `dwell.rate_windows`) and only the other runs are
         simulated."""
         have = covariates_in(data)
         cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
@@ -164,7 +164,7 @@ class ContinuousProblem(AbstractProblem):
         constant along each ramp, say c·Ṫ) is not a switch-on bias: the covariate that
         explains the run means significantly (F-test, p < `RUN_COVARIATE_ALPHA`) is
         regressed out first, so the noise model cannot absorb the effect that the screening
-        is to find ([`follows_covariate`][hrgjax.discovery.stats.follows_covariate])."""
+        is to find (`stats.follows_covariate`)."""
         # the training and held-out runs apart: their residual programs exist already;
         # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
         # one session, whose bias the shared `bias` parameter takes)
