@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 import time
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 from ..units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
 from ._common import (
@@ -25,12 +25,15 @@ from ._common import (
     usage_errors,
 )
 
+if TYPE_CHECKING:  # the calibration package imports JAX; `--help` must not
+    from ..calibration import AbstractCompensator
+
 
 class Method(NamedTuple):
     """A `--method`, built from the options: the compensator to fit (its settings as
     fields), what to say while it fits, and the ramp window its reduction needs."""
 
-    compensator: object
+    compensator: AbstractCompensator
     message: str | None = None
     ramp_window_s: float | None = None
 
