@@ -467,7 +467,7 @@ def test_one_fit_call_for_every_compensator_and_the_old_keywords_still_work():
     """Issue 45: `fit(data, key=…, raw=…)` is every compensator's call (settings are fields);
     the per-call keywords of earlier versions (`window_s`, `mode`, `initial`) give the same
     fit."""
-    data = closed_form_session(duration_s=30.0, dt=1.0)
+    data = closed_form_session(duration_s=30.0)
     windows, key = reduce(data, window_s=5.0), jax.random.key(2)
     th = np.linspace(-90.0, 90.0, 7)
     same = lambda a, b: np.testing.assert_array_equal(a.drift_dph(th, 0.0), b.drift_dph(th, 0.0))
