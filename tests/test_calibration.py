@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import noisy_model_gyro
+from helpers import closed_form_session, noisy_model_gyro
 
 import hrgjax as hg
 from hrgjax.calibration import (
@@ -457,12 +457,41 @@ def test_missing_rotation_runs_for_scale_factor(exact_windows):
     static_only = exact_windows.select(exact_windows.static)
     for comp in (FourierCompensator(), MLPCompensator(steps=5)):
         with pytest.raises(ValueError, match="no rotation runs"):
-            comp.fit(static_only, key=jax.random.key(0)) if isinstance(
-                comp, MLPCompensator
-            ) else comp.fit(static_only)
+            comp.fit(static_only, key=jax.random.key(0))  # one call for every compensator
     moving_only = exact_windows.select(~exact_windows.static)
     with pytest.raises(ValueError, match="no static runs"):
         FourierCompensator().fit(moving_only)
+
+
+def test_one_fit_call_for_every_compensator_and_the_old_keywords_still_work():
+    """Issue 45: `fit(data, key=…, raw=…)` is every compensator's call (settings are fields);
+    the per-call keywords of earlier versions (`window_s`, `mode`, `initial`) give the same
+    fit."""
+    data = closed_form_session(duration_s=30.0)
+    windows, key = reduce(data, window_s=5.0), jax.random.key(2)
+    th = np.linspace(-90.0, 90.0, 7)
+    same = lambda a, b: np.testing.assert_array_equal(a.drift_dph(th, 0.0), b.drift_dph(th, 0.0))
+    fourier = FourierCompensator(temperature_degree=2, window_s=5.0)
+    new = fourier.fit(data, key=key, raw=data)
+    for old in (FourierCompensator(temperature_degree=2).fit(data, window_s=5.0),
+                FourierCompensator(temperature_degree=2).fit(data, 5.0), fourier.fit(windows)):  # fmt: skip
+        same(new, old)
+    mlp = MLPCompensator(steps=20, e2e_steps=2, mode="end_to_end", window_s=5.0)
+    new = mlp.fit(windows, key=key, raw=data)
+    old = MLPCompensator(steps=20, e2e_steps=2).fit(windows, key=key, mode="end_to_end",
+                                                    window_s=5.0, raw=data)  # fmt: skip
+    same(new, old)
+    assert (new.mode, new.window_s) == (old.mode, old.window_s) == ("end_to_end", 5.0)
+    with pytest.raises(TypeError, match="key="):
+        MLPCompensator().fit(windows)
+    with pytest.raises(ValueError, match="mode must be one of"):
+        MLPCompensator(mode="joint")
+    raw_gyro = NoCompensation()
+    assert raw_gyro.fit(windows, key=key, raw=data) is raw_gyro
+    with pytest.raises(TypeError, match="raw samples"):
+        PhysicalCompensator().fit(windows, key=key)
+    x0 = jnp.asarray(physical.initial_values(windows))
+    assert PhysicalCompensator(initial=x0).initial is x0
 
 
 def test_fourier_base_needs_points_at_fit_temperature(exact_windows):

@@ -132,6 +132,9 @@ class _Shifted(AbstractCompensator):
     inner: AbstractCompensator
     offset: float  # rad/s
 
+    def fit(self, data, *, key=None, raw=None):
+        return _Shifted(self.k_e, self.inner.fit(data, key=key, raw=raw), self.offset)
+
     def drift(self, theta, temperature_c):
         sf = self.inner.scale_factor(theta, temperature_c)
         return self.inner.drift(theta, temperature_c) + self.offset * sf

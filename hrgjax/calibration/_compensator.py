@@ -22,6 +22,7 @@ readout can supply it (the physical compensator); the others take $s_T = 0$.
 from __future__ import annotations
 
 import abc
+import enum
 
 import equinox as eqx
 import jax
@@ -40,14 +41,61 @@ CORRECTED_COLUMNS = {
 """Columns that `correct` adds to the data."""
 
 
-class AbstractCompensator(eqx.Module):
-    """Base class: subclasses give `drift` and `scale_factor`; correction is shared.
+class FromField(enum.Enum):
+    """The default of a deprecated `fit` keyword: the compensator's field of that name."""
 
-    Subclasses also hold `k_e` (the nominal angular gain, static) and implement `fit`, which
-    returns a new fitted object.
+    FIELD = "the compensator's field"
+
+    def __repr__(self) -> str:
+        return "FROM_FIELD"
+
+
+FROM_FIELD = FromField.FIELD
+"""Default of the deprecated per-call `fit` keywords (`window_s`, `mode`, `initial`): take
+the setting from the compensator's field of that name."""
+
+
+def setting(comp, name: str, value):
+    """`value`, unless it is `FROM_FIELD`: then the compensator's field `name`."""
+    return getattr(comp, name) if value is FROM_FIELD else value
+
+
+class AbstractCompensator(eqx.Module):
+    """Base class: subclasses give `drift`, `scale_factor` and `fit`; correction is shared.
+
+    Subclasses also hold `k_e` (the nominal angular gain, static). Every setting of a method
+    (harmonics, window length, training mode, starting values …) is a field given to the
+    constructor, so every compensator is fitted by the same call:
+
+    ```python
+    comp = FourierCompensator(temperature_degree=3)  # or MLPCompensator(mode=…), …
+    fitted = comp.fit(windows, key=key, raw=data)
+    ```
     """
 
     k_e: eqx.AbstractVar[float]
+
+    @abc.abstractmethod
+    def fit(self, data, *, key: jax.Array | None = None, raw: MeasuredData | None = None):
+        """Fit the compensator to bench data; the same call for every compensator.
+
+        **Arguments:**
+
+        - `data`: [`hrgjax.MeasuredData`][] or reduced
+          [`RateWindows`][hrgjax.calibration.RateWindows] (from
+          [`reduce`][hrgjax.calibration.reduce] with this compensator's `k_e`).
+        - `key`: PRNG key for compensators that draw random numbers (the MLP's initial
+          weights; required there); the deterministic ones ignore it.
+        - `raw`: the raw samples behind `data` when `data` are windows; compensators that
+          need samples (the physical grey box, the MLP trained end to end) take them from
+          here, the others ignore it.
+
+        **Returns:** a new fitted compensator of the same class (the object is not changed).
+
+        **Raises:** `ValueError` for data the method cannot fit (no static or no rotation
+        runs, too few points …); `TypeError` (or `ValueError`) when samples are needed and
+        not given.
+        """
 
     @abc.abstractmethod
     def drift(self, theta, temperature_c):

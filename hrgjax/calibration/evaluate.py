@@ -49,6 +49,10 @@ class NoCompensation(AbstractCompensator):
         """Short label used in tables."""
         return "raw"
 
+    def fit(self, data, *, key=None, raw=None) -> NoCompensation:
+        """Nothing to fit: returns `self` (the common interface's arguments are not used)."""
+        return self
+
     def drift(self, theta, temperature_c):
         return jnp.zeros_like(theta)
 

@@ -17,8 +17,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._compiled import device
+from ..data import MeasuredData
 from ..units import DEG, T_REF_C
-from ._compensator import AbstractCompensator, as_windows, split_targets
+from ._compensator import (
+    FROM_FIELD,
+    AbstractCompensator,
+    FromField,
+    as_windows,
+    setting,
+    split_targets,
+)
 from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows
 
 T_SCALE = 50.0
@@ -50,6 +58,8 @@ class FourierCompensator(AbstractCompensator):
     - `k_e`: nominal angular gain.
     - `drift_coef`, `sf_coef`: fitted coefficients, shape (K+1, 2N+1) (drift in rad/s);
       `None` before `fit`.
+    - `window_s`: rotation-run window [s] of the reduction when `fit` is given
+      `MeasuredData` (windows given to `fit` are used as they are).
     """
 
     harmonics: int = eqx.field(static=True, default=2)
@@ -59,6 +69,7 @@ class FourierCompensator(AbstractCompensator):
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
     drift_coef: jax.Array | None = None
     sf_coef: jax.Array | None = None
+    window_s: float | None = eqx.field(static=True, default=WINDOW_S)
 
     def __check_init__(self):
         if self.harmonics < 1:
@@ -96,20 +107,32 @@ class FourierCompensator(AbstractCompensator):
         self._require_fitted(self.sf_coef)
         return self._basis(theta, temperature_c) @ self.sf_coef.ravel()
 
-    def fit(self, data, window_s: float | None = WINDOW_S) -> FourierCompensator:
-        """Fit drift on static windows, then SF on rotation windows with that drift removed.
+    def fit(
+        self,
+        data,
+        window_s: float | None | FromField = FROM_FIELD,
+        *,
+        key: jax.Array | None = None,
+        raw: MeasuredData | None = None,
+    ) -> FourierCompensator:
+        """Fit drift on static windows, then SF on rotation windows with that drift removed
+        ([`AbstractCompensator.fit`][hrgjax.calibration.AbstractCompensator.fit]).
 
         **Arguments:**
 
         - `data`: [`hrgjax.MeasuredData`][] or reduced
           [`RateWindows`][hrgjax.calibration.RateWindows].
-        - `window_s`: rotation-run window for the reduction [s].
+        - `key`, `raw`: the common interface's; not used (the fit is linear least squares
+          on the reduced windows).
+        - `window_s`: *deprecated*, give `FourierCompensator(window_s=…)`: the rotation-run
+          window for the reduction [s] (default: the `window_s` field).
 
         **Returns:** a new fitted `FourierCompensator`.
 
         **Raises:** `ValueError` without static or rotation runs, with no points near the fit
         temperature (base algorithm), or with fewer points than coefficients.
         """
+        window_s = setting(self, "window_s", window_s)
         static, moving = split_targets(as_windows(data, self.k_e, window_s))
         if self.temperature_degree is None:
             static = _near(static, self.fit_temperature_c, self.tolerance_c, "static")

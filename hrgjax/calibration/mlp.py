@@ -27,6 +27,8 @@ compiled `lax.scan` with a progress bar between blocks:
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -36,7 +38,14 @@ from .._compiled import device, program
 from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
-from ._compensator import AbstractCompensator, as_windows, split_targets
+from ._compensator import (
+    FROM_FIELD,
+    AbstractCompensator,
+    FromField,
+    as_windows,
+    setting,
+    split_targets,
+)
 from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, reduce
 
 ENCODINGS = ("periodic", "angle")
@@ -65,6 +74,9 @@ class MLPCompensator(AbstractCompensator):
       (0, the default: none, the seed's MLP; see the module docstring).
     - `drift_net`, `sf_net`, `st_net`, and the normalisation (`t_centre`, `t_scale` [°C];
       `drift_offset`, `drift_scale` [rad/s]; `sf_offset`, `sf_scale`): set by `fit`.
+    - `mode`: how `fit` trains, `"reduced"` or `"end_to_end"` (module docstring).
+    - `window_s`: rotation-run window [s] of the reduction when `fit` is given
+      `MeasuredData`, and of the end-to-end loss.
     """
 
     drift_width: int = eqx.field(static=True, default=30)
@@ -85,6 +97,8 @@ class MLPCompensator(AbstractCompensator):
     drift_scale: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
     sf_offset: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
     sf_scale: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
+    mode: str = eqx.field(static=True, default="reduced")
+    window_s: float | None = eqx.field(static=True, default=WINDOW_S)
 
     def __check_init__(self):
         if self.encoding not in ENCODINGS:
@@ -93,6 +107,8 @@ class MLPCompensator(AbstractCompensator):
             raise ValueError("drift_width, sf_width and steps must be ≥ 1")
         if self.st_width < 0:
             raise ValueError(f"st_width must be ≥ 0 (0: no s_T network); got {self.st_width}")
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}; got {self.mode!r}")
 
     @property
     def name(self) -> str:
@@ -158,21 +174,23 @@ class MLPCompensator(AbstractCompensator):
         self,
         data,
         *,
-        key: jax.Array,
-        mode: str = "reduced",
-        window_s: float | None = WINDOW_S,
+        key: jax.Array | None = None,
         raw: MeasuredData | None = None,
+        mode: str | FromField = FROM_FIELD,
+        window_s: float | None | FromField = FROM_FIELD,
     ) -> MLPCompensator:
-        """Train both networks.
+        """Train the networks ([`AbstractCompensator.fit`][hrgjax.calibration.AbstractCompensator.fit]).
 
         **Arguments:**
 
         - `data`: [`hrgjax.MeasuredData`][] or [`RateWindows`][hrgjax.calibration.RateWindows]
           (for `mode="end_to_end"` the raw samples are needed: pass `MeasuredData`, or the
           windows plus `raw=`).
-        - `key`: PRNG key of the initial weights.
-        - `mode`: `"reduced"` or `"end_to_end"` (module docstring).
-        - `window_s`: rotation-run window of the reduction [s].
+        - `key`: PRNG key of the initial weights (required).
+        - `raw`: the raw samples behind windows given as `data` (used by
+          `mode="end_to_end"`).
+        - `mode`, `window_s`: *deprecated*, give `MLPCompensator(mode=…, window_s=…)`; a
+          value here overrides the field of that name (and the fitted compensator keeps it).
 
         With `st_width > 0` the drift and s_T networks are trained together on every at-rest
         window, ramps cut into `RAMP_WINDOW_S` windows (windows given as `RateWindows` must
@@ -181,11 +199,18 @@ class MLPCompensator(AbstractCompensator):
 
         **Returns:** a new fitted `MLPCompensator`.
 
-        **Raises:** `ValueError` for an unknown mode, data without static or rotation runs,
-        or, with `st_width > 0`, data without ramps.
+        **Raises:** `TypeError` without `key`; `ValueError` for an unknown mode, data
+        without static or rotation runs, or, with `st_width > 0`, data without ramps.
         """
-        if mode not in MODES:
+        if key is None:
+            raise TypeError("MLPCompensator.fit needs key= (the PRNG key of the initial weights)")
+        if mode is not FROM_FIELD and mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
+        if mode is not FROM_FIELD or window_s is not FROM_FIELD:
+            self = dataclasses.replace(
+                self, mode=setting(self, "mode", mode), window_s=setting(self, "window_s", window_s)
+            )
+        mode, window_s = self.mode, self.window_s
         if self.st_width and isinstance(data, MeasuredData):
             windows = reduce(data, self.k_e, window_s=window_s, ramp_window_s=RAMP_WINDOW_S)
         else:

@@ -56,7 +56,7 @@ from ..resonator.readout import Readout
 from ..resonator.slow import reduced_rate
 from ..simulate import simulate
 from ..units import DEG, DEG_PER_H, PHYSICAL_WINDOW_S, T_REF_C
-from ._compensator import AbstractCompensator, split_targets
+from ._compensator import FROM_FIELD, AbstractCompensator, FromField, setting, split_targets
 from ._physical_start import initial_values
 from .reduce import K_E_NOMINAL, _slope, reduce
 from .reduce import RAMP_WINDOW_S as RAMP_WINDOW_S
@@ -229,6 +229,10 @@ class PhysicalCompensator(AbstractCompensator):
       loops' lag — `fit` sets it to the calibration's mean rotation rate. The lag's 2θ
       ripple turns its phase with the rate (by 2·atan(2k_eΩ/β): 5.5° at 5 °/s with 2 rad/s
       loops), so one SF(θ, T) holds it exactly at one rate; 0: the slow-rate limit.
+    - `initial`: optional starting values of `fit` (order of
+      [`PARAMETERS`][hrgjax.calibration.physical.PARAMETERS], SI); `None` (default): from
+      harmonic fits of the reduced drift and scale factor at each temperature. A fitted
+      compensator has `None` here.
     """
 
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
@@ -239,6 +243,7 @@ class PhysicalCompensator(AbstractCompensator):
     stats: tuple = eqx.field(static=True, default=())
     plant: Gyro | None = eqx.field(default=None, converter=known_plant)
     sf_rate: float = eqx.field(static=True, default=0.0)
+    initial: jax.Array | None = None
 
     @property
     def fit_stats(self) -> dict:
@@ -326,24 +331,42 @@ class PhysicalCompensator(AbstractCompensator):
             )
         return "\n".join(lines)
 
-    def fit(self, data: MeasuredData, initial=None) -> PhysicalCompensator:
-        """Fit the laws to bench data by Levenberg–Marquardt through the averaged simulator.
+    def fit(
+        self,
+        data,
+        initial: jax.Array | None | FromField = FROM_FIELD,
+        *,
+        key: jax.Array | None = None,
+        raw: MeasuredData | None = None,
+    ) -> PhysicalCompensator:
+        """Fit the laws to bench data by Levenberg–Marquardt through the averaged simulator
+        ([`AbstractCompensator.fit`][hrgjax.calibration.AbstractCompensator.fit]).
 
         **Arguments:**
 
         - `data`: [`hrgjax.MeasuredData`][] with static and rotation runs (the raw samples
-          are needed: the simulator reproduces each run).
-        - `initial`: optional starting values (order of `PARAMETERS`); by default they come
-          from harmonic fits of the reduced drift and scale factor at each temperature.
+          are needed: the simulator reproduces each run), or reduced windows with the
+          samples as `raw` (the samples are then reduced again with this compensator's
+          `window_s`; the windows themselves are not used).
+        - `raw`: the raw samples, when `data` are windows.
+        - `key`: the common interface's; not used (the fit is deterministic).
+        - `initial`: *deprecated*, give `PhysicalCompensator(initial=…)`: starting values
+          (order of `PARAMETERS`); default: the `initial` field.
 
         **Returns:** a new fitted `PhysicalCompensator` (values, covariance, stats).
 
-        **Raises:** `RuntimeError` without float64; `ValueError` without static or rotation
-        runs.
+        **Raises:** `RuntimeError` without float64; `TypeError` without the raw samples;
+        `ValueError` without static or rotation runs.
         """
         require_x64("PhysicalCompensator.fit")
+        if raw is not None:
+            data = raw
         if not isinstance(data, MeasuredData):
-            raise TypeError("PhysicalCompensator.fit needs MeasuredData (the raw samples)")
+            raise TypeError(
+                "PhysicalCompensator.fit needs MeasuredData (the raw samples): pass them as "
+                "data or as raw="
+            )
+        initial = setting(self, "initial", initial)
         windows = reduce(data, self.k_e, window_s=self.window_s)
         split_targets(windows)
         groups = _groups(data, self.window_s, self.k_e)

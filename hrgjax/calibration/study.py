@@ -113,26 +113,24 @@ def run_study(
 
     windows = reduce(cal)
     comps: dict[str, AbstractCompensator] = {"raw": NoCompensation()}
-    fits = {
-        "fourier": ("Fourier @+20°C", lambda: FourierCompensator().fit(windows)),
+    compensators = {  # method: (label, the compensator to fit, its settings as fields)
+        "fourier": ("Fourier @+20°C", lambda: FourierCompensator()),
         "fourier_t": (
             "Fourier+T",
-            lambda: FourierCompensator(temperature_degree=2 if quick else 3).fit(windows),
+            lambda: FourierCompensator(temperature_degree=2 if quick else 3),
         ),
-        "mlp": ("MLP", lambda: MLPCompensator().fit(windows, key=k_net)),
+        "mlp": ("MLP", lambda: MLPCompensator()),
         "mlp_e2e": (
             "MLP end-to-end",
-            lambda: MLPCompensator(e2e_steps=100 if quick else 200).fit(
-                windows, key=k_net, mode="end_to_end", raw=cal
-            ),
+            lambda: MLPCompensator(e2e_steps=100 if quick else 200, mode="end_to_end"),
         ),
-        "physical": ("physical", lambda: PhysicalCompensator().fit(cal)),
+        "physical": ("physical", lambda: PhysicalCompensator()),
     }
     for m in methods:
-        label, fit = fits[m]
+        label, build = compensators[m]
         say(f"fitting {label}")
         t0 = time.perf_counter()
-        comps[label] = fit()
+        comps[label] = build().fit(windows, key=k_net, raw=cal)
         timings[f"fit {label}"] = time.perf_counter() - t0
     say("evaluating on the test grid")
     t0 = time.perf_counter()

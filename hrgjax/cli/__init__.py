@@ -1,0 +1,188 @@
+"""The `hrgjax` command."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from . import calibrate, discover, ins, simulate
+from ._common import DATA_EXTENSIONS as DATA_EXTENSIONS
+from ._common import EXIT_BAD_INPUT as EXIT_BAD_INPUT
+from ._common import EXIT_FAILURE as EXIT_FAILURE
+from ._common import EXIT_INTERRUPTED as EXIT_INTERRUPTED
+from ._common import NONNEGATIVE_INT as NONNEGATIVE_INT
+from ._common import PLOT_EXTENSIONS as PLOT_EXTENSIONS
+from ._common import POSITIVE_FLOAT as POSITIVE_FLOAT
+from ._common import POSITIVE_INT as POSITIVE_INT
+from ._common import POSITIVE_SECONDS as POSITIVE_SECONDS
+from ._common import PRESETS as PRESETS
+from ._common import UsageError as UsageError
+from ._common import one_line, option_name
+from .calibrate import COMPENSATORS as COMPENSATORS
+from .calibrate import METHODS as METHODS
+from .calibrate import cmd_calibrate as cmd_calibrate
+from .calibrate import cmd_compare as cmd_compare
+from .calibrate import cmd_correct as cmd_correct
+from .discover import cmd_discover as cmd_discover
+from .ins import ACCEL_UNIT_NAMES as ACCEL_UNIT_NAMES
+from .ins import DIAGNOSIS_METHODS as DIAGNOSIS_METHODS
+from .ins import GYRO_UNIT_NAMES as GYRO_UNIT_NAMES
+from .ins import cmd_align as cmd_align
+from .ins import cmd_diagnose as cmd_diagnose
+from .ins import cmd_imu_calibrate as cmd_imu_calibrate
+from .ins import cmd_vibration as cmd_vibration
+from .simulate import cmd_demo as cmd_demo
+from .simulate import cmd_design as cmd_design
+from .simulate import cmd_simulate as cmd_simulate
+
+COMMANDS = ("demo", "calibrate", "correct", "compare", "discover", "align", "diagnose",
+            "vibration", "simulate", "design", "imu-calibrate")  # fmt: skip
+"""The subcommands, in the order `hrgjax --help` lists them; `hrgjax NAME` runs this
+module's `cmd_NAME` (dashes as underscores)."""
+EXAMPLES = {
+    "demo": "hrgjax demo --quick --out out/demo",
+    "simulate": "hrgjax simulate --preset tvg3 --plan seed --quick --out out/bench.csv",
+    "calibrate": "hrgjax calibrate out/bench.csv --method fourier --out out/model.eqx "
+    "(bench.csv from the simulate example)",
+    "correct": "hrgjax correct out/test.csv --model out/model.eqx --out out/corrected.csv "
+    "--plot out/corrected.png (test.csv: a second session, e.g. the simulate example with "
+    "--seed 1)",
+    "compare": "hrgjax compare out/test.csv --models out/model.eqx out/mlp.eqx --json "
+    "out/compare.json --plot out/compare.png (models from calibrate on out/bench.csv, "
+    "test.csv from the simulate example with --seed 1: another switch-on)",
+    "discover": "hrgjax discover out/bench.csv --json out/report.json --plot out/report.png",
+    "align": "hrgjax align psins_lasergyro.imu --json out/align.json --plot out/align.png",
+    "diagnose": "hrgjax diagnose --scenario stationary --runs 3 --methods filter_bank,pnn_direct",
+    "vibration": "hrgjax vibration --quick --json out/vib.json --plot out/vib.png",
+    "design": "hrgjax design --budget-h 4 --out out/plan.json --plot out/plan.png",
+    "imu-calibrate": "hrgjax imu-calibrate session.csv --sections sections.json --rate-hz 102.4 "
+    "--gyro-unit deg/s --accel-unit m/s^2 --turn-deg -360 --json out/imu_cal.json --plot "
+    "out/imu.png (a session with imucal's columns gyr_x … acc_z and its section-list JSON)",
+}
+"""One runnable example per command, shown at the end of `hrgjax CMD --help`."""
+_PARSERS = {**simulate.PARSERS, **calibrate.PARSERS, **discover.PARSERS, **ins.PARSERS}
+
+
+def main(argv=None) -> int:
+    """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
+    args = build_parser().parse_args(argv)
+    if getattr(args, "quiet", False):
+        os.environ["HRGJAX_QUIET"] = "1"
+    return _run(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The `hrgjax` argument parser (every option with its help and default)."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--quiet",
+        action="store_true",
+        default=argparse.SUPPRESS,  # before or after the command; neither overrides the other
+        help="no progress bars (they are off without a terminal)",
+    )
+    common.add_argument(
+        "--debug",
+        action="store_true",
+        default=argparse.SUPPRESS,
+        help="show the full traceback of an error (otherwise one line)",
+    )
+
+    class fmt(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+        """Defaults shown; the description and the example kept as written."""
+
+    parser = argparse.ArgumentParser(
+        prog="hrgjax", description=__doc__, parents=[common], formatter_class=fmt
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_parser = sub.add_parser
+    sub.add_parser = lambda name, **k: add_parser(
+        name, parents=[common], formatter_class=fmt, epilog=f"example: {EXAMPLES[name]}", **k
+    )
+    here = globals()  # looked up now, so that a replaced cmd_NAME (a test's) is the one run
+    for name in COMMANDS:
+        _PARSERS[name](sub).set_defaults(func=here["cmd_" + name.replace("-", "_")])
+    return parser
+
+
+INPUT_OPTIONS = ("data", "log", "imu_log", "sections", "model", "models", "plan_file",
+                 "offset_from")  # fmt: skip
+"""Argument names (dests) that name files a command reads."""
+OUTPUT_OPTIONS = ("out", "plot", "json", "write_sections")
+"""Argument names (dests) that name files a command writes."""
+
+
+def check_distinct_paths(args) -> None:
+    """Every output path differs from every input and from every other output, in every
+    command: a `--plot` or `--json` naming the input file would overwrite the user's data.
+    Inputs count where they are files (`--model` of `design` is a word, not a file).
+
+    **Raises:** `UsageError` naming the two options and the path."""
+    seen: dict[str, str] = {}
+    for dest in INPUT_OPTIONS:
+        value = getattr(args, dest, None)
+        for v in value if isinstance(value, list) else [value]:
+            if isinstance(v, str) and os.path.isfile(v):
+                seen.setdefault(os.path.realpath(v), option_name(dest))
+    inputs = dict(seen)
+    for dest in OUTPUT_OPTIONS:
+        v = getattr(args, dest, None)
+        if not isinstance(v, str):
+            continue
+        real = os.path.realpath(v)
+        if real in seen:
+            what = "the input" if real in inputs else "the output"
+            raise UsageError(f"{option_name(dest)} {v} is also {what} {seen[real]}; writing it "
+                             "would overwrite that file: give another path")  # fmt: skip
+        seen[real] = option_name(dest)
+
+
+# Commands whose work is a wide batch (a plan's runs, a design's points vmapped): they stay on
+# JAX's default backend. Every other command fits or follows one trajectory at a time.
+BATCH_COMMANDS = frozenset({"simulate", "design"})
+
+
+def _placement(command):
+    """Where a command runs: beside an accelerator, a command that is not a wide batch runs on
+    the CPU, as an eager `hg.simulate` does (`hrgjax._compiled.single_run_device`). Its
+    programs are sequential loops of small kernels: on an NVIDIA H200 the demo, a
+    calibration fit and discovery each took over 180 s (the per-test limit of
+    `benchmarks/on_gpu.sh`), where a 2-core CPU takes about a minute."""
+    import contextlib
+
+    if command in BATCH_COMMANDS:
+        return contextlib.nullcontext()
+    from .._compiled import single_run_device
+
+    device = single_run_device()
+    if device is None:
+        return contextlib.nullcontext()
+    import jax
+
+    return jax.default_device(device)
+
+
+def _run(args) -> int:
+    """Run the command: a one-line error and exit status 2 for bad input, 1 for a failure
+    during the work, 130 on Ctrl-C (files are written atomically, so none is left half
+    written); `--debug` shows the traceback instead."""
+    name, debug = f"hrgjax {args.command}", getattr(args, "debug", False)
+    try:
+        check_distinct_paths(args)
+        with _placement(args.command):
+            return args.func(args)
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print(f"\n{name}: interrupted (no partial output files are left)", file=sys.stderr)
+        raise SystemExit(EXIT_INTERRUPTED) from None
+    except (UsageError, ValueError, TypeError, OSError) as err:
+        if debug:
+            raise
+        print(f"{name}: error: {one_line(err)}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from None
+    except Exception as err:
+        if debug:
+            raise
+        print(f"{name}: failed: {one_line(err)} (--debug shows the traceback)", file=sys.stderr)
+        raise SystemExit(EXIT_FAILURE) from None

@@ -1,0 +1,7 @@
+"""`python -m hrgjax.cli`: the `hrgjax` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())

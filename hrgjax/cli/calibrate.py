@@ -1,0 +1,332 @@
+"""`hrgjax calibrate`, `correct` and `compare`: fit a compensator to bench data, compensate a
+session with it, and weigh several on one test session."""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import TYPE_CHECKING, NamedTuple
+
+from ..units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
+from ._common import (
+    DATA_EXTENSIONS,
+    NONNEGATIVE_INT,
+    PLOT_EXTENSIONS,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    POSITIVE_SECONDS,
+    UsageError,
+    finish,
+    load_data,
+    one_line,
+    preset_gyro,
+    say,
+    start,
+    usage_errors,
+)
+
+if TYPE_CHECKING:  # the calibration package imports JAX; `--help` must not
+    from ..calibration import AbstractCompensator
+
+
+class Method(NamedTuple):
+    """A `--method`, built from the options: the compensator to fit (its settings as
+    fields), what to say while it fits, and the ramp window its reduction needs."""
+
+    compensator: AbstractCompensator
+    message: str | None = None
+    ramp_window_s: float | None = None
+
+
+def _no_plant(args) -> None:
+    if args.plant is not None:
+        raise UsageError(f"--plant is for --method physical (the grey box); got --method "
+                         f"{args.method}")  # fmt: skip
+
+
+def _window(args) -> dict:
+    """`window_s` for the constructor when `--window` is given (else the class's default)."""
+    return {} if args.window is None else {"window_s": args.window}
+
+
+def _fourier(args) -> Method:
+    from ..calibration import FourierCompensator
+
+    _no_plant(args)
+    degree = None if args.temperature_degree < 0 else args.temperature_degree
+    return Method(FourierCompensator(harmonics=args.harmonics, temperature_degree=degree,
+                                     k_e=args.k_e, **_window(args)))  # fmt: skip
+
+
+def _mlp(args) -> Method:
+    from ..calibration import MLPCompensator
+    from ..calibration.reduce import RAMP_WINDOW_S
+
+    _no_plant(args)
+    # --window is the reduction's, as it has always been: the end-to-end loss keeps the
+    # class's window_s (WINDOW_S), so the fit is the one earlier versions gave
+    comp = MLPCompensator(k_e=args.k_e, st_width=args.st_width, mode=args.mode)
+    message = f"training the MLP ({args.mode}{', with s_T' if args.st_width else ''})"
+    return Method(comp, message, RAMP_WINDOW_S if args.st_width else None)
+
+
+def _physical(args) -> Method:
+    from ..calibration import PhysicalCompensator
+
+    plant = None if args.plant is None else preset_gyro(args.plant, noise=False)
+    comp = PhysicalCompensator(k_e=args.k_e, plant=plant, **_window(args))
+    return Method(comp, "fitting the physical model through the simulator (Levenberg–Marquardt)")
+
+
+COMPENSATORS = {"fourier": _fourier, "mlp": _mlp, "physical": _physical}
+"""`calibrate --method`: the name → a `Method` built from the parsed options."""
+METHODS = tuple(COMPENSATORS)
+
+
+def cmd_calibrate(args) -> int:
+    """`hrgjax calibrate DATA --method …`: fit a compensator to bench data."""
+    args.json = args.json or os.path.splitext(args.out)[0] + ".json"
+    start(args, [args.data], out=(".eqx",), json=(".json",))
+    import jax
+    import numpy as np
+
+    from ..calibration import export_json, reduce, save_compensator
+    from ..calibration.mlp import MIN_RAMP_RATE
+    from ..units import group_temperatures
+
+    data = load_data(args.data, args.allow_extra)
+    progress = say(time.perf_counter())
+    with usage_errors():
+        method = COMPENSATORS[args.method](args)
+    # --window, else the class's own default (10 s for the grey box, 3 s for the others)
+    window = method.compensator.window_s if args.window is None else args.window
+    with usage_errors(args.data):
+        windows = reduce(data, k_e=args.k_e, window_s=window, ramp_window_s=method.ramp_window_s)
+    n_static = len(np.unique(windows.run[windows.static]))
+    n_moving = len(np.unique(windows.run[~windows.static]))
+    temps = np.unique(np.round(group_temperatures(windows.temperature_c), 2))
+    print(
+        f"hrgjax calibrate: {args.data}: {n_static} static and {n_moving} rotation runs, "
+        f"{len(windows)} windows, temperatures {temps.tolist()} °C"
+    )
+    if method.message:
+        progress(method.message)
+    with usage_errors():
+        comp = method.compensator.fit(windows, key=jax.random.key(args.seed), raw=data)
+    progress("fitted")
+    static = windows.select(windows.static & (np.abs(windows.temperature_rate_cps) < MIN_RAMP_RATE))
+    resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c)
+    print("  in-sample drift residual RMS per temperature [°/h]:")
+    groups = group_temperatures(static.temperature_c)  # one row per temperature
+    for T in np.unique(groups):
+        r = resid[groups == T]
+        print(f"    {T:+7.1f} °C  {np.sqrt(np.mean(r**2)):.4f}")
+    if hasattr(comp, "equations"):  # a model that prints its fitted laws (the grey box)
+        print(comp.equations())
+    return finish((args.out, lambda p: save_compensator(comp, p)),
+                  (args.json, lambda p: export_json(comp, p)))  # fmt: skip
+
+
+def _load_model(option: str, path: str):
+    """A compensator file, or a one-line error naming `option` and the file."""
+    from ..calibration import load_compensator
+
+    try:
+        return load_compensator(path)
+    except FileNotFoundError:
+        raise UsageError(f"{option} {path}: no such file") from None
+    except IsADirectoryError:
+        raise UsageError(f"{option} {path} is a folder; give a compensator file (.eqx)") from None
+    except (OSError, ValueError) as err:
+        raise UsageError(f"{option}: {one_line(err)}") from None
+
+
+def _report(result, args, *more) -> int:
+    """Print a comparison; write its --json and --plot and any `more` outputs."""
+    print(result.format(by_wave_angle=not args.no_angles), end="")
+    return finish((args.json, result.write_json), (args.plot, result.plot), *more)
+
+
+def cmd_correct(args) -> int:
+    """`hrgjax correct DATA --model model.eqx`: compensate data with a fitted compensator, and
+    report the session's offset and what the compensation leaves after it."""
+    inputs = [args.data, args.model]
+    start(args, inputs, out=DATA_EXTENSIONS, json=(".json",), plot=PLOT_EXTENSIONS)
+    import numpy as np
+
+    from ..calibration import compare_corrected, corrected_run_errors
+
+    comp = _load_model("--model", args.model)
+    data = load_data(args.data, args.allow_extra)
+    with usage_errors(args.data):
+        out = comp.correct(data)
+    e = corrected_run_errors(out)
+    print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
+    if np.any(e["static"]):
+        d = e["drift_error_dph"][e["static"]]
+        print(f"  static runs: residual rate RMS {np.sqrt(np.mean(d**2)):.4f} °/h (offset kept)")
+    if np.any(~e["static"]):
+        a = e["angle_error_deg"][~e["static"]]
+        print(
+            f"  moving runs: end-of-run angle error RMS {np.sqrt(np.mean(a**2)):.4f}° (offset kept)"
+        )
+    label = comp.name
+    result = compare_corrected(
+        {label: out}, names={label: label}, files={label: args.model},
+        temperature_bin_c=args.temperature_bin, angle_bin_deg=args.angle_bin, data=args.data,
+    )  # fmt: skip
+    print()
+    rows = lambda p: (f"{len(out)} rows with rate_corrected_dps, angle_corrected_deg to "
+                      f"{out.save(p)}")  # fmt: skip
+    return _report(result, args, (args.out, rows))
+
+
+def _labels(comps, paths) -> list[str]:
+    """Each compensator's name; where names repeat, the name and the file's stem (the path
+    as given where stems repeat too)."""
+    names = [c.name for c in comps]
+    stems = [os.path.splitext(os.path.basename(p))[0] for p in paths]
+    labels = [n if names.count(n) == 1 else f"{n} ({s})" for n, s in zip(names, stems, strict=True)]
+    return [
+        lab if labels.count(lab) == 1 else f"{n} ({p})"
+        for lab, n, p in zip(labels, names, paths, strict=True)
+    ]
+
+
+def cmd_compare(args) -> int:
+    """`hrgjax compare TEST --models a.eqx b.eqx …`: several compensators on one test
+    session, the session's offset apart (hrgjax.calibration.compare)."""
+    inputs = [args.data, *args.models]
+    start(args, inputs, json=(".json",), plot=PLOT_EXTENSIONS)
+    from .._io import same_file
+    from ..calibration import compare
+
+    for i, a in enumerate(args.models):
+        for b in args.models[:i]:
+            if same_file(a, b):
+                raise UsageError(f"--models: {b} and {a} are the same file; give each once")
+    comps = [_load_model("--models", path) for path in args.models]
+    labels = _labels(comps, args.models)
+    offset_from = args.offset_from
+    if offset_from is not None:
+        by_file = [lab for lab, p in zip(labels, args.models, strict=True) if p == offset_from]
+        if by_file:
+            offset_from = by_file[0]
+        elif offset_from not in labels:
+            raise UsageError(
+                f"--offset-from {args.offset_from!r}: give one of the --models files or a label "
+                f"({', '.join(labels)})"
+            )
+    data = load_data(args.data, args.allow_extra)
+    with usage_errors(args.data):
+        result = compare(
+            dict(zip(labels, comps, strict=True)), data,
+            files=dict(zip(labels, args.models, strict=True)), offset_from=offset_from,
+            temperature_bin_c=args.temperature_bin, angle_bin_deg=args.angle_bin, name=args.data,
+        )  # fmt: skip
+    n = result.counts()
+    print(
+        f"hrgjax compare: {args.data} ({n['static']} static, {n['rotation']} rotation runs), "
+        f"{len(labels)} compensators: "
+        + ", ".join(f"{lab} ({p})" for lab, p in zip(labels, args.models, strict=True))
+    )
+    print()
+    return _report(result, args)
+
+
+def _evaluation_options(p) -> None:
+    p.add_argument("--json", default=None,
+                   help="write the offset and the residual tables here (JSON; layout in "
+                   "docs/calibration.md)")  # fmt: skip
+    p.add_argument("--plot", default=None,
+                   help="write the figure of the residuals after the offset per "
+                   "temperature and wave angle here (.png, .pdf, .svg)")  # fmt: skip
+    p.add_argument("--temperature-bin", type=POSITIVE_FLOAT, default=1.0,
+                   help="runs are grouped by mean temperature rounded to a multiple of "
+                   "this [°C]")  # fmt: skip
+    p.add_argument("--angle-bin", type=POSITIVE_FLOAT, default=5.0,
+                   help="runs are grouped by start wave angle rounded to a multiple of "
+                   "this [° electrical]")  # fmt: skip
+    p.add_argument("--no-angles", action="store_true",
+                   help="print the tables per temperature only (the JSON and the figure "
+                   "keep the wave angles)")  # fmt: skip
+    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+
+
+def _calibrate_parser(sub):
+    """`hrgjax calibrate`'s parser."""
+    p = sub.add_parser("calibrate", help="fit a compensator to bench data (CSV or NetCDF)")
+    p.add_argument("data", help="data file in the MeasuredData contract")
+    p.add_argument("--method", default="fourier", choices=METHODS, help="compensator to fit")
+    p.add_argument("--out", default="out/model.eqx", help="compensator file (.eqx)")
+    p.add_argument("--json", default=None, help="JSON export (None: beside --out)")
+    p.add_argument(
+        "--k-e", type=POSITIVE_FLOAT, default=K_E_NOMINAL, help="nominal angular gain k_e"
+    )
+    p.add_argument(
+        "--window",
+        type=POSITIVE_SECONDS,
+        default=None,
+        help=f"rotation-run window [s] (None: {WINDOW_S:g} s for fourier and mlp, "
+        f"{PHYSICAL_WINDOW_S:g} s for physical, as the Python classes)",
+    )
+    p.add_argument(
+        "--plant", default=None, choices=("tvg3",),
+        help="physical: the gyro whose loops and resonator constants (ω, τ, Δω, θ_ω, χ) the "
+        "grey box models (their lag then leaves g, cross-talk and k_e physical); default: "
+        "ideal loops (those are effective values)",
+    )  # fmt: skip
+    p.add_argument(
+        "--mode", default="reduced", choices=("reduced", "end_to_end"), help="MLP training mode"
+    )
+    p.add_argument("--harmonics", type=POSITIVE_INT, default=2, help="Fourier harmonics of 2θ")
+    p.add_argument(
+        "--temperature-degree",
+        type=int,
+        default=-1,
+        help="Fourier: polynomial degree in T (-1 = seed's base algorithm at +20 °C)",
+    )
+    p.add_argument(
+        "--st-width", type=NONNEGATIVE_INT, default=0,
+        help="MLP: hidden neurons of the readout temperature-sensitivity network s_T(θ, T), "
+        "learnt from ramps (at rest, temperature moving); 0 = none, the seed's MLP",
+    )  # fmt: skip
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed (MLP weights)")
+    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    return p
+
+
+def _correct_parser(sub):
+    """`hrgjax correct`'s parser."""
+    p = sub.add_parser(
+        "correct",
+        help="compensate data with a fitted compensator; report the session's offset and the "
+        "residual after it",
+    )
+    p.add_argument("data", help="data file in the MeasuredData contract")
+    p.add_argument("--model", required=True, help="compensator file from `calibrate` (.eqx)")
+    p.add_argument("--out", default="out/corrected.csv", help="output CSV or .nc")
+    _evaluation_options(p)
+    return p
+
+
+def _compare_parser(sub):
+    """`hrgjax compare`'s parser."""
+    p = sub.add_parser(
+        "compare",
+        help="several compensators on one test session: the session's offset, then per "
+        "temperature and wave angle what each leaves",
+    )
+    p.add_argument("data", help="test session in the MeasuredData contract (static and/or "
+                   "rotation runs)")  # fmt: skip
+    p.add_argument("--models", required=True, nargs="+", metavar="MODEL.eqx",
+                   help="compensator files from `calibrate` (.eqx), one or more")  # fmt: skip
+    p.add_argument("--offset-from", default=None, metavar="MODEL",
+                   help="the compensator (its file or label) whose mean rate at rest is the "
+                   "session's offset (None: the one whose static runs scatter least)")  # fmt: skip
+    _evaluation_options(p)
+    return p
+
+
+PARSERS = {"calibrate": _calibrate_parser, "correct": _correct_parser, "compare": _compare_parser}
+"""Command → the function that adds its parser to the subparsers (`hrgjax.cli`)."""

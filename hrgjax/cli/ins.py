@@ -1,0 +1,245 @@
+"""`hrgjax align`, `diagnose`, `vibration` and `imu-calibrate`: the navigation-side
+commands (seeds 001–003 and six-axis IMU calibration)."""
+
+from __future__ import annotations
+
+import sys
+
+from ._common import (
+    PLOT_EXTENSIONS,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    POSITIVE_SECONDS,
+    UsageError,
+    figure,
+    finish,
+    start,
+    usage_errors,
+    write_json,
+)
+
+GYRO_UNIT_NAMES = ("deg/s", "rad/s", "deg/h", "mrad/s")
+"""`imu-calibrate --gyro-unit` choices (a subset of hrgjax.imu.GYRO_UNITS)."""
+ACCEL_UNIT_NAMES = ("m/s^2", "g", "mg")
+"""`imu-calibrate --accel-unit` choices (a subset of hrgjax.imu.ACCEL_UNITS)."""
+DIAGNOSIS_METHODS = (
+    "filter_bank", "filter_bank_full", "filter_bank_rest", "pnn_bank", "pnn_direct", "som",
+    "mlp_classifier", "mlp_predictor",
+)  # fmt: skip
+"""`hrgjax.diagnosis.compare.METHODS`, restated so that `--help` imports no JAX (a test
+checks that they agree)."""
+
+
+def _log(msg) -> None:
+    print(f"  … {msg}", file=sys.stderr, flush=True)
+
+
+def cmd_align(args) -> int:
+    """`hrgjax align IMU_LOG`: stationary coarse + fine alignment of a strapdown IMU log."""
+    if args.format != "psins":
+        raise UsageError(f"unknown --format {args.format!r}; choose 'psins'")
+    start(args, [args.imu_log], json=(".json",), plot=PLOT_EXTENSIONS)
+    from ..ins.alignment import align, load_psins
+
+    with usage_errors(missing=f"{args.imu_log}: no such file"):
+        log = load_psins(args.imu_log)
+        result = align(log, coarse_s=args.coarse, step_s=args.step)
+    out = result.to_json()
+    span = float(log.t[-1] - log.t[0])
+    print(f"hrgjax align: {args.imu_log} ({log.t.shape[0]} samples, {span:.0f} s)")
+    c = out["coarse"]
+    print(
+        f"  coarse ({args.coarse:g} s): heading {c['heading_deg']:.3f}°, pitch "
+        f"{c['pitch_deg']:.3f}°, roll {c['roll_deg']:.3f}°"
+    )
+    for k in ("heading", "pitch", "roll"):
+        print(f"  {k:>7}: {out[k + '_deg']:9.4f}° ± {out[k + '_std_deg']:.4f}° (1σ)")
+    header = log.header_attitude_deg
+    if header is not None:
+        print(f"  file header heading: {header[2]:.2f}° (clockwise from north)")
+    return finish((args.json, out),
+                  (args.plot, lambda p: figure("alignment_figure")(result, p, header)))  # fmt: skip
+
+
+def cmd_diagnose(args) -> int:
+    """`hrgjax diagnose`: every seed-002 diagnosis method on one scenario, in one table."""
+    start(args, json=(".json",), plot=PLOT_EXTENSIONS)
+    import jax
+
+    from ..diagnosis.compare import METHODS, compare, table
+
+    methods = METHODS if args.methods is None else tuple(args.methods.split(","))
+    with usage_errors():
+        result = compare(
+            args.scenario, key=jax.random.key(args.seed), n_faulty=args.runs,
+            n_healthy=max(args.runs // 2, 1), methods=methods, traces=bool(args.plot), log=_log,
+        )  # fmt: skip
+    print(f"hrgjax diagnose: scenario {args.scenario}")
+    print(table(result))
+    traces = result.pop("traces", None)
+    title = result["scenario"]
+    return finish((args.json, result),
+                  (args.plot, lambda p: figure("diagnosis_figure")(traces, p, title=title)))  # fmt: skip
+
+
+def cmd_vibration(args) -> int:
+    """`hrgjax vibration`: the seed-003 pipeline on one scenario (hrgjax.fog.study)."""
+    start(args, json=(".json",), plot=PLOT_EXTENSIONS)
+    import jax
+
+    from ..fog.study import SCENARIOS, run, table
+
+    if args.scenario not in SCENARIOS:
+        raise UsageError(f"unknown --scenario {args.scenario!r}; known: {tuple(SCENARIOS)}")
+    with usage_errors():
+        quick = dict(freqs_hz=(5.0, 10.0, 20.0), amps_g=(0.25, 0.75, 1.25, 1.5), fs=100.0)
+        result = run(
+            args.scenario, key=jax.random.key(args.seed),
+            epochs=min(args.epochs, 300) if args.quick else args.epochs, log=_log,
+            **(quick if args.quick else {}),
+        )  # fmt: skip
+    figures = result.pop("_figures")
+    print("hrgjax vibration")
+    print(table(result))
+    return finish((args.json, result),
+                  (args.plot, lambda p: figure("vibration_figure")(figures, p)))  # fmt: skip
+
+
+def cmd_imu_calibrate(args) -> int:
+    """`hrgjax imu-calibrate LOG`: Ferraris calibration of a six-axis IMU session."""
+    start(args, [args.log, args.sections], json=(".json",), plot=PLOT_EXTENSIONS,
+          write_sections=(".json",))  # fmt: skip
+    import numpy as np
+
+    from .. import imu
+
+    columns = {"gyro": _three("--gyro-columns", args.gyro_columns),
+               "accel": _three("--accel-columns", args.accel_columns)}  # fmt: skip
+    if args.time_column:
+        columns["time"] = args.time_column
+    with usage_errors(errors=(FileNotFoundError, ValueError)):
+        data = imu.load(args.log, columns=columns, rate_hz=args.rate_hz,
+                        units={"gyro": args.gyro_unit, "accel": args.accel_unit})  # fmt: skip
+        if args.sections is None:
+            sections = imu.detect_sections(data)
+        else:
+            sections = imu.parse_sections(args.sections, len(data))
+        cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg)
+    span = float(data.time[-1] - data.time[0])
+    found = "found in the data" if args.sections is None else f"from {args.sections}"
+    print(f"hrgjax imu-calibrate: {args.log} ({len(data)} samples, {span:.0f} s at "
+          f"{data.rate_hz:g} Hz); sections {found}")  # fmt: skip
+    if args.sections is None:
+        for key, ranges in sections.items():
+            print(f"  {key:>5}: " + ", ".join(f"rows {s}–{e}" for s, e in ranges))
+    dps = np.rad2deg(1.0)
+
+    def rows(name, m, sd, scale=1.0, fmt="{:+.6f}"):
+        m, sd = np.atleast_2d(np.asarray(m) * scale), np.atleast_2d(np.asarray(sd) * scale)
+        for k, (r, e) in enumerate(zip(m, sd, strict=True)):
+            cells = "  ".join(f"{fmt.format(v)} ± {abs(x):.1e}" for v, x in zip(r, e, strict=True))
+            print(f"  {name if k == 0 else '':<22}{cells}")
+
+    print(f"  (± 1σ from {cal.sigma_source}; g = {cal.g:g} m/s², turns {list(cal.turn_deg)}°)")
+    rows("accel matrix M_a", cal.accel_matrix, cal.accel_matrix_std)
+    rows("accel bias [m/s²]", cal.accel_bias, cal.accel_bias_std, fmt="{:+.5f}")
+    rows("gyro matrix M_g", cal.gyro_matrix, cal.gyro_matrix_std)
+    rows("gyro bias [°/s]", cal.gyro_bias, cal.gyro_bias_std, dps, fmt="{:+.5f}")
+    rows("gyro g-sens [°/s/(m/s²)]", cal.gyro_g_sensitivity, cal.gyro_g_sensitivity_std, dps,
+         fmt="{:+.5f}")  # fmt: skip
+    return finish(
+        (args.json, cal.save),
+        (args.write_sections, lambda p: write_json(imu.sections_to_json(sections), p)),
+        (args.plot, lambda p: figure("imu_session_figure")(data, sections, p, calibration=cal)),
+    )
+
+
+def _three(option: str, text: str) -> list[str]:
+    names = [t.strip() for t in text.split(",")]
+    if len(names) != 3 or not all(names):
+        raise UsageError(f"{option} {text!r}: give three comma-separated column names (x,y,z)")
+    return names
+
+
+def _align_parser(sub):
+    """`hrgjax align`'s parser."""
+    p = sub.add_parser("align", help="stationary coarse + fine alignment of an IMU log")
+    p.add_argument("imu_log", help="IMU log file")
+    p.add_argument("--format", default="psins", help="log format (psins)")
+    p.add_argument("--json", default=None, help="write heading/pitch/roll (+ _std_deg) here")
+    p.add_argument("--plot", default=None, help="write the convergence figure here (PNG)")
+    p.add_argument(
+        "--coarse", type=POSITIVE_SECONDS, default=60.0, help="coarse-alignment span [s]"
+    )
+    p.add_argument("--step", type=POSITIVE_SECONDS, default=1.0, help="Kalman filter step [s]")
+    return p
+
+
+def _diagnose_parser(sub):
+    """`hrgjax diagnose`'s parser."""
+    p = sub.add_parser("diagnose", help="three-INS fault diagnosis: every method, one table")
+    p.add_argument("--scenario", default="stationary",
+                   choices=("stationary", "accel3g", "accel10g", "gyro"),
+                   help="the INS's motion and the faulty sensor (hrgjax.diagnosis.compare)")  # fmt: skip
+    p.add_argument("--json", default=None, help="write the table (methods[...]) here")
+    p.add_argument("--plot", default=None, help="write decision traces of one run here (PNG)")
+    p.add_argument("--runs", type=POSITIVE_INT, default=12, help="faulty Monte Carlo runs")
+    p.add_argument(
+        "--methods", default=None, metavar="M1,M2,…",
+        help=f"comma-separated subset of {', '.join(DIAGNOSIS_METHODS)} (None: all)",
+    )  # fmt: skip
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    return p
+
+
+def _vibration_parser(sub):
+    """`hrgjax vibration`'s parser."""
+    p = sub.add_parser("vibration", help="FOG IMU vibration compensation (Elman) and alignment")
+    p.add_argument("--scenario", default="10hz_1g", help="10hz_1g, 10hz_0.5g or on_off")
+    p.add_argument("--json", default=None, help="write heading errors and RMSEs here (JSON)")
+    p.add_argument("--plot", default=None, help="write the PSD/training/alignment figure (PNG)")
+    p.add_argument("--epochs", type=POSITIVE_INT, default=1000,
+                   help="training epochs (the patent's 120 under-train)")  # fmt: skip
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="12-condition grid, 100 Hz, ≤ 300 epochs (a smoke run, < 1 min)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    return p
+
+
+def _imu_calibrate_parser(sub):
+    """`hrgjax imu-calibrate`'s parser."""
+    p = sub.add_parser("imu-calibrate", help="Ferraris calibration of a six-axis IMU session (CSV)")
+    p.add_argument("log", help="CSV file, one row per sample")
+    p.add_argument(
+        "--sections", default=None,
+        help="JSON {\"x_p\": {\"start\": i, \"end\": j}, …} (rows, end excluded; keys x_p x_a y_p "
+        "y_a z_p z_a x_rot y_rot z_rot; a list of ranges per key for repeats); None: find them "
+        "in the data",
+    )  # fmt: skip
+    p.add_argument("--gyro-columns", default="gyr_x,gyr_y,gyr_z", help="gyro x,y,z columns")
+    p.add_argument("--accel-columns", default="acc_x,acc_y,acc_z", help="accel x,y,z columns")
+    p.add_argument("--time-column", default=None, help="time column [s] (None: use --rate-hz)")
+    p.add_argument("--rate-hz", type=POSITIVE_FLOAT, default=None,
+                   help="sample rate [Hz] (needed without --time-column)")  # fmt: skip
+    p.add_argument("--gyro-unit", default="deg/s", choices=tuple(GYRO_UNIT_NAMES),
+                   help="the file's gyro unit")  # fmt: skip
+    p.add_argument("--accel-unit", default="m/s^2", choices=tuple(ACCEL_UNIT_NAMES),
+                   help="the file's accelerometer unit (checked against the data)")  # fmt: skip
+    p.add_argument("--g", type=POSITIVE_FLOAT, default=9.81,
+                   help="local gravity [m/s²], 9.76–9.84 (the Earth's surface)")  # fmt: skip
+    p.add_argument("--turn-deg", type=float, default=360.0,
+                   help="angle of each turn [°], right-handed positive (imucal's clockwise "
+                   "hand turns: -360)")  # fmt: skip
+    p.add_argument("--json", default=None, help="write the calibration here (JSON, SI units)")
+    p.add_argument("--plot", default=None, help="write the session figure here (PNG)")
+    p.add_argument("--write-sections", default=None,
+                   help="write the sections used (found or given) here (JSON)")  # fmt: skip
+    return p
+
+
+PARSERS = {"align": _align_parser, "diagnose": _diagnose_parser, "vibration": _vibration_parser,
+           "imu-calibrate": _imu_calibrate_parser}  # fmt: skip
+"""Command → the function that adds its parser to the subparsers (`hrgjax.cli`)."""

@@ -1,0 +1,343 @@
+"""`hrgjax simulate`, `design` and `demo`: bench data from a preset gyro, the bench plan that
+calibrates best within a budget, and seed 000's whole study."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+from ._common import (
+    DATA_EXTENSIONS,
+    PLOT_EXTENSIONS,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    POSITIVE_SECONDS,
+    PRESETS,
+    UsageError,
+    check_folder,
+    figure,
+    finish,
+    preset_gyro,
+    say,
+    setup,
+    start,
+    usage_errors,
+)
+
+
+def _run_plans(gyro, plans, seed: int):
+    import jax
+
+    from ..calibration import run_plan
+    from ..data import concat
+
+    key = jax.random.key(seed)
+    bias_key = jax.random.fold_in(key, 1)
+    parts, first = [], 0
+    for i, plan in enumerate(plans):
+        t0 = time.perf_counter()
+        data = run_plan(
+            gyro, plan, key=jax.random.fold_in(key, 10 + i), bias_key=bias_key, first_run=first
+        )
+        print(
+            f"  simulated {plan.size} runs × {plan.duration_s:g} s in "
+            f"{time.perf_counter() - t0:.1f} s",
+            flush=True,
+        )
+        parts.append(data)
+        first += plan.size
+    return parts[0] if len(parts) == 1 else concat(parts)
+
+
+def _rows(data):
+    """The writer of simulated data: saves it and says how much."""
+    return lambda path: f"{len(data)} rows ({len(data.run_indices())} runs) to {data.save(path)}"
+
+
+def cmd_simulate(args) -> int:
+    """`hrgjax simulate`: run a bench plan on a preset gyro and write the data."""
+    start(args, [args.plan_file], out=DATA_EXTENSIONS)
+    from ..calibration import rotation_plan, seed_plan, static_plan
+
+    gyro = preset_gyro(args.preset, noise=not args.no_noise)
+    if args.plan_file is not None:
+        return _simulate_plan_file(args, gyro)
+    if args.plan is None:
+        args.plan = "static"
+    if args.plan == "static":
+        plans = [static_plan(duration_s=args.duration)]
+    elif args.plan == "rotation":
+        plans = [rotation_plan(duration_s=args.duration)]
+    else:
+        plans = list(seed_plan(quick=args.quick))
+    print(f"hrgjax simulate: preset {args.preset}, plan {args.plan}")
+    data = _run_plans(gyro, plans, args.seed)
+    return finish((args.out, _rows(data)))
+
+
+def _simulate_plan_file(args, gyro) -> int:
+    import jax
+
+    from ..calibration.design import load_plan, simulate_plan
+
+    if args.plan is not None:
+        raise UsageError("give either --plan or --plan-file, not both")
+    with usage_errors("--plan-file", errors=(FileNotFoundError, ValueError)):
+        plan, bench = load_plan(args.plan_file)
+    with usage_errors(f"--plan-file {args.plan_file}"):
+        bench.check(plan)
+    hours = bench.breakdown_h(plan)
+    print(
+        f"hrgjax simulate: preset {args.preset}, plan file {args.plan_file}: {plan.size} "
+        f"segments, bench time {hours['total']:.2f} h (measuring {hours['measuring']:.2f} h)"
+    )
+    t0 = time.perf_counter()
+    key = jax.random.key(args.seed)
+    data = simulate_plan(gyro, plan, key=key, bias_key=jax.random.fold_in(key, 1))
+    print(f"  simulated {plan.size} segments in {time.perf_counter() - t0:.1f} s", flush=True)
+    return finish((args.out, _rows(data)))
+
+
+def _levels(text):
+    try:
+        out = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected whole numbers like 2,3,4; got {text!r}"
+        ) from None
+    if not out or min(out) < 1:
+        raise argparse.ArgumentTypeError(f"expected positive whole numbers; got {text!r}")
+    return out
+
+
+def cmd_design(args) -> int:
+    """`hrgjax design`: the bench plan that calibrates best within a bench-time budget."""
+    start(args, out=(".json",), plot=PLOT_EXTENSIONS)
+    import jax
+
+    from ..calibration import design as d
+
+    levels = d.DEFAULT_LEVELS[args.model] if args.levels is None else args.levels
+    lr = d.DEFAULT_LEARNING_RATE if args.learning_rate is None else args.learning_rate
+    print(
+        f"hrgjax design: {args.budget_h:g} h of bench time, criterion {args.criterion} "
+        f"({args.model} model), levels {','.join(map(str, levels))}"
+    )
+    t0 = time.perf_counter()
+    result = d.design(
+        args.budget_h, criterion=args.criterion, levels=levels, statics=args.statics,
+        rotations=args.rotations, ramps=not args.no_ramps, steps=args.steps, model=args.model,
+        learning_rate=lr, key=jax.random.key(args.seed),
+        temperature_step=args.temperature_step, angle_step=args.angle_step,
+        time_step=args.time_step, rate_step=args.rate_step,
+    )  # fmt: skip
+    took = time.perf_counter() - t0
+    unit = d.CRITERION_UNITS[args.criterion]
+    unit = bare = f" {unit}" if unit else ""
+    if args.model != "physical":
+        unit += f" ({args.model} surrogate)"
+    hours = result.bench.breakdown_h(result.plan)
+    print(f"  searched {len(result.search)} structures in {took:.1f} s:")
+    for n, v in result.search.items():
+        if v is None:
+            print(f"    {n} temperature levels: does not fit the budget")
+            continue
+        mark = "  <- chosen" if n == result.levels else ""
+        print(f"    {n} temperature levels: {args.criterion} {v:.4g}{unit}{mark}")
+    print(
+        f"  plan: {result.plan.size} segments, bench time {hours['total']:.2f} h (measuring "
+        f"{hours['measuring']:.2f} h, slew {hours['slew']:.2f} h, soak {hours['settle']:.2f} h, "
+        f"re-positioning {hours['reposition']:.2f} h)"
+    )
+    change = (result.value / result.optimised_value - 1.0) * 100.0
+    print(
+        f"  rounded for the bench: {args.temperature_step:g} °C, {args.angle_step:g}° electrical "
+        f"within (−90°, 90°], {args.time_step:g} s, {args.rate_step:g} °/s\n"
+        f"    {args.criterion} {result.optimised_value:.6g}{bare} optimised → "
+        f"{result.value:.6g}{bare} as rounded ({change:+.2f} %)"
+    )
+    what = "ideal-loop grey box" if args.model == "physical" else f"{args.model} surrogate"
+    print(f"  predicted (ARW, readout and Gauss–Markov noise, {what}; docs/design.md):")
+    for name, plan in (("designed", result.plan), ("seed quick", d.seed_bench_plan(True)),
+                       ("seed", d.seed_bench_plan())):  # fmt: skip
+        parts = ""
+        if args.criterion == "drift+warmup":  # and its two terms (one compiled program)
+            value, drift, warm = (float(v) for v in d.drift_warmup_error(plan, model=args.model,
+                                                                          terms=True))  # fmt: skip
+            parts = f" (drift {drift:.4g} °/h, warm-up {warm:.4g} °)"
+        else:
+            value = float(d.criterion(plan, args.criterion, model=args.model))
+        print(f"    {name:10s} {float(d.bench_time_h(plan, result.bench)):6.2f} h  "
+              f"{args.criterion} {value:.4g}{unit}{parts}")  # fmt: skip
+    title = f"designed plan: {args.budget_h:g} h budget, {args.criterion}"
+    return finish(
+        (args.out, result.save),  # the rounded plan, both criterion values, the resolution
+        (args.plot, lambda p: figure("plan_figure")(result.plan, p, result.bench, title=title)),
+    )
+
+
+def cmd_demo(args) -> int:
+    """`hrgjax demo`: seed 000's whole calibration study on tvg3_like()."""
+    setup()
+    import jax
+
+    from ..calibration import export_json, format_table, run_study, save_compensator
+    from ..calibration.evaluate import SEED_TABLE
+    from ..plots import compensation_residuals, drift_and_scale_factor, error_vs_temperature
+
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise UsageError(f"--out {args.out} is a file; give a folder for the demo's outputs")
+    check_folder("--out", os.path.abspath(args.out))
+    os.makedirs(args.out, exist_ok=True)
+    mode = "quick" if args.quick else "full"
+    print(f"hrgjax demo ({mode}): seed 000's calibration study on the built-in TVG-3-like gyro")
+    t0 = time.perf_counter()
+    study = run_study(key=jax.random.key(args.seed), quick=args.quick, progress=say(t0))
+    print()
+    print(format_table(study.table))
+    if study.ins is not None:
+        from ..calibration.ins_impact import format_ins_table
+
+        print(format_ins_table(study.ins) + "\n")
+    print("times [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in study.timings.items()))
+    phys = study.compensators.get("physical")
+    if phys is not None:
+        print("\nphysical fit (1σ):\n" + phys.equations())
+    written = [study.calibration.save(os.path.join(args.out, "calibration.csv"))]
+    from ..calibration import scale_factor_vs_angle, static_drift
+
+    written.append(
+        drift_and_scale_factor(
+            static_drift(study.calibration),
+            scale_factor_vs_angle(study.calibration),
+            os.path.join(args.out, "drift_scale_factor.png"),
+            "hrgjax: tvg3_like() bench data",
+        )
+    )
+    written.append(
+        compensation_residuals(
+            study.windows,
+            study.compensators,
+            os.path.join(args.out, "drift_residuals.png"),
+            "static drift and what each compensator leaves",
+        )
+    )
+    written.append(
+        error_vs_temperature(
+            study.table, os.path.join(args.out, "error_vs_temperature.png"), SEED_TABLE
+        )
+    )
+    for label, comp in study.compensators.items():
+        if label == "raw":
+            continue
+        slug = "_".join("".join(c if c.isalnum() else " " for c in label.lower()).split())
+        stem = os.path.join(args.out, "model_" + slug)
+        written.append(save_compensator(comp, stem + ".eqx"))
+        written.append(export_json(comp, stem + ".json"))
+    print(f"\ntotal {time.perf_counter() - t0:.1f} s; wrote:")
+    for w in written:
+        print(f"  {w}")
+    return 0
+
+
+def _demo_parser(sub):
+    """`hrgjax demo`'s parser."""
+    p = sub.add_parser("demo", help="main job on the built-in gyro")
+    p.add_argument("--out", default="out/demo", help="output folder")
+    p.add_argument("--quick", action="store_true", help="3 temperatures, short runs (< 1 min)")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    return p
+
+
+def _simulate_parser(sub):
+    """`hrgjax simulate`'s parser."""
+    p = sub.add_parser("simulate", help="simulate a bench plan on a preset gyro")
+    p.add_argument(
+        "--preset", default="tvg3", choices=PRESETS,
+        help="tvg3: the TVG-3-like gyro (temperature laws, closed loops, noise); ideal: its "
+        "resonator frozen at 20 °C with ideal loops, a perfect readout and no noise",
+    )  # fmt: skip
+    p.add_argument(
+        "--plan", default=None, choices=("static", "rotation", "seed"),
+        help="static (the default): 11 temperatures × 19 wave angles at rest; rotation: the "
+        "same at 5 °/s; seed: both, as seed 000's bench",
+    )  # fmt: skip
+    p.add_argument(
+        "--plan-file", default=None, metavar="PLAN.json",
+        help="a JSON bench plan (segments: static, rotation, ramp; see docs/design.md), "
+        "simulated as one switch-on, one run per segment; instead of --plan",
+    )  # fmt: skip
+    p.add_argument("--out", default="out/data.csv", help="CSV or .nc path")
+    p.add_argument(
+        "--duration", type=POSITIVE_SECONDS, default=180.0,
+        help="run length of the static and rotation plans [s] (the seed plan's are 180 s)",
+    )  # fmt: skip
+    p.add_argument(
+        "--quick", action="store_true",
+        help="(--plan seed) −40, +20, +60 °C × 19 wave angles, 120-s runs: 57 static and 57 "
+        "rotation runs",
+    )  # fmt: skip
+    p.add_argument("--no-noise", action="store_true", help="switch the gyro's noise off")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    return p
+
+
+def _design_parser(sub):
+    """`hrgjax design`'s parser."""
+    p = sub.add_parser(
+        "design", help="design the bench plan that calibrates best within a bench-time budget"
+    )
+    p.add_argument(
+        "--budget-h", type=POSITIVE_FLOAT, required=True,
+        help="bench time available [h], transitions (slew, soak, re-positioning) included",
+    )  # fmt: skip
+    p.add_argument(
+        "--criterion", default="drift+warmup",
+        choices=("drift+warmup", "drift", "warmup", "ins", "d", "a"),
+        help="drift+warmup (default): the wave-angle error of an hour's operation — the "
+        "static drift over an hour and the 1-h warm-up's own error, in quadrature [°]; "
+        "drift: predicted compensated static drift RMS over −40…+60 °C × all wave angles "
+        "[°/h]; warmup: predicted wave-angle error after 1-h warm-up flights (−40 → +20 °C) "
+        "[°]; ins: predicted horizontal position error after them [km]; d / a: D- / "
+        "A-optimal (log det / trace of the posterior covariance)",
+    )  # fmt: skip
+    p.add_argument(
+        "--levels", type=_levels, default=None,
+        help="numbers of temperature levels to try, comma-separated (default 2,3,4,5; "
+        "4,5,6,7 with --model empirical)",
+    )  # fmt: skip
+    p.add_argument("--statics", type=POSITIVE_INT, default=6,
+                   help="static segments per temperature level")  # fmt: skip
+    p.add_argument("--rotations", type=int, default=2,
+                   help="rotations at ±5 °/s per temperature level")  # fmt: skip
+    p.add_argument("--no-ramps", action="store_true",
+                   help="no measuring ramps between levels (slew and soak instead)")  # fmt: skip
+    p.add_argument("--steps", type=POSITIVE_INT, default=300,
+                   help="Adam steps per structure")  # fmt: skip
+    p.add_argument("--learning-rate", type=POSITIVE_FLOAT, default=None,
+                   help="Adam's learning rate (default: design.DEFAULT_LEARNING_RATE = 0.3)")  # fmt: skip
+    p.add_argument(
+        "--model", default="physical", choices=("physical", "empirical"),
+        help="what the calibration will fit: physical (the grey box) or empirical (an MLP or "
+        "a Fourier fit: the plan must visit what the gyro will meet)",
+    )  # fmt: skip
+    p.add_argument("--temperature-step", type=POSITIVE_FLOAT, default=0.1,
+                   help="the bench's temperature resolution [°C]: the plan's temperatures "
+                   "are rounded to it (default 0.1)")  # fmt: skip
+    p.add_argument("--angle-step", type=POSITIVE_FLOAT, default=0.1,
+                   help="wave-angle resolution [° electrical]: angles are wrapped to "
+                   "(−90°, 90°] and rounded to it (default 0.1)")  # fmt: skip
+    p.add_argument("--time-step", type=POSITIVE_FLOAT, default=1.0,
+                   help="duration resolution [s] (default 1: whole seconds; static and "
+                   "rotation durations rounded down, ramps up)")  # fmt: skip
+    p.add_argument("--rate-step", type=POSITIVE_FLOAT, default=0.01,
+                   help="table-rate resolution [°/s] (default 0.01)")  # fmt: skip
+    p.add_argument("--out", default="out/plan.json", help="plan file to write (JSON)")
+    p.add_argument("--plot", default=None, help="figure of the plan's time line (.png)")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed (start angles)")
+    return p
+
+
+PARSERS = {"demo": _demo_parser, "simulate": _simulate_parser, "design": _design_parser}
+"""Command → the function that adds its parser to the subparsers (`hrgjax.cli`)."""
