@@ -184,8 +184,8 @@ def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 10
     source, panels = information_source(
         plan, values, noise := noise_vector(arw, gauss_markov, angle_white), model
     )
-    return _warmup_error(source, values, noise, float(prior_scale), as_flights(flight), model,
-                         panels)  # fmt: skip
+    flights = as_flights(flight)
+    return _warmup_error(source, values, noise, float(prior_scale), flights, model, panels)
 
 
 def warmup_sensitivity(values=None, flight=None, nodes: int = NODES, model=None) -> jax.Array:
@@ -221,8 +221,8 @@ def drift_warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: floa
     source, panels = information_source(
         plan, values, noise := noise_vector(arw, gauss_markov, angle_white), model
     )
-    out = _drift_warmup_terms(source, values, noise, float(prior_scale), as_flights(flight), model,
-                              panels)  # fmt: skip
+    flights = as_flights(flight)
+    out = _drift_warmup_terms(source, values, noise, float(prior_scale), flights, model, panels)
     return out if terms else out[0]
 
 
@@ -263,15 +263,17 @@ def criterion(plan: BenchPlan, kind: str = "drift+warmup", values=None, arw=None
     values = model_values(values, model)
     noise = noise_vector(arw, gauss_markov, angle_white)
     source, panels = information_source(plan, values, noise, model)
-    return evaluate_criterion(source, kind, values, noise, float(prior_scale), as_flights(flight), model,
-                      panels)  # fmt: skip
+    flights = as_flights(flight)
+    return evaluate_criterion(source, kind, values, noise, float(prior_scale), flights, model,
+                              panels)  # fmt: skip
 
 
 @eqx.filter_jit
-def evaluate_criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS, model=GREY_BOX,
-               panels=None):  # fmt: skip
+def evaluate_criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS,
+                       model=GREY_BOX, panels=None):  # fmt: skip
     """`criterion`, compiled once per plan length, kind, model (and flights, for `ins`;
-    `panels`: `ramp_panels`, for a plan with ramps that turn)."""
+    `panels`: `ramp_panels`, for a plan with ramps that turn); `plan` a plan or its
+    information matrix (`information_source`), `noise` a `noise_vector`."""
     if kind == "drift+warmup":
         return _drift_warmup_error(plan, values, noise, prior_scale, flights, model, panels)[0]
     if kind == "drift":

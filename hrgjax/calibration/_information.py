@@ -18,6 +18,7 @@ from ._models import GREY_BOX, as_model, model_values, noise_vector
 from ._plan import DT_OUT, BenchPlan
 
 NODES = 64
+"""Quadrature points per rotation and ramp (a turning ramp's: per panel) of `information`."""
 
 
 def window_density(arw, angle_white, samples, dt, length_s):

@@ -240,4 +240,5 @@ def as_model(model):
 
 
 def model_values(values, model):
+    """`values` as a float array, or `model`'s linearisation point (`nominal()`) for None."""
     return model.nominal() if values is None else jnp.asarray(values, dtype=float)

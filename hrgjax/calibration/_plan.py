@@ -52,6 +52,7 @@ SEGMENT_UNITS = {
     "rate_dps": "°/s",
     "duration_s": "s",
 }
+"""The unit of each segment key of a plan file (named in its error messages)."""
 
 
 class BenchPlan(eqx.Module):

@@ -79,6 +79,7 @@ def _wave_angle_grid(angle_deg, step: float) -> np.ndarray:
 
 
 def resolution_step(name: str, value, unit: str) -> float:
+    """A rounding step argument `name` [`unit`] as a float, checked to be finite and > 0."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
             or not (math.isfinite(value) and value > 0):  # fmt: skip
         raise ValueError(f"{name} must be a finite number > 0 [{unit}]; got {value!r}")

@@ -202,7 +202,9 @@ def run_plan(
     order, each computed by the same program as unsorted: the data equal the unsorted ones to
     round-off (XLA:CPU may round a point by an ulp differently at another place in a chunk;
     measured ≤ 1e-14 relative in the wave angle, ≤ 5e-13 in amplitude and quadrature);
-    `order_by_cost=False` keeps the plan's order.
+    `order_by_cost=False` keeps the plan's order. Point i's noise key is
+    `jax.random.split(k, P)[i]` with `k, k_bias = jax.random.split(key)`, the switch-on's
+    `k_bias` unless `bias_key` is given — the runner `simulate_plan` shares.
     """
     n_out = int(round(plan.duration_s / plan.dt_out)) + 1
     plausible.check_size("run_plan", float(n_out) * plan.size, plan.size)
