@@ -19,7 +19,7 @@ window, a rotation is cut into `window_s` windows and a ramp (table at rest, tem
 moving) into `RAMP_WINDOW_S` windows, each a drift at its own temperature. Weights: the
 residual scatter of each kind of window (at rest, moving), an at-rest window of length L
 weighted by √(L / 60 s) (white rate noise: a long dwell tells more), re-estimated after the
-fit with each kind's own degrees of freedom (`_scatter_per_dof`); the parameter covariance
+fit with each kind's own degrees of freedom (`scatter_per_dof`); the parameter covariance
 is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced χ² (≈ 1 with those weights).
 Starting values come from harmonic fits at each temperature held for at least three
 windows (a ramp's windows are not a level).
@@ -726,7 +726,7 @@ def _scatter(residuals, weights) -> dict:
     return out
 
 
-def _scatter_per_dof(residuals, jac, weights, iterations: int = 4) -> dict:
+def scatter_per_dof(residuals, jac, weights, iterations: int = 4) -> dict:
     """Residual scatter of each kind of window (at rest, moving) at the solution, each kind
     with its own degrees of freedom: σ_k² = Σ r_k² / (n_k − p_k), where p_k is the sum of
     the leverages (the hat matrix's diagonal of the σ-weighted Jacobian) over kind k's rows
@@ -792,7 +792,7 @@ def _fit(groups, x0, k_e, max_steps):
     values = x0 + np.asarray(x) * _SCALE
     # `least_squares_with_jacobian` evaluated last at the solution: `at` holds it, unweighted.
     r1, jac1 = at["r"], at["jac"]
-    sigma1 = _scatter_per_dof(r1, {k: np.asarray(v) for k, v in jac1.items()}, weights)
+    sigma1 = scatter_per_dof(r1, {k: np.asarray(v) for k, v in jac1.items()}, weights)
     jac = np.concatenate(
         [np.asarray(jac1[True]) / sigma1[True], np.asarray(jac1[False]) / sigma1[False]]
     )
