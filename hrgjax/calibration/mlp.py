@@ -328,9 +328,9 @@ class AngleRuns(eqx.Module):
 
 
 def run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
-    """`data`'s runs as `AngleRuns`, one per group of
-    equal length and sampling (`MeasuredData.stacked`), windows of moving runs every
-    `window_s` [s]: what the end-to-end training integrates over."""
+    """`data`'s runs as `AngleRuns`, one per group of equal length and sampling
+    (`MeasuredData.stacked`), windows of moving runs every `window_s` [s]: what the
+    end-to-end training integrates over."""
     out = []
     for stack in data.stacked():
         n = stack.n_samples
