@@ -28,7 +28,7 @@ import numpy as np
 from .. import plausible
 from .._checks import is_concrete
 from .._compiled import device
-from .experiment import SEED_ANGLES, SEED_TEMPERATURES
+from .experiment import QUICK_DURATION, QUICK_TEMPERATURES, SEED_ANGLES, SEED_TEMPERATURES
 
 KINDS = ("static", "rotation", "ramp")
 """The segment kinds."""
@@ -323,8 +323,6 @@ def seed_bench_plan(
     `rate_dps` [°/s] from each angle. `quick`: −40, +20, +60 °C and 2-min runs (as
     `seed_plan(quick=True)`). `duration_s`: every run's length [s] instead (the same grid
     with shorter or longer dwells)."""
-    from .experiment import QUICK_DURATION, QUICK_TEMPERATURES
-
     temps, dur = (QUICK_TEMPERATURES, QUICK_DURATION) if quick else (SEED_TEMPERATURES, 180.0)
     if duration_s is not None:
         if not (np.isfinite(duration_s) and duration_s > 0):
