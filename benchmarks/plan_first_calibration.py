@@ -1,8 +1,8 @@
 """Time to the first calibration of a designed plan: simulate it, fit the physical model —
 both compiling in a fresh process — with rare run lengths padded to a ladder of
 ⌈2^(k/4)⌉ samples (`before`, kept here as `_ladder_before`), to powers of two (`pow2`,
-`physical._ladder`), and to powers of two with neighbouring lengths run as one where a compile costs more than the
-extra steps (`merged`, the default: `design._simulation_groups` for `simulate_plan`,
+`calibration._grouping.ladder`), and to powers of two with neighbouring lengths run as one where a compile costs more than the
+extra steps (`merged`, the default: `_plan_simulation.simulation_groups` for `simulate_plan`,
 `physical._merged` for the fit). Fewer, longer groups: fewer programs to compile, a little more
 to run.
 
@@ -40,13 +40,13 @@ def child(plan_path, variant, out_path):
 
     jax.config.update("jax_enable_x64", True)
     import hrgjax as hg
-    from hrgjax.calibration import PhysicalCompensator, physical
+    from hrgjax.calibration import PhysicalCompensator, _plan_simulation, physical
     from hrgjax.calibration import design as d
 
     if variant == "before":
-        physical._ladder = _ladder_before  # simulate_plan imports it from physical per call
+        physical.ladder = _plan_simulation.ladder = _ladder_before  # each imports it by name
     if variant in ("before", "pow2"):
-        d.MERGED_STEPS_MAX = 0  # no two lengths merged
+        _plan_simulation.MERGED_STEPS_MAX = 0  # no two lengths merged
         physical._merged = lambda buckets, short: [(k[0], v) for k, v in buckets.items()]
     plan, _ = d.load_plan(plan_path)
     gyro = hg.presets.tvg3_like()

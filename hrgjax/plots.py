@@ -395,8 +395,8 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     angle of each segment [° electrical] (bottom) against bench time [h], segments coloured
     by kind, transitions (slew, soak, re-positioning) in grey.
 
-    - `plan`: a [`BenchPlan`][hrgjax.calibration.design.BenchPlan]; `bench`: a
-      [`BenchModel`][hrgjax.calibration.design.BenchModel] (default `BenchModel()`).
+    - `plan`: a [`BenchPlan`][hrgjax.calibration.BenchPlan]; `bench`: a
+      [`BenchModel`][hrgjax.calibration.BenchModel] (default `BenchModel()`).
       Returns `path`."""
     from .calibration.design import BenchModel
 

@@ -380,12 +380,14 @@ def simulate(
     key or a bad output grid; a solver failure (max steps, non-finite state) raises too.
     """
     options = {k: v for k, v in locals().items() if k not in ("gyro", "profile", "model")}
-    return _simulate(gyro, profile, model, **options)[0]
+    return simulate_with_stats(gyro, profile, model, **options)[0]
 
 
-def _simulate(gyro, profile, model="averaged", **options):
-    """`simulate` returning (Record, accepted steps, solver result); `options` are
-    `simulate`'s keyword arguments, defaults taken from its signature."""
+def simulate_with_stats(gyro, profile, model="averaged", **options):
+    """`simulate` returning (Record, accepted steps, solver result), for callers that read
+    the result code or count the solver's steps (the calibration's batched runner, tests of
+    step counts); `options` are `simulate`'s keyword arguments, defaults taken from its
+    signature."""
     unknown = set(options) - set(_OPTIONS)
     if unknown:
         raise TypeError(f"simulate got unknown keyword arguments {sorted(unknown)}")
@@ -510,4 +512,4 @@ _OPTIONS = {
     for name, p in inspect.signature(simulate).parameters.items()
     if p.kind is inspect.Parameter.KEYWORD_ONLY
 }
-"""`simulate`'s keyword arguments and their defaults (one source for `_simulate`)."""
+"""`simulate`'s keyword arguments and their defaults (one source for `simulate_with_stats`)."""

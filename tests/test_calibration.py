@@ -264,7 +264,7 @@ def test_correct_removes_a_known_constant_drift():
 def small_runs():
     parts = [_run(0.0, 2.0, n=41, run=0), _run(5.0, 2.0, n=41, run=1, theta0=-30.0)]
     data = hg.MeasuredData({k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
-    return data, mlp_module._run_groups(data, window_s=5.0)
+    return data, mlp_module.run_groups(data, window_s=5.0)
 
 
 def test_integrate_compensated_is_exact_for_linear_data(small_runs):
@@ -389,7 +389,7 @@ def test_residual_scatter_counts_each_kinds_degrees_of_freedom():
     r_rest = r_rest - j_rest @ np.linalg.lstsq(j_rest, r_rest, rcond=None)[0]  # a residual
     r_moving = 3.0 * rng.standard_normal(n_moving)
     jac = {True: j_rest, False: np.zeros((n_moving, p))}
-    sigma = physical._scatter_per_dof({True: r_rest, False: r_moving}, jac, weights)
+    sigma = physical.scatter_per_dof({True: r_rest, False: r_moving}, jac, weights)
     assert sigma[True] == pytest.approx(np.sqrt(r_rest @ r_rest / (n_rest - p)), rel=1e-12)
     assert sigma[False] == pytest.approx(np.sqrt(np.mean(r_moving**2)), rel=1e-12)
     # (b) shared parameters, σ = 1 at rest and 5 moving: the per-kind σ² average to the truth
@@ -404,7 +404,7 @@ def test_residual_scatter_counts_each_kinds_degrees_of_freedom():
         y = np.r_[e[True] / 1.0, e[False] / 5.0]
         fit = np.r_[j_rest[:n_rest], j_moving] @ np.linalg.lstsq(w, y, rcond=None)[0]
         res = {True: np.r_[e[True] - fit[:n_rest], 0.0, 0.0], False: e[False] - fit[n_rest:]}
-        s = physical._scatter_per_dof(res, jac, weights)
+        s = physical.scatter_per_dof(res, jac, weights)
         for k in est:
             est[k].append(s[k] ** 2 / true_sigma[k] ** 2)
         rms.append(np.mean(res[True][:n_rest] ** 2))

@@ -361,7 +361,7 @@ def test_partition_is_the_cheapest_split_by_brute_force():
     import itertools
     import math
 
-    from hrgjax.calibration.physical import _partition
+    from hrgjax.calibration._grouping import partition
 
     rng = np.random.default_rng(1)
     for n in (1, 2, 5, 7):
@@ -371,7 +371,7 @@ def test_partition_is_the_cheapest_split_by_brute_force():
         def cost(i, j, table=table, forbidden=forbidden):
             return math.inf if j - i > 1 and forbidden[i, j] else table[i, j]
 
-        parts = _partition(n, cost)
+        parts = partition(n, cost)
         assert [a for a, _ in parts] == [0] + [b for _, b in parts[:-1]] and parts[-1][1] == n
         brute = min(
             sum(cost(a, b) for a, b in itertools.pairwise((0, *cuts, n)))
@@ -386,6 +386,8 @@ def test_simulation_groups_merge_lengths_where_a_compile_costs_more(monkeypatch)
     longest member; the seed plan keeps its two exact lengths; rare nearby rotation lengths
     share one simulator; the full model's (whose steps are dear) are not merged; a dear
     compile merges every length of one output interval up to the guard on estimated steps."""
+    from hrgjax.calibration import _plan_simulation
+
     segs = [
         {
             "kind": "rotation",
@@ -403,7 +405,7 @@ def test_simulation_groups_merge_lengths_where_a_compile_costs_more(monkeypatch)
     def groups(plan, model="averaged"):
         dts = dict(d.DT_OUT)
         n_out = [round(float(t) / dts[k]) for t, k in zip(plan.duration_s, plan.kind, strict=True)]
-        out = d._simulation_groups(plan, n_out, dts, model)
+        out = _plan_simulation.simulation_groups(plan, n_out, dts, model)
         members = sorted(m for v in out.values() for m in v)
         assert members == list(range(plan.size))  # each segment exactly once
         for (samples, dt), v in out.items():
@@ -416,9 +418,11 @@ def test_simulation_groups_merge_lengths_where_a_compile_costs_more(monkeypatch)
     units = {(243, 0.5): 4, (245, 0.5): 4, (512, 0.5): 2, (1024, 1.0): 1, (2048, 1.0): 1,
              (4096, 1.0): 1}  # fmt: skip
     assert groups(plan, "full") == units
-    monkeypatch.setattr(d, "SIMULATOR_COMPILE_S", 1e6)  # compiling dear: one group per dt
+    monkeypatch.setattr(
+        _plan_simulation, "SIMULATOR_COMPILE_S", 1e6
+    )  # compiling dear: one group per dt
     assert groups(plan) == {(512, 0.5): 10, (4096, 1.0): 3}
-    monkeypatch.setattr(d, "MERGED_STEPS_MAX", 2000)  # but never past the step guard
+    monkeypatch.setattr(_plan_simulation, "MERGED_STEPS_MAX", 2000)  # but never past the step guard
     assert groups(plan) == {(512, 0.5): 10, (1024, 1.0): 1, (2048, 1.0): 1, (4096, 1.0): 1}
 
 
@@ -495,6 +499,8 @@ def test_information_is_one_over_the_slope_variance_and_adds_over_a_split_segmen
     1-min pieces; a plan's
     information is the sum of its segments' alone (statics take one quadrature node, the
     others 64, all in one vmapped Jacobian: no point is counted against another segment)."""
+    from hrgjax.calibration._information import ramp_panels
+
     arw, white, no_gm = 1e-5, 2e-6, dict(gauss_markov=(0.0, 1.0))
     static = d.BenchPlan.from_segments([SEGMENTS[0]])
     info = np.asarray(d.information(static, IDEAL_READOUT, arw, angle_white=white, **no_gm))
@@ -534,16 +540,16 @@ def test_information_is_one_over_the_slope_variance_and_adds_over_a_split_segmen
         [{**warm, "temperature_start_c": -40.0 + i, "temperature_end_c": -39.0 + i,
           "wave_angle_deg": 30.0 - k_e * 5.0 * 60.0 * i, "duration_s": 60.0} for i in range(60)]
     )  # fmt: skip
-    assert d._ramp_panels(pieces) is None
+    assert ramp_panels(pieces) is None
     a = np.asarray(d.information(pieces, **no_gm))
     b = np.asarray(d.information(d.BenchPlan.from_segments([warm]), **no_gm))
     scale = np.sqrt(np.outer(np.diag(b), np.diag(b)))
     np.testing.assert_allclose(a / scale, b / scale, rtol=0, atol=1e-9)
     # the panels are counted from the plan's numbers, which `jax.grad` carries (`jit` not)
     counted = []
-    jax.grad(lambda p: counted.append(d._ramp_panels(p)) or 0.0)(pieces)
-    jax.grad(lambda p: counted.append(d._ramp_panels(p)) or 0.0)(d.BenchPlan.from_segments([warm]))
-    jax.jit(lambda p: counted.append(d._ramp_panels(p)) or 0.0)(d.BenchPlan.from_segments([warm]))
+    jax.grad(lambda p: counted.append(ramp_panels(p)) or 0.0)(pieces)
+    jax.grad(lambda p: counted.append(ramp_panels(p)) or 0.0)(d.BenchPlan.from_segments([warm]))
+    jax.jit(lambda p: counted.append(ramp_panels(p)) or 0.0)(d.BenchPlan.from_segments([warm]))
     assert counted == [None, (57,), None]
     mixed = d.BenchPlan.from_segments(SEGMENTS)
     alone = sum(np.asarray(d.information(d.BenchPlan.from_segments([s]))) for s in SEGMENTS)
@@ -614,16 +620,15 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     twice the information, and with a negligible prior its drift error is 1/√2 (the seed's
     quick plan identifies all twelve parameters); the information summed in chunks (a
     concrete plan) is the traced plan's."""
-    from hrgjax.calibration.physical import _SCALE
-
+    scale = np.asarray(d.GREY_BOX.scale())  # each parameter's typical uncertainty
     plan = d.seed_bench_plan(quick=True)
     f = np.asarray(d.information(plan))
-    a = f * _SCALE[:, None] * _SCALE[None, :] + np.eye(12) / 100.0**2
+    a = f * scale[:, None] * scale[None, :] + np.eye(12) / 100.0**2
     inv = np.linalg.inv(a)
     assert float(d.criterion(plan, "d")) == pytest.approx(np.linalg.slogdet(inv)[1], rel=1e-9)
     assert float(d.criterion(plan, "a")) == pytest.approx(np.trace(inv), rel=1e-7)
     cov = np.asarray(d.posterior_covariance(plan))
-    np.testing.assert_allclose(cov, inv * _SCALE[:, None] * _SCALE[None, :], rtol=1e-6,
+    np.testing.assert_allclose(cov, inv * scale[:, None] * scale[None, :], rtol=1e-6,
                                atol=1e-9 * np.abs(cov).max())  # fmt: skip
     fields = (plan.temperature_c, plan.temperature_end_c, plan.wave_angle_deg, plan.rate_dps,
               plan.duration_s)  # fmt: skip

@@ -4,18 +4,17 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
 from .._checks import check_finite, is_concrete
-from .._compiled import Check, device, program
-from .._progress import bar
+from .._compiled import device
 from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
-from ..simulate import _simulate
 from ..units import DEG, DEG_PER_S
+from ._runs import RunGroup, simulate_runs, switch_on_keys
+from ._runs import failed_member as failed_member  # its home until issue 45; now `_runs`
 
 SEED_TEMPERATURES = tuple(float(t) for t in range(-40, 61, 10))
 """−40…+60 °C in 10 °C steps."""
@@ -171,59 +170,12 @@ CHUNK = 32
 reuses one compiled simulator, whatever its number of points."""
 
 
-class _ChunkCheck(Check):
-    """`Check` of a vmapped chunk that also says which member failed, as
-    "(batch member (j,))": the first whose solve failed or whose outputs are not finite."""
-
-    def host(self, out):
-        message = super().host(out)
-        if message is None:
-            return None
-        rec, result = out
-        bad = np.zeros(np.shape(rec.t)[0], bool)
-        try:
-            bad |= np.asarray(result._value) != self._enumeration().successful._value
-        except AttributeError:  # another JAX/diffrax layout: the outputs still tell
-            pass
-        for x in (rec.wave_angle, rec.amplitude, rec.quadrature):
-            bad |= ~np.all(np.isfinite(np.asarray(x)), axis=-1)
-        if bad.any():
-            message += f" (batch member ({int(np.flatnonzero(bad)[0])},))"
-        return message
-
-
-_CHUNK_WHAT = "run_plan (simulating a plan point)"
-
-
-@program(check=_ChunkCheck(_CHUNK_WHAT, result_index=1))
-def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
-    def one(p, k):
-        rec, _, result = _simulate(gyro, p, model, key=k, bias_key=bias_key, ts=ts)
-        return rec, result
-
-    if keys is None:
-        return jax.vmap(lambda p: one(p, None))(profiles)
-    return jax.vmap(one)(profiles, keys)
-
-
-def failed_member(message: str) -> tuple[int | None, str]:
-    """(the batch member a `_ChunkCheck` message names, or None; the message without that
-    note and without the chunk program's own prefix) — for callers that name the point."""
-    import re
-
-    found = re.search(r"\s*\(batch member \((\d+),?\)\)", message)
-    detail = message if found is None else message.replace(found.group(0), "")
-    detail = detail.removeprefix(f"{_CHUNK_WHAT}: ")
-    return (None if found is None else int(found.group(1))), detail
-
-
-def _failed_point(plan: Plan, order, start: int, message: str) -> str:
+def _failed_point(plan: Plan, take: np.ndarray, message: str) -> str:
     """A chunk's failure with the plan point named (from the check's batch member)."""
     member, detail = failed_member(message)
     if member is None:
         return message
-    j = min(start + member, plan.size - 1)
-    i = int(order[j]) if order is not None else j
+    i = int(take[member])
     return (f"run_plan: point {i} ({float(plan.temperature_c[i]):g} °C, "
             f"{float(plan.wave_angle0_deg[i]):g}°, {float(plan.rate_dps[i]):g} °/s) failed: "
             f"{detail}")  # fmt: skip
@@ -250,70 +202,33 @@ def run_plan(
     order, each computed by the same program as unsorted: the data equal the unsorted ones to
     round-off (XLA:CPU may round a point by an ulp differently at another place in a chunk;
     measured ≤ 1e-14 relative in the wave angle, ≤ 5e-13 in amplitude and quadrature);
-    `order_by_cost=False` keeps the plan's order.
+    `order_by_cost=False` keeps the plan's order. Point i's noise key is
+    `jax.random.split(k, P)[i]` with `k, k_bias = jax.random.split(key)`, the switch-on's
+    `k_bias` unless `bias_key` is given — the runner `simulate_plan` shares.
     """
     n_out = int(round(plan.duration_s / plan.dt_out)) + 1
     plausible.check_size("run_plan", float(n_out) * plan.size, plan.size)
-    profiles = plan.profiles()
-    ts = device(np.arange(n_out) * plan.dt_out)
-    keys = None
-    if gyro.noise is not None:
-        if key is None:
-            raise ValueError("this gyro has noise: pass key=jax.random.key(…)")
-        k_points, k_bias = jax.random.split(key)
-        bias_key = k_bias if bias_key is None else bias_key
-        keys = jax.random.split(k_points, plan.size)
+    fields = (plan.temperature_c, plan.wave_angle0_deg, plan.rate_dps)
+    if not all(is_concrete(x) for x in fields):
+        raise ValueError("run_plan needs a concrete plan (host values), not a traced one")
+    batch = jax.tree_util.tree_map(np.asarray, plan.profiles())  # chunked on the host
+    keys, bias_key = switch_on_keys(gyro, key, bias_key, plan.size)
     size = plan.size
     chunk = min(CHUNK, size)
-    n_pad = -size % chunk
-    # Padding and chunking on the host where the plan is concrete (no eager device ops).
-    xp = np if all(is_concrete(x) for x in jax.tree_util.tree_leaves(profiles)) else jnp
-    order = None
-    if order_by_cost and xp is np and size > chunk:
+    members = np.arange(size)
+    if order_by_cost and size > chunk:
         speed = np.abs(np.asarray(plan.rate_dps, dtype=float))
         if speed.max() > speed.min():
-            order = np.argsort(speed, kind="stable")
-            profiles = jax.tree_util.tree_map(lambda x: np.asarray(x)[order], profiles)
-            if keys is not None:  # each point keeps its own key
-                impl, data = jax.random.key_impl(keys), np.asarray(jax.random.key_data(keys))
-                keys = jax.random.wrap_key_data(device(data[order]), impl=impl)
-    pad_np = lambda x, xp=xp: xp.concatenate([x, xp.repeat(x[-1:], n_pad, axis=0)])
-    profiles = jax.tree_util.tree_map(
-        lambda x: pad_np(xp.asarray(x)) if n_pad else xp.asarray(x), profiles
+            members = np.argsort(speed, kind="stable")  # each point keeps its own key
+    return simulate_runs(
+        gyro,
+        [RunGroup(np.arange(n_out) * plan.dt_out, members, chunk)],
+        lambda take, _: jax.tree_util.tree_map(lambda x: x[take], batch),
+        keys,
+        bias_key,
+        model,
+        samples=np.full(size, n_out),
+        failure=lambda take, message: _failed_point(plan, take, message),
+        unit="run",
+        first_run=first_run,
     )
-    starts = range(0, size + n_pad, chunk)
-    if keys is not None and xp is np:  # key data padded and sliced on the host too
-        impl, data = jax.random.key_impl(keys), np.asarray(jax.random.key_data(keys))
-        data = pad_np(data) if n_pad else data
-        keys = [jax.random.wrap_key_data(device(data[s : s + chunk]), impl=impl) for s in starts]
-    elif keys is not None:
-        keys = jnp.concatenate([keys, jnp.repeat(keys[-1:], n_pad, axis=0)]) if n_pad else keys
-        keys = [keys[s : s + chunk] for s in starts]
-    parts = []
-    with bar(size, f"simulating {size} runs", unit="run") as progress:
-        for i, start in enumerate(starts):
-            take = lambda x, s=start: x[s : s + chunk]
-            try:
-                rec, _ = _simulate_chunk(
-                    gyro,
-                    jax.tree_util.tree_map(take, profiles),
-                    None if keys is None else keys[i],
-                    bias_key,
-                    ts,
-                    model,
-                )
-            except RuntimeError as err:
-                raise RuntimeError(_failed_point(plan, order, start, str(err))) from None
-            parts.append(rec)
-            progress.update(min(chunk, size - start))
-    join = lambda *xs: (np if xp is np else jnp).concatenate(xs)[:size]
-    rec = jax.tree_util.tree_map(join, *parts)
-    if order is not None:  # back to the plan's order
-        back = np.argsort(order)
-        rec = jax.tree_util.tree_map(lambda x: np.asarray(x)[back], rec)
-    data = rec.to_data()
-    if first_run:
-        cols = data.columns
-        cols["run"] = cols["run"] + first_run
-        data = MeasuredData(cols)
-    return data

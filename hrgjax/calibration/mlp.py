@@ -352,7 +352,10 @@ class AngleRuns(eqx.Module):
     static: jax.Array
 
 
-def _run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
+def run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
+    """`data`'s runs as `AngleRuns`, one per group of equal length and sampling
+    (`MeasuredData.stacked`), windows of moving runs every `window_s` [s]: what the
+    end-to-end training integrates over."""
     out = []
     for stack in data.stacked():
         n = stack.n_samples
@@ -437,7 +440,7 @@ def train_end_to_end(
 ) -> MLPCompensator:
     """Rprop on the end-to-end losses of all runs: the static and the moving runs' mean squared
     errors, each normalised by its value at the start, so both kinds weigh alike."""
-    groups = _run_groups(data, window_s)
+    groups = run_groups(data, window_s)
     params, static = eqx.partition(comp, _trainable(comp))
     scales = _e2e_scales(comp, groups)
     params, _ = rprop_with_progress(

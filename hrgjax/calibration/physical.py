@@ -19,7 +19,7 @@ window, a rotation is cut into `window_s` windows and a ramp (table at rest, tem
 moving) into `RAMP_WINDOW_S` windows, each a drift at its own temperature. Weights: the
 residual scatter of each kind of window (at rest, moving), an at-rest window of length L
 weighted by √(L / 60 s) (white rate noise: a long dwell tells more), re-estimated after the
-fit with each kind's own degrees of freedom (`_scatter_per_dof`); the parameter covariance
+fit with each kind's own degrees of freedom (`scatter_per_dof`); the parameter covariance
 is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced χ² (≈ 1 with those weights).
 Starting values come from harmonic fits at each temperature held for at least three
 windows (a ramp's windows are not a level).
@@ -57,8 +57,9 @@ from ..resonator.slow import reduced_rate
 from ..simulate import simulate
 from ..units import DEG, DEG_PER_H, PHYSICAL_WINDOW_S, T_REF_C
 from ._compensator import FROM_FIELD, AbstractCompensator, FromField, setting, split_targets
+from ._grouping import ladder, partition
 from ._physical_start import initial_values
-from .reduce import K_E_NOMINAL, _slope, reduce
+from .reduce import K_E_NOMINAL, least_squares_slope, reduce
 from .reduce import RAMP_WINDOW_S as RAMP_WINDOW_S
 
 PARAMETERS = (
@@ -193,7 +194,10 @@ def model_gyro(
     )
 
 
-def _readout_angle(gyro_t: Gyro, theta):
+def readout_angle(gyro_t: Gyro, theta):
+    """The readout map at one temperature: the measured pattern angle θ̂ [rad] of the true
+    pattern angle `theta` [rad] under ideal loops (the amplitude at the AGC set point, no
+    quadrature), `gyro_t` a gyro at that temperature (`gyro.at(T)`)."""
     a0 = gyro_t.control.amplitude
     return measured_estimates(gyro_t, a0, 0.0 * a0, theta, 0.0 * a0).theta
 
@@ -202,7 +206,7 @@ def true_angle(gyro_t: Gyro, theta_meas, iterations: int = 4):
     """Invert the readout map at one temperature: θ with θ̂(θ) = `theta_meas` [rad]."""
     theta = theta_meas
     for _ in range(iterations):
-        theta = theta - (_readout_angle(gyro_t, theta) - theta_meas)
+        theta = theta - (readout_angle(gyro_t, theta) - theta_meas)
     return theta
 
 
@@ -274,7 +278,7 @@ class PhysicalCompensator(AbstractCompensator):
     def _derivatives(self, theta_meas, temperature_c):
         g = self.gyro().at(temperature_c)
         theta = true_angle(g, theta_meas)
-        slope = jax.jvp(lambda th: _readout_angle(g, th), (theta,), (jnp.ones_like(theta),))[1]
+        slope = jax.jvp(lambda th: readout_angle(g, th), (theta,), (jnp.ones_like(theta),))[1]
         rest = Profile.static(1.0, temperature_c)
         if self.plant is None:
             theta_dot = averaged_vector_field(0.0, theta[None], (g, rest))[0]
@@ -292,7 +296,7 @@ class PhysicalCompensator(AbstractCompensator):
     def readout_temperature_sensitivity(self, theta, temperature_c):
         gyro = self.gyro()
         true = true_angle(gyro.at(temperature_c), theta)
-        meas = lambda temp: _readout_angle(gyro.at(temp), true)
+        meas = lambda temp: readout_angle(gyro.at(temp), true)
         return jax.jvp(meas, (temperature_c,), (jnp.ones_like(temperature_c),))[1]
 
     def drift(self, theta, temperature_c):
@@ -451,29 +455,6 @@ run (2-core CPU, fitted to a 12-h designed plan's layouts of 7 and 2 groups; mea
 `benchmarks/fit_group_layouts.py`: 80, 131 and 410 ms per evaluation for 7, 3 and 2)."""
 
 
-def _ladder(n: int) -> int:
-    """Smallest power of two ≥ n."""
-    return 1 << max(int(n) - 1, 0).bit_length()
-
-
-def _partition(count: int, cost) -> list[tuple[int, int]]:
-    """The cheapest split of `count` items (in their order) into contiguous runs `[i, j)`,
-    by dynamic programming on `cost(i, j)` (`math.inf`: not allowed; a single item's cost
-    must be finite). Groups of sorted run lengths: each run of them shares one compiled
-    program."""
-    best, cut = [0.0] + [math.inf] * count, [0] * (count + 1)
-    for j in range(1, count + 1):
-        for i in range(j):
-            c = best[i] + cost(i, j)
-            if c < best[j]:
-                best[j], cut[j] = c, i
-    out, j = [], count
-    while j > 0:
-        out.append((cut[j], j))
-        j = cut[j]
-    return out[::-1]
-
-
 def steps_estimate(seconds: float, rate_rad_s: float) -> float:
     """Accepted steps of the averaged model over `seconds` at a table rate [rad/s]
     (`hrgjax._cost.steps_per_s` at the nominal angular gain)."""
@@ -555,7 +536,7 @@ def _masked_slopes(xp, t, y, mask, n, partial=False):
     (`_windows`), each over its samples with `mask` 1 (`reduce`'s slope); (R, W). Windows
     without 2 such samples give 0."""
     t, y, m = (_windows(xp, a, n, partial) for a in (t, y, mask))
-    return _slope(xp, t, y, m)[0]
+    return least_squares_slope(xp, t, y, m)[0]
 
 
 def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
@@ -572,7 +553,7 @@ def _groups(data: MeasuredData, window_s: float, k_e: float) -> list[_Group]:
         n = stack.n_samples
         # runs shorter than a moving window keep their length (reduced as one window)
         is_short = n < max(int(round(window_s / stack.dt)), 4)
-        length = n if is_short or len(stack) >= SHARED_LENGTH_RUNS else _ladder(n)
+        length = n if is_short or len(stack) >= SHARED_LENGTH_RUNS else ladder(n)
         key = (length, round(stack.dt, 9))
         buckets.setdefault(key, []).append(stack)
         if is_short:
@@ -601,7 +582,7 @@ def _merged(buckets, short) -> list[tuple[int, list]]:
             run = steps * (FIT_STEP_S[0] + rows * FIT_STEP_S[1])
             return FIT_COMPILE_S + FIT_EVALUATIONS * run
 
-        for i, j in _partition(len(keys), cost):
+        for i, j in partition(len(keys), cost):
             out.append((keys[j - 1][0], [st for k in keys[i:j] for st in buckets[k]]))
     return out
 
@@ -768,7 +749,7 @@ def _scatter(residuals, weights) -> dict:
     return out
 
 
-def _scatter_per_dof(residuals, jac, weights, iterations: int = 4) -> dict:
+def scatter_per_dof(residuals, jac, weights, iterations: int = 4) -> dict:
     """Residual scatter of each kind of window (at rest, moving) at the solution, each kind
     with its own degrees of freedom: σ_k² = Σ r_k² / (n_k − p_k), where p_k is the sum of
     the leverages (the hat matrix's diagonal of the σ-weighted Jacobian) over kind k's rows
@@ -834,7 +815,7 @@ def _fit(groups, x0, k_e, max_steps):
     values = x0 + np.asarray(x) * _SCALE
     # `least_squares_with_jacobian` evaluated last at the solution: `at` holds it, unweighted.
     r1, jac1 = at["r"], at["jac"]
-    sigma1 = _scatter_per_dof(r1, {k: np.asarray(v) for k, v in jac1.items()}, weights)
+    sigma1 = scatter_per_dof(r1, {k: np.asarray(v) for k, v in jac1.items()}, weights)
     jac = np.concatenate(
         [np.asarray(jac1[True]) / sigma1[True], np.asarray(jac1[False]) / sigma1[False]]
     )

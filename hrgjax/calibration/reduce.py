@@ -64,23 +64,23 @@ def _window_stats(xp, t, theta, n_windows, batches):
         raise ValueError(f"{t.shape[0]} samples do not split into {n_windows} equal windows")
     tw = t.reshape(n_windows, n)
     yw = theta.reshape(n_windows, n)
-    slope, tm, ym = _slope(xp, tw, yw)
+    slope, tm, ym = least_squares_slope(xp, tw, yw)
     if batches < 3:
         return slope, tm, ym
     nb = n // batches
     tb = tw[:, : nb * batches].reshape(n_windows, batches, nb)
     yb = yw[:, : nb * batches].reshape(n_windows, batches, nb)
-    sb, _, _ = _slope(xp, tb, yb)
+    sb, _, _ = least_squares_slope(xp, tb, yb)
     # A smooth change of rate within the window (the scale-factor ripple as the pattern turns)
     # is systematic, not noise: remove a linear trend over the batches before the scatter.
     idx = xp.broadcast_to(xp.arange(batches, dtype=sb.dtype), sb.shape)
-    trend, _, mean = _slope(xp, idx, sb)
+    trend, _, mean = least_squares_slope(xp, idx, sb)
     resid = sb - mean[..., None] - trend[..., None] * (idx - (batches - 1) / 2)
     stderr = xp.sqrt(xp.sum(resid**2, axis=-1) / (batches - 2) / batches)
     return slope, tm, ym, stderr
 
 
-def _slope(xp, t, y, mask=None):
+def least_squares_slope(xp, t, y, mask=None):
     """Least-squares slope, mean time and mean value along the last axis; with `mask`, over
     the samples where it is 1 only (a window without 2 of them gets slope 0)."""
     if mask is None:
@@ -223,7 +223,7 @@ def reduce(
         cols["wave_angle_deg"].append(ym)
         cols["rate_dps"].append(-slope / k_e)
         cols["stderr_dps"].append(se / k_e)
-        cols["temperature_rate_cps"].append(_slope(np, t[:m].reshape(n_win, n),
+        cols["temperature_rate_cps"].append(least_squares_slope(np, t[:m].reshape(n_win, n),
                                                    temp[:m].reshape(n_win, n))[0])  # fmt: skip
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     return RateWindows(**arrays, k_e=float(k_e))

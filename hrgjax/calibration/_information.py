@@ -1,0 +1,323 @@
+"""What a plan teaches: the Fisher information of a bench plan about a model's parameters,
+and the posterior it leaves."""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import concrete_value, is_concrete
+from .._compiled import device
+from .._x64 import require_x64
+from ..units import DEG, DEG_PER_S
+from ._models import GREY_BOX, as_model, model_values, noise_vector
+from ._plan import DT_OUT, BenchPlan
+
+NODES = 64
+"""Quadrature points per rotation and ramp (a turning ramp's: per panel) of `information`."""
+
+
+def window_density(arw, angle_white, samples, dt, length_s):
+    """Effective white rate-noise density [rad/√s] of the physical fit's window slopes: a
+    window of n = `samples` samples spaced Δt = `dt` [s] has least-squares slope variance
+    6(n² + 1)/(5n(n² − 1)) · N²/Δt (random walk of density N = `arw` [rad/√s]; → 6/5 of a
+    mean rate's N²/(nΔt) for long windows) + 12 σ_a²/(Δt² n(n² − 1)) (white angle noise
+    σ_a = `angle_white` [rad per sample]), both exact; × the length of segment the window
+    stands for (`length_s` [s]: nΔt for consecutive windows, the duration for a static
+    segment's one window), the density a continuous observation of the rate with the same
+    information would have."""
+    n = samples
+    m = n * (n**2 - 1.0)
+    var = 6.0 * (n**2 + 1.0) / (5.0 * m) * arw**2 / dt + 12.0 * angle_white**2 / (dt**2 * m)
+    return jnp.sqrt(var * length_s)
+
+
+def gauss_markov_discount(duration_s, arw, sigma, tau):
+    """Share of a segment's white-noise information left by a Gauss–Markov rate:
+    (N²/D) / (N²/D + V(D)), with V(D) = 2σ²τ/D · (1 − (τ/D)(1 − e^(−D/τ))) the variance of
+    the GM rate's mean over the segment's duration D [s] (N [rad/√s], σ [rad/s], τ [s]).
+    Exact for the mean rate of a static segment; for a rotation it treats the GM rate as an
+    extra error of each parameter's segment-average, which is what a slow bias is."""
+    x = duration_s / tau
+    # D·V/N² = 2σ²τ/N² · (1 − (1 − e^−x)/x), written with expm1 for short segments
+    excess = 2.0 * sigma**2 * tau / arw**2 * (1.0 + jnp.expm1(-x) / x)
+    return 1.0 / (1.0 + excess)
+
+
+def _segment_windows(dt, t0, t1, rate_dps, duration):
+    """(samples, sample interval [s], length [s]) of the windows the physical fit reduces a
+    segment with (see `window_density`): moving — `PhysicalCompensator.window_s` (10 s);
+    a ramp at rest — ≈ `RAMP_WINDOW_S` (300 s) tiling it; static — the whole segment (one
+    window of duration/Δt + 1 samples); sampled at `DT_OUT` of its kind."""
+    from .physical import RAMP_WINDOW_S, PhysicalCompensator
+
+    moving = rate_dps != 0.0
+    ramp = t1 != t0
+    ramp_window = duration / jnp.maximum(jnp.round(duration / RAMP_WINDOW_S), 1.0)  # tiling
+    length = jnp.where(moving, PhysicalCompensator.window_s,
+                       jnp.where(ramp, ramp_window, duration))  # fmt: skip
+    samples = jnp.where(moving | ramp, length / dt, duration / dt + 1.0)
+    return samples, dt, length
+
+
+def _segment_weights(noise, dt, t0, t1, rate_dps, duration):
+    """Per segment: 1/N_w² × the segment's `gauss_markov_discount` — the factor of its
+    quadrature weights [s⁻¹ per (rad/s)²] (N_w the windows' `window_density` with N, σ_a =
+    `noise[0]`, `noise[3]`; σ, τ = `noise[1:3]`)."""
+    arw, sigma, tau, angle_white = noise[0], noise[1], noise[2], noise[3]
+    density = window_density(arw, angle_white, *_segment_windows(dt, t0, t1, rate_dps,
+                                                                 duration))  # fmt: skip
+    return gauss_markov_discount(duration, density, sigma, tau) / density**2
+
+
+# The kinds of quadrature point (`_quadrature_points`).
+_ALONG, _PERIOD, _REST = 0, 1, 2
+
+
+SWEEP_PER_NODE_DEG = 5.0
+"""Electrical angle a ramp that turns may sweep per Gauss–Legendre node [°]: a turning
+ramp is cut into panels of `nodes` nodes, each sweeping at most `nodes` × this (320° at 64
+nodes: the information to 1e-14; one 64-node panel along an hour at 5 °/s, −40 → +20 °C,
+was 29 % off) — `ramp_panels`."""
+
+
+def ramp_panels(plan, nodes=NODES):
+    """Gauss–Legendre panels per segment of `plan` (a tuple, static), or None where every
+    segment takes one — or the plan's rates and durations are unknown on the host (traced by
+    `jit`: then one panel each; `jax.grad` alone carries the values).
+    A ramp that turns sweeps at most |Ω| D of electrical angle (k_e < 1): it gets
+    ⌈|Ω| D / (`nodes` · `SWEEP_PER_NODE_DEG`)⌉ panels. Rotations need none (their rule is
+    exact at any length), statics one node."""
+    if "ramp" not in plan.kind:
+        return None
+    rate, duration = concrete_value(plan.rate_dps), concrete_value(plan.duration_s)
+    if rate is None or duration is None:
+        return None
+    swept = np.abs(rate.astype(float)) * duration.astype(float)
+    per_panel = nodes * SWEEP_PER_NODE_DEG
+    panels = tuple(
+        max(1, math.ceil(float(a) / per_panel)) if k == "ramp" else 1
+        for k, a in zip(plan.kind, swept, strict=True)
+    )
+    return None if all(p == 1 for p in panels) else panels
+
+
+def _quadrature_points(kinds, nodes, panels=None):
+    """(segment index, point kind, position s ∈ [0, 1], weight summing to 1 per part) of
+    every quadrature point of a plan of `kinds` (`panels`: `ramp_panels`).
+
+    - static: one point (`_ALONG`) — its path is one point (θ and T constant, Ω = Ṫ = 0), so
+      its integrand is constant and one node integrates it exactly, as it does its
+      derivatives with respect to the plan (linear in the node's position; a one-point rule
+      is exact to degree 1);
+    - ramp: `nodes`-point Gauss–Legendre along the whole segment (`_ALONG`) — or, for a ramp
+      that turns, along each of its `panels[i]` equal panels (its integrand oscillates with
+      the wave angle while T moves: a node per `SWEEP_PER_NODE_DEG` of angle swept);
+    - rotation: at constant T the integrand is periodic in time — the rate is π-periodic in
+      the electrical wave angle (every law of both models is a function of 2θ), which turns
+      by π in T_π = π / (k_e |Ω|) — so the segment is m = ⌊D / T_π⌋ whole periods, each the
+      same integral, plus a remainder shorter than one: `nodes` / 2 points of the periodic
+      trapezoid rule over one period (`_PERIOD`: exact for harmonics of 2θ below `nodes` / 2)
+      and `nodes` / 2 Gauss–Legendre points over the remainder (`_REST`). Exact for any
+      length: Gauss–Legendre along a long rotation would need a node per ~25° of electrical
+      angle swept (64 nodes were off by 10 % at one hour at 5 °/s)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    half = max(nodes // 2, 1)
+    xh, wh = np.polynomial.legendre.leggauss(half)
+    seg, code, pos, wt = [], [], [], []
+
+    def add(i, c, s, ws):
+        seg.append(np.full(len(s), i))
+        code.append(np.full(len(s), c))
+        pos.append(np.asarray(s, float))
+        wt.append(np.asarray(ws, float))
+
+    for i, k in enumerate(kinds):
+        if k == "static":
+            add(i, _ALONG, [0.5], [1.0])
+        elif k == "rotation":
+            add(i, _PERIOD, (np.arange(half) + 0.5) / half, np.full(half, 1.0 / half))
+            add(i, _REST, (xh + 1.0) / 2.0, wh / 2.0)
+        else:
+            p = 1 if panels is None else panels[i]
+            for j in range(p):
+                add(i, _ALONG, (j + (x + 1.0) / 2.0) / p, w / 2.0 / p)
+    return tuple(np.concatenate(a) for a in (seg, code, pos, wt))
+
+
+def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: int = NODES,
+                gauss_markov: tuple[float, float] | None = None,
+                angle_white: float | None = None, model=None):  # fmt: skip
+    """Fisher information matrix (P × P, P = 12) of `plan` about the physical grey box's
+    parameters ([`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] order, SI)
+    — or, with `model` (`MODELS`), about that model's — linearised at `values` (default
+    the model's `nominal()`: `nominal_values()`), for white rate noise of density
+    `arw` on the measured pattern angle [rad/√s] (default `pattern_arw()`) and a
+    Gauss–Markov rate `gauss_markov` = (σ [rad/s], τ [s]) on it (default
+    `pattern_gauss_markov()`; `(0.0, 1.0)` for white noise only) and white readout noise
+    `angle_white` on each sample of it [rad] (default `pattern_angle_white()`; 0 for none).
+    `nodes`: quadrature points per rotation and ramp (a static segment's path is one point,
+    which one node integrates exactly; a rotation is whole periods of its π-periodic
+    integrand plus a remainder, exact at any length; a ramp that turns takes panels of
+    `nodes` points, each sweeping at most `nodes` × `SWEEP_PER_NODE_DEG` — counted from the
+    plan's numbers (as `jax.grad` carries them), so under `jax.jit` with the plan traced a
+    ramp takes one panel, accurate while it sweeps less than that — `_quadrature_points`).
+
+    Each segment is observed through its measured pattern rate along its path: θ turning at
+    −k_e Ω from its wave angle, T moving linearly from start to end (a ramp's Ṫ reaches the
+    readout's temperature sensitivity ∂θ̂/∂T — what a static grid cannot see) — through the
+    windows the physical fit reduces it with (a static segment whole, a rotation in 10-s
+    windows, a ramp in 300-s windows; samples every `DT_OUT`), whose least-squares slopes
+    have the noise density [`window_density`][hrgjax.calibration.design.window_density]:
+    the random walk's 6/5 and, for short windows, the readout noise (1″ per 0.5-s sample is
+    ≈ 14× the ARW's variance in a 10-s window). The
+    Gauss–Markov rate discounts each segment's information by
+    [`gauss_markov_discount`][hrgjax.calibration.design.gauss_markov_discount] (a long dwell
+    averages white noise down, not a slow bias); the switch-on bias is left out (it is a
+    constant of the session: the fitted bias absorbs it). Differentiable with respect to the
+    plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
+    require_x64("hrgjax.calibration.design.information")
+    if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 2:
+        raise ValueError(f"nodes must be a whole number ≥ 2 (quadrature points); got {nodes!r}")
+    model = as_model(model)
+    values = model_values(values, model)
+    noise = noise_vector(arw, gauss_markov, angle_white)
+    source, panels = information_source(plan, values, noise, model, nodes)
+    if not isinstance(source, BenchPlan):
+        return source
+    return _information(plan, values, noise, nodes, model, panels)
+
+
+@eqx.filter_jit
+def _information(plan, values, noise, nodes, model=GREY_BOX, panels=None):
+    """`information`, compiled once per plan length, kinds and model: each segment observed
+    through its measured pattern rate, ∫ g gᵀ dt / N_w² with g = ∂(measured rate)/∂values
+    along its path (θ turning at −k_e Ω, T linear) — every quadrature point of every
+    segment (`_quadrature_points`) in one vmapped Jacobian, so that the program holds one
+    copy of the rate's derivative."""
+    weight, *path = _path_points(plan, values, noise, nodes, model, panels)
+    return _weighted_information(values, model, weight, *path)
+
+
+def _weighted_information(values, model, weight, thetas, temps, omega, temp_rate):
+    """Σ wᵢ gᵢ gᵀᵢ over points (θ, T, Ω, Ṫ), g = ∂(measured rate)/∂values."""
+    jac = jax.vmap(lambda th, T, om, tr: jax.jacfwd(model.rate)(values, th, T, om, tr))(
+        thetas, temps, omega, temp_rate
+    )  # (points, P)
+    return jnp.einsum("n,np,nq->pq", weight, jac, jac)
+
+
+INFORMATION_CHUNK = 1024
+"""Quadrature points per call of the information's compiled Jacobian on a concrete plan
+(`_information_chunked`): every plan, whatever its length and kinds, meets one program."""
+
+
+_chunk_information = eqx.filter_jit(_weighted_information)
+
+
+def _information_chunked(plan, values, noise, model=GREY_BOX, panels=None, nodes=NODES):
+    """`_information` of a concrete plan (values and noise concrete too): the
+    points' weights and paths by a small program per plan structure, then their Jacobians
+    `INFORMATION_CHUNK` points at a time (padded with weight 0) by one program for every
+    plan — a criterion of a new plan then compiles nothing large (`hrgjax design` compares
+    three plans of different structures; each cost ≈ 4 s of compiling before)."""
+    points = [np.asarray(x) for x in _path_points_compiled(plan, values, noise, nodes, model,
+                                                            panels)]  # fmt: skip
+    n = points[0].shape[0]
+    m = -(-n // INFORMATION_CHUNK) * INFORMATION_CHUNK
+    points = [np.pad(x, (0, m - n)) for x in points]  # padding: weight 0, θ = T = Ω = 0
+    total = None
+    for i in range(0, m, INFORMATION_CHUNK):
+        part = _chunk_information(values, model, *(device(x[i : i + INFORMATION_CHUNK])
+                                                    for x in points))  # fmt: skip
+        total = part if total is None else total + part
+    return total
+
+
+def information_source(plan, values, noise, model=GREY_BOX, nodes=NODES):
+    """What the criteria read the plan through: its information matrix, chunked
+    (`_information_chunked`), where the plan, values and noise are concrete; else the plan
+    itself (traced: `jax.jit`, `jax.grad` with respect to it — `_information` inline)."""
+    panels = ramp_panels(plan, nodes)
+    if all(is_concrete(x) for x in (*plan._fields().values(), values, noise)):
+        return _information_chunked(plan, values, noise, model, panels, nodes), None
+    return plan, panels
+
+
+def _path_points(plan, values, noise, nodes, model=GREY_BOX, panels=None):
+    """Every quadrature point of `plan` (`_quadrature_points`): its weight (quadrature
+    weight × span × its segment's 1/N_w² and Gauss–Markov discount) and its path point
+    (θ [rad], T [°C], Ω [rad/s], Ṫ [°C/s])."""
+    dt = jnp.asarray([DT_OUT[k] for k in plan.kind], dtype=float)  # each kind's sampling
+    t0, t1, angle, rate, duration = (plan.temperature_c, plan.temperature_end_c,
+                                     plan.wave_angle_deg, plan.rate_dps, plan.duration_s)  # fmt: skip
+    seg_w = _segment_weights(noise, dt, t0, t1, rate, duration)
+    seg, code, pos, wt = _quadrature_points(plan.kind, nodes, panels)
+    at = lambda x: x[seg]  # noqa: E731  (each point's segment's value)
+    d, omega = at(duration), at(rate) * DEG_PER_S
+    k_e = model.gain(values)
+    # a rotation's period of the integrand, T_π = π / (k_e |Ω|), and its whole periods m
+    # (computed with Ω = 1 for the other points, which do not use them: no division by 0)
+    turning = jnp.asarray(code != _ALONG)
+    period = jnp.pi / (k_e * jnp.abs(jnp.where(turning, omega, 1.0)))
+    whole = jnp.floor(d / period)
+    rest = d - whole * period
+    pos, wt = jnp.asarray(pos), jnp.asarray(wt)
+    is_period, is_rest = jnp.asarray(code == _PERIOD), jnp.asarray(code == _REST)
+    t = jnp.where(is_period, pos * period, jnp.where(is_rest, whole * period + pos * rest, pos * d))
+    span = jnp.where(is_period, whole * period, jnp.where(is_rest, rest, d))  # [s]
+    temp_rate = (at(t1) - at(t0)) / d
+    thetas = at(angle) * DEG - k_e * omega * t
+    # a rotation holds its temperature (checked where the plan is built): at the mean of
+    # its two, so that the path stays periodic in every direction a gradient takes (the
+    # derivative splits equally between temperature_c and temperature_end_c, as a static's)
+    temps = jnp.where(turning, 0.5 * (at(t0) + at(t1)), at(t0) + temp_rate * t)
+    return wt * span * at(seg_w), thetas, temps, omega, temp_rate
+
+
+_path_points_compiled = eqx.filter_jit(_path_points)
+
+
+def precision_factor(plan, values, noise, prior_scale, model=GREY_BOX, panels=None):
+    """Cholesky factor of the posterior precision in units of each parameter's typical
+    uncertainty, equilibrated to unit diagonal: `(L, d)` with A = diag(d) L Lᵀ diag(d)
+    (forming (F + Λ)⁻¹ explicitly loses ~cond·ε; triangular solves keep the criteria and
+    their gradients accurate). `plan`: a plan, or its information matrix (`information_source`)."""
+    scale = model.scale()
+    if isinstance(plan, BenchPlan):
+        a = _information(plan, values, noise, NODES, model, panels)
+    else:
+        a = plan
+    a = a * scale[:, None] * scale[None, :]
+    a = a + jnp.eye(a.shape[0]) / prior_scale**2
+    d = jnp.sqrt(jnp.diagonal(a))
+    return jnp.linalg.cholesky(a / d[:, None] / d[None, :]), d
+
+
+def scaled_solve(factor, h):
+    """Rows L⁻¹ diag(d)⁻¹ hᵢ for h (N, P) in scaled units: ‖row‖² = hᵢᵀ A⁻¹ hᵢ."""
+    import jax.scipy.linalg as jsl
+
+    chol, d = factor
+    return jsl.solve_triangular(chol, (h / d[None, :]).T, lower=True).T
+
+
+def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
+                         gauss_markov=None, angle_white=None, model=None):  # fmt: skip
+    """Linearised posterior covariance of the grey box's parameters after `plan` (P × P,
+    SI): (F + Λ)⁻¹ with F = [`information`][hrgjax.calibration.design.information] and a
+    weak Gaussian prior Λ of σ = `prior_scale` × each parameter's typical uncertainty
+    (`physical.PARAMETERS`; `model` as [`information`][hrgjax.calibration.design.information],
+    its `scale()`), which keeps directions a plan does not see finite."""
+    model = as_model(model)
+    values = model_values(values, model)
+    noise = noise_vector(arw, gauss_markov, angle_white)
+    source, panels = information_source(plan, values, noise, model)
+    factor = precision_factor(source, values, noise, prior_scale, model, panels)
+    scale = model.scale()
+    w = scaled_solve(factor, jnp.eye(scale.shape[0]))  # rows: L⁻¹ D⁻¹ e_i
+    return (w @ w.T) * scale[:, None] * scale[None, :]

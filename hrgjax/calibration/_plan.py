@@ -1,0 +1,339 @@
+"""A bench plan as a differentiable pytree of segments, and the bench time it costs.
+
+A [`BenchPlan`][hrgjax.calibration.BenchPlan] is a sequence of segments in bench order,
+each of one kind:
+
+- **static** — table at rest at one temperature and wave angle for a duration;
+- **rotation** — the table turning at a constant rate, one temperature;
+- **ramp** — the chamber moving the temperature linearly from T₀ to T₁ over the duration
+  (the table at rest, or turning at `rate_dps`).
+
+Every continuous quantity (temperatures, wave angles, rates, durations) is an array leaf, so
+a plan can be differentiated, vmapped over and optimised; the kinds are static. A
+[`BenchModel`][hrgjax.calibration.BenchModel] turns a plan into bench time: the measuring
+time plus, between segments, the chamber's slew and soak and the table's re-positioning —
+smoothly, so that the bench time has a gradient with respect to the plan.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import plausible
+from .._checks import is_concrete
+from .._compiled import device
+from .experiment import QUICK_DURATION, QUICK_TEMPERATURES, SEED_ANGLES, SEED_TEMPERATURES
+
+KINDS = ("static", "rotation", "ramp")
+"""The segment kinds."""
+
+DT_OUT = {"static": 1.0, "rotation": 0.5, "ramp": 1.0}
+"""Default output interval of each kind [s] (the seed's: static 1 s, rotation 0.5 s)."""
+
+_KEYS = {
+    "static": (("temperature_c", "wave_angle_deg", "duration_s"), ()),
+    "rotation": (("temperature_c", "wave_angle_deg", "rate_dps", "duration_s"), ()),
+    "ramp": (
+        ("temperature_start_c", "temperature_end_c", "wave_angle_deg", "duration_s"),
+        ("rate_dps",),
+    ),
+}
+SEGMENT_UNITS = {
+    "temperature_c": "°C",
+    "temperature_start_c": "°C",
+    "temperature_end_c": "°C",
+    "wave_angle_deg": "° electrical",
+    "rate_dps": "°/s",
+    "duration_s": "s",
+}
+"""The unit of each segment key of a plan file (named in its error messages)."""
+
+
+class BenchPlan(eqx.Module):
+    """A bench session as a sequence of segments (static, rotation, ramp), in bench order.
+
+    **Arguments** (arrays of shape (S,), one entry per segment):
+
+    - `kind`: tuple of S names from `KINDS` (static: not differentiated).
+    - `temperature_c`: temperature at the segment's start [°C].
+    - `temperature_end_c`: temperature at its end [°C] (equal to `temperature_c` except for
+      ramps).
+    - `wave_angle_deg`: electrical wave angle at the segment's start [°].
+    - `rate_dps`: table rate [°/s] (0 for static segments; a ramp may turn).
+    - `duration_s`: length of the segment [s] (a ramp's rate of change is
+      (T₁ − T₀)/duration).
+
+    Build one with [`BenchPlan.from_segments`][hrgjax.calibration.BenchPlan.from_segments]
+    (the plan file's list of dicts), [`load_plan`][hrgjax.calibration.load_plan] or
+    [`seed_bench_plan`][hrgjax.calibration.seed_bench_plan].
+    """
+
+    kind: tuple[str, ...] = eqx.field(static=True)
+    temperature_c: jax.Array
+    temperature_end_c: jax.Array
+    wave_angle_deg: jax.Array
+    rate_dps: jax.Array
+    duration_s: jax.Array
+
+    def __check_init__(self):
+        if not isinstance(self.kind, tuple) or any(k not in KINDS for k in self.kind):
+            bad = (
+                [k for k in self.kind if k not in KINDS]
+                if isinstance(self.kind, tuple)
+                else [self.kind]
+            )
+            raise ValueError(f"BenchPlan.kind must be a tuple of {KINDS}; got {bad[:3]}")
+        n = len(self.kind)
+        if n == 0:
+            raise ValueError("BenchPlan needs at least one segment")
+        fields = self._fields()
+        for name, x in fields.items():
+            if getattr(x, "shape", None) != (n,):
+                raise ValueError(
+                    f"BenchPlan.{name} must have shape ({n},) (one value per segment); "
+                    f"got {getattr(x, 'shape', type(x).__name__)}"
+                )
+        if not all(is_concrete(x) for x in fields.values()):
+            return  # traced (under jit, grad, vmap): checked where it was built
+        v = {k: np.asarray(x, dtype=float) for k, x in fields.items()}
+        for name, x in v.items():
+            bad = np.flatnonzero(~np.isfinite(x))
+            if bad.size:
+                raise ValueError(f"BenchPlan.{name}[{bad[0]}] is {x[bad[0]]}; give a finite value")
+        bad = np.flatnonzero(v["duration_s"] <= 0)
+        if bad.size:
+            i = bad[0]
+            raise ValueError(f"segment {i} ({self.kind[i]}): duration_s must be > 0 [s]")
+        for name, quantity in (("temperature_c", "temperature_c"),
+                               ("temperature_end_c", "temperature_c"),
+                               ("wave_angle_deg", "wave_angle_deg"),
+                               ("rate_dps", "table_rate_dps"),
+                               ("duration_s", "duration_s")):  # fmt: skip
+            plausible.check(f"BenchPlan.{name}", v[name], quantity)
+        for i, k in enumerate(self.kind):
+            if k != "ramp" and v["temperature_end_c"][i] != v["temperature_c"][i]:
+                raise ValueError(
+                    f"segment {i} ({k}): temperature_end_c must equal temperature_c "
+                    "(only a ramp changes the temperature)"
+                )
+            if k == "static" and v["rate_dps"][i] != 0.0:
+                raise ValueError(f"segment {i} (static): rate_dps must be 0; use a rotation")
+            if k == "rotation" and v["rate_dps"][i] == 0.0:
+                raise ValueError(f"segment {i} (rotation): rate_dps must be non-zero [°/s]")
+
+    def _fields(self) -> dict[str, jax.Array]:
+        return {
+            "temperature_c": self.temperature_c,
+            "temperature_end_c": self.temperature_end_c,
+            "wave_angle_deg": self.wave_angle_deg,
+            "rate_dps": self.rate_dps,
+            "duration_s": self.duration_s,
+        }
+
+    @property
+    def size(self) -> int:
+        """Number of segments."""
+        return len(self.kind)
+
+    @property
+    def measuring_s(self) -> jax.Array:
+        """Total time of the segments themselves [s] (transitions excluded)."""
+        return jnp.sum(self.duration_s)
+
+    @classmethod
+    def from_segments(cls, segments: Sequence[Mapping], where: str = "segments") -> BenchPlan:
+        """A plan from the plan file's list of segment dicts (keys with units in their
+        names, as in the module docstring). Every error names the segment and the key."""
+        if isinstance(segments, (str, bytes)) or not isinstance(segments, Sequence):
+            raise ValueError(f"{where} must be a list of segment objects; got {type(segments)}")
+        if not segments:
+            raise ValueError(f"{where} is empty; give at least one segment")
+        cols: dict[str, list[float]] = {k: [] for k in cls._FIELDS}
+        kinds = []
+        for i, seg in enumerate(segments):
+            here = f"{where}[{i}]"
+            if not isinstance(seg, Mapping):
+                raise ValueError(f"{here} must be an object with a 'kind'; got {seg!r}")
+            kind = seg.get("kind")
+            if kind not in KINDS:
+                raise ValueError(f"{here}: 'kind' must be one of {KINDS}; got {kind!r}")
+            need, optional = _KEYS[kind]
+            for k in seg:
+                if k != "kind" and k not in need + optional:
+                    allowed = ", ".join(f"'{a}' [{SEGMENT_UNITS[a]}]" for a in need + optional)
+                    raise ValueError(f"{here} ({kind}): unknown key {k!r}; expected {allowed}")
+            for k in need:
+                if k not in seg:
+                    raise ValueError(f"{here} ({kind}): missing {k!r} [{SEGMENT_UNITS[k]}]")
+            val = {}
+            for k in need + optional:
+                if k not in seg:
+                    continue
+                x = seg[k]
+                if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                    raise ValueError(f"{here} ({kind}): {k!r} must be a finite number "
+                                     f"[{SEGMENT_UNITS[k]}]; got {x!r}")  # fmt: skip
+                val[k] = float(x)
+            t0 = val.get("temperature_c", val.get("temperature_start_c"))
+            cols["temperature_c"].append(t0)
+            cols["temperature_end_c"].append(val.get("temperature_end_c", t0))
+            cols["wave_angle_deg"].append(val["wave_angle_deg"])
+            cols["rate_dps"].append(val.get("rate_dps", 0.0))
+            cols["duration_s"].append(val["duration_s"])
+            kinds.append(kind)
+        try:
+            return cls(tuple(kinds), **{k: device(np.asarray(v)) for k, v in cols.items()})
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+
+    _FIELDS = ("temperature_c", "temperature_end_c", "wave_angle_deg", "rate_dps", "duration_s")
+
+    def segments(self) -> list[dict]:
+        """The plan file's list of segment dicts (host floats; keys with units)."""
+        v = {k: np.asarray(x, dtype=float) for k, x in self._fields().items()}
+        out = []
+        for i, k in enumerate(self.kind):
+            if k == "ramp":
+                seg = {"kind": k, "temperature_start_c": float(v["temperature_c"][i]),
+                       "temperature_end_c": float(v["temperature_end_c"][i])}  # fmt: skip
+            else:
+                seg = {"kind": k, "temperature_c": float(v["temperature_c"][i])}
+            seg["wave_angle_deg"] = float(v["wave_angle_deg"][i])
+            if k == "rotation" or (k == "ramp" and v["rate_dps"][i] != 0.0):
+                seg["rate_dps"] = float(v["rate_dps"][i])
+            seg["duration_s"] = float(v["duration_s"][i])
+            out.append(seg)
+        return out
+
+
+class BenchModel(eqx.Module):
+    """What a bench session costs besides measuring: the thermal chamber and the rate table.
+
+    Between consecutive segments (and before the first, from `start_temperature_c`) a
+    temperature change ΔT = T_start(next) − T_end(previous) costs
+
+    $$t(\\Delta T) = \\frac{|\\Delta T|_\\delta}{\\text{slew}}
+      + t_\\text{settle}\\,\\bigl(1 - e^{-(\\Delta T/T_s)^2}\\bigr) + t_\\text{reposition},$$
+
+    with |x|_δ = x·tanh(x/δ) (δ = 0.05 °C: |x| to 1e-15 beyond 2 °C, 0 at 0) and
+    T_s = `settle_scale_c`: a smooth
+    version of "slew at the chamber's rate, then soak until the gyro is at temperature", so
+    that the bench time has a gradient with respect to every temperature. Ramps run at their
+    own rate inside their duration (`check` refuses one faster than the chamber).
+
+    **Arguments:**
+
+    - `slew_c_per_min`: the chamber's fastest temperature change [°C/min] (1 °C/min).
+    - `settle_s`: soak after a temperature change, before measuring [s] (30 min).
+    - `reposition_s`: between any two segments: set the wave angle, start or stop the table,
+      check the loops [s] (1 min).
+    - `start_temperature_c`: where the chamber starts [°C] (20 °C).
+    - `settle_scale_c`: temperature change below which the soak shrinks [°C] (0.5 °C).
+    """
+
+    slew_c_per_min: float = 1.0
+    settle_s: float = 1800.0
+    reposition_s: float = 60.0
+    start_temperature_c: float = 20.0
+    settle_scale_c: float = 0.5
+
+    def __check_init__(self):
+        for name in ("slew_c_per_min", "settle_scale_c"):
+            x = getattr(self, name)
+            if is_concrete(x) and not float(x) > 0:
+                raise ValueError(f"BenchModel.{name} must be > 0; got {x}")
+        for name in ("settle_s", "reposition_s"):
+            x = getattr(self, name)
+            if is_concrete(x) and not float(x) >= 0:
+                raise ValueError(f"BenchModel.{name} must be ≥ 0 [s]; got {x}")
+        x = self.start_temperature_c
+        if is_concrete(x):
+            if not math.isfinite(float(x)):
+                raise ValueError(f"BenchModel.start_temperature_c must be finite [°C]; got {x}")
+            plausible.check("BenchModel.start_temperature_c", x, "temperature_c")
+
+    def transitions_s(self, plan: BenchPlan) -> dict[str, jax.Array]:
+        """Per-segment costs before each segment [s], shape (S,) each: `slew`, `settle`,
+        `reposition`."""
+        prev_end = jnp.concatenate(
+            [jnp.reshape(jnp.asarray(self.start_temperature_c, float), (1,)),
+             plan.temperature_end_c[:-1]]
+        )  # fmt: skip
+        dt = plan.temperature_c - prev_end
+        delta = 0.05
+        slew = dt * jnp.tanh(dt / delta) / self.slew_c_per_min * 60.0
+        settle = self.settle_s * (1.0 - jnp.exp(-((dt / self.settle_scale_c) ** 2)))
+        repos = jnp.broadcast_to(jnp.asarray(self.reposition_s, dtype=float), dt.shape)
+        return {"slew": slew, "settle": settle, "reposition": repos}
+
+    def bench_time_s(self, plan: BenchPlan) -> jax.Array:
+        """Bench time of the whole plan [s]: measuring plus every transition (differentiable
+        with respect to the plan's arrays)."""
+        parts = self.transitions_s(plan)
+        return plan.measuring_s + sum(jnp.sum(p) for p in parts.values())
+
+    def breakdown_h(self, plan: BenchPlan) -> dict[str, float]:
+        """Bench time split into measuring, slewing, settling and re-positioning [h]."""
+        parts = {"measuring": plan.measuring_s}
+        parts.update({k: jnp.sum(v) for k, v in self.transitions_s(plan).items()})
+        out = {k: float(v) / 3600.0 for k, v in parts.items()}
+        out["total"] = sum(out.values())
+        return out
+
+    def check(self, plan: BenchPlan) -> None:
+        """Raise `ValueError` naming the first ramp faster than the chamber can slew."""
+        rate = (
+            np.abs(np.asarray(plan.temperature_end_c) - np.asarray(plan.temperature_c))
+            / np.asarray(plan.duration_s)
+            * 60.0
+        )
+        for i, k in enumerate(plan.kind):
+            if k == "ramp" and rate[i] > float(self.slew_c_per_min) * (1 + 1e-12):
+                raise ValueError(
+                    f"segment {i} (ramp): {rate[i]:.3g} °C/min is faster than the chamber's "
+                    f"slew_c_per_min={float(self.slew_c_per_min):g}; lengthen duration_s"
+                )
+
+    def to_json(self) -> dict[str, float]:
+        return {
+            "slew_c_per_min": float(self.slew_c_per_min),
+            "settle_s": float(self.settle_s),
+            "reposition_s": float(self.reposition_s),
+            "start_temperature_c": float(self.start_temperature_c),
+            "settle_scale_c": float(self.settle_scale_c),
+        }
+
+
+def bench_time_h(plan: BenchPlan, bench: BenchModel | None = None) -> jax.Array:
+    """Bench time of `plan` [h] under `bench` (default `BenchModel()`)."""
+    return (BenchModel() if bench is None else bench).bench_time_s(plan) / 3600.0
+
+
+def seed_bench_plan(
+    quick: bool = False, rate_dps: float = 5.0, duration_s: float | None = None
+) -> BenchPlan:
+    """The seed's calibration plan as one bench session: at each temperature (−40 → +60 °C),
+    3-min static dwells at each wave angle (−90…+90° in 10° steps), then 3-min rotations at
+    `rate_dps` [°/s] from each angle. `quick`: −40, +20, +60 °C and 2-min runs (as
+    `seed_plan(quick=True)`). `duration_s`: every run's length [s] instead (the same grid
+    with shorter or longer dwells)."""
+    temps, dur = (QUICK_TEMPERATURES, QUICK_DURATION) if quick else (SEED_TEMPERATURES, 180.0)
+    if duration_s is not None:
+        if not (np.isfinite(duration_s) and duration_s > 0):
+            raise ValueError(f"duration_s must be a positive run length [s]; got {duration_s}")
+        dur = float(duration_s)
+    segs = []
+    for t in temps:
+        for kind in ("static", "rotation"):
+            for a in SEED_ANGLES:
+                seg = {"kind": kind, "temperature_c": t, "wave_angle_deg": a, "duration_s": dur}
+                if kind == "rotation":
+                    seg["rate_dps"] = rate_dps
+                segs.append(seg)
+    return BenchPlan.from_segments(segs)
