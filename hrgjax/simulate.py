@@ -380,12 +380,16 @@ def simulate(
     key or a bad output grid; a solver failure (max steps, non-finite state) raises too.
     """
     options = {k: v for k, v in locals().items() if k not in ("gyro", "profile", "model")}
-    return _simulate(gyro, profile, model, **options)[0]
+    return simulate_with_stats(gyro, profile, model, **options)[0]
 
 
-def _simulate(gyro, profile, model="averaged", **options):
-    """`simulate` returning (Record, accepted steps, solver result); `options` are
-    `simulate`'s keyword arguments, defaults taken from its signature."""
+def simulate_with_stats(gyro, profile, model="averaged", **options):
+    """[`hrgjax.simulate`][] that also says how the solve went.
+
+    **Arguments:** as `simulate` (`options`: its keyword arguments, same defaults).
+
+    **Returns:** `(record, steps, result)`: the [`hrgjax.Record`][], the solver's accepted
+    steps and its `diffrax.RESULTS` item."""
     unknown = set(options) - set(_OPTIONS)
     if unknown:
         raise TypeError(f"simulate got unknown keyword arguments {sorted(unknown)}")
@@ -462,6 +466,9 @@ def _simulate(gyro, profile, model="averaged", **options):
     )
 
 
+_simulate = simulate_with_stats  # deprecated: the old private name of `simulate_with_stats`
+
+
 def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
     """Steps per interval of the fixed-step carrier path (between outputs and the profile's
     knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the
@@ -510,4 +517,4 @@ _OPTIONS = {
     for name, p in inspect.signature(simulate).parameters.items()
     if p.kind is inspect.Parameter.KEYWORD_ONLY
 }
-"""`simulate`'s keyword arguments and their defaults (one source for `_simulate`)."""
+"""`simulate`'s keyword arguments and their defaults (one source for `simulate_with_stats`)."""

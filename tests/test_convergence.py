@@ -206,7 +206,7 @@ def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
     may round it by an ulp differently at another place in the batch), and the estimate
     follows the steps the solver really takes."""
     from hrgjax import _cost
-    from hrgjax.simulate import _simulate
+    from hrgjax.simulate import simulate_with_stats
 
     gyro = hg.presets.tvg3_like(noise=False)
 
@@ -226,7 +226,7 @@ def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
     # the estimate against the solver's accepted steps (10-s runs)
     for w in (0.1, 5.0, 400.0):
         prof = hg.Profile.constant_rate(w, 10.0, 20.0)
-        steps = int(_simulate(gyro, prof, dt_out=10.0)[1])
+        steps = int(simulate_with_stats(gyro, prof, dt_out=10.0)[1])
         assert 0.5 < float(_cost.steps_estimate(gyro, prof)) / steps < 2.0, (w, steps)
 
     plain = hg.sweep(f, cost=None, temperature_c=T, rate_dps=W, chunk_size=4)

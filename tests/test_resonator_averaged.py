@@ -9,7 +9,7 @@ import pytest
 from helpers import OMEGA, CompileCounter, resonator, slope
 
 import hrgjax as hg
-from hrgjax.simulate import _simulate
+from hrgjax.simulate import simulate_with_stats
 from hrgjax.units import DEG
 
 THETAS = jnp.deg2rad(jnp.array([5.0, 35.0, 65.0, 95.0, 125.0, 155.0]))
@@ -149,7 +149,7 @@ def test_grad_matches_finite_differences():
     )
     np.testing.assert_allclose(grad, fd, rtol=1e-5)
     assert np.all(np.abs(grad) > 0)
-    _, steps, _ = _simulate(gyro, prof, dt_out=5.0, rtol=1e-11, atol=1e-13)
+    _, steps, _ = simulate_with_stats(gyro, prof, dt_out=5.0, rtol=1e-11, atol=1e-13)
     assert int(steps) > 4 * 4  # 4 checkpoints: most steps are recomputed
     few = diffrax.RecursiveCheckpointAdjoint(checkpoints=4)
     np.testing.assert_allclose(jax.grad(lambda p: loss(p, few))(p0), grad, rtol=1e-10)
