@@ -120,7 +120,7 @@ def weakly_typed(x):
     """`x` with JAX's weak type set (as a Python scalar's), same dtype and value.
 
     Upstream internal: `jax._src.lax.lax._convert_element_type(..., weak_type=True)` (no
-    public way to set a weak type; `jax.dtypes.is_weakly_typed` only reads it)."""
+    public way to set a weak type; `jax.typeof(x).weak_type` only reads it)."""
     from jax._src.lax import lax as lax_internal
 
     return lax_internal._convert_element_type(x, x.dtype, weak_type=True)
