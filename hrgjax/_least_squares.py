@@ -78,7 +78,10 @@ def _drive(solver, wrapped, y0, args, f_struct, max_steps, desc, args_at=None):
     given, gives the arguments of each step from the state's arrays (default `args`)."""
     dynamic, done, result = _start(solver, wrapped, y0, args, f_struct)
     y, steps = y0, 0
-    going = lambda: not bool(done) and bool(_upstream.succeeded(result, optx.RESULTS))  # noqa: E731
+
+    def going():  # neither converged nor failed
+        return not bool(done) and bool(_upstream.succeeded(result, optx.RESULTS))
+
     # No total: the solver stops when it converges, usually long before max_steps.
     with bar(None, desc) as progress:
         while going() and steps < max_steps:
