@@ -90,14 +90,15 @@ def test_the_compile_cache_writes_through_hrgjax_store():
 
     folder = _cache.enabled_folder()
     assert folder is not None, "the tests' conftest enables the compile cache"
-    assert isinstance(cc._cache, _cache._AtomicStore) and cc._cache.path == folder, _moved(
+    store = cc._cache
+    assert type(store).__module__ == "hrgjax._cache" and store.path == folder, _moved(
         "jax._src.compilation_cache._cache", "hrgjax's store is not the one JAX uses"
     )
     before = set(folder.glob("*-cache"))
     jax.jit(lambda x: jnp.cos(x) * 1.2345 + 6.789)(jnp.ones((13, 7))).block_until_ready()
     new = set(folder.glob("*-cache")) - before
     assert new, _moved("jax._src.compilation_cache._cache", "a compile wrote no entry")
-    assert all(_cache._intact(f.read_bytes()) for f in new)
+    assert all(len(_upstream.decompress_executable(f.read_bytes())) > 4 for f in new)
 
 
 def test_weakly_typed_sets_the_weak_type_only():
