@@ -219,12 +219,12 @@ def adjoint_memory():
     gyro = hg.presets.tvg3_like(noise=False)
     params, static = eqx.partition(gyro.resonator, eqx.is_inexact_array)
 
-    from hrgjax._compiled import _callback_free
+    from hrgjax._compiled import callback_free
 
     def peak(fn, *args):
         # traced as hrgjax's own programs are (checks in NaN form, no host callback), so the
         # compile cache keeps them and a second `make docs` loads instead of compiling
-        with _callback_free():
+        with callback_free():
             m = jax.jit(fn).lower(params, *args).compile().memory_analysis()
         return (m.temp_size_in_bytes + m.argument_size_in_bytes + m.output_size_in_bytes) / 1e3
 

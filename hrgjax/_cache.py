@@ -94,16 +94,22 @@ class _AtomicStore:
 def _intact(value: bytes) -> bool:
     """Whether a stored entry decompresses (zlib and zstd frames both carry checksums of
     their content, so truncation and flipped bits are caught here)."""
-    from jax._src import compilation_cache as cc
+    from . import _upstream
 
     try:
-        return len(cc.decompress_executable(value)) > 4
+        return len(_upstream.decompress_executable(value)) > 4
     except Exception:
         return False
 
 
 _enabled: Path | None = None
 _warned: set[Path] = set()
+
+
+def enabled_folder() -> Path | None:
+    """The folder of compiled programs `enable_cache` switched on in this process (its
+    `xla/`), or None while the cache is off."""
+    return _enabled
 
 
 def _unusable(folder: Path) -> str | None:
@@ -162,13 +168,9 @@ def enable_cache(path: str | os.PathLike | None = None) -> Path | None:
     # Small programs too: loading one (~ms) is cheaper than compiling it (~20–40 ms).
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    try:
-        from jax._src import compilation_cache as cc
+    from . import _upstream
 
-        cc.reset_cache()
-        cc._cache = _AtomicStore(folder)
-        cc._cache_initialized = True
-    except (ImportError, AttributeError) as err:  # a future JAX: its own store still works
-        _log.debug("using JAX's own compile-cache store (%s)", err)
+    if not _upstream.install_compile_cache_store(_AtomicStore(folder)):
+        _log.debug("using JAX's own compile-cache store")  # a future JAX: its own still works
     _enabled = folder
     return folder

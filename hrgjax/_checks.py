@@ -5,6 +5,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _upstream
+
 
 def is_concrete(x) -> bool:
     try:
@@ -20,12 +22,7 @@ def concrete_value(x) -> np.ndarray | None:
     else None (under `jit`)."""
     if is_concrete(x):
         return np.asarray(x)
-    try:  # JAX's own unwrapping of value-carrying tracers (private: guarded)
-        from jax._src.core import to_concrete_value
-
-        value = to_concrete_value(x)
-    except Exception:
-        return None
+    value = _upstream.concrete_value(x)  # JAX's own unwrapping of value-carrying tracers
     return None if value is None else np.asarray(value)
 
 

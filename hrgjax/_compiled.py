@@ -30,28 +30,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hrgjax import _export
-
-try:  # equinox's trace-time switch of error_if, and its compiled-check cache
-    import equinox._errors as _eqx_errors
-
-    _CAN_SWITCH = hasattr(_eqx_errors, "EQX_ON_ERROR") and hasattr(
-        _eqx_errors, "branched_error_if_impl_jit"
-    )
-except ImportError:  # pragma: no cover - a future equinox: programs keep their callbacks
-    _eqx_errors, _CAN_SWITCH = None, False
-
-
-def _private_check(*args, **kwargs):
-    # A function of our own: equinox keys its compiled functions by the function wrapped,
-    # so this one's traces (NaN form) are kept apart from equinox's own (raising form).
-    return _eqx_errors.branched_error_if_impl(*args, **kwargs)
-
-
-_PRIVATE_CHECKS = eqx.filter_jit(_private_check) if _CAN_SWITCH else None
+from hrgjax import _export, _upstream
 
 _state = threading.local()
-_switch = threading.Lock()
 
 
 def tracing_callback_free() -> bool:
@@ -60,24 +41,16 @@ def tracing_callback_free() -> bool:
 
 
 @contextlib.contextmanager
-def _callback_free():
+def callback_free():
+    """While inside, programs trace callback-free (equinox's checks in NaN form)."""
     depth = getattr(_state, "depth", 0)
     _state.depth = depth + 1
-    if depth or not _CAN_SWITCH:
-        try:
+    switch = contextlib.nullcontext() if depth else _upstream.errors_as_nan()
+    try:
+        with switch:
             yield
-        finally:
-            _state.depth = depth
-        return
-    with _switch:
-        old = _eqx_errors.EQX_ON_ERROR, _eqx_errors.branched_error_if_impl_jit
-        _eqx_errors.EQX_ON_ERROR = "nan"
-        _eqx_errors.branched_error_if_impl_jit = _PRIVATE_CHECKS
-        try:
-            yield
-        finally:
-            _eqx_errors.EQX_ON_ERROR, _eqx_errors.branched_error_if_impl_jit = old
-            _state.depth = depth
+    finally:
+        _state.depth = depth
 
 
 def device(x, dtype=None) -> jax.Array:
@@ -90,16 +63,6 @@ def device(x, dtype=None) -> jax.Array:
     if isinstance(x, jax.Array):
         return x if dtype is None else x.astype(dtype)
     return jax.device_put(np.asarray(x, dtype=dtype))
-
-
-def _top_level() -> bool:
-    """Whether no trace is active (no caller's jit/vmap/grad around this call, even one whose
-    inputs are all closed-over constants); False where this JAX cannot tell."""
-    try:
-        from jax._src.core import trace_state_clean
-    except ImportError:  # pragma: no cover - a future JAX
-        return False
-    return trace_state_clean()
 
 
 def _is_traced(tree) -> bool:
@@ -167,7 +130,7 @@ class Check:
         """The outputs with the same checks as `eqx.error_if`s in the caller's trace."""
         values, result = self._split(out)
         if result is not None:
-            out = result.error_if(out, result != result._enumeration.successful)
+            out = result.error_if(out, result != self._enumeration().successful)
         return eqx.error_if(out, ~_traced_all_finite(values), self._nonfinite())
 
 
@@ -225,9 +188,9 @@ def program(
         if tracing_callback_free():
             return compiled(*args, **kwargs)
         traced = _is_traced((args, kwargs))
-        device = single_run_device() if single_run and _top_level() else None
+        device = single_run_device() if single_run and _upstream.trace_state_clean() else None
         place = contextlib.nullcontext() if device is None else jax.default_device(device)
-        with _callback_free(), place:
+        with callback_free(), place:
             out = _export.NONE
             if export and not traced:
                 out = _export.call(name, fn, args, kwargs)
@@ -247,12 +210,10 @@ def program(
 def first_failure(result, enumeration) -> str | None:
     """Host: the message of the first failed member of an equinox result enumeration item
     (diffrax or optimistix `RESULTS`), or None when all succeeded."""
-    codes = np.asarray(result._value).ravel()
-    bad = np.flatnonzero(codes != 0)
+    bad = np.flatnonzero(~_upstream.succeeded(result, enumeration).ravel())
     if bad.size == 0:
         return None
-    item = eqx.tree_at(lambda r: r._value, result, jnp.asarray(codes[bad[0]]))
-    return enumeration[item]
+    return enumeration[_upstream.result_member(result, int(bad[0]))]
 
 
 def bucket_size(n: int, smallest: int = 64) -> int:

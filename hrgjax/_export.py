@@ -42,6 +42,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from hrgjax import _upstream
+
 _log = logging.getLogger("hrgjax.export")
 _MAGIC = b"hrgjax-exported-program-v1\n"
 _TRUSTED = (
@@ -79,9 +81,10 @@ def folder() -> Path | None:
     None when the compile cache is off."""
     from hrgjax import _cache
 
-    if _cache._enabled is None or _cache.cache_disabled():
+    enabled = _cache.enabled_folder()
+    if enabled is None or _cache.cache_disabled():
         return None
-    return _cache._enabled.parent / "export"
+    return enabled.parent / "export"
 
 
 def _source_hash() -> str:
@@ -305,15 +308,9 @@ def _runner(exported, slots):
 
     def run(*values):
         out = exported.call(*values)
-        return [_weakened(x) if i in weak else x for i, x in enumerate(out)]
+        return [_upstream.weakly_typed(x) if i in weak else x for i, x in enumerate(out)]
 
     return jax.jit(run)
-
-
-def _weakened(x):
-    from jax._src.lax import lax as lax_internal  # no public way to set a weak type
-
-    return lax_internal._convert_element_type(x, x.dtype, weak_type=True)
 
 
 def _write(path: Path, exported, template) -> None:

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from . import _upstream
 from ._compiled import Unchecked, program
 from ._progress import bar
 
@@ -68,36 +69,65 @@ def _step(solver, fn, y, args, dynamic, f_struct):
     return new_y, eqx.filter(new_state, eqx.is_array), done, result, cost
 
 
+def _finite(y) -> bool:
+    return bool(np.all([np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(y)]))
+
+
+def _drive(solver, wrapped, y0, args, f_struct, max_steps, desc, args_at=None):
+    """The stepping loop of both drivers: `(y, steps, result)`. `args_at(dynamic)`, when
+    given, gives the arguments of each step from the state's arrays (default `args`)."""
+    dynamic, done, result = _start(solver, wrapped, y0, args, f_struct)
+    y, steps = y0, 0
+
+    def going():  # neither converged nor failed
+        return not bool(done) and bool(_upstream.succeeded(result, optx.RESULTS))
+
+    # No total: the solver stops when it converges, usually long before max_steps.
+    with bar(None, desc) as progress:
+        while going() and steps < max_steps:
+            step_args = args if args_at is None else args_at(dynamic)
+            y, dynamic, done, result, cost = _step(solver, wrapped, y, step_args, dynamic, f_struct)
+            steps += 1
+            progress.update(1)
+            progress.set_postfix_str(f"χ²/2 {float(cost):.6g}")
+    if going():
+        result = optx.RESULTS.nonlinear_max_steps_reached
+    if not _finite(y):
+        result = optx.RESULTS.nonfinite
+    return y, steps, result
+
+
 def least_squares(
-    fn, solver, y0, args, *, max_steps: int, desc: str = "least squares", f_struct=None
+    fn,
+    solver,
+    y0,
+    args,
+    *,
+    max_steps: int,
+    desc: str = "least squares",
+    f_struct=None,
+    stepwise: bool = True,
 ):
     """Minimise ½‖fn(y, args)‖² with an optimistix least-squares `solver` from `y0`.
 
     `fn` must be a module-level function (a fresh closure would compile anew each call).
     `f_struct`: the residuals' `jax.ShapeDtypeStruct` when the caller knows it (saves
-    tracing `fn` once to find it).
+    tracing `fn` once to find it). `stepwise=False` runs `optimistix.least_squares`' own
+    compiled loop instead (no progress between steps: for fits whose steps take
+    milliseconds; one program per shapes, named `least_squares`).
 
     **Returns:** `(y, steps, result)`: the solution, the number of steps taken and an
     `optimistix.RESULTS` item (`nonlinear_max_steps_reached` when `max_steps` ran out).
     """
+    if not stepwise:
+        sol = optx.least_squares(fn, solver, y0, args, max_steps=max_steps, throw=False)
+        result = sol.result if _finite(sol.value) else optx.RESULTS.nonfinite
+        return sol.value, int(sol.stats["num_steps"]), result
     wrapped = _WithAux(fn)
     if f_struct is None:
         out_struct = jax.eval_shape(fn, y0, args)
         f_struct = jax.ShapeDtypeStruct(out_struct.shape, out_struct.dtype)
-    dynamic, done, result = _start(solver, wrapped, y0, args, f_struct)
-    y, steps = y0, 0
-    # No total: the solver stops when it converges, usually long before max_steps.
-    with bar(None, desc) as progress:
-        while not bool(done) and int(result._value) == 0 and steps < max_steps:
-            y, dynamic, done, result, cost = _step(solver, wrapped, y, args, dynamic, f_struct)
-            steps += 1
-            progress.update(1)
-            progress.set_postfix_str(f"χ²/2 {float(cost):.6g}")
-    if int(result._value) == 0 and not bool(done):
-        result = optx.RESULTS.nonlinear_max_steps_reached
-    if not np.all([np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(y)]):
-        result = optx.RESULTS.nonfinite
-    return y, steps, result
+    return _drive(solver, wrapped, y0, args, f_struct, max_steps, desc)
 
 
 def _linear_model(y, args):
@@ -123,28 +153,25 @@ def least_squares_with_jacobian(
     """
     y0 = jnp.asarray(y0)
     r, jac = residuals_jacobian(y0)
-    r, jac = jnp.asarray(r), jnp.asarray(jac)
-    wrapped = _WithAux(_linear_model)
-    f_struct = jax.ShapeDtypeStruct(r.shape, r.dtype)
-    args = (r, jac, y0)
-    dynamic, done, result = _start(solver, wrapped, y0, args, f_struct)
-    y, steps, at = y0, 0, (y0, r, jac)
-    with bar(None, desc) as progress:
-        while not bool(done) and int(result._value) == 0 and steps < max_steps:
-            y_eval = dynamic.y_eval
-            if not np.array_equal(np.asarray(y_eval), np.asarray(at[0])):
-                r, jac = residuals_jacobian(y_eval)
-                at = (y_eval, jnp.asarray(r), jnp.asarray(jac))
-            args = (at[1], at[2], at[0])
-            y, dynamic, done, result, cost = _step(solver, wrapped, y, args, dynamic, f_struct)
-            steps += 1
-            progress.update(1)
-            progress.set_postfix_str(f"χ²/2 {float(cost):.6g}")
-    if int(result._value) == 0 and not bool(done):
-        result = optx.RESULTS.nonlinear_max_steps_reached
-    if not np.all(np.isfinite(np.asarray(y))):
-        result = optx.RESULTS.nonfinite
-    if not np.array_equal(np.asarray(y), np.asarray(at[0])):
-        r, jac = residuals_jacobian(y)
-        at = (y, jnp.asarray(r), jnp.asarray(jac))
-    return y, steps, result, (at[1], at[2])
+    at = (y0, jnp.asarray(r), jnp.asarray(jac))  # the point last evaluated, r and J there
+
+    def evaluated(y_eval):
+        nonlocal at
+        if not np.array_equal(np.asarray(y_eval), np.asarray(at[0])):
+            r, jac = residuals_jacobian(y_eval)
+            at = (y_eval, jnp.asarray(r), jnp.asarray(jac))
+        return at[1], at[2], at[0]
+
+    f_struct = jax.ShapeDtypeStruct(at[1].shape, at[1].dtype)
+    y, steps, result = _drive(
+        solver,
+        _WithAux(_linear_model),
+        y0,
+        (at[1], at[2], y0),
+        f_struct,
+        max_steps,
+        desc,
+        args_at=lambda dynamic: evaluated(dynamic.y_eval),
+    )
+    r, jac, _ = evaluated(y)
+    return y, steps, result, (r, jac)

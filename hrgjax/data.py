@@ -44,6 +44,12 @@ the validation then names); no thousands separators or underscores."""
 _INTEGER = re.compile(r"[+-]?\d+")
 
 
+def is_number(field: str) -> bool:
+    """Whether a CSV field (surrounding blanks ignored) is a number as the CSV reader takes
+    it: decimal or scientific notation, or nan/inf."""
+    return _NUMBER.fullmatch(field.strip()) is not None
+
+
 class MeasuredData:
     """A measured (or simulated) gyro record in the units of the data contract.
 
@@ -580,11 +586,11 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
         return _load_netcdf(path, allow_extra)
     if ext != ".csv":
         raise ValueError(f"unknown data file extension {ext!r}; use .csv or .nc")
-    columns, lines = _read_csv(path)
+    columns, lines = read_csv_table(path)
     try:
         return MeasuredData(columns, allow_extra=allow_extra)
     except ValueError as err:
-        raise ValueError(f"{path}: {_with_line(str(err), lines)}") from None
+        raise ValueError(f"{path}: {with_file_line(str(err), lines)}") from None
 
 
 def _load_netcdf(path: str, allow_extra: bool) -> MeasuredData:
@@ -637,8 +643,9 @@ def _quiet_h5netcdf_finalisers():
         sys.unraisablehook = old
 
 
-def _with_line(message: str, lines: np.ndarray) -> str:
-    """Add the file's line number to a message naming a data row."""
+def with_file_line(message: str, lines: np.ndarray) -> str:
+    """`message` with the file's line added after the first "row i" it names (`lines`: the
+    file's line of each data row, from [`read_csv_table`][hrgjax.data.read_csv_table])."""
     m = re.search(r"\brow (\d+)\b", message)
     if m is None or int(m.group(1)) >= lines.size:
         return message
@@ -646,8 +653,13 @@ def _with_line(message: str, lines: np.ndarray) -> str:
     return message[: m.end()] + f" (line {lines[i]} of the file)" + message[m.end() :]
 
 
-def _read_csv(path: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """(columns as parsed arrays, the file's line number of each data row)."""
+def read_csv_table(path: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """A CSV file as `(columns, lines)`: each column parsed (numbers as float, `run` ids as
+    exact integers, a column not in `COLUMNS` that is not all numbers as text) and the file's
+    line number of each data row. UTF-8, a header row, `#` comment lines.
+
+    **Raises:** `ValueError` naming the file and its line for text that is not UTF-8, a
+    malformed row, an empty or duplicate header, or a known column with text in it."""
     line = [0]
 
     def source(fh):

@@ -10,7 +10,7 @@ import numpy as np
 from ._checks import check_positive, is_concrete
 from .noise import Noise
 from .resonator.control import Control
-from .resonator.params import Resonator, TemperatureLaw, _param, evaluate_at
+from .resonator.params import Resonator, TemperatureLaw, as_parameter, evaluate_at
 from .resonator.readout import Readout
 from .units import T_REF_C
 
@@ -46,12 +46,12 @@ class DriftTerms(eqx.Module):
     - `rate_cubic`: $\kappa_\Omega$ [s²] (a rate-dependent scale factor 1 + κ_Ω Ω²).
     """
 
-    temperature_rate: jax.Array = eqx.field(converter=_param, default=0.0)
-    lag: jax.Array = eqx.field(converter=_param, default=0.0)
-    lag_time: jax.Array = eqx.field(converter=_param, default=300.0)
-    warmup: jax.Array = eqx.field(converter=_param, default=0.0)
-    warmup_time: jax.Array = eqx.field(converter=_param, default=600.0)
-    rate_cubic: jax.Array = eqx.field(converter=_param, default=0.0)
+    temperature_rate: jax.Array = eqx.field(converter=as_parameter, default=0.0)
+    lag: jax.Array = eqx.field(converter=as_parameter, default=0.0)
+    lag_time: jax.Array = eqx.field(converter=as_parameter, default=300.0)
+    warmup: jax.Array = eqx.field(converter=as_parameter, default=0.0)
+    warmup_time: jax.Array = eqx.field(converter=as_parameter, default=600.0)
+    rate_cubic: jax.Array = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
         for name in ("lag_time", "warmup_time"):
@@ -93,7 +93,7 @@ class Gyro(eqx.Module):
     control: Control = Control()
     readout: Readout = Readout()
     noise: Noise | None = None
-    rate_bias: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    rate_bias: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
     g_sensitivity: jax.Array = eqx.field(converter=_vector3, default=0.0)
     drift_terms: DriftTerms | None = None
 

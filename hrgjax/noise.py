@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from ._checks import check_nonnegative, check_positive, is_concrete
-from .resonator.params import TemperatureLaw, _param
+from .resonator.params import TemperatureLaw, as_parameter
 
 
 class Noise(eqx.Module):
@@ -32,12 +32,12 @@ class Noise(eqx.Module):
       relative to the amplitude set point.
     """
 
-    angle_white: jax.Array = eqx.field(converter=_param, default=0.0)
-    angle_random_walk: jax.Array = eqx.field(converter=_param, default=0.0)
-    bias_instability: jax.Array = eqx.field(converter=_param, default=0.0)
-    correlation_time: jax.Array = eqx.field(converter=_param, default=100.0)
-    run_bias: jax.Array = eqx.field(converter=_param, default=0.0)
-    amplitude_white: jax.Array = eqx.field(converter=_param, default=0.0)
+    angle_white: jax.Array = eqx.field(converter=as_parameter, default=0.0)
+    angle_random_walk: jax.Array = eqx.field(converter=as_parameter, default=0.0)
+    bias_instability: jax.Array = eqx.field(converter=as_parameter, default=0.0)
+    correlation_time: jax.Array = eqx.field(converter=as_parameter, default=100.0)
+    run_bias: jax.Array = eqx.field(converter=as_parameter, default=0.0)
+    amplitude_white: jax.Array = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
         for name in NONNEGATIVE:

@@ -7,7 +7,10 @@ import numpy as np
 from .units import DEG_PER_H, group_temperatures
 
 
-def _plt():
+def pyplot():
+    """`matplotlib.pyplot` on the non-interactive Agg backend (figures go to files).
+
+    **Raises:** `ImportError` naming the `hrgjax[plot]` extra when matplotlib is absent."""
     try:
         import matplotlib
 
@@ -18,13 +21,21 @@ def _plt():
     return plt
 
 
-def _save(fig, path, dpi: int) -> None:
-    """`fig.savefig` under a temporary name, renamed when complete (an interrupted save
-    leaves no partial image)."""
+def save(fig, path, dpi: int) -> None:
+    """`fig.savefig(path, dpi=dpi)` under a temporary name, renamed when complete (an
+    interrupted save leaves no partial image); makes the folder."""
     from ._io import atomic_path
 
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi)
+
+
+def _plt():  # deprecated: the old private name of `pyplot`
+    return pyplot()
+
+
+def _save(fig, path, dpi: int) -> None:  # deprecated: the old private name of `save`
+    save(fig, path, dpi)
 
 
 def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") -> str:
@@ -33,7 +44,7 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
     `drift` is [`static_drift`][hrgjax.calibration.static_drift]'s output, `sf`
     [`scale_factor_vs_angle`][hrgjax.calibration.scale_factor_vs_angle]'s.
     """
-    plt = _plt()
+    plt = pyplot()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
     groups = group_temperatures(drift["temperature_c"])  # one curve per temperature
     temps = np.unique(groups)
@@ -63,7 +74,7 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
     ax2.grid(alpha=0.3)
     if title:
         fig.suptitle(title)
-    _save(fig, path, dpi=120)
+    save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -76,7 +87,7 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
     ([`RateWindows`][hrgjax.calibration.RateWindows]); `compensators`, {label: fitted
     compensator}.
     """
-    plt = _plt()
+    plt = pyplot()
     static = windows.select(windows.static)
     labels = [k for k in compensators if k != "raw"]
     n = 1 + len(labels)
@@ -122,7 +133,7 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
     fig.legend(handles, names, loc="outside right upper", fontsize=8, title="temperature")
     if title:
         fig.suptitle(title)
-    _save(fig, path, dpi=110)
+    save(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -132,7 +143,7 @@ def error_vs_temperature(table: dict, path: str, seed: dict | None = None) -> st
 
     `table` is [`accuracy_table`][hrgjax.calibration.accuracy_table]'s output; `seed` its
     `SEED_TABLE`."""
-    plt = _plt()
+    plt = pyplot()
     keys = [
         ("static_drift_dph", "static drift error [°/h]"),
         ("angle_error_deg", "angle error after the 5 °/s run [°]"),
@@ -159,7 +170,7 @@ def error_vs_temperature(table: dict, path: str, seed: dict | None = None) -> st
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
-    _save(fig, path, dpi=110)
+    save(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -168,7 +179,7 @@ def alignment_figure(result, path: str, header_attitude_deg=None) -> str:
     """Heading, pitch and roll during fine alignment with their 1σ bands
     ([`AlignmentResult`][hrgjax.ins.alignment.AlignmentResult]); the file header's attitude
     as a dashed line when given. **Returns** the path written."""
-    plt = _plt()
+    plt = pyplot()
     t = np.asarray(result.t) - float(result.t[0])
     hist, std = np.asarray(result.history_deg), np.asarray(result.std_history_deg)
     fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
@@ -188,14 +199,14 @@ def alignment_figure(result, path: str, header_attitude_deg=None) -> str:
     axes[-1].set_xlabel("time [min]")
     fig.suptitle("Stationary alignment: coarse start, Kalman fine alignment")
     fig.tight_layout()
-    _save(fig, path, dpi=120)
+    save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
 
 def schuler_figure(t, position_m: dict, path: str) -> str:
     """Position-error histories [m] (label → (N,) array) against time [s]."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for label, y in position_m.items():
         ax.plot(np.asarray(t) / 3600, np.asarray(y), label=label)
@@ -204,7 +215,7 @@ def schuler_figure(t, position_m: dict, path: str) -> str:
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    _save(fig, path, dpi=120)
+    save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -214,7 +225,7 @@ def diagnosis_figure(traces: dict, path: str, title: str = "", span=(-20.0, 40.0
     i = fault in INS i) around the fault onset of one run
     ([`compare`][hrgjax.diagnosis.compare.compare] with `traces=True`), over `span` [s]
     around the onset. **Returns** the path written."""
-    plt = _plt()
+    plt = pyplot()
     t = np.asarray(traces["t_s"])
     t_f = float(traces["t_fault_s"])
     names = [k for k in traces if k not in ("t_s", "truth", "t_fault_s")]
@@ -231,7 +242,7 @@ def diagnosis_figure(traces: dict, path: str, title: str = "", span=(-20.0, 40.0
     axes[-1, 0].set_xlabel("time from the fault onset [s]")
     fig.suptitle(f"Decided state, {title} (dotted: the faulty INS; red: onset)")
     fig.tight_layout()
-    _save(fig, path, dpi=120)
+    save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -242,7 +253,7 @@ def vibration_figure(figures: dict, path: str) -> str:
     under vibration and its PSD against rest; the training curves; the held-out prediction
     of the east-equivalent (y) gyro's error; the heading during alignment, raw and
     compensated. **Returns** the path written."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(2, 3, figsize=(14, 7))
     t, a = figures["t"], figures["accel_z_g"]
     t0 = figures.get("vibration_start_s", 0.0)
@@ -287,7 +298,7 @@ def vibration_figure(figures: dict, path: str) -> str:
                  title=f"alignment, {figures['scenario']}", ylim=(-3, 3))  # fmt: skip
     ax[1, 2].legend(fontsize=7)
     fig.tight_layout()
-    _save(fig, path, dpi=110)
+    save(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -302,7 +313,7 @@ def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "
     """
     from .allan import NOISE_TERMS
 
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
     t, d = np.asarray(result.taus), np.asarray(result.dev)
     err = np.stack([d - np.asarray(result.dev_low), np.asarray(result.dev_high) - d])
@@ -324,7 +335,7 @@ def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "
     ax.set_title(title or f"{result.kind} with confidence intervals")
     ax.grid(which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    _save(fig, path, dpi=110)
+    save(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -339,7 +350,7 @@ def imu_session_figure(data, sections, path: str, calibration=None, title: str =
       [`ImuCalibration`][hrgjax.imu.ImuCalibration]. Returns `path`."""
     from .imu.sections import FACES, parse_sections
 
-    plt = _plt()
+    plt = pyplot()
     sections = parse_sections(sections, len(data))
     rows = 3 if calibration is not None else 2
     fig, axes = plt.subplots(rows, 1, figsize=(9.0, 2.3 * rows + 0.6), sharex=True,
@@ -382,7 +393,7 @@ def imu_session_figure(data, sections, path: str, calibration=None, title: str =
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
     fig.suptitle(title or "Ferraris session: faces (grey) and turns (orange)", fontsize=11)
-    _save(fig, path, dpi=110)
+    save(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -401,7 +412,7 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     from .calibration.design import BenchModel
 
     bench = BenchModel() if bench is None else bench
-    plt = _plt()
+    plt = pyplot()
     tr = {k: np.asarray(v, float) for k, v in bench.transitions_s(plan).items()}
     t0 = np.asarray(plan.temperature_c, float)
     t1 = np.asarray(plan.temperature_end_c, float)
@@ -440,7 +451,7 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
     fig.suptitle(title or "bench plan", fontsize=11)
-    _save(fig, path, dpi=110)
+    save(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -455,7 +466,7 @@ def session_figure(comparison, path: str, title: str = "") -> str:
     `comparison` is a [`Comparison`][hrgjax.calibration.Comparison]."""
     from .calibration.evaluate import SEED_TABLE
 
-    plt = _plt()
+    plt = pyplot()
     counts = comparison.counts()
     rows = [
         (key, ylabel, seed)
@@ -513,6 +524,6 @@ def session_figure(comparison, path: str, title: str = "") -> str:
     if off.estimated:
         text += ", taken off every compensator"
     fig.suptitle(f"{head}\n{text}", fontsize=10)
-    _save(fig, path, dpi=110)
+    save(fig, path, dpi=110)
     plt.close(fig)
     return path

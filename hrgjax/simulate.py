@@ -384,10 +384,12 @@ def simulate(
 
 
 def simulate_with_stats(gyro, profile, model="averaged", **options):
-    """`simulate` returning (Record, accepted steps, solver result), for callers that read
-    the result code or count the solver's steps (the calibration's batched runner, tests of
-    step counts); `options` are `simulate`'s keyword arguments, defaults taken from its
-    signature."""
+    """[`hrgjax.simulate`][] that also says how the solve went.
+
+    **Arguments:** as `simulate` (`options`: its keyword arguments, same defaults).
+
+    **Returns:** `(record, steps, result)`: the [`hrgjax.Record`][], the solver's accepted
+    steps and its `diffrax.RESULTS` item."""
     unknown = set(options) - set(_OPTIONS)
     if unknown:
         raise TypeError(f"simulate got unknown keyword arguments {sorted(unknown)}")
@@ -462,6 +464,8 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         jnp.asarray(o["run"]),
         carrier,
     )
+
+
 
 
 def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:

@@ -271,7 +271,7 @@ def test_end_to_end_training_and_compensation_remove_the_error(imu, memory_sets)
                       key=jax.random.key(7))  # fmt: skip
     g, pred = cp.compensate(c, q, rec, window_s=2.0)
     assert pred.shape == (85, 3)
-    ref = cp._reference(q, rec).reshape(1, 3)
+    ref = cp.reference_output(q, rec).reshape(1, 3)
     before = vb.window_means(rec.gyro, 100.0, 2.0) - ref
     after = vb.window_means(g, 100.0, 2.0) - ref
     assert float(jnp.sqrt(jnp.mean(after**2))) < 0.25 * float(jnp.sqrt(jnp.mean(before**2)))

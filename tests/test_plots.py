@@ -13,8 +13,8 @@ from hrgjax.calibration.reduce import RateWindows
 def figures(monkeypatch):
     """The figures the plotting functions save, kept open for inspection."""
     kept = []
-    monkeypatch.setattr(plots, "_save", lambda fig, path, dpi: kept.append(fig))
-    monkeypatch.setattr(plots._plt(), "close", lambda fig=None: None)
+    monkeypatch.setattr(plots, "save", lambda fig, path, dpi: kept.append(fig))
+    monkeypatch.setattr(plots.pyplot(), "close", lambda fig=None: None)
     return kept
 
 

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._x64 import require_x64
-from ..ins.platform import FAULTS, NAV, Fault, PlatformINS, _simulate
+from ..ins.platform import FAULTS, NAV, Fault, PlatformINS, simulate
 from .filter_bank import Bank
 from .measurements import first_difference_pairs, second_difference_pairs
 
@@ -63,7 +63,7 @@ def simulate_complex(
         e = e.at[fault_ins].set(fault.e)
     faults = Fault(e, jnp.full(n_ins, fault.t_fault))
     keys = jax.random.split(key, n_ins)
-    run = lambda k, f: _simulate(ins, jnp.asarray(float(dt)), int(n_steps), k, f, None)
+    run = lambda k, f: simulate(ins, dt=dt, n_steps=n_steps, key=k, fault=f)
     t, _, nav = jax.vmap(run)(keys, faults)
     return t[0], nav
 

@@ -39,7 +39,8 @@ import numpy as np
 import optax
 import optimistix as optx
 
-from ..ins.platform import Fault, PlatformINS, _simulate
+from .._least_squares import least_squares
+from ..ins.platform import Fault, PlatformINS, simulate
 from ..nn.mlp import MLP
 from ..nn.pnn import PNN
 from ..nn.som import SOM
@@ -68,7 +69,7 @@ def onset_templates(
     first measurement it changes: `(n_ins, length, m)`."""
     lead = 4
     fault = Fault.on(sensor, 1.0, lead * dt)
-    _, _, nav1 = _simulate(ins, jnp.asarray(float(dt)), length + lead + 4, None, fault, None)
+    _, _, nav1 = simulate(ins, dt=dt, n_steps=length + lead + 4, key=None, fault=fault)
     out = []
     for i in range(n_ins):
         nav = jnp.zeros((n_ins,) + nav1.shape).at[i].set(nav1)
@@ -284,9 +285,10 @@ def _levenberg_marquardt(net, x, y, max_steps):
     # once for all hypotheses of the same shapes (a closure per net compiled it per net)
     params, static = eqx.partition(net, eqx.is_inexact_array)
     solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-9)
-    sol = optx.least_squares(_predictor_residuals, solver, params, (static, x, y),
-                             max_steps=max_steps, throw=False)  # fmt: skip
-    return eqx.combine(sol.value, static)
+    # optimistix's own compiled loop (`stepwise=False`): a step takes milliseconds here
+    params, _, _ = least_squares(_predictor_residuals, solver, params, (static, x, y),
+                                 max_steps=max_steps, stepwise=False)  # fmt: skip
+    return eqx.combine(params, static)
 
 
 def stream_classes(detector, z, unit: float = 1e-7, taps: int = TAPS):

@@ -163,14 +163,14 @@ def training_set(
         samples.append(error_samples(proc, vib, st, window_s))
         truths.append(to_body(proc.gyro, window_means(vib.gyro_error, fs, window_s)))
         raws.append(window_means(vib.gyro, fs, window_s))
-    ref = _reference(proc, vib)
+    ref = reference_output(proc, vib)
     return TrainingSet(
         jnp.stack(feats), jnp.stack(samples), jnp.stack(truths), jnp.stack(raws), ref,
         jnp.asarray(conditions), float(window_s),
     )  # fmt: skip
 
 
-def _reference(imu: FogImu, rec: VibrationRecord):
+def reference_output(imu: FogImu, rec: VibrationRecord):
     """Static model output (3,) [rad/s, sensor axes] at the record's attitude: M ω_b + β."""
     w_b = rec.c_bn.T @ earth_rate_ned(jnp.asarray(rec.lat))
     return imu.gyro.sensor(w_b)
@@ -349,7 +349,7 @@ def align_record(imu: FogImu, record: VibrationRecord, gyro=None, *, coarse_s=60
     log = imu_log(imu, record, gyro)
     fine_kw.setdefault("velocity_noise", 0.05)
     res = _al.align(log, coarse_s=coarse_s, **fine_kw)
-    truth = np.asarray(_al._euler_deg(record.c_bn))
+    truth = np.asarray(_al.euler_deg(record.c_bn))
     est = np.array([res.heading_deg, res.pitch_deg, res.roll_deg])
     err = est - truth
     err[0] = (err[0] + 180.0) % 360.0 - 180.0

@@ -8,7 +8,7 @@ $a(t) = A(t)\,g_0 \sin\theta(t)$, $\dot\theta = 2\pi f(t)$, and the body's speci
 $f^b = C_n^b(-g^n) + a(t)\,u$. The table holds the attitude: the angular rate is the Earth's,
 $\omega^b = C_n^b\omega_{ie}^n$.
 
-**Sensors.** Each triad follows its static model ([`TriadCalibration`][hrgjax.fog.misalignment.TriadCalibration]),
+**Sensors.** Each triad follows its static model ([`TriadCalibration`][hrgjax.imu.triad.TriadCalibration]),
 $s = \mathrm{diag}(1+k)(I+E)\,b + \beta$, plus white noise (angle and velocity random walk)
 and the vibration errors below, which arise on each sensor's own axis.
 
@@ -171,7 +171,7 @@ class VibrationError(eqx.Module):
 
 class FogImu(eqx.Module):
     """A strapdown FOG IMU: `gyro` and `accel` static models
-    ([`TriadCalibration`][hrgjax.fog.misalignment.TriadCalibration]; gyro bias in rad/s,
+    ([`TriadCalibration`][hrgjax.imu.triad.TriadCalibration]; gyro bias in rad/s,
     accelerometer bias in m/s²), its `vibration` error, white noise `arw` [rad/√s] and
     `vrw` [m/s/√s]."""
 

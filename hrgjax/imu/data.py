@@ -223,7 +223,7 @@ def load(
     **Raises:** `ValueError` naming the file, the column and the row (and the file's line)
     for a missing column, text where a number belongs, a value that is not finite (or not
     in SI units: 1e308 g), or a time column without a finite sample rate."""
-    from ..data import _read_csv
+    from ..data import read_csv_table
 
     path = os.fspath(path)
     if os.path.splitext(path)[1].lower() != ".csv":
@@ -238,16 +238,16 @@ def load(
             return _build(path, names, fast, None, units, rate_hz, check_units)
         except ValueError:
             pass  # read again below, so that the error names the file's line
-    table, lines = _read_csv(path)
+    table, lines = read_csv_table(path)
     return _build(path, names, table, lines, units, rate_hz, check_units)
 
 
 def _build(path, names, table, lines, units, rate_hz, check_units) -> ImuData:
     """`ImuData` from parsed columns; `lines` (the file's line of each row, or None) make the
     errors name the line."""
-    from ..data import _with_line
+    from ..data import with_file_line
 
-    where = (lambda m: m) if lines is None else (lambda m: _with_line(m, lines))
+    where = (lambda m: m) if lines is None else (lambda m: with_file_line(m, lines))
     missing = [c for c in _all_names(names) if c not in table]
     if missing:
         raise ValueError(
@@ -312,10 +312,10 @@ def _fast_columns(path: str, wanted: list[str]) -> dict[str, np.ndarray] | None:
 
 
 def _is_number(v) -> bool:
-    """Whether a CSV field is a number as the CSV reader takes it (`data._NUMBER`)."""
-    from ..data import _NUMBER
+    """Whether a CSV field is a number as the CSV reader takes it (`data.is_number`)."""
+    from ..data import is_number
 
-    return isinstance(v, str) and _NUMBER.fullmatch(v.strip()) is not None
+    return isinstance(v, str) and is_number(v)
 
 
 def _column_map(columns) -> dict:

@@ -57,11 +57,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._x64 import require_x64
-from ..fog.misalignment import _IDX, TriadCalibration
 from ..units import DEG
 from ._drift import walk_intensity, walk_kernel
 from .data import ImuData
 from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections
+from .triad import ANGLE_AXES, TriadCalibration
 
 PARAMETERS = (
     [f"accel_matrix[{i}{j}]" for i in "xyz" for j in "xyz"]
@@ -103,7 +103,7 @@ class ImuCalibration(eqx.Module):
 
     Standard errors: `accel_matrix_std`, `accel_bias_std`, `gyro_matrix_std`, `gyro_bias_std`,
     `gyro_g_sensitivity_std`; the six-angle form of
-    [`fog.misalignment`][hrgjax.fog.misalignment]: [`accel_triad`][hrgjax.imu.ImuCalibration.accel_triad],
+    [`TriadCalibration`][hrgjax.imu.triad.TriadCalibration]: [`accel_triad`][hrgjax.imu.ImuCalibration.accel_triad],
     [`gyro_triad`][hrgjax.imu.ImuCalibration.gyro_triad]."""
 
     accel_matrix: jax.Array
@@ -202,7 +202,7 @@ class ImuCalibration(eqx.Module):
                      self.gyro_g_sensitivity)  # fmt: skip
 
     def accel_triad(self) -> TriadCalibration:
-        """The accelerometers in the six-angle form of `fog.misalignment`: M_a = diag(1 +
+        """The accelerometers in the six-angle form of `imu.triad`: M_a = diag(1 +
         scale)(I + E(angles)) exactly (scale_i = M_ii − 1, θ_ij = M_ij / M_ii), bias b_a
         [m/s²], with propagated standard errors."""
         return self._triad(0, 9, self.accel_bias, self.noise_std[3:])
@@ -435,7 +435,7 @@ def _flat(*parts) -> jax.Array:
 def _six_angle(x):
     """M (9 row-major) and bias (3) → angles (6), scale (3), bias (3)."""
     m = x[:9].reshape(3, 3)
-    angles = jnp.stack([m[i, j] / m[i, i] for i, j in _IDX])
+    angles = jnp.stack([m[i, j] / m[i, i] for i, j in ANGLE_AXES])
     return jnp.concatenate([angles, jnp.diag(m) - 1.0, x[9:12]])
 
 

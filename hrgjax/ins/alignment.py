@@ -32,7 +32,7 @@ from .._x64 import require_x64
 from ..kalman import Gaussian, update, van_loan
 from ..units import ARCSEC, DEG, DEG_PER_H
 from .constants import WGS84, earth_rate_ned
-from .strapdown import _matrices_at, augmented
+from .strapdown import augmented, error_matrices_at
 from .trajectory import dcm_to_euler
 
 
@@ -191,7 +191,8 @@ class AlignmentResult(eqx.Module):
         return out
 
 
-def _euler_deg(c):
+def euler_deg(c):
+    """(heading [0, 360), pitch, roll) [°] of the body-to-NED matrix `c` (3, 3)."""
     roll, pitch, heading = dcm_to_euler(c)
     return jnp.stack([jnp.mod(heading / DEG, 360.0), pitch / DEG, roll / DEG])
 
@@ -253,7 +254,7 @@ def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std):
 
     def model(c):
         f_n = -g_n
-        f, gg, ga = _matrices_at(WGS84, False, lat_a, h_a, z3, c, f_n)
+        f, gg, ga = error_matrices_at(WGS84, False, lat_a, h_a, z3, c, f_n)
         fa = augmented(f, gg, ga)[3:, 3:]  # drop the (known) position states
         gw = jnp.concatenate([gg[3:], jnp.zeros((6, 3))])
         aw = jnp.concatenate([ga[3:], jnp.zeros((6, 3))])
@@ -312,9 +313,9 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
             f"{coarse_s} s is not g ({g:.3f}): is the IMU stationary, are the units right?"
         )
     c0 = coarse_align(f_b, w_b, log.lat)
-    coarse = tuple(float(x) for x in _euler_deg(c0))
+    coarse = tuple(float(x) for x in euler_deg(c0))
     t, cs, ps, bias = fine_align(log, c0, start_s=0.0, **fine_kw)
-    hist = jax.vmap(_euler_deg)(cs)
+    hist = jax.vmap(euler_deg)(cs)
     std = jax.vmap(_euler_std)(cs, ps[:, 3:6, 3:6])
     last, s = np.asarray(hist[-1]), np.asarray(std[-1])
     return AlignmentResult(

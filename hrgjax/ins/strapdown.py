@@ -70,8 +70,12 @@ def error_rate(earth: Earth, lat, h, v, c_bn, f_ned, dx, dgyro, daccel, altitude
     return jnp.concatenate([d_pos, ddv, dphi])
 
 
-def _matrices_at(earth, aided, lat, h, v, c_bn, f_ned):
-    fn = lambda dx, dg, da: error_rate(earth, lat, h, v, c_bn, f_ned, dx, dg, da, aided)
+def error_matrices_at(earth, altitude_aided, lat, h, v, c_bn, f_ned):
+    """(F (9, 9), G_gyro (9, 3), G_accel (9, 3)) of [`error_rate`][hrgjax.ins.strapdown.error_rate]
+    on `earth` at one point: latitude `lat` [rad], height `h` [m], velocity `v` (3,) [m/s,
+    NED], attitude `c_bn` (3, 3) and specific force `f_ned` (3,) [m/s²]
+    ([`error_matrices`][hrgjax.ins.strapdown.error_matrices] along a trajectory)."""
+    fn = lambda dx, dg, da: error_rate(earth, lat, h, v, c_bn, f_ned, dx, dg, da, altitude_aided)
     z9, z3 = jnp.zeros(9), jnp.zeros(3)
     return jax.jacfwd(fn, argnums=(0, 1, 2))(z9, z3, z3)
 
@@ -79,7 +83,7 @@ def _matrices_at(earth, aided, lat, h, v, c_bn, f_ned):
 def error_matrices(traj: Trajectory, altitude_aided: bool = False):
     """(F (N, 9, 9), G_gyro (N, 9, 3), G_accel (N, 9, 3)) along `traj`: the error rate is
     `F dx + G_gyro dgyro + G_accel daccel`."""
-    return jax.vmap(lambda *p: _matrices_at(traj.earth, altitude_aided, *p))(
+    return jax.vmap(lambda *p: error_matrices_at(traj.earth, altitude_aided, *p))(
         traj.lat, traj.h, traj.v_ned, traj.c_bn, traj.f_ned
     )
 

@@ -36,7 +36,10 @@ from .readout import estimate, from_pendulum
 N_STATE = 7
 
 
-def _input(gyro, profile, t, rate, accel):
+def sampled_input_rate(gyro, profile, t, rate, accel):
+    """[`input_rate`][hrgjax.resonator.averaged.input_rate] from the profile already sampled
+    at `t` [s]: table `rate` [rad/s] and specific force `accel` (3,) [g] (a caller that
+    samples the profile itself, or holds the rate over a step)."""
     gs = gyro.g_sensitivity  # elementwise, not a 3-dot (a kernel of its own on XLA:CPU)
     omega = rate + gyro.rate_bias + (gs[0] * accel[0] + gs[1] * accel[1] + gs[2] * accel[2])
     if gyro.drift_terms is not None:
@@ -48,7 +51,7 @@ def input_rate(gyro, profile, t):
     """Equivalent input rate [rad/s]: table rate + rate bias + g-sensitivity · specific force
     (+ the gyro's [`DriftTerms`][hrgjax.DriftTerms])."""
     rate, _, _, accel = profile.sample(t)
-    return _input(gyro, profile, t, rate, accel)
+    return sampled_input_rate(gyro, profile, t, rate, accel)
 
 
 def pattern_forces(u, v, phi, theta):
@@ -79,7 +82,7 @@ def averaged_vector_field(t, y, args):
     rate, _, temperature, accel = profile.sample(t)
     g = gyro.at(temperature)
     res, ctl = g.resonator, g.control
-    omega_in = _input(g, profile, t, rate, accel)
+    omega_in = sampled_input_rate(g, profile, t, rate, accel)
     if ctl.ideal:
         d_theta = -res.k_e * omega_in + 0.5 * res.delta_inv_tau * jnp.sin(
             2 * (y[0] - res.theta_tau)

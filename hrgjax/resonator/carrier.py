@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .averaged import _input
+from .averaged import sampled_input_rate
 from .full import loop_efforts, mechanics
 from .params import TemperatureLaw
 
@@ -132,7 +132,7 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
             # (exact for the piecewise-linear profile: no step straddles a knot)
             mean_rate = (angle1 - angle0) / safe_h
             accel = 0.5 * (accel0 + accel1)
-            omega_in = _input(g, profile, t1 - 0.5 * h, mean_rate, accel)
+            omega_in = sampled_input_rate(g, profile, t1 - 0.5 * h, mean_rate, accel)
             env = (g, omega_in, (rate1 - rate0) / safe_h)
             return _step(env, omega_scale, yy, h), angle1, rate1, accel1
 

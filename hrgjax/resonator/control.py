@@ -19,7 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .params import TemperatureLaw, _param
+from .params import TemperatureLaw, as_parameter
 
 DRIVES = ("force", "parametric")
 
@@ -44,14 +44,16 @@ class Control(eqx.Module):
     A loop with bandwidth 0 holds its effort at the initial steady-state value (open loop).
     """
 
-    amplitude: jax.Array = eqx.field(converter=_param, default=1.0)
+    amplitude: jax.Array = eqx.field(converter=as_parameter, default=1.0)
     drive: str = eqx.field(static=True, default="force")
-    excitation_phase: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
-    pll_bandwidth: jax.Array = eqx.field(converter=_param, default=2.0)
-    agc_bandwidth: jax.Array = eqx.field(converter=_param, default=1.0)
-    quadrature_bandwidth: jax.Array = eqx.field(converter=_param, default=2.0)
+    excitation_phase: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    pll_bandwidth: jax.Array = eqx.field(converter=as_parameter, default=2.0)
+    agc_bandwidth: jax.Array = eqx.field(converter=as_parameter, default=1.0)
+    quadrature_bandwidth: jax.Array = eqx.field(converter=as_parameter, default=2.0)
     ideal: bool = eqx.field(static=True, default=False)
-    forcer_gain_mismatch: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    forcer_gain_mismatch: jax.Array | TemperatureLaw = eqx.field(
+        converter=as_parameter, default=0.0
+    )
     enabled: bool = eqx.field(static=True, default=True)
 
     @classmethod

@@ -13,7 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .averaged import _input, input_rate
+from .averaged import input_rate, sampled_input_rate
 from .control import (
     drive_vectors,
     integrator_rates,
@@ -53,7 +53,7 @@ def full_vector_field(t, y, args):
     gyro, profile, omega_scale = args
     rate, omega_dot, temperature, accel = profile.sample(t)
     g = gyro.at(temperature)
-    return carrier_rhs(g, _input(g, profile, t, rate, accel), omega_dot, y, omega_scale)
+    return carrier_rhs(g, sampled_input_rate(g, profile, t, rate, accel), omega_dot, y, omega_scale)
 
 
 def carrier_rhs(g, omega_in, omega_dot, y, omega_scale):

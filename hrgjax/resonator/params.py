@@ -50,7 +50,9 @@ class TemperatureLaw(eqx.Module):
         return (p0 + p1 * dt + p2 * dt**2) * np.exp(lam * dt)
 
 
-def _param(x):
+def as_parameter(x):
+    """A parameter field's value: a [`hrgjax.TemperatureLaw`][] as it is, anything
+    else as a float array (the converter of every parameter field that may follow a law)."""
     return x if isinstance(x, TemperatureLaw) else _as_float(x)
 
 
@@ -90,14 +92,14 @@ class Resonator(eqx.Module):
     - `chi`: isotropic cubic stiffness χ [rad²/s² per (readout unit)²].
     """
 
-    omega: jax.Array | TemperatureLaw = eqx.field(converter=_param)
-    tau: jax.Array | TemperatureLaw = eqx.field(converter=_param)
-    k_e: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.554)
-    delta_omega: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
-    theta_omega: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
-    delta_inv_tau: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
-    theta_tau: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
-    chi: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    omega: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter)
+    tau: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter)
+    k_e: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.554)
+    delta_omega: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    theta_omega: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    delta_inv_tau: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    theta_tau: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    chi: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
         for name in ("omega", "tau"):

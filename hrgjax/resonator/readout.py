@@ -17,7 +17,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .params import TemperatureLaw, _param
+from .params import TemperatureLaw, as_parameter
 
 
 class Readout(eqx.Module):
@@ -38,9 +38,9 @@ class Readout(eqx.Module):
     - `misalignment`: $\varepsilon_m$ [rad, mechanical], misplacement of the 45° pickoff.
     """
 
-    gain_mismatch: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
-    cross_talk: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
-    misalignment: jax.Array | TemperatureLaw = eqx.field(converter=_param, default=0.0)
+    gain_mismatch: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    cross_talk: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    misalignment: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
 
     def matrix(self):
         """The pickoff matrix $\\mathbf I + \\mathbf E$ (evaluate temperature laws first)."""
