@@ -30,14 +30,6 @@ def save(fig, path, dpi: int) -> None:
         fig.savefig(tmp, dpi=dpi)
 
 
-def _plt():  # deprecated: the old private name of `pyplot`
-    return pyplot()
-
-
-def _save(fig, path, dpi: int) -> None:  # deprecated: the old private name of `save`
-    save(fig, path, dpi)
-
-
 def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") -> str:
     """Drift [°/h] and scale factor vs wave angle, one curve per temperature; saves `path`.
 

@@ -466,8 +466,6 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     )
 
 
-
-
 def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
     """Steps per interval of the fixed-step carrier path (between outputs and the profile's
     knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the

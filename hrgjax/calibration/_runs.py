@@ -11,6 +11,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from .. import _upstream
 from .._compiled import Check, device, program
 from .._progress import bar
 from ..data import MeasuredData
@@ -29,10 +30,7 @@ class _ChunkCheck(Check):
             return None
         rec, result = out
         bad = np.zeros(np.shape(rec.t)[0], bool)
-        try:
-            bad |= np.asarray(result._value) != self._enumeration().successful._value
-        except AttributeError:  # another JAX/diffrax layout: the outputs still tell
-            pass
+        bad |= ~_upstream.succeeded(result, self._enumeration())
         for x in (rec.wave_angle, rec.amplitude, rec.quadrature):
             bad |= ~np.all(np.isfinite(np.asarray(x)), axis=-1)
         if bad.any():

@@ -13,10 +13,9 @@ def plot_discovery(disc, path: str) -> str:  # disc: a Discovery (not imported: 
     """The report as one figure (see [`Discovery.plot`][hrgjax.discovery.result.Discovery.plot]):
     residuals before and after in the top row, the first-round scores and the held-out gap
     against the noise floor beneath. Returns `path`."""
-    # plots._plt/_save are another module's privates: to be promoted in plots (issue 45)
-    from ..plots import _plt, _save
+    from ..plots import pyplot, save
 
-    plt = _plt()
+    plt = pyplot()
     mixed = "records" in disc.residuals["before"]  # a mixed log: records and dwell windows
     fig, axes = plt.subplots(3 if mixed else 2, 2, figsize=(11, 11 if mixed else 7.5),
                              constrained_layout=True)  # fmt: skip
@@ -63,7 +62,7 @@ def plot_discovery(disc, path: str) -> str:  # disc: a Discovery (not imported: 
     ax.set_xlabel("model [nominal | with the accepted effects | noise alone]")
     ax.set_title(f"verdict: {disc.verdict}\nmissing effect: {disc.missing_effect}", fontsize=10)
     fig.suptitle(f"discovery on {disc.shape} data", fontsize=11)
-    _save(fig, path, dpi=110)  # makes the folder
+    save(fig, path, dpi=110)  # makes the folder
     plt.close(fig)
     return path
 
