@@ -120,20 +120,24 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
 BYTES_PER_SAMPLE = 100
 """Host and device memory one output sample of a simulated run takes, all fields [bytes]."""
 
+MAX_OUTPUT_SAMPLES = 50_000_000
+"""Largest output grid `simulate` builds from `dt_out` (checked before anything is
+allocated; pass `ts=` explicitly for more), and the most output samples a plan may hold
+([`check_size`][hrgjax.plausible.check_size]). Also readable and settable as
+`hrgjax.simulate.MAX_OUTPUT_SAMPLES`, its old place."""
+
 
 def check_size(what: str, samples: float, runs: int) -> None:
     """Refuse, before anything is allocated, work whose output would exceed
-    `hrgjax.simulate.MAX_OUTPUT_SAMPLES` samples (set that constant higher to allow more),
-    with the estimate.
+    [`MAX_OUTPUT_SAMPLES`][hrgjax.plausible.MAX_OUTPUT_SAMPLES] samples (set that constant
+    higher to allow more), with the estimate.
 
     **Raises:** `ValueError`: "<what>: N runs hold S output samples (≈ M GiB) …"."""
-    from .simulate import MAX_OUTPUT_SAMPLES
-
     if samples > MAX_OUTPUT_SAMPLES:
         gib = samples * BYTES_PER_SAMPLE / 2**30
         raise ValueError(
             f"{what}: {runs} runs hold {samples:.3g} output samples (≈ {gib:.3g} GiB at "
             f"≈ {BYTES_PER_SAMPLE} bytes each), more than the {MAX_OUTPUT_SAMPLES:.0e} hrgjax "
             "allocates at once; split the plan, lengthen dt_out, or raise "
-            "hrgjax.simulate.MAX_OUTPUT_SAMPLES"
+            "hrgjax.plausible.MAX_OUTPUT_SAMPLES"
         )

@@ -6,6 +6,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .data import MeasuredData
 from .units import DEG, DEG_PER_S
 
 
@@ -49,8 +50,6 @@ class Record(eqx.Module):
 
         A batched record becomes consecutive runs numbered 0, 1, … in row-major order.
         """
-        from .data import MeasuredData
-
         t = np.asarray(self.t)
         batch = t.shape[:-1]
         n = t.shape[-1]

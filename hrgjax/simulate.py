@@ -5,6 +5,8 @@ from __future__ import annotations
 import inspect
 import math
 import numbers
+import sys
+import types
 
 import diffrax
 import equinox as eqx
@@ -12,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import plausible
 from ._checks import is_concrete
 from ._compiled import Check, device, program
 from ._cost import report as report_cost
@@ -56,18 +59,29 @@ def output_times(profile: Profile, dt_out: float):
         raise ValueError(f"dt_out must be a positive number of seconds; got {dt_out!r}")
     span = float(t[-1] - t[0])
     n = int(np.floor(span / dt_out + 1e-9)) + 1
-    if n > MAX_OUTPUT_SAMPLES:
+    if n > plausible.MAX_OUTPUT_SAMPLES:
         raise ValueError(
             f"dt_out={dt_out:g} s on a {span:g}-s profile gives {n:.3g} output samples, more "
-            f"than the {MAX_OUTPUT_SAMPLES:.0e} hrgjax allocates at once (≈ 100 bytes each); "
-            "choose a larger dt_out or split the profile into runs"
+            f"than the {plausible.MAX_OUTPUT_SAMPLES:.0e} hrgjax allocates at once (≈ 100 "
+            "bytes each); choose a larger dt_out or split the profile into runs"
         )
     return device(t[0] + dt_out * np.arange(n))
 
 
-MAX_OUTPUT_SAMPLES = 50_000_000
-"""Largest output grid `simulate` builds from `dt_out` (checked before anything is
-allocated; pass `ts=` explicitly for more)."""
+class _Module(types.ModuleType):
+    """`MAX_OUTPUT_SAMPLES` moved to [`hrgjax.plausible`][hrgjax.plausible.MAX_OUTPUT_SAMPLES]
+    (issue 45): reading or setting `hrgjax.simulate.MAX_OUTPUT_SAMPLES` reads or sets it there."""
+
+    @property
+    def MAX_OUTPUT_SAMPLES(self) -> int:
+        return plausible.MAX_OUTPUT_SAMPLES
+
+    @MAX_OUTPUT_SAMPLES.setter
+    def MAX_OUTPUT_SAMPLES(self, value: int) -> None:
+        plausible.MAX_OUTPUT_SAMPLES = value
+
+
+sys.modules[__name__].__class__ = _Module
 
 
 def _is_number(x) -> bool:

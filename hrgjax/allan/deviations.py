@@ -1,12 +1,13 @@
-r"""Allan-family deviations in JAX (NIST SP 1065 definitions).
+r"""Allan-family deviations of rate samples (NIST SP 1065 definitions), computed in JAX.
 
 Inputs are *rate* ("frequency") samples $y_k$ at interval $\tau_0$; the phase is
 $x_k = \tau_0\sum_{j<k} y_j$ ($x_0 = 0$). The averaging factor `m` is a static integer
 ($\tau = m\tau_0$). Checked against the NBS14 data set (PHYSICS.md §12).
 
-IEEE 952 noise terms on an Allan-deviation plot: quantisation $\sqrt3 Q/\tau$, angle random
-walk $N/\sqrt\tau$, bias instability flat at $0.6643B$, rate random walk $K\sqrt{\tau/3}$,
-rate ramp $R\tau/\sqrt2$.
+The single-factor estimators (`adev` … `totdev`), one compiled curve over many factors
+([`allan_deviation`][hrgjax.allan_deviation]) and [`deviation`][hrgjax.allan.deviation]:
+that curve on allantools' τ grids, with the statistics of `hrgjax.allan.uncertainty`
+(noise type, EDF, χ² interval) attached.
 """
 
 from __future__ import annotations
@@ -15,14 +16,13 @@ import dataclasses
 import functools
 import math
 import numbers
-from statistics import NormalDist
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._nnls import nnls as _nnls
-from ._x64 import require_x64
+from .._x64 import require_x64
+from .uncertainty import ONE_SIGMA, confidence_interval, edf_greenhall, edf_totdev, noise_id
 
 
 def _phase(y, tau0):
@@ -261,12 +261,10 @@ _AT_M = {
 
 
 # ---------------------------------------------------------------------------------------
-# Allan statistics: τ grids, term counts, noise identification, EDF and intervals
+# `deviation`: τ grids, term counts, and the curve with its noise type, EDF and interval
 
 KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
 """The deviations [`deviation`][hrgjax.allan.deviation] computes."""
-ONE_SIGMA = 0.6826894921370859
-"""erf(1/√2): the ±1σ confidence level, the default of `ci`."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -429,183 +427,6 @@ def _n_terms(kind: str, m: int, n: int) -> int:
     return n - 2 if m <= n - 1 else 0  # totdev: every point, the record reflected
 
 
-def noise_id(x, m, dmax: int = 2) -> np.ndarray:
-    """The power-law noise α (rate PSD ∝ f^α) at each factor `m` of phase (angle) samples
-    `x`, by the lag-1 autocorrelation method (Riley & Greenhall 2004, as allantools'
-    `autocorr_noise_id` with `dmin=0`): the phase decimated by m, a quadratic removed,
-    differenced until ρ = r₁/(1 + r₁) < 0.25 or `dmax` times; α = 2 − 2d − round(2ρ). Where
-    fewer than 30 decimated points are left, the α of the largest factor that had them is
-    carried on (allantools stops there). **Returns:** an int array."""
-    x = np.asarray(x, dtype=float)
-    out, last = [], None
-    for k in np.asarray(m, dtype=int):
-        z = x[:: int(k)]
-        if z.size < 30:
-            if last is None:
-                raise ValueError(
-                    f"x: {x.size} samples leave {z.size} at m = {k}; noise identification needs 30"
-                )
-            out.append(last)
-            continue
-        z = _detrend2(z)
-        d = 0
-        while True:
-            zc = z - z.mean()
-            r1 = float(np.dot(zc[:-1], zc[1:]) / np.dot(zc, zc))
-            rho = r1 / (1.0 + r1)
-            if rho < 0.25 or d >= dmax:
-                break
-            z = np.diff(z)
-            d += 1
-        last = int(-round(2 * rho) - 2 * d) + 2
-        out.append(last)
-    return np.asarray(out, dtype=int)
-
-
-def _detrend2(z):
-    """z less its least-squares quadratic in the sample index (as `np.polyfit(t, z, 2)`), by
-    three orthogonal polynomials on the index: three passes instead of a Vandermonde solve."""
-    n = z.size
-    t = np.linspace(-1.0, 1.0, n)
-    p1 = t
-    p2 = t * t - np.dot(t, t) / n
-    out = z - z.mean()
-    for p in (p1, p2):
-        out = out - p * (np.dot(p, out) / np.dot(p, p))
-    return out
-
-
-# -- equivalent degrees of freedom (Greenhall & Riley, "Uncertainty of stability variances
-# based on finite differences", PTTI 2003; NIST SP 1065 Table 7 for totdev)
-
-
-def _sw(t, alpha):
-    """Eq. 7: the generalised autocovariance of the noise, up to a constant."""
-    t = abs(t)
-    if alpha % 2 == 0:  # α = 2: −|t|; 0, −2, −4: |t|^(3−α)
-        return -t if alpha == 2 else t ** (3 - alpha)
-    return 0.0 if t == 0 else t ** (3 - alpha) * math.log(t)  # α odd: t^(3−α)·ln|t|
-
-
-def _sx(t, f, alpha):
-    """Eq. 8: the filter of factor F (F = ∞: its limit)."""
-    if math.isinf(f):
-        return _sw(t, alpha + 2)
-    return f * f * (2 * _sw(t, alpha) - _sw(t - 1.0 / f, alpha) - _sw(t + 1.0 / f, alpha))
-
-
-_BINOMIAL = {1: (2, -1), 2: (6, -4, 1), 3: (20, -15, 6, -1)}
-
-
-def _sz(t, f, alpha, d):
-    """Eq. 9: the d-th difference."""
-    c = _BINOMIAL[d]
-    return c[0] * _sx(t, f, alpha) + sum(
-        c[k] * (_sx(t - k, f, alpha) + _sx(t + k, f, alpha)) for k in range(1, d + 1)
-    )
-
-
-def _basic_sum(j, m_terms, s, f, alpha, d):
-    """Eq. 10."""
-    total = _sz(0, f, alpha, d) ** 2 + (1 - j / m_terms) * _sz(j / s, f, alpha, d) ** 2
-    return total + sum(
-        2 * (1 - k / m_terms) * _sz(k / s, f, alpha, d) ** 2 for k in range(1, int(j))
-    )
-
-
-_TABLE1 = {  # modified variances, (a0, a1) by α (rows) and d = 1, 2, 3
-    2: ((2 / 3, 1 / 3), (7 / 9, 1 / 2), (22 / 25, 2 / 3)),
-    1: ((0.840, 0.345), (0.997, 0.616), (1.141, 0.843)),
-    0: ((1.079, 0.368), (1.033, 0.607), (1.184, 0.848)),
-    -1: (None, (1.048, 0.534), (1.180, 0.816)),
-    -2: (None, (1.302, 0.535), (1.175, 0.777)),
-    -3: (None, None, (1.194, 0.703)),
-    -4: (None, None, (1.489, 0.702)),
-}
-_TABLE2 = {  # unmodified variances
-    2: ((3 / 2, 1 / 2), (35 / 18, 1.0), (231 / 100, 3 / 2)),
-    1: ((78.6, 25.2), (790.0, 410.0), (9950.0, 6520.0)),
-    0: ((2 / 3, 1 / 6), (2 / 3, 1 / 3), (7 / 9, 1 / 2)),
-    -1: (None, (0.852, 0.375), (0.997, 0.617)),
-    -2: (None, (1.079, 0.368), (1.033, 0.607)),
-    -3: (None, None, (1.053, 0.553)),
-    -4: (None, None, (1.302, 0.535)),
-}
-_TABLE3 = {1: (6.0, 4.0), 2: (15.23, 12.0), 3: (47.8, 40.0)}  # flicker phase, unmodified
-
-
-def edf_greenhall(alpha: int, d: int, m: int, n: int, overlapping: bool, modified: bool):
-    """Equivalent degrees of freedom of a d-th difference variance at factor `m` over `n`
-    phase points for power-law noise α (Greenhall & Riley 2003, eqs. 10–13 and Tables 1–3;
-    d = 2 Allan, 3 Hadamard; `modified`: mdev/tdev; `overlapping`: stride 1).
-
-    **Raises:** `ValueError` where the variance does not converge (α + 2d ≤ 1) or the data
-    are shorter than the filter."""
-    if alpha + 2 * d <= 1:
-        raise ValueError(f"alpha = {alpha} needs alpha + 2d > 1 (d = {d})")
-    f = 1 if modified else int(m)
-    s = int(m) if overlapping else 1
-    length = m / f + m * d
-    if n < length:
-        raise ValueError(f"n = {n} phase points are fewer than the filter's {length:g}")
-    m_terms = 1 + math.floor(s * (n - length) / m)
-    j = min(m_terms, (d + 1) * s)
-    j_max = 100
-    r = m_terms / s
-    if modified:
-        if j <= j_max:
-            return _sz(0, 1, alpha, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, 1, alpha, d)
-        if r > d + 1:
-            a0, a1 = _TABLE1[alpha][d - 1]
-            return 1.0 / ((a0 - a1 / r) / r)
-        mp = j_max / r
-        return _sz(0, 1, alpha, d) ** 2 * j_max / _basic_sum(j_max, j_max, mp, 1, alpha, d)
-    if alpha <= 0:
-        if j <= j_max:
-            fp = m if m * (d + 1) <= j_max else math.inf
-            return _sz(0, fp, alpha, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, fp, alpha, d)
-        if r > d + 1:
-            a0, a1 = _TABLE2[alpha][d - 1]
-            return 1.0 / ((a0 - a1 / r) / r)
-        mp = j_max / r
-        return (
-            _sz(0, math.inf, alpha, d) ** 2
-            * j_max
-            / _basic_sum(j_max, j_max, mp, math.inf, alpha, d)
-        )
-    if alpha == 1:
-        if j <= j_max:
-            return _sz(0, m, 1, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, m, 1, d)
-        b0, b1 = _TABLE3[d]
-        if r > d + 1:
-            a0, a1 = _TABLE2[1][d - 1]
-            return (b0 + b1 * math.log(m)) ** 2 * r / (a0 - a1 / r)
-        mp = j_max / r
-        return (b0 + b1 * math.log(m)) ** 2 * j_max / _basic_sum(j_max, j_max, mp, mp, 1, d)
-    # α = 2, unmodified: eq. 13's limit where the estimate has more than d + 1 terms, else
-    # the basic sum itself
-    if math.ceil(r) > d:
-        a0 = math.comb(4 * d, 2 * d) / math.comb(2 * d, d) ** 2
-        return 1.0 / ((a0 - (d / 2.0) / r) / m_terms)
-    return _sz(0, m, 2, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, m, 2, d)
-
-
-def edf_totdev(alpha: int, m: int, n: int) -> float:
-    """EDF of the total deviation: b·N/m − c (NIST SP 1065 Table 7) for α = 0, −1, −2; other
-    noises the (N−1)-point approximations of Stein (1985)."""
-    table7 = {0: (1.50, 0.0), -1: (1.17, 0.22), -2: (0.93, 0.36)}
-    if alpha in table7:
-        b, c = table7[alpha]
-        return b * n / m - c
-    if alpha == 2:
-        return (n + 1) * (n - 2 * m) / (2 * (n - m))
-    if alpha == 1:
-        return math.exp(
-            math.sqrt(math.log((n - 1) / (2 * m)) * math.log((2 * m + 1) * (n - 1) / 4))
-        )
-    return float(n - 1)
-
-
 def _edf(kind: str, alpha: int, m: int, n: int) -> float:
     if kind == "totdev":
         return edf_totdev(alpha, m, n)
@@ -615,161 +436,3 @@ def _edf(kind: str, alpha: int, m: int, n: int) -> float:
         alpha, d, m, n, overlapping=kind in ("oadev", "ohdev", "mdev", "tdev"),
         modified=kind in ("mdev", "tdev"),
     )  # fmt: skip
-
-
-def confidence_interval(dev, edf, ci: float = ONE_SIGMA):
-    """χ² interval (low, high) of deviations `dev` with `edf` degrees of freedom at level
-    `ci`: σ²·edf/χ²(1 − p) … σ²·edf/χ²(p), p = (1 − ci)/2 (NIST SP 1065 eq. 45)."""
-    dev, edf = np.asarray(dev, dtype=float), np.asarray(edf, dtype=float)
-    p = min(ci, 1 - ci) / 2
-    lo = np.vectorize(lambda k: chi2_ppf(1 - p, k))(edf)
-    hi = np.vectorize(lambda k: chi2_ppf(p, k))(edf)
-    return dev * np.sqrt(edf / lo), dev * np.sqrt(edf / hi)
-
-
-def _gammainc(a: float, x: float) -> float:
-    """Regularised lower incomplete gamma P(a, x) (series below a + 1, continued fraction
-    above; float64 whatever JAX's precision)."""
-    if x <= 0:
-        return 0.0
-    log_front = a * math.log(x) - x - math.lgamma(a)
-    if x < a + 1 + 20 * math.sqrt(a):
-        # the series Σ xⁿ/(a(a+1)…(a+n)), summed at once: its terms fall off as
-        # exp(−n²/2a) past n ≈ x − a, so 10√x + (x − a) + 50 of them reach round-off
-        n = int(10 * math.sqrt(x) + max(x - a, 0.0) + 50)
-        terms = np.cumprod(x / (a + np.arange(1, n + 1)))
-        return float((1.0 + terms.sum()) / a * math.exp(log_front))
-    tiny = 1e-300  # modified Lentz for Q(a, x)
-    b = x + 1 - a
-    c, dd = 1 / tiny, 1 / b
-    h = dd
-    for i in range(1, 10_000):
-        an = -i * (i - a)
-        b += 2
-        dd = an * dd + b
-        dd = tiny if abs(dd) < tiny else dd
-        c = b + an / c
-        c = tiny if abs(c) < tiny else c
-        dd = 1 / dd
-        delta = dd * c
-        h *= delta
-        if abs(delta - 1) < 1e-16:
-            break
-    return 1.0 - math.exp(log_front) * h
-
-
-def chi2_ppf(q: float, k: float) -> float:
-    """The q-quantile of the χ² distribution with k (> 0, real) degrees of freedom."""
-    a = 0.5 * k
-    # Wilson–Hilferty start, then safeguarded Newton on P(k/2, x/2) = q
-    z = NormalDist().inv_cdf(q)
-    x = max(k * (1 - 2 / (9 * k) + z * math.sqrt(2 / (9 * k))) ** 3, 1e-8)
-    lo, hi = 0.0, math.inf
-    for _ in range(200):
-        f = _gammainc(a, 0.5 * x) - q
-        if f > 0:
-            hi = x
-        else:
-            lo = x
-        pdf = math.exp((a - 1) * math.log(0.5 * x) - 0.5 * x - math.lgamma(a)) * 0.5
-        step = f / pdf if pdf > 0 else math.inf
-        new = x - step
-        if not (lo < new < hi):
-            new = 0.5 * (lo + hi) if math.isfinite(hi) else 2 * x
-        if abs(new - x) <= 1e-15 * x:
-            return new
-        x = new
-    return x
-
-
-# -- IEEE 952 noise terms from an Allan variance
-
-NOISE_TERMS = (
-    ("quantization", "Q", "rate unit·s", lambda t: 3.0 / t**2),
-    ("angle_random_walk", "N", "rate unit·√s", lambda t: 1.0 / t),
-    ("bias_instability", "B", "rate unit", lambda t: np.full_like(t, 2 * math.log(2) / math.pi)),
-    ("rate_random_walk", "K", "rate unit/√s", lambda t: t / 3.0),
-    ("rate_ramp", "R", "rate unit/s", lambda t: t**2 / 2.0),
-)
-"""IEEE 952 terms of the Allan variance: (name, symbol, unit, σ²(τ) per unit coefficient²)
-— 3Q²/τ², N²/τ, (2 ln 2/π)B², K²τ/3, R²τ²/2 (the bias instability's flat part, 0.664 B)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class NoiseFit:
-    """IEEE 952 noise coefficients fitted to an Allan deviation
-    ([`fit_noise`][hrgjax.allan.fit_noise]).
-
-    - `value`, `sigma`, `low`, `high`: `{name: float}` for quantization Q [rate unit·s],
-      angle_random_walk N [rate unit·√s], bias_instability B [rate unit], rate_random_walk K
-      [rate unit/√s] and rate_ramp R [rate unit/s] — for rates in °/h, N in °/h·√s is
-      N/60 in °/√h. A term the data do not show is 0 with an upper bound. `low`/`high`: the
-      interval at the result's `ci`, from the fit's covariance.
-    - `chi2`, `dof`: the weighted misfit of the Allan variance and its degrees of freedom.
-    """
-
-    value: dict
-    sigma: dict
-    low: dict
-    high: dict
-    chi2: float
-    dof: int
-
-    def adev(self, taus) -> np.ndarray:
-        """The fitted Allan deviation at `taus` [s]."""
-        t = np.asarray(taus, dtype=float)
-        return np.sqrt(sum(self.value[n] ** 2 * f(t) for n, _, _, f in NOISE_TERMS))
-
-
-def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
-    r"""Fit the IEEE 952 terms to an Allan deviation by weighted non-negative least squares
-    on the Allan variance $\sigma^2(\tau) = 3Q^2/\tau^2 + N^2/\tau + (2\ln2/\pi)B^2 + K^2\tau/3
-    + R^2\tau^2/2$, each τ weighted by its EDF (var σ̂² ≈ 2σ⁴/edf, the σ⁴ of the model,
-    iterated) — what allantools leaves to the user.
-
-    **Arguments:** `result` from [`deviation`][hrgjax.allan.deviation] with kind `adev` or
-    `oadev` (the terms are Allan-variance slopes); `terms`: names of
-    [`NOISE_TERMS`][hrgjax.allan.NOISE_TERMS] to fit (default all five).
-
-    **Returns:** a [`NoiseFit`][hrgjax.allan.NoiseFit]; intervals at the result's `ci`,
-    from the fit's covariance with the τ points taken as independent — overlapping estimates
-    at neighbouring octaves are correlated, so read them as optimistic (in simulated white
-    + rate-random-walk records the K interval at 3σ held in 5 of 6).
-    """
-    if not isinstance(result, AllanResult):
-        raise TypeError(f"result must be an AllanResult; got {type(result).__name__}")
-    if result.kind not in ("adev", "oadev"):
-        raise ValueError(
-            f"result.kind must be 'adev' or 'oadev' (Allan variance); got {result.kind!r}"
-        )
-    names = [n for n, *_ in NOISE_TERMS]
-    terms = names if terms is None else list(terms)
-    bad = [t for t in terms if t not in names]
-    if bad:
-        raise ValueError(f"terms must be among {names}; got {bad}")
-    t, var, edf = result.taus, result.dev**2, result.edf
-    basis = np.stack([f(t) for n, _, _, f in NOISE_TERMS if n in terms], axis=1)
-    model = var.copy()
-    for _ in range(5):
-        w = np.sqrt(edf / 2.0) / model
-        a = basis * w[:, None]
-        scale = np.linalg.norm(a, axis=0)  # the columns span 10⁹ over a τ grid
-        coef = _nnls(a / scale, var * w) / scale
-        model = np.maximum(basis @ coef, 1e-300)
-    a = basis * w[:, None] / scale
-    cov = np.linalg.pinv(a.T @ a) / np.outer(scale, scale)
-    z = NormalDist().inv_cdf(0.5 + result.ci / 2)
-    value, sigma, low, high = {}, {}, {}, {}
-    it = iter(range(len(terms)))
-    for n in names:
-        if n not in terms:
-            value[n] = sigma[n] = low[n] = high[n] = 0.0
-            continue
-        i = next(it)
-        c, sc = coef[i], math.sqrt(max(cov[i, i], 0.0))
-        value[n] = math.sqrt(c)
-        sigma[n] = sc / (2 * math.sqrt(c)) if c > 0 else math.sqrt(sc)
-        low[n] = math.sqrt(max(c - z * sc, 0.0))
-        high[n] = math.sqrt(c + z * sc)
-    chi2 = float(np.sum(((basis @ coef - var) * w) ** 2))
-    return NoiseFit(value, sigma, low, high, chi2, int(t.size - np.count_nonzero(coef)))

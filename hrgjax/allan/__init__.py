@@ -1,0 +1,39 @@
+r"""Allan-family deviations in JAX (NIST SP 1065 definitions).
+
+Inputs are *rate* ("frequency") samples $y_k$ at interval $\tau_0$; the phase is
+$x_k = \tau_0\sum_{j<k} y_j$ ($x_0 = 0$). The averaging factor `m` is a static integer
+($\tau = m\tau_0$). Checked against the NBS14 data set (PHYSICS.md §12).
+
+IEEE 952 noise terms on an Allan-deviation plot: quantisation $\sqrt3 Q/\tau$, angle random
+walk $N/\sqrt\tau$, bias instability flat at $0.6643B$, rate random walk $K\sqrt{\tau/3}$,
+rate ramp $R\tau/\sqrt2$.
+
+Every name is importable from `hrgjax.allan` (it was one module until issue 45); inside:
+`deviations` (the estimators, the compiled curve and `deviation` with its τ grids),
+`uncertainty` (noise identification, EDF, χ² intervals) and `noise_terms` (the IEEE 952
+fit).
+"""
+
+from .deviations import KINDS as KINDS
+from .deviations import AllanResult as AllanResult
+from .deviations import adev as adev
+from .deviations import allan_deviation as allan_deviation
+from .deviations import deviation as deviation
+from .deviations import hdev as hdev
+from .deviations import mdev as mdev
+from .deviations import oadev as oadev
+from .deviations import ohdev as ohdev
+from .deviations import totdev as totdev
+from .noise_terms import NOISE_TERMS as NOISE_TERMS
+from .noise_terms import NoiseFit as NoiseFit
+from .noise_terms import fit_noise as fit_noise
+from .uncertainty import ONE_SIGMA as ONE_SIGMA
+from .uncertainty import chi2_ppf as chi2_ppf
+from .uncertainty import confidence_interval as confidence_interval
+from .uncertainty import edf_greenhall as edf_greenhall
+from .uncertainty import edf_totdev as edf_totdev
+from .uncertainty import noise_id as noise_id
+
+_KINDS = {f.__name__: f for f in (adev, oadev, mdev, hdev, ohdev, totdev)}
+"""The single-factor estimators by kind, as `hrgjax.allan._KINDS` was before the split
+(benchmarks/latency.py compares the compiled curve with them)."""
