@@ -49,7 +49,8 @@ def simulated_rates(group: Group, values, k_e: float, plant=None):
 
 def window_residuals(groups, values, k_e):
     """The fit's residuals at `values`: {True: at-rest residuals (static and ramp windows,
-    each × √(length / 60 s)), False: moving residuals} [rad/s], measured − simulated; 0 where there is no window."""
+    each × √(length / 60 s)), False: moving residuals} [rad/s], measured − simulated; 0
+    where there is no window."""
     sims = [simulated_rates(g, values, k_e) for g in groups]
     rest, moving = [], []
     for g, (s, mv, r) in zip(groups, sims, strict=True):

@@ -166,10 +166,11 @@ def fit_groups(data: MeasuredData, window_s: float, k_e: float) -> list[Group]:
 
 def merge_buckets(buckets, short) -> list[tuple[int, list]]:
     """The buckets `{(length, dt): [RunStack, …]}` as `[(padded length, stacks), …]`, one per
-    compiled group. Buckets of one sample interval, sorted by length, run as one group (padded to the
-    longest) where compiling another group's simulator and Jacobian (`FIT_COMPILE_S`) costs
-    more than the steps the shorter runs are simulated on for over a fit's evaluations
-    (`FIT_EVALUATIONS`, each with its tangents); runs shorter than a window stay apart."""
+    compiled group. Buckets of one sample interval, sorted by length, run as one group
+    (padded to the longest) where compiling another group's simulator and Jacobian
+    (`FIT_COMPILE_S`) costs more than the steps the shorter runs are simulated on for over a
+    fit's evaluations (`FIT_EVALUATIONS`, each with its tangents); runs shorter than a window
+    stay apart (`short`: their keys)."""
     out = []
     for dt in sorted({dt for _, dt in buckets}):
         keys = sorted(k for k in buckets if k[1] == dt)
