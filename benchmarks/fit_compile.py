@@ -73,11 +73,12 @@ def _fit_before(groups, x0, k_e, max_steps):
 
     from hrgjax._compiled import device
     from hrgjax._least_squares import least_squares
-    from hrgjax.calibration import physical as ph
+    from hrgjax.calibration import _physical_fit as ph
+    from hrgjax.calibration._physical_groups import window_weights
 
-    weights = ph._weights(groups)
-    r0, _ = ph._residuals_jacobian(groups, x0, k_e)
-    sigma = {k: device(v) for k, v in ph._scatter(r0, weights).items()}
+    weights = window_weights(groups)
+    r0, _ = ph.residuals_jacobian(groups, x0, k_e)
+    sigma = {k: device(v) for k, v in ph.robust_scatter(r0, weights).items()}
     x, steps, result = least_squares(
         _weighted_residual,
         optx.LevenbergMarquardt(rtol=0.0, atol=1e-4),
@@ -88,23 +89,23 @@ def _fit_before(groups, x0, k_e, max_steps):
         f_struct=jax.ShapeDtypeStruct((sum(r.size for r in r0.values()),), r0[True].dtype),
     )
     assert int(result._value) == 0, result
-    values = np.asarray(x0) + np.asarray(x) * ph._SCALE
-    r1, jac1 = ph._residuals_jacobian(groups, device(values), k_e)
+    values = np.asarray(x0) + np.asarray(x) * ph.SCALE
+    r1, jac1 = ph.residuals_jacobian(groups, device(values), k_e)
     r1 = {k: np.asarray(r) for k, r in r1.items()}
     sigma1 = {k: np.sqrt(np.mean(r[weights[k] > 0] ** 2)) for k, r in r1.items()}
     jac = np.concatenate(
         [np.asarray(jac1[True]) / sigma1[True], np.asarray(jac1[False]) / sigma1[False]]
     )
-    return values, steps, r1, sigma1, jac / np.asarray(ph._SCALE)[None, :]
+    return values, steps, r1, sigma1, jac / np.asarray(ph.SCALE)[None, :]
 
 
 def _weighted_residual(x, args):
     import jax.numpy as jnp
 
-    from hrgjax.calibration import physical as ph
+    from hrgjax.calibration import _physical_fit as ph
 
     groups, x0, sigma, k_e = args
-    res = ph._residuals(groups, x0 + x * ph._SCALE, k_e)
+    res = ph.window_residuals(groups, x0 + x * ph.SCALE, k_e)
     return jnp.concatenate([res[True] / sigma[True], res[False] / sigma[False]])
 
 
@@ -116,7 +117,7 @@ def worker(case, method, plan_path):
 
     data = _data(case, plan_path)
     if method == "before":
-        physical._fit = _fit_before
+        physical.fit_values = _fit_before
     times, fits = [], []
     for _ in range(2):
         t0 = time.perf_counter()

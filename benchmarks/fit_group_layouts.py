@@ -2,10 +2,10 @@
 
 A designed plan's runs have many lengths; the fit pads rare ones to powers of two of
 samples and then runs neighbouring lengths as one group where compiling another costs more
-than the extra steps (`physical._merged`). This script times the fit's one program (the
-residuals and their Jacobian, `physical._residuals_jacobian`) on one plan's simulated data
-in three layouts — every padded length apart, the default merge, and one group per sample
-interval — and prints each layout's compile (with its first call) and best-of-5 evaluation,
+than the extra steps (`_physical_groups.merge_buckets`). This script times the fit's one
+program (the residuals and their Jacobian, `_physical_fit.residuals_jacobian`) on one plan's
+simulated data in three layouts — every padded length apart, the default merge, and one group
+per sample interval — and prints each layout's compile (with its first call) and best-of-5 evaluation,
 the figures `physical.FIT_COMPILE_S` and `FIT_STEP_S` were fitted to. Each layout is a
 different program; all run in this one process, so compiled pieces they share (none of the
 groups' simulators) would favour the later ones.
@@ -21,8 +21,8 @@ import jax
 from _common import machine, report
 
 import hrgjax as hg
+from hrgjax.calibration import _physical_fit, _physical_groups, physical
 from hrgjax.calibration import design as d
-from hrgjax.calibration import physical
 
 
 def apart(buckets, short):
@@ -43,17 +43,18 @@ def main():
     plan = d.load_plan(a.plan_file)[0] if a.plan_file else d.design(12.0).plan
     data = d.simulate_plan(hg.presets.tvg3_like(), plan, key=jax.random.key(0))
     values, k_e = d.nominal_values(), physical.K_E_NOMINAL
-    program = jax.jit(physical._residuals_jacobian)
+    program = jax.jit(_physical_fit.residuals_jacobian)
     print(f"machine: {machine()}")
     print(f"plan: {plan.size} segments")
     rows = {}
-    for name, layout in (("apart", apart), ("default", physical._merged),
+    default = _physical_groups.merge_buckets
+    for name, layout in (("apart", apart), ("default", default),
                          ("one per interval", one_per_interval)):  # fmt: skip
-        physical_merged, physical._merged = physical._merged, layout
+        _physical_groups.merge_buckets = layout
         try:
-            groups = physical._groups(data, 10.0, k_e)
+            groups = _physical_groups.fit_groups(data, 10.0, k_e)
         finally:
-            physical._merged = physical_merged
+            _physical_groups.merge_buckets = default
         t0 = time.perf_counter()
         jax.block_until_ready(program(groups, values, k_e))
         compile_s = time.perf_counter() - t0

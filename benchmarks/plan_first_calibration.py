@@ -3,8 +3,8 @@ both compiling in a fresh process — with rare run lengths padded to a ladder o
 ⌈2^(k/4)⌉ samples (`before`, kept here as `_ladder_before`), to powers of two (`pow2`,
 `calibration._grouping.ladder`), and to powers of two with neighbouring lengths run as one where a compile costs more than the
 extra steps (`merged`, the default: `_plan_simulation.simulation_groups` for `simulate_plan`,
-`physical._merged` for the fit). Fewer, longer groups: fewer programs to compile, a little more
-to run.
+`_physical_groups.merge_buckets` for the fit). Fewer, longer groups: fewer programs to
+compile, a little more to run.
 
 The plan: `design(12.0)` (5 levels, 44 segments of many lengths; ≈ 2 min to design), or
 `--plan-file`. Each variant runs in its own process with the compile cache off, on the same
@@ -40,14 +40,17 @@ def child(plan_path, variant, out_path):
 
     jax.config.update("jax_enable_x64", True)
     import hrgjax as hg
-    from hrgjax.calibration import PhysicalCompensator, _plan_simulation, physical
+    from hrgjax.calibration import PhysicalCompensator, _physical_groups, _plan_simulation
     from hrgjax.calibration import design as d
 
     if variant == "before":
-        physical.ladder = _plan_simulation.ladder = _ladder_before  # each imports it by name
+        # each imports it by name
+        _physical_groups.ladder = _plan_simulation.ladder = _ladder_before
     if variant in ("before", "pow2"):
         _plan_simulation.MERGED_STEPS_MAX = 0  # no two lengths merged
-        physical._merged = lambda buckets, short: [(k[0], v) for k, v in buckets.items()]
+        _physical_groups.merge_buckets = lambda buckets, short: [
+            (k[0], v) for k, v in buckets.items()
+        ]
     plan, _ = d.load_plan(plan_path)
     gyro = hg.presets.tvg3_like()
     t0 = time.perf_counter()
@@ -59,7 +62,7 @@ def child(plan_path, variant, out_path):
     t3 = time.perf_counter()
     PhysicalCompensator().fit(data2)
     t4 = time.perf_counter()
-    groups = len(physical._groups(data, 10.0, physical.K_E_NOMINAL))
+    groups = len(_physical_groups.fit_groups(data, 10.0, _physical_groups.K_E_NOMINAL))
     with open(out_path, "w") as f:
         json.dump({"simulate": t1 - t0, "fit": t2 - t1, "simulate2": t3 - t2, "fit2": t4 - t3,
                    "groups": groups, "values": np.asarray(fit.values).tolist(),

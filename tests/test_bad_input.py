@@ -182,7 +182,7 @@ def test_damaged_netcdf_is_a_clear_error(tmp_path):
 
 
 def test_an_interrupted_save_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch):
-    import hrgjax.data as hd
+    from hrgjax import _data_files
 
     path = tmp_path / "d.csv"
     hg.MeasuredData(_cols()).save(path)
@@ -192,7 +192,7 @@ def test_an_interrupted_save_leaves_the_old_file_and_no_temporary(tmp_path, monk
         fh.write("time_s,run\n0,")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(hd, "_write_csv", half)
+    monkeypatch.setattr(_data_files, "write_csv", half)
     with pytest.raises(KeyboardInterrupt):
         hg.MeasuredData(_cols(n=7)).save(path)
     assert path.read_bytes() == before

@@ -324,22 +324,22 @@ def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, mon
     ramp's last partial one) equals the unpadded layout's to 1e-6 °/h (the adaptive solver
     steps differently towards a later end: 3e-8 °/h seen), and the padded tail adds no
     residual."""
-    from hrgjax.calibration import physical
+    from hrgjax.calibration import _physical_fit, _physical_groups, physical
 
     segs = [{**SEGMENTS[0], "duration_s": 70.0}, {**SEGMENTS[1], "duration_s": 40.0},
             {**SEGMENTS[2], "temperature_end_c": -18.0, "duration_s": 400.0}]  # fmt: skip
     data = d.simulate_plan(quiet, d.BenchPlan.from_segments(segs))
     values = d.nominal_values()
-    residuals = eqx.filter_jit(physical._residuals)
+    residuals = eqx.filter_jit(_physical_fit.window_residuals)
     out, lengths = {}, {}
-    merged = physical._merged
+    merged = _physical_groups.merge_buckets
     apart = lambda buckets, short: [(k[0], v) for k, v in buckets.items()]  # noqa: E731
     # every length its own group / every run padded and lengths merged (as the default does)
     for shared, merge in ((1, apart), (100, merged)):
-        monkeypatch.setattr(physical, "SHARED_LENGTH_RUNS", shared)
-        monkeypatch.setattr(physical, "_merged", merge)
-        groups = physical._groups(data, 10.0, physical.K_E_NOMINAL)
-        weights = physical._weights(groups)
+        monkeypatch.setattr(_physical_groups, "SHARED_LENGTH_RUNS", shared)
+        monkeypatch.setattr(_physical_groups, "merge_buckets", merge)
+        groups = _physical_groups.fit_groups(data, 10.0, physical.K_E_NOMINAL)
+        weights = _physical_groups.window_weights(groups)
         res = residuals(groups, values, physical.K_E_NOMINAL)
         key = (shared, merge is merged)
         out[key] = [np.asarray(res[k])[weights[k] > 0] / weights[k][weights[k] > 0]

@@ -108,7 +108,7 @@ def measured_rate(values, theta, temperature_c, rate, temperature_rate):
     [°C/s]: dθ̂/dθ · θ̇ + ∂θ̂/∂T · Ṫ (ideal loops, PHYSICS.md §10; the averaged field and
     the readout map of `physical.model_gyro`)."""
     from ..resonator.averaged import averaged_vector_field
-    from .physical import model_gyro, readout_angle
+    from ._physical_model import model_gyro, readout_angle
 
     gyro = model_gyro(values)
     g = gyro.at(temperature_c)
@@ -143,7 +143,7 @@ class GreyBox(eqx.Module):
 
     def scale(self) -> jax.Array:
         """Typical uncertainty of each parameter (SI): the prior is `prior_scale` × this."""
-        from .physical import PARAMETERS
+        from ._physical_model import PARAMETERS
 
         return jnp.asarray(np.array([p[2] for p in PARAMETERS]))
 

@@ -87,7 +87,7 @@ def simulation_groups(plan, n_out, dts, model) -> dict[tuple[int, float], list[i
     later one 0.5–0.6 → 0.8–0.9 s (`benchmarks/plan_first_calibration.py`). The full
     model's steps are far dearer than a compile: its groups stay apart."""
     from .._cost import CPU_STEP_S
-    from .physical import SHARED_LENGTH_RUNS, steps_estimate
+    from ._physical_groups import SHARED_LENGTH_RUNS, steps_estimate
 
     exact: dict[tuple[int, float], int] = {}
     for i, k in enumerate(plan.kind):

@@ -43,40 +43,33 @@ puts 65.6–71.8 % of the truths within ±1σ and 92.8–96.4 % within ±2σ wit
 random walk and a Gauss–Markov drift of the biases; the white-noise σ alone covered 39.8 %
 and 67.5 % under the random walk. Not covered: the repeats' σ (Student-t with R − 1
 degrees of freedom, and blind to the drift common to all repeats); face tilts (inexact
-flips), which the accelerometers' q absorbs only in part."""
+flips), which the accelerometers' q absorbs only in part.
+
+This module is the method: the section statistics and their covariance
+(`session_statistics`), the estimates and `ferraris`. What it returns,
+[`ImuCalibration`][hrgjax.imu.ImuCalibration] with its file (`load_calibration`), lives in
+`hrgjax.imu._calibration` and is re-exported here."""
 
 from __future__ import annotations
 
-import json
-import os
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._x64 import require_x64
 from ..units import DEG
+from ._calibration import FORMAT as FORMAT
+from ._calibration import G_RANGE_M_S2 as G_RANGE_M_S2
+from ._calibration import PARAMETERS as PARAMETERS
+from ._calibration import ImuCalibration as ImuCalibration
+from ._calibration import check_g, check_turn_deg, flat_parameters
+from ._calibration import load_calibration as load_calibration
 from ._drift import walk_intensity, walk_kernel
 from .data import ImuData
 from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections
-from .triad import ANGLE_AXES, TriadCalibration
 
-PARAMETERS = (
-    [f"accel_matrix[{i}{j}]" for i in "xyz" for j in "xyz"]
-    + [f"accel_bias[{i}]" for i in "xyz"]
-    + [f"gyro_matrix[{i}{j}]" for i in "xyz" for j in "xyz"]
-    + [f"gyro_bias[{i}]" for i in "xyz"]
-    + [f"gyro_g_sensitivity[{i}{j}]" for i in "xyz" for j in "xyz"]
-)
-"""Order of the 33 parameters in `ImuCalibration.covariance` (matrices row-major)."""
-FORMAT = "hrgjax.imu_calibration"
-G_RANGE_M_S2 = (9.76, 9.84)
-"""The local gravity `g` [m/s²] a Ferraris session may declare: the range of the Earth's
-surface (9.780 at the equator to 9.832 at the poles at sea level, about −3e-6 m/s² per m of
-height), with a margin. A g outside it is a unit slip (981 in cm/s², 1 in units of g) that
-would scale M_a by that factor without a word."""
 G_DATA_TOLERANCE = 0.05
 """How far (relative) the declared `g` may be from the mean |specific force| the static
 faces read. The raw faces carry the accelerometers' scale errors (±3 % per axis is a common
@@ -85,359 +78,6 @@ calibrating and refuses a g or a unit that the data contradict."""
 TURN_OFF_AXIS = 0.1
 """The most a turn section may integrate about the two other axes, as a fraction of its
 turn (a section spanning two turns, or a turn about the wrong axis, reads far more)."""
-
-
-class ImuCalibration(eqx.Module):
-    r"""A six-axis IMU calibration: $a_s = M_a a + b_a$, $\omega_s = M_g\omega + G a + b_g$.
-
-    **Fields:** `accel_matrix` M_a (3, 3) [-]; `accel_bias` b_a (3,) [m/s²]; `gyro_matrix`
-    M_g (3, 3) [-]; `gyro_bias` b_g (3,) [rad/s]; `gyro_g_sensitivity` G (3, 3) [rad/s per
-    m/s²]; `covariance` (33, 33) of the parameters in
-    [`PARAMETERS`][hrgjax.imu.ferraris.PARAMETERS] order (zeros when set by hand);
-    `noise_std` (6,): per-sample white-noise σ of the gyros [rad/s] and the accelerometers
-    [m/s²] seen on the static faces; `g` [m/s²] and `turn_deg` (3,) [°] the session's
-    references; `sigma_source` ("repeats", "white noise", "white noise and bias drift",
-    "repeats and white noise" or "none": see the module notes); `bias_walk` (2,) or None:
-    the in-run random walk of the biases the session showed, gyros [rad/s/√s] and
-    accelerometers [m/s²/√s] (None when set by hand).
-
-    Standard errors: `accel_matrix_std`, `accel_bias_std`, `gyro_matrix_std`, `gyro_bias_std`,
-    `gyro_g_sensitivity_std`; the six-angle form of
-    [`TriadCalibration`][hrgjax.imu.triad.TriadCalibration]: [`accel_triad`][hrgjax.imu.ImuCalibration.accel_triad],
-    [`gyro_triad`][hrgjax.imu.ImuCalibration.gyro_triad]."""
-
-    accel_matrix: jax.Array
-    accel_bias: jax.Array
-    gyro_matrix: jax.Array
-    gyro_bias: jax.Array
-    gyro_g_sensitivity: jax.Array
-    covariance: jax.Array
-    noise_std: jax.Array
-    g: float = eqx.field(static=True, default=9.81)
-    turn_deg: tuple[float, float, float] = eqx.field(static=True, default=(360.0, 360.0, 360.0))
-    sigma_source: str = eqx.field(static=True, default="none")
-    bias_walk: jax.Array | None = None
-
-    @classmethod
-    def known(
-        cls, accel_matrix=None, accel_bias=None, gyro_matrix=None, gyro_bias=None,
-        gyro_g_sensitivity=None,
-    ) -> ImuCalibration:  # fmt: skip
-        """A calibration set by hand (identity matrices and zero biases by default; no
-        uncertainty): M_a (3, 3), b_a (3,) [m/s²], M_g (3, 3), b_g (3,) [rad/s], G (3, 3)
-        [rad/s per m/s²]."""
-        eye, z = jnp.eye(3), jnp.zeros(3)
-        parts = {
-            "accel_matrix": (accel_matrix, eye), "accel_bias": (accel_bias, z),
-            "gyro_matrix": (gyro_matrix, eye), "gyro_bias": (gyro_bias, z),
-            "gyro_g_sensitivity": (gyro_g_sensitivity, jnp.zeros((3, 3))),
-        }  # fmt: skip
-        values = {}
-        for name, (x, default) in parts.items():
-            x = default if x is None else jnp.asarray(x, float)
-            if x.shape != default.shape:
-                raise ValueError(f"{name} must have shape {default.shape}; got {x.shape}")
-            values[name] = x
-        return cls(**values, covariance=jnp.zeros((33, 33)), noise_std=jnp.zeros(6))
-
-    # ---- the model -----------------------------------------------------------------------
-    def sensor(self, omega, accel):
-        """Sensor outputs from true body-frame values: `omega` (..., 3) [rad/s] and `accel`
-        (..., 3) [m/s²] → (gyro (..., 3) [rad/s], accel (..., 3) [m/s²]). Differentiable."""
-        omega, accel = jnp.asarray(omega), jnp.asarray(accel)
-        a_s = accel @ self.accel_matrix.T + _row(self.accel_bias, accel)
-        w_s = omega @ self.gyro_matrix.T + accel @ self.gyro_g_sensitivity.T
-        return w_s + _row(self.gyro_bias, omega), a_s
-
-    def correct(self, gyro, accel):
-        """Calibrated body-frame values from sensor outputs (the exact inverse of `sensor`):
-        `gyro` (..., 3) [rad/s], `accel` (..., 3) [m/s²] → (ω (..., 3) [rad/s], a (..., 3)
-        [m/s²]). Pure JAX: `jit`, `vmap` and `grad` through it."""
-        gyro, accel = jnp.asarray(gyro), jnp.asarray(accel)
-        a = (accel - _row(self.accel_bias, accel)) @ jnp.linalg.inv(self.accel_matrix).T
-        rhs = gyro - _row(self.gyro_bias, gyro) - a @ self.gyro_g_sensitivity.T
-        return rhs @ jnp.linalg.inv(self.gyro_matrix).T, a
-
-    def apply(self, data: ImuData) -> ImuData:
-        """The record `data` calibrated (a new `ImuData`; `data` is not changed)."""
-        if not isinstance(data, ImuData):
-            raise TypeError(f"apply takes an hg.imu.ImuData; got {type(data).__name__}")
-        w, a = self.correct(data.gyro, data.accel)
-        return ImuData(data.time, np.asarray(w), np.asarray(a), data.temperature, data.rate_hz)
-
-    # ---- uncertainty -------------------------------------------------------------------
-    def _std(self, lo: int, shape) -> jax.Array:
-        n = int(np.prod(shape))
-        var = jnp.diag(self.covariance)[lo : lo + n]
-        return _sqrt_variance(var, PARAMETERS[lo : lo + n]).reshape(shape)
-
-    @property
-    def accel_matrix_std(self) -> jax.Array:
-        """Standard errors of M_a (3, 3) [-]."""
-        return self._std(0, (3, 3))
-
-    @property
-    def accel_bias_std(self) -> jax.Array:
-        """Standard errors of b_a (3,) [m/s²]."""
-        return self._std(9, (3,))
-
-    @property
-    def gyro_matrix_std(self) -> jax.Array:
-        """Standard errors of M_g (3, 3) [-]."""
-        return self._std(12, (3, 3))
-
-    @property
-    def gyro_bias_std(self) -> jax.Array:
-        """Standard errors of b_g (3,) [rad/s]."""
-        return self._std(21, (3,))
-
-    @property
-    def gyro_g_sensitivity_std(self) -> jax.Array:
-        """Standard errors of G (3, 3) [rad/s per m/s²]."""
-        return self._std(24, (3, 3))
-
-    def vector(self) -> jax.Array:
-        """The 33 parameters as one vector in `PARAMETERS` order."""
-        return _flat(self.accel_matrix, self.accel_bias, self.gyro_matrix, self.gyro_bias,
-                     self.gyro_g_sensitivity)  # fmt: skip
-
-    def accel_triad(self) -> TriadCalibration:
-        """The accelerometers in the six-angle form of `imu.triad`: M_a = diag(1 +
-        scale)(I + E(angles)) exactly (scale_i = M_ii − 1, θ_ij = M_ij / M_ii), bias b_a
-        [m/s²], with propagated standard errors."""
-        return self._triad(0, 9, self.accel_bias, self.noise_std[3:])
-
-    def gyro_triad(self) -> TriadCalibration:
-        """The gyros in the six-angle form (as `accel_triad`), bias b_g [rad/s]."""
-        return self._triad(12, 21, self.gyro_bias, self.noise_std[:3])
-
-    def _triad(self, m_at: int, b_at: int, bias, noise) -> TriadCalibration:
-        idx = np.r_[m_at : m_at + 9, b_at : b_at + 3]
-        cov = self.covariance[np.ix_(idx, idx)]
-        x = self.vector()[idx]
-        jac = jax.jacfwd(_six_angle)(x)
-        sensor = "accel" if m_at == 0 else "gyro"
-        names = [f"{sensor} angle {a}" for a in ("xy", "xz", "yx", "yz", "zx", "zy")]
-        names += [f"{sensor} scale {a}" for a in "xyz"] + [PARAMETERS[b_at + i] for i in range(3)]
-        std = _sqrt_variance(jnp.diag(jac @ cov @ jac.T), names)
-        y = _six_angle(x)
-        return TriadCalibration(y[:6], y[6:9], bias, std[:6], std[6:9], std[9:12], noise)
-
-    # ---- files -------------------------------------------------------------------------
-    def to_json(self) -> dict:
-        """JSON-ready dict: the contract's matrices and biases with units in the key names,
-        their standard errors, the covariance, the six-angle forms (read-only extras)."""
-
-        def lst(x):
-            return np.asarray(x).tolist()
-
-        acc, gyr = self.accel_triad(), self.gyro_triad()
-        walk = [0.0, 0.0] if self.bias_walk is None else lst(self.bias_walk)
-        return {
-            "format": FORMAT,
-            "version": 1,
-            "model": "accel_sensor = accel_matrix @ a + accel_bias; gyro_sensor = gyro_matrix @ "
-            "omega + gyro_g_sensitivity @ a + gyro_bias (SI: a [m/s^2], omega [rad/s])",
-            "accel_matrix": lst(self.accel_matrix),
-            "accel_bias_m_s2": lst(self.accel_bias),
-            "gyro_matrix": lst(self.gyro_matrix),
-            "gyro_bias_rad_s": lst(self.gyro_bias),
-            "gyro_g_sensitivity_rad_s_per_m_s2": lst(self.gyro_g_sensitivity),
-            "accel_matrix_std": lst(self.accel_matrix_std),
-            "accel_bias_std_m_s2": lst(self.accel_bias_std),
-            "gyro_matrix_std": lst(self.gyro_matrix_std),
-            "gyro_bias_std_rad_s": lst(self.gyro_bias_std),
-            "gyro_g_sensitivity_std_rad_s_per_m_s2": lst(self.gyro_g_sensitivity_std),
-            "covariance": lst(self.covariance),
-            "parameters": list(PARAMETERS),
-            "noise_std": {
-                "gyro_rad_s": lst(self.noise_std[:3]),
-                "accel_m_s2": lst(self.noise_std[3:]),
-            },
-            "g_m_s2": self.g,
-            "turn_deg": list(self.turn_deg),
-            "sigma_source": self.sigma_source,
-            "bias_walk": {
-                "gyro_rad_s_per_sqrt_s": walk[0],
-                "accel_m_s2_per_sqrt_s": walk[1],
-            },
-            "six_angle_form": {
-                "angle_order": ["xy", "xz", "yx", "yz", "zx", "zy"],
-                "accel_scale": lst(acc.scale),
-                "accel_misalignment_rad": lst(acc.angles),
-                "gyro_scale": lst(gyr.scale),
-                "gyro_misalignment_rad": lst(gyr.angles),
-            },
-        }
-
-    def save(self, path: str | os.PathLike) -> str:
-        """Write the calibration as JSON (`to_json`), atomically; returns the path. Read it
-        back with [`load_calibration`][hrgjax.imu.load_calibration]."""
-        from .._io import atomic_write
-
-        with atomic_write(path, "w") as fh:
-            json.dump(self.to_json(), fh, indent=2)
-        return os.fspath(path)
-
-
-def load_calibration(path: str | os.PathLike) -> ImuCalibration:
-    """Read a calibration written by [`ImuCalibration.save`][hrgjax.imu.ImuCalibration.save].
-
-    **Raises:** `ValueError` naming the file and the field for a file of another format, a
-    field of the wrong shape or holding text or booleans where numbers belong, a singular `accel_matrix` or `gyro_matrix`, a negative
-    variance, a `g_m_s2` outside [`G_RANGE_M_S2`][hrgjax.imu.ferraris.G_RANGE_M_S2] or a
-    `turn_deg` that is not three non-zero angles."""
-    from .._io import read_json
-
-    path = os.fspath(path)
-    obj = read_json(path)
-    if not isinstance(obj, dict) or obj.get("format") != FORMAT:
-        raise ValueError(f'{path}: not an hrgjax IMU calibration (no "format": "{FORMAT}")')
-    shapes = {
-        "accel_matrix": (3, 3), "accel_bias_m_s2": (3,), "gyro_matrix": (3, 3),
-        "gyro_bias_rad_s": (3,), "gyro_g_sensitivity_rad_s_per_m_s2": (3, 3),
-        "covariance": (33, 33),
-    }  # fmt: skip
-    got = {}
-    for key, shape in shapes.items():
-        try:
-            x = np.asarray(obj[key], dtype=float)
-        except KeyError:
-            raise ValueError(f"{path}: field {key!r} is missing") from None
-        except (TypeError, ValueError):
-            raise ValueError(f"{path}: field {key!r} must be numbers of shape {shape}") from None
-        odd = _not_a_number(obj[key])  # text ("1.5") or booleans (true would read 1.0)
-        if odd is not None:
-            raise ValueError(f"{path}: field {key!r} must be numbers of shape {shape}; got {odd}")
-        if x.shape != shape or not np.all(np.isfinite(x)):
-            raise ValueError(f"{path}: field {key!r} must be finite numbers of shape {shape}")
-        got[key] = jnp.asarray(x)
-    for key in ("accel_matrix", "gyro_matrix"):
-        sv = np.linalg.svd(np.asarray(got[key]), compute_uv=False)
-        if not sv[-1] > 1e-9 * sv[0]:
-            raise ValueError(
-                f"{path}: field {key!r} is singular (singular values "
-                f"{np.array2string(sv, precision=3)}): correct() inverts it; expected an "
-                "invertible scale-and-misalignment matrix, near the identity"
-            )
-    var = np.diag(np.asarray(got["covariance"]))
-    if np.any(var < 0):
-        i = int(np.flatnonzero(var < 0)[0])
-        raise ValueError(
-            f"{path}: field 'covariance' has the variance {var[i]:.3g} < 0 for {PARAMETERS[i]} "
-            f"(row {i}); expected a covariance with a non-negative diagonal"
-        )
-    noise_std = _nonnegative(path, "noise_std", obj.get("noise_std", {}),
-                             ("gyro_rad_s", "accel_m_s2"), 3)  # fmt: skip
-    bias_walk = _nonnegative(path, "bias_walk", obj.get("bias_walk", {}),
-                             ("gyro_rad_s_per_sqrt_s", "accel_m_s2_per_sqrt_s"), None)  # fmt: skip
-    g = _check_g(obj.get("g_m_s2", 9.81), f"{path}: field 'g_m_s2'")
-    turn_deg = _check_turn_deg(obj.get("turn_deg", [360.0] * 3), f"{path}: field 'turn_deg'")
-    source = obj.get("sigma_source", "none")
-    if not isinstance(source, str):
-        raise ValueError(f"{path}: field 'sigma_source' must be text; got {source!r}")
-    return ImuCalibration(
-        got["accel_matrix"], got["accel_bias_m_s2"], got["gyro_matrix"], got["gyro_bias_rad_s"],
-        got["gyro_g_sensitivity_rad_s_per_m_s2"], got["covariance"], noise_std,
-        g=g, turn_deg=tuple(float(t) for t in turn_deg),
-        sigma_source=source, bias_walk=bias_walk,
-    )  # fmt: skip
-
-
-def _sqrt_variance(var, names) -> jax.Array:
-    """Standard errors √var, refusing a negative variance (a damaged or hand-made covariance)
-    with its parameter's name instead of returning NaN; a negative of round-off size (1e-12
-    of the largest variance) is zero. Traced values (inside `jit`) are not checked."""
-    if isinstance(var, jax.core.Tracer):
-        return jnp.sqrt(var)
-    v = np.asarray(var, dtype=float)
-    tol = 1e-12 * float(np.max(np.abs(v[np.isfinite(v)]), initial=0.0))
-    bad = np.flatnonzero(~(v >= -tol))
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"covariance: the variance of {names[i]} is {v[i]:.3g}, not a number >= 0, so it has "
-            "no standard error; the calibration's covariance must be symmetric positive "
-            "semi-definite (33 x 33, PARAMETERS order)"
-        )
-    return jnp.sqrt(jnp.maximum(jnp.asarray(var), 0.0))
-
-
-def _check_g(g, name: str = "g") -> float:
-    """The declared local gravity [m/s²] as a float, within `G_RANGE_M_S2`."""
-    lo, hi = G_RANGE_M_S2
-    form = f"the local gravity in m/s² on the Earth's surface, {lo}–{hi} (9.81 standard)"
-    if isinstance(g, bool | np.bool_ | str):
-        raise ValueError(f"{name} must be {form}; got {g!r}")
-    try:
-        v = float(g)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {form}; got {g!r}") from None
-    if not (np.isfinite(v) and lo <= v <= hi):
-        hint = ""
-        if lo <= v / 100.0 <= hi:
-            hint = " (that is cm/s²)"
-        elif 0.99 <= v <= 1.01:
-            hint = " (that is in units of g)"
-        raise ValueError(f"{name} = {g!r}{hint}: expected {form}")
-    return v
-
-
-def _not_a_number(value) -> str | None:
-    """What a JSON value holds that is not a number (`"text"`, `"booleans"`, `None`), looking
-    through nested lists; None when every leaf is a number."""
-    stack = [value]
-    while stack:
-        x = stack.pop()
-        if isinstance(x, list | tuple):
-            stack.extend(x)
-        elif isinstance(x, bool):
-            return "booleans"
-        elif not isinstance(x, int | float):
-            return "text" if isinstance(x, str) else repr(x)[:40]
-    return None
-
-
-def _nonnegative(path: str, field: str, value, keys, size) -> jax.Array:
-    """`{keys[0]: …, keys[1]: …}` of a calibration file as one vector of finite numbers >= 0
-    (each `size` numbers, or one where size is None); missing keys read 0."""
-    each = "[3 numbers]" if size else "a number"
-    form = "{" + ", ".join(f"{k!r}: {each}" for k in keys) + "} with finite values >= 0"
-    if not isinstance(value, dict):
-        raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}")
-    out = []
-    for k in keys:
-        try:
-            raw = value.get(k, [0.0] * size if size else 0.0)
-            x = np.asarray(raw, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}") from None
-        if (
-            _not_a_number(raw) is not None  # text or booleans (true would read 1.0)
-            or x.shape != ((size,) if size else ())
-            or not np.all(np.isfinite(x) & (x >= 0))
-        ):
-            raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}")
-        out.append(np.atleast_1d(x))
-    return jnp.asarray(np.concatenate(out))
-
-
-def _row(v, like):
-    """`v` (3,) shaped to broadcast against `like` (..., 3) (explicit rank)."""
-    return v.reshape((1,) * (like.ndim - 1) + (3,))
-
-
-# ---- the estimator ------------------------------------------------------------------------
-def _flat(*parts) -> jax.Array:
-    return jnp.concatenate([jnp.ravel(p) for p in parts])
-
-
-def _six_angle(x):
-    """M (9 row-major) and bias (3) → angles (6), scale (3), bias (3)."""
-    m = x[:9].reshape(3, 3)
-    angles = jnp.stack([m[i, j] / m[i, i] for i, j in ANGLE_AXES])
-    return jnp.concatenate([angles, jnp.diag(m) - 1.0, x[9:12]])
-
 
 # Flat layout of a session's section statistics: per face (x_p, x_a, …) mean accel (3) and
 # mean gyro (3); per turn (x, y, z) Σ gyro·Δt (3), Σ accel·Δt (3) and Σ Δt (1).
@@ -461,7 +101,7 @@ def _estimate(stats, g, turn_rad):
     a_int = jnp.linalg.solve(m_a, (s_a - t[:, None] * b_a[None, :]).T)  # (3 comps, 3 turns)
     w_int = s_g.T - b_g[:, None] * t[None, :] - gsens @ a_int  # (3 comps, 3 turns)
     m_g = w_int / turn_rad[None, :]
-    return _flat(m_a, b_a, m_g, b_g, gsens)
+    return flat_parameters(m_a, b_a, m_g, b_g, gsens)
 
 
 # the estimates and their Jacobian in one compiled pass (the estimate is jacfwd's aux output)
@@ -621,8 +261,8 @@ def ferraris(
         sections = detect_sections(data)
     else:
         sections = parse_sections(sections, len(data))
-    g = _check_g(g)
-    turns = _check_turn_deg(turn_deg, "turn_deg")
+    g = check_g(g)
+    turns = check_turn_deg(turn_deg, "turn_deg")
     got = _statistics(data, sections)
     stats, cov = got.stats, got.white + got.drift
     _check_faces(stats, g)
@@ -638,22 +278,6 @@ def ferraris(
         turn_deg=tuple(float(t) for t in turns), sigma_source=got.source,
         bias_walk=jnp.asarray(got.bias_walk),
     )  # fmt: skip
-
-
-def _check_turn_deg(turn_deg, name: str) -> np.ndarray:
-    """`turn_deg` (one angle or three) as (3,) non-zero finite angles [°]."""
-    form = "a non-zero angle [°] or three of them (x, y, z turns), e.g. 360 or -360"
-    try:
-        raw = np.asarray(turn_deg)
-        turns = np.array(raw, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {form}; got {turn_deg!r}") from None
-    if raw.dtype.kind not in "iuf" or turns.shape not in ((), (3,)):
-        raise ValueError(f"{name} must be {form}; got {turn_deg!r}")
-    turns = np.broadcast_to(turns, (3,)).copy()
-    if not np.all(np.isfinite(turns) & (turns != 0)):
-        raise ValueError(f"{name} must be {form}; got {turn_deg!r}")
-    return turns
 
 
 def _check_gravity(stats: np.ndarray, g: float) -> None:

@@ -10,8 +10,8 @@ import jax
 import numpy as np
 
 from .._x64 import require_x64
+from ._calibration import ImuCalibration
 from .data import ImuData
-from .ferraris import ImuCalibration
 from .sections import FACES, TURNS, Sections
 
 _UP = np.array([0.0, 0.0, 1.0])

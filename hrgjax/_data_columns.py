@@ -1,0 +1,176 @@
+"""The data contract's columns (`COLUMNS`, `REQUIRED`) and the checks of one given column:
+numbers in the column's unit, no NaN or infinity, exact integers and run ids
+(`checked_column`), and time strictly increasing within a run (`check_time`)."""
+
+from __future__ import annotations
+
+import numbers
+import re
+
+import numpy as np
+
+COLUMNS: dict[str, str] = {
+    "time_s": "time [s], strictly increasing within a run",
+    "run": "integer id of a segment (default 0)",
+    "temperature_c": "resonator temperature [°C]",
+    "table_rate_dps": "reference rate about the sensitive axis [°/s]",
+    "table_angle_deg": "reference angle [°] (integrated from the rate when absent)",
+    "wave_angle_deg": "measured wave angle [°, electrical], unwrapped",
+    "amplitude": "principal amplitude [readout units]",
+    "quadrature": "quadrature amplitude [readout units]",
+    "accel_x_g": "specific force along case x [g]",
+    "accel_y_g": "specific force along case y [g]",
+    "accel_z_g": "specific force along case z (sensitive axis) [g]",
+    "rate_corrected_dps": "equivalent input rate after compensation [°/s] (`hrgjax correct`)",
+    "angle_corrected_deg": "case rotation angle since the start of the run [°] (`hrgjax correct`)",
+}
+"""Known columns and their meaning (units in brackets)."""
+REQUIRED = ("time_s", "temperature_c", "table_rate_dps", "wave_angle_deg")
+"""Columns every dataset must have."""
+
+_NUMBER = re.compile(
+    r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:nan|inf|infinity)", re.IGNORECASE
+)
+"""A number as the CSV reader accepts it: decimal or scientific notation, or nan/inf (which
+the validation then names); no thousands separators or underscores."""
+
+
+def is_number(field: str) -> bool:
+    """Whether a CSV field (surrounding blanks ignored) is a number as the CSV reader takes
+    it: decimal or scientific notation, or nan/inf."""
+    return _NUMBER.fullmatch(field.strip()) is not None
+
+
+MAX_EXACT_INTEGER = 2**53
+"""Largest integer magnitude a float64 holds exactly; larger run ids or integer values are
+refused rather than rounded."""
+
+
+def checked_column(name: str, value) -> np.ndarray:
+    """One column as a new array: float64 (``run``: int64; an extra column: float64 or text),
+    or a `ValueError` naming the column, the row and the expected form."""
+    arr = np.asarray(value)
+    if arr.ndim != 1:
+        raise ValueError(f"column {name!r} must be 1-D (one value per row); got shape {arr.shape}")
+    unit = unit_hint(name)
+    kind = arr.dtype.kind
+    if kind in "Mm":
+        example = ", e.g. (t - t[0]) / np.timedelta64(1, 's')" if name == "time_s" else ""
+        raise ValueError(
+            f"column {name!r} holds {arr.dtype} values (dates or durations); give plain "
+            f"numbers in {unit}{example}"
+        )
+    if kind == "c":
+        raise ValueError(f"column {name!r} holds complex numbers; give real numbers in {unit}")
+    if kind == "b":
+        raise ValueError(
+            f"column {name!r} holds booleans; give numbers in {unit} (e.g. x.astype(float))"
+        )
+    if kind == "O":
+        arr = _from_objects(name, arr, unit)
+        kind = arr.dtype.kind
+    if kind == "S":  # bytes (a NetCDF char array): text, if it is UTF-8
+        try:
+            arr = np.char.decode(arr, "utf-8")
+        except UnicodeDecodeError:
+            raise ValueError(f"column {name!r} holds bytes that are not UTF-8 text") from None
+        kind = "U"
+    if kind in "US":
+        if name in COLUMNS:
+            bad = np.flatnonzero(_not_number(arr))
+            i = int(bad[0]) if bad.size else 0
+            raise ValueError(
+                f"column {name!r} must hold numbers in {unit}; row {i} has {arr[i]!r} (text)"
+            )
+        return np.array(arr, dtype=str)  # an extra text column, kept as text
+    if kind in "iu":
+        if name == "run":
+            top = np.iinfo(np.int64).max
+            if kind == "u" and np.any(arr > top):
+                i = int(np.flatnonzero(arr > top)[0])
+                raise ValueError(
+                    f"column 'run' row {i}: {arr[i]} exceeds the int64 range of run ids"
+                )
+            return arr.astype(np.int64)
+        big = np.flatnonzero((arr > MAX_EXACT_INTEGER) | (arr < -MAX_EXACT_INTEGER))
+        if big.size:
+            i = int(big[0])
+            raise ValueError(
+                f"column {name!r} row {i}: the integer {arr[i]} is too large to hold exactly as "
+                "a float64 (|x| > 2**53); give it as a float if rounding is intended"
+            )
+        return arr.astype(float)
+    if kind != "f":
+        raise ValueError(f"column {name!r} must hold numbers in {unit}; got dtype {arr.dtype}")
+    farr = arr.astype(float)
+    bad = np.flatnonzero(~np.isfinite(farr))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"column {name!r} has a non-finite value ({farr[i]}) at row {i}")
+    if name == "run":
+        frac = np.flatnonzero(farr != np.round(farr))
+        if frac.size:
+            i = int(frac[0])
+            raise ValueError(f"column 'run' must hold integers; row {i} has {farr[i]}")
+        big = np.flatnonzero(np.abs(farr) > MAX_EXACT_INTEGER)
+        if big.size:
+            i = int(big[0])
+            raise ValueError(
+                f"column 'run' row {i}: {farr[i]:.17g} is beyond 2**53, where floats no longer "
+                "hold every integer; give run ids as integers (int64) or smaller numbers"
+            )
+        return farr.astype(np.int64)
+    return farr
+
+
+def _from_objects(name: str, arr: np.ndarray, unit: str) -> np.ndarray:
+    """An object column (e.g. from pandas) as numbers or text, refusing a mixture."""
+    items = arr.tolist()
+    if all(isinstance(v, str) for v in items):
+        return np.array(items, dtype=str)
+    if all(isinstance(v, bytes) for v in items):
+        return np.array(items, dtype=bytes)  # decoded as UTF-8 by the caller
+    for i, v in enumerate(items):
+        if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
+            raise ValueError(
+                f"column {name!r} must hold numbers in {unit}; row {i} has {v!r} "
+                f"({type(v).__name__})"
+            )
+    if all(isinstance(v, numbers.Integral) for v in items):
+        try:
+            return np.array(items, dtype=np.int64)  # checked for exactness by the caller
+        except OverflowError:
+            i = next(i for i, v in enumerate(items) if abs(int(v)) > np.iinfo(np.int64).max)
+            raise ValueError(
+                f"column {name!r} row {i}: the integer {items[i]} exceeds the int64 range"
+            ) from None
+    return np.array(items, dtype=float)
+
+
+def _not_number(arr: np.ndarray) -> np.ndarray:
+    return np.array([_NUMBER.fullmatch(str(v).strip()) is None for v in arr], dtype=bool)
+
+
+def unit_hint(name: str) -> str:
+    """The unit of column `name` as error messages give it ("[°/s]", "[integer id]", or "the
+    column's unit" for a column without one)."""
+    if name == "run":
+        return "[integer id]"
+    meaning = COLUMNS.get(name)
+    if meaning is None or "[" not in meaning:
+        return "the column's unit"
+    return meaning[meaning.rindex("[") : meaning.rindex("]") + 1]
+
+
+def check_time(t: np.ndarray, run: np.ndarray) -> None:
+    """Time strictly increases within every run, wherever the run's rows are."""
+    order = np.argsort(run, kind="stable")
+    same = run[order][1:] == run[order][:-1]
+    bad = np.flatnonzero(same & (np.diff(t[order]) <= 0))
+    if bad.size:
+        i, j = int(order[bad[0] + 1]), int(order[bad[0]])
+        what = "duplicate time stamp" if t[i] == t[j] else "time goes backwards"
+        raise ValueError(
+            f"column 'time_s' must strictly increase within a run; row {i} (time {t[i]}, run "
+            f"{run[i]}) does not follow row {j} (time {t[j]}), the run's previous row — {what}"
+        )
