@@ -22,7 +22,8 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q -n auto --dist loadfile --durations=20
 
 # Every python block of docs/ at the size the page shows, the compile-bound ones included
-# (make test runs them at reduced sizes and lists the compile-bound ones as skipped).
+# (make test runs the light pages at reduced sizes, compiles the heavy pages' blocks as Python
+# and lists the compile-bound ones as skipped). Run it before a change to docs/ lands.
 docs-test: $(STAMP)
 	HRGJAX_DOCS_FULL=1 $(BIN)/python -m pytest -q tests/test_docs_examples.py
 

@@ -7,7 +7,8 @@ reader brings (`bench.csv`, `session.csv`), a short setup step — run in the sa
 before that block, shown in the failure message — writes one. Where a page's example is
 slow, the run shrinks its sizes by the literal replacements in `QUICK` below; each must
 still match the page (a test checks), so the examples cannot drift away from what is run.
-`HRGJAX_DOCS_FULL=1` runs every page exactly as written.
+`HRGJAX_DOCS_FULL=1` runs every page exactly as written. The pages in `HEAVY_PAGES` (a run
+that is mostly compiling) run only then; by default their blocks are compiled as Python.
 
 A block is left out only with an HTML comment directly above it: `<!-- docs-test: skip —
 why -->` (never run here: the reason names the test that runs the same thing) or
@@ -184,8 +185,39 @@ def test_full_only_blocks_run_with_HRGJAX_DOCS_FULL(page, line, why):
     assert any(b["line"] == line for b in _script(page))
 
 
+# Pages whose run is mostly compiling (each in a fresh process): they run with
+# HRGJAX_DOCS_FULL=1 (`make docs-test`), as the compile-bound blocks do, and the default run
+# compiles their code (test_every_block_is_python) and tests the same calls in the modules
+# named. Seconds: one page's run on the 2-core machine, four helpers beside it (2026-11-26).
+HEAVY_PAGES = {
+    "discovery.md": "260 s; tests/test_discovery_*.py, test_cli.py::test_discover_*",
+    "fog.md": "156 s; tests/test_fog.py",
+    "simulate.md": "150 s; tests/test_resonator_*.py, test_convergence.py, test_cli.py",
+    "design.md": "145 s; tests/test_design*.py",
+    "resonator.md": "143 s; tests/test_resonator_*.py, test_carrier.py",
+    "calibration.md": "136 s; tests/test_calibration.py, test_session.py, test_cli.py",
+    "diagnosis.md": "129 s; tests/test_diagnosis*.py",
+    "ins.md": "125 s; tests/test_ins_*.py, test_kalman.py",
+    "scaling.md": "111 s; tests/test_convergence.py, test_cache.py",
+}
+
+
+def test_every_block_is_python():
+    """Every block of every page, as the run would execute it (QUICK sizes, SETUP steps),
+    compiles as Python: a heavy page left to `make docs-test` cannot rot into a syntax
+    error unseen, and HEAVY_PAGES names only pages that exist."""
+    assert set(HEAVY_PAGES) <= set(PAGES), set(HEAVY_PAGES) - set(PAGES)
+    for name in PAGES:
+        for b in _script(name):
+            compile("\n" * (b["line"] - 1) + b["code"], b["file"], "exec")
+
+
 @pytest.mark.parametrize("page", PAGES)
 def test_docs_page_runs(page, tmp_path, _run_compile_cache):
+    if page in HEAVY_PAGES and not FULL:
+        pytest.skip(
+            f"docs/{page} runs with HRGJAX_DOCS_FULL=1 (make docs-test): {HEAVY_PAGES[page]}"
+        )
     (tmp_path / "out").mkdir()
     (tmp_path / "tests").mkdir()
     (tmp_path / "tests" / "data").symlink_to(ROOT / "tests" / "data")
