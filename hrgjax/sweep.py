@@ -84,7 +84,7 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
     if not (cost is None or callable(cost) or (isinstance(cost, str) and cost == "auto")):
         raise ValueError(f'cost must be "auto", None or a callable cost(**point); got {cost!r}')
     n_proc, rank = jax.process_count(), jax.process_index()
-    costs = _costs(fn, cost, flat)  # the same on every process
+    costs = member_costs(fn, cost, flat)  # the same on every process
     devices = jax.local_devices()
     if costs is not None:
         order = np.argsort(costs, kind="stable")
@@ -126,8 +126,15 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
     return jax.tree_util.tree_map(lambda x: x[:total].reshape(shape + x.shape[1:]), out)
 
 
-def _costs(fn, cost, flat):
-    """Estimated cost of every flat point (NumPy), or None to keep the grid order."""
+def member_costs(fn, cost, flat: dict) -> np.ndarray | None:
+    """The estimated cost of every point of a flattened grid, as `sweep` orders them.
+
+    **Arguments:** `fn` as `sweep`'s; `cost` as `sweep`'s (`"auto"`: the solver steps each
+    `simulate` call inside `fn` is estimated to take, `hrgjax._cost.steps_estimate`; a
+    callable of the point's named values; None); `flat`: name → 1-D array of every point.
+
+    **Returns:** one number per point (NumPy, relative units), or None to keep the grid order
+    (no cost asked for, or `fn` reaches no `simulate`)."""
     if cost is None:
         return None
     if callable(cost):
