@@ -192,13 +192,13 @@ def test_full_only_blocks_run_with_HRGJAX_DOCS_FULL(page, line, why):
 HEAVY_PAGES = {
     "discovery.md": "260 s; tests/test_discovery_*.py, test_cli.py::test_discover_*",
     "fog.md": "156 s; tests/test_fog.py",
-    "simulate.md": "150 s; tests/test_resonator_*.py, test_convergence.py, test_cli.py",
+    "simulate.md": "150 s; tests/test_resonator_*.py, test_sweep.py, test_cli.py",
     "design.md": "145 s; tests/test_design*.py",
     "resonator.md": "143 s; tests/test_resonator_*.py, test_carrier.py",
     "calibration.md": "136 s; tests/test_calibration.py, test_session.py, test_cli.py",
     "diagnosis.md": "129 s; tests/test_diagnosis*.py",
     "ins.md": "125 s; tests/test_ins_*.py, test_kalman.py",
-    "scaling.md": "111 s; tests/test_convergence.py, test_cache.py",
+    "scaling.md": "111 s; tests/test_sweep.py, test_cache.py",
 }
 
 
