@@ -460,23 +460,10 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
             "model (or another solver) a step in seconds"
         )
     dt0 = fixed_step if fixed_step is not None else (1e-2 if model == "averaged" else 1e-5)
+    stepping = (solver, rtol, atol, max_steps, dt0, fixed_step is not None)
+    quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
     return _solve(
-        model,
-        gyro,
-        profile,
-        ts,
-        solver,
-        rtol,
-        atol,
-        max_steps,
-        dt0,
-        fixed_step is not None,
-        jnp.asarray(quadrature0, dtype=float),
-        adjoint,
-        key,
-        bias_key,
-        jnp.asarray(o["run"]),
-        carrier,
+        model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run, carrier
     )
 
 

@@ -209,14 +209,17 @@ def _interval_rates(comp, theta_mid, theta_dot, temperature_mid, temperature_dot
     return jax.vmap(comp.corrected_rate)(theta_mid, theta_dot, temperature_mid, temperature_dot)
 
 
-def as_windows(data, k_e: float, window_s: float | None = WINDOW_S) -> RateWindows:
-    """Accept bench data or already reduced windows (checked for the same k_e)."""
+def as_windows(
+    data, k_e: float, window_s: float | None = WINDOW_S, ramp_window_s: float | None = None
+) -> RateWindows:
+    """Accept bench data (reduced with `window_s`, `ramp_window_s`) or already reduced
+    windows (checked for the same k_e)."""
     if isinstance(data, RateWindows):
         if data.k_e != k_e:
             raise ValueError(f"windows were reduced with k_e = {data.k_e}, compensator has {k_e}")
         return data
     if isinstance(data, MeasuredData):
-        return reduce(data, k_e, window_s=window_s)
+        return reduce(data, k_e, window_s=window_s, ramp_window_s=ramp_window_s)
     raise TypeError(f"expected MeasuredData or RateWindows; got {type(data).__name__}")
 
 
@@ -235,3 +238,8 @@ def split_targets(windows: RateWindows):
             "factor cannot be fitted; add rotation runs (e.g. calibration.rotation_plan)"
         )
     return static, moving
+
+
+def fit_windows(data, k_e: float, window_s: float | None, ramp_window_s: float | None = None):
+    """`split_targets(as_windows(…))`: the static and moving windows a `fit` works on."""
+    return split_targets(as_windows(data, k_e, window_s, ramp_window_s))

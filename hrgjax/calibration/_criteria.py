@@ -35,6 +35,16 @@ OPERATING_ANGLES = tuple(float(a) for a in range(-90, 91, 5))
 """Wave angles of its operating grid [° electrical] (the seed's 5° test steps)."""
 
 
+def _inputs(plan, values, arw, gauss_markov, angle_white, model):
+    """What every public criterion starts from: the model (`as_model`), its values, the
+    noise vector and `plan`'s information source with its panels."""
+    model = as_model(model)
+    values = model_values(values, model)
+    noise = noise_vector(arw, gauss_markov, angle_white)
+    source, panels = information_source(plan, values, noise, model)
+    return model, values, noise, source, panels
+
+
 def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
                 temperatures_c=OPERATING_TEMPERATURES, angles_deg=OPERATING_ANGLES,
                 gauss_markov=None, angle_white=None, model=None):  # fmt: skip
@@ -42,10 +52,8 @@ def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100
     RMS over the operating grid (`temperatures_c` × `angles_deg`): √(mean hᵀ C h) with
     h = ∂(static drift)/∂values and C the posterior covariance (noise arguments and `model`
     as [`information`][hrgjax.calibration.design.information])."""
-    model = as_model(model)
-    values = model_values(values, model)
-    source, panels = information_source(
-        plan, values, noise := noise_vector(arw, gauss_markov, angle_white), model
+    model, values, noise, source, panels = _inputs(
+        plan, values, arw, gauss_markov, angle_white, model
     )
     return _drift_error(source, values, noise, prior_scale, temperatures_c, angles_deg, model,
                         panels)  # fmt: skip
@@ -111,10 +119,8 @@ def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0
     ([`ins_impact`][hrgjax.calibration.ins_impact.ins_impact] keeps both), and model error
     outside the grey box's family."""
     require_x64("hrgjax.calibration.design.ins_error")
-    model = as_model(model)
-    values = model_values(values, model)
-    source, panels = information_source(
-        plan, values, noise := noise_vector(arw, gauss_markov, angle_white), model
+    model, values, noise, source, panels = _inputs(
+        plan, values, arw, gauss_markov, angle_white, model
     )
     return _ins_error(source, values, noise, float(prior_scale), as_flights(flight), model, panels)
 
@@ -179,10 +185,8 @@ def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 10
     warm-up, before any Schuler dynamics. Noise arguments and `model` as
     [`information`][hrgjax.calibration.design.information]."""
     require_x64("hrgjax.calibration.design.warmup_error")
-    model = as_model(model)
-    values = model_values(values, model)
-    source, panels = information_source(
-        plan, values, noise := noise_vector(arw, gauss_markov, angle_white), model
+    model, values, noise, source, panels = _inputs(
+        plan, values, arw, gauss_markov, angle_white, model
     )
     flights = as_flights(flight)
     return _warmup_error(source, values, noise, float(prior_scale), flights, model, panels)
@@ -216,10 +220,8 @@ def drift_warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: floa
     temperatures and rates of change a warm-up passes through. Arguments as `ins_error`;
     `terms=True` returns `(total [°], drift [°/h], warm-up [°])` from one compiled program."""
     require_x64("hrgjax.calibration.design.drift_warmup_error")
-    model = as_model(model)
-    values = model_values(values, model)
-    source, panels = information_source(
-        plan, values, noise := noise_vector(arw, gauss_markov, angle_white), model
+    model, values, noise, source, panels = _inputs(
+        plan, values, arw, gauss_markov, angle_white, model
     )
     flights = as_flights(flight)
     out = _drift_warmup_terms(source, values, noise, float(prior_scale), flights, model, panels)
@@ -259,10 +261,9 @@ def criterion(plan: BenchPlan, kind: str = "drift+warmup", values=None, arw=None
     the calibration fits: `MODELS`) as [`information`][hrgjax.calibration.design.information]."""
     if kind not in CRITERIA:
         raise ValueError(f"criterion kind must be one of {CRITERIA}; got {kind!r}")
-    model = as_model(model)
-    values = model_values(values, model)
-    noise = noise_vector(arw, gauss_markov, angle_white)
-    source, panels = information_source(plan, values, noise, model)
+    model, values, noise, source, panels = _inputs(
+        plan, values, arw, gauss_markov, angle_white, model
+    )
     flights = as_flights(flight)
     return evaluate_criterion(source, kind, values, noise, float(prior_scale), flights, model,
                               panels)  # fmt: skip

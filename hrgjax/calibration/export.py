@@ -34,26 +34,23 @@ _CLASSES = {
 }
 
 
+_HYPER_FIELDS = {
+    FourierCompensator: ("harmonics", "temperature_degree", "fit_temperature_c", "tolerance_c", "k_e"),
+    MLPCompensator: (
+        "drift_width", "sf_width", "encoding", "steps", "learning_rate", "bin_deg", "e2e_steps", "k_e"
+    ),
+}  # fmt: skip
+"""The fields that `_hyper` saves, in this order, of the compensators whose hyperparameters
+are plain fields."""
+
+
 def _hyper(comp) -> dict:
-    if isinstance(comp, FourierCompensator):
-        return {
-            "harmonics": comp.harmonics,
-            "temperature_degree": comp.temperature_degree,
-            "fit_temperature_c": comp.fit_temperature_c,
-            "tolerance_c": comp.tolerance_c,
-            "k_e": comp.k_e,
-        }
-    if isinstance(comp, MLPCompensator):
-        return {
-            "drift_width": comp.drift_width,
-            "sf_width": comp.sf_width,
-            "encoding": comp.encoding,
-            "steps": comp.steps,
-            "learning_rate": comp.learning_rate,
-            "bin_deg": comp.bin_deg,
-            "e2e_steps": comp.e2e_steps,
-            "k_e": comp.k_e,
-        } | ({"st_width": comp.st_width} if comp.st_width else {})
+    for cls, names in _HYPER_FIELDS.items():
+        if isinstance(comp, cls):
+            hyper = {name: getattr(comp, name) for name in names}
+            if cls is MLPCompensator and comp.st_width:
+                hyper["st_width"] = comp.st_width
+            return hyper
     if isinstance(comp, PhysicalCompensator):
         return {
             "k_e": comp.k_e,

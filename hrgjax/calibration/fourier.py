@@ -19,14 +19,7 @@ import numpy as np
 from .._compiled import device
 from ..data import MeasuredData
 from ..units import DEG, T_REF_C
-from ._compensator import (
-    FROM_FIELD,
-    AbstractCompensator,
-    FromField,
-    as_windows,
-    setting,
-    split_targets,
-)
+from ._compensator import FROM_FIELD, AbstractCompensator, FromField, fit_windows, setting
 from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows
 
 T_SCALE = 50.0
@@ -133,7 +126,7 @@ class FourierCompensator(AbstractCompensator):
         temperature (base algorithm), or with fewer points than coefficients.
         """
         window_s = setting(self, "window_s", window_s)
-        static, moving = split_targets(as_windows(data, self.k_e, window_s))
+        static, moving = fit_windows(data, self.k_e, window_s)
         if self.temperature_degree is None:
             static = _near(static, self.fit_temperature_c, self.tolerance_c, "static")
             moving = _near(moving, self.fit_temperature_c, self.tolerance_c, "rotation")

@@ -38,15 +38,8 @@ from .._compiled import device, program
 from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
-from ._compensator import (
-    FROM_FIELD,
-    AbstractCompensator,
-    FromField,
-    as_windows,
-    setting,
-    split_targets,
-)
-from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, reduce
+from ._compensator import FROM_FIELD, AbstractCompensator, FromField, fit_windows, setting
+from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows
 
 ENCODINGS = ("periodic", "angle")
 MODES = ("reduced", "end_to_end")
@@ -211,11 +204,8 @@ class MLPCompensator(AbstractCompensator):
                 self, mode=setting(self, "mode", mode), window_s=setting(self, "window_s", window_s)
             )
         mode, window_s = self.mode, self.window_s
-        if self.st_width and isinstance(data, MeasuredData):
-            windows = reduce(data, self.k_e, window_s=window_s, ramp_window_s=RAMP_WINDOW_S)
-        else:
-            windows = as_windows(data, self.k_e, window_s)
-        static, moving = split_targets(windows)
+        ramp_window_s = RAMP_WINDOW_S if self.st_width else None
+        static, moving = fit_windows(data, self.k_e, window_s, ramp_window_s)
         u = _ramp_rates(static) if self.st_width else None
         comp = self.init(key)
         temps = np.concatenate([static.temperature_c, moving.temperature_c])
