@@ -27,7 +27,7 @@ from _common import machine  # noqa: E402
 
 import hrgjax as hg  # noqa: E402
 from hrgjax import _cost  # noqa: E402
-from hrgjax.sweep import _costs  # noqa: E402
+from hrgjax.sweep import member_costs  # noqa: E402
 
 DURATION_S = 60.0
 
@@ -59,7 +59,7 @@ def main(quick: bool, repeat: int):
     t_auto, out_auto = timed(lambda: hg.sweep(f, temperature_c=temps, rate_dps=rates))
     # the chunk size auto chose, from the same estimates
     tt, ww = (np.asarray(m).ravel() for m in np.meshgrid(temps, rates, indexing="ij"))
-    costs = _costs(f, "auto", {"temperature_c": jnp.asarray(tt), "rate_dps": jnp.asarray(ww)})
+    costs = member_costs(f, "auto", {"temperature_c": jnp.asarray(tt), "rate_dps": jnp.asarray(ww)})
     devices = jax.local_devices()
     _, chunk = _cost.plan(costs, len(devices), devices[0].platform)
     # by hand: sorted by rate, chunks of the same size, each a jit(vmap) of the chunk

@@ -33,7 +33,3 @@ from .uncertainty import confidence_interval as confidence_interval
 from .uncertainty import edf_greenhall as edf_greenhall
 from .uncertainty import edf_totdev as edf_totdev
 from .uncertainty import noise_id as noise_id
-
-_KINDS = {f.__name__: f for f in (adev, oadev, mdev, hdev, ohdev, totdev)}
-"""The single-factor estimators by kind, as `hrgjax.allan._KINDS` was before the split
-(benchmarks/latency.py compares the compiled curve with them)."""
