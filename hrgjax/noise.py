@@ -5,6 +5,11 @@ cause them); the simulator maps them to the wave angle through $\dot\theta = -k_
 They are superposed on the deterministic solution (first order in the noise: the drift
 laws change by ~1e-5 rad/s per rad of wave angle, so noise-sized angle offsets do not alter
 them measurably).
+
+The same noise on the measured pattern (electrical) angle — the rate parts × k_e, its
+second moments and its estimation from data — is
+[`NoiseModel`][hrgjax.pattern_noise.NoiseModel] (`NoiseModel.from_gyro(noise, k_e)`),
+which the bench design and the discovery share.
 """
 
 from __future__ import annotations

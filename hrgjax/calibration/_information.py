@@ -13,6 +13,7 @@ import numpy as np
 from .._checks import concrete_value, is_concrete
 from .._compiled import device
 from .._x64 import require_x64
+from ..pattern_noise import gauss_markov_mean_factor, slope_variance
 from ..units import DEG, DEG_PER_S
 from ._models import GREY_BOX, as_model, model_values, noise_vector
 from ._plan import DT_OUT, BenchPlan
@@ -26,25 +27,24 @@ def window_density(arw, angle_white, samples, dt, length_s):
     window of n = `samples` samples spaced Δt = `dt` [s] has least-squares slope variance
     6(n² + 1)/(5n(n² − 1)) · N²/Δt (random walk of density N = `arw` [rad/√s]; → 6/5 of a
     mean rate's N²/(nΔt) for long windows) + 12 σ_a²/(Δt² n(n² − 1)) (white angle noise
-    σ_a = `angle_white` [rad per sample]), both exact; × the length of segment the window
-    stands for (`length_s` [s]: nΔt for consecutive windows, the duration for a static
-    segment's one window), the density a continuous observation of the rate with the same
-    information would have."""
-    n = samples
-    m = n * (n**2 - 1.0)
-    var = 6.0 * (n**2 + 1.0) / (5.0 * m) * arw**2 / dt + 12.0 * angle_white**2 / (dt**2 * m)
-    return jnp.sqrt(var * length_s)
+    σ_a = `angle_white` [rad per sample]), both exact — the pattern noise model's
+    [`slope_variance`][hrgjax.pattern_noise.slope_variance] —; × the length of segment the
+    window stands for (`length_s` [s]: nΔt for consecutive windows, the duration for a
+    static segment's one window), the density a continuous observation of the rate with the
+    same information would have."""
+    return jnp.sqrt(slope_variance(angle_white, arw, samples, dt) * length_s)
 
 
 def gauss_markov_discount(duration_s, arw, sigma, tau):
     """Share of a segment's white-noise information left by a Gauss–Markov rate:
     (N²/D) / (N²/D + V(D)), with V(D) = 2σ²τ/D · (1 − (τ/D)(1 − e^(−D/τ))) the variance of
-    the GM rate's mean over the segment's duration D [s] (N [rad/√s], σ [rad/s], τ [s]).
+    the GM rate's mean over the segment's duration D [s] (N [rad/√s], σ [rad/s], τ [s]) —
+    the pattern noise model's
+    [`gauss_markov_mean_variance`][hrgjax.pattern_noise.gauss_markov_mean_variance].
     Exact for the mean rate of a static segment; for a rotation it treats the GM rate as an
     extra error of each parameter's segment-average, which is what a slow bias is."""
-    x = duration_s / tau
-    # D·V/N² = 2σ²τ/N² · (1 − (1 − e^−x)/x), written with expm1 for short segments
-    excess = 2.0 * sigma**2 * tau / arw**2 * (1.0 + jnp.expm1(-x) / x)
+    # D·V/N² = 2σ²τ/N² · (1 − (1 − e^−x)/x), x = D/τ (`gauss_markov_mean_factor`: expm1)
+    excess = 2.0 * sigma**2 * tau / arw**2 * gauss_markov_mean_factor(duration_s / tau)
     return 1.0 / (1.0 + excess)
 
 

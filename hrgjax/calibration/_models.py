@@ -11,6 +11,7 @@ import numpy as np
 
 from .._checks import is_concrete
 from ..gyro import Gyro
+from ..pattern_noise import NoiseModel
 from ..profiles import Profile
 from ..units import DEG_PER_H, K_E_NOMINAL
 
@@ -61,35 +62,47 @@ def _noisy(gyro: Gyro | None) -> tuple[Gyro, float]:
     return g, float(_coefficients(g.resonator.k_e)[0])
 
 
+def pattern_noise_model(gyro: Gyro | None = None) -> NoiseModel:
+    """The noise on `gyro`'s measured pattern angle (default `presets.tvg3_like()`): its
+    [`NoiseModel.from_gyro`][hrgjax.pattern_noise.NoiseModel.from_gyro] with the k_e of its
+    law at the reference temperature — the model the discovery uses for a known gyro."""
+    g, k_e = _noisy(gyro)
+    return NoiseModel.from_gyro(g.noise, k_e)
+
+
 def pattern_arw(gyro: Gyro | None = None) -> float:
     """Angle random walk of the measured pattern angle [rad/√s]: k_e × the gyro's ARW
-    (default gyro: 0.554 × 0.002 °/√h)."""
-    g, k_e = _noisy(gyro)
-    return k_e * float(g.noise.angle_random_walk)
+    (`pattern_noise_model(gyro).angle_random_walk`; default gyro: 0.554 × 0.002 °/√h)."""
+    return pattern_noise_model(gyro).angle_random_walk
 
 
 def pattern_gauss_markov(gyro: Gyro | None = None) -> tuple[float, float]:
     """The gyro's Gauss–Markov rate (bias instability) on the measured pattern angle:
-    (σ [rad/s] = k_e × `noise.bias_instability`, correlation time [s]); default gyro:
-    0.554 × 0.003 °/h, 600 s."""
-    g, k_e = _noisy(gyro)
-    return k_e * float(g.noise.bias_instability), float(g.noise.correlation_time)
+    (σ [rad/s] = k_e × `noise.bias_instability`, correlation time [s]) —
+    `pattern_noise_model(gyro)`'s (`gm_sigma`, `gm_time`); default gyro: 0.554 × 0.003 °/h,
+    600 s."""
+    model = pattern_noise_model(gyro)
+    return model.gm_sigma, model.gm_time
 
 
 def pattern_angle_white(gyro: Gyro | None = None) -> float:
     """White readout noise on the measured pattern angle [rad per sample]: the gyro's
-    `noise.angle_white` (default gyro: 1″)."""
-    g, _ = _noisy(gyro)
-    return float(g.noise.angle_white)
+    `noise.angle_white` (`pattern_noise_model(gyro).angle_white`; default gyro: 1″)."""
+    return pattern_noise_model(gyro).angle_white
 
 
 def noise_vector(arw, gauss_markov, angle_white=None) -> jax.Array:
     """The design's noise vector [N, σ, τ, σ_a]: pattern ARW [rad/√s], Gauss–Markov σ
-    [rad/s] and correlation time [s], white angle noise [rad per sample] (defaults: the
-    default gyro's)."""
-    arw = pattern_arw() if arw is None else arw
-    sigma, tau = pattern_gauss_markov() if gauss_markov is None else gauss_markov
-    angle_white = pattern_angle_white() if angle_white is None else angle_white
+    [rad/s] and correlation time [s], white angle noise [rad per sample] — the fields of a
+    [`NoiseModel`][hrgjax.pattern_noise.NoiseModel] as (possibly traced) numbers (defaults:
+    the default gyro's, `pattern_noise_model()`)."""
+    if arw is None or gauss_markov is None or angle_white is None:
+        default = pattern_noise_model()
+        arw = default.angle_random_walk if arw is None else arw
+        if gauss_markov is None:
+            gauss_markov = (default.gm_sigma, default.gm_time)
+        angle_white = default.angle_white if angle_white is None else angle_white
+    sigma, tau = gauss_markov
     concrete = all(is_concrete(x) for x in (arw, sigma, tau, angle_white))
     if concrete and not (
         float(arw) > 0 and float(sigma) >= 0 and float(tau) > 0 and float(angle_white) >= 0

@@ -304,7 +304,7 @@ def _sigma_dph(sigma, mask, k_e):
 
 def _noise_scale(data: MeasuredData, w: RateWindows, k_e):
     """Standard error of each window's pattern rate [rad/s]: the exact least-squares slope
-    error under the data's [`NoiseModel`][hrgjax.discovery.noise.NoiseModel] (estimated from
+    error under the data's [`NoiseModel`][hrgjax.pattern_noise.NoiseModel] (estimated from
     its still stretches); without a still stretch, the windows' batch-means errors.
 
     **Returns:** (σ per window, the noise model or None)."""

@@ -4,7 +4,7 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
 
 1. **Split** by run: every `holdout_every`-th run is held out (never split within a run).
 2. **Noise model first**, before any drift model: one
-   [`NoiseModel`][hrgjax.discovery.noise.NoiseModel] (white angle noise, angle random walk,
+   [`NoiseModel`][hrgjax.pattern_noise.NoiseModel] (white angle noise, angle random walk,
    a Gauss–Markov rate where the data can show it) estimated from every still stretch of the
    log ([`noise_model`][hrgjax.discovery.noise.noise_model]) gives every window's standard
    error and every continuous record's whitening, so the tests are in whitened units.

@@ -1,0 +1,315 @@
+r"""The noise on a whole-angle gyro's measured *pattern* (electrical) wave angle: white angle
+noise, angle random walk, a first-order Gauss–Markov rate and a run-to-run bias — one model,
+[`NoiseModel`][hrgjax.pattern_noise.NoiseModel], for the calibration's bench design and the
+discovery's search alike.
+
+Everything is in pattern-angle units (electrical): σ_w [rad], N [rad/√s], σ_GM [rad/s],
+T_c [s], σ_b [rad/s]. A known gyro's [`hrgjax.Noise`][] (equivalent input rate) gives it
+through [`NoiseModel.from_gyro`][hrgjax.pattern_noise.NoiseModel.from_gyro] (the rate parts
+× the angular gain k_e); measured data give it through
+[`NoiseModel.estimate`][hrgjax.pattern_noise.NoiseModel.estimate], which reads every stretch
+of a log where the table is still and the temperature holds (the static dwells of a bench
+grid, the holds of a continuous record, both in a mixed log). Its second moments:
+
+- the **least-squares slope** of a window of samples
+  ([`slope_sigma`][hrgjax.pattern_noise.NoiseModel.slope_sigma]; for n equally spaced samples
+  without the Gauss–Markov part, the closed form
+  [`slope_variance`][hrgjax.pattern_noise.slope_variance]);
+- the **mean of the Gauss–Markov rate** over a segment
+  ([`gauss_markov_mean_variance`][hrgjax.pattern_noise.gauss_markov_mean_variance]);
+- the **block increments** of continuous records
+  ([`increment_covariance`][hrgjax.pattern_noise.NoiseModel.increment_covariance]);
+- the **lag-τ second differences** the estimator fits
+  ([`d2_variance`][hrgjax.pattern_noise.NoiseModel.d2_variance]).
+
+The module-level closed forms are arithmetic (and `expm1`) on their arguments: NumPy floats
+give NumPy floats, (traced) JAX arrays give JAX arrays — the bench design's Fisher
+information uses them under `jax.jit` and `jax.grad`.
+
+Angle covariance under the model (times from a stretch's start, $s, t \ge 0$):
+
+$$C(s,t) = \sigma_w^2\delta_{st} + N^2\min(s,t)
+  + \sigma^2T_c\bigl[s + t - |s-t| - T_c(1 - e^{-s/T_c} - e^{-t/T_c} + e^{-|s-t|/T_c})\bigr].$$
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._nnls import nnls as _nnls
+from .units import DEG, DEG_PER_H
+
+if TYPE_CHECKING:
+    from .data import MeasuredData
+
+GM_TIMES = (30.0, 100.0, 300.0, 1000.0, 3000.0)
+"""Correlation times tried for the Gauss–Markov part of the noise model [s]."""
+MIN_STRETCH = 16
+"""Fewest samples of a still stretch that the estimator uses."""
+TEMPERATURE_TOLERANCE_C = 0.1
+"""A still stretch's temperature stays within this of its first sample [°C] (a measured
+temperature's sensor noise does not cut a static dwell into pieces; a ramp does)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class NoiseModel:
+    """The noise of a whole-angle gyro's measured wave angle, in pattern-angle units.
+
+    **Fields:** `angle_white` σ_w [rad per sample], `angle_random_walk` N [rad/√s],
+    `gm_sigma` σ_GM [rad/s] and `gm_time` T_c [s] of a Gauss–Markov rate, `run_bias` σ_b
+    [rad/s] (spread of a constant rate per switch-on). All electrical pattern angle: divide
+    rates by the angular gain k_e for input rate
+    ([`from_gyro`][hrgjax.pattern_noise.NoiseModel.from_gyro] multiplies a gyro's by it).
+    """
+
+    angle_white: float
+    angle_random_walk: float = 0.0
+    gm_sigma: float = 0.0
+    gm_time: float = 100.0
+    run_bias: float = 0.0
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"NoiseModel.{f.name} must be a finite number ≥ 0; got {v!r}")
+        if self.gm_time <= 0:
+            raise ValueError(f"NoiseModel.gm_time must be > 0 [s]; got {self.gm_time!r}")
+
+    def replace(self, **changes) -> NoiseModel:
+        """A copy with `changes` (this one is left as it is)."""
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_gyro(cls, noise, k_e: float) -> NoiseModel:
+        """The model of a known [`hrgjax.Noise`][]: its equivalent-input-rate parts scaled by
+        the angular gain `k_e` to pattern-angle units (σ_w as it is: it is already on the
+        measured angle; `amplitude_white` is not part of the angle's noise). The one
+        conversion: the bench design's noise (`calibration.design.pattern_arw`, …) and the
+        discovery's known noise both read it."""
+        return cls(
+            angle_white=float(noise.angle_white),
+            angle_random_walk=k_e * float(noise.angle_random_walk),
+            gm_sigma=k_e * float(noise.bias_instability),
+            gm_time=float(noise.correlation_time),
+            run_bias=k_e * float(noise.run_bias),
+        )
+
+    # -- second moments -------------------------------------------------------
+    def angle_covariance(self, t) -> np.ndarray:
+        """Covariance (n, n) [rad²] of the measured angle at times `t` [s] of one stretch
+        (white + ARW + Gauss–Markov; the run bias is a constant rate, left to the fits)."""
+        t = np.asarray(t, float)
+        s = t - t[0]
+        a, b = s[:, None], s[None, :]
+        cov = self.angle_white**2 * np.eye(s.size) + self.angle_random_walk**2 * np.minimum(a, b)
+        if self.gm_sigma > 0:
+            tc = self.gm_time
+            d = np.abs(a - b)
+            cov = cov + self.gm_sigma**2 * tc * (
+                a + b - d - tc * (1 - np.exp(-a / tc) - np.exp(-b / tc) + np.exp(-d / tc))
+            )
+        return cov
+
+    def slope_sigma(self, t) -> float:
+        """Standard error [rad/s] of the least-squares slope of the angle sampled at `t` [s]:
+        $\\sqrt{w^\\top C w}$ with $w = (t-\\bar t)/\\sum(t-\\bar t)^2$ — exact for every part
+        (for n equally spaced samples the white and walk parts are
+        [`slope_variance`][hrgjax.pattern_noise.slope_variance]; for dense samples σ_w²·12/(nT²)
+        and 6N²/5T)."""
+        t = np.asarray(t, float)
+        w = (t - t.mean()) / np.sum((t - t.mean()) ** 2)
+        # white and walk in O(n): the walk is a sum of independent increments, each weighted
+        # by the slope weights of the samples after it
+        tail = np.cumsum(w[::-1])[::-1][1:]
+        var = self.angle_white**2 * np.sum(w**2)
+        var += self.angle_random_walk**2 * np.sum(np.diff(t) * tail**2)
+        if self.gm_sigma > 0:
+            gm = self.replace(angle_white=0.0, angle_random_walk=0.0).angle_covariance(t)
+            var += float(w @ gm @ w)
+        return float(np.sqrt(var))
+
+    def increment_covariance(self, delta: float, k: int) -> np.ndarray:
+        """Covariance (K, K) [rad²] of K consecutive block increments of length `delta` [s]
+        (the whitening of the discovery's continuous records,
+        [`ContinuousProblem`][hrgjax.discovery.continuous.ContinuousProblem]), the run bias
+        included (each run its own switch-on)."""
+        lag = np.abs(np.subtract.outer(np.arange(k), np.arange(k)))
+        cov = self.angle_white**2 * np.where(lag == 0, 2.0, np.where(lag == 1, -1.0, 0.0))
+        cov = cov + np.where(lag == 0, self.angle_random_walk**2 * delta, 0.0)
+        if self.gm_sigma > 0:
+            sigma, tc = self.gm_sigma, self.gm_time
+            e = math.exp(-delta / tc)
+            off = sigma**2 * tc**2 * (1 - e) ** 2 * np.exp(-(np.maximum(lag, 1) - 1) * delta / tc)
+            diag = 2 * sigma**2 * tc * (delta - tc * (1 - e))
+            cov = cov + np.where(lag == 0, diag, off)
+        return cov + self.run_bias**2 * delta**2
+
+    def d2_variance(self, tau):
+        """Variance [rad²] of the lag-τ second difference θ(t+τ) − 2θ(t) + θ(t−τ)."""
+        return _d2_basis(np.asarray(tau, float), self.gm_time) @ np.array(
+            [self.angle_white**2, self.angle_random_walk**2, self.gm_sigma**2]
+        )
+
+    def gauss_markov_mean_variance(self, duration):
+        """Variance [rad²/s²] of the Gauss–Markov rate's mean over `duration` [s]
+        ([`gauss_markov_mean_variance`][hrgjax.pattern_noise.gauss_markov_mean_variance] of
+        this model's σ_GM, T_c)."""
+        return gauss_markov_mean_variance(self.gm_sigma, self.gm_time, duration)
+
+    def report(self, k_e: float) -> dict:
+        """The model in report units (equivalent input rate: divided by `k_e`)."""
+        return {
+            "angle_white_arcsec": self.angle_white / DEG * 3600,
+            "angle_random_walk_dph_per_sqrt_h": self.angle_random_walk / k_e / DEG * 60,
+            "gauss_markov_dph": self.gm_sigma / k_e / DEG_PER_H,
+            "gauss_markov_time_s": self.gm_time,
+            "run_bias_dph": self.run_bias / k_e / DEG_PER_H,
+        }
+
+    # -- estimation -------------------------------------------------------------
+    @classmethod
+    def estimate(cls, data: MeasuredData, max_lag_s: float = 1024.0) -> NoiseModel:
+        r"""Estimate σ_w, N and a Gauss–Markov part from every still stretch of `data` (table
+        still, temperature within
+        [`TEMPERATURE_TOLERANCE_C`][hrgjax.pattern_noise.TEMPERATURE_TOLERANCE_C], ≥
+        [`MIN_STRETCH`][hrgjax.pattern_noise.MIN_STRETCH] samples): static dwells and the
+        holds of continuous records alike.
+
+        Lag-τ second differences remove a stretch's angle and drift rate; their mean square,
+        pooled over stretches per lag (τ = 1, 2, 4, … samples, up to `max_lag_s` and a
+        quarter of the stretch), is fitted by non-negative least squares with relative
+        errors set by each lag's number of roughly independent terms (iterated on the model,
+        so the weights do not follow the noise of the estimates). The Gauss–Markov part is
+        kept only where it earns its two parameters (χ² drop > 2 ln n, the correlation times
+        of [`GM_TIMES`][hrgjax.pattern_noise.GM_TIMES] up to 4× the longest lag): short
+        dwells cannot tell it from the angle random walk, and then it is left out.
+
+        **Returns:** the model (`run_bias` 0: it needs fitted run means).
+
+        **Raises:** `ValueError` when `data` has no still stretch.
+        """
+        sums: dict[float, list] = {}
+        for idx in data.run_indices():
+            for a, b in _still_stretches(data["table_rate_dps"][idx], data["temperature_c"][idx]):
+                th = data["wave_angle_deg"][idx][a:b] * DEG
+                dt = float(np.median(np.diff(data["time_s"][idx][a:b])))
+                k = 1
+                while k * dt <= max_lag_s and k <= (b - a) // 4:
+                    d2 = th[2 * k :] - 2 * th[k:-k] + th[: -2 * k]
+                    acc = sums.setdefault(float(f"{k * dt:.9g}"), [0.0, 0, 0.0])
+                    acc[0] += float(np.sum(d2**2))
+                    acc[1] += d2.size
+                    acc[2] += d2.size / (1.0 + k)  # roughly independent terms
+                    k *= 2
+        if not sums:
+            raise ValueError(
+                f"the noise model needs a still stretch of at least {MIN_STRETCH} samples "
+                "(table_rate_dps == 0 and the temperature constant), e.g. a static run; or "
+                "pass noise=hrgjax.Noise(...)"
+            )
+        taus = np.asarray(sorted(sums))
+        var = np.asarray([sums[t][0] / sums[t][1] for t in taus])
+        n_eff = np.asarray([sums[t][2] for t in taus])
+        fits = [_fit_d2(taus, var, n_eff, None)]
+        fits += [_fit_d2(taus, var, n_eff, tc) for tc in GM_TIMES if tc <= 4 * taus[-1]]
+        best = min(fits[1:], key=lambda f: f[0], default=None)
+        chosen = fits[0]
+        if best is not None and best[2] > 0 and fits[0][0] - best[0] > 2 * math.log(n_eff.sum()):
+            chosen = best
+        chi2, coef, tc = chosen
+        return cls(
+            angle_white=float(np.sqrt(coef[0])),
+            angle_random_walk=float(np.sqrt(coef[1])),
+            gm_sigma=float(np.sqrt(coef[2])),
+            gm_time=float(tc) if tc is not None else cls.gm_time,
+        )
+
+
+def slope_variance(angle_white, angle_random_walk, samples, dt):
+    r"""Variance [rad²/s²] of the least-squares slope of n = `samples` equally spaced samples
+    (interval Δt = `dt` [s]) of the angle under white angle noise σ_w = `angle_white` [rad per
+    sample] and a random walk of density N = `angle_random_walk` [rad/√s]:
+
+    $$\frac{6(n^2+1)}{5n(n^2-1)}\frac{N^2}{\Delta t} + \frac{12\,\sigma_w^2}{\Delta t^2 n(n^2-1)},$$
+
+    exact (the closed form of
+    [`NoiseModel.slope_sigma`][hrgjax.pattern_noise.NoiseModel.slope_sigma]² of such samples
+    without the Gauss–Markov part; → 6/5 of a mean rate's N²/(nΔt) for long windows). Arithmetic only: NumPy floats or (traced) JAX arrays, `samples` need not be a
+    whole number (the bench design's windows)."""
+    n = samples
+    m = n * (n**2 - 1.0)
+    walk = 6.0 * (n**2 + 1.0) / (5.0 * m) * angle_random_walk**2 / dt
+    white = 12.0 * angle_white**2 / (dt**2 * m)
+    return walk + white
+
+
+def gauss_markov_mean_factor(x):
+    """1 − (1 − e^(−x))/x, written with `expm1` (accurate for short segments): the variance of
+    a Gauss–Markov rate's mean over a duration D = x T_c in units of 2σ²T_c/D
+    ([`gauss_markov_mean_variance`][hrgjax.pattern_noise.gauss_markov_mean_variance]). NumPy
+    or (traced) JAX."""
+    xp = jnp if isinstance(x, jax.Array) else np
+    return 1.0 + xp.expm1(-x) / x
+
+
+def gauss_markov_mean_variance(sigma, correlation_time, duration):
+    """Variance [rad²/s²] of the mean over `duration` D [s] of a stationary first-order
+    Gauss–Markov rate of σ = `sigma` [rad/s] and correlation time τ = `correlation_time` [s]:
+    2σ²τ/D · (1 − (τ/D)(1 − e^(−D/τ))) — the Gauss–Markov part of
+    [`NoiseModel.angle_covariance`][hrgjax.pattern_noise.NoiseModel.angle_covariance] at (D, D)
+    over D². NumPy or (traced) JAX."""
+    x = duration / correlation_time
+    return 2.0 * sigma**2 * correlation_time / duration * gauss_markov_mean_factor(x)
+
+
+def _still_stretches(rate_dps, temperature_c):
+    """(start, stop) of every stretch of ≥ MIN_STRETCH samples with the table still and the
+    temperature within TEMPERATURE_TOLERANCE_C of the stretch's first sample."""
+    out, start = [], None
+    for i, (w, temp) in enumerate(zip(rate_dps, temperature_c, strict=True)):
+        if start is not None and (
+            w != 0.0 or abs(temp - temperature_c[start]) > TEMPERATURE_TOLERANCE_C
+        ):
+            if i - start >= MIN_STRETCH:
+                out.append((start, i))
+            start = None
+        if start is None and w == 0.0:
+            start = i
+    if start is not None and len(rate_dps) - start >= MIN_STRETCH:
+        out.append((start, len(rate_dps)))
+    return out
+
+
+def _d2_basis(tau, tc):
+    """Columns (σ_w², N², σ_GM²) of the lag-τ second difference's variance."""
+    cols = [np.full_like(tau, 6.0), 2 * tau]
+    if tc is None:
+        cols.append(np.zeros_like(tau))
+    else:
+        e = np.exp(-tau / tc)
+        cols.append(4 * tc * (tau - tc * (1 - e)) - 2 * tc**2 * (1 - e) ** 2)
+    return np.stack(cols, axis=-1)
+
+
+def _fit_d2(taus, var, n_eff, tc):
+    """Weighted NNLS of the pooled second-difference variances: (χ², coefficients, T_c)."""
+    basis = _d2_basis(taus, tc)
+    if tc is None:
+        basis = basis[:, :2]
+    scale = var.copy()
+    for _ in range(3):  # relative errors on the model, not on the noisy estimates
+        w = np.sqrt(n_eff / 2.0) / scale
+        coef = _nnls(basis * w[:, None], var * w)
+        model = basis @ coef
+        scale = np.where(model > 0, model, var)
+    chi2 = float(np.sum(((basis @ coef - var) * w) ** 2))
+    if tc is None:
+        coef = np.r_[coef, 0.0]
+    return chi2, coef, tc

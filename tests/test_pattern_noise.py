@@ -1,0 +1,98 @@
+"""One pattern-angle noise model (issue 45): `hrgjax.pattern_noise.NoiseModel` is the model
+the discovery re-exports and the bench design converts a gyro's noise with; its closed forms
+agree with its general second moments, and the design's JAX forms are built from them."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hrgjax.discovery
+import hrgjax.discovery.noise
+from hrgjax import pattern_noise as pn
+from hrgjax.calibration import design as d
+from hrgjax.presets import tvg3_like
+
+ARW, WHITE = 3.2e-7, 4.8e-6  # the default gyro's pattern-angle N [rad/√s] and σ_w [rad]
+
+
+def test_the_discovery_reexports_the_one_model():
+    assert hrgjax.discovery.NoiseModel is pn.NoiseModel
+    assert hrgjax.discovery.noise.NoiseModel is pn.NoiseModel
+    assert hrgjax.discovery.noise.GM_TIMES is pn.GM_TIMES
+    assert hrgjax.discovery.noise.MIN_STRETCH == pn.MIN_STRETCH
+    assert hrgjax.discovery.noise.TEMPERATURE_TOLERANCE_C == pn.TEMPERATURE_TOLERANCE_C
+
+
+def test_the_design_noise_is_the_model_of_the_gyro():
+    """`pattern_arw`, `pattern_gauss_markov`, `pattern_angle_white` are the fields of
+    `NoiseModel.from_gyro(noise, k_e)` — the discovery's conversion of a known gyro."""
+    g = tvg3_like()
+    model = pn.NoiseModel.from_gyro(g.noise, float(d.nominal_values(g)[0]))  # k_e
+    assert d.pattern_arw() == model.angle_random_walk
+    assert d.pattern_gauss_markov() == (model.gm_sigma, model.gm_time)
+    assert d.pattern_angle_white() == model.angle_white
+    assert d.pattern_arw(g) == model.angle_random_walk
+
+
+@pytest.mark.parametrize("samples, dt", [(3, 0.5), (20, 0.5), (61, 1.0), (301, 0.25)])
+def test_slope_variance_is_slope_sigma_of_equally_spaced_samples(samples, dt):
+    """The closed form of the white + walk least-squares slope variance of n equally spaced
+    samples is the model's general `slope_sigma`² (wᵀ C w) — exactly, to rounding — and the
+    design's `window_density`² / length is it."""
+    t = 7.0 + dt * np.arange(samples)
+    for white, arw in [(WHITE, ARW), (WHITE, 0.0), (0.0, ARW)]:
+        model = pn.NoiseModel(white, arw)
+        closed = pn.slope_variance(white, arw, samples, dt)
+        assert isinstance(closed, float)
+        assert closed == pytest.approx(model.slope_sigma(t) ** 2, rel=1e-12)
+        length = samples * dt
+        density = d.window_density(arw, white, float(samples), dt, length)
+        assert float(density) ** 2 / length == pytest.approx(closed, rel=1e-14)
+
+
+@pytest.mark.parametrize("duration, tau", [(1e-3, 600.0), (20.0, 600.0), (600.0, 600.0),
+                                           (3600.0, 100.0)])  # fmt: skip
+def test_gauss_markov_mean_variance_is_the_covariance_of_the_model(duration, tau):
+    """The variance of a Gauss–Markov rate's mean over D is the model's angle covariance at
+    (D, D) / D², and the design's `gauss_markov_discount` is (N²/D) / (N²/D + it)."""
+    sigma = 8e-9
+    model = pn.NoiseModel(0.0, gm_sigma=sigma, gm_time=tau)
+    v = model.gauss_markov_mean_variance(duration)
+    assert v == pn.gauss_markov_mean_variance(sigma, tau, duration)
+    assert v == pytest.approx(model.angle_covariance([0.0, duration])[1, 1] / duration**2,
+                              rel=1e-6 if duration < 1 else 1e-12)  # fmt: skip
+    white = ARW**2 / duration
+    share = d.gauss_markov_discount(jnp.asarray(duration), ARW, sigma, tau)
+    assert float(share) == pytest.approx(white / (white + v), rel=1e-13)
+
+
+def test_closed_forms_work_on_numpy_and_traced_jax():
+    """NumPy in, NumPy out; traced JAX (`jit`, `grad`) in, JAX out, the same numbers."""
+    args = (WHITE, ARW, 20.0, 0.5)
+    ref = pn.slope_variance(*args)
+    jitted = jax.jit(pn.slope_variance)(*(jnp.asarray(a) for a in args))
+    assert float(jitted) == pytest.approx(ref, rel=1e-14)
+    assert isinstance(pn.gauss_markov_mean_variance(8e-9, 600.0, 20.0), float)
+    assert isinstance(pn.gauss_markov_mean_factor(np.array([0.1, 1.0])), np.ndarray)
+    gm = jax.jit(pn.gauss_markov_mean_variance)(8e-9, 600.0, jnp.asarray(20.0))
+    assert isinstance(gm, jax.Array)
+    assert float(gm) == pytest.approx(pn.gauss_markov_mean_variance(8e-9, 600.0, 20.0), rel=1e-14)
+    grad = jax.grad(pn.gauss_markov_mean_variance, argnums=2)(8e-9, 600.0, jnp.asarray(20.0))
+    h = 1e-3
+    fd = (pn.gauss_markov_mean_variance(8e-9, 600.0, 20.0 + h)
+          - pn.gauss_markov_mean_variance(8e-9, 600.0, 20.0 - h)) / (2 * h)  # fmt: skip
+    assert float(grad) == pytest.approx(fd, rel=1e-6)
+
+
+def test_design_forms_keep_their_numbers():
+    """`window_density` and `gauss_markov_discount` give the numbers of their former inline
+    expressions bit for bit (design criteria unchanged)."""
+    n, dt, length = jnp.asarray([20.0, 2401.0]), 0.5, jnp.asarray([10.0, 1200.0])
+    m = n * (n**2 - 1.0)
+    var = 6.0 * (n**2 + 1.0) / (5.0 * m) * ARW**2 / dt + 12.0 * WHITE**2 / (dt**2 * m)
+    assert np.array_equal(d.window_density(ARW, WHITE, n, dt, length), jnp.sqrt(var * length))
+    dur, sigma, tau = jnp.asarray([10.0, 1200.0]), 8e-9, 600.0
+    x = dur / tau
+    excess = 2.0 * sigma**2 * tau / ARW**2 * (1.0 + jnp.expm1(-x) / x)
+    assert np.array_equal(d.gauss_markov_discount(dur, ARW, sigma, tau), 1.0 / (1.0 + excess))
