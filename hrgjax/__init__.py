@@ -25,6 +25,7 @@ _SUBMODULES = (
     "kalman",
     "nn",
     "noise",
+    "pattern_noise",
     "plausible",
     "presets",
     "units",
