@@ -7,7 +7,11 @@ import os
 import platform
 import time
 
-import jax
+from hrgjax._threads import single_threaded_eigen
+
+single_threaded_eigen()  # before any JAX work (hrgjax/_threads.py: XLA:CPU's pool on 2 cores)
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 

@@ -107,7 +107,9 @@ def spawn(platform, tmp):
     path = os.path.join(tmp, f"{platform}.json")
     env = dict(os.environ, JAX_PLATFORMS=platform)
     if platform == "cpu":
-        env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={os.cpu_count()}"
+        env["XLA_FLAGS"] = (
+            f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={os.cpu_count()}"
+        )
     print(f"{platform}:", flush=True)
     flags = [f for f in ("--quick", "--no-large") if f in sys.argv]
     args = [sys.executable, __file__, "--child", path] + flags

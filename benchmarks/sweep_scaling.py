@@ -102,7 +102,9 @@ def spawn(devices, platform, tmp):
     path = os.path.join(tmp, f"{platform}{devices}.json")
     env = dict(os.environ, JAX_PLATFORMS=platform)
     if platform == "cpu":
-        env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
+        env["XLA_FLAGS"] = (
+            f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}"
+        )
     args = [sys.executable, __file__, "--child", path] + (["--quick"] if QUICK else [])
     subprocess.run(args, env=env, check=True)
     import numpy as np

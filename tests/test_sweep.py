@@ -38,7 +38,9 @@ def test_sweep_sharded_equals_single_device():
     )
     out = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"sweep_{os.getpid()}.npy")
     env = dict(
-        os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu"
+        os.environ,
+        XLA_FLAGS=f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=4",
+        JAX_PLATFORMS="cpu",
     )
     subprocess.run([sys.executable, "-c", code, out], check=True, env=env, timeout=300)
     sharded, chunked, single = np.load(out)
@@ -96,7 +98,9 @@ def test_two_process_sweep_equals_one_process():
     tmp = os.environ.get("TMPDIR", "/tmp")
     outs = [os.path.join(tmp, f"sweep2p_{os.getpid()}_{r}.npy") for r in (0, 1)]
     env = dict(
-        os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu"
+        os.environ,
+        XLA_FLAGS=f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2",
+        JAX_PLATFORMS="cpu",
     )
     procs = [
         subprocess.Popen(
