@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test docs-test lint docs bench clean
+.PHONY: demo test test-full docs-test lint docs bench clean
 
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
@@ -21,6 +21,12 @@ demo: $(STAMP)
 # 20 slowest tests are listed at the end, so every CI log shows where the time goes.
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n auto --dist loadfile --durations=20
+
+# Everything: the fast tier above, the tests marked `slow` (whole studies, 20-100 s each, each
+# naming the fast test that covers its behaviour) and every docs block at full size. Run it
+# before a change to the physics lands, and on a GPU machine (benchmarks/on_gpu.sh).
+test-full: $(STAMP)
+	HRGJAX_TEST_FULL=1 HRGJAX_DOCS_FULL=1 $(BIN)/python -m pytest -q -n auto --dist loadfile --durations=20
 
 # Every python block of docs/ at the size the page shows, the compile-bound ones included
 # (make test runs the light pages at reduced sizes, compiles the heavy pages' blocks as Python
