@@ -13,7 +13,8 @@ program still run in parallel).
 
 The library itself never changes process-wide settings: `single_threaded_eigen` is called
 by the `hrgjax` command, the test suite and the benchmarks, which own their processes. A
-user's own script may call it first thing (before any JAX work), or set
+user's own script may call it (`hg.single_threaded_eigen()`) first thing, before any JAX
+work, or set
 `XLA_FLAGS=--xla_cpu_multi_thread_eigen=false` in the environment.
 """
 

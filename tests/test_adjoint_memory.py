@@ -34,6 +34,11 @@ def setup():
     return params, loss_for
 
 
+@pytest.mark.slow(
+    "~60 s: three compiles of an hour's gradient (nothing run); fast tier: the "
+    "final-angle gradient's memory independent of the run's length "
+    "(test_final_angle_gradient_memory_independent_of_length)"
+)
 def test_one_hour_gradient_within_twice_the_forward(setup):
     params, loss_for = setup
     loss = loss_for(3600.0)

@@ -342,6 +342,11 @@ def test_end_to_end_gradient_matches_finite_differences(small_runs):
 # --- physical fit: coverage of the reported uncertainties ---------------------------------
 
 
+@pytest.mark.slow(
+    "~40 s: 20 noisy benches fitted; fast tier: the physical fit's values on one bench "
+    "(test_calibration); benchmarks/coverage.py --only-physical measures the σ's coverage "
+    "at scale"
+)
 def test_physical_fit_recovers_injected_damping_within_uncertainty():
     truth = dict(zip(physical.NAMES, np.zeros(len(physical.NAMES)), strict=True))
     truth.update(

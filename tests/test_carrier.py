@@ -63,6 +63,12 @@ def ramp():
     return gyro, prof, ts, ref
 
 
+@pytest.mark.slow(
+    "~40 s: an adaptive rtol-1e-11 reference of the full model with loops and laws; fast "
+    "tier: the fixed step's order and its 'auto' accuracy "
+    "(test_free_resonator_converges_at_eighth_order), closed loops with adaptive steps "
+    "(test_resonator_full)"
+)
 def test_closed_loops_match_adaptive_stepping(ramp):
     """Held loops (a digital controller at 1/h) and laws interpolated over 256 steps: the
     wave angle within 1e-9 rad of the adaptive solution of the continuous equations, the

@@ -18,6 +18,12 @@ def test_simulate_writes_loadable_csv(tmp_path, capsys):
     assert str(out) in capsys.readouterr().out
 
 
+@pytest.mark.slow(
+    "~85 s: the whole study (five fits, an INS flight, plots, exports) is `make demo`; "
+    "fast tier: each compensator's fit (test_calibration), the Fourier baseline and "
+    "correction on seed data (test_calibrate_and_correct_on_user_data), exports "
+    "(test_export_round_trips)"
+)
 def test_demo_quick_runs_the_study(tmp_path, capsys):
     assert main(["demo", "--quick", "--out", str(tmp_path)]) == 0
     for name in (
@@ -118,6 +124,13 @@ def test_correct_reports_bad_model_file(tmp_path, capsys):
     cli_fails(["correct", str(data_path), "--model", str(bad)], capsys, "not an hrgjax compensator")
 
 
+@pytest.mark.slow(
+    "~30 s: the dwell search on seed-quick data; fast tier: the same search on the same "
+    "data shapes, asserting more "
+    "(test_discovery_search::test_the_default_gyros_own_bench_data_end_near_their_floor), "
+    "the report's keys and units "
+    "(test_discovery_search::test_hidden_temperature_dependent_damping_is_named)"
+)
 def test_discover_writes_the_contract_report(tmp_path, capsys):
     data_path = _bench_csv(tmp_path)
     js, png = tmp_path / "report.json", tmp_path / "report.png"

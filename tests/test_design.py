@@ -317,6 +317,11 @@ def test_each_segment_is_the_simulation_of_its_profile(quiet):
         assert np.all(data["table_rate_dps"][rows] == s.get("rate_dps", 0.0))
 
 
+@pytest.mark.slow(
+    "~50 s: eight simulator and residual programs for three run lengths; fast tier: the "
+    "physical fit on one layout (test_calibration, test_loops_plant), the segments' "
+    "simulation (test_each_segment_is_the_simulation_of_its_profile)"
+)
 def test_physical_fit_pads_rare_run_lengths_without_changing_a_window(quiet, monkeypatch):
     """Runs of rare lengths share a compiled group padded to a power of two of samples, and
     neighbouring lengths one group where that is cheaper than compiling another: every
@@ -650,6 +655,12 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     assert two / one == pytest.approx(2**-0.5, rel=1e-6)
 
 
+@pytest.mark.slow(
+    "~60 s: compiling the search's Adam step and 40 steps of it; fast tier: the criteria "
+    "and their gradient against finite differences "
+    "(test_criterion_gradient_equals_finite_differences, test_warmup_criterion_…), the "
+    "plan file (test_simulate_plan_file_cli)"
+)
 def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, capsys):
     """`hrgjax design`: the plan it writes is within the budget (transitions included),
     loads and checks, its criterion is the one printed, and the search lowered the loss

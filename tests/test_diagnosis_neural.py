@@ -135,6 +135,11 @@ def test_compare_scores_every_method_on_one_short_scenario():
         cp.compare(cp.Scenario("late", t_fault=500.0, duration=400.0))
 
 
+@pytest.mark.slow(
+    "~30 s: the 4000-s scenario through the CLI; fast tier: the same keys, table and "
+    "filter-bank detection from compare() "
+    "(test_compare_scores_every_method_on_one_short_scenario)"
+)
 def test_diagnose_cli_writes_the_design_keys(tmp_path, capsys):
     import json
 

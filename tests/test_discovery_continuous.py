@@ -203,9 +203,15 @@ def _short(effect, size, seed):
     )
 
 
+# The fast tier searches a catalogue of one (the layout test_continuous_known_noise_and_bad_shape
+# compiles too: one set of programs for the three); the whole catalogue, whose screening
+# compiles ~90 s of programs whatever the data size, is the slow test at the end.
+ONE = ["thermal_rate"]
+
+
 @pytest.fixture(scope="module")
 def thermal_rate_report():
-    return discover(_short("thermal_rate", 0.15, 3))
+    return discover(_short("thermal_rate", 0.15, 3), catalogue=ONE)
 
 
 def test_continuous_names_a_hidden_thermal_rate(thermal_rate_report):
@@ -222,7 +228,6 @@ def test_continuous_names_a_hidden_thermal_rate(thermal_rate_report):
     assert abs(user["value"] - 0.15) < 4 * user["sigma"]
     assert rep.to_json()["parameters"]["thermal_rate"]["c_Tdot"] == pytest.approx(user)
     assert "[thermal_rate]" in rep.equations()
-    assert rep.ranking[0]["effect"] == "thermal_rate"
     # the evidence repeats: refitted on each training run alone, every run agrees
     cons = rep.consistency["thermal_rate"]
     assert len(cons["per_run"]) == 4 and cons["dof"] >= 2
@@ -232,7 +237,7 @@ def test_continuous_names_a_hidden_thermal_rate(thermal_rate_report):
 
 def test_continuous_null_says_nothing_is_missing():
     data = _short(None, 0.0, 4)
-    rep = discover(data)
+    rep = discover(data, catalogue=ONE)
     assert rep.missing_effect is None and rep.verdict == "none"
     assert not rep.structure_left
     noise = rep.noise
@@ -259,6 +264,24 @@ def test_continuous_known_noise_and_bad_shape():
     rep = discover(data, noise=generate.base_gyro().noise, catalogue=["thermal_rate"])
     assert rep.noise["run_bias_dph"] == pytest.approx(0.2)
     assert rep.missing_effect is None
+
+
+@pytest.mark.slow(
+    "~100 s: screening the whole catalogue compiles a program per candidate layout; fast "
+    "tier: the same search with one candidate (test_continuous_names_a_hidden_thermal_rate, "
+    "test_continuous_null_says_nothing_is_missing), the screening's rules on dwell data "
+    "(test_discovery_search)"
+)
+def test_the_whole_catalogue_names_the_thermal_rate_and_nothing_in_the_null():
+    rep = discover(_short("thermal_rate", 0.15, 3))
+    assert rep.missing_effect == "thermal_rate" and rep.verdict == "found"
+    assert rep.ranking[0]["effect"] == "thermal_rate"
+    truth = -K_E * 0.15 * DEG_PER_H * 60.0
+    fit = rep.fit_parameters["thermal_rate"]["c_Tdot"]
+    assert abs(fit["value"] - truth) < 4 * fit["std"]
+    rep = discover(_short(None, 0.0, 4))
+    assert rep.missing_effect is None and rep.verdict == "none"
+    assert not rep.structure_left
 
 
 def test_runs_of_one_length_but_different_sample_intervals_are_not_stacked():

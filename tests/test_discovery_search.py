@@ -104,6 +104,17 @@ def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
     assert left["shape"] == "2θ·ΔT" and left["significant"], left
     assert left["unit"] == "°/h/°C" and "changes with temperature" in left["words"]
     assert "left over: a 2θ harmonic" in rep.equations()
+
+
+@pytest.mark.slow(
+    "~30 s: rates of 5 and 100 °/s are another data shape, so a second simulation and "
+    "Jacobian compile; fast tier: the outshone rule and the named leftover are asserted "
+    "above (2θ·ΔT) and by test_discovery_effects' leftover tests"
+)
+def test_a_sliver_beside_an_unnamed_cubic_is_not_named():
+    from hrgjax.discovery.generate import hidden_effect_dataset
+    from hrgjax.discovery.search import candidates_for
+
     # dwarfed: a rate scale factor left out (rates 5 and 100 °/s). The readout ripple adds
     # ΔBIC ≈ 20 on this draw even given the Ω³ shape, but Ω³ has a hundred times its evidence:
     # the first effect named may not be a sliver beside what no candidate names

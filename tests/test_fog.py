@@ -295,6 +295,14 @@ def test_vibration_inputs_are_checked(imu):
         vibration_features(jnp.zeros((100, 2)), 100.0)
 
 
+@pytest.mark.slow(
+    "~55 s: three network trainings end to end; fast tier: the raw and error-free "
+    "alignment limits "
+    "(test_alignment_reaches_the_analytic_limits_raw_and_with_the_error_removed), "
+    "training and compensation "
+    "(test_end_to_end_training_and_compensation_remove_the_error, "
+    "test_elman_beats_the_mlp_…)"
+)
 def test_vibration_cli_writes_the_design_keys_and_compensation_helps(tmp_path, capsys):
     """`hrgjax vibration --quick`: the DESIGN keys; the compensated heading is nearer the
     remaining-drift limit than the raw one; every network beats no compensation."""

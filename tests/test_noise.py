@@ -103,7 +103,7 @@ def test_noise_deterministic_for_key_and_needs_key():
 
 
 def test_sweep_shape_and_values():
-    gyro = hg.presets.tvg3_like(noise=False)
+    gyro = hg.Gyro(resonator(), control=hg.Control(ideal=True))  # ideal loops: a light compile
 
     def final_angle(temperature_c, rate_dps):
         prof = hg.Profile.constant_rate(rate_dps, 10.0, temperature_c)

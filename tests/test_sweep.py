@@ -84,6 +84,12 @@ _TWO_PROCESS = textwrap.dedent(
 )
 
 
+@pytest.mark.slow(
+    "~45 s: two JAX processes under jax.distributed, each compiling the simulation cold; "
+    "fast tier: the sharded sweep on 4 devices (test_sweep_sharded_equals_single_device), "
+    "the process split's ordering "
+    "(test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order)"
+)
 @pytest.mark.skipif(sys.platform == "win32", reason="uses XLA_FLAGS in subprocesses")
 def test_two_process_sweep_equals_one_process():
     """Two processes on localhost (127.0.0.1 coordinator, two forced CPU devices each) run
