@@ -7,9 +7,9 @@ import os
 import platform
 import time
 
-from hrgjax._threads import single_threaded_eigen
+from hrgjax._threads import widen_cpu_thread_pool
 
-single_threaded_eigen()  # before any JAX work (hrgjax/_threads.py: XLA:CPU's pool on 2 cores)
+widen_cpu_thread_pool()  # before any JAX work (hrgjax/_threads.py: XLA:CPU's pool on 2 cores)
 
 import jax  # noqa: E402
 

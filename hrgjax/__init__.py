@@ -39,7 +39,7 @@ _NAMES = {
     "ohdev": "allan",
     "totdev": "allan",
     "enable_cache": "_cache",
-    "single_threaded_eigen": "_threads",
+    "widen_cpu_thread_pool": "_threads",
     "MeasuredData": "data",
     "load": "data",
     "DriftTerms": "gyro",
@@ -104,7 +104,7 @@ if TYPE_CHECKING:  # what static tools (type checkers, mkdocstrings) read
     from . import presets as presets
     from . import units as units
     from ._cache import enable_cache as enable_cache
-    from ._threads import single_threaded_eigen as single_threaded_eigen
+    from ._threads import widen_cpu_thread_pool as widen_cpu_thread_pool
     from .allan import adev as adev
     from .allan import allan_deviation as allan_deviation
     from .allan import hdev as hdev

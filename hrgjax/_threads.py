@@ -1,43 +1,47 @@
-"""XLA:CPU's intra-op thread pool, made safe before JAX's CPU backend starts.
+"""XLA:CPU's intra-op thread pool, widened before JAX's CPU backend starts.
 
-With jaxlib 0.10 on a machine with few cores (two, as on CI runners), a compiled program
-whose batched LAPACK kernels (a `vmap`ped `jnp.linalg.solve`, e.g. `resonator.slow`'s Newton
-steps) run on every thread of XLA's Eigen pool at once can wait forever: each kernel splits
-its batch onto the same pool and blocks until the pieces finish, and no thread is left to
-run them. The process then sits idle with every thread in a futex wait, for ever (seen here
-in a `make test` that stopped at 469 of 470 tests; the native stack shows the two
-`tf_XLAEigen` threads inside `LuDecomposition` → `ParallelBatchMap`). The same wedge is
-reported upstream for other pool-splitting kernels, with this flag as the fix
-(`--xla_cpu_multi_thread_eigen=false`: single-threaded Eigen inside each op; ops of one
-program still run in parallel).
+With jaxlib 0.10 on a machine with few cores (two, as on CI runners), a compiled program can
+wait for ever: XLA runs its operations on a pool of one thread per core (`tf_XLAEigen`), and
+a batched LAPACK kernel (a `vmap`ped `jnp.linalg.solve`, e.g. `resonator.slow`'s Newton
+steps under the grey box's `scale_factor_at`) splits its batch onto that same pool and
+blocks until the pieces finish. When every thread of the pool is such a blocked kernel, no
+thread is left to run the pieces: the process sits idle, every thread in a futex wait. Seen
+twice in `tests/test_loops_plant.py` (a `make test` held at 469 of 470 tests until CI's
+limit); the native stacks show both `tf_XLAEigen` threads inside `LuDecomposition` →
+`ParallelBatchMap`. XLA's `--xla_cpu_multi_thread_eigen=false` did not prevent it (the pool
+stays, and the kernels still split onto it).
 
-The library itself never changes process-wide settings: `single_threaded_eigen` is called
+XLA sizes that pool from `PJRT_NPROC` (else `NPROC`, else the core count). With at least
+`MIN_THREADS` threads, the pool can only wedge when that many batched kernels block at
+once, which no hrgjax program does. Threads beyond the cores wait idle; XLA still splits
+work by its cost, so the work done is the same.
+
+The library itself never changes process-wide settings: `widen_cpu_thread_pool` is called
 by the `hrgjax` command, the test suite and the benchmarks, which own their processes. A
-user's own script may call it (`hg.single_threaded_eigen()`) first thing, before any JAX
-work, or set
-`XLA_FLAGS=--xla_cpu_multi_thread_eigen=false` in the environment.
+user's script may call it (`hg.widen_cpu_thread_pool()`) first thing, before any JAX work,
+or export `PJRT_NPROC=8`.
 """
 
 from __future__ import annotations
 
 import os
 
-FLAG = "--xla_cpu_multi_thread_eigen=false"
+MIN_THREADS = 8
+"""Threads in XLA:CPU's pool at least (more where the machine has more cores)."""
 
 
-def single_threaded_eigen(environ=None) -> bool:
-    """Add `FLAG` to `XLA_FLAGS` unless it names `xla_cpu_multi_thread_eigen` already (a
-    choice made there is kept). Takes effect only when called before JAX's first
-    computation in this process (its CPU backend reads XLA_FLAGS once, when it starts), and
-    in every process started after it with this environment.
+def widen_cpu_thread_pool(environ=None) -> bool:
+    """Set `PJRT_NPROC` to max(cores, `MIN_THREADS`) unless `PJRT_NPROC` or `NPROC` is set
+    already (a choice made there is kept). Takes effect only when called before JAX's first
+    computation in this process (its CPU backend reads it once, when it starts), and in every
+    process started after it with this environment.
 
     **Arguments:** `environ`, the mapping to change (default `os.environ`).
 
-    **Returns:** True when the flag was added, False when XLA_FLAGS already chose.
+    **Returns:** True when it was set, False when the environment already chose.
     """
     env = os.environ if environ is None else environ
-    flags = env.get("XLA_FLAGS", "")
-    if "xla_cpu_multi_thread_eigen" in flags:
+    if env.get("PJRT_NPROC") or env.get("NPROC"):
         return False
-    env["XLA_FLAGS"] = f"{flags} {FLAG}".strip()
+    env["PJRT_NPROC"] = str(max(os.cpu_count() or 1, MIN_THREADS))
     return True

@@ -1,10 +1,10 @@
 import os
 
-from hrgjax._threads import single_threaded_eigen
+from hrgjax._threads import widen_cpu_thread_pool
 
 # Before the first JAX computation, for this process and every one the tests start: on two
-# cores XLA:CPU's Eigen pool can wedge on batched LAPACK kernels (hrgjax/_threads.py).
-single_threaded_eigen()
+# cores XLA:CPU's thread pool can wedge on batched LAPACK kernels (hrgjax/_threads.py).
+widen_cpu_thread_pool()
 
 import jax  # noqa: E402
 import pytest  # noqa: E402

@@ -66,9 +66,9 @@ _PARSERS = {**simulate.PARSERS, **calibrate.PARSERS, **discover.PARSERS, **ins.P
 
 def main(argv=None) -> int:
     """Entry point of the `hrgjax` command; `argv` defaults to `sys.argv[1:]`."""
-    from .._threads import single_threaded_eigen
+    from .._threads import widen_cpu_thread_pool
 
-    single_threaded_eigen()  # before any JAX work: XLA:CPU's pool cannot wedge (hrgjax._threads)
+    widen_cpu_thread_pool()  # before any JAX work: XLA:CPU's pool cannot wedge (hrgjax._threads)
     args = build_parser().parse_args(argv)
     if getattr(args, "quiet", False):
         os.environ["HRGJAX_QUIET"] = "1"
