@@ -107,7 +107,7 @@ def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
 
 
 @pytest.mark.slow(
-    "~30 s: rates of 5 and 100 °/s are another data shape, so a second simulation and "
+    "15-30 s: rates of 5 and 100 °/s are another data shape, so a second simulation and "
     "Jacobian compile; fast tier: the outshone rule and the named leftover are asserted "
     "above (2θ·ΔT) and by test_discovery_effects' leftover tests"
 )
