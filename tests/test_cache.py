@@ -27,7 +27,8 @@ _RUN = textwrap.dedent(
         lambda e, d, **k: traced.append(k.get("fun_name"))
         if e.endswith("jaxpr_trace_duration") else None)
     print("cache:", hg.enable_cache())
-    gyro = hg.presets.tvg3_like()
+    g = hg.presets.tvg3_like()  # its resonator and noise; ideal loops: a light compile
+    gyro = hg.Gyro(g.resonator, control=hg.Control(ideal=True), noise=g.noise)
     rec = hg.simulate(gyro, hg.Profile.constant_rate(2.0, 4.0, -10.0, 20.0),
                       key=jax.random.key(3), dt_out=0.5)
     np.save(sys.argv[1], np.stack([rec.wave_angle, rec.amplitude, rec.quadrature]))
