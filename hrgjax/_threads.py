@@ -16,6 +16,10 @@ XLA sizes that pool from `PJRT_NPROC` (else `NPROC`, else the core count). With 
 once, which no hrgjax program does. Threads beyond the cores wait idle; XLA still splits
 work by its cost, so the work done is the same.
 
+Where the wedge was seen, the library no longer depends on this: the slow manifold solves
+its small systems in plain XLA operations (`hrgjax/_linalg.py`), which a pool of any size
+runs. The wider pool guards the rest (a `vmap`ped Cholesky or inverse elsewhere).
+
 The library itself never changes process-wide settings: `widen_cpu_thread_pool` is called
 by the `hrgjax` command, the test suite and the benchmarks, which own their processes. A
 user's script may call it (`hg.widen_cpu_thread_pool()`) first thing, before any JAX work,

@@ -41,6 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._linalg import solve
 from .averaged import loop_field
 from .control import steady_integrators
 
@@ -85,7 +86,7 @@ def _at_rest(g, omega_in, theta):
     x = jnp.concatenate([jnp.stack([a0, 0.0 * a0, 0.0 * a0]), integ])
     fast = lambda x: _fields(g, omega_in, x, theta)[0]
     for _ in range(NEWTON):
-        x = x - jnp.linalg.solve(jax.jacfwd(fast)(x), fast(x))
+        x = x - solve(jax.jacfwd(fast)(x), fast(x))  # no LAPACK call under vmap: _linalg
     return x, jax.jacfwd(fast)(x), _fields(g, omega_in, x, theta)[1]
 
 
@@ -105,7 +106,7 @@ def slow_manifold(g, omega_in, theta):
     d = jnp.asarray(_D, dtype=h0.dtype)
     big_d = jnp.kron(rate[:, None] * d, jnp.eye(m))  # θ̇_j Σ_k D_jk (per state)
     blocks = jax.scipy.linalg.block_diag(*[jac[j] for j in range(n)])
-    delta = jnp.linalg.solve(big_d - blocks, -big_d @ h0.reshape(-1)).reshape(n, m)
+    delta = solve(big_d - blocks, -big_d @ h0.reshape(-1)).reshape(n, m)
     return h0[0] + delta[0]
 
 
