@@ -13,8 +13,9 @@ stays, and the kernels still split onto it).
 
 XLA sizes that pool from `PJRT_NPROC` (else `NPROC`, else the core count). With at least
 `MIN_THREADS` threads, the pool can only wedge when that many batched kernels block at
-once, which no hrgjax program does. Threads beyond the cores wait idle; XLA still splits
-work by its cost, so the work done is the same.
+once (the wedges seen had two). Threads beyond the cores cost some time on a small machine
+(`benchmarks/thread_pool.py`, 2 cores: one `simulate` 1.0×, a 32-run `vmap` 1.08–1.12×);
+on 8 cores or more nothing changes.
 
 Where the wedge was seen, the library no longer depends on this: the slow manifold solves
 its small systems in plain XLA operations (`hrgjax/_linalg.py`), which a pool of any size
