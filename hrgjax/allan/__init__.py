@@ -15,6 +15,7 @@ fit).
 """
 
 from .deviations import KINDS as KINDS
+from .deviations import TOTVAR_BIAS as TOTVAR_BIAS
 from .deviations import AllanResult as AllanResult
 from .deviations import adev as adev
 from .deviations import allan_deviation as allan_deviation
@@ -27,9 +28,13 @@ from .deviations import totdev as totdev
 from .noise_terms import NOISE_TERMS as NOISE_TERMS
 from .noise_terms import NoiseFit as NoiseFit
 from .noise_terms import fit_noise as fit_noise
+from .uncertainty import ACF_POINTS as ACF_POINTS
+from .uncertainty import B1_AVERAGES as B1_AVERAGES
 from .uncertainty import ONE_SIGMA as ONE_SIGMA
+from .uncertainty import b1_expected as b1_expected
 from .uncertainty import chi2_ppf as chi2_ppf
 from .uncertainty import confidence_interval as confidence_interval
 from .uncertainty import edf_greenhall as edf_greenhall
 from .uncertainty import edf_totdev as edf_totdev
 from .uncertainty import noise_id as noise_id
+from .uncertainty import rn_expected as rn_expected

@@ -280,7 +280,13 @@ class AllanResult:
     - `alpha`: the power-law noise identified at each τ, the exponent α of the rate PSD
       S_y(f) ∝ f^α: 2 white angle (phase) noise, 1 flicker angle, 0 white rate (angle random
       walk), −1 flicker rate (bias instability), −2 rate random walk (lag-1 autocorrelation,
-      Riley & Greenhall 2004).
+      Riley & Greenhall 2004; the B1 and R(n) ratios where the record is short at that τ:
+      [`noise_id`][hrgjax.allan.noise_id]).
+    - `bias_factor`: what `dev` was multiplied by to remove the estimator's bias (totdev:
+      1/√(1 − a·τ/T), NIST SP 1065 §5.2.11; 1 elsewhere and where the correction was off).
+
+    `print(result)` shows it as a table; `to_dict`, `to_json(path)` and `to_csv(path)` write
+    it with its units.
     """
 
     kind: str
@@ -293,6 +299,63 @@ class AllanResult:
     edf: np.ndarray
     n_terms: np.ndarray
     alpha: np.ndarray
+    bias_factor: np.ndarray | None = None
+    unit: str = ""
+
+    def _columns(self) -> dict:
+        return {
+            "tau_s": self.taus, "m": self.m, "dev": self.dev, "dev_low": self.dev_low,
+            "dev_high": self.dev_high, "edf": self.edf, "n_terms": self.n_terms,
+            "alpha": self.alpha,
+        }  # fmt: skip
+
+    def __str__(self) -> str:
+        unit = f" [{self.unit}]" if self.unit else ""
+        head = f"{self.kind}{unit}, ±{self.ci:.3f} χ² interval"
+        cols = (
+            f"{'tau [s]':>12} {'m':>8} {'dev':>12} {'low':>12} {'high':>12} {'edf':>9} {'alpha':>6}"
+        )
+        rows = [
+            f"{t:12.5g} {int(m):8d} {d:12.5g} {lo:12.5g} {hi:12.5g} {e:9.4g} {int(a):+6d}"
+            for t, m, d, lo, hi, e, a in zip(self.taus, self.m, self.dev, self.dev_low,
+                                             self.dev_high, self.edf, self.alpha, strict=True)
+        ]  # fmt: skip
+        return "\n".join([head, cols, *rows])
+
+    def to_dict(self) -> dict:
+        """The curve as plain lists, with its kind, level, unit and column units."""
+        out = {"kind": self.kind, "ci": self.ci, "unit": self.unit,
+               "units": {"tau_s": "s", "dev": self.unit, "dev_low": self.unit,
+                         "dev_high": self.unit, "alpha": "S_y ∝ f^alpha"}}  # fmt: skip
+        cols = self._columns()
+        if self.bias_factor is not None:
+            cols["bias_factor"] = self.bias_factor
+        return out | {k: np.asarray(v).tolist() for k, v in cols.items()}
+
+    def to_json(self, path) -> None:
+        """Write [`to_dict`][hrgjax.allan.AllanResult.to_dict] to `path` (JSON)."""
+        import json
+
+        with open(path, "w") as fh:
+            json.dump(self.to_dict(), fh, indent=1)
+
+    def to_csv(self, path) -> None:
+        """Write one row per τ to `path` (CSV: `tau_s, m, dev, dev_low, dev_high, edf,
+        n_terms, alpha`, the deviation's unit in the header's `dev` column name)."""
+        cols = self._columns()
+        unit = f" [{self.unit}]" if self.unit else ""
+        names = [f"{k}{unit}" if k.startswith("dev") else k for k in cols]
+        with open(path, "w") as fh:
+            fh.write(",".join(names) + "\n")
+            for row in zip(*cols.values(), strict=True):
+                fh.write(",".join(repr(float(v)) if isinstance(v, float | np.floating)
+                                  else str(int(v)) for v in row) + "\n")  # fmt: skip
+
+
+TOTVAR_BIAS = {-1: 0.481, -2: 0.750}
+"""NIST SP 1065 §5.2.11: the total variance's bias a by noise type α (flicker and random-walk
+rate noise; none for white rate or angle noise): E[Totvar] = (1 − a·τ/T)·σ²(τ), T the
+record's length."""
 
 
 def deviation(
@@ -302,6 +365,9 @@ def deviation(
     taus="octave",
     data: str = "rate",
     ci: float = ONE_SIGMA,
+    *,
+    bias_correction: bool = True,
+    unit: str = "",
 ) -> AllanResult:
     r"""An Allan-family deviation with confidence intervals, as allantools and Stable32
     compute it.
@@ -316,6 +382,10 @@ def deviation(
       allantools does). Factors whose estimate would average fewer than 2 terms are left
       out (allantools' and Stable32's limit).
     - `ci`: confidence level of the interval (default ±1σ, 0.683).
+    - `bias_correction`: totdev divided by √(1 − a·τ/T) for the identified noise
+      ([`TOTVAR_BIAS`][hrgjax.allan.TOTVAR_BIAS]), as Stable32 reports it; `False` gives the
+      raw estimator (allantools').
+    - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
 
     One compiled program per kind and data length serves every τ grid (factors are run-time
     values, padded to a power-of-two count), so a new grid compiles nothing.
@@ -375,10 +445,15 @@ def deviation(
     taus_s = m * tau0
     if kind == "tdev":
         dev = dev * taus_s / math.sqrt(3.0)
+    factor = np.ones_like(dev)
+    if kind == "totdev" and bias_correction:
+        a = np.asarray([TOTVAR_BIAS.get(int(k), 0.0) for k in alpha])
+        factor = 1.0 / np.sqrt(1.0 - a * taus_s / ((n_phase - 1) * tau0))
+        dev = dev * factor
     low, high = confidence_interval(dev, edf, ci)
     return AllanResult(
         kind=kind, ci=float(ci), taus=taus_s, m=m, dev=dev, dev_low=low, dev_high=high,
-        edf=edf, n_terms=n_terms, alpha=alpha,
+        edf=edf, n_terms=n_terms, alpha=alpha, bias_factor=factor, unit=str(unit),
     )  # fmt: skip
 
 
