@@ -10,10 +10,13 @@ rate ramp $R\tau/\sqrt2$.
 
 Every name is importable from `hrgjax.allan` (it was one module until issue 45); inside:
 `deviations` (the estimators, the compiled curve and `deviation` with its τ grids),
-`uncertainty` (noise identification, EDF, χ² intervals) and `noise_terms` (the IEEE 952
-fit).
+`uncertainty` (noise identification, EDF, χ² intervals), `noise_terms` (the IEEE 952
+line fit) and `composite` (a composite noise model with the estimator's own covariance and
+model selection: `identify_noise`).
 """
 
+from .composite import CompositeNoise as CompositeNoise
+from .composite import identify_noise as identify_noise
 from .deviations import KINDS as KINDS
 from .deviations import TOTVAR_BIAS as TOTVAR_BIAS
 from .deviations import AllanResult as AllanResult

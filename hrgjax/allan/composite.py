@@ -1,0 +1,636 @@
+r"""A composite noise model identified from a record by its Allan variance at octave scales
+with that estimator's own covariance: a generalised method of wavelet moments (GMWM;
+Guerrier et al. 2013 — the overlapping Allan variance at τ = 2ʲτ₀ is twice the Haar wavelet
+variance).
+
+The terms, for rate samples $y_k$ every $\tau_0$ (their Allan variances exact for sampled
+data, not the continuous-time approximations):
+
+| term | coefficient | Allan variance at τ = mτ₀ |
+|---|---|---|
+| `quantization` | Q [unit·s] (white angle noise, σ per sample) | 3Q²/τ² |
+| `angle_random_walk` | N [unit·√s] (white rate noise, N²/τ₀ per sample) | N²/τ |
+| `rate_random_walk` | K [unit/√s] (rate steps of variance K²τ₀) | K²τ/3 + K²τ₀/(6m) |
+| `rate_ramp` | R [unit/s] (a drift y = R·t) | R²τ²/2 |
+| `gauss_markov` (up to two) | σ [unit], T [s] (first order: y_{k+1} = φy_k + …, φ = e^{−τ₀/T}) | (4D(m) − D(2m))/(2τ²) |
+
+with D(t) = σ²[t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)²]τ₀² the structure function of the angle.
+
+**The estimator's covariance.** Each octave's estimate σ̂²(m) = Σᵢ aᵢ²/(2m²M) is a quadratic
+form of the second differences aᵢ of the angle; for Gaussian noise
+Cov(σ̂²_a, σ̂²_b) = Σ_ℓ n_ab(ℓ)·[2c_ab(ℓ)² + 4μ_aμ_b c_ab(ℓ)]/(4m_a²m_b²M_aM_b), where c_ab(ℓ)
+is the covariance of aᵢ and b_{i+ℓ} (a sum of nine values of each term's generalised
+covariance), n_ab(ℓ) the number of pairs at lag ℓ and μ the drift's mean difference. It is
+exact for the model (finite record, overlapping estimates, neighbouring octaves correlated);
+the sum over ℓ runs piecewise (Gauss–Legendre on each smooth piece, the end corrections of
+Euler–Maclaurin), so it costs the same for 10³ or 10⁷ samples.
+
+**Fit and selection.** Generalised least squares on the octaves with that covariance
+(evaluated at the previous fit, three rounds), the coefficients² non-negative, each
+Gauss–Markov correlation time profiled on a grid refined by a parabola in log T. Every
+subset of the candidate terms is fitted with one shared covariance (the fullest model's)
+and the subset with the least J + penalty kept (J the χ²-distributed misfit; penalty
+[`PENALTY`][hrgjax.allan.composite.PENALTY] per linear term, twice that per Gauss–Markov
+term, whose T is not identified when σ = 0), so a term the data do not need is not reported.
+Intervals: (GᵀΩ⁻¹G)⁻¹ at the selected fit (G the model's derivative in the coefficients²
+and log T), on the coefficients² (a lower end below zero reads 0) and on log T.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import math
+from statistics import NormalDist
+
+import numpy as np
+
+LINEAR = ("quantization", "angle_random_walk", "rate_random_walk", "rate_ramp")
+"""The terms linear in their coefficient² (the Gauss–Markov terms add a correlation time)."""
+SYMBOLS = {"quantization": "Q", "angle_random_walk": "N", "rate_random_walk": "K",
+           "rate_ramp": "R"}  # fmt: skip
+UNIT_OF = {"quantization": "{u}·s", "angle_random_walk": "{u}·√s",
+           "rate_random_walk": "{u}/√s", "rate_ramp": "{u}/s"}  # fmt: skip
+PENALTY = 4.0
+"""The misfit a linear term must remove to be kept (a Gauss–Markov term: twice). Under a
+term's absence its J drop is ½χ²₀ + ½χ²₁ (a non-negative coefficient), exceeded with
+probability 2.3 %."""
+SCALE_LIMIT = 8
+"""The octaves fitted: m ≤ n/SCALE_LIMIT (at least 2·SCALE_LIMIT − 1 differences each)."""
+GM_PENALTY = 12.0
+"""The misfit a Gauss–Markov term must remove: its correlation time is searched (and
+undefined when σ = 0), so its drop under absence is the largest of many (Davies 1987); 12
+keeps false detections in white + random-walk records near 5 %
+(`benchmarks/noise_identification.py`)."""
+FINALISTS = 6
+"""The best subsets under the fullest model's covariance that are refitted with their own."""
+T_GRID = 24
+"""Correlation times tried per Gauss–Markov term: log-spaced from 2τ₀ to the record's length."""
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
+
+
+# -- each term's generalised covariance of the angle X = Σy (rate units × samples) ------------
+
+
+def _g_white(t):
+    return -0.5 * np.abs(t)
+
+
+def _g_walk(t):
+    t = np.abs(t)
+    return (t**3 - t) / 12.0
+
+
+def _gm_structure(t, eps):
+    """D(t)/σ² of a unit-variance AR(1) rate with φ = e^{−ε}, summed over t samples:
+    t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)², with the bracket's cancellation avoided (a
+    series where εt < 1e-4)."""
+    t = np.abs(np.asarray(t, dtype=float))
+    u = eps * t
+    one_m_phi = -math.expm1(-eps)
+    bracket = t * one_m_phi + np.expm1(-u)  # t(1 − φ) − (1 − φᵗ)
+    small = u < 1e-4
+    ts = t[small]
+    bracket[small] = ((eps**2 / 2) * (ts * ts - ts) - (eps**3 / 6) * (ts**3 - ts)
+                      + (eps**4 / 24) * (ts**4 - ts))  # fmt: skip
+    return t + 2 * math.exp(-eps) * bracket / one_m_phi**2
+
+
+def _g_gm(t, eps):
+    return -0.5 * _gm_structure(t, eps)
+
+
+def _c(gfun, ell, ma, mb):
+    """Covariance of the angle's second differences at lags ma (at i) and mb (at i + ℓ):
+    Σ c_p c_q G(ℓ + u_q − t_p), c = (1, −2, 1), t = (0, ma, 2ma), u = (0, mb, 2mb)."""
+    cp = (1.0, -2.0, 1.0)
+    out = 0.0
+    for p in range(3):
+        for q in range(3):
+            out = out + cp[p] * cp[q] * gfun(ell + q * mb - p * ma)
+    return out
+
+
+# -- the model's Allan variance and the estimator's covariance -----------------------------
+
+
+def _unit_avar(term, m, tau0, eps=None):
+    """Allan variance at factors `m` of one term with unit coefficient² (Q² = 1 [unit·s]²,
+    …; Gauss–Markov: σ² = 1 [unit²] with φ = e^{−eps})."""
+    m = np.asarray(m, dtype=float)
+    if term == "rate_ramp":
+        return (m * tau0) ** 2 / 2.0
+    if term == "quantization":
+        return 3.0 / (m * tau0) ** 2
+    return _c(_term_g(term, tau0, eps), 0.0, m, m) / (2 * m**2)
+
+
+def _term_g(term, tau0, eps=None):
+    """The generalised covariance of X = Σy for one term with unit coefficient²."""
+    if term == "angle_random_walk":  # σ² = N²/τ₀ per sample
+        return lambda t: _g_white(t) / tau0
+    if term == "rate_random_walk":  # steps of variance K²τ₀
+        return lambda t: _g_walk(t) * tau0
+    if term == "gauss_markov":
+        return lambda t: _g_gm(t, eps)
+    raise ValueError(term)
+
+
+def _sum_rule(lo, hi):
+    """Points and weights with Σ_{ℓ=lo}^{hi} f(ℓ) ≈ Σ wᵢ f(xᵢ) for f smooth on [lo, hi]
+    (integers): every point below 48 of them, else Gauss–Legendre on [lo, hi] plus the
+    trapezoid's end terms and the first Euler–Maclaurin correction (f′ by differences)."""
+    if hi < lo:
+        return np.zeros(0), np.zeros(0)
+    if hi - lo < 48:
+        x = np.arange(lo, hi + 1, dtype=float)
+        return x, np.ones_like(x)
+    half = 0.5 * (hi - lo)
+    x = np.concatenate([lo + half * (_GL_X + 1.0), [lo, lo + 1, hi - 1, hi]])
+    w = np.concatenate([half * _GL_W, [0.5 + 1 / 12, -1 / 12, -1 / 12, 0.5 + 1 / 12]])
+    return x, w
+
+
+def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
+    """Cov(σ̂²(m_a), σ̂²(m_b)) of the overlapping Allan variance at factors `ms` of `n` rate
+    samples for the model `coef` ({term: coefficient²} of [`LINEAR`][hrgjax.allan.composite.LINEAR])
+    plus Gauss–Markov terms `gm` [(σ², T [s])] (module docstring). [unit⁴]"""
+    ms = [int(m) for m in ms]
+    terms = [(_term_g(t, tau0), c) for t, c in coef.items()
+             if t in ("angle_random_walk", "rate_random_walk") and c > 0]  # fmt: skip
+    terms += [(_term_g("gauss_markov", tau0, tau0 / tt), s2) for s2, tt in gm if s2 > 0]
+    q2 = coef.get("quantization", 0.0) / tau0**2  # white angle noise in X units
+    drift = coef.get("rate_ramp", 0.0)
+    tails = [tt / tau0 for s2, tt in gm if s2 > 0]
+    count_m = [n + 1 - 2 * m for m in ms]
+    pairs = list(itertools.combinations_with_replacement(range(len(ms)), 2))
+    xs, ws, idx, qx, qc, qidx = [], [], [], [], [], []
+    for k, (a, b) in enumerate(pairs):
+        ma, mb, na, nb = ms[a], ms[b], count_m[a], count_m[b]
+        # breakpoints: where a generalised covariance turns (ℓ = t_p − u_q) and the count
+        # bends; Gauss–Markov tails cut where they have died (φ^{2ℓ} < 1e-16)
+        lo_all, hi_all = -(na - 1), nb - 1
+        cuts = {lo_all, hi_all + 1, 0, nb - na}
+        cuts.update(p * ma - q * mb for p in range(3) for q in range(3))
+        edge = 2 * max(ma, mb)
+        for tt in tails:
+            for j in (1, 2, 4, 8, 18):
+                cuts.update((edge + int(j * tt), -edge - int(j * tt)))
+        if tails:
+            reach = edge + int(18 * max(tails)) + 1
+            lo_all, hi_all = max(lo_all, -reach), min(hi_all, reach)
+        pts = sorted(c for c in cuts if lo_all < c <= hi_all + 1)
+        pts = [lo_all, *pts] if pts[-1] == hi_all + 1 else [lo_all, *pts, hi_all + 1]
+        for lo, nxt in zip(pts[:-1], pts[1:], strict=True):
+            x, w = _sum_rule(lo, nxt - 1)
+            xs.append(x)
+            ws.append(w)
+            idx.append(np.full(x.size, k))
+        if q2 > 0:  # white angle noise: c is q2·Σ c_p c_q at ℓ = t_p − u_q only
+            lags = {}
+            for p, q in itertools.product(range(3), range(3)):
+                ell = p * ma - q * mb
+                lags[ell] = lags.get(ell, 0.0) + (1, -2, 1)[p] * (1, -2, 1)[q] * q2
+            qx += list(lags)
+            qc += list(lags.values())
+            qidx += [k] * len(lags)
+    ma_of = np.asarray([ms[a] for a, _ in pairs], dtype=float)
+    mb_of = np.asarray([ms[b] for _, b in pairs], dtype=float)
+    na_of = np.asarray([count_m[a] for a, _ in pairs], dtype=float)
+    nb_of = np.asarray([count_m[b] for _, b in pairs], dtype=float)
+    mu2 = drift * tau0**2 * ma_of**2 * mb_of**2  # μ_a·μ_b of the drift
+
+    def c_smooth(ell, k):
+        if not terms:
+            return np.zeros_like(ell)
+        return sum(w * _c(g, ell, ma_of[k], mb_of[k]) for g, w in terms)
+
+    def count(ell, k):
+        return np.maximum(np.minimum(na_of[k], nb_of[k] - ell) - np.maximum(0.0, -ell), 0.0)
+
+    x, w, k = np.concatenate(xs), np.concatenate(ws), np.concatenate(idx)
+    c = c_smooth(x, k)
+    total = np.bincount(k, weights=w * count(x, k) * (2 * c * c + 4 * mu2[k] * c),
+                        minlength=len(pairs))  # fmt: skip
+    if qx:
+        x, cq, k = np.asarray(qx, dtype=float), np.asarray(qc), np.asarray(qidx)
+        cs = c_smooth(x, k)
+        total += np.bincount(k, weights=count(x, k) * (2 * ((cs + cq) ** 2 - cs**2)
+                                                       + 4 * mu2[k] * cq), minlength=len(pairs))  # fmt: skip
+    out = np.zeros((len(ms), len(ms)))
+    for k, (a, b) in enumerate(pairs):
+        out[a, b] = out[b, a] = total[k] / (4.0 * ms[a] ** 2 * ms[b] ** 2 * na_of[k] * nb_of[k])
+    return out
+
+
+# -- the fit -------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class CompositeNoise:
+    """A composite noise model identified from a record
+    ([`identify_noise`][hrgjax.allan.identify_noise]).
+
+    - `terms`: `{name: {"value", "low", "high", "unit"}}` for the terms the data need
+      (quantization Q, angle_random_walk N, rate_random_walk K, rate_ramp R;
+      `gauss_markov_1`, `gauss_markov_2`: `{"sigma": {...}, "correlation_time": {...}}`),
+      intervals at level `ci`. A term the data do not need is absent.
+    - `unit`: the rate unit of the record; `rate_hz`: its sample rate [Hz]; `n`: samples.
+    - `taus` [s], `avar` [unit²]: the octaves fitted; `covariance` [unit⁴]: the estimator's
+      covariance at the fit; `chi2`, `dof`, `p_value`: the misfit J, its degrees of
+      freedom and P(χ²_dof > J) — a small p says the model leaves structure.
+    - `selection`: each candidate subset tried, with its J and penalty.
+    """
+
+    terms: dict
+    unit: str
+    rate_hz: float
+    n: int
+    ci: float
+    taus: np.ndarray
+    avar: np.ndarray
+    covariance: np.ndarray
+    chi2: float
+    dof: int
+    p_value: float
+    selection: tuple = ()
+
+    def model_avar(self, taus) -> np.ndarray:
+        """The model's Allan variance at `taus` [s] (rounded to whole samples). [unit²]"""
+        tau0 = 1.0 / self.rate_hz
+        m = np.maximum(np.round(np.asarray(taus, dtype=float) / tau0), 1.0)
+        out = np.zeros_like(m)
+        for name, spec in self.terms.items():
+            if name in LINEAR:
+                out = out + spec["value"] ** 2 * _unit_avar(name, m, tau0)
+            else:
+                s, t = spec["sigma"]["value"], spec["correlation_time"]["value"]
+                out = out + s**2 * _unit_avar("gauss_markov", m, tau0, tau0 / t)
+        return out
+
+    def term_avar(self, name, taus) -> np.ndarray:
+        """One term's Allan variance at `taus` [s]. [unit²]"""
+        one = dataclasses.replace(self, terms={name: self.terms[name]})
+        return one.model_avar(taus)
+
+    def adev(self, taus) -> np.ndarray:
+        """The model's Allan deviation at `taus` [s]. [unit]"""
+        return np.sqrt(self.model_avar(taus))
+
+    def value(self, name: str) -> float:
+        """A coefficient's value (0 where the term is absent); Gauss–Markov terms: σ."""
+        spec = self.terms.get(name)
+        if spec is None:
+            return 0.0
+        return spec["value"] if "value" in spec else spec["sigma"]["value"]
+
+    def __str__(self) -> str:
+        lines = [f"composite noise model [{self.unit or 'rate unit'}], {self.n} samples at "
+                 f"{self.rate_hz:g} Hz, {100 * self.ci:.0f} % intervals; J = {self.chi2:.1f} "
+                 f"on {self.dof} dof (p = {self.p_value:.2g})"]  # fmt: skip
+        for name, spec in self.terms.items():
+            parts = [("", spec)] if "value" in spec else list(spec.items())
+            for sub, s in parts:
+                label = f"{name}{'.' + sub if sub else ''}"
+                lines.append(f"  {label:<34} {s['value']:.4g} [{s['low']:.4g}, {s['high']:.4g}]"
+                             f" {s['unit']}")  # fmt: skip
+        if not self.terms:
+            lines.append("  (no term: the record is below every candidate's detection)")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {
+            "format": "hrgjax.noise_model", "unit": self.unit, "rate_hz": self.rate_hz,
+            "n_samples": self.n, "ci": self.ci, "terms": self.terms, "chi2": self.chi2,
+            "dof": self.dof, "p_value": self.p_value, "taus_s": self.taus.tolist(),
+            "avar": self.avar.tolist(),
+        }  # fmt: skip
+
+    def to_json(self, path) -> None:
+        """Write the model (terms with units and intervals, the octaves fitted) as JSON."""
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump(self.to_dict(), fh, indent=1, ensure_ascii=False)
+
+    def to_kalibr(self, path=None, sensor: str = "gyroscope", rostopic: str = "/imu0") -> dict:
+        """Kalibr's IMU noise parameters (`imu.yaml`): `{sensor}_noise_density` = N and
+        `{sensor}_random_walk` = K in SI continuous-time units (gyroscope: rad/s/√Hz and
+        rad/s²/√Hz; accelerometer: m/s²/√Hz and m/s³/√Hz), with `update_rate` [Hz]. The
+        record's `unit` must be one Kalibr's units follow from ([`TO_SI`][hrgjax.allan.composite.TO_SI]).
+        Written to `path` when given. **Returns:** the entries."""
+        if sensor not in ("gyroscope", "accelerometer"):
+            raise ValueError(f"sensor must be 'gyroscope' or 'accelerometer'; got {sensor!r}")
+        scale = _si_scale(self.unit, sensor)
+        out = {
+            f"{sensor}_noise_density": self.value("angle_random_walk") * scale,
+            f"{sensor}_random_walk": self.value("rate_random_walk") * scale,
+            "rostopic": rostopic,
+            "update_rate": float(self.rate_hz),
+        }
+        if path is not None:
+            si = "rad" if sensor == "gyroscope" else "m"
+            with open(path, "w", encoding="utf-8") as fh:
+                fh.write(f"# from hrgjax.allan.identify_noise: {self.n} samples at "
+                         f"{self.rate_hz:g} Hz, unit {self.unit}\n")  # fmt: skip
+                for k, v in out.items():
+                    unit = {"noise_density": f"{si}/s^{1 if si == 'rad' else 2}/sqrt(Hz)",
+                            "random_walk": f"{si}/s^{2 if si == 'rad' else 3}/sqrt(Hz)"}  # fmt: skip
+                    note = next((f"  # [{u}]" for key, u in unit.items() if k.endswith(key)), "")
+                    val = v if isinstance(v, str) else f"{v:.6g}"
+                    fh.write(f"{k}: {val}{note}\n")
+        return out
+
+    def to_noise(self, k_e: float):
+        """hrgjax's [`Noise`][hrgjax.Noise] for simulating a gyro with this noise (rate unit
+        rad/s, °/s or °/h): N → `angle_random_walk`, one Gauss–Markov term → `bias_instability`
+        and `correlation_time`, Q → `angle_white` (× `k_e`: readout noise on the electrical
+        wave angle, per sample at this record's rate). A rate random walk, a drift or a
+        second Gauss–Markov term has no field in `Noise`: `ValueError` naming it."""
+        from ..noise import Noise
+
+        scale = _si_scale(self.unit, "gyroscope")
+        extra = [n for n in self.terms if n in ("rate_random_walk", "rate_ramp", "gauss_markov_2")]
+        if extra:
+            raise ValueError(
+                f"to_noise: {', '.join(extra)} has no field in hrgjax.Noise (it simulates "
+                "white angle and rate noise and one Gauss–Markov rate)"
+            )
+        gm = self.terms.get("gauss_markov_1")
+        return Noise(
+            angle_white=k_e * self.value("quantization") * scale,
+            angle_random_walk=self.value("angle_random_walk") * scale,
+            bias_instability=0.0 if gm is None else gm["sigma"]["value"] * scale,
+            correlation_time=100.0 if gm is None else gm["correlation_time"]["value"],
+        )
+
+
+TO_SI = {
+    "rad/s": ("gyroscope", 1.0), "°/s": ("gyroscope", math.pi / 180),
+    "deg/s": ("gyroscope", math.pi / 180), "°/h": ("gyroscope", math.pi / 180 / 3600),
+    "deg/h": ("gyroscope", math.pi / 180 / 3600), "m/s²": ("accelerometer", 1.0),
+    "m/s^2": ("accelerometer", 1.0), "g": ("accelerometer", 9.80665),
+    "mg": ("accelerometer", 9.80665e-3),
+}  # fmt: skip
+"""Rate units Kalibr's and `Noise`'s SI units follow from: unit → (sensor, factor to SI)."""
+
+
+def _si_scale(unit, sensor):
+    if unit not in TO_SI:
+        raise ValueError(f"unit {unit!r} has no SI factor; give the record's unit as one of "
+                         f"{sorted(TO_SI)}")  # fmt: skip
+    kind, factor = TO_SI[unit]
+    if kind != sensor:
+        raise ValueError(f"unit {unit!r} is an {kind}'s, not a {sensor}'s")
+    return factor
+
+
+def identify_noise(
+    y,
+    rate_hz: float,
+    *,
+    unit: str = "",
+    terms=("quantization", "angle_random_walk", "rate_random_walk"),
+    gauss_markov: int = 2,
+    ci: float = 0.95,
+) -> CompositeNoise:
+    """Identify a composite noise model in rate samples `y` [unit] taken at `rate_hz` [Hz]
+    (module docstring): the terms the record needs among `terms` (names of
+    [`LINEAR`][hrgjax.allan.composite.LINEAR]) and up to `gauss_markov` (0–2) first-order
+    Gauss–Markov terms, each with an interval at level `ci`.
+
+    `rate_ramp` is not a default candidate: over one record a rate random walk's wander and a
+    drift give the same rise at the longest octaves, and offered both, white + random-walk
+    records took a drift in 25 % (`benchmarks/noise_identification.py`). Remove a known drift
+    first (Stable32 does), or ask for it where the sensor has one.
+
+    **Returns:** a [`CompositeNoise`][hrgjax.allan.CompositeNoise].
+
+    **Raises:** `ValueError` naming the argument for unknown terms, a `gauss_markov` outside
+    0–2, a bad rate or level, or a record shorter than 64 samples (four octaves)."""
+    from .deviations import deviation
+
+    bad = [t for t in terms if t not in LINEAR]
+    if bad:
+        raise ValueError(f"terms must be among {list(LINEAR)}; got {bad}")
+    if gauss_markov not in (0, 1, 2):
+        raise ValueError(f"gauss_markov must be 0, 1 or 2 terms; got {gauss_markov!r}")
+    if not (0.0 < ci < 1.0):
+        raise ValueError(f"ci must be a confidence level in (0, 1); got {ci!r}")
+    y = np.asarray(y, dtype=float)
+    if y.ndim != 1 or y.size < 64:
+        raise ValueError(f"y must be 1-D with at least 64 samples; got shape {y.shape}")
+    n, tau0 = y.size, 1.0 / float(rate_hz)
+    ms = 2 ** np.arange(int(math.log2(n // SCALE_LIMIT)) + 1)
+    res = deviation(y, rate_hz, kind="oadev", taus=ms * tau0, unit=unit)
+    avar, ms = res.dev**2, res.m
+    t_grid = np.geomspace(2 * tau0, ms[-1] * tau0, T_GRID)
+    cols = {t: _unit_avar(t, ms, tau0) for t in terms}
+    gm_cols = {tt: _unit_avar("gauss_markov", ms, tau0, tau0 / tt) for tt in t_grid}
+
+    # round 0: each octave's variance from its EDF (independent), then the model's own
+    omega = np.diag(2 * avar**2 / np.maximum(res.edf, 1.0))
+    full = _best(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
+    for _ in range(3):
+        omega = _omega(full, ms, n, tau0, avar)
+        full = _best(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
+    # selection: every subset ranked with the fullest model's covariance; the best few then
+    # each with its own covariance, by the Gaussian likelihood of the octaves
+    # (J + log det Ω) + penalty — a covariance from too large a model hides misfit at long τ,
+    # one from too small a model exaggerates it, and log det Ω weighs the two
+    tried = _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms)
+    best = None
+    for row in tried[:FINALISTS]:
+        got = _consistent(row["fit"], avar, cols, gm_cols, ms, n, tau0)
+        if got is None:  # a coefficient went negative: not admissible
+            continue
+        fit, om = got
+        logdet = float(np.linalg.slogdet(om)[1])
+        row["likelihood_score"] = fit["J"] + logdet + row["score"] - row["J"]
+        if best is None or row["likelihood_score"] < best[0]:
+            best = (row["likelihood_score"], fit, om)
+    _, fit, omega = best
+    for row in tried:
+        row.pop("fit")
+    terms_out = _intervals(fit, avar, omega, ms, tau0, ci, unit)
+    dof = int(ms.size - len(fit["names"]) - 2 * len(fit["gm"]))
+    chi2 = float(fit["J"])
+    from .uncertainty import _gammainc
+
+    p = 1.0 - _gammainc(max(dof, 1) / 2.0, chi2 / 2.0)
+    return CompositeNoise(
+        terms=terms_out, unit=unit, rate_hz=float(rate_hz), n=n, ci=float(ci),
+        taus=ms * tau0, avar=avar, covariance=omega, chi2=chi2, dof=dof, p_value=float(p),
+        selection=tuple(tried),
+    )  # fmt: skip
+
+
+def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms):
+    """Every subset of the candidates fitted with one covariance, by J + penalty."""
+    tried = []
+    for k in range(len(terms) + 1):
+        for subset in itertools.combinations(terms, k):
+            for g in range(gauss_markov + 1):
+                if not subset and g == 0:
+                    continue
+                fit = _best(avar, omega, cols, gm_cols, list(subset), g, g, tau0, ms)
+                if fit is None:
+                    continue
+                score = fit["J"] + PENALTY * len(subset) + GM_PENALTY * g
+                tried.append({"terms": list(subset), "gauss_markov": g, "J": fit["J"],
+                              "score": score, "fit": fit})  # fmt: skip
+    return sorted(tried, key=lambda r: r["score"])
+
+
+def _model(fit, ms, tau0):
+    """The Allan variance of a fit at the factors `ms`. [unit²]"""
+    out = sum(c * _unit_avar(t, ms, tau0) for t, c in zip(fit["names"], fit["c"], strict=False))
+    for c, t in zip(fit["c"][len(fit["names"]) :], fit["gm"], strict=True):
+        out = out + c * _unit_avar("gauss_markov", ms, tau0, tau0 / t)
+    return out
+
+
+def _consistent(fit, avar, cols, gm_cols, ms, n, tau0, rounds: int = 4):
+    """Refit `fit`'s terms with the covariance at the fit until the two agree (the model's
+    Allan variance moves by < 1e-3 of itself); **returns** `(fit, Ω at that fit)` with J
+    evaluated there, or None when a coefficient turns negative."""
+    for _ in range(rounds):
+        om = _omega(fit, ms, n, tau0, avar)
+        new = _best(avar, om, cols, gm_cols, fit["names"], len(fit["gm"]), len(fit["gm"]),
+                    tau0, ms)  # fmt: skip
+        if new is None:
+            return None
+        moved = np.max(np.abs(_model(new, ms, tau0) / _model(fit, ms, tau0) - 1))
+        fit = new
+        if moved < 1e-3:
+            break
+    om = _omega(fit, ms, n, tau0, avar)
+    r = np.linalg.solve(np.linalg.cholesky(om), avar - _model(fit, ms, tau0))
+    return dict(fit, J=float(r @ r)), om
+
+
+def _omega(fit, ms, n, tau0, avar):
+    coef = dict(zip(fit["names"], fit["c"][: len(fit["names"])], strict=True))
+    gm = [(s2, tt) for s2, tt in zip(fit["c"][len(fit["names"]) :], fit["gm"], strict=True)]
+    om = covariance(coef, gm, ms, n, tau0)
+    # a floor of 1e-6 of each octave's own variance keeps Ω invertible where the model is 0
+    return om + np.diag(1e-6 * np.maximum(np.diag(om), 2 * avar**2 / max(n, 1)))
+
+
+def _gls(avar, chol_inv, basis):
+    """Coefficients² by GLS for a batch of bases (C, S, p) (or one, (S, p)): `(c (C, p),
+    J (C,))`, J = inf where a coefficient is negative (that subset is not admissible)."""
+    one = basis.ndim == 2
+    basis = basis[None] if one else basis
+    a = np.einsum("ij,cjp->cip", chol_inv, basis)
+    b = chol_inv @ avar
+    scale = np.linalg.norm(a, axis=1, keepdims=True)  # the columns span decades
+    a = a / scale
+    ata = np.einsum("cip,ciq->cpq", a, a)
+    atb = np.einsum("cip,i->cp", a, b)
+    try:
+        c = np.linalg.solve(ata, atb[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        c = np.stack([np.linalg.lstsq(m, v, rcond=None)[0] for m, v in zip(ata, atb, strict=True)])
+    r = np.einsum("cip,cp->ci", a, c) - b
+    j = np.einsum("ci,ci->c", r, r)
+    c = c / scale[:, 0, :]
+    j = np.where(np.all(c >= 0, axis=1) & np.isfinite(j), j, np.inf)
+    return (c[0], j[0]) if one else (c, j)
+
+
+def _best(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
+    """The best fit of the linear terms `names` plus g Gauss–Markov terms (correlation times
+    profiled on the grid, then refined by a parabola in log T); with `g_exact` None, every
+    admissible subset of them (NNLS), as the fullest model's fit."""
+    chol_inv = np.linalg.inv(np.linalg.cholesky(omega))
+    subsets = [names] if g_exact is not None else [
+        list(s) for k in range(len(names) + 1) for s in itertools.combinations(names, k)]  # fmt: skip
+    gms = [g] if g_exact is not None else list(range(g + 1))
+    best = None
+    grid = sorted(gm_cols)
+    gm_stack = np.stack([gm_cols[t] for t in grid], axis=1)  # (S, T)
+    for sub in subsets:
+        base = np.stack([cols[t] for t in sub], axis=1) if sub else np.zeros((len(ms), 0))
+        for k in gms:
+            if not sub and k == 0:
+                continue
+            combos = list(itertools.combinations(range(len(grid)), k))
+            extra = gm_stack[:, np.asarray(combos, dtype=int).reshape(len(combos), k)]
+            basis = np.concatenate(
+                [np.broadcast_to(base, (len(combos), *base.shape)), extra.transpose(1, 0, 2)],
+                axis=2,
+            )
+            c, j = _gls(avar, chol_inv, basis)
+            i = int(np.argmin(j))
+            if np.isfinite(j[i]) and (best is None or j[i] < best["J"]):
+                best = {"names": list(sub), "gm": [grid[t] for t in combos[i]], "c": c[i],
+                        "J": float(j[i])}  # fmt: skip
+    if best is None:
+        return None
+    if best["gm"]:
+        best = _refine(best, avar, chol_inv, cols, tau0, ms, grid)
+    return best
+
+
+def _refine(fit, avar, chol_inv, cols, tau0, ms, grid):
+    """Each correlation time moved to the vertex of a parabola in log T through its grid
+    neighbours (the others held), when that lowers J."""
+    step = math.log(grid[1] / grid[0])
+    for i in range(len(fit["gm"])):
+
+        def j_at(log_t, fit=fit, i=i):
+            ts = list(fit["gm"])
+            ts[i] = math.exp(log_t)
+            basis = np.stack([cols[t] for t in fit["names"]]
+                             + [_unit_avar("gauss_markov", ms, tau0, tau0 / t) for t in ts], 1)  # fmt: skip
+            c, j = _gls(avar, chol_inv, basis)
+            return (np.inf, None) if not np.isfinite(j) else (float(j), (ts, c))
+
+        x0 = math.log(fit["gm"][i])
+        js = [j_at(x0 + d * step)[0] for d in (-1, 0, 1)]
+        den = js[0] - 2 * js[1] + js[2]
+        if np.isfinite(den) and den > 0:
+            x = x0 + 0.5 * step * (js[0] - js[2]) / den
+            x = min(max(x, math.log(grid[0])), math.log(grid[-1]))
+            jx, sol = j_at(x)
+            if sol is not None and jx < fit["J"]:
+                fit = {"names": fit["names"], "gm": sol[0], "c": sol[1], "J": jx}
+    return fit
+
+
+def _intervals(fit, avar, omega, ms, tau0, ci, unit):
+    """Values and intervals of the selected terms: (GᵀΩ⁻¹G)⁻¹, G = ∂(model)/∂(c², log T)."""
+    names, gm, c = fit["names"], fit["gm"], fit["c"]
+    cols = [_unit_avar(t, ms, tau0) for t in names]
+    cols += [_unit_avar("gauss_markov", ms, tau0, tau0 / t) for t in gm]
+    for j, t in enumerate(gm):  # ∂/∂ log T of c·basis(T), by a central difference
+        h = 1e-4
+        up = _unit_avar("gauss_markov", ms, tau0, tau0 / (t * math.exp(h)))
+        dn = _unit_avar("gauss_markov", ms, tau0, tau0 / (t * math.exp(-h)))
+        cols.append(c[len(names) + j] * (up - dn) / (2 * h))
+    g = np.stack(cols, axis=1)
+    w = np.linalg.inv(omega)
+    cov = np.linalg.pinv(g.T @ w @ g)
+    z = NormalDist().inv_cdf(0.5 + ci / 2)
+    u = unit or "rate unit"
+
+    def coef(v, s, unit_s):
+        return {"value": math.sqrt(max(v, 0.0)), "low": math.sqrt(max(v - z * s, 0.0)),
+                "high": math.sqrt(max(v + z * s, 0.0)), "unit": unit_s}  # fmt: skip
+
+    out = {}
+    for i, t in enumerate(names):
+        out[t] = coef(c[i], math.sqrt(max(cov[i, i], 0.0)), UNIT_OF[t].format(u=u))
+    for j, t in enumerate(gm):
+        i, k = len(names) + j, len(names) + len(gm) + j
+        s_log = math.sqrt(max(cov[k, k], 0.0))
+        out[f"gauss_markov_{j + 1}"] = {
+            "sigma": coef(c[i], math.sqrt(max(cov[i, i], 0.0)), u),
+            "correlation_time": {
+                "value": float(t),
+                "low": float(t * math.exp(-z * s_log)),
+                "high": float(t * math.exp(z * s_log)),
+                "unit": "s",
+            },  # fmt: skip
+        }
+    return out
