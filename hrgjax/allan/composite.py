@@ -137,19 +137,29 @@ def _term_g(term, tau0, eps=None):
     raise ValueError(term)
 
 
-def _sum_rule(lo, hi):
-    """Points and weights with Σ_{ℓ=lo}^{hi} f(ℓ) ≈ Σ wᵢ f(xᵢ) for f smooth on [lo, hi]
-    (integers): every point below 48 of them, else Gauss–Legendre on [lo, hi] plus the
-    trapezoid's end terms and the first Euler–Maclaurin correction (f′ by differences)."""
-    if hi < lo:
-        return np.zeros(0), np.zeros(0)
-    if hi - lo < 48:
-        x = np.arange(lo, hi + 1, dtype=float)
-        return x, np.ones_like(x)
-    half = 0.5 * (hi - lo)
-    x = np.concatenate([lo + half * (_GL_X + 1.0), [lo, lo + 1, hi - 1, hi]])
-    w = np.concatenate([half * _GL_W, [0.5 + 1 / 12, -1 / 12, -1 / 12, 0.5 + 1 / 12]])
-    return x, w
+def _sum_rules(lo, hi):
+    """Points, weights and piece index with Σ_{ℓ=lo}^{hi} f(ℓ) ≈ Σ wᵢ f(xᵢ) for each piece
+    [lo, hi] (integer arrays) on which f is smooth: every point below 48 of them, else
+    Gauss–Legendre on [lo, hi] plus the trapezoid's end terms and the first Euler–Maclaurin
+    correction (f′ by differences)."""
+    lo, hi = np.asarray(lo, dtype=np.int64), np.asarray(hi, dtype=np.int64)
+    keep = hi >= lo
+    lo, hi, piece = lo[keep], hi[keep], np.flatnonzero(keep)
+    short = hi - lo < 48
+    length = (hi - lo + 1)[short]
+    start = np.repeat(lo[short], length)
+    offset = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length, length)
+    xs, ws, ps = [start + offset], [np.ones(offset.size)], [np.repeat(piece[short], length)]
+    lo_l, hi_l, p_l = lo[~short].astype(float), hi[~short].astype(float), piece[~short]
+    half = 0.5 * (hi_l - lo_l)[:, None]
+    xs.append((lo_l[:, None] + half * (_GL_X + 1.0)).ravel())
+    ws.append((half * _GL_W).ravel())
+    ps.append(np.repeat(p_l, _GL_X.size))
+    ends = np.stack([lo_l, lo_l + 1, hi_l - 1, hi_l], axis=1)
+    xs.append(ends.ravel())
+    ws.append(np.tile([0.5 + 1 / 12, -1 / 12, -1 / 12, 0.5 + 1 / 12], p_l.size))
+    ps.append(np.repeat(p_l, 4))
+    return np.concatenate(xs).astype(float), np.concatenate(ws), np.concatenate(ps)
 
 
 def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
@@ -165,7 +175,7 @@ def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
     tails = [tt / tau0 for s2, tt in gm if s2 > 0]
     count_m = [n + 1 - 2 * m for m in ms]
     pairs = list(itertools.combinations_with_replacement(range(len(ms)), 2))
-    xs, ws, idx, qx, qc, qidx = [], [], [], [], [], []
+    los, his, owner, qx, qc, qidx = [], [], [], [], [], []
     for k, (a, b) in enumerate(pairs):
         ma, mb, na, nb = ms[a], ms[b], count_m[a], count_m[b]
         # breakpoints: where a generalised covariance turns (ℓ = t_p − u_q) and the count
@@ -182,11 +192,9 @@ def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
             lo_all, hi_all = max(lo_all, -reach), min(hi_all, reach)
         pts = sorted(c for c in cuts if lo_all < c <= hi_all + 1)
         pts = [lo_all, *pts] if pts[-1] == hi_all + 1 else [lo_all, *pts, hi_all + 1]
-        for lo, nxt in zip(pts[:-1], pts[1:], strict=True):
-            x, w = _sum_rule(lo, nxt - 1)
-            xs.append(x)
-            ws.append(w)
-            idx.append(np.full(x.size, k))
+        los += pts[:-1]
+        his += [c - 1 for c in pts[1:]]
+        owner += [k] * (len(pts) - 1)
         if q2 > 0:  # white angle noise: c is q2·Σ c_p c_q at ℓ = t_p − u_q only
             lags = {}
             for p, q in itertools.product(range(3), range(3)):
@@ -209,7 +217,8 @@ def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
     def count(ell, k):
         return np.maximum(np.minimum(na_of[k], nb_of[k] - ell) - np.maximum(0.0, -ell), 0.0)
 
-    x, w, k = np.concatenate(xs), np.concatenate(ws), np.concatenate(idx)
+    x, w, piece = _sum_rules(los, his)
+    k = np.asarray(owner)[piece]
     c = c_smooth(x, k)
     total = np.bincount(k, weights=w * count(x, k) * (2 * c * c + 4 * mu2[k] * c),
                         minlength=len(pairs))  # fmt: skip
@@ -328,16 +337,16 @@ class CompositeNoise:
             "update_rate": float(self.rate_hz),
         }
         if path is not None:
-            si = "rad" if sensor == "gyroscope" else "m"
+            units = {"gyroscope": ("rad/s/sqrt(Hz)", "rad/s^2/sqrt(Hz)"),
+                     "accelerometer": ("m/s^2/sqrt(Hz)", "m/s^3/sqrt(Hz)")}[sensor]  # fmt: skip
             with open(path, "w", encoding="utf-8") as fh:
                 fh.write(f"# from hrgjax.allan.identify_noise: {self.n} samples at "
                          f"{self.rate_hz:g} Hz, unit {self.unit}\n")  # fmt: skip
-                for k, v in out.items():
-                    unit = {"noise_density": f"{si}/s^{1 if si == 'rad' else 2}/sqrt(Hz)",
-                            "random_walk": f"{si}/s^{2 if si == 'rad' else 3}/sqrt(Hz)"}  # fmt: skip
-                    note = next((f"  # [{u}]" for key, u in unit.items() if k.endswith(key)), "")
-                    val = v if isinstance(v, str) else f"{v:.6g}"
-                    fh.write(f"{k}: {val}{note}\n")
+                fh.write(f"{sensor}_noise_density: {out[f'{sensor}_noise_density']:.6g}"
+                         f"  # [{units[0]}]\n")  # fmt: skip
+                fh.write(f"{sensor}_random_walk: {out[f'{sensor}_random_walk']:.6g}"
+                         f"  # [{units[1]}]\n")  # fmt: skip
+                fh.write(f"rostopic: {rostopic}\nupdate_rate: {float(self.rate_hz)!r}\n")
         return out
 
     def to_noise(self, k_e: float):
@@ -451,7 +460,8 @@ def identify_noise(
     _, fit, omega = best
     for row in tried:
         row.pop("fit")
-    terms_out = _intervals(fit, avar, omega, ms, tau0, ci, unit)
+    fit, omega, cov = _log_fit(fit, avar, ms, n, tau0)
+    terms_out = _intervals(fit, cov, ci, unit)
     dof = int(ms.size - len(fit["names"]) - 2 * len(fit["gm"]))
     chi2 = float(fit["J"])
     from .uncertainty import _gammainc
@@ -598,39 +608,90 @@ def _refine(fit, avar, chol_inv, cols, tau0, ms, grid):
     return fit
 
 
-def _intervals(fit, avar, omega, ms, tau0, ci, unit):
-    """Values and intervals of the selected terms: (GᵀΩ⁻¹G)⁻¹, G = ∂(model)/∂(c², log T)."""
-    names, gm, c = fit["names"], fit["gm"], fit["c"]
+def _log_parts(p, names, k, ms, tau0):
+    """Model Allan variance and ∂(log model)/∂p at p = (log c² of `names` and of the k
+    Gauss–Markov terms, log T of each)."""
+    q = len(names)
+    c, logt = np.exp(p[: q + k]), p[q + k :]
     cols = [_unit_avar(t, ms, tau0) for t in names]
-    cols += [_unit_avar("gauss_markov", ms, tau0, tau0 / t) for t in gm]
-    for j, t in enumerate(gm):  # ∂/∂ log T of c·basis(T), by a central difference
-        h = 1e-4
-        up = _unit_avar("gauss_markov", ms, tau0, tau0 / (t * math.exp(h)))
-        dn = _unit_avar("gauss_markov", ms, tau0, tau0 / (t * math.exp(-h)))
-        cols.append(c[len(names) + j] * (up - dn) / (2 * h))
-    g = np.stack(cols, axis=1)
-    w = np.linalg.inv(omega)
-    cov = np.linalg.pinv(g.T @ w @ g)
+    cols += [_unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt)) for lt in logt]
+    model = sum(ci * col for ci, col in zip(c, cols, strict=True))
+    jac = [ci * col for ci, col in zip(c, cols, strict=True)]
+    h = 1e-4
+    for j, lt in enumerate(logt):  # ∂/∂ log T, central difference
+        up = _unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt + h))
+        dn = _unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt - h))
+        jac.append(c[q + j] * (up - dn) / (2 * h))
+    return model, np.stack(jac, axis=1) / model[:, None]
+
+
+def _log_fit(fit, avar, ms, n, tau0, steps: int = 12):
+    """The selected model refitted on log σ̂² (Gauss–Newton, step-halving): the relative
+    covariance D⁻¹ΩD⁻¹ (D the model) hardly depends on the fitted level, so the weights do
+    not follow the estimate as Ω's do on σ̂² itself, and the long octaves' skewed estimates
+    weigh symmetrically. **Returns:** `(fit, Ω, covariance of p)`, p = (log c², log T)."""
+    names, k = fit["names"], len(fit["gm"])
+    c = np.maximum(np.asarray(fit["c"], dtype=float), 1e-300)
+    p = np.concatenate([np.log(c), np.log(np.asarray(fit["gm"], dtype=float))])
+    target = np.log(avar)
+
+    def fitted(p):
+        return {"names": names, "gm": list(np.exp(p[len(names) + k :])),
+                "c": np.exp(p[: len(names) + k])}  # fmt: skip
+
+    def state(p, chol):
+        model, jac = _log_parts(p, names, k, ms, tau0)
+        r = np.linalg.solve(chol, target - np.log(model))
+        return r, np.linalg.solve(chol, jac)
+
+    def relative(p):  # the covariance of log σ̂² at p: D⁻¹ΩD⁻¹
+        om = _omega(fitted(p), ms, n, tau0, avar)
+        model = _log_parts(p, names, k, ms, tau0)[0]
+        return om, np.linalg.cholesky(om / np.outer(model, model))
+
+    for _ in range(2):  # Gauss–Newton with the weights held, then the weights at its end
+        om, chol = relative(p)
+        r, a = state(p, chol)
+        cost = float(r @ r)
+        for _ in range(steps):
+            step, *_ = np.linalg.lstsq(a, r, rcond=None)
+            for scale in (1.0, 0.5, 0.25, 0.125):
+                trial = p + scale * np.clip(step, -2.0, 2.0)
+                got = state(trial, chol)
+                if float(got[0] @ got[0]) < cost:
+                    p, (r, a), cost = trial, got, float(got[0] @ got[0])
+                    break
+            else:
+                break
+            if np.max(np.abs(scale * step)) < 1e-6:
+                break
+    om, chol = relative(p)
+    r, a = state(p, chol)
+    f = fitted(p)
+    f["J"] = float(r @ r)
+    return f, om, np.linalg.pinv(a.T @ a)
+
+
+def _intervals(fit, cov, ci, unit):
+    """Values and intervals of the selected terms from the covariance of p = (log c²,
+    log T): exp(p ± zσ), the coefficients as √c²."""
+    names, gm, c = fit["names"], fit["gm"], fit["c"]
     z = NormalDist().inv_cdf(0.5 + ci / 2)
     u = unit or "rate unit"
 
-    def coef(v, s, unit_s):
-        return {"value": math.sqrt(max(v, 0.0)), "low": math.sqrt(max(v - z * s, 0.0)),
-                "high": math.sqrt(max(v + z * s, 0.0)), "unit": unit_s}  # fmt: skip
+    def coef(i, unit_s, root=True):
+        v, s = math.log(c[i]) if root else math.log(gm[i - len(names) - len(gm)]), 0.0
+        s = math.sqrt(max(cov[i, i], 0.0))
+        e = 0.5 if root else 1.0
+        return {"value": math.exp(e * v), "low": math.exp(e * (v - z * s)),
+                "high": math.exp(e * (v + z * s)), "unit": unit_s}  # fmt: skip
 
     out = {}
     for i, t in enumerate(names):
-        out[t] = coef(c[i], math.sqrt(max(cov[i, i], 0.0)), UNIT_OF[t].format(u=u))
-    for j, t in enumerate(gm):
-        i, k = len(names) + j, len(names) + len(gm) + j
-        s_log = math.sqrt(max(cov[k, k], 0.0))
+        out[t] = coef(i, UNIT_OF[t].format(u=u))
+    for j in range(len(gm)):
         out[f"gauss_markov_{j + 1}"] = {
-            "sigma": coef(c[i], math.sqrt(max(cov[i, i], 0.0)), u),
-            "correlation_time": {
-                "value": float(t),
-                "low": float(t * math.exp(-z * s_log)),
-                "high": float(t * math.exp(z * s_log)),
-                "unit": "s",
-            },  # fmt: skip
+            "sigma": coef(len(names) + j, u),
+            "correlation_time": coef(len(names) + len(gm) + j, "s", root=False),
         }
     return out
