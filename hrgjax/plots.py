@@ -296,14 +296,16 @@ def vibration_figure(figures: dict, path: str) -> str:
 
 
 def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "") -> str:
-    """An Allan-family deviation with its confidence interval (error bars) and, given a
-    [`NoiseFit`][hrgjax.allan.NoiseFit], the fitted curve and each IEEE 952 term's slope
-    (quantization −1, ARW −½, bias instability 0, rate random walk +½, rate ramp +1).
+    """An Allan-family deviation with its confidence interval (error bars) and a fitted noise
+    model: a [`NoiseFit`][hrgjax.allan.NoiseFit] (the IEEE 952 line fit; each term's slope:
+    quantization −1, ARW −½, bias instability 0, rate random walk +½, rate ramp +1) or a
+    [`CompositeNoise`][hrgjax.allan.CompositeNoise] (the identified model and each of its
+    terms). Legends give each coefficient with its unit.
 
     - `result`: an [`AllanResult`][hrgjax.allan.AllanResult]; `unit`: the rate unit of the
-      samples (axis label). Returns `path`.
+      samples (axis label and coefficients' units). Returns `path`.
     """
-    from .allan import NOISE_TERMS
+    from .allan import NOISE_TERMS, CompositeNoise
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
@@ -311,15 +313,27 @@ def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "
     err = np.stack([d - np.asarray(result.dev_low), np.asarray(result.dev_high) - d])
     ax.errorbar(t, d, yerr=err, fmt="o", ms=4, capsize=2, color="k",
                 label=f"{result.kind} ± {100 * result.ci:.1f} % interval")  # fmt: skip
-    if fit is not None:
-        grid = np.geomspace(t[0], t[-1], 200)
+    grid = np.geomspace(t[0], t[-1], 200)
+    styles = ("C0", "C1", "C2", "C4", "C5", "C6")
+    if isinstance(fit, CompositeNoise):  # whole samples: the model is for sampled data
+        grid = np.unique(np.maximum(np.round(grid * fit.rate_hz), 1.0)) / fit.rate_hz
+        ax.loglog(grid, fit.adev(grid), "-", color="C3", lw=1.5,
+                  label=f"identified model (J = {fit.chi2:.1f}, {fit.dof} dof)")  # fmt: skip
+        for (name, spec), style in zip(fit.terms.items(), styles, strict=False):
+            if "value" in spec:
+                what = f"{spec['value']:.3g} {spec['unit']}"
+            else:
+                s, c = spec["sigma"], spec["correlation_time"]
+                what = f"σ {s['value']:.3g} {s['unit']}, T {c['value']:.3g} s"
+            ax.loglog(grid, np.sqrt(fit.term_avar(name, grid)), "--", color=style, lw=1,
+                      label=f"{name.replace('_', ' ')}: {what}")  # fmt: skip
+    elif fit is not None:
         ax.loglog(grid, fit.adev(grid), "-", color="C3", lw=1.5, label="fitted IEEE 952 model")
-        for (name, sym, _, f), style in zip(
-            NOISE_TERMS, ("C0", "C1", "C2", "C4", "C5"), strict=True
-        ):
+        for (name, sym, term_unit, f), style in zip(NOISE_TERMS, styles, strict=False):
             if fit.value[name] > 0:
+                u = term_unit.replace("rate unit", unit)
                 ax.loglog(grid, fit.value[name] * np.sqrt(f(grid)), "--", color=style, lw=1,
-                          label=f"{name.replace('_', ' ')} {sym} = {fit.value[name]:.3g}")  # fmt: skip
+                          label=f"{name.replace('_', ' ')} {sym} = {fit.value[name]:.3g} {u}")  # fmt: skip
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("averaging time τ [s]")

@@ -137,3 +137,48 @@ def test_bad_input_is_named(kwargs, match):
         hg.allan.identify_noise(np.zeros(1000), 1.0, **kwargs)
     with pytest.raises(ValueError, match="at least 64 samples"):
         hg.allan.identify_noise(np.zeros(10), 1.0)
+
+
+def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, tmp_path, capsys):
+    from helpers import cli_fails
+
+    from hrgjax.cli import main
+
+    y, fs = white_walk
+    y = y[: 2**14]
+    log = tmp_path / "gyro.csv"
+    np.savetxt(log, np.column_stack([np.arange(y.size) / fs, y]), delimiter=",",
+               header="time,rate", comments="", fmt="%.17g")  # fmt: skip
+    out = {k: tmp_path / f"a.{k}" for k in ("json", "csv", "yaml", "png")}
+    args = ["allan", str(log), "--time-column", "time", "--unit", "deg/h", "--fit",
+            "--json", str(out["json"]), "--csv", str(out["csv"]), "--kalibr", str(out["yaml"]),
+            "--plot", str(out["png"])]  # fmt: skip
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "16384 samples at 10 Hz" in text and "angle_random_walk" in text
+    import json
+
+    d = json.loads(out["json"].read_text())
+    direct = hg.allan.deviation(y, fs, unit="°/h")
+    np.testing.assert_allclose(d["deviation"]["dev"], direct.dev, rtol=1e-12)
+    assert d["deviation"]["unit"] == "°/h" and "angle_random_walk" in d["noise_model"]["terms"]
+    assert "gyroscope_noise_density" in out["yaml"].read_text() and out["png"].stat().st_size
+    # bad input: one line each, naming what is wrong
+    uneven = tmp_path / "uneven.csv"
+    t = np.arange(200) / fs
+    t[100:] += 0.05
+    np.savetxt(uneven, np.column_stack([t, y[:200]]), delimiter=",", header="time,rate",
+               comments="", fmt="%.17g")  # fmt: skip
+    cli_fails(
+        ["allan", str(uneven), "--time-column", "time"], capsys, "time stamps are not uniform"
+    )
+    gap = tmp_path / "gap.csv"
+    z = y[:200].copy()
+    z[50] = np.nan
+    np.savetxt(gap, np.column_stack([t, z]), delimiter=",", header="time,rate", comments="",
+               fmt="%.17g")  # fmt: skip
+    cli_fails(["allan", str(gap), "--rate-hz", "10"], capsys, "column 'rate' has 1 missing")
+    cli_fails(["allan", str(log), "--rate-hz", "10", "--column", "yaw"], capsys, "no column 'yaw'")
+    cli_fails(["allan", str(log), "--time-column", "time", "--kalibr", str(tmp_path / "k.yaml")],
+              capsys, "--kalibr needs --unit")  # fmt: skip
+    assert not (tmp_path / "k.yaml").exists()

@@ -6,7 +6,7 @@ import argparse
 import os
 import sys
 
-from . import calibrate, discover, ins, simulate
+from . import allan, calibrate, discover, ins, simulate
 from ._common import DATA_EXTENSIONS as DATA_EXTENSIONS
 from ._common import EXIT_BAD_INPUT as EXIT_BAD_INPUT
 from ._common import EXIT_FAILURE as EXIT_FAILURE
@@ -19,6 +19,7 @@ from ._common import POSITIVE_SECONDS as POSITIVE_SECONDS
 from ._common import PRESETS as PRESETS
 from ._common import UsageError as UsageError
 from ._common import one_line, option_name
+from .allan import cmd_allan as cmd_allan
 from .calibrate import COMPENSATORS as COMPENSATORS
 from .calibrate import METHODS as METHODS
 from .calibrate import cmd_calibrate as cmd_calibrate
@@ -37,7 +38,7 @@ from .simulate import cmd_design as cmd_design
 from .simulate import cmd_simulate as cmd_simulate
 
 COMMANDS = ("demo", "calibrate", "correct", "compare", "discover", "align", "diagnose",
-            "vibration", "simulate", "design", "imu-calibrate")  # fmt: skip
+            "vibration", "simulate", "design", "imu-calibrate", "allan")  # fmt: skip
 """The subcommands, in the order `hrgjax --help` lists them; `hrgjax NAME` runs this
 module's `cmd_NAME` (dashes as underscores)."""
 EXAMPLES = {
@@ -56,12 +57,15 @@ EXAMPLES = {
     "diagnose": "hrgjax diagnose --scenario stationary --runs 3 --methods filter_bank,pnn_direct",
     "vibration": "hrgjax vibration --quick --json out/vib.json --plot out/vib.png",
     "design": "hrgjax design --budget-h 4 --out out/plan.json --plot out/plan.png",
+    "allan": "hrgjax allan gyro.csv --column rate --unit deg/h --rate-hz 10 --fit --plot "
+    "out/allan.png --kalibr out/imu.yaml (a CSV with a header row and a rate column)",
     "imu-calibrate": "hrgjax imu-calibrate session.csv --sections sections.json --rate-hz 102.4 "
     "--gyro-unit deg/s --accel-unit m/s^2 --turn-deg -360 --json out/imu_cal.json --plot "
     "out/imu.png (a session with imucal's columns gyr_x … acc_z and its section-list JSON)",
 }
 """One runnable example per command, shown at the end of `hrgjax CMD --help`."""
-_PARSERS = {**simulate.PARSERS, **calibrate.PARSERS, **discover.PARSERS, **ins.PARSERS}
+_PARSERS = {**simulate.PARSERS, **calibrate.PARSERS, **discover.PARSERS, **ins.PARSERS,
+            **allan.PARSERS}  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -111,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
 INPUT_OPTIONS = ("data", "log", "imu_log", "sections", "model", "models", "plan_file",
                  "offset_from")  # fmt: skip
 """Argument names (dests) that name files a command reads."""
-OUTPUT_OPTIONS = ("out", "plot", "json", "write_sections")
+OUTPUT_OPTIONS = ("out", "plot", "json", "write_sections", "csv", "kalibr")
 """Argument names (dests) that name files a command writes."""
 
 

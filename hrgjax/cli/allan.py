@@ -1,0 +1,190 @@
+"""`hrgjax allan LOG`: the Allan-family deviation of one column of a log, with its
+confidence intervals and noise types, and (`--fit`) the composite noise model the record
+needs, exported for Kalibr and for simulation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._common import PLOT_EXTENSIONS, POSITIVE_FLOAT, UsageError, figure, finish, start
+from ._common import usage_errors as usage_errors
+
+KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
+UNIT_CHOICES = ("rad/s", "deg/s", "deg/h", "°/s", "°/h", "m/s^2", "m/s²", "g", "mg")
+
+
+def read_column(path: str, column: str | None, time_column: str | None, rate_hz):
+    """`(samples, rate [Hz], column name)` from a CSV log: the column named (or the only
+    numeric one that is not the time), its rate from `rate_hz` or a uniform time column.
+    Bad input raises `UsageError` naming the file, the column and the row."""
+    from .._data_files import read_csv_table
+
+    if not path.lower().endswith((".csv", ".txt")):
+        raise UsageError(f"{path}: hrgjax allan reads CSV logs (.csv: a header row, one "
+                         "sample per row)")  # fmt: skip
+    with usage_errors(missing=f"{path}: no such file"):
+        table, lines = read_csv_table(path)
+    numeric = [k for k, v in table.items() if np.asarray(v).dtype.kind == "f"]
+    if column is None:
+        choices = [k for k in numeric if k != time_column and k.lower() not in ("t", "time")]
+        if len(choices) != 1:
+            raise UsageError(f"{path}: give --column (numeric columns: {', '.join(numeric)})")
+        column = choices[0]
+    if column not in table:
+        raise UsageError(f"{path}: no column {column!r} (columns: {', '.join(table)})")
+    if column not in numeric:
+        raise UsageError(f"{path}: column {column!r} holds text, not numbers")
+    y = np.asarray(table[column], dtype=float)
+    bad = np.flatnonzero(~np.isfinite(y))
+    if bad.size:
+        raise UsageError(
+            f"{path}: column {column!r} has {bad.size} missing or non-finite value(s), the first "
+            f"at line {int(lines[bad[0]])}; Allan statistics here need a gap-free record: split "
+            "the record at the gap, or fill it"
+        )
+    if time_column is not None:
+        if time_column not in numeric:
+            raise UsageError(f"{path}: no numeric time column {time_column!r} (columns: "
+                             f"{', '.join(table)})")  # fmt: skip
+        t = np.asarray(table[time_column], dtype=float)
+        dt = np.diff(t)
+        if dt.size == 0 or not np.all(np.isfinite(dt)) or np.any(dt <= 0):
+            raise UsageError(f"{path}: the time column {time_column!r} must increase")
+        step = float(np.median(dt))
+        spread = float(np.max(np.abs(dt - step)))
+        if spread > 1e-3 * step:
+            raise UsageError(
+                f"{path}: time stamps are not uniform (steps from {dt.min():.6g} to "
+                f"{dt.max():.6g} s); resample the record onto a uniform grid first (e.g. "
+                "numpy.interp at t0 + k·Δt), or give --rate-hz to treat the samples as uniform"
+            )
+        found = float(f"{1.0 / step:.12g}")  # the float noise of summed time stamps dropped
+        if rate_hz is not None and abs(found / rate_hz - 1) > 1e-3:
+            raise UsageError(f"{path}: --rate-hz {rate_hz:g} contradicts the time column's "
+                             f"{found:g} Hz")  # fmt: skip
+        rate_hz = found
+    if rate_hz is None:
+        raise UsageError(f"{path}: give --rate-hz or --time-column (the sample rate)")
+    return y, float(rate_hz), column
+
+
+def cmd_allan(args) -> int:
+    """`hrgjax allan LOG`: deviation, intervals and noise types of one column; `--fit`: the
+    composite noise model (hrgjax.allan.identify_noise)."""
+    start(args, [args.log], json=(".json",), plot=PLOT_EXTENSIONS, csv=(".csv",),
+          kalibr=(".yaml", ".yml"))  # fmt: skip
+    from .. import allan
+
+    unit = {"deg/s": "°/s", "deg/h": "°/h", "m/s^2": "m/s²"}.get(args.unit, args.unit) or ""
+    y, rate_hz, column = read_column(args.log, args.column, args.time_column, args.rate_hz)
+    with usage_errors(prefix=args.log):
+        result = allan.deviation(y, rate_hz, kind=args.kind, taus=args.taus, unit=unit)
+    span = y.size / rate_hz
+    print(f"hrgjax allan: {args.log}, column {column!r}: {y.size} samples at {rate_hz:g} Hz "
+          f"({span:.6g} s)")  # fmt: skip
+    print(result)
+    model = None
+    if args.fit or args.kalibr:
+        if args.kind not in ("adev", "oadev"):
+            print("  (the noise model is fitted to the overlapping Allan variance)")
+        with usage_errors(prefix=args.log):
+            model = allan.identify_noise(y, rate_hz, unit=unit, gauss_markov=args.gauss_markov,
+                                         terms=_terms(args.drift))  # fmt: skip
+        print(model)
+    kalibr = None
+    if args.kalibr:
+        sensor = args.sensor or _sensor(unit)
+        with usage_errors(prefix="--kalibr"):
+            model.to_kalibr(None, sensor=sensor)  # the unit checked before a file is written
+
+        def kalibr(path, model=model, sensor=sensor):
+            from .._io import atomic_path
+
+            with atomic_path(path) as tmp:
+                model.to_kalibr(tmp, sensor=sensor)
+            return path
+
+    out = {"deviation": result.to_dict(), "noise_model": None if model is None else
+           model.to_dict(), "log": args.log, "column": column}  # fmt: skip
+    title = f"{args.log}: {column}"
+
+    def plot(path):
+        return figure("allan_figure")(result, path, fit=model, unit=unit or "rate unit",
+                                      title=title)  # fmt: skip
+
+    def csv(path):
+        from .._io import atomic_path
+
+        with atomic_path(path) as tmp:
+            result.to_csv(tmp)
+        return path
+
+    return finish((args.json, out), (args.csv, csv), (args.kalibr, kalibr), (args.plot, plot))
+
+
+def _terms(drift: bool):
+    base = ("quantization", "angle_random_walk", "rate_random_walk")
+    return (*base, "rate_ramp") if drift else base
+
+
+def _sensor(unit: str) -> str:
+    from ..allan.composite import TO_SI
+
+    if unit not in TO_SI:
+        raise UsageError(f"--kalibr needs --unit, one of {', '.join(UNIT_CHOICES)}; got "
+                         f"{unit or 'none'}")  # fmt: skip
+    return TO_SI[unit][0]
+
+
+def _taus(text: str):
+    if text in ("octave", "decade", "all"):
+        return text
+    import argparse
+
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected octave, decade, all or τ values in s (1,10,100); got {text!r}"
+        ) from None
+    if not all(math.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"τ values must be finite and > 0 s; got {text!r}")
+    return values
+
+
+def _allan_parser(sub):
+    """`hrgjax allan`'s parser."""
+    p = sub.add_parser("allan", help="Allan deviation with intervals and noise types; "
+                       "--fit: the composite noise model (Kalibr export)")  # fmt: skip
+    p.add_argument("log", help="CSV log: a header row, one sample per row")
+    p.add_argument("--column", default=None,
+                   help="the column to analyse (default: the only numeric non-time column)")  # fmt: skip
+    p.add_argument("--unit", default=None, choices=UNIT_CHOICES,
+                   help="the column's rate unit (labels, JSON; needed for --kalibr)")  # fmt: skip
+    p.add_argument("--rate-hz", type=POSITIVE_FLOAT, default=None, help="sample rate [Hz]")
+    p.add_argument("--time-column", default=None,
+                   help="a time column [s] (uniform steps) instead of --rate-hz")  # fmt: skip
+    p.add_argument("--kind", default="oadev", choices=KINDS, help="the deviation (oadev)")
+    p.add_argument("--taus", default="octave", type=_taus,
+                   help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip
+    p.add_argument("--fit", action="store_true",
+                   help="identify the composite noise model (white angle/rate noise, rate "
+                   "random walk, Gauss–Markov terms) with intervals")  # fmt: skip
+    p.add_argument("--gauss-markov", type=int, default=2, choices=(0, 1, 2),
+                   help="Gauss–Markov terms the model may use (2)")  # fmt: skip
+    p.add_argument("--drift", action="store_true",
+                   help="also offer a rate ramp (drift) to the model")  # fmt: skip
+    p.add_argument("--json", default=None, help="write the deviation and the model here")
+    p.add_argument("--csv", default=None, help="write the deviation table here (CSV)")
+    p.add_argument("--plot", default=None, help="write the deviation figure here (PNG)")
+    p.add_argument("--kalibr", default=None, metavar="IMU.yaml",
+                   help="write Kalibr's noise parameters here (implies --fit)")  # fmt: skip
+    p.add_argument("--sensor", default=None, choices=("gyroscope", "accelerometer"),
+                   help="Kalibr's sensor (default: from --unit)")  # fmt: skip
+    return p
+
+
+PARSERS = {"allan": _allan_parser}
+"""Command → the function that adds its parser to the subparsers (`hrgjax.cli`)."""
