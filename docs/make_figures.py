@@ -65,6 +65,18 @@ def allan():
                  title="default gyro at rest, 20 000 s at 1 Hz")  # fmt: skip
 
 
+def allan_model():
+    from hrgjax.plots import allan_figure
+
+    gyro = hg.presets.tvg3_like(temperature_laws=False)
+    rec = hg.simulate(gyro, hg.Profile.static(20000.0), key=jax.random.key(0), dt_out=1.0)
+    rate = -np.diff(np.asarray(rec.wave_angle)) / 0.554 / hg.units.DEG_PER_H
+    result = hg.allan.deviation(rate - rate.mean(), 1.0, unit="°/h")
+    model = hg.allan.identify_noise(rate - rate.mean(), 1.0, unit="°/h")
+    allan_figure(result, os.path.join(HERE, "allan_model.png"), fit=model, unit="°/h",
+                 title="default gyro at rest: the identified noise model")  # fmt: skip
+
+
 def bench_plan():
     from hrgjax.calibration import design
     from hrgjax.plots import plan_figure
@@ -277,6 +289,7 @@ FIGURES = (  # longest first (cold, 2 cores), so that the workers finish togethe
     ins,
     full_vs_averaged,
     allan,
+    allan_model,
     imu,
     bench_plan,
     design_budgets,
