@@ -177,7 +177,9 @@ def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, t
     z[50] = np.nan
     np.savetxt(gap, np.column_stack([t, z]), delimiter=",", header="time,rate", comments="",
                fmt="%.17g")  # fmt: skip
-    cli_fails(["allan", str(gap), "--rate-hz", "10"], capsys, "column 'rate' has 1 missing")
+    cli_fails(["allan", str(gap), "--rate-hz", "10", "--fit"], capsys, "has 1 missing value")
+    assert main(["allan", str(gap), "--rate-hz", "10"]) == 0  # the deviation takes gaps
+    assert "1 missing (windows across them left out)" in capsys.readouterr().out
     cli_fails(["allan", str(log), "--rate-hz", "10", "--column", "yaw"], capsys, "no column 'yaw'")
     cli_fails(["allan", str(log), "--time-column", "time", "--kalibr", str(tmp_path / "k.yaml")],
               capsys, "--kalibr needs --unit")  # fmt: skip

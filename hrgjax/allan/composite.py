@@ -428,6 +428,10 @@ def identify_noise(
     y = np.asarray(y, dtype=float)
     if y.ndim != 1 or y.size < 64:
         raise ValueError(f"y must be 1-D with at least 64 samples; got shape {y.shape}")
+    if not np.all(np.isfinite(y)):
+        i = int(np.argmin(np.isfinite(y)))
+        raise ValueError(f"y has a missing or non-finite value at index {i}; the noise model "
+                         "needs a gap-free record: split the record at its gaps")  # fmt: skip
     n, tau0 = y.size, 1.0 / float(rate_hz)
     ms = 2 ** np.arange(int(math.log2(n // SCALE_LIMIT)) + 1)
     res = deviation(y, rate_hz, kind="oadev", taus=ms * tau0, unit=unit)

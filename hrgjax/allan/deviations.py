@@ -387,13 +387,19 @@ def deviation(
       raw estimator (allantools').
     - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
 
+    **Gaps**: NaN samples are missing data. Every kind but totdev then averages only the
+    differences whose windows avoid every gap, as allantools' `gradev` (NumPy, not the
+    compiled curve; noise type and EDF approximate: [`hrgjax.allan.gaps`][hrgjax.allan.gaps]).
+    `n_terms` counts the differences used.
+
     One compiled program per kind and data length serves every τ grid (factors are run-time
     values, padded to a power-of-two count), so a new grid compiles nothing.
 
     **Returns:** an [`AllanResult`][hrgjax.allan.AllanResult].
 
     **Raises:** `ValueError` naming the argument for an unknown kind or data type, a
-    non-positive rate, non-finite samples, a `ci` outside (0, 1), or data too short for any τ;
+    non-positive rate, infinite samples, a `ci` outside (0, 1), data too short for any τ, or
+    gaps in a totdev;
     `RuntimeError` when JAX is in float32 mode (a summed phase's differences need float64).
     """
     require_x64("hrgjax.allan.deviation (differences of a summed phase)")
@@ -414,15 +420,25 @@ def deviation(
     y = np.asarray(y, dtype=float)
     if y.ndim != 1 or y.size < 3:
         raise ValueError(f"y must be 1-D with at least 3 samples; got shape {y.shape}")
-    if not np.all(np.isfinite(y)):
-        raise ValueError(f"y has a non-finite value at index {int(np.argmin(np.isfinite(y)))}")
+    if np.any(np.isinf(y)):
+        raise ValueError(f"y has an infinite value at index {int(np.argmax(np.isinf(y)))}")
     tau0 = 1.0 / float(rate_hz)
-    if data == "phase":
-        x = y - y[0]
-        rate = np.diff(y) / tau0
+    gaps = bool(np.any(np.isnan(y)))
+    if gaps:
+        from .gaps import bridged, gapped_curve
+
+        present = int(np.sum(np.isfinite(y)))
+        if present < 3:
+            raise ValueError(f"y has {present} values that are not NaN; at least 3 are needed")
+        filled = bridged(y, data)
     else:
-        rate = y
-        x = np.concatenate([[0.0], np.cumsum(y) * tau0])
+        filled = y
+    if data == "phase":
+        x = filled - filled[0]
+        rate = np.diff(filled) / tau0
+    else:
+        rate = filled
+        x = np.concatenate([[0.0], np.cumsum(filled) * tau0])
     n_phase = x.size
     m = _factors(taus, rate_hz, n_phase)
     n_terms = np.asarray([_n_terms(kind, int(k), n_phase) for k in m], dtype=int)
@@ -432,16 +448,26 @@ def deviation(
             f"y: {y.size} samples are too few for {kind} at any of the τ asked (taus={taus!r})"
         )
     base = "mdev" if kind == "tdev" else kind
-    # one program for every grid of ≤ 32 τ (octave grids up to 2³² samples), powers of two
-    # beyond
-    pad = max(32, 1 << int(math.ceil(math.log2(m.size))))
-    ms = np.concatenate([m, np.full(pad - m.size, m[-1])])
-    # JAX runs the curve asynchronously while NumPy identifies the noise and the EDF
-    pending = _curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base)
+    if gaps:  # windows across a gap left out (hrgjax.allan.gaps), in NumPy
+        dev, n_terms = gapped_curve(kind, y, data, m)
+        dev = dev / tau0 if data == "phase" else dev
+        m, n_terms, dev = m[n_terms > 1], n_terms[n_terms > 1], dev[n_terms > 1]
+        if m.size == 0:
+            raise ValueError(f"y: its gaps leave fewer than 2 {kind} terms at every τ asked")
+        n_eff = present + (data == "rate")  # EDF of a gap-free record of what is present
+    else:
+        # one program for every grid of ≤ 32 τ (octave grids up to 2³² samples), powers of
+        # two beyond; JAX runs the curve asynchronously while NumPy identifies the noise
+        pad = max(32, 1 << int(math.ceil(math.log2(m.size))))
+        ms = np.concatenate([m, np.full(pad - m.size, m[-1])])
+        pending = _curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base)
+        n_eff = n_phase
     dmax = 3 if kind in ("hdev", "ohdev") else 2
     alpha = noise_id(x, m, dmax=dmax)
-    edf = np.asarray([_edf(kind, int(a), int(k), n_phase) for a, k in zip(alpha, m, strict=True)])
-    dev = np.asarray(pending)[: m.size]
+    edf = np.asarray([_edf(kind, int(a), int(k), min(n_phase, max(n_eff, 4 * int(k) + 1)))
+                      for a, k in zip(alpha, m, strict=True)])  # fmt: skip
+    if not gaps:
+        dev = np.asarray(pending)[: m.size]
     taus_s = m * tau0
     if kind == "tdev":
         dev = dev * taus_s / math.sqrt(3.0)

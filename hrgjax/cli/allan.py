@@ -37,13 +37,10 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
     if column not in numeric:
         raise UsageError(f"{path}: column {column!r} holds text, not numbers")
     y = np.asarray(table[column], dtype=float)
-    bad = np.flatnonzero(~np.isfinite(y))
+    bad = np.flatnonzero(np.isinf(y))
     if bad.size:
-        raise UsageError(
-            f"{path}: column {column!r} has {bad.size} missing or non-finite value(s), the first "
-            f"at line {int(lines[bad[0]])}; Allan statistics here need a gap-free record: split "
-            "the record at the gap, or fill it"
-        )
+        raise UsageError(f"{path}: column {column!r} line {int(lines[bad[0]])}: an infinite "
+                         "value (missing samples are NaN or an empty field)")  # fmt: skip
     if time_column is not None:
         if time_column not in numeric:
             raise UsageError(f"{path}: no numeric time column {time_column!r} (columns: "
@@ -79,11 +76,19 @@ def cmd_allan(args) -> int:
 
     unit = {"deg/s": "°/s", "deg/h": "°/h", "m/s^2": "m/s²"}.get(args.unit, args.unit) or ""
     y, rate_hz, column = read_column(args.log, args.column, args.time_column, args.rate_hz)
+    gaps = np.flatnonzero(np.isnan(y))
+    if gaps.size and (args.fit or args.kalibr):
+        raise UsageError(
+            f"{args.log}: column {column!r} has {gaps.size} missing value(s) (NaN), the first at "
+            f"row {int(gaps[0])}; the noise model needs a gap-free record: split the record at "
+            "its gaps (the deviation alone takes gaps: drop --fit and --kalibr)"
+        )
     with usage_errors(prefix=args.log):
         result = allan.deviation(y, rate_hz, kind=args.kind, taus=args.taus, unit=unit)
     span = y.size / rate_hz
+    missing = f", {gaps.size} missing (windows across them left out)" if gaps.size else ""
     print(f"hrgjax allan: {args.log}, column {column!r}: {y.size} samples at {rate_hz:g} Hz "
-          f"({span:.6g} s)")  # fmt: skip
+          f"({span:.6g} s){missing}")  # fmt: skip
     print(result)
     model = None
     if args.fit or args.kalibr:

@@ -1,0 +1,83 @@
+r"""Allan-family deviations of records with gaps (NaN samples), in NumPy.
+
+Each estimate averages differences of the angle over windows; a window that touches a gap
+is left out and the rest averaged, as allantools' gap-resistant `gradev` does for the
+overlapping Allan deviation (equal to it on angle data), for every kind but totdev:
+
+- rate samples $y_k$ (NaN where missing): the angle's differences are window sums of $y$,
+  so a window counts when none of its samples is missing — a gap costs the windows across
+  it, not the record after it;
+- angle samples $x_k$: a difference counts when each angle it uses is there.
+
+`totdev` reflects the record at its ends and has no gap-tolerant form: split the record.
+
+The noise type at each τ is read on the record with its gaps bridged (missing rates by the
+mean rate; missing angles by a straight line between their neighbours), and the EDF is that
+of a gap-free record of as many samples as are present: both approximations, fair while the
+gaps are a small part of the record.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def gapped_curve(kind: str, y: np.ndarray, data: str, ms) -> tuple[np.ndarray, np.ndarray]:
+    """`(dev, n_terms)` of `kind` at factors `ms` (rate units, τ0 = 1: the caller scales
+    tdev) from `y` with NaN gaps; `n_terms` counts the differences that avoid every gap."""
+    if kind == "totdev":
+        raise ValueError(
+            "y has gaps (NaN): totdev reflects the record at its ends and has no gap-tolerant "
+            "form; split the record at its gaps, or use oadev, mdev or ohdev"
+        )
+    if data == "rate":
+        ok = np.isfinite(y)
+        level = np.concatenate([[0.0], np.cumsum(np.where(ok, y, 0.0))])  # angle / τ0
+        holes = np.concatenate([[0], np.cumsum(~ok)])
+    else:
+        level = y - y[np.flatnonzero(np.isfinite(y))[0]]
+        holes = None
+    devs, counts = [], []
+    for m in (int(k) for k in ms):
+        if kind in ("hdev", "ohdev"):
+            d, valid = _difference(level, holes, m, (1, -3, 3, -1))
+            norm = 6.0
+        else:
+            d, valid = _difference(level, holes, m, (1, -2, 1))
+            norm = 2.0
+        if kind in ("adev", "hdev"):
+            keep = np.arange(d.size) % m == 0
+            d, valid = d[keep], valid[keep]
+        if kind in ("mdev", "tdev"):  # sums of m consecutive second differences
+            c = np.concatenate([[0.0], np.cumsum(np.where(valid, d, 0.0))])
+            bad = np.concatenate([[0], np.cumsum(~valid)])
+            d = (c[m:] - c[:-m]) / m
+            valid = bad[m:] - bad[:-m] == 0
+        n = int(valid.sum())
+        counts.append(n)
+        dev = np.sqrt(np.sum(d[valid] ** 2) / (norm * m * m * n)) if n else np.nan
+        devs.append(dev)
+    return np.asarray(devs), np.asarray(counts, dtype=int)
+
+
+def _difference(level, holes, m, coef):
+    """The angle's finite difference with coefficients `coef` at lag m for every start, and
+    whether it avoids every gap."""
+    k = len(coef) - 1
+    size = level.size - k * m
+    d = sum(c * level[j * m : j * m + size] for j, c in enumerate(coef))
+    if holes is None:  # angle data: each angle used must be there
+        valid = np.all([np.isfinite(level[j * m : j * m + size]) for j in range(k + 1)], axis=0)
+    else:  # rate data: no missing sample inside the k·m window
+        valid = holes[k * m : k * m + size] - holes[:size] == 0
+    return np.where(valid, d, 0.0), valid
+
+
+def bridged(y: np.ndarray, data: str) -> np.ndarray:
+    """`y` with its gaps bridged for noise identification: missing rates by the mean rate,
+    missing angles by a straight line between their neighbours."""
+    ok = np.isfinite(y)
+    if data == "rate":
+        return np.where(ok, y, y[ok].mean())
+    idx = np.arange(y.size)
+    return np.interp(idx, idx[ok], y[ok])
