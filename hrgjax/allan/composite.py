@@ -28,12 +28,17 @@ Euler–Maclaurin), so it costs the same for 10³ or 10⁷ samples.
 **Fit and selection.** Generalised least squares on the octaves with that covariance
 (evaluated at the previous fit, three rounds), the coefficients² non-negative, each
 Gauss–Markov correlation time profiled on a grid refined by a parabola in log T. Every
-subset of the candidate terms is fitted with one shared covariance (the fullest model's)
-and the subset with the least J + penalty kept (J the χ²-distributed misfit; penalty
-[`PENALTY`][hrgjax.allan.composite.PENALTY] per linear term, twice that per Gauss–Markov
-term, whose T is not identified when σ = 0), so a term the data do not need is not reported.
-Intervals: (GᵀΩ⁻¹G)⁻¹ at the selected fit (G the model's derivative in the coefficients²
-and log T), on the coefficients² (a lower end below zero reads 0) and on log T.
+subset of the candidate terms with fewer parameters than octaves is fitted with one shared
+covariance (the fullest model's) and ranked by J + penalty (J the χ²-distributed misfit;
+[`PENALTY`][hrgjax.allan.composite.PENALTY] per linear term,
+[`GM_PENALTY`][hrgjax.allan.composite.GM_PENALTY] per Gauss–Markov term, whose T is searched
+and undefined when σ = 0). The best [`FINALISTS`][hrgjax.allan.composite.FINALISTS] are
+refitted with their own covariance until fit and covariance agree, and the one with the
+least J + log det Ω + penalty (the octaves' Gaussian likelihood) is kept, so a term the
+data do not need is not reported. It is then refitted on log σ̂² with the relative
+covariance D⁻¹ΩD⁻¹ (weights that do not follow the estimate), and the intervals are
+(GᵀΩ⁻¹G)⁻¹ on log c² and log T (G the model's derivative there). For each candidate term not
+selected, the upper end of its interval with it forced in is kept as a bound.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ import dataclasses
 import itertools
 import json
 import math
+import numbers
 from statistics import NormalDist
 
 import numpy as np
@@ -53,11 +59,11 @@ SYMBOLS = {"quantization": "Q", "angle_random_walk": "N", "rate_random_walk": "K
 UNIT_OF = {"quantization": "{u}·s", "angle_random_walk": "{u}·√s",
            "rate_random_walk": "{u}/√s", "rate_ramp": "{u}/s"}  # fmt: skip
 PENALTY = 4.0
-"""The misfit a linear term must remove to be kept (a Gauss–Markov term: twice). Under a
-term's absence its J drop is ½χ²₀ + ½χ²₁ (a non-negative coefficient), exceeded with
-probability 2.3 %."""
+"""The misfit a linear term must remove to be kept. Under a term's absence its J drop is
+½χ²₀ + ½χ²₁ (a non-negative coefficient), exceeded with probability 2.3 %."""
 SCALE_LIMIT = 8
-"""The octaves fitted: m ≤ n/SCALE_LIMIT (at least 2·SCALE_LIMIT − 1 differences each)."""
+"""The octaves fitted: m ≤ n/SCALE_LIMIT (each estimate from ≥ 8 τ-averages' worth of
+record)."""
 GM_PENALTY = 12.0
 """The misfit a Gauss–Markov term must remove: its correlation time is searched (and
 undefined when σ = 0), so its drop under absence is the largest of many (Davies 1987); 12
@@ -66,7 +72,8 @@ keeps false detections in white + random-walk records near 5 %
 FINALISTS = 6
 """The best subsets under the fullest model's covariance that are refitted with their own."""
 T_GRID = 24
-"""Correlation times tried per Gauss–Markov term: log-spaced from 2τ₀ to the record's length."""
+"""Correlation times tried per Gauss–Markov term: log-spaced from 2τ₀ to the longest octave
+fitted (n/SCALE_LIMIT·τ₀; a longer T looks like a random walk there)."""
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
 
 
@@ -249,7 +256,11 @@ class CompositeNoise:
     - `taus` [s], `avar` [unit²]: the octaves fitted; `covariance` [unit⁴]: the estimator's
       covariance at the fit; `chi2`, `dof`, `p_value`: the misfit J, its degrees of
       freedom and P(χ²_dof > J) — a small p says the model leaves structure.
-    - `selection`: each candidate subset tried, with its J and penalty.
+    - `selection`: each candidate subset tried: `terms`, `gauss_markov`, `J` and `score`
+      (J + penalty) under the fullest model's covariance, and for the finalists
+      `likelihood_score` (J + log det Ω + penalty under their own).
+    - `bounds`: `{name: upper end [coefficient unit]}` of each candidate term not selected,
+      from a fit with it forced in (its interval's upper end at `ci`).
     """
 
     terms: dict
@@ -264,6 +275,7 @@ class CompositeNoise:
     dof: int
     p_value: float
     selection: tuple = ()
+    bounds: dict = dataclasses.field(default_factory=dict)
 
     def model_avar(self, taus) -> np.ndarray:
         """The model's Allan variance at `taus` [s] (rounded to whole samples). [unit²]"""
@@ -312,7 +324,8 @@ class CompositeNoise:
         return {
             "format": "hrgjax.noise_model", "unit": self.unit, "rate_hz": self.rate_hz,
             "n_samples": self.n, "ci": self.ci, "terms": self.terms, "chi2": self.chi2,
-            "dof": self.dof, "p_value": self.p_value, "taus_s": self.taus.tolist(),
+            "dof": self.dof, "p_value": self.p_value, "bounds": self.bounds,
+            "taus_s": self.taus.tolist(),
             "avar": self.avar.tolist(),
         }  # fmt: skip
 
@@ -324,15 +337,31 @@ class CompositeNoise:
     def to_kalibr(self, path=None, sensor: str = "gyroscope", rostopic: str = "/imu0") -> dict:
         """Kalibr's IMU noise parameters (`imu.yaml`): `{sensor}_noise_density` = N and
         `{sensor}_random_walk` = K in SI continuous-time units (gyroscope: rad/s/√Hz and
-        rad/s²/√Hz; accelerometer: m/s²/√Hz and m/s³/√Hz), with `update_rate` [Hz]. The
-        record's `unit` must be one Kalibr's units follow from ([`TO_SI`][hrgjax.allan.composite.TO_SI]).
+        rad/s²/√Hz; accelerometer: m/s²/√Hz and m/s³/√Hz), with `update_rate` [Hz]. A term
+        the record did not need is written as its upper bound (`bounds`; Kalibr refuses a 0),
+        marked so in the file; with no bound either, `ValueError`. The record's `unit` must
+        be one Kalibr's units follow from ([`TO_SI`][hrgjax.allan.composite.TO_SI]). Kalibr
+        reads both sensors' entries from one file: write each sensor's model and merge them.
         Written to `path` when given. **Returns:** the entries."""
         if sensor not in ("gyroscope", "accelerometer"):
             raise ValueError(f"sensor must be 'gyroscope' or 'accelerometer'; got {sensor!r}")
         scale = _si_scale(self.unit, sensor)
+        values, notes = {}, {}
+        for key, name in (
+            ("noise_density", "angle_random_walk"),
+            ("random_walk", "rate_random_walk"),
+        ):
+            v = self.value(name)
+            if v <= 0:
+                v = self.bounds.get(name, 0.0)
+                notes[key] = " (not detected: the record's upper bound)"
+            if not v > 0:
+                raise ValueError(f"to_kalibr: {name} was not identified and has no bound; "
+                                 "Kalibr needs a positive value")  # fmt: skip
+            values[key] = v * scale
         out = {
-            f"{sensor}_noise_density": self.value("angle_random_walk") * scale,
-            f"{sensor}_random_walk": self.value("rate_random_walk") * scale,
+            f"{sensor}_noise_density": values["noise_density"],
+            f"{sensor}_random_walk": values["random_walk"],
             "rostopic": rostopic,
             "update_rate": float(self.rate_hz),
         }
@@ -343,9 +372,9 @@ class CompositeNoise:
                 fh.write(f"# from hrgjax.allan.identify_noise: {self.n} samples at "
                          f"{self.rate_hz:g} Hz, unit {self.unit}\n")  # fmt: skip
                 fh.write(f"{sensor}_noise_density: {out[f'{sensor}_noise_density']:.6g}"
-                         f"  # [{units[0]}]\n")  # fmt: skip
+                         f"  # [{units[0]}]{notes.get('noise_density', '')}\n")  # fmt: skip
                 fh.write(f"{sensor}_random_walk: {out[f'{sensor}_random_walk']:.6g}"
-                         f"  # [{units[1]}]\n")  # fmt: skip
+                         f"  # [{units[1]}]{notes.get('random_walk', '')}\n")  # fmt: skip
                 fh.write(f"rostopic: {rostopic}\nupdate_rate: {float(self.rate_hz)!r}\n")
         return out
 
@@ -354,7 +383,9 @@ class CompositeNoise:
         rad/s, °/s or °/h): N → `angle_random_walk`, one Gauss–Markov term → `bias_instability`
         and `correlation_time`, Q → `angle_white` (× `k_e`: readout noise on the electrical
         wave angle, per sample at this record's rate). A rate random walk, a drift or a
-        second Gauss–Markov term has no field in `Noise`: `ValueError` naming it."""
+        second Gauss–Markov term has no field in `Noise`: `ValueError` naming it. (The
+        simulator integrates the Gauss–Markov rate by trapezoids, which lowers its sampled
+        variance by (1 + φ)/2: under 1 % for T ≥ 50 samples, 20 % at T = 2 samples.)"""
         from ..noise import Noise
 
         scale = _si_scale(self.unit, "gyroscope")
@@ -389,7 +420,7 @@ def _si_scale(unit, sensor):
                          f"{sorted(TO_SI)}")  # fmt: skip
     kind, factor = TO_SI[unit]
     if kind != sensor:
-        raise ValueError(f"unit {unit!r} is an {kind}'s, not a {sensor}'s")
+        raise ValueError(f"unit {unit!r} is a unit of the {kind}, not of the {sensor}")
     return factor
 
 
@@ -418,9 +449,13 @@ def identify_noise(
     0–2, a bad rate or level, or a record shorter than 64 samples (four octaves)."""
     from .deviations import deviation
 
+    if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
     bad = [t for t in terms if t not in LINEAR]
     if bad:
         raise ValueError(f"terms must be among {list(LINEAR)}; got {bad}")
+    if not terms and gauss_markov == 0:
+        raise ValueError("terms: give at least one candidate (or gauss_markov ≥ 1)")
     if gauss_markov not in (0, 1, 2):
         raise ValueError(f"gauss_markov must be 0, 1 or 2 terms; got {gauss_markov!r}")
     if not (0.0 < ci < 1.0):
@@ -461,7 +496,11 @@ def identify_noise(
         row["likelihood_score"] = fit["J"] + logdet + row["score"] - row["J"]
         if best is None or row["likelihood_score"] < best[0]:
             best = (row["likelihood_score"], fit, om)
+    if best is None:  # no finalist stays admissible with its own covariance
+        raise RuntimeError("identify_noise: no candidate model stays admissible (a coefficient "
+                           "turns negative under its own covariance); try fewer terms")  # fmt: skip
     _, fit, omega = best
+    bounds = _bounds(fit, avar, omega, cols, ms, tau0, terms, ci)
     for row in tried:
         row.pop("fit")
     fit, omega, cov = _log_fit(fit, avar, ms, n, tau0)
@@ -474,7 +513,7 @@ def identify_noise(
     return CompositeNoise(
         terms=terms_out, unit=unit, rate_hz=float(rate_hz), n=n, ci=float(ci),
         taus=ms * tau0, avar=avar, covariance=omega, chi2=chi2, dof=dof, p_value=float(p),
-        selection=tuple(tried),
+        selection=tuple(tried), bounds=bounds,
     )  # fmt: skip
 
 
@@ -484,8 +523,8 @@ def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms):
     for k in range(len(terms) + 1):
         for subset in itertools.combinations(terms, k):
             for g in range(gauss_markov + 1):
-                if not subset and g == 0:
-                    continue
+                if (not subset and g == 0) or len(subset) + 2 * g >= len(ms):
+                    continue  # nothing, or no degree of freedom left
                 fit = _best(avar, omega, cols, gm_cols, list(subset), g, g, tau0, ms)
                 if fit is None:
                     continue
@@ -493,6 +532,24 @@ def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms):
                 tried.append({"terms": list(subset), "gauss_markov": g, "J": fit["J"],
                               "score": score, "fit": fit})  # fmt: skip
     return sorted(tried, key=lambda r: r["score"])
+
+
+def _bounds(fit, avar, omega, cols, ms, tau0, terms, ci):
+    """Upper ends at level `ci` of the candidate linear terms not in `fit`, each forced in
+    beside the selected model (its coefficient² free in sign, the others' held): √ of
+    max(c² + zσ, 0) [coefficient unit]."""
+    chol_inv = np.linalg.inv(np.linalg.cholesky(omega))
+    base = _model(fit, ms, tau0)
+    z = NormalDist().inv_cdf(0.5 + ci / 2)
+    out = {}
+    for name in terms:
+        if name in fit["names"]:
+            continue
+        a = chol_inv @ cols[name]
+        r = chol_inv @ (avar - base)
+        c2 = float(a @ r / (a @ a))
+        out[name] = math.sqrt(max(c2 + z / math.sqrt(float(a @ a)), 0.0))
+    return out
 
 
 def _model(fit, ms, tau0):

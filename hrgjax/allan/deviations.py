@@ -454,18 +454,21 @@ def deviation(
         m, n_terms, dev = m[n_terms > 1], n_terms[n_terms > 1], dev[n_terms > 1]
         if m.size == 0:
             raise ValueError(f"y: its gaps leave fewer than 2 {kind} terms at every τ asked")
-        n_eff = present + (data == "rate")  # EDF of a gap-free record of what is present
+        # the EDF of a gap-free record with as many differences as the gaps leave at each τ
+        extra = {"adev": 2, "oadev": 2, "hdev": 3, "ohdev": 3, "mdev": 3, "tdev": 3}[kind]
+        stride = m if kind in ("adev", "hdev") else 1
+        n_eff = np.minimum(stride * n_terms + extra * m - (kind in ("mdev", "tdev")), n_phase)
     else:
         # one program for every grid of ≤ 32 τ (octave grids up to 2³² samples), powers of
         # two beyond; JAX runs the curve asynchronously while NumPy identifies the noise
         pad = max(32, 1 << int(math.ceil(math.log2(m.size))))
         ms = np.concatenate([m, np.full(pad - m.size, m[-1])])
         pending = _curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base)
-        n_eff = n_phase
+        n_eff = np.full(m.size, n_phase)
     dmax = 3 if kind in ("hdev", "ohdev") else 2
     alpha = noise_id(x, m, dmax=dmax)
-    edf = np.asarray([_edf(kind, int(a), int(k), min(n_phase, max(n_eff, 4 * int(k) + 1)))
-                      for a, k in zip(alpha, m, strict=True)])  # fmt: skip
+    edf = np.asarray([_edf(kind, int(a), int(k), int(n))
+                      for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
     if not gaps:
         dev = np.asarray(pending)[: m.size]
     taus_s = m * tau0

@@ -12,9 +12,9 @@ overlapping Allan deviation (equal to it on angle data), for every kind but totd
 `totdev` reflects the record at its ends and has no gap-tolerant form: split the record.
 
 The noise type at each τ is read on the record with its gaps bridged (missing rates by the
-mean rate; missing angles by a straight line between their neighbours), and the EDF is that
-of a gap-free record of as many samples as are present: both approximations, fair while the
-gaps are a small part of the record.
+mean rate; missing angles by a straight line between their neighbours), and the EDF at each
+τ is that of a gap-free record giving as many differences as the gaps leave: both
+approximations, fair while the gaps are a small part of the record.
 """
 
 from __future__ import annotations

@@ -44,7 +44,8 @@ def noise_id(x, m, dmax: int = 2) -> np.ndarray:
       expectation B1(N, μ) = N(1 − N^μ)/(2(N − 1)(1 − 2^μ)) for Allan-variance slope μ
       (α = −μ − 1), the boundaries at the geometric means of neighbouring expectations;
       where it says phase noise (μ = −2), the R(n) ratio MVAR/AVAR (1/m for white, 3.37/(1.04
-      + 3 ln πm) for flicker phase noise, with f_h = 1/(2τ₀)) tells white from flicker;
+      + 3 ln πm) for flicker phase noise, with f_h = 1/(2τ₀)) tells white from flicker from
+      m = 4 on (below, the two expectations coincide: white is taken);
     - with fewer than [`B1_AVERAGES`][hrgjax.allan.uncertainty.B1_AVERAGES] averages the α of
       the factor before is carried on (for the first factor asked: that of the largest m/2,
       m/4, … that can be read); Stable32 goes on with B1 down to N = 2.
@@ -88,7 +89,10 @@ def _acf_alpha(z, dmax):
     d = 0
     while True:
         zc = z - z.mean()
-        r1 = float(np.dot(zc[:-1], zc[1:]) / np.dot(zc, zc))
+        power = float(np.dot(zc, zc))
+        if not power > 1e-30 * max(float(np.dot(z, z)), 1e-300):
+            _no_noise()
+        r1 = float(np.dot(zc[:-1], zc[1:]) / power)
         rho = r1 / (1.0 + r1)
         if rho < 0.25 or d >= dmax:
             break
@@ -122,6 +126,8 @@ def _b1_alpha(x, m, dmax):
     n = (x.size - 1) // m
     ybar = np.diff(x[: n * m + 1 : m])  # τ-averages (×τ: the scale cancels in the ratios)
     avar = 0.5 * np.mean(np.diff(ybar) ** 2)
+    if not avar > 0:
+        _no_noise()
     b1 = float(np.var(ybar, ddof=1) / avar)
     mus = range(2 if dmax >= 3 else 1, -3, -1)  # μ = 2 (α = −3) only for Hadamard
     expected = {mu: b1_expected(n, mu) for mu in mus}
@@ -132,14 +138,21 @@ def _b1_alpha(x, m, dmax):
             break
     if mu > -2:
         return -mu - 1
-    if x.size < 3 * m:  # R(n) needs a modified variance at m
-        return 2
+    if x.size < 3 * m or m < 4:  # R(n) needs a modified variance at m; below m = 4 its
+        return 2  # expectations for white and flicker coincide (both 1 at m = 1): white taken
     d = x[2 * m :] - 2 * x[m:-m] + x[: -2 * m]
     avar_o = np.mean(d**2)
     c = np.concatenate([[0.0], np.cumsum(d)])
     mvar = np.mean((c[m:] - c[:-m]) ** 2) / m**2
     rn = float(mvar / avar_o)
     return 1 if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 2)) else 2
+
+
+def _no_noise():
+    raise ValueError(
+        "y has no noise to identify: its angle is a polynomial of degree ≤ 2 (a constant or "
+        "ramping rate) to round-off, and every deviation of it is a deterministic value"
+    )
 
 
 def _detrend2(z):

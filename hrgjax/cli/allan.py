@@ -16,7 +16,7 @@ UNIT_CHOICES = ("rad/s", "deg/s", "deg/h", "°/s", "°/h", "m/s^2", "m/s²", "g"
 
 
 def read_column(path: str, column: str | None, time_column: str | None, rate_hz):
-    """`(samples, rate [Hz], column name)` from a CSV log: the column named (or the only
+    """`(samples, rate [Hz], column name, file line of each row)` from a CSV log: the column named (or the only
     numeric one that is not the time), its rate from `rate_hz` or a uniform time column.
     Bad input raises `UsageError` naming the file, the column and the row."""
     from .._data_files import read_csv_table
@@ -64,7 +64,7 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
         rate_hz = found
     if rate_hz is None:
         raise UsageError(f"{path}: give --rate-hz or --time-column (the sample rate)")
-    return y, float(rate_hz), column
+    return y, float(rate_hz), column, lines
 
 
 def cmd_allan(args) -> int:
@@ -75,13 +75,21 @@ def cmd_allan(args) -> int:
     from .. import allan
 
     unit = {"deg/s": "°/s", "deg/h": "°/h", "m/s^2": "m/s²"}.get(args.unit, args.unit) or ""
-    y, rate_hz, column = read_column(args.log, args.column, args.time_column, args.rate_hz)
+    sensor = None
+    if args.kalibr:  # the unit is checked before any work
+        from ..allan.composite import TO_SI
+
+        sensor = args.sensor or _sensor(unit)
+        if unit not in TO_SI or TO_SI[unit][0] != sensor:
+            raise UsageError(f"--kalibr needs --unit of a {sensor}'s rate (one of "
+                             f"{', '.join(UNIT_CHOICES)}); got {unit or 'none'}")  # fmt: skip
+    y, rate_hz, column, lines = read_column(args.log, args.column, args.time_column, args.rate_hz)
     gaps = np.flatnonzero(np.isnan(y))
     if gaps.size and (args.fit or args.kalibr):
         raise UsageError(
             f"{args.log}: column {column!r} has {gaps.size} missing value(s) (NaN), the first at "
-            f"row {int(gaps[0])}; the noise model needs a gap-free record: split the record at "
-            "its gaps (the deviation alone takes gaps: drop --fit and --kalibr)"
+            f"line {int(lines[gaps[0]])}; the noise model needs a gap-free record: split the "
+            "record at its gaps (the deviation alone takes gaps: drop --fit and --kalibr)"
         )
     with usage_errors(prefix=args.log):
         result = allan.deviation(y, rate_hz, kind=args.kind, taus=args.taus, unit=unit)
@@ -100,9 +108,8 @@ def cmd_allan(args) -> int:
         print(model)
     kalibr = None
     if args.kalibr:
-        sensor = args.sensor or _sensor(unit)
         with usage_errors(prefix="--kalibr"):
-            model.to_kalibr(None, sensor=sensor)  # the unit checked before a file is written
+            model.to_kalibr(None, sensor=sensor)  # a term with no value nor bound: said here
 
         def kalibr(path, model=model, sensor=sensor):
             from .._io import atomic_path
