@@ -33,8 +33,9 @@ covariance (the fullest model's) and ranked by J + penalty (J the χ²-distribut
 [`PENALTY`][hrgjax.allan.composite.PENALTY] per linear term,
 [`GM_PENALTY`][hrgjax.allan.composite.GM_PENALTY] per Gauss–Markov term, whose T is searched
 and undefined when σ = 0). The best [`FINALISTS`][hrgjax.allan.composite.FINALISTS] are
-refitted with their own covariance until fit and covariance agree, and the one with the
-least J + log det Ω + penalty (the octaves' Gaussian likelihood) is kept, so a term the
+refitted with their own covariance until fit and covariance agree, and among those their
+own covariance does not reject (p ≥ [`FIT_ALPHA`][hrgjax.allan.composite.FIT_ALPHA]) the one
+with the least J + log det Ω + penalty (the octaves' Gaussian likelihood) is kept, so a term the
 data do not need is not reported. It is then refitted on log σ̂² with the relative
 covariance D⁻¹ΩD⁻¹ (weights that do not follow the estimate), and the intervals are
 (GᵀΩ⁻¹G)⁻¹ on log c² and log T (G the model's derivative there). For each candidate term not
@@ -51,6 +52,8 @@ import numbers
 from statistics import NormalDist
 
 import numpy as np
+
+from .uncertainty import _gammainc
 
 LINEAR = ("quantization", "angle_random_walk", "rate_random_walk", "rate_ramp")
 """The terms linear in their coefficient² (the Gauss–Markov terms add a correlation time)."""
@@ -71,6 +74,9 @@ keeps false detections in white + random-walk records near 5 %
 (`benchmarks/noise_identification.py`)."""
 FINALISTS = 6
 """The best subsets under the fullest model's covariance that are refitted with their own."""
+FIT_ALPHA = 1e-3
+"""A finalist whose misfit under its own covariance has p < FIT_ALPHA is kept only when no
+other finalist fits."""
 T_GRID = 24
 """Correlation times tried per Gauss–Markov term: log-spaced from 2τ₀ to the longest octave
 fitted (n/SCALE_LIMIT·τ₀; a longer T looks like a random walk there)."""
@@ -482,33 +488,39 @@ def identify_noise(
         omega = _omega(full, ms, n, tau0, avar)
         full = _best(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
     # selection: every subset ranked with the fullest model's covariance; the best few then
-    # each with its own covariance, by the Gaussian likelihood of the octaves
-    # (J + log det Ω) + penalty — a covariance from too large a model hides misfit at long τ,
-    # one from too small a model exaggerates it, and log det Ω weighs the two
+    # each with its own, by the Gaussian likelihood of the octaves (J + log det) + penalty —
+    # a covariance from too large a model hides misfit at long τ, one from too small a model
+    # exaggerates it
     tried = _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms)
-    best = None
+
+    finalists = []
     for row in tried[:FINALISTS]:
-        got = _consistent(row["fit"], avar, cols, gm_cols, ms, n, tau0)
-        if got is None:  # a coefficient went negative: not admissible
+        # each finalist fitted with its own covariance, then on log σ̂²: J there and the
+        # relative covariance's log det score it (in log space the covariance barely moves
+        # with the level, so the likelihood cannot trade misfit for a smaller Ω)
+        fit, _ = _consistent(row["fit"], avar, cols, gm_cols, ms, n, tau0)
+        try:
+            fit, om, cov = _log_fit(fit, avar, ms, n, tau0)
+        except np.linalg.LinAlgError:  # its covariance degenerate at the fit: not a model
             continue
-        fit, om = got
-        logdet = float(np.linalg.slogdet(om)[1])
+        model = _model(fit, ms, tau0)
+        logdet = float(np.linalg.slogdet(om / np.outer(model, model))[1])
         row["likelihood_score"] = fit["J"] + logdet + row["score"] - row["J"]
-        if best is None or row["likelihood_score"] < best[0]:
-            best = (row["likelihood_score"], fit, om)
-    if best is None:  # no finalist stays admissible with its own covariance
-        raise RuntimeError("identify_noise: no candidate model stays admissible (a coefficient "
-                           "turns negative under its own covariance); try fewer terms")  # fmt: skip
-    _, fit, omega = best
+        dof = max(int(ms.size - len(fit["names"]) - 2 * len(fit["gm"])), 1)
+        row["p_value"] = 1.0 - _gammainc(dof / 2.0, fit["J"] / 2.0)
+        finalists.append((row["likelihood_score"], row["p_value"], fit, om, cov))
+    # a model its own covariance rejects (p < FIT_ALPHA) is not kept while another fits
+    fitting = [f for f in finalists if f[1] >= FIT_ALPHA] or finalists
+    if not fitting:
+        raise RuntimeError("identify_noise: no candidate model could be fitted with its own "
+                           "covariance (degenerate); try fewer terms or a longer record")  # fmt: skip
+    _, _, fit, omega, cov = min(fitting, key=lambda f: f[0])
     bounds = _bounds(fit, avar, omega, cols, ms, tau0, terms, ci)
     for row in tried:
         row.pop("fit")
-    fit, omega, cov = _log_fit(fit, avar, ms, n, tau0)
     terms_out = _intervals(fit, cov, ci, unit)
     dof = int(ms.size - len(fit["names"]) - 2 * len(fit["gm"]))
     chi2 = float(fit["J"])
-    from .uncertainty import _gammainc
-
     p = 1.0 - _gammainc(max(dof, 1) / 2.0, chi2 / 2.0)
     return CompositeNoise(
         terms=terms_out, unit=unit, rate_hz=float(rate_hz), n=n, ci=float(ci),
@@ -562,14 +574,15 @@ def _model(fit, ms, tau0):
 
 def _consistent(fit, avar, cols, gm_cols, ms, n, tau0, rounds: int = 4):
     """Refit `fit`'s terms with the covariance at the fit until the two agree (the model's
-    Allan variance moves by < 1e-3 of itself); **returns** `(fit, Ω at that fit)` with J
-    evaluated there, or None when a coefficient turns negative."""
+    Allan variance moves by < 1e-3 of itself; a refit that would turn a coefficient negative
+    stops it at the last admissible fit); **returns** `(fit, Ω at that fit)` with J
+    evaluated there."""
     for _ in range(rounds):
         om = _omega(fit, ms, n, tau0, avar)
         new = _best(avar, om, cols, gm_cols, fit["names"], len(fit["gm"]), len(fit["gm"]),
                     tau0, ms)  # fmt: skip
         if new is None:
-            return None
+            break
         moved = np.max(np.abs(_model(new, ms, tau0) / _model(fit, ms, tau0) - 1))
         fit = new
         if moved < 1e-3:
@@ -691,9 +704,13 @@ def _log_fit(fit, avar, ms, n, tau0, steps: int = 12):
     covariance D⁻¹ΩD⁻¹ (D the model) hardly depends on the fitted level, so the weights do
     not follow the estimate as Ω's do on σ̂² itself, and the long octaves' skewed estimates
     weigh symmetrically. **Returns:** `(fit, Ω, covariance of p)`, p = (log c², log T)."""
-    names, k = fit["names"], len(fit["gm"])
-    c = np.maximum(np.asarray(fit["c"], dtype=float), 1e-300)
-    p = np.concatenate([np.log(c), np.log(np.asarray(fit["gm"], dtype=float))])
+    c = np.asarray(fit["c"], dtype=float)
+    keep = c > 0  # a term at zero is absent: log c² has no place to start from
+    q = len(fit["names"])
+    names = [t for t, kept in zip(fit["names"], keep[:q], strict=True) if kept]
+    gm = [t for t, kept in zip(fit["gm"], keep[q:], strict=True) if kept]
+    k, c = len(gm), c[keep]
+    p = np.concatenate([np.log(c), np.log(np.asarray(gm, dtype=float))])
     target = np.log(avar)
 
     def fitted(p):
