@@ -35,7 +35,7 @@ def noise_id(x, m, dmax: int = 2) -> np.ndarray:
     """The power-law noise α (rate PSD ∝ f^α) at each factor `m` of phase (angle) samples
     `x`, as Stable32 identifies it (NIST SP 1065 §5.6):
 
-    - where the phase decimated by m keeps at least [`ACF_POINTS`][hrgjax.allan.uncertainty.ACF_POINTS]
+    - where the phase decimated by m keeps at least [`ACF_POINTS`][hrgjax.allan.ACF_POINTS]
       points, the lag-1 autocorrelation (Riley & Greenhall 2004, as allantools'
       `autocorr_noise_id` with `dmin=0`): a quadratic removed, differenced until
       ρ = r₁/(1 + r₁) < 0.25 or `dmax` times; α = 2 − 2d − round(2ρ);
@@ -46,7 +46,7 @@ def noise_id(x, m, dmax: int = 2) -> np.ndarray:
       where it says phase noise (μ = −2), the R(n) ratio MVAR/AVAR (1/m for white, 3.37/(1.04
       + 3 ln πm) for flicker phase noise, with f_h = 1/(2τ₀)) tells white from flicker from
       m = 4 on (below, the two expectations coincide: white is taken);
-    - with fewer than [`B1_AVERAGES`][hrgjax.allan.uncertainty.B1_AVERAGES] averages the α of
+    - with fewer than [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages the α of
       the factor before is carried on (for the first factor asked: that of the largest m/2,
       m/4, … that can be read); Stable32 goes on with B1 down to N = 2.
 
