@@ -26,8 +26,10 @@ Workflows:
 `std_textbook`); "after" is what `discover` now reports
 ([`honest`][hrgjax.discovery.trust.honest]), both from the same fits in one run.
 
-Also elsewhere: the test session's offset (`benchmarks/session_offset.py`) and the design's
-predicted accuracy against the achieved one (`benchmarks/design_mc.py`).
+Also elsewhere: the test session's offset (`benchmarks/session_offset.py`), the design's
+predicted accuracy against the achieved one (`benchmarks/design_mc.py`), the Allan
+deviation's χ² intervals at long τ (`benchmarks/coverage_allan.py`) and the composite noise
+model's intervals and term selection (`benchmarks/noise_identification.py`).
 
 Usage: `.venv/bin/python benchmarks/coverage.py [--quick] [--physical] [--only-physical]
 [--n N]`.

@@ -184,3 +184,13 @@ def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, t
     cli_fails(["allan", str(log), "--time-column", "time", "--kalibr", str(tmp_path / "k.yaml")],
               capsys, "--kalibr needs --unit")  # fmt: skip
     assert not (tmp_path / "k.yaml").exists()
+
+
+def test_a_record_the_candidates_cannot_describe_says_so():
+    """A 40-s-period sinusoid on white noise is none of the terms: the misfit is rejected
+    (p < 0.001) and the printout says the intervals assume a model that does not fit."""
+    rng = np.random.default_rng(0)
+    t = np.arange(8192)
+    model = hg.allan.identify_noise(rng.normal(size=t.size) + 3 * np.sin(t / 40.0), 1.0)
+    assert model.p_value < 1e-3
+    assert "the model leaves structure" in str(model)

@@ -53,6 +53,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from ..imu.data import ACCEL_UNITS, GYRO_UNITS
 from .uncertainty import _gammainc
 
 LINEAR = ("quantization", "angle_random_walk", "rate_random_walk", "rate_ramp")
@@ -324,6 +325,9 @@ class CompositeNoise:
                              f" {s['unit']}")  # fmt: skip
         if not self.terms:
             lines.append("  (no term: the record is below every candidate's detection)")
+        if self.p_value < 1e-3:
+            lines.append("  the model leaves structure (p < 0.001): the record has noise the "
+                         "candidates cannot describe, and these intervals assume they can")  # fmt: skip
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -411,13 +415,11 @@ class CompositeNoise:
 
 
 TO_SI = {
-    "rad/s": ("gyroscope", 1.0), "°/s": ("gyroscope", math.pi / 180),
-    "deg/s": ("gyroscope", math.pi / 180), "°/h": ("gyroscope", math.pi / 180 / 3600),
-    "deg/h": ("gyroscope", math.pi / 180 / 3600), "m/s²": ("accelerometer", 1.0),
-    "m/s^2": ("accelerometer", 1.0), "g": ("accelerometer", 9.80665),
-    "mg": ("accelerometer", 9.80665e-3),
-}  # fmt: skip
-"""Rate units Kalibr's and `Noise`'s SI units follow from: unit → (sensor, factor to SI)."""
+    **{u: ("gyroscope", f) for u, f in GYRO_UNITS.items()},
+    **{u: ("accelerometer", f) for u, f in ACCEL_UNITS.items()},
+}
+"""Rate units Kalibr's and `Noise`'s SI units follow from: unit → (sensor, factor to SI) —
+`hrgjax.imu`'s gyro and accelerometer units."""
 
 
 def _si_scale(unit, sensor):

@@ -8,11 +8,19 @@ import math
 
 import numpy as np
 
-from ._common import PLOT_EXTENSIONS, POSITIVE_FLOAT, UsageError, figure, finish, start
-from ._common import usage_errors as usage_errors
+from ._common import (
+    PLOT_EXTENSIONS,
+    POSITIVE_FLOAT,
+    UsageError,
+    figure,
+    finish,
+    start,
+    usage_errors,
+)
+from .ins import ACCEL_UNIT_NAMES, GYRO_UNIT_NAMES
 
 KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
-UNIT_CHOICES = ("rad/s", "deg/s", "deg/h", "°/s", "°/h", "m/s^2", "m/s²", "g", "mg")
+UNIT_CHOICES = (*GYRO_UNIT_NAMES, *ACCEL_UNIT_NAMES)
 
 
 def read_column(path: str, column: str | None, time_column: str | None, rate_hz):
