@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import hrgjax as hg
-from hrgjax.allan import composite
+from hrgjax.allan import octave_covariance
 
 RNG_RECORDS = 3000
 
@@ -50,10 +50,10 @@ def test_covariance_of_the_octaves_equals_monte_carlo():
     est = avar_octaves(y, ms)
     coef = {"quantization": q**2, "angle_random_walk": nn**2, "rate_random_walk": k**2,
             "rate_ramp": r**2}  # fmt: skip
-    model = sum(c * composite._unit_avar(name, ms, tau0) for name, c in coef.items())
-    model = model + s**2 * composite._unit_avar("gauss_markov", ms, tau0, tau0 / t)
+    model = sum(c * octave_covariance.unit_avar(name, ms, tau0) for name, c in coef.items())
+    model = model + s**2 * octave_covariance.unit_avar("gauss_markov", ms, tau0, tau0 / t)
     np.testing.assert_allclose(est.mean(axis=0), model, rtol=0.02)
-    om = composite.covariance(coef, [(s**2, t)], ms, n, tau0)
+    om = octave_covariance.covariance(coef, [(s**2, t)], ms, n, tau0)
     mc = np.cov(est.T)
     np.testing.assert_allclose(np.diag(mc) / np.diag(om), 1.0, atol=0.08)
     corr = lambda c: c / np.sqrt(np.outer(np.diag(c), np.diag(c)))  # noqa: E731

@@ -11,8 +11,9 @@ rate ramp $R\tau/\sqrt2$.
 Every name is importable from `hrgjax.allan` (it was one module until issue 45); inside:
 `deviations` (the estimators, the compiled curve and `deviation` with its τ grids),
 `uncertainty` (noise identification, EDF, χ² intervals), `noise_terms` (the IEEE 952
-line fit) and `composite` (a composite noise model with the estimator's own covariance and
-model selection: `identify_noise`).
+line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
+exact covariance of the octave estimates) and `composite` (a composite noise model fitted with
+that covariance, with model selection: `identify_noise`).
 """
 
 from .composite import CompositeNoise as CompositeNoise

@@ -3,27 +3,11 @@ with that estimator's own covariance: a generalised method of wavelet moments (G
 Guerrier et al. 2013 — the overlapping Allan variance at τ = 2ʲτ₀ is twice the Haar wavelet
 variance).
 
-The terms, for rate samples $y_k$ every $\tau_0$ (their Allan variances exact for sampled
-data, not the continuous-time approximations):
-
-| term | coefficient | Allan variance at τ = mτ₀ |
-|---|---|---|
-| `quantization` | Q [unit·s] (white angle noise, σ per sample) | 3Q²/τ² |
-| `angle_random_walk` | N [unit·√s] (white rate noise, N²/τ₀ per sample) | N²/τ |
-| `rate_random_walk` | K [unit/√s] (rate steps of variance K²τ₀) | K²τ/3 + K²τ₀/(6m) |
-| `rate_ramp` | R [unit/s] (a drift y = R·t) | R²τ²/2 |
-| `gauss_markov` (up to two) | σ [unit], T [s] (first order: y_{k+1} = φy_k + …, φ = e^{−τ₀/T}) | (4D(m) − D(2m))/(2τ²) |
-
-with D(t) = σ²[t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)²]τ₀² the structure function of the angle.
-
-**The estimator's covariance.** Each octave's estimate σ̂²(m) = Σᵢ aᵢ²/(2m²M) is a quadratic
-form of the second differences aᵢ of the angle; for Gaussian noise
-Cov(σ̂²_a, σ̂²_b) = Σ_ℓ n_ab(ℓ)·[2c_ab(ℓ)² + 4μ_aμ_b c_ab(ℓ)]/(4m_a²m_b²M_aM_b), where c_ab(ℓ)
-is the covariance of aᵢ and b_{i+ℓ} (a sum of nine values of each term's generalised
-covariance), n_ab(ℓ) the number of pairs at lag ℓ and μ the drift's mean difference. It is
-exact for the model (finite record, overlapping estimates, neighbouring octaves correlated);
-the sum over ℓ runs piecewise (Gauss–Legendre on each smooth piece, the end corrections of
-Euler–Maclaurin), so it costs the same for 10³ or 10⁷ samples.
+The terms — `quantization` Q, `angle_random_walk` N, `rate_random_walk` K, `rate_ramp` R and
+up to two first-order `gauss_markov` terms (σ, T) — and their Allan variances for sampled data
+are in [`octave_covariance`][hrgjax.allan.octave_covariance], with the
+estimator's exact covariance of the octaves (finite record, overlapping estimates,
+neighbouring octaves correlated): [`covariance`][hrgjax.allan.octave_covariance.covariance].
 
 **Fit and selection.** Generalised least squares on the octaves with that covariance
 (evaluated at the previous fit, three rounds), the coefficients² non-negative, each
@@ -54,7 +38,9 @@ from statistics import NormalDist
 import numpy as np
 
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
-from .uncertainty import _gammainc
+from .octave_covariance import covariance as covariance
+from .octave_covariance import unit_avar
+from .uncertainty import chi2_sf
 
 LINEAR = ("quantization", "angle_random_walk", "rate_random_walk", "rate_ramp")
 """The terms linear in their coefficient² (the Gauss–Markov terms add a correlation time)."""
@@ -81,172 +67,6 @@ other finalist fits."""
 T_GRID = 24
 """Correlation times tried per Gauss–Markov term: log-spaced from 2τ₀ to the longest octave
 fitted (n/SCALE_LIMIT·τ₀; a longer T looks like a random walk there)."""
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
-
-
-# -- each term's generalised covariance of the angle X = Σy (rate units × samples) ------------
-
-
-def _g_white(t):
-    return -0.5 * np.abs(t)
-
-
-def _g_walk(t):
-    t = np.abs(t)
-    return (t**3 - t) / 12.0
-
-
-def _gm_structure(t, eps):
-    """D(t)/σ² of a unit-variance AR(1) rate with φ = e^{−ε}, summed over t samples:
-    t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)², with the bracket's cancellation avoided (a
-    series where εt < 1e-4)."""
-    t = np.abs(np.asarray(t, dtype=float))
-    u = eps * t
-    one_m_phi = -math.expm1(-eps)
-    bracket = t * one_m_phi + np.expm1(-u)  # t(1 − φ) − (1 − φᵗ)
-    small = u < 1e-4
-    ts = t[small]
-    bracket[small] = ((eps**2 / 2) * (ts * ts - ts) - (eps**3 / 6) * (ts**3 - ts)
-                      + (eps**4 / 24) * (ts**4 - ts))  # fmt: skip
-    return t + 2 * math.exp(-eps) * bracket / one_m_phi**2
-
-
-def _g_gm(t, eps):
-    return -0.5 * _gm_structure(t, eps)
-
-
-def _c(gfun, ell, ma, mb):
-    """Covariance of the angle's second differences at lags ma (at i) and mb (at i + ℓ):
-    Σ c_p c_q G(ℓ + u_q − t_p), c = (1, −2, 1), t = (0, ma, 2ma), u = (0, mb, 2mb)."""
-    cp = (1.0, -2.0, 1.0)
-    out = 0.0
-    for p in range(3):
-        for q in range(3):
-            out = out + cp[p] * cp[q] * gfun(ell + q * mb - p * ma)
-    return out
-
-
-# -- the model's Allan variance and the estimator's covariance -----------------------------
-
-
-def _unit_avar(term, m, tau0, eps=None):
-    """Allan variance at factors `m` of one term with unit coefficient² (Q² = 1 [unit·s]²,
-    …; Gauss–Markov: σ² = 1 [unit²] with φ = e^{−eps})."""
-    m = np.asarray(m, dtype=float)
-    if term == "rate_ramp":
-        return (m * tau0) ** 2 / 2.0
-    if term == "quantization":
-        return 3.0 / (m * tau0) ** 2
-    return _c(_term_g(term, tau0, eps), 0.0, m, m) / (2 * m**2)
-
-
-def _term_g(term, tau0, eps=None):
-    """The generalised covariance of X = Σy for one term with unit coefficient²."""
-    if term == "angle_random_walk":  # σ² = N²/τ₀ per sample
-        return lambda t: _g_white(t) / tau0
-    if term == "rate_random_walk":  # steps of variance K²τ₀
-        return lambda t: _g_walk(t) * tau0
-    if term == "gauss_markov":
-        return lambda t: _g_gm(t, eps)
-    raise ValueError(term)
-
-
-def _sum_rules(lo, hi):
-    """Points, weights and piece index with Σ_{ℓ=lo}^{hi} f(ℓ) ≈ Σ wᵢ f(xᵢ) for each piece
-    [lo, hi] (integer arrays) on which f is smooth: every point below 48 of them, else
-    Gauss–Legendre on [lo, hi] plus the trapezoid's end terms and the first Euler–Maclaurin
-    correction (f′ by differences)."""
-    lo, hi = np.asarray(lo, dtype=np.int64), np.asarray(hi, dtype=np.int64)
-    keep = hi >= lo
-    lo, hi, piece = lo[keep], hi[keep], np.flatnonzero(keep)
-    short = hi - lo < 48
-    length = (hi - lo + 1)[short]
-    start = np.repeat(lo[short], length)
-    offset = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length, length)
-    xs, ws, ps = [start + offset], [np.ones(offset.size)], [np.repeat(piece[short], length)]
-    lo_l, hi_l, p_l = lo[~short].astype(float), hi[~short].astype(float), piece[~short]
-    half = 0.5 * (hi_l - lo_l)[:, None]
-    xs.append((lo_l[:, None] + half * (_GL_X + 1.0)).ravel())
-    ws.append((half * _GL_W).ravel())
-    ps.append(np.repeat(p_l, _GL_X.size))
-    ends = np.stack([lo_l, lo_l + 1, hi_l - 1, hi_l], axis=1)
-    xs.append(ends.ravel())
-    ws.append(np.tile([0.5 + 1 / 12, -1 / 12, -1 / 12, 0.5 + 1 / 12], p_l.size))
-    ps.append(np.repeat(p_l, 4))
-    return np.concatenate(xs).astype(float), np.concatenate(ws), np.concatenate(ps)
-
-
-def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
-    """Cov(σ̂²(m_a), σ̂²(m_b)) of the overlapping Allan variance at factors `ms` of `n` rate
-    samples for the model `coef` ({term: coefficient²} of [`LINEAR`][hrgjax.allan.composite.LINEAR])
-    plus Gauss–Markov terms `gm` [(σ², T [s])] (module docstring). [unit⁴]"""
-    ms = [int(m) for m in ms]
-    terms = [(_term_g(t, tau0), c) for t, c in coef.items()
-             if t in ("angle_random_walk", "rate_random_walk") and c > 0]  # fmt: skip
-    terms += [(_term_g("gauss_markov", tau0, tau0 / tt), s2) for s2, tt in gm if s2 > 0]
-    q2 = coef.get("quantization", 0.0) / tau0**2  # white angle noise in X units
-    drift = coef.get("rate_ramp", 0.0)
-    tails = [tt / tau0 for s2, tt in gm if s2 > 0]
-    count_m = [n + 1 - 2 * m for m in ms]
-    pairs = list(itertools.combinations_with_replacement(range(len(ms)), 2))
-    los, his, owner, qx, qc, qidx = [], [], [], [], [], []
-    for k, (a, b) in enumerate(pairs):
-        ma, mb, na, nb = ms[a], ms[b], count_m[a], count_m[b]
-        # breakpoints: where a generalised covariance turns (ℓ = t_p − u_q) and the count
-        # bends; Gauss–Markov tails cut where they have died (φ^{2ℓ} < 1e-16)
-        lo_all, hi_all = -(na - 1), nb - 1
-        cuts = {lo_all, hi_all + 1, 0, nb - na}
-        cuts.update(p * ma - q * mb for p in range(3) for q in range(3))
-        edge = 2 * max(ma, mb)
-        for tt in tails:
-            for j in (1, 2, 4, 8, 18):
-                cuts.update((edge + int(j * tt), -edge - int(j * tt)))
-        if tails:
-            reach = edge + int(18 * max(tails)) + 1
-            lo_all, hi_all = max(lo_all, -reach), min(hi_all, reach)
-        pts = sorted(c for c in cuts if lo_all < c <= hi_all + 1)
-        pts = [lo_all, *pts] if pts[-1] == hi_all + 1 else [lo_all, *pts, hi_all + 1]
-        los += pts[:-1]
-        his += [c - 1 for c in pts[1:]]
-        owner += [k] * (len(pts) - 1)
-        if q2 > 0:  # white angle noise: c is q2·Σ c_p c_q at ℓ = t_p − u_q only
-            lags = {}
-            for p, q in itertools.product(range(3), range(3)):
-                ell = p * ma - q * mb
-                lags[ell] = lags.get(ell, 0.0) + (1, -2, 1)[p] * (1, -2, 1)[q] * q2
-            qx += list(lags)
-            qc += list(lags.values())
-            qidx += [k] * len(lags)
-    ma_of = np.asarray([ms[a] for a, _ in pairs], dtype=float)
-    mb_of = np.asarray([ms[b] for _, b in pairs], dtype=float)
-    na_of = np.asarray([count_m[a] for a, _ in pairs], dtype=float)
-    nb_of = np.asarray([count_m[b] for _, b in pairs], dtype=float)
-    mu2 = drift * tau0**2 * ma_of**2 * mb_of**2  # μ_a·μ_b of the drift
-
-    def c_smooth(ell, k):
-        if not terms:
-            return np.zeros_like(ell)
-        return sum(w * _c(g, ell, ma_of[k], mb_of[k]) for g, w in terms)
-
-    def count(ell, k):
-        return np.maximum(np.minimum(na_of[k], nb_of[k] - ell) - np.maximum(0.0, -ell), 0.0)
-
-    x, w, piece = _sum_rules(los, his)
-    k = np.asarray(owner)[piece]
-    c = c_smooth(x, k)
-    total = np.bincount(k, weights=w * count(x, k) * (2 * c * c + 4 * mu2[k] * c),
-                        minlength=len(pairs))  # fmt: skip
-    if qx:
-        x, cq, k = np.asarray(qx, dtype=float), np.asarray(qc), np.asarray(qidx)
-        cs = c_smooth(x, k)
-        total += np.bincount(k, weights=count(x, k) * (2 * ((cs + cq) ** 2 - cs**2)
-                                                       + 4 * mu2[k] * cq), minlength=len(pairs))  # fmt: skip
-    out = np.zeros((len(ms), len(ms)))
-    for k, (a, b) in enumerate(pairs):
-        out[a, b] = out[b, a] = total[k] / (4.0 * ms[a] ** 2 * ms[b] ** 2 * na_of[k] * nb_of[k])
-    return out
-
-
 # -- the fit -------------------------------------------------------------------------------
 
 
@@ -291,10 +111,10 @@ class CompositeNoise:
         out = np.zeros_like(m)
         for name, spec in self.terms.items():
             if name in LINEAR:
-                out = out + spec["value"] ** 2 * _unit_avar(name, m, tau0)
+                out = out + spec["value"] ** 2 * unit_avar(name, m, tau0)
             else:
                 s, t = spec["sigma"]["value"], spec["correlation_time"]["value"]
-                out = out + s**2 * _unit_avar("gauss_markov", m, tau0, tau0 / t)
+                out = out + s**2 * unit_avar("gauss_markov", m, tau0, tau0 / t)
         return out
 
     def term_avar(self, name, taus) -> np.ndarray:
@@ -480,8 +300,8 @@ def identify_noise(
     res = deviation(y, rate_hz, kind="oadev", taus=ms * tau0, unit=unit)
     avar, ms = res.dev**2, res.m
     t_grid = np.geomspace(2 * tau0, ms[-1] * tau0, T_GRID)
-    cols = {t: _unit_avar(t, ms, tau0) for t in terms}
-    gm_cols = {tt: _unit_avar("gauss_markov", ms, tau0, tau0 / tt) for tt in t_grid}
+    cols = {t: unit_avar(t, ms, tau0) for t in terms}
+    gm_cols = {tt: unit_avar("gauss_markov", ms, tau0, tau0 / tt) for tt in t_grid}
 
     # round 0: each octave's variance from its EDF (independent), then the model's own
     omega = np.diag(2 * avar**2 / np.maximum(res.edf, 1.0))
@@ -509,7 +329,7 @@ def identify_noise(
         logdet = float(np.linalg.slogdet(om / np.outer(model, model))[1])
         row["likelihood_score"] = fit["J"] + logdet + row["score"] - row["J"]
         dof = max(int(ms.size - len(fit["names"]) - 2 * len(fit["gm"])), 1)
-        row["p_value"] = 1.0 - _gammainc(dof / 2.0, fit["J"] / 2.0)
+        row["p_value"] = chi2_sf(fit["J"], dof)
         finalists.append((row["likelihood_score"], row["p_value"], fit, om, cov))
     # a model its own covariance rejects (p < FIT_ALPHA) is not kept while another fits
     fitting = [f for f in finalists if f[1] >= FIT_ALPHA] or finalists
@@ -523,7 +343,7 @@ def identify_noise(
     terms_out = _intervals(fit, cov, ci, unit)
     dof = int(ms.size - len(fit["names"]) - 2 * len(fit["gm"]))
     chi2 = float(fit["J"])
-    p = 1.0 - _gammainc(max(dof, 1) / 2.0, chi2 / 2.0)
+    p = chi2_sf(chi2, max(dof, 1))
     return CompositeNoise(
         terms=terms_out, unit=unit, rate_hz=float(rate_hz), n=n, ci=float(ci),
         taus=ms * tau0, avar=avar, covariance=omega, chi2=chi2, dof=dof, p_value=float(p),
@@ -568,9 +388,9 @@ def _bounds(fit, avar, omega, cols, ms, tau0, terms, ci):
 
 def _model(fit, ms, tau0):
     """The Allan variance of a fit at the factors `ms`. [unit²]"""
-    out = sum(c * _unit_avar(t, ms, tau0) for t, c in zip(fit["names"], fit["c"], strict=False))
+    out = sum(c * unit_avar(t, ms, tau0) for t, c in zip(fit["names"], fit["c"], strict=False))
     for c, t in zip(fit["c"][len(fit["names"]) :], fit["gm"], strict=True):
-        out = out + c * _unit_avar("gauss_markov", ms, tau0, tau0 / t)
+        out = out + c * unit_avar("gauss_markov", ms, tau0, tau0 / t)
     return out
 
 
@@ -668,7 +488,7 @@ def _refine(fit, avar, chol_inv, cols, tau0, ms, grid):
             ts = list(fit["gm"])
             ts[i] = math.exp(log_t)
             basis = np.stack([cols[t] for t in fit["names"]]
-                             + [_unit_avar("gauss_markov", ms, tau0, tau0 / t) for t in ts], 1)  # fmt: skip
+                             + [unit_avar("gauss_markov", ms, tau0, tau0 / t) for t in ts], 1)  # fmt: skip
             c, j = _gls(avar, chol_inv, basis)
             return (np.inf, None) if not np.isfinite(j) else (float(j), (ts, c))
 
@@ -689,14 +509,14 @@ def _log_parts(p, names, k, ms, tau0):
     Gauss–Markov terms, log T of each)."""
     q = len(names)
     c, logt = np.exp(p[: q + k]), p[q + k :]
-    cols = [_unit_avar(t, ms, tau0) for t in names]
-    cols += [_unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt)) for lt in logt]
+    cols = [unit_avar(t, ms, tau0) for t in names]
+    cols += [unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt)) for lt in logt]
     model = sum(ci * col for ci, col in zip(c, cols, strict=True))
     jac = [ci * col for ci, col in zip(c, cols, strict=True)]
     h = 1e-4
     for j, lt in enumerate(logt):  # ∂/∂ log T, central difference
-        up = _unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt + h))
-        dn = _unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt - h))
+        up = unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt + h))
+        dn = unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt - h))
         jac.append(c[q + j] * (up - dn) / (2 * h))
     return model, np.stack(jac, axis=1) / model[:, None]
 

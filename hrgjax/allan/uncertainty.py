@@ -340,6 +340,11 @@ def _gammainc(a: float, x: float) -> float:
     return 1.0 - math.exp(log_front) * h
 
 
+def chi2_sf(x: float, dof: float) -> float:
+    """Upper tail probability P(χ²_dof > x) (float64 whatever JAX's precision)."""
+    return 1.0 - _gammainc(dof / 2.0, max(x, 0.0) / 2.0)
+
+
 def chi2_ppf(q: float, k: float) -> float:
     """The q-quantile of the χ² distribution with k (> 0, real) degrees of freedom."""
     a = 0.5 * k
