@@ -27,11 +27,13 @@ Euler–Maclaurin), so it costs the same for 10³ or 10⁷ samples.
 A term enters through its *generalised covariance* G of the angle X = Σy (rate units ×
 samples): white rate −|t|/2, random-walk rate (|t|³ − |t|)/12, a first-order Gauss–Markov rate
 −D(t)/2; c_ab(ℓ) is [`second_difference_cov`][hrgjax.allan.octave_covariance.second_difference_cov].
+On a piece between kinks the nine arguments of G keep their signs, so c_ab is a cubic plus
+two exponentials per Gauss–Markov term there, and is evaluated so: exact zeros beyond the
+kinks (where the nine cubics, summed pointwise at t ≈ 10⁵, cancel only to round-off).
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -92,7 +94,8 @@ def unit_avar(term, m, tau0, eps=None):
         return (m * tau0) ** 2 / 2.0
     if term == "quantization":
         return 3.0 / (m * tau0) ** 2
-    return second_difference_cov(term_g(term, tau0, eps), 0.0, m, m) / (2 * m**2)
+    g = term_g(term, tau0, eps)  # second_difference_cov at ℓ = 0 (G(0) = 0, G even)
+    return (2 * g(2 * m) - 8 * g(m)) / (2 * m**2)
 
 
 def term_g(term, tau0, eps=None):
@@ -131,72 +134,118 @@ def _sum_rules(lo, hi):
     return np.concatenate(xs).astype(float), np.concatenate(ws), np.concatenate(ps)
 
 
+_CP = np.array([1.0, -2.0, 1.0])
+_P, _Q = np.divmod(np.arange(9), 3)
+_W = _CP[_P] * _CP[_Q]  # c_p·c_q of the nine values of G in a second-difference covariance
+
+
+def _on_pieces(x, piece, lo, hi, ma, mb, lin, gms, tau0):
+    """Σ_terms coefficient²·[`second_difference_cov`][hrgjax.allan.octave_covariance.second_difference_cov]
+    at the nodes `x` of pieces [lo, hi] (pairs of factors ma, mb): on a piece every argument
+    t = ℓ + q·mb − p·ma of G keeps its sign σ, so the white and random-walk parts are a cubic
+    in ℓ − lo and a Gauss–Markov term's exponential part is P·φ^{ℓ−lo} + M·φ^{hi−ℓ} — nine
+    values of G per node become one cubic and two exponentials per Gauss–Markov term. Where
+    every σ agrees (beyond the kinks) the polynomial part vanishes exactly and P, M are
+    products of expm1's; where a Gauss–Markov term is near a random walk (ε·(ma + mb) < 0.05,
+    its linear and exponential parts cancelling), it is evaluated pointwise."""
+    s = _Q[None, :] * mb[:, None] - _P[None, :] * ma[:, None]  # (pieces, 9)
+    d, dh = lo[:, None] + s, hi[:, None] + s  # t at the piece's ends
+    sig = np.where(d >= 0, 1.0, -1.0)
+    inside = np.any(sig != sig[:, :1], axis=1)  # the kinks' region: mixed signs
+    sw = np.where(inside, (_W * sig).sum(1), 0.0)
+    swd = np.where(inside, (_W * sig * d).sum(1), 0.0)
+    coef = np.zeros((lo.size, 4))  # cubic in x = ℓ − lo
+    if lin.get("angle_random_walk", 0.0) > 0:
+        f = -0.5 * lin["angle_random_walk"] / tau0
+        coef[:, 1] += f * sw
+        coef[:, 0] += f * swd
+    if lin.get("rate_random_walk", 0.0) > 0:
+        f = lin["rate_random_walk"] * tau0 / 12.0
+        swd2 = np.where(inside, (_W * sig * d * d).sum(1), 0.0)
+        swd3 = np.where(inside, (_W * sig * d**3).sum(1), 0.0)
+        coef += f * np.stack([swd3 - swd, 3 * swd2 - sw, 3 * swd, sw], axis=1)
+    xr = x - lo[piece]
+    cp = coef[piece]
+    c = ((cp[:, 3] * xr + cp[:, 2]) * xr + cp[:, 1]) * xr + cp[:, 0]
+    for s2, eps in gms:
+        r, phi = -math.expm1(-eps), math.exp(-eps)
+        near_walk = inside & (eps * 2 * (ma + mb) < 0.05)
+        a = -0.5 * s2 * (1 + 2 * phi / r)  # the linear part of −D/2 (its constant cancels)
+        e = -0.5 * s2 * 2 * phi / r**2  # the exponential part's weight
+        plus = sig > 0
+        pw = np.where(plus, _W * np.exp(-eps * np.where(plus, d, 0.0)), 0.0).sum(1)
+        mw = np.where(plus, 0.0, _W * np.exp(eps * np.where(plus, 0.0, dh))).sum(1)
+        # beyond the kinks the nine exponentials factor: (1 − φ^{mb})²(1 − φ^{−ma})²·φ^{lo}
+        both = (-np.expm1(-eps * ma)) ** 2 * (-np.expm1(-eps * mb)) ** 2
+        right, left = ~inside & plus[:, 0], ~inside & ~plus[:, 0]
+        pw[right] = np.exp(-eps * (lo - 2 * ma)[right]) * both[right]
+        mw[left] = np.exp(eps * (hi + 2 * mb)[left]) * both[left]
+        length = (hi - lo)[piece]
+        part = a * (sw[piece] * xr + swd[piece])
+        part += e * (pw[piece] * np.exp(-eps * xr) + mw[piece] * np.exp(-eps * (length - xr)))
+        slow = near_walk[piece]
+        if slow.any():
+            g = term_g("gauss_markov", tau0, eps)
+            part[slow] = s2 * second_difference_cov(g, x[slow], ma[piece][slow], mb[piece][slow])
+        c = c + part
+    return c
+
+
 def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
     """Cov(σ̂²(m_a), σ̂²(m_b)) of the overlapping Allan variance at factors `ms` of `n` rate
     samples for the model `coef` ({term: coefficient²} of [`LINEAR`][hrgjax.allan.composite.LINEAR])
     plus Gauss–Markov terms `gm` [(σ², T [s])] (module docstring). [unit⁴]"""
-    ms = [int(m) for m in ms]
+    ms = np.asarray([int(m) for m in ms], dtype=np.int64)
     terms = [(term_g(t, tau0), c) for t, c in coef.items()
              if t in ("angle_random_walk", "rate_random_walk") and c > 0]  # fmt: skip
     terms += [(term_g("gauss_markov", tau0, tau0 / tt), s2) for s2, tt in gm if s2 > 0]
     q2 = coef.get("quantization", 0.0) / tau0**2  # white angle noise in X units
     drift = coef.get("rate_ramp", 0.0)
     tails = [tt / tau0 for s2, tt in gm if s2 > 0]
-    count_m = [n + 1 - 2 * m for m in ms]
-    pairs = list(itertools.combinations_with_replacement(range(len(ms)), 2))
-    los, his, owner, qx, qc, qidx = [], [], [], [], [], []
-    for k, (a, b) in enumerate(pairs):
-        ma, mb, na, nb = ms[a], ms[b], count_m[a], count_m[b]
-        # breakpoints: where a generalised covariance turns (ℓ = t_p − u_q) and the count
-        # bends; Gauss–Markov tails cut where they have died (φ^{2ℓ} < 1e-16)
-        lo_all, hi_all = -(na - 1), nb - 1
-        cuts = {lo_all, hi_all + 1, 0, nb - na}
-        cuts.update(p * ma - q * mb for p in range(3) for q in range(3))
-        edge = 2 * max(ma, mb)
-        for tt in tails:
-            for j in (1, 2, 4, 8, 18):
-                cuts.update((edge + int(j * tt), -edge - int(j * tt)))
-        if tails:
-            reach = edge + int(18 * max(tails)) + 1
-            lo_all, hi_all = max(lo_all, -reach), min(hi_all, reach)
-        pts = sorted(c for c in cuts if lo_all < c <= hi_all + 1)
-        pts = [lo_all, *pts] if pts[-1] == hi_all + 1 else [lo_all, *pts, hi_all + 1]
-        los += pts[:-1]
-        his += [c - 1 for c in pts[1:]]
-        owner += [k] * (len(pts) - 1)
-        if q2 > 0:  # white angle noise: c is q2·Σ c_p c_q at ℓ = t_p − u_q only
-            lags = {}
-            for p, q in itertools.product(range(3), range(3)):
-                ell = p * ma - q * mb
-                lags[ell] = lags.get(ell, 0.0) + (1, -2, 1)[p] * (1, -2, 1)[q] * q2
-            qx += list(lags)
-            qc += list(lags.values())
-            qidx += [k] * len(lags)
-    ma_of = np.asarray([ms[a] for a, _ in pairs], dtype=float)
-    mb_of = np.asarray([ms[b] for _, b in pairs], dtype=float)
-    na_of = np.asarray([count_m[a] for a, _ in pairs], dtype=float)
-    nb_of = np.asarray([count_m[b] for _, b in pairs], dtype=float)
+    ia, ib = np.triu_indices(ms.size)  # the pairs a ≤ b
+    ma, mb = ms[ia], ms[ib]
+    na, nb = n + 1 - 2 * ma, n + 1 - 2 * mb
+    # breakpoints: where a generalised covariance turns (ℓ = t_p − u_q) and the count bends;
+    # Gauss–Markov tails cut where they have died (φ^{2ℓ} < 1e-16)
+    lo_all, hi_all = -(na - 1), nb - 1
+    kinks = _P[None, :] * ma[:, None] - _Q[None, :] * mb[:, None]  # (pairs, 9)
+    cuts = [np.zeros_like(ma), nb - na, *kinks.T]
+    edge = 2 * np.maximum(ma, mb)
+    for tt in tails:
+        for j in (1, 2, 4, 8, 18):
+            cuts += [edge + int(j * tt), -edge - int(j * tt)]
+    if tails:
+        reach = edge + int(18 * max(tails)) + 1
+        lo_all, hi_all = np.maximum(lo_all, -reach), np.minimum(hi_all, reach)
+    cuts = np.clip(np.stack([lo_all, *cuts, hi_all + 1], axis=1), lo_all[:, None],
+                   (hi_all + 1)[:, None])  # fmt: skip
+    cuts.sort(axis=1)  # repeated cuts make empty pieces, which the sum skips
+    los, his = cuts[:, :-1].ravel(), (cuts[:, 1:] - 1).ravel()
+    owner = np.repeat(np.arange(ma.size), cuts.shape[1] - 1)
+    ma_of, mb_of, na_of, nb_of = (v.astype(float) for v in (ma, mb, na, nb))
     mu2 = drift * tau0**2 * ma_of**2 * mb_of**2  # μ_a·μ_b of the drift
-
-    def c_smooth(ell, k):
-        if not terms:
-            return np.zeros_like(ell)
-        return sum(w * second_difference_cov(g, ell, ma_of[k], mb_of[k]) for g, w in terms)
 
     def count(ell, k):
         return np.maximum(np.minimum(na_of[k], nb_of[k] - ell) - np.maximum(0.0, -ell), 0.0)
 
     x, w, piece = _sum_rules(los, his)
-    k = np.asarray(owner)[piece]
-    c = c_smooth(x, k)
+    k = owner[piece]
+    lin = {t: c for t, c in coef.items() if t in ("angle_random_walk", "rate_random_walk")}
+    gms = [(s2, tau0 / tt) for s2, tt in gm if s2 > 0]
+    c = _on_pieces(x, piece, los.astype(float), his.astype(float), ma_of[owner], mb_of[owner],
+                   lin, gms, tau0)  # fmt: skip
     total = np.bincount(k, weights=w * count(x, k) * (2 * c * c + 4 * mu2[k] * c),
-                        minlength=len(pairs))  # fmt: skip
-    if qx:
-        x, cq, k = np.asarray(qx, dtype=float), np.asarray(qc), np.asarray(qidx)
-        cs = c_smooth(x, k)
+                        minlength=ma.size)  # fmt: skip
+    if q2 > 0:  # white angle noise: c is q2·Σ c_p c_q at the lags ℓ = t_p − u_q only
+        key, where = np.unique(np.stack([np.repeat(np.arange(ma.size), 9), kinks.ravel()]),
+                               axis=1, return_inverse=True)  # fmt: skip
+        cq = np.bincount(where.ravel(), weights=np.tile(_W * q2, ma.size))
+        k, x = key[0], key[1].astype(float)
+        cs = (sum(w * second_difference_cov(g, x, ma_of[k], mb_of[k]) for g, w in terms)
+              if terms else np.zeros_like(x))  # fmt: skip
         total += np.bincount(k, weights=count(x, k) * (2 * ((cs + cq) ** 2 - cs**2)
-                                                       + 4 * mu2[k] * cq), minlength=len(pairs))  # fmt: skip
-    out = np.zeros((len(ms), len(ms)))
-    for k, (a, b) in enumerate(pairs):
-        out[a, b] = out[b, a] = total[k] / (4.0 * ms[a] ** 2 * ms[b] ** 2 * na_of[k] * nb_of[k])
+                                                       + 4 * mu2[k] * cq), minlength=ma.size)  # fmt: skip
+    out = np.zeros((ms.size, ms.size))
+    out[ia, ib] = total / (4.0 * ma_of**2 * mb_of**2 * na_of * nb_of)
+    out[ib, ia] = out[ia, ib]
     return out
