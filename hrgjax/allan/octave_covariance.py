@@ -34,6 +34,7 @@ kinks (where the nine cubics, summed pointwise at t ≈ 10⁵, cancel only to ro
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -62,9 +63,10 @@ def _gm_structure(t, eps):
     one_m_phi = -math.expm1(-eps)
     bracket = t * one_m_phi + np.expm1(-u)  # t(1 − φ) − (1 − φᵗ)
     small = u < 1e-4
-    ts = t[small]
-    bracket[small] = ((eps**2 / 2) * (ts * ts - ts) - (eps**3 / 6) * (ts**3 - ts)
-                      + (eps**4 / 24) * (ts**4 - ts))  # fmt: skip
+    if small.any():
+        ts = t[small]
+        bracket[small] = ((eps**2 / 2) * (ts * ts - ts) - (eps**3 / 6) * (ts**3 - ts)
+                          + (eps**4 / 24) * (ts**4 - ts))  # fmt: skip
     return t + 2 * math.exp(-eps) * bracket / one_m_phi**2
 
 
@@ -139,113 +141,148 @@ _P, _Q = np.divmod(np.arange(9), 3)
 _W = _CP[_P] * _CP[_Q]  # c_p·c_q of the nine values of G in a second-difference covariance
 
 
-def _on_pieces(x, piece, lo, hi, ma, mb, lin, gms, tau0):
-    """Σ_terms coefficient²·[`second_difference_cov`][hrgjax.allan.octave_covariance.second_difference_cov]
-    at the nodes `x` of pieces [lo, hi] (pairs of factors ma, mb): on a piece every argument
-    t = ℓ + q·mb − p·ma of G keeps its sign σ, so the white and random-walk parts are a cubic
-    in ℓ − lo and a Gauss–Markov term's exponential part is P·φ^{ℓ−lo} + M·φ^{hi−ℓ} — nine
-    values of G per node become one cubic and two exponentials per Gauss–Markov term. Where
-    every σ agrees (beyond the kinks) the polynomial part vanishes exactly and P, M are
-    products of expm1's; where a Gauss–Markov term is near a random walk (ε·(ma + mb) < 0.05,
-    its linear and exponential parts cancelling), it is evaluated pointwise."""
+def _geometry(x, piece, lo, hi, ma, mb):
+    """What [`_on_pieces`] needs of the pieces that no model changes: each argument's sign σ
+    and value at the ends, the signed moments Σ c_p c_q σ dʲ, the nodes' offsets."""
     s = _Q[None, :] * mb[:, None] - _P[None, :] * ma[:, None]  # (pieces, 9)
     d, dh = lo[:, None] + s, hi[:, None] + s  # t at the piece's ends
     sig = np.where(d >= 0, 1.0, -1.0)
-    inside = np.any(sig != sig[:, :1], axis=1)  # the kinks' region: mixed signs
-    sw = np.where(inside, (_W * sig).sum(1), 0.0)
-    swd = np.where(inside, (_W * sig * d).sum(1), 0.0)
-    coef = np.zeros((lo.size, 4))  # cubic in x = ℓ − lo
+    moments = np.stack([(_W * sig * d**j).sum(1) for j in range(4)], axis=1)
+    plus = sig > 0
+    return {"d": np.where(plus, d, 0.0), "dh": np.where(plus, 0.0, dh), "plus": plus,
+            "moments": moments, "xr": x - lo[piece], "rest": (hi - lo)[piece] - (x - lo[piece]),
+            "ma": ma, "mb": mb}  # fmt: skip
+
+
+def _on_pieces(geo, x, piece, lin, gms, tau0):
+    """Σ_terms coefficient²·[`second_difference_cov`][hrgjax.allan.octave_covariance.second_difference_cov]
+    at the nodes `x` of pieces [lo, hi] between the kinks (pairs of factors ma, mb): on a
+    piece every argument t = ℓ + q·mb − p·ma of G keeps its sign σ, so the white and
+    random-walk parts are a cubic in ℓ − lo and a Gauss–Markov term's exponential part is
+    P·φ^{ℓ−lo} + M·φ^{hi−ℓ} — nine values of G per node become one cubic and two exponentials
+    per Gauss–Markov term. Where a Gauss–Markov term is near a random walk
+    (ε·(ma + mb) < 0.05, its linear and exponential parts cancelling) it is evaluated
+    pointwise."""
+    sw, swd, swd2, swd3 = geo["moments"].T
+    coef = np.zeros((sw.size, 4))  # cubic in x = ℓ − lo
     if lin.get("angle_random_walk", 0.0) > 0:
         f = -0.5 * lin["angle_random_walk"] / tau0
         coef[:, 1] += f * sw
         coef[:, 0] += f * swd
     if lin.get("rate_random_walk", 0.0) > 0:
         f = lin["rate_random_walk"] * tau0 / 12.0
-        swd2 = np.where(inside, (_W * sig * d * d).sum(1), 0.0)
-        swd3 = np.where(inside, (_W * sig * d**3).sum(1), 0.0)
         coef += f * np.stack([swd3 - swd, 3 * swd2 - sw, 3 * swd, sw], axis=1)
-    xr = x - lo[piece]
-    cp = coef[piece]
+    for s2, eps in gms:  # the linear part of a Gauss–Markov term's G
+        a = _gm_weights(s2, eps)[0]
+        coef[:, 1] += a * sw
+        coef[:, 0] += a * swd
+    xr, cp = geo["xr"], coef[piece]
     c = ((cp[:, 3] * xr + cp[:, 2]) * xr + cp[:, 1]) * xr + cp[:, 0]
+    plus, ma, mb = geo["plus"], geo["ma"], geo["mb"]
     for s2, eps in gms:
-        r, phi = -math.expm1(-eps), math.exp(-eps)
-        near_walk = inside & (eps * 2 * (ma + mb) < 0.05)
-        a = -0.5 * s2 * (1 + 2 * phi / r)  # the linear part of −D/2 (its constant cancels)
-        e = -0.5 * s2 * 2 * phi / r**2  # the exponential part's weight
-        plus = sig > 0
-        pw = np.where(plus, _W * np.exp(-eps * np.where(plus, d, 0.0)), 0.0).sum(1)
-        mw = np.where(plus, 0.0, _W * np.exp(eps * np.where(plus, 0.0, dh))).sum(1)
-        # beyond the kinks the nine exponentials factor: (1 − φ^{mb})²(1 − φ^{−ma})²·φ^{lo}
-        both = (-np.expm1(-eps * ma)) ** 2 * (-np.expm1(-eps * mb)) ** 2
-        right, left = ~inside & plus[:, 0], ~inside & ~plus[:, 0]
-        pw[right] = np.exp(-eps * (lo - 2 * ma)[right]) * both[right]
-        mw[left] = np.exp(eps * (hi + 2 * mb)[left]) * both[left]
-        length = (hi - lo)[piece]
-        part = a * (sw[piece] * xr + swd[piece])
-        part += e * (pw[piece] * np.exp(-eps * xr) + mw[piece] * np.exp(-eps * (length - xr)))
-        slow = near_walk[piece]
-        if slow.any():
+        e = _gm_weights(s2, eps)[1]
+        pw = (np.where(plus, _W, 0.0) * np.exp(-eps * geo["d"])).sum(1)
+        mw = (np.where(plus, 0.0, _W) * np.exp(eps * geo["dh"])).sum(1)
+        c += e * (pw[piece] * np.exp(-eps * xr) + mw[piece] * np.exp(-eps * geo["rest"]))
+        slow = (eps * 2 * (ma + mb) < 0.05)[piece]
+        if slow.any():  # replace the cancelling parts by the pointwise value
+            a = _gm_weights(s2, eps)[0]
+            m1, m0 = geo["moments"][piece][slow, 1], geo["moments"][piece][slow, 0]
+            fast = a * (m0 * xr[slow] + m1) + e * (pw[piece][slow] * np.exp(-eps * xr[slow])
+                                                    + mw[piece][slow] * np.exp(-eps * geo["rest"][slow]))  # fmt: skip
             g = term_g("gauss_markov", tau0, eps)
-            part[slow] = s2 * second_difference_cov(g, x[slow], ma[piece][slow], mb[piece][slow])
-        c = c + part
+            c[slow] += (
+                s2 * second_difference_cov(g, x[slow], ma[piece][slow], mb[piece][slow]) - fast
+            )
     return c
+
+
+def _gm_weights(s2, eps):
+    """G of a Gauss–Markov term (σ² = s2, φ = e^{−ε}) as a·|t| + e·φ^{|t|} + const: (a, e)."""
+    r, phi = -math.expm1(-eps), math.exp(-eps)
+    return -0.5 * s2 * (1 + 2 * phi / r), -0.5 * s2 * 2 * phi / r**2
+
+
+def _tail_sum(rate, x_end):
+    """Σ_{x=0}^{X} (X + 1 − x)·e^{−rate·x} for X = `x_end` (arrays): the count-weighted sum
+    of an exponential over a tail, closed form, its cancellation avoided by a series where
+    rate·(X + 1) < 1e-4."""
+    big = x_end + 1.0
+    u, v = -np.expm1(-rate), -np.expm1(-rate * big)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        closed = (big * u - (1 - u) * v) / u**2
+    series = big * (big + 1) / 2 - rate * x_end * (x_end + 1) * (x_end + 2) / 6
+    return np.where(rate * big < 1e-4, series, closed)
+
+
+@functools.lru_cache(maxsize=8)
+def _layout(ms: tuple, n: int):
+    """The pairs of octaves, the pieces of the kinks' region −2mb < ℓ < 2ma (cut where a
+    generalised covariance turns, ℓ = p·ma − q·mb, and where the count bends) and their
+    nodes and weights — the same for every model of one record."""
+    ms = np.asarray(ms, dtype=np.int64)
+    ia, ib = np.triu_indices(ms.size)  # the pairs a ≤ b
+    ma, mb = ms[ia], ms[ib]
+    na, nb = n + 1 - 2 * ma, n + 1 - 2 * mb
+    kinks = _P[None, :] * ma[:, None] - _Q[None, :] * mb[:, None]  # (pairs, 9)
+    first, end = -2 * mb + 1, 2 * ma  # the region's first lag, one past its last
+    cuts = np.stack([first, np.zeros_like(ma), nb - na, *kinks.T, end], axis=1)
+    cuts = np.clip(cuts, first[:, None], end[:, None])
+    cuts.sort(axis=1)  # repeated cuts make empty pieces, which the sum skips
+    los, his = cuts[:, :-1].ravel(), (cuts[:, 1:] - 1).ravel()
+    owner = np.repeat(np.arange(ma.size), cuts.shape[1] - 1)
+    x, w, piece = _sum_rules(los, his)
+    floats = tuple(v.astype(float) for v in (ma, mb, na, nb))
+    geo = _geometry(x, piece, los.astype(float), his.astype(float), floats[0][owner],
+                    floats[1][owner])  # fmt: skip
+    return ia, ib, kinks, owner, x, w, piece, floats, geo
 
 
 def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
     """Cov(σ̂²(m_a), σ̂²(m_b)) of the overlapping Allan variance at factors `ms` of `n` rate
     samples for the model `coef` ({term: coefficient²} of [`LINEAR`][hrgjax.allan.composite.LINEAR])
-    plus Gauss–Markov terms `gm` [(σ², T [s])] (module docstring). [unit⁴]"""
-    ms = np.asarray([int(m) for m in ms], dtype=np.int64)
+    plus Gauss–Markov terms `gm` [(σ², T [s])] (module docstring). [unit⁴]
+
+    Between the kinks the sum over ℓ runs piecewise by quadrature; beyond them only the
+    Gauss–Markov terms' exponentials are left (c = Σ_g K_g φ_g^x, x lags past the last kink,
+    the count linear in x), and both tails are summed in closed form."""
+    ia, ib, kinks, owner, x, w, piece, (ma, mb, na, nb), geo = _layout(
+        tuple(int(m) for m in ms), int(n)
+    )
     terms = [(term_g(t, tau0), c) for t, c in coef.items()
              if t in ("angle_random_walk", "rate_random_walk") and c > 0]  # fmt: skip
     terms += [(term_g("gauss_markov", tau0, tau0 / tt), s2) for s2, tt in gm if s2 > 0]
     q2 = coef.get("quantization", 0.0) / tau0**2  # white angle noise in X units
-    drift = coef.get("rate_ramp", 0.0)
-    tails = [tt / tau0 for s2, tt in gm if s2 > 0]
-    ia, ib = np.triu_indices(ms.size)  # the pairs a ≤ b
-    ma, mb = ms[ia], ms[ib]
-    na, nb = n + 1 - 2 * ma, n + 1 - 2 * mb
-    # breakpoints: where a generalised covariance turns (ℓ = t_p − u_q) and the count bends;
-    # Gauss–Markov tails cut where they have died (φ^{2ℓ} < 1e-16)
-    lo_all, hi_all = -(na - 1), nb - 1
-    kinks = _P[None, :] * ma[:, None] - _Q[None, :] * mb[:, None]  # (pairs, 9)
-    cuts = [np.zeros_like(ma), nb - na, *kinks.T]
-    edge = 2 * np.maximum(ma, mb)
-    for tt in tails:
-        for j in (1, 2, 4, 8, 18):
-            cuts += [edge + int(j * tt), -edge - int(j * tt)]
-    if tails:
-        reach = edge + int(18 * max(tails)) + 1
-        lo_all, hi_all = np.maximum(lo_all, -reach), np.minimum(hi_all, reach)
-    cuts = np.clip(np.stack([lo_all, *cuts, hi_all + 1], axis=1), lo_all[:, None],
-                   (hi_all + 1)[:, None])  # fmt: skip
-    cuts.sort(axis=1)  # repeated cuts make empty pieces, which the sum skips
-    los, his = cuts[:, :-1].ravel(), (cuts[:, 1:] - 1).ravel()
-    owner = np.repeat(np.arange(ma.size), cuts.shape[1] - 1)
-    ma_of, mb_of, na_of, nb_of = (v.astype(float) for v in (ma, mb, na, nb))
-    mu2 = drift * tau0**2 * ma_of**2 * mb_of**2  # μ_a·μ_b of the drift
-
-    def count(ell, k):
-        return np.maximum(np.minimum(na_of[k], nb_of[k] - ell) - np.maximum(0.0, -ell), 0.0)
-
-    x, w, piece = _sum_rules(los, his)
-    k = owner[piece]
+    mu2 = coef.get("rate_ramp", 0.0) * tau0**2 * ma**2 * mb**2  # μ_a·μ_b of the drift
     lin = {t: c for t, c in coef.items() if t in ("angle_random_walk", "rate_random_walk")}
     gms = [(s2, tau0 / tt) for s2, tt in gm if s2 > 0]
-    c = _on_pieces(x, piece, los.astype(float), his.astype(float), ma_of[owner], mb_of[owner],
-                   lin, gms, tau0)  # fmt: skip
+
+    def count(ell, k):
+        return np.maximum(np.minimum(na[k], nb[k] - ell) - np.maximum(0.0, -ell), 0.0)
+
+    k = owner[piece]
+    c = _on_pieces(geo, x, piece, lin, gms, tau0)
     total = np.bincount(k, weights=w * count(x, k) * (2 * c * c + 4 * mu2[k] * c),
                         minlength=ma.size)  # fmt: skip
+    # the tails ℓ ≥ 2ma (count nb − ℓ) and ℓ ≤ −2mb (count na + ℓ): c = Σ_g K_g φ_g^x with
+    # K_g = e_g·(1 − φ^{ma})²(1 − φ^{mb})² (the nine exponentials factor)
+    amp = [_gm_weights(s2, eps)[1] * np.expm1(-eps * ma) ** 2 * np.expm1(-eps * mb) ** 2
+           for s2, eps in gms]  # fmt: skip
+    for x_end in (nb - 1 - 2 * ma, na - 1 - 2 * mb):
+        for g, (_, eg) in enumerate(gms):
+            total += 4 * mu2 * amp[g] * _tail_sum(eg, x_end)
+            for h, (_, eh) in enumerate(gms):
+                total += 2 * amp[g] * amp[h] * _tail_sum(eg + eh, x_end)
     if q2 > 0:  # white angle noise: c is q2·Σ c_p c_q at the lags ℓ = t_p − u_q only
         key, where = np.unique(np.stack([np.repeat(np.arange(ma.size), 9), kinks.ravel()]),
                                axis=1, return_inverse=True)  # fmt: skip
         cq = np.bincount(where.ravel(), weights=np.tile(_W * q2, ma.size))
-        k, x = key[0], key[1].astype(float)
-        cs = (sum(w * second_difference_cov(g, x, ma_of[k], mb_of[k]) for g, w in terms)
-              if terms else np.zeros_like(x))  # fmt: skip
-        total += np.bincount(k, weights=count(x, k) * (2 * ((cs + cq) ** 2 - cs**2)
-                                                       + 4 * mu2[k] * cq), minlength=ma.size)  # fmt: skip
-    out = np.zeros((ms.size, ms.size))
-    out[ia, ib] = total / (4.0 * ma_of**2 * mb_of**2 * na_of * nb_of)
+        k, xq = key[0], key[1].astype(float)
+        cs = (sum(wt * second_difference_cov(g, xq, ma[k], mb[k]) for g, wt in terms)
+              if terms else np.zeros_like(xq))  # fmt: skip
+        total += np.bincount(k, weights=count(xq, k) * (2 * ((cs + cq) ** 2 - cs**2)
+                                                        + 4 * mu2[k] * cq), minlength=ma.size)  # fmt: skip
+    out = np.zeros((len(ms), len(ms)))
+    out[ia, ib] = total / (4.0 * ma**2 * mb**2 * na * nb)
     out[ib, ia] = out[ia, ib]
     return out
