@@ -22,9 +22,11 @@ that do not follow the estimate; Gauss–Newton, the covariance re-evaluated at 
 times), and among those their own covariance does not reject
 (p ≥ [`FIT_ALPHA`][hrgjax.allan.composite.FIT_ALPHA]) the one with the least
 J + log det + penalty (the octaves' Gaussian likelihood) is kept, so a term the data do not
-need is not reported. Its intervals are (GᵀΩ⁻¹G)⁻¹ on log c² and log T (G the model's
-derivative there). For each candidate term not selected, the upper end of its interval with
-it forced in is kept as a bound.
+need is not reported. (A finalist its own covariance rejects is fitted again from its fit
+under the per-τ EDF weights, a start no model's covariance shaped, and the better kept.) Its
+intervals are (GᵀΩ⁻¹G)⁻¹ on log c² and log T (G the model's derivative there). For each
+candidate term not selected, the upper end of its interval with it forced in is kept as a
+bound.
 """
 
 from __future__ import annotations
@@ -307,7 +309,7 @@ def identify_noise(
     # round 0: each octave's variance from its EDF (independent; the noise type identified
     # per octave), then the model's own. (A start from white noise's EDF everywhere lands
     # the fullest fit in another optimum more often: the benchmark's coverage fell 86 → 83 %.)
-    omega = np.diag(2 * avar**2 / np.maximum(res.edf, 1.0))
+    omega = omega0 = np.diag(2 * avar**2 / np.maximum(res.edf, 1.0))
     full = _best(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
     for _ in range(3):
         omega = _omega(full, ms, n, tau0, avar)
@@ -323,15 +325,20 @@ def identify_noise(
         # each finalist fitted on log σ̂² with its own covariance: J there and the
         # relative covariance's log det score it (in log space the covariance barely moves
         # with the level, so the likelihood cannot trade misfit for a smaller Ω)
-        try:
-            fit, om, cov = _log_fit(row["fit"], avar, ms, n, tau0)
-        except np.linalg.LinAlgError:  # its covariance degenerate at the fit: not a model
+        got = _own_fit(row["fit"], avar, ms, n, tau0)
+        if got is None or got[3] < FIT_ALPHA:
+            # rejected by its own covariance: the start may be an optimum the fullest
+            # model's covariance made (a wrong fullest fit ranks its own kind first), so it
+            # is fitted again from the subset's fit under the per-τ EDF weights
+            g = row["gauss_markov"]
+            start = _best(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms)
+            other = None if start is None else _own_fit(start, avar, ms, n, tau0)
+            if other is not None and (got is None or other[2] < got[2]):
+                got = other
+        if got is None:  # its covariance degenerate at the fit: not a model
             continue
-        model = _model(fit, ms, tau0)
-        logdet = float(np.linalg.slogdet(om / np.outer(model, model))[1])
-        row["likelihood_score"] = fit["J"] + logdet + row["score"] - row["J"]
-        dof = max(int(ms.size - len(fit["names"]) - 2 * len(fit["gm"])), 1)
-        row["p_value"] = chi2_sf(fit["J"], dof)
+        fit, om, likelihood, row["p_value"], cov = got
+        row["likelihood_score"] = likelihood + row["score"] - row["J"]
         finalists.append((row["likelihood_score"], row["p_value"], fit, om, cov))
     # a model its own covariance rejects (p < FIT_ALPHA) is not kept while another fits
     fitting = [f for f in finalists if f[1] >= FIT_ALPHA] or finalists
@@ -351,6 +358,20 @@ def identify_noise(
         taus=ms * tau0, avar=avar, covariance=omega, chi2=chi2, dof=dof, p_value=float(p),
         selection=tuple(tried), bounds=bounds,
     )  # fmt: skip
+
+
+def _own_fit(start, avar, ms, n, tau0):
+    """A finalist refitted from `start` on log σ̂² with its own covariance: `(fit, Ω,
+    J + log det of the relative covariance, p-value of J, covariance of p)`, or None where
+    its covariance is degenerate."""
+    try:
+        fit, om, cov = _log_fit(start, avar, ms, n, tau0)
+    except np.linalg.LinAlgError:
+        return None
+    model = _model(fit, ms, tau0)
+    logdet = float(np.linalg.slogdet(om / np.outer(model, model))[1])
+    dof = max(int(ms.size - len(fit["names"]) - 2 * len(fit["gm"])), 1)
+    return fit, om, fit["J"] + logdet, chi2_sf(fit["J"], dof), cov
 
 
 def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms):
