@@ -247,9 +247,14 @@ def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, t
     t[100:] += 0.05
     np.savetxt(uneven, np.column_stack([t, y[:200]]), delimiter=",", header="time,rate",
                comments="", fmt="%.17g")  # fmt: skip
-    cli_fails(
-        ["allan", str(uneven), "--time-column", "time"], capsys, "time stamps are not uniform"
-    )
+    assert main(["allan", str(uneven), "--time-column", "time"]) == 0  # resampled, said so
+    said = capsys.readouterr().out
+    assert "time stamps not uniform (steps 0.1 to 0.15 s): resampled at 10 Hz" in said
+    t_gap = np.r_[t[:100], t[100:] + 1.0]  # a 1.15-s interval: the 12 grid steps it touches
+    np.savetxt(uneven, np.column_stack([t_gap, y[:200]]), delimiter=",", header="time,rate",
+               comments="", fmt="%.17g")  # fmt: skip
+    cli_fails(["allan", str(uneven), "--time-column", "time", "--fit"], capsys,
+              r"12 missing value.*the first at line 102")  # fmt: skip
     gap = tmp_path / "gap.csv"
     z = y[:200].copy()
     z[50] = np.nan

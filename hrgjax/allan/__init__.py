@@ -13,7 +13,8 @@ Every name is importable from `hrgjax.allan` (it was one module until issue 45);
 `uncertainty` (noise identification, EDF, χ² intervals), `noise_terms` (the IEEE 952
 line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
 exact covariance of the octave estimates) and `composite` (a composite noise model fitted with
-that covariance, with model selection: `identify_noise`).
+that covariance, with model selection: `identify_noise`) and `resample` (non-uniform time
+stamps onto a uniform grid by the angle: `to_uniform`).
 """
 
 from .composite import CompositeNoise as CompositeNoise
@@ -32,6 +33,7 @@ from .deviations import totdev as totdev
 from .noise_terms import NOISE_TERMS as NOISE_TERMS
 from .noise_terms import NoiseFit as NoiseFit
 from .noise_terms import fit_noise as fit_noise
+from .resample import to_uniform as to_uniform
 from .uncertainty import ACF_POINTS as ACF_POINTS
 from .uncertainty import B1_AVERAGES as B1_AVERAGES
 from .uncertainty import ONE_SIGMA as ONE_SIGMA

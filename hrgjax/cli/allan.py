@@ -25,7 +25,8 @@ UNIT_CHOICES = (*GYRO_UNIT_NAMES, *ACCEL_UNIT_NAMES)
 
 def read_column(path: str, column: str | None, time_column: str | None, rate_hz):
     """`(samples, rate [Hz], column name, file line of each row)` from a CSV log: the column named (or the only
-    numeric one that is not the time), its rate from `rate_hz` or a uniform time column.
+    numeric one that is not the time), its rate from `rate_hz` or the time column (stamps
+    that are not uniform: resampled onto `rate_hz` or their median step by the angle).
     Bad input raises `UsageError` naming the file, the column and the row."""
     from .._data_files import read_csv_table
 
@@ -59,13 +60,18 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
             raise UsageError(f"{path}: the time column {time_column!r} must increase")
         step = float(np.median(dt))
         spread = float(np.max(np.abs(dt - step)))
-        if spread > 1e-3 * step:
-            raise UsageError(
-                f"{path}: time stamps are not uniform (steps from {dt.min():.6g} to "
-                f"{dt.max():.6g} s); resample the record onto a uniform grid first (e.g. "
-                "numpy.interp at t0 + k·Δt), or give --rate-hz to treat the samples as uniform"
-            )
         found = float(f"{1.0 / step:.12g}")  # the float noise of summed time stamps dropped
+        if spread > 1e-3 * step:  # onto a uniform grid by the angle (hrgjax.allan.resample)
+            from ..allan import to_uniform
+
+            u = to_uniform(t, y, rate_hz=rate_hz or found)
+            gaps = f", {len(u.gaps)} interval(s) over 2.5 steps left as gaps" if u.gaps else ""
+            print(f"hrgjax allan: {path}: time stamps not uniform (steps {dt.min():.6g} to "
+                  f"{dt.max():.6g} s): resampled at {u.rate_hz:g} Hz by the integrated "
+                  f"angle{gaps}; white noise reads low at the shortest τ "
+                  "(docs/allan.md)")  # fmt: skip
+            stamp = np.searchsorted(t, u.t0 + np.arange(1, u.y.size + 1) / u.rate_hz)
+            return u.y, u.rate_hz, column, np.asarray(lines)[np.minimum(stamp, t.size - 1)]
         if rate_hz is not None and abs(found / rate_hz - 1) > 1e-3:
             raise UsageError(f"{path}: --rate-hz {rate_hz:g} contradicts the time column's "
                              f"{found:g} Hz")  # fmt: skip
@@ -185,7 +191,8 @@ def _allan_parser(sub):
                    help="the column's rate unit (labels, JSON; needed for --kalibr)")  # fmt: skip
     p.add_argument("--rate-hz", type=POSITIVE_FLOAT, default=None, help="sample rate [Hz]")
     p.add_argument("--time-column", default=None,
-                   help="a time column [s] (uniform steps) instead of --rate-hz")  # fmt: skip
+                   help="a time column [s]; stamps that are not uniform are resampled "
+                   "by the integrated angle (onto --rate-hz, or the median step)")  # fmt: skip
     p.add_argument("--kind", default="oadev", choices=KINDS, help="the deviation (oadev)")
     p.add_argument("--taus", default="octave", type=_taus,
                    help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip
