@@ -10,6 +10,7 @@ rate ramp $R\tau/\sqrt2$.
 
 Every name is importable from `hrgjax.allan` (it was one module until issue 45); inside:
 `deviations` (the estimators, the compiled curve and `deviation` with its τ grids),
+`total` (mtotdev and ttotdev, NumPy),
 `uncertainty` (noise identification, EDF, χ² intervals), `noise_terms` (the IEEE 952
 line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
 exact covariance of the octave estimates) and `composite` (a composite noise model fitted with

@@ -263,8 +263,9 @@ _AT_M = {
 # ---------------------------------------------------------------------------------------
 # `deviation`: τ grids, term counts, and the curve with its noise type, EDF and interval
 
-KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
-"""The deviations [`deviation`][hrgjax.allan.deviation] computes."""
+KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "mtotdev", "ttotdev")
+"""The deviations [`deviation`][hrgjax.allan.deviation] computes (mtotdev and ttotdev in
+NumPy: [`hrgjax.allan.total`][hrgjax.allan.total])."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -275,7 +276,8 @@ class AllanResult:
     - `taus` [s]; `m`: averaging factors (τ = m/rate_hz).
     - `dev`: the deviation [rate unit; tdev: rate unit × s, an angle];
       `dev_low`, `dev_high`: the χ² interval at level `ci` (NIST SP 1065 eq. 45).
-    - `edf`: equivalent degrees of freedom (Greenhall–Riley; totdev: SP 1065 Table 7).
+    - `edf`: equivalent degrees of freedom (Greenhall–Riley; totdev: SP 1065 Table 7;
+      mtotdev, ttotdev: Table 8).
     - `n_terms`: the number of differences each estimate averages.
     - `alpha`: the power-law noise identified at each τ, the exponent α of the rate PSD
       S_y(f) ∝ f^α: 2 white angle (phase) noise, 1 flicker angle, 0 white rate (angle random
@@ -376,15 +378,17 @@ def deviation(
 
     - `y`: the samples (1-D): rates (`data="rate"`, e.g. °/h) or angles (`data="phase"`, e.g.
       °), taken at `rate_hz` [Hz].
-    - `kind`: one of [`KINDS`][hrgjax.allan.KINDS] (tdev = τ·mdev/√3, in angle units).
+    - `kind`: one of [`KINDS`][hrgjax.allan.KINDS] (tdev = τ·mdev/√3 and ttotdev =
+      τ·mtotdev/√3, in angle units).
     - `taus`: `"octave"` (m = 1, 2, 4, …), `"decade"` (1, 2, 4, 10, 20, 40, …), `"all"`
       (every m) or τ values in seconds (rounded to the nearest m, duplicates dropped, as
       allantools does). Factors whose estimate would average fewer than 2 terms are left
       out (allantools' and Stable32's limit).
     - `ci`: confidence level of the interval (default ±1σ, 0.683).
     - `bias_correction`: totdev divided by √(1 − a·τ/T) for the identified noise
-      ([`TOTVAR_BIAS`][hrgjax.allan.TOTVAR_BIAS]), as Stable32 reports it; `False` gives the
-      raw estimator (allantools').
+      ([`TOTVAR_BIAS`][hrgjax.allan.TOTVAR_BIAS]), mtotdev and ttotdev by
+      √[`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS], as Stable32 reports them; `False`
+      gives the raw estimators (allantools').
     - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
 
     **Gaps**: NaN samples are missing data. Every kind but totdev then averages only the
@@ -448,7 +452,15 @@ def deviation(
             f"y: {y.size} samples are too few for {kind} at any of the τ asked (taus={taus!r})"
         )
     base = "mdev" if kind == "tdev" else kind
-    if gaps:  # windows across a gap left out (hrgjax.allan.gaps), in NumPy
+    if kind in ("mtotdev", "ttotdev"):  # each run detrended and reflected (hrgjax.allan.total)
+        from .total import mtotdev_curve
+
+        if gaps:
+            raise ValueError(f"y has gaps (NaN): {kind} reflects every run of 3m points and "
+                             "has no gap-tolerant form; split the record, or use mdev")  # fmt: skip
+        dev = mtotdev_curve(x, m)[0] / tau0
+        n_eff = np.full(m.size, n_phase)
+    elif gaps:  # windows across a gap left out (hrgjax.allan.gaps), in NumPy
         dev, n_terms = gapped_curve(kind, y, data, m)
         dev = dev / tau0 if data == "phase" else dev
         m, n_terms, dev = m[n_terms > 1], n_terms[n_terms > 1], dev[n_terms > 1]
@@ -469,12 +481,17 @@ def deviation(
     alpha = noise_id(x, m, dmax=dmax)
     edf = np.asarray([_edf(kind, int(a), int(k), int(n))
                       for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
-    if not gaps:
+    if not gaps and kind not in ("mtotdev", "ttotdev"):
         dev = np.asarray(pending)[: m.size]
     taus_s = m * tau0
-    if kind == "tdev":
+    if kind in ("tdev", "ttotdev"):
         dev = dev * taus_s / math.sqrt(3.0)
     factor = np.ones_like(dev)
+    if kind in ("mtotdev", "ttotdev") and bias_correction:
+        from .total import MTOTVAR_BIAS
+
+        factor = 1.0 / np.sqrt([MTOTVAR_BIAS[int(min(max(a, -2), 2))] for a in alpha])
+        dev = dev * factor
     if kind == "totdev" and bias_correction:
         a = np.asarray([TOTVAR_BIAS.get(int(k), 0.0) for k in alpha])
         factor = 1.0 / np.sqrt(1.0 - a * taus_s / ((n_phase - 1) * tau0))
@@ -526,7 +543,7 @@ def _n_terms(kind: str, m: int, n: int) -> int:
         return max(0, n - 2 * m)
     if kind == "ohdev":
         return max(0, n - 3 * m)
-    if kind in ("mdev", "tdev"):
+    if kind in ("mdev", "tdev", "mtotdev", "ttotdev"):
         return max(0, n - 3 * m + 1)
     return n - 2 if m <= n - 1 else 0  # totdev: every point, the record reflected
 
@@ -534,6 +551,10 @@ def _n_terms(kind: str, m: int, n: int) -> int:
 def _edf(kind: str, alpha: int, m: int, n: int) -> float:
     if kind == "totdev":
         return edf_totdev(alpha, m, n)
+    if kind in ("mtotdev", "ttotdev"):
+        from .total import edf_mtotdev
+
+        return edf_mtotdev(alpha, m, n)
     d = 3 if kind in ("hdev", "ohdev") else 2
     alpha = max(alpha, 2 - 2 * d)  # the variance converges for α > 1 − 2d
     return edf_greenhall(

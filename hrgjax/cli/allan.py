@@ -19,7 +19,7 @@ from ._common import (
 )
 from .ins import ACCEL_UNIT_NAMES, GYRO_UNIT_NAMES
 
-KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
+KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "mtotdev", "ttotdev")
 UNIT_CHOICES = (*GYRO_UNIT_NAMES, *ACCEL_UNIT_NAMES)
 
 
