@@ -391,8 +391,8 @@ def deviation(
       gives the raw estimators (allantools').
     - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
 
-    **Gaps**: NaN samples are missing data. Every kind but totdev then averages only the
-    differences whose windows avoid every gap, as allantools' `gradev` (NumPy, not the
+    **Gaps**: NaN samples are missing data. Every kind but the total ones then averages only
+    the differences whose windows avoid every gap, as allantools' `gradev` (NumPy, not the
     compiled curve; noise type and EDF approximate: [`hrgjax.allan.gaps`][hrgjax.allan.gaps]).
     `n_terms` counts the differences used.
 
