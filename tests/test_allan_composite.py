@@ -85,11 +85,11 @@ def direct_covariance(coef, gm, ms, n, tau0):
             for var, phi in rates:
                 r = var * phi ** np.abs(lags) if phi > 0 else var * (lags == 0)
                 full = fftconvolve(r, cross[::-1])
-                c += full[ell - lag0 + 2 * ma - 1]
+                c += full[ell - lag0 + 2 * mb - 1]
             ga = np.cumsum(ha[::-1])[::-1]  # steps e_j enter a_i through Σ_{k ≥ j} h(k)
             gb = np.cumsum(hb[::-1])[::-1]
             walk = np.convolve(ga[::-1], gb) * coef.get("rate_random_walk", 0.0) * tau0
-            idx = ell + 2 * ma - 1  # the same index map as `cross`
+            idx = 2 * ma - 1 - ell  # c(ℓ) = Σ_j g_a(j) g_b(j − ℓ): the lag reversed
             ok = (idx >= 0) & (idx < walk.size)
             c[ok] += walk[idx[ok]]
             count = np.maximum(np.minimum(na, nb - ell) - np.maximum(0, -ell), 0)
@@ -103,7 +103,7 @@ def test_covariance_equals_the_direct_sum_over_every_lag():
     whose short octaves a random walk and a slow Gauss–Markov term carry (summed pointwise,
     nine cubics at t ≈ 10⁵ cancelled to round-off and left Var σ̂²(τ₀) 785× too large), and
     white noise with a fast Gauss–Markov term (T = 6 samples: its decay inside the kinks)."""
-    tau0, ms = 0.5, [1, 2, 8]
+    tau0, ms = 0.5, [1, 2, 8, 64]
     for n, coef, gm in (
         (200_000, {"rate_random_walk": 1e-4}, [(0.1, 2e4)]),
         (50_000, {"angle_random_walk": 1e-4, "rate_random_walk": 1e-4}, [(0.1, 3.0)]),

@@ -76,6 +76,12 @@ def test_mtotdev_and_ttotdev_equal_allantools_and_ignore_a_frequency_offset():
     np.testing.assert_allclose(r.dev, m.taus * m.dev / math.sqrt(3.0), rtol=1e-12)
     offset = allan.deviation(y + 7.0, 1.0, kind="mtotdev", taus=m.taus, bias_correction=False)
     np.testing.assert_allclose(offset.dev, m.dev, rtol=1e-9)
+    # an offset 10⁶ × the noise over 2·10⁴ samples (a running sum of the phase grew as
+    # offset·n²/2 and cancelled the noise: 6e-5 off here, +21 % at 2·10⁵ samples)
+    small = 0.01 * RNG.normal(size=20_000)
+    a, b = (allan.deviation(small + c, 1.0, kind="mtotdev", taus=[1, 4], bias_correction=False)
+            for c in (0.0, 1e4))  # fmt: skip
+    np.testing.assert_allclose(b.dev, a.dev, rtol=1e-6)  # the phase of y + 10⁴ keeps 1e-8
     # the default divides out the bias of the noise type identified (Stable32's bias option)
     corrected = allan.deviation(y, 1.0, kind="mtotdev")
     from hrgjax.allan.total import MTOTVAR_BIAS
@@ -265,6 +271,12 @@ def test_non_uniform_stamps_onto_a_uniform_grid_by_the_angle():
     angles = allan.to_uniform(stamps, 2.0 * stamps, data="phase")
     np.testing.assert_array_equal(np.flatnonzero(np.isnan(angles.y)), np.arange(100, 130))
     np.testing.assert_allclose(allan.to_uniform(np.arange(50.0), Y[:50]).y, Y[1:50], atol=1e-12)
+    for t0, fs in ((123.456, 7.3), (1.7e9, 10.0)):  # stamps on the grid to round-off, epoch s
+        stamps = t0 + np.arange(300) / fs
+        stamps[-3:] += np.array([0.01, 0.02, 0.01]) / fs
+        one_missing = np.where(np.arange(300) == 150, np.nan, 1.0)
+        got = allan.to_uniform(stamps, one_missing, rate_hz=fs)
+        np.testing.assert_array_equal(np.flatnonzero(np.isnan(got.y)), [149])
     n, noise, ms = 40_000, 0.5, np.array([1, 2, 4, 16])
     for jitter in (0.0, 0.3):
         dt = rng.uniform(1 - jitter, 1 + jitter, size=n)

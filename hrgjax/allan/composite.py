@@ -17,16 +17,13 @@ covariance (the fullest model's) and ranked by J + penalty (J the χ²-distribut
 [`PENALTY`][hrgjax.allan.composite.PENALTY] per linear term,
 [`GM_PENALTY`][hrgjax.allan.composite.GM_PENALTY] per Gauss–Markov term, whose T is searched
 and undefined when σ = 0). The best [`FINALISTS`][hrgjax.allan.composite.FINALISTS] are
-each refitted on log σ̂² with their own relative covariance D⁻¹ΩD⁻¹ (D the model: weights
-that do not follow the estimate; Gauss–Newton, the covariance re-evaluated at the fit three
-times), and among those their own covariance does not reject
-(p ≥ [`FIT_ALPHA`][hrgjax.allan.composite.FIT_ALPHA]) the one with the least
-J + log det + penalty (the octaves' Gaussian likelihood) is kept, so a term the data do not
-need is not reported. (A finalist its own covariance rejects is fitted again from its fit
-under the per-τ EDF weights, a start no model's covariance shaped, and the better kept.) Its
-intervals are (GᵀΩ⁻¹G)⁻¹ on log c² and log T (G the model's derivative there). For each
-candidate term not selected, the upper end of its interval with it forced in is kept as a
-bound.
+refitted on log σ̂² with their own relative covariance D⁻¹ΩD⁻¹ (D the model; Gauss–Newton,
+the covariance re-evaluated at the fit three times; one its covariance rejects is fitted
+again from a start under the per-τ EDF weights), and of those their own covariance does not
+reject (p ≥ [`FIT_ALPHA`][hrgjax.allan.composite.FIT_ALPHA]) the least J + log det + penalty
+(the octaves' Gaussian likelihood) is kept: a term the data do not need is not reported. Its
+intervals are (GᵀΩ⁻¹G)⁻¹ on log c² and log T; for each candidate term not selected, the
+upper end of its interval with it forced in is kept as a bound.
 """
 
 from __future__ import annotations
@@ -329,11 +326,13 @@ def identify_noise(
         if got is None or got[3] < FIT_ALPHA:
             # rejected by its own covariance: the start may be an optimum the fullest
             # model's covariance made (a wrong fullest fit ranks its own kind first), so it
-            # is fitted again from the subset's fit under the per-τ EDF weights
+            # is fitted again from the subset's fit under the per-τ EDF weights; a fit its
+            # covariance accepts is kept first, then the better likelihood
             g = row["gauss_markov"]
             start = _best(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms)
             other = None if start is None else _own_fit(start, avar, ms, n, tau0)
-            if other is not None and (got is None or other[2] < got[2]):
+            rank = lambda f: (f[3] >= FIT_ALPHA, -f[2])  # noqa: E731
+            if other is not None and (got is None or rank(other) > rank(got)):
                 got = other
         if got is None:  # its covariance degenerate at the fit: not a model
             continue

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 
 import numpy as np
 
@@ -64,6 +65,7 @@ def to_uniform(
     """
     t = np.asarray(t, dtype=float)
     y = np.asarray(y, dtype=float)
+    start = float(t[0]) if t.size else 0.0
     if data not in ("rate", "phase"):
         raise ValueError(f"data must be 'rate' or 'phase'; got {data!r}")
     if t.ndim != 1 or t.shape != y.shape or t.size < 3:
@@ -79,10 +81,12 @@ def to_uniform(
     median = float(np.median(dt))
     if rate_hz is None:
         rate_hz = 1.0 / median
-    if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+    if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
-    step = 1.0 / rate_hz
-    grid = t[0] + step * np.arange(int(math.floor((t[-1] - t[0]) / step * (1 + 1e-12))) + 1)
+    step = 1.0 / float(rate_hz)
+    t = t - start  # stamps from the first (epoch seconds keep their digits)
+    grid = step * np.arange(int(math.floor(t[-1] / step * (1 + 1e-12))) + 1)
+    tol = max(1e-9 * step, 4 * float(np.spacing(t[-1])))  # a grid point on a stamp is on it
     missing = ~np.isfinite(y)
     wide = dt > max_gap * step
     if data == "rate":
@@ -92,8 +96,8 @@ def to_uniform(
         at = np.interp(grid, t, angle)
         out = np.diff(at) / step
         # a grid interval touching a hole: NaN (the holes' stamps, spread over the grid)
-        lo = np.searchsorted(t, grid[:-1], side="right") - 1  # the stamp interval of each start
-        hi = np.searchsorted(t, grid[1:], side="left") - 1  # ... and of each end
+        lo = np.searchsorted(t, grid[:-1] + tol, side="right") - 1  # each start's interval
+        hi = np.searchsorted(t, grid[1:] - tol, side="left") - 1  # ... and each end's
         bad = np.concatenate([[0], np.cumsum(hole)])
         touched = bad[np.minimum(hi, hole.size - 1) + 1] - bad[np.maximum(lo, 0)] > 0
         out = np.where(touched, np.nan, out)
@@ -101,15 +105,17 @@ def to_uniform(
         ok = ~missing
         at = np.interp(grid, t[ok], y[ok])
         # a grid point inside a wide interval or next to a missing angle: NaN
-        k = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, t.size - 2)
-        exact = np.isclose(grid, t[k], rtol=0, atol=1e-9 * step)
-        near = missing[k] | (missing[k + 1] & ~exact) | (wide[k] & ~exact)
+        k = np.clip(np.searchsorted(t, grid + tol, side="right") - 1, 0, t.size - 1)
+        exact = np.abs(grid - t[k]) <= tol
+        after = np.minimum(k + 1, t.size - 1)
+        inside = missing[k] | (missing[after] | wide[np.minimum(k, t.size - 2)])
+        near = np.where(exact, missing[k], inside)
         out = np.where(near, np.nan, at)
-    gaps = tuple((float(t[i]), float(t[i + 1])) for i in np.flatnonzero(wide))
+    gaps = tuple((start + float(t[i]), start + float(t[i + 1])) for i in np.flatnonzero(wide))
     return Uniform(
         y=out,
         rate_hz=float(rate_hz),
-        t0=float(t[0]),
+        t0=start,
         step_spread=float(np.max(np.abs(dt - median)) / median),
         gaps=gaps,
     )

@@ -64,13 +64,14 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
         if spread > 1e-3 * step:  # onto a uniform grid by the angle (hrgjax.allan.resample)
             from ..allan import to_uniform
 
-            u = to_uniform(t, y, rate_hz=rate_hz or found)
+            with usage_errors(prefix=path):
+                u = to_uniform(t, y, rate_hz=rate_hz or found)
             gaps = f", {len(u.gaps)} interval(s) over 2.5 steps left as gaps" if u.gaps else ""
             print(f"hrgjax allan: {path}: time stamps not uniform (steps {dt.min():.6g} to "
                   f"{dt.max():.6g} s): resampled at {u.rate_hz:g} Hz by the integrated "
                   f"angle{gaps}; white noise reads low at the shortest τ "
                   "(docs/allan.md)")  # fmt: skip
-            stamp = np.searchsorted(t, u.t0 + np.arange(1, u.y.size + 1) / u.rate_hz)
+            stamp = np.searchsorted(t, u.t0 + np.arange(1, u.y.size + 1) * (1.0 / u.rate_hz))
             return u.y, u.rate_hz, column, np.asarray(lines)[np.minimum(stamp, t.size - 1)]
         if rate_hz is not None and abs(found / rate_hz - 1) > 1e-3:
             raise UsageError(f"{path}: --rate-hz {rate_hz:g} contradicts the time column's "
