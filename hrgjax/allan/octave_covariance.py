@@ -41,6 +41,9 @@ import math
 import numpy as np
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
+_CP = np.array([1.0, -2.0, 1.0])
+_P, _Q = np.divmod(np.arange(9), 3)
+_W = _CP[_P] * _CP[_Q]  # c_p·c_q of the nine values of G in a second-difference covariance
 
 
 # -- each term's generalised covariance of the angle X = Σy (rate units × samples) ------------
@@ -78,11 +81,9 @@ def _g_gm(t, eps):
 def second_difference_cov(gfun, ell, ma, mb):
     """Covariance of the angle's second differences at lags ma (at i) and mb (at i + ℓ):
     Σ c_p c_q G(ℓ + u_q − t_p), c = (1, −2, 1), t = (0, ma, 2ma), u = (0, mb, 2mb)."""
-    cp = (1.0, -2.0, 1.0)
     out = 0.0
-    for p in range(3):
-        for q in range(3):
-            out = out + cp[p] * cp[q] * gfun(ell + q * mb - p * ma)
+    for w, p, q in zip(_W, _P, _Q, strict=True):
+        out = out + w * gfun(ell + q * mb - p * ma)
     return out
 
 
@@ -135,11 +136,6 @@ def _sum_rules(lo, hi):
     ws.append(np.tile([0.5 + 1 / 12, -1 / 12, -1 / 12, 0.5 + 1 / 12], p_l.size))
     ps.append(np.repeat(p_l, 4))
     return np.concatenate(xs).astype(float), np.concatenate(ws), np.concatenate(ps)
-
-
-_CP = np.array([1.0, -2.0, 1.0])
-_P, _Q = np.divmod(np.arange(9), 3)
-_W = _CP[_P] * _CP[_Q]  # c_p·c_q of the nine values of G in a second-difference covariance
 
 
 def _geometry(x, piece, lo, hi, ma, mb):
@@ -237,6 +233,9 @@ def _layout(ms: tuple, n: int):
     floats = tuple(v.astype(float) for v in (ma, mb, na, nb))
     geo = _geometry(x, piece, los.astype(float), his.astype(float), floats[0][owner],
                     floats[1][owner])  # fmt: skip
+    out = (ia, ib, kinks, owner, x, w, piece, *floats, *geo.values())
+    for a in out:
+        a.flags.writeable = False  # cached: shared by every call for this record
     return ia, ib, kinks, owner, x, w, piece, floats, geo
 
 

@@ -13,9 +13,10 @@ keeps the record's angle exactly (no rate is invented or lost between stamps). A
 
 The first sample's interval precedes the first stamp: in rate data it is not used.
 
-An interval longer than `max_gap` × the grid step is a gap: the uniform samples whose
-interval touches it are NaN, which [`deviation`][hrgjax.allan.deviation] treats as missing
-(its windows across them are left out).
+An interval longer than `max_gap` steps is a gap (steps of the stamps' median, or of the
+grid where that is longer: a finer grid does not make every interval a gap). The uniform
+samples whose interval touches it are NaN, which [`deviation`][hrgjax.allan.deviation]
+treats as missing (its windows across them are left out).
 
 **What resampling costs.** Between stamps the angle is a straight line: the noise inside one
 step is smoothed. Where the grid does not fall on the stamps (any jitter, after a few
@@ -42,7 +43,7 @@ class Uniform:
     """A record on a uniform grid ([`to_uniform`][hrgjax.allan.to_uniform]): `y` the
     samples (NaN in gaps) [the record's unit], `rate_hz` [Hz], `t0` the grid's start [s],
     `step_spread` the largest |Δt − median Δt| of the stamps over the median [-], `gaps`
-    the intervals longer than `max_gap` steps, as `(start, end)` stamps [s]."""
+    the intervals taken as gaps, as `(start, end)` stamps [s]."""
 
     y: np.ndarray
     rate_hz: float
@@ -56,7 +57,7 @@ def to_uniform(
 ) -> Uniform:
     """Samples `y` stamped `t` [s] (increasing) onto a uniform grid at `rate_hz` [Hz]
     (default: 1 / the median step), through the angle they integrate to (module docstring).
-    NaN samples, and intervals longer than `max_gap` grid steps, are gaps.
+    NaN samples, and intervals longer than `max_gap` steps (module docstring), are gaps.
 
     **Returns:** a [`Uniform`][hrgjax.allan.resample.Uniform].
 
@@ -77,7 +78,7 @@ def to_uniform(
         i = int(np.argmax(dt <= 0))
         raise ValueError(f"t must increase; t[{i + 1}] = {t[i + 1]!r} follows t[{i}] = {t[i]!r}")
     if not (max_gap > 1):
-        raise ValueError(f"max_gap must be > 1 grid step; got {max_gap!r}")
+        raise ValueError(f"max_gap must be > 1 step; got {max_gap!r}")
     median = float(np.median(dt))
     if rate_hz is None:
         rate_hz = 1.0 / median
@@ -88,7 +89,7 @@ def to_uniform(
     grid = step * np.arange(int(math.floor(t[-1] / step * (1 + 1e-12))) + 1)
     tol = max(1e-9 * step, 4 * float(np.spacing(t[-1])))  # a grid point on a stamp is on it
     missing = ~np.isfinite(y)
-    wide = dt > max_gap * step
+    wide = dt > max_gap * max(step, median)
     if data == "rate":
         # interval k (t_k, t_{k+1}] carries y_{k+1}; a missing rate or a wide interval is a hole
         hole = missing[1:] | wide

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._progress import bar
+
 EDF_MTOTDEV = {2: (1.90, 2.10), 1: (1.20, 1.40), 0: (1.10, 1.20), -1: (0.85, 0.50),
                -2: (0.75, 0.31)}  # fmt: skip
 """NIST SP 1065 Table 8: noise type α → (b, c) with EDF = b·(N/m) − c."""
@@ -50,41 +52,47 @@ def mtotdev_curve(x, ms) -> tuple[np.ndarray, np.ndarray]:
     x = x - x[0] - (x[-1] - x[0]) / max(n - 1, 1) * np.arange(n)
     prefix = np.concatenate([[0.0], np.cumsum(x)])
     out, counts = [], []
-    for m in (int(k) for k in ms):
-        runs = n - 3 * m + 1
-        if runs < 1:
-            out.append(np.nan)
-            counts.append(0)
-            continue
-        length = 3 * m
-        half = length // 2  # both halves' length; the middle point (3m odd) is in neither
-        distance = (length - 1) / 2 + 1 if length % 2 else length / 2
-        k = np.arange(length + 1)
-        # the extension's running sum C(p), p = 0 … 9m, from the run's own R(k) = Σ_{l<k} r_l:
-        # reversed part R(3m) − R(3m − p), then R(3m) + R(p − 3m), then 3R(3m) − R(9m − p)
-        p = np.arange(9 * m + 1)
-        index = np.where(
-            p <= length, length - p, np.where(p <= 2 * length, p - length, 3 * length - p)
-        )
-        sign = np.where((p <= length) | (p > 2 * length), -1.0, 1.0)
-        whole = np.where(p <= length, 1.0, np.where(p <= 2 * length, 1.0, 3.0))
-        total = 0.0
-        step = max(1, _ELEMENTS // (9 * m))
-        for lo in range(0, runs, step):
-            i = np.arange(lo, min(lo + step, runs))
-            first = (prefix[i + half] - prefix[i]) / half
-            last = (prefix[i + length] - prefix[i + length - half]) / half
-            slope = (last - first) / distance
-            # R(k) of the detrended run x_{i+l} − slope·l
-            r = prefix[i[:, None] + k] - prefix[i][:, None] - slope[:, None] * (k * (k - 1) / 2)
-            c = whole * r[:, -1:] + sign * r[:, index]
-            # S_j − 2S_{j+m} + S_{j+2m} = C(j+3m) − 3C(j+2m) + 3C(j+m) − C(j), j < 6m
-            second = (c[:, 3 * m :] - 3 * c[:, 2 * m : 8 * m + 1] + 3 * c[:, m : 7 * m + 1]
-                      - c[:, : 6 * m + 1])[:, : 6 * m]  # fmt: skip
-            total += float(np.sum(np.mean((second / m) ** 2, axis=1)))
-        out.append(np.sqrt(total / (2.0 * m * m * runs)))
-        counts.append(runs)
+    work = [max(n - 3 * int(k) + 1, 0) * 9 * int(k) for k in ms]  # extended points per factor
+    with bar(sum(work), "mtotdev", unit="pt") as progress:
+        for m, done in zip((int(k) for k in ms), work, strict=True):
+            out_m, runs = _one_factor(x, prefix, m)
+            out.append(out_m)
+            counts.append(runs)
+            progress.update(done)
     return np.asarray(out), np.asarray(counts, dtype=int)
+
+
+def _one_factor(x, prefix, m):
+    """`(mtotdev, runs)` at factor m of phase `x` with running sum `prefix` (module
+    docstring); NaN and 0 where 3m > N."""
+    runs = x.size - 3 * m + 1
+    if runs < 1:
+        return np.nan, 0
+    length = 3 * m
+    half = length // 2  # both halves' length; the middle point (3m odd) is in neither
+    distance = (length - 1) / 2 + 1 if length % 2 else length / 2
+    k = np.arange(length + 1)
+    # the extension's running sum C(p), p = 0 … 9m, from the run's own R(k) = Σ_{l<k} r_l:
+    # reversed part R(3m) − R(3m − p), then R(3m) + R(p − 3m), then 3R(3m) − R(9m − p)
+    p = np.arange(9 * m + 1)
+    index = np.where(p <= length, length - p, np.where(p <= 2 * length, p - length, 3 * length - p))
+    sign = np.where((p <= length) | (p > 2 * length), -1.0, 1.0)
+    whole = np.where(p <= 2 * length, 1.0, 3.0)
+    total = 0.0
+    step = max(1, _ELEMENTS // (9 * m))
+    for lo in range(0, runs, step):
+        i = np.arange(lo, min(lo + step, runs))
+        first = (prefix[i + half] - prefix[i]) / half
+        last = (prefix[i + length] - prefix[i + length - half]) / half
+        slope = (last - first) / distance
+        # R(k) of the detrended run x_{i+l} − slope·l
+        r = prefix[i[:, None] + k] - prefix[i][:, None] - slope[:, None] * (k * (k - 1) / 2)
+        c = whole * r[:, -1:] + sign * r[:, index]
+        # S_j − 2S_{j+m} + S_{j+2m} = C(j+3m) − 3C(j+2m) + 3C(j+m) − C(j), j < 6m
+        second = (c[:, 3 * m :] - 3 * c[:, 2 * m : 8 * m + 1] + 3 * c[:, m : 7 * m + 1]
+                  - c[:, : 6 * m + 1])[:, : 6 * m]  # fmt: skip
+        total += float(np.sum(np.mean((second / m) ** 2, axis=1)))
+    return float(np.sqrt(total / (2.0 * m * m * runs))), runs
 
 
 def edf_mtotdev(alpha: int, m: int, n: int) -> float:
