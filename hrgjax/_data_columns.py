@@ -21,6 +21,10 @@ COLUMNS: dict[str, str] = {
     "accel_x_g": "specific force along case x [g]",
     "accel_y_g": "specific force along case y [g]",
     "accel_z_g": "specific force along case z (sensitive axis) [g]",
+    "rebalance_rate_dps": "force-to-rebalance output: the rate read from the rebalance force "
+    "[°/s] (`hrgjax simulate --mode ftr`)",
+    "precession_dps": "commanded precession rate of the wave [°/s, electrical] (virtual "
+    "precession, angle switching)",
     "rate_corrected_dps": "equivalent input rate after compensation [°/s] (`hrgjax correct`)",
     "angle_corrected_deg": "case rotation angle since the start of the run [°] (`hrgjax correct`)",
 }

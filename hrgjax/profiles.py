@@ -60,6 +60,12 @@ class Profile(eqx.Module):
     - `temperature`: resonator temperature [°C], shape (N,).
     - `accel`: specific force along case axes x, y, z [g], shape (N, 3).
     - `wave_angle0`: initial electrical wave angle [rad].
+    - `precession`: commanded precession rate of the wave at the knots [rad/s, electrical],
+      shape (N,), or `None` (none). Whole-angle mode turns the wave at this rate with the
+      case at rest (virtual precession); force-to-rebalance mode holds the wave at the
+      commanded angle, `wave_angle0` + ∫ρ dt, so a pulse of ρ moves the held angle (angle
+      switching, mode reversal). See [`Profile.held_angles`][hrgjax.Profile.held_angles]
+      and [`Profile.virtual_precession`][hrgjax.Profile.virtual_precession].
     """
 
     t: jax.Array = eqx.field(converter=_f)
@@ -67,6 +73,8 @@ class Profile(eqx.Module):
     temperature: jax.Array = eqx.field(converter=_f)
     accel: jax.Array = eqx.field(converter=_f)
     wave_angle0: jax.Array = eqx.field(converter=_f, default=0.0)
+    precession: jax.Array | None = eqx.field(converter=lambda x: x if x is None else _f(x),
+                                             default=None)  # fmt: skip
 
     def __check_init__(self):
         n = self.t.shape[-1] if self.t.ndim else 0
@@ -86,8 +94,15 @@ class Profile(eqx.Module):
             raise ValueError(
                 f"Profile.wave_angle0 must be a scalar [rad]; got {self.wave_angle0.shape}"
             )
+        if self.precession is not None and self.precession.shape != (n,):
+            raise ValueError(
+                f"Profile.precession must have the shape of Profile.t, ({n},) [rad/s], or be "
+                f"None; got {self.precession.shape}"
+            )
         for name in ("t", "rate", "temperature", "accel", "wave_angle0"):
             check_finite(f"Profile.{name}", getattr(self, name))
+        if self.precession is not None:
+            check_finite("Profile.precession", self.precession)
         plausible.check("Profile.temperature", self.temperature, "temperature_c")
         if is_concrete(self.t):
             t = np.asarray(self.t)
@@ -172,6 +187,77 @@ class Profile(eqx.Module):
             t=t, rate=rate, temperature=temp, accel=acc, wave_angle0=_f(wave_angle0_deg) * DEG
         )
 
+    @classmethod
+    def virtual_precession(
+        cls,
+        precession_dps: float,
+        duration_s: float,
+        temperature_c: float = 20.0,
+        wave_angle0_deg: float = 0.0,
+        rate_dps: float = 0.0,
+        accel_g=(0.0, 0.0, 0.0),
+    ) -> Profile:
+        """A run whose wave is turned at `precession_dps` [°/s, electrical] by a commanded node
+        force, the case at `rate_dps` [°/s] (default at rest), for `duration_s` [s] at
+        `temperature_c` [°C] from `wave_angle0_deg` [° electrical]. In whole-angle mode the
+        wave then visits every angle: what the drift's θ-dependence needs, without a table."""
+        p = cls.constant_rate(rate_dps, duration_s, temperature_c, wave_angle0_deg, accel_g)
+        return eqx.tree_at(
+            lambda q: q.precession, p, jnp.ones(2) * _f(precession_dps) * DEG_PER_S,
+            is_leaf=lambda x: x is None,
+        )  # fmt: skip
+
+    @classmethod
+    def held_angles(
+        cls,
+        angles_deg,
+        dwell_s: float,
+        slew_s: float = 10.0,
+        temperature_c: float = 20.0,
+        rate_dps: float = 0.0,
+    ) -> Profile:
+        """A force-to-rebalance schedule: the wave held at each of `angles_deg` [° electrical]
+        in turn for `dwell_s` [s], moved between them by a commanded precession pulse of
+        `slew_s` [s] (a trapezoid: ramps of `slew_s`/4), the case at `rate_dps` [°/s] and
+        `temperature_c` [°C]. Mode reversal is `angles_deg=(θ, θ + 90)`: the damping
+        anisotropy's drift ½Δ(1/τ)·sin 2(θ − θ_τ) changes sign, the rate does not."""
+        ang = np.atleast_1d(np.asarray(angles_deg, dtype=float))
+        if ang.ndim != 1 or ang.size < 1 or not np.all(np.isfinite(ang)):
+            raise ValueError(f"angles_deg must be finite angles [° electrical]; got {angles_deg!r}")
+        for name, v in (("dwell_s", dwell_s), ("slew_s", slew_s)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number of seconds; got {v!r}")
+        ramp = slew_s / 4.0
+        t, rho = [0.0, dwell_s], [0.0, 0.0]
+        for k in range(1, ang.size):
+            peak = (ang[k] - ang[k - 1]) / (slew_s - ramp)  # ∫ over the trapezoid = the step
+            start = t[-1]
+            t += [start + ramp, start + slew_s - ramp, start + slew_s, start + slew_s + dwell_s]
+            rho += [peak, peak, 0.0, 0.0]
+        t = np.asarray(t)
+        one = np.ones(t.size)
+        return cls(
+            t=t,
+            rate=one * rate_dps * DEG_PER_S,
+            temperature=one * temperature_c,
+            accel=np.zeros((t.size, 3)),
+            wave_angle0=ang[0] * DEG,
+            precession=np.asarray(rho) * DEG_PER_S,
+        )
+
+    def hold_windows(self, settle_s: float = 0.0) -> list[tuple[float, float]]:
+        """(start, end) [s] of the spans where the commanded precession is zero on both ends
+        of a segment (the wave held still), each start moved on by `settle_s` [s]."""
+        t = np.asarray(self.t)
+        if self.precession is None:
+            return [(float(t[0]) + settle_s, float(t[-1]))]
+        rho = np.asarray(self.precession)
+        out = []
+        for i in range(t.size - 1):
+            if rho[i] == 0 and rho[i + 1] == 0 and t[i + 1] - t[i] > settle_s:
+                out.append((float(t[i]) + settle_s, float(t[i + 1])))
+        return out
+
     @property
     def duration(self):
         """Run length [s]."""
@@ -250,6 +336,30 @@ class Profile(eqx.Module):
         frac = jnp.clip(dt / length, 0.0, 1.0)
         accel = self.accel[i] + (self.accel[i + 1] - self.accel[i]) * frac
         return cum[i] + self.rate[i] * dt + 0.5 * slope * dt**2, self.rate[i] + slope * dt, accel
+
+    def precession_at(self, t):
+        """Commanded precession rate [rad/s, electrical] at time t [s] (0 without one)."""
+        if self.precession is None:
+            return 0.0 * t
+        return self._interp(t, self.precession)
+
+    def commanded_angle_at(self, t):
+        """Commanded wave angle `wave_angle0` + ∫ρ dt [rad, electrical] at time t [s] (exact for
+        the piecewise-linear ρ): the angle force-to-rebalance holds."""
+        if self.precession is None:
+            return self.wave_angle0 + 0.0 * t
+        rho = self.precession
+        seg = 0.5 * (rho[1:] + rho[:-1]) * jnp.diff(self.t)
+        cum = jnp.concatenate([jnp.zeros(1), jnp.cumsum(seg)])
+        i, t0, length = self._segment(t)
+        dt = jnp.clip(t - t0, 0.0, length)
+        slope = (rho[i + 1] - rho[i]) / length
+        return self.wave_angle0 + cum[i] + rho[i] * dt + 0.5 * slope * dt**2
+
+    def command_at(self, t):
+        """(commanded angle [rad], commanded precession [rad/s]) at time t [s]: what the
+        loops are told ([`hrgjax.resonator.control.loop_outputs`][])."""
+        return self.commanded_angle_at(t), self.precession_at(t)
 
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""

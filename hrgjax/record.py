@@ -44,6 +44,14 @@ class Record(eqx.Module):
     """Angular gain k_e at each sample (temperature laws evaluated)."""
     run: jax.Array
     """Run id."""
+    rebalance_rate: jax.Array | None = None
+    """Force-to-rebalance output [rad/s]: the rate read from the rebalance force
+    ([`hrgjax.resonator.control.ftr_rate`][]); `None` in whole-angle mode."""
+    precession: jax.Array | None = None
+    """Commanded precession rate [rad/s, electrical] (the profile's schedule); `None` when
+    the profile commands none."""
+    mode: str = eqx.field(static=True, default="wa")
+    """Operating mode the record was taken in: `"wa"` (whole-angle) or `"ftr"`."""
 
     def to_data(self):
         """The record as [`hrgjax.MeasuredData`][] in the units of the data contract.
@@ -72,4 +80,8 @@ class Record(eqx.Module):
             "accel_y_g": acc[:, 1],
             "accel_z_g": acc[:, 2],
         }
+        if self.precession is not None:
+            cols["precession_dps"] = flat(self.precession) / DEG_PER_S
+        if self.rebalance_rate is not None:
+            cols["rebalance_rate_dps"] = flat(self.rebalance_rate) / DEG_PER_S
         return MeasuredData(cols)

@@ -32,7 +32,7 @@ from .resonator.averaged import (
     measured_estimates,
 )
 from .resonator.carrier import carrier_solve, event_grid, steps_per_cycle
-from .resonator.control import loop_outputs, steady_integrators
+from .resonator.control import ftr_rate, loop_outputs, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field
 from .resonator.params import TemperatureLaw
 
@@ -126,6 +126,7 @@ _LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by
     "drift_terms.lag_time": ("> 0", "s"),
     "drift_terms.warmup_time": ("> 0", "s"),
     "noise.correlation_time": ("> 0", "s"),
+    "control.rebalance_limit": ("> 0", "readout units · rad²/s²"),
     **{f"noise.{n}": (">= 0", NOISE_UNITS[n]) for n in NOISE_NONNEGATIVE},
 }
 
@@ -260,7 +261,7 @@ def _solve(
 
 def _record(gyro, profile, ts, read, key, bias_key, run):
     """The Record of a solve: readout estimates plus the gyro's noise (when it has any)."""
-    est, true_theta, loops = read
+    est, true_theta, loops, rebalance_rate = read
     theta = est.theta
     amplitude, quadrature = est.amplitude, est.quadrature
     k_e = jax.vmap(lambda t: gyro.at(profile.temperature_at(t)).resonator.k_e)(ts)
@@ -268,13 +269,15 @@ def _record(gyro, profile, ts, read, key, bias_key, run):
         k_rate, k_white, k_amp, k_bias = jax.random.split(key, 4)
         k_bias = k_bias if bias_key is None else bias_key
         nz = gyro.noise
-        rate_angle = rate_noise_angle(k_rate, ts, nz)
-        run_bias = draw_run_bias(k_bias, nz)
-        theta = (
-            theta
-            - k_e * (rate_angle + run_bias * (ts - ts[0]))
-            + nz.angle_white * jax.random.normal(k_white, ts.shape)
-        )
+        rate_angle = rate_noise_angle(k_rate, ts, nz) + draw_run_bias(k_bias, nz) * (ts - ts[0])
+        white = nz.angle_white * jax.random.normal(k_white, ts.shape)
+        if rebalance_rate is None:
+            theta = theta - k_e * rate_angle + white
+        else:  # FTR: the wave is held; the rate noise is on the rate read out, as the mean
+            # rate over each output interval (the first sample: the first interval's)
+            inc = jnp.diff(rate_angle) / jnp.diff(ts)
+            rebalance_rate = rebalance_rate + jnp.concatenate([inc[:1], inc])
+            theta = theta + white
         amp_noise = nz.amplitude_white * gyro.control.amplitude
         ka, kq = jax.random.split(k_amp)
         amplitude = amplitude + amp_noise * jax.random.normal(ka, ts.shape)
@@ -295,26 +298,43 @@ def _record(gyro, profile, ts, read, key, bias_key, run):
         quadrature_force=loops.quad_force,
         k_e=k_e,
         run=run,
+        rebalance_rate=rebalance_rate,
+        precession=None if profile.precession is None else jax.vmap(profile.precession_at)(ts),
+        mode=gyro.control.mode,
     )
 
 
 def _read_averaged(gyro, profile, ts, ys):
     def one(t, y):
         g = gyro.at(profile.temperature_at(t))
-        ctl = g.control
+        ctl, res = g.control, g.resonator
+        command = profile.command_at(t)
         if ctl.ideal:
             a0 = ctl.amplitude
             est = measured_estimates(g, a0, 0.0 * a0, y[0], 0.0 * a0)
-            integ = steady_integrators(ctl, g.resonator, a0, y[0])
+            omega_in = input_rate(g, profile, t)
+            integ = steady_integrators(ctl, res, a0, y[0], omega_in)
             true_theta = y[0]
+            loops = loop_outputs(ctl, res.omega, est, integ, command)
+            if ctl.mode == "ftr":  # the force that holds it exactly: rate − drift / k_e
+                drift = 0.5 * res.delta_inv_tau * jnp.sin(2 * (y[0] - res.theta_tau))
+                held = 2.0 * loops.omega_r * est.amplitude * (drift - res.k_e * omega_in)
+                loops = eqx.tree_at(lambda lo: lo.rebalance, loops, held)
         else:
             est = measured_estimates(g, y[0], y[1], y[2], y[3])
-            integ = y[4:7]
             true_theta = y[2]
-        loops = loop_outputs(ctl, g.resonator.omega, est, integ)
-        return est, true_theta, loops
+            loops = loop_outputs(ctl, res.omega, est, y[4:], command)
+        return est, true_theta, loops, res.k_e
 
-    return jax.vmap(one)(ts, ys)
+    est, true_theta, loops, k_e = jax.vmap(one)(ts, ys)
+    return est, true_theta, loops, _ftr_output(gyro, est, loops, k_e)
+
+
+def _ftr_output(gyro, est, loops, k_e):
+    """The rate read from the rebalance force (FTR), or `None` in whole-angle mode."""
+    if gyro.control.mode != "ftr":
+        return None
+    return ftr_rate(loops, est, k_e)
 
 
 def _unwrap_pi(theta, near):
@@ -327,15 +347,17 @@ def _read_full(gyro, profile, ts, ys, omega_scale):
     def one(t, y):
         g = gyro.at(profile.temperature_at(t))
         omega_in = input_rate(g, profile, t)
-        est = full_estimates(g, y, omega_scale, omega_in)
-        true = full_estimates(g, y, omega_scale, omega_in, readout=False)
-        loops = loop_outputs(g.control, g.resonator.omega, est, y[5:8])
-        return est, true.theta, loops
+        command = profile.command_at(t)
+        est = full_estimates(g, y, omega_scale, omega_in, command=command)
+        true = full_estimates(g, y, omega_scale, omega_in, readout=False, command=command)
+        loops = loop_outputs(g.control, g.resonator.omega, est, y[5:], command)
+        return est, true.theta, loops, g.resonator.k_e
 
-    est, true_theta, loops = jax.vmap(one)(ts, ys)
+    est, true_theta, loops, k_e = jax.vmap(one)(ts, ys)
     true_theta = _unwrap_pi(true_theta, profile.wave_angle0)
     theta = _unwrap_pi(est.theta, true_theta[0])
-    return eqx.tree_at(lambda e: e.theta, est, theta), true_theta, loops
+    est = eqx.tree_at(lambda e: e.theta, est, theta)
+    return est, true_theta, loops, _ftr_output(gyro, est, loops, k_e)
 
 
 def simulate(

@@ -1,8 +1,8 @@
 r"""Slow-variable (averaged) vector field, PHYSICS.md §3.2, with the loops closed.
 
-State $\mathbf y = (a, q, \theta, \varphi, I_\varphi, I_{\rm agc}, I_q)$: principal and
-quadrature amplitudes, electrical wave angle, phase relative to the reference, and the three
-loop integrators. The forces of the loops are formed from *estimates* of the measured
+State $\mathbf y = (a, q, \theta, \varphi, I_\varphi, I_{\rm agc}, I_q[, I_r])$: principal and
+quadrature amplitudes, electrical wave angle, phase relative to the reference, and the loop
+integrators (the rebalance loop's in force-to-rebalance mode). The forces of the loops are formed from *estimates* of the measured
 demodulated signals, then projected on the true pattern frame, so readout errors act on the
 dynamics exactly as in the full model.
 
@@ -84,20 +84,26 @@ def averaged_vector_field(t, y, args):
     res, ctl = g.resonator, g.control
     omega_in = sampled_input_rate(g, profile, t, rate, accel)
     if ctl.ideal:
-        d_theta = -res.k_e * omega_in + 0.5 * res.delta_inv_tau * jnp.sin(
-            2 * (y[0] - res.theta_tau)
+        rho = profile.precession_at(t)
+        if ctl.mode == "ftr":  # held exactly at the commanded angle
+            return jnp.reshape(rho, (1,))
+        d_theta = (
+            -res.k_e * omega_in
+            + 0.5 * res.delta_inv_tau * jnp.sin(2 * (y[0] - res.theta_tau))
+            + rho
         )
         return d_theta[None]
-    return loop_field(g, omega_in, y)
+    return loop_field(g, omega_in, y, profile.command_at(t))
 
 
-def loop_field(g, omega_in, y):
+def loop_field(g, omega_in, y, command=None):
     """The averaged model's right-hand side with the PI loops, for a gyro `g` already at its
-    temperature, equivalent input rate `omega_in` [rad/s] and state `y` (module docstring)."""
+    temperature, equivalent input rate `omega_in` [rad/s] and state `y` (module docstring);
+    `command` = (commanded angle [rad], commanded precession [rad/s]) or `None`."""
     res, ctl = g.resonator, g.control
     a, q, theta, phi = y[0], y[1], y[2], y[3]
     est = measured_estimates(g, a, q, theta, phi)
-    loops = loop_outputs(ctl, res.omega, est, y[4:7])
+    loops = loop_outputs(ctl, res.omega, est, y[4:], command)
     u, v = drive_vectors(ctl, loops, est.theta)
     f_ac, f_as, f_qc, f_qs = pattern_forces(u, v, phi, theta)
 
@@ -141,8 +147,18 @@ def loop_field(g, omega_in, y):
         + 3 * res.chi * (a**2 + q**2) / (8 * w)
         - pump * jnp.cos(beta) * big_p
     )
-    d_int = integrator_rates(ctl, w, est)
+    d_int = integrator_rates(ctl, w, est, command)
     return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int])
+
+
+def held_angle(g, a, theta_cmd, iterations: int = 4):
+    """The true wave angle [rad] at which the estimate (through the readout errors) reads
+    `theta_cmd`: where force-to-rebalance holds the wave (fixed-point iteration; the readout
+    error is ≈ 1e-2 rad at most, so each pass gains two orders)."""
+    theta = theta_cmd
+    for _ in range(iterations):
+        theta = theta + (theta_cmd - measured_estimates(g, a, 0.0 * a, theta, 0.0 * a).theta)
+    return theta
 
 
 def averaged_initial_state(gyro, profile, quadrature0=0.0):
@@ -152,5 +168,8 @@ def averaged_initial_state(gyro, profile, quadrature0=0.0):
     if g.control.ideal:
         return theta0[None]
     a0 = g.control.amplitude
-    integ = steady_integrators(g.control, g.resonator, a0, theta0)
+    if g.control.mode == "ftr":  # held where the *estimate* reads the commanded angle
+        theta0 = held_angle(g, a0, theta0)
+    integ = steady_integrators(g.control, g.resonator, a0, theta0,
+                               input_rate(g, profile, profile.t[0]))  # fmt: skip
     return jnp.concatenate([jnp.stack([a0, quadrature0 + 0.0 * a0, theta0, 0.0 * a0]), integ])

@@ -70,11 +70,12 @@ def _rk_step(f, w, h):
 
 
 def _step(env, omega_scale, y, h):
-    """One held-loop step over h [s] from state y (8,) in the environment `env` = (gyro with
-    its temperature laws evaluated, Ω [rad/s], Ω̇ [rad/s²]) at the step's midpoint."""
-    g, omega_in, omega_dot = env
+    """One held-loop step over h [s] from state y (8,) (9,: FTR) in the environment `env` =
+    (gyro with its temperature laws evaluated, Ω [rad/s], Ω̇ [rad/s²] at the step's midpoint,
+    the profile's command at the step's start)."""
+    g, omega_in, omega_dot, command = env
     res = g.resonator
-    eff = loop_efforts(g, omega_in, y, omega_scale)
+    eff = loop_efforts(g, omega_in, y, omega_scale, command)
     cp2, sp2 = jnp.cos(eff.pump_phase2), jnp.sin(eff.pump_phase2)
     psi = y[4]
 
@@ -89,7 +90,7 @@ def _step(env, omega_scale, y, h):
     w = jnp.concatenate([y[0:4], jnp.stack([jnp.cos(psi), jnp.sin(psi)])])
     w = _rk_step(field, w, h)
     psi = jnp.remainder(psi + eff.omega_r * h, 2 * jnp.pi)
-    return jnp.concatenate([w[0:4], jnp.reshape(psi, (1,)), y[5:8] + h * eff.d_int])
+    return jnp.concatenate([w[0:4], jnp.reshape(psi, (1,)), y[5:] + h * eff.d_int])
 
 
 def _has_laws(gyro) -> bool:
@@ -133,7 +134,7 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
             mean_rate = (angle1 - angle0) / safe_h
             accel = 0.5 * (accel0 + accel1)
             omega_in = sampled_input_rate(g, profile, t1 - 0.5 * h, mean_rate, accel)
-            env = (g, omega_in, (rate1 - rate0) / safe_h)
+            env = (g, omega_in, (rate1 - rate0) / safe_h, profile.command_at(t1 - h))
             return _step(env, omega_scale, yy, h), angle1, rate1, accel1
 
         start = (y, *profile.kinematics_at(first))

@@ -1,4 +1,5 @@
-r"""Whole-angle control loops (PHYSICS.md §5): PLL, amplitude (AGC), quadrature null.
+r"""The HRG's control loops (PHYSICS.md §5): PLL, amplitude (AGC), quadrature null and, in
+force-to-rebalance mode, the rebalance loop; the commanded (virtual) precession.
 
 Every loop is a PI controller acting on an *estimate* (readout errors feed back):
 
@@ -6,7 +7,16 @@ Every loop is a PI controller acting on an *estimate* (readout errors feed back)
 - AGC by force: antinode force $f_a = -F\sin(\psi_r+\gamma_e)$,
   $F = k_p(a_0-\hat a) + I_F$; or by parametric pump: depth $h = k_p(a_0-\hat a) + I_h$,
   pump $-\omega^2h\cos(2\psi_r + 2\gamma)$ with $2\gamma = \pi/2 + \gamma_e$;
-- quadrature: node force $f_q = f_{qc}\cos\psi_r$, $f_{qc} = -k_p\hat q + I_q$.
+- quadrature: node force $f_q = f_{qc}\cos\psi_r$, $f_{qc} = -k_p\hat q + I_q$;
+- commanded precession at $\rho$ [rad/s, electrical] (virtual precession, the profile's
+  schedule): a feed-forward node force in phase with the velocity,
+  $f_{qs}^{\rm ff} = -2\omega_r\hat a\,\rho$, which turns the wave at $\dot\theta = \rho$
+  through $\dot\theta \ni -f_{qs}/(2\omega a)$ (PHYSICS.md §3.2) — up to the forcers' own errors;
+- force-to-rebalance (`mode="ftr"`): a PI loop on $x = \hat\theta - \theta_{\rm cmd}$ (the
+  commanded angle: the start angle plus $\int\rho\,dt$) adds $u = -k_p x + I_r$ to
+  $f_{qs}$. The plant is $\dot x = -u/(2\omega a_0) + d$, so $b = -1/(2\omega a_0)$; at rest
+  $u = 2\omega a\,d$ with $d = -k_e\Omega + $ (the drift at the held angle), and the output
+  is the rate $\hat\Omega = -u/(2\omega_r\hat a\,k_e)$ ([`ftr_rate`][hrgjax.resonator.control.ftr_rate]).
 
 Gains are set from loop bandwidths: for a plant $\dot e = b\,u$ the PI gains
 $k_p = 2\beta/b$, $k_i = \beta^2/b$ place a double closed-loop pole at $-\beta$.
@@ -22,6 +32,8 @@ import jax.numpy as jnp
 from .params import TemperatureLaw, as_parameter
 
 DRIVES = ("force", "parametric")
+MODES = ("wa", "ftr")
+"""Operating modes: whole-angle (rate-integrating) and force-to-rebalance (rate)."""
 
 
 class Control(eqx.Module):
@@ -40,6 +52,19 @@ class Control(eqx.Module):
       model then integrates only the wave angle; the full model uses the PI loops.
     - `forcer_gain_mismatch`: relative gain difference of the x and y forcers.
     - `enabled`: `False` for a free-running resonator (see [`Control.free`][hrgjax.Control.free]).
+    - `mode`: `"wa"` (whole-angle: the wave turns with the case, the output is its angle) or
+      `"ftr"` (force-to-rebalance: a node force holds the wave at the commanded angle, the
+      output is the rate read from that force; [`Record.rebalance_rate`][hrgjax.Record]).
+    - `rebalance_bandwidth`: closed-loop bandwidth of the rebalance loop [rad/s] (`"ftr"`).
+    - `rebalance_limit`: largest node force the rebalance loop may command (forcer
+      saturation) [readout units · rad²/s²]; `None` for none. At the default gyro
+      (ω = 2π·5 kHz, a₀ = 1, k_e = 0.277) 1 °/s needs ≈ 304.
+    - `forcer_gain`: common relative gain error of both forcers (1 + `forcer_gain`): it scales
+      every force, so the FTR scale factor by 1/(1 + g_f) and a commanded precession by
+      (1 + g_f); the loops' own efforts absorb it.
+    - `forcer_angle`: angle error of the applied force [rad, electrical]: each force is
+      applied turned by this angle from where it is meant (a node force leaks onto the
+      antinode).
 
     A loop with bandwidth 0 holds its effort at the initial steady-state value (open loop).
     """
@@ -55,6 +80,13 @@ class Control(eqx.Module):
         converter=as_parameter, default=0.0
     )
     enabled: bool = eqx.field(static=True, default=True)
+    mode: str = eqx.field(static=True, default="wa")
+    rebalance_bandwidth: jax.Array = eqx.field(converter=as_parameter, default=2.0)
+    rebalance_limit: jax.Array | None = eqx.field(
+        converter=lambda x: None if x is None else as_parameter(x), default=None
+    )
+    forcer_gain: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    forcer_angle: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
 
     @classmethod
     def free(cls, amplitude=1.0) -> Control:
@@ -65,11 +97,24 @@ class Control(eqx.Module):
     def __check_init__(self):
         if self.drive not in DRIVES:
             raise ValueError(f"Control.drive must be one of {DRIVES}; got {self.drive!r}")
+        if self.mode not in MODES:
+            raise ValueError(
+                f"Control.mode must be one of {MODES} (whole-angle or force-to-rebalance); "
+                f"got {self.mode!r}"
+            )
+        if self.mode == "ftr" and not self.enabled:
+            raise ValueError("Control.mode='ftr' needs the loops: a free resonator has none")
+
+    @property
+    def n_integrators(self) -> int:
+        """Loop integrator states: PLL, AGC, quadrature (+ rebalance in FTR mode)."""
+        return 4 if self.mode == "ftr" else 3
 
     def forcer_matrix(self):
-        """Forcer gain matrix diag(1 + g, 1 − g) applied to the electrode-frame force."""
-        g = self.forcer_gain_mismatch
-        return jnp.stack([jnp.stack([1.0 + g, 0.0 * g]), jnp.stack([0.0 * g, 1.0 - g])])
+        """Forcer gain matrix diag(1 + g_f + g, 1 + g_f − g) applied to the electrode-frame
+        force (g_f = `forcer_gain`, g = `forcer_gain_mismatch`)."""
+        g, c = self.forcer_gain_mismatch, self.forcer_gain
+        return jnp.stack([jnp.stack([1.0 + c + g, 0.0 * g]), jnp.stack([0.0 * g, 1.0 + c - g])])
 
 
 class LoopOutputs(eqx.Module):
@@ -81,6 +126,10 @@ class LoopOutputs(eqx.Module):
     """Parametric pump depth h (parametric drive) [-]."""
     quad_force: jax.Array
     """Quadrature force $f_{qc}$."""
+    rebalance: jax.Array
+    """Rebalance loop's node force $u$ (FTR; 0 in whole-angle mode) [readout units · rad²/s²]."""
+    precession_force: jax.Array
+    r"""Feed-forward node force of the commanded precession, $-2\omega_r\hat a\rho$."""
 
 
 def _gains(bandwidth, plant_gain):
@@ -98,48 +147,94 @@ def loop_gains(control: Control, omega):
     return pll, agc, quad
 
 
-def loop_outputs(control: Control, omega, est, integrators) -> LoopOutputs:
-    """Loop efforts from estimates and integrator states `(I_pll, I_agc, I_quad)`."""
+def rebalance_gains(control: Control, omega):
+    r"""PI gains (kp, ki) of the rebalance loop: plant $\dot x = -u/(2\omega a_0)$."""
+    return _gains(control.rebalance_bandwidth, -1.0 / (2.0 * omega * control.amplitude))
+
+
+def _wrap_half_pi(x):
+    return (x + jnp.pi / 2) % jnp.pi - jnp.pi / 2
+
+
+def angle_error(est, command):
+    r"""Rebalance loop error $\hat\theta - \theta_{\rm cmd}$ [rad], wrapped to [−π/2, π/2)
+    (θ and θ + π are the same standing wave)."""
+    return _wrap_half_pi(est.theta - command[0])
+
+
+def loop_outputs(control: Control, omega, est, integrators, command=None) -> LoopOutputs:
+    """Loop efforts from estimates and integrator states `(I_pll, I_agc, I_quad[, I_r])`;
+    `command` = (commanded angle θ_cmd [rad], commanded precession ρ [rad/s]) from the
+    profile (`None`: hold the start, no precession)."""
     (kp_p, _), (kp_a, _), (kp_q, _) = loop_gains(control, omega)
-    i_pll, i_agc, i_quad = integrators
+    i_pll, i_agc, i_quad = integrators[0], integrators[1], integrators[2]
     agc = kp_a * (control.amplitude - est.amplitude) + i_agc
     zero = jnp.zeros_like(agc)
     if not control.enabled:
-        return LoopOutputs(omega_r=omega + zero, force=zero, pump=zero, quad_force=zero)
+        return LoopOutputs(omega_r=omega + zero, force=zero, pump=zero, quad_force=zero,
+                           rebalance=zero, precession_force=zero)  # fmt: skip
+    omega_r = omega + kp_p * est.phase + i_pll
+    rho = zero if command is None else command[1]
+    rebalance = zero
+    if control.mode == "ftr":
+        kp_r, _ = rebalance_gains(control, omega)
+        x = zero if command is None else angle_error(est, command)
+        rebalance = -kp_r * x + integrators[3]
+        if control.rebalance_limit is not None:
+            lim = control.rebalance_limit
+            rebalance = jnp.clip(rebalance, -lim, lim)
     return LoopOutputs(
-        omega_r=omega + kp_p * est.phase + i_pll,
+        omega_r=omega_r,
         force=agc if control.drive == "force" else zero,
         pump=agc if control.drive == "parametric" else zero,
         quad_force=-kp_q * est.quadrature + i_quad,
+        rebalance=rebalance,
+        precession_force=-2.0 * omega_r * est.amplitude * rho,
     )
 
 
-def integrator_rates(control: Control, omega, est):
-    """Time derivatives of the loop integrators."""
+def integrator_rates(control: Control, omega, est, command=None):
+    """Time derivatives of the loop integrators (`command` as in
+    [`loop_outputs`][hrgjax.resonator.control.loop_outputs])."""
     (_, ki_p), (_, ki_a), (_, ki_q) = loop_gains(control, omega)
     if not control.enabled:
         return jnp.zeros(3) * est.phase
-    return jnp.stack(
-        [
-            ki_p * est.phase,
-            ki_a * (control.amplitude - est.amplitude),
-            ki_q * (-est.quadrature),
-        ]
-    )
+    rates = [
+        ki_p * est.phase,
+        ki_a * (control.amplitude - est.amplitude),
+        ki_q * (-est.quadrature),
+    ]
+    if control.mode == "ftr":
+        _, ki_r = rebalance_gains(control, omega)
+        x = 0.0 * est.phase if command is None else angle_error(est, command)
+        rates.append(-ki_r * x)
+    return jnp.stack(rates)
+
+
+def ftr_rate(loops: LoopOutputs, est, k_e):
+    r"""The FTR output: the rate read from the rebalance force,
+    $\hat\Omega = -u/(2\omega_r\hat a\,k_e)$ [rad/s] — the electronics divide by the
+    frequency and amplitude they measure (ratiometric), so an ideal gyro reads Ω exactly;
+    forcer gain, readout errors and the drift at the held angle are what is left."""
+    return -loops.rebalance / (2.0 * loops.omega_r * est.amplitude * k_e)
 
 
 def drive_vectors(control: Control, loops: LoopOutputs, theta_est):
     r"""Electrode-frame force as $\mathbf f = \mathbf u\cos\psi_r + \mathbf v\sin\psi_r$.
 
-    The AGC force lies along the estimated antinode, the quadrature force along the
-    estimated node; the forcer gain mismatch is applied last.
+    The AGC force lies along the estimated antinode; the quadrature force (in phase with
+    the displacement) and the rebalance and precession forces (in phase with the velocity)
+    along the estimated node; the forcer angle error turns them all, and the forcers' gains
+    are applied last.
     """
-    c, s = jnp.cos(theta_est), jnp.sin(theta_est)  # e_a = (c, s), e_q = (−s, c)
+    th = theta_est + control.forcer_angle
+    c, s = jnp.cos(th), jnp.sin(th)  # e_a = (c, s), e_q = (−s, c)
     g = control.excitation_phase if control.drive == "force" else 0.0
     fs, fc, fq = -loops.force * jnp.sin(g), -loops.force * jnp.cos(g), loops.quad_force
+    fn = loops.rebalance + loops.precession_force  # node, in phase with the velocity
     m = control.forcer_matrix()  # diagonal: applied elementwise (no 2 × 2 dot kernel)
     u = jnp.stack([m[0, 0] * (fs * c - fq * s), m[1, 1] * (fs * s + fq * c)])
-    v = jnp.stack([m[0, 0] * fc * c, m[1, 1] * fc * s])
+    v = jnp.stack([m[0, 0] * (fc * c - fn * s), m[1, 1] * (fc * s + fn * c)])
     return u, v
 
 
@@ -149,12 +244,15 @@ def pump_phase(control: Control):
     return 0.25 * jnp.pi + 0.5 * e
 
 
-def steady_integrators(control: Control, res, a, theta):
+def steady_integrators(control: Control, res, a, theta, omega_in=0.0):
     """Integrator values at the loops' steady state (used as initial conditions).
 
     AGC: $F = 2\\omega a[1/\\tau + \\tfrac12\\Delta(1/\\tau)\\cos2(\\theta-\\theta_\\tau)]/\\cos\\gamma_e$
     or $h = 4[\\dots]/\\omega$; quadrature: $f_{qc} = -\\omega\\Delta\\omega\\,a\\sin2(\\theta-\\theta_\\omega)$;
-    PLL: $\\omega_r = \\omega + \\tfrac12\\Delta\\omega\\cos2(\\theta-\\theta_\\omega)$.
+    PLL: $\\omega_r = \\omega + \\tfrac12\\Delta\\omega\\cos2(\\theta-\\theta_\\omega) + 3\\chi a^2/8\\omega
+    + [\\dots]\\tan\\gamma_e$ (the excitation phase error's pull, either drive); FTR (at the
+    equivalent input rate `omega_in` [rad/s]):
+    $u = 2\\omega a[-k_e\\Omega + \\tfrac12\\Delta(1/\\tau)\\sin2(\\theta-\\theta_\\tau)]$.
     """
     if not control.enabled:
         return jnp.zeros(3) * a
@@ -164,7 +262,13 @@ def steady_integrators(control: Control, res, a, theta):
     else:
         i_agc = 4.0 * loss / (res.omega * jnp.cos(control.excitation_phase))
     i_quad = -res.omega * res.delta_omega * a * jnp.sin(2 * (theta - res.theta_omega))
-    i_pll = 0.5 * res.delta_omega * jnp.cos(2 * (theta - res.theta_omega)) + 3 * res.chi * a**2 / (
-        8 * res.omega
+    i_pll = (
+        0.5 * res.delta_omega * jnp.cos(2 * (theta - res.theta_omega))
+        + 3 * res.chi * a**2 / (8 * res.omega)
+        + loss * jnp.tan(control.excitation_phase)  # the drive's pull (PHYSICS.md §4.4)
     )
-    return jnp.stack([i_pll, i_agc, i_quad])
+    integ = [i_pll, i_agc, i_quad]
+    if control.mode == "ftr":
+        drift = 0.5 * res.delta_inv_tau * jnp.sin(2 * (theta - res.theta_tau))
+        integ.append(2.0 * res.omega * a * (drift - res.k_e * omega_in))
+    return jnp.stack(integ)

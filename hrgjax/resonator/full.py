@@ -1,6 +1,6 @@
 r"""Carrier-resolving two-pendulum vector field (PHYSICS.md §2) with the loops closed.
 
-State $\mathbf y = (x, y, \dot x/\omega_s, \dot y/\omega_s, \psi_r, I_\varphi, I_{\rm agc}, I_q)$,
+State $\mathbf y = (x, y, \dot x/\omega_s, \dot y/\omega_s, \psi_r, I_\varphi, I_{\rm agc}, I_q[, I_r])$,
 where $\omega_s$ is a fixed velocity scale (ω at the start) and $\psi_r$ the reference
 phase of the PLL. The pickoff signals are demodulated instantaneously against $\psi_r$
 (readout.py), the loops (control.py) form forces along the *estimated* antinode and node,
@@ -13,7 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .averaged import input_rate, sampled_input_rate
+from .averaged import held_angle, input_rate, sampled_input_rate
 from .control import (
     drive_vectors,
     integrator_rates,
@@ -26,13 +26,24 @@ from .readout import estimate, from_signals
 N_STATE = 8
 
 
-def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
+def pattern_rate(g, omega_in, command=None):
+    r"""The rate the wave turns at [rad/s, electrical] by the operating mode: $-k_e\Omega + \rho$
+    in whole-angle mode, the commanded ρ in force-to-rebalance mode (held)."""
+    rho = 0.0 if command is None else command[1]
+    if g.control.mode == "ftr":
+        return rho + 0.0 * omega_in
+    return -g.resonator.k_e * omega_in + rho
+
+
+def full_estimates(gyro, y, omega_scale, omega_in, readout=True, command=None):
     r"""Estimates from the full state (through the pickoff errors when `readout`).
 
     Emulates a low-pass demodulator of the displacement signals, which does not see the
-    kinematic angular momentum $k_e\Omega E/\omega$ of a precessing pattern: the velocity is
-    taken relative to the frame precessing at $-k_e\Omega$ ($\dot{\mathbf z} + k_e\Omega\mathbf J\mathbf z$).
-    Without this the quadrature loop would null a fake $q = -k_e\Omega a/2\omega$ by creating
+    kinematic angular momentum $\dot\theta E/\omega$ of a turning pattern: the velocity is
+    taken relative to the frame turning at the pattern's rate $\dot\theta$
+    ($\dot{\mathbf z} - \dot\theta\mathbf J\mathbf z$; $\dot\theta = -k_e\Omega + \rho$ in whole-angle
+    mode, ρ in force-to-rebalance mode, [`pattern_rate`][hrgjax.resonator.full.pattern_rate]).
+    Without this the quadrature loop would null a fake $q = \dot\theta a/2\omega$ by creating
     real quadrature.
 
     The velocity channel is scaled by the PLL's tracked frequency ω + I_φ (the frequency
@@ -41,7 +52,7 @@ def full_estimates(gyro, y, omega_scale, omega_in, readout=True):
     gains would rectify into a bias of the efforts.
     """
     z, zdot = y[0:2], y[2:4] * omega_scale
-    zdot = zdot + gyro.resonator.k_e * omega_in * _rot90(z)
+    zdot = zdot - pattern_rate(gyro, omega_in, command) * _rot90(z)
     demod = from_signals(z, zdot, y[4], gyro.resonator.omega + y[5])
     if readout:
         demod = demod.transform(gyro.readout.matrix())
@@ -53,16 +64,18 @@ def full_vector_field(t, y, args):
     gyro, profile, omega_scale = args
     rate, omega_dot, temperature, accel = profile.sample(t)
     g = gyro.at(temperature)
-    return carrier_rhs(g, sampled_input_rate(g, profile, t, rate, accel), omega_dot, y, omega_scale)
+    omega_in = sampled_input_rate(g, profile, t, rate, accel)
+    return carrier_rhs(g, omega_in, omega_dot, y, omega_scale, profile.command_at(t))
 
 
-def carrier_rhs(g, omega_in, omega_dot, y, omega_scale):
+def carrier_rhs(g, omega_in, omega_dot, y, omega_scale, command=None):
     """The full model's right-hand side for a gyro `g` whose temperature laws are evaluated,
     the input rate `omega_in` [rad/s] and angular acceleration `omega_dot` [rad/s²]:
-    demodulation, loops, forces and the two-pendulum dynamics at state `y`."""
+    demodulation, loops, forces and the two-pendulum dynamics at state `y` (`command`: the
+    profile's commanded angle and precession, [`hrgjax.Profile.command_at`][])."""
     z, zdot = y[0:2], y[2:4] * omega_scale
     psi_r = y[4]
-    eff = loop_efforts(g, omega_in, y, omega_scale)
+    eff = loop_efforts(g, omega_in, y, omega_scale, command)
     force = eff.u * jnp.cos(psi_r) + eff.v * jnp.sin(psi_r)
     pump = eff.pump * jnp.cos(2 * psi_r + eff.pump_phase2)
     zddot = mechanics(g.resonator, omega_in, omega_dot, z, zdot, force, pump)
@@ -83,21 +96,21 @@ class LoopEfforts(eqx.Module):
     omega_r: jax.Array
 
 
-def loop_efforts(g, omega_in, y, omega_scale) -> LoopEfforts:
+def loop_efforts(g, omega_in, y, omega_scale, command=None) -> LoopEfforts:
     """Demodulation and loop laws at state `y` (zero efforts for free-running control)."""
     res, ctl = g.resonator, g.control
     if not ctl.enabled:
         zero = 0.0 * y[0]
         return LoopEfforts(jnp.zeros(2), jnp.zeros(2), zero, zero, jnp.zeros(3), res.omega + zero)
-    est = full_estimates(g, y, omega_scale, omega_in)
-    loops = loop_outputs(ctl, res.omega, est, y[5:8])
+    est = full_estimates(g, y, omega_scale, omega_in, command=command)
+    loops = loop_outputs(ctl, res.omega, est, y[5:], command)
     u, v = drive_vectors(ctl, loops, est.theta)
     return LoopEfforts(
         u=u,
         v=v,
         pump=res.omega**2 * loops.pump,
         pump_phase2=2 * pump_phase(ctl),
-        d_int=integrator_rates(ctl, res.omega, est),
+        d_int=integrator_rates(ctl, res.omega, est, command),
         omega_r=loops.omega_r,
     )
 
@@ -130,15 +143,20 @@ def _times(m, z):
 
 
 def full_initial_state(gyro, profile, quadrature0=0.0):
-    """x = a₀cosθ₀, y = a₀sinθ₀ at ψ_r = 0, with the velocity of a pattern already precessing
-    at −k_eΩ (no start transient); loop integrators at steady state."""
+    """x = a₀cosθ₀, y = a₀sinθ₀ at ψ_r = 0, with the velocity of a pattern already turning at
+    its mode's rate (−k_eΩ + ρ whole-angle, ρ force-to-rebalance: no start transient; FTR holds
+    θ₀ where the estimate reads the commanded angle); loop integrators at steady state."""
     g = gyro.at(profile.temperature[0])
     res = g.resonator
     a0 = g.control.amplitude
     th = profile.wave_angle0
+    if g.control.mode == "ftr":
+        th = held_angle(g, a0, th)
+    omega_in = input_rate(g, profile, profile.t[0])
     z0 = a0 * jnp.stack([jnp.cos(th), jnp.sin(th)])
     q_vel = quadrature0 * res.omega * jnp.stack([-jnp.sin(th), jnp.cos(th)])
-    zdot0 = -res.k_e * input_rate(g, profile, profile.t[0]) * _rot90(z0) + q_vel
-    integ = steady_integrators(g.control, res, a0, th)
+    rate0 = pattern_rate(g, omega_in, profile.command_at(profile.t[0]))
+    zdot0 = rate0 * _rot90(z0) + q_vel
+    integ = steady_integrators(g.control, res, a0, th, omega_in)
     omega_scale = res.omega
     return jnp.concatenate([z0, zdot0 / omega_scale, jnp.zeros(1), integ]), omega_scale

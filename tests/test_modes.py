@@ -1,0 +1,188 @@
+"""Operating modes (docs/modes.md): force-to-rebalance, held-angle switching (mode reversal)
+and virtual precession, each against its analytic law (PHYSICS.md §3.2, §4.1, §4.3)."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hrgjax as hg
+from hrgjax import Control
+from hrgjax.units import DEG, DEG_PER_H, DEG_PER_S
+
+BASE = hg.presets.tvg3_like(temperature_laws=False, noise=False)
+RES = BASE.resonator
+PERFECT = eqx.tree_at(lambda r: (r.delta_omega, r.delta_inv_tau, r.chi), RES, (0.0, 0.0, 0.0))
+TIGHT = dict(rtol=1e-10, atol=1e-12)
+
+
+def _ftr(res, **control):
+    return hg.Gyro(resonator=res, control=Control(mode="ftr", drive="force", **control))
+
+
+def test_ftr_on_a_perfect_gyro_reads_the_input_rate():
+    """A perfect resonator held by the rebalance loop: the rate read from the force is Ω
+    (relative error ≤ 1e-6), the wave stays at the commanded angle."""
+    rec = hg.simulate(_ftr(PERFECT), hg.Profile.constant_rate(10.0, 20.0, 20.0, 30.0),
+                      dt_out=1.0, **TIGHT)  # fmt: skip
+    rate = np.asarray(rec.rebalance_rate)
+    assert np.max(np.abs(rate / (10.0 * DEG_PER_S) - 1.0)) < 1e-6
+    assert np.max(np.abs(np.asarray(rec.wave_angle) - 30.0 * DEG)) < 1e-9
+    cols = rec.to_data().columns
+    np.testing.assert_allclose(cols["rebalance_rate_dps"], rate / DEG_PER_S)
+    assert hg.simulate(hg.Gyro(resonator=PERFECT), hg.Profile.static(2.0)).rebalance_rate is None
+
+
+@pytest.fixture(scope="module")
+def held_with_quadrature():
+    """A defective gyro (damping anisotropy, frequency split, Duffing) held at four angles
+    with the quadrature loop open and 2 % quadrature left: every drift law of §3.2 acts."""
+    gyro = _ftr(RES, quadrature_bandwidth=0.0)
+    thetas = jnp.deg2rad(jnp.array([0.0, 35.0, 80.0, 125.0]))
+    prof = hg.Profile.constant_rate(0.5, 60.0, 20.0)
+
+    def one(th):
+        p = eqx.tree_at(lambda p: p.wave_angle0, prof, th)
+        return hg.simulate(gyro, p, dt_out=5.0, quadrature0=0.02, **TIGHT)
+
+    return thetas, jax.vmap(one)(thetas)
+
+
+def test_ftr_bias_follows_the_damping_split_and_duffing_laws(held_with_quadrature):
+    """Held at θ, the force balances every unforced θ̇ term of PHYSICS.md §3.2:
+    Ω̂ = −(ω/ω_r)·(a² − q²)/a² · d/k_e with
+    d = −k_eΩ + ½Δ(1/τ)sin2(θ−θ_τ)·P − ½Δω cos2(θ−θ_ω)·Π − χaq/4ω — within 1e-4 of the law's
+    θ-dependent part once the loop's start transient (q₀ is not at the loop's rest) has
+    passed (β·t ≥ 20), while q decays (a, q, ω_r read from the record)."""
+    thetas, rec = held_with_quadrature
+    a, q, w_r = (np.asarray(x) for x in (rec.amplitude, rec.quadrature, rec.frequency))
+    th = np.asarray(thetas)[:, None]
+    d2 = a**2 - q**2
+    drift = (
+        0.5 * RES.delta_inv_tau * np.sin(2 * (th - RES.theta_tau)) * (a**2 + q**2) / d2
+        - 0.5 * RES.delta_omega * np.cos(2 * (th - RES.theta_omega)) * 2 * a * q / d2
+        - RES.chi * a * q / (4 * RES.omega)
+    )
+    omega = 0.5 * DEG_PER_S
+    law = -(RES.omega / w_r) * d2 / a**2 * (drift - RES.k_e * omega) / RES.k_e
+    out = np.asarray(rec.rebalance_rate)
+    assert np.ptp(q[:, -1] / q[:, 0]) < 1e-3 and 0.85 < q[0, -1] / q[0, 0] < 0.99  # q decays
+    err = np.abs(out - law) / np.max(np.abs(drift / RES.k_e))
+    assert err[:, 2:].max() < 1e-4, err
+
+
+def test_mode_reversal_separates_the_rate_bias_from_the_damping_anisotropy():
+    """Held at θ and at θ + 90° (electrical), the damping anisotropy's bias changes sign and
+    the rate bias does not: the mean of the two readings is the rate bias, half their
+    difference the drift law (PHYSICS.md §4.1), to ≤ 1e-6 of the drift."""
+    bias = 0.3 * DEG_PER_H
+    gyro = eqx.tree_at(lambda g: g.rate_bias, _ftr(RES), bias)
+    prof = hg.Profile.held_angles([40.0, 130.0], dwell_s=60.0, slew_s=10.0)
+    rec = hg.simulate(gyro, prof, dt_out=1.0, **TIGHT)
+    t, out = np.asarray(rec.t), np.asarray(rec.rebalance_rate)
+    out = out * np.asarray(rec.frequency) / RES.omega  # the Duffing pull on ω_r: 2e-6
+    (s0, e0), (s1, e1) = prof.hold_windows(settle_s=20.0)
+    r0 = out[(t >= s0) & (t <= e0)].mean()
+    r1 = out[(t >= s1) & (t <= e1)].mean()
+    law = -0.5 * RES.delta_inv_tau * np.sin(2 * (40.0 * DEG - RES.theta_tau)) / RES.k_e
+    assert abs(0.5 * (r0 + r1) - bias) < 1e-6 * abs(law)
+    assert abs(0.5 * (r0 - r1) - law) < 1e-6 * abs(law)
+    # the slew between them is a commanded precession: the wave arrives at 130°
+    assert abs(float(rec.wave_angle[-1]) - 130.0 * DEG) < 1e-9
+
+
+def test_whole_angle_drift_equals_the_ftr_bias_at_the_same_angle():
+    """One defective gyro, two modes: whole-angle's wave rate at θ (a static run's first
+    seconds) read as a rate, −θ̇/k_e, equals force-to-rebalance's reading held at θ — the
+    same drift physics — to within 1e-4 of the drift (10-20 s, after the parametric drive's
+    start transient)."""
+    gyro_wa = eqx.tree_at(lambda g: g.readout, BASE, hg.Readout())
+    gyro_ftr = eqx.tree_at(lambda g: g.control, gyro_wa,
+                           Control(amplitude=1.0, drive="parametric", excitation_phase=0.01,
+                                   mode="ftr"))  # fmt: skip
+    thetas = jnp.deg2rad(jnp.array([10.0, 55.0, 100.0]))
+    prof = hg.Profile.static(20.0)
+
+    def both(th):
+        p = eqx.tree_at(lambda p: p.wave_angle0, prof, th)
+        wa = hg.simulate(gyro_wa, p, dt_out=1.0, **TIGHT)
+        ftr = hg.simulate(gyro_ftr, p, dt_out=1.0, **TIGHT)
+        return wa.true_wave_angle, ftr.rebalance_rate
+
+    angle, rate = jax.vmap(both)(thetas)
+    wa_rate = -(np.asarray(angle[:, 20]) - np.asarray(angle[:, 10])) / 10.0 / RES.k_e
+    ftr_rate = np.asarray(rate[:, 15])
+    scale = np.max(np.abs(ftr_rate))
+    assert np.max(np.abs(wa_rate - ftr_rate)) < 1e-4 * scale, (wa_rate, ftr_rate)
+
+
+def test_virtual_precession_turns_the_wave_by_the_forcers_gain_and_angle():
+    """A commanded precession ρ with the case at rest turns the wave by the forcers' gain on
+    the node direction: ρ·(1 + g_f)·cos δ (forcer gain g_f, forcer angle δ) and
+    ρ·(1 − g cos 2θ) with a forcer gain mismatch g, under the isotropic parametric drive.
+    Under a force drive the AGC also takes up the node force's leak onto the antinode along
+    its own misaligned axis: ρ(1 + g_f)/cos δ + tan δ/τ (PHYSICS.md §4.4's drive-axis term)."""
+    rho, dur = 2.0, 30.0
+    prof = hg.Profile.virtual_precession(rho, dur, wave_angle0_deg=10.0)
+    cases = (
+        ("parametric", 0.01, 0.0, rho * (1.01)),
+        ("parametric", 0.01, 0.02, rho * 1.01 * np.cos(0.02)),
+        ("force", 0.01, 0.02, rho * 1.01 / np.cos(0.02) + np.tan(0.02) / RES.tau / DEG_PER_S),
+    )
+    for drive, gain, delta, rate_dps in cases:
+        gyro = hg.Gyro(resonator=PERFECT, control=Control(drive=drive, forcer_gain=gain,
+                                                          forcer_angle=delta))  # fmt: skip
+        rec = hg.simulate(gyro, prof, dt_out=1.0, **TIGHT)
+        turned = float(rec.wave_angle[-1] - rec.wave_angle[0])
+        assert abs(turned / (dur * rate_dps * DEG_PER_S) - 1.0) < 1e-7, (drive, gain, delta)
+
+    g = 0.02
+    gyro = hg.Gyro(resonator=PERFECT, control=Control(drive="parametric", forcer_gain_mismatch=g))
+    rec = hg.simulate(gyro, prof, dt_out=0.25, **TIGHT)
+    th = np.asarray(rec.wave_angle)
+    rate = np.diff(th) / 0.25
+    mid = 0.5 * (th[1:] + th[:-1])
+    law = rho * DEG_PER_S * (1.0 - g * np.cos(2 * mid))
+    assert np.max(np.abs(rate / law - 1.0)) < 1e-6
+
+
+def test_ftr_in_the_full_model_agrees_with_the_averaged_model():
+    """The carrier-resolving model (fixed-step path) held by the same rebalance loop on the
+    default gyro's defects reads what the averaged model reads, to 1e-5 of the reading."""
+    control = Control(amplitude=1.0, drive="parametric", excitation_phase=0.01, mode="ftr",
+                      pll_bandwidth=20.0, agc_bandwidth=10.0, quadrature_bandwidth=20.0,
+                      rebalance_bandwidth=20.0)  # fmt: skip
+    gyro = eqx.tree_at(lambda g: g.control, BASE, control)
+    prof = hg.Profile.static(1.0, wave_angle0_deg=70.0)
+    avg = hg.simulate(gyro, prof, dt_out=0.5)
+    full = hg.simulate(gyro, prof, model="full", dt_out=0.5, fixed_step="auto")
+    a, f = float(avg.rebalance_rate[-1]), float(full.rebalance_rate[-1])
+    assert abs(f - a) < 1e-5 * abs(a)
+    assert abs(float(full.wave_angle[-1]) - 70.0 * DEG) < 1e-7
+
+
+def test_ftr_rate_noise_is_on_the_rate_read_out():
+    """With angle random walk N the FTR output's samples scatter by N/√Δt (the mean rate of
+    each interval) and the held wave angle does not wander."""
+    arw = 0.05 * DEG / 60.0  # 0.05 °/√h in rad/√s
+    gyro = hg.Gyro(resonator=PERFECT, control=Control(mode="ftr", drive="force"),
+                   noise=hg.Noise(angle_random_walk=arw))  # fmt: skip
+    rec = hg.simulate(gyro, hg.Profile.static(2000.0), dt_out=1.0, key=jax.random.key(3))
+    std = np.std(np.asarray(rec.rebalance_rate))
+    assert abs(std / arw - 1.0) < 0.1
+    assert np.ptp(np.asarray(rec.wave_angle)) < 1e-12
+
+
+def test_bad_mode_and_schedule_inputs_name_the_field():
+    with pytest.raises(ValueError, match="Control.mode must be one of"):
+        Control(mode="rate")
+    with pytest.raises(ValueError, match="free resonator"):
+        Control(mode="ftr", enabled=False)
+    with pytest.raises(ValueError, match="Profile.precession must have the shape"):
+        hg.Profile(t=[0.0, 1.0], rate=[0.0, 0.0], temperature=[20.0, 20.0],
+                   accel=np.zeros((2, 3)), precession=[0.0, 0.0, 0.0])  # fmt: skip
+    with pytest.raises(ValueError, match="dwell_s must be a positive"):
+        hg.Profile.held_angles([0.0, 90.0], dwell_s=0.0)
+    with pytest.raises(ValueError, match="rebalance_limit"):
+        hg.simulate(_ftr(PERFECT, rebalance_limit=-1.0), hg.Profile.static(1.0))
