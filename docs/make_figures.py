@@ -17,6 +17,7 @@ jax.config.update("jax_enable_x64", True)
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -279,6 +280,69 @@ def adjoint_memory():
     plt.close(fig)
 
 
+def ftr_run():
+    """A force-to-rebalance run of the default gyro: held at 70°, switched to 160° (mode
+    reversal) while the case turns at 0.01 °/s."""
+    gyro = hg.presets.tvg3_like(temperature_laws=False).in_mode("ftr")
+    prof = hg.Profile.held_angles([70.0, 160.0], dwell_s=300.0, slew_s=20.0, rate_dps=0.01)
+    rec = hg.simulate(gyro, prof, key=jax.random.key(0), dt_out=1.0)
+    t = np.asarray(rec.t)
+    fig, (a0, a1) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    a0.plot(t, np.asarray(rec.wave_angle) / hg.units.DEG, lw=1)
+    a0.set_ylabel("wave angle [° el.]")
+    a0.set_title("force-to-rebalance: the wave held at 70°, then at 160°")
+    rate = np.asarray(rec.rebalance_rate) / hg.units.DEG_PER_H
+    a1.plot(t, rate, lw=0.6, color="0.6", label="FTR output (1-s samples)")
+    k = 30
+    a1.plot(t[k // 2 : -k // 2 + 1], np.convolve(rate, np.ones(k) / k, "valid"), lw=1.5,
+            label="30-s mean")  # fmt: skip
+    a1.axhline(36.0, ls="--", color="k", lw=0.8, label="input 0.01 °/s = 36 °/h")
+    a1.set_ylim(30, 42)
+    a1.set_ylabel("rate [°/h]")
+    a1.set_xlabel("time [s]")
+    a1.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "ftr_run.png"), dpi=120)
+    plt.close(fig)
+
+
+def virtual_precession():
+    """The drift the sweeps identify at rest against the gyro's own static drift."""
+    from hrgjax.calibration import self_calibration as sc
+
+    gyro = hg.presets.tvg3_like()
+    key, bias = jax.random.split(jax.random.key(0))
+    temps = (-40.0, 20.0, 60.0)
+    data = sc.run_precession_plan(gyro, sc.precession_plan(temps), key=key, bias_key=bias)
+    comp = sc.PrecessionCompensator().fit(data)
+    switch_on = float(hg.noise.draw_run_bias(bias, gyro.noise))  # the session's own bias
+    angles = np.arange(-90.0, 91.0, 15.0)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    fine = np.linspace(-90.0, 90.0, 181)
+    for temp, color in zip(temps, ("C0", "C1", "C3"), strict=True):
+        clean = gyro.without_noise()
+        base = hg.Profile.static(60.0, temp)
+
+        def one(a, base=base, clean=clean):
+            p = eqx.tree_at(lambda q: q.wave_angle0, base, a)
+            return hg.simulate(clean, p, dt_out=1.0).wave_angle
+
+        wave = jax.vmap(one)(jnp.asarray(angles * hg.units.DEG))
+        wave = np.asarray(wave)
+        truth = -(wave[:, 50] - wave[:, 20]) / 30.0 / comp.k_e + switch_on
+        truth = truth / hg.units.DEG_PER_H
+        ax.plot(fine, comp.drift_dph(fine, temp), color=color, label=f"self-calibration {temp:+.0f} °C")
+        ax.plot(angles, truth, "o", color=color, ms=4)
+    ax.plot([], [], "o", color="k", ms=4, label="static runs without noise (+ the session's switch-on bias)")
+    ax.set_xlabel("measured wave angle [° electrical]")
+    ax.set_ylabel("drift at rest [°/h]")
+    ax.set_title("virtual precession at rest: the identified drift law")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "virtual_precession.png"), dpi=120)
+    plt.close(fig)
+
+
 FIGURES = (  # longest first (cold, 2 cores), so that the workers finish together
     diagnosis,
     vibration,
@@ -290,6 +354,8 @@ FIGURES = (  # longest first (cold, 2 cores), so that the workers finish togethe
     full_vs_averaged,
     allan,
     allan_model,
+    virtual_precession,
+    ftr_run,
     imu,
     bench_plan,
     design_budgets,

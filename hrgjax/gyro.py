@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -100,6 +102,11 @@ class Gyro(eqx.Module):
     def at(self, temperature_c) -> Gyro:
         """This gyro with every temperature law evaluated at `temperature_c` [°C]."""
         return evaluate_at(self, temperature_c)
+
+    def in_mode(self, mode: str) -> Gyro:
+        """The same gyro run in another operating mode: `"wa"` (whole-angle) or `"ftr"`
+        (force-to-rebalance; [`hrgjax.Control`][] `mode`)."""
+        return eqx.tree_at(lambda g: g.control, self, dataclasses.replace(self.control, mode=mode))
 
     def without_noise(self) -> Gyro:
         """The same gyro with its noise switched off."""

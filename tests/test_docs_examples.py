@@ -192,6 +192,7 @@ def test_full_only_blocks_run_with_HRGJAX_DOCS_FULL(page, line, why):
 HEAVY_PAGES = {
     "discovery.md": "260 s; tests/test_discovery_*.py, test_cli.py::test_discover_*",
     "fog.md": "156 s; tests/test_fog.py",
+    "modes.md": "≈ 60 s; tests/test_modes.py, test_self_calibration.py",
     "simulate.md": "150 s; tests/test_resonator_*.py, test_sweep.py, test_cli.py",
     "design.md": "145 s; tests/test_design*.py",
     "resonator.md": "143 s; tests/test_resonator_*.py, test_carrier.py",

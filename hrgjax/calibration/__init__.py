@@ -31,6 +31,14 @@ from .reduce import RateWindows as RateWindows
 from .reduce import reduce as reduce
 from .reduce import scale_factor_vs_angle as scale_factor_vs_angle
 from .reduce import static_drift as static_drift
+from .self_calibration import ModeReversal as ModeReversal
+from .self_calibration import PrecessionCompensator as PrecessionCompensator
+from .self_calibration import PrecessionPlan as PrecessionPlan
+from .self_calibration import mode_reversal as mode_reversal
+from .self_calibration import mode_reversal_data as mode_reversal_data
+from .self_calibration import precession_plan as precession_plan
+from .self_calibration import run_precession_plan as run_precession_plan
+from .self_calibration import run_reversal_plan as run_reversal_plan
 from .session import Comparison as Comparison
 from .session import Offset as Offset
 from .session import compare as compare

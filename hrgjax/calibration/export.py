@@ -25,13 +25,18 @@ from .evaluate import NoCompensation
 from .fourier import T_SCALE, FourierCompensator
 from .mlp import MLPCompensator
 from .physical import NAMES, PhysicalCompensator, plant_from_json, plant_to_json
+from .self_calibration import PrecessionCompensator
 
 FORMAT_VERSION = 3
 """Version of the `.eqx` and JSON files (2: the `.eqx` header holds the payload's length and
 SHA-256; 3: the SHA-256 covers the header too, so an edited hyperparameter is caught)."""
 _CLASSES = {
-    c.__name__: c for c in (FourierCompensator, MLPCompensator, PhysicalCompensator, NoCompensation)
-}
+    c.__name__: c
+    for c in (
+        FourierCompensator, MLPCompensator, PhysicalCompensator, NoCompensation,
+        PrecessionCompensator,
+    )
+}  # fmt: skip
 
 
 _HYPER_FIELDS = {
@@ -61,6 +66,10 @@ def _hyper(comp) -> dict:
              if comp.plant is not None else {})  # fmt: skip
     if isinstance(comp, NoCompensation):
         return {"k_e": comp.k_e}
+    if isinstance(comp, PrecessionCompensator):
+        return {"harmonics": comp.harmonics, "settle_s": comp.settle_s,
+                "temperature_bin": comp.temperature_bin, "k_e": comp.k_e,
+                "temperatures_c": list(comp.temperatures_c)}  # fmt: skip
     raise TypeError(f"cannot save a {type(comp).__name__}")
 
 
@@ -78,6 +87,10 @@ def _skeleton(name: str, hyper: dict):
         n = len(NAMES)
         return cls(**hyper, stats=stats, values=jnp.zeros(n), covariance=jnp.zeros((n, n)),
                    plant=plant)  # fmt: skip
+    if cls is PrecessionCompensator:
+        hyper = hyper | {"temperatures_c": tuple(hyper["temperatures_c"])}
+        shape = (len(hyper["temperatures_c"]), 2 * hyper["harmonics"] + 1)
+        return cls(**hyper, drift_coef=jnp.zeros(shape), gain_coef=jnp.zeros(shape))
     return cls(**hyper)
 
 
@@ -228,6 +241,16 @@ def to_json_dict(comp) -> dict:
             covariance=np.asarray(comp.covariance).tolist(),
             hyper=_hyper(comp),
         )
+    elif isinstance(comp, PrecessionCompensator):
+        base.update(
+            formula="at each temperature_c[k]: drift_k = c[k][0] + sum_n c[k][2n-1] cos(2n theta) "
+            "+ c[k][2n] sin(2n theta); linear in T between the temperatures, held beyond; "
+            "sf = 1 (virtual precession does not calibrate the scale factor)",
+            temperatures_c=list(comp.temperatures_c),
+            drift_coef=np.asarray(comp.drift_coef).tolist(),
+            gain_coef=np.asarray(comp.gain_coef).tolist(),
+            hyper=_hyper(comp),
+        )
     else:
         base["hyper"] = _hyper(comp)
     return base
@@ -274,4 +297,7 @@ def load_json(path: str | os.PathLike):
     if name == "PhysicalCompensator":
         values = f64([d["parameters"][n] for n in NAMES])
         return eqx.tree_at(lambda c: (c.values, c.covariance), comp, (values, f64(d["covariance"])))
+    if name == "PrecessionCompensator":
+        return eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef), comp,
+                           (f64(d["drift_coef"]), f64(d["gain_coef"])))  # fmt: skip
     return comp

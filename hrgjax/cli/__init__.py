@@ -25,6 +25,7 @@ from .calibrate import METHODS as METHODS
 from .calibrate import cmd_calibrate as cmd_calibrate
 from .calibrate import cmd_compare as cmd_compare
 from .calibrate import cmd_correct as cmd_correct
+from .calibrate import cmd_self_calibrate as cmd_self_calibrate
 from .discover import cmd_discover as cmd_discover
 from .ins import ACCEL_UNIT_NAMES as ACCEL_UNIT_NAMES
 from .ins import DIAGNOSIS_METHODS as DIAGNOSIS_METHODS
@@ -37,8 +38,8 @@ from .simulate import cmd_demo as cmd_demo
 from .simulate import cmd_design as cmd_design
 from .simulate import cmd_simulate as cmd_simulate
 
-COMMANDS = ("demo", "calibrate", "correct", "compare", "discover", "align", "diagnose",
-            "vibration", "simulate", "design", "imu-calibrate", "allan")  # fmt: skip
+COMMANDS = ("demo", "calibrate", "self-calibrate", "correct", "compare", "discover", "align",
+            "diagnose", "vibration", "simulate", "design", "imu-calibrate", "allan")  # fmt: skip
 """The subcommands, in the order `hrgjax --help` lists them; `hrgjax NAME` runs this
 module's `cmd_NAME` (dashes as underscores)."""
 EXAMPLES = {
@@ -46,6 +47,8 @@ EXAMPLES = {
     "simulate": "hrgjax simulate --preset tvg3 --plan seed --quick --out out/bench.csv",
     "calibrate": "hrgjax calibrate out/bench.csv --method fourier --out out/model.eqx "
     "(bench.csv from the simulate example)",
+    "self-calibrate": "hrgjax self-calibrate out/sweeps.csv --out out/self_cal.eqx (sweeps.csv "
+    "from hrgjax simulate --plan precession --quick --out out/sweeps.csv)",
     "correct": "hrgjax correct out/test.csv --model out/model.eqx --out out/corrected.csv "
     "--plot out/corrected.png (test.csv: a second session, e.g. the simulate example with "
     "--seed 1)",

@@ -52,6 +52,16 @@ def NONNEGATIVE_INT(text):  # noqa: N802 (an argparse type, named like the other
     return value
 
 
+def NONNEGATIVE_FLOAT(text):  # noqa: N802 (an argparse type, named like the others)
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number ≥ 0; got {text!r}") from None
+    if not (0 <= value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number ≥ 0; got {text}")
+    return value
+
+
 def option_name(dest: str) -> str:
     """The option as the user typed it: `DATA` for a positional file, else `--json-name`."""
     return dest.upper() if dest in ("data", "log", "imu_log") else "--" + dest.replace("_", "-")

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, NamedTuple
 from ..units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
 from ._common import (
     DATA_EXTENSIONS,
+    NONNEGATIVE_FLOAT,
     NONNEGATIVE_INT,
     PLOT_EXTENSIONS,
     POSITIVE_FLOAT,
@@ -328,5 +329,75 @@ def _compare_parser(sub):
     return p
 
 
-PARSERS = {"calibrate": _calibrate_parser, "correct": _correct_parser, "compare": _compare_parser}
+def cmd_self_calibrate(args) -> int:
+    """`hrgjax self-calibrate DATA`: calibrate from runs at rest — virtual-precession sweeps
+    (the drift compensator) or force-to-rebalance mode reversal (bias and anisotropy)."""
+    import numpy as np
+
+    data = load_data(args.data, args.allow_extra)
+    reversal = "rebalance_rate_dps" in data
+    if reversal:
+        start(args, [args.data], json=(".json",))
+    else:
+        args.json = args.json or os.path.splitext(args.out)[0] + ".json"
+        start(args, [args.data], out=(".eqx",), json=(".json",))
+    import json
+
+    from ..calibration import export_json, save_compensator
+    from ..calibration import self_calibration as sc
+
+    if reversal:
+        with usage_errors(args.data):
+            rows = sc.mode_reversal_data(data, settle_s=args.settle)
+        print(f"hrgjax self-calibrate: {args.data}: mode reversal in {len(rows)} runs")
+        print("    T [°C]   held at [°]     bias [°/h]   anisotropy at the first [°/h]")
+        for r in rows:
+            a0, a1 = (a + 0.0 for a in r["angles_deg"])  # no "-0.0"
+            print(f"    {r['temperature_c']:+6.1f}   {a0:6.1f}, {a1:6.1f}   {r['bias_dph']:+10.5f}"
+                  f"   {r['anisotropy_dph']:+10.5f}")  # fmt: skip
+
+        def write(path):
+            from .._io import atomic_write
+
+            with atomic_write(path, "w") as fh:
+                json.dump({"mode_reversal": rows}, fh, indent=1)
+            return f"the table to {path}"
+
+        return finish((args.json, write)) if args.json else 0
+    with usage_errors(args.data):
+        comp = sc.PrecessionCompensator(harmonics=args.harmonics, settle_s=args.settle).fit(data)
+    print(f"hrgjax self-calibrate: {args.data}: virtual-precession sweeps at "
+          f"{list(comp.temperatures_c)} °C")  # fmt: skip
+    angles = np.arange(-90.0, 90.0, 1.0)
+    print("    T [°C]   drift mean [°/h]   peak-to-peak [°/h]")
+    for t in comp.temperatures_c:
+        d = comp.drift_dph(angles, t)
+        print(f"    {t:+6.1f}   {np.mean(d):+10.4f}         {np.ptp(d):.4f}")
+    print("  scale factor: nominal (sweeps at rest do not calibrate it; see docs/modes.md)")
+    return finish((args.out, lambda p: save_compensator(comp, p)),
+                  (args.json, lambda p: export_json(comp, p)))  # fmt: skip
+
+
+def _self_calibrate_parser(sub):
+    """`hrgjax self-calibrate`'s parser."""
+    p = sub.add_parser(
+        "self-calibrate",
+        help="calibrate without a turntable: virtual-precession sweeps or FTR mode reversal",
+    )
+    p.add_argument("data", help="runs at rest: virtual-precession sweeps (a precession_dps "
+                   "column, whole-angle) or FTR holds (rebalance_rate_dps)")  # fmt: skip
+    p.add_argument("--out", default="out/self_cal.eqx",
+                   help="(sweeps) the fitted compensator (.eqx; for correct and compare)")  # fmt: skip
+    p.add_argument("--json", default=None,
+                   help="(sweeps) its JSON export, default beside --out; (reversal) the table")  # fmt: skip
+    p.add_argument("--harmonics", type=POSITIVE_INT, default=2,
+                   help="(sweeps) 2nθ harmonics of the drift (2: 2θ and 4θ)")  # fmt: skip
+    p.add_argument("--settle", type=NONNEGATIVE_FLOAT, default=30.0,
+                   help="time left out at the start of each sweep or hold [s]")  # fmt: skip
+    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    return p
+
+
+PARSERS = {"calibrate": _calibrate_parser, "correct": _correct_parser, "compare": _compare_parser,
+           "self-calibrate": _self_calibrate_parser}  # fmt: skip
 """Command → the function that adds its parser to the subparsers (`hrgjax.cli`)."""

@@ -60,19 +60,55 @@ def cmd_simulate(args) -> int:
     start(args, [args.plan_file], out=DATA_EXTENSIONS)
     from ..calibration import rotation_plan, seed_plan, static_plan
 
-    gyro = preset_gyro(args.preset, noise=not args.no_noise)
+    gyro = preset_gyro(args.preset, noise=not args.no_noise).in_mode(args.mode)
     if args.plan_file is not None:
         return _simulate_plan_file(args, gyro)
     if args.plan is None:
         args.plan = "static"
+    if args.plan in ("precession", "reversal"):
+        return _self_calibration_plan(args, gyro)
     if args.plan == "static":
         plans = [static_plan(duration_s=args.duration)]
     elif args.plan == "rotation":
         plans = [rotation_plan(duration_s=args.duration)]
     else:
         plans = list(seed_plan(quick=args.quick))
-    print(f"hrgjax simulate: preset {args.preset}, plan {args.plan}")
+    mode = "" if args.mode == "wa" else ", force-to-rebalance"
+    print(f"hrgjax simulate: preset {args.preset}{mode}, plan {args.plan}")
     data = _run_plans(gyro, plans, args.seed)
+    return finish((args.out, _rows(data)))
+
+
+def _self_calibration_plan(args, gyro) -> int:
+    """The plans of the self-calibration (case at rest): virtual-precession sweeps (±ρ at
+    each temperature, whole-angle) or mode reversal (held at θ and θ + 90°, FTR)."""
+    import jax
+
+    from ..calibration import self_calibration as sc
+    from ..calibration.experiment import QUICK_TEMPERATURES, SEED_TEMPERATURES
+
+    temps = QUICK_TEMPERATURES if args.quick else SEED_TEMPERATURES
+    key = jax.random.key(args.seed)
+    bias_key = jax.random.fold_in(key, 1)
+    t0 = time.perf_counter()
+    if args.plan == "precession":
+        if args.mode != "wa":
+            raise UsageError(
+                "--plan precession sweeps the wave in whole-angle mode: drop --mode ftr"
+            )
+        plan = sc.precession_plan(temps, args.precession)
+        print(f"hrgjax simulate: preset {args.preset}, virtual precession at ±{args.precession:g} "
+              f"°/s, {len(temps)} temperatures, {plan.size} sweeps × {plan.duration_s:g} s")  # fmt: skip
+        data = sc.run_precession_plan(gyro, plan, key=jax.random.fold_in(key, 10),
+                                      bias_key=bias_key)  # fmt: skip
+    else:
+        if args.mode != "ftr":
+            raise UsageError("--plan reversal holds the wave: add --mode ftr")
+        print(f"hrgjax simulate: preset {args.preset}, force-to-rebalance, mode reversal at "
+              f"{len(temps)} temperatures, held {args.duration:g} s at 0° and 90°")  # fmt: skip
+        data = sc.run_reversal_plan(gyro, temps, 0.0, args.duration,
+                                    key=jax.random.fold_in(key, 10), bias_key=bias_key)  # fmt: skip
+    print(f"  simulated in {time.perf_counter() - t0:.1f} s", flush=True)
     return finish((args.out, _rows(data)))
 
 
@@ -259,9 +295,20 @@ def _simulate_parser(sub):
         "resonator frozen at 20 °C with ideal loops, a perfect readout and no noise",
     )  # fmt: skip
     p.add_argument(
-        "--plan", default=None, choices=("static", "rotation", "seed"),
+        "--plan", default=None, choices=("static", "rotation", "seed", "precession", "reversal"),
         help="static (the default): 11 temperatures × 19 wave angles at rest; rotation: the "
-        "same at 5 °/s; seed: both, as seed 000's bench",
+        "same at 5 °/s; seed: both, as seed 000's bench; precession: virtual-precession "
+        "sweeps ±--precession at rest at each temperature (for self-calibrate); reversal: "
+        "held at 0° and 90° at each temperature (--mode ftr; --duration per hold)",
+    )  # fmt: skip
+    p.add_argument(
+        "--mode", default="wa", choices=("wa", "ftr"),
+        help="wa: whole-angle (the wave angle is the output); ftr: force-to-rebalance (the "
+        "wave held, the rate read from the rebalance force: column rebalance_rate_dps)",
+    )  # fmt: skip
+    p.add_argument(
+        "--precession", type=POSITIVE_FLOAT, default=0.5, metavar="DPS",
+        help="(--plan precession) commanded precession rate [°/s, electrical]",
     )  # fmt: skip
     p.add_argument(
         "--plan-file", default=None, metavar="PLAN.json",
@@ -276,7 +323,7 @@ def _simulate_parser(sub):
     p.add_argument(
         "--quick", action="store_true",
         help="(--plan seed) −40, +20, +60 °C × 19 wave angles, 120-s runs: 57 static and 57 "
-        "rotation runs",
+        "rotation runs; (--plan precession, reversal) −40, +20, +60 °C only",
     )  # fmt: skip
     p.add_argument("--no-noise", action="store_true", help="switch the gyro's noise off")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")

@@ -1,0 +1,503 @@
+r"""Calibration without a turntable: virtual precession at rest, and mode reversal in FTR.
+
+**Virtual precession** (docs/modes.md). With the case at rest in the chamber, a commanded
+node force turns the wave at ρ (a few tenths of a degree per second, electrical) in
+whole-angle mode, so it visits every angle. The measured angle then moves at
+
+$$\dot{\hat\theta} = S(\hat\theta)\,\rho + D_\theta(\hat\theta),$$
+
+where $D_\theta$ is the wave's own drift at rest seen through the readout (damping
+anisotropy, rate bias, the drive's and the readout's errors — what a static run at that
+angle measures) and $S$ the commanded precession's gain seen through the readout (the
+readout's scale factor × the forcers' gain on the node). Two sweeps, +ρ and −ρ, over the same
+angles separate the two: terms odd in ρ (the forcers' gain, the loops' lag) go into $S$, the
+rest into $D_\theta$. Both are Fourier series in 2θ (`harmonics`), fitted to the measured
+angle itself (not to its noisy differences): sample i of run r is
+
+$$\hat\theta_i = c_r + \sum_j s_j\int_{t_0}^{t_i}\rho\,b_j(\hat\theta)\,dt
+  + \sum_j d_j\int_{t_0}^{t_i}b_j(\hat\theta)\,dt,\qquad b = (1, \cos2\theta, \sin2\theta, …),$$
+
+linear least squares with one offset per run (each interval's integral exact for a wave
+turning uniformly between its two measured angles).
+The compensator's drift is $D = -D_\theta/k_{e,\rm nom}$ (the equivalent input rate at rest,
+as every compensator's) at each calibrated temperature, linear in temperature between them
+(held beyond). **What it cannot know: the scale factor.** The angular gain $k_e$ needs a
+rate (one rotation, or the Earth's), and $S$ is not the whole-angle scale factor: it is the
+readout's $d\hat\theta/d\theta$ times the forcers' gain on the node times the true over the
+estimated amplitude (the AGC holds the *estimate*; with a pickoff gain mismatch g,
+$S = (1 - 2g\cos2\theta)(1 + g\cos2\theta) \approx 1 - g\cos2\theta$), and these do not
+separate at rest. So `scale_factor` is the nominal 1 and $S$ is kept as `gain_coef` for
+inspection; the static drift, which needs no rate, is what the sweeps calibrate.
+
+**Mode reversal** ([`mode_reversal`][hrgjax.calibration.mode_reversal]):
+force-to-rebalance readings at θ and θ + 90° (electrical): the damping anisotropy's bias
+½Δ(1/τ)·sin 2(θ − θ_τ) changes sign, a rate (the input and the rate bias) does not.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import plausible
+from .._checks import check_finite
+from .._compiled import device
+from .._x64 import require_x64
+from ..data import MeasuredData
+from ..gyro import Gyro
+from ..profiles import Profile
+from ..units import DEG, DEG_PER_S, K_E_NOMINAL
+from ._compensator import AbstractCompensator
+from ._runs import RunGroup, simulate_runs, switch_on_keys
+from .experiment import QUICK_TEMPERATURES
+
+PRECESSION_DPS = 0.5
+"""Default commanded precession rate [°/s, electrical]: 180° in 6 min."""
+SETTLE_S = 30.0
+"""Default time left out at the start of each sweep [s]: the loops' transient (≥ 30/β)."""
+
+
+class PrecessionPlan(eqx.Module):
+    """Virtual-precession sweeps at rest: each point is one run at one chamber temperature,
+    the wave turned at a constant commanded rate.
+
+    **Arguments:**
+
+    - `temperature_c`: chamber temperature of each run [°C], shape (P,).
+    - `precession_dps`: commanded precession rate of each run [°/s, electrical], shape (P,).
+    - `wave_angle0_deg`: start angle of each run [° electrical], shape (P,).
+    - `duration_s`: length of every run [s] (one output grid).
+    - `dt_out`: output interval [s].
+    """
+
+    temperature_c: jax.Array
+    precession_dps: jax.Array
+    wave_angle0_deg: jax.Array
+    duration_s: float = eqx.field(static=True)
+    dt_out: float = eqx.field(static=True, default=1.0)
+
+    def __check_init__(self):
+        fields = (self.temperature_c, self.precession_dps, self.wave_angle0_deg)
+        if len({np.shape(x) for x in fields}) != 1 or np.ndim(self.temperature_c) != 1:
+            raise ValueError(
+                "PrecessionPlan.temperature_c, precession_dps and wave_angle0_deg must be 1-D "
+                f"of equal length; got {[np.shape(x) for x in fields]}"
+            )
+        if not (np.isfinite(self.duration_s) and self.duration_s > 0):
+            raise ValueError(f"PrecessionPlan.duration_s must be > 0 [s]; got {self.duration_s}")
+        if not (np.isfinite(self.dt_out) and 0 < self.dt_out <= self.duration_s):
+            raise ValueError(
+                f"PrecessionPlan.dt_out must be in (0, duration_s] [s]; got {self.dt_out}"
+            )
+        for name, x in zip(("temperature_c", "precession_dps", "wave_angle0_deg"), fields,
+                           strict=True):  # fmt: skip
+            check_finite(f"PrecessionPlan.{name}", x)
+        plausible.check("PrecessionPlan.temperature_c", self.temperature_c, "temperature_c")
+        plausible.check("PrecessionPlan.duration_s", self.duration_s, "duration_s")
+        if np.any(np.asarray(self.precession_dps) == 0):
+            raise ValueError("PrecessionPlan.precession_dps must be nonzero [°/s] in every run")
+
+    @property
+    def size(self) -> int:
+        """Number of runs."""
+        return int(np.shape(self.temperature_c)[0])
+
+    def profiles(self) -> Profile:
+        """A batch of profiles, one per run (leading axis P; the case at rest)."""
+        temp, rho, angle = (np.asarray(x, dtype=float) for x in
+                            (self.temperature_c, self.precession_dps, self.wave_angle0_deg))  # fmt: skip
+        ones = np.ones((self.size, 2))
+        one = Profile.virtual_precession(1.0, self.duration_s)
+        return eqx.tree_at(
+            lambda p: (p.t, p.rate, p.temperature, p.accel, p.wave_angle0, p.precession),
+            one,
+            (
+                device(ones * np.array([0.0, self.duration_s])),
+                device(np.zeros((self.size, 2))),
+                device(ones * temp[:, None]),
+                device(np.zeros((self.size, 2, 3))),
+                device(angle * DEG),
+                device(ones * rho[:, None] * DEG_PER_S),
+            ),
+        )
+
+
+def precession_plan(
+    temperatures_c=QUICK_TEMPERATURES,
+    precession_dps: float = PRECESSION_DPS,
+    turns: int = 1,
+    settle_s: float = SETTLE_S,
+    dt_out: float = 1.0,
+) -> PrecessionPlan:
+    """Two sweeps at each chamber temperature, case at rest: +`precession_dps` from −90°
+    and −`precession_dps` from +90° (electrical), each over `turns` × 180° after `settle_s`
+    [s] of settling — every angle the drift's 2θ and 4θ terms have, seen in both directions.
+    At the default 0.5 °/s a sweep takes 6.5 min."""
+    temps = np.asarray(temperatures_c, dtype=float).ravel()
+    if temps.size == 0 or not np.all(np.isfinite(temps)):
+        raise ValueError(f"temperatures_c must be finite temperatures [°C]; got {temperatures_c!r}")
+    if not (np.isfinite(precession_dps) and precession_dps > 0):
+        raise ValueError(f"precession_dps must be a positive rate [°/s]; got {precession_dps!r}")
+    if not (isinstance(turns, int) and turns >= 1):
+        raise ValueError(f"turns must be a whole number ≥ 1 of half turns; got {turns!r}")
+    if not (np.isfinite(settle_s) and settle_s >= 0):
+        raise ValueError(f"settle_s must be ≥ 0 [s]; got {settle_s!r}")
+    margin = precession_dps * settle_s
+    duration = settle_s + 180.0 * turns / precession_dps
+    rho = np.tile([precession_dps, -precession_dps], temps.size)
+    start = np.tile([-90.0 - margin, -90.0 + 180.0 * turns + margin], temps.size)
+    return PrecessionPlan(
+        temperature_c=device(np.repeat(temps, 2)),
+        precession_dps=device(rho),
+        wave_angle0_deg=device(start),
+        duration_s=float(duration),
+        dt_out=float(dt_out),
+    )
+
+
+def run_precession_plan(
+    gyro: Gyro,
+    plan: PrecessionPlan,
+    *,
+    key: jax.Array | None = None,
+    bias_key: jax.Array | None = None,
+    model: str = "averaged",
+    first_run: int = 0,
+) -> MeasuredData:
+    """Simulate every sweep of `plan` on `gyro` (whole-angle mode, one switch-on) and return
+    the data, with the commanded rate in the column `precession_dps`; runs numbered from
+    `first_run`. Keys as [`run_plan`][hrgjax.calibration.run_plan]."""
+    if gyro.control.mode != "wa":
+        raise ValueError("virtual-precession sweeps run in whole-angle mode: give a gyro with "
+                         f"Control(mode='wa'); got mode={gyro.control.mode!r}")  # fmt: skip
+    n_out = int(round(plan.duration_s / plan.dt_out)) + 1
+    plausible.check_size("run_precession_plan", float(n_out) * plan.size, plan.size)
+    batch = jax.tree_util.tree_map(np.asarray, plan.profiles())
+    keys, bias_key = switch_on_keys(gyro, key, bias_key, plan.size)
+    chunk = min(32, plan.size)
+    return simulate_runs(
+        gyro,
+        [RunGroup(np.arange(n_out) * plan.dt_out, np.arange(plan.size), chunk)],
+        lambda take, _: jax.tree_util.tree_map(lambda x: x[take], batch),
+        keys,
+        bias_key,
+        model,
+        samples=np.full(plan.size, n_out),
+        failure=lambda take, message: f"run_precession_plan: {message}",
+        unit="sweep",
+        first_run=first_run,
+    )
+
+
+def angle_basis(theta, harmonics: int):
+    """(…, 2·harmonics + 1): 1, cos 2θ, sin 2θ, …, cos 2Nθ, sin 2Nθ of θ [rad]."""
+    cols = [jnp.ones_like(theta)]
+    for n in range(1, harmonics + 1):
+        cols += [jnp.cos(2 * n * theta), jnp.sin(2 * n * theta)]
+    return jnp.stack(cols, axis=-1)
+
+
+def fit_sweeps(t, wave_angle, precession, weight, harmonics: int = 2):
+    r"""The sweeps' least squares (module docstring), differentiable: `t` [s], `wave_angle`
+    [rad, measured], `precession` [rad/s, commanded] of R runs × n samples, `weight` (R, n)
+    1 for a sample used, 0 for one left out (the settling); every run's integrals start at
+    its first used sample. **Returns** `(s, d)`: the gain S and drift $D_\theta$ [rad/s,
+    electrical] coefficients on [`angle_basis`][hrgjax.calibration.self_calibration.angle_basis],
+    shape (2·harmonics + 1,) each."""
+    # Each interval's mean of b along a wave turning uniformly from θ_i to θ_{i+1} — exact
+    # for that path: cos/sin 2kθ_m · sinc(kΔθ) (a trapezoid would err by (2kΔθ)²/12).
+    mid = 0.5 * (wave_angle[:, 1:] + wave_angle[:, :-1])
+    half = 0.5 * jnp.diff(wave_angle, axis=-1)
+    cols = [jnp.ones_like(mid)]
+    for k in range(1, harmonics + 1):
+        damp = jnp.sinc(2 * k * half / jnp.pi)
+        cols += [jnp.cos(2 * k * mid) * damp, jnp.sin(2 * k * mid) * damp]
+    mean_b = jnp.stack(cols, axis=-1)  # (R, n − 1, J)
+    dt = jnp.diff(t, axis=-1)[..., None]
+    used = (weight[:, :-1] * weight[:, 1:])[..., None]  # intervals between two used samples
+    mean_rho = 0.5 * (precession[:, 1:] + precession[:, :-1])[..., None]
+
+    def cumulative(inc):  # ∫ dt from the run's first used sample
+        inc = inc * dt * used
+        return jnp.concatenate([jnp.zeros_like(inc[:, :1]), jnp.cumsum(inc, axis=1)], axis=1)
+
+    phi_s = cumulative(mean_rho * mean_b)
+    phi_d = cumulative(mean_b)
+    r = t.shape[0]
+    offsets = jnp.broadcast_to(jnp.eye(r)[:, None, :], (r, t.shape[1], r))
+    design = jnp.concatenate([phi_s, phi_d, offsets], axis=-1)  # (R, n, 2J + R)
+    w = weight.reshape(-1)[:, None]
+    a = design.reshape(-1, design.shape[-1]) * w
+    y = wave_angle.reshape(-1) * w[:, 0]
+    scale = jnp.sqrt(jnp.sum(a * a, axis=0)) + 1e-300  # columns equilibrated
+    coef = jnp.linalg.lstsq(a / scale[None, :], y)[0] / scale
+    j = mean_b.shape[-1]
+    return coef[:j], coef[j : 2 * j]
+
+
+class PrecessionCompensator(AbstractCompensator):
+    """The compensator a virtual-precession self-calibration gives (module docstring):
+    the drift as a Fourier series in the measured angle at each calibrated temperature,
+    linear in temperature between them (held beyond the ends); the nominal scale factor.
+
+    **Arguments:**
+
+    - `harmonics`: N, number of 2nθ harmonics fitted (2: the 2θ and 4θ terms).
+    - `settle_s`: time left out at the start of every sweep [s].
+    - `temperature_bin`: sweeps are grouped by mean temperature rounded to this [°C].
+    - `k_e`: nominal angular gain.
+    - `temperatures_c`: calibrated temperatures [°C] (set by `fit`).
+    - `drift_coef`: (K, 2N + 1) coefficients of the drift (equivalent input rate [rad/s]);
+      `gain_coef`: of the commanded precession's gain S (module docstring); `None` before
+      `fit`. The scale factor is the nominal 1: the sweeps do not calibrate it.
+    """
+
+    harmonics: int = eqx.field(static=True, default=2)
+    settle_s: float = eqx.field(static=True, default=SETTLE_S)
+    temperature_bin: float = eqx.field(static=True, default=1.0)
+    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    temperatures_c: tuple[float, ...] = eqx.field(static=True, default=())
+    drift_coef: jax.Array | None = None
+    gain_coef: jax.Array | None = None
+
+    def __check_init__(self):
+        if not (isinstance(self.harmonics, int) and self.harmonics >= 1):
+            raise ValueError(f"harmonics must be a whole number ≥ 1; got {self.harmonics!r}")
+        if not (np.isfinite(self.settle_s) and self.settle_s >= 0):
+            raise ValueError(f"settle_s must be ≥ 0 [s]; got {self.settle_s!r}")
+        if not (np.isfinite(self.temperature_bin) and self.temperature_bin > 0):
+            raise ValueError(f"temperature_bin must be > 0 [°C]; got {self.temperature_bin!r}")
+
+    @property
+    def name(self) -> str:
+        """Short label used in tables."""
+        return "virtual precession"
+
+    def _at(self, coef, theta, temperature_c):
+        if coef is None:
+            raise ValueError("this PrecessionCompensator is not fitted; use comp = comp.fit(data)")
+        basis = angle_basis(theta, self.harmonics)  # (…, J)
+        if len(self.temperatures_c) == 1:
+            return basis @ coef[0]
+        temps = jnp.asarray(self.temperatures_c, dtype=float)
+        tc = jnp.clip(temperature_c, temps[0], temps[-1])
+        i = jnp.clip(jnp.searchsorted(temps, tc, side="right") - 1, 0, temps.shape[0] - 2)
+        frac = ((tc - temps[i]) / (temps[i + 1] - temps[i]))[..., None]
+        return jnp.sum(basis * (coef[i] + (coef[i + 1] - coef[i]) * frac), axis=-1)
+
+    def drift(self, theta, temperature_c):
+        return self._at(self.drift_coef, theta, temperature_c)
+
+    def scale_factor(self, theta, temperature_c):
+        """The nominal 1: sweeps at rest do not calibrate the scale factor (module docstring)."""
+        return jnp.ones_like(theta + temperature_c)
+
+    def fit(self, data, *, key=None, raw=None) -> PrecessionCompensator:
+        """Fit to virtual-precession sweeps at rest (`data` with a `precession_dps` column,
+        from [`run_precession_plan`][hrgjax.calibration.run_precession_plan]
+        or a gyro's own sweeps); `key` and `raw` are not used.
+
+        **Raises:** `ValueError` for data without the column, a temperature without sweeps
+        in both directions, or sweeps too short for the harmonics."""
+        require_x64("PrecessionCompensator.fit")
+        if not isinstance(data, MeasuredData):
+            raise TypeError("PrecessionCompensator.fit needs MeasuredData (the sweeps' samples)")
+        if "precession_dps" not in data:
+            raise ValueError(
+                "self-calibration needs virtual-precession data: a 'precession_dps' column "
+                "(the commanded rate [°/s]; run_precession_plan or hrgjax simulate --precession)"
+            )
+        groups = _sweeps_by_temperature(data, self.temperature_bin, self.settle_s)
+        temps, drift, sf = [], [], []
+        for temp, runs in groups:
+            t, th, rho, w = _padded(runs)
+            s, d = fit_sweeps(device(t), device(th), device(rho), device(w), self.harmonics)
+            temps.append(temp)
+            drift.append(-np.asarray(d) / self.k_e)
+            sf.append(np.asarray(s))
+        return eqx.tree_at(
+            lambda c: (c.drift_coef, c.gain_coef),
+            PrecessionCompensator(
+                harmonics=self.harmonics,
+                settle_s=self.settle_s,
+                temperature_bin=self.temperature_bin,
+                k_e=self.k_e,
+                temperatures_c=tuple(temps),
+            ),  # fmt: skip
+            (jnp.asarray(np.stack(drift)), jnp.asarray(np.stack(sf))),
+            is_leaf=lambda x: x is None,
+        )
+
+
+def _sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
+    """[(temperature [°C], [(t, θ, ρ, used) per run])] sorted by temperature, each with runs
+    turning both ways."""
+    by_temp: dict[float, list] = {}
+    for idx in data.run_indices():
+        t = data["time_s"][idx]
+        rho = data["precession_dps"][idx] * DEG_PER_S
+        if np.all(rho == 0):
+            continue  # a static run: nothing to sweep
+        temp = float(np.round(np.mean(data["temperature_c"][idx]) / bin_c) * bin_c)
+        used = (t - t[0] >= settle_s) & (rho != 0)
+        by_temp.setdefault(temp, []).append((t, data["wave_angle_deg"][idx] * DEG, rho, used))
+    if not by_temp:
+        raise ValueError("no virtual-precession sweeps in the data (every precession_dps is 0)")
+    out = []
+    for temp in sorted(by_temp):
+        runs = by_temp[temp]
+        signs = {float(np.sign(np.median(r[2][r[3]]))) for r in runs if r[3].sum() > 0}
+        if signs != {1.0, -1.0}:
+            raise ValueError(
+                f"at {temp:g} °C the sweeps turn one way only; the drift and the forcers' gain "
+                "separate only with sweeps in both directions (precession_plan runs ±ρ)"
+            )
+        if min(int(r[3].sum()) for r in runs) < 20:
+            raise ValueError(f"at {temp:g} °C a sweep keeps fewer than 20 samples after settle_s")
+        out.append((temp, runs))
+    return out
+
+
+def _padded(runs):
+    """Runs stacked to one length (the shorter padded with weight 0)."""
+    n = max(len(r[0]) for r in runs)
+
+    def pad(x, fill):
+        return np.concatenate([x, np.full(n - len(x), fill if np.isscalar(fill) else x[-1])])
+
+    t = np.stack([pad(r[0], r[0][-1]) + np.arange(n) * 0.0 for r in runs])
+    for k, r in enumerate(runs):  # padded times keep increasing (zero-weight samples)
+        t[k, len(r[0]) :] = r[0][-1] + np.arange(1, n - len(r[0]) + 1)
+    th = np.stack([pad(r[1], r[1][-1]) for r in runs])
+    rho = np.stack([pad(r[2], 0.0) for r in runs])
+    w = np.stack([pad(r[3].astype(float), 0.0) for r in runs])
+    return t, th, rho, w
+
+
+class ModeReversal(eqx.Module):
+    """Force-to-rebalance readings at two held angles θ and θ + 90° (electrical).
+
+    - `angles_deg`: the two held angles [°].
+    - `readings`: the mean FTR output held at each [rad/s].
+    - `bias`: their mean, the rate with the damping anisotropy's bias cancelled [rad/s].
+    - `anisotropy`: half their difference, the damping anisotropy's bias at θ [rad/s].
+    """
+
+    angles_deg: tuple[float, float] = eqx.field(static=True)
+    readings: jax.Array
+    bias: jax.Array
+    anisotropy: jax.Array
+
+
+def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -> ModeReversal:
+    """Reduce an FTR run held at two angles 90° apart (electrical;
+    [`Profile.held_angles`][hrgjax.Profile.held_angles]) to the rate bias and the damping
+    anisotropy's bias: each hold's mean output after `settle_s` [s], their mean and half
+    difference. `t` [s] and `rebalance_rate` [rad/s] as in the record (jax arrays pass:
+    the reduction is differentiable)."""
+    windows = profile.hold_windows(settle_s)
+    if len(windows) != 2:
+        raise ValueError(
+            f"mode_reversal needs a profile with two holds; this one has {len(windows)}"
+        )
+    theta0 = float(profile.wave_angle0) / DEG
+    turn = float(profile.commanded_angle_at(profile.t[-1])) / DEG - theta0
+    if abs(abs(turn) - 90.0) > 1e-6:
+        raise ValueError(f"the holds must be 90° apart (electrical); these are {turn:g}° apart")
+    t = jnp.asarray(t)
+    r = jnp.asarray(rebalance_rate)
+    means = []
+    for start, end in windows:
+        m = ((t >= start) & (t <= end)).astype(r.dtype)
+        means.append(jnp.sum(m * r) / jnp.sum(m))
+    readings = jnp.stack(means)
+    return ModeReversal(
+        angles_deg=(round(theta0, 9), round(theta0 + turn, 9)),
+        readings=readings,
+        bias=0.5 * (readings[0] + readings[1]),
+        anisotropy=0.5 * (readings[0] - readings[1]),
+    )
+
+
+def run_reversal_plan(
+    gyro: Gyro,
+    temperatures_c=QUICK_TEMPERATURES,
+    angle_deg: float = 0.0,
+    dwell_s: float = 180.0,
+    slew_s: float = 20.0,
+    *,
+    key: jax.Array | None = None,
+    bias_key: jax.Array | None = None,
+    first_run: int = 0,
+) -> MeasuredData:
+    """Mode reversal at each chamber temperature, case at rest: one force-to-rebalance run
+    per temperature held at `angle_deg` and at `angle_deg` + 90° (electrical) for `dwell_s`
+    [s] each, moved by a `slew_s` [s] commanded precession
+    ([`Profile.held_angles`][hrgjax.Profile.held_angles]). The data carry the FTR output
+    `rebalance_rate_dps` and the schedule `precession_dps`; reduce them with
+    [`mode_reversal_data`][hrgjax.calibration.mode_reversal_data]."""
+    if gyro.control.mode != "ftr":
+        raise ValueError("mode reversal holds the wave: give a gyro in force-to-rebalance mode "
+                         "(gyro.in_mode('ftr'))")  # fmt: skip
+    temps = np.asarray(temperatures_c, dtype=float).ravel()
+    if temps.size == 0 or not np.all(np.isfinite(temps)):
+        raise ValueError(f"temperatures_c must be finite temperatures [°C]; got {temperatures_c!r}")
+    profiles = [
+        Profile.held_angles([angle_deg, angle_deg + 90.0], dwell_s, slew_s, t) for t in temps
+    ]
+    batch = jax.tree_util.tree_map(lambda *x: np.stack(x), *profiles)
+    ts = np.arange(0.0, float(profiles[0].t[-1]) + 0.5, 1.0)
+    keys, bias_key = switch_on_keys(gyro, key, bias_key, temps.size)
+    return simulate_runs(
+        gyro,
+        [RunGroup(ts, np.arange(temps.size), min(32, temps.size))],
+        lambda take, _: jax.tree_util.tree_map(lambda x: device(x[take]), batch),
+        keys,
+        bias_key,
+        "averaged",
+        samples=np.full(temps.size, ts.size),
+        failure=lambda take, message: f"run_reversal_plan: {message}",
+        unit="run",
+        first_run=first_run,
+    )
+
+
+def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]:
+    """[`mode_reversal`][hrgjax.calibration.mode_reversal] on every run of FTR data held at
+    two angles (the holds found where `precession_dps` is 0): per run
+    `{"run", "temperature_c", "angles_deg", "readings_dph", "bias_dph", "anisotropy_dph"}`
+    [°, °/h]. **Raises:** `ValueError` without the FTR output or the schedule, or for a run
+    with other than two holds 90° apart."""
+    for name in ("rebalance_rate_dps", "precession_dps"):
+        if name not in data:
+            raise ValueError(f"mode reversal needs force-to-rebalance data with a {name!r} column "
+                             "(hrgjax simulate --mode ftr --plan reversal)")  # fmt: skip
+    out = []
+    for idx in data.run_indices():
+        t = data["time_s"][idx]
+        rho = data["precession_dps"][idx]
+        still = rho == 0
+        # holds: maximal stretches of zero commanded precession
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
+        holds = [(t[a] + settle_s, t[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)
+                 if t[b - 1] - t[a] > settle_s]  # fmt: skip
+        run = int(data["run"][idx[0]])
+        if len(holds) != 2:
+            raise ValueError(f"run {run}: mode reversal needs two holds; found {len(holds)}")
+        turn = float(np.sum(0.5 * (rho[1:] + rho[:-1]) * np.diff(t)))
+        if abs(abs(turn) - 90.0) > 0.5:
+            raise ValueError(f"run {run}: the holds are {turn:.3g}° apart; mode reversal needs 90°")
+        rate = data["rebalance_rate_dps"][idx] * 3600.0
+        readings = [float(np.mean(rate[(t >= a) & (t <= b)])) for a, b in holds]
+        first = data["wave_angle_deg"][idx][(t >= holds[0][0]) & (t <= holds[0][1])].mean()
+        out.append({
+            "run": run,
+            "temperature_c": float(np.mean(data["temperature_c"][idx])),
+            "angles_deg": [round(float(first), 3), round(float(first) + turn, 3)],
+            "readings_dph": readings,
+            "bias_dph": 0.5 * (readings[0] + readings[1]),
+            "anisotropy_dph": 0.5 * (readings[0] - readings[1]),
+        })  # fmt: skip
+    return out

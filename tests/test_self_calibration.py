@@ -1,0 +1,208 @@
+"""Self-calibration without a turntable (hrgjax.calibration.self_calibration): the sweeps'
+least squares against a known answer, the compensator against the gyro's own static drift,
+its gradient against finite differences, and mode reversal."""
+
+import json
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import cli_fails
+
+import hrgjax as hg
+from hrgjax.calibration import self_calibration as sc
+from hrgjax.units import DEG, DEG_PER_H, DEG_PER_S
+
+BASE = hg.presets.tvg3_like(temperature_laws=False, noise=False)
+
+
+def _integrate(s, d, rho, theta0, t):
+    """θ(t) of θ̇ = S(θ)ρ + D(θ) by RK4 on a 20× finer grid (a second method)."""
+    c = rho * s + d
+    f = lambda th: c[0] + c[1] * np.cos(2 * th) + c[2] * np.sin(2 * th) + c[3] * np.cos(
+        4 * th) + c[4] * np.sin(4 * th)  # fmt: skip
+    out, th = [theta0], theta0
+    for a, b in zip(t[:-1], t[1:], strict=True):
+        h = (b - a) / 20
+        for _ in range(20):
+            k1 = f(th)
+            k2 = f(th + 0.5 * h * k1)
+            k3 = f(th + 0.5 * h * k2)
+            k4 = f(th + h * k3)
+            th = th + h * (k1 + 2 * k2 + 2 * k3 + k4) / 6
+        out.append(th)
+    return np.asarray(out)
+
+
+def test_fit_sweeps_recovers_a_known_gain_and_drift():
+    """Two sweeps ±ρ of θ̇ = S(θ)ρ + D(θ) integrated independently: the coefficients come
+    back to 1e-7 of S and 1e-5 of D's peak (the path's curvature within a step), whatever the start angles and offsets."""
+    s = np.array([1.01, -0.01, 0.004, 0.001, -0.0005])
+    d = np.array([2e-6, 1e-6, -3e-6, 5e-7, 2e-7])  # rad/s: the drift at rest
+    rho = 1.0 * DEG_PER_S
+    t = np.arange(0.0, 200.0, 1.0)
+    up = _integrate(s, d, rho, -1.6, t)
+    down = _integrate(s, d, -rho, 1.7, t)
+    used = np.ones((2, t.size))
+    used[:, :5] = 0.0  # the settling left out
+    fit_s, fit_d = sc.fit_sweeps(jnp.asarray(np.stack([t, t])), jnp.asarray(np.stack([up, down])),
+                                 jnp.asarray(np.array([[rho], [-rho]]) * np.ones(t.size)),
+                                 jnp.asarray(used))  # fmt: skip
+    np.testing.assert_allclose(np.asarray(fit_s), s, atol=1e-7)
+    np.testing.assert_allclose(np.asarray(fit_d), d, atol=1e-5 * np.max(np.abs(d)))
+
+
+@pytest.fixture(scope="module")
+def sweeps():
+    plan = sc.precession_plan((20.0,), precession_dps=1.0, settle_s=15.0)
+    return sc.run_precession_plan(BASE, plan)
+
+
+def test_self_calibration_reads_the_gyros_static_drift(sweeps):
+    """Sweeps at rest, the default gyro's defects: the compensator's drift at every angle
+    equals what a static whole-angle run at that angle reads (−θ̂̇/k_e,nom over its first
+    20 s), to 1 % of the drift's peak-to-peak (what is left grows as ρ²: 0.54 % at 1 °/s,
+    0.13 % at the default 0.5 °/s — a term even in ρ lands in the drift)."""
+    comp = sc.PrecessionCompensator().fit(sweeps)
+    assert comp.temperatures_c == (20.0,)
+    assert "precession_dps" in sweeps and np.all(np.abs(sweeps["precession_dps"]) == 1.0)
+    angles = np.arange(-90.0, 90.0, 15.0)
+
+    def static(theta):
+        p = eqx.tree_at(lambda p: p.wave_angle0, hg.Profile.static(40.0), theta)
+        return hg.simulate(BASE, p, dt_out=1.0).wave_angle
+
+    wave = np.asarray(jax.vmap(static)(jnp.asarray(angles * DEG)))
+    truth = -(wave[:, 40] - wave[:, 20]) / 20.0 / comp.k_e
+    got = comp.drift_dph(wave[:, 30] / DEG, 20.0) * DEG_PER_H
+    assert np.max(np.abs(got - truth)) < 0.01 * np.ptp(truth), (got / DEG_PER_H, truth / DEG_PER_H)
+    # the gain S: the readout's scale factor 1 − 2g cos 2θ times the true over the estimated
+    # amplitude the AGC holds, 1 + g cos 2θ (g = 0.46 % at 20 °C; forcers ideal): 1 − g cos 2θ
+    g = float(BASE.readout.gain_mismatch)
+    np.testing.assert_allclose(np.asarray(comp.gain_coef[0, :3]), [1.0, -g, 0.0], atol=1e-4)
+    np.testing.assert_array_equal(comp.scale_factor_at(angles, 20.0), 1.0)
+
+
+def _sweep_jacobian(mode):
+    """d(fitted 2θ drift coefficients)/d(Δ(1/τ), θ_τ) through the simulated sweeps and the
+    least squares (`mode` "forward" or "reverse"), and central finite differences."""
+    plan = sc.precession_plan((20.0,), precession_dps=3.0, settle_s=10.0, dt_out=1.0)
+    profiles = plan.profiles()
+    ts = jnp.arange(0.0, plan.duration_s + 0.5, 1.0)
+    used = (ts >= 10.0).astype(float)[None, :] * jnp.ones((2, 1))
+    rho = jnp.asarray(np.asarray(plan.precession_dps)[:, None] * DEG_PER_S) * jnp.ones_like(used)
+    options = dict(ts=ts, fixed_step=0.5)
+    if mode == "forward":
+        options["adjoint"] = diffrax.ForwardMode()
+
+    def estimate(params):
+        gyro = eqx.tree_at(lambda g: (g.resonator.delta_inv_tau, g.resonator.theta_tau),
+                           BASE, (params[0] * 1e-5, params[1]))  # fmt: skip
+        rec = jax.vmap(lambda p: hg.simulate(gyro, p, **options))(profiles)
+        _, d = sc.fit_sweeps(rec.t, rec.wave_angle, rho, used)
+        return jnp.stack([d[1], d[2]]) * 1e6  # the 2θ terms of the drift [µrad/s]
+
+    x = jnp.array([float(BASE.resonator.delta_inv_tau) * 1e5, float(BASE.resonator.theta_tau)])
+    jac = np.asarray(jax.jit((jax.jacfwd if mode == "forward" else jax.jacrev)(estimate))(x))
+    estimate = jax.jit(estimate)
+    fd = np.zeros_like(jac)
+    h = 1e-4
+    for j in range(2):
+        e = np.zeros(2)
+        e[j] = h
+        fd[:, j] = (np.asarray(estimate(x + e)) - np.asarray(estimate(x - e))) / (2 * h)
+    return jac, fd
+
+
+def test_self_calibration_estimate_is_differentiable_in_the_gyros_defects():
+    """The self-calibration's drift estimate, differentiated through the simulated sweeps
+    and the least squares (forward mode), equals central finite differences to 1e-6."""
+    jac, fd = _sweep_jacobian("forward")
+    np.testing.assert_allclose(jac, fd, rtol=1e-6, atol=1e-6 * np.max(np.abs(fd)))
+
+
+@pytest.mark.slow(
+    "~50 s on two cores: the reverse pass through the checkpointed sweeps compiled; fast "
+    "tier: the same Jacobian by forward mode (test_self_calibration_estimate_is_"
+    "differentiable_in_the_gyros_defects)"
+)
+def test_self_calibration_gradient_by_reverse_mode():
+    """As above, by reverse mode (the recursive-checkpoint adjoint): equals finite
+    differences to 1e-6."""
+    jac, fd = _sweep_jacobian("reverse")
+    np.testing.assert_allclose(jac, fd, rtol=1e-6, atol=1e-6 * np.max(np.abs(fd)))
+
+
+def test_mode_reversal_reduces_a_held_angle_run():
+    """`mode_reversal` on an FTR run held at θ and θ + 90°: the bias is the rate bias and the
+    anisotropy half the difference, to 1e-6 of the anisotropy's bias (PHYSICS.md §4.1)."""
+    bias = 0.3 * DEG_PER_H
+    ctl = hg.Control(mode="ftr", drive="force")
+    gyro = hg.Gyro(resonator=BASE.resonator, control=ctl, rate_bias=bias)
+    prof = hg.Profile.held_angles([40.0, 130.0], dwell_s=60.0, slew_s=10.0)
+    rec = hg.simulate(gyro, prof, dt_out=1.0, rtol=1e-10, atol=1e-12)
+    # the reading is scaled by ω/ω_r (the Duffing pull on the PLL, 2e-6): taken out here
+    out = sc.mode_reversal(rec.t, rec.rebalance_rate * rec.frequency / BASE.resonator.omega, prof)
+    res = BASE.resonator
+    law = -0.5 * res.delta_inv_tau * np.sin(2 * (40.0 * DEG - res.theta_tau)) / res.k_e
+    assert out.angles_deg == (40.0, 130.0)
+    assert abs(float(out.bias) - bias) < 1e-6 * abs(law)
+    assert abs(float(out.anisotropy) - law) < 1e-6 * abs(law)
+
+
+def test_self_calibration_inputs_are_named():
+    with pytest.raises(ValueError, match="precession_dps must be a positive"):
+        sc.precession_plan(precession_dps=0.0)
+    with pytest.raises(ValueError, match="turns must be"):
+        sc.precession_plan(turns=0)
+    data = hg.MeasuredData({"time_s": np.arange(5.0), "temperature_c": np.full(5, 20.0),
+                            "table_rate_dps": np.zeros(5), "wave_angle_deg": np.zeros(5)})  # fmt: skip
+    with pytest.raises(ValueError, match="needs virtual-precession data"):
+        sc.PrecessionCompensator().fit(data)
+    one_way = hg.MeasuredData(data.columns | {"precession_dps": np.full(5, 1.0)})
+    with pytest.raises(ValueError, match="one way only"):
+        sc.PrecessionCompensator(settle_s=0.0).fit(one_way)
+    with pytest.raises(ValueError, match="two holds"):
+        sc.mode_reversal(np.arange(3.0), np.zeros(3), hg.Profile.static(2.0))
+    with pytest.raises(ValueError, match="90° apart"):
+        sc.mode_reversal(np.arange(3.0), np.zeros(3), hg.Profile.held_angles([0.0, 60.0], 60.0))
+
+
+def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, capsys):
+    """`hrgjax self-calibrate` on sweeps writes the compensator the Python fit gives (and
+    `correct` reads it); on FTR holds (`simulate --mode ftr --plan reversal`) it prints and
+    writes the bias and anisotropy; either with the wrong data is one clear line."""
+    from hrgjax.calibration import load_compensator
+    from hrgjax.cli import main
+
+    path = sweeps.save(tmp_path / "sweeps.csv")
+    model = tmp_path / "self.eqx"
+    assert main(["self-calibrate", str(path), "--out", str(model), "--settle", "15"]) == 0
+    comp = load_compensator(model)
+    direct = sc.PrecessionCompensator(settle_s=15.0).fit(hg.load(path))
+    np.testing.assert_allclose(np.asarray(comp.drift_coef), np.asarray(direct.drift_coef))
+    assert "virtual-precession sweeps at [20.0] °C" in capsys.readouterr().out
+    assert main(["correct", str(path), "--model", str(model), "--out",
+                 str(tmp_path / "c.csv")]) == 0  # fmt: skip
+
+    holds = sc.run_reversal_plan(BASE.in_mode("ftr"), (20.0,), 10.0, dwell_s=60.0)
+    rev = holds.save(tmp_path / "rev.csv")
+    table = tmp_path / "rev.json"
+    capsys.readouterr()
+    assert main(["self-calibrate", str(rev), "--json", str(table), "--settle", "20"]) == 0
+    row = json.loads(table.read_text())["mode_reversal"][0]
+    res = BASE.resonator
+    law = -0.5 * res.delta_inv_tau * np.sin(2 * (10.0 * DEG - res.theta_tau)) / res.k_e
+    assert abs(row["anisotropy_dph"] * DEG_PER_H - law) < 0.02 * abs(law)  # readout, 0.5 %
+    assert row["angles_deg"] == pytest.approx([10.0, 100.0], abs=0.01)
+
+    cli_fails(["simulate", "--plan", "reversal", "--quick", "--out", str(tmp_path / "x.csv")],
+              capsys, "add --mode ftr")  # fmt: skip
+    plain = tmp_path / "plain.csv"
+    hg.MeasuredData({c: sweeps[c] for c in ("time_s", "run", "temperature_c", "table_rate_dps",
+                                            "wave_angle_deg")}).save(plain)  # fmt: skip
+    cli_fails(["self-calibrate", str(plain), "--out", str(model)], capsys,
+              "needs virtual-precession data")  # fmt: skip
