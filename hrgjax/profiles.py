@@ -246,16 +246,24 @@ class Profile(eqx.Module):
         )
 
     def hold_windows(self, settle_s: float = 0.0) -> list[tuple[float, float]]:
-        """(start, end) [s] of the spans where the commanded precession is zero on both ends
-        of a segment (the wave held still), each start moved on by `settle_s` [s]."""
+        """(start, end) [s] of each hold — a maximal stretch of knots between which the
+        commanded precession is zero (the wave held still) — its start moved on by `settle_s`
+        [s]; holds no longer than `settle_s` are left out."""
         t = np.asarray(self.t)
-        if self.precession is None:
-            return [(float(t[0]) + settle_s, float(t[-1]))]
-        rho = np.asarray(self.precession)
-        out = []
-        for i in range(t.size - 1):
-            if rho[i] == 0 and rho[i + 1] == 0 and t[i + 1] - t[i] > settle_s:
-                out.append((float(t[i]) + settle_s, float(t[i + 1])))
+        still = (np.zeros(t.size - 1, bool) if self.precession is None else
+                 (np.asarray(self.precession)[:-1] != 0) | (np.asarray(self.precession)[1:] != 0))  # fmt: skip
+        still = ~still
+        out, i = [], 0
+        while i < still.size:
+            if not still[i]:
+                i += 1
+                continue
+            j = i
+            while j + 1 < still.size and still[j + 1]:
+                j += 1
+            if t[j + 1] - t[i] > settle_s:
+                out.append((float(t[i]) + settle_s, float(t[j + 1])))
+            i = j + 1
         return out
 
     @property

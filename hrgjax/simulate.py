@@ -28,11 +28,13 @@ from .record import Record
 from .resonator.averaged import (
     averaged_initial_state,
     averaged_vector_field,
+    held_angle,
     input_rate,
     measured_estimates,
+    pattern_forces,
 )
 from .resonator.carrier import carrier_solve, event_grid, steps_per_cycle
-from .resonator.control import ftr_rate, loop_outputs, steady_integrators
+from .resonator.control import drive_vectors, ftr_rate, loop_outputs, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field
 from .resonator.params import TemperatureLaw
 
@@ -275,8 +277,9 @@ def _record(gyro, profile, ts, read, key, bias_key, run):
             theta = theta - k_e * rate_angle + white
         else:  # FTR: the wave is held; the rate noise is on the rate read out, as the mean
             # rate over each output interval (the first sample: the first interval's)
-            inc = jnp.diff(rate_angle) / jnp.diff(ts)
-            rebalance_rate = rebalance_rate + jnp.concatenate([inc[:1], inc])
+            if ts.shape[0] > 1:
+                inc = jnp.diff(rate_angle) / jnp.diff(ts)
+                rebalance_rate = rebalance_rate + jnp.concatenate([inc[:1], inc])
             theta = theta + white
         amp_noise = nz.amplitude_white * gyro.control.amplitude
         ka, kq = jax.random.split(k_amp)
@@ -309,32 +312,46 @@ def _read_averaged(gyro, profile, ts, ys):
         g = gyro.at(profile.temperature_at(t))
         ctl, res = g.control, g.resonator
         command = profile.command_at(t)
-        if ctl.ideal:
+        if ctl.ideal and ctl.mode == "ftr":
+            est, true_theta, loops = _ideal_ftr(g, input_rate(g, profile, t), y[0], command)
+        elif ctl.ideal:
             a0 = ctl.amplitude
             est = measured_estimates(g, a0, 0.0 * a0, y[0], 0.0 * a0)
-            omega_in = input_rate(g, profile, t)
-            integ = steady_integrators(ctl, res, a0, y[0], omega_in)
+            integ = steady_integrators(ctl, res, a0, y[0])
             true_theta = y[0]
             loops = loop_outputs(ctl, res.omega, est, integ, command)
-            if ctl.mode == "ftr":  # the force that holds it exactly: rate − drift / k_e
-                drift = 0.5 * res.delta_inv_tau * jnp.sin(2 * (y[0] - res.theta_tau))
-                held = 2.0 * loops.omega_r * est.amplitude * (drift - res.k_e * omega_in)
-                loops = eqx.tree_at(lambda lo: lo.rebalance, loops, held)
         else:
             est = measured_estimates(g, y[0], y[1], y[2], y[3])
             true_theta = y[2]
             loops = loop_outputs(ctl, res.omega, est, y[4:], command)
-        return est, true_theta, loops, res.k_e
+        return est, true_theta, loops
 
-    est, true_theta, loops, k_e = jax.vmap(one)(ts, ys)
-    return est, true_theta, loops, _ftr_output(gyro, est, loops, k_e)
+    est, true_theta, loops = jax.vmap(one)(ts, ys)
+    return est, true_theta, loops, _ftr_output(gyro, est, loops)
 
 
-def _ftr_output(gyro, est, loops, k_e):
+def _ideal_ftr(g, omega_in, theta_cmd, command):
+    """Ideal loops in FTR mode: the wave held exactly where the estimate reads the commanded
+    angle (`held_angle`), a = a₀, q = 0, and the rebalance force that holds it there through
+    the forcers' own gain and angle: (estimates, true angle, loop outputs)."""
+    ctl, res = g.control, g.resonator
+    a0 = ctl.amplitude
+    theta = held_angle(g, a0, theta_cmd)
+    est = measured_estimates(g, a0, 0.0 * a0, theta, 0.0 * a0)
+    loops = loop_outputs(ctl, res.omega, est, steady_integrators(ctl, res, a0, theta), command)
+    unit = eqx.tree_at(lambda lo: (lo.force, lo.quad_force, lo.rebalance, lo.precession_force),
+                       loops, (0.0 * a0, 0.0 * a0, 1.0 + 0.0 * a0, 0.0 * a0))  # fmt: skip
+    node_gain = pattern_forces(*drive_vectors(ctl, unit, est.theta), 0.0 * a0, theta)[3]
+    drift = 0.5 * res.delta_inv_tau * jnp.sin(2 * (theta - res.theta_tau))
+    held = 2.0 * res.omega * a0 * (drift - res.k_e * omega_in) / node_gain
+    return est, theta, eqx.tree_at(lambda lo: lo.rebalance, loops, held)
+
+
+def _ftr_output(gyro, est, loops):
     """The rate read from the rebalance force (FTR), or `None` in whole-angle mode."""
     if gyro.control.mode != "ftr":
         return None
-    return ftr_rate(loops, est, k_e)
+    return ftr_rate(gyro.control, loops, est)
 
 
 def _unwrap_pi(theta, near):
@@ -351,13 +368,13 @@ def _read_full(gyro, profile, ts, ys, omega_scale):
         est = full_estimates(g, y, omega_scale, omega_in, command=command)
         true = full_estimates(g, y, omega_scale, omega_in, readout=False, command=command)
         loops = loop_outputs(g.control, g.resonator.omega, est, y[5:], command)
-        return est, true.theta, loops, g.resonator.k_e
+        return est, true.theta, loops
 
-    est, true_theta, loops, k_e = jax.vmap(one)(ts, ys)
+    est, true_theta, loops = jax.vmap(one)(ts, ys)
     true_theta = _unwrap_pi(true_theta, profile.wave_angle0)
     theta = _unwrap_pi(est.theta, true_theta[0])
     est = eqx.tree_at(lambda e: e.theta, est, theta)
-    return est, true_theta, loops, _ftr_output(gyro, est, loops, k_e)
+    return est, true_theta, loops, _ftr_output(gyro, est, loops)
 
 
 def simulate(

@@ -137,8 +137,10 @@ def test_self_calibration_gradient_by_reverse_mode():
 
 
 def test_mode_reversal_reduces_a_held_angle_run():
-    """`mode_reversal` on an FTR run held at θ and θ + 90°: the bias is the rate bias and the
-    anisotropy half the difference, to 1e-6 of the anisotropy's bias (PHYSICS.md §4.1)."""
+    """Held at θ and at θ + 90° (electrical), the damping anisotropy's bias changes sign and
+    the rate bias does not: `mode_reversal`'s bias (the mean of the two readings) is the rate
+    bias and its anisotropy (half their difference) the drift law of PHYSICS.md §4.1, to
+    1e-6 of the drift; the slew between the holds (a commanded precession) lands on 130°."""
     bias = 0.3 * DEG_PER_H
     ctl = hg.Control(mode="ftr", drive="force")
     gyro = hg.Gyro(resonator=BASE.resonator, control=ctl, rate_bias=bias)
@@ -151,6 +153,29 @@ def test_mode_reversal_reduces_a_held_angle_run():
     assert out.angles_deg == (40.0, 130.0)
     assert abs(float(out.bias) - bias) < 1e-6 * abs(law)
     assert abs(float(out.anisotropy) - law) < 1e-6 * abs(law)
+    assert abs(float(rec.wave_angle[-1]) - 130.0 * DEG) < 1e-9
+    # the same from the data, the holds found in the samples (the ramps' corners fall
+    # between them: 2.5-s ramps, 1-s samples)
+    row = sc.mode_reversal_data(rec.to_data())[0]
+    assert row["angles_deg"] == pytest.approx([40.0, 130.0], abs=1e-6)
+    assert abs(row["anisotropy_dph"] * DEG_PER_H - law) < 1e-4 * abs(law)
+
+
+def test_compensator_interpolates_in_temperature_for_any_shapes():
+    """Between calibrated temperatures the drift is linear in T, held beyond; θ and T
+    broadcast (a vector of angles at one temperature, one angle at many)."""
+    d = jnp.array([[1e-6, 2e-6, 0.0, 0.0, 0.0], [3e-6, -2e-6, 0.0, 0.0, 0.0]])
+    comp = eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef),
+                       sc.PrecessionCompensator(temperatures_c=(0.0, 40.0)), (d, d),
+                       is_leaf=lambda x: x is None)  # fmt: skip
+    theta = jnp.array([0.0, 0.3, 0.9])
+    at10 = comp.drift(theta, 10.0)
+    expected = 0.75 * (1e-6 + 2e-6 * jnp.cos(2 * theta)) + 0.25 * (3e-6 - 2e-6 * jnp.cos(2 * theta))
+    np.testing.assert_allclose(np.asarray(at10), np.asarray(expected), rtol=1e-12)
+    temps = jnp.array([-20.0, 0.0, 20.0, 60.0])
+    one = comp.drift(0.0, temps)
+    np.testing.assert_allclose(np.asarray(one), [3e-6, 3e-6, 2e-6, 1e-6], rtol=1e-12)
+    assert comp.scale_factor(theta, 10.0).shape == (3,)
 
 
 def test_self_calibration_inputs_are_named():
@@ -169,6 +194,17 @@ def test_self_calibration_inputs_are_named():
         sc.mode_reversal(np.arange(3.0), np.zeros(3), hg.Profile.static(2.0))
     with pytest.raises(ValueError, match="90° apart"):
         sc.mode_reversal(np.arange(3.0), np.zeros(3), hg.Profile.held_angles([0.0, 60.0], 60.0))
+    with pytest.raises(ValueError, match="not fitted"):
+        from hrgjax.calibration import save_compensator
+
+        save_compensator(sc.PrecessionCompensator(), "/nonexistent/x.eqx")
+    paused = hg.MeasuredData(data.columns | {"precession_dps": np.array([1.0, 1, 0, 1, 1])})
+    with pytest.raises(ValueError, match="pauses"):
+        sc.PrecessionCompensator(settle_s=0.0).fit(paused)
+    with pytest.raises(ValueError, match="force-to-rebalance output"):
+        from hrgjax.calibration import reduce
+
+        reduce(hg.MeasuredData(data.columns | {"rebalance_rate_dps": np.zeros(5)}))
 
 
 def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, capsys):
@@ -187,8 +223,15 @@ def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, 
     assert "virtual-precession sweeps at [20.0] °C" in capsys.readouterr().out
     assert main(["correct", str(path), "--model", str(model), "--out",
                  str(tmp_path / "c.csv")]) == 0  # fmt: skip
+    from hrgjax.calibration import load_json
 
-    holds = sc.run_reversal_plan(BASE.in_mode("ftr"), (20.0,), 10.0, dwell_s=60.0)
+    back = load_json(tmp_path / "self.json")  # the JSON export round trip
+    assert back.temperatures_c == comp.temperatures_c
+    np.testing.assert_array_equal(np.asarray(back.gain_coef), np.asarray(comp.gain_coef))
+    theta = np.linspace(-90.0, 90.0, 7)
+    np.testing.assert_array_equal(back.drift_dph(theta, 20.0), comp.drift_dph(theta, 20.0))
+
+    holds = sc.run_reversal_plan(BASE.in_mode("ftr"), (20.0,), 10.0, dwell_s=60.3)
     rev = holds.save(tmp_path / "rev.csv")
     table = tmp_path / "rev.json"
     capsys.readouterr()

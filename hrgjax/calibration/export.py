@@ -67,6 +67,8 @@ def _hyper(comp) -> dict:
     if isinstance(comp, NoCompensation):
         return {"k_e": comp.k_e}
     if isinstance(comp, PrecessionCompensator):
+        if comp.drift_coef is None:
+            raise ValueError("this PrecessionCompensator is not fitted; fit it before saving")
         return {"harmonics": comp.harmonics, "settle_s": comp.settle_s,
                 "temperature_bin": comp.temperature_bin, "k_e": comp.k_e,
                 "temperatures_c": list(comp.temperatures_c)}  # fmt: skip

@@ -170,6 +170,25 @@ def _window_layout(
     return (1, len(t)) if n_win == 0 else (n_win, n)
 
 
+def check_whole_angle(data: MeasuredData) -> None:
+    """Refuse data a whole-angle calibration cannot read: force-to-rebalance output (the wave
+    held; a `rebalance_rate_dps` column) or runs with a commanded precession (the wave turned
+    by a force, not by the case; nonzero `precession_dps`) — `hrgjax self-calibrate` reads
+    those."""
+    if "rebalance_rate_dps" in data:
+        raise ValueError(
+            "these data are force-to-rebalance output (a rebalance_rate_dps column: the wave is "
+            "held, its angle does not measure the rate); this calibration reads whole-angle "
+            "data — for FTR holds use hrgjax self-calibrate"
+        )
+    if "precession_dps" in data and np.any(data["precession_dps"] != 0):
+        raise ValueError(
+            "these data have a commanded precession (precession_dps ≠ 0: the wave was turned "
+            "by a force, not by the case); this calibration reads runs without one — for "
+            "virtual-precession sweeps use hrgjax self-calibrate"
+        )
+
+
 def reduce(
     data: MeasuredData,
     k_e: float = K_E_NOMINAL,
@@ -193,10 +212,13 @@ def reduce(
 
     **Returns:** [`RateWindows`][hrgjax.calibration.RateWindows].
 
-    **Raises:** `ValueError` for `k_e ≤ 0`, `batches < 3`, `window_s ≤ 0` or a run too short.
+    **Raises:** `ValueError` for `k_e ≤ 0`, `batches < 3`, `window_s ≤ 0`, a run too short, or
+    force-to-rebalance or virtual-precession data
+    ([`check_whole_angle`][hrgjax.calibration.reduce.check_whole_angle]).
     """
     if not (np.isfinite(k_e) and k_e > 0):
         raise ValueError(f"k_e must be a positive angular gain; got {k_e}")
+    check_whole_angle(data)
     if batches < 3:
         raise ValueError(f"batches must be ≥ 3 for a standard error; got {batches}")
     for name, value in (("window_s", window_s), ("ramp_window_s", ramp_window_s)):

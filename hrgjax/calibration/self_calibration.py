@@ -172,7 +172,7 @@ def run_precession_plan(
     if gyro.control.mode != "wa":
         raise ValueError("virtual-precession sweeps run in whole-angle mode: give a gyro with "
                          f"Control(mode='wa'); got mode={gyro.control.mode!r}")  # fmt: skip
-    n_out = int(round(plan.duration_s / plan.dt_out)) + 1
+    n_out = int(np.floor(plan.duration_s / plan.dt_out + 1e-9)) + 1  # none past the end
     plausible.check_size("run_precession_plan", float(n_out) * plan.size, plan.size)
     batch = jax.tree_util.tree_map(np.asarray, plan.profiles())
     keys, bias_key = switch_on_keys(gyro, key, bias_key, plan.size)
@@ -278,9 +278,12 @@ class PrecessionCompensator(AbstractCompensator):
     def _at(self, coef, theta, temperature_c):
         if coef is None:
             raise ValueError("this PrecessionCompensator is not fitted; use comp = comp.fit(data)")
+        theta, temperature_c = jnp.broadcast_arrays(
+            jnp.asarray(theta, dtype=float), jnp.asarray(temperature_c, dtype=float)
+        )
         basis = angle_basis(theta, self.harmonics)  # (…, J)
         if len(self.temperatures_c) == 1:
-            return basis @ coef[0]
+            return jnp.sum(basis * coef[0], axis=-1)
         temps = jnp.asarray(self.temperatures_c, dtype=float)
         tc = jnp.clip(temperature_c, temps[0], temps[-1])
         i = jnp.clip(jnp.searchsorted(temps, tc, side="right") - 1, 0, temps.shape[0] - 2)
@@ -340,8 +343,16 @@ def _sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
         rho = data["precession_dps"][idx] * DEG_PER_S
         if np.all(rho == 0):
             continue  # a static run: nothing to sweep
+        run = int(data["run"][idx[0]])
+        if np.any(data["table_rate_dps"][idx] != 0):
+            raise ValueError(f"run {run}: the table turns; virtual-precession sweeps are taken "
+                             "with the case at rest (table_rate_dps 0)")  # fmt: skip
         temp = float(np.round(np.mean(data["temperature_c"][idx]) / bin_c) * bin_c)
-        used = (t - t[0] >= settle_s) & (rho != 0)
+        used = t - t[0] >= settle_s
+        if np.any(rho[used] == 0):
+            first = float(t[used][rho[used] == 0][0])
+            raise ValueError(f"run {run}: the sweep pauses (precession_dps 0) at t = {first:g} s "
+                             "after settling; give each sweep its own run")  # fmt: skip
         by_temp.setdefault(temp, []).append((t, data["wave_angle_deg"][idx] * DEG, rho, used))
     if not by_temp:
         raise ValueError("no virtual-precession sweeps in the data (every precession_dps is 0)")
@@ -380,7 +391,8 @@ class ModeReversal(eqx.Module):
     """Force-to-rebalance readings at two held angles θ and θ + 90° (electrical).
 
     - `angles_deg`: the two held angles [°].
-    - `readings`: the mean FTR output held at each [rad/s].
+    - `readings`: the mean FTR output held at each [rad/s], shape (…, 2) (a batched record:
+      one pair per member).
     - `bias`: their mean, the rate with the damping anisotropy's bias cancelled [rad/s].
     - `anisotropy`: half their difference, the damping anisotropy's bias at θ [rad/s].
     """
@@ -411,13 +423,13 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
     means = []
     for start, end in windows:
         m = ((t >= start) & (t <= end)).astype(r.dtype)
-        means.append(jnp.sum(m * r) / jnp.sum(m))
-    readings = jnp.stack(means)
+        means.append(jnp.sum(m * r, axis=-1) / jnp.sum(m, axis=-1))
+    readings = jnp.stack(means, axis=-1)  # (…, 2): a batched record gives a batch
     return ModeReversal(
         angles_deg=(round(theta0, 9), round(theta0 + turn, 9)),
         readings=readings,
-        bias=0.5 * (readings[0] + readings[1]),
-        anisotropy=0.5 * (readings[0] - readings[1]),
+        bias=0.5 * (readings[..., 0] + readings[..., 1]),
+        anisotropy=0.5 * (readings[..., 0] - readings[..., 1]),
     )
 
 
@@ -448,7 +460,7 @@ def run_reversal_plan(
         Profile.held_angles([angle_deg, angle_deg + 90.0], dwell_s, slew_s, t) for t in temps
     ]
     batch = jax.tree_util.tree_map(lambda *x: np.stack(x), *profiles)
-    ts = np.arange(0.0, float(profiles[0].t[-1]) + 0.5, 1.0)
+    ts = np.arange(int(np.floor(float(profiles[0].t[-1]) + 1e-9)) + 1, dtype=float)  # 1 s
     keys, bias_key = switch_on_keys(gyro, key, bias_key, temps.size)
     return simulate_runs(
         gyro,
@@ -486,16 +498,17 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
         run = int(data["run"][idx[0]])
         if len(holds) != 2:
             raise ValueError(f"run {run}: mode reversal needs two holds; found {len(holds)}")
-        turn = float(np.sum(0.5 * (rho[1:] + rho[:-1]) * np.diff(t)))
+        wave = data["wave_angle_deg"][idx]
+        held = [float(np.mean(wave[(t >= a) & (t <= b)])) for a, b in holds]
+        turn = held[1] - held[0]  # FTR holds the estimate at the commanded angle
         if abs(abs(turn) - 90.0) > 0.5:
             raise ValueError(f"run {run}: the holds are {turn:.3g}° apart; mode reversal needs 90°")
         rate = data["rebalance_rate_dps"][idx] * 3600.0
         readings = [float(np.mean(rate[(t >= a) & (t <= b)])) for a, b in holds]
-        first = data["wave_angle_deg"][idx][(t >= holds[0][0]) & (t <= holds[0][1])].mean()
         out.append({
             "run": run,
             "temperature_c": float(np.mean(data["temperature_c"][idx])),
-            "angles_deg": [round(float(first), 3), round(float(first) + turn, 3)],
+            "angles_deg": [round(held[0], 3), round(held[1], 3)],
             "readings_dph": readings,
             "bias_dph": 0.5 * (readings[0] + readings[1]),
             "anisotropy_dph": 0.5 * (readings[0] - readings[1]),

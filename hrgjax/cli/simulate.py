@@ -318,7 +318,8 @@ def _simulate_parser(sub):
     p.add_argument("--out", default="out/data.csv", help="CSV or .nc path")
     p.add_argument(
         "--duration", type=POSITIVE_SECONDS, default=180.0,
-        help="run length of the static and rotation plans [s] (the seed plan's are 180 s)",
+        help="run length of the static and rotation plans [s] (the seed plan's are 180 s); "
+        "--plan reversal: each hold's",
     )  # fmt: skip
     p.add_argument(
         "--quick", action="store_true",

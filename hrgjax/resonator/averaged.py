@@ -147,7 +147,7 @@ def loop_field(g, omega_in, y, command=None):
         + 3 * res.chi * (a**2 + q**2) / (8 * w)
         - pump * jnp.cos(beta) * big_p
     )
-    d_int = integrator_rates(ctl, w, est, command)
+    d_int = integrator_rates(ctl, w, est, command, y[4:])
     return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int])
 
 

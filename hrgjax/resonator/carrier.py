@@ -99,7 +99,7 @@ def _has_laws(gyro) -> bool:
 
 
 def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
-    """States (len(ts), 8) at the output times `ts` [s] (ts[0] ≥ the profile's start), each
+    """States (len(ts), 8) ((len(ts), 9) in FTR mode) at the output times `ts` [s] (ts[0] ≥ the profile's start), each
     interval of [`event_grid`][hrgjax.resonator.carrier.event_grid] (the first from the
     profile's start) in `steps` equal held-loop steps."""
     events = event_grid(profile.t, ts)

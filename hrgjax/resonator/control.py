@@ -16,7 +16,8 @@ Every loop is a PI controller acting on an *estimate* (readout errors feed back)
   commanded angle: the start angle plus $\int\rho\,dt$) adds $u = -k_p x + I_r$ to
   $f_{qs}$. The plant is $\dot x = -u/(2\omega a_0) + d$, so $b = -1/(2\omega a_0)$; at rest
   $u = 2\omega a\,d$ with $d = -k_e\Omega + $ (the drift at the held angle), and the output
-  is the rate $\hat\Omega = -u/(2\omega_r\hat a\,k_e)$ ([`ftr_rate`][hrgjax.resonator.control.ftr_rate]).
+  is the rate $\hat\Omega = -u/(2\omega_r\hat a\,k_{e,\rm nom})$
+  ([`ftr_rate`][hrgjax.resonator.control.ftr_rate]).
 
 Gains are set from loop bandwidths: for a plant $\dot e = b\,u$ the PI gains
 $k_p = 2\beta/b$, $k_i = \beta^2/b$ place a double closed-loop pole at $-\beta$.
@@ -29,6 +30,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..units import K_E_NOMINAL
 from .params import TemperatureLaw, as_parameter
 
 DRIVES = ("force", "parametric")
@@ -58,7 +60,11 @@ class Control(eqx.Module):
     - `rebalance_bandwidth`: closed-loop bandwidth of the rebalance loop [rad/s] (`"ftr"`).
     - `rebalance_limit`: largest node force the rebalance loop may command (forcer
       saturation) [readout units · rad²/s²]; `None` for none. At the default gyro
-      (ω = 2π·5 kHz, a₀ = 1, k_e = 0.277) 1 °/s needs ≈ 304.
+      (ω = 2π·5 kHz, a₀ = 1, k_e = 0.554) 1 °/s needs 2ωa₀k_eΩ ≈ 608. While saturated the
+      loop's integrator stops (anti-windup).
+    - `k_e_nominal`: the angular gain the electronics divide the rebalance force by to read
+      the rate (FTR output) — the nominal one, as whole-angle data are read with, so a gyro
+      whose k_e differs from it, or varies with temperature, shows it as a scale factor.
     - `forcer_gain`: common relative gain error of both forcers (1 + `forcer_gain`): it scales
       every force, so the FTR scale factor by 1/(1 + g_f) and a commanded precession by
       (1 + g_f); the loops' own efforts absorb it.
@@ -87,6 +93,7 @@ class Control(eqx.Module):
     )
     forcer_gain: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
     forcer_angle: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+    k_e_nominal: float = eqx.field(static=True, default=K_E_NOMINAL)
 
     @classmethod
     def free(cls, amplitude=1.0) -> Control:
@@ -104,11 +111,6 @@ class Control(eqx.Module):
             )
         if self.mode == "ftr" and not self.enabled:
             raise ValueError("Control.mode='ftr' needs the loops: a free resonator has none")
-
-    @property
-    def n_integrators(self) -> int:
-        """Loop integrator states: PLL, AGC, quadrature (+ rebalance in FTR mode)."""
-        return 4 if self.mode == "ftr" else 3
 
     def forcer_matrix(self):
         """Forcer gain matrix diag(1 + g_f + g, 1 + g_f − g) applied to the electrode-frame
@@ -193,9 +195,10 @@ def loop_outputs(control: Control, omega, est, integrators, command=None) -> Loo
     )
 
 
-def integrator_rates(control: Control, omega, est, command=None):
+def integrator_rates(control: Control, omega, est, command=None, integrators=None):
     """Time derivatives of the loop integrators (`command` as in
-    [`loop_outputs`][hrgjax.resonator.control.loop_outputs])."""
+    [`loop_outputs`][hrgjax.resonator.control.loop_outputs]; `integrators`, the current
+    values, for the rebalance loop's anti-windup when it has a force limit)."""
     (_, ki_p), (_, ki_a), (_, ki_q) = loop_gains(control, omega)
     if not control.enabled:
         return jnp.zeros(3) * est.phase
@@ -207,16 +210,23 @@ def integrator_rates(control: Control, omega, est, command=None):
     if control.mode == "ftr":
         _, ki_r = rebalance_gains(control, omega)
         x = 0.0 * est.phase if command is None else angle_error(est, command)
-        rates.append(-ki_r * x)
+        rate = -ki_r * x
+        if control.rebalance_limit is not None and integrators is not None:
+            kp_r, _ = rebalance_gains(control, omega)
+            raw = -kp_r * x + integrators[3]  # stop winding up while saturated
+            rate = jnp.where((jnp.abs(raw) > control.rebalance_limit) & (rate * raw > 0), 0.0, rate)
+        rates.append(rate)
     return jnp.stack(rates)
 
 
-def ftr_rate(loops: LoopOutputs, est, k_e):
+def ftr_rate(control: Control, loops: LoopOutputs, est):
     r"""The FTR output: the rate read from the rebalance force,
-    $\hat\Omega = -u/(2\omega_r\hat a\,k_e)$ [rad/s] — the electronics divide by the
-    frequency and amplitude they measure (ratiometric), so an ideal gyro reads Ω exactly;
-    forcer gain, readout errors and the drift at the held angle are what is left."""
-    return -loops.rebalance / (2.0 * loops.omega_r * est.amplitude * k_e)
+    $\hat\Omega = -u/(2\omega_r\hat a\,k_{e,\rm nom})$ [rad/s] — the electronics divide by
+    the frequency and amplitude they measure (ratiometric) and the nominal angular gain
+    (`control.k_e_nominal`), so a perfect gyro whose k_e is the nominal one reads Ω exactly;
+    k_e/k_e,nom, the forcers' gain, the readout errors and the drift at the held angle are
+    what is left."""
+    return -loops.rebalance / (2.0 * loops.omega_r * est.amplitude * control.k_e_nominal)
 
 
 def drive_vectors(control: Control, loops: LoopOutputs, theta_est):

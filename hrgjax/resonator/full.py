@@ -110,7 +110,7 @@ def loop_efforts(g, omega_in, y, omega_scale, command=None) -> LoopEfforts:
         v=v,
         pump=res.omega**2 * loops.pump,
         pump_phase2=2 * pump_phase(ctl),
-        d_int=integrator_rates(ctl, res.omega, est, command),
+        d_int=integrator_rates(ctl, res.omega, est, command, y[5:]),
         omega_r=loops.omega_r,
     )
 
@@ -144,8 +144,9 @@ def _times(m, z):
 
 def full_initial_state(gyro, profile, quadrature0=0.0):
     """x = a₀cosθ₀, y = a₀sinθ₀ at ψ_r = 0, with the velocity of a pattern already turning at
-    its mode's rate (−k_eΩ + ρ whole-angle, ρ force-to-rebalance: no start transient; FTR holds
-    θ₀ where the estimate reads the commanded angle); loop integrators at steady state."""
+    its mode's rate (−k_eΩ + ρ whole-angle, ρ force-to-rebalance: no start transient of the
+    motion; FTR holds θ₀ where the estimate reads the commanded angle); loop integrators at
+    steady state (for ideal forcers: their gain and angle errors start a short transient)."""
     g = gyro.at(profile.temperature[0])
     res = g.resonator
     a0 = g.control.amplitude
