@@ -23,6 +23,8 @@ COLUMNS: dict[str, str] = {
     "accel_z_g": "specific force along case z (sensitive axis) [g]",
     "rebalance_rate_dps": "force-to-rebalance output: the rate read from the rebalance force "
     "[°/s] (`hrgjax simulate --mode ftr`)",
+    "rebalance_on": "1 where force-to-rebalance held the wave (read rebalance_rate_dps), 0 "
+    "where the gyro ran whole-angle (read wave_angle_deg)",
     "precession_dps": "commanded precession rate of the wave [°/s, electrical] (virtual "
     "precession, angle switching)",
     "rate_corrected_dps": "equivalent input rate after compensation [°/s] (`hrgjax correct`)",

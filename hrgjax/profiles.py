@@ -66,6 +66,11 @@ class Profile(eqx.Module):
       commanded angle, `wave_angle0` + ∫ρ dt, so a pulse of ρ moves the held angle (angle
       switching, mode reversal). See [`Profile.held_angles`][hrgjax.Profile.held_angles]
       and [`Profile.virtual_precession`][hrgjax.Profile.virtual_precession].
+    - `rebalance`: force-to-rebalance schedule at the knots, shape (N,), or `None`: 1 where
+      the rebalance loop holds the wave over the segment that starts at that knot, 0 where
+      the gyro runs whole-angle (the loop off, its integrator held). Switching to 1 captures
+      the wave where the electronics read it then; switching to 0 lets it go. Needs a gyro
+      in force-to-rebalance mode (`Control(mode="ftr")`) with its PI loops.
     """
 
     t: jax.Array = eqx.field(converter=_f)
@@ -75,6 +80,8 @@ class Profile(eqx.Module):
     wave_angle0: jax.Array = eqx.field(converter=_f, default=0.0)
     precession: jax.Array | None = eqx.field(converter=lambda x: x if x is None else _f(x),
                                              default=None)  # fmt: skip
+    rebalance: jax.Array | None = eqx.field(converter=lambda x: x if x is None else _f(x),
+                                            default=None)  # fmt: skip
 
     def __check_init__(self):
         n = self.t.shape[-1] if self.t.ndim else 0
@@ -103,6 +110,19 @@ class Profile(eqx.Module):
             check_finite(f"Profile.{name}", getattr(self, name))
         if self.precession is not None:
             check_finite("Profile.precession", self.precession)
+        if self.rebalance is not None:
+            if self.rebalance.shape != (n,):
+                raise ValueError(
+                    f"Profile.rebalance must have the shape of Profile.t, ({n},), or be None; "
+                    f"got {self.rebalance.shape}"
+                )
+            if is_concrete(self.rebalance):
+                bad = np.flatnonzero(~np.isin(np.asarray(self.rebalance), (0.0, 1.0)))
+                if bad.size:
+                    raise ValueError(
+                        f"Profile.rebalance[{bad[0]}] is {float(self.rebalance[bad[0]])}; give 1 "
+                        "(force-to-rebalance over the segment) or 0 (whole-angle)"
+                    )
         plausible.check("Profile.temperature", self.temperature, "temperature_c")
         if is_concrete(self.t):
             t = np.asarray(self.t)
@@ -166,9 +186,13 @@ class Profile(eqx.Module):
         temperature_c,
         accel_g=None,
         wave_angle0_deg: float = 0.0,
+        precession_dps=None,
+        rebalance=None,
     ) -> Profile:
         """A profile from knot arrays in bench units: times [s], rates [°/s],
-        temperatures [°C] and optionally specific force [g], shape (N, 3)."""
+        temperatures [°C] and optionally specific force [g], shape (N, 3), a commanded
+        precession [°/s, electrical] and a force-to-rebalance schedule (1 on, 0 whole-angle
+        over the segment from each knot; see the class's arguments)."""
         args = (t_s, rate_dps, temperature_c, accel_g, wave_angle0_deg)
         if not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(args)):
             t = np.asarray(t_s, dtype=float)  # host values: built on the host
@@ -178,14 +202,24 @@ class Profile(eqx.Module):
                 temperature=np.broadcast_to(np.asarray(temperature_c, dtype=float), t.shape),
                 accel=np.zeros(t.shape + (3,)) if accel_g is None else accel_g,
                 wave_angle0=np.asarray(wave_angle0_deg, dtype=float) * DEG,
-            )
+                precession=None if precession_dps is None else
+                np.broadcast_to(np.asarray(precession_dps, dtype=float), t.shape) * DEG_PER_S,
+                rebalance=None if rebalance is None else
+                np.broadcast_to(np.asarray(rebalance, dtype=float), t.shape),
+            )  # fmt: skip
         t = _eager(_f, t_s)
         rate = jnp.broadcast_to(_f(rate_dps), t.shape) * DEG_PER_S
         temp = jnp.broadcast_to(_f(temperature_c), t.shape)
         acc = jnp.zeros(t.shape + (3,)) if accel_g is None else _f(accel_g)
+        extra = {}
+        if precession_dps is not None:
+            extra["precession"] = jnp.broadcast_to(_f(precession_dps), t.shape) * DEG_PER_S
+        if rebalance is not None:
+            extra["rebalance"] = jnp.broadcast_to(_f(rebalance), t.shape)
         return cls(
-            t=t, rate=rate, temperature=temp, accel=acc, wave_angle0=_f(wave_angle0_deg) * DEG
-        )
+            t=t, rate=rate, temperature=temp, accel=acc, wave_angle0=_f(wave_angle0_deg) * DEG,
+            **extra,
+        )  # fmt: skip
 
     @classmethod
     def virtual_precession(
@@ -364,10 +398,20 @@ class Profile(eqx.Module):
         slope = (rho[i + 1] - rho[i]) / length
         return self.wave_angle0 + cum[i] + rho[i] * dt + 0.5 * slope * dt**2
 
+    def rebalance_at(self, t):
+        """1 where the rebalance loop holds the wave at time t [s], 0 where the gyro runs
+        whole-angle (the `rebalance` schedule's value at the segment's start; 1 without one)."""
+        if self.rebalance is None:
+            return 1.0 + 0.0 * t
+        i, _, _ = self._segment(t)
+        return self.rebalance[i]
+
     def command_at(self, t):
-        """(commanded angle [rad], commanded precession [rad/s]) at time t [s]: what the
-        loops are told ([`hrgjax.resonator.control.loop_outputs`][])."""
-        return self.commanded_angle_at(t), self.precession_at(t)
+        """(commanded angle [rad], commanded precession [rad/s], rebalance on 1 / off 0) at
+        time t [s]: what the loops are told ([`hrgjax.resonator.control.loop_outputs`][]; in
+        force-to-rebalance mode the models hold the angle in their state, so that a switch
+        captures the wave where it is read)."""
+        return self.commanded_angle_at(t), self.precession_at(t), self.rebalance_at(t)
 
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""

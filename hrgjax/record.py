@@ -47,6 +47,9 @@ class Record(eqx.Module):
     rebalance_rate: jax.Array | None = None
     """Force-to-rebalance output [rad/s]: the rate read from the rebalance force
     ([`hrgjax.resonator.control.ftr_rate`][]); `None` in whole-angle mode."""
+    rebalance_on: jax.Array | None = None
+    """1 where the rebalance loop held the wave, 0 where the gyro ran whole-angle (a profile's
+    `rebalance` schedule); `None` without one."""
     precession: jax.Array | None = None
     """Commanded precession rate [rad/s, electrical] (the profile's schedule); `None` when
     the profile commands none."""
@@ -84,4 +87,6 @@ class Record(eqx.Module):
             cols["precession_dps"] = flat(self.precession) / DEG_PER_S
         if self.rebalance_rate is not None:
             cols["rebalance_rate_dps"] = flat(self.rebalance_rate) / DEG_PER_S
+        if self.rebalance_on is not None:
+            cols["rebalance_on"] = flat(self.rebalance_on)
         return MeasuredData(cols)

@@ -35,7 +35,7 @@ from .resonator.averaged import (
 )
 from .resonator.carrier import carrier_solve, event_grid, steps_per_cycle
 from .resonator.control import drive_vectors, ftr_rate, loop_outputs, steady_integrators
-from .resonator.full import full_estimates, full_initial_state, full_vector_field
+from .resonator.full import full_estimates, full_initial_state, full_vector_field, held_command
 from .resonator.params import TemperatureLaw
 
 MODELS = ("averaged", "full")
@@ -302,6 +302,7 @@ def _record(gyro, profile, ts, read, key, bias_key, run):
         k_e=k_e,
         run=run,
         rebalance_rate=rebalance_rate,
+        rebalance_on=None if profile.rebalance is None else jax.vmap(profile.rebalance_at)(ts),
         precession=None if profile.precession is None else jax.vmap(profile.precession_at)(ts),
         mode=gyro.control.mode,
     )
@@ -323,6 +324,8 @@ def _read_averaged(gyro, profile, ts, ys):
         else:
             est = measured_estimates(g, y[0], y[1], y[2], y[3])
             true_theta = y[2]
+            if ctl.mode == "ftr":  # the held angle is the state's
+                command = (y[8], command[1], command[2])
             loops = loop_outputs(ctl, res.omega, est, y[4:], command)
         return est, true_theta, loops
 
@@ -364,7 +367,7 @@ def _read_full(gyro, profile, ts, ys, omega_scale):
     def one(t, y):
         g = gyro.at(profile.temperature_at(t))
         omega_in = input_rate(g, profile, t)
-        command = profile.command_at(t)
+        command = held_command(g, y, profile.command_at(t))
         est = full_estimates(g, y, omega_scale, omega_in, command=command)
         true = full_estimates(g, y, omega_scale, omega_in, readout=False, command=command)
         loops = loop_outputs(g.control, g.resonator.omega, est, y[5:], command)
@@ -455,6 +458,13 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         raise ValueError(f"model must be one of {MODELS}; got {model!r}")
     if not isinstance(gyro, Gyro):
         raise TypeError(f"gyro must be an hrgjax.Gyro; got {type(gyro).__name__}")
+    if getattr(profile, "rebalance", None) is not None and (
+        gyro.control.mode != "ftr" or gyro.control.ideal
+    ):
+        raise ValueError(
+            "Profile.rebalance switches the rebalance loop on and off: give the gyro "
+            "Control(mode='ftr') (gyro.in_mode('ftr')) with its PI loops (ideal=False)"
+        )
     if not isinstance(profile, Profile):
         raise TypeError(f"profile must be an hrgjax.Profile; got {type(profile).__name__}")
     if gyro.noise is not None and key is None:

@@ -184,3 +184,33 @@ def test_ideal_loops_hold_the_wave_where_the_pi_loops_settle():
     assert abs(a - b) < 1e-7 * abs(a)
     assert abs(float(pi.true_wave_angle[-1] - held.true_wave_angle[-1])) < 1e-9
     assert abs(float(held.wave_angle[-1]) - 30.0 * DEG) < 1e-10
+
+
+def test_a_schedule_switches_whole_angle_and_rebalance_during_a_run():
+    """`Profile.rebalance` = (0, 1, 0): whole-angle for 20 s, then the rebalance loop captures
+    the wave where it is read and holds it — after the loop's transient the wave is back
+    where it was caught and the output reads Ω (1e-6) — then lets it go, and it turns at
+    −k_eΩ again. The full model (fixed steps) agrees with the averaged one."""
+    omega = 1.0
+    prof = hg.Profile.piecewise([0.0, 20.0, 60.0, 80.0], omega, 20.0, rebalance=[0, 1, 0, 0])
+    gyro = _ftr(PERFECT)
+    rec = hg.simulate(gyro, prof, dt_out=1.0, **TIGHT)
+    th = np.asarray(rec.wave_angle)
+    turn = -PERFECT.k_e * omega * DEG_PER_S
+    np.testing.assert_allclose(np.diff(th[:21]), turn, rtol=1e-7)  # whole-angle
+    assert abs(th[59] - th[20]) < 1e-9  # caught at 20 s, held (the transient has passed)
+    rate = np.asarray(rec.rebalance_rate)
+    assert np.max(np.abs(rate[40:60] / (omega * DEG_PER_S) - 1.0)) < 1e-6
+    np.testing.assert_allclose(np.diff(th[61:]), turn, rtol=1e-6)  # let go
+    np.testing.assert_array_equal(np.asarray(rec.rebalance_on)[[0, 19, 20, 59, 60, 80]],
+                                  [0, 0, 1, 1, 0, 0])  # fmt: skip
+    assert rec.to_data()["rebalance_on"].sum() == 40
+    full = hg.simulate(gyro, hg.Profile.piecewise([0.0, 0.5, 2.0], omega, 20.0, rebalance=[0, 1, 1]),
+                       model="full", dt_out=0.25, fixed_step="auto")  # fmt: skip
+    avg = hg.simulate(gyro, hg.Profile.piecewise([0.0, 0.5, 2.0], omega, 20.0, rebalance=[0, 1, 1]),
+                      dt_out=0.25)  # fmt: skip
+    np.testing.assert_allclose(np.asarray(full.wave_angle), np.asarray(avg.wave_angle), atol=1e-6)
+    with pytest.raises(ValueError, match="give the gyro Control"):
+        hg.simulate(hg.Gyro(resonator=PERFECT), prof)
+    with pytest.raises(ValueError, match="Profile.rebalance\\[1\\] is 0.5"):
+        hg.Profile.piecewise([0.0, 1.0], 0.0, 20.0, rebalance=[1, 0.5])

@@ -83,6 +83,7 @@ def test_self_calibration_reads_the_gyros_static_drift(sweeps):
     # amplitude the AGC holds, 1 + g cos 2θ (g = 0.46 % at 20 °C; forcers ideal): 1 − g cos 2θ
     g = float(BASE.readout.gain_mismatch)
     np.testing.assert_allclose(np.asarray(comp.gain_coef[0, :3]), [1.0, -g, 0.0], atol=1e-4)
+    np.testing.assert_allclose(comp.readout_gain_mismatch, [g], rtol=0.02)
     np.testing.assert_array_equal(comp.scale_factor_at(angles, 20.0), 1.0)
 
 

@@ -293,6 +293,16 @@ class PrecessionCompensator(AbstractCompensator):
     def drift(self, theta, temperature_c):
         return self._at(self.drift_coef, theta, temperature_c)
 
+    @property
+    def readout_gain_mismatch(self) -> np.ndarray:
+        """The pickoff gain mismatch g at each calibrated temperature [–], read from the
+        sweeps' gain S ≈ 1 − g cos 2θ (module docstring) **assuming ideal forcers**: a forcer
+        gain mismatch g_m adds to it (S's cos 2θ term is −(g + g_m)) and cannot be told
+        apart at rest."""
+        if self.gain_coef is None:
+            raise ValueError("this PrecessionCompensator is not fitted; use comp = comp.fit(data)")
+        return -np.asarray(self.gain_coef)[:, 1]
+
     def scale_factor(self, theta, temperature_c):
         """The nominal 1: sweeps at rest do not calibrate the scale factor (module docstring)."""
         return jnp.ones_like(theta + temperature_c)

@@ -1,8 +1,11 @@
 r"""Slow-variable (averaged) vector field, PHYSICS.md §3.2, with the loops closed.
 
-State $\mathbf y = (a, q, \theta, \varphi, I_\varphi, I_{\rm agc}, I_q[, I_r])$: principal and
-quadrature amplitudes, electrical wave angle, phase relative to the reference, and the loop
-integrators (the rebalance loop's in force-to-rebalance mode). The forces of the loops are formed from *estimates* of the measured
+State $\mathbf y = (a, q, \theta, \varphi, I_\varphi, I_{\rm agc}, I_q[, I_r, \theta_{\rm hold}])$:
+principal and quadrature amplitudes, electrical wave angle, phase relative to the reference,
+the loop integrators and, in force-to-rebalance mode, the rebalance loop's integrator and the
+angle it holds ($\dot\theta_{\rm hold} = \rho$ while it holds; while a `rebalance` schedule
+runs whole-angle it follows the estimate, $\dot\theta_{\rm hold} = \dot{\hat\theta}$, so that
+switching back captures the wave where it is read). The forces of the loops are formed from *estimates* of the measured
 demodulated signals, then projected on the true pattern frame, so readout errors act on the
 dynamics exactly as in the full model.
 
@@ -22,6 +25,7 @@ $\Omega$ here is the equivalent input rate: table rate + rate bias + g-sensitivi
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .control import (
@@ -84,6 +88,9 @@ def averaged_vector_field(t, y, args):
     res, ctl = g.resonator, g.control
     omega_in = sampled_input_rate(g, profile, t, rate, accel)
     if ctl.ideal:
+        if profile.rebalance is not None:
+            raise ValueError("a Profile.rebalance schedule needs the PI loops: give the gyro "
+                             "Control(ideal=False)")  # fmt: skip
         rho = profile.precession_at(t)
         if ctl.mode == "ftr":  # held exactly at the commanded angle
             return jnp.reshape(rho, (1,))
@@ -93,16 +100,23 @@ def averaged_vector_field(t, y, args):
             + rho
         )
         return d_theta[None]
-    return loop_field(g, omega_in, y, profile.command_at(t))
+    return loop_field(g, omega_in, y, profile.command_at(t), profile.rebalance is not None)
 
 
-def loop_field(g, omega_in, y, command=None):
+def loop_field(g, omega_in, y, command=None, scheduled=False):
     """The averaged model's right-hand side with the PI loops, for a gyro `g` already at its
     temperature, equivalent input rate `omega_in` [rad/s] and state `y` (module docstring);
-    `command` = (commanded angle [rad], commanded precession [rad/s]) or `None`."""
+    `command` = (commanded angle [rad], commanded precession [rad/s], rebalance on/off) or
+    `None` — in force-to-rebalance mode the held angle is the state's θ_hold; `scheduled`: the
+    profile switches the rebalance loop (θ_hold then follows the estimate while it is off)."""
     res, ctl = g.resonator, g.control
     a, q, theta, phi = y[0], y[1], y[2], y[3]
     est = measured_estimates(g, a, q, theta, phi)
+    ftr = ctl.mode == "ftr"
+    if ftr:
+        if command is None:
+            command = (y[8], 0.0 * a, 1.0 + 0.0 * a)
+        command = (y[8], command[1], command[2])
     loops = loop_outputs(ctl, res.omega, est, y[4:], command)
     u, v = drive_vectors(ctl, loops, est.theta)
     f_ac, f_as, f_qc, f_qs = pattern_forces(u, v, phi, theta)
@@ -148,7 +162,14 @@ def loop_field(g, omega_in, y, command=None):
         - pump * jnp.cos(beta) * big_p
     )
     d_int = integrator_rates(ctl, w, est, command, y[4:])
-    return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int])
+    if not ftr:
+        return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int])
+    d_hold = command[1]
+    if scheduled:  # off: follow the estimate, d/dt θ̂(a, q, θ, φ) along the motion
+        _, d_est = jax.jvp(lambda *s: measured_estimates(g, *s).theta, (a, q, theta, phi),
+                           (da, dq, dtheta, dphi))  # fmt: skip
+        d_hold = command[2] * command[1] + (1.0 - command[2]) * d_est
+    return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int, jnp.reshape(d_hold, (1,))])
 
 
 def held_angle(g, a, theta_cmd, iterations: int = 4):
@@ -168,8 +189,17 @@ def averaged_initial_state(gyro, profile, quadrature0=0.0):
     if g.control.ideal:
         return theta0[None]
     a0 = g.control.amplitude
-    if g.control.mode == "ftr":  # held where the *estimate* reads the commanded angle
-        theta0 = held_angle(g, a0, theta0)
-    integ = steady_integrators(g.control, g.resonator, a0, theta0,
-                               input_rate(g, profile, profile.t[0]))  # fmt: skip
-    return jnp.concatenate([jnp.stack([a0, quadrature0 + 0.0 * a0, theta0, 0.0 * a0]), integ])
+    omega_in = input_rate(g, profile, profile.t[0])
+    if g.control.mode != "ftr":
+        integ = steady_integrators(g.control, g.resonator, a0, theta0, omega_in)
+        return jnp.concatenate([jnp.stack([a0, quadrature0 + 0.0 * a0, theta0, 0.0 * a0]), integ])
+    # FTR: held where the *estimate* reads the commanded angle; starting whole-angle (a
+    # schedule's first segment off), the wave is at θ₀ and the held angle is its estimate
+    on = profile.rebalance_at(profile.t[0])
+    held = held_angle(g, a0, theta0)
+    theta = on * held + (1.0 - on) * theta0
+    read = measured_estimates(g, a0, 0.0 * a0, theta, 0.0 * a0).theta
+    integ = steady_integrators(g.control, g.resonator, a0, theta, omega_in, on)
+    hold = on * theta0 + (1.0 - on) * read
+    return jnp.concatenate([jnp.stack([a0, quadrature0 + 0.0 * a0, theta, 0.0 * a0]), integ,
+                            jnp.reshape(hold, (1,))])  # fmt: skip

@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .averaged import sampled_input_rate
-from .full import loop_efforts, mechanics
+from .full import full_estimates, held_command, loop_efforts, mechanics
 from .params import TemperatureLaw
 
 _TABLEAU = diffrax.Dopri8.tableau
@@ -69,10 +69,15 @@ def _rk_step(f, w, h):
     return w + h * sum(float(_B[j]) * ks[j] for j in range(len(ks)) if _B[j] != 0.0)
 
 
-def _step(env, omega_scale, y, h):
-    """One held-loop step over h [s] from state y (8,) (9,: FTR) in the environment `env` =
-    (gyro with its temperature laws evaluated, Ω [rad/s], Ω̇ [rad/s²] at the step's midpoint,
-    the profile's command at the step's start)."""
+def _wrap_half_pi(x):
+    return (x + jnp.pi / 2) % jnp.pi - jnp.pi / 2
+
+
+def _step(env, omega_scale, y, h, scheduled=False):
+    """One held-loop step over h [s] from state y (8,) ((10,) in FTR mode) in the environment
+    `env` = (gyro with its temperature laws evaluated, Ω [rad/s], Ω̇ [rad/s²] at the step's
+    midpoint, the profile's command at the step's start); `scheduled`: the profile switches
+    the rebalance loop."""
     g, omega_in, omega_dot, command = env
     res = g.resonator
     eff = loop_efforts(g, omega_in, y, omega_scale, command)
@@ -90,7 +95,17 @@ def _step(env, omega_scale, y, h):
     w = jnp.concatenate([y[0:4], jnp.stack([jnp.cos(psi), jnp.sin(psi)])])
     w = _rk_step(field, w, h)
     psi = jnp.remainder(psi + eff.omega_r * h, 2 * jnp.pi)
-    return jnp.concatenate([w[0:4], jnp.reshape(psi, (1,)), y[5:] + h * eff.d_int])
+    n = eff.d_int.shape[0]
+    out = jnp.concatenate([w[0:4], jnp.reshape(psi, (1,)), y[5 : 5 + n] + h * eff.d_int])
+    if g.control.mode != "ftr":
+        return out
+    cmd = held_command(g, y, command)
+    hold = y[-1] + h * cmd[1]  # held: turned by the commanded precession
+    if scheduled:  # off: the held angle is the estimate at the step's end (sample and hold)
+        read = full_estimates(g, jnp.concatenate([out, y[-1:]]), omega_scale, omega_in,
+                              command=cmd).theta  # fmt: skip
+        hold = cmd[2] * hold + (1.0 - cmd[2]) * (y[-1] + _wrap_half_pi(read - y[-1]))
+    return jnp.concatenate([out, jnp.reshape(hold, (1,))])
 
 
 def _has_laws(gyro) -> bool:
@@ -99,7 +114,7 @@ def _has_laws(gyro) -> bool:
 
 
 def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
-    """States (len(ts), 8) ((len(ts), 9) in FTR mode) at the output times `ts` [s] (ts[0] ≥ the profile's start), each
+    """States (len(ts), 8) ((len(ts), 10) in FTR mode) at the output times `ts` [s] (ts[0] ≥ the profile's start), each
     interval of [`event_grid`][hrgjax.resonator.carrier.event_grid] (the first from the
     profile's start) in `steps` equal held-loop steps."""
     events = event_grid(profile.t, ts)
@@ -109,6 +124,7 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
     steps = n_chunks * chunk
 
     laws = _has_laws(gyro)
+    scheduled = profile.rebalance is not None
     fixed_gyro = None if laws else gyro.at(profile.temperature[0])
 
     @jax.checkpoint
@@ -135,7 +151,7 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
             accel = 0.5 * (accel0 + accel1)
             omega_in = sampled_input_rate(g, profile, t1 - 0.5 * h, mean_rate, accel)
             env = (g, omega_in, (rate1 - rate0) / safe_h, profile.command_at(t1 - h))
-            return _step(env, omega_scale, yy, h), angle1, rate1, accel1
+            return _step(env, omega_scale, yy, h, scheduled), angle1, rate1, accel1
 
         start = (y, *profile.kinematics_at(first))
         y = jax.lax.fori_loop(0, chunk, one, start)[0]

@@ -166,8 +166,8 @@ def angle_error(est, command):
 
 def loop_outputs(control: Control, omega, est, integrators, command=None) -> LoopOutputs:
     """Loop efforts from estimates and integrator states `(I_pll, I_agc, I_quad[, I_r])`;
-    `command` = (commanded angle θ_cmd [rad], commanded precession ρ [rad/s]) from the
-    profile (`None`: hold the start, no precession)."""
+    `command` = (commanded angle θ_cmd [rad], commanded precession ρ [rad/s], rebalance on 1 /
+    off 0) (`None`: hold the start, no precession)."""
     (kp_p, _), (kp_a, _), (kp_q, _) = loop_gains(control, omega)
     i_pll, i_agc, i_quad = integrators[0], integrators[1], integrators[2]
     agc = kp_a * (control.amplitude - est.amplitude) + i_agc
@@ -185,6 +185,8 @@ def loop_outputs(control: Control, omega, est, integrators, command=None) -> Loo
         if control.rebalance_limit is not None:
             lim = control.rebalance_limit
             rebalance = jnp.clip(rebalance, -lim, lim)
+        if command is not None:
+            rebalance = command[2] * rebalance  # off (0) where the schedule runs whole-angle
     return LoopOutputs(
         omega_r=omega_r,
         force=agc if control.drive == "force" else zero,
@@ -210,7 +212,7 @@ def integrator_rates(control: Control, omega, est, command=None, integrators=Non
     if control.mode == "ftr":
         _, ki_r = rebalance_gains(control, omega)
         x = 0.0 * est.phase if command is None else angle_error(est, command)
-        rate = -ki_r * x
+        rate = -ki_r * x * (1.0 if command is None else command[2])  # held while off
         if control.rebalance_limit is not None and integrators is not None:
             kp_r, _ = rebalance_gains(control, omega)
             raw = -kp_r * x + integrators[3]  # stop winding up while saturated
@@ -254,7 +256,7 @@ def pump_phase(control: Control):
     return 0.25 * jnp.pi + 0.5 * e
 
 
-def steady_integrators(control: Control, res, a, theta, omega_in=0.0):
+def steady_integrators(control: Control, res, a, theta, omega_in=0.0, on=1.0):
     """Integrator values at the loops' steady state (used as initial conditions).
 
     AGC: $F = 2\\omega a[1/\\tau + \\tfrac12\\Delta(1/\\tau)\\cos2(\\theta-\\theta_\\tau)]/\\cos\\gamma_e$
@@ -280,5 +282,5 @@ def steady_integrators(control: Control, res, a, theta, omega_in=0.0):
     integ = [i_pll, i_agc, i_quad]
     if control.mode == "ftr":
         drift = 0.5 * res.delta_inv_tau * jnp.sin(2 * (theta - res.theta_tau))
-        integ.append(2.0 * res.omega * a * (drift - res.k_e * omega_in))
+        integ.append(on * 2.0 * res.omega * a * (drift - res.k_e * omega_in))
     return jnp.stack(integ)

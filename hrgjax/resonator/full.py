@@ -1,6 +1,6 @@
 r"""Carrier-resolving two-pendulum vector field (PHYSICS.md §2) with the loops closed.
 
-State $\mathbf y = (x, y, \dot x/\omega_s, \dot y/\omega_s, \psi_r, I_\varphi, I_{\rm agc}, I_q[, I_r])$,
+State $\mathbf y = (x, y, \dot x/\omega_s, \dot y/\omega_s, \psi_r, I_\varphi, I_{\rm agc}, I_q[, I_r, \theta_{\rm hold}])$,
 where $\omega_s$ is a fixed velocity scale (ω at the start) and $\psi_r$ the reference
 phase of the PLL. The pickoff signals are demodulated instantaneously against $\psi_r$
 (readout.py), the loops (control.py) form forces along the *estimated* antinode and node,
@@ -13,7 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .averaged import held_angle, input_rate, sampled_input_rate
+from .averaged import held_angle, input_rate, measured_estimates, sampled_input_rate
 from .control import (
     drive_vectors,
     integrator_rates,
@@ -28,10 +28,12 @@ N_STATE = 8
 
 def pattern_rate(g, omega_in, command=None):
     r"""The rate the wave turns at [rad/s, electrical] by the operating mode: $-k_e\Omega + \rho$
-    in whole-angle mode, the commanded ρ in force-to-rebalance mode (held)."""
+    in whole-angle mode (and where a force-to-rebalance schedule has the loop off), the
+    commanded ρ while force-to-rebalance holds it."""
     rho = 0.0 if command is None else command[1]
     if g.control.mode == "ftr":
-        return rho + 0.0 * omega_in
+        on = 1.0 if command is None else command[2]
+        return rho - (1.0 - on) * g.resonator.k_e * omega_in
     return -g.resonator.k_e * omega_in + rho
 
 
@@ -65,28 +67,51 @@ def full_vector_field(t, y, args):
     rate, omega_dot, temperature, accel = profile.sample(t)
     g = gyro.at(temperature)
     omega_in = sampled_input_rate(g, profile, t, rate, accel)
-    return carrier_rhs(g, omega_in, omega_dot, y, omega_scale, profile.command_at(t))
+    command = profile.command_at(t)
+    return carrier_rhs(
+        g, omega_in, omega_dot, y, omega_scale, command, profile.rebalance is not None
+    )
 
 
-def carrier_rhs(g, omega_in, omega_dot, y, omega_scale, command=None):
+def held_command(g, y, command):
+    """The loops' command with the held angle from the state (force-to-rebalance: the last
+    entry of `y`), or `command` as it is (whole-angle)."""
+    if g.control.mode != "ftr":
+        return command
+    if command is None:
+        return (y[-1], 0.0 * y[0], 1.0 + 0.0 * y[0])
+    return (y[-1], command[1], command[2])
+
+
+def carrier_rhs(g, omega_in, omega_dot, y, omega_scale, command=None, scheduled=False):
     """The full model's right-hand side for a gyro `g` whose temperature laws are evaluated,
     the input rate `omega_in` [rad/s] and angular acceleration `omega_dot` [rad/s²]:
     demodulation, loops, forces and the two-pendulum dynamics at state `y` (`command`: the
-    profile's commanded angle and precession, [`hrgjax.Profile.command_at`][])."""
+    profile's, [`hrgjax.Profile.command_at`][]; `scheduled`: the profile switches the
+    rebalance loop, and the held angle follows the estimate while it is off)."""
     z, zdot = y[0:2], y[2:4] * omega_scale
     psi_r = y[4]
     eff = loop_efforts(g, omega_in, y, omega_scale, command)
     force = eff.u * jnp.cos(psi_r) + eff.v * jnp.sin(psi_r)
     pump = eff.pump * jnp.cos(2 * psi_r + eff.pump_phase2)
     zddot = mechanics(g.resonator, omega_in, omega_dot, z, zdot, force, pump)
-    return jnp.concatenate([zdot, zddot / omega_scale, jnp.reshape(eff.omega_r, (1,)), eff.d_int])
+    dy = jnp.concatenate([zdot, zddot / omega_scale, jnp.reshape(eff.omega_r, (1,)), eff.d_int])
+    if g.control.mode != "ftr":
+        return dy
+    cmd = held_command(g, y, command)
+    d_hold = cmd[1]
+    if scheduled:  # off: follow the estimate, d/dt θ̂(y) along the motion
+        read = lambda state: full_estimates(g, state, omega_scale, omega_in, command=cmd).theta
+        _, d_est = jax.jvp(read, (y,), (jnp.concatenate([dy, jnp.zeros(1)]),))
+        d_hold = cmd[2] * cmd[1] + (1.0 - cmd[2]) * d_est
+    return jnp.concatenate([dy, jnp.reshape(d_hold, (1,))])
 
 
 class LoopEfforts(eqx.Module):
     r"""What the closed loops apply, from the demodulated state: the electrode force
     $\mathbf u\cos\psi_r + \mathbf v\sin\psi_r$, the pump $P\cos(2\psi_r + 2\gamma)$ (`pump` = P
-    [1/s²], `pump_phase2` = 2γ), the integrators' rates `d_int` (3,) and the reference
-    frequency `omega_r` [rad/s]."""
+    [1/s²], `pump_phase2` = 2γ), the loop integrators' rates `d_int` (3,) ((4,) in FTR: the
+    held angle's is the caller's) and the reference frequency `omega_r` [rad/s]."""
 
     u: jax.Array
     v: jax.Array
@@ -102,6 +127,7 @@ def loop_efforts(g, omega_in, y, omega_scale, command=None) -> LoopEfforts:
     if not ctl.enabled:
         zero = 0.0 * y[0]
         return LoopEfforts(jnp.zeros(2), jnp.zeros(2), zero, zero, jnp.zeros(3), res.omega + zero)
+    command = held_command(g, y, command)
     est = full_estimates(g, y, omega_scale, omega_in, command=command)
     loops = loop_outputs(ctl, res.omega, est, y[5:], command)
     u, v = drive_vectors(ctl, loops, est.theta)
@@ -150,14 +176,21 @@ def full_initial_state(gyro, profile, quadrature0=0.0):
     g = gyro.at(profile.temperature[0])
     res = g.resonator
     a0 = g.control.amplitude
-    th = profile.wave_angle0
-    if g.control.mode == "ftr":
-        th = held_angle(g, a0, th)
+    th0 = th = profile.wave_angle0
+    command = profile.command_at(profile.t[0])
+    on = command[2]
+    ftr = g.control.mode == "ftr"
+    if ftr:  # as the averaged model's start (`averaged_initial_state`)
+        th = on * held_angle(g, a0, th0) + (1.0 - on) * th0
     omega_in = input_rate(g, profile, profile.t[0])
     z0 = a0 * jnp.stack([jnp.cos(th), jnp.sin(th)])
     q_vel = quadrature0 * res.omega * jnp.stack([-jnp.sin(th), jnp.cos(th)])
-    rate0 = pattern_rate(g, omega_in, profile.command_at(profile.t[0]))
+    rate0 = pattern_rate(g, omega_in, command)
     zdot0 = rate0 * _rot90(z0) + q_vel
-    integ = steady_integrators(g.control, res, a0, th, omega_in)
+    integ = steady_integrators(g.control, res, a0, th, omega_in, on)
     omega_scale = res.omega
-    return jnp.concatenate([z0, zdot0 / omega_scale, jnp.zeros(1), integ]), omega_scale
+    y0 = jnp.concatenate([z0, zdot0 / omega_scale, jnp.zeros(1), integ])
+    if ftr:
+        read = measured_estimates(g, a0, 0.0 * a0, th, 0.0 * a0).theta
+        y0 = jnp.concatenate([y0, jnp.reshape(on * th0 + (1.0 - on) * read, (1,))])
+    return y0, omega_scale
