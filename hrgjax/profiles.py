@@ -228,14 +228,15 @@ class Profile(eqx.Module):
         duration_s: float,
         temperature_c: float = 20.0,
         wave_angle0_deg: float = 0.0,
-        rate_dps: float = 0.0,
-        accel_g=(0.0, 0.0, 0.0),
+        **case,
     ) -> Profile:
         """A run whose wave is turned at `precession_dps` [°/s, electrical] by a commanded node
-        force, the case at `rate_dps` [°/s] (default at rest), for `duration_s` [s] at
-        `temperature_c` [°C] from `wave_angle0_deg` [° electrical]. In whole-angle mode the
-        wave then visits every angle: what the drift's θ-dependence needs, without a table."""
-        p = cls.constant_rate(rate_dps, duration_s, temperature_c, wave_angle0_deg, accel_g)
+        force for `duration_s` [s] at `temperature_c` [°C] from `wave_angle0_deg` [° electrical],
+        the case at rest unless `case` gives [`constant_rate`][hrgjax.Profile.constant_rate]'s
+        `rate_dps` [°/s] or `accel_g` [g]. In whole-angle mode the wave then visits every
+        angle: what the drift's θ-dependence needs, without a table."""
+        rate_dps = case.pop("rate_dps", 0.0)
+        p = cls.constant_rate(rate_dps, duration_s, temperature_c, wave_angle0_deg, **case)
         return eqx.tree_at(
             lambda q: q.precession, p, jnp.ones(2) * _f(precession_dps) * DEG_PER_S,
             is_leaf=lambda x: x is None,

@@ -33,7 +33,6 @@ from .reduce import scale_factor_vs_angle as scale_factor_vs_angle
 from .reduce import static_drift as static_drift
 from .self_calibration import ModeReversal as ModeReversal
 from .self_calibration import PrecessionCompensator as PrecessionCompensator
-from .self_calibration import PrecessionPlan as PrecessionPlan
 from .self_calibration import mode_reversal as mode_reversal
 from .self_calibration import mode_reversal_data as mode_reversal_data
 from .self_calibration import precession_plan as precession_plan

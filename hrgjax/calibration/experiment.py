@@ -32,6 +32,9 @@ class Plan(eqx.Module):
     - `rate_dps`: table rate of each point [°/s], shape (P,).
     - `duration_s`: length of every run [s] (static: one output grid for the whole plan).
     - `dt_out`: output interval [s].
+    - `precession_dps`: commanded precession rate of each point [°/s, electrical], shape
+      (P,), or `None`: virtual-precession sweeps
+      ([`precession_plan`][hrgjax.calibration.precession_plan]).
     """
 
     temperature_c: jax.Array
@@ -39,6 +42,7 @@ class Plan(eqx.Module):
     rate_dps: jax.Array
     duration_s: float = eqx.field(static=True)
     dt_out: float = eqx.field(static=True, default=1.0)
+    precession_dps: jax.Array | None = None
 
     def __check_init__(self):
         shapes = {a.shape for a in (self.temperature_c, self.wave_angle0_deg, self.rate_dps)}
@@ -53,6 +57,13 @@ class Plan(eqx.Module):
         plausible.check("Plan.temperature_c", self.temperature_c, "temperature_c")
         plausible.check("Plan.wave_angle0_deg", self.wave_angle0_deg, "wave_angle_deg")
         plausible.check("Plan.rate_dps", self.rate_dps, "table_rate_dps")
+        if self.precession_dps is not None:
+            if np.shape(self.precession_dps) != np.shape(self.rate_dps):
+                raise ValueError(
+                    f"Plan.precession_dps must have the plan's shape {np.shape(self.rate_dps)} "
+                    f"[°/s]; got {np.shape(self.precession_dps)}"
+                )
+            check_finite("Plan.precession_dps", self.precession_dps)
 
     @property
     def size(self) -> int:
@@ -63,7 +74,7 @@ class Plan(eqx.Module):
         """A batch of profiles, one per point (leading axis P)."""
         one = lambda T, a, w: Profile.constant_rate(w, self.duration_s, T, a)
         fields = (self.temperature_c, self.wave_angle0_deg, self.rate_dps)
-        if not all(is_concrete(x) for x in fields):
+        if not all(is_concrete(x) for x in fields) and self.precession_dps is None:
             return jax.vmap(one)(*fields)
         # Concrete plan: build the batch on the host (checked here), not by an eager vmap
         # of the constructor, which would compile its checks for every plan size.
@@ -71,7 +82,7 @@ class Plan(eqx.Module):
         for name, x in zip(("temperature_c", "wave_angle0_deg", "rate_dps"), fields, strict=True):
             check_finite(f"Plan.{name}", x)
         ones = np.ones((self.size, 2))
-        return eqx.tree_at(
+        batch = eqx.tree_at(
             lambda p: (p.t, p.rate, p.temperature, p.accel, p.wave_angle0),
             one(0.0, 0.0, 0.0),
             (
@@ -82,6 +93,11 @@ class Plan(eqx.Module):
                 device(angle * DEG),
             ),
         )
+        if self.precession_dps is None:
+            return batch
+        rho = np.asarray(self.precession_dps, dtype=float)[:, None] * DEG_PER_S
+        return eqx.tree_at(lambda p: p.precession, batch, device(ones * rho),
+                           is_leaf=lambda x: x is None)  # fmt: skip
 
 
 def _grid(temps, angles, rate, duration, dt_out):
@@ -206,7 +222,7 @@ def run_plan(
     `jax.random.split(k, P)[i]` with `k, k_bias = jax.random.split(key)`, the switch-on's
     `k_bias` unless `bias_key` is given — the runner `simulate_plan` shares.
     """
-    n_out = int(round(plan.duration_s / plan.dt_out)) + 1
+    n_out = int(np.floor(plan.duration_s / plan.dt_out + 1e-9)) + 1  # none past the end
     plausible.check_size("run_plan", float(n_out) * plan.size, plan.size)
     fields = (plan.temperature_c, plan.wave_angle0_deg, plan.rate_dps)
     if not all(is_concrete(x) for x in fields):

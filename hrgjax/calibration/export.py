@@ -183,6 +183,14 @@ def _mlp_layers(net: eqx.nn.MLP) -> list[dict]:
     ]
 
 
+def _series(comp, coefs, **fields) -> dict:
+    """A Fourier-series compensator's JSON fields: `fields`, its coefficient arrays `coefs` as
+    lists and its hyperparameters."""
+    return (
+        fields | {c: np.asarray(getattr(comp, c)).tolist() for c in coefs} | {"hyper": _hyper(comp)}
+    )
+
+
 def to_json_dict(comp) -> dict:
     """Everything a C implementation needs, as plain lists and numbers (SI units)."""
     base = {
@@ -197,16 +205,12 @@ def to_json_dict(comp) -> dict:
         "correction": "rate = (-dtheta_dt / k_e_nominal - drift(theta, T)) / sf(theta, T)",
     }
     if isinstance(comp, FourierCompensator):
-        base.update(
+        base.update(_series(
+            comp, ("drift_coef", "sf_coef"),
             formula="x = (T - t_ref)/t_scale; f = sum_k x^k * (c[k][0] + "
             "sum_n c[k][2n-1] cos(2n theta) + c[k][2n] sin(2n theta))",
-            t_ref=comp.fit_temperature_c,
-            t_scale=T_SCALE,
-            harmonics=comp.harmonics,
-            drift_coef=np.asarray(comp.drift_coef).tolist(),
-            sf_coef=np.asarray(comp.sf_coef).tolist(),
-            hyper=_hyper(comp),
-        )
+            t_ref=comp.fit_temperature_c, t_scale=T_SCALE, harmonics=comp.harmonics,
+        ))  # fmt: skip
     elif isinstance(comp, MLPCompensator):
         base.update(
             formula="input = [cos 2theta, sin 2theta, (T - t_centre)/t_scale] (periodic) or "
@@ -244,15 +248,13 @@ def to_json_dict(comp) -> dict:
             hyper=_hyper(comp),
         )
     elif isinstance(comp, PrecessionCompensator):
-        base.update(
+        base.update(_series(
+            comp, ("drift_coef", "gain_coef"),
             formula="at each temperature_c[k]: drift_k = c[k][0] + sum_n c[k][2n-1] cos(2n theta) "
             "+ c[k][2n] sin(2n theta); linear in T between the temperatures, held beyond; "
             "sf = 1 (virtual precession does not calibrate the scale factor)",
             temperatures_c=list(comp.temperatures_c),
-            drift_coef=np.asarray(comp.drift_coef).tolist(),
-            gain_coef=np.asarray(comp.gain_coef).tolist(),
-            hyper=_hyper(comp),
-        )
+        ))  # fmt: skip
     else:
         base["hyper"] = _hyper(comp)
     return base

@@ -41,8 +41,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import plausible
-from .._checks import check_finite
 from .._compiled import device
 from .._x64 import require_x64
 from ..data import MeasuredData
@@ -51,77 +49,12 @@ from ..profiles import Profile
 from ..units import DEG, DEG_PER_S, K_E_NOMINAL
 from ._compensator import AbstractCompensator
 from ._runs import RunGroup, simulate_runs, switch_on_keys
-from .experiment import QUICK_TEMPERATURES
+from .experiment import QUICK_TEMPERATURES, Plan, run_plan
 
 PRECESSION_DPS = 0.5
 """Default commanded precession rate [°/s, electrical]: 180° in 6 min."""
 SETTLE_S = 30.0
 """Default time left out at the start of each sweep [s]: the loops' transient (≥ 30/β)."""
-
-
-class PrecessionPlan(eqx.Module):
-    """Virtual-precession sweeps at rest: each point is one run at one chamber temperature,
-    the wave turned at a constant commanded rate.
-
-    **Arguments:**
-
-    - `temperature_c`: chamber temperature of each run [°C], shape (P,).
-    - `precession_dps`: commanded precession rate of each run [°/s, electrical], shape (P,).
-    - `wave_angle0_deg`: start angle of each run [° electrical], shape (P,).
-    - `duration_s`: length of every run [s] (one output grid).
-    - `dt_out`: output interval [s].
-    """
-
-    temperature_c: jax.Array
-    precession_dps: jax.Array
-    wave_angle0_deg: jax.Array
-    duration_s: float = eqx.field(static=True)
-    dt_out: float = eqx.field(static=True, default=1.0)
-
-    def __check_init__(self):
-        fields = (self.temperature_c, self.precession_dps, self.wave_angle0_deg)
-        if len({np.shape(x) for x in fields}) != 1 or np.ndim(self.temperature_c) != 1:
-            raise ValueError(
-                "PrecessionPlan.temperature_c, precession_dps and wave_angle0_deg must be 1-D "
-                f"of equal length; got {[np.shape(x) for x in fields]}"
-            )
-        if not (np.isfinite(self.duration_s) and self.duration_s > 0):
-            raise ValueError(f"PrecessionPlan.duration_s must be > 0 [s]; got {self.duration_s}")
-        if not (np.isfinite(self.dt_out) and 0 < self.dt_out <= self.duration_s):
-            raise ValueError(
-                f"PrecessionPlan.dt_out must be in (0, duration_s] [s]; got {self.dt_out}"
-            )
-        for name, x in zip(("temperature_c", "precession_dps", "wave_angle0_deg"), fields,
-                           strict=True):  # fmt: skip
-            check_finite(f"PrecessionPlan.{name}", x)
-        plausible.check("PrecessionPlan.temperature_c", self.temperature_c, "temperature_c")
-        plausible.check("PrecessionPlan.duration_s", self.duration_s, "duration_s")
-        if np.any(np.asarray(self.precession_dps) == 0):
-            raise ValueError("PrecessionPlan.precession_dps must be nonzero [°/s] in every run")
-
-    @property
-    def size(self) -> int:
-        """Number of runs."""
-        return int(np.shape(self.temperature_c)[0])
-
-    def profiles(self) -> Profile:
-        """A batch of profiles, one per run (leading axis P; the case at rest)."""
-        temp, rho, angle = (np.asarray(x, dtype=float) for x in
-                            (self.temperature_c, self.precession_dps, self.wave_angle0_deg))  # fmt: skip
-        ones = np.ones((self.size, 2))
-        one = Profile.virtual_precession(1.0, self.duration_s)
-        return eqx.tree_at(
-            lambda p: (p.t, p.rate, p.temperature, p.accel, p.wave_angle0, p.precession),
-            one,
-            (
-                device(ones * np.array([0.0, self.duration_s])),
-                device(np.zeros((self.size, 2))),
-                device(ones * temp[:, None]),
-                device(np.zeros((self.size, 2, 3))),
-                device(angle * DEG),
-                device(ones * rho[:, None] * DEG_PER_S),
-            ),
-        )
 
 
 def precession_plan(
@@ -130,7 +63,7 @@ def precession_plan(
     turns: int = 1,
     settle_s: float = SETTLE_S,
     dt_out: float = 1.0,
-) -> PrecessionPlan:
+) -> Plan:
     """Two sweeps at each chamber temperature, case at rest: +`precession_dps` from −90°
     and −`precession_dps` from +90° (electrical), each over `turns` × 180° after `settle_s`
     [s] of settling — every angle the drift's 2θ and 4θ terms have, seen in both directions.
@@ -148,47 +81,28 @@ def precession_plan(
     duration = settle_s + 180.0 * turns / precession_dps
     rho = np.tile([precession_dps, -precession_dps], temps.size)
     start = np.tile([-90.0 - margin, -90.0 + 180.0 * turns + margin], temps.size)
-    return PrecessionPlan(
+    return Plan(
         temperature_c=device(np.repeat(temps, 2)),
-        precession_dps=device(rho),
         wave_angle0_deg=device(start),
+        rate_dps=device(np.zeros(rho.size)),
         duration_s=float(duration),
         dt_out=float(dt_out),
+        precession_dps=device(rho),
     )
 
 
-def run_precession_plan(
-    gyro: Gyro,
-    plan: PrecessionPlan,
-    *,
-    key: jax.Array | None = None,
-    bias_key: jax.Array | None = None,
-    model: str = "averaged",
-    first_run: int = 0,
-) -> MeasuredData:
-    """Simulate every sweep of `plan` on `gyro` (whole-angle mode, one switch-on) and return
-    the data, with the commanded rate in the column `precession_dps`; runs numbered from
-    `first_run`. Keys as [`run_plan`][hrgjax.calibration.run_plan]."""
+def run_precession_plan(gyro: Gyro, plan: Plan, **options) -> MeasuredData:
+    """Simulate every sweep of `plan` ([`precession_plan`][hrgjax.calibration.precession_plan])
+    on `gyro` in whole-angle mode, one switch-on: [`run_plan`][hrgjax.calibration.run_plan]
+    with its keywords (`key`, `bias_key`, `model`, `first_run`; chunks and progress as there);
+    the data carry the commanded rate in the column `precession_dps`."""
     if gyro.control.mode != "wa":
         raise ValueError("virtual-precession sweeps run in whole-angle mode: give a gyro with "
                          f"Control(mode='wa'); got mode={gyro.control.mode!r}")  # fmt: skip
-    n_out = int(np.floor(plan.duration_s / plan.dt_out + 1e-9)) + 1  # none past the end
-    plausible.check_size("run_precession_plan", float(n_out) * plan.size, plan.size)
-    batch = jax.tree_util.tree_map(np.asarray, plan.profiles())
-    keys, bias_key = switch_on_keys(gyro, key, bias_key, plan.size)
-    chunk = min(32, plan.size)
-    return simulate_runs(
-        gyro,
-        [RunGroup(np.arange(n_out) * plan.dt_out, np.arange(plan.size), chunk)],
-        lambda take, _: jax.tree_util.tree_map(lambda x: x[take], batch),
-        keys,
-        bias_key,
-        model,
-        samples=np.full(plan.size, n_out),
-        failure=lambda take, message: f"run_precession_plan: {message}",
-        unit="sweep",
-        first_run=first_run,
-    )
+    if plan.precession_dps is None or np.any(np.asarray(plan.precession_dps) == 0):
+        raise ValueError("a sweep plan commands a nonzero precession in every run "
+                         "(precession_plan builds one)")  # fmt: skip
+    return run_plan(gyro, plan, **options)
 
 
 def angle_basis(theta, harmonics: int):
