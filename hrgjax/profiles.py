@@ -193,7 +193,7 @@ class Profile(eqx.Module):
         temperatures [°C] and optionally specific force [g], shape (N, 3), a commanded
         precession [°/s, electrical] and a force-to-rebalance schedule (1 on, 0 whole-angle
         over the segment from each knot; see the class's arguments)."""
-        args = (t_s, rate_dps, temperature_c, accel_g, wave_angle0_deg)
+        args = (t_s, rate_dps, temperature_c, accel_g, wave_angle0_deg, precession_dps, rebalance)
         if not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(args)):
             t = np.asarray(t_s, dtype=float)  # host values: built on the host
             return cls(

@@ -67,7 +67,7 @@ def output_times(profile: Profile, dt_out: float):
             f"than the {plausible.MAX_OUTPUT_SAMPLES:.0e} hrgjax allocates at once (≈ 100 "
             "bytes each); choose a larger dt_out or split the profile into runs"
         )
-    return device(t[0] + dt_out * np.arange(n))
+    return device(np.minimum(t[0] + dt_out * np.arange(n), t[-1]))  # no rounding past the end
 
 
 class _Module(types.ModuleType):
@@ -275,11 +275,17 @@ def _record(gyro, profile, ts, read, key, bias_key, run):
         white = nz.angle_white * jax.random.normal(k_white, ts.shape)
         if rebalance_rate is None:
             theta = theta - k_e * rate_angle + white
-        else:  # FTR: the wave is held; the rate noise is on the rate read out, as the mean
-            # rate over each output interval (the first sample: the first interval's)
-            if ts.shape[0] > 1:
-                inc = jnp.diff(rate_angle) / jnp.diff(ts)
-                rebalance_rate = rebalance_rate + jnp.concatenate([inc[:1], inc])
+        elif ts.shape[0] > 1:  # FTR: while held, the rate noise is on the rate read out (the
+            # mean rate of each output interval; the first sample: the first interval's);
+            # where a schedule runs whole-angle it moves the wave, which is caught there
+            on = (jnp.ones_like(ts) if profile.rebalance is None
+                  else jax.vmap(profile.rebalance_at)(ts))  # fmt: skip
+            inc = jnp.diff(rate_angle)
+            free = jnp.concatenate([jnp.zeros(1), jnp.cumsum((1.0 - on[:-1]) * inc)])
+            held = on[:-1] * inc / jnp.diff(ts)
+            rebalance_rate = rebalance_rate + jnp.concatenate([held[:1], held])
+            theta = theta - k_e * free + white
+        else:
             theta = theta + white
         amp_noise = nz.amplitude_white * gyro.control.amplitude
         ka, kq = jax.random.split(k_amp)

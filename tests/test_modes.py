@@ -214,3 +214,18 @@ def test_a_schedule_switches_whole_angle_and_rebalance_during_a_run():
         hg.simulate(hg.Gyro(resonator=PERFECT), prof)
     with pytest.raises(ValueError, match="Profile.rebalance\\[1\\] is 0.5"):
         hg.Profile.piecewise([0.0, 1.0], 0.0, 20.0, rebalance=[1, 0.5])
+
+
+def test_a_schedule_captures_the_wave_where_it_is_read_while_the_temperature_moves():
+    """The default gyro with its temperature laws and noise, whole-angle for 100 s while the
+    chamber goes from −20 to +60 °C, then held: the held estimate stays where it was read at
+    the switch (the readout's temperature law followed while off; without it the wave was
+    kicked by 5.8e-3 rad), and the FTR output is exactly 0 where the loop is off (the rate
+    noise moved the free wave instead)."""
+    gyro = hg.presets.tvg3_like().in_mode("ftr")
+    prof = hg.Profile.piecewise([0.0, 100.0, 160.0], 0.0, [-20.0, 60.0, 60.0], rebalance=[0, 1, 1])
+    rec = hg.simulate(gyro, prof, dt_out=1.0, key=jax.random.key(1))
+    th = np.asarray(rec.wave_angle)
+    assert abs(np.mean(th[130:]) - th[100]) < 2e-5  # 1″ white readout noise per sample
+    assert np.all(np.asarray(rec.rebalance_rate)[:100] == 0.0)
+    assert np.ptp(th[:100]) > 1e-5  # the free wave moved (drift and noise)

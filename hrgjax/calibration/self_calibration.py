@@ -415,6 +415,8 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
         t = data["time_s"][idx]
         rho = data["precession_dps"][idx]
         still = rho == 0
+        if "rebalance_on" in data:  # a schedule's whole-angle stretches are not holds
+            still &= data["rebalance_on"][idx] == 1
         # holds: maximal stretches of zero commanded precession
         edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
         holds = [(t[a] + settle_s, t[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)

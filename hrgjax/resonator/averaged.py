@@ -38,6 +38,7 @@ from .control import (
 from .readout import estimate, from_pendulum
 
 N_STATE = 7
+"""State size in whole-angle mode (9 in force-to-rebalance mode: + I_r, θ_hold)."""
 
 
 def sampled_input_rate(gyro, profile, t, rate, accel):
@@ -100,7 +101,14 @@ def averaged_vector_field(t, y, args):
             + rho
         )
         return d_theta[None]
-    return loop_field(g, omega_in, y, profile.command_at(t), profile.rebalance is not None)
+    command = profile.command_at(t)
+    dy = loop_field(g, omega_in, y, command, profile.rebalance is not None)
+    if profile.rebalance is None or ctl.mode != "ftr":
+        return dy
+    # while off, θ_hold follows θ̂ — which also moves as the readout's temperature laws do
+    _, d_temp = jax.jvp(lambda temp: measured_estimates(gyro.at(temp), *y[:4]).theta,
+                        (temperature,), (profile.temperature_rate_at(t),))  # fmt: skip
+    return dy.at[8].add(jnp.where(command[2] > 0, 0.0, d_temp))
 
 
 def loop_field(g, omega_in, y, command=None, scheduled=False):
@@ -168,7 +176,7 @@ def loop_field(g, omega_in, y, command=None, scheduled=False):
     if scheduled:  # off: follow the estimate, d/dt θ̂(a, q, θ, φ) along the motion
         _, d_est = jax.jvp(lambda *s: measured_estimates(g, *s).theta, (a, q, theta, phi),
                            (da, dq, dtheta, dphi))  # fmt: skip
-        d_hold = command[2] * command[1] + (1.0 - command[2]) * d_est
+        d_hold = jnp.where(command[2] > 0, command[1], d_est)
     return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int, jnp.reshape(d_hold, (1,))])
 
 

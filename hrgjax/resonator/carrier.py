@@ -76,9 +76,9 @@ def _wrap_half_pi(x):
 def _step(env, omega_scale, y, h, scheduled=False):
     """One held-loop step over h [s] from state y (8,) ((10,) in FTR mode) in the environment
     `env` = (gyro with its temperature laws evaluated, Ω [rad/s], Ω̇ [rad/s²] at the step's
-    midpoint, the profile's command at the step's start); `scheduled`: the profile switches
-    the rebalance loop."""
-    g, omega_in, omega_dot, command = env
+    midpoint, the profile's command at the step's start, the commanded precession at its
+    midpoint); `scheduled`: the profile switches the rebalance loop."""
+    g, omega_in, omega_dot, command, rho_mid = env
     res = g.resonator
     eff = loop_efforts(g, omega_in, y, omega_scale, command)
     cp2, sp2 = jnp.cos(eff.pump_phase2), jnp.sin(eff.pump_phase2)
@@ -100,7 +100,7 @@ def _step(env, omega_scale, y, h, scheduled=False):
     if g.control.mode != "ftr":
         return out
     cmd = held_command(g, y, command)
-    hold = y[-1] + h * cmd[1]  # held: turned by the commanded precession
+    hold = y[-1] + h * rho_mid  # held: turned by the commanded precession (exact: ρ is linear)
     if scheduled:  # off: the held angle is the estimate at the step's end (sample and hold)
         read = full_estimates(g, jnp.concatenate([out, y[-1:]]), omega_scale, omega_in,
                               command=cmd).theta  # fmt: skip
@@ -150,7 +150,8 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
             mean_rate = (angle1 - angle0) / safe_h
             accel = 0.5 * (accel0 + accel1)
             omega_in = sampled_input_rate(g, profile, t1 - 0.5 * h, mean_rate, accel)
-            env = (g, omega_in, (rate1 - rate0) / safe_h, profile.command_at(t1 - h))
+            env = (g, omega_in, (rate1 - rate0) / safe_h, profile.command_at(t1 - h),
+                   profile.precession_at(t1 - 0.5 * h))  # fmt: skip
             return _step(env, omega_scale, yy, h, scheduled), angle1, rate1, accel1
 
         start = (y, *profile.kinematics_at(first))

@@ -24,6 +24,7 @@ from .control import (
 from .readout import estimate, from_signals
 
 N_STATE = 8
+"""State size in whole-angle mode (10 in force-to-rebalance mode: + I_r, θ_hold)."""
 
 
 def pattern_rate(g, omega_in, command=None):
@@ -68,9 +69,15 @@ def full_vector_field(t, y, args):
     g = gyro.at(temperature)
     omega_in = sampled_input_rate(g, profile, t, rate, accel)
     command = profile.command_at(t)
-    return carrier_rhs(
-        g, omega_in, omega_dot, y, omega_scale, command, profile.rebalance is not None
-    )
+    scheduled = profile.rebalance is not None
+    dy = carrier_rhs(g, omega_in, omega_dot, y, omega_scale, command, scheduled)
+    if not scheduled or g.control.mode != "ftr":
+        return dy
+    # while off, θ_hold follows θ̂ — which also moves as the readout's temperature laws do
+    cmd = held_command(g, y, command)
+    read = lambda temp: full_estimates(gyro.at(temp), y, omega_scale, omega_in, command=cmd).theta
+    _, d_temp = jax.jvp(read, (temperature,), (profile.temperature_rate_at(t),))
+    return dy.at[-1].add(jnp.where(command[2] > 0, 0.0, d_temp))
 
 
 def held_command(g, y, command):
@@ -103,7 +110,7 @@ def carrier_rhs(g, omega_in, omega_dot, y, omega_scale, command=None, scheduled=
     if scheduled:  # off: follow the estimate, d/dt θ̂(y) along the motion
         read = lambda state: full_estimates(g, state, omega_scale, omega_in, command=cmd).theta
         _, d_est = jax.jvp(read, (y,), (jnp.concatenate([dy, jnp.zeros(1)]),))
-        d_hold = cmd[2] * cmd[1] + (1.0 - cmd[2]) * d_est
+        d_hold = jnp.where(cmd[2] > 0, cmd[1], d_est)
     return jnp.concatenate([dy, jnp.reshape(d_hold, (1,))])
 
 

@@ -98,6 +98,9 @@ def slow_manifold(g, omega_in, theta):
     loops; `omega_in`, the equivalent input rate [rad/s]; `theta`, the electrical wave angle
     [rad].
     """
+    if g.control.mode == "ftr":
+        raise ValueError("the slow manifold is whole-angle mode's (the wave turns freely); "
+                         "force-to-rebalance holds it — give a gyro with Control(mode='wa')")  # fmt: skip
     theta = jnp.asarray(theta, dtype=jnp.result_type(float))
     n = SAMPLES
     thetas = theta + (jnp.pi / n) * jnp.arange(n, dtype=jnp.result_type(float))
