@@ -296,18 +296,18 @@ def _sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
 
 
 def _padded(runs):
-    """Runs stacked to one length (the shorter padded with weight 0)."""
+    """Runs stacked to one length, the shorter padded with zero-weight samples: times going
+    on by 1 s, the last angle held, no precession."""
     n = max(len(r[0]) for r in runs)
 
-    def pad(x, fill):
-        return np.concatenate([x, np.full(n - len(x), fill if np.isscalar(fill) else x[-1])])
+    def pad(x, tail):
+        return np.concatenate([x, tail[: n - len(x)]])
 
-    t = np.stack([pad(r[0], r[0][-1]) + np.arange(n) * 0.0 for r in runs])
-    for k, r in enumerate(runs):  # padded times keep increasing (zero-weight samples)
-        t[k, len(r[0]) :] = r[0][-1] + np.arange(1, n - len(r[0]) + 1)
-    th = np.stack([pad(r[1], r[1][-1]) for r in runs])
-    rho = np.stack([pad(r[2], 0.0) for r in runs])
-    w = np.stack([pad(r[3].astype(float), 0.0) for r in runs])
+    ramp = np.arange(1.0, n + 1.0)
+    t = np.stack([pad(r[0], r[0][-1] + ramp) for r in runs])
+    th = np.stack([pad(r[1], np.full(n, r[1][-1])) for r in runs])
+    rho = np.stack([pad(r[2], np.zeros(n)) for r in runs])
+    w = np.stack([pad(r[3].astype(float), np.zeros(n)) for r in runs])
     return t, th, rho, w
 
 

@@ -43,6 +43,7 @@ import numpy as np
 from .averaged import sampled_input_rate
 from .full import full_estimates, held_command, loop_efforts, mechanics
 from .params import TemperatureLaw
+from .readout import wrap_half_pi
 
 _TABLEAU = diffrax.Dopri8.tableau
 _A = [np.asarray(a, dtype=float) for a in _TABLEAU.a_lower]
@@ -67,10 +68,6 @@ def _rk_step(f, w, h):
         inc = sum(float(a[j]) * ks[j] for j in range(a.size) if a[j] != 0.0)
         ks.append(f(w + h * inc))
     return w + h * sum(float(_B[j]) * ks[j] for j in range(len(ks)) if _B[j] != 0.0)
-
-
-def _wrap_half_pi(x):
-    return (x + jnp.pi / 2) % jnp.pi - jnp.pi / 2
 
 
 def _step(env, omega_scale, y, h, scheduled=False):
@@ -104,7 +101,7 @@ def _step(env, omega_scale, y, h, scheduled=False):
     if scheduled:  # off: the held angle is the estimate at the step's end (sample and hold)
         read = full_estimates(g, jnp.concatenate([out, y[-1:]]), omega_scale, omega_in,
                               command=cmd).theta  # fmt: skip
-        hold = cmd[2] * hold + (1.0 - cmd[2]) * (y[-1] + _wrap_half_pi(read - y[-1]))
+        hold = cmd[2] * hold + (1.0 - cmd[2]) * (y[-1] + wrap_half_pi(read - y[-1]))
     return jnp.concatenate([out, jnp.reshape(hold, (1,))])
 
 

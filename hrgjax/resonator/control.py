@@ -32,6 +32,7 @@ import jax.numpy as jnp
 
 from ..units import K_E_NOMINAL
 from .params import TemperatureLaw, as_parameter
+from .readout import wrap_half_pi
 
 DRIVES = ("force", "parametric")
 MODES = ("wa", "ftr")
@@ -154,14 +155,10 @@ def rebalance_gains(control: Control, omega):
     return _gains(control.rebalance_bandwidth, -1.0 / (2.0 * omega * control.amplitude))
 
 
-def _wrap_half_pi(x):
-    return (x + jnp.pi / 2) % jnp.pi - jnp.pi / 2
-
-
 def angle_error(est, command):
     r"""Rebalance loop error $\hat\theta - \theta_{\rm cmd}$ [rad], wrapped to [−π/2, π/2)
     (θ and θ + π are the same standing wave)."""
-    return _wrap_half_pi(est.theta - command[0])
+    return wrap_half_pi(est.theta - command[0])
 
 
 def loop_outputs(control: Control, omega, est, integrators, command=None) -> LoopOutputs:

@@ -116,8 +116,8 @@ class Estimates(eqx.Module):
     energy: jax.Array
 
 
-def _wrap_half_pi(x):
-    """Wrap an angle to [-π/2, π/2)."""
+def wrap_half_pi(x):
+    """Wrap an angle [rad] to [-π/2, π/2) (θ and θ + π are the same standing wave)."""
     return (x + jnp.pi / 2) % jnp.pi - jnp.pi / 2
 
 
@@ -136,7 +136,7 @@ def estimate(demod: Demodulated, theta_branch=None) -> Estimates:
         c_a = jnp.cos(raw) * demod.cx + jnp.sin(raw) * demod.cy
         theta = raw + jnp.where(c_a < 0, jnp.pi, 0.0)
     else:
-        theta = theta_branch + _wrap_half_pi(raw - theta_branch)
+        theta = theta_branch + wrap_half_pi(raw - theta_branch)
     ct, st = jnp.cos(theta), jnp.sin(theta)
     c_a = ct * demod.cx + st * demod.cy
     s_a = ct * demod.sx + st * demod.sy
