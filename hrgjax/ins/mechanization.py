@@ -1,0 +1,338 @@
+r"""Nonlinear strapdown mechanization in NED on WGS-84: attitude, velocity and position from
+IMU increments, with two-sample coning and sculling corrections (Savage, *Strapdown
+Analytics*, ch. 7; Groves ch. 5.4).
+
+The IMU gives, for each interval $[t_{k-1}, t_k]$ of length Δt, the gyro and accelerometer
+**increments** $\Delta\theta_k = \int\omega_{ib}^b\,dt$ [rad] and $\Delta v_k = \int f^b\,dt$
+[m/s] (each integrand in the body frame of its instant). One step from state k−1:
+
+1. The navigation-frame terms at the interval's midpoint, extrapolated from the two previous
+   states ($x_m = \tfrac32x_{k-1} - \tfrac12x_{k-2}$ for latitude, height and velocity):
+   $\zeta = (\omega_{ie}^n + \omega_{en}^n)\,\Delta t$ and
+   $a_m = g^n - (2\omega_{ie}^n + \omega_{en}^n)\times v^n$.
+2. Coning and sculling with the previous interval's increments:
+   $\phi = \Delta\theta_k + \tfrac1{12}\Delta\theta_{k-1}\times\Delta\theta_k$,
+   $\Delta v_{sf}^b = \Delta v_k + \tfrac12\Delta\theta_k\times\Delta v_k
+   + \tfrac1{12}(\Delta\theta_{k-1}\times\Delta v_k + \Delta v_{k-1}\times\Delta\theta_k)$.
+3. Velocity: $v_k = v_{k-1} + (I - \tfrac12[\zeta\times])\,C_{b,k-1}^n\Delta v_{sf}^b
+   + a_m\Delta t$.
+4. Position (height, then latitude, then longitude) by the trapezoid of the two velocities
+   with the radii of curvature at the interval's midpoint.
+5. Attitude: $C_{b,k}^n = e^{-[\zeta\times]}\,C_{b,k-1}^n\,e^{[\phi\times]}$, as unit
+   quaternions (scalar first, body to NED).
+
+Every step is explicit and exactly invertible:
+[`increments_from_states`][hrgjax.ins.mechanization.increments_from_states] solves it for
+the increments that carry one state into the next, which is how
+[`hrgjax.ins.motion`][hrgjax.ins.motion] makes increments that this integrator returns to
+the trajectory at round-off. Everything is `jax.lax.scan` (jit / vmap / grad).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._compiled import Check, program
+from .._x64 import require_x64
+from .constants import WGS84, Earth
+
+# --- rotations ----------------------------------------------------------------------------
+
+
+def skew(w):
+    r"""$[w\times]$, the cross-product matrix of `w` (..., 3)."""
+    z = jnp.zeros_like(w[..., 0])
+    return jnp.stack(
+        [
+            jnp.stack([z, -w[..., 2], w[..., 1]], -1),
+            jnp.stack([w[..., 2], z, -w[..., 0]], -1),
+            jnp.stack([-w[..., 1], w[..., 0], z], -1),
+        ],
+        -2,
+    )
+
+
+def quat_multiply(p, q):
+    """Hamilton product p ⊗ q of quaternions (..., 4), scalar first."""
+    pw, pv = p[..., :1], p[..., 1:]
+    qw, qv = q[..., :1], q[..., 1:]
+    w = pw * qw - jnp.sum(pv * qv, -1, keepdims=True)
+    v = pw * qv + qw * pv + jnp.cross(pv, qv)
+    return jnp.concatenate([w, v], -1)
+
+
+def quat_conjugate(q):
+    """The conjugate (inverse of a unit quaternion), scalar first."""
+    return q * jnp.array([1.0, -1.0, -1.0, -1.0])
+
+
+def rotvec_to_quat(phi):
+    r"""Unit quaternion of the rotation vector `phi` (..., 3) [rad]: $(\cos\frac{|\phi|}2,
+    \frac{\phi}{|\phi|}\sin\frac{|\phi|}2)$, by its series below 1e-2 rad (exact to
+    round-off, differentiable at 0)."""
+    a2 = jnp.sum(phi * phi, -1, keepdims=True)
+    small = a2 < 1e-4
+    a = jnp.sqrt(jnp.where(small, 1.0, a2))
+    w = jnp.where(small, 1.0 - a2 / 8.0 + a2**2 / 384.0, jnp.cos(0.5 * a))
+    s = jnp.where(small, 0.5 - a2 / 48.0 + a2**2 / 3840.0, jnp.sin(0.5 * a) / a)
+    return jnp.concatenate([w, s * phi], -1)
+
+
+def quat_to_rotvec(q):
+    """Rotation vector [rad] (..., 3) of a unit quaternion (..., 4), angle in [0, π]."""
+    q = jnp.where(q[..., :1] < 0, -q, q)
+    w, v = q[..., :1], q[..., 1:]
+    s2 = jnp.sum(v * v, -1, keepdims=True)
+    small = s2 < 1e-8
+    s = jnp.sqrt(jnp.where(small, 1.0, s2))
+    # 2·atan2(s, w)/s, by its series in s/w for small s
+    r2 = s2 / jnp.where(small, w * w, 1.0)
+    k = jnp.where(small, 2.0 / w * (1.0 - r2 / 3.0 + r2**2 / 5.0), 2.0 * jnp.arctan2(s, w) / s)
+    return k * v
+
+
+def quat_to_dcm(q):
+    """Rotation matrix (..., 3, 3) of a unit quaternion: body-to-NED $C_b^n$ for `q_bn`."""
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return jnp.stack(
+        [
+            jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def euler_to_quat(roll, pitch, heading):
+    """Body (FRD)-to-NED quaternion from roll, pitch, heading [rad] (3-2-1 order, as
+    [`euler_to_dcm`][hrgjax.ins.trajectory.euler_to_dcm])."""
+    roll, pitch, heading = (jnp.asarray(x, float) for x in (roll, pitch, heading))
+    cr, sr = jnp.cos(0.5 * roll), jnp.sin(0.5 * roll)
+    cp, sp = jnp.cos(0.5 * pitch), jnp.sin(0.5 * pitch)
+    ch, sh = jnp.cos(0.5 * heading), jnp.sin(0.5 * heading)
+    return jnp.stack(
+        [
+            ch * cp * cr + sh * sp * sr,
+            ch * cp * sr - sh * sp * cr,
+            ch * sp * cr + sh * cp * sr,
+            sh * cp * cr - ch * sp * sr,
+        ],
+        -1,
+    )
+
+
+# --- the navigation state -----------------------------------------------------------------
+
+
+class NavState(eqx.Module):
+    """Position, velocity and attitude of a strapdown INS (one epoch, or a history with a
+    leading time axis).
+
+    **Fields:** `lat`, `lon` [rad]; `h` [m above the WGS-84 ellipsoid]; `v_ned` (..., 3)
+    [m/s]; `q_bn` (..., 4) the body (FRD)-to-NED unit quaternion, scalar first."""
+
+    lat: jax.Array
+    lon: jax.Array
+    h: jax.Array
+    v_ned: jax.Array
+    q_bn: jax.Array
+
+    @classmethod
+    def from_euler(cls, lat, lon, h, v_ned, roll, pitch, heading) -> NavState:
+        """A state from geodetic position [rad, rad, m], NED velocity [m/s] and roll, pitch,
+        heading [rad]."""
+        f = lambda x: jnp.asarray(x, float)
+        return cls(f(lat), f(lon), f(h), f(v_ned), euler_to_quat(roll, pitch, heading))
+
+    @property
+    def c_bn(self):
+        """Body-to-NED matrix (..., 3, 3)."""
+        return quat_to_dcm(self.q_bn)
+
+    @property
+    def euler(self):
+        """(roll, pitch, heading) [rad]."""
+        from .trajectory import dcm_to_euler
+
+        return dcm_to_euler(self.c_bn)
+
+    def __getitem__(self, k) -> NavState:
+        """Epoch(s) `k` of a history."""
+        return jax.tree_util.tree_map(lambda x: x[k], self)
+
+
+def navigation_errors(nav: NavState, truth: NavState, earth: Earth = WGS84):
+    r"""Errors of `nav` against `truth` (same epochs), in the strapdown error model's
+    conventions ([`hrgjax.ins.strapdown`][hrgjax.ins.strapdown]).
+
+    **Returns** `(position (..., 3) [m, north east down], velocity (..., 3) [m/s, NED],
+    attitude (..., 3) [rad])`, the attitude error φ defined by
+    $\hat C_b^n = e^{-[\phi\times]}C_b^n \approx (I - [\phi\times])C_b^n$."""
+    r_m, r_n = earth.radii(truth.lat)
+    pos = jnp.stack(
+        [
+            (nav.lat - truth.lat) * (r_m + truth.h),
+            (nav.lon - truth.lon) * (r_n + truth.h) * jnp.cos(truth.lat),
+            -(nav.h - truth.h),
+        ],
+        -1,
+    )
+    err = quat_multiply(nav.q_bn, quat_conjugate(truth.q_bn))
+    return pos, nav.v_ned - truth.v_ned, -quat_to_rotvec(err)
+
+
+# --- one step and its inverse -------------------------------------------------------------
+
+
+def _midpoint_terms(earth, prev, prev2, dt):
+    """ζ and the gravity-minus-Coriolis acceleration at the interval's extrapolated midpoint."""
+    lat, h, v = (1.5 * a - 0.5 * b for a, b in zip(prev, prev2, strict=True))
+    w_ie, w_en = earth.earth_rate(lat), earth.transport_rate(lat, h, v)
+    acc = earth.gravity_ned(lat, h) - jnp.cross(2.0 * w_ie + w_en, v)
+    return (w_ie + w_en) * dt, acc
+
+
+def position_step(earth: Earth, lat, lon, h, v0, v1, dt):
+    """Geodetic position after one interval Δt = `dt` [s] from (`lat`, `lon` [rad], `h` [m])
+    with velocities `v0` → `v1` [m/s, NED] at its ends (trapezoid; radii at the midpoint;
+    height first, then latitude, then longitude). **Returns** `(lat, lon, h)`."""
+    va = 0.5 * (v0 + v1)
+    h1 = h - dt * va[..., 2]
+    hm = 0.5 * (h + h1)
+    r_m, _ = earth.radii(lat)
+    lat_half = lat + 0.5 * dt * va[..., 0] / (r_m + hm)
+    r_m, _ = earth.radii(lat_half)
+    lat1 = lat + dt * va[..., 0] / (r_m + hm)
+    lat_m = 0.5 * (lat + lat1)
+    _, r_n = earth.radii(lat_m)
+    lon1 = lon + dt * va[..., 1] / ((r_n + hm) * jnp.cos(lat_m))
+    return lat1, lon1, h1
+
+
+def _step(earth, dt, carry, inc):
+    state, prev2, (dth_p, dv_p) = carry
+    dth, dv = inc
+    zeta, acc = _midpoint_terms(earth, (state.lat, state.h, state.v_ned), prev2, dt)
+    phi = dth + jnp.cross(dth_p, dth) / 12.0
+    dv_sf = dv + 0.5 * jnp.cross(dth, dv) + (jnp.cross(dth_p, dv) + jnp.cross(dv_p, dth)) / 12.0
+    dv_n = state.c_bn @ dv_sf
+    v1 = state.v_ned + dv_n - 0.5 * jnp.cross(zeta, dv_n) + acc * dt
+    lat1, lon1, h1 = position_step(earth, state.lat, state.lon, state.h, state.v_ned, v1, dt)
+    q1 = quat_multiply(quat_multiply(rotvec_to_quat(-zeta), state.q_bn), rotvec_to_quat(phi))
+    q1 = q1 / jnp.linalg.norm(q1)
+    new = NavState(lat1, lon1, h1, v1, q1)
+    return (new, (state.lat, state.h, state.v_ned), (dth, dv)), new
+
+
+def _start(initial: NavState, dtype):
+    zeros = jnp.zeros(3, dtype)
+    return (initial, (initial.lat, initial.h, initial.v_ned), (zeros, zeros))
+
+
+def _check_increments(dtheta, dv, dt):
+    dtheta, dv = jnp.asarray(dtheta, float), jnp.asarray(dv, float)
+    if dtheta.ndim != 2 or dtheta.shape[-1] != 3 or dtheta.shape != dv.shape:
+        raise ValueError(
+            "dtheta and dv must both have shape (N, 3) (one gyro [rad] and one accelerometer "
+            f"[m/s] increment per interval); got {dtheta.shape} and {dv.shape}"
+        )
+    if isinstance(dt, (int, float)) and not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be the increments' interval in seconds (> 0); got {dt}")
+    return dtheta, dv
+
+
+def _check_state(initial):
+    if not isinstance(initial, NavState):
+        raise TypeError(
+            f"initial must be a NavState (hrgjax.ins.mechanization); got {type(initial).__name__}"
+        )
+    if jnp.shape(initial.v_ned) != (3,) or jnp.shape(initial.q_bn) != (4,):
+        raise ValueError(
+            "initial must be one epoch: v_ned (3,) [m/s] and q_bn (4,); got "
+            f"{jnp.shape(initial.v_ned)} and {jnp.shape(initial.q_bn)}"
+        )
+
+
+def mechanize(
+    initial: NavState, dtheta, dv, dt: float, *, earth: Earth = WGS84, every: int = 1
+) -> NavState:
+    """Free-inertial navigation from increments (module docstring).
+
+    **Arguments:** `initial` the state at the first increment's start; `dtheta` (N, 3) gyro
+    increments [rad] and `dv` (N, 3) accelerometer increments [m/s] over intervals of `dt`
+    [s]; `earth` the Earth model; `every`: keep every `every`-th epoch (it must divide N) to
+    bound memory on long runs.
+
+    **Returns:** the [`NavState`][hrgjax.ins.mechanization.NavState] history, N/every + 1
+    epochs, the initial state first.
+
+    **Raises:** `ValueError` for mis-shaped increments; `RuntimeError` if the solution stops
+    being finite (e.g. increments in degrees, or a vertical channel run into the ground)."""
+    require_x64("ins.mechanize")
+    _check_state(initial)
+    dtheta, dv = _check_increments(dtheta, dv, dt)
+    n = dtheta.shape[0]
+    if not (isinstance(every, int) and every >= 1 and n % every == 0):
+        raise ValueError(f"every must be a positive divisor of the {n} intervals; got {every}")
+    return _mechanize(initial, dtheta, dv, jnp.asarray(dt, float), earth, every)
+
+
+@program(check=Check("ins.mechanize"), single_run=True)
+def _mechanize(initial, dtheta, dv, dt, earth, every):
+    step = lambda c, x: _step(earth, dt, c, x)
+    if every == 1:
+        _, hist = jax.lax.scan(step, _start(initial, dtheta.dtype), (dtheta, dv))
+    else:
+        blocks = lambda a: a.reshape((-1, every) + a.shape[1:])
+
+        def block(c, x):
+            c, _ = jax.lax.scan(step, c, x)
+            return c, c[0]
+
+        _, hist = jax.lax.scan(block, _start(initial, dtheta.dtype), (blocks(dtheta), blocks(dv)))
+    return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), initial, hist)
+
+
+def _solve_cross(a, b):
+    r"""$x$ with $x + a\times x = b$: $x = (b - a\times b + (a\cdot b)\,a)/(1 + |a|^2)$."""
+    return (b - jnp.cross(a, b) + jnp.dot(a, b) * a) / (1.0 + jnp.dot(a, a))
+
+
+def _inverse_step(earth, dt, carry, target):
+    state, prev2, (dth_p, dv_p) = carry
+    v1, q1 = target
+    zeta, acc = _midpoint_terms(earth, (state.lat, state.h, state.v_ned), prev2, dt)
+    qphi = quat_multiply(quat_multiply(quat_conjugate(state.q_bn), rotvec_to_quat(zeta)), q1)
+    dth = _solve_cross(dth_p / 12.0, quat_to_rotvec(qphi))
+    dv_sf = state.c_bn.T @ _solve_cross(-0.5 * zeta, v1 - state.v_ned - acc * dt)
+    dv = _solve_cross(0.5 * dth + dth_p / 12.0, dv_sf - jnp.cross(dv_p, dth) / 12.0)
+    lat1, lon1, h1 = position_step(earth, state.lat, state.lon, state.h, state.v_ned, v1, dt)
+    new = NavState(lat1, lon1, h1, v1, q1)
+    return (new, (state.lat, state.h, state.v_ned), (dth, dv)), (new, dth, dv)
+
+
+def increments_from_states(initial: NavState, v_ned, q_bn, dt: float, *, earth: Earth = WGS84):
+    """The increments that [`mechanize`][hrgjax.ins.mechanization.mechanize] turns into a
+    given velocity and attitude history, and the positions it then computes (the inverse of
+    its step, solved exactly: three 3×3 linear solves and a quaternion logarithm per step).
+
+    **Arguments:** `initial` the first epoch; `v_ned` (N, 3) [m/s] and `q_bn` (N, 4) the
+    velocity and attitude at the N following epochs, `dt` [s] apart.
+
+    **Returns:** `(states, dtheta, dv)`: the N + 1 epochs (positions from the trapezoid of the
+    velocities, as the integrator computes them) and the (N, 3) increments [rad, m/s]."""
+    require_x64("ins.increments_from_states")
+    _check_state(initial)
+    return _invert(initial, jnp.asarray(v_ned, float), jnp.asarray(q_bn, float), dt, earth)
+
+
+@eqx.filter_jit
+def _invert(initial, v_ned, q_bn, dt, earth):
+    step = lambda c, x: _inverse_step(earth, dt, c, x)
+    _, (hist, dth, dv) = jax.lax.scan(step, _start(initial, v_ned.dtype), (v_ned, q_bn))
+    states = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), initial, hist)
+    return states, dth, dv
