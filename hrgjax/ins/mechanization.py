@@ -66,7 +66,7 @@ def quat_multiply(p, q):
 
 def quat_conjugate(q):
     """The conjugate (inverse of a unit quaternion), scalar first."""
-    return q * jnp.array([1.0, -1.0, -1.0, -1.0])
+    return jnp.concatenate([q[..., :1], -q[..., 1:]], -1)
 
 
 def rotvec_to_quat(phi):

@@ -141,7 +141,9 @@ class Motion:
             if v[0] != int(v[0]):
                 raise ValueError(f"{path}:{line}: command type must be 1-5; got {v[0]}")
             segs.append(
-                Segment(int(v[0]), tuple(v[1:4]), tuple(v[4:7]), v[7], bool(v[8] if len(v) > 8 else 1))
+                Segment(
+                    int(v[0]), tuple(v[1:4]), tuple(v[4:7]), v[7], bool(v[8] if len(v) > 8 else 1)
+                )
             )
         return cls(ini[0], ini[1], ini[2], tuple(ini[3:6]), ini[6], ini[7], ini[8], tuple(segs))
 
@@ -190,7 +192,11 @@ class Motion:
             rates.append(rate)
             cur = cur + rate * s.duration
         starts, rates = np.asarray(starts), np.asarray(rates)
-        return starts, rates, starts + rates * np.asarray([s.duration for s in self.segments])[:, None]
+        return (
+            starts,
+            rates,
+            starts + rates * np.asarray([s.duration for s in self.segments])[:, None],
+        )
 
     def kinematics(self, t):
         """The closed-form motion at times `t` [s] (any shape; a time on a segment boundary
@@ -237,7 +243,11 @@ class Motion:
         vdot = np.einsum("nij,nj->ni", c, np.cross(w_nb, vb) + ab)
         lat0, lon0 = self.lat_deg * DEG, self.lon_deg * DEG
         initial = NavState(
-            jnp.asarray(lat0), jnp.asarray(lon0), jnp.asarray(float(self.h)), jnp.asarray(v_ned[0]), q[0]
+            jnp.asarray(lat0),
+            jnp.asarray(lon0),
+            jnp.asarray(float(self.h)),
+            jnp.asarray(v_ned[0]),
+            q[0],
         )
         states, dth, dv = increments_from_states(initial, v_ned[1:], q[1:], dt, earth=earth)
         lat, h = np.asarray(states.lat), np.asarray(states.h)
@@ -285,7 +295,7 @@ class Truth(eqx.Module):
     @property
     def t(self):
         """Epoch times [s], (N + 1,)."""
-        return jnp.arange(self.f_ned.shape[0]) * self.dt
+        return jnp.arange(self.f_ned.shape[0], dtype=float) * self.dt
 
     @property
     def initial(self) -> NavState:
@@ -296,7 +306,9 @@ class Truth(eqx.Module):
         """The truth as a [`Trajectory`][hrgjax.ins.trajectory.Trajectory] for the linear
         error models, every `every`-th epoch."""
         s = self.states[::every]
-        return Trajectory(self.t[::every], s.lat, s.lon, s.h, s.v_ned, s.c_bn, self.f_ned[::every], self.earth)
+        return Trajectory(
+            self.t[::every], s.lat, s.lon, s.h, s.v_ned, s.c_bn, self.f_ned[::every], self.earth
+        )
 
 
 def example() -> Motion:
