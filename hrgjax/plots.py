@@ -533,3 +533,65 @@ def session_figure(comparison, path: str, title: str = "") -> str:
     save(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def navigation_figure(truth, flights, path: str, title: str = "") -> str:
+    """The motion's ground track with its GNSS gaps, the first run's horizontal position
+    errors (free inertial, filter with its ±3σ, smoother) and the filter's and smoother's
+    mean NEES against its 95 % band ([`hrgjax.ins.flights.fly`][hrgjax.ins.flights.fly]).
+    **Returns** the path written."""
+    from .ins.constants import radii
+    from .ins.ekf import nees_band
+
+    plt = pyplot()
+    s = truth.states
+    lat, lon = np.asarray(s.lat), np.asarray(s.lon)
+    r_m, r_n = (np.asarray(r) for r in radii(lat[0]))
+    north, east = (lat - lat[0]) * r_m / 1e3, (lon - lon[0]) * r_n * np.cos(lat[0]) / 1e3
+    t = np.asarray(flights.t)
+    gap = ~np.asarray(flights.gnss_valid)
+    gap[0] = False
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    ax = axes[0]
+    ax.plot(east, north, lw=1.2, label="trajectory")
+    every = max(1, int(round((t[1] - t[0]) / truth.dt)))
+    k = np.flatnonzero(gap) * every
+    if k.size:
+        ax.plot(east[k], north[k], ".", color="C3", ms=3, label="GNSS gap")
+    ax.set_xlabel("east [km]")
+    ax.set_ylabel("north [km]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8)
+    ax.set_title("ground track")
+    ax = axes[1]
+    hor = lambda d: np.linalg.norm(np.asarray(d["position"])[0, :, :2], axis=-1)
+    sig = np.linalg.norm(np.asarray(flights.filter["sigma"])[0, :, :2], axis=-1)
+    ax.semilogy(
+        t / 60, np.maximum(hor(flights.free), 1e-3), color="0.6", lw=1, label="free inertial"
+    )
+    ax.semilogy(t / 60, np.maximum(hor(flights.filter), 1e-3), color="C0", lw=1, label="filter")
+    ax.semilogy(t / 60, 3 * sig, color="C0", ls="--", lw=0.8, label="filter 3σ")
+    ax.semilogy(t / 60, np.maximum(hor(flights.smoother), 1e-3), color="C2", lw=1, label="smoother")
+    for a in np.flatnonzero(np.diff(np.concatenate([[0], gap.astype(int)])) == 1):
+        b = a + np.argmin(gap[a:]) if not gap[a:].all() else gap.size - 1
+        ax.axvspan(t[a] / 60, t[b] / 60, color="C3", alpha=0.12, lw=0)
+    ax.set_xlabel("time [min]")
+    ax.set_ylabel("horizontal position error [m] (run 1)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    ax = axes[2]
+    lo, hi = nees_band(flights.n_states, flights.runs)
+    for name, color in (("filter", "C0"), ("smoother", "C2")):
+        ax.plot(t[1:] / 60, np.asarray(flights.__getattribute__(name)["nees"]).mean(0)[1:],
+                color=color, lw=1, label=name)  # fmt: skip
+    ax.axhspan(lo, hi, color="0.8", alpha=0.5, label="95 % band")
+    ax.set_yscale("log")
+    ax.set_xlabel("time [min]")
+    ax.set_ylabel(f"mean NEES over {flights.runs} run(s)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    fig.suptitle(title or "Loosely-coupled GNSS/INS: errors against the truth")
+    fig.tight_layout()
+    save(fig, path, dpi=120)
+    plt.close(fig)
+    return path

@@ -6,7 +6,7 @@ import argparse
 import os
 import sys
 
-from . import allan, calibrate, discover, ins, simulate
+from . import allan, calibrate, discover, ins, navigate, simulate
 from ._common import DATA_EXTENSIONS as DATA_EXTENSIONS
 from ._common import EXIT_BAD_INPUT as EXIT_BAD_INPUT
 from ._common import EXIT_FAILURE as EXIT_FAILURE
@@ -34,12 +34,14 @@ from .ins import cmd_align as cmd_align
 from .ins import cmd_diagnose as cmd_diagnose
 from .ins import cmd_imu_calibrate as cmd_imu_calibrate
 from .ins import cmd_vibration as cmd_vibration
+from .navigate import cmd_navigate as cmd_navigate
 from .simulate import cmd_demo as cmd_demo
 from .simulate import cmd_design as cmd_design
 from .simulate import cmd_simulate as cmd_simulate
 
 COMMANDS = ("demo", "calibrate", "self-calibrate", "correct", "compare", "discover", "align",
-            "diagnose", "vibration", "simulate", "design", "imu-calibrate", "allan")  # fmt: skip
+            "diagnose", "vibration", "navigate", "simulate", "design", "imu-calibrate",
+            "allan")  # fmt: skip
 """The subcommands, in the order `hrgjax --help` lists them; `hrgjax NAME` runs this
 module's `cmd_NAME` (dashes as underscores)."""
 EXAMPLES = {
@@ -59,6 +61,8 @@ EXAMPLES = {
     "align": "hrgjax align psins_lasergyro.imu --json out/align.json --plot out/align.png",
     "diagnose": "hrgjax diagnose --scenario stationary --runs 3 --methods filter_bank,pnn_direct",
     "vibration": "hrgjax vibration --quick --json out/vib.json --plot out/vib.png",
+    "navigate": "hrgjax navigate example --imu tactical --outage 1400:1460 --runs 20 --json "
+    "out/nav.json --plot out/nav.png (or a gnss-ins-sim motion CSV instead of 'example')",
     "design": "hrgjax design --budget-h 4 --out out/plan.json --plot out/plan.png",
     "allan": "hrgjax allan gyro.csv --column rate --unit deg/h --rate-hz 10 --fit --plot "
     "out/allan.png --kalibr out/imu.yaml (a CSV with a header row and a rate column)",
@@ -68,7 +72,7 @@ EXAMPLES = {
 }
 """One runnable example per command, shown at the end of `hrgjax CMD --help`."""
 _PARSERS = {**simulate.PARSERS, **calibrate.PARSERS, **discover.PARSERS, **ins.PARSERS,
-            **allan.PARSERS}  # fmt: skip
+            **allan.PARSERS, **navigate.PARSERS}  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -116,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 INPUT_OPTIONS = ("data", "log", "imu_log", "sections", "model", "models", "plan_file",
-                 "offset_from")  # fmt: skip
+                 "offset_from", "motion")  # fmt: skip
 """Argument names (dests) that name files a command reads."""
 OUTPUT_OPTIONS = ("out", "plot", "json", "write_sections", "csv", "kalibr")
 """Argument names (dests) that name files a command writes."""

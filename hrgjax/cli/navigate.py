@@ -1,0 +1,123 @@
+"""`hrgjax navigate MOTION.csv`: a motion flown by Monte Carlo IMUs, navigated free-inertially
+and by the loosely-coupled GNSS/INS filter and smoother (hrgjax.ins.flights)."""
+
+from __future__ import annotations
+
+from ._common import (
+    PLOT_EXTENSIONS,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    UsageError,
+    figure,
+    finish,
+    start,
+    usage_errors,
+)
+
+IMU_PRESETS = ("navigation", "tactical", "industrial", "consumer")
+"""`--imu` choices (hrgjax.ins.sensors.PRESETS, restated so that `--help` imports no JAX)."""
+
+
+def _outage(text: str):
+    try:
+        a, b = (float(x) for x in text.split(":"))
+    except ValueError:
+        raise UsageError(
+            f"--outage {text!r}: expected START:END in seconds, e.g. 600:660"
+        ) from None
+    if not (0 <= a < b):
+        raise UsageError(f"--outage {text!r}: expected 0 <= START < END seconds")
+    return (a, b)
+
+
+def _lever_arm(text: str):
+    try:
+        v = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 3:
+        raise UsageError(
+            f"--lever-arm {text!r}: expected x,y,z in metres (body: forward, right, down)"
+        )
+    return v
+
+
+def cmd_navigate(args) -> int:
+    """`hrgjax navigate MOTION.csv`: Monte Carlo flights of a motion definition."""
+    inputs = [] if args.motion == "example" else [args.motion]
+    start(args, inputs, json=(".json",), plot=PLOT_EXTENSIONS)
+    import jax
+
+    from ..ins import ekf, flights, gnss, motion, sensors
+
+    outages = tuple(_outage(o) for o in args.outage or ())
+    with usage_errors(prefix=args.motion, missing=f"{args.motion}: no such file"):
+        mot = motion.example() if args.motion == "example" else motion.Motion.from_csv(args.motion)
+    with usage_errors():
+        truth = mot.truth(args.rate_hz)
+        imu = sensors.preset(args.imu)
+        receiver = gnss.Gnss(
+            rate_hz=args.gnss_hz,
+            outages=outages,
+            lever_arm=_lever_arm(args.lever_arm),
+            use_velocity=not args.no_gnss_velocity,
+        )
+        settings = ekf.LooselyCoupled(imu, receiver, scale_factors=args.states == 21)
+        result = flights.fly(truth, imu, settings, key=jax.random.key(args.seed), runs=args.runs)
+    out = result.summary()
+    out.update(motion=args.motion, imu=args.imu, rate_hz=args.rate_hz, gnss_hz=args.gnss_hz,
+               outages=[list(o) for o in outages])  # fmt: skip
+    print(f"hrgjax navigate: {args.motion} ({mot.duration:g} s at {args.rate_hz:g} Hz), "
+          f"{args.imu} IMU, GNSS {args.gnss_hz:g} Hz, {args.runs} run(s), {args.states} states")  # fmt: skip
+    print(
+        f"{'horizontal position error [m]':>32} {'RMS':>9} {'max':>9} {'in gaps':>9} {'final':>9}"
+    )
+    for name in ("filter", "smoother", "free"):
+        r = out[name]
+        gap = r.get("gap_horizontal_max_m", float("nan"))
+        label = {"free": "free inertial"}.get(name, name)
+        print(f"{label:>32} {r['horizontal_rms_m']:9.2f} {r['horizontal_max_m']:9.2f} "
+              f"{gap:9.2f} {r['final_horizontal_median_m']:9.2f}")  # fmt: skip
+    lo, hi = out["nees_band_95"]
+    lo9, hi9 = out["nees_navigation_band_95"]
+    trusted = lambda inside: "can be trusted" if inside >= 0.9 else "cannot be trusted"
+    for name in ("filter", "smoother"):
+        r = out[name]
+        print(f"  {name} NEES, navigation states: mean {r['nees_navigation_mean']:.1f} (95 % band "
+              f"{lo9:.1f}–{hi9:.1f}), inside on {100 * r['nees_navigation_inside_95_band']:.0f} % "
+              f"of epochs: its position, velocity and attitude σ "
+              f"{trusted(r['nees_navigation_inside_95_band'])}")  # fmt: skip
+        print(f"  {name} NEES, all {out['n_states']} states: mean {r['nees_mean']:.1f} (band "
+              f"{lo:.1f}–{hi:.1f}), inside on {100 * r['nees_inside_95_band']:.0f} %: its sensor "
+              f"estimates' σ {trusted(r['nees_inside_95_band'])}"
+              + ("" if r["nees_inside_95_band"] >= 0.9 else " (the IMU has errors the filter does "
+                 "not model: misalignments, scale factors, bias instability)"))  # fmt: skip
+    print(f"  NIS mean {out['nis_mean']:.2f} (expected {out['innovation_dim']})")
+    return finish((args.json, out),
+                  (args.plot, lambda p: figure("navigation_figure")(truth, result, p)))  # fmt: skip
+
+
+def _navigate_parser(sub):
+    p = sub.add_parser("navigate", help="Monte Carlo flights: free inertial, GNSS/INS filter, smoother",
+                       description=cmd_navigate.__doc__)  # fmt: skip
+    p.add_argument(
+        "motion", help="motion definition (gnss-ins-sim CSV) or 'example' (a 1-h flight)"
+    )
+    p.add_argument("--imu", default="tactical", choices=IMU_PRESETS, help="IMU grade")
+    p.add_argument("--rate-hz", type=POSITIVE_FLOAT, default=100.0, help="IMU rate [Hz]")
+    p.add_argument("--gnss-hz", type=POSITIVE_FLOAT, default=1.0, help="GNSS fix rate [Hz]")
+    p.add_argument("--outage", action="append", default=None,
+                   help="GNSS outage START:END [s] (repeat for several)")  # fmt: skip
+    p.add_argument("--lever-arm", default="0,0,0", help="GNSS antenna from the IMU, x,y,z [m] body")
+    p.add_argument("--no-gnss-velocity", action="store_true", help="position fixes only")
+    p.add_argument("--states", type=int, default=15, choices=(15, 21),
+                   help="filter states: 15, or 21 with gyro and accelerometer scale factors")  # fmt: skip
+    p.add_argument("--runs", type=POSITIVE_INT, default=1, help="Monte Carlo runs")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    p.add_argument("--json", default=None, help="write the summary here (JSON)")
+    p.add_argument("--plot", default=None, help="write the trajectory and error figure (PNG)")
+    return p
+
+
+PARSERS = {"navigate": _navigate_parser}
+"""Command → the function that adds its parser to the subparsers (`hrgjax.cli`)."""

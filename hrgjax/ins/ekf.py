@@ -1,0 +1,370 @@
+r"""Loosely-coupled GNSS/INS: an error-state extended Kalman filter with closed-loop
+correction, a Rauch–Tung–Striebel smoother, and their consistency figures (NEES, NIS).
+
+**States** (15, or 21 with `scale_factors=True`): the strapdown error model's position,
+velocity and attitude errors ([`hrgjax.ins.strapdown.STATES`][hrgjax.ins.strapdown]:
+δφ, δλ [rad], δh [m], δv [m/s, NED], φ [rad]), then the residual gyro and accelerometer
+biases $b - \hat b$ [rad/s, m/s²] (body), then the residual scale factors $s - \hat s$.
+Each is *estimate minus truth* for the navigation states and *truth minus estimate* for the
+sensor states, so that the gyro error left after correction is
+$\delta\omega = \delta b + \mathrm{diag}(\omega)\,\delta s$ as the error model expects.
+
+**Per GNSS interval** T (a block of IMU steps):
+
+1. the increments, corrected with the current sensor estimates
+   ($\Delta\theta \leftarrow (\Delta\tilde\theta - \hat b_g\Delta t)/(1 + \hat s_g)$, same for
+   Δv), run through [`mechanize`][hrgjax.ins.mechanization]'s step;
+2. the covariance is propagated with $\Phi, Q_d$ = Van Loan of the error model
+   (F at the block's end state with the block's mean specific force and rate; white gyro and
+   accelerometer noise densities `arw`, `vrw`; bias random walks) — the same exact
+   linearisation as [`hrgjax.ins.strapdown`][hrgjax.ins.strapdown];
+3. at a valid fix the innovation (INS antenna position and velocity minus the fix, with the
+   lever arm's attitude sensitivity in H) updates the error state (Joseph form,
+   [`hrgjax.kalman.update`][hrgjax.kalman.update]);
+4. the estimate is fed back — position and velocity subtracted, attitude
+   $q \leftarrow q(\hat\phi)\otimes q$, sensor estimates accumulated — and reset to zero.
+
+The smoother runs the RTS recursion on these reset error states backwards:
+$s_k = C_k\,(\hat x^+_{k+1} + s_{k+1})$, $C_k = P^+_k\Phi_k^\top(P^-_{k+1})^{-1}$,
+$P^s_k = P^+_k + C_k(P^s_{k+1} - P^-_{k+1})C_k^\top$, and applies $s_k$ to the filtered
+state at k.
+
+Sensor model behind the filter: the fixed biases are random constants with σ the
+`ImuModel`'s `gyro_bias`/`accel_bias`, the bias instability is treated as a random walk
+with density $2\sigma^2/\tau$ (exact over times ≪ τ), misalignments are not estimated.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .. import kalman
+from .._compiled import Check, program
+from .._x64 import require_x64
+from .constants import WGS84, Earth
+from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
+from .mechanization import (
+    NavState,
+    _start,
+    _step,
+    navigation_errors,
+    quat_multiply,
+    rotvec_to_quat,
+    skew,
+)
+from .sensors import ImuModel
+from .strapdown import error_matrices_at
+
+
+class FilterResult(eqx.Module):
+    """A filter or smoother pass, at the GNSS epochs (M of them, the start first).
+
+    **Fields:** `t` (M,) [s]; `nav` the corrected [`NavState`][hrgjax.ins.mechanization.NavState]
+    history; `gyro_bias`, `accel_bias` (M, 3) estimates [rad/s, m/s²]; `gyro_scale`,
+    `accel_scale` (M, 3) [-] (zeros without scale-factor states); `P` (M, n, n) error
+    covariance; `nis` (M,) normalised innovation squared (NaN where no fix);
+    `innovation_dim` the number of measured components per fix."""
+
+    t: jax.Array
+    nav: NavState
+    gyro_bias: jax.Array
+    accel_bias: jax.Array
+    gyro_scale: jax.Array
+    accel_scale: jax.Array
+    P: jax.Array
+    nis: jax.Array
+    innovation_dim: int = eqx.field(static=True)
+    # the forward pass's terms the smoother needs
+    x_update: jax.Array
+    P_prior: jax.Array
+    Phi: jax.Array
+
+    def position_sigma(self, earth: Earth = WGS84):
+        """1σ position uncertainty (M, 3) [m, north east down]."""
+        r_m, r_n = earth.radii(self.nav.lat)
+        d = jnp.stack(
+            [
+                r_m + self.nav.h,
+                (r_n + self.nav.h) * jnp.cos(self.nav.lat),
+                jnp.ones_like(self.nav.h),
+            ],
+            -1,
+        )
+        return jnp.sqrt(jnp.diagonal(self.P, axis1=-2, axis2=-1)[..., :3]) * d
+
+
+class LooselyCoupled(eqx.Module):
+    """Filter settings (module docstring).
+
+    **Fields:** `imu` the [`ImuModel`][hrgjax.ins.sensors.ImuModel] whose noise densities and
+    bias sizes the filter assumes; `gnss` the [`Gnss`][hrgjax.ins.gnss.Gnss] receiver;
+    `position_sigma` [m, NED], `velocity_sigma` [m/s], `attitude_sigma` [rad] (3,): initial
+    uncertainty; `scale_factors`: 21 states instead of 15; `earth`."""
+
+    imu: ImuModel
+    gnss: Gnss
+    position_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=(3.0, 3.0, 5.0))
+    velocity_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=(0.1, 0.1, 0.1))
+    attitude_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=(1e-3, 1e-3, 5e-3))
+    scale_factors: bool = eqx.field(static=True, default=False)
+    earth: Earth = eqx.field(static=True, default=WGS84)
+
+    @property
+    def n_states(self) -> int:
+        """15, or 21 with scale factors."""
+        return 21 if self.scale_factors else 15
+
+    def _metres_to_states(self, lat, h):
+        r_m, r_n = self.earth.radii(lat)
+        return jnp.stack([1.0 / (r_m + h), 1.0 / ((r_n + h) * jnp.cos(lat)), -jnp.ones_like(h)])
+
+    def initial_covariance(self, nav: NavState):
+        """(n, n) initial covariance at `nav`: the initial sigmas, the sensor biases' sizes
+        (and bias instabilities), the scale factors' sizes."""
+        d = self._metres_to_states(nav.lat, nav.h)
+        imu = self.imu
+        var = [
+            (jnp.broadcast_to(self.position_sigma, (3,)) * d) ** 2,
+            jnp.broadcast_to(self.velocity_sigma, (3,)) ** 2,
+            jnp.broadcast_to(self.attitude_sigma, (3,)) ** 2,
+            imu.gyro_bias**2 + imu.gyro_bias_instability**2,
+            imu.accel_bias**2 + imu.accel_bias_instability**2,
+        ]
+        if self.scale_factors:
+            var += [imu.gyro_scale**2, imu.accel_scale**2]
+        return jnp.diag(jnp.concatenate(var))
+
+    def _dynamics(self, nav: NavState, w_b, f_b, T):
+        """Φ and Q_d over the block T [s] (module docstring, step 2)."""
+        c = nav.c_bn
+        f, gg, ga = error_matrices_at(self.earth, False, nav.lat, nav.h, nav.v_ned, c, c @ f_b)
+        n = self.n_states
+        cols = [f, gg, ga]
+        if self.scale_factors:
+            cols += [gg * w_b[None], ga * f_b[None]]
+        top = jnp.concatenate(cols, -1)
+        big = jnp.concatenate([top, jnp.zeros((n - 9, n))], 0)
+        imu = self.imu
+        g9 = lambda g: jnp.concatenate([g, jnp.zeros((n - 9, 3))], 0)
+        q = g9(gg) @ jnp.diag(imu.arw**2) @ g9(gg).T + g9(ga) @ jnp.diag(imu.vrw**2) @ g9(ga).T
+        rw_g = (
+            imu.gyro_rate_random_walk**2
+            + 2 * imu.gyro_bias_instability**2 / imu.gyro_correlation_time
+        )
+        rw_a = (
+            imu.accel_random_walk**2
+            + 2 * imu.accel_bias_instability**2 / imu.accel_correlation_time
+        )
+        q = q.at[9:12, 9:12].add(jnp.diag(rw_g)).at[12:15, 12:15].add(jnp.diag(rw_a))
+        return kalman.van_loan(big, q, T)
+
+    def _measurement(self, nav: NavState, w_eb, fix_pos, fix_vel):
+        """Innovation (antenna minus fix, in state units), H and R."""
+        n = self.n_states
+        c = nav.c_bn
+        arm = self.gnss.lever_arm
+        (la, lo, hh), v = antenna(self.earth, nav.lat, nav.lon, nav.h, nav.v_ned, c, w_eb, arm)
+        d = self._metres_to_states(nav.lat, nav.h)
+        h_pos = (
+            jnp.zeros((3, n)).at[:, 0:3].set(jnp.eye(3)).at[:, 6:9].set(d[:, None] * skew(c @ arm))
+        )
+        nu = jnp.stack([la - fix_pos[0], lo - fix_pos[1], hh - fix_pos[2]])
+        r = jnp.diag(d**2 * self.gnss.position_sigma**2)
+        if not self.gnss.use_velocity:
+            return nu, h_pos, r
+        h_vel = (
+            jnp.zeros((3, n))
+            .at[:, 3:6]
+            .set(jnp.eye(3))
+            .at[:, 6:9]
+            .set(skew(c @ jnp.cross(w_eb, arm)))
+        )
+        return (
+            jnp.concatenate([nu, v - fix_vel]),
+            jnp.concatenate([h_pos, h_vel]),
+            jax.scipy.linalg.block_diag(r, jnp.diag(self.gnss.velocity_sigma**2)),
+        )
+
+
+def _feedback(nav: NavState, x):
+    """Subtract the estimated navigation errors from `nav`."""
+    q = quat_multiply(rotvec_to_quat(x[6:9]), nav.q_bn)
+    return NavState(
+        nav.lat - x[0], nav.lon - x[1], nav.h - x[2], nav.v_ned - x[3:6], q / jnp.linalg.norm(q)
+    )
+
+
+def loosely_coupled(
+    settings: LooselyCoupled, initial: NavState, dtheta, dv, dt: float, fixes: GnssData
+) -> FilterResult:
+    """Run the filter (module docstring) from `initial` over IMU increments `dtheta`,
+    `dv` (N, 3) [rad, m/s] at interval `dt` [s] with GNSS `fixes`
+    ([`measure`][hrgjax.ins.gnss.measure]; their epochs must be every m-th IMU epoch,
+    starting at m). **Returns** a [`FilterResult`][hrgjax.ins.ekf.FilterResult] at the start
+    and every fix epoch."""
+    require_x64("ins.loosely_coupled")
+    n, blocks = dtheta.shape[0], fixes.lat.shape[0]
+    if blocks < 1 or n % blocks:
+        raise ValueError(
+            f"fixes: {blocks} fixes for {n} IMU intervals; they must fall every m-th IMU epoch "
+            "from m to the end (as gnss.measure makes them for these increments)"
+        )
+    m = n // blocks
+    shape = lambda a: a.reshape((blocks, m) + a.shape[1:])
+    res = _filter(settings, initial, shape(jnp.asarray(dtheta)), shape(jnp.asarray(dv)), dt, fixes)
+    valid = jnp.concatenate([jnp.zeros(1, bool), jnp.asarray(fixes.valid)])
+    return eqx.tree_at(lambda r: r.nis, res, jnp.where(valid, res.nis, jnp.nan))
+
+
+@program(
+    check=Check(
+        "ins.loosely_coupled",
+        nonfinite="ins.loosely_coupled: the filter diverged (NaN or inf); check the increments' "
+        "units (rad, m/s), the fixes and the initial state",
+    )
+)
+def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
+    n_s = settings.n_states
+    m = dth_blocks.shape[1]
+    T = m * dt
+    p0 = settings.initial_covariance(initial)
+    zeros3 = jnp.zeros(3, p0.dtype)
+    sensors0 = (zeros3, zeros3, zeros3, zeros3)
+
+    def block(carry, inp):
+        mech, sens, p = carry
+        dth, dv, lat_f, lon_f, h_f, v_f, valid = inp
+        bg, ba, sg, sa = sens
+        dth_c = (dth - (bg * dt)[None]) / (1.0 + sg)[None]
+        dv_c = (dv - (ba * dt)[None]) / (1.0 + sa)[None]
+        mech, hist = jax.lax.scan(lambda c, x: _step(settings.earth, dt, c, x), mech, (dth_c, dv_c))
+        nav = mech[0]
+        mid = hist[m // 2 - 1] if m > 1 else nav  # the state at the block's middle
+        phi, qd = settings._dynamics(mid, jnp.sum(dth_c, 0) / T, jnp.sum(dv_c, 0) / T, T)
+        prior = kalman.predict(kalman.Gaussian(jnp.zeros(n_s, p.dtype), p), phi, qd)
+        w_eb = body_rate_wrt_earth(settings.earth, nav.lat, nav.c_bn, dth_c[-1], dt)
+        nu, h, r = settings._measurement(nav, w_eb, (lat_f, lon_f, h_f), v_f)
+        post, _, s, _ = kalman.update(prior, nu, h, r, mask=valid)
+        nis = jnp.where(valid, nu @ jnp.linalg.solve(s, nu), 0.0)
+        x = post.x
+        nav = _feedback(nav, x)
+        lat2, h2, v2 = mech[1]
+        prev2 = (lat2 - x[0], h2 - x[2], v2 - x[3:6])
+        sens = (bg + x[9:12], ba + x[12:15]) + (
+            (sg + x[15:18], sa + x[18:21]) if settings.scale_factors else (sg, sa)
+        )
+        out = (nav, sens, post.P, nis, x, prior.P, phi)
+        return ((nav, prev2, mech[2]), sens, post.P), out
+
+    inputs = (dth_blocks, dv_blocks, fixes.lat, fixes.lon, fixes.h, fixes.v_ned, fixes.valid)
+    _, (nav, sens, ps, nis, xs, pp, phis) = jax.lax.scan(
+        block, (_start(initial, p0.dtype), sensors0, p0), inputs
+    )
+    cat = lambda a0, a: jnp.concatenate([a0[None], a])
+    nav = jax.tree_util.tree_map(cat, initial, nav)
+    sens = [cat(zeros3, s) for s in sens]
+    t = jnp.arange(dth_blocks.shape[0] + 1, dtype=p0.dtype) * T
+    dim = 6 if settings.gnss.use_velocity else 3
+    return FilterResult(
+        t,
+        nav,
+        *sens,
+        cat(p0, ps),
+        cat(jnp.zeros((), p0.dtype), nis),
+        dim,
+        cat(jnp.zeros(n_s, p0.dtype), xs),
+        cat(p0, pp),
+        cat(jnp.eye(n_s, dtype=p0.dtype), phis),
+    )
+
+
+def smooth(result: FilterResult) -> FilterResult:
+    """The RTS smoother of a forward pass (module docstring): the same epochs, every state
+    given all the fixes; `nis` is NaN (no innovations)."""
+    require_x64("ins.smooth")
+    res = _smooth(eqx.tree_at(lambda r: r.nis, result, jnp.zeros_like(result.nis)))
+    return eqx.tree_at(lambda r: r.nis, res, jnp.full_like(res.nis, jnp.nan))
+
+
+@program(check=Check("ins.smooth"))
+def _smooth(res):
+    p_post, p_prior, phi, xu = res.P, res.P_prior, res.Phi, res.x_update
+
+    def back(carry, k):
+        s_next, ps_next = carry
+        c = jnp.linalg.solve(p_prior[k + 1].T, (p_post[k] @ phi[k + 1].T).T).T
+        s = c @ (xu[k + 1] + s_next)
+        ps = p_post[k] + c @ (ps_next - p_prior[k + 1]) @ c.T
+        return (s, 0.5 * (ps + ps.T)), (s, ps)
+
+    n = xu.shape[0]
+    last = (jnp.zeros_like(xu[-1]), p_post[-1])
+    _, (s, ps) = jax.lax.scan(back, last, jnp.arange(n - 1), reverse=True)
+    s = jnp.concatenate([s, last[0][None]])
+    ps = jnp.concatenate([ps, last[1][None]])
+    nav = jax.vmap(_feedback)(res.nav, s)
+    scale = lambda a, k: a + s[:, k : k + 3] if s.shape[1] > k else a
+    return FilterResult(
+        res.t,
+        nav,
+        scale(res.gyro_bias, 9),
+        scale(res.accel_bias, 12),
+        scale(res.gyro_scale, 15),
+        scale(res.accel_scale, 18),
+        ps,
+        res.nis,
+        res.innovation_dim,
+        res.x_update,
+        res.P_prior,
+        res.Phi,
+    )
+
+
+def error_states(
+    result: FilterResult,
+    truth_nav: NavState,
+    gyro_bias,
+    accel_bias,
+    earth=WGS84,
+    gyro_scale=None,
+    accel_scale=None,
+):
+    """The true error state of `result` at its epochs, in the filter's state order (module
+    docstring), given the true navigation states there and the true sensor errors
+    (biases (3,) or (M, 3); scale factors for 21 states)."""
+    nav = result.nav
+    _, _, att = navigation_errors(nav, truth_nav, earth)
+    parts = [
+        jnp.stack([nav.lat - truth_nav.lat, nav.lon - truth_nav.lon, nav.h - truth_nav.h], -1),
+        nav.v_ned - truth_nav.v_ned,
+        att,
+        jnp.broadcast_to(gyro_bias, result.gyro_bias.shape) - result.gyro_bias,
+        jnp.broadcast_to(accel_bias, result.accel_bias.shape) - result.accel_bias,
+    ]
+    if result.P.shape[-1] == 21:
+        parts += [
+            jnp.broadcast_to(gyro_scale, result.gyro_scale.shape) - result.gyro_scale,
+            jnp.broadcast_to(accel_scale, result.accel_scale.shape) - result.accel_scale,
+        ]
+    return jnp.concatenate(parts, -1)
+
+
+def nees(errors, P):
+    """Normalised estimation error squared $e^\\top P^{-1}e$ per epoch (..., M), from the
+    true error states `errors` (..., M, n) and the reported covariance `P` (..., M, n, n).
+    For a consistent filter its mean over R Monte Carlo runs lies inside
+    [`nees_band`][hrgjax.ins.ekf.nees_band] 95 % of the time."""
+    return jnp.einsum("...i,...i->...", errors, jnp.linalg.solve(P, errors[..., None])[..., 0])
+
+
+def nees_band(n_states: int, n_runs: int, level: float = 0.95):
+    """The two-sided `level` interval of the mean NEES over `n_runs` runs of a consistent
+    filter with `n_states` states: $\\chi^2_{Rn}$ quantiles divided by R (Bar-Shalom
+    §5.4)."""
+    from ..allan.uncertainty import chi2_ppf
+
+    a = 0.5 * (1.0 - level)
+    dof = n_states * n_runs
+    return chi2_ppf(a, dof) / n_runs, chi2_ppf(1.0 - a, dof) / n_runs

@@ -1,0 +1,173 @@
+r"""Monte Carlo flights: a sampled motion flown by many IMUs of one grade, each navigated
+free-inertially and by the loosely-coupled filter and smoother, against the truth.
+
+Each run draws its own turn-on biases ([`random_biases`][hrgjax.ins.sensors.random_biases]),
+sensor noise, GNSS noise and initial navigation error (from the filter's initial covariance),
+all from one key per run; the runs are vmapped in chunks (one compiled program for every
+chunk) with a progress bar.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import kalman
+from .._progress import bar
+from .._x64 import require_x64
+from .ekf import LooselyCoupled, _feedback, error_states, loosely_coupled, nees, nees_band, smooth
+from .gnss import measure
+from .mechanization import mechanize, navigation_errors
+from .motion import Truth
+from .sensors import ImuModel, random_biases
+
+
+class Flights(eqx.Module):
+    """Errors of R Monte Carlo runs at the M GNSS epochs (the start first).
+
+    **Fields:** `t` (M,) [s]; `gnss_valid` (M,) whether a fix was taken; for each of
+    `filter`, `smoother`, `free` (free inertial) a dict with `position` (R, M, 3) [m, north
+    east down], `velocity` (R, M, 3) [m/s], `attitude` (R, M, 3) [rad]; for `filter` and
+    `smoother` also `sigma` (R, M, 9) (position [m], velocity [m/s], attitude [rad], 1σ) and
+    `nees` (R, M) of all the filter's states and `nees_navigation` (R, M) of the nine
+    navigation states alone; `nis` (R, M) (NaN without a fix); `n_states`; `innovation_dim`."""
+
+    t: jax.Array
+    gnss_valid: jax.Array
+    filter: dict
+    smoother: dict
+    free: dict
+    nis: jax.Array
+    n_states: int = eqx.field(static=True)
+    innovation_dim: int = eqx.field(static=True)
+
+    @property
+    def runs(self) -> int:
+        """The number of runs R."""
+        return int(self.nis.shape[0])
+
+    def summary(self) -> dict:
+        """JSON-ready figures: horizontal position error RMS and maximum over runs and
+        epochs [m] for the filter, smoother and free inertial; the largest horizontal error
+        in GNSS gaps; the fraction of epochs whose mean NEES lies inside its 95 % band; the
+        mean NIS (its expectation is the innovation dimension)."""
+        gap = ~np.asarray(self.gnss_valid)
+        gap[0] = False
+        out = {"runs": self.runs, "epochs": int(self.t.shape[0]), "duration_s": float(self.t[-1])}
+        lo, hi = nees_band(self.n_states, self.runs)
+        lo9, hi9 = nees_band(9, self.runs)
+        for name in ("filter", "smoother", "free"):
+            d = getattr(self, name)
+            hor = np.linalg.norm(np.asarray(d["position"])[..., :2], axis=-1)
+            row = {
+                "horizontal_rms_m": float(np.sqrt(np.mean(hor**2))),
+                "horizontal_max_m": float(hor.max()),
+                "final_horizontal_median_m": float(np.median(hor[:, -1])),
+            }
+            if gap.any():
+                row["gap_horizontal_max_m"] = float(hor[:, gap].max())
+            if "nees" in d:
+                m = np.asarray(d["nees"]).mean(0)[1:]
+                row["nees_mean"] = float(m.mean())
+                row["nees_inside_95_band"] = float(np.mean((m > lo) & (m < hi)))
+                m9 = np.asarray(d["nees_navigation"]).mean(0)[1:]
+                row["nees_navigation_mean"] = float(m9.mean())
+                row["nees_navigation_inside_95_band"] = float(np.mean((m9 > lo9) & (m9 < hi9)))
+            out[name] = row
+        out["nees_band_95"] = [float(lo), float(hi)]
+        out["nees_navigation_band_95"] = [float(lo9), float(hi9)]
+        out["n_states"] = self.n_states
+        out["nis_mean"] = float(np.nanmean(np.asarray(self.nis)))
+        out["innovation_dim"] = self.innovation_dim
+        return out
+
+
+def _sigmas(res):
+    d = jnp.sqrt(jnp.diagonal(res.P, axis1=-2, axis2=-1)[..., 3:9])
+    return jnp.concatenate([res.position_sigma(), d], -1)
+
+
+def _one_run(truth: Truth, imu: ImuModel, settings: LooselyCoupled, m, key, gyro_rate_error):
+    k_bias, k_imu, k_gnss, k_init = jax.random.split(key, 4)
+    sensor = random_biases(imu, k_bias)
+    dth, dv = sensor.apply(k_imu, truth.dtheta, truth.dv, truth.dt, gyro_rate_error)
+    fixes = measure(truth, settings.gnss, k_gnss)
+    p0 = settings.initial_covariance(truth.initial)
+    e0 = kalman.psd_factor(p0[:9, :9]) @ jax.random.normal(k_init, (9,))
+    start = _feedback(truth.initial, -e0)  # the truth plus the drawn error
+    res = loosely_coupled(settings, start, dth, dv, truth.dt, fixes)
+    sm = smooth(res)
+    free = mechanize(start, dth, dv, truth.dt, earth=truth.earth, every=m)
+    tn = truth.states[::m]
+    scales = (sensor.gyro_scale, sensor.accel_scale)
+
+    def summary(r, with_cov):
+        p, v, a = navigation_errors(r.nav if with_cov else r, tn, truth.earth)
+        d = {"position": p, "velocity": v, "attitude": a}
+        if with_cov:
+            e = error_states(r, tn, sensor.gyro_bias, sensor.accel_bias, truth.earth, *scales)
+            d["sigma"] = _sigmas(r)
+            d["nees"] = nees(e, r.P)
+            d["nees_navigation"] = nees(e[..., :9], r.P[..., :9, :9])
+        return d
+
+    return summary(res, True), summary(sm, True), summary(free, False), res.nis
+
+
+def fly(
+    truth: Truth,
+    imu: ImuModel,
+    settings: LooselyCoupled,
+    *,
+    key,
+    runs: int = 1,
+    chunk: int = 16,
+    gyro_rate_error=None,
+) -> Flights:
+    """Fly `truth` `runs` times (module docstring).
+
+    **Arguments:** `truth` a [`Truth`][hrgjax.ins.motion.Truth]; `imu` the
+    [`ImuModel`][hrgjax.ins.sensors.ImuModel] of the simulated sensors (its fixed biases
+    are the 1σ of the drawn turn-on biases); `settings` the
+    [`LooselyCoupled`][hrgjax.ins.ekf.LooselyCoupled] filter (its `gnss` makes the fixes);
+    `key` a PRNG key; `runs`; `chunk`: runs per vmapped batch; `gyro_rate_error`: an extra
+    gyro error (N, 3) [rad/s] common to all runs (e.g. an hrgjax gyro's simulated drift).
+
+    **Returns:** [`Flights`][hrgjax.ins.flights.Flights]."""
+    require_x64("ins.fly")
+    if not (isinstance(runs, int) and runs >= 1):
+        raise ValueError(f"runs must be a whole number >= 1; got {runs}")
+    n = truth.dtheta.shape[0]
+    idx = settings.gnss.epochs(n, truth.dt)
+    if idx[-1] != n:
+        raise ValueError(
+            f"the motion's {n * truth.dt:g} s must be a whole number of GNSS intervals "
+            f"(1/{settings.gnss.rate_hz} s)"
+        )
+    epochs = np.concatenate([[0], idx])
+    size = min(chunk, runs)
+    keys = jax.random.split(key, -(-runs // size) * size)
+    parts = []
+    with bar(runs, "flights", unit="run") as progress:
+        for i in range(0, keys.shape[0], size):
+            batch = keys[i : i + size]
+            parts.append(_run_batch(truth, imu, settings, int(idx[0]), batch, gyro_rate_error))
+            progress.update(min(size, runs - i))
+    out = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a)[:runs], *parts)
+    f, s, free, nis = out
+    valid = np.concatenate([[False], np.asarray(truth.gnss)[idx]])
+    for a, b in settings.gnss.outages:
+        t = idx * truth.dt
+        valid[1:] &= ~((t >= a) & (t <= b))
+    dim = 6 if settings.gnss.use_velocity else 3
+    return Flights(
+        jnp.asarray(epochs * truth.dt), jnp.asarray(valid), f, s, free, nis, settings.n_states, dim
+    )
+
+
+@eqx.filter_jit
+def _run_batch(truth, imu, settings, m, keys, gyro_rate_error):
+    one = lambda k: _one_run(truth, imu, settings, m, k, gyro_rate_error)
+    return jax.vmap(one)(keys)

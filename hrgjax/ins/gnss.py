@@ -1,0 +1,126 @@
+r"""GNSS position and velocity fixes of a sampled motion: white noise in NED metres, an
+antenna lever arm, outages.
+
+The antenna sits at the body-frame lever arm $l^b$ from the IMU: its position is
+$r + C_b^n l^b$ (NED offset turned into latitude, longitude and height with the radii of
+curvature) and its velocity $v^n + C_b^n(\omega_{eb}^b\times l^b)$, with
+$\omega_{eb}^b \approx \Delta\theta/\Delta t - C_n^b\omega_{ie}^n$ from the interval's
+increment. A fix is taken every 1/`rate_hz` s where the motion has GNSS visible and no
+outage window covers it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .constants import Earth
+
+
+def _vec3(x):
+    return jnp.broadcast_to(jnp.asarray(x, float), (3,))
+
+
+class Gnss(eqx.Module):
+    """A GNSS receiver (module docstring).
+
+    **Fields:** `rate_hz` [Hz]; `position_sigma` (3,) [m, north east down];
+    `velocity_sigma` (3,) [m/s, NED], or `use_velocity=False` for position fixes only;
+    `lever_arm` (3,) [m, body FRD]; `outages`: ((start, end), …) [s] without fixes."""
+
+    rate_hz: float = eqx.field(static=True, default=1.0)
+    position_sigma: jax.Array = eqx.field(converter=_vec3, default=(1.5, 1.5, 3.0))
+    velocity_sigma: jax.Array = eqx.field(converter=_vec3, default=0.05)
+    lever_arm: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    use_velocity: bool = eqx.field(static=True, default=True)
+    outages: tuple = eqx.field(static=True, default=())
+
+    def __check_init__(self):
+        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise ValueError(f"Gnss.rate_hz must be > 0 Hz; got {self.rate_hz}")
+        for name in ("position_sigma", "velocity_sigma"):
+            v = np.asarray(getattr(self, name))
+            if not np.all(np.isfinite(v) & (v > 0)):
+                raise ValueError(f"Gnss.{name} must be > 0 (a 1σ per NED axis); got {v}")
+        for w in self.outages:
+            if len(w) != 2 or not (w[0] < w[1]):
+                raise ValueError(
+                    f"Gnss.outages: each window is (start, end) with start < end s; got {w}"
+                )
+
+    def noise_covariance(self):
+        """Diagonal measurement covariance in NED [m², (m/s)²]: (3,) or (6,) with velocity."""
+        p = self.position_sigma**2
+        return jnp.concatenate([p, self.velocity_sigma**2]) if self.use_velocity else p
+
+    def epochs(self, n_intervals: int, dt: float) -> np.ndarray:
+        """IMU epoch indices of the fixes (every 1/`rate_hz` s). **Raises** `ValueError`
+        when the IMU interval does not divide the GNSS interval."""
+        m = 1.0 / (self.rate_hz * dt)
+        if abs(m - round(m)) > 1e-6 or round(m) < 1:
+            raise ValueError(
+                f"Gnss.rate_hz: the GNSS interval 1/{self.rate_hz} s must be a whole number of "
+                f"IMU intervals ({dt} s)"
+            )
+        return np.arange(int(round(m)), n_intervals + 1, int(round(m)))
+
+
+class GnssData(eqx.Module):
+    """Fixes: `t` (M,) [s]; `index` (M,) the IMU epochs; `lat`, `lon` [rad], `h` [m];
+    `v_ned` (M, 3) [m/s]; `valid` (M,) whether a fix exists (outages are False)."""
+
+    t: jax.Array
+    index: jax.Array
+    lat: jax.Array
+    lon: jax.Array
+    h: jax.Array
+    v_ned: jax.Array
+    valid: jax.Array
+
+
+def antenna(earth: Earth, lat, lon, h, v_ned, c_bn, w_eb_b, lever_arm):
+    """Antenna position (lat, lon, h) and velocity (module docstring) of IMU states."""
+    off = c_bn @ lever_arm
+    r_m, r_n = earth.radii(lat)
+    pos = (
+        lat + off[..., 0] / (r_m + h),
+        lon + off[..., 1] / ((r_n + h) * jnp.cos(lat)),
+        h - off[..., 2],
+    )
+    return pos, v_ned + c_bn @ jnp.cross(w_eb_b, lever_arm)
+
+
+def body_rate_wrt_earth(earth: Earth, lat, c_bn, dtheta, dt):
+    """$\\omega_{eb}^b \\approx \\Delta\\theta/\\Delta t - C_n^b\\omega_{ie}^n$ [rad/s]."""
+    return dtheta / dt - jnp.swapaxes(c_bn, -1, -2) @ earth.earth_rate(lat)
+
+
+def measure(truth, gnss: Gnss, key) -> GnssData:
+    """GNSS fixes along `truth` (a [`Truth`][hrgjax.ins.motion.Truth]) with noise drawn
+    from `key` (module docstring)."""
+    n = truth.dtheta.shape[0]
+    idx = gnss.epochs(n, truth.dt)
+    t = np.asarray(idx, float) * truth.dt
+    valid = jnp.asarray(truth.gnss)[idx]
+    for a, b in gnss.outages:
+        valid = valid & jnp.asarray(~((t >= a) & (t <= b)))
+    s = truth.states[idx]
+    c = s.c_bn
+    w = jax.vmap(lambda la, cc, th: body_rate_wrt_earth(truth.earth, la, cc, th, truth.dt))(
+        s.lat, c, truth.dtheta[idx - 1]
+    )
+    (lat, lon, h), v = jax.vmap(
+        lambda la, lo, hh, vv, cc, ww: antenna(truth.earth, la, lo, hh, vv, cc, ww, gnss.lever_arm)
+    )(s.lat, s.lon, s.h, s.v_ned, c, w)
+    kp, kv = jax.random.split(key)
+    e = jax.random.normal(kp, (idx.size, 3)) * gnss.position_sigma[None]
+    r_m, r_n = truth.earth.radii(lat)
+    lat = lat + e[:, 0] / (r_m + h)
+    lon = lon + e[:, 1] / ((r_n + h) * jnp.cos(lat))
+    h = h - e[:, 2]
+    v = v + jax.random.normal(kv, (idx.size, 3)) * gnss.velocity_sigma[None]
+    return GnssData(jnp.asarray(t), jnp.asarray(idx), lat, lon, h, v, valid)

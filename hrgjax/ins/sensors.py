@@ -1,0 +1,210 @@
+r"""IMU errors on increments: biases, scale factors, misalignments, white noise, bias
+instability (first-order Gauss–Markov) and random walks, per axis in the body frame, with
+explicit PRNG keys.
+
+For the interval k of length Δt, with $M = I + \mathrm{diag}(s) + A$ (scale factors `s`,
+misalignment matrix `A`, small angles, its diagonal ignored):
+
+$$\widetilde{\Delta\theta}_k = M_g\,\Delta\theta_k + \big(b_g + \bar\beta_{g,k}\big)\Delta t
++ N_g\sqrt{\Delta t}\,w_k + \int_k\varepsilon(t)\,dt,$$
+
+and the same for $\Delta v$ (without ε). $N$ is the angle / velocity random walk density,
+$\bar\beta_k$ the mean over the interval of the sum of a Gauss–Markov bias (σ, τ, exact
+discretisation, started from its stationary law) and a random walk (rate random walk
+density K); ε is any extra rate error series, e.g. an hrgjax gyro's simulated output error
+(the HRG's drift laws driven by the flight's temperature).
+
+[`PRESETS`][hrgjax.ins.sensors.PRESETS] holds representative grades (navigation, tactical,
+industrial MEMS, consumer MEMS) after Groves, *Principles of GNSS, Inertial, and
+Multisensor Integrated Navigation Systems*, 2nd ed., Table 4.1 and §4.4 — typical values of
+each class, not any product's datasheet.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import is_concrete
+from ..units import DEG_PER_H, DEG_PER_SQRT_H, G0
+
+MICRO_G = 1e-6 * G0
+"""One micro-g in m/s²."""
+MG_PER_SQRT_HZ = 1e-3 * G0
+"""Velocity random walk of 1 mg/√Hz in m/s/√s."""
+
+_VECTOR_FIELDS = (
+    "gyro_bias",
+    "accel_bias",
+    "gyro_scale",
+    "accel_scale",
+    "arw",
+    "vrw",
+    "gyro_bias_instability",
+    "accel_bias_instability",
+    "gyro_rate_random_walk",
+    "accel_random_walk",
+)
+
+
+def _vec3(x):
+    return jnp.broadcast_to(jnp.asarray(x, float), (3,))
+
+
+class ImuModel(eqx.Module):
+    """Errors of a strapdown IMU (module docstring). Every vector field takes a scalar (all
+    axes) or 3 values (x, y, z body).
+
+    **Fields:** `gyro_bias` [rad/s], `accel_bias` [m/s²]: fixed biases; `gyro_scale`,
+    `accel_scale` [-]: scale-factor errors (1e-6 = 1 ppm); `gyro_misalignment`,
+    `accel_misalignment` (3, 3) [rad]: off-diagonal small angles (row = sensed axis);
+    `arw` [rad/√s], `vrw` [m/s/√s]: white-noise densities; `gyro_bias_instability` [rad/s],
+    `accel_bias_instability` [m/s²] with `gyro_correlation_time`, `accel_correlation_time`
+    [s]: first-order Gauss–Markov biases (σ, τ); `gyro_rate_random_walk` [rad/s/√s],
+    `accel_random_walk` [m/s²/√s]: bias random walks."""
+
+    gyro_bias: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    accel_bias: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    gyro_scale: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    accel_scale: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    gyro_misalignment: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
+    accel_misalignment: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
+    arw: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    vrw: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    gyro_bias_instability: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    accel_bias_instability: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    gyro_correlation_time: float = eqx.field(static=True, default=3600.0)
+    accel_correlation_time: float = eqx.field(static=True, default=3600.0)
+    gyro_rate_random_walk: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    accel_random_walk: jax.Array = eqx.field(converter=_vec3, default=0.0)
+
+    def __check_init__(self):
+        for name in _VECTOR_FIELDS:
+            v = getattr(self, name)
+            if is_concrete(v) and not np.all(np.isfinite(np.asarray(v))):
+                raise ValueError(f"ImuModel.{name} must be finite; got {v}")
+        for name in _VECTOR_FIELDS[4:]:
+            v = getattr(self, name)
+            if is_concrete(v) and np.any(np.asarray(v) < 0):
+                raise ValueError(f"ImuModel.{name} is a density or a 1σ: it must be >= 0; got {v}")
+        for name in ("gyro_misalignment", "accel_misalignment"):
+            if jnp.shape(getattr(self, name)) not in ((), (3, 3)):
+                raise ValueError(
+                    f"ImuModel.{name} must be 0 or a (3, 3) matrix of small angles [rad]; got "
+                    f"shape {jnp.shape(getattr(self, name))}"
+                )
+        for name in ("gyro_correlation_time", "accel_correlation_time"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"ImuModel.{name} must be > 0 s; got {v}")
+
+    def _matrix(self, scale, mis):
+        mis = jnp.broadcast_to(mis, (3, 3)) * (1.0 - jnp.eye(3))
+        return jnp.eye(3) + jnp.diag(scale) + mis
+
+    def apply(self, key, dtheta, dv, dt: float, gyro_rate_error=None):
+        """Increments as this IMU measures them (module docstring).
+
+        **Arguments:** `key` a PRNG key; `dtheta` (N, 3) [rad] and `dv` (N, 3) [m/s] true
+        increments over intervals of `dt` [s]; `gyro_rate_error`: optional extra gyro error
+        [rad/s], (N, 3) as each interval's mean rate.
+
+        **Returns:** `(dtheta, dv)` measured, each (N, 3)."""
+        n = dtheta.shape[0]
+        kg, ka = jax.random.split(key)
+        eg = self._bias_path(
+            kg,
+            n,
+            dt,
+            self.gyro_bias_instability,
+            self.gyro_correlation_time,
+            self.gyro_rate_random_walk,
+            self.arw,
+        )
+        ea = self._bias_path(
+            ka,
+            n,
+            dt,
+            self.accel_bias_instability,
+            self.accel_correlation_time,
+            self.accel_random_walk,
+            self.vrw,
+        )
+        mg = self._matrix(self.gyro_scale, self.gyro_misalignment)
+        ma = self._matrix(self.accel_scale, self.accel_misalignment)
+        th = dtheta @ mg.T + (self.gyro_bias * dt)[None] + eg
+        if gyro_rate_error is not None:
+            th = th + jnp.asarray(gyro_rate_error, float) * dt
+        return th, dv @ ma.T + (self.accel_bias * dt)[None] + ea
+
+    @staticmethod
+    def _bias_path(key, n, dt, sigma, tau, rrw, white):
+        """(N, 3) increments of the random errors: Gauss–Markov and random-walk biases
+        (interval means by the trapezoid) plus white noise."""
+        k0, k1, k2, k3 = jax.random.split(key, 4)
+        a = math.exp(-dt / tau)
+        gm0 = sigma * jax.random.normal(k0, (3,))
+        w_gm = jax.random.normal(k1, (n, 3)) * (sigma * math.sqrt(1.0 - a * a))[None]
+        w_rw = jax.random.normal(k2, (n, 3)) * (rrw * math.sqrt(dt))[None]
+
+        def step(c, w):
+            gm, rw = c
+            gm1, rw1 = a * gm + w[0], rw + w[1]
+            return (gm1, rw1), 0.5 * (gm + gm1 + rw + rw1)
+
+        _, mean = jax.lax.scan(step, (gm0, jnp.zeros(3)), (w_gm, w_rw))
+        return mean * dt + jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None]
+
+
+def _grade(gb_dph, arw_dpsh, bi_dph, g_ppm, g_urad, ab_ug, vrw_ug_rthz, abi_ug, a_ppm, a_urad, tau):
+    mis = lambda u: np.array([[0.0, 1.0, -1.0], [-1.0, 0.0, 1.0], [1.0, -1.0, 0.0]]) * u * 1e-6
+    return ImuModel(
+        gyro_bias=gb_dph * DEG_PER_H,
+        accel_bias=ab_ug * MICRO_G,
+        gyro_scale=g_ppm * 1e-6,
+        accel_scale=a_ppm * 1e-6,
+        gyro_misalignment=mis(g_urad),
+        accel_misalignment=mis(a_urad),
+        arw=arw_dpsh * DEG_PER_SQRT_H,
+        vrw=vrw_ug_rthz * MICRO_G,
+        gyro_bias_instability=bi_dph * DEG_PER_H,
+        accel_bias_instability=abi_ug * MICRO_G,
+        gyro_correlation_time=tau,
+        accel_correlation_time=tau,
+    )
+
+
+PRESETS = {
+    "navigation": _grade(0.005, 0.002, 0.003, 5, 5, 25, 5, 10, 20, 10, 3600.0),
+    "tactical": _grade(1.0, 0.1, 0.5, 100, 100, 1000, 50, 50, 300, 100, 600.0),
+    "industrial": _grade(10.0, 0.3, 5.0, 1000, 1000, 5000, 100, 100, 1000, 1000, 300.0),
+    "consumer": _grade(300.0, 1.0, 30.0, 5000, 5000, 20000, 300, 500, 5000, 5000, 100.0),
+}
+"""Representative IMU grades (module docstring): fixed gyro bias [°/h] 0.005 / 1 / 10 / 300,
+ARW [°/√h] 0.002 / 0.1 / 0.3 / 1, gyro bias instability [°/h] 0.003 / 0.5 / 5 / 30,
+accelerometer bias [µg] 25 / 1000 / 5000 / 20000, VRW [µg/√Hz] 5 / 50 / 100 / 300; scale
+factors and misalignments from 5 ppm, 5 µrad (navigation) to 5000 ppm, 5 mrad (consumer).
+The fixed biases are one unit's values (signs as given), not 1σ: draw turn-on biases with
+[`random_biases`][hrgjax.ins.sensors.random_biases]."""
+
+
+def preset(name: str) -> ImuModel:
+    """The [`PRESETS`][hrgjax.ins.sensors.PRESETS] entry `name`, with a clear error for an
+    unknown one."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"IMU preset must be one of {sorted(PRESETS)}; got {name!r}") from None
+
+
+def random_biases(imu: ImuModel, key) -> ImuModel:
+    """`imu` with its fixed biases redrawn as N(0, σ²) per axis, σ the preset's value (a
+    turn-on bias for each Monte Carlo run)."""
+    kg, ka = jax.random.split(key)
+    g = jnp.abs(imu.gyro_bias) * jax.random.normal(kg, (3,))
+    a = jnp.abs(imu.accel_bias) * jax.random.normal(ka, (3,))
+    return eqx.tree_at(lambda m: (m.gyro_bias, m.accel_bias), imu, (g, a))
