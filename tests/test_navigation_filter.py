@@ -1,0 +1,207 @@
+"""GNSS/INS: IMU error models, GNSS fixes, the loosely-coupled filter and smoother against
+Monte Carlo truth (NEES, NIS), scale-factor states, and `hrgjax navigate`."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hrgjax.ins import ekf, flights, gnss, motion, sensors
+from hrgjax.ins import mechanization as me
+from hrgjax.units import DEG_PER_H, DEG_PER_SQRT_H
+
+Z = (0.0, 0.0, 0.0)
+OUTAGE = ((70.0, 90.0),)
+
+
+def _motion():
+    """120 s: a take-off run, a banked right turn, a climb, level flight."""
+    s = motion.Segment
+    return motion.Motion(
+        40.0,
+        10.0,
+        200.0,
+        (20.0, 0.0, 0.0),
+        10.0,
+        0.0,
+        0.0,
+        (
+            s(1, Z, (2.0, 0.0, 0.0), 30.0),
+            s(3, (0.0, 0.0, 20.0), Z, 5.0),
+            s(1, (3.0, 0.0, 0.0), Z, 25.0),
+            s(3, (0.0, 4.0, -20.0), Z, 5.0),
+            s(1, Z, Z, 55.0),
+        ),
+    )
+
+
+# the tactical preset's noise and biases, without what a 15-state filter does not model
+# (scale factors, misalignments, bias instability); the preset's correlation time so that the
+# CLI's tactical run below compiles the same program
+TACTICAL = sensors.preset("tactical")
+CONSISTENT = sensors.ImuModel(
+    gyro_bias=TACTICAL.gyro_bias,
+    accel_bias=TACTICAL.accel_bias,
+    arw=TACTICAL.arw,
+    vrw=TACTICAL.vrw,
+    gyro_misalignment=np.zeros((3, 3)),
+    accel_misalignment=np.zeros((3, 3)),
+    gyro_rate_random_walk=0.05 * DEG_PER_H / 10.0,
+    gyro_correlation_time=TACTICAL.gyro_correlation_time,
+    accel_correlation_time=TACTICAL.accel_correlation_time,
+)
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return _motion().truth(10.0)
+
+
+@pytest.fixture(scope="module")
+def monte_carlo(truth):
+    settings = ekf.LooselyCoupled(
+        CONSISTENT, gnss.Gnss(outages=OUTAGE, lever_arm=(1.5, -0.3, -0.8))
+    )
+    return flights.fly(truth, CONSISTENT, settings, key=jax.random.key(3), runs=48)
+
+
+def test_imu_errors_have_their_stated_statistics():
+    n, dt = 40_000, 0.01
+    z = jnp.zeros((n, 3))
+    white = sensors.ImuModel(arw=0.1 * DEG_PER_SQRT_H, vrw=1e-3)
+    th, dv = white.apply(jax.random.key(0), z, z, dt)
+    np.testing.assert_allclose(np.var(th, 0) / (white.arw**2 * dt), 1.0, rtol=0.04)
+    np.testing.assert_allclose(np.var(dv, 0) / (1e-3**2 * dt), 1.0, rtol=0.04)
+    # scale factors and misalignments act as the matrix I + diag(s) + A (diagonal of A ignored)
+    a = np.array([[9.0, 1e-3, -2e-3], [3e-3, 9.0, 1e-3], [-1e-3, 2e-3, 9.0]])
+    m = sensors.ImuModel(gyro_scale=(1e-3, -2e-3, 5e-4), gyro_misalignment=a, gyro_bias=1e-5)
+    x = jax.random.normal(jax.random.key(1), (5, 3))
+    th, _ = m.apply(jax.random.key(2), x, x, dt)
+    want = x @ (np.eye(3) + np.diag([1e-3, -2e-3, 5e-4]) + a * (1 - np.eye(3))).T + 1e-5 * dt
+    np.testing.assert_allclose(th, want, rtol=1e-13, atol=1e-18)
+    # a Gauss–Markov bias: stationary σ and lag-τ correlation e^-1 of the interval means
+    gm = sensors.ImuModel(gyro_bias_instability=1e-4, gyro_correlation_time=50.0)
+    th, _ = jax.vmap(lambda k: gm.apply(k, jnp.zeros((200, 3)), jnp.zeros((200, 3)), 1.0))(
+        jax.random.split(jax.random.key(4), 400)
+    )
+    b = np.moveaxis(np.asarray(th), 2, 1).reshape(-1, 200)  # per run and axis, per interval
+    np.testing.assert_allclose(np.std(b[:, 100]), 1e-4, rtol=0.08)
+    rho = np.corrcoef(b[:, 100], b[:, 150])[0, 1]
+    assert abs(rho - np.exp(-1.0)) < 0.08
+    with pytest.raises(ValueError, match="IMU preset must be one of"):
+        sensors.preset("automotive")
+    with pytest.raises(ValueError, match="arw is a density or a 1σ"):
+        sensors.ImuModel(arw=-1.0)
+
+
+def test_gnss_fixes_carry_the_lever_arm_and_the_outages(truth):
+    rx = gnss.Gnss(
+        position_sigma=1e-9, velocity_sigma=1e-12, lever_arm=(2.0, 0.0, -1.0), outages=OUTAGE
+    )
+    fixes = gnss.measure(truth, rx, jax.random.key(0))
+    np.testing.assert_array_equal(fixes.index, np.arange(10, 1201, 10))
+    t = np.asarray(fixes.t)
+    np.testing.assert_array_equal(fixes.valid, ~((t >= 70) & (t <= 90)))
+    s = truth.states[np.asarray(fixes.index)]
+    # the antenna offset in NED metres equals C_b^n l (and its height is 1 m above at level)
+    ant = me.NavState(fixes.lat, fixes.lon, fixes.h, fixes.v_ned, s.q_bn)
+    pos, vel, _ = me.navigation_errors(ant, s)
+    want = np.einsum("nij,j->ni", np.asarray(s.c_bn), [2.0, 0.0, -1.0])
+    np.testing.assert_allclose(pos, want, atol=2e-6)
+    # in the banked turn the antenna moves faster than the IMU by ω × l
+    turn = (t > 36) & (t < 59)
+    assert np.all(np.linalg.norm(np.asarray(vel)[turn], axis=1) > 0.09)
+    # in level flight only the transport rate turns the vehicle: |ω_en × l| ≈ 4e-5 × 2 m
+    np.testing.assert_allclose(np.asarray(vel)[t > 70], 0.0, atol=1e-4)
+
+
+def test_filter_and_smoother_are_consistent_over_monte_carlo_flights(monte_carlo):
+    """48 flights of an IMU the 15-state filter models exactly: the mean NEES lies inside its
+    95 % band on most epochs, the NIS averages the innovation dimension, the smoother beats
+    the filter in the outage, and both beat free inertial navigation by far."""
+    s = monte_carlo.summary()
+    # (epochs' NEES are correlated in time, so the fraction inside the band varies from one
+    # set of 48 flights to the next: 0.78–1.0 over three seeds; benchmarks/navigation.py
+    # measures it on 100 one-hour flights)
+    for name in ("filter", "smoother"):
+        assert abs(s[name]["nees_mean"] / 15.0 - 1.0) < 0.1, s[name]
+        assert s[name]["nees_inside_95_band"] >= 0.7, s[name]
+    assert abs(s["nis_mean"] / 6.0 - 1.0) < 0.08
+    gap = ~np.asarray(monte_carlo.gnss_valid)
+    gap[0] = False
+    hor = lambda d: np.linalg.norm(np.asarray(d["position"])[:, gap, :2], axis=-1)
+    assert np.sqrt(np.mean(hor(monte_carlo.smoother) ** 2)) < 0.5 * np.sqrt(
+        np.mean(hor(monte_carlo.filter) ** 2)
+    )
+    assert s["free"]["final_horizontal_median_m"] > 20 * s["filter"]["horizontal_rms_m"]
+    # the reported position σ grows in the outage and shrinks after it
+    sig = np.asarray(monte_carlo.filter["sigma"])[0, :, 0]
+    t = np.asarray(monte_carlo.t)
+    assert sig[np.searchsorted(t, 90.0)] > 3 * sig[np.searchsorted(t, 69.0)]
+    assert sig[-1] < 0.5 * sig[np.searchsorted(t, 90.0)]
+
+
+def test_scale_factor_states_estimate_the_scale_factors(truth):
+    """A 21-state filter on an IMU with 2000-ppm scale factors: the scale factors the
+    flight exercises (roll rate, vertical specific force in the banked turn) are learnt —
+    their σ falls well below the prior — and every remaining error is inside its 3.5σ."""
+    imu = sensors.ImuModel(
+        gyro_bias=CONSISTENT.gyro_bias,
+        accel_bias=CONSISTENT.accel_bias,
+        arw=CONSISTENT.arw,
+        vrw=CONSISTENT.vrw,
+        gyro_scale=(2e-3, -2e-3, 2e-3),
+        accel_scale=(2e-3, 2e-3, -2e-3),
+    )
+    settings = ekf.LooselyCoupled(imu, gnss.Gnss(), scale_factors=True)
+    dth, dv = imu.apply(jax.random.key(0), truth.dtheta, truth.dv, truth.dt)
+    fixes = gnss.measure(truth, settings.gnss, jax.random.key(1))
+    res = ekf.loosely_coupled(settings, truth.initial, dth, dv, truth.dt, fixes)
+    sm = ekf.smooth(res)
+    idx = np.concatenate([[0], np.asarray(fixes.index)])
+    e = ekf.error_states(
+        sm,
+        truth.states[idx],
+        imu.gyro_bias,
+        imu.accel_bias,
+        truth.earth,
+        imu.gyro_scale,
+        imu.accel_scale,
+    )
+    sd = np.sqrt(np.diagonal(np.asarray(sm.P), axis1=1, axis2=2))
+    assert np.all(np.abs(np.asarray(e)[-1]) < 3.5 * sd[-1])
+    prior = np.sqrt(np.diag(np.asarray(settings.initial_covariance(truth.initial))))
+    ratio = sd[-1] / prior
+    assert ratio[15] < 0.4 and ratio[20] < 0.5, ratio[15:]  # gyro x, accelerometer z
+    assert ratio[9:].max() <= 1.0 + 1e-9  # nothing is less known than before
+    assert np.all(np.isnan(np.asarray(sm.nis))) and np.isnan(float(res.nis[0]))
+
+
+def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carlo):
+    from hrgjax.cli import main
+
+    path = tmp_path / "m.csv"
+    _motion().to_csv(path)
+    out = tmp_path / "nav.json"
+    args = [
+        "navigate", str(path), "--rate-hz", "10", "--runs", "16", "--outage", "70:90",
+        "--lever-arm", "1.5,-0.3,-0.8", "--json", str(out), "--quiet",
+    ]  # fmt: skip
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    d = json.loads(out.read_text())
+    assert d["runs"] == 16 and d["outages"] == [[70.0, 90.0]] and d["imu"] == "tactical"
+    assert "navigation states" in text and "NIS mean" in text
+    # the tactical preset's misalignments and scale factors are not in the 15 states: the
+    # position σ stays trustworthy, the sensor states' σ does not, and the output says so
+    assert d["filter"]["nees_navigation_inside_95_band"] > 0.7
+    assert d["filter"]["nees_inside_95_band"] < 0.5 and "cannot be trusted" in text
+    with pytest.raises(SystemExit) as err:
+        main(["navigate", str(path), "--outage", "90-70", "--quiet"])
+    assert err.value.code == 2
+    assert "--outage '90-70': expected START:END" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["navigate", str(path), "--rate-hz", "7.5", "--quiet"])
+    assert "not a whole number of samples at 7.5 Hz" in capsys.readouterr().err
