@@ -343,6 +343,19 @@ def virtual_precession():
     plt.close(fig)
 
 
+def navigation():
+    """The example flight: 20 tactical-grade Monte Carlo runs with a 60-s GNSS outage."""
+    from hrgjax.ins import ekf, flights, gnss, motion, sensors
+
+    truth = motion.example().truth(20.0)
+    imu = sensors.preset("tactical")
+    settings = ekf.LooselyCoupled(imu, gnss.Gnss(outages=((1400.0, 1460.0),)))
+    runs = flights.fly(truth, imu, settings, key=jax.random.key(0), runs=20)
+    from hrgjax.plots import navigation_figure
+
+    navigation_figure(truth, runs, os.path.join(HERE, "navigation.png"))
+
+
 FIGURES = (  # longest first (cold, 2 cores), so that the workers finish together
     diagnosis,
     vibration,
@@ -355,6 +368,7 @@ FIGURES = (  # longest first (cold, 2 cores), so that the workers finish togethe
     allan,
     allan_model,
     virtual_precession,
+    navigation,
     ftr_run,
     imu,
     bench_plan,

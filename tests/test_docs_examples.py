@@ -199,6 +199,7 @@ HEAVY_PAGES = {
     "calibration.md": "136 s; tests/test_calibration.py, test_session.py, test_cli.py",
     "diagnosis.md": "129 s; tests/test_diagnosis*.py",
     "ins.md": "125 s; tests/test_ins_*.py, test_kalman.py",
+    "navigation.md": "≈ 90 s (an hour at 100 Hz, 20 flights compiled); tests/test_navigation*.py",
     "scaling.md": "111 s; tests/test_sweep.py, test_cache.py",
 }
 

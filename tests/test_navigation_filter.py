@@ -181,7 +181,9 @@ def test_scale_factor_states_estimate_the_scale_factors(truth):
 
 def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carlo):
     from hrgjax.cli import main
+    from hrgjax.cli.navigate import IMU_PRESETS
 
+    assert IMU_PRESETS == tuple(sensors.PRESETS)  # restated for a JAX-free --help
     path = tmp_path / "m.csv"
     _motion().to_csv(path)
     out = tmp_path / "nav.json"
