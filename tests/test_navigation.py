@@ -197,6 +197,25 @@ def test_linear_error_model_is_the_nonlinear_difference_to_second_order(truth50)
     np.testing.assert_allclose(large / mid, 10.0, rtol=0.2)
 
 
+def test_vertical_aiding_holds_the_height_as_the_linear_models_altitude_aiding(truth50):
+    """With the height and vertical velocity given, the mechanization's horizontal errors
+    from a gyro bias follow the linear model with `altitude_aided=True`."""
+    every, t = 25, truth50
+    bg = np.array([2.0, -1.5, 1.0]) * DEG_PER_H
+    vertical = (t.states.h[1:], t.states.v_ned[1:, 2])
+    nav = me.mechanize(
+        t.initial, t.dtheta + (bg * t.dt)[None], t.dv, t.dt, every=every, vertical=vertical
+    )
+    p, v, _ = (np.asarray(x) for x in me.navigation_errors(nav, t.states[::every]))
+    np.testing.assert_allclose(p[:, 2], 0.0, atol=1e-9)
+    traj = t.trajectory(every)
+    dx = sd.propagate(traj, gyro_error=bg, altitude_aided=True)
+    lin = np.asarray(sd.position_metres(traj, dx))
+    assert np.abs(p[:, :2] - lin[:, :2]).max() < 2e-3 * np.abs(lin[:, :2]).max()
+    with pytest.raises(ValueError, match=r"vertical must be \(h, v_down\)"):
+        me.mechanize(t.initial, t.dtheta, t.dv, t.dt, vertical=(t.states.h, t.states.v_ned[:, 2]))
+
+
 def test_mechanization_is_differentiable_and_vmaps(truth50):
     """d(final position)/d(gyro bias) by forward mode equals central differences, and a vmap
     over biases equals the runs one by one."""

@@ -169,6 +169,44 @@ def navigation_errors(
     return float(velocity), float(position)
 
 
+def mechanized_errors(
+    comp: AbstractCompensator, records: MeasuredData, flight: Flight, rate_hz: float = 10.0
+):
+    """[`navigation_errors`][hrgjax.calibration.ins_impact.navigation_errors] through the
+    nonlinear strapdown mechanization instead of the linear error model: the flight as a
+    motion ([`hrgjax.ins.motion`][hrgjax.ins.motion]) sampled at `rate_hz` [Hz], its exact
+    increments with the compensated rates added to the x and y gyros (linearly interpolated
+    between records, as the linear model does), altitude held.
+
+    **Returns** the horizontal velocity and position error magnitudes [m/s], [m] after the
+    flight."""
+    from ..ins import mechanization, motion
+
+    out = comp.correct(records)
+    idx = records.run_indices()
+    eps = [np.asarray(out["rate_corrected_dps"][idx[k]]) * DEG for k in (0, 1)]
+    t_rec = np.arange(eps[0].shape[0]) * flight.dt_out
+    z = (0.0, 0.0, 0.0)
+    mot = motion.Motion(
+        flight.lat_deg, 0.0, 0.0, (flight.speed_mps, 0.0, 0.0), flight.heading_deg, 0.0, 0.0,
+        (motion.Segment(1, z, z, flight.duration_s),),
+    )  # fmt: skip
+    truth = mot.truth(rate_hz)
+    n = truth.dtheta.shape[0]
+    mid = (np.arange(n) + 0.5) * truth.dt
+    err = np.stack([np.interp(mid, t_rec, e) for e in eps] + [np.zeros(n)], -1)
+    nav = mechanization.mechanize(
+        truth.initial,
+        truth.dtheta + device(err * truth.dt),
+        truth.dv,
+        truth.dt,
+        every=n,
+        vertical=(truth.states.h[1:], truth.states.v_ned[1:, 2]),
+    )
+    p, v, _ = mechanization.navigation_errors(nav, truth.states[::n])
+    return float(jnp.linalg.norm(v[-1, :2])), float(jnp.linalg.norm(p[-1, :2]))
+
+
 @program
 def _final_errors(traj, dx):
     """Horizontal velocity [m/s] and position [m] error magnitudes at the last state (one

@@ -215,7 +215,7 @@ def position_step(earth: Earth, lat, lon, h, v0, v1, dt):
 
 def _step(earth, dt, carry, inc):
     state, prev2, (dth_p, dv_p) = carry
-    dth, dv = inc
+    dth, dv = inc[:2]
     zeta, acc = _midpoint_terms(earth, (state.lat, state.h, state.v_ned), prev2, dt)
     phi = dth + jnp.cross(dth_p, dth) / 12.0
     dv_sf = dv + 0.5 * jnp.cross(dth, dv) + (jnp.cross(dth_p, dv) + jnp.cross(dv_p, dth)) / 12.0
@@ -224,6 +224,8 @@ def _step(earth, dt, carry, inc):
     lat1, lon1, h1 = position_step(earth, state.lat, state.lon, state.h, state.v_ned, v1, dt)
     q1 = quat_multiply(quat_multiply(rotvec_to_quat(-zeta), state.q_bn), rotvec_to_quat(phi))
     q1 = q1 / jnp.linalg.norm(q1)
+    if len(inc) == 3:  # vertical aiding: height and vertical velocity given
+        h1, v1 = inc[2][0], v1.at[2].set(inc[2][1])
     new = NavState(lat1, lon1, h1, v1, q1)
     return (new, (state.lat, state.h, state.v_ned), (dth, dv)), new
 
@@ -258,14 +260,23 @@ def _check_state(initial):
 
 
 def mechanize(
-    initial: NavState, dtheta, dv, dt: float, *, earth: Earth = WGS84, every: int = 1
+    initial: NavState,
+    dtheta,
+    dv,
+    dt: float,
+    *,
+    earth: Earth = WGS84,
+    every: int = 1,
+    vertical=None,
 ) -> NavState:
     """Free-inertial navigation from increments (module docstring).
 
     **Arguments:** `initial` the state at the first increment's start; `dtheta` (N, 3) gyro
     increments [rad] and `dv` (N, 3) accelerometer increments [m/s] over intervals of `dt`
     [s]; `earth` the Earth model; `every`: keep every `every`-th epoch (it must divide N) to
-    bound memory on long runs.
+    bound memory on long runs; `vertical`: `(h, v_down)`, each (N,) [m, m/s] at the N epochs
+    after the first, to aid the (unstable) vertical channel: each step's height and vertical
+    velocity are replaced by them (as the linear model's `altitude_aided`).
 
     **Returns:** the [`NavState`][hrgjax.ins.mechanization.NavState] history, N/every + 1
     epochs, the initial state first.
@@ -278,14 +289,24 @@ def mechanize(
     n = dtheta.shape[0]
     if not (isinstance(every, int) and every >= 1 and n % every == 0):
         raise ValueError(f"every must be a positive divisor of the {n} intervals; got {every}")
-    return _mechanize(initial, dtheta, dv, jnp.asarray(dt, float), earth, every)
+    xs = (dtheta, dv)
+    if vertical is not None:
+        hv = jnp.stack([jnp.asarray(x, float) for x in vertical], -1)
+        if hv.shape != (n, 2):
+            raise ValueError(
+                f"vertical must be (h, v_down), each ({n},) [m, m/s] (the epochs after the "
+                f"first); got shape {hv.shape[:-1]}"
+            )
+        xs = xs + (hv,)
+    return _mechanize(initial, xs, jnp.asarray(dt, float), earth, every)
 
 
 @program(check=Check("ins.mechanize"), single_run=True)
-def _mechanize(initial, dtheta, dv, dt, earth, every):
+def _mechanize(initial, xs, dt, earth, every):
     step = lambda c, x: _step(earth, dt, c, x)
+    start = _start(initial, xs[0].dtype)
     if every == 1:
-        _, hist = jax.lax.scan(step, _start(initial, dtheta.dtype), (dtheta, dv))
+        _, hist = jax.lax.scan(step, start, xs)
     else:
         blocks = lambda a: a.reshape((-1, every) + a.shape[1:])
 
@@ -293,7 +314,7 @@ def _mechanize(initial, dtheta, dv, dt, earth, every):
             c, _ = jax.lax.scan(step, c, x)
             return c, c[0]
 
-        _, hist = jax.lax.scan(block, _start(initial, dtheta.dtype), (blocks(dtheta), blocks(dv)))
+        _, hist = jax.lax.scan(block, start, tuple(blocks(a) for a in xs))
     return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), initial, hist)
 
 
