@@ -37,15 +37,18 @@ def _motion():
     )
 
 
-# the tactical preset's noise and biases, without what a 15-state filter does not model
-# (scale factors, misalignments, bias instability); the preset's correlation time so that the
-# CLI's tactical run below compiles the same program
+# the tactical preset without what a 15-state filter does not model (scale factors,
+# misalignments); its bias instability is in (the filter's random walk of density 2σ²/τ is
+# close to the Gauss–Markov bias over 2 min of τ = 600 s), and the same shapes and correlation
+# times, so that the CLI's tactical run below compiles the same program
 TACTICAL = sensors.preset("tactical")
 CONSISTENT = sensors.ImuModel(
     gyro_bias=TACTICAL.gyro_bias,
     accel_bias=TACTICAL.accel_bias,
     arw=TACTICAL.arw,
     vrw=TACTICAL.vrw,
+    gyro_bias_instability=TACTICAL.gyro_bias_instability,
+    accel_bias_instability=TACTICAL.accel_bias_instability,
     gyro_misalignment=np.zeros((3, 3)),
     accel_misalignment=np.zeros((3, 3)),
     gyro_rate_random_walk=0.05 * DEG_PER_H / 10.0,
@@ -90,6 +93,18 @@ def test_imu_errors_have_their_stated_statistics():
     np.testing.assert_allclose(np.std(b[:, 100]), 1e-4, rtol=0.08)
     rho = np.corrcoef(b[:, 100], b[:, 150])[0, 1]
     assert abs(rho - np.exp(-1.0)) < 0.08
+    # one unit of a grade: its fixed errors drawn with the grade's values as σ
+    units = jax.vmap(lambda k: sensors.random_unit(TACTICAL, k))(
+        jax.random.split(jax.random.key(5), 2000)
+    )
+    np.testing.assert_allclose(np.std(units.gyro_bias, 0) / TACTICAL.gyro_bias, 1.0, rtol=0.06)
+    np.testing.assert_allclose(np.std(units.accel_scale, 0) / TACTICAL.accel_scale, 1.0, rtol=0.06)
+    np.testing.assert_allclose(
+        np.std(units.gyro_misalignment, 0), np.abs(TACTICAL.gyro_misalignment), rtol=0.06
+    )
+    # return_bias: the interval's bias is everything but the white noise
+    th, _, bg, _ = gm.apply(jax.random.key(6), z[:50], z[:50], 1.0, return_bias=True)
+    np.testing.assert_allclose(th, bg * 1.0, rtol=1e-12)
     with pytest.raises(ValueError, match="IMU preset must be one of"):
         sensors.preset("automotive")
     with pytest.raises(ValueError, match="arw is a density or a 1σ"):
@@ -136,6 +151,11 @@ def test_filter_and_smoother_are_consistent_over_monte_carlo_flights(monte_carlo
         np.mean(hor(monte_carlo.filter) ** 2)
     )
     assert s["free"]["final_horizontal_median_m"] > 20 * s["filter"]["horizontal_rms_m"]
+    # a state with a zero prior σ would make the covariance singular: refused, naming it
+    with pytest.raises(
+        ValueError, match=r"accel_bias \(or accel_bias_instability\) is the prior σ"
+    ):
+        ekf.LooselyCoupled(sensors.ImuModel(gyro_bias=1e-6), gnss.Gnss())
     # the reported position σ grows in the outage and shrinks after it
     sig = np.asarray(monte_carlo.filter["sigma"])[0, :, 0]
     t = np.asarray(monte_carlo.t)

@@ -75,23 +75,28 @@ def cmd_navigate(args) -> int:
     for name in ("filter", "smoother", "free"):
         r = out[name]
         gap = r.get("gap_horizontal_max_m", float("nan"))
-        label = {"free": "free inertial"}.get(name, name)
+        label = {"free": "free inertial (height aided)"}.get(name, name)
         print(f"{label:>32} {r['horizontal_rms_m']:9.2f} {r['horizontal_max_m']:9.2f} "
               f"{gap:9.2f} {r['final_horizontal_median_m']:9.2f}")  # fmt: skip
     lo, hi = out["nees_band_95"]
     lo9, hi9 = out["nees_navigation_band_95"]
-    trusted = lambda inside: "can be trusted" if inside >= 0.9 else "cannot be trusted"
+    meaning = {
+        "consistent": "can be trusted",
+        "conservative": "is larger than the errors (conservative)",
+        "overconfident": "cannot be trusted: it is smaller than the errors",
+    }
+    missing = "misalignments" + (", scale factors" if args.states == 15 else "")
     for name in ("filter", "smoother"):
         r = out[name]
         print(f"  {name} NEES, navigation states: mean {r['nees_navigation_mean']:.1f} (95 % band "
               f"{lo9:.1f}–{hi9:.1f}), inside on {100 * r['nees_navigation_inside_95_band']:.0f} % "
               f"of epochs: its position, velocity and attitude σ "
-              f"{trusted(r['nees_navigation_inside_95_band'])}")  # fmt: skip
+              f"{meaning[r['nees_navigation_verdict']]}")  # fmt: skip
+        why = "" if r["nees_verdict"] != "overconfident" else (
+            f" (the IMU has errors the filter does not model: {missing})")  # fmt: skip
         print(f"  {name} NEES, all {out['n_states']} states: mean {r['nees_mean']:.1f} (band "
               f"{lo:.1f}–{hi:.1f}), inside on {100 * r['nees_inside_95_band']:.0f} %: its sensor "
-              f"estimates' σ {trusted(r['nees_inside_95_band'])}"
-              + ("" if r["nees_inside_95_band"] >= 0.9 else " (the IMU has errors the filter does "
-                 "not model: misalignments, scale factors, bias instability)"))  # fmt: skip
+              f"estimates' σ {meaning[r['nees_verdict']]}{why}")  # fmt: skip
     print(f"  NIS mean {out['nis_mean']:.2f} (expected {out['innovation_dim']})")
     return finish((args.json, out),
                   (args.plot, lambda p: figure("navigation_figure")(truth, result, p)))  # fmt: skip

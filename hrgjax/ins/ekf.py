@@ -15,7 +15,7 @@ $\delta\omega = \delta b + \mathrm{diag}(\omega)\,\delta s$ as the error model e
    ($\Delta\theta \leftarrow (\Delta\tilde\theta - \hat b_g\Delta t)/(1 + \hat s_g)$, same for
    Δv), run through [`mechanize`][hrgjax.ins.mechanization]'s step;
 2. the covariance is propagated with $\Phi, Q_d$ = Van Loan of the error model
-   (F at the block's end state with the block's mean specific force and rate; white gyro and
+   (F at the block's middle state with the block's mean specific force and rate; white gyro and
    accelerometer noise densities `arw`, `vrw`; bias random walks) — the same exact
    linearisation as [`hrgjax.ins.strapdown`][hrgjax.ins.strapdown];
 3. at a valid fix the innovation (INS antenna position and velocity minus the fix, with the
@@ -31,7 +31,10 @@ state at k.
 
 Sensor model behind the filter: the fixed biases are random constants with σ the
 `ImuModel`'s `gyro_bias`/`accel_bias`, the bias instability is treated as a random walk
-with density $2\sigma^2/\tau$ (exact over times ≪ τ), misalignments are not estimated.
+with density $2\sigma^2/\tau$ (exact over times ≪ τ, conservative beyond: a Gauss–Markov
+bias never wanders more than its σ), misalignments are not estimated. Every sensor state
+needs a prior σ > 0 (a zero makes the covariance singular): the model's values are the sizes
+the filter assumes.
 """
 
 from __future__ import annotations
@@ -39,14 +42,18 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .. import kalman
+from .._checks import is_concrete
 from .._compiled import Check, program
 from .._x64 import require_x64
 from .constants import WGS84, Earth
 from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
 from .mechanization import (
     NavState,
+    _check_increments,
+    _check_state,
     _start,
     _step,
     navigation_errors,
@@ -110,6 +117,30 @@ class LooselyCoupled(eqx.Module):
     attitude_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=(1e-3, 1e-3, 5e-3))
     scale_factors: bool = eqx.field(static=True, default=False)
     earth: Earth = eqx.field(static=True, default=WGS84)
+
+    def __check_init__(self):
+        for name in ("position_sigma", "velocity_sigma", "attitude_sigma"):
+            v = getattr(self, name)
+            if not is_concrete(v):
+                continue
+            v = np.asarray(v)
+            if v.size not in (1, 3) or not np.all(np.isfinite(v) & (v > 0)):
+                raise ValueError(f"LooselyCoupled.{name} must be > 0 (1 or 3 values); got {v}")
+        imu = self.imu
+        sizes = {
+            "gyro_bias (or gyro_bias_instability)": imu.gyro_bias**2 + imu.gyro_bias_instability**2,
+            "accel_bias (or accel_bias_instability)": imu.accel_bias**2
+            + imu.accel_bias_instability**2,
+        }
+        if self.scale_factors:
+            sizes.update(gyro_scale=imu.gyro_scale**2, accel_scale=imu.accel_scale**2)
+        for name, v in sizes.items():
+            if is_concrete(v) and not np.all(np.asarray(v) > 0):
+                raise ValueError(
+                    f"LooselyCoupled: the IMU model's {name} is the prior σ of the filter's "
+                    f"states and must be > 0 on every axis; got {np.sqrt(np.asarray(v))} (a zero "
+                    "σ makes the covariance singular)"
+                )
 
     @property
     def n_states(self) -> int:
@@ -188,6 +219,18 @@ class LooselyCoupled(eqx.Module):
         )
 
 
+def _filter_gnss(g: Gnss) -> Gnss:
+    """The receiver as the filter sees it: its noise, lever arm and measured components (the
+    fix rate and outages, static, are the fixes' business: a new outage set must not
+    recompile the filter)."""
+    return Gnss(
+        position_sigma=g.position_sigma,
+        velocity_sigma=g.velocity_sigma,
+        lever_arm=g.lever_arm,
+        use_velocity=g.use_velocity,
+    )
+
+
 def _feedback(nav: NavState, x):
     """Subtract the estimated navigation errors from `nav`."""
     q = quat_multiply(rotvec_to_quat(x[6:9]), nav.q_bn)
@@ -205,13 +248,21 @@ def loosely_coupled(
     starting at m). **Returns** a [`FilterResult`][hrgjax.ins.ekf.FilterResult] at the start
     and every fix epoch."""
     require_x64("ins.loosely_coupled")
+    _check_state(initial)
+    dtheta, dv = _check_increments(dtheta, dv, dt)
     n, blocks = dtheta.shape[0], fixes.lat.shape[0]
-    if blocks < 1 or n % blocks:
+    m = n // blocks if blocks else 0
+    index = fixes.index
+    if (
+        m < 1
+        or n % blocks
+        or (is_concrete(index) and not np.array_equal(np.asarray(index), np.arange(m, n + 1, m)))
+    ):
         raise ValueError(
             f"fixes: {blocks} fixes for {n} IMU intervals; they must fall every m-th IMU epoch "
             "from m to the end (as gnss.measure makes them for these increments)"
         )
-    m = n // blocks
+    settings = eqx.tree_at(lambda s: s.gnss, settings, _filter_gnss(settings.gnss))
     shape = lambda a: a.reshape((blocks, m) + a.shape[1:])
     res = _filter(settings, initial, shape(jnp.asarray(dtheta)), shape(jnp.asarray(dv)), dt, fixes)
     valid = jnp.concatenate([jnp.zeros(1, bool), jnp.asarray(fixes.valid)])

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import is_concrete
 from .constants import Earth
 
 
@@ -43,8 +44,8 @@ class Gnss(eqx.Module):
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise ValueError(f"Gnss.rate_hz must be > 0 Hz; got {self.rate_hz}")
         for name in ("position_sigma", "velocity_sigma"):
-            v = np.asarray(getattr(self, name))
-            if not np.all(np.isfinite(v) & (v > 0)):
+            v = getattr(self, name)
+            if is_concrete(v) and not np.all(np.isfinite(np.asarray(v)) & (np.asarray(v) > 0)):
                 raise ValueError(f"Gnss.{name} must be > 0 (a 1σ per NED axis); got {v}")
         for w in self.outages:
             if len(w) != 2 or not (w[0] < w[1]):

@@ -106,7 +106,7 @@ class Motion:
         if np.any(np.abs(ends[:, 1]) >= 89.0 * DEG):
             bad = int(np.argmax(np.abs(ends[:, 1]) >= 89.0 * DEG))
             raise ValueError(
-                f"Motion: the pitch reaches ±89° by the end of segment {bad} (Euler angles are "
+                f"Motion: the pitch reaches ±89° by the end of segment {bad + 1} (Euler angles are "
                 "singular at ±90°)"
             )
 

@@ -106,45 +106,37 @@ class ImuModel(eqx.Module):
         mis = jnp.broadcast_to(mis, (3, 3)) * (1.0 - jnp.eye(3))
         return jnp.eye(3) + jnp.diag(scale) + mis
 
-    def apply(self, key, dtheta, dv, dt: float, gyro_rate_error=None):
+    def apply(self, key, dtheta, dv, dt: float, gyro_rate_error=None, *, return_bias=False):
         """Increments as this IMU measures them (module docstring).
 
         **Arguments:** `key` a PRNG key; `dtheta` (N, 3) [rad] and `dv` (N, 3) [m/s] true
         increments over intervals of `dt` [s]; `gyro_rate_error`: optional extra gyro error
-        [rad/s], (N, 3) as each interval's mean rate.
+        [rad/s], (N, 3) as each interval's mean rate; `return_bias`: also return each
+        interval's total bias — fixed, Gauss–Markov, random walk and the extra rate error, all
+        but the white noise — which is what a filter's bias states estimate.
 
-        **Returns:** `(dtheta, dv)` measured, each (N, 3)."""
+        **Returns:** `(dtheta, dv)` measured, each (N, 3); with `return_bias`,
+        `(dtheta, dv, gyro_bias (N, 3) [rad/s], accel_bias (N, 3) [m/s²])`."""
         n = dtheta.shape[0]
         kg, ka = jax.random.split(key)
-        eg = self._bias_path(
-            kg,
-            n,
-            dt,
-            self.gyro_bias_instability,
-            self.gyro_correlation_time,
-            self.gyro_rate_random_walk,
-            self.arw,
-        )
-        ea = self._bias_path(
-            ka,
-            n,
-            dt,
-            self.accel_bias_instability,
-            self.accel_correlation_time,
-            self.accel_random_walk,
-            self.vrw,
-        )
+        g = (self.gyro_bias_instability, self.gyro_correlation_time, self.gyro_rate_random_walk)
+        a = (self.accel_bias_instability, self.accel_correlation_time, self.accel_random_walk)
+        bg, wg = self._bias_path(kg, n, dt, *g, self.arw)
+        ba, wa = self._bias_path(ka, n, dt, *a, self.vrw)
+        bg = bg + self.gyro_bias[None]
+        if gyro_rate_error is not None:
+            bg = bg + jnp.asarray(gyro_rate_error, float)
+        ba = ba + self.accel_bias[None]
         mg = self._matrix(self.gyro_scale, self.gyro_misalignment)
         ma = self._matrix(self.accel_scale, self.accel_misalignment)
-        th = dtheta @ mg.T + (self.gyro_bias * dt)[None] + eg
-        if gyro_rate_error is not None:
-            th = th + jnp.asarray(gyro_rate_error, float) * dt
-        return th, dv @ ma.T + (self.accel_bias * dt)[None] + ea
+        th = dtheta @ mg.T + bg * dt + wg
+        dv = dv @ ma.T + ba * dt + wa
+        return (th, dv, bg, ba) if return_bias else (th, dv)
 
     @staticmethod
     def _bias_path(key, n, dt, sigma, tau, rrw, white):
-        """(N, 3) increments of the random errors: Gauss–Markov and random-walk biases
-        (interval means by the trapezoid) plus white noise."""
+        """(N, 3) interval means of the Gauss–Markov and random-walk biases (trapezoid of
+        their exact samples) [per s], and (N, 3) white-noise increments."""
         k0, k1, k2, k3 = jax.random.split(key, 4)
         a = math.exp(-dt / tau)
         gm0 = sigma * jax.random.normal(k0, (3,))
@@ -157,7 +149,7 @@ class ImuModel(eqx.Module):
             return (gm1, rw1), 0.5 * (gm + gm1 + rw + rw1)
 
         _, mean = jax.lax.scan(step, (gm0, jnp.zeros(3)), (w_gm, w_rw))
-        return mean * dt + jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None]
+        return mean, jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None]
 
 
 def _grade(gb_dph, arw_dpsh, bi_dph, g_ppm, g_urad, ab_ug, vrw_ug_rthz, abi_ug, a_ppm, a_urad, tau):
@@ -188,8 +180,8 @@ PRESETS = {
 ARW [°/√h] 0.002 / 0.1 / 0.3 / 1, gyro bias instability [°/h] 0.003 / 0.5 / 5 / 30,
 accelerometer bias [µg] 25 / 1000 / 5000 / 20000, VRW [µg/√Hz] 5 / 50 / 100 / 300; scale
 factors and misalignments from 5 ppm, 5 µrad (navigation) to 5000 ppm, 5 mrad (consumer).
-The fixed biases are one unit's values (signs as given), not 1σ: draw turn-on biases with
-[`random_biases`][hrgjax.ins.sensors.random_biases]."""
+The fixed errors are one unit's values (signs as given); draw a unit's own with
+[`random_unit`][hrgjax.ins.sensors.random_unit]."""
 
 
 def preset(name: str) -> ImuModel:
@@ -201,10 +193,35 @@ def preset(name: str) -> ImuModel:
         raise ValueError(f"IMU preset must be one of {sorted(PRESETS)}; got {name!r}") from None
 
 
-def random_biases(imu: ImuModel, key) -> ImuModel:
-    """`imu` with its fixed biases redrawn as N(0, σ²) per axis, σ the preset's value (a
-    turn-on bias for each Monte Carlo run)."""
-    kg, ka = jax.random.split(key)
-    g = jnp.abs(imu.gyro_bias) * jax.random.normal(kg, (3,))
-    a = jnp.abs(imu.accel_bias) * jax.random.normal(ka, (3,))
-    return eqx.tree_at(lambda m: (m.gyro_bias, m.accel_bias), imu, (g, a))
+def random_unit(imu: ImuModel, key) -> ImuModel:
+    """One unit of `imu`'s grade: its fixed biases, scale factors and misalignments redrawn as
+    N(0, σ²) per axis (per element), σ the given value's magnitude — a Monte Carlo run's own
+    turn-on errors."""
+    k = jax.random.split(key, 6)
+    draw = lambda kk, x: jnp.abs(x) * jax.random.normal(kk, jnp.shape(x))
+    return eqx.tree_at(
+        lambda m: (
+            m.gyro_bias,
+            m.accel_bias,
+            m.gyro_scale,
+            m.accel_scale,
+            m.gyro_misalignment,
+            m.accel_misalignment,
+        ),  # fmt: skip
+        imu,
+        tuple(
+            draw(kk, x)
+            for kk, x in zip(
+                k,
+                (
+                    imu.gyro_bias,
+                    imu.accel_bias,
+                    imu.gyro_scale,
+                    imu.accel_scale,
+                    imu.gyro_misalignment,
+                    imu.accel_misalignment,
+                ),
+                strict=True,
+            )
+        ),  # fmt: skip
+    )
