@@ -16,12 +16,19 @@ loosely-coupled filter's consistency over Monte Carlo flights.
    epochs whose mean NEES lies inside its 95 % band (target ≥ 90 %), for all states and for
    the nine navigation states.
 4. Speed: mechanization steps per second, one flight against a vmapped batch per flight.
-5. Seed 000's INS impact (`hrgjax.calibration.ins_impact`, the three 1-h flights of two level
+5. pyins 1.0 (`python-ins`, test-only dependency) on the same data with its gravity model:
+   its strapdown integrator on the example's exact increments (its own truncation, at 100 and
+   200 Hz) and the response to a navigation-grade IMU's errors beside ours; its feedback
+   filter (`run_feedback_filter`, the same IMU model, fixes, initial state and 1-s covariance
+   step) beside `loosely_coupled` on `--pyins N` flights at 20 Hz (target: horizontal error
+   statistics within 10 %), and their wall times.
+6. Seed 000's INS impact (`hrgjax.calibration.ins_impact`, the three 1-h flights of two level
    HRGs warming from −40 °C) recomputed through the mechanization
    (`ins_impact.mechanized_errors`, 10 Hz, altitude held) beside the linear error model, for
    the raw gyro and the Fourier compensator fitted on the seed's quick plan (`--ins-impact`).
 
-Usage: `.venv/bin/python benchmarks/navigation.py [--runs 100] [--rate 20] [--ins-impact]`.
+Usage: `.venv/bin/python benchmarks/navigation.py [--runs 100] [--rate 20] [--pyins 5]
+[--ins-impact]`.
 """
 
 import sys
@@ -149,6 +156,161 @@ def monte_carlo(mot, runs, rate):
            ratio=t1 / (t16 / 16))  # fmt: skip
 
 
+def _pyins_earth():
+    import pyins.earth as pe
+
+    from hrgjax.ins.constants import E2, GAMMA_E, A, Earth
+
+    class PyinsGravity(Earth):
+        """WGS-84 with pyins's gravity: Somigliana with the linear free-air term."""
+
+        def gravity(self, lat, h=0.0):
+            s2 = jnp.sin(lat) ** 2
+            return GAMMA_E * (1 + pe.F * s2) / jnp.sqrt(1 - E2 * s2) * (1 - 2 * h / A)
+
+    return PyinsGravity()
+
+
+def _pyins_pva(state):
+    import pandas as pd
+
+    from hrgjax.units import DEG
+
+    r, p, h = (float(np.asarray(x)) / DEG for x in state.euler)
+    v = np.asarray(state.v_ned)
+    return pd.Series({"lat": float(state.lat) / DEG, "lon": float(state.lon) / DEG,
+                      "alt": float(state.h), "VN": v[0], "VE": v[1], "VD": v[2], "roll": r,
+                      "pitch": p, "heading": h}, name=0.0)  # fmt: skip
+
+
+def _pyins_increments(dth, dv, dt):
+    import pandas as pd
+    import pyins.strapdown as ps
+
+    cols = ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
+    rows = np.vstack([np.zeros((1, 6)), np.hstack([np.asarray(dth), np.asarray(dv)])])
+    imu = pd.DataFrame(rows, index=np.arange(rows.shape[0]) * dt, columns=cols)
+    return ps.compute_increments_from_imu(imu, "increment")
+
+
+def _horizontal(lat, lon, states, earth):
+    lat0, h0 = np.asarray(states.lat), np.asarray(states.h)
+    r_m, r_n = (np.asarray(x) for x in earth.radii(lat0))
+    north = (lat - lat0) * (r_m + h0)
+    east = (lon - np.asarray(states.lon)) * (r_n + h0) * np.cos(lat0)
+    return np.hypot(north, east)
+
+
+def pyins_comparison(mot, flights_n):
+    import warnings
+
+    import pyins.filters as pf
+    import pyins.inertial_sensor as pis
+    import pyins.measurements as pm
+    import pyins.strapdown as ps
+
+    from hrgjax import kalman
+    from hrgjax.units import DEG
+
+    warnings.filterwarnings("ignore")  # pyins on pandas 3: copy-keyword deprecations
+    earth = _pyins_earth()
+    imu = sensors.preset("navigation")
+    for hz in (100.0, 200.0):
+        t = mot.truth(hz, earth=earth)
+        run = lambda a, b, t=t: ps.Integrator(_pyins_pva(t.states[0])).integrate(
+            _pyins_increments(a, b, t.dt)
+        )
+        tj0 = run(t.dtheta, t.dv)
+        own = _horizontal(tj0.lat.values * DEG, tj0.lon.values * DEG, t.states, earth)
+        report(
+            f"pyins integrator on the exact increments, {hz:g} Hz: horizontal after 1 h",
+            own.max(),
+            "m",
+        )
+        dth, dv = imu.apply(jax.random.key(0), t.dtheta, t.dv, t.dt)
+        t0 = time.perf_counter()
+        tj = run(dth, dv)
+        t_p = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        nav = me.mechanize(t.initial, dth, dv, t.dt, earth=earth)
+        jax.block_until_ready(nav.lat)
+        t_h = time.perf_counter() - t0
+        ours = np.stack(me.navigation_errors(nav, t.states, earth)[0].T[:2], -1)
+        r_m, r_n = (np.asarray(x) for x in earth.radii(np.asarray(t.states.lat)))
+        rh = np.asarray(t.states.h)
+        theirs = np.stack([(tj.lat.values - tj0.lat.values) * DEG * (r_m + rh),
+                           (tj.lon.values - tj0.lon.values) * DEG * (r_n + rh)
+                           * np.cos(np.asarray(t.states.lat))], -1)  # fmt: skip
+        gap = np.abs(np.asarray(ours) - theirs).max()
+        report(f"  response to navigation-grade IMU errors, hrgjax vs pyins, {hz:g} Hz: largest gap",
+               gap, "m", comparison="response's largest value",
+               ratio=np.abs(np.asarray(ours)).max())  # fmt: skip
+        report(
+            f"  integrator wall time, pyins (numba, second call) / hrgjax, {hz:g} Hz", t_p / t_h, ""
+        )
+    if flights_n <= 0:
+        return
+    t = mot.truth(20.0, earth=earth)
+    tac = sensors.preset("tactical")
+    model = sensors.ImuModel(
+        gyro_bias=tac.gyro_bias, accel_bias=tac.accel_bias, arw=tac.arw, vrw=tac.vrw
+    )
+    rx = gnss.Gnss(position_sigma=2.0, velocity_sigma=0.05, outages=((1400.0, 1460.0),))
+    settings = ekf.LooselyCoupled(model, rx, position_sigma=3.0, velocity_sigma=0.1,
+                                  attitude_sigma=(1e-3, 1e-3, 5e-3), earth=earth)  # fmt: skip
+    n = t.dtheta.shape[0]
+    idx = rx.epochs(n, t.dt)
+    tfix = idx * t.dt
+
+    @jax.jit
+    def draw(key):
+        k_unit, k_imu, k_gnss, k_init = jax.random.split(key, 4)
+        dth, dv = sensors.random_unit(model, k_unit).apply(k_imu, t.dtheta, t.dv, t.dt)
+        p0 = settings.initial_covariance(t.initial)
+        e0 = kalman.psd_factor(p0[:9, :9]) @ jax.random.normal(k_init, (9,))
+        return ekf._feedback(t.initial, -e0), dth, dv, gnss.measure(t, rx, k_gnss)
+
+    ours, theirs, times = [], [], []
+    for r in range(flights_n):
+        start, dth, dv, fixes = draw(jax.random.key(r))
+        t0 = time.perf_counter()
+        res = ekf.loosely_coupled(settings, start, dth, dv, t.dt, fixes)
+        jax.block_until_ready(res.nav.lat)
+        t_ours = time.perf_counter() - t0
+        ours.append(
+            _horizontal(
+                np.asarray(res.nav.lat[1:]), np.asarray(res.nav.lon[1:]), t.states[idx], earth
+            )
+        )
+        ok = np.asarray(fixes.valid)
+        pos = {"lat": np.asarray(fixes.lat)[ok] / DEG, "lon": np.asarray(fixes.lon)[ok] / DEG,
+               "alt": np.asarray(fixes.h)[ok]}  # fmt: skip
+        vel = {k: np.asarray(fixes.v_ned)[ok, i] for i, k in enumerate(("VN", "VE", "VD"))}
+        import pandas as pd
+
+        meas = [pm.Position(pd.DataFrame(pos, index=tfix[ok]), 2.0),
+                pm.NedVelocity(pd.DataFrame(vel, index=tfix[ok]), 0.05)]  # fmt: skip
+        gm = pis.EstimationModel(bias_sd=np.asarray(model.gyro_bias), noise=np.asarray(model.arw))
+        am = pis.EstimationModel(bias_sd=np.asarray(model.accel_bias), noise=np.asarray(model.vrw))
+        t0 = time.perf_counter()
+        out = pf.run_feedback_filter(_pyins_pva(start), 3.0, 0.1, 1e-3 / DEG, 5e-3 / DEG,
+                                     _pyins_increments(dth, dv, t.dt), gm, am, meas, time_step=1.0)  # fmt: skip
+        times.append((time.perf_counter() - t0, t_ours))
+        tj = out.trajectory.loc[tfix]
+        theirs.append(_horizontal(tj.lat.values * DEG, tj.lon.values * DEG, t.states[idx], earth))
+    o, p = np.asarray(ours), np.asarray(theirs)
+    gap = (tfix >= 1400.0) & (tfix <= 1460.0)
+    rms = lambda x: float(np.sqrt(np.mean(x**2)))
+    report(f"{flights_n} flights, hrgjax filter vs pyins feedback filter: horizontal RMS", rms(o), "m",
+           comparison="hrgjax / pyins", ratio=rms(o) / rms(p), target="within 10 %")  # fmt: skip
+    report("  in the 60-s outage: horizontal RMS", rms(o[:, gap]), "m", comparison="hrgjax / pyins",
+           ratio=rms(o[:, gap]) / rms(p[:, gap]), target="within 10 %")  # fmt: skip
+    report("  epoch by epoch, median |hrgjax − pyins|", float(np.median(np.abs(o - p))), "m")
+    tp, th = np.median(np.asarray(times), 0)
+    report("  filter wall time, one 1-h flight at 20 Hz: hrgjax (after its first call)", th, "s",
+           comparison="pyins / hrgjax", ratio=tp / th)  # fmt: skip
+
+
 def ins_impact_through_the_mechanization():
     import hrgjax as hg
     from hrgjax.calibration import FourierCompensator, NoCompensation, run_plan, seed_plan
@@ -178,6 +340,8 @@ def main():
     truth = free_integration(mot)
     linear_vs_nonlinear(truth)
     monte_carlo(mot, runs, rate)
+    if "--pyins" in sys.argv:
+        pyins_comparison(mot, int(sys.argv[sys.argv.index("--pyins") + 1]))
     if "--ins-impact" in sys.argv:
         ins_impact_through_the_mechanization()
 
