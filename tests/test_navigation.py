@@ -325,3 +325,22 @@ def test_the_response_to_sensor_errors_equals_pyins_integrator(truth50):
     response_ours, response_theirs = (ours - truth) * metres, (theirs - theirs0) * metres
     assert np.abs(response_ours[:, :2]).max() > 30.0
     np.testing.assert_allclose(response_ours, response_theirs, rtol=0, atol=2e-3)
+
+
+@pytest.mark.slow(
+    "~40 s: an HRG pair simulated for 10 min and both navigation models compiled; fast tier: "
+    "test_vertical_aiding_holds_the_height_as_the_linear_models_altitude_aiding (the same "
+    "comparison on constant biases); benchmarks/navigation.py --ins-impact runs the 1-h flights"
+)
+def test_ins_impact_through_the_mechanization_equals_the_linear_model():
+    import hrgjax as hg
+    from hrgjax.calibration import NoCompensation
+    from hrgjax.calibration import ins_impact as ii
+
+    flight = ii.Flight(duration_s=600.0)
+    gyro = hg.presets.tvg3_like()
+    rec = ii.fly(gyro, flight, key=jax.random.key(0), bias_key=jax.random.key(1))
+    v_lin, p_lin = ii.navigation_errors(NoCompensation(), rec, flight)
+    v_mech, p_mech = ii.mechanized_errors(NoCompensation(), rec, flight)
+    assert p_lin > 1.0
+    np.testing.assert_allclose([v_mech, p_mech], [v_lin, p_lin], rtol=0.02)
