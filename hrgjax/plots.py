@@ -537,7 +537,7 @@ def session_figure(comparison, path: str, title: str = "") -> str:
 
 def navigation_figure(truth, flights, path: str, title: str = "") -> str:
     """The motion's ground track with its GNSS gaps, the first run's horizontal position
-    errors (free inertial, filter with its ±3σ, smoother) and the filter's and smoother's
+    errors (free inertial with its height held, filter with its ±3σ, smoother) and the filter's and smoother's
     mean NEES against its 95 % band ([`hrgjax.ins.flights.fly`][hrgjax.ins.flights.fly]).
     **Returns** the path written."""
     from .ins.constants import radii
@@ -567,7 +567,7 @@ def navigation_figure(truth, flights, path: str, title: str = "") -> str:
     hor = lambda d: np.linalg.norm(np.asarray(d["position"])[0, :, :2], axis=-1)
     sig = np.linalg.norm(np.asarray(flights.filter["sigma"])[0, :, :2], axis=-1)
     ax.semilogy(
-        t / 60, np.maximum(hor(flights.free), 1e-3), color="0.6", lw=1, label="free inertial"
+        t / 60, np.maximum(hor(flights.free), 1e-3), color="0.6", lw=1, label="free inertial (height held)"
     )
     ax.semilogy(t / 60, np.maximum(hor(flights.filter), 1e-3), color="C0", lw=1, label="filter")
     ax.semilogy(t / 60, 3 * sig, color="C0", ls="--", lw=0.8, label="filter 3σ")

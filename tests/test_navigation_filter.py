@@ -72,39 +72,45 @@ def monte_carlo(truth):
 
 def test_imu_errors_have_their_stated_statistics():
     n, dt = 40_000, 0.01
-    z = jnp.zeros((n, 3))
     white = sensors.ImuModel(arw=0.1 * DEG_PER_SQRT_H, vrw=1e-3)
-    th, dv = white.apply(jax.random.key(0), z, z, dt)
-    np.testing.assert_allclose(np.var(th, 0) / (white.arw**2 * dt), 1.0, rtol=0.04)
-    np.testing.assert_allclose(np.var(dv, 0) / (1e-3**2 * dt), 1.0, rtol=0.04)
     # scale factors and misalignments act as the matrix I + diag(s) + A (diagonal of A ignored)
     a = np.array([[9.0, 1e-3, -2e-3], [3e-3, 9.0, 1e-3], [-1e-3, 2e-3, 9.0]])
     m = sensors.ImuModel(gyro_scale=(1e-3, -2e-3, 5e-4), gyro_misalignment=a, gyro_bias=1e-5)
-    x = jax.random.normal(jax.random.key(1), (5, 3))
-    th, _ = m.apply(jax.random.key(2), x, x, dt)
-    want = x @ (np.eye(3) + np.diag([1e-3, -2e-3, 5e-4]) + a * (1 - np.eye(3))).T + 1e-5 * dt
-    np.testing.assert_allclose(th, want, rtol=1e-13, atol=1e-18)
-    # a Gauss–Markov bias: stationary σ and lag-τ correlation e^-1 of the interval means
     gm = sensors.ImuModel(gyro_bias_instability=1e-4, gyro_correlation_time=50.0)
-    th, _ = jax.vmap(lambda k: gm.apply(k, jnp.zeros((200, 3)), jnp.zeros((200, 3)), 1.0))(
-        jax.random.split(jax.random.key(4), 400)
-    )
-    b = np.moveaxis(np.asarray(th), 2, 1).reshape(-1, 200)  # per run and axis, per interval
+
+    @jax.jit  # one program for every draw below
+    def draws():
+        z = jnp.zeros((n, 3))
+        th_w, dv_w = white.apply(jax.random.key(0), z, z, dt)
+        x = jax.random.normal(jax.random.key(1), (5, 3))
+        th_m, _ = m.apply(jax.random.key(2), x, x, dt)
+        z2 = jnp.zeros((200, 3))
+        th_gm, _ = jax.vmap(lambda k: gm.apply(k, z2, z2, 1.0))(
+            jax.random.split(jax.random.key(4), 400)
+        )
+        keys = jax.random.split(jax.random.key(5), 2000)
+        units = jax.vmap(lambda k: sensors.random_unit(TACTICAL, k))(keys)
+        th_b, _, bg, _ = gm.apply(jax.random.key(6), z2[:50], z2[:50], 1.0, return_bias=True)
+        return th_w, dv_w, x, th_m, th_gm, units, th_b, bg
+
+    th_w, dv_w, x, th_m, th_gm, units, th_b, bg = draws()
+    np.testing.assert_allclose(np.var(th_w, 0) / (white.arw**2 * dt), 1.0, rtol=0.04)
+    np.testing.assert_allclose(np.var(dv_w, 0) / (1e-3**2 * dt), 1.0, rtol=0.04)
+    want = x @ (np.eye(3) + np.diag([1e-3, -2e-3, 5e-4]) + a * (1 - np.eye(3))).T + 1e-5 * dt
+    np.testing.assert_allclose(th_m, want, rtol=1e-13, atol=1e-18)
+    # a Gauss–Markov bias: stationary σ and lag-τ correlation e^-1 of the interval means
+    b = np.moveaxis(np.asarray(th_gm), 2, 1).reshape(-1, 200)  # per run and axis, per interval
     np.testing.assert_allclose(np.std(b[:, 100]), 1e-4, rtol=0.08)
     rho = np.corrcoef(b[:, 100], b[:, 150])[0, 1]
     assert abs(rho - np.exp(-1.0)) < 0.08
     # one unit of a grade: its fixed errors drawn with the grade's values as σ
-    units = jax.vmap(lambda k: sensors.random_unit(TACTICAL, k))(
-        jax.random.split(jax.random.key(5), 2000)
-    )
     np.testing.assert_allclose(np.std(units.gyro_bias, 0) / TACTICAL.gyro_bias, 1.0, rtol=0.06)
     np.testing.assert_allclose(np.std(units.accel_scale, 0) / TACTICAL.accel_scale, 1.0, rtol=0.06)
     np.testing.assert_allclose(
         np.std(units.gyro_misalignment, 0), np.abs(TACTICAL.gyro_misalignment), rtol=0.06
     )
     # return_bias: the interval's bias is everything but the white noise
-    th, _, bg, _ = gm.apply(jax.random.key(6), z[:50], z[:50], 1.0, return_bias=True)
-    np.testing.assert_allclose(th, bg * 1.0, rtol=1e-12)
+    np.testing.assert_allclose(th_b, bg * 1.0, rtol=1e-12)
     with pytest.raises(ValueError, match="IMU preset must be one of"):
         sensors.preset("automotive")
     with pytest.raises(ValueError, match="arw is a density or a 1σ"):
@@ -207,14 +213,17 @@ def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carl
     path = tmp_path / "m.csv"
     _motion().to_csv(path)
     out = tmp_path / "nav.json"
+    compiled = flights._run_batch._cached._cache_size()
     args = [
-        "navigate", str(path), "--rate-hz", "10", "--runs", "16", "--outage", "70:90",
+        "navigate", str(path), "--rate-hz", "10", "--runs", "16", "--outage", "60:80",
         "--lever-arm", "1.5,-0.3,-0.8", "--json", str(out), "--quiet",
     ]  # fmt: skip
     assert main(args) == 0
     text = capsys.readouterr().out
     d = json.loads(out.read_text())
-    assert d["runs"] == 16 and d["outages"] == [[70.0, 90.0]] and d["imu"] == "tactical"
+    assert d["runs"] == 16 and d["outages"] == [[60.0, 80.0]] and d["imu"] == "tactical"
+    # another grade and another outage than the fixture's flights: the same program
+    assert flights._run_batch._cached._cache_size() == compiled
     assert "navigation states" in text and "NIS mean" in text
     # the tactical preset's misalignments and scale factors are not in the 15 states: the
     # position σ stays trustworthy, the sensor states' σ does not, and the output says so
@@ -227,3 +236,30 @@ def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carl
     with pytest.raises(SystemExit):
         main(["navigate", str(path), "--rate-hz", "7.5", "--quiet"])
     assert "not a whole number of samples at 7.5 Hz" in capsys.readouterr().err
+
+
+def test_filter_inputs_and_verdicts(truth):
+    """Mismatched fixes, an empty GNSS grid and a bad chunk are one-line errors; the NEES
+    verdict tells a conservative σ from an overconfident one."""
+    settings = ekf.LooselyCoupled(CONSISTENT, gnss.Gnss(rate_hz=2.0))
+    fixes = gnss.measure(truth, gnss.Gnss(), jax.random.key(0))  # 1-Hz fixes ...
+    n = truth.dtheta.shape[0]
+    with pytest.raises(ValueError, match="fixes: 120 fixes for 600 IMU intervals"):
+        ekf.loosely_coupled(
+            settings, truth.initial, truth.dtheta[: n // 2], truth.dv[: n // 2], truth.dt, fixes
+        )
+    with pytest.raises(ValueError, match=r"dtheta and dv must both have shape \(N, 3\)"):
+        ekf.loosely_coupled(settings, truth.initial, truth.dtheta, truth.dv[:-1], truth.dt, fixes)
+    with pytest.raises(ValueError, match="whole number of GNSS intervals"):
+        flights.fly(
+            truth,
+            CONSISTENT,
+            ekf.LooselyCoupled(CONSISTENT, gnss.Gnss(rate_hz=0.001)),
+            key=jax.random.key(0),
+        )
+    with pytest.raises(ValueError, match="chunk must be a whole number >= 1"):
+        flights.fly(truth, CONSISTENT, settings, key=jax.random.key(0), chunk=0)
+    lo, hi = 10.0, 20.0
+    assert flights._verdict(np.full(100, 15.0), lo, hi) == "consistent"
+    assert flights._verdict(np.r_[np.full(80, 15.0), np.full(20, 5.0)], lo, hi) == "conservative"
+    assert flights._verdict(np.r_[np.full(80, 15.0), np.full(20, 40.0)], lo, hi) == "overconfident"

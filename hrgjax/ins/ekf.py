@@ -31,8 +31,9 @@ state at k.
 
 Sensor model behind the filter: the fixed biases are random constants with σ the
 `ImuModel`'s `gyro_bias`/`accel_bias`, the bias instability is treated as a random walk
-with density $2\sigma^2/\tau$ (exact over times ≪ τ, conservative beyond: a Gauss–Markov
-bias never wanders more than its σ), misalignments are not estimated. Every sensor state
+with density $2\sigma^2/\tau$ (exact over times ≪ τ, conservative beyond: a stationary
+Gauss–Markov bias keeps its variance σ², so its change from any start has a variance of at
+most 2σ², while the random walk's grows as 2σ²t/τ), misalignments are not estimated. Every sensor state
 needs a prior σ > 0 (a zero makes the covariance singular): the model's values are the sizes
 the filter assumes.
 """
@@ -72,7 +73,8 @@ class FilterResult(eqx.Module):
     history; `gyro_bias`, `accel_bias` (M, 3) estimates [rad/s, m/s²]; `gyro_scale`,
     `accel_scale` (M, 3) [-] (zeros without scale-factor states); `P` (M, n, n) error
     covariance; `nis` (M,) normalised innovation squared (NaN where no fix);
-    `innovation_dim` the number of measured components per fix."""
+    `innovation_dim` the number of measured components per fix; `earth` the filter's Earth
+    model."""
 
     t: jax.Array
     nav: NavState
@@ -87,10 +89,11 @@ class FilterResult(eqx.Module):
     x_update: jax.Array
     P_prior: jax.Array
     Phi: jax.Array
+    earth: Earth = eqx.field(static=True, default=WGS84)
 
-    def position_sigma(self, earth: Earth = WGS84):
-        """1σ position uncertainty (M, 3) [m, north east down]."""
-        r_m, r_n = earth.radii(self.nav.lat)
+    def position_sigma(self):
+        """1σ position uncertainty (M, 3) [m, north east down], on the filter's Earth."""
+        r_m, r_n = self.earth.radii(self.nav.lat)
         d = jnp.stack(
             [
                 r_m + self.nav.h,
@@ -328,6 +331,7 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
         cat(jnp.zeros(n_s, p0.dtype), xs),
         cat(p0, pp),
         cat(jnp.eye(n_s, dtype=p0.dtype), phis),
+        settings.earth,
     )
 
 
@@ -370,6 +374,7 @@ def _smooth(res):
         res.x_update,
         res.P_prior,
         res.Phi,
+        res.earth,
     )
 
 

@@ -34,7 +34,8 @@ class Flights(eqx.Module):
     """Errors of R Monte Carlo runs at the M GNSS epochs (the start first).
 
     **Fields:** `t` (M,) [s]; `gnss_valid` (M,) whether a fix was taken; for each of
-    `filter`, `smoother`, `free` (free inertial) a dict with `position` (R, M, 3) [m, north
+    `filter`, `smoother`, `free` (free inertial, its height and vertical velocity held to the
+    truth) a dict with `position` (R, M, 3) [m, north
     east down], `velocity` (R, M, 3) [m/s], `attitude` (R, M, 3) [rad]; for `filter` and
     `smoother` also `sigma` (R, M, 9) (position [m], velocity [m/s], attitude [rad], 1σ) and
     `nees` (R, M) of all the filter's states and `nees_navigation` (R, M) of the nine
@@ -105,9 +106,9 @@ def _verdict(mean_nees, lo, hi) -> str:
     )
 
 
-def _sigmas(res, earth):
+def _sigmas(res):
     d = jnp.sqrt(jnp.diagonal(res.P, axis1=-2, axis2=-1)[..., 3:9])
-    return jnp.concatenate([res.position_sigma(earth), d], -1)
+    return jnp.concatenate([res.position_sigma(), d], -1)
 
 
 def _one_run(
@@ -137,7 +138,7 @@ def _one_run(
         d = {"position": p, "velocity": v, "attitude": a}
         if with_cov:
             e = error_states(r, tn, bias_g[at], bias_a[at], truth.earth, *scales)
-            d["sigma"] = _sigmas(r, truth.earth)
+            d["sigma"] = _sigmas(r)
             d["nees"] = nees(e, r.P)
             d["nees_navigation"] = nees(e[..., :9], r.P[..., :9, :9])
         return d
@@ -158,8 +159,8 @@ def fly(
     """Fly `truth` `runs` times (module docstring).
 
     **Arguments:** `truth` a [`Truth`][hrgjax.ins.motion.Truth]; `imu` the
-    [`ImuModel`][hrgjax.ins.sensors.ImuModel] of the simulated sensors (its fixed biases
-    are the 1σ of the drawn turn-on biases); `settings` the
+    [`ImuModel`][hrgjax.ins.sensors.ImuModel] of the simulated sensors (its fixed biases,
+    scale factors and misalignments are the σ of each run's drawn ones); `settings` the
     [`LooselyCoupled`][hrgjax.ins.ekf.LooselyCoupled] filter (its `gnss` makes the fixes);
     `key` a PRNG key; `runs`; `chunk`: runs per vmapped batch; `gyro_rate_error`: an extra
     gyro error (N, 3) [rad/s] common to all runs (e.g. an hrgjax gyro's simulated drift).

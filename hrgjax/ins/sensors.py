@@ -199,6 +199,7 @@ def random_unit(imu: ImuModel, key) -> ImuModel:
     turn-on errors."""
     k = jax.random.split(key, 6)
     draw = lambda kk, x: jnp.abs(x) * jax.random.normal(kk, jnp.shape(x))
+    off = lambda m: jnp.broadcast_to(m, (3, 3)) * (1.0 - jnp.eye(3))  # a scalar: every element
     return eqx.tree_at(
         lambda m: (
             m.gyro_bias,
@@ -218,8 +219,8 @@ def random_unit(imu: ImuModel, key) -> ImuModel:
                     imu.accel_bias,
                     imu.gyro_scale,
                     imu.accel_scale,
-                    imu.gyro_misalignment,
-                    imu.accel_misalignment,
+                    off(imu.gyro_misalignment),
+                    off(imu.accel_misalignment),
                 ),
                 strict=True,
             )
