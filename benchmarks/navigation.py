@@ -29,7 +29,7 @@ loosely-coupled filter's consistency over Monte Carlo flights.
    the raw gyro and the Fourier compensator fitted on the seed's quick plan (`--ins-impact`).
 
 Usage: `.venv/bin/python benchmarks/navigation.py [--runs 100] [--rate 20] [--pyins 5]
-[--ins-impact]`.
+[--ins-impact] [--only free,linear,monte-carlo,pyins,ins-impact]`.
 """
 
 import sys
@@ -202,9 +202,25 @@ def _horizontal(lat, lon, states, earth):
     return np.hypot(north, east)
 
 
+def _import_pyins():
+    """Import pyins with this folder off the path: numba imports `coverage` if it can, and
+    would find benchmarks/coverage.py."""
+    import os
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    saved = sys.path[:]
+    sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != here]
+    try:
+        import pyins.filters  # noqa: F401
+        import pyins.strapdown  # noqa: F401
+    finally:
+        sys.path[:] = saved
+
+
 def pyins_comparison(mot, flights_n):
     import warnings
 
+    _import_pyins()
     import pyins.filters as pf
     import pyins.inertial_sensor as pis
     import pyins.measurements as pm
@@ -334,16 +350,22 @@ def ins_impact_through_the_mechanization():
 
 
 def main():
-    runs = int(sys.argv[sys.argv.index("--runs") + 1]) if "--runs" in sys.argv else 100
-    rate = float(sys.argv[sys.argv.index("--rate") + 1]) if "--rate" in sys.argv else 20.0
+    arg = lambda name, default: (
+        type(default)(sys.argv[sys.argv.index(name) + 1]) if name in sys.argv else default
+    )
+    runs, rate, n_pyins = arg("--runs", 100), arg("--rate", 20.0), arg("--pyins", 0)
+    parts = arg("--only", "free,linear,monte-carlo,pyins,ins-impact").split(",")
     print(f"machine: {machine()}")
     mot = motion.example()
-    truth = free_integration(mot)
-    linear_vs_nonlinear(truth)
-    monte_carlo(mot, runs, rate)
-    if "--pyins" in sys.argv:
-        pyins_comparison(mot, int(sys.argv[sys.argv.index("--pyins") + 1]))
-    if "--ins-impact" in sys.argv:
+    if "free" in parts or "linear" in parts:
+        truth = free_integration(mot)
+        if "linear" in parts:
+            linear_vs_nonlinear(truth)
+    if "monte-carlo" in parts:
+        monte_carlo(mot, runs, rate)
+    if "pyins" in parts and "--pyins" in sys.argv:
+        pyins_comparison(mot, n_pyins)
+    if "ins-impact" in parts and "--ins-impact" in sys.argv:
         ins_impact_through_the_mechanization()
 
 

@@ -52,6 +52,7 @@ from .._x64 import require_x64
 from .constants import WGS84, Earth
 from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
 from .mechanization import (
+    UNROLL,
     NavState,
     _check_increments,
     _check_state,
@@ -293,7 +294,9 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
         bg, ba, sg, sa = sens
         dth_c = (dth - (bg * dt)[None]) / (1.0 + sg)[None]
         dv_c = (dv - (ba * dt)[None]) / (1.0 + sa)[None]
-        mech, hist = jax.lax.scan(lambda c, x: _step(settings.earth, dt, c, x), mech, (dth_c, dv_c))
+        mech, hist = jax.lax.scan(
+            lambda c, x: _step(settings.earth, dt, c, x), mech, (dth_c, dv_c), unroll=UNROLL
+        )
         nav = mech[0]
         mid = hist[m // 2 - 1] if m > 1 else nav  # the state at the block's middle
         phi, qd = settings._dynamics(mid, jnp.sum(dth_c, 0) / T, jnp.sum(dv_c, 0) / T, T)
