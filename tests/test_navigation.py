@@ -217,22 +217,32 @@ def test_vertical_aiding_holds_the_height_as_the_linear_models_altitude_aiding(t
 
 
 def test_mechanization_is_differentiable_and_vmaps(truth50):
-    """d(final position)/d(gyro bias) by forward mode equals central differences, and a vmap
-    over biases equals the runs one by one."""
+    """The gradient of the final position error with respect to gyro biases and scale factors
+    — forward mode (jacfwd) and reverse mode (grad of its horizontal norm) — equals central
+    differences to 1e-6, and a vmap over the parameters equals the runs one by one."""
     t = truth50
-    n = 250  # the first 5 s, the take-off run
+    n = 2500  # the first 50 s: the take-off run and the rotation into the climb
 
-    def final(bg):
-        nav = me.mechanize(t.initial, t.dtheta[:n] + (bg * t.dt)[None], t.dv[:n], t.dt, every=n)
+    def final(p):  # p = (gyro bias [rad/s] (3,), gyro scale factor (3,))
+        dth = t.dtheta[:n] * (1.0 + p[3:])[None] + (p[:3] * t.dt)[None]
+        nav = me.mechanize(t.initial, dth, t.dv[:n], t.dt, every=n)
         return me.navigation_errors(nav, t.states[jnp.array([0, n])])[0][-1]
 
-    x0 = jnp.array([1e-5, -2e-5, 3e-5])
-    e = 1e-4  # position round-off (≈ 1e-8 m after 250 steps) swamps smaller differences
-    steps = jnp.concatenate([e * jnp.eye(3), -e * jnp.eye(3), 2 * x0[None] - x0[None]])
-    batch = jax.jit(jax.vmap(final))(x0[None] + steps)  # six differences and 2·x0
-    fd = (batch[:3] - batch[3:6]).T / (2 * e)
-    np.testing.assert_allclose(jax.jit(jax.jacfwd(final))(x0), fd, rtol=1e-6, atol=1e-4)
-    np.testing.assert_allclose(batch[6], final(2 * x0), rtol=1e-12, atol=1e-12)
+    horizontal = lambda p: jnp.linalg.norm(final(p)[:2])
+    p0 = jnp.array([1e-5, -2e-5, 3e-5, 2e-4, -1e-4, 3e-4])
+    e = jnp.array([1e-5] * 3 + [1e-3] * 3)  # above the positions' round-off (≈ 1e-7 m)
+    steps = jnp.concatenate([jnp.diag(e), -jnp.diag(e), p0[None]])
+    batch = jax.jit(jax.vmap(final))(p0[None] + steps)  # twelve differences and p0 + p0
+    fd = (batch[:6] - batch[6:12]).T / (2 * e)[None]
+    jac = jax.jit(jax.jacfwd(final))(p0)
+    scale = np.abs(fd).max(axis=1, keepdims=True)  # per position component
+    assert np.all(np.abs(jac - fd) <= 1e-6 * scale), np.abs(jac - fd) / scale
+    grad = jax.jit(jax.grad(horizontal))(p0)
+    h0 = final(p0)[:2]
+    want = (h0 / jnp.linalg.norm(h0)) @ fd[:2]
+    assert np.all(np.abs(grad - want) <= 1e-6 * np.abs(want).max())
+    assert np.abs(fd[:, 3:]).max() > 1.0  # the rotation makes the scale factors count
+    np.testing.assert_allclose(batch[12], final(2 * p0), rtol=1e-12, atol=1e-12)
 
 
 def test_motion_files_round_trip_and_bad_input_names_the_line(motion, tmp_path):
