@@ -238,6 +238,34 @@ def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carl
     assert "not a whole number of samples at 7.5 Hz" in capsys.readouterr().err
 
 
+def test_discretisation_equals_van_loan(truth):
+    """The filter's series discretisation of the 21-state model over 1 s and 10 s equals the
+    exact Van Loan exponential in the climb's turn (scaled by the states' own σ)."""
+    from hrgjax import kalman
+    from hrgjax.ins.strapdown import error_matrices_at
+
+    k = 400  # in the banked turn
+    s, w, f = truth.states[k], truth.dtheta[k] / truth.dt, truth.dv[k] / truth.dt
+    f9, gg, ga = error_matrices_at(truth.earth, False, s.lat, s.h, s.v_ned, s.c_bn, s.c_bn @ f)
+    big = jnp.concatenate(
+        [jnp.concatenate([f9, gg, ga, gg * w[None], ga * f[None]], -1), jnp.zeros((12, 21))]
+    )
+    g = jnp.concatenate([jnp.concatenate([gg, ga], -1), jnp.zeros((12, 6))])
+    q = g @ jnp.diag(jnp.r_[TACTICAL.arw, TACTICAL.vrw] ** 2) @ g.T + jnp.diag(
+        jnp.r_[jnp.zeros(9), 1e-16 * jnp.ones(6), jnp.zeros(6)]
+    )
+    for T in (1.0, 10.0):
+        phi, qd = ekf.discretise(big, q, T)
+        phi_x, qd_x = kalman.van_loan(big, q, T)
+        np.testing.assert_allclose(phi, phi_x, rtol=0, atol=1e-9 * np.abs(phi_x).max())
+        d = np.sqrt(np.diag(np.asarray(qd_x)))[:15]
+        np.testing.assert_allclose(
+            np.asarray(qd)[:15, :15] / np.outer(d, d),
+            np.asarray(qd_x)[:15, :15] / np.outer(d, d),
+            atol=1e-8,
+        )
+
+
 def test_filter_inputs_and_verdicts(truth):
     """Mismatched fixes, an empty GNSS grid and a bad chunk are one-line errors; the NEES
     verdict tells a conservative σ from an overconfident one."""

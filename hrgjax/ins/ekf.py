@@ -14,7 +14,8 @@ $\delta\omega = \delta b + \mathrm{diag}(\omega)\,\delta s$ as the error model e
 1. the increments, corrected with the current sensor estimates
    ($\Delta\theta \leftarrow (\Delta\tilde\theta - \hat b_g\Delta t)/(1 + \hat s_g)$, same for
    Δv), run through [`mechanize`][hrgjax.ins.mechanization]'s step;
-2. the covariance is propagated with $\Phi, Q_d$ = Van Loan of the error model
+2. the covariance is propagated with $\Phi, Q_d$ of the error model
+   ([`discretise`][hrgjax.ins.ekf.discretise]: the Van Loan integrals by series)
    (F at the block's middle state with the block's mean specific force and rate; white gyro and
    accelerometer noise densities `arw`, `vrw`; bias random walks) — the same exact
    linearisation as [`hrgjax.ins.strapdown`][hrgjax.ins.strapdown];
@@ -39,6 +40,8 @@ the filter assumes.
 """
 
 from __future__ import annotations
+
+import math
 
 import equinox as eqx
 import jax
@@ -193,7 +196,7 @@ class LooselyCoupled(eqx.Module):
             + 2 * imu.accel_bias_instability**2 / imu.accel_correlation_time
         )
         q = q.at[9:12, 9:12].add(jnp.diag(rw_g)).at[12:15, 12:15].add(jnp.diag(rw_a))
-        return kalman.van_loan(big, q, T)
+        return discretise(big, q, T)
 
     def _measurement(self, nav: NavState, w_eb, fix_pos, fix_vel):
         """Innovation (antenna minus fix, in state units), H and R."""
@@ -221,6 +224,41 @@ class LooselyCoupled(eqx.Module):
             jnp.concatenate([h_pos, h_vel]),
             jax.scipy.linalg.block_diag(r, jnp.diag(self.gnss.velocity_sigma**2)),
         )
+
+
+def _powers(F, order=8):
+    """I, F, F², …, F^order stacked: (order + 1, n, n)."""
+    out = [jnp.eye(F.shape[-1], dtype=F.dtype)]
+    for _ in range(order):
+        out.append(out[-1] @ F)
+    return jnp.stack(out)
+
+
+def _taylor(powers, s: float):
+    """Σ_k F^k s^k / k! from the stacked powers of F."""
+    c = np.array([s**k / math.factorial(k) for k in range(powers.shape[0])])
+    return jnp.einsum("k,kij->ij", c, powers)
+
+
+def discretise(F, q, T: float):
+    r"""$(\Phi, Q_d)$ of $\dot x = Fx + w$, $E[ww^\top] = q\,\delta$, over a GNSS interval
+    `T` [s]: $\Phi(s)$ by its Taylor series to eighth order, and
+    $Q_d = \int_0^T\Phi(s)\,q\,\Phi(s)^\top ds$ by three-point Gauss–Legendre (exact for the
+    integrand's polynomial of degree ≤ 5). The error model's F is a slow, nearly nilpotent
+    chain (attitude → velocity → position, rates ≲ 1e-3 s⁻¹), so for T ≤ 10 s both agree with
+    the exact Van Loan exponential ([`hrgjax.kalman.van_loan`][hrgjax.kalman.van_loan]) to
+    ≈ 1e-10 at 1 s (1e-8 at 10 s; tests/test_navigation_filter.py), at a fraction of its cost
+    batched over flights (benchmarks/navigation.py); longer
+    intervals use Van Loan."""
+    if T > 10.0:
+        return kalman.van_loan(F, q, T)
+    x, w = np.polynomial.legendre.leggauss(3)
+    powers = _powers(F)
+    qd = 0.0
+    for xi, wi in zip(x, w, strict=True):
+        p = _taylor(powers, 0.5 * T * (1.0 + xi))
+        qd = qd + (0.5 * T * wi) * (p @ q @ p.T)
+    return _taylor(powers, T), 0.5 * (qd + qd.T)
 
 
 def _filter_gnss(g: Gnss) -> Gnss:
