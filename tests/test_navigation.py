@@ -216,33 +216,50 @@ def test_vertical_aiding_holds_the_height_as_the_linear_models_altitude_aiding(t
         me.mechanize(t.initial, t.dtheta, t.dv, t.dt, vertical=(t.states.h, t.states.v_ned[:, 2]))
 
 
-def test_mechanization_is_differentiable_and_vmaps(truth50):
-    """The gradient of the final position error with respect to gyro biases and scale factors
-    — forward mode (jacfwd) and reverse mode (grad of its horizontal norm) — equals central
-    differences to 1e-6, and a vmap over the parameters equals the runs one by one."""
-    t = truth50
-    n = 2500  # the first 50 s: the take-off run and the rotation into the climb
+def _final_error(t, n=2500):
+    """The position error after the first `n` steps (the first 50 s: the take-off run and
+    the rotation into the climb) as a function of p = (gyro bias [rad/s] (3,), gyro scale
+    factor (3,))."""
 
-    def final(p):  # p = (gyro bias [rad/s] (3,), gyro scale factor (3,))
+    def final(p):
         dth = t.dtheta[:n] * (1.0 + p[3:])[None] + (p[:3] * t.dt)[None]
         nav = me.mechanize(t.initial, dth, t.dv[:n], t.dt, every=n)
         return me.navigation_errors(nav, t.states[jnp.array([0, n])])[0][-1]
 
-    horizontal = lambda p: jnp.linalg.norm(final(p)[:2])
-    p0 = jnp.array([1e-5, -2e-5, 3e-5, 2e-4, -1e-4, 3e-4])
+    return final
+
+
+P0 = jnp.array([1e-5, -2e-5, 3e-5, 2e-4, -1e-4, 3e-4])
+
+
+def test_mechanization_is_differentiable_and_vmaps(truth50):
+    """The gradient of the final position error with respect to gyro biases and scale factors
+    (forward mode) equals central differences to 1e-6, and a vmap over the parameters equals
+    the runs one by one."""
+    final = _final_error(truth50)
     e = jnp.array([1e-5] * 3 + [1e-3] * 3)  # above the positions' round-off (≈ 1e-7 m)
-    steps = jnp.concatenate([jnp.diag(e), -jnp.diag(e), p0[None]])
-    batch = jax.jit(jax.vmap(final))(p0[None] + steps)  # twelve differences and p0 + p0
+    steps = jnp.concatenate([jnp.diag(e), -jnp.diag(e), P0[None]])
+    batch = jax.jit(jax.vmap(final))(P0[None] + steps)  # twelve differences and P0 + P0
     fd = (batch[:6] - batch[6:12]).T / (2 * e)[None]
-    jac = jax.jit(jax.jacfwd(final))(p0)
+    jac = jax.jit(jax.jacfwd(final))(P0)
     scale = np.abs(fd).max(axis=1, keepdims=True)  # per position component
     assert np.all(np.abs(jac - fd) <= 1e-6 * scale), np.abs(jac - fd) / scale
-    grad = jax.jit(jax.grad(horizontal))(p0)
-    h0 = final(p0)[:2]
-    want = (h0 / jnp.linalg.norm(h0)) @ fd[:2]
-    assert np.all(np.abs(grad - want) <= 1e-6 * np.abs(want).max())
     assert np.abs(fd[:, 3:]).max() > 1.0  # the rotation makes the scale factors count
-    np.testing.assert_allclose(batch[12], final(2 * p0), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(batch[12], jax.jit(final)(2 * P0), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.slow(
+    "~25 s: compiling the reverse pass through the unrolled scan; fast tier: the same "
+    "Jacobian by forward mode against central differences "
+    "(test_mechanization_is_differentiable_and_vmaps)"
+)
+def test_reverse_mode_gradient_equals_forward_mode(truth50):
+    final = _final_error(truth50)
+    horizontal = lambda p: jnp.linalg.norm(final(p)[:2])
+    grad = jax.jit(jax.grad(horizontal))(P0)
+    h0 = final(P0)[:2]
+    want = (h0 / jnp.linalg.norm(h0)) @ jax.jit(jax.jacfwd(final))(P0)[:2]
+    np.testing.assert_allclose(grad, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
 
 
 def test_motion_files_round_trip_and_bad_input_names_the_line(motion, tmp_path):
