@@ -567,7 +567,11 @@ def navigation_figure(truth, flights, path: str, title: str = "") -> str:
     hor = lambda d: np.linalg.norm(np.asarray(d["position"])[0, :, :2], axis=-1)
     sig = np.linalg.norm(np.asarray(flights.filter["sigma"])[0, :, :2], axis=-1)
     ax.semilogy(
-        t / 60, np.maximum(hor(flights.free), 1e-3), color="0.6", lw=1, label="free inertial (height held)"
+        t / 60,
+        np.maximum(hor(flights.free), 1e-3),
+        color="0.6",
+        lw=1,
+        label="free inertial (height held)",
     )
     ax.semilogy(t / 60, np.maximum(hor(flights.filter), 1e-3), color="C0", lw=1, label="filter")
     ax.semilogy(t / 60, 3 * sig, color="C0", ls="--", lw=0.8, label="filter 3σ")
