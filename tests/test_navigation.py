@@ -290,8 +290,23 @@ def test_motion_files_round_trip_and_bad_input_names_the_line(motion, tmp_path):
         mo.Motion(0.0, 0.0, 0.0, Z, 0.0, 0.0, 0.0, (mo.Segment(1, Z, Z, 10.005),)).truth(100.0)
     with pytest.raises(ValueError, match="pitch reaches ±89° by the end of segment 1"):
         mo.Motion(0.0, 0.0, 0.0, Z, 0.0, 0.0, 0.0, (mo.Segment(3, (0.0, 95.0, 0.0), Z, 10.0),))
+    start = motion.truth(1.0).initial
     with pytest.raises(ValueError, match=r"dtheta and dv must both have shape \(N, 3\)"):
-        me.mechanize(motion.truth(1.0).initial, np.zeros((5, 3)), np.zeros((4, 3)), 1.0)
+        me.mechanize(start, np.zeros((5, 3)), np.zeros((4, 3)), 1.0)
+    with pytest.raises(ValueError, match="dv holds NaN or inf .first at row 2"):
+        me.mechanize(
+            start, np.zeros((5, 3)), np.where(np.arange(15).reshape(5, 3) == 7, np.nan, 0.0), 1.0
+        )
+    with pytest.raises(
+        ValueError,
+        match="dtheta turns 5.73 rad in one interval .row 0.: gyro increments are in radians",
+    ):
+        me.mechanize(
+            start,
+            np.full((5, 3), 0.0) + np.array([[5.73, 0, 0]] + [[0, 0, 0]] * 4),
+            np.zeros((5, 3)),
+            1.0,
+        )
 
 
 @pytest.mark.filterwarnings("ignore:The copy keyword is deprecated")  # pyins on pandas 3

@@ -32,6 +32,7 @@ from .._x64 import require_x64
 from ..kalman import Gaussian, update, van_loan
 from ..units import ARCSEC, DEG, DEG_PER_H
 from .constants import WGS84, earth_rate_ned
+from .mechanization import skew
 from .strapdown import augmented, error_matrices_at
 from .trajectory import dcm_to_euler
 
@@ -142,11 +143,6 @@ def coarse_align(f_b, w_b, lat):
     return triad(f_n, w_n) @ triad(f_b, w_b).T
 
 
-def _skew(w):
-    z = jnp.zeros_like(w[0])
-    return jnp.array([[z, -w[2], w[1]], [w[2], z, -w[0]], [-w[1], w[0], z]])
-
-
 def _rotation(v):
     """exp([v×]) (Rodrigues)."""
     a2 = v @ v
@@ -154,7 +150,7 @@ def _rotation(v):
     small = a2 < 1e-12
     s = jnp.where(small, 1.0 - a2 / 6.0, jnp.sin(a) / a)
     c = jnp.where(small, 0.5 - a2 / 24.0, (1.0 - jnp.cos(a)) / (a2 + 1e-300))
-    k = _skew(v)
+    k = skew(v)
     return jnp.eye(3) + s * k + c * (k @ k)
 
 

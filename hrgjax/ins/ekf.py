@@ -261,18 +261,6 @@ def discretise(F, q, T: float):
     return _taylor(powers, T), 0.5 * (qd + qd.T)
 
 
-def _filter_gnss(g: Gnss) -> Gnss:
-    """The receiver as the filter sees it: its noise, lever arm and measured components (the
-    fix rate and outages, static, are the fixes' business: a new outage set must not
-    recompile the filter)."""
-    return Gnss(
-        position_sigma=g.position_sigma,
-        velocity_sigma=g.velocity_sigma,
-        lever_arm=g.lever_arm,
-        use_velocity=g.use_velocity,
-    )
-
-
 def _feedback(nav: NavState, x):
     """Subtract the estimated navigation errors from `nav`."""
     q = quat_multiply(rotvec_to_quat(x[6:9]), nav.q_bn)
@@ -304,7 +292,7 @@ def loosely_coupled(
             f"fixes: {blocks} fixes for {n} IMU intervals; they must fall every m-th IMU epoch "
             "from m to the end (as gnss.measure makes them for these increments)"
         )
-    settings = eqx.tree_at(lambda s: s.gnss, settings, _filter_gnss(settings.gnss))
+    settings = eqx.tree_at(lambda s: s.gnss, settings, settings.gnss.without_outages())
     shape = lambda a: a.reshape((blocks, m) + a.shape[1:])
     res = _filter(settings, initial, shape(jnp.asarray(dtheta)), shape(jnp.asarray(dv)), dt, fixes)
     valid = jnp.concatenate([jnp.zeros(1, bool), jnp.asarray(fixes.valid)])

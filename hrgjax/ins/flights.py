@@ -184,18 +184,7 @@ def fly(
     for a, b in settings.gnss.outages:
         mask &= ~((t >= a) & (t <= b))
     # the fix rate stays static; the outages travel as a mask (no recompile per outage set)
-    receiver = settings.gnss
-    plain = eqx.tree_at(
-        lambda s: s.gnss,
-        settings,
-        type(receiver)(
-            rate_hz=receiver.rate_hz,
-            position_sigma=receiver.position_sigma,
-            velocity_sigma=receiver.velocity_sigma,
-            lever_arm=receiver.lever_arm,
-            use_velocity=receiver.use_velocity,
-        ),
-    )
+    plain = eqx.tree_at(lambda s: s.gnss, settings, settings.gnss.without_outages())
     size = min(chunk, runs)
     keys = jax.random.split(key, -(-runs // size) * size)
     parts = []

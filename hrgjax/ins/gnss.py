@@ -53,6 +53,18 @@ class Gnss(eqx.Module):
                     f"Gnss.outages: each window is (start, end) with start < end s; got {w}"
                 )
 
+    def without_outages(self) -> Gnss:
+        """The same receiver with no outage windows: what a compiled filter or Monte Carlo
+        program needs of it (the outages, static, travel as a mask of the fixes instead, so a
+        new outage set compiles nothing)."""
+        return Gnss(
+            rate_hz=self.rate_hz,
+            position_sigma=self.position_sigma,
+            velocity_sigma=self.velocity_sigma,
+            lever_arm=self.lever_arm,
+            use_velocity=self.use_velocity,
+        )
+
     def noise_covariance(self):
         """Diagonal measurement covariance in NED [m², (m/s)²]: (3,) or (6,) with velocity."""
         p = self.position_sigma**2

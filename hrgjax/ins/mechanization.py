@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import is_concrete
 from .._compiled import Check, program
 from .._x64 import require_x64
 from .constants import WGS84, Earth
@@ -249,6 +250,19 @@ def _check_increments(dtheta, dv, dt):
         )
     if isinstance(dt, (int, float)) and not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be the increments' interval in seconds (> 0); got {dt}")
+    for name, x in (("dtheta", dtheta), ("dv", dv)):
+        if is_concrete(x) and not np.all(np.isfinite(np.asarray(x))):
+            row = int(np.argmax(~np.all(np.isfinite(np.asarray(x)), axis=1)))
+            raise ValueError(
+                f"{name} holds NaN or inf (first at row {row}); increments must be finite"
+            )
+    if is_concrete(dtheta):
+        turn = np.linalg.norm(np.asarray(dtheta), axis=1)
+        if turn.size and turn.max() >= np.pi:
+            raise ValueError(
+                f"dtheta turns {turn.max():.3g} rad in one interval (row {int(turn.argmax())}): "
+                "gyro increments are in radians per interval, not degrees or rates"
+            )
     return dtheta, dv
 
 
