@@ -5,11 +5,13 @@ per core (`hg.sweep` shards a batch over them, so the CPU side uses every core).
 
 - averaged model, 60-s runs at rates 0.1–400 °/s × temperatures −40…60 °C through `hg.sweep`,
   batches of 64, 1 024 and 10 000 members;
-- one averaged run of 180 s at 10 °/s: `simulate` under `eqx.filter_jit` with 0.1-s outputs
-  and with one output (a GPU waits on the device at every iteration of diffrax's saving
-  loop), and `hg.simulate` called eagerly (hrgjax puts it on the CPU beside an accelerator);
+- one averaged run of 180 s at 10 °/s: `simulate` under `eqx.filter_jit` with 0.1-s outputs,
+  and `hg.simulate` called eagerly (hrgjax runs it, set-up included, on the CPU beside an
+  accelerator: `hrgjax._compiled.single_run_entry`);
 - the full (carrier-resolving) model: one run of 0.05 s on fixed steps, and batches of 256
-  runs of 0.05 s (rates 0.1–400 °/s) on fixed steps and adaptive (Dopri8).
+  runs of 0.05 s (rates 0.1–400 °/s) on fixed steps and adaptive (Dopri8); the fixed-step
+  batch again with 4, 16 and 64 steps per iteration of the compiled step loop
+  (`hrgjax.resonator.carrier.UNROLL`).
 
 Printed: compile + first call and the best later call, the GPU / CPU speed-up of each row and
 the largest difference between the backends' results (relative to the largest value).
@@ -34,6 +36,7 @@ if "--no-large" in sys.argv:
     AVG_SIZES = AVG_SIZES[:2]
 FULL_MEMBERS = 16 if QUICK else 256
 FULL_S, AVG_S, SINGLE_S = 0.05, 60.0, 180.0  # run lengths [s]
+UNROLLS = (4,) if QUICK else (4, 16, 64)  # carrier steps per loop iteration tried
 
 
 def child(out_path):
@@ -44,12 +47,14 @@ def child(out_path):
     from _common import best_of, first_call, machine
 
     import hrgjax as hg
+    from hrgjax.resonator import carrier
 
     gyro = hg.presets.tvg3_like(noise=False)
     rows, results = {}, {}
 
     def timed(name, fn, repeat=3):
         first, value = first_call(fn)
+        repeat = min(repeat, 2) if first > 5.0 else repeat  # slow rows: device time is short
         rows[name] = {"first_s": first, "wall_s": best_of(fn, repeat)}
         results[name] = np.asarray(jax.tree_util.tree_leaves(value)[0]).ravel()
         print(f"  {name}: {rows[name]['wall_s']:.4f} s (first {first:.1f} s)", flush=True)
@@ -69,14 +74,6 @@ def child(out_path):
         lambda g, rate: hg.simulate(g, hg.Profile.constant_rate(rate, SINGLE_S, 20.0)).wave_angle
     )
     timed("averaged, one run of 180 s", lambda: single(gyro, jnp.asarray(10.0)), repeat=5)
-    one_out = eqx.filter_jit(
-        lambda g, rate: (
-            hg.simulate(
-                g, hg.Profile.constant_rate(rate, SINGLE_S, 20.0), dt_out=SINGLE_S
-            ).wave_angle
-        )
-    )
-    timed("  the same, one output", lambda: one_out(gyro, jnp.asarray(10.0)), repeat=5)
     prof = hg.Profile.constant_rate(10.0, SINGLE_S, 20.0)
     timed("  the same, eager hg.simulate", lambda: hg.simulate(gyro, prof).wave_angle, repeat=5)
 
@@ -94,6 +91,16 @@ def child(out_path):
         f = lambda rate_dps, fixed=fixed: full(rate_dps, fixed)  # noqa: E731
         name = f"full × {FULL_MEMBERS}, {'fixed steps' if fixed else 'adaptive'}"
         timed(name, lambda f=f: hg.sweep(f, rate_dps=R), repeat=2)
+    # steps per iteration of the carrier's compiled step loop (carrier.UNROLL, by backend):
+    # a fresh function per setting traces anew (no exported program: it is the caller's code)
+    backend = jax.default_backend()
+    default_unroll = carrier.UNROLL.get(backend, 1)
+    for u in UNROLLS:
+        carrier.UNROLL[backend] = u
+        f = lambda rate_dps: full(rate_dps, True)  # noqa: E731
+        timed(f"full × {FULL_MEMBERS}, fixed, {u} steps per loop iteration", lambda f=f: hg.sweep(f, rate_dps=R),
+              repeat=2)  # fmt: skip
+    carrier.UNROLL[backend] = default_unroll
 
     dev = jax.devices()[0]
     meta = {"machine": machine(), "platform": dev.platform, "kind": dev.device_kind,

@@ -19,7 +19,7 @@ if ls .whl/*.whl > /dev/null 2>&1; then
 fi
 export PYTHONPATH=$PWD:${PYTHONPATH:-} PYTHONUNBUFFERED=1
 export XLA_PYTHON_CLIENT_PREALLOCATE=false  # many workers share one GPU
-export HRGJAX_TEST_FULL=1  # the slow tier too (tests/conftest.py)
+export HRGJAX_TEST_FULL=${HRGJAX_TEST_FULL-1}  # the slow tier too (tests/conftest.py); 0: CI's tier
 log=${OUT:-out}/tests.log
 mkdir -p "$(dirname "$log")"
 export HRGJAX_FAILURE_LOG=$(dirname "$log")/failures.log

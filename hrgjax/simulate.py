@@ -16,7 +16,7 @@ import numpy as np
 
 from . import plausible
 from ._checks import is_concrete
-from ._compiled import Check, device, program
+from ._compiled import Check, device, program, single_run_entry
 from ._cost import report as report_cost
 from ._x64 import require_x64
 from .gyro import Gyro
@@ -445,6 +445,7 @@ def simulate(
     return simulate_with_stats(gyro, profile, model, **options)[0]
 
 
+@single_run_entry
 def simulate_with_stats(gyro, profile, model="averaged", **options):
     """[`hrgjax.simulate`][] that also says how the solve went.
 

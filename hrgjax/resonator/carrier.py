@@ -50,6 +50,10 @@ _A = [np.asarray(a, dtype=float) for a in _TABLEAU.a_lower]
 _B = np.asarray(_TABLEAU.b_sol, dtype=float)[: len(_A) + 1]
 CHUNK = 256
 """Steps recomputed together in reverse mode (checkpoint granularity)."""
+UNROLL = {"cpu": 1}
+"""Steps per iteration of the compiled step loop, by JAX backend (default 1 for a backend
+not named): on a GPU each loop iteration is a launch and a host round trip, so several
+steps per iteration pay there (benchmarks/gpu_backend.py)."""
 STEPS_PER_CYCLE_AT_1E8 = 10.0
 """Steps per carrier cycle that match adaptive Dopri8 at rtol 1e-8 on the final state (the
 8th-order error scales as (steps per cycle)⁻⁸; `steps_per_cycle`)."""
@@ -152,7 +156,8 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
             return _step(env, omega_scale, yy, h, scheduled), angle1, rate1, accel1
 
         start = (y, *profile.kinematics_at(first))
-        y = jax.lax.fori_loop(0, chunk, one, start)[0]
+        unroll = max(1, min(chunk, UNROLL.get(jax.default_backend(), 1)))
+        y = jax.lax.fori_loop(0, chunk, one, start, unroll=unroll)[0]
         return (y, t, h), None
 
     def interval(y, span):
