@@ -182,7 +182,7 @@ def single_run_entry(fn):
         moving = [i for i, x in enumerate(leaves)
                   if isinstance(x, jax.Array) and x.devices() != {device}]  # fmt: skip
         moved = jax.device_put([leaves[i] for i in moving], device)
-        for i, x in zip(moving, moved):
+        for i, x in zip(moving, moved, strict=True):
             leaves[i] = x
         args, kwargs = jax.tree_util.tree_unflatten(tree, leaves)
         with jax.default_device(device):
