@@ -106,9 +106,10 @@ def _check_options(o) -> None:
         raise ValueError(f"max_steps must be a positive integer or None; got {v!r}")
     v = o["fixed_step"]
     if isinstance(v, str):
-        if v != "auto":
+        if v not in ("auto", "held"):
             raise ValueError(
-                f'fixed_step must be a positive number of seconds, "auto" or None; got {v!r}'
+                f'fixed_step must be "auto", "held", a positive number of seconds or None; '
+                f"got {v!r}"
             )
     elif v is not None and is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v) and v > 0):
         raise ValueError(f"fixed_step must be a positive number of seconds or None; got {v!r}")
@@ -215,7 +216,7 @@ def _solve(
     key=None,
     bias_key=None,
     run=0,
-    carrier_steps=None,
+    carrier=None,
 ):
     """The whole of `simulate` after its input checks, as one compiled program: the solve,
     the readout, the noise and the record. Returns (Record, accepted steps, solver result);
@@ -226,8 +227,9 @@ def _solve(
     else:
         y0, omega_scale = full_initial_state(gyro, profile, quadrature0)
         field, args = full_vector_field, (gyro, profile, omega_scale)
-    if carrier_steps is not None:  # the fixed-step carrier path (resonator/carrier.py)
-        ys = carrier_solve(gyro, profile, y0, omega_scale, ts, carrier_steps)
+    if carrier is not None:  # the fixed-step carrier path (resonator/carrier.py)
+        carrier_steps, held = carrier
+        ys = carrier_solve(gyro, profile, y0, omega_scale, ts, carrier_steps, held)
         rec = _record(gyro, profile, ts, _read_full(gyro, profile, ts, ys, omega_scale), key,
                       bias_key, run)  # fmt: skip
         steps = jnp.asarray(carrier_steps * ts.shape[0])
@@ -399,7 +401,7 @@ def simulate(
     atol: float = 1e-10,
     max_steps: int | None = None,
     solver: diffrax.AbstractSolver | None = None,
-    fixed_step: float | str | None = None,
+    fixed_step: float | str | None = "auto",
     quadrature0: float = 0.0,
     adjoint: diffrax.AbstractAdjoint | None = None,
     run: int = 0,
@@ -418,12 +420,22 @@ def simulate(
     - `dt_out`: output interval [s]; or `ts`, explicit output times [s] within the profile.
     - `rtol`, `atol`, `max_steps`, `solver`: diffrax settings (Tsit5 for averaged, Dopri8 for
       full by default).
-    - `fixed_step`: integrate with this constant step [s] instead of adaptive steps. For
-      `model="full"` with the default solver this is the fixed-step carrier path
-      (`hrgjax.resonator.carrier`: loops held over each step as a digital controller,
-      5–15× faster than adaptive stepping, docs/resonator.md); `"auto"` picks the step
-      from `rtol` and the highest carrier frequency over the profile's temperatures (10
-      steps per cycle at rtol 1e-8; over −60 … 100 °C when those are traced).
+    - `fixed_step`: `"auto"` (default) lets hrgjax choose the fastest path that meets
+      `rtol`: for `model="full"` the fixed-step carrier path (`hrgjax.resonator.carrier`:
+      Dormand–Prince 8 on equal steps, no error control; 1.6× faster than adaptive stepping
+      with the loops closed, 150× faster than scipy's RK45 on a free resonator, at the same
+      accuracy; docs/resonator.md) with the step chosen from `rtol` and the highest carrier
+      frequency over the profile's temperatures (10 steps per cycle at rtol 1e-8; over
+      −60 … 100 °C when those are traced) — wherever `rtol` ≥ 1e-9, no `solver`, `adjoint`
+      or `max_steps` is given, and the output times, the profile's knot times and the
+      resonator are concrete; otherwise, and for the averaged model, adaptive steps.
+      `None`: adaptive steps always. A number: this constant step [s] (for the full model
+      with the default solver, the carrier path). `"held"` (full model): the step of
+      `"auto"` with the loops' efforts sampled once per step and extrapolated across it —
+      4× faster with the loops closed, but it misses their response to the carrier-frequency
+      ripple of the demodulated state (a drift error of ≈ 2e-7 rad/s on a gyro with a 0.02
+      rad/s frequency split at 10 steps per cycle; long runs where that is below the
+      question's resolution).
     - `quadrature0`: initial quadrature amplitude q₀ (readout units; a₀ is the AGC set point).
     - `adjoint`: how reverse-mode gradients pass through the solve (default: recursive
       checkpointing with 256 checkpoints for the averaged model, so memory stays bounded
@@ -508,13 +520,20 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
             checkpoints=AVERAGED_CHECKPOINTS if model == "averaged" else None
         )
     carrier = None
-    if model == "full" and fixed_step is not None and o["solver"] is None:
-        carrier = _carrier_steps(gyro, profile, ts, fixed_step, rtol)
-    elif isinstance(fixed_step, str):
-        raise ValueError(
-            'fixed_step="auto" is for model="full" with the default solver; give the averaged '
-            "model (or another solver) a step in seconds"
-        )
+    if isinstance(fixed_step, str) and fixed_step == "held":
+        if model != "full" or o["solver"] is not None:
+            raise ValueError(
+                'fixed_step="held" (loops held over each step) is for model="full" with the '
+                "default solver"
+            )
+        carrier = (_carrier_steps(gyro, profile, ts, fixed_step, rtol), True)
+        fixed_step = None
+    elif isinstance(fixed_step, str):  # "auto" (checked above)
+        fixed_step = None  # adaptive, unless the rule below picks the carrier path
+        if model == "full" and _auto_takes_fixed_steps(gyro, profile, ts, o):
+            carrier = (_carrier_steps(gyro, profile, ts, "auto", rtol), False)
+    elif model == "full" and fixed_step is not None and o["solver"] is None:
+        carrier = (_carrier_steps(gyro, profile, ts, fixed_step, rtol), False)
     dt0 = fixed_step if fixed_step is not None else (1e-2 if model == "averaged" else 1e-5)
     stepping = (solver, rtol, atol, max_steps, dt0, fixed_step is not None)
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
@@ -523,10 +542,33 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     )
 
 
+AUTO_RTOL_FLOOR = 1e-9
+"""The tightest `rtol` for which `fixed_step="auto"` takes the fixed-step carrier path: below
+it the held loops' lag (an error ∝ the step, ≈ 1e-10 in the quadrature at any step count the
+rule picks) exceeds what adaptive stepping reaches, so tighter requests solve adaptively
+(measured in tests/test_carrier.py and benchmarks/README.md)."""
+
+
+def _auto_takes_fixed_steps(gyro, profile, ts, o) -> bool:
+    """The rule of `fixed_step="auto"` for the full model (docs/resonator.md): fixed steps
+    where they meet `rtol` and the step can be chosen before the solve — the default solver,
+    adjoint and step budget (a user who names one of those asks diffrax for adaptive steps),
+    `rtol` ≥ `AUTO_RTOL_FLOOR`, and concrete output times, knot times, resonator and
+    `rtol` (inside `jit` or `hg.sweep`, built from Python numbers or NumPy arrays)."""
+    if any(o[name] is not None for name in ("solver", "adjoint", "max_steps")):
+        return False
+    rtol = o["rtol"]
+    if not is_concrete(rtol) or float(rtol) < AUTO_RTOL_FLOOR:
+        return False
+    leaves = [ts, profile.t, *jax.tree_util.tree_leaves(gyro.resonator)]
+    return all(is_concrete(x) for x in leaves)
+
+
 def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
     """Steps per interval of the fixed-step carrier path (between outputs and the profile's
-    knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the
-    highest carrier frequency over the profile's temperatures (needs concrete values)."""
+    knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" and
+    "held" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the highest carrier frequency
+    over the profile's temperatures (needs concrete values)."""
     traced = [n for n, x in (("ts", ts), ("the profile's knot times", profile.t))
               if not is_concrete(x)]  # fmt: skip
     if traced:
@@ -540,14 +582,12 @@ def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
     knots = np.asarray(profile.t, dtype=float)
     spans = np.diff(np.concatenate([knots[:1], event_grid(knots, ts_c, xp=np)]))
     longest = float(spans.max())
-    if isinstance(fixed_step, str):
-        if fixed_step != "auto":
-            raise ValueError(f'fixed_step must be seconds or "auto"; got {fixed_step!r}')
+    if isinstance(fixed_step, str):  # "auto" or "held" (checked on entry)
         res = gyro.resonator
         if not all(is_concrete(x) for x in jax.tree_util.tree_leaves(res)):
             raise ValueError(
-                'fixed_step="auto" reads the carrier frequency from the gyro, which is traced '
-                "here (a sweep over resonator parameters): give fixed_step in seconds"
+                f"fixed_step={fixed_step!r} reads the carrier frequency from the gyro, which is "
+                "traced here (a sweep over resonator parameters): give fixed_step in seconds"
             )
         if is_concrete(profile.temperature):
             t = np.asarray(profile.temperature, dtype=float).ravel()

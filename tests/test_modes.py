@@ -137,7 +137,7 @@ def test_ftr_in_the_full_model_agrees_with_the_averaged_model():
     gyro = eqx.tree_at(lambda g: g.control, BASE, control)
     prof = hg.Profile.static(1.0, wave_angle0_deg=70.0)
     avg = hg.simulate(gyro, prof, dt_out=0.5)
-    full = hg.simulate(gyro, prof, model="full", dt_out=0.5, fixed_step="auto")
+    full = hg.simulate(gyro, prof, model="full", dt_out=0.5)  # the default: fixed steps
     a, f = float(avg.rebalance_rate[-1]), float(full.rebalance_rate[-1])
     assert abs(f - a) < 1e-5 * abs(a)
     assert abs(float(full.wave_angle[-1]) - 70.0 * DEG) < 1e-7
@@ -205,10 +205,9 @@ def test_a_schedule_switches_whole_angle_and_rebalance_during_a_run():
     np.testing.assert_array_equal(np.asarray(rec.rebalance_on)[[0, 19, 20, 59, 60, 80]],
                                   [0, 0, 1, 1, 0, 0])  # fmt: skip
     assert rec.to_data()["rebalance_on"].sum() == 40
-    full = hg.simulate(gyro, hg.Profile.piecewise([0.0, 0.5, 2.0], omega, 20.0, rebalance=[0, 1, 1]),
-                       model="full", dt_out=0.25, fixed_step="auto")  # fmt: skip
-    avg = hg.simulate(gyro, hg.Profile.piecewise([0.0, 0.5, 2.0], omega, 20.0, rebalance=[0, 1, 1]),
-                      dt_out=0.25)  # fmt: skip
+    short = hg.Profile.piecewise([0.0, 0.25, 1.0], omega, 20.0, rebalance=[0, 1, 1])
+    full = hg.simulate(gyro, short, model="full", dt_out=0.25)  # the default: fixed steps
+    avg = hg.simulate(gyro, short, dt_out=0.25)
     np.testing.assert_allclose(np.asarray(full.wave_angle), np.asarray(avg.wave_angle), atol=1e-6)
     with pytest.raises(ValueError, match="give the gyro Control"):
         hg.simulate(hg.Gyro(resonator=PERFECT), prof)

@@ -1,28 +1,36 @@
-r"""Fixed-step integration of the carrier-resolving model (`simulate(model="full",
-fixed_step=…)`), built for speed on long runs and large batches.
+r"""Fixed-step integration of the carrier-resolving model (`simulate(model="full")`'s
+default where it meets `rtol`, or `fixed_step=…`), built for speed on long runs and large
+batches.
 
-One step of length h:
+Each step of length h is one step of Dormand–Prince 8(7) (its 8th-order solution, 13
+stages, no error estimate) of the full model's equations:
 
-1. the profile gives the table's mean rate, angular acceleration and specific force over
-   the step (exact: the profile is piecewise linear and no step straddles a knot); the
-   temperature laws are evaluated at the ends of each chunk of
-   ≤ `CHUNK` steps and interpolated linearly in between;
-2. the electronics sample the state at the step's start: demodulation, the whole-angle
-   estimates and the loop laws give the electrode force $\mathbf u\cos\psi_r + \mathbf v
-   \sin\psi_r$, the pump depth and phase, the PLL frequency ω_r and the integrators' rates,
-   which then **hold over the step** — a digital controller updating at 1/h (tens of kHz
-   at 10 steps per carrier cycle, faster than the loops' bandwidths by 10³);
-3. the resonator and the reference phasor $(\cos\psi_r, \sin\psi_r)$ advance together by
-   one step of Dormand–Prince 8(7) (its 8th-order solution, 13 stages, no error estimate);
-   the phasor turns at the held ω_r, so the forces at the stages need no trigonometry and
-   each stage is one fused kernel;
-4. ψ_r advances by ω_r·h (exact for the held frequency; kept in [0, 2π)) and the phasor is
-   reset from it, the integrators by their held rates times h.
+- the profile gives the table's rate at each stage (linear over the step: exact, as the
+  profile is piecewise linear and no step straddles a knot), the angular acceleration and
+  the specific force; the temperature laws are evaluated at the ends of each chunk of
+  ≤ `CHUNK` steps and interpolated linearly in between;
+- **loops closed** (`_step_continuous`): every stage demodulates its state and runs the
+  loop laws (`carrier_rhs`, the adaptive solve's right-hand side), so the path differs from
+  adaptive stepping of the same equations only by its truncation error (8th order in h) and
+  meets `rtol` as adaptive stepping does (tests/test_carrier.py): on a gyro with a
+  frequency split, excitation-phase error and pick-off mismatch, the pattern's drift rate
+  within 1.5e-10 rad/s of a tight reference at 10 steps per cycle (adaptive Dopri8 at rtol
+  1e-8: 1.9e-10);
+- **free-running, or `fixed_step="held"`** (`_step`): the electronics sample the state at
+  the step's start (demodulation, whole-angle estimates, loop laws: the electrode force
+  $\mathbf u\cos\psi_r + \mathbf v\sin\psi_r$, the pump depth and phase, the PLL frequency
+  ω_r and the integrators' rates), which then **hold over the step** — a digital controller
+  updating at 1/h. The resonator and the reference phasor $(\cos\psi_r, \sin\psi_r)$
+  advance together at the held ω_r, so the stages need no trigonometry and each is one
+  fused kernel: 4× faster than the continuous step with the loops closed; ψ_r then advances
+  by ω_r·h, the integrators by their held rates times h. Free-running (no efforts) this is
+  exact. With the loops closed the held loops lag the continuous ones by h/2 and miss their
+  response to the carrier-frequency ripple of the demodulated state: first order in h, a
+  drift error of 1.4e-6 rad/s at 10 steps per cycle on the gyro above (0.3 °/h; 1.8e-7 with
+  the efforts extrapolated linearly across the step, which made the recorded frequency 80×
+  worse on a ramp and was not kept).
 
-The held loops are the one approximation beyond the 8th-order truncation: they lag the
-continuous demodulator by h/2 on average. With the loops at their steady state (the bench
-and navigation runs hrgjax simulates) this changes nothing measurable; the tests hold the
-path to the adaptive solution of the same equations (`tests/test_carrier.py`).
+ψ_r is kept in [0, 2π).
 
 Output times: the steps run between the output times and the profile's knots (no step
 straddles a knot, where the rate's slope jumps); each such interval takes the same number of
@@ -41,12 +49,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from .averaged import sampled_input_rate
-from .full import full_estimates, held_command, loop_efforts, mechanics
+from .full import carrier_rhs, full_estimates, held_command, loop_efforts, mechanics
 from .params import TemperatureLaw
 from .readout import wrap_half_pi
 
 _TABLEAU = diffrax.Dopri8.tableau
 _A = [np.asarray(a, dtype=float) for a in _TABLEAU.a_lower]
+_C = np.asarray(_TABLEAU.c, dtype=float)
 _B = np.asarray(_TABLEAU.b_sol, dtype=float)[: len(_A) + 1]
 CHUNK = 256
 """Steps recomputed together in reverse mode (checkpoint granularity)."""
@@ -66,11 +75,12 @@ def steps_per_cycle(rtol: float) -> int:
 
 
 def _rk_step(f, w, h):
-    """One step of the Dormand–Prince 8th-order solution (explicit, fixed h)."""
-    ks = [f(w)]
-    for a in _A:
+    """One step of the Dormand–Prince 8th-order solution (explicit, fixed h); `f(c, w)` with
+    c the stage's fraction of the step."""
+    ks = [f(0.0, w)]
+    for a, c in zip(_A, _C, strict=True):
         inc = sum(float(a[j]) * ks[j] for j in range(a.size) if a[j] != 0.0)
-        ks.append(f(w + h * inc))
+        ks.append(f(float(c), w + h * inc))
     return w + h * sum(float(_B[j]) * ks[j] for j in range(len(ks)) if _B[j] != 0.0)
 
 
@@ -85,13 +95,15 @@ def _step(env, omega_scale, y, h, scheduled=False):
     cp2, sp2 = jnp.cos(eff.pump_phase2), jnp.sin(eff.pump_phase2)
     psi = y[4]
 
-    def field(w):  # w = (x, y, ẋ/ω_s, ẏ/ω_s, cos ψ_r, sin ψ_r)
+    def field(c, w):  # w = (x, y, ẋ/ω_s, ẏ/ω_s, cos ψ_r, sin ψ_r); c: unused (all held)
         z, zdot = w[0:2], w[2:4] * omega_scale
-        c, s = w[4], w[5]
-        force = eff.u * c + eff.v * s
-        pump = eff.pump * ((c * c - s * s) * cp2 - 2.0 * c * s * sp2)  # P cos(2ψ + 2γ)
-        zddot = mechanics(res, omega_in, omega_dot, z, zdot, force, pump)
-        return jnp.concatenate([zdot, zddot / omega_scale, jnp.stack([-s, c]) * eff.omega_r])
+        cos_r, sin_r = w[4], w[5]
+        force = eff.u * cos_r + eff.v * sin_r
+        pump = eff.pump * ((cos_r * cos_r - sin_r * sin_r) * cp2 - 2.0 * cos_r * sin_r * sp2)
+        zddot = mechanics(res, omega_in, omega_dot, z, zdot, force, pump)  # P cos(2ψ + 2γ) z
+        return jnp.concatenate(
+            [zdot, zddot / omega_scale, jnp.stack([-sin_r, cos_r]) * eff.omega_r]
+        )
 
     w = jnp.concatenate([y[0:4], jnp.stack([jnp.cos(psi), jnp.sin(psi)])])
     w = _rk_step(field, w, h)
@@ -109,12 +121,34 @@ def _step(env, omega_scale, y, h, scheduled=False):
     return jnp.concatenate([out, jnp.reshape(hold, (1,))])
 
 
+def _step_continuous(env, omega_scale, y, h, d_rate, scheduled=False):
+    """One step over h [s] of the full model's own right-hand side (`carrier_rhs`: the loops
+    demodulate the state at every stage, as in the adaptive solve), Ω linear over the step
+    (`d_rate` [rad/s]: its change over the step; exact for the piecewise-linear profile).
+    In FTR mode under a schedule, while the rebalance loop is off the held angle is the
+    estimate at the step's end (sample and hold: what the continuous hold tracks)."""
+    g, omega_in, omega_dot, command, rho_mid = env
+
+    def field(c, w):
+        rate = omega_in + (c - 0.5) * d_rate
+        return carrier_rhs(g, rate, omega_dot, w, omega_scale, command, False)
+
+    out = _rk_step(field, y, h)
+    out = out.at[4].set(jnp.remainder(out[4], 2 * jnp.pi))
+    if g.control.mode != "ftr" or not scheduled:
+        return out
+    cmd = held_command(g, y, command)
+    read = full_estimates(g, out, omega_scale, omega_in, command=cmd).theta
+    hold = cmd[2] * out[-1] + (1.0 - cmd[2]) * (y[-1] + wrap_half_pi(read - y[-1]))
+    return out.at[-1].set(hold)
+
+
 def _has_laws(gyro) -> bool:
     is_law = lambda x: isinstance(x, TemperatureLaw)
     return any(is_law(x) for x in jax.tree_util.tree_leaves(gyro, is_leaf=is_law))
 
 
-def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
+def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False):
     """States (len(ts), 8) ((len(ts), 10) in FTR mode) at the output times `ts` [s] (ts[0] ≥ the profile's start), each
     interval of [`event_grid`][hrgjax.resonator.carrier.event_grid] (the first from the
     profile's start) in `steps` equal held-loop steps."""
@@ -124,6 +158,7 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
     chunk = -(-steps // n_chunks)  # equal chunks of ≤ CHUNK steps, adding < n_chunks steps
     steps = n_chunks * chunk
 
+    continuous = gyro.control.enabled and not held
     laws = _has_laws(gyro)
     scheduled = profile.rebalance is not None
     fixed_gyro = None if laws else gyro.at(profile.temperature[0])
@@ -153,7 +188,11 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int):
             omega_in = sampled_input_rate(g, profile, t1 - 0.5 * h, mean_rate, accel)
             env = (g, omega_in, (rate1 - rate0) / safe_h, profile.command_at(t1 - h),
                    profile.precession_at(t1 - 0.5 * h))  # fmt: skip
-            return _step(env, omega_scale, yy, h, scheduled), angle1, rate1, accel1
+            if continuous:
+                yy = _step_continuous(env, omega_scale, yy, h, rate1 - rate0, scheduled)
+            else:
+                yy = _step(env, omega_scale, yy, h, scheduled)
+            return yy, angle1, rate1, accel1
 
         start = (y, *profile.kinematics_at(first))
         unroll = max(1, min(chunk, UNROLL.get(jax.default_backend(), 1)))
