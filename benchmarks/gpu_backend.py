@@ -9,9 +9,9 @@ per core (`hg.sweep` shards a batch over them, so the CPU side uses every core).
   and `hg.simulate` called eagerly (hrgjax runs it, set-up included, on the CPU beside an
   accelerator: `hrgjax._compiled.single_run_entry`);
 - the full (carrier-resolving) model: one run of 0.05 s on fixed steps, and batches of 256
-  runs of 0.05 s (rates 0.1–400 °/s) on fixed steps and adaptive (Dopri8); the fixed-step
-  batch again with 4, 16 and 64 steps per iteration of the compiled step loop
-  (`hrgjax.resonator.carrier.UNROLL`).
+  runs of 0.05 s (rates 0.1–400 °/s): the default call (fixed steps, every stage
+  demodulating), held loops and adaptive (Dopri8); the held batch again with 4, 16 and 64
+  steps per iteration of the compiled step loop (`hrgjax.resonator.carrier.UNROLL`).
 
 Printed: compile + first call and the best later call, the GPU / CPU speed-up of each row and
 the largest difference between the backends' results (relative to the largest value).
@@ -79,26 +79,25 @@ def child(out_path):
 
     ts = np.array([FULL_S])
 
-    def full(rate_dps, fixed):
+    def full(rate_dps, path):
         prof = hg.Profile.constant_rate(rate_dps, FULL_S, wave_angle0_deg=10.0)
-        kw = {"fixed_step": "auto"} if fixed else {}
-        return hg.simulate(gyro, prof, "full", ts=ts, **kw).wave_angle[-1]
+        return hg.simulate(gyro, prof, "full", ts=ts, fixed_step=path).wave_angle[-1]
 
-    one_full = eqx.filter_jit(lambda rate: full(rate, True))
-    timed("full, one run of 0.05 s, fixed steps", lambda: one_full(jnp.asarray(10.0)))
+    one_full = eqx.filter_jit(lambda rate: full(rate, "held"))
+    timed("full, one run of 0.05 s, held loops", lambda: one_full(jnp.asarray(10.0)))
     R = jnp.geomspace(0.1, 400.0, FULL_MEMBERS)
-    for fixed in (True, False):
-        f = lambda rate_dps, fixed=fixed: full(rate_dps, fixed)  # noqa: E731
-        name = f"full × {FULL_MEMBERS}, {'fixed steps' if fixed else 'adaptive'}"
-        timed(name, lambda f=f: hg.sweep(f, rate_dps=R), repeat=2)
+    for path, label in (("auto", "default (fixed steps)"), ("held", "held loops"),
+                        (None, "adaptive")):  # fmt: skip
+        f = lambda rate_dps, path=path: full(rate_dps, path)  # noqa: E731
+        timed(f"full × {FULL_MEMBERS}, {label}", lambda f=f: hg.sweep(f, rate_dps=R), repeat=2)
     # steps per iteration of the carrier's compiled step loop (carrier.UNROLL, by backend):
     # a fresh function per setting traces anew (no exported program: it is the caller's code)
     backend = jax.default_backend()
     default_unroll = carrier.UNROLL.get(backend, 1)
     for u in UNROLLS:
         carrier.UNROLL[backend] = u
-        f = lambda rate_dps: full(rate_dps, True)  # noqa: E731
-        timed(f"full × {FULL_MEMBERS}, fixed, {u} steps per loop iteration", lambda f=f: hg.sweep(f, rate_dps=R),
+        f = lambda rate_dps: full(rate_dps, "held")  # noqa: E731
+        timed(f"full × {FULL_MEMBERS}, held, {u} steps per loop iteration", lambda f=f: hg.sweep(f, rate_dps=R),
               repeat=2)  # fmt: skip
     carrier.UNROLL[backend] = default_unroll
 

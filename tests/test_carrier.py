@@ -124,6 +124,30 @@ def test_gradient_reverse_equals_forward_and_finite_differences():
     np.testing.assert_allclose(rev, -0.554 * 0.004 * np.pi / 180, rtol=2e-3)
 
 
+@pytest.mark.slow(
+    "~60 s: the checkpointed reverse pass compiled beside the stored-state one; fast tier: "
+    "reverse = forward = finite differences on the stored-state path "
+    "(test_gradient_reverse_equals_forward_and_finite_differences), the stored-state rule "
+    "against plain scans (tests/test_stepped.py)"
+)
+def test_stored_state_and_checkpointed_gradients_agree(monkeypatch):
+    """Runs longer than `carrier.STORE_STEPS` differentiate through the checkpointed step
+    loop: the same gradient, with the loops closed (every stage demodulating)."""
+    gyro = hg.presets.tvg3_like(noise=False)
+
+    def grad():
+        def final_angle(rate_dps):
+            prof = hg.Profile.constant_rate(rate_dps, 0.002, wave_angle0_deg=10.0)
+            ts = np.array([0.001, 0.002])
+            return jnp.sum(hg.simulate(gyro, prof, "full", ts=ts, fixed_step=2e-5).wave_angle)
+
+        return jax.jit(jax.grad(final_angle))(jnp.asarray(50.0))
+
+    stored = grad()
+    monkeypatch.setattr(hg.resonator.carrier, "STORE_STEPS", 0)
+    np.testing.assert_allclose(grad(), stored, rtol=1e-10)
+
+
 def test_vmap_over_rates_equals_single_runs():
     ts = jnp.array([0.002, 0.004])
 

@@ -41,6 +41,7 @@ with the number of outputs, not of steps."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import diffrax
@@ -48,6 +49,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._stepped import tangent_states
 from .averaged import sampled_input_rate
 from .full import carrier_rhs, full_estimates, held_command, loop_efforts, mechanics
 from .params import TemperatureLaw
@@ -59,6 +61,10 @@ _C = np.asarray(_TABLEAU.c, dtype=float)
 _B = np.asarray(_TABLEAU.b_sol, dtype=float)[: len(_A) + 1]
 CHUNK = 256
 """Steps recomputed together in reverse mode (checkpoint granularity)."""
+STORE_STEPS = 2**17
+"""Runs of at most this many steps (all intervals) take their derivatives from stored
+states (`hrgjax._stepped`: states and Jacobians ≈ 0.6 kB a step, 80 MB at the bound); longer
+ones through the step loop, checkpointed by chunks."""
 UNROLL = {"cpu": 1}
 """Steps per iteration of the compiled step loop, by JAX backend (default 1 for a backend
 not named): on a GPU each loop iteration is a launch and a host round trip, so several
@@ -149,9 +155,113 @@ def _has_laws(gyro) -> bool:
 
 
 def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False):
-    """States (len(ts), 8) ((len(ts), 10) in FTR mode) at the output times `ts` [s] (ts[0] ≥ the profile's start), each
-    interval of [`event_grid`][hrgjax.resonator.carrier.event_grid] (the first from the
-    profile's start) in `steps` equal held-loop steps."""
+    """States (len(ts), 8) ((len(ts), 10) in FTR mode) at the output times `ts` [s] (ts[0] ≥
+    the profile's start), each interval of [`event_grid`][hrgjax.resonator.carrier.event_grid]
+    (the first from the profile's start) in `steps` equal steps (`held`: the loops held over
+    each step). Derivatives: from the stored states (`hrgjax._stepped`) for runs of at most
+    `STORE_STEPS` steps, else through the step loop checkpointed by chunks."""
+    intervals = ts.shape[0] + max(profile.t.shape[0] - 2, 0)
+    if steps * intervals <= STORE_STEPS:
+        return _stored(steps, held, gyro, profile, y0, omega_scale, ts)
+    return _streamed(gyro, profile, y0, omega_scale, ts, steps, held)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _stored(steps, held, gyro, profile, y0, omega_scale, ts):
+    return _streamed(gyro, profile, y0, omega_scale, ts, steps, held)
+
+
+@_stored.defjvp
+def _stored_jvp(steps, held, primals, tangents):
+    gyro, profile, y0, omega_scale, ts = primals
+    d_gyro, d_profile, dy0, d_scale, d_ts = tangents
+    build = lambda g, p, s, t: _per_step(g, p, s, t, steps, held)  # noqa: E731
+    (xs, theta, at), (dxs, d_theta, _) = jax.jvp(
+        build, (gyro, profile, omega_scale, ts), (d_gyro, d_profile, d_scale, d_ts)
+    )
+    step = functools.partial(_flat_step, gyro.control.enabled and not held,
+                             profile.rebalance is not None)  # fmt: skip
+    ys = _stepped_scan(step, y0, xs, theta)
+    dys = tangent_states(step, ys, xs, theta, dy0, dxs, d_theta)
+    return ys[at], dys[at]
+
+
+def _stepped_scan(step, y0, xs, theta):
+    def body(y, x):
+        y1 = step(y, x, theta)
+        return y1, y1
+
+    return jnp.concatenate([y0[None], jax.lax.scan(body, y0, xs)[1]])
+
+
+def _flat_step(continuous, scheduled, y, x, theta):
+    """One step of `_stored`'s flat layout: `x` = (gyro at the step or None, Ω, Ω̇, command,
+    ρ at the midpoint, h, Ω's change over the step), `theta` = (ω_s, the gyro when it has no
+    temperature laws). An empty interval's steps (h = 0) leave the state as it is."""
+    g_n, omega_in, omega_dot, command, rho, h, d_rate = x
+    omega_scale, g_fixed = theta
+    env = (g_fixed if g_n is None else g_n, omega_in, omega_dot, command, rho)
+    safe = jnp.where(h > 0, h, 1.0)
+    if continuous:
+        y1 = _step_continuous(env, omega_scale, y, safe, d_rate, scheduled)
+    else:
+        y1 = _step(env, omega_scale, y, safe, scheduled)
+    return jnp.where(h > 0, y1, y)
+
+
+def _per_step(gyro, profile, omega_scale, ts, steps: int, held: bool):
+    """`_streamed`'s per-step environment for every step at once (the same expressions,
+    vectorised): per-step inputs, shared inputs and the flat index of each output's state."""
+    events = event_grid(profile.t, ts)
+    starts = jnp.concatenate([profile.t[:1], events[:-1]])
+    n_chunks = -(-steps // CHUNK)
+    chunk = -(-steps // n_chunks)
+    steps = n_chunks * chunk
+    h = (events - starts) / steps  # (I,)
+    k = jnp.arange(n_chunks)
+    first = starts[:, None] + (k * chunk).astype(h.dtype)[None, :] * h[:, None]  # (I, C)
+    fi = jnp.arange(chunk).astype(h.dtype)
+    t1 = first[..., None] + (fi + 1.0)[None, None, :] * h[:, None, None]  # (I, C, K)
+    t0 = first[..., None] + fi[None, None, :] * h[:, None, None]
+    hh = jnp.broadcast_to(h[:, None, None], t1.shape).ravel()
+    t0, t1 = t0.ravel(), t1.ravel()
+    safe_h = jnp.where(hh > 0, hh, 1.0)
+    kin = jax.vmap(profile.kinematics_at)
+    angle0, rate0, accel0 = kin(t0)
+    angle1, rate1, accel1 = kin(t1)
+    laws = _has_laws(gyro)
+    if laws:
+        at_temp = jax.vmap(lambda t: gyro.at(profile.temperature_at(t)))
+        g0, g1 = at_temp(first.ravel()), at_temp((first + chunk * h[:, None]).ravel())
+        frac = (fi + 0.5) / chunk
+
+        def per_step(a, b):  # (I·C, …) chunk ends → (I·C·K, …) steps
+            a, b = a[:, None], b[:, None]
+            f = frac.reshape((1, chunk) + (1,) * (a.ndim - 2))
+            return (a + (b - a) * f).reshape((-1,) + a.shape[2:])
+
+        g_n = jax.tree_util.tree_map(per_step, g0, g1)
+        g_fixed = None
+        rate_in = jax.vmap(sampled_input_rate, in_axes=(0, None, 0, 0, 0))
+        g_arg = g_n
+    else:
+        g_n, g_fixed = None, gyro.at(profile.temperature[0])
+        rate_in = jax.vmap(sampled_input_rate, in_axes=(None, None, 0, 0, 0))
+        g_arg = g_fixed
+    mean_rate = (angle1 - angle0) / safe_h
+    accel = 0.5 * (accel0 + accel1)
+    omega_in = rate_in(g_arg, profile, t1 - 0.5 * hh, mean_rate, accel)
+    command = jax.vmap(profile.command_at)(t1 - hh)
+    rho = jax.vmap(profile.precession_at)(t1 - 0.5 * hh)
+    xs = (g_n, omega_in, (rate1 - rate0) / safe_h, command, rho, hh, rate1 - rate0)
+    # each output: the state at the end of the last event at its time
+    at = (jnp.searchsorted(events, ts, side="right") - 1 + 1) * steps
+    return xs, (omega_scale, g_fixed), at
+
+
+def _streamed(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False):
+    """`carrier_solve` through the step loop: intervals, chunks of ≤ `CHUNK` steps (the
+    temperature laws evaluated at their ends), steps; reverse mode recomputes each chunk."""
     events = event_grid(profile.t, ts)
     starts = jnp.concatenate([profile.t[:1], events[:-1]])
     n_chunks = -(-steps // CHUNK)
@@ -163,7 +273,6 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = F
     scheduled = profile.rebalance is not None
     fixed_gyro = None if laws else gyro.at(profile.temperature[0])
 
-    @jax.checkpoint
     def run_chunk(carry, k):
         y, t, h = carry
         first = t + (k * chunk).astype(h.dtype) * h
@@ -198,6 +307,8 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = F
         unroll = max(1, min(chunk, UNROLL.get(jax.default_backend(), 1)))
         y = jax.lax.fori_loop(0, chunk, one, start, unroll=unroll)[0]
         return (y, t, h), None
+
+    run_chunk = jax.checkpoint(run_chunk)  # reverse mode: each chunk recomputed
 
     def interval(y, span):
         start, end = span
