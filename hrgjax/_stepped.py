@@ -79,17 +79,17 @@ def tangent_states(step, ys, xs, theta, dy0, dxs, dtheta, batch: int = BATCH):
     tangents `dy0`, `dxs`, `dtheta` of its inputs: batched Jacobians and input tangents, then
     the recurrence (module docstring). For a caller that computes the states itself."""
     states = ys[:-1]
+    eye = jnp.eye(ys.shape[1], dtype=ys.dtype)
+    zero_theta = jax.tree_util.tree_map(_zero_tangent, theta)
 
-    def jac(y, x):
-        return jax.jacfwd(step, argnums=0)(y, x, theta)
-
-    jacobians = _map(jac, (states, xs), batch)  # (N, d, d)
-
-    def push(y, x, dx):  # ∂Φ/∂(x, θ) · (dx, dθ) at one stored state
+    def linear(y, x, dx):  # J_n and ∂Φ/∂(x, θ)·(dx, dθ) from one linearisation at Y_n
         dx = jax.tree_util.tree_map(_zero_if_none, x, dx, is_leaf=lambda v: v is None)
-        return jax.jvp(lambda x_, th_: step(y, x_, th_), (x, theta), (dx, dtheta))[1]
+        _, lin = jax.linearize(step, y, x, theta)
+        zero_x = jax.tree_util.tree_map(_zero_tangent, x)
+        jn = jax.vmap(lambda e: lin(e, zero_x, zero_theta), out_axes=1)(eye)
+        return jn, lin(jnp.zeros_like(y), dx, dtheta)
 
-    inputs = _map(push, (states, xs, _float_only(dxs)), batch)  # (N, d)
+    jacobians, inputs = _map(linear, (states, xs, _float_only(dxs)), batch)  # (N, d, d), (N, d)
 
     def carry(dy, jn_un):
         jn, un = jn_un
@@ -103,6 +103,13 @@ def tangent_states(step, ys, xs, theta, dy0, dxs, dtheta, batch: int = BATCH):
 def _float_only(tangents):
     """The tangents with `None` for integer inputs (float0 tangents cannot be mapped over)."""
     return jax.tree_util.tree_map(lambda t: None if t.dtype == jax.dtypes.float0 else t, tangents)
+
+
+def _zero_tangent(x):
+    """A zero tangent for `x` (float0 for an integer input)."""
+    if jnp.issubdtype(jnp.result_type(x), jnp.inexact):
+        return jnp.zeros_like(x)
+    return np.zeros(np.shape(x), jax.dtypes.float0)
 
 
 def _zero_if_none(x, dx):
