@@ -4,8 +4,9 @@
   angles, gradient with respect to every resonator parameter and the table rate, steps of
   2e-5 s (10 per carrier cycle; a step in seconds, as the default `"auto"` falls back to
   adaptive steps when the resonator is traced): a free resonator and the default gyro with
-  its loops closed (every stage demodulating); reverse mode recomputes each chunk of ≤ 256
-  steps (`carrier.CHUNK`);
+  its loops closed (every stage demodulating); derivatives from the stored states
+  (`hrgjax._stepped`, runs of ≤ `carrier.STORE_STEPS` steps; `--checkpointed`: through the
+  step loop, each chunk of ≤ 256 steps recomputed, as longer runs and before issue 50);
 - discovery's Bogacki–Shampine scan (`discovery.records.bosh3_path`, a plain `lax.scan`:
   reverse mode keeps every step's residuals, nothing recomputed) on a 1-h record of 20 000
   samples (5 000 steps, a covariate look-up per stage), loss = Σ model², four parameters;
@@ -14,8 +15,11 @@
 Each: the forward and the gradient compiled (`jax.jit`), best of 5 after the first call, and
 their ratio. Target (issue 50): ≤ 2.5× on both.
 
-Usage: `.venv/bin/python benchmarks/gradient_scans.py` (≈ 2 min on 2 cores).
+Usage: `.venv/bin/python benchmarks/gradient_scans.py [--checkpointed]` (≈ 4 min on 2
+cores, mostly compiling).
 """
+
+import sys
 
 import equinox as eqx
 import jax
@@ -43,6 +47,8 @@ def timed(forward, gradient, args):
 
 
 def carrier_rows():
+    if "--checkpointed" in sys.argv:
+        hg.resonator.carrier.STORE_STEPS = 0
     ts = np.linspace(SPAN / 4, SPAN, 4)
     loops = hg.presets.tvg3_like(noise=False)
     for name, gyro, path in (("free resonator", FREE, 2e-5),

@@ -422,20 +422,20 @@ def simulate(
       full by default).
     - `fixed_step`: `"auto"` (default) lets hrgjax choose the fastest path that meets
       `rtol`: for `model="full"` the fixed-step carrier path (`hrgjax.resonator.carrier`:
-      Dormand–Prince 8 on equal steps, no error control; 1.6× faster than adaptive stepping
-      with the loops closed, 150× faster than scipy's RK45 on a free resonator, at the same
-      accuracy; docs/resonator.md) with the step chosen from `rtol` and the highest carrier
-      frequency over the profile's temperatures (10 steps per cycle at rtol 1e-8; over
-      −60 … 100 °C when those are traced) — wherever `rtol` ≥ 1e-9, no `solver`, `adjoint`
-      or `max_steps` is given, and the output times, the profile's knot times and the
-      resonator are concrete; otherwise, and for the averaged model, adaptive steps.
-      `None`: adaptive steps always. A number: this constant step [s] (for the full model
-      with the default solver, the carrier path). `"held"` (full model): the step of
-      `"auto"` with the loops' efforts sampled once per step and extrapolated across it —
-      4× faster with the loops closed, but it misses their response to the carrier-frequency
-      ripple of the demodulated state (a drift error of ≈ 2e-7 rad/s on a gyro with a 0.02
-      rad/s frequency split at 10 steps per cycle; long runs where that is below the
-      question's resolution).
+      Dormand–Prince 8 on equal steps, the loops at every stage, no error control; at the
+      same accuracy 1.9× faster than adaptive stepping with the loops closed and 422× a
+      minimal scipy RK45 script on a free resonator, docs/resonator.md) with the step
+      chosen from `rtol` and the highest carrier frequency over the profile's temperatures
+      (10 steps per cycle at rtol 1e-8; over −60 … 100 °C when those are traced) — wherever
+      `rtol` ≥ 1e-9, no `solver`, `adjoint` or `max_steps` is given, and the output times,
+      the profile's knot times and the resonator are concrete; otherwise, and for the
+      averaged model, adaptive steps. `None`: adaptive steps always. A number: this
+      constant step [s] (for the full model with the default solver, the carrier path).
+      `"held"` (full model): the step of `"auto"` with the loops evaluated once per step and
+      held over it (a digital controller at 1/h) — 3–4× faster with the loops closed, but
+      first order in h in what the loops do (a drift error of 1.4e-6 rad/s on a gyro with a
+      0.02 rad/s frequency split at 10 steps per cycle); for long runs whose question is
+      coarser than that.
     - `quadrature0`: initial quadrature amplitude q₀ (readout units; a₀ is the AGC set point).
     - `adjoint`: how reverse-mode gradients pass through the solve (default: recursive
       checkpointing with 256 checkpoints for the averaged model, so memory stays bounded
@@ -526,6 +526,11 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
                 'fixed_step="held" (loops held over each step) is for model="full" with the '
                 "default solver"
             )
+        if not is_concrete(rtol):
+            raise ValueError(
+                'fixed_step="held" chooses its step from rtol, which is traced here: give '
+                "rtol as a Python number"
+            )
         carrier = (_carrier_steps(gyro, profile, ts, fixed_step, rtol), True)
         fixed_step = None
     elif isinstance(fixed_step, str):  # "auto" (checked above)
@@ -543,10 +548,10 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
 
 
 AUTO_RTOL_FLOOR = 1e-9
-"""The tightest `rtol` for which `fixed_step="auto"` takes the fixed-step carrier path: below
-it the held loops' lag (an error ∝ the step, ≈ 1e-10 in the quadrature at any step count the
-rule picks) exceeds what adaptive stepping reaches, so tighter requests solve adaptively
-(measured in tests/test_carrier.py and benchmarks/README.md)."""
+"""The tightest `rtol` for which `fixed_step="auto"` takes the fixed-step carrier path: the
+range over which the path has been measured to match adaptive stepping (1e-6 … 1e-9 on a
+closed-loop gyro with a frequency split, docs/resonator.md); tighter requests — references,
+mostly — solve adaptively."""
 
 
 def _auto_takes_fixed_steps(gyro, profile, ts, o) -> bool:

@@ -91,12 +91,27 @@ def test_the_default_meets_rtol_with_closed_loops_and_laws(ramp):
     np.testing.assert_allclose(turn, -0.554 * np.asarray(default.table_angle), rtol=1e-3)
 
 
+def test_a_commanded_precession_ramp_is_integrated_within_the_step():
+    """Force-to-rebalance through a trapezoid precession pulse (`Profile.held_angles`: ρ
+    ramps linearly inside segments): the default's held angle and reading follow adaptive
+    stepping of the same equations to 1e-9 rad — ρ and its angle are taken at each stage's
+    time (held at the step's start they were off by ~1e-6 rad)."""
+    gyro = hg.presets.tvg3_like(noise=False).in_mode("ftr")
+    prof = hg.Profile.held_angles([10.0, 40.0], dwell_s=0.002, slew_s=0.008)
+    ts = np.linspace(0.001, float(prof.t[-1]), 5)
+    default = hg.simulate(gyro, prof, model="full", ts=ts)
+    ref = hg.simulate(gyro, prof, model="full", ts=ts, fixed_step=None, rtol=1e-10, atol=1e-12)
+    assert abs(float(ref.wave_angle[-1] - ref.wave_angle[0])) > 0.1  # the pulse moved it
+    np.testing.assert_allclose(default.wave_angle, ref.wave_angle, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(default.true_wave_angle, ref.true_wave_angle, rtol=0, atol=1e-9)
+
+
 @pytest.mark.slow(
     "~20 s: one more compile of the full model; fast tier: the default (continuous) fixed "
     "step against the same references (test_the_default_meets_rtol_with_closed_loops_and_laws)"
 )
 def test_held_loops_stay_close_to_adaptive_stepping(ramp):
-    """`fixed_step="held"` (efforts sampled once per step, a second-order hold; laws
+    """`fixed_step="held"` (efforts sampled once per step and held over it; laws
     interpolated over 256 steps): the wave angle within 1e-9 rad of the continuous equations,
     amplitude and quadrature within 1e-6 of the set point's scale, frequency within 1e-4
     rad/s — close to, but not as close as, adaptive stepping at rtol 1e-8."""
@@ -111,7 +126,9 @@ def test_held_loops_stay_close_to_adaptive_stepping(ramp):
 def test_gradient_reverse_equals_forward_and_finite_differences():
     def final_angle(rate_dps):
         prof = hg.Profile.constant_rate(rate_dps, 0.004, wave_angle0_deg=10.0)
-        rec = hg.simulate(FREE, prof, model="full", ts=jnp.array([0.004]), fixed_step=2e-5)
+        # an output at the start: an empty first interval (its steps of h = 0)
+        ts = np.array([0.0, 0.004])
+        rec = hg.simulate(FREE, prof, model="full", ts=ts, fixed_step=2e-5)
         return rec.wave_angle[-1]
 
     rate = jnp.asarray(50.0)
@@ -145,7 +162,10 @@ def test_stored_state_and_checkpointed_gradients_agree(monkeypatch):
 
     stored = grad()
     monkeypatch.setattr(hg.resonator.carrier, "STORE_STEPS", 0)
-    np.testing.assert_allclose(grad(), stored, rtol=1e-10)
+    jax.clear_caches()  # the compiled programs chose their path when traced
+    checkpointed = grad()
+    assert checkpointed != stored  # another program: round-off apart
+    np.testing.assert_allclose(checkpointed, stored, rtol=1e-10)
 
 
 def test_vmap_over_rates_equals_single_runs():
@@ -187,8 +207,7 @@ def test_the_default_takes_fixed_steps_where_they_meet_rtol():
     np.testing.assert_array_equal(default, angle(fixed_step=0.002 / per_interval))
     assert np.all(default != adaptive)
     np.testing.assert_allclose(default, adaptive, rtol=0, atol=1e-10)  # both meet rtol 1e-8
-    assert AUTO_RTOL_FLOOR == 1e-9
-    tight = dict(rtol=1e-10, atol=1e-12)
+    tight = dict(rtol=0.1 * AUTO_RTOL_FLOOR, atol=1e-12)
     np.testing.assert_array_equal(angle(**tight), angle(fixed_step=None, **tight))
     np.testing.assert_array_equal(angle(max_steps=2**18), angle(fixed_step=None, max_steps=2**18))
     traced = jax.jit(lambda t: hg.simulate(FREE, prof, "full", ts=t).wave_angle)(ts)
