@@ -129,7 +129,7 @@ def test_frequency_split_and_nonlinearity_instantaneous_laws():
     "~50 s: the reverse pass, its forward runs and the 4-checkpoint pass compiled; fast "
     "tier: jacfwd = jacrev through simulate (test_forward_mode_sensitivities), reverse = "
     "forward = finite differences on the full model "
-    "(test_carrier::test_gradient_reverse_equals_forward_and_finite_differences)"
+    "(test_carrier::test_reverse_gradient_equals_finite_differences)"
 )
 def test_grad_matches_finite_differences():
     """∂(final wave angle)/∂(Δ(1/τ), θτ, k_e) through diffrax == central differences; with
