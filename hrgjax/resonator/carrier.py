@@ -61,10 +61,12 @@ _C = np.asarray(_TABLEAU.c, dtype=float)
 _B = np.asarray(_TABLEAU.b_sol, dtype=float)[: len(_A) + 1]
 CHUNK = 256
 """Steps recomputed together in reverse mode (checkpoint granularity)."""
-STORE_STEPS = 2**17
-"""Runs of at most this many steps (all intervals) take their derivatives from stored
-states (`hrgjax._stepped`: states and Jacobians ≈ 0.6 kB a step, 80 MB at the bound); longer
-ones through the step loop, checkpointed by chunks."""
+STORE_STEPS = 2**15
+"""Runs of at most this many steps (all intervals; 0.65 s at 5 kHz and 10 steps per cycle)
+take their derivatives from stored states (`hrgjax._stepped`); longer ones through the step
+loop, checkpointed by chunks. Reverse mode keeps ≈ 6 kB a step free-running and ≈ 12 kB
+with the loops closed (XLA's temporaries, `benchmarks/README.md`): ≈ 380 MB at the bound per
+trajectory, times the batch under `vmap`."""
 UNROLL = {"cpu": 1}
 """Steps per iteration of the compiled step loop, by JAX backend (default 1 for a backend
 not named): on a GPU each loop iteration is a launch and a host round trip, so several
