@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import inspect
-import math
 import numbers
 import sys
 import types
@@ -33,7 +32,11 @@ from .resonator.averaged import (
     measured_estimates,
     pattern_forces,
 )
-from .resonator.carrier import carrier_solve, event_grid, steps_per_cycle
+from .resonator.carrier import (
+    AUTO_RTOL_FLOOR as AUTO_RTOL_FLOOR,  # the rule's floor, documented here
+)
+from .resonator.carrier import AUTO_STEP_TEMPERATURES_C as AUTO_STEP_TEMPERATURES_C
+from .resonator.carrier import carrier_solve, steps_per_interval, takes_fixed_steps
 from .resonator.control import drive_vectors, ftr_rate, loop_outputs, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field, held_command
 from .resonator.params import TemperatureLaw
@@ -531,14 +534,14 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
                 'fixed_step="held" chooses its step from rtol, which is traced here: give '
                 "rtol as a Python number"
             )
-        carrier = (_carrier_steps(gyro, profile, ts, fixed_step, rtol), True)
+        carrier = (steps_per_interval(gyro, profile, ts, fixed_step, rtol), True)
         fixed_step = None
     elif isinstance(fixed_step, str):  # "auto" (checked above)
         fixed_step = None  # adaptive, unless the rule below picks the carrier path
-        if model == "full" and _auto_takes_fixed_steps(gyro, profile, ts, o):
-            carrier = (_carrier_steps(gyro, profile, ts, "auto", rtol), False)
+        if model == "full" and takes_fixed_steps(gyro, profile, ts, o):
+            carrier = (steps_per_interval(gyro, profile, ts, "auto", rtol), False)
     elif model == "full" and fixed_step is not None and o["solver"] is None:
-        carrier = (_carrier_steps(gyro, profile, ts, fixed_step, rtol), False)
+        carrier = (steps_per_interval(gyro, profile, ts, fixed_step, rtol), False)
     dt0 = fixed_step if fixed_step is not None else (1e-2 if model == "averaged" else 1e-5)
     stepping = (solver, rtol, atol, max_steps, dt0, fixed_step is not None)
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
@@ -546,70 +549,6 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run, carrier
     )
 
-
-AUTO_RTOL_FLOOR = 1e-9
-"""The tightest `rtol` for which `fixed_step="auto"` takes the fixed-step carrier path: the
-range over which the path has been measured to match adaptive stepping (1e-6 … 1e-9 on a
-closed-loop gyro with a frequency split, docs/resonator.md); tighter requests — references,
-mostly — solve adaptively."""
-
-
-def _auto_takes_fixed_steps(gyro, profile, ts, o) -> bool:
-    """The rule of `fixed_step="auto"` for the full model (docs/resonator.md): fixed steps
-    where they meet `rtol` and the step can be chosen before the solve — the default solver,
-    adjoint and step budget (a user who names one of those asks diffrax for adaptive steps),
-    `rtol` ≥ `AUTO_RTOL_FLOOR`, and concrete output times, knot times, resonator and
-    `rtol` (inside `jit` or `hg.sweep`, built from Python numbers or NumPy arrays)."""
-    if any(o[name] is not None for name in ("solver", "adjoint", "max_steps")):
-        return False
-    rtol = o["rtol"]
-    if not is_concrete(rtol) or float(rtol) < AUTO_RTOL_FLOOR:
-        return False
-    leaves = [ts, profile.t, *jax.tree_util.tree_leaves(gyro.resonator)]
-    return all(is_concrete(x) for x in leaves)
-
-
-def _carrier_steps(gyro, profile, ts, fixed_step, rtol) -> int:
-    """Steps per interval of the fixed-step carrier path (between outputs and the profile's
-    knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" and
-    "held" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the highest carrier frequency
-    over the profile's temperatures (needs concrete values)."""
-    traced = [n for n, x in (("ts", ts), ("the profile's knot times", profile.t))
-              if not is_concrete(x)]  # fmt: skip
-    if traced:
-        raise ValueError(
-            f"the fixed-step carrier path chooses its step count from the output times and the "
-            f"profile's knot times, but {' and '.join(traced)} are traced here (inside jit or "
-            "hg.sweep): build them outside the traced function (a NumPy array or Python "
-            "numbers; Profile constructors keep Python durations concrete)"
-        )
-    ts_c = np.asarray(ts)
-    knots = np.asarray(profile.t, dtype=float)
-    spans = np.diff(np.concatenate([knots[:1], event_grid(knots, ts_c, xp=np)]))
-    longest = float(spans.max())
-    if isinstance(fixed_step, str):  # "auto" or "held" (checked on entry)
-        res = gyro.resonator
-        if not all(is_concrete(x) for x in jax.tree_util.tree_leaves(res)):
-            raise ValueError(
-                f"fixed_step={fixed_step!r} reads the carrier frequency from the gyro, which is "
-                "traced here (a sweep over resonator parameters): give fixed_step in seconds"
-            )
-        if is_concrete(profile.temperature):
-            t = np.asarray(profile.temperature, dtype=float).ravel()
-        else:  # temperatures traced (a sweep over them): the range a gyro is specified for
-            t = np.asarray(AUTO_STEP_TEMPERATURES_C)
-        grid = np.linspace(t.min(), t.max(), 9)
-        with jax.ensure_compile_time_eval():  # concrete values, also under jit
-            omega = np.max(np.abs([np.max(np.asarray(res.at(x).omega)) for x in grid]))
-        h = 2 * np.pi / (omega * steps_per_cycle(float(rtol)))
-    else:
-        h = float(fixed_step)
-    return max(1, math.ceil(longest / h - 1e-9))
-
-
-AUTO_STEP_TEMPERATURES_C = (-60.0, 100.0)
-"""Temperatures [°C] whose highest carrier frequency sets `fixed_step="auto"` when the
-profile's temperatures are traced (inside `hg.sweep` over temperature)."""
 
 _OPTIONS = {
     name: p.default

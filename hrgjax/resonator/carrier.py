@@ -49,6 +49,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import is_concrete
 from .._stepped import tangent_states
 from .averaged import sampled_input_rate
 from .full import carrier_rhs, full_estimates, held_command, loop_efforts, mechanics
@@ -343,3 +344,68 @@ def event_grid(knots, ts, xp=jnp):
     order. `xp` = `jnp` (traced, static shapes) or `np`."""
     inner = xp.clip(knots[1:-1], knots[0], ts[-1])
     return xp.sort(xp.concatenate([ts, inner]))
+
+
+AUTO_RTOL_FLOOR = 1e-9
+"""The tightest `rtol` for which `fixed_step="auto"` takes the fixed-step carrier path: the
+range over which the path has been measured to match adaptive stepping (1e-6 … 1e-9 on a
+closed-loop gyro with a frequency split, docs/resonator.md); tighter requests — references,
+mostly — solve adaptively."""
+
+
+def takes_fixed_steps(gyro, profile, ts, o) -> bool:
+    """The rule of `fixed_step="auto"` for the full model (docs/resonator.md): fixed steps
+    where they meet `rtol` and the step can be chosen before the solve — the default solver,
+    adjoint and step budget (a user who names one of those asks diffrax for adaptive steps),
+    `rtol` ≥ `AUTO_RTOL_FLOOR`, and concrete output times, knot times, resonator and
+    `rtol` (inside `jit` or `hg.sweep`, built from Python numbers or NumPy arrays)."""
+    if any(o[name] is not None for name in ("solver", "adjoint", "max_steps")):
+        return False
+    rtol = o["rtol"]
+    if not is_concrete(rtol) or float(rtol) < AUTO_RTOL_FLOOR:
+        return False
+    leaves = [ts, profile.t, *jax.tree_util.tree_leaves(gyro.resonator)]
+    return all(is_concrete(x) for x in leaves)
+
+
+def steps_per_interval(gyro, profile, ts, fixed_step, rtol) -> int:
+    """Steps per interval of the fixed-step carrier path (between outputs and the profile's
+    knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" and
+    "held" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the highest carrier frequency
+    over the profile's temperatures (needs concrete values)."""
+    traced = [n for n, x in (("ts", ts), ("the profile's knot times", profile.t))
+              if not is_concrete(x)]  # fmt: skip
+    if traced:
+        raise ValueError(
+            f"the fixed-step carrier path chooses its step count from the output times and the "
+            f"profile's knot times, but {' and '.join(traced)} are traced here (inside jit or "
+            "hg.sweep): build them outside the traced function (a NumPy array or Python "
+            "numbers; Profile constructors keep Python durations concrete)"
+        )
+    ts_c = np.asarray(ts)
+    knots = np.asarray(profile.t, dtype=float)
+    spans = np.diff(np.concatenate([knots[:1], event_grid(knots, ts_c, xp=np)]))
+    longest = float(spans.max())
+    if isinstance(fixed_step, str):  # "auto" or "held" (checked on entry)
+        res = gyro.resonator
+        if not all(is_concrete(x) for x in jax.tree_util.tree_leaves(res)):
+            raise ValueError(
+                f"fixed_step={fixed_step!r} reads the carrier frequency from the gyro, which is "
+                "traced here (a sweep over resonator parameters): give fixed_step in seconds"
+            )
+        if is_concrete(profile.temperature):
+            t = np.asarray(profile.temperature, dtype=float).ravel()
+        else:  # temperatures traced (a sweep over them): the range a gyro is specified for
+            t = np.asarray(AUTO_STEP_TEMPERATURES_C)
+        grid = np.linspace(t.min(), t.max(), 9)
+        with jax.ensure_compile_time_eval():  # concrete values, also under jit
+            omega = np.max(np.abs([np.max(np.asarray(res.at(x).omega)) for x in grid]))
+        h = 2 * np.pi / (omega * steps_per_cycle(float(rtol)))
+    else:
+        h = float(fixed_step)
+    return max(1, math.ceil(longest / h - 1e-9))
+
+
+AUTO_STEP_TEMPERATURES_C = (-60.0, 100.0)
+"""Temperatures [°C] whose highest carrier frequency sets `fixed_step="auto"` when the
+profile's temperatures are traced (inside `hg.sweep` over temperature)."""
