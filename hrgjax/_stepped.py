@@ -47,7 +47,9 @@ def stepped(step, y0, xs, theta, batch: int = BATCH):
     return _stepped(step, batch, y0, xs, theta)
 
 
-def _scan(step, y0, xs, theta):
+def scan_states(step, y0, xs, theta):
+    """All states (N + 1, d) of the recurrence by a plain `lax.scan` (no derivative rule)."""
+
     def body(y, x):
         y1 = step(y, x, theta)
         return y1, y1
@@ -58,7 +60,7 @@ def _scan(step, y0, xs, theta):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
 def _stepped(step, batch, y0, xs, theta):
-    return _scan(step, y0, xs, theta)
+    return scan_states(step, y0, xs, theta)
 
 
 def _map(fn, args, batch):
@@ -116,4 +118,4 @@ def _zero_if_none(x, dx):
     """The tangent of one input: float0 zeros for an integer input."""
     if x is None or dx is not None:
         return dx
-    return np.zeros(np.shape(x), jax.dtypes.float0)
+    return _zero_tangent(x)

@@ -50,7 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import is_concrete
-from .._stepped import tangent_states
+from .._stepped import scan_states, tangent_states
 from .averaged import sampled_input_rate
 from .full import carrier_rhs, full_estimates, held_command, loop_efforts, mechanics
 from .params import TemperatureLaw
@@ -189,17 +189,9 @@ def _stored_jvp(steps, held, primals, tangents):
     )
     step = functools.partial(_flat_step, gyro.control.enabled and not held,
                              profile.rebalance is not None)  # fmt: skip
-    ys = _stepped_scan(step, y0, xs, theta)
+    ys = scan_states(step, y0, xs, theta)
     dys = tangent_states(step, ys, xs, theta, dy0, dxs, d_theta)
     return ys[at], dys[at]
-
-
-def _stepped_scan(step, y0, xs, theta):
-    def body(y, x):
-        y1 = step(y, x, theta)
-        return y1, y1
-
-    return jnp.concatenate([y0[None], jax.lax.scan(body, y0, xs)[1]])
 
 
 def _flat_step(continuous, scheduled, y, x, theta):
