@@ -21,13 +21,18 @@ def pyplot():
     return plt
 
 
-def save(fig, path, dpi: int) -> None:
+def save(fig, path, dpi: int) -> str:
     """`fig.savefig(path, dpi=dpi)` under a temporary name, renamed when complete (an
-    interrupted save leaves no partial image); makes the folder."""
+    interrupted save leaves no partial image); makes the folder and closes `fig`. Returns
+    `path`."""
     from ._io import atomic_path
 
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        pyplot().close(fig)
+    return path
 
 
 def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") -> str:
@@ -66,9 +71,7 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
     ax2.grid(alpha=0.3)
     if title:
         fig.suptitle(title)
-    save(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=120)
 
 
 def compensation_residuals(windows, compensators: dict, path: str, title: str = "") -> str:
@@ -125,9 +128,7 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
     fig.legend(handles, names, loc="outside right upper", fontsize=8, title="temperature")
     if title:
         fig.suptitle(title)
-    save(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def error_vs_temperature(table: dict, path: str, seed: dict | None = None) -> str:
@@ -162,9 +163,7 @@ def error_vs_temperature(table: dict, path: str, seed: dict | None = None) -> st
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
-    save(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def alignment_figure(result, path: str, header_attitude_deg=None) -> str:
@@ -191,9 +190,7 @@ def alignment_figure(result, path: str, header_attitude_deg=None) -> str:
     axes[-1].set_xlabel("time [min]")
     fig.suptitle("Stationary alignment: coarse start, Kalman fine alignment")
     fig.tight_layout()
-    save(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=120)
 
 
 def schuler_figure(t, position_m: dict, path: str) -> str:
@@ -207,9 +204,7 @@ def schuler_figure(t, position_m: dict, path: str) -> str:
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    save(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=120)
 
 
 def diagnosis_figure(traces: dict, path: str, title: str = "", span=(-20.0, 40.0)) -> str:
@@ -234,9 +229,7 @@ def diagnosis_figure(traces: dict, path: str, title: str = "", span=(-20.0, 40.0
     axes[-1, 0].set_xlabel("time from the fault onset [s]")
     fig.suptitle(f"Decided state, {title} (dotted: the faulty INS; red: onset)")
     fig.tight_layout()
-    save(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=120)
 
 
 def vibration_figure(figures: dict, path: str) -> str:
@@ -290,9 +283,7 @@ def vibration_figure(figures: dict, path: str) -> str:
                  title=f"alignment, {figures['scenario']}", ylim=(-3, 3))  # fmt: skip
     ax[1, 2].legend(fontsize=7)
     fig.tight_layout()
-    save(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "") -> str:
@@ -341,9 +332,7 @@ def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "
     ax.set_title(title or f"{result.kind} with confidence intervals")
     ax.grid(which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    save(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def imu_session_figure(data, sections, path: str, calibration=None, title: str = "") -> str:
@@ -399,9 +388,7 @@ def imu_session_figure(data, sections, path: str, calibration=None, title: str =
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
     fig.suptitle(title or "Ferraris session: faces (grey) and turns (orange)", fontsize=11)
-    save(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 _KIND_COLORS = {"static": "C0", "rotation": "C3", "ramp": "C2"}
@@ -457,9 +444,7 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
     fig.suptitle(title or "bench plan", fontsize=11)
-    save(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def session_figure(comparison, path: str, title: str = "") -> str:
@@ -530,9 +515,7 @@ def session_figure(comparison, path: str, title: str = "") -> str:
     if off.estimated:
         text += ", taken off every compensator"
     fig.suptitle(f"{head}\n{text}", fontsize=10)
-    save(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def navigation_figure(truth, flights, path: str, title: str = "") -> str:
@@ -596,6 +579,4 @@ def navigation_figure(truth, flights, path: str, title: str = "") -> str:
     ax.grid(alpha=0.3, which="both")
     fig.suptitle(title or "Loosely-coupled GNSS/INS: errors against the truth")
     fig.tight_layout()
-    save(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=120)

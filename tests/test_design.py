@@ -631,7 +631,9 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     a = f * scale[:, None] * scale[None, :] + np.eye(12) / 100.0**2
     inv = np.linalg.inv(a)
     assert float(d.criterion(plan, "d")) == pytest.approx(np.linalg.slogdet(inv)[1], rel=1e-9)
-    assert float(d.criterion(plan, "a")) == pytest.approx(np.trace(inv), rel=1e-7)
+    with CompileCounter() as first:  # the A criterion's program (its first use in this file)
+        assert float(d.criterion(plan, "a")) == pytest.approx(np.trace(inv), rel=1e-7)
+    assert "jit(evaluate_criterion)" in first.names
     cov = np.asarray(d.posterior_covariance(plan))
     np.testing.assert_allclose(cov, inv * scale[:, None] * scale[None, :], rtol=1e-6,
                                atol=1e-9 * np.abs(cov).max())  # fmt: skip
@@ -645,11 +647,13 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     one, two = (float(d.criterion(p, "drift", **wide)) for p in (plan, twice))
     # a concrete plan's information is summed in fixed-size chunks of points (every plan
     # meets one compiled Jacobian, every criterion one program): a plan of a new structure
-    # (the first 40 segments) compiles neither again; a traced plan's (jit) is the same
+    # (the first 40 segments) compiles neither again; a traced plan's (jit) is the same.
+    # (The default prior: at 1e6 the 40 segments' unseen directions are below float64's
+    # resolution of F, and the Cholesky factor is round-off.)
     part = d.BenchPlan(plan.kind[:40], *(x[:40] for x in fields))
     with CompileCounter() as c:
-        assert np.isfinite(float(d.criterion(part, "drift", **wide)))
-    assert "jit(_weighted_information)" not in c.names and "jit(_criterion)" not in c.names
+        assert np.isfinite(float(d.criterion(part, "a")))
+    assert not {"jit(_weighted_information)", "jit(evaluate_criterion)"} & set(c.names), c.names
     np.testing.assert_allclose(jax.jit(d.information)(plan), f, rtol=1e-12,
                                atol=1e-12 * np.abs(f).max())  # fmt: skip
     assert two / one == pytest.approx(2**-0.5, rel=1e-6)

@@ -16,7 +16,7 @@ import hrgjax as hg
 
 @pytest.mark.skipif(sys.platform == "win32", reason="uses XLA_FLAGS in a subprocess")
 def test_sweep_sharded_equals_single_device():
-    """With 4 forced CPU devices the sharded sweep equals the unsharded result exactly."""
+    """With 4 forced CPU devices the sharded sweep equals the unsharded result to round-off."""
     code = textwrap.dedent(
         """
         import jax
@@ -46,9 +46,10 @@ def test_sweep_sharded_equals_single_device():
     sharded, chunked, single = np.load(out)
     os.remove(out)
     assert sharded.shape == (3, 2)
-    np.testing.assert_array_equal(sharded, single)
-    # A chunk is a batch of another length, which XLA:CPU may round differently by an ulp
-    # that the adaptive step control carries to the end (measured: ≤ 1e-13 relative).
+    # A device's share (2 of 6 members) and a chunk are batches of other lengths, which
+    # XLA:CPU may round differently by an ulp that the adaptive step control carries to the
+    # end (measured: ≤ 1e-13 relative; equal to the bit with XLA's default emitters).
+    np.testing.assert_allclose(sharded, single, rtol=1e-12, atol=0)
     np.testing.assert_allclose(chunked, single, rtol=1e-12, atol=0)
 
 

@@ -62,9 +62,7 @@ def plot_discovery(disc, path: str) -> str:  # disc: a Discovery (not imported: 
     ax.set_xlabel("model [nominal | with the accepted effects | noise alone]")
     ax.set_title(f"verdict: {disc.verdict}\nmissing effect: {disc.missing_effect}", fontsize=10)
     fig.suptitle(f"discovery on {disc.shape} data", fontsize=11)
-    save(fig, path, dpi=110)  # makes the folder
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)  # makes the folder, closes the figure
 
 
 def _dwell_panel(ax, res, plt):
