@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import CompileCounter
 
 from hrgjax.ins import ekf, flights, gnss, motion, sensors
 from hrgjax.ins import mechanization as me
@@ -213,17 +214,17 @@ def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carl
     path = tmp_path / "m.csv"
     _motion().to_csv(path)
     out = tmp_path / "nav.json"
-    compiled = flights._run_batch._cached._cache_size()
     args = [
         "navigate", str(path), "--rate-hz", "10", "--runs", "16", "--outage", "60:80",
         "--lever-arm", "1.5,-0.3,-0.8", "--json", str(out), "--quiet",
     ]  # fmt: skip
-    assert main(args) == 0
+    with CompileCounter() as c:
+        assert main(args) == 0
     text = capsys.readouterr().out
     d = json.loads(out.read_text())
     assert d["runs"] == 16 and d["outages"] == [[60.0, 80.0]] and d["imu"] == "tactical"
     # another grade and another outage than the fixture's flights: the same program
-    assert flights._run_batch._cached._cache_size() == compiled
+    assert "jit(_run_batch)" not in c.names, c.names
     assert "navigation states" in text and "NIS mean" in text
     # the tactical preset's misalignments and scale factors are not in the 15 states: the
     # position σ stays trustworthy, the sensor states' σ does not, and the output says so
@@ -288,6 +289,6 @@ def test_filter_inputs_and_verdicts(truth):
     with pytest.raises(ValueError, match="chunk must be a whole number >= 1"):
         flights.fly(truth, CONSISTENT, settings, key=jax.random.key(0), chunk=0)
     lo, hi = 10.0, 20.0
-    assert flights._verdict(np.full(100, 15.0), lo, hi) == "consistent"
-    assert flights._verdict(np.r_[np.full(80, 15.0), np.full(20, 5.0)], lo, hi) == "conservative"
-    assert flights._verdict(np.r_[np.full(80, 15.0), np.full(20, 40.0)], lo, hi) == "overconfident"
+    assert flights.verdict(np.full(100, 15.0), lo, hi) == "consistent"
+    assert flights.verdict(np.r_[np.full(80, 15.0), np.full(20, 5.0)], lo, hi) == "conservative"
+    assert flights.verdict(np.r_[np.full(80, 15.0), np.full(20, 40.0)], lo, hi) == "overconfident"

@@ -57,14 +57,14 @@ from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
 from .mechanization import (
     UNROLL,
     NavState,
-    _check_increments,
-    _check_state,
-    _start,
-    _step,
+    check_increments,
+    check_state,
     navigation_errors,
     quat_multiply,
     rotvec_to_quat,
     skew,
+    start_carry,
+    step,
 )
 from .sensors import ImuModel
 from .strapdown import error_matrices_at
@@ -261,8 +261,9 @@ def discretise(F, q, T: float):
     return _taylor(powers, T), 0.5 * (qd + qd.T)
 
 
-def _feedback(nav: NavState, x):
-    """Subtract the estimated navigation errors from `nav`."""
+def feedback(nav: NavState, x):
+    """`nav` less the estimated navigation errors `x` (the filter's error state: δlat, δlon
+    [rad], δh [m], δv_ned [m/s], attitude error [rad] first)."""
     q = quat_multiply(rotvec_to_quat(x[6:9]), nav.q_bn)
     return NavState(
         nav.lat - x[0], nav.lon - x[1], nav.h - x[2], nav.v_ned - x[3:6], q / jnp.linalg.norm(q)
@@ -278,8 +279,8 @@ def loosely_coupled(
     starting at m). **Returns** a [`FilterResult`][hrgjax.ins.ekf.FilterResult] at the start
     and every fix epoch."""
     require_x64("ins.loosely_coupled")
-    _check_state(initial)
-    dtheta, dv = _check_increments(dtheta, dv, dt)
+    check_state(initial)
+    dtheta, dv = check_increments(dtheta, dv, dt)
     n, blocks = dtheta.shape[0], fixes.lat.shape[0]
     m = n // blocks if blocks else 0
     index = fixes.index
@@ -321,7 +322,7 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
         dth_c = (dth - (bg * dt)[None]) / (1.0 + sg)[None]
         dv_c = (dv - (ba * dt)[None]) / (1.0 + sa)[None]
         mech, hist = jax.lax.scan(
-            lambda c, x: _step(settings.earth, dt, c, x), mech, (dth_c, dv_c), unroll=UNROLL
+            lambda c, x: step(settings.earth, dt, c, x), mech, (dth_c, dv_c), unroll=UNROLL
         )
         nav = mech[0]
         mid = hist[m // 2 - 1] if m > 1 else nav  # the state at the block's middle
@@ -332,7 +333,7 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
         post, _, s, _ = kalman.update(prior, nu, h, r, mask=valid)
         nis = jnp.where(valid, nu @ jnp.linalg.solve(s, nu), 0.0)
         x = post.x
-        nav = _feedback(nav, x)
+        nav = feedback(nav, x)
         lat2, h2, v2 = mech[1]
         prev2 = (lat2 - x[0], h2 - x[2], v2 - x[3:6])
         sens = (bg + x[9:12], ba + x[12:15]) + (
@@ -343,7 +344,7 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
 
     inputs = (dth_blocks, dv_blocks, fixes.lat, fixes.lon, fixes.h, fixes.v_ned, fixes.valid)
     _, (nav, sens, ps, nis, xs, pp, phis) = jax.lax.scan(
-        block, (_start(initial, p0.dtype), sensors0, p0), inputs
+        block, (start_carry(initial, p0.dtype), sensors0, p0), inputs
     )
     cat = lambda a0, a: jnp.concatenate([a0[None], a])
     nav = jax.tree_util.tree_map(cat, initial, nav)
@@ -388,7 +389,7 @@ def _smooth(res):
     _, (s, ps) = jax.lax.scan(back, last, jnp.arange(n - 1), reverse=True)
     s = jnp.concatenate([s, last[0][None]])
     ps = jnp.concatenate([ps, last[1][None]])
-    nav = jax.vmap(_feedback)(res.nav, s)
+    nav = jax.vmap(feedback)(res.nav, s)
     scale = lambda a, k: a + s[:, k : k + 3] if s.shape[1] > k else a
     return FilterResult(
         res.t,

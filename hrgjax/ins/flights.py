@@ -23,7 +23,7 @@ import numpy as np
 from .. import kalman
 from .._progress import bar
 from .._x64 import require_x64
-from .ekf import LooselyCoupled, _feedback, error_states, loosely_coupled, nees, nees_band, smooth
+from .ekf import LooselyCoupled, error_states, feedback, loosely_coupled, nees, nees_band, smooth
 from .gnss import measure
 from .mechanization import mechanize, navigation_errors
 from .motion import Truth
@@ -84,8 +84,8 @@ class Flights(eqx.Module):
                 m9 = np.asarray(d["nees_navigation"]).mean(0)[1:]
                 row["nees_navigation_mean"] = float(m9.mean())
                 row["nees_navigation_inside_95_band"] = float(np.mean((m9 > lo9) & (m9 < hi9)))
-                row["nees_verdict"] = _verdict(m, lo, hi)
-                row["nees_navigation_verdict"] = _verdict(m9, lo9, hi9)
+                row["nees_verdict"] = verdict(m, lo, hi)
+                row["nees_navigation_verdict"] = verdict(m9, lo9, hi9)
             out[name] = row
         out["nees_band_95"] = [float(lo), float(hi)]
         out["nees_navigation_band_95"] = [float(lo9), float(hi9)]
@@ -95,8 +95,9 @@ class Flights(eqx.Module):
         return out
 
 
-def _verdict(mean_nees, lo, hi) -> str:
-    """ "consistent" when the mean NEES is inside its 95 % band on ≥ 90 % of epochs; else
+def verdict(mean_nees, lo, hi) -> str:
+    """A filter's consistency from its mean NEES per epoch `mean_nees` [-] and the 95 % band
+    (`lo`, `hi`) of that mean: "consistent" when the mean NEES is inside its 95 % band on ≥ 90 % of epochs; else
     "conservative" (σ larger than the errors: the mean below the band more often than above)
     or "overconfident"."""
     if np.mean((mean_nees > lo) & (mean_nees < hi)) >= 0.9:
@@ -123,7 +124,7 @@ def _one_run(
     fixes = eqx.tree_at(lambda f: f.valid, fixes, fixes.valid & gnss_mask)
     p0 = settings.initial_covariance(truth.initial)
     e0 = kalman.psd_factor(p0[:9, :9]) @ jax.random.normal(k_init, (9,))
-    start = _feedback(truth.initial, -e0)  # the truth plus the drawn error
+    start = feedback(truth.initial, -e0)  # the truth plus the drawn error
     res = loosely_coupled(settings, start, dth, dv, truth.dt, fixes)
     sm = smooth(res)
     vertical = (truth.states.h[1:], truth.states.v_ned[1:, 2])

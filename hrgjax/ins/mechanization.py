@@ -219,7 +219,11 @@ def position_step(earth: Earth, lat, lon, h, v0, v1, dt):
     return lat1, lon1, h1
 
 
-def _step(earth, dt, carry, inc):
+def step(earth, dt, carry, inc):
+    """One mechanisation interval (module docstring), a `lax.scan` body: `carry` from
+    [`start_carry`][hrgjax.ins.mechanization.start_carry] or the last step, `inc` the
+    interval's (gyro [rad], accelerometer [m/s]) increments, with (height [m], down velocity
+    [m/s]) appended for vertical aiding; `dt` [s]. Returns (carry, the new `NavState`)."""
     state, prev2, (dth_p, dv_p) = carry
     dth, dv = inc[:2]
     zeta, acc = _midpoint_terms(earth, (state.lat, state.h, state.v_ned), prev2, dt)
@@ -236,12 +240,17 @@ def _step(earth, dt, carry, inc):
     return (new, (state.lat, state.h, state.v_ned), (dth, dv)), new
 
 
-def _start(initial: NavState, dtype):
+def start_carry(initial: NavState, dtype):
+    """The scan carry of [`step`][hrgjax.ins.mechanization.step] at `initial`: the state,
+    its (lat, h, v_ned) as the previous epoch and zero previous increments (`dtype`)."""
     zeros = jnp.zeros(3, dtype)
     return (initial, (initial.lat, initial.h, initial.v_ned), (zeros, zeros))
 
 
-def _check_increments(dtheta, dv, dt):
+def check_increments(dtheta, dv, dt):
+    """`dtheta` [rad] and `dv` [m/s] as float arrays of shape (N, 3), and `dt` [s] > 0; a
+    `ValueError` naming the field for another shape, NaN or inf, or a gyro increment of π or
+    more (degrees or rates given for radians)."""
     dtheta, dv = jnp.asarray(dtheta, float), jnp.asarray(dv, float)
     if dtheta.ndim != 2 or dtheta.shape[-1] != 3 or dtheta.shape != dv.shape:
         raise ValueError(
@@ -266,7 +275,8 @@ def _check_increments(dtheta, dv, dt):
     return dtheta, dv
 
 
-def _check_state(initial):
+def check_state(initial):
+    """A `TypeError` unless `initial` is a `NavState`, a `ValueError` unless it is one epoch."""
     if not isinstance(initial, NavState):
         raise TypeError(
             f"initial must be a NavState (hrgjax.ins.mechanization); got {type(initial).__name__}"
@@ -303,8 +313,8 @@ def mechanize(
     **Raises:** `ValueError` for mis-shaped increments; `RuntimeError` if the solution stops
     being finite (e.g. increments in degrees, or a vertical channel run into the ground)."""
     require_x64("ins.mechanize")
-    _check_state(initial)
-    dtheta, dv = _check_increments(dtheta, dv, dt)
+    check_state(initial)
+    dtheta, dv = check_increments(dtheta, dv, dt)
     n = dtheta.shape[0]
     if not (isinstance(every, int) and every >= 1 and n % every == 0):
         raise ValueError(f"every must be a positive divisor of the {n} intervals; got {every}")
@@ -322,15 +332,15 @@ def mechanize(
 
 @program(check=Check("ins.mechanize"), single_run=True)
 def _mechanize(initial, xs, dt, earth, every):
-    step = lambda c, x: _step(earth, dt, c, x)
-    start = _start(initial, xs[0].dtype)
+    body = lambda c, x: step(earth, dt, c, x)
+    start = start_carry(initial, xs[0].dtype)
     if every == 1:
-        _, hist = jax.lax.scan(step, start, xs, unroll=UNROLL)
+        _, hist = jax.lax.scan(body, start, xs, unroll=UNROLL)
     else:
         blocks = lambda a: a.reshape((-1, every) + a.shape[1:])
 
         def block(c, x):
-            c, _ = jax.lax.scan(step, c, x, unroll=UNROLL)
+            c, _ = jax.lax.scan(body, c, x, unroll=UNROLL)
             return c, c[0]
 
         _, hist = jax.lax.scan(block, start, tuple(blocks(a) for a in xs))
@@ -366,15 +376,15 @@ def increments_from_states(initial: NavState, v_ned, q_bn, dt: float, *, earth: 
     **Returns:** `(states, dtheta, dv)`: the N + 1 epochs (positions from the trapezoid of the
     velocities, as the integrator computes them) and the (N, 3) increments [rad, m/s]."""
     require_x64("ins.increments_from_states")
-    _check_state(initial)
+    check_state(initial)
     return _invert(initial, jnp.asarray(v_ned, float), jnp.asarray(q_bn, float), dt, earth)
 
 
 @eqx.filter_jit
 def _invert(initial, v_ned, q_bn, dt, earth):
-    step = lambda c, x: _inverse_step(earth, dt, c, x)
+    body = lambda c, x: _inverse_step(earth, dt, c, x)
     _, (hist, dth, dv) = jax.lax.scan(
-        step, _start(initial, v_ned.dtype), (v_ned, q_bn), unroll=UNROLL
+        body, start_carry(initial, v_ned.dtype), (v_ned, q_bn), unroll=UNROLL
     )
     states = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), initial, hist)
     return states, dth, dv
