@@ -288,7 +288,7 @@ def pyins_comparison(mot, flights_n):
         dth, dv = sensors.random_unit(model, k_unit).apply(k_imu, t.dtheta, t.dv, t.dt)
         p0 = settings.initial_covariance(t.initial)
         e0 = kalman.psd_factor(p0[:9, :9]) @ jax.random.normal(k_init, (9,))
-        return ekf._feedback(t.initial, -e0), dth, dv, gnss.measure(t, rx, k_gnss)
+        return ekf.feedback(t.initial, -e0), dth, dv, gnss.measure(t, rx, k_gnss)
 
     ours, theirs, times = [], [], []
     for r in range(flights_n):
