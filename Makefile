@@ -16,10 +16,11 @@ demo: $(STAMP)
 	$(BIN)/hrgjax demo --out out/demo
 
 # Two test files at a time on two cores (pytest-xdist; each file stays in one worker, so its
-# module-scoped fixtures compile once): 11 min 27 s on the 2-core machine on 2026-11-27
-# (quiet, .ci/run on a clean clone of 27493ca, 448 passed; the tests marked `slow` and the heavy docs pages are
-# left to test-full / docs-test). The 20 slowest tests are listed at the end, so every CI
-# log shows where the time goes.
+# module-scoped fixtures compile once), compiling with XLA's quick flags (tests/conftest.py):
+# 15 min 38 s on the 2-core machine on 2026-11-29 (.ci/run on a clean clone of e8beb0d, 508
+# passed, pytest 848 s; 23 min 50 s before the flags). The tests marked `slow` and the heavy
+# docs pages are left to test-full / docs-test. The 20 slowest tests are listed at the end,
+# so every CI log shows where the time goes.
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n auto --dist loadfile --durations=20
 
