@@ -28,7 +28,8 @@ def _conftest_flags() -> tuple:
     would set them in this process's environment)."""
     tree = ast.parse((ROOT / "tests" / "conftest.py").read_text())
     for node in tree.body:
-        if isinstance(node, ast.Assign) and node.targets[0].id == "QUICK_COMPILE_FLAGS":
+        target = node.targets[0] if isinstance(node, ast.Assign) else None
+        if isinstance(target, ast.Name) and target.id == "QUICK_COMPILE_FLAGS":
             return ast.literal_eval(node.value)
     raise LookupError("tests/conftest.py: no QUICK_COMPILE_FLAGS")
 
@@ -62,11 +63,17 @@ print("RESULT " + json.dumps(out))
 """
 
 
+def without_quick_flags(flags: str) -> str:
+    names = {f.split("=")[0] for f in QUICK_COMPILE_FLAGS}
+    return " ".join(f for f in flags.split() if f.split("=")[0] not in names)
+
+
 def child_env(quick: bool) -> dict:
     env = dict(os.environ, HRGJAX_NO_CACHE="1")
     env.pop("HRGJAX_TEST_COMPILE_FLAGS", None)
+    env["XLA_FLAGS"] = without_quick_flags(env.get("XLA_FLAGS", ""))
     if quick:
-        env["XLA_FLAGS"] = f"{env.get('XLA_FLAGS', '')} {' '.join(QUICK_COMPILE_FLAGS)}".strip()
+        env["XLA_FLAGS"] = f"{env['XLA_FLAGS']} {' '.join(QUICK_COMPILE_FLAGS)}".strip()
     return env
 
 
@@ -92,7 +99,8 @@ def programs() -> None:
 def suite(files) -> None:
     walls = {}
     for quick in (False, True):
-        env = dict(os.environ)
+        env = dict(os.environ, XLA_FLAGS=without_quick_flags(os.environ.get("XLA_FLAGS", "")))
+        env.pop("HRGJAX_TEST_FULL", None)  # the full tier keeps XLA's defaults
         if quick:
             env.pop("HRGJAX_TEST_COMPILE_FLAGS", None)
         else:
