@@ -17,8 +17,8 @@ demo: $(STAMP)
 
 # Two test files at a time on two cores (pytest-xdist; each file stays in one worker, so its
 # module-scoped fixtures compile once), compiling with XLA's quick flags (tests/conftest.py):
-# 15 min 38 s on the 2-core machine on 2026-11-29 (.ci/run on a clean clone of e8beb0d, 508
-# passed, pytest 848 s; 23 min 50 s before the flags). The tests marked `slow` and the heavy
+# 15 min 38 s on the 2-core machine on 2026-11-29 (.ci/run on a clean clone of e8beb0d with
+# the install, 508 passed, pytest 848 s; before the flags ≈ 25 min, pytest 1 431 s). The tests marked `slow` and the heavy
 # docs pages are left to test-full / docs-test. The 20 slowest tests are listed at the end,
 # so every CI log shows where the time goes.
 test: $(STAMP)
@@ -30,7 +30,8 @@ test: $(STAMP)
 test-full: $(STAMP)
 	HRGJAX_TEST_FULL=1 HRGJAX_DOCS_FULL=1 $(BIN)/python -m pytest -q -n auto --dist loadfile --durations=20
 
-# Every python block of docs/ at the size the page shows, the compile-bound ones included
+# Every python block of docs/ at the size the page shows, the compile-bound ones included,
+# with the fast tier's quick-compile flags (tests/conftest.py: the pages are compile-bound)
 # (make test runs the light pages at reduced sizes, compiles the heavy pages' blocks as Python
 # and lists the compile-bound ones as skipped). Run it before a change to docs/ lands.
 docs-test: $(STAMP)
