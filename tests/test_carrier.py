@@ -142,7 +142,7 @@ def test_reverse_gradient_equals_finite_differences():
         return rec.wave_angle[-1]
 
     rate = jnp.asarray(50.0)
-    rev = jax.grad(final_angle)(rate)
+    rev = jax.jit(jax.grad(final_angle))(rate)
     fd = (final_angle(rate + 1e-3) - final_angle(rate - 1e-3)) / 2e-3
     np.testing.assert_allclose(rev, fd, rtol=1e-6)
     # dθ/dΩ = −k_e·T (rate in °/s, θ in rad)

@@ -190,7 +190,7 @@ def test_forward_mode_sensitivities():
         return hg.simulate(g, prof, dt_out=2.5, adjoint=adjoint).wave_angle
 
     p0 = jnp.array([0.02, 0.3])
-    fwd = jax.jacfwd(lambda p: angles(p, diffrax.ForwardMode()))(p0)
-    rev = jax.jacrev(lambda p: angles(p, None))(p0)
+    fwd = jax.jit(jax.jacfwd(lambda p: angles(p, diffrax.ForwardMode())))(p0)
+    rev = jax.jit(jax.jacrev(lambda p: angles(p, None)))(p0)
     np.testing.assert_allclose(fwd, rev, rtol=1e-8, atol=1e-14)
     assert fwd.shape == (3, 2)
