@@ -173,6 +173,40 @@ def test_noise_identification_beyond_the_autocorrelations_reach(alpha):
     assert allan.noise_id(x, [2048])[0] == allan.noise_id(x, [256])[0]
 
 
+def test_stable32_rule_removes_the_drift_reads_two_averages_and_carries_for_adev():
+    """`noise_rule="stable32"` (Stable32 1.60's tables, benchmarks/stable32_ocxo.py: 90/90):
+    on white rate noise under a strong rate drift, the default rule's B1 (16 averages, the
+    record as it is) sees the drift as a random walk (α = −2) in every record; Stable32's
+    removes the line first and names white rate noise (18–20 of 20 records). At 2 averages B1 is 1 for
+    any noise: white rate noise (α = 0), no bias correction for totdev. The non-overlapping
+    kinds carry the last autocorrelation α instead."""
+    t = np.arange(4096.0)
+    default, s32 = [], []
+    for seed in range(20):
+        y = np.random.default_rng(seed).normal(size=t.size) + 2e-3 * t  # white + drift
+        x = np.concatenate([[0.0], np.cumsum(y)])
+        default.append(int(allan.noise_id(x, [256])[0]))
+        s32.append(int(allan.noise_id(x, [256], rule="stable32")[0]))
+    assert set(default) == {-2}, default
+    assert np.sum(np.asarray(s32) == 0) >= 16, s32
+    # 2 averages: B1 ≡ 1, white rate noise; the default carries the α read before
+    y = np.random.default_rng(3).normal(size=4096) + 0.05 * np.cumsum(
+        np.random.default_rng(4).normal(size=4096)
+    )
+    x = np.concatenate([[0.0], np.cumsum(y)])
+    ms = [64, 128, 1024, 2048]
+    ours, theirs = allan.noise_id(x, ms), allan.noise_id(x, ms, rule="stable32")
+    assert ours[-1] == ours[-2] and theirs[-1] == 0
+    adev = allan.noise_id(x, ms, rule="stable32", overlapping=False)
+    assert list(adev[2:]) == [adev[1]] * 2  # 1024, 2048: beyond the autocorrelation: carried
+    tot = allan.deviation(y, 1.0, "totdev", taus=[2048.0], noise_rule="stable32")
+    assert tot.alpha[-1] == 0 and tot.bias_factor[-1] == 1.0
+    with pytest.raises(ValueError, match="noise_rule must be one of"):
+        allan.deviation(y, 1.0, noise_rule="Stable32")
+    with pytest.raises(ValueError, match="rule must be one of"):
+        allan.noise_id(x, ms, rule="b1")
+
+
 def test_totdev_bias_correction_removes_sp1065s_bias():
     """E[Totvar] = (1 − a·τ/T)·σ²(τ): over 400 records of a rate random walk (a = 0.75) the
     mean raw Totvar at τ/T = 1/4 is 0.81 of the mean overlapping Allan variance (unbiased

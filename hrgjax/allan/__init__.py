@@ -37,6 +37,7 @@ from .noise_terms import fit_noise as fit_noise
 from .resample import to_uniform as to_uniform
 from .uncertainty import ACF_POINTS as ACF_POINTS
 from .uncertainty import B1_AVERAGES as B1_AVERAGES
+from .uncertainty import NOISE_RULES as NOISE_RULES
 from .uncertainty import ONE_SIGMA as ONE_SIGMA
 from .uncertainty import b1_expected as b1_expected
 from .uncertainty import chi2_ppf as chi2_ppf

@@ -22,7 +22,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._x64 import require_x64
-from .uncertainty import ONE_SIGMA, confidence_interval, edf_greenhall, edf_totdev, noise_id
+from .uncertainty import (
+    NOISE_RULES,
+    ONE_SIGMA,
+    confidence_interval,
+    edf_greenhall,
+    edf_totdev,
+    noise_id,
+)
 
 
 def _phase(y, tau0):
@@ -369,6 +376,7 @@ def deviation(
     ci: float = ONE_SIGMA,
     *,
     bias_correction: bool = True,
+    noise_rule: str = "hrgjax",
     unit: str = "",
 ) -> AllanResult:
     r"""An Allan-family deviation with confidence intervals, as allantools and Stable32
@@ -389,6 +397,10 @@ def deviation(
       ([`TOTVAR_BIAS`][hrgjax.allan.TOTVAR_BIAS]), mtotdev and ttotdev by
       √[`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS], as Stable32 reports them; `False`
       gives the raw estimators (allantools').
+    - `noise_rule`: how the noise type is read where the lag-1 autocorrelation cannot:
+      `"hrgjax"` (default; intervals calibrated by Monte Carlo) or `"stable32"` (Stable32
+      1.60's α at every τ, and so its intervals and totdev bias correction);
+      [`noise_id`][hrgjax.allan.noise_id] says both.
     - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
 
     **Gaps**: NaN samples are missing data. Every kind but the total ones then averages only
@@ -409,6 +421,8 @@ def deviation(
     require_x64("hrgjax.allan.deviation (differences of a summed phase)")
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {list(KINDS)}; got {kind!r}")
+    if noise_rule not in NOISE_RULES:
+        raise ValueError(f"noise_rule must be one of {list(NOISE_RULES)}; got {noise_rule!r}")
     if data not in ("rate", "phase"):
         raise ValueError(f"data must be 'rate' or 'phase'; got {data!r}")
     if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
@@ -478,7 +492,7 @@ def deviation(
         pending = _curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base)
         n_eff = np.full(m.size, n_phase)
     dmax = 3 if kind in ("hdev", "ohdev") else 2
-    alpha = noise_id(x, m, dmax=dmax)
+    alpha = noise_id(x, m, dmax=dmax, rule=noise_rule, overlapping=kind not in ("adev", "hdev"))
     edf = np.asarray([_edf(kind, int(a), int(k), int(n))
                       for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
     if not gaps and kind not in ("mtotdev", "ttotdev"):

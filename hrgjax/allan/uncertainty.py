@@ -26,12 +26,17 @@ B1_AVERAGES = 8
 neighbouring noise types (at N = 4: 2, 1.33, 1 for α = −2, −1, 0) lie within its sampling
 spread, and at N = 2 it is 1 whatever the noise; there the factor before is carried on.
 `benchmarks/coverage_allan.py` (200 records of 20 000 s each, white rate or angle noise plus
-rate random walk): the ±1σ interval at the longest τ (8 192 s) covers the truth in 67–71 % of
+rate random walk): the ±1σ interval at the longest τ (8 192 s) covers the truth in 70–71 % of
 records with this rule (59–72 % with the α of the last autocorrelation τ carried on, 58–60 %
 with B1 read down to N = 3)."""
 
 
-def noise_id(x, m, dmax: int = 2) -> np.ndarray:
+NOISE_RULES = ("hrgjax", "stable32")
+"""The rules [`noise_id`][hrgjax.allan.noise_id] knows beyond the lag-1 autocorrelation's
+reach: `"hrgjax"` (the default) and `"stable32"` (Stable32 1.60's tables)."""
+
+
+def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = True) -> np.ndarray:
     """The power-law noise α (rate PSD ∝ f^α) at each factor `m` of phase (angle) samples
     `x`, as Stable32 identifies it (NIST SP 1065 §5.6):
 
@@ -45,21 +50,49 @@ def noise_id(x, m, dmax: int = 2) -> np.ndarray:
       (α = −μ − 1), the boundaries at the geometric means of neighbouring expectations;
       where it says phase noise (μ = −2), the R(n) ratio MVAR/AVAR (1/m for white, 3.37/(1.04
       + 3 ln πm) for flicker phase noise, with f_h = 1/(2τ₀)) tells white from flicker from
-      m = 4 on (below, the two expectations coincide: white is taken);
-    - with fewer than [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages the α of
-      the factor before is carried on (for the first factor asked: that of the largest m/2,
-      m/4, … that can be read); Stable32 goes on with B1 down to N = 2.
+      m = 4 on (below, the two expectations coincide: white is taken).
+
+    How far B1 is read is the `rule`:
+
+    - `"hrgjax"` (default): B1 on the record as it is, from
+      [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages on; with fewer, the α of the factor
+      before is carried on (for the first factor asked: that of the largest m/2, m/4, … that
+      can be read). On drift-free white + random-walk records its intervals cover the truth
+      at the nominal rate at every τ (`benchmarks/coverage_allan.py`).
+    - `"stable32"`: as Stable32 1.60's tables, which it reproduces at every τ of seven kinds
+      on a real OCXO record (90 of 90; `benchmarks/stable32_ocxo.py`): B1 on the rate with
+      its least-squares line (a frequency drift) removed, down to N = 2 averages, where B1 is
+      1 whatever the noise and white rate noise (α = 0) is taken; the non-overlapping kinds
+      (`overlapping=False`: adev, hdev) carry the last autocorrelation α on instead. For
+      comparing with Stable32: on drift-free white + random-walk records
+      (`coverage_allan.py --noise-rule stable32`) removing the line biases B1 away from the
+      random walk, and the ±1σ intervals cover the truth in 60–68 % of records at 4
+      averages and 64–65 % at 2 (by default: 66–69 % and 70–71 %).
+
+    Both rules: where B1 names phase noise but R(n) lies nearer white rate noise's ½ than
+    flicker phase noise's value, white rate noise (α = 0) is taken (few averages put its B1
+    of 1 below the phase-noise boundary).
 
     `dmax` = 3 (Hadamard) lets both methods name flicker walk (α = −3).
 
     **Returns:** an int array.
 
-    **Raises:** `ValueError` when the record has fewer than `B1_AVERAGES` + 1 points."""
+    **Raises:** `ValueError` for an unknown `rule`, or when the record has fewer than
+    `B1_AVERAGES` + 1 points."""
+    if rule not in NOISE_RULES:
+        raise ValueError(f"rule must be one of {list(NOISE_RULES)}; got {rule!r}")
     x = np.asarray(x, dtype=float)
+    stable32 = rule == "stable32"
+    drift_free = _less_drift(x) if stable32 and overlapping else None
     out, last = [], None
     for k in np.asarray(m, dtype=int):
         k = int(k)
-        a = _identify(x, k, dmax)
+        if drift_free is not None and x[::k].size < ACF_POINTS and (x.size - 1) // k >= 2:
+            a = _b1_alpha(drift_free, k, dmax)
+        elif stable32 and not overlapping and last is not None and x[::k].size < ACF_POINTS:
+            a = None  # carried on
+        else:
+            a = _identify(x, k, dmax)
         if a is None and last is None:  # the first factor: from the largest k/2ʲ that can
             j = k // 2
             while a is None and j >= 1:
@@ -72,6 +105,16 @@ def noise_id(x, m, dmax: int = 2) -> np.ndarray:
         last = last if a is None else a
         out.append(last)
     return np.asarray(out, dtype=int)
+
+
+def _less_drift(x):
+    """The phase of the rate diff(x) less its least-squares line (Stable32's drift removal
+    before B1)."""
+    y = np.diff(x)
+    t = np.linspace(-1.0, 1.0, y.size)
+    y = y - y.mean()
+    y = y - t * (np.dot(t, y) / np.dot(t, t))
+    return np.concatenate([[0.0], np.cumsum(y)])
 
 
 def _identify(x, k, dmax):
@@ -113,17 +156,25 @@ def b1_expected(n: int, mu: int) -> float:
 
 def rn_expected(m: int, alpha: int) -> float:
     """R(n) = MVAR/AVAR expected at factor m for white (α = 2) or flicker (α = 1) phase noise,
-    the measurement bandwidth f_h = 1/(2τ₀) (NIST TN 1337, A-6)."""
+    the measurement bandwidth f_h = 1/(2τ₀) (NIST TN 1337, A-6), and for white rate noise
+    (α = 0: ½, its limit for m ≫ 1)."""
     if alpha == 2:
         return 1.0 / m
     if alpha == 1:
         return 3.37 / (1.04 + 3 * math.log(math.pi * m))
-    raise ValueError(f"R(n) tells white (2) from flicker (1) phase noise; got alpha = {alpha}")
+    if alpha == 0:
+        return 0.5
+    raise ValueError(
+        f"R(n) tells white (2) and flicker (1) phase noise from white rate noise (0); got "
+        f"alpha = {alpha}"
+    )
 
 
 def _b1_alpha(x, m, dmax):
     """B1 (and R(n)) identification at factor m from the phase x (module docstring)."""
     n = (x.size - 1) // m
+    if n == 2:  # B1(2, μ) = 1 for every μ: white rate noise's value (Stable32's choice)
+        return 0
     ybar = np.diff(x[: n * m + 1 : m])  # τ-averages (×τ: the scale cancels in the ratios)
     avar = 0.5 * np.mean(np.diff(ybar) ** 2)
     if not avar > 0:
@@ -145,6 +196,8 @@ def _b1_alpha(x, m, dmax):
     c = np.concatenate([[0.0], np.cumsum(d)])
     mvar = np.mean((c[m:] - c[:-m]) ** 2) / m**2
     rn = float(mvar / avar_o)
+    if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 0)):  # rate noise after all: B1
+        return 0  # put white rate noise's 1 below the phase noises' boundary (few averages)
     return 1 if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 2)) else 2
 
 

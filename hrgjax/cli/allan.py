@@ -107,7 +107,9 @@ def cmd_allan(args) -> int:
             "record at its gaps (the deviation alone takes gaps: drop --fit and --kalibr)"
         )
     with usage_errors(prefix=args.log):
-        result = allan.deviation(y, rate_hz, kind=args.kind, taus=args.taus, unit=unit)
+        result = allan.deviation(
+            y, rate_hz, kind=args.kind, taus=args.taus, unit=unit, noise_rule=args.noise_rule
+        )
     span = y.size / rate_hz
     missing = f", {gaps.size} missing (windows across them left out)" if gaps.size else ""
     print(f"hrgjax allan: {args.log}, column {column!r}: {y.size} samples at {rate_hz:g} Hz "
@@ -197,6 +199,10 @@ def _allan_parser(sub):
     p.add_argument("--kind", default="oadev", choices=KINDS, help="the deviation (oadev)")
     p.add_argument("--taus", default="octave", type=_taus,
                    help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip
+    p.add_argument("--noise-rule", default="hrgjax", choices=("hrgjax", "stable32"),
+                   help="the noise type where the lag-1 autocorrelation cannot read it: "
+                   "hrgjax (intervals checked by Monte Carlo) or stable32 (Stable32's "
+                   "types, intervals and totdev at every τ)")  # fmt: skip
     p.add_argument("--fit", action="store_true",
                    help="identify the composite noise model (white angle/rate noise, rate "
                    "random walk, Gauss–Markov terms) with intervals")  # fmt: skip
