@@ -19,13 +19,17 @@ Two things in Stable32's numbers, checked here with NumPy:
   sums the phase from the normalised frequency f/f₀ ≈ 1, a ramp reaching 2·10⁴ s whose last
   bit (3.6 ps) is not small against the phase's second differences (≈ 76 ps at 1 s). Summed
   that way, the tables come out to their printed digits; hrgjax sums y = f/f₀ − 1 and
-  differs by up to ≈ 10⁻³ (non-overlapping adev and hdev, from frequency averages, agree);
+  differs by up to ≈ 2·10⁻³ (non-overlapping adev and hdev, from frequency averages, agree);
 - its totdev is bias-corrected (NIST SP 1065 §5.2.11): Totvar/(1 − a·τ/T), T the record
   length, a = 0.481 for flicker FM (α = −1) and 0.750 for random-walk FM (α = −2), with the
   table's α. hrgjax's `deviation` applies it too (`bias_correction=True`, the default), with
   its own α.
 
-Usage: `.venv/bin/python benchmarks/stable32_ocxo.py [--dir out/ocxo] [--json PATH]`.
+Both of `deviation`'s noise rules run side by side; `--noise-rule` (default `stable32`
+here, while the library's default is `hrgjax`) picks the one printed in detail and written.
+
+Usage: `.venv/bin/python benchmarks/stable32_ocxo.py [--dir out/ocxo] [--json PATH]
+[--noise-rule stable32|hrgjax]`.
 The files are not in this repository; get them with
 `git clone https://github.com/aewallin/allantools` and copy `tests/ocxo/ocxo_frequency.txt`
 and `tests/ocxo/*_octave.txt` into `out/ocxo/` (git-ignored).
@@ -242,7 +246,9 @@ def main():
     out = runs[args.noise_rule][0]
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(out, indent=2) + "\n")
+        Path(args.json).write_text(
+            json.dumps({"noise_rule": args.noise_rule} | out, indent=2) + "\n"
+        )
         print(f"figures written to {args.json}")
 
 

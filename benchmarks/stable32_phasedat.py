@@ -11,7 +11,8 @@ The octave and decade tables are the raw estimator (`bias_correction=False`); St
 `phase_dat_ttotdev_all.txt` (no intervals) is bias-corrected, the raw value divided by
 √(MTOTVAR_BIAS[α]) (0.73 for white FM): compared with hrgjax's default.
 
-Usage: `.venv/bin/python benchmarks/stable32_phasedat.py [--dir out/phasedat]`. The files
+Usage: `.venv/bin/python benchmarks/stable32_phasedat.py [--dir out/phasedat]
+[--noise-rule hrgjax|stable32]`. The files
 are not in this repository: `git clone https://github.com/aewallin/allantools` and copy
 `tests/phasedat/PHASE.DAT` and `tests/phasedat/phase_dat_{mtotdev,ttotdev}_*.txt` into
 `out/phasedat/` (git-ignored).
@@ -49,13 +50,16 @@ def read_table(path):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dir", default="out/phasedat")
+    ap.add_argument("--noise-rule", default="hrgjax", choices=hg.allan.NOISE_RULES,
+                    help="deviation's noise_rule (hrgjax)")  # fmt: skip
     args = ap.parse_args(argv)
     folder = Path(args.dir)
     if not (folder / "PHASE.DAT").exists():
         print(f"{folder}/PHASE.DAT missing: see this script's docstring for the files")
         return 1
     x = np.loadtxt(folder / "PHASE.DAT", comments="#")
-    print(f"stable32_phasedat.py: PHASE.DAT, {x.size} phase points, τ0 = 1 s")
+    print(f"stable32_phasedat.py: PHASE.DAT, {x.size} phase points, τ0 = 1 s, "
+          f"noise_rule={args.noise_rule!r}")  # fmt: skip
     for name, kind in TABLES.items():
         if not (folder / name).exists():
             print(f"  {name}: missing")
@@ -63,7 +67,7 @@ def main(argv=None):
         tab = read_table(folder / name)
         corrected = not np.all(tab[:, 4] > 0)  # the table without intervals: bias-corrected
         r = hg.allan.deviation(x, 1.0, kind=kind, data="phase", taus=tab[:, 1],
-                               bias_correction=corrected)  # fmt: skip
+                               bias_correction=corrected, noise_rule=args.noise_rule)  # fmt: skip
         keep = np.isin(tab[:, 0], r.m)
         tab = tab[keep]
         rel = r.dev / tab[:, 5] - 1

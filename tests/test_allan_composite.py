@@ -246,7 +246,7 @@ def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, t
                  "stable32", "--json", str(out["json"])]) == 0  # fmt: skip
     s32 = hg.allan.deviation(y, fs, "totdev", noise_rule="stable32")
     d = json.loads(out["json"].read_text())["deviation"]
-    assert d["alpha"] == s32.alpha.tolist() and s32.alpha[-1] == 0  # 2 averages: white
+    assert d["alpha"] == s32.alpha.tolist() and s32.alpha[-1] == 0  # white from 2 averages on
     np.testing.assert_allclose(d["dev"], s32.dev, rtol=1e-12)
     # bad input: one line each, naming what is wrong
     uneven = tmp_path / "uneven.csv"

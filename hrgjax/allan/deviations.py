@@ -398,9 +398,10 @@ def deviation(
       √[`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS], as Stable32 reports them; `False`
       gives the raw estimators (allantools').
     - `noise_rule`: how the noise type is read where the lag-1 autocorrelation cannot:
-      `"hrgjax"` (default; intervals calibrated by Monte Carlo) or `"stable32"` (Stable32
-      1.60's α at every τ, and so its intervals and totdev bias correction);
-      [`noise_id`][hrgjax.allan.noise_id] says both.
+      `"hrgjax"` (default; intervals checked by Monte Carlo) or `"stable32"` (the rule read
+      off Stable32 1.60's octave tables of an OCXO record, whose α, intervals and totdev it
+      reproduces at all 90 τ; for comparing with Stable32, its intervals are less well
+      calibrated); [`noise_id`][hrgjax.allan.noise_id] says both.
     - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
 
     **Gaps**: NaN samples are missing data. Every kind but the total ones then averages only

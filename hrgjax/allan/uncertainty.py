@@ -27,8 +27,8 @@ neighbouring noise types (at N = 4: 2, 1.33, 1 for α = −2, −1, 0) lie withi
 spread, and at N = 2 it is 1 whatever the noise; there the factor before is carried on.
 `benchmarks/coverage_allan.py` (200 records of 20 000 s each, white rate or angle noise plus
 rate random walk): the ±1σ interval at the longest τ (8 192 s) covers the truth in 70–71 % of
-records with this rule (59–72 % with the α of the last autocorrelation τ carried on, 58–60 %
-with B1 read down to N = 3)."""
+records with this rule (59–74 % with the α of the last autocorrelation τ carried on, 58–60 %
+with B1 read down to N = 3, before R(n)'s white-rate guard)."""
 
 
 NOISE_RULES = ("hrgjax", "stable32")
@@ -57,50 +57,61 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
     - `"hrgjax"` (default): B1 on the record as it is, from
       [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages on; with fewer, the α of the factor
       before is carried on (for the first factor asked: that of the largest m/2, m/4, … that
-      can be read). On drift-free white + random-walk records its intervals cover the truth
-      at the nominal rate at every τ (`benchmarks/coverage_allan.py`).
-    - `"stable32"`: as Stable32 1.60's tables, which it reproduces at every τ of seven kinds
-      on a real OCXO record (90 of 90; `benchmarks/stable32_ocxo.py`): B1 on the rate with
-      its least-squares line (a frequency drift) removed, down to N = 2 averages, where B1 is
-      1 whatever the noise and white rate noise (α = 0) is taken; the non-overlapping kinds
-      (`overlapping=False`: adev, hdev) carry the last autocorrelation α on instead. For
-      comparing with Stable32: on drift-free white + random-walk records
-      (`coverage_allan.py --noise-rule stable32`) removing the line biases B1 away from the
-      random walk, and the ±1σ intervals cover the truth in 60–68 % of records at 4
-      averages and 64–65 % at 2 (by default: 66–69 % and 70–71 %).
-
-    Both rules: where B1 names phase noise but R(n) lies nearer white rate noise's ½ than
-    flicker phase noise's value, white rate noise (α = 0) is taken (few averages put its B1
-    of 1 below the phase-noise boundary).
+      can be read). Where B1 names phase noise but R(n) lies nearer white rate noise's ½ than
+      flicker phase noise's value, white rate noise (α = 0) is taken (on few averages its B1
+      of 1 falls below the phase-noise boundary). On drift-free white + random-walk records
+      its ±1σ intervals cover the truth at the nominal rate at every τ
+      (`benchmarks/coverage_allan.py`).
+    - `"stable32"`: as Stable32 1.60's octave tables of a real OCXO record, which it
+      reproduces at all 90 τ of seven kinds (`benchmarks/stable32_ocxo.py`; the rule was read
+      off those tables, not from Stable32's code): B1 on the rate with its least-squares line
+      (a frequency drift) removed, down to N = 2 averages, where B1 is 1 whatever the noise
+      and white rate noise (α = 0) is taken; the non-overlapping kinds (`overlapping=False`:
+      adev, hdev) carry the last autocorrelation α on instead. For comparing with Stable32:
+      on drift-free white + random-walk records (`coverage_allan.py --noise-rule stable32`)
+      removing the line biases B1 away from the random walk, and at 4 averages its α
+      scatters over four types: the ±1σ intervals cover the truth in 49–53 % of records
+      there (±2σ: 74–78 %) and in 64–65 % at 2 averages (by default: 66–69 % and 70–71 %).
+      On PHASE.DAT's mtotdev/ttotdev tables it does not reproduce every α either
+      (`benchmarks/stable32_phasedat.py`).
 
     `dmax` = 3 (Hadamard) lets both methods name flicker walk (α = −3).
 
     **Returns:** an int array.
 
-    **Raises:** `ValueError` for an unknown `rule`, or when the record has fewer than
-    `B1_AVERAGES` + 1 points."""
+    **Raises:** `ValueError` for an unknown `rule`, or when no factor of the record can be
+    read: fewer than `B1_AVERAGES` + 1 points (default rule), fewer than 3 (`"stable32"`), or
+    fewer than `ACF_POINTS` (`"stable32"`, `overlapping=False`)."""
     if rule not in NOISE_RULES:
         raise ValueError(f"rule must be one of {list(NOISE_RULES)}; got {rule!r}")
     x = np.asarray(x, dtype=float)
-    stable32 = rule == "stable32"
-    drift_free = _less_drift(x) if stable32 and overlapping else None
+    if rule == "hrgjax":
+        read, needs = (lambda k: _identify(x, k, dmax)), f"{B1_AVERAGES} averages"
+    elif overlapping:
+        drift_free = _less_drift(x)
+
+        def read(k):
+            if x[::k].size >= ACF_POINTS:
+                return _acf_alpha(x[::k], dmax)
+            if (x.size - 1) // k >= 2:
+                return _b1_alpha(drift_free, k, dmax, white_rate_guard=False)
+            return None
+
+        needs = "2 averages"
+    else:  # Stable32's adev and hdev: the autocorrelation, its last α carried beyond
+        read, needs = (lambda k: _acf_alpha(x[::k], dmax) if x[::k].size >= ACF_POINTS else None,
+                       f"{ACF_POINTS} points")  # fmt: skip
     out, last = [], None
     for k in np.asarray(m, dtype=int):
-        k = int(k)
-        if drift_free is not None and x[::k].size < ACF_POINTS and (x.size - 1) // k >= 2:
-            a = _b1_alpha(drift_free, k, dmax)
-        elif stable32 and not overlapping and last is not None and x[::k].size < ACF_POINTS:
-            a = None  # carried on
-        else:
-            a = _identify(x, k, dmax)
+        a = read(int(k))
         if a is None and last is None:  # the first factor: from the largest k/2ʲ that can
-            j = k // 2
+            j = int(k) // 2
             while a is None and j >= 1:
-                a, j = _identify(x, j, dmax), j // 2
+                a, j = read(j), j // 2
             if a is None:
                 raise ValueError(
                     f"x: {x.size} samples leave {x.size - 1} averages at m = 1; noise "
-                    f"identification needs {B1_AVERAGES}"
+                    f"identification needs {needs}"
                 )
         last = last if a is None else a
         out.append(last)
@@ -170,11 +181,12 @@ def rn_expected(m: int, alpha: int) -> float:
     )
 
 
-def _b1_alpha(x, m, dmax):
-    """B1 (and R(n)) identification at factor m from the phase x (module docstring)."""
+def _b1_alpha(x, m, dmax, white_rate_guard: bool = True):
+    """B1 (and R(n)) identification at factor m from the phase x (`noise_id`); the guard: R(n)
+    nearer white rate noise's than flicker phase noise's takes white rate noise."""
     n = (x.size - 1) // m
-    if n == 2:  # B1(2, μ) = 1 for every μ: white rate noise's value (Stable32's choice)
-        return 0
+    if n == 2:  # B1(2, μ) = 1 for every μ: white rate noise's value (Stable32's choice; a
+        return 0  # noise-free record gets no error here: only Stable32's rule reads N = 2)
     ybar = np.diff(x[: n * m + 1 : m])  # τ-averages (×τ: the scale cancels in the ratios)
     avar = 0.5 * np.mean(np.diff(ybar) ** 2)
     if not avar > 0:
@@ -196,8 +208,8 @@ def _b1_alpha(x, m, dmax):
     c = np.concatenate([[0.0], np.cumsum(d)])
     mvar = np.mean((c[m:] - c[:-m]) ** 2) / m**2
     rn = float(mvar / avar_o)
-    if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 0)):  # rate noise after all: B1
-        return 0  # put white rate noise's 1 below the phase noises' boundary (few averages)
+    if white_rate_guard and rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 0)):
+        return 0  # rate noise after all: few averages put its B1 of 1 below the boundary
     return 1 if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 2)) else 2
 
 

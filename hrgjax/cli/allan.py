@@ -201,8 +201,8 @@ def _allan_parser(sub):
                    help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip
     p.add_argument("--noise-rule", default="hrgjax", choices=("hrgjax", "stable32"),
                    help="the noise type where the lag-1 autocorrelation cannot read it: "
-                   "hrgjax (intervals checked by Monte Carlo) or stable32 (Stable32's "
-                   "types, intervals and totdev at every τ)")  # fmt: skip
+                   "hrgjax (intervals checked by Monte Carlo) or stable32 (the rule that "
+                   "reproduces Stable32 1.60's OCXO tables)")  # fmt: skip
     p.add_argument("--fit", action="store_true",
                    help="identify the composite noise model (white angle/rate noise, rate "
                    "random walk, Gauss–Markov terms) with intervals")  # fmt: skip
