@@ -87,20 +87,12 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
     x = np.asarray(x, dtype=float)
     if rule == "hrgjax":
         read, needs = (lambda k: _identify(x, k, dmax)), f"{B1_AVERAGES} averages"
-    elif overlapping:
+    elif overlapping:  # B1 on the drift-free record down to 2 averages, no R(n) guard
         drift_free = _less_drift(x)
-
-        def read(k):
-            if x[::k].size >= ACF_POINTS:
-                return _acf_alpha(x[::k], dmax)
-            if (x.size - 1) // k >= 2:
-                return _b1_alpha(drift_free, k, dmax, white_rate_guard=False)
-            return None
-
+        read = lambda k: _identify(x, k, dmax, b1_x=drift_free, b1_min=2, guard=False)  # noqa: E731
         needs = "2 averages"
     else:  # Stable32's adev and hdev: the autocorrelation, its last α carried beyond
-        read, needs = (lambda k: _acf_alpha(x[::k], dmax) if x[::k].size >= ACF_POINTS else None,
-                       f"{ACF_POINTS} points")  # fmt: skip
+        read, needs = (lambda k: _identify(x, k, dmax, b1_min=None)), f"{ACF_POINTS} points"
     out, last = [], None
     for k in np.asarray(m, dtype=int):
         a = read(int(k))
@@ -128,13 +120,14 @@ def _less_drift(x):
     return np.concatenate([[0.0], np.cumsum(y)])
 
 
-def _identify(x, k, dmax):
-    """α at factor k by the lag-1 autocorrelation or B1/R(n); None where neither reaches."""
+def _identify(x, k, dmax, *, b1_x=None, b1_min=B1_AVERAGES, guard=True):
+    """α at factor k by the lag-1 autocorrelation or, from `b1_min` averages on (None: never),
+    B1/R(n) on `b1_x` (default `x`); None where neither reaches."""
     z = x[::k]
     if z.size >= ACF_POINTS:
         return _acf_alpha(z, dmax)
-    if (x.size - 1) // k >= B1_AVERAGES:
-        return _b1_alpha(x, k, dmax)
+    if b1_min is not None and (x.size - 1) // k >= b1_min:
+        return _b1_alpha(x if b1_x is None else b1_x, k, dmax, white_rate_guard=guard)
     return None
 
 

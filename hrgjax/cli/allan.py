@@ -199,6 +199,7 @@ def _allan_parser(sub):
     p.add_argument("--kind", default="oadev", choices=KINDS, help="the deviation (oadev)")
     p.add_argument("--taus", default="octave", type=_taus,
                    help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip
+    # hrgjax.allan.NOISE_RULES, written out: --help imports no JAX
     p.add_argument("--noise-rule", default="hrgjax", choices=("hrgjax", "stable32"),
                    help="the noise type where the lag-1 autocorrelation cannot read it: "
                    "hrgjax (intervals checked by Monte Carlo) or stable32 (the rule that "
