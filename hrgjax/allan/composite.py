@@ -29,6 +29,7 @@ upper end of its interval with it forced in is kept as a bound.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import json
 import math
@@ -322,7 +323,7 @@ def identify_noise(
         # each finalist fitted on log σ̂² with its own covariance: J there and the
         # relative covariance's log det score it (in log space the covariance barely moves
         # with the level, so the likelihood cannot trade misfit for a smaller Ω)
-        got = _own_fit(row["fit"], avar, ms, n, tau0)
+        got = _own_fit(row["fit"], avar, ms, n, tau0, cols)
         if got is None or got[3] < FIT_ALPHA:
             # rejected by its own covariance: the start may be an optimum the fullest
             # model's covariance made (a wrong fullest fit ranks its own kind first), so it
@@ -330,7 +331,7 @@ def identify_noise(
             # covariance accepts is kept first, then the better likelihood
             g = row["gauss_markov"]
             start = _best(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms)
-            other = None if start is None else _own_fit(start, avar, ms, n, tau0)
+            other = None if start is None else _own_fit(start, avar, ms, n, tau0, cols)
             rank = lambda f: (f[3] >= FIT_ALPHA, -f[2])  # noqa: E731
             if other is not None and (got is None or rank(other) > rank(got)):
                 got = other
@@ -359,12 +360,12 @@ def identify_noise(
     )  # fmt: skip
 
 
-def _own_fit(start, avar, ms, n, tau0):
+def _own_fit(start, avar, ms, n, tau0, cols=None):
     """A finalist refitted from `start` on log σ̂² with its own covariance: `(fit, Ω,
     J + log det of the relative covariance, p-value of J, covariance of p)`, or None where
     its covariance is degenerate."""
     try:
-        fit, om, cov = _log_fit(start, avar, ms, n, tau0)
+        fit, om, cov = _log_fit(start, avar, ms, n, tau0, cols=cols)
     except np.linalg.LinAlgError:
         return None
     model = _model(fit, ms, tau0)
@@ -429,21 +430,30 @@ def _gls(avar, chol_inv, basis):
     J (C,))`, J = inf where a coefficient is negative (that subset is not admissible)."""
     one = basis.ndim == 2
     basis = basis[None] if one else basis
-    a = np.einsum("ij,cjp->cip", chol_inv, basis)
+    a = chol_inv @ basis
     b = chol_inv @ avar
     scale = np.linalg.norm(a, axis=1, keepdims=True)  # the columns span decades
     a = a / scale
-    ata = np.einsum("cip,ciq->cpq", a, a)
-    atb = np.einsum("cip,i->cp", a, b)
+    ata = a.transpose(0, 2, 1) @ a
+    atb = b @ a
     try:
         c = np.linalg.solve(ata, atb[..., None])[..., 0]
     except np.linalg.LinAlgError:
         c = np.stack([np.linalg.lstsq(m, v, rcond=None)[0] for m, v in zip(ata, atb, strict=True)])
-    r = np.einsum("cip,cp->ci", a, c) - b
-    j = np.einsum("ci,ci->c", r, r)
+    r = (a @ c[..., None])[..., 0] - b
+    j = (r * r).sum(1)
     c = c / scale[:, 0, :]
     j = np.where(np.all(c >= 0, axis=1) & np.isfinite(j), j, np.inf)
     return (c[0], j[0]) if one else (c, j)
+
+
+@functools.lru_cache(maxsize=8)
+def _combinations(n: int, k: int) -> np.ndarray:
+    """The k-subsets of range(n) as rows (C, k)."""
+    rows = list(itertools.combinations(range(n), k))
+    out = np.asarray(rows, dtype=int).reshape(len(rows), k)
+    out.flags.writeable = False
+    return out
 
 
 def _best(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
@@ -462,8 +472,8 @@ def _best(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
         for k in gms:
             if not sub and k == 0:
                 continue
-            combos = list(itertools.combinations(range(len(grid)), k))
-            extra = gm_stack[:, np.asarray(combos, dtype=int).reshape(len(combos), k)]
+            combos = _combinations(len(grid), k)
+            extra = gm_stack[:, combos]
             basis = np.concatenate(
                 [np.broadcast_to(base, (len(combos), *base.shape)), extra.transpose(1, 0, 2)],
                 axis=2,
@@ -471,7 +481,7 @@ def _best(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
             c, j = _gls(avar, chol_inv, basis)
             i = int(np.argmin(j))
             if np.isfinite(j[i]) and (best is None or j[i] < best["J"]):
-                best = {"names": list(sub), "gm": [grid[t] for t in combos[i]], "c": c[i],
+                best = {"names": list(sub), "gm": [grid[int(t)] for t in combos[i]], "c": c[i],
                         "J": float(j[i])}  # fmt: skip
     if best is None:
         return None
@@ -506,24 +516,24 @@ def _refine(fit, avar, chol_inv, cols, tau0, ms, grid):
     return fit
 
 
-def _log_parts(p, names, k, ms, tau0):
+def _log_parts(p, names, k, ms, tau0, cols=None):
     """Model Allan variance and ∂(log model)/∂p at p = (log c² of `names` and of the k
-    Gauss–Markov terms, log T of each)."""
+    Gauss–Markov terms, log T of each); `cols`: the linear terms' unit Allan variances at
+    `ms`, where known."""
     q = len(names)
     c, logt = np.exp(p[: q + k]), p[q + k :]
-    cols = [unit_avar(t, ms, tau0) for t in names]
-    cols += [unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt)) for lt in logt]
-    model = sum(ci * col for ci, col in zip(c, cols, strict=True))
-    jac = [ci * col for ci, col in zip(c, cols, strict=True)]
-    h = 1e-4
-    for j, lt in enumerate(logt):  # ∂/∂ log T, central difference
-        up = unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt + h))
-        dn = unit_avar("gauss_markov", ms, tau0, tau0 / math.exp(lt - h))
-        jac.append(c[q + j] * (up - dn) / (2 * h))
-    return model, np.stack(jac, axis=1) / model[:, None]
+    h = 1e-4  # ∂/∂ log T by central differences: each T and T·e^{±h} in one evaluation
+    times = np.exp(np.concatenate([logt, logt + h, logt - h]))
+    gm = unit_avar("gauss_markov", ms, tau0, tau0 / times)
+    cols = np.stack([unit_avar(t, ms, tau0) if cols is None else cols[t] for t in names]
+                    + list(gm[:k]), axis=1)  # fmt: skip
+    jac = cols * c
+    model = jac.sum(1)
+    slope = c[q:] * (gm[k : 2 * k] - gm[2 * k :]).T / (2 * h)
+    return model, np.concatenate([jac, slope], axis=1) / model[:, None]
 
 
-def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3):
+def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None):
     """The selected model refitted on log σ̂² (Gauss–Newton, step-halving): the relative
     covariance D⁻¹ΩD⁻¹ (D the model) hardly depends on the fitted level, so the weights do
     not follow the estimate as Ω's do on σ̂² itself, and the long octaves' skewed estimates
@@ -541,15 +551,14 @@ def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3):
         return {"names": names, "gm": list(np.exp(p[len(names) + k :])),
                 "c": np.exp(p[: len(names) + k])}  # fmt: skip
 
-    def state(p, chol):
-        model, jac = _log_parts(p, names, k, ms, tau0)
-        r = np.linalg.solve(chol, target - np.log(model))
-        return r, np.linalg.solve(chol, jac)
+    def state(p, whiten):  # whitened residual and Jacobian
+        model, jac = _log_parts(p, names, k, ms, tau0, cols)
+        return whiten @ (target - np.log(model)), whiten @ jac
 
-    def relative(p):  # the covariance of log σ̂² at p: D⁻¹ΩD⁻¹
+    def relative(p):  # the covariance of log σ̂² at p, D⁻¹ΩD⁻¹, and its inverse factor
         om = _omega(fitted(p), ms, n, tau0, avar)
-        model = _log_parts(p, names, k, ms, tau0)[0]
-        return om, np.linalg.cholesky(om / np.outer(model, model))
+        model = _log_parts(p, names, k, ms, tau0, cols)[0]
+        return om, np.linalg.inv(np.linalg.cholesky(om / np.outer(model, model)))
 
     for _ in range(rounds):  # Gauss–Newton with the weights held, then the weights at its end
         om, chol = relative(p)

@@ -61,17 +61,20 @@ def _g_walk(t):
 def _gm_structure(t, eps):
     """D(t)/σ² of a unit-variance AR(1) rate with φ = e^{−ε}, summed over t samples:
     t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)², with the bracket's cancellation avoided (a
-    series where εt < 1e-4)."""
+    series where εt < 1e-4). `t` and `eps` broadcast (several terms' ε in one call)."""
     t = np.abs(np.asarray(t, dtype=float))
+    eps = np.asarray(eps, dtype=float)
     u = eps * t
-    one_m_phi = -math.expm1(-eps)
+    one_m_phi = -np.expm1(-eps)
     bracket = t * one_m_phi + np.expm1(-u)  # t(1 − φ) − (1 − φᵗ)
     small = u < 1e-4
     if small.any():
-        ts = t[small]
-        bracket[small] = ((eps**2 / 2) * (ts * ts - ts) - (eps**3 / 6) * (ts**3 - ts)
-                          + (eps**4 / 24) * (ts**4 - ts))  # fmt: skip
-    return t + 2 * math.exp(-eps) * bracket / one_m_phi**2
+        e, ts = (eps, t[small]) if eps.ndim == 0 else (np.broadcast_to(eps, u.shape)[small],
+                                                       np.broadcast_to(t, u.shape)[small])  # fmt: skip
+        t2 = ts * ts  # (powers by products: np.power is ten times slower)
+        bracket[small] = ((e * e / 2) * (t2 - ts) - (e * e * e / 6) * (t2 * ts - ts)
+                          + (e * e * e * e / 24) * (t2 * t2 - ts))  # fmt: skip
+    return t + 2 * np.exp(-eps) * bracket / one_m_phi**2
 
 
 def _g_gm(t, eps):
@@ -81,10 +84,9 @@ def _g_gm(t, eps):
 def second_difference_cov(gfun, ell, ma, mb):
     """Covariance of the angle's second differences at lags ma (at i) and mb (at i + ℓ):
     Σ c_p c_q G(ℓ + u_q − t_p), c = (1, −2, 1), t = (0, ma, 2ma), u = (0, mb, 2mb)."""
-    out = 0.0
-    for w, p, q in zip(_W, _P, _Q, strict=True):
-        out = out + w * gfun(ell + q * mb - p * ma)
-    return out
+    ell, ma, mb = (np.asarray(v, dtype=float) for v in (ell, ma, mb))
+    shift = _Q.reshape(9, *[1] * np.ndim(ell)) * mb - _P.reshape(9, *[1] * np.ndim(ell)) * ma
+    return np.tensordot(_W, gfun(ell + shift), axes=1)  # the nine values in one call
 
 
 # -- the model's Allan variance and the estimator's covariance -----------------------------
@@ -92,13 +94,19 @@ def second_difference_cov(gfun, ell, ma, mb):
 
 def unit_avar(term, m, tau0, eps=None):
     """Allan variance at factors `m` of one term with unit coefficient² (Q² = 1 [unit·s]²,
-    …; Gauss–Markov: σ² = 1 [unit²] with φ = e^{−eps})."""
+    …; Gauss–Markov: σ² = 1 [unit²] with φ = e^{−eps}; a 1-D `eps` gives one row per
+    value)."""
     m = np.asarray(m, dtype=float)
     if term == "rate_ramp":
         return (m * tau0) ** 2 / 2.0
     if term == "quantization":
         return 3.0 / (m * tau0) ** 2
-    g = term_g(term, tau0, eps)  # second_difference_cov at ℓ = 0 (G(0) = 0, G even)
+    # second_difference_cov at ℓ = 0 (G(0) = 0, G even): (2G(2m) − 8G(m))/(2m²)
+    if term == "gauss_markov":  # G at m and 2m in one evaluation
+        eps = np.asarray(eps, dtype=float)
+        g = _g_gm(np.concatenate([m, 2 * m]), eps[:, None] if eps.ndim == 1 else eps)
+        return (2 * g[..., m.size :] - 8 * g[..., : m.size]) / (2 * m**2)
+    g = term_g(term, tau0)
     return (2 * g(2 * m) - 8 * g(m)) / (2 * m**2)
 
 
@@ -140,14 +148,23 @@ def _sum_rules(lo, hi):
 
 def _geometry(x, piece, lo, hi, ma, mb):
     """What [`_on_pieces`] needs of the pieces that no model changes: each argument's sign σ
-    and value at the ends, the signed moments Σ c_p c_q σ dʲ, the nodes' offsets."""
+    and value at the ends, the signed moments Σ c_p c_q σ dʲ, the nodes' offsets, and at the
+    nodes the two shapes a linear term's c takes — Σ c_p c_q |t| (white rate, and the linear
+    part of a Gauss–Markov G) and Σ c_p c_q (|t|³ − |t|) (a random-walk rate) — as cubics in
+    ℓ − lo."""
     s = _Q[None, :] * mb[:, None] - _P[None, :] * ma[:, None]  # (pieces, 9)
     d, dh = lo[:, None] + s, hi[:, None] + s  # t at the piece's ends
     sig = np.where(d >= 0, 1.0, -1.0)
-    moments = np.stack([(_W * sig * d**j).sum(1) for j in range(4)], axis=1)
+    sw, swd, swd2, swd3 = (np.stack([(_W * sig * d**j).sum(1) for j in range(4)], axis=1)).T
     plus = sig > 0
-    return {"d": np.where(plus, d, 0.0), "dh": np.where(plus, 0.0, dh), "plus": plus,
-            "moments": moments, "xr": x - lo[piece], "rest": (hi - lo)[piece] - (x - lo[piece]),
+    xr = x - lo[piece]
+    walk = np.stack([swd3 - swd, 3 * swd2 - sw, 3 * swd, sw], axis=1)[piece]
+    return {"dist": np.where(plus, d, -dh),  # |t| at the end where φ^{|t|} is largest
+            "w_plus": np.where(plus, _W, 0.0), "w_minus": np.where(plus, 0.0, _W),
+            "length": hi - lo, "xr": xr, "rest": (hi - lo)[piece] - xr,
+            "span": (2 * (ma + mb))[piece],
+            "abs_t": sw[piece] * xr + swd[piece],
+            "cubic": ((walk[:, 3] * xr + walk[:, 2]) * xr + walk[:, 1]) * xr + walk[:, 0],
             "ma": ma, "mb": mb}  # fmt: skip
 
 
@@ -157,40 +174,31 @@ def _on_pieces(geo, x, piece, lin, gms, tau0):
     piece every argument t = ℓ + q·mb − p·ma of G keeps its sign σ, so the white and
     random-walk parts are a cubic in ℓ − lo and a Gauss–Markov term's exponential part is
     P·φ^{ℓ−lo} + M·φ^{hi−ℓ} — nine values of G per node become one cubic and two exponentials
-    per Gauss–Markov term. Where a Gauss–Markov term is near a random walk
-    (ε·(ma + mb) < 0.05, its linear and exponential parts cancelling) it is evaluated
-    pointwise."""
-    sw, swd, swd2, swd3 = geo["moments"].T
-    coef = np.zeros((sw.size, 4))  # cubic in x = ℓ − lo
-    if lin.get("angle_random_walk", 0.0) > 0:
-        f = -0.5 * lin["angle_random_walk"] / tau0
-        coef[:, 1] += f * sw
-        coef[:, 0] += f * swd
+    per Gauss–Markov term (the cubics' two shapes are the layout's: a model only scales
+    them). Where a Gauss–Markov term is near a random walk (ε·(ma + mb) < 0.05, its linear and
+    exponential parts cancelling) it is evaluated pointwise."""
+    f_abs = -0.5 * lin.get("angle_random_walk", 0.0) / tau0
+    f_abs += sum(_gm_weights(s2, eps)[0] for s2, eps in gms)  # their linear parts
+    c = f_abs * geo["abs_t"]
     if lin.get("rate_random_walk", 0.0) > 0:
-        f = lin["rate_random_walk"] * tau0 / 12.0
-        coef += f * np.stack([swd3 - swd, 3 * swd2 - sw, 3 * swd, sw], axis=1)
-    for s2, eps in gms:  # the linear part of a Gauss–Markov term's G
-        a = _gm_weights(s2, eps)[0]
-        coef[:, 1] += a * sw
-        coef[:, 0] += a * swd
-    xr, cp = geo["xr"], coef[piece]
-    c = ((cp[:, 3] * xr + cp[:, 2]) * xr + cp[:, 1]) * xr + cp[:, 0]
-    plus, ma, mb = geo["plus"], geo["ma"], geo["mb"]
+        c = c + (lin["rate_random_walk"] * tau0 / 12.0) * geo["cubic"]
+    xr, rest = geo["xr"], geo["rest"]
     for s2, eps in gms:
-        e = _gm_weights(s2, eps)[1]
-        pw = (np.where(plus, _W, 0.0) * np.exp(-eps * geo["d"])).sum(1)
-        mw = (np.where(plus, 0.0, _W) * np.exp(eps * geo["dh"])).sum(1)
-        c += e * (pw[piece] * np.exp(-eps * xr) + mw[piece] * np.exp(-eps * geo["rest"]))
-        slow = (eps * 2 * (ma + mb) < 0.05)[piece]
-        if slow.any():  # replace the cancelling parts by the pointwise value
-            a = _gm_weights(s2, eps)[0]
-            m1, m0 = geo["moments"][piece][slow, 1], geo["moments"][piece][slow, 0]
-            fast = a * (m0 * xr[slow] + m1) + e * (pw[piece][slow] * np.exp(-eps * xr[slow])
-                                                    + mw[piece][slow] * np.exp(-eps * geo["rest"][slow]))  # fmt: skip
+        a, e = _gm_weights(s2, eps)
+        ends = np.exp(-eps * geo["dist"])
+        pw = (geo["w_plus"] * ends).sum(1)[piece]
+        mw = (geo["w_minus"] * ends).sum(1)[piece]
+        down = np.exp(-eps * xr)  # φ^{ℓ−lo}; φ^{hi−ℓ} = φ^{hi−lo}/φ^{ℓ−lo} where that is finite
+        up = np.exp(-eps * geo["length"])[piece] / np.maximum(down, 1e-290)
+        far = np.flatnonzero(eps * xr > 600.0)
+        up[far] = np.exp(-eps * rest[far])
+        c = c + e * (pw * down + mw * up)
+        slow = np.flatnonzero(eps * geo["span"] < 0.05)
+        if slow.size:  # replace the cancelling parts by the pointwise value
+            fast = a * geo["abs_t"][slow] + e * (pw[slow] * down[slow] + mw[slow] * up[slow])
+            ps = piece[slow]
             g = term_g("gauss_markov", tau0, eps)
-            c[slow] += (
-                s2 * second_difference_cov(g, x[slow], ma[piece][slow], mb[piece][slow]) - fast
-            )
+            c[slow] += s2 * second_difference_cov(g, x[slow], geo["ma"][ps], geo["mb"][ps]) - fast
     return c
 
 
@@ -214,10 +222,11 @@ def _tail_sum(rate, x_end):
 
 
 @functools.lru_cache(maxsize=8)
-def _layout(ms: tuple, n: int):
+def _layout(ms: tuple, n: int) -> dict:
     """The pairs of octaves, the pieces of the kinks' region −2mb < ℓ < 2ma (cut where a
     generalised covariance turns, ℓ = p·ma − q·mb, and where the count bends or reaches 0) and their
-    nodes and weights — the same for every model of one record."""
+    nodes and weights (× the count of pairs at each lag; nodes where it is 0 left out) — the
+    same for every model of one record."""
     ms = np.asarray(ms, dtype=np.int64)
     ia, ib = np.triu_indices(ms.size)  # the pairs a ≤ b
     ma, mb = ms[ia], ms[ib]
@@ -230,13 +239,28 @@ def _layout(ms: tuple, n: int):
     los, his = cuts[:, :-1].ravel(), (cuts[:, 1:] - 1).ravel()
     owner = np.repeat(np.arange(ma.size), cuts.shape[1] - 1)
     x, w, piece = _sum_rules(los, his)
-    floats = tuple(v.astype(float) for v in (ma, mb, na, nb))
-    geo = _geometry(x, piece, los.astype(float), his.astype(float), floats[0][owner],
-                    floats[1][owner])  # fmt: skip
-    out = (ia, ib, kinks, owner, x, w, piece, *floats, *geo.values())
-    for a in out:
-        a.flags.writeable = False  # cached: shared by every call for this record
-    return ia, ib, kinks, owner, x, w, piece, floats, geo
+    ma, mb, na, nb = (v.astype(float) for v in (ma, mb, na, nb))
+
+    def count(ell, k):  # pairs (i, i + ℓ) of second differences at lag ℓ
+        return np.maximum(np.minimum(na[k], nb[k] - ell) - np.maximum(0.0, -ell), 0.0)
+
+    wc = w * count(x, owner[piece])
+    keep = wc != 0
+    x, wc, piece = x[keep], wc[keep], piece[keep]
+    # white angle noise: c is non-zero only at the nine lags ℓ = t_p − u_q of each pair
+    key, where = np.unique(np.stack([np.repeat(np.arange(ma.size), 9), kinks.ravel()]),
+                           axis=1, return_inverse=True)  # fmt: skip
+    q_k, q_x = key[0], key[1].astype(float)
+    lay = {"ia": ia, "ib": ib, "x": x, "wc": wc, "piece": piece, "k": owner[piece],
+           "ma": ma, "mb": mb, "na": na, "nb": nb, "q_k": q_k, "q_x": q_x,
+           "q_count": count(q_x, q_k),
+           "q_unit": np.bincount(where.ravel(), weights=np.tile(_W, ma.size)),
+           "geo": _geometry(x, piece, los.astype(float), his.astype(float), ma[owner],
+                            mb[owner])}  # fmt: skip
+    for a in (*lay.values(), *lay["geo"].values()):
+        if isinstance(a, np.ndarray):
+            a.flags.writeable = False  # cached: shared by every call for this record
+    return lay
 
 
 def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
@@ -247,43 +271,38 @@ def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
     Between the kinks the sum over ℓ runs piecewise by quadrature; beyond them only the
     Gauss–Markov terms' exponentials are left (c = Σ_g K_g φ_g^x, x lags past the last kink,
     the count linear in x), and both tails are summed in closed form."""
-    ia, ib, kinks, owner, x, w, piece, (ma, mb, na, nb), geo = _layout(
-        tuple(int(m) for m in ms), int(n)
-    )
-    terms = [(term_g(t, tau0), c) for t, c in coef.items()
-             if t in ("angle_random_walk", "rate_random_walk") and c > 0]  # fmt: skip
-    terms += [(term_g("gauss_markov", tau0, tau0 / tt), s2) for s2, tt in gm if s2 > 0]
-    q2 = coef.get("quantization", 0.0) / tau0**2  # white angle noise in X units
-    mu2 = coef.get("rate_ramp", 0.0) * tau0**2 * ma**2 * mb**2  # μ_a·μ_b of the drift
+    lay = _layout(tuple(int(m) for m in ms), int(n))
+    ma, mb, na, nb = lay["ma"], lay["mb"], lay["na"], lay["nb"]
     lin = {t: c for t, c in coef.items() if t in ("angle_random_walk", "rate_random_walk")}
     gms = [(s2, tau0 / tt) for s2, tt in gm if s2 > 0]
+    q2 = coef.get("quantization", 0.0) / tau0**2  # white angle noise in X units
+    mu2 = coef.get("rate_ramp", 0.0) * tau0**2 * ma**2 * mb**2  # μ_a·μ_b of the drift
 
-    def count(ell, k):
-        return np.maximum(np.minimum(na[k], nb[k] - ell) - np.maximum(0.0, -ell), 0.0)
-
-    k = owner[piece]
-    c = _on_pieces(geo, x, piece, lin, gms, tau0)
-    total = np.bincount(k, weights=w * count(x, k) * (2 * c * c + 4 * mu2[k] * c),
-                        minlength=ma.size)  # fmt: skip
+    c = _on_pieces(lay["geo"], lay["x"], lay["piece"], lin, gms, tau0)
+    terms = 2 * c * c
+    if mu2.any():
+        terms = terms + 4 * mu2[lay["k"]] * c
+    total = np.bincount(lay["k"], weights=lay["wc"] * terms, minlength=ma.size)
     # the tails ℓ ≥ 2ma (count nb − ℓ) and ℓ ≤ −2mb (count na + ℓ): c = Σ_g K_g φ_g^x with
     # K_g = e_g·(1 − φ^{ma})²(1 − φ^{mb})² (the nine exponentials factor)
-    amp = [_gm_weights(s2, eps)[1] * np.expm1(-eps * ma) ** 2 * np.expm1(-eps * mb) ** 2
-           for s2, eps in gms]  # fmt: skip
-    for x_end in (nb - 1 - 2 * ma, na - 1 - 2 * mb):
-        for g, (_, eg) in enumerate(gms):
-            total += 4 * mu2 * amp[g] * _tail_sum(eg, x_end)
-            for h, (_, eh) in enumerate(gms):
-                total += 2 * amp[g] * amp[h] * _tail_sum(eg + eh, x_end)
+    if gms:
+        eps = np.array([e for _, e in gms])[:, None]  # (G, 1)
+        amp = np.stack([_gm_weights(s2, e)[1] * np.expm1(-e * ma) ** 2 * np.expm1(-e * mb) ** 2
+                        for s2, e in gms])  # fmt: skip
+        for x_end in (nb - 1 - 2 * ma, na - 1 - 2 * mb):
+            total += 4 * mu2 * (amp * _tail_sum(eps, x_end)).sum(0)
+            pairs = _tail_sum(eps[:, None] + eps[None, :], x_end)  # (G, G, pairs)
+            total += 2 * (amp[:, None] * amp[None, :] * pairs).sum((0, 1))
     if q2 > 0:  # white angle noise: c is q2·Σ c_p c_q at the lags ℓ = t_p − u_q only
-        key, where = np.unique(np.stack([np.repeat(np.arange(ma.size), 9), kinks.ravel()]),
-                               axis=1, return_inverse=True)  # fmt: skip
-        cq = np.bincount(where.ravel(), weights=np.tile(_W * q2, ma.size))
-        k, xq = key[0], key[1].astype(float)
-        cs = (sum(wt * second_difference_cov(g, xq, ma[k], mb[k]) for g, wt in terms)
-              if terms else np.zeros_like(xq))  # fmt: skip
-        total += np.bincount(k, weights=count(xq, k) * (2 * ((cs + cq) ** 2 - cs**2)
-                                                        + 4 * mu2[k] * cq), minlength=ma.size)  # fmt: skip
+        k, xq = lay["q_k"], lay["q_x"]
+        cq = q2 * lay["q_unit"]
+        cs = sum(wt * second_difference_cov(term_g(t, tau0), xq, ma[k], mb[k])
+                 for t, wt in lin.items() if wt > 0)  # fmt: skip
+        cs = cs + sum(s2 * second_difference_cov(term_g("gauss_markov", tau0, e), xq, ma[k], mb[k])
+                      for s2, e in gms)  # fmt: skip
+        total += np.bincount(k, weights=lay["q_count"] * (2 * ((cs + cq) ** 2 - cs**2)
+                                                          + 4 * mu2[k] * cq), minlength=ma.size)  # fmt: skip
     out = np.zeros((len(ms), len(ms)))
-    out[ia, ib] = total / (4.0 * ma**2 * mb**2 * na * nb)
-    out[ib, ia] = out[ia, ib]
+    out[lay["ia"], lay["ib"]] = total / (4.0 * ma**2 * mb**2 * na * nb)
+    out[lay["ib"], lay["ia"]] = out[lay["ia"], lay["ib"]]
     return out

@@ -135,9 +135,10 @@ def _acf_alpha(z, dmax):
     z = _detrend2(z)
     d = 0
     while True:
-        zc = z - z.mean()
+        mean = z.mean()
+        zc = z - mean
         power = float(np.dot(zc, zc))
-        if not power > 1e-30 * max(float(np.dot(z, z)), 1e-300):
+        if not power > 1e-30 * max(power + z.size * float(mean) ** 2, 1e-300):  # Σz²
             _no_noise()
         r1 = float(np.dot(zc[:-1], zc[1:]) / power)
         rho = r1 / (1.0 + r1)
@@ -215,15 +216,20 @@ def _no_noise():
 
 def _detrend2(z):
     """z less its least-squares quadratic in the sample index (as `np.polyfit(t, z, 2)`), by
-    three orthogonal polynomials on the index: three passes instead of a Vandermonde solve."""
+    the orthogonal polynomials 1, t, t² − mean(t²) on the symmetric index t ∈ [−1, 1]: their
+    norms in closed form, each coefficient one pass."""
     n = z.size
+    if n < 3:
+        return z - z.mean()
     t = np.linspace(-1.0, 1.0, n)
-    p1 = t
-    p2 = t * t - np.dot(t, t) / n
-    out = z - z.mean()
-    for p in (p1, p2):
-        out = out - p * (np.dot(p, out) / np.dot(p, p))
-    return out
+    s2 = n * (n + 1) / (3.0 * (n - 1))  # Σt², and Σt⁴ below
+    s4 = n * (n + 1) * (3.0 * n * n - 7) / (15.0 * (n - 1) ** 3)
+    c2 = s2 / n  # mean(t²)
+    a0 = z.mean()
+    b1 = np.dot(t, z) / s2
+    tt = t * t
+    b2 = (np.dot(tt, z) - c2 * n * a0) / (s4 - n * c2 * c2)
+    return z - ((b2 * t + b1) * t + (a0 - b2 * c2))
 
 
 # -- equivalent degrees of freedom (Greenhall & Riley, "Uncertainty of stability variances
