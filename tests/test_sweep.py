@@ -24,7 +24,7 @@ def test_sweep_sharded_equals_single_device():
         import jax.numpy as jnp, numpy as np
         import hrgjax as hg
         assert jax.device_count() == 4
-        gyro = hg.presets.tvg3_like(noise=False)
+        gyro = hg.presets.ideal(hg.presets.tvg3_like().resonator)  # ideal loops: a light compile
         def f(temperature_c, rate_dps):
             prof = hg.Profile.constant_rate(rate_dps, 5.0, temperature_c)
             return hg.simulate(gyro, prof, dt_out=5.0).wave_angle[-1]
