@@ -5,11 +5,14 @@ own path) — the slow manifold must reproduce its wave-angle rate, and a grey b
 gyro's loops must return the gyro's own laws, where the ideal-loop grey box is pulled.
 """
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import CompileCounter
 
 import hrgjax as hg
 from hrgjax.calibration import (
@@ -78,12 +81,20 @@ def test_grey_box_with_the_plant_returns_the_laws(gyro, tmp_path):
     th = np.linspace(-90.0, 90.0, 7)
     sf_i, sf_p = ideal.scale_factor_at(th, 20.0), plant.scale_factor_at(th, 20.0)
     bare = PhysicalCompensator(values=plant.values, covariance=plant.covariance)  # no loops
-    ripple = np.max(np.abs(sf_i - bare.scale_factor_at(th, 20.0)))
+    with CompileCounter() as c:  # another fit of the same structure: the same program
+        sf_bare = bare.scale_factor_at(th, 20.0)
+    assert c.compiles == 0, c.names
+    ripple = np.max(np.abs(sf_i - sf_bare))
     assert ripple > 1e-5  # the loops' lag in SF: ≈ 3e-5
     assert np.max(np.abs(sf_p - sf_i)) < 0.1 * ripple  # (30-s runs: their transients ≈ 4 %)
-    # the plant travels with the saved compensator
+    # the plant travels with the saved compensator; a plant fitted at another table rate
+    # shares its program too
     back = load_compensator(save_compensator(plant, tmp_path / "p.eqx"))
-    np.testing.assert_array_equal(back.scale_factor_at(th, 20.0), plant.scale_factor_at(th, 20.0))
+    np.testing.assert_array_equal(back.scale_factor_at(th, 20.0), sf_p)
+    with CompileCounter() as c:
+        other = dataclasses.replace(plant, sf_rate=2 * plant.sf_rate)
+        assert np.max(np.abs(other.scale_factor_at(th, 20.0) - sf_p)) > 0
+    assert c.compiles == 0, c.names
     assert "PI loops" in back.equations()
     with pytest.raises(ValueError, match="plant=None"):
         PhysicalCompensator(plant=hg.presets.ideal(gyro.resonator))

@@ -119,6 +119,12 @@ class AbstractCompensator(eqx.Module):
             theta, temperature_c
         )
 
+    def _program_form(self):
+        """This compensator as the compiled programs of `drift_dph`, `scale_factor_at` and
+        `correct` take it: a module with `drift`, `scale_factor` and `corrected_rate` whose
+        static part does not change from fit to fit (here: itself)."""
+        return self
+
     def drift_dph(self, theta_deg, temperature_c) -> np.ndarray:
         """`drift` in the bench's units: θ [°] in, drift [°/h] out (NumPy)."""
         return self._pointwise("drift", theta_deg, temperature_c) / DEG * 3600.0
@@ -135,7 +141,7 @@ class AbstractCompensator(eqx.Module):
         n = th.size
         size = bucket_size(n)
         pad = lambda x: device(bucket_pad(x.ravel(), size))
-        out = np.asarray(_pointwise(self, which, pad(th), pad(tc)))[:n]
+        out = np.asarray(_pointwise(self._program_form(), which, pad(th), pad(tc)))[:n]
         return out.reshape(th.shape)
 
     def correct(self, data: MeasuredData) -> MeasuredData:
@@ -176,7 +182,7 @@ class AbstractCompensator(eqx.Module):
         )
         n = first.size
         padded = [device(bucket_pad(x, bucket_size(n))) for x in inputs]
-        interval = np.asarray(_interval_rates(self, *padded))[:n]
+        interval = np.asarray(_interval_rates(self._program_form(), *padded))[:n]
         rate_out = np.empty(len(data))
         angle_out = np.empty(len(data))
         start = 0

@@ -78,6 +78,60 @@ from .reduce import K_E_NOMINAL, reduce
 from .reduce import RAMP_WINDOW_S as RAMP_WINDOW_S
 
 
+class _FittedLaws(eqx.Module):
+    """A fitted `PhysicalCompensator`'s arithmetic (its `_program_form`): its D(θ, T),
+    SF(θ, T), ∂θ̂/∂T and compensated rate, without what does not enter them (fit
+    statistics, covariance, fit settings), the scale factor's table rate `sf_rate` [rad/s]
+    an array (`at_rate`: whether it is used; False: the slow-rate limit)."""
+
+    k_e: float = eqx.field(static=True)
+    values: jax.Array
+    plant: Gyro | None
+    sf_rate: jax.Array
+    at_rate: bool = eqx.field(static=True)
+
+    def gyro(self) -> Gyro:
+        """The fitted model gyro (`PhysicalCompensator.gyro`)."""
+        return model_gyro(self.values, plant=self.plant)
+
+    def _derivatives(self, theta_meas, temperature_c):
+        g = self.gyro().at(temperature_c)
+        theta = true_angle(g, theta_meas)
+        slope = jax.jvp(lambda th: readout_angle(g, th), (theta,), (jnp.ones_like(theta),))[1]
+        rest = Profile.static(1.0, temperature_c)
+        if self.plant is None:
+            theta_dot = averaged_vector_field(0.0, theta[None], (g, rest))[0]
+            return slope, theta_dot, g.resonator.k_e
+        # the PI loops on their slow manifold: the rest drift, and the gain −∂θ̇/∂Ω with
+        # the loops' lag (a 2θ ripple ∝ Ω) in it
+        rate = lambda w: reduced_rate(g, w, theta)
+        w0 = input_rate(g, rest, 0.0)
+        if not self.at_rate:
+            theta_dot, d_rate = jax.jvp(rate, (w0,), (jnp.ones_like(w0),))
+            return slope, theta_dot, -d_rate
+        theta_dot = rate(w0)
+        return slope, theta_dot, -(rate(w0 + self.sf_rate) - theta_dot) / self.sf_rate
+
+    def readout_temperature_sensitivity(self, theta, temperature_c):
+        """∂θ̂/∂T [rad/°C] at the measured angle θ [rad] and temperature [°C]."""
+        gyro = self.gyro()
+        true = true_angle(gyro.at(temperature_c), theta)
+        meas = lambda temp: readout_angle(gyro.at(temp), true)
+        return jax.jvp(meas, (temperature_c,), (jnp.ones_like(temperature_c),))[1]
+
+    def drift(self, theta, temperature_c):
+        """D(θ, T) [rad/s]; θ electrical [rad], T [°C]."""
+        slope, theta_dot, _ = self._derivatives(theta, temperature_c)
+        return -slope * theta_dot / self.k_e
+
+    def scale_factor(self, theta, temperature_c):
+        """SF(θ, T) (1 = nominal)."""
+        slope, _, k_e = self._derivatives(theta, temperature_c)
+        return slope * k_e / self.k_e
+
+    corrected_rate = AbstractCompensator.corrected_rate
+
+
 class PhysicalCompensator(AbstractCompensator):
     """Grey-box compensator (module docstring).
 
@@ -131,9 +185,7 @@ class PhysicalCompensator(AbstractCompensator):
     def gyro(self) -> Gyro:
         """The fitted model gyro: fitted laws, with ideal loops (no `plant`) or the plant's
         loops and resonator constants."""
-        if self.values is None:
-            raise ValueError("this PhysicalCompensator is not fitted; use comp = comp.fit(data)")
-        return model_gyro(self.values, plant=self.plant)
+        return self._program_form().gyro()
 
     def parameters(self) -> dict[str, tuple[float, float]]:
         """{name: (value, standard error)} in SI units."""
@@ -143,37 +195,29 @@ class PhysicalCompensator(AbstractCompensator):
             for n, v, e in zip(NAMES, np.asarray(self.values), err, strict=True)
         }
 
-    def _derivatives(self, theta_meas, temperature_c):
-        g = self.gyro().at(temperature_c)
-        theta = true_angle(g, theta_meas)
-        slope = jax.jvp(lambda th: readout_angle(g, th), (theta,), (jnp.ones_like(theta),))[1]
-        rest = Profile.static(1.0, temperature_c)
-        if self.plant is None:
-            theta_dot = averaged_vector_field(0.0, theta[None], (g, rest))[0]
-            return slope, theta_dot, g.resonator.k_e
-        # the PI loops on their slow manifold: the rest drift, and the gain −∂θ̇/∂Ω with
-        # the loops' lag (a 2θ ripple ∝ Ω) in it
-        rate = lambda w: reduced_rate(g, w, theta)
-        w0 = input_rate(g, rest, 0.0)
-        if self.sf_rate == 0.0:
-            theta_dot, d_rate = jax.jvp(rate, (w0,), (jnp.ones_like(w0),))
-            return slope, theta_dot, -d_rate
-        theta_dot = rate(w0)
-        return slope, theta_dot, -(rate(w0 + self.sf_rate) - theta_dot) / self.sf_rate
+    def _program_form(self) -> _FittedLaws:
+        """The fitted laws as the compiled programs take them (`_FittedLaws`): what enters D,
+        SF and ∂θ̂/∂T, the scale factor's table rate as an array — so every fit of one plant
+        shares the programs of `drift_dph`, `scale_factor_at` and `correct` (the fit
+        statistics and the table rate, static here, would make each fit compile them anew)."""
+        if self.values is None:
+            raise ValueError("this PhysicalCompensator is not fitted; use comp = comp.fit(data)")
+        return _FittedLaws(
+            k_e=self.k_e,
+            values=self.values,
+            plant=self.plant,
+            sf_rate=jnp.asarray(np.float64(self.sf_rate)),
+            at_rate=self.sf_rate != 0.0,
+        )
 
     def readout_temperature_sensitivity(self, theta, temperature_c):
-        gyro = self.gyro()
-        true = true_angle(gyro.at(temperature_c), theta)
-        meas = lambda temp: readout_angle(gyro.at(temp), true)
-        return jax.jvp(meas, (temperature_c,), (jnp.ones_like(temperature_c),))[1]
+        return self._program_form().readout_temperature_sensitivity(theta, temperature_c)
 
     def drift(self, theta, temperature_c):
-        slope, theta_dot, _ = self._derivatives(theta, temperature_c)
-        return -slope * theta_dot / self.k_e
+        return self._program_form().drift(theta, temperature_c)
 
     def scale_factor(self, theta, temperature_c):
-        slope, _, k_e = self._derivatives(theta, temperature_c)
-        return slope * k_e / self.k_e
+        return self._program_form().scale_factor(theta, temperature_c)
 
     def equations(self) -> str:
         """The fitted laws with 1σ uncertainties, as text."""
