@@ -176,7 +176,8 @@ def test_single_simulations_run_on_the_cpu_beside_an_accelerator(monkeypatch):
     rest for real."""
     from hrgjax import _compiled, _export
 
-    gyro, prof = hg.presets.tvg3_like(noise=False), hg.Profile.constant_rate(2.0, 1.0)
+    gyro = hg.presets.ideal(hg.presets.tvg3_like().resonator)  # ideal loops: a light compile
+    prof = hg.Profile.constant_rate(2.0, 1.0)
     plain = hg.simulate(gyro, prof)
     seen = []
     real_call = _export.call

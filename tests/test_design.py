@@ -300,7 +300,8 @@ def test_each_segment_is_the_simulation_of_its_profile(quiet):
     """Segment i is run i; each equals hg.simulate of its two-knot profile (static,
     5 °/s rotation, 1-°C ramp) to 1e-10 rad; the columns carry the plan's values."""
     plan = d.BenchPlan.from_segments(SEGMENTS)
-    data = d.simulate_plan(quiet, plan)
+    k = jax.random.key(0)  # the keys `hrgjax simulate --plan-file` passes: its program
+    data = d.simulate_plan(quiet, plan, key=k, bias_key=jax.random.fold_in(k, 1))
     assert np.unique(data.run).tolist() == [0, 1, 2]
     for i, s in enumerate(SEGMENTS):
         rows = data.run == i

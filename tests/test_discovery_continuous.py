@@ -74,7 +74,7 @@ def test_each_drift_term_alone_gives_its_formula(quiet):
     np.testing.assert_allclose(th, -K_E * b_l * integral[::500], atol=1e-9)
 
     kappa = 0.3  # s²
-    turn = hg.Profile.constant_rate(30.0, 1000.0)
+    turn = hg.Profile.piecewise(RAMP.t, 30.0, 20.0)  # RAMP's knots: its program
     omega = 30.0 * DEG
     th = _angle(_with(quiet, rate_cubic=kappa), turn)
     np.testing.assert_allclose(th, -K_E * (omega + kappa * omega**3) * TS, rtol=1e-9)
