@@ -205,9 +205,11 @@ def test_a_schedule_switches_whole_angle_and_rebalance_during_a_run():
     np.testing.assert_array_equal(np.asarray(rec.rebalance_on)[[0, 19, 20, 59, 60, 80]],
                                   [0, 0, 1, 1, 0, 0])  # fmt: skip
     assert rec.to_data()["rebalance_on"].sum() == 40
-    short = hg.Profile.piecewise([0.0, 0.25, 1.0], omega, 20.0, rebalance=[0, 1, 1])
-    full = hg.simulate(gyro, short, model="full", dt_out=0.25)  # the default: fixed steps
-    avg = hg.simulate(gyro, short, dt_out=0.25)
+    # (four knots and 81 outputs: the averaged run is the run above's program)
+    short = hg.Profile.piecewise([0.0, 0.25, 0.5, 1.0], omega, 20.0, rebalance=[0, 1, 1, 1])
+    ts = np.linspace(0.0, 1.0, 81)
+    full = hg.simulate(gyro, short, model="full", ts=ts)  # the default: fixed steps
+    avg = hg.simulate(gyro, short, ts=ts, **TIGHT)
     np.testing.assert_allclose(np.asarray(full.wave_angle), np.asarray(avg.wave_angle), atol=1e-6)
     with pytest.raises(ValueError, match="give the gyro Control"):
         hg.simulate(hg.Gyro(resonator=PERFECT), prof)
