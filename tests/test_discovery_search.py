@@ -213,7 +213,10 @@ def test_the_default_gyros_own_bench_data_end_near_their_floor():
     bias_key = jax.random.fold_in(key, 1)
     parts, first = [], 0
     for i, plan in enumerate(
-        (static_plan(temps, angles, 120.0), rotation_plan(temps, angles, duration_s=120.0))
+        (
+            static_plan(temps, angles, 120.0, dt_out=0.5),
+            rotation_plan(temps, angles, duration_s=120.0),
+        )
     ):
         parts.append(
             run_plan(
