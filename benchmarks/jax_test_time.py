@@ -7,10 +7,12 @@ As a plugin it appends one JSON line per test to `$JAX_TEST_TIME_OUT` (default
 (`backend_compile_duration`), with each compiled program's name and time. Run as a script it
 sums a file: per file, and the compiles by size (≥ 0.1 s: programs; below: eager operations).
 
-Usage (2 workers, as `make test`):
+Usage (2 workers, as `make test`; the plugin copied to a folder of its own, since
+`benchmarks/` on the path would shadow the `coverage` package with `benchmarks/coverage.py`):
 
+    mkdir -p out/plugin && cp benchmarks/jax_test_time.py out/plugin/
     rm -f out/jax_test_time.jsonl
-    PYTHONPATH=benchmarks .venv/bin/python -m pytest -q -n 2 --dist loadfile -p jax_test_time
+    PYTHONPATH=out/plugin .venv/bin/python -m pytest -q -n 2 --dist loadfile -p jax_test_time
     .venv/bin/python benchmarks/jax_test_time.py out/jax_test_time.jsonl
 """
 
