@@ -378,6 +378,14 @@ def test_bad_input_is_named(kwargs, match):
     with pytest.raises(ValueError, match="infinite value at index 3"):
         allan.deviation(np.r_[Y[:3], np.inf, Y[:10]], 1.0)
     assert hg.allan.deviation is allan.deviation
+    # a noise-free phase (constant, or a quadratic: a drifting rate), at any offset, has no
+    # noise type; a phase with noise 100 ulp above a large offset has one
+    i = np.arange(1001.0)
+    for phase in (np.full(1001, 3.0), 1e9 + 3.0 * i + 1e-3 * i * i, np.full(64, 0.1)):
+        with pytest.raises(ValueError, match="no noise to identify"):
+            allan.noise_id(phase, [1])
+    walk = 1e5 + np.cumsum(1e-9 * np.random.default_rng(3).normal(size=1001))
+    assert allan.noise_id(walk, [1, 2]).tolist() == [0, 0]  # white rate (a random-walk phase)
 
 
 def test_fit_noise_recovers_the_ieee952_terms():

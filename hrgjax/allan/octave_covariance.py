@@ -84,8 +84,9 @@ def _g_gm(t, eps):
 def second_difference_cov(gfun, ell, ma, mb):
     """Covariance of the angle's second differences at lags ma (at i) and mb (at i + ℓ):
     Σ c_p c_q G(ℓ + u_q − t_p), c = (1, −2, 1), t = (0, ma, 2ma), u = (0, mb, 2mb)."""
-    ell, ma, mb = (np.asarray(v, dtype=float) for v in (ell, ma, mb))
-    shift = _Q.reshape(9, *[1] * np.ndim(ell)) * mb - _P.reshape(9, *[1] * np.ndim(ell)) * ma
+    ell, ma, mb = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (ell, ma, mb)))
+    axes = (9,) + (1,) * ell.ndim
+    shift = _Q.reshape(axes) * mb - _P.reshape(axes) * ma
     return np.tensordot(_W, gfun(ell + shift), axes=1)  # the nine values in one call
 
 
@@ -103,9 +104,13 @@ def unit_avar(term, m, tau0, eps=None):
         return 3.0 / (m * tau0) ** 2
     # second_difference_cov at ℓ = 0 (G(0) = 0, G even): (2G(2m) − 8G(m))/(2m²)
     if term == "gauss_markov":  # G at m and 2m in one evaluation
+        if eps is None:
+            raise ValueError("unit_avar: a gauss_markov term needs eps = τ₀/T")
         eps = np.asarray(eps, dtype=float)
-        g = _g_gm(np.concatenate([m, 2 * m]), eps[:, None] if eps.ndim == 1 else eps)
-        return (2 * g[..., m.size :] - 8 * g[..., : m.size]) / (2 * m**2)
+        if eps.ndim == 1:  # a row per value
+            eps = eps.reshape((eps.size,) + (1,) * (m.ndim + 1))
+        g = _g_gm(np.stack([m, 2 * m], axis=-1), eps)
+        return (2 * g[..., 1] - 8 * g[..., 0]) / (2 * m**2)
     g = term_g(term, tau0)
     return (2 * g(2 * m) - 8 * g(m)) / (2 * m**2)
 
@@ -147,11 +152,12 @@ def _sum_rules(lo, hi):
 
 
 def _geometry(x, piece, lo, hi, ma, mb):
-    """What [`_on_pieces`] needs of the pieces that no model changes: each argument's sign σ
-    and value at the ends, the signed moments Σ c_p c_q σ dʲ, the nodes' offsets, and at the
-    nodes the two shapes a linear term's c takes — Σ c_p c_q |t| (white rate, and the linear
-    part of a Gauss–Markov G) and Σ c_p c_q (|t|³ − |t|) (a random-walk rate) — as cubics in
-    ℓ − lo."""
+    """What [`_on_pieces`] needs of the pieces that no model changes: each argument's |t| at
+    the end where φ^{|t|} is largest and the weights c_p c_q by its sign, the pieces' lengths,
+    the nodes' offsets from either end, and at the nodes the two shapes a linear term's c
+    takes — Σ c_p c_q |t| (white rate, and the linear part of a Gauss–Markov G) and
+    Σ c_p c_q (|t|³ − |t|) (a random-walk rate), cubics in ℓ − lo from the signed moments
+    Σ c_p c_q σ dʲ."""
     s = _Q[None, :] * mb[:, None] - _P[None, :] * ma[:, None]  # (pieces, 9)
     d, dh = lo[:, None] + s, hi[:, None] + s  # t at the piece's ends
     sig = np.where(d >= 0, 1.0, -1.0)
@@ -161,7 +167,7 @@ def _geometry(x, piece, lo, hi, ma, mb):
     walk = np.stack([swd3 - swd, 3 * swd2 - sw, 3 * swd, sw], axis=1)[piece]
     return {"dist": np.where(plus, d, -dh),  # |t| at the end where φ^{|t|} is largest
             "w_plus": np.where(plus, _W, 0.0), "w_minus": np.where(plus, 0.0, _W),
-            "length": hi - lo, "xr": xr, "rest": (hi - lo)[piece] - xr,
+            "length": np.maximum(hi - lo, 0.0), "xr": xr, "rest": (hi - lo)[piece] - xr,
             "span": (2 * (ma + mb))[piece],
             "abs_t": sw[piece] * xr + swd[piece],
             "cubic": ((walk[:, 3] * xr + walk[:, 2]) * xr + walk[:, 1]) * xr + walk[:, 0],
@@ -175,9 +181,9 @@ def _on_pieces(geo, x, piece, lin, gms, tau0):
     random-walk parts are a cubic in ℓ − lo and a Gauss–Markov term's exponential part is
     P·φ^{ℓ−lo} + M·φ^{hi−ℓ} — nine values of G per node become one cubic and two exponentials
     per Gauss–Markov term (the cubics' two shapes are the layout's: a model only scales
-    them). Where a Gauss–Markov term is near a random walk (ε·(ma + mb) < 0.05, its linear and
-    exponential parts cancelling) it is evaluated pointwise."""
-    f_abs = -0.5 * lin.get("angle_random_walk", 0.0) / tau0
+    them). Where a Gauss–Markov term is near a random walk (2ε·(ma + mb) < 0.05, its linear
+    and exponential parts cancelling) it is evaluated pointwise."""
+    f_abs = -0.5 * max(lin.get("angle_random_walk", 0.0), 0.0) / tau0
     f_abs += sum(_gm_weights(s2, eps)[0] for s2, eps in gms)  # their linear parts
     c = f_abs * geo["abs_t"]
     if lin.get("rate_random_walk", 0.0) > 0:

@@ -132,13 +132,17 @@ def _identify(x, k, dmax, *, b1_x=None, b1_min=B1_AVERAGES, guard=True):
 
 
 def _acf_alpha(z, dmax):
+    size = max(abs(float(z.max())), abs(float(z.min())))
     z = _detrend2(z)
     d = 0
     while True:
         mean = z.mean()
         zc = z - mean
         power = float(np.dot(zc, zc))
-        if not power > 1e-30 * max(power + z.size * float(mean) ** 2, 1e-300):  # Σz²
+        # no noise: the quadratic's residual at the data's round-off (RMS ≤ 1e-14 of their
+        # size; a noise-free quadratic leaves ≤ 1e-15 up to 10⁶ points), or 0 once differenced
+        floor = (1e-14 * size) ** 2 * z.size if d == 0 else 1e-30 * (power + z.size * mean**2)
+        if not power > max(floor, 1e-300):
             _no_noise()
         r1 = float(np.dot(zc[:-1], zc[1:]) / power)
         rho = r1 / (1.0 + r1)

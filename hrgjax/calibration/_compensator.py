@@ -121,8 +121,9 @@ class AbstractCompensator(eqx.Module):
 
     def _program_form(self):
         """This compensator as the compiled programs of `drift_dph`, `scale_factor_at` and
-        `correct` take it: a module with `drift`, `scale_factor` and `corrected_rate` whose
-        static part does not change from fit to fit (here: itself)."""
+        `correct` take it: a module with `drift`, `scale_factor` and `corrected_rate`. The
+        programs compile once per static part, so a compensator whose fit stores numbers in
+        static fields returns a form without them (the physical one does); here: itself."""
         return self
 
     def drift_dph(self, theta_deg, temperature_c) -> np.ndarray:
