@@ -544,6 +544,8 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         carrier = (steps_per_interval(gyro, profile, ts, fixed_step, rtol), False)
     dt0 = fixed_step if fixed_step is not None else (1e-2 if model == "averaged" else 1e-5)
     stepping = (solver, rtol, atol, max_steps, dt0, fixed_step is not None)
+    if carrier is not None:  # it reads none of diffrax's settings: one program per step count
+        stepping, adjoint = (_default_solver(model), 0.0, 0.0, 1, 0.0, True), None
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
     return _solve(
         model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run, carrier

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import CompileCounter
 
 import hrgjax as hg
 
@@ -216,7 +217,9 @@ def test_the_default_takes_fixed_steps_where_they_meet_rtol():
     per_interval = 0.002 * F0 * hg.resonator.carrier.steps_per_cycle(1e-8)
     assert per_interval == 100.0
     default, adaptive = angle(), angle(fixed_step=None)
-    np.testing.assert_array_equal(default, angle(fixed_step=0.002 / per_interval))
+    with CompileCounter() as c:  # the same step in seconds: the same program
+        np.testing.assert_array_equal(default, angle(fixed_step=0.002 / per_interval))
+    assert c.compiles == 0, c.names
     assert np.all(default != adaptive)
     np.testing.assert_allclose(default, adaptive, rtol=0, atol=1e-10)  # both meet rtol 1e-8
     tight = dict(rtol=0.1 * AUTO_RTOL_FLOOR, atol=1e-12)
