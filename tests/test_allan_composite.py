@@ -284,3 +284,19 @@ def test_a_record_the_candidates_cannot_describe_says_so():
     model = hg.allan.identify_noise(rng.normal(size=t.size) + 3 * np.sin(t / 40.0), 1.0)
     assert model.p_value < 1e-3
     assert "the model leaves structure" in str(model)
+
+
+def test_unit_avar_and_second_differences_take_scalars_and_broadcast():
+    """A scalar factor or lag gives the value the arrays give at that point (a model's
+    `adev(10.0)` with a Gauss–Markov term); a scalar lag broadcasts against arrays of
+    factors; several Gauss–Markov ε at once give one row each."""
+    tau0, ms = 0.01, np.array([4.0, 8.0, 16.0])
+    row = octave_covariance.unit_avar("gauss_markov", ms, tau0, 0.01)
+    assert octave_covariance.unit_avar("gauss_markov", 8, tau0, 0.01) == pytest.approx(row[1])
+    rows = octave_covariance.unit_avar("gauss_markov", ms, tau0, np.array([0.01, 0.02]))
+    np.testing.assert_array_equal(rows[0], row)
+    with pytest.raises(ValueError, match="needs eps"):
+        octave_covariance.unit_avar("gauss_markov", ms, tau0)
+    g = octave_covariance.term_g("angle_random_walk", 1.0)
+    ks = np.arange(1.0, 10.0)  # nine factors: a length that must not meet the nine values
+    np.testing.assert_allclose(octave_covariance.second_difference_cov(g, 0.0, ks, ks), 2 * ks)
