@@ -13,7 +13,7 @@ import sys
 import time
 
 import numpy as np
-from _common import machine, report
+from _common import best_of, machine, report
 
 from hrgjax import allan
 
@@ -21,15 +21,6 @@ try:
     import allantools as at
 except ImportError:  # pragma: no cover
     sys.exit("allan_speed.py needs allantools: pip install -e '.[dev]'")
-
-
-def best(fn, repeat=3):
-    out = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        out.append(time.perf_counter() - t0)
-    return min(out)
 
 
 if __name__ == "__main__":
@@ -44,8 +35,8 @@ if __name__ == "__main__":
         t0 = time.perf_counter()
         ours = allan.deviation(y, 1.0, kind=kind)
         first = time.perf_counter() - t0
-        t_ours = best(lambda kind=kind: allan.deviation(y, 1.0, kind=kind))
-        t_at = best(
+        t_ours = best_of(lambda kind=kind: allan.deviation(y, 1.0, kind=kind))
+        t_at = best_of(
             lambda kind=kind: getattr(at, kind)(y, rate=1.0, data_type="freq", taus="octave")
         )
         _, dev, _, _ = getattr(at, kind)(y, rate=1.0, data_type="freq", taus="octave")
