@@ -302,7 +302,7 @@ def identify_noise(
     avar, ms = res.dev**2, res.m
     t_grid = np.geomspace(2 * tau0, ms[-1] * tau0, T_GRID)
     cols = {t: unit_avar(t, ms, tau0) for t in terms}
-    gm_cols = {tt: unit_avar("gauss_markov", ms, tau0, tau0 / tt) for tt in t_grid}
+    gm_cols = dict(zip(t_grid, unit_avar("gauss_markov", ms, tau0, tau0 / t_grid), strict=True))
 
     # round 0: each octave's variance from its EDF (independent; the noise type identified
     # per octave), then the model's own. (A start from white noise's EDF everywhere lands
@@ -496,21 +496,24 @@ def _refine(fit, avar, chol_inv, cols, tau0, ms, grid):
     step = math.log(grid[1] / grid[0])
     for i in range(len(fit["gm"])):
 
-        def j_at(log_t, fit=fit, i=i):
-            ts = list(fit["gm"])
-            ts[i] = math.exp(log_t)
-            basis = np.stack([cols[t] for t in fit["names"]]
-                             + [unit_avar("gauss_markov", ms, tau0, tau0 / t) for t in ts], 1)  # fmt: skip
+        def j_at(log_ts, fit=fit, i=i):  # J and (times, c) with T_i at each of `log_ts`
+            times = np.repeat(np.asarray(fit["gm"], dtype=float)[None], len(log_ts), axis=0)
+            times[:, i] = np.exp(log_ts)
+            gm = unit_avar("gauss_markov", ms, tau0, tau0 / times.ravel())
+            gm = gm.reshape(*times.shape, len(ms)).transpose(0, 2, 1)  # (trials, S, k)
+            lin = np.stack([cols[t] for t in fit["names"]], 1) if fit["names"] else gm[0, :, :0]
+            basis = np.concatenate([np.broadcast_to(lin, (len(log_ts), *lin.shape)), gm], 2)
             c, j = _gls(avar, chol_inv, basis)
-            return (np.inf, None) if not np.isfinite(j) else (float(j), (ts, c))
+            return [(np.inf, None) if not np.isfinite(jt) else (float(jt), (list(ts), ct))
+                    for jt, ts, ct in zip(j, times, c, strict=True)]  # fmt: skip
 
         x0 = math.log(fit["gm"][i])
-        js = [j_at(x0 + d * step)[0] for d in (-1, 0, 1)]
-        den = js[0] - 2 * js[1] + js[2]
+        (j_lo, _), (j_hi, _) = j_at([x0 - step, x0 + step])
+        den = j_lo - 2 * fit["J"] + j_hi  # J at x0 is the fit's own
         if np.isfinite(den) and den > 0:
-            x = x0 + 0.5 * step * (js[0] - js[2]) / den
+            x = x0 + 0.5 * step * (j_lo - j_hi) / den
             x = min(max(x, math.log(grid[0])), math.log(grid[-1]))
-            jx, sol = j_at(x)
+            ((jx, sol),) = j_at([x])
             if sol is not None and jx < fit["J"]:
                 fit = {"names": fit["names"], "gm": sol[0], "c": sol[1], "J": jx}
     return fit
