@@ -430,9 +430,13 @@ def _gls(avar, chol_inv, basis):
     J (C,))`, J = inf where a coefficient is negative (that subset is not admissible)."""
     one = basis.ndim == 2
     basis = basis[None] if one else basis
-    a = chol_inv @ basis
-    b = chol_inv @ avar
-    scale = np.linalg.norm(a, axis=1, keepdims=True)  # the columns span decades
+    c, j = _whitened_ls(chol_inv @ basis, chol_inv @ avar)
+    return (c[0], j[0]) if one else (c, j)
+
+
+def _whitened_ls(a, b):
+    """`_gls` on whitened columns a (C, S, p) and data b (S,)."""
+    scale = np.sqrt(np.einsum("csp,csp->cp", a, a))[:, None, :]  # the columns span decades
     a = a / scale
     ata = a.transpose(0, 2, 1) @ a
     atb = b @ a
@@ -444,7 +448,7 @@ def _gls(avar, chol_inv, basis):
     j = (r * r).sum(1)
     c = c / scale[:, 0, :]
     j = np.where(np.all(c >= 0, axis=1) & np.isfinite(j), j, np.inf)
-    return (c[0], j[0]) if one else (c, j)
+    return c, j
 
 
 @functools.lru_cache(maxsize=8)
@@ -466,19 +470,21 @@ def _best(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
     gms = [g] if g_exact is not None else list(range(g + 1))
     best = None
     grid = sorted(gm_cols)
-    gm_stack = np.stack([gm_cols[t] for t in grid], axis=1)  # (S, T)
+    # every column whitened once; each basis gathers its columns
+    b = chol_inv @ avar
+    w_lin = {t: chol_inv @ cols[t] for t in names}
+    w_gm = chol_inv @ np.stack([gm_cols[t] for t in grid], axis=1)  # (S, T)
     for sub in subsets:
-        base = np.stack([cols[t] for t in sub], axis=1) if sub else np.zeros((len(ms), 0))
+        base = np.stack([w_lin[t] for t in sub], axis=1) if sub else np.zeros((len(ms), 0))
         for k in gms:
             if not sub and k == 0:
                 continue
             combos = _combinations(len(grid), k)
-            extra = gm_stack[:, combos]
             basis = np.concatenate(
-                [np.broadcast_to(base, (len(combos), *base.shape)), extra.transpose(1, 0, 2)],
-                axis=2,
-            )
-            c, j = _gls(avar, chol_inv, basis)
+                [np.broadcast_to(base, (len(combos), *base.shape)),
+                 w_gm[:, combos].transpose(1, 0, 2)], axis=2,
+            )  # fmt: skip
+            c, j = _whitened_ls(basis, b)
             i = int(np.argmin(j))
             if np.isfinite(j[i]) and (best is None or j[i] < best["J"]):
                 best = {"names": list(sub), "gm": [grid[int(t)] for t in combos[i]], "c": c[i],
@@ -519,18 +525,21 @@ def _refine(fit, avar, chol_inv, cols, tau0, ms, grid):
     return fit
 
 
-def _log_parts(p, names, k, ms, tau0, cols=None):
-    """Model Allan variance and ∂(log model)/∂p at p = (log c² of `names` and of the k
-    Gauss–Markov terms, log T of each); `cols`: the linear terms' unit Allan variances at
-    `ms`, where known."""
-    q = len(names)
-    c, logt = np.exp(p[: q + k]), p[q + k :]
+def _log_parts(p, lin, k, ms, tau0):
+    """Model Allan variance and ∂(log model)/∂p at p = (log c² of the linear terms, whose
+    unit Allan variances at `ms` are the columns of `lin` (S, q), and of the k Gauss–Markov
+    terms, log T of each)."""
+    q = lin.shape[1]
+    c = np.exp(p[: q + k])
+    if not k:
+        jac = lin * c
+        model = jac.sum(1)
+        return model, jac / model[:, None]
+    logt = p[q + k :]
     h = 1e-4  # ∂/∂ log T by central differences: each T and T·e^{±h} in one evaluation
     times = np.exp(np.concatenate([logt, logt + h, logt - h]))
     gm = unit_avar("gauss_markov", ms, tau0, tau0 / times)
-    cols = np.stack([unit_avar(t, ms, tau0) if cols is None else cols[t] for t in names]
-                    + list(gm[:k]), axis=1)  # fmt: skip
-    jac = cols * c
+    jac = np.concatenate([lin, gm[:k].T], axis=1) * c
     model = jac.sum(1)
     slope = c[q:] * (gm[k : 2 * k] - gm[2 * k :]).T / (2 * h)
     return model, np.concatenate([jac, slope], axis=1) / model[:, None]
@@ -549,29 +558,31 @@ def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None
     k, c = len(gm), c[keep]
     p = np.concatenate([np.log(c), np.log(np.asarray(gm, dtype=float))])
     target = np.log(avar)
+    lin = np.stack([unit_avar(t, ms, tau0) if cols is None else cols[t] for t in names], axis=1)
+    lin = lin if names else np.zeros((len(ms), 0))
 
     def fitted(p):
         return {"names": names, "gm": list(np.exp(p[len(names) + k :])),
                 "c": np.exp(p[: len(names) + k])}  # fmt: skip
 
-    def state(p, whiten):  # whitened residual and Jacobian
-        model, jac = _log_parts(p, names, k, ms, tau0, cols)
+    def whitened(parts, whiten):  # whitened residual and Jacobian
+        model, jac = parts
         return whiten @ (target - np.log(model)), whiten @ jac
 
-    def relative(p):  # the covariance of log σ̂² at p, D⁻¹ΩD⁻¹, and its inverse factor
+    def relative(p, model):  # the covariance of log σ̂² at p, D⁻¹ΩD⁻¹, and its inverse factor
         om = _omega(fitted(p), ms, n, tau0, avar)
-        model = _log_parts(p, names, k, ms, tau0, cols)[0]
         return om, np.linalg.inv(np.linalg.cholesky(om / np.outer(model, model)))
 
     for _ in range(rounds):  # Gauss–Newton with the weights held, then the weights at its end
-        om, chol = relative(p)
-        r, a = state(p, chol)
+        parts = _log_parts(p, lin, k, ms, tau0)
+        om, chol = relative(p, parts[0])
+        r, a = whitened(parts, chol)
         cost = float(r @ r)
         for _ in range(steps):
             step, *_ = np.linalg.lstsq(a, r, rcond=None)
             for scale in (1.0, 0.5, 0.25, 0.125):
                 trial = p + scale * np.clip(step, -2.0, 2.0)
-                got = state(trial, chol)
+                got = whitened(_log_parts(trial, lin, k, ms, tau0), chol)
                 if float(got[0] @ got[0]) < cost:
                     p, (r, a), cost = trial, got, float(got[0] @ got[0])
                     break
@@ -579,8 +590,9 @@ def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None
                 break
             if np.max(np.abs(scale * step)) < 1e-6:
                 break
-    om, chol = relative(p)
-    r, a = state(p, chol)
+    parts = _log_parts(p, lin, k, ms, tau0)
+    om, chol = relative(p, parts[0])
+    r, a = whitened(parts, chol)
     f = fitted(p)
     f["J"] = float(r @ r)
     return f, om, np.linalg.pinv(a.T @ a)
