@@ -434,6 +434,23 @@ def _gls(avar, chol_inv, basis):
     return (c[0], j[0]) if one else (c, j)
 
 
+def _gram_ls(gram, h, bb, idx):
+    """`_gls` from the whitened columns' Gram matrix `gram`, their products `h` with the
+    whitened data and its square `bb`, for the bases whose columns are the rows of `idx`
+    (C, p): J = bb − c·(Aᵀb) at the solution (to ≈ 1e-16·bb, for ranking the bases)."""
+    d = np.sqrt(gram.diagonal())[idx]  # the columns span decades
+    ata = gram[idx[:, :, None], idx[:, None, :]] / (d[:, :, None] * d[:, None, :])
+    atb = h[idx] / d
+    try:
+        c = np.linalg.solve(ata, atb[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        c = np.stack([np.linalg.lstsq(m, v, rcond=None)[0] for m, v in zip(ata, atb, strict=True)])
+    j = bb - (c * atb).sum(1)
+    c = c / d
+    j = np.where(np.all(c >= 0, axis=1) & np.isfinite(j), np.maximum(j, 0.0), np.inf)
+    return c, j
+
+
 def _whitened_ls(a, b):
     """`_gls` on whitened columns a (C, S, p) and data b (S,)."""
     scale = np.sqrt(np.einsum("csp,csp->cp", a, a))[:, None, :]  # the columns span decades
@@ -470,27 +487,31 @@ def _best(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
     gms = [g] if g_exact is not None else list(range(g + 1))
     best = None
     grid = sorted(gm_cols)
-    # every column whitened once; each basis gathers its columns
+    # every column whitened once, and their Gram matrix: each basis's normal equations are
+    # a submatrix of it, each subset screened without forming its columns
     b = chol_inv @ avar
-    w_lin = {t: chol_inv @ cols[t] for t in names}
-    w_gm = chol_inv @ np.stack([gm_cols[t] for t in grid], axis=1)  # (S, T)
+    lin = np.stack([cols[t] for t in names], axis=1) if names else np.zeros((len(ms), 0))
+    w = chol_inv @ np.concatenate([lin, np.stack([gm_cols[t] for t in grid], axis=1)], axis=1)
+    gram, h, bb = w.T @ w, w.T @ b, float(b @ b)
     for sub in subsets:
-        base = np.stack([w_lin[t] for t in sub], axis=1) if sub else np.zeros((len(ms), 0))
+        li = np.asarray([names.index(t) for t in sub], dtype=int)
         for k in gms:
             if not sub and k == 0:
                 continue
             combos = _combinations(len(grid), k)
-            basis = np.concatenate(
-                [np.broadcast_to(base, (len(combos), *base.shape)),
-                 w_gm[:, combos].transpose(1, 0, 2)], axis=2,
-            )  # fmt: skip
-            c, j = _whitened_ls(basis, b)
+            idx = np.concatenate([np.broadcast_to(li, (len(combos), li.size)), len(names) + combos],
+                                 axis=1)  # fmt: skip
+            c, j = _gram_ls(gram, h, bb, idx)
             i = int(np.argmin(j))
             if np.isfinite(j[i]) and (best is None or j[i] < best["J"]):
                 best = {"names": list(sub), "gm": [grid[int(t)] for t in combos[i]], "c": c[i],
-                        "J": float(j[i])}  # fmt: skip
+                        "J": float(j[i]), "idx": idx[i]}  # fmt: skip
     if best is None:
         return None
+    # the winner's coefficients and J from its residual, as every other fit's
+    c, j = _whitened_ls(w[:, best.pop("idx")][None], b)
+    if np.isfinite(j[0]):
+        best["c"], best["J"] = c[0], float(j[0])
     if best["gm"]:
         best = _refine(best, avar, chol_inv, cols, tau0, ms, grid)
     return best
