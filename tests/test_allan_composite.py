@@ -92,6 +92,14 @@ def direct_covariance(coef, gm, ms, n, tau0):
             idx = 2 * ma - 1 - ell  # c(ℓ) = Σ_j g_a(j) g_b(j − ℓ): the lag reversed
             ok = (idx >= 0) & (idx < walk.size)
             c[ok] += walk[idx[ok]]
+            # white angle noise (Q/τ₀ per sample of X) through the second differences'
+            # own filters d = (1, −2, 1) at 0, m, 2m: c(ℓ) = var·Σ_j d_a(j) d_b(j − ℓ)
+            da, db = np.zeros(2 * ma + 1), np.zeros(2 * mb + 1)
+            da[[0, ma, 2 * ma]] = db[[0, mb, 2 * mb]] = (1.0, -2.0, 1.0)
+            white = np.correlate(da, db, "full") * coef.get("quantization", 0.0) / tau0**2
+            idx = ell + db.size - 1
+            ok = (idx >= 0) & (idx < white.size)
+            c[ok] += white[idx[ok]]
             count = np.maximum(np.minimum(na, nb - ell) - np.maximum(0, -ell), 0)
             out[a, b] = out[b, a] = np.sum(count * 2 * c * c) / (4.0 * ma**2 * mb**2 * na * nb)
     return out
@@ -101,12 +109,15 @@ def test_covariance_equals_the_direct_sum_over_every_lag():
     """`covariance` (each G's nine values per lag, summed piecewise) equals the direct sum
     over every lag with c(ℓ) from the noise filters, to 1e-4: a long record (2·10⁵ samples)
     whose short octaves a random walk and a slow Gauss–Markov term carry (summed pointwise,
-    nine cubics at t ≈ 10⁵ cancelled to round-off and left Var σ̂²(τ₀) 785× too large), and
-    white noise with a fast Gauss–Markov term (T = 6 samples: its decay inside the kinks)."""
+    nine cubics at t ≈ 10⁵ cancelled to round-off and left Var σ̂²(τ₀) 785× too large),
+    white noise with a fast Gauss–Markov term (T = 6 samples: its decay inside the kinks),
+    and white angle noise beside a fast and a slow Gauss–Markov term (c at the nine kink lags
+    only; the slow term summed pointwise at the short octaves)."""
     tau0, ms = 0.5, [1, 2, 8, 64]
     for n, coef, gm in (
         (200_000, {"rate_random_walk": 1e-4}, [(0.1, 2e4)]),
         (50_000, {"angle_random_walk": 1e-4, "rate_random_walk": 1e-4}, [(0.1, 3.0)]),
+        (20_000, {"quantization": 1e-3, "angle_random_walk": 1e-4}, [(0.1, 3.0), (0.05, 1e4)]),
     ):
         om = octave_covariance.covariance(coef, gm, ms, n, tau0)
         ref = direct_covariance(coef, gm, ms, n, tau0)

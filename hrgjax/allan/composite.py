@@ -17,8 +17,8 @@ covariance (the fullest model's) and ranked by J + penalty (J the χ²-distribut
 [`PENALTY`][hrgjax.allan.composite.PENALTY] per linear term,
 [`GM_PENALTY`][hrgjax.allan.composite.GM_PENALTY] per Gauss–Markov term, whose T is searched
 and undefined when σ = 0). The best [`FINALISTS`][hrgjax.allan.composite.FINALISTS] are
-refitted on log σ̂² with their own relative covariance D⁻¹ΩD⁻¹ (D the model; Gauss–Newton,
-the covariance re-evaluated at the fit three times; one its covariance rejects is fitted
+refitted on log σ̂² with their own relative covariance D⁻¹ΩD⁻¹ (D the model; Newton on the
+weighted squares, the covariance re-evaluated at the fit three times; one its covariance rejects is fitted
 again from a start under the per-τ EDF weights), and of those their own covariance does not
 reject (p ≥ [`FIT_ALPHA`][hrgjax.allan.composite.FIT_ALPHA]) the least J + log det + penalty
 (the octaves' Gaussian likelihood) is kept: a term the data do not need is not reported. Its
@@ -65,6 +65,10 @@ FINALISTS = 6
 FIT_ALPHA = 1e-3
 """A finalist whose misfit under its own covariance has p < FIT_ALPHA is kept only when no
 other finalist fits."""
+HOPELESS = 1e-12
+"""A finalist's refit stops after the round whose misfit has p < HOPELESS (10⁹ below
+`FIT_ALPHA`: the covariance's updates in the rounds after it move J by a few per cent, not
+from ≈ 80 to the ≈ 30 that would fit); its J and covariance are then taken there."""
 T_GRID = 24
 """Correlation times tried per Gauss–Markov term: log-spaced from 2τ₀ to the longest octave
 fitted (n/SCALE_LIMIT·τ₀; a longer T looks like a random walk there)."""
@@ -547,30 +551,42 @@ def _refine(fit, avar, chol_inv, cols, tau0, ms, grid):
 
 
 def _log_parts(p, lin, k, ms, tau0):
-    """Model Allan variance and ∂(log model)/∂p at p = (log c² of the linear terms, whose
-    unit Allan variances at `ms` are the columns of `lin` (S, q), and of the k Gauss–Markov
-    terms, log T of each)."""
+    """Model Allan variance M, ∂(log M)/∂p, and a function giving ∂²(log M)/∂p² (S, P, P),
+    at p = (log c² of the linear terms, whose unit Allan variances at `ms` are the columns
+    of `lin` (S, q), and of the k Gauss–Markov terms, log T of each)."""
     q = lin.shape[1]
     c = np.exp(p[: q + k])
-    if not k:
-        jac = lin * c
-        model = jac.sum(1)
-        return model, jac / model[:, None]
-    logt = p[q + k :]
     h = 1e-4  # ∂/∂ log T by central differences: each T and T·e^{±h} in one evaluation
-    times = np.exp(np.concatenate([logt, logt + h, logt - h]))
-    gm = unit_avar("gauss_markov", ms, tau0, tau0 / times)
-    jac = np.concatenate([lin, gm[:k].T], axis=1) * c
-    model = jac.sum(1)
-    slope = c[q:] * (gm[k : 2 * k] - gm[2 * k :]).T / (2 * h)
-    return model, np.concatenate([jac, slope], axis=1) / model[:, None]
+    if k:
+        logt = p[q + k :]
+        times = np.exp(np.concatenate([logt, logt + h, logt - h]))
+        gm = unit_avar("gauss_markov", ms, tau0, tau0 / times)
+        amp = np.concatenate([lin, gm[:k].T], axis=1) * c  # ∂M/∂ log c² = c²·f
+        slope = c[q:] * (gm[k : 2 * k] - gm[2 * k :]).T / (2 * h)  # ∂M/∂ log T
+    else:
+        amp = lin * c
+    model = amp.sum(1)
+    jac = np.concatenate([amp, slope], axis=1) / model[:, None] if k else amp / model[:, None]
+
+    def curvature():  # ∂²M/M − ∇L∇Lᵀ, ∂²M nonzero on the diagonal and each (c_g², T_g) pair
+        size = q + 2 * k
+        second = np.zeros((len(ms), size, size))
+        second[:, np.arange(q + k), np.arange(q + k)] = amp
+        if k:
+            g, t = np.arange(q, q + k), np.arange(q + k, size)
+            second[:, g, t] = second[:, t, g] = slope
+            second[:, t, t] = c[q:] * (gm[k : 2 * k] - 2 * gm[:k] + gm[2 * k :]).T / (h * h)
+        return second / model[:, None, None] - jac[:, :, None] * jac[:, None, :]
+
+    return model, jac, curvature
 
 
 def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None):
-    """The selected model refitted on log σ̂² (Gauss–Newton, step-halving): the relative
-    covariance D⁻¹ΩD⁻¹ (D the model) hardly depends on the fitted level, so the weights do
-    not follow the estimate as Ω's do on σ̂² itself, and the long octaves' skewed estimates
-    weigh symmetrically. **Returns:** `(fit, Ω, covariance of p)`, p = (log c², log T)."""
+    """The selected model refitted on log σ̂² (Newton on the weighted squares, Gauss–Newton
+    where its Hessian is not positive definite, step-halving): the relative covariance
+    D⁻¹ΩD⁻¹ (D the model) hardly depends on the fitted level, so the weights do not follow
+    the estimate as Ω's do on σ̂² itself, and the long octaves' skewed estimates weigh
+    symmetrically. **Returns:** `(fit, Ω, covariance of p)`, p = (log c², log T)."""
     c = np.asarray(fit["c"], dtype=float)
     keep = c > 0  # a term at zero is absent: log c² has no place to start from
     q = len(fit["names"])
@@ -586,34 +602,50 @@ def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None
         return {"names": names, "gm": list(np.exp(p[len(names) + k :])),
                 "c": np.exp(p[: len(names) + k])}  # fmt: skip
 
-    def whitened(parts, whiten):  # whitened residual and Jacobian
-        model, jac = parts
-        return whiten @ (target - np.log(model)), whiten @ jac
+    def whitened(parts, whiten):  # whitened residual and Jacobian, the log model's ∂², and
+        model, jac, curvature = parts  # which parameters still move the model (a term whose
+        # share of it has fallen below 1e-6 at every octave is absent: its log c² would fall
+        # by ≈ 1 a step for as long as it is let, changing nothing)
+        live = np.max(np.abs(jac), axis=0) >= 1e-6
+        return whiten @ (target - np.log(model)), whiten @ jac, curvature, live
 
     def relative(p, model):  # the covariance of log σ̂² at p, D⁻¹ΩD⁻¹, and its inverse factor
         om = _omega(fitted(p), ms, n, tau0, avar)
         return om, np.linalg.inv(np.linalg.cholesky(om / np.outer(model, model)))
 
-    for _ in range(rounds):  # Gauss–Newton with the weights held, then the weights at its end
+    def step_from(r, a, curv, whiten):
+        # Newton: the squares' Hessian AᵀA − Σ (Wᵀr)_s ∂²L_s; where the residuals are
+        # large against A's small singular values Gauss–Newton alone converges linearly
+        hess = a.T @ a - np.einsum("s,sij->ij", whiten.T @ r, curv())
+        try:
+            np.linalg.cholesky(hess)
+            return np.linalg.solve(hess, a.T @ r)
+        except np.linalg.LinAlgError:
+            return np.linalg.lstsq(a, r, rcond=None)[0]
+
+    dof = max(len(ms) - p.size, 1)
+    for _ in range(rounds):  # Newton with the weights held, then the weights at its end
         parts = _log_parts(p, lin, k, ms, tau0)
         om, chol = relative(p, parts[0])
-        r, a = whitened(parts, chol)
+        r, a, curv, live = whitened(parts, chol)
         cost = float(r @ r)
         for _ in range(steps):
-            step, *_ = np.linalg.lstsq(a, r, rcond=None)
+            step = step_from(r, a, curv, chol)
             for scale in (1.0, 0.5, 0.25, 0.125):
                 trial = p + scale * np.clip(step, -2.0, 2.0)
                 got = whitened(_log_parts(trial, lin, k, ms, tau0), chol)
                 if float(got[0] @ got[0]) < cost:
-                    p, (r, a), cost = trial, got, float(got[0] @ got[0])
+                    p, (r, a, curv, live), cost = trial, got, float(got[0] @ got[0])
                     break
             else:
                 break
-            if np.max(np.abs(scale * step)) < 1e-6:
+            if np.max(np.abs(scale * step)[live], initial=0.0) < 1e-6:
                 break
+        if chi2_sf(cost, dof) < HOPELESS:  # rejected whatever the later rounds do
+            break
     parts = _log_parts(p, lin, k, ms, tau0)
     om, chol = relative(p, parts[0])
-    r, a = whitened(parts, chol)
+    r, a, *_ = whitened(parts, chol)
     f = fitted(p)
     f["J"] = float(r @ r)
     return f, om, np.linalg.pinv(a.T @ a)
