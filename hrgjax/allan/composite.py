@@ -68,7 +68,8 @@ other finalist fits."""
 HOPELESS = 1e-12
 """A finalist's refit stops after the round whose misfit has p < HOPELESS (10⁹ below
 `FIT_ALPHA`: the covariance's updates in the rounds after it move J by a few per cent, not
-from ≈ 80 to the ≈ 30 that would fit); its J and covariance are then taken there."""
+from ≈ 80 to the ≈ 30 that would fit); its J and covariance are then taken there. Where no
+finalist fits, all are refitted to the end and the least bad is kept."""
 T_GRID = 24
 """Correlation times tried per Gauss–Markov term: log-spaced from 2τ₀ to the longest octave
 fitted (n/SCALE_LIMIT·τ₀; a longer T looks like a random walk there)."""
@@ -322,28 +323,35 @@ def identify_noise(
     # exaggerates it
     tried = _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms)
 
-    finalists = []
-    for row in tried[:FINALISTS]:
-        # each finalist fitted on log σ̂² with its own covariance: J there and the
-        # relative covariance's log det score it (in log space the covariance barely moves
-        # with the level, so the likelihood cannot trade misfit for a smaller Ω)
-        got = _own_fit(row["fit"], avar, ms, n, tau0, cols)
-        if got is None or got[3] < FIT_ALPHA:
-            # rejected by its own covariance: the start may be an optimum the fullest
-            # model's covariance made (a wrong fullest fit ranks its own kind first), so it
-            # is fitted again from the subset's fit under the per-τ EDF weights; a fit its
-            # covariance accepts is kept first, then the better likelihood
-            g = row["gauss_markov"]
-            start = _best(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms)
-            other = None if start is None else _own_fit(start, avar, ms, n, tau0, cols)
-            rank = lambda f: (f[3] >= FIT_ALPHA, -f[2])  # noqa: E731
-            if other is not None and (got is None or rank(other) > rank(got)):
-                got = other
-        if got is None:  # its covariance degenerate at the fit: not a model
-            continue
-        fit, om, likelihood, row["p_value"], cov = got
-        row["likelihood_score"] = likelihood + row["score"] - row["J"]
-        finalists.append((row["likelihood_score"], row["p_value"], fit, om, cov))
+    def fitted_finalists(give_up):
+        out = []
+        for row in tried[:FINALISTS]:
+            # each finalist fitted on log σ̂² with its own covariance: J there and the
+            # relative covariance's log det score it (in log space the covariance barely
+            # moves with the level, so the likelihood cannot trade misfit for a smaller Ω)
+            got = _own_fit(row["fit"], avar, ms, n, tau0, cols, give_up)
+            if got is None or got[3] < FIT_ALPHA:
+                # rejected by its own covariance: the start may be an optimum the fullest
+                # model's covariance made (a wrong fullest fit ranks its own kind first), so
+                # it is fitted again from the subset's fit under the per-τ EDF weights; a fit
+                # its covariance accepts is kept first, then the better likelihood
+                g = row["gauss_markov"]
+                start = _best(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms)
+                other = None if start is None else _own_fit(start, avar, ms, n, tau0, cols,
+                                                            give_up)  # fmt: skip
+                rank = lambda f: (f[3] >= FIT_ALPHA, -f[2])  # noqa: E731
+                if other is not None and (got is None or rank(other) > rank(got)):
+                    got = other
+            if got is None:  # its covariance degenerate at the fit: not a model
+                continue
+            fit, om, likelihood, row["p_value"], cov = got
+            row["likelihood_score"] = likelihood + row["score"] - row["J"]
+            out.append((row["likelihood_score"], row["p_value"], fit, om, cov))
+        return out
+
+    finalists = fitted_finalists(HOPELESS)
+    if not any(f[1] >= FIT_ALPHA for f in finalists):  # none fits: the least bad is chosen
+        finalists = fitted_finalists(None)  # among the finalists fitted to the end
     # a model its own covariance rejects (p < FIT_ALPHA) is not kept while another fits
     fitting = [f for f in finalists if f[1] >= FIT_ALPHA] or finalists
     if not fitting:
@@ -364,12 +372,12 @@ def identify_noise(
     )  # fmt: skip
 
 
-def _own_fit(start, avar, ms, n, tau0, cols=None):
+def _own_fit(start, avar, ms, n, tau0, cols=None, give_up=None):
     """A finalist refitted from `start` on log σ̂² with its own covariance: `(fit, Ω,
     J + log det of the relative covariance, p-value of J, covariance of p)`, or None where
     its covariance is degenerate."""
     try:
-        fit, om, cov = _log_fit(start, avar, ms, n, tau0, cols=cols)
+        fit, om, cov = _log_fit(start, avar, ms, n, tau0, cols=cols, give_up=give_up)
     except np.linalg.LinAlgError:
         return None
     model = _model(fit, ms, tau0)
@@ -581,7 +589,7 @@ def _log_parts(p, lin, k, ms, tau0):
     return model, jac, curvature
 
 
-def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None):
+def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None, give_up=None):
     """The selected model refitted on log σ̂² (Newton on the weighted squares, Gauss–Newton
     where its Hessian is not positive definite, step-halving): the relative covariance
     D⁻¹ΩD⁻¹ (D the model) hardly depends on the fitted level, so the weights do not follow
@@ -641,14 +649,19 @@ def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None
                 break
             if np.max(np.abs(scale * step)[live], initial=0.0) < 1e-6:
                 break
-        if chi2_sf(cost, dof) < HOPELESS:  # rejected whatever the later rounds do
-            break
+        if give_up is not None and chi2_sf(cost, dof) < give_up:  # rejected, whatever the
+            break  # later rounds do
     parts = _log_parts(p, lin, k, ms, tau0)
     om, chol = relative(p, parts[0])
     r, a, *_ = whitened(parts, chol)
     f = fitted(p)
     f["J"] = float(r @ r)
     return f, om, np.linalg.pinv(a.T @ a)
+
+
+def _exp(v: float) -> float:
+    """e^v, inf beyond float's range (the upper end of a term the data hardly see)."""
+    return math.inf if v > 709.0 else math.exp(v)
 
 
 def _intervals(fit, cov, ci, unit):
@@ -662,8 +675,8 @@ def _intervals(fit, cov, ci, unit):
         v, s = math.log(c[i]) if root else math.log(gm[i - len(names) - len(gm)]), 0.0
         s = math.sqrt(max(cov[i, i], 0.0))
         e = 0.5 if root else 1.0
-        return {"value": math.exp(e * v), "low": math.exp(e * (v - z * s)),
-                "high": math.exp(e * (v + z * s)), "unit": unit_s}  # fmt: skip
+        return {"value": _exp(e * v), "low": _exp(e * (v - z * s)),
+                "high": _exp(e * (v + z * s)), "unit": unit_s}  # fmt: skip
 
     out = {}
     for i, t in enumerate(names):
