@@ -13,7 +13,7 @@ report terms that are not there, and what does it cost? Monte Carlo with known t
   `oadev` on the same octave grid (the peer's cheapest Allan call). Target ≤ 3×.
 
 Usage: `.venv/bin/python benchmarks/noise_identification.py [--n 100] [--quick]`
-(quick: 20 records each; the default takes about 6 minutes on 2 cores).
+(quick: 20 records each; the default takes 1–1.5 minutes on 2 cores).
 """
 
 from __future__ import annotations
