@@ -311,3 +311,18 @@ def test_unit_avar_and_second_differences_take_scalars_and_broadcast():
     g = octave_covariance.term_g("angle_random_walk", 1.0)
     ks = np.arange(1.0, 10.0)  # nine factors: a length that must not meet the nine values
     np.testing.assert_allclose(octave_covariance.second_difference_cov(g, 0.0, ks, ks), 2 * ks)
+
+
+def test_a_gauss_markov_only_record_is_identified():
+    """An AR(1) rate (σ = 0.3, T = 50 s, 40 000 samples at 1 Hz) with white noise 300× below
+    it: the model is that one Gauss–Markov term, both truths inside their 95 % intervals,
+    offered the default candidates or none (a finalist with no linear term is fitted too)."""
+    rng = np.random.default_rng(1)
+    n, s, t = 40_000, 0.3, 50.0
+    y = ar1(rng, (1, n), s, math.exp(-1 / t))[0] + 1e-3 * rng.normal(size=n)
+    for terms in (("quantization", "angle_random_walk", "rate_random_walk"), ()):
+        model = hg.allan.identify_noise(y, 1.0, terms=terms, gauss_markov=1)
+        assert set(model.terms) == {"gauss_markov_1"}, model.terms
+        gm = model.terms["gauss_markov_1"]
+        for name, truth in (("sigma", s), ("correlation_time", t)):
+            assert gm[name]["low"] < truth < gm[name]["high"], (name, gm[name])

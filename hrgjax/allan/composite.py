@@ -603,8 +603,8 @@ def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None
     k, c = len(gm), c[keep]
     p = np.concatenate([np.log(c), np.log(np.asarray(gm, dtype=float))])
     target = np.log(avar)
-    lin = np.stack([unit_avar(t, ms, tau0) if cols is None else cols[t] for t in names], axis=1)
-    lin = lin if names else np.zeros((len(ms), 0))
+    lin = (np.stack([unit_avar(t, ms, tau0) if cols is None else cols[t] for t in names], axis=1)
+           if names else np.zeros((len(ms), 0)))  # fmt: skip
 
     def fitted(p):
         return {"names": names, "gm": list(np.exp(p[len(names) + k :])),
@@ -661,7 +661,10 @@ def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None
 
 def _exp(v: float) -> float:
     """e^v, inf beyond float's range (the upper end of a term the data hardly see)."""
-    return math.inf if v > 709.0 else math.exp(v)
+    try:
+        return math.exp(v)
+    except OverflowError:
+        return math.inf
 
 
 def _intervals(fit, cov, ci, unit):

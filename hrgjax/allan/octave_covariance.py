@@ -41,10 +41,11 @@ import math
 import numpy as np
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
-SLOW = 0.01
-"""2ε·(ma + mb) below which a Gauss–Markov term's c is evaluated pointwise: its linear and
-exponential parts cancel to ≈ 1e-16/(2ε(ma + mb))² of c (the covariance within 1e-10 of the
-pointwise sum everywhere, for T up to 10⁶ samples; the quadrature's own error is ≈ 1e-5)."""
+SLOW = 1e-6
+"""ε³·min(ma, mb)²·max(ma, mb) below which a Gauss–Markov term's c is evaluated pointwise on
+the pair's pieces: its closed form's exponential part is ≈ σ²/ε² while c itself is
+≈ σ²·ε·ma²·mb, so the closed form keeps ≈ 1e-16/(ε³ma²mb) of c (here ≤ 1e-10; for ma ≈ mb
+this is 2ε(ma + mb) ≲ 0.04, the old rule; a pair of very different octaves needs more)."""
 _CP = np.array([1.0, -2.0, 1.0])
 _P, _Q = np.divmod(np.arange(9), 3)
 _W = _CP[_P] * _CP[_Q]  # c_p·c_q of the nine values of G in a second-difference covariance
@@ -174,11 +175,14 @@ def _geometry(x, piece, lo, hi, ma, mb):
     dist_u, dist_i = np.unique(np.where(plus, d, -dh), return_inverse=True)
     xr_u, xr_i = np.unique(xr, return_inverse=True)
     rest_u, rest_i = np.unique((hi - lo)[piece] - xr, return_inverse=True)
-    span = (2 * (ma + mb))[piece]
+    cube = (np.minimum(ma, mb) ** 2 * np.maximum(ma, mb))[piece]  # c ≈ σ²·ε·this (slow GM)
+    nine = np.abs(x + s[piece].T)  # G's nine arguments at every node (9, nodes), few distinct
+    args_u, args_i = np.unique(nine, return_inverse=True)
     return {"dist": (dist_u, dist_i.reshape(d.shape)),  # |t| at the end where φ^{|t|} is largest
             "w_plus": np.where(plus, _W, 0.0), "w_minus": np.where(plus, 0.0, _W),
             "xr": (xr_u, xr_i), "rest": (rest_u, rest_i),  # ℓ − lo and hi − ℓ at the nodes
-            "span": span, "span_min": float(span.min(initial=np.inf)),
+            "cube": cube, "cube_min": float(cube.min(initial=np.inf)),
+            "args": (args_u, args_i.reshape(nine.shape)),
             "abs_t": sw[piece] * xr + swd[piece],
             "cubic": ((walk[:, 3] * xr + walk[:, 2]) * xr + walk[:, 1]) * xr + walk[:, 0],
             "ma": ma, "mb": mb}  # fmt: skip
@@ -191,8 +195,8 @@ def _on_pieces(geo, x, piece, lin, gms, tau0):
     random-walk parts are a cubic in ℓ − lo and a Gauss–Markov term's exponential part is
     P·φ^{ℓ−lo} + M·φ^{hi−ℓ} — nine values of G per node become one cubic and two exponentials
     per Gauss–Markov term (the cubics' two shapes are the layout's: a model only scales
-    them). Where a Gauss–Markov term is near a random walk (2ε·(ma + mb) < `SLOW`, its linear
-    and exponential parts cancelling) it is evaluated pointwise."""
+    them). Where a Gauss–Markov term is near a random walk (ε³·min(ma, mb)²·max(ma, mb) <
+    `SLOW`, its linear and exponential parts cancelling) it is evaluated pointwise."""
     f_abs = -0.5 * max(lin.get("angle_random_walk", 0.0), 0.0) / tau0
     c = f_abs * geo["abs_t"]
     if lin.get("rate_random_walk", 0.0) > 0:
@@ -205,11 +209,15 @@ def _on_pieces(geo, x, piece, lin, gms, tau0):
         term = a * geo["abs_t"]
         term += pw[piece] * _exp(-eps, geo["xr"])  # P·φ^{ℓ−lo} + M·φ^{hi−ℓ}
         term += mw[piece] * _exp(-eps, geo["rest"])
-        if geo["span_min"] < SLOW / eps:
-            slow = np.flatnonzero(geo["span"] < SLOW / eps)  # linear and exponential parts
-            ps = piece[slow]  # cancel there: the pointwise value instead
-            g = term_g("gauss_markov", tau0, eps)
-            term[slow] = s2 * second_difference_cov(g, x[slow], geo["ma"][ps], geo["mb"][ps])
+        if geo["cube_min"] < SLOW / eps**3:
+            slow = np.flatnonzero(geo["cube"] < SLOW / eps**3)  # linear and exponential parts
+            args_u, args_i = geo["args"]  # cancel there: the pointwise value instead, G at
+            if 9 * slow.size > args_u.size:  # every distinct argument once where that is fewer
+                term[slow] = s2 * (_W @ _g_gm(args_u, eps)[args_i[:, slow]])
+            else:
+                ps = piece[slow]
+                g = term_g("gauss_markov", tau0, eps)
+                term[slow] = s2 * second_difference_cov(g, x[slow], geo["ma"][ps], geo["mb"][ps])
         c += term
     return c
 

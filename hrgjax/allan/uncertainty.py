@@ -354,7 +354,12 @@ def edf_greenhall(alpha: int, d: int, m: int, n: int, overlapping: bool, modifie
 
     **Raises:** `ValueError` where the variance does not converge (α + 2d ≤ 1) or the data
     are shorter than the filter."""
-    return _edf_greenhall(int(alpha), int(d), int(m), int(n), bool(overlapping), bool(modified))
+    args = tuple(v.item() if isinstance(v, np.generic) else v
+                 for v in (alpha, d, m, n, overlapping, modified))  # fmt: skip
+    try:
+        return _edf_greenhall(*args)
+    except TypeError:  # an unhashable argument (an array): not kept
+        return _edf_greenhall.__wrapped__(*args)
 
 
 @functools.lru_cache(maxsize=4096)
