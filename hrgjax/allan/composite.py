@@ -29,7 +29,6 @@ upper end of its interval with it forced in is kept as a bound.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import itertools
 import json
 import math
@@ -41,6 +40,7 @@ import numpy as np
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
 from .octave_covariance import covariance as covariance
 from .octave_covariance import unit_avar
+from .octave_fits import best_fit, log_fit, model_avar, model_covariance
 from .uncertainty import chi2_sf
 
 LINEAR = ("quantization", "angle_random_walk", "rate_random_walk", "rate_ramp")
@@ -313,10 +313,10 @@ def identify_noise(
     # per octave), then the model's own. (A start from white noise's EDF everywhere lands
     # the fullest fit in another optimum more often: the benchmark's coverage fell 86 → 83 %.)
     omega = omega0 = np.diag(2 * avar**2 / np.maximum(res.edf, 1.0))
-    full = _best(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
+    full = best_fit(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
     for _ in range(3):
-        omega = _omega(full, ms, n, tau0, avar)
-        full = _best(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
+        omega = model_covariance(full, ms, n, tau0, avar)
+        full = best_fit(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
     # selection: every subset ranked with the fullest model's covariance; the best few then
     # each with its own, by the Gaussian likelihood of the octaves (J + log det) + penalty —
     # a covariance from too large a model hides misfit at long τ, one from too small a model
@@ -336,7 +336,7 @@ def identify_noise(
                 # it is fitted again from the subset's fit under the per-τ EDF weights; a fit
                 # its covariance accepts is kept first, then the better likelihood
                 g = row["gauss_markov"]
-                start = _best(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms)
+                start = best_fit(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms)
                 other = None if start is None else _own_fit(start, avar, ms, n, tau0, cols,
                                                             give_up)  # fmt: skip
                 rank = lambda f: (f[3] >= FIT_ALPHA, -f[2])  # noqa: E731
@@ -377,10 +377,10 @@ def _own_fit(start, avar, ms, n, tau0, cols=None, give_up=None):
     J + log det of the relative covariance, p-value of J, covariance of p)`, or None where
     its covariance is degenerate."""
     try:
-        fit, om, cov = _log_fit(start, avar, ms, n, tau0, cols=cols, give_up=give_up)
+        fit, om, cov = log_fit(start, avar, ms, n, tau0, cols=cols, give_up=give_up)
     except np.linalg.LinAlgError:
         return None
-    model = _model(fit, ms, tau0)
+    model = model_avar(fit, ms, tau0)
     logdet = float(np.linalg.slogdet(om / np.outer(model, model))[1])
     dof = max(int(ms.size - len(fit["names"]) - 2 * len(fit["gm"])), 1)
     return fit, om, fit["J"] + logdet, chi2_sf(fit["J"], dof), cov
@@ -394,7 +394,7 @@ def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms):
             for g in range(gauss_markov + 1):
                 if (not subset and g == 0) or len(subset) + 2 * g >= len(ms):
                     continue  # nothing, or no degree of freedom left
-                fit = _best(avar, omega, cols, gm_cols, list(subset), g, g, tau0, ms)
+                fit = best_fit(avar, omega, cols, gm_cols, list(subset), g, g, tau0, ms)
                 if fit is None:
                     continue
                 score = fit["J"] + PENALTY * len(subset) + GM_PENALTY * g
@@ -408,7 +408,7 @@ def _bounds(fit, avar, omega, cols, ms, tau0, terms, ci):
     beside the selected model (its coefficient² free in sign, the others' held): √ of
     max(c² + zσ, 0) [coefficient unit]."""
     chol_inv = np.linalg.inv(np.linalg.cholesky(omega))
-    base = _model(fit, ms, tau0)
+    base = model_avar(fit, ms, tau0)
     z = NormalDist().inv_cdf(0.5 + ci / 2)
     out = {}
     for name in terms:
@@ -419,244 +419,6 @@ def _bounds(fit, avar, omega, cols, ms, tau0, terms, ci):
         c2 = float(a @ r / (a @ a))
         out[name] = math.sqrt(max(c2 + z / math.sqrt(float(a @ a)), 0.0))
     return out
-
-
-def _model(fit, ms, tau0):
-    """The Allan variance of a fit at the factors `ms`. [unit²]"""
-    out = sum(c * unit_avar(t, ms, tau0) for t, c in zip(fit["names"], fit["c"], strict=False))
-    for c, t in zip(fit["c"][len(fit["names"]) :], fit["gm"], strict=True):
-        out = out + c * unit_avar("gauss_markov", ms, tau0, tau0 / t)
-    return out
-
-
-def _omega(fit, ms, n, tau0, avar):
-    coef = dict(zip(fit["names"], fit["c"][: len(fit["names"])], strict=True))
-    gm = [(s2, tt) for s2, tt in zip(fit["c"][len(fit["names"]) :], fit["gm"], strict=True)]
-    om = covariance(coef, gm, ms, n, tau0)
-    # a floor of 1e-6 of each octave's own variance keeps Ω invertible where the model is 0
-    return om + np.diag(1e-6 * np.maximum(np.diag(om), 2 * avar**2 / max(n, 1)))
-
-
-def _gls(avar, chol_inv, basis):
-    """Coefficients² by GLS for a batch of bases (C, S, p) (or one, (S, p)): `(c (C, p),
-    J (C,))`, J = inf where a coefficient is negative (that subset is not admissible)."""
-    one = basis.ndim == 2
-    basis = basis[None] if one else basis
-    c, j = _whitened_ls(chol_inv @ basis, chol_inv @ avar)
-    return (c[0], j[0]) if one else (c, j)
-
-
-def _gram_ls(gram, h, bb, idx):
-    """`_gls` from the whitened columns' Gram matrix `gram`, their products `h` with the
-    whitened data and its square `bb`, for the bases whose columns are the rows of `idx`
-    (C, p): J = bb − c·(Aᵀb) at the solution (to ≈ 1e-16·bb, for ranking the bases)."""
-    d = np.sqrt(gram.diagonal())[idx]  # the columns span decades
-    ata = gram[idx[:, :, None], idx[:, None, :]] / (d[:, :, None] * d[:, None, :])
-    atb = h[idx] / d
-    try:
-        c = np.linalg.solve(ata, atb[..., None])[..., 0]
-    except np.linalg.LinAlgError:
-        c = np.stack([np.linalg.lstsq(m, v, rcond=None)[0] for m, v in zip(ata, atb, strict=True)])
-    j = bb - (c * atb).sum(1)
-    c = c / d
-    j = np.where(np.all(c >= 0, axis=1) & np.isfinite(j), np.maximum(j, 0.0), np.inf)
-    return c, j
-
-
-def _whitened_ls(a, b):
-    """`_gls` on whitened columns a (C, S, p) and data b (S,)."""
-    scale = np.sqrt(np.einsum("csp,csp->cp", a, a))[:, None, :]  # the columns span decades
-    a = a / scale
-    ata = a.transpose(0, 2, 1) @ a
-    atb = b @ a
-    try:
-        c = np.linalg.solve(ata, atb[..., None])[..., 0]
-    except np.linalg.LinAlgError:
-        c = np.stack([np.linalg.lstsq(m, v, rcond=None)[0] for m, v in zip(ata, atb, strict=True)])
-    r = (a @ c[..., None])[..., 0] - b
-    j = (r * r).sum(1)
-    c = c / scale[:, 0, :]
-    j = np.where(np.all(c >= 0, axis=1) & np.isfinite(j), j, np.inf)
-    return c, j
-
-
-@functools.lru_cache(maxsize=8)
-def _combinations(n: int, k: int) -> np.ndarray:
-    """The k-subsets of range(n) as rows (C, k)."""
-    rows = list(itertools.combinations(range(n), k))
-    out = np.asarray(rows, dtype=int).reshape(len(rows), k)
-    out.flags.writeable = False
-    return out
-
-
-def _best(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
-    """The best fit of the linear terms `names` plus g Gauss–Markov terms (correlation times
-    profiled on the grid, then refined by a parabola in log T); with `g_exact` None, every
-    admissible subset of them (NNLS), as the fullest model's fit."""
-    chol_inv = np.linalg.inv(np.linalg.cholesky(omega))
-    subsets = [names] if g_exact is not None else [
-        list(s) for k in range(len(names) + 1) for s in itertools.combinations(names, k)]  # fmt: skip
-    gms = [g] if g_exact is not None else list(range(g + 1))
-    best = None
-    grid = sorted(gm_cols)
-    # every column whitened once, and their Gram matrix: each basis's normal equations are
-    # a submatrix of it, each subset screened without forming its columns
-    b = chol_inv @ avar
-    lin = np.stack([cols[t] for t in names], axis=1) if names else np.zeros((len(ms), 0))
-    w = chol_inv @ np.concatenate([lin, np.stack([gm_cols[t] for t in grid], axis=1)], axis=1)
-    gram, h, bb = w.T @ w, w.T @ b, float(b @ b)
-    for sub in subsets:
-        li = np.asarray([names.index(t) for t in sub], dtype=int)
-        for k in gms:
-            if not sub and k == 0:
-                continue
-            combos = _combinations(len(grid), k)
-            idx = np.concatenate([np.broadcast_to(li, (len(combos), li.size)), len(names) + combos],
-                                 axis=1)  # fmt: skip
-            c, j = _gram_ls(gram, h, bb, idx)
-            i = int(np.argmin(j))
-            if np.isfinite(j[i]) and (best is None or j[i] < best["J"]):
-                best = {"names": list(sub), "gm": [grid[int(t)] for t in combos[i]], "c": c[i],
-                        "J": float(j[i]), "idx": idx[i]}  # fmt: skip
-    if best is None:
-        return None
-    # the winner's coefficients and J from its residual, as every other fit's
-    c, j = _whitened_ls(w[:, best.pop("idx")][None], b)
-    if np.isfinite(j[0]):
-        best["c"], best["J"] = c[0], float(j[0])
-    if best["gm"]:
-        best = _refine(best, avar, chol_inv, cols, tau0, ms, grid)
-    return best
-
-
-def _refine(fit, avar, chol_inv, cols, tau0, ms, grid):
-    """Each correlation time moved to the vertex of a parabola in log T through its grid
-    neighbours (the others held), when that lowers J."""
-    step = math.log(grid[1] / grid[0])
-    for i in range(len(fit["gm"])):
-
-        def j_at(log_ts, fit=fit, i=i):  # J and (times, c) with T_i at each of `log_ts`
-            times = np.repeat(np.asarray(fit["gm"], dtype=float)[None], len(log_ts), axis=0)
-            times[:, i] = np.exp(log_ts)
-            gm = unit_avar("gauss_markov", ms, tau0, tau0 / times.ravel())
-            gm = gm.reshape(*times.shape, len(ms)).transpose(0, 2, 1)  # (trials, S, k)
-            lin = np.stack([cols[t] for t in fit["names"]], 1) if fit["names"] else gm[0, :, :0]
-            basis = np.concatenate([np.broadcast_to(lin, (len(log_ts), *lin.shape)), gm], 2)
-            c, j = _gls(avar, chol_inv, basis)
-            return [(np.inf, None) if not np.isfinite(jt) else (float(jt), (list(ts), ct))
-                    for jt, ts, ct in zip(j, times, c, strict=True)]  # fmt: skip
-
-        x0 = math.log(fit["gm"][i])
-        (j_lo, _), (j_hi, _) = j_at([x0 - step, x0 + step])
-        den = j_lo - 2 * fit["J"] + j_hi  # J at x0 is the fit's own
-        if np.isfinite(den) and den > 0:
-            x = x0 + 0.5 * step * (j_lo - j_hi) / den
-            x = min(max(x, math.log(grid[0])), math.log(grid[-1]))
-            ((jx, sol),) = j_at([x])
-            if sol is not None and jx < fit["J"]:
-                fit = {"names": fit["names"], "gm": sol[0], "c": sol[1], "J": jx}
-    return fit
-
-
-def _log_parts(p, lin, k, ms, tau0):
-    """Model Allan variance M, ∂(log M)/∂p, and a function giving ∂²(log M)/∂p² (S, P, P),
-    at p = (log c² of the linear terms, whose unit Allan variances at `ms` are the columns
-    of `lin` (S, q), and of the k Gauss–Markov terms, log T of each)."""
-    q = lin.shape[1]
-    c = np.exp(p[: q + k])
-    h = 1e-4  # ∂/∂ log T by central differences: each T and T·e^{±h} in one evaluation
-    if k:
-        logt = p[q + k :]
-        times = np.exp(np.concatenate([logt, logt + h, logt - h]))
-        gm = unit_avar("gauss_markov", ms, tau0, tau0 / times)
-        amp = np.concatenate([lin, gm[:k].T], axis=1) * c  # ∂M/∂ log c² = c²·f
-        slope = c[q:] * (gm[k : 2 * k] - gm[2 * k :]).T / (2 * h)  # ∂M/∂ log T
-    else:
-        amp = lin * c
-    model = amp.sum(1)
-    jac = np.concatenate([amp, slope], axis=1) / model[:, None] if k else amp / model[:, None]
-
-    def curvature():  # ∂²M/M − ∇L∇Lᵀ, ∂²M nonzero on the diagonal and each (c_g², T_g) pair
-        size = q + 2 * k
-        second = np.zeros((len(ms), size, size))
-        second[:, np.arange(q + k), np.arange(q + k)] = amp
-        if k:
-            g, t = np.arange(q, q + k), np.arange(q + k, size)
-            second[:, g, t] = second[:, t, g] = slope
-            second[:, t, t] = c[q:] * (gm[k : 2 * k] - 2 * gm[:k] + gm[2 * k :]).T / (h * h)
-        return second / model[:, None, None] - jac[:, :, None] * jac[:, None, :]
-
-    return model, jac, curvature
-
-
-def _log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None, give_up=None):
-    """The selected model refitted on log σ̂² (Newton on the weighted squares, Gauss–Newton
-    where its Hessian is not positive definite, step-halving): the relative covariance
-    D⁻¹ΩD⁻¹ (D the model) hardly depends on the fitted level, so the weights do not follow
-    the estimate as Ω's do on σ̂² itself, and the long octaves' skewed estimates weigh
-    symmetrically. **Returns:** `(fit, Ω, covariance of p)`, p = (log c², log T)."""
-    c = np.asarray(fit["c"], dtype=float)
-    keep = c > 0  # a term at zero is absent: log c² has no place to start from
-    q = len(fit["names"])
-    names = [t for t, kept in zip(fit["names"], keep[:q], strict=True) if kept]
-    gm = [t for t, kept in zip(fit["gm"], keep[q:], strict=True) if kept]
-    k, c = len(gm), c[keep]
-    p = np.concatenate([np.log(c), np.log(np.asarray(gm, dtype=float))])
-    target = np.log(avar)
-    lin = (np.stack([unit_avar(t, ms, tau0) if cols is None else cols[t] for t in names], axis=1)
-           if names else np.zeros((len(ms), 0)))  # fmt: skip
-
-    def fitted(p):
-        return {"names": names, "gm": list(np.exp(p[len(names) + k :])),
-                "c": np.exp(p[: len(names) + k])}  # fmt: skip
-
-    def whitened(parts, whiten):  # whitened residual and Jacobian, the log model's ∂², and
-        model, jac, curvature = parts  # which parameters still move the model (a term whose
-        # share of it has fallen below 1e-6 at every octave is absent: its log c² would fall
-        # by ≈ 1 a step for as long as it is let, changing nothing)
-        live = np.max(np.abs(jac), axis=0) >= 1e-6
-        return whiten @ (target - np.log(model)), whiten @ jac, curvature, live
-
-    def relative(p, model):  # the covariance of log σ̂² at p, D⁻¹ΩD⁻¹, and its inverse factor
-        om = _omega(fitted(p), ms, n, tau0, avar)
-        return om, np.linalg.inv(np.linalg.cholesky(om / np.outer(model, model)))
-
-    def step_from(r, a, curv, whiten):
-        # Newton: the squares' Hessian AᵀA − Σ (Wᵀr)_s ∂²L_s; where the residuals are
-        # large against A's small singular values Gauss–Newton alone converges linearly
-        hess = a.T @ a - np.einsum("s,sij->ij", whiten.T @ r, curv())
-        try:
-            np.linalg.cholesky(hess)
-            return np.linalg.solve(hess, a.T @ r)
-        except np.linalg.LinAlgError:
-            return np.linalg.lstsq(a, r, rcond=None)[0]
-
-    dof = max(len(ms) - p.size, 1)
-    for _ in range(rounds):  # Newton with the weights held, then the weights at its end
-        parts = _log_parts(p, lin, k, ms, tau0)
-        om, chol = relative(p, parts[0])
-        r, a, curv, live = whitened(parts, chol)
-        cost = float(r @ r)
-        for _ in range(steps):
-            step = step_from(r, a, curv, chol)
-            for scale in (1.0, 0.5, 0.25, 0.125):
-                trial = p + scale * np.clip(step, -2.0, 2.0)
-                got = whitened(_log_parts(trial, lin, k, ms, tau0), chol)
-                if float(got[0] @ got[0]) < cost:
-                    p, (r, a, curv, live), cost = trial, got, float(got[0] @ got[0])
-                    break
-            else:
-                break
-            if np.max(np.abs(scale * step)[live], initial=0.0) < 1e-6:
-                break
-        if give_up is not None and chi2_sf(cost, dof) < give_up:  # rejected, whatever the
-            break  # later rounds do
-    parts = _log_parts(p, lin, k, ms, tau0)
-    om, chol = relative(p, parts[0])
-    r, a, *_ = whitened(parts, chol)
-    f = fitted(p)
-    f["J"] = float(r @ r)
-    return f, om, np.linalg.pinv(a.T @ a)
 
 
 def _exp(v: float) -> float:
