@@ -183,9 +183,9 @@ def log_parts(p, lin, k, ms, tau0):
         amp = np.concatenate([lin, gm[:k].T], axis=1) * c  # ∂M/∂ log c² = c²·f
         slope = c[q:] * (gm[k : 2 * k] - gm[2 * k :]).T / (2 * h)  # ∂M/∂ log T
     else:
-        amp = lin * c
+        amp, slope = lin * c, np.zeros((len(ms), 0))
     model = amp.sum(1)
-    jac = np.concatenate([amp, slope], axis=1) / model[:, None] if k else amp / model[:, None]
+    jac = np.concatenate([amp, slope], axis=1) / model[:, None]
 
     def curvature():  # ∂²M/M − ∇L∇Lᵀ, ∂²M nonzero on the diagonal and each (c_g², T_g) pair
         size = q + 2 * k

@@ -203,10 +203,10 @@ def _detrended_sums(z, dmax):
     first, last = [0.0] * (dmax + 1), [None] * (dmax + 1)
     for i0 in range(0, n, _BLOCK):
         zb = z[i0 : i0 + _BLOCK]
-        fit = index(i0, zb.size)
-        fit *= b2
+        t = index(i0, zb.size)
+        fit = b2 * t
         fit += b1
-        fit *= index(i0, zb.size)
+        fit *= t
         fit += c0
         v = zb - fit
         before = list(last)  # each sequence's last value in the blocks before
