@@ -72,6 +72,14 @@ UNROLL = {"cpu": 1}
 """Steps per iteration of the compiled step loop, by JAX backend (default 1 for a backend
 not named): on a GPU each loop iteration is a launch and a host round trip, so several
 steps per iteration pay there (benchmarks/gpu_backend.py)."""
+LOOPED_STAGES_STEPS = {"cpu": 2**18}
+"""By JAX backend (0 for a backend not named: on a GPU each loop iteration is a launch, as
+for `UNROLL`): runs with the loops closed of at most this many steps (all intervals; 5.2 s
+at 5 kHz and 10 steps per cycle) evaluate the 13 stages of each step in a loop (`_rk_step_looped`),
+longer ones unrolled. On the default gyro (XLA's default flags, 2 cores) the loop's program
+compiles 3× faster (3.1 against 9.5 s; its gradient 18 against 65 s) and runs 1.3–1.6×
+slower (175 against 108 ms for 2 500 steps), so the compile time saved pays for
+≈ 2.7·10⁵ steps of one trajectory (`benchmarks/carrier_stages.py`)."""
 STEPS_PER_CYCLE_AT_1E8 = 10.0
 """Steps per carrier cycle that match adaptive Dopri8 at rtol 1e-8 on the final state (the
 8th-order error scales as (steps per cycle)⁻⁸; `steps_per_cycle`)."""
@@ -91,6 +99,27 @@ def _rk_step(f, w, h):
         inc = sum(float(a[j]) * ks[j] for j in range(a.size) if a[j] != 0.0)
         ks.append(f(float(c), w + h * inc))
     return w + h * sum(float(_B[j]) * ks[j] for j in range(len(ks)) if _B[j] != 0.0)
+
+
+_A_FULL = np.zeros((len(_C) + 1, len(_C) + 1))
+for _s, _a in enumerate(_A, start=1):
+    _A_FULL[_s, : _a.size] = _a
+_C_FULL = np.concatenate([[0.0], _C])
+
+
+def _rk_step_looped(f, w, h):
+    """`_rk_step` with the stages in a loop (`f(c, w)`, c traced): `f` is traced and
+    compiled once, not 13 times (`LOOPED_STAGES_STEPS`)."""
+    ks = jnp.zeros((_C_FULL.size,) + w.shape, w.dtype).at[0].set(f(0.0, w))
+    a, c = jnp.asarray(_A_FULL, w.dtype), jnp.asarray(_C_FULL, w.dtype)
+
+    def stage(s, ks):
+        inc = jnp.sum(a[s][:, None] * ks, axis=0)
+        return ks.at[s].set(f(c[s], w + h * inc))
+
+    ks = jax.lax.fori_loop(1, _C_FULL.size, stage, ks)
+    b = jnp.asarray(np.concatenate([_B, np.zeros(_C_FULL.size - _B.size)]), w.dtype)
+    return w + h * jnp.sum(b[:, None] * ks, axis=0)
 
 
 def _step(env, omega_scale, y, h, scheduled=False):
@@ -130,12 +159,14 @@ def _step(env, omega_scale, y, h, scheduled=False):
     return jnp.concatenate([out, jnp.reshape(hold, (1,))])
 
 
-def _step_continuous(env, omega_scale, y, h, d_rate, scheduled=False):
+def _step_continuous(env, omega_scale, y, h, d_rate, scheduled=False, looped=False):
     """One step over h [s] of the full model's own right-hand side (`carrier_rhs`: the loops
     demodulate the state at every stage, as in the adaptive solve), Ω linear over the step
     (`d_rate` [rad/s]: its change over the step; exact for the piecewise-linear profile).
     In FTR mode under a schedule, while the rebalance loop is off the held angle is the
-    estimate at the step's end (sample and hold: what the continuous hold tracks)."""
+    estimate at the step's end (sample and hold: what the continuous hold tracks).
+    `looped`: the stages in a loop (`_rk_step_looped`; the same arithmetic, summed in
+    another order)."""
     g, omega_in, omega_dot, command, rho_mid = env
     angle0, rho0, on = command
 
@@ -147,7 +178,7 @@ def _step_continuous(env, omega_scale, y, h, d_rate, scheduled=False):
         angle = angle0 + c * h * (rho0 + c * (rho_mid - rho0))
         return carrier_rhs(g, rate, omega_dot, w, omega_scale, (angle, rho, on), False)
 
-    out = _rk_step(field, y, h)
+    out = (_rk_step_looped if looped else _rk_step)(field, y, h)
     out = out.at[4].set(jnp.remainder(out[4], 2 * jnp.pi))
     if g.control.mode != "ftr" or not scheduled:
         return out
@@ -169,18 +200,19 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = F
     each step). Derivatives: from the stored states (`hrgjax._stepped`) for runs of at most
     `STORE_STEPS` steps, else through the step loop checkpointed by chunks."""
     intervals = ts.shape[0] + max(profile.t.shape[0] - 2, 0)
+    looped = steps * intervals <= LOOPED_STAGES_STEPS.get(jax.default_backend(), 0)
     if steps * intervals <= STORE_STEPS:
-        return _stored(steps, held, gyro, profile, y0, omega_scale, ts)
-    return _streamed(gyro, profile, y0, omega_scale, ts, steps, held)
+        return _stored(steps, held, looped, gyro, profile, y0, omega_scale, ts)
+    return _streamed(gyro, profile, y0, omega_scale, ts, steps, held, looped)
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1))
-def _stored(steps, held, gyro, profile, y0, omega_scale, ts):
-    return _streamed(gyro, profile, y0, omega_scale, ts, steps, held)
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
+def _stored(steps, held, looped, gyro, profile, y0, omega_scale, ts):
+    return _streamed(gyro, profile, y0, omega_scale, ts, steps, held, looped)
 
 
 @_stored.defjvp
-def _stored_jvp(steps, held, primals, tangents):
+def _stored_jvp(steps, held, looped, primals, tangents):
     gyro, profile, y0, omega_scale, ts = primals
     d_gyro, d_profile, dy0, d_scale, d_ts = tangents
     build = lambda g, p, s, t: _per_step(g, p, s, t, steps, held)  # noqa: E731
@@ -188,13 +220,13 @@ def _stored_jvp(steps, held, primals, tangents):
         build, (gyro, profile, omega_scale, ts), (d_gyro, d_profile, d_scale, d_ts)
     )
     step = functools.partial(_flat_step, gyro.control.enabled and not held,
-                             profile.rebalance is not None)  # fmt: skip
+                             profile.rebalance is not None, looped)  # fmt: skip
     ys = scan_states(step, y0, xs, theta)
     dys = tangent_states(step, ys, xs, theta, dy0, dxs, d_theta)
     return ys[at], dys[at]
 
 
-def _flat_step(continuous, scheduled, y, x, theta):
+def _flat_step(continuous, scheduled, looped, y, x, theta):
     """One step of `_stored`'s flat layout: `x` = (gyro at the step or None, Ω, Ω̇, command,
     ρ at the midpoint, h, Ω's change over the step), `theta` = (ω_s, the gyro when it has no
     temperature laws). An empty interval's steps (h = 0) leave the state as it is."""
@@ -204,7 +236,7 @@ def _flat_step(continuous, scheduled, y, x, theta):
     # h = 0 returns y itself (no step divides by h); a stand-in step would overflow, and its
     # inf would reach the reverse pass through the `where` (0 · inf)
     if continuous:
-        y1 = _step_continuous(env, omega_scale, y, h, d_rate, scheduled)
+        y1 = _step_continuous(env, omega_scale, y, h, d_rate, scheduled, looped)
     else:
         y1 = _step(env, omega_scale, y, h, scheduled)
     return jnp.where(h > 0, y1, y)
@@ -260,7 +292,9 @@ def _per_step(gyro, profile, omega_scale, ts, steps: int, held: bool):
     return xs, (omega_scale, g_fixed), at
 
 
-def _streamed(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False):
+def _streamed(
+    gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False, looped: bool = False
+):
     """`carrier_solve` through the step loop: intervals, chunks of ≤ `CHUNK` steps (the
     temperature laws evaluated at their ends), steps; reverse mode recomputes each chunk."""
     events = event_grid(profile.t, ts)
@@ -299,7 +333,7 @@ def _streamed(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False
             env = (g, omega_in, (rate1 - rate0) / safe_h, profile.command_at(t1 - h),
                    profile.precession_at(t1 - 0.5 * h))  # fmt: skip
             if continuous:
-                yy = _step_continuous(env, omega_scale, yy, h, rate1 - rate0, scheduled)
+                yy = _step_continuous(env, omega_scale, yy, h, rate1 - rate0, scheduled, looped)
             else:
                 yy = _step(env, omega_scale, yy, h, scheduled)
             return yy, angle1, rate1, accel1
