@@ -22,7 +22,7 @@ stages, no error estimate) of the full model's equations:
   ω_r and the integrators' rates), which then **hold over the step** — a digital controller
   updating at 1/h. The resonator and the reference phasor $(\cos\psi_r, \sin\psi_r)$
   advance together at the held ω_r, so the stages need no trigonometry and each is one
-  fused kernel: 3–4× faster than the continuous step with the loops closed; ψ_r then advances
+  fused kernel: 3–5× faster than the continuous step with the loops closed; ψ_r then advances
   by ω_r·h, the integrators by their held rates times h. Free-running (no efforts) this is
   exact. With the loops closed the held loops lag the continuous ones by h/2 and miss their
   response to the carrier-frequency ripple of the demodulated state: first order in h, a
@@ -72,14 +72,18 @@ UNROLL = {"cpu": 1}
 """Steps per iteration of the compiled step loop, by JAX backend (default 1 for a backend
 not named): on a GPU each loop iteration is a launch and a host round trip, so several
 steps per iteration pay there (benchmarks/gpu_backend.py)."""
-LOOPED_STAGES_STEPS = {"cpu": 2**18}
+LOOPED_STAGES_STEPS = {"cpu": 2**17}
 """By JAX backend (0 for a backend not named: on a GPU each loop iteration is a launch, as
-for `UNROLL`): runs with the loops closed of at most this many steps (all intervals; 5.2 s
-at 5 kHz and 10 steps per cycle) evaluate the 13 stages of each step in a loop (`_rk_step_looped`),
-longer ones unrolled. On the default gyro (XLA's default flags, 2 cores) the loop's program
-compiles 3× faster (3.1 against 9.5 s; its gradient 18 against 65 s) and runs 1.3–1.6×
-slower (175 against 108 ms for 2 500 steps), so the compile time saved pays for
-≈ 2.7·10⁵ steps of one trajectory (`benchmarks/carrier_stages.py`)."""
+for `UNROLL`): runs with the loops closed of at most this many steps (all intervals; 2.6 s
+at 5 kHz and 10 steps per cycle) evaluate the 13 stages of each step in a loop
+(`_rk_step_looped`), longer ones unrolled. On the default gyro (XLA's default flags, 2
+cores, `benchmarks/carrier_stages.py`) the loop's program compiles about 3× faster (3.1–3.5
+against 8.4–10.1 s; its gradient's first call 22–27 against 92–100 s) and runs 1.3–1.9×
+slower (2 500 steps: 170–184 against 88–108 ms; under `vmap` 1.26×, the gradient
+1.4–1.5×): a first call gains while the run has fewer than ≈ 2·10⁵ steps. The bound keeps
+that gain (at most ≈ 4.5 s of extra run time in a call of the longest looped run, against
+≈ 6 s of compiling saved). For many
+repeated calls of one program (the compile cache on, `hg.enable_cache`), set it to 0."""
 STEPS_PER_CYCLE_AT_1E8 = 10.0
 """Steps per carrier cycle that match adaptive Dopri8 at rtol 1e-8 on the final state (the
 8th-order error scales as (steps per cycle)⁻⁸; `steps_per_cycle`)."""
