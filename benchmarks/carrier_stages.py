@@ -9,7 +9,7 @@ prints the first call (trace, lower, compile and run), the compiled run (best of
 number of steps for which the compile time saved pays for the slower run:
 
 - one closed-loop run of the default gyro (temperature laws on), 0.05 s with a rate ramp and a
-  knot, rtol 1e-8 (2 500 steps: `resonator_speed.py`'s case);
+  knot, rtol 1e-8 (11 intervals of 250 steps: `resonator_speed.py`'s case);
 - the same under `jax.vmap` over 16 rates (one program, 16 trajectories);
 - the gradient of its final wave angle with respect to the resonator (stored-state
   derivatives, `hrgjax._stepped`).
@@ -82,9 +82,9 @@ def main():
 
     print(f"machine: {machine()}")
     for case, what, steps in (
-        ("single", "one 0.05-s run, loops closed, laws on", 2500),
-        ("vmap16", "16 such runs under vmap (2e-5 s steps)", 2500 * 16),
-        ("grad", "gradient of the final angle (2e-5 s steps)", 2500),
+        ("single", "one 0.05-s run, loops closed, laws on", 2750),
+        ("vmap16", "16 such runs under vmap (2e-5 s steps)", 2750 * 16),
+        ("grad", "gradient of the final angle (2e-5 s steps)", 2750),
     ):
         rows = {form: one(case, form) for form in ("looped", "unrolled")}
         a, b = rows["looped"], rows["unrolled"]

@@ -36,7 +36,12 @@ from .resonator.carrier import (
     AUTO_RTOL_FLOOR as AUTO_RTOL_FLOOR,  # the rule's floor, documented here
 )
 from .resonator.carrier import AUTO_STEP_TEMPERATURES_C as AUTO_STEP_TEMPERATURES_C
-from .resonator.carrier import carrier_solve, steps_per_interval, takes_fixed_steps
+from .resonator.carrier import (
+    carrier_solve,
+    looped_stages,
+    steps_per_interval,
+    takes_fixed_steps,
+)
 from .resonator.control import drive_vectors, ftr_rate, loop_outputs, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field, held_command
 from .resonator.params import TemperatureLaw
@@ -231,8 +236,8 @@ def _solve(
         y0, omega_scale = full_initial_state(gyro, profile, quadrature0)
         field, args = full_vector_field, (gyro, profile, omega_scale)
     if carrier is not None:  # the fixed-step carrier path (resonator/carrier.py)
-        carrier_steps, held = carrier
-        ys = carrier_solve(gyro, profile, y0, omega_scale, ts, carrier_steps, held)
+        carrier_steps, held, looped = carrier
+        ys = carrier_solve(gyro, profile, y0, omega_scale, ts, carrier_steps, held, looped)
         rec = _record(gyro, profile, ts, _read_full(gyro, profile, ts, ys, omega_scale), key,
                       bias_key, run)  # fmt: skip
         steps = jnp.asarray(carrier_steps * ts.shape[0])
@@ -545,6 +550,7 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     dt0 = fixed_step if fixed_step is not None else (1e-2 if model == "averaged" else 1e-5)
     stepping = (solver, rtol, atol, max_steps, dt0, fixed_step is not None)
     if carrier is not None:  # it reads none of diffrax's settings: one program per step count
+        carrier = (*carrier, looped_stages(gyro, profile, ts, *carrier))
         stepping, adjoint = (_default_solver(model), 0.0, 0.0, 1, 0.0, True), None
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
     return _solve(

@@ -74,16 +74,19 @@ not named): on a GPU each loop iteration is a launch and a host round trip, so s
 steps per iteration pay there (benchmarks/gpu_backend.py)."""
 LOOPED_STAGES_STEPS = {"cpu": 2**17}
 """By JAX backend (0 for a backend not named: on a GPU each loop iteration is a launch, as
-for `UNROLL`): runs with the loops closed of at most this many steps (all intervals; 2.6 s
-at 5 kHz and 10 steps per cycle) evaluate the 13 stages of each step in a loop
-(`_rk_step_looped`), longer ones unrolled. On the default gyro (XLA's default flags, 2
-cores, `benchmarks/carrier_stages.py`) the loop's program compiles about 3× faster (3.1–3.5
-against 8.4–10.1 s; its gradient's first call 22–27 against 92–100 s) and runs 1.3–1.9×
-slower (2 500 steps: 170–184 against 88–108 ms; under `vmap` 1.26×, the gradient
-1.4–1.5×): a first call gains while the run has fewer than ≈ 2·10⁵ steps. The bound keeps
-that gain (at most ≈ 4.5 s of extra run time in a call of the longest looped run, against
-≈ 6 s of compiling saved). For many
-repeated calls of one program (the compile cache on, `hg.enable_cache`), set it to 0."""
+for `UNROLL`): runs with the loops closed of at most this many steps per trajectory (all
+intervals; 2.6 s at 5 kHz and 10 steps per cycle) evaluate the 13 stages of each step in a
+loop (`_rk_step_looped`), longer ones unrolled (`looped_stages`). On the default gyro (XLA's
+default flags, 2 cores, `benchmarks/carrier_stages.py`, 2 750 steps) the loop's program
+compiles about 3× faster (3.1–3.5 against 8.4–10.1 s; the first gradient through it 22–27
+against 92–100 s) and runs 1.3–1.9× slower (170–184 against 88–108 ms; 16 trajectories
+under `vmap` 1.26×, the gradient 1.4–1.5×): one trajectory's first call gains while it
+has fewer than ≈ 2·10⁵ steps (≤ ≈ 4.5 s more run time at the bound, ≈ 6 s of compiling
+saved). Under `vmap` the extra run time grows with the batch and the saving does not (a
+batch gains below ≈ 4·10⁶ trajectory-steps). For large batches, or many calls of one
+program with the compile cache on (`hg.enable_cache`), set it to 0 before the call: it is
+a static argument of the simulator's program, so each setting compiles and exports its
+own."""
 STEPS_PER_CYCLE_AT_1E8 = 10.0
 """Steps per carrier cycle that match adaptive Dopri8 at rtol 1e-8 on the final state (the
 8th-order error scales as (steps per cycle)⁻⁸; `steps_per_cycle`)."""
@@ -105,24 +108,25 @@ def _rk_step(f, w, h):
     return w + h * sum(float(_B[j]) * ks[j] for j in range(len(ks)) if _B[j] != 0.0)
 
 
-_A_FULL = np.zeros((len(_C) + 1, len(_C) + 1))
-for _s, _a in enumerate(_A, start=1):
+_STAGES = int(np.flatnonzero(_B)[-1]) + 1  # 13: the 14th stage has no weight in b_sol
+_A_FULL = np.zeros((_STAGES, _STAGES))
+for _s, _a in enumerate(_A[: _STAGES - 1], start=1):
     _A_FULL[_s, : _a.size] = _a
-_C_FULL = np.concatenate([[0.0], _C])
+_C_FULL = np.concatenate([[0.0], _C[: _STAGES - 1]])
 
 
 def _rk_step_looped(f, w, h):
     """`_rk_step` with the stages in a loop (`f(c, w)`, c traced): `f` is traced and
     compiled once, not 13 times (`LOOPED_STAGES_STEPS`)."""
-    ks = jnp.zeros((_C_FULL.size,) + w.shape, w.dtype).at[0].set(f(0.0, w))
+    ks = jnp.zeros((_STAGES,) + w.shape, w.dtype).at[0].set(f(0.0, w))
     a, c = jnp.asarray(_A_FULL, w.dtype), jnp.asarray(_C_FULL, w.dtype)
 
     def stage(s, ks):
         inc = jnp.sum(a[s][:, None] * ks, axis=0)
         return ks.at[s].set(f(c[s], w + h * inc))
 
-    ks = jax.lax.fori_loop(1, _C_FULL.size, stage, ks)
-    b = jnp.asarray(np.concatenate([_B, np.zeros(_C_FULL.size - _B.size)]), w.dtype)
+    ks = jax.lax.fori_loop(1, _STAGES, stage, ks)
+    b = jnp.asarray(_B[:_STAGES], w.dtype)
     return w + h * jnp.sum(b[:, None] * ks, axis=0)
 
 
@@ -197,14 +201,31 @@ def _has_laws(gyro) -> bool:
     return any(is_law(x) for x in jax.tree_util.tree_leaves(gyro, is_leaf=is_law))
 
 
-def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False):
+def looped_stages(gyro, profile, ts, steps: int, held: bool) -> bool:
+    """Whether `carrier_solve` evaluates each step's stages in a loop (`LOOPED_STAGES_STEPS`,
+    for the platform this call runs on: the CPU inside `jax.default_device(a CPU device)`,
+    as an eager `hg.simulate` beside an accelerator). A static argument of the compiled
+    program, so a change of the setting compiles (and exports) a program of its own."""
+    if held or not gyro.control.enabled:
+        return False  # the held step (`_step`) is small: its stages stay unrolled
+    device = jax.config.jax_default_device
+    if device is None:
+        platform = jax.default_backend()
+    else:
+        platform = device if isinstance(device, str) else device.platform
+    intervals = ts.shape[0] + max(profile.t.shape[0] - 2, 0)
+    return steps * intervals <= LOOPED_STAGES_STEPS.get(platform, 0)
+
+
+def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False,
+                  looped: bool = False):  # fmt: skip
     """States (len(ts), 8) ((len(ts), 10) in FTR mode) at the output times `ts` [s] (ts[0] ≥
     the profile's start), each interval of [`event_grid`][hrgjax.resonator.carrier.event_grid]
     (the first from the profile's start) in `steps` equal steps (`held`: the loops held over
-    each step). Derivatives: from the stored states (`hrgjax._stepped`) for runs of at most
+    each step; `looped`: with the loops closed, the stages in a loop, `looped_stages`).
+    Derivatives: from the stored states (`hrgjax._stepped`) for runs of at most
     `STORE_STEPS` steps, else through the step loop checkpointed by chunks."""
     intervals = ts.shape[0] + max(profile.t.shape[0] - 2, 0)
-    looped = steps * intervals <= LOOPED_STAGES_STEPS.get(jax.default_backend(), 0)
     if steps * intervals <= STORE_STEPS:
         return _stored(steps, held, looped, gyro, profile, y0, omega_scale, ts)
     return _streamed(gyro, profile, y0, omega_scale, ts, steps, held, looped)
