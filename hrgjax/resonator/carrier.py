@@ -79,8 +79,8 @@ intervals; 2.6 s at 5 kHz and 10 steps per cycle) evaluate the 13 stages of each
 loop (`_rk_step_looped`), longer ones unrolled (`looped_stages`). On the default gyro (XLA's
 default flags, 2 cores, `benchmarks/carrier_stages.py`, 2 750 steps) the loop's program
 compiles about 3× faster (3.1–3.5 against 8.4–10.1 s; the first gradient through it 22–27
-against 92–100 s) and runs 1.3–1.9× slower (170–184 against 88–108 ms; 16 trajectories
-under `vmap` 1.26×, the gradient 1.4–1.5×): one trajectory's first call gains while it
+against 92–100 s) and runs ≈ 1.8× slower (five runs on a noisy machine: 170–212 against
+74–125 ms; 16 trajectories under `vmap` 1.26×, the gradient 1.4–1.5×): one trajectory's first call gains while it
 has fewer than ≈ 2·10⁵ steps (≤ ≈ 4.5 s more run time at the bound, ≈ 6 s of compiling
 saved). Under `vmap` the extra run time grows with the batch and the saving does not (a
 batch gains below ≈ 4·10⁶ trajectory-steps). For large batches, or many calls of one
