@@ -62,41 +62,15 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 FULL = os.environ.get("HRGJAX_TEST_FULL") == "1"
 
 
-# The heaviest test files, heaviest first (test-seconds per file in `make test`, measured by
-# benchmarks/jax_test_time.py, 2026-11-29). pytest-xdist's `--dist loadfile` hands whole
-# files to its two workers in the order of the collection (its own reordering, by the number
-# of tests in a file, is turned off below), so these go first and the small files fill the
-# gaps at the end: neither worker is left alone with a 60-s file at the end of the run
-# (≈ 20 s of the run's wall time, in a two-worker simulation of the measured file times).
-# A file missing here only runs later; the order never changes what a test does.
-HEAVY_FIRST = (
-    "test_navigation.py", "test_resonator_averaged.py", "test_carrier.py",
-    "test_discovery_search.py", "test_design.py", "test_modes.py", "test_diagnosis_neural.py",
-    "test_ins_errors.py", "test_discovery_continuous.py", "test_bad_input.py",
-    "test_loops_plant.py", "test_diagnosis.py", "test_navigation_filter.py", "test_fog.py",
-    "test_calibration.py", "test_cache.py", "test_cli.py", "test_self_calibration.py",
-    "test_presets.py", "test_sweep.py", "test_noise.py", "test_resonator_full.py",
-    "test_docs_examples.py",
-)  # fmt: skip
-
-
 def pytest_configure(config):
     config.addinivalue_line(
         "markers",
         "slow(reason): a study-sized test run only by `make test-full` (HRGJAX_TEST_FULL=1); "
         "reason: why it is slow and which fast test covers its behaviour",
     )
-    if hasattr(config.option, "loadscopereorder"):  # pytest-xdist: keep the order below
-        config.option.loadscopereorder = False
-
-
-def _weight(item) -> int:
-    name = item.path.name
-    return HEAVY_FIRST.index(name) if name in HEAVY_FIRST else len(HEAVY_FIRST)
 
 
 def pytest_collection_modifyitems(config, items):
-    items.sort(key=_weight)  # stable: each file's tests keep their order
     if FULL:
         return
     for item in items:
