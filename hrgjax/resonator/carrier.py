@@ -80,8 +80,8 @@ loop (`_rk_step_looped`), longer ones unrolled (`looped_stages`). On the default
 default flags, 2 cores, `benchmarks/carrier_stages.py`, 2 750 steps) the loop's program
 compiles about 3× faster (3.1–3.5 against 8.4–10.1 s; the first gradient through it 22–27
 against 92–100 s) and runs ≈ 1.8× slower (five runs on a noisy machine: 170–212 against
-74–125 ms; 16 trajectories under `vmap` 1.26×, the gradient 1.4–1.5×): one trajectory's first call gains while it
-has fewer than ≈ 2·10⁵ steps (≤ ≈ 4.5 s more run time at the bound, ≈ 6 s of compiling
+74–125 ms; 16 trajectories under `vmap` 1.26×, the gradient 1.4–1.5×): one trajectory's
+first call gains while it has fewer than ≈ 2·10⁵ steps (≤ ≈ 4.5 s more run time at the bound, ≈ 6 s of compiling
 saved). Under `vmap` the extra run time grows with the batch and the saving does not (a
 batch gains below ≈ 4·10⁶ trajectory-steps). For large batches, or many calls of one
 program with the compile cache on (`hg.enable_cache`), set it to 0 before the call: it is
@@ -201,6 +201,12 @@ def _has_laws(gyro) -> bool:
     return any(is_law(x) for x in jax.tree_util.tree_leaves(gyro, is_leaf=is_law))
 
 
+def _intervals(profile, ts) -> int:
+    """Intervals the fixed-step path steps through: the outputs and the inner knots
+    (`event_grid`)."""
+    return ts.shape[0] + max(profile.t.shape[0] - 2, 0)
+
+
 def looped_stages(gyro, profile, ts, steps: int, held: bool) -> bool:
     """Whether `carrier_solve` evaluates each step's stages in a loop (`LOOPED_STAGES_STEPS`,
     for the platform this call runs on: the CPU inside `jax.default_device(a CPU device)`,
@@ -213,8 +219,7 @@ def looped_stages(gyro, profile, ts, steps: int, held: bool) -> bool:
         platform = jax.default_backend()
     else:
         platform = device if isinstance(device, str) else device.platform
-    intervals = ts.shape[0] + max(profile.t.shape[0] - 2, 0)
-    return steps * intervals <= LOOPED_STAGES_STEPS.get(platform, 0)
+    return steps * _intervals(profile, ts) <= LOOPED_STAGES_STEPS.get(platform, 0)
 
 
 def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = False,
@@ -225,8 +230,7 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = F
     each step; `looped`: with the loops closed, the stages in a loop, `looped_stages`).
     Derivatives: from the stored states (`hrgjax._stepped`) for runs of at most
     `STORE_STEPS` steps, else through the step loop checkpointed by chunks."""
-    intervals = ts.shape[0] + max(profile.t.shape[0] - 2, 0)
-    if steps * intervals <= STORE_STEPS:
+    if steps * _intervals(profile, ts) <= STORE_STEPS:
         return _stored(steps, held, looped, gyro, profile, y0, omega_scale, ts)
     return _streamed(gyro, profile, y0, omega_scale, ts, steps, held, looped)
 
