@@ -78,15 +78,15 @@ for `UNROLL`): runs with the loops closed of at most this many steps per traject
 intervals; 2.6 s at 5 kHz and 10 steps per cycle) evaluate the 13 stages of each step in a
 loop (`_rk_step_looped`), longer ones unrolled (`looped_stages`). On the default gyro (XLA's
 default flags, 2 cores, `benchmarks/carrier_stages.py`, 2 750 steps) the loop's program
-compiles about 3× faster (3.1–3.5 against 8.4–10.1 s; the first gradient through it 22–27
-against 92–100 s) and runs ≈ 1.8× slower (five runs on a noisy machine: 170–212 against
-74–125 ms; 16 trajectories under `vmap` 1.26×, the gradient 1.4–1.5×): one trajectory's
-first call gains while it has fewer than ≈ 2·10⁵ steps (≤ ≈ 4.5 s more run time at the bound, ≈ 6 s of compiling
-saved). Under `vmap` the extra run time grows with the batch and the saving does not (a
-batch gains below ≈ 4·10⁶ trajectory-steps). For large batches, or many calls of one
-program with the compile cache on (`hg.enable_cache`), set it to 0 before the call: it is
-a static argument of the simulator's program, so each setting compiles and exports its
-own."""
+compiles about 2.5–3× faster (3.1–3.7 against 8.4–10.1 s; the first gradient through it
+22–27 against 83–100 s) and runs ≈ 1.8× slower (six runs on a noisy machine: 170–212
+against 74–137 ms; 16 trajectories under `vmap` 1.26–1.37×, the gradient 1.4–1.5×). One
+trajectory's first call gains while it has fewer than ≈ 2–5·10⁵ steps (at the bound:
+≤ ≈ 4.5 s more run time, ≈ 6 s of compiling saved). Under `vmap` the extra run time grows
+with the batch and the saving does not (a batch gains below ≈ 3–4·10⁶ trajectory-steps).
+For large batches, or many calls of one program with the compile cache on
+(`hg.enable_cache`), set it to 0 before the call: it is a static argument of the
+simulator's program, so each setting compiles and exports its own."""
 STEPS_PER_CYCLE_AT_1E8 = 10.0
 """Steps per carrier cycle that match adaptive Dopri8 at rtol 1e-8 on the final state (the
 8th-order error scales as (steps per cycle)⁻⁸; `steps_per_cycle`)."""
