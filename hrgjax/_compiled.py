@@ -65,6 +65,20 @@ def device(x, dtype=None) -> jax.Array:
     return jax.device_put(np.asarray(x, dtype=dtype))
 
 
+def fused(fn=None, **jit_kwargs):
+    """Decorate an array function so that a call outside a trace runs it as *one* compiled
+    program, and a call inside the caller's `jit`/`vmap`/`grad` trace inlines it (no nested
+    call in the caller's program). `jit_kwargs` go to `jax.jit` (`static_argnames`, …).
+
+    Called eagerly, each `jax.numpy` operation is a program of its own, compiled on its first
+    call with each new shape: ≈ 20–40 ms on a CPU, so a 30-operation helper cost ≈ 1 s the
+    first time a script called it on a new length (`benchmarks/eager_ops.py`). Fused, it is
+    one compile of ≈ the cost of one such operation."""
+    if fn is None:
+        return functools.partial(fused, **jit_kwargs)
+    return functools.wraps(fn)(jax.jit(fn, inline=True, **jit_kwargs))
+
+
 def _is_traced(tree) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 

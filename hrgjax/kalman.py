@@ -27,6 +27,8 @@ import jax
 import jax.numpy as jnp
 from jax.scipy.linalg import cho_factor, cho_solve, expm
 
+from ._compiled import fused
+
 LOG_2PI = 1.8378770664093453
 
 
@@ -37,6 +39,7 @@ class Gaussian(eqx.Module):
     P: jax.Array
 
 
+@fused
 def van_loan(F, Q, dt):
     r"""Exact discretisation $(\Phi, Q_d)$ of $\dot x = Fx + w$ with white-noise spectral
     density `Q` over a step `dt`, from one matrix exponential:
@@ -55,6 +58,7 @@ def van_loan(F, Q, dt):
     return phi, 0.5 * (qd + qd.T)
 
 
+@fused
 def discretise_input(F, B, dt):
     r"""Zero-order-hold input matrix $\Gamma = \int_0^{dt} e^{Fs}ds\,B$ (with $\Phi$), from the
     exponential of $\begin{bmatrix}F & B\\ 0 & 0\end{bmatrix}dt$: an input held constant over
@@ -67,6 +71,7 @@ def discretise_input(F, B, dt):
     return e[:n, :n], e[:n, n:]
 
 
+@fused
 def psd_factor(m):
     r"""A factor L with $LL^\top = M$ of a symmetric positive semi-definite M that may be
     singular (eigen-decomposition, negative round-off clipped): what samples

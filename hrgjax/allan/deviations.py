@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import fused
 from .._x64 import require_x64
 from .uncertainty import (
     NOISE_RULES,
@@ -45,6 +46,7 @@ def _check(y, m, needed, name):
         raise ValueError(f"{name}: m = {m} needs at least {needed} samples; got {n}")
 
 
+@fused(static_argnames="m")
 def adev(y, m: int = 1, tau0: float = 1.0):
     """Non-overlapping Allan deviation of rate samples `y` at τ = m·τ0."""
     _check(y, m, 2 * m, "adev")
@@ -54,6 +56,7 @@ def adev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(0.5 * jnp.mean(jnp.diff(ybar) ** 2))
 
 
+@fused(static_argnames="m")
 def oadev(y, m: int = 1, tau0: float = 1.0):
     """Overlapping Allan deviation at τ = m·τ0."""
     _check(y, m, 2 * m, "oadev")
@@ -63,6 +66,7 @@ def oadev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(jnp.mean(d**2) / (2 * tau**2))
 
 
+@fused(static_argnames="m")
 def mdev(y, m: int = 1, tau0: float = 1.0):
     """Modified Allan deviation at τ = m·τ0."""
     _check(y, m, 3 * m - 1, "mdev")
@@ -74,6 +78,7 @@ def mdev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(jnp.mean(s**2) / (2 * m**2 * tau**2))
 
 
+@fused(static_argnames="m")
 def hdev(y, m: int = 1, tau0: float = 1.0):
     """Non-overlapping Hadamard deviation at τ = m·τ0."""
     _check(y, m, 3 * m, "hdev")
@@ -84,6 +89,7 @@ def hdev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(jnp.mean(d**2) / 6)
 
 
+@fused(static_argnames="m")
 def ohdev(y, m: int = 1, tau0: float = 1.0):
     """Overlapping Hadamard deviation at τ = m·τ0."""
     _check(y, m, 3 * m, "ohdev")
@@ -93,6 +99,7 @@ def ohdev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(jnp.mean(d**2) / (6 * tau**2))
 
 
+@fused(static_argnames="m")
 def totdev(y, m: int = 1, tau0: float = 1.0):
     """Total deviation at τ = m·τ0 (phase extended by reflection at both ends)."""
     _check(y, m, 2, "totdev")

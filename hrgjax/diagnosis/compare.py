@@ -114,9 +114,10 @@ def _measure(ins, sc: Scenario, keys, meas_sigma, fault_ins=None, sizes=None):
     if fault_ins is None:
         return jax.jit(jax.vmap(lambda k: one(k, None, 0.0)))(keys)
     outs = []
+    faulty = jax.jit(one, static_argnums=1)  # one program per faulty INS, not per operation
     with bar(len(keys), "simulating faulty runs", unit="run") as progress:
         for k, i, e in zip(keys, fault_ins, sizes, strict=True):
-            outs.append(one(k, int(i), e))
+            outs.append(faulty(k, int(i), e))
             progress.update(1)
     return jnp.stack(outs)
 

@@ -39,6 +39,7 @@ import numpy as np
 import optax
 import optimistix as optx
 
+from .._compiled import fused
 from .._least_squares import least_squares
 from ..ins.platform import Fault, PlatformINS, simulate
 from ..nn.mlp import MLP
@@ -79,6 +80,7 @@ def onset_templates(
     return jnp.asarray(np.stack(out))
 
 
+@fused(static_argnames=("n", "taps", "onset_within_last"))
 def training_windows(
     z_healthy,
     templates,
@@ -118,6 +120,7 @@ def training_windows(
     return w + e[:, None, None] * add, c, q
 
 
+@fused
 def classifier_set(w, c, q, unit: float = 1e-7):
     """Classifier inputs and labels from [`training_windows`][hrgjax.diagnosis.neural.training_windows]:
     the features of the last `taps` samples, labelled with the fault class (an onset at any
@@ -127,6 +130,7 @@ def classifier_set(w, c, q, unit: float = 1e-7):
     return features(w[:, 1:], unit), jnp.asarray(c)
 
 
+@fused(static_argnames="confirm")
 def latch(classes, confirm: int = 1):
     """State trace from per-step onset classes (..., K): S0 until a nonzero class has been
     named on `confirm` consecutive steps, that class from then on (faults do not clear).
@@ -165,6 +169,7 @@ class PNNDirect(eqx.Module):
     def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
         return cls(PNN.fit(x, y, n_classes, sigma), threshold)
 
+    @fused
     def classify(self, x):
         ls = jax.vmap(self.pnn.log_scores)(jnp.asarray(x, float))
         post = jax.nn.softmax(ls, axis=-1)
@@ -184,6 +189,7 @@ class PNNBank(eqx.Module):
         pnns = [PNN.fit(x, (y == i).astype(int), 2, sigma) for i in range(1, n_classes)]
         return cls(pnns, threshold)
 
+    @fused
     def classify(self, x):
         x = jnp.asarray(x, float)
         yes = [jax.nn.softmax(jax.vmap(p.log_scores)(x), axis=-1)[:, 1] for p in self.pnns]
@@ -200,6 +206,7 @@ class SOMDetector(eqx.Module):
         som = SOM.train(x, shape, key=key, steps=steps)
         return cls(som.label(x, y, n_classes))
 
+    @fused
     def classify(self, x):
         return self.som.predict(x)
 
@@ -229,15 +236,18 @@ class MLPClassifier(eqx.Module):
             nets.append(train_module(net, loss, steps, learning_rate=0.01, max_step=0.5))
         return cls(nets, threshold)
 
+    @fused
     def outputs(self, x):
         """Sigmoid output of every network: (N, n_faults)."""
         x = jnp.asarray(x, float)
         return jax.nn.sigmoid(jnp.stack([jax.vmap(n)(x)[:, 0] for n in self.nets], axis=-1))
 
+    @fused
     def classify(self, x):
         return _scores_to_class(self.outputs(x), self.threshold)
 
 
+@fused
 def predictor_set(w, unit: float = 1e-7):
     """Predictor inputs and targets from windows (n, taps+1, m): the features of the first
     `taps` samples, and the last sample's second difference less the input's mean second

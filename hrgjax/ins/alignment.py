@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import fused
 from .._x64 import require_x64
 from ..kalman import Gaussian, update, van_loan
 from ..units import ARCSEC, DEG, DEG_PER_H
@@ -128,6 +129,7 @@ def load_psins(path) -> ImuLog:
     )
 
 
+@fused
 def coarse_align(f_b, w_b, lat):
     """Body-to-NED matrix from the mean specific force `f_b` [m/s²] and angular rate `w_b`
     [rad/s] of a stationary IMU at latitude `lat` [rad] (TRIAD)."""
@@ -143,6 +145,7 @@ def coarse_align(f_b, w_b, lat):
     return triad(f_n, w_n) @ triad(f_b, w_b).T
 
 
+@fused
 def _rotation(v):
     """exp([v×]) (Rodrigues)."""
     a2 = v @ v
@@ -187,12 +190,14 @@ class AlignmentResult(eqx.Module):
         return out
 
 
+@fused
 def euler_deg(c):
     """(heading [0, 360), pitch, roll) [°] of the body-to-NED matrix `c` (3, 3)."""
     roll, pitch, heading = dcm_to_euler(c)
     return jnp.stack([jnp.mod(heading / DEG, 360.0), pitch / DEG, roll / DEG])
 
 
+@fused
 def _euler_std(c, p_phi):
     """1σ of (heading, pitch, roll) [°] for attitude error covariance `p_phi` (φ = rotation
     of the computed frame, C_true = (I + [φ×]) C)."""

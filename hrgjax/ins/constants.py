@@ -11,6 +11,8 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
+from .._compiled import fused
+
 A = 6_378_137.0
 """WGS-84 semi-major axis [m]."""
 FLATTENING = 1.0 / 298.257223563
@@ -37,6 +39,7 @@ SCHULER_PERIOD = 2.0 * math.pi * math.sqrt(A / G0)
 """Schuler period 2π√(a/g) [s] (84.45 min)."""
 
 
+@fused
 def gravity(lat, h=0.0):
     r"""Normal gravity magnitude γ(φ, h) [m/s²]: Somigliana's closed form on the ellipsoid,
 
@@ -51,6 +54,7 @@ def gravity(lat, h=0.0):
     return g0 * (corr + 3.0 / A**2 * h**2)
 
 
+@fused
 def radii(lat):
     r"""Meridian and prime-vertical radii of curvature $(R_M, R_N)$ [m]:
     $R_N = a/\sqrt{1-e^2\sin^2\varphi}$, $R_M = R_N(1-e^2)/(1-e^2\sin^2\varphi)$."""
@@ -59,17 +63,20 @@ def radii(lat):
     return r_n * (1.0 - E2) / w, r_n
 
 
+@fused
 def earth_rate_ned(lat):
     r"""Earth rate in NED, $\omega_{ie}^n = \omega_{ie}(\cos\varphi, 0, -\sin\varphi)$ [rad/s]."""
     return OMEGA_IE * jnp.stack([jnp.cos(lat), jnp.zeros_like(lat), -jnp.sin(lat)], axis=-1)
 
 
+@fused
 def transport_rate_ned(lat, h, v_ned):
     r"""Transport rate $\omega_{en}^n = (v_E/(R_N+h), -v_N/(R_M+h), -v_E\tan\varphi/(R_N+h))$
     [rad/s] for velocity `v_ned` [m/s] (shape (..., 3)), on WGS-84."""
     return WGS84.transport_rate(lat, h, v_ned)
 
 
+@fused
 def gravity_ned(lat, h=0.0):
     """Normal gravity vector in NED, (0, 0, γ) [m/s²] (plumb-line gravity, centrifugal
     included)."""
@@ -99,10 +106,12 @@ class Earth(eqx.Module):
         if not (math.isfinite(self.rate) and self.rate >= 0):
             raise ValueError(f"Earth.rate must be >= 0 rad/s; got {self.rate}")
 
+    @fused(static_argnums=0)
     def earth_rate(self, lat):
         """Earth rate in NED [rad/s] (see [`earth_rate_ned`][hrgjax.ins.constants.earth_rate_ned])."""
         return earth_rate_ned(lat) * (self.rate / OMEGA_IE)
 
+    @fused(static_argnums=0)
     def radii(self, lat):
         """$(R_M, R_N)$ [m] (equal on the sphere)."""
         if self.radius is None:
@@ -110,18 +119,21 @@ class Earth(eqx.Module):
         r = jnp.full_like(jnp.asarray(lat, float), self.radius)
         return r, r
 
+    @fused(static_argnums=0)
     def gravity(self, lat, h=0.0):
         """Gravity magnitude [m/s²] at latitude `lat` [rad] and height `h` [m]."""
         if self.radius is None:
             return gravity(lat, h)
         return self.g * (self.radius / (self.radius + h)) ** 2 + 0.0 * lat
 
+    @fused(static_argnums=0)
     def gravity_ned(self, lat, h=0.0):
         """Gravity vector (0, 0, γ) in NED [m/s²]."""
         g = self.gravity(lat, h)
         z = jnp.zeros_like(g)
         return jnp.stack([z, z, g], axis=-1)
 
+    @fused(static_argnums=0)
     def transport_rate(self, lat, h, v_ned):
         r"""$\omega_{en}^n$ [rad/s] (see [`transport_rate_ned`][hrgjax.ins.constants.transport_rate_ned])."""
         r_m, r_n = self.radii(lat)
@@ -130,6 +142,7 @@ class Earth(eqx.Module):
             [v_e / (r_n + h), -v_n / (r_m + h), -v_e * jnp.tan(lat) / (r_n + h)], axis=-1
         )
 
+    @fused(static_argnums=0)
     def position_rate(self, lat, h, v_ned):
         r"""$(\dot\varphi, \dot\lambda, \dot h) = (v_N/(R_M+h),\; v_E/((R_N+h)\cos\varphi),\; -v_D)$."""
         r_m, r_n = self.radii(lat)

@@ -50,7 +50,7 @@ import numpy as np
 
 from .. import kalman
 from .._checks import is_concrete
-from .._compiled import Check, program
+from .._compiled import Check, fused, program
 from .._x64 import require_x64
 from .constants import WGS84, Earth
 from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
@@ -408,6 +408,7 @@ def _smooth(res):
     )
 
 
+@fused
 def error_states(
     result: FilterResult,
     truth_nav: NavState,
@@ -437,6 +438,7 @@ def error_states(
     return jnp.concatenate(parts, -1)
 
 
+@fused
 def nees(errors, P):
     """Normalised estimation error squared $e^\\top P^{-1}e$ per epoch (..., M), from the
     true error states `errors` (..., M, n) and the reported covariance `P` (..., M, n, n).

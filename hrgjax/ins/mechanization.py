@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import is_concrete
-from .._compiled import Check, program
+from .._compiled import Check, fused, program
 from .._x64 import require_x64
 from .constants import WGS84, Earth
 
@@ -48,6 +48,7 @@ compile time (benchmarks/navigation.py)."""
 # --- rotations ----------------------------------------------------------------------------
 
 
+@fused
 def skew(w):
     r"""$[w\times]$, the cross-product matrix of `w` (..., 3)."""
     z = jnp.zeros_like(w[..., 0])
@@ -61,6 +62,7 @@ def skew(w):
     )
 
 
+@fused
 def quat_multiply(p, q):
     """Hamilton product p ⊗ q of quaternions (..., 4), scalar first."""
     pw, pv = p[..., :1], p[..., 1:]
@@ -70,11 +72,13 @@ def quat_multiply(p, q):
     return jnp.concatenate([w, v], -1)
 
 
+@fused
 def quat_conjugate(q):
     """The conjugate (inverse of a unit quaternion), scalar first."""
     return jnp.concatenate([q[..., :1], -q[..., 1:]], -1)
 
 
+@fused
 def rotvec_to_quat(phi):
     r"""Unit quaternion of the rotation vector `phi` (..., 3) [rad]: $(\cos\frac{|\phi|}2,
     \frac{\phi}{|\phi|}\sin\frac{|\phi|}2)$, by its series below 1e-2 rad (exact to
@@ -87,6 +91,7 @@ def rotvec_to_quat(phi):
     return jnp.concatenate([w, s * phi], -1)
 
 
+@fused
 def quat_to_rotvec(q):
     """Rotation vector [rad] (..., 3) of a unit quaternion (..., 4), angle in [0, π]."""
     q = jnp.where(q[..., :1] < 0, -q, q)
@@ -100,6 +105,7 @@ def quat_to_rotvec(q):
     return k * v
 
 
+@fused
 def quat_to_dcm(q):
     """Rotation matrix (..., 3, 3) of a unit quaternion: body-to-NED $C_b^n$ for `q_bn`."""
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -113,6 +119,7 @@ def quat_to_dcm(q):
     )
 
 
+@fused
 def euler_to_quat(roll, pitch, heading):
     """Body (FRD)-to-NED quaternion from roll, pitch, heading [rad] (3-2-1 order, as
     [`euler_to_dcm`][hrgjax.ins.trajectory.euler_to_dcm])."""
@@ -171,6 +178,7 @@ class NavState(eqx.Module):
         return jax.tree_util.tree_map(lambda x: x[k], self)
 
 
+@fused
 def navigation_errors(nav: NavState, truth: NavState, earth: Earth = WGS84):
     r"""Errors of `nav` against `truth` (same epochs), in the strapdown error model's
     conventions ([`hrgjax.ins.strapdown`][hrgjax.ins.strapdown]).

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import is_concrete
-from .._compiled import Check, program
+from .._compiled import Check, fused, program
 from .._x64 import require_x64
 from ..kalman import psd_factor, van_loan
 from .constants import Earth
@@ -70,6 +70,7 @@ def error_rate(earth: Earth, lat, h, v, c_bn, f_ned, dx, dgyro, daccel, altitude
     return jnp.concatenate([d_pos, ddv, dphi])
 
 
+@fused(static_argnums=(0, 1))
 def error_matrices_at(earth, altitude_aided, lat, h, v, c_bn, f_ned):
     """(F (9, 9), G_gyro (9, 3), G_accel (9, 3)) of [`error_rate`][hrgjax.ins.strapdown.error_rate]
     on `earth` at one point: latitude `lat` [rad], height `h` [m], velocity `v` (3,) [m/s,
@@ -80,6 +81,7 @@ def error_matrices_at(earth, altitude_aided, lat, h, v, c_bn, f_ned):
     return jax.jacfwd(fn, argnums=(0, 1, 2))(z9, z3, z3)
 
 
+@fused(static_argnames="altitude_aided")
 def error_matrices(traj: Trajectory, altitude_aided: bool = False):
     """(F (N, 9, 9), G_gyro (N, 9, 3), G_accel (N, 9, 3)) along `traj`: the error rate is
     `F dx + G_gyro dgyro + G_accel daccel`."""
@@ -88,6 +90,7 @@ def error_matrices(traj: Trajectory, altitude_aided: bool = False):
     )
 
 
+@fused
 def augmented(f, gg, ga):
     """The 15-state matrix with constant gyro and accelerometer biases appended."""
     top = jnp.concatenate([f, gg, ga], axis=-1)
@@ -95,6 +98,7 @@ def augmented(f, gg, ga):
     return jnp.concatenate([top, bottom], axis=-2)
 
 
+@fused
 def position_metres(traj: Trajectory, dx):
     """Position errors (north, east, down) [m] from error states `dx` (N, ≥3) on `traj`."""
     r_m, r_n = traj.earth.radii(traj.lat)
@@ -210,6 +214,7 @@ class ImuErrors(eqx.Module):
         return jnp.diag(v**2)
 
 
+@fused(static_argnames="altitude_aided")
 def discretise(traj: Trajectory, imu: ImuErrors, altitude_aided: bool = False):
     r"""Exact discretisation of the 15-state model between trajectory samples: for each step
     k → k+1, $\Phi_k = e^{F\,\Delta t}$ and $Q_{d,k}$ (Van Loan) with F at the step's midpoint

@@ -18,10 +18,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import fused
 from ..units import DEG
 from .constants import E2, WGS84, A, Earth
 
 
+@fused
 def euler_to_dcm(roll, pitch, heading):
     r"""Body (FRD)-to-NED matrix $C_b^n$ from roll, pitch, heading [rad] (3-2-1 order)."""
     cr, sr = jnp.cos(roll), jnp.sin(roll)
@@ -37,6 +39,7 @@ def euler_to_dcm(roll, pitch, heading):
     )
 
 
+@fused
 def dcm_to_euler(c):
     """(roll, pitch, heading) [rad] of a body-to-NED matrix (heading in (−π, π])."""
     roll = jnp.arctan2(c[..., 2, 1], c[..., 2, 2])
