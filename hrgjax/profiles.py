@@ -9,7 +9,7 @@ import numpy as np
 
 from . import plausible
 from ._checks import check_finite, is_concrete
-from ._compiled import device
+from ._compiled import device, fused
 from .units import DEG, DEG_PER_S
 
 
@@ -32,6 +32,7 @@ def _eager(fn, *args):
     return fn(*args)
 
 
+@fused
 def lag_at_knots(t, values, tau):
     r"""First-order lag $\dot y = (x - y)/\tau$ of a piecewise-linear signal x (`values` at
     strictly increasing knots `t`), starting at $y(t_0) = x(t_0)$: y at every knot (exact).
@@ -318,6 +319,7 @@ class Profile(eqx.Module):
         t0, t1 = self.t[i], self.t[i + 1]
         return i, t0, t1 - t0
 
+    @fused
     def sample(self, t):
         """Rate [rad/s], its derivative [rad/s²], temperature [°C] and specific force [g]
         at time t [s], with one segment look-up (clamped outside the knots)."""
@@ -332,28 +334,34 @@ class Profile(eqx.Module):
         frac = jnp.clip((t - t0) / length, 0.0, 1.0)
         return values[i] + (values[i + 1] - values[i]) * frac
 
+    @fused
     def rate_at(self, t):
         """Rate [rad/s] at time t [s]."""
         return self._interp(t, self.rate)
 
+    @fused
     def temperature_at(self, t):
         """Temperature [°C] at time t [s]."""
         return self._interp(t, self.temperature)
 
+    @fused
     def accel_at(self, t):
         """Specific force [g], shape (3,), at time t [s]."""
         return self._interp(t, self.accel)
 
+    @fused
     def rate_derivative_at(self, t):
         """Angular acceleration [rad/s²] at time t [s] (slope of the current segment)."""
         i, _, length = self._segment(t)
         return (self.rate[i + 1] - self.rate[i]) / length
 
+    @fused
     def temperature_rate_at(self, t):
         """Temperature rate dT/dt [°C/s] at time t [s] (slope of the current segment)."""
         i, _, length = self._segment(t)
         return (self.temperature[i + 1] - self.temperature[i]) / length
 
+    @fused
     def lagged_temperature_at(self, t, tau):
         r"""First-order lagged temperature $T_i(t)$ [°C], $\dot T_i = (T - T_i)/\tau$,
         starting in equilibrium, $T_i(t_0) = T(t_0)$; `tau` [s] > 0.
@@ -368,6 +376,7 @@ class Profile(eqx.Module):
         s = slope[i]
         return temp[i] + s * dt - s * tau + (at_knots[i] - temp[i] + s * tau) * jnp.exp(-dt / tau)
 
+    @fused
     def kinematics_at(self, t):
         """Table angle since the first knot [rad], rate [rad/s] and specific force [g] (3,)
         at time t [s], with one segment look-up (what a fixed step needs at its end)."""
@@ -380,12 +389,14 @@ class Profile(eqx.Module):
         accel = self.accel[i] + (self.accel[i + 1] - self.accel[i]) * frac
         return cum[i] + self.rate[i] * dt + 0.5 * slope * dt**2, self.rate[i] + slope * dt, accel
 
+    @fused
     def precession_at(self, t):
         """Commanded precession rate [rad/s, electrical] at time t [s] (0 without one)."""
         if self.precession is None:
             return 0.0 * t
         return self._interp(t, self.precession)
 
+    @fused
     def commanded_angle_at(self, t):
         """Commanded wave angle `wave_angle0` + ∫ρ dt [rad, electrical] at time t [s] (exact for
         the piecewise-linear ρ): the angle force-to-rebalance holds."""
@@ -399,6 +410,7 @@ class Profile(eqx.Module):
         slope = (rho[i + 1] - rho[i]) / length
         return self.wave_angle0 + cum[i] + rho[i] * dt + 0.5 * slope * dt**2
 
+    @fused
     def rebalance_at(self, t):
         """1 where the rebalance loop holds the wave at time t [s], 0 where the gyro runs
         whole-angle (the `rebalance` schedule's value at the segment's start; 1 without one)."""
@@ -407,6 +419,7 @@ class Profile(eqx.Module):
         i, _, _ = self._segment(t)
         return self.rebalance[i]
 
+    @fused
     def command_at(self, t):
         """(commanded angle [rad], commanded precession [rad/s], rebalance on 1 / off 0) at
         time t [s]: what the loops are told ([`hrgjax.resonator.control.loop_outputs`][]; in
@@ -414,6 +427,7 @@ class Profile(eqx.Module):
         captures the wave where it is read)."""
         return self.commanded_angle_at(t), self.precession_at(t), self.rebalance_at(t)
 
+    @fused
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""
         return self.kinematics_at(t)[0]

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import fused
 from ..units import T_REF_C
 
 
@@ -174,6 +175,7 @@ class Covariates(eqx.Module):
     harmonic_gain: jax.Array = 1.0
 
 
+@fused
 def window_gain(x):
     r"""What a least-squares slope over a window sees of a 2θ harmonic when θ sweeps
     uniformly across the window by `x` [rad] (x = θ_end − θ_start):
