@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compiled import device
+from .._compiled import device, fused
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
@@ -189,6 +189,7 @@ class PrecessionCompensator(AbstractCompensator):
         """Short label used in tables."""
         return "virtual precession"
 
+    @fused
     def _at(self, coef, theta, temperature_c):
         if coef is None:
             raise ValueError("this PrecessionCompensator is not fitted; use comp = comp.fit(data)")

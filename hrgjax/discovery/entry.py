@@ -12,6 +12,7 @@ The entries themselves, and the model they add up to, are the catalogue:
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 
 import equinox as eqx
@@ -144,9 +145,19 @@ class Effect:
         its regular parameters at the null
         ([`window_rate`][hrgjax.discovery.effects.Effect.window_rate]) at the windows'
         covariates `c`."""
+        return np.asarray(self._columns_program(c, k_e))
+
+    @functools.cached_property
+    def _columns_program(self):
+        """[`columns`][hrgjax.discovery.effects.Effect.columns] as one compiled program per
+        data shape: an eager `jacfwd` dispatched every operation of the term on its own,
+        ≈ 0.2 s a call in the screening's refits."""
         regular = np.asarray([p.regular for p in self.params])
-        jac = np.asarray(jax.jacfwd(lambda p: self.window_rate(p, c, k_e))(self.null))
-        return jac[:, regular]
+
+        def jac(c, k_e):
+            return jax.jacfwd(lambda p: self.window_rate(p, c, k_e))(self.null)[:, regular]
+
+        return jax.jit(jac)
 
 
 class Covariates(eqx.Module):

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import fused
 from .._x64 import require_x64
 from ..ins.constants import WGS84, earth_rate_ned
 from ..ins.trajectory import euler_to_dcm
@@ -305,6 +306,7 @@ def _run(imu, freq, amp, axis, fs, key, lat, c_bn):
     return w_s, a_s, err
 
 
+@fused(static_argnames=("fs", "window_s"))
 def window_means(x, fs: float, window_s: float):
     """Means of `x` (..., N, c) over consecutive windows of `window_s` [s] → (..., K, c);
     a partial last window is left out (K = N // (window_s·fs))."""
@@ -332,12 +334,14 @@ def error_samples(imu: FogImu, vibrating: VibrationRecord, static: VibrationReco
     return to_body(imu.gyro, d)
 
 
+@fused
 def to_body(calib: TriadCalibration, s):
     """Sensor-axis increments `s` (..., 3) → body frame by the linear part of the triad model,
     (diag(1+k)(I+E))⁻¹ (no bias: for differences and errors)."""
     return jnp.asarray(s) @ jnp.linalg.inv(calib.matrix).T
 
 
+@fused
 def to_sensor(calib: TriadCalibration, b):
     """Body-frame errors `b` (..., 3) → sensor axes, diag(1+k)(I+E) b (no bias)."""
     return jnp.asarray(b) @ calib.matrix.T
