@@ -73,7 +73,11 @@ def fused(fn=None, **jit_kwargs):
     Called eagerly, each `jax.numpy` operation is a program of its own, compiled on its first
     call with each new shape: ≈ 20–40 ms on a CPU, so a 30-operation helper cost ≈ 1 s the
     first time a script called it on a new length (`benchmarks/eager_ops.py`). Fused, it is
-    one compile of ≈ the cost of one such operation."""
+    one compile of ≈ the cost of one such operation.
+
+    Not for functions with equinox checks (`eqx.error_if`, `check_finite`) inside: JAX keeps
+    the traced function by its argument shapes, and equinox reads its error mode (raise, or
+    NaN inside `program`) while tracing, so the first caller's mode would stick."""
     if fn is None:
         return functools.partial(fused, **jit_kwargs)
     return functools.wraps(fn)(jax.jit(fn, inline=True, **jit_kwargs))
@@ -92,8 +96,12 @@ def all_finite(tree) -> bool:
 
 
 def _traced_all_finite(tree):
-    leaves = jax.tree_util.tree_leaves(tree)
-    flags = [jnp.all(jnp.isfinite(x)) for x in leaves if eqx.is_inexact_array(x)]
+    return _all_finite([x for x in jax.tree_util.tree_leaves(tree) if eqx.is_inexact_array(x)])
+
+
+@fused
+def _all_finite(arrays):
+    flags = [jnp.all(jnp.isfinite(x)) for x in arrays]
     return jnp.all(jnp.stack(flags)) if flags else jnp.asarray(True)
 
 

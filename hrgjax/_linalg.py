@@ -16,7 +16,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from ._compiled import fused
 
+
+@fused
 def solve(a, b):
     """x with a·x = b, by Gauss–Jordan elimination with partial pivoting (no LAPACK call).
 

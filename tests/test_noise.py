@@ -26,6 +26,9 @@ NBS14 = np.array([892, 809, 823, 798, 671, 644, 883, 903, 677], dtype=float)
 )
 def test_nbs14(fn, m, expected):
     assert float(fn(NBS14, m)) == pytest.approx(expected, rel=1e-4)
+    # any array-like and any integer m: a list, a NumPy or a 0-d JAX integer (each deviation
+    # is one compiled program with m static, behind the eager conversion)
+    assert float(fn(NBS14.tolist(), np.int64(m))) == float(fn(NBS14, jnp.asarray(m)))
 
 
 def test_allan_errors():

@@ -16,12 +16,13 @@ import dataclasses
 import functools
 import math
 import numbers
+import operator
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compiled import fused
+from .._compiled import device, fused
 from .._x64 import require_x64
 from .uncertainty import (
     NOISE_RULES,
@@ -46,7 +47,24 @@ def _check(y, m, needed, name):
         raise ValueError(f"{name}: m = {m} needs at least {needed} samples; got {n}")
 
 
-@fused(static_argnames="m")
+def _per_tau(fn):
+    """One deviation at one τ as one compiled program per data length and `m` (`fused`),
+    behind the eager checks: `y` may be any array-like (a list too), `m` any integer (a
+    NumPy or 0-d JAX integer too)."""
+    core = fused(fn, static_argnames="m")
+
+    @functools.wraps(fn)
+    def call(y, m: int = 1, tau0: float = 1.0):
+        try:
+            m = operator.index(m)
+        except TypeError:
+            pass  # `_check` names the problem
+        return core(y if isinstance(y, jax.Array) else device(y, float), m, tau0)
+
+    return call
+
+
+@_per_tau
 def adev(y, m: int = 1, tau0: float = 1.0):
     """Non-overlapping Allan deviation of rate samples `y` at τ = m·τ0."""
     _check(y, m, 2 * m, "adev")
@@ -56,7 +74,7 @@ def adev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(0.5 * jnp.mean(jnp.diff(ybar) ** 2))
 
 
-@fused(static_argnames="m")
+@_per_tau
 def oadev(y, m: int = 1, tau0: float = 1.0):
     """Overlapping Allan deviation at τ = m·τ0."""
     _check(y, m, 2 * m, "oadev")
@@ -66,7 +84,7 @@ def oadev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(jnp.mean(d**2) / (2 * tau**2))
 
 
-@fused(static_argnames="m")
+@_per_tau
 def mdev(y, m: int = 1, tau0: float = 1.0):
     """Modified Allan deviation at τ = m·τ0."""
     _check(y, m, 3 * m - 1, "mdev")
@@ -78,7 +96,7 @@ def mdev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(jnp.mean(s**2) / (2 * m**2 * tau**2))
 
 
-@fused(static_argnames="m")
+@_per_tau
 def hdev(y, m: int = 1, tau0: float = 1.0):
     """Non-overlapping Hadamard deviation at τ = m·τ0."""
     _check(y, m, 3 * m, "hdev")
@@ -89,7 +107,7 @@ def hdev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(jnp.mean(d**2) / 6)
 
 
-@fused(static_argnames="m")
+@_per_tau
 def ohdev(y, m: int = 1, tau0: float = 1.0):
     """Overlapping Hadamard deviation at τ = m·τ0."""
     _check(y, m, 3 * m, "ohdev")
@@ -99,7 +117,7 @@ def ohdev(y, m: int = 1, tau0: float = 1.0):
     return jnp.sqrt(jnp.mean(d**2) / (6 * tau**2))
 
 
-@fused(static_argnames="m")
+@_per_tau
 def totdev(y, m: int = 1, tau0: float = 1.0):
     """Total deviation at τ = m·τ0 (phase extended by reflection at both ends)."""
     _check(y, m, 2, "totdev")

@@ -45,7 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compiled import device, fused
+from .._compiled import device
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
@@ -112,7 +112,6 @@ class _FittedLaws(eqx.Module):
         theta_dot = rate(w0)
         return slope, theta_dot, -(rate(w0 + self.sf_rate) - theta_dot) / self.sf_rate
 
-    @fused
     def readout_temperature_sensitivity(self, theta, temperature_c):
         """∂θ̂/∂T [rad/°C] at the measured angle θ [rad] and temperature [°C]."""
         gyro = self.gyro()
@@ -120,13 +119,11 @@ class _FittedLaws(eqx.Module):
         meas = lambda temp: readout_angle(gyro.at(temp), true)
         return jax.jvp(meas, (temperature_c,), (jnp.ones_like(temperature_c),))[1]
 
-    @fused
     def drift(self, theta, temperature_c):
         """D(θ, T) [rad/s]; θ electrical [rad], T [°C]."""
         slope, theta_dot, _ = self._derivatives(theta, temperature_c)
         return -slope * theta_dot / self.k_e
 
-    @fused
     def scale_factor(self, theta, temperature_c):
         """SF(θ, T) (1 = nominal)."""
         slope, _, k_e = self._derivatives(theta, temperature_c)

@@ -83,6 +83,10 @@ def gravity_ned(lat, h=0.0):
     return WGS84.gravity_ned(lat, h)
 
 
+def _float_or_none(v):
+    return None if v is None else float(v)
+
+
 class Earth(eqx.Module):
     """The Earth model of the navigation equations: the WGS-84 ellipsoid with Somigliana
     gravity (default), or a sphere of radius `radius` with gravity `g`·(R/(R+h))² — the
@@ -92,9 +96,9 @@ class Earth(eqx.Module):
     `rate`: rotation rate [rad/s] (default ω_ie; 0 gives the classical single-channel
     models with Earth-rate coupling removed)."""
 
-    radius: float | None = eqx.field(static=True, default=None)
-    g: float | None = eqx.field(static=True, default=None)
-    rate: float = eqx.field(static=True, default=OMEGA_IE)
+    radius: float | None = eqx.field(static=True, default=None, converter=_float_or_none)
+    g: float | None = eqx.field(static=True, default=None, converter=_float_or_none)
+    rate: float = eqx.field(static=True, default=OMEGA_IE, converter=float)
 
     def __check_init__(self):
         if (self.radius is None) != (self.g is None):

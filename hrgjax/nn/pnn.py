@@ -13,6 +13,8 @@ import jax
 import jax.numpy as jnp
 from jax.scipy.special import logsumexp
 
+from .._compiled import fused
+
 
 class PNN(eqx.Module):
     """A trained PNN: `centres` (n, d), `labels` (n,) int in [0, `n_classes`), kernel width
@@ -47,6 +49,7 @@ class PNN(eqx.Module):
         n_c = jnp.sum(onehot, axis=0)
         return logsumexp(masked, axis=0) - jnp.log(jnp.maximum(n_c, 1)) + self.log_prior
 
+    @fused
     def predict(self, x):
         """Class of each sample of `x` (m, d) → (m,)."""
         return jnp.argmax(jax.vmap(self.log_scores)(jnp.asarray(x, float)), axis=-1)
