@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import is_concrete
+from .._compiled import fused
 from .constants import Earth
 
 
@@ -95,6 +96,7 @@ class GnssData(eqx.Module):
     valid: jax.Array
 
 
+@fused(static_argnums=0)
 def antenna(earth: Earth, lat, lon, h, v_ned, c_bn, w_eb_b, lever_arm):
     """Antenna position (lat, lon, h) and velocity (module docstring) of IMU states."""
     off = c_bn @ lever_arm
@@ -107,6 +109,7 @@ def antenna(earth: Earth, lat, lon, h, v_ned, c_bn, w_eb_b, lever_arm):
     return pos, v_ned + c_bn @ jnp.cross(w_eb_b, lever_arm)
 
 
+@fused(static_argnums=0)
 def body_rate_wrt_earth(earth: Earth, lat, c_bn, dtheta, dt):
     """$\\omega_{eb}^b \\approx \\Delta\\theta/\\Delta t - C_n^b\\omega_{ie}^n$ [rad/s]."""
     return dtheta / dt - jnp.swapaxes(c_bn, -1, -2) @ earth.earth_rate(lat)
