@@ -50,6 +50,11 @@ CASES = {
         "from hrgjax import kalman\nF = np.eye(15) * -0.1; Q = np.eye(15) * 1e-6",
         "kalman.van_loan(F, Q, 0.5)",
     ),
+    "vibration features of a 20-s record at 200 Hz (fog.spectrum.vibration_features)": (
+        "from hrgjax.fog.spectrum import vibration_features\n"
+        "a = np.random.default_rng(0).normal(size=(4000, 3))",
+        "vibration_features(a, 200.0, 2.0)",
+    ),
     "overlapping Allan deviation at m = 8 of 4 096 samples (allan.deviations.oadev)": (
         "from hrgjax.allan import deviations as dv\ny = np.random.default_rng(0).normal(size=4096)",
         "dv.oadev(y, 8, 0.1)",

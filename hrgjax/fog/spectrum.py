@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from .._checks import check_finite
+from .._compiled import fused
 from ..units import G0
 
 
@@ -34,6 +35,13 @@ def psd(x, fs: float, nperseg: int | None = None):
     nperseg = int(nperseg)
     if not 2 <= nperseg <= n:
         raise ValueError(f"nperseg must be in [2, {n}] samples; got {nperseg}")
+    return _psd(x, fs, nperseg=nperseg)
+
+
+@fused(static_argnames="nperseg")
+def _psd(x, fs, *, nperseg):
+    """`psd` past its checks, as one compiled program per length and segment."""
+    n = x.shape[-1]
     step = nperseg // 2
     starts = jnp.arange(0, n - nperseg + 1, step)
     idx = starts[:, None] + jnp.arange(nperseg)[None, :]
@@ -94,16 +102,25 @@ def vibration_features(
             f"window_s·fs must be >= 8 samples and the record at least one window; got "
             f"window {m} samples, record {a.shape[0]}"
         )
+    if axis is not None:
+        axis = jnp.asarray(axis, a.dtype)
+        if axis.shape != (3,):
+            raise ValueError(f"axis must have shape (3,); got {axis.shape}")
+    return _features(a, axis, fs, min_amp_g, m=m, lobe=int(lobe))
+
+
+@fused(static_argnames=("m", "lobe"))
+def _features(a, axis, fs, min_amp_g, *, m, lobe):
+    """`vibration_features` past its checks, as one compiled program (windows of `m`
+    samples, each one Hann segment)."""
+    k = a.shape[0] // m
     if axis is None:
         var = jnp.var(a, axis=0)
         u = jnp.zeros(3, a.dtype).at[jnp.argmax(var)].set(1.0)
     else:
-        u = jnp.asarray(axis, a.dtype)
-        if u.shape != (3,):
-            raise ValueError(f"axis must have shape (3,); got {u.shape}")
-        u = u / jnp.linalg.norm(u)
+        u = axis / jnp.linalg.norm(axis)
     x = (a[: k * m] @ u).reshape(k, m)
-    f, amp = jax.vmap(lambda w: _peak(*psd(w, fs, m), lobe))(x)
+    f, amp = jax.vmap(lambda w: _peak(*_psd(w, fs, nperseg=m), lobe))(x)
     amp = amp / G0
     on = amp >= min_amp_g
     return jnp.stack([jnp.where(on, f, 0.0), jnp.where(on, amp, 0.0)], axis=-1)
