@@ -28,6 +28,7 @@ the thesis's are noise-free).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import jax
@@ -96,28 +97,38 @@ METHODS = (
 """Method names of the comparison table."""
 
 
-def _measure(ins, sc: Scenario, keys, meas_sigma, fault_ins=None, sizes=None):
+def _run(ins, sc: Scenario, key, meas_sigma, size, fault_ins):
+    """One Monte Carlo run's noisy measurements: healthy (`fault_ins` None) or with a fault
+    of `size` in INS `fault_ins`."""
     n_steps = int(round(sc.duration / sc.dt))
-
-    def one(key, i, e):
-        k_sim, k_noise = jax.random.split(key)
-        if i is None:
-            _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim)
-        else:
-            f = Fault.on(sc.sensor, 1.0, sc.t_fault)
-            f = Fault(f.e * e, f.t_fault)
-            _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim, fault_ins=i,
-                                      fault=f)  # fmt: skip
-        z = measurements(nav, sc.dt, sc.sensor, ins)
-        return z + meas_sigma * jax.random.normal(k_noise, z.shape)
-
+    k_sim, k_noise = jax.random.split(key)
     if fault_ins is None:
-        return jax.jit(jax.vmap(lambda k: one(k, None, 0.0)))(keys)
+        _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim)
+    else:
+        f = Fault.on(sc.sensor, 1.0, sc.t_fault)
+        f = Fault(f.e * size, f.t_fault)
+        _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim,
+                                  fault_ins=fault_ins, fault=f)  # fmt: skip
+    z = measurements(nav, sc.dt, sc.sensor, ins)
+    return z + meas_sigma * jax.random.normal(k_noise, z.shape)
+
+
+# one program per scenario (and faulty INS, and batch size), kept between calls
+_faulty_run = jax.jit(_run, static_argnames=("sc", "fault_ins"))
+
+
+@functools.partial(jax.jit, static_argnames="sc")
+def _healthy_runs(ins, sc: Scenario, keys, meas_sigma):
+    return jax.vmap(lambda k: _run(ins, sc, k, meas_sigma, 0.0, None))(keys)
+
+
+def _measure(ins, sc: Scenario, keys, meas_sigma, fault_ins=None, sizes=None):
+    if fault_ins is None:
+        return _healthy_runs(ins, sc, keys, meas_sigma)
     outs = []
-    faulty = jax.jit(one, static_argnums=1)  # one program per faulty INS, not per operation
     with bar(len(keys), "simulating faulty runs", unit="run") as progress:
         for k, i, e in zip(keys, fault_ins, sizes, strict=True):
-            outs.append(faulty(k, int(i), e))
+            outs.append(_faulty_run(ins, sc, k, meas_sigma, e, fault_ins=int(i)))
             progress.update(1)
     return jnp.stack(outs)
 
