@@ -29,6 +29,10 @@ def test_wgs84_constants_and_gravity():
     assert 2 * np.pi / C.OMEGA_IE / 3600 == pytest.approx(23.934, abs=1e-3)
     with pytest.raises(ValueError, match="both radius and g"):
         C.Earth(radius=1.0)
+    with pytest.raises(ValueError, match="Earth.radius must be a number"):
+        C.Earth(radius="6.4e6 m", g=9.8)
+    # a 0-d array is taken as its number (the fields are static: hashed, compared by value)
+    assert C.Earth(radius=jnp.asarray(6.4e6), g=9.8) == C.Earth(radius=6.4e6, g=9.8)
 
 
 def test_van_loan_matches_the_closed_form_and_the_lyapunov_identity():

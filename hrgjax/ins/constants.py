@@ -6,6 +6,7 @@ Navigation frame: NED (north, east, down). Latitude `lat` and longitude in radia
 
 from __future__ import annotations
 
+import functools
 import math
 
 import equinox as eqx
@@ -83,8 +84,14 @@ def gravity_ned(lat, h=0.0):
     return WGS84.gravity_ned(lat, h)
 
 
-def _float_or_none(v):
-    return None if v is None else float(v)
+def _number(name, v):
+    """A static field's value as a Python float (None kept), or an error naming the field."""
+    if v is None and name != "rate":
+        return None
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        raise ValueError(f"Earth.{name} must be a number; got {v!r}") from None
 
 
 class Earth(eqx.Module):
@@ -96,9 +103,15 @@ class Earth(eqx.Module):
     `rate`: rotation rate [rad/s] (default ω_ie; 0 gives the classical single-channel
     models with Earth-rate coupling removed)."""
 
-    radius: float | None = eqx.field(static=True, default=None, converter=_float_or_none)
-    g: float | None = eqx.field(static=True, default=None, converter=_float_or_none)
-    rate: float = eqx.field(static=True, default=OMEGA_IE, converter=float)
+    radius: float | None = eqx.field(
+        static=True, default=None, converter=functools.partial(_number, "radius")
+    )
+    g: float | None = eqx.field(
+        static=True, default=None, converter=functools.partial(_number, "g")
+    )
+    rate: float = eqx.field(
+        static=True, default=OMEGA_IE, converter=functools.partial(_number, "rate")
+    )
 
     def __check_init__(self):
         if (self.radius is None) != (self.g is None):
