@@ -9,7 +9,8 @@ walk $N/\sqrt\tau$, bias instability flat at $0.6643B$, rate random walk $K\sqrt
 rate ramp $R\tau/\sqrt2$.
 
 Every name is importable from `hrgjax.allan` (it was one module until issue 45); inside:
-`deviations` (the estimators, the compiled curve and `deviation` with its τ grids),
+`deviations` (the estimators and the compiled curve), `result` (`deviation`: that curve on
+τ grids with its statistics, an `AllanResult`),
 `total` (mtotdev and ttotdev, NumPy),
 `uncertainty` (noise identification, EDF, χ² intervals), `noise_terms` (the IEEE 952
 line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
@@ -20,12 +21,8 @@ stamps onto a uniform grid by the angle: `to_uniform`).
 
 from .composite import CompositeNoise as CompositeNoise
 from .composite import identify_noise as identify_noise
-from .deviations import KINDS as KINDS
-from .deviations import TOTVAR_BIAS as TOTVAR_BIAS
-from .deviations import AllanResult as AllanResult
 from .deviations import adev as adev
 from .deviations import allan_deviation as allan_deviation
-from .deviations import deviation as deviation
 from .deviations import hdev as hdev
 from .deviations import mdev as mdev
 from .deviations import oadev as oadev
@@ -35,6 +32,10 @@ from .noise_terms import NOISE_TERMS as NOISE_TERMS
 from .noise_terms import NoiseFit as NoiseFit
 from .noise_terms import fit_noise as fit_noise
 from .resample import to_uniform as to_uniform
+from .result import KINDS as KINDS
+from .result import TOTVAR_BIAS as TOTVAR_BIAS
+from .result import AllanResult as AllanResult
+from .result import deviation as deviation
 from .uncertainty import ACF_POINTS as ACF_POINTS
 from .uncertainty import B1_AVERAGES as B1_AVERAGES
 from .uncertainty import NOISE_RULES as NOISE_RULES

@@ -281,7 +281,7 @@ def identify_noise(
 
     **Raises:** `ValueError` naming the argument for unknown terms, a `gauss_markov` outside
     0–2, a bad rate or level, or a record shorter than 64 samples (four octaves)."""
-    from .deviations import deviation
+    from .result import deviation
 
     if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")

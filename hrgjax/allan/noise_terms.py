@@ -16,7 +16,7 @@ from statistics import NormalDist
 import numpy as np
 
 from .._nnls import nnls as _nnls
-from .deviations import AllanResult
+from .result import AllanResult
 
 NOISE_TERMS = (
     ("quantization", "Q", "rate unit·s", lambda t: 3.0 / t**2),

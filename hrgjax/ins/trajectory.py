@@ -153,20 +153,8 @@ def stationary(
     earth: Earth = WGS84,
 ) -> Trajectory:
     """A vehicle at rest at (`lat_deg`, `lon_deg`, `h`) with the given attitude [°]."""
-    t = _grid(duration_s, dt)
-    n = t.size
-    full = lambda x: np.full(n, x)
-    return _from_kinematics(
-        t,
-        lat_deg * DEG,
-        lon_deg * DEG,
-        h,
-        full(0.0),
-        full(heading_deg * DEG),
-        full(pitch_deg * DEG),
-        earth,
-        roll=full(roll_deg * DEG),
-    )
+    return _steady(lat_deg, lon_deg, h, 0.0, (heading_deg, pitch_deg, roll_deg), duration_s, dt,
+                   earth)  # fmt: skip
 
 
 def constant_velocity(
@@ -182,18 +170,16 @@ def constant_velocity(
 ) -> Trajectory:
     """Level flight at `speed` [m/s] on a constant heading [°, clockwise from north] (a rhumb
     line)."""
+    return _steady(lat_deg, lon_deg, h, speed, (heading_deg, 0.0, 0.0), duration_s, dt, earth)
+
+
+def _steady(lat_deg, lon_deg, h, speed, attitude_deg, duration_s, dt, earth) -> Trajectory:
+    """Constant `speed` [m/s] and attitude (heading, pitch = flight-path angle, roll) [°]."""
     t = _grid(duration_s, dt)
-    n = t.size
-    return _from_kinematics(
-        t,
-        lat_deg * DEG,
-        lon_deg * DEG,
-        h,
-        np.full(n, float(speed)),
-        np.full(n, heading_deg * DEG),
-        np.zeros(n),
-        earth,
-    )
+    heading, pitch, roll = (np.full(t.size, float(a) * DEG) for a in attitude_deg)
+    speeds = np.full(t.size, float(speed))
+    return _from_kinematics(t, lat_deg * DEG, lon_deg * DEG, h, speeds, heading, pitch, earth,
+                            roll=roll)  # fmt: skip
 
 
 def segments(

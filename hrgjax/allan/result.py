@@ -1,0 +1,331 @@
+r"""A deviation curve with its statistics: [`deviation`][hrgjax.allan.deviation] evaluates the
+compiled curve of `hrgjax.allan.deviations` on allantools' τ grids and attaches the noise
+type, the equivalent degrees of freedom and the χ² interval of `hrgjax.allan.uncertainty`,
+as an [`AllanResult`][hrgjax.allan.AllanResult]."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._x64 import require_x64
+from .deviations import curve
+from .uncertainty import (
+    NOISE_RULES,
+    ONE_SIGMA,
+    confidence_interval,
+    edf_greenhall,
+    edf_totdev,
+    noise_id,
+)
+
+KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "mtotdev", "ttotdev")
+"""The deviations [`deviation`][hrgjax.allan.deviation] computes (mtotdev and ttotdev in
+NumPy: [`hrgjax.allan.total`][hrgjax.allan.total])."""
+
+
+@dataclasses.dataclass(frozen=True)
+class AllanResult:
+    """A deviation curve with its uncertainty (NumPy arrays, one entry per τ).
+
+    - `kind`: the deviation (one of [`KINDS`][hrgjax.allan.KINDS]); `ci`: the confidence level.
+    - `taus` [s]; `m`: averaging factors (τ = m/rate_hz).
+    - `dev`: the deviation [rate unit; tdev: rate unit × s, an angle];
+      `dev_low`, `dev_high`: the χ² interval at level `ci` (NIST SP 1065 eq. 45).
+    - `edf`: equivalent degrees of freedom (Greenhall–Riley; totdev: SP 1065 Table 7;
+      mtotdev, ttotdev: Table 8).
+    - `n_terms`: the number of differences each estimate averages.
+    - `alpha`: the power-law noise identified at each τ, the exponent α of the rate PSD
+      S_y(f) ∝ f^α: 2 white angle (phase) noise, 1 flicker angle, 0 white rate (angle random
+      walk), −1 flicker rate (bias instability), −2 rate random walk (lag-1 autocorrelation,
+      Riley & Greenhall 2004; the B1 and R(n) ratios where the record is short at that τ:
+      [`noise_id`][hrgjax.allan.noise_id]).
+    - `bias_factor`: what `dev` was multiplied by to remove the estimator's bias (totdev:
+      1/√(1 − a·τ/T), NIST SP 1065 §5.2.11; 1 elsewhere and where the correction was off).
+
+    `print(result)` shows it as a table; `to_dict`, `to_json(path)` and `to_csv(path)` write
+    it with its units.
+    """
+
+    kind: str
+    ci: float
+    taus: np.ndarray
+    m: np.ndarray
+    dev: np.ndarray
+    dev_low: np.ndarray
+    dev_high: np.ndarray
+    edf: np.ndarray
+    n_terms: np.ndarray
+    alpha: np.ndarray
+    bias_factor: np.ndarray | None = None
+    unit: str = ""
+
+    def _columns(self) -> dict:
+        return {
+            "tau_s": self.taus, "m": self.m, "dev": self.dev, "dev_low": self.dev_low,
+            "dev_high": self.dev_high, "edf": self.edf, "n_terms": self.n_terms,
+            "alpha": self.alpha,
+        }  # fmt: skip
+
+    def __str__(self) -> str:
+        unit = f" [{self.unit}]" if self.unit else ""
+        head = f"{self.kind}{unit}, ±{self.ci:.3f} χ² interval"
+        cols = (
+            f"{'tau [s]':>12} {'m':>8} {'dev':>12} {'low':>12} {'high':>12} {'edf':>9} {'alpha':>6}"
+        )
+        rows = [
+            f"{t:12.5g} {int(m):8d} {d:12.5g} {lo:12.5g} {hi:12.5g} {e:9.4g} {int(a):+6d}"
+            for t, m, d, lo, hi, e, a in zip(self.taus, self.m, self.dev, self.dev_low,
+                                             self.dev_high, self.edf, self.alpha, strict=True)
+        ]  # fmt: skip
+        return "\n".join([head, cols, *rows])
+
+    def to_dict(self) -> dict:
+        """The curve as plain lists, with its kind, level, unit and column units."""
+        out = {"kind": self.kind, "ci": self.ci, "unit": self.unit,
+               "units": {"tau_s": "s", "dev": self.unit, "dev_low": self.unit,
+                         "dev_high": self.unit, "alpha": "S_y ∝ f^alpha"}}  # fmt: skip
+        cols = self._columns()
+        if self.bias_factor is not None:
+            cols["bias_factor"] = self.bias_factor
+        return out | {k: np.asarray(v).tolist() for k, v in cols.items()}
+
+    def to_json(self, path) -> None:
+        """Write [`to_dict`][hrgjax.allan.AllanResult.to_dict] to `path` (JSON)."""
+        import json
+
+        with open(path, "w") as fh:
+            json.dump(self.to_dict(), fh, indent=1)
+
+    def to_csv(self, path) -> None:
+        """Write one row per τ to `path` (CSV: `tau_s, m, dev, dev_low, dev_high, edf,
+        n_terms, alpha`, the deviation's unit in the header's `dev` column name)."""
+        cols = self._columns()
+        unit = f" [{self.unit}]" if self.unit else ""
+        names = [f"{k}{unit}" if k.startswith("dev") else k for k in cols]
+        with open(path, "w") as fh:
+            fh.write(",".join(names) + "\n")
+            for row in zip(*cols.values(), strict=True):
+                fh.write(",".join(repr(float(v)) if isinstance(v, float | np.floating)
+                                  else str(int(v)) for v in row) + "\n")  # fmt: skip
+
+
+TOTVAR_BIAS = {-1: 0.481, -2: 0.750}
+"""NIST SP 1065 §5.2.11: the total variance's bias a by noise type α (flicker and random-walk
+rate noise; none for white rate or angle noise): E[Totvar] = (1 − a·τ/T)·σ²(τ), T the
+record's length."""
+
+
+def deviation(
+    y,
+    rate_hz: float,
+    kind: str = "oadev",
+    taus="octave",
+    data: str = "rate",
+    ci: float = ONE_SIGMA,
+    *,
+    bias_correction: bool = True,
+    noise_rule: str = "hrgjax",
+    unit: str = "",
+) -> AllanResult:
+    r"""An Allan-family deviation with confidence intervals, as allantools and Stable32
+    compute it.
+
+    **Arguments:**
+
+    - `y`: the samples (1-D): rates (`data="rate"`, e.g. °/h) or angles (`data="phase"`, e.g.
+      °), taken at `rate_hz` [Hz].
+    - `kind`: one of [`KINDS`][hrgjax.allan.KINDS] (tdev = τ·mdev/√3 and ttotdev =
+      τ·mtotdev/√3, in angle units).
+    - `taus`: `"octave"` (m = 1, 2, 4, …), `"decade"` (1, 2, 4, 10, 20, 40, …), `"all"`
+      (every m) or τ values in seconds (rounded to the nearest m, duplicates dropped, as
+      allantools does). Factors whose estimate would average fewer than 2 terms are left
+      out (allantools' and Stable32's limit).
+    - `ci`: confidence level of the interval (default ±1σ, 0.683).
+    - `bias_correction`: totdev divided by √(1 − a·τ/T) for the identified noise
+      ([`TOTVAR_BIAS`][hrgjax.allan.TOTVAR_BIAS]), mtotdev and ttotdev by
+      √[`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS], as Stable32 reports them; `False`
+      gives the raw estimators (allantools').
+    - `noise_rule`: how the noise type is read where the lag-1 autocorrelation cannot:
+      `"hrgjax"` (default; intervals checked by Monte Carlo) or `"stable32"` (the rule read
+      off Stable32 1.60's octave tables of an OCXO record, whose α, intervals and totdev it
+      reproduces at all 90 τ; for comparing with Stable32, its intervals are less well
+      calibrated); [`noise_id`][hrgjax.allan.noise_id] says both.
+    - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
+
+    **Gaps**: NaN samples are missing data. Every kind but the total ones then averages only
+    the differences whose windows avoid every gap, as allantools' `gradev` (NumPy, not the
+    compiled curve; noise type and EDF approximate: [`hrgjax.allan.gaps`][hrgjax.allan.gaps]).
+    `n_terms` counts the differences used.
+
+    One compiled program per kind and data length serves every τ grid (factors are run-time
+    values, padded to a power-of-two count), so a new grid compiles nothing.
+
+    **Returns:** an [`AllanResult`][hrgjax.allan.AllanResult].
+
+    **Raises:** `ValueError` naming the argument for an unknown kind or data type, a
+    non-positive rate, infinite samples, a `ci` outside (0, 1), data too short for any τ, or
+    gaps in a totdev;
+    `RuntimeError` when JAX is in float32 mode (a summed phase's differences need float64).
+    """
+    require_x64("hrgjax.allan.deviation (differences of a summed phase)")
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {list(KINDS)}; got {kind!r}")
+    if noise_rule not in NOISE_RULES:
+        raise ValueError(f"noise_rule must be one of {list(NOISE_RULES)}; got {noise_rule!r}")
+    if data not in ("rate", "phase"):
+        raise ValueError(f"data must be 'rate' or 'phase'; got {data!r}")
+    if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
+    if not (0.0 < ci < 1.0):
+        raise ValueError(f"ci must be a confidence level in (0, 1); got {ci!r}")
+    kind_of = np.asarray(y).dtype.kind
+    if kind_of in "cbOUSMm":
+        what = {"c": "complex numbers", "b": "booleans"}.get(kind_of, f"{np.asarray(y).dtype}")
+        if kind_of not in "O" or not all(isinstance(v, numbers.Real) and not isinstance(v, bool)
+                                         for v in np.ravel(y)):  # fmt: skip
+            raise ValueError(f"y holds {what}; give real numbers (rates or angles)")
+    y = np.asarray(y, dtype=float)
+    if y.ndim != 1 or y.size < 3:
+        raise ValueError(f"y must be 1-D with at least 3 samples; got shape {y.shape}")
+    if np.any(np.isinf(y)):
+        raise ValueError(f"y has an infinite value at index {int(np.argmax(np.isinf(y)))}")
+    tau0 = 1.0 / float(rate_hz)
+    gaps = bool(np.any(np.isnan(y)))
+    if gaps:
+        from .gaps import bridged, gapped_curve
+
+        present = int(np.sum(np.isfinite(y)))
+        if present < 3:
+            raise ValueError(f"y has {present} values that are not NaN; at least 3 are needed")
+        filled = bridged(y, data)
+    else:
+        filled = y
+    if data == "phase":
+        x = filled - filled[0]
+        rate = np.diff(filled) / tau0
+    else:
+        rate = filled
+        x = np.concatenate([[0.0], np.cumsum(filled) * tau0])
+    n_phase = x.size
+    m = _factors(taus, rate_hz, n_phase)
+    n_terms = np.asarray([_n_terms(kind, int(k), n_phase) for k in m], dtype=int)
+    m, n_terms = m[n_terms > 1], n_terms[n_terms > 1]
+    if m.size == 0:
+        raise ValueError(
+            f"y: {y.size} samples are too few for {kind} at any of the τ asked (taus={taus!r})"
+        )
+    base = "mdev" if kind == "tdev" else kind
+    if kind in ("mtotdev", "ttotdev"):  # each run detrended and reflected (hrgjax.allan.total)
+        from .total import mtotdev_curve
+
+        if gaps:
+            raise ValueError(f"y has gaps (NaN): {kind} reflects every run of 3m points and "
+                             "has no gap-tolerant form; split the record, or use mdev")  # fmt: skip
+        dev = mtotdev_curve(x, m)[0] / tau0
+        n_eff = np.full(m.size, n_phase)
+    elif gaps:  # windows across a gap left out (hrgjax.allan.gaps), in NumPy
+        dev, n_terms = gapped_curve(kind, y, data, m)
+        dev = dev / tau0 if data == "phase" else dev
+        m, n_terms, dev = m[n_terms > 1], n_terms[n_terms > 1], dev[n_terms > 1]
+        if m.size == 0:
+            raise ValueError(f"y: its gaps leave fewer than 2 {kind} terms at every τ asked")
+        # the EDF of a gap-free record with as many differences as the gaps leave at each τ
+        extra = {"adev": 2, "oadev": 2, "hdev": 3, "ohdev": 3, "mdev": 3, "tdev": 3}[kind]
+        stride = m if kind in ("adev", "hdev") else 1
+        n_eff = np.minimum(stride * n_terms + extra * m - (kind in ("mdev", "tdev")), n_phase)
+    else:
+        # one program for every grid of ≤ 32 τ (octave grids up to 2³² samples), powers of
+        # two beyond; JAX runs the curve asynchronously while NumPy identifies the noise
+        pad = max(32, 1 << int(math.ceil(math.log2(m.size))))
+        ms = np.concatenate([m, np.full(pad - m.size, m[-1])])
+        pending = curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base)
+        n_eff = np.full(m.size, n_phase)
+    dmax = 3 if kind in ("hdev", "ohdev") else 2
+    alpha = noise_id(x, m, dmax=dmax, rule=noise_rule, overlapping=kind not in ("adev", "hdev"))
+    edf = np.asarray([_edf(kind, int(a), int(k), int(n))
+                      for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
+    if not gaps and kind not in ("mtotdev", "ttotdev"):
+        dev = np.asarray(pending)[: m.size]
+    taus_s = m * tau0
+    if kind in ("tdev", "ttotdev"):
+        dev = dev * taus_s / math.sqrt(3.0)
+    factor = np.ones_like(dev)
+    if kind in ("mtotdev", "ttotdev") and bias_correction:
+        from .total import MTOTVAR_BIAS
+
+        factor = 1.0 / np.sqrt([MTOTVAR_BIAS[int(min(max(a, -2), 2))] for a in alpha])
+        dev = dev * factor
+    if kind == "totdev" and bias_correction:
+        a = np.asarray([TOTVAR_BIAS.get(int(k), 0.0) for k in alpha])
+        factor = 1.0 / np.sqrt(1.0 - a * taus_s / ((n_phase - 1) * tau0))
+        dev = dev * factor
+    low, high = confidence_interval(dev, edf, ci)
+    return AllanResult(
+        kind=kind, ci=float(ci), taus=taus_s, m=m, dev=dev, dev_low=low, dev_high=high,
+        edf=edf, n_terms=n_terms, alpha=alpha, bias_factor=factor, unit=str(unit),
+    )  # fmt: skip
+
+
+def _factors(taus, rate_hz: float, n_phase: int) -> np.ndarray:
+    """Averaging factors of a τ grid (allantools' `tau_generator`), sorted and unique."""
+    if isinstance(taus, str):
+        if taus == "all":
+            m = np.arange(1, n_phase + 1, dtype=float)
+        elif taus == "octave":
+            m = 2.0 ** np.arange(int(math.floor(math.log2(n_phase))) + 1)
+        elif taus == "decade":
+            m = np.asarray(
+                [
+                    c * 10.0**k
+                    for k in range(int(math.floor(math.log10(n_phase))) + 1)
+                    for c in (1, 2, 4)
+                ]  # fmt: skip
+            )
+        else:
+            raise ValueError(
+                f"taus must be 'octave', 'decade', 'all' or τ values in seconds; got {taus!r}"
+            )
+    else:
+        t = np.asarray(taus, dtype=float).ravel()
+        if t.size == 0 or not np.all(np.isfinite(t)):
+            raise ValueError(f"taus must be finite τ values in seconds; got {taus!r}")
+        if np.any(t <= 0):
+            raise ValueError(f"taus must be > 0 s; got {float(t[t <= 0][0]):g} in {taus!r}")
+        m = np.round(t * rate_hz)
+    m = m[(m > 0) & (m < n_phase)]
+    return np.unique(m).astype(int)
+
+
+def _n_terms(kind: str, m: int, n: int) -> int:
+    """Differences averaged by `kind` at factor m over n phase points (allantools' `ns`)."""
+    if kind == "adev":
+        return max(0, -(-(n - 2 * m) // m))
+    if kind == "hdev":
+        return max(0, -(-(n - 3 * m) // m))
+    if kind == "oadev":
+        return max(0, n - 2 * m)
+    if kind == "ohdev":
+        return max(0, n - 3 * m)
+    if kind in ("mdev", "tdev", "mtotdev", "ttotdev"):
+        return max(0, n - 3 * m + 1)
+    return n - 2 if m <= n - 1 else 0  # totdev: every point, the record reflected
+
+
+def _edf(kind: str, alpha: int, m: int, n: int) -> float:
+    if kind == "totdev":
+        return edf_totdev(alpha, m, n)
+    if kind in ("mtotdev", "ttotdev"):
+        from .total import edf_mtotdev
+
+        return edf_mtotdev(alpha, m, n)
+    d = 3 if kind in ("hdev", "ohdev") else 2
+    alpha = max(alpha, 2 - 2 * d)  # the variance converges for α > 1 − 2d
+    return edf_greenhall(
+        alpha, d, m, n, overlapping=kind in ("oadev", "ohdev", "mdev", "tdev"),
+        modified=kind in ("mdev", "tdev"),
+    )  # fmt: skip
