@@ -113,3 +113,14 @@ def pytest_runtest_logreport(report):
         reason = " | ".join(ln[1:].strip() for ln in lines if ln.startswith("E ")) or lines[-1]
         with open(path, "a") as fh:
             fh.write(f"{report.nodeid} ({report.when}): {reason[:400]}\n")
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    """An xdist worker, once it has sent its last report, leaves without Python's and XLA's
+    teardown: freeing the few thousand programs a worker compiled held the run's end ≈ 5 s
+    on two cores (measured: the controller waited 6.6 s after the last worker's atexit)."""
+    if os.environ.get("PYTEST_XDIST_WORKER") and hasattr(config, "workeroutput"):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
