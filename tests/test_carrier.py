@@ -272,19 +272,3 @@ def test_the_default_takes_fixed_steps_where_they_meet_rtol():
     np.testing.assert_array_equal(angle(max_steps=2**18), angle(fixed_step=None, max_steps=2**18))
     traced = jax.jit(lambda t: hg.simulate(FREE, prof, "full", ts=t).wave_angle)(ts)
     np.testing.assert_allclose(traced, adaptive, rtol=0, atol=1e-13)
-
-
-def test_profile_kinematics_equal_the_separate_lookups():
-    """`Profile.kinematics_at` (one segment look-up per fixed step) equals `table_angle_at`,
-    `rate_at` and `accel_at`, at knots and between them; the table angle is ∫rate dt."""
-    prof = hg.Profile.piecewise(
-        [0.0, 1.0, 2.5, 4.0], [0.0, 10.0, -5.0, -5.0], [20.0, 20.0, 21.0, 22.0],
-        accel_g=[[0, 0, 1.0], [0.1, 0, 1.0], [0, 0.2, 0.9], [0, 0, 1.0]],
-    )  # fmt: skip
-    for t in (0.0, 0.3, 1.0, 1.7, 2.5, 3.99, 4.0):
-        angle, rate, accel = prof.kinematics_at(t)
-        np.testing.assert_allclose(angle, prof.table_angle_at(t), rtol=1e-14, atol=1e-15)
-        np.testing.assert_allclose(rate, prof.rate_at(t), rtol=1e-14, atol=1e-15)
-        np.testing.assert_allclose(accel, prof.accel_at(t), rtol=1e-14, atol=1e-15)
-    # the table angle at the end, the trapezoids of the rate: 5 + 3.75 − 7.5 = 1.25°
-    np.testing.assert_allclose(prof.kinematics_at(4.0)[0], np.deg2rad(5.0 + 3.75 - 7.5), rtol=1e-12)

@@ -39,24 +39,6 @@ def _angle(gyro, profile=RAMP):
     return np.asarray(rec.wave_angle - rec.wave_angle[0])
 
 
-def test_lagged_temperature_is_the_first_order_lag():
-    tau = 120.0
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(lambda t, y, a: (RAMP.temperature_at(t) - y) / tau),
-        diffrax.Tsit5(),
-        0.0,
-        1000.0,
-        0.1,
-        RAMP.temperature[0],
-        saveat=diffrax.SaveAt(ts=jnp.asarray(TS)),
-        stepsize_controller=diffrax.ClipStepSizeController(
-            diffrax.PIDController(rtol=1e-10, atol=1e-10), jump_ts=RAMP.t[1:-1]
-        ),
-    ).ys
-    closed = jax.vmap(lambda t: RAMP.lagged_temperature_at(t, tau))(jnp.asarray(TS))
-    np.testing.assert_allclose(closed, sol, atol=1e-7)
-
-
 def test_each_drift_term_alone_gives_its_formula(quiet):
     c = 2e-4  # rad/s per °C/s
     th = _angle(_with(quiet, temperature_rate=c))

@@ -1,0 +1,80 @@
+"""`hrgjax.Profile`: the look-ups every model reads, against the piecewise-linear profile's
+own closed forms (trapezoids, slopes) and an ODE solve of the lagged temperature."""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import hrgjax as hg
+from hrgjax.units import DEG
+
+RAMP = hg.Profile.piecewise([0, 200, 500, 1000], [0, 0, 0, 0], [-10, -10, 50, 50])
+TS = np.linspace(0.0, 1000.0, 201)
+
+
+def test_profile_kinematics_equal_the_separate_lookups():
+    """`Profile.kinematics_at` (one segment look-up per fixed step) and `sample` equal
+    `table_angle_at`, `rate_at`, `rate_derivative_at`, `temperature_at` and `accel_at`, at
+    knots and between them; the table angle is ∫rate dt and the derivatives are the
+    segments' slopes."""
+    prof = hg.Profile.piecewise(
+        [0.0, 1.0, 2.5, 4.0], [0.0, 10.0, -5.0, -5.0], [20.0, 20.0, 21.0, 22.0],
+        accel_g=[[0, 0, 1.0], [0.1, 0, 1.0], [0, 0.2, 0.9], [0, 0, 1.0]],
+    )  # fmt: skip
+    for t in (0.0, 0.3, 1.0, 1.7, 2.5, 3.99, 4.0):
+        angle, rate, accel = prof.kinematics_at(t)
+        np.testing.assert_allclose(angle, prof.table_angle_at(t), rtol=1e-14, atol=1e-15)
+        np.testing.assert_allclose(rate, prof.rate_at(t), rtol=1e-14, atol=1e-15)
+        np.testing.assert_allclose(accel, prof.accel_at(t), rtol=1e-14, atol=1e-15)
+        sampled = prof.sample(t)
+        for got, want in zip(sampled, (rate, prof.rate_derivative_at(t),
+                                       prof.temperature_at(t), accel), strict=True):  # fmt: skip
+            np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-15)
+    # the table angle at the end, the trapezoids of the rate: 5 + 3.75 − 7.5 = 1.25°
+    np.testing.assert_allclose(prof.kinematics_at(4.0)[0], np.deg2rad(5.0 + 3.75 - 7.5), rtol=1e-12)
+    # inside each segment: the slopes of the rate [rad/s²] and of the temperature [°C/s]
+    for t, d_rate, d_temp in ((0.5, 10.0, 0.0), (2.0, -15.0 / 1.5, 1.0 / 1.5), (3.0, 0.0, 1 / 1.5)):
+        np.testing.assert_allclose(prof.rate_derivative_at(t), d_rate * DEG, rtol=1e-14)
+        np.testing.assert_allclose(prof.temperature_rate_at(t), d_temp, rtol=1e-14, atol=1e-15)
+
+
+def test_lagged_temperature_is_the_first_order_lag():
+    """The closed form of `lagged_temperature_at` against diffrax on Ṫ_i = (T − T_i)/τ."""
+    tau = 120.0
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(lambda t, y, a: (RAMP.temperature_at(t) - y) / tau),
+        diffrax.Tsit5(),
+        0.0,
+        1000.0,
+        0.1,
+        RAMP.temperature[0],
+        saveat=diffrax.SaveAt(ts=jnp.asarray(TS)),
+        stepsize_controller=diffrax.ClipStepSizeController(
+            diffrax.PIDController(rtol=1e-10, atol=1e-10), jump_ts=RAMP.t[1:-1]
+        ),
+    ).ys
+    closed = jax.vmap(lambda t: RAMP.lagged_temperature_at(t, tau))(jnp.asarray(TS))
+    np.testing.assert_allclose(closed, sol, atol=1e-7)
+
+
+def test_held_angles_reach_each_angle_and_hold_it():
+    """A force-to-rebalance schedule: each trapezoidal precession pulse integrates to the
+    step between two held angles (∫ρ dt, `commanded_angle_at`), the holds are the dwells
+    (`hold_windows`, with and without a settling time), and the wave is still inside them."""
+    angles, dwell, slew = (10.0, 55.0, -20.0), 30.0, 8.0
+    prof = hg.Profile.held_angles(angles, dwell, slew_s=slew, temperature_c=5.0)
+    holds = prof.hold_windows()
+    starts = [k * (dwell + slew) for k in range(len(angles))]
+    assert holds == [(s, s + dwell) for s in starts]
+    assert prof.hold_windows(settle_s=5.0) == [(s + 5.0, s + dwell) for s in starts]
+    assert prof.hold_windows(settle_s=dwell) == []  # no hold outlasts its settling
+    for (start, end), angle in zip(holds, angles, strict=True):
+        for t in (start, 0.5 * (start + end), end):
+            np.testing.assert_allclose(prof.commanded_angle_at(t), angle * DEG, rtol=1e-13)
+            assert float(prof.precession_at(t)) == 0.0
+    # halfway through the second pulse the trapezoid is symmetric: half the step
+    mid = starts[1] + dwell + 0.5 * slew
+    np.testing.assert_allclose(prof.commanded_angle_at(mid), 0.5 * (55.0 - 20.0) * DEG, rtol=1e-13)
+    np.testing.assert_allclose(prof.temperature_at(mid), 5.0)
+    assert float(prof.rebalance_at(mid)) == 1.0  # no schedule: the rebalance loop stays on
