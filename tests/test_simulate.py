@@ -1,4 +1,6 @@
-"""Bad input to the simulator gets clear errors naming the field."""
+"""`hrgjax.simulate`'s inputs and failures: bad gyros, profiles and options get clear errors
+naming the field; a solver that runs out of steps, a NaN in a traced profile and float32
+mode raise rather than return NaN; temperature laws vmap."""
 
 import jax
 import jax.numpy as jnp
