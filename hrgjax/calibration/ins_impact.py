@@ -133,7 +133,12 @@ constant), three headings and wave-angle pairs."""
 
 
 def fly(gyro: Gyro, flight: Flight, *, key: jax.Array, bias_key: jax.Array) -> MeasuredData:
-    """Records of the two level gyros (runs 0 = x, 1 = y) during `flight` (table rate 0)."""
+    """Records of the two level gyros during `flight` (runs 0 = x, 1 = y; table rate 0, so
+    all they read is error), sampled every `flight.dt_out` [s] through the flight's
+    temperature history at its wave angles [° electrical]. `key`: PRNG key of the noise;
+    `bias_key`: of the switch-on bias (the same draw for both runs). **Returns** the
+    `MeasuredData` (the data contract's columns: `time_s`, `temperature_c`,
+    `table_rate_dps` = 0, the measured `wave_angle_deg`, …)."""
     require_x64("calibration.ins_impact.fly")
     knots = np.linspace(0.0, flight.duration_s, 61)
     ts = device(np.arange(0.0, flight.duration_s + 1e-9, flight.dt_out))

@@ -9,7 +9,7 @@ $$\mathbf F(\mathbf h, \theta) = \frac{\partial\mathbf h}{\partial\theta}\,
 G(\mathbf h, \theta)$$
 
 ($\mathbf F$, $G$: the averaged model's fast and slow right-hand sides,
-[`hrgjax.resonator.averaged`][]). Write $\mathbf h = \mathbf h_0 + \boldsymbol\delta$ with
+`hrgjax.resonator.averaged`). Write $\mathbf h = \mathbf h_0 + \boldsymbol\delta$ with
 $\mathbf h_0$ the loops at rest, $\mathbf F(\mathbf h_0, \theta) = 0$ (Newton from
 `steady_integrators`; with a perfect readout, the ideal-loop model). The lag δ is small (≈
 1e-4 of a₀), so linearised, $\dot\theta\,\partial_\theta\boldsymbol\delta = J(\theta)\,
