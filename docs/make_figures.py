@@ -10,7 +10,14 @@ compile cache is on too, so a figure whose code changed recompiles only what cha
 
 import os
 
-import jax
+from hrgjax._threads import widen_cpu_thread_pool
+
+# Before JAX's CPU backend starts, here and in the figure processes (they inherit it): on two
+# cores the navigation figure's batched LU (20 filters under `vmap`) wedged XLA's pool, every
+# thread waiting in `ParallelBatchMap` (hrgjax/_threads.py).
+widen_cpu_thread_pool()
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
