@@ -34,6 +34,11 @@ def test_nbs14(fn, m, expected):
 def test_allan_errors():
     with pytest.raises(ValueError, match="m"):
         hg.oadev(NBS14, 0)
+    # a whole real number is the integer; anything else is refused naming m, not by JAX
+    assert float(hg.oadev(NBS14, 2.0)) == float(hg.oadev(NBS14, 2))
+    for bad in (2.5, [2], "2", float("nan")):
+        with pytest.raises(ValueError, match="oadev: m must be a positive integer"):
+            hg.oadev(NBS14, bad)
     with pytest.raises(ValueError, match="kind"):
         hg.allan_deviation(NBS14, 1.0, kind="fancy")
 

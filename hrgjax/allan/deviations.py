@@ -13,6 +13,8 @@ that curve on allantools' τ grids with its statistics
 from __future__ import annotations
 
 import functools
+import math
+import numbers
 import operator
 
 import jax
@@ -42,6 +44,18 @@ def _check(y, m, needed, name):
         raise ValueError(f"{name}: m = {m} needs at least {needed} samples; got {n}")
 
 
+def _factor(m, name: str) -> int:
+    """The averaging factor as a Python int: any integer, or a whole real number (2.0);
+    anything else is refused naming `m` (the range is `_check`'s)."""
+    try:
+        return operator.index(m)
+    except TypeError:
+        pass
+    if isinstance(m, numbers.Real) and math.isfinite(m) and float(m).is_integer():
+        return int(m)
+    raise ValueError(f"{name}: m must be a positive integer; got {m!r}")
+
+
 def _per_tau(fn):
     """One deviation at one τ as one compiled program per data length and `m` (`fused`),
     behind the eager checks: `y` may be any array-like (a list too), `m` any integer (a
@@ -50,11 +64,8 @@ def _per_tau(fn):
 
     @functools.wraps(fn)
     def call(y, m: int = 1, tau0: float = 1.0):
-        try:
-            m = operator.index(m)
-        except TypeError:
-            pass  # `_check` names the problem
-        return core(y if isinstance(y, jax.Array) else device(y, float), m, tau0)
+        return core(y if isinstance(y, jax.Array) else device(y, float), _factor(m, fn.__name__),
+                    tau0)  # fmt: skip
 
     return call
 
