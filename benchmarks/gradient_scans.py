@@ -15,8 +15,17 @@
 Each: the forward and the gradient compiled (`jax.jit`), best of 5 after the first call, and
 their ratio. Target (issue 50): ≤ 2.5× on both.
 
-Usage: `.venv/bin/python benchmarks/gradient_scans.py [--checkpointed]` (≈ 4 min on 2
-cores, mostly compiling).
+`--parts`: where the carrier gradient's time goes, each variant in a fresh process (≈ 5 min):
+the stored-state derivative as it is (`full`); without the 8 × 8 Jacobians (`no-jacobians`:
+the identity instead), without the input tangents (`no-inputs`), without either (`neither`:
+the forward, the per-step inputs' derivatives and the recurrence); the stages written out
+in the derivative while the forward keeps its stage loop (`stages-unrolled`, loops closed
+only); and the reverse pass through the step loop checkpointed every step (`chunk-1`) or
+every 256 steps (`chunk-256`). The variants other than `full` give wrong gradients: they
+time parts, nothing else.
+
+Usage: `.venv/bin/python benchmarks/gradient_scans.py [--checkpointed | --parts]` (≈ 4 min on
+2 cores, mostly compiling).
 """
 
 import sys
@@ -93,8 +102,108 @@ def bosh3_rows():
            "≤ 2.5×")  # fmt: skip
 
 
+PARTS = ("full", "no-jacobians", "no-inputs", "neither", "stages-unrolled", "chunk-1",
+         "chunk-256")  # fmt: skip
+
+
+def _variant(name):
+    """Patch the carrier path for one `--parts` variant (this process only)."""
+    import functools
+
+    from hrgjax import _stepped
+    from hrgjax.resonator import carrier as C
+
+    if name.startswith("chunk-"):
+        C.STORE_STEPS, C.CHUNK = 0, int(name[6:])
+        return
+    if name == "stages-unrolled":
+
+        @functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
+        def stored(steps, held, looped, gyro, profile, y0, omega_scale, ts):
+            return C._streamed(gyro, profile, y0, omega_scale, ts, steps, held, looped)
+
+        @stored.defjvp
+        def stored_jvp(steps, held, looped, primals, tangents):  # carrier._stored_jvp, but
+            gyro, profile, y0, omega_scale, ts = primals  # the tangents' stages written out
+            d_gyro, d_profile, dy0, d_scale, d_ts = tangents
+            build = lambda g, p, s, t: C._per_step(g, p, s, t, steps, held)  # noqa: E731
+            (xs, theta, at), (dxs, d_theta, _) = jax.jvp(
+                build, (gyro, profile, omega_scale, ts), (d_gyro, d_profile, d_scale, d_ts)
+            )
+            flags = (gyro.control.enabled and not held, profile.rebalance is not None)
+            ys = _stepped.scan_states(
+                functools.partial(C._flat_step, *flags, looped), y0, xs, theta
+            )
+            dys = _stepped.tangent_states(
+                functools.partial(C._flat_step, *flags, False), ys, xs, theta, dy0, dxs, d_theta
+            )
+            return ys[at], dys[at]
+
+        C._stored = stored
+        return
+    if name == "full":
+        return
+    original = _stepped.tangent_states
+
+    def tangent_states(step, ys, xs, theta, dy0, dxs, dtheta, batch=_stepped.BATCH):
+        eye = jnp.eye(ys.shape[1], dtype=ys.dtype)
+        zero_theta = jax.tree_util.tree_map(_stepped._zero_tangent, theta)
+
+        def linear(y, x, dx):
+            dx = jax.tree_util.tree_map(_stepped._zero_if_none, x, dx, is_leaf=lambda v: v is None)
+            _, lin = jax.linearize(step, y, x, theta)
+            zero_x = jax.tree_util.tree_map(_stepped._zero_tangent, x)
+            if name in ("no-jacobians", "neither"):
+                jn = eye
+            else:
+                jn = jax.vmap(lambda e: lin(e, zero_x, zero_theta), out_axes=1)(eye)
+            if name in ("no-inputs", "neither"):
+                return jn, jnp.zeros_like(y)
+            return jn, lin(jnp.zeros_like(y), dx, dtheta)
+
+        jacobians, inputs = _stepped._map(linear, (ys[:-1], xs, _stepped._float_only(dxs)), batch)
+        _, dys = jax.lax.scan(lambda dy, ju: (ju[0] @ dy + ju[1],) * 2, dy0, (jacobians, inputs))
+        return jnp.concatenate([dy0[None], dys])
+
+    assert original is C.tangent_states
+    C.tangent_states = tangent_states
+
+
+def parts_row(name, which):
+    _variant(name)
+    ts = np.linspace(SPAN / 4, SPAN, 4)
+    gyro = FREE if which == "free" else hg.presets.tvg3_like(noise=False)
+
+    def loss(res, rate):
+        g = eqx.tree_at(lambda g: g.resonator, gyro, res)
+        prof = hg.Profile.constant_rate(rate, SPAN, wave_angle0_deg=10.0)
+        return jnp.sum(hg.simulate(g, prof, "full", ts=ts, fixed_step=2e-5).wave_angle)
+
+    fwd, grad = eqx.filter_jit(loss), eqx.filter_jit(eqx.filter_grad(loss))
+    (tf, cf), (tg, cg) = timed(fwd, grad, (gyro.resonator, jnp.asarray(30.0)))
+    print(f"  {which:5s} {name:16s} forward {tf * 1e3:6.1f} ms, gradient {tg * 1e3:6.1f} ms "
+          f"({tg / tf:5.2f}×; compile {cf:.1f} / {cg:.1f} s)", flush=True)  # fmt: skip
+
+
+def parts():
+    import subprocess
+
+    for which in ("free", "loops"):
+        for name in PARTS:
+            if name == "stages-unrolled" and which == "free":
+                continue  # the free resonator's stages are written out already
+            subprocess.run([sys.executable, __file__, "--part", name, which], check=True)
+
+
 def main():
+    if "--part" in sys.argv:
+        i = sys.argv.index("--part")
+        parts_row(sys.argv[i + 1], sys.argv[i + 2])
+        return
     print(f"machine: {machine()}")
+    if "--parts" in sys.argv:
+        parts()
+        return
     carrier_rows()
     bosh3_rows()
 
