@@ -1,14 +1,23 @@
 """Small dense solves in plain XLA operations, for code that runs under `vmap`.
 
-`jnp.linalg.solve` lowers to LAPACK's LU, a custom call that jaxlib 0.10 splits over XLA's
-CPU thread pool when batched; two such calls on a two-thread pool can wait for each other
-for ever (`hrgjax/_threads.py`). The loops' slow manifold (`resonator.slow`) solves a 6×6
-Newton system per angle and one 54×54 system per point, batched by the grey box's
-`scale_factor_at`: here they are Gauss–Jordan elimination with partial pivoting in a
-`fori_loop`, which XLA runs like any other loop, at any batch size, differentiable in both
-modes. It costs about twice the LAPACK call there (the slow-manifold rate on 64 angles:
-15.7 ms against 7.8–9.3 ms, `benchmarks/thread_pool.py` on 2 cores), a few ms of a
-grey-box fit that takes tens of seconds.
+`jnp.linalg.solve`, `cholesky` and `jax.scipy.linalg.cho_factor`/`cho_solve` lower to LAPACK
+(getrf, potrf, trsm): custom calls that jaxlib 0.10 splits over XLA's CPU thread pool when
+batched. Two such calls running at once on a two-thread pool wait for each other for ever
+(`hrgjax/_threads.py`): seen in the loops' slow manifold, and in twenty INS flights
+(`ins.flights.fly(runs=20)`, the stacks in `lapack_dtrsm_ffi` → `ParallelBatchMap`).
+
+Here the same factorisations are written in plain XLA operations, which XLA runs like any
+other, at any batch size, differentiable in both modes:
+
+- `solve`: Gauss–Jordan elimination with partial pivoting in a
+  `fori_loop` (the slow manifold's 6×6 Newton and 54×54 harmonic-balance systems; the INS
+  smoother's gain and the NEES). About twice the LAPACK call on the slow manifold (64
+  angles: 15.7 ms against 7.8–9.3 ms, `benchmarks/thread_pool.py` on 2 cores).
+- `cholesky`, `cho_solve`,
+  `cho_logdet`: the Kalman filters' innovation covariances
+  (`kalman`, `ins.ekf`, `diagnosis.filter_bank`), written out column by column (n ≤
+  `UNROLLED` rows, the filters' 1–6 measurements and ≤ 21 states) or in a `fori_loop`.
+  The filters' costs before and after: `benchmarks/filter_linalg.py`.
 """
 
 from __future__ import annotations
@@ -43,3 +52,92 @@ def solve(a, b):
 
     x = jax.lax.fori_loop(0, n, eliminate, m)[:, n:]
     return x[:, 0] if vec else x
+
+
+UNROLLED = 6
+"""Largest n for which the Cholesky factor and its triangular solves are written out row by
+row (straight-line code XLA fuses; a `fori_loop` above)."""
+
+
+def _rows(a):
+    return jnp.arange(a.shape[-1])
+
+
+@fused
+def cholesky(a):
+    """Lower-triangular L with L·Lᵀ = a, by the Cholesky–Banachiewicz recurrence (no LAPACK
+    call).
+
+    **Arguments:** `a`, one symmetric positive-definite (n, n) matrix (its lower triangle is
+    read). Batch with `vmap`.
+
+    **Returns:** L (n, n), zero above the diagonal. A matrix that is not positive definite
+    gives NaN, as `jnp.linalg.cholesky` does."""
+    n = a.shape[-1]
+    rows = _rows(a)
+
+    def column(j, lower):  # L[:, j] from the columns before it (zero from j on)
+        v = a[:, j] - lower @ jnp.where(rows < j, lower[j], 0.0)
+        d = jnp.sqrt(v[j])
+        return lower.at[:, j].set(jnp.where(rows > j, v / d, jnp.where(rows == j, d, 0.0)))
+
+    lower = jnp.zeros_like(a)
+    if n <= UNROLLED:
+        for j in range(n):
+            lower = column(j, lower)
+        return lower
+    return jax.lax.fori_loop(0, n, column, lower)
+
+
+def _forward(lower, b):
+    """y with L·y = b (L lower triangular; b (n,) or (n, k))."""
+    n = lower.shape[-1]
+
+    def row(i, y):
+        return y.at[i].set((b[i] - lower[i] @ y) / lower[i, i])
+
+    y = jnp.zeros_like(b)
+    if n <= UNROLLED:
+        for i in range(n):
+            y = row(i, y)
+        return y
+    return jax.lax.fori_loop(0, n, row, y)
+
+
+def _backward(lower, y):
+    """x with Lᵀ·x = y."""
+    n = lower.shape[-1]
+
+    def row(k, x):
+        i = n - 1 - k
+        return x.at[i].set((y[i] - lower[:, i] @ x) / lower[i, i])
+
+    x = jnp.zeros_like(y)
+    if n <= UNROLLED:
+        for k in range(n):
+            x = row(k, x)
+        return x
+    return jax.lax.fori_loop(0, n, row, x)
+
+
+@fused
+def cho_solve(lower, b):
+    """x with (L·Lᵀ)·x = b, from L = `cholesky`(a): a forward
+    and a backward substitution.
+
+    **Arguments:** `lower` (n, n); `b`, (n,) or (n, k). Batch with `vmap`.
+
+    **Returns:** x, shaped like `b`."""
+    return _backward(lower, _forward(lower, b))
+
+
+@fused
+def whiten(lower, b):
+    """L⁻¹·b: ‖L⁻¹ν‖² = νᵀ a⁻¹ ν (the Mahalanobis distance) with one substitution."""
+    return _forward(lower, b)
+
+
+@fused
+def cho_logdet(lower):
+    """log det a = 2 Σ log Lᵢᵢ from a's Cholesky factor L."""
+    return 2.0 * jnp.sum(jnp.log(jnp.diagonal(lower)))

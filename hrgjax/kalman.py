@@ -25,9 +25,10 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.scipy.linalg import cho_factor, cho_solve, expm
+from jax.scipy.linalg import expm
 
 from ._compiled import fused
+from ._linalg import cho_logdet, cho_solve, cholesky, whiten
 
 LOG_2PI = 1.8378770664093453
 
@@ -104,13 +105,13 @@ def _update_innovation(g: Gaussian, nu, H, R, mask=True):
     """`update` given the innovation ν (linear: z − Hx; EKF: z − h(x)) and H."""
     s = H @ g.P @ H.T + R
     s = 0.5 * (s + s.T)
-    c = cho_factor(s, lower=True)
+    c = cholesky(s)
     k = cho_solve(c, H @ g.P).T  # K = P Hᵀ S⁻¹
     x = g.x + k @ nu
     ikh = jnp.eye(g.x.shape[0]) - k @ H
     p = ikh @ g.P @ ikh.T + k @ R @ k.T
-    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(c[0])))
-    loglik = -0.5 * (nu @ cho_solve(c, nu) + logdet + nu.shape[0] * LOG_2PI)
+    w = whiten(c, nu)  # ‖L⁻¹ν‖² = νᵀS⁻¹ν
+    loglik = -0.5 * (w @ w + cho_logdet(c) + nu.shape[0] * LOG_2PI)
     post = Gaussian(jnp.where(mask, x, g.x), jnp.where(mask, 0.5 * (p + p.T), g.P))
     return post, nu, s, jnp.where(mask, loglik, 0.0)
 
@@ -167,7 +168,7 @@ def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
 
     def backward(nxt, inp):
         x, p, x_pred, p_pred, f = inp  # filtered at k; predicted and Φ of step k + 1
-        c = cho_solve(cho_factor(p_pred, lower=True), f @ p).T  # P Φᵀ P_pred⁻¹
+        c = cho_solve(cholesky(p_pred), f @ p).T  # P Φᵀ P_pred⁻¹
         xs = x + c @ (nxt.x - x_pred)
         ps = p + c @ (nxt.P - p_pred) @ c.T
         g = Gaussian(xs, 0.5 * (ps + ps.T))
@@ -218,7 +219,7 @@ def sigma_points(g: Gaussian, alpha: float = 1.0, beta: float = 2.0, kappa: floa
     covariance weights)`; λ = α²(n + κ) − n, points x ± columns of chol((n + λ)P)."""
     n = g.x.shape[0]
     lam = alpha**2 * (n + kappa) - n
-    root = jnp.linalg.cholesky((n + lam) * g.P)
+    root = cholesky((n + lam) * g.P)
     pts = jnp.concatenate([g.x[None], g.x[None] + root.T, g.x[None] - root.T])
     wm = jnp.full(2 * n + 1, 0.5 / (n + lam)).at[0].set(lam / (n + lam))
     wc = wm.at[0].add(1 - alpha**2 + beta)
@@ -250,13 +251,13 @@ def unscented_kalman_filter(
         s = (wc[:, None] * dz).T @ dz + R
         s = 0.5 * (s + s.T)
         pxz = (wc[:, None] * dxp).T @ dz
-        c = cho_factor(s, lower=True)
+        c = cholesky(s)
         gain = cho_solve(c, pxz.T).T
         nu = z - zhat
         xn = pred.x + gain @ nu
         pn = pred.P - gain @ s @ gain.T
-        logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(c[0])))
-        ll = -0.5 * (nu @ cho_solve(c, nu) + logdet + nu.shape[0] * LOG_2PI)
+        w = whiten(c, nu)
+        ll = -0.5 * (w @ w + cho_logdet(c) + nu.shape[0] * LOG_2PI)
         g = Gaussian(jnp.where(m, xn, pred.x), jnp.where(m, 0.5 * (pn + pn.T), pred.P))
         return g, (g.x, g.P, jnp.where(m, ll, 0.0))
 
@@ -276,7 +277,7 @@ def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
     def step(p, _):
         pp = phi @ p @ phi.T + qd
         s = h @ pp @ h.T + r
-        k = cho_solve(cho_factor(0.5 * (s + s.T), lower=True), h @ pp).T
+        k = cho_solve(cholesky(0.5 * (s + s.T)), h @ pp).T
         ikh = eye - k @ h
         p = ikh @ pp @ ikh.T + k @ r @ k.T
         return 0.5 * (p + p.T), None
@@ -285,5 +286,5 @@ def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
     pp = phi @ p @ phi.T + qd
     s = h @ pp @ h.T + r
     s = 0.5 * (s + s.T)
-    k = cho_solve(cho_factor(s, lower=True), h @ pp).T
+    k = cho_solve(cholesky(s), h @ pp).T
     return 0.5 * (pp + pp.T), k, s

@@ -165,3 +165,32 @@ def cli_fails(argv, capsys, match, code=2):
     assert err, "no message on stderr"
     assert re.search(match, err[-1]), err
     return err[-1]
+
+
+LAPACK_PRIMITIVES = frozenset({"cholesky", "lu", "triangular_solve", "eigh", "eig", "svd", "qr",
+                               "householder_product", "geqrf", "geqp3", "schur", "hessenberg",
+                               "tridiagonal", "tridiagonal_solve"})  # fmt: skip
+"""JAX primitives that XLA:CPU runs as jaxlib's LAPACK custom calls: batched, they split over
+the CPU thread pool and can wedge it (hrgjax/_threads.py, hrgjax/_linalg.py)."""
+
+
+def batched_lapack(fn, *args) -> set:
+    """The LAPACK-backed primitives that `fn(*args)`'s program runs on a batch of matrices (an
+    operand of rank > 2: what jaxlib splits over the pool), nested programs included. Traced
+    only: nothing compiles."""
+    import equinox as eqx
+    from jax.extend.core import ClosedJaxpr, Jaxpr
+
+    def walk(jaxpr):
+        for eqn in jaxpr.eqns:
+            if any(getattr(v.aval, "ndim", 0) > 2 for v in eqn.invars):
+                yield eqn.primitive.name
+            for value in eqn.params.values():
+                for v in value if isinstance(value, (tuple, list)) else (value,):
+                    if isinstance(v, ClosedJaxpr):
+                        yield from walk(v.jaxpr)
+                    elif isinstance(v, Jaxpr):
+                        yield from walk(v)
+
+    closed = eqx.filter_make_jaxpr(fn)(*args)[0]
+    return set(walk(closed.jaxpr)) & LAPACK_PRIMITIVES

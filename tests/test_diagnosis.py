@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import batched_lapack
 
 from hrgjax import kalman
 from hrgjax.diagnosis import filter_bank as fb
@@ -217,3 +218,14 @@ def test_relevant_states_are_the_ones_that_reach_the_parameter():
     east = {"dv_e", "alpha_y", "da_x", "dw_eta"}
     accelerated = PlatformINS(specific_force=jnp.array([30.0, 0.0, 0.0]))
     assert names(accelerated, 0) == north | east  # the heading error couples in
+
+
+def test_batched_banks_run_no_lapack_kernel():
+    """The bank's updates, its gain schedules and their inverses run on plain XLA operations
+    when batched over runs (jaxlib's LAPACK kernels can wedge XLA:CPU's pool: test_kalman)."""
+    bank = fb.Bank.build(_toy(2, q=1e-3, p_level=1e-2), switch_prob=1e-3)
+    zs = jnp.zeros((2, 60, 1))
+    assert not batched_lapack(jax.vmap(lambda z: fb.run_bank(bank, z)), zs)
+    assert not batched_lapack(lambda b: fb.GainBank.from_bank(b, 60), bank)
+    gb = fb.GainBank.from_bank(bank, 60)
+    assert not batched_lapack(lambda z: fb.run_gains(gb, z), zs)

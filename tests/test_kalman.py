@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import batched_lapack
 
 from hrgjax import kalman
 
@@ -116,3 +117,20 @@ def test_smoother_and_ekf_vmap_over_records():
         assert float(batch[2][i]) == pytest.approx(float(one[2]), rel=1e-12)
         lin = kalman.kalman_filter(PRIOR, PHI, QD, H, R, zs[i], us=US)
         np.testing.assert_allclose(ekf[0][i], lin[0], rtol=1e-9, atol=1e-12)
+
+
+def test_batched_filters_run_no_lapack_kernel():
+    """Batched over records, every filter's factorisations are plain XLA operations
+    (`hrgjax._linalg`): jaxlib's LAPACK kernels split a batch over XLA:CPU's pool, and two at
+    once wedged a two-thread pool for ever (hrgjax/_threads.py)."""
+    zs = jnp.zeros((3, K, 1))
+    f, h = (lambda x, u: PHI @ x + u), (lambda x: H @ x)
+    runs = {
+        "kalman_filter": lambda z: kalman.kalman_filter(PRIOR, PHI, QD, H, R, z, us=US),
+        "rts_smoother": lambda z: kalman.rts_smoother(PRIOR, PHI, QD, H, R, z, us=US),
+        "extended": lambda z: kalman.extended_kalman_filter(PRIOR, f, QD, h, R, z, us=US),
+        "unscented": lambda z: kalman.unscented_kalman_filter(PRIOR, f, QD, h, R, z, us=US),
+        "steady_state": lambda z: kalman.steady_state(PHI, QD, H, R + z[0, 0], PRIOR.P, 8),
+    }
+    for name, run in runs.items():
+        assert not batched_lapack(jax.vmap(run), zs), name

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import CompileCounter
+from helpers import CompileCounter, batched_lapack
 
 from hrgjax.ins import ekf, flights, gnss, motion, sensors
 from hrgjax.ins import mechanization as me
@@ -292,3 +292,16 @@ def test_filter_inputs_and_verdicts(truth):
     assert flights.verdict(np.full(100, 15.0), lo, hi) == "consistent"
     assert flights.verdict(np.r_[np.full(80, 15.0), np.full(20, 5.0)], lo, hi) == "conservative"
     assert flights.verdict(np.r_[np.full(80, 15.0), np.full(20, 40.0)], lo, hi) == "overconfident"
+
+
+def test_batched_flights_run_no_lapack_kernel(truth):
+    """`fly`'s batched program (filter, smoother, free inertial, NEES of every run) runs no
+    LAPACK kernel on a batch: twenty such flights wedged a two-thread XLA:CPU pool for ever
+    (`benchmarks/filter_linalg.py --wedge`; the rule in test_kalman)."""
+    imu = TACTICAL  # with scale factors: the 21-state filter
+    settings = ekf.LooselyCoupled(imu, gnss.Gnss(outages=OUTAGE), scale_factors=True)
+    idx = settings.gnss.epochs(truth.dtheta.shape[0], truth.dt)
+    keys = jax.random.split(jax.random.key(0), 2)
+    mask = jnp.ones(idx.size, bool)
+    args = (truth, imu, settings, int(idx[0]), mask, keys, None)
+    assert not batched_lapack(flights._run_batch, *args)

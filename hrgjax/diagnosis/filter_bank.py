@@ -23,9 +23,9 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.scipy.linalg import cho_factor, cho_solve
 from jax.scipy.special import logsumexp
 
+from .._linalg import cho_logdet, cho_solve, cholesky
 from ..kalman import LOG_2PI, Gaussian, predict, update
 
 
@@ -226,8 +226,18 @@ class GainBank(eqx.Module):
 
 
 def _inv_logdet(s):
-    s_inv = jnp.linalg.inv(s)
-    return 0.5 * (s_inv + jnp.swapaxes(s_inv, -1, -2)), jnp.linalg.slogdet(s)[1]
+    """S⁻¹ (symmetrised) and log det S of innovation covariances (..., m, m)."""
+    c = _batched(cholesky, s.ndim - 2)(s)
+    eye = jnp.broadcast_to(jnp.eye(s.shape[-1], dtype=s.dtype), s.shape)
+    s_inv = _batched(cho_solve, s.ndim - 2)(c, eye)
+    return 0.5 * (s_inv + jnp.swapaxes(s_inv, -1, -2)), _batched(cho_logdet, s.ndim - 2)(c)
+
+
+def _batched(fn, depth: int):
+    """`fn` vmapped over `depth` leading axes."""
+    for _ in range(depth):
+        fn = jax.vmap(fn)
+    return fn
 
 
 def _gains(phi, qd, h, r, p0, n_steps):
@@ -238,7 +248,7 @@ def _gains(phi, qd, h, r, p0, n_steps):
         g = predict(Gaussian(jnp.zeros(p.shape[0]), p), phi, qd)
         s = h @ g.P @ h.T + r
         s = 0.5 * (s + s.T)
-        k = cho_solve(cho_factor(s, lower=True), h @ g.P).T
+        k = cho_solve(cholesky(s), h @ g.P).T
         post = update(g, jnp.zeros(h.shape[0]), h, r)[0]
         return post.P, (k, s)
 

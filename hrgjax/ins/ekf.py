@@ -51,6 +51,7 @@ import numpy as np
 from .. import kalman
 from .._checks import is_concrete
 from .._compiled import Check, fused, program
+from .._linalg import cho_solve, cholesky, whiten
 from .._x64 import require_x64
 from .constants import WGS84, Earth
 from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
@@ -331,7 +332,8 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
         w_eb = body_rate_wrt_earth(settings.earth, nav.lat, nav.c_bn, dth_c[-1], dt)
         nu, h, r = settings._measurement(nav, w_eb, (lat_f, lon_f, h_f), v_f)
         post, _, s, _ = kalman.update(prior, nu, h, r, mask=valid)
-        nis = jnp.where(valid, nu @ jnp.linalg.solve(s, nu), 0.0)
+        w = whiten(cholesky(s), nu)  # ‖L⁻¹ν‖² = νᵀS⁻¹ν
+        nis = jnp.where(valid, w @ w, 0.0)
         x = post.x
         nav = feedback(nav, x)
         lat2, h2, v2 = mech[1]
@@ -379,7 +381,7 @@ def _smooth(res):
 
     def back(carry, k):
         s_next, ps_next = carry
-        c = jnp.linalg.solve(p_prior[k + 1].T, (p_post[k] @ phi[k + 1].T).T).T
+        c = cho_solve(cholesky(p_prior[k + 1]), phi[k + 1] @ p_post[k]).T  # P Φᵀ P_prior⁻¹
         s = c @ (xu[k + 1] + s_next)
         ps = p_post[k] + c @ (ps_next - p_prior[k + 1]) @ c.T
         return (s, 0.5 * (ps + ps.T)), (s, ps)
@@ -444,7 +446,12 @@ def nees(errors, P):
     true error states `errors` (..., M, n) and the reported covariance `P` (..., M, n, n).
     For a consistent filter its mean over R Monte Carlo runs lies inside
     [`nees_band`][hrgjax.ins.ekf.nees_band] 95 % of the time."""
-    return jnp.einsum("...i,...i->...", errors, jnp.linalg.solve(P, errors[..., None])[..., 0])
+    n = errors.shape[-1]
+    batch = jnp.broadcast_shapes(errors.shape[:-1], P.shape[:-2])
+    p = jnp.reshape(jnp.broadcast_to(P, batch + (n, n)), (-1, n, n))
+    e = jnp.reshape(jnp.broadcast_to(errors, batch + (n,)), (-1, n))
+    w = jax.vmap(lambda p, e: whiten(cholesky(p), e))(p, e)  # ‖L⁻¹e‖² = eᵀP⁻¹e
+    return jnp.reshape(jnp.sum(w * w, -1), batch)
 
 
 def nees_band(n_states: int, n_runs: int, level: float = 0.95):

@@ -1,0 +1,163 @@
+"""The Kalman filters' small factorisations in plain XLA operations (`hrgjax._linalg`) against
+LAPACK (jaxlib's potrf/trsm/getrf custom calls, what the filters used before), side by side.
+
+Each arm runs in its own process, XLA:CPU's pool widened (`hg.widen_cpu_thread_pool`) so
+that the LAPACK arm cannot wedge:
+
+- `fly`: `ins.flights.fly`, 20 tactical-grade flights of 10 min at 20 Hz, one batch
+  (docs/navigation.md's call on a shorter motion): filter, smoother, free inertial, NEES;
+- `bank`: `diagnosis.filter_bank.run_bank` of 3 models over 2 000 steps, 64 records vmapped;
+- `filter`: `kalman.kalman_filter` + `rts_smoother` of a 15-state, 6-measurement model over
+  2 000 steps, 32 records vmapped.
+
+Best of 5 after the first call (which compiles); the first call's time too.
+
+`--wedge`: instead, the docs' `fly` (the whole hour, 20 flights) with XLA:CPU's pool at two
+threads (`PJRT_NPROC=2`, a two-core machine's default), each arm under a 300-s limit: does it
+finish? Before, the LAPACK arm's process sat idle in `lapack_dtrsm_ffi` → `ParallelBatchMap`
+(hrgjax/_threads.py).
+
+    .venv/bin/python benchmarks/filter_linalg.py            # ≈ 2 min on 2 cores
+    .venv/bin/python benchmarks/filter_linalg.py --wedge    # ≈ 6 min
+"""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+from _common import machine, report
+
+LAPACK = r"""
+# the filters' factorisations as they were: jaxlib's LAPACK custom calls
+import jax.numpy as jnp
+from jax.scipy.linalg import cho_solve as _cs, solve_triangular
+from hrgjax import kalman
+from hrgjax.diagnosis import filter_bank
+from hrgjax.ins import ekf
+
+chol = lambda a: jnp.linalg.cholesky(a)
+solve = lambda l, b: _cs((l, True), b)
+whiten = lambda l, b: solve_triangular(l, b, lower=True)
+for m in (kalman, ekf, filter_bank):
+    for name, fn in (("cholesky", chol), ("cho_solve", solve), ("whiten", whiten)):
+        if hasattr(m, name):
+            setattr(m, name, fn)
+"""
+
+CHILD = r"""
+import dataclasses, json, sys, time
+arm, case = sys.argv[1], sys.argv[2]
+if case != "wedge":
+    import hrgjax as hg
+    hg.widen_cpu_thread_pool()
+import jax, jax.numpy as jnp, numpy as np
+jax.config.update("jax_enable_x64", True)
+import hrgjax as hg
+if arm == "lapack":
+    exec(LAPACK)
+from hrgjax import kalman
+from hrgjax.diagnosis import filter_bank
+from hrgjax.ins import ekf, flights, gnss, motion, sensors
+
+def timed(fn, repeat=5):
+    t0 = time.perf_counter(); jax.block_until_ready(fn()); first = time.perf_counter() - t0
+    best = []
+    for _ in range(repeat):
+        t0 = time.perf_counter(); jax.block_until_ready(fn()); best.append(time.perf_counter() - t0)
+    return first, min(best)
+
+def fly_case(short, repeat):
+    flight = motion.example()
+    if short:  # the first 10 min: ground run, rotation, climb, level-off, 150 s of cruise
+        segs = flight.segments[:5] + (dataclasses.replace(flight.segments[5], duration=150.0),)
+        flight = dataclasses.replace(flight, segments=segs)
+    truth = flight.truth(rate_hz=20.0)
+    imu = sensors.preset("tactical")
+    settings = ekf.LooselyCoupled(imu, gnss.Gnss(outages=((300.0, 360.0),)))
+    fn = lambda: flights.fly(truth, imu, settings, key=jax.random.key(0), runs=20, chunk=20)
+    out = timed(fn, repeat)
+    return out + (float(fn().summary()["filter"]["horizontal_rms_m"]),)
+
+def bank_case():
+    rng = np.random.default_rng(0)
+    n, m, k = 4, 2, 2000
+    models = [(np.eye(n) + 0.01 * rng.normal(size=(n, n)), 1e-3 * np.eye(n), np.eye(m, n),
+               0.1 * np.eye(m), np.zeros(n), np.eye(n)) for _ in range(3)]
+    bank = filter_bank.Bank.build(models, switch_prob=0.01)
+    zs = jnp.asarray(rng.normal(size=(64, k, m)))
+    run = jax.jit(jax.vmap(lambda z: filter_bank.run_bank(bank, z)[0]))
+    return timed(lambda: run(zs))
+
+def filter_case():
+    rng = np.random.default_rng(1)
+    n, m, k = 15, 6, 2000
+    phi = jnp.asarray(np.eye(n) + 0.01 * rng.normal(size=(n, n)))
+    qd, h, r = 1e-3 * jnp.eye(n), jnp.asarray(rng.normal(size=(m, n))), 0.1 * jnp.eye(m)
+    prior = kalman.Gaussian(jnp.zeros(n), jnp.eye(n))
+    zs = jnp.asarray(rng.normal(size=(32, k, m)))
+    def one(z):
+        xs, ps, ll = kalman.kalman_filter(prior, phi, qd, h, r, z)
+        xs2, _, _ = kalman.rts_smoother(prior, phi, qd, h, r, z)
+        return ll, xs2
+    run = jax.jit(jax.vmap(one))
+    return timed(lambda: run(zs))
+
+out = {}
+if case == "wedge":
+    t0 = time.perf_counter()
+    flight = motion.example()
+    truth = flight.truth(rate_hz=20.0)
+    imu = sensors.preset("tactical")
+    settings = ekf.LooselyCoupled(imu, gnss.Gnss(outages=((1400.0, 1460.0),)))
+    flights.fly(truth, imu, settings, key=jax.random.key(0), runs=20).summary()
+    out["fly"] = (time.perf_counter() - t0,)
+else:
+    out["fly"] = fly_case(True, 5)
+    out["bank"] = bank_case()
+    out["filter"] = filter_case()
+print(json.dumps(out))
+"""
+
+
+def child(arm, case, env=None, timeout=None):
+    code = "LAPACK = " + repr(LAPACK) + "\n" + CHILD
+    try:
+        res = subprocess.run([sys.executable, "-c", code, arm, case], capture_output=True,
+                             text=True, env=env, timeout=timeout)  # fmt: skip
+    except subprocess.TimeoutExpired:
+        return None
+    if res.returncode != 0:
+        sys.exit(f"the {arm} arm failed:\n{res.stderr[-3000:]}")
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def main():
+    print(f"machine: {machine()}")
+    if "--wedge" in sys.argv:
+        env = dict(os.environ, PJRT_NPROC="2")
+        for arm in ("plain", "lapack"):
+            t0 = time.perf_counter()
+            out = child(arm, "wedge", env, timeout=300)
+            took = time.perf_counter() - t0
+            verdict = "did not finish (killed)" if out is None else "finished"
+            print(f"  {arm:6s} 20 flights of the hour, pool of 2 threads: {verdict} after "
+                  f"{took:.0f} s")  # fmt: skip
+        return
+    arms = {arm: child(arm, "speed") for arm in ("lapack", "plain")}
+    names = {"fly": "20 INS flights, 10 min at 20 Hz", "bank": "filter bank, 64 × 2 000 steps",
+             "filter": "Kalman filter + RTS, 15 states, 32 × 2 000 steps"}  # fmt: skip
+    for case, label in names.items():
+        (f0, b0), (f1, b1) = arms["lapack"][case][:2], arms["plain"][case][:2]
+        print(f"  {label:48s} LAPACK {b0 * 1e3:8.1f} ms (first {f0:5.1f} s), plain XLA "
+              f"{b1 * 1e3:8.1f} ms (first {f1:5.1f} s): {b1 / b0:.2f}×")  # fmt: skip
+        report(f"filters' factorisations in plain XLA, {label}", b1 * 1e3, "ms",
+               "plain / LAPACK", b1 / b0)  # fmt: skip
+    rms = arms["lapack"]["fly"][2], arms["plain"]["fly"][2]
+    print(f"  filter's horizontal RMS over the 20 flights: LAPACK {rms[0]:.9g} m, plain "
+          f"{rms[1]:.9g} m")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
