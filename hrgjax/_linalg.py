@@ -9,15 +9,14 @@ batched. Two such calls running at once on a two-thread pool wait for each other
 Here the same factorisations are written in plain XLA operations, which XLA runs like any
 other, at any batch size, differentiable in both modes:
 
-- `solve`: Gauss–Jordan elimination with partial pivoting in a
-  `fori_loop` (the slow manifold's 6×6 Newton and 54×54 harmonic-balance systems; the INS
-  smoother's gain and the NEES). About twice the LAPACK call on the slow manifold (64
+- `solve`: Gauss–Jordan elimination with partial pivoting in a `fori_loop` (the slow
+  manifold's 6×6 Newton and 54×54 harmonic-balance systems). About twice the LAPACK call on the slow manifold (64
   angles: 15.7 ms against 7.8–9.3 ms, `benchmarks/thread_pool.py` on 2 cores).
-- `cholesky`, `cho_solve`,
-  `cho_logdet`: the Kalman filters' innovation covariances
-  (`kalman`, `ins.ekf`, `diagnosis.filter_bank`), written out column by column (n ≤
-  `UNROLLED` rows, the filters' 1–6 measurements and ≤ 21 states) or in a `fori_loop`.
-  The filters' costs before and after: `benchmarks/filter_linalg.py`.
+- `cholesky`, `cho_solve`, `whiten`, `cho_logdet`: the Kalman filters' innovation and
+  prediction covariances (`kalman`, `ins.ekf`, `diagnosis.filter_bank`), a column (a row of
+  the substitutions) per iteration of a `fori_loop`; written out for n ≤ `UNROLLED`, where
+  that is faster (the filter bank's 1–2 measurements). The filters' costs against LAPACK,
+  side by side: `benchmarks/filter_linalg.py`.
 """
 
 from __future__ import annotations
@@ -54,9 +53,9 @@ def solve(a, b):
     return x[:, 0] if vec else x
 
 
-UNROLLED = 6
-"""Largest n for which the Cholesky factor and its triangular solves are written out row by
-row (straight-line code XLA fuses; a `fori_loop` above)."""
+UNROLLED = 3
+"""Largest n for which the Cholesky factor and its triangular solves are written out (a
+`fori_loop` above: from n = 4 on the loop was the faster, `benchmarks/filter_linalg.py`)."""
 
 
 def _rows(a):

@@ -17,9 +17,11 @@ once (the wedges seen had two). Threads beyond the cores cost some time on a sma
 (`benchmarks/thread_pool.py`, 2 cores: one `simulate` 1.0×, a 32-run `vmap` 1.08–1.12×);
 on 8 cores or more nothing changes.
 
-Where the wedge was seen, the library no longer depends on this: the slow manifold solves
-its small systems in plain XLA operations (`hrgjax/_linalg.py`), which a pool of any size
-runs. The wider pool guards the rest (a `vmap`ped Cholesky or inverse elsewhere).
+Where the wedge was seen, the library no longer depends on this: the slow manifold and the
+Kalman filters (`kalman`, the INS filter behind `ins.flights.fly`, whose twenty flights wedged
+a two-thread pool in `lapack_dtrsm_ffi` → `ParallelBatchMap`, and the diagnosis filter bank)
+factorise their small matrices in plain XLA operations (`hrgjax/_linalg.py`), which a pool
+of any size runs. The wider pool guards the rest (a user's own `vmap`ped LAPACK call).
 
 The library itself never changes process-wide settings: `widen_cpu_thread_pool` is called
 by the `hrgjax` command, the test suite and the benchmarks, which own their processes. A
