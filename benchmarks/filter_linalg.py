@@ -1,5 +1,7 @@
 """The Kalman filters' small factorisations in plain XLA operations (`hrgjax._linalg`) against
-LAPACK (jaxlib's potrf/trsm/getrf custom calls, what the filters used before), side by side.
+LAPACK's, side by side: the LAPACK arm puts jaxlib's Cholesky kernels (potrf, trsm) where
+`_linalg`'s now stand (the filters as they were also used LU solves, getrf, for the NIS, the
+smoother's gain, the NEES and the filter bank's inverse).
 
 Each arm runs in its own process, XLA:CPU's pool widened (`hg.widen_cpu_thread_pool`) so
 that the LAPACK arm cannot wedge:
@@ -8,14 +10,16 @@ that the LAPACK arm cannot wedge:
   (docs/navigation.md's call on a shorter motion): filter, smoother, free inertial, NEES;
 - `bank`: `diagnosis.filter_bank.run_bank` of 3 models over 2 000 steps, 64 records vmapped;
 - `filter`: `kalman.kalman_filter` + `rts_smoother` of a 15-state, 6-measurement model over
-  2 000 steps, 32 records vmapped.
+  2 000 steps, 32 records vmapped;
+
+each record with its own measurement noise, so that the covariances are batched too.
 
 Best of 5 after the first call (which compiles); the first call's time too.
 
 `--wedge`: instead, the docs' `fly` (the whole hour, 20 flights) with XLA:CPU's pool at two
 threads (`PJRT_NPROC=2`, a two-core machine's default), each arm under a 300-s limit: does it
-finish? Before, the LAPACK arm's process sat idle in `lapack_dtrsm_ffi` → `ParallelBatchMap`
-(hrgjax/_threads.py).
+finish? The filters as they were sat idle in `lapack_dtrsm_ffi` → `ParallelBatchMap` (gdb,
+hrgjax/_threads.py).
 
     .venv/bin/python benchmarks/filter_linalg.py            # ≈ 2 min on 2 cores
     .venv/bin/python benchmarks/filter_linalg.py --wedge    # ≈ 6 min
@@ -30,7 +34,7 @@ import time
 from _common import machine, report
 
 LAPACK = r"""
-# the filters' factorisations as they were: jaxlib's LAPACK custom calls
+# jaxlib's LAPACK Cholesky kernels where hrgjax._linalg's stand
 import jax.numpy as jnp
 from jax.scipy.linalg import cho_solve as _cs, solve_triangular
 from hrgjax import kalman
@@ -52,7 +56,7 @@ arm, case = sys.argv[1], sys.argv[2]
 if case != "wedge":
     import hrgjax as hg
     hg.widen_cpu_thread_pool()
-import jax, jax.numpy as jnp, numpy as np
+import equinox as eqx, jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
 import hrgjax as hg
 if arm == "lapack":
@@ -87,8 +91,10 @@ def bank_case():
                0.1 * np.eye(m), np.zeros(n), np.eye(n)) for _ in range(3)]
     bank = filter_bank.Bank.build(models, switch_prob=0.01)
     zs = jnp.asarray(rng.normal(size=(64, k, m)))
-    run = jax.jit(jax.vmap(lambda z: filter_bank.run_bank(bank, z)[0]))
-    return timed(lambda: run(zs))
+    scale = jnp.linspace(0.5, 2.0, 64)  # each run its own noise: S and P batched too
+    with_r = lambda s: eqx.tree_at(lambda b: b.r, bank, bank.r * s)
+    run = jax.jit(jax.vmap(lambda z, s: filter_bank.run_bank(with_r(s), z)[0]))
+    return timed(lambda: run(zs, scale))
 
 def filter_case():
     rng = np.random.default_rng(1)
@@ -97,12 +103,13 @@ def filter_case():
     qd, h, r = 1e-3 * jnp.eye(n), jnp.asarray(rng.normal(size=(m, n))), 0.1 * jnp.eye(m)
     prior = kalman.Gaussian(jnp.zeros(n), jnp.eye(n))
     zs = jnp.asarray(rng.normal(size=(32, k, m)))
-    def one(z):
-        xs, ps, ll = kalman.kalman_filter(prior, phi, qd, h, r, z)
-        xs2, _, _ = kalman.rts_smoother(prior, phi, qd, h, r, z)
+    scale = jnp.linspace(0.5, 2.0, 32)  # each record its own noise: S and P batched too
+    def one(z, s):
+        xs, ps, ll = kalman.kalman_filter(prior, phi, qd, h, r * s, z)
+        xs2, _, _ = kalman.rts_smoother(prior, phi, qd, h, r * s, z)
         return ll, xs2
     run = jax.jit(jax.vmap(one))
-    return timed(lambda: run(zs))
+    return timed(lambda: run(zs, scale))
 
 out = {}
 if case == "wedge":

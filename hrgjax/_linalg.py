@@ -55,7 +55,8 @@ def solve(a, b):
 
 UNROLLED = 3
 """Largest n for which the Cholesky factor and its triangular solves are written out (a
-`fori_loop` above: from n = 4 on the loop was the faster, `benchmarks/filter_linalg.py`)."""
+`fori_loop` above). Chosen from 0, 3 and 6 by `benchmarks/filter_linalg.py` (its figures
+in benchmarks/README.md)."""
 
 
 def _rows(a):
@@ -64,14 +65,16 @@ def _rows(a):
 
 @fused
 def cholesky(a):
-    """Lower-triangular L with L·Lᵀ = a, by the Cholesky–Banachiewicz recurrence (no LAPACK
-    call).
+    """Lower-triangular L with L·Lᵀ = a, column by column (the Cholesky–Crout order; no
+    LAPACK call).
 
     **Arguments:** `a`, one symmetric positive-definite (n, n) matrix (its lower triangle is
     read). Batch with `vmap`.
 
     **Returns:** L (n, n), zero above the diagonal. A matrix that is not positive definite
-    gives NaN, as `jnp.linalg.cholesky` does."""
+    gives NaN from the first failing column on (`jnp.linalg.cholesky`: NaN everywhere), or,
+    semidefinite, a zero on the diagonal: the solves then give inf or NaN, `cho_logdet` −inf.
+    Never a finite answer to an unsolvable system."""
     n = a.shape[-1]
     rows = _rows(a)
 

@@ -21,7 +21,10 @@ Where the wedge was seen, the library no longer depends on this: the slow manifo
 Kalman filters (`kalman`, the INS filter behind `ins.flights.fly`, whose twenty flights wedged
 a two-thread pool in `lapack_dtrsm_ffi` → `ParallelBatchMap`, and the diagnosis filter bank)
 factorise their small matrices in plain XLA operations (`hrgjax/_linalg.py`), which a pool
-of any size runs. The wider pool guards the rest (a user's own `vmap`ped LAPACK call).
+of any size runs. What still batches a LAPACK kernel runs one at a time: `ins.strapdown`'s
+discretisation (one LU and its solves per step, `kalman.van_loan` under `vmap`) and its
+Monte Carlo (one eigen-decomposition of every factor). The wider pool guards those and a
+user's own `vmap`ped LAPACK calls.
 
 The library itself never changes process-wide settings: `widen_cpu_thread_pool` is called
 by the `hrgjax` command, the test suite and the benchmarks, which own their processes. A

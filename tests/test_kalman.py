@@ -120,17 +120,19 @@ def test_smoother_and_ekf_vmap_over_records():
 
 
 def test_batched_filters_run_no_lapack_kernel():
-    """Batched over records, every filter's factorisations are plain XLA operations
-    (`hrgjax._linalg`): jaxlib's LAPACK kernels split a batch over XLA:CPU's pool, and two at
-    once wedged a two-thread pool for ever (hrgjax/_threads.py)."""
+    """Batched over records with their own noise (so that S and P are batched too), every
+    filter's factorisations are plain XLA operations (`hrgjax._linalg`): jaxlib's LAPACK
+    kernels split a batch over XLA:CPU's pool, and two at once wedged a two-thread pool for
+    ever (hrgjax/_threads.py)."""
     zs = jnp.zeros((3, K, 1))
+    rs = R[None] * jnp.arange(1.0, 4.0)[:, None, None]
     f, h = (lambda x, u: PHI @ x + u), (lambda x: H @ x)
     runs = {
-        "kalman_filter": lambda z: kalman.kalman_filter(PRIOR, PHI, QD, H, R, z, us=US),
-        "rts_smoother": lambda z: kalman.rts_smoother(PRIOR, PHI, QD, H, R, z, us=US),
-        "extended": lambda z: kalman.extended_kalman_filter(PRIOR, f, QD, h, R, z, us=US),
-        "unscented": lambda z: kalman.unscented_kalman_filter(PRIOR, f, QD, h, R, z, us=US),
-        "steady_state": lambda z: kalman.steady_state(PHI, QD, H, R + z[0, 0], PRIOR.P, 8),
+        "kalman_filter": lambda z, r: kalman.kalman_filter(PRIOR, PHI, QD, H, r, z, us=US),
+        "rts_smoother": lambda z, r: kalman.rts_smoother(PRIOR, PHI, QD, H, r, z, us=US),
+        "extended": lambda z, r: kalman.extended_kalman_filter(PRIOR, f, QD, h, r, z, us=US),
+        "unscented": lambda z, r: kalman.unscented_kalman_filter(PRIOR, f, QD, h, r, z, us=US),
+        "steady_state": lambda z, r: kalman.steady_state(PHI, QD, H, r, PRIOR.P, 8),
     }
     for name, run in runs.items():
-        assert not batched_lapack(jax.vmap(run), zs), name
+        assert not batched_lapack(jax.vmap(run), zs, rs), name

@@ -240,8 +240,9 @@ def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carl
 
 
 def test_discretisation_equals_van_loan(truth):
-    """The filter's series discretisation of the 21-state model over 1 s and 10 s equals the
-    exact Van Loan exponential in the climb's turn (scaled by the states' own σ)."""
+    """The filter's series discretisation of the 21-state model over 1 s and 10 s (and 30 s:
+    three 10-s steps composed) equals the exact Van Loan exponential in the climb's turn
+    (scaled by the states' own σ)."""
     from hrgjax import kalman
     from hrgjax.ins.strapdown import error_matrices_at
 
@@ -255,7 +256,7 @@ def test_discretisation_equals_van_loan(truth):
     q = g @ jnp.diag(jnp.r_[TACTICAL.arw, TACTICAL.vrw] ** 2) @ g.T + jnp.diag(
         jnp.r_[jnp.zeros(9), 1e-16 * jnp.ones(6), jnp.zeros(6)]
     )
-    for T in (1.0, 10.0):
+    for T in (1.0, 10.0, 30.0):
         phi, qd = ekf.discretise(big, q, T)
         phi_x, qd_x = kalman.van_loan(big, q, T)
         np.testing.assert_allclose(phi, phi_x, rtol=0, atol=1e-9 * np.abs(phi_x).max())
@@ -292,14 +293,16 @@ def test_filter_inputs_and_verdicts(truth):
     assert flights.verdict(np.full(100, 15.0), lo, hi) == "consistent"
     assert flights.verdict(np.r_[np.full(80, 15.0), np.full(20, 5.0)], lo, hi) == "conservative"
     assert flights.verdict(np.r_[np.full(80, 15.0), np.full(20, 40.0)], lo, hi) == "overconfident"
+    assert flights.verdict(np.r_[np.full(99, 15.0), np.nan], lo, hi) == "undefined"
 
 
 def test_batched_flights_run_no_lapack_kernel(truth):
     """`fly`'s batched program (filter, smoother, free inertial, NEES of every run) runs no
-    LAPACK kernel on a batch: twenty such flights wedged a two-thread XLA:CPU pool for ever
+    LAPACK kernel on a batch, also where the GNSS interval is longer than 10 s: twenty such flights wedged a two-thread XLA:CPU pool for ever
     (`benchmarks/filter_linalg.py --wedge`; the rule in test_kalman)."""
-    imu = TACTICAL  # with scale factors: the 21-state filter
-    settings = ekf.LooselyCoupled(imu, gnss.Gnss(outages=OUTAGE), scale_factors=True)
+    imu = TACTICAL  # with scale factors: the 21-state filter; fixes every 20 s, two steps
+    fixes = gnss.Gnss(rate_hz=0.05)  # of 10 s composed (ekf.discretise: no exponential)
+    settings = ekf.LooselyCoupled(imu, fixes, scale_factors=True)
     idx = settings.gnss.epochs(truth.dtheta.shape[0], truth.dt)
     keys = jax.random.split(jax.random.key(0), 2)
     mask = jnp.ones(idx.size, bool)

@@ -249,17 +249,28 @@ def discretise(F, q, T: float):
     chain (attitude → velocity → position, rates ≲ 1e-3 s⁻¹), so for T ≤ 10 s both agree with
     the exact Van Loan exponential ([`hrgjax.kalman.van_loan`][hrgjax.kalman.van_loan]) to
     ≈ 1e-10 at 1 s (1e-8 at 10 s; tests/test_navigation_filter.py), at a fraction of its cost
-    batched over flights (benchmarks/navigation.py); longer
-    intervals use Van Loan."""
-    if T > 10.0:
-        return kalman.van_loan(F, q, T)
+    batched over flights (benchmarks/navigation.py). A longer interval is k = ⌈T / 10 s⌉
+    such steps of h = T/k composed ($\Phi = \phi_h^k$, $Q_d$ by $Q \leftarrow \phi_h Q
+    \phi_h^\top + Q_h$): no matrix exponential, so no LAPACK kernel in a batched flight
+    (hrgjax/_threads.py)."""
+    k = max(1, math.ceil(T / 10.0 - 1e-12))
+    h = T / k
     x, w = np.polynomial.legendre.leggauss(3)
     powers = _powers(F)
     qd = 0.0
     for xi, wi in zip(x, w, strict=True):
-        p = _taylor(powers, 0.5 * T * (1.0 + xi))
-        qd = qd + (0.5 * T * wi) * (p @ q @ p.T)
-    return _taylor(powers, T), 0.5 * (qd + qd.T)
+        p = _taylor(powers, 0.5 * h * (1.0 + xi))
+        qd = qd + (0.5 * h * wi) * (p @ q @ p.T)
+    phi, qd = _taylor(powers, h), 0.5 * (qd + qd.T)
+    if k == 1:
+        return phi, qd
+
+    def compose(_, pq):
+        p, qq = pq
+        qq = phi @ qq @ phi.T + qd
+        return phi @ p, 0.5 * (qq + qq.T)
+
+    return jax.lax.fori_loop(1, k, compose, (phi, qd))
 
 
 def feedback(nav: NavState, x):
@@ -443,7 +454,9 @@ def error_states(
 @fused
 def nees(errors, P):
     """Normalised estimation error squared $e^\\top P^{-1}e$ per epoch (..., M), from the
-    true error states `errors` (..., M, n) and the reported covariance `P` (..., M, n, n).
+    true error states `errors` (..., M, n) and the reported covariance `P` (..., M, n, n):
+    symmetric positive definite (its lower triangle is read, by Cholesky; NaN or inf where it
+    is not positive definite).
     For a consistent filter its mean over R Monte Carlo runs lies inside
     [`nees_band`][hrgjax.ins.ekf.nees_band] 95 % of the time."""
     n = errors.shape[-1]

@@ -99,7 +99,10 @@ def verdict(mean_nees, lo, hi) -> str:
     """A filter's consistency from its mean NEES per epoch `mean_nees` [-] and the 95 % band
     (`lo`, `hi`) of that mean: "consistent" when the mean NEES is inside its 95 % band on ≥ 90 % of epochs; else
     "conservative" (σ larger than the errors: the mean below the band more often than above)
-    or "overconfident"."""
+    or "overconfident"; "undefined" where the NEES is not finite at some epoch (a covariance
+    that is not positive definite there: [`nees`][hrgjax.ins.ekf.nees])."""
+    if not np.all(np.isfinite(mean_nees)):
+        return "undefined"
     if np.mean((mean_nees > lo) & (mean_nees < hi)) >= 0.9:
         return "consistent"
     return (
