@@ -60,8 +60,8 @@ class Flights(eqx.Module):
         epochs [m] for the filter, smoother and free inertial; the largest horizontal error
         in GNSS gaps; the fraction of epochs whose mean NEES lies inside its 95 % band, for
         all states and for the nine navigation states, each with a verdict ("consistent",
-        "conservative", "overconfident", "undefined": `verdict`); the mean NIS (its expectation is the innovation
-        dimension)."""
+        "conservative", "overconfident", "undefined": `verdict`); the mean NIS (its
+        expectation is the innovation dimension)."""
         gap = ~np.asarray(self.gnss_valid)
         gap[0] = False
         out = {"runs": self.runs, "epochs": int(self.t.shape[0]), "duration_s": float(self.t[-1])}
