@@ -308,3 +308,21 @@ def test_batched_flights_run_no_lapack_kernel(truth):
     mask = jnp.ones(idx.size, bool)
     args = (truth, imu, settings, int(idx[0]), mask, keys, None)
     assert not batched_lapack(flights._run_batch, *args)
+
+
+def test_whitened_errors_give_the_nees_of_all_and_of_the_leading_states():
+    """Σ(L⁻¹e)² = eᵀP⁻¹e, and over the first 9 entries the NEES of the nine navigation states
+    alone (Cholesky's leading block): numpy's solves, broadcast over runs and epochs."""
+    rng = np.random.default_rng(5)
+    m = rng.normal(size=(2, 3, 15, 15))
+    p = m @ np.swapaxes(m, -1, -2) + 15 * np.eye(15)
+    e = rng.normal(size=(2, 3, 15))
+    w = np.asarray(ekf.whitened_errors(jnp.asarray(e), jnp.asarray(p)))
+    full = np.einsum("...i,...i->...", e, np.linalg.solve(p, e[..., None])[..., 0])
+    nav = np.einsum("...i,...i->...", e[..., :9],
+                    np.linalg.solve(p[..., :9, :9], e[..., :9, None])[..., 0])  # fmt: skip
+    np.testing.assert_allclose(np.sum(w**2, -1), full, rtol=1e-12)
+    np.testing.assert_allclose(np.sum(w[..., :9] ** 2, -1), nav, rtol=1e-12)
+    shared = np.broadcast_to(p[0], p.shape)  # one covariance per epoch for every run
+    expect = np.einsum("...i,...i->...", e, np.linalg.solve(shared, e[..., None])[..., 0])
+    np.testing.assert_allclose(ekf.nees(jnp.asarray(e), jnp.asarray(p[0])), expect, rtol=1e-12)

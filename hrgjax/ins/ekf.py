@@ -452,6 +452,22 @@ def error_states(
 
 
 @fused
+def whitened_errors(errors, P):
+    """The error states in units of their reported covariance, decorrelated: $L^{-1}e$ per
+    epoch (..., M, n), L the Cholesky factor of `P` (..., M, n, n) (symmetric positive
+    definite; its lower triangle is read; NaN or inf where it is not positive definite).
+    `errors` (..., M, n) are the true error states. The sum of their squares is the
+    [`nees`][hrgjax.ins.ekf.nees], and that of the first k the NEES of the first k states
+    alone (L's leading block is their covariance's factor): one factorisation for both."""
+    n = errors.shape[-1]
+    batch = jnp.broadcast_shapes(errors.shape[:-1], P.shape[:-2])
+    p = jnp.reshape(jnp.broadcast_to(P, batch + (n, n)), (-1, n, n))
+    e = jnp.reshape(jnp.broadcast_to(errors, batch + (n,)), (-1, n))
+    w = jax.vmap(lambda p, e: whiten(cholesky(p), e))(p, e)
+    return jnp.reshape(w, batch + (n,))
+
+
+@fused
 def nees(errors, P):
     """Normalised estimation error squared $e^\\top P^{-1}e$ per epoch (..., M), from the
     true error states `errors` (..., M, n) and the reported covariance `P` (..., M, n, n):
@@ -459,12 +475,7 @@ def nees(errors, P):
     is not positive definite).
     For a consistent filter its mean over R Monte Carlo runs lies inside
     [`nees_band`][hrgjax.ins.ekf.nees_band] 95 % of the time."""
-    n = errors.shape[-1]
-    batch = jnp.broadcast_shapes(errors.shape[:-1], P.shape[:-2])
-    p = jnp.reshape(jnp.broadcast_to(P, batch + (n, n)), (-1, n, n))
-    e = jnp.reshape(jnp.broadcast_to(errors, batch + (n,)), (-1, n))
-    w = jax.vmap(lambda p, e: whiten(cholesky(p), e))(p, e)  # ‖L⁻¹e‖² = eᵀP⁻¹e
-    return jnp.reshape(jnp.sum(w * w, -1), batch)
+    return jnp.sum(whitened_errors(errors, P) ** 2, -1)
 
 
 def nees_band(n_states: int, n_runs: int, level: float = 0.95):
