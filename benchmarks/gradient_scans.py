@@ -21,8 +21,10 @@ the identity instead), without the input tangents (`no-inputs`), without either 
 the forward, the per-step inputs' derivatives and the recurrence); the stages written out
 in the derivative while the forward keeps its stage loop (`stages-unrolled`, loops closed
 only); and the reverse pass through the step loop checkpointed every step (`chunk-1`) or
-every 256 steps (`chunk-256`). The variants other than `full` give wrong gradients: they
-time parts, nothing else.
+every 256 steps (`chunk-256`); and the stored states' derivative without the batched
+linearisation, each step's JVP rematerialised and transposed one step at a time
+(`sequential`: a per-step hand-written VJP's work). The variants other than `full` and
+`sequential` give wrong gradients: they time parts, nothing else.
 
 Usage: `.venv/bin/python benchmarks/gradient_scans.py [--checkpointed | --parts]` (≈ 4 min on
 2 cores, mostly compiling).
@@ -103,7 +105,7 @@ def bosh3_rows():
 
 
 PARTS = ("full", "no-jacobians", "no-inputs", "neither", "stages-unrolled", "chunk-1",
-         "chunk-256")  # fmt: skip
+         "chunk-256", "sequential")  # fmt: skip
 
 
 def _variant(name):
@@ -142,6 +144,24 @@ def _variant(name):
         C._stored = stored
         return
     if name == "full":
+        return
+    if name == "sequential":  # no linearisation batch: each step's JVP, rematerialised,
+        # transposed one step at a time (what a hand-written per-step VJP would run)
+
+        def sequential(step, ys, xs, theta, dy0, dxs, dtheta, batch=_stepped.BATCH):
+            @functools.partial(jax.checkpoint, policy=jax.checkpoint_policies.nothing_saveable)
+            def body(dy, inp):
+                y, x, dx = inp
+                dx = jax.tree_util.tree_map(
+                    _stepped._zero_if_none, x, dx, is_leaf=lambda v: v is None
+                )
+                dy1 = jax.jvp(step, (y, x, theta), (dy, dx, dtheta))[1]
+                return dy1, dy1
+
+            _, dys = jax.lax.scan(body, dy0, (ys[:-1], xs, _stepped._float_only(dxs)))
+            return jnp.concatenate([dy0[None], dys])
+
+        C.tangent_states = sequential
         return
     original = _stepped.tangent_states
 

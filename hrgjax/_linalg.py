@@ -72,9 +72,10 @@ def cholesky(a):
     read). Batch with `vmap`.
 
     **Returns:** L (n, n), zero above the diagonal. A matrix that is not positive definite
-    gives NaN from the first failing column on (`jnp.linalg.cholesky`: NaN everywhere), or,
-    semidefinite, a zero on the diagonal: the solves then give inf or NaN, `cho_logdet` −inf.
-    Never a finite answer to an unsolvable system."""
+    gives NaN from the first failing column on (`jnp.linalg.cholesky`: NaN on the whole lower
+    triangle); a zero pivot (semidefinite) gives NaN below it, or, in the last column, a zero
+    on the diagonal, where the solves give inf or NaN and `cho_logdet` −inf. Never a finite
+    answer to an unsolvable system."""
     n = a.shape[-1]
     rows = _rows(a)
 

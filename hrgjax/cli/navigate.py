@@ -84,7 +84,8 @@ def cmd_navigate(args) -> int:
         "consistent": "can be trusted",
         "conservative": "is larger than the errors (conservative)",
         "overconfident": "cannot be trusted: it is smaller than the errors",
-        "undefined": "cannot be judged: its covariance is not positive definite on some epochs",
+        "undefined": "cannot be judged: the NEES is not finite on some epochs (a covariance "
+        "not positive definite there)",
     }
     missing = "misalignments" + (", scale factors" if args.states == 15 else "")
     for name in ("filter", "smoother"):
