@@ -63,6 +63,16 @@ def _rows(a):
     return jnp.arange(a.shape[-1])
 
 
+def _each(n: int, body, init):
+    """`body(i, carry)` for i = 0 … n − 1: written out for n ≤ `UNROLLED`, else a
+    `fori_loop`."""
+    if n <= UNROLLED:
+        for i in range(n):
+            init = body(i, init)
+        return init
+    return jax.lax.fori_loop(0, n, body, init)
+
+
 @fused
 def cholesky(a):
     """Lower-triangular L with L·Lᵀ = a, column by column (the Cholesky–Crout order; no
@@ -76,7 +86,6 @@ def cholesky(a):
     triangle); a zero pivot (semidefinite) gives NaN below it, or, in the last column, a zero
     on the diagonal, where the solves give inf or NaN and `cho_logdet` −inf. Never a finite
     answer to an unsolvable system."""
-    n = a.shape[-1]
     rows = _rows(a)
 
     def column(j, lower):  # L[:, j] from the columns before it (zero from j on)
@@ -84,43 +93,28 @@ def cholesky(a):
         d = jnp.sqrt(v[j])
         return lower.at[:, j].set(jnp.where(rows > j, v / d, jnp.where(rows == j, d, 0.0)))
 
-    lower = jnp.zeros_like(a)
-    if n <= UNROLLED:
-        for j in range(n):
-            lower = column(j, lower)
-        return lower
-    return jax.lax.fori_loop(0, n, column, lower)
+    return _each(a.shape[-1], column, jnp.zeros_like(a))
 
 
 def _forward(lower, b):
-    """y with L·y = b (L lower triangular; b (n,) or (n, k))."""
-    n = lower.shape[-1]
+    """y with L·y = b (L lower triangular; b (n,) or (n, k)): row i from the rows before it
+    (y is zero from i on)."""
 
     def row(i, y):
         return y.at[i].set((b[i] - lower[i] @ y) / lower[i, i])
 
-    y = jnp.zeros_like(b)
-    if n <= UNROLLED:
-        for i in range(n):
-            y = row(i, y)
-        return y
-    return jax.lax.fori_loop(0, n, row, y)
+    return _each(lower.shape[-1], row, jnp.zeros_like(b))
 
 
 def _backward(lower, y):
-    """x with Lᵀ·x = y."""
+    """x with Lᵀ·x = y: row n − 1 − k from the rows after it (x is zero up to it)."""
     n = lower.shape[-1]
 
     def row(k, x):
         i = n - 1 - k
         return x.at[i].set((y[i] - lower[:, i] @ x) / lower[i, i])
 
-    x = jnp.zeros_like(y)
-    if n <= UNROLLED:
-        for k in range(n):
-            x = row(k, x)
-        return x
-    return jax.lax.fori_loop(0, n, row, x)
+    return _each(n, row, jnp.zeros_like(y))
 
 
 @fused
