@@ -10,8 +10,8 @@ Here the same factorisations are written in plain XLA operations, which XLA runs
 other, at any batch size, differentiable in both modes:
 
 - `solve`: Gauss–Jordan elimination with partial pivoting in a `fori_loop` (the slow
-  manifold's 6×6 Newton and 54×54 harmonic-balance systems). About twice the LAPACK call on the slow manifold (64
-  angles: 15.7 ms against 7.8–9.3 ms, `benchmarks/thread_pool.py` on 2 cores).
+  manifold's 6×6 Newton and 54×54 harmonic-balance systems). About twice the LAPACK call
+  there (64 angles: 15.7 ms against 7.8–9.3 ms, `benchmarks/thread_pool.py` on 2 cores).
 - `cholesky`, `cho_solve`, `whiten`, `cho_logdet`: the Kalman filters' innovation and
   prediction covariances (`kalman`, `ins.ekf`, `diagnosis.filter_bank`), a column (a row of
   the substitutions) per iteration of a `fori_loop`; written out for n ≤ `UNROLLED`, where
@@ -119,8 +119,7 @@ def _backward(lower, y):
 
 @fused
 def cho_solve(lower, b):
-    """x with (L·Lᵀ)·x = b, from L = `cholesky`(a): a forward
-    and a backward substitution.
+    """x with (L·Lᵀ)·x = b, from L = `cholesky`(a): a forward and a backward substitution.
 
     **Arguments:** `lower` (n, n); `b`, (n,) or (n, k). Batch with `vmap`.
 

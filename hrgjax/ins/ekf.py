@@ -249,10 +249,10 @@ def discretise(F, q, T: float):
     chain (attitude → velocity → position, rates ≲ 1e-3 s⁻¹), so for T ≤ 10 s both agree with
     the exact Van Loan exponential ([`hrgjax.kalman.van_loan`][hrgjax.kalman.van_loan]):
     Φ to 1e-14, $Q_d$ in units of the states' σ to 3e-11 at 1 s and 4e-8 at 10 s
-    (tests/test_navigation_filter.py), at a fraction of its cost
-    batched over flights (benchmarks/navigation.py). A longer interval is k = ⌈T / 10 s⌉
-    such steps of h = T/k composed ($\Phi = \phi_h^k$, $Q_d$ by $Q \leftarrow \phi_h Q
-    \phi_h^\top + Q_h$): no matrix exponential, so no LAPACK kernel in a batched flight
+    (tests/test_navigation_filter.py), at a fraction of its cost batched over flights
+    (benchmarks/navigation.py). A longer interval is k = ⌈T / 10 s⌉ such steps of h = T/k
+    composed ($\Phi = \phi_h^k$, $Q_d$ by $Q \leftarrow \phi_h Q \phi_h^\top + Q_h$; 6e-10 at
+    30 s): no matrix exponential, so no LAPACK kernel in a batched flight
     (hrgjax/_threads.py)."""
     k = max(1, math.ceil(T / 10.0 - 1e-12))
     h = T / k
