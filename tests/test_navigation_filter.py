@@ -299,7 +299,8 @@ def test_filter_inputs_and_verdicts(truth):
 
 def test_batched_flights_run_no_lapack_kernel(truth):
     """`fly`'s batched program (filter, smoother, free inertial, NEES of every run) runs no
-    LAPACK kernel on a batch, also where the GNSS interval is longer than 10 s: twenty such flights wedged a two-thread XLA:CPU pool for ever
+    LAPACK kernel on a batch, also where the GNSS interval is longer than 10 s: with them,
+    twenty flights wedged a two-core machine's XLA:CPU pool for ever
     (`benchmarks/filter_linalg.py --wedge`; the rule in test_kalman)."""
     imu = TACTICAL  # with scale factors: the 21-state filter; fixes every 20 s, two steps
     fixes = gnss.Gnss(rate_hz=0.05)  # of 10 s composed (ekf.discretise: no exponential)
