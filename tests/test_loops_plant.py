@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import CompileCounter
+from helpers import CompileCounter, batched_lapack
 
 import hrgjax as hg
 from hrgjax.calibration import (
@@ -57,6 +57,9 @@ def test_slow_manifold_holds_the_pi_loops_lag(gyro):
     lag = np.max(np.abs(rate - ideal))
     assert lag > 1e-5 * abs(float(ideal[0]))  # the lag is there (a full ripple period: 32 s)
     assert np.max(np.abs(rate - slow)) < 0.01 * lag
+    # batched over angles (as the grey box's scale_factor_at runs it), the manifold's Newton
+    # and harmonic-balance solves run no LAPACK kernel: two at once wedged a two-thread pool
+    assert not batched_lapack(slow_and_ideal, gyro, jnp.asarray(theta[160:-1:20]))
 
 
 def test_grey_box_with_the_plant_returns_the_laws(gyro, tmp_path):
