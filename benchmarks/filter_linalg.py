@@ -10,7 +10,8 @@ that the LAPACK arm cannot wedge:
   (docs/navigation.md's call on a shorter motion): filter, smoother, free inertial, NEES;
 - `bank`: `diagnosis.filter_bank.run_bank` of 3 models over 2 000 steps, 64 records vmapped;
 - `filter`: `kalman.kalman_filter` + `rts_smoother` of a 15-state, 6-measurement model over
-  2 000 steps, 32 records vmapped;
+  2 000 steps, 32 records vmapped; and one record alone (`single`: nothing batched, the
+  case where LAPACK never wedges and its kernels cost the least);
 
 each record with its own measurement noise, so that the covariances are batched too.
 
@@ -115,7 +116,8 @@ def filter_case():
         xs2, _, _ = kalman.rts_smoother(prior, phi, qd, h, r * s, z)
         return ll, xs2
     run = jax.jit(jax.vmap(one))
-    return timed(lambda: run(zs, scale))
+    single = jax.jit(one)  # one record, nothing batched (where LAPACK never wedges)
+    return timed(lambda: run(zs, scale)), timed(lambda: single(zs[0], scale[0]))
 
 out = {}
 if case == "wedge":
@@ -130,7 +132,7 @@ if case == "wedge":
 else:
     out["fly"] = fly_case(True, 5)
     out["bank"] = bank_case()
-    out["filter"] = filter_case()
+    out["filter"], out["single"] = filter_case()
 print(json.dumps(out))
 """
 
@@ -179,7 +181,8 @@ def main():
         return
     arms = {arm: child(arm, "speed") for arm in ("lapack", "plain")}
     names = {"fly": "20 INS flights, 10 min at 20 Hz", "bank": "filter bank, 64 × 2 000 steps",
-             "filter": "Kalman filter + RTS, 15 states, 32 × 2 000 steps"}  # fmt: skip
+             "filter": "Kalman filter + RTS, 15 states, 32 × 2 000 steps",
+             "single": "the same, one record (not batched)"}  # fmt: skip
     for case, label in names.items():
         (f0, b0), (f1, b1) = arms["lapack"][case][:2], arms["plain"][case][:2]
         print(f"  {label:48s} LAPACK {b0 * 1e3:8.1f} ms (first {f0:5.1f} s), plain XLA "
