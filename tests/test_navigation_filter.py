@@ -328,3 +328,7 @@ def test_whitened_errors_give_the_nees_of_all_and_of_the_leading_states():
     shared = np.broadcast_to(p[0], p.shape)  # one covariance per epoch for every run
     expect = np.einsum("...i,...i->...", e, np.linalg.solve(shared, e[..., None])[..., 0])
     np.testing.assert_allclose(ekf.nees(jnp.asarray(e), jnp.asarray(p[0])), expect, rtol=1e-12)
+    with pytest.raises(
+        ValueError, match=r"errors \(\.\.\., M, n\) and P .* got errors \(2, 3, 15\)"
+    ):
+        ekf.nees(jnp.asarray(e), jnp.asarray(p[..., :9, :9]))

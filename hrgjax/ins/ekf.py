@@ -460,8 +460,16 @@ def whitened_errors(errors, P):
     `errors` (..., M, n) are the true error states. The sum of their squares is the
     [`nees`][hrgjax.ins.ekf.nees], and that of the first k the NEES of the first k states
     alone (L's leading block is their covariance's factor): one factorisation for both."""
-    n = errors.shape[-1]
-    batch = jnp.broadcast_shapes(errors.shape[:-1], P.shape[:-2])
+    n = errors.shape[-1] if errors.ndim else 0
+    try:
+        if errors.ndim < 1 or P.shape[-2:] != (n, n):
+            raise ValueError
+        batch = jnp.broadcast_shapes(errors.shape[:-1], P.shape[:-2])
+    except ValueError:
+        raise ValueError(
+            f"errors (..., M, n) and P (..., M, n, n) must match; got errors {errors.shape}, "
+            f"P {P.shape}"
+        ) from None
     p = jnp.reshape(jnp.broadcast_to(P, batch + (n, n)), (-1, n, n))
     e = jnp.reshape(jnp.broadcast_to(errors, batch + (n,)), (-1, n))
     w = jax.vmap(lambda p, e: whiten(cholesky(p), e))(p, e)
