@@ -59,10 +59,6 @@ UNROLLED = 3
 in benchmarks/README.md)."""
 
 
-def _rows(a):
-    return jnp.arange(a.shape[-1])
-
-
 def _each(n: int, body, init):
     """`body(i, carry)` for i = 0 … n − 1: written out for n ≤ `UNROLLED`, else a
     `fori_loop`."""
@@ -86,7 +82,7 @@ def cholesky(a):
     triangle); a zero pivot (semidefinite) gives NaN below it, or, in the last column, a zero
     on the diagonal, where the solves give inf or NaN and `cho_logdet` −inf. Never a finite
     answer to an unsolvable system."""
-    rows = _rows(a)
+    rows = jnp.arange(a.shape[-1])
 
     def column(j, lower):  # L[:, j] from the columns before it (zero from j on)
         v = a[:, j] - lower @ jnp.where(rows < j, lower[j], 0.0)

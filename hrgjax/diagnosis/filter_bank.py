@@ -227,17 +227,13 @@ class GainBank(eqx.Module):
 
 def _inv_logdet(s):
     """S⁻¹ (symmetrised) and log det S of innovation covariances (..., m, m)."""
-    c = _batched(cholesky, s.ndim - 2)(s)
-    eye = jnp.broadcast_to(jnp.eye(s.shape[-1], dtype=s.dtype), s.shape)
-    s_inv = _batched(cho_solve, s.ndim - 2)(c, eye)
-    return 0.5 * (s_inv + jnp.swapaxes(s_inv, -1, -2)), _batched(cho_logdet, s.ndim - 2)(c)
 
+    def one(s):
+        c = cholesky(s)
+        s_inv = cho_solve(c, jnp.eye(s.shape[-1], dtype=s.dtype))
+        return 0.5 * (s_inv + s_inv.T), cho_logdet(c)
 
-def _batched(fn, depth: int):
-    """`fn` vmapped over `depth` leading axes."""
-    for _ in range(depth):
-        fn = jax.vmap(fn)
-    return fn
+    return jnp.vectorize(one, signature="(m,m)->(m,m),()")(s)
 
 
 def _gains(phi, qd, h, r, p0, n_steps):

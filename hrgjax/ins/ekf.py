@@ -470,10 +470,9 @@ def whitened_errors(errors, P):
             f"errors (..., M, n) and P (..., M, n, n) must match; got errors {errors.shape}, "
             f"P {P.shape}"
         ) from None
-    p = jnp.reshape(jnp.broadcast_to(P, batch + (n, n)), (-1, n, n))
-    e = jnp.reshape(jnp.broadcast_to(errors, batch + (n,)), (-1, n))
-    w = jax.vmap(lambda p, e: whiten(cholesky(p), e))(p, e)
-    return jnp.reshape(w, batch + (n,))
+    one = lambda p, e: whiten(cholesky(p), e)  # noqa: E731
+    p, e = jnp.broadcast_to(P, batch + (n, n)), jnp.broadcast_to(errors, batch + (n,))
+    return jnp.vectorize(one, signature="(n,n),(n)->(n)")(p, e)
 
 
 @fused
