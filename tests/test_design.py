@@ -649,12 +649,19 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     # a concrete plan's information is summed in fixed-size chunks of points (every plan
     # meets one compiled Jacobian, every criterion one program): a plan of a new structure
     # (the first 40 segments) compiles neither again; a traced plan's (jit) is the same.
-    # (The default prior: at 1e6 the 40 segments' unseen directions are below float64's
-    # resolution of F, and the Cholesky factor is round-off.)
     part = d.BenchPlan(plan.kind[:40], *(x[:40] for x in fields))
     with CompileCounter() as c:
         assert np.isfinite(float(d.criterion(part, "a")))
     assert not {"jit(_weighted_information)", "jit(evaluate_criterion)"} & set(c.names), c.names
+    # the 40 segments leave directions unseen: beyond ≈ 1e6 the prior is below float64's
+    # resolution of F (its Cholesky factor was round-off, NaN at 1e8); floored there, the
+    # criterion stays finite, grows with the prior, and reads as the floor beyond it
+    widening = [float(d.criterion(part, "a", prior_scale=s)) for s in (1e4, 1e8, 1e12)]
+    assert np.all(np.isfinite(widening)) and widening[0] < widening[1], widening
+    assert widening[2] == pytest.approx(widening[1], rel=1e-6)
+    for bad in (0.0, -1.0, np.inf):
+        with pytest.raises(ValueError, match=r"^prior_scale must be a finite number > 0"):
+            d.criterion(part, "a", prior_scale=bad)
     np.testing.assert_allclose(jax.jit(d.information)(plan), f, rtol=1e-12,
                                atol=1e-12 * np.abs(f).max())  # fmt: skip
     assert two / one == pytest.approx(2**-0.5, rel=1e-6)

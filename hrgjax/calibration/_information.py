@@ -282,18 +282,37 @@ def _path_points(plan, values, noise, nodes, model=GREY_BOX, panels=None):
 _path_points_compiled = eqx.filter_jit(_path_points)
 
 
+PRECISION_FLOOR = 16.0 * float(np.finfo(np.float64).eps)
+"""The weakest prior float64 resolves, relative to what a plan teaches: `precision_factor`
+floors each parameter's prior precision at P × this (P parameters: 4.3·10⁻¹⁴ for the grey
+box's 12) × the parameter's own information F_ii (in units of its typical uncertainty). F is
+summed in float64, so a direction a plan does not see reads as ±P·ε of F's diagonal, not 0:
+a prior weaker than that (`prior_scale` ≳ 10⁶ on a plan that leaves directions unseen) left
+a posterior variance that was round-off, and at 10⁸ no Cholesky factor at all (NaN
+criteria). Floored, such a prior reads as the floor and every criterion stays finite; where
+the prior is stronger than the floor (the default `prior_scale` = 100 on any plan so far),
+nothing changes, and a parameter the plan does not see at all keeps its prior."""
+
+
 def precision_factor(plan, values, noise, prior_scale, model=GREY_BOX, panels=None):
     """Cholesky factor of the posterior precision in units of each parameter's typical
     uncertainty, equilibrated to unit diagonal: `(L, d)` with A = diag(d) L Lᵀ diag(d)
     (forming (F + Λ)⁻¹ explicitly loses ~cond·ε; triangular solves keep the criteria and
-    their gradients accurate). `plan`: a plan, or its information matrix (`information_source`)."""
+    their gradients accurate), the prior floored at float64's resolution (`PRECISION_FLOOR`).
+    `plan`: a plan, or its information matrix (`information_source`); `prior_scale` > 0."""
+    given = concrete_value(prior_scale)  # a static float inside the criteria's programs
+    if given is not None and not (np.isfinite(given).all() and (given > 0).all()):
+        raise ValueError(f"prior_scale must be a finite number > 0 (the prior's σ in units of "
+                         f"each parameter's typical uncertainty); got {given}")  # fmt: skip
     scale = model.scale()
     if isinstance(plan, BenchPlan):
         a = _information(plan, values, noise, NODES, model, panels)
     else:
         a = plan
+    n = a.shape[0]
     a = a * scale[:, None] * scale[None, :]
-    a = a + jnp.eye(a.shape[0]) / prior_scale**2
+    prior = jnp.maximum(1.0 / prior_scale**2, (n * PRECISION_FLOOR) * jnp.diagonal(a))
+    a = a + jnp.diag(prior)
     d = jnp.sqrt(jnp.diagonal(a))
     return jnp.linalg.cholesky(a / d[:, None] / d[None, :]), d
 
@@ -312,7 +331,8 @@ def posterior_covariance(plan: BenchPlan, values=None, arw=None, prior_scale: fl
     SI): (F + Λ)⁻¹ with F = [`information`][hrgjax.calibration.design.information] and a
     weak Gaussian prior Λ of σ = `prior_scale` × each parameter's typical uncertainty
     (`physical.PARAMETERS`; `model` as [`information`][hrgjax.calibration.design.information],
-    its `scale()`), which keeps directions a plan does not see finite."""
+    its `scale()`), which keeps directions a plan does not see finite (`prior_scale` > 0;
+    beyond ≈ 10⁶ float64 cannot resolve it, and it reads as `PRECISION_FLOOR`)."""
     model = as_model(model)
     values = model_values(values, model)
     noise = noise_vector(arw, gauss_markov, angle_white)

@@ -34,6 +34,7 @@ from ._criteria import ins_sensitivity as ins_sensitivity
 from ._criteria import warmup_error as warmup_error
 from ._criteria import warmup_sensitivity as warmup_sensitivity
 from ._information import INFORMATION_CHUNK as INFORMATION_CHUNK
+from ._information import PRECISION_FLOOR as PRECISION_FLOOR
 from ._information import SWEEP_PER_NODE_DEG as SWEEP_PER_NODE_DEG
 from ._information import gauss_markov_discount as gauss_markov_discount
 from ._information import information as information
