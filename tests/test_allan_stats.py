@@ -388,6 +388,28 @@ def test_bad_input_is_named(kwargs, match):
     assert allan.noise_id(walk, [1, 2]).tolist() == [0, 0]  # white rate (a random-walk phase)
 
 
+def test_a_stuck_sensor_has_no_noise_and_a_periodic_one_stays_in_range():
+    """A constant rate has no noise at any length (summed into a phase, 2·10⁴ samples of 0.3
+    left round-off above the phase's test and passed as noise); one 10⁻⁷ of its size noisy
+    has some. A periodic component (lag-1 autocorrelation → −1) is no power law: its α is
+    held to what the deviation's differences take, [2 − 2·dmax, 2] (it read α = 4 874 on an
+    alternating rate, and allantools' edf_greenhall refuses α = −3 with d = 2)."""
+    rng = np.random.default_rng(0)
+    for n in (1000, 20000):
+        with pytest.raises(ValueError, match="^y has no noise to identify"):
+            allan.deviation(np.full(n, 0.3), 10.0)
+    allan.uncertainty.check_rate_has_noise(10.0 + 1e-6 * rng.normal(size=20000))
+    i = np.arange(2**14)
+    for rate in (
+        np.where(i % 2 == 0, 1.0, -1.0) + 0.01 * rng.normal(size=i.size),
+        0.1 * rng.normal(size=i.size) + 5 * np.sin(0.9 * np.pi * i),
+    ):
+        x = np.concatenate([[0.0], np.cumsum(rate)])
+        for dmax in (2, 3):
+            got = allan.noise_id(x, [1, 2, 4, 8, 16], dmax=dmax)
+            assert got.min() >= 2 - 2 * dmax and got.max() <= 2, (dmax, got)
+
+
 def test_fit_noise_recovers_the_ieee952_terms():
     """On an exact Allan variance all five coefficients come back; on a simulated record of
     white rate noise (N) and rate random walk (K) the two are found within their intervals

@@ -17,6 +17,7 @@ from .deviations import curve
 from .uncertainty import (
     NOISE_RULES,
     ONE_SIGMA,
+    check_rate_has_noise,
     confidence_interval,
     edf_greenhall,
     edf_totdev,
@@ -209,6 +210,7 @@ def deviation(
         x = filled - filled[0]
         rate = np.diff(filled) / tau0
     else:
+        check_rate_has_noise(y)
         rate = filled
         x = np.concatenate([[0.0], np.cumsum(filled) * tau0])
     n_phase = x.size

@@ -78,7 +78,8 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
 
     `dmax` = 3 (Hadamard) lets both methods name flicker walk (α = −3).
 
-    **Returns:** an int array.
+    **Returns:** an int array, each α within [2 − 2·`dmax`, 2]: the autocorrelation of a
+    periodic component (no power law: r₁ → −1) is held to the nearest end of that range.
 
     **Raises:** `ValueError` for an unknown `rule`, or when no factor of the record can be
     read: fewer than `B1_AVERAGES` + 1 points (default rule), fewer than 3 (`"stable32"`), or
@@ -146,6 +147,7 @@ def _acf_alpha(z, dmax):
         power = square - count * mean * mean  # Σ(v − v̄)²: v̄ ≈ 0 after the quadratic's removal
         # no noise: the quadratic's residual at the data's round-off (RMS ≤ 1e-14 of their
         # size; a noise-free quadratic leaves ≤ 1e-15 up to 10⁶ points), or 0 once differenced
+        # (a rate's summation leaves more: `check_rate_has_noise` reads the rate itself)
         floor = (1e-14 * size) ** 2 * count if d == 0 else 1e-30 * square
         if not power > max(floor, 1e-300):
             _no_noise()
@@ -155,7 +157,9 @@ def _acf_alpha(z, dmax):
         if rho < 0.25 or d >= dmax:
             break
         d += 1
-    return int(-round(2 * rho) - 2 * d) + 2
+    # a periodic or deterministic component (r₁ → −1: ρ → −∞) reads as no power law at all;
+    # the nearest the deviation's differences can take: 2 (white phase) … 2 − 2·dmax
+    return min(2, max(2 - 2 * dmax, int(-round(2 * rho) - 2 * d) + 2))
 
 
 _BLOCK = 1 << 15
@@ -279,6 +283,25 @@ def _b1_alpha(x, m, dmax, white_rate_guard: bool = True):
     if white_rate_guard and rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 0)):
         return 0  # rate noise after all: few averages put its B1 of 1 below the boundary
     return 1 if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 2)) else 2
+
+
+def check_rate_has_noise(rate):
+    """Raise `_no_noise`'s error when the rate samples `rate` (NaN: missing) are a straight
+    line in time to round-off (RMS about their least-squares line ≤ 64 ε of their largest
+    size): a stuck or constant sensor. Read on the rate itself, because summing it into a
+    phase leaves round-off (3e-15 of the phase's size at 10³ constant samples, 6e-14 at
+    2·10⁴, 3e-12 at 10⁶) above the phase test's floor."""
+    rate = np.asarray(rate, dtype=float)
+    t = np.flatnonzero(np.isfinite(rate)).astype(float)
+    v = rate[np.isfinite(rate)]
+    if v.size < 3:
+        return
+    t, v = t - t.mean(), v - v.mean()
+    v = v - t * (np.dot(t, v) / np.dot(t, t))
+    if not np.sqrt(np.mean(v**2)) > 64 * np.finfo(float).eps * np.max(
+        np.abs(rate[np.isfinite(rate)])
+    ):
+        _no_noise()
 
 
 def _no_noise():
