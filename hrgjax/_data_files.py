@@ -197,10 +197,14 @@ def with_file_line(message: str, lines: np.ndarray) -> str:
     return message[: m.end()] + f" (line {lines[i]} of the file)" + message[m.end() :]
 
 
-def read_csv_table(path: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def read_csv_table(
+    path: str, empty_as_nan: bool = False
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """A CSV file as `(columns, lines)`: each column parsed (numbers as float, `run` ids as
     exact integers, a column not in `COLUMNS` that is not all numbers as text) and the file's
-    line number of each data row. UTF-8, a header row, `#` comment lines.
+    line number of each data row. UTF-8, a header row, `#` comment lines. `empty_as_nan`: an
+    empty field is a missing number (NaN), as in a log with gaps (`hrgjax allan`); else it is
+    refused in a known column and makes an extra column text.
 
     **Raises:** `ValueError` naming the file and its line for text that is not UTF-8, a
     malformed row, an empty or duplicate header, or a known column with text in it."""
@@ -247,6 +251,8 @@ def read_csv_table(path: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
             raise ValueError(f"{path}: line {ln} has {len(r)} fields, the header has {len(header)}")
     fields = {h: [r[j] for r in rows] for j, h in enumerate(header)}
     lines_arr = np.asarray(lines, dtype=np.int64)
+    if empty_as_nan:
+        fields = {h: [f if f.strip() else "nan" for f in v] for h, v in fields.items()}
     return {h: _parse(path, h, v, lines_arr) for h, v in fields.items()}, lines_arr
 
 

@@ -281,6 +281,15 @@ def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, t
     cli_fails(["allan", str(gap), "--rate-hz", "10", "--fit"], capsys, "has 1 missing value")
     assert main(["allan", str(gap), "--rate-hz", "10"]) == 0  # the deviation takes gaps
     assert "1 missing (windows across them left out)" in capsys.readouterr().out
+    lines = gap.read_text().splitlines()  # an empty field is a gap too (docs/cli.md)
+    lines[51] = lines[51].split(",")[0] + ","
+    gap.write_text("\n".join(lines) + "\n")
+    assert main(["allan", str(gap), "--rate-hz", "10"]) == 0
+    assert "1 missing (windows across them left out)" in capsys.readouterr().out
+    stuck = tmp_path / "stuck.csv"  # a constant log: refused before any work
+    np.savetxt(stuck, np.column_stack([np.arange(20000) / fs, np.full(20000, 0.3)]),
+               delimiter=",", header="time,rate", comments="", fmt="%.17g")  # fmt: skip
+    cli_fails(["allan", str(stuck), "--rate-hz", "10", "--fit"], capsys, "no noise to identify")
     cli_fails(["allan", str(log), "--rate-hz", "10", "--column", "yaw"], capsys, "no column 'yaw'")
     cli_fails(["allan", str(log), "--time-column", "time", "--kalibr", str(tmp_path / "k.yaml")],
               capsys, "--kalibr needs --unit")  # fmt: skip

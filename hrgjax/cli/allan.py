@@ -34,7 +34,7 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
         raise UsageError(f"{path}: hrgjax allan reads CSV logs (.csv: a header row, one "
                          "sample per row)")  # fmt: skip
     with usage_errors(missing=f"{path}: no such file"):
-        table, lines = read_csv_table(path)
+        table, lines = read_csv_table(path, empty_as_nan=True)
     numeric = [k for k, v in table.items() if np.asarray(v).dtype.kind == "f"]
     if column is None:
         choices = [k for k in numeric if k != time_column and k.lower() not in ("t", "time")]
