@@ -41,6 +41,14 @@ def test_allan_errors():
             hg.oadev(NBS14, bad)
     with pytest.raises(ValueError, match="kind"):
         hg.allan_deviation(NBS14, 1.0, kind="fancy")
+    # the sample interval and the samples, named (τ = −1, −2, … and NaN deviations before)
+    for bad in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match=r"^oadev: tau0 must be the sample interval"):
+            hg.oadev(NBS14, 2, bad)
+        with pytest.raises(ValueError, match=r"^allan_deviation: dt must be the sample"):
+            hg.allan_deviation(NBS14, bad)
+    with pytest.raises(ValueError, match=r"^mdev: y must be finite; found nan at index 3 "):
+        hg.mdev(np.r_[NBS14[:3], np.nan, NBS14[3:]], 1)
 
 
 @pytest.mark.parametrize("kind", ["adev", "oadev", "mdev", "hdev", "ohdev", "totdev"])

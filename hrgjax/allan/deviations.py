@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import concrete_value
 from .._compiled import device, fused
 
 
@@ -56,6 +57,23 @@ def _factor(m, name: str) -> int:
     raise ValueError(f"{name}: m must be a positive integer; got {m!r}")
 
 
+def _check_inputs(name, y, tau0, tau_name="tau0"):
+    """The sample interval a positive finite number of seconds and the samples finite, where
+    they are concrete (a traced call passes); NaN samples are gaps only to
+    [`hrgjax.allan.deviation`][hrgjax.allan.deviation]."""
+    step = concrete_value(tau0)
+    if step is not None and not (np.ndim(step) == 0 and np.isfinite(step) and step > 0):
+        raise ValueError(f"{name}: {tau_name} must be the sample interval, a number > 0 [s]; "
+                         f"got {tau0!r}")  # fmt: skip
+    values = concrete_value(y)
+    if values is not None and np.asarray(values).dtype.kind in "fc":
+        bad = np.flatnonzero(~np.isfinite(np.ravel(values)))
+        if bad.size:
+            raise ValueError(f"{name}: y must be finite; found {np.ravel(values)[bad[0]]} at "
+                             f"index {int(bad[0])} (for records with gaps (NaN): "
+                             "hrgjax.allan.deviation)")  # fmt: skip
+
+
 def _per_tau(fn):
     """One deviation at one τ as one compiled program per data length and `m` (`fused`),
     behind the eager checks: `y` may be any array-like (a list too), `m` any integer (a
@@ -64,6 +82,7 @@ def _per_tau(fn):
 
     @functools.wraps(fn)
     def call(y, m: int = 1, tau0: float = 1.0):
+        _check_inputs(fn.__name__, y, tau0)
         return core(y if isinstance(y, jax.Array) else device(y, float), _factor(m, fn.__name__),
                     tau0)  # fmt: skip
 
@@ -162,10 +181,12 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
 
     **Returns:** `(taus [s], deviations [rate unit])` as arrays.
 
-    **Raises:** `ValueError` for an unknown kind, or an `m` the data are too short for.
+    **Raises:** `ValueError` for an unknown kind, an `m` the data are too short for, a `dt`
+    that is not a positive number, or samples that are not finite (gaps: `hg.allan.deviation`).
     """
     if kind not in _KINDS:
         raise ValueError(f"kind must be one of {list(_KINDS)}; got {kind!r}")
+    _check_inputs("allan_deviation", rate, dt, "dt")
     n = np.shape(rate)[0]
     if ms is None:
         ms = [2**k for k in range(int(np.log2(max(n // 4, 1))) + 1)]
