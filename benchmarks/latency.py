@@ -8,7 +8,7 @@ does not). Commands run as a user runs them, each in a fresh process; "cold" use
 compile cache folder, "warm" the same folder again.
 
 - `hrgjax --help`;
-- `hrgjax simulate --preset tvg3 --plan static --quick`, cold and warm;
+- `hrgjax simulate --preset tvg3 --plan static`, cold and warm;
 - `hrgjax demo --quick`, cold and warm, with the number of XLA compilations of the warm run
   (compile requests the cache did not answer);
 - the first `simulate` in a process with a warm cache, against the same call compiled;
@@ -122,13 +122,13 @@ def main():
         t, _ = timed(CLI + ["--help"], env, 3)
         report("hrgjax --help", t, "s", "/ import", ratio(t), "≤ 0.3×")
 
-        sim = CLI + ["simulate", "--preset", "tvg3", "--plan", "static", "--quick"]
+        sim = CLI + ["simulate", "--preset", "tvg3", "--plan", "static"]
         sim += ["--out", str(work / "s.csv")]
         t, _ = timed(sim, env)
-        report("hrgjax simulate --plan static --quick, cold cache", t, "s", "/ import", ratio(t))
+        report("hrgjax simulate --plan static, cold cache", t, "s", "/ import", ratio(t))
         t, _ = timed(sim, env, repeat)
         report(
-            "hrgjax simulate --plan static --quick, second invocation",
+            "hrgjax simulate --plan static, second invocation",
             t, "s", "/ import", ratio(t), "≤ 3×",
         )  # fmt: skip
 

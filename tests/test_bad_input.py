@@ -323,6 +323,11 @@ def test_cli_refuses_outputs_before_any_work(tmp_path, capsys):
     cli_fails(
         ["simulate", "--duration", "-5"], capsys, "--duration: expected a number of seconds > 0"
     )
+    # an option of another plan is refused, not ignored
+    cli_fails(["simulate", "--plan", "static", "--precession", "0.5"], capsys,
+              "--precession does not apply to --plan static .it applies to --plan precession")  # fmt: skip
+    cli_fails(["simulate", "--plan", "seed", "--duration", "60"], capsys,
+              "--duration does not apply to --plan seed")  # fmt: skip
     cli_fails(["calibrate", str(tmp_path / "none.csv")], capsys, "none.csv: no such file")
     cli_fails(
         ["calibrate", str(data), "--out", str(tmp_path / "m.txt")], capsys, "must end in .eqx"

@@ -55,11 +55,35 @@ def _rows(data):
     return lambda path: f"{len(data)} rows ({len(data.run_indices())} runs) to {data.save(path)}"
 
 
+PRECESSION_DPS = 0.5
+"""`--precession`'s default [°/s, electrical]."""
+DURATION_S = 180.0
+"""`--duration`'s default [s]."""
+_OPTIONS_OF = {
+    "--plan static": ("--duration",),
+    "--plan rotation": ("--duration",),
+    "--plan seed": ("--quick",),
+    "--plan precession": ("--precession", "--quick"),
+    "--plan reversal": ("--duration", "--quick"),
+}
+"""The plan options each plan reads (one given to another plan is refused, not ignored)."""
+
+
 def cmd_simulate(args) -> int:
     """`hrgjax simulate`: run a bench plan on a preset gyro and write the data."""
     start(args, [args.plan_file], out=DATA_EXTENSIONS)
     from ..calibration import rotation_plan, seed_plan, static_plan
 
+    plan = "a --plan-file" if args.plan_file is not None else f"--plan {args.plan or 'static'}"
+    given = [o for o, v in (("--precession", args.precession), ("--duration", args.duration),
+                            ("--quick", args.quick or None)) if v is not None]  # fmt: skip
+    unused = [o for o in given if o not in _OPTIONS_OF.get(plan, ())]
+    if unused:
+        takes = [p for p, options in _OPTIONS_OF.items() if unused[0] in options]
+        raise UsageError(f"{unused[0]} does not apply to {plan} (it applies to "
+                         f"{', '.join(takes)})")  # fmt: skip
+    args.precession = PRECESSION_DPS if args.precession is None else args.precession
+    args.duration = DURATION_S if args.duration is None else args.duration
     gyro = preset_gyro(args.preset, noise=not args.no_noise).in_mode(args.mode)
     if args.plan_file is not None:
         return _simulate_plan_file(args, gyro)
@@ -307,8 +331,8 @@ def _simulate_parser(sub):
         "wave held, the rate read from the rebalance force: column rebalance_rate_dps)",
     )  # fmt: skip
     p.add_argument(
-        "--precession", type=POSITIVE_FLOAT, default=0.5, metavar="DPS",
-        help="(--plan precession) commanded precession rate [°/s, electrical]",
+        "--precession", type=POSITIVE_FLOAT, default=None, metavar="DPS",
+        help="(--plan precession) commanded precession rate [°/s, electrical] (default 0.5)",
     )  # fmt: skip
     p.add_argument(
         "--plan-file", default=None, metavar="PLAN.json",
@@ -317,9 +341,9 @@ def _simulate_parser(sub):
     )  # fmt: skip
     p.add_argument("--out", default="out/data.csv", help="CSV or .nc path")
     p.add_argument(
-        "--duration", type=POSITIVE_SECONDS, default=180.0,
-        help="run length of the static and rotation plans [s] (the seed plan's are 180 s); "
-        "--plan reversal: each hold's",
+        "--duration", type=POSITIVE_SECONDS, default=None,
+        help="run length of the static and rotation plans [s] (default 180; the seed plan's "
+        "are 180 s); --plan reversal: each hold's",
     )  # fmt: skip
     p.add_argument(
         "--quick", action="store_true",
