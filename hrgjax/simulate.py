@@ -287,11 +287,17 @@ def _record(gyro, profile, ts, read, key, bias_key, run):
             theta = theta - k_e * rate_angle + white
         elif ts.shape[0] > 1:  # FTR: while held, the rate noise is on the rate read out (the
             # mean rate of each output interval; the first sample: the first interval's);
-            # where a schedule runs whole-angle it moves the wave, which is caught there
+            # where a schedule runs whole-angle it moves the wave, which is caught there.
+            # The loop nulls the angle it reads, readout noise and all: the wave moves by
+            # minus that noise, and the force that moves it reads as the rate −Δw/(k_e Δt)
+            # (the rate a whole-angle reading of the same noise gives; a loop faster than the
+            # output rate)
             on = (jnp.ones_like(ts) if profile.rebalance is None
                   else jax.vmap(profile.rebalance_at)(ts))  # fmt: skip
-            inc = jnp.diff(rate_angle)
-            free = jnp.concatenate([jnp.zeros(1), jnp.cumsum((1.0 - on[:-1]) * inc)])
+            inc = jnp.diff(rate_angle) - jnp.diff(white) / (0.5 * (k_e[1:] + k_e[:-1]))
+            free = jnp.concatenate(
+                [jnp.zeros(1), jnp.cumsum((1.0 - on[:-1]) * jnp.diff(rate_angle))]
+            )
             held = on[:-1] * inc / jnp.diff(ts)
             rebalance_rate = rebalance_rate + jnp.concatenate([held[:1], held])
             theta = theta - k_e * free + white

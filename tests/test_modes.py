@@ -145,7 +145,10 @@ def test_ftr_in_the_full_model_agrees_with_the_averaged_model():
 
 def test_ftr_rate_noise_is_on_the_rate_read_out():
     """With angle random walk N the FTR output's samples scatter by N/√Δt (the mean rate of
-    each interval) and the held wave angle does not wander."""
+    each interval) and the held wave angle does not wander. White readout noise σ_w per
+    sample reaches the rate too: the loop nulls the angle it reads, so the force reads
+    −Δw/(k_e Δt), what a whole-angle reading of the same noise gives (std √2·σ_w/(k_e Δt),
+    lag-1 autocorrelation −½); it read no readout noise at all before."""
     arw = 0.05 * DEG / 60.0  # 0.05 °/√h in rad/√s
     gyro = hg.Gyro(resonator=PERFECT, control=Control(mode="ftr", drive="force"),
                    noise=hg.Noise(angle_random_walk=arw))  # fmt: skip
@@ -153,6 +156,11 @@ def test_ftr_rate_noise_is_on_the_rate_read_out():
     std = np.std(np.asarray(rec.rebalance_rate))
     assert abs(std / arw - 1.0) < 0.1
     assert np.ptp(np.asarray(rec.wave_angle)) < 1e-12
+    white = eqx.tree_at(lambda g: g.noise, gyro, hg.Noise(angle_white=1e-5))
+    rec = hg.simulate(white, hg.Profile.static(2000.0), dt_out=1.0, key=jax.random.key(4))
+    rate = np.asarray(rec.rebalance_rate)[1:]
+    assert np.std(rate) / (np.sqrt(2.0) * 1e-5 / float(rec.k_e[0])) == pytest.approx(1.0, abs=0.1)
+    assert np.corrcoef(rate[:-1], rate[1:])[0, 1] == pytest.approx(-0.5, abs=0.1)
 
 
 def test_bad_mode_and_schedule_inputs_name_the_field():
