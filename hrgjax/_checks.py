@@ -68,3 +68,30 @@ def check_positive(name: str, x, unit: str = ""):
             )
         return x
     return eqx.error_if(x, jnp.any(x <= 0), f"{name} must be > 0 {unit}".rstrip())
+
+
+def finite_number(name: str, x, unit: str) -> float:
+    """`x` (a Python, NumPy or 0-d array number) as a finite float, or a one-line error
+    naming `name` and its `unit`: `TypeError` for a non-number, `ValueError` for NaN or inf."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        if not (isinstance(x, (np.ndarray, jax.Array)) and np.shape(x) == ()):
+            raise TypeError(f"{name} must be a number [{unit}]; got {type(x).__name__}")
+    x = float(x)
+    if not np.isfinite(x):
+        raise ValueError(f"{name} must be finite [{unit}]; got {x}")
+    return x
+
+
+def vec3(owner: str, name: str, unit: str):
+    """An `eqx.field` converter for the field `name` of `owner`: a scalar (every axis) or 3
+    values, as a (3,) float array; a one-line `ValueError` naming `owner.name`, its `unit`
+    and shape (3,) for any other shape."""
+
+    def convert(x):
+        x = jnp.asarray(x, float)
+        if x.shape not in ((), (1,), (3,)):
+            raise ValueError(f"{owner}.{name} must be a scalar (every axis) or 3 values "
+                             f"[{unit}], shape (3,); got shape {x.shape}")  # fmt: skip
+        return jnp.broadcast_to(x, (3,))
+
+    return convert

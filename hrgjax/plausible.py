@@ -27,11 +27,16 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "table_rate_dps": (-3600.0, 3600.0, "°/s"),
     "wave_angle_deg": (-1e7, 1e7, "° electrical"),
     "duration_s": (0.0, 30 * 86400.0, "s"),
+    "speed_mps": (0.0, 10_000.0, "m/s"),
+    "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
 }
 """(low, high, unit) of each quantity: temperatures an HRG is built and tested for (−100 …
 +150 °C; −40 … +60 °C is the seed's bench), table rates (±10 turns/s), wave angles (±1e7°:
-an angle that has turned 27 000 times is a unit error) and the length of one run or
-segment (30 days)."""
+an angle that has turned 27 000 times is a unit error), the length of one run or
+segment (30 days), a vehicle's speed (10 km/s, above low-orbit speed: a speed in km/h or
+mm/s read as m/s is refused) and the median specific force |Δv|/Δt over a record of
+accelerometer increments (5 g: a navigating vehicle spends most of its time near 1 g, a 60°
+banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s])."""
 
 KELVIN_HINT_C = 200.0
 """A temperature column whose every value is ≥ this [°C] looks like kelvin (250–400 K is

@@ -2,6 +2,7 @@
 `hrgjax align` CLI and the platform error model of seed 002 with faults."""
 
 import json
+import warnings
 from pathlib import Path
 
 import jax
@@ -110,6 +111,22 @@ def test_imu_log_refuses_bad_input():
         al.ImuLog(jnp.array([1.0, 1.0, 2.0]), jnp.zeros((3, 3)), jnp.zeros((3, 3)), 0.5)
     with pytest.raises(ValueError, match="finite"):
         al.ImuLog(t, jnp.zeros((3, 3)).at[1, 1].set(jnp.nan), jnp.zeros((3, 3)), 0.5)
+    # a NumPy latitude is kept as a Python float (no "JAX array set as static" warning)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        log = al.ImuLog(t, jnp.zeros((3, 3)), jnp.zeros((3, 3)), np.deg2rad(45.0))
+    assert type(log.lat) is float and log.lat == np.deg2rad(45.0)
+    with pytest.raises(
+        ValueError, match=r"^ImuLog.lat must be in \[-π/2, π/2\] rad; got 45.0 \(degrees"
+    ):
+        al.ImuLog(t, jnp.zeros((3, 3)), jnp.zeros((3, 3)), 45.0)
+    # at the pole there is no horizontal Earth rate to find north from: refused before any work
+    pole = al.ImuLog(t, jnp.zeros((3, 3)), jnp.zeros((3, 3)), np.pi / 2)
+    for run in (al.align, lambda g: al.fine_align(g, np.eye(3))):
+        with pytest.raises(
+            ValueError, match=r"^ImuLog.lat = 1.5708 rad \(90°\) is within 1° of a pole"
+        ):
+            run(pole)
     log, _ = _stationary_log(30.0, np.zeros(3), np.zeros(3), duration_s=120.0)
     with pytest.raises(ValueError, match="not g"):
         al.align(al.ImuLog(log.t, log.dtheta, log.dvel * 2.0, log.lat))

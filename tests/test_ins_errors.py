@@ -254,6 +254,9 @@ def test_monte_carlo_covariance_matches_the_propagated_covariance():
         sd.propagate(traj, gyro_error=jnp.zeros((5, 3)))
     with pytest.raises(ValueError, match="dt must be"):
         tr.stationary(45.0, duration_s=10.0, dt=-1.0)
+    # a grid that would silently end early (9 s of 10); latitudes: tests/test_navigation.py
+    with pytest.raises(ValueError, match=r"^dt = 3.0 s must divide duration_s = 10.0 s"):
+        tr.stationary(45.0, duration_s=10.0, dt=3.0)
     with pytest.raises(ValueError, match="arw must be finite"):
         sd.ImuErrors(arw=-1.0)
 

@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from hrgjax import plausible
 from hrgjax.ins import constants as C
 from hrgjax.ins import mechanization as me
 from hrgjax.ins import motion as mo
@@ -307,6 +308,37 @@ def test_motion_files_round_trip_and_bad_input_names_the_line(motion, tmp_path):
             np.zeros((5, 3)),
             1.0,
         )
+    # dt as a NumPy or JAX scalar is checked too; dv given as accelerations [m/s²]
+    for dt in (np.array(-0.1), jnp.asarray(-0.1), np.array([0.1, 0.1])):
+        with pytest.raises(
+            ValueError, match=r"^dt must be (one number, )?the increments' interval"
+        ):
+            me.mechanize(start, np.zeros((5, 3)), np.zeros((5, 3)), dt)
+    rates = np.tile([0.0, 0.0, -9.81], (5, 1))  # at rest, as m/s² instead of m/s per 0.1 s
+    with pytest.raises(
+        ValueError, match=r"^dv: the median specific force .*10 g.* not accelerations"
+    ):
+        me.mechanize(start, np.zeros((5, 3)), rates, 0.1)
+    me.check_increments(np.zeros((5, 3)), rates * 0.1, 0.1)  # the increments themselves pass
+    # and a header read in another order (lat,lon,alt,yaw,…) is refused, naming the column;
+    # gnss-ins-sim's "reserved" columns, case and a missing GPS column are accepted
+    head, ini, cmd, *rest = path.read_text().replace("4x5", "45").splitlines()
+    path.write_text("\n".join(["lat,lon,alt,yaw,pitch,roll,vx,vy,vz", ini, cmd, *rest]))
+    with pytest.raises(
+        ValueError, match=r"motion.csv:1: header column 1 is 'lat', expected 'ini lat \(deg\)'"
+    ):
+        mo.Motion.from_csv(path)
+    loose = "Command Type,yaw (rad),pitch,roll,vx_body,reserved,reserved,command duration (s)"
+    path.write_text("\n".join([head, ini, loose, *rest]))
+    assert mo.Motion.from_csv(path).duration == 550.0
+    path.write_text("\n".join([head, ini, cmd.replace("vy_body", "vx_body"), *rest]))
+    with pytest.raises(
+        ValueError, match=r":3: header column 6 is 'vx_body \(m/s\)', expected 'vy_"
+    ):
+        mo.Motion.from_csv(path)
+    path.write_text("\n".join([head, ini.replace("120", "nan"), cmd, *rest]))
+    with pytest.raises(ValueError, match=r"motion.csv:2: Motion.lon_deg must be finite"):
+        mo.Motion.from_csv(path)
 
 
 @pytest.mark.filterwarnings("ignore:The copy keyword is deprecated")  # pyins on pandas 3
@@ -386,3 +418,43 @@ def test_ins_impact_through_the_mechanization_equals_the_linear_model():
     v_mech, p_mech = ii.mechanized_errors(NoCompensation(), rec, flight)
     assert p_lin > 1.0
     np.testing.assert_allclose([v_mech, p_mech], [v_lin, p_lin], rtol=0.02)
+
+
+def test_positions_speeds_and_grids_out_of_range_are_one_line_errors():
+    """Bad motions, trajectory grids and latitudes: one line naming the field, raised before
+    any JAX work; a latitude in degrees where radians are expected is refused, a traced one
+    is not checked."""
+    seg = (mo.Segment(1, Z, Z, 10.0),)
+    motion = lambda **kw: mo.Motion(**{**dict(lat_deg=45.0, lon_deg=0.0, h=0.0, velocity=Z,
+                                              yaw_deg=0.0, pitch_deg=0.0, roll_deg=0.0,
+                                              segments=seg), **kw})  # fmt: skip
+    for field, value, match in [
+        ("lon_deg", np.nan, r"Motion.lon_deg must be finite"),
+        ("yaw_deg", np.nan, r"Motion.yaw_deg must be finite"),
+        ("roll_deg", np.inf, r"Motion.roll_deg must be finite"),
+        ("velocity", (np.nan, 0.0, 0.0), r"Motion.velocity must be finite"),
+        ("velocity", (1.0, 0.0), r"Motion.velocity must be 3 values \(vx, vy, vz\) body \[m/s\]"),
+        ("lon_deg", 1000.0, r"Motion.lon_deg must be in \[-180, 360\] °"),
+        ("lat_deg", 90.0, r"Motion.lat_deg must be in \[-89, 89\] °"),
+        ("velocity", (1e9, 0.0, 0.0), r"Motion.velocity: the initial speed = 1e\+09 is outside "
+         r"the plausible range 0 … 10000 m/s"),
+        ("segments", (mo.Segment(1, Z, (2000.0, 0.0, 0.0), 10.0),),
+         r"Motion: the speed by the end of segment 1 = 20000 is outside the plausible range"),
+    ]:  # fmt: skip
+        with pytest.raises(ValueError, match="^" + match):
+            motion(**{field: value})
+    with plausible.relaxed(speed_mps=(0.0, 3e4)):  # an explicit override: accepted
+        motion(segments=(mo.Segment(1, Z, (2000.0, 0.0, 0.0), 10.0),))
+    for lat, match in [(90.0, r"in \[-89, 89\] ° \(the navigation frame is singular"),
+                       (100.0, r"in \[-89, 89\] °"), (np.nan, "finite")]:  # fmt: skip
+        for build in (tr.stationary, tr.constant_velocity):
+            with pytest.raises(ValueError, match=r"^lat_deg must be " + match):
+                build(lat, duration_s=10.0)
+        with pytest.raises(ValueError, match=r"^lat_deg must be " + match):
+            tr.segments(lat, 0.0, 0.0, [(10.0, 1.0, 0.0, 0.0)])
+    with pytest.raises(ValueError, match=r"^legs: a non-empty list of finite"):
+        tr.segments(45.0, 0.0, 0.0, [(10.0, np.nan, 0.0, 0.0)])
+    with pytest.raises(ValueError, match=r"^NavState.from_euler: lat = 45 rad .* np.deg2rad"):
+        me.NavState.from_euler(45.0, 0.0, 0.0, np.zeros(3), 0.0, 0.0, 0.0)
+    lat = jax.jit(lambda la: me.NavState.from_euler(la, 0.0, 0.0, jnp.zeros(3), 0, 0, 0).lat)
+    assert float(lat(45.0)) == 45.0  # traced: not checked

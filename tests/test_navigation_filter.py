@@ -2,12 +2,14 @@
 Monte Carlo truth (NEES, NIS), scale-factor states, and `hrgjax navigate`."""
 
 import json
+import re
+import warnings
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import CompileCounter, batched_lapack
+from helpers import CompileCounter, batched_lapack, cli_fails
 
 from hrgjax.ins import ekf, flights, gnss, motion, sensors
 from hrgjax.ins import mechanization as me
@@ -73,6 +75,21 @@ def monte_carlo(truth):
 
 def test_imu_errors_have_their_stated_statistics():
     n, dt = 40_000, 0.01
+    # bad shapes, intervals and rate errors: one line naming the field, before any JAX work
+    with pytest.raises(
+        ValueError, match=r"^ImuModel.gyro_bias must be .* shape \(3,\); got shape \(4,\)"
+    ):
+        sensors.ImuModel(gyro_bias=[1.0, 2.0, 3.0, 4.0])
+    z = np.zeros((5, 3))
+    for bad_dt in (0.0, -0.1, float("nan"), np.array([0.1, 0.1])):
+        with pytest.raises(
+            ValueError, match=r"^ImuModel.apply: dt must be the increments' interval"
+        ):
+            sensors.ImuModel(arw=1e-5).apply(jax.random.key(0), z, z, bad_dt)
+    with pytest.raises(ValueError, match=r"^ImuModel.apply: dtheta and dv must both have shape"):
+        sensors.ImuModel().apply(jax.random.key(0), z, z[:, :2], 0.1)
+    with pytest.raises(ValueError, match=r"^ImuModel.apply: gyro_rate_error must be \(5, 3\)"):
+        sensors.ImuModel().apply(jax.random.key(0), z, z, 0.1, np.zeros(5))
     white = sensors.ImuModel(arw=0.1 * DEG_PER_SQRT_H, vrw=1e-3)
     # scale factors and misalignments act as the matrix I + diag(s) + A (diagonal of A ignored)
     a = np.array([[9.0, 1e-3, -2e-3], [3e-3, 9.0, 1e-3], [-1e-3, 2e-3, 9.0]])
@@ -237,6 +254,28 @@ def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carl
     with pytest.raises(SystemExit):
         main(["navigate", str(path), "--rate-hz", "7.5", "--quiet"])
     assert "not a whole number of samples at 7.5 Hz" in capsys.readouterr().err
+    # every fix in an outage: the mean NIS does not exist, written as null (strict JSON), no
+    # warning; the same compiled program (the outages travel as a mask)
+    with CompileCounter() as c, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert main([*args[:7], "0:120", *args[8:]]) == 0
+    assert "jit(_run_batch)" not in c.names, c.names
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], caught
+    assert "NIS mean: none (every GNSS fix fell in an outage)" in capsys.readouterr().out
+    nan_is_error = lambda x: (_ for _ in ()).throw(ValueError(x))
+    assert json.loads(out.read_text(), parse_constant=nan_is_error)["nis_mean"] is None
+    # an outage after the flight, a header read in another order, a semicolon file: one line
+    fails = lambda argv, match: cli_fails(["navigate", *argv], capsys, "^hrgjax navigate: " + match)
+    fails([str(path), "--outage", "130:200"], "error: --outage 130:200: starts after the flight")
+    text = path.read_text()
+    wrong = tmp_path / "cols.csv"
+    wrong.write_text("lat,lon,alt,yaw,pitch,roll,vx,vy,vz\n" + text.split("\n", 1)[1])
+    fails([str(wrong)], f"error: {re.escape(str(wrong))}:1: header column 1 is 'lat', expected")
+    semi = tmp_path / "semi.csv"
+    lines = text.split("\n")
+    semi.write_text("\n".join([lines[0], lines[1].replace(",", ";"), *lines[2:]]))
+    line = fails([str(semi)], f"error: {re.escape(str(semi))}:2: expected numbers; got .*commas")
+    assert line.count(str(semi)) == 1, line
 
 
 def test_discretisation_equals_van_loan(truth):
@@ -290,6 +329,30 @@ def test_filter_inputs_and_verdicts(truth):
         )
     with pytest.raises(ValueError, match="chunk must be a whole number >= 1"):
         flights.fly(truth, CONSISTENT, settings, key=jax.random.key(0), chunk=0)
+    # receiver settings: one line naming the field and the expected form
+    with pytest.raises(ValueError, match=r"^Gnss.lever_arm must be finite \[m, body FRD\]"):
+        gnss.Gnss(lever_arm=(np.nan, 0.0, 0.0))
+    with pytest.raises(
+        ValueError, match=r"^Gnss.lever_arm must be .* shape \(3,\); got shape \(2,\)"
+    ):
+        gnss.Gnss(lever_arm=(1.0, 0.0))
+    with pytest.raises(
+        ValueError, match=r"^Gnss.outages must be \(\(start_s, end_s\), …\).*\(\(10.0, 20.0\),\)"
+    ):
+        gnss.Gnss(outages=(10.0, 20.0))
+    for window in ((-10.0, 5.0), (20.0, 10.0), (10.0, np.inf)):
+        with pytest.raises(
+            ValueError,
+            match=r"^Gnss.outages: each window is \(start_s, end_s\) with 0 <= start < end",
+        ):
+            gnss.Gnss(outages=(window,))
+    assert gnss.Gnss(outages=[[10, 20]]).outages == ((10.0, 20.0),)
+    with pytest.raises(ValueError, match=r"^nees_band: n_runs must be a whole number >= 1; got 0"):
+        ekf.nees_band(15, 0)
+    with pytest.raises(ValueError, match=r"^nees_band: n_states must be a whole number"):
+        ekf.nees_band(1.5, 10)
+    with pytest.raises(ValueError, match=r"^nees_band: level must be a probability in \(0, 1\)"):
+        ekf.nees_band(15, 10, 1.5)
     lo, hi = 10.0, 20.0
     assert flights.verdict(np.full(100, 15.0), lo, hi) == "consistent"
     assert flights.verdict(np.r_[np.full(80, 15.0), np.full(20, 5.0)], lo, hi) == "conservative"

@@ -210,7 +210,6 @@ def deviation(
         x = filled - filled[0]
         rate = np.diff(filled) / tau0
     else:
-        check_rate_has_noise(y)
         rate = filled
         x = np.concatenate([[0.0], np.cumsum(filled) * tau0])
     n_phase = x.size
@@ -221,6 +220,8 @@ def deviation(
         raise ValueError(
             f"y: {y.size} samples are too few for {kind} at any of the τ asked (taus={taus!r})"
         )
+    if data == "rate":
+        check_rate_has_noise(y)
     base = "mdev" if kind == "tdev" else kind
     if kind in ("mtotdev", "ttotdev"):  # each run detrended and reflected (hrgjax.allan.total)
         from .total import mtotdev_curve

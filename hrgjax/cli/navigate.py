@@ -3,6 +3,8 @@ and by the loosely-coupled GNSS/INS filter and smoother (hrgjax.ins.flights)."""
 
 from __future__ import annotations
 
+import math
+
 from ._common import (
     PLOT_EXTENSIONS,
     POSITIVE_FLOAT,
@@ -25,8 +27,8 @@ def _outage(text: str):
         raise UsageError(
             f"--outage {text!r}: expected START:END in seconds, e.g. 600:660"
         ) from None
-    if not (0 <= a < b):
-        raise UsageError(f"--outage {text!r}: expected 0 <= START < END seconds")
+    if not (math.isfinite(b) and 0 <= a < b):
+        raise UsageError(f"--outage {text!r}: expected 0 <= START < END seconds, finite")
     return (a, b)
 
 
@@ -35,11 +37,20 @@ def _lever_arm(text: str):
         v = tuple(float(x) for x in text.split(","))
     except ValueError:
         v = ()
-    if len(v) != 3:
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise UsageError(
-            f"--lever-arm {text!r}: expected x,y,z in metres (body: forward, right, down)"
+            f"--lever-arm {text!r}: expected x,y,z in metres, finite (body: forward, right, down)"
         )
     return v
+
+
+def _strict_json(x):
+    """`x` with every NaN or infinite float as None (null): strict JSON has no NaN."""
+    if isinstance(x, dict):
+        return {k: _strict_json(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_strict_json(v) for v in x]
+    return None if isinstance(x, float) and not math.isfinite(x) else x
 
 
 def cmd_navigate(args) -> int:
@@ -51,8 +62,15 @@ def cmd_navigate(args) -> int:
     from ..ins import ekf, flights, gnss, motion, sensors
 
     outages = tuple(_outage(o) for o in args.outage or ())
-    with usage_errors(prefix=args.motion, missing=f"{args.motion}: no such file"):
+    # Motion.from_csv names the file (and the line) in every error it raises
+    with usage_errors(missing=f"{args.motion}: no such file"):
         mot = motion.example() if args.motion == "example" else motion.Motion.from_csv(args.motion)
+    for a, b in outages:
+        if a > mot.duration:
+            raise UsageError(
+                f"--outage {a:g}:{b:g}: starts after the flight, which lasts {mot.duration:g} s "
+                f"(outage windows are seconds from the motion's start)"
+            )
     with usage_errors():
         truth = mot.truth(args.rate_hz)
         imu = sensors.preset(args.imu)
@@ -99,8 +117,11 @@ def cmd_navigate(args) -> int:
         print(f"  {name} NEES, all {out['n_states']} states: mean {r['nees_mean']:.1f} (band "
               f"{lo:.1f}–{hi:.1f}), inside on {100 * r['nees_inside_95_band']:.0f} %: its sensor "
               f"estimates' σ {meaning[r['nees_verdict']]}{why}")  # fmt: skip
-    print(f"  NIS mean {out['nis_mean']:.2f} (expected {out['innovation_dim']})")
-    return finish((args.json, out),
+    if out["nis_mean"] is None:
+        print("  NIS mean: none (every GNSS fix fell in an outage)")
+    else:
+        print(f"  NIS mean {out['nis_mean']:.2f} (expected {out['innovation_dim']})")
+    return finish((args.json, _strict_json(out)),
                   (args.plot, lambda p: figure("navigation_figure")(truth, result, p)))  # fmt: skip
 
 

@@ -32,10 +32,32 @@ from .._compiled import fused
 from .._x64 import require_x64
 from ..kalman import Gaussian, update, van_loan
 from ..units import ARCSEC, DEG, DEG_PER_H
-from .constants import WGS84, earth_rate_ned
+from .constants import MAX_LAT_DEG, WGS84, earth_rate_ned
 from .mechanization import skew
 from .strapdown import augmented, error_matrices_at
 from .trajectory import dcm_to_euler
+
+
+def _python_float(x):
+    """A number (a NumPy or JAX scalar too) as a Python float, so that the static field holds
+    no array; anything else unchanged (`ImuLog.__check_init__` refuses it)."""
+    if isinstance(x, bool | str):
+        return x
+    try:
+        return float(x) if np.ndim(x) == 0 else x
+    except (TypeError, ValueError):
+        return x
+
+
+def _check_gyrocompass_latitude(lat: float) -> None:
+    """Refuse |lat| beyond [`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG]: gyrocompassing
+    is impossible at the poles."""
+    if abs(lat) > MAX_LAT_DEG * DEG:
+        raise ValueError(
+            f"ImuLog.lat = {lat:.6g} rad ({lat / DEG:.4g}°) is within {90 - MAX_LAT_DEG:g}° of a "
+            f"pole: gyrocompassing finds north from the horizontal Earth rate ω_ie·cos(lat), "
+            f"which vanishes there; alignment needs |lat| <= {MAX_LAT_DEG:g}°"
+        )
 
 
 class ImuLog(eqx.Module):
@@ -48,12 +70,23 @@ class ImuLog(eqx.Module):
     t: jax.Array
     dtheta: jax.Array
     dvel: jax.Array
-    lat: float = eqx.field(static=True)
-    lon: float = eqx.field(static=True, default=0.0)
-    h: float = eqx.field(static=True, default=0.0)
+    lat: float = eqx.field(static=True, converter=_python_float)
+    lon: float = eqx.field(static=True, default=0.0, converter=_python_float)
+    h: float = eqx.field(static=True, default=0.0, converter=_python_float)
     header_attitude_deg: tuple | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
+        for name, unit in (("lat", "rad"), ("lon", "rad"), ("h", "m")):
+            v = getattr(self, name)
+            if not isinstance(v, float):
+                raise TypeError(f"ImuLog.{name} must be a number [{unit}]; got {type(v).__name__}")
+            if not math.isfinite(v):
+                raise ValueError(f"ImuLog.{name} must be finite [{unit}]; got {v}")
+        if not -math.pi / 2 <= self.lat <= math.pi / 2:
+            raise ValueError(
+                f"ImuLog.lat must be in [-π/2, π/2] rad; got {self.lat} (degrees? "
+                f"np.deg2rad({self.lat:g}) = {math.radians(self.lat):.6g})"
+            )
         t = np.asarray(self.t)
         for name in ("dtheta", "dvel"):
             a = np.asarray(getattr(self, name))
@@ -68,8 +101,6 @@ class ImuLog(eqx.Module):
             raise ValueError(
                 f"ImuLog.t must be strictly increasing (row {int(np.argmax(d <= 0)) + 1})"
             )
-        if not -math.pi / 2 <= self.lat <= math.pi / 2:
-            raise ValueError(f"ImuLog.lat must be in [-π/2, π/2] rad; got {self.lat}")
 
     @property
     def dt(self) -> float:
@@ -227,7 +258,10 @@ def fine_align(
     update (sway of a parked vehicle); bias and initial attitude standard deviations (level,
     level, heading) [°].
 
-    **Returns:** `(t (K,), C_bn (K, 3, 3), P (K, 12, 12), biases (6,))`."""
+    **Returns:** `(t (K,), C_bn (K, 3, 3), P (K, 12, 12), biases (6,))`.
+
+    **Raises:** `ValueError` for a log within 1° of a pole (no gyrocompassing there)."""
+    _check_gyrocompass_latitude(log.lat)
     dt = log.dt
     m = max(1, int(round(step_s / dt)))
     i0 = int(round(start_s / dt))
@@ -297,8 +331,10 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
     [`fine_align`][hrgjax.ins.alignment.fine_align]).
 
     **Raises:** `ValueError` when the log is shorter than `coarse_s` or not stationary
-    enough to level (specific force far from g)."""
+    enough to level (specific force far from g), or for a log within 1° of a pole
+    (gyrocompassing finds north from the horizontal Earth rate, which vanishes there)."""
     require_x64("ins.alignment.align")
+    _check_gyrocompass_latitude(log.lat)
     dt = log.dt
     n = int(round(coarse_s / dt))
     if not (coarse_s > 0) or n > log.t.shape[0] or n < 1:

@@ -39,6 +39,11 @@ G0 = 9.80665
 SCHULER_PERIOD = 2.0 * math.pi * math.sqrt(A / G0)
 """Schuler period 2π√(a/g) [s] (84.45 min)."""
 
+MAX_LAT_DEG = 89.0
+"""Largest |latitude| [°] a motion, a trajectory or an alignment accepts: the NED frame is
+singular at the poles (the longitude rate v_E / (R cos φ) is infinite there, and
+gyrocompassing finds north from the horizontal Earth rate ω_ie cos φ, which vanishes)."""
+
 
 @fused
 def gravity(lat, h=0.0):

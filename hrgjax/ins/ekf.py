@@ -489,7 +489,19 @@ def nees(errors, P):
 def nees_band(n_states: int, n_runs: int, level: float = 0.95):
     """The two-sided `level` interval of the mean NEES over `n_runs` runs of a consistent
     filter with `n_states` states: $\\chi^2_{Rn}$ quantiles divided by R (Bar-Shalom
-    §5.4)."""
+    §5.4).
+
+    **Raises:** `ValueError` naming the argument unless `n_states`, `n_runs` are whole
+    numbers >= 1 and 0 < `level` < 1."""
+    for name, x in (("n_states", n_states), ("n_runs", n_runs)):
+        if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < 1:
+            raise ValueError(f"nees_band: {name} must be a whole number >= 1; got {x!r}")
+    if isinstance(level, bool) or not isinstance(level, (int, float, np.number)):
+        raise TypeError(f"nees_band: level must be a number in (0, 1); got {level!r}")
+    if not 0.0 < level < 1.0:
+        raise ValueError(
+            f"nees_band: level must be a probability in (0, 1), e.g. 0.95; got {level}"
+        )
     from ..allan.uncertainty import chi2_ppf
 
     a = 0.5 * (1.0 - level)

@@ -69,7 +69,7 @@ class Flights(eqx.Module):
         in GNSS gaps; the fraction of epochs whose mean NEES lies inside its 95 % band, for
         all states and for the nine navigation states, each with a verdict ("consistent",
         "conservative", "overconfident", "undefined": `verdict`); the mean NIS (its
-        expectation is the innovation dimension)."""
+        expectation is the innovation dimension; None when every fix fell in an outage)."""
         gap = ~np.asarray(self.gnss_valid)
         gap[0] = False
         out = {"runs": self.runs, "epochs": int(self.t.shape[0]), "duration_s": float(self.t[-1])}
@@ -98,7 +98,8 @@ class Flights(eqx.Module):
         out["nees_band_95"] = [float(lo), float(hi)]
         out["nees_navigation_band_95"] = [float(lo9), float(hi9)]
         out["n_states"] = self.n_states
-        out["nis_mean"] = float(np.nanmean(np.asarray(self.nis)))
+        nis = np.asarray(self.nis)  # NaN where no fix: None when no epoch had one
+        out["nis_mean"] = None if np.isnan(nis).all() else float(np.nanmean(nis))
         out["innovation_dim"] = self.innovation_dim
         return out
 

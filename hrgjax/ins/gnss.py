@@ -18,13 +18,50 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import is_concrete, vec3
 from .._compiled import fused
 from .constants import Earth
 
+_FIELDS = {
+    "position_sigma": "m, north east down",
+    "velocity_sigma": "m/s, north east down",
+    "lever_arm": "m, body FRD",
+}
 
-def _vec3(x):
-    return jnp.broadcast_to(jnp.asarray(x, float), (3,))
+
+def _vec3(name):
+    return vec3("Gnss", name, _FIELDS[name])
+
+
+_OUTAGES = "((start_s, end_s), …) with 0 <= start < end, finite, in seconds"
+
+
+def _windows(x):
+    """`outages` as a tuple of (start, end) float pairs [s], or a one-line error."""
+    try:
+        if isinstance(x, str):
+            raise TypeError
+        pairs = [tuple(w) for w in x]
+    except TypeError:
+        flat = isinstance(x, (tuple, list)) and len(x) == 2
+        fix = f" (one window is written ({tuple(x)!r},))" if flat else ""
+        raise ValueError(f"Gnss.outages must be {_OUTAGES}; got {x!r}{fix}") from None
+    out = []
+    for w in pairs:
+        if len(w) != 2:
+            raise ValueError(f"Gnss.outages: each window is (start_s, end_s); got {w!r}")
+        if not all(isinstance(v, (int, float, np.integer, np.floating)) for v in w) or any(
+            isinstance(v, bool) for v in w
+        ):
+            raise TypeError(f"Gnss.outages: each window is two numbers [s]; got {w!r}")
+        a, b = float(w[0]), float(w[1])
+        if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
+            raise ValueError(
+                f"Gnss.outages: each window is (start_s, end_s) with 0 <= start < end, finite, "
+                f"in seconds; got {w!r}"
+            )
+        out.append((a, b))
+    return tuple(out)
 
 
 class Gnss(eqx.Module):
@@ -32,14 +69,17 @@ class Gnss(eqx.Module):
 
     **Fields:** `rate_hz` [Hz]; `position_sigma` (3,) [m, north east down];
     `velocity_sigma` (3,) [m/s, NED], or `use_velocity=False` for position fixes only;
-    `lever_arm` (3,) [m, body FRD]; `outages`: ((start, end), …) [s] without fixes."""
+    `lever_arm` (3,) [m, body FRD]; `outages`: ((start, end), …) [s] without fixes, each
+    with 0 <= start < end (one window is `((start, end),)`)."""
 
     rate_hz: float = eqx.field(static=True, default=1.0)
-    position_sigma: jax.Array = eqx.field(converter=_vec3, default=(1.5, 1.5, 3.0))
-    velocity_sigma: jax.Array = eqx.field(converter=_vec3, default=0.05)
-    lever_arm: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    position_sigma: jax.Array = eqx.field(
+        converter=_vec3("position_sigma"), default=(1.5, 1.5, 3.0)
+    )
+    velocity_sigma: jax.Array = eqx.field(converter=_vec3("velocity_sigma"), default=0.05)
+    lever_arm: jax.Array = eqx.field(converter=_vec3("lever_arm"), default=0.0)
     use_velocity: bool = eqx.field(static=True, default=True)
-    outages: tuple = eqx.field(static=True, default=())
+    outages: tuple = eqx.field(static=True, default=(), converter=_windows)
 
     def __check_init__(self):
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
@@ -48,11 +88,9 @@ class Gnss(eqx.Module):
             v = getattr(self, name)
             if is_concrete(v) and not np.all(np.isfinite(np.asarray(v)) & (np.asarray(v) > 0)):
                 raise ValueError(f"Gnss.{name} must be > 0 (a 1σ per NED axis); got {v}")
-        for w in self.outages:
-            if len(w) != 2 or not (w[0] < w[1]):
-                raise ValueError(
-                    f"Gnss.outages: each window is (start, end) with start < end s; got {w}"
-                )
+        v = self.lever_arm
+        if is_concrete(v) and not np.all(np.isfinite(np.asarray(v))):
+            raise ValueError(f"Gnss.lever_arm must be finite [m, body FRD]; got {v}")
 
     def without_outages(self) -> Gnss:
         """The same receiver with no outage windows: what a compiled filter or Monte Carlo

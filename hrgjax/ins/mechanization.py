@@ -35,10 +35,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import is_concrete
 from .._compiled import Check, fused, program
 from .._x64 import require_x64
-from .constants import WGS84, Earth
+from .constants import G0, WGS84, Earth
 
 UNROLL = 4
 """Steps per iteration of the compiled loops: the step is a few dozen scalar operations, so the
@@ -157,7 +158,18 @@ class NavState(eqx.Module):
     @classmethod
     def from_euler(cls, lat, lon, h, v_ned, roll, pitch, heading) -> NavState:
         """A state from geodetic position [rad, rad, m], NED velocity [m/s] and roll, pitch,
-        heading [rad]."""
+        heading [rad].
+
+        **Raises:** `ValueError` for a concrete `lat` beyond ±π/2 (a latitude in degrees;
+        traced values are not checked)."""
+        if is_concrete(lat):
+            bad = np.abs(np.asarray(lat, float)) > np.pi / 2
+            if np.any(bad):
+                x = float(np.asarray(lat, float)[bad].flat[0])
+                raise ValueError(
+                    f"NavState.from_euler: lat = {x:g} rad is beyond ±π/2: the latitude is in "
+                    f"radians here (degrees? np.deg2rad({x:g}) = {np.deg2rad(x):.6g})"
+                )
         f = lambda x: jnp.asarray(x, float)
         return cls(f(lat), f(lon), f(h), f(v_ned), euler_to_quat(roll, pitch, heading))
 
@@ -257,16 +269,25 @@ def start_carry(initial: NavState, dtype):
 
 def check_increments(dtheta, dv, dt):
     """`dtheta` [rad] and `dv` [m/s] as float arrays of shape (N, 3), and `dt` [s] > 0; a
-    `ValueError` naming the field for another shape, NaN or inf, or a gyro increment of π or
-    more (degrees or rates given for radians)."""
+    `ValueError` naming the field for another shape, NaN or inf, a gyro increment of π or
+    more (degrees or rates given for radians), or a median specific force |dv|/dt beyond
+    `hrgjax.plausible.RANGES["median_specific_force_mps2"]` (5 g: accelerations [m/s²] given
+    for increments). Concrete values only: traced ones pass."""
     dtheta, dv = jnp.asarray(dtheta, float), jnp.asarray(dv, float)
     if dtheta.ndim != 2 or dtheta.shape[-1] != 3 or dtheta.shape != dv.shape:
         raise ValueError(
             "dtheta and dv must both have shape (N, 3) (one gyro [rad] and one accelerometer "
             f"[m/s] increment per interval); got {dtheta.shape} and {dv.shape}"
         )
-    if isinstance(dt, (int, float)) and not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be the increments' interval in seconds (> 0); got {dt}")
+    if is_concrete(dt):
+        d = np.asarray(dt)
+        if d.shape != () or not np.issubdtype(d.dtype, np.number):
+            raise ValueError(
+                f"dt must be one number, the increments' interval [s]; got {type(dt).__name__} "
+                f"of shape {d.shape}"
+            )
+        if not (np.isfinite(d) and d > 0):
+            raise ValueError(f"dt must be the increments' interval in seconds (> 0); got {d}")
     for name, x in (("dtheta", dtheta), ("dv", dv)):
         if is_concrete(x) and not np.all(np.isfinite(np.asarray(x))):
             row = int(np.argmax(~np.all(np.isfinite(np.asarray(x)), axis=1)))
@@ -279,6 +300,17 @@ def check_increments(dtheta, dv, dt):
             raise ValueError(
                 f"dtheta turns {turn.max():.3g} rad in one interval (row {int(turn.argmax())}): "
                 "gyro increments are in radians per interval, not degrees or rates"
+            )
+    if is_concrete(dv) and is_concrete(dt) and dv.shape[0]:
+        force = float(np.median(np.linalg.norm(np.asarray(dv), axis=1))) / float(dt)
+        high = plausible.RANGES["median_specific_force_mps2"][1]
+        if force > high:
+            raise ValueError(
+                f"dv: the median specific force |dv|/dt is {force:.4g} m/s² "
+                f"({force / G0:.3g} g) with dt = {float(dt):g} s, beyond the {high / G0:g} g of "
+                "a navigating vehicle (hrgjax.plausible): accelerometer increments are velocity "
+                "changes [m/s] per interval (specific force × dt), not accelerations [m/s²], "
+                "and dt is their interval"
             )
     return dtheta, dv
 

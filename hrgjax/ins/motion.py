@@ -42,11 +42,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
+from .._checks import finite_number
 from .._x64 import require_x64
 from ..units import DEG
 from .constants import WGS84, Earth
 from .mechanization import NavState, euler_to_quat, increments_from_states, quat_to_dcm
-from .trajectory import Trajectory
+from .trajectory import Trajectory, check_position
 
 _HEAD_INIT = (
     "ini lat (deg),ini lon (deg),ini alt (m),ini vx_body (m/s),ini vy_body (m/s),"
@@ -56,6 +58,61 @@ _HEAD_CMD = (
     "command type,yaw (deg),pitch (deg),roll (deg),vx_body (m/s),vy_body (m/s),"
     "vz_body (m/s),command duration (s),GPS visibility"
 )
+
+
+def _triple(name, x, what, unit):
+    """`x` as 3 finite floats, or a one-line error naming `name`."""
+    try:
+        n = len(x)
+    except TypeError:
+        n = None
+    if n != 3:
+        raise ValueError(f"{name} must be 3 values {what} [{unit}]; got {x!r}")
+    return np.array([finite_number(name, v, unit) for v in x])
+
+
+_INIT_COLUMNS = tuple((c,) for c in _HEAD_INIT.split(","))
+_CMD_COLUMNS = tuple(
+    (c, "reserved") if c.startswith(("vy_body", "vz_body", "GPS")) else (c,)
+    for c in _HEAD_CMD.split(",")
+)
+"""The accepted names of each header column (module docstring, `Motion.from_csv`)."""
+
+
+def _column_name(x: str) -> str:
+    """A header cell without case, spacing or a trailing "(unit)"."""
+    x = " ".join(x.lower().split())
+    return x[: x.index("(")].rstrip() if x.endswith(")") and "(" in x else x
+
+
+def _check_header(path, line, row, columns, layout, which):
+    """A one-line `ValueError` naming the first header cell of `row` that is not the
+    gnss-ins-sim column expected there (the GPS visibility column may be left out)."""
+    row = list(row)
+    while row and not row[-1].strip():
+        row.pop()
+    optional = 1 if which == "command" else 0
+    for j, names in enumerate(columns, 1):
+        want = " or ".join(repr(n) for n in names)
+        if j > len(row):
+            if j > len(columns) - optional:
+                return
+            got = "missing"
+        elif _column_name(row[j - 1]) in {_column_name(n) for n in names}:
+            continue
+        else:
+            got = f"{row[j - 1]!r}"
+        semi = any(";" in x for x in row)
+        hint = " (the cells are separated by ';': use commas)" if semi else ""
+        raise ValueError(
+            f"{path}:{line}: header column {j} is {got}, expected {want}{hint}: the {which} "
+            f"header of a gnss-ins-sim motion file is {layout}"
+        )
+    if len(row) > len(columns):
+        raise ValueError(
+            f"{path}:{line}: header column {len(columns) + 1} ({row[len(columns)]!r}) is not "
+            f"in the layout: the {which} header of a gnss-ins-sim motion file is {layout}"
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,20 +146,31 @@ class Motion:
     segments: tuple[Segment, ...]
 
     def __post_init__(self):
-        if not (math.isfinite(self.lat_deg) and -89.0 <= self.lat_deg <= 89.0):
-            raise ValueError(f"Motion.lat_deg must be in [-89, 89] °; got {self.lat_deg}")
-        if not (math.isfinite(self.h) and -1e4 < self.h < 1e5):
-            raise ValueError(f"Motion.h must be a height in metres in (-1e4, 1e5); got {self.h}")
+        check_position(self.lat_deg, self.lon_deg, self.h, "Motion.")
+        v0 = _triple("Motion.velocity", self.velocity, "(vx, vy, vz) body", "m/s")
+        for name in ("yaw_deg", "pitch_deg", "roll_deg"):
+            finite_number(f"Motion.{name}", getattr(self, name), "°")
         if not self.segments:
             raise ValueError("Motion.segments: give at least one segment")
         for i, s in enumerate(self.segments, 1):
+            if not isinstance(s, Segment):
+                raise TypeError(
+                    f"Motion segment {i}: expected a motion.Segment; got {type(s).__name__}"
+                )
             if s.kind not in (1, 2, 3, 4, 5):
                 raise ValueError(f"Motion segment {i}: command type must be 1-5; got {s.kind}")
-            if not (math.isfinite(s.duration) and s.duration > 0):
+            d = finite_number(f"Motion segment {i}: duration", s.duration, "s")
+            if d <= 0:
                 raise ValueError(f"Motion segment {i}: duration must be > 0 s; got {s.duration}")
-            if not all(math.isfinite(x) for x in (*s.attitude, *s.velocity)):
-                raise ValueError(f"Motion segment {i}: every value must be finite")
+            plausible.check(f"Motion segment {i}: duration", d, "duration_s")
+            _triple(f"Motion segment {i}: attitude", s.attitude, "(yaw, pitch, roll)", "° or °/s")
+            _triple(f"Motion segment {i}: velocity", s.velocity, "(vx, vy, vz) body",
+                    "m/s or m/s²")  # fmt: skip
+        plausible.check("Motion.velocity: the initial speed", np.linalg.norm(v0), "speed_mps")
         _, _, ends = self._rates()
+        speed = np.linalg.norm(ends[:, 3:], axis=1)  # |v| along a segment peaks at an end
+        for i, s in enumerate(speed):  # (an acceleration in another unit, for one)
+            plausible.check(f"Motion: the speed by the end of segment {i + 1}", s, "speed_mps")
         if np.any(np.abs(ends[:, 1]) >= 89.0 * DEG):
             bad = int(np.argmax(np.abs(ends[:, 1]) >= 89.0 * DEG))
             raise ValueError(
@@ -117,35 +185,70 @@ class Motion:
         """Read a gnss-ins-sim motion file: a header line, the initial state (lat, lon [°],
         alt [m], body velocity [m/s], yaw, pitch, roll [°]), a header line, then one command
         per line (type, three attitude values, three velocity values, duration [s], GNSS
-        visibility 0/1, optional)."""
-        rows = [r for r in csv.reader(Path(path).read_text().splitlines()) if any(r)]
+        visibility 0/1, optional).
+
+        The two header lines must name gnss-ins-sim's columns in its order, as `to_csv`
+        writes them (docs/navigation.md lists both). The names are compared without case,
+        spacing or the unit in parentheses (gnss-ins-sim's own files label the command
+        angles "(rad)" while holding degrees: the values are read in the units above,
+        whatever the label), and a command column vy_body, vz_body or GPS visibility may be
+        headed "reserved", as in gnss-ins-sim's older files.
+
+        **Raises:** `ValueError` starting with the path and the line: a header naming other
+        columns (the first that differs and what was expected), a row that is not numbers,
+        or a value `Motion` refuses."""
+        try:
+            text = Path(path).read_text(encoding="utf-8-sig")
+        except UnicodeDecodeError:
+            raise ValueError(f"{path}: not a UTF-8 text file (a gnss-ins-sim motion CSV)") from None
+        rows = [(i, r) for i, r in enumerate(csv.reader(text.splitlines()), 1) if any(r)]
         if len(rows) < 4:
             raise ValueError(
                 f"{path}: a motion file needs a header, the initial state, a header and at "
                 "least one command"
             )
 
+        def semicolons(row):
+            return " (separated by ';': use commas)" if any(";" in x for x in row) else ""
+
         def numbers(row, line, n):
             try:
                 vals = [float(x) for x in row]
             except ValueError:
-                raise ValueError(f"{path}:{line}: expected numbers; got {row}") from None
+                raise ValueError(
+                    f"{path}:{line}: expected numbers; got {row}{semicolons(row)}"
+                ) from None
             if len(vals) not in n:
-                raise ValueError(f"{path}:{line}: expected {n[-1]} values; got {len(vals)}")
+                raise ValueError(
+                    f"{path}:{line}: expected {n[-1]} values; got {len(vals)}{semicolons(row)}"
+                )
             return vals
 
-        ini = numbers(rows[1], 2, (9,))
-        segs = []
-        for line, row in enumerate(rows[3:], 4):
+        _check_header(path, *rows[0], _INIT_COLUMNS, _HEAD_INIT, "initial-state")
+        _check_header(path, *rows[2], _CMD_COLUMNS, _HEAD_CMD, "command")
+        ini_line, ini = rows[1][0], numbers(rows[1][1], rows[1][0], (9,))
+        segs, lines = [], []
+        for line, row in rows[3:]:
             v = numbers(row, line, (8, 9))
-            if v[0] != int(v[0]):
-                raise ValueError(f"{path}:{line}: command type must be 1-5; got {v[0]}")
+            if v[0] not in (1, 2, 3, 4, 5):
+                raise ValueError(f"{path}:{line}: command type must be 1-5; got {v[0]:g}")
+            if len(v) > 8 and v[8] not in (0, 1):
+                raise ValueError(f"{path}:{line}: GPS visibility must be 0 or 1; got {v[8]:g}")
+            lines.append(line)
             segs.append(
                 Segment(
                     int(v[0]), tuple(v[1:4]), tuple(v[4:7]), v[7], bool(v[8] if len(v) > 8 else 1)
                 )
             )
-        return cls(ini[0], ini[1], ini[2], tuple(ini[3:6]), ini[6], ini[7], ini[8], tuple(segs))
+        try:
+            return cls(ini[0], ini[1], ini[2], tuple(ini[3:6]), ini[6], ini[7], ini[8], tuple(segs))
+        except ValueError as err:  # name the line: the initial state's or the command's
+            msg = str(err)
+            where = ini_line if msg.startswith("Motion.") else None
+            if msg.startswith("Motion segment "):
+                where = lines[int(msg.split()[2].rstrip(":")) - 1]
+            at = f"{path}:{where}" if where is not None else f"{path}"
+            raise ValueError(f"{at}: {msg}") from None
 
     def to_csv(self, path) -> None:
         """Write the motion as a gnss-ins-sim motion file."""

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import is_concrete, vec3
 from ..units import DEG_PER_H, DEG_PER_SQRT_H, G0
 
 MICRO_G = 1e-6 * G0
@@ -51,8 +51,22 @@ _VECTOR_FIELDS = (
 )
 
 
-def _vec3(x):
-    return jnp.broadcast_to(jnp.asarray(x, float), (3,))
+_UNITS = {
+    "gyro_bias": "rad/s",
+    "accel_bias": "m/s²",
+    "gyro_scale": "-",
+    "accel_scale": "-",
+    "arw": "rad/√s",
+    "vrw": "m/s/√s",
+    "gyro_bias_instability": "rad/s",
+    "accel_bias_instability": "m/s²",
+    "gyro_rate_random_walk": "rad/s/√s",
+    "accel_random_walk": "m/s²/√s",
+}
+
+
+def _vec3(name):
+    return vec3("ImuModel", name, _UNITS[name])
 
 
 class ImuModel(eqx.Module):
@@ -67,20 +81,26 @@ class ImuModel(eqx.Module):
     [s]: first-order Gauss–Markov biases (σ, τ); `gyro_rate_random_walk` [rad/s/√s],
     `accel_random_walk` [m/s²/√s]: bias random walks."""
 
-    gyro_bias: jax.Array = eqx.field(converter=_vec3, default=0.0)
-    accel_bias: jax.Array = eqx.field(converter=_vec3, default=0.0)
-    gyro_scale: jax.Array = eqx.field(converter=_vec3, default=0.0)
-    accel_scale: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    gyro_bias: jax.Array = eqx.field(converter=_vec3("gyro_bias"), default=0.0)
+    accel_bias: jax.Array = eqx.field(converter=_vec3("accel_bias"), default=0.0)
+    gyro_scale: jax.Array = eqx.field(converter=_vec3("gyro_scale"), default=0.0)
+    accel_scale: jax.Array = eqx.field(converter=_vec3("accel_scale"), default=0.0)
     gyro_misalignment: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
     accel_misalignment: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
-    arw: jax.Array = eqx.field(converter=_vec3, default=0.0)
-    vrw: jax.Array = eqx.field(converter=_vec3, default=0.0)
-    gyro_bias_instability: jax.Array = eqx.field(converter=_vec3, default=0.0)
-    accel_bias_instability: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    arw: jax.Array = eqx.field(converter=_vec3("arw"), default=0.0)
+    vrw: jax.Array = eqx.field(converter=_vec3("vrw"), default=0.0)
+    gyro_bias_instability: jax.Array = eqx.field(
+        converter=_vec3("gyro_bias_instability"), default=0.0
+    )
+    accel_bias_instability: jax.Array = eqx.field(
+        converter=_vec3("accel_bias_instability"), default=0.0
+    )
     gyro_correlation_time: float = eqx.field(static=True, default=3600.0)
     accel_correlation_time: float = eqx.field(static=True, default=3600.0)
-    gyro_rate_random_walk: jax.Array = eqx.field(converter=_vec3, default=0.0)
-    accel_random_walk: jax.Array = eqx.field(converter=_vec3, default=0.0)
+    gyro_rate_random_walk: jax.Array = eqx.field(
+        converter=_vec3("gyro_rate_random_walk"), default=0.0
+    )
+    accel_random_walk: jax.Array = eqx.field(converter=_vec3("accel_random_walk"), default=0.0)
 
     def __check_init__(self):
         for name in _VECTOR_FIELDS:
@@ -116,8 +136,36 @@ class ImuModel(eqx.Module):
         but the white noise — which is what a filter's bias states estimate.
 
         **Returns:** `(dtheta, dv)` measured, each (N, 3); with `return_bias`,
-        `(dtheta, dv, gyro_bias (N, 3) [rad/s], accel_bias (N, 3) [m/s²])`."""
-        n = dtheta.shape[0]
+        `(dtheta, dv, gyro_bias (N, 3) [rad/s], accel_bias (N, 3) [m/s²])`.
+
+        **Raises:** `ValueError` for a `dt` that is not a finite interval > 0 s, increments
+        not both (N, 3), or a `gyro_rate_error` that is not (N, 3) [rad/s]."""
+        shape = jnp.shape(dtheta)
+        if len(shape) != 2 or shape[-1] != 3 or jnp.shape(dv) != shape:
+            raise ValueError(
+                "ImuModel.apply: dtheta and dv must both have shape (N, 3) (one gyro [rad] and "
+                f"one accelerometer [m/s] increment per interval); got {shape} and "
+                f"{jnp.shape(dv)}"
+            )
+        if is_concrete(dt):
+            d = np.asarray(dt)
+            if d.shape != () or not (np.isfinite(d) and d > 0):
+                raise ValueError(
+                    f"ImuModel.apply: dt must be the increments' interval in seconds (> 0); got "
+                    f"{dt}"
+                )
+        if gyro_rate_error is not None:
+            es = jnp.shape(gyro_rate_error)
+            try:
+                ok = np.broadcast_shapes(es, shape) == shape
+            except ValueError:
+                ok = False
+            if not ok:
+                raise ValueError(
+                    f"ImuModel.apply: gyro_rate_error must be ({shape[0]}, 3) [rad/s], each "
+                    f"interval's mean rate error; got shape {es}"
+                )
+        n = shape[0]
         kg, ka = jax.random.split(key)
         g = (self.gyro_bias_instability, self.gyro_correlation_time, self.gyro_rate_random_walk)
         a = (self.accel_bias_instability, self.accel_correlation_time, self.accel_random_walk)

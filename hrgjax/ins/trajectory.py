@@ -18,9 +18,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
+from .._checks import finite_number
 from .._compiled import fused
 from ..units import DEG
-from .constants import E2, WGS84, A, Earth
+from .constants import E2, MAX_LAT_DEG, WGS84, A, Earth
 
 
 @fused
@@ -137,7 +139,32 @@ def _grid(duration_s, dt):
         raise ValueError(f"duration_s must be > 0 s; got {duration_s}")
     if not (np.isfinite(dt) and 0 < dt <= duration_s):
         raise ValueError(f"dt must be in (0, duration_s]; got {dt}")
+    steps = duration_s / dt
+    if abs(steps - round(steps)) > 1e-6:
+        raise ValueError(
+            f"dt = {dt} s must divide duration_s = {duration_s} s into whole steps; got "
+            f"{steps:.6g} steps"
+        )
     return np.arange(int(round(duration_s / dt)) + 1) * dt
+
+
+def check_position(lat_deg, lon_deg, h, where: str = "") -> None:
+    """A one-line `ValueError` (`TypeError` for a non-number) naming the field unless
+    `lat_deg` [°] is within ±[`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG] (the NED frame
+    is singular at the poles), `lon_deg` in [−180, 360] ° and `h` a height in (−1e4, 1e5) m;
+    `where` prefixes the field names (e.g. `"Motion."`)."""
+    lat = finite_number(f"{where}lat_deg", lat_deg, "°")
+    if abs(lat) > MAX_LAT_DEG:
+        hint = " (the navigation frame is singular at the poles)" if abs(lat) <= 90.0 else ""
+        raise ValueError(
+            f"{where}lat_deg must be in [-{MAX_LAT_DEG:g}, {MAX_LAT_DEG:g}] °{hint}; got {lat}"
+        )
+    lon = finite_number(f"{where}lon_deg", lon_deg, "°")
+    if not -180.0 <= lon <= 360.0:
+        raise ValueError(f"{where}lon_deg must be in [-180, 360] °; got {lon}")
+    h = finite_number(f"{where}h", h, "m")
+    if not -1e4 < h < 1e5:
+        raise ValueError(f"{where}h must be a height in metres in (-1e4, 1e5); got {h}")
 
 
 def stationary(
@@ -175,6 +202,11 @@ def constant_velocity(
 
 def _steady(lat_deg, lon_deg, h, speed, attitude_deg, duration_s, dt, earth) -> Trajectory:
     """Constant `speed` [m/s] and attitude (heading, pitch = flight-path angle, roll) [°]."""
+    check_position(lat_deg, lon_deg, h)
+    speed = finite_number("speed", speed, "m/s")
+    plausible.check("speed", abs(speed), "speed_mps")
+    for name, a in zip(("heading_deg", "pitch_deg", "roll_deg"), attitude_deg, strict=True):
+        finite_number(name, a, "°")
     t = _grid(duration_s, dt)
     heading, pitch, roll = (np.full(t.size, float(a) * DEG) for a in attitude_deg)
     speeds = np.full(t.size, float(speed))
@@ -196,9 +228,16 @@ def segments(
     """A trajectory from legs `(duration_s, accel m/s², turn rate °/s, climb rate m/s)`, each
     held constant over its leg: speed and heading integrate, the flight-path angle is
     asin(climb/speed), turns are coordinated."""
+    check_position(lat_deg, lon_deg, h)
+    speed0 = finite_number("speed0", speed0, "m/s")
+    heading0_deg = finite_number("heading0_deg", heading0_deg, "°")
     legs = [tuple(float(x) for x in leg) for leg in legs]
-    if not legs or any(len(leg) != 4 or leg[0] <= 0 for leg in legs):
-        raise ValueError("legs: a non-empty list of (duration_s > 0, accel, turn_dps, climb)")
+    if not legs or any(
+        len(leg) != 4 or not np.all(np.isfinite(leg)) or leg[0] <= 0 for leg in legs
+    ):
+        raise ValueError(
+            "legs: a non-empty list of finite (duration_s > 0, accel m/s², turn °/s, climb m/s)"
+        )
     t = _grid(sum(leg[0] for leg in legs), dt)
     edges = np.cumsum([0.0] + [leg[0] for leg in legs])
     idx = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(legs) - 1)
@@ -206,6 +245,7 @@ def segments(
     speed = speed0 + np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * np.diff(t))])
     if np.any(speed < 0):
         raise ValueError("legs: the speed would become negative")
+    plausible.check("legs: the speed reached", speed.max(), "speed_mps")
     heading = (
         heading0_deg * DEG
         + np.concatenate([[0.0], np.cumsum(0.5 * (turn[1:] + turn[:-1]) * np.diff(t))]) * DEG
