@@ -77,13 +77,34 @@ class MeasuredData:
             raise ValueError("the data have no rows")
         self._columns = cols
         check_time(cols["time_s"], self.run)
+        order = np.lexsort((cols["time_s"], self.run))
+        steps = np.diff(cols["time_s"][order])[np.diff(self.run[order]) == 0]
+        if steps.size:
+            plausible.check("column 'time_s': the median sample interval", np.median(steps),
+                            "sample_interval_s")  # fmt: skip
         for name in ("temperature_c", "table_rate_dps", "wave_angle_deg"):
             plausible.check(f"column {name!r}", cols[name], name)
         turning = cols["table_rate_dps"] != 0.0
-        if turning.any():  # the table angle (a per-run integral) only where the table turns
-            moving = np.isin(self.run, np.unique(self.run[turning]))
+        given = "table_angle_deg" in cols
+        # the wave turns against the table where it runs free: not where force-to-rebalance
+        # holds it, nor where a commanded precession moves it too
+        steered = np.zeros(len(self), bool)
+        if "rebalance_rate_dps" in cols:
+            steered |= cols["rebalance_on"] != 0 if "rebalance_on" in cols else True
+        precession = cols.get("precession_dps", np.zeros(len(self)))
+        steered |= precession != 0.0
+        free = ~np.isin(self.run, np.unique(self.run[steered]))
+        if (turning & free).any():  # the table angle (a per-run integral) where the table turns
+            moving = np.isin(self.run, np.unique(self.run[turning])) & free
+            if given:
+                plausible.check_table_angle(cols["table_angle_deg"], self._rate_integral(),
+                                            self.run, moving)  # fmt: skip
             plausible.check_wave_angle_units(cols["wave_angle_deg"], self.table_angle_deg,
-                                             self.run, moving, K_E_NOMINAL)  # fmt: skip
+                                             self.run, moving, K_E_NOMINAL,
+                                             integrated=not given)  # fmt: skip
+        plausible.check_wave_angle_jumps(cols["wave_angle_deg"], self.table_angle_deg,
+                                         cols["time_s"], self.run, K_E_NOMINAL,
+                                         precession)  # fmt: skip
 
     @property
     def columns(self) -> dict[str, np.ndarray]:
@@ -132,6 +153,10 @@ class MeasuredData:
         """Reference angle [°]: the column, or the trapezoidal integral of the rate per run."""
         if "table_angle_deg" in self._columns:
             return self._columns["table_angle_deg"]
+        return self._rate_integral()
+
+    def _rate_integral(self) -> np.ndarray:
+        """The trapezoidal integral of `table_rate_dps` over `time_s`, per run [°]."""
         out = np.empty(len(self))
         t, w = self._columns["time_s"], self._columns["table_rate_dps"]
         for idx in self.run_indices():

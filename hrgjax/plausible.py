@@ -27,13 +27,15 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "table_rate_dps": (-3600.0, 3600.0, "°/s"),
     "wave_angle_deg": (-1e7, 1e7, "° electrical"),
     "duration_s": (0.0, 30 * 86400.0, "s"),
+    "sample_interval_s": (0.0, 300.0, "s"),
     "speed_mps": (0.0, 10_000.0, "m/s"),
     "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
 }
 """(low, high, unit) of each quantity: temperatures an HRG is built and tested for (−100 …
 +150 °C; −40 … +60 °C is the seed's bench), table rates (±10 turns/s), wave angles (±1e7°:
 an angle that has turned 27 000 times is a unit error), the length of one run or
-segment (30 days), a vehicle's speed (10 km/s, above low-orbit speed: a speed in km/h or
+segment (30 days), the median interval between a record's samples (5 min: a log of
+5-minute means is fine, time stamps in milliseconds at up to 3 Hz are not), a vehicle's speed (10 km/s, above low-orbit speed: a speed in km/h or
 mm/s read as m/s is refused) and the median specific force |Δv|/Δt over a record of
 accelerometer increments (5 g: a navigating vehicle spends most of its time near 1 g, a 60°
 banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s])."""
@@ -66,6 +68,8 @@ def _hint(name: str, values: np.ndarray) -> str:
     if name == "temperature_c" and values.size and np.min(values) >= KELVIN_HINT_C:
         return (f" — these look like kelvin ({np.min(values):g} … {np.max(values):g}): "
                 "subtract 273.15")  # fmt: skip
+    if name == "sample_interval_s" and values.size and np.max(values) > RANGES[name][1]:
+        return " — time stamps in milliseconds? (give seconds)"
     return ""
 
 
@@ -92,34 +96,121 @@ def check(name: str, values, quantity: str | None = None) -> None:
         )
 
 
-def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: float) -> None:
-    """Refuse a wave-angle column that is in radians: over the rotation runs the measured
-    wave angle turns by ≈ −k_e times the table (in degrees); in radians by ≈ −k_e·π/180.
+def _run_ends(run):
+    """Indices of each run's first and last rows (rows of a run may be interleaved)."""
+    n = run.size
+    _, first = np.unique(run, return_index=True)
+    _, last = np.unique(run[::-1], return_index=True)
+    return first, n - 1 - last
+
+
+WAVE_TABLE_RATIO = (0.05, 2.0)
+"""Range of |Δwave / Δtable| over the rotation runs that `check_wave_angle_units` accepts:
+an HRG's wave turns k_e (0.554 for a hemisphere's electrical angle, 1 for a Foucault
+pendulum) times the table, either way round (the sign is a convention the calibration fits)."""
+
+
+def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: float,
+                           integrated: bool = False) -> None:  # fmt: skip
+    """Refuse columns whose units cannot be the contract's: over the rotation runs the
+    measured wave angle turns by ≈ −k_e times the table (both in degrees). Read as a ratio,
+    a wave angle in radians gives −k_e·π/180, a table in radians (a rate in rad/s, or a
+    `table_angle_deg` column in radians) −k_e·180/π, time stamps in milliseconds −k_e/1000
+    (where the table angle is the rate's integral over time, `integrated`); any other
+    |ratio| outside `WAVE_TABLE_RATIO` is refused naming all three columns.
 
     **Arguments:** per-row arrays (`run` ids, `moving`: the row's run turns the table) and
-    the nominal angular gain `k_e`. Runs whose table turns less than 10° are not used.
+    the nominal angular gain `k_e`. Runs whose table turns less than 1° are not used.
 
-    **Raises:** `ValueError` naming `wave_angle_deg` and the ratio found."""
+    **Raises:** `ValueError` naming the column the ratio points at, and the ratio found."""
     wave, table = (np.asarray(x, dtype=float) for x in (wave_angle_deg, table_angle_deg))
     run, moving = np.asarray(run), np.asarray(moving, bool)
     if not moving.any():
         return
-    n = run.size
-    _, first = np.unique(run, return_index=True)
-    _, last = np.unique(run[::-1], return_index=True)
-    last = n - 1 - last
+    first, last = _run_ends(run)
     turn = table[last] - table[first]
-    use = moving[first] & (np.abs(turn) >= 10.0)
+    use = moving[first] & (np.abs(turn) >= 1.0)
     if not use.any():
         return
     ratio = float(np.median((wave[last] - wave[first])[use] / turn[use]))
-    radians = -k_e * np.pi / 180.0
-    if abs(ratio - radians) < 0.3 * abs(radians):
+    said = f"column 'wave_angle_deg' turns {ratio:.4g} × the table over the rotation runs"
+    degrees = f"in degrees, ≈ −k_e = {-k_e:.4g}"
+    looks = [(-k_e * np.pi / 180.0, "as an angle in radians would", "give the wave angle in "
+              "degrees (np.degrees)"),
+             (-k_e * 180.0 / np.pi, "as a table angle in radians would", "give "
+              "'table_rate_dps' in °/s (and 'table_angle_deg', if given, in degrees)")]  # fmt: skip
+    if integrated:
+        looks.append((-k_e / 1000.0, "as a table angle integrated over time stamps in "
+                      "milliseconds would", "give 'time_s' in seconds"))  # fmt: skip
+    for expected, like, fix in looks:
+        if abs(ratio - expected) < 0.3 * abs(expected):
+            raise ValueError(f"{said}, {like} ({expected:.4g}; {degrees}): {fix}")
+    low, high = WAVE_TABLE_RATIO
+    if not low <= abs(ratio) <= high:
         raise ValueError(
-            f"column 'wave_angle_deg' turns {ratio:.4g} × the table over the rotation runs, as "
-            f"an angle in radians would (−k_e·π/180 = {radians:.4g}; in degrees ≈ −k_e = "
-            f"{-k_e:.4g}): give the wave angle in degrees (np.degrees)"
+            f"{said} ({degrees}; hrgjax takes |ratio| in {low:g} … {high:g}): check the units "
+            "of 'wave_angle_deg' [° electrical], 'table_rate_dps' [°/s], 'table_angle_deg' [°] "
+            "and 'time_s' [s]"
         )
+
+
+def check_table_angle(table_angle_deg, integral_deg, run, moving) -> None:
+    """Refuse a `table_angle_deg` column that does not turn as the integral of
+    `table_rate_dps` over `time_s` (`integral_deg`, per row) over the rotation runs: within
+    10 %, or named as radians (π/180) or a rate in rad/s (180/π).
+
+    **Raises:** `ValueError` naming `table_angle_deg` and the ratio found."""
+    column, integral = (np.asarray(x, dtype=float) for x in (table_angle_deg, integral_deg))
+    run, moving = np.asarray(run), np.asarray(moving, bool)
+    first, last = _run_ends(run)
+    turn = integral[last] - integral[first]
+    use = moving[first] & (np.abs(turn) >= 10.0)
+    if not use.any():
+        return
+    ratio = float(np.median((column[last] - column[first])[use] / turn[use]))
+    if abs(ratio - 1.0) <= 0.1:
+        return
+    hint = {np.pi / 180.0: ": it looks like radians (np.degrees)",
+            180.0 / np.pi: ": it looks like 'table_rate_dps' is in rad/s"}  # fmt: skip
+    why = next((h for r, h in hint.items() if abs(ratio - r) < 0.3 * r), "")
+    raise ValueError(
+        f"column 'table_angle_deg' turns {ratio:.4g} × the integral of 'table_rate_dps' over "
+        f"'time_s' over the rotation runs; the two must agree (within 10 %){why}"
+    )
+
+
+def check_wave_angle_jumps(wave_angle_deg, table_angle_deg, time_s, run, k_e: float,
+                           precession_dps=0.0) -> None:  # fmt: skip
+    """Refuse a wave angle that jumps between two adjacent samples of one run by more than
+    `MAX_WAVE_STEP_DEG` beyond what the table's turn and a commanded precession
+    (`precession_dps`, per row) move it between them (2·k_e × the turn, 2 × the commanded
+    angle): the wave moves at drift rates (°/h) plus −k_e Ω and the precession, so a step of
+    degrees between samples is two runs under one id, or a glitch.
+
+    **Raises:** `ValueError` naming the run, the rows and the jump."""
+    wave, table, t = (np.asarray(x, dtype=float) for x in (wave_angle_deg, table_angle_deg,
+                                                            time_s))  # fmt: skip
+    run = np.asarray(run)
+    order = np.lexsort((t, run))
+    same = run[order][1:] == run[order][:-1]
+    rho = np.broadcast_to(np.asarray(precession_dps, dtype=float), t.shape)[order]
+    commanded = 0.5 * np.abs(rho[1:] + rho[:-1]) * np.diff(t[order])
+    step = (np.abs(np.diff(wave[order])) - 2.0 * k_e * np.abs(np.diff(table[order]))
+            - 2.0 * commanded)  # fmt: skip
+    bad = np.flatnonzero(same & (step > MAX_WAVE_STEP_DEG))
+    if bad.size:
+        i, j = int(order[bad[0]]), int(order[bad[0] + 1])
+        raise ValueError(
+            f"column 'wave_angle_deg' jumps {wave[j] - wave[i]:+.4g}° from row {i} to row {j} "
+            f"of run {run[i]} (times {t[i]:g} → {t[j]:g} s), beyond what the table's turn "
+            "moves it: two runs under one 'run' id, or a glitch to cut out (the wave angle "
+            "must be unwrapped)"
+        )
+
+
+MAX_WAVE_STEP_DEG = 5.0
+"""Largest step [° electrical] of the wave angle between adjacent samples of a run beyond
+2·k_e × the table's turn between them (`check_wave_angle_jumps`)."""
 
 
 BYTES_PER_SAMPLE = 100

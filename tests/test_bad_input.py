@@ -463,6 +463,25 @@ def test_physically_impossible_numbers_are_refused_with_a_hint():
         hg.MeasuredData(cols | dict(temperature_c=np.full(t.size, 293.15)))
     with pytest.raises(ValueError, match=r"'wave_angle_deg' turns -0.0096.* radians"):
         hg.MeasuredData(cols | dict(wave_angle_deg=np.radians(cols["wave_angle_deg"])))
+    # the wave turns −k_e × the table: a rate in rad/s, a table angle in radians, time in
+    # ms, a wave 10× too large or a jump of degrees between samples cannot be (each passed)
+    for bad, match in [
+        (dict(table_rate_dps=np.full(t.size, np.radians(5.0))), r"turns -31.7.* table angle in "
+         r"radians .* give 'table_rate_dps' in °/s"),
+        (dict(table_angle_deg=np.radians(5.0 * t)), r"^column 'table_angle_deg' turns 0.01745 × "
+         r"the integral .* radians"),
+        (dict(time_s=1000 * t), r"^column 'time_s': the median sample interval = 500 .* "
+         r"milliseconds"),
+        (dict(wave_angle_deg=-5.54 * 5.0 * t), r"turns -5.54 × the table .* check the units"),
+        (dict(wave_angle_deg=cols["wave_angle_deg"] + np.where(t > 30, 10.0, 0.0)),
+         r"^column 'wave_angle_deg' jumps \+8.615° from row 60 to row 61 of run 0"),
+    ]:  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            hg.MeasuredData(cols | bad)
+    held = np.zeros(t.size)  # force-to-rebalance holds the wave; a precession moves it
+    hg.MeasuredData(cols | dict(wave_angle_deg=held, rebalance_rate_dps=np.full(t.size, 5.0)))
+    hg.MeasuredData(cols | dict(wave_angle_deg=20.0 * t, precession_dps=np.full(t.size, 20.0)))
+    hg.MeasuredData(cols | dict(wave_angle_deg=0.554 * 5.0 * t))  # the other sign: a convention
     with pytest.raises(ValueError, match=r"Plan.temperature_c = -273 .* -100 … 150 °C"):
         hg.calibration.static_plan((-273.0,), (0.0,), duration_s=10.0)
     with pytest.raises(ValueError, match=r"Plan.wave_angle0_deg = 1e\+300"):

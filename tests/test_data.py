@@ -124,7 +124,10 @@ def test_stacked_runs_in_si():
             "run": run,
             "temperature_c": rng.normal(20, 5, t.size),
             "table_rate_dps": rate,
-            "wave_angle_deg": rng.normal(0, 90, t.size),
+            # turning at −k_e × the table, as a wave does (MeasuredData checks the units)
+            "wave_angle_deg": 30
+            + np.r_[np.zeros(12), -0.554 * 2.0 * t5, 0.554 * t9]
+            + rng.normal(0, 0.1, t.size),
             "accel_z_g": rng.normal(1, 0.1, t.size),
         }  # fmt: skip
     )
