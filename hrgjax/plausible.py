@@ -28,6 +28,7 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "wave_angle_deg": (-1e7, 1e7, "° electrical"),
     "duration_s": (0.0, 30 * 86400.0, "s"),
     "sample_interval_s": (0.0, 300.0, "s"),
+    "imu_rate_hz": (1.0, 1e7, "Hz"),
     "speed_mps": (0.0, 10_000.0, "m/s"),
     "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
 }
@@ -35,7 +36,9 @@ RANGES: dict[str, tuple[float, float, str]] = {
 +150 °C; −40 … +60 °C is the seed's bench), table rates (±10 turns/s), wave angles (±1e7°:
 an angle that has turned 27 000 times is a unit error), the length of one run or
 segment (30 days), the median interval between a record's samples (5 min: a log of
-5-minute means is fine, time stamps in milliseconds at up to 3 Hz are not), a vehicle's speed (10 km/s, above low-orbit speed: a speed in km/h or
+5-minute means is fine, time stamps in milliseconds at up to 3 Hz are not), an IMU's sample
+rate (at least 1 Hz: IMUs sample at tens to thousands of Hz; slower is time stamps in
+milliseconds read as seconds), a vehicle's speed (10 km/s, above low-orbit speed: a speed in km/h or
 mm/s read as m/s is refused) and the median specific force |Δv|/Δt over a record of
 accelerometer increments (5 g: a navigating vehicle spends most of its time near 1 g, a 60°
 banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s])."""
@@ -68,7 +71,8 @@ def _hint(name: str, values: np.ndarray) -> str:
     if name == "temperature_c" and values.size and np.min(values) >= KELVIN_HINT_C:
         return (f" — these look like kelvin ({np.min(values):g} … {np.max(values):g}): "
                 "subtract 273.15")  # fmt: skip
-    if name == "sample_interval_s" and values.size and np.max(values) > RANGES[name][1]:
+    slow = name == "imu_rate_hz" and values.size and np.min(values) < RANGES[name][0]
+    if slow or (name == "sample_interval_s" and values.size and np.max(values) > RANGES[name][1]):
         return " — time stamps in milliseconds? (give seconds)"
     return ""
 

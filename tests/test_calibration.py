@@ -153,6 +153,8 @@ def test_reduce_rejects_bad_arguments():
         reduce(data)
     with pytest.raises(ValueError, match="k_e"):
         reduce(data, k_e=-1.0)
+    with pytest.raises(ValueError, match=r"^k_e must be .* in \(0, 1\).*got 55\.4 \(a gain in "):
+        reduce(data, k_e=55.4)
 
 
 # --- compensators on exact targets -------------------------------------------------------
@@ -502,6 +504,81 @@ def test_one_fit_call_for_every_compensator_and_the_old_keywords_still_work():
 def test_fourier_base_needs_points_at_fit_temperature(exact_windows):
     with pytest.raises(ValueError, match="within 1.0 °C of the fit temperature 25"):
         FourierCompensator(fit_temperature_c=25.0).fit(exact_windows)
+
+
+def test_laws_in_temperature_need_enough_distinct_temperatures(exact_windows, monkeypatch):
+    """Audit items 1 and 3: a temperature polynomial fitted to fewer temperatures than it has
+    coefficients was a made-up law (SF 0.55 at +20 °C from −40 and +60 °C; flat in T from
+    one), the grey box at one temperature a bare 'Singular matrix', at two σ of 6.6e4."""
+    w = exact_windows
+    two = w.select(np.isin(w.temperature_c, [-40.0, 60.0]))
+    with pytest.raises(ValueError, match=r"^temperature_degree 2 needs at least 3 distinct "
+                       r"temperatures in the calibration data's static runs; got 2 \(-40\.0, "
+                       r"\+60\.0 °C.*lower temperature_degree \(CLI --temperature-degree\)"):  # fmt: skip
+        FourierCompensator(temperature_degree=2).fit(two)
+    # one level whose windows scatter by 0.3 °C is one temperature
+    one = w.select(w.temperature_c == 20.0)
+    one = eqx.tree_at(lambda x: x.temperature_c, one, 20.0 + 0.3 * (np.arange(len(one)) % 2))
+    with pytest.raises(ValueError, match=r"^temperature_degree 1 needs at least 2 .* got 1 "):
+        FourierCompensator(temperature_degree=1).fit(one)
+    rotations_at_two = w.select(w.static | np.isin(w.temperature_c, [-40.0, 60.0]))
+    with pytest.raises(ValueError, match=r"^temperature_degree 3 .* rotation runs; got 2 "):
+        FourierCompensator(temperature_degree=3).fit(rotations_at_two)
+    FourierCompensator(temperature_degree=1).fit(rotations_at_two)  # enough: fitted
+    FourierCompensator(temperature_degree=0).fit(one)
+    # the grey box: refused before any simulation
+    for temps, got in (((20.0,), r"got 1 \(\+20\.0 °C"), ((-40.0, 60.0), r"got 2 \(-40\.0, ")):
+        data = closed_form_session(temps=temps, duration_s=20.0)
+        with pytest.raises(ValueError, match=r"^the physical model's rate bias law \(quadratic "
+                           r"in T\) needs at least 3 distinct temperatures in the calibration "
+                           rf"data; {got}"):  # fmt: skip
+            PhysicalCompensator().fit(data)
+    data = closed_form_session(duration_s=20.0)  # −40, +20, +60 °C
+    keep = (data["table_rate_dps"] == 0) | (data["temperature_c"] == 20.0)
+    at_one = hg.MeasuredData({k: v[keep] for k, v in data.columns.items()})
+    with pytest.raises(ValueError, match=r"^the physical model's k_e\(T\) \(linear in T\) "
+                       r"needs at least 2 distinct temperatures in the calibration data's "
+                       r"rotation runs; got 1 \(\+20\.0 °C"):  # fmt: skip
+        PhysicalCompensator().fit(at_one)
+    # a ramp's 300-s windows are temperatures of their own: −40 and +60 °C and a ramp 50 → 70 °C
+    data = closed_form_session(temps=(-40.0, 60.0), duration_s=20.0)
+    t = np.arange(0.0, 1200.0, 0.5)
+    ramp = {"time_s": t, "run": np.full(t.size, data["run"].max() + 1),
+            "temperature_c": 50.0 + t / 60.0, "table_rate_dps": np.zeros(t.size),
+            "wave_angle_deg": 10.0 - 1e-5 * t}  # fmt: skip
+    with_ramp = hg.MeasuredData({k: np.r_[v, ramp[k]] for k, v in data.columns.items()})
+
+    def past_the_checks(*args):
+        raise RuntimeError("past the checks")
+
+    monkeypatch.setattr(physical, "fit_groups", past_the_checks)
+    with pytest.raises(RuntimeError, match="past the checks"):
+        PhysicalCompensator().fit(with_ramp)
+    # a normal matrix that is singular names the parameters it leaves free, never LinAlgError
+    jac = np.random.default_rng(0).standard_normal((40, len(physical.NAMES)))
+    jac[:, physical.NAMES.index("bias2")] = 0.0
+    with pytest.raises(ValueError, match=r"^PhysicalCompensator.fit: the calibration data do not "
+                       r"identify bias2 \(the fit's normal matrix JᵀJ is singular\)"):  # fmt: skip
+        physical._covariance(jac, 1.0)
+    jac[:, 4] = 2.0 * jac[:, 3]  # bias2 moves as bias1 does
+    with pytest.raises(ValueError, match=r"do not identify bias1, bias2 \("):
+        physical._covariance(jac, 1.0)
+
+
+def test_k_e_is_the_electrical_gain_in_zero_one():
+    """Audit item 7: k_e = 55.4 (a percentage) was taken by every compensator."""
+    from hrgjax.calibration.self_calibration import PrecessionCompensator
+
+    for cls in (FourierCompensator, MLPCompensator, PhysicalCompensator, NoCompensation,
+                PrecessionCompensator):  # fmt: skip
+        with pytest.raises(ValueError, match=r"^k_e must be the data's electrical angular gain "
+                           r"2K .* in \(0, 1\).*got 55\.4 \(a gain in percent\?"):  # fmt: skip
+            cls(k_e=55.4)
+        with pytest.raises(ValueError, match=r"^k_e must be .*got 0\.0$"):
+            cls(k_e=0.0)
+        with pytest.raises(TypeError, match=r"^k_e must be a number"):
+            cls(k_e="0.554")
+        assert cls(k_e=0.6).k_e == 0.6
 
 
 def test_unfitted_compensators_say_so():

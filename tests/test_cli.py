@@ -286,3 +286,33 @@ def test_correct_reports_the_offset_and_draws_it(two_sessions, tmp_path, capsys)
     assert "residual rate RMS 0.43" in text and "(offset kept)" in text
     assert "session offset with Fourier+T^2: +0.43" in text and "seed Fourier" in text
     assert f"wrote {png}" in text and png.stat().st_size > 0 and out.exists()
+
+
+def test_calibrate_refuses_k_e_outside_zero_one_and_too_few_temperatures(tmp_path, capsys):
+    """Audit items 1, 3 and 7: --k-e 55.4 was taken; --temperature-degree 2 on data at two
+    temperatures gave SF 0.55 at +20 °C; --method physical at one temperature a bare
+    'Singular matrix'. Each is now one line, before any fit."""
+    cols = {k: [] for k in ("time_s", "run", "temperature_c", "table_rate_dps", "wave_angle_deg")}
+    t = np.arange(0.0, 30.1, 0.5)
+    for T in (-40.0, 60.0):
+        for angle in (-60.0, 0.0, 60.0):
+            for rate in (0.0, 5.0):
+                for name, x in (("time_s", t), ("run", len(cols["run"])), ("temperature_c", T),
+                                ("table_rate_dps", rate),
+                                ("wave_angle_deg", angle - 0.554 * rate * t)):  # fmt: skip
+                    cols[name].append(np.broadcast_to(x, t.shape))
+    path = hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()}).save(
+        tmp_path / "two.csv"
+    )
+    out = ["--out", str(tmp_path / "m.eqx")]
+    cli_fails(["calibrate", str(path), "--k-e", "55.4", *out], capsys,
+              r"argument --k-e: expected the electrical angular gain k_e = 2K, a number in "
+              r"\(0, 1\) \(≈ 0\.554\); got 55\.4 \(a gain in percent\?")  # fmt: skip
+    cli_fails(["calibrate", str(path), "--k-e", "0", *out], capsys, r"--k-e: .*got 0$")
+    cli_fails(["calibrate", str(path), "--temperature-degree", "2", *out], capsys,
+              r"temperature_degree 2 needs at least 3 distinct temperatures in the calibration "
+              r"data's static runs; got 2 \(-40\.0, \+60\.0 °C")  # fmt: skip
+    cli_fails(["calibrate", str(path), "--method", "physical", *out], capsys,
+              r"the physical model's rate bias law \(quadratic in T\) needs at least 3 distinct "
+              r"temperatures in the calibration data; got 2")  # fmt: skip
+    assert not (tmp_path / "m.eqx").exists()

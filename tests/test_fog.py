@@ -118,6 +118,13 @@ def test_psd_peak_finds_a_known_tone_and_matches_scipy():
         freq, a = spectrum.tone(jnp.asarray(x), fs, nperseg=1024)
         assert abs(float(freq) - f0) < 0.05 * (fs / 1024)  # 5 % of a bin
         assert abs(float(a) / amp - 1.0) < 0.01
+    # odd nperseg: scipy's default overlap is nperseg // 2 = 50 (hrgjax overlapped by 51)
+    x = rng.normal(size=1000)
+    for nperseg in (101, 33):
+        f, p = spectrum.psd(jnp.asarray(x), 100.0, nperseg=nperseg)
+        fr, pr = welch(x, 100.0, nperseg=nperseg)
+        np.testing.assert_allclose(f, fr)
+        np.testing.assert_allclose(p, pr, rtol=1e-10, atol=1e-12 * pr.max())
     # Parseval: white noise of variance σ² has ∫P df = σ²
     w = rng.normal(size=2**15) * 0.7
     f, p = spectrum.psd(jnp.asarray(w), fs, nperseg=512)
@@ -134,7 +141,7 @@ def test_psd_peak_finds_a_known_tone_and_matches_scipy():
 from hrgjax.fog import compensation as cp  # noqa: E402
 from hrgjax.fog import vibration as vb  # noqa: E402
 from hrgjax.fog.spectrum import vibration_features  # noqa: E402
-from hrgjax.units import G0  # noqa: E402
+from hrgjax.units import DEG, G0  # noqa: E402
 
 
 def _quiet(imu):
@@ -293,6 +300,15 @@ def test_vibration_inputs_are_checked(imu):
         cp.VibrationCompensator("lstm", key=jax.random.key(0))
     with pytest.raises(ValueError, match=r"accel must have shape \(N, 3\)"):
         vibration_features(jnp.zeros((100, 2)), 100.0)
+    # the latitude is in radians: 45 (degrees) returned a wrong number
+    eps, nab = np.array([0.0, 1e-7, 0.0]), np.zeros(3)
+    with pytest.raises(ValueError, match=r"^lat must be the latitude in radians, \|lat\| ≤ π/2; "
+                       r"got 45 \(degrees\? give np\.radians\(45\)\)"):  # fmt: skip
+        cp.heading_limit_deg(eps, nab, np.eye(3), 45.0)
+    with pytest.raises(ValueError, match=r"^lat must be the latitude in radians.*got nan$"):
+        cp.heading_limit_deg(eps, nab, np.eye(3), jnp.nan)
+    limit = cp.heading_limit_deg(eps, nab, np.eye(3), np.pi / 4)
+    assert limit == pytest.approx(-1e-7 / (7.292115e-5 * np.cos(np.pi / 4)) / DEG, rel=1e-6)
 
 
 @pytest.mark.slow(

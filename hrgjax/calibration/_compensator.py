@@ -31,7 +31,7 @@ import numpy as np
 
 from .._compiled import bucket_pad, bucket_size, device, program
 from ..data import MeasuredData
-from ..units import DEG
+from ..units import DEG, group_temperatures
 from .reduce import WINDOW_S, RateWindows, reduce
 
 CORRECTED_COLUMNS = {
@@ -245,6 +245,36 @@ def split_targets(windows: RateWindows):
             "factor cannot be fitted; add rotation runs (e.g. calibration.rotation_plan)"
         )
     return static, moving
+
+
+LEVEL_TOLERANCE_C = 0.5
+"""Window temperatures closer than this are one temperature when a fit counts the distinct
+temperatures its laws in T need [°C]: a bench holds a level to a few tenths of a degree, and
+levels that close tell a law in T nothing."""
+
+
+def temperature_levels(temperature_c) -> np.ndarray:
+    """The distinct temperatures among windows' temperatures [°C], sorted: the values grouped
+    within `LEVEL_TOLERANCE_C` ([`group_temperatures`][hrgjax.units.group_temperatures]),
+    one number (the group's median) per group."""
+    labels = group_temperatures(np.asarray(temperature_c, dtype=float), LEVEL_TOLERANCE_C)
+    return np.unique(labels[np.isfinite(labels)])
+
+
+def require_temperatures(
+    temperature_c, needed: int, what: str, remedy: str, where: str = "the calibration data"
+) -> None:
+    """Refuse data whose windows hold fewer than `needed` distinct temperatures
+    (`temperature_levels`): "<what> needs at least <needed> distinct temperatures in
+    <where>; got N (…)", then `remedy`."""
+    levels = temperature_levels(temperature_c)
+    if levels.size < needed:
+        shown = ", ".join(f"{t:+.1f}" for t in levels)
+        raise ValueError(
+            f"{what} needs at least {needed} distinct temperatures in {where}; got "
+            f"{levels.size} ({shown} °C; levels within {LEVEL_TOLERANCE_C:g} °C count once)"
+            f"{remedy}"
+        )
 
 
 def fit_windows(data, k_e: float, window_s: float | None, ramp_window_s: float | None = None):

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..data import MeasuredData
 from ._compensator import AbstractCompensator
-from .reduce import K_E_NOMINAL
+from .reduce import K_E_NOMINAL, check_k_e
 
 SEED_TABLE = {
     "static_drift_dph": {-40.0: (1.28, 0.054), 60.0: (0.51, 0.043)},
@@ -43,6 +43,9 @@ class NoCompensation(AbstractCompensator):
     """The raw gyro: D = 0, SF = 1 (only the nominal angular gain)."""
 
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+
+    def __check_init__(self):
+        check_k_e(self.k_e)
 
     @property
     def name(self) -> str:

@@ -19,8 +19,15 @@ import numpy as np
 from .._compiled import device
 from ..data import MeasuredData
 from ..units import DEG, T_REF_C
-from ._compensator import FROM_FIELD, AbstractCompensator, FromField, fit_windows, setting
-from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows
+from ._compensator import (
+    FROM_FIELD,
+    AbstractCompensator,
+    FromField,
+    fit_windows,
+    require_temperatures,
+    setting,
+)
+from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, check_k_e
 
 T_SCALE = 50.0
 """Temperature scale of the polynomial basis [°C]."""
@@ -65,6 +72,7 @@ class FourierCompensator(AbstractCompensator):
     window_s: float | None = eqx.field(static=True, default=WINDOW_S)
 
     def __check_init__(self):
+        check_k_e(self.k_e)
         if self.harmonics < 1:
             raise ValueError(f"harmonics must be ≥ 1; got {self.harmonics}")
         if self.temperature_degree is not None and self.temperature_degree < 0:
@@ -123,13 +131,18 @@ class FourierCompensator(AbstractCompensator):
         **Returns:** a new fitted `FourierCompensator`.
 
         **Raises:** `ValueError` without static or rotation runs, with no points near the fit
-        temperature (base algorithm), or with fewer points than coefficients.
+        temperature (base algorithm), with fewer distinct temperatures (levels within 0.5 °C
+        counted once) among the static or the rotation runs than the temperature polynomial
+        has coefficients (`temperature_degree` + 1), or with fewer points than coefficients.
         """
         window_s = setting(self, "window_s", window_s)
         static, moving = fit_windows(data, self.k_e, window_s)
         if self.temperature_degree is None:
             static = _near(static, self.fit_temperature_c, self.tolerance_c, "static")
             moving = _near(moving, self.fit_temperature_c, self.tolerance_c, "rotation")
+        else:
+            for kind, w in (("static", static), ("rotation", moving)):
+                _require_degree(self.temperature_degree, w.temperature_c, kind)
         th_s = static.wave_angle_deg * DEG
         drift = (static.rate_dps - static.table_rate_dps) * DEG
         d_coef = _lstsq(self._basis(th_s, static.temperature_c, np), drift, "drift")
@@ -149,6 +162,19 @@ class FourierCompensator(AbstractCompensator):
             device(s_coef.reshape(self._degree + 1, -1)),
             is_leaf=lambda x: x is None,
         )
+
+
+def _require_degree(degree: int, temperature_c, kind: str) -> None:
+    """Refuse a temperature polynomial of `degree` that the `kind` windows' temperatures do
+    not determine: degree K needs K + 1 distinct temperatures (fewer leave the least squares
+    rank-deficient: a minimum-norm fit, flat or wild between and beyond them)."""
+    require_temperatures(
+        temperature_c,
+        degree + 1,
+        f"temperature_degree {degree}",
+        "; lower temperature_degree (CLI --temperature-degree) or add runs at other temperatures",
+        where=f"the calibration data's {kind} runs",
+    )
 
 
 def _near(w: RateWindows, temperature_c: float, tol: float, kind: str) -> RateWindows:

@@ -39,7 +39,7 @@ from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
 from ._compensator import FROM_FIELD, AbstractCompensator, FromField, fit_windows, setting
-from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows
+from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, check_k_e
 
 ENCODINGS = ("periodic", "angle")
 MODES = ("reduced", "end_to_end")
@@ -94,6 +94,7 @@ class MLPCompensator(AbstractCompensator):
     window_s: float | None = eqx.field(static=True, default=WINDOW_S)
 
     def __check_init__(self):
+        check_k_e(self.k_e)
         if self.encoding not in ENCODINGS:
             raise ValueError(f"encoding must be one of {ENCODINGS}; got {self.encoding!r}")
         if self.drift_width < 1 or self.sf_width < 1 or self.steps < 1:

@@ -53,7 +53,15 @@ from ..profiles import Profile
 from ..resonator.averaged import averaged_vector_field, input_rate
 from ..resonator.slow import reduced_rate
 from ..units import DEG, DEG_PER_H, PHYSICAL_WINDOW_S
-from ._compensator import FROM_FIELD, AbstractCompensator, FromField, setting, split_targets
+from ._compensator import (
+    FROM_FIELD,
+    AbstractCompensator,
+    FromField,
+    require_temperatures,
+    setting,
+    split_targets,
+    temperature_levels,
+)
 from ._physical_fit import LOOP_PASSES as LOOP_PASSES
 from ._physical_fit import fit_values, less_pull, loop_pull
 from ._physical_fit import scatter_per_dof as scatter_per_dof
@@ -74,8 +82,15 @@ from ._plant import PLANT_RESONATOR as PLANT_RESONATOR
 from ._plant import known_plant
 from ._plant import plant_from_json as plant_from_json
 from ._plant import plant_to_json as plant_to_json
-from .reduce import K_E_NOMINAL, reduce
+from .reduce import K_E_NOMINAL, check_k_e, reduce
 from .reduce import RAMP_WINDOW_S as RAMP_WINDOW_S
+
+LAW_TEMPERATURES = 3
+"""Distinct temperatures the grey box's laws need in the calibration data: the rate bias is
+quadratic in T (3 coefficients); with fewer, its T² term (and more) is not identified."""
+ROTATION_TEMPERATURES = 2
+"""Distinct temperatures its rotation runs need: k_e(T) is linear in T and only the rotations
+measure it (at rest it multiplies the bias, whose own law absorbs it)."""
 
 
 class _FittedLaws(eqx.Module):
@@ -170,6 +185,9 @@ class PhysicalCompensator(AbstractCompensator):
     plant: Gyro | None = eqx.field(default=None, converter=known_plant)
     sf_rate: float = eqx.field(static=True, default=0.0)
     initial: jax.Array | None = None
+
+    def __check_init__(self):
+        check_k_e(self.k_e)
 
     @property
     def fit_stats(self) -> dict:
@@ -274,7 +292,11 @@ class PhysicalCompensator(AbstractCompensator):
         **Returns:** a new fitted `PhysicalCompensator` (values, covariance, stats).
 
         **Raises:** `RuntimeError` without float64; `TypeError` without the raw samples;
-        `ValueError` without static or rotation runs.
+        `ValueError` without static or rotation runs, with fewer than 3 distinct temperatures
+        in the data (levels within 0.5 °C counted once; a ramp's 300-s windows count each) or
+        fewer than 2 among the rotation runs — the laws in T need them, checked before the fit
+        — or when the data leave parameters unidentified (a singular normal matrix; the
+        message names them).
         """
         require_x64("PhysicalCompensator.fit")
         if raw is not None:
@@ -287,6 +309,7 @@ class PhysicalCompensator(AbstractCompensator):
         initial = setting(self, "initial", initial)
         windows = reduce(data, self.k_e, window_s=self.window_s)
         split_targets(windows)
+        _require_law_temperatures(data, windows, self.k_e, self.window_s)
         groups = fit_groups(data, self.window_s, self.k_e)
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
         plant = self.plant  # normalised by the field's converter (known_plant)
@@ -308,7 +331,7 @@ class PhysicalCompensator(AbstractCompensator):
         r = np.concatenate([res[k] / sigma[k] for k in (True, False)])
         dof = max(r.size - len(NAMES), 1)
         chi2 = float(r @ r) / dof
-        cov = np.linalg.inv(jac.T @ jac) * chi2 * np.outer(SCALE, SCALE)
+        cov = _covariance(jac, chi2)
         rest = res[True] / weights[True][weights[True] > 0]  # the windows' rates, unweighted
         stats = {
             "chi2_per_dof": chi2,
@@ -327,6 +350,61 @@ class PhysicalCompensator(AbstractCompensator):
             plant=plant,
             sf_rate=0.0 if plant is None else _mean_rotation_rate(data),
         )
+
+
+def _require_law_temperatures(data: MeasuredData, windows, k_e: float, window_s: float) -> None:
+    """Refuse, before the fit, data with fewer distinct temperatures than the laws in T need
+    (`LAW_TEMPERATURES` in all, `ROTATION_TEMPERATURES` among the rotations). The fit sees a
+    ramp (at rest, temperature moving) as `RAMP_WINDOW_S` windows, each at its own
+    temperature: counted so when the runs' own levels are too few."""
+    what = "the physical model's rate bias law (quadratic in T)"
+    remedy = "; add runs at 3 or more temperatures (or ramps between them)"
+    temperatures = windows.temperature_c
+    if temperature_levels(temperatures).size < LAW_TEMPERATURES:
+        ramps = reduce(data, k_e, window_s=window_s, ramp_window_s=RAMP_WINDOW_S)
+        temperatures = ramps.temperature_c
+    require_temperatures(temperatures, LAW_TEMPERATURES, what, remedy)
+    moving = windows.temperature_c[~windows.static]
+    require_temperatures(moving, ROTATION_TEMPERATURES, "the physical model's k_e(T) (linear "
+                         "in T)", "; add rotation runs at another temperature",
+                         where="the calibration data's rotation runs")  # fmt: skip
+
+
+SINGULAR_RCOND = 1e-10
+"""Smallest singular value of the fit's scaled Jacobian, relative to its largest, of an
+identified parameter direction: below it JᵀJ (condition number its square, beyond 1/ε of
+float64) is singular in all but rounding, its inverse noise."""
+
+
+def _covariance(jac: np.ndarray, chi2: float) -> np.ndarray:
+    """The parameters' covariance (J^T J)^-1 · χ²/dof in SI (`jac` in the scaled units of
+    `SCALE`); a one-line error naming the parameters the data leave unidentified when
+    J^T J is singular (`SINGULAR_RCOND`)."""
+    finite = np.all(np.isfinite(jac))
+    s = np.linalg.svd(jac, compute_uv=False) if finite else np.zeros(1)
+    if finite and s.size == jac.shape[1] and s[-1] > SINGULAR_RCOND * s[0]:
+        try:
+            return np.linalg.inv(jac.T @ jac) * chi2 * np.outer(SCALE, SCALE)
+        except np.linalg.LinAlgError:
+            pass
+    raise ValueError(_not_identified(jac))
+
+
+def _not_identified(jac: np.ndarray) -> str:
+    """The message for a singular J^T J: the parameters in its null space (the right
+    singular vectors below `SINGULAR_RCOND`, else the weakest one)."""
+    _, s, vt = np.linalg.svd(np.nan_to_num(jac), full_matrices=True)
+    s = np.concatenate([s, np.zeros(vt.shape[0] - s.size)])
+    null = vt[s <= max(s.max(initial=0.0), 1e-300) * SINGULAR_RCOND]
+    if not null.size:  # singular in the LU, not below the cut: the weakest direction
+        null = vt[np.argmin(s)][None]
+    names = [n for i, n in enumerate(NAMES) if np.max(np.abs(null[:, i])) > 0.1]
+    which = ", ".join(names) if names else "some parameters"
+    return (
+        f"PhysicalCompensator.fit: the calibration data do not identify {which} (the fit's "
+        "normal matrix JᵀJ is singular); add runs that move them — other temperatures, "
+        "wave angles or table rates"
+    )
 
 
 def _mean_rotation_rate(data: MeasuredData) -> float:

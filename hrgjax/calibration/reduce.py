@@ -148,6 +148,35 @@ class RateWindows(eqx.Module):
         return int(np.asarray(self.run).shape[0])
 
 
+K_E_RANGE = (0.0, 1.0)
+"""Open interval a nominal angular gain k_e = 2K must lie in: the Bryan factor K of a
+hemispherical resonator's n = 2 mode is ≈ 0.277–0.3 (k_e ≈ 0.554), and 0 < K < 1/2 for any
+shell or ring — a k_e of 55.4 is the gain in percent."""
+
+
+def check_k_e(k_e, name: str = "k_e") -> float:
+    """`k_e` as a float, or a one-line error naming `name`: `TypeError` for a non-number,
+    `ValueError` outside `K_E_RANGE`, (0, 1)."""
+    try:
+        value = np.asarray(k_e)
+    except Exception:  # a tracer under jit: nothing to check here
+        return k_e
+    if isinstance(k_e, bool) or value.shape != () or value.dtype.kind not in "iuf":
+        raise TypeError(
+            f"{name} must be a number, the electrical angular gain 2K in (0, 1) (≈ 0.554); "
+            f"got {type(k_e).__name__}"
+        )
+    k_e = float(value)
+    low, high = K_E_RANGE
+    if not (np.isfinite(k_e) and low < k_e < high):
+        hint = " (a gain in percent? give 0.554, not 55.4)" if 1.0 <= k_e <= 100.0 else ""
+        raise ValueError(
+            f"{name} must be the data's electrical angular gain 2K (Bryan factor K), a "
+            f"number in (0, 1), ≈ 0.554 for an HRG; got {k_e!r}{hint}"
+        )
+    return float(k_e)
+
+
 def _window_layout(
     r: MeasuredData, window_s: float | None, ramp_window_s: float | None = None
 ) -> tuple[int, int]:
@@ -212,12 +241,12 @@ def reduce(
 
     **Returns:** [`RateWindows`][hrgjax.calibration.RateWindows].
 
-    **Raises:** `ValueError` for `k_e ≤ 0`, `batches < 3`, `window_s ≤ 0`, a run too short, or
+    **Raises:** `ValueError` for `k_e` outside (0, 1), `batches < 3`, `window_s ≤ 0`, a run
+    too short, or
     force-to-rebalance or virtual-precession data
     ([`check_whole_angle`][hrgjax.calibration.reduce.check_whole_angle]).
     """
-    if not (np.isfinite(k_e) and k_e > 0):
-        raise ValueError(f"k_e must be a positive angular gain; got {k_e}")
+    check_k_e(k_e)
     check_whole_angle(data)
     if batches < 3:
         raise ValueError(f"batches must be ≥ 3 for a standard error; got {batches}")

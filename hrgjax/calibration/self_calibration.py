@@ -50,6 +50,7 @@ from ..units import DEG, DEG_PER_S, K_E_NOMINAL
 from ._compensator import AbstractCompensator
 from ._runs import RunGroup, simulate_runs, switch_on_keys
 from .experiment import QUICK_TEMPERATURES, Plan, run_plan
+from .reduce import check_k_e
 
 PRECESSION_DPS = 0.5
 """Default commanded precession rate [°/s, electrical]: 180° in 6 min."""
@@ -177,6 +178,7 @@ class PrecessionCompensator(AbstractCompensator):
     gain_coef: jax.Array | None = None
 
     def __check_init__(self):
+        check_k_e(self.k_e)
         if not (isinstance(self.harmonics, int) and self.harmonics >= 1):
             raise ValueError(f"harmonics must be a whole number ≥ 1; got {self.harmonics!r}")
         if not (np.isfinite(self.settle_s) and self.settle_s >= 0):

@@ -3,6 +3,7 @@ session with it, and weigh several on one test session."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 from typing import TYPE_CHECKING, NamedTuple
@@ -28,6 +29,24 @@ from ._common import (
 
 if TYPE_CHECKING:  # the calibration package imports JAX; `--help` must not
     from ..calibration import AbstractCompensator
+
+
+def K_E(text):  # noqa: N802 (an argparse type, named like the others)
+    """`--k-e`: the electrical angular gain 2K of the data, a number in (0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); "
+            f"got {text!r}"
+        ) from None
+    if not 0.0 < value < 1.0:
+        hint = " (a gain in percent? give 0.554, not 55.4)" if 1.0 <= value <= 100.0 else ""
+        raise argparse.ArgumentTypeError(
+            f"expected the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); "
+            f"got {text}{hint}"
+        )
+    return value
 
 
 class Method(NamedTuple):
@@ -262,8 +281,9 @@ def _calibrate_parser(sub):
     p.add_argument("--out", default="out/model.eqx", help="compensator file (.eqx)")
     p.add_argument("--json", default=None, help="JSON export (None: beside --out)")
     p.add_argument(
-        "--k-e", type=POSITIVE_FLOAT, default=K_E_NOMINAL, help="nominal angular gain k_e"
-    )
+        "--k-e", type=K_E, default=K_E_NOMINAL,
+        help="nominal electrical angular gain k_e = 2K of the data, in (0, 1)",
+    )  # fmt: skip
     p.add_argument(
         "--window",
         type=POSITIVE_SECONDS,

@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._checks import concrete_value
 from .._x64 import require_x64
 from ..ins import alignment as _al
 from ..ins.constants import OMEGA_IE, WGS84, earth_rate_ned
@@ -360,7 +361,23 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat):
     """Analytic stationary heading error [°] (estimate − truth) set by a constant body-frame
     gyro drift `eps_body` [rad/s] and accelerometer bias `nabla_body` [m/s²]:
     $\\delta\\psi = -\\varepsilon_E/(\\omega_{ie}\\cos\\varphi) + (\\nabla_E/g)\\tan\\varphi$
-    (PHYSICS.md §12, $\\delta\\psi = -\\phi_D$)."""
+    (PHYSICS.md §12, $\\delta\\psi = -\\phi_D$).
+
+    **Arguments:** `eps_body` (3,) [rad/s]; `nabla_body` (3,) [m/s²]; `c_bn` (3, 3), the
+    body-to-NED direction cosine matrix; `lat`, the geodetic latitude φ **in radians**
+    (|φ| ≤ π/2; `np.radians(45.0)` for 45°).
+
+    **Raises:** `ValueError` for a latitude beyond ±π/2 (degrees given for radians) or not
+    finite."""
+    value = concrete_value(lat)
+    if value is not None:
+        if value.dtype.kind not in "iuf":
+            raise TypeError(f"lat must be a number, the latitude [rad]; got {type(lat).__name__}")
+        bad = ~(np.abs(value) <= np.pi / 2)  # NaN too
+        if np.any(bad):
+            v = float(value[bad].ravel()[0]) if value.ndim else float(value)
+            hint = f" (degrees? give np.radians({v:g}))" if np.isfinite(v) else ""
+            raise ValueError(f"lat must be the latitude in radians, |lat| ≤ π/2; got {v:g}{hint}")
     c = jnp.asarray(c_bn)
     eps_e = (c @ jnp.asarray(eps_body))[1]
     nab_e = (c @ jnp.asarray(nabla_body))[1]

@@ -2,8 +2,9 @@ r"""Vibration features from an accelerometer record (seed 003, step 3): the powe
 density by Welch's method, the vibration frequency at its peak and the amplitude from the
 peak's power.
 
-Welch (1967): the record is cut into segments of `nperseg` samples overlapping by half, each
-is detrended (mean removed) and Hann-windowed, and the one-sided periodograms are averaged:
+Welch (1967): the record is cut into segments of `nperseg` samples overlapping by
+`nperseg // 2` (half; `scipy.signal.welch`'s default, also for odd `nperseg`), each is
+detrended (mean removed) and Hann-windowed, and the one-sided periodograms are averaged:
 
 $$P(f_k) = \frac{2\,|X_k|^2}{f_s \sum_n w_n^2} \quad [\text{unit}^2/\text{Hz}]$$
 
@@ -42,7 +43,7 @@ def psd(x, fs: float, nperseg: int | None = None):
 def _psd(x, fs, *, nperseg):
     """`psd` past its checks, as one compiled program per length and segment."""
     n = x.shape[-1]
-    step = nperseg // 2
+    step = nperseg - nperseg // 2  # overlap nperseg // 2, scipy.signal.welch's default
     starts = jnp.arange(0, n - nperseg + 1, step)
     idx = starts[:, None] + jnp.arange(nperseg)[None, :]
     seg = x[..., idx]  # (..., S, nperseg)

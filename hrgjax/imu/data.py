@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from .. import plausible
 from ..units import DEG, G0
 
 GYRO_UNITS: dict[str, float] = {
@@ -52,8 +53,10 @@ class ImuData:
     - `gyro` (N, 3) [rad/s], sensor axes x, y, z;
     - `accel` (N, 3) [m/s²], specific force along the sensor axes (at rest and level, the
       axis that points up reads +g);
-    - `temperature` (N,) [°C] or None;
-    - `rate_hz` [Hz]: the nominal sample rate (given, or 1 / median time step).
+    - `temperature` (N,) [°C] or None, within the plausible range of `hrgjax.plausible`
+      (a column in kelvin is refused);
+    - `rate_hz` [Hz]: the nominal sample rate (given, or 1 / median time step), at least
+      `hrgjax.plausible.RANGES["imu_rate_hz"]` (1 Hz).
 
     Build it in SI with `ImuData(time, gyro, accel, temperature, rate_hz)` (validated), from
     arrays in other units with [`from_arrays`][hrgjax.imu.ImuData.from_arrays], or from a
@@ -61,7 +64,9 @@ class ImuData:
 
     **Raises:** `ValueError` naming the field (and the first bad row) for a wrong shape,
     complex or boolean values, a value that is not finite, a time that does not increase,
-    or a `rate_hz` more than 1 % from the time column's (1 / median step)."""
+    a `rate_hz` more than 1 % from the time column's (1 / median step), a sample rate below
+    1 Hz (time stamps in milliseconds?) or a temperature outside the plausible range (in
+    kelvin?)."""
 
     time: np.ndarray
     gyro: np.ndarray
@@ -109,7 +114,11 @@ class ImuData:
                     f"{RATE_TOLERANCE:.0%} apart); give the time column's rate, or leave rate_hz "
                     "out"
                 )
+        plausible.check(f"time: the sample rate (median step {median:.4g} s)", rate,
+                        "imu_rate_hz")  # fmt: skip
         temp = None if self.temperature is None else _vector("temperature", self.temperature, n)
+        if temp is not None:
+            plausible.check("temperature", temp, "temperature_c")
         for name, value in (
             ("time", time), ("gyro", gyro), ("accel", accel), ("temperature", temp),
         ):  # fmt: skip
@@ -222,7 +231,8 @@ def load(
 
     **Raises:** `ValueError` naming the file, the column and the row (and the file's line)
     for a missing column, text where a number belongs, a value that is not finite (or not
-    in SI units: 1e308 g), or a time column without a finite sample rate."""
+    in SI units: 1e308 g), a time column without a finite sample rate or slower than 1 Hz
+    (milliseconds?), or a temperature outside the plausible range (kelvin?)."""
     from ..data import read_csv_table
 
     path = os.fspath(path)
@@ -270,6 +280,12 @@ def _build(path, names, table, lines, units, rate_hz, check_units) -> ImuData:
             i = int(bad[0])
             raise ValueError(where(f"{path}: column {c!r} row {i}: {col[i]!r} is not finite"))
         got[c] = col
+    if "temperature" in names:
+        c = names["temperature"]
+        try:
+            plausible.check(f"temperature (column {c!r})", got[c], "temperature_c")
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
     try:
         return ImuData.from_arrays(
             np.stack([got[c] for c in names["gyro"]], axis=1),

@@ -313,8 +313,13 @@ def _check_turns(params: np.ndarray, turns: np.ndarray) -> None:
                 hint = f"; the turn went the other way: pass turn_deg={-turns[i]:g}"
             elif 0.75 < scale / DEG < 1.25 or 0.75 < scale * DEG < 1.25:
                 hint = "; the gyro unit is declared wrong (deg/s read as rad/s or the other way)"
+            elif 0.75 < scale / 1000.0 < 1.25 or 0.75 < scale * 1000.0 < 1.25:
+                hint = ("; the time stamps' unit is wrong (milliseconds read as seconds or the "
+                        "other way: 1000× off)")  # fmt: skip
             else:
-                hint = "; check the section's rows, turn_deg and the gyro unit"
+                hint = (
+                    "; check the section's rows, turn_deg, the gyro unit or the time stamps' unit"
+                )
             raise ValueError(
                 f"sections: turn {key!r} integrates to {measured:.1f}° about {key[0]} but "
                 f"turn_deg is {turns[i]:g}°{hint}"
