@@ -223,3 +223,21 @@ def load_data(path, allow_extra):
         raise UsageError(f"{path}: no such file") from None
     except (OSError, ValueError) as err:
         raise UsageError(f"cannot read {path}: {one_line(err)}") from None
+
+
+def K_E(text):  # noqa: N802 (an argparse type, named like the others)
+    """`--k-e`: the electrical angular gain 2K of the data, a number in (0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); "
+            f"got {text!r}"
+        ) from None
+    if not 0.0 < value < 1.0:
+        hint = " (a gain in percent? give 0.554, not 55.4)" if 1.0 <= value <= 100.0 else ""
+        raise argparse.ArgumentTypeError(
+            f"expected the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); "
+            f"got {text}{hint}"
+        )
+    return value

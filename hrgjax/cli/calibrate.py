@@ -3,7 +3,6 @@ session with it, and weigh several on one test session."""
 
 from __future__ import annotations
 
-import argparse
 import os
 import time
 from typing import TYPE_CHECKING, NamedTuple
@@ -11,6 +10,7 @@ from typing import TYPE_CHECKING, NamedTuple
 from ..units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
 from ._common import (
     DATA_EXTENSIONS,
+    K_E,
     NONNEGATIVE_FLOAT,
     NONNEGATIVE_INT,
     PLOT_EXTENSIONS,
@@ -29,24 +29,6 @@ from ._common import (
 
 if TYPE_CHECKING:  # the calibration package imports JAX; `--help` must not
     from ..calibration import AbstractCompensator
-
-
-def K_E(text):  # noqa: N802 (an argparse type, named like the others)
-    """`--k-e`: the electrical angular gain 2K of the data, a number in (0, 1)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); "
-            f"got {text!r}"
-        ) from None
-    if not 0.0 < value < 1.0:
-        hint = " (a gain in percent? give 0.554, not 55.4)" if 1.0 <= value <= 100.0 else ""
-        raise argparse.ArgumentTypeError(
-            f"expected the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); "
-            f"got {text}{hint}"
-        )
-    return value
 
 
 class Method(NamedTuple):

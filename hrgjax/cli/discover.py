@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from ..units import K_E_NOMINAL
 from ._common import (
+    K_E,
     PLOT_EXTENSIONS,
-    POSITIVE_FLOAT,
     UsageError,
     finish,
     load_data,
@@ -65,7 +65,10 @@ def _discover_parser(sub):
     p.add_argument("--json", default=None, help="write the report here (JSON)")
     p.add_argument("--plot", default=None, help="write the report figure here (PNG)")
     p.add_argument(
-        "--k-e", type=POSITIVE_FLOAT, default=K_E_NOMINAL, help="nominal angular gain k_e"
+        "--k-e",
+        type=K_E,
+        default=K_E_NOMINAL,
+        help="nominal electrical angular gain k_e = 2K, in (0, 1) (default 0.554)",
     )
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     return p
