@@ -77,11 +77,6 @@ class MeasuredData:
             raise ValueError("the data have no rows")
         self._columns = cols
         check_time(cols["time_s"], self.run)
-        order = np.lexsort((cols["time_s"], self.run))
-        steps = np.diff(cols["time_s"][order])[np.diff(self.run[order]) == 0]
-        if steps.size:
-            plausible.check("column 'time_s': the median sample interval", np.median(steps),
-                            "sample_interval_s")  # fmt: skip
         for name in ("temperature_c", "table_rate_dps", "wave_angle_deg"):
             plausible.check(f"column {name!r}", cols[name], name)
         turning = cols["table_rate_dps"] != 0.0

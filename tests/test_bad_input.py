@@ -470,14 +470,17 @@ def test_physically_impossible_numbers_are_refused_with_a_hint():
          r"radians .* give 'table_rate_dps' in °/s"),
         (dict(table_angle_deg=np.radians(5.0 * t)), r"^column 'table_angle_deg' turns 0.01745 × "
          r"the integral .* radians"),
-        (dict(time_s=1000 * t), r"^column 'time_s': the median sample interval = 500 .* "
-         r"milliseconds"),
+        (dict(time_s=1000 * t), r"turns -0.000554 × the table .* time stamps in milliseconds"),
         (dict(wave_angle_deg=-5.54 * 5.0 * t), r"turns -5.54 × the table .* check the units"),
         (dict(wave_angle_deg=cols["wave_angle_deg"] + np.where(t > 30, 10.0, 0.0)),
          r"^column 'wave_angle_deg' jumps \+8.615° from row 60 to row 61 of run 0"),
     ]:  # fmt: skip
         with pytest.raises(ValueError, match=match):
             hg.MeasuredData(cols | bad)
+    hour = np.r_[t, t + 3600.0]  # a run with an hour cut out: the wave drifted meanwhile
+    hg.MeasuredData(dict(time_s=hour, temperature_c=np.full(hour.size, 20.0),
+                         table_rate_dps=np.zeros(hour.size),
+                         wave_angle_deg=-0.554 * 10.6 / 3600.0 * hour))  # fmt: skip
     held = np.zeros(t.size)  # force-to-rebalance holds the wave; a precession moves it
     hg.MeasuredData(cols | dict(wave_angle_deg=held, rebalance_rate_dps=np.full(t.size, 5.0)))
     hg.MeasuredData(cols | dict(wave_angle_deg=20.0 * t, precession_dps=np.full(t.size, 20.0)))

@@ -571,10 +571,10 @@ def test_k_e_is_the_electrical_gain_in_zero_one():
 
     for cls in (FourierCompensator, MLPCompensator, PhysicalCompensator, NoCompensation,
                 PrecessionCompensator):  # fmt: skip
-        with pytest.raises(ValueError, match=r"^k_e must be the data's electrical angular gain "
-                           r"2K .* in \(0, 1\).*got 55\.4 \(a gain in percent\?"):  # fmt: skip
+        with pytest.raises(ValueError, match=r"^k_e must be the electrical angular gain k_e = "
+                           r"2K, a number in \(0, 1\).*got 55\.4 \(a gain in percent\?"):  # fmt: skip
             cls(k_e=55.4)
-        with pytest.raises(ValueError, match=r"^k_e must be .*got 0\.0$"):
+        with pytest.raises(ValueError, match=r"^k_e must be .*got 0$"):
             cls(k_e=0.0)
         with pytest.raises(TypeError, match=r"^k_e must be a number"):
             cls(k_e="0.554")

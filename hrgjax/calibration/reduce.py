@@ -28,7 +28,7 @@ import numpy as np
 from ..data import MeasuredData
 from ..units import K_E_NOMINAL as K_E_NOMINAL
 from ..units import WINDOW_S as WINDOW_S
-from ..units import group_temperatures
+from ..units import group_temperatures, k_e_problem
 
 RAMP_WINDOW_S = 300.0
 """Window of a ramp (table at rest, temperature moving) in the physical fit and the MLP's
@@ -148,15 +148,9 @@ class RateWindows(eqx.Module):
         return int(np.asarray(self.run).shape[0])
 
 
-K_E_RANGE = (0.0, 1.0)
-"""Open interval a nominal angular gain k_e = 2K must lie in: the Bryan factor K of a
-hemispherical resonator's n = 2 mode is ≈ 0.277–0.3 (k_e ≈ 0.554), and 0 < K < 1/2 for any
-shell or ring — a k_e of 55.4 is the gain in percent."""
-
-
 def check_k_e(k_e, name: str = "k_e") -> float:
     """`k_e` as a float, or a one-line error naming `name`: `TypeError` for a non-number,
-    `ValueError` outside `K_E_RANGE`, (0, 1)."""
+    `ValueError` outside [`K_E_RANGE`][hrgjax.units.K_E_RANGE], (0, 1)."""
     try:
         value = np.asarray(k_e)
     except Exception:  # a tracer under jit: nothing to check here
@@ -166,15 +160,10 @@ def check_k_e(k_e, name: str = "k_e") -> float:
             f"{name} must be a number, the electrical angular gain 2K in (0, 1) (≈ 0.554); "
             f"got {type(k_e).__name__}"
         )
-    k_e = float(value)
-    low, high = K_E_RANGE
-    if not (np.isfinite(k_e) and low < k_e < high):
-        hint = " (a gain in percent? give 0.554, not 55.4)" if 1.0 <= k_e <= 100.0 else ""
-        raise ValueError(
-            f"{name} must be the data's electrical angular gain 2K (Bryan factor K), a "
-            f"number in (0, 1), ≈ 0.554 for an HRG; got {k_e!r}{hint}"
-        )
-    return float(k_e)
+    problem = k_e_problem(float(value))
+    if problem:
+        raise ValueError(f"{name} must be {problem}")
+    return float(value)
 
 
 def _window_layout(

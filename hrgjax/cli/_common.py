@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import time
 import warnings
@@ -166,14 +167,24 @@ def _prefixed(prefix, err) -> str:
 
 
 def write_json(obj: dict, path: str) -> str:
-    """Write `obj` as indented JSON at `path` (folders made); returns the path."""
+    """Write `obj` as indented, strict JSON at `path` (folders made; NaN and ±inf, which
+    strict JSON has no word for, as null); returns the path."""
     import json
 
     from .._io import atomic_write
 
     with atomic_write(path, "w") as fh:
-        fh.write(json.dumps(obj, indent=2))
+        fh.write(json.dumps(_strict(obj), indent=2, allow_nan=False))
     return str(path)
+
+
+def _strict(x):
+    """`x` with every NaN or infinite float as None (null)."""
+    if isinstance(x, dict):
+        return {k: _strict(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_strict(v) for v in x]
+    return None if isinstance(x, float) and not math.isfinite(x) else x
 
 
 def figure(name: str):
@@ -227,17 +238,14 @@ def load_data(path, allow_extra):
 
 def K_E(text):  # noqa: N802 (an argparse type, named like the others)
     """`--k-e`: the electrical angular gain 2K of the data, a number in (0, 1)."""
+    from ..units import k_e_problem
+
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); "
-            f"got {text!r}"
-        ) from None
-    if not 0.0 < value < 1.0:
-        hint = " (a gain in percent? give 0.554, not 55.4)" if 1.0 <= value <= 100.0 else ""
-        raise argparse.ArgumentTypeError(
-            f"expected the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); "
-            f"got {text}{hint}"
-        )
+        wanted = k_e_problem(math.nan).rsplit("; got", 1)[0]
+        raise argparse.ArgumentTypeError(f"expected {wanted}; got {text!r}") from None
+    problem = k_e_problem(value)
+    if problem:
+        raise argparse.ArgumentTypeError(f"expected {problem}")
     return value

@@ -44,15 +44,6 @@ def _lever_arm(text: str):
     return v
 
 
-def _strict_json(x):
-    """`x` with every NaN or infinite float as None (null): strict JSON has no NaN."""
-    if isinstance(x, dict):
-        return {k: _strict_json(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_strict_json(v) for v in x]
-    return None if isinstance(x, float) and not math.isfinite(x) else x
-
-
 def cmd_navigate(args) -> int:
     """`hrgjax navigate MOTION.csv`: Monte Carlo flights of a motion definition."""
     inputs = [] if args.motion == "example" else [args.motion]
@@ -121,7 +112,7 @@ def cmd_navigate(args) -> int:
         print("  NIS mean: none (every GNSS fix fell in an outage)")
     else:
         print(f"  NIS mean {out['nis_mean']:.2f} (expected {out['innovation_dim']})")
-    return finish((args.json, _strict_json(out)),
+    return finish((args.json, out),
                   (args.plot, lambda p: figure("navigation_figure")(truth, result, p)))  # fmt: skip
 
 

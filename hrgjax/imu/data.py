@@ -55,8 +55,7 @@ class ImuData:
       axis that points up reads +g);
     - `temperature` (N,) [°C] or None, within the plausible range of `hrgjax.plausible`
       (a column in kelvin is refused);
-    - `rate_hz` [Hz]: the nominal sample rate (given, or 1 / median time step), at least
-      `hrgjax.plausible.RANGES["imu_rate_hz"]` (1 Hz).
+    - `rate_hz` [Hz]: the nominal sample rate (given, or 1 / median time step).
 
     Build it in SI with `ImuData(time, gyro, accel, temperature, rate_hz)` (validated), from
     arrays in other units with [`from_arrays`][hrgjax.imu.ImuData.from_arrays], or from a
@@ -64,9 +63,8 @@ class ImuData:
 
     **Raises:** `ValueError` naming the field (and the first bad row) for a wrong shape,
     complex or boolean values, a value that is not finite, a time that does not increase,
-    a `rate_hz` more than 1 % from the time column's (1 / median step), a sample rate below
-    1 Hz (time stamps in milliseconds?) or a temperature outside the plausible range (in
-    kelvin?)."""
+    a `rate_hz` more than 1 % from the time column's (1 / median step) or a temperature
+    outside the plausible range (in kelvin?)."""
 
     time: np.ndarray
     gyro: np.ndarray
@@ -114,8 +112,6 @@ class ImuData:
                     f"{RATE_TOLERANCE:.0%} apart); give the time column's rate, or leave rate_hz "
                     "out"
                 )
-        plausible.check(f"time: the sample rate (median step {median:.4g} s)", rate,
-                        "imu_rate_hz")  # fmt: skip
         temp = None if self.temperature is None else _vector("temperature", self.temperature, n)
         if temp is not None:
             plausible.check("temperature", temp, "temperature_c")
@@ -231,8 +227,8 @@ def load(
 
     **Raises:** `ValueError` naming the file, the column and the row (and the file's line)
     for a missing column, text where a number belongs, a value that is not finite (or not
-    in SI units: 1e308 g), a time column without a finite sample rate or slower than 1 Hz
-    (milliseconds?), or a temperature outside the plausible range (kelvin?)."""
+    in SI units: 1e308 g), a time column without a finite sample rate, or a temperature
+    outside the plausible range (kelvin?)."""
     from ..data import read_csv_table
 
     path = os.fspath(path)
