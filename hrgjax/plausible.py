@@ -97,12 +97,20 @@ def check(name: str, values, quantity: str | None = None) -> None:
         )
 
 
-def _run_ends(run):
-    """Indices of each run's first and last rows (rows of a run may be interleaved)."""
-    n = run.size
+def _turn_ratio(numerator, denominator, run, moving, min_turn: float) -> float | None:
+    """The median over the `moving` runs of (numerator's change) / (denominator's change)
+    from each run's first row to its last (rows of a run may be interleaved), among runs
+    whose denominator changes by at least `min_turn`; None where none does."""
+    num, den = (np.asarray(x, dtype=float) for x in (numerator, denominator))
+    run, moving = np.asarray(run), np.asarray(moving, bool)
     _, first = np.unique(run, return_index=True)
     _, last = np.unique(run[::-1], return_index=True)
-    return first, n - 1 - last
+    last = run.size - 1 - last
+    turn = den[last] - den[first]
+    use = moving[first] & (np.abs(turn) >= min_turn)
+    if not use.any():
+        return None
+    return float(np.median((num[last] - num[first])[use] / turn[use]))
 
 
 WAVE_TABLE_RATIO = (0.05, 2.0)
@@ -124,16 +132,9 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
     the nominal angular gain `k_e`. Runs whose table turns less than 1° are not used.
 
     **Raises:** `ValueError` naming the column the ratio points at, and the ratio found."""
-    wave, table = (np.asarray(x, dtype=float) for x in (wave_angle_deg, table_angle_deg))
-    run, moving = np.asarray(run), np.asarray(moving, bool)
-    if not moving.any():
+    ratio = _turn_ratio(wave_angle_deg, table_angle_deg, run, moving, 1.0)
+    if ratio is None:
         return
-    first, last = _run_ends(run)
-    turn = table[last] - table[first]
-    use = moving[first] & (np.abs(turn) >= 1.0)
-    if not use.any():
-        return
-    ratio = float(np.median((wave[last] - wave[first])[use] / turn[use]))
     said = f"column 'wave_angle_deg' turns {ratio:.4g} × the table over the rotation runs"
     degrees = f"in degrees, ≈ −k_e = {-k_e:.4g}"
     looks = [(-k_e * np.pi / 180.0, "as an angle in radians would", "give the wave angle in "
@@ -161,15 +162,8 @@ def check_table_angle(table_angle_deg, integral_deg, run, moving) -> None:
     10 %, or named as radians (π/180) or a rate in rad/s (180/π).
 
     **Raises:** `ValueError` naming `table_angle_deg` and the ratio found."""
-    column, integral = (np.asarray(x, dtype=float) for x in (table_angle_deg, integral_deg))
-    run, moving = np.asarray(run), np.asarray(moving, bool)
-    first, last = _run_ends(run)
-    turn = integral[last] - integral[first]
-    use = moving[first] & (np.abs(turn) >= 10.0)
-    if not use.any():
-        return
-    ratio = float(np.median((column[last] - column[first])[use] / turn[use]))
-    if abs(ratio - 1.0) <= 0.1:
+    ratio = _turn_ratio(table_angle_deg, integral_deg, run, moving, 10.0)
+    if ratio is None or abs(ratio - 1.0) <= 0.1:
         return
     hint = {np.pi / 180.0: ": it looks like radians (np.degrees)",
             180.0 / np.pi: ": it looks like 'table_rate_dps' is in rad/s"}  # fmt: skip
