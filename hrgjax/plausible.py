@@ -162,7 +162,7 @@ def check_table_angle(table_angle_deg, integral_deg, run, moving) -> None:
     10 %, or named as radians (π/180) or a rate in rad/s (180/π).
 
     **Raises:** `ValueError` naming `table_angle_deg` and the ratio found."""
-    ratio = _turn_ratio(table_angle_deg, integral_deg, run, moving, 10.0)
+    ratio = _turn_ratio(table_angle_deg, integral_deg, run, moving, 1.0)
     if ratio is None or abs(ratio - 1.0) <= 0.1:
         return
     hint = {np.pi / 180.0: ": it looks like radians (np.degrees)",

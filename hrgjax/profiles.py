@@ -125,6 +125,15 @@ class Profile(eqx.Module):
                         "(force-to-rebalance over the segment) or 0 (whole-angle)"
                     )
         plausible.check("Profile.temperature", self.temperature, "temperature_c")
+        if is_concrete(self.rate):  # in the data's units: °/s, ° electrical, s
+            plausible.check("Profile.rate [°/s]", np.degrees(np.asarray(self.rate)),
+                            "table_rate_dps")  # fmt: skip
+        if is_concrete(self.wave_angle0):
+            plausible.check("Profile.wave_angle0 [°]", np.degrees(np.asarray(self.wave_angle0)),
+                            "wave_angle_deg")  # fmt: skip
+        if is_concrete(self.t):
+            plausible.check("Profile's length [s]", float(np.ptp(np.asarray(self.t))),
+                            "duration_s")  # fmt: skip
         if is_concrete(self.t):
             t = np.asarray(self.t)
             bad = np.nonzero(np.diff(t) <= 0)[0]
@@ -195,6 +204,12 @@ class Profile(eqx.Module):
         precession [°/s, electrical] and a force-to-rebalance schedule (1 on, 0 whole-angle
         over the segment from each knot; see the class's arguments)."""
         args = (t_s, rate_dps, temperature_c, accel_g, wave_angle0_deg, precession_dps, rebalance)
+        knots = np.shape(t_s)
+        for name, x in (("rate_dps", rate_dps), ("temperature_c", temperature_c),
+                        ("precession_dps", precession_dps), ("rebalance", rebalance)):  # fmt: skip
+            if x is not None and np.shape(x) not in ((), knots):
+                raise ValueError(f"Profile.piecewise: {name} must be one value or one per knot "
+                                 f"of t_s, shape {knots}; got shape {np.shape(x)}")  # fmt: skip
         if not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(args)):
             t = np.asarray(t_s, dtype=float)  # host values: built on the host
             return cls(

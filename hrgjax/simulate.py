@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import math
 import numbers
 import sys
 import types
@@ -14,9 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import plausible
-from ._checks import is_concrete
+from ._checks import concrete_value, is_concrete
 from ._compiled import Check, device, program, single_run_entry
 from ._cost import report as report_cost
+from ._cost import steps_per_s
 from ._x64 import require_x64
 from .gyro import Gyro
 from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
@@ -55,7 +57,10 @@ def _default_solver(model):
 
 
 def output_times(profile: Profile, dt_out: float):
-    """Output grid t[0], t[0] + dt_out, … up to the end of the profile (inclusive)."""
+    """Output grid t[0], t[0] + dt_out, … up to the end of the profile (inclusive; where
+    `dt_out` does not divide the profile, the grid ends at its last whole multiple: pass
+    `ts=` to have the end). A `dt_out` longer than the profile is refused (its grid would be
+    the start alone)."""
     if not is_concrete(profile.t):
         raise ValueError(
             "simulate needs concrete profile knot times to build its output grid from dt_out, "
@@ -68,6 +73,11 @@ def output_times(profile: Profile, dt_out: float):
     if not _is_number(dt_out) or not (np.isfinite(dt_out) and dt_out > 0):
         raise ValueError(f"dt_out must be a positive number of seconds; got {dt_out!r}")
     span = float(t[-1] - t[0])
+    if dt_out > span * (1 + 1e-9):
+        raise ValueError(
+            f"dt_out = {dt_out:g} s is longer than the profile ({span:g} s): the output would "
+            "be its start alone; give dt_out ≤ the profile's length, or ts= (output times)"
+        )
     n = int(np.floor(span / dt_out + 1e-9)) + 1
     if n > plausible.MAX_OUTPUT_SAMPLES:
         raise ValueError(
@@ -99,6 +109,29 @@ def _is_number(x) -> bool:
     if isinstance(x, bool) or not is_concrete(x) or np.ndim(x) != 0:
         return False
     return np.asarray(x).dtype.kind in "iuf"
+
+
+MAX_STEPS = {"averaged": 2**16, "full": 2**20}
+"""`simulate`'s solver step limit by model when `max_steps` is not given, for runs whose
+expected steps fit 4 times over (`hrgjax.simulate.default_max_steps`)."""
+
+
+def default_max_steps(gyro, profile, model: str) -> int:
+    """The step limit `simulate` gives the adaptive solver: `MAX_STEPS[model]`, or for the
+    averaged model on a concrete profile that needs more, the power of two ≥ 4 × its
+    expected steps (`hrgjax._cost.steps_per_s` at the profile's largest
+    |k_e Ω|, k_e taken as 1 where it is traced or a temperature law): a long or fast run
+    (an hour at 100 °/s is ≈ 7.7·10⁴ steps, a day at rest ≈ 10⁵) is solved, not stopped at
+    the limit. A power of two, so that runs of similar length share one program."""
+    base = MAX_STEPS.get(model, MAX_STEPS["full"])
+    t, rate = concrete_value(profile.t), concrete_value(profile.rate)
+    if model != "averaged" or t is None or rate is None or t.size < 2:
+        return base
+    k_e = gyro.resonator.k_e
+    k_e = None if isinstance(k_e, TemperatureLaw) else concrete_value(k_e)
+    k = 1.0 if k_e is None else float(np.max(np.abs(k_e)))
+    need = 4.0 * float(t[-1] - t[0]) * float(steps_per_s(k * np.max(np.abs(rate))))
+    return base if need <= base else int(2 ** math.ceil(math.log2(need)))
 
 
 def _check_options(o) -> None:
@@ -431,9 +464,12 @@ def simulate(
     - `key`: PRNG key; required when `gyro.noise` is not `None`. Deterministic for a key.
     - `bias_key`: key of the switch-on bias; give the same one to several runs to simulate
       segments of one switch-on (defaults to a split of `key`).
-    - `dt_out`: output interval [s]; or `ts`, explicit output times [s] within the profile.
+    - `dt_out`: output interval [s], at most the profile's length (the grid ends at the last
+      whole multiple of it: `hrgjax.simulate.output_times`); or `ts`,
+      explicit output times [s] within the profile.
     - `rtol`, `atol`, `max_steps`, `solver`: diffrax settings (Tsit5 for averaged, Dopri8 for
-      full by default).
+      full by default; `max_steps` by default follows the run's expected steps,
+      `hrgjax.simulate.default_max_steps`).
     - `fixed_step`: `"auto"` (default) lets hrgjax choose the fastest path that meets
       `rtol`: for `model="full"` the fixed-step carrier path (`hrgjax.resonator.carrier`:
       Dormand–Prince 8 on equal steps, the loops at every stage, no error control; at the
@@ -527,7 +563,7 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
                 )
     report_cost(gyro, profile, model)  # only while `sweep` probes what its members cost
     if max_steps is None:
-        max_steps = 2**16 if model == "averaged" else 2**20
+        max_steps = default_max_steps(gyro, profile, model)
     solver = _default_solver(model) if solver is None else solver
     if adjoint is None:
         adjoint = diffrax.RecursiveCheckpointAdjoint(

@@ -30,19 +30,20 @@ K_BRYAN = 0.277
 K_E_NOMINAL = 2 * K_BRYAN
 """Nominal angular gain k_e = 2K = 0.554 used to turn wave-angle rates into input rates."""
 K_E_RANGE = (0.0, 1.0)
-"""Open interval a nominal angular gain k_e = 2K must lie in: the Bryan factor K of a
-hemispherical resonator's n = 2 mode is ≈ 0.277–0.3 (k_e ≈ 0.554), and 0 < K < 1/2 for any
-shell or ring — a k_e of 55.4 is the gain in percent."""
+"""Interval (0, 1] a nominal angular gain k_e = 2K must lie in: the Bryan factor K of a
+hemispherical resonator's n = 2 mode is ≈ 0.277–0.3 (k_e ≈ 0.554), 0 < K < 1/2 for any
+shell or ring, and k_e = 1 is a Foucault pendulum (PHYSICS.md §1) — a k_e of 55.4 is the
+gain in percent."""
 
 
 def k_e_problem(k_e: float) -> str | None:
     """What is wrong with a nominal angular gain `k_e` (a float), or None: the one check
     behind every `k_e` argument and the CLI's `--k-e` (`K_E_RANGE`)."""
     low, high = K_E_RANGE
-    if math.isfinite(k_e) and low < k_e < high:
+    if math.isfinite(k_e) and low < k_e <= high:
         return None
     hint = " (a gain in percent? give 0.554, not 55.4)" if 1.0 < k_e <= 100.0 else ""
-    return f"the electrical angular gain k_e = 2K, a number in (0, 1) (≈ 0.554); got {k_e:g}{hint}"
+    return f"the electrical angular gain k_e = 2K, a number in (0, 1] (≈ 0.554); got {k_e:g}{hint}"
 
 
 WINDOW_S = 3.0

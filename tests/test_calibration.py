@@ -153,7 +153,7 @@ def test_reduce_rejects_bad_arguments():
         reduce(data)
     with pytest.raises(ValueError, match="k_e"):
         reduce(data, k_e=-1.0)
-    with pytest.raises(ValueError, match=r"^k_e must be .* in \(0, 1\).*got 55\.4 \(a gain in "):
+    with pytest.raises(ValueError, match=r"^k_e must be .* in \(0, 1\].*got 55\.4 \(a gain in "):
         reduce(data, k_e=55.4)
 
 
@@ -572,7 +572,7 @@ def test_k_e_is_the_electrical_gain_in_zero_one():
     for cls in (FourierCompensator, MLPCompensator, PhysicalCompensator, NoCompensation,
                 PrecessionCompensator):  # fmt: skip
         with pytest.raises(ValueError, match=r"^k_e must be the electrical angular gain k_e = "
-                           r"2K, a number in \(0, 1\).*got 55\.4 \(a gain in percent\?"):  # fmt: skip
+                           r"2K, a number in \(0, 1\].*got 55\.4 \(a gain in percent\?"):  # fmt: skip
             cls(k_e=55.4)
         with pytest.raises(ValueError, match=r"^k_e must be .*got 0$"):
             cls(k_e=0.0)

@@ -77,6 +77,41 @@ def test_bad_simulate_arguments():
         hg.Gyro(resonator(), g_sensitivity=[1.0, 2.0])
 
 
+def test_impossible_profiles_and_grids_are_refused_in_one_line():
+    """Audit: a 1e5-°/s table, a 1e9-s profile, a 1e9° wave, a rate list one short of the
+    knots (numpy's broadcast error), a dt_out longer than the run (its start alone) and
+    k_e = 55.4 (a percentage) were taken or failed without naming the field."""
+    for build, match in [
+        (lambda: hg.Profile.constant_rate(1e5, 1.0), r"^Profile.rate \[°/s\] = 100000 .* 3600 °/s"),
+        (lambda: hg.Profile.static(1e9), r"^Profile's length \[s\] = 1e\+09"),
+        (lambda: hg.Profile.static(10.0, wave_angle0_deg=1e9), r"^Profile.wave_angle0 \[°\]"),
+        (lambda: hg.Profile.piecewise([0.0, 10.0, 20.0], [0.0, 1.0], 20.0),
+         r"^Profile.piecewise: rate_dps must be one value or one per knot of t_s, shape \(3,\)"),
+        (lambda: resonator(k_e=55.4), r"^Resonator.k_e must be .*percent"),
+        (lambda: hg.simulate(hg.presets.ideal(resonator()), hg.Profile.static(10.0), dt_out=30.0),
+         r"^dt_out = 30 s is longer than the profile \(10 s\)"),
+    ]:  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            build()
+    resonator(k_e=1.0)  # a Foucault pendulum's gain: allowed
+
+
+def test_a_long_fast_run_gets_the_steps_it_needs():
+    """The averaged solver's step limit follows the run (`default_max_steps`): an hour at
+    100 °/s takes ≈ 7.7·10⁴ steps and stopped at the old fixed limit of 2¹⁶ (at t ≈ 3 050 s);
+    a 3-min run keeps 2¹⁶ (its program is the one every short run shares)."""
+    from hrgjax.simulate import MAX_STEPS, default_max_steps
+
+    gyro = hg.presets.tvg3_like(noise=False, temperature_laws=False)
+    fast = hg.Profile.constant_rate(100.0, 3600.0)
+    assert default_max_steps(gyro, hg.Profile.constant_rate(5.0, 180.0), "averaged") == 2**16
+    assert default_max_steps(gyro, fast, "averaged") >= 4 * 7.7e4
+    assert default_max_steps(gyro, fast, "full") == MAX_STEPS["full"]
+    rec = hg.simulate(gyro, fast, dt_out=3600.0)
+    k_e = float(rec.k_e[-1])  # −k_e Ω, and the drift's few °/h beside 2·10⁵° of precession
+    assert float(rec.wave_angle[-1]) == pytest.approx(-k_e * np.radians(100.0) * 3600.0, rel=1e-4)
+
+
 def test_max_steps_raises_not_nan():
     gyro = hg.Gyro(resonator())
     with pytest.raises(RuntimeError, match="maximum number of solver steps") as err:

@@ -150,14 +150,14 @@ class RateWindows(eqx.Module):
 
 def check_k_e(k_e, name: str = "k_e") -> float:
     """`k_e` as a float, or a one-line error naming `name`: `TypeError` for a non-number,
-    `ValueError` outside [`K_E_RANGE`][hrgjax.units.K_E_RANGE], (0, 1)."""
+    `ValueError` outside [`K_E_RANGE`][hrgjax.units.K_E_RANGE], (0, 1]."""
     try:
         value = np.asarray(k_e)
     except Exception:  # a tracer under jit: nothing to check here
         return k_e
     if isinstance(k_e, bool) or value.shape != () or value.dtype.kind not in "iuf":
         raise TypeError(
-            f"{name} must be a number, the electrical angular gain 2K in (0, 1) (≈ 0.554); "
+            f"{name} must be a number, the electrical angular gain 2K in (0, 1] (≈ 0.554); "
             f"got {type(k_e).__name__}"
         )
     problem = k_e_problem(float(value))
@@ -230,7 +230,7 @@ def reduce(
 
     **Returns:** [`RateWindows`][hrgjax.calibration.RateWindows].
 
-    **Raises:** `ValueError` for `k_e` outside (0, 1), `batches < 3`, `window_s ≤ 0`, a run
+    **Raises:** `ValueError` for `k_e` outside (0, 1], `batches < 3`, `window_s ≤ 0`, a run
     too short, or
     force-to-rebalance or virtual-precession data
     ([`check_whole_angle`][hrgjax.calibration.reduce.check_whole_angle]).

@@ -237,7 +237,7 @@ def load_data(path, allow_extra):
 
 
 def K_E(text):  # noqa: N802 (an argparse type, named like the others)
-    """`--k-e`: the electrical angular gain 2K of the data, a number in (0, 1)."""
+    """`--k-e`: the electrical angular gain 2K of the data, a number in (0, 1]."""
     from ..units import k_e_problem
 
     try:

@@ -264,7 +264,7 @@ def _calibrate_parser(sub):
     p.add_argument("--json", default=None, help="JSON export (None: beside --out)")
     p.add_argument(
         "--k-e", type=K_E, default=K_E_NOMINAL,
-        help="nominal electrical angular gain k_e = 2K of the data, in (0, 1)",
+        help="nominal electrical angular gain k_e = 2K of the data, in (0, 1]",
     )  # fmt: skip
     p.add_argument(
         "--window",

@@ -68,7 +68,7 @@ def _discover_parser(sub):
         "--k-e",
         type=K_E,
         default=K_E_NOMINAL,
-        help="nominal electrical angular gain k_e = 2K, in (0, 1) (default 0.554)",
+        help="nominal electrical angular gain k_e = 2K, in (0, 1] (default 0.554)",
     )
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     return p

@@ -112,6 +112,13 @@ class Resonator(eqx.Module):
                 from .._checks import check_finite
 
                 check_finite(f"Resonator.{name}", value)
+        if not isinstance(self.k_e, TemperatureLaw) and is_concrete(self.k_e):
+            from ..units import k_e_problem
+
+            for value in np.ravel(np.asarray(self.k_e, dtype=float)):
+                problem = k_e_problem(float(value))
+                if problem:
+                    raise ValueError(f"Resonator.k_e must be {problem}")
 
     def at(self, temperature_c) -> Resonator:
         """This resonator with every temperature law evaluated at `temperature_c` [°C].
