@@ -194,7 +194,14 @@ class Discovery:
         user = self.parameters
         lines = [f"verdict: {self.verdict}"]
         if "angular_gain" in user:
-            lines.append(f"angular gain k_e = {_number(user['angular_gain']['k_e'])}")
+            k_e = user["angular_gain"]["k_e"]
+            sigma = k_e["sigma"]
+            if sigma is not None and not (math.isfinite(sigma) and sigma < abs(k_e["value"])):
+                # a σ as large as the value or infinite: no rotation run turns the wave
+                lines.append("angular gain k_e: not identified by these data (no rotation "
+                             "runs to turn the wave by it)")  # fmt: skip
+            else:
+                lines.append(f"angular gain k_e = {_number(k_e)}")
         rate, readout = [], []
         nominal = [n for n in NOMINAL if n in user]
         for name in nominal + [n for n in user if n not in nominal]:
