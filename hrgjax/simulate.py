@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import inspect
-import math
 import numbers
 import sys
 import types
@@ -15,10 +14,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import plausible
-from ._checks import concrete_value, is_concrete
+from ._checks import is_concrete
 from ._compiled import Check, device, program, single_run_entry
+from ._cost import MAX_STEPS as MAX_STEPS
+from ._cost import default_max_steps as default_max_steps
 from ._cost import report as report_cost
-from ._cost import steps_per_s
 from ._x64 import require_x64
 from .gyro import Gyro
 from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
@@ -109,29 +109,6 @@ def _is_number(x) -> bool:
     if isinstance(x, bool) or not is_concrete(x) or np.ndim(x) != 0:
         return False
     return np.asarray(x).dtype.kind in "iuf"
-
-
-MAX_STEPS = {"averaged": 2**16, "full": 2**20}
-"""`simulate`'s solver step limit by model when `max_steps` is not given, for runs whose
-expected steps fit 4 times over (`hrgjax.simulate.default_max_steps`)."""
-
-
-def default_max_steps(gyro, profile, model: str) -> int:
-    """The step limit `simulate` gives the adaptive solver: `MAX_STEPS[model]`, or for the
-    averaged model on a concrete profile that needs more, the power of two ≥ 4 × its
-    expected steps (`hrgjax._cost.steps_per_s` at the profile's largest
-    |k_e Ω|, k_e taken as 1 where it is traced or a temperature law): a long or fast run
-    (an hour at 100 °/s is ≈ 7.7·10⁴ steps, a day at rest ≈ 10⁵) is solved, not stopped at
-    the limit. A power of two, so that runs of similar length share one program."""
-    base = MAX_STEPS.get(model, MAX_STEPS["full"])
-    t, rate = concrete_value(profile.t), concrete_value(profile.rate)
-    if model != "averaged" or t is None or rate is None or t.size < 2:
-        return base
-    k_e = gyro.resonator.k_e
-    k_e = None if isinstance(k_e, TemperatureLaw) else concrete_value(k_e)
-    k = 1.0 if k_e is None else float(np.max(np.abs(k_e)))
-    need = 4.0 * float(t[-1] - t[0]) * float(steps_per_s(k * np.max(np.abs(rate))))
-    return base if need <= base else int(2 ** math.ceil(math.log2(need)))
 
 
 def _check_options(o) -> None:
