@@ -111,6 +111,15 @@ def _is_number(x) -> bool:
     return np.asarray(x).dtype.kind in "iuf"
 
 
+def _is_key(k) -> bool:
+    """A typed PRNG key (`jax.random.key`) or a legacy uint32 key array (`PRNGKey`), traced
+    or not."""
+    dtype = getattr(k, "dtype", None)
+    if dtype is None:
+        return False
+    return jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key) or dtype == jnp.uint32
+
+
 def _check_options(o) -> None:
     """`simulate`'s numeric settings (concrete ones; a traced value passes unchecked)."""
     for name in ("rtol", "atol"):
@@ -517,6 +526,10 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         raise ValueError(
             "this gyro has noise: pass key=jax.random.key(…), or use gyro.without_noise()"
         )
+    for name, k in (("key", key), ("bias_key", bias_key)):
+        if k is not None and not _is_key(k):
+            raise TypeError(f"{name} must be a JAX PRNG key, e.g. jax.random.key(0); got "
+                            f"{type(k).__name__} {k!r}"[:160])  # fmt: skip
     _check_options(o)
     _check_laws(gyro, profile)
     if ts is None:

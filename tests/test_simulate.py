@@ -71,6 +71,10 @@ def test_bad_simulate_arguments():
         hg.simulate(gyro, {"t": [0, 1]})
     with pytest.raises(ValueError, match="key"):
         hg.simulate(hg.presets.tvg3_like(), prof)
+    with pytest.raises(
+        TypeError, match=r"^key must be a JAX PRNG key, e.g. jax.random.key\(0\); got int"
+    ):
+        hg.simulate(hg.presets.tvg3_like(), prof, key=0)
     with pytest.raises(ValueError, match="drive"):
         hg.Control(drive="magic")
     with pytest.raises(ValueError, match="g_sensitivity"):
