@@ -122,19 +122,20 @@ expected steps fit 4 times over (`default_max_steps`)."""
 
 def default_max_steps(gyro, profile, model: str) -> int:
     """The step limit `simulate` gives the adaptive solver: `MAX_STEPS[model]`, or for the
-    averaged model on a concrete profile that needs more, the power of two ≥ 4 × its
-    expected steps (`steps_per_s` at the profile's largest
+    averaged model on a concrete profile (or batch of profiles: the most any member needs)
+    that needs more, the power of two ≥ 4 × its expected steps (`steps_per_s` at the profile's largest
     |k_e Ω|, k_e taken as 1 where it is traced or a temperature law): a long or fast run
     (an hour at 100 °/s is ≈ 7.7·10⁴ steps, a day at rest ≈ 10⁵) is solved, not stopped at
     the limit. A power of two, so that runs of similar length share one program."""
     base = MAX_STEPS.get(model, MAX_STEPS["full"])
     t, rate = concrete_value(profile.t), concrete_value(profile.rate)
-    if model != "averaged" or t is None or rate is None or t.size < 2:
+    if model != "averaged" or t is None or rate is None or t.shape[-1] < 2:
         return base
     from .resonator.params import TemperatureLaw
 
     k_e = gyro.resonator.k_e
     k_e = None if isinstance(k_e, TemperatureLaw) else concrete_value(k_e)
     k = 1.0 if k_e is None else float(np.max(np.abs(k_e)))
-    need = 4.0 * float(t[-1] - t[0]) * float(steps_per_s(k * np.max(np.abs(rate))))
+    span = float(np.max(t[..., -1] - t[..., 0]))  # a batch of profiles: its longest
+    need = 4.0 * span * float(steps_per_s(k * np.max(np.abs(rate))))
     return base if need <= base else int(2 ** math.ceil(math.log2(need)))

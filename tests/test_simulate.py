@@ -111,6 +111,15 @@ def test_a_long_fast_run_gets_the_steps_it_needs():
     assert default_max_steps(gyro, hg.Profile.constant_rate(5.0, 180.0), "averaged") == 2**16
     assert default_max_steps(gyro, fast, "averaged") >= 4 * 7.7e4
     assert default_max_steps(gyro, fast, "full") == MAX_STEPS["full"]
+    # a batch of profiles (a plan's chunk: concrete outside its program) gets its longest
+    # member's: a 4-h rotation at 5 °/s in a plan file stopped at the fixed limit
+    batch = jax.tree_util.tree_map(lambda *x: np.stack(x), hg.Profile.constant_rate(5.0, 60.0),
+                                   hg.Profile.constant_rate(5.0, 14400.0))  # fmt: skip
+    assert (
+        default_max_steps(gyro, batch, "averaged")
+        == default_max_steps(gyro, hg.Profile.constant_rate(5.0, 14400.0), "averaged")
+        > MAX_STEPS["averaged"]
+    )
     rec = hg.simulate(gyro, fast, dt_out=3600.0)
     k_e = float(rec.k_e[-1])  # −k_e Ω, and the drift's few °/h beside 2·10⁵° of precession
     assert float(rec.wave_angle[-1]) == pytest.approx(-k_e * np.radians(100.0) * 3600.0, rel=1e-4)

@@ -13,6 +13,7 @@ import numpy as np
 
 from .. import _upstream
 from .._compiled import Check, device, program
+from .._cost import MAX_STEPS, default_max_steps
 from .._progress import bar
 from ..data import MeasuredData
 from ..gyro import Gyro
@@ -42,9 +43,10 @@ _CHUNK_WHAT = "run_plan (simulating a plan point)"
 
 
 @program(check=_ChunkCheck(_CHUNK_WHAT, result_index=1))
-def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model):
+def _simulate_chunk(gyro, profiles, keys, bias_key, ts, model, max_steps=None):
     def one(p, k):
-        rec, _, result = simulate_with_stats(gyro, p, model, key=k, bias_key=bias_key, ts=ts)
+        rec, _, result = simulate_with_stats(gyro, p, model, key=k, bias_key=bias_key, ts=ts,
+                                             max_steps=max_steps)  # fmt: skip
         return rec, result
 
     if keys is None:
@@ -134,10 +136,13 @@ def simulate_runs(
                 k = None
                 if data is not None:
                     k = jax.random.wrap_key_data(device(data[take]), impl=impl)
+                batch = profiles(take, length_s)
+                # the solver's step limit for the batch's longest member (its profiles are
+                # concrete here, traced inside); None keeps the short runs' shared program
+                steps = default_max_steps(gyro, batch, model)
+                steps = None if steps == MAX_STEPS.get(model) else steps
                 try:
-                    rec, _ = _simulate_chunk(
-                        gyro, profiles(take, length_s), k, bias_key, ts_device, model
-                    )
+                    rec, _ = _simulate_chunk(gyro, batch, k, bias_key, ts_device, model, steps)
                 except RuntimeError as err:
                     raise RuntimeError(failure(take, str(err))) from None
                 cols = rec.to_data().columns  # consecutive runs of len(ts) rows each
