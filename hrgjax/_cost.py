@@ -123,10 +123,11 @@ expected steps fit 4 times over (`default_max_steps`)."""
 def default_max_steps(gyro, profile, model: str) -> int:
     """The step limit `simulate` gives the adaptive solver: `MAX_STEPS[model]`, or for the
     averaged model on a concrete profile (or batch of profiles: the most any member needs)
-    that needs more, the power of two ≥ 4 × its expected steps (`steps_per_s` at the profile's largest
-    |k_e Ω|, k_e taken as 1 where it is traced or a temperature law): a long or fast run
-    (an hour at 100 °/s is ≈ 7.7·10⁴ steps, a day at rest ≈ 10⁵) is solved, not stopped at
-    the limit. A power of two, so that runs of similar length share one program."""
+    that needs more, the power of two ≥ 4 × its expected steps (`steps_per_s` at the
+    profile's largest |k_e Ω|, k_e taken as 1 where it is traced or a temperature law): a
+    long or fast run (an hour at 100 °/s is ≈ 7.7·10⁴ steps, a day at rest ≈ 10⁵) is
+    solved, not stopped at the limit. A power of two, so that runs of similar length share
+    one program."""
     base = MAX_STEPS.get(model, MAX_STEPS["full"])
     t, rate = concrete_value(profile.t), concrete_value(profile.rate)
     if model != "averaged" or t is None or rate is None or t.shape[-1] < 2:
