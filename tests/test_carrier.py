@@ -46,6 +46,9 @@ def test_free_resonator_converges_at_eighth_order():
     ]  # fmt: skip
     slope = -np.polyfit(np.log(per_cycle), np.log(err), 1)[0]
     assert 7.0 < slope < 10.0, (err, slope)  # Dormand–Prince's 8th-order solution
+    # 2 steps a cycle damp the carrier itself (87 % of the amplitude lost): refused
+    with pytest.raises(ValueError, match=r"^fixed_step = .* is 2 steps per carrier cycle"):
+        hg.simulate(FREE, prof, model="full", ts=ts, fixed_step=1 / (F0 * 2))
     # and is as accurate as adaptive stepping at rtol 1e-8
     adaptive = adaptive(1e-8, 1e-10)  # simulate's default tolerances
     assert err[1] < 2.0 * max(_errors(adaptive, ref), 1e-9), (err, _errors(adaptive, ref))
