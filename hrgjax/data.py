@@ -83,23 +83,20 @@ class MeasuredData:
         given = "table_angle_deg" in cols
         # the wave turns against the table where it runs free: not where force-to-rebalance
         # holds it, nor where a commanded precession moves it too
-        steered = np.zeros(len(self), bool)
-        if "rebalance_rate_dps" in cols:
-            steered |= cols["rebalance_on"] != 0 if "rebalance_on" in cols else True
         precession = cols.get("precession_dps", np.zeros(len(self)))
-        steered |= precession != 0.0
+        steered = precession != 0.0
+        if "rebalance_rate_dps" in cols:  # held wherever rebalance_on is absent or 1
+            steered |= cols.get("rebalance_on", np.ones(len(self))) != 0
         free = ~np.isin(self.run, np.unique(self.run[steered]))
-        if (turning & free).any():  # the table angle (a per-run integral) where the table turns
+        table = self.table_angle_deg  # the column, or the rate's per-run integral (once)
+        if (turning & free).any():
             moving = np.isin(self.run, np.unique(self.run[turning])) & free
             if given:
-                plausible.check_table_angle(cols["table_angle_deg"], self._rate_integral(),
-                                            self.run, moving)  # fmt: skip
-            plausible.check_wave_angle_units(cols["wave_angle_deg"], self.table_angle_deg,
-                                             self.run, moving, K_E_NOMINAL,
-                                             integrated=not given)  # fmt: skip
-        plausible.check_wave_angle_jumps(cols["wave_angle_deg"], self.table_angle_deg,
-                                         cols["time_s"], self.run, K_E_NOMINAL,
-                                         precession)  # fmt: skip
+                plausible.check_table_angle(table, self._rate_integral(), self.run, moving)
+            plausible.check_wave_angle_units(cols["wave_angle_deg"], table, self.run, moving,
+                                             K_E_NOMINAL, integrated=not given)  # fmt: skip
+        plausible.check_wave_angle_jumps(cols["wave_angle_deg"], table, cols["time_s"],
+                                         self.run, K_E_NOMINAL, precession)  # fmt: skip
 
     @property
     def columns(self) -> dict[str, np.ndarray]:

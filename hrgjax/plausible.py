@@ -34,12 +34,12 @@ RANGES: dict[str, tuple[float, float, str]] = {
 }
 """(low, high, unit) of each quantity: temperatures an HRG is built and tested for (−100 …
 +150 °C; −40 … +60 °C is the seed's bench), table rates (±10 turns/s), wave angles (±1e7°:
-an angle that has turned 27 000 times is a unit error), the length of one run or
-segment (30 days), the wave angle's step between adjacent samples of a run beyond what the
-table and a commanded precession move it (5° plus 100 °/h of drift over the time between
-them: the wave drifts at °/h, Earth's rate included, so a step of degrees between close
-samples is two runs under one id or a glitch), a vehicle's speed (10 km/s, above low-orbit speed: a speed in km/h or
-mm/s read as m/s is refused) and the median specific force |Δv|/Δt over a record of
+an angle that has turned 27 000 times is a unit error), the length of one run or segment
+(30 days), the wave angle's step between adjacent samples of a run beyond what the table and
+a commanded precession move it (5° plus 100 °/h of drift over the time between them: the
+wave drifts at °/h, Earth's rate included, so a step of degrees between close samples is two
+runs under one id or a glitch), a vehicle's speed (10 km/s, above low-orbit speed: a speed in
+km/h or mm/s read as m/s is refused) and the median specific force |Δv|/Δt over a record of
 accelerometer increments (5 g: a navigating vehicle spends most of its time near 1 g, a 60°
 banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s])."""
 

@@ -36,6 +36,10 @@ shell or ring, and k_e = 1 is a Foucault pendulum (PHYSICS.md §1) — a k_e of 
 gain in percent."""
 
 
+K_E_WANTED = "the electrical angular gain k_e = 2K, a number in (0, 1] (≈ 0.554)"
+"""What a `k_e` argument must be, as the errors say it."""
+
+
 def k_e_problem(k_e: float) -> str | None:
     """What is wrong with a nominal angular gain `k_e` (a float), or None: the one check
     behind every `k_e` argument and the CLI's `--k-e` (`K_E_RANGE`)."""
@@ -43,7 +47,7 @@ def k_e_problem(k_e: float) -> str | None:
     if math.isfinite(k_e) and low < k_e <= high:
         return None
     hint = " (a gain in percent? give 0.554, not 55.4)" if 1.0 < k_e <= 100.0 else ""
-    return f"the electrical angular gain k_e = 2K, a number in (0, 1] (≈ 0.554); got {k_e:g}{hint}"
+    return f"{K_E_WANTED}; got {k_e:g}{hint}"
 
 
 WINDOW_S = 3.0

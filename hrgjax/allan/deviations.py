@@ -58,14 +58,14 @@ def _factor(m, name: str) -> int:
 
 
 def _check_inputs(name, y, tau0, tau_name="tau0"):
-    """The sample interval a positive finite number of seconds and the samples finite, where
-    they are concrete (a traced call passes); NaN samples are gaps only to
-    [`hrgjax.allan.deviation`][hrgjax.allan.deviation]."""
+    """The sample interval a positive finite number of seconds, and host samples (a list or
+    NumPy array; a JAX array is not copied back to be read) finite: NaN samples are gaps only
+    to [`hrgjax.allan.deviation`][hrgjax.allan.deviation]. Traced values pass."""
     step = concrete_value(tau0)
     if step is not None and not (np.ndim(step) == 0 and np.isfinite(step) and step > 0):
         raise ValueError(f"{name}: {tau_name} must be the sample interval, a number > 0 [s]; "
                          f"got {tau0!r}")  # fmt: skip
-    values = concrete_value(y)
+    values = None if isinstance(y, jax.Array) else concrete_value(y)
     if values is not None and np.asarray(values).dtype.kind in "fc":
         bad = np.flatnonzero(~np.isfinite(np.ravel(values)))
         if bad.size:
@@ -182,7 +182,8 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
     **Returns:** `(taus [s], deviations [rate unit])` as arrays.
 
     **Raises:** `ValueError` for an unknown kind, an `m` the data are too short for, a `dt`
-    that is not a positive number, or samples that are not finite (gaps: `hg.allan.deviation`).
+    that is not a positive number, or host samples (a list, a NumPy array) that are not
+    finite (gaps: `hg.allan.deviation`).
     """
     if kind not in _KINDS:
         raise ValueError(f"kind must be one of {list(_KINDS)}; got {kind!r}")

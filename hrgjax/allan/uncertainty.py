@@ -292,15 +292,14 @@ def check_rate_has_noise(rate):
     phase leaves round-off (3e-15 of the phase's size at 10³ constant samples, 6e-14 at
     2·10⁴, 3e-12 at 10⁶) above the phase test's floor."""
     rate = np.asarray(rate, dtype=float)
-    t = np.flatnonzero(np.isfinite(rate)).astype(float)
-    v = rate[np.isfinite(rate)]
-    if v.size < 3:
+    present = np.isfinite(rate)
+    if present.sum() < 3:
         return
+    t, v = np.flatnonzero(present).astype(float), rate[present]
+    size = np.max(np.abs(v))
     t, v = t - t.mean(), v - v.mean()
     v = v - t * (np.dot(t, v) / np.dot(t, t))
-    if not np.sqrt(np.mean(v**2)) > 64 * np.finfo(float).eps * np.max(
-        np.abs(rate[np.isfinite(rate)])
-    ):
+    if not np.sqrt(np.mean(v**2)) > 64 * np.finfo(float).eps * size:
         _no_noise()
 
 

@@ -27,8 +27,8 @@ import numpy as np
 
 from ..data import MeasuredData
 from ..units import K_E_NOMINAL as K_E_NOMINAL
+from ..units import K_E_WANTED, group_temperatures, k_e_problem
 from ..units import WINDOW_S as WINDOW_S
-from ..units import group_temperatures, k_e_problem
 
 RAMP_WINDOW_S = 300.0
 """Window of a ramp (table at rest, temperature moving) in the physical fit and the MLP's
@@ -156,10 +156,7 @@ def check_k_e(k_e, name: str = "k_e") -> float:
     except Exception:  # a tracer under jit: nothing to check here
         return k_e
     if isinstance(k_e, bool) or value.shape != () or value.dtype.kind not in "iuf":
-        raise TypeError(
-            f"{name} must be a number, the electrical angular gain 2K in (0, 1] (≈ 0.554); "
-            f"got {type(k_e).__name__}"
-        )
+        raise TypeError(f"{name} must be a number, {K_E_WANTED}; got {type(k_e).__name__}")
     problem = k_e_problem(float(value))
     if problem:
         raise ValueError(f"{name} must be {problem}")

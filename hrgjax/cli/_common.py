@@ -238,13 +238,12 @@ def load_data(path, allow_extra):
 
 def K_E(text):  # noqa: N802 (an argparse type, named like the others)
     """`--k-e`: the electrical angular gain 2K of the data, a number in (0, 1]."""
-    from ..units import k_e_problem
+    from ..units import K_E_WANTED, k_e_problem
 
     try:
         value = float(text)
     except ValueError:
-        wanted = k_e_problem(math.nan).rsplit("; got", 1)[0]
-        raise argparse.ArgumentTypeError(f"expected {wanted}; got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected {K_E_WANTED}; got {text!r}") from None
     problem = k_e_problem(value)
     if problem:
         raise argparse.ArgumentTypeError(f"expected {problem}")
