@@ -112,8 +112,7 @@ def _is_number(x) -> bool:
 
 
 def _is_key(k) -> bool:
-    """A typed PRNG key (`jax.random.key`) or a legacy uint32 key array (`PRNGKey`), traced
-    or not."""
+    """A typed PRNG key (`jax.random.key`) or a legacy uint32 one (`PRNGKey`), traced or not."""
     dtype = getattr(k, "dtype", None)
     if dtype is None:
         return False
@@ -153,12 +152,20 @@ def _check_options(o) -> None:
 _LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by path
     "resonator.omega": ("> 0", "rad/s"),
     "resonator.tau": ("> 0", "s"),
+    "resonator.k_e": ("in (0, 1]", "(the electrical angular gain 2K, ≈ 0.554)"),
     "drift_terms.lag_time": ("> 0", "s"),
     "drift_terms.warmup_time": ("> 0", "s"),
     "noise.correlation_time": ("> 0", "s"),
     "control.rebalance_limit": ("> 0", "readout units · rad²/s²"),
     **{f"noise.{n}": (">= 0", NOISE_UNITS[n]) for n in NOISE_NONNEGATIVE},
 }
+
+
+def _obeys(rule: str, value):
+    """Where `value` keeps `rule` of `_LAW_LIMITS` ("finite" alone: everywhere)."""
+    v = np.asarray(value, dtype=float)
+    rules = {"> 0": v > 0, ">= 0": v >= 0, "in (0, 1]": (v > 0) & (v <= 1)}
+    return rules.get(rule, np.full(v.shape, True))
 
 
 def _check_laws(gyro, profile) -> None:
@@ -177,8 +184,7 @@ def _check_laws(gyro, profile) -> None:
         if plain and np.asarray(law).dtype.kind == "f":
             # a plain value, checked here too: eqx.tree_at (as sweeps do) skips __init__
             value, (rule, unit) = float(np.asarray(law)), _LAW_LIMITS.get(name, ("finite", ""))
-            ok = np.isfinite(value) and {"> 0": value > 0, ">= 0": value >= 0}.get(rule, True)
-            if not ok:
+            if not (np.isfinite(value) and _obeys(rule, value)):
                 raise ValueError(f"gyro.{name} = {value:g} {unit}; it must be {rule}".replace(
                     "  ", " "))  # fmt: skip
             continue
@@ -189,11 +195,7 @@ def _check_laws(gyro, profile) -> None:
         with np.errstate(over="ignore", invalid="ignore"):
             value = law(grid, xp=np)
         rule, unit = _LAW_LIMITS.get(name, ("finite", ""))
-        bad = ~np.isfinite(value)
-        if rule == "> 0":
-            bad |= value <= 0
-        elif rule == ">= 0":
-            bad |= value < 0
+        bad = ~np.isfinite(value) | ~_obeys(rule, value)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(

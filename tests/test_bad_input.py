@@ -526,6 +526,7 @@ def test_values_swapped_in_after_construction_are_checked_where_simulate_starts(
         (lambda g: g.noise.angle_random_walk, -1e-6, r"gyro.noise.angle_random_walk = -1e-06"),
         (lambda g: g.noise.angle_white, np.nan, r"gyro.noise.angle_white = nan"),
         (lambda g: g.resonator.k_e, np.nan, r"gyro.resonator.k_e|finite"),
+        (lambda g: g.resonator.k_e, 55.4, r"gyro.resonator.k_e = 55.4 .*must be in \(0, 1\]"),
     ):
         with pytest.raises(ValueError, match=match):
             hg.simulate(eqx.tree_at(where, g, value), prof, key=jax.random.key(0), dt_out=1.0)
