@@ -41,6 +41,30 @@ def check_finite(name: str, x):
     return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{name} must be finite (found NaN or inf)")
 
 
+def check_finite_leaves(name: str, tree):
+    """`tree` with its traced floating leaves checked finite by one `eqx.branched_error_if`
+    whose message names the first bad leaf (`gyro.resonator.omega must be finite …`).
+
+    A module built under `jit` or `vmap` cannot keep the `eqx.error_if`s of its
+    `__check_init__` (their results are discarded), so without this a NaN in a traced
+    parameter or profile shows up far downstream (a solver's "maximum number of steps").
+    Concrete leaves pass unchecked: they were checked where they were built."""
+    flat = jax.tree_util.tree_flatten_with_path(tree)[0]
+    traced = [
+        (path, x)
+        for path, x in flat
+        if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.floating) and not is_concrete(x)
+    ]
+    if not traced:
+        return tree
+    ok = jnp.stack([jnp.all(jnp.isfinite(x)) for _, x in traced])
+    messages = [
+        f"{name}{jax.tree_util.keystr(path)} must be finite (found NaN or inf)"
+        for path, _ in traced
+    ]
+    return eqx.branched_error_if(tree, ~jnp.all(ok), jnp.argmin(ok), messages)
+
+
 def check_nonnegative(name: str, x, unit: str = ""):
     """Raise if any element of x is negative or not finite (concrete values only: a traced
     value passes unchecked)."""

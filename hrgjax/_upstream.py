@@ -9,6 +9,7 @@ versions and names the attribute that moved when one fails. Nothing else in hrgj
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 
 import equinox as eqx
@@ -148,3 +149,53 @@ def result_member(result, index: int):
     """The item of member `index` (flat, C order) of a batched enumeration item, a host
     value (`enumeration[item]` gives its message)."""
     return jax.tree.map(lambda codes: np.asarray(np.asarray(codes).ravel()[index]), result)
+
+
+def _runtime_errors() -> tuple[type, ...]:
+    if hasattr(jax.errors, "JaxRuntimeError"):
+        return (jax.errors.JaxRuntimeError,)
+    try:  # pragma: no cover - JAX before `jax.errors.JaxRuntimeError`: jaxlib's own
+        from jaxlib.xla_extension import XlaRuntimeError
+    except ImportError:  # pragma: no cover
+        return (RuntimeError,)
+    return (XlaRuntimeError,)
+
+
+RUNTIME_ERRORS = _runtime_errors()
+"""What a compiled program raises when a check inside it fails at run time (an
+`eqx.error_if` under `jax.jit`): `jax.errors.JaxRuntimeError`, or jaxlib's
+`XlaRuntimeError` where JAX has no public name for it."""
+
+
+def failed_check_message(err: BaseException) -> str | None:
+    """The message of the `eqx.error_if` whose failure `err` (one of `RUNTIME_ERRORS`)
+    reports, or None when `err` is some other run-time failure.
+
+    Upstream internal: the text equinox puts into the error (its exception class name,
+    `EquinoxRuntimeError`, then `: ` and the message, inside JAX's callback traceback)."""
+    import re
+
+    found = re.findall(r"EquinoxRuntimeError: (.+)", str(err))
+    return found[-1].strip() if found else None
+
+
+class _CheckFailures(logging.Filter):
+    def filter(self, record):  # keep every record but a failed equinox check's
+        kind = record.exc_info[0] if record.exc_info else None
+        return kind is None or "EquinoxRuntimeError" not in kind.__name__
+
+
+@contextlib.contextmanager
+def quiet_failed_checks():
+    """While inside, JAX does not log the traceback of a failed `eqx.error_if` in a compiled
+    program (the caller raises its message as one line); other callback failures are logged
+    as before.
+
+    Upstream internal: the logger of `jax._src.callback`, which logs "jax.pure_callback
+    failed" with the traceback before the program raises."""
+    log, quiet = logging.getLogger("jax._src.callback"), _CheckFailures()
+    log.addFilter(quiet)
+    try:
+        yield
+    finally:
+        log.removeFilter(quiet)

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _cost
+from . import _cost, _upstream
 
 _BATCHED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _PROBES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -73,6 +73,9 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
             raise ValueError(
                 f"sweep grid {name!r} must be a non-empty 1-D array; got shape {g.shape}"
             )
+        if jnp.issubdtype(g.dtype, jnp.inexact) and not bool(jnp.all(jnp.isfinite(g))):
+            i = int(np.flatnonzero(~np.isfinite(np.asarray(g)))[0])
+            raise ValueError(f"sweep grid {name!r} must be finite; {name}[{i}] is {g[i]}")
         arrays.append(g)
     shape = tuple(a.shape[0] for a in arrays)
     mesh = jnp.meshgrid(*arrays, indexing="ij")
@@ -231,14 +234,27 @@ def _batch(call, flat, devices):
     """`call` on one flat batch, sharded over `devices` when there are several (the result
     may be padded at the end)."""
     if len(devices) == 1:
-        return call(flat)
+        return _run(call, flat)
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     total = next(iter(flat.values())).shape[0]
     flat = _pad(flat, (-total) % len(devices))
     sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
     flat = jax.device_put(flat, sharding)
-    return call(flat)
+    return _run(call, flat)
+
+
+def _run(call, flat):
+    """`call(flat)`, finished; a check that fails inside it (`eqx.error_if`: a NaN in a
+    traced parameter, a solver out of steps) raised as one line, not JAX's callback trace."""
+    try:
+        with _upstream.quiet_failed_checks():
+            return jax.block_until_ready(call(flat))
+    except _upstream.RUNTIME_ERRORS as err:
+        message = _upstream.failed_check_message(err)
+        if message is None:
+            raise
+        raise RuntimeError(f"sweep: at one or more grid points, {message}") from None
 
 
 def _progress(it, show: bool):

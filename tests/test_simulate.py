@@ -2,6 +2,7 @@
 naming the field; a solver that runs out of steps, a NaN in a traced profile and float32
 mode raise rather than return NaN; temperature laws vmap."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -144,6 +145,13 @@ def test_traced_nan_in_profile_raises():
 
     with pytest.raises(Exception, match="Profile.rate must be finite"):
         jax.vmap(run)(jnp.array([jnp.nan]))
+
+    def run_tau(tau):  # under jit a module's own checks are dropped; simulate's stay
+        slow = eqx.tree_at(lambda g: g.resonator.tau, gyro, tau)
+        return hg.simulate(slow, hg.Profile.constant_rate(1.0, 1.0), dt_out=0.5).wave_angle
+
+    with pytest.raises(Exception, match=r"gyro\.resonator\.tau must be finite"):
+        jax.block_until_ready(jax.jit(run_tau)(jnp.nan))
 
 
 def test_float32_mode_raises():

@@ -170,6 +170,24 @@ def test_chunked_sweep_equals_one_batch_and_reports_progress(capsys):
         hg.sweep(f, a=a, b=b, chunk_size=0)
 
 
+def test_a_bad_grid_or_a_failed_check_inside_is_one_line(caplog):
+    """A grid with NaN is refused before anything runs; a check that fails inside `fn` (an
+    `eqx.error_if`, as `simulate` puts on traced parameters) is raised as one line, and JAX
+    logs no callback traceback for it."""
+    import equinox as eqx
+
+    def f(a):
+        return eqx.error_if(a, a > 1.0, "a must be at most 1")
+
+    with pytest.raises(ValueError, match=r"sweep grid 'a' must be finite; a\[1\] is nan"):
+        hg.sweep(f, a=jnp.array([0.0, jnp.nan]))
+    with caplog.at_level("ERROR"), pytest.raises(RuntimeError) as err:
+        hg.sweep(f, a=jnp.array([0.0, 2.0]))
+    assert str(err.value) == "sweep: at one or more grid points, a must be at most 1"
+    assert not [r for r in caplog.records if r.name.startswith("jax")]
+    np.testing.assert_array_equal(hg.sweep(f, a=jnp.array([0.0, 0.5])), [0.0, 0.5])
+
+
 def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
     """Members of very different cost (rate innermost, shuffled) are sorted by the solver
     steps `simulate` is estimated to take and chunked; results come back in the grid's order,

@@ -136,3 +136,31 @@ def test_result_codes_agree_with_the_enumeration_comparisons(enumeration):
         "equinox.Enumeration.__getitem__", "a member's message is not its item's"
     )
     assert enumeration[_upstream.result_member(batch, 0)] == enumeration[enumeration.successful]
+
+
+def test_a_failed_check_in_a_compiled_program_is_told_by_its_message():
+    def f(x):
+        return eqx.error_if(x, x > 0, "upstream-check says x > 0")
+
+    with pytest.raises(_upstream.RUNTIME_ERRORS) as err:
+        jax.block_until_ready(jax.jit(f)(jnp.asarray(1.0)))
+    assert _upstream.failed_check_message(err.value) == "upstream-check says x > 0", _moved(
+        "the text of equinox's runtime error", "no 'EquinoxRuntimeError: <message>' in it"
+    )
+    assert _upstream.failed_check_message(RuntimeError("other")) is None
+
+
+def test_a_failed_check_is_logged_by_jax_unless_quieted(caplog):
+    f = jax.jit(lambda x: eqx.error_if(x, x > 0, "upstream-check logged"))
+    for quiet in (False, True):
+        caplog.clear()
+        with caplog.at_level("ERROR"), pytest.raises(_upstream.RUNTIME_ERRORS):
+            if quiet:
+                with _upstream.quiet_failed_checks():
+                    jax.block_until_ready(f(jnp.asarray(1.0)))
+            else:
+                jax.block_until_ready(f(jnp.asarray(1.0)))
+        logged = [r for r in caplog.records if r.name == "jax._src.callback"]
+        assert bool(logged) != quiet, _moved(
+            "the logger jax._src.callback", "no longer logs a failed callback's traceback"
+        )
