@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 import weakref
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _cost, _upstream
+from . import _cost, _upstream, plausible
 
 _BATCHED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _PROBES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -59,7 +60,12 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
       round-off: each member is computed by the same compiled program, but XLA:CPU may round
       a member by an ulp differently at another place in the batch, which the adaptive step
       control carries to the end (measured ≤ 1e-14 relative in the wave angle).
-    - `**grids`: 1-D arrays, one per keyword.
+    - `**grids`: 1-D arrays, one per keyword (finite).
+
+    A sweep whose outputs over the whole grid would exceed
+    `hrgjax.plausible.MAX_OUTPUT_SAMPLES` × `BYTES_PER_SAMPLE` bytes (≈ 4.7 GiB) is refused
+    before it runs; a check that fails inside `fn` (a NaN in a traced parameter, a solver out
+    of steps) is raised as one line (`RuntimeError`).
     """
     if not grids:
         raise ValueError(
@@ -99,7 +105,7 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
         ):
             costs = None  # one batch on one process: the order is moot, keep the grid's
     if n_proc == 1 and costs is None:
-        out = _local(call, flat, chunk_size, progress)
+        out = _local(call, flat, chunk_size, progress, total)
     else:
         # Several processes (jax.distributed) and/or members ordered by cost: each process
         # evaluates an equal share of the grid on its own devices — contiguous blocks, or
@@ -118,7 +124,7 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
             _, chunk = _cost.plan(costs[mine], len(devices), platform, chunk_size)
             chunk = None if chunk >= per and chunk_size is None else chunk
         pts = {n: v[jnp.asarray(mine)] for n, v in flat.items()}
-        out = _local(call, pts, chunk, progress and rank == 0)
+        out = _local(call, pts, chunk, progress and rank == 0, total)
         out = jax.tree_util.tree_map(lambda x: np.asarray(x)[:per], out)
         if n_proc > 1:
             out = jax.tree_util.tree_map(_gather, out)
@@ -200,11 +206,12 @@ def _kept(cache: weakref.WeakKeyDictionary, fn, make):
     return value
 
 
-def _local(call, flat, chunk_size, progress):
-    """`call` over a flat batch on this process's devices, whole or in chunks."""
+def _local(call, flat, chunk_size, progress, total):
+    """`call` over a flat batch on this process's devices, whole or in chunks (`total`: the
+    points of the whole grid, whose outputs the host will hold)."""
     devices = jax.local_devices()
     if chunk_size is None:
-        return _batch(call, flat, devices)
+        return _batch(call, flat, devices, total)
     total = next(iter(flat.values())).shape[0]
     chunk = -(-int(chunk_size) // len(devices)) * len(devices)
     n_chunks = -(-total // chunk)
@@ -212,7 +219,7 @@ def _local(call, flat, chunk_size, progress):
     parts = []
     for i in _progress(range(n_chunks), progress):
         part = {n: v[i * chunk : (i + 1) * chunk] for n, v in flat.items()}
-        parts.append(jax.device_get(_batch(call, part, devices)))
+        parts.append(jax.device_get(_batch(call, part, devices, total)))
     return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
 
 
@@ -230,10 +237,12 @@ def _pad(flat, pad):
     return {n: jnp.concatenate([v, jnp.repeat(v[-1:], pad)]) for n, v in flat.items()}
 
 
-def _batch(call, flat, devices):
+def _batch(call, flat, devices, total):
     """`call` on one flat batch, sharded over `devices` when there are several (the result
-    may be padded at the end)."""
+    may be padded at the end); refused first when the outputs of the `total` points of the
+    grid would not fit (`_check_size`)."""
     if len(devices) == 1:
+        _check_size(call, flat, total)
         return _run(call, flat)
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
@@ -241,7 +250,25 @@ def _batch(call, flat, devices):
     flat = _pad(flat, (-total) % len(devices))
     sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
     flat = jax.device_put(flat, sharding)
+    _check_size(call, flat, total)
     return _run(call, flat)
+
+
+def _check_size(call, flat, total):
+    """Refuse a sweep whose outputs over its `total` grid points exceed what hrgjax allocates
+    at once (`plausible.MAX_OUTPUT_SAMPLES` × `plausible.BYTES_PER_SAMPLE`, ≈ 4.7 GiB), before
+    anything runs: `fn`'s output shapes come from its trace (`jax.eval_shape`, which the
+    call then reuses), so nothing is allocated to find them."""
+    shapes = jax.tree_util.tree_leaves(jax.eval_shape(call, flat))
+    each = sum(math.prod(s.shape[1:]) * s.dtype.itemsize for s in shapes)
+    limit = plausible.MAX_OUTPUT_SAMPLES * plausible.BYTES_PER_SAMPLE
+    if each * total > limit:
+        raise ValueError(
+            f"sweep: fn's outputs over the {total} grid points take {each * total / 2**30:.3g} "
+            f"GiB ({each} bytes a point), more than the {limit / 2**30:.3g} GiB hrgjax "
+            "allocates at once; return less from fn (the samples you need), sweep a smaller "
+            "grid, or raise hrgjax.plausible.MAX_OUTPUT_SAMPLES"
+        )
 
 
 def _run(call, flat):

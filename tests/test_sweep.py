@@ -186,6 +186,10 @@ def test_a_bad_grid_or_a_failed_check_inside_is_one_line(caplog):
     assert str(err.value) == "sweep: at one or more grid points, a must be at most 1"
     assert not [r for r in caplog.records if r.name.startswith("jax")]
     np.testing.assert_array_equal(hg.sweep(f, a=jnp.array([0.0, 0.5])), [0.0, 0.5])
+    # 1 000 points of 10⁶ float64 each (8 GB): refused from the output shapes alone
+    big = lambda a: jnp.full(1_000_000, a)  # noqa: E731
+    with pytest.raises(ValueError, match=r"take 7.45 GiB \(8000000 bytes a point\)"):
+        hg.sweep(big, a=jnp.arange(1000.0), chunk_size=10)
 
 
 def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
