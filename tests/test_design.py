@@ -275,10 +275,17 @@ def test_plan_file_keeps_the_rounded_values_and_both_criteria_and_old_files_load
     back, _ = d.load_plan(path)
     for a, b in zip(jax.tree_util.tree_leaves(back), jax.tree_util.tree_leaves(plan), strict=True):
         np.testing.assert_array_equal(a, b)
+    # load → save keeps the blocks: the same file again, byte for byte
+    back, bench_back, blocks = d.load_plan(path, blocks=True)
+    assert blocks == {"criterion": criterion, "resolution": resolution}
+    again = d.save_plan(back, tmp_path / "again.json", bench_back, **blocks)
+    assert (tmp_path / "again.json").read_bytes() == (tmp_path / "plan.json").read_bytes()
+    assert d.load_plan(again, blocks=True)[2] == blocks
     old = tmp_path / "old.json"  # the contract's keys alone, as before issue 43
     old.write_text(json.dumps({"segments": RAW, "bench_time_h": 3.15}))
     back, bench_back = d.load_plan(old)
     assert back.segments() == RAW and bench_back == d.BenchModel()
+    assert d.load_plan(old, blocks=True)[2] == {}
     for block, match in (
         ({"criterion": {**criterion, "rounded": "small"}}, r"'criterion': 'rounded' must be"),
         ({"criterion": {"kind": "drift"}}, r"'criterion' must be an object with keys"),

@@ -104,11 +104,13 @@ def save_plan(plan: BenchPlan, path: str | os.PathLike, bench: BenchModel | None
     return os.fspath(path)
 
 
-def load_plan(path: str | os.PathLike) -> tuple[BenchPlan, BenchModel]:
+def load_plan(path: str | os.PathLike, *, blocks: bool = False):
     """Read a JSON plan file: `(plan, bench)` — `bench` from its `"bench"` block where it
     has one, else `BenchModel()`. A designed plan's `"criterion"` and `"resolution"` blocks
-    (`plan_to_json`) are checked and otherwise left to the reader; files without them load
-    as before. Errors name the file, the segment and the key."""
+    (`plan_to_json`) are checked; with `blocks=True` they come back too, as a third item
+    (a dict holding those the file has), so `save_plan(plan, new_path, bench, **blocks)`
+    writes the same file again. Files without them load as before. Errors name the file,
+    the segment and the key."""
     doc = read_json(path)
     where = f"{os.fspath(path)}"
     if not isinstance(doc, dict) or "segments" not in doc:
@@ -119,10 +121,11 @@ def load_plan(path: str | os.PathLike) -> tuple[BenchPlan, BenchModel]:
             f"{where}: unknown key(s) {sorted(unknown)}; expected 'segments', "
             "'bench_time_h', 'bench', 'criterion', 'resolution'"
         )
+    kept = {}
     if "criterion" in doc:
-        _criterion_block(doc["criterion"], f"{where}: 'criterion'")
+        kept["criterion"] = _criterion_block(doc["criterion"], f"{where}: 'criterion'")
     if "resolution" in doc:
-        _resolution_block(doc["resolution"], f"{where}: 'resolution'")
+        kept["resolution"] = _resolution_block(doc["resolution"], f"{where}: 'resolution'")
     plan = BenchPlan.from_segments(doc["segments"], where=f"{where}: segments")
     bench = BenchModel()
     if "bench" in doc:
@@ -137,4 +140,4 @@ def load_plan(path: str | os.PathLike) -> tuple[BenchPlan, BenchModel]:
             bench = BenchModel(**{k: float(v) for k, v in b.items()})
         except (TypeError, ValueError) as err:
             raise ValueError(f"{where}: 'bench': {err}") from None
-    return plan, bench
+    return (plan, bench, kept) if blocks else (plan, bench)
