@@ -5,11 +5,13 @@ variable's `units` checked against the contract's (`UNITS`, `dataset_columns`,
 
 from __future__ import annotations
 
+import array
 import contextlib
 import csv
 import io
 import os
 import re
+import warnings
 
 import numpy as np
 
@@ -31,15 +33,43 @@ def import_xarray():
 
 def write_csv(data, fh) -> None:
     """A [`MeasuredData`][hrgjax.MeasuredData] as CSV to the text file `fh`: a header row,
-    run ids as integers, text as is, floats exactly (`repr`)."""
+    run ids as integers, text as is, floats exactly (`repr`). A row with a field that begins
+    with `#` is written with every field quoted, so that the reader does not take the row
+    for a comment.
+
+    **Raises:** `ValueError` naming the column for a text column whose every field looks
+    like a number (`'nan'`, `'1'`): CSV cannot mark it as text, so it would read back as
+    numbers (or not at all); nothing is written then."""
     cols = data.columns
     names = list(cols)
+    for k in names:
+        check_csv_text(k, cols[k])
     w = csv.writer(fh)
-    w.writerow(names)
+    quoted = csv.writer(fh, quoting=csv.QUOTE_ALL)
+    (quoted if any(_hashed(h) for h in names) else w).writerow(names)
     kinds = [cols[k].dtype.kind for k in names]
     fmt = [(lambda v: str(int(v))) if k == "i" else str if k in "US" else repr for k in kinds]
+    text = any(k in "US" for k in kinds)
     for row in zip(*(cols[k].tolist() for k in names), strict=True):
-        w.writerow([f(v) for f, v in zip(fmt, row, strict=True)])
+        fields = [f(v) for f, v in zip(fmt, row, strict=True)]
+        (quoted if text and any(_hashed(f) for f in fields) else w).writerow(fields)
+
+
+def _hashed(field: str) -> bool:
+    return field.lstrip().startswith("#")
+
+
+def check_csv_text(name: str, values: np.ndarray) -> None:
+    """Refuse a text column that a CSV file cannot hold as text: one whose every field is a
+    number as the reader takes it (it would be read back as numbers, or refused for a
+    'nan')."""
+    if values.dtype.kind not in "US" or not all(is_number(str(v)) for v in values):
+        return
+    shown = ", ".join(repr(str(v)) for v in values[:3]) + (", …" if values.size > 3 else "")
+    raise ValueError(
+        f"column {name!r} is text whose every field looks like a number ({shown}); a CSV "
+        "file would read it back as numbers: convert it (np.asarray(x, float)) or save as .nc"
+    )
 
 
 NETCDF_EXTENSIONS = (".nc", ".nc4", ".netcdf")
@@ -83,10 +113,12 @@ def dataset_columns(ds, where: str) -> dict[str, np.ndarray]:
     columns: dict[str, np.ndarray] = {}
     dims = set()
     items = [(k, ds.data_vars[k]) for k in ds.data_vars]
-    # A coordinate is a column too, unless it is a plain sample index (0, 1, 2, …).
+    # A coordinate is a column too, unless it is a plain sample index (0, 1, 2, …) named
+    # like no contract column (a 'time_s' of 0, 1, 2 s is data).
     for k in ds.coords:
         c = ds.coords[k]
-        if c.dims == (k,) and c.ndim == 1 and np.array_equal(c.values, np.arange(c.size)):
+        index = c.dims == (k,) and c.ndim == 1 and np.array_equal(c.values, np.arange(c.size))
+        if index and str(k) not in COLUMNS:
             continue
         items.append((k, c))
     for name, var in items:
@@ -140,21 +172,34 @@ def _apply_units(name: str, values, units, where: str):
 def netcdf_columns(path: str) -> dict[str, np.ndarray]:
     """The columns of a NetCDF file (as `dataset_columns`), or an error naming the file.
 
+    NetCDF-4 (HDF5) through h5netcdf; NetCDF-3 (classic, 64-bit offset or data) through
+    scipy where scipy is installed, else a one-line error saying so.
+
     **Raises:** `FileNotFoundError` for no file; `ValueError` for a file that h5netcdf
     cannot read or a variable that is not a column."""
     xr = import_xarray()
     if not os.path.isfile(path):
         raise FileNotFoundError(f"{path}: no such file")
+    with open(path, "rb") as fh:
+        classic = fh.read(4) in (b"CDF\x01", b"CDF\x02", b"CDF\x05")
+    engine, kind = "h5netcdf", "NetCDF (HDF5)"
+    if classic:  # NetCDF-3: read through scipy where it is installed
+        import importlib.util
+
+        if importlib.util.find_spec("scipy") is None:
+            raise ValueError(
+                f"{path}: a NetCDF-3 (classic) file; hrgjax reads NetCDF-4 (HDF5): install "
+                "scipy to read NetCDF-3, or convert it (nccopy -k nc4 in.nc out.nc)"
+            )
+        engine, kind = "scipy", "NetCDF-3"
     failure = None
     with _quiet_h5netcdf_finalisers():
         try:
             ds = xr.open_dataset(
-                path, engine="h5netcdf", decode_times=False, decode_timedelta=False
+                path, engine=engine, decode_times=False, decode_timedelta=False
             ).load()
         except Exception as err:  # h5py/h5netcdf raise many types for a damaged file
-            failure = (
-                f"{path}: not a readable NetCDF (HDF5) file ({type(err).__name__}: {_flat(err)})"
-            )
+            failure = f"{path}: not a readable {kind} file ({type(err).__name__}: {_flat(err)})"
     if failure is not None:
         raise ValueError(failure)
     with ds:
@@ -202,21 +247,32 @@ def read_csv_table(
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """A CSV file as `(columns, lines)`: each column parsed (numbers as float, `run` ids as
     exact integers, a column not in `COLUMNS` that is not all numbers as text) and the file's
-    line number of each data row. UTF-8, a header row, `#` comment lines. `empty_as_nan`: an
-    empty field is a missing number (NaN), as in a log with gaps (`hrgjax allan`); else it is
-    refused in a known column and makes an extra column text.
+    line number of each data row.
+
+    UTF-8, a header row; a line whose first non-blank character is `#` is a comment where a
+    record begins (inside a quoted field it is data; a field that begins with `#` is quoted
+    by `write_csv`); a blank line (nothing but spaces) is skipped. A row whose every field is
+    empty (`,,,`) is a missing sample: with `empty_as_nan` (an empty field is a missing
+    number, NaN, as in a log with gaps: `hrgjax allan`) a row of NaN, else an error; without
+    `empty_as_nan` an empty field is refused in a known column and makes an extra column text.
 
     **Raises:** `ValueError` naming the file and its line for text that is not UTF-8, a
-    malformed row, an empty or duplicate header, or a known column with text in it."""
+    malformed row, a row of empty fields, an empty, numeric or duplicate header, or a known
+    column with text in it."""
     line = [0]
+    at_start = [True]  # the CSV reader asks for a line that begins a record (not one inside quotes)
 
     def source(fh):
         for i, text in enumerate(fh, 1):
             line[0] = i
-            if text.lstrip().startswith("#"):
+            if at_start[0] and text.lstrip().startswith("#"):
                 continue
+            at_start[0] = False
             yield text
 
+    fast = _numeric_table(path)
+    if fast is not None:
+        return fast
     with open(path, "rb") as fh:
         blob = fh.read()
     try:
@@ -226,34 +282,70 @@ def read_csv_table(
         raise ValueError(
             f"{path}: line {at}: not UTF-8 text ({err.reason}); save the file as UTF-8 CSV"
         ) from None
+    del blob
     header, rows, lines = None, [], []
     try:
         for row in csv.reader(source(io.StringIO(text, newline=""))):
-            if not row or all(not f.strip() for f in row):
-                continue
+            at_start[0] = True
+            if not row or (len(row) == 1 and not row[0].strip()):
+                continue  # a blank line
             if header is None:
                 header = [h.strip() for h in row]
+                header_line = line[0]
                 continue
+            if all(not f.strip() for f in row) and not empty_as_nan:
+                raise ValueError(
+                    f"{path}: line {line[0]}: every field is empty (a missing sample?); only "
+                    "blank lines are skipped: fill the row in or delete it"
+                )
             rows.append(row)
             lines.append(line[0])
     except csv.Error as err:
         raise ValueError(f"{path}: line {line[0]}: not a readable CSV row ({err})") from None
     if header is None:
         raise ValueError(f"{path}: empty file (expected a header row)")
-    empty = [i for i, h in enumerate(header) if not h]
-    if empty:
-        raise ValueError(f"{path}: header field {empty[0] + 1} is empty; name every column")
-    if len(set(header)) != len(header):
-        dup = sorted({h for h in header if header.count(h) > 1})
-        raise ValueError(f"{path}: duplicate column names {dup} in the header")
+    check_header(path, header, header_line)
     for r, ln in zip(rows, lines, strict=True):
         if len(r) != len(header):
             raise ValueError(f"{path}: line {ln} has {len(r)} fields, the header has {len(header)}")
     fields = {h: [r[j] for r in rows] for j, h in enumerate(header)}
+    del rows
     lines_arr = np.asarray(lines, dtype=np.int64)
     if empty_as_nan:
         fields = {h: [f if f.strip() else "nan" for f in v] for h, v in fields.items()}
     return {h: _parse(path, h, v, lines_arr) for h, v in fields.items()}, lines_arr
+
+
+def check_header(path: str, header: list[str], at: int) -> None:
+    """Refuse a CSV header (stripped fields, from line `at`) that does not name the columns:
+    an empty field (a pandas index), a row of numbers (a header commented out with `#`), one
+    field holding another separator, or a name given twice."""
+    empty = [i for i, h in enumerate(header) if not h]
+    if empty:
+        hint = (
+            " (an unnamed first column is the index pandas writes: save with "
+            "df.to_csv(path, index=False))"
+            if empty[0] == 0 and len(header) > 1
+            else ""
+        )
+        raise ValueError(f"{path}: header field {empty[0] + 1} is empty; name every column{hint}")
+    if all(is_number(h) for h in header):
+        raise ValueError(
+            f"{path}: line {at}, the header row, holds numbers ({', '.join(header[:3])}"
+            f"{', …' if len(header) > 3 else ''}); the first row that is not a comment must "
+            "name the columns — is the header commented out with '#' (np.savetxt(header=…) "
+            "writes '# time_s,…'; pass comments='')?"
+        )
+    if len(header) == 1:
+        sep = next((c for c in (";", "\t", "|") if c in header[0]), None)
+        if sep is not None:
+            raise ValueError(
+                f"{path}: the header has one field {header[0][:60]!r}; columns must be "
+                f"separated by commas, and this file looks separated by {sep!r}"
+            )
+    if len(set(header)) != len(header):
+        dup = sorted({h for h in header if header.count(h) > 1})
+        raise ValueError(f"{path}: duplicate column names {dup} in the header")
 
 
 def _parse(path: str, name: str, values: list[str], lines: np.ndarray) -> np.ndarray:
@@ -288,3 +380,66 @@ def _parse(path: str, name: str, values: list[str], lines: np.ndarray) -> np.nda
                     "rounding is intended"
                 )
     return np.array([float(v) for v in stripped], dtype=float)
+
+
+_FIELD_LIMIT = 131072  # the csv module's field limit, which the slow path reports
+_NUMERIC = str.maketrans("", "", "0123456789.eE+-, \t\r\n")
+"""Deletes every character a plain numeric data line may hold."""
+
+
+def _numeric_table(path: str):
+    """`read_csv_table`'s result for a plain numeric file, streamed through NumPy's C parser
+    in a fraction of the memory (no Python string per field, no copy of the whole text);
+    None for anything else — text that is not UTF-8, quotes, a lone carriage return, any
+    character but digits, `.eE+-`, commas and blanks in a data line (`nan` included), a row
+    with another number of fields, an integer the slow path must check exactly — which the
+    validating reader then reads and names. Over that alphabet NumPy accepts exactly the
+    fields `is_number` accepts (tests/test_files.py), so both paths give the same columns."""
+    header, at = None, 0
+    lines = array.array("q")
+    bad = [False]
+
+    def data_lines(fh):  # (an empty field never parses: NumPy refuses it, and this path too)
+        nonlocal header, at
+        for i, ln in enumerate(fh, 1):
+            if '"' in ln or len(ln) > _FIELD_LIMIT or ln.endswith("\r"):
+                bad[0] = True
+                return
+            stripped = ln.strip(" \t\r\n")
+            if not stripped or stripped.startswith("#"):
+                continue
+            if header is None:
+                header, at = [h.strip() for h in ln.rstrip("\r\n").split(",")], i
+                continue
+            if ln.translate(_NUMERIC):
+                bad[0] = True
+                return
+            lines.append(i)
+            yield ln
+
+    try:
+        with (
+            open(path, encoding="utf-8-sig", newline="") as fh,
+            warnings.catch_warnings(),  # "input contained no data": read again, named there
+        ):
+            warnings.simplefilter("ignore", UserWarning)
+            values = np.loadtxt(data_lines(fh), delimiter=",", dtype=float, ndmin=2,
+                                comments=None)  # fmt: skip
+    except (ValueError, UnicodeDecodeError):
+        return None
+    if bad[0] or header is None or not lines or values.shape != (len(lines), len(header)):
+        return None
+    check_header(path, header, at)
+    columns = {}
+    for j, name in enumerate(header):
+        col = np.ascontiguousarray(values[:, j])
+        if name in COLUMNS:
+            big = np.abs(col) >= MAX_EXACT_INTEGER  # (rounded: 2**53 + 1 reads 2**53)
+            if name == "run":
+                if big.any() or not np.all(col == np.round(col)):
+                    return None
+                col = col.astype(np.int64)
+            elif big.any():
+                return None
+        columns[name] = col
+    return columns, np.frombuffer(lines, dtype=np.int64).copy()

@@ -25,6 +25,10 @@ from ._data_files import with_file_line as with_file_line
 from ._io import atomic_path, atomic_write
 from .units import DEG, K_E_NOMINAL
 
+SAMPLE_DIM = "sample"
+"""The one dimension of the NetCDF files `MeasuredData.save` writes (no column may take its
+name)."""
+
 
 class MeasuredData:
     """A measured (or simulated) gyro record in the units of the data contract.
@@ -200,11 +204,20 @@ class MeasuredData:
 
     def to_xarray(self):
         """An `xarray.Dataset` with one variable per column along dimension ``sample``, each
-        contract column with its ``units`` attribute (UDUNITS spelling)."""
+        contract column with its ``units`` attribute (UDUNITS spelling).
+
+        **Raises:** `ValueError` for an extra column named ``sample``: it would become the
+        dimension's coordinate, read back in another place (or, holding 0, 1, 2, …, not at
+        all) — rename it."""
         xr = import_xarray()
+        if SAMPLE_DIM in self._columns:
+            raise ValueError(
+                f"column {SAMPLE_DIM!r} has the name of the NetCDF sample dimension, which "
+                "would not read back as a column: rename it (or save as .csv)"
+            )
         return xr.Dataset(
             {
-                k: ("sample", v, {"units": UNITS[k][0]} if k in UNITS else {})
+                k: (SAMPLE_DIM, v, {"units": UNITS[k][0]} if k in UNITS else {})
                 for k, v in self._columns.items()
             }
         )
@@ -321,9 +334,10 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
     [`MeasuredData`][hrgjax.MeasuredData], errors naming the file, the column and the row (and
     for CSV the line of the file).
 
-    CSV: UTF-8 (a byte-order mark is fine), a header row, comma-separated; lines starting with
-    ``#`` are comments; numbers in decimal or scientific notation (no thousands separators or
-    underscores); extra columns (with `allow_extra`) that are not all numbers are kept as
+    CSV: UTF-8 (a byte-order mark is fine), a header row, comma-separated; a line starting
+    with ``#`` is a comment where a row begins (not inside a quoted field); blank lines are
+    skipped, a row of empty fields is refused; numbers in decimal or scientific notation (no
+    thousands separators or underscores); extra columns (with `allow_extra`) that are not all numbers are kept as
     text. NetCDF: as [`MeasuredData.from_xarray`][hrgjax.MeasuredData.from_xarray]."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()

@@ -506,3 +506,25 @@ def test_negative_variance_is_named_not_nan(fitted, tmp_path):
         (tmp_path / "bad.json").write_text(json.dumps({**obj, field: value}))
         with pytest.raises(ValueError, match=match):
             hg.imu.load_calibration(tmp_path / "bad.json")
+
+
+def test_save_keeps_the_sample_rate_exactly(tmp_path):
+    """A 100 Hz record (time = arange(N) / 100, whose median step is not exactly 0.01 s) and a
+    jittered one declared 100 Hz reload at 100.0 Hz, not 1 / median step (old:
+    100.00000000000213 Hz), and a reload saves to the same bytes."""
+    n = 1000
+    time = np.arange(n) / RATE
+    assert 1.0 / np.median(np.diff(time)) != RATE  # what the file alone would give
+    gyro, accel = np.zeros((n, 3)), np.tile([0.0, 0.0, 9.80665], (n, 1))
+    jitter = time + np.random.default_rng(0).normal(0.0, 1e-5, n)
+    for i, t in enumerate((time, jitter)):
+        data = hg.imu.ImuData(t, gyro, accel, rate_hz=RATE)
+        path = data.save(tmp_path / f"r{i}.csv")
+        back = hg.imu.load(path, columns=hg.imu.SI_COLUMNS, units=hg.imu.SI_UNITS)
+        assert back.rate_hz == RATE
+        np.testing.assert_array_equal(back.time, data.time)
+        again = back.save(tmp_path / f"again{i}.csv")
+        assert Path(again).read_bytes() == Path(path).read_bytes()
+    # a rate given to load wins over the file's comment
+    assert hg.imu.load(path, columns=hg.imu.SI_COLUMNS, units=hg.imu.SI_UNITS,
+                       rate_hz=100.5).rate_hz == 100.5  # fmt: skip

@@ -37,6 +37,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from .._io import atomic_write
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
 from .octave_covariance import covariance as covariance
 from .octave_covariance import unit_avar
@@ -166,8 +167,9 @@ class CompositeNoise:
         }  # fmt: skip
 
     def to_json(self, path) -> None:
-        """Write the model (terms with units and intervals, the octaves fitted) as JSON."""
-        with open(path, "w", encoding="utf-8") as fh:
+        """Write the model (terms with units and intervals, the octaves fitted) as JSON,
+        atomically (missing folders are made)."""
+        with atomic_write(path, "w", encoding="utf-8") as fh:
             json.dump(self.to_dict(), fh, indent=1, ensure_ascii=False)
 
     def to_kalibr(self, path=None, sensor: str = "gyroscope", rostopic: str = "/imu0") -> dict:
@@ -178,7 +180,8 @@ class CompositeNoise:
         marked so in the file; with no bound either, `ValueError`. The record's `unit` must
         be one Kalibr's units follow from ([`TO_SI`][hrgjax.allan.composite.TO_SI]). Kalibr
         reads both sensors' entries from one file: write each sensor's model and merge them.
-        Written to `path` when given. **Returns:** the entries."""
+        Written to `path` when given, atomically (missing folders are made). **Returns:** the
+        entries."""
         if sensor not in ("gyroscope", "accelerometer"):
             raise ValueError(f"sensor must be 'gyroscope' or 'accelerometer'; got {sensor!r}")
         scale = _si_scale(self.unit, sensor)
@@ -204,7 +207,7 @@ class CompositeNoise:
         if path is not None:
             units = {"gyroscope": ("rad/s/sqrt(Hz)", "rad/s^2/sqrt(Hz)"),
                      "accelerometer": ("m/s^2/sqrt(Hz)", "m/s^3/sqrt(Hz)")}[sensor]  # fmt: skip
-            with open(path, "w", encoding="utf-8") as fh:
+            with atomic_write(path, "w", encoding="utf-8") as fh:
                 fh.write(f"# from hrgjax.allan.identify_noise: {self.n} samples at "
                          f"{self.rate_hz:g} Hz, unit {self.unit}\n")  # fmt: skip
                 fh.write(f"{sensor}_noise_density: {out[f'{sensor}_noise_density']:.6g}"

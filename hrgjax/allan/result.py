@@ -96,19 +96,25 @@ class AllanResult:
         return out | {k: np.asarray(v).tolist() for k, v in cols.items()}
 
     def to_json(self, path) -> None:
-        """Write [`to_dict`][hrgjax.allan.AllanResult.to_dict] to `path` (JSON)."""
+        """Write [`to_dict`][hrgjax.allan.AllanResult.to_dict] to `path` (JSON), atomically
+        (missing folders are made)."""
         import json
 
-        with open(path, "w") as fh:
+        from .._io import atomic_write
+
+        with atomic_write(path, "w", encoding="utf-8") as fh:
             json.dump(self.to_dict(), fh, indent=1)
 
     def to_csv(self, path) -> None:
         """Write one row per τ to `path` (CSV: `tau_s, m, dev, dev_low, dev_high, edf,
-        n_terms, alpha`, the deviation's unit in the header's `dev` column name)."""
+        n_terms, alpha`, the deviation's unit in the header's `dev` column name), atomically
+        (missing folders are made)."""
+        from .._io import atomic_write
+
         cols = self._columns()
         unit = f" [{self.unit}]" if self.unit else ""
         names = [f"{k}{unit}" if k.startswith("dev") else k for k in cols]
-        with open(path, "w") as fh:
+        with atomic_write(path, "w", encoding="utf-8") as fh:
             fh.write(",".join(names) + "\n")
             for row in zip(*cols.values(), strict=True):
                 fh.write(",".join(repr(float(v)) if isinstance(v, float | np.floating)

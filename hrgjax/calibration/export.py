@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import atomic_write
+from .._io import atomic_write, read_json
 from .evaluate import NoCompensation
 from .fourier import T_SCALE, FourierCompensator
 from .mlp import MLPCompensator
@@ -40,13 +40,17 @@ _CLASSES = {
 
 
 _HYPER_FIELDS = {
-    FourierCompensator: ("harmonics", "temperature_degree", "fit_temperature_c", "tolerance_c", "k_e"),
+    FourierCompensator: (
+        "harmonics", "temperature_degree", "fit_temperature_c", "tolerance_c", "k_e", "window_s"
+    ),
     MLPCompensator: (
-        "drift_width", "sf_width", "encoding", "steps", "learning_rate", "bin_deg", "e2e_steps", "k_e"
+        "drift_width", "sf_width", "encoding", "steps", "learning_rate", "bin_deg", "e2e_steps",
+        "k_e", "mode", "window_s",
     ),
 }  # fmt: skip
 """The fields that `_hyper` saves, in this order, of the compensators whose hyperparameters
-are plain fields."""
+are plain fields (`window_s` [s] and MLP's `mode` were added later: older files without them load
+with the class defaults)."""
 
 
 def _hyper(comp) -> dict:
@@ -269,39 +273,123 @@ def export_json(comp, path: str | os.PathLike) -> str:
 
 
 def load_json(path: str | os.PathLike):
-    """Rebuild the compensator from its JSON export."""
-    with open(path) as fh:
-        d = json.load(fh)
+    """Rebuild the compensator from its JSON export
+    ([`export_json`][hrgjax.calibration.export_json]).
+
+    **Raises:** `FileNotFoundError` for no file; `ValueError` naming the file and the field,
+    in one line, for a file that is not UTF-8 JSON, a newer or unknown `format`, an unknown
+    class, a missing key, numbers that are not finite or arrays of the wrong shape for the
+    file's `hyper`, or a top-level copy (`k_e_nominal`, `t_ref`, `harmonics`,
+    `temperatures_c`) that disagrees with `hyper`."""
+    path = os.fspath(path)
+    d = read_json(path)
+    if not isinstance(d, dict):
+        raise ValueError(f"{path}: not an hrgjax compensator JSON (expected an object)")
+    version = d.get("format", 1)
+    if isinstance(version, bool) or not isinstance(version, int) or not 1 <= version:
+        raise ValueError(f"{path}: 'format' must be a positive integer; got {version!r}")
+    if version > FORMAT_VERSION:
+        raise ValueError(
+            f"{path}: compensator file format {version}; this hrgjax reads formats up to "
+            f"{FORMAT_VERSION} (update hrgjax)"
+        )
     name = d.get("class")
     if name not in _CLASSES:
-        raise ValueError(f"{path}: unknown compensator class {name!r}")
-    comp = _skeleton(name, dict(d["hyper"]))
-    f64 = lambda x: jnp.asarray(x, dtype=float)
-    if name == "FourierCompensator":
-        return eqx.tree_at(
-            lambda c: (c.drift_coef, c.sf_coef), comp, (f64(d["drift_coef"]), f64(d["sf_coef"]))
+        raise ValueError(
+            f"{path}: unknown compensator class {name!r}; known are {sorted(_CLASSES)}"
         )
+    hyper = _key(path, d, "hyper", dict)
+    try:
+        comp = _skeleton(name, dict(hyper))
+    except Exception as err:  # a hand-edited hyper: unknown or missing fields, wrong types
+        raise ValueError(
+            f"{path}: 'hyper' does not describe a {name} ({type(err).__name__}: "
+            f"{' '.join(str(err).split())})"
+        ) from None
+    _same(path, d, "k_e_nominal", comp.k_e)
+    if name == "FourierCompensator":
+        _same(path, d, "t_ref", comp.fit_temperature_c)
+    if name in ("FourierCompensator", "PrecessionCompensator"):
+        _same(path, d, "harmonics", comp.harmonics)
+    if name == "PrecessionCompensator":
+        _same(path, d, "temperatures_c", list(comp.temperatures_c))
+
+    def f64(key, like, value=None):
+        value = _key(path, d, key, list) if value is None else value
+        try:
+            a = np.asarray(value, dtype=float)
+        except (ValueError, TypeError):
+            raise ValueError(f"{path}: {key!r} must be an array of numbers") from None
+        if a.shape != np.shape(like):
+            raise ValueError(
+                f"{path}: {key!r} has shape {a.shape}; the {name} of the file's 'hyper' needs "
+                f"{np.shape(like)}"
+            )
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{path}: {key!r} holds a value that is not finite")
+        return jnp.asarray(a)
+
+    if name == "FourierCompensator":
+        coefs = (f64("drift_coef", comp.drift_coef), f64("sf_coef", comp.sf_coef))
+        return eqx.tree_at(lambda c: (c.drift_coef, c.sf_coef), comp, coefs)
     if name == "MLPCompensator":
         for net, key in (
             (lambda c: c.drift_net, "drift_layers"),
             (lambda c: c.sf_net, "sf_layers"),
         ) + (((lambda c: c.st_net, "st_layers"),) if comp.st_net is not None else ()):
-            layers = d[key]
+            layers, like = _key(path, d, key, list), net(comp).layers
+            if len(layers) != len(like) or not all(isinstance(x, dict) for x in layers):
+                raise ValueError(f"{path}: {key!r} must list {len(like)} layers, each "
+                                 "{'weight': …, 'bias': …}")  # fmt: skip
+            new = []
+            for i, (lay, ref) in enumerate(zip(layers, like, strict=True)):
+                for part in ("weight", "bias"):
+                    where = f"{key}[{i}].{part}"
+                    if part not in lay:
+                        raise ValueError(f"{path}: missing key {where!r}")
+                    new.append(f64(where, getattr(ref, part), lay[part]))
             comp = eqx.tree_at(
-                lambda c, net=net: [
-                    leaf for lay in net(c).layers for leaf in (lay.weight, lay.bias)
-                ],
+                lambda c, net=net: [x for lay in net(c).layers for x in (lay.weight, lay.bias)],
                 comp,
-                [f64(x) for lay in layers for x in (lay["weight"], lay["bias"])],
+                new,
             )
         names = ("t_centre", "t_scale", "drift_offset", "drift_scale", "sf_offset", "sf_scale")
-        return eqx.tree_at(
-            lambda c: [getattr(c, n) for n in names], comp, [f64(d[n]) for n in names]
-        )
+        values = [f64(n, getattr(comp, n), _key(path, d, n, float)) for n in names]
+        return eqx.tree_at(lambda c: [getattr(c, n) for n in names], comp, values)
     if name == "PhysicalCompensator":
-        values = f64([d["parameters"][n] for n in NAMES])
-        return eqx.tree_at(lambda c: (c.values, c.covariance), comp, (values, f64(d["covariance"])))
+        params = _key(path, d, "parameters", dict)
+        missing = [n for n in NAMES if n not in params]
+        if missing:
+            raise ValueError(f"{path}: 'parameters' lacks {missing}; it needs {list(NAMES)}")
+        values = f64("parameters", comp.values, [params[n] for n in NAMES])
+        return eqx.tree_at(lambda c: (c.values, c.covariance), comp,
+                           (values, f64("covariance", comp.covariance)))  # fmt: skip
     if name == "PrecessionCompensator":
-        return eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef), comp,
-                           (f64(d["drift_coef"]), f64(d["gain_coef"])))  # fmt: skip
+        coefs = (f64("drift_coef", comp.drift_coef), f64("gain_coef", comp.gain_coef))
+        return eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef), comp, coefs)
     return comp
+
+
+def _key(path: str, d: dict, key: str, kind: type):
+    """`d[key]`, or a one-line error naming the file and the key; `kind` float takes ints."""
+    if key not in d:
+        raise ValueError(f"{path}: missing key {key!r}")
+    value = d[key]
+    ok = (
+        isinstance(value, int | float) and not isinstance(value, bool)
+        if kind is float
+        else isinstance(value, kind)
+    )
+    if not ok:
+        what = {float: "a number", list: "a list", dict: "an object"}[kind]
+        raise ValueError(f"{path}: {key!r} must be {what}; got {type(value).__name__}")
+    return value
+
+
+def _same(path: str, d: dict, key: str, value) -> None:
+    """Refuse a top-level copy of a hyperparameter that disagrees with `hyper`."""
+    if key in d and d[key] != value:
+        raise ValueError(
+            f"{path}: {key!r} = {d[key]!r} disagrees with the value in 'hyper' ({value!r}); "
+            "the file was edited: export the compensator again"
+        )

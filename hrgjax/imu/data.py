@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import warnings
 from collections.abc import Mapping, Sequence
 
@@ -175,8 +176,10 @@ class ImuData:
 
     def save(self, path: str | os.PathLike) -> str:
         """Write the record as CSV in SI units (columns `time_s`, `gyro_x_rad_s` … `gyro_z_rad_s`,
-        `accel_x_m_s2` … `accel_z_m_s2`, `temperature_c`), atomically; returns the path. Read
-        it back with `load(path, columns=SI_COLUMNS, units=SI_UNITS)`."""
+        `accel_x_m_s2` … `accel_z_m_s2`, `temperature_c`), after a comment line
+        `# rate_hz = …` holding the nominal sample rate [Hz] exactly, atomically; returns the
+        path. Read it back with `load(path, columns=SI_COLUMNS, units=SI_UNITS)` (which takes
+        the rate from that comment)."""
         from .._io import atomic_write
 
         names = [SI_COLUMNS["time"], *SI_COLUMNS["gyro"], *SI_COLUMNS["accel"]]
@@ -185,7 +188,8 @@ class ImuData:
             names.append("temperature_c")
             cols.append(self.temperature[:, None])
         table = np.concatenate(cols, axis=1)
-        with atomic_write(path, "w", newline="") as fh:
+        with atomic_write(path, "w", newline="", encoding="utf-8") as fh:
+            fh.write(f"# rate_hz = {self.rate_hz!r}\n")
             fh.write(",".join(names) + "\n")
             np.savetxt(fh, table, delimiter=",", fmt="%.17g")
         return os.fspath(path)
@@ -219,7 +223,8 @@ def load(
       ignored.
     - `units`: `{"gyro": "deg/s" | "rad/s" | …, "accel": "m/s^2" | "g" | …}`
       ([`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS]).
-    - `rate_hz`: sample rate [Hz]; needed when there is no time column, otherwise
+    - `rate_hz`: sample rate [Hz]; needed when there is no time column, otherwise the
+      file's `# rate_hz = …` comment (before the header, as `ImuData.save` writes it) or
       1 / median time step unless given.
     - `check_units`: refuse an accelerometer unit the data contradict (see the module notes).
 
@@ -238,6 +243,8 @@ def load(
         raise FileNotFoundError(f"{path}: no such file")
     names = _column_map(columns)
     _declared(units)
+    if rate_hz is None:
+        rate_hz = _saved_rate(path)
     fast = _fast_columns(path, _all_names(names))
     if fast is not None:  # plain numeric columns: NumPy's C parser, 4× faster
         try:
@@ -294,6 +301,33 @@ def _build(path, names, table, lines, units, rate_hz, check_units) -> ImuData:
         )
     except ValueError as err:
         raise ValueError(f"{path}: {where(str(err))}") from None
+
+
+_SAVED_RATE = re.compile(r"#\s*rate_hz\s*=\s*(\S+)\s*")
+
+
+def _saved_rate(path: str) -> float | None:
+    """The `# rate_hz = …` comment [Hz] among the comment lines before a file's header (as
+    `ImuData.save` writes it), or None."""
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            for line in fh:
+                if not line.strip():
+                    continue
+                if not line.lstrip().startswith("#"):
+                    return None
+                m = _SAVED_RATE.fullmatch(line.strip())
+                if m is not None:
+                    try:
+                        return float(m.group(1))
+                    except ValueError:
+                        raise ValueError(
+                            f"{path}: the comment {line.strip()!r} must give the sample rate "
+                            "as a number [Hz]"
+                        ) from None
+    except UnicodeDecodeError:
+        return None  # the CSV reader names the line
+    return None
 
 
 def _fast_columns(path: str, wanted: list[str]) -> dict[str, np.ndarray] | None:

@@ -115,13 +115,19 @@ def load_psins(path) -> ImuLog:
     integer increments per sample, axes right–forward–up. Returned in FRD with the heading
     converted from PSINS's counter-clockwise yaw to clockwise from north.
 
-    **Raises:** `ValueError` naming the line for a malformed header or sample row."""
+    **Raises:** `ValueError` naming the file (and the line) for text that is not UTF-8, a
+    malformed header or sample row."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no IMU log at {path}")
-    lines = [
-        ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("%")
-    ]
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        at = path.read_bytes()[: err.start].count(b"\n") + 1
+        raise ValueError(
+            f"{path}: line {at}: not UTF-8 text ({err.reason}); a PSINS log is plain text"
+        ) from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("%")]
     if len(lines) < 4:
         raise ValueError(
             f"{path}: a PSINS log needs 3 header lines and samples; got {len(lines)} lines"

@@ -251,8 +251,14 @@ class Motion:
             raise ValueError(f"{at}: {msg}") from None
 
     def to_csv(self, path) -> None:
-        """Write the motion as a gnss-ins-sim motion file."""
-        g = lambda x: f"{x:.12g}"
+        """Write the motion as a gnss-ins-sim motion file, every number exactly (`repr`: the
+        shortest text that reads back as the same float, so `from_csv` returns an equal
+        `Motion`), atomically (missing folders are made)."""
+        from .._io import atomic_write
+
+        def g(x):
+            return str(int(x)) if isinstance(x, bool | int) else repr(float(x))
+
         lines = [
             _HEAD_INIT,
             ",".join(
@@ -265,7 +271,8 @@ class Motion:
         for s in self.segments:
             vals = (s.kind, *s.attitude, *s.velocity, s.duration, int(s.gnss))
             lines.append(",".join(g(x) for x in vals))
-        Path(path).write_text("\n".join(lines) + "\n")
+        with atomic_write(path, "w", encoding="utf-8") as fh:
+            fh.write("\n".join(lines) + "\n")
 
     # --- kinematics ------------------------------------------------------------------
 
