@@ -21,6 +21,9 @@ Workflows:
   loops, temperature laws) against the gyro's true laws — the ideal-loop grey box (its g
   and cross-talk are effective values; also against its own noise-free fit) and the grey
   box given the gyro's loops (`PhysicalCompensator(plant=gyro)`).
+- The physical grey box on many short runs (`--physical-runs [--run-bias σ]`): 3
+  temperatures × 6 wave angles of 60-s static and rotation runs against the plan's
+  noise-free fit; with `--run-bias`, each run its own switch-on bias as well.
 
 "Before" is the textbook σ ((JᵀJ)⁻¹ of the noise model's whitening, kept in the report as
 `std_textbook`); "after" is what `discover` now reports
@@ -32,7 +35,7 @@ deviation's χ² intervals at long τ (`benchmarks/coverage_allan.py`) and the c
 model's intervals and term selection (`benchmarks/noise_identification.py`).
 
 Usage: `.venv/bin/python benchmarks/coverage.py [--quick] [--physical] [--only-physical]
-[--n N]`.
+[--physical-runs [--run-bias σ]] [--n N]`.
 """
 
 import argparse
@@ -176,6 +179,67 @@ def physical_coverage(n: int) -> tuple[dict, dict, dict]:
     return summarise(z_eff), summarise(z_laws), summarise(z_plant)
 
 
+def with_run_biases(data, sigma_dph: float, key, k_e: float):
+    """`data` with an independent constant rate bias of σ `sigma_dph` [°/h] per run on its
+    wave angle (each run its own switch-on, as on a bench that powers the gyro per run)."""
+    cols = dict(data.columns)
+    runs = np.unique(cols["run"])
+    bias = np.asarray(jax.random.normal(key, (runs.size,))) * sigma_dph / 3600.0  # °/s
+    b = bias[np.searchsorted(runs, cols["run"])]
+    t0 = {r: cols["time_s"][cols["run"] == r][0] for r in runs}
+    t = cols["time_s"] - np.array([t0[r] for r in cols["run"]])
+    cols["wave_angle_deg"] = cols["wave_angle_deg"] - k_e * b * t
+    return MeasuredData(cols)
+
+
+def physical_runs_coverage(n: int, run_bias_dph: float = 0.0) -> dict:
+    """z of the physical grey box on a plan of many short runs — 3 temperatures × 6 wave
+    angles, 60-s static and 5 °/s rotation runs, one switch-on — over `n` seeds of the
+    default gyro, against the plan's noise-free fit (its effective values); with
+    `run_bias_dph`, each run also gets its own constant bias of that σ [°/h], as on a bench
+    that powers the gyro per run (the fit counts a run's 10-s windows as independent)."""
+    from hrgjax.calibration import (
+        PhysicalCompensator,
+        physical,
+        rotation_plan,
+        run_plan,
+        static_plan,
+    )
+    from hrgjax.data import concat
+    from hrgjax.presets import tvg3_like
+
+    temps, angles = (-40.0, 20.0, 60.0), tuple(range(-90, 90, 30))
+    static = static_plan(temps, angles, duration_s=60.0, dt_out=0.5)
+    rotation = rotation_plan(temps, angles, duration_s=60.0, dt_out=0.5)
+
+    def session(gyro, key):
+        bias = jax.random.fold_in(key, 7)
+        a = run_plan(gyro, static, key=key, bias_key=bias)
+        b = run_plan(gyro, rotation, key=jax.random.fold_in(key, 1), bias_key=bias,
+                     first_run=static.size)  # fmt: skip
+        return concat([a, b])
+
+    truth = np.asarray(
+        PhysicalCompensator().fit(session(tvg3_like(noise=False), jax.random.key(0))).values
+    )
+    z = {}
+    for s in range(n):
+        data = session(tvg3_like(), jax.random.key(1000 + s))
+        if run_bias_dph:
+            data = with_run_biases(data, run_bias_dph, jax.random.key(5000 + s),
+                                   float(tvg3_like().k_e))  # fmt: skip
+        fit = PhysicalCompensator().fit(data)
+        v, e = np.asarray(fit.values), np.sqrt(np.diag(np.asarray(fit.covariance)))
+        for i, name in enumerate(physical.NAMES):
+            if name != "bias0":  # its truth holds each session's switch-on bias
+                z.setdefault(name, []).append((v[i] - truth[i]) / e[i])
+        print(f"  seed {s}: fitted", flush=True)
+    print(f"  {'parameter':>18}  z-RMS  mean z")
+    for name, values in z.items():
+        print(f"  {name:>18}  {np.sqrt(np.mean(np.square(values))):5.2f}  {np.mean(values):+6.2f}")
+    return summarise(z)
+
+
 def discover_rows(n: int) -> list:
     """The four discover rows: one effect and one beside a 4θ drift, before and after."""
     b1, a1, _ = discover_coverage(n)
@@ -195,12 +259,20 @@ def main(argv=None) -> int:
     ap.add_argument("--n", type=int, default=None, help="datasets per workflow")
     ap.add_argument("--physical", action="store_true", help="also the physical grey box")
     ap.add_argument("--only-physical", action="store_true", help="the physical grey box alone")
+    ap.add_argument("--physical-runs", action="store_true",
+                    help="the physical grey box on 36 short runs alone")  # fmt: skip
+    ap.add_argument("--run-bias", type=float, default=0.0,
+                    help="with --physical-runs: each run's own bias, σ [°/h]")  # fmt: skip
     args = ap.parse_args(argv)
     n = args.n or (6 if args.quick else 20)
     print(f"coverage.py on {machine()}, {n} datasets per workflow")
     t0 = time.perf_counter()
     rows = []
-    if args.only_physical:
+    if args.physical_runs:
+        res = physical_runs_coverage(n, args.run_bias)
+        rows += [(f"physical, 36 × 60-s runs, run bias {args.run_bias:g} °/h", res)]
+        args.only_physical, args.physical = True, False
+    elif args.only_physical:
         args.physical = True
     else:
         rows += discover_rows(n)
