@@ -223,3 +223,29 @@ def test_bad_arguments_are_refused(sessions):
                            allow_extra=True)  # fmt: skip
     with pytest.raises(ValueError, match="other runs"):
         compare_corrected({"F": corrected, "G": part})
+
+
+def test_measured_temperatures_and_wave_angles_a_half_turn_apart_group_as_one(sessions):
+    """Temperatures that jitter by 0.05 °C make one row per chamber level (not one per
+    sample, all NaN: 7180 rows on the auditor's session), in `accuracy_table` as in
+    `compare`; wave angles θ and θ + 180° (one state of the pattern) one group."""
+    _, test, _ = sessions
+    cols = dict(test.columns)
+    rng = np.random.default_rng(0)
+    cols["temperature_c"] = cols["temperature_c"] + 0.05 * rng.standard_normal(len(test))
+    half = np.isin(test.run, np.unique(test.run)[::2])
+    cols["wave_angle_deg"] = np.where(half, cols["wave_angle_deg"] + 180.0, cols["wave_angle_deg"])
+    moved = hg.MeasuredData(cols)
+    raw = {"raw": NoCompensation()}
+    table, exact = accuracy_table(raw, moved)["raw"], accuracy_table(raw, test)["raw"]
+    assert list(table["static_drift_dph"]) == [-40.0, 20.0, 60.0]
+    for key in exact:  # the raw gyro's errors do not depend on T or on a half turn
+        np.testing.assert_allclose(list(table[key].values()), list(exact[key].values()), rtol=1e-9)
+    same = compare(raw, moved).before_offset()["raw"]
+    for key in table:
+        assert same[key] == pytest.approx(table[key], rel=1e-12)
+    before, after = compare(raw, test), compare(raw, moved)
+    assert after.wave_angles_deg == before.wave_angles_deg
+    for by in ("temperature", "wave_angle"):
+        got = after.figure("raw", "static_residual_dph", by=by)
+        assert got == pytest.approx(before.figure("raw", "static_residual_dph", by=by), rel=1e-9)

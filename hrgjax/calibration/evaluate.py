@@ -30,6 +30,7 @@ import numpy as np
 
 from ..data import MeasuredData
 from ._compensator import AbstractCompensator
+from ._grouping import nearest_multiples
 from .reduce import K_E_NOMINAL, check_k_e
 
 SEED_TABLE = {
@@ -127,10 +128,17 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
     return {k: np.asarray(v) for k, v in rows.items()}
 
 
+TEMPERATURE_BIN_C = 1.0
+"""Width of the temperature groups of the accuracy tables [°C]: a run's mean temperature
+rounded to the nearest multiple (as [`compare`][hrgjax.calibration.compare] groups them), so
+measured temperatures that jitter by hundredths of a degree make one row, not one each."""
+
+
 def _rms_by_temperature(temps, values, at):
+    keys = nearest_multiples(temps, TEMPERATURE_BIN_C)
     out = {}
-    for temp in at:
-        m = np.isclose(temps, temp) & np.isfinite(values)
+    for temp in nearest_multiples(at, TEMPERATURE_BIN_C):
+        m = (keys == temp) & np.isfinite(values)
         out[float(temp)] = float(np.sqrt(np.mean(values[m] ** 2))) if np.any(m) else np.nan
     return out
 
@@ -146,16 +154,19 @@ def accuracy_table(
 
     - `compensators`: {label: fitted compensator}.
     - `data`: test data with static and/or rotation runs.
-    - `temperatures_c`: temperatures to tabulate (default: all in the data).
+    - `temperatures_c`: temperatures to tabulate [°C] (default: every run's mean
+      temperature); runs are grouped by mean temperature rounded to `TEMPERATURE_BIN_C`
+      (1 °C), and so are these.
 
     **Returns:** {label: {"static_drift_dph": {T: RMS}, "angle_error_deg": {T: RMS},
     "max_angle_error_deg": {T: RMS}}} (module docstring for the definitions).
     """
+    errors = {label: run_errors(comp, data) for label, comp in compensators.items()}
     if temperatures_c is None:
-        temperatures_c = np.unique(np.round(data["temperature_c"], 6))
+        temps = [e["temperature_c"] for e in errors.values()]
+        temperatures_c = np.unique(nearest_multiples(np.concatenate(temps), TEMPERATURE_BIN_C))
     table = {}
-    for label, comp in compensators.items():
-        e = run_errors(comp, data)
+    for label, e in errors.items():
         table[label] = {
             "static_drift_dph": _rms_by_temperature(
                 e["temperature_c"], e["drift_error_dph"], temperatures_c
@@ -168,6 +179,10 @@ def accuracy_table(
             ),
         }
     return table
+
+
+def _group(temp) -> float:
+    return float(nearest_multiples(temp, TEMPERATURE_BIN_C))
 
 
 def format_table(table, temperatures_c=(-40.0, 20.0, 60.0)) -> str:
@@ -186,7 +201,7 @@ def format_table(table, temperatures_c=(-40.0, 20.0, 60.0)) -> str:
         lines.append(head)
         for temp in temperatures_c:
             row = f"{temp:>7.0f} " + " ".join(
-                f"{table[lab][key].get(float(temp), np.nan):>14.4g}" for lab in labels
+                f"{table[lab][key].get(_group(temp), np.nan):>14.4g}" for lab in labels
             )
             seed = SEED_TABLE.get(key, {}).get(float(temp))
             if seed:

@@ -21,11 +21,13 @@ from ..data import MeasuredData
 from ..units import DEG, T_REF_C
 from ._compensator import (
     FROM_FIELD,
+    LEVEL_TOLERANCE_C,
     AbstractCompensator,
     FromField,
     fit_windows,
     require_temperatures,
     setting,
+    temperature_levels,
 )
 from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, check_k_e
 
@@ -145,7 +147,8 @@ class FourierCompensator(AbstractCompensator):
                 _require_degree(self.temperature_degree, w.temperature_c, kind)
         th_s = static.wave_angle_deg * DEG
         drift = (static.rate_dps - static.table_rate_dps) * DEG
-        d_coef = _lstsq(self._basis(th_s, static.temperature_c, np), drift, "drift")
+        d_coef = _lstsq(self._basis(th_s, static.temperature_c, np), drift,
+                        "drift (static runs)", static, self.harmonics)  # fmt: skip
         fitted = eqx.tree_at(
             lambda c: c.drift_coef,
             self,
@@ -155,7 +158,8 @@ class FourierCompensator(AbstractCompensator):
         th_m = moving.wave_angle_deg * DEG
         d_m = self._basis(th_m, moving.temperature_c, np) @ d_coef
         sf = (moving.rate_dps * DEG - d_m) / (moving.table_rate_dps * DEG)
-        s_coef = _lstsq(self._basis(th_m, moving.temperature_c, np), sf, "scale factor")
+        s_coef = _lstsq(self._basis(th_m, moving.temperature_c, np), sf,
+                        "scale factor (rotation runs)", moving, self.harmonics)  # fmt: skip
         return eqx.tree_at(
             lambda c: c.sf_coef,
             fitted,
@@ -187,13 +191,43 @@ def _near(w: RateWindows, temperature_c: float, tol: float, kind: str) -> RateWi
     return w.select(mask)
 
 
-def _lstsq(basis, y, what: str):
+CONDITION_LIMIT = 1e6
+"""Largest condition number of the least squares' basis (columns scaled to unit length) a
+Fourier fit accepts: beyond it the windows' wave angles do not determine the harmonics (two
+distinct angles for five coefficients put the drift at 10⁹ °/h), and the fit says which
+angles to add instead of answering."""
+
+
+def _lstsq(basis, y, what: str, w: RateWindows | None = None, harmonics: int = 0):
     """Ordinary least squares: the batch-means errors of single windows are too noisy to
-    weight by, and windows of one kind have equal length."""
+    weight by, and windows of one kind have equal length. Refuses a basis the windows `w`
+    do not determine (`CONDITION_LIMIT`), naming their distinct wave angles."""
     if basis.shape[0] < basis.shape[1]:
         raise ValueError(
             f"{what}: {basis.shape[0]} calibration points for {basis.shape[1]} coefficients; "
             "add points or lower harmonics / temperature_degree"
         )
+    scaled = basis / np.maximum(np.linalg.norm(basis, axis=0), 1e-300)
+    sv = np.linalg.svd(scaled, compute_uv=False)
+    if not sv[-1] > sv[0] / CONDITION_LIMIT and w is not None:
+        raise ValueError(f"{what}: the windows' wave angles do not determine the "
+                         f"{basis.shape[1]} coefficients; {_angle_summary(w, harmonics)}")  # fmt: skip
     coef, *_ = np.linalg.lstsq(basis, y, rcond=None)
     return coef
+
+
+def _angle_summary(w: RateWindows, harmonics: int) -> str:
+    """'at +20 °C 2 distinct wave angles (0, 45° electrical, mod 180°); …: harmonics=N needs
+    ≥ 2N + 1 at each temperature — add runs at other wave angles or lower harmonics'."""
+    parts = []
+    for level in temperature_levels(w.temperature_c):
+        near = np.abs(w.temperature_c - level) <= LEVEL_TOLERANCE_C
+        folded = (w.wave_angle_deg[near] + 90.0) % 180.0 - 90.0
+        distinct = np.unique(np.round(folded)) + 0.0  # angles within ≈ 1° count once (no −0)
+        shown = ", ".join(f"{a:g}" for a in distinct[:8]) + (", …" if distinct.size > 8 else "")
+        parts.append(f"at {level:+.1f} °C {distinct.size} distinct wave angles ({shown}°)")
+    return (
+        "; ".join(parts) + f" (electrical, mod 180°): harmonics={harmonics} needs ≥ "
+        f"{2 * harmonics + 1} distinct wave angles at each temperature — add runs at other wave "
+        "angles or lower harmonics (CLI --harmonics)"
+    )

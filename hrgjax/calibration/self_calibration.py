@@ -230,7 +230,8 @@ class PrecessionCompensator(AbstractCompensator):
         or a gyro's own sweeps); `key` and `raw` are not used.
 
         **Raises:** `ValueError` for data without the column, a temperature without sweeps
-        in both directions, or sweeps too short for the harmonics."""
+        in both directions, sweeps too short for the harmonics, or sweeps in one direction
+        covering less than `MIN_COVERAGE_DEG` (120°) of the 180° (electrical) period."""
         require_x64("PrecessionCompensator.fit")
         if not isinstance(data, MeasuredData):
             raise TypeError("PrecessionCompensator.fit needs MeasuredData (the sweeps' samples)")
@@ -294,8 +295,40 @@ def _sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
             )
         if min(int(r[3].sum()) for r in runs) < 20:
             raise ValueError(f"at {temp:g} °C a sweep keeps fewer than 20 samples after settle_s")
+        for sign, way in ((1.0, "+ρ"), (-1.0, "−ρ")):
+            arcs = [r[1][r[3]] / DEG for r in runs if np.median(r[2][r[3]]) * sign > 0]
+            covered = _coverage_deg(arcs)
+            if covered < MIN_COVERAGE_DEG:
+                raise ValueError(
+                    f"at {temp:g} °C the sweeps turning {way} cover {covered:.0f}° of the 180° "
+                    f"(electrical) of wave angle the 2nθ harmonics need (≥ {MIN_COVERAGE_DEG:g}° "
+                    "after settle_s): sweep over a half turn (180° electrical) in each direction "
+                    "(precession_plan does)"
+                )
         out.append((temp, runs))
     return out
+
+
+MIN_COVERAGE_DEG = 120.0
+"""Least arc of wave angle (electrical, mod 180°) the sweeps turning each way must cover at
+a temperature after `settle_s` [°]: the 2nθ harmonics are determined only over most of a
+period — the 2θ and 4θ basis has condition number 1 over 180°, 1.3 over 165° (a plan's
+sweeps read with a longer settle_s), 5 over 120°, 20 over 90° and 2900 over 30° (a 30° arc
+put the drift 100× off)."""
+
+
+def _coverage_deg(arcs) -> float:
+    """Degrees of the 180° (electrical) period visited by the wave angles [°] of `arcs` (each
+    a run's samples, the path between them counted), in 1° bins."""
+    seen = np.zeros(180, bool)
+    for a in arcs:
+        lo, hi = float(np.min(a)), float(np.max(a))
+        if hi - lo >= 180.0:
+            return 180.0
+        start = int(np.floor(lo))
+        bins = np.arange(start, start + int(np.ceil(hi - start)))
+        seen[bins % 180] = True
+    return float(seen.sum())
 
 
 def _padded(runs):

@@ -45,7 +45,9 @@ sample.
 **Groups.** A run's temperature is its mean temperature rounded to the nearest multiple of
 `temperature_bin_c` (1 °C), its wave angle its measured start angle rounded to the nearest
 multiple of `angle_bin_deg` (5°: the seed's grids are multiples of 5°, and the readout's
-error at a run's start, ≤ 0.6° on `tvg3_like()`, stays inside the bin). Each figure is the
+error at a run's start, ≤ 0.6° on `tvg3_like()`, stays inside the bin) and folded to
+[−90°, 90°) electrical (θ and θ + 180° are one state of the pattern: −90° and +90° are one
+group, as in `scale_factor_vs_angle` and the MLP). Each figure is the
 RMS over the runs of a group: per temperature over the wave angles (the seed's accuracy
 table, [`accuracy_table`][hrgjax.calibration.accuracy_table]), per wave angle over the
 temperatures. The **figure of merit** of a compensator is the RMS over every static run
@@ -70,6 +72,7 @@ import numpy as np
 
 from ..data import MeasuredData
 from ._compensator import AbstractCompensator
+from ._grouping import nearest_multiples, wave_angle_groups
 from .evaluate import SEED_TABLE, corrected_run_errors
 
 UNIT = {"static_residual_dph": "°/h", "angle_error_deg": "°", "max_angle_error_deg": "°"}
@@ -148,11 +151,6 @@ def session_offset(errors: dict, source: str = "") -> Offset:
     return Offset(value, math.sqrt(var), n, source)
 
 
-def _bins(values, width):
-    """Nearest multiples of `width` (a whole-looking float, `-0.0` made `0.0`)."""
-    return np.round(np.asarray(values, dtype=float) / width) * width + 0.0
-
-
 def _rms_groups(keys, values):
     """{key: RMS of the finite values with that key} over the sorted unique keys (NaN where
     a group has none)."""
@@ -209,9 +207,9 @@ class Comparison:
     def _keys(self, label, by):
         e = self.residuals[label]
         if by == "temperature":
-            return _bins(e["temperature_c"], self.temperature_bin_c)
+            return nearest_multiples(e["temperature_c"], self.temperature_bin_c)
         if by == "wave_angle":
-            return _bins(e["wave_angle0_deg"], self.angle_bin_deg)
+            return wave_angle_groups(e["wave_angle0_deg"], self.angle_bin_deg)
         raise ValueError(f"by must be 'temperature' or 'wave_angle'; got {by!r}")
 
     def figure(self, label: str, key: str, by: str = "temperature", after: bool = True) -> dict:
