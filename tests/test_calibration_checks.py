@@ -2,6 +2,7 @@
 window compares with, the standard errors under white and random-walk angle noise, and the
 data the Fourier and virtual-precession fits refuse because they cannot determine them."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -157,3 +158,99 @@ def test_precession_fit_refuses_sweeps_that_cover_too_little_angle():
     with pytest.raises(ValueError, match=r"^at 20 °C the sweeps turning \+ρ cover 30° of the 180° "
                        r"\(electrical\).*sweep over a half turn"):  # fmt: skip
         comp.fit(_sweeps(30.0))
+
+
+@pytest.mark.parametrize(
+    ("cls", "settings", "match"),
+    [
+        ("MLPCompensator", {"learning_rate": -1.0}, "learning_rate must be a finite number > 0"),
+        ("MLPCompensator", {"learning_rate": float("nan")}, "learning_rate must be a finite"),
+        ("MLPCompensator", {"bin_deg": 0.0}, r"bin_deg must be a finite number > 0 \[°"),
+        ("MLPCompensator", {"bin_deg": -5.0}, "bin_deg must be a finite number > 0"),
+        ("MLPCompensator", {"e2e_steps": 0, "mode": "end_to_end"},
+         "e2e_steps must be a whole number ≥ 1 with mode='end_to_end'; got 0"),
+        ("MLPCompensator", {"e2e_steps": -1}, "e2e_steps must be a whole number ≥ 0"),
+        ("MLPCompensator", {"steps": 0}, "steps must be a whole number ≥ 1"),
+        ("MLPCompensator", {"steps": 2.5}, "steps must be a whole number ≥ 1"),
+        ("MLPCompensator", {"sf_width": 0}, "sf_width must be a whole number ≥ 1"),
+        ("MLPCompensator", {"st_width": -1}, "st_width must be a whole number ≥ 0"),
+        ("MLPCompensator", {"window_s": float("inf")}, "window_s must be None or a finite"),
+        ("FourierCompensator", {"window_s": float("inf")}, "window_s must be None or a finite"),
+        ("FourierCompensator", {"window_s": 0.0}, "window_s must be None or a finite"),
+        ("FourierCompensator", {"tolerance_c": -1.0}, r"tolerance_c must be a finite number ≥ 0"),
+        ("FourierCompensator", {"tolerance_c": float("nan")}, "tolerance_c must be a finite"),
+        ("FourierCompensator", {"fit_temperature_c": float("nan")},
+         r"fit_temperature_c must be a finite number \[°C\]"),
+        ("FourierCompensator", {"harmonics": 1.5}, "harmonics must be a whole number ≥ 1"),
+        ("FourierCompensator", {"harmonics": True}, "harmonics must be a whole number ≥ 1"),
+        ("FourierCompensator", {"temperature_degree": 1.5},
+         "temperature_degree must be a whole number ≥ 0 or None"),
+        ("FourierCompensator", {"temperature_degree": -1}, "temperature_degree must be a whole"),
+    ],
+)  # fmt: skip
+def test_compensator_settings_are_refused_at_construction(cls, settings, match):
+    """Audit: learning_rate=-1 trained to a wrong fit, bin_deg=0 failed after training
+    (ZeroDivisionError), e2e_steps=0 end to end with 'need at least one array', window_s=inf
+    with an OverflowError. Each is now one line naming the class and the field, before any fit."""
+    with pytest.raises(ValueError, match=f"^{cls}: {match}") as err:
+        getattr(cal, cls)(**settings)
+    assert "\n" not in str(err.value)
+
+
+def test_good_settings_and_old_files_pass_the_checks(tmp_path):
+    """The checks take every documented value (None windows, e2e_steps=0 when not end to end,
+    tolerance 0), and a compensator file written before `window_s` and `mode` were saved loads
+    with the class defaults."""
+    import json
+
+    from hrgjax.calibration.export import checksum
+
+    cal.MLPCompensator(e2e_steps=0, window_s=None, learning_rate=1, bin_deg=180.0)
+    cal.FourierCompensator(tolerance_c=0.0, window_s=None, temperature_degree=0)
+    comps = (
+        cal.FourierCompensator(window_s=5.0, drift_coef=jnp.zeros((1, 5)), sf_coef=jnp.ones((1, 5))),
+        cal.MLPCompensator(drift_width=2, sf_width=2, window_s=5.0, mode="end_to_end",
+                           e2e_steps=3).init(jax.random.key(0)),
+    )  # fmt: skip
+    for comp in comps:
+        path = cal.save_compensator(comp, tmp_path / "model.eqx")
+        with open(path, "rb") as fh:
+            header, payload = json.loads(fh.readline()), fh.read()
+        for old in ("window_s", "mode"):
+            header["hyper"].pop(old, None)
+        header["sha256"] = checksum(header, payload)
+        with open(path, "wb") as fh:
+            fh.write((json.dumps(header) + "\n").encode() + payload)
+        loaded = cal.load_compensator(path)
+        assert loaded.window_s == type(comp)().window_s
+        assert getattr(loaded, "mode", "reduced") == "reduced"
+
+
+def test_known_plant_keeps_the_forcers_and_refuses_force_to_rebalance(tmp_path):
+    """Audit: `known_plant` rebuilt the loops without `forcer_gain` and `forcer_angle` (which
+    whole-angle mode reads: the grey box then modelled other loops than the plant's) and took a
+    force-to-rebalance plant. Both forcer errors are now kept (and saved); FTR is refused."""
+    import dataclasses
+
+    import equinox as eqx
+
+    from hrgjax.calibration.physical import known_plant, plant_from_json, plant_to_json
+
+    gyro = hg.presets.tvg3_like()
+    law = hg.TemperatureLaw(0.01, 1e-4)
+    control = dataclasses.replace(gyro.control, forcer_gain=law, forcer_angle=0.002)
+    plant = known_plant(eqx.tree_at(lambda g: g.control, gyro, control))
+    assert float(plant.control.forcer_gain.p0) == 0.01
+    assert float(plant.control.forcer_gain.p1) == 1e-4
+    assert float(plant.control.forcer_angle) == 0.002
+    d = plant_to_json(plant)
+    assert d["control"]["forcer_gain"][:2] == [0.01, 1e-4]
+    assert d["control"]["forcer_angle"] == 0.002
+    back = plant_from_json(d)
+    assert float(back.control.forcer_gain(40.0)) == pytest.approx(0.01 + 20 * 1e-4)
+    assert float(back.control.forcer_angle) == 0.002
+    old = {"resonator": d["resonator"], "control": {
+        k: v for k, v in d["control"].items() if k not in ("forcer_gain", "forcer_angle")}}  # fmt: skip
+    assert float(plant_from_json(old).control.forcer_gain) == 0.0  # files from before load
+    with pytest.raises(ValueError, match=r"^plant.control.mode must be 'wa' .*got 'ftr'"):
+        cal.PhysicalCompensator(plant=gyro.in_mode("ftr"))

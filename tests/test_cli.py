@@ -317,3 +317,61 @@ def test_calibrate_refuses_k_e_outside_zero_one_and_too_few_temperatures(tmp_pat
               r"the physical model's rate bias law \(quadratic in T\) needs at least 3 distinct "
               r"temperatures in the calibration data; got 2")  # fmt: skip
     assert not (tmp_path / "m.eqx").exists()
+
+
+def _tiny_session(path, **extra):
+    """Two short runs at rest (a bench file that is never fitted: the commands stop before)."""
+    t = np.arange(0.0, 2.0, 0.5)
+    cols = {"time_s": np.tile(t, 2), "run": np.repeat([0, 1], t.size),
+            "temperature_c": np.full(2 * t.size, 20.0), "table_rate_dps": np.zeros(2 * t.size),
+            "wave_angle_deg": np.zeros(2 * t.size)}  # fmt: skip
+    cols.update({k: np.full(2 * t.size, v) for k, v in extra.items()})
+    return str(hg.MeasuredData(cols).save(path))
+
+
+def test_calibrate_refuses_options_its_method_does_not_read(tmp_path, capsys):
+    """Audit: `calibrate --method fourier --mode end_to_end --st-width 4` and
+    `--temperature-degree` with mlp or physical were ignored, `--temperature-degree -7` meant
+    the base algorithm. Each is now one line naming the option and the methods that read it."""
+    data = _tiny_session(tmp_path / "bench.csv")
+    base = ["calibrate", data, "--out", str(tmp_path / "m.eqx")]
+    for method, option, takes in (
+        ("fourier", ["--mode", "end_to_end"], "--method mlp"),
+        ("fourier", ["--st-width", "4"], "--method mlp"),
+        ("fourier", ["--plant", "tvg3"], "--method physical"),
+        ("mlp", ["--temperature-degree", "2"], "--method fourier"),
+        ("physical", ["--temperature-degree", "-1"], "--method fourier"),
+        ("physical", ["--harmonics", "2"], "--method fourier"),
+        ("physical", ["--seed", "0"], "--method mlp"),  # its default value, given: refused too
+    ):
+        cli_fails(base + ["--method", method, *option], capsys,
+                  rf"^hrgjax calibrate: error: {option[0]} is for {takes}: it does not apply "
+                  rf"to --method {method}$")  # fmt: skip
+    cli_fails(base + ["--temperature-degree", "-7"], capsys,
+              r"--temperature-degree: expected a whole number ≥ 0 .* or -1 .*; got '-7'")  # fmt: skip
+    assert not (tmp_path / "m.eqx").exists()
+
+
+def test_self_calibrate_refuses_sweep_options_on_mode_reversal_data(tmp_path, capsys):
+    """`--harmonics` and `--out` are the sweeps' fit's: on force-to-rebalance holds (which only
+    write a table) they were ignored; now refused, naming the data they apply to."""
+    data = _tiny_session(tmp_path / "holds.csv", rebalance_rate_dps=0.0)
+    for option in (["--harmonics", "3"], ["--out", str(tmp_path / "s.eqx")]):
+        cli_fails(["self-calibrate", data, *option], capsys,
+                  rf"{option[0]} is for virtual-precession sweeps .*: it does not apply to "
+                  r"force-to-rebalance holds")  # fmt: skip
+
+
+def test_compare_offset_from_names_a_model_file_however_written(tmp_path, capsys, monkeypatch):
+    """Audit: `--offset-from ./f0.eqx` was refused when the models were given as `f0.eqx`
+    (the paths were compared as strings). Now the same file is found; the command then stops
+    at the missing test session, before any work."""
+    from hrgjax.calibration import NoCompensation, save_compensator
+
+    monkeypatch.chdir(tmp_path)
+    save_compensator(NoCompensation(), "f0.eqx")
+    save_compensator(NoCompensation(k_e=0.5), "f1.eqx")
+    argv = ["compare", "none.csv", "--models", "f0.eqx", "f1.eqx", "--offset-from"]
+    cli_fails(argv + ["./f0.eqx"], capsys, "none.csv: no such file")
+    cli_fails(argv + [str(tmp_path / "f1.eqx")], capsys, "none.csv: no such file")
+    cli_fails(argv + ["./f2.eqx"], capsys, r"--offset-from './f2.eqx': give one of the --models")

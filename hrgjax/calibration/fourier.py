@@ -35,6 +35,40 @@ T_SCALE = 50.0
 """Temperature scale of the polynomial basis [°C]."""
 
 
+def _is_number(value) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+
+
+def check_whole(who: str, name: str, value, minimum: int, extra: str = "") -> None:
+    """Refuse a compensator setting that is not a whole number ≥ `minimum`: one-line
+    `ValueError` naming `who` (the class) and the field `name`; `extra` ends the expected
+    form (e.g. " (number of 2nθ harmonics)")."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"{who}: {name} must be a whole number ≥ {minimum}{extra}; got {value!r}")
+
+
+def check_number(who: str, name: str, value, extra: str, *, minimum=None, strict=False) -> None:
+    """Refuse a compensator setting that is not a finite number (≥ `minimum`, or > it with
+    `strict`): one-line `ValueError` naming `who` and the field `name`; `extra` ends the
+    expected form (its unit, e.g. " [°C]")."""
+    ok = _is_number(value) and bool(np.isfinite(value))
+    if ok and minimum is not None:
+        ok = value > minimum if strict else value >= minimum
+    if not ok:
+        bound = "" if minimum is None else f" {'>' if strict else '≥'} {minimum:g}"
+        raise ValueError(f"{who}: {name} must be a finite number{bound}{extra}; got {value!r}")
+
+
+def check_window(who: str, window_s) -> None:
+    """Refuse a `window_s` that is neither `None` (the reduction's default) nor a finite
+    number of seconds > 0."""
+    if window_s is not None and not (
+        _is_number(window_s) and np.isfinite(window_s) and window_s > 0
+    ):
+        raise ValueError(f"{who}: window_s must be None or a finite number of seconds > 0 "
+                         f"(the rotation-run window); got {window_s!r}")  # fmt: skip
+
+
 def _angle_basis(theta, harmonics: int, xp=jnp):
     cols = [xp.ones_like(theta)]
     for n in range(1, harmonics + 1):
@@ -62,6 +96,11 @@ class FourierCompensator(AbstractCompensator):
       `None` before `fit`.
     - `window_s`: rotation-run window [s] of the reduction when `fit` is given
       `MeasuredData` (windows given to `fit` are used as they are).
+
+    **Raises:** `ValueError`, one line naming the field, when built with `harmonics` not a
+    whole number ≥ 1, `temperature_degree` neither `None` nor a whole number ≥ 0,
+    `fit_temperature_c` not finite, `tolerance_c` not finite and ≥ 0, `window_s` neither
+    `None` nor finite and > 0, or `k_e` outside (0, 1].
     """
 
     harmonics: int = eqx.field(static=True, default=2)
@@ -75,12 +114,14 @@ class FourierCompensator(AbstractCompensator):
 
     def __check_init__(self):
         check_k_e(self.k_e)
-        if self.harmonics < 1:
-            raise ValueError(f"harmonics must be ≥ 1; got {self.harmonics}")
-        if self.temperature_degree is not None and self.temperature_degree < 0:
-            raise ValueError(
-                f"temperature_degree must be None or ≥ 0; got {self.temperature_degree}"
-            )
+        who = "FourierCompensator"
+        check_whole(who, "harmonics", self.harmonics, 1, " (number of 2nθ harmonics)")
+        if self.temperature_degree is not None:
+            check_whole(who, "temperature_degree", self.temperature_degree, 0,
+                        " or None (the seed's base algorithm)")  # fmt: skip
+        check_number(who, "fit_temperature_c", self.fit_temperature_c, " [°C]")
+        check_number(who, "tolerance_c", self.tolerance_c, " [°C]", minimum=0.0)
+        check_window(who, self.window_s)
 
     @property
     def _degree(self) -> int:

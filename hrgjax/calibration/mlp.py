@@ -39,6 +39,7 @@ from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
 from ._compensator import FROM_FIELD, AbstractCompensator, FromField, fit_windows, setting
+from .fourier import check_number, check_whole, check_window
 from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, check_k_e
 
 ENCODINGS = ("periodic", "angle")
@@ -70,6 +71,12 @@ class MLPCompensator(AbstractCompensator):
     - `mode`: how `fit` trains, `"reduced"` or `"end_to_end"` (module docstring).
     - `window_s`: rotation-run window [s] of the reduction when `fit` is given
       `MeasuredData`, and of the end-to-end loss.
+
+    **Raises:** `ValueError`, one line naming the field, when built with an unknown
+    `encoding` or `mode`, `drift_width`, `sf_width` or `steps` not a whole number ≥ 1,
+    `st_width` or `e2e_steps` not a whole number ≥ 0 (`e2e_steps` ≥ 1 with
+    `mode="end_to_end"`), `learning_rate` or `bin_deg` not finite and > 0, `window_s` neither
+    `None` nor finite and > 0, or `k_e` outside (0, 1].
     """
 
     drift_width: int = eqx.field(static=True, default=30)
@@ -95,14 +102,22 @@ class MLPCompensator(AbstractCompensator):
 
     def __check_init__(self):
         check_k_e(self.k_e)
+        who = "MLPCompensator"
         if self.encoding not in ENCODINGS:
-            raise ValueError(f"encoding must be one of {ENCODINGS}; got {self.encoding!r}")
-        if self.drift_width < 1 or self.sf_width < 1 or self.steps < 1:
-            raise ValueError("drift_width, sf_width and steps must be ≥ 1")
-        if self.st_width < 0:
-            raise ValueError(f"st_width must be ≥ 0 (0: no s_T network); got {self.st_width}")
+            raise ValueError(f"{who}: encoding must be one of {ENCODINGS}; got {self.encoding!r}")
         if self.mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}; got {self.mode!r}")
+            raise ValueError(f"{who}: mode must be one of {MODES}; got {self.mode!r}")
+        check_whole(who, "drift_width", self.drift_width, 1, " (hidden neurons)")
+        check_whole(who, "sf_width", self.sf_width, 1, " (hidden neurons)")
+        check_whole(who, "st_width", self.st_width, 0, " (0: no s_T network)")
+        check_whole(who, "steps", self.steps, 1, " (Rprop iterations)")
+        e2e = self.mode == "end_to_end"
+        check_whole(who, "e2e_steps", self.e2e_steps, 1 if e2e else 0,
+                    " with mode='end_to_end'" if e2e else " (Rprop iterations)")  # fmt: skip
+        check_number(who, "learning_rate", self.learning_rate, " (Rprop's initial step)",
+                     minimum=0.0, strict=True)  # fmt: skip
+        check_number(who, "bin_deg", self.bin_deg, " [° of wave angle]", minimum=0.0, strict=True)
+        check_window(who, self.window_s)
 
     @property
     def name(self) -> str:

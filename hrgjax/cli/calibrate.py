@@ -3,6 +3,7 @@ session with it, and weigh several on one test session."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 from typing import TYPE_CHECKING, NamedTuple
@@ -40,10 +41,47 @@ class Method(NamedTuple):
     ramp_window_s: float | None = None
 
 
-def _no_plant(args) -> None:
-    if args.plant is not None:
-        raise UsageError(f"--plant is for --method physical (the grey box); got --method "
-                         f"{args.method}")  # fmt: skip
+class Given(argparse.Action):
+    """Store the option's value and note the option as given by the user (`args.given`, a
+    frozenset of option strings): `check_given` refuses one the command will not read."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        namespace.given = getattr(namespace, "given", frozenset()) | {self.option_strings[0]}
+
+
+def check_given(args, options_of: dict, chosen: str) -> None:
+    """Refuse an option the user gave (`Given`) that `chosen` does not read: one line naming the
+    option and the choices that read it. `options_of` maps each choice, in words (`--method
+    fourier`), to the options it reads; options in no entry are read by every choice."""
+    given = getattr(args, "given", frozenset())
+    specific = {o for options in options_of.values() for o in options}
+    for option in sorted(given & specific):
+        if option not in options_of.get(chosen, ()):
+            takes = [c for c, options in options_of.items() if option in options]
+            raise UsageError(f"{option} is for {' and '.join(takes)}: it does not apply to "
+                             f"{chosen}")  # fmt: skip
+
+
+OPTIONS_OF_METHOD = {
+    "--method fourier": ("--harmonics", "--temperature-degree"),
+    "--method mlp": ("--mode", "--st-width", "--seed"),
+    "--method physical": ("--plant",),
+}
+"""`calibrate`: the method-specific options each `--method` reads (one given to another method
+is refused, not ignored; `--k-e` and `--window` apply to all)."""
+
+
+def TEMPERATURE_DEGREE(text):  # noqa: N802 (an argparse type, named like _common's)
+    """`--temperature-degree`: a whole number ≥ 0, or -1 for the seed's base algorithm."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or value < -1:
+        raise argparse.ArgumentTypeError(f"expected a whole number ≥ 0 (the polynomial degree in "
+                                         f"T) or -1 (the seed's base algorithm); got {text!r}")  # fmt: skip
+    return value
 
 
 def _window(args) -> dict:
@@ -54,7 +92,6 @@ def _window(args) -> dict:
 def _fourier(args) -> Method:
     from ..calibration import FourierCompensator
 
-    _no_plant(args)
     degree = None if args.temperature_degree < 0 else args.temperature_degree
     return Method(FourierCompensator(harmonics=args.harmonics, temperature_degree=degree,
                                      k_e=args.k_e, **_window(args)))  # fmt: skip
@@ -64,7 +101,6 @@ def _mlp(args) -> Method:
     from ..calibration import MLPCompensator
     from ..calibration.reduce import RAMP_WINDOW_S
 
-    _no_plant(args)
     # --window is the reduction's, as it has always been: the end-to-end loss keeps the
     # class's window_s (WINDOW_S), so the fit is the one earlier versions gave
     comp = MLPCompensator(k_e=args.k_e, st_width=args.st_width, mode=args.mode)
@@ -87,6 +123,7 @@ METHODS = tuple(COMPENSATORS)
 
 def cmd_calibrate(args) -> int:
     """`hrgjax calibrate DATA --method …`: fit a compensator to bench data."""
+    check_given(args, OPTIONS_OF_METHOD, f"--method {args.method}")
     args.json = args.json or os.path.splitext(args.out)[0] + ".json"
     start(args, [args.data], out=(".eqx",), json=(".json",))
     import jax
@@ -211,7 +248,11 @@ def cmd_compare(args) -> int:
     labels = _labels(comps, args.models)
     offset_from = args.offset_from
     if offset_from is not None:
-        by_file = [lab for lab, p in zip(labels, args.models, strict=True) if p == offset_from]
+        by_file = [  # by file: ./f.eqx names f.eqx
+            lab
+            for lab, p in zip(labels, args.models, strict=True)
+            if p == offset_from or same_file(p, offset_from)
+        ]
         if by_file:
             offset_from = by_file[0]
         elif offset_from not in labels:
@@ -274,27 +315,28 @@ def _calibrate_parser(sub):
         f"{PHYSICAL_WINDOW_S:g} s for physical, as the Python classes)",
     )
     p.add_argument(
-        "--plant", default=None, choices=("tvg3",),
+        "--plant", default=None, choices=("tvg3",), action=Given,
         help="physical: the gyro whose loops and resonator constants (ω, τ, Δω, θ_ω, χ) the "
         "grey box models (their lag then leaves g, cross-talk and k_e physical); default: "
         "ideal loops (those are effective values)",
     )  # fmt: skip
     p.add_argument(
-        "--mode", default="reduced", choices=("reduced", "end_to_end"), help="MLP training mode"
-    )
-    p.add_argument("--harmonics", type=POSITIVE_INT, default=2, help="Fourier harmonics of 2θ")
+        "--mode", default="reduced", choices=("reduced", "end_to_end"), action=Given,
+        help="mlp: training mode",
+    )  # fmt: skip
+    p.add_argument("--harmonics", type=POSITIVE_INT, default=2, action=Given,
+                   help="fourier: harmonics of 2θ")  # fmt: skip
     p.add_argument(
-        "--temperature-degree",
-        type=int,
-        default=-1,
-        help="Fourier: polynomial degree in T (-1 = seed's base algorithm at +20 °C)",
-    )
+        "--temperature-degree", type=TEMPERATURE_DEGREE, default=-1, action=Given,
+        help="fourier: polynomial degree in T (-1 = seed's base algorithm at +20 °C)",
+    )  # fmt: skip
     p.add_argument(
-        "--st-width", type=NONNEGATIVE_INT, default=0,
-        help="MLP: hidden neurons of the readout temperature-sensitivity network s_T(θ, T), "
+        "--st-width", type=NONNEGATIVE_INT, default=0, action=Given,
+        help="mlp: hidden neurons of the readout temperature-sensitivity network s_T(θ, T), "
         "learnt from ramps (at rest, temperature moving); 0 = none, the seed's MLP",
     )  # fmt: skip
-    p.add_argument("--seed", type=int, default=0, help="PRNG seed (MLP weights)")
+    p.add_argument("--seed", type=int, default=0, action=Given,
+                   help="mlp: PRNG seed of the initial weights")  # fmt: skip
     p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
     return p
 
@@ -331,6 +373,13 @@ def _compare_parser(sub):
     return p
 
 
+SWEEPS = "virtual-precession sweeps (a precession_dps column)"
+REVERSAL = "force-to-rebalance holds (a rebalance_rate_dps column)"
+OPTIONS_OF_DATA = {SWEEPS: ("--out", "--harmonics"), REVERSAL: ()}
+"""`self-calibrate`: the options each kind of data reads (the sweeps' fit writes a compensator;
+mode reversal only a table, to --json); one the data's kind does not read is refused."""
+
+
 def cmd_self_calibrate(args) -> int:
     """`hrgjax self-calibrate DATA`: calibrate from runs at rest — virtual-precession sweeps
     (the drift compensator) or force-to-rebalance mode reversal (bias and anisotropy)."""
@@ -338,6 +387,7 @@ def cmd_self_calibrate(args) -> int:
 
     data = load_data(args.data, args.allow_extra)
     reversal = "rebalance_rate_dps" in data
+    check_given(args, OPTIONS_OF_DATA, REVERSAL if reversal else SWEEPS)
     if reversal:
         start(args, [args.data], json=(".json",))
     else:
@@ -388,11 +438,11 @@ def _self_calibrate_parser(sub):
     )
     p.add_argument("data", help="runs at rest: virtual-precession sweeps (a precession_dps "
                    "column, whole-angle) or FTR holds (rebalance_rate_dps)")  # fmt: skip
-    p.add_argument("--out", default="out/self_cal.eqx",
+    p.add_argument("--out", default="out/self_cal.eqx", action=Given,
                    help="(sweeps) the fitted compensator (.eqx; for correct and compare)")  # fmt: skip
     p.add_argument("--json", default=None,
                    help="(sweeps) its JSON export, default beside --out; (reversal) the table")  # fmt: skip
-    p.add_argument("--harmonics", type=POSITIVE_INT, default=2,
+    p.add_argument("--harmonics", type=POSITIVE_INT, default=2, action=Given,
                    help="(sweeps) 2nθ harmonics of the drift (2: 2θ and 4θ)")  # fmt: skip
     p.add_argument("--settle", type=NONNEGATIVE_FLOAT, default=30.0,
                    help="time left out at the start of each sweep or hold [s]")  # fmt: skip
