@@ -254,3 +254,22 @@ def test_known_plant_keeps_the_forcers_and_refuses_force_to_rebalance(tmp_path):
     assert float(plant_from_json(old).control.forcer_gain) == 0.0  # files from before load
     with pytest.raises(ValueError, match=r"^plant.control.mode must be 'wa' .*got 'ftr'"):
         cal.PhysicalCompensator(plant=gyro.in_mode("ftr"))
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"window_s": float("inf")}, r"window_s must be a finite number > 0 of seconds"),
+        ({"window_s": -1.0}, r"window_s must be a finite number > 0"),
+        ({"window_s": None}, r"window_s must be a finite number > 0"),
+        ({"max_steps": 0}, r"max_steps must be a whole number ≥ 1"),
+        ({"max_steps": 2.5}, r"max_steps must be a whole number ≥ 1"),
+        ({"sf_rate": float("nan")}, r"sf_rate must be a finite number \[rad/s\]"),
+    ],
+)
+def test_physical_compensator_settings_are_refused_at_construction(kw, match):
+    from hrgjax.calibration import PhysicalCompensator
+
+    with pytest.raises(ValueError, match=match):
+        PhysicalCompensator(**kw)
+    PhysicalCompensator(window_s=10.0, max_steps=8, sf_rate=0.1)  # good ones pass

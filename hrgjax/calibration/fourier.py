@@ -24,6 +24,9 @@ from ._compensator import (
     LEVEL_TOLERANCE_C,
     AbstractCompensator,
     FromField,
+    check_number,
+    check_whole,
+    check_window,
     fit_windows,
     require_temperatures,
     setting,
@@ -33,40 +36,6 @@ from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, check_k_e
 
 T_SCALE = 50.0
 """Temperature scale of the polynomial basis [°C]."""
-
-
-def _is_number(value) -> bool:
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-
-
-def check_whole(who: str, name: str, value, minimum: int, extra: str = "") -> None:
-    """Refuse a compensator setting that is not a whole number ≥ `minimum`: one-line
-    `ValueError` naming `who` (the class) and the field `name`; `extra` ends the expected
-    form (e.g. " (number of 2nθ harmonics)")."""
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise ValueError(f"{who}: {name} must be a whole number ≥ {minimum}{extra}; got {value!r}")
-
-
-def check_number(who: str, name: str, value, extra: str, *, minimum=None, strict=False) -> None:
-    """Refuse a compensator setting that is not a finite number (≥ `minimum`, or > it with
-    `strict`): one-line `ValueError` naming `who` and the field `name`; `extra` ends the
-    expected form (its unit, e.g. " [°C]")."""
-    ok = _is_number(value) and bool(np.isfinite(value))
-    if ok and minimum is not None:
-        ok = value > minimum if strict else value >= minimum
-    if not ok:
-        bound = "" if minimum is None else f" {'>' if strict else '≥'} {minimum:g}"
-        raise ValueError(f"{who}: {name} must be a finite number{bound}{extra}; got {value!r}")
-
-
-def check_window(who: str, window_s) -> None:
-    """Refuse a `window_s` that is neither `None` (the reduction's default) nor a finite
-    number of seconds > 0."""
-    if window_s is not None and not (
-        _is_number(window_s) and np.isfinite(window_s) and window_s > 0
-    ):
-        raise ValueError(f"{who}: window_s must be None or a finite number of seconds > 0 "
-                         f"(the rotation-run window); got {window_s!r}")  # fmt: skip
 
 
 def _angle_basis(theta, harmonics: int, xp=jnp):

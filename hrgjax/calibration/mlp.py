@@ -38,8 +38,16 @@ from .._compiled import device, program
 from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
-from ._compensator import FROM_FIELD, AbstractCompensator, FromField, fit_windows, setting
-from .fourier import check_number, check_whole, check_window
+from ._compensator import (
+    FROM_FIELD,
+    AbstractCompensator,
+    FromField,
+    check_number,
+    check_whole,
+    check_window,
+    fit_windows,
+    setting,
+)
 from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, check_k_e
 
 ENCODINGS = ("periodic", "angle")

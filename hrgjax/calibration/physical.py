@@ -57,6 +57,8 @@ from ._compensator import (
     FROM_FIELD,
     AbstractCompensator,
     FromField,
+    check_number,
+    check_whole,
     require_temperatures,
     setting,
     split_targets,
@@ -188,6 +190,11 @@ class PhysicalCompensator(AbstractCompensator):
 
     def __check_init__(self):
         check_k_e(self.k_e)
+        check_number("PhysicalCompensator", "window_s", self.window_s,
+                     " of seconds (the rotation-run window)", minimum=0.0, strict=True)  # fmt: skip
+        check_whole("PhysicalCompensator", "max_steps", self.max_steps, 1,
+                    " (Levenberg–Marquardt steps)")  # fmt: skip
+        check_number("PhysicalCompensator", "sf_rate", self.sf_rate, " [rad/s]")
 
     @property
     def fit_stats(self) -> dict:
