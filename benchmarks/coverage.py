@@ -264,6 +264,8 @@ def main(argv=None) -> int:
     ap.add_argument("--run-bias", type=float, default=0.0,
                     help="with --physical-runs: each run's own bias, σ [°/h]")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.run_bias and not args.physical_runs or args.run_bias < 0:
+        ap.error("--run-bias takes a σ ≥ 0 [°/h] and goes with --physical-runs")
     n = args.n or (6 if args.quick else 20)
     print(f"coverage.py on {machine()}, {n} datasets per workflow")
     t0 = time.perf_counter()

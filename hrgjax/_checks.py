@@ -49,20 +49,27 @@ def check_finite_leaves(name: str, tree):
     `__check_init__` (their results are discarded), so without this a NaN in a traced
     parameter or profile shows up far downstream (a solver's "maximum number of steps").
     Concrete leaves pass unchecked: they were checked where they were built."""
-    flat = jax.tree_util.tree_flatten_with_path(tree)[0]
+    flat, treedef = jax.tree_util.tree_flatten_with_path(tree)
+    leaves = [x for _, x in flat]
     traced = [
-        (path, x)
-        for path, x in flat
+        i
+        for i, x in enumerate(leaves)
         if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.floating) and not is_concrete(x)
     ]
     if not traced:
         return tree
-    ok = jnp.stack([jnp.all(jnp.isfinite(x)) for _, x in traced])
+    ok = jnp.stack([jnp.all(jnp.isfinite(leaves[i])) for i in traced])
     messages = [
-        f"{name}{jax.tree_util.keystr(path)} must be finite (found NaN or inf)"
-        for path, _ in traced
+        f"{name}{jax.tree_util.keystr(flat[i][0])} must be finite (found NaN or inf)"
+        for i in traced
     ]
-    return eqx.branched_error_if(tree, ~jnp.all(ok), jnp.argmin(ok), messages)
+    # only the traced leaves pass through the check: constants stay constants (XLA folds them)
+    checked = eqx.branched_error_if(
+        [leaves[i] for i in traced], ~jnp.all(ok), jnp.argmin(ok), messages
+    )
+    for i, x in zip(traced, checked, strict=True):
+        leaves[i] = x
+    return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
 def check_nonnegative(name: str, x, unit: str = ""):

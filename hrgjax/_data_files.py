@@ -293,15 +293,19 @@ def read_csv_table(
                 header = [h.strip() for h in row]
                 header_line = line[0]
                 continue
-            if all(not f.strip() for f in row) and not empty_as_nan:
-                raise ValueError(
-                    f"{path}: line {line[0]}: every field is empty (a missing sample?); only "
-                    "blank lines are skipped: fill the row in or delete it"
-                )
             rows.append(row)
             lines.append(line[0])
     except csv.Error as err:
         raise ValueError(f"{path}: line {line[0]}: not a readable CSV row ({err})") from None
+    empty = [all(not f.strip() for f in row) for row in rows]
+    while rows and empty[-1]:  # a spreadsheet's trailing rows of empty fields hold no sample
+        rows.pop(), lines.pop(), empty.pop()
+    if any(empty) and not empty_as_nan:
+        raise ValueError(
+            f"{path}: line {lines[empty.index(True)]}: every field is empty (a missing "
+            "sample?); only blank lines and empty rows after the data are skipped: fill the "
+            "row in or delete it"
+        )
     if header is None:
         raise ValueError(f"{path}: empty file (expected a header row)")
     check_header(path, header, header_line)
@@ -379,7 +383,10 @@ def _parse(path: str, name: str, values: list[str], lines: np.ndarray) -> np.nda
                     "large to hold exactly as a float64; write it in scientific notation if "
                     "rounding is intended"
                 )
-    return np.array([float(v) for v in stripped], dtype=float)
+    out = np.array([float(v) for v in stripped], dtype=float)
+    if name == "run" and np.all(np.abs(out) < MAX_EXACT_INTEGER) and np.all(out == np.round(out)):
+        return out.astype(np.int64)  # run ids written 1.0 or 1e2: exact integers too
+    return out
 
 
 _FIELD_LIMIT = 131072  # the csv module's field limit, which the slow path reports

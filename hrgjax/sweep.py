@@ -64,8 +64,8 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
 
     A sweep whose outputs over the whole grid would exceed
     `hrgjax.plausible.MAX_OUTPUT_SAMPLES` × `BYTES_PER_SAMPLE` bytes (≈ 4.7 GiB) is refused
-    before it runs; a check that fails inside `fn` (a NaN in a traced parameter, a solver out
-    of steps) is raised as one line (`RuntimeError`).
+    before the batch runs; a check that fails inside `fn` (a NaN in a traced parameter, a
+    solver out of steps) is raised as one line (`RuntimeError`).
     """
     if not grids:
         raise ValueError(

@@ -66,6 +66,11 @@ def test_empty_rows_are_gaps_or_errors_never_skipped(tmp_path):
     assert np.isnan(cols["time_s"][1]) and lines.tolist() == [2, 3, 5]
     with pytest.raises(ValueError, match=r"^\S*gap.csv: line 3: every field is empty"):
         hg.load(path)
+    # rows of empty fields after the last sample (a spreadsheet's export) hold no sample
+    tail = write(tmp_path / "tail.csv", f"{HEADER}\n0,20,0,0\n0.2,20,0,0\n,,,\n,,,\n")
+    assert len(hg.load(tail)["time_s"]) == 2
+    cols, lines = read_csv_table(str(tail), empty_as_nan=True)
+    assert lines.tolist() == [2, 3] and not np.isnan(cols["time_s"]).any()
     imu = write(tmp_path / "imu.csv", "t,gx,gy,gz,ax,ay,az\n0,0,0,0,0,0,9.8\n,,,,,,\n"
                 "0.02,0,0,0,0,0,9.8\n0.03,0,0,0,0,0,9.8\n")  # fmt: skip
     with pytest.raises(ValueError, match=r"imu.csv: line 3: every field is empty"):

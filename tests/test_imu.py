@@ -528,3 +528,13 @@ def test_save_keeps_the_sample_rate_exactly(tmp_path):
     # a rate given to load wins over the file's comment
     assert hg.imu.load(path, columns=hg.imu.SI_COLUMNS, units=hg.imu.SI_UNITS,
                        rate_hz=100.5).rate_hz == 100.5  # fmt: skip
+    # a file thinned after saving: the comment's rate is wrong, and the error says where it
+    # came from (the user gave none)
+    lines = Path(path).read_text().splitlines()
+    thinned = tmp_path / "thinned.csv"
+    thinned.write_text("\n".join(lines[:2] + lines[2::10]) + "\n")
+    with pytest.raises(ValueError, match=r"comment '# rate_hz = 100.0' on line 1"):
+        hg.imu.load(thinned, columns=hg.imu.SI_COLUMNS, units=hg.imu.SI_UNITS)
+    thinned.write_text("\n".join(["# rate_hz = nan"] + lines[1:]) + "\n")
+    with pytest.raises(ValueError, match=r"line 1: the comment '# rate_hz = nan' must give"):
+        hg.imu.load(thinned, columns=hg.imu.SI_COLUMNS, units=hg.imu.SI_UNITS)

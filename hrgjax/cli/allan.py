@@ -55,6 +55,11 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
             raise UsageError(f"{path}: no numeric time column {time_column!r} (columns: "
                              f"{', '.join(table)})")  # fmt: skip
         t = np.asarray(table[time_column], dtype=float)
+        missing = np.flatnonzero(~np.isfinite(t))
+        if missing.size:
+            raise UsageError(f"{path}: line {int(lines[missing[0]])}: no time stamp in "
+                             f"{time_column!r} (a row of empty fields?); every sample needs "
+                             "its time: fill it in or delete the row")  # fmt: skip
         dt = np.diff(t)
         if dt.size == 0 or not np.all(np.isfinite(dt)) or np.any(dt <= 0):
             raise UsageError(f"{path}: the time column {time_column!r} must increase")

@@ -10,6 +10,7 @@ other way round) — an error, never a silent rescale."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import re
 import warnings
@@ -243,8 +244,9 @@ def load(
         raise FileNotFoundError(f"{path}: no such file")
     names = _column_map(columns)
     _declared(units)
+    comment = None  # (line, text) of the file's `# rate_hz = …` when the rate comes from it
     if rate_hz is None:
-        rate_hz = _saved_rate(path)
+        rate_hz, comment = _saved_rate(path)
     fast = _fast_columns(path, _all_names(names))
     if fast is not None:  # plain numeric columns: NumPy's C parser, 4× faster
         try:
@@ -252,7 +254,15 @@ def load(
         except ValueError:
             pass  # read again below, so that the error names the file's line
     table, lines = read_csv_table(path)
-    return _build(path, names, table, lines, units, rate_hz, check_units)
+    try:
+        return _build(path, names, table, lines, units, rate_hz, check_units)
+    except ValueError as err:
+        if comment is None or "rate_hz" not in str(err):
+            raise
+        raise ValueError(
+            f"{err} (rate_hz here is the file's comment {comment[1]!r} on line {comment[0]}: "
+            "correct or delete that line, or pass rate_hz=)"
+        ) from None
 
 
 def _build(path, names, table, lines, units, rate_hz, check_units) -> ImuData:
@@ -306,28 +316,31 @@ def _build(path, names, table, lines, units, rate_hz, check_units) -> ImuData:
 _SAVED_RATE = re.compile(r"#\s*rate_hz\s*=\s*(\S+)\s*")
 
 
-def _saved_rate(path: str) -> float | None:
+def _saved_rate(path: str) -> tuple[float | None, tuple[int, str] | None]:
     """The `# rate_hz = …` comment [Hz] among the comment lines before a file's header (as
-    `ImuData.save` writes it), or None."""
+    `ImuData.save` writes it) and (its line, its text), or (None, None)."""
     try:
         with open(path, encoding="utf-8-sig") as fh:
-            for line in fh:
+            for i, line in enumerate(fh, 1):
                 if not line.strip():
                     continue
                 if not line.lstrip().startswith("#"):
-                    return None
+                    return None, None
                 m = _SAVED_RATE.fullmatch(line.strip())
                 if m is not None:
                     try:
-                        return float(m.group(1))
+                        rate = float(m.group(1))
                     except ValueError:
+                        rate = math.nan
+                    if not (math.isfinite(rate) and rate > 0):
                         raise ValueError(
-                            f"{path}: the comment {line.strip()!r} must give the sample rate "
-                            "as a number [Hz]"
-                        ) from None
+                            f"{path}: line {i}: the comment {line.strip()!r} must give the "
+                            "sample rate as a number > 0 [Hz]: correct or delete that line"
+                        )
+                    return rate, (i, line.strip())
     except UnicodeDecodeError:
-        return None  # the CSV reader names the line
-    return None
+        return None, None  # the CSV reader names the line
+    return None, None
 
 
 def _fast_columns(path: str, wanted: list[str]) -> dict[str, np.ndarray] | None:

@@ -35,6 +35,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import numbers
 from pathlib import Path
 
 import equinox as eqx
@@ -257,7 +258,7 @@ class Motion:
         from .._io import atomic_write
 
         def g(x):
-            return str(int(x)) if isinstance(x, bool | int) else repr(float(x))
+            return str(int(x)) if isinstance(x, numbers.Integral) else repr(float(x))
 
         lines = [
             _HEAD_INIT,
