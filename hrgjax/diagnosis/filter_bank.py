@@ -182,47 +182,99 @@ class GainBank(eqx.Module):
     matrix–vector products per hypothesis and step. For the independent bank this is
     exact.
 
-    The interacting bank (IMM) mixes covariances too, which depends on the data; its
-    gain-schedule form keeps the one thing that matters for a fault's onset: a hypothesis
-    with `reset` states (a fault's size) restarts them at its prior when it is entered. So
-    each such hypothesis also has an *onset* schedule — the recursion started from the
-    healthy filter's converged covariance with its reset states at their prior — indexed
-    by the number of steps it has been the most probable hypothesis (0 while it is not,
-    when it is re-entered from the leading one at every step). The estimates are mixed
-    exactly; the covariances are those of the schedules.
+    The interacting bank (IMM) mixes covariances too, which depends on the data. Its
+    gain-schedule form keeps two things of the mixing:
+
+    - a fault hypothesis (one with `reset` states, a fault's size) restarts them at its
+      prior when it is entered, so it has an *onset* schedule too — the recursion started
+      from the healthy filter's converged covariance with its reset states at their prior —
+      indexed by the number of steps it has been the most probable hypothesis (0 while it
+      is not: it is re-entered from the leading one at every step). The first `warmup`
+      steps (the filters' start-up transient) use the plain schedules;
+    - a hypothesis without reset states (S0) that does not lead steps from the leading
+      hypothesis's covariance (its schedule at that step), as the IMM's mixing starts it
+      mostly from the leader's estimate. Kept on its own healthy schedule instead, S0 named
+      a fault and then took the decision back within ≈ 35 s while the fault persisted (its
+      healthy gain absorbs the step into its sensor-error state; the IMM's S0, started each
+      step from the faulty hypothesis's covariance, cannot).
+
+    The estimates are mixed exactly; the covariances are those of the schedules. Agreement
+    with the full IMM: `docs/diagnosis.md`.
 
     **Fields:** `bank`; `gain` (M, L, n, m), `s_inv` (M, L, m, m) and `logdet` (M, L):
-    the schedule from `p0`; `onset_gain`, `onset_s_inv`, `onset_logdet`: the onset
-    schedules."""
+    each filter's schedule from `p0` (the independent bank); `from_gain`
+    (2, M, M, L, n, m), `from_s_inv` (2, M, M, L, m, m), `from_logdet` (2, M, M, L):
+    [schedule (0 plain, 1 onset), source hypothesis j, hypothesis i, step] — i's step from
+    j's covariance before step τ of j's schedule, with i's reset states at their prior
+    when i ≠ j (the diagonal is each hypothesis's own schedule); `warmup`. Memory grows as
+    M² L: 4 hypotheses of 21 states over 1000 steps take 12 MB."""
 
     bank: Bank
     gain: jax.Array
     s_inv: jax.Array
     logdet: jax.Array
-    onset_gain: jax.Array
-    onset_s_inv: jax.Array
-    onset_logdet: jax.Array
+    from_gain: jax.Array
+    from_s_inv: jax.Array
+    from_logdet: jax.Array
     warmup: int = eqx.field(static=True)
 
     @classmethod
-    def from_bank(cls, bank: Bank, n_steps: int, healthy: int = 0, warmup: int = 50):
-        """Run every filter's covariance recursion from its `p0` for `n_steps` steps, and
-        the onset recursions from the covariance of hypothesis `healthy` after them. The
-        interacting bank uses the plain schedules for the first `warmup` steps (the
-        filters' start-up transient, common to all hypotheses) and the onset schedules
-        after."""
+    def from_bank(cls, bank: Bank, n_steps: int, healthy: int = 0, warmup: int | None = None):
+        """Run every filter's covariance recursion from its `p0` for `n_steps` steps, the
+        onset recursions from the covariance of hypothesis `healthy` after them, and every
+        hypothesis's step from each of these covariances (class docstring); the
+        interacting bank uses the plain schedules for its first `warmup` steps (default
+        min(50, `n_steps`); checked before any computation: 0 ≤ warmup ≤ n_steps)."""
+        if isinstance(n_steps, bool) or not float(n_steps).is_integer() or int(n_steps) < 1:
+            raise ValueError(f"n_steps must be an integer >= 1; got {n_steps!r}")
+        if not 0 <= int(healthy) < bank.size:
+            raise ValueError(
+                f"healthy must be a hypothesis index in [0, {bank.size}); got {healthy}"
+            )
         n_steps = int(n_steps)
-        if n_steps < 1:
-            raise ValueError(f"n_steps must be >= 1; got {n_steps}")
-        run = jax.vmap(lambda *a: _gains(*a, n_steps))
-        k, s, p_end = run(bank.phi, bank.qd, bank.h, bank.r, bank.p0)
-        both = bank.reset[:, :, None] | bank.reset[:, None, :]
-        diag = bank.reset[:, :, None] & bank.reset[:, None, :]
-        p_on = jnp.where(both, jnp.where(diag, bank.p0, 0.0), p_end[healthy][None])
-        k_on, s_on, _ = run(bank.phi, bank.qd, bank.h, bank.r, p_on)
-        if not 0 <= int(warmup) <= n_steps:
-            raise ValueError(f"warmup must be in [0, n_steps]; got {warmup}")
-        return cls(bank, k, *_inv_logdet(s), k_on, *_inv_logdet(s_on), int(warmup))
+        warmup = min(50, n_steps) if warmup is None else warmup
+        if isinstance(warmup, bool) or not 0 <= int(warmup) <= n_steps:
+            raise ValueError(f"warmup must be an integer in [0, n_steps={n_steps}]; got {warmup!r}")
+        track = jax.vmap(lambda *a: _track(*a, n_steps))
+        k, s, plain = track(bank.phi, bank.qd, bank.h, bank.r, bank.p0)
+        p_on = _restart(bank.reset, bank.p0, plain[int(healthy), -1][None])
+        _, _, onset = track(bank.phi, bank.qd, bank.h, bank.r, p_on)
+        # each track's covariance before its step τ: its start, then its posteriors
+        src = jnp.stack([
+            jnp.concatenate([bank.p0[:, None], plain[:, :-1]], axis=1),
+            jnp.concatenate([p_on[:, None], onset[:, :-1]], axis=1),
+        ])  # fmt: skip
+        cross, s_from = jax.vmap(lambda p: _from_each(bank, p))(src)
+        s_inv, logdet = _inv_logdet(s_from)
+        gain = jnp.einsum("...nc,...cd->...nd", cross, s_inv)
+        return cls(bank, k, *_inv_logdet(s), gain, s_inv, logdet, int(warmup))
+
+
+def _restart(reset, p0, p):
+    """`p` (…, n, n) with the `reset` states (M, n) at their prior `p0` (M, n, n) and
+    uncorrelated with the rest: a hypothesis entered from another one."""
+    both = reset[:, :, None] | reset[:, None, :]
+    diag = reset[:, :, None] & reset[:, None, :]
+    return jnp.where(both, jnp.where(diag, p0, 0.0), p)
+
+
+def _from_each(bank: Bank, src):
+    """Every hypothesis i's predicted P Hᵀ and S = H P Hᵀ + R from every hypothesis j's
+    covariance `src[j]` (M, L, n, n), with i's reset states at their prior when j ≠ i:
+    (M_j, M_i, L, n, m) and (M_j, M_i, L, m, m)."""
+    m = bank.size
+    same = jnp.eye(m, dtype=bool)
+
+    def one(j, i):
+        rst = bank.reset[i] & ~same[j, i]
+        p = _restart(rst[None], bank.p0[i][None], src[j])
+        p = jnp.einsum("ab,lbc,dc->lad", bank.phi[i], p, bank.phi[i]) + bank.qd[i][None]
+        cross = jnp.einsum("lab,mb->lam", p, bank.h[i])
+        s = jnp.einsum("ma,lak->lmk", bank.h[i], cross) + bank.r[i][None]
+        return cross, 0.5 * (s + s.swapaxes(-1, -2))
+
+    j, i = jnp.meshgrid(jnp.arange(m), jnp.arange(m), indexing="ij")
+    return jax.vmap(jax.vmap(one))(j, i)
 
 
 def _inv_logdet(s):
@@ -236,19 +288,25 @@ def _inv_logdet(s):
     return jnp.vectorize(one, signature="(m,m)->(m,m),()")(s)
 
 
-def _gains(phi, qd, h, r, p0, n_steps):
-    """Gains and innovation covariances of `n_steps` filter steps from `p0`, and the last
-    posterior covariance."""
+def _step(phi, qd, h, r, p):
+    """One filter step's covariance from posterior `p`: (posterior, gain, S)."""
+    g = predict(Gaussian(jnp.zeros(p.shape[0]), p), phi, qd)
+    s = h @ g.P @ h.T + r
+    s = 0.5 * (s + s.T)
+    k = cho_solve(cholesky(s), h @ g.P).T
+    post = update(g, jnp.zeros(h.shape[0]), h, r)[0]
+    return post.P, k, s
+
+
+def _track(phi, qd, h, r, p0, n_steps):
+    """Gains (L, n, m), innovation covariances (L, m, m) and posterior covariances
+    (L, n, n) of `n_steps` filter steps from `p0`."""
 
     def step(p, _):
-        g = predict(Gaussian(jnp.zeros(p.shape[0]), p), phi, qd)
-        s = h @ g.P @ h.T + r
-        s = 0.5 * (s + s.T)
-        k = cho_solve(cholesky(s), h @ g.P).T
-        post = update(g, jnp.zeros(h.shape[0]), h, r)[0]
-        return post.P, (k, s)
+        p, k, s = _step(phi, qd, h, r, p)
+        return p, (k, s, p)
 
-    p, (k, s) = jax.lax.scan(step, jnp.asarray(p0), None, length=n_steps)
+    _, (k, s, p) = jax.lax.scan(step, jnp.asarray(p0), None, length=n_steps)
     return k, s, p
 
 
@@ -279,33 +337,35 @@ def _run_gains(gb, zs, log_floor, lp0, threshold, interacting):
     m = b.h.shape[1]
     last = gb.gain.shape[1] - 1
     hyp = jnp.arange(b.size)
-    has_onset = jnp.any(b.reset, axis=1) & interacting
+    has_onset = jnp.any(b.reset, axis=1)
 
     def step(carry, inp):
         x, lp, lead = carry
         z, k = inp
-        onset = has_onset & (k >= gb.warmup)
-        i = jnp.where(onset, jnp.minimum(lead, last), jnp.minimum(k, last))
-        pick = lambda on, plain: jnp.where(
-            onset.reshape((-1,) + (1,) * (on.ndim - 2)), on[hyp, i], plain[hyp, i]
-        )
-        gain = pick(gb.onset_gain, gb.gain)
-        s_inv = pick(gb.onset_s_inv, gb.s_inv)
-        logdet = pick(gb.onset_logdet, gb.logdet)
         if interacting:
+            # a fault hypothesis runs its own schedule (the onset one from its entry); one
+            # without reset states (S0) steps from the leader's covariance when it does not
+            # lead, as the IMM's mixing starts it each step mostly from the leader's estimate
+            onset = has_onset & (k >= gb.warmup)
+            src = jnp.where(has_onset, hyp, jnp.argmax(lp))
+            tau = jnp.minimum(jnp.where(onset[src], lead[src], k), last)
+            pick = (onset[src].astype(int), src, hyp, tau)
+            gain, s_inv, logdet = gb.from_gain[pick], gb.from_s_inv[pick], gb.from_logdet[pick]
             x = _mix_means(x, lp, b)
+        else:
+            i = jnp.minimum(k, last)
+            gain, s_inv, logdet = gb.gain[:, i], gb.s_inv[:, i], gb.logdet[:, i]
         x = jnp.einsum("hij,hj->hi", b.phi, x)
         nu = z[None, :] - b.z_offset - jnp.einsum("hij,hj->hi", b.h, x)
         x = x + jnp.einsum("hij,hj->hi", gain, nu)
         ll = -0.5 * (jnp.einsum("hi,hij,hj->h", nu, s_inv, nu) + logdet + m * LOG_2PI)
         lp = _probabilities(lp, ll, b.log_trans, log_floor)
-        leading = hyp == jnp.argmax(lp)
-        lead = jnp.where(leading, lead + 1, 0)
+        lead = jnp.where(hyp == jnp.argmax(lp), lead + 1, 0)
         return (x, lp, lead), lp
 
     steps = jnp.arange(zs.shape[0])
-    lead0 = jnp.zeros(b.size, steps.dtype)
-    _, lps = jax.lax.scan(step, (b.x0, _normalise(lp0, log_floor), lead0), (zs, steps))
+    carry = (b.x0, _normalise(lp0, log_floor), jnp.zeros(b.size, steps.dtype))
+    _, lps = jax.lax.scan(step, carry, (zs, steps))
     return _decide(lps, threshold)
 
 
