@@ -129,5 +129,5 @@ def test_st_network_without_ramps_is_a_clear_error(bench):
     static_and_rotation, _ = bench
     with pytest.raises(ValueError, match="st_width > 0 learns s_T from ramps"):
         MLPCompensator(steps=2, st_width=4).fit(static_and_rotation, key=jax.random.key(0))
-    with pytest.raises(ValueError, match="st_width must be ≥ 0"):
+    with pytest.raises(ValueError, match="st_width must be a whole number ≥ 0"):
         MLPCompensator(st_width=-1)
