@@ -10,7 +10,9 @@ the filter bank's throughput.
    and the thesis's 0.04 s per step (MATLAB).
 
 Writes `out/diagnosis.json` and `out/diagnosis_<scenario>.png` (decision traces).
-Usage: `.venv/bin/python benchmarks/diagnosis.py [--quick] [--scenarios a,b]`.
+Usage: `.venv/bin/python benchmarks/diagnosis.py [--quick] [--scenarios a,b]`;
+`--throughput` runs part 2 alone (about a minute). The gain-schedule IMM's agreement with the
+full IMM: `benchmarks/diagnosis_agreement.py`.
 """
 
 import dataclasses
@@ -65,6 +67,9 @@ def throughput(runs=64, k_len=4000):
 
 def main():
     print(f"machine: {machine()}")
+    if "--throughput" in sys.argv:
+        throughput(runs=16 if QUICK else 64)
+        return
     names = (
         ARG.split(",")
         if ARG

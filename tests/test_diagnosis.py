@@ -272,3 +272,74 @@ def test_batched_banks_run_no_lapack_kernel():
     assert not batched_lapack(lambda b: fb.GainBank.from_bank(b, 60), bank)
     gb = fb.GainBank.from_bank(bank, 60)
     assert not batched_lapack(lambda z: fb.run_gains(gb, z), zs)
+
+
+def test_scores_count_post_onset_steps_that_name_no_fault_as_missed():
+    """`compare`'s scores from a hand-made decision trace: after the onset (step 4) a faulty
+    run's steps name the right INS, a wrong one, or none (healthy, or undecided −1): the
+    three shares sum to 1, and `missed_rate` is the last (it counted nowhere before)."""
+    from hrgjax.diagnosis import compare as cp
+
+    states = np.array(
+        [
+            [0, 0, 0, 0, 0, 1, 1, 1],  # INS 1: 1 missed, 3 right
+            [0, 0, 0, 0, -1, -1, 0, 2],  # INS 2: 3 missed (undecided counts), 1 right
+            [0, 0, 0, 0, 3, 1, 1, 0],  # INS 3: 1 right, 2 wrong, 1 missed
+            [0, 0, 0, 0, 0, 0, 0, 0],  # healthy: never post-onset
+        ]
+    )
+    truth = np.array([1, 2, 3, 0])
+    s = cp._score(states, truth, onset_k=4, k0=0, dt=1.0, t_fault=3.0)
+    assert s["missed_rate"] == pytest.approx(5 / 12)
+    assert s["wrong_diagnosis_rate"] == pytest.approx(2 / 12)
+    right = np.mean((states == truth[:, None])[:3, 4:])
+    assert s["missed_rate"] + s["wrong_diagnosis_rate"] + right == pytest.approx(1.0)
+    assert s["detected"] == 1.0 and s["false_alarm_rate"] == 0.0
+    res = {"scenario": "x", "sensor": "accel_y", "thesis": "", "methods": [
+        {"name": "filter_bank", "step_cost_s": 1e-6, **s}],
+        "setup": {"fault_sizes": [1e-7, 2e-7], "nominal_sensor_error": 1e-7}}  # fmt: skip
+    assert "| missed |" in cp.table(res) and "41.67%" in cp.table(res)
+    # a method list with nothing to run on the scenario is refused, not an empty table
+    with pytest.raises(ValueError, match="nothing to run on scenario 'stationary'.*specific"):
+        cp.compare("stationary", methods=("filter_bank_rest",), key=jax.random.key(0))
+
+
+def test_bank_inputs_are_refused_in_one_line(accel_bank, accel_gains):
+    """A NaN measurement used to make every later probability NaN silently; a bad prior,
+    transposed measurements or a wrong number of pairs failed deep in JAX (or broadcast)."""
+    from hrgjax.diagnosis import complex as cx
+
+    ins, bank = accel_bank
+    z = np.zeros((60, 2))
+    z[37, 1] = np.nan
+    for run in (lambda zz, **kw: fb.run_bank(bank, zz, **kw),
+                lambda zz, **kw: fb.run_gains(accel_gains, zz, **kw)):  # fmt: skip
+        with pytest.raises(ValueError, match=r"non-finite value \(nan\) at step 37, column 1"):
+            run(z)
+        for prior in ([1.2, -0.1, -0.05, -0.05], [0.5, 0.5], [0, 0, 0, 0], [np.nan, 1, 1, 1]):
+            with pytest.raises(ValueError, match=r"prior must be 4 finite probabilities"):
+                run(np.zeros((60, 2)), prior=prior)
+        with pytest.raises(ValueError, match=r"zs must have shape .*m = 2.*\(transposed\?"):
+            run(np.zeros((2, 60)))
+        with pytest.raises(ValueError, match=r"zs must have shape .*m = 2.*got \(60, 3\)"):
+            run(np.zeros((60, 3)))
+        with pytest.raises(ValueError, match=r"threshold must be a probability"):
+            run(np.zeros((60, 2)), threshold=1.5)
+    z3 = np.zeros((2, 60, 2))
+    z3[1, 5, 0] = np.inf
+    with pytest.raises(ValueError, match=r"at step 5 of run 1, column 0"):
+        fb.run_gains(accel_gains, z3)
+    # an unnormalised prior is a prior: the same run as its normalised form
+    zz = np.asarray(np.random.default_rng(0).normal(size=(60, 2))) * 1e-8
+    p1 = fb.run_gains(accel_gains, zz, prior=[97.0, 1, 1, 1])[0]
+    np.testing.assert_allclose(p1, fb.run_gains(accel_gains, zz, prior=[0.97, 0.01, 0.01, 0.01])[0])
+    # the measurements: the bank's pairs (0, j) by default, for any number of INS; selections
+    # outside the complex's pairs are refused
+    nav = jnp.zeros((4, 10, 3))
+    assert cx.measurements(nav, 1.0, "accel_y", ins).shape == (8, 3)
+    assert cx.measurements(nav[:3], 1.0, "accel_y", ins).shape == (8, 2)
+    for bad in ((0, 0), (0, 3), (), (-1,)):
+        with pytest.raises(ValueError, match=r"pairs must be distinct indices into"):
+            cx.measurements(nav[:3], 1.0, "accel_y", ins, pairs=bad)
+    with pytest.raises(ValueError, match=r"nav must have shape \(n_ins >= 2, K, 3\)"):
+        cx.measurements(jnp.zeros((10, 3)), 1.0, "accel_y", ins)

@@ -140,7 +140,7 @@ def test_psd_peak_finds_a_known_tone_and_matches_scipy():
 
 from hrgjax.fog import compensation as cp  # noqa: E402
 from hrgjax.fog import vibration as vb  # noqa: E402
-from hrgjax.fog.spectrum import vibration_features  # noqa: E402
+from hrgjax.fog.spectrum import psd, tone, vibration_features  # noqa: E402
 from hrgjax.units import DEG, G0  # noqa: E402
 
 
@@ -278,6 +278,15 @@ def test_end_to_end_training_and_compensation_remove_the_error(imu, memory_sets)
                       key=jax.random.key(7))  # fmt: skip
     g, pred = cp.compensate(c, q, rec, window_s=2.0)
     assert pred.shape == (85, 3)
+    # the compensator records the window it was trained on (the Elman context steps once per
+    # window): compensate uses it by default and refuses another (it stepped at 2× the rate)
+    assert c.window_s == 2.0
+    np.testing.assert_array_equal(cp.compensate(c, q, rec)[1], pred)
+    with pytest.raises(ValueError, match=r"^compensate: window_s=1 s, but the compensator was "
+                       r"trained on 2-s windows"):  # fmt: skip
+        cp.compensate(c, q, rec, window_s=1.0)
+    with pytest.raises(ValueError, match=r"give window_s \(the compensator has not been trained"):
+        cp.compensate(cp.VibrationCompensator("elman", key=jax.random.key(0)), q, rec)
     ref = cp.reference_output(q, rec).reshape(1, 3)
     before = vb.window_means(rec.gyro, 100.0, 2.0) - ref
     after = vb.window_means(g, 100.0, 2.0) - ref
@@ -341,3 +350,65 @@ def test_vibration_cli_writes_the_design_keys_and_compensation_helps(tmp_path, c
     assert png.stat().st_size > 10_000
     assert "| compensated |" in capsys.readouterr().out
     cli_fails(["vibration", "--scenario", "20hz"], capsys, "unknown --scenario")
+
+
+def test_calibration_intervals_cover_with_student_t():
+    """The standard errors come from n − 4 residual dof: a ±1.96σ interval covers well below
+    95 % for few positions, t's quantile covers 95 % (numpy Monte Carlo, 1000 fits of 3 axes each;
+    the binomial σ of a 95 % coverage is 0.4 %)."""
+    truth = mis.TriadCalibration.known(jnp.array([3e-4, -2e-4, 1e-4, 5e-4, -4e-4, 2.5e-4]),
+                                       jnp.array([2e-4, -1e-4, 3e-4]))  # fmt: skip
+    pos = _positions()
+    rng = np.random.default_rng(7)
+    for idx in ([0, 1, 2, 3, 4], list(range(14))):  # 5 positions (1 dof), 14 (10 dof)
+        b = pos[idx]
+        clean = np.asarray(truth.sensor(b))
+        noise = 5e-4
+        cover_t = cover_g = 0
+        n_mc = 1000
+        for _ in range(n_mc):
+            fit = mis.calibrate(b, clean + rng.normal(size=b.shape) * noise)
+            err = np.abs(np.asarray(fit.scale) - np.asarray(truth.scale))
+            cover_t += np.sum(err <= mis.half_width(fit.scale_std, len(idx)))
+            cover_g += np.sum(err <= 1.96 * np.asarray(fit.scale_std))
+        cover_t, cover_g = cover_t / (3 * n_mc), cover_g / (3 * n_mc)
+        assert abs(cover_t - 0.95) < 0.015, (len(idx), cover_t)
+        assert mis.dof(len(idx)) == len(idx) - 4
+        if len(idx) == 5:
+            assert 0.65 < cover_g < 0.75, cover_g  # 2·Φ_t1(1.96) − 1 = 0.70
+    with pytest.raises(ValueError, match="n_positions must be an integer >= 5"):
+        mis.dof(4)
+
+
+def test_units_and_spectrum_settings_are_checked(imu):
+    """Accelerometers in g, a drift in °/h given as rad/s, a 1-g vibration at 0 Hz, a short
+    record's PSD and a negative lobe: each refused in one line (they gave wrong numbers, a
+    NaN, or an error about an nperseg the user never passed)."""
+    rng = np.random.default_rng(0)
+    t = np.arange(400) / 100.0
+    acc = np.zeros((400, 3))
+    acc[:, 2] = -9.80665 + 9.80665 * np.sin(2 * np.pi * 10.0 * t)
+    f = np.asarray(vibration_features(acc, 100.0, 1.0))
+    np.testing.assert_allclose(f[:, 0], 10.0, atol=0.5)
+    with pytest.raises(ValueError, match=r"^accel must be specific force in m/s².*in g\?"):
+        vibration_features(acc / 9.80665, 100.0, 1.0)
+    eps, nab = np.array([0.0, 0.36, 0.0]), np.zeros(3)  # 0.36 meant as °/h
+    with pytest.raises(ValueError, match=r"^eps_body must be a bias in rad/s.*°/h\?"):
+        cp.heading_limit_deg(eps, nab, np.eye(3), np.pi / 4)
+    with pytest.raises(ValueError, match=r"^nabla_body must be a bias in m/s²"):
+        cp.heading_limit_deg(np.zeros(3), np.array([0.0, 5.0, 0.0]), np.eye(3), np.pi / 4)
+    with pytest.raises(ValueError, match=r"amp_g > 0 needs freq_hz > 0"):
+        vb.VibrationSchedule.constant(0.0, 1.0, 10.0)
+    vb.VibrationSchedule([1.0, 1.0], [0.0, 10.0], [0.0, 1.0])  # rest at 0 Hz is fine
+    # a record shorter than 16 samples: the default segment is the record (as scipy's)
+    import scipy.signal
+
+    x = rng.normal(size=10)
+    fr, p = psd(x, 10.0)
+    fs_, ps_ = scipy.signal.welch(x, 10.0, nperseg=10)
+    np.testing.assert_allclose(fr, fs_)
+    np.testing.assert_allclose(p, ps_, rtol=1e-10)
+    with pytest.raises(ValueError, match=r"x must have at least 2 samples"):
+        psd(x[:1], 10.0)
+    with pytest.raises(ValueError, match=r"^lobe must be an integer number of bins >= 0"):
+        tone(np.sin(2 * np.pi * 2.0 * np.arange(64) / 16.0), 16.0, lobe=-1)

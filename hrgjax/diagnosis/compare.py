@@ -15,6 +15,8 @@ and scores it:
 - `false_alarm_rate`: share of the steps without a fault (healthy runs, and faulty runs
   before the onset), after the first `warmup_s`, on which a fault is named;
 - `wrong_diagnosis_rate`: share of the steps after the onset on which a wrong INS is named;
+- `missed_rate`: share of the steps after the onset (faulty runs) on which no fault is named
+  (healthy or undecided) — with `wrong_diagnosis_rate` and the right-INS share it sums to 1;
 - `step_cost_s`: wall time per measurement step and run, with the runs batched (`vmap`) —
   compile time excluded.
 
@@ -141,7 +143,8 @@ def _timed(fn, *args):
 
 
 def _score(states, truth, onset_k, k0, dt, t_fault):
-    """states (R, K) decided INS (0 none, i = INS i); truth (R,) faulty INS (0 healthy)."""
+    """states (R, K) decided INS (0 none or undecided, i = INS i; −1, undecided, counts as 0);
+    truth (R,) faulty INS (0 healthy)."""
     states = np.asarray(states)
     r, k = states.shape
     steps = np.arange(k)
@@ -151,6 +154,7 @@ def _score(states, truth, onset_k, k0, dt, t_fault):
     fa = float(named[quiet].mean())
     wrong = named & (states != truth[:, None])
     wd = float(wrong[post].mean()) if post.any() else 0.0
+    missed = float((~named)[post].mean()) if post.any() else 0.0
     times = []
     for run in np.flatnonzero(truth > 0):
         hit = np.flatnonzero((states[run] == truth[run]) & (steps >= onset_k))
@@ -164,6 +168,7 @@ def _score(states, truth, onset_k, k0, dt, t_fault):
         "detected": len(times) / max(n_faulty, 1),
         "false_alarm_rate": fa,
         "wrong_diagnosis_rate": wd,
+        "missed_rate": missed,
     }
 
 
@@ -207,6 +212,17 @@ def compare(
     unknown = set(methods) - set(METHODS)
     if unknown:
         raise ValueError(f"unknown methods {sorted(unknown)}; choose from {METHODS}")
+    skipped = {}
+    if "filter_bank_rest" in methods and not any(f != 0.0 for f in sc.specific_force):
+        skipped["filter_bank_rest"] = (
+            f"not run: scenario {sc.name!r} has no specific force (the bank built at rest is "
+            "the scenario's own bank)"
+        )
+    if not set(methods) - set(skipped):
+        raise ValueError(
+            f"methods {tuple(methods)}: nothing to run on scenario {sc.name!r}; "
+            + "; ".join(f"{k} {v}" for k, v in skipped.items())
+        )
     if key is None:
         raise ValueError(
             "compare needs key=jax.random.key(…): the Monte Carlo runs, the training windows "
@@ -288,6 +304,8 @@ def compare(
             add(name, nl.latch(cls, confirm), cost, train_s)
     rows.sort(key=lambda r: METHODS.index(r["name"]))
     out = {"scenario": sc.name, "sensor": sc.sensor, "thesis": sc.thesis, "methods": rows}
+    if skipped:
+        out["skipped"] = skipped
     out["setup"] = {
         "fault_sizes": list(sc.sizes), "t_fault_s": sc.t_fault, "duration_s": sc.duration,
         "dt_s": sc.dt, "nominal_sensor_error": float(ins.accel_sigma),
@@ -332,14 +350,21 @@ def table(result) -> str:
         f"Thesis: {result['thesis']}",
         "",
         "| method | detection time [s] (median / max) | detected | false alarms | wrong "
-        "diagnoses | cost per step [s] |",
-        "|---|---|---|---|---|---|",
+        "diagnoses | missed | cost per step [s] |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in result["methods"]:
         dt = "–" if r["detection_time_s"] is None else (
             f"{r['detection_time_s']:.0f} / {r['detection_time_max_s']:.0f}")  # fmt: skip
         lines.append(
             f"| {r['name']} | {dt} | {r['detected']:.0%} | {r['false_alarm_rate']:.2%} | "
-            f"{r['wrong_diagnosis_rate']:.2%} | {r['step_cost_s']:.1e} |"
+            f"{r['wrong_diagnosis_rate']:.2%} | {_pct(r.get('missed_rate'))} | "
+            f"{r['step_cost_s']:.1e} |"
         )
+    for name, why in result.get("skipped", {}).items():
+        lines.append(f"{name}: {why}")
     return "\n".join(lines)
+
+
+def _pct(v):
+    return "–" if v is None else f"{v:.2%}"

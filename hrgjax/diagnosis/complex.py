@@ -27,6 +27,7 @@ from .._x64 import require_x64
 from ..ins.platform import FAULTS, NAV, Fault, PlatformINS, simulate
 from .filter_bank import Bank
 from .measurements import first_difference_pairs, second_difference_pairs
+from .measurements import pairs as _pairs
 
 CHANNEL = {
     "accel_x": ("departure", "second"),
@@ -69,13 +70,32 @@ def simulate_complex(
     return t[0], nav
 
 
-def measurements(nav, dt: float, sensor: str, ins: PlatformINS | None = None, pairs=(0, 1)):
+def measurements(nav, dt: float, sensor: str, ins: PlatformINS | None = None, pairs=None):
     """The diagnosis measurements for `sensor` from navigation errors `nav` (n_ins, K, 3):
     eq. (7) or (8) on its parameter (`CHANNEL`), scaled by R/g, for the pairs whose indices
-    (into [`pairs`][hrgjax.diagnosis.measurements.pairs]) are given. **Returns** (K', len(pairs))
-    where step k of the output is step k + 2 of `nav` (both equations, aligned)."""
+    (into [`pairs`][hrgjax.diagnosis.measurements.pairs]) are given; the default is the
+    pairs (0, j), j = 1 … n_ins − 1, in order — the ones [`fault_bank`][hrgjax.diagnosis.complex.fault_bank]
+    models (another selection of as many pairs has the bank's shape but not its meaning).
+    **Returns** (K', len(pairs)) where step k of the output is step k + 2 of `nav` (both
+    equations, aligned)."""
     ins = PlatformINS() if ins is None else ins
     param, kind = _channel(sensor)
+    n_ins = jnp.shape(nav)[-3] if jnp.ndim(nav) >= 3 else 0
+    n_pairs = len(_pairs(n_ins)) if n_ins >= 2 else 0
+    if n_ins < 2 or jnp.shape(nav)[-1] != len(NAV):
+        raise ValueError(
+            f"nav must have shape (n_ins >= 2, K, {len(NAV)}) ({', '.join(NAV)}); "
+            f"got {jnp.shape(nav)}"
+        )
+    if pairs is None:
+        pairs = tuple(range(n_ins - 1))
+    pairs = tuple(pairs)
+    if (not pairs or len(set(pairs)) != len(pairs)
+            or not all(isinstance(i, (int, np.integer)) and 0 <= i < n_pairs for i in pairs)):  # fmt: skip
+        raise ValueError(
+            f"pairs must be distinct indices into {_pairs(n_ins)} (0 … {n_pairs - 1}); "
+            f"got {pairs!r}"
+        )
     z = nav[..., NAV.index(param)]
     if kind == "second":
         d = second_difference_pairs(z, dt)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.scipy.special import logsumexp
 
 from .._linalg import cho_logdet, cho_solve, cholesky
@@ -144,19 +145,66 @@ def run_bank(
 
     **Returns:** `(probabilities (K, M), decisions (K,) int, −1 = undecided, means (K, M, n))`
     (the means are each filter's posterior estimate)."""
-    lp0, log_floor = _start(bank.size, floor, prior)
-    return _run(bank, jnp.asarray(zs, float), log_floor, lp0, jnp.asarray(threshold), interacting)
+    lp0, log_floor = _start(bank.size, floor, prior, threshold)
+    zs = _check_zs(zs, bank, (2,))
+    return _run(bank, zs, log_floor, lp0, jnp.asarray(threshold), interacting)
 
 
-def _start(m, floor, prior):
+def _start(m, floor, prior, threshold):
     if not 0.0 < floor < 1.0 / m:
         raise ValueError(f"floor must be in (0, 1/{m}); got {floor}")
+    if not 0.0 <= threshold < 1.0:
+        raise ValueError(f"threshold must be a probability in [0, 1); got {threshold}")
     with jax.numpy_dtype_promotion("standard"):
         if prior is None:
             lp0 = jnp.full(m, -jnp.log(float(m)))
-        else:
+        elif (p := _concrete(prior)) is None:  # traced: checked by the caller's trace
             lp0 = jnp.log(jnp.asarray(prior, float))
+        else:
+            if p.shape != (m,) or not np.all(np.isfinite(p)) or np.any(p < 0) or p.sum() <= 0:
+                raise ValueError(
+                    f"prior must be {m} finite probabilities >= 0, not all 0 (one per "
+                    f"hypothesis S0 … S{m - 1}); got {np.asarray(prior).tolist()}"
+                )
+            lp0 = jnp.log(jnp.asarray(p / p.sum()))
     return lp0, jnp.log(jnp.asarray(floor))
+
+
+def _concrete(x):
+    """`x` as a float64 NumPy array, or None when it is traced (inside a caller's `jit`)."""
+    try:
+        return np.asarray(x, dtype=float)
+    except jax.errors.TracerArrayConversionError:
+        return None
+
+
+def _check_zs(zs, bank: Bank, ndims):
+    """`zs` as float64 (…, K, m), refused with a one-line error when its shape does not match
+    the bank's measurement (m columns, one per pair) or when a value is not finite (one NaN
+    would make every later probability NaN)."""
+    m = bank.h.shape[1]
+    shape = " or ".join({2: "(K, m)", 3: "(runs, K, m)"}[d] for d in ndims)
+    z = _concrete(zs)
+    traced = z is None
+    z = jnp.asarray(zs, float) if traced else z
+    if z.ndim not in ndims or z.shape[-1] != m:
+        hint = ""
+        if z.ndim in ndims and z.shape[-2] == m:
+            hint = " (transposed? time runs along the second-to-last axis)"
+        raise ValueError(
+            f"zs must have shape {shape} with m = {m} (one column per measured pair the bank "
+            f"models; fault_bank: pairs (0, j), j = 1 … {m}, in order); got {z.shape}{hint}"
+        )
+    if not traced:
+        bad = ~np.isfinite(z)
+        if bad.any():
+            where = np.argwhere(bad)[0]
+            at = f"step {where[-2]}" + (f" of run {where[0]}" if z.ndim == 3 else "")
+            raise ValueError(
+                f"zs has a non-finite value ({z[tuple(where)]}) at {at}, column {where[-1]}: "
+                "the hypothesis probabilities would be NaN from there on; drop or fill it"
+            )
+    return jnp.asarray(z, float)
 
 
 def _probabilities(lp, ll, log_trans, log_floor):
@@ -323,10 +371,8 @@ def run_gains(
     (no covariance recursion; see [`GainBank`][hrgjax.diagnosis.filter_bank.GainBank]).
     `zs` (K, m), or (B, K, m) for a batch of runs. **Returns** `(probabilities,
     decisions)` with the leading shape of `zs`."""
-    lp0, log_floor = _start(gb.bank.size, floor, prior)
-    zs = jnp.asarray(zs, float)
-    if zs.ndim not in (2, 3):
-        raise ValueError(f"zs must have shape (K, m) or (runs, K, m); got {zs.shape}")
+    lp0, log_floor = _start(gb.bank.size, floor, prior, threshold)
+    zs = _check_zs(zs, gb.bank, (2, 3))
     fn = lambda z: _run_gains(gb, z, log_floor, lp0, jnp.asarray(threshold), interacting)
     return fn(zs) if zs.ndim == 2 else jax.vmap(fn)(zs)
 

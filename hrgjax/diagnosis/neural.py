@@ -80,7 +80,7 @@ def onset_templates(
     return jnp.asarray(np.stack(out))
 
 
-@fused(static_argnames=("n", "taps", "onset_within_last"))
+@fused(static_argnames=("n", "taps", "onset_within_last", "signed"))
 def training_windows(
     z_healthy,
     templates,
@@ -91,12 +91,16 @@ def training_windows(
     p_fault: float = 0.5,
     taps: int = TAPS,
     onset_within_last: int | None = None,
+    signed: bool = True,
 ):
     """`n` windows of `taps` + 1 measurements cut from healthy complexes `z_healthy`
     (runs, K, m); a share `p_fault` carries a fault onset in INS i (uniform) of size
-    U(`sizes`) at window position q (uniform in 1 … taps, or over the last
-    `onset_within_last` positions). **Returns** `(windows (n, taps+1,
-    m), fault class (n,) 0 = none, onset position q (n,), 0 where none)`."""
+    U(`sizes`) — with a random sign (±, even odds) when `signed`, as a sensor error may jump
+    either way — at window position q (uniform in 1 … taps, or over the last
+    `onset_within_last` positions). Trained on positive sizes only, the detectors named
+    the wrong INS for a negative fault (its signature in the pairs is another INS's, of
+    the other sign). **Returns** `(windows (n, taps+1, m), fault class (n,) 0 = none,
+    onset position q (n,), 0 where none)`."""
     z = jnp.asarray(z_healthy, float)
     if z.ndim != 3 or z.shape[1] < taps + 1:
         raise ValueError(f"z_healthy must be (runs, K >= {taps + 1}, m); got {z.shape}")
@@ -113,6 +117,8 @@ def training_windows(
     q = jax.random.randint(kq, (n,), max(lo, 1), taps + 1)
     q = jnp.where(faulty, q, 0)
     e = jax.random.uniform(ks, (n,), minval=sizes[0], maxval=sizes[1])
+    if signed:
+        e = jnp.where(jax.random.bernoulli(jax.random.fold_in(ks, 1), 0.5, (n,)), e, -e)
     # template sample j lands at window position q + j
     j = jnp.arange(taps + 1)[None, :] - q[:, None]
     tmpl = templates[jnp.maximum(c - 1, 0)[:, None], jnp.clip(j, 0, templates.shape[1] - 1)]

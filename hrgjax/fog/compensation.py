@@ -28,6 +28,8 @@ is the analytic heading error set by the remaining east drift (PHYSICS.md §12).
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -61,19 +63,23 @@ class VibrationCompensator(eqx.Module):
     error (K, 3) [rad/s]. **Fields:** `net`: three stacked 2–`hidden`–1 networks (Elman or
     MLP); `x_scale` (2,) [Hz, g] and `y_scale` [rad/s]: input and output normalisation;
     `kind`: "elman" or "mlp"; `warmup`: steps of rest input run before a sequence to set the
-    Elman context (the record is assumed to start from rest). `recurrent_init` ρ starts the
-    context weights at ρ·I."""
+    Elman context (the record is assumed to start from rest); `window_s` [s]: the feature
+    window it was trained on (set by [`fit`][hrgjax.fog.compensation.fit]; None until
+    then) — the Elman context steps once per window, so features of another window length
+    would step it at the wrong rate, and [`compensate`][hrgjax.fog.compensation.compensate]
+    refuses them. `recurrent_init` ρ starts the context weights at ρ·I."""
 
     net: eqx.Module
     x_scale: jax.Array
     y_scale: jax.Array
     kind: str = eqx.field(static=True)
     warmup: int = eqx.field(static=True)
+    window_s: float | None = eqx.field(static=True)
 
     def __init__(
         self, kind: str = "elman", *, key: jax.Array, hidden: int = 7, x_scale=(25.0, 1.0),
         y_scale: float = 0.2 * DEG_PER_H, warmup: int = 30,
-        recurrent_init: float = 0.5,
+        recurrent_init: float = 0.5, window_s: float | None = None,
     ):  # fmt: skip
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
@@ -90,6 +96,7 @@ class VibrationCompensator(eqx.Module):
         self.y_scale = jnp.asarray(y_scale, float)
         self.kind = kind
         self.warmup = int(warmup)
+        self.window_s = None if window_s is None else _window(window_s)
 
     def normalised(self, features):
         """Network outputs (K, 3) in units of `y_scale`."""
@@ -276,7 +283,42 @@ four seeds on the default IMU's grid (issue 7 development; at 1e-2 the MLP does 
 in 120 epochs, at 5e-2 the Elman network is unstable)."""
 
 
+def _window(window_s) -> float:
+    w = float(window_s)
+    if not (np.isfinite(w) and w > 0):
+        raise ValueError(f"window_s must be a finite duration > 0 s; got {window_s!r}")
+    return w
+
+
+def _same_window(comp: VibrationCompensator, window_s, what: str) -> float:
+    """`window_s` checked against the window `comp` was trained on (its own when None)."""
+    if window_s is None:
+        if comp.window_s is None:
+            raise ValueError(f"{what}: give window_s (the compensator has not been trained)")
+        return comp.window_s
+    w = _window(window_s)
+    if comp.window_s is not None and not np.isclose(w, comp.window_s, rtol=1e-9, atol=0.0):
+        raise ValueError(
+            f"{what}: window_s={w:g} s, but the compensator was trained on {comp.window_s:g}-s "
+            "windows (its Elman context steps once per window); use its window_s"
+        )
+    return w
+
+
+def _with_window(comp: VibrationCompensator, window_s: float) -> VibrationCompensator:
+    """A copy of `comp` that records the window it was trained on (a static field, which
+    `eqx.tree_at` cannot set)."""
+    new = object.__new__(type(comp))
+    for f in dataclasses.fields(comp):
+        object.__setattr__(new, f.name, getattr(comp, f.name))
+    object.__setattr__(new, "window_s", _window(window_s))
+    return new
+
+
 def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
+    _same_window(comp, train.window_s, "fit")
+    if test is not None:
+        _same_window(comp, test.window_s, "fit (test set)")
     if learning_rate is None:
         learning_rate = LEARNING_RATE[comp.kind]
     n = train.features.shape[0]
@@ -301,23 +343,28 @@ def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
     history = {"train": hist[:, 0]}
     if test is not None:
         history |= {"test": hist[:, 1], "test_rmse": hist[:, 2]}
-    return trained, history
+    return _with_window(trained, train.window_s), history
 
 
 def rmse(comp: VibrationCompensator | None, data: TrainingSet):
     """RMS over sequences, windows and axes of prediction − noise-free error [rad/s];
     `comp=None` is no compensation (the error itself)."""
+    if comp is not None:
+        _same_window(comp, data.window_s, "rmse")
     pred = 0.0 if comp is None else jax.vmap(comp)(data.features)
     return jnp.sqrt(jnp.mean((pred - data.truth) ** 2))
 
 
 def compensate(
-    comp: VibrationCompensator, imu: FogImu, record: VibrationRecord, *, window_s=2.0, axis=None
-):
+    comp: VibrationCompensator, imu: FogImu, record: VibrationRecord, *, window_s=None,
+    axis=None,
+):  # fmt: skip
     """Raw gyro output (N, 3) [rad/s, sensor axes] less the predicted vibration error:
-    features from the misalignment-compensated accelerometers, the prediction per window
-    mapped to sensor axes and held over its window (the last window's prediction covers a
-    partial tail). **Returns** `(gyro (N, 3), prediction (K, 3) body frame)`."""
+    features from the misalignment-compensated accelerometers over windows of `window_s`
+    (default: the window `comp` was trained on; another one is refused), the prediction per
+    window mapped to sensor axes and held over its window (the last window's prediction
+    covers a partial tail). **Returns** `(gyro (N, 3), prediction (K, 3) body frame)`."""
+    window_s = _same_window(comp, window_s, "compensate")
     feats = vibration_features(to_body(imu.accel, record.accel), record.fs, window_s, axis)
     pred = comp(feats)
     m = int(round(window_s * record.fs))
@@ -368,7 +415,8 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat):
     (|φ| ≤ π/2; `np.radians(45.0)` for 45°).
 
     **Raises:** `ValueError` for a latitude beyond ±π/2 (degrees given for radians) or not
-    finite."""
+    finite, a drift beyond 1e-3 rad/s (≈ 206 °/h: °/h given for rad/s) or a bias beyond
+    1 m/s² (mg given for m/s²)."""
     value = concrete_value(lat)
     if value is not None:
         if value.dtype.kind not in "iuf":
@@ -378,6 +426,16 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat):
             v = float(value[bad].ravel()[0]) if value.ndim else float(value)
             hint = f" (degrees? give np.radians({v:g}))" if np.isfinite(v) else ""
             raise ValueError(f"lat must be the latitude in radians, |lat| ≤ π/2; got {v:g}{hint}")
+    for name, x, top, unit, hint in (
+        ("eps_body", eps_body, 1e-3, "rad/s", "°/h? multiply by hrgjax.units.DEG_PER_H"),
+        ("nabla_body", nabla_body, 1.0, "m/s²", "mg? multiply by 9.80665e-3"),
+    ):  # fmt: skip
+        v = concrete_value(x)
+        if v is not None and not np.all(np.abs(v) <= top):  # NaN too
+            raise ValueError(
+                f"{name} must be a bias in {unit}, |{name}| <= {top:g} (a stationary "
+                f"alignment's error); got {np.asarray(v).tolist()} ({hint})"
+            )
     c = jnp.asarray(c_bn)
     eps_e = (c @ jnp.asarray(eps_body))[1]
     nab_e = (c @ jnp.asarray(nabla_body))[1]

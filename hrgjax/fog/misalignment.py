@@ -11,7 +11,12 @@ $E^2$. With scale factors k and biases β the static model is $s = \mathrm{diag}
 + \beta$ (the IMU's [`TriadCalibration`][hrgjax.imu.triad.TriadCalibration], re-exported
 here), which [`calibrate`][hrgjax.fog.misalignment.calibrate] estimates from positions with
 known body-frame inputs (a multi-position static test for accelerometers, rate-table
-rotations plus Earth rate for gyros) by linear least squares, with standard errors.
+rotations plus Earth rate for gyros) by linear least squares, with standard errors. Those
+come from the residual scatter of n positions with n − 4 degrees of freedom
+([`dof`][hrgjax.fog.misalignment.dof]): an estimate over its standard error follows
+Student's t with n − 4 dof, not N(0, 1), and an interval must use t's quantile
+([`half_width`][hrgjax.fog.misalignment.half_width]) — ±1.96σ covers 70 % of the time with
+1 dof, 93 % with 10 (the 14 positions of the study).
 
 Angle order everywhere: `ANGLES` = (xy, xz, yx, yz, zx, zy)."""
 
@@ -19,6 +24,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
+from scipy import stats
 
 # The triad model is the IMU's (hrgjax.imu.triad); its names stay importable from here.
 from ..imu.triad import ANGLE_AXES
@@ -34,7 +40,9 @@ def calibrate(b, s) -> TriadCalibration:
     the averaged sensor outputs `s` (n, 3). Linear least squares per sensor axis for the row
     of M = diag(1 + k)(I + E) and the bias (4 unknowns per axis), then k_i = M_ii − 1 and
     θ_ij = M_ij / M_ii. Standard errors from the residual scatter (σ²(AᵀA)⁻¹, propagated to
-    first order). Needs ≥ 5 positions whose inputs span all three axes with both signs —
+    first order) — with n − 4 degrees of freedom ([`dof`][hrgjax.fog.misalignment.dof]):
+    read them with Student's t ([`half_width`][hrgjax.fog.misalignment.half_width] gives
+    an interval), not as Gaussian. Needs ≥ 5 positions whose inputs span all three axes with both signs —
     e.g. the six ±axis positions plus any tilted one."""
     b = np.asarray(b, float)
     s = np.asarray(s, float)
@@ -70,3 +78,24 @@ def calibrate(b, s) -> TriadCalibration:
         *(jnp.asarray(x) for x in (angles, scale, bias, angles_std, scale_std, bias_std)),
         jnp.asarray(np.sqrt(sigma2)),
     )
+
+
+def dof(n_positions: int) -> int:
+    """Degrees of freedom of [`calibrate`][hrgjax.fog.misalignment.calibrate]'s standard
+    errors from `n_positions` positions: n − 4 (four unknowns per sensor axis)."""
+    n = int(n_positions)
+    if n != n_positions or n < 5:
+        raise ValueError(
+            f"n_positions must be an integer >= 5 (calibrate's minimum); got {n_positions!r}"
+        )
+    return n - 4
+
+
+def half_width(std, n_positions: int, level: float = 0.95):
+    """Half-width of the two-sided `level` confidence interval of an estimate of
+    [`calibrate`][hrgjax.fog.misalignment.calibrate] with standard error `std` from
+    `n_positions` positions: Student's t quantile with n − 4 dof times `std`
+    (2.23σ at 95 % for 14 positions, 12.7σ for 5)."""
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1); got {level}")
+    return stats.t.ppf(0.5 + 0.5 * level, dof(n_positions)) * np.asarray(std)

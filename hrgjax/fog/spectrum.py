@@ -17,22 +17,26 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .._checks import check_finite
+from .._checks import check_finite, concrete_value
 from .._compiled import fused
 from ..units import G0
 
 
 def psd(x, fs: float, nperseg: int | None = None):
     """One-sided power spectral density of `x` (..., N) sampled at `fs` [Hz] (module
-    docstring). `nperseg` defaults to the largest power of two ≤ N/4 (at least 16).
+    docstring). `nperseg` defaults to the largest power of two ≤ N/4, at least 16 and at most
+    N (scipy's default is 256, or N when shorter).
     **Returns** `(f (nperseg//2 + 1,) [Hz], P (..., nperseg//2 + 1) [unit²/Hz])`."""
     x = check_finite("x", x)
     n = x.shape[-1]
     if not fs > 0:
         raise ValueError(f"fs must be > 0 Hz; got {fs}")
+    if n < 2:
+        raise ValueError(f"x must have at least 2 samples along its last axis; got {n}")
     if nperseg is None:
-        nperseg = max(16, 1 << int(max(n // 4, 1)).bit_length() - 1)
+        nperseg = min(n, max(16, 1 << int(max(n // 4, 1)).bit_length() - 1))
     nperseg = int(nperseg)
     if not 2 <= nperseg <= n:
         raise ValueError(f"nperseg must be in [2, {n}] samples; got {nperseg}")
@@ -65,7 +69,13 @@ def tone(x, fs: float, nperseg: int | None = None, lobe: int = 3):
     peak (DC excluded), the power within ±`lobe` bins of it (the Hann main lobe is ±2)."""
     if jnp.ndim(x) != 1:
         raise ValueError(f"x must have shape (N,); got {jnp.shape(x)}")
-    return _peak(*psd(x, fs, nperseg), lobe)
+    return _peak(*psd(x, fs, nperseg), _lobe(lobe))
+
+
+def _lobe(lobe) -> int:
+    if isinstance(lobe, bool) or not float(lobe).is_integer() or int(lobe) < 0:
+        raise ValueError(f"lobe must be an integer number of bins >= 0; got {lobe!r}")
+    return int(lobe)
 
 
 def _peak(f, p, lobe):
@@ -96,6 +106,13 @@ def vibration_features(
         raise ValueError(f"accel must have shape (N, 3) [m/s²]; got {a.shape}")
     if not fs > 0:
         raise ValueError(f"fs must be > 0 Hz; got {fs}")
+    v = concrete_value(a)
+    norm = float(np.median(np.linalg.norm(v, axis=1))) if v is not None else np.nan
+    if 0.5 < norm < 2.0:
+        raise ValueError(
+            f"accel must be specific force in m/s² (|f| ≈ 9.8 at rest); its median |f| is "
+            f"{norm:.3g}: in g? multiply by {G0}"
+        )
     m = int(round(window_s * fs))
     k = a.shape[0] // m
     if m < 8 or k < 1:
@@ -107,7 +124,7 @@ def vibration_features(
         axis = jnp.asarray(axis, a.dtype)
         if axis.shape != (3,):
             raise ValueError(f"axis must have shape (3,); got {axis.shape}")
-    return _features(a, axis, fs, min_amp_g, m=m, lobe=int(lobe))
+    return _features(a, axis, fs, min_amp_g, m=m, lobe=_lobe(lobe))
 
 
 @fused(static_argnames=("m", "lobe"))

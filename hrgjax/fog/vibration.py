@@ -77,6 +77,12 @@ class VibrationSchedule(eqx.Module):
             raise ValueError(f"VibrationSchedule.durations_s must be > 0 s; got {d}")
         if np.any(f < 0) or np.any(a < 0):
             raise ValueError("VibrationSchedule.freq_hz [Hz] and amp_g [g] must be >= 0")
+        if np.any((f == 0) & (a > 0)):
+            raise ValueError(
+                "VibrationSchedule: a segment with amp_g > 0 needs freq_hz > 0 (a 0-Hz "
+                f"vibration is a constant acceleration); got freq_hz {f.tolist()}, amp_g "
+                f"{a.tolist()} (rest is amp_g 0)"
+            )
         if np.any(a > 50):
             raise ValueError(
                 f"VibrationSchedule.amp_g is in g (standard gravity), not m/s²; got {a.max()}"
