@@ -10,6 +10,8 @@ before (the old figures are quoted, measured at 35fb7d0):
   in an FTR gyro's rebalance output, for angle random walk, white readout noise and a
   Gauss–Markov rate. Before: the FTR output carried no readout noise (a Gauss–Markov σ of
   1.8e-13 rad/s where whole-angle read quantization 1.79e-4 rad).
+- **The check on traced parameters** (`simulate` under `jit`/`vmap`/`sweep` names a NaN
+  parameter or profile): a sweep's time with it and without it (as before), one process.
 
 Usage: `.venv/bin/python benchmarks/trust_checks.py` (≈ 30 s on 2 cores).
 """
@@ -63,8 +65,50 @@ def ftr_rows():
             print(f"  {label:30s} {mode:3s}: {terms}")
 
 
+def check_cost_rows(repeat: int = 5):
+    """The cost of `simulate`'s check on traced parameters (`check_finite_leaves`, added in
+    the eleventh session) in a sweep: the same 32-member temperature × rate sweep with the
+    check and with it replaced by the identity (as before), each compiled first, best of
+    `repeat`, interleaved."""
+    import sys
+    import time
+
+    sim_module = sys.modules["hrgjax.simulate"]  # (the package's `simulate` is the function)
+
+    gyro = hg.presets.tvg3_like(noise=False)
+
+    def make():
+        def f(temperature_c, rate_dps):  # a fresh function: its own compiled batch
+            prof = hg.Profile.constant_rate(rate_dps, 60.0, temperature_c)
+            return hg.simulate(gyro, prof, dt_out=1.0).wave_angle[-1]
+
+        return f
+
+    grids = {"temperature_c": jnp.linspace(-40.0, 60.0, 4), "rate_dps": jnp.geomspace(1, 100, 8)}
+    checked, real = make(), sim_module.check_finite_leaves
+    plain = make()
+    sim_module.check_finite_leaves = lambda name, tree: tree
+    try:
+        np.asarray(hg.sweep(plain, cost=None, **grids))
+    finally:
+        sim_module.check_finite_leaves = real
+    np.asarray(hg.sweep(checked, cost=None, **grids))
+    best = {"with the check": np.inf, "without (before)": np.inf}
+    for _ in range(repeat):
+        for label, fn in (("with the check", checked), ("without (before)", plain)):
+            t0 = time.perf_counter()
+            np.asarray(hg.sweep(fn, cost=None, **grids))
+            best[label] = min(best[label], time.perf_counter() - t0)
+    ratio = best["with the check"] / best["without (before)"]
+    print("sweep of 32 × 60-s runs (averaged model), best of", repeat, "after compiling:")
+    for label, t in best.items():
+        print(f"  {label:17s} {1e3 * t:8.1f} ms")
+    print(f"  ratio with / without: {ratio:.3f}")
+
+
 if __name__ == "__main__":
     print(machine())
     jnp.zeros(1).block_until_ready()
     criteria_rows()
     ftr_rows()
+    check_cost_rows()
