@@ -13,21 +13,19 @@ The table rate of a window is the least-squares slope of the table angle over th
 samples (the measured rate's estimator), so a table rate that changes within a window — a
 spin-up, an oscillating table — is compared with the same average of it.
 
-Standard errors come from **one noise model for all the windows**: white angle noise σ_w
-(per sample) and an angle random walk N, fitted to two statistics of every window — the
-scatter of its first differences (white noise mostly) and the scatter of its `batches`
-batch slopes about a linear trend (a smooth change of the rate within the window, e.g. the
-scale-factor ripple while the pattern turns, is systematic, not noise) — by weighted least
-squares on their expectations; N enters only where the data show it (`RANDOM_WALK_Z`). Each
-window's error is then the exact least-squares slope error of its samples under that model
-([`slope_variance`][hrgjax.pattern_noise.slope_variance]). The batch scatter alone (earlier
-versions) is right for a random walk but counts white angle noise `batches` times over (4.2×
-on 60-s runs of 1″ noise); on Monte Carlo sets of 200 windows both are now within 3 % of the
-slopes' scatter, and on 20 windows within 10 %. Where the walk's share of a window's error is
-comparable to the white noise's (it hardly shows in the batch scatter) the error can be low
-by up to ≈ 20 %; a single window (one static run reduced alone) leaves the model noisy.
-Noise correlated over much longer than a window (a Gauss–Markov bias with a 10-min
-correlation time) acts as a slowly varying offset and shows up as scatter between runs.
+Standard errors use **batch means**: the window is split into `batches` equal parts, the slope
+of each part is fitted, a linear trend over the parts is removed (a smooth change of the
+rate within the window is systematic, e.g. the scale-factor ripple while the pattern turns),
+and the error is the residual scatter over √batches. Per window, so runs of different noise
+each get their own. Right for an angle random walk (measured 0.92 of the slopes' scatter);
+**white angle noise is counted about `batches` times too large** (4.2× with 5 batches: a
+least-squares slope's variance under white angle noise falls as the cube of its length), so
+on a gyro whose windows are dominated by white angle noise the error bars are conservative.
+A model fitted to all the windows together was tried and withdrawn: it was right on
+average but pooled runs of different noise (6.8× too large on one, 1.7× too small on the
+other) and let a random walk in on pure white noise one time in six. Noise correlated over
+much longer than a window (a Gauss–Markov bias with a 10-min correlation time) acts as a
+slowly varying offset and shows up as scatter between runs instead.
 """
 
 from __future__ import annotations
@@ -38,7 +36,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..data import MeasuredData
-from ..pattern_noise import slope_variance
 from ..units import K_E_NOMINAL as K_E_NOMINAL
 from ..units import K_E_WANTED, group_temperatures, k_e_problem
 from ..units import WINDOW_S as WINDOW_S
@@ -61,19 +58,14 @@ def window_slopes(t, theta, n_windows: int, batches: int = 0):
     **Arguments:**
 
     - `t`, `theta`: shape (N,) sample times [s] and angles (any unit); N must be a multiple
-      of `n_windows`; the samples of a window equally spaced.
+      of `n_windows`.
     - `n_windows`: number of windows.
-    - `batches`: if ≥ 3, also return the standard errors of each window's slope (module
-      docstring: white angle noise and a random walk fitted to all the windows together).
+    - `batches`: if ≥ 3, also return batch-means standard errors of each window's slope.
 
-    **Returns:** `(slope, t_mid, theta_mean)` each of shape (n_windows,), plus `stderr`
-    [unit of `theta` per s] when `batches ≥ 3`.
+    **Returns:** `(slope, t_mid, theta_mean)` each of shape (n_windows,), plus `stderr` when
+    `batches ≥ 3`.
     """
-    out = _window_stats(jnp, t, theta, n_windows, batches)
-    if batches < 3:
-        return out
-    slope, tm, ym, stats = out
-    return slope, tm, ym, slope_errors(jnp, [stats])
+    return _window_stats(jnp, t, theta, n_windows, batches)
 
 
 def _window_stats(xp, t, theta, n_windows, batches):
@@ -85,104 +77,17 @@ def _window_stats(xp, t, theta, n_windows, batches):
     slope, tm, ym = least_squares_slope(xp, tw, yw)
     if batches < 3:
         return slope, tm, ym
-    return slope, tm, ym, _noise_statistics(xp, tw, yw, batches)
-
-
-def _noise_statistics(xp, tw, yw, batches: int) -> dict:
-    """Two quadratic statistics of each window's angles (rows of `tw`, `yw`: n equally spaced
-    samples) and the coefficients of their expectations in (σ_w², N²), white angle noise
-    [angle² per sample] and the random walk's density [angle²/s]:
-
-    - `a`: the first differences' squares about a straight line in sample number (a rate
-      changing linearly is not noise); E = a_w σ_w² + a_r N², a_w = tr(P D Dᵀ), a_r = Δt(m−2);
-    - `q`: the batch slopes' squares about a straight line in batch number (the batch means
-      of earlier versions); E = (B − 2)(v_w σ_w² + v_r N²), v the variance of one batch's
-      least-squares slope ([`slope_variance`][hrgjax.pattern_noise.slope_variance]).
-    """
-    n = tw.shape[-1]
-    dt = (tw[:, -1] - tw[:, 0]) / (n - 1)
-    m = n - 1
-    d = xp.diff(yw, axis=-1)
-    i = xp.arange(m, dtype=d.dtype) - (m - 1) / 2
-    s2 = m * (m**2 - 1) / 12.0
-    i = i[None, :]
-    r = d - xp.mean(d, axis=-1, keepdims=True) - xp.sum(d * i, axis=-1, keepdims=True) / s2 * i
-    a_w = 2.0 * m - 2.0 / m - (2.0 * ((m - 1) / 2) ** 2 + (m - 1)) / s2
     nb = n // batches
-    tb = tw[:, : nb * batches].reshape(-1, batches, nb)
-    yb = yw[:, : nb * batches].reshape(-1, batches, nb)
+    tb = tw[:, : nb * batches].reshape(n_windows, batches, nb)
+    yb = yw[:, : nb * batches].reshape(n_windows, batches, nb)
     sb, _, _ = least_squares_slope(xp, tb, yb)
     # A smooth change of rate within the window (the scale-factor ripple as the pattern turns)
     # is systematic, not noise: remove a linear trend over the batches before the scatter.
     idx = xp.broadcast_to(xp.arange(batches, dtype=sb.dtype), sb.shape)
     trend, _, mean = least_squares_slope(xp, idx, sb)
     resid = sb - mean[..., None] - trend[..., None] * (idx - (batches - 1) / 2)
-    ones = xp.ones_like(dt)
-    return {
-        "n": n * ones,
-        "dt": dt,
-        "a": xp.sum(r * r, axis=-1),
-        "a_w": a_w * ones,
-        "a_r": dt * (m - 2),
-        "a_dof": 2.0 * (m - 2) / 3.0 * ones,  # first differences of white noise: MA(1)
-        "q": xp.sum(resid**2, axis=-1),
-        "q_w": (batches - 2) * slope_variance(1.0, 0.0, nb, dt),
-        "q_r": (batches - 2) * slope_variance(0.0, 1.0, nb, dt),
-        "q_dof": (batches - 2.0) * ones,
-    }
-
-
-RANDOM_WALK_Z = 1.0
-"""Significance (in σ of its own estimate) a random walk's fitted density must reach to
-enter the standard errors; below it the windows' scatter is white angle noise alone. A
-density consistent with zero would add the fluctuation of the batch slopes (several times
-the white-noise error) to every window; a higher bar would miss a walk whose share of a
-window's error is comparable to the white noise's. 1σ balances the two (module docstring)."""
-
-
-def slope_errors(xp, stats: list[dict], iterations: int = 3):
-    """Standard error of each window's least-squares slope [angle/s] under white angle noise
-    σ_w and an angle random walk N fitted to the statistics of every window
-    (`_noise_statistics`) together: weighted least squares on their expectations, each
-    statistic weighted by its degrees of freedom over its expectation², `iterations` times;
-    σ_w², N² ≥ 0, and N² = 0 unless `RANDOM_WALK_Z` σ from zero. Traceable."""
-    st = {k: xp.concatenate([s[k] for s in stats]) for k in stats[0]}
-    y = xp.concatenate([st["a"], st["q"]])
-    cw = xp.concatenate([st["a_w"], st["q_w"]])
-    cr = xp.concatenate([st["a_r"], st["q_r"]])
-    dof = xp.concatenate([st["a_dof"], st["q_dof"]])
-    # each statistic divided by its size were all of A white noise plus all of A a walk
-    # (an equation and its coefficients scaled alike: the same fit, and every term O(≤ 1))
-    a_sum = xp.sum(st["a"])
-    noisy = a_sum > 0.0
-    a_sum = xp.where(noisy, a_sum, 1.0)
-    norm = cw * a_sum / xp.sum(st["a_w"]) + cr * a_sum / xp.sum(st["a_r"])
-    y, cw, cr = y / norm, cw / norm, cr / norm
-    weight = dof / (y * y + 1e-12)  # a first pass weighted by the statistics themselves
-
-    def solve(weight):
-        sww, swr, srr = (xp.sum(weight * u * v) for u, v in ((cw, cw), (cw, cr), (cr, cr)))
-        yw, yr = xp.sum(weight * cw * y), xp.sum(weight * cr * y)
-        det = sww * srr - swr * swr
-        good = det > 1e-12 * sww * srr
-        det = xp.where(good, det, 1.0)
-        both_w = (srr * yw - swr * yr) / det
-        both_r = (sww * yr - swr * yw) / det
-        # Var(statistic) = 2 E² / dof = 2 / weight: Cov(σ_w², N²) = 2 (CᵀWC)⁻¹
-        walk = good & (both_r > RANDOM_WALK_Z * xp.sqrt(2.0 * sww / det))
-        only_w = xp.maximum(yw / sww, 0.0)
-        only_r = xp.maximum(yr / srr, 0.0)
-        w2 = xp.where(walk, xp.where(both_w >= 0.0, both_w, 0.0), only_w)
-        r2 = xp.where(walk, xp.where(both_w >= 0.0, both_r, only_r), 0.0)
-        return w2, r2
-
-    for _ in range(iterations):
-        w2, r2 = solve(weight)
-        expect = cw * w2 + cr * r2
-        weight = dof / (expect * expect + 1e-12)
-    w2, r2 = solve(weight)
-    w2, r2 = (xp.where(noisy, v, 0.0) for v in (w2, r2))
-    return xp.sqrt(slope_variance(xp.sqrt(w2), xp.sqrt(r2), st["n"], st["dt"]))
+    stderr = xp.sqrt(xp.sum(resid**2, axis=-1) / (batches - 2) / batches)
+    return slope, tm, ym, stderr
 
 
 def _table_rates(t, table_angle, rate, n_windows: int) -> np.ndarray:
@@ -229,8 +134,8 @@ class RateWindows(eqx.Module):
       exactly 0 where the table rate is 0 throughout the window.
     - `wave_angle_deg`: mean measured wave angle over the window.
     - `rate_dps`: measured equivalent input rate −(dθ/dt)/k_e,nom.
-    - `stderr_dps`: standard error of `rate_dps` (module docstring: one noise model fitted to
-      every window).
+    - `stderr_dps`: batch-means standard error of `rate_dps` (module docstring: right for an
+      angle random walk, ≈ `batches` times too large for white angle noise).
     - `k_e`: the nominal angular gain used.
     - `temperature_rate_cps`: least-squares slope of the temperature over the window [°C/s]
       (None when the windows were built by hand).
@@ -360,7 +265,6 @@ def reduce(
         if value is not None and not value > 0:
             raise ValueError(f"{name} must be a positive number of seconds or None; got {value}")
     cols: dict[str, list] = {k: [] for k in RateWindows.__dataclass_fields__ if k != "k_e"}
-    noise: list[dict] = []
     for r in data.runs():
         t, th = r["time_s"], r["wave_angle_deg"]
         temp, rate = r["temperature_c"], r["table_rate_dps"]
@@ -369,8 +273,7 @@ def reduce(
         if nb < 3:
             raise ValueError(f"run {int(r.run[0])}: windows of {n} samples are too short")
         m = n_win * n
-        slope, tm, ym, stats = _window_stats(np, t[:m], th[:m], n_win, nb)
-        noise.append(stats)
+        slope, tm, ym, se = _window_stats(np, t[:m], th[:m], n_win, nb)
         starts = np.arange(n_win) * n
         cols["run"].append(np.full(n_win, int(r.run[0])))
         cols["start"].append(starts)
@@ -381,9 +284,9 @@ def reduce(
         cols["table_rate_dps"].append(_table_rates(t[:m], r.table_angle_deg[:m], rate[:m], n_win))
         cols["wave_angle_deg"].append(ym)
         cols["rate_dps"].append(-slope / k_e)
+        cols["stderr_dps"].append(se / k_e)
         cols["temperature_rate_cps"].append(least_squares_slope(np, t[:m].reshape(n_win, n),
                                                    temp[:m].reshape(n_win, n))[0])  # fmt: skip
-    cols["stderr_dps"] = [slope_errors(np, noise) / k_e]  # one noise model: every window's
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     return RateWindows(**arrays, k_e=float(k_e))
 
