@@ -85,7 +85,8 @@ def output_times(profile: Profile, dt_out: float):
             f"than the {plausible.MAX_OUTPUT_SAMPLES:.0e} hrgjax allocates at once (≈ 100 "
             "bytes each); choose a larger dt_out or split the profile into runs"
         )
-    return device(np.minimum(t[0] + dt_out * np.arange(n), t[-1]))  # no rounding past the end
+    with jax.ensure_compile_time_eval():  # concrete under jit too: the fixed-step path counts on it
+        return device(np.minimum(t[0] + dt_out * np.arange(n), t[-1]))  # no rounding past the end
 
 
 class _Module(types.ModuleType):
@@ -139,8 +140,7 @@ def _check_options(o) -> None:
             )
     elif v is not None and is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v) and v > 0):
         raise ValueError(f"fixed_step must be a positive number of seconds or None; got {v!r}")
-    v = o["quadrature0"]
-    if is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v)):
+    if is_concrete(v := o["quadrature0"]) and not (np.ndim(v) == 0 and np.isfinite(v)):
         raise ValueError(f"quadrature0 must be a finite number (readout units); got {v!r}")
     if is_concrete(v := o["run"]):
         arr = np.asarray(v)

@@ -275,3 +275,8 @@ def test_the_default_takes_fixed_steps_where_they_meet_rtol():
     np.testing.assert_array_equal(angle(max_steps=2**18), angle(fixed_step=None, max_steps=2**18))
     traced = jax.jit(lambda t: hg.simulate(FREE, prof, "full", ts=t).wave_angle)(ts)
     np.testing.assert_allclose(traced, adaptive, rtol=0, atol=1e-13)
+    # output times from dt_out are built on the host, so under jit (and in sweeps) the rule
+    # still sees them and takes the same fixed steps as an eager call (it fell back to
+    # adaptive there, without a word)
+    on_grid = jax.jit(lambda: hg.simulate(FREE, prof, "full", dt_out=0.002).wave_angle)()
+    np.testing.assert_array_equal(on_grid[1:], default)
