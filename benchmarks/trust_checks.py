@@ -66,7 +66,7 @@ def ftr_rows():
 
 
 def check_cost_rows(repeat: int = 5):
-    """The cost of `simulate`'s check on traced parameters (`check_finite_leaves`, added in
+    """The cost of `simulate`'s check on traced parameters (`_checks.traceable`, added in
     the eleventh session) in a sweep: the same 32-member temperature × rate sweep with the
     check and with it replaced by the identity (as before), each compiled first, best of
     `repeat`, interleaved."""
@@ -85,13 +85,13 @@ def check_cost_rows(repeat: int = 5):
         return f
 
     grids = {"temperature_c": jnp.linspace(-40.0, 60.0, 4), "rate_dps": jnp.geomspace(1, 100, 8)}
-    checked, real = make(), sim_module.check_finite_leaves
+    checked, real = make(), sim_module.traceable
     plain = make()
-    sim_module.check_finite_leaves = lambda name, tree: tree
+    sim_module.traceable = lambda name, tree: tree
     try:
         np.asarray(hg.sweep(plain, cost=None, **grids))
     finally:
-        sim_module.check_finite_leaves = real
+        sim_module.traceable = real
     np.asarray(hg.sweep(checked, cost=None, **grids))
     best = {"with the check": np.inf, "without (before)": np.inf}
     for _ in range(repeat):

@@ -72,6 +72,21 @@ def check_finite_leaves(name: str, tree):
     return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
+def floats_as_arrays(tree):
+    """`tree` with its Python float leaves as float64 arrays (not weakly typed), as a
+    module's own converters make them: a float put in with `eqx.tree_at` would otherwise be
+    static to `eqx.filter_jit`, one compiled program per value."""
+    return jax.tree_util.tree_map(
+        lambda x: jnp.asarray(x, dtype=float) if isinstance(x, float) else x, tree
+    )
+
+
+def traceable(name: str, tree):
+    """`tree` (a module `name`) ready for a compiled program: its Python floats as arrays
+    (`floats_as_arrays`), its traced leaves checked finite (`check_finite_leaves`)."""
+    return check_finite_leaves(name, floats_as_arrays(tree))
+
+
 def check_nonnegative(name: str, x, unit: str = ""):
     """Raise if any element of x is negative or not finite (concrete values only: a traced
     value passes unchecked)."""

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import plausible
-from ._checks import check_finite_leaves, is_concrete
+from ._checks import is_concrete, traceable
 from ._compiled import Check, device, program, single_run_entry
 from ._cost import MAX_STEPS as MAX_STEPS
 from ._cost import default_max_steps as default_max_steps
@@ -586,7 +586,7 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         carrier = (*carrier, looped_stages(gyro, profile, ts, *carrier))
         stepping, adjoint = (_default_solver(model), 0.0, 0.0, 1, 0.0, True), None
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
-    gyro, profile = check_finite_leaves("gyro", gyro), check_finite_leaves("profile", profile)
+    gyro, profile = traceable("gyro", gyro), traceable("profile", profile)
     return _solve(
         model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run, carrier
     )

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import resonator
+from helpers import CompileCounter, resonator
 
 import hrgjax as hg
 
@@ -152,6 +152,18 @@ def test_traced_nan_in_profile_raises():
 
     with pytest.raises(Exception, match=r"gyro\.resonator\.tau must be finite"):
         jax.block_until_ready(jax.jit(run_tau)(jnp.nan))
+
+
+def test_python_floats_put_in_with_tree_at_compile_nothing_new():
+    """A float put in with `eqx.tree_at` (as docs/simulate.md shows) runs the program of the
+    same gyro built the usual way: one per shape, not one per value (each compiled again)."""
+    gyro, prof = hg.presets.ideal(resonator()), hg.Profile.constant_rate(1.0, 1.0)
+    base = hg.simulate(gyro, prof, dt_out=0.5).wave_angle
+    with CompileCounter() as c:
+        for tau in (600.0, 700.0):  # decay times [s]
+            hg.simulate(eqx.tree_at(lambda g: g.resonator.tau, gyro, tau), prof, dt_out=0.5)
+    assert c.compiles == 0, c.names
+    assert np.all(np.isfinite(base))
 
 
 def test_float32_mode_raises():
