@@ -29,6 +29,7 @@ from jax.scipy.linalg import expm
 
 from ._compiled import fused
 from ._linalg import cho_logdet, cho_solve, cholesky, whiten
+from ._x64 import require_x64
 
 LOG_2PI = 1.8378770664093453
 
@@ -135,6 +136,7 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     [`discretise_input`][hrgjax.kalman.discretise_input]: u = Γ·input).
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
+    require_x64("hrgjax.kalman.kalman_filter")
     phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
 
     def step(g, inp):
@@ -156,6 +158,7 @@ def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
 
     **Returns:** `(smoothed means (K, n), covariances (K, n, n), the filter's total
     log-likelihood)`."""
+    require_x64("hrgjax.kalman.rts_smoother")
     phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
 
     def forward(g, inp):
@@ -199,6 +202,7 @@ def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None)
     Kalman filter.
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
+    require_x64("hrgjax.kalman.extended_kalman_filter")
     qds, mask, us = _nonlinear_steps(prior, qd, zs, mask, us)
 
     def step(g, inp):
@@ -234,6 +238,7 @@ def unscented_kalman_filter(
     through `f` and `h` by [`sigma_points`][hrgjax.kalman.sigma_points] instead of Jacobians
     (exact for the mean of a quadratic). The log-likelihood is that of the innovation under
     its unscented covariance."""
+    require_x64("hrgjax.kalman.unscented_kalman_filter")
     qds, mask, us = _nonlinear_steps(prior, qd, zs, mask, us)
 
     def step(g, inp):
@@ -272,6 +277,7 @@ def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
     and the innovation log-likelihood uses the fixed $S$.
 
     **Returns:** `(P_prior (n, n), K (n, m), S (m, m))`."""
+    require_x64("hrgjax.kalman.steady_state")
     eye = jnp.eye(phi.shape[0])
 
     def step(p, _):

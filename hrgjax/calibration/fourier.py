@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._compiled import device
+from .._x64 import require_x64
 from ..data import MeasuredData
 from ..units import DEG, T_REF_C
 from ._compensator import (
@@ -147,6 +148,7 @@ class FourierCompensator(AbstractCompensator):
         counted once) among the static or the rotation runs than the temperature polynomial
         has coefficients (`temperature_degree` + 1), or with fewer points than coefficients.
         """
+        require_x64("FourierCompensator.fit")
         window_s = setting(self, "window_s", window_s)
         static, moving = fit_windows(data, self.k_e, window_s)
         if self.temperature_degree is None:

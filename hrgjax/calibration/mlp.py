@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._compiled import device, program
+from .._x64 import require_x64
 from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
 from ..units import DEG
@@ -219,6 +220,7 @@ class MLPCompensator(AbstractCompensator):
         **Raises:** `TypeError` without `key`; `ValueError` for an unknown mode, data
         without static or rotation runs, or, with `st_width > 0`, data without ramps.
         """
+        require_x64("MLPCompensator.fit")
         if key is None:
             raise TypeError("MLPCompensator.fit needs key= (the PRNG key of the initial weights)")
         if mode is not FROM_FIELD and mode not in MODES:
