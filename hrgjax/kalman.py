@@ -103,7 +103,10 @@ def update(g: Gaussian, z, H, R, mask=True):
 
 
 def _update_innovation(g: Gaussian, nu, H, R, mask=True):
-    """`update` given the innovation ν (linear: z − Hx; EKF: z − h(x)) and H."""
+    """`update` given the innovation ν (linear: z − Hx; EKF: z − h(x)) and H. Where `mask`
+    is False ν is not used at all (a NaN there, a missing measurement, reaches neither the
+    result nor its gradient)."""
+    raw, nu = nu, jnp.where(mask, nu, 0.0)
     s = H @ g.P @ H.T + R
     s = 0.5 * (s + s.T)
     c = cholesky(s)
@@ -114,7 +117,7 @@ def _update_innovation(g: Gaussian, nu, H, R, mask=True):
     w = whiten(c, nu)  # ‖L⁻¹ν‖² = νᵀS⁻¹ν
     loglik = -0.5 * (w @ w + cho_logdet(c) + nu.shape[0] * LOG_2PI)
     post = Gaussian(jnp.where(mask, x, g.x), jnp.where(mask, 0.5 * (p + p.T), g.P))
-    return post, nu, s, jnp.where(mask, loglik, 0.0)
+    return post, raw, s, jnp.where(mask, loglik, 0.0)
 
 
 def _steps(prior, phi, qd, zs, mask, us):

@@ -73,6 +73,18 @@ def test_rts_smoother_is_the_batch_posterior():
     assert not np.allclose(x0, xf)
 
 
+def test_a_masked_nan_reaches_neither_the_result_nor_its_gradient():
+    """A missing measurement written as NaN at a masked step: the smoother's result and the
+    gradient of its log-likelihood in the measurements are those of any finite value there
+    (the masked step's gradient 0), not NaN."""
+    loss = lambda zs: kalman.rts_smoother(PRIOR, PHI, QD, H, R, zs, mask=MASK, us=US)[2]  # noqa: E731
+    holes = ZS.at[2].set(jnp.nan).at[5].set(jnp.nan)  # the two masked steps
+    np.testing.assert_array_equal(loss(holes), loss(ZS))
+    g_holes, g = jax.grad(loss)(holes), jax.grad(loss)(ZS)
+    np.testing.assert_allclose(g_holes, g, rtol=1e-12, atol=0)
+    assert np.all(np.asarray(g)[~np.asarray(MASK)] == 0.0)
+
+
 def test_ekf_and_ukf_are_the_kalman_filter_on_a_linear_model():
     f = lambda x, u: PHI @ x + u
     h = lambda x: H @ x
