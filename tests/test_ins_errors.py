@@ -225,6 +225,12 @@ def test_single_channel_closed_forms_without_earth_rate():
     dx = sd.propagate(traj, jnp.zeros(9).at[3].set(0.1), altitude_aided=True)
     north = np.asarray(sd.position_metres(traj, dx))[:, 0]
     np.testing.assert_allclose(north, 0.1 * np.sin(ws * t) / ws, atol=1e-6)
+    # a NaN error is named, eagerly and under jit (it ran the solver out of steps)
+    with pytest.raises(ValueError, match=r"gyro_error must be finite; found nan"):
+        sd.propagate(traj, gyro_error=jnp.array([jnp.nan, 0.0, 0.0]), altitude_aided=True)
+    run = jax.jit(lambda e: sd.propagate(traj, gyro_error=e, altitude_aided=True))
+    with pytest.raises(Exception, match=r"gyro_error must be finite"):
+        jax.block_until_ready(run(jnp.array([jnp.nan, 0.0, 0.0])))
 
 
 def test_north_gyro_bias_grows_longitude_at_r_eps_cos2_lat():

@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import check_finite, is_concrete
 from .._compiled import Check, fused, program
 from .._x64 import require_x64
 from ..kalman import psd_factor, van_loan
@@ -115,7 +115,7 @@ def position_metres(traj: Trajectory, dx):
 def _check_series(name, x, n):
     if x is None:
         return jnp.zeros((n, 3))
-    x = jnp.asarray(x, float)
+    x = check_finite(name, jnp.asarray(x, float))  # (a NaN there ran the solver out of steps)
     if x.shape == (3,):
         return jnp.broadcast_to(x, (n, 3))
     if x.shape != (n, 3):
@@ -155,6 +155,7 @@ def propagate(
     dx0 = jnp.zeros(9) if dx0 is None else jnp.asarray(dx0, float)
     if dx0.shape != (9,):
         raise ValueError(f"dx0 must have shape (9,) (states {STATES}); got {dx0.shape}")
+    dx0 = check_finite("dx0", dx0)
     eg = _check_series("gyro_error", gyro_error, n)
     ea = _check_series("accel_error", accel_error, n)
     return _propagate(traj, dx0, eg, ea, altitude_aided, rtol, atol, max_steps or 64 * n)[0]
