@@ -65,16 +65,6 @@ def check_number(who: str, name: str, value, extra: str, *, minimum=None, strict
         raise ValueError(f"{who}: {name} must be a finite number{bound}{extra}; got {value!r}")
 
 
-def check_window(who: str, window_s) -> None:
-    """Refuse a `window_s` that is neither `None` (the reduction's default) nor a finite
-    number of seconds > 0."""
-    if window_s is not None and not (
-        _is_number(window_s) and np.isfinite(window_s) and window_s > 0
-    ):
-        raise ValueError(f"{who}: window_s must be None or a finite number of seconds > 0 "
-                         f"(the rotation-run window); got {window_s!r}")  # fmt: skip
-
-
 class FromField(enum.Enum):
     """The default of a deprecated `fit` keyword: the compensator's field of that name."""
 

@@ -27,13 +27,12 @@ from ._compensator import (
     FromField,
     check_number,
     check_whole,
-    check_window,
     fit_windows,
     require_temperatures,
     setting,
     temperature_levels,
 )
-from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, check_k_e
+from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, check_k_e, check_window
 
 T_SCALE = 50.0
 """Temperature scale of the polynomial basis [°C]."""

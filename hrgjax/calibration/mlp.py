@@ -45,11 +45,10 @@ from ._compensator import (
     FromField,
     check_number,
     check_whole,
-    check_window,
     fit_windows,
     setting,
 )
-from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, check_k_e
+from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, check_k_e, check_window
 
 ENCODINGS = ("periodic", "angle")
 MODES = ("reduced", "end_to_end")

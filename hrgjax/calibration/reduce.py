@@ -30,6 +30,8 @@ slowly varying offset and shows up as scatter between runs instead.
 
 from __future__ import annotations
 
+import numbers
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -99,6 +101,19 @@ def _table_rates(t, table_angle, rate, n_windows: int) -> np.ndarray:
     slope = least_squares_slope(np, tw, aw)[0]
     at_rest = np.all(rate.reshape(n_windows, -1) == 0.0, axis=1)
     return np.where(at_rest, 0.0, slope)
+
+
+def check_window(who: str, window_s) -> None:
+    """Refuse a `window_s` that is neither `None` (the reduction's default) nor a finite
+    number of seconds > 0."""
+    if window_s is not None and not (
+        isinstance(window_s, numbers.Real)
+        and not isinstance(window_s, bool)
+        and np.isfinite(window_s)
+        and window_s > 0
+    ):
+        raise ValueError(f"{who}: window_s must be None or a finite number of seconds > 0 "
+                         f"(the rotation-run window); got {window_s!r}")  # fmt: skip
 
 
 def least_squares_slope(xp, t, y, mask=None):
