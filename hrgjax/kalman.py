@@ -130,6 +130,7 @@ def _steps(prior, phi, qd, zs, mask, us):
     return phis, qds, mask, us
 
 
+@fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
 def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     r"""Run predict → update over the measurements `zs` (K, m) with one `lax.scan`.
 
@@ -151,6 +152,7 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     return xs, ps, jnp.sum(ll)
 
 
+@fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
 def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     r"""Rauch–Tung–Striebel smoother: the filter of
     [`kalman_filter`][hrgjax.kalman.kalman_filter] forward, then backward

@@ -1,0 +1,56 @@
+"""Eager calls of the Kalman filter and smoother (eleventh session): the second call on new
+data of the same shapes, fused (`hrgjax._compiled.fused`: one compiled program per shape)
+against the plain function (`__wrapped__`, as before: its `lax.scan` traced and compiled on
+every call, a new closure each time). Side by side in one process, best of `--repeat`.
+
+Usage: `.venv/bin/python benchmarks/kalman_calls.py [--steps K] [--repeat N]`.
+"""
+
+import argparse
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+from _common import machine  # noqa: E402
+
+from hrgjax import kalman  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    print(machine())
+    n, k = 4, args.steps
+    rng = np.random.default_rng(0)
+    phi = jnp.eye(n) + 0.01 * jnp.asarray(rng.normal(size=(n, n)))
+    qd, h, r = 1e-3 * jnp.eye(n), jnp.eye(2, n), 0.1 * jnp.eye(2)
+    prior = kalman.Gaussian(jnp.zeros(n), jnp.eye(n))
+    for name in ("kalman_filter", "rts_smoother"):
+        fused = getattr(kalman, name)
+        plain = fused.__wrapped__
+        best = {}
+        for label, fn in (("fused", fused), ("plain (before)", plain)):
+            fn(prior, phi, qd, h, r, jnp.asarray(rng.normal(size=(k, 2))))[2].block_until_ready()
+            times = []
+            for _ in range(args.repeat):
+                zs = jnp.asarray(rng.normal(size=(k, 2)))
+                t0 = time.perf_counter()
+                fn(prior, phi, qd, h, r, zs)[2].block_until_ready()
+                times.append(time.perf_counter() - t0)
+            best[label] = min(times)
+        ratio = best["plain (before)"] / best["fused"]
+        print(
+            f"{name}, {k} steps, {n} states, a later eager call: fused "
+            f"{1e3 * best['fused']:.1f} ms, plain {1e3 * best['plain (before)']:.1f} ms "
+            f"(plain / fused {ratio:.0f}×)"
+        )
+
+
+if __name__ == "__main__":
+    main()
