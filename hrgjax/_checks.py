@@ -41,9 +41,19 @@ def check_finite(name: str, x):
     return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{name} must be finite (found NaN or inf)")
 
 
-def check_finite_leaves(name: str, tree):
+RULES = {
+    "> 0": lambda v: v > 0,
+    ">= 0": lambda v: v >= 0,
+    "in (0, 1]": lambda v: (v > 0) & (v <= 1),
+}
+"""The value rules `check_finite_leaves` can apply to traced leaves, by their text."""
+
+
+def check_finite_leaves(name: str, tree, limits=None):
     """`tree` with its traced floating leaves checked finite by one `eqx.branched_error_if`
-    whose message names the first bad leaf (`gyro.resonator.omega must be finite …`).
+    whose message names the first bad leaf (`gyro.resonator.omega must be finite …`);
+    `limits` ({"resonator.tau": ("> 0", "s"), …}: a leaf's path, a rule of `RULES` and its
+    unit) also holds a traced leaf at that path to its rule (τ = 0 under `jit`).
 
     A module built under `jit` or `vmap` cannot keep the `eqx.error_if`s of its
     `__check_init__` (their results are discarded), so without this a NaN in a traced
@@ -58,11 +68,18 @@ def check_finite_leaves(name: str, tree):
     ]
     if not traced:
         return tree
-    ok = jnp.stack([jnp.all(jnp.isfinite(leaves[i])) for i in traced])
+    limits = limits or {}
+    paths = [jax.tree_util.keystr(flat[i][0]) for i in traced]
+    rules = [limits.get(p.lstrip("."), ("finite", "")) for p in paths]
+    ok = jnp.stack([
+        jnp.all(jnp.isfinite(leaves[i]) & RULES.get(rule, lambda v: True)(leaves[i]))
+        for i, (rule, _) in zip(traced, rules, strict=True)
+    ])  # fmt: skip
     messages = [
-        f"{name}{jax.tree_util.keystr(flat[i][0])} must be finite (found NaN or inf)"
-        for i in traced
-    ]
+        f"{name}{p} must be finite (found NaN or inf)" if rule == "finite"
+        else f"{name}{p} must be finite and {rule} {unit}".rstrip()
+        for p, (rule, unit) in zip(paths, rules, strict=True)
+    ]  # fmt: skip
     # only the traced leaves pass through the check: constants stay constants (XLA folds them)
     checked = eqx.branched_error_if(
         [leaves[i] for i in traced], ~jnp.all(ok), jnp.argmin(ok), messages
@@ -81,10 +98,11 @@ def floats_as_arrays(tree):
     )
 
 
-def traceable(name: str, tree):
+def traceable(name: str, tree, limits=None):
     """`tree` (a module `name`) ready for a compiled program: its Python floats as arrays
-    (`floats_as_arrays`), its traced leaves checked finite (`check_finite_leaves`)."""
-    return check_finite_leaves(name, floats_as_arrays(tree))
+    (`floats_as_arrays`), its traced leaves checked finite and within `limits`
+    (`check_finite_leaves`)."""
+    return check_finite_leaves(name, floats_as_arrays(tree), limits)
 
 
 def check_nonnegative(name: str, x, unit: str = ""):

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import plausible
-from ._checks import is_concrete, traceable
+from ._checks import RULES, is_concrete, traceable
 from ._compiled import Check, device, program, single_run_entry
 from ._cost import MAX_STEPS as MAX_STEPS
 from ._cost import default_max_steps as default_max_steps
@@ -163,8 +163,7 @@ _LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by
 def _obeys(rule: str, value):
     """Where `value` keeps `rule` of `_LAW_LIMITS` ("finite" alone: everywhere)."""
     v = np.asarray(value, dtype=float)
-    rules = {"> 0": v > 0, ">= 0": v >= 0, "in (0, 1]": (v > 0) & (v <= 1)}
-    return rules.get(rule, np.full(v.shape, True))
+    return RULES[rule](v) if rule in RULES else np.full(v.shape, True)
 
 
 def _check_laws(gyro, profile) -> None:
@@ -586,7 +585,7 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         carrier = (*carrier, looped_stages(gyro, profile, ts, *carrier))
         stepping, adjoint = (_default_solver(model), 0.0, 0.0, 1, 0.0, True), None
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
-    gyro, profile = traceable("gyro", gyro), traceable("profile", profile)
+    gyro, profile = traceable("gyro", gyro, _LAW_LIMITS), traceable("profile", profile)
     return _solve(
         model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run, carrier
     )

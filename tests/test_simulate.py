@@ -152,6 +152,9 @@ def test_traced_nan_in_profile_raises():
 
     with pytest.raises(Exception, match=r"gyro\.resonator\.tau must be finite"):
         jax.block_until_ready(jax.jit(run_tau)(jnp.nan))
+    # a finite but impossible traced value too: the laws' limits (it ran out of steps)
+    with pytest.raises(Exception, match=r"gyro\.resonator\.tau must be finite and > 0 s"):
+        jax.block_until_ready(jax.jit(run_tau)(0.0))
 
 
 def test_python_floats_put_in_with_tree_at_compile_nothing_new():
