@@ -87,7 +87,7 @@ def check_cost_rows(repeat: int = 5):
     grids = {"temperature_c": jnp.linspace(-40.0, 60.0, 4), "rate_dps": jnp.geomspace(1, 100, 8)}
     checked, real = make(), sim_module.traceable
     plain = make()
-    sim_module.traceable = lambda name, tree: tree
+    sim_module.traceable = lambda name, tree, limits=None: tree
     try:
         np.asarray(hg.sweep(plain, cost=None, **grids))
     finally:
