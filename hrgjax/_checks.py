@@ -90,11 +90,13 @@ def check_finite_leaves(name: str, tree, limits=None):
 
 
 def floats_as_arrays(tree):
-    """`tree` with its Python float leaves as float64 arrays (not weakly typed), as a
-    module's own converters make them: a float put in with `eqx.tree_at` would otherwise be
-    static to `eqx.filter_jit`, one compiled program per value."""
+    """`tree` with its Python and NumPy number leaves (floats, ints; not bools) as float64
+    arrays (not weakly typed), as a module's own converters make them: a number put in with
+    `eqx.tree_at` would otherwise be static to `eqx.filter_jit`, one compiled program per
+    value. (No XLA program: the host value is put on the device.)"""
+    number = lambda x: isinstance(x, int | float | np.number) and not isinstance(x, bool)  # noqa: E731
     return jax.tree_util.tree_map(
-        lambda x: jnp.asarray(x, dtype=float) if isinstance(x, float) else x, tree
+        lambda x: jax.device_put(np.asarray(x, dtype=float)) if number(x) else x, tree
     )
 
 

@@ -179,7 +179,7 @@ def _check_laws(gyro, profile) -> None:
     for path, law in flat:
         name = ".".join(str(getattr(p, "name", getattr(p, "key", p))) for p in path)
         plain = not is_law(law) and is_concrete(law) and np.ndim(law) == 0
-        if plain and np.asarray(law).dtype.kind == "f":
+        if plain and np.asarray(law).dtype.kind in "fiu" and not isinstance(law, bool):
             # a plain value, checked here too: eqx.tree_at (as sweeps do) skips __init__
             value, (rule, unit) = float(np.asarray(law)), _LAW_LIMITS.get(name, ("finite", ""))
             if not (np.isfinite(value) and _obeys(rule, value)):

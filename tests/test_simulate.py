@@ -167,6 +167,12 @@ def test_python_floats_put_in_with_tree_at_compile_nothing_new():
             hg.simulate(eqx.tree_at(lambda g: g.resonator.tau, gyro, tau), prof, dt_out=0.5)
     assert c.compiles == 0, c.names
     assert np.all(np.isfinite(base))
+    # an int put in the same way is a number too: checked (it skipped every check) and traced
+    with pytest.raises(ValueError, match=r"gyro.resonator.tau = 0 s; it must be > 0"):
+        hg.simulate(eqx.tree_at(lambda g: g.resonator.tau, gyro, 0), prof, dt_out=0.5)
+    with CompileCounter() as c:
+        hg.simulate(eqx.tree_at(lambda g: g.resonator.tau, gyro, 600), prof, dt_out=0.5)
+    assert c.compiles == 0, c.names
 
 
 def test_float32_mode_raises():
