@@ -212,14 +212,14 @@ def _local(call, flat, chunk_size, progress, total):
     devices = jax.local_devices()
     if chunk_size is None:
         return _batch(call, flat, devices, total)
-    total = next(iter(flat.values())).shape[0]
+    n = next(iter(flat.values())).shape[0]
     chunk = -(-int(chunk_size) // len(devices)) * len(devices)
-    n_chunks = -(-total // chunk)
-    flat = _pad(flat, n_chunks * chunk - total)
+    n_chunks = -(-n // chunk)
+    flat = _pad(flat, n_chunks * chunk - n)
     parts = []
-    for i in _progress(range(n_chunks), progress):
-        part = {n: v[i * chunk : (i + 1) * chunk] for n, v in flat.items()}
-        parts.append(jax.device_get(_batch(call, part, devices, total)))
+    for i in _progress(range(n_chunks), progress):  # (every chunk has the first one's shapes)
+        part = {k: v[i * chunk : (i + 1) * chunk] for k, v in flat.items()}
+        parts.append(jax.device_get(_batch(call, part, devices, total if i == 0 else None)))
     return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
 
 
@@ -237,20 +237,19 @@ def _pad(flat, pad):
     return {n: jnp.concatenate([v, jnp.repeat(v[-1:], pad)]) for n, v in flat.items()}
 
 
-def _batch(call, flat, devices, total):
+def _batch(call, flat, devices, total=None):
     """`call` on one flat batch, sharded over `devices` when there are several (the result
-    may be padded at the end); refused first when the outputs of the `total` points of the
-    grid would not fit (`_check_size`)."""
-    if len(devices) == 1:
-        _check_size(call, flat, total)
-        return _run(call, flat)
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+    may be padded at the end); with `total`, refused first when the outputs of the `total`
+    points of the whole grid would not fit (`_check_size`)."""
+    if len(devices) > 1:
+        from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-    total = next(iter(flat.values())).shape[0]
-    flat = _pad(flat, (-total) % len(devices))
-    sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
-    flat = jax.device_put(flat, sharding)
-    _check_size(call, flat, total)
+        n = next(iter(flat.values())).shape[0]
+        flat = _pad(flat, (-n) % len(devices))
+        sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
+        flat = jax.device_put(flat, sharding)
+    if total is not None:
+        _check_size(call, flat, total)
     return _run(call, flat)
 
 

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import logsumexp
 
+from .._checks import is_concrete
 from .._linalg import cho_logdet, cho_solve, cholesky
 from ..kalman import LOG_2PI, Gaussian, predict, update
 
@@ -172,10 +173,7 @@ def _start(m, floor, prior, threshold):
 
 def _concrete(x):
     """`x` as a float64 NumPy array, or None when it is traced (inside a caller's `jit`)."""
-    try:
-        return np.asarray(x, dtype=float)
-    except jax.errors.TracerArrayConversionError:
-        return None
+    return np.asarray(x, dtype=float) if is_concrete(x) else None
 
 
 def _check_zs(zs, bank: Bank, ndims):
