@@ -75,11 +75,38 @@ def discretise_input(F, B, dt):
 
 @fused
 def psd_factor(m):
-    r"""A factor L with $LL^\top = M$ of a symmetric positive semi-definite M that may be
-    singular (eigen-decomposition, negative round-off clipped): what samples
-    $N(0, M) = L\,N(0, I)$ need where Cholesky would fail on a zero-variance state."""
-    w, v = jnp.linalg.eigh(m)
-    return v * jnp.sqrt(jnp.clip(w, 0.0))[None, :]
+    r"""A lower-triangular factor L with $LL^\top = M$ of a symmetric positive semi-definite M
+    that may be singular: what samples $N(0, M) = L\,N(0, I)$ need where a plain Cholesky
+    fails on a zero-variance state (a constant bias, an exactly known initial state).
+
+    A Cholesky factorisation whose pivots are held at zero where they fall to round-off:
+    the pivot of row k, the variance of state k not explained by states 0…k−1, is taken as 0
+    (its column of L is 0) when it is at most $n\,\epsilon\,M_{kk}$ (ε the float's
+    resolution). The test is relative to the state's own variance, so states in different
+    units (radians of latitude beside metres per second) are factored alike.
+
+    Unlike an eigen-decomposition, L is continuous in M (an eigenvector's sign or the basis
+    of a repeated eigenvalue can flip under a change in the last bit, and with it every
+    sample drawn from the same key) and so is its gradient, which is finite where
+    eigenvalues repeat (several zero-variance states). Where a pivot is held at zero the
+    gradient through it is taken as 0: the derivative of $\sqrt{v}$ at $v = 0$ is infinite.
+
+    `m`: (n, n) in any units; the result has the units of $\sqrt{M}$."""
+    m = jnp.asarray(m)
+    m = 0.5 * (m + m.T)
+    n = m.shape[-1]
+    rows = jnp.arange(n)
+    floor = n * jnp.finfo(m.dtype).eps * jnp.diagonal(m)
+
+    def column(k, carry):
+        a, factor = carry
+        pivot = a[k, k]
+        held = pivot > floor[k]
+        root = jnp.sqrt(jnp.where(held, pivot, 1.0))
+        col = jnp.where(held & (rows >= k), a[:, k] / root, 0.0)
+        return a - jnp.outer(col, col), factor.at[:, k].set(col)
+
+    return jax.lax.fori_loop(0, n, column, (m, jnp.zeros_like(m)))[1]
 
 
 def predict(g: Gaussian, phi, qd, u=None) -> Gaussian:

@@ -268,8 +268,8 @@ def monte_carlo(phi, qd, p0, key, n_runs: int, every: int = 1):
 
 @eqx.filter_jit
 def _monte_carlo(phi, qd, p0, key, n_runs, every):
-    # one batched eigen-decomposition for every factor: two LAPACK kernels on a batch at once
-    # (this under a user's vmap) can wedge a small XLA:CPU pool (hrgjax/_threads.py)
+    # every factor at once, in plain XLA operations (no LAPACK kernel on a batch, which can
+    # wedge a small XLA:CPU pool: hrgjax/_threads.py)
     factors = jax.vmap(psd_factor)(jnp.concatenate([qd, p0[None]]))
     ls, l0 = factors[:-1], factors[-1]
     n = p0.shape[0]
