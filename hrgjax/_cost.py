@@ -68,9 +68,12 @@ def steps_estimate(gyro, profile, model: str = "averaged"):
     """Expected solver steps of `simulate(gyro, profile, model)` (module docstring): the run's
     length [s] times the steps per second of `STEPS_PER_S` (averaged) or of `CARRIER_STEPS`
     per carrier cycle (full), at the largest precession rate |k_eΩ| of the profile."""
+    from .resonator.control import max_step
+
     g = gyro.at(jnp.mean(profile.temperature))
     duration = profile.t[-1] - profile.t[0]
     per_s = steps_per_s(jnp.max(jnp.abs(g.resonator.k_e * profile.rate)))
+    per_s = jnp.maximum(per_s, 1.0 / max_step(gyro.control, model))  # fast loops' bound
     if model != "averaged":
         per_s = per_s + CARRIER_STEPS * jnp.abs(g.resonator.omega) / (2 * np.pi)
     return duration * per_s
@@ -132,11 +135,15 @@ def default_max_steps(gyro, profile, model: str) -> int:
     t, rate = concrete_value(profile.t), concrete_value(profile.rate)
     if model != "averaged" or t is None or rate is None or t.shape[-1] < 2:
         return base
+    from .resonator.control import max_step
     from .resonator.params import TemperatureLaw
 
     k_e = gyro.resonator.k_e
     k_e = None if isinstance(k_e, TemperatureLaw) else concrete_value(k_e)
     k = 1.0 if k_e is None else float(np.max(np.abs(k_e)))
     span = float(np.max(t[..., -1] - t[..., 0]))  # a batch of profiles: its longest
-    need = 4.0 * span * float(steps_per_s(k * np.max(np.abs(rate))))
+    per_s = float(steps_per_s(k * np.max(np.abs(rate))))
+    longest = concrete_value(max_step(gyro.control, model))  # fast loops bound the step
+    per_s = per_s if longest is None else max(per_s, float(np.max(1.0 / longest)))
+    need = 4.0 * span * per_s
     return base if need <= base else int(2 ** math.ceil(math.log2(need)))

@@ -44,7 +44,7 @@ from .resonator.carrier import (
     steps_per_interval,
     takes_fixed_steps,
 )
-from .resonator.control import drive_vectors, ftr_rate, loop_outputs, steady_integrators
+from .resonator.control import drive_vectors, ftr_rate, loop_outputs, max_step, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field, held_command
 from .resonator.params import TemperatureLaw
 
@@ -261,10 +261,11 @@ def _solve(
                       bias_key, run)  # fmt: skip
         steps = jnp.asarray(carrier_steps * ts.shape[0])
         return rec, steps, diffrax.RESULTS.successful
-    if fixed:
-        controller = diffrax.ConstantStepSize()
-    else:
-        controller = diffrax.PIDController(rtol=rtol, atol=atol)
+    controller = diffrax.ConstantStepSize()
+    if not fixed:  # the loops' time constants bound the step (`max_step`)
+        controller = diffrax.PIDController(
+            rtol=rtol, atol=atol, dtmax=max_step(gyro.control, model)
+        )
     if profile.t.shape[0] > 2 and not fixed:
         controller = diffrax.ClipStepSizeController(controller, jump_ts=profile.t[1:-1])
     sol = diffrax.diffeqsolve(

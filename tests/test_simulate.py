@@ -204,3 +204,39 @@ def test_temperature_law_vmap():
     taus = jax.vmap(lambda T: res.at(T).tau)(jnp.array([10.0, 20.0, 30.0]))
     np.testing.assert_allclose(taus, [1.0, 2.0, 3.0])
     assert not isinstance(res.at(0.0).tau, hg.TemperatureLaw)
+
+
+def test_loops_at_exact_equilibrium_give_the_right_sensitivities():
+    """A gyro with no defects, at rest, noise off, sits exactly on its loops' equilibrium:
+    the step-size controller sees nothing and took 5 steps of 4 s over 20 s, beyond the
+    explicit solver's stability on the loops' double pole at −β, so the sensitivities the
+    loops drive through those steps came out with the wrong sign and 10⁶ too large
+    (d amplitude / d gain mismatch −1.9e4 against 1.3e-2). `max_step` bounds the step at
+    `LOOP_STEPS`/β: the gradient now equals central differences."""
+    from hrgjax.resonator.control import LOOP_STEPS, max_step
+
+    gyro = hg.presets.tvg3_like(noise=False, temperature_laws=False)
+    zero = eqx.tree_at(
+        lambda g: (g.resonator.delta_omega, g.resonator.delta_inv_tau, g.resonator.chi,
+                   g.control.excitation_phase, g.readout.gain_mismatch, g.readout.cross_talk,
+                   g.readout.misalignment, g.rate_bias),
+        gyro, (0.0,) * 8,
+    )  # fmt: skip
+    beta = max(float(gyro.control.pll_bandwidth), float(gyro.control.agc_bandwidth),
+               float(gyro.control.quadrature_bandwidth))  # fmt: skip
+    assert float(max_step(zero.control)) == pytest.approx(LOOP_STEPS / beta)
+    assert float(max_step(hg.Control.free())) == np.inf
+    prof = hg.Profile.static(10.0, 20.0, 30.0)
+
+    def loss(g):
+        rec = hg.simulate(g, prof, dt_out=1.0)
+        return jnp.mean(rec.amplitude) + 1e3 * jnp.mean(rec.quadrature)
+
+    def at(x):
+        return eqx.tree_at(lambda g: g.readout.gain_mismatch, zero, x)
+
+    tangent = jax.grad(lambda x: loss(at(x)))(jnp.asarray(0.0))
+    h = 1e-7
+    fd = (loss(at(h)) - loss(at(-h))) / (2 * h)
+    assert abs(float(fd)) > 1e-2  # the loss does respond (≈ 0.03)
+    np.testing.assert_allclose(float(tangent), float(fd), rtol=1e-5)

@@ -26,6 +26,8 @@ The loops are "slow time" loops: bandwidths must be far below ω for averaging t
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -153,6 +155,34 @@ def loop_gains(control: Control, omega):
 def rebalance_gains(control: Control, omega):
     r"""PI gains (kp, ki) of the rebalance loop: plant $\dot x = -u/(2\omega a_0)$."""
     return _gains(control.rebalance_bandwidth, -1.0 / (2.0 * omega * control.amplitude))
+
+
+LOOP_STEPS = 3.0
+"""The adaptive solver's longest step, in time constants of the fastest closed loop
+(1/bandwidth): `max_step`."""
+
+
+def max_step(control: Control, model: str = "averaged"):
+    r"""The longest step [s] the adaptive solver may take with these loops: `LOOP_STEPS` /
+    (the largest closed-loop bandwidth β, rad/s), ∞ with no loop integrated.
+
+    Why a bound: a closed loop's linearisation has its double pole at −β, and an explicit
+    Runge–Kutta step is stable only for $heta$ ≲ 3.3 (Tsit5 and Dopri5 on the real axis).
+    A run whose loops sit exactly at their equilibrium (a gyro with no defects, or defects of
+    1e-7, at rest, noise off) gives the step-size controller nothing to measure, so its steps
+    grow to several seconds; the run is right, but its sensitivities, which the loops drive
+    through the same unstable steps, are not (`jax.grad` of the amplitude or the
+    quadrature came out with the wrong sign and 10⁶ too large against finite differences).
+    At $heta = 3$ every loop is stable on its step, and a run with defects, whose
+    controller already holds its steps near that limit (1.3 s at β = 2 rad/s at rest), is
+    unchanged: `benchmarks/max_step.py` prints the steps and gradients with and without."""
+    if not control.enabled or (control.ideal and model == "averaged"):
+        return jnp.inf
+    rates = [control.pll_bandwidth, control.agc_bandwidth, control.quadrature_bandwidth]
+    if control.mode == "ftr":
+        rates.append(control.rebalance_bandwidth)
+    fastest = functools.reduce(jnp.maximum, rates)  # broadcasts over a batch of gyros
+    return jnp.where(fastest > 0, LOOP_STEPS / jnp.where(fastest > 0, fastest, 1.0), jnp.inf)
 
 
 def angle_error(est, command):
