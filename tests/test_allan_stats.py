@@ -447,3 +447,116 @@ def test_fit_noise_recovers_the_ieee952_terms():
     assert hits["rate_random_walk"] >= 5 and hits["bias_instability"] >= 4, hits
     with pytest.raises(ValueError, match="result.kind must be 'adev' or 'oadev'"):
         allan.fit_noise(allan.deviation(Y, 1.0, kind="mdev"))
+
+
+# exact EDFs of Gaussian noise: a deviation's variance is a quadratic form q = Σ (L z)² of
+# the noise z ~ N(0, Σ), whose EDF 2·E[q]²/Var[q] is tr(G)²/‖G‖²_F with G = L Σ Lᵀ
+N_EXACT = 201  # phase points of the exact totdev cases
+CUMSUM = np.tril(np.ones((N_EXACT, N_EXACT)), -1)[:, :-1]  # phase x = CUMSUM @ rate, x₀ = 0
+
+
+def quadratic_form_edf(rows, cov=None):
+    """tr(G)²/‖G‖²_F, G = rows·cov·rowsᵀ (cov: identity by default)."""
+    g = rows @ rows.T if cov is None else rows @ cov @ rows.T
+    return float(np.trace(g) ** 2 / np.sum(g * g))
+
+
+def totvar_rows(n, m):
+    """SP 1065 eq. 25: the n − 2 second differences x*ᵢ₋ₘ − 2x*ᵢ + x*ᵢ₊ₘ of the phase
+    reflected at both ends (x*₋ⱼ = 2x₀ − xⱼ, x*ₙ₋₁₊ⱼ = 2xₙ₋₁ − xₙ₋₁₋ⱼ), as rows over x."""
+    e = np.eye(n)
+
+    def ext(k):
+        return e[k] if 0 <= k < n else 2 * e[0] - e[-k] if k < 0 else 2 * e[-1] - e[2 * n - 2 - k]
+
+    return np.array([ext(i - m) - 2 * ext(i) + ext(i + m) for i in range(1, n - 1)])
+
+
+def test_totdev_edf_holds_to_the_last_factor_and_is_not_overconfident():
+    """SP 1065's white/flicker angle-noise EDF (N + 1)(N − 2m)/(2(N − m)) turns negative past
+    m = (N − 1)/2 while totdev reads m up to N − 1: every factor now gets an EDF ≥ 1, and for
+    white angle noise (N = 201) at most the exact EDF of totdev's quadratic form (25.5, 11.6,
+    5.3 and 3.0 at m = 50, 99, 150, 199); a quantised-angle record's totdev runs on the
+    default grid; χ²'s quantile refuses an EDF ≤ 0 by name."""
+    for alpha in (2, 1, 0, -1, -2):
+        edf = [allan.edf_totdev(alpha, m, N_EXACT) for m in range(1, N_EXACT)]
+        assert np.all(np.isfinite(edf)) and min(edf) >= 1.0, alpha
+    for m in (50, 99, 150, 199):
+        exact = quadratic_form_edf(totvar_rows(N_EXACT, m))
+        assert 1.0 <= allan.edf_totdev(2, m, N_EXACT) <= exact, (m, exact)
+    quantised = np.diff(np.round(np.random.default_rng(1).normal(scale=3.0, size=1001))) * 100
+    r = allan.deviation(quantised, 100.0, kind="totdev")
+    assert r.m[-1] == 512 and np.all(r.edf >= 1.0) and np.all(r.dev_low < r.dev)
+    for k in (0.0, -1.01):
+        with pytest.raises(ValueError, match="degrees of freedom \\(EDF\\) must be > 0"):
+            allan.chi2_ppf(0.5, k)
+
+
+def test_interval_level_below_one_half_is_that_level():
+    """NIST SP 1065 eq. 45, p = (1 − ci)/2 for any ci: the ci = 0.3 interval is
+    σ·√(edf/χ²(0.65)) … σ·√(edf/χ²(0.35)) (scipy's quantiles), narrower than the 0.7 one;
+    a level outside (0, 1) is refused."""
+    stats = pytest.importorskip("scipy.stats")
+    dev, edf = np.array([1.0, 2.0]), np.array([5.0, 123.4])
+    for ci in (0.1, 0.3, 0.7, allan.ONE_SIGMA):
+        lo, hi = allan.confidence_interval(dev, edf, ci)
+        p = (1 - ci) / 2
+        np.testing.assert_allclose(lo, dev * np.sqrt(edf / stats.chi2.ppf(1 - p, edf)), rtol=1e-9)
+        np.testing.assert_allclose(hi, dev * np.sqrt(edf / stats.chi2.ppf(p, edf)), rtol=1e-9)
+    narrow, wide = (
+        allan.confidence_interval(dev, edf, 0.3),
+        allan.confidence_interval(dev, edf, 0.7),
+    )
+    assert np.all(wide[0] < narrow[0]) and np.all(narrow[1] < wide[1])
+    for ci in (0.0, 1.0, 1.5):
+        with pytest.raises(ValueError, match="ci must be a confidence level in \\(0, 1\\)"):
+            allan.confidence_interval(dev, edf, ci)
+
+
+def test_total_edf_at_the_shortest_tau_is_at_most_the_terms_and_the_exact_edf():
+    """SP 1065 Tables 7 and 8 give totdev and mtotdev more EDF at m = 1 than they average
+    terms (totdev, white rate noise over N = 201 points: 301.5 for 199 terms, exact 132.9;
+    mtotdev over 61 points: 65.9 against an exact 39.6, white angle noise 113.8 against
+    30.6). Now at most the terms, the Greenhall EDF of oadev and mdev (as many terms), and
+    within Greenhall's own +17 % of the exact EDF at m = 1 (equal to it for white angle
+    noise); mtotdev's quadratic form is read off `mtotdev_curve` by polarisation."""
+    from hrgjax.allan.total import edf_mtotdev, mtotdev_curve
+
+    exact = quadratic_form_edf(totvar_rows(N_EXACT, 1) @ CUMSUM)
+    edf = allan.edf_totdev(0, 1, N_EXACT)
+    assert edf == pytest.approx(allan.edf_greenhall(0, 2, 1, N_EXACT, True, False))
+    assert edf <= N_EXACT - 2 and edf <= 1.2 * exact, (edf, exact)
+    n = 61
+    q = [mtotdev_curve(e, [1])[0][0] ** 2 for e in np.eye(n)]
+    form = np.diag(q)
+    for i in range(n):
+        for j in range(i + 1, n):
+            e = np.zeros(n)
+            e[[i, j]] = 1.0
+            form[i, j] = form[j, i] = (mtotdev_curve(e, [1])[0][0] ** 2 - q[i] - q[j]) / 2
+    white_angle = np.trace(form) ** 2 / np.sum(form * form)
+    walk = np.tril(np.ones((n, n)), -1)[:, :-1]
+    rate_form = walk.T @ form @ walk
+    white_rate = np.trace(rate_form) ** 2 / np.sum(rate_form * rate_form)
+    assert edf_mtotdev(2, 1, n) == pytest.approx(white_angle, rel=1e-6)
+    assert edf_mtotdev(0, 1, n) <= min(1.2 * white_rate, n - 2), white_rate
+
+
+def test_gapped_edf_pools_the_gap_free_segments():
+    """oadev of white rate noise (400 samples, one in 50 missing): the differences left lie in
+    8 independent segments. The EDF is that of their pooled estimate, (Σ nₛ)²/Σ nₛ²/EDFₛ
+    from each segment's nₛ terms and Greenhall EDF, within 10 % of the exact EDF of the
+    quadratic form at m = 8 and 16 (54.8, 20.0); one unbroken record with as many terms
+    (43.8, 11.9) is 20–40 % below it."""
+    mask = np.ones(400, dtype=bool)
+    mask[25::50] = False
+    y = np.where(mask, np.random.default_rng(3).normal(size=400), np.nan)
+    for m in (8, 16):
+        windows = np.lib.stride_tricks.sliding_window_view(np.arange(400), 2 * m)
+        windows = windows[np.all(mask[windows], axis=1)]
+        rows = np.zeros((len(windows), 400))
+        np.put_along_axis(rows, windows[:, :m], -1.0, axis=1)
+        np.put_along_axis(rows, windows[:, m:], 1.0, axis=1)
+        r = allan.deviation(y, 1.0, taus=[m])
+        assert r.alpha[0] == 0 and r.n_terms[0] == len(windows)
+        assert r.edf[0] == pytest.approx(quadratic_form_edf(rows), rel=0.1), m

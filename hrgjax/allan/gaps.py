@@ -12,9 +12,10 @@ overlapping Allan deviation (equal to it on angle data), for every kind but totd
 `totdev` reflects the record at its ends and has no gap-tolerant form: split the record.
 
 The noise type at each τ is read on the record with its gaps bridged (missing rates by the
-mean rate; missing angles by a straight line between their neighbours), and the EDF at each
-τ is that of a gap-free record giving as many differences as the gaps leave: both
-approximations, fair while the gaps are a small part of the record.
+mean rate; missing angles by a straight line between their neighbours), an approximation
+fair while the gaps are a small part of the record. The EDF at each τ pools the gap-free
+segments' EDFs (`hrgjax.allan.result.deviation`: fragments are less correlated than one
+record with as many differences).
 """
 
 from __future__ import annotations
