@@ -2,6 +2,8 @@
 physical integrals of a closed-form motion, and against the linear error model; motion
 files."""
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -458,3 +460,92 @@ def test_positions_speeds_and_grids_out_of_range_are_one_line_errors():
         me.NavState.from_euler(45.0, 0.0, 0.0, np.zeros(3), 0.0, 0.0, 0.0)
     lat = jax.jit(lambda la: me.NavState.from_euler(la, 0.0, 0.0, jnp.zeros(3), 0, 0, 0).lat)
     assert float(lat(45.0)) == 45.0  # traced: not checked
+
+
+def test_a_flight_over_a_pole_is_refused_at_the_time_it_passes_the_limit():
+    """300 m/s due north from 88.9° (or due south from −88.9°): the meridian arc to ±89°
+    (quadrature of the WGS-84 meridian radius) takes 37.23 s, so the 1-s trajectory and the
+    motion's truth are refused at t = 38 s, one line naming the time and the limit; short of
+    it they are built."""
+    phi = np.linspace(88.9 * DEG, C.MAX_LAT_DEG * DEG, 20001)
+    arc = np.trapezoid(C.A * (1 - C.E2) / (1 - C.E2 * np.sin(phi) ** 2) ** 1.5, phi)
+    first = int(np.ceil(arc / 300.0))
+    assert first == 38
+    match = rf"^the {{}} goes beyond latitude ±89° at t = {first} s \(-?89\.00\d+°\): the "
+    with pytest.raises(ValueError, match=match.format("trajectory")) as err:
+        tr.constant_velocity(88.9, speed=300.0, heading_deg=0.0, duration_s=60.0)
+    assert "\n" not in str(err.value)
+    tj = tr.constant_velocity(88.9, speed=300.0, heading_deg=0.0, duration_s=37.0)
+    assert np.degrees(float(tj.lat[-1])) < C.MAX_LAT_DEG
+    for lat, yaw in ((88.9, 0.0), (-88.9, 180.0)):
+        m = mo.Motion(lat, 0.0, 0.0, (300.0, 0.0, 0.0), yaw, 0.0, 0.0,
+                      (mo.Segment(1, Z, Z, 60.0),))  # fmt: skip
+        with pytest.raises(ValueError, match=match.format("motion")):
+            m.truth(1.0)
+
+
+def test_a_latitude_in_degrees_is_refused_by_mechanize_and_trajectory():
+    """|lat| > π/2 rad is a latitude in degrees: `mechanize` (through `check_state`, as
+    `loosely_coupled` and `increments_from_states`) and `Trajectory` refuse it with
+    `from_euler`'s hint, before any JAX work; a traced one is not checked."""
+    q = jnp.array([1.0, 0.0, 0.0, 0.0])
+    nav = me.NavState(jnp.asarray(45.0), jnp.asarray(0.0), jnp.asarray(0.0), jnp.zeros(3), q)
+    hint = r" = 45 rad is beyond ±π/2: the latitude is in radians here \(degrees\? " + re.escape(
+        "np.deg2rad(45) = 0.785398)"
+    )
+    with pytest.raises(ValueError, match="^initial.lat" + hint + "$"):
+        me.mechanize(nav, jnp.zeros((2, 3)), jnp.zeros((2, 3)), 0.1)
+    with pytest.raises(ValueError, match="^initial.lat" + hint + "$"):
+        me.increments_from_states(nav, jnp.zeros((2, 3)), jnp.tile(q, (2, 1)), 0.1)
+    n = 3
+    fields = (np.arange(n, dtype=float), np.full(n, 45.0), np.zeros(n), np.zeros(n),
+              np.zeros((n, 3)), np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3)))  # fmt: skip
+    with pytest.raises(ValueError, match="^Trajectory.lat" + hint + "$"):
+        tr.Trajectory(*fields)
+    ok = tr.Trajectory(*fields[:1], np.full(n, 45.0 * DEG), *fields[2:])
+    assert float(ok.lat[0]) == pytest.approx(np.pi / 4)
+    traced = jax.jit(lambda la: tr.Trajectory(fields[0], la, *fields[2:]).lat)
+    assert float(traced(jnp.full(n, 45.0))[0]) == 45.0  # traced: not checked
+
+
+def test_segments_integrate_each_legs_rates_over_exactly_its_duration():
+    """Piecewise-constant rates over whole-sample legs integrate exactly, the first leg's
+    too: 45 s at 2 °/s turns 90°, 100 s at 2 m/s² from rest reaches 200 m/s (`flight()`'s
+    take-off run, as its docstring says), at dt = 1 s and 0.1 s."""
+    for dt in (1.0, 0.1):
+        tj = tr.segments(45.0, 0.0, 0.0, [(45.0, 0.0, 2.0, 0.0), (10.0, 0.0, 0.0, 0.0)],
+                         speed0=100.0, heading0_deg=0.0, dt=dt)  # fmt: skip
+        heading = np.degrees(np.asarray(tj.attitude[2]))
+        np.testing.assert_allclose(heading[-1], 90.0, atol=1e-9)
+        np.testing.assert_allclose(heading[int(round(20.0 / dt))], 40.0, atol=1e-9)  # at 20 s
+        tj = tr.segments(45.0, 0.0, 0.0, [(100.0, 2.0, 0.0, 0.0), (10.0, 0.0, 0.0, 0.0)],
+                         speed0=0.0, dt=dt)  # fmt: skip
+        speed = np.linalg.norm(np.asarray(tj.v_ned), axis=1)
+        np.testing.assert_allclose(speed[int(round(100.0 / dt)) :], 200.0, rtol=1e-12)
+    f = tr.flight()
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(f.v_ned[100:400]), axis=1), 200.0,
+                               rtol=1e-12)  # fmt: skip
+
+
+def test_segments_hold_the_climb_rate_or_refuse_it_naming_the_leg():
+    """The speed is along the flight path: a climb of 0.5 m/s at 0.8 m/s is a steep climb
+    (flight-path angle asin 0.625) that gains 5 m in 10 s; a climb rate above the speed (or
+    within 1° of it: pitch 90° is Euler-singular) is one line naming the leg."""
+    tj = tr.segments(45.0, 0.0, 0.0, [(10.0, 0.0, 0.0, 0.5)], speed0=0.8, dt=1.0)
+    np.testing.assert_allclose(tj.h[-1], 5.0, rtol=1e-12)
+    np.testing.assert_allclose(-np.asarray(tj.v_ned[:, 2]), 0.5, rtol=1e-12)
+    np.testing.assert_allclose(tj.attitude[1], np.arcsin(0.5 / 0.8), rtol=1e-12)
+    tj = tr.segments(45.0, 0.0, 0.0, [(10.0, 0.0, 0.0, 50.0)], speed0=60.0, dt=1.0)
+    np.testing.assert_allclose(tj.h[-1], 500.0, rtol=1e-12)
+    for legs, speed0, match in [
+        ([(10.0, 0.0, 0.0, 50.0)], 10.0, "leg 1's climb rate 50 m/s exceeds the speed 10 m/s at t = 0 s"),
+        ([(5.0, 1.0, 0.0, 0.0), (10.0, 0.0, 0.0, -8.0)], 0.0,
+         "leg 2's climb rate -8 m/s exceeds the speed 5 m/s at t = 5 s"),
+        ([(10.0, 0.0, 0.0, 10.0)], 10.0, "leg 1's climb rate 10 m/s is within 1° of the speed"),
+        ([(10.0, 1.0, 0.0, 1.0)], 0.0, "leg 1's climb rate 1 m/s exceeds the speed 0 m/s"),
+        ([(10.0, 0.0, 0.0, 0.0), (10.0, -2.0, 0.0, 0.0)], 10.0,
+         r"the speed would become negative in leg 2 \(at t = 16 s\)"),
+    ]:  # fmt: skip
+        with pytest.raises(ValueError, match="^legs: " + match) as err:
+            tr.segments(45.0, 0.0, 0.0, legs, speed0=speed0, dt=1.0)
+        assert "\n" not in str(err.value)

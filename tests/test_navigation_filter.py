@@ -395,3 +395,18 @@ def test_whitened_errors_give_the_nees_of_all_and_of_the_leading_states():
         ValueError, match=r"errors \(\.\.\., M, n\) and P .* got errors \(2, 3, 15\)"
     ):
         ekf.nees(jnp.asarray(e), jnp.asarray(p[..., :9, :9]))
+
+
+def test_a_diverging_flight_is_one_line_as_loosely_coupled_gives_it(truth, monte_carlo):
+    """A lever arm of 1e308 m makes the filter diverge: `fly` (so `hrgjax navigate`) raises
+    `loosely_coupled`'s one-line `RuntimeError`, not the framework's multi-line banner (the
+    fixture's compiled batch: only the lever arm differs, a traced value)."""
+    settings = ekf.LooselyCoupled(CONSISTENT, gnss.Gnss(lever_arm=(0.0, 0.0, 1e308)))
+    with CompileCounter() as c, pytest.raises(RuntimeError) as err:
+        flights.fly(truth, CONSISTENT, settings, key=jax.random.key(0), runs=16)
+    assert "jit(_run_batch)" not in c.names, c.names
+    assert type(err.value) is RuntimeError, type(err.value)
+    assert str(err.value) == (
+        "ins.fly: in one or more runs, ins.loosely_coupled: the filter diverged (NaN or inf); "
+        "check the increments' units (rad, m/s), the fixes and the initial state"
+    )

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import kalman
+from .. import _upstream, kalman
 from .._progress import bar
 from .._x64 import require_x64
 from .ekf import (
@@ -179,7 +179,11 @@ def fly(
     `key` a PRNG key; `runs`; `chunk`: runs per vmapped batch; `gyro_rate_error`: an extra
     gyro error (N, 3) [rad/s] common to all runs (e.g. an hrgjax gyro's simulated drift).
 
-    **Returns:** [`Flights`][hrgjax.ins.flights.Flights]."""
+    **Returns:** [`Flights`][hrgjax.ins.flights.Flights].
+
+    **Raises:** `RuntimeError`, one line, when a run's filter or free-inertial solution stops
+    being finite (the message of [`loosely_coupled`][hrgjax.ins.ekf.loosely_coupled] or
+    [`mechanize`][hrgjax.ins.mechanization.mechanize])."""
     require_x64("ins.fly")
     if not (isinstance(runs, int) and runs >= 1):
         raise ValueError(f"runs must be a whole number >= 1; got {runs}")
@@ -202,15 +206,22 @@ def fly(
     size = min(chunk, runs)
     keys = jax.random.split(key, -(-runs // size) * size)
     parts = []
-    with bar(runs, "flights", unit="run") as progress:
-        for i in range(0, keys.shape[0], size):
-            batch = keys[i : i + size]
-            parts.append(
-                _run_batch(
+    # a check failing inside the batched program (the filter's or the free inertial's
+    # finiteness: a run that diverged) is raised as its one line, as loosely_coupled does
+    try:
+        with bar(runs, "flights", unit="run") as progress, _upstream.quiet_failed_checks():
+            for i in range(0, keys.shape[0], size):
+                batch = keys[i : i + size]
+                part = _run_batch(
                     truth, imu, plain, int(idx[0]), jnp.asarray(mask), batch, gyro_rate_error
                 )
-            )
-            progress.update(min(size, runs - i))
+                parts.append(jax.block_until_ready(part))
+                progress.update(min(size, runs - i))
+    except (*_upstream.RUNTIME_ERRORS, eqx.EquinoxRuntimeError) as err:
+        message = _upstream.failed_check_message(err)
+        if message is None:
+            raise
+        raise RuntimeError(f"ins.fly: in one or more runs, {message}") from None
     out = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a)[:runs], *parts)
     f, s, free, nis = out
     valid = np.concatenate([[False], np.asarray(truth.gnss)[idx] & mask])

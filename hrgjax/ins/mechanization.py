@@ -142,6 +142,21 @@ def euler_to_quat(roll, pitch, heading):
 # --- the navigation state -----------------------------------------------------------------
 
 
+def check_latitude_radians(name: str, lat) -> None:
+    """A one-line `ValueError` naming `name` if a concrete `lat` [rad] (any shape) is beyond
+    ±π/2 anywhere: a latitude in degrees. Traced values are not checked."""
+    if not is_concrete(lat):
+        return
+    a = np.asarray(lat, float)
+    bad = np.abs(a) > np.pi / 2
+    if np.any(bad):
+        x = float(a[bad].flat[0])
+        raise ValueError(
+            f"{name} = {x:g} rad is beyond ±π/2: the latitude is in radians here (degrees? "
+            f"np.deg2rad({x:g}) = {np.deg2rad(x):.6g})"
+        )
+
+
 class NavState(eqx.Module):
     """Position, velocity and attitude of a strapdown INS (one epoch, or a history with a
     leading time axis).
@@ -162,14 +177,7 @@ class NavState(eqx.Module):
 
         **Raises:** `ValueError` for a concrete `lat` beyond ±π/2 (a latitude in degrees;
         traced values are not checked)."""
-        if is_concrete(lat):
-            bad = np.abs(np.asarray(lat, float)) > np.pi / 2
-            if np.any(bad):
-                x = float(np.asarray(lat, float)[bad].flat[0])
-                raise ValueError(
-                    f"NavState.from_euler: lat = {x:g} rad is beyond ±π/2: the latitude is in "
-                    f"radians here (degrees? np.deg2rad({x:g}) = {np.deg2rad(x):.6g})"
-                )
+        check_latitude_radians("NavState.from_euler: lat", lat)
         f = lambda x: jnp.asarray(x, float)
         return cls(f(lat), f(lon), f(h), f(v_ned), euler_to_quat(roll, pitch, heading))
 
@@ -316,7 +324,9 @@ def check_increments(dtheta, dv, dt):
 
 
 def check_state(initial):
-    """A `TypeError` unless `initial` is a `NavState`, a `ValueError` unless it is one epoch."""
+    """A `TypeError` unless `initial` is a `NavState`, a `ValueError` unless it is one epoch
+    with a concrete latitude within ±π/2 rad (one beyond is in degrees; a traced latitude is
+    not checked)."""
     if not isinstance(initial, NavState):
         raise TypeError(
             f"initial must be a NavState (hrgjax.ins.mechanization); got {type(initial).__name__}"
@@ -326,6 +336,7 @@ def check_state(initial):
             "initial must be one epoch: v_ned (3,) [m/s] and q_bn (4,); got "
             f"{jnp.shape(initial.v_ned)} and {jnp.shape(initial.q_bn)}"
         )
+    check_latitude_radians("initial.lat", initial.lat)
 
 
 def mechanize(
@@ -350,8 +361,9 @@ def mechanize(
     **Returns:** the [`NavState`][hrgjax.ins.mechanization.NavState] history, N/every + 1
     epochs, the initial state first.
 
-    **Raises:** `ValueError` for mis-shaped increments; `RuntimeError` if the solution stops
-    being finite (e.g. increments in degrees, or a vertical channel run into the ground)."""
+    **Raises:** `ValueError` for mis-shaped increments or an `initial.lat` beyond ±π/2 (in
+    degrees); `RuntimeError` if the solution stops being finite (e.g. increments in degrees,
+    or a vertical channel run into the ground)."""
     require_x64("ins.mechanize")
     check_state(initial)
     dtheta, dv = check_increments(dtheta, dv, dt)

@@ -23,6 +23,7 @@ from .._checks import finite_number
 from .._compiled import fused
 from ..units import DEG
 from .constants import E2, MAX_LAT_DEG, WGS84, A, Earth
+from .mechanization import check_latitude_radians
 
 
 @fused
@@ -54,7 +55,10 @@ class Trajectory(eqx.Module):
     """A reference trajectory on a time grid (module docstring).
 
     **Fields:** `t` (N,) [s]; `lat`, `lon` (N,) [rad]; `h` (N,) [m]; `v_ned` (N, 3) [m/s];
-    `c_bn` (N, 3, 3) body-to-NED; `f_ned` (N, 3) specific force [m/s²]; `earth` (static)."""
+    `c_bn` (N, 3, 3) body-to-NED; `f_ned` (N, 3) specific force [m/s²]; `earth` (static).
+
+    **Raises:** `ValueError` for times that do not increase, or a concrete `lat` beyond ±π/2
+    (a latitude in degrees)."""
 
     t: jax.Array
     lat: jax.Array
@@ -69,6 +73,7 @@ class Trajectory(eqx.Module):
         t = np.asarray(self.t)
         if t.ndim == 1 and (t.size < 2 or np.any(np.diff(t) <= 0)):
             raise ValueError("Trajectory.t must hold at least 2 strictly increasing times")
+        check_latitude_radians("Trajectory.lat", self.lat)
 
     @property
     def attitude(self):
@@ -123,6 +128,7 @@ def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None)
         lat[i + 1] = lat[i] + 0.5 * dt * (r0[0] + r1[0])
         lon[i + 1] = lon[i] + 0.5 * dt * (r0[1] + r1[1])
         h[i + 1] = h[i] + 0.5 * dt * (r0[2] + r1[2])
+    check_latitudes(t, lat, "the trajectory")
     vdot = np.gradient(v, t, axis=0)
     w = 2 * np.asarray(earth.earth_rate(lat)) + np.asarray(earth.transport_rate(lat, h, v))
     g = np.asarray(earth.gravity_ned(lat, h))
@@ -132,6 +138,21 @@ def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None)
     c = euler_to_dcm(jnp.asarray(roll), jnp.asarray(gamma), jnp.asarray(heading))
     arr = jnp.asarray
     return Trajectory(arr(t), arr(lat), arr(lon), arr(h), arr(v), c, arr(f), earth)
+
+
+def check_latitudes(t, lat, what: str) -> None:
+    """A one-line `ValueError` if the integrated latitudes `lat` [rad] at times `t` [s] go
+    beyond ±[`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG], naming `what` and the time
+    they first do (a flight over or near a pole: the NED frame is singular there)."""
+    lat = np.asarray(lat, float)
+    over = ~(np.abs(lat) <= MAX_LAT_DEG * DEG)  # NaN counts as beyond
+    if np.any(over):
+        k = int(np.argmax(over))
+        raise ValueError(
+            f"{what} goes beyond latitude ±{MAX_LAT_DEG:g}° at t = {float(t[k]):g} s "
+            f"({np.degrees(lat[k]):.6g}°): the navigation frame is singular at the poles; "
+            "fly it away from them"
+        )
 
 
 def _grid(duration_s, dt):
@@ -226,10 +247,17 @@ def segments(
     earth: Earth = WGS84,
 ) -> Trajectory:
     """A trajectory from legs `(duration_s, accel m/s², turn rate °/s, climb rate m/s)`, each
-    held constant over its leg: speed and heading integrate, the flight-path angle is
-    asin(climb/speed), turns are coordinated."""
+    held constant over its leg: speed and heading integrate (each sample interval at the rates
+    of the leg holding its midpoint: exact where the legs are whole samples), the flight-path
+    angle is asin(climb/speed) (the speed is along the flight path), turns are coordinated.
+
+    **Raises:** `ValueError` (one line, naming the leg) where the speed would become negative
+    or a climb rate exceeds the speed (sin 89° of it: the pitch is the flight-path angle, and
+    Euler angles are singular at ±90°); a climb from rest is refused so."""
     check_position(lat_deg, lon_deg, h)
     speed0 = finite_number("speed0", speed0, "m/s")
+    if speed0 < 0:
+        raise ValueError(f"speed0 must be >= 0 m/s (along the flight path); got {speed0}")
     heading0_deg = finite_number("heading0_deg", heading0_deg, "°")
     legs = [tuple(float(x) for x in leg) for leg in legs]
     if not legs or any(
@@ -240,17 +268,31 @@ def segments(
         )
     t = _grid(sum(leg[0] for leg in legs), dt)
     edges = np.cumsum([0.0] + [leg[0] for leg in legs])
-    idx = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(legs) - 1)
-    acc, turn, climb = (np.asarray([leg[k] for leg in legs])[idx] for k in (1, 2, 3))
-    speed = speed0 + np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * np.diff(t))])
+    table = np.asarray([leg[1:] for leg in legs])  # (accel, turn, climb) per leg
+    leg_of = lambda x: np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(legs) - 1)
+    idx = leg_of(t)  # a sample on a boundary belongs to the leg it starts
+    mid = leg_of(0.5 * (t[1:] + t[:-1]))  # the leg of each interval
+    step = lambda rate: np.concatenate([[0.0], np.cumsum(rate * np.diff(t))])
+    speed = speed0 + step(table[mid, 0])
     if np.any(speed < 0):
-        raise ValueError("legs: the speed would become negative")
+        k = int(np.argmax(speed < 0))
+        raise ValueError(
+            f"legs: the speed would become negative in leg {int(mid[k - 1]) + 1} "
+            f"(at t = {t[k]:g} s)"
+        )
     plausible.check("legs: the speed reached", speed.max(), "speed_mps")
-    heading = (
-        heading0_deg * DEG
-        + np.concatenate([[0.0], np.cumsum(0.5 * (turn[1:] + turn[:-1]) * np.diff(t))]) * DEG
-    )
-    gamma = np.where(speed > 1.0, np.arcsin(np.clip(climb / np.maximum(speed, 1.0), -1, 1)), 0.0)
+    heading = heading0_deg * DEG + step(table[mid, 1]) * DEG
+    climb = table[idx, 2]
+    steep = np.abs(climb) > np.sin(89.0 * DEG) * speed
+    if np.any(steep):
+        k = int(np.argmax(steep))
+        limit = "exceeds the speed" if abs(climb[k]) > speed[k] else "is within 1° of the speed"
+        raise ValueError(
+            f"legs: leg {int(idx[k]) + 1}'s climb rate {climb[k]:g} m/s {limit} {speed[k]:.6g} "
+            f"m/s at t = {t[k]:g} s (the flight-path angle asin(climb/speed) must stay within "
+            "±89°)"
+        )
+    gamma = np.arcsin(np.divide(climb, speed, out=np.zeros_like(speed), where=climb != 0))
     return _from_kinematics(t, lat_deg * DEG, lon_deg * DEG, h, speed, heading, gamma, earth)
 
 
