@@ -55,6 +55,10 @@ MIN_STRETCH = 16
 TEMPERATURE_TOLERANCE_C = 0.1
 """A still stretch's temperature stays within this of its first sample [°C] (a measured
 temperature's sensor noise does not cut a static dwell into pieces; a ramp does)."""
+STILL_RATE_DPS = 1e-3
+"""The table is still where its measured rate is within this of zero [°/s] (3.6 °/h: a rate
+table's readback jitter does not turn a static run into a rotation; a turning table, at
+tenths of a degree per second and more, is far above it)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -177,14 +181,18 @@ class NoiseModel:
     @classmethod
     def estimate(cls, data: MeasuredData, max_lag_s: float = 1024.0) -> NoiseModel:
         r"""Estimate σ_w, N and a Gauss–Markov part from every still stretch of `data` (table
-        still, temperature within
+        still within [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS], temperature within
         [`TEMPERATURE_TOLERANCE_C`][hrgjax.pattern_noise.TEMPERATURE_TOLERANCE_C], ≥
         [`MIN_STRETCH`][hrgjax.pattern_noise.MIN_STRETCH] samples): static dwells and the
         holds of continuous records alike.
 
-        Lag-τ second differences remove a stretch's angle and drift rate; their mean square,
-        pooled over stretches per lag (τ = 1, 2, 4, … samples, up to `max_lag_s` and a
-        quarter of the stretch), is fitted by non-negative least squares with relative
+        Lag-τ second differences remove a stretch's angle and drift rate; they are taken on
+        the samples' true times (three samples t − a, t, t + b weighted so that the drift
+        cancels for any a, b, each term's variance from its own spans), so a gap in the
+        samples or uneven stamps leave no drift in them. Their mean square, pooled over
+        stretches per lag (τ = 1, 2, 4, … samples of the stretch's median step, up to
+        `max_lag_s` and a quarter of the stretch), is fitted against the terms' mean variance
+        columns by non-negative least squares with relative
         errors set by each lag's number of roughly independent terms (iterated on the model,
         so the weights do not follow the noise of the estimates). The Gauss–Markov part is
         kept only where it earns its two parameters (χ² drop > 2 ln n, the correlation times
@@ -195,30 +203,38 @@ class NoiseModel:
 
         **Raises:** `ValueError` when `data` has no still stretch.
         """
-        sums: dict[float, list] = {}
+        sums: dict[float, np.ndarray] = {}
         for idx in data.run_indices():
+            time = data["time_s"][idx]
             for a, b in _still_stretches(data["table_rate_dps"][idx], data["temperature_c"][idx]):
                 th = data["wave_angle_deg"][idx][a:b] * DEG
-                dt = float(np.median(np.diff(data["time_s"][idx][a:b])))
+                t = time[a:b]
+                dt = float(np.median(np.diff(t)))
                 k = 1
                 while k * dt <= max_lag_s and k <= (b - a) // 4:
-                    d2 = th[2 * k :] - 2 * th[k:-k] + th[: -2 * k]
-                    acc = sums.setdefault(float(f"{k * dt:.9g}"), [0.0, 0, 0.0])
+                    d2, coef = _d2_terms(t, th, k)
+                    acc = sums.setdefault(float(f"{k * dt:.9g}"), np.zeros(3 + coef.shape[1]))
                     acc[0] += float(np.sum(d2**2))
                     acc[1] += d2.size
                     acc[2] += d2.size / (1.0 + k)  # roughly independent terms
+                    acc[3:] += coef.sum(axis=0)
                     k *= 2
         if not sums:
             raise ValueError(
                 f"the noise model needs a still stretch of at least {MIN_STRETCH} samples "
-                "(table_rate_dps == 0 and the temperature constant), e.g. a static run; or "
-                "pass noise=hrgjax.Noise(...)"
+                f"(|table_rate_dps| ≤ {STILL_RATE_DPS} and the temperature constant within "
+                f"{TEMPERATURE_TOLERANCE_C} °C), e.g. a static run; or pass noise=hrgjax.Noise(...)"
             )
         taus = np.asarray(sorted(sums))
-        var = np.asarray([sums[t][0] / sums[t][1] for t in taus])
-        n_eff = np.asarray([sums[t][2] for t in taus])
-        fits = [_fit_d2(taus, var, n_eff, None)]
-        fits += [_fit_d2(taus, var, n_eff, tc) for tc in GM_TIMES if tc <= 4 * taus[-1]]
+        acc = np.asarray([sums[t] for t in taus])
+        var, n_eff = acc[:, 0] / acc[:, 1], acc[:, 2]
+        basis = acc[:, 3:] / acc[:, 1:2]  # the terms' mean (σ_w², N², σ_GM²(T_c)…) columns
+        fits = [_fit_d2(basis[:, :2], var, n_eff, None)]
+        fits += [
+            _fit_d2(basis[:, [0, 1, 2 + i]], var, n_eff, tc)
+            for i, tc in enumerate(GM_TIMES)
+            if tc <= 4 * taus[-1]
+        ]
         best = min(fits[1:], key=lambda f: f[0], default=None)
         chosen = fits[0]
         if best is not None and best[2] > 0 and fits[0][0] - best[0] > 2 * math.log(n_eff.sum()):
@@ -270,21 +286,50 @@ def gauss_markov_mean_variance(sigma, correlation_time, duration):
 
 
 def _still_stretches(rate_dps, temperature_c):
-    """(start, stop) of every stretch of ≥ MIN_STRETCH samples with the table still and the
-    temperature within TEMPERATURE_TOLERANCE_C of the stretch's first sample."""
+    """(start, stop) of every stretch of ≥ MIN_STRETCH samples with the table still
+    (|rate| ≤ STILL_RATE_DPS) and the temperature within TEMPERATURE_TOLERANCE_C of the
+    stretch's first sample."""
     out, start = [], None
     for i, (w, temp) in enumerate(zip(rate_dps, temperature_c, strict=True)):
+        still = abs(w) <= STILL_RATE_DPS
         if start is not None and (
-            w != 0.0 or abs(temp - temperature_c[start]) > TEMPERATURE_TOLERANCE_C
+            not still or abs(temp - temperature_c[start]) > TEMPERATURE_TOLERANCE_C
         ):
             if i - start >= MIN_STRETCH:
                 out.append((start, i))
             start = None
-        if start is None and w == 0.0:
+        if start is None and still:
             start = i
     if start is not None and len(rate_dps) - start >= MIN_STRETCH:
         out.append((start, len(rate_dps)))
     return out
+
+
+def _d2_terms(t, theta, k):
+    r"""The lag-k (in samples) second differences of the angle `theta` [rad] sampled at `t`
+    [s], on the samples' true times, and each term's variance columns.
+
+    Three samples at t − a, t, t + b give D = (b θ(t−a) − (a+b) θ(t) + a θ(t+b))/h, h =
+    (a+b)/2: θ(t+τ) − 2θ(t) + θ(t−τ) where a = b = τ, and a constant angle and drift rate
+    cancel exactly for any a, b — a gap or uneven stamps between the samples leave no drift
+    in D. Its variance under the model, −Σ_{i<j} w_i w_j S(|t_i − t_j|) over the increments'
+    structure function S (N²Δ for the walk, 2σ²T_c(Δ − T_c(1 − e^{−Δ/T_c})) for the
+    Gauss–Markov rate) plus σ_w² Σ w_i², has the columns (σ_w², N², σ_GM² at each T_c of
+    GM_TIMES) returned as (terms, 2 + len(GM_TIMES)); equal spans give `_d2_basis`.
+
+    **Returns:** `(d2, columns)`."""
+    a = t[k:-k] - t[: -2 * k]
+    b = t[2 * k :] - t[k:-k]
+    h = 0.5 * (a + b)
+    w1, w3 = b / h, a / h  # the middle sample's weight is −2
+    d2 = w1 * theta[: -2 * k] - 2.0 * theta[k:-k] + w3 * theta[2 * k :]
+
+    def pairs(s):  # −Σ_{i<j} w_i w_j S(|t_i − t_j|)
+        return 2.0 * w1 * s(a) + 2.0 * w3 * s(b) - w1 * w3 * s(a + b)
+
+    cols = [w1**2 + 4.0 + w3**2, pairs(lambda x: x)]
+    cols += [pairs(lambda x, tc=tc: 2.0 * tc * (x + tc * np.expm1(-x / tc))) for tc in GM_TIMES]
+    return d2, np.stack(cols, axis=-1)
 
 
 def _d2_basis(tau, tc):
@@ -298,11 +343,9 @@ def _d2_basis(tau, tc):
     return np.stack(cols, axis=-1)
 
 
-def _fit_d2(taus, var, n_eff, tc):
-    """Weighted NNLS of the pooled second-difference variances: (χ², coefficients, T_c)."""
-    basis = _d2_basis(taus, tc)
-    if tc is None:
-        basis = basis[:, :2]
+def _fit_d2(basis, var, n_eff, tc):
+    """Weighted NNLS of the pooled second-difference variances on the columns `basis`
+    (σ_w², N² and, with a correlation time `tc`, σ_GM²): (χ², coefficients, T_c)."""
     scale = var.copy()
     for _ in range(3):  # relative errors on the model, not on the noisy estimates
         w = np.sqrt(n_eff / 2.0) / scale

@@ -279,3 +279,36 @@ def test_a_near_tie_of_evidence_goes_to_the_simpler_effect_and_is_reported_ambig
     rows[1]["delta_bic"] = 280353068.0 * (1 - 2 * TIE_FRACTION)
     assert simplest_of_the_tied(rows)["effect"] == "loop_ripple"
     assert tolerance(10.0, 50.0) == 10.0 and tolerance(10.0, 1e8) == 1e8 * TIE_FRACTION
+
+
+def test_sensor_readback_noise_leaves_a_dwell_a_dwell_and_a_ramp_a_ramp():
+    """Audit finding 4: 5 mK of thermometer noise (or 1e-5 °/s of table-rate jitter) made
+    every run of a dwell grid count as continuous — the slow path and a wrong 'ambiguous
+    with thermal_lag'. A run is a dwell when its temperature's peak-to-peak is within
+    TEMPERATURE_TOLERANCE_C and its rate's within STILL_RATE_DPS; a 1 °C ramp is not."""
+    from hrgjax.discovery.problem import dwell_runs, is_dwell
+
+    rng = np.random.default_rng(0)
+    t = np.arange(120) * 0.5
+    n = t.size
+    runs = []  # (run id, temperature [°C], table rate [°/s])
+    for r, temp in enumerate((-40.0, 10.0, 60.0)):
+        runs.append((2 * r, temp + rng.normal(0, 0.005, n), rng.normal(0, 1e-5, n)))
+        runs.append((2 * r + 1, temp + rng.normal(0, 0.005, n), 5.0 + rng.normal(0, 1e-5, n)))
+    ramp = (6, 20.0 + t / t[-1] + rng.normal(0, 0.005, n), np.zeros(n))  # 1 °C over the run
+
+    def log(runs):
+        cols = {"time_s": [], "run": [], "temperature_c": [], "table_rate_dps": [],
+                "wave_angle_deg": []}  # fmt: skip
+        for r, temp, rate in runs:
+            table = np.cumsum(rate) * 0.5
+            for k, v in (("time_s", t + 1000.0 * r), ("run", np.full(n, r)),
+                         ("temperature_c", temp), ("table_rate_dps", rate),
+                         ("wave_angle_deg", -K * table + rng.normal(0, 1e-4, n))):  # fmt: skip
+                cols[k].append(v)
+        return hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
+
+    grid = log(runs)
+    assert dwell_runs(grid) == set(range(6)) and is_dwell(grid)
+    mixed = log([*runs, ramp])
+    assert dwell_runs(mixed) == set(range(6)) and not is_dwell(mixed)

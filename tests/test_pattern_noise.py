@@ -96,3 +96,76 @@ def test_design_forms_keep_their_numbers():
     x = dur / tau
     excess = 2.0 * sigma**2 * tau / ARW**2 * (1.0 + jnp.expm1(-x) / x)
     assert np.array_equal(d.gauss_markov_discount(dur, ARW, sigma, tau), 1.0 / (1.0 + excess))
+
+
+def _static_log(seed, *, gap_s=None, rate_jitter_dps=0.0, thermometer_c=0.0, runs=12, n=600):
+    """Static runs (0.5-s samples, 300 s) whose angle is a known white + walk noise
+    (σ_w 5e-6 rad, N 1e-6 rad/√s) on a large drift (~1e-4 rad/s, a fresh one per run); a
+    sample dropout over `gap_s` = (start, stop) [s] of each run, table-rate readback jitter
+    and thermometer noise as asked."""
+    rng = np.random.default_rng(seed)
+    cols = {k: [] for k in ("time_s", "run", "temperature_c", "table_rate_dps", "wave_angle_deg")}
+    for r in range(runs):
+        t = np.arange(n) * 0.5
+        walk = np.r_[0.0, np.cumsum(rng.normal(0.0, 1e-6 * np.sqrt(0.5), n - 1))]
+        theta = rng.uniform(-1, 1) + rng.normal(0.0, 1e-4) * t + walk + rng.normal(0, 5e-6, n)
+        keep = np.ones(n, bool) if gap_s is None else ~((t >= gap_s[0]) & (t < gap_s[1]))
+        for k, v in (
+            ("time_s", t),
+            ("run", np.full(n, r)),
+            ("temperature_c", 20.0 + 10.0 * r + rng.normal(0.0, thermometer_c, n)),
+            ("table_rate_dps", rng.normal(0.0, rate_jitter_dps, n)),
+            ("wave_angle_deg", np.degrees(theta)),
+        ):
+            cols[k].append(v[keep])
+    return hrgjax.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
+
+
+def test_a_dropout_inside_static_runs_leaves_the_noise_estimate_as_it_is():
+    """Audit finding 2: 30 s of samples missing mid-run. Differences that straddled the gap
+    were labelled with the lag of equally spaced samples, and the drift times the time
+    imbalance (1e-4 rad/s × 30 s) was read as angle random walk (200× the truth). On the
+    samples' true times the drift cancels: the same N, and the truth, with or without it."""
+    full = pn.NoiseModel.estimate(_static_log(0))
+    gap = pn.NoiseModel.estimate(_static_log(0, gap_s=(100.0, 130.0)))
+    for m in (full, gap):
+        assert m.angle_random_walk == pytest.approx(1e-6, rel=0.2)
+        assert m.angle_white == pytest.approx(5e-6, rel=0.05)
+    assert gap.angle_random_walk == pytest.approx(full.angle_random_walk, rel=0.1)
+
+
+def test_uneven_spans_give_the_model_variance_of_their_second_differences():
+    """The true-time second difference of three samples t − a, t, t + b: no drift left, and
+    its variance columns are the model's (Monte Carlo of white + walk + Gauss–Markov), equal
+    to the lag-τ closed form where a = b = τ."""
+    t = np.array([0.0, 0.5, 20.5, 21.0, 21.5])  # a 20-s gap between the 2nd and 3rd samples
+    d2, cols = pn._d2_terms(t, 3.0 + 2e-3 * t, 1)
+    assert np.max(np.abs(d2)) < 1e-12
+    model = pn.NoiseModel(2e-6, 1e-6, 3e-8, pn.GM_TIMES[1])
+    cov = model.angle_covariance(t)
+    a, b = t[1:-1] - t[:-2], t[2:] - t[1:-1]
+    h = (a + b) / 2
+    for i in range(3):
+        w = np.zeros(t.size)
+        w[i : i + 3] = b[i] / h[i], -2.0, a[i] / h[i]
+        coef = np.array([model.angle_white**2, model.angle_random_walk**2, model.gm_sigma**2])
+        assert cols[i, [0, 1, 3]] @ coef == pytest.approx(w @ cov @ w, rel=1e-6)
+    even = np.arange(9) * 0.5
+    _, cols = pn._d2_terms(even, np.zeros(9), 2)
+    for j, tc in enumerate(pn.GM_TIMES):
+        assert cols[0, [0, 1, 2 + j]] == pytest.approx(pn._d2_basis(np.array([1.0]), tc)[0])
+
+
+def test_table_rate_readback_jitter_leaves_static_runs_still():
+    """Audit finding 4: a table rate read back with 1e-5 °/s of jitter (and a thermometer
+    with 5 mK) made a log of static runs have no still stretch. Still is |rate| ≤
+    STILL_RATE_DPS: the noise model reads them, and gets the truth; a turning table is not
+    still."""
+    log = _static_log(1, rate_jitter_dps=1e-5, thermometer_c=0.005)
+    m = pn.NoiseModel.estimate(log)
+    assert m.angle_random_walk == pytest.approx(1e-6, rel=0.2)
+    assert m.angle_white == pytest.approx(5e-6, rel=0.05)
+    n = 100
+    jitter = np.random.default_rng(2).normal(0.0, 1e-5, n)
+    assert pn._still_stretches(jitter, np.full(n, 20.0)) == [(0, n)]
+    assert pn._still_stretches(0.01 + jitter, np.full(n, 20.0)) == []

@@ -18,6 +18,7 @@ import dataclasses
 import numpy as np
 
 from ..data import MeasuredData
+from ..pattern_noise import STILL_RATE_DPS, TEMPERATURE_TOLERANCE_C
 from .effects import CATALOGUE, NOMINAL
 
 
@@ -132,12 +133,17 @@ OPTIONAL = {"amplitude": "amplitude", "quadrature": "quadrature", "accel_z": "ac
 
 
 def dwell_runs(data: MeasuredData) -> set[int]:
-    """Ids of the runs that hold their temperature and table rate constant (dwell runs)."""
+    """Ids of the runs that hold their temperature and table rate constant (dwell runs):
+    the temperature's peak-to-peak within
+    [`TEMPERATURE_TOLERANCE_C`][hrgjax.pattern_noise.TEMPERATURE_TOLERANCE_C] and the table
+    rate's within [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS] — a thermometer's
+    or a rate table's readback noise leaves a dwell a dwell; a temperature ramp (a degree
+    over the run) or a change of table rate does not."""
     out = set()
     for idx in data.run_indices():
-        if all(
-            np.ptp(v := data[col][idx]) <= 1e-9 * max(1.0, float(np.max(np.abs(v))))
-            for col in ("temperature_c", "table_rate_dps")
+        if (
+            np.ptp(data["temperature_c"][idx]) <= TEMPERATURE_TOLERANCE_C
+            and np.ptp(data["table_rate_dps"][idx]) <= STILL_RATE_DPS
         ):
             out.add(int(data.run[idx[0]]))
     return out
