@@ -23,6 +23,7 @@ from ._data_files import dataset_columns, import_xarray, netcdf_columns
 from ._data_files import read_csv_table as read_csv_table
 from ._data_files import with_file_line as with_file_line
 from ._io import atomic_path, atomic_write
+from .pattern_noise import STILL_RATE_DPS
 from .units import DEG, K_E_NOMINAL
 
 SAMPLE_DIM = "sample"
@@ -249,7 +250,8 @@ class RunStack:
     - `temperature`: (R, N) [°C].
     - `accel`: (R, N, 3) specific force along case x, y, z [g] (absent axes read 0).
     - `amplitude`, `quadrature`: (R, N) [readout units] (absent: 1 and 0).
-    - `static`: (R,) true for runs with the table at rest throughout.
+    - `static`: (R,) true for runs with the table at rest throughout (|rate| within
+      [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS]: readback jitter is rest).
     """
 
     run: np.ndarray
@@ -297,7 +299,7 @@ class RunStack:
             accel=np.stack([col(f"accel_{a}_g", 0.0) for a in "xyz"], axis=-1),
             amplitude=col("amplitude", 1.0),
             quadrature=col("quadrature", 0.0),
-            static=np.all(rate == 0.0, axis=1),
+            static=np.all(np.abs(rate) <= STILL_RATE_DPS * DEG, axis=1),  # jitter is rest
         )
         for f in dataclasses.fields(out):
             v = getattr(out, f.name)

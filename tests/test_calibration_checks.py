@@ -274,3 +274,29 @@ def test_physical_compensator_settings_are_refused_at_construction(kw, match):
     with pytest.raises(ValueError, match=match):
         PhysicalCompensator(**kw)
     PhysicalCompensator(window_s=10.0, max_steps=8, sf_rate=0.1)  # good ones pass
+
+
+def test_a_rate_tables_readback_jitter_and_a_thermometers_noise_leave_a_static_run_static():
+    """A static run whose table-rate column carries 1e-5 °/s of readback jitter and whose
+    temperature 5 mK of noise is the same static run: one window, static, the same drift
+    (the jitter split it into 3-s "moving" windows, and with `ramp_window_s` the noise made
+    it a ramp), in the reduction, the run stack and the accuracy table alike."""
+    rng = np.random.default_rng(5)
+    t = np.arange(601) * 0.1
+    clean = {
+        "time_s": t,
+        "temperature_c": np.full(t.size, 20.0),
+        "table_rate_dps": np.zeros(t.size),
+        "table_angle_deg": np.zeros(t.size),
+        "wave_angle_deg": 10.0 - K * 1.5 / 3600.0 * t,
+    }
+    noisy = dict(clean, table_rate_dps=1e-5 * rng.standard_normal(t.size),
+                 temperature_c=20.0 + 5e-3 * rng.standard_normal(t.size))  # fmt: skip
+    for kw in ({}, {"ramp_window_s": 10.0}):
+        a, b = (cal.reduce(hg.MeasuredData(c), **kw) for c in (clean, noisy))
+        assert len(b) == len(a) == 1 and bool(b.static[0])
+        np.testing.assert_allclose(b.drift_dph, a.drift_dph, rtol=1e-12)
+    assert bool(hg.MeasuredData(noisy).stacked()[0].static[0])
+    # the turned table (0.3° over the minute: 5e-3 °/s) is a moving run
+    turning = dict(clean, table_rate_dps=np.full(t.size, 5e-3), table_angle_deg=5e-3 * t)
+    assert not bool(hg.MeasuredData(turning).stacked()[0].static[0])

@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..data import MeasuredData
+from ..pattern_noise import STILL_RATE_DPS
 from ._compensator import AbstractCompensator
 from ._grouping import nearest_multiples
 from .reduce import K_E_NOMINAL, check_k_e
@@ -112,7 +113,9 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
     offset_dps = float(offset_dph) / 3600.0
     for idx in corrected.run_indices():
         t = corrected["time_s"][idx]
-        static = bool(np.all(corrected["table_rate_dps"][idx] == 0.0))
+        # at rest: |rate| within STILL_RATE_DPS (readback jitter); what the table turned is
+        # subtracted all the same
+        static = bool(np.all(np.abs(corrected["table_rate_dps"][idx]) <= STILL_RATE_DPS))
         angle = corrected["angle_corrected_deg"][idx] - offset_dps * (t - t[0])
         turned = table[idx][-1] - table[idx][0]
         duration = t[-1] - t[0]
@@ -121,7 +124,9 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
         rows["wave_angle0_deg"].append(float(corrected["wave_angle_deg"][idx[0]]))
         rows["duration_s"].append(float(duration))
         rows["static"].append(static)
-        rows["drift_error_dph"].append(angle[-1] / duration * 3600.0 if static else np.nan)
+        rows["drift_error_dph"].append(
+            (angle[-1] - turned) / duration * 3600.0 if static else np.nan
+        )
         rows["angle_error_deg"].append(np.nan if static else angle[-1] - turned)
         track = np.max(np.abs(angle - (table[idx] - table[idx][0])))
         rows["max_angle_error_deg"].append(np.nan if static else track)

@@ -38,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..data import MeasuredData
+from ..pattern_noise import STILL_RATE_DPS, TEMPERATURE_TOLERANCE_C
 from ..units import K_E_NOMINAL as K_E_NOMINAL
 from ..units import K_E_WANTED, group_temperatures, k_e_problem
 from ..units import WINDOW_S as WINDOW_S
@@ -171,8 +172,10 @@ class RateWindows(eqx.Module):
 
     @property
     def static(self) -> np.ndarray:
-        """Mask of windows with the table at rest."""
-        return self.table_rate_dps == 0.0
+        """Mask of windows with the table at rest: |table rate| within
+        [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS] (a rate table's readback
+        jitter is not a rotation; the window's table rate is subtracted all the same)."""
+        return np.abs(self.table_rate_dps) <= STILL_RATE_DPS
 
     @property
     def drift_dph(self) -> np.ndarray:
@@ -214,8 +217,8 @@ def _window_layout(
         raise ValueError(
             f"run {int(r.run[0])} has {len(t)} samples; reduction needs at least 4 per window"
         )
-    if bool(np.all(r["table_rate_dps"] == 0.0)):
-        if ramp_window_s is None or np.ptp(r["temperature_c"]) == 0.0:
+    if bool(np.all(np.abs(r["table_rate_dps"]) <= STILL_RATE_DPS)):  # at rest (readback jitter)
+        if ramp_window_s is None or np.ptp(r["temperature_c"]) <= TEMPERATURE_TOLERANCE_C:
             return 1, len(t)
         window_s = ramp_window_s
     elif window_s is None:
