@@ -2,6 +2,7 @@
 formula and finite differences, plan files, simulating a plan as one switch-on."""
 
 import json
+import re
 
 import equinox as eqx
 import jax
@@ -840,3 +841,80 @@ def test_warmup_criterion_is_the_integrated_rate_error_and_the_default_adds_the_
             "wave_angle_deg": 30.0, "duration_s": 6000.0}  # fmt: skip
     more = d.BenchPlan.from_segments(plan.segments() + [ramp])
     assert float(d.criterion(more, "warmup", flight=flight)) < warm
+
+
+def _window_slope_information(rate_dps, angles, duration, n=20, dt=0.5, fine=0.05):
+    """Fisher information of rotations at `rate_dps` from `angles` [°] as the physical fit
+    sees them, written out: ∂θ̂/∂p integrated along the path (trapezoid, `fine` [s]), the
+    least-squares slope of each consecutive window of `n` samples `dt` [s] apart (a
+    rotation's: 20 × 0.5 s; a ramp's: 10 × 1 s), 1/slope variance each."""
+    from hrgjax.pattern_noise import slope_variance
+    from hrgjax.units import DEG, DEG_PER_S
+
+    values = d.nominal_values()
+    k_e, om = float(values[0]), rate_dps * DEG_PER_S
+    var = float(slope_variance(d.pattern_angle_white(), d.pattern_arw(), n, dt))
+    t = np.arange(0.0, duration + 1e-9, fine)
+    rate = jax.jit(jax.vmap(jax.jacfwd(d.measured_rate), in_axes=(None, 0, None, None, None)))
+    total = np.zeros((values.size, values.size))
+    for a0 in angles:
+        g = np.asarray(rate(values, jnp.asarray(a0 * DEG - k_e * om * t), 20.0, om, 0.0))
+        cum = np.concatenate([np.zeros((1, g.shape[1])),
+                              np.cumsum(0.5 * (g[1:] + g[:-1]) * fine, axis=0)])  # fmt: skip
+        for w0 in np.arange(0.0, duration - n * dt + 1e-9, n * dt):
+            ts = w0 + dt * np.arange(n)
+            c = (ts - ts.mean()) / np.sum((ts - ts.mean()) ** 2)
+            s = c @ cum[np.rint(ts / fine).astype(int)]
+            total += np.outer(s, s) / var
+    return total
+
+
+def test_a_rotation_informs_only_through_its_window_slopes():
+    """The fit sees a rotation only through its 10-s window slopes: at 40 °/s a window sweeps
+    222° electrical and the 2θ ripple that carries Δ(1/τ)₀, θ_τ0, gain_mismatch0 and
+    cross_talk averages out of every slope. `information` equals the window slopes' Fisher
+    information written out (averaged over four wave angles 45° apart, which cancels where
+    the windows happen to fall) at 5, 20 and 40 °/s — it counted the pointwise rate, 1.05,
+    2.2 and 73× too much; the traced program (`jit`, the design search's) agrees, and so does
+    a turning ramp at a held temperature with its own windows (10 samples 1 s apart)."""
+    angles, duration = (0.0, 45.0, 90.0, 135.0), 40.0
+    seen = [0, 2, 5, 7, 9, 11]  # a rotation at one temperature sees these (k_e, bias, 2θ)
+    for rate in (5.0, 20.0, 40.0):
+        segs = [{"kind": "rotation", "temperature_c": 20.0, "wave_angle_deg": a,
+                 "rate_dps": rate, "duration_s": duration} for a in angles]  # fmt: skip
+        plan = d.BenchPlan.from_segments(segs)
+        lib = np.asarray(d.information(plan, gauss_markov=(0.0, 1.0)))
+        ref = _window_slope_information(rate, angles, duration)
+        np.testing.assert_allclose(np.diag(lib)[seen], np.diag(ref)[seen], rtol=0.01)
+    traced = jax.jit(lambda p: d.information(p, gauss_markov=(0.0, 1.0)))(plan)
+    np.testing.assert_allclose(np.diag(traced)[seen], np.diag(lib)[seen], rtol=1e-9)
+    ramps = d.BenchPlan.from_segments([
+        {"kind": "ramp", "temperature_start_c": 20.0, "temperature_end_c": 20.0 + 1e-6,
+         "wave_angle_deg": a, "rate_dps": 40.0, "duration_s": duration} for a in angles])  # fmt: skip
+    turning = np.asarray(d.information(ramps, gauss_markov=(0.0, 1.0)))
+    ref = _window_slope_information(40.0, angles, duration, n=10, dt=1.0)
+    np.testing.assert_allclose(np.diag(turning)[seen], np.diag(ref)[seen], rtol=0.01)
+
+
+def test_a_bad_linearisation_point_is_named():
+    """`values` is checked where it enters every criterion and the design search: a NaN, a
+    k_e ≤ 0 (both NaN criteria before) or a wrong length (a raw broadcasting error) is one
+    ValueError naming `values`; the traced (`jit`) path checks the shape."""
+    plan = d.BenchPlan.from_segments(SEGMENTS)
+    v = np.asarray(d.nominal_values())
+    nan, zero = v.copy(), v.copy()
+    nan[3], zero[0] = np.nan, 0.0
+    for bad, what in ((nan, "nan at index 3"), (zero, "k_e = 0.0"), (np.ones(5), "shape (5,)")):
+        for call in (lambda x: d.criterion(plan, "drift", values=x),
+                     lambda x: d.information(plan, values=x),
+                     lambda x: d.posterior_covariance(plan, values=x)):  # fmt: skip
+            with pytest.raises(
+                ValueError, match=r"values must be 12 finite numbers.*" + re.escape(what)
+            ):
+                call(bad)
+    with pytest.raises(ValueError, match="values must be 12 finite"):
+        d.design(4.0, levels=(2,), statics=1, rotations=1, steps=1, values=nan)
+    with pytest.raises(ValueError, match=r"values must be .* shape \(5,\)"):
+        jax.jit(lambda x: d.criterion(plan, "drift", values=x))(jnp.ones(5))
+    with pytest.raises(ValueError, match=r"values must be 90 finite numbers in the empirical"):
+        d.criterion(plan, "drift", model="empirical", values=np.ones(12))

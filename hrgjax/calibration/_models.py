@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import concrete_value, is_concrete
 from ..gyro import Gyro
 from ..pattern_noise import NoiseModel
 from ..profiles import Profile
@@ -253,5 +253,27 @@ def as_model(model):
 
 
 def model_values(values, model):
-    """`values` as a float array, or `model`'s linearisation point (`nominal()`) for None."""
-    return model.nominal() if values is None else jnp.asarray(values, dtype=float)
+    """`values` as a float array, or `model`'s linearisation point (`nominal()`) for None.
+
+    **Raises:** `ValueError` naming `values` when its shape is not `model`'s parameter
+    vector's (`nominal()`: the grey box's 12, in
+    [`physical.PARAMETERS`][hrgjax.calibration.physical.PARAMETERS] order), or — where its
+    numbers are known on the host — one is not finite, or the grey box's k_e = `values[0]`
+    is not > 0 (every criterion was NaN, or a broadcasting error, before)."""
+    if values is None:
+        return model.nominal()
+    expected = model.scale().shape
+    order = "physical.PARAMETERS" if isinstance(model, GreyBox) else f"the {model.name} model's"
+    what = f"values must be {expected[0]} finite numbers in {order} order (the linearisation point)"
+    shape = np.shape(values)
+    if shape != expected:
+        raise ValueError(f"{what}; got shape {shape}")
+    given = concrete_value(values)
+    if given is not None:
+        given = np.asarray(given, dtype=float)
+        bad = np.flatnonzero(~np.isfinite(given))
+        if bad.size:
+            raise ValueError(f"{what}; got {given[bad[0]]} at index {bad[0]}")
+        if isinstance(model, GreyBox) and not given[0] > 0:
+            raise ValueError(f"{what}, k_e = values[0] > 0; got k_e = {given[0]}")
+    return jnp.asarray(values, dtype=float)

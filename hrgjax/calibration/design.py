@@ -40,6 +40,7 @@ from ._information import gauss_markov_discount as gauss_markov_discount
 from ._information import information as information
 from ._information import posterior_covariance as posterior_covariance
 from ._information import window_density as window_density
+from ._information import window_transfer as window_transfer
 from ._models import GREY_BOX as GREY_BOX
 from ._models import MODELS as MODELS
 from ._models import Empirical as Empirical
