@@ -147,3 +147,113 @@ def test_a_tie_at_infinite_evidence_still_names_one():
     rows = [{"effect": "loop_ripple", "delta_bic": np.inf},
             {"effect": "readout_gain_mismatch", "delta_bic": 5.0}]  # fmt: skip
     assert simplest_of_the_tied(rows)["effect"] == "loop_ripple"
+
+
+@pytest.fixture(scope="module")
+def mismatch_pair():
+    """The default dwell grid with a readout gain mismatch g = ±1 % (ε₁ = −2g exactly:
+    `Readout.matrix` = diag(1+g, 1−g)), both signs on one noise draw."""
+    import jax
+
+    from hrgjax.discovery.generate import hidden_effect_dataset
+
+    return {
+        g: hidden_effect_dataset("readout_gain_mismatch", g, key=jax.random.key(100))
+        for g in (0.01, -0.01)
+    }
+
+
+def test_the_window_gain_of_a_2theta_harmonic_is_the_sampled_slopes(mismatch_pair):
+    """Each moving window's `harmonic_gain` is what the least-squares slope over its own
+    samples sees of a 2θ harmonic (checked by fitting the slope of a pure harmonic on those
+    sample times), not the continuous 3(sin x − x cos x)/x³ of the arc, 5·10⁻⁴ too large at
+    six samples (issue: ε₁ came out 4σ small)."""
+    from hrgjax.calibration.reduce import WINDOW_S
+
+    data = mismatch_pair[0.01]
+    w, _, c, _ = dwell.rate_windows(data, K, WINDOW_S)
+    times = {int(data.run[i[0]]): data["time_s"][i] for i in data.run_indices()}
+    angle = {int(data.run[i[0]]): data["wave_angle_deg"][i] * DEG for i in data.run_indices()}
+    moving = np.flatnonzero(~np.asarray(w.static))[:20]
+    assert moving.size
+    a = 1e-6  # a small harmonic A·sin 2θ added to the angle
+    for i in moving:
+        t = times[int(w.run[i])][w.start[i] : w.stop[i]]
+        th = angle[int(w.run[i])][w.start[i] : w.stop[i]]
+        v = np.polyfit(t, th, 1)[0]
+        th0 = np.mean(th)
+        line = th0 + v * (t - t.mean())
+        extra = np.polyfit(t, line + a * np.sin(2 * line), 1)[0] - v
+        gain = extra / (2 * a * v * np.cos(2 * th0))
+        assert float(c.harmonic_gain[i]) == pytest.approx(gain, abs=2e-6)
+
+
+def test_a_readout_gain_mismatch_is_read_back_unshrunk(mismatch_pair):
+    """ε₁ = −2g at g = ±1 %: both signs share the noise, so half the difference of their
+    errors is the estimator's bias alone — under 0.25σ (the continuous window gain gave
+    +10 ppm, 4σ, towards zero on both signs), and each error within 2.5σ."""
+    from hrgjax.discovery import discover
+
+    err = {}
+    for g, data in mismatch_pair.items():
+        p = discover(data).parameters["readout_gain_mismatch"]["eps_1"]
+        err[g] = (p["value"] - (-2e6 * g), p["sigma"])
+        assert abs(err[g][0]) < 2.5 * p["sigma"], (g, p)
+    bias = (err[0.01][0] - err[-0.01][0]) / 2
+    assert abs(bias) < 0.25 * err[0.01][1], err
+
+
+def test_gaps_and_floor_are_converted_at_the_gain_the_parameters_use(mismatch_pair):
+    """A nominal k_e of 0.277 (the mechanical K passed for the angular gain) or 0.9: the
+    rotations fix k_e = 0.554 and the parameters are read at it, so the gaps, the noise
+    floor and the noise report in °/h are those of a run given the right gain — not scaled by
+    0.554/k_nominal (issue: 2× at 0.277)."""
+    from hrgjax.discovery import discover
+
+    data = mismatch_pair[0.01]
+    right = discover(data, k_e=K)
+    for k_nominal in (0.277, 0.9):
+        wrong = discover(data, k_e=k_nominal)
+        assert wrong.k_e == pytest.approx(right.k_e, rel=1e-6)
+        for key in ("gap_before", "gap_after", "noise_floor"):
+            assert getattr(wrong, key) == pytest.approx(getattr(right, key), rel=1e-4), key
+        for key in ("sigma_static_dph", "sigma_moving_dph"):
+            assert wrong.noise[key] == pytest.approx(right.noise[key], rel=1e-4), key
+
+
+def test_a_small_class_reads_its_noise_level_with_an_allowance(grid):
+    """A small dwell grid's 20 static windows (below `MIN_ROWS`) carry most of the bias
+    parameters and are 2× noisier than the noise model says (a 60-s run leaves the angle
+    random walk unresolved): their level is read from their own residual, with the leverage
+    they carry and a small-sample allowance, so the ΔT slope's z spread is ≈ 1 (it was 2:
+    the class kept the noise model's σ). A small class quieter than the model keeps it."""
+    g, _, classes = grid
+    keep = np.flatnonzero((classes == 0) | (np.arange(classes.size) % 7 < 4))  # 20 static
+    g, classes = g[keep], classes[keep]
+    assert np.sum(classes == 1) == 20 < trust.MIN_ROWS
+    s = 0.01 * DEG_PER_H
+    sig = np.where(classes == 1, s, 3 * s)  # the moving windows are short: noisier
+    truth = np.zeros(g.shape[1])
+    truth[1], truth[-2] = K, -K * 0.02 * DEG_PER_H
+    rng = np.random.default_rng(7)
+    z, scale = [], {}
+    for factor in (2.0, 0.5):
+        for _ in range(150 if factor == 2.0 else 5):
+            noise = np.where(classes == 1, factor, 1.0) * sig
+            y = g @ truth + noise * rng.standard_normal(g.shape[0])
+            beta, r, cov = stats.wls(g, y, sig)
+            params = {}
+            for (name, pname), b, e in zip(regular_parameters(MODEL), beta,
+                                           np.sqrt(np.diag(cov)), strict=True):  # fmt: skip
+                params.setdefault(name, {})[pname] = {"value": b, "std": e}
+            fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
+            new, info = trust.honest(fit, {}, classes)
+            scale.setdefault(factor, []).append(info["noise_scale"]["static windows"])
+            if factor == 2.0:
+                b1 = new["bias_temperature"]["b1"]
+                z.append((b1["value"] - truth[-2]) / b1["std"])
+    z = np.asarray(z)
+    assert 0.85 < np.sqrt(np.mean(z**2)) < 1.2, np.sqrt(np.mean(z**2))
+    assert np.mean(np.abs(z) < 2) > 0.92
+    assert 1.6 < np.median(scale[2.0]) < 2.6, np.median(scale[2.0])
+    assert all(v == 1.0 for v in scale[0.5])  # never below the noise model's σ

@@ -80,6 +80,7 @@ class ContinuousProblem(AbstractProblem):
         self, data, names, k_e, held, noise, block_s=BLOCK_S, windows=None, noise_known=False
     ):
         self.data, self.k_e, self.block_s = data, k_e, block_s
+        self.k_out = float(k_e)  # the current model's fitted angular gain (dwell.output_gain)
         self.noise_known = noise_known  # the noise model was given: σ_b is not re-estimated
         self.windows = windows  # (Windows, held mask): the dwell runs of a mixed log
         self.layout = Layout(names)
@@ -180,7 +181,7 @@ class ContinuousProblem(AbstractProblem):
             x = np.asarray([covs[r] for r in rates])
             resid, k = stats.follows_covariate(means, x, RUN_COVARIATE_ALPHA)
             spread = float(resid @ resid) / max(means.size - k, 1)
-            sigma_b = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_e
+            sigma_b = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_out
             new.noise = new.noise.replace(run_bias=sigma_b)
         new._build()
         return new
@@ -188,6 +189,7 @@ class ContinuousProblem(AbstractProblem):
     def after_accept(self, fit):
         """Re-estimate σ_b at the new model (unless the noise was given) and refit: a new
         problem and its fit."""
+        self.k_out = dwell.output_gain(fit.parameters, self.k_e)
         if self.noise_known:
             return self, fit
         new = self.with_run_bias(fit.z)
@@ -217,8 +219,16 @@ class ContinuousProblem(AbstractProblem):
 
     def fit(self, model, z0=None):
         """Fit the regular parameters of `model` (effect names) on the training runs from
-        `z0`; the rest of the superset stays where it is (at its null by default).
+        `z0`; the rest of the superset stays where it is (at its null by default). The fit
+        becomes the current model: its angular gain converts the floor (`k_out`).
         **Returns:** a [`Fit`][hrgjax.discovery.problem.Fit]."""
+        fit = self._fit_model(model, z0)
+        self.k_out = dwell.output_gain(fit.parameters, self.k_e)
+        return fit
+
+    def _fit_model(self, model, z0=None):
+        """[`fit`][hrgjax.discovery.continuous.ContinuousProblem.fit] without making it the
+        current model (the screening's refits)."""
         z0 = self.z_null if z0 is None else np.asarray(z0)
         basis, idx = self._basis(model)
         z, ok = lm(self.layout, basis, jnp.asarray(z0), self.train_groups)
@@ -255,21 +265,23 @@ class ContinuousProblem(AbstractProblem):
             j=j,
             chi2=float(r @ r),
             heldout_chi2=float(held_r @ held_r),
-            gap=self._gap(held_raw),
+            gap=self._gap(held_raw, dwell.output_gain(params, self.k_e)),
             z=z,
         )
 
-    def _run_means(self, raw, groups):
-        """Run-mean equivalent-input-rate residual [°/h] of every run, from raw residuals."""
+    def _run_means(self, raw, groups, k=None):
+        """Run-mean equivalent-input-rate residual [°/h] of every run, from raw residuals
+        (converted at the angular gain `k`; default: the current model's)."""
+        k = self.k_out if k is None else k
         out = {}
         for g, r in zip(groups, raw, strict=True):
             if isinstance(g, Windows):  # the mean of the run's windows
                 runs, r = np.asarray(g.run), np.asarray(r)
                 for run in np.unique(runs):
-                    out[int(run)] = float(-np.mean(r[runs == run]) / self.k_e / DEG_PER_H)
+                    out[int(run)] = float(-np.mean(r[runs == run]) / k / DEG_PER_H)
                 continue
             span = np.asarray(g.t[:, g.bidx[-1]] - g.t[:, g.bidx[0]])
-            means = -np.asarray(r).sum(axis=1) / (self.k_e * span) / DEG_PER_H
+            means = -np.asarray(r).sum(axis=1) / (k * span) / DEG_PER_H
             out.update(zip(g.run, means, strict=True))
         return out
 
@@ -424,10 +436,10 @@ class ContinuousProblem(AbstractProblem):
         without held-out runs."""
         return self._gap(self.raw_residuals(z, self.held_groups))
 
-    def _gap(self, held_raw):
+    def _gap(self, held_raw, k=None):
         if not self.held_groups:
             return float("nan")
-        rates = self._run_means(held_raw, self.held_groups)
+        rates = self._run_means(held_raw, self.held_groups, k)
         return float(np.sqrt(np.mean(np.square(list(rates.values())))))
 
     def floor(self, every=False, windows=True):
@@ -441,13 +453,13 @@ class ContinuousProblem(AbstractProblem):
             if isinstance(g, Windows):
                 if windows:
                     runs, inv = np.asarray(g.run), 1.0 / np.asarray(g.sigma) ** 2
-                    var += [1.0 / inv[runs == r].sum() / self.k_e**2 for r in np.unique(runs)]
+                    var += [1.0 / inv[runs == r].sum() / self.k_out**2 for r in np.unique(runs)]
                 continue
             k = int(g.bidx.shape[0]) - 1
             for i in range(len(g.run)):
                 span = float(g.t[i, g.bidx[-1]] - g.t[i, g.bidx[0]])
                 cov = self.noise.increment_covariance(span / k, k)
-                var.append(cov.sum() / (self.k_e * span) ** 2)
+                var.append(cov.sum() / (self.k_out * span) ** 2)
         return float(np.sqrt(np.mean(var))) / DEG_PER_H if var else float("nan")
 
     # -- interface shared with the dwell problem ------------------------------
@@ -577,7 +589,7 @@ class ContinuousProblem(AbstractProblem):
             z_start = z.copy()
             z_start[self.layout.index(name, which=True)] += step
             try:
-                refit = self.fit(model + [name], z0=z_start)
+                refit = self._fit_model(model + [name], z0=z_start)
             except RuntimeError:
                 continue
             q = CATALOGUE[name].size

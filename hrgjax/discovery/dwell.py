@@ -10,8 +10,11 @@ weighted least squares; the score test of a candidate
 ([`score`][hrgjax.discovery.stats.score]) is then exact (DISCOVERY.md §2.4 S3), χ²_q under
 the null in whitened units. A readout term g(θ) enters through
 $\dot\theta_{\rm meas} = (1+\partial g/\partial\theta)\,\dot\theta$ (for the gain mismatch
-$1+\varepsilon_1\cos2\theta-\varepsilon_2\sin2\theta$), linearised at the nominal rate −k_e,nom Ω; a window in which the pattern sweeps an arc x
-sees every 2θ harmonic times [`window_gain`][hrgjax.discovery.effects.window_gain](x); `angular_gain_temperature` and
+$1+\varepsilon_1\cos2\theta-\varepsilon_2\sin2\theta$), linearised at the nominal rate −k_e,nom Ω; a window in which the pattern turns sees every 2θ
+harmonic times the gain its least-squares slope has for it over the window's own samples
+(`dwell.sampled_gain`; the continuous
+[`window_gain`][hrgjax.discovery.effects.window_gain] of the arc is 5·10⁻⁴ too large at
+6 samples); `angular_gain_temperature` and
 `rate_scale_factor` likewise at k_e,nom. Nonregular time constants are held at their typical
 size here.
 """
@@ -30,7 +33,7 @@ from ..calibration.reduce import RateWindows, reduce
 from ..data import MeasuredData
 from ..units import DEG, DEG_PER_H, T_REF_C
 from . import leftover
-from .effects import CATALOGUE, Covariates, window_gain, window_rate
+from .effects import CATALOGUE, Covariates, window_rate
 from .noise import NoiseModel
 from .problem import OPTIONAL, AbstractProblem, Fit, candidates_for, covariates_in
 from .stats import chi2_sf, covariance, score, wls  # dwell.score etc.: deprecated, see stats
@@ -148,6 +151,31 @@ def target(w: RateWindows, k_e: float) -> np.ndarray:
 # -- the dwell-grid problem ----------------------------------------------------
 
 
+def sampled_gain(t, theta) -> float:
+    r"""What the least-squares slope over the samples at times `t` [s] sees of a 2θ harmonic
+    while the pattern turns at the samples' own slope v = slope of `theta` [rad] on `t`:
+    with τᵢ = tᵢ − t̄, a term A·sin 2θ(t) of the angle gives the slope
+    $2A\cos 2\bar\theta\cdot v\,G$ (and a rate term ∝ sin 2θ its window value times G), with
+    $G = \sum_i \tau_i \sin(2v\tau_i) / (2v\sum_i\tau_i^2)$ — the discrete sum the slope
+    really forms, not the continuous $3(\sin x - x\cos x)/x^3$ of
+    [`window_gain`][hrgjax.discovery.effects.window_gain], which at 6 samples of a 3-s window
+    is 5·10⁻⁴ too large (a 2θ term fitted on moving windows came out that much too small).
+    The in-phase part is exact for any sampling; uneven sampling adds an out-of-phase part
+    $\propto \sum_i\tau_i(\cos 2v\tau_i - 1)$ that vanishes for times symmetric about t̄ (the
+    windows of [`reduce`][hrgjax.calibration.reduce] on a regular log). 1 for fewer than
+    two samples."""
+    t = np.asarray(t, float)
+    if t.size < 2:
+        return 1.0
+    tau = t - t.mean()
+    s_tt = float(tau @ tau)
+    if s_tt == 0.0:
+        return 1.0
+    v = float(tau @ (np.asarray(theta, float) - np.mean(theta))) / s_tt
+    # τ sin(2vτ)/(2v) = τ² sinc(2vτ/π): exact, and 1 at v = 0
+    return float(np.sum(tau**2 * np.sinc(2.0 * v * tau / np.pi)) / s_tt)
+
+
 def window_extras(data: MeasuredData, w: RateWindows) -> dict:
     """Per-window means of the optional columns (and `t_run`, the 2θ `harmonic_gain` and the
     `arc` [rad] the pattern sweeps)."""
@@ -159,8 +187,9 @@ def window_extras(data: MeasuredData, w: RateWindows) -> dict:
     for run, a, b, tm in zip(w.run, w.start, w.stop, w.t_mid, strict=True):
         idx = starts[int(run)]
         extra["t_run"].append(tm - data["time_s"][idx[0]])
-        arc = np.ptp(data["wave_angle_deg"][idx[a:b]]) * DEG if b - a > 1 else 0.0
-        extra["harmonic_gain"].append(float(window_gain(arc)))
+        t, theta = data["time_s"][idx[a:b]], data["wave_angle_deg"][idx[a:b]] * DEG
+        arc = np.ptp(theta) if b - a > 1 else 0.0
+        extra["harmonic_gain"].append(sampled_gain(t, theta))
         extra["arc"].append(arc)
         for key, col in OPTIONAL.items():
             if key in extra:
@@ -179,8 +208,20 @@ def rate_windows(data: MeasuredData, k_e: float, window_s: float):
     return w, target(w, k_e), covariates(w, extra), arc
 
 
+def output_gain(parameters: dict, k_e: float) -> float:
+    """The angular gain that turns a fit's pattern rates into input rates: the fit's own
+    `angular_gain` where the data determine it, else the nominal `k_e` — the gain `discover`
+    reports its parameters at (`search._fitted_k_e`), so the
+    gaps and the noise floor are on the same scale as the parameters (a nominal 0.277 passed
+    for 0.554 once doubled them)."""
+    from .search import _fitted_k_e  # search imports this module
+
+    return _fitted_k_e(parameters, k_e)
+
+
 def _gap(resid, w: RateWindows, runs, k_e):
-    """RMS over `runs` of the run-mean equivalent-input-rate residual [°/h]."""
+    """RMS over `runs` of the run-mean equivalent-input-rate residual [°/h] (`k_e`: the
+    fit's `output_gain`)."""
     means = [np.mean(resid[w.run == r]) for r in runs]
     return float(np.sqrt(np.mean(np.square(means)))) / k_e / DEG_PER_H
 
@@ -204,6 +245,7 @@ class DwellProblem(AbstractProblem):
 
     def __init__(self, data, k_e, window_s, held):
         self.k_e, self.held = k_e, held
+        self.k_out = float(k_e)  # the current model's output_gain, once one is fitted
         w, self.y, self.c, self.arc = rate_windows(data, k_e, window_s)
         self.w = w
         self.have = covariates_in(data)
@@ -220,12 +262,17 @@ class DwellProblem(AbstractProblem):
         return candidates_for(self.have, nominal)
 
     def fit(self, model):
-        return _fit(model, self.c, self.y, self.sigma, self.train, self.w, self.held, self.k_e)
+        fit = _fit(model, self.c, self.y, self.sigma, self.train, self.w, self.held, self.k_e)
+        self.k_out = output_gain(fit.parameters, self.k_e)
+        return fit
 
     def floor(self):
-        return _floor(self.sigma, self.w, self.held, self.k_e)
+        """The held-out gap the noise alone gives [°/h], at the current model's angular gain
+        (`k_out`: the one the report states)."""
+        return _floor(self.sigma, self.w, self.held, self.k_out)
 
     def after_accept(self, fit):
+        self.k_out = output_gain(fit.parameters, self.k_e)
         return self, fit
 
     def consistency(self, fit, name):
@@ -258,7 +305,7 @@ class DwellProblem(AbstractProblem):
             "wave_angle_deg": np.asarray(w.wave_angle_deg),
             "temperature_c": np.asarray(w.temperature_c),
             "static": np.asarray(w.static),
-            "drift_dph": -np.asarray(fit.resid) / self.k_e / DEG_PER_H,
+            "drift_dph": -np.asarray(fit.resid) / output_gain(fit.parameters, self.k_e) / DEG_PER_H,
         }
 
     @functools.cached_property
@@ -281,7 +328,8 @@ class DwellProblem(AbstractProblem):
     def leftover(self, fit):
         """The strongest shape left in `fit`'s training residual
         ([`describe`][hrgjax.discovery.leftover.describe])."""
-        return leftover.describe(fit.r, fit.j, self.shape_columns, self.k_e)
+        k = output_gain(fit.parameters, self.k_e)
+        return leftover.describe(fit.r, fit.j, self.shape_columns, k)
 
     def row_classes(self):
         """Static (1) and moving (0) training windows: their σ come from different parts of
@@ -289,7 +337,7 @@ class DwellProblem(AbstractProblem):
         return np.asarray(self.w.static)[self.train].astype(int)
 
     def noise_report(self):
-        k_e, w = self.k_e, self.w
+        k_e, w = self.k_out, self.w
         out = dict.fromkeys(NoiseModel(0.0).report(k_e)) if self.nm is None else self.nm.report(k_e)
         out.pop("run_bias_dph")  # one switch-on: its bias is the fitted `bias`
         return out | {
@@ -356,7 +404,7 @@ def _fit(model, c, y, sigma, train, w, held, k_e):
         j=g[train] / sigma[train][:, None],
         chi2=float(r @ r),
         heldout_chi2=heldout_chi2,
-        gap=_gap(resid, w, held, k_e),
+        gap=_gap(resid, w, held, output_gain(params, k_e)),
         resid=resid,
     )
 

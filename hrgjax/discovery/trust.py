@@ -7,13 +7,20 @@ and the windows' σ swing by 2–4× between sessions), and a model with structu
 biased by it. Two corrections, both from the fit's own residual:
 
 1. **Noise scale** (Birge ratio). Each class of rows (static and moving dwell windows,
-   continuous blocks) has its whitened residual's mean square $s_g^2 = \sum r_g^2/(n_g -
-   p\,n_g/n)$: the noise level the data show, not the one the noise model guessed. The
+   continuous blocks) has its whitened residual's mean square $s_g^2 = \sum r_g^2/\nu_g$,
+   $\nu_g = n_g - \sum_{i\in g} h_{ii}$ (h the fit's leverages: the parameters a class
+   fixes are taken from its own degrees of freedom): the noise level the data show, not
+   the one the noise model guessed. The
    reported values keep the noise model's weights, so their variance is the sandwich
    $(A^\top A)^{-1}A^\top \mathrm{diag}(s^2)A(A^\top A)^{-1}$ (which is $s^2(A^\top
    A)^{-1}$ when one scale fits all rows). $s_g$ is read after the structure left (2.) is
    fitted, and the shapes are judged at that level (twice round: a shape inflates the level
-   it is judged at). A class with fewer than `MIN_ROWS` rows keeps its whitening.
+   it is judged at). A class with fewer than `MIN_ROWS` rows (the ≈ 19 static windows of
+   a 5 × 5 dwell grid, whose 60-s runs leave the angle random walk unresolved and their σ
+   2× small) reads its level from its own rows with the small-sample allowance of a level
+   estimated from ν_g degrees of freedom, $s_g^2 = \sum r_g^2/(\nu_g - 2)$ (the variance
+   of Student's t), or, with `SMALL_DOF` or fewer, pooled with the other classes; either
+   way never below 1 (too few rows to vouch for a noise model that is *too pessimistic*).
 2. **Structure left** (model uncertainty). The generic shapes of
    [`leftover`][hrgjax.discovery.leftover] that are still significant (Bonferroni over the
    shapes tried, p < `alpha`) are fitted beside the model, strongest first, up to
@@ -48,22 +55,56 @@ CLASS_NAMES = {0: "moving windows", 1: "static windows", 2: "continuous blocks"}
 """What the row classes of [`row_classes`][hrgjax.discovery.problem.AbstractProblem.row_classes]
 are, for the report."""
 MIN_ROWS = 30
-"""Fewest rows of a class whose noise scale is read from its own residual."""
+"""Fewest rows of a class whose noise scale is read from its own residual as it is; a
+smaller class reads it with a small-sample allowance and never below the noise model's
+(module docstring)."""
+SMALL_DOF = 4.0
+"""A class below `MIN_ROWS` with at most this many degrees of freedom pools its noise level
+with the other classes'."""
 
 
-def _noise_scale(r, p, classes):
-    """Per-row noise scale s (N,) from each class's residual mean square (module docstring)."""
+def _leverage(a):
+    """Diagonal of the hat matrix of the columns `a` (N, p): how much of each row's noise the
+    fit takes (their sum is the rank); invariant to the columns' units."""
+    norm = np.linalg.norm(a, axis=0)
+    live = norm > 0
+    if not live.any():
+        return np.zeros(a.shape[0])
+    u, sv, _ = np.linalg.svd(a[:, live] / norm[live], full_matrices=False)
+    rank = int(np.sum(sv > sv[0] * max(a.shape) * np.finfo(float).eps))
+    return np.sum(u[:, :rank] ** 2, axis=1)
+
+
+def _noise_scale(r, a, classes, weights=None):
+    """Per-row noise scale s (N,) from each class's residual mean square (module docstring):
+    `r` the residual of the fit on the whitened columns `a` weighted by 1/`weights` (the
+    previous scale; None: 1), each class's degrees of freedom n_g − Σ_g h_ii (the leverage
+    its rows carry: static windows fix most of a dwell model's parameters, so an even share
+    p·n_g/n read their scale ≈ 15 % low on a small grid)."""
     n = r.size
     s = np.ones(n)
     if classes is None:
         classes = np.zeros(n, int)
+    w = np.ones(n) if weights is None else np.asarray(weights, float)
+    h = _leverage(a / w[:, None])
+    rss, dof, small = {}, {}, []
     for c in np.unique(classes):
         m = classes == c
-        n_g = int(m.sum())
-        dof = n_g - p * n_g / n
-        rss = float(r[m] @ r[m])
-        if n_g >= MIN_ROWS and dof > 0 and math.isfinite(rss) and rss > 0:
-            s[m] = math.sqrt(rss / dof)
+        rss[c], dof[c] = float(r[m] @ r[m]), float(m.sum() - h[m].sum())
+        if not (math.isfinite(rss[c]) and rss[c] > 0 and dof[c] > 0):
+            continue
+        if m.sum() >= MIN_ROWS:
+            s[m] = math.sqrt(rss[c] / dof[c])
+        else:
+            small.append(c)
+    for c in small:  # too few rows to read a level alone: never below the noise model's
+        m = classes == c
+        if dof[c] > SMALL_DOF:  # its own rows, with the t allowance ν/(ν−2) of a level read from ν
+            level = rss[c] / (dof[c] - 2.0)
+        else:  # pooled with the other classes
+            good = [k for k in rss if math.isfinite(rss[k]) and dof[k] > 0]
+            level = sum(rss[k] for k in good) / sum(dof[k] for k in good)
+        s[m] = math.sqrt(max(level, 1.0))
     return s
 
 
@@ -125,13 +166,13 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
     if classes is not None and len(classes) != n:
         raise ValueError(f"honest: {len(classes)} row classes for a residual of {n} rows")
     cols = {k: v for k, v in shape_columns.items() if v.shape[0] == n}
-    s = _noise_scale(r, p, classes)
+    s = _noise_scale(r, j, classes)
     for _ in range(2):  # the shapes judged at the noise level the data show, and back
         shapes = _shapes_left(r / s, j / s[:, None], {k: v / s[:, None] for k, v in cols.items()},
                               alpha)  # fmt: skip
         a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
         step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
-        s = _noise_scale(r - a @ step, a.shape[1], classes)  # the noise the shapes leave
+        s = _noise_scale(r - a @ step, a, classes, s)  # the noise the shapes leave
     # the reported values are the noise model's weighted fit: the shift and the sandwich
     # variance are that estimator's (with the shapes beside it), at the noise level s
     step, *_ = np.linalg.lstsq(a, r, rcond=None)
