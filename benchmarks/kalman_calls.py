@@ -1,5 +1,5 @@
-"""Eager calls of the Kalman filter and smoother (eleventh session): the second call on new
-data of the same shapes, fused (`hrgjax._compiled.fused`: one compiled program per shape)
+"""Eager calls of the Kalman filter and smoother (eleventh session) and of `steady_state`
+(twelfth): the second call on new data of the same shapes, fused (`hrgjax._compiled.fused`: one compiled program per shape)
 against the plain function (`__wrapped__`, as before: its `lax.scan` traced and compiled on
 every call, a new closure each time). Side by side in one process, best of `--repeat`.
 
@@ -44,12 +44,29 @@ def main() -> None:
                 fn(prior, phi, qd, h, r, zs)[2].block_until_ready()
                 times.append(time.perf_counter() - t0)
             best[label] = min(times)
-        ratio = best["plain (before)"] / best["fused"]
-        print(
-            f"{name}, {k} steps, {n} states, a later eager call: fused "
-            f"{1e3 * best['fused']:.1f} ms, plain {1e3 * best['plain (before)']:.1f} ms "
-            f"(plain / fused {ratio:.0f}×)"
-        )
+        _print(name, f"{k} steps, {n} states", best)
+    best = {}
+    for label, fn in (
+        ("fused", kalman.steady_state),
+        ("plain (before)", kalman.steady_state.__wrapped__),
+    ):
+        fn(phi, qd, h, r, jnp.eye(n), 500)[2].block_until_ready()
+        times = []
+        for _ in range(args.repeat):
+            r_new = r * (1.0 + rng.uniform())
+            t0 = time.perf_counter()
+            fn(phi, qd, h, r_new, jnp.eye(n), 500)[2].block_until_ready()
+            times.append(time.perf_counter() - t0)
+        best[label] = min(times)
+    _print("steady_state", f"500 Riccati steps, {n} states", best)
+
+
+def _print(name, what, best):
+    ratio = best["plain (before)"] / best["fused"]
+    print(
+        f"{name}, {what}, a later eager call: fused {1e3 * best['fused']:.1f} ms, "
+        f"plain {1e3 * best['plain (before)']:.1f} ms (plain / fused {ratio:.0f}×)"
+    )
 
 
 if __name__ == "__main__":

@@ -302,6 +302,7 @@ def unscented_kalman_filter(
     return xs, ps, jnp.sum(ll)
 
 
+@fused(static_argnames="n_iter")  # one program per shape: an eager call compiled every time
 def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
     r"""Converged prior covariance, gain and innovation covariance of a time-invariant model,
     by iterating the Riccati recursion (predict, then the Joseph update) `n_iter` times from

@@ -183,3 +183,23 @@ def test_psd_factor_is_exact_per_state_continuous_and_differentiable():
     h = 1e-6
     fd = (loss(h) - loss(-h)) / (2 * h)
     np.testing.assert_allclose(jax.grad(loss)(0.0), fd, rtol=1e-6)
+
+
+def test_eager_filters_and_steady_state_compile_once_per_shape():
+    """A later eager call on new values of the same shapes runs the program of the first
+    (each compiled its `lax.scan` on every call: ≈ 0.4–1 s, `benchmarks/kalman_calls.py`)
+    and gives the plain function's values."""
+    from helpers import CompileCounter
+
+    zs, r2 = ZS + 0.25, 2.0 * R
+    kalman.kalman_filter(PRIOR, PHI, QD, H, R, ZS)
+    kalman.steady_state(PHI, QD, H, R, PRIOR.P, 9)
+    with CompileCounter() as again:
+        kf = kalman.kalman_filter(PRIOR, PHI, QD, H, r2, zs)
+        ss = kalman.steady_state(PHI, QD, H, r2, PRIOR.P, 9)
+    assert again.compiles == 0, again.names
+    plain = kalman.steady_state.__wrapped__(PHI, QD, H, r2, PRIOR.P, 9)
+    for a, b in zip(ss, plain, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-13)
+    np.testing.assert_allclose(kf[2], kalman.kalman_filter.__wrapped__(PRIOR, PHI, QD, H, r2, zs)[2],
+                               rtol=1e-13)  # fmt: skip
