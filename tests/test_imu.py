@@ -538,3 +538,20 @@ def test_save_keeps_the_sample_rate_exactly(tmp_path):
     thinned.write_text("\n".join(["# rate_hz = nan"] + lines[1:]) + "\n")
     with pytest.raises(ValueError, match=r"line 1: the comment '# rate_hz = nan' must give"):
         hg.imu.load(thinned, columns=hg.imu.SI_COLUMNS, units=hg.imu.SI_UNITS)
+
+
+def test_imu_load_reads_a_file_as_the_data_contract_does(tmp_path):
+    """`imu.load` reads through the one CSV reader: a trailing `# note` after the numbers of
+    a row is text in a number's place, named with its line — its own NumPy fast path took
+    it as a comment and dropped it silently, where `MeasuredData` refuses the same file."""
+    path = tmp_path / "imu.csv"
+    rows = [f"{0.01 * i:.2f},1,2,3,4,5,6" for i in range(5)]
+    rows[2] += " # a note"
+    path.write_text("t,gx,gy,gz,ax,ay,az\n" + "\n".join(rows) + "\n")
+    cols = {"gyro": ["gx", "gy", "gz"], "accel": ["ax", "ay", "az"], "time": "t"}
+    units = {"gyro": "rad/s", "accel": "m/s^2"}
+    with pytest.raises(ValueError, match=r"line 4 of the file\): '6 # a note' is not a number"):
+        hg.imu.load(path, cols, units, check_units=False)
+    rows[2] = rows[2].split(" #")[0]
+    path.write_text("t,gx,gy,gz,ax,ay,az\n" + "\n".join(rows) + "\n")
+    np.testing.assert_array_equal(hg.imu.load(path, cols, units, check_units=False).gyro[:, 2], 3.0)

@@ -13,7 +13,6 @@ import dataclasses
 import math
 import os
 import re
-import warnings
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -247,13 +246,7 @@ def load(
     comment = None  # (line, text) of the file's `# rate_hz = …` when the rate comes from it
     if rate_hz is None:
         rate_hz, comment = _saved_rate(path)
-    fast = _fast_columns(path, _all_names(names))
-    if fast is not None:  # plain numeric columns: NumPy's C parser, 4× faster
-        try:
-            return _build(path, names, fast, None, units, rate_hz, check_units)
-        except ValueError:
-            pass  # read again below, so that the error names the file's line
-    table, lines = read_csv_table(path)
+    table, lines = read_csv_table(path)  # a plain numeric file: NumPy's C parser, streamed
     try:
         return _build(path, names, table, lines, units, rate_hz, check_units)
     except ValueError as err:
@@ -341,33 +334,6 @@ def _saved_rate(path: str) -> tuple[float | None, tuple[int, str] | None]:
     except UnicodeDecodeError:
         return None, None  # the CSV reader names the line
     return None, None
-
-
-def _fast_columns(path: str, wanted: list[str]) -> dict[str, np.ndarray] | None:
-    """The `wanted` columns of a plain numeric CSV by `np.loadtxt`, or None when the file is
-    anything but plain (then the validating reader runs and names what is wrong)."""
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            skip = 0
-            for line in fh:
-                skip += 1
-                if line.strip() and not line.lstrip().startswith("#"):
-                    break
-            else:
-                return None
-        header = [h.strip() for h in line.rstrip("\r\n").split(",")]
-        if len(set(header)) != len(header) or any(w not in header for w in wanted):
-            return None
-        # every column, so that a row with more or fewer fields than the header is refused
-        with warnings.catch_warnings():  # "input contained no data": named by _build
-            warnings.simplefilter("ignore", UserWarning)
-            data = np.loadtxt(path, delimiter=",", comments="#", skiprows=skip, ndmin=2,
-                              dtype=float, encoding="utf-8-sig")  # fmt: skip
-    except (ValueError, OSError, UnicodeDecodeError):
-        return None
-    if data.shape[0] == 0 or data.shape[1] != len(header):
-        return None
-    return {w: np.ascontiguousarray(data[:, header.index(w)]) for w in wanted}
 
 
 def _is_number(v) -> bool:
