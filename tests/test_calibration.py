@@ -649,3 +649,79 @@ def test_run_plan_sorts_points_by_rate_and_returns_the_plans_order():
         np.testing.assert_allclose(ordered[k], plain[k], rtol=1e-12, atol=1e-11, err_msg=k)
     first = ordered.columns["table_rate_dps"][ordered.run == 0]
     np.testing.assert_allclose(first, rates[0])
+
+
+def _restart_moves(fit_a, fit_b) -> dict:
+    """How far a fit restarted from `fit_a`'s values moved (`fit_b`), in `fit_a`'s σ's."""
+    pa, pb = fit_a.parameters(), fit_b.parameters()
+    return {n: (pb[n][0] - pa[n][0]) / pa[n][1] for n in pa}
+
+
+def test_physical_fit_weighs_each_kind_by_its_scatter_at_the_solution(monkeypatch):
+    """`fit_values` on a linear stand-in for the simulator (host arrays, no simulator to
+    compile): the start fits the moving windows 30× worse than their noise (as the harmonic
+    start does on a plan with ramps), the at-rest ones to their noise. The fit must end at
+    the weighted least squares whose weights (each kind's scatter at the solution) and σ's
+    it reports — the same as a fit restarted from its result, to 0.05 of each σ — not at the
+    optimum of the starting weights (Levenberg–Marquardt alone: 1.1 σ away)."""
+    from hrgjax.calibration import _physical_fit as pf
+
+    rng = np.random.default_rng(3)
+    p = len(physical.NAMES)
+    sig = {True: 1e-7, False: 1e-6}  # each kind's noise [rad/s]
+    a_rest = rng.standard_normal((30, p)) * sig[True] / np.sqrt(30)
+    a_rest[:, p // 2 :] = 0.0  # the at-rest windows see the first half of the parameters only
+    a_mov = rng.standard_normal((60, p)) * sig[False] / np.sqrt(60)
+    x_true = np.where(np.arange(p) < p // 2, 0.0, 30.0)  # far in what only moving windows see
+    y = {True: a_rest @ x_true + sig[True] * rng.standard_normal(30),
+         False: a_mov @ x_true + sig[False] * rng.standard_normal(60)}  # fmt: skip
+    scale = np.asarray(physical.SCALE)
+
+    def residuals_jacobian(groups, values, k_e):
+        x = np.asarray(values) / scale
+        return ({True: y[True] - a_rest @ x, False: y[False] - a_mov @ x},
+                {True: -a_rest, False: -a_mov})  # fmt: skip
+
+    monkeypatch.setattr(pf, "residuals_jacobian", residuals_jacobian)
+    monkeypatch.setattr(pf, "window_weights", lambda g: {True: np.ones(30), False: np.ones(60)})
+    values, _, r, sigma, jac = pf.fit_values(None, np.zeros(p), K, 200)
+    again, _, _, _, _ = pf.fit_values(None, values, K, 200)
+    err = np.sqrt(np.diag(np.linalg.inv(jac.T @ jac)))
+    assert np.max(np.abs(again - values) / err) < 0.05
+    # the weighted least squares with the reported weights, solved directly
+    w = np.concatenate([np.full(30, 1 / sigma[True]), np.full(60, 1 / sigma[False])])
+    a = np.concatenate([a_rest, a_mov]) * w[:, None]
+    best = np.linalg.lstsq(a, np.concatenate([y[True], y[False]]) * w, rcond=None)[0] * scale
+    assert np.max(np.abs(values - best) / err) < 0.05
+    np.testing.assert_allclose(r[True], y[True] - a_rest @ (values / scale), atol=1e-12)
+
+
+@pytest.mark.slow(
+    "~25 s (compiling the fit's simulator); fast tier: "
+    "test_physical_fit_weighs_each_kind_by_its_scatter_at_the_solution (a linear stand-in)"
+)
+def test_physical_fit_restarted_from_its_result_stays_on_a_plan_with_ramps():
+    """The audit's case made small (3 levels, 2 static and 2 rotation minutes each, two 10-min
+    ramps between them): the harmonic start fits the moving windows ~10× worse than their
+    noise, so Levenberg–Marquardt alone, weighing them by that, stopped 1.3 σ (bias1: 1.2 σ)
+    from where a fit restarted from its result goes. Now the restart moves no parameter by
+    more than 0.05 of its σ."""
+    from hrgjax.calibration import design
+
+    segs = []
+    levels = (-40.0, 10.0, 60.0)
+    for k, temp in enumerate(levels):
+        segs += [{"kind": "static", "temperature_c": temp, "wave_angle_deg": a,
+                  "duration_s": 60.0} for a in (-60.0, 30.0)]  # fmt: skip
+        segs += [{"kind": "rotation", "temperature_c": temp, "wave_angle_deg": a,
+                  "rate_dps": 5.0, "duration_s": 60.0} for a in (0.0, 45.0)]  # fmt: skip
+        if k < 2:
+            segs.append({"kind": "ramp", "temperature_start_c": temp, "wave_angle_deg": 30.0,
+                         "temperature_end_c": levels[k + 1], "duration_s": 600.0})  # fmt: skip
+    plan = design.BenchPlan.from_segments(segs)
+    data = design.simulate_plan(hg.presets.tvg3_like(), plan, key=jax.random.key(102),
+                                bias_key=jax.random.key(999))  # fmt: skip
+    fit = PhysicalCompensator().fit(data)
+    again = PhysicalCompensator(initial=fit.values).fit(data)
+    moves = _restart_moves(fit, again)
+    assert max(abs(m) for m in moves.values()) < 0.05, moves

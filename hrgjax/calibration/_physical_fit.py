@@ -1,7 +1,7 @@
 """The physical fit's least squares: the model's window rates simulated and reduced as the
 measured ones (`simulated_rates`), the weighted residuals and their Jacobian, the PI loops'
-pull (`loop_pull`), Levenberg–Marquardt (`fit_values`) and the residual scatter of each kind
-of window (`scatter_per_dof`)."""
+pull (`loop_pull`), Levenberg–Marquardt finished by reweighted Gauss–Newton (`fit_values`)
+and the residual scatter of each kind of window (`scatter_per_dof`)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import optimistix as optx
 
 from .._compiled import Check, device, first_failure, program
 from .._least_squares import least_squares_with_jacobian
+from .._progress import bar
 from ..profiles import Profile
 from ..simulate import simulate
 from ._physical_groups import Group, masked_slopes, window_weights
@@ -136,31 +137,75 @@ def scatter_per_dof(residuals, jac, weights, iterations: int = 4) -> dict:
     return sigma
 
 
+POLISH_STEPS = 8
+"""Most simulator evaluations of the reweighted Gauss–Newton after Levenberg–Marquardt
+(`fit_values`); step halvings count."""
+POLISH_TOL = 0.01
+"""The reweighted Gauss–Newton stops when no parameter's step exceeds this fraction of its
+own standard error (from the same Jacobian)."""
+
+
+def gauss_newton_step(r_w, jac_w):
+    """The Gauss–Newton step dx minimising ‖r_w + J_w dx‖ and the standard error of each x
+    from the same Jacobian (√diag (JᵀJ)⁻¹), by the SVD of the σ-weighted Jacobian; (None,
+    None) when J_w is rank-deficient (the covariance then names the parameters the data
+    leave unidentified)."""
+    u, s, vt = np.linalg.svd(np.asarray(jac_w), full_matrices=False)
+    if not (s.size and np.all(np.isfinite(s)) and s[-1] > s[0] * 1e-13):
+        return None, None
+    dx = -vt.T @ ((u.T @ np.asarray(r_w)) / s)
+    return dx, np.sqrt(np.sum((vt.T / s) ** 2, axis=1))
+
+
+def _weigh(r, jac, sigma):
+    """Residuals and Jacobians of both kinds divided by their kind's σ, stacked (at rest
+    first)."""
+    kinds = (True, False)
+    return (
+        np.concatenate([np.asarray(r[k]) / sigma[k] for k in kinds]),
+        np.concatenate([np.asarray(jac[k]) / sigma[k] for k in kinds]),
+    )
+
+
 def fit_values(groups, x0, k_e, max_steps):
     """The fit of the parameters from `x0` over `groups`: weights, Levenberg–Marquardt (one
-    compiled step at a time, with a progress bar), final residuals and Jacobian; returns
-    (values, steps, residuals, σ of each kind, σ-weighted Jacobian in the parameters).
+    compiled step at a time, with a progress bar), Gauss–Newton with the weights re-estimated
+    at the solution, final residuals and Jacobian; returns (values, steps, residuals, σ of
+    each kind, σ-weighted Jacobian in the parameters), the residuals, σ's and Jacobian those
+    at the returned values; `steps` counts Levenberg–Marquardt's steps and Gauss–Newton's
+    evaluations.
 
-    Weights: the residual scatter of each kind of window (at rest, moving) at the starting
-    values (robust: median absolute deviation; the harmonic start is close), re-estimated
-    after the fit for the covariance. The solver is optimistix's Levenberg–Marquardt, fed
-    the residuals and Jacobian of `residuals_jacobian` at each point it evaluates
-    (`least_squares_with_jacobian`), so the simulator is compiled once per fit, not twice."""
+    Levenberg–Marquardt weighs each kind of window (at rest, moving) by its residual scatter
+    at the starting values (robust: median absolute deviation, which a far start's few bad
+    windows do not inflate). The solver is optimistix's Levenberg–Marquardt, fed the
+    residuals and Jacobian of `residuals_jacobian` at each point it evaluates
+    (`least_squares_with_jacobian`), so the simulator is compiled once per fit, not twice.
+
+    Those weights can be far off: the harmonic start fits the moving windows much worse than
+    the solution does (10× their noise on a plan with temperature ramps), so the moving
+    windows weigh ~100× too little, the fit lands many of its reported σ's from the
+    optimum of the weights it reports (gain_mismatch1 by 7 σ), a fit restarted from its
+    result moves, and the scatter over seeds exceeds the σ's. So Gauss–Newton steps follow
+    (`_reweighted_gauss_newton`): each kind's σ re-estimated at the current point as the
+    covariance's (`scatter_per_dof`), then a step on the weighted residuals from the
+    residuals and Jacobian `residuals_jacobian` gives there (host linear algebra, no new
+    program), until no parameter's step exceeds `POLISH_TOL` of its standard error (at most
+    `POLISH_STEPS` evaluations; a step halved while it raises the cost). The returned values
+    are then the weighted least squares whose weights and covariance the fit reports."""
     weights = window_weights(groups)
     x0 = np.asarray(x0)
     at = {}  # host copies of the last evaluation: {True/False: residuals}, Jacobians
 
-    def weighted(x):
+    def evaluate(x):
         # Host arithmetic between the compiled programs (eager jnp would compile each op).
         r, jac = residuals_jacobian(groups, device(x0 + np.asarray(x) * SCALE), k_e)
-        at["r"], at["jac"] = {k: np.asarray(v) for k, v in r.items()}, jac
+        return {k: np.asarray(v) for k, v in r.items()}, {k: np.asarray(v) for k, v in jac.items()}
+
+    def weighted(x):
+        at["r"], at["jac"] = evaluate(x)
         if "sigma" not in at:  # the first call: at the starting values
             at["sigma"] = robust_scatter(at["r"], weights)
-        sigma = at["sigma"]
-        kinds = (True, False)
-        r_w = np.concatenate([at["r"][k] / sigma[k] for k in kinds])
-        jac_w = np.concatenate([np.asarray(jac[k]) / sigma[k] for k in kinds])
-        return device(r_w), device(jac_w)
+        return tuple(device(a) for a in _weigh(at["r"], at["jac"], at["sigma"]))
 
     # The problem is scaled so that one unit of x is about one standard error: stopping at
     # 1e-4 of that is far below anything the data can tell. Absolute only: a tolerance
@@ -176,11 +221,39 @@ def fit_values(groups, x0, k_e, max_steps):
     message = first_failure(result, optx.RESULTS)
     if message is not None:
         raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
-    values = x0 + np.asarray(x) * SCALE
     # `least_squares_with_jacobian` evaluated last at the solution: `at` holds it, unweighted.
-    r1, jac1 = at["r"], at["jac"]
-    sigma1 = scatter_per_dof(r1, {k: np.asarray(v) for k, v in jac1.items()}, weights)
-    jac = np.concatenate(
-        [np.asarray(jac1[True]) / sigma1[True], np.asarray(jac1[False]) / sigma1[False]]
+    x, r1, jac1, sigma1, evaluations = _reweighted_gauss_newton(
+        evaluate, weights, np.asarray(x), at["r"], at["jac"]
     )
-    return values, steps, r1, sigma1, jac / np.asarray(SCALE)[None, :]
+    _, jac = _weigh(r1, jac1, sigma1)
+    return x0 + x * SCALE, steps + evaluations, r1, sigma1, jac / np.asarray(SCALE)[None, :]
+
+
+def _reweighted_gauss_newton(evaluate, weights, x, r, jac):
+    """Gauss–Newton from `x` (residuals `r`, Jacobians `jac` there, unweighted) with each
+    kind's σ re-estimated at every point (`fit_values`): (x, r, jac, σ's, evaluations)."""
+    evaluations = 0
+    with bar(None, "physical fit (Gauss–Newton, reweighted)") as progress:
+        while True:
+            sigma = scatter_per_dof(r, jac, weights)
+            if not all(np.isfinite(s) and s > 0 for s in sigma.values()):
+                break  # noise-free (or degenerate) data: no weights to re-estimate
+            r_w, jac_w = _weigh(r, jac, sigma)
+            dx, err = gauss_newton_step(r_w, jac_w)
+            if dx is None or np.max(np.abs(dx) / err) <= POLISH_TOL:
+                break
+            cost = 0.5 * float(r_w @ r_w)
+            while evaluations < POLISH_STEPS:
+                r_new, jac_new = evaluate(x + dx)
+                evaluations += 1
+                r_w, _ = _weigh(r_new, jac_new, sigma)
+                new_cost = 0.5 * float(r_w @ r_w)
+                progress.update(1)
+                progress.set_postfix_str(f"χ²/2 {new_cost:.6g}")
+                if np.isfinite(new_cost) and new_cost <= cost:
+                    x, r, jac = x + dx, r_new, jac_new
+                    break
+                dx = dx / 2
+            else:
+                break  # out of evaluations, the last step not taken: x is the last point
+    return x, r, jac, sigma, evaluations
