@@ -210,13 +210,17 @@ def rate_windows(data: MeasuredData, k_e: float, window_s: float):
 
 def output_gain(parameters: dict, k_e: float) -> float:
     """The angular gain that turns a fit's pattern rates into input rates: the fit's own
-    `angular_gain` where the data determine it, else the nominal `k_e` — the gain `discover`
-    reports its parameters at (`search._fitted_k_e`), so the
-    gaps and the noise floor are on the same scale as the parameters (a nominal 0.277 passed
-    for 0.554 once doubled them)."""
-    from .search import _fitted_k_e  # search imports this module
-
-    return _fitted_k_e(parameters, k_e)
+    `angular_gain` where the data determine it (rotations: within 10 %), else the nominal
+    `k_e` (static data leave it free) — the gain `discover` reports its parameters at, so
+    the gaps and the noise floor are on the same scale as the parameters (a nominal 0.277
+    passed for 0.554 once doubled them)."""
+    p = parameters.get("angular_gain", {}).get("k_e")
+    if p is None or not np.isfinite(p["value"]) or p["value"] <= 0:
+        return float(k_e)
+    std = p.get("std")
+    if std is None or not np.isfinite(std) or std > 0.1 * p["value"]:
+        return float(k_e)
+    return float(p["value"])
 
 
 def _gap(resid, w: RateWindows, runs, k_e):

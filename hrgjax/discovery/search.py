@@ -44,7 +44,7 @@ from ..data import MeasuredData
 from ..noise import Noise
 from . import leftover, stats, trust
 from .continuous import BLOCK_S, ContinuousProblem
-from .dwell import DwellProblem
+from .dwell import DwellProblem, output_gain
 from .effects import CATALOGUE, NOMINAL
 from .noise import NoiseModel as NoiseModel
 from .noise import noise_model as noise_model
@@ -245,7 +245,7 @@ def discover(
         metric=METRIC,
         structure_left=bool(left),
         fit_parameters=parameters,
-        k_e=_fitted_k_e(parameters, k_e),
+        k_e=output_gain(parameters, k_e),
         ranking=tuple(
             {"effect": r["effect"], "score": r["score"], "params": r["params"]} for r in ranking
         ),
@@ -267,18 +267,6 @@ def discover(
         leftover=problem.leftover(current),
         uncertainty=uncertainty,
     )
-
-
-def _fitted_k_e(parameters: dict, k_e: float) -> float:
-    """The fitted angular gain where the data determine it (rotations: within 10 %), else
-    the nominal `k_e` (static data leave it free)."""
-    p = parameters.get("angular_gain", {}).get("k_e")
-    if p is None or not np.isfinite(p["value"]) or p["value"] <= 0:
-        return float(k_e)
-    std = p.get("std")
-    if std is None or not np.isfinite(std) or std > 0.1 * p["value"]:
-        return float(k_e)
-    return float(p["value"])
 
 
 SHAPES = ("auto", "dwell", "continuous", "mixed")
