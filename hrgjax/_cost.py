@@ -67,13 +67,14 @@ def steps_per_s(precession):
 def steps_estimate(gyro, profile, model: str = "averaged"):
     """Expected solver steps of `simulate(gyro, profile, model)` (module docstring): the run's
     length [s] times the steps per second of `STEPS_PER_S` (averaged) or of `CARRIER_STEPS`
-    per carrier cycle (full), at the largest precession rate |k_eΩ| of the profile."""
+    per carrier cycle (full), at the largest precession rate |k_eΩ| of the profile, and at
+    least one step per `resonator.control.max_step` (fast loops bound the step)."""
     from .resonator.control import max_step
 
     g = gyro.at(jnp.mean(profile.temperature))
     duration = profile.t[-1] - profile.t[0]
     per_s = steps_per_s(jnp.max(jnp.abs(g.resonator.k_e * profile.rate)))
-    per_s = jnp.maximum(per_s, 1.0 / max_step(gyro.control, model))  # fast loops' bound
+    per_s = jnp.maximum(per_s, 1.0 / max_step(gyro.control, model, profile.temperature))
     if model != "averaged":
         per_s = per_s + CARRIER_STEPS * jnp.abs(g.resonator.omega) / (2 * np.pi)
     return duration * per_s
@@ -127,7 +128,8 @@ def default_max_steps(gyro, profile, model: str) -> int:
     """The step limit `simulate` gives the adaptive solver: `MAX_STEPS[model]`, or for the
     averaged model on a concrete profile (or batch of profiles: the most any member needs)
     that needs more, the power of two ≥ 4 × its expected steps (`steps_per_s` at the
-    profile's largest |k_e Ω|, k_e taken as 1 where it is traced or a temperature law): a
+    profile's largest |k_e Ω|, k_e taken as 1 where it is traced or a temperature law; at
+    least one step per `resonator.control.max_step` where the loops' bandwidths are concrete): a
     long or fast run (an hour at 100 °/s is ≈ 7.7·10⁴ steps, a day at rest ≈ 10⁵) is
     solved, not stopped at the limit. A power of two, so that runs of similar length share
     one program."""
@@ -143,7 +145,7 @@ def default_max_steps(gyro, profile, model: str) -> int:
     k = 1.0 if k_e is None else float(np.max(np.abs(k_e)))
     span = float(np.max(t[..., -1] - t[..., 0]))  # a batch of profiles: its longest
     per_s = float(steps_per_s(k * np.max(np.abs(rate))))
-    longest = concrete_value(max_step(gyro.control, model))  # fast loops bound the step
+    longest = concrete_value(max_step(gyro.control, model, profile.temperature))
     per_s = per_s if longest is None else max(per_s, float(np.max(1.0 / longest)))
     need = 4.0 * span * per_s
     return base if need <= base else int(2 ** math.ceil(math.log2(need)))

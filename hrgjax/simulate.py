@@ -264,7 +264,7 @@ def _solve(
     controller = diffrax.ConstantStepSize()
     if not fixed:  # the loops' time constants bound the step (`max_step`)
         controller = diffrax.PIDController(
-            rtol=rtol, atol=atol, dtmax=max_step(gyro.control, model)
+            rtol=rtol, atol=atol, dtmax=max_step(gyro.control, model, profile.temperature)
         )
     if profile.t.shape[0] > 2 and not fixed:
         controller = diffrax.ClipStepSizeController(controller, jump_ts=profile.t[1:-1])

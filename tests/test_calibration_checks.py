@@ -297,6 +297,11 @@ def test_a_rate_tables_readback_jitter_and_a_thermometers_noise_leave_a_static_r
         assert len(b) == len(a) == 1 and bool(b.static[0])
         np.testing.assert_allclose(b.drift_dph, a.drift_dph, rtol=1e-12)
     assert bool(hg.MeasuredData(noisy).stacked()[0].static[0])
+    for cols in (clean, noisy):  # the accuracy table: a static run, its drift error
+        done = hg.MeasuredData(dict(cols, angle_corrected_deg=1.5 / 3600.0 * t))
+        table = cal.corrected_run_errors(done)
+        assert list(table["static"]) == [True]
+        np.testing.assert_allclose(table["drift_error_dph"], 1.5, rtol=1e-9)
     # the turned table (0.3° over the minute: 5e-3 °/s) is a moving run
     turning = dict(clean, table_rate_dps=np.full(t.size, 5e-3), table_angle_deg=5e-3 * t)
     assert not bool(hg.MeasuredData(turning).stacked()[0].static[0])

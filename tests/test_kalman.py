@@ -167,6 +167,9 @@ def test_psd_factor_is_exact_per_state_continuous_and_differentiable():
     scale = np.where(np.outer(d, d) > 0, np.outer(d, d), 1.0)
     assert np.max(np.abs(np.asarray(low @ low.T - m)) / scale) < 1e-12
     assert np.all(np.asarray(low)[[3, 5]] == 0.0)
+    # not PSD beyond round-off (Cauchy–Schwarz broken 10¹⁴×): bounded, not LLᵀ₁₁ = 100
+    bad = kalman.psd_factor(jnp.array([[1e-30, 1e-14], [1e-14, 1.0]]))
+    assert float((bad @ bad.T)[1, 1]) <= 1.0 + 1e-12
     # continuity: a change in the last bits of M changes L in its last bits too
     m2 = jnp.array([[2.0, 0.1], [0.1, 2.0]])
     tweak = jnp.array([[1e-9, 0.0], [0.0, -1e-9]])

@@ -240,3 +240,21 @@ def test_loops_at_exact_equilibrium_give_the_right_sensitivities():
     fd = (loss(at(h)) - loss(at(-h))) / (2 * h)
     assert abs(float(fd)) > 1e-2  # the loss does respond (≈ 0.03)
     np.testing.assert_allclose(float(tangent), float(fd), rtol=1e-5)
+
+
+def test_a_loop_bandwidth_may_follow_a_temperature_law():
+    """A bandwidth given as a temperature law bounds the step at its largest value over the
+    profile's temperatures (the bound crashed on a law: "maximum requires ndarray")."""
+    from hrgjax.resonator.control import LOOP_STEPS, max_step
+    from hrgjax.simulate import default_max_steps
+
+    gyro = hg.presets.tvg3_like(noise=False, temperature_laws=False)
+    law = hg.TemperatureLaw(2.0, 0.1)  # 2 rad/s at 25 °C, +0.1 rad/s per °C
+    warm = eqx.tree_at(lambda g: g.control.pll_bandwidth, gyro, law)
+    temps = np.array([20.0, 40.0])
+    beta = float(np.max(law(jnp.asarray(temps))))
+    assert float(max_step(warm.control, "averaged", temps)) == pytest.approx(LOOP_STEPS / beta)
+    prof = hg.Profile.static(4.0, 40.0, 30.0)
+    assert default_max_steps(warm, prof, "averaged") >= 1
+    rec = hg.simulate(warm, prof, dt_out=1.0)
+    np.testing.assert_allclose(rec.amplitude, 1.0, rtol=1e-2)  # the AGC holds its set point

@@ -13,6 +13,7 @@ import numpy as np
 
 from .._compiled import device
 from ..data import MeasuredData
+from ..pattern_noise import TEMPERATURE_TOLERANCE_C
 from ._grouping import ladder, partition
 from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, least_squares_slope
 
@@ -199,7 +200,8 @@ def _group(stacks, length: int, window_s: float, k_e: float) -> Group:
     n_ramp = min(max(int(round(RAMP_WINDOW_S / dt)), 4), length)
     rows = []  # per run: (n, t, theta, rate, temperature, accel, kind)
     for st in stacks:
-        ramp = st.static & (np.ptp(st.temperature, axis=1) > 0.0)
+        # a ramp: at rest, the temperature moving by more than a thermometer's noise
+        ramp = st.static & (np.ptp(st.temperature, axis=1) > TEMPERATURE_TOLERANCE_C)
         kind = np.where(~st.static, "moving", np.where(ramp, "ramp", "static"))
         ext = (
             _extend(st.t, length, True),

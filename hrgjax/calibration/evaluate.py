@@ -90,7 +90,10 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
     With $b$ = `offset_dph` taken off the compensated rate, for a run of duration $T$ whose
     compensated case angle is $\hat\phi(t)$ (0 at its start) and table angle $\phi(t)$:
 
-    - static runs (table rate 0 throughout): `drift_error_dph` $= \hat\phi(T)/T - b$ [°/h];
+    - static runs (|table rate| within
+      [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS] throughout: a rate table's
+      readback jitter is rest; a slower rotation counts as static, its turn subtracted):
+      `drift_error_dph` $= (\hat\phi(T) - \Delta\phi)/T - b$ [°/h];
     - moving runs: `angle_error_deg` $= \hat\phi(T) - b\,T - \Delta\phi$ [°] and
       `max_angle_error_deg` $= \max_t |\hat\phi(t) - b\,(t - t_0) - (\phi(t) - \phi(t_0))|$ [°]
       ($b$ converted to °/s).

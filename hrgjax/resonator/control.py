@@ -162,26 +162,36 @@ LOOP_STEPS = 3.0
 (1/bandwidth): `max_step`."""
 
 
-def max_step(control: Control, model: str = "averaged"):
+def max_step(control: Control, model: str = "averaged", temperatures_c=None):
     r"""The longest step [s] the adaptive solver may take with these loops: `LOOP_STEPS` /
-    (the largest closed-loop bandwidth β, rad/s), ∞ with no loop integrated.
+    (the largest closed-loop bandwidth β, rad/s), ∞ with no loop integrated. A bandwidth
+    that follows a temperature law counts at its largest over `temperatures_c` [°C] (the
+    profile's; its reference temperature when not given).
 
     Why a bound: a closed loop's linearisation has its double pole at −β, and an explicit
-    Runge–Kutta step is stable only for $heta$ ≲ 3.3 (Tsit5 and Dopri5 on the real axis).
+    Runge–Kutta step is stable only for $h\beta$ ≲ 3.3 (Tsit5 and Dopri5 on the real axis).
     A run whose loops sit exactly at their equilibrium (a gyro with no defects, or defects of
     1e-7, at rest, noise off) gives the step-size controller nothing to measure, so its steps
-    grow to several seconds; the run is right, but its sensitivities, which the loops drive
-    through the same unstable steps, are not (`jax.grad` of the amplitude or the
-    quadrature came out with the wrong sign and 10⁶ too large against finite differences).
-    At $heta = 3$ every loop is stable on its step, and a run with defects, whose
-    controller already holds its steps near that limit (1.3 s at β = 2 rad/s at rest), is
-    unchanged: `benchmarks/max_step.py` prints the steps and gradients with and without."""
+    grow to minutes; its sensitivities, which the loops drive through the same unstable
+    steps, came out wrong (`jax.grad` of the amplitude or the quadrature with the wrong sign
+    and 10⁶ too large against central differences), and the run itself moved by the solver's
+    tolerance. At $h\beta = 3$ every loop is stable on its step, and a run with defects,
+    whose controller already holds its steps near that limit (1.3 s at β = 2 rad/s at rest),
+    takes as many steps or fewer: `benchmarks/max_step.py` prints the steps and gradients
+    with and without."""
     if not control.enabled or (control.ideal and model == "averaged"):
         return jnp.inf
     rates = [control.pll_bandwidth, control.agc_bandwidth, control.quadrature_bandwidth]
     if control.mode == "ftr":
         rates.append(control.rebalance_bandwidth)
-    fastest = functools.reduce(jnp.maximum, rates)  # broadcasts over a batch of gyros
+
+    def largest(rate):
+        if not isinstance(rate, TemperatureLaw):
+            return rate
+        t = rate.t_ref if temperatures_c is None else jnp.asarray(temperatures_c)
+        return jnp.max(rate(t))
+
+    fastest = functools.reduce(jnp.maximum, [largest(r) for r in rates])  # (a batch: each)
     return jnp.where(fastest > 0, LOOP_STEPS / jnp.where(fastest > 0, fastest, 1.0), jnp.inf)
 
 
