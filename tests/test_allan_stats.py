@@ -560,3 +560,23 @@ def test_gapped_edf_pools_the_gap_free_segments():
         r = allan.deviation(y, 1.0, taus=[m])
         assert r.alpha[0] == 0 and r.n_terms[0] == len(windows)
         assert r.edf[0] == pytest.approx(quadratic_form_edf(rows), rel=0.1), m
+
+
+def test_gapped_flicker_noise_keeps_one_records_edf():
+    """Flicker rate noise's differences stay correlated across a gap, so pooling the
+    segments as independent would overstate the EDF: where α = −1 is identified the EDF is
+    that of one record with as many terms (Greenhall on n_terms + 2m points), the
+    conservative one; the white-noise τ beside it still pools."""
+    rng = np.random.default_rng(4)
+    n = 4000
+    f = np.fft.rfftfreq(n)
+    w = np.fft.rfft(rng.normal(size=n))
+    w[1:] /= np.sqrt(f[1:])
+    w[0] = 0.0
+    y = np.fft.irfft(w, n)
+    y[25::50] = np.nan
+    r = allan.deviation(y, 1.0, taus=[4, 16])
+    assert list(r.alpha) == [-1, -1]
+    for m, t, e in zip(r.m, r.n_terms, r.edf, strict=True):
+        one = allan.edf_greenhall(-1, 2, int(m), int(t + 2 * m), overlapping=True, modified=False)
+        assert e == pytest.approx(one, rel=1e-12)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import functools
 import math
 import numbers
 
@@ -172,7 +173,8 @@ def deviation(
     compiled curve: [`hrgjax.allan.gaps`][hrgjax.allan.gaps]; the noise type read on the
     bridged record, an approximation). The EDF pools the gap-free segments' Greenhall EDFs,
     (Σ nₛ)²/Σ nₛ²/EDFₛ over segments of nₛ terms: fragments are less correlated than one
-    record with as many terms. `n_terms` counts the differences used.
+    record with as many terms — except for flicker noise (α = ±1), whose differences stay
+    correlated across a gap: there one record's EDF, a conservative one. `n_terms` counts the differences used.
 
     One compiled program per kind and data length serves every τ grid (factors are run-time
     values, padded to a power-of-two count), so a new grid compiles nothing.
@@ -266,8 +268,11 @@ def deviation(
     alpha = noise_id(x, m, dmax=dmax, rule=noise_rule, overlapping=kind not in ("adev", "hdev"))
     edf = np.asarray([_edf(kind, int(a), int(k), int(n))
                       for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
-    if gaps:  # the gap-free segments' EDFs summed (their differences are independent)
-        edf = np.asarray([_gapped_edf(kind, int(a), int(k), int(t), segments, e)
+    if gaps:  # the gap-free segments' EDFs pooled: their differences are independent for
+        # white angle noise, white rate noise and a rate random walk, not for flicker noise
+        # (α = ±1: long-range correlated), which keeps one record's EDF (conservative)
+        edf = np.asarray([e if abs(int(a)) == 1 else
+                          _gapped_edf(kind, int(a), int(k), int(t), segments, e)
                           for a, k, t, e in zip(alpha, m, n_terms, edf, strict=True)])  # fmt: skip
     if not gaps and kind not in ("mtotdev", "ttotdev"):
         dev = np.asarray(pending)[: m.size]
@@ -365,6 +370,7 @@ def _gapped_edf(kind: str, alpha: int, m: int, n_terms: int, segments, fallback)
     return max(held * n_terms / spread, 1.0)
 
 
+@functools.lru_cache(maxsize=65536)  # a gapped record asks for each segment length per τ
 def _edf(kind: str, alpha: int, m: int, n: int) -> float:
     if kind == "totdev":
         return edf_totdev(alpha, m, n)
