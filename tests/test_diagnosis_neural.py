@@ -84,7 +84,7 @@ def test_predictor_bank_names_the_onset_by_least_residual(data):
                                       onset_within_last=3)  # fmt: skip
         sets.append(nl.predictor_set(w))
     # 20 hidden units, not the default 50: the Levenberg–Marquardt steps' linear algebra
-    # grows as the square of the weights (14 → 6.5 s here; held-out accuracy 0.975, chance 0.48)
+    # grows as the square of the weights (14 → 6.5 s here)
     with CompileCounter() as compiles:
         pred = nl.MLPPredictor.fit(sets, key=jax.random.key(8), hidden=20, max_steps=8)
     # one Levenberg–Marquardt program for the four hypotheses (same shapes)
@@ -92,7 +92,10 @@ def test_predictor_bank_names_the_onset_by_least_residual(data):
     w, c, _ = nl.training_windows(z_te, tmpl, jax.random.key(10), 400, sizes=SIZES,
                                   onset_within_last=3)  # fmt: skip
     acc = float(jnp.mean(pred.classify_pairs(*nl.predictor_set(w)) == c))
-    assert acc > _chance(c) + 0.25, acc
+    # held-out accuracy over 12 draws (data keys (1, 2) and (11, 12), fit keys 8–10, noise
+    # drawn by the eigen-factor and by the Cholesky psd_factor): 0.63–0.79, chance 0.48 —
+    # "chance + 0.25" failed about half of them, so it held only for the draw it was set on
+    assert acc > _chance(c) + 0.12, acc
 
 
 def test_latch_holds_the_first_named_fault():
