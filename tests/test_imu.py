@@ -555,3 +555,51 @@ def test_imu_load_reads_a_file_as_the_data_contract_does(tmp_path):
     rows[2] = rows[2].split(" #")[0]
     path.write_text("t,gx,gy,gz,ax,ay,az\n" + "\n".join(rows) + "\n")
     np.testing.assert_array_equal(hg.imu.load(path, cols, units, check_units=False).gyro[:, 2], 3.0)
+
+
+def test_bias_sigma_holds_the_drift_rate_uncertainty():
+    """Audit 2026-11-30: under a bias random walk (2e-5 rad/s/√s, 3e-4 m/s²/√s) the
+    maximum-likelihood q of the gyros, from six face contrasts, was exactly 0 in this
+    session; the σ were labelled "white noise" and the x gyro bias came out 11.0σ off. The
+    σ now use q's posterior mean, never 0 on noisy data: 4.7σ (2.3 with the true q; one of
+    the largest |z| in 100 such sessions, where the old σ had five beyond 4)."""
+    rng = np.random.default_rng(204)
+    truth = ImuCalibration.known(
+        accel_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)), accel_bias=rng.normal(0, 0.1, 3),
+        gyro_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)), gyro_bias=rng.normal(0, 0.01, 3),
+        gyro_g_sensitivity=rng.normal(0, 1e-4, (3, 3)),
+    )  # fmt: skip
+    data, sections = hg.imu.ferraris_session(
+        truth, jax.random.key(104), gyro_walk=2e-5, accel_walk=3e-4
+    )
+    cal = hg.imu.ferraris(data, sections)
+    z = np.asarray(cal.gyro_bias - truth.gyro_bias) / np.asarray(cal.gyro_bias_std)
+    assert np.all(np.abs(z) < 5.0), z
+    assert cal.sigma_source == "white noise and bias drift"
+    assert 0.3 < float(cal.bias_walk[0]) / 2e-5 < 3
+
+
+def test_gyro_unit_checked_against_the_median_rate(session, tmp_path):
+    """Audit 2026-11-30: a gyro column in °/h declared as rad/s read a median |ω| of 2152
+    rad/s at rest and was accepted. A median beyond 10 rad/s is refused, in one line that
+    names the field (the file and column for `load`) and the likely unit;
+    `check_units=False` lets it through (a spin test)."""
+    data, _ = session
+    si = {"gyro": "rad/s", "accel": "m/s^2"}
+    deg_h = data.gyro / (np.pi / 180 / 3600)
+    pattern = r"units\[\"gyro\"\] = 'rad/s' makes the median \|gyro\| .* the data look like 'deg/h'"
+    with pytest.raises(ValueError, match=pattern) as err:
+        hg.imu.ImuData.from_arrays(deg_h, data.accel, units=si, rate_hz=RATE)
+    assert "\n" not in str(err.value)
+    ok = hg.imu.ImuData.from_arrays(deg_h, data.accel, units=si, rate_hz=RATE, check_units=False)
+    np.testing.assert_array_equal(ok.gyro, deg_h)
+    declared = hg.imu.ImuData.from_arrays(deg_h, data.accel, units={**si, "gyro": "deg/h"},
+                                          rate_hz=RATE)  # fmt: skip
+    np.testing.assert_allclose(declared.gyro, data.gyro, rtol=1e-12)
+    path = tmp_path / "deg_h.csv"
+    np.savetxt(path, np.c_[deg_h, data.accel], delimiter=",", header="gx,gy,gz,ax,ay,az",
+               comments="")  # fmt: skip
+    cols = {"gyro": ["gx", "gy", "gz"], "accel": ["ax", "ay", "az"]}
+    with pytest.raises(ValueError, match=r"deg_h\.csv: .*units\[\"gyro\"\].*'deg/h'"):
+        hg.imu.load(path, cols, si, rate_hz=RATE)
+    assert len(hg.imu.load(path, cols, si, rate_hz=RATE, check_units=False)) == len(data)

@@ -43,8 +43,9 @@ class ImuCalibration(eqx.Module):
     [m/s²] seen on the static faces; `g` [m/s²] and `turn_deg` (3,) [°] the session's
     references; `sigma_source` ("repeats", "white noise", "white noise and bias drift",
     "repeats and white noise" or "none": see `hrgjax.imu.ferraris`); `bias_walk` (2,) or None:
-    the in-run random walk of the biases the session showed, gyros [rad/s/√s] and
-    accelerometers [m/s²/√s] (None when set by hand).
+    the in-run random walk of the biases the session showed (the posterior mean of its
+    intensity from the face contrasts: `hrgjax.imu._drift.walk_posterior_mean`), gyros
+    [rad/s/√s] and accelerometers [m/s²/√s] (None when set by hand).
 
     Standard errors: `accel_matrix_std`, `accel_bias_std`, `gyro_matrix_std`, `gyro_bias_std`,
     `gyro_g_sensitivity_std`; the six-angle form of

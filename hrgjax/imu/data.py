@@ -5,7 +5,8 @@ Inside, every record is SI: time [s], angular rate [rad/s], specific force [m/s�
 temperature [°C]. The units of a file are declared when it is read (`units=`) and checked
 against what the data can tell: a record that is mostly at rest reads about one g of
 specific force, so an accelerometer declared in m/s² that reads ≈ 1 is in g (and the
-other way round) — an error, never a silent rescale."""
+other way round) — an error, never a silent rescale; and its median |angular rate| is far
+below `GYRO_MEDIAN_LIMIT_RAD_S` (a gyro in °/h declared as rad/s reads thousands)."""
 
 from __future__ import annotations
 
@@ -30,6 +31,15 @@ GYRO_UNITS: dict[str, float] = {
     "mrad/s": 1e-3,
 }
 """Angular-rate units `load` and `ImuData.from_arrays` accept, with their size in rad/s."""
+GYRO_MEDIAN_LIMIT_RAD_S = 10.0
+"""The largest median |angular rate| [rad/s] (573 °/s, 1.6 turns/s) a gyro record may read
+with `check_units`. A record that is mostly at rest reads its gyros' bias plus the Earth's
+rate (7.3e-5 rad/s): well under 0.1 rad/s for any MEMS, tactical or navigation gyro, and
+no vehicle turns at 573 °/s for half of a log. The same rates in °/h read as rad/s are at
+least the Earth's rate, 15 "rad/s" (a MEMS bias of 0.5 °/s: 1800), and in °/s read as rad/s
+a record turning at over 10 °/s half the time. (`hrgjax.plausible`'s table rate, ±3600 °/s,
+is a rate table's peak, not a log's median: 62.8 rad/s would let a navigation gyro's
+Earth rate in °/h through.) Pass `check_units=False` for a spin test."""
 ACCEL_UNITS: dict[str, float] = {
     "m/s^2": 1.0,
     "m/s2": 1.0,
@@ -140,7 +150,9 @@ class ImuData:
         [`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], e.g. "deg/s") and `units["accel"]` (one of
         [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS], e.g. "m/s^2" or "g"); `rate_hz` [Hz]
         (needed without `time`); `time` (N,) [s]; `temperature` (N,) [°C]; `check_units`:
-        compare the declared accelerometer unit with the data's median |specific force|."""
+        compare the declared accelerometer unit with the data's median |specific force|,
+        and refuse a gyro record whose median |angular rate| exceeds
+        [`GYRO_MEDIAN_LIMIT_RAD_S`][hrgjax.imu.data.GYRO_MEDIAN_LIMIT_RAD_S] (10 rad/s)."""
         gyro_unit, accel_unit = _declared(units)
         g = _triad("gyro", gyro)
         a = _triad("accel", accel)
@@ -151,6 +163,7 @@ class ImuData:
             time = np.arange(g.shape[0]) / rate_hz
         if check_units:
             _check_accel_unit(a, accel_unit)
+            _check_gyro_unit(g, gyro_unit)
         return cls(
             time=time,
             gyro=_to_si("gyro", g, gyro_unit, GYRO_UNITS[gyro_unit], "rad/s"),
@@ -226,7 +239,8 @@ def load(
     - `rate_hz`: sample rate [Hz]; needed when there is no time column, otherwise the
       file's `# rate_hz = …` comment (before the header, as `ImuData.save` writes it) or
       1 / median time step unless given.
-    - `check_units`: refuse an accelerometer unit the data contradict (see the module notes).
+    - `check_units`: refuse an accelerometer unit the data contradict, and a gyro record
+      whose median |angular rate| is beyond 10 rad/s (see the module notes).
 
     **Returns:** an [`ImuData`][hrgjax.imu.ImuData] in SI units.
 
@@ -483,4 +497,27 @@ def _check_accel_unit(a: np.ndarray, unit: str) -> None:
         f'units["accel"] = {unit!r} makes the median |accel| {norm:.4g} m/s², not about one g '
         f"(9.8 m/s²){hint}; declare the file's unit, or pass check_units=False for a record "
         "that is not mostly at rest"
+    )
+
+
+def _check_gyro_unit(w: np.ndarray, unit: str) -> None:
+    """Refuse a gyro record whose median |angular rate| is beyond `GYRO_MEDIAN_LIMIT_RAD_S`,
+    naming the units that would bring it under (closest to a rest reading, 0.01 rad/s,
+    first)."""
+    with np.errstate(over="ignore"):  # |ω| of a row beyond 1e154: inf, refused below
+        raw = float(np.median(np.linalg.norm(w, axis=1)))
+        norm = raw * GYRO_UNITS[unit]
+    if norm <= GYRO_MEDIAN_LIMIT_RAD_S:
+        return
+    names = {}  # one name per size, the first listed ("deg/s", not "dps")
+    for u, f in GYRO_UNITS.items():
+        names.setdefault(f, u)
+    fits = sorted(((raw * f, u) for f, u in names.items() if raw * f <= GYRO_MEDIAN_LIMIT_RAD_S),
+                  key=lambda m: abs(np.log10(max(m[0], 1e-300) / 1e-2)))  # fmt: skip
+    hint = ("; the data look like " + " or ".join(f"{u!r} (median {m:.3g} rad/s)" for m, u in fits)
+            if fits else "")  # fmt: skip
+    raise ValueError(
+        f'units["gyro"] = {unit!r} makes the median |gyro| {norm:.4g} rad/s ({norm / DEG:.4g} '
+        f"°/s), beyond the {GYRO_MEDIAN_LIMIT_RAD_S:g} rad/s any IMU log reads for half its "
+        f"rows{hint}; declare the file's unit, or pass check_units=False for a spin test"
     )

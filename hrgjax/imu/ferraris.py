@@ -32,16 +32,18 @@ propagation (`jax.jacfwd` of the estimator) of those sums' covariance, formed as
 - **"bias drift"**: where every key has one range, an in-run random walk of each
   channel's bias from the session's start, q² min(s − t₀, t − t₀), propagated exactly
   into every section sum (`hrgjax.imu._drift`); q (one for the gyros, one for the
-  accelerometers, `bias_walk`) is the maximum-likelihood value given the twelve
-  combinations of face means that vanish for any calibration (each channel's three ±
-  pair sums are equal) — zero where the faces agree within the white noise, when the
-  source is "white noise" alone. The biases are then those at the session's start (its
-  earliest section's first row).
+  accelerometers, `bias_walk`) is measured by the twelve combinations of face means that
+  vanish for any calibration (each channel's three ± pair sums are equal). Six
+  contrasts per sensor pin q down poorly — its maximum-likelihood value is exactly 0 in
+  about 6 % of sessions that do drift, and σ built on it missed a gyro bias by 11σ — so
+  `bias_walk` is q's posterior mean (Jeffreys prior, `_drift.walk_posterior_mean`),
+  which holds what the contrasts allow of q. It is positive on any noisy session (the
+  source is then "white noise and bias drift"), 0 on noise-free data. The biases are
+  those at the session's start (its earliest section's first row).
 
-Monte Carlo with known truth (`benchmarks/coverage_ferraris.py`, docs/imu.md: 200 sessions)
-puts 65.6–71.8 % of the truths within ±1σ and 92.8–96.4 % within ±2σ with white noise, a
-random walk and a Gauss–Markov drift of the biases; the white-noise σ alone covered 39.8 %
-and 67.5 % under the random walk. Not covered: the repeats' σ (Student-t with R − 1
+Monte Carlo with known truth (`benchmarks/coverage_ferraris.py`; figures in docs/imu.md)
+checks the coverage with white noise, a random walk and a Gauss–Markov drift of the
+biases, pooled and per parameter. Not covered: the repeats' σ (Student-t with R − 1
 degrees of freedom, and blind to the drift common to all repeats); face tilts (inexact
 flips), which the accelerometers' q absorbs only in part.
 
@@ -66,7 +68,7 @@ from ._calibration import PARAMETERS as PARAMETERS
 from ._calibration import ImuCalibration as ImuCalibration
 from ._calibration import check_g, check_turn_deg, flat_parameters
 from ._calibration import load_calibration as load_calibration
-from ._drift import walk_intensity, walk_kernel
+from ._drift import walk_kernel, walk_posterior_mean
 from .data import ImuData
 from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections
 
@@ -123,8 +125,9 @@ def session_statistics(data: ImuData, sections: Sections):
     noise_std (6,), sigma_source)`. A key with repeats contributes the mean of its repeats'
     statistics; its covariance is their scatter / R where R ≥ 2, else white noise of the
     static faces' per-sample scatter (σ²/n for a face mean, σ²ΣΔt² for a turn's sums) plus,
-    where every key has one range, the in-run bias drift that the faces' disagreement shows
-    (a random walk of the biases from the record's start, see `hrgjax.imu._drift`)."""
+    where every key has one range, the in-run bias drift that the faces' disagreement allows
+    (a random walk of the biases from the record's start, its intensity q's posterior
+    mean, see `hrgjax.imu._drift`)."""
     got = _statistics(data, sections)
     return got.stats, got.white + got.drift, got.noise_std, got.source
 
@@ -186,8 +189,9 @@ def _statistics(data: ImuData, sections: Sections) -> _Statistics:
 
 def _drift_covariance(data: ImuData, sections: Sections, stats: np.ndarray, white: np.ndarray):
     """The statistics' covariance from a random walk of the biases (one intensity for the
-    gyros, one for the accelerometers) estimated from the faces' ± pair sums, and the two
-    intensities q [unit/√s]."""
+    gyros, one for the accelerometers) measured by the faces' ± pair sums, and the two
+    intensities q [unit/√s]: q's posterior mean (`walk_posterior_mean`), not its
+    maximum-likelihood value, which six contrasts make 0 in some drifting sessions."""
     dt = data.dt
     pieces = [[(s, e, np.full(e - s, 1.0 / (e - s)) if key in FACES else dt[s:e], 1.0)]
               for key in SECTION_KEYS for s, e in sections[key][:1]]  # fmt: skip
@@ -201,9 +205,8 @@ def _drift_covariance(data: ImuData, sections: Sections, stats: np.ndarray, whit
     walk = np.zeros(2)
     for sensor, (kernel, offset) in enumerate(zip(kernels, (3, 0), strict=True)):
         contrasts = _pair_contrasts(offset)
-        q2 = walk_intensity(contrasts @ stats, contrasts @ white
-                            @ contrasts.T, contrasts @ kernel @ contrasts.T)  # fmt: skip
-        walk[sensor] = np.sqrt(q2)
+        walk[sensor] = walk_posterior_mean(contrasts @ stats, contrasts @ white
+                                           @ contrasts.T, contrasts @ kernel @ contrasts.T)  # fmt: skip
     return walk[0] ** 2 * kernels[0] + walk[1] ** 2 * kernels[1], walk
 
 
