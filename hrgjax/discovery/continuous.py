@@ -482,7 +482,8 @@ class ContinuousProblem(AbstractProblem):
 
     def noise_report(self):
         """The noise model in report units."""
-        return self.noise.report(self.k_e)
+        # at the fitted gain the parameters use; a noise model the user gave stays as given
+        return self.noise.report(self.k_e if self.noise_known else self.k_out)
 
     # -- screening -----------------------------------------------------------
     def _columns(self, current, name, tau=None):
