@@ -238,3 +238,34 @@ def test_a_schedule_captures_the_wave_where_it_is_read_while_the_temperature_mov
     assert abs(np.mean(th[130:]) - th[100]) < 2e-5  # 1″ white readout noise per sample
     assert np.all(np.asarray(rec.rebalance_rate)[:100] == 0.0)
     assert np.ptp(th[:100]) > 1e-5  # the free wave moved (drift and noise)
+
+
+def test_ftr_scale_factor_is_first_order_in_the_readout_errors():
+    """docs/modes.md's closed-form FTR scale factor is first order in the readout errors:
+    the force acts along the *estimated* node, so with large defects (readout g = 0.03,
+    forcers g_f = 0.02, g_m = 0.03, Δ(1/τ) × 50) at 33° the output leaves the law by ≈ 1e-3
+    of itself, and the second-order factor 1/cos(θ̂ − θ) (g_m at cos(θ + θ̂)) closes the gap
+    to 1e-5."""
+    from hrgjax.resonator import readout as ro
+
+    big = eqx.tree_at(
+        lambda g: (g.resonator.delta_inv_tau, g.readout.gain_mismatch, g.control.forcer_gain,
+                   g.control.forcer_gain_mismatch),
+        BASE, (BASE.resonator.delta_inv_tau * 50, 0.03, 0.02, 0.03),
+    ).in_mode("ftr")  # fmt: skip
+    rate = 1.0 * DEG_PER_S
+    rec = hg.simulate(big, hg.Profile.constant_rate(1.0, 40.0, 20.0, 33.0), dt_out=1.0, **TIGHT)
+    res, ctl = big.resonator, big.control
+    th, th_hat = float(rec.true_wave_angle[-1]), 33.0 * DEG
+    a_hat = float(rec.amplitude[-1])
+    unit = ro.from_pendulum(1.0, 0.0, th, 0.0).transform(big.readout.matrix())
+    a = a_hat / float(ro.estimate(unit, theta_branch=th).amplitude)
+    common = res.k_e / ctl.k_e_nominal * res.omega / float(rec.frequency[-1]) * a / a_hat
+    drift = 0.5 * res.delta_inv_tau * np.sin(2 * (th - res.theta_tau)) / res.k_e
+    omega = rate + float(big.rate_bias)
+    first = common / (1 + 0.02 - 0.03 * np.cos(2 * th)) * (omega - drift)
+    second = common / (1 + 0.02 - 0.03 * np.cos(th + th_hat)) / np.cos(th_hat - th)
+    second *= omega - drift
+    out = float(rec.rebalance_rate[-1])
+    assert 5e-4 < abs(out / first - 1) < 2e-3
+    assert abs(out / second - 1) < 1e-5

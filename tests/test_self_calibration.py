@@ -210,7 +210,7 @@ def test_self_calibration_inputs_are_named():
 
 def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, capsys):
     """`hrgjax self-calibrate` on sweeps writes the compensator the Python fit gives (and
-    `correct` reads it); on FTR holds (`simulate --mode ftr --plan reversal`) it prints and
+    `correct` reads it, on whole-angle data at rest); on FTR holds (`simulate --mode ftr --plan reversal`) it prints and
     writes the bias and anisotropy; either with the wrong data is one clear line."""
     from hrgjax.calibration import load_compensator
     from hrgjax.cli import main
@@ -222,7 +222,9 @@ def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, 
     direct = sc.PrecessionCompensator(settle_s=15.0).fit(hg.load(path))
     np.testing.assert_allclose(np.asarray(comp.drift_coef), np.asarray(direct.drift_coef))
     assert "virtual-precession sweeps at [20.0] °C" in capsys.readouterr().out
-    assert main(["correct", str(path), "--model", str(model), "--out",
+    static = hg.simulate(BASE, hg.Profile.static(30.0, 20.0, 10.0), dt_out=1.0).to_data()
+    still = static.save(tmp_path / "static.csv")  # sweeps themselves are refused (below)
+    assert main(["correct", str(still), "--model", str(model), "--out",
                  str(tmp_path / "c.csv")]) == 0  # fmt: skip
     from hrgjax.calibration import load_json
 
@@ -250,3 +252,74 @@ def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, 
                                             "wave_angle_deg")}).save(plain)  # fmt: skip
     cli_fails(["self-calibrate", str(plain), "--out", str(model)], capsys,
               "needs virtual-precession data")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def reversal_at_minus_45():
+    """Noise-free FTR holds at −45° and +45° (electrical), the case at rest."""
+    prof = hg.Profile.held_angles([-45.0, 45.0], dwell_s=90.0, slew_s=20.0)
+    return prof, hg.simulate(BASE.in_mode("ftr"), prof, dt_out=1.0)
+
+
+def test_mode_reversal_anisotropy_is_the_bias_as_read_on_the_output(
+    reversal_at_minus_45, tmp_path, capsys
+):
+    """Half the difference of the two readings SF·(Ω − b) is −b: the anisotropy is the
+    damping anisotropy's bias as it shows on the output, −½Δ(1/τ)sin2(θ−θ_τ)/k_e (the
+    compensators' drift convention), to the readout's 1 %; at −45° it is positive. The
+    CLI's column says which it is."""
+    from hrgjax.cli import main
+
+    prof, rec = reversal_at_minus_45
+    out = sc.mode_reversal(rec.t, rec.rebalance_rate, prof, settle_s=30.0)
+    res = BASE.resonator
+    law = -0.5 * res.delta_inv_tau * np.sin(2 * (-45.0 * DEG - res.theta_tau)) / res.k_e
+    assert law > 0 and float(out.anisotropy) > 0
+    assert abs(float(out.anisotropy) - law) < 0.01 * abs(law)
+    assert "as it shows on the output" in " ".join(sc.ModeReversal.__doc__.split())
+    path = rec.to_data().save(tmp_path / "rev.csv")
+    capsys.readouterr()
+    assert main(["self-calibrate", str(path), "--settle", "30"]) == 0
+    text = capsys.readouterr().out
+    assert "anisotropy at the first, as read (−½Δ(1/τ)sin2(θ−θτ)/k_e)" in text
+    row = sc.mode_reversal_data(rec.to_data(), settle_s=30.0)[0]
+    assert abs(row["anisotropy_dph"] * DEG_PER_H - law) < 0.01 * abs(law)
+
+
+def test_mode_reversal_refuses_a_turning_case():
+    """With an input rate the FTR scale factor (a/â ≈ 1 − g cos 2θ) reads it differently at
+    the two holds, so it does not cancel (36 °/h put a third of the anisotropy off): both
+    reductions refuse a case turning faster than STILL_RATE_DPS, naming the rate."""
+    from hrgjax.pattern_noise import STILL_RATE_DPS
+
+    turning = hg.Profile.held_angles([0.0, 90.0], dwell_s=60.0, slew_s=10.0, rate_dps=0.01)
+    with pytest.raises(ValueError, match=r"case at rest .*profile's rate reaches 0\.01 °/s"):
+        sc.mode_reversal(np.arange(131.0), np.zeros(131), turning)
+    slow = hg.Profile.held_angles([0.0, 90.0], dwell_s=60.0, slew_s=10.0,
+                                  rate_dps=0.5 * STILL_RATE_DPS)  # fmt: skip
+    sc.mode_reversal(np.arange(131.0), np.zeros(131), slow)  # readback jitter is rest
+    rec = hg.simulate(BASE.in_mode("ftr"), turning, dt_out=1.0)
+    with pytest.raises(ValueError, match=r"run 0's table_rate_dps reaches 0\.01 °/s"):
+        sc.mode_reversal_data(rec.to_data())
+
+
+def test_correct_and_compare_refuse_ftr_and_precession_data(
+    sweeps, reversal_at_minus_45, tmp_path, capsys
+):
+    """The wave angle of FTR output (held) or of a sweep (turned by a force) does not
+    measure the case's rate: `correct`, `compare` and the CLI refuse them in one line, as
+    `calibrate` does (they printed −0.18 °/h for a 36 °/h input, −3237 °/h at rest)."""
+    from hrgjax.calibration import compare, save_compensator
+
+    comp = sc.PrecessionCompensator(settle_s=15.0).fit(sweeps)
+    ftr = reversal_at_minus_45[1].to_data()
+    for data, match in ((sweeps, "commanded precession"), (ftr, "force-to-rebalance output")):
+        with pytest.raises(ValueError, match=match):
+            comp.correct(data)
+        with pytest.raises(ValueError, match=match):
+            compare({"vp": comp}, data)
+    model = save_compensator(comp, tmp_path / "vp.eqx")
+    for data, match in ((sweeps, "commanded precession"), (ftr, "force-to-rebalance output")):
+        path = str(data.save(tmp_path / "d.csv"))
+        cli_fails(["correct", path, "--model", str(model)], capsys, match)
+        cli_fails(["compare", path, "--models", str(model)], capsys, match)

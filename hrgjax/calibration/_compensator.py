@@ -32,7 +32,7 @@ import numpy as np
 from .._compiled import bucket_pad, bucket_size, device, program
 from ..data import MeasuredData
 from ..units import DEG, group_temperatures
-from .reduce import WINDOW_S, RateWindows, reduce
+from .reduce import WINDOW_S, RateWindows, check_whole_angle, reduce
 
 CORRECTED_COLUMNS = {
     "rate_corrected_dps": "equivalent input rate after compensation [°/s]",
@@ -181,9 +181,13 @@ class AbstractCompensator(eqx.Module):
         **Returns:** a new [`hrgjax.MeasuredData`][] with the input columns unchanged plus
         `rate_corrected_dps` and `angle_corrected_deg`.
 
-        **Raises:** `ValueError` if the data already have those columns or a run has fewer than
-        two samples.
+        **Raises:** `ValueError` if the data already have those columns, a run has fewer than
+        two samples, or the data are not whole-angle output the case turned: force-to-rebalance
+        output or runs with a commanded precession
+        ([`check_whole_angle`][hrgjax.calibration.reduce.check_whole_angle], as `calibrate`
+        refuses them).
         """
+        check_whole_angle(data)
         for name in CORRECTED_COLUMNS:
             if name in data:
                 raise ValueError(f"data already has a {name!r} column; correct raw data")

@@ -30,8 +30,13 @@ separate at rest. So `scale_factor` is the nominal 1 and $S$ is kept as `gain_co
 inspection; the static drift, which needs no rate, is what the sweeps calibrate.
 
 **Mode reversal** ([`mode_reversal`][hrgjax.calibration.mode_reversal]):
-force-to-rebalance readings at θ and θ + 90° (electrical): the damping anisotropy's bias
-½Δ(1/τ)·sin 2(θ − θ_τ) changes sign, a rate (the input and the rate bias) does not.
+force-to-rebalance readings at θ and θ + 90° (electrical), **the case at rest**: the damping
+anisotropy's bias changes sign, the rate bias does not. Half the difference is that bias as
+it shows on the output, −½Δ(1/τ)·sin 2(θ − θ_τ)/k_e (the compensators' drift convention: the
+equivalent input rate). An input rate does not cancel: the FTR scale factor carries
+a/â ≈ 1 − g cos 2θ (g the pickoff gain mismatch, unknown), so a rate Ω puts −g cos 2θ·Ω into
+the difference; `mode_reversal` and `mode_reversal_data` refuse a case turning faster than
+[`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS].
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ from .._compiled import device, fused
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
+from ..pattern_noise import STILL_RATE_DPS
 from ..profiles import Profile
 from ..units import DEG, DEG_PER_S, K_E_NOMINAL
 from ._compensator import AbstractCompensator
@@ -353,8 +359,13 @@ class ModeReversal(eqx.Module):
     - `angles_deg`: the two held angles [°].
     - `readings`: the mean FTR output held at each [rad/s], shape (…, 2) (a batched record:
       one pair per member).
-    - `bias`: their mean, the rate with the damping anisotropy's bias cancelled [rad/s].
-    - `anisotropy`: half their difference, the damping anisotropy's bias at θ [rad/s].
+    - `bias`: their mean, the rate bias with the damping anisotropy's bias cancelled [rad/s]
+      (the case at rest).
+    - `anisotropy`: half their difference [rad/s]: the damping anisotropy's bias at θ **as it
+      shows on the output**, −½Δ(1/τ)·sin 2(θ − θ_τ)/k_e — the equivalent input rate, the
+      sign convention of the compensators' drift (each reading is SF·(Ω − b) with
+      b = ½Δ(1/τ)·sin 2(θ − θ_τ)/k_e the bias in the FTR law of docs/modes.md, so half the
+      difference is −b).
     """
 
     angles_deg: tuple[float, float] = eqx.field(static=True)
@@ -368,7 +379,18 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
     [`Profile.held_angles`][hrgjax.Profile.held_angles]) to the rate bias and the damping
     anisotropy's bias: each hold's mean output after `settle_s` [s], their mean and half
     difference. `t` [s] and `rebalance_rate` [rad/s] as in the record (jax arrays pass:
-    the reduction is differentiable)."""
+    the reduction is differentiable).
+
+    **The case must be at rest** (the profile's rate within
+    [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS]): the FTR scale factor carries
+    a/â ≈ 1 − g cos 2θ (g the pickoff gain mismatch), so an input rate Ω reads differently
+    at the two holds and puts −g cos 2θ·Ω into the anisotropy (33 % of it at 0° and 36 °/h on the
+    default gyro); g is not known, so this cannot be corrected.
+
+    **Raises:** `ValueError` for a profile without two holds 90° apart, or whose case turns."""
+    _check_at_rest(
+        float(np.max(np.abs(np.asarray(profile.rate)))) / DEG_PER_S, "the profile's rate"
+    )
     windows = profile.hold_windows(settle_s)
     if len(windows) != 2:
         raise ValueError(
@@ -391,6 +413,17 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
         bias=0.5 * (readings[..., 0] + readings[..., 1]),
         anisotropy=0.5 * (readings[..., 0] - readings[..., 1]),
     )
+
+
+def _check_at_rest(rate_dps: float, what: str) -> None:
+    """Refuse mode reversal with the case turning (`rate_dps`: its largest |rate| [°/s])."""
+    if not rate_dps <= STILL_RATE_DPS:
+        raise ValueError(
+            f"mode reversal needs the case at rest (|rate| ≤ STILL_RATE_DPS = "
+            f"{STILL_RATE_DPS:g} °/s); {what} reaches {rate_dps:g} °/s: the FTR scale factor "
+            "differs at the two holds by the unknown readout gain mismatch (≈ 1 − g cos 2θ), "
+            "so the rate does not cancel and biases the anisotropy"
+        )
 
 
 def run_reversal_plan(
@@ -440,8 +473,11 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
     """[`mode_reversal`][hrgjax.calibration.mode_reversal] on every run of FTR data held at
     two angles (the holds found where `precession_dps` is 0): per run
     `{"run", "temperature_c", "angles_deg", "readings_dph", "bias_dph", "anisotropy_dph"}`
-    [°, °/h]. **Raises:** `ValueError` without the FTR output or the schedule, or for a run
-    with other than two holds 90° apart."""
+    [°, °/h]; `anisotropy_dph` as `ModeReversal.anisotropy` (the bias as it shows on the
+    output). **Raises:** `ValueError` without the FTR output or the schedule, for a run
+    with other than two holds 90° apart, or one whose case turns (`table_rate_dps` beyond
+    [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS]: mode reversal needs the case at
+    rest, see `mode_reversal`)."""
     for name in ("rebalance_rate_dps", "precession_dps"):
         if name not in data:
             raise ValueError(f"mode reversal needs force-to-rebalance data with a {name!r} column "
@@ -458,6 +494,8 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
         holds = [(t[a] + settle_s, t[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)
                  if t[b - 1] - t[a] > settle_s]  # fmt: skip
         run = int(data["run"][idx[0]])
+        _check_at_rest(float(np.max(np.abs(data["table_rate_dps"][idx]))),
+                       f"run {run}'s table_rate_dps")  # fmt: skip
         if len(holds) != 2:
             raise ValueError(f"run {run}: mode reversal needs two holds; found {len(holds)}")
         wave = data["wave_angle_deg"][idx]

@@ -402,7 +402,8 @@ def cmd_self_calibrate(args) -> int:
         with usage_errors(args.data):
             rows = sc.mode_reversal_data(data, settle_s=args.settle)
         print(f"hrgjax self-calibrate: {args.data}: mode reversal in {len(rows)} runs")
-        print("    T [°C]   held at [°]     bias [°/h]   anisotropy at the first [°/h]")
+        print("    T [°C]   held at [°]     bias [°/h]   anisotropy at the first, as read "
+              "(−½Δ(1/τ)sin2(θ−θτ)/k_e) [°/h]")  # fmt: skip
         for r in rows:
             a0, a1 = (a + 0.0 for a in r["angles_deg"])  # no "-0.0"
             print(f"    {r['temperature_c']:+6.1f}   {a0:6.1f}, {a1:6.1f}   {r['bias_dph']:+10.5f}"
