@@ -302,6 +302,17 @@ def test_a_rate_tables_readback_jitter_and_a_thermometers_noise_leave_a_static_r
         table = cal.corrected_run_errors(done)
         assert list(table["static"]) == [True]
         np.testing.assert_allclose(table["drift_error_dph"], 1.5, rtol=1e-9)
+    # the physical fit's grouping: the noisy static run is static, not a ramp
+    from hrgjax.calibration._physical_groups import fit_groups
+
+    (group,) = fit_groups(hg.MeasuredData(noisy), 10.0, K)
+    assert group.static_idx == (0,) and group.ramp_idx == ()
+    # an FTR gyro's record with its loop off throughout (rebalance_on 0) is whole-angle
+    # data: correct and reduce read it; with the loop on somewhere they refuse it
+    free = dict(clean, rebalance_rate_dps=np.zeros(t.size), rebalance_on=np.zeros(t.size))
+    cal.reduce(hg.MeasuredData(free))
+    with pytest.raises(ValueError, match="force-to-rebalance output"):
+        cal.reduce(hg.MeasuredData(dict(free, rebalance_on=np.r_[np.zeros(300), np.ones(301)])))
     # the turned table (0.3° over the minute: 5e-3 °/s) is a moving run
     turning = dict(clean, table_rate_dps=np.full(t.size, 5e-3), table_angle_deg=5e-3 * t)
     assert not bool(hg.MeasuredData(turning).stacked()[0].static[0])

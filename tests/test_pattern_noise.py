@@ -169,3 +169,41 @@ def test_table_rate_readback_jitter_leaves_static_runs_still():
     jitter = np.random.default_rng(2).normal(0.0, 1e-5, n)
     assert pn._still_stretches(jitter, np.full(n, 20.0)) == [(0, n)]
     assert pn._still_stretches(0.01 + jitter, np.full(n, 20.0)) == []
+
+
+def test_still_stretches_are_the_sample_by_sample_rule():
+    """The NumPy search gives the stretches of the rule written sample by sample: still
+    (|rate| ≤ STILL_RATE_DPS), the temperature within TEMPERATURE_TOLERANCE_C of the
+    stretch's first sample (a sample beyond it starts the next), at least MIN_STRETCH
+    samples — on random logs with jumps, drifts, ties and NaN."""
+    from hrgjax.pattern_noise import (
+        MIN_STRETCH,
+        STILL_RATE_DPS,
+        TEMPERATURE_TOLERANCE_C,
+        _still_stretches,
+    )
+
+    def rule(rate, temp):
+        out, start = [], None
+        for i, (w, c) in enumerate(zip(rate, temp, strict=True)):
+            still = abs(w) <= STILL_RATE_DPS
+            if start is not None and (not still or abs(c - temp[start]) > TEMPERATURE_TOLERANCE_C):
+                if i - start >= MIN_STRETCH:
+                    out.append((start, i))
+                start = None
+            if start is None and still:
+                start = i
+        if start is not None and len(rate) - start >= MIN_STRETCH:
+            out.append((start, len(rate)))
+        return out
+
+    rng = np.random.default_rng(1)
+    for trial in range(60):
+        n = int(rng.integers(1, 1500))
+        rate = np.where(rng.random(n) < 0.01, 1.0, 1e-4 * rng.normal(size=n))
+        temp = 20.0 + np.cumsum(rng.normal(size=n) * rng.choice([1e-3, 1e-2, 5e-2]))
+        if trial % 5 == 0:
+            temp[rng.integers(0, n)] = np.nan
+        if trial % 7 == 0:
+            temp[:] = 20.0 + TEMPERATURE_TOLERANCE_C * (np.arange(n) % 3 == 2)  # ties
+        assert _still_stretches(rate, temp) == rule(rate, temp), trial

@@ -249,11 +249,17 @@ def test_a_loop_bandwidth_may_follow_a_temperature_law():
     from hrgjax.simulate import default_max_steps
 
     gyro = hg.presets.tvg3_like(noise=False, temperature_laws=False)
-    law = hg.TemperatureLaw(2.0, 0.1)  # 2 rad/s at 25 °C, +0.1 rad/s per °C
+    law = hg.TemperatureLaw(2.0, 0.1)  # 2 rad/s at the reference 20 °C, +0.1 rad/s per °C
     warm = eqx.tree_at(lambda g: g.control.pll_bandwidth, gyro, law)
     temps = np.array([20.0, 40.0])
     beta = float(np.max(law(jnp.asarray(temps))))
     assert float(max_step(warm.control, "averaged", temps)) == pytest.approx(LOOP_STEPS / beta)
+    # a batch of three gyros' laws over five temperatures: each gyro its own largest
+    batch = eqx.tree_at(lambda c: c.pll_bandwidth, warm.control,
+                        hg.TemperatureLaw(jnp.array([1.0, 2.0, 4.0]), 0.1))  # fmt: skip
+    five = np.linspace(0.0, 40.0, 5)
+    want = LOOP_STEPS / np.maximum(np.array([1.0, 2.0, 4.0]) + 0.1 * 20.0, 2.0)
+    np.testing.assert_allclose(max_step(batch, "averaged", five), want, rtol=1e-12)
     prof = hg.Profile.static(4.0, 40.0, 30.0)
     assert default_max_steps(warm, prof, "averaged") >= 1
     rec = hg.simulate(warm, prof, dt_out=1.0)

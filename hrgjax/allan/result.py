@@ -173,7 +173,7 @@ def deviation(
     compiled curve: [`hrgjax.allan.gaps`][hrgjax.allan.gaps]; the noise type read on the
     bridged record, an approximation). The EDF pools the gap-free segments' Greenhall EDFs,
     (Σ nₛ)²/Σ nₛ²/EDFₛ over segments of nₛ terms: fragments are less correlated than one
-    record with as many terms — except for flicker noise (α = ±1), whose differences stay
+    record with as many terms — except for flicker noise (odd α), whose differences stay
     correlated across a gap: there one record's EDF, a conservative one. `n_terms` counts the differences used.
 
     One compiled program per kind and data length serves every τ grid (factors are run-time
@@ -270,8 +270,9 @@ def deviation(
                       for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
     if gaps:  # the gap-free segments' EDFs pooled: their differences are independent for
         # white angle noise, white rate noise and a rate random walk, not for flicker noise
-        # (α = ±1: long-range correlated), which keeps one record's EDF (conservative)
-        edf = np.asarray([e if abs(int(a)) == 1 else
+        # (odd α: ±1, and −3 for the Hadamard kinds: long-range correlated), which keeps
+        # one record's EDF (conservative)
+        edf = np.asarray([e if int(a) % 2 else  # odd α: flicker (α = ±1, −3), correlated
                           _gapped_edf(kind, int(a), int(k), int(t), segments, e)
                           for a, k, t, e in zip(alpha, m, n_terms, edf, strict=True)])  # fmt: skip
     if not gaps and kind not in ("mtotdev", "ttotdev"):

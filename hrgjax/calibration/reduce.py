@@ -230,10 +230,14 @@ def _window_layout(
 
 def check_whole_angle(data: MeasuredData) -> None:
     """Refuse data a whole-angle calibration cannot read: force-to-rebalance output (the wave
-    held; a `rebalance_rate_dps` column) or runs with a commanded precession (the wave turned
+    held: a `rebalance_rate_dps` column, with `rebalance_on` absent or 1 somewhere — an FTR
+    gyro's record with its loop off throughout is whole-angle data) or runs with a commanded precession (the wave turned
     by a force, not by the case; nonzero `precession_dps`) — `hrgjax self-calibrate` reads
     those."""
-    if "rebalance_rate_dps" in data:
+    held = "rebalance_rate_dps" in data and np.any(  # held wherever rebalance_on is absent or 1
+        data["rebalance_on"] != 0 if "rebalance_on" in data else True
+    )
+    if held:
         raise ValueError(
             "these data are force-to-rebalance output (a rebalance_rate_dps column: the wave is "
             "held, its angle does not measure the rate); this calibration reads whole-angle "

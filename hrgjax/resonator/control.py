@@ -185,11 +185,12 @@ def max_step(control: Control, model: str = "averaged", temperatures_c=None):
     if control.mode == "ftr":
         rates.append(control.rebalance_bandwidth)
 
-    def largest(rate):
+    def largest(rate):  # a law: its largest over the temperatures (per gyro of a batch)
         if not isinstance(rate, TemperatureLaw):
             return rate
-        t = rate.t_ref if temperatures_c is None else jnp.asarray(temperatures_c)
-        return jnp.max(rate(t))
+        if temperatures_c is None:
+            return rate(rate.t_ref)
+        return jnp.max(jax.vmap(rate)(jnp.ravel(jnp.asarray(temperatures_c))), axis=0)
 
     fastest = functools.reduce(jnp.maximum, [largest(r) for r in rates])  # (a batch: each)
     return jnp.where(fastest > 0, LOOP_STEPS / jnp.where(fastest > 0, fastest, 1.0), jnp.inf)
