@@ -171,8 +171,8 @@ def test_a_commanded_precession_ramp_is_integrated_within_the_step():
     "step against the same references (test_the_default_meets_rtol_with_closed_loops_and_laws)"
 )
 def test_held_loops_stay_close_to_adaptive_stepping(ramp):
-    """`fixed_step="held"` (efforts sampled once per step and held over it; laws
-    interpolated over 256 steps): the wave angle within 1e-9 rad of the continuous equations,
+    """`fixed_step="held"` (efforts sampled once per step and held over it; laws at
+    each step's midpoint temperature): the wave angle within 1e-9 rad of the continuous equations,
     amplitude and quadrature within 1e-6 of the set point's scale, frequency within 1e-4
     rad/s — close to, but not as close as, adaptive stepping at rtol 1e-8."""
     gyro, prof, ts, ref, adaptive = ramp
@@ -280,3 +280,23 @@ def test_the_default_takes_fixed_steps_where_they_meet_rtol():
     # adaptive there, without a word)
     on_grid = jax.jit(lambda: hg.simulate(FREE, prof, "full", dt_out=0.002).wave_angle)()
     np.testing.assert_array_equal(on_grid[1:], default)
+
+
+def test_temperature_laws_follow_a_steep_ramp_at_a_low_carrier():
+    """Free decay under a steep Δ(1/τ) law on a temperature ramp at 40 Hz, where a chunk of
+    `CHUNK` steps spans ≈ 0.5 s: the laws are taken at each step's midpoint temperature, so
+    the wave angle follows the closed form tan(θ−θ_τ) = tan(θ₀−θ_τ)·exp(∫Δ(1/τ)(T(t))dt)
+    (interpolating the laws' values over chunks was off by 0.22 rad)."""
+    p0, p1, lam, t_a, t_b, dur, th_tau, th0 = 0.2, 0.01, 0.05, -20.0, 60.0, 1.0, 0.5, 0.8
+    law = hg.TemperatureLaw(p0=p0, p1=p1, lam=lam)
+    res = hg.Resonator(omega=2 * np.pi * 40.0, tau=3.0, k_e=0.554, delta_inv_tau=law,
+                       theta_tau=th_tau)  # fmt: skip
+    gyro = hg.Gyro(res, control=hg.Control.free(), readout=hg.Readout(), noise=None)
+    prof = hg.Profile.piecewise([0.0, dur], 0.0, [t_a, t_b], wave_angle0_deg=np.degrees(th0))
+    run = hg.simulate(gyro, prof, model="full", dt_out=dur)  # the default: fixed steps
+    # ∫(p0 + p1·u)e^{λu} du in u = T − t_ref, over the linear ramp
+    prim = lambda u: np.exp(lam * u) * (p0 / lam + p1 * (u / lam - 1 / lam**2))  # noqa: E731
+    integral = (prim(t_b - 20.0) - prim(t_a - 20.0)) * dur / (t_b - t_a)
+    exact = th_tau + np.arctan(np.tan(th0 - th_tau) * np.exp(integral))
+    # what is left is the full model's own averaging error (Δ(1/τ) reaches 4.4 /s here)
+    np.testing.assert_allclose(float(run.true_wave_angle[-1]), exact, rtol=0, atol=1e-4)

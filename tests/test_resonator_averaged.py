@@ -194,3 +194,26 @@ def test_forward_mode_sensitivities():
     rev = jax.jit(jax.jacrev(lambda p: angles(p, None)))(p0)
     np.testing.assert_allclose(fwd, rev, rtol=1e-8, atol=1e-14)
     assert fwd.shape == (3, 2)
+
+
+def test_amplitude_follows_a_natural_frequency_law_adiabatically():
+    """ω(T(t)) on a temperature ramp: the free amplitude goes as e^{−t/τ}·√(ω(0)/ω(t)) (E/ω
+    is the adiabatic invariant; ȧ, q̇ take −½(d ln ω/dt)·a, q — the averaged model kept a
+    at e^{−t/τ}, 4 % high here). At constant temperature the term is exactly zero: the same
+    numbers as the gyro with ω evaluated."""
+    w0, tau, dur = 2 * np.pi * 40.0, 3.0, 4.0
+    law = hg.TemperatureLaw(p0=w0, p1=w0 * 1e-3)  # +1000 ppm/°C about 20 °C
+    res = hg.Resonator(omega=law, tau=tau, k_e=0.554)
+    gyro = hg.Gyro(res, control=hg.Control.free(), readout=hg.Readout(), noise=None)
+    prof = hg.Profile.piecewise([0.0, dur], 0.0, [-20.0, 60.0], wave_angle0_deg=30.0)
+    run = hg.simulate(gyro, prof, dt_out=1.0)
+    t = np.asarray(run.t)
+    omega = w0 * (1.0 + 1e-3 * (-40.0 + 20.0 * t))
+    exact = np.exp(-t / tau) * np.sqrt(omega[0] / omega)
+    np.testing.assert_allclose(np.asarray(run.amplitude), exact, rtol=1e-7)
+    np.testing.assert_allclose(np.asarray(run.wave_angle), np.radians(30.0), rtol=0, atol=1e-12)
+    static = hg.Profile.piecewise([0.0, dur], 0.0, [50.0, 50.0], wave_angle0_deg=30.0)
+    fixed = hg.Gyro(res.at(50.0), control=hg.Control.free(), readout=hg.Readout(), noise=None)
+    held, plain = hg.simulate(gyro, static, dt_out=1.0), hg.simulate(fixed, static, dt_out=1.0)
+    np.testing.assert_array_equal(np.asarray(held.amplitude), np.asarray(plain.amplitude))
+    np.testing.assert_array_equal(np.asarray(held.wave_angle), np.asarray(plain.wave_angle))

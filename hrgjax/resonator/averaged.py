@@ -20,6 +20,14 @@ $$\dot\varphi = (\omega-\omega_r) + \tfrac{k_e^2\Omega^2}{2\omega} + \tfrac12\De
   + \tfrac{3\chi(a^2+q^2)}{8\omega} - \tfrac{\omega h}4\cos\beta\,P$$
 
 with $\beta = 2(\gamma-\varphi)$, $P = (a^2+q^2)/(a^2-q^2)$, $\Pi = 2aq/(a^2-q^2)$.
+When ω follows a temperature law on a ramp, $\dot a$ and $\dot q$ also take
+$-\tfrac12(\mathrm d\ln\omega/\mathrm dt)\,a$ and $-\tfrac12(\mathrm d\ln\omega/\mathrm dt)\,q$
+(first-order averaging of $\ddot x + \omega(t)^2x = 0$ with $\dot x = -\omega A\sin\psi$:
+$\dot A = -\tfrac{\dot\omega}{\omega}A\sin^2\psi$, $\dot\psi$'s term goes as
+$\sin\psi\cos\psi$ and averages out, so θ and φ take nothing) — the adiabatic invariant
+$E/\omega$: a free amplitude goes as $e^{-t/\tau}\sqrt{\omega(0)/\omega(t)}$. The laws of
+Δω, θ_ω change the stiffness anisotropically; their like terms, $O(\dot{\Delta\omega}/\omega)$, are
+left out.
 $\Omega$ here is the equivalent input rate: table rate + rate bias + g-sensitivity · f.
 """
 
@@ -35,6 +43,7 @@ from .control import (
     pump_phase,
     steady_integrators,
 )
+from .params import TemperatureLaw
 from .readout import estimate, from_pendulum
 
 N_STATE = 7
@@ -102,7 +111,12 @@ def averaged_vector_field(t, y, args):
         )
         return d_theta[None]
     command = profile.command_at(t)
-    dy = loop_field(g, omega_in, y, command, profile.rebalance is not None)
+    ln_omega_rate = None
+    if isinstance(gyro.resonator.omega, TemperatureLaw):  # d ln ω/dt along the ramp
+        law = gyro.resonator.omega
+        _, d_omega = jax.jvp(law, (temperature,), (profile.temperature_rate_at(t),))
+        ln_omega_rate = d_omega / res.omega
+    dy = loop_field(g, omega_in, y, command, profile.rebalance is not None, ln_omega_rate)
     if profile.rebalance is None or ctl.mode != "ftr":
         return dy
     # while off, θ_hold follows θ̂ — which also moves as the readout's temperature laws do
@@ -111,12 +125,14 @@ def averaged_vector_field(t, y, args):
     return dy.at[8].add(jnp.where(command[2] > 0, 0.0, d_temp))
 
 
-def loop_field(g, omega_in, y, command=None, scheduled=False):
+def loop_field(g, omega_in, y, command=None, scheduled=False, ln_omega_rate=None):
     """The averaged model's right-hand side with the PI loops, for a gyro `g` already at its
     temperature, equivalent input rate `omega_in` [rad/s] and state `y` (module docstring);
     `command` = (commanded angle [rad], commanded precession [rad/s], rebalance on/off) or
     `None` — in force-to-rebalance mode the held angle is the state's θ_hold; `scheduled`: the
-    profile switches the rebalance loop (θ_hold then follows the estimate while it is off)."""
+    profile switches the rebalance loop (θ_hold then follows the estimate while it is off);
+    `ln_omega_rate`: d ln ω/dt [1/s] of a natural frequency that changes in time (a
+    temperature law on a ramp), or `None` (constant: no term at all)."""
     res, ctl = g.resonator, g.control
     a, q, theta, phi = y[0], y[1], y[2], y[3]
     est = measured_estimates(g, a, q, theta, phi)
@@ -169,6 +185,9 @@ def loop_field(g, omega_in, y, command=None, scheduled=False):
         + 3 * res.chi * (a**2 + q**2) / (8 * w)
         - pump * jnp.cos(beta) * big_p
     )
+    if ln_omega_rate is not None:  # adiabatic: a, q ∝ ω^(-1/2) (module docstring)
+        da = da - 0.5 * ln_omega_rate * a
+        dq = dq - 0.5 * ln_omega_rate * q
     d_int = integrator_rates(ctl, w, est, command, y[4:])
     if not ftr:
         return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int])
