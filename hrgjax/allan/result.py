@@ -174,7 +174,8 @@ def deviation(
     bridged record, an approximation). The EDF pools the gap-free segments' Greenhall EDFs,
     (Σ nₛ)²/Σ nₛ²/EDFₛ over segments of nₛ terms: fragments are less correlated than one
     record with as many terms — except for flicker noise (odd α), whose differences stay
-    correlated across a gap: there one record's EDF, a conservative one. `n_terms` counts the differences used.
+    correlated across a gap: there one record's EDF, a conservative one. `n_terms` counts
+    the differences used.
 
     One compiled program per kind and data length serves every τ grid (factors are run-time
     values, padded to a power-of-two count), so a new grid compiles nothing.

@@ -231,9 +231,9 @@ def _window_layout(
 def check_whole_angle(data: MeasuredData) -> None:
     """Refuse data a whole-angle calibration cannot read: force-to-rebalance output (the wave
     held: a `rebalance_rate_dps` column, with `rebalance_on` absent or 1 somewhere — an FTR
-    gyro's record with its loop off throughout is whole-angle data) or runs with a commanded precession (the wave turned
-    by a force, not by the case; nonzero `precession_dps`) — `hrgjax self-calibrate` reads
-    those."""
+    gyro's record with its loop off throughout is whole-angle data) or runs with a
+    commanded precession (the wave turned by a force, not by the case; nonzero
+    `precession_dps`) — `hrgjax self-calibrate` reads those."""
     held = "rebalance_rate_dps" in data and np.any(  # held wherever rebalance_on is absent or 1
         data["rebalance_on"] != 0 if "rebalance_on" in data else True
     )

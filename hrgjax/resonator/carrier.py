@@ -11,7 +11,8 @@ stages, no error estimate) of the full model's equations:
   temperature (held over the step: a relative error ≈ (h·d ln p/dt)²/24 for a parameter p,
   whatever the carrier frequency; interpolating the laws' values linearly over chunks of
   `CHUNK` steps instead, as before, was off by (t_chunk·d ln p/dt)²/8 — 1.8e-2 rad on the
-  wave angle of a steep Δ(1/τ) law at 40 Hz, where a chunk spans 0.5 s);
+  wave angle of a steep Δ(1/τ) law over 4 s at 40 Hz, where a chunk spans 0.5 s, 0.22 rad
+  on tests/test_carrier.py's 1-s ramp);
 - **loops closed** (`_step_continuous`): every stage demodulates its state and runs the
   loop laws (`carrier_rhs`, the adaptive solve's right-hand side), so the path differs from
   adaptive stepping of the same equations only by its truncation error (8th order in h) and
