@@ -149,9 +149,9 @@ class NoiseModel:
         cov = cov + np.where(lag == 0, self.angle_random_walk**2 * delta, 0.0)
         if self.gm_sigma > 0:
             sigma, tc = self.gm_sigma, self.gm_time
-            e = math.exp(-delta / tc)
-            off = sigma**2 * tc**2 * (1 - e) ** 2 * np.exp(-(np.maximum(lag, 1) - 1) * delta / tc)
-            diag = 2 * sigma**2 * tc * (delta - tc * (1 - e))
+            one_minus_e = -math.expm1(-delta / tc)
+            off = sigma**2 * tc**2 * one_minus_e**2 * np.exp(-(np.maximum(lag, 1) - 1) * delta / tc)
+            diag = sigma**2 * gm_structure(delta, tc)  # accurate where Δ ≪ T_c
             cov = cov + np.where(lag == 0, diag, off)
         return cov + self.run_bias**2 * delta**2
 
@@ -340,7 +340,7 @@ def _d2_terms(t, theta, k):
         return 2.0 * w1 * s(a) + 2.0 * w3 * s(b) - w1 * w3 * s(a + b)
 
     cols = [w1**2 + 4.0 + w3**2, pairs(lambda x: x)]
-    cols += [pairs(lambda x, tc=tc: 2.0 * tc * (x + tc * np.expm1(-x / tc))) for tc in GM_TIMES]
+    cols += [pairs(lambda x, tc=tc: gm_structure(x, tc)) for tc in GM_TIMES]
     cols = np.stack(cols, axis=-1)
     return d2, np.broadcast_to(cols, (d2.size, cols.shape[1])) if even else cols
 
@@ -350,10 +350,23 @@ def _d2_basis(tau, tc):
     cols = [np.full_like(tau, 6.0), 2 * tau]
     if tc is None:
         cols.append(np.zeros_like(tau))
-    else:
-        e = np.exp(-tau / tc)
-        cols.append(4 * tc * (tau - tc * (1 - e)) - 2 * tc**2 * (1 - e) ** 2)
+    else:  # 4S(τ) − S(2τ), the x² terms cancelling exactly in the series (x = τ/T_c)
+        x = tau / tc
+        series = x**3 * (2 / 3 - x / 2 + 7 * x**2 / 30 - x**3 / 12 + 31 * x**4 / 1260)
+        closed = 4 * gm_structure(tau, tc) - gm_structure(2 * tau, tc)
+        cols.append(np.where(x < 1e-2, 2 * tc**2 * series, closed))
     return np.stack(cols, axis=-1)
+
+
+def gm_structure(delta, tc):
+    """Structure function of a unit-σ first-order Gauss–Markov rate's angle [rad² per
+    (rad/s)²]: E[(φ(t+Δ) − φ(t))²] = 2T_c(Δ − T_c(1 − e^{−Δ/T_c})) = 2T_c²(x + expm1(−x)),
+    x = Δ/T_c — by its series where x < 1e-2, whose leading x²/2 the closed form reaches
+    only through cancellation (relative error ε/x: 1e-3 of a second difference's variance
+    at τ = 1 ms, T_c = 3000 s). NumPy."""
+    x = np.asarray(delta, float) / tc
+    series = x**2 * (0.5 - x / 6 + x**2 / 24 - x**3 / 120 + x**4 / 720)
+    return 2 * tc**2 * np.where(x < 1e-2, series, x + np.expm1(-x))
 
 
 def _fit_d2(basis, var, n_eff, tc):
