@@ -20,7 +20,7 @@ each channel, the three ± pair sums ($u^+_i + u^-_i = 2 b_a$, $w^+_i + w^-_i = 
 i = x, y, z) are equal — two contrasts per channel, six per sensor. Their covariance is
 $A + q^2 B$ (A from the white noise, B from the kernel above); their restricted likelihood
 (the contrasts are free of the parameters) gives q². Six contrasts pin q² down poorly:
-its maximum-likelihood value (`walk_intensity`) is exactly 0 in about 6 % of sessions
+its maximum-likelihood value (what the σ used before) is exactly 0 in about 6 % of sessions
 that do drift, and the σ built on it then miss the gyro biases by up to 11σ (audit of
 2026-11-30). The σ therefore use q's posterior mean (`walk_posterior_mean`, Jeffreys
 prior), which holds what the contrasts allow of q and is never 0 on noisy data."""
@@ -75,43 +75,6 @@ def _pair(tau, s1, e1, w1, s2, e2, w2) -> float:
     return float(total)
 
 
-def walk_intensity(residual: np.ndarray, white: np.ndarray, walk: np.ndarray) -> float:
-    """Maximum-likelihood q² ≥ 0 of `residual` (r,) ~ N(0, `white` + q² `walk`) (both
-    (r, r)); 0 where the white part is singular (noise-free data) or the residual fits
-    the white noise alone."""
-    try:
-        chol = np.linalg.cholesky(white)
-    except np.linalg.LinAlgError:
-        return 0.0
-    y = np.linalg.solve(chol, residual)
-    b = np.linalg.solve(chol, np.linalg.solve(chol, walk).T)
-    lam, vec = np.linalg.eigh((b + b.T) / 2)
-    lam = np.clip(lam, 0.0, None)
-    z2 = (vec.T @ y) ** 2
-    if lam.max() <= 0 or not np.all(np.isfinite(z2)):
-        return 0.0
-
-    def loglik(theta):
-        v = 1.0 + theta * lam
-        return -0.5 * float(np.sum(np.log(v) + z2 / v))
-
-    # θλ from 1e-4 to 1e6 on a log grid, then golden-section refinement around the best
-    grid = np.concatenate([[0.0], np.logspace(-4, 6, 81) / lam.max()])
-    values = [loglik(t) for t in grid]
-    best = int(np.argmax(values))
-    if best == 0:
-        return 0.0
-    a, b_ = grid[best - 1], grid[min(best + 1, grid.size - 1)]
-    ratio = (np.sqrt(5.0) - 1) / 2
-    for _ in range(60):
-        c, d = b_ - ratio * (b_ - a), a + ratio * (b_ - a)
-        if loglik(c) >= loglik(d):
-            b_ = d
-        else:
-            a = c
-    return float((a + b_) / 2)
-
-
 WALK_GRID = np.logspace(-6, 6, 1201)
 """Where `walk_posterior_mean` integrates: q² λ_max (the drift's largest share of a
 whitened contrast's variance) from 1e-6 to 1e6, and 0."""
@@ -123,7 +86,7 @@ def walk_posterior_mean(residual: np.ndarray, white: np.ndarray, walk: np.ndarra
     (1 + q² λᵢ)²)^½ (λ: the eigenvalues of `walk` whitened by `white`), on q² λ_max ∈
     [0, 1e6] (`WALK_GRID`); 0 where the white part is singular (noise-free data).
 
-    Unlike the maximum-likelihood q² (`walk_intensity`), it is positive whenever the
+    Unlike the maximum-likelihood q², which the σ used before, it is positive whenever the
     residual can hold any drift, also where the likelihood peaks at 0. Its square, not q²'s
     posterior mean, goes into the σ: with six contrasts q²'s posterior has a heavy tail,
     and its mean made the σ of white-noise-only sessions' gyro biases 2.8× too large (RMS
