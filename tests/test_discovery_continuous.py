@@ -230,6 +230,15 @@ def test_continuous_null_says_nothing_is_missing():
     true = NoiseModel.from_gyro(generate.base_gyro().noise, K_E)
     for tau in (16.0, 64.0, 128.0):
         assert est.d2_variance(tau) == pytest.approx(true.d2_variance(tau), rel=0.2), tau
+    # a nominal k_e of 0.277 (the mechanical K given for the angular gain): the ramps fix
+    # k_e = 0.554, and the noise report, the gaps and the floor in °/h are read at it, as
+    # with the right gain (the report was converted at the nominal gain: 2× off)
+    wrong = discover(data, catalogue=ONE, k_e=0.277)
+    assert wrong.k_e == pytest.approx(rep.k_e, rel=1e-6)
+    for key, value in rep.noise.items():
+        assert wrong.noise[key] == pytest.approx(value, rel=1e-6), key
+    for key in ("gap_before", "gap_after", "noise_floor"):
+        assert getattr(wrong, key) == pytest.approx(getattr(rep, key), rel=1e-6), key
 
 
 def test_continuous_known_noise_and_bad_shape():
