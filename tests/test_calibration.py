@@ -581,11 +581,23 @@ def test_k_e_is_the_electrical_gain_in_zero_one():
         assert cls(k_e=0.6).k_e == 0.6
 
 
-def test_unfitted_compensators_say_so():
+def test_unfitted_compensators_say_so(tmp_path):
+    """Evaluating, saving or exporting an unfitted compensator is refused in one line (saving
+    one wrote a file its loader then blamed on a hand-edited header; exporting an MLP raised
+    AttributeError), and no file is left behind."""
+    from hrgjax.calibration import export_json, save_compensator
+
     with pytest.raises(ValueError, match="not fitted"):
         FourierCompensator().drift_dph([0.0], 20.0)
     with pytest.raises(ValueError, match="not fitted"):
         MLPCompensator().drift_dph([0.0], 20.0)
+    for comp in (FourierCompensator(), MLPCompensator(), PhysicalCompensator()):
+        name = type(comp).__name__
+        for write, path in ((save_compensator, tmp_path / "c.eqx"),
+                            (export_json, tmp_path / "c.json")):  # fmt: skip
+            with pytest.raises(ValueError, match=f"^this {name} is not fitted; fit it before"):
+                write(comp, path)
+            assert not path.exists()
 
 
 # --- INS impact (minimal Schuler model) ------------------------------------------------------

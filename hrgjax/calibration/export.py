@@ -53,7 +53,25 @@ are plain fields (`window_s` [s] and MLP's `mode` were added later: older files 
 with the class defaults)."""
 
 
+_FITTED_FIELD = {
+    FourierCompensator: "drift_coef",
+    MLPCompensator: "drift_net",
+    PhysicalCompensator: "values",
+    PrecessionCompensator: "drift_coef",
+}
+"""The field each compensator's `fit` fills (None before): what saving and exporting check."""
+
+
+def _require_fitted(comp) -> None:
+    for cls, field in _FITTED_FIELD.items():
+        if isinstance(comp, cls) and getattr(comp, field) is None:
+            raise ValueError(
+                f"this {cls.__name__} is not fitted; fit it before saving (comp = comp.fit(data))"
+            )
+
+
 def _hyper(comp) -> dict:
+    _require_fitted(comp)
     for cls, names in _HYPER_FIELDS.items():
         if isinstance(comp, cls):
             hyper = {name: getattr(comp, name) for name in names}
@@ -71,8 +89,6 @@ def _hyper(comp) -> dict:
     if isinstance(comp, NoCompensation):
         return {"k_e": comp.k_e}
     if isinstance(comp, PrecessionCompensator):
-        if comp.drift_coef is None:
-            raise ValueError("this PrecessionCompensator is not fitted; fit it before saving")
         return {"harmonics": comp.harmonics, "settle_s": comp.settle_s,
                 "temperature_bin": comp.temperature_bin, "k_e": comp.k_e,
                 "temperatures_c": list(comp.temperatures_c)}  # fmt: skip
@@ -114,6 +130,7 @@ def save_compensator(comp, path: str | os.PathLike) -> str:
     length and SHA-256) and the equinox serialisation of the module; it is written under a
     temporary name and renamed when complete."""
     path = os.fspath(path)
+    _require_fitted(comp)
     buf = io.BytesIO()
     eqx.tree_serialise_leaves(buf, comp)
     payload = buf.getvalue()
@@ -197,6 +214,7 @@ def _series(comp, coefs, **fields) -> dict:
 
 def to_json_dict(comp) -> dict:
     """Everything a C implementation needs, as plain lists and numbers (SI units)."""
+    _require_fitted(comp)
     base = {
         "format": FORMAT_VERSION,
         "class": type(comp).__name__,
