@@ -161,3 +161,68 @@ def vec3(owner: str, name: str, unit: str):
         return jnp.broadcast_to(x, (3,))
 
     return convert
+
+
+_ROUND_OFF = 1e-9
+"""Relative tolerance of the covariance checks: asymmetry up to this share of the largest
+entry, and (semi-definite matrices) a smallest eigenvalue down to minus this share of the
+largest variance, are round-off."""
+
+
+def host_value(x) -> np.ndarray | None:
+    """`x` as a float64 NumPy array when its value is known on the host, else None (traced)."""
+    value = concrete_value(x)
+    return None if value is None else np.asarray(value, dtype=float)
+
+
+def _at(index: str, i: int, batched: bool) -> str:
+    return f" at {index} {i}" if batched else ""
+
+
+def check_finite_host(name: str, x):
+    """Refuse a concrete `x` with a NaN or inf in one line naming `name`, the value and where
+    (its first bad index); a traced `x` passes."""
+    v = host_value(x)
+    if v is None or np.isfinite(v).all():
+        return
+    where = tuple(int(i) for i in np.argwhere(~np.isfinite(v))[0])
+    raise ValueError(f"{name} must be finite; it has {v[where]} at index {where}")
+
+
+def check_covariance(name: str, a, *, definite: bool = False, form: str = "(n, n)",
+                     index: str = "step"):  # fmt: skip
+    """Refuse a concrete covariance `a` (n, n), or a stack (…, n, n) of them, that is not
+    finite, not symmetric or not positive (semi-)definite, in one line naming `name`, the
+    expected `form` and, for a stack, the first bad `index`. Round-off is allowed relative to
+    the matrix's scale (`_ROUND_OFF`); `definite` (a measurement noise R) needs every
+    eigenvalue > 0. A traced `a` passes (no run-time check). One batched `eigvalsh` on the
+    host."""
+    v = host_value(a)
+    if v is None or v.size == 0:
+        return
+    kind = "positive-definite" if definite else "positive semi-definite"
+    head = f"{name} must be a symmetric {kind} {form} covariance"
+    mats = v.reshape((-1,) + v.shape[-2:])
+    batched = v.ndim > 2
+    finite = np.isfinite(mats).all(axis=(-2, -1))
+    if not finite.all():
+        i = int(np.argmin(finite))
+        raise ValueError(
+            f"{head}; it has {mats[i][~np.isfinite(mats[i])][0]}{_at(index, i, batched)}"
+        )
+    trans = np.swapaxes(mats, -1, -2)
+    asym = np.abs(mats - trans).max(axis=(-2, -1))
+    size = np.abs(mats).max(axis=(-2, -1))
+    skew = asym > _ROUND_OFF * size
+    if skew.any():
+        i = int(np.argmax(skew))
+        raise ValueError(
+            f"{head}; it is not symmetric{_at(index, i, batched)} (|A - A^T| reaches "
+            f"{asym[i]:.3g} beside entries up to {size[i]:.3g})"
+        )
+    low = np.linalg.eigvalsh(0.5 * (mats + trans))[:, 0]
+    scale = np.abs(np.diagonal(mats, axis1=-2, axis2=-1)).max(axis=-1)
+    bad = ~(low > 0) if definite else low < -_ROUND_OFF * scale
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"{head}; its smallest eigenvalue is {low[i]:.6g}{_at(index, i, batched)}")

@@ -25,13 +25,89 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.scipy.linalg import expm
 
+from ._checks import check_covariance, check_finite_host, concrete_value, host_value
 from ._compiled import fused
 from ._linalg import cho_logdet, cho_solve, cholesky, whiten
 from ._x64 import require_x64
 
 LOG_2PI = 1.8378770664093453
+
+
+def _check_measurements(zs, mask):
+    """Refuse a concrete NaN or inf in `zs` (K, m) at a step that has a measurement (`mask`
+    True, or no mask): a missing measurement is a step with mask=False."""
+    z = host_value(zs)
+    if z is None:
+        return
+    if mask is None:
+        on = np.ones(z.shape[0], bool)
+    else:
+        mv = concrete_value(mask)
+        if mv is None:  # traced mask: which steps count is not known here
+            return
+        on = np.broadcast_to(np.asarray(mv, bool), z.shape[:1])
+    bad = ~np.isfinite(z).reshape(z.shape[0], -1).all(axis=1) & on
+    if bad.any():
+        k = int(np.argmax(bad))
+        value = z[k][~np.isfinite(z[k])].ravel()[0]
+        text = "NaN" if np.isnan(value) else str(value)
+        raise ValueError(f"zs has {text} at step {k}: mark a missing measurement with mask=False")
+
+
+def _stack_shape_ok(shape, n, k) -> bool:
+    """`shape` is (n, n) or a per-step (K, n, n) (or (1, n, n), broadcast)."""
+    return len(shape) in (2, 3) and tuple(shape[-2:]) == (n, n) and shape[:-2] in ((), (1,), (k,))
+
+
+def _check_linear(prior, phi, qd, H, R, zs, mask, us):
+    """The arguments of `kalman_filter` / `rts_smoother`: shapes always (trace time, so under
+    `jit` and `vmap` too), values on the host when they are concrete. Raises one line naming
+    the argument and its expected form."""
+    x_shape, p_shape = np.shape(prior.x), np.shape(prior.P)
+    if len(x_shape) != 1:
+        raise ValueError(f"prior.x must be a (n,) mean; got shape {x_shape}")
+    n = x_shape[0]
+    if p_shape != (n, n):
+        raise ValueError(f"prior.P must be (n, n) = ({n}, {n}) (n = len(prior.x)); got {p_shape}")
+    h_shape = np.shape(H)
+    if len(h_shape) != 2 or h_shape[1] != n:
+        raise ValueError(f"H must be (m, n) = (m, {n}) (n = len(prior.x)); got {h_shape}")
+    m = h_shape[0]
+    z_shape = np.shape(zs)
+    if len(z_shape) != 2 or z_shape[1] != m:
+        hint = " (transposed? one row per step)" if len(z_shape) == 2 and z_shape[0] == m else ""
+        raise ValueError(f"zs must be (K, m) = (K, {m}) (one row per step, m = rows of H); "
+                         f"got {z_shape}{hint}")  # fmt: skip
+    k = z_shape[0]
+    for name, a in (("phi", phi), ("qd", qd)):
+        if not _stack_shape_ok(np.shape(a), n, k):
+            raise ValueError(f"{name} must be (n, n) = ({n}, {n}) or per step (K, n, n) = "
+                             f"({k}, {n}, {n}); got {np.shape(a)}")  # fmt: skip
+    if np.shape(R) != (m, m):
+        raise ValueError(f"R must be (m, m) = ({m}, {m}) (m = rows of H); got {np.shape(R)}")
+    if mask is not None and np.shape(mask) != (k,):
+        raise ValueError(f"mask must be (K,) = ({k},) booleans (False: no measurement at that "
+                         f"step); got {np.shape(mask)}")  # fmt: skip
+    if us is not None:
+        try:
+            fits = np.broadcast_shapes(np.shape(us), (k, n)) == (k, n)
+        except ValueError:
+            fits = False
+        if not fits:
+            raise ValueError(f"us must be (K, n) = ({k}, {n}) (or (n,), the same every step); "
+                             f"got {np.shape(us)}")  # fmt: skip
+    check_finite_host("prior.x", prior.x)
+    check_covariance("prior.P", prior.P, form=f"(n, n) = ({n}, {n})")
+    check_finite_host("phi", phi)
+    check_covariance("qd", qd, form=f"(n, n) = ({n}, {n})")
+    check_finite_host("H", H)
+    check_covariance("R", R, definite=True, form=f"(m, m) = ({m}, {m})")
+    if us is not None:
+        check_finite_host("us", us)
+    _check_measurements(zs, mask)
 
 
 class Gaussian(eqx.Module):
@@ -136,8 +212,34 @@ def update(g: Gaussian, z, H, R, mask=True):
 
     **Returns:** `(posterior, innovation, S, loglik)` where `loglik` is
     $\log N(\nu; 0, S)$ of the innovation ν (0 when `mask` is False: no measurement, the
-    prior is returned unchanged)."""
+    prior is returned unchanged). Shapes are checked when traced; values (a NaN in `z`
+    where `mask` is True, `R` not positive-definite, `g.P` not positive semi-definite) when
+    they are concrete."""
+    _check_update(g, z, H, R, mask)
     return _update_innovation(g, z - H @ g.x, H, R, mask)
+
+
+def _check_update(g, z, H, R, mask):
+    """`update`'s arguments: shapes always (trace time), values when concrete."""
+    x_shape, p_shape, h_shape = np.shape(g.x), np.shape(g.P), np.shape(H)
+    if len(x_shape) != 1 or p_shape != x_shape * 2:
+        raise ValueError(f"g must be a Gaussian with x (n,) and P (n, n); got x {x_shape}, "
+                         f"P {p_shape}")  # fmt: skip
+    n = x_shape[0]
+    if len(h_shape) != 2 or h_shape[1] != n:
+        raise ValueError(f"H must be (m, n) = (m, {n}) (n = len(g.x)); got {h_shape}")
+    m = h_shape[0]
+    if np.shape(z) != (m,):
+        raise ValueError(f"z must be (m,) = ({m},) (m = rows of H); got {np.shape(z)}")
+    if np.shape(R) != (m, m):
+        raise ValueError(f"R must be (m, m) = ({m}, {m}) (m = rows of H); got {np.shape(R)}")
+    check_covariance("g.P", g.P, form=f"(n, n) = ({n}, {n})")
+    check_finite_host("H", H)
+    check_covariance("R", R, definite=True, form=f"(m, m) = ({m}, {m})")
+    zv, on = host_value(z), concrete_value(mask)
+    if zv is not None and on is not None and np.any(on) and not np.isfinite(zv).all():
+        raise ValueError(f"z must be finite where mask is True (a missing measurement is "
+                         f"mask=False); got {zv.tolist()}")  # fmt: skip
 
 
 def _update_innovation(g: Gaussian, nu, H, R, mask=True):
@@ -168,7 +270,6 @@ def _steps(prior, phi, qd, zs, mask, us):
     return phis, qds, mask, us
 
 
-@fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
 def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     r"""Run predict → update over the measurements `zs` (K, m) with one `lax.scan`.
 
@@ -177,7 +278,21 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     input added in each step's prediction, $x_k = \Phi_k x_{k-1} + u_k$ (discretised with
     [`discretise_input`][hrgjax.kalman.discretise_input]: u = Γ·input).
 
+    Refused in one line (`ValueError`): shapes that do not fit (checked when traced too);
+    when the values are concrete, a NaN or inf in `zs` at a step with a measurement, `R` not
+    positive-definite, `qd` or `prior.P` not symmetric positive semi-definite (to round-off),
+    non-finite `phi`, `H`, `prior.x` or `us`. Under a caller's `jit` the values are not
+    checked.
+
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
+    require_x64("hrgjax.kalman.kalman_filter")
+    _check_linear(prior, phi, qd, H, R, zs, mask, us)
+    return _kalman_filter(prior, phi, qd, H, R, zs, mask, us)
+
+
+@fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
+def _kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
+    """`kalman_filter` without the argument checks (fused: one compiled program)."""
     require_x64("hrgjax.kalman.kalman_filter")
     phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
 
@@ -190,17 +305,24 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     return xs, ps, jnp.sum(ll)
 
 
-@fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
 def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     r"""Rauch–Tung–Striebel smoother: the filter of
     [`kalman_filter`][hrgjax.kalman.kalman_filter] forward, then backward
     $C_k = P_{k|k}\Phi_{k+1}^	op P_{k+1|k}^{-1}$ (a Cholesky solve),
     $x_{k|K} = x_{k|k} + C_k(x_{k+1|K} - x_{k+1|k})$,
     $P_{k|K} = P_{k|k} + C_k(P_{k+1|K} - P_{k+1|k})C_k^	op$ — the posterior of every state
-    given all the measurements. Same arguments as the filter.
+    given all the measurements. Same arguments (and checks) as the filter.
 
     **Returns:** `(smoothed means (K, n), covariances (K, n, n), the filter's total
     log-likelihood)`."""
+    require_x64("hrgjax.kalman.rts_smoother")
+    _check_linear(prior, phi, qd, H, R, zs, mask, us)
+    return _rts_smoother(prior, phi, qd, H, R, zs, mask, us)
+
+
+@fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
+def _rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
+    """`rts_smoother` without the argument checks (fused: one compiled program)."""
     require_x64("hrgjax.kalman.rts_smoother")
     phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
 
@@ -224,6 +346,12 @@ def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     inputs = (xf[:-1], pf[:-1], xp[1:], pp[1:], phis[1:])
     _, (xs, ps) = jax.lax.scan(backward, last, inputs, reverse=True)
     return jnp.concatenate([xs, xf[-1:]]), jnp.concatenate([ps, pf[-1:]]), jnp.sum(ll)
+
+
+# the unchecked programs, as `fused` exposes them (`kalman_filter.__wrapped__(…)`: the plain
+# function's values)
+kalman_filter.__wrapped__ = _kalman_filter.__wrapped__
+rts_smoother.__wrapped__ = _rts_smoother.__wrapped__
 
 
 def _nonlinear_steps(prior, qd, zs, mask, us):

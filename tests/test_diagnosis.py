@@ -1,6 +1,7 @@
 """Diagnosis building blocks: the pairwise measurements of eqs. (7)–(8) and the multiple-model
 filter bank (log-space probabilities with a floor)."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -343,3 +344,64 @@ def test_bank_inputs_are_refused_in_one_line(accel_bank, accel_gains):
             cx.measurements(nav[:3], 1.0, "accel_y", ins, pairs=bad)
     with pytest.raises(ValueError, match=r"nav must have shape \(n_ins >= 2, K, 3\)"):
         cx.measurements(jnp.zeros((10, 3)), 1.0, "accel_y", ins)
+
+
+def test_bank_refuses_impossible_covariances():
+    """A negative variance (R, Qd) or a NaN Φ made every probability NaN and every decision
+    undecided (−1), which `compare` scored as "no false alarm"; an indefinite P0 gave
+    plausible-looking probabilities."""
+    from hrgjax.diagnosis import compare as cp
+
+    good = _toy(1, r=0.1)[0]
+    cases = {
+        3: (-0.1 * jnp.eye(1), r"model 1's r must be a symmetric positive-definite \(m, m\) = "
+                               r"\(1, 1\) covariance; its smallest eigenvalue is -0.1"),
+        1: (-jnp.eye(1), r"model 1's qd must be a symmetric positive semi-definite"),
+        0: (jnp.full((1, 1), jnp.nan), r"model 1's phi must be finite"),
+        2: (jnp.ones((1, 2)), r"model 1's h must be \(m, n\) = \(1, 1\)"),
+    }  # fmt: skip
+    for i, (value, message) in cases.items():
+        bad = list(good)
+        bad[i] = value
+        with pytest.raises(ValueError, match=message):
+            fb.Bank.build([good, tuple(bad)])
+    two = (jnp.eye(2), 0.01 * jnp.eye(2), jnp.ones((1, 2)), 0.1 * jnp.eye(1), jnp.zeros(2))
+    with pytest.raises(ValueError, match=r"model 1's p0 must be .* eigenvalue is -1"):
+        fb.Bank.build([(*two, jnp.eye(2)), (*two, jnp.array([[1.0, 2.0], [2.0, 1.0]]))])
+    # a bank changed after `build` is checked where it runs
+    bank = fb.Bank.build(_toy(2))
+    broken = eqx.tree_at(lambda b: b.r, bank, bank.r.at[1].set(-0.1))
+    message = r"bank.r must be a symmetric positive-definite .* -0.1 at hypothesis 1"
+    with pytest.raises(ValueError, match=message):
+        fb.run_bank(broken, jnp.zeros((10, 1)))
+    with pytest.raises(ValueError, match=message):
+        fb.GainBank.from_bank(broken, 10)
+    gains = fb.GainBank.from_bank(bank, 10)
+    with pytest.raises(ValueError, match=message):
+        fb.run_gains(eqx.tree_at(lambda g: g.bank, gains, broken), jnp.zeros((10, 1)))
+    # compare does not score NaN probabilities' undecided steps as "no fault named"
+    probs = jnp.array([[[0.5, 0.5], [jnp.nan, jnp.nan]]])
+    out = cp._bank_run((probs, jnp.array([[-1, -1]])))
+    with pytest.raises(RuntimeError, match=r"filter_bank: the hypothesis probabilities are NaN "
+                                           r"from step 1 of run 0"):  # fmt: skip
+        cp._bank_states("filter_bank", out)
+    np.testing.assert_array_equal(
+        cp._bank_states("filter_bank", cp._bank_run((probs[:, :1], jnp.array([[-1]])))), [[0]]
+    )
+
+
+def test_scores_without_fault_free_steps_are_refused_or_none():
+    """With no fault-free step after the warm-up the false-alarm rate was NaN (and NumPy's
+    "Mean of empty slice" warning); `compare` refuses a warm-up that reaches the onset."""
+    from hrgjax.diagnosis import compare as cp
+
+    states = np.array([[0, 0, 1, 1], [0, -1, 2, 2]])
+    s = cp._score(states, np.array([1, 2]), onset_k=2, k0=2, dt=1.0, t_fault=3.0)
+    assert s["false_alarm_rate"] is None and s["missed_rate"] == 0.0
+    res = {"scenario": "x", "sensor": "accel_y", "thesis": "", "methods": [
+        {"name": "filter_bank", "step_cost_s": 1e-6, **s}],
+        "setup": {"fault_sizes": [1e-7, 2e-7], "nominal_sensor_error": 1e-7}}  # fmt: skip
+    assert "| 100% | – |" in cp.table(res)
+    for warmup in (3700.0, 5000.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match=r"warmup_s must be in \[0, t_fault\) = \[0, 3700.0\)"):
+            cp.compare("stationary", n_healthy=0, warmup_s=warmup, key=jax.random.key(0))

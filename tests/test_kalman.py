@@ -206,3 +206,43 @@ def test_eager_filters_and_steady_state_compile_once_per_shape():
         np.testing.assert_allclose(a, b, rtol=1e-13)
     np.testing.assert_allclose(kf[2], kalman.kalman_filter.__wrapped__(PRIOR, PHI, QD, H, r2, zs)[2],
                                rtol=1e-13)  # fmt: skip
+
+
+def test_filter_inputs_are_refused_in_one_line():
+    """Impossible inputs used to run silently (a NaN measurement without a mask, a negative
+    variance: NaN means and log-likelihood; an indefinite P0: a finite log-likelihood) or
+    failed deep in JAX (`dot_general requires contracting dimensions`)."""
+    bad_z = np.asarray(ZS).copy()
+    bad_z[3] = np.nan
+    indefinite = kalman.Gaussian(PRIOR.x, jnp.array([[1.0, 3.0], [3.0, 1.0]]))
+    qd_steps = np.stack([np.asarray(QD)] * (K - 1) + [-np.asarray(QD)])
+    cases = [
+        ((PRIOR, PHI, QD, H, R, bad_z), r"zs has NaN at step 3: mark a missing measurement"),
+        ((PRIOR, PHI, QD, H, -R, ZS), r"R must be a symmetric positive-definite \(m, m\) = "
+                                      r"\(1, 1\) covariance; its smallest eigenvalue is -0.3"),
+        ((PRIOR, PHI, -QD, H, R, ZS), r"qd must be a symmetric positive semi-definite"),
+        ((PRIOR, PHI, qd_steps, H, R, ZS), r"qd must be .* eigenvalue is .* at step 6"),
+        ((indefinite, PHI, QD, H, R, ZS), r"prior.P must be a symmetric positive semi-definite "
+                                          r"\(n, n\) = \(2, 2\) covariance; its smallest eigen"),
+        ((PRIOR, PHI * np.nan, QD, H, R, ZS), r"phi must be finite; it has nan"),
+        ((PRIOR, PHI, QD, H, R, ZS.T), r"zs must be \(K, m\) = \(K, 1\) .*got \(1, 7\) \(transp"),
+        ((PRIOR, PHI, QD, jnp.ones((1, 3)), R, ZS), r"H must be \(m, n\) = \(m, 2\)"),
+        ((PRIOR, PHI, QD, H, jnp.eye(2), ZS), r"R must be \(m, m\) = \(1, 1\)"),
+    ]  # fmt: skip
+    for run in (kalman.kalman_filter, kalman.rts_smoother):
+        for args, message in cases:
+            with pytest.raises(ValueError, match=message):
+                run(*args)
+        with pytest.raises(ValueError, match=r"mask must be \(K,\) = \(7,\)"):
+            run(PRIOR, PHI, QD, H, R, ZS, mask=MASK[:3])
+        # shapes are refused under the caller's jit too (they are known when tracing)
+        with pytest.raises(ValueError, match=r"zs must be \(K, m\)"):
+            jax.jit(lambda z, run=run: run(PRIOR, PHI, QD, H, R, z))(ZS.T)
+    # a NaN at a step without a measurement is a missing measurement (documented)
+    masked = kalman.kalman_filter(PRIOR, PHI, QD, H, R, bad_z, mask=MASK.at[3].set(False))
+    assert np.isfinite(masked[2]) and np.isfinite(masked[0]).all()
+    with pytest.raises(ValueError, match=r"z must be finite where mask is True"):
+        kalman.update(PRIOR, jnp.array([np.nan]), H, R)
+    with pytest.raises(ValueError, match=r"R must be a symmetric positive-definite"):
+        kalman.update(PRIOR, ZS[0], H, -R)
+    assert kalman.update(PRIOR, jnp.array([np.nan]), H, R, mask=False)[3] == 0.0

@@ -13,7 +13,8 @@ and scores it:
   first measurement a fault changes comes one step after it);
 - `detected`: share of faulty runs in which it did, within the run;
 - `false_alarm_rate`: share of the steps without a fault (healthy runs, and faulty runs
-  before the onset), after the first `warmup_s`, on which a fault is named;
+  before the onset), after the first `warmup_s` (< `t_fault`), on which a fault is named
+  (`null` when there is no such step);
 - `wrong_diagnosis_rate`: share of the steps after the onset on which a wrong INS is named;
 - `missed_rate`: share of the steps after the onset (faulty runs) on which no fault is named
   (healthy or undecided) — with `wrong_diagnosis_rate` and the right-INS share it sums to 1;
@@ -142,16 +143,36 @@ def _timed(fn, *args):
     return out, time.perf_counter() - t0
 
 
+def _bank_run(out):
+    """A filter bank's decisions and, per step, whether its probabilities are all finite."""
+    probs, dec = out[0], out[1]
+    return dec, jnp.all(jnp.isfinite(probs), axis=-1)
+
+
+def _bank_states(name, out):
+    """A bank's decisions for `_score`: undecided (−1) counts as no fault named (the scoring
+    rule), but not where the probabilities are NaN — a broken bank is not "no false alarm"."""
+    dec, finite = (np.asarray(x) for x in out)
+    if not finite.all():
+        run, step = np.argwhere(~finite)[0]
+        raise RuntimeError(
+            f"{name}: the hypothesis probabilities are NaN from step {step} of run {run} (the "
+            "bank's model is broken); its decisions cannot be scored"
+        )
+    return np.maximum(dec, 0)
+
+
 def _score(states, truth, onset_k, k0, dt, t_fault):
     """states (R, K) decided INS (0 none or undecided, i = INS i; −1, undecided, counts as 0);
-    truth (R,) faulty INS (0 healthy)."""
+    truth (R,) faulty INS (0 healthy). `false_alarm_rate` is None when no step is fault-free
+    after step `k0` (nothing to count false alarms on)."""
     states = np.asarray(states)
     r, k = states.shape
     steps = np.arange(k)
     post = (truth[:, None] > 0) & (steps[None, :] >= onset_k)
     quiet = ~post & (steps[None, :] >= k0)
     named = states > 0
-    fa = float(named[quiet].mean())
+    fa = float(named[quiet].mean()) if quiet.any() else None
     wrong = named & (states != truth[:, None])
     wd = float(wrong[post].mean()) if post.any() else 0.0
     missed = float((~named)[post].mean()) if post.any() else 0.0
@@ -207,6 +228,11 @@ def compare(
     sc = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
     if not 0.0 < sc.t_fault < sc.duration:
         raise ValueError(f"t_fault must be inside (0, duration={sc.duration}) s; got {sc.t_fault}")
+    if not 0.0 <= warmup_s < sc.t_fault:
+        raise ValueError(
+            f"warmup_s must be in [0, t_fault) = [0, {sc.t_fault}) s (false alarms are counted "
+            f"on the fault-free steps after it); got warmup_s = {warmup_s}"
+        )
     if int(n_faulty) < 1 or int(n_healthy) < 0 or int(n_train) < 1:
         raise ValueError("n_faulty and n_train must be >= 1 and n_healthy >= 0")
     unknown = set(methods) - set(METHODS)
@@ -266,22 +292,24 @@ def compare(
         t0 = time.perf_counter()
         gb = GainBank.from_bank(bank, min(k_len, 1000))
         gb_s = time.perf_counter() - t0
-        run = jax.jit(lambda z: run_gains(gb, z, interacting=True, prior=prior)[1])
-        dec, cost = _timed(run, zs)
-        add("filter_bank", np.maximum(np.asarray(dec), 0), cost, build_s + gb_s)
+        run = jax.jit(lambda z: _bank_run(run_gains(gb, z, interacting=True, prior=prior)))
+        out, cost = _timed(run, zs)
+        add("filter_bank", _bank_states("filter_bank", out), cost, build_s + gb_s)
     if "filter_bank_rest" in methods and any(f != 0.0 for f in sc.specific_force):
         t0 = time.perf_counter()
         rest = fault_bank(PlatformINS(), sc.sensor, sc.dt, meas_sigma=meas_sigma,
                           switch_prob=1e-4)  # fmt: skip
         gb_rest = GainBank.from_bank(rest, min(k_len, 1000))
         rest_s = time.perf_counter() - t0
-        run = jax.jit(lambda z: run_gains(gb_rest, z, interacting=True, prior=prior)[1])
-        dec, cost = _timed(run, zs)
-        add("filter_bank_rest", np.maximum(np.asarray(dec), 0), cost, rest_s)
+        run = jax.jit(lambda z: _bank_run(run_gains(gb_rest, z, interacting=True, prior=prior)))
+        out, cost = _timed(run, zs)
+        add("filter_bank_rest", _bank_states("filter_bank_rest", out), cost, rest_s)
     if "filter_bank_full" in methods:
-        run = jax.jit(jax.vmap(lambda z: run_bank(bank, z, interacting=True, prior=prior)[1]))
-        dec, cost = _timed(run, zs)
-        add("filter_bank_full", np.maximum(np.asarray(dec), 0), cost, build_s)
+        run = jax.jit(
+            jax.vmap(lambda z: _bank_run(run_bank(bank, z, interacting=True, prior=prior)))
+        )
+        out, cost = _timed(run, zs)
+        add("filter_bank_full", _bank_states("filter_bank_full", out), cost, build_s)
 
     neural = [m for m in methods if not m.startswith("filter_bank")]
     if neural:
@@ -357,7 +385,7 @@ def table(result) -> str:
         dt = "–" if r["detection_time_s"] is None else (
             f"{r['detection_time_s']:.0f} / {r['detection_time_max_s']:.0f}")  # fmt: skip
         lines.append(
-            f"| {r['name']} | {dt} | {r['detected']:.0%} | {r['false_alarm_rate']:.2%} | "
+            f"| {r['name']} | {dt} | {r['detected']:.0%} | {_pct(r['false_alarm_rate'])} | "
             f"{r['wrong_diagnosis_rate']:.2%} | {_pct(r.get('missed_rate'))} | "
             f"{r['step_cost_s']:.1e} |"
         )

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import logsumexp
 
-from .._checks import is_concrete
+from .._checks import check_covariance, check_finite_host, is_concrete
 from .._linalg import cho_logdet, cho_solve, cholesky
 from ..kalman import LOG_2PI, Gaussian, predict, update
 
@@ -57,12 +57,16 @@ class Bank(eqx.Module):
         """From a list of `(phi, qd, h, r, x0, p0)` tuples (and optional `z_offsets`, one (m,)
         per model, and `reset` masks, one (n,) per model); hypotheses stay put with
         probability 1 − `switch_prob` per step and otherwise move to any other one
-        uniformly."""
+        uniformly. Each model is refused in one line when its shapes do not fit or (concrete
+        values) a value is not finite, `qd` or `p0` is not symmetric positive
+        semi-definite, or `r` is not positive-definite."""
         m = len(models)
         if m < 1:
             raise ValueError("a bank needs at least one model")
         if not 0.0 <= switch_prob < 1.0:
             raise ValueError(f"switch_prob must be in [0, 1); got {switch_prob}")
+        for i, mod in enumerate(models):
+            _check_model(i, mod, models[0])
         parts = [jnp.stack([jnp.asarray(mod[k], float) for mod in models]) for k in range(6)]
         if m == 1:
             trans = jnp.ones((1, 1))
@@ -89,6 +93,50 @@ class Bank(eqx.Module):
     @property
     def size(self) -> int:
         return self.phi.shape[0]
+
+
+_FIELDS = ("phi", "qd", "h", "r", "x0", "p0")
+
+
+def _check_model(i, mod, first):
+    """Model `i` of `Bank.build`: a `(phi, qd, h, r, x0, p0)` tuple whose shapes fit each other
+    and the first model's (trace time), with finite values, `qd` and `p0` symmetric positive
+    semi-definite and `r` positive-definite when they are concrete (one line naming the model
+    and the field: a negative variance made every probability NaN, every decision undecided)."""
+    if len(mod) != 6:
+        raise ValueError(f"model {i} must be a (phi, qd, h, r, x0, p0) tuple; got {len(mod)} items")
+    n_shape, h_shape = np.shape(first[0]), np.shape(first[2])
+    n = n_shape[0] if len(n_shape) == 2 and n_shape[0] == n_shape[1] else None
+    m = h_shape[0] if len(h_shape) == 2 else None
+    if n is None or m is None:
+        raise ValueError(
+            f"model 0's phi must be (n, n) and h (m, n); got phi {n_shape}, h {h_shape}"
+        )
+    want = {"phi": (n, n), "qd": (n, n), "h": (m, n), "r": (m, m), "x0": (n,), "p0": (n, n)}
+    form = {"phi": "(n, n)", "qd": "(n, n)", "h": "(m, n)", "r": "(m, m)", "x0": "(n,)",
+            "p0": "(n, n)"}  # fmt: skip
+    for name, a in zip(_FIELDS, mod, strict=True):
+        if np.shape(a) != want[name]:
+            raise ValueError(f"model {i}'s {name} must be {form[name]} = {want[name]} (n = {n} "
+                             f"states, m = {m} measurements); got {np.shape(a)}")  # fmt: skip
+    phi, qd, h, r, x0, p0 = mod
+    for name, a in (("phi", phi), ("h", h), ("x0", x0)):
+        check_finite_host(f"model {i}'s {name}", a)
+    check_covariance(f"model {i}'s qd", qd, form=f"(n, n) = ({n}, {n})")
+    check_covariance(f"model {i}'s r", r, definite=True, form=f"(m, m) = ({m}, {m})")
+    check_covariance(f"model {i}'s p0", p0, form=f"(n, n) = ({n}, {n})")
+
+
+def _check_bank(bank: Bank):
+    """A bank's concrete values (a `Bank` made directly, or changed after `Bank.build`):
+    finite, `qd` and `p0` symmetric positive semi-definite, `r` positive-definite, per
+    hypothesis; traced fields pass (no run-time check)."""
+    for name in ("phi", "h", "x0", "z_offset"):
+        check_finite_host(f"bank.{name}", getattr(bank, name))
+    n, m = bank.phi.shape[-1], bank.h.shape[-2]
+    for name, definite, size in (("qd", False, n), ("r", True, m), ("p0", False, n)):
+        check_covariance(f"bank.{name}", getattr(bank, name), definite=definite,
+                         form=f"({size}, {size})", index="hypothesis")  # fmt: skip
 
 
 def _normalise(lp, log_floor):
@@ -147,6 +195,7 @@ def run_bank(
     **Returns:** `(probabilities (K, M), decisions (K,) int, −1 = undecided, means (K, M, n))`
     (the means are each filter's posterior estimate)."""
     lp0, log_floor = _start(bank.size, floor, prior, threshold)
+    _check_bank(bank)
     zs = _check_zs(zs, bank, (2,))
     return _run(bank, zs, log_floor, lp0, jnp.asarray(threshold), interacting)
 
@@ -281,6 +330,7 @@ class GainBank(eqx.Module):
         warmup = min(50, n_steps) if warmup is None else warmup
         if isinstance(warmup, bool) or not 0 <= int(warmup) <= n_steps:
             raise ValueError(f"warmup must be an integer in [0, n_steps={n_steps}]; got {warmup!r}")
+        _check_bank(bank)
         track = jax.vmap(lambda *a: _track(*a, n_steps))
         k, s, plain = track(bank.phi, bank.qd, bank.h, bank.r, bank.p0)
         p_on = _restart(bank.reset, bank.p0, plain[int(healthy), -1][None])
@@ -370,6 +420,7 @@ def run_gains(
     `zs` (K, m), or (B, K, m) for a batch of runs. **Returns** `(probabilities,
     decisions)` with the leading shape of `zs`."""
     lp0, log_floor = _start(gb.bank.size, floor, prior, threshold)
+    _check_bank(gb.bank)
     zs = _check_zs(zs, gb.bank, (2, 3))
     fn = lambda z: _run_gains(gb, z, log_floor, lp0, jnp.asarray(threshold), interacting)
     return fn(zs) if zs.ndim == 2 else jax.vmap(fn)(zs)
