@@ -17,6 +17,7 @@ import contextlib
 import contextvars
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -51,10 +52,27 @@ def probing():
         _PROBING.reset(token)
 
 
+AD_LEVELS = 8
+"""Levels of differentiation (`jax.grad`, `jvp`, `linearize`, `jacfwd`, … nested) around
+`simulate` inside a swept function whose estimate `report` takes the primal of."""
+
+
 def report(gyro, profile, model: str) -> None:
-    """Called by `simulate` before it solves: while probing, stop with the estimate."""
+    """Called by `simulate` before it solves: while probing, stop with the estimate.
+
+    `simulate` may be differentiated inside the swept function (`jax.grad` of it, say): its
+    estimate is then a tracer of that differentiation, which would escape it with the
+    exception. Each `jax.lax.stop_gradient` returns the primal of the innermost such level
+    the value has (the estimate is not differentiated; its value is the undifferentiated
+    run's), so after `AD_LEVELS` of them the estimate is the probe's own value. A
+    transformation that leaves no primal (`fn`'s own `jax.jit`, a `vmap` over the swept
+    values, a `lax.scan` around `simulate`) still lets it escape: `sweep` then keeps the
+    grid order (`hrgjax.sweep.member_costs`)."""
     if _PROBING.get():
-        raise Found(steps_estimate(gyro, profile, model))
+        cost = steps_estimate(gyro, profile, model)
+        for _ in range(AD_LEVELS):
+            cost = jax.lax.stop_gradient(cost)
+        raise Found(cost)
 
 
 def steps_per_s(precession):

@@ -51,7 +51,9 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
       until the slowest is done, so members of very different cost (rates from 0.1 to
       400 °/s, say) waste most of a batch. `"auto"` (default): the solver steps each member
       will take, estimated from the profile of the first `simulate` call in `fn`
-      (`hrgjax._cost`; `fn` is traced once more for it, no solve is compiled); the members are
+      (`hrgjax._cost`; `fn` is traced once more for it, no solve is compiled; a
+      differentiated `simulate` counts as undifferentiated, one under `fn`'s own `jit`,
+      `scan` or `vmap` of the swept values gives no estimate: grid order); the members are
       sorted by it and run in chunks of similar cost — on a CPU the chunk size that
       minimises the estimated time (one batch when the costs are alike), on an accelerator
       one batch unless `chunk_size` is given. A callable `cost(**point)` → estimated cost per
@@ -157,7 +159,14 @@ def member_costs(fn, cost, flat: dict) -> np.ndarray | None:
     probe, state = _probe(fn)
     if not state["simulates"]:
         return None
-    c = np.asarray(probe(flat), dtype=float)
+    try:
+        c = np.asarray(probe(flat), dtype=float)
+    except jax.errors.UnexpectedTracerError:
+        # The estimate is a value of a transformation inside `fn` that has no primal to
+        # take (`_cost.report`): `fn`'s own jit, a vmap over the swept values, a scan around
+        # `simulate`. No estimate then: the grid's order, as for a `fn` with no `simulate`.
+        state["simulates"] = False
+        return None
     if not state["simulates"]:  # this trace found no simulate call
         return None
     return c if np.all(np.isfinite(c)) else None
@@ -166,7 +175,8 @@ def member_costs(fn, cost, flat: dict) -> np.ndarray | None:
 def _probe(fn):
     """`(jax.jit(jax.vmap(…)), state)`: `fn` traced with the cost probe on (hrgjax._cost),
     giving the first `simulate` call's estimated steps per point. Kept per `fn`;
-    `state["simulates"]` turns False once a trace has shown that `fn` calls no `simulate`."""
+    `state["simulates"]` turns False once a trace has shown that `fn` calls no `simulate`,
+    or none whose estimate can leave `fn`'s own transformations (`member_costs`)."""
 
     def make():
         state = {"simulates": True}

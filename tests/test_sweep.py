@@ -235,3 +235,33 @@ def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
         hg.sweep(f, cost="fast", temperature_c=T, rate_dps=W)
     with pytest.raises(ValueError, match="one per point"):
         hg.sweep(f, cost=lambda **_: 1.0, temperature_c=T, rate_dps=W)
+
+
+def test_sweep_of_a_gradient_through_simulate_orders_by_the_undifferentiated_estimate():
+    """A `fn` that differentiates `simulate` (`jax.grad`) is swept with the default
+    `cost="auto"`: the probe's estimate is the undifferentiated run's (no tracer of the
+    gradient escapes it), the result equals `cost=None` bit for bit and a central difference;
+    a `fn` whose estimate cannot leave its own transformation (its own `jax.jit`) falls back
+    to the grid's order."""
+    from hrgjax.sweep import member_costs
+
+    gyro = hg.presets.ideal(hg.presets.tvg3_like().resonator)  # ideal loops: a light compile
+
+    def angle(rate_dps):
+        prof = hg.Profile.constant_rate(rate_dps, 5.0, 20.0)
+        return hg.simulate(gyro, prof, dt_out=5.0).wave_angle[-1]
+
+    def slope(rate_dps):
+        return jax.grad(angle)(rate_dps)
+
+    W = jnp.array([0.5, 5.0])
+    flat = {"rate_dps": W}
+    np.testing.assert_array_equal(
+        member_costs(slope, "auto", flat), member_costs(angle, "auto", flat)
+    )
+    assert member_costs(lambda rate_dps: jax.jit(slope)(rate_dps), "auto", flat) is None
+    auto = hg.sweep(slope, rate_dps=W)
+    np.testing.assert_array_equal(auto, hg.sweep(slope, rate_dps=W, cost=None))
+    h = 1e-4
+    lo, hi = hg.sweep(angle, rate_dps=W[1] + jnp.array([-h, h]), cost=None)
+    assert float(auto[1]) == pytest.approx(float(hi - lo) / (2 * h), rel=1e-7)
