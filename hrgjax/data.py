@@ -99,7 +99,8 @@ class MeasuredData:
             if given:
                 plausible.check_table_angle(table, self._rate_integral(), self.run, moving)
             plausible.check_wave_angle_units(cols["wave_angle_deg"], table, self.run, moving,
-                                             K_E_NOMINAL, integrated=not given)  # fmt: skip
+                                             K_E_NOMINAL, integrated=not given,
+                                             time_s=cols["time_s"])  # fmt: skip
         plausible.check_wave_angle_jumps(cols["wave_angle_deg"], table, cols["time_s"],
                                          self.run, K_E_NOMINAL, precession)  # fmt: skip
 

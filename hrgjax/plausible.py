@@ -97,20 +97,39 @@ def check(name: str, values, quantity: str | None = None) -> None:
         )
 
 
-def _turn_ratio(numerator, denominator, run, moving, min_turn: float) -> float | None:
-    """The median over the `moving` runs of (numerator's change) / (denominator's change)
-    from each run's first row to its last (rows of a run may be interleaved), among runs
-    whose denominator changes by at least `min_turn`; None where none does."""
-    num, den = (np.asarray(x, dtype=float) for x in (numerator, denominator))
-    run, moving = np.asarray(run), np.asarray(moving, bool)
+WAVE_TURN_OVER_DRIFT = 3.0
+"""A rotation run counts for `check_wave_angle_units` where its table turns ≥ 1 (in the
+file's units) or, whatever the table column's unit, where its wave angle turns by at least
+this many times the most drift `RANGES["wave_drift_dph"]` allows over the run (and ≥ 1°):
+then the table, not drift, moves the wave, and the ratio read is −k_e within a factor
+1.5 — far inside `WAVE_TABLE_RATIO` and far from the unit errors' ratios (×57.3, ×1/57.3)."""
+
+
+def _run_ends(run) -> tuple[np.ndarray, np.ndarray]:
+    """Each run's first and last row (rows of a run may be interleaved)."""
+    run = np.asarray(run)
     _, first = np.unique(run, return_index=True)
     _, last = np.unique(run[::-1], return_index=True)
-    last = run.size - 1 - last
+    return first, run.size - 1 - last
+
+
+def _turn_ratio(numerator, denominator, run, moving, min_turn: float,
+                min_numerator_turn=np.inf) -> float | None:  # fmt: skip
+    """The median over the `moving` runs of (numerator's change) / (denominator's change)
+    from each run's first row to its last (rows of a run may be interleaved), among runs
+    whose denominator changes by at least `min_turn` or whose numerator changes by at least
+    `min_numerator_turn` (a number, or one per run in the order of `np.unique(run)`); None
+    where none does."""
+    num, den = (np.asarray(x, dtype=float) for x in (numerator, denominator))
+    first, last = _run_ends(run)
+    moving = np.asarray(moving, bool)
     turn = den[last] - den[first]
-    use = moving[first] & (np.abs(turn) >= min_turn)
+    num_turn = num[last] - num[first]
+    use = moving[first] & ((np.abs(turn) >= min_turn) | (np.abs(num_turn) >= min_numerator_turn))
+    use &= turn != 0.0
     if not use.any():
         return None
-    return float(np.median((num[last] - num[first])[use] / turn[use]))
+    return float(np.median(num_turn[use] / turn[use]))
 
 
 WAVE_TABLE_RATIO = (0.05, 2.0)
@@ -120,7 +139,7 @@ pendulum) times the table, either way round (the sign is a convention the calibr
 
 
 def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: float,
-                           integrated: bool = False) -> None:  # fmt: skip
+                           integrated: bool = False, time_s=None) -> None:  # fmt: skip
     """Refuse columns whose units cannot be the contract's: over the rotation runs the
     measured wave angle turns by ≈ −k_e times the table (both in degrees). Read as a ratio,
     a wave angle in radians gives −k_e·π/180, a table in radians (a rate in rad/s, or a
@@ -128,11 +147,25 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
     (where the table angle is the rate's integral over time, `integrated`); any other
     |ratio| outside `WAVE_TABLE_RATIO` is refused naming all three columns.
 
-    **Arguments:** per-row arrays (`run` ids, `moving`: the row's run turns the table) and
-    the nominal angular gain `k_e`. Runs whose table turns less than 1° are not used.
+    **Arguments:** per-row arrays (`run` ids, `moving`: the row's run turns the table,
+    `time_s`: the time stamps, None: not known) and the nominal angular gain `k_e`. A run
+    counts where its table turns by ≥ 1 in the file's units or (with `time_s`) its wave angle
+    turns beyond what drift can ([`WAVE_TURN_OVER_DRIFT`][hrgjax.plausible.WAVE_TURN_OVER_DRIFT]):
+    a rate in rad/s integrates to < 1 over any run shorter than 57.3°, so the table's turn
+    alone cannot pick the runs.
 
     **Raises:** `ValueError` naming the column the ratio points at, and the ratio found."""
-    ratio = _turn_ratio(wave_angle_deg, table_angle_deg, run, moving, 1.0)
+    wave_turn = np.inf
+    if time_s is not None:
+        t = np.asarray(time_s, dtype=float)
+        ids = np.unique(np.asarray(run), return_inverse=True)[1].ravel()
+        span = np.zeros(ids.max() + 1)
+        np.maximum.at(span, ids, t)
+        low_t = np.full(span.size, np.inf)
+        np.minimum.at(low_t, ids, t)
+        drift = RANGES["wave_drift_dph"][1] / 3600.0 * (span - low_t)
+        wave_turn = np.maximum(1.0, WAVE_TURN_OVER_DRIFT * drift)
+    ratio = _turn_ratio(wave_angle_deg, table_angle_deg, run, moving, 1.0, wave_turn)
     if ratio is None:
         return
     said = f"column 'wave_angle_deg' turns {ratio:.4g} × the table over the rotation runs"
@@ -159,10 +192,12 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
 def check_table_angle(table_angle_deg, integral_deg, run, moving) -> None:
     """Refuse a `table_angle_deg` column that does not turn as the integral of
     `table_rate_dps` over `time_s` (`integral_deg`, per row) over the rotation runs: within
-    10 %, or named as radians (π/180) or a rate in rad/s (180/π).
+    10 %, or named as radians (π/180) or a rate in rad/s (180/π). A run counts where either
+    turns by ≥ 1 (in the file's units: a table angle or a rate in radians turns < 1 over a
+    run shorter than 57.3°, the other one does not).
 
     **Raises:** `ValueError` naming `table_angle_deg` and the ratio found."""
-    ratio = _turn_ratio(table_angle_deg, integral_deg, run, moving, 1.0)
+    ratio = _turn_ratio(table_angle_deg, integral_deg, run, moving, 1.0, 1.0)
     if ratio is None or abs(ratio - 1.0) <= 0.1:
         return
     hint = {np.pi / 180.0: ": it looks like radians (np.degrees)",

@@ -501,6 +501,30 @@ def test_physically_impossible_numbers_are_refused_with_a_hint():
         hg.calibration.static_plan((-150.0,), (0.0,), duration_s=10.0)
 
 
+def test_rate_in_rad_per_s_is_refused_on_runs_shorter_than_a_radian():
+    """Audit: a table rate in rad/s integrates to < 1 over a run shorter than 57.3°, and
+    only runs whose table turned ≥ 1 in the file's units were read, so a 10-s run at 5 °/s
+    written as 0.0873 loaded (calibrate then fitted a scale factor of 57.3). A run now counts
+    too where its wave turns beyond any drift; a slow table under drift still loads."""
+    t = np.arange(21) * 0.5
+    k_e = 0.554
+    cols = dict(time_s=t, temperature_c=np.full(t.size, 20.0), table_rate_dps=np.full(t.size, 5.0),
+                wave_angle_deg=-k_e * 5.0 * t)  # fmt: skip
+    hg.MeasuredData(cols)
+    rads = dict(table_rate_dps=np.full(t.size, np.radians(5.0)))
+    with pytest.raises(ValueError, match=r"^column 'wave_angle_deg' turns -31.7\d × the table "
+                       r"over the rotation runs, as a table angle in radians would"):  # fmt: skip
+        hg.MeasuredData(cols | rads)
+    with pytest.raises(ValueError, match=r"^column 'table_angle_deg' turns 57.3 × the integral "
+                       r".* 'table_rate_dps' is in rad/s$"):  # fmt: skip
+        hg.MeasuredData(cols | rads | dict(table_angle_deg=5.0 * t))
+    # the wave drifting at the most RANGES allows (100 °/h) on top: still −k_e, loads
+    hg.MeasuredData(cols | dict(wave_angle_deg=-k_e * 5.0 * t + 100.0 / 3600.0 * t))
+    # a table turning 0.5° under 50 °/h of drift: no run to read, no refusal
+    hg.MeasuredData(cols | dict(table_rate_dps=np.full(t.size, 0.05),
+                                wave_angle_deg=-k_e * 0.05 * t + 50.0 / 3600.0 * t))  # fmt: skip
+
+
 def test_impossible_bench_plans_are_refused():
     """Issue 44: a bench starting at NaN °C, a 1e9-h budget, a segment at +300 °C."""
     from hrgjax.calibration import design
@@ -534,6 +558,19 @@ def test_values_swapped_in_after_construction_are_checked_where_simulate_starts(
         hg.allan.deviation(np.ones(100) * (1 + 1j), rate_hz=1.0)
     with pytest.raises(ValueError, match=r"taus must be > 0 s; got -1"):
         hg.allan.deviation(np.ones(100), rate_hz=1.0, taus=[-1.0, 2.0])
+
+
+def test_allan_refuses_a_bool_sample_rate():
+    """Audit: `identify_noise(y, True)` took True as 1 Hz (a bool is a numbers.Real)."""
+    y = np.random.default_rng(0).normal(size=256)
+    for call in (hg.allan.deviation, hg.allan.identify_noise):
+        with pytest.raises(ValueError, match=r"^rate_hz must be a positive sample rate \[Hz\]; "
+                           r"got True$"):  # fmt: skip
+            call(y, True)
+    with pytest.raises(
+        ValueError, match=r"^rate_hz must be a positive sample rate \[Hz\]; got True$"
+    ):
+        hg.allan.to_uniform(np.arange(256.0), y, rate_hz=True)
 
 
 @pytest.mark.parametrize(

@@ -375,3 +375,42 @@ def test_compare_offset_from_names_a_model_file_however_written(tmp_path, capsys
     cli_fails(argv + ["./f0.eqx"], capsys, "none.csv: no such file")
     cli_fails(argv + [str(tmp_path / "f1.eqx")], capsys, "none.csv: no such file")
     cli_fails(argv + ["./f2.eqx"], capsys, r"--offset-from './f2.eqx': give one of the --models")
+
+
+def test_allan_refuses_noise_model_options_without_fit(tmp_path, capsys):
+    """Audit: `allan --sensor accelerometer --gauss-markov 1 --drift` without `--fit` or
+    `--kalibr` was accepted and ignored; each is now one line naming what reads it."""
+    log = tmp_path / "gyro.csv"
+    rate = np.random.default_rng(0).normal(size=64)
+    log.write_text("rate\n" + "\n".join(f"{v:.6f}" for v in rate) + "\n")
+    base = ["allan", str(log), "--rate-hz", "10", "--column", "rate"]
+    for given, option, takes, them in (
+        (["--sensor", "accelerometer", "--gauss-markov", "1", "--drift"], "--gauss-markov",
+         "--fit and --kalibr", "them"),
+        (["--gauss-markov", "2"], "--gauss-markov", "--fit and --kalibr", "them"),  # the default
+        (["--drift"], "--drift", "--fit and --kalibr", "them"),
+        (["--sensor", "accelerometer"], "--sensor", "--kalibr", "it"),
+        (["--fit", "--sensor", "gyroscope"], "--sensor", "--kalibr", "it"),
+    ):  # fmt: skip
+        cli_fails(base + given, capsys,
+                  rf"^hrgjax allan: error: {option} is for {takes}: it does not apply without "
+                  rf"{them}$")  # fmt: skip
+
+
+def test_imu_calibrate_table_labels_fit_their_column(tmp_path, capsys):
+    """Audit: the label `gyro g-sens [°/s/(m/s²)]` ran into its numbers; every row's numbers
+    now start in one column."""
+    import jax
+
+    truth = hg.imu.ImuCalibration.known(gyro_bias=np.array([0.01, -0.02, 0.005]))
+    data, sections = hg.imu.ferraris_session(truth, jax.random.key(0), rate_hz=20.0,
+                                             repeats=2, static_s=3.0)  # fmt: skip
+    log = tmp_path / "imu.csv"
+    np.savetxt(log, np.concatenate([data.time[:, None], data.gyro, data.accel], axis=1),
+               delimiter=",", header="t,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z", comments="")  # fmt: skip
+    assert main(["imu-calibrate", str(log), "--time-column", "t", "--gyro-unit", "rad/s"]) == 0
+    import re
+
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if re.search(r" [+-]\d.* ± ", ln)]
+    assert any(ln.lstrip().startswith("gyro g-sens [°/s/(m/s²)] ") for ln in rows), rows
+    assert len({re.search(r"[+-]\d", ln).start() for ln in rows}) == 1, rows

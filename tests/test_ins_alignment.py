@@ -103,6 +103,64 @@ def test_align_cli_writes_the_design_keys(psins_log, tmp_path, capsys):
     cli_fails(["align", str(PSINS), "--format", "csv"], capsys, "format")
 
 
+def _psins_file(path, lat=34.0, interval_ms=1000.0, gyro_unit=1.0, yaw="-90.6"):
+    """A 120-s stationary PSINS log at 1 Hz (increments of `tr.stationary`): gyro increments
+    in `gyro_unit` arcsec, accelerometer increments in 1 µg·s; header values as given."""
+    log, _ = _stationary_log(34.0, np.zeros(3), np.zeros(3), duration_s=120.0)
+    frd_to_rfu = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    g = 9.780327
+    gyro = np.asarray(log.dtheta) @ frd_to_rfu.T / (np.pi / 180 / 3600)
+    acc = np.asarray(log.dvel) @ frd_to_rfu.T / (1e-6 * g)
+    head = [f"0 0 {yaw} 0 0 0", f"{lat} 108.9 380 0 {interval_ms} {g}",
+            f"{gyro_unit} {gyro_unit} {gyro_unit} 1 1 1"]  # fmt: skip
+    rows = [" ".join(f"{v:.6f}" for v in r) for r in np.concatenate([gyro, acc], axis=1)]
+    path.write_text("\n".join(["% a stationary log", *head, *rows]) + "\n")
+    return path
+
+
+def test_align_refuses_a_gyro_unit_10x_off(tmp_path, capsys):
+    """Audit: a PSINS header's gyro increment unit 10× too large gave a confident wrong
+    heading: the mean angular rate at rest was never checked against the Earth's rate."""
+    path = _psins_file(tmp_path / "gyro10.imu", gyro_unit=10.0)
+    with pytest.raises(ValueError, match=r"^mean angular rate 150.4 °/h over the first 60 s is "
+                       r"not the Earth's rate \(15.04 °/h; alignment takes 0.5–2 × it\)"):  # fmt: skip
+        al.align(al.load_psins(path))
+    cli_fails(["align", str(path)], capsys,
+              r"^hrgjax align: error: .*gyro10.imu: mean angular rate 150.4 °/h over the first "
+              r"60 s is not the Earth's rate \(15.04 °/h; .*\): is the IMU stationary, is the "
+              r"header's gyro increment unit \(line 3, fields 1–3\) \[arcsec\] right\?$")  # fmt: skip
+    al.check_stationary(al.load_psins(_psins_file(tmp_path / "good.imu")))  # 15.04 °/h: fine
+
+
+def test_align_names_the_header_for_an_interval_in_seconds_and_a_bad_latitude(tmp_path, capsys):
+    """Audit: an interval of 1 (s, for 1000 ms) read "coarse_s must be in (0, 0] s"; a
+    latitude of 134° "ImuLog.lat must be in [-π/2, π/2] rad … (degrees? …)"."""
+    seconds = _psins_file(tmp_path / "dts.imu", interval_ms=1.0)
+    cli_fails(["align", str(seconds)], capsys,
+              r"^hrgjax align: error: .*dts.imu: the record spans 0.12 s \(120 samples at 1 ms\), "
+              r"shorter than --coarse = 60 s: check the header's sampling interval \(line 2, "
+              r"field 5\) \[ms\]$")  # fmt: skip
+    with pytest.raises(
+        ValueError, match=r"^the record spans 0.12 s .*shorter than coarse_s = 60 s"
+    ):
+        al.align(al.load_psins(seconds))
+    lat = _psins_file(tmp_path / "lat134.imu", lat=134.0)
+    cli_fails(["align", str(lat)], capsys,
+              r"^hrgjax align: error: .*lat134.imu: the header's latitude \(line 2, field 1\) = "
+              r"134° is outside ±90°$")  # fmt: skip
+    nan = _psins_file(tmp_path / "latnan.imu", lat="nan")
+    with pytest.raises(ValueError, match=r"latnan.imu: the header's latitude \[°\] \(line 2, "
+                       r"field 1\) must be finite; got nan$"):  # fmt: skip
+        al.load_psins(nan)
+
+
+def test_psins_header_attitude_that_is_not_finite_is_left_out(tmp_path):
+    """Audit: a NaN header yaw printed "file header heading: nan°". The header's attitude is
+    an approximate reference (`header_attitude_deg` may be None): not finite, it is left out."""
+    assert al.load_psins(_psins_file(tmp_path / "a.imu")).header_attitude_deg == (0.0, 0.0, 90.6)
+    assert al.load_psins(_psins_file(tmp_path / "n.imu", yaw="nan")).header_attitude_deg is None
+
+
 def test_imu_log_refuses_bad_input():
     t = jnp.arange(1.0, 4.0)
     with pytest.raises(ValueError, match=r"dtheta must have shape \(3, 3\)"):

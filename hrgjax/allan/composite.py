@@ -288,7 +288,9 @@ def identify_noise(
     0–2, a bad rate or level, or a record shorter than 64 samples (four octaves)."""
     from .result import deviation
 
-    if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
+    if isinstance(rate_hz, bool) or not (
+        isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0
+    ):
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
     bad = [t for t in terms if t not in LINEAR]
     if bad:

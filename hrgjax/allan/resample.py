@@ -82,7 +82,9 @@ def to_uniform(
     median = float(np.median(dt))
     if rate_hz is None:
         rate_hz = 1.0 / median
-    if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
+    if isinstance(rate_hz, bool) or not (
+        isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0
+    ):
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
     step = 1.0 / float(rate_hz)
     t = t - start  # stamps from the first (epoch seconds keep their digits)

@@ -194,7 +194,8 @@ def deviation(
         raise ValueError(f"noise_rule must be one of {list(NOISE_RULES)}; got {noise_rule!r}")
     if data not in ("rate", "phase"):
         raise ValueError(f"data must be 'rate' or 'phase'; got {data!r}")
-    if not (isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0):
+    if not (isinstance(rate_hz, numbers.Real) and not isinstance(rate_hz, bool)
+            and math.isfinite(rate_hz) and rate_hz > 0):  # fmt: skip
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
     if not (0.0 < ci < 1.0):
         raise ValueError(f"ci must be a confidence level in (0, 1); got {ci!r}")

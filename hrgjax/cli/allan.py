@@ -95,6 +95,7 @@ def cmd_allan(args) -> int:
     from .. import allan
 
     unit = {"deg/s": "°/s", "deg/h": "°/h", "m/s^2": "m/s²"}.get(args.unit, args.unit) or ""
+    _refuse_unread(args)
     sensor = None
     if args.kalibr:  # the unit is checked before any work
         from ..allan.composite import TO_SI
@@ -125,8 +126,9 @@ def cmd_allan(args) -> int:
         if args.kind not in ("adev", "oadev"):
             print("  (the noise model is fitted to the overlapping Allan variance)")
         with usage_errors(prefix=args.log):
-            model = allan.identify_noise(y, rate_hz, unit=unit, gauss_markov=args.gauss_markov,
-                                         terms=_terms(args.drift))  # fmt: skip
+            gauss_markov = 2 if args.gauss_markov is None else args.gauss_markov
+            model = allan.identify_noise(y, rate_hz, unit=unit, gauss_markov=gauss_markov,
+                                         terms=_terms(bool(args.drift)))  # fmt: skip
         print(model)
     kalibr = None
     if args.kalibr:
@@ -156,6 +158,23 @@ def cmd_allan(args) -> int:
         return path
 
     return finish((args.json, out), (args.csv, csv), (args.kalibr, kalibr), (args.plot, plot))
+
+
+OPTIONS_READ_BY = {
+    "--gauss-markov": ("gauss_markov", "--fit and --kalibr", "them"),
+    "--drift": ("drift", "--fit and --kalibr", "them"),
+    "--sensor": ("sensor", "--kalibr", "it"),
+}
+"""The noise model's options (default None: given or not) and the options that read them:
+given without those they are refused, not ignored."""
+
+
+def _refuse_unread(args) -> None:
+    model = bool(args.fit or args.kalibr)
+    for option, (dest, takes, pronoun) in OPTIONS_READ_BY.items():
+        read = bool(args.kalibr) if dest == "sensor" else model
+        if getattr(args, dest) is not None and not read:
+            raise UsageError(f"{option} is for {takes}: it does not apply without {pronoun}")
 
 
 def _terms(drift: bool):
@@ -212,17 +231,17 @@ def _allan_parser(sub):
     p.add_argument("--fit", action="store_true",
                    help="identify the composite noise model (white angle/rate noise, rate "
                    "random walk, Gauss–Markov terms) with intervals")  # fmt: skip
-    p.add_argument("--gauss-markov", type=int, default=2, choices=(0, 1, 2),
-                   help="Gauss–Markov terms the model may use (2)")  # fmt: skip
-    p.add_argument("--drift", action="store_true",
-                   help="also offer a rate ramp (drift) to the model")  # fmt: skip
+    p.add_argument("--gauss-markov", type=int, default=None, choices=(0, 1, 2),
+                   help="Gauss–Markov terms the model may use (2; with --fit or --kalibr)")  # fmt: skip
+    p.add_argument("--drift", action="store_const", const=True, default=None,
+                   help="also offer a rate ramp (drift) to the model (with --fit or --kalibr)")  # fmt: skip
     p.add_argument("--json", default=None, help="write the deviation and the model here")
     p.add_argument("--csv", default=None, help="write the deviation table here (CSV)")
     p.add_argument("--plot", default=None, help="write the deviation figure here (PNG)")
     p.add_argument("--kalibr", default=None, metavar="IMU.yaml",
                    help="write Kalibr's noise parameters here (implies --fit)")  # fmt: skip
     p.add_argument("--sensor", default=None, choices=("gyroscope", "accelerometer"),
-                   help="Kalibr's sensor (default: from --unit)")  # fmt: skip
+                   help="Kalibr's sensor (default: from --unit; with --kalibr)")  # fmt: skip
     return p
 
 

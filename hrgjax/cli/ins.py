@@ -39,10 +39,12 @@ def cmd_align(args) -> int:
     if args.format != "psins":
         raise UsageError(f"unknown --format {args.format!r}; choose 'psins'")
     start(args, [args.imu_log], json=(".json",), plot=PLOT_EXTENSIONS)
-    from ..ins.alignment import align, load_psins
+    from ..ins.alignment import PSINS_FIELDS, align, check_stationary, load_psins
 
     with usage_errors(missing=f"{args.imu_log}: no such file"):
         log = load_psins(args.imu_log)
+        check_stationary(log, args.coarse, fields=PSINS_FIELDS, coarse_name="--coarse",
+                         where=f"{args.imu_log}: ")  # fmt: skip
         result = align(log, coarse_s=args.coarse, step_s=args.step)
     out = result.to_json()
     span = float(log.t[-1] - log.t[0])
@@ -138,7 +140,7 @@ def cmd_imu_calibrate(args) -> int:
         m, sd = np.atleast_2d(np.asarray(m) * scale), np.atleast_2d(np.asarray(sd) * scale)
         for k, (r, e) in enumerate(zip(m, sd, strict=True)):
             cells = "  ".join(f"{fmt.format(v)} ± {abs(x):.1e}" for v, x in zip(r, e, strict=True))
-            print(f"  {name if k == 0 else '':<22}{cells}")
+            print(f"  {name if k == 0 else '':<26}{cells}")
 
     print(f"  (± 1σ from {cal.sigma_source}; g = {cal.g:g} m/s², turns {list(cal.turn_deg)}°)")
     rows("accel matrix M_a", cal.accel_matrix, cal.accel_matrix_std)

@@ -32,7 +32,7 @@ from .._compiled import fused
 from .._x64 import require_x64
 from ..kalman import Gaussian, update, van_loan
 from ..units import ARCSEC, DEG, DEG_PER_H
-from .constants import MAX_LAT_DEG, WGS84, earth_rate_ned
+from .constants import MAX_LAT_DEG, OMEGA_IE, WGS84, earth_rate_ned
 from .mechanization import skew
 from .strapdown import augmented, error_matrices_at
 from .trajectory import dcm_to_euler
@@ -108,15 +108,43 @@ class ImuLog(eqx.Module):
         return float(np.median(np.diff(np.asarray(self.t))))
 
 
+PSINS_FIELDS = {
+    "interval": "the header's sampling interval (line 2, field 5) [ms]",
+    "gyro": "the header's gyro increment unit (line 3, fields 1–3) [arcsec]",
+    "accel": "the header's accelerometer increment unit (line 3, fields 4–6) [µg·s] or g "
+    "(line 2, field 6) [m/s²]",
+}
+"""What `check_stationary` names, for a log read by `load_psins`, as the source of each
+quantity a unit error would spoil."""
+
+_LOG_FIELDS = {
+    "interval": "the log's time stamps ImuLog.t [s]",
+    "gyro": "the gyro increments ImuLog.dtheta [rad]",
+    "accel": "the velocity increments ImuLog.dvel [m/s]",
+}
+
+EARTH_RATE_RATIO = (0.5, 2.0)
+"""Range of |mean angular rate| / ω_ie over the coarse span that `align` accepts. At rest a
+gyro reads the Earth's rate (15.04 °/h) plus its bias: the fine filter's gyro-bias prior is
+0.05 °/h (navigation grade), and gyrocompassing with a bias of half the Earth's rate is
+already tens of degrees off, so a wider spread is no gyro `align` serves; a parked vehicle's
+sway adds apparent rate (the PSINS log reads 12.6–22.5 °/h over its 60-s windows, 0.84–1.50
+ω_ie). Unit errors land far outside: ×10 or ÷10 in an increment unit, ×3600 (°/h for °/s),
+×57.3 (degrees for radians)."""
+
+
 def load_psins(path) -> ImuLog:
     """Read a PSINS-format text IMU log (provenance in `tests/data/README.md`): `%` comments, three
     header lines (attitude [°] and velocity; lat [°], lon [°], h [m], t0 [s], interval [ms],
     g; increment units: gyro [arcsec] ×3, accelerometer [µg·s] ×3), then one line of six
     integer increments per sample, axes right–forward–up. Returned in FRD with the heading
-    converted from PSINS's counter-clockwise yaw to clockwise from north.
+    converted from PSINS's counter-clockwise yaw to clockwise from north. The header's
+    attitude is an approximate reference only: where it is not finite (NaN: unknown),
+    `header_attitude_deg` is `None`.
 
     **Raises:** `ValueError` naming the file (and the line) for text that is not UTF-8, a
-    malformed header or sample row."""
+    malformed header (a field of lines 2–3 that is not finite, a latitude beyond ±90°) or
+    sample row."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no IMU log at {path}")
@@ -141,7 +169,22 @@ def load_psins(path) -> ImuLog:
         if len(vals) != 6:
             raise ValueError(f"{path}: header line {k + 1} must hold 6 numbers; got {len(vals)}")
         head.append(vals)
+    names = ("latitude [°]", "longitude [°]", "height [m]", "start time t0 [s]",
+             "sampling interval [ms]", "g [m/s²]", "gyro increment unit [arcsec]",
+             "gyro increment unit [arcsec]", "gyro increment unit [arcsec]",
+             "accelerometer increment unit [µg·s]", "accelerometer increment unit [µg·s]",
+             "accelerometer increment unit [µg·s]")  # fmt: skip
+    for k, (name, v) in enumerate(zip(names, head[1] + head[2], strict=True)):
+        if not math.isfinite(v):
+            raise ValueError(
+                f"{path}: the header's {name} (line {2 + k // 6}, field {1 + k % 6}) must be "
+                f"finite; got {v}"
+            )
     (pitch, roll, yaw, *_), (lat, lon, h, t0, dt_ms, g), units = head
+    if not -90.0 <= lat <= 90.0:
+        raise ValueError(
+            f"{path}: the header's latitude (line 2, field 1) = {lat:g}° is outside ±90°"
+        )
     if not dt_ms > 0:
         raise ValueError(f"{path}: the sampling interval (header line 2, field 5) must be > 0 ms")
     try:
@@ -155,6 +198,7 @@ def load_psins(path) -> ImuLog:
     rfu_to_frd = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
     n = raw.shape[0]
     t = t0 + dt_ms * 1e-3 * np.arange(1, n + 1)
+    attitude = (pitch, roll, -yaw)
     return ImuLog(
         jnp.asarray(t),
         jnp.asarray(gyro_rfu @ rfu_to_frd.T),
@@ -162,8 +206,46 @@ def load_psins(path) -> ImuLog:
         lat * DEG,
         lon * DEG,
         h,
-        (pitch, roll, -yaw),
+        attitude if all(math.isfinite(a) for a in attitude) else None,
     )
+
+
+def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None = None,
+                     coarse_name: str = "coarse_s", where: str = "") -> None:  # fmt: skip
+    """Refuse, before any work, a log that cannot be a stationary record of the first
+    `coarse_s` seconds: one shorter than `coarse_s`, a mean specific force beyond 5 % of g,
+    or a mean angular rate outside [`EARTH_RATE_RATIO`][hrgjax.ins.alignment.EARTH_RATE_RATIO]
+    × the Earth's rate — the signatures of a unit error in the time stamps, accelerometer or
+    gyro increments. `fields` names where each comes from (`PSINS_FIELDS` for `load_psins`;
+    default: the `ImuLog` fields), `coarse_name` the span's option, `where` a prefix (a file).
+
+    **Raises:** `ValueError`, one line, naming the quantity, its source and what was expected."""
+    fields = {**_LOG_FIELDS, **(fields or {})}
+    if not coarse_s > 0:
+        raise ValueError(f"{where}{coarse_name} must be > 0 s; got {coarse_s}")
+    dt, size = log.dt, int(log.t.shape[0])
+    n = int(round(coarse_s / dt))
+    if n > size or n < 1:
+        raise ValueError(
+            f"{where}the record spans {size * dt:.4g} s ({size} samples at {dt * 1e3:.4g} ms), "
+            f"shorter than {coarse_name} = {coarse_s:g} s: check {fields['interval']}"
+        )
+    f = float(jnp.linalg.norm(jnp.sum(log.dvel[:n], 0) / (n * dt)))
+    g = float(WGS84.gravity(log.lat, log.h))
+    if abs(f - g) > 0.05 * g:
+        raise ValueError(
+            f"{where}mean specific force {f:.4g} m/s² over the first {coarse_s:g} s is not g "
+            f"({g:.4g}): is the IMU stationary, are {fields['accel']} and {fields['interval']} "
+            "right?"
+        )
+    w = float(jnp.linalg.norm(jnp.sum(log.dtheta[:n], 0) / (n * dt)))
+    low, high = EARTH_RATE_RATIO
+    if not low * OMEGA_IE <= w <= high * OMEGA_IE:
+        raise ValueError(
+            f"{where}mean angular rate {w / DEG_PER_H:.4g} °/h over the first {coarse_s:g} s is "
+            f"not the Earth's rate ({OMEGA_IE / DEG_PER_H:.4g} °/h; alignment takes "
+            f"{low:g}–{high:g} × it): is the IMU stationary, is {fields['gyro']} right?"
+        )
 
 
 @fused
@@ -336,25 +418,17 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
     log from that start (module docstring; `fine_kw` go to
     [`fine_align`][hrgjax.ins.alignment.fine_align]).
 
-    **Raises:** `ValueError` when the log is shorter than `coarse_s` or not stationary
-    enough to level (specific force far from g), or for a log within 1° of a pole
+    **Raises:** `ValueError` when the log is shorter than `coarse_s` or not a stationary
+    record ([`check_stationary`][hrgjax.ins.alignment.check_stationary]: specific force far
+    from g, angular rate far from the Earth's), or for a log within 1° of a pole
     (gyrocompassing finds north from the horizontal Earth rate, which vanishes there)."""
     require_x64("ins.alignment.align")
     _check_gyrocompass_latitude(log.lat)
+    check_stationary(log, coarse_s)
     dt = log.dt
     n = int(round(coarse_s / dt))
-    if not (coarse_s > 0) or n > log.t.shape[0] or n < 1:
-        raise ValueError(
-            f"coarse_s must be in (0, {float(log.t[-1] - log.t[0]):.0f}] s; got {coarse_s}"
-        )
     f_b = jnp.sum(log.dvel[:n], 0) / (n * dt)
     w_b = jnp.sum(log.dtheta[:n], 0) / (n * dt)
-    g = float(WGS84.gravity(log.lat, log.h))
-    if abs(float(jnp.linalg.norm(f_b)) - g) > 0.05 * g:
-        raise ValueError(
-            f"mean specific force {float(jnp.linalg.norm(f_b)):.3f} m/s² over the first "
-            f"{coarse_s} s is not g ({g:.3f}): is the IMU stationary, are the units right?"
-        )
     c0 = coarse_align(f_b, w_b, log.lat)
     coarse = tuple(float(x) for x in euler_deg(c0))
     t, cs, ps, bias = fine_align(log, c0, start_s=0.0, **fine_kw)
