@@ -31,6 +31,7 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "wave_drift_dph": (0.0, 100.0, "°/h electrical"),
     "speed_mps": (0.0, 10_000.0, "m/s"),
     "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
+    "specific_force_g": (-20.0, 20.0, "g"),
 }
 """(low, high, unit) of each quantity: temperatures an HRG is built and tested for (−100 …
 +150 °C; −40 … +60 °C is the seed's bench), table rates (±10 turns/s), wave angles (±1e7°:
@@ -41,7 +42,10 @@ wave drifts at °/h, Earth's rate included, so a step of degrees between close s
 runs under one id or a glitch), a vehicle's speed (10 km/s, above low-orbit speed: a speed in
 km/h or mm/s read as m/s is refused) and the median specific force |Δv|/Δt over a record of
 accelerometer increments (5 g: a navigating vehicle spends most of its time near 1 g, a 60°
-banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s])."""
+banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s]) and a
+`Profile`'s specific force along each case axis (±20 g: a fighter's 9 g turn, a launch, a
+centrifuge test of the g-sensitivity; beyond it the g-sensitivity term is all a simulation
+shows). A `Profile`'s commanded precession is held to the table rate's range."""
 
 KELVIN_HINT_C = 200.0
 """A temperature column whose every value is ≥ this [°C] looks like kelvin (250–400 K is

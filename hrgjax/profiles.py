@@ -128,6 +128,14 @@ class Profile(eqx.Module):
         if is_concrete(self.rate):  # in the data's units: °/s, ° electrical, s
             plausible.check("Profile.rate [°/s]", np.degrees(np.asarray(self.rate)),
                             "table_rate_dps")  # fmt: skip
+        if self.precession is not None and is_concrete(self.precession):
+            plausible.check("Profile.precession [°/s, electrical]",
+                            np.degrees(np.asarray(self.precession)), "table_rate_dps")  # fmt: skip
+        if is_concrete(self.accel):
+            accel = np.asarray(self.accel)
+            for j, axis in enumerate("xyz"):
+                plausible.check(f"Profile.accel[:, {j}] (specific force along {axis}) [g]",
+                                accel[:, j], "specific_force_g")  # fmt: skip
         if is_concrete(self.wave_angle0):
             plausible.check("Profile.wave_angle0 [°]", np.degrees(np.asarray(self.wave_angle0)),
                             "wave_angle_deg")  # fmt: skip
@@ -253,10 +261,10 @@ class Profile(eqx.Module):
         angle: what the drift's θ-dependence needs, without a table."""
         rate_dps = case.pop("rate_dps", 0.0)
         p = cls.constant_rate(rate_dps, duration_s, temperature_c, wave_angle0_deg, **case)
-        return eqx.tree_at(
-            lambda q: q.precession, p, jnp.ones(2) * _f(precession_dps) * DEG_PER_S,
-            is_leaf=lambda x: x is None,
-        )  # fmt: skip
+        # built again (not `eqx.tree_at`) so that the precession is checked as any field is
+        return cls(t=p.t, rate=p.rate, temperature=p.temperature, accel=p.accel,
+                   wave_angle0=p.wave_angle0,
+                   precession=jnp.ones(2) * _f(precession_dps) * DEG_PER_S)  # fmt: skip
 
     @classmethod
     def held_angles(
