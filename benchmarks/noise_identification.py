@@ -87,7 +87,10 @@ def main(argv=None):
     from _common import machine, report
 
     n = 20 if args.quick else args.n
-    print(f"noise_identification.py on {machine()}: {n} records of {LENGTH} samples at {FS:g} Hz")
+    t = BOUND_TRUTH
+    print(f"noise_identification.py on {machine()}: {n} records "
+          + (f"of {t['n']} samples at {t['fs']:g} Hz" if args.bounds_only
+             else f"of {LENGTH} samples at {FS:g} Hz (the bound study: {t['n']} at {t['fs']:g} Hz)"))  # fmt: skip
     rng = np.random.default_rng(args.seed)
     t0 = time.perf_counter()
     if args.speed_only:

@@ -193,10 +193,14 @@ def check_covariance(name: str, a, *, definite: bool = False, form: str = "(n, n
                      index: str = "step"):  # fmt: skip
     """Refuse a concrete covariance `a` (n, n), or a stack (…, n, n) of them, that is not
     finite, not symmetric or not positive (semi-)definite, in one line naming `name`, the
-    expected `form` and, for a stack, the first bad `index`. Round-off is allowed relative to
-    the matrix's scale (`_ROUND_OFF`); `definite` (a measurement noise R) needs every
-    eigenvalue > 0. A traced `a` passes (no run-time check). One batched `eigvalsh` on the
-    host."""
+    expected `form` and, for a stack, the first bad `index`. `definite` (a measurement noise
+    R) needs every eigenvalue > 0. A traced `a` passes (no run-time check).
+
+    The tests run on the correlation form D⁻¹AD⁻¹ (D = √diag, 1 where a variance is 0), so
+    they do not depend on the states' units (a position variance of 100 m² beside a bias
+    variance of −1e-14 is refused; a valid R whose σ span 12 decades is not): a negative
+    variance is refused as such, then asymmetry and a negative eigenvalue beyond round-off
+    (`_ROUND_OFF`) — one batched Cholesky on the host, eigenvalues only to name a bad one."""
     v = host_value(a)
     if v is None or v.size == 0:
         return
@@ -210,19 +214,35 @@ def check_covariance(name: str, a, *, definite: bool = False, form: str = "(n, n
         raise ValueError(
             f"{head}; it has {mats[i][~np.isfinite(mats[i])][0]}{_at(index, i, batched)}"
         )
-    trans = np.swapaxes(mats, -1, -2)
-    asym = np.abs(mats - trans).max(axis=(-2, -1))
-    size = np.abs(mats).max(axis=(-2, -1))
-    skew = asym > _ROUND_OFF * size
+    var = np.diagonal(mats, axis1=-2, axis2=-1)
+    bad = (var <= 0) if definite else (var < 0)
+    if bad.any():
+        i, j = (int(x) for x in np.argwhere(bad)[0])
+        raise ValueError(f"{head}; its variance [{j}, {j}] is {var[i, j]:.6g}"
+                         f"{_at(index, i, batched)}")  # fmt: skip
+    d = np.where(var > 0, np.sqrt(np.where(var > 0, var, 1.0)), 1.0)
+    c = mats / (d[:, :, None] * d[:, None, :])
+    trans = np.swapaxes(c, -1, -2)
+    asym = np.abs(c - trans).max(axis=(-2, -1))
+    skew = asym > _ROUND_OFF * np.maximum(np.abs(c).max(axis=(-2, -1)), 1.0)
     if skew.any():
         i = int(np.argmax(skew))
         raise ValueError(
             f"{head}; it is not symmetric{_at(index, i, batched)} (|A - A^T| reaches "
-            f"{asym[i]:.3g} beside entries up to {size[i]:.3g})"
+            f"{asym[i]:.3g} of the entries' scale √(A_ii A_jj))"
         )
-    low = np.linalg.eigvalsh(0.5 * (mats + trans))[:, 0]
-    scale = np.abs(np.diagonal(mats, axis1=-2, axis2=-1)).max(axis=-1)
-    bad = ~(low > 0) if definite else low < -_ROUND_OFF * scale
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise ValueError(f"{head}; its smallest eigenvalue is {low[i]:.6g}{_at(index, i, batched)}")
+    sym = 0.5 * (c + trans)
+    shift = 0.0 if definite else _ROUND_OFF
+    try:
+        np.linalg.cholesky(sym + shift * np.eye(sym.shape[-1]))
+        return
+    except np.linalg.LinAlgError:
+        pass
+    low = np.linalg.eigvalsh(sym)[:, 0]
+    bad = ~(low > 0) if definite else low < -shift
+    if not bad.any():  # the factorisation failed at round-off the eigenvalues do not show
+        return
+    i = int(np.argmax(bad))
+    sym_a = 0.5 * (mats[i] + mats[i].T)
+    raise ValueError(f"{head}; its smallest eigenvalue is {np.linalg.eigvalsh(sym_a)[0]:.6g}"
+                     f"{_at(index, i, batched)}")  # fmt: skip

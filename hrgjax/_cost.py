@@ -65,8 +65,8 @@ def report(gyro, profile, model: str) -> None:
     exception. Each `jax.lax.stop_gradient` returns the primal of the innermost such level
     the value has (the estimate is not differentiated; its value is the undifferentiated
     run's), so after `AD_LEVELS` of them the estimate is the probe's own value. A
-    transformation that leaves no primal (`fn`'s own `jax.jit`, a `vmap` over the swept
-    values, a `lax.scan` around `simulate`) still lets it escape: `sweep` then keeps the
+    transformation that leaves no primal (`fn`'s own `jax.jit`, a `vmap` inside `fn`, a
+    `lax.scan` around `simulate`) still lets it escape: `sweep` then keeps the
     grid order (`hrgjax.sweep.member_costs`)."""
     if _PROBING.get():
         cost = steps_estimate(gyro, profile, model)

@@ -53,7 +53,7 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
       will take, estimated from the profile of the first `simulate` call in `fn`
       (`hrgjax._cost`; `fn` is traced once more for it, no solve is compiled; a
       differentiated `simulate` counts as undifferentiated, one under `fn`'s own `jit`,
-      `scan` or `vmap` of the swept values gives no estimate: grid order); the members are
+      `scan` or `vmap` gives no estimate: grid order); the members are
       sorted by it and run in chunks of similar cost — on a CPU the chunk size that
       minimises the estimated time (one batch when the costs are alike), on an accelerator
       one batch unless `chunk_size` is given. A callable `cost(**point)` → estimated cost per
@@ -163,7 +163,7 @@ def member_costs(fn, cost, flat: dict) -> np.ndarray | None:
         c = np.asarray(probe(flat), dtype=float)
     except jax.errors.UnexpectedTracerError:
         # The estimate is a value of a transformation inside `fn` that has no primal to
-        # take (`_cost.report`): `fn`'s own jit, a vmap over the swept values, a scan around
+        # take (`_cost.report`): `fn`'s own jit, a vmap inside `fn`, a scan around
         # `simulate`. No estimate then: the grid's order, as for a `fn` with no `simulate`.
         state["simulates"] = False
         return None

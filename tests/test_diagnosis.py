@@ -355,7 +355,7 @@ def test_bank_refuses_impossible_covariances():
     good = _toy(1, r=0.1)[0]
     cases = {
         3: (-0.1 * jnp.eye(1), r"model 1's r must be a symmetric positive-definite \(m, m\) = "
-                               r"\(1, 1\) covariance; its smallest eigenvalue is -0.1"),
+                               r"\(1, 1\) covariance; its variance \[0, 0\] is -0.1"),
         1: (-jnp.eye(1), r"model 1's qd must be a symmetric positive semi-definite"),
         0: (jnp.full((1, 1), jnp.nan), r"model 1's phi must be finite"),
         2: (jnp.ones((1, 2)), r"model 1's h must be \(m, n\) = \(1, 1\)"),
@@ -392,7 +392,8 @@ def test_bank_refuses_impossible_covariances():
 
 def test_scores_without_fault_free_steps_are_refused_or_none():
     """With no fault-free step after the warm-up the false-alarm rate was NaN (and NumPy's
-    "Mean of empty slice" warning); `compare` refuses a warm-up that reaches the onset."""
+    "Mean of empty slice" warning); `compare` refuses a warm-up outside the run (one past the
+    onset is valid: the healthy runs still count false alarms)."""
     from hrgjax.diagnosis import compare as cp
 
     states = np.array([[0, 0, 1, 1], [0, -1, 2, 2]])
@@ -402,6 +403,8 @@ def test_scores_without_fault_free_steps_are_refused_or_none():
         {"name": "filter_bank", "step_cost_s": 1e-6, **s}],
         "setup": {"fault_sizes": [1e-7, 2e-7], "nominal_sensor_error": 1e-7}}  # fmt: skip
     assert "| 100% | – |" in cp.table(res)
-    for warmup in (3700.0, 5000.0, -1.0, np.nan):
-        with pytest.raises(ValueError, match=r"warmup_s must be in \[0, t_fault\) = \[0, 3700.0\)"):
+    for warmup in (4000.0, 5000.0, -1.0, np.nan):
+        with pytest.raises(
+            ValueError, match=r"warmup_s must be in \[0, duration\) = \[0, 4000.0\)"
+        ):
             cp.compare("stationary", n_healthy=0, warmup_s=warmup, key=jax.random.key(0))

@@ -215,13 +215,17 @@ def test_filter_inputs_are_refused_in_one_line():
     bad_z = np.asarray(ZS).copy()
     bad_z[3] = np.nan
     indefinite = kalman.Gaussian(PRIOR.x, jnp.array([[1.0, 3.0], [3.0, 1.0]]))
+    mixed = kalman.Gaussian(PRIOR.x, jnp.diag(jnp.array([100.0, -1e-14])))
     qd_steps = np.stack([np.asarray(QD)] * (K - 1) + [-np.asarray(QD)])
     cases = [
         ((PRIOR, PHI, QD, H, R, bad_z), r"zs has NaN at step 3: mark a missing measurement"),
         ((PRIOR, PHI, QD, H, -R, ZS), r"R must be a symmetric positive-definite \(m, m\) = "
-                                      r"\(1, 1\) covariance; its smallest eigenvalue is -0.3"),
+                                      r"\(1, 1\) covariance; its variance \[0, 0\] is -0.3"),
         ((PRIOR, PHI, -QD, H, R, ZS), r"qd must be a symmetric positive semi-definite"),
-        ((PRIOR, PHI, qd_steps, H, R, ZS), r"qd must be .* eigenvalue is .* at step 6"),
+        ((PRIOR, PHI, qd_steps, H, R, ZS), r"qd must be .* at step 6"),
+        # the tests do not depend on the states' units: a negative bias variance beside a
+        # position variance of 100 m² is refused (it passed the largest variance's round-off)
+        ((mixed, PHI, QD, H, R, ZS), r"prior.P must .* its variance \[1, 1\] is -1e-14"),
         ((indefinite, PHI, QD, H, R, ZS), r"prior.P must be a symmetric positive semi-definite "
                                           r"\(n, n\) = \(2, 2\) covariance; its smallest eigen"),
         ((PRIOR, PHI * np.nan, QD, H, R, ZS), r"phi must be finite; it has nan"),
@@ -246,3 +250,9 @@ def test_filter_inputs_are_refused_in_one_line():
     with pytest.raises(ValueError, match=r"R must be a symmetric positive-definite"):
         kalman.update(PRIOR, ZS[0], H, -R)
     assert kalman.update(PRIOR, jnp.array([np.nan]), H, R, mask=False)[3] == 0.0
+    # a valid R whose σ span 12 decades (correlated: its eigenvalues in its own units reach
+    # the round-off of the largest, and it was refused) and a P0 with exact zeros pass
+    sig = np.logspace(-6, 6, 5)
+    corr = 0.5 * np.eye(5) + 0.5 * np.exp(-np.abs(np.subtract.outer(range(5), range(5))))
+    g = kalman.Gaussian(jnp.zeros(5), jnp.diag(jnp.array([1.0, 0.0, 1e-12, 0.0, 1e6])))
+    assert np.isfinite(kalman.update(g, jnp.zeros(5), jnp.eye(5), corr * np.outer(sig, sig))[3])

@@ -13,7 +13,7 @@ and scores it:
   first measurement a fault changes comes one step after it);
 - `detected`: share of faulty runs in which it did, within the run;
 - `false_alarm_rate`: share of the steps without a fault (healthy runs, and faulty runs
-  before the onset), after the first `warmup_s` (< `t_fault`), on which a fault is named
+  before the onset), after the first `warmup_s` (< `duration`), on which a fault is named
   (`null` when there is no such step);
 - `wrong_diagnosis_rate`: share of the steps after the onset on which a wrong INS is named;
 - `missed_rate`: share of the steps after the onset (faulty runs) on which no fault is named
@@ -228,10 +228,10 @@ def compare(
     sc = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
     if not 0.0 < sc.t_fault < sc.duration:
         raise ValueError(f"t_fault must be inside (0, duration={sc.duration}) s; got {sc.t_fault}")
-    if not 0.0 <= warmup_s < sc.t_fault:
+    if not 0.0 <= warmup_s < sc.duration:
         raise ValueError(
-            f"warmup_s must be in [0, t_fault) = [0, {sc.t_fault}) s (false alarms are counted "
-            f"on the fault-free steps after it); got warmup_s = {warmup_s}"
+            f"warmup_s must be in [0, duration) = [0, {sc.duration}) s (false alarms are "
+            f"counted on the fault-free steps after it); got warmup_s = {warmup_s}"
         )
     if int(n_faulty) < 1 or int(n_healthy) < 0 or int(n_train) < 1:
         raise ValueError("n_faulty and n_train must be >= 1 and n_healthy >= 0")
