@@ -32,6 +32,7 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "speed_mps": (0.0, 10_000.0, "m/s"),
     "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
     "specific_force_g": (-20.0, 20.0, "g"),
+    "precession_dps": (-2e4, 2e4, "°/s electrical"),
 }
 """(low, high, unit) of each quantity: temperatures an HRG is built and tested for (−100 …
 +150 °C; −40 … +60 °C is the seed's bench), table rates (±10 turns/s), wave angles (±1e7°:
@@ -45,7 +46,9 @@ accelerometer increments (5 g: a navigating vehicle spends most of its time near
 banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s]) and a
 `Profile`'s specific force along each case axis (±20 g: a fighter's 9 g turn, a launch, a
 centrifuge test of the g-sensitivity; beyond it the g-sensitivity term is all a simulation
-shows). A `Profile`'s commanded precession is held to the table rate's range."""
+shows), and a `Profile`'s commanded precession (±2·10⁴ °/s electrical: a trapezoid pulse of
+force-to-rebalance slews at thousands of °/s; the averaging needs the wave slow against the
+carrier's ≈ 10⁶ °/s of phase, and a rate in °/h read as °/s is 3600× too large)."""
 
 KELVIN_HINT_C = 200.0
 """A temperature column whose every value is ≥ this [°C] looks like kelvin (250–400 K is

@@ -130,7 +130,7 @@ class Profile(eqx.Module):
                             "table_rate_dps")  # fmt: skip
         if self.precession is not None and is_concrete(self.precession):
             plausible.check("Profile.precession [°/s, electrical]",
-                            np.degrees(np.asarray(self.precession)), "table_rate_dps")  # fmt: skip
+                            np.degrees(np.asarray(self.precession)), "precession_dps")  # fmt: skip
         if is_concrete(self.accel):
             accel = np.asarray(self.accel)
             for j, axis in enumerate("xyz"):

@@ -83,7 +83,7 @@ def test_held_angles_reach_each_angle_and_hold_it():
 
 def test_absurd_specific_force_and_precession_are_refused_naming_field_unit_and_limit():
     """A specific force of 1e6 g (or 3 g given in m/s²: 29.4) and a commanded precession
-    of 1e9 or 1e4 °/s were built and simulated (the g-sensitivity dominating; the solver
+    of 1e9 or 1e5 °/s were built and simulated (the g-sensitivity dominating; the solver
     running out of steps): each is refused where the profile is built, in one line naming
     the field, its unit and the limit; under `jax.jit` the traced values are not checked,
     as the rate's; `hrgjax.plausible.relaxed` widens the range."""
@@ -95,20 +95,20 @@ def test_absurd_specific_force_and_precession_are_refused_naming_field_unit_and_
          r"^Profile.accel\[:, 2\] \(specific force along z\) \[g\] = 29.42 at index 1 "),
         (lambda: hg.Profile.virtual_precession(1e9, 10.0),
          r"^Profile.precession \[°/s, electrical\] = 1e\+09 at index 0 is outside the "
-         r"plausible range -3600 … 3600 °/s"),
-        (lambda: hg.Profile.virtual_precession(1e4, 10.0), r"^Profile.precession .* = 10000 "),
+         r"plausible range -20000 … 20000 °/s electrical"),
+        (lambda: hg.Profile.virtual_precession(1e5, 10.0), r"^Profile.precession .* = 100000 "),
         (lambda: hg.Profile.virtual_precession(float("nan"), 10.0),
          r"^Profile.precession must be finite"),
-        (lambda: hg.Profile.piecewise([0, 1], 0.0, 20.0, precession_dps=[0.0, -5000.0]),
-         r"^Profile.precession .* = -5000 at index 1 "),
+        (lambda: hg.Profile.piecewise([0, 1], 0.0, 20.0, precession_dps=[0.0, -50000.0]),
+         r"^Profile.precession .* = -50000 at index 1 "),
     ):  # fmt: skip
         with pytest.raises(ValueError, match=match) as err:
             build()
         assert "\n" not in str(err.value)
     # the limits themselves are taken, and a relaxed range takes more
     limit = hg.plausible.RANGES["specific_force_g"][1]
-    prof = hg.Profile.virtual_precession(3600.0, 1.0, accel_g=(limit, -limit, 1.0))
-    np.testing.assert_allclose(prof.precession, 3600.0 * DEG)
+    prof = hg.Profile.virtual_precession(2e4, 1.0, accel_g=(limit, -limit, 1.0))
+    np.testing.assert_allclose(prof.precession, 2e4 * DEG)
     with hg.plausible.relaxed(specific_force_g=(-100.0, 100.0)):
         assert float(hg.Profile.static(1.0, accel_g=(50.0, 0.0, 0.0)).accel[0, 0]) == 50.0
     traced = jax.jit(lambda r, a: hg.Profile.virtual_precession(r, 10.0, accel_g=a).precession)
