@@ -45,6 +45,9 @@ RULES = {
     "> 0": lambda v: v > 0,
     ">= 0": lambda v: v >= 0,
     "in (0, 1]": lambda v: (v > 0) & (v <= 1),
+    "in (-0.5, 0.5)": lambda v: (v > -0.5) & (v < 0.5),
+    "in (-π/4, π/4)": lambda v: (v > -np.pi / 4) & (v < np.pi / 4),
+    "> -1": lambda v: v > -1.0,
 }
 """The value rules `check_finite_leaves` can apply to traced leaves, by their text."""
 

@@ -44,9 +44,12 @@ from .resonator.carrier import (
     steps_per_interval,
     takes_fixed_steps,
 )
+from .resonator.control import LIMITS as CONTROL_LIMITS
 from .resonator.control import drive_vectors, ftr_rate, loop_outputs, max_step, steady_integrators
 from .resonator.full import full_estimates, full_initial_state, full_vector_field, held_command
 from .resonator.params import TemperatureLaw
+from .resonator.readout import LIMITS as READOUT_LIMITS
+from .resonator.readout import continue_angle, wrap_half_pi
 
 MODELS = ("averaged", "full")
 AVERAGED_CHECKPOINTS = 256
@@ -155,7 +158,8 @@ _LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by
     "drift_terms.lag_time": ("> 0", "s"),
     "drift_terms.warmup_time": ("> 0", "s"),
     "noise.correlation_time": ("> 0", "s"),
-    "control.rebalance_limit": ("> 0", "readout units · rad²/s²"),
+    **{f"control.{n}": rule for n, rule in CONTROL_LIMITS.items()},
+    **{f"readout.{n}": rule for n, rule in READOUT_LIMITS.items()},
     **{f"noise.{n}": (">= 0", NOISE_UNITS[n]) for n in NOISE_NONNEGATIVE},
 }
 
@@ -372,7 +376,8 @@ def _read_averaged(gyro, profile, ts, ys):
         return est, true_theta, loops
 
     est, true_theta, loops = jax.vmap(one)(ts, ys)
-    return est, true_theta, loops, _ftr_output(gyro, est, loops)
+    ftr = ftr_rate(gyro.control, loops, est) if gyro.control.mode == "ftr" else None  # FTR's output
+    return est, true_theta, loops, ftr
 
 
 def _ideal_ftr(g, omega_in, theta_cmd, command):
@@ -392,19 +397,6 @@ def _ideal_ftr(g, omega_in, theta_cmd, command):
     return est, theta, eqx.tree_at(lambda lo: lo.rebalance, loops, held)
 
 
-def _ftr_output(gyro, est, loops):
-    """The rate read from the rebalance force (FTR), or `None` in whole-angle mode."""
-    if gyro.control.mode != "ftr":
-        return None
-    return ftr_rate(gyro.control, loops, est)
-
-
-def _unwrap_pi(theta, near):
-    """Unwrap an angle defined modulo π; put the first sample within π/2 of `near`."""
-    u = 0.5 * jnp.unwrap(2.0 * theta)
-    return u + jnp.pi * jnp.round((near - u[0]) / jnp.pi)
-
-
 def _read_full(gyro, profile, ts, ys, omega_scale):
     def one(t, y):
         g = gyro.at(profile.temperature_at(t))
@@ -413,13 +405,20 @@ def _read_full(gyro, profile, ts, ys, omega_scale):
         est = full_estimates(g, y, omega_scale, omega_in, command=command)
         true = full_estimates(g, y, omega_scale, omega_in, readout=False, command=command)
         loops = loop_outputs(g.control, g.resonator.omega, est, y[5:], command)
-        return est, true.theta, loops
+        cmd = command[0] if g.control.enabled else 0.0 * t  # no loops: no precession
+        turn = (g.resonator.k_e, g.rate_bias, profile.table_angle_at(t), cmd, y[-1])
+        return est, true.theta, loops, turn
 
-    est, true_theta, loops = jax.vmap(one)(ts, ys)
-    true_theta = _unwrap_pi(true_theta, profile.wave_angle0)
-    theta = _unwrap_pi(est.theta, true_theta[0])
-    est = eqx.tree_at(lambda e: e.theta, est, theta)
-    return est, true_theta, loops, _ftr_output(gyro, est, loops)
+    est, true_theta, loops, (k_e, bias, table, cmd, hold) = jax.vmap(one)(ts, ys)
+    if gyro.control.mode == "ftr":  # held at θ_hold (a state; while off, it follows θ̂)
+        true_theta = hold + wrap_half_pi(true_theta - hold)
+    else:  # θ mod π, continued along the turn the table and the precession command expect
+        mean = lambda x: 0.5 * (x[1:] + x[:-1])  # noqa: E731
+        turn = jnp.diff(cmd) - mean(k_e) * (jnp.diff(table) + mean(bias) * jnp.diff(ts))
+        true_theta = continue_angle(true_theta, profile.wave_angle0, turn)
+    est = eqx.tree_at(lambda e: e.theta, est, true_theta + wrap_half_pi(est.theta - true_theta))
+    ftr = ftr_rate(gyro.control, loops, est) if gyro.control.mode == "ftr" else None  # FTR's output
+    return est, true_theta, loops, ftr
 
 
 def simulate(

@@ -230,7 +230,8 @@ def test_good_settings_and_old_files_pass_the_checks(tmp_path):
 def test_known_plant_keeps_the_forcers_and_refuses_force_to_rebalance(tmp_path):
     """Audit: `known_plant` rebuilt the loops without `forcer_gain` and `forcer_angle` (which
     whole-angle mode reads: the grey box then modelled other loops than the plant's) and took a
-    force-to-rebalance plant. Both forcer errors are now kept (and saved); FTR is refused."""
+    force-to-rebalance plant, or one with a loop open. Both forcer errors are now kept (and
+    saved); FTR and open loops are refused."""
     import dataclasses
 
     import equinox as eqx
@@ -255,6 +256,10 @@ def test_known_plant_keeps_the_forcers_and_refuses_force_to_rebalance(tmp_path):
     assert float(plant_from_json(old).control.forcer_gain) == 0.0  # files from before load
     with pytest.raises(ValueError, match=r"^plant.control.mode must be 'wa' .*got 'ftr'"):
         cal.PhysicalCompensator(plant=gyro.in_mode("ftr"))
+    # audit: a plant with a loop open (bandwidth 0) passed and reached `reduced_rate`: NaN
+    open_q = dataclasses.replace(gyro.control, quadrature_bandwidth=0.0)
+    with pytest.raises(ValueError, match=r"^plant.control.quadrature_bandwidth = 0 rad/s opens"):
+        known_plant(eqx.tree_at(lambda g: g.control, gyro, open_q))
 
 
 @pytest.mark.parametrize(

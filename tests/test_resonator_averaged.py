@@ -217,3 +217,27 @@ def test_amplitude_follows_a_natural_frequency_law_adiabatically():
     held, plain = hg.simulate(gyro, static, dt_out=1.0), hg.simulate(fixed, static, dt_out=1.0)
     np.testing.assert_array_equal(np.asarray(held.amplitude), np.asarray(plain.amplitude))
     np.testing.assert_array_equal(np.asarray(held.wave_angle), np.asarray(plain.wave_angle))
+
+
+def test_slow_manifold_refuses_open_loops():
+    """Audit: `slow_manifold` / `reduced_rate` returned NaN for open loops (a free resonator,
+    a bandwidth of 0: the Newton step's Jacobian is singular). They are refused in one line
+    naming the loop; a traced bandwidth of 0 raises when the program runs."""
+    import dataclasses
+
+    from hrgjax.resonator.slow import reduced_rate
+
+    gyro = hg.Gyro(resonator(delta_inv_tau=0.01, delta_omega=0.02, chi=300.0))
+    w = np.radians(5.0)
+    assert np.isfinite(float(reduced_rate(gyro, w, 0.3)))
+    with_control = lambda **kw: eqx.tree_at(  # noqa: E731
+        lambda g: g.control, gyro, dataclasses.replace(gyro.control, **kw)
+    )
+    with pytest.raises(ValueError, match=r"free resonator \(Control.free\(\)\) has none"):
+        reduced_rate(with_control(enabled=False), w, 0.3)
+    for loop in ("pll", "agc", "quadrature"):
+        with pytest.raises(ValueError, match=f"Control.{loop}_bandwidth = 0 rad/s opens that"):
+            reduced_rate(with_control(**{f"{loop}_bandwidth": 0.0}), w, 0.3)
+    traced = jax.jit(lambda b: reduced_rate(with_control(quadrature_bandwidth=b), w, 0.3))
+    with pytest.raises(Exception, match="a traced Control bandwidth is <= 0"):
+        jax.block_until_ready(traced(0.0))

@@ -237,3 +237,38 @@ def test_bias_and_acceleration_sensitivity_full_model():
     t, first = until(rec, 4.0)
     expect = -0.554 * (np.deg2rad(1.0) + b + 0.5 * gz)
     assert slope(t, np.asarray(rec.wave_angle)[first]) == pytest.approx(expect, rel=1e-5)
+
+
+def test_a_wave_turning_over_90_degrees_a_sample_is_not_aliased():
+    """Audit: θ is read modulo π at the output times, and the full model unwrapped it along
+    the turn nearest zero — at 200 °/s (−110.8 °/s electrical) and 1-s samples it read
+    +69.2 °/s. It is now continued along the turn the table (−k_eΩ) and a commanded
+    precession (ρ) expect: both read as the averaged model does, with or without a readout
+    error, and with a precession that turns the wave the other way (ρ − k_eΩ = +189.2 °/s)."""
+    gyro = hg.Gyro(resonator(tau=20.0), readout=hg.Readout(gain_mismatch=0.005))
+    rate, rho = np.radians(200.0), np.radians(300.0)
+    spin = hg.Profile.constant_rate(200.0, 2.0)
+    both = hg.Profile(t=[0.0, 2.0], rate=[rate, rate], temperature=[20.0, 20.0],
+                      accel=np.zeros((2, 3)), precession=[rho, rho])  # fmt: skip
+    for prof, turn in ((spin, -0.554 * rate), (both, rho - 0.554 * rate)):
+        full = sim(gyro, prof, dt_out=1.0)
+        avg = hg.simulate(gyro, prof, dt_out=1.0)
+        np.testing.assert_allclose(full.true_wave_angle, turn * np.asarray(full.t), rtol=1e-3)
+        np.testing.assert_allclose(full.true_wave_angle, avg.true_wave_angle, atol=1e-3)
+        np.testing.assert_allclose(full.wave_angle, avg.wave_angle, atol=1e-3)
+
+
+def test_force_to_rebalance_reads_a_released_wave_without_aliasing():
+    """The same for force-to-rebalance: held for 1 s, then released (the schedule runs
+    whole-angle) at 200 °/s, read every 1 s. The angle is read next to the held angle (a
+    state that follows the estimate while released): it was unwrapped along the turn nearest
+    zero and read +69.2 °/s electrical."""
+    gyro = hg.Gyro(resonator(tau=20.0), control=hg.Control(mode="ftr"))
+    rate = np.radians(200.0)
+    prof = hg.Profile(t=[0.0, 1.0, 3.0], rate=[rate] * 3, temperature=[20.0] * 3,
+                      accel=np.zeros((3, 3)), rebalance=[1.0, 0.0, 0.0])  # fmt: skip
+    full, avg = sim(gyro, prof, dt_out=1.0), hg.simulate(gyro, prof, dt_out=1.0)
+    expect = -0.554 * rate * np.maximum(np.asarray(full.t) - 1.0, 0.0)
+    for name in ("true_wave_angle", "wave_angle"):
+        np.testing.assert_allclose(getattr(full, name), expect, atol=1e-4)
+        np.testing.assert_allclose(getattr(full, name), getattr(avg, name), atol=1e-4)

@@ -264,3 +264,47 @@ def test_a_loop_bandwidth_may_follow_a_temperature_law():
     assert default_max_steps(warm, prof, "averaged") >= 1
     rec = hg.simulate(warm, prof, dt_out=1.0)
     np.testing.assert_allclose(rec.amplitude, 1.0, rtol=1e-2)  # the AGC holds its set point
+
+
+def test_readout_and_control_refuse_values_out_of_range():
+    """Audit: `Readout` and `Control` took any value — a gain mismatch of 1 (1 % given as 1)
+    read wave angle 0 at every sample; 100, or a misalignment of 5 (degrees as radians), ran
+    out of solver steps; a negative amplitude or bandwidth ran on with garbage. Each field has
+    a range (`LIMITS`, justified in the docstrings), refused in one line naming the field,
+    the range and the unit: where the module is built, as a temperature law over the run's
+    temperatures, and as a traced value inside the run. A bandwidth of 0 (open loop) stays."""
+    import re
+
+    bad = [
+        (hg.Readout, "gain_mismatch", 1.0, "in (-0.5, 0.5) (a fraction, not percent); got 1"),
+        (hg.Readout, "gain_mismatch", 100.0, "(a fraction, not percent)"),
+        (hg.Readout, "cross_talk", np.nan, "got nan"),
+        (hg.Readout, "misalignment", 5.0, "in (-π/4, π/4) rad (mechanical); got 5"),
+        (hg.Control, "amplitude", 0.0, "> 0 readout units"),
+        (hg.Control, "amplitude", -1.0, "> 0 readout units"),
+        (hg.Control, "excitation_phase", 5.0, "in (-π/4, π/4) rad"),
+        (hg.Control, "pll_bandwidth", -2.0, ">= 0 rad/s"),
+        (hg.Control, "quadrature_bandwidth", -2.0, ">= 0 rad/s"),
+        (hg.Control, "agc_bandwidth", np.nan, ">= 0 rad/s"),
+        (hg.Control, "forcer_gain", -1.0, "> -1 (a fraction, not percent"),
+        (hg.Control, "forcer_gain_mismatch", 100.0, "in (-0.5, 0.5)"),
+        (hg.Control, "forcer_angle", 2.0, "in (-π/4, π/4) rad (electrical)"),
+        (hg.Control, "k_e_nominal", 0.0, "in (0, 1]"),
+        (hg.Control, "rebalance_limit", -5.0, "> 0 readout units · rad²/s²"),
+    ]
+    for cls, field, value, words in bad:
+        with pytest.raises(ValueError, match=f"{cls.__name__}.{field} must be finite and") as e:
+            cls(**{field: value})
+        assert words in str(e.value) and "\n" not in str(e.value), str(e.value)
+    hg.Control(pll_bandwidth=0.0, agc_bandwidth=0.0, quadrature_bandwidth=0.0)  # open loops
+    gyro, prof = hg.presets.ideal(resonator()), hg.Profile.static(1.0, 80.0)
+    law = hg.Readout(gain_mismatch=hg.TemperatureLaw(0.0, 0.01))  # 0.01/°C: 0.6 at 80 °C
+    with pytest.raises(ValueError, match=re.escape("gyro.readout.gain_mismatch gives 0.6 (a")):
+        hg.simulate(eqx.tree_at(lambda g: g.readout, gyro, law), prof)
+
+    def run(amplitude):  # under jit the module's own check is dropped; simulate's stays
+        ctl = eqx.tree_at(lambda g: g.control.amplitude, gyro, amplitude)
+        return hg.simulate(ctl, prof, dt_out=0.5).amplitude
+
+    with pytest.raises(Exception, match=re.escape("gyro.control.amplitude must be finite and > 0")):
+        jax.block_until_ready(jax.jit(run)(-1.0))

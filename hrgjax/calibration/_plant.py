@@ -8,6 +8,7 @@ from ..gyro import Gyro
 from ..resonator.control import Control
 from ..resonator.params import Resonator, TemperatureLaw
 from ..resonator.readout import Readout
+from ..resonator.slow import open_loop
 
 PLANT_RESONATOR = ("omega", "tau", "delta_omega", "theta_omega", "chi")
 """What a plant (`PhysicalCompensator(plant=…)`) gives the grey box of its resonator, held
@@ -48,8 +49,9 @@ def known_plant(plant: Gyro | None) -> Gyro | None:
     (ideal loops).
 
     **Raises:** `TypeError` for anything but a [`hrgjax.Gyro`][]; `ValueError` for a plant
-    whose loops are ideal or open (nothing for the grey box to model: give `plant=None`) or
-    run in force-to-rebalance mode (the grey box models whole-angle data)."""
+    whose loops are ideal or free (nothing for the grey box to model: give `plant=None`), with
+    a loop open (a bandwidth of 0: no slow manifold) or run in force-to-rebalance mode (the
+    grey box models whole-angle data)."""
     if plant is None:
         return None
     if not isinstance(plant, Gyro):
@@ -59,6 +61,11 @@ def known_plant(plant: Gyro | None) -> Gyro | None:
     if ctl.ideal or not ctl.enabled:
         raise ValueError("plant.control: ideal or open loops have no lag to model; give "
                          "plant=None for the ideal-loop grey box")  # fmt: skip
+    if (loop := open_loop(ctl)) is not None:
+        raise ValueError(f"plant.control.{loop[0]}_bandwidth = {loop[1]:g} rad/s opens that "
+                         "loop: the grey box models closed PI loops (an open one has no slow "
+                         "manifold); give it one > 0, or plant=None for the ideal-loop grey "
+                         "box")  # fmt: skip
     if ctl.mode != "wa":
         raise ValueError(f"plant.control.mode must be 'wa' (the grey box models whole-angle "
                          f"data); got {ctl.mode!r}: give plant.in_mode('wa')")  # fmt: skip

@@ -34,11 +34,25 @@ import jax.numpy as jnp
 
 from ..units import K_E_NOMINAL
 from .params import TemperatureLaw, as_parameter
-from .readout import wrap_half_pi
+from .readout import check_limits, wrap_half_pi
 
 DRIVES = ("force", "parametric")
 MODES = ("wa", "ftr")
 """Operating modes: whole-angle (rate-integrating) and force-to-rebalance (rate)."""
+
+LIMITS = {  # field: (rule of `hrgjax._checks.RULES`, unit); why: `Control`'s docstring
+    "amplitude": ("> 0", "readout units"),
+    "excitation_phase": ("in (-π/4, π/4)", "rad"),
+    **{f"{loop}_bandwidth": (">= 0", "rad/s") for loop in ("pll", "agc", "quadrature")},
+    "rebalance_bandwidth": (">= 0", "rad/s"),
+    "forcer_gain_mismatch": ("in (-0.5, 0.5)", "(a fraction, not percent)"),
+    "forcer_gain": ("> -1", "(a fraction, not percent: the forcers' gain is 1 + forcer_gain)"),
+    "forcer_angle": ("in (-π/4, π/4)", "rad (electrical)"),
+    "rebalance_limit": ("> 0", "readout units · rad²/s²"),
+    "k_e_nominal": ("in (0, 1]", "(the electrical angular gain 2K, ≈ 0.554)"),
+}
+"""The range of each `Control` field; `simulate` holds temperature laws and traced values to
+them too (`hrgjax.simulate._LAW_LIMITS`)."""
 
 
 class Control(eqx.Module):
@@ -76,6 +90,16 @@ class Control(eqx.Module):
       antinode).
 
     A loop with bandwidth 0 holds its effort at the initial steady-state value (open loop).
+
+    Each field must lie in its range (`LIMITS`), or is refused in one line: the set point
+    `amplitude` > 0 (the loops divide by it); bandwidths ≥ 0 (a negative one is an unstable
+    loop); the angle errors `excitation_phase` and `forcer_angle` within ±π/4 rad (real ones
+    are milliradians; at π/4 the drive or the node force puts as much into the wrong
+    quadrature as into the right one, and the steady drive grows as 1/cos γ_e: a larger
+    value is degrees given as radians); `forcer_gain_mismatch` within ±0.5 and
+    `forcer_gain` > −1, fractions, not percent (the forcers' common gain 1 + g_f must stay
+    positive, g is a small difference of the two); `rebalance_limit` > 0; `k_e_nominal`
+    in (0, 1] (as `Resonator.k_e`).
     """
 
     amplitude: jax.Array = eqx.field(converter=as_parameter, default=1.0)
@@ -114,6 +138,7 @@ class Control(eqx.Module):
             )
         if self.mode == "ftr" and not self.enabled:
             raise ValueError("Control.mode='ftr' needs the loops: a free resonator has none")
+        check_limits("Control", self, LIMITS)
 
     def forcer_matrix(self):
         """Forcer gain matrix diag(1 + g_f + g, 1 + g_f − g) applied to the electrode-frame

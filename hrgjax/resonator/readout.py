@@ -16,8 +16,34 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from .._checks import RULES, is_concrete
 from .params import TemperatureLaw, as_parameter
+
+LIMITS = {  # field: (rule of `hrgjax._checks.RULES`, unit); why: `Readout`'s docstring
+    "gain_mismatch": ("in (-0.5, 0.5)", "(a fraction, not percent)"),
+    "cross_talk": ("in (-0.5, 0.5)", "(a fraction, not percent)"),
+    "misalignment": ("in (-π/4, π/4)", "rad (mechanical)"),
+}
+"""The range of each `Readout` field; `simulate` holds temperature laws and traced values to
+them too (`hrgjax.simulate._LAW_LIMITS`)."""
+
+
+def check_limits(owner: str, module, limits) -> None:
+    """Refuse a concrete field of `module` that is not finite or breaks its rule in `limits`
+    ({field: (rule, unit)}) in one line naming `owner.field`, the range and the unit. A
+    temperature law or a traced value passes here: `simulate` checks laws over the run's
+    temperatures and traced values inside the run (`check_finite_leaves`)."""
+    for name, (rule, unit) in limits.items():
+        value = getattr(module, name)
+        if value is None or isinstance(value, TemperatureLaw) or not is_concrete(value):
+            continue
+        v = np.asarray(value, dtype=float)
+        bad = ~(np.isfinite(v) & RULES[rule](v))
+        if bad.any():
+            got = v[tuple(np.argwhere(bad)[0])]
+            raise ValueError(f"{owner}.{name} must be finite and {rule} {unit}; got {got:g}")
 
 
 class Readout(eqx.Module):
@@ -36,11 +62,19 @@ class Readout(eqx.Module):
     - `gain_mismatch`: g, relative gain difference of the x (0°) and y (45°) pickoffs.
     - `cross_talk`: c, symmetric cross-coupling between the channels.
     - `misalignment`: $\varepsilon_m$ [rad, mechanical], misplacement of the 45° pickoff.
+
+    Each must lie in its range (`LIMITS`), or is refused in one line: |g|, |c| < 0.5, as
+    fractions, not percent (at g = ±1 a channel reads nothing, and the first-order
+    formulas above hold only for errors of a few percent), and |ε_m| < π/4 (at π/4 the
+    45° pickoff would sit on the 90° axis, electrically opposite the 0° one: no y channel).
     """
 
     gain_mismatch: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
     cross_talk: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
     misalignment: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
+
+    def __check_init__(self):
+        check_limits("Readout", self, LIMITS)
 
     def matrix(self):
         """The pickoff matrix $\\mathbf I + \\mathbf E$ (evaluate temperature laws first)."""
@@ -119,6 +153,18 @@ class Estimates(eqx.Module):
 def wrap_half_pi(x):
     """Wrap an angle [rad] to [-π/2, π/2) (θ and θ + π are the same standing wave)."""
     return (x + jnp.pi / 2) % jnp.pi - jnp.pi / 2
+
+
+def continue_angle(theta, near, expected):
+    """Samples `theta` (n,) of an angle known modulo π [rad] made continuous: from one sample to
+    the next the angle turns by `expected` (n − 1,) [rad] plus the difference from it wrapped
+    to ±π/2, and the first sample lies within π/2 of `near` — right while the true turn over
+    each interval is within π/2 of the expected one (an unwrap that takes the turn nearest
+    zero aliases once the wave turns over π/2 a sample). Adds whole multiples of π: the
+    gradient is `theta`'s."""
+    steps = jnp.round((expected - jnp.diff(theta)) / jnp.pi)
+    first = jnp.round((near - theta[0]) / jnp.pi)
+    return theta + jnp.pi * jnp.concatenate([first[None], first + jnp.cumsum(steps)])
 
 
 def estimate(demod: Demodulated, theta_branch=None) -> Estimates:

@@ -37,13 +37,16 @@ instant's rate and temperature).
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import is_concrete
 from .._linalg import solve
 from .averaged import loop_field
 from .control import steady_integrators
+from .params import TemperatureLaw
 
 SAMPLES = 9
 """Angles over one period of 2θ on which the manifold is balanced (odd: no Nyquist term);
@@ -90,6 +93,45 @@ def _at_rest(g, omega_in, theta):
     return x, jax.jacfwd(fast)(x), _fields(g, omega_in, x, theta)[1]
 
 
+LOOPS = ("pll", "agc", "quadrature")
+"""The PI loops the slow manifold needs closed (bandwidth > 0)."""
+
+
+def open_loop(control):
+    """The first of `control`'s PI loops that is open — `"all"` for a free resonator, else
+    `(name, bandwidth [rad/s])` for a concrete bandwidth ≤ 0 (a temperature law: at its
+    reference temperature) — or `None`."""
+    if not control.enabled:
+        return "all"
+    for name in LOOPS:
+        bandwidth = getattr(control, f"{name}_bandwidth")
+        if isinstance(bandwidth, TemperatureLaw):
+            known = all(is_concrete(x) for x in jax.tree_util.tree_leaves(bandwidth))
+            bandwidth = bandwidth(bandwidth.t_ref, xp=np) if known else 1.0
+        if is_concrete(bandwidth) and np.any(np.asarray(bandwidth, dtype=float) <= 0):
+            return name, float(np.min(np.asarray(bandwidth, dtype=float)))
+    return None
+
+
+def _closed(g, theta):
+    """`theta`, once `g`'s loops are known closed: an open one is refused (concrete) or
+    raises when the program runs (traced bandwidths) — its fast states have no rest point to
+    settle on (the Newton step's Jacobian is singular: NaN)."""
+    loop = open_loop(g.control)
+    if loop == "all":
+        raise ValueError("the slow manifold is the PI loops': a free resonator "
+                         "(Control.free()) has none; simulate it with the averaged model")  # fmt: skip
+    if loop is not None:
+        raise ValueError(f"the slow manifold needs every PI loop closed; Control.{loop[0]}_"
+                         f"bandwidth = {loop[1]:g} rad/s opens that loop: give it one > 0")  # fmt: skip
+    widths = [getattr(g.control, f"{n}_bandwidth") for n in LOOPS]
+    if all(is_concrete(w) for w in widths):
+        return theta
+    widths = jnp.stack([jnp.min(w) for w in widths])
+    return eqx.error_if(theta, jnp.any(widths <= 0), "the slow manifold needs every PI loop "
+                        "closed: a traced Control bandwidth is <= 0 rad/s (an open loop)")  # fmt: skip
+
+
 def slow_manifold(g, omega_in, theta):
     """The loops' fast states $\\mathbf h(\\theta) = (a, q, \\varphi, I_\\varphi, I_{\\rm agc},
     I_q)$ on the slow manifold (module docstring).
@@ -97,11 +139,15 @@ def slow_manifold(g, omega_in, theta):
     **Arguments:** `g`, a [`hrgjax.Gyro`][] at its temperature (`gyro.at(T)`) with closed
     loops; `omega_in`, the equivalent input rate [rad/s]; `theta`, the electrical wave angle
     [rad].
+
+    **Raises:** `ValueError` for force-to-rebalance mode and for open loops (a free
+    resonator, a bandwidth of 0: no rest point, NaN); a traced bandwidth ≤ 0 raises when
+    the program runs.
     """
     if g.control.mode == "ftr":
         raise ValueError("the slow manifold is whole-angle mode's (the wave turns freely); "
                          "force-to-rebalance holds it — give a gyro with Control(mode='wa')")  # fmt: skip
-    theta = jnp.asarray(theta, dtype=jnp.result_type(float))
+    theta = _closed(g, jnp.asarray(theta, dtype=jnp.result_type(float)))
     n = SAMPLES
     thetas = theta + (jnp.pi / n) * jnp.arange(n, dtype=jnp.result_type(float))
     h0, jac, rate = jax.vmap(lambda th: _at_rest(g, omega_in, th))(thetas)
