@@ -933,3 +933,12 @@ def test_json_fields_found_by_fuzzing_are_named(documents, tmp_path, kind, edit,
     with pytest.raises(ValueError, match=match) as err:
         _json_loader(kind, documents["n"])(p)
     assert str(err.value).startswith(str(p)) and "\n" not in str(err.value)
+
+
+def test_gnss_rate_that_is_not_a_number_is_named():
+    """`Gnss(rate_hz=None)` raised `TypeError: must be real number, not NoneType` (no field)."""
+    from hrgjax.ins.gnss import Gnss
+
+    for bad in (None, "1", True, 0.0, float("nan")):
+        with pytest.raises(ValueError, match=r"^Gnss.rate_hz must be a number > 0 \[Hz\]; got "):
+            Gnss(rate_hz=bad)

@@ -12,6 +12,7 @@ outage window covers it.
 from __future__ import annotations
 
 import math
+import numbers
 
 import equinox as eqx
 import jax
@@ -82,8 +83,10 @@ class Gnss(eqx.Module):
     outages: tuple = eqx.field(static=True, default=(), converter=_windows)
 
     def __check_init__(self):
-        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise ValueError(f"Gnss.rate_hz must be > 0 Hz; got {self.rate_hz}")
+        r = self.rate_hz
+        if not (isinstance(r, numbers.Real) and not isinstance(r, bool) and math.isfinite(r)
+                and r > 0):  # fmt: skip
+            raise ValueError(f"Gnss.rate_hz must be a number > 0 [Hz]; got {r!r}")
         for name in ("position_sigma", "velocity_sigma"):
             v = getattr(self, name)
             if is_concrete(v) and not np.all(np.isfinite(np.asarray(v)) & (np.asarray(v) > 0)):
