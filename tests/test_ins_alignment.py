@@ -77,6 +77,10 @@ def test_psins_loader_reads_the_real_log(psins_log):
     assert f[2] < 0  # FRD: the specific force at rest points up, −z
     w = np.asarray(jnp.sum(log.dtheta, 0)) / float(log.t[-1] - log.t[0] + log.dt)
     assert np.linalg.norm(w) == pytest.approx(C.OMEGA_IE, rel=0.05)
+    # its first seconds sway (55 °/h over 10 s): the Earth-rate check reads ≥ 60 s, so a
+    # short coarse span is not taken for a unit error (it was, for 5–19 s)
+    for coarse in (5.0, 10.0, 19.0, 60.0):
+        al.check_stationary(log, coarse)
 
 
 def test_alignment_on_the_real_psins_log(psins_log):

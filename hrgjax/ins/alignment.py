@@ -130,7 +130,13 @@ gyro reads the Earth's rate (15.04 °/h) plus its bias: the fine filter's gyro-b
 already tens of degrees off, so a wider spread is no gyro `align` serves; a parked vehicle's
 sway adds apparent rate (the PSINS log reads 12.6–22.5 °/h over its 60-s windows, 0.84–1.50
 ω_ie). Unit errors land far outside: ×10 or ÷10 in an increment unit, ×3600 (°/h for °/s),
-×57.3 (degrees for radians)."""
+×57.3 (degrees for radians). Read over `RATE_SPAN_S`."""
+
+RATE_SPAN_S = 60.0
+"""The span [s] the mean angular rate is read over for `EARTH_RATE_RATIO`: the coarse span
+or this, whichever is longer (the whole record where it is shorter) — a parked vehicle's sway
+is tens of °/h over a few seconds (the PSINS log: 55 °/h over its first 10 s, 0.77–0.86 ω_ie
+over 30–60 s), and a short `coarse_s` still aligns."""
 
 
 def load_psins(path) -> ImuLog:
@@ -214,8 +220,9 @@ def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None
                      coarse_name: str = "coarse_s", where: str = "") -> None:  # fmt: skip
     """Refuse, before any work, a log that cannot be a stationary record of the first
     `coarse_s` seconds: one shorter than `coarse_s`, a mean specific force beyond 5 % of g,
-    or a mean angular rate outside [`EARTH_RATE_RATIO`][hrgjax.ins.alignment.EARTH_RATE_RATIO]
-    × the Earth's rate — the signatures of a unit error in the time stamps, accelerometer or
+    or a mean angular rate (over [`RATE_SPAN_S`][hrgjax.ins.alignment.RATE_SPAN_S] or the
+    coarse span) outside [`EARTH_RATE_RATIO`][hrgjax.ins.alignment.EARTH_RATE_RATIO] × the
+    Earth's rate — the signatures of a unit error in the time stamps, accelerometer or
     gyro increments. `fields` names where each comes from (`PSINS_FIELDS` for `load_psins`;
     default: the `ImuLog` fields), `coarse_name` the span's option, `where` a prefix (a file).
 
@@ -238,11 +245,12 @@ def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None
             f"({g:.4g}): is the IMU stationary, are {fields['accel']} and {fields['interval']} "
             "right?"
         )
-    w = float(jnp.linalg.norm(jnp.sum(log.dtheta[:n], 0) / (n * dt)))
+    m = min(size, max(n, int(round(RATE_SPAN_S / dt))))
+    w = float(jnp.linalg.norm(jnp.sum(log.dtheta[:m], 0) / (m * dt)))
     low, high = EARTH_RATE_RATIO
     if not low * OMEGA_IE <= w <= high * OMEGA_IE:
         raise ValueError(
-            f"{where}mean angular rate {w / DEG_PER_H:.4g} °/h over the first {coarse_s:g} s is "
+            f"{where}mean angular rate {w / DEG_PER_H:.4g} °/h over the first {m * dt:g} s is "
             f"not the Earth's rate ({OMEGA_IE / DEG_PER_H:.4g} °/h; alignment takes "
             f"{low:g}–{high:g} × it): is the IMU stationary, is {fields['gyro']} right?"
         )
