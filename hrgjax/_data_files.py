@@ -81,6 +81,9 @@ UNITS: dict[str, tuple[str, ...]] = {
     "temperature_c": ("degC", "°C", "celsius", "degree_Celsius", "degrees_Celsius", "deg_C"),
     "table_rate_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
     "rate_corrected_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
+    "rebalance_rate_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
+    "rebalance_on": ("1", "", "-", "bool", "boolean", "flag"),
+    "precession_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
     "table_angle_deg": ("degree", "deg", "degrees", "°"),
     "wave_angle_deg": ("degree", "deg", "degrees", "°"),
     "angle_corrected_deg": ("degree", "deg", "degrees", "°"),
@@ -89,7 +92,11 @@ UNITS: dict[str, tuple[str, ...]] = {
     "accel_z_g": ("g", "g0", "standard_gravity"),
 }
 """`units` attributes accepted on NetCDF variables (the first is the one written; compared
-without case or spaces). `amplitude`, `quadrature` and extra columns take any unit."""
+without case or spaces): every contract column but those of `ANY_UNIT`."""
+
+ANY_UNIT = ("amplitude", "quadrature")
+"""Contract columns in readout units, which take any `units` attribute (as extra columns do)
+and are written without one."""
 
 _CF_TIME = re.compile(r"\s*(\w+)\s+since\s+(.+)", re.IGNORECASE)
 _CF_FACTOR = {
@@ -243,7 +250,7 @@ def with_file_line(message: str, lines: np.ndarray) -> str:
 
 
 def read_csv_table(
-    path: str, empty_as_nan: bool = False
+    path: str, empty_as_nan: bool = False, exact_integers: bool = False
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """A CSV file as `(columns, lines)`: each column parsed (numbers as float, `run` ids as
     exact integers, a column not in `COLUMNS` that is not all numbers as text) and the file's
@@ -255,6 +262,9 @@ def read_csv_table(
     empty (`,,,`) is a missing sample: with `empty_as_nan` (an empty field is a missing
     number, NaN, as in a log with gaps: `hrgjax allan`) a row of NaN, else an error; without
     `empty_as_nan` an empty field is refused in a known column and makes an extra column text.
+    An integer beyond 2**53, which a float64 would round, is refused in a contract column,
+    and with `exact_integers` (as [`hrgjax.load`][hrgjax.load] reads) in an extra column too;
+    without it an extra column's such integer reads as the nearest float.
 
     **Raises:** `ValueError` naming the file and its line for text that is not UTF-8, a
     malformed row, a row of empty fields, an empty, numeric or duplicate header, or a known
@@ -271,8 +281,8 @@ def read_csv_table(
             yield text
 
     fast = _numeric_table(path)
-    if fast is not None:
-        return fast
+    if fast is not None and not (exact_integers and _beyond_exact(fast[0])):
+        return fast  # (else the validating reader names an integer beyond 2**53)
     with open(path, "rb") as fh:
         blob = fh.read()
     try:
@@ -317,7 +327,7 @@ def read_csv_table(
     lines_arr = np.asarray(lines, dtype=np.int64)
     if empty_as_nan:
         fields = {h: [f if f.strip() else "nan" for f in v] for h, v in fields.items()}
-    return {h: _parse(path, h, v, lines_arr) for h, v in fields.items()}, lines_arr
+    return {h: _parse(path, h, v, lines_arr, exact_integers) for h, v in fields.items()}, lines_arr
 
 
 def check_header(path: str, header: list[str], at: int) -> None:
@@ -352,9 +362,12 @@ def check_header(path: str, header: list[str], at: int) -> None:
         raise ValueError(f"{path}: duplicate column names {dup} in the header")
 
 
-def _parse(path: str, name: str, values: list[str], lines: np.ndarray) -> np.ndarray:
+def _parse(
+    path: str, name: str, values: list[str], lines: np.ndarray, exact_integers: bool = False
+) -> np.ndarray:
     """A CSV column's fields as numbers (run ids as exact integers); an extra column that is
-    not all numbers stays text."""
+    not all numbers stays text. An integer beyond 2**53 is refused in a contract column (an
+    extra one too with `exact_integers`)."""
     stripped = [v.strip() for v in values]
     ok = [is_number(v) for v in stripped]
     if not all(ok):
@@ -375,7 +388,8 @@ def _parse(path: str, name: str, values: list[str], lines: np.ndarray) -> np.nda
                 "int64 range of run ids"
             )
         return np.array(ints, dtype=np.int64)
-    if name in COLUMNS and name != "run" and any(_INTEGER.fullmatch(v) for v in stripped):
+    checked = name in COLUMNS or exact_integers
+    if checked and name != "run" and any(_INTEGER.fullmatch(v) for v in stripped):
         for i, v in enumerate(stripped):
             if _INTEGER.fullmatch(v) and abs(int(v)) > MAX_EXACT_INTEGER:
                 raise ValueError(
@@ -399,7 +413,8 @@ def _numeric_table(path: str):
     in a fraction of the memory (no Python string per field, no copy of the whole text);
     None for anything else — text that is not UTF-8, quotes, a lone carriage return, any
     character but digits, `.eE+-`, commas and blanks in a data line (`nan` included), a row
-    with another number of fields, an integer the slow path must check exactly — which the
+    with another number of fields, an integer the slow path must check exactly (in a
+    contract column; `read_csv_table` checks the extra ones where asked) — which the
     validating reader then reads and names. Over that alphabet NumPy accepts exactly the
     fields `is_number` accepts (tests/test_files.py), so both paths give the same columns."""
     header, at = None, 0
@@ -440,13 +455,23 @@ def _numeric_table(path: str):
     columns = {}
     for j, name in enumerate(header):
         col = np.ascontiguousarray(values[:, j])
-        if name in COLUMNS:
+        if name == "run":
             big = np.abs(col) >= MAX_EXACT_INTEGER  # (rounded: 2**53 + 1 reads 2**53)
-            if name == "run":
-                if big.any() or not np.all(col == np.round(col)):
-                    return None
-                col = col.astype(np.int64)
-            elif big.any():
+            if big.any() or not np.all(col == np.round(col)):
                 return None
+            col = col.astype(np.int64)
+        elif name in COLUMNS and _beyond_exact({name: col}):
+            return None
         columns[name] = col
     return columns, np.frombuffer(lines, dtype=np.int64).copy()
+
+
+def _beyond_exact(columns: dict[str, np.ndarray]) -> bool:
+    """Whether a float column holds a value of magnitude 2**53 or more: there the text may
+    have been an integer that the float rounded (2**53 + 1 reads 2**53), which the validating
+    reader checks exactly."""
+    top = MAX_EXACT_INTEGER
+    return any(
+        c.dtype.kind == "f" and c.size and (c.max() >= top or c.min() <= -top)
+        for c in columns.values()
+    )

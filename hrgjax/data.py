@@ -45,7 +45,8 @@ class MeasuredData:
     - `allow_extra`: keep columns not in [`hrgjax.data.COLUMNS`][] (otherwise an error).
 
     **Raises:** `ValueError` naming the column (and first bad row) for a missing required
-    column, an unknown column, mismatched lengths, values that are not real numbers (text in
+    column, an unknown column, a name that is empty or begins or ends with blanks (a CSV
+    file would not keep it), mismatched lengths, values that are not real numbers (text in
     a contract column, booleans, complex numbers, dates or durations), NaN or infinite
     values, integers too large to hold exactly, a run id that is not an exactly representable
     integer, or time that does not strictly increase within a run (checked run by run, also
@@ -69,6 +70,13 @@ class MeasuredData:
         for name, value in columns.items():
             if not isinstance(name, str):
                 raise ValueError(f"column names must be strings; got {name!r}")
+            if not name.strip():
+                raise ValueError(f"column name {name!r} is empty; name every column")
+            if name != name.strip():
+                raise ValueError(
+                    f"column name {name!r} begins or ends with blanks, which a CSV header does "
+                    f"not keep (the reader strips them): rename it {name.strip()!r}"
+                )
             arr = checked_column(name, value)
             if n is None:
                 n = arr.shape[0]
@@ -341,7 +349,8 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
     with ``#`` is a comment where a row begins (not inside a quoted field); blank lines are
     skipped, a row of empty fields is refused; numbers in decimal or scientific notation (no
     thousands separators or underscores); extra columns (with `allow_extra`) that are not all numbers are kept as
-    text. NetCDF: as [`MeasuredData.from_xarray`][hrgjax.MeasuredData.from_xarray]."""
+    text; an integer beyond 2**53, which a float would round, is refused in every column
+    (extra ones too), naming it, its row and its line. NetCDF: as [`MeasuredData.from_xarray`][hrgjax.MeasuredData.from_xarray]."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
     if ext in NETCDF_EXTENSIONS:
@@ -352,7 +361,7 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
             raise ValueError(f"{path}: {err}") from None
     if ext != ".csv":
         raise ValueError(f"unknown data file extension {ext!r}; use .csv or .nc")
-    columns, lines = read_csv_table(path)
+    columns, lines = read_csv_table(path, exact_integers=True)
     try:
         return MeasuredData(columns, allow_extra=allow_extra)
     except ValueError as err:

@@ -100,6 +100,18 @@ def test_extra_columns_allowed_when_asked():
     assert "note" in d.names
 
 
+@pytest.mark.parametrize("name", ["", "  ", " note", "note ", "x\t"])
+def test_column_names_a_csv_header_would_change_are_refused(name, tmp_path):
+    """The CSV reader strips a header's blanks: a name it would change (or find empty) is
+    refused where the data are made, not after a save that does not read back."""
+    import re
+
+    with pytest.raises(ValueError, match=f"^column name {re.escape(repr(name))} (is empty|begins)"):
+        hg.MeasuredData(table(**{name: np.zeros(5)}), allow_extra=True)
+    d = hg.MeasuredData(table(**{"x": np.zeros(5), "x y": np.ones(5)}), allow_extra=True)
+    assert hg.load(d.save(tmp_path / "n.csv"), allow_extra=True) == d
+
+
 def test_csv_errors(tmp_path):
     p = tmp_path / "bad.csv"
     p.write_text("time_s,temperature_c,table_rate_dps,wave_angle_deg\n0,20,5,abc\n")

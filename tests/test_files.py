@@ -331,3 +331,56 @@ def test_numpy_accepts_exactly_the_readers_numbers_over_the_fast_alphabet():
             except ValueError:
                 continue
             assert is_number(field), field
+
+
+def test_load_refuses_integers_a_float_would_round_in_extra_columns_too(tmp_path, monkeypatch):
+    """Two nanosecond stamps 2 ns apart read as one float: `hg.load` refuses them, on the
+    fast path and on the validating reader's, as `MeasuredData` does in memory; a float
+    written in scientific notation is kept (rounding is then the writer's choice)."""
+    from hrgjax import _data_files
+
+    text = f"{HEADER},stamp_ns\n0,20,0,0,1700000000000000001\n1,20,0,0,1700000000000000003\n"
+    path = write(tmp_path / "ns.csv", text)
+    want = r"ns.csv: column 'stamp_ns' row 0 \(line 2\): the integer 1700000000000000001 is too"
+    with pytest.raises(ValueError, match=want):
+        hg.load(path, allow_extra=True)
+    with pytest.raises(
+        ValueError, match=r"column 'stamp_ns' row 0: the integer 1700000000000000001"
+    ):
+        hg.MeasuredData(
+            base(2) | {"stamp_ns": np.array([1700000000000000001, 3])}, allow_extra=True
+        )
+    assert read_csv_table(str(path))[0]["stamp_ns"][0] == 1.7e18  # hg.imu.load: as before
+    monkeypatch.setattr(_data_files, "_numeric_table", lambda p: None)
+    with pytest.raises(ValueError, match=want):
+        hg.load(path, allow_extra=True)
+    monkeypatch.undo()
+    d = hg.MeasuredData(base(2) | {"stamp_ns": np.array([1.7e18, -(2.0**60)])}, allow_extra=True)
+    assert hg.load(d.save(tmp_path / "f.csv"), allow_extra=True) == d
+
+
+def test_every_contract_column_has_its_netcdf_units(tmp_path):
+    """Each column of `COLUMNS` has its `units` (or takes any: `ANY_UNIT`): checked on load (a
+    rate in rad/s is refused, not read as °/s) and written by `save`."""
+    import xarray as xr
+
+    from hrgjax import _data_files
+
+    for col in ("rebalance_rate_dps", "precession_dps"):
+        ds = xr.Dataset({k: ("sample", v) for k, v in base().items()})
+        ds[col] = ("sample", np.full(N, 0.01), {"units": "rad/s"})
+        ds.to_netcdf(tmp_path / "r.nc", engine="h5netcdf")
+        with pytest.raises(ValueError, match=rf"r.nc: variable '{col}' has units 'rad/s'"):
+            hg.load(tmp_path / "r.nc")
+        ds[col].attrs["units"] = "deg s-1"
+        ds.to_netcdf(tmp_path / "d.nc", engine="h5netcdf")
+        assert hg.load(tmp_path / "d.nc")[col][0] == 0.01
+    units, any_unit = _data_files.UNITS, _data_files.ANY_UNIT
+    assert set(hg.data.COLUMNS) == set(units) | set(any_unit) and not set(units) & set(any_unit)
+    cols = base() | {k: np.zeros(N, int if k == "run" else float) for k in hg.data.COLUMNS
+                     if k not in base()}  # fmt: skip
+    d = hg.MeasuredData(cols)
+    with xr.open_dataset(d.save(tmp_path / "all.nc"), engine="h5netcdf") as ds:
+        got = {k: ds[k].attrs.get("units") for k in hg.data.COLUMNS}
+    assert got == {k: None if k in any_unit else units[k][0] for k in hg.data.COLUMNS}
+    assert hg.load(tmp_path / "all.nc") == d

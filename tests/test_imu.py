@@ -159,6 +159,18 @@ def test_detection_finds_the_true_sections(session):
     assert np.all(np.isfinite(cal.covariance))
 
 
+def test_detection_averages_white_gyro_noise_before_the_threshold(truth):
+    """White gyro noise of 1.6 °/s per axis: |ω| per sample averages 2.6 °/s, near the 3 °/s
+    threshold, but the rate averaged over the window is 0.6 °/s: every face and turn is
+    found once, not split into fake repeats."""
+    data, true = hg.imu.ferraris_session(truth, jax.random.key(5), gyro_noise=np.deg2rad(1.6))
+    found = hg.imu.detect_sections(data)
+    assert {k: len(v) for k, v in found.items()} == {k: 1 for k in SECTION_KEYS}
+    for key in FACES:
+        (s, e), (ts, te) = found[key][0], true[key][0]
+        assert ts <= s < e <= te and e - s > 0.8 * (te - ts)
+
+
 def test_repeats_give_standard_errors_like_the_noise(truth):
     data, sections = hg.imu.ferraris_session(truth, jax.random.key(2), repeats=4, static_s=3.0)
     assert all(len(sections[k]) == 4 for k in SECTION_KEYS)

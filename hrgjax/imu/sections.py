@@ -157,8 +157,9 @@ def detect_sections(
 ) -> Sections:
     """Find the Ferraris sections of a session in its data.
 
-    Rest is where the gyro's rate (median over the record removed, moving mean over
-    `window_s`) stays below `motion_threshold_dps` [°/s] for at least `min_static_s` [s];
+    Rest is where the magnitude of the gyro's rate vector (median over the record removed,
+    moving mean over `window_s` of each axis, so that white noise averages down) stays below
+    `motion_threshold_dps` [°/s] for at least `min_static_s` [s];
     each rest, less `trim_s` [s] at both ends, is the face whose accelerometer axis carries
     most of the specific force (at least 80 %, by sign `p` or `a`). Each stretch of motion
     between two rests whose bias-corrected gyro integrates to a full turn (360° within
@@ -178,7 +179,9 @@ def detect_sections(
     accel = np.asarray(data.accel)
     w = max(int(round(window_s * rate)), 1)
     rel = gyro - np.median(gyro, axis=0)
-    speed = _moving_mean(np.linalg.norm(rel, axis=1), w)
+    # the rate vector averaged, then its norm: white noise averages down (the mean of |noise|
+    # would not: ≈ 1.6 σ per sample, splitting a noisy face into fake repeats)
+    speed = np.linalg.norm(np.stack([_moving_mean(rel[:, i], w) for i in range(3)], 1), axis=1)
     still = speed < np.deg2rad(motion_threshold_dps)
     rests = [(s, e) for s, e in _runs(still) if e - s >= min_static_s * rate]
     trim = int(round(trim_s * rate)) + w // 2
