@@ -39,7 +39,9 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
     """Drift [°/h] and scale factor vs wave angle, one curve per temperature; saves `path`.
 
     `drift` is [`static_drift`][hrgjax.calibration.static_drift]'s output, `sf`
-    [`scale_factor_vs_angle`][hrgjax.calibration.scale_factor_vs_angle]'s.
+    [`scale_factor_vs_angle`][hrgjax.calibration.scale_factor_vs_angle]'s: the scale factor
+    relative to the nominal k_e, drawn as SF − 1 [%] (0 is nominal; runs at different
+    temperatures keep their different levels).
     """
     plt = pyplot()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
@@ -64,11 +66,14 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
     ax1.grid(alpha=0.3)
     ax1.legend(fontsize=7, ncol=2)
     for T, row in zip(sf["temperature_c"], sf["scale_factor"], strict=True):
-        ax2.plot(sf["wave_angle_deg"], (row - 1) * 100, "o-", ms=3, color=cmap(norm(T)))
+        ax2.plot(sf["wave_angle_deg"], (row - 1) * 100, "o-", ms=3, color=cmap(norm(T)),
+                 label=f"{T:+.0f} °C")  # fmt: skip
     ax2.set_xlabel("wave angle [° electrical]")
-    ax2.set_ylabel("scale factor − 1 [%]")
+    ax2.set_ylabel("scale factor − 1 [%]")  # relative to the nominal k_e: 0 is nominal
     ax2.set_title("scale factor vs wave angle (5 °/s)")
     ax2.grid(alpha=0.3)
+    if len(sf["temperature_c"]) > 1:
+        ax2.legend(fontsize=7, ncol=2)
     if title:
         fig.suptitle(title)
     return save(fig, path, dpi=120)

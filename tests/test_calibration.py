@@ -157,6 +157,59 @@ def test_reduce_rejects_bad_arguments():
         reduce(data, k_e=55.4)
 
 
+def _bench_run(run, temp, sf, rate, n=6000, dt=0.01, jitter=0.0, drift_dps=1e-3):
+    """Columns of one run: the table at `rate` [°/s] (an array, or a number), the wave angle
+    −k_e·(sf·(table angle) + drift·t); readback `jitter` [°/s] on the rate."""
+    t = np.arange(n) * dt
+    w = np.broadcast_to(np.asarray(rate, float), (n,))
+    table = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
+    w = w + jitter * np.random.default_rng(run).standard_normal(n)
+    theta = 10.0 - K * (sf * table + drift_dps * t)
+    return dict(time_s=t, wave_angle_deg=theta, temperature_c=np.full(n, temp),
+                table_rate_dps=w, table_angle_deg=table, run=np.full(n, run))  # fmt: skip
+
+
+def _bench(*runs):
+    return hg.MeasuredData({k: np.concatenate([r[k] for r in runs]) for k in runs[0]})
+
+
+def test_scale_factor_vs_angle_is_relative_to_the_nominal_gain():
+    """Two rotation runs with scale factors 1.002 (−40 °C) and 0.998 (+60 °C) keep their
+    levels (the figure's "scale factor − 1"), not each ≈ 1 relative to its own mean."""
+    from hrgjax.calibration import scale_factor_vs_angle
+
+    data = _bench(_bench_run(0, -40.0, 1.002, 5.0), _bench_run(1, 60.0, 0.998, 5.0),
+                  _bench_run(2, 20.0, 1.0, 0.0))  # fmt: skip
+    out = scale_factor_vs_angle(data)
+    np.testing.assert_array_equal(out["temperature_c"], [-40.0, 60.0])
+    assert out["scale_factor"].shape == (2, 18)
+    for row, truth in zip(out["scale_factor"], [1.002, 0.998], strict=True):
+        assert np.sum(np.isfinite(row)) >= 10
+        # the drift, 10⁻³ °/s, is not removed: 2·10⁻⁴ of the 5 °/s table rate
+        np.testing.assert_allclose(row[np.isfinite(row)], truth + 1e-3 / 5.0, rtol=1e-9)
+
+
+def test_scale_factor_vs_angle_uses_only_where_the_table_turns():
+    """A spin-up after 1 s at rest, a stop 1 s before the end, a sign change and a static run
+    with readback jitter: only intervals where the table turns throughout count (no
+    division by a zero rate, no row for the static run), from increments, not instantaneous
+    rates."""
+    from hrgjax.calibration import scale_factor_vs_angle
+
+    t = np.arange(6000) * 0.01
+    rates = [np.where(t < 1.0, 0.0, 5.0), np.where(t > 59.0, 0.0, 5.0),
+             np.where(t < 30.0, 5.0, -5.0), np.clip(t, 0.0, 5.0)]  # fmt: skip
+    runs = [_bench_run(i, 20.0, 1.001, w, drift_dps=0.0) for i, w in enumerate(rates)]
+    runs.append(_bench_run(4, 30.0, 1.0, 0.0, jitter=1e-5))
+    out = scale_factor_vs_angle(_bench(*runs))
+    np.testing.assert_array_equal(out["temperature_c"], [20.0])
+    row = out["scale_factor"][0]
+    assert np.sum(np.isfinite(row)) >= 10
+    np.testing.assert_allclose(row[np.isfinite(row)], 1.001, rtol=1e-9)
+    static = scale_factor_vs_angle(_bench(runs[-1]))
+    assert static["scale_factor"].shape == (0, 18) and static["temperature_c"].size == 0
+
+
 # --- compensators on exact targets -------------------------------------------------------
 
 
@@ -504,6 +557,43 @@ def test_one_fit_call_for_every_compensator_and_the_old_keywords_still_work():
 def test_fourier_base_needs_points_at_fit_temperature(exact_windows):
     with pytest.raises(ValueError, match="within 1.0 °C of the fit temperature 25"):
         FourierCompensator(fit_temperature_c=25.0).fit(exact_windows)
+
+
+def test_mlp_bins_targets_by_temperature_level_not_by_sensor_noise():
+    """Windows of one level whose temperatures carry 0.005 °C of sensor noise share cells:
+    120 windows over 0–178° in 5° cells are 36 cells, not one each."""
+    theta = np.linspace(0.0, 178.0, 120) * DEG
+    noisy = 20.0 + 0.005 * np.random.default_rng(5).standard_normal(theta.size)
+    th, tc, value = mlp_module.bin_targets(theta, noisy, np.ones_like(theta), 5.0)
+    assert th.size == 36
+    np.testing.assert_allclose(tc, 20.0, atol=0.02)
+    np.testing.assert_allclose(value, 1.0)
+    two = mlp_module.bin_targets(np.r_[theta, theta], np.r_[noisy, noisy + 40.0],
+                                 np.ones(2 * theta.size), 5.0)  # fmt: skip
+    assert two[0].size == 72
+
+
+def test_fourier_refusal_names_temperatures_too_close_for_the_polynomial():
+    """temperature_degree=3 on four levels 0.6 °C apart (wave angles fine): the refusal
+    blames the temperatures, not the wave angles."""
+    temps, angles = np.array([59.0, 59.6, 60.2, 60.8]), np.arange(-90.0, 90.0, 15.0)
+    tt, aa = (x.ravel() for x in np.meshgrid(temps, angles, indexing="ij"))
+    n = tt.size
+    table = np.r_[np.zeros(n), np.full(n, 5.0)]
+    w = RateWindows(
+        run=np.arange(2 * n), start=np.zeros(2 * n, int), stop=np.full(2 * n, 10),
+        t_mid=np.full(2 * n, 5.0), duration=np.full(2 * n, 10.0),
+        temperature_c=np.r_[tt, tt], table_rate_dps=table, wave_angle_deg=np.r_[aa, aa],
+        rate_dps=table + 1e-4 * np.cos(2 * np.r_[aa, aa] * DEG), stderr_dps=np.full(2 * n, 1e-6),
+        k_e=K,
+    )  # fmt: skip
+    with pytest.raises(ValueError) as err:
+        FourierCompensator(temperature_degree=3).fit(w)
+    msg = str(err.value)
+    assert msg.startswith("drift (static runs): the windows' temperatures do not determine")
+    assert "+59.0, +59.6, +60.2, +60.8 °C" in msg and "lower temperature_degree" in msg
+    assert "wave angles" not in msg
+    FourierCompensator(temperature_degree=1).fit(w)  # a line in T: these levels do for it
 
 
 def test_laws_in_temperature_need_enough_distinct_temperatures(exact_windows, monkeypatch):

@@ -155,3 +155,28 @@ def test_imu_session_and_allan_figures_read_at_a_glance(figures):
     assert len(figures) == 2
     for fig in figures:
         _check(fig)
+
+
+def test_scale_factor_panel_draws_the_scale_factor_relative_to_nominal(figures):
+    """Rotation runs with scale factors 1.002 (−40 °C) and 0.998 (+60 °C) are drawn at
+    +0.2 % and −0.2 % ("scale factor − 1"), not both at 0 (each run about its own mean)."""
+    from hrgjax import MeasuredData
+    from hrgjax.calibration import scale_factor_vs_angle, static_drift
+
+    k_e, t = 0.554, np.arange(6000) * 0.01
+    cols = []
+    for run, (temp, sf, rate) in enumerate([(-40.0, 1.002, 5.0), (60.0, 0.998, 5.0),
+                                            (-40.0, 1.0, 0.0), (60.0, 1.0, 0.0)]):  # fmt: skip
+        cols.append(dict(time_s=t, wave_angle_deg=10.0 - k_e * sf * rate * t,
+                         temperature_c=np.full(t.size, temp), table_rate_dps=np.full(t.size, rate),
+                         run=np.full(t.size, run)))  # fmt: skip
+    data = MeasuredData({k: np.concatenate([c[k] for c in cols]) for k in cols[0]})
+    plots.drift_and_scale_factor(static_drift(data, k_e), scale_factor_vs_angle(data, k_e), "x.png")
+    (fig,) = figures
+    lines = fig.axes[1].get_lines()
+    assert len(lines) == 2
+    for line, percent in zip(lines, [0.2, -0.2], strict=True):
+        y = np.asarray(line.get_ydata(), float)
+        assert np.sum(np.isfinite(y)) >= 10
+        np.testing.assert_allclose(y[np.isfinite(y)], percent, rtol=1e-9)
+    _check(fig)  # and a legend for the two curves

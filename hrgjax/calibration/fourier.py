@@ -145,7 +145,9 @@ class FourierCompensator(AbstractCompensator):
         **Raises:** `ValueError` without static or rotation runs, with no points near the fit
         temperature (base algorithm), with fewer distinct temperatures (levels within 0.5 °C
         counted once) among the static or the rotation runs than the temperature polynomial
-        has coefficients (`temperature_degree` + 1), or with fewer points than coefficients.
+        has coefficients (`temperature_degree` + 1), with fewer points than coefficients, or
+        with windows whose wave angles or temperature levels do not determine the
+        coefficients (`CONDITION_LIMIT`; the message says which, and what to add).
         """
         require_x64("FourierCompensator.fit")
         window_s = setting(self, "window_s", window_s)
@@ -159,7 +161,7 @@ class FourierCompensator(AbstractCompensator):
         th_s = static.wave_angle_deg * DEG
         drift = (static.rate_dps - static.table_rate_dps) * DEG
         d_coef = _lstsq(self._basis(th_s, static.temperature_c, np), drift,
-                        "drift (static runs)", static, self.harmonics)  # fmt: skip
+                        "drift (static runs)", static, self)  # fmt: skip
         fitted = eqx.tree_at(
             lambda c: c.drift_coef,
             self,
@@ -170,7 +172,7 @@ class FourierCompensator(AbstractCompensator):
         d_m = self._basis(th_m, moving.temperature_c, np) @ d_coef
         sf = (moving.rate_dps * DEG - d_m) / (moving.table_rate_dps * DEG)
         s_coef = _lstsq(self._basis(th_m, moving.temperature_c, np), sf,
-                        "scale factor (rotation runs)", moving, self.harmonics)  # fmt: skip
+                        "scale factor (rotation runs)", moving, self)  # fmt: skip
         return eqx.tree_at(
             lambda c: c.sf_coef,
             fitted,
@@ -204,39 +206,83 @@ def _near(w: RateWindows, temperature_c: float, tol: float, kind: str) -> RateWi
 
 CONDITION_LIMIT = 1e6
 """Largest condition number of the least squares' basis (columns scaled to unit length) a
-Fourier fit accepts: beyond it the windows' wave angles do not determine the harmonics (two
-distinct angles for five coefficients put the drift at 10⁹ °/h), and the fit says which
-angles to add instead of answering."""
+Fourier fit accepts: beyond it the windows do not determine the coefficients (two distinct
+wave angles for five coefficients put the drift at 10⁹ °/h; four temperature levels 0.6 °C
+apart do not determine a cubic in T), and the fit says what to add instead of answering."""
 
 
-def _lstsq(basis, y, what: str, w: RateWindows | None = None, harmonics: int = 0):
+def _condition(basis) -> float:
+    """Condition number of `basis` with its columns scaled to unit length (inf if singular)."""
+    scaled = basis / np.maximum(np.linalg.norm(basis, axis=0), 1e-300)
+    sv = np.linalg.svd(scaled, compute_uv=False)
+    return float(sv[0] / sv[-1]) if sv[-1] > 0 else np.inf
+
+
+def _lstsq(basis, y, what: str, w: RateWindows | None = None, comp=None):
     """Ordinary least squares: the batch-means errors of single windows are too noisy to
     weight by, and windows of one kind have equal length. Refuses a basis the windows `w`
-    do not determine (`CONDITION_LIMIT`), naming their distinct wave angles."""
+    do not determine (`CONDITION_LIMIT`), naming the cause (`_cause`)."""
     if basis.shape[0] < basis.shape[1]:
         raise ValueError(
             f"{what}: {basis.shape[0]} calibration points for {basis.shape[1]} coefficients; "
             "add points or lower harmonics / temperature_degree"
         )
-    scaled = basis / np.maximum(np.linalg.norm(basis, axis=0), 1e-300)
-    sv = np.linalg.svd(scaled, compute_uv=False)
-    if not sv[-1] > sv[0] / CONDITION_LIMIT and w is not None:
-        raise ValueError(f"{what}: the windows' wave angles do not determine the "
-                         f"{basis.shape[1]} coefficients; {_angle_summary(w, harmonics)}")  # fmt: skip
+    if not _condition(basis) < CONDITION_LIMIT and w is not None and comp is not None:
+        raise ValueError(f"{what}: {_cause(w, comp, basis.shape[1])}")
     coef, *_ = np.linalg.lstsq(basis, y, rcond=None)
     return coef
+
+
+def _cause(w: RateWindows, comp: FourierCompensator, n_coef: int) -> str:
+    """Why the windows `w` do not determine `comp`'s `n_coef` coefficients: the temperature
+    polynomial's basis alone over the windows' temperatures, or the Fourier basis alone over
+    their wave angles, ill-conditioned (condition number above √`CONDITION_LIMIT`: the
+    product basis's is about the product of the two), and the wave angles at each
+    temperature level; the angles are named when the temperatures are not to blame."""
+    limit = np.sqrt(CONDITION_LIMIT)
+    temp_basis = _temperature_basis(w.temperature_c, comp._degree, comp.fit_temperature_c, np)
+    temp_bad = comp._degree > 0 and not _condition(temp_basis) < limit
+    angle_basis = _angle_basis(w.wave_angle_deg * DEG, comp.harmonics, np)
+    short = any(n < 2 * comp.harmonics + 1 for n, _ in _angles_per_level(w))
+    angle_bad = short or not _condition(angle_basis) < limit or not temp_bad
+    causes = [_temperature_summary(w, comp._degree)] * temp_bad
+    causes += [_angle_summary(w, comp.harmonics)] * angle_bad
+    which = " and ".join(["temperatures"] * temp_bad + ["wave angles"] * angle_bad)
+    return f"the windows' {which} do not determine the {n_coef} coefficients; " + "; ".join(causes)
+
+
+def _temperature_summary(w: RateWindows, degree: int) -> str:
+    """'4 temperature levels (+59.0, …, +60.8 °C) span 1.8 °C: temperature_degree=3 …'."""
+    levels = temperature_levels(w.temperature_c)
+    shown = ", ".join(f"{t:+.1f}" for t in levels[:8]) + (", …" if levels.size > 8 else "")
+    return (
+        f"{levels.size} temperature levels ({shown} °C; levels within {LEVEL_TOLERANCE_C:g} °C "
+        f"count once) span {np.ptp(levels):.1f} °C, too close together for a polynomial of "
+        f"temperature_degree={degree} in (T − T_ref)/{T_SCALE:g} °C — add runs at temperatures "
+        "further apart or lower temperature_degree (CLI --temperature-degree)"
+    )
+
+
+def _angles_per_level(w: RateWindows) -> list[tuple[int, np.ndarray]]:
+    """(count, distinct folded wave angles [°]) at each temperature level; angles within ≈ 1°
+    count once."""
+    out = []
+    for level in temperature_levels(w.temperature_c):
+        near = np.abs(w.temperature_c - level) <= LEVEL_TOLERANCE_C
+        folded = (w.wave_angle_deg[near] + 90.0) % 180.0 - 90.0
+        distinct = np.unique(np.round(folded)) + 0.0  # no −0
+        out.append((distinct.size, distinct))
+    return out
 
 
 def _angle_summary(w: RateWindows, harmonics: int) -> str:
     """'at +20 °C 2 distinct wave angles (0, 45° electrical, mod 180°); …: harmonics=N needs
     ≥ 2N + 1 at each temperature — add runs at other wave angles or lower harmonics'."""
     parts = []
-    for level in temperature_levels(w.temperature_c):
-        near = np.abs(w.temperature_c - level) <= LEVEL_TOLERANCE_C
-        folded = (w.wave_angle_deg[near] + 90.0) % 180.0 - 90.0
-        distinct = np.unique(np.round(folded)) + 0.0  # angles within ≈ 1° count once (no −0)
+    levels = temperature_levels(w.temperature_c)
+    for level, (count, distinct) in zip(levels, _angles_per_level(w), strict=True):
         shown = ", ".join(f"{a:g}" for a in distinct[:8]) + (", …" if distinct.size > 8 else "")
-        parts.append(f"at {level:+.1f} °C {distinct.size} distinct wave angles ({shown}°)")
+        parts.append(f"at {level:+.1f} °C {count} distinct wave angles ({shown}°)")
     return (
         "; ".join(parts) + f" (electrical, mod 180°): harmonics={harmonics} needs ≥ "
         f"{2 * harmonics + 1} distinct wave angles at each temperature — add runs at other wave "

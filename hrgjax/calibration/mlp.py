@@ -38,9 +38,10 @@ from .._compiled import device, program
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..nn.train import rprop_with_progress
-from ..units import DEG
+from ..units import DEG, group_temperatures
 from ._compensator import (
     FROM_FIELD,
+    LEVEL_TOLERANCE_C,
     AbstractCompensator,
     FromField,
     check_number,
@@ -68,9 +69,10 @@ class MLPCompensator(AbstractCompensator):
     - `encoding`: `"periodic"` (cos 2θ, sin 2θ, T) or `"angle"` (folded θ, T; the seed's).
     - `steps`: Rprop iterations for the reduced fit; `e2e_steps` for end-to-end training.
     - `learning_rate`: Rprop's initial step size.
-    - `bin_deg`: the scale-factor targets are averaged in cells of one temperature and
-      `bin_deg` of wave angle (the seed's grid: one target per point); the cell's input is
-      the circular mean of its windows' angles.
+    - `bin_deg`: the scale-factor targets are averaged in cells of one temperature level
+      (window temperatures within 0.5 °C are one level, as the fits count them) and
+      `bin_deg` of wave angle (the seed's grid: one target per point); the cell's inputs
+      are the circular mean of its windows' angles and their mean temperature.
     - `k_e`: nominal angular gain.
     - `st_width`: hidden neurons of the readout temperature-sensitivity network s_T(θ, T)
       (0, the default: none, the seed's MLP; see the module docstring).
@@ -314,14 +316,19 @@ def _drift_st_loss(params, data):
 
 
 def bin_targets(theta, temperature_c, value, bin_deg: float):
-    """Average `value` in cells of equal temperature and `bin_deg` of wave angle (period 180°).
+    """Average `value` in cells of one temperature level and `bin_deg` of wave angle (period
+    180°). Temperature levels are the windows' temperatures grouped within
+    `LEVEL_TOLERANCE_C` ([`group_temperatures`][hrgjax.units.group_temperatures], as the
+    fits count distinct temperatures), so a sensor's noise does not make each window its
+    own cell.
 
     **Returns:** `(theta, temperature_c, value)` per non-empty cell; θ [rad] is the circular
-    mean (in 2θ) of the cell's angles.
+    mean (in 2θ) of the cell's angles, the temperature the mean of its windows'.
     """
     folded = (np.degrees(theta) + 90.0) % 180.0
     cell_angle = np.floor(folded / bin_deg).astype(int)
-    temps, t_idx = np.unique(np.round(temperature_c, 6), return_inverse=True)
+    levels = group_temperatures(np.asarray(temperature_c, dtype=float), LEVEL_TOLERANCE_C)
+    temps, t_idx = np.unique(levels, return_inverse=True)
     keys = t_idx * (int(np.ceil(180.0 / bin_deg)) + 1) + cell_angle
     uniq, inv = np.unique(keys, return_inverse=True)
     count = np.bincount(inv)

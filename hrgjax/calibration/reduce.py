@@ -334,33 +334,53 @@ def static_drift(data: MeasuredData, k_e: float = K_E_NOMINAL):
 def scale_factor_vs_angle(
     data: MeasuredData, k_e: float = K_E_NOMINAL, window_s: float = 2.0, bin_deg: float = 10.0
 ):
-    """Local scale factor of rotation runs vs wave angle (folded to [−90°, 90°)), binned.
+    r"""Local scale factor of rotation runs vs wave angle (folded to [−90°, 90°)), binned.
 
-    SF = (Δθ_meas/Δt)/(−k_e Ω_table) over windows of `window_s`, relative to its run mean.
+    $\mathrm{SF} = -\Delta\theta_{\rm meas} / (k_e\,\Delta\alpha_{\rm table})$ over intervals
+    of `window_s`: the measured equivalent input rate over the table rate, relative to the
+    nominal gain `k_e` (1 is nominal; the definition of the scale-factor targets the
+    compensators fit to [`reduce`][hrgjax.calibration.reduce]'s windows, with the sign of
+    its measured rate), so runs at different temperatures keep their different levels.
+    Δα is the increment of the table angle (the column `table_angle_deg`, or the rate's
+    integral) over the same samples as Δθ. Only intervals over which the table turns
+    throughout — |table rate| above
+    [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS], one sign, at every sample —
+    count: a spin-up, a stop or an at-rest stretch of a run is left out, and a run with no
+    such interval (a static run, readback jitter included) gives no row. The drift is not
+    removed (at 5 °/s a drift of 1 °/h is 5.6·10⁻⁵ of the rate).
 
     **Returns:** dict `temperature_c` (T,), `wave_angle_deg` (B,), `scale_factor` (T, B):
-    one row per temperature (runs' mean temperatures grouped by
-    [`group_temperatures`][hrgjax.units.group_temperatures]).
+    one row per temperature (the mean temperatures of the runs' turning samples, grouped by
+    [`group_temperatures`][hrgjax.units.group_temperatures]); NaN in bins no interval's
+    mid-angle falls in.
     """
-    temps = []
-    rows = []
+    k_e = check_k_e(k_e)
     edges = np.arange(-90.0, 90.0 + bin_deg / 2, bin_deg)
     centres = 0.5 * (edges[1:] + edges[:-1])
     run_temps, run_parts = [], []
     for r in data.runs():
-        w = r["table_rate_dps"]
-        if np.all(w == 0):
+        t, th, rate = r["time_s"], r["wave_angle_deg"], r["table_rate_dps"]
+        step = max(int(round(window_s / float(np.median(np.diff(t))))), 1) if len(t) > 1 else 1
+        if len(t) <= step:
             continue
-        t, th = r["time_s"], r["wave_angle_deg"]
-        step = max(int(round(window_s / np.median(np.diff(t)))), 1)
-        sf = (th[step:] - th[:-step]) / (t[step:] - t[:-step]) / (-k_e * w[step:])
-        mid = 0.5 * (th[step:] + th[:-step])
+        sign = np.where(rate > STILL_RATE_DPS, 1, 0) - np.where(rate < -STILL_RATE_DPS, 1, 0)
+        ok = np.zeros(len(t) - step, bool)
+        for s in (1, -1):  # samples i … i + step all turning one way
+            count = np.concatenate([[0], np.cumsum(sign == s)])
+            ok |= count[step + 1 :] - count[: -step - 1] == step + 1
+        d_table = r.table_angle_deg[step:] - r.table_angle_deg[:-step]
+        ok &= d_table != 0.0
+        if not np.any(ok):
+            continue
+        sf = -(th[step:] - th[:-step])[ok] / (k_e * d_table[ok])
+        mid = 0.5 * (th[step:] + th[:-step])[ok]
         folded = (mid + 90.0) % 180.0 - 90.0
-        run_temps.append(float(np.mean(r["temperature_c"])))
-        run_parts.append((folded, sf / np.mean(sf)))
+        run_temps.append(float(np.mean(r["temperature_c"][sign != 0])))
+        run_parts.append((folded, sf))
     by_temp: dict[float, list] = {}  # one row per temperature, last-bit differences merged
     for temp, part in zip(group_temperatures(run_temps), run_parts, strict=True):
         by_temp.setdefault(float(temp), []).append(part)
+    temps, rows = [], []
     for temp, parts in sorted(by_temp.items()):
         ang = np.concatenate([p[0] for p in parts])
         sf = np.concatenate([p[1] for p in parts])
@@ -370,9 +390,9 @@ def scale_factor_vs_angle(
         )
         temps.append(temp)
     return {
-        "temperature_c": np.asarray(temps),
+        "temperature_c": np.asarray(temps, dtype=float),
         "wave_angle_deg": centres,
-        "scale_factor": np.asarray(rows),
+        "scale_factor": np.asarray(rows, dtype=float).reshape(len(temps), len(centres)),
     }
 
 
