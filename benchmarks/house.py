@@ -123,7 +123,10 @@ def cycles(graph):
     return out
 
 
-def main():
+def analyse():
+    """`(files, graph, eager, pkg_uses, test_uses)`: the package's modules, their imports
+    (all, and at import time only) and the uses of another module's `_private` name in the
+    package and in the tests."""
     files = sorted(PKG.rglob("*.py"))
     modules = {module_name(p) for p in files}
     graph, eager, pkg_uses, test_uses = {}, {}, {}, {}
@@ -140,6 +143,11 @@ def main():
         _, _, uses = scan(p, modules)
         if uses:
             test_uses[str(p.relative_to(ROOT))] = uses
+    return files, graph, eager, pkg_uses, test_uses
+
+
+def main():
+    files, graph, eager, pkg_uses, test_uses = analyse()
     sizes = sorted(((len(p.read_text().splitlines()), str(p.relative_to(ROOT))) for p in files),
                    reverse=True)  # fmt: skip
     print("largest modules (lines):")

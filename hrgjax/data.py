@@ -23,8 +23,7 @@ from ._data_files import dataset_columns, import_xarray, netcdf_columns
 from ._data_files import read_csv_table as read_csv_table
 from ._data_files import with_file_line as with_file_line
 from ._io import atomic_path, atomic_write
-from .pattern_noise import STILL_RATE_DPS
-from .units import DEG, K_E_NOMINAL
+from .units import DEG, K_E_NOMINAL, STILL_RATE_DPS
 
 SAMPLE_DIM = "sample"
 """The one dimension of the NetCDF files `MeasuredData.save` writes (no column may take its
@@ -260,7 +259,7 @@ class RunStack:
     - `accel`: (R, N, 3) specific force along case x, y, z [g] (absent axes read 0).
     - `amplitude`, `quadrature`: (R, N) [readout units] (absent: 1 and 0).
     - `static`: (R,) true for runs with the table at rest throughout (|rate| within
-      [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS]: readback jitter is rest).
+      [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS]: readback jitter is rest).
     """
 
     run: np.ndarray

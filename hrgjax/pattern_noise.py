@@ -44,6 +44,7 @@ import numpy as np
 
 from ._nnls import nnls as _nnls
 from .units import DEG, DEG_PER_H
+from .units import STILL_RATE_DPS as STILL_RATE_DPS
 
 if TYPE_CHECKING:
     from .data import MeasuredData
@@ -55,10 +56,6 @@ MIN_STRETCH = 16
 TEMPERATURE_TOLERANCE_C = 0.1
 """A still stretch's temperature stays within this of its first sample [°C] (a measured
 temperature's sensor noise does not cut a static dwell into pieces; a ramp does)."""
-STILL_RATE_DPS = 1e-3
-"""The table is still where its measured rate is within this of zero [°/s] (3.6 °/h: a rate
-table's readback jitter does not turn a static run into a rotation; a turning table, at
-tenths of a degree per second and more, is far above it)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -181,7 +178,7 @@ class NoiseModel:
     @classmethod
     def estimate(cls, data: MeasuredData, max_lag_s: float = 1024.0) -> NoiseModel:
         r"""Estimate σ_w, N and a Gauss–Markov part from every still stretch of `data` (table
-        still within [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS], temperature within
+        still within [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS], temperature within
         [`TEMPERATURE_TOLERANCE_C`][hrgjax.pattern_noise.TEMPERATURE_TOLERANCE_C], ≥
         [`MIN_STRETCH`][hrgjax.pattern_noise.MIN_STRETCH] samples): static dwells and the
         holds of continuous records alike.

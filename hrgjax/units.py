@@ -92,6 +92,12 @@ def to_dps(x):
     return x / DEG_PER_S
 
 
+STILL_RATE_DPS = 1e-3
+"""The table is still where its measured rate is within this of zero [°/s] (3.6 °/h: a rate
+table's readback jitter does not turn a static run into a rotation; a turning table, at
+tenths of a degree per second and more, is far above it)."""
+
+
 TEMPERATURE_TOLERANCE_C = 0.05
 """Temperatures closer than this are one temperature in a report [°C]: half the bench
 resolution a designed plan is rounded to (0.1 °C), far above the last-bit differences

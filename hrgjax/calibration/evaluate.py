@@ -91,7 +91,7 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
     compensated case angle is $\hat\phi(t)$ (0 at its start) and table angle $\phi(t)$:
 
     - static runs (|table rate| within
-      [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS] throughout: a rate table's
+      [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS] throughout: a rate table's
       readback jitter is rest; a slower rotation counts as static, its turn subtracted):
       `drift_error_dph` $= (\hat\phi(T) - \Delta\phi)/T - b$ [°/h];
     - moving runs: `angle_error_deg` $= \hat\phi(T) - b\,T - \Delta\phi$ [°] and

@@ -173,7 +173,7 @@ class RateWindows(eqx.Module):
     @property
     def static(self) -> np.ndarray:
         """Mask of windows with the table at rest: |table rate| within
-        [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS] (a rate table's readback
+        [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS] (a rate table's readback
         jitter is not a rotation; the window's table rate is subtracted all the same)."""
         return np.abs(self.table_rate_dps) <= STILL_RATE_DPS
 
@@ -344,7 +344,7 @@ def scale_factor_vs_angle(
     Δα is the increment of the table angle (the column `table_angle_deg`, or the rate's
     integral) over the same samples as Δθ. Only intervals over which the table turns
     throughout — |table rate| above
-    [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS], one sign, at every sample —
+    [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS], one sign, at every sample —
     count: a spin-up, a stop or an at-rest stretch of a run is left out, and a run with no
     such interval (a static run, readback jitter included) gives no row. The drift is not
     removed (at 5 °/s a drift of 1 °/h is 5.6·10⁻⁵ of the rate).

@@ -36,7 +36,7 @@ it shows on the output, −½Δ(1/τ)·sin 2(θ − θ_τ)/k_e (the compensators
 equivalent input rate). An input rate does not cancel: the FTR scale factor carries
 a/â ≈ 1 − g cos 2θ (g the pickoff gain mismatch, unknown), so a rate Ω puts −g cos 2θ·Ω into
 the difference; `mode_reversal` and `mode_reversal_data` refuse a case turning faster than
-[`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS].
+[`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS].
 """
 
 from __future__ import annotations
@@ -382,7 +382,7 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
     the reduction is differentiable).
 
     **The case must be at rest** (the profile's rate within
-    [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS]): the FTR scale factor carries
+    [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS]): the FTR scale factor carries
     a/â ≈ 1 − g cos 2θ (g the pickoff gain mismatch), so an input rate Ω reads differently
     at the two holds and puts −g cos 2θ·Ω into the anisotropy (33 % of it at 0° and 36 °/h on the
     default gyro); g is not known, so this cannot be corrected.
@@ -476,7 +476,7 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
     [°, °/h]; `anisotropy_dph` as `ModeReversal.anisotropy` (the bias as it shows on the
     output). **Raises:** `ValueError` without the FTR output or the schedule, for a run
     with other than two holds 90° apart, or one whose case turns (`table_rate_dps` beyond
-    [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS]: mode reversal needs the case at
+    [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS]: mode reversal needs the case at
     rest, see `mode_reversal`)."""
     for name in ("rebalance_rate_dps", "precession_dps"):
         if name not in data:

@@ -136,7 +136,7 @@ def dwell_runs(data: MeasuredData) -> set[int]:
     """Ids of the runs that hold their temperature and table rate constant (dwell runs):
     the temperature's peak-to-peak within
     [`TEMPERATURE_TOLERANCE_C`][hrgjax.pattern_noise.TEMPERATURE_TOLERANCE_C] and the table
-    rate's within [`STILL_RATE_DPS`][hrgjax.pattern_noise.STILL_RATE_DPS] — a thermometer's
+    rate's within [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS] — a thermometer's
     or a rate table's readback noise leaves a dwell a dwell; a temperature ramp (a degree
     over the run) or a change of table rate does not."""
     out = set()

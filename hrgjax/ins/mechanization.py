@@ -142,6 +142,14 @@ def euler_to_quat(roll, pitch, heading):
 # --- the navigation state -----------------------------------------------------------------
 
 
+def dcm_to_euler(c):
+    """(roll, pitch, heading) [rad] of a body-to-NED matrix (heading in (−π, π])."""
+    roll = jnp.arctan2(c[..., 2, 1], c[..., 2, 2])
+    pitch = -jnp.arcsin(jnp.clip(c[..., 2, 0], -1.0, 1.0))
+    heading = jnp.arctan2(c[..., 1, 0], c[..., 0, 0])
+    return roll, pitch, heading
+
+
 def check_latitude_radians(name: str, lat) -> None:
     """A one-line `ValueError` naming `name` if a concrete `lat` [rad] (any shape) is beyond
     ±π/2 anywhere: a latitude in degrees. Traced values are not checked."""
@@ -189,8 +197,6 @@ class NavState(eqx.Module):
     @property
     def euler(self):
         """(roll, pitch, heading) [rad]."""
-        from .trajectory import dcm_to_euler
-
         return dcm_to_euler(self.c_bn)
 
     def __getitem__(self, k) -> NavState:

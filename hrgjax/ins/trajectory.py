@@ -24,6 +24,7 @@ from .._compiled import fused
 from ..units import DEG
 from .constants import E2, MAX_LAT_DEG, WGS84, A, Earth
 from .mechanization import check_latitude_radians
+from .mechanization import dcm_to_euler as dcm_to_euler
 
 
 @fused
@@ -43,14 +44,6 @@ def euler_to_dcm(roll, pitch, heading):
 
 
 @fused
-def dcm_to_euler(c):
-    """(roll, pitch, heading) [rad] of a body-to-NED matrix (heading in (−π, π])."""
-    roll = jnp.arctan2(c[..., 2, 1], c[..., 2, 2])
-    pitch = -jnp.arcsin(jnp.clip(c[..., 2, 0], -1.0, 1.0))
-    heading = jnp.arctan2(c[..., 1, 0], c[..., 0, 0])
-    return roll, pitch, heading
-
-
 class Trajectory(eqx.Module):
     """A reference trajectory on a time grid (module docstring).
 
