@@ -142,6 +142,7 @@ def euler_to_quat(roll, pitch, heading):
 # --- the navigation state -----------------------------------------------------------------
 
 
+@fused
 def dcm_to_euler(c):
     """(roll, pitch, heading) [rad] of a body-to-NED matrix (heading in (−π, π])."""
     roll = jnp.arctan2(c[..., 2, 1], c[..., 2, 2])

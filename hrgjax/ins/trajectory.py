@@ -43,7 +43,6 @@ def euler_to_dcm(roll, pitch, heading):
     )
 
 
-@fused
 class Trajectory(eqx.Module):
     """A reference trajectory on a time grid (module docstring).
 
