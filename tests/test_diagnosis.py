@@ -219,6 +219,28 @@ def test_gain_schedule_imm_holds_the_decision_like_the_full_imm(
     assert np.mean(d_g[20:] == d_full[20:]) >= 0.98
 
 
+def test_gain_schedule_imm_keeps_a_healthy_record_healthy_under_a_uniform_prior(
+    accel_bank, accel_gains
+):
+    """With the default (uniform) prior the hypotheses start level and a fault hypothesis
+    can lead S0 for a step. The gain-schedule IMM used to step S0 from the leader's
+    covariance whenever S0 did not lead (its S ≈ e^5 times larger in determinant, −2.7 nats
+    a step), so S0 never took the lead back: healthy records were decided a fault in some
+    INS with probability 1 (3 of these 4 keys within 60 steps; 4 of 5 over 400 s) where the
+    full IMM decides S0. S0 now steps from another hypothesis's covariance only when the
+    mixing draws it mostly from that one (its probability below switch_prob/(M − 1) of it)."""
+    from hrgjax.diagnosis import complex as cx
+
+    ins, bank = accel_bank
+    for seed in range(3):
+        _, nav = cx.simulate_complex(ins, dt=1.0, n_steps=60, key=jax.random.key(seed))
+        z = cx.measurements(nav, 1.0, "accel_y", ins)
+        d_g = np.asarray(fb.run_gains(accel_gains, z, interacting=True)[1])
+        d_full = np.asarray(fb.run_bank(bank, z, interacting=True)[1])
+        assert np.all(d_g <= 0), (seed, d_g)
+        assert np.all(d_g[15:] == 0) and np.array_equal(d_g[15:], d_full[15:]), (seed, d_g)
+
+
 @pytest.mark.parametrize("g_east", [0.0, 10.0])
 def test_healthy_filter_is_consistent_from_the_first_step(g_east):
     """The S0 filter's model is the simulator's: on healthy data (with the measurement noise
