@@ -220,7 +220,9 @@ def compare(
     window for 18 steps, so this costs `confirm` − 1 steps of delay and filters isolated
     misclassifications, which would otherwise latch a false alarm for the rest of a run).
     `n_windows`: training windows (half with an onset); `n_predictor`, `predictor_steps`:
-    samples per hypothesis and Levenberg–Marquardt steps of the predictors; `log`: called with
+    samples per hypothesis and Levenberg–Marquardt steps of the predictors (one for S0 and
+    one per INS and fault sign: [`predictor_sets`][hrgjax.diagnosis.neural.predictor_sets]);
+    `log`: called with
     a line of progress before each stage (the CLI prints them)."""
     require_x64("diagnosis.compare")
     if isinstance(scenario, str) and scenario not in SCENARIOS:
@@ -358,14 +360,11 @@ def _train(name, x, y, xv, yv, z_tr, tmpl, sc, key, n_predictor, predictor_steps
     if name == "mlp_classifier":
         return nl.MLPClassifier.fit(x, y, n_cls, key=key, steps=1000)
     if name == "mlp_predictor":
-        sets = []
-        for h, k in zip(range(n_cls), jax.random.split(key, n_cls + 1)[1:], strict=True):
-            t = tmpl if h == 0 else tmpl[h - 1 : h]
-            w, _, _ = nl.training_windows(z_tr, t, k, n_predictor, sizes=sc.sizes,
-                                          p_fault=0.0 if h == 0 else 1.0,
-                                          onset_within_last=3)  # fmt: skip
-            sets.append(nl.predictor_set(w))
-        return nl.MLPPredictor.fit(sets, key=key, max_steps=predictor_steps)
+        # S0 and one predictor per INS and fault sign (2 n_ins + 1): the sign of an onset is
+        # not in the window yet, and one predictor per INS fitted to both predicts no jump
+        k_sets, k_fit = jax.random.split(key)
+        sets, classes = nl.predictor_sets(z_tr, tmpl, k_sets, n_predictor, sizes=sc.sizes)
+        return nl.MLPPredictor.fit(sets, key=k_fit, max_steps=predictor_steps, classes=classes)
     raise ValueError(f"unknown method {name!r}")
 
 

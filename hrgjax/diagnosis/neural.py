@@ -27,7 +27,10 @@ Detectors (each has `classify(x) → (N,)` onset classes, 0 = none):
   state, 20 and 10 tanh hidden units, sigmoid output, Rprop (alg. 3.4.1);
 - [`MLPPredictor`][hrgjax.diagnosis.neural.MLPPredictor]: one MLP per hypothesis (50 tanh
   hidden, linear output) predicting the next measurement, trained by Levenberg–Marquardt
-  (optimistix); the hypothesis with the least residual wins (alg. 3.3.1).
+  (optimistix); the hypothesis with the least residual wins (alg. 3.3.1). The hypotheses
+  are S0 and an onset per INS *and sign*
+  ([`predictor_sets`][hrgjax.diagnosis.neural.predictor_sets]): at an onset the window
+  holds nothing of the fault, so the sign is only in the predicted step.
 """
 
 from __future__ import annotations
@@ -264,31 +267,81 @@ def predictor_set(w, unit: float = 1e-7):
     return features(head, unit), (w[:, -1] - 2.0 * w[:, -2] + w[:, -3] - mean_d2) / unit
 
 
+def predictor_sets(z_healthy, templates, key: jax.Array, n: int, *, sizes: tuple[float, float],
+                   onset_within_last: int = 3, unit: float = 1e-7):  # fmt: skip
+    """Training sets of an [`MLPPredictor`][hrgjax.diagnosis.neural.MLPPredictor] bank: one
+    hypothesis for S0 (healthy windows) and one per INS i and fault sign (windows with an
+    onset of +e, then of −e, e ~ U(`sizes`) in sensor units, in INS i within the last
+    `onset_within_last` samples), cut from healthy complexes `z_healthy` (runs, K, m) with
+    the unit responses `templates` (n_ins, L, m); `n` windows per hypothesis, `unit` as in
+    [`predictor_set`][hrgjax.diagnosis.neural.predictor_set].
+
+    The signs get a predictor each because, at an onset, the input window holds nothing of
+    the fault yet: the sign is only in the predicted step (±e times the template). One
+    predictor trained on both signs predicts their mean, no jump, and loses to S0's: such a
+    bank named 0.63–0.74 of held-out signed onsets right (chance 0.48), the per-sign bank
+    0.935–0.975 (12 draws, `tests/test_diagnosis_neural.py`'s small bank).
+
+    **Returns** `(sets, classes)`: the `(x, y)` pairs of
+    [`predictor_set`][hrgjax.diagnosis.neural.predictor_set], S0 first, then INS 1 +,
+    INS 1 −, INS 2 +, …; and the onset class each names (0, 1, 1, 2, 2, …), for
+    [`MLPPredictor.fit`][hrgjax.diagnosis.neural.MLPPredictor.fit]."""
+    templates = jnp.asarray(templates, float)
+    hyps = [(0, 1.0)] + [(i, s) for i in range(1, templates.shape[0] + 1) for s in (1.0, -1.0)]
+    sets = []
+    for (i, s), k in zip(hyps, jax.random.split(key, len(hyps)), strict=True):
+        # S0 draws no onset (p_fault 0): the template only fixes the shapes, one program
+        t = s * templates[max(i - 1, 0) : max(i, 1)]
+        w, _, _ = training_windows(z_healthy, t, k, n, sizes=sizes, p_fault=float(i > 0),
+                                   onset_within_last=onset_within_last, signed=False)  # fmt: skip
+        sets.append(predictor_set(w, unit))
+    return sets, tuple(i for i, _ in hyps)
+
+
 class MLPPredictor(eqx.Module):
-    """One MLP per hypothesis (S0: no onset; S_i: an onset in INS i at the predicted sample
-    or one or two samples before it — the span of its signature in the second differences),
-    50 tanh hidden units and a linear output, predicting the
-    next measurement step (alg. 3.3.1); trained by Levenberg–Marquardt. At each step the
-    hypothesis with the least residual sum over the channels is the onset class."""
+    """A bank of MLPs, one per hypothesis, each with 50 tanh hidden units (by default) and a
+    linear output, predicting the next measurement step (alg. 3.3.1) in units of the
+    nominal sensor error ([`predictor_set`][hrgjax.diagnosis.neural.predictor_set]);
+    trained by Levenberg–Marquardt. The hypotheses: S0 (no onset) and an onset at the
+    predicted sample or one or two samples before it (the span of its signature in the
+    second differences) — per INS and fault sign, as
+    [`predictor_sets`][hrgjax.diagnosis.neural.predictor_sets] builds them. At each step
+    the hypothesis with the least residual sum over the channels wins, and `classes` maps it
+    to its onset class (0 none, i = INS i; `None`: the hypothesis's index is its class)."""
 
     nets: list[MLP]
+    classes: tuple[int, ...] | None = eqx.field(static=True, default=None)
 
     @classmethod
-    def fit(cls, sets, *, key, hidden: int = 50, max_steps: int = 60):
-        """`sets`: one `(x (n, d), y (n, m))` per hypothesis, S0 first."""
+    def fit(cls, sets, *, key, hidden: int = 50, max_steps: int = 60, classes=None):
+        """`sets`: one `(x (n, d), y (n, m))` per hypothesis, S0 first; `classes`: the onset
+        class each hypothesis names (default: its index). A fault that may jump either way
+        needs one hypothesis per sign ([`predictor_sets`][hrgjax.diagnosis.neural.predictor_sets]
+        returns both); `hidden` units, `max_steps` Levenberg–Marquardt steps per net."""
+        sets = list(sets)
+        if classes is not None:
+            classes = tuple(int(c) for c in classes)
+            if len(classes) != len(sets) or classes[0] != 0:
+                raise ValueError(
+                    f"classes must name one onset class per hypothesis ({len(sets)}), S0 (0) "
+                    f"first; got {classes}"
+                )
         nets = []
         for (x, y), k in zip(sets, jax.random.split(key, len(sets)), strict=True):
             net = MLP((x.shape[1], hidden, y.shape[1]), key=k)
             nets.append(_levenberg_marquardt(net, jnp.asarray(x), jnp.asarray(y), max_steps))
-        return cls(nets)
+        return cls(nets, classes)
 
     def residuals(self, x, y):
-        """Squared residual of each hypothesis's prediction: (n, M)."""
+        """Squared residual of each hypothesis's prediction (units of the nominal sensor
+        error, squared): (n, M), M hypotheses in the order of `nets`."""
         return jnp.stack([jnp.sum((jax.vmap(n)(x) - y) ** 2, axis=-1) for n in self.nets], axis=-1)
 
     def classify_pairs(self, x, y):
-        """Onset class from inputs `x` and the measured next step `y`."""
-        return jnp.argmin(self.residuals(x, y), axis=-1)
+        """Onset class (0 none, i = INS i) from inputs `x` and the measured next step `y`:
+        the class of the hypothesis with the least residual."""
+        h = jnp.argmin(self.residuals(x, y), axis=-1)
+        return h if self.classes is None else jnp.asarray(self.classes)[h]
 
 
 def _predictor_residuals(params, args):
