@@ -98,7 +98,8 @@ def checked_column(name: str, value) -> np.ndarray:
                     f"column 'run' row {i}: {arr[i]} exceeds the int64 range of run ids"
                 )
             return arr.astype(np.int64)
-        big = np.flatnonzero((arr > MAX_EXACT_INTEGER) | (arr < -MAX_EXACT_INTEGER))
+        beyond = (arr > MAX_EXACT_INTEGER) | (arr < -MAX_EXACT_INTEGER)
+        big = np.flatnonzero(beyond & (arr.astype(float).astype(arr.dtype) != arr))
         if big.size:
             i = int(big[0])
             raise ValueError(

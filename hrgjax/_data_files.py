@@ -82,7 +82,6 @@ UNITS: dict[str, tuple[str, ...]] = {
     "table_rate_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
     "rate_corrected_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
     "rebalance_rate_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
-    "rebalance_on": ("1", "", "-", "bool", "boolean", "flag"),
     "precession_dps": ("degree/s", "deg/s", "degrees/s", "°/s", "deg s-1", "degree s-1"),
     "table_angle_deg": ("degree", "deg", "degrees", "°"),
     "wave_angle_deg": ("degree", "deg", "degrees", "°"),
@@ -94,9 +93,10 @@ UNITS: dict[str, tuple[str, ...]] = {
 """`units` attributes accepted on NetCDF variables (the first is the one written; compared
 without case or spaces): every contract column but those of `ANY_UNIT`."""
 
-ANY_UNIT = ("amplitude", "quadrature")
-"""Contract columns in readout units, which take any `units` attribute (as extra columns do)
-and are written without one."""
+ANY_UNIT = ("amplitude", "quadrature", "rebalance_on")
+"""Contract columns in readout units, and the 0/1 flag `rebalance_on`, which take any
+`units` attribute (as extra columns do: a unit check cannot catch an error in them, and other
+tools write "dimensionless", "none", "bool" …) and are written without one."""
 
 _CF_TIME = re.compile(r"\s*(\w+)\s+since\s+(.+)", re.IGNORECASE)
 _CF_FACTOR = {
@@ -391,7 +391,11 @@ def _parse(
     checked = name in COLUMNS or exact_integers
     if checked and name != "run" and any(_INTEGER.fullmatch(v) for v in stripped):
         for i, v in enumerate(stripped):
-            if _INTEGER.fullmatch(v) and abs(int(v)) > MAX_EXACT_INTEGER:
+            if (
+                _INTEGER.fullmatch(v)
+                and abs(int(v)) > MAX_EXACT_INTEGER
+                and int(float(v)) != int(v)
+            ):
                 raise ValueError(
                     f"{path}: column {name!r} row {i} (line {lines[i]}): the integer {v} is too "
                     "large to hold exactly as a float64; write it in scientific notation if "

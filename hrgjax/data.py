@@ -348,8 +348,9 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
     with ``#`` is a comment where a row begins (not inside a quoted field); blank lines are
     skipped, a row of empty fields is refused; numbers in decimal or scientific notation (no
     thousands separators or underscores); extra columns (with `allow_extra`) that are not all numbers are kept as
-    text; an integer beyond 2**53, which a float would round, is refused in every column
-    (extra ones too), naming it, its row and its line. NetCDF: as [`MeasuredData.from_xarray`][hrgjax.MeasuredData.from_xarray]."""
+    text; an integer beyond 2**53 that a float would round (not one a float holds exactly,
+    as `%.0f` writes 1e20) is refused in every column (extra ones too), naming it, its row
+    and its line. NetCDF: as [`MeasuredData.from_xarray`][hrgjax.MeasuredData.from_xarray]."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
     if ext in NETCDF_EXTENSIONS:
@@ -360,7 +361,8 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
             raise ValueError(f"{path}: {err}") from None
     if ext != ".csv":
         raise ValueError(f"unknown data file extension {ext!r}; use .csv or .nc")
-    columns, lines = read_csv_table(path, exact_integers=True)
+    # an unknown column is refused as such first; only one the user keeps is checked for size
+    columns, lines = read_csv_table(path, exact_integers=allow_extra)
     try:
         return MeasuredData(columns, allow_extra=allow_extra)
     except ValueError as err:

@@ -357,6 +357,15 @@ def test_load_refuses_integers_a_float_would_round_in_extra_columns_too(tmp_path
     monkeypatch.undo()
     d = hg.MeasuredData(base(2) | {"stamp_ns": np.array([1.7e18, -(2.0**60)])}, allow_extra=True)
     assert hg.load(d.save(tmp_path / "f.csv"), allow_extra=True) == d
+    # an integer a float64 holds exactly (what "%.0f" writes of 1e20) is not refused, in a
+    # file or in memory; without allow_extra the column is refused as unknown first
+    exact = write(tmp_path / "exact.csv", f"{HEADER},big\n0,20,0,0,100000000000000000000\n"
+                  "1,20,0,0,1700000000000000000\n")  # fmt: skip
+    assert list(hg.load(exact, allow_extra=True)["big"]) == [1e20, 1.7e18]
+    big = hg.MeasuredData(base(2) | {"big": np.array([2**60, -(2**62)])}, allow_extra=True)
+    assert list(big["big"]) == [2.0**60, -(2.0**62)]
+    with pytest.raises(ValueError, match=r"unknown column\(s\) \['stamp_ns'\]"):
+        hg.load(path)
 
 
 def test_every_contract_column_has_its_netcdf_units(tmp_path):
@@ -375,6 +384,12 @@ def test_every_contract_column_has_its_netcdf_units(tmp_path):
         ds[col].attrs["units"] = "deg s-1"
         ds.to_netcdf(tmp_path / "d.nc", engine="h5netcdf")
         assert hg.load(tmp_path / "d.nc")[col][0] == 0.01
+    # the 0/1 flag takes whatever other tools call its unit
+    ds = xr.Dataset({k: ("sample", v) for k, v in base().items()})
+    for unit in ("dimensionless", "none", "bool", "1"):
+        ds["rebalance_on"] = ("sample", np.ones(N), {"units": unit})
+        ds.to_netcdf(tmp_path / "flag.nc", engine="h5netcdf")
+        assert hg.load(tmp_path / "flag.nc")["rebalance_on"][0] == 1.0
     units, any_unit = _data_files.UNITS, _data_files.ANY_UNIT
     assert set(hg.data.COLUMNS) == set(units) | set(any_unit) and not set(units) & set(any_unit)
     cols = base() | {k: np.zeros(N, int if k == "run" else float) for k in hg.data.COLUMNS
