@@ -123,6 +123,21 @@ def cycles(graph):
     return out
 
 
+def _edges(name, imports, modules):
+    """The modules `name`'s imports run: each imported module and every package on its path
+    (importing `hrgjax.ins.x` runs `hrgjax/ins/__init__.py`), but not `name`'s own packages
+    (a module's package is being imported already when it runs)."""
+    own = {".".join(name.split(".")[:k]) for k in range(1, name.count(".") + 1)}
+    out = set()
+    for i in imports:
+        parts = i.split(".")
+        for k in range(2, len(parts) + 1):
+            q = ".".join(parts[:k])
+            if q in modules and q != name and q not in own:
+                out.add(q)
+    return out
+
+
 def analyse():
     """`(files, graph, eager, pkg_uses, test_uses)`: the package's modules, their imports
     (all, and at import time only) and the uses of another module's `_private` name in the
@@ -132,11 +147,8 @@ def analyse():
     graph, eager, pkg_uses, test_uses = {}, {}, {}, {}
     for p in files:
         name, imports, uses = scan(p, modules)
-        # a package's __init__ re-exporting its modules is not a cycle with them
-        keep = lambda i, name=name, p=p: (i in modules and i != name  # noqa: E731
-                                          and p.name != "__init__.py")  # fmt: skip
-        graph[name] = {i for i in imports if keep(i)}
-        eager[name] = {i for i in scan(p, modules, module_level=True)[1] if keep(i)}
+        graph[name] = _edges(name, imports, modules)
+        eager[name] = _edges(name, scan(p, modules, module_level=True)[1], modules)
         if uses:
             pkg_uses[str(p.relative_to(ROOT))] = uses
     for p in sorted((ROOT / "tests").glob("*.py")):

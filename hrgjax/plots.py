@@ -407,11 +407,8 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     - `plan`: a [`BenchPlan`][hrgjax.calibration.BenchPlan]; `bench`: a
       [`BenchModel`][hrgjax.calibration.BenchModel] (default `BenchModel()`).
       Returns `path`."""
-    from .calibration.design import BenchModel
-
-    bench = BenchModel() if bench is None else bench
     plt = pyplot()
-    tr = {k: np.asarray(v, float) for k, v in bench.transitions_s(plan).items()}
+    tr = {k: np.asarray(v, float) for k, v in plan.transitions_s(bench).items()}
     t0 = np.asarray(plan.temperature_c, float)
     t1 = np.asarray(plan.temperature_end_c, float)
     angle = np.asarray(plan.wave_angle_deg, float)
@@ -452,21 +449,22 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     return save(fig, path, dpi=110)
 
 
-def session_figure(comparison, path: str, title: str = "") -> str:
+def session_figure(comparison, path: str, title: str = "", seed: dict | None = None) -> str:
     """Compensators on one session, after its offset: the static residual [°/h] (top row)
     and the rotation runs' end-of-run angle error [°] (bottom row), RMS per temperature
     (left, seed 000's figures as black stars and crosses) and per start wave angle (right),
     one marker and colour per compensator; the session's offset ± σ in a text box. A row
     for a kind of run the session lacks is left out; saves `path`.
 
-    `comparison` is a [`Comparison`][hrgjax.calibration.Comparison]."""
-    from .calibration.evaluate import SEED_TABLE
+    `comparison` is a [`Comparison`][hrgjax.calibration.Comparison]; `seed`, the seed's
+    table to mark ([`SEED_TABLE`][hrgjax.calibration.evaluate.SEED_TABLE], which
+    [`Comparison.plot`][hrgjax.calibration.Comparison.plot] passes; None: no marks)."""
 
     plt = pyplot()
     counts = comparison.counts()
     rows = [
-        (key, ylabel, seed)
-        for key, ylabel, seed, n in (
+        (key, ylabel, seed_key)
+        for key, ylabel, seed_key, n in (
             (
                 "static_residual_dph",
                 "static residual after the offset [°/h]",
@@ -486,7 +484,7 @@ def session_figure(comparison, path: str, title: str = "") -> str:
                              constrained_layout=True, squeeze=False)  # fmt: skip
     markers = "osD^vP X<>"
     colours = plt.get_cmap("tab10")
-    for r, (key, ylabel, seed) in enumerate(rows):
+    for r, (key, ylabel, seed_key) in enumerate(rows):
         for c, by in enumerate(("temperature", "wave_angle")):
             ax = axes[r, c]
             values = []
@@ -497,9 +495,9 @@ def session_figure(comparison, path: str, title: str = "") -> str:
                 values.extend(ys[np.isfinite(ys) & (ys > 0)])
                 ax.plot(xs, ys, marker=markers[i % len(markers)], ls="-", lw=1, ms=5,
                         color=colours(i % 10), label=lab)  # fmt: skip
-            if by == "temperature":
+            if by == "temperature" and seed is not None:
                 for j, (name, marker) in enumerate((("seed Fourier", "*"), ("seed MLP", "x"))):
-                    pts = SEED_TABLE[seed]
+                    pts = seed[seed_key]
                     ax.plot(list(pts), [v[j] for v in pts.values()], marker, ms=10, ls="none",
                             color="k", label=name)  # fmt: skip
                     values.extend(v[j] for v in pts.values())

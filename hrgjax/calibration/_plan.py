@@ -146,6 +146,11 @@ class BenchPlan(eqx.Module):
         """Total time of the segments themselves [s] (transitions excluded)."""
         return jnp.sum(self.duration_s)
 
+    def transitions_s(self, bench: BenchModel | None = None) -> dict[str, jax.Array]:
+        """[`BenchModel.transitions_s`][hrgjax.calibration.BenchModel.transitions_s] of this
+        plan on `bench` (default `BenchModel()`) [s]."""
+        return (BenchModel() if bench is None else bench).transitions_s(self)
+
     @classmethod
     def from_segments(cls, segments: Sequence[Mapping], where: str = "segments") -> BenchPlan:
         """A plan from the plan file's list of segment dicts (keys with units in their

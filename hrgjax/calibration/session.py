@@ -410,8 +410,9 @@ class Comparison:
         marker and colour per compensator, the offset in a text box
         ([`session_figure`][hrgjax.plots.session_figure]); returns the path."""
         from ..plots import session_figure
+        from .evaluate import SEED_TABLE
 
-        return session_figure(self, os.fspath(path), title=title)
+        return session_figure(self, os.fspath(path), title=title, seed=SEED_TABLE)
 
 
 def compare_corrected(

@@ -52,8 +52,8 @@ from .records import (
     Layout,
     Runs,
     Windows,
-    fit_each_run,
     lm,
+    per_run_fits,
     raw_residuals,
     residual_and_jacobian,
     run_covariates,
@@ -302,31 +302,17 @@ class ContinuousProblem(AbstractProblem):
 
         **Returns:** `{"p_value", "dof", "agreement", "per_run": {run: {param: value}}}`."""
         basis, idx = self._basis([name])
-        z0 = jnp.asarray(fit.z)
         stat, dof, per_run, agree, exciting = 0.0, -len(idx), {}, 0, 0
-        names = CATALOGUE[name].regular_names
-        for g in self.train_groups:
-            if isinstance(g, Windows):  # a dwell run is one grid point: no per-run refit
-                continue
-            zs, oks, js = (np.asarray(a) for a in fit_each_run(self.layout, basis, z0, g))
-            for i, run in enumerate(g.run):
-                z, ok, j = zs[i], oks[i], js[i]
-                if not bool(ok):
-                    continue
-                info = j.T @ j
-                rank = np.linalg.matrix_rank(info, tol=1e-9 * max(np.trace(info), 1e-300))
-                d = np.asarray(z)[idx] - fit.z[idx]
-                stat += float(d @ info @ d)
-                dof += int(rank)
-                if rank > 0:
-                    exciting += 1
-                    agree += float(np.asarray(z)[idx] @ info @ fit.z[idx]) > 0
-                per_run[int(run)] = {
-                    n: float(v * sc)
-                    for n, v, sc in zip(
-                        names, np.asarray(z)[idx], self.layout.scale[idx], strict=True
-                    )
-                }
+        names, scale = CATALOGUE[name].regular_names, self.layout.scale[idx]
+        for run, z, info in per_run_fits(self.layout, basis, fit.z, self.train_groups, idx):
+            rank = np.linalg.matrix_rank(info, tol=1e-9 * max(np.trace(info), 1e-300))
+            d = z - fit.z[idx]
+            stat += float(d @ info @ d)
+            dof += int(rank)
+            if rank > 0:
+                exciting += 1
+                agree += float(z @ info @ fit.z[idx]) > 0
+            per_run[run] = {n: float(v * sc) for n, v, sc in zip(names, z, scale, strict=True)}
         p = stats.chi2_sf(stat, dof) if dof > 0 else None
         share = agree / exciting if exciting else None
         return {"p_value": p, "dof": max(dof, 0), "agreement": share, "per_run": per_run}

@@ -251,6 +251,20 @@ def fit_each_run(layout, basis, z0, group):
     return z, ok, j[..., :m]
 
 
+def per_run_fits(layout, basis, z, groups, idx):
+    """Each training run's own fit of the parameters `basis` picks (indices `idx` of the
+    scaled vector; the rest held at `z`): `(run id, its values (len(idx),), its information
+    JᵀJ in them)` for every run whose fit converged (`fit_each_run`; a dwell run is one grid
+    point: none)."""
+    out = []
+    for g in groups:
+        if not isinstance(g, Windows):
+            zs, oks, js = (np.asarray(a) for a in fit_each_run(layout, basis, jnp.asarray(z), g))
+            out += [(int(run), zs[i][idx], js[i].T @ js[i])
+                    for i, run in enumerate(g.run) if bool(oks[i])]  # fmt: skip
+    return out
+
+
 @program(check=Unchecked())
 def _per_run_compiled(layout, basis, z0, group):
     """`fit_each_run`: one program for every run of a group (`vmap` over the runs)."""
