@@ -227,8 +227,9 @@ def test_gain_schedule_imm_keeps_a_healthy_record_healthy_under_a_uniform_prior(
     covariance whenever S0 did not lead (its S ≈ e^5 times larger in determinant, −2.7 nats
     a step), so S0 never took the lead back: healthy records were decided a fault in some
     INS with probability 1 (3 of these 4 keys within 60 steps; 4 of 5 over 400 s) where the
-    full IMM decides S0. S0 now steps from another hypothesis's covariance only when the
-    mixing draws it mostly from that one (its probability below switch_prob/(M − 1) of it)."""
+    full IMM decides S0. S0 now steps from its own schedule while its own covariance
+    dominates its mixed one (its own mixing weight against the others' plus the spread of
+    the mixed estimates, weighed by its own S)."""
     from hrgjax.diagnosis import complex as cx
 
     ins, bank = accel_bank

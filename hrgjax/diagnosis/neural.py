@@ -29,11 +29,13 @@ Detectors (each has `classify(x) → (N,)` onset classes, 0 = none):
   hidden, linear output) predicting the next measurement, trained by Levenberg–Marquardt
   (optimistix); the hypothesis with the least residual wins (alg. 3.3.1). The hypotheses
   are S0 and an onset per INS *and sign*
-  ([`predictor_sets`][hrgjax.diagnosis.neural.predictor_sets]): at an onset the window
-  holds nothing of the fault, so the sign is only in the predicted step.
+  ([`predictor_sets`][hrgjax.diagnosis.neural.predictor_sets]): at an onset in the
+  predicted step the window holds nothing of the fault, so its sign is only in that step.
 """
 
 from __future__ import annotations
+
+import numbers
 
 import equinox as eqx
 import jax
@@ -320,11 +322,13 @@ class MLPPredictor(eqx.Module):
         returns both); `hidden` units, `max_steps` Levenberg–Marquardt steps per net."""
         sets = list(sets)
         if classes is not None:
-            classes = tuple(int(c) for c in classes)
-            if len(classes) != len(sets) or classes[0] != 0:
+            given = tuple(classes)
+            classes = tuple(int(c) for c in given if isinstance(c, numbers.Integral))
+            if (len(classes) != len(sets) or len(given) != len(sets) or classes[0] != 0
+                    or min(classes[1:], default=1) < 1):  # fmt: skip
                 raise ValueError(
-                    f"classes must name one onset class per hypothesis ({len(sets)}), S0 (0) "
-                    f"first; got {classes}"
+                    f"classes must name one onset class per hypothesis ({len(sets)}): integers, "
+                    f"S0 (0) first, every other ≥ 1; got {given}"
                 )
         nets = []
         for (x, y), k in zip(sets, jax.random.split(key, len(sets)), strict=True):
