@@ -99,7 +99,8 @@ def checked_column(name: str, value) -> np.ndarray:
                 )
             return arr.astype(np.int64)
         beyond = (arr > MAX_EXACT_INTEGER) | (arr < -MAX_EXACT_INTEGER)
-        big = np.flatnonzero(beyond & (arr.astype(float).astype(arr.dtype) != arr))
+        big = [i for i in np.flatnonzero(beyond) if int(float(arr[i])) != int(arr[i])]
+        big = np.asarray(big, dtype=int)
         if big.size:
             i = int(big[0])
             raise ValueError(

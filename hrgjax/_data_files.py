@@ -9,6 +9,7 @@ import array
 import contextlib
 import csv
 import io
+import math
 import os
 import re
 import warnings
@@ -165,7 +166,7 @@ def _apply_units(name: str, values, units, where: str):
                 raise ValueError(f"{where}: 'time_s' with units {units!r} must hold numbers")
             return np.asarray(values) * factor if factor != 1.0 else values
     accepted = UNITS.get(name)
-    if accepted is None:  # amplitude, quadrature and extra columns: any unit
+    if accepted is None:  # amplitude, quadrature, rebalance_on and extra columns: any unit
         return values
     if _norm_unit(units) not in {_norm_unit(u) for u in accepted}:
         hint = " or CF '<unit> since <epoch>'" if name == "time_s" else ""
@@ -362,6 +363,13 @@ def check_header(path: str, header: list[str], at: int) -> None:
         raise ValueError(f"{path}: duplicate column names {dup} in the header")
 
 
+def _exact_float(digits: str) -> bool:
+    """Whether the integer `digits` is a float64 exactly (1e20 as "%.0f" writes it is; an
+    integer beyond float range is not)."""
+    f = float(digits)
+    return math.isfinite(f) and int(f) == int(digits)
+
+
 def _parse(
     path: str, name: str, values: list[str], lines: np.ndarray, exact_integers: bool = False
 ) -> np.ndarray:
@@ -391,11 +399,7 @@ def _parse(
     checked = name in COLUMNS or exact_integers
     if checked and name != "run" and any(_INTEGER.fullmatch(v) for v in stripped):
         for i, v in enumerate(stripped):
-            if (
-                _INTEGER.fullmatch(v)
-                and abs(int(v)) > MAX_EXACT_INTEGER
-                and int(float(v)) != int(v)
-            ):
+            if _INTEGER.fullmatch(v) and abs(int(v)) > MAX_EXACT_INTEGER and not _exact_float(v):
                 raise ValueError(
                     f"{path}: column {name!r} row {i} (line {lines[i]}): the integer {v} is too "
                     "large to hold exactly as a float64; write it in scientific notation if "

@@ -407,8 +407,9 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     - `plan`: a [`BenchPlan`][hrgjax.calibration.BenchPlan]; `bench`: a
       [`BenchModel`][hrgjax.calibration.BenchModel] (default `BenchModel()`).
       Returns `path`."""
+    bench = plan.bench_or_default(bench)
     plt = pyplot()
-    tr = {k: np.asarray(v, float) for k, v in plan.transitions_s(bench).items()}
+    tr = {k: np.asarray(v, float) for k, v in bench.transitions_s(plan).items()}
     t0 = np.asarray(plan.temperature_c, float)
     t1 = np.asarray(plan.temperature_end_c, float)
     angle = np.asarray(plan.wave_angle_deg, float)
@@ -452,7 +453,7 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
 def session_figure(comparison, path: str, title: str = "", seed: dict | None = None) -> str:
     """Compensators on one session, after its offset: the static residual [°/h] (top row)
     and the rotation runs' end-of-run angle error [°] (bottom row), RMS per temperature
-    (left, seed 000's figures as black stars and crosses) and per start wave angle (right),
+    (left; with `seed`, seed 000's figures as black stars and crosses) and per start wave angle (right),
     one marker and colour per compensator; the session's offset ± σ in a text box. A row
     for a kind of run the session lacks is left out; saves `path`.
 

@@ -97,7 +97,9 @@ def test_predictor_bank_names_the_onset_by_least_residual(data):
     # window says nothing of the sign: 0.63–0.74 over the first 6 draws, 15–25 % of the
     # healthy windows named a fault
     assert acc > 0.9, (acc, _chance(c))
-    for bad in (classes, (0, -1), (0, 1.7), (1, 0)):  # -1 is the decisions' "undecided"
+    assert nl.MLPPredictor.fit(sets[:2], key=jax.random.key(8), hidden=2, max_steps=1,
+                               classes=jnp.array([0, 1])).classes == (0, 1)  # fmt: skip
+    for bad in (classes, (0, -1), (0, 1.7), (1, 0), (False, True)):  # -1: "undecided"
         with pytest.raises(ValueError, match="one onset class per hypothesis"):
             nl.MLPPredictor.fit(sets[:2], key=jax.random.key(8), classes=bad)
 

@@ -366,6 +366,13 @@ def test_load_refuses_integers_a_float_would_round_in_extra_columns_too(tmp_path
     assert list(big["big"]) == [2.0**60, -(2.0**62)]
     with pytest.raises(ValueError, match=r"unknown column\(s\) \['stamp_ns'\]"):
         hg.load(path)
+    # digits beyond float range, in a file or in memory near int64's end: named, no
+    # OverflowError or cast warning
+    huge = write(tmp_path / "huge.csv", f"{HEADER},big\n0,20,0,0,1{'0' * 400}\n1,20,0,0,1\n")
+    with pytest.raises(ValueError, match=r"column 'big' row 0 \(line 2\): the integer 1000"):
+        hg.load(huge, allow_extra=True)
+    with pytest.raises(ValueError, match=r"column 'big' row 0: the integer 9223372036854775807"):
+        hg.MeasuredData(base(2) | {"big": np.array([2**63 - 1, 0])}, allow_extra=True)
 
 
 def test_every_contract_column_has_its_netcdf_units(tmp_path):

@@ -180,3 +180,15 @@ def test_scale_factor_panel_draws_the_scale_factor_relative_to_nominal(figures):
         assert np.sum(np.isfinite(y)) >= 10
         np.testing.assert_allclose(y[np.isfinite(y)], percent, rtol=1e-9)
     _check(fig)  # and a legend for the two curves
+
+
+def test_plan_figure_draws_a_plan_without_a_bench_given(figures):
+    """`plan_figure(plan, path)`: the bench defaults to `BenchModel()` through the plan
+    (plots imports no study), and the title's bench time is the default bench's."""
+    from hrgjax.calibration import BenchModel, bench_time_h, seed_bench_plan
+
+    plan = seed_bench_plan()
+    plots.plan_figure(plan, "unused.png")
+    plots.plan_figure(plan, "unused.png", BenchModel())
+    a, b = (f.axes[0].get_title() for f in figures)
+    assert a == b and f"bench time {float(bench_time_h(plan)):.1f} h" in a, (a, b)

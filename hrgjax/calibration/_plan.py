@@ -146,10 +146,11 @@ class BenchPlan(eqx.Module):
         """Total time of the segments themselves [s] (transitions excluded)."""
         return jnp.sum(self.duration_s)
 
-    def transitions_s(self, bench: BenchModel | None = None) -> dict[str, jax.Array]:
-        """[`BenchModel.transitions_s`][hrgjax.calibration.BenchModel.transitions_s] of this
-        plan on `bench` (default `BenchModel()`) [s]."""
-        return (BenchModel() if bench is None else bench).transitions_s(self)
+    @staticmethod
+    def bench_or_default(bench: BenchModel | None = None) -> BenchModel:
+        """`bench`, or `BenchModel()` where it is None: what a plan's figure and times take
+        (`hrgjax.plots` draws a plan without importing `calibration`)."""
+        return BenchModel() if bench is None else bench
 
     @classmethod
     def from_segments(cls, segments: Sequence[Mapping], where: str = "segments") -> BenchPlan:

@@ -35,7 +35,7 @@ Detectors (each has `classify(x) → (N,)` onset classes, 0 = none):
 
 from __future__ import annotations
 
-import numbers
+import operator
 
 import equinox as eqx
 import jax
@@ -300,6 +300,17 @@ def predictor_sets(z_healthy, templates, key: jax.Array, n: int, *, sizes: tuple
     return sets, tuple(i for i, _ in hyps)
 
 
+def _class_index(c) -> int | None:
+    """`c` as an int where it is an integer (Python, NumPy, a 0-d array; not a bool), else
+    None."""
+    if isinstance(c, (bool, np.bool_)) or np.dtype(getattr(c, "dtype", int)).kind == "b":
+        return None
+    try:
+        return operator.index(c)
+    except TypeError:
+        return None
+
+
 class MLPPredictor(eqx.Module):
     """A bank of MLPs, one per hypothesis, each with 50 tanh hidden units (by default) and a
     linear output, predicting the next measurement step (alg. 3.3.1) in units of the
@@ -323,7 +334,8 @@ class MLPPredictor(eqx.Module):
         sets = list(sets)
         if classes is not None:
             given = tuple(classes)
-            classes = tuple(int(c) for c in given if isinstance(c, numbers.Integral))
+            classes = tuple(_class_index(c) for c in given)
+            classes = tuple(c for c in classes if c is not None)
             if (len(classes) != len(sets) or len(given) != len(sets) or classes[0] != 0
                     or min(classes[1:], default=1) < 1):  # fmt: skip
                 raise ValueError(
