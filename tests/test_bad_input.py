@@ -53,7 +53,7 @@ def test_time_is_checked_within_each_run_even_when_runs_interleave(times, what):
         ("time_s", np.arange(4).astype("timedelta64[s]"), "timedelta64.*timedelta64\\(1, 's'\\)"),
         ("temperature_c", np.array([20, 20, 20, 20 + 1j]), "complex"),
         ("temperature_c", np.array([True, False, True, True]), "booleans"),
-        ("temperature_c", np.array([1, 2, 3, 2**60]), "row 3.*too large.*2\\*\\*53"),
+        ("temperature_c", np.array([1, 2, 3, 2**60 + 1]), "row 3.*too large.*2\\*\\*53"),
         ("temperature_c", np.array([1.0, 2.0, "x", 3.0], dtype=object), "row 2 has 'x'"),
         ("temperature_c", np.array(["20", "20", "21", "x"]), "numbers in \\[°C\\].*text"),
         ("run", np.array([0, 0, 1.5, 2]), "integers; row 2"),
