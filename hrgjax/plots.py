@@ -70,7 +70,10 @@ def drift_and_scale_factor(drift: dict, sf: dict, path: str, title: str = "") ->
                  label=f"{T:+.0f} °C")  # fmt: skip
     ax2.set_xlabel("wave angle [° electrical]")
     ax2.set_ylabel("scale factor − 1 [%]")  # relative to the nominal k_e: 0 is nominal
-    ax2.set_title("scale factor vs wave angle (5 °/s)")
+    rate = sf.get("rate_dps", np.nan)
+    ax2.set_title(
+        "scale factor vs wave angle" + (f" ({rate:.3g} °/s)" if np.isfinite(rate) else "")
+    )
     ax2.grid(alpha=0.3)
     if len(sf["temperature_c"]) > 1:
         ax2.legend(fontsize=7, ncol=2)

@@ -180,6 +180,7 @@ def test_scale_factor_panel_draws_the_scale_factor_relative_to_nominal(figures):
         assert np.sum(np.isfinite(y)) >= 10
         np.testing.assert_allclose(y[np.isfinite(y)], percent, rtol=1e-9)
     _check(fig)  # and a legend for the two curves
+    assert fig.axes[1].get_title() == "scale factor vs wave angle (5 °/s)"  # the data's rate
 
 
 def test_plan_figure_draws_a_plan_without_a_bench_given(figures):

@@ -349,7 +349,8 @@ def scale_factor_vs_angle(
     such interval (a static run, readback jitter included) gives no row. The drift is not
     removed (at 5 °/s a drift of 1 °/h is 5.6·10⁻⁵ of the rate).
 
-    **Returns:** dict `temperature_c` (T,), `wave_angle_deg` (B,), `scale_factor` (T, B):
+    **Returns:** dict `temperature_c` (T,), `wave_angle_deg` (B,), `rate_dps` (the median
+    |table rate| of the turning samples [°/s]; NaN without any), `scale_factor` (T, B):
     one row per temperature (the mean temperatures of the runs' turning samples, grouped by
     [`group_temperatures`][hrgjax.units.group_temperatures]); NaN in bins no interval's
     mid-angle falls in.
@@ -357,7 +358,7 @@ def scale_factor_vs_angle(
     k_e = check_k_e(k_e)
     edges = np.arange(-90.0, 90.0 + bin_deg / 2, bin_deg)
     centres = 0.5 * (edges[1:] + edges[:-1])
-    run_temps, run_parts = [], []
+    run_temps, run_parts, run_rates = [], [], []
     for r in data.runs():
         t, th, rate = r["time_s"], r["wave_angle_deg"], r["table_rate_dps"]
         step = max(int(round(window_s / float(np.median(np.diff(t))))), 1) if len(t) > 1 else 1
@@ -377,6 +378,7 @@ def scale_factor_vs_angle(
         folded = (mid + 90.0) % 180.0 - 90.0
         run_temps.append(float(np.mean(r["temperature_c"][sign != 0])))
         run_parts.append((folded, sf))
+        run_rates.append(np.abs(rate[sign != 0]))
     by_temp: dict[float, list] = {}  # one row per temperature, last-bit differences merged
     for temp, part in zip(group_temperatures(run_temps), run_parts, strict=True):
         by_temp.setdefault(float(temp), []).append(part)
@@ -393,6 +395,7 @@ def scale_factor_vs_angle(
         "temperature_c": np.asarray(temps, dtype=float),
         "wave_angle_deg": centres,
         "scale_factor": np.asarray(rows, dtype=float).reshape(len(temps), len(centres)),
+        "rate_dps": float(np.median(np.concatenate(run_rates))) if run_rates else np.nan,
     }
 
 
