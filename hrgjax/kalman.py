@@ -292,8 +292,8 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
 
 @fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
 def _kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
-    """`kalman_filter` without the argument checks (fused: one compiled program)."""
-    require_x64("hrgjax.kalman.kalman_filter")
+    """`kalman_filter` without the argument checks (fused: one compiled program); the public
+    wrapper has checked x64 and the arguments."""
     phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
 
     def step(g, inp):
@@ -322,8 +322,8 @@ def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
 
 @fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
 def _rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
-    """`rts_smoother` without the argument checks (fused: one compiled program)."""
-    require_x64("hrgjax.kalman.rts_smoother")
+    """`rts_smoother` without the argument checks (fused: one compiled program); the public
+    wrapper has checked x64 and the arguments."""
     phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
 
     def forward(g, inp):
