@@ -3,6 +3,10 @@
 against the plain function (`__wrapped__`, as before: its `lax.scan` traced and compiled on
 every call, a new closure each time). Side by side in one process, best of `--repeat`.
 
+The extended and unscented filters (thirteenth session): the first eager call (compile + run)
+against the second on new data with the same `f`, `h`, fused (compiled once per shape and
+model) and plain (before: compiled on every call); the ratio first / second is ≈ 1 before.
+
 Usage: `.venv/bin/python benchmarks/kalman_calls.py [--steps K] [--repeat N]`.
 """
 
@@ -59,6 +63,27 @@ def main() -> None:
             times.append(time.perf_counter() - t0)
         best[label] = min(times)
     _print("steady_state", f"500 Riccati steps, {n} states", best)
+    nonlinear(prior, qd, r, rng, k)
+
+
+def nonlinear(prior, qd, r, rng, k) -> None:
+    """First / second eager call of the EKF and UKF, fused and plain (before), one process."""
+    f = lambda x, u: x + 0.01 * jnp.sin(x[::-1]) + u  # noqa: E731
+    h = lambda x: jnp.stack([x[0], x[1] * x[2]])  # noqa: E731
+    us = jnp.zeros((k, 4))
+    for name in ("extended_kalman_filter", "unscented_kalman_filter"):
+        fused = getattr(kalman, name)
+        line = []
+        for label, fn in (("fused", fused), ("plain (before)", fused.__wrapped__)):
+            times = []
+            for _ in range(2):
+                zs = jnp.asarray(rng.normal(size=(k, 2)))
+                t0 = time.perf_counter()
+                fn(prior, f, qd, h, r, zs, us=us)[2].block_until_ready()
+                times.append(time.perf_counter() - t0)
+            line.append(f"{label} first {1e3 * times[0]:.1f} ms, second {1e3 * times[1]:.1f} ms "
+                        f"(first / second {times[0] / times[1]:.1f}×)")  # fmt: skip
+        print(f"{name}, {k} steps, 4 states, same f and h: " + "; ".join(line))
 
 
 def _print(name, what, best):

@@ -29,7 +29,7 @@ import numpy as np
 from jax.scipy.linalg import expm
 
 from ._checks import check_covariance, check_finite_host, concrete_value, host_value
-from ._compiled import fused
+from ._compiled import ByIdentity, fused
 from ._linalg import cho_logdet, cho_solve, cholesky, whiten
 from ._x64 import require_x64
 
@@ -363,6 +363,13 @@ def _nonlinear_steps(prior, qd, zs, mask, us):
     return qds, mask, us
 
 
+def _check_model(f, h):
+    """The model functions of the EKF/UKF: callables (one line naming the one that is not)."""
+    for name, fn, form in (("f", f, "f(x, u) -> x"), ("h", h, "h(x) -> z")):
+        if not callable(fn):
+            raise ValueError(f"{name} must be a function {form}; got {type(fn).__name__}")
+
+
 def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
     """Extended Kalman filter: $x_k = f(x_{k-1}, u_k) + w$, $z_k = h(x_k) + v$, with the
     Jacobians of `f` and `h` by `jax.jacfwd` at the current estimate; the update and the
@@ -370,10 +377,17 @@ def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None)
 
     `f(x, u) -> x` and `h(x) -> z` (pure JAX functions); `qd` (n, n) or (K, n, n); `R` (m, m);
     `us` (K, p) inputs passed to `f` (zeros (K, 0) when None). On a linear model it is the
-    Kalman filter.
+    Kalman filter. An eager call runs one compiled program per shape and per `f`, `h`
+    (the same function objects: a later call on new data compiles nothing).
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
     require_x64("hrgjax.kalman.extended_kalman_filter")
+    _check_model(f, h)
+    return _extended_kalman_filter(prior, ByIdentity(f), qd, ByIdentity(h), R, zs, mask, us)
+
+
+def _ekf(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
+    """`extended_kalman_filter`'s pass, plain (no checks, not compiled)."""
     qds, mask, us = _nonlinear_steps(prior, qd, zs, mask, us)
 
     def step(g, inp):
@@ -387,6 +401,13 @@ def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None)
 
     _, (xs, ps, ll) = jax.lax.scan(step, prior, (qds, zs, mask, us))
     return xs, ps, jnp.sum(ll)
+
+
+# one program per shape and model (f, h by identity): an eager call compiled its scan every
+# time (`benchmarks/kalman_calls.py`)
+@fused(static_argnames=("f", "h"))
+def _extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
+    return _ekf(prior, f.fn, qd, h.fn, R, zs, mask, us)
 
 
 def sigma_points(g: Gaussian, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
@@ -408,8 +429,16 @@ def unscented_kalman_filter(
     [`extended_kalman_filter`][hrgjax.kalman.extended_kalman_filter], moments propagated
     through `f` and `h` by [`sigma_points`][hrgjax.kalman.sigma_points] instead of Jacobians
     (exact for the mean of a quadratic). The log-likelihood is that of the innovation under
-    its unscented covariance."""
+    its unscented covariance. Compiled once per shape and per `f`, `h`, as the EKF."""
     require_x64("hrgjax.kalman.unscented_kalman_filter")
+    _check_model(f, h)
+    return _unscented_kalman_filter(
+        prior, ByIdentity(f), qd, ByIdentity(h), R, zs, mask, us, alpha, beta, kappa
+    )
+
+
+def _ukf(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None, alpha=1.0, beta=2.0, kappa=0.0):
+    """`unscented_kalman_filter`'s pass, plain (no checks, not compiled)."""
     qds, mask, us = _nonlinear_steps(prior, qd, zs, mask, us)
 
     def step(g, inp):
@@ -439,6 +468,16 @@ def unscented_kalman_filter(
 
     _, (xs, ps, ll) = jax.lax.scan(step, prior, (qds, zs, mask, us))
     return xs, ps, jnp.sum(ll)
+
+
+@fused(static_argnames=("f", "h"))  # one program per shape and model, as the EKF's
+def _unscented_kalman_filter(prior, f, qd, h, R, zs, mask, us, alpha, beta, kappa):
+    return _ukf(prior, f.fn, qd, h.fn, R, zs, mask, us, alpha, beta, kappa)
+
+
+# the plain passes (`extended_kalman_filter.__wrapped__(…)`: as before, traced every call)
+extended_kalman_filter.__wrapped__ = _ekf
+unscented_kalman_filter.__wrapped__ = _ukf
 
 
 @fused(static_argnames="n_iter")  # one program per shape: an eager call compiled every time

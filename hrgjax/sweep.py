@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import weakref
 
@@ -11,8 +12,43 @@ import numpy as np
 
 from . import _cost, _upstream, plausible
 
-_BATCHED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-_PROBES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+class _FnCache:
+    """Values kept per swept function while it lives: by the function itself where it is
+    hashable, else by its identity — a callable equinox Module with array fields cannot be
+    hashed, and a fresh `jax.jit` on every sweep compiled its same shapes again each time."""
+
+    def __init__(self):
+        self.by_key: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self.by_id: dict = {}
+
+    def get(self, fn, make):
+        """`make()`'s value kept for `fn`; a `fn` that can be neither hashed nor weakly
+        referenced gets a fresh one."""
+        try:
+            return self.by_key[fn]
+        except KeyError:
+            value = make()
+            with contextlib.suppress(TypeError):  # not weakly referable (a builtin)
+                self.by_key[fn] = value
+            return value
+        except TypeError:  # unhashable: by identity
+            pass
+        kept = self.by_id.get(id(fn))
+        if kept is not None and kept[0]() is fn:
+            return kept[1]
+        value = make()
+        key = id(fn)
+        try:
+            ref = weakref.ref(fn, lambda _, key=key: self.by_id.pop(key, None))
+        except TypeError:
+            return value
+        self.by_id[key] = (ref, value)
+        return value
+
+
+_BATCHED = _FnCache()
+_PROBES = _FnCache()
 
 
 def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="auto", **grids):
@@ -192,28 +228,13 @@ def _probe(fn):
 
         return jax.jit(jax.vmap(one)), state
 
-    return _kept(_PROBES, fn, make)
+    return _PROBES.get(fn, make)
 
 
 def _batched(fn):
     """`jax.jit(jax.vmap(fn))` on a dict of keyword arrays, one per `fn` (kept while `fn`
     lives), so repeated sweeps of one function reuse its compiled batch."""
-    return _kept(_BATCHED, fn, lambda: jax.jit(jax.vmap(lambda kw: fn(**kw))))
-
-
-def _kept(cache: weakref.WeakKeyDictionary, fn, make):
-    """`cache[fn]`, made by `make()` the first time; a `fn` that cannot be weakly referenced
-    (a builtin) gets a fresh one each sweep."""
-    try:
-        return cache[fn]
-    except (KeyError, TypeError):
-        pass
-    value = make()
-    try:
-        cache[fn] = value
-    except TypeError:
-        pass
-    return value
+    return _BATCHED.get(fn, lambda: jax.jit(jax.vmap(lambda kw: fn(**kw))))
 
 
 def _local(call, flat, chunk_size, progress, total):

@@ -208,6 +208,35 @@ def test_eager_filters_and_steady_state_compile_once_per_shape():
                                rtol=1e-13)  # fmt: skip
 
 
+def test_eager_ekf_and_ukf_compile_once_per_shape_and_model():
+    """A later eager EKF/UKF call with the same `f`, `h` (a plain function, or a callable
+    equinox Module, which cannot be hashed) on new values of the same shapes compiles
+    nothing (each compiled its `lax.scan` on every call) and gives the plain pass's values;
+    a model that is not a function is refused in one line."""
+    import equinox as eqx
+    from helpers import CompileCounter
+
+    class Measure(eqx.Module):
+        h: jax.Array
+
+        def __call__(self, x):
+            return self.h @ x
+
+    f = lambda x, u: PHI @ x + u
+    zs, r2 = ZS + 0.25, 2.0 * R
+    for run in (kalman.extended_kalman_filter, kalman.unscented_kalman_filter):
+        for h in (lambda x: H @ x, Measure(H)):
+            run(PRIOR, f, QD, h, R, ZS, us=US)
+            with CompileCounter() as again:
+                got = run(PRIOR, f, QD, h, r2, zs, us=US)
+            assert again.compiles == 0, (run.__name__, again.names)
+            plain = run.__wrapped__(PRIOR, f, QD, h, r2, zs, us=US)
+            for a, b in zip(got, plain, strict=True):
+                np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+        with pytest.raises(ValueError, match=r"^h must be a function h\(x\) -> z; got ArrayImpl$"):
+            run(PRIOR, f, QD, H, R, ZS)
+
+
 def test_filter_inputs_are_refused_in_one_line():
     """Impossible inputs used to run silently (a NaN measurement without a mask, a negative
     variance: NaN means and log-likelihood; an indefinite P0: a finite log-likelihood) or

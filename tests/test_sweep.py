@@ -170,6 +170,36 @@ def test_chunked_sweep_equals_one_batch_and_reports_progress(capsys):
         hg.sweep(f, a=a, b=b, chunk_size=0)
 
 
+def test_a_chunked_sweep_compiles_its_chunk_once_and_a_second_sweep_nothing():
+    """The chunks of one sweep (the last padded) share one compiled program, and a second
+    sweep of the same `fn` on grids of the same sizes compiles nothing — also when `fn` is a
+    callable equinox Module, which cannot be hashed (it was compiled afresh every sweep)."""
+    import equinox as eqx
+    from helpers import CompileCounter
+
+    class Scaled(eqx.Module):
+        k: jax.Array
+
+        def __call__(self, a, b):
+            return jnp.sin(a) * self.k + b
+
+    def plain(a, b):
+        return jnp.cos(a) - b
+
+    a, b = jnp.linspace(0.0, 1.0, 5), jnp.array([0.5, 2.0])  # 10 points: chunks 3+3+3+1
+    for fn in (plain, Scaled(jnp.asarray(2.0))):
+        with CompileCounter() as first:
+            one = hg.sweep(fn, a=a, b=b, chunk_size=3)
+        assert first.names.count("jit(<lambda>)") == 1, first.names
+        with CompileCounter() as again:
+            two = hg.sweep(fn, a=a, b=b, chunk_size=3)
+        assert again.compiles == 0, again.names
+        np.testing.assert_array_equal(two, one)
+        np.testing.assert_allclose(
+            one, jax.vmap(jax.vmap(fn, (None, 0)), (0, None))(a, b), rtol=1e-15
+        )
+
+
 def test_a_bad_grid_or_a_failed_check_inside_is_one_line(caplog):
     """A grid with NaN is refused before anything runs; a check that fails inside `fn` (an
     `eqx.error_if`, as `simulate` puts on traced parameters) is raised as one line, and JAX
