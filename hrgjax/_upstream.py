@@ -167,8 +167,17 @@ RUNTIME_ERRORS = _runtime_errors()
 `XlaRuntimeError` where JAX has no public name for it."""
 
 
+CHECK_ERRORS = (*RUNTIME_ERRORS, ValueError)
+"""What a compiled program raises when an `eqx.error_if` inside it fails: one of
+`RUNTIME_ERRORS` on the call that compiled it, a `ValueError` ("INTERNAL: CpuCallback
+error …") when JAX's fast path runs the same program again (a repeat call, a later chunk).
+Catch these, then keep only what `failed_check_message` recognises.
+
+Upstream internal: the fast path's exception type."""
+
+
 def failed_check_message(err: BaseException) -> str | None:
-    """The message of the `eqx.error_if` whose failure `err` (one of `RUNTIME_ERRORS`)
+    """The message of the `eqx.error_if` whose failure `err` (one of `CHECK_ERRORS`)
     reports, or None when `err` is some other run-time failure.
 
     Upstream internal: the text equinox puts into the error (its exception class name,

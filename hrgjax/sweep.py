@@ -307,7 +307,7 @@ def _run(call, flat):
     try:
         with _upstream.quiet_failed_checks():
             return jax.block_until_ready(call(flat))
-    except _upstream.RUNTIME_ERRORS as err:
+    except _upstream.CHECK_ERRORS as err:
         message = _upstream.failed_check_message(err)
         if message is None:
             raise

@@ -216,6 +216,13 @@ def test_a_bad_grid_or_a_failed_check_inside_is_one_line(caplog):
     assert str(err.value) == "sweep: at one or more grid points, a must be at most 1"
     assert not [r for r in caplog.records if r.name.startswith("jax")]
     np.testing.assert_array_equal(hg.sweep(f, a=jnp.array([0.0, 0.5])), [0.0, 0.5])
+    # the compiled batch run again (a repeat sweep; a later chunk): JAX's fast path reports
+    # the failed check as a ValueError ("INTERNAL: CpuCallback error"), still one line here
+    for chunks in ({}, {"chunk_size": 1}):
+        with caplog.at_level("ERROR"), pytest.raises(RuntimeError) as err:
+            hg.sweep(f, a=jnp.array([0.0, 2.0]), **chunks)
+        assert str(err.value) == "sweep: at one or more grid points, a must be at most 1"
+    assert not [r for r in caplog.records if r.name.startswith("jax")]
     # 1 000 points of 10⁶ float64 each (8 GB): refused from the output shapes alone
     big = lambda a: jnp.full(1_000_000, a)  # noqa: E731
     with pytest.raises(ValueError, match=r"take 7.45 GiB \(8000000 bytes a point\)"):

@@ -217,7 +217,7 @@ def fly(
                 )
                 parts.append(jax.block_until_ready(part))
                 progress.update(min(size, runs - i))
-    except (*_upstream.RUNTIME_ERRORS, eqx.EquinoxRuntimeError) as err:
+    except (*_upstream.CHECK_ERRORS, eqx.EquinoxRuntimeError) as err:
         message = _upstream.failed_check_message(err)
         if message is None:
             raise
