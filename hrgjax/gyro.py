@@ -9,10 +9,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_positive, is_concrete
+from ._checks import check_positive
 from .noise import Noise
 from .resonator.control import Control
-from .resonator.params import Resonator, TemperatureLaw, as_parameter, evaluate_at
+from .resonator.params import (
+    Resonator,
+    TemperatureLaw,
+    as_parameter,
+    concrete_fields,
+    evaluate_at,
+)
 from .resonator.readout import Readout
 from .units import T_REF_C
 
@@ -56,10 +62,8 @@ class DriftTerms(eqx.Module):
     rate_cubic: jax.Array = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
-        for name in ("lag_time", "warmup_time"):
-            value = getattr(self, name)
-            if not isinstance(value, TemperatureLaw) and is_concrete(value):
-                check_positive(f"DriftTerms.{name}", value, "s")
+        for name, value in concrete_fields(self, ("lag_time", "warmup_time")):
+            check_positive(f"DriftTerms.{name}", value, "s")
 
     def input_rate(self, profile, t):
         """The added equivalent input rate [rad/s] at time t [s] of `profile`."""

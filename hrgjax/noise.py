@@ -20,8 +20,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._checks import check_nonnegative, check_positive, is_concrete
-from .resonator.params import TemperatureLaw, as_parameter
+from ._checks import check_nonnegative, check_positive
+from .resonator.params import as_parameter, concrete_fields
 
 
 class Noise(eqx.Module):
@@ -47,13 +47,10 @@ class Noise(eqx.Module):
     amplitude_white: jax.Array = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
-        for name in NONNEGATIVE:
-            value = getattr(self, name)
-            if not isinstance(value, TemperatureLaw) and is_concrete(value):
-                check_nonnegative(f"Noise.{name}", value, f"[{UNITS[name]}] (a standard deviation)")
-        value = self.correlation_time
-        if not isinstance(value, TemperatureLaw) and is_concrete(value):
-            check_positive("Noise.correlation_time", value, "[s]")
+        for name, value in concrete_fields(self, NONNEGATIVE):
+            check_nonnegative(f"Noise.{name}", value, f"[{UNITS[name]}] (a standard deviation)")
+        for name, value in concrete_fields(self, ("correlation_time",)):
+            check_positive(f"Noise.{name}", value, "[s]")
 
 
 NONNEGATIVE = (

@@ -224,6 +224,12 @@ def preset_gyro(name: str, noise: bool = True):
     raise UsageError(f"unknown --preset {name!r}; choose from {PRESETS}")
 
 
+def allow_extra_option(parser) -> None:
+    """`--allow-extra`: what `load_data` reads as `allow_extra` (every command that reads
+    a data file offers it)."""
+    parser.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+
+
 def load_data(path, allow_extra):
     """Measured data from `path`, or a one-line usage error naming the file."""
     import hrgjax as hg

@@ -19,6 +19,7 @@ from ._common import (
     POSITIVE_INT,
     POSITIVE_SECONDS,
     UsageError,
+    allow_extra_option,
     finish,
     load_data,
     one_line,
@@ -293,7 +294,7 @@ def _evaluation_options(p) -> None:
     p.add_argument("--no-angles", action="store_true",
                    help="print the tables per temperature only (the JSON and the figure "
                    "keep the wave angles)")  # fmt: skip
-    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    allow_extra_option(p)
 
 
 def _calibrate_parser(sub):
@@ -337,7 +338,7 @@ def _calibrate_parser(sub):
     )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, action=Given,
                    help="mlp: PRNG seed of the initial weights")  # fmt: skip
-    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    allow_extra_option(p)
     return p
 
 
@@ -447,7 +448,7 @@ def _self_calibrate_parser(sub):
                    help="(sweeps) 2nθ harmonics of the drift (2: 2θ and 4θ)")  # fmt: skip
     p.add_argument("--settle", type=NONNEGATIVE_FLOAT, default=30.0,
                    help="time left out at the start of each sweep or hold [s]")  # fmt: skip
-    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    allow_extra_option(p)
     return p
 
 

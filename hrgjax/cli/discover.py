@@ -7,6 +7,7 @@ from ._common import (
     K_E,
     PLOT_EXTENSIONS,
     UsageError,
+    allow_extra_option,
     finish,
     load_data,
     start,
@@ -70,7 +71,7 @@ def _discover_parser(sub):
         default=K_E_NOMINAL,
         help="nominal electrical angular gain k_e = 2K, in (0, 1] (default 0.554)",
     )
-    p.add_argument("--allow-extra", action="store_true", help="keep unknown data columns")
+    allow_extra_option(p)
     return p
 
 

@@ -7,8 +7,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_positive, is_concrete
-from ..units import T_REF_C
+from .._checks import check_finite, check_positive, is_concrete
+from ..units import T_REF_C, k_e_problem
 
 
 def _as_float(x):
@@ -54,6 +54,16 @@ def as_parameter(x):
     """A parameter field's value: a [`hrgjax.TemperatureLaw`][] as it is, anything
     else as a float array (the converter of every parameter field that may follow a law)."""
     return x if isinstance(x, TemperatureLaw) else _as_float(x)
+
+
+def concrete_fields(module, names):
+    """`(name, value)` for each field of `module` in `names` whose value can be checked now:
+    not None, not a [`hrgjax.TemperatureLaw`][] (`simulate` checks a law over the run's
+    temperatures) and not traced (checked inside the run)."""
+    for name in names:
+        value = getattr(module, name)
+        if value is not None and not isinstance(value, TemperatureLaw) and is_concrete(value):
+            yield name, value
 
 
 def evaluate_at(tree, temperature_c):
@@ -102,20 +112,13 @@ class Resonator(eqx.Module):
     chi: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
-        for name in ("omega", "tau"):
-            value = getattr(self, name)
-            if not isinstance(value, TemperatureLaw) and is_concrete(value):
-                check_positive(f"Resonator.{name}", value, "[rad/s]" if name == "omega" else "[s]")
-        for name in ("k_e", "delta_omega", "theta_omega", "delta_inv_tau", "theta_tau", "chi"):
-            value = getattr(self, name)
-            if not isinstance(value, TemperatureLaw) and is_concrete(value):
-                from .._checks import check_finite
-
-                check_finite(f"Resonator.{name}", value)
-        if not isinstance(self.k_e, TemperatureLaw) and is_concrete(self.k_e):
-            from ..units import k_e_problem
-
-            for value in np.ravel(np.asarray(self.k_e, dtype=float)):
+        for name, value in concrete_fields(self, ("omega", "tau")):
+            check_positive(f"Resonator.{name}", value, "[rad/s]" if name == "omega" else "[s]")
+        finite = ("k_e", "delta_omega", "theta_omega", "delta_inv_tau", "theta_tau", "chi")
+        for name, value in concrete_fields(self, finite):
+            check_finite(f"Resonator.{name}", value)
+        for _, k_e in concrete_fields(self, ("k_e",)):
+            for value in np.ravel(np.asarray(k_e, dtype=float)):
                 problem = k_e_problem(float(value))
                 if problem:
                     raise ValueError(f"Resonator.k_e must be {problem}")

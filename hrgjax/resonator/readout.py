@@ -18,8 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import RULES, is_concrete
-from .params import TemperatureLaw, as_parameter
+from .._checks import RULES
+from .params import TemperatureLaw, as_parameter, concrete_fields
 
 LIMITS = {  # field: (rule of `hrgjax._checks.RULES`, unit); why: `Readout`'s docstring
     "gain_mismatch": ("in (-0.5, 0.5)", "(a fraction, not percent)"),
@@ -35,10 +35,8 @@ def check_limits(owner: str, module, limits) -> None:
     ({field: (rule, unit)}) in one line naming `owner.field`, the range and the unit. A
     temperature law or a traced value passes here: `simulate` checks laws over the run's
     temperatures and traced values inside the run (`check_finite_leaves`)."""
-    for name, (rule, unit) in limits.items():
-        value = getattr(module, name)
-        if value is None or isinstance(value, TemperatureLaw) or not is_concrete(value):
-            continue
+    for name, value in concrete_fields(module, limits):
+        rule, unit = limits[name]
         v = np.asarray(value, dtype=float)
         bad = ~(np.isfinite(v) & RULES[rule](v))
         if bad.any():
