@@ -13,6 +13,7 @@ import math
 import os
 import re
 import warnings
+from collections.abc import Collection
 
 import numpy as np
 
@@ -251,7 +252,7 @@ def with_file_line(message: str, lines: np.ndarray) -> str:
 
 
 def read_csv_table(
-    path: str, empty_as_nan: bool = False, exact_integers: bool = False
+    path: str, empty_as_nan: bool = False, exact_integers: bool | Collection[str] = False
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """A CSV file as `(columns, lines)`: each column parsed (numbers as float, `run` ids as
     exact integers, a column not in `COLUMNS` that is not all numbers as text) and the file's
@@ -264,8 +265,10 @@ def read_csv_table(
     number, NaN, as in a log with gaps: `hrgjax allan`) a row of NaN, else an error; without
     `empty_as_nan` an empty field is refused in a known column and makes an extra column text.
     An integer beyond 2**53, which a float64 would round, is refused in a contract column,
-    and with `exact_integers` (as [`hrgjax.load`][hrgjax.load] reads) in an extra column too;
-    without it an extra column's such integer reads as the nearest float.
+    and with `exact_integers` (as [`hrgjax.load`][hrgjax.load] reads) in an extra column too
+    (True: every one; a collection of names: those, as `hrgjax.imu.load` and `hrgjax allan`
+    read the columns they use); elsewhere an extra column's such integer reads as the
+    nearest float.
 
     **Raises:** `ValueError` naming the file and its line for text that is not UTF-8, a
     malformed row, a row of empty fields, an empty, numeric or duplicate header, or a known
@@ -281,8 +284,11 @@ def read_csv_table(
             at_start[0] = False
             yield text
 
+    if not isinstance(exact_integers, bool):
+        exact_integers = frozenset([exact_integers] if isinstance(exact_integers, str)
+                                   else exact_integers)  # fmt: skip
     fast = _numeric_table(path)
-    if fast is not None and not (exact_integers and _beyond_exact(fast[0])):
+    if fast is not None and not beyond_exact(_exact_columns(fast[0], exact_integers)):
         return fast  # (else the validating reader names an integer beyond 2**53)
     with open(path, "rb") as fh:
         blob = fh.read()
@@ -363,15 +369,48 @@ def check_header(path: str, header: list[str], at: int) -> None:
         raise ValueError(f"{path}: duplicate column names {dup} in the header")
 
 
-def _exact_float(digits: str) -> bool:
-    """Whether the integer `digits` is a float64 exactly (1e20 as "%.0f" writes it is; an
-    integer beyond float range is not)."""
-    f = float(digits)
-    return math.isfinite(f) and int(f) == int(digits)
+def rounded_integer(field: str) -> bool:
+    """Whether the text `field` (surrounding blanks ignored) is an integer that a float64
+    does not hold exactly: beyond 2**53 and not a float64's value (2**60 and 1e20 as "%.0f"
+    writes it are; 2**53 + 1 and an integer beyond float range are not). The check of every
+    loader that reads integers as floats (`read_csv_table`, `hrgjax.ins.alignment.load_psins`)."""
+    v = field.strip()
+    if len(v) < 16 or not _INTEGER.fullmatch(v):  # (fewer than 16 digits: below 2**53)
+        return False
+    n = int(v)
+    if abs(n) <= MAX_EXACT_INTEGER:
+        return False
+    f = float(v)
+    return not (math.isfinite(f) and int(f) == n)
+
+
+def rounded_integer_error(where: str, field: str) -> str:
+    """The one-line message refusing the integer text `field` (see `rounded_integer`) at
+    `where` (the file, the column and the row)."""
+    return (
+        f"{where}: the integer {field.strip()} is too large to hold exactly as a float64; "
+        "write it in scientific notation if rounding is intended"
+    )
+
+
+def _wants_exact(name: str, exact_integers: bool | Collection[str]) -> bool:
+    if isinstance(exact_integers, bool):
+        return exact_integers
+    return name in exact_integers
+
+
+def _exact_columns(columns: dict[str, np.ndarray], exact_integers) -> dict[str, np.ndarray]:
+    """The columns whose integers `read_csv_table` must check exactly (the fast path has
+    checked the contract's)."""
+    return {k: v for k, v in columns.items() if _wants_exact(k, exact_integers)}
 
 
 def _parse(
-    path: str, name: str, values: list[str], lines: np.ndarray, exact_integers: bool = False
+    path: str,
+    name: str,
+    values: list[str],
+    lines: np.ndarray,
+    exact_integers: bool | Collection[str] = False,
 ) -> np.ndarray:
     """A CSV column's fields as numbers (run ids as exact integers); an extra column that is
     not all numbers stays text. An integer beyond 2**53 is refused in a contract column (an
@@ -396,15 +435,12 @@ def _parse(
                 "int64 range of run ids"
             )
         return np.array(ints, dtype=np.int64)
-    checked = name in COLUMNS or exact_integers
-    if checked and name != "run" and any(_INTEGER.fullmatch(v) for v in stripped):
+    checked = name in COLUMNS or _wants_exact(name, exact_integers)
+    if checked and name != "run":
         for i, v in enumerate(stripped):
-            if _INTEGER.fullmatch(v) and abs(int(v)) > MAX_EXACT_INTEGER and not _exact_float(v):
-                raise ValueError(
-                    f"{path}: column {name!r} row {i} (line {lines[i]}): the integer {v} is too "
-                    "large to hold exactly as a float64; write it in scientific notation if "
-                    "rounding is intended"
-                )
+            if rounded_integer(v):
+                where = f"{path}: column {name!r} row {i} (line {lines[i]})"
+                raise ValueError(rounded_integer_error(where, v))
     out = np.array([float(v) for v in stripped], dtype=float)
     if name == "run" and np.all(np.abs(out) < MAX_EXACT_INTEGER) and np.all(out == np.round(out)):
         return out.astype(np.int64)  # run ids written 1.0 or 1e2: exact integers too
@@ -468,16 +504,16 @@ def _numeric_table(path: str):
             if big.any() or not np.all(col == np.round(col)):
                 return None
             col = col.astype(np.int64)
-        elif name in COLUMNS and _beyond_exact({name: col}):
+        elif name in COLUMNS and beyond_exact({name: col}):
             return None
         columns[name] = col
     return columns, np.frombuffer(lines, dtype=np.int64).copy()
 
 
-def _beyond_exact(columns: dict[str, np.ndarray]) -> bool:
+def beyond_exact(columns: dict[str, np.ndarray]) -> bool:
     """Whether a float column holds a value of magnitude 2**53 or more: there the text may
     have been an integer that the float rounded (2**53 + 1 reads 2**53), which the validating
-    reader checks exactly."""
+    reader checks exactly (`read_csv_table` with `exact_integers`)."""
     top = MAX_EXACT_INTEGER
     return any(
         c.dtype.kind == "f" and c.size and (c.max() >= top or c.min() <= -top)

@@ -414,3 +414,27 @@ def test_imu_calibrate_table_labels_fit_their_column(tmp_path, capsys):
     rows = [ln for ln in capsys.readouterr().out.splitlines() if re.search(r" [+-]\d.* ± ", ln)]
     assert any(ln.lstrip().startswith("gyro g-sens [°/s/(m/s²)] ") for ln in rows), rows
     assert len({re.search(r"[+-]\d", ln).start() for ln in rows}) == 1, rows
+
+
+def test_allan_refuses_integers_a_float_would_round(tmp_path, capsys):
+    """Audit: `hrgjax allan` read nanosecond stamps 1700000000000000001, …003 as one time
+    ("the time column must increase"; further apart they were rounded silently). The columns
+    it reads — the time column, the column named or the one it picks — are checked, naming
+    the file, column, row and line; integers a float64 holds exactly, and a column it does
+    not read, still load."""
+    rate = np.random.default_rng(0).normal(size=64)
+    log = tmp_path / "ns.csv"
+    log.write_text("t_ns,t_s,rate,serial\n" + "".join(
+        f"{1700000000000000001 + 2 * i},{2**60 + 256 * i},{v:.6f},{2**53 + 1}\n"
+        for i, v in enumerate(rate)))  # fmt: skip
+    cli_fails(["allan", str(log), "--column", "rate", "--time-column", "t_ns"], capsys,
+              r"^hrgjax allan: error: .*ns.csv: column 't_ns' row 0 \(line 2\): the integer "
+              r"1700000000000000001 is too large to hold exactly as a float64; write it in "
+              r"scientific notation if rounding is intended$")  # fmt: skip
+    assert main(["allan", str(log), "--column", "rate", "--time-column", "t_s"]) == 0
+    assert "64 samples at 0.00390625 Hz" in capsys.readouterr().out
+    picked = tmp_path / "count.csv"
+    picked.write_text("t,count\n" + "".join(f"{i},{2**53 + 1 + 2 * i}\n" for i in range(64)))
+    cli_fails(["allan", str(picked), "--rate-hz", "10"], capsys,
+              r"^hrgjax allan: error: .*count.csv: column 'count' row 0 \(line 2\): the "
+              r"integer 9007199254740993 is too large")  # fmt: skip

@@ -350,7 +350,7 @@ def test_load_refuses_integers_a_float_would_round_in_extra_columns_too(tmp_path
         hg.MeasuredData(
             base(2) | {"stamp_ns": np.array([1700000000000000001, 3])}, allow_extra=True
         )
-    assert read_csv_table(str(path))[0]["stamp_ns"][0] == 1.7e18  # hg.imu.load: as before
+    assert read_csv_table(str(path))[0]["stamp_ns"][0] == 1.7e18  # not asked: nearest float
     monkeypatch.setattr(_data_files, "_numeric_table", lambda p: None)
     with pytest.raises(ValueError, match=want):
         hg.load(path, allow_extra=True)
@@ -406,3 +406,48 @@ def test_every_contract_column_has_its_netcdf_units(tmp_path):
         got = {k: ds[k].attrs.get("units") for k in hg.data.COLUMNS}
     assert got == {k: None if k in any_unit else units[k][0] for k in hg.data.COLUMNS}
     assert hg.load(tmp_path / "all.nc") == d
+
+
+def test_rounded_integer_is_the_loaders_one_check():
+    """`rounded_integer` (every loader's check): an integer beyond 2**53 that a float64
+    would round, blanks and signs allowed; an integer a float64 holds (2**53, 2**60, 1e20 as
+    "%.0f" writes it) and anything that is not an integer's digits are not."""
+    from hrgjax._data_files import rounded_integer
+
+    for text in ("9007199254740993", " -9007199254740993 ", "+1700000000000000001",
+                 "1" + "0" * 400):  # fmt: skip
+        assert rounded_integer(text), text
+    for text in ("9007199254740992", str(2**60), "-" + str(2**62), "100000000000000000000",
+                 "1.7e18", "1700000000000000001.0", "nan", "", "123"):  # fmt: skip
+        assert not rounded_integer(text), text
+
+
+def test_imu_load_refuses_integers_a_float_would_round_in_the_columns_it_reads(
+    tmp_path, monkeypatch
+):
+    """Audit: `hg.imu.load` read nanosecond stamps 1 ns apart as one time ("time does not
+    increase"; further apart they were rounded silently). The columns it reads are checked
+    as `hg.load` checks an extra column, on the fast path and the validating reader's, naming
+    the file, column, row and line; an integer a float64 holds exactly still loads, and a
+    column it does not read (the file's other columns are ignored) is not checked."""
+    from hrgjax import _data_files
+
+    rows = [f"{1700000000000000001 + i},{2**60 + 256 * i},{2**53 + 1},1e-3,2e-3,3e-3,0,0,9.81"
+            for i in range(4)]  # fmt: skip
+    path = write(tmp_path / "imu.csv", "t_ns,t_exact,serial,gx,gy,gz,ax,ay,az\n" + "\n".join(rows))
+    cols = {"gyro": ["gx", "gy", "gz"], "accel": ["ax", "ay", "az"]}
+    units = {"gyro": "rad/s", "accel": "m/s^2"}
+    want = (r"imu.csv: column 't_ns' row 0 \(line 2\): the integer 1700000000000000001 is too "
+            r"large to hold exactly as a float64; write it in scientific notation if rounding is "
+            r"intended$")  # fmt: skip
+    for fast in (True, False):
+        if not fast:
+            monkeypatch.setattr(_data_files, "_numeric_table", lambda p: None)
+        with pytest.raises(ValueError, match=want):
+            hg.imu.load(path, cols | {"time": "t_ns"}, units, check_units=False)
+        data = hg.imu.load(path, cols | {"time": "t_exact"}, units, check_units=False)
+        assert list(data.time) == [2.0**60 + 256 * i for i in range(4)]
+    # a rounded integer in a gyro column is named the same way
+    write(path, "t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,9.81\n1,1,2,-9007199254740993,0,0,9.81\n")
+    with pytest.raises(ValueError, match=r"column 'gz' row 1 \(line 3\): the integer -90071"):
+        hg.imu.load(path, cols | {"time": "t"}, units, check_units=False)

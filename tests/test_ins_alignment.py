@@ -18,6 +18,7 @@ from hrgjax.ins import platform as pf
 from hrgjax.ins import trajectory as tr
 
 DEG = np.pi / 180
+ARCSEC = DEG / 3600
 PSINS = Path(__file__).resolve().parent / "data" / "psins_lasergyro.imu"  # BSD-2, see data/
 
 
@@ -156,6 +157,32 @@ def test_align_names_the_header_for_an_interval_in_seconds_and_a_bad_latitude(tm
     with pytest.raises(ValueError, match=r"latnan.imu: the header's latitude \[°\] \(line 2, "
                        r"field 1\) must be finite; got nan$"):  # fmt: skip
         al.load_psins(nan)
+
+
+def test_psins_loader_refuses_integers_a_float_would_round(tmp_path):
+    """Audit: `load_psins` read its integer increments (and header) through float64 and
+    rounded an integer beyond 2**53 silently (9007199254740993 read …992). Refused now, in
+    one line naming the file, the line and the field; 2**53, which a float64 holds, loads."""
+    lines = _psins_file(tmp_path / "a.imu").read_text().splitlines()  # line 5: first sample
+
+    def edited(name, line, field, value):
+        out = list(lines)
+        fields = out[line - 1].split()
+        fields[field - 1] = value
+        out[line - 1] = " ".join(fields)
+        (tmp_path / name).write_text("\n".join(out) + "\n")
+        return tmp_path / name
+
+    with pytest.raises(ValueError, match=r"^.*big.imu: line 5, sample row 0, field 3 \(gyro "
+                       r"increment up\): the integer 9007199254740993 is too large to hold "
+                       r"exactly as a float64; write it in scientific notation if rounding is "
+                       r"intended$"):  # fmt: skip
+        al.load_psins(edited("big.imu", 5, 3, "9007199254740993"))
+    with pytest.raises(ValueError, match=r"t0.imu: header line 2 \(line 3\), field 4: the "
+                       r"integer 1700000000000000001 is too large"):  # fmt: skip
+        al.load_psins(edited("t0.imu", 3, 4, "1700000000000000001"))
+    log = al.load_psins(edited("exact.imu", 5, 3, "9007199254740992"))
+    assert float(log.dtheta[0, 2]) == -(2.0**53) * ARCSEC  # up is −z in FRD
 
 
 def test_psins_header_attitude_that_is_not_finite_is_left_out(tmp_path):

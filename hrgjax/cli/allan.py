@@ -27,20 +27,25 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
     """`(samples, rate [Hz], column name, file line of each row)` from a CSV log: the column named (or the only
     numeric one that is not the time), its rate from `rate_hz` or the time column (stamps
     that are not uniform: resampled onto `rate_hz` or their median step by the angle).
-    Bad input raises `UsageError` naming the file, the column and the row."""
-    from .._data_files import read_csv_table
+    Bad input raises `UsageError` naming the file, the column and the row (an integer a
+    float64 would round, such as a nanosecond time stamp, too, in the columns used)."""
+    from .._data_files import beyond_exact, read_csv_table
 
     if not path.lower().endswith((".csv", ".txt")):
         raise UsageError(f"{path}: hrgjax allan reads CSV logs (.csv: a header row, one "
                          "sample per row)")  # fmt: skip
+    used = [c for c in (column, time_column) if c is not None]
     with usage_errors(missing=f"{path}: no such file"):
-        table, lines = read_csv_table(path, empty_as_nan=True)
+        table, lines = read_csv_table(path, empty_as_nan=True, exact_integers=used)
     numeric = [k for k, v in table.items() if np.asarray(v).dtype.kind == "f"]
     if column is None:
         choices = [k for k in numeric if k != time_column and k.lower() not in ("t", "time")]
         if len(choices) != 1:
             raise UsageError(f"{path}: give --column (numeric columns: {', '.join(numeric)})")
         column = choices[0]
+        if beyond_exact({column: table[column]}):  # read again to name a rounded integer
+            with usage_errors():
+                read_csv_table(path, empty_as_nan=True, exact_integers=[column])
     if column not in table:
         raise UsageError(f"{path}: no column {column!r} (columns: {', '.join(table)})")
     if column not in numeric:

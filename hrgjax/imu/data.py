@@ -245,9 +245,10 @@ def load(
     **Returns:** an [`ImuData`][hrgjax.imu.ImuData] in SI units.
 
     **Raises:** `ValueError` naming the file, the column and the row (and the file's line)
-    for a missing column, text where a number belongs, a value that is not finite (or not
-    in SI units: 1e308 g), a time column without a finite sample rate, or a temperature
-    outside the plausible range (kelvin?)."""
+    for a missing column, text where a number belongs, an integer beyond 2**53 that a
+    float64 would round (a nanosecond time stamp: `1700000000000000001`) in a column used, a
+    value that is not finite (or not in SI units: 1e308 g), a time column without a finite
+    sample rate, or a temperature outside the plausible range (kelvin?)."""
     from ..data import read_csv_table
 
     path = os.fspath(path)
@@ -260,7 +261,9 @@ def load(
     comment = None  # (line, text) of the file's `# rate_hz = …` when the rate comes from it
     if rate_hz is None:
         rate_hz, comment = _saved_rate(path)
-    table, lines = read_csv_table(path)  # a plain numeric file: NumPy's C parser, streamed
+    # a plain numeric file: NumPy's C parser, streamed; an integer a float64 would round (a
+    # nanosecond time stamp) refused in the columns used, naming the column, row and line
+    table, lines = read_csv_table(path, exact_integers=_all_names(names))
     try:
         return _build(path, names, table, lines, units, rate_hz, check_units)
     except ValueError as err:

@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._compiled import fused
+from .._data_files import beyond_exact, rounded_integer, rounded_integer_error
 from .._x64 import require_x64
 from ..kalman import Gaussian, update, van_loan
 from ..units import ARCSEC, DEG, DEG_PER_H
@@ -150,7 +151,8 @@ def load_psins(path) -> ImuLog:
 
     **Raises:** `ValueError` naming the file (and the line) for text that is not UTF-8, a
     malformed header (a field of lines 2–3 that is not finite, a latitude beyond ±90°) or
-    sample row."""
+    sample row, or an integer beyond 2**53 that a float64 would round (naming its line and
+    field)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no IMU log at {path}")
@@ -161,15 +163,19 @@ def load_psins(path) -> ImuLog:
         raise ValueError(
             f"{path}: line {at}: not UTF-8 text ({err.reason}); a PSINS log is plain text"
         ) from None
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("%")]
+    numbered = [(i, ln) for i, ln in enumerate(text.splitlines(), 1)
+                if ln.strip() and not ln.lstrip().startswith("%")]  # fmt: skip
+    lines = [ln for _, ln in numbered]
     if len(lines) < 4:
         raise ValueError(
             f"{path}: a PSINS log needs 3 header lines and samples; got {len(lines)} lines"
         )
     head = []
     for k in range(3):
+        fields = lines[k].replace(",", " ").split()
+        _refuse_rounded(path, f"header line {k + 1} (line {numbered[k][0]})", fields)
         try:
-            vals = [float(x) for x in lines[k].replace(",", " ").split()]
+            vals = [float(x) for x in fields]
         except ValueError as err:
             raise ValueError(f"{path}: header line {k + 1} is not numeric: {lines[k]!r}") from err
         if len(vals) != 6:
@@ -199,6 +205,9 @@ def load_psins(path) -> ImuLog:
         raise ValueError(f"{path}: sample rows must hold 6 numbers each ({err})") from err
     if raw.shape[1] != 6:
         raise ValueError(f"{path}: sample rows must hold 6 numbers; got {raw.shape[1]}")
+    if beyond_exact({"samples": raw.ravel()}):  # an integer the float may have rounded
+        for i, (at, ln) in enumerate(numbered[3:]):
+            _refuse_rounded(path, f"line {at}, sample row {i}", ln.split(), _PSINS_SAMPLE)
     gyro_rfu = raw[:, :3] * np.asarray(units[:3]) * ARCSEC
     acc_rfu = raw[:, 3:] * np.asarray(units[3:]) * 1e-6 * g
     rfu_to_frd = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -214,6 +223,20 @@ def load_psins(path) -> ImuLog:
         h,
         attitude if all(math.isfinite(a) for a in attitude) else None,
     )
+
+
+_PSINS_SAMPLE = tuple(f"{s} increment {a}" for s in ("gyro", "accelerometer")
+                      for a in ("right", "forward", "up"))  # fmt: skip
+"""The fields of a PSINS sample row, as `load_psins`'s errors name them."""
+
+
+def _refuse_rounded(path, where: str, fields: list[str], names=None) -> None:
+    """Refuse a field of a PSINS line that is an integer a float64 would round (beyond
+    2**53: a corrupted increment, a time in ns), naming the line and the field."""
+    for j, v in enumerate(fields):
+        if rounded_integer(v):
+            name = f" ({names[j]})" if names is not None and j < len(names) else ""
+            raise ValueError(rounded_integer_error(f"{path}: {where}, field {j + 1}{name}", v))
 
 
 def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None = None,
