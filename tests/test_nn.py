@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hrgjax.nn import pnn, tapped_delay, train
+from hrgjax.nn import pnn, som, tapped_delay, train
 
 
 def test_tapped_delay_windows_by_hand():
@@ -44,3 +44,81 @@ def test_rprop_minimises_and_is_deterministic():
     np.testing.assert_allclose(p["w"], target, atol=1e-6)
     q = train.rprop(loss, {"w": jnp.zeros(3)}, 200, 1e-2)
     np.testing.assert_array_equal(p["w"], q["w"])
+
+
+def test_pnn_refuses_nan_samples_bad_priors_and_labels_out_of_range():
+    """A NaN query or training sample and a negative prior made every prediction a confident
+    class 0 (argmax over NaN); a label outside [0, n_classes) was dropped (one_hot of 2 is
+    zeros), 1.7 was taken as a class: each refused in one line."""
+    x = np.array([[0.0, 0.0], [0.1, 0.0], [5.0, 5.0], [5.1, 5.0]])
+    y = np.array([0, 0, 1, 1])
+    model = pnn.PNN.fit(x, y, 2, sigma=0.5, prior=[1.0, 3.0])  # normalised to [0.25, 0.75]
+    np.testing.assert_allclose(np.exp(model.log_prior), [0.25, 0.75])
+    np.testing.assert_array_equal(model.predict(x), y)
+    with pytest.raises(ValueError, match=r"^x \(PNN query samples\) must be finite; it has nan"):
+        model.predict(np.array([[np.nan, 0.0]]))
+    xn = x.copy()
+    xn[1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"^x \(PNN training samples\) must be finite"):
+        pnn.PNN.fit(xn, y, 2, sigma=0.5)
+    for prior, found in (([-0.5, 1.5], r"\[-0\.5, 1\.5\]"), ([0.2, 0.3, 0.5], r"\(3,\)"),
+                         ([0.0, 0.0], r"\[0\.0, 0\.0\]"), ([np.nan, 1.0], r"\[nan, 1\.0\]")):  # fmt: skip
+        with pytest.raises(
+            ValueError, match=rf"^prior must be 2 finite class priors >= 0 .*got {found}$"
+        ):
+            pnn.PNN.fit(x, y, 2, sigma=0.5, prior=prior)
+    for labels, found in (([0, 0, 2, 2], "2 at index \\(2,\\)"), ([0.0, 0.0, 1.7, 1.7], "1.7"),
+                          ([-1, 0, 1, 1], "-1 at index \\(0,\\)")):  # fmt: skip
+        with pytest.raises(
+            ValueError, match=rf"^y must be integer class labels in \[0, 2\); got {found}"
+        ):
+            pnn.PNN.fit(x, np.array(labels), 2, sigma=0.5)
+
+
+def test_som_refuses_zero_schedule_ends_nan_samples_and_bad_labels():
+    """radius end 0 gave NaN weights (÷ 2σ²), rate start 0 a raw ZeroDivisionError, a NaN
+    sample NaN weights; a label out of range was dropped (scatter out of bounds) or wrapped
+    round (−1 → the last class)."""
+    x = np.array([[0.0, 0.0], [0.1, 0.0], [5.0, 5.0], [5.1, 5.0]])
+    key = jax.random.key(0)
+    for kw, field in (({"radius": (1.0, 0.0)}, "radius"), ({"rate": (0.0, 0.01)}, "rate"),
+                      ({"rate": (0.5, np.inf)}, "rate")):  # fmt: skip
+        with pytest.raises(
+            ValueError, match=rf"^{field}.* must be \(start, end\), two finite numbers > 0"
+        ):
+            som.SOM.train(x, (2, 2), key=key, steps=20, **kw)
+    with pytest.raises(ValueError, match=r"^x \(SOM training samples\) must be finite"):
+        som.SOM.train(np.array([[0.0, 0.0], [np.nan, 1.0]]), (2, 2), key=key, steps=20)
+    with pytest.raises(ValueError, match=r"^steps must be an integer >= 1"):
+        som.SOM.train(x, (2, 2), key=key, steps=0)
+    m = som.SOM.train(x, (2, 2), key=key, steps=200)
+    labelled = m.label(x, np.array([0, 0, 1, 1]), 2)
+    np.testing.assert_array_equal(labelled.predict(x), [0, 0, 1, 1])
+    with pytest.raises(ValueError, match=r"^x \(SOM query samples\) must be finite"):
+        labelled.predict(np.array([[np.nan, 5.0]]))
+    for labels in ([0, 0, 5, 5], [0, 0, -1, -1], [0.0, 0.0, 0.5, 1.0]):
+        with pytest.raises(ValueError, match=r"^y must be integer class labels in \[0, 2\)"):
+            m.label(x, np.array(labels), 2)
+
+
+def test_rprop_refuses_divergence_and_zero_steps_alike_everywhere():
+    """NaN data: `rprop` and `train_module` returned NaN weights silently while
+    `rprop_with_progress` raised; steps=0 raised NumPy's "need at least one array to
+    concatenate"."""
+    data = jnp.array([1.0, np.nan])
+    lf = lambda p, d: jnp.sum((p - d) ** 2)
+    diverged = r"^training diverged: the loss or the weights became NaN or inf"
+    with pytest.raises(RuntimeError, match=diverged):
+        train.rprop(lambda p: lf(p, data), jnp.zeros(2), 10)
+    with pytest.raises(RuntimeError, match=diverged):
+        train.rprop_with_progress(lf, jnp.zeros(2), data, 10)
+    with pytest.raises(RuntimeError, match=diverged):
+        train.train_module({"w": jnp.zeros(2)}, lambda m: lf(m["w"], data), 10)
+    for steps in (0, -3, 2.5):
+        with pytest.raises(ValueError, match=r"^steps must be an integer >= 1"):
+            train.rprop_with_progress(lf, jnp.zeros(2), jnp.ones(2), steps)
+        with pytest.raises(ValueError, match=r"^steps must be an integer >= 1"):
+            train.rprop(lambda p: lf(p, data), jnp.zeros(2), steps)
+    # under jit the traced result passes unchecked (no host check on tracers)
+    out = jax.jit(lambda d: train.rprop(lambda p: lf(p, d), jnp.zeros(2), 5))(jnp.ones(2))
+    assert np.isfinite(np.asarray(out)).all()

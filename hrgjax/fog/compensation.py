@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._checks import concrete_value
+from .._checks import concrete_value, host_value
 from .._x64 import require_x64
 from ..ins import alignment as _al
 from ..ins.constants import OMEGA_IE, WGS84, earth_rate_ned
@@ -67,7 +67,14 @@ class VibrationCompensator(eqx.Module):
     window it was trained on (set by [`fit`][hrgjax.fog.compensation.fit]; None until
     then) — the Elman context steps once per window, so features of another window length
     would step it at the wrong rate, and [`compensate`][hrgjax.fog.compensation.compensate]
-    refuses them. `recurrent_init` ρ starts the context weights at ρ·I."""
+    refuses them. `axis` (unit 3-vector): the body-frame vibration direction its features
+    were taken along (set by `fit` from the training set; None until then, and in a
+    compensator rebuilt without it, e.g. the skeleton of a file saved before it was
+    recorded — `compensate` then falls back to the body axis with the largest AC power).
+    `recurrent_init` ρ starts the context weights at ρ·I.
+
+    **Raises:** `ValueError` for an unknown `kind`, `x_scale` not two finite numbers > 0 or
+    `y_scale` not one (a zero scale gave NaN losses reported as "training diverged")."""
 
     net: eqx.Module
     x_scale: jax.Array
@@ -75,14 +82,17 @@ class VibrationCompensator(eqx.Module):
     kind: str = eqx.field(static=True)
     warmup: int = eqx.field(static=True)
     window_s: float | None = eqx.field(static=True)
+    axis: tuple | None = eqx.field(static=True, default=None)
 
     def __init__(
         self, kind: str = "elman", *, key: jax.Array, hidden: int = 7, x_scale=(25.0, 1.0),
         y_scale: float = 0.2 * DEG_PER_H, warmup: int = 30,
-        recurrent_init: float = 0.5, window_s: float | None = None,
+        recurrent_init: float = 0.5, window_s: float | None = None, axis=None,
     ):  # fmt: skip
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
+        x_scale = _scale("x_scale", x_scale, (2,), "(frequency Hz, amplitude g)")
+        y_scale = _scale("y_scale", y_scale, (), "[rad/s]")
         keys = jax.random.split(key, 3)
         if kind == "elman":
             net = eqx.filter_vmap(lambda k: Elman(2, hidden, 1, key=k))(keys)
@@ -92,11 +102,12 @@ class VibrationCompensator(eqx.Module):
             self.net = eqx.tree_at(lambda n: n.w_h.weight, net, w_h)
         else:
             self.net = eqx.filter_vmap(lambda k: MLP((2, hidden, 1), key=k))(keys)
-        self.x_scale = jnp.asarray(x_scale, float)
-        self.y_scale = jnp.asarray(y_scale, float)
+        self.x_scale = jnp.asarray(x_scale)
+        self.y_scale = jnp.asarray(y_scale)
         self.kind = kind
         self.warmup = int(warmup)
         self.window_s = None if window_s is None else _window(window_s)
+        self.axis = None if axis is None else _unit(axis)
 
     def normalised(self, features):
         """Network outputs (K, 3) in units of `y_scale`."""
@@ -125,7 +136,8 @@ class TrainingSet(eqx.Module):
     body frame; noisy); `truth` (S, K, 3) [rad/s]: the noise-free error, body frame;
     `raw` (S, K, 3) [rad/s]: window means of the raw vibrating gyro output, sensor axes;
     `reference` (3,) [rad/s]: the static model's output at the test attitude, sensor axes;
-    `conditions` (S, 2): the (f, A) of each sequence; `window_s` (static)."""
+    `conditions` (S, 2): the (f, A) of each sequence; `window_s` (static); `axis` (static):
+    the unit vibration direction the features were taken along (None: not recorded)."""
 
     features: jax.Array
     samples: jax.Array
@@ -134,6 +146,7 @@ class TrainingSet(eqx.Module):
     reference: jax.Array
     conditions: jax.Array
     window_s: float = eqx.field(static=True)
+    axis: tuple | None = eqx.field(static=True, default=None)
 
 
 def grid(freqs_hz, amps_g, exclude=()):
@@ -158,6 +171,7 @@ def training_set(
     conditions = [(float(f), float(a)) for f, a in conditions]
     if not conditions:
         raise ValueError("conditions must list at least one (frequency Hz, amplitude g) pair")
+    axis = _unit(axis)
     proc = imu if model is None else model
     feats, samples, truths, raws = [], [], [], []
     keys = jax.random.split(key, 2 * len(conditions))
@@ -174,7 +188,7 @@ def training_set(
     ref = reference_output(proc, vib)
     return TrainingSet(
         jnp.stack(feats), jnp.stack(samples), jnp.stack(truths), jnp.stack(raws), ref,
-        jnp.asarray(conditions), float(window_s),
+        jnp.asarray(conditions), float(window_s), axis,
     )  # fmt: skip
 
 
@@ -290,6 +304,45 @@ def _window(window_s) -> float:
     return w
 
 
+def _scale(name: str, x, shape: tuple, form: str):
+    """A normalisation constant as a float64 array of `shape`, every value finite and > 0,
+    or a one-line `ValueError` naming `name` and its `form`."""
+    v = host_value(x)
+    if v is None:  # traced: passes unchecked
+        return jnp.asarray(x, float)
+    if v.shape != shape or not (np.isfinite(v).all() and (v > 0).all()):
+        raise ValueError(f"{name} must be {'two' if shape else 'one'} finite number"
+                         f"{'s' if shape else ''} > 0 {form}; got {v.tolist()}")  # fmt: skip
+    return v
+
+
+def _unit(axis) -> tuple:
+    """A vibration direction as a unit 3-tuple, or a one-line `ValueError`."""
+    u = np.asarray(axis, dtype=float)
+    if u.shape != (3,) or not np.isfinite(u).all() or not np.linalg.norm(u) > 0:
+        raise ValueError(f"axis must be a non-zero finite 3-vector (body frame); got {axis!r}")
+    return tuple((u / np.linalg.norm(u)).tolist())
+
+
+def _same_axis(trained, axis, what: str):
+    """`axis` checked against the vibration direction `trained` a compensator was trained on
+    (`trained` when None; None when neither is known). A direction and its opposite give the
+    same features."""
+    if axis is None:
+        return trained
+    u = _unit(axis)
+    if trained is not None and not (
+        np.allclose(u, trained, rtol=0.0, atol=1e-9)
+        or np.allclose(u, np.negative(trained), rtol=0.0, atol=1e-9)
+    ):
+        shown = lambda v: "(" + ", ".join(f"{c:.4g}" for c in v) + ")"  # noqa: E731
+        raise ValueError(
+            f"{what}: axis={shown(u)}, but the compensator was trained on features along "
+            f"{shown(trained)} (the amplitude it sees depends on the direction); use its axis"
+        )
+    return u
+
+
 def _same_window(comp: VibrationCompensator, window_s, what: str) -> float:
     """`window_s` checked against the window `comp` was trained on (its own when None)."""
     if window_s is None:
@@ -305,20 +358,24 @@ def _same_window(comp: VibrationCompensator, window_s, what: str) -> float:
     return w
 
 
-def _with_window(comp: VibrationCompensator, window_s: float) -> VibrationCompensator:
-    """A copy of `comp` that records the window it was trained on (a static field, which
-    `eqx.tree_at` cannot set)."""
+def _with_window(comp: VibrationCompensator, window_s: float, axis=None) -> VibrationCompensator:
+    """A copy of `comp` that records the window (and, when known, the vibration direction)
+    it was trained on (static fields, which `eqx.tree_at` cannot set)."""
     new = object.__new__(type(comp))
     for f in dataclasses.fields(comp):
         object.__setattr__(new, f.name, getattr(comp, f.name))
     object.__setattr__(new, "window_s", _window(window_s))
+    if axis is not None:
+        object.__setattr__(new, "axis", _unit(axis))
     return new
 
 
 def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
     _same_window(comp, train.window_s, "fit")
+    axis = _same_axis(comp.axis, train.axis, "fit")
     if test is not None:
         _same_window(comp, test.window_s, "fit (test set)")
+        _same_axis(axis, test.axis, "fit (test set)")
     if learning_rate is None:
         learning_rate = LEARNING_RATE[comp.kind]
     n = train.features.shape[0]
@@ -343,7 +400,7 @@ def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
     history = {"train": hist[:, 0]}
     if test is not None:
         history |= {"test": hist[:, 1], "test_rmse": hist[:, 2]}
-    return _with_window(trained, train.window_s), history
+    return _with_window(trained, train.window_s, axis), history
 
 
 def rmse(comp: VibrationCompensator | None, data: TrainingSet):
@@ -351,6 +408,7 @@ def rmse(comp: VibrationCompensator | None, data: TrainingSet):
     `comp=None` is no compensation (the error itself)."""
     if comp is not None:
         _same_window(comp, data.window_s, "rmse")
+        _same_axis(comp.axis, data.axis, "rmse")
     pred = 0.0 if comp is None else jax.vmap(comp)(data.features)
     return jnp.sqrt(jnp.mean((pred - data.truth) ** 2))
 
@@ -361,10 +419,15 @@ def compensate(
 ):  # fmt: skip
     """Raw gyro output (N, 3) [rad/s, sensor axes] less the predicted vibration error:
     features from the misalignment-compensated accelerometers over windows of `window_s`
-    (default: the window `comp` was trained on; another one is refused), the prediction per
-    window mapped to sensor axes and held over its window (the last window's prediction
-    covers a partial tail). **Returns** `(gyro (N, 3), prediction (K, 3) body frame)`."""
+    (default: the window `comp` was trained on; another one is refused) along `axis`
+    (default: the vibration direction `comp` was trained on, `comp.axis`; another one is
+    refused — the amplitude along (1, 1, 1)/√3 of a vibration along it is √3 times that along
+    its largest body axis; a compensator without a recorded axis uses the body axis with the
+    largest AC power), the prediction per window mapped to sensor axes and held over its
+    window (the last window's prediction covers a partial tail). **Returns**
+    `(gyro (N, 3), prediction (K, 3) body frame)`."""
     window_s = _same_window(comp, window_s, "compensate")
+    axis = _same_axis(comp.axis, axis, "compensate")
     feats = vibration_features(to_body(imu.accel, record.accel), record.fs, window_s, axis)
     pred = comp(feats)
     m = int(round(window_s * record.fs))

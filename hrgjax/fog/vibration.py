@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import concrete_value
 from .._compiled import fused
 from .._x64 import require_x64
 from ..ins.constants import WGS84, earth_rate_ned
@@ -330,11 +331,24 @@ def window_means(x, fs: float, window_s: float):
 def error_samples(imu: FogImu, vibrating: VibrationRecord, static: VibrationRecord, window_s=2.0):
     """The patent's vibration-error samples: vibrating − static gyro output per window of
     `window_s`, mapped to the orthogonal (body) frame by the gyro triad's linear map —
-    (K, 3) [rad/s]. The two records must share rate, length and attitude."""
+    (K, 3) [rad/s]. The two records must share rate, length, attitude (`c_bn`) and
+    latitude: the Earth rate each gyro senses depends on both, so records at two headings
+    differed by a spurious "vibration error" (a `ValueError` names the mismatch)."""
     if vibrating.gyro.shape != static.gyro.shape or vibrating.fs != static.fs:
         raise ValueError(
             "vibrating and static records must have the same length and rate; got "
             f"{vibrating.gyro.shape} at {vibrating.fs} Hz and {static.gyro.shape} at {static.fs} Hz"
+        )
+    c_v, c_s = concrete_value(vibrating.c_bn), concrete_value(static.c_bn)
+    if c_v is not None and c_s is not None and not np.allclose(c_v, c_s, rtol=0.0, atol=1e-9):
+        raise ValueError(
+            "vibrating and static records must have the same attitude c_bn; they differ by up "
+            f"to {np.abs(c_v - c_s).max():.3g} (simulate both with the same attitude_deg)"
+        )
+    if not np.isclose(vibrating.lat, static.lat, rtol=0.0, atol=1e-12):
+        raise ValueError(
+            "vibrating and static records must have the same latitude lat [rad]; got "
+            f"{vibrating.lat:.9g} and {static.lat:.9g}"
         )
     d = window_means(vibrating.gyro - static.gyro, vibrating.fs, window_s)
     return to_body(imu.gyro, d)

@@ -11,9 +11,35 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.scipy.special import logsumexp
 
+from .._checks import check_finite_host, host_value
 from .._compiled import fused
+
+
+def check_labels(name: str, y, n_classes: int):
+    """`y` as an int array, refused in one line naming `name` unless every label is an
+    integer in [0, `n_classes`) (a label out of range was dropped or wrapped round; 1.7 was
+    taken as a class); a traced `y` passes unchecked."""
+    v = host_value(y)
+    if v is None:
+        return jnp.asarray(y).astype(int)
+    bad = ~(np.isfinite(v) & (v == np.round(v)) & (v >= 0) & (v < n_classes))
+    if bad.any():
+        i = tuple(int(k) for k in np.argwhere(bad)[0])
+        raise ValueError(f"{name} must be integer class labels in [0, {n_classes}); "
+                         f"got {v[i]:g} at index {i}")  # fmt: skip
+    return jnp.asarray(v.astype(int))
+
+
+def check_n_classes(n_classes) -> int:
+    """`n_classes` as an int >= 1, or a one-line `ValueError`."""
+    if isinstance(n_classes, bool) or not isinstance(n_classes, (int, np.integer)):
+        raise ValueError(f"n_classes must be an integer >= 1; got {n_classes!r}")
+    if n_classes < 1:
+        raise ValueError(f"n_classes must be an integer >= 1; got {n_classes}")
+    return int(n_classes)
 
 
 class PNN(eqx.Module):
@@ -28,16 +54,32 @@ class PNN(eqx.Module):
 
     @classmethod
     def fit(cls, x, y, n_classes: int, sigma: float, prior=None):
-        """Store the training samples `x` (n, d) with labels `y` (n,)."""
+        """Store the training samples `x` (n, d), finite, with labels `y` (n,), integers in
+        [0, `n_classes`). `prior` (n_classes,): class priors, finite, >= 0 with a positive
+        sum (normalised here; default: equal).
+
+        **Raises:** `ValueError` for a malformed or non-finite `x`, a label that is not an
+        integer in [0, n_classes), `sigma` not > 0, or a bad `prior`."""
+        n_classes = check_n_classes(n_classes)
         x, y = jnp.asarray(x, float), jnp.asarray(y)
         if x.ndim != 2 or y.shape != (x.shape[0],):
             raise ValueError(f"x must be (n, d) and y (n,); got {x.shape}, {y.shape}")
+        check_finite_host("x (PNN training samples)", x)
+        y = check_labels("y", y, n_classes)
         if not sigma > 0:
             raise ValueError(f"sigma must be > 0; got {sigma}")
         if prior is None:
             log_prior = jnp.full(n_classes, -jnp.log(float(n_classes)))
         else:
-            log_prior = jnp.log(jnp.asarray(prior, float))
+            p = jnp.asarray(prior, float)
+            v = host_value(p)
+            if p.shape != (n_classes,) or (
+                v is not None and not (np.isfinite(v).all() and (v >= 0).all() and v.sum() > 0)
+            ):
+                shown = p.shape if p.shape != (n_classes,) else np.asarray(v).tolist()
+                raise ValueError(f"prior must be {n_classes} finite class priors >= 0 with a "
+                                 f"positive sum, shape ({n_classes},); got {shown}")  # fmt: skip
+            log_prior = jnp.log(p / jnp.sum(p))
         return cls(x, y, jnp.asarray(float(sigma)), log_prior, n_classes)
 
     def log_scores(self, x):
@@ -49,7 +91,13 @@ class PNN(eqx.Module):
         n_c = jnp.sum(onehot, axis=0)
         return logsumexp(masked, axis=0) - jnp.log(jnp.maximum(n_c, 1)) + self.log_prior
 
-    @fused
     def predict(self, x):
-        """Class of each sample of `x` (m, d) → (m,)."""
-        return jnp.argmax(jax.vmap(self.log_scores)(jnp.asarray(x, float)), axis=-1)
+        """Class of each sample of `x` (m, d), finite, → (m,) (a NaN sample was given class
+        0, the argmax over NaN scores); a traced `x` passes unchecked."""
+        x = jnp.asarray(x, float)
+        check_finite_host("x (PNN query samples)", x)
+        return self._predict(x)
+
+    @fused
+    def _predict(self, x):
+        return jnp.argmax(jax.vmap(self.log_scores)(x), axis=-1)

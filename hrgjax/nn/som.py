@@ -17,6 +17,23 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+
+from .._checks import check_finite_host
+from .pnn import check_labels, check_n_classes
+
+
+def _schedule(name: str, ends) -> tuple[float, float]:
+    """`ends` (start, end) of a geometric decay as two finite floats > 0, or a one-line
+    `ValueError` naming `name` (an end of 0 gave NaN weights or a `ZeroDivisionError`)."""
+    message = f"{name} must be (start, end), two finite numbers > 0; got {ends!r}"
+    try:
+        a, b = (float(v) for v in ends)
+    except (TypeError, ValueError):
+        raise ValueError(message) from None
+    if not (np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0):
+        raise ValueError(message)
+    return a, b
 
 
 class SOM(eqx.Module):
@@ -40,15 +57,23 @@ class SOM(eqx.Module):
     ) -> SOM:
         """Self-organise a `shape` grid on samples `x` (n, d): prototypes start at random
         samples; `rate` and `radius` (default: half the grid's larger side → 0.5) decay
-        geometrically over `steps`."""
+        geometrically over `steps`.
+
+        **Raises:** `ValueError` for a malformed or non-finite `x`, `rate` or `radius` ends
+        not finite and > 0, or `steps` < 1."""
         x = jnp.asarray(x, float)
         if x.ndim != 2 or x.shape[0] < 1:
             raise ValueError(f"x must have shape (n, d); got {x.shape}")
+        check_finite_host("x (SOM training samples)", x)
         rows, cols = int(shape[0]), int(shape[1])
         if rows < 1 or cols < 1:
             raise ValueError(f"shape must be two positive ints; got {shape}")
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+            raise ValueError(f"steps must be an integer >= 1; got {steps!r}")
         if radius is None:
             radius = (max(rows, cols) / 2.0, 0.5)
+        rate = _schedule("rate", rate)
+        radius = _schedule("radius [grid units]", radius)
         grid = jnp.stack(
             jnp.meshgrid(jnp.arange(rows, dtype=x.dtype), jnp.arange(cols, dtype=x.dtype),
                          indexing="ij"), axis=-1,
@@ -70,16 +95,26 @@ class SOM(eqx.Module):
 
     def label(self, x, y, n_classes: int) -> SOM:
         """Label each unit by the majority class of the samples `x` (n, d), `y` (n,) it
-        wins."""
-        win = self.winners(x)
+        wins; `y` must be integers in [0, `n_classes`) (`ValueError` otherwise: a label out
+        of range was dropped or wrapped round)."""
+        n_classes = check_n_classes(n_classes)
+        x = jnp.asarray(x, float)
         y = jnp.asarray(y)
+        if x.ndim != 2 or y.shape != (x.shape[0],):
+            raise ValueError(f"x must be (n, d) and y (n,); got {x.shape}, {y.shape}")
+        check_finite_host("x (SOM labelling samples)", x)
+        y = check_labels("y", y, n_classes)
+        win = self.winners(x)
         counts = jnp.zeros((self.weights.shape[0], n_classes)).at[win, y].add(1.0)
         overall = jnp.argmax(jnp.bincount(y, length=n_classes))
         labels = jnp.where(counts.sum(-1) > 0, jnp.argmax(counts, -1), overall)
         return eqx.tree_at(lambda s: s.labels, self, labels)
 
     def predict(self, x):
-        """Class of each sample of `x` (n, d) → (n,): its best-matching unit's label."""
+        """Class of each sample of `x` (n, d), finite, → (n,): its best-matching unit's label
+        (a NaN sample matched unit 0); a traced `x` passes unchecked."""
+        x = jnp.asarray(x, float)
+        check_finite_host("x (SOM query samples)", x)
         return self.labels[self.winners(x)]
 
 

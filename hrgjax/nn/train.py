@@ -7,22 +7,58 @@ import jax
 import numpy as np
 import optax
 
+from .._checks import host_value
 from .._compiled import Check, device, program
 from .._progress import bar
+
+DIVERGED = (
+    "training diverged: the loss or the weights became NaN or inf (NaN or inf in the data, "
+    "a solve inside the loss failed, or the learning rate is too large)"
+)
+"""The one-line error of every training loop here when the loss or the weights are not
+finite at the end."""
+
+
+def check_steps(steps) -> int:
+    """`steps` as an int >= 1, or a one-line `ValueError` naming it."""
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise ValueError(f"steps must be an integer >= 1 (Rprop updates); got {steps!r}")
+    return int(steps)
+
+
+def check_trained(params, losses=None) -> None:
+    """Refuse (`RuntimeError`, `DIVERGED` naming the first non-finite loss's step) trained
+    `params` or `losses` that are not finite; traced values (under `jit`) pass."""
+    if losses is not None:
+        v = host_value(losses)
+        if v is not None and not np.isfinite(v).all():
+            step = int(np.argmax(~np.isfinite(v)))
+            raise RuntimeError(f"{DIVERGED}; the loss is not finite from step {step}")
+    for leaf in jax.tree_util.tree_leaves(params):
+        v = host_value(leaf) if eqx.is_inexact_array(leaf) else None
+        if v is not None and not np.isfinite(v).all():
+            raise RuntimeError(DIVERGED)
 
 
 def rprop(loss, params, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0):
     """`steps` full-batch resilient-backpropagation updates (`optax.rprop`) of the pytree
     `params` on the scalar `loss(params)`, in one `lax.scan`; `learning_rate` is the initial
     step size, `max_step` the largest one (a sigmoid/tanh network saturates, and stops
-    learning, when a weight's step grows too large). **Returns** the parameters."""
+    learning, when a weight's step grows too large). **Returns** the parameters.
+
+    **Raises:** `ValueError` for `steps` < 1; `RuntimeError` ("training diverged") when the
+    loss or the trained weights are not finite (checked on the host after training; under
+    `jit` the traced result passes unchecked)."""
+    steps = check_steps(steps)
     state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
     scan = _rprop_scan(lambda p, _: loss(p), params, state, None, steps, learning_rate, max_step)
+    check_trained(scan[0], scan[2])
     return scan[0]
 
 
 def train_module(module, loss, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0):
-    """Rprop on the inexact-array leaves of an equinox `module`; `loss(module)` → scalar."""
+    """Rprop on the inexact-array leaves of an equinox `module`; `loss(module)` → scalar.
+    Raises as [`rprop`][hrgjax.nn.train.rprop]."""
     params, static = eqx.partition(module, eqx.is_inexact_array)
     trained = rprop(lambda p: loss(eqx.combine(p, static)), params, steps, learning_rate, max_step)
     return eqx.combine(trained, static)
@@ -54,8 +90,7 @@ _rprop_block = program(
     _rprop_scan,
     check=Check(
         "training",
-        nonfinite="training diverged: the loss or the weights became NaN or inf (a solve "
-        "inside the loss failed, or the learning rate is too large)",
+        nonfinite=DIVERGED,
     ),
 )
 """`_rprop_scan` as a compiled program (one per loss function and shapes)."""
@@ -81,13 +116,15 @@ def rprop_with_progress(
     **Returns:** `(params, losses)`: the trained parameters and the loss before each step,
     shape (steps,).
 
-    **Raises:** `RuntimeError` when the loss or the weights become non-finite.
+    **Raises:** `ValueError` for `steps` < 1; `RuntimeError` when the loss or the weights
+    become non-finite.
     """
+    steps = check_steps(steps)
     state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
-    length = _block_length(int(steps))
+    length = _block_length(steps)
     losses = []
-    with bar(int(steps), desc) as progress:
-        for _ in range(int(steps) // length):
+    with bar(steps, desc) as progress:
+        for _ in range(steps // length):
             params, state, chunk = _rprop_block(
                 loss_fn, params, state, data, length, learning_rate, max_step
             )
