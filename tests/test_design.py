@@ -97,8 +97,8 @@ def test_bench_time_gradient_equals_finite_differences_and_the_analytic_slope():
 
 
 def test_plan_file_round_trip_and_every_bad_input_named(tmp_path):
-    plan = d.BenchPlan.from_segments(SEGMENTS)
-    bench = d.BenchModel(slew_c_per_min=2.0, settle_s=900.0)
+    plan = d.BenchPlan.from_segments(SEGMENTS)  # its ramp: 3 °C/min
+    bench = d.BenchModel(slew_c_per_min=5.0, settle_s=900.0)
     path = d.save_plan(plan, tmp_path / "plan.json", bench)
     doc = json.loads((tmp_path / "plan.json").read_text())
     assert doc["segments"] == SEGMENTS  # the contract's keys, units in their names
@@ -449,7 +449,9 @@ def test_simulate_plan_file_cli(tmp_path, quiet, capsys):
     data = hg.load(out)
     assert np.unique(data.run).tolist() == [0, 1, 2]
     assert "3 segments, bench time" in capsys.readouterr().out
-    slow = d.save_plan(plan, tmp_path / "slow.json")  # a 1-°C/min chamber cannot ramp it
+    slow = tmp_path / "slow.json"  # a 1-°C/min chamber cannot ramp it (save_plan refuses)
+    slow.write_text(json.dumps(d.plan_to_json(plan, d.BenchModel(slew_c_per_min=5.0))
+                               | {"bench": d.BenchModel().to_json()}))  # fmt: skip
     cli_fails(["simulate", "--plan-file", str(slow), "--out", str(out)], capsys,
               r"slow.json: segment 2 \(ramp\): 3 °C/min is faster than")  # fmt: skip
     cli_fails(["simulate", "--plan-file", str(path), "--plan", "seed", "--out", str(out)],
@@ -918,3 +920,82 @@ def test_a_bad_linearisation_point_is_named():
         jax.jit(lambda x: d.criterion(plan, "drift", values=x))(jnp.ones(5))
     with pytest.raises(ValueError, match=r"values must be 90 finite numbers in the empirical"):
         d.criterion(plan, "drift", model="empirical", values=np.ones(12))
+
+
+def test_a_ramp_faster_than_its_bench_is_neither_written_nor_read_and_costs_the_chambers_time(
+    tmp_path,
+):
+    """100 °C in 10 s on a 1 °C/min chamber: `save_plan`, `plan_to_json` and `load_plan`
+    refuse it with `BenchModel.check`'s message (the file carries its bench), and a plan
+    built in Python — which does not know its bench — is charged the chamber's 6000 s for
+    it (it read 1.59 h, less than the 1.67 h of slewing alone)."""
+    fast = d.BenchPlan.from_segments([
+        {**SEGMENTS[0], "temperature_c": -40.0},
+        {**SEGMENTS[2], "temperature_start_c": -40.0, "temperature_end_c": 60.0,
+         "duration_s": 10.0}])  # fmt: skip
+    bench = d.BenchModel()
+    message = r"segment 1 \(ramp\): 600 °C/min is faster than the chamber's slew_c_per_min=1"
+    with pytest.raises(ValueError, match=message):
+        d.save_plan(fast, tmp_path / "fast.json", bench)
+    with pytest.raises(ValueError, match=message):
+        d.plan_to_json(fast)
+    assert not (tmp_path / "fast.json").exists()
+    f = tmp_path / "hand.json"
+    f.write_text(json.dumps({"segments": fast.segments(), "bench": bench.to_json()}))
+    with pytest.raises(ValueError, match="hand.json: " + message):
+        d.load_plan(f)
+    slow = eqx.tree_at(lambda p: p.duration_s, fast, fast.duration_s.at[1].set(6000.0))
+    assert float(d.bench_time_h(fast, bench)) == pytest.approx(
+        float(d.bench_time_h(slow, bench)), rel=1e-12
+    )
+    parts = bench.breakdown_h(fast)
+    assert parts["slew"] == pytest.approx(60.0 / 60.0 + (6000.0 - 10.0) / 3600.0, rel=1e-12)
+    assert parts["total"] == pytest.approx(float(d.bench_time_h(fast, bench)), rel=1e-12)
+    # a ramp the chamber can run is charged its duration, as before (gradient unchanged)
+    assert float(bench.ramp_overrun_s(slow)[1]) == 0.0
+    slope = float(jax.grad(lambda p: d.bench_time_h(p, bench))(slow).duration_s[1])
+    assert slope == pytest.approx(1 / 3600, rel=1e-12)
+
+
+def test_information_counts_the_windows_the_reduction_forms():
+    """Each segment's windows as `information` counts them equal those `reduce` forms of its
+    samples (10-s windows of a rotation, a static whole): a rotation shorter than a window
+    is one window of its own samples (not a full 10-s one), and a segment of fewer than 6
+    samples — which `reduce` refuses (3 batches of 2 for its standard error) — teaches
+    nothing (a 0.5-s static and a 0.7-s rotation added 2.7e9 and 1.9e11 to F's trace)."""
+    from hrgjax.calibration import reduce
+    from hrgjax.calibration._information import segment_windows
+    from hrgjax.calibration.physical import PhysicalCompensator
+
+    rot = SEGMENTS[1]
+    segs = [{**SEGMENTS[0], "duration_s": 5.0}, SEGMENTS[0], {**rot, "duration_s": 5.0},
+            {**rot, "duration_s": 9.5}, {**rot, "duration_s": 30.0},
+            {**SEGMENTS[2], "temperature_end_c": -20.0, "rate_dps": 5.0, "duration_s": 20.0}]  # fmt: skip
+    plan = d.BenchPlan.from_segments(segs)
+    dts = [d.DT_OUT[k] for k in plan.kind]
+    times = [
+        np.arange(round(s["duration_s"] / dt) + 1) * dt for s, dt in zip(segs, dts, strict=True)
+    ]
+    data = hg.MeasuredData({
+        "time_s": np.concatenate(times),
+        "run": np.concatenate([np.full(t.size, i) for i, t in enumerate(times)]),
+        "temperature_c": np.concatenate([np.full(t.size, -20.0) for t in times]),
+        "table_rate_dps": np.concatenate([np.full(t.size, s.get("rate_dps", 0.0))
+                                          for s, t in zip(segs, times, strict=True)]),
+        "wave_angle_deg": np.concatenate([-0.6 * s.get("rate_dps", 0.0) * t
+                                          for s, t in zip(segs, times, strict=True)])})  # fmt: skip
+    win = reduce(data, window_s=PhysicalCompensator.window_s)
+    counted = segment_windows(plan)
+    for i in range(plan.size):
+        mine = win.run == i
+        n = np.round(win.duration[mine] / dts[i]) + 1  # samples of each window
+        assert counted[i] == (n[0], mine.sum()), (i, counted[i], n, mine.sum())
+    base = d.BenchPlan.from_segments([SEGMENTS[0]])
+    before = np.asarray(d.information(base))
+    for short in ({**SEGMENTS[0], "duration_s": 0.5}, {**SEGMENTS[0], "duration_s": 4.0},
+                  {**rot, "duration_s": 0.7}, {**rot, "duration_s": 2.0}):  # fmt: skip
+        plan = d.BenchPlan.from_segments([SEGMENTS[0], short])
+        assert segment_windows(plan)[1] == (0.0, 0.0)
+        np.testing.assert_array_equal(np.asarray(d.information(plan)), before)
+    with pytest.raises(ValueError, match="windows of 5 samples are too short"):
+        reduce(hg.MeasuredData({k: v[:5] for k, v in data.columns.items()}))

@@ -87,6 +87,50 @@ def test_self_calibration_reads_the_gyros_static_drift(sweeps):
     np.testing.assert_array_equal(comp.scale_factor_at(angles, 20.0), 1.0)
 
 
+def test_precession_in_the_wrong_unit_is_refused(sweeps):
+    """A `precession_dps` column in rad/s fitted S₀ = 180/π and g 57× too large, silently:
+    the fit refuses a constant gain S₀ further than `GAIN_TOLERANCE` from 1, naming the
+    column and the unit it looks like."""
+    for factor, hint in ((DEG, "looks like rad/s"), (1 / DEG, "57.3× too large"),
+                         (-1.0, "unit .* and sign")):  # fmt: skip
+        bad = hg.MeasuredData(sweeps.columns | {"precession_dps": sweeps["precession_dps"] * factor},
+                              allow_extra=True)  # fmt: skip
+        with pytest.raises(ValueError, match=f"precession_dps: at 20 °C .*S₀ = .*{hint}"):
+            sc.PrecessionCompensator().fit(bad)
+
+
+def test_sweeps_in_force_to_rebalance_mode_are_refused(sweeps):
+    """Audit: an FTR gyro given a precession plan holds the wave where the commanded
+    precession puts it, and the fit found S = 1, D = 0 (a confident "no drift" where the
+    truth was ±3 °/h). Data with a `rebalance_rate_dps` column and the loop on are refused;
+    with `rebalance_on` 0 throughout (the loop off: whole-angle data) they fit as before."""
+    n = len(sweeps["time_s"])
+    held = sweeps.columns | {"rebalance_rate_dps": np.zeros(n)}
+    with pytest.raises(ValueError, match=r"^self-calibration reads whole-angle sweeps; .*held"):
+        sc.PrecessionCompensator().fit(hg.MeasuredData(held))
+    on = held | {"rebalance_on": np.r_[np.zeros(n - 1), 1.0]}
+    with pytest.raises(ValueError, match=r"force-to-rebalance output"):
+        sc.PrecessionCompensator().fit(hg.MeasuredData(on))
+    off = hg.MeasuredData(held | {"rebalance_on": np.zeros(n)})
+    np.testing.assert_array_equal(
+        sc.PrecessionCompensator().fit(off).drift_coef,
+        sc.PrecessionCompensator().fit(sweeps).drift_coef,
+    )
+
+
+def test_readout_gain_mismatch_is_free_of_the_forcers_common_gain(sweeps):
+    """A common forcer gain g_f scales the whole gain S = (1 + g_f)(1 − g cos 2θ) (a
+    simulated forcer_gain of 5 % read S₀ = 1.05, −S₁ = 1.056 g, −S₁/S₀ = g to 3e-4): the
+    recorded command ρ/(1 + g_f) for a wave turned at ρ is the same fit. g = −S₁/S₀; −S₁
+    alone was 5 % off."""
+    g_f = 0.05
+    cols = sweeps.columns | {"precession_dps": sweeps["precession_dps"] / (1 + g_f)}
+    comp = sc.PrecessionCompensator().fit(hg.MeasuredData(cols, allow_extra=True))
+    np.testing.assert_allclose(np.asarray(comp.gain_coef[:, 0]), 1 + g_f, rtol=1e-4)
+    np.testing.assert_allclose(comp.readout_gain_mismatch, [float(BASE.readout.gain_mismatch)],
+                               rtol=0.02)  # fmt: skip
+
+
 def _sweep_jacobian(mode):
     """d(fitted 2θ drift coefficients)/d(Δ(1/τ), θ_τ) through the simulated sweeps and the
     least squares (`mode` "forward" or "reverse"), and central finite differences."""

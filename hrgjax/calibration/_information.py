@@ -49,30 +49,70 @@ def gauss_markov_discount(duration_s, arw, sigma, tau):
     return 1.0 / (1.0 + excess)
 
 
+LEAST_SAMPLES = 6.0
+"""Fewest samples of a window `reduce` (and so the physical fit) accepts: its standard error
+takes at least 3 batches of 2 samples (`reduce`: `min(batches, n // 2) ≥ 3`); a segment
+with fewer teaches `information` nothing."""
+
+
 def _segment_windows(dt, t0, t1, rate_dps, duration):
-    """(samples, sample interval [s], length [s]) of the windows the physical fit reduces a
-    segment with (see `window_density`): moving — `PhysicalCompensator.window_s` (10 s);
-    a ramp at rest — ≈ `RAMP_WINDOW_S` (300 s) tiling it; static — the whole segment (one
-    window of duration/Δt + 1 samples); sampled at `DT_OUT` of its kind."""
+    """(samples, sample interval [s], length [s], windows) of the windows the physical fit
+    (and `reduce`) cuts a segment into (see `window_density`), sampled at `DT_OUT` of its
+    kind: N = duration/Δt + 1 samples (whole for every plan `simulate_plan` runs: it
+    refuses a duration that is not a whole number of Δt). Moving — windows of n =
+    max(round(`PhysicalCompensator.window_s`/Δt), 4) samples, (N − 1)/n of them (at least
+    one), or one window of all N samples where N < n (`reduce` and the fit keep a run
+    shorter than a window whole); a ramp at rest — ≈ `RAMP_WINDOW_S` (300 s) windows tiling
+    it; static — one window of all N. A segment of fewer than `LEAST_SAMPLES` (6) forms
+    none: windows 0. `length` is the stretch of segment each window stands for
+    (duration / windows).
+
+    The moving count is the continuous extension of the ⌊N/n⌋ whole windows the reduction
+    forms (the samples past the last are not used): equal to it where the duration is a
+    whole number of windows (the seed's 180-s rotations: 18), within one window elsewhere
+    (a 72-s rotation: 7.2 for 7) — a whole count would be a staircase in the duration, on
+    whose steps every whole-second duration sits, and the design search and the
+    criterion's gradient need one that moves with it."""
     from .physical import RAMP_WINDOW_S, PhysicalCompensator
 
     moving = rate_dps != 0.0
     ramp = t1 != t0
-    ramp_window = duration / jnp.maximum(jnp.round(duration / RAMP_WINDOW_S), 1.0)  # tiling
-    length = jnp.where(moving, PhysicalCompensator.window_s,
-                       jnp.where(ramp, ramp_window, duration))  # fmt: skip
-    samples = jnp.where(moving | ramp, length / dt, duration / dt + 1.0)
-    return samples, dt, length
+    total = duration / dt + 1.0  # N
+    enough = total >= LEAST_SAMPLES
+    per_window = jnp.maximum(jnp.round(PhysicalCompensator.window_s / dt), 4.0)
+    long = total >= per_window
+    moving_windows = jnp.where(long, jnp.maximum((total - 1.0) / per_window, 1.0), 1.0)
+    ramp_windows = jnp.maximum(jnp.round(duration / RAMP_WINDOW_S), 1.0)  # tiling
+    windows = jnp.where(moving, moving_windows, jnp.where(ramp, ramp_windows, 1.0))
+    windows = jnp.where(enough, windows, 0.0)
+    samples = jnp.where(moving, jnp.where(long, per_window, total),
+                        jnp.where(ramp, duration / ramp_windows / dt, total))  # fmt: skip
+    samples = jnp.where(enough, samples, LEAST_SAMPLES)  # (not used: no window)
+    length = duration / jnp.maximum(windows, 1.0)
+    return samples, dt, length, windows
 
 
 def _segment_weights(noise, dt, t0, t1, rate_dps, duration):
     """Per segment: 1/N_w² × the segment's `gauss_markov_discount` — the factor of its
     quadrature weights [s⁻¹ per (rad/s)²] (N_w the windows' `window_density` with N, σ_a =
-    `noise[0]`, `noise[3]`; σ, τ = `noise[1:3]`)."""
+    `noise[0]`, `noise[3]`; σ, τ = `noise[1:3]`); 0 for a segment too short for a window
+    (`_segment_windows`)."""
     arw, sigma, tau, angle_white = noise[0], noise[1], noise[2], noise[3]
-    density = window_density(arw, angle_white, *_segment_windows(dt, t0, t1, rate_dps,
-                                                                 duration))  # fmt: skip
-    return gauss_markov_discount(duration, density, sigma, tau) / density**2
+    samples, dt, length, windows = _segment_windows(dt, t0, t1, rate_dps, duration)
+    density = window_density(arw, angle_white, samples, dt, length)
+    weight = gauss_markov_discount(duration, density, sigma, tau) / density**2
+    return jnp.where(windows > 0.0, weight, 0.0)
+
+
+def segment_windows(plan: BenchPlan) -> list[tuple[float, float]]:
+    """(samples per window, windows) of each segment of a concrete `plan` as `information`
+    counts them (`_segment_windows`; (0, 0) for a segment too short for one) — what the
+    reduction forms of the segment's data at `DT_OUT`."""
+    dt = jnp.asarray([DT_OUT[k] for k in plan.kind], dtype=float)
+    samples, _, _, windows = _segment_windows(dt, plan.temperature_c, plan.temperature_end_c,
+                                              plan.rate_dps, plan.duration_s)  # fmt: skip
+    return [(float(n) if w else 0.0, float(w))
+            for n, w in zip(np.asarray(samples), np.asarray(windows), strict=True)]  # fmt: skip
 
 
 # The kinds of quadrature point (`_quadrature_points`): along a static or ramp, over one

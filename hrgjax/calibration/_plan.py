@@ -231,7 +231,10 @@ class BenchModel(eqx.Module):
     T_s = `settle_scale_c`: a smooth
     version of "slew at the chamber's rate, then soak until the gyro is at temperature", so
     that the bench time has a gradient with respect to every temperature. Ramps run at their
-    own rate inside their duration (`check` refuses one faster than the chamber).
+    own rate inside their duration; one faster than the chamber takes the chamber's time,
+    |T₁ − T₀|_δ/slew, and is charged it (`ramp_overrun_s`, counted as slewing) — `check`
+    refuses it, as do `save_plan`, `plan_to_json` and `load_plan` for the bench they write
+    or read.
 
     **Arguments:**
 
@@ -278,16 +281,31 @@ class BenchModel(eqx.Module):
         repos = jnp.broadcast_to(jnp.asarray(self.reposition_s, dtype=float), dt.shape)
         return {"slew": slew, "settle": settle, "reposition": repos}
 
+    def ramp_overrun_s(self, plan: BenchPlan) -> jax.Array:
+        """Per segment, the time a ramp faster than the chamber takes beyond its duration
+        [s], shape (S,): max(0, |T₁ − T₀|_δ/slew − duration) (0 for every other segment and
+        every ramp the chamber can run) — a plan does not know its bench, so `bench_time_s`
+        charges the chamber's time rather than the plan's (`check` refuses such a plan)."""
+        dtemp = plan.temperature_end_c - plan.temperature_c
+        slowest = dtemp * jnp.tanh(dtemp / 0.05) / self.slew_c_per_min * 60.0
+        ramp = jnp.asarray([k == "ramp" for k in plan.kind])
+        over = slowest - plan.duration_s  # where (not max): 0 with no slope at the limit
+        return jnp.where(ramp & (over > 0.0), over, 0.0)
+
     def bench_time_s(self, plan: BenchPlan) -> jax.Array:
-        """Bench time of the whole plan [s]: measuring plus every transition (differentiable
+        """Bench time of the whole plan [s]: measuring plus every transition, plus the
+        chamber's time a ramp too fast for it overruns (`ramp_overrun_s`; differentiable
         with respect to the plan's arrays)."""
         parts = self.transitions_s(plan)
-        return plan.measuring_s + sum(jnp.sum(p) for p in parts.values())
+        return (plan.measuring_s + sum(jnp.sum(p) for p in parts.values())
+                + jnp.sum(self.ramp_overrun_s(plan)))  # fmt: skip
 
     def breakdown_h(self, plan: BenchPlan) -> dict[str, float]:
-        """Bench time split into measuring, slewing, settling and re-positioning [h]."""
+        """Bench time split into measuring, slewing (a too-fast ramp's `ramp_overrun_s`
+        included), settling and re-positioning [h]."""
         parts = {"measuring": plan.measuring_s}
         parts.update({k: jnp.sum(v) for k, v in self.transitions_s(plan).items()})
+        parts["slew"] = parts["slew"] + jnp.sum(self.ramp_overrun_s(plan))
         out = {k: float(v) / 3600.0 for k, v in parts.items()}
         out["total"] = sum(out.values())
         return out

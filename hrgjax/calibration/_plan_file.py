@@ -13,7 +13,9 @@ A plan file is::
                "start_temperature_c": 20.0}}
 
 `bench_time_h` (and the `bench` block it was computed with) is written for the reader; on
-loading, the bench time is computed again from the segments. A designed plan adds its
+loading, the bench time is computed again from the segments. A plan its bench cannot run
+(a ramp faster than the chamber's `slew_c_per_min`: `BenchModel.check`) is neither
+written nor read. A designed plan adds its
 `"criterion"` and `"resolution"` blocks.
 """
 
@@ -39,8 +41,10 @@ def plan_to_json(plan: BenchPlan, bench: BenchModel | None = None, *,
     `unit`, `optimised` — the search's plan — and `rounded` — this one; as
     `Design.criterion_json`) and `resolution` (the steps the plan was rounded to, by
     segment key: `temperature_c` [°C], `wave_angle_deg` [° electrical], `duration_s` [s],
-    `rate_dps` [°/s]), those blocks too."""
+    `rate_dps` [°/s]), those blocks too. **Raises:** `ValueError` (`BenchModel.check`'s)
+    for a ramp faster than `bench`'s chamber."""
     bench = BenchModel() if bench is None else bench
+    bench.check(plan)
     doc = {
         "segments": plan.segments(),
         "bench_time_h": float(bench_time_h(plan, bench)),
@@ -140,4 +144,8 @@ def load_plan(path: str | os.PathLike, *, blocks: bool = False):
             bench = BenchModel(**{k: float(v) for k, v in b.items()})
         except (TypeError, ValueError) as err:
             raise ValueError(f"{where}: 'bench': {err}") from None
+    try:
+        bench.check(plan)
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from None
     return (plan, bench, kept) if blocks else (plan, bench)

@@ -219,12 +219,15 @@ class PrecessionCompensator(AbstractCompensator):
     @property
     def readout_gain_mismatch(self) -> np.ndarray:
         """The pickoff gain mismatch g at each calibrated temperature [–], read from the
-        sweeps' gain S ≈ 1 − g cos 2θ (module docstring) **assuming ideal forcers**: a forcer
-        gain mismatch g_m adds to it (S's cos 2θ term is −(g + g_m)) and cannot be told
-        apart at rest."""
+        sweeps' gain S ≈ (1 + g_f)(1 − g cos 2θ) (module docstring; g_f the forcers' common
+        gain, which scales the whole of S) as −S₁/S₀, the cos 2θ term over the constant:
+        free of g_f (−S₁ alone is (1 + g_f) g: 5 % off at g_f = 5 %). It **assumes matched
+        forcers**: a forcer gain mismatch g_m adds to it (S's cos 2θ term is −(g + g_m)) and
+        cannot be told apart at rest."""
         if self.gain_coef is None:
             raise ValueError("this PrecessionCompensator is not fitted; use comp = comp.fit(data)")
-        return -np.asarray(self.gain_coef)[:, 1]
+        coef = np.asarray(self.gain_coef)
+        return -coef[:, 1] / coef[:, 0]
 
     def scale_factor(self, theta, temperature_c):
         """The nominal 1: sweeps at rest do not calibrate the scale factor (module docstring)."""
@@ -235,9 +238,12 @@ class PrecessionCompensator(AbstractCompensator):
         from [`run_precession_plan`][hrgjax.calibration.run_precession_plan]
         or a gyro's own sweeps); `key` and `raw` are not used.
 
-        **Raises:** `ValueError` for data without the column, a temperature without sweeps
-        in both directions, sweeps too short for the harmonics, or sweeps in one direction
-        covering less than `MIN_COVERAGE_DEG` (120°) of the 180° (electrical) period."""
+        **Raises:** `ValueError` for data without the column, force-to-rebalance output (a
+        `rebalance_rate_dps` column with `rebalance_on` absent or 1), a temperature without sweeps
+        in both directions, sweeps too short for the harmonics, sweeps in one direction
+        covering less than `MIN_COVERAGE_DEG` (120°) of the 180° (electrical) period, or a
+        fitted constant gain S₀ further than `GAIN_TOLERANCE` from 1 (the column in the
+        wrong unit: S₀ ≈ 180/π for rad/s)."""
         require_x64("PrecessionCompensator.fit")
         if not isinstance(data, MeasuredData):
             raise TypeError("PrecessionCompensator.fit needs MeasuredData (the sweeps' samples)")
@@ -246,11 +252,21 @@ class PrecessionCompensator(AbstractCompensator):
                 "self-calibration needs virtual-precession data: a 'precession_dps' column "
                 "(the commanded rate [°/s]; run_precession_plan or hrgjax simulate --precession)"
             )
+        if "rebalance_rate_dps" in data and np.any(
+            data["rebalance_on"] != 0 if "rebalance_on" in data else True
+        ):
+            raise ValueError(
+                "self-calibration reads whole-angle sweeps; these data are force-to-rebalance "
+                "output (a rebalance_rate_dps column with the loop on: the wave is held and "
+                "follows the commanded precession exactly, so the drift would read 0) — run "
+                "the sweeps in whole-angle mode (Control(mode='wa'), run_precession_plan)"
+            )
         groups = _sweeps_by_temperature(data, self.temperature_bin, self.settle_s)
         temps, drift, sf = [], [], []
         for temp, runs in groups:
             t, th, rho, w = _padded(runs)
             s, d = fit_sweeps(device(t), device(th), device(rho), device(w), self.harmonics)
+            _check_gain(float(s[0]), temp)
             temps.append(temp)
             drift.append(-np.asarray(d) / self.k_e)
             sf.append(np.asarray(s))
@@ -266,6 +282,30 @@ class PrecessionCompensator(AbstractCompensator):
             (jnp.asarray(np.stack(drift)), jnp.asarray(np.stack(sf))),
             is_leaf=lambda x: x is None,
         )
+
+
+GAIN_TOLERANCE = 0.2
+"""Largest |S₀ − 1| `PrecessionCompensator.fit` accepts, S₀ the constant term of the fitted
+gain of the commanded precession: S₀ = 1 + g_f, the forcers' common gain error (a few
+percent at most on a working gyro — an error of tens of percent is not a gyro, it is a
+`precession_dps` column in the wrong unit: rad/s gives S₀ = 180/π ≈ 57.3)."""
+
+
+def _check_gain(s0: float, temp: float) -> None:
+    """Refuse a fitted constant gain S₀ (at `temp` [°C]) implausibly far from 1."""
+    if abs(s0 - 1.0) <= GAIN_TOLERANCE:
+        return
+    if abs(s0 * DEG - 1.0) <= GAIN_TOLERANCE:
+        hint = "S₀ ≈ 180/π: the precession_dps column looks like rad/s; give °/s"
+    elif abs(s0 / DEG - 1.0) <= GAIN_TOLERANCE:
+        hint = ("S₀ ≈ π/180: the precession_dps column looks 57.3× too large (or "
+                "wave_angle_deg in rad); give °/s and °")  # fmt: skip
+    else:
+        hint = "check the precession_dps column's unit (°/s, electrical) and sign"
+    raise ValueError(
+        f"precession_dps: at {temp:g} °C the sweeps' fitted gain S₀ = {s0:.4g}, expected "
+        f"1 ± {GAIN_TOLERANCE:g} (the forcers' gain); {hint}"
+    )
 
 
 def _sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
