@@ -83,25 +83,6 @@ def fused(fn=None, **jit_kwargs):
     return functools.wraps(fn)(jax.jit(fn, inline=True, **jit_kwargs))
 
 
-class ByIdentity:
-    """A user's function as a static argument of a `fused` program (`static_argnames`):
-    hashed and compared by identity, so that the same function object meets the program it
-    compiled before, whatever it holds — `jax.jit` hashes a static argument, and a callable
-    equinox Module with array fields cannot be hashed. The function is in `.fn`; the compiled
-    program keeps it alive (its identity cannot be reused by another object meanwhile)."""
-
-    __slots__ = ("fn",)
-
-    def __init__(self, fn):
-        self.fn = fn
-
-    def __hash__(self) -> int:
-        return id(self.fn)
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, ByIdentity) and other.fn is self.fn
-
-
 def _is_traced(tree) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 

@@ -29,7 +29,7 @@ import numpy as np
 from jax.scipy.linalg import expm
 
 from ._checks import check_covariance, check_finite_host, concrete_value, host_value
-from ._compiled import ByIdentity, fused
+from ._compiled import fused
 from ._linalg import cho_logdet, cho_solve, cholesky, whiten
 from ._x64 import require_x64
 
@@ -377,13 +377,21 @@ def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None)
 
     `f(x, u) -> x` and `h(x) -> z` (pure JAX functions); `qd` (n, n) or (K, n, n); `R` (m, m);
     `us` (K, p) inputs passed to `f` (zeros (K, 0) when None). On a linear model it is the
-    Kalman filter. An eager call runs one compiled program per shape and per `f`, `h`
-    (the same function objects: a later call on new data compiles nothing).
+    Kalman filter.
+
+    One compiled program per shape and model: `f` and `h` are arguments of the program as
+    equinox treats them — the arrays of a callable `eqx.Module` (or of a bound method's
+    Module) are its inputs, so a model with new parameter values compiles nothing and is
+    never stale; a plain function is a static part, compared with `==` (the same function
+    object, the same bound method), so it must be pure (a function reading a global that
+    changes afterwards keeps the program compiled with the old value, as under `jax.jit`).
+    A fresh closure on every call compiles on every call, and the compile cache keeps it
+    (and what it captures) for as long as JAX keeps the program.
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
     require_x64("hrgjax.kalman.extended_kalman_filter")
     _check_model(f, h)
-    return _extended_kalman_filter(prior, ByIdentity(f), qd, ByIdentity(h), R, zs, mask, us)
+    return _extended_kalman_filter(prior, f, qd, h, R, zs, mask, us)
 
 
 def _ekf(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
@@ -403,11 +411,9 @@ def _ekf(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
     return xs, ps, jnp.sum(ll)
 
 
-# one program per shape and model (f, h by identity): an eager call compiled its scan every
-# time (`benchmarks/kalman_calls.py`)
-@fused(static_argnames=("f", "h"))
-def _extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
-    return _ekf(prior, f.fn, qd, h.fn, R, zs, mask, us)
+# one program per shape and model (a Module's arrays are inputs, a function is static): an
+# eager call compiled its scan every time (`benchmarks/kalman_calls.py`)
+_extended_kalman_filter = eqx.filter_jit(_ekf)
 
 
 def sigma_points(g: Gaussian, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
@@ -429,12 +435,12 @@ def unscented_kalman_filter(
     [`extended_kalman_filter`][hrgjax.kalman.extended_kalman_filter], moments propagated
     through `f` and `h` by [`sigma_points`][hrgjax.kalman.sigma_points] instead of Jacobians
     (exact for the mean of a quadratic). The log-likelihood is that of the innovation under
-    its unscented covariance. Compiled once per shape and per `f`, `h`, as the EKF."""
+    its unscented covariance. Compiled once per shape and model, as the EKF (`alpha`,
+    `beta`, `kappa` are inputs: new values compile nothing)."""
     require_x64("hrgjax.kalman.unscented_kalman_filter")
     _check_model(f, h)
-    return _unscented_kalman_filter(
-        prior, ByIdentity(f), qd, ByIdentity(h), R, zs, mask, us, alpha, beta, kappa
-    )
+    alpha, beta, kappa = (jnp.asarray(v, float) for v in (alpha, beta, kappa))
+    return _unscented_kalman_filter(prior, f, qd, h, R, zs, mask, us, alpha, beta, kappa)
 
 
 def _ukf(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None, alpha=1.0, beta=2.0, kappa=0.0):
@@ -470,9 +476,7 @@ def _ukf(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None, alpha=1.0, beta=2
     return xs, ps, jnp.sum(ll)
 
 
-@fused(static_argnames=("f", "h"))  # one program per shape and model, as the EKF's
-def _unscented_kalman_filter(prior, f, qd, h, R, zs, mask, us, alpha, beta, kappa):
-    return _ukf(prior, f.fn, qd, h.fn, R, zs, mask, us, alpha, beta, kappa)
+_unscented_kalman_filter = eqx.filter_jit(_ukf)  # one program per shape and model, as the EKF's
 
 
 # the plain passes (`extended_kalman_filter.__wrapped__(…)`: as before, traced every call)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
 import weakref
 
@@ -16,34 +15,35 @@ from . import _cost, _upstream, plausible
 class _FnCache:
     """Values kept per swept function while it lives: by the function itself where it is
     hashable, else by its identity — a callable equinox Module with array fields cannot be
-    hashed, and a fresh `jax.jit` on every sweep compiled its same shapes again each time."""
+    hashed, and a fresh `jax.jit` on every sweep compiled its same shapes again each time.
+    A value reaches its function only through a weak reference, so the cache never keeps a
+    function (and the arrays it holds) alive: the entry goes when the function goes."""
 
     def __init__(self):
         self.by_key: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
         self.by_id: dict = {}
 
     def get(self, fn, make):
-        """`make()`'s value kept for `fn`; a `fn` that can be neither hashed nor weakly
-        referenced gets a fresh one."""
+        """`make(ref)`'s value kept for `fn`, where `ref()` returns `fn` (the value must
+        reach `fn` only through it); a `fn` that cannot be weakly referenced (a builtin)
+        gets a fresh one each time."""
         try:
-            return self.by_key[fn]
-        except KeyError:
-            value = make()
-            with contextlib.suppress(TypeError):  # not weakly referable (a builtin)
-                self.by_key[fn] = value
-            return value
-        except TypeError:  # unhashable: by identity
-            pass
-        kept = self.by_id.get(id(fn))
-        if kept is not None and kept[0]() is fn:
-            return kept[1]
-        value = make()
-        key = id(fn)
-        try:
-            ref = weakref.ref(fn, lambda _, key=key: self.by_id.pop(key, None))
+            ref = weakref.ref(fn)
         except TypeError:
+            return make(lambda: fn)
+        try:
+            value = self.by_key.get(fn)
+        except TypeError:  # unhashable: by identity
+            key = id(fn)
+            kept = self.by_id.get(key)
+            if kept is not None and kept[0]() is fn:
+                return kept[1]
+            value = make(ref)
+            gone = weakref.ref(fn, lambda _, key=key: self.by_id.pop(key, None))
+            self.by_id[key] = (gone, value)
             return value
-        self.by_id[key] = (ref, value)
+        if value is None:
+            value = self.by_key[fn] = make(ref)
         return value
 
 
@@ -214,13 +214,13 @@ def _probe(fn):
     `state["simulates"]` turns False once a trace has shown that `fn` calls no `simulate`,
     or none whose estimate can leave `fn`'s own transformations (`member_costs`)."""
 
-    def make():
+    def make(ref):
         state = {"simulates": True}
 
         def one(kw):
             with _cost.probing():
                 try:
-                    fn(**kw)
+                    ref()(**kw)
                 except _cost.Found as found:
                     return jnp.asarray(found.cost, dtype=float)
             state["simulates"] = False
@@ -234,7 +234,7 @@ def _probe(fn):
 def _batched(fn):
     """`jax.jit(jax.vmap(fn))` on a dict of keyword arrays, one per `fn` (kept while `fn`
     lives), so repeated sweeps of one function reuse its compiled batch."""
-    return _BATCHED.get(fn, lambda: jax.jit(jax.vmap(lambda kw: fn(**kw))))
+    return _BATCHED.get(fn, lambda ref: jax.jit(jax.vmap(lambda kw: ref()(**kw))))
 
 
 def _local(call, flat, chunk_size, progress, total):

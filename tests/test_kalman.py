@@ -209,10 +209,11 @@ def test_eager_filters_and_steady_state_compile_once_per_shape():
 
 
 def test_eager_ekf_and_ukf_compile_once_per_shape_and_model():
-    """A later eager EKF/UKF call with the same `f`, `h` (a plain function, or a callable
-    equinox Module, which cannot be hashed) on new values of the same shapes compiles
-    nothing (each compiled its `lax.scan` on every call) and gives the plain pass's values;
-    a model that is not a function is refused in one line."""
+    """A later eager EKF/UKF call with the same `f`, `h` (a plain function, a callable
+    equinox Module, a bound method) on new values of the same shapes compiles nothing (each
+    compiled its `lax.scan` on every call) and gives the plain pass's values; a Module with
+    new parameter values is a new input, not a stale program; a model that is not a function
+    is refused in one line."""
     import equinox as eqx
     from helpers import CompileCounter
 
@@ -222,17 +223,28 @@ def test_eager_ekf_and_ukf_compile_once_per_shape_and_model():
         def __call__(self, x):
             return self.h @ x
 
+    class Plant:  # a plain object: its bound methods are equal, not identical, call to call
+        def transition(self, x, u):
+            return PHI @ x + u
+
     f = lambda x, u: PHI @ x + u
-    zs, r2 = ZS + 0.25, 2.0 * R
+    zs, r2, h2 = ZS + 0.25, 2.0 * R, 2.0 * H
     for run in (kalman.extended_kalman_filter, kalman.unscented_kalman_filter):
-        for h in (lambda x: H @ x, Measure(H)):
-            run(PRIOR, f, QD, h, R, ZS, us=US)
+        for fn, h, h_new in ((f, lambda x: H @ x, None), (f, Measure(H), Measure(h2)),
+                             (Plant().transition, Measure(H), Measure(h2))):  # fmt: skip
+            run(PRIOR, fn, QD, h, R, ZS, us=US)
             with CompileCounter() as again:
-                got = run(PRIOR, f, QD, h, r2, zs, us=US)
+                got = [
+                    run(PRIOR, fn, QD, model, r2, zs, us=US)
+                    for model in (h, h_new)
+                    if model is not None
+                ]
             assert again.compiles == 0, (run.__name__, again.names)
-            plain = run.__wrapped__(PRIOR, f, QD, h, r2, zs, us=US)
-            for a, b in zip(got, plain, strict=True):
-                np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+            for out, model in zip(got, (h, h_new), strict=False):
+                plain = run.__wrapped__(PRIOR, fn, QD, model, r2, zs, us=US)
+                for a, b in zip(out, plain, strict=True):
+                    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+            assert len(got) == 1 or not np.allclose(got[1][2], got[0][2])
         with pytest.raises(ValueError, match=r"^h must be a function h\(x\) -> z; got ArrayImpl$"):
             run(PRIOR, f, QD, H, R, ZS)
 

@@ -99,6 +99,10 @@ def test_som_refuses_zero_schedule_ends_nan_samples_and_bad_labels():
     for labels in ([0, 0, 5, 5], [0, 0, -1, -1], [0.0, 0.0, 0.5, 1.0]):
         with pytest.raises(ValueError, match=r"^y must be integer class labels in \[0, 2\)"):
             m.label(x, np.array(labels), 2)
+    # a traced schedule (a sweep over the rate, its gradient) is not refused
+    trained = lambda r: som.SOM.train(x, (2, 2), key=key, steps=20, rate=(r, 0.01)).weights
+    np.testing.assert_allclose(jax.vmap(trained)(jnp.array([0.5]))[0], trained(0.5), rtol=1e-12)
+    assert np.isfinite(jax.grad(lambda r: trained(r).sum())(0.5))
 
 
 def test_rprop_refuses_divergence_and_zero_steps_alike_everywhere():

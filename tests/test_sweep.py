@@ -1,10 +1,12 @@
 """`hg.sweep`: sharded over devices and processes, chunked, ordered by cost — each equal to
 the one-batch result."""
 
+import gc
 import os
 import subprocess
 import sys
 import textwrap
+import weakref
 
 import jax
 import jax.numpy as jnp
@@ -198,6 +200,14 @@ def test_a_chunked_sweep_compiles_its_chunk_once_and_a_second_sweep_nothing():
         np.testing.assert_allclose(
             one, jax.vmap(jax.vmap(fn, (None, 0)), (0, None))(a, b), rtol=1e-15
         )
+    # the kept programs do not keep the swept function (and the arrays it holds) alive
+    gone = []
+    for fn in (lambda a, b: a - b, Scaled(jnp.ones(1000))):
+        hg.sweep(fn, a=a, b=b)
+        gone.append(weakref.ref(fn))
+        del fn
+    gc.collect()
+    assert [r() for r in gone] == [None, None]
 
 
 def test_a_bad_grid_or_a_failed_check_inside_is_one_line(caplog):

@@ -19,20 +19,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite_host
+from .._checks import check_finite_host, host_value
 from .pnn import check_labels, check_n_classes
 
 
-def _schedule(name: str, ends) -> tuple[float, float]:
-    """`ends` (start, end) of a geometric decay as two finite floats > 0, or a one-line
-    `ValueError` naming `name` (an end of 0 gave NaN weights or a `ZeroDivisionError`)."""
+def _schedule(name: str, ends):
+    """`ends` (start, end) of a geometric decay, unchanged, or a one-line `ValueError` naming
+    `name` unless both are finite and > 0 (an end of 0 gave NaN weights or a
+    `ZeroDivisionError`); a traced end (a sweep, `jax.grad` over the schedule) passes."""
     message = f"{name} must be (start, end), two finite numbers > 0; got {ends!r}"
     try:
-        a, b = (float(v) for v in ends)
+        a, b = ends
+        values = [host_value(jnp.asarray(v, float)) for v in (a, b)]
     except (TypeError, ValueError):
         raise ValueError(message) from None
-    if not (np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0):
-        raise ValueError(message)
+    for v in values:
+        if v is not None and not (v.shape == () and np.isfinite(v) and v > 0):
+            raise ValueError(message)
     return a, b
 
 
