@@ -431,3 +431,19 @@ def test_scores_without_fault_free_steps_are_refused_or_none():
             ValueError, match=r"warmup_s must be in \[0, duration\) = \[0, 4000.0\)"
         ):
             cp.compare("stationary", n_healthy=0, warmup_s=warmup, key=jax.random.key(0))
+
+
+def test_false_alarms_are_scored_from_the_first_measurement_at_warmup_s():
+    """Measurement k is at t = (k + 2)·dt (the trace's time grid): the first scored step is
+    the first measurement at t ≥ warmup_s — `round(warmup_s / dt)` was two steps late (50 s
+    of warm-up at dt = 1 s scored from t = 52 s) — and the first one for warmup_s = 0."""
+    from hrgjax.diagnosis import compare as cp
+
+    for dt, warmups in ((1.0, (0.0, 1.0, 2.0, 2.5, 3.0, 50.0)), (0.1, (0.0, 0.3, 5.0, 5.05)),
+                        (0.01, (0.07, 0.5))):  # fmt: skip
+        t = cp._measurement_times(int(60 / dt), dt)
+        for w in warmups:
+            k0 = cp._first_step_at(w, dt)
+            assert k0 == np.flatnonzero(t >= w - 1e-12)[0], (dt, w, k0, t[k0])
+            assert t[k0] >= w - 1e-12 and (k0 == 0 or t[k0 - 1] < w - 1e-12), (dt, w, k0)
+    assert cp._first_step_at(0.0, 1.0) == 0 and cp._first_step_at(50.0, 1.0) == 48

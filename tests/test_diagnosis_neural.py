@@ -185,3 +185,38 @@ def test_detectors_trained_the_default_way_name_the_ins_of_a_negative_fault(data
         xt, yt = nl.classifier_set(w, c, None)
         acc = float(jnp.mean(det.classify(xt) == yt))
         assert acc > 0.8, (sign, acc)
+
+
+def test_detectors_refuse_a_nan_window_on_the_host_and_pass_a_traced_one():
+    """A NaN feature row was named a confident class (the PNNs' arg-max over NaN scores gave
+    class 0, the SOM unit 0's label, the predictor bank's arg-min S0): each public classify
+    refuses it in one line naming the input; under the caller's `jit`/`vmap` (compare's
+    batched runs) the input passes unchecked, as before."""
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(40, 6)), np.arange(40) % 4
+    q = x[:3].copy()
+    q[1, 2] = np.nan
+    dets = {
+        "PNNDirect": nl.PNNDirect.fit(x, y, 4, 1.0),
+        "PNNBank": nl.PNNBank.fit(x, y, 4, 1.0),
+        "SOMDetector": nl.SOMDetector.fit(x, y, 4, key=jax.random.key(0), shape=(3, 3), steps=50),
+        "MLPClassifier": nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(0), hidden=(3,), steps=2),
+    }
+    jit_classify = jax.jit(lambda det, q: det.classify(q))
+    for name, det in dets.items():
+        with pytest.raises(ValueError, match=rf"^x \({name} query features\) must be finite; "
+                                             r"it has nan at index \(1, 2\)$"):  # fmt: skip
+            det.classify(q)
+        assert jit_classify(det, q).shape == (3,)
+        assert jax.vmap(det.classify)(q[None]).shape == (1, 3)
+        np.testing.assert_array_equal(det.classify(x[:3]), jit_classify(det, x[:3]))
+    with pytest.raises(ValueError, match=r"^x \(MLPClassifier query features\) must be finite"):
+        dets["MLPClassifier"].outputs(q)
+    sets = [(x[:20], rng.normal(size=(20, 2))), (x[20:], rng.normal(size=(20, 2)))]
+    pred = nl.MLPPredictor.fit(sets, key=jax.random.key(1), hidden=2, max_steps=1)
+    yq = np.zeros((3, 2))
+    with pytest.raises(ValueError, match=r"^x \(MLPPredictor query features\) must be finite"):
+        pred.classify_pairs(q, yq)
+    with pytest.raises(ValueError, match=r"^y \(MLPPredictor measured next steps\) must be"):
+        pred.classify_pairs(x[:3], np.where(np.eye(3, 2) > 0, np.nan, 0.0))
+    assert jax.jit(lambda p, a, b: p.classify_pairs(a, b))(pred, q, yq).shape == (3,)

@@ -162,6 +162,18 @@ def _bank_states(name, out):
     return np.maximum(dec, 0)
 
 
+def _measurement_times(k_len: int, dt: float) -> np.ndarray:
+    """Time [s] of measurements 0 … `k_len` − 1: measurement k is navigation step k + 2."""
+    return (np.arange(k_len) + 2) * dt
+
+
+def _first_step_at(t_s: float, dt: float) -> int:
+    """Index of the first measurement at time ≥ `t_s` (times of `_measurement_times`;
+    round-off of 1e-9 steps is forgiven). The index `round(t_s / dt)` used before is the
+    measurement at t_s + 2·dt: the warm-up's two steps late."""
+    return max(0, int(np.ceil(t_s / dt - 2.0 - 1e-9)))
+
+
 def _score(states, truth, onset_k, k0, dt, t_fault):
     """states (R, K) decided INS (0 none or undecided, i = INS i; −1, undecided, counts as 0);
     truth (R,) faulty INS (0 healthy). `false_alarm_rate` is None when no step is fault-free
@@ -269,8 +281,8 @@ def compare(
     k_len = zs.shape[1]
     # measurement k is navigation step k + 2; the fault acts from step ceil(t/dt) + 1
     onset_k = int(np.ceil(sc.t_fault / sc.dt)) + 1 - 2
-    k0 = int(round(warmup_s / sc.dt))
-    rows, trace = [], {"t_s": (np.arange(k_len) + 2) * sc.dt}
+    k0 = _first_step_at(warmup_s, sc.dt)
+    rows, trace = [], {"t_s": _measurement_times(k_len, sc.dt)}
 
     say = log or (lambda _msg: None)
 

@@ -16,7 +16,9 @@ in INS i is the healthy one plus e times the noise-free unit response
 ([`onset_templates`][hrgjax.diagnosis.neural.onset_templates]) — at random positions and
 sizes ([`training_windows`][hrgjax.diagnosis.neural.training_windows]).
 
-Detectors (each has `classify(x) → (N,)` onset classes, 0 = none):
+Detectors (each has `classify(x) → (N,)` onset classes, 0 = none; a concrete `x` must be
+finite — a NaN window was named a confident class, the arg-max over NaN scores — a traced
+one, under the caller's `jit`/`vmap`, passes unchecked):
 
 - [`PNNBank`][hrgjax.diagnosis.neural.PNNBank]: one two-class probabilistic neural network
   per transition S0 → S_i (alg. 3.1.1);
@@ -44,6 +46,7 @@ import numpy as np
 import optax
 import optimistix as optx
 
+from .._checks import check_finite_host
 from .._compiled import fused
 from .._least_squares import least_squares
 from ..ins.platform import Fault, PlatformINS, simulate
@@ -180,8 +183,13 @@ class PNNDirect(eqx.Module):
     def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
         return cls(PNN.fit(x, y, n_classes, sigma), threshold)
 
-    @fused
     def classify(self, x):
+        """Onset class of each feature row of `x` (N, d), finite, → (N,) (0 = none)."""
+        check_finite_host("x (PNNDirect query features)", x)
+        return self._classify(x)
+
+    @fused
+    def _classify(self, x):
         ls = jax.vmap(self.pnn.log_scores)(jnp.asarray(x, float))
         post = jax.nn.softmax(ls, axis=-1)
         return _scores_to_class(post[:, 1:], self.threshold)
@@ -200,8 +208,13 @@ class PNNBank(eqx.Module):
         pnns = [PNN.fit(x, (y == i).astype(int), 2, sigma) for i in range(1, n_classes)]
         return cls(pnns, threshold)
 
-    @fused
     def classify(self, x):
+        """Onset class of each feature row of `x` (N, d), finite, → (N,) (0 = none)."""
+        check_finite_host("x (PNNBank query features)", x)
+        return self._classify(x)
+
+    @fused
+    def _classify(self, x):
         x = jnp.asarray(x, float)
         yes = [jax.nn.softmax(jax.vmap(p.log_scores)(x), axis=-1)[:, 1] for p in self.pnns]
         return _scores_to_class(jnp.stack(yes, axis=-1), self.threshold)
@@ -217,8 +230,13 @@ class SOMDetector(eqx.Module):
         som = SOM.train(x, shape, key=key, steps=steps)
         return cls(som.label(x, y, n_classes))
 
-    @fused
     def classify(self, x):
+        """Onset class of each feature row of `x` (N, d), finite, → (N,) (0 = none)."""
+        check_finite_host("x (SOMDetector query features)", x)
+        return self._classify(x)
+
+    @fused
+    def _classify(self, x):
         return self.som.predict(x)
 
 
@@ -247,15 +265,25 @@ class MLPClassifier(eqx.Module):
             nets.append(train_module(net, loss, steps, learning_rate=0.01, max_step=0.5))
         return cls(nets, threshold)
 
-    @fused
     def outputs(self, x):
-        """Sigmoid output of every network: (N, n_faults)."""
+        """Sigmoid output of every network for the feature rows of `x` (N, d), finite:
+        (N, n_faults)."""
+        check_finite_host("x (MLPClassifier query features)", x)
+        return self._outputs(x)
+
+    @fused
+    def _outputs(self, x):
         x = jnp.asarray(x, float)
         return jax.nn.sigmoid(jnp.stack([jax.vmap(n)(x)[:, 0] for n in self.nets], axis=-1))
 
-    @fused
     def classify(self, x):
-        return _scores_to_class(self.outputs(x), self.threshold)
+        """Onset class of each feature row of `x` (N, d), finite, → (N,) (0 = none)."""
+        check_finite_host("x (MLPClassifier query features)", x)
+        return self._classify(x)
+
+    @fused
+    def _classify(self, x):
+        return _scores_to_class(self._outputs(x), self.threshold)
 
 
 @fused
@@ -355,7 +383,10 @@ class MLPPredictor(eqx.Module):
 
     def classify_pairs(self, x, y):
         """Onset class (0 none, i = INS i) from inputs `x` and the measured next step `y`:
-        the class of the hypothesis with the least residual."""
+        the class of the hypothesis with the least residual. `x` and `y` must be finite
+        (the arg-min over NaN residuals named S0); traced ones pass unchecked."""
+        check_finite_host("x (MLPPredictor query features)", x)
+        check_finite_host("y (MLPPredictor measured next steps)", y)
         h = jnp.argmin(self.residuals(x, y), axis=-1)
         return h if self.classes is None else jnp.asarray(self.classes)[h]
 
