@@ -537,7 +537,9 @@ def navigation_figure(truth, flights, path: str, title: str = "") -> str:
     s = truth.states
     lat, lon = np.asarray(s.lat), np.asarray(s.lon)
     r_m, r_n = (np.asarray(r) for r in radii(lat[0]))
-    north, east = (lat - lat[0]) * r_m / 1e3, (lon - lon[0]) * r_n * np.cos(lat[0]) / 1e3
+    # a truth written in (−180°, 180°] jumps by 2π at the antimeridian: unwrap the track
+    east = np.unwrap(lon - lon[0]) * r_n * np.cos(lat[0]) / 1e3
+    north = (lat - lat[0]) * r_m / 1e3
     t = np.asarray(flights.t)
     gap = ~np.asarray(flights.gnss_valid)
     gap[0] = False

@@ -549,3 +549,82 @@ def test_segments_hold_the_climb_rate_or_refuse_it_naming_the_leg():
         with pytest.raises(ValueError, match="^legs: " + match) as err:
             tr.segments(45.0, 0.0, 0.0, legs, speed0=speed0, dt=1.0)
         assert "\n" not in str(err.value)
+
+
+def test_longitude_differences_wrap_across_the_antimeridian(truth50):
+    """The same point written as lon +180° and −180° (or 0° and 360°) is no error, and a
+    track carried continuously past 180° against the same track written in (−180°, 180°]
+    reads round-off; the wrapped difference keeps its derivative (1 per radian)."""
+    for a, b in [(180.0, -180.0), (-180.0, 180.0), (0.0, 360.0), (179.9999, -179.9999)]:
+        nav, ref = (
+            me.NavState.from_euler(0.2, x * DEG, 10.0, jnp.zeros(3), 0, 0, 0) for x in (a, b)
+        )
+        pos, _, _ = me.navigation_errors(nav, ref)
+        r_n = float(C.radii(0.2)[1]) + 10.0
+        want = np.deg2rad((a - b + 180.0) % 360.0 - 180.0) * r_n * np.cos(0.2)
+        np.testing.assert_allclose(pos, [0.0, want, 0.0], atol=1e-6)
+    s = truth50.states
+    lon = s.lon + (np.pi - float(jnp.mean(s.lon)))  # the track crosses 180°
+    assert float(lon.min()) < np.pi < float(lon.max())
+    ahead = me.NavState(s.lat, lon, s.h, s.v_ned, s.q_bn)
+    written = me.NavState(s.lat, (lon + np.pi) % (2 * np.pi) - np.pi, s.h, s.v_ned, s.q_bn)
+    for nav, ref in ((ahead, written), (written, ahead)):
+        pos, vel, att = me.navigation_errors(nav, ref)
+        assert np.abs(np.asarray(pos)).max() < 1e-7
+    at = lambda lon: me.NavState.from_euler(0.2, lon, 0.0, jnp.zeros(3), 0.0, 0.0, 0.0)
+    east = lambda lon: me.navigation_errors(at(lon), at(-np.pi))[0][1]
+    slope = float(jax.grad(east)(jnp.asarray(np.pi)))
+    np.testing.assert_allclose(slope, float(C.radii(0.2)[1]) * np.cos(0.2), rtol=1e-12)
+
+
+def test_euler_angles_hold_at_and_near_gimbal_lock():
+    """`dcm_to_euler` rebuilds the matrix to round-off at every pitch, ±90° included: there
+    roll is 0 and the heading is ψ − φ (+90°) or ψ + φ (−90°); elsewhere it is scipy's 'ZYX';
+    its gradient is finite at the lock, near it and at roll 90° pitch 0."""
+    from scipy.spatial.transform import Rotation
+
+    near = np.pi / 2 - np.logspace(-15, -1, 15)
+    pitch = np.concatenate([[np.pi / 2, -np.pi / 2], near, -near, [0.0, 0.7, -1.2]])
+    r, p, h = np.meshgrid([0.3, -2.0, 3.0], pitch, [1.0, -2.5], indexing="ij")
+    c = me.quat_to_dcm(me.euler_to_quat(r, p, h))
+    out = me.dcm_to_euler(c)
+    np.testing.assert_allclose(tr.euler_to_dcm(*out), c, atol=2e-14)
+    for sign in (1, -1):
+        c = me.quat_to_dcm(me.euler_to_quat(0.3, sign * np.pi / 2, 1.0))
+        got = [float(x) for x in me.dcm_to_euler(c)]
+        np.testing.assert_allclose(got, [0.0, sign * np.pi / 2, 1.0 - sign * 0.3], atol=1e-14)
+    rng = np.random.default_rng(2)
+    e = rng.uniform([-3, -1.5, -3], [3, 1.5, 3], (200, 3))
+    c = me.quat_to_dcm(me.euler_to_quat(e[:, 0], e[:, 1], e[:, 2]))
+    want = Rotation.from_matrix(np.asarray(c)).as_euler("ZYX")[:, ::-1]
+    np.testing.assert_allclose(np.stack(me.dcm_to_euler(c), -1), want, atol=1e-13)
+    total = lambda c: sum(jnp.sum(x) for x in me.dcm_to_euler(c))
+    for r0, p0 in [(0.3, np.pi / 2), (0.3, -np.pi / 2), (0.3, np.pi / 2 - 1e-9), (np.pi / 2, 0.0)]:
+        g = jax.grad(total)(me.quat_to_dcm(me.euler_to_quat(r0, p0, 1.0)))
+        assert np.all(np.isfinite(np.asarray(g))), (r0, p0)
+
+
+def test_a_motion_starting_at_pitch_89_or_more_is_refused():
+    seg = (mo.Segment(3, (0.0, -10.0, 0.0), Z, 10.0),)  # it would pitch down from the start
+    for pitch in (90.0, -89.0):
+        with pytest.raises(ValueError, match=rf"^Motion.pitch_deg must be within ±89° .*; got "
+                                             rf"{pitch}$"):  # fmt: skip
+            mo.Motion(10.0, 0.0, 0.0, (10.0, 0.0, 0.0), 30.0, pitch, 20.0, seg)
+    mo.Motion(10.0, 0.0, 0.0, (10.0, 0.0, 0.0), 30.0, 88.9, 20.0, seg)
+
+
+def test_segments_refuse_a_leg_that_is_not_whole_samples_naming_it():
+    """A 0.5-s leg at dt = 1 s would vanish (its 10° turn lost): refused, naming the leg, its
+    duration and dt, as `Motion.truth` refuses such a segment; whole legs pass at 1e-9."""
+    for legs, dt, match in [
+        ([(9.75, 0, 0, 0), (0.5, 0, 20.0, 0), (9.75, 0, 0, 0)], 1.0,
+         r"leg 1's duration 9.75 s is not a whole number of samples at dt = 1 s \(9.75 samples\)"),
+        ([(10.0, 0, 0, 0), (0.5, 0, 20.0, 0), (9.5, 0, 0, 0)], 1.0, "leg 2's duration 0.5 s"),
+        ([(10.0, 0, 0, 0), (0.25, 10.0, 0, 0)], 0.1, r"leg 2's duration 0.25 s .* dt = 0.1 s"),
+        ([(10.0, 0, 0, 0)], 3.0, r"leg 1's duration 10 s .* dt = 3 s"),
+    ]:  # fmt: skip
+        with pytest.raises(ValueError, match="^legs: " + match) as err:
+            tr.segments(45.0, 0.0, 100.0, legs, speed0=100.0, dt=dt)
+        assert "\n" not in str(err.value)
+    tj = tr.segments(45.0, 0.0, 100.0, [(0.3, 0, 0, 0), (0.7, 0, 20.0, 0)], speed0=100.0, dt=0.1)
+    np.testing.assert_allclose(np.degrees(float(tj.attitude[2][-1])), 14.0, atol=1e-9)

@@ -410,3 +410,40 @@ def test_a_diverging_flight_is_one_line_as_loosely_coupled_gives_it(truth, monte
         "ins.fly: in one or more runs, ins.loosely_coupled: the filter diverged (NaN or inf); "
         "check the increments' units (rad, m/s), the fixes and the initial state"
     )
+
+
+def test_fixes_written_in_minus_180_to_180_give_the_same_filter(truth):
+    """The flight moved to cross the antimeridian, its fixes once as measured (longitude
+    carried past 180°) and once as a receiver writes them, in (−180°, 180°]: the filter, its
+    NIS and its true error states are the same to round-off."""
+    import equinox as eqx
+
+    wrap = lambda a: (a + np.pi) % (2 * np.pi) - np.pi
+    shifted = eqx.tree_at(lambda t: t.states.lon, truth, truth.states.lon + np.deg2rad(169.96))
+    settings = ekf.LooselyCoupled(CONSISTENT, gnss.Gnss())
+    fixes = gnss.measure(shifted, settings.gnss, jax.random.key(1))
+    written = eqx.tree_at(lambda f: f.lon, fixes, wrap(fixes.lon))
+    assert np.any(np.asarray(fixes.lon) > np.pi) and np.any(np.asarray(written.lon) < 0)
+    a, b = (ekf.loosely_coupled(settings, shifted.initial, shifted.dtheta, shifted.dv,
+                                shifted.dt, f) for f in (fixes, written))  # fmt: skip
+    pos, vel, att = me.navigation_errors(a.nav, b.nav)
+    assert np.abs(np.asarray(pos)).max() < 1e-6 and np.abs(np.asarray(vel)).max() < 1e-9
+    assert np.abs(np.asarray(att)).max() < 1e-10
+    np.testing.assert_allclose(b.nis, a.nis, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(b.P, a.P, rtol=1e-6, atol=0)
+    assert float(np.nanmax(np.asarray(a.nis))) < 50.0
+    idx = np.concatenate([[0], np.asarray(fixes.index)])
+    tn = shifted.states[idx]
+    tw = eqx.tree_at(lambda s: s.lon, tn, wrap(tn.lon))
+    e, ew = (ekf.error_states(a, s, CONSISTENT.gyro_bias, CONSISTENT.accel_bias) for s in (tn, tw))
+    np.testing.assert_allclose(ew, e, rtol=0, atol=1e-12)
+
+
+def test_a_misalignment_that_is_not_finite_is_refused_naming_it():
+    for field, value, match in [
+        ("gyro_misalignment", np.full((3, 3), np.nan), r"got nan at \[0, 0\]$"),
+        ("accel_misalignment", np.inf, r"got inf$"),
+        ("accel_misalignment", np.diag([0.0, -np.inf, 0.0]), r"got -inf at \[1, 1\]$"),
+    ]:
+        with pytest.raises(ValueError, match=rf"^ImuModel.{field} must be finite .*" + match):
+            sensors.ImuModel(**{field: value})

@@ -19,9 +19,9 @@ $\delta\omega = \delta b + \mathrm{diag}(\omega)\,\delta s$ as the error model e
    (F at the block's middle state with the block's mean specific force and rate; white gyro and
    accelerometer noise densities `arw`, `vrw`; bias random walks) — the same exact
    linearisation as [`hrgjax.ins.strapdown`][hrgjax.ins.strapdown];
-3. at a valid fix the innovation (INS antenna position and velocity minus the fix, with the
-   lever arm's attitude sensitivity in H) updates the error state (Joseph form,
-   [`hrgjax.kalman.update`][hrgjax.kalman.update]);
+3. at a valid fix the innovation (INS antenna position and velocity minus the fix, the
+   longitude difference wrapped to ±π, with the lever arm's attitude sensitivity in H)
+   updates the error state (Joseph form, [`hrgjax.kalman.update`][hrgjax.kalman.update]);
 4. the estimate is fed back — position and velocity subtracted, attitude
    $q \leftarrow q(\hat\phi)\otimes q$, sensor estimates accumulated — and reset to zero.
 
@@ -66,6 +66,7 @@ from .mechanization import (
     skew,
     start_carry,
     step,
+    wrap_angle,
 )
 from .sensors import ImuModel
 from .strapdown import error_matrices_at
@@ -200,7 +201,8 @@ class LooselyCoupled(eqx.Module):
         return discretise(big, q, T)
 
     def _measurement(self, nav: NavState, w_eb, fix_pos, fix_vel):
-        """Innovation (antenna minus fix, in state units), H and R."""
+        """Innovation (antenna minus fix, in state units; the longitude difference wrapped to
+        ±π, so fixes may write longitude in (−180°, 180°]), H and R."""
         n = self.n_states
         c = nav.c_bn
         arm = self.gnss.lever_arm
@@ -209,7 +211,7 @@ class LooselyCoupled(eqx.Module):
         h_pos = (
             jnp.zeros((3, n)).at[:, 0:3].set(jnp.eye(3)).at[:, 6:9].set(d[:, None] * skew(c @ arm))
         )
-        nu = jnp.stack([la - fix_pos[0], lo - fix_pos[1], hh - fix_pos[2]])
+        nu = jnp.stack([la - fix_pos[0], wrap_angle(lo - fix_pos[1]), hh - fix_pos[2]])
         r = jnp.diag(d**2 * self.gnss.position_sigma**2)
         if not self.gnss.use_velocity:
             return nu, h_pos, r
@@ -438,7 +440,9 @@ def error_states(
     nav = result.nav
     _, _, att = navigation_errors(nav, truth_nav, earth)
     parts = [
-        jnp.stack([nav.lat - truth_nav.lat, nav.lon - truth_nav.lon, nav.h - truth_nav.h], -1),
+        jnp.stack(
+            [nav.lat - truth_nav.lat, wrap_angle(nav.lon - truth_nav.lon), nav.h - truth_nav.h], -1
+        ),
         nav.v_ned - truth_nav.v_ned,
         att,
         jnp.broadcast_to(gyro_bias, result.gyro_bias.shape) - result.gyro_bias,

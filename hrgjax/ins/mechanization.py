@@ -142,13 +142,52 @@ def euler_to_quat(roll, pitch, heading):
 # --- the navigation state -----------------------------------------------------------------
 
 
+GIMBAL_LOCK = 1e-14
+"""Below this |cos pitch| (√(c00² + c10²)),
+[`dcm_to_euler`][hrgjax.ins.mechanization.dcm_to_euler] treats a matrix as at pitch ±90°
+(gimbal lock): roll 0, the heading carrying the whole
+rotation about the vertical. A matrix of unit quaternion holds cos pitch to ≈ 3e-16."""
+
+
 @fused
 def dcm_to_euler(c):
-    """(roll, pitch, heading) [rad] of a body-to-NED matrix (heading in (−π, π])."""
-    roll = jnp.arctan2(c[..., 2, 1], c[..., 2, 2])
-    pitch = -jnp.arcsin(jnp.clip(c[..., 2, 0], -1.0, 1.0))
-    heading = jnp.arctan2(c[..., 1, 0], c[..., 0, 0])
+    r"""(roll, pitch, heading) [rad] of a body-to-NED matrix (..., 3, 3) (3-2-1 order, as
+    [`euler_to_dcm`][hrgjax.ins.trajectory.euler_to_dcm]; heading in [−π, π], roll in
+    [−π, π], pitch in [−π/2, π/2]): angles that rebuild `c` to round-off at every pitch.
+
+    Pitch is $\operatorname{atan2}(-c_{20}, \sqrt{c_{00}^2 + c_{10}^2})$ (accurate near ±90°,
+    where $\arcsin c_{20}$ is not); heading $\operatorname{atan2}(c_{10}, c_{00})$; roll
+    from the heading, $\sin\phi = \sin\psi\,c_{02} - \cos\psi\,c_{12}$,
+    $\cos\phi = \cos\psi\,c_{11} - \sin\psi\,c_{01}$, so that roll and heading agree
+    even where pitch nears ±90° and they are ill-conditioned apart. At gimbal lock (cos pitch
+    below [`GIMBAL_LOCK`][hrgjax.ins.mechanization.GIMBAL_LOCK]) only heading ∓ roll is
+    defined: roll is 0 and the heading $\operatorname{atan2}(-c_{01}, c_{11})$, which is
+    ψ − φ at pitch +90° ($c_{01} = \sin(\phi - \psi)$, $c_{11} = \cos(\phi - \psi)$)
+    and ψ + φ at −90° ($c_{01} = -\sin(\phi + \psi)$, $c_{11} = \cos(\phi + \psi)$).
+    Differentiable (jit / vmap / grad) with finite gradients at and away from the lock."""
+    c00, c01, c02 = c[..., 0, 0], c[..., 0, 1], c[..., 0, 2]
+    c10, c11, c12 = c[..., 1, 0], c[..., 1, 1], c[..., 1, 2]
+    c20 = c[..., 2, 0]
+    cp2 = c00 * c00 + c10 * c10
+    lock = cp2 < GIMBAL_LOCK**2
+    # every branch's arguments kept away from atan2(0, 0) and √0, whose gradients are NaN
+    cp = jnp.where(lock, 0.0, jnp.sqrt(jnp.where(lock, 1.0, cp2)))
+    pitch = jnp.arctan2(-c20, cp)
+    heading_free = jnp.arctan2(jnp.where(lock, 0.0, c10), jnp.where(lock, 1.0, c00))
+    sh, ch = jnp.sin(heading_free), jnp.cos(heading_free)
+    roll_free = jnp.arctan2(sh * c02 - ch * c12, ch * c11 - sh * c01)
+    heading_lock = jnp.arctan2(jnp.where(lock, -c01, 0.0), jnp.where(lock, c11, 1.0))
+    roll = jnp.where(lock, 0.0, roll_free)
+    heading = jnp.where(lock, heading_lock, heading_free)
     return roll, pitch, heading
+
+
+@fused
+def wrap_angle(a):
+    r"""Angles `a` [rad] (any shape) wrapped to [−π, π): $((a + π) \bmod 2π) − π$, derivative
+    1 (jit / vmap / grad). For differences of longitudes, which a trajectory may carry
+    continuously past ±180° while a receiver or a truth file writes them in (−180°, 180°]."""
+    return jnp.mod(a + jnp.pi, 2.0 * jnp.pi) - jnp.pi
 
 
 def check_latitude_radians(name: str, lat) -> None:
@@ -212,12 +251,14 @@ def navigation_errors(nav: NavState, truth: NavState, earth: Earth = WGS84):
 
     **Returns** `(position (..., 3) [m, north east down], velocity (..., 3) [m/s, NED],
     attitude (..., 3) [rad])`, the attitude error φ defined by
-    $\hat C_b^n = e^{-[\phi\times]}C_b^n \approx (I - [\phi\times])C_b^n$."""
+    $\hat C_b^n = e^{-[\phi\times]}C_b^n \approx (I - [\phi\times])C_b^n$. The longitude
+    difference is wrapped to ±π ([`wrap_angle`][hrgjax.ins.mechanization.wrap_angle]): the
+    same meridian written as +180° and −180° (or 0° and 360°) is no error."""
     r_m, r_n = earth.radii(truth.lat)
     pos = jnp.stack(
         [
             (nav.lat - truth.lat) * (r_m + truth.h),
-            (nav.lon - truth.lon) * (r_n + truth.h) * jnp.cos(truth.lat),
+            wrap_angle(nav.lon - truth.lon) * (r_n + truth.h) * jnp.cos(truth.lat),
             -(nav.h - truth.h),
         ],
         -1,

@@ -151,6 +151,11 @@ class Motion:
         v0 = _triple("Motion.velocity", self.velocity, "(vx, vy, vz) body", "m/s")
         for name in ("yaw_deg", "pitch_deg", "roll_deg"):
             finite_number(f"Motion.{name}", getattr(self, name), "°")
+        if abs(self.pitch_deg) >= 89.0:
+            raise ValueError(
+                f"Motion.pitch_deg must be within ±89° (Euler angles are singular at ±90°); got "
+                f"{self.pitch_deg}"
+            )
         if not self.segments:
             raise ValueError("Motion.segments: give at least one segment")
         for i, s in enumerate(self.segments, 1):

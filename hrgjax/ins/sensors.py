@@ -112,10 +112,19 @@ class ImuModel(eqx.Module):
             if is_concrete(v) and np.any(np.asarray(v) < 0):
                 raise ValueError(f"ImuModel.{name} is a density or a 1σ: it must be >= 0; got {v}")
         for name in ("gyro_misalignment", "accel_misalignment"):
-            if jnp.shape(getattr(self, name)) not in ((), (3, 3)):
+            v = getattr(self, name)
+            if jnp.shape(v) not in ((), (3, 3)):
                 raise ValueError(
                     f"ImuModel.{name} must be 0 or a (3, 3) matrix of small angles [rad]; got "
-                    f"shape {jnp.shape(getattr(self, name))}"
+                    f"shape {jnp.shape(v)}"
+                )
+            if is_concrete(v) and not np.all(np.isfinite(np.asarray(v))):
+                a = np.asarray(v)
+                at = np.unravel_index(int(np.argmax(~np.isfinite(a))), a.shape)
+                where = f" at {list(map(int, at))}" if a.ndim else ""
+                raise ValueError(
+                    f"ImuModel.{name} must be finite (0 or a (3, 3) matrix of small angles "
+                    f"[rad]); got {a[at]}{where}"
                 )
         for name in ("gyro_correlation_time", "accel_correlation_time"):
             v = getattr(self, name)

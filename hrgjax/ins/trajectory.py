@@ -239,13 +239,15 @@ def segments(
     earth: Earth = WGS84,
 ) -> Trajectory:
     """A trajectory from legs `(duration_s, accel m/s², turn rate °/s, climb rate m/s)`, each
-    held constant over its leg: speed and heading integrate (each sample interval at the rates
-    of the leg holding its midpoint: exact where the legs are whole samples), the flight-path
-    angle is asin(climb/speed) (the speed is along the flight path), turns are coordinated.
+    held constant over exactly its leg: speed and heading integrate (each sample interval at
+    the rates of its leg), the flight-path angle is asin(climb/speed) (the speed is along the
+    flight path), turns are coordinated.
 
-    **Raises:** `ValueError` (one line, naming the leg) where the speed would become negative
-    or a climb rate exceeds the speed (sin 89° of it: the pitch is the flight-path angle, and
-    Euler angles are singular at ±90°); a climb from rest is refused so."""
+    **Raises:** `ValueError` (one line, naming the leg) for a leg that is not a whole number
+    of samples `dt` [s] long (to 1e-9 relative: it could not be held over its duration),
+    where the speed would become negative or a climb rate exceeds the speed (sin 89° of it:
+    the pitch is the flight-path angle, and Euler angles are singular at ±90°); a climb from
+    rest is refused so."""
     check_position(lat_deg, lon_deg, h)
     speed0 = finite_number("speed0", speed0, "m/s")
     if speed0 < 0:
@@ -258,6 +260,17 @@ def segments(
         raise ValueError(
             "legs: a non-empty list of finite (duration_s > 0, accel m/s², turn °/s, climb m/s)"
         )
+    dt = finite_number("dt", dt, "s")
+    if dt <= 0:
+        raise ValueError(f"dt must be a sample interval > 0 s; got {dt}")
+    for i, leg in enumerate(legs, 1):
+        k = leg[0] / dt
+        if abs(k - round(k)) > 1e-9 * max(1.0, k) or round(k) < 1:
+            raise ValueError(
+                f"legs: leg {i}'s duration {leg[0]:g} s is not a whole number of samples at "
+                f"dt = {dt:g} s ({k:.6g} samples): each leg's rates are held over exactly "
+                "its duration"
+            )
     t = _grid(sum(leg[0] for leg in legs), dt)
     edges = np.cumsum([0.0] + [leg[0] for leg in legs])
     table = np.asarray([leg[1:] for leg in legs])  # (accel, turn, climb) per leg
