@@ -104,6 +104,29 @@ def check(name: str, values, quantity: str | None = None) -> None:
         )
 
 
+def traced_violations(name: str, values, quantity: str | None = None) -> list:
+    """The run-time twin of [`check`][hrgjax.plausible.check] for traced `values` (inside
+    `jit`, `vmap` or `hg.sweep`): `[(bad, message), …]`, `bad` a traced boolean that is true
+    where a finite value lies outside the range of `quantity` (default: `name`), `message`
+    `check`'s one line without the value (a temperature that looks like kelvin: its own
+    entry, with the hint). The range is read when traced. NaN and inf are not flagged here
+    (they are the finite check's)."""
+    import jax.numpy as jnp
+
+    quantity = quantity or name
+    low, high, unit = RANGES[quantity]
+    v = jnp.asarray(values, dtype=float)
+    out = jnp.any(jnp.isfinite(v) & ~((v >= low) & (v <= high)))
+    where = " at one or more points" if v.ndim else ""
+    head = f"{name} is outside the plausible range {low:g} … {high:g} {unit}{where}"
+    tail = " (hrgjax.plausible.relaxed widens it)"
+    if quantity != "temperature_c":
+        return [(out, head + tail)]
+    kelvin = jnp.min(v) >= KELVIN_HINT_C
+    return [(out & ~kelvin, head + tail),
+            (out & kelvin, f"{head} — these look like kelvin: subtract 273.15{tail}")]  # fmt: skip
+
+
 WAVE_TURN_OVER_DRIFT = 3.0
 """A rotation run counts for `check_wave_angle_units` where its table turns ≥ 1 (in the
 file's units) or, whatever the table column's unit, where its wave angle turns by at least

@@ -454,3 +454,36 @@ class Profile(eqx.Module):
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""
         return self.kinematics_at(t)[0]
+
+
+def traced_checks(profile: Profile) -> list:
+    """The run-time twins of `Profile`'s own plausibility checks for its traced fields
+    (inside `jit`, `vmap` or `hg.sweep` a module's `__check_init__` sees no values):
+    `[(bad, message), …]`, `bad` a traced boolean, `message` the eager one line without the
+    value, in the order `__check_init__` checks them; concrete fields were checked where the
+    profile was built. `simulate` raises the first that holds (`eqx.branched_error_if`)."""
+    traced = lambda x: x is not None and not is_concrete(x)  # noqa: E731
+    checks = []
+    if traced(profile.rebalance):
+        off = jnp.any((profile.rebalance != 0.0) & (profile.rebalance != 1.0))
+        checks.append((off, "Profile.rebalance is neither 1 nor 0 at one or more knots; give 1 "
+                            "(force-to-rebalance over the segment) or 0 (whole-angle)"))  # fmt: skip
+    fields = [("Profile.temperature", profile.temperature, "temperature_c", False),
+              ("Profile.rate [°/s]", profile.rate, "table_rate_dps", True),
+              ("Profile.precession [°/s, electrical]", profile.precession, "precession_dps",
+               True)]  # fmt: skip
+    if traced(profile.accel):
+        fields += [(f"Profile.accel[:, {j}] (specific force along {axis}) [g]",
+                    profile.accel[:, j], "specific_force_g", False)
+                   for j, axis in enumerate("xyz")]  # fmt: skip
+    fields.append(("Profile.wave_angle0 [°]", profile.wave_angle0, "wave_angle_deg", True))
+    for name, value, quantity, in_degrees in fields:  # in the data's units, as eagerly
+        if traced(value):
+            value = jnp.degrees(value) if in_degrees else value
+            checks += plausible.traced_violations(name, value, quantity)
+    if traced(profile.t):
+        length = jnp.max(profile.t) - jnp.min(profile.t)
+        checks += plausible.traced_violations("Profile's length [s]", length, "duration_s")
+        checks.append((jnp.any(jnp.diff(profile.t) <= 0), "Profile.t must be strictly "
+                       "increasing at one or more knots (unsorted or duplicate time)"))  # fmt: skip
+    return checks

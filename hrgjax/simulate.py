@@ -14,15 +14,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import plausible
-from ._checks import RULES, is_concrete, traceable
+from ._checks import is_concrete, traceable
 from ._compiled import Check, device, program, single_run_entry
 from ._cost import MAX_STEPS as MAX_STEPS
 from ._cost import default_max_steps as default_max_steps
 from ._cost import report as report_cost
+from ._run_checks import LAW_LIMITS as _LAW_LIMITS  # its old name here
+from ._run_checks import check_laws as _check_laws
+from ._run_checks import check_traced
 from ._x64 import require_x64
 from .gyro import Gyro
-from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
-from .noise import UNITS as NOISE_UNITS
 from .noise import draw_run_bias, rate_noise_angle
 from .profiles import Profile
 from .record import Record
@@ -44,11 +45,15 @@ from .resonator.carrier import (
     steps_per_interval,
     takes_fixed_steps,
 )
-from .resonator.control import LIMITS as CONTROL_LIMITS
-from .resonator.control import drive_vectors, ftr_rate, loop_outputs, max_step, steady_integrators
+from .resonator.control import (
+    IDEAL_LIMIT,
+    drive_vectors,
+    ftr_rate,
+    loop_outputs,
+    max_step,
+    steady_integrators,
+)
 from .resonator.full import full_estimates, full_initial_state, full_vector_field, held_command
-from .resonator.params import TemperatureLaw
-from .resonator.readout import LIMITS as READOUT_LIMITS
 from .resonator.readout import continue_angle, wrap_half_pi
 
 MODELS = ("averaged", "full")
@@ -149,62 +154,6 @@ def _check_options(o) -> None:
         arr = np.asarray(v)
         if arr.ndim != 0 or arr.dtype.kind not in "iu" or isinstance(v, bool):
             raise ValueError(f"run must be an integer run id (e.g. 3); got {v!r}")
-
-
-_LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by path
-    "resonator.omega": ("> 0", "rad/s"),
-    "resonator.tau": ("> 0", "s"),
-    "resonator.k_e": ("in (0, 1]", "(the electrical angular gain 2K, ≈ 0.554)"),
-    "drift_terms.lag_time": ("> 0", "s"),
-    "drift_terms.warmup_time": ("> 0", "s"),
-    "noise.correlation_time": ("> 0", "s"),
-    **{f"control.{n}": rule for n, rule in CONTROL_LIMITS.items()},
-    **{f"readout.{n}": rule for n, rule in READOUT_LIMITS.items()},
-    **{f"noise.{n}": (">= 0", NOISE_UNITS[n]) for n in NOISE_NONNEGATIVE},
-}
-
-
-def _obeys(rule: str, value):
-    """Where `value` keeps `rule` of `_LAW_LIMITS` ("finite" alone: everywhere)."""
-    v = np.asarray(value, dtype=float)
-    return RULES[rule](v) if rule in RULES else np.full(v.shape, True)
-
-
-def _check_laws(gyro, profile) -> None:
-    """Every temperature law of `gyro` finite over the profile's temperatures, and decay
-    times, frequencies and noise levels of the right sign there (concrete values only)."""
-    if not is_concrete(profile.temperature):
-        return
-    temps = np.asarray(profile.temperature, dtype=float).ravel()
-    lo, hi = float(temps.min()), float(temps.max())
-    grid = np.unique(np.concatenate([temps, np.linspace(lo, hi, 257)]))
-    is_law = lambda x: isinstance(x, TemperatureLaw)
-    flat, _ = jax.tree_util.tree_flatten_with_path(gyro, is_leaf=is_law)
-    for path, law in flat:
-        name = ".".join(str(getattr(p, "name", getattr(p, "key", p))) for p in path)
-        plain = not is_law(law) and is_concrete(law) and np.ndim(law) == 0
-        if plain and np.asarray(law).dtype.kind in "fiu" and not isinstance(law, bool):
-            # a plain value, checked here too: eqx.tree_at (as sweeps do) skips __init__
-            value, (rule, unit) = float(np.asarray(law)), _LAW_LIMITS.get(name, ("finite", ""))
-            if not (np.isfinite(value) and _obeys(rule, value)):
-                raise ValueError(f"gyro.{name} = {value:g} {unit}; it must be {rule}".replace(
-                    "  ", " "))  # fmt: skip
-            continue
-        if not is_law(law) or not all(is_concrete(x) for x in jax.tree_util.tree_leaves(law)):
-            continue
-        if any(np.ndim(x) for x in jax.tree_util.tree_leaves(law)):
-            continue  # a batch of laws: checked member by member where it is evaluated
-        with np.errstate(over="ignore", invalid="ignore"):
-            value = law(grid, xp=np)
-        rule, unit = _LAW_LIMITS.get(name, ("finite", ""))
-        bad = ~np.isfinite(value) | ~_obeys(rule, value)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(
-                f"the temperature law of gyro.{name} gives {value[i]:.6g} {unit} at "
-                f"{grid[i]:.4g} °C, inside the profile's temperatures [{lo:.4g}, {hi:.4g}] °C; "
-                f"it must be {rule} there".replace("  ", " ")
-            )
 
 
 class _SimulateCheck(Check):
@@ -520,6 +469,9 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
             "Profile.rebalance switches the rebalance loop on and off: give the gyro "
             "Control(mode='ftr') (gyro.in_mode('ftr')) with its PI loops (ideal=False)"
         )
+    ctl = gyro.control  # as Control refuses it (a control put in with eqx.tree_at skips that)
+    if ctl.mode == "ftr" and ctl.ideal and ctl.rebalance_limit is not None:
+        raise ValueError(IDEAL_LIMIT)
     if not isinstance(profile, Profile):
         raise TypeError(f"profile must be an hrgjax.Profile; got {type(profile).__name__}")
     if gyro.noise is not None and key is None:
@@ -586,6 +538,7 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         stepping, adjoint = (_default_solver(model), 0.0, 0.0, 1, 0.0, True), None
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
     gyro, profile = traceable("gyro", gyro, _LAW_LIMITS), traceable("profile", profile)
+    gyro, profile = check_traced(gyro, profile)  # traced values: the eager rules, at run time
     return _solve(
         model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run, carrier
     )

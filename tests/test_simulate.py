@@ -308,3 +308,53 @@ def test_readout_and_control_refuse_values_out_of_range():
 
     with pytest.raises(Exception, match=re.escape("gyro.control.amplitude must be finite and > 0")):
         jax.block_until_ready(jax.jit(run)(-1.0))
+
+
+def test_implausible_traced_values_are_refused_in_a_sweep_as_eagerly():
+    """Inside `hg.sweep` (jit + vmap) `Profile` sees no values, so `simulate` holds traced
+    ones to the eager rules at run time: a temperature of 1000 °C and a τ law driven negative
+    over the run's temperatures raise one line naming the field (they returned a confident
+    angle with τ < 0); a plausible grid still equals the runs one by one."""
+    gyro = hg.presets.ideal(resonator())
+
+    def final(temperature_c):
+        prof = hg.Profile.constant_rate(1.0, 2.0, temperature_c)
+        return hg.simulate(gyro, prof, dt_out=1.0).wave_angle[-1]
+
+    good = hg.sweep(final, temperature_c=jnp.array([20.0, 60.0]))
+    one = [float(final(t)) for t in (20.0, 60.0)]
+    np.testing.assert_allclose(good, one, rtol=1e-12)
+    with pytest.raises(RuntimeError) as err:
+        hg.sweep(final, temperature_c=jnp.array([20.0, 1000.0]))
+    message = str(err.value)
+    assert message.startswith("sweep: at one or more grid points, Profile.temperature is "
+                              "outside the plausible range -100 … 150 °C") and "kelvin" in message  # fmt: skip
+    assert "\n" not in message
+
+    def tau_slope(p1):  # τ = 50 s + p1 (T − 20 °C): at 60 °C, p1 = −2 s/°C gives τ = −30 s
+        hot = eqx.tree_at(lambda g: g.resonator.tau, gyro, hg.TemperatureLaw(50.0, p1))
+        return hg.simulate(hot, hg.Profile.constant_rate(1.0, 2.0, 60.0), dt_out=1.0).wave_angle
+
+    with pytest.raises(ValueError, match=r"law of gyro\.resonator\.tau gives -30 s at 60"):
+        tau_slope(-2.0)  # eagerly
+    with pytest.raises(RuntimeError, match=r"grid points, the temperature law of gyro\.resonator"
+                       r"\.tau leaves its range .* it must be > 0 s there$"):  # fmt: skip
+        hg.sweep(tau_slope, p1=jnp.array([0.0, -2.0]))
+
+
+def test_implausible_traced_rates_and_knots_are_refused_under_jit_and_vmap():
+    """The same under the caller's own `jax.jit(jax.vmap(…))`: a table rate of 10⁶ °/s and a
+    run of negative length (its knots out of order) raise the eager rule's line."""
+    gyro = hg.presets.ideal(resonator())
+
+    def run(rate_dps, duration_s):
+        prof = hg.Profile.constant_rate(rate_dps, duration_s)
+        return hg.simulate(gyro, prof, ts=jnp.array([0.0, 0.5])).wave_angle
+
+    batch = jax.jit(jax.vmap(run))
+    ok = batch(jnp.array([1.0, 2.0]), jnp.array([1.0, 1.0]))
+    assert np.all(np.isfinite(ok))
+    with pytest.raises(Exception, match=r"Profile.rate \[°/s\] is outside the plausible range"):
+        jax.block_until_ready(batch(jnp.array([1.0, 1e6]), jnp.array([1.0, 1.0])))
+    with pytest.raises(Exception, match="Profile.t must be strictly increasing"):
+        jax.block_until_ready(batch(jnp.array([1.0, 1.0]), jnp.array([1.0, -1.0])))

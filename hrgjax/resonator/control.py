@@ -52,7 +52,15 @@ LIMITS = {  # field: (rule of `hrgjax._checks.RULES`, unit); why: `Control`'s do
     "k_e_nominal": ("in (0, 1]", "(the electrical angular gain 2K, ≈ 0.554)"),
 }
 """The range of each `Control` field; `simulate` holds temperature laws and traced values to
-them too (`hrgjax.simulate._LAW_LIMITS`)."""
+them too (`hrgjax._run_checks.LAW_LIMITS`)."""
+
+
+IDEAL_LIMIT = (
+    "Control.rebalance_limit needs Control.ideal=False in mode='ftr': ideal loops hold the "
+    "wave with whatever force it takes and cannot saturate; give rebalance_limit=None, or "
+    "ideal=False (the PI loops, which saturate and let the wave drift)"
+)
+"""The one line refusing ideal force-to-rebalance loops with a force limit (`Control`)."""
 
 
 class Control(eqx.Module):
@@ -78,7 +86,8 @@ class Control(eqx.Module):
     - `rebalance_limit`: largest node force the rebalance loop may command (forcer
       saturation) [readout units · rad²/s²]; `None` for none. At the default gyro
       (ω = 2π·5 kHz, a₀ = 1, k_e = 0.554) 1 °/s needs 2ωa₀k_eΩ ≈ 608. While saturated the
-      loop's integrator stops (anti-windup).
+      loop's integrator stops (anti-windup). Needs the PI loops (`ideal=False`): ideal loops
+      cannot saturate, and the pair is refused.
     - `k_e_nominal`: the angular gain the electronics divide the rebalance force by to read
       the rate (FTR output) — the nominal one, as whole-angle data are read with, so a gyro
       whose k_e differs from it, or varies with temperature, shows it as a scale factor.
@@ -138,6 +147,8 @@ class Control(eqx.Module):
             )
         if self.mode == "ftr" and not self.enabled:
             raise ValueError("Control.mode='ftr' needs the loops: a free resonator has none")
+        if self.mode == "ftr" and self.ideal and self.rebalance_limit is not None:
+            raise ValueError(IDEAL_LIMIT)
         check_limits("Control", self, LIMITS)
 
     def forcer_matrix(self):

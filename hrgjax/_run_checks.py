@@ -1,0 +1,150 @@
+"""The plausibility of a run's inputs, checked at `simulate`'s entry: the gyro's temperature
+laws over the profile's temperatures (`check_laws`, on concrete values), and the same rules
+with `Profile`'s own held at run time on traced values (`check_traced`: inside `jit`, `vmap`
+or `hg.sweep`, where no value is known when the run is set up)."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import RULES, is_concrete
+from ._compiled import tracing_callback_free
+from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
+from .noise import UNITS as NOISE_UNITS
+from .profiles import traced_checks as profile_checks
+from .resonator.control import LIMITS as CONTROL_LIMITS
+from .resonator.params import TemperatureLaw
+from .resonator.readout import LIMITS as READOUT_LIMITS
+
+LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by path
+    "resonator.omega": ("> 0", "rad/s"),
+    "resonator.tau": ("> 0", "s"),
+    "resonator.k_e": ("in (0, 1]", "(the electrical angular gain 2K, ≈ 0.554)"),
+    "drift_terms.lag_time": ("> 0", "s"),
+    "drift_terms.warmup_time": ("> 0", "s"),
+    "noise.correlation_time": ("> 0", "s"),
+    **{f"control.{n}": rule for n, rule in CONTROL_LIMITS.items()},
+    **{f"readout.{n}": rule for n, rule in READOUT_LIMITS.items()},
+    **{f"noise.{n}": (">= 0", NOISE_UNITS[n]) for n in NOISE_NONNEGATIVE},
+}
+"""(rule of `hrgjax._checks.RULES`, unit) of each gyro field a temperature law (or a value
+put in with `eqx.tree_at`) must keep, by its path in the gyro; "finite" for any other."""
+
+LAW_GRID = 257
+"""Points between the profile's lowest and highest temperature at which a law is evaluated
+(with the knots' own temperatures)."""
+
+
+def obeys(rule: str, value, xp=np):
+    """Where `value` keeps `rule` of `LAW_LIMITS` ("finite" alone: everywhere)."""
+    v = xp.asarray(value, dtype=float)
+    return RULES[rule](v) if rule in RULES else xp.full(v.shape, True)
+
+
+def _laws(gyro):
+    """(dotted path, leaf) of every leaf of `gyro`, a `TemperatureLaw` counting as one."""
+    is_law = lambda x: isinstance(x, TemperatureLaw)  # noqa: E731
+    flat, _ = jax.tree_util.tree_flatten_with_path(gyro, is_leaf=is_law)
+    for path, law in flat:
+        yield ".".join(str(getattr(p, "name", getattr(p, "key", p))) for p in path), law
+
+
+def check_laws(gyro, profile) -> None:
+    """Every temperature law of `gyro` finite over the profile's temperatures, and decay
+    times, frequencies and noise levels of the right sign there; plain values put in with
+    `eqx.tree_at` within their limits (concrete values only: `check_traced` holds traced
+    ones to the same rules at run time)."""
+    temps = np.asarray(profile.temperature, float).ravel() if is_concrete(
+        profile.temperature) else None  # fmt: skip
+    grid = None
+    for name, law in _laws(gyro):
+        plain = not isinstance(law, TemperatureLaw) and is_concrete(law) and np.ndim(law) == 0
+        if plain and np.asarray(law).dtype.kind in "fiu" and not isinstance(law, bool):
+            # a plain value, checked here too: eqx.tree_at (as sweeps do) skips __init__
+            value, (rule, unit) = float(np.asarray(law)), LAW_LIMITS.get(name, ("finite", ""))
+            if not (np.isfinite(value) and obeys(rule, value)):
+                raise ValueError(f"gyro.{name} = {value:g} {unit}; it must be {rule}".replace(
+                    "  ", " "))  # fmt: skip
+            continue
+        if temps is None or not isinstance(law, TemperatureLaw):
+            continue
+        leaves = jax.tree_util.tree_leaves(law)
+        if not all(is_concrete(x) for x in leaves) or any(np.ndim(x) for x in leaves):
+            continue  # traced (`check_traced`), or a batch of laws: checked where evaluated
+        lo, hi = float(temps.min()), float(temps.max())
+        if grid is None:
+            grid = np.unique(np.concatenate([temps, np.linspace(lo, hi, LAW_GRID)]))
+        with np.errstate(over="ignore", invalid="ignore"):
+            value = law(grid, xp=np)
+        rule, unit = LAW_LIMITS.get(name, ("finite", ""))
+        bad = ~np.isfinite(value) | ~obeys(rule, value)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"the temperature law of gyro.{name} gives {value[i]:.6g} {unit} at "
+                f"{grid[i]:.4g} °C, inside the profile's temperatures [{lo:.4g}, {hi:.4g}] °C; "
+                f"it must be {rule} there".replace("  ", " ")
+            )
+
+
+def law_checks(gyro, profile) -> list:
+    """`check_laws`'s rule for every law it could not check (traced coefficients, or traced
+    temperatures): `[(bad, message), …]`, `bad` a traced boolean, the message its one line
+    without the value. A law is judged only where the temperatures and its coefficients are
+    finite (a NaN is the finite check's)."""
+    temps = jnp.ravel(jnp.asarray(profile.temperature, dtype=float))
+    temps_traced = not is_concrete(profile.temperature)
+    checks, grid = [], None
+    for name, law in _laws(gyro):
+        if not isinstance(law, TemperatureLaw):
+            continue
+        leaves = jax.tree_util.tree_leaves(law)
+        if any(np.ndim(x) for x in leaves):
+            continue  # a batch of laws (as `check_laws`)
+        if not temps_traced and all(is_concrete(x) for x in leaves):
+            continue  # `check_laws` did it
+        if grid is None:
+            grid = jnp.concatenate([temps, jnp.linspace(temps.min(), temps.max(), LAW_GRID)])
+        rule, unit = LAW_LIMITS.get(name, ("finite", ""))
+        value = law(grid)
+        judged = jnp.all(jnp.isfinite(temps)) & jnp.all(
+            jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves]))  # fmt: skip
+        bad = judged & jnp.any(~jnp.isfinite(value) | ~obeys(rule, value, jnp))
+        checks.append((bad, f"the temperature law of gyro.{name} leaves its range at one or "
+                            "more points inside the profile's temperatures; it must be "
+                            f"{rule} {unit} there".replace("  ", " ")))  # fmt: skip
+    return checks
+
+
+def check_traced(gyro, profile):
+    """`(gyro, profile)` with the plausibility rules of their traced values held at run
+    time by one `eqx.branched_error_if` on every traced leaf of both (what the run computes
+    from): `Profile`'s own ranges and knot order (`hrgjax.profiles.traced_checks`), then the
+    temperature laws' (`law_checks`). The first rule broken raises its one line, the eager
+    message without the value (`hg.sweep`: "sweep: at one or more grid points, …").
+    Concrete inputs add nothing: they were checked eagerly.
+
+    Nor does a run traced inside one of hrgjax's own compiled programs (`tracing_callback_free`):
+    their profiles come from data and plans checked where they were loaded or built, and are
+    padded on purpose (the physical fit continues a run's temperature linearly past its end to
+    stack runs of several lengths), and there a failed check could only poison the values
+    (equinox's NaN form) into a solver's "NaN or inf"."""
+    if tracing_callback_free():
+        return gyro, profile
+    checks = profile_checks(profile) + law_checks(gyro, profile)
+    if not checks:
+        return gyro, profile
+    bad = jnp.stack([jnp.asarray(b) for b, _ in checks])
+    messages = [m for _, m in checks]
+    flat, tree = jax.tree_util.tree_flatten((gyro, profile))
+    traced = [i for i, x in enumerate(flat)
+              if isinstance(x, jax.Array) and not is_concrete(x)]  # fmt: skip
+    checked = eqx.branched_error_if(
+        [flat[i] for i in traced], jnp.any(bad), jnp.argmax(bad), messages
+    )
+    for i, x in zip(traced, checked, strict=True):
+        flat[i] = x
+    return jax.tree_util.tree_unflatten(tree, flat)
