@@ -233,8 +233,14 @@ def _probe(fn):
 
 def _batched(fn):
     """`jax.jit(jax.vmap(fn))` on a dict of keyword arrays, one per `fn` (kept while `fn`
-    lives), so repeated sweeps of one function reuse its compiled batch."""
-    return _BATCHED.get(fn, lambda ref: jax.jit(jax.vmap(lambda kw: ref()(**kw))))
+    lives) and per plausible ranges (`simulate` reads `plausible.RANGES` when traced: a
+    batch compiled before a `plausible.relaxed` block would hold the old ranges inside it),
+    so repeated sweeps of one function reuse its compiled batch."""
+    ranges = tuple(sorted(plausible.RANGES.items()))
+    by_ranges, ref = _BATCHED.get(fn, lambda ref: ({}, ref))
+    if ranges not in by_ranges:
+        by_ranges[ranges] = jax.jit(jax.vmap(lambda kw: ref()(**kw)))
+    return by_ranges[ranges]
 
 
 def _local(call, flat, chunk_size, progress, total):

@@ -330,6 +330,9 @@ def test_implausible_traced_values_are_refused_in_a_sweep_as_eagerly():
     assert message.startswith("sweep: at one or more grid points, Profile.temperature is "
                               "outside the plausible range -100 … 150 °C") and "kelvin" in message  # fmt: skip
     assert "\n" not in message
+    with hg.plausible.relaxed(temperature_c=(-100.0, 1100.0)):  # the same fn, swept again
+        np.testing.assert_allclose(hg.sweep(final, temperature_c=jnp.array([60.0, 1000.0]))[0],
+                                   one[1], rtol=1e-12)  # fmt: skip
 
     def tau_slope(p1):  # τ = 50 s + p1 (T − 20 °C): at 60 °C, p1 = −2 s/°C gives τ = −30 s
         hot = eqx.tree_at(lambda g: g.resonator.tau, gyro, hg.TemperatureLaw(50.0, p1))
