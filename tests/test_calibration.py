@@ -140,6 +140,31 @@ def test_reduce_static_run_slope_and_units():
     np.testing.assert_allclose(w.wave_angle_deg, [np.mean(theta)])
 
 
+def test_static_drift_reports_the_student_t_degrees_of_freedom_of_its_error():
+    """Seeded Monte Carlo, 400 static runs of a pure angle random walk (truth: drift 0): the
+    batch-means error read as a normal 1σ under-covers (t₃: 61 %, z-RMS √3), so its degrees
+    of freedom are reported and the t interval they give covers at its nominal rate."""
+    from scipy import stats
+
+    rng = np.random.default_rng(7)
+    runs, n = 400, 100
+    walk = np.cumsum(rng.standard_normal((runs, n)), axis=1) * 1e-3
+    data = hg.MeasuredData(dict(
+        time_s=np.tile(np.arange(n) * 0.1, runs), temperature_c=np.full(runs * n, 20.0),
+        table_rate_dps=np.zeros(runs * n), wave_angle_deg=walk.ravel(),
+        run=np.repeat(np.arange(runs), n)))  # fmt: skip
+    for batches, normal_1s in ((5, (0.55, 0.66)), (10, (0.59, 0.71))):
+        d = hg.calibration.static_drift(data, batches=batches)
+        np.testing.assert_array_equal(d["dof"], batches - 2)
+        z = np.abs(d["drift_dph"] / d["stderr_dph"])
+        assert normal_1s[0] < np.mean(z < 1) < normal_1s[1], np.mean(z < 1)  # t's, not 68 %
+        for p, lo, hi in ((0.6827, 0.63, 0.74), (0.9545, 0.93, 0.98)):
+            q = stats.t.ppf(0.5 + p / 2, batches - 2)
+            assert lo < np.mean(z < q) < hi, (batches, p, np.mean(z < q))
+    short = reduce(hg.MeasuredData({k: v[:8] for k, v in data.columns.items()}))
+    np.testing.assert_array_equal(short.dof, [2])  # 8 samples: 4 batches, 2 dof
+
+
 def test_reduce_rejects_bad_arguments():
     data = hg.MeasuredData(
         dict(

@@ -17,10 +17,18 @@ Standard errors use **batch means**: the window is split into `batches` equal pa
 of each part is fitted, a linear trend over the parts is removed (a smooth change of the
 rate within the window is systematic, e.g. the scale-factor ripple while the pattern turns),
 and the error is the residual scatter over √batches. Per window, so runs of different noise
-each get their own. Right for an angle random walk (measured 0.92 of the slopes' scatter);
-**white angle noise is counted about `batches` times too large** (4.2× with 5 batches: a
-least-squares slope's variance under white angle noise falls as the cube of its length), so
-on a gyro whose windows are dominated by white angle noise the error bars are conservative.
+each get their own. Under an angle random walk its *size* is right (its mean is 0.92 of the
+slopes' scatter, as √(χ²₃/3)'s is), but it is read from `batches` − 2 = 3 degrees of freedom
+(`RateWindows.dof`, `static_drift()['dof']`), so the error over it is **Student-t with
+`dof` degrees of freedom, not normal**: ±1 standard error holds the truth 61 % of the time
+and ±2 86 % (Monte Carlo, 2000 300-s static runs of the default gyro: 59.5 % and 86.7 %, RMS
+of error/stderr 1.65 against t₃'s √3; `benchmarks/coverage_stderr.py`). For 68 % / 95 %
+intervals multiply it by t's quantiles (1.20 / 3.18 at 3 dof, 1.07 / 2.31 at 8), or use more
+batches (`static_drift(batches=10)`: 8 dof) where the run is long enough for white angle
+noise not to matter (below). **White angle noise is counted about `batches` times too
+large** (4.2× with 5 batches: a least-squares slope's variance under white angle noise falls
+as the cube of its length), so on a gyro whose windows are dominated by white angle noise
+the error bars are conservative.
 A model fitted to all the windows together was tried and withdrawn: it was right on
 average but pooled runs of different noise (6.8× too large on one, 1.7× too small on the
 other) and let a random walk in on pure white noise one time in six. Noise correlated over
@@ -66,7 +74,7 @@ def window_slopes(t, theta, n_windows: int, batches: int = 0):
     - `batches`: if ≥ 3, also return batch-means standard errors of each window's slope.
 
     **Returns:** `(slope, t_mid, theta_mean)` each of shape (n_windows,), plus `stderr` when
-    `batches ≥ 3`.
+    `batches ≥ 3`: a Student-t scale with `batches − 2` degrees of freedom (module docstring).
     """
     return _window_stats(jnp, t, theta, n_windows, batches)
 
@@ -150,8 +158,11 @@ class RateWindows(eqx.Module):
       exactly 0 where the table rate is 0 throughout the window.
     - `wave_angle_deg`: mean measured wave angle over the window.
     - `rate_dps`: measured equivalent input rate −(dθ/dt)/k_e,nom.
-    - `stderr_dps`: batch-means standard error of `rate_dps` (module docstring: right for an
-      angle random walk, ≈ `batches` times too large for white angle noise).
+    - `stderr_dps`: batch-means standard error of `rate_dps` (module docstring: its size right
+      for an angle random walk, ≈ `batches` times too large for white angle noise).
+    - `dof`: its degrees of freedom (batches − 2; 3 by default): (rate − truth)/stderr is
+      Student-t with `dof` degrees of freedom, so ±1 `stderr_dps` covers 61 % at 3 dof, not
+      68 % (None when the windows were built by hand).
     - `k_e`: the nominal angular gain used.
     - `temperature_rate_cps`: least-squares slope of the temperature over the window [°C/s]
       (None when the windows were built by hand).
@@ -169,6 +180,7 @@ class RateWindows(eqx.Module):
     stderr_dps: np.ndarray
     k_e: float = eqx.field(static=True)
     temperature_rate_cps: np.ndarray | None = None
+    dof: np.ndarray | None = None
 
     @property
     def static(self) -> np.ndarray:
@@ -267,7 +279,8 @@ def reduce(
     - `k_e`: nominal angular gain used for the conversion to input rate.
     - `window_s`: window length for moving runs [s] (see
       [`WINDOW_S`][hrgjax.calibration.reduce.WINDOW_S]); `None` keeps each run whole.
-    - `batches`: batch count for the standard errors (≥ 3).
+    - `batches`: batch count for the standard errors (≥ 3); they have `batches − 2` degrees
+      of freedom (fewer where a window has under 2·`batches` samples: `RateWindows.dof`).
     - `ramp_window_s`: window length for ramps — runs at rest whose temperature moves [s]
       (e.g. `RAMP_WINDOW_S`, 300 s); `None` (default) keeps each ramp one window,
       as every static run.
@@ -307,26 +320,36 @@ def reduce(
         cols["wave_angle_deg"].append(ym)
         cols["rate_dps"].append(-slope / k_e)
         cols["stderr_dps"].append(se / k_e)
+        cols["dof"].append(np.full(n_win, nb - 2))
         cols["temperature_rate_cps"].append(least_squares_slope(np, t[:m].reshape(n_win, n),
                                                    temp[:m].reshape(n_win, n))[0])  # fmt: skip
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     return RateWindows(**arrays, k_e=float(k_e))
 
 
-def static_drift(data: MeasuredData, k_e: float = K_E_NOMINAL):
+def static_drift(data: MeasuredData, k_e: float = K_E_NOMINAL, batches: int = 5):
     """Drift of each static run as equivalent input rate [°/h]: −(wave-angle slope)/k_e minus
     the table rate; with the run's temperature [°C] and mean wave angle [°].
 
+    `batches` (≥ 3) sets the standard error's degrees of freedom, `batches − 2`: the error
+    (drift − truth)/`stderr_dph` is Student-t with `dof` degrees of freedom, so ±1
+    `stderr_dph` holds the truth 61 % of the time at the default 3 dof (t₃'s 68 % / 95 %
+    quantiles are 1.20 / 3.18), 65 % with `batches=10` (8 dof; 1.07 / 2.31). More batches
+    are right on long static runs, where an angle random walk dominates the drift's error;
+    where white angle noise does, each batch counts it ≈ `batches` times too large
+    (conservative: the module docstring).
+
     **Returns:** dict of arrays `temperature_c`, `wave_angle_deg`, `drift_dph`,
-    `stderr_dph`, `run`.
+    `stderr_dph`, `dof`, `run`.
     """
-    w = reduce(data, k_e, window_s=None)
+    w = reduce(data, k_e, window_s=None, batches=batches)
     w = w.select(w.static)
     return {
         "temperature_c": w.temperature_c,
         "wave_angle_deg": w.wave_angle_deg,
         "drift_dph": w.drift_dph,
         "stderr_dph": w.stderr_dps * 3600.0,
+        "dof": w.dof,
         "run": w.run,
     }
 
