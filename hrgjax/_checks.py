@@ -249,3 +249,169 @@ def check_covariance(name: str, a, *, definite: bool = False, form: str = "(n, n
     sym_a = 0.5 * (mats[i] + mats[i].T)
     raise ValueError(f"{head}; its smallest eigenvalue is {np.linalg.eigvalsh(sym_a)[0]:.6g}"
                      f"{_at(index, i, batched)}")  # fmt: skip
+
+
+# -- one-line descriptions of bad values, and the 1-D check (Allan estimators, Kalman filters)
+
+_SHORT = 60
+"""The longest repr `describe` shows whole; a longer one is cut."""
+
+
+def describe(x) -> str:
+    """`x` for a one-line error message, whatever its size: a number (a 0-d array too) or a
+    short value as its repr; an array, a list or a tuple of any length as its type and shape
+    (never its values); anything else as its repr cut to `_SHORT` characters."""
+    if hasattr(x, "shape") and hasattr(x, "dtype"):  # NumPy, JAX (a tracer too)
+        shape, dtype = tuple(x.shape), x.dtype
+        if shape == () and getattr(dtype, "kind", None) in ("b", "i", "u", "f") and is_concrete(x):
+            return f"{_kind(x)} {np.asarray(x).item()!r}"
+        return f"{_kind(x)} of shape {shape} and dtype {dtype}"
+    if isinstance(x, list | tuple) and len(x) > 0:
+        try:
+            shape = np.shape(x)
+        except ValueError:  # ragged
+            return f"ragged {type(x).__name__} of {len(x)} items"
+        if len(repr(x)) > _SHORT or "\n" in repr(x):
+            return f"{type(x).__name__} of shape {shape}"
+    text = repr(x).replace("\n", " ")
+    return text if len(text) <= _SHORT else f"{type(x).__name__} {text[:_SHORT]}…"
+
+
+def _kind(x) -> str:
+    return "jax.Array" if isinstance(x, jax.Array) else type(x).__name__
+
+
+def is_finite_real(x) -> bool:
+    """Whether `x` is one finite real number: a Python or NumPy one, or a concrete 0-d real
+    array (not a bool, not a longer array, not a string)."""
+    if isinstance(x, bool | np.bool_ | str | bytes):
+        return False
+    if hasattr(x, "shape") and hasattr(x, "dtype"):
+        if x.shape != () or getattr(x.dtype, "kind", None) not in ("i", "u", "f"):
+            return False
+        if not is_concrete(x):
+            return False
+    elif not isinstance(x, int | float):
+        return False
+    return bool(np.isfinite(float(x)))
+
+
+def check_1d(name: str, x, what: str = "") -> tuple:
+    """The shape of `x` (an array, a list or a tracer: only its shape is read), or a
+    one-line `ValueError` naming `name`, `what` it holds and the shape found unless it is
+    1-D: several columns are refused, not flattened into one record."""
+    try:
+        shape = tuple(x.shape) if hasattr(x, "shape") else np.shape(x)
+    except ValueError:  # a ragged list
+        shape = None
+    if shape is None or len(shape) != 1:
+        found = f"shape {shape}" if shape is not None else describe(x)
+        extra = " (several records: one call per record)" if shape and len(shape) > 1 else ""
+        raise ValueError(f"{name} must be 1-D{', ' + what if what else ''}; got {found}{extra}")
+    return shape
+
+
+# --- types of numeric arguments (numbers, arrays of numbers, flags) ----------------------
+
+
+def _type_name(x) -> str:
+    return "jax.Array" if isinstance(x, jax.Array) else type(x).__name__
+
+
+def _numeric_kind(x, bools=False):
+    """`(shape, problem)` of `x` as a real number or array of them: `problem` is None for
+    one, else the words after "got" (its type, and for an array its dtype and shape — never
+    the values). Arrays and tracers are judged by dtype and shape only; lists and tuples
+    element by element (so a traced element is never converted)."""
+    if x is None:
+        return (), "None"
+    if isinstance(x, str | bytes):
+        text = repr(x if len(x) <= 40 else x[:37] + "...")
+        return (), f"{type(x).__name__} {text}"
+    if isinstance(x, bool | np.bool_):
+        return (), None if bools else f"bool {x}"
+    if isinstance(x, list | tuple):
+        try:  # the common case at once: plain numbers (a traced element raises)
+            dtype = np.asarray(x).dtype
+            if np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.floating):
+                return np.shape(x), None
+        except Exception:  # noqa: BLE001 — ragged, traced or odd: judged element by element
+            pass
+        kinds = [_numeric_kind(v, bools) for v in x]
+        for _, problem in kinds:
+            if problem is not None:
+                return (len(x),), f"{type(x).__name__} holding {problem}"
+        shapes = {shape for shape, _ in kinds}
+        if len(shapes) > 1:
+            return (len(x),), f"ragged {type(x).__name__} (elements of shapes {sorted(shapes)})"
+        return (len(x),) + (shapes.pop() if shapes else ()), None
+    dtype, shape = getattr(x, "dtype", None), getattr(x, "shape", None)
+    if dtype is None or shape is None:
+        if isinstance(x, int | float | np.integer | np.floating):
+            return (), None
+        if isinstance(x, complex | np.complexfloating):
+            return (), f"complex {x}"
+        return (), type(x).__name__
+    shape = tuple(shape)
+    what = f"{_type_name(x)} (dtype {dtype}, shape {shape})"
+    if jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key):
+        return shape, f"a JAX PRNG key (dtype {dtype}, shape {shape}), not a number"
+    if bools and np.issubdtype(dtype, np.bool_):
+        return shape, None
+    if not (np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.floating)):
+        return shape, what
+    return shape, None
+
+
+def numeric_problem(x, bools: bool = False) -> str | None:
+    """Why `x` is not a real number or array of real numbers (bool — unless `bools` —, str,
+    None, a dict, a complex or ragged value, a PRNG key…), in words for "got …"; None when
+    it is one."""
+    return _numeric_kind(x, bools)[1]
+
+
+def check_number(name: str, x, unit: str = ""):
+    """Refuse `x` unless it is a single real number (a Python or NumPy number, a 0-d array or
+    a traced scalar), in one line naming `name` and `unit`: `TypeError` for a bool, str,
+    None, complex, PRNG key or other non-number, `ValueError` for an array of numbers (its
+    type and shape). Returns `x`."""
+    shape, problem = _numeric_kind(x)
+    form = f"a single real number{f' [{unit}]' if unit else ''}"
+    if problem is not None:
+        raise TypeError(f"{name} must be {form}; got {problem}")
+    if shape != ():
+        raise ValueError(f"{name} must be {form}; got {_type_name(x)} of shape {shape}")
+    return x
+
+
+def check_numbers(name: str, x, form: str, shape=None, bools: bool = False):
+    """Refuse `x` unless it is real numbers (no bool — unless `bools` —, str, None, complex,
+    PRNG key or ragged list), of `shape` when given (a tuple; None entries match any length),
+    in one line naming `name` and the expected `form`. Returns `x`."""
+    got, problem = _numeric_kind(x, bools)
+    if problem is not None:
+        raise TypeError(f"{name} must be {form}; got {problem}")
+    if shape is not None and (
+        len(got) != len(shape)
+        or any(s is not None and s != g for s, g in zip(shape, got, strict=True))
+    ):
+        raise ValueError(f"{name} must be {form}; got {_type_name(x)} of shape {got}")
+    return x
+
+
+def check_flag(name: str, x) -> bool:
+    """`x` as a bool when it is one (Python `bool` or `np.bool_`), else a one-line `TypeError`
+    naming `name` (a truthy string such as "no" must not switch a feature on)."""
+    if isinstance(x, bool | np.bool_):
+        return bool(x)
+    shown = (
+        "None"
+        if x is None
+        else f"{type(x).__name__} {x!r}"
+        if isinstance(x, str | int | float)
+        else (
+            f"{type(x).__name__}"
+            + (f" of shape {tuple(np.shape(x))}" if hasattr(x, "shape") else "")
+        )
+    )
+    raise TypeError(f"{name} must be True or False; got {shown}")

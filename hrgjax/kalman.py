@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.linalg import expm
 
-from ._checks import check_covariance, check_finite_host, concrete_value, host_value
+from ._checks import check_covariance, check_finite_host, concrete_value, describe, host_value
 from ._compiled import fused
 from ._linalg import cho_logdet, cho_solve, cholesky, whiten
 from ._x64 import require_x64
@@ -110,14 +110,45 @@ def _check_linear(prior, phi, qd, H, R, zs, mask, us):
     _check_measurements(zs, mask)
 
 
+def _floats(a):
+    """`a` with integer or boolean entries (an array, a tracer, a list) as floats (float64
+    under x64), as the filters compute them: `jnp.array([0, 0])` is a valid way to write a
+    zero state, and an integer carry cannot hold the float updates of a `lax.scan`. Float
+    arrays pass as they are (a NumPy array stays on the host), and so does anything else
+    (a Python number, a string, None: the shape checks name it)."""
+    if isinstance(a, list | tuple):
+        try:
+            host = np.asarray(a)
+        except ValueError:  # ragged: the shape checks name it
+            return a
+        return np.asarray(host, float) if host.dtype.kind in "biuf" else a
+    if getattr(getattr(a, "dtype", None), "kind", None) in ("b", "i", "u"):
+        if isinstance(a, jax.Array):
+            return a.astype(jax.dtypes.canonicalize_dtype(np.float64))
+        return np.asarray(a, float)
+    return a
+
+
 class Gaussian(eqx.Module):
-    """A state estimate: mean `x` (n,) and covariance `P` (n, n)."""
+    """A state estimate: mean `x` (n,) and covariance `P` (n, n). Integer or boolean entries
+    (`jnp.array([0, 0])`, a list) become floats."""
 
-    x: jax.Array
-    P: jax.Array
+    x: jax.Array = eqx.field(converter=_floats)
+    P: jax.Array = eqx.field(converter=_floats)
 
 
-@fused
+def _dt(name: str, dt):
+    """Refuse a host `dt` that is not one finite real number, in one line naming `name`; a
+    traced one (under `jit` or `vmap`) passes."""
+    if isinstance(dt, jax.core.Tracer):
+        return
+    value = np.asarray(dt) if isinstance(dt, str) else concrete_value(dt)
+    if value is None:
+        return
+    if not (value.ndim == 0 and value.dtype.kind in "iuf" and np.isfinite(value)):
+        raise ValueError(f"{name} must be the step, one finite number [s]; got {describe(dt)}")
+
+
 def van_loan(F, Q, dt):
     r"""Exact discretisation $(\Phi, Q_d)$ of $\dot x = Fx + w$ with white-noise spectral
     density `Q` over a step `dt`, from one matrix exponential:
@@ -125,7 +156,15 @@ def van_loan(F, Q, dt):
     $$\exp\!\left(\begin{bmatrix}-F & Q\\ 0 & F^\top\end{bmatrix}dt\right)
     = \begin{bmatrix}\cdot & \Phi^{-1}Q_d\\ 0 & \Phi^\top\end{bmatrix}.$$
 
-    It satisfies $FQ_d + Q_dF^\top + Q - \Phi Q\Phi^\top = 0$ (PHYSICS.md §12)."""
+    It satisfies $FQ_d + Q_dF^\top + Q - \Phi Q\Phi^\top = 0$ (PHYSICS.md §12). A host
+    `dt` that is not one finite number is refused in one line."""
+    _dt("dt", dt)
+    return _van_loan(_floats(F), _floats(Q), dt)
+
+
+@fused
+def _van_loan(F, Q, dt):
+    """`van_loan` without the check of `dt` (fused: one compiled program)."""
     F, Q = jnp.asarray(F), jnp.asarray(Q)
     n = F.shape[-1]
     z = jnp.zeros_like(F)
@@ -136,11 +175,18 @@ def van_loan(F, Q, dt):
     return phi, 0.5 * (qd + qd.T)
 
 
-@fused
 def discretise_input(F, B, dt):
     r"""Zero-order-hold input matrix $\Gamma = \int_0^{dt} e^{Fs}ds\,B$ (with $\Phi$), from the
     exponential of $\begin{bmatrix}F & B\\ 0 & 0\end{bmatrix}dt$: an input held constant over
-    the step moves the state by $\Gamma u$ exactly."""
+    the step moves the state by $\Gamma u$ exactly. A host `dt` that is not one finite
+    number is refused in one line."""
+    _dt("dt", dt)
+    return _discretise_input(_floats(F), _floats(B), dt)
+
+
+@fused
+def _discretise_input(F, B, dt):
+    """`discretise_input` without the check of `dt` (fused: one compiled program)."""
     F, B = jnp.asarray(F), jnp.asarray(B)
     n, m = B.shape
     top = jnp.concatenate([F, B], axis=1)
@@ -198,6 +244,7 @@ def psd_factor(m):
 
 def predict(g: Gaussian, phi, qd, u=None) -> Gaussian:
     r"""Time update $x \leftarrow \Phi x (+u)$, $P \leftarrow \Phi P \Phi^\top + Q_d$."""
+    phi, qd, u = _floats(phi), _floats(qd), _floats(u)
     x = phi @ g.x if u is None else phi @ g.x + u
     p = phi @ g.P @ phi.T + qd
     return Gaussian(x, 0.5 * (p + p.T))
@@ -215,6 +262,7 @@ def update(g: Gaussian, z, H, R, mask=True):
     prior is returned unchanged). Shapes are checked when traced; values (a NaN in `z`
     where `mask` is True, `R` not positive-definite, `g.P` not positive semi-definite) when
     they are concrete."""
+    z, H, R = _floats(z), _floats(H), _floats(R)
     _check_update(g, z, H, R, mask)
     return _update_innovation(g, z - H @ g.x, H, R, mask)
 
@@ -286,6 +334,7 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
     require_x64("hrgjax.kalman.kalman_filter")
+    phi, qd, H, R, zs, us = (_floats(a) for a in (phi, qd, H, R, zs, us))
     _check_linear(prior, phi, qd, H, R, zs, mask, us)
     return _kalman_filter(prior, phi, qd, H, R, zs, mask, us)
 
@@ -316,6 +365,7 @@ def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     **Returns:** `(smoothed means (K, n), covariances (K, n, n), the filter's total
     log-likelihood)`."""
     require_x64("hrgjax.kalman.rts_smoother")
+    phi, qd, H, R, zs, us = (_floats(a) for a in (phi, qd, H, R, zs, us))
     _check_linear(prior, phi, qd, H, R, zs, mask, us)
     return _rts_smoother(prior, phi, qd, H, R, zs, mask, us)
 
@@ -391,6 +441,7 @@ def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None)
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
     require_x64("hrgjax.kalman.extended_kalman_filter")
     _check_model(f, h)
+    qd, R, zs, us = (_floats(a) for a in (qd, R, zs, us))
     return _extended_kalman_filter(prior, f, qd, h, R, zs, mask, us)
 
 
@@ -439,6 +490,7 @@ def unscented_kalman_filter(
     `beta`, `kappa` are inputs: new values compile nothing)."""
     require_x64("hrgjax.kalman.unscented_kalman_filter")
     _check_model(f, h)
+    qd, R, zs, us = (_floats(a) for a in (qd, R, zs, us))
     alpha, beta, kappa = (jnp.asarray(v, float) for v in (alpha, beta, kappa))
     return _unscented_kalman_filter(prior, f, qd, h, R, zs, mask, us, alpha, beta, kappa)
 
@@ -484,7 +536,6 @@ extended_kalman_filter.__wrapped__ = _ekf
 unscented_kalman_filter.__wrapped__ = _ukf
 
 
-@fused(static_argnames="n_iter")  # one program per shape: an eager call compiled every time
 def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
     r"""Converged prior covariance, gain and innovation covariance of a time-invariant model,
     by iterating the Riccati recursion (predict, then the Joseph update) `n_iter` times from
@@ -492,6 +543,12 @@ def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
     and the innovation log-likelihood uses the fixed $S$.
 
     **Returns:** `(P_prior (n, n), K (n, m), S (m, m))`."""
+    return _steady_state(*(_floats(a) for a in (phi, qd, h, r, p0)), n_iter)
+
+
+@fused(static_argnames="n_iter")  # one program per shape: an eager call compiled every time
+def _steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
+    """`steady_state` with its matrices as floats (fused: one compiled program)."""
     require_x64("hrgjax.kalman.steady_state")
     eye = jnp.eye(phi.shape[0])
 
@@ -509,3 +566,6 @@ def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
     s = 0.5 * (s + s.T)
     k = cho_solve(cholesky(s), h @ pp).T
     return 0.5 * (pp + pp.T), k, s
+
+
+steady_state.__wrapped__ = _steady_state.__wrapped__

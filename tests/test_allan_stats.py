@@ -4,6 +4,7 @@ dependency), scipy's χ² quantiles, and power-law noises of known type."""
 
 import json
 import math
+import re
 
 import jax
 import jax.numpy as jnp
@@ -580,3 +581,67 @@ def test_gapped_flicker_noise_keeps_one_records_edf():
     for m, t, e in zip(r.m, r.n_terms, r.edf, strict=True):
         one = allan.edf_greenhall(-1, 2, int(m), int(t + 2 * m), overlapping=True, modified=False)
         assert e == pytest.approx(one, rel=1e-12)
+
+
+def test_every_estimator_refuses_several_records_instead_of_flattening_them():
+    """Audit: `oadev(y (600, 3))` returned one number for the three axes raveled together
+    (59.4 where the axes have 0.99, 9.7 and 99); `mdev(y.T)` a number; `adev(y, m=2)` a
+    reshape TypeError. Every estimator now refuses non-1-D samples in one line."""
+    y3 = np.random.default_rng(0).normal(size=(600, 3)) * np.array([1.0, 10.0, 100.0])
+    calls = {
+        "oadev": lambda y: hg.oadev(y, m=1, tau0=0.01),
+        "adev": lambda y: hg.adev(y, m=2),
+        "mdev": lambda y: hg.mdev(y),
+        "hdev": lambda y: hg.hdev(y),
+        "ohdev": lambda y: hg.ohdev(y),
+        "totdev": lambda y: hg.totdev(y),
+        "allan_deviation": lambda y: hg.allan_deviation(y, dt=0.01),
+        "curve": lambda y: allan.deviations.curve(y, jnp.asarray([1, 2]), 0.01, "oadev"),
+    }
+    for name, call in calls.items():
+        for bad in (y3, y3.T, jnp.asarray(y3)):
+            with pytest.raises(ValueError, match=rf"^{name}: y must be 1-D.*got shape \((600, 3|3, 600)\)"):  # fmt: skip
+                call(bad)
+    for call in (lambda y: allan.deviation(y, 100.0), lambda y: allan.identify_noise(y, 100.0)):
+        with pytest.raises(ValueError, match=r"^y must be 1-D.*got shape \(600, 3\)"):
+            call(y3)
+    with pytest.raises(ValueError, match=r"^x must be 1-D.*got shape \(601, 3\)"):
+        allan.noise_id(np.cumsum(np.r_[np.zeros((1, 3)), y3], axis=0), [1, 2])
+    with pytest.raises(ValueError, match=r"^x must be 1-D.*got shape \(3, 600\)"):
+        from hrgjax.allan.total import mtotdev_curve
+
+        mtotdev_curve(y3.T, [1])
+    # under jit the shape is still checked (it is known while tracing)
+    with pytest.raises(ValueError, match=r"^oadev: y must be 1-D"):
+        jax.jit(lambda y: hg.oadev(y, 1))(jnp.asarray(y3))
+
+
+def test_a_number_given_an_array_is_named_in_one_line():
+    """Audit: `deviation(y, rate_hz=t)` (t 600 stamps) printed the array (55 lines), as did
+    identify_noise, adev's m and tau0, allan_deviation's dt and taus; `ci=None` gave
+    "'<' not supported between 'float' and 'NoneType'"."""
+    y = np.random.default_rng(1).normal(size=600)
+    t = np.arange(600) / 100.0
+    cases = [
+        (lambda: allan.deviation(y, rate_hz=t), r"^rate_hz must be a positive sample rate"),
+        (lambda: allan.identify_noise(y, rate_hz=t), r"^rate_hz must be a positive sample"),
+        (lambda: allan.to_uniform(t, y, rate_hz=t), r"^rate_hz must be a positive sample"),
+        (lambda: hg.adev(y, m=np.arange(600)), r"^adev: m must be a positive integer"),
+        (lambda: hg.adev(y, tau0=t), r"^adev: tau0 must be the sample interval"),
+        (lambda: hg.allan_deviation(y, dt=t.reshape(60, 10)), r"^allan_deviation: dt must be"),
+        (lambda: allan.deviation(y, 100.0, taus=t), r"^taus must be > 0 s; got 0 at index 0"),
+        (lambda: allan.deviation(y, 100.0, ci=t), r"^ci must be a confidence level in \(0, 1\)"),
+        (lambda: allan.identify_noise(y, 100.0, ci=t), r"^ci must be a confidence level"),
+        (lambda: allan.confidence_interval(y, y, t), r"^ci must be a confidence level"),
+    ]
+    for call, match in cases:
+        with pytest.raises(ValueError, match=match) as err:
+            call()
+        assert "\n" not in str(err.value) and len(str(err.value)) < 200, str(err.value)
+        assert re.search(r"of shape \((600,|60, 10)\)", str(err.value)), str(err.value)
+    for call in (lambda: allan.deviation(y, 100.0, ci=None),
+                 lambda: allan.identify_noise(y, 100.0, ci=None)):  # fmt: skip
+        with pytest.raises(ValueError, match=r"^ci must be a confidence level in \(0, 1\); got None$"):  # fmt: skip
+            call()
+    with pytest.raises(ValueError, match=r"^adev: tau0 must be the sample interval.*got '0.1'$"):
+        hg.adev(y, tau0="0.1")

@@ -942,3 +942,17 @@ def test_gnss_rate_that_is_not_a_number_is_named():
     for bad in (None, "1", True, 0.0, float("nan")):
         with pytest.raises(ValueError, match=r"^Gnss.rate_hz must be a number > 0 \[Hz\]; got "):
             Gnss(rate_hz=bad)
+
+
+def test_mechanize_every_is_shown_as_given():
+    """Audit: `mechanize(…, every="2")` said "got 2" (the quotes lost: it looked valid)."""
+    from hrgjax import ins
+
+    n0 = ins.NavState.from_euler(0.5, 0.1, 0.0, np.zeros(3), 0.0, 0.0, 0.0)
+    z = np.zeros((10, 3))
+    for bad, shown in (("2", "'2'"), (2.5, "2.5"), (np.arange(10), "ndarray of shape (10,)")):
+        with pytest.raises(ValueError) as err:
+            ins.mechanize(n0, z, z, 0.01, every=bad)
+        assert str(err.value).startswith(
+            f"every must be a positive divisor of the 10 intervals; got {shown}"
+        ), str(err.value)

@@ -297,3 +297,54 @@ def test_filter_inputs_are_refused_in_one_line():
     corr = 0.5 * np.eye(5) + 0.5 * np.exp(-np.abs(np.subtract.outer(range(5), range(5))))
     g = kalman.Gaussian(jnp.zeros(5), jnp.diag(jnp.array([1.0, 0.0, 1e-12, 0.0, 1e6])))
     assert np.isfinite(kalman.update(g, jnp.zeros(5), jnp.eye(5), corr * np.outer(sig, sig))[3])
+
+
+def test_integer_and_list_inputs_are_floats():
+    """Audit: a prior written with integers (`jnp.array([0, 0])`, `np.eye(2, dtype=int)`)
+    gave a 5-line scan-carry TypeError (kalman_filter, rts_smoother, the UKF) or "jacfwd
+    requires real-valued inputs" (the EKF); `Gaussian(x=[0, 0], …)` an AttributeError. An
+    integer or list state is a valid way to write it: the same result as floats."""
+    zs = np.asarray(ZS)
+    as_int = kalman.Gaussian(jnp.array([0, 0]), np.eye(2, dtype=int))
+    as_list = kalman.Gaussian([0, 0], [[1, 0], [0, 1]])
+    floats = kalman.Gaussian(jnp.zeros(2), jnp.eye(2))
+    assert as_int.x.dtype == as_list.P.dtype == jnp.float64
+    f = lambda x, u: PHI @ x  # noqa: E731
+    h = lambda x: H @ x  # noqa: E731
+    runs = {
+        "kalman_filter": lambda g, *m: kalman.kalman_filter(g, *m[:2], H, *m[2:]),
+        "rts_smoother": lambda g, *m: kalman.rts_smoother(g, *m[:2], H, *m[2:]),
+        "ekf": lambda g, phi, qd, r, z: kalman.extended_kalman_filter(g, f, qd, h, r, z),
+        "ukf": lambda g, phi, qd, r, z: kalman.unscented_kalman_filter(g, f, qd, h, r, z),
+    }
+    for name, run in runs.items():
+        want = run(floats, PHI, QD, R, zs)
+        for g in (as_int, as_list):
+            got = run(g, PHI, QD, R, zs)
+            for a, b in zip(got, want, strict=True):
+                np.testing.assert_allclose(a, b, rtol=1e-12, err_msg=name)
+        # integer model matrices and measurements too
+        got = run(floats, np.eye(2, dtype=int), np.eye(2, dtype=int), np.array([[1]]),
+                  np.round(zs).astype(int))  # fmt: skip
+        want = run(floats, jnp.eye(2), jnp.eye(2), jnp.ones((1, 1)), np.round(zs))
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12, err_msg=name)
+    # traced integers convert too (jit), and the float path keeps its gradient
+    xs = jax.jit(lambda x0: kalman.kalman_filter(kalman.Gaussian(x0, jnp.eye(2)), PHI, QD, H,
+                                                 R, ZS)[0])(jnp.array([0, 0]))  # fmt: skip
+    np.testing.assert_allclose(xs, kalman.kalman_filter(floats, PHI, QD, H, R, ZS)[0], rtol=1e-12)
+    grad = jax.grad(lambda s: kalman.kalman_filter(kalman.Gaussian(jnp.zeros(2), s * jnp.eye(2)),
+                                                   PHI, QD, H, R, ZS)[2])(1.0)  # fmt: skip
+    assert np.isfinite(grad)
+
+
+def test_van_loan_names_a_step_that_is_not_a_number():
+    """Audit: `van_loan(F, Q, "0.1")` gave a 2-line jit message naming no argument."""
+    for fn, b in ((kalman.van_loan, QD), (kalman.discretise_input, jnp.ones((2, 1)))):
+        for bad in ("0.1", None, np.ones(3), float("nan")):
+            with pytest.raises(ValueError, match=r"^dt must be the step, one finite number \[s\]") as err:  # fmt: skip
+                fn(PHI, b, bad)
+            assert "\n" not in str(err.value)
+    # traced steps pass (vmap over steps, as the INS models do)
+    phis, _ = jax.vmap(kalman.van_loan, in_axes=(None, None, 0))(PHI, QD, jnp.array([0.1, 0.2]))
+    np.testing.assert_allclose(phis[1], kalman.van_loan(PHI, QD, 0.2)[0], rtol=1e-12)

@@ -32,11 +32,11 @@ import dataclasses
 import itertools
 import json
 import math
-import numbers
 from statistics import NormalDist
 
 import numpy as np
 
+from .._checks import check_1d, describe, is_finite_real
 from .._io import atomic_write
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
 from .octave_covariance import covariance as covariance
@@ -288,19 +288,18 @@ def identify_noise(
     0–2, a bad rate or level, or a record shorter than 64 samples (four octaves)."""
     from .result import deviation
 
-    if isinstance(rate_hz, bool) or not (
-        isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0
-    ):
-        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
+    if not (is_finite_real(rate_hz) and rate_hz > 0):
+        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {describe(rate_hz)}")
     bad = [t for t in terms if t not in LINEAR]
     if bad:
         raise ValueError(f"terms must be among {list(LINEAR)}; got {bad}")
     if not terms and gauss_markov == 0:
         raise ValueError("terms: give at least one candidate (or gauss_markov ≥ 1)")
-    if gauss_markov not in (0, 1, 2):
-        raise ValueError(f"gauss_markov must be 0, 1 or 2 terms; got {gauss_markov!r}")
-    if not (0.0 < ci < 1.0):
-        raise ValueError(f"ci must be a confidence level in (0, 1); got {ci!r}")
+    if isinstance(gauss_markov, bool) or gauss_markov not in (0, 1, 2):
+        raise ValueError(f"gauss_markov must be 0, 1 or 2 terms; got {describe(gauss_markov)}")
+    if not (is_finite_real(ci) and 0.0 < ci < 1.0):
+        raise ValueError(f"ci must be a confidence level in (0, 1); got {describe(ci)}")
+    check_1d("y", y, "one rate sample per interval")
     y = np.asarray(y, dtype=float)
     if y.ndim != 1 or y.size < 64:
         raise ValueError(f"y must be 1-D with at least 64 samples; got shape {y.shape}")

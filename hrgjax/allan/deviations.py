@@ -8,6 +8,9 @@ The single-factor estimators (`adev` … `totdev`) and one compiled curve over m
 (`curve`, behind [`allan_deviation`][hrgjax.allan_deviation]); `hrgjax.allan.result` puts
 that curve on allantools' τ grids with its statistics
 ([`deviation`][hrgjax.allan.deviation]).
+
+Each takes one record: samples that are not 1-D (an (N, 3) array of three axes) are refused
+in one line, not flattened into one record.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import concrete_value
+from .._checks import check_1d, concrete_value, describe
 from .._compiled import device, fused
 from .._x64 import require_x64
 
@@ -56,17 +59,20 @@ def _factor(m, name: str) -> int:
         pass
     if isinstance(m, numbers.Real) and math.isfinite(m) and float(m).is_integer():
         return int(m)
-    raise ValueError(f"{name}: m must be a positive integer; got {m!r}")
+    raise ValueError(f"{name}: m must be a positive integer; got {describe(m)}")
 
 
 def _check_inputs(name, y, tau0, tau_name="tau0"):
     """The sample interval a positive finite number of seconds, and host samples (a list or
     NumPy array; a JAX array is not copied back to be read) finite: NaN samples are gaps only
     to [`hrgjax.allan.deviation`][hrgjax.allan.deviation]. Traced values pass."""
-    step = concrete_value(tau0)
-    if step is not None and not (np.ndim(step) == 0 and np.isfinite(step) and step > 0):
+    check_1d(f"{name}: y", y, "one rate sample per interval")
+    step = concrete_value(tau0)  # None when traced
+    if step is not None and not (
+        step.ndim == 0 and step.dtype.kind in "iuf" and np.isfinite(step) and step > 0
+    ):
         raise ValueError(f"{name}: {tau_name} must be the sample interval, a number > 0 [s]; "
-                         f"got {tau0!r}")  # fmt: skip
+                         f"got {describe(tau0)}")  # fmt: skip
     values = None if isinstance(y, jax.Array) else concrete_value(y)
     if values is not None and np.asarray(values).dtype.kind in "fc":
         bad = np.flatnonzero(~np.isfinite(np.ravel(values)))
@@ -184,8 +190,9 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
     **Returns:** `(taus [s], deviations [rate unit])` as arrays.
 
     **Raises:** `ValueError` for an unknown kind, an `m` the data are too short for, a `dt`
-    that is not a positive number, or host samples (a list, a NumPy array) that are not
-    finite (gaps: `hg.allan.deviation`).
+    that is not a positive number, samples that are not 1-D (several records, e.g. (N, 3)
+    axes: one call per record; never flattened into one), or host samples (a list, a NumPy
+    array) that are not finite (gaps: `hg.allan.deviation`).
     """
     require_x64("hrgjax.allan.allan_deviation")
     if kind not in _KINDS:
@@ -210,6 +217,7 @@ def curve(y, ms, tau0, kind):
     every `tau0` [s], at every averaging factor in `ms` (a run-time integer array: one
     program per kind, length of `y` and count of `ms`) [rate unit]. The scan keeps the memory
     at one factor's O(N)."""
+    check_1d("curve: y", y, "one rate sample per interval")
     x = _phase(y, tau0)
     n = x.shape[0]
     if kind == "totdev":  # the record reflected at both ends, built once for every m

@@ -37,6 +37,8 @@ import numbers
 
 import numpy as np
 
+from .._checks import describe, is_finite_real
+
 
 @dataclasses.dataclass(frozen=True)
 class Uniform:
@@ -67,8 +69,8 @@ def to_uniform(
     t = np.asarray(t, dtype=float)
     y = np.asarray(y, dtype=float)
     start = float(t[0]) if t.size else 0.0
-    if data not in ("rate", "phase"):
-        raise ValueError(f"data must be 'rate' or 'phase'; got {data!r}")
+    if not isinstance(data, str) or data not in ("rate", "phase"):
+        raise ValueError(f"data must be 'rate' or 'phase'; got {describe(data)}")
     if t.ndim != 1 or t.shape != y.shape or t.size < 3:
         raise ValueError(f"t and y must be 1-D of one length ≥ 3; got {t.shape} and {y.shape}")
     if not np.all(np.isfinite(t)):
@@ -77,15 +79,13 @@ def to_uniform(
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
         raise ValueError(f"t must increase; t[{i + 1}] = {t[i + 1]!r} follows t[{i}] = {t[i]!r}")
-    if not (max_gap > 1):
-        raise ValueError(f"max_gap must be > 1 step; got {max_gap!r}")
+    if isinstance(max_gap, bool) or not (isinstance(max_gap, numbers.Real) and max_gap > 1):
+        raise ValueError(f"max_gap must be > 1 step; got {describe(max_gap)}")
     median = float(np.median(dt))
     if rate_hz is None:
         rate_hz = 1.0 / median
-    if isinstance(rate_hz, bool) or not (
-        isinstance(rate_hz, numbers.Real) and math.isfinite(rate_hz) and rate_hz > 0
-    ):
-        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
+    if not (is_finite_real(rate_hz) and rate_hz > 0):
+        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {describe(rate_hz)}")
     step = 1.0 / float(rate_hz)
     t = t - start  # stamps from the first (epoch seconds keep their digits)
     grid = step * np.arange(int(math.floor(t[-1] / step * (1 + 1e-12))) + 1)

@@ -14,6 +14,7 @@ import numbers
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_1d, describe, is_finite_real
 from .._x64 import require_x64
 from .deviations import curve
 from .uncertainty import (
@@ -183,22 +184,24 @@ def deviation(
     **Returns:** an [`AllanResult`][hrgjax.allan.AllanResult].
 
     **Raises:** `ValueError` naming the argument for an unknown kind or data type, a
-    non-positive rate, infinite samples, a `ci` outside (0, 1), data too short for any τ, or
+    rate that is not one positive number, samples that are not 1-D, infinite samples, a `ci` outside (0, 1), data too short for any τ, or
     gaps in a totdev;
     `RuntimeError` when JAX is in float32 mode (a summed phase's differences need float64).
     """
     require_x64("hrgjax.allan.deviation (differences of a summed phase)")
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {list(KINDS)}; got {kind!r}")
-    if noise_rule not in NOISE_RULES:
-        raise ValueError(f"noise_rule must be one of {list(NOISE_RULES)}; got {noise_rule!r}")
-    if data not in ("rate", "phase"):
-        raise ValueError(f"data must be 'rate' or 'phase'; got {data!r}")
-    if not (isinstance(rate_hz, numbers.Real) and not isinstance(rate_hz, bool)
-            and math.isfinite(rate_hz) and rate_hz > 0):  # fmt: skip
-        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {rate_hz!r}")
-    if not (0.0 < ci < 1.0):
-        raise ValueError(f"ci must be a confidence level in (0, 1); got {ci!r}")
+    if not isinstance(kind, str) or kind not in KINDS:
+        raise ValueError(f"kind must be one of {list(KINDS)}; got {describe(kind)}")
+    if not isinstance(noise_rule, str) or noise_rule not in NOISE_RULES:
+        raise ValueError(
+            f"noise_rule must be one of {list(NOISE_RULES)}; got {describe(noise_rule)}"
+        )
+    if not isinstance(data, str) or data not in ("rate", "phase"):
+        raise ValueError(f"data must be 'rate' or 'phase'; got {describe(data)}")
+    if not (is_finite_real(rate_hz) and rate_hz > 0):
+        raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {describe(rate_hz)}")
+    if not (is_finite_real(ci) and 0.0 < ci < 1.0):
+        raise ValueError(f"ci must be a confidence level in (0, 1); got {describe(ci)}")
+    check_1d("y", y, "one sample per interval")
     kind_of = np.asarray(y).dtype.kind
     if kind_of in "cbOUSMm":
         what = {"c": "complex numbers", "b": "booleans"}.get(kind_of, f"{np.asarray(y).dtype}")
@@ -233,7 +236,8 @@ def deviation(
     m, n_terms = m[n_terms > 1], n_terms[n_terms > 1]
     if m.size == 0:
         raise ValueError(
-            f"y: {y.size} samples are too few for {kind} at any of the τ asked (taus={taus!r})"
+            f"y: {y.size} samples are too few for {kind} at any of the τ asked "
+            f"(taus={describe(taus)})"
         )
     if data == "rate":
         check_rate_has_noise(y)
@@ -316,14 +320,17 @@ def _factors(taus, rate_hz: float, n_phase: int) -> np.ndarray:
             )
         else:
             raise ValueError(
-                f"taus must be 'octave', 'decade', 'all' or τ values in seconds; got {taus!r}"
+                f"taus must be 'octave', 'decade', 'all' or τ values in seconds; "
+                f"got {describe(taus)}"
             )
     else:
         t = np.asarray(taus, dtype=float).ravel()
         if t.size == 0 or not np.all(np.isfinite(t)):
-            raise ValueError(f"taus must be finite τ values in seconds; got {taus!r}")
+            raise ValueError(f"taus must be finite τ values in seconds; got {describe(taus)}")
         if np.any(t <= 0):
-            raise ValueError(f"taus must be > 0 s; got {float(t[t <= 0][0]):g} in {taus!r}")
+            i = int(np.argmax(t <= 0))
+            raise ValueError(f"taus must be > 0 s; got {float(t[i]):g} at index {i} of "
+                             f"{describe(taus)}")  # fmt: skip
         m = np.round(t * rate_hz)
     m = m[(m > 0) & (m < n_phase)]
     return np.unique(m).astype(int)

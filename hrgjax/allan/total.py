@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._checks import check_1d
 from .._progress import bar
 from .uncertainty import edf_greenhall
 
@@ -49,6 +50,7 @@ _ELEMENTS = 2_000_000  # extended points held at once (chunks of runs)
 def mtotdev_curve(x, ms) -> tuple[np.ndarray, np.ndarray]:
     """`(mtotdev, runs)` at factors `ms` of phase `x` (1-D, angle units, τ₀ = 1: the caller
     divides by τ₀); `runs` = N − 3m + 1 per factor (0 where 3m > N, with NaN)."""
+    check_1d("x", x, "one phase (angle) sample per interval")
     x = np.asarray(x, dtype=float)
     n = x.size
     # a line through the ends taken off first (each run's own line removes any line exactly):

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
 from statistics import NormalDist
 
 import numpy as np
+
+from .._checks import check_1d, describe, is_finite_real
 
 ONE_SIGMA = 0.6826894921370859
 """erf(1/√2): the ±1σ confidence level, the default of `ci`."""
@@ -85,8 +86,9 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
     **Raises:** `ValueError` for an unknown `rule`, or when no factor of the record can be
     read: fewer than `B1_AVERAGES` + 1 points (default rule), fewer than 3 (`"stable32"`), or
     fewer than `ACF_POINTS` (`"stable32"`, `overlapping=False`)."""
-    if rule not in NOISE_RULES:
-        raise ValueError(f"rule must be one of {list(NOISE_RULES)}; got {rule!r}")
+    if not isinstance(rule, str) or rule not in NOISE_RULES:
+        raise ValueError(f"rule must be one of {list(NOISE_RULES)}; got {describe(rule)}")
+    check_1d("x", x, "one phase (angle) sample per interval")
     x = np.asarray(x, dtype=float)
     if rule == "hrgjax":
         read, needs = (lambda k: _identify(x, k, dmax)), f"{B1_AVERAGES} averages"
@@ -497,8 +499,8 @@ def confidence_interval(dev, edf, ci: float = ONE_SIGMA):
     (NIST SP 1065 eq. 45), for any ci in (0, 1).
 
     **Raises:** `ValueError` for a `ci` outside (0, 1) or an EDF ≤ 0."""
-    if not (isinstance(ci, numbers.Real) and 0.0 < ci < 1.0):
-        raise ValueError(f"ci must be a confidence level in (0, 1); got {ci!r}")
+    if not (is_finite_real(ci) and 0.0 < ci < 1.0):
+        raise ValueError(f"ci must be a confidence level in (0, 1); got {describe(ci)}")
     dev, edf = np.asarray(dev, dtype=float), np.asarray(edf, dtype=float)
     p = (1.0 - ci) / 2
     lo = np.vectorize(lambda k: chi2_ppf(1 - p, k))(edf)

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import is_concrete
+from .._checks import describe, is_concrete
 from .._compiled import Check, fused, program
 from .._x64 import require_x64
 from .constants import G0, WGS84, Earth
@@ -417,7 +417,9 @@ def mechanize(
     dtheta, dv = check_increments(dtheta, dv, dt)
     n = dtheta.shape[0]
     if not (isinstance(every, int) and every >= 1 and n % every == 0):
-        raise ValueError(f"every must be a positive divisor of the {n} intervals; got {every}")
+        raise ValueError(
+            f"every must be a positive divisor of the {n} intervals; got {describe(every)}"
+        )
     xs = (dtheta, dv)
     if vertical is not None:
         hv = jnp.stack([jnp.asarray(x, float) for x in vertical], -1)
