@@ -123,7 +123,7 @@ def main():
         report("hrgjax --help", t, "s", "/ import", ratio(t), "≤ 0.3×")
 
         sim = CLI + ["simulate", "--preset", "tvg3", "--plan", "static"]
-        sim += ["--out", str(work / "s.csv")]
+        sim += ["--out", str(work / "s.csv"), "--force"]
         t, _ = timed(sim, env)
         report("hrgjax simulate --plan static, cold cache", t, "s", "/ import", ratio(t))
         t, _ = timed(sim, env, repeat)

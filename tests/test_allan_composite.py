@@ -254,7 +254,7 @@ def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, t
     assert "gyroscope_noise_density" in out["yaml"].read_text() and out["png"].stat().st_size
     # Stable32's noise rule: the same table as the Python call with it
     assert main(["allan", str(log), "--rate-hz", "10", "--kind", "totdev", "--noise-rule",
-                 "stable32", "--json", str(out["json"])]) == 0  # fmt: skip
+                 "stable32", "--json", str(out["json"]), "--force"]) == 0  # fmt: skip
     s32 = hg.allan.deviation(y, fs, "totdev", noise_rule="stable32")
     d = json.loads(out["json"].read_text())["deviation"]
     assert d["alpha"] == s32.alpha.tolist() and s32.alpha[-1] == 0  # white from 2 averages on

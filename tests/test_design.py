@@ -452,11 +452,11 @@ def test_simulate_plan_file_cli(tmp_path, quiet, capsys):
     slow = tmp_path / "slow.json"  # a 1-°C/min chamber cannot ramp it (save_plan refuses)
     slow.write_text(json.dumps(d.plan_to_json(plan, d.BenchModel(slew_c_per_min=5.0))
                                | {"bench": d.BenchModel().to_json()}))  # fmt: skip
-    cli_fails(["simulate", "--plan-file", str(slow), "--out", str(out)], capsys,
+    cli_fails(["simulate", "--plan-file", str(slow), "--out", str(out), "--force"], capsys,
               r"slow.json: segment 2 \(ramp\): 3 °C/min is faster than")  # fmt: skip
-    cli_fails(["simulate", "--plan-file", str(path), "--plan", "seed", "--out", str(out)],
+    cli_fails(["simulate", "--plan-file", str(path), "--plan", "seed", "--out", str(out), "--force"],
               capsys, "either --plan or --plan-file")  # fmt: skip
-    cli_fails(["simulate", "--plan-file", str(tmp_path / "none.json"), "--out", str(out)],
+    cli_fails(["simulate", "--plan-file", str(tmp_path / "none.json"), "--out", str(out), "--force"],
               capsys, r"--plan-file: .*none.json: no such file")  # fmt: skip
 
 

@@ -400,7 +400,7 @@ def test_cli_imu_calibrate(session, fitted, tmp_path, capsys):
     back = hg.imu.load_calibration(out)
     np.testing.assert_allclose(back.vector(), fitted.vector(), rtol=1e-12, atol=1e-15)
     with pytest.raises(SystemExit) as err:
-        main(["imu-calibrate", str(log), "--gyro-columns", "gx,gy", "--json", str(out)])
+        main(["imu-calibrate", str(log), "--gyro-columns", "gx,gy", "--json", str(out), "--force"])
     assert err.value.code == 2
     assert "--gyro-columns" in capsys.readouterr().err
 

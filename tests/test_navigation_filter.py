@@ -258,7 +258,7 @@ def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carl
     # warning; the same compiled program (the outages travel as a mask)
     with CompileCounter() as c, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        assert main([*args[:7], "0:120", *args[8:]]) == 0
+        assert main([*args[:7], "0:120", *args[8:], "--force"]) == 0
     assert "jit(_run_batch)" not in c.names, c.names
     assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], caught
     assert "NIS mean: none (every GNSS fix fell in an outage)" in capsys.readouterr().out

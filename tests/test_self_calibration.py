@@ -294,7 +294,7 @@ def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, 
     plain = tmp_path / "plain.csv"
     hg.MeasuredData({c: sweeps[c] for c in ("time_s", "run", "temperature_c", "table_rate_dps",
                                             "wave_angle_deg")}).save(plain)  # fmt: skip
-    cli_fails(["self-calibrate", str(plain), "--out", str(model)], capsys,
+    cli_fails(["self-calibrate", str(plain), "--out", str(model), "--force"], capsys,
               "needs virtual-precession data")  # fmt: skip
 
 

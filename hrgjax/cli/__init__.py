@@ -12,13 +12,14 @@ from ._common import EXIT_BAD_INPUT as EXIT_BAD_INPUT
 from ._common import EXIT_FAILURE as EXIT_FAILURE
 from ._common import EXIT_INTERRUPTED as EXIT_INTERRUPTED
 from ._common import NONNEGATIVE_INT as NONNEGATIVE_INT
+from ._common import OUTPUT_OPTIONS as OUTPUT_OPTIONS
 from ._common import PLOT_EXTENSIONS as PLOT_EXTENSIONS
 from ._common import POSITIVE_FLOAT as POSITIVE_FLOAT
 from ._common import POSITIVE_INT as POSITIVE_INT
 from ._common import POSITIVE_SECONDS as POSITIVE_SECONDS
 from ._common import PRESETS as PRESETS
 from ._common import UsageError as UsageError
-from ._common import one_line, option_name
+from ._common import force_option, one_line, option_name
 from .allan import cmd_allan as cmd_allan
 from .calibrate import COMPENSATORS as COMPENSATORS
 from .calibrate import METHODS as METHODS
@@ -115,15 +116,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     here = globals()  # looked up now, so that a replaced cmd_NAME (a test's) is the one run
     for name in COMMANDS:
-        _PARSERS[name](sub).set_defaults(func=here["cmd_" + name.replace("-", "_")])
+        p = _PARSERS[name](sub)
+        p.set_defaults(func=here["cmd_" + name.replace("-", "_")])
+        if name not in TOOL_NAMED_OUTPUTS:
+            force_option(p)
     return parser
+
+
+TOOL_NAMED_OUTPUTS = frozenset({"demo"})
+"""Commands whose every output has a name the tool chooses, in a folder (`demo --out DIR`):
+those files are the tool's own, replaced on a second run; every other command names its
+files after the user's options, refuses one that exists, and takes `--force`."""
 
 
 INPUT_OPTIONS = ("data", "log", "imu_log", "sections", "model", "models", "plan_file",
                  "offset_from", "motion")  # fmt: skip
 """Argument names (dests) that name files a command reads."""
-OUTPUT_OPTIONS = ("out", "plot", "json", "write_sections", "csv", "kalibr")
-"""Argument names (dests) that name files a command writes."""
 
 
 def check_distinct_paths(args) -> None:

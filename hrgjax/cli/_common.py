@@ -1,6 +1,6 @@
-"""What every `hrgjax` command shares: argument types, the start (x64, compile cache, output
-paths checked before any work), bad input as a one-line usage error, and the end (each
-output written, atomically, and said where)."""
+"""What every `hrgjax` command shares: argument types, the start (output paths checked before
+any work, an existing file refused unless `--force`; x64, compile cache), bad input as a
+one-line usage error, and the end (each output written, atomically, and said where)."""
 
 from __future__ import annotations
 
@@ -61,6 +61,14 @@ def NONNEGATIVE_FLOAT(text):  # noqa: N802 (an argparse type, named like the oth
     if not (0 <= value < float("inf")):
         raise argparse.ArgumentTypeError(f"expected a finite number ≥ 0; got {text}")
     return value
+
+
+OUTPUT_OPTIONS = ("out", "plot", "json", "write_sections", "csv", "kalibr")
+"""Argument names (dests) that name files a command writes."""
+TOOL_FOLDER = "out"
+"""hrgjax's own folder, in the current one: every command's default outputs, `make demo`'s
+and the docs' examples' go there. An output there that exists is replaced; a file named
+anywhere else that exists is refused unless `--force` (`refuse_existing`)."""
 
 
 def option_name(dest: str) -> str:
@@ -133,14 +141,70 @@ def _one_line_warning(message, category, filename, lineno, line=None) -> str:
 
 
 def start(args, inputs=(), **outputs) -> None:
-    """The start of every command: `setup`, then each output option checked before any work.
+    """The start of every command: each output option checked before any work, then `setup`.
 
     `outputs` maps an output option's dest (`out`, `json`, `plot`, `write_sections`) to the
     file name endings it takes; its path is `args.<dest>` (None: not asked for), checked by
-    `check_output` against the `inputs` (paths the command reads)."""
-    setup()
+    `check_output` against the `inputs` (paths the command reads), then by
+    `refuse_existing`."""
     for dest, extensions in outputs.items():
         check_output(option_name(dest), getattr(args, dest, None), extensions, inputs)
+    refuse_existing(args, outputs)
+    setup()
+
+
+def force_option(parser) -> None:
+    """`--force`: replace output files that exist (`refuse_existing`). Every command that
+    writes files the user names takes it (`hrgjax.cli.build_parser` adds it)."""
+    parser.add_argument(
+        "--force", action="store_true",
+        help=f"replace output files that exist (without it, a file outside {TOOL_FOLDER}/ "
+        "that exists is refused, before any work)",
+    )  # fmt: skip
+
+
+def in_tool_folder(path) -> bool:
+    """Whether `path` lies inside `TOOL_FOLDER` of the current folder (links resolved: a
+    link there to a file elsewhere is not inside)."""
+    folder = os.path.realpath(TOOL_FOLDER)
+    real = os.path.realpath(path)
+    try:
+        return real != folder and os.path.commonpath([folder, real]) == folder
+    except ValueError:  # another drive (Windows)
+        return False
+
+
+def refuse_existing(args, dests) -> None:
+    """Refuse, before any work, to replace a file that exists: an output the user named (each
+    of `dests` given in `args`), or one written beside it (`beside`), unless `args.force`
+    (`--force`) or the file lies in hrgjax's own folder (`TOOL_FOLDER`: every default output
+    goes there). The user's data is never replaced unasked.
+
+    **Raises:** `UsageError` naming the option, the file and `--force`."""
+    if getattr(args, "force", False):
+        return
+    derived = getattr(args, "derived", {})
+    for dest in dests:
+        path = getattr(args, dest, None)
+        if not path or not os.path.lexists(path) or in_tool_folder(path):
+            continue
+        option = option_name(dest)
+        if dest in derived:
+            of = derived[dest]
+            raise UsageError(
+                f"{option} {path} (written beside {option_name(of)} {getattr(args, of)}) "
+                f"exists; give {option} another path, or --force to replace it"
+            )
+        raise UsageError(f"{option} {path} exists; give another path, or --force to replace it")
+
+
+def beside(args, dest: str, of: str, ext: str) -> None:
+    """`args.<dest>`, when not given, is `args.<of>` with the extension `ext` (calibrate's
+    JSON export beside its `.eqx`): a file the user did not name, kept as the one named
+    (`refuse_existing` names both)."""
+    if getattr(args, dest) is None:
+        setattr(args, dest, os.path.splitext(getattr(args, of))[0] + ext)
+        args.derived = {**getattr(args, "derived", {}), dest: of}
 
 
 @contextlib.contextmanager

@@ -20,6 +20,7 @@ from ._common import (
     POSITIVE_SECONDS,
     UsageError,
     allow_extra_option,
+    beside,
     finish,
     load_data,
     one_line,
@@ -125,7 +126,7 @@ METHODS = tuple(COMPENSATORS)
 def cmd_calibrate(args) -> int:
     """`hrgjax calibrate DATA --method …`: fit a compensator to bench data."""
     check_given(args, OPTIONS_OF_METHOD, f"--method {args.method}")
-    args.json = args.json or os.path.splitext(args.out)[0] + ".json"
+    beside(args, "json", "out", ".json")
     start(args, [args.data], out=(".eqx",), json=(".json",))
     import jax
     import numpy as np
@@ -392,7 +393,7 @@ def cmd_self_calibrate(args) -> int:
     if reversal:
         start(args, [args.data], json=(".json",))
     else:
-        args.json = args.json or os.path.splitext(args.out)[0] + ".json"
+        beside(args, "json", "out", ".json")
         start(args, [args.data], out=(".eqx",), json=(".json",))
     import json
 

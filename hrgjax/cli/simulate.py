@@ -36,6 +36,7 @@ def _run_plans(gyro, plans, seed: int):
     bias_key = jax.random.fold_in(key, 1)
     parts, first = [], 0
     for i, plan in enumerate(plans):
+        _simulating(f"{plan.size} runs × {plan.duration_s:g} s", first=i == 0)
         t0 = time.perf_counter()
         data = run_plan(
             gyro, plan, key=jax.random.fold_in(key, 10 + i), bias_key=bias_key, first_run=first
@@ -48,6 +49,15 @@ def _run_plans(gyro, plans, seed: int):
         parts.append(data)
         first += plan.size
     return parts[0] if len(parts) == 1 else concat(parts)
+
+
+def _simulating(what: str, first: bool = True) -> None:
+    """The line said before a simulation starts: what it runs, and that the first call
+    compiles (seconds of silence otherwise, before the line that says it is done)."""
+    compiles = (
+        " (compiling the simulator first, unless the compile cache holds it)" if first else ""
+    )
+    print(f"  simulating {what} …{compiles}", flush=True)
 
 
 def _rows(data):
@@ -72,6 +82,9 @@ _OPTIONS_OF = {
 def cmd_simulate(args) -> int:
     """`hrgjax simulate`: run a bench plan on a preset gyro and write the data."""
     start(args, [args.plan_file], out=DATA_EXTENSIONS)
+    if args.plan_file is not None and os.path.isdir(args.plan_file):
+        raise UsageError(f"--plan-file {args.plan_file} is a folder; give a plan file (JSON, "
+                         "as hrgjax design writes)")  # fmt: skip
     from ..calibration import rotation_plan, seed_plan, static_plan
 
     plan = "a --plan-file" if args.plan_file is not None else f"--plan {args.plan or 'static'}"
@@ -123,6 +136,7 @@ def _self_calibration_plan(args, gyro) -> int:
         plan = sc.precession_plan(temps, args.precession)
         print(f"hrgjax simulate: preset {args.preset}, virtual precession at ±{args.precession:g} "
               f"°/s, {len(temps)} temperatures, {plan.size} sweeps × {plan.duration_s:g} s")  # fmt: skip
+        _simulating(f"{plan.size} sweeps × {plan.duration_s:g} s")
         data = sc.run_precession_plan(gyro, plan, key=jax.random.fold_in(key, 10),
                                       bias_key=bias_key)  # fmt: skip
     else:
@@ -130,6 +144,7 @@ def _self_calibration_plan(args, gyro) -> int:
             raise UsageError("--plan reversal holds the wave: add --mode ftr")
         print(f"hrgjax simulate: preset {args.preset}, force-to-rebalance, mode reversal at "
               f"{len(temps)} temperatures, held {args.duration:g} s at 0° and 90°")  # fmt: skip
+        _simulating(f"{len(temps)} runs of two {args.duration:g}-s holds")
         data = sc.run_reversal_plan(gyro, temps, 0.0, args.duration,
                                     key=jax.random.fold_in(key, 10), bias_key=bias_key)  # fmt: skip
     print(f"  simulated in {time.perf_counter() - t0:.1f} s", flush=True)
@@ -152,6 +167,7 @@ def _simulate_plan_file(args, gyro) -> int:
         f"hrgjax simulate: preset {args.preset}, plan file {args.plan_file}: {plan.size} "
         f"segments, bench time {hours['total']:.2f} h (measuring {hours['measuring']:.2f} h)"
     )
+    _simulating(f"{plan.size} segments")
     t0 = time.perf_counter()
     key = jax.random.key(args.seed)
     data = simulate_plan(gyro, plan, key=key, bias_key=jax.random.fold_in(key, 1))
