@@ -55,6 +55,31 @@ def test_alignment_converges_to_the_analytic_limits():
     assert r.heading_std_deg == pytest.approx(floor, rel=0.1)
 
 
+def test_heading_sigma_counts_the_east_gyro_bias_once():
+    """Audit: the fine filter started from the coarse heading with an independent 5° prior,
+    but the coarse heading's error comes from the same east gyro bias: counted twice, the σ
+    was 1/√(1/F² + 1/(5°)²) (3.66° for a 1 °/h grade at 45°, where the limit F is 5.39°).
+    The prior now holds the coarse stage's correlation with the biases: σ → F."""
+    lat = 45.0
+    log, _ = _stationary_log(lat, np.zeros(3), np.zeros(3))
+    r = al.align(log, gyro_bias_std=1.0 * DEG / 3600, arw=0.1 * DEG / 60)
+    limit = np.degrees(1.0 * DEG / 3600 / (C.OMEGA_IE * np.cos(lat * DEG)))
+    assert limit == pytest.approx(5.387, abs=1e-3)
+    assert r.heading_std_deg == pytest.approx(limit, rel=0.03)  # was 3.66°
+    assert r.to_json()["assumed_gyro_bias_std_deg_h"] == pytest.approx(1.0)
+    # the jacobian the prior uses: an east gyro bias moves the coarse heading by ε/(ω_ie cos φ)
+    jac = np.asarray(al.coarse_bias_jacobian(jnp.mean(log.dvel, 0), jnp.mean(log.dtheta, 0),
+                                             lat * DEG))  # fmt: skip
+    _, c = _stationary_log(lat, np.zeros(3), np.zeros(3), duration_s=2.0)
+    east_in_body = c.T @ np.array([0.0, 1.0, 0.0])
+    assert jac[2, :3] @ east_in_body == pytest.approx(
+        1 / (C.OMEGA_IE * np.cos(lat * DEG)), rel=1e-6
+    )
+    with pytest.raises(ValueError, match=r"^fine_align start_bias_jacobian must have shape "
+                       r"\(3, 6\) .*; got \(3, 3\)$"):  # fmt: skip
+        al.fine_align(log, np.eye(3), start_bias_jacobian=np.zeros((3, 3)))
+
+
 def test_coarse_alignment_is_exact_for_ideal_data():
     log, c = _stationary_log(30.0, np.zeros(3), np.zeros(3), duration_s=120.0)
     f_b = jnp.mean(log.dvel, 0)
@@ -106,6 +131,25 @@ def test_align_cli_writes_the_design_keys(psins_log, tmp_path, capsys):
     bad.write_text("% x\n0 0 0 0 0 0\n34 108 0 0 10 9.8\n1 1 1 1 1 1\n1 2 3\n")
     cli_fails(["align", str(bad)], capsys, "6 numbers")
     cli_fails(["align", str(PSINS), "--format", "csv"], capsys, "format")
+
+
+def test_align_cli_takes_the_gyro_grade_and_says_what_the_heading_sigma_assumes(tmp_path, capsys):
+    """Audit: the heading σ is the assumed gyro bias's (0.05 °/h), which the CLI could not
+    set and did not name: `--gyro-bias` [°/h] and `--arw` [°/√h] set it, and it is printed."""
+    path = _psins_file(tmp_path / "a.imu")
+    out = tmp_path / "a.json"
+    assert main(["align", str(path), "--json", str(out)]) == 0
+    default = json.loads(out.read_text())
+    assert ("(1σ, assuming gyro bias σ 0.05 °/h: stationary alignment cannot measure the east "
+            "gyro bias)") in capsys.readouterr().out  # fmt: skip
+    assert default["assumed_gyro_bias_std_deg_h"] == pytest.approx(0.05)
+    out = tmp_path / "b.json"
+    assert main(["align", str(path), "--gyro-bias", "1", "--arw", "0.1", "--json", str(out)]) == 0
+    assert "assuming gyro bias σ 1 °/h" in capsys.readouterr().out
+    tactical = json.loads(out.read_text())
+    assert tactical["assumed_gyro_bias_std_deg_h"] == pytest.approx(1.0)
+    assert tactical["heading_std_deg"] > 3 * default["heading_std_deg"]
+    cli_fails(["align", str(path), "--gyro-bias", "0"], capsys, "--gyro-bias")
 
 
 def _psins_file(path, lat=34.0, interval_ms=1000.0, gyro_unit=1.0, yaw="-90.6"):

@@ -40,12 +40,14 @@ def cmd_align(args) -> int:
         raise UsageError(f"unknown --format {args.format!r}; choose 'psins'")
     start(args, [args.imu_log], json=(".json",), plot=PLOT_EXTENSIONS)
     from ..ins.alignment import PSINS_FIELDS, align, check_stationary, load_psins
+    from ..units import DEG, DEG_PER_H
 
     with usage_errors(missing=f"{args.imu_log}: no such file"):
         log = load_psins(args.imu_log)
         check_stationary(log, args.coarse, fields=PSINS_FIELDS, coarse_name="--coarse",
                          where=f"{args.imu_log}: ")  # fmt: skip
-        result = align(log, coarse_s=args.coarse, step_s=args.step)
+        result = align(log, coarse_s=args.coarse, step_s=args.step,
+                       gyro_bias_std=args.gyro_bias * DEG_PER_H, arw=args.arw * DEG / 60.0)  # fmt: skip
     out = result.to_json()
     span = float(log.t[-1] - log.t[0])
     print(f"hrgjax align: {args.imu_log} ({log.t.shape[0]} samples, {span:.0f} s)")
@@ -55,7 +57,9 @@ def cmd_align(args) -> int:
         f"{c['pitch_deg']:.3f}°, roll {c['roll_deg']:.3f}°"
     )
     for k in ("heading", "pitch", "roll"):
-        print(f"  {k:>7}: {out[k + '_deg']:9.4f}° ± {out[k + '_std_deg']:.4f}° (1σ)")
+        why = (f", assuming gyro bias σ {args.gyro_bias:g} °/h: stationary alignment cannot "
+               "measure the east gyro bias" if k == "heading" else "")  # fmt: skip
+        print(f"  {k:>7}: {out[k + '_deg']:9.4f}° ± {out[k + '_std_deg']:.4f}° (1σ{why})")
     header = log.header_attitude_deg
     if header is not None:
         print(f"  file header heading: {header[2]:.2f}° (clockwise from north)")
@@ -174,6 +178,14 @@ def _align_parser(sub):
         "--coarse", type=POSITIVE_SECONDS, default=60.0, help="coarse-alignment span [s]"
     )
     p.add_argument("--step", type=POSITIVE_SECONDS, default=1.0, help="Kalman filter step [s]")
+    p.add_argument(
+        "--gyro-bias", type=POSITIVE_FLOAT, default=0.05, metavar="DEG_PER_H",
+        help="the gyros' bias σ [°/h] the filter assumes (navigation grade 0.05; tactical "
+        "≈ 0.5–1): the heading σ ends at it / (ω_ie cos lat), since stationary alignment "
+        "cannot measure the east gyro bias",
+    )  # fmt: skip
+    p.add_argument("--arw", type=POSITIVE_FLOAT, default=0.01, metavar="DEG_PER_RT_H",
+                   help="the gyros' angle random walk [°/√h] the filter assumes")  # fmt: skip
     return p
 
 

@@ -16,6 +16,15 @@ velocity, biases) and reset. East gyro bias and level accelerometer biases are
 unobservable, so the attitude converges to the analytic limits of PHYSICS.md §12
 ($\phi_E = -\nabla_N/g$, $\phi_N = \nabla_E/g$,
 $\phi_D = \varepsilon_E/(\omega_{ie}\cos\varphi) - (\nabla_E/g)\tan\varphi$).
+
+**What the heading σ rests on.** The east gyro bias is not measured, so the heading's 1σ
+ends at $\sigma_\varepsilon/(\omega_{ie}\cos\varphi)$ for the *assumed* gyro-bias σ
+`gyro_bias_std` (0.05 °/h by default): a property of the assumption, not of the data. The
+coarse attitude's error comes from the same biases (its heading error is
+$\varepsilon_E/(\omega_{ie}\cos\varphi)$ too), so `align` starts the filter with that
+correlation in its prior (`start_bias_jacobian`): the information is counted once, and the
+final heading σ is that limit however large the bias σ (an independent 5° heading prior
+counted it twice: $1/\sqrt{1/F^2 + 1/(5°)^2}$ for a limit F, too small when F is not ≪ 5°).
 """
 
 from __future__ import annotations
@@ -296,6 +305,22 @@ def coarse_align(f_b, w_b, lat):
 
 
 @fused
+def coarse_bias_jacobian(f_b, w_b, lat):
+    """(3, 6) ∂φ/∂(gyro bias [rad/s], accelerometer bias [m/s²]), body frame, of the attitude
+    error φ (C_true = (I + [φ×]) Ĉ) of [`coarse_align`][hrgjax.ins.alignment.coarse_align]'s
+    Ĉ for means `f_b`, `w_b` at latitude `lat` [rad] that hold constant sensor biases: the
+    coarse attitude's error is this times the biases (plus noise and sway) —
+    [`fine_align`][hrgjax.ins.alignment.fine_align]'s `start_bias_jacobian`."""
+    c = coarse_align(f_b, w_b, lat)
+
+    def phi(b):
+        m = coarse_align(f_b - b[3:], w_b - b[:3], lat) @ c.T  # C_true Ĉᵀ = I + [φ×]
+        return 0.5 * jnp.stack([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+
+    return jax.jacfwd(phi)(jnp.zeros(6))
+
+
+@fused
 def _rotation(v):
     """exp([v×]) (Rodrigues)."""
     a2 = v @ v
@@ -307,6 +332,10 @@ def _rotation(v):
     return jnp.eye(3) + s * k + c * (k @ k)
 
 
+_GYRO_BIAS_STD = 0.05 * DEG_PER_H
+"""`fine_align`'s default gyro-bias σ [rad/s] (navigation grade)."""
+
+
 class AlignmentResult(eqx.Module):
     """Attitude after alignment and its history.
 
@@ -314,7 +343,15 @@ class AlignmentResult(eqx.Module):
     `*_std_deg` (1σ); `t` (K,) [s] and `history_deg` (K, 3) (heading, pitch, roll),
     `std_history_deg` (K, 3); `coarse_deg` (heading, pitch, roll) of the coarse stage;
     `biases`: estimated gyro [rad/s] and accelerometer [m/s²] biases (6,); `c_bn`: the
-    final body-to-NED matrix."""
+    final body-to-NED matrix; `gyro_bias_std_deg_h`: the gyro-bias σ [°/h] the filter
+    assumed.
+
+    **The heading σ is an assumption's, not a measurement:** stationary alignment cannot
+    measure the east gyro bias, so `heading_std_deg` ends at
+    `gyro_bias_std / (ω_ie cos lat)` for the *assumed* `gyro_bias_std` (0.05 °/h by default:
+    0.28° at 45°). A gyro whose bias is larger has a heading error larger in proportion, the
+    σ does not show it: give [`align`][hrgjax.ins.alignment.align] the gyro's grade
+    (`gyro_bias_std`, `arw`; `hrgjax align --gyro-bias`, `--arw`)."""
 
     heading_deg: float
     pitch_deg: float
@@ -328,15 +365,18 @@ class AlignmentResult(eqx.Module):
     coarse_deg: tuple
     biases: jax.Array
     c_bn: jax.Array
+    gyro_bias_std_deg_h: float = 0.05
 
     def to_json(self) -> dict:
-        """The DESIGN.md keys (and the coarse result)."""
+        """The DESIGN.md keys (and the coarse result, and `assumed_gyro_bias_std_deg_h`: the
+        gyro-bias σ the heading σ rests on)."""
         keys = ("heading", "pitch", "roll")
         out = {f"{k}_deg": float(getattr(self, f"{k}_deg")) for k in keys}
         out |= {f"{k}_std_deg": float(getattr(self, f"{k}_std_deg")) for k in keys}
         out["coarse"] = dict(
             zip((f"{k}_deg" for k in keys), map(float, self.coarse_deg), strict=True)
         )
+        out["assumed_gyro_bias_std_deg_h"] = float(self.gyro_bias_std_deg_h)
         return out
 
 
@@ -365,17 +405,24 @@ def fine_align(
     arw: float = 0.01 * DEG / 60.0,
     vrw: float = 1e-4,
     velocity_noise: float = 0.01,
-    gyro_bias_std: float = 0.05 * DEG_PER_H,
+    gyro_bias_std: float = _GYRO_BIAS_STD,
     accel_bias_std: float = 1e-3,
     attitude_std_deg=(0.5, 0.5, 5.0),
+    start_bias_jacobian=None,
 ):
     """Kalman fine alignment from the body-to-NED start `c0` (module docstring).
 
     **Arguments:** `step_s`: filter step [s] (increments summed over it); `start_s`: time
     from the log's start at which the fine stage begins; `arw` [rad/√s], `vrw` [m/s/√s]:
     sensor white noise; `velocity_noise` [m/s]: measurement noise of the zero-velocity
-    update (sway of a parked vehicle); bias and initial attitude standard deviations (level,
-    level, heading) [°].
+    update (sway of a parked vehicle); `gyro_bias_std` [rad/s], `accel_bias_std` [m/s²]:
+    the assumed sensor grade (the heading σ ends at `gyro_bias_std / (ω_ie cos lat)`);
+    `attitude_std_deg` (level, level, heading) [°]: the start attitude's error σ — with
+    `start_bias_jacobian` (3, 6), A = ∂φ/∂(gyro, accel bias) of `c0`'s error
+    ([`coarse_bias_jacobian`][hrgjax.ins.alignment.coarse_bias_jacobian] for a coarse
+    start), the part of it the biases do not explain: the prior is then φ = A b + that, its
+    correlation with the bias states kept (without it, a start whose error comes from the
+    biases counts the same information twice and the σ is too small).
 
     **Returns:** `(t (K,), C_bn (K, 3, 3), P (K, 12, 12), biases (6,))`.
 
@@ -391,15 +438,24 @@ def fine_align(
     dth = log.dtheta[sl].reshape(n_blocks, m, 3).sum(1)
     dv = log.dvel[sl].reshape(n_blocks, m, 3).sum(1)
     t = log.t[sl].reshape(n_blocks, m)[:, -1]
+    if start_bias_jacobian is None:
+        jac = jnp.zeros((3, 6))
+    else:
+        jac = jnp.asarray(start_bias_jacobian, dtype=float)
+        if jac.shape != (3, 6):
+            raise ValueError(
+                f"fine_align start_bias_jacobian must have shape (3, 6) [rad per (rad/s, "
+                f"m/s²)]; got {jac.shape}"
+            )
     return _fine(
         jnp.asarray(c0), dth, dv, t, jnp.asarray(m * dt), log.lat, log.h,
         jnp.asarray([arw, vrw, velocity_noise, gyro_bias_std, accel_bias_std]),
-        jnp.asarray(attitude_std_deg) * DEG,
+        jnp.asarray(attitude_std_deg) * DEG, jac,
     )  # fmt: skip
 
 
 @eqx.filter_jit
-def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std):
+def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std, jac):
     arw, vrw, vnoise, bg_std, ba_std = (noise[i] for i in range(5))
     lat_a, h_a = jnp.asarray(lat), jnp.asarray(h)
     g_n = WGS84.gravity_ned(lat_a, h_a)
@@ -420,6 +476,11 @@ def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std):
             [jnp.full(3, 0.1) ** 2, att_std**2, jnp.full(3, bg_std**2), jnp.full(3, ba_std**2)]
         )
     )
+    cross = (
+        jac * jnp.concatenate([jnp.full(3, bg_std**2), jnp.full(3, ba_std**2)])[None, :]
+    )  # A Σ_b
+    p0 = p0.at[3:6, 6:].set(cross).at[6:, 3:6].set(cross.T)
+    p0 = p0.at[3:6, 3:6].add(cross @ jac.T)  # φ = A b + independent part
     hm = jnp.zeros((3, 12)).at[:, :3].set(jnp.eye(3))
     r = jnp.eye(3) * vnoise**2
 
@@ -447,7 +508,12 @@ def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std):
 def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
     """Coarse alignment on the first `coarse_s` seconds, then fine alignment over the whole
     log from that start (module docstring; `fine_kw` go to
-    [`fine_align`][hrgjax.ins.alignment.fine_align]).
+    [`fine_align`][hrgjax.ins.alignment.fine_align]: the gyro's grade `gyro_bias_std`
+    [rad/s] and `arw` [rad/√s] among them). The filter's prior holds the coarse attitude's
+    correlation with the sensor biases
+    ([`coarse_bias_jacobian`][hrgjax.ins.alignment.coarse_bias_jacobian]), so the heading σ
+    ends at `gyro_bias_std / (ω_ie cos lat)`: what the assumed grade allows, not a
+    measurement of the bias ([`AlignmentResult`][hrgjax.ins.alignment.AlignmentResult]).
 
     **Raises:** `ValueError` when the log is shorter than `coarse_s` or not a stationary
     record ([`check_stationary`][hrgjax.ins.alignment.check_stationary]: specific force far
@@ -462,6 +528,7 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
     w_b = jnp.sum(log.dtheta[:n], 0) / (n * dt)
     c0 = coarse_align(f_b, w_b, log.lat)
     coarse = tuple(float(x) for x in euler_deg(c0))
+    fine_kw.setdefault("start_bias_jacobian", coarse_bias_jacobian(f_b, w_b, log.lat))
     t, cs, ps, bias = fine_align(log, c0, start_s=0.0, **fine_kw)
     hist = jax.vmap(euler_deg)(cs)
     std = jax.vmap(_euler_std)(cs, ps[:, 3:6, 3:6])
@@ -470,4 +537,5 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
         float(last[0]), float(last[1]), float(last[2]),
         float(s[0]), float(s[1]), float(s[2]),
         t, hist, std, coarse, bias, cs[-1],
+        float(fine_kw.get("gyro_bias_std", _GYRO_BIAS_STD)) / DEG_PER_H,
     )  # fmt: skip
