@@ -306,7 +306,11 @@ def check_1d(name: str, x, what: str = "") -> tuple:
         shape = None
     if shape is None or len(shape) != 1:
         found = f"shape {shape}" if shape is not None else describe(x)
-        extra = " (several records: one call per record)" if shape and len(shape) > 1 else ""
+        extra = ""
+        if shape and len(shape) > 1:
+            one = int(np.prod(shape[1:])) == 1
+            extra = (" (one column: pass y[:, 0] or y.ravel())" if one
+                     else " (several records: one call per record)")  # fmt: skip
         raise ValueError(f"{name} must be 1-D{', ' + what if what else ''}; got {found}{extra}")
     return shape
 

@@ -22,6 +22,8 @@ and grad work. A missing measurement is a step with `mask=False`.
 
 from __future__ import annotations
 
+import types
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -429,20 +431,27 @@ def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None)
     `us` (K, p) inputs passed to `f` (zeros (K, 0) when None). On a linear model it is the
     Kalman filter.
 
-    One compiled program per shape and model: `f` and `h` are arguments of the program as
-    equinox treats them — the arrays of a callable `eqx.Module` (or of a bound method's
-    Module) are its inputs, so a model with new parameter values compiles nothing and is
-    never stale; a plain function is a static part, compared with `==` (the same function
-    object, the same bound method), so it must be pure (a function reading a global that
-    changes afterwards keeps the program compiled with the old value, as under `jax.jit`).
-    A fresh closure on every call compiles on every call, and the compile cache keeps it
-    (and what it captures) for as long as JAX keeps the program.
+    One compiled program per shape and model where the model cannot go stale: `f` and `h`
+    each a callable `eqx.Module` (or a Module's bound method: its arrays are inputs of the
+    program, so new parameter values compile nothing) or a plain function (static, by
+    identity: it must be pure — a function reading a global that changes afterwards keeps
+    the value it was compiled with, as under `jax.jit`). Any other callable (a bound method
+    of a plain object, a callable instance, `functools.partial`) may carry state the program
+    cannot see: the filter is traced and compiled on every call, as a plain `lax.scan` is.
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
     require_x64("hrgjax.kalman.extended_kalman_filter")
     _check_model(f, h)
     qd, R, zs, us = (_floats(a) for a in (qd, R, zs, us))
-    return _extended_kalman_filter(prior, f, qd, h, R, zs, mask, us)
+    run = _extended_kalman_filter if _kept(f) and _kept(h) else _ekf
+    return run(prior, f, qd, h, R, zs, mask, us)
+
+
+def _kept(fn) -> bool:
+    """Whether a compiled filter may be kept for the model function `fn`: an `eqx.Module`
+    (its bound methods are Modules too), whose arrays are the program's inputs, or a plain
+    function; not a callable that may hold state the program would not see change."""
+    return isinstance(fn, (eqx.Module, types.FunctionType))
 
 
 def _ekf(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
@@ -492,7 +501,8 @@ def unscented_kalman_filter(
     _check_model(f, h)
     qd, R, zs, us = (_floats(a) for a in (qd, R, zs, us))
     alpha, beta, kappa = (jnp.asarray(v, float) for v in (alpha, beta, kappa))
-    return _unscented_kalman_filter(prior, f, qd, h, R, zs, mask, us, alpha, beta, kappa)
+    run = _unscented_kalman_filter if _kept(f) and _kept(h) else _ukf
+    return run(prior, f, qd, h, R, zs, mask, us, alpha, beta, kappa)
 
 
 def _ukf(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None, alpha=1.0, beta=2.0, kappa=0.0):

@@ -611,6 +611,8 @@ def test_every_estimator_refuses_several_records_instead_of_flattening_them():
         from hrgjax.allan.total import mtotdev_curve
 
         mtotdev_curve(y3.T, [1])
+    with pytest.raises(ValueError, match=r"got shape \(600, 1\) \(one column: pass y\[:, 0\]"):
+        hg.oadev(y3[:, :1], m=1)
     # under jit the shape is still checked (it is known while tracing)
     with pytest.raises(ValueError, match=r"^oadev: y must be 1-D"):
         jax.jit(lambda y: hg.oadev(y, 1))(jnp.asarray(y3))

@@ -1,6 +1,8 @@
 """Kalman smoother, EKF and UKF (issue 21, scope 5): against the batch Gaussian posterior,
 the linear filter, and exact moments of a quadratic."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -210,7 +212,7 @@ def test_eager_filters_and_steady_state_compile_once_per_shape():
 
 def test_eager_ekf_and_ukf_compile_once_per_shape_and_model():
     """A later eager EKF/UKF call with the same `f`, `h` (a plain function, a callable
-    equinox Module, a bound method) on new values of the same shapes compiles nothing (each
+    equinox Module) on new values of the same shapes compiles nothing (each
     compiled its `lax.scan` on every call) and gives the plain pass's values; a Module with
     new parameter values is a new input, not a stale program; a model that is not a function
     is refused in one line."""
@@ -223,15 +225,24 @@ def test_eager_ekf_and_ukf_compile_once_per_shape_and_model():
         def __call__(self, x):
             return self.h @ x
 
-    class Plant:  # a plain object: its bound methods are equal, not identical, call to call
+    class Plant:  # a plain object: its state may change between calls
+        def __init__(self, a):
+            self.a = a
+
         def transition(self, x, u):
-            return PHI @ x + u
+            return self.a * (PHI @ x) + u
+
+    @dataclasses.dataclass
+    class Callable:  # eq=True: cannot be hashed
+        a: float
+
+        def __call__(self, x, u):
+            return self.a * (PHI @ x) + u
 
     f = lambda x, u: PHI @ x + u
     zs, r2, h2 = ZS + 0.25, 2.0 * R, 2.0 * H
     for run in (kalman.extended_kalman_filter, kalman.unscented_kalman_filter):
-        for fn, h, h_new in ((f, lambda x: H @ x, None), (f, Measure(H), Measure(h2)),
-                             (Plant().transition, Measure(H), Measure(h2))):  # fmt: skip
+        for fn, h, h_new in ((f, lambda x: H @ x, None), (f, Measure(H), Measure(h2))):
             run(PRIOR, fn, QD, h, R, ZS, us=US)
             with CompileCounter() as again:
                 got = [
@@ -245,6 +256,15 @@ def test_eager_ekf_and_ukf_compile_once_per_shape_and_model():
                 for a, b in zip(out, plain, strict=True):
                     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
             assert len(got) == 1 or not np.allclose(got[1][2], got[0][2])
+        # a model that may hold state the program cannot see is run afresh: never stale
+        plant, h = Plant(1.0), Measure(H)
+        for a in (1.0, 0.5):
+            plant.a = a
+            for model in (plant.transition, Callable(a)):
+                got = run(PRIOR, model, QD, h, R, ZS, us=US)[2]
+                np.testing.assert_allclose(got, run.__wrapped__(PRIOR, model, QD, h, R, ZS, us=US)[2],
+                                           rtol=1e-12)  # fmt: skip
+        assert not np.isclose(got, run(PRIOR, Plant(1.0).transition, QD, h, R, ZS, us=US)[2])
         with pytest.raises(ValueError, match=r"^h must be a function h\(x\) -> z; got ArrayImpl$"):
             run(PRIOR, f, QD, H, R, ZS)
 

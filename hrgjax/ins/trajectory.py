@@ -309,7 +309,14 @@ def flight(
     earth: Earth = WGS84,
 ) -> Trajectory:
     """A 1-hour flight: take-off run and climb to 200 m/s, cruise north-east, a 90° turn to
-    the right, cruise, a 180° turn to the left, cruise, a shallow descent (3600 s)."""
+    the right, cruise, a 180° turn to the left, cruise, a shallow descent (3600 s).
+
+    `dt` [s] must divide every leg (45 s and 995 s among them: a divisor of 5 s, such as
+    0.01, 0.1, 0.5 or 1); another is refused naming `dt`."""
+    step = finite_number("dt", dt, "s")
+    if not (step > 0 and abs(5.0 / step - round(5.0 / step)) <= 1e-9 * (5.0 / step)):
+        raise ValueError(f"flight: dt must divide its legs of 45 s and 995 s (a divisor of 5 s, "
+                         f"e.g. 0.01, 0.1, 0.5, 1); got dt = {dt!r}")  # fmt: skip
     legs = [
         (100.0, 2.0, 0.0, 0.0),  # take-off run to 200 m/s
         (300.0, 0.0, 0.0, 15.0),  # climb 4.5 km
