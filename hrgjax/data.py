@@ -55,6 +55,10 @@ class MeasuredData:
     def __init__(self, columns: Mapping[str, object], allow_extra: bool = False):
         if not isinstance(columns, Mapping):
             raise TypeError(f"columns must be a mapping of name -> 1-D array; got {type(columns)}")
+        if not isinstance(allow_extra, bool | np.bool_):
+            shown = repr(allow_extra) if isinstance(allow_extra, str | int | float) else ""
+            raise TypeError(f"MeasuredData: allow_extra must be True or False; got "
+                            f"{type(allow_extra).__name__} {shown[:60]}".rstrip())  # fmt: skip
         unknown = [k for k in columns if k not in COLUMNS]
         if unknown and not allow_extra:
             raise ValueError(

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_positive
+from ._checks import check_positive, numeric_problem
 from .noise import Noise
 from .resonator.control import Control
 from .resonator.params import (
@@ -18,12 +18,17 @@ from .resonator.params import (
     as_parameter,
     concrete_fields,
     evaluate_at,
+    refuse_unconverted,
 )
 from .resonator.readout import Readout
 from .units import T_REF_C
 
 
 def _vector3(x):
+    problem = numeric_problem(x)
+    if problem is not None:
+        raise TypeError(f"Gyro.g_sensitivity must be 3 real numbers [rad/s per g], shape (3,) "
+                        f"(or one for every axis); got {problem}")  # fmt: skip
     x = jnp.asarray(np.asarray(x) if isinstance(x, list | tuple) else x, dtype=float)
     if x.ndim == 0:
         x = jnp.broadcast_to(x, (3,))
@@ -62,6 +67,7 @@ class DriftTerms(eqx.Module):
     rate_cubic: jax.Array = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
+        refuse_unconverted(self)
         for name, value in concrete_fields(self, ("lag_time", "warmup_time")):
             check_positive(f"DriftTerms.{name}", value, "s")
 
@@ -76,6 +82,39 @@ class DriftTerms(eqx.Module):
             + self.warmup * jnp.exp(-(t - profile.t[0]) / self.warmup_time)
             + self.rate_cubic * rate**3
         )
+
+
+_NO_NOISE = " (for a noise-free gyro use gyro.without_noise() or noise=None)"
+_PARTS = {  # field: (class, None allowed, {type found: hint})
+    "resonator": (Resonator, False, {}),
+    "control": (Control, False, {type(None): " (hrgjax.Control.free() has no loops)"}),
+    "readout": (Readout, False, {type(None): " (hrgjax.Readout() is a perfect one)"}),
+    "noise": (
+        Noise,
+        True,
+        {
+            bool: _NO_NOISE,
+            float: _NO_NOISE,
+            int: _NO_NOISE,
+            type: " (an instance, e.g. hrgjax.Noise(...))",
+        },
+    ),
+    "drift_terms": (DriftTerms, True, {type: " (an instance, e.g. hrgjax.DriftTerms(...))"}),
+}
+"""`Gyro`'s sub-module fields: each an instance of its class (or None where allowed)."""
+
+
+def _kind(x) -> str:
+    """`x` for a one-line error: short reprs of numbers, bools, str and None; else its type
+    (and shape for an array)."""
+    if x is None:
+        return "None"
+    if hasattr(x, "shape") and hasattr(x, "dtype"):
+        return f"{type(x).__name__} (dtype {x.dtype}, shape {tuple(x.shape)})"
+    if isinstance(x, bool | int | float | str | None):
+        text = repr(x)
+        return f"{type(x).__name__} {text}" if len(text) <= 40 else type(x).__name__
+    return type(x).__name__
 
 
 class Gyro(eqx.Module):
@@ -102,6 +141,17 @@ class Gyro(eqx.Module):
     rate_bias: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
     g_sensitivity: jax.Array = eqx.field(converter=_vector3, default=0.0)
     drift_terms: DriftTerms | None = None
+
+    def __check_init__(self):
+        for name, (cls, optional, hint) in _PARTS.items():
+            value = getattr(self, name)
+            if isinstance(value, cls) or (optional and value is None):
+                continue
+            form = f"a hrgjax.{cls.__name__}" + (" or None" if optional else "")
+            got = "the class itself" if value is cls else _kind(value)
+            extra = hint.get(type(value) if value is not cls else type, "")
+            raise TypeError(f"Gyro.{name} must be {form}; got {got}{extra}")
+        refuse_unconverted(self)
 
     def at(self, temperature_c) -> Gyro:
         """This gyro with every temperature law evaluated at `temperature_c` [°C]."""

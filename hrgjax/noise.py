@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from ._checks import check_nonnegative, check_positive
-from .resonator.params import as_parameter, concrete_fields
+from .resonator.params import as_parameter, concrete_fields, refuse_unconverted
 
 
 class Noise(eqx.Module):
@@ -47,6 +47,7 @@ class Noise(eqx.Module):
     amplitude_white: jax.Array = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
+        refuse_unconverted(self)
         for name, value in concrete_fields(self, NONNEGATIVE):
             check_nonnegative(f"Noise.{name}", value, f"[{UNITS[name]}] (a standard deviation)")
         for name, value in concrete_fields(self, ("correlation_time",)):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from ._checks import check_flag
 from .gyro import Gyro
 from .noise import Noise
 from .resonator.control import Control
@@ -57,7 +58,11 @@ def tvg3_like(
 
     - `temperature_laws`: `False` freezes every law at 20 °C.
     - `noise`: `False` gives the noise-free gyro.
+
+    Both flags must be `True` or `False` (a string such as "no" is refused, not taken as true).
     """
+    temperature_laws = check_flag("presets.tvg3_like: temperature_laws", temperature_laws)
+    noise = check_flag("presets.tvg3_like: noise", noise)
     k_e = 2 * K_BRYAN
     lam = -math.log(_DRIFT_PP_M40 / _DRIFT_PP_P60) / 100.0
     pp20 = _DRIFT_PP_M40 * math.exp(lam * (T_REF_C + 40.0))

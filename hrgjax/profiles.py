@@ -8,8 +8,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import plausible
-from ._checks import check_finite, is_concrete
+from ._checks import (
+    check_finite,
+    check_finite_host,
+    check_number,
+    check_numbers,
+    is_concrete,
+    numeric_problem,
+)
 from ._compiled import device, fused
+from .resonator.params import Unconverted, refuse_unconverted
 from .units import DEG, DEG_PER_S
 
 
@@ -22,6 +30,30 @@ def _f(x):
         return device(x, float)
 
 
+def _field(x, bools=False):
+    """A field's converter: `_f`, or an `Unconverted` (a str, None, a bool, a complex or
+    ragged value, a PRNG key) that `Profile.__check_init__` refuses naming the field."""
+    problem = numeric_problem(x, bools)
+    return _f(x) if problem is None else Unconverted(x, problem)
+
+
+def _optional(x):
+    return x if x is None else _field(x)
+
+
+def _schedule(x):
+    return x if x is None else _field(x, bools=True)
+
+
+def _finite(name, x):
+    """Refuse a NaN or inf in `x`: a concrete one now, in one line with its index as plain
+    ints; a traced one where the transformation runs eagerly (`check_finite`)."""
+    if is_concrete(x):
+        check_finite_host(name, x)
+    else:
+        check_finite(name, x)
+
+
 def _eager(fn, *args):
     """`fn(*args)`, computed eagerly when every argument is concrete: knot times built from
     Python numbers stay concrete inside `jax.jit` (and `hg.sweep`, which jits), so the
@@ -30,6 +62,25 @@ def _eager(fn, *args):
         with jax.ensure_compile_time_eval():
             return fn(*args)
     return fn(*args)
+
+
+_UNITS = {"rate_dps": "°/s", "duration_s": "s", "temperature_c": "°C",
+          "wave_angle0_deg": "° electrical", "precession_dps": "°/s electrical", "dwell_s": "s",
+          "slew_s": "s"}  # fmt: skip
+"""Units of the builders' scalar arguments, for their errors."""
+
+
+def _scalars(builder: str, **args) -> None:
+    """Refuse any of `args` that is not one real number (a bool, str, None, an array…) in one
+    line naming `Profile.builder: argument` (a traced scalar passes: sweeps build profiles
+    from traced scalars)."""
+    for name, x in args.items():
+        check_number(f"Profile.{builder}: {name}", x, _UNITS.get(name, ""))
+
+
+def _accel(builder: str, accel_g) -> None:
+    check_numbers(f"Profile.{builder}: accel_g", accel_g,
+                  "3 values (specific force along case x, y, z) [g], shape (3,)", (3,))  # fmt: skip
 
 
 @fused
@@ -74,17 +125,16 @@ class Profile(eqx.Module):
       in force-to-rebalance mode (`Control(mode="ftr")`) with its PI loops.
     """
 
-    t: jax.Array = eqx.field(converter=_f)
-    rate: jax.Array = eqx.field(converter=_f)
-    temperature: jax.Array = eqx.field(converter=_f)
-    accel: jax.Array = eqx.field(converter=_f)
-    wave_angle0: jax.Array = eqx.field(converter=_f, default=0.0)
-    precession: jax.Array | None = eqx.field(converter=lambda x: x if x is None else _f(x),
-                                             default=None)  # fmt: skip
-    rebalance: jax.Array | None = eqx.field(converter=lambda x: x if x is None else _f(x),
-                                            default=None)  # fmt: skip
+    t: jax.Array = eqx.field(converter=_field)
+    rate: jax.Array = eqx.field(converter=_field)
+    temperature: jax.Array = eqx.field(converter=_field)
+    accel: jax.Array = eqx.field(converter=_field)
+    wave_angle0: jax.Array = eqx.field(converter=_field, default=0.0)
+    precession: jax.Array | None = eqx.field(converter=_optional, default=None)
+    rebalance: jax.Array | None = eqx.field(converter=_schedule, default=None)
 
     def __check_init__(self):
+        refuse_unconverted(self, "real numbers (an array; precession and rebalance may be None)")
         n = self.t.shape[-1] if self.t.ndim else 0
         if self.t.ndim != 1 or n < 2:
             raise ValueError(
@@ -108,9 +158,9 @@ class Profile(eqx.Module):
                 f"None; got {self.precession.shape}"
             )
         for name in ("t", "rate", "temperature", "accel", "wave_angle0"):
-            check_finite(f"Profile.{name}", getattr(self, name))
+            _finite(f"Profile.{name}", getattr(self, name))
         if self.precession is not None:
-            check_finite("Profile.precession", self.precession)
+            _finite("Profile.precession", self.precession)
         if self.rebalance is not None:
             if self.rebalance.shape != (n,):
                 raise ValueError(
@@ -163,7 +213,13 @@ class Profile(eqx.Module):
     ) -> Profile:
         """A run at constant rate `rate_dps` [°/s] for `duration_s` [s] at `temperature_c` [°C],
         starting at electrical wave angle `wave_angle0_deg` [°], under specific force
-        `accel_g` [g] (case axes x, y, z)."""
+        `accel_g` [g] (case axes x, y, z).
+
+        Each argument but `accel_g` is one real number (bools, strings, None and arrays are
+        refused in one line naming it); `accel_g` is three."""
+        _scalars("constant_rate", rate_dps=rate_dps, duration_s=duration_s,
+                 temperature_c=temperature_c, wave_angle0_deg=wave_angle0_deg)  # fmt: skip
+        _accel("constant_rate", accel_g)
         args = (rate_dps, duration_s, temperature_c, wave_angle0_deg, accel_g)
         if not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(args)):
             # Python / NumPy numbers: build on the host (no eager device programs).
@@ -194,6 +250,9 @@ class Profile(eqx.Module):
         accel_g=(0.0, 0.0, 0.0),
     ) -> Profile:
         """A static run (zero rate); arguments as [`Profile.constant_rate`][hrgjax.Profile.constant_rate]."""
+        _scalars("static", duration_s=duration_s, temperature_c=temperature_c,
+                 wave_angle0_deg=wave_angle0_deg)  # fmt: skip
+        _accel("static", accel_g)
         return cls.constant_rate(0.0, duration_s, temperature_c, wave_angle0_deg, accel_g)
 
     @classmethod
@@ -211,6 +270,13 @@ class Profile(eqx.Module):
         temperatures [°C] and optionally specific force [g], shape (N, 3), a commanded
         precession [°/s, electrical] and a force-to-rebalance schedule (1 on, 0 whole-angle
         over the segment from each knot; see the class's arguments)."""
+        for name, x in (("t_s", t_s), ("rate_dps", rate_dps), ("temperature_c", temperature_c),
+                        ("accel_g", accel_g), ("precession_dps", precession_dps)):  # fmt: skip
+            if x is not None or name in ("t_s", "rate_dps", "temperature_c"):
+                check_numbers(f"Profile.piecewise: {name}", x, "real numbers")
+        if rebalance is not None:
+            check_numbers("Profile.piecewise: rebalance", rebalance, "1 or 0 per knot", bools=True)
+        _scalars("piecewise", wave_angle0_deg=wave_angle0_deg)
         args = (t_s, rate_dps, temperature_c, accel_g, wave_angle0_deg, precession_dps, rebalance)
         knots = np.shape(t_s)
         for name, x in (("rate_dps", rate_dps), ("temperature_c", temperature_c),
@@ -259,6 +325,11 @@ class Profile(eqx.Module):
         the case at rest unless `case` gives [`constant_rate`][hrgjax.Profile.constant_rate]'s
         `rate_dps` [°/s] or `accel_g` [g]. In whole-angle mode the wave then visits every
         angle: what the drift's θ-dependence needs, without a table."""
+        _scalars("virtual_precession", precession_dps=precession_dps, duration_s=duration_s,
+                 temperature_c=temperature_c, wave_angle0_deg=wave_angle0_deg,
+                 **{k: v for k, v in case.items() if k == "rate_dps"})  # fmt: skip
+        if "accel_g" in case:
+            _accel("virtual_precession", case["accel_g"])
         rate_dps = case.pop("rate_dps", 0.0)
         p = cls.constant_rate(rate_dps, duration_s, temperature_c, wave_angle0_deg, **case)
         # built again (not `eqx.tree_at`) so that the precession is checked as any field is
@@ -280,9 +351,15 @@ class Profile(eqx.Module):
         `slew_s` [s] (a trapezoid: ramps of `slew_s`/4), the case at `rate_dps` [°/s] and
         `temperature_c` [°C]. Mode reversal is `angles_deg=(θ, θ + 90)`: the damping
         anisotropy's drift ½Δ(1/τ)·sin 2(θ − θ_τ) changes sign, the rate does not."""
+        check_numbers("Profile.held_angles: angles_deg", angles_deg,
+                      "one or more finite angles [° electrical]")  # fmt: skip
+        _scalars("held_angles", dwell_s=dwell_s, slew_s=slew_s, temperature_c=temperature_c,
+                 rate_dps=rate_dps)  # fmt: skip
         ang = np.atleast_1d(np.asarray(angles_deg, dtype=float))
         if ang.ndim != 1 or ang.size < 1 or not np.all(np.isfinite(ang)):
-            raise ValueError(f"angles_deg must be finite angles [° electrical]; got {angles_deg!r}")
+            raise ValueError(f"Profile.held_angles: angles_deg must be one or more finite angles "
+                             f"[° electrical], shape (n,); got shape {np.shape(angles_deg)}"
+                             + ("" if ang.ndim != 1 or not ang.size else " with NaN or inf"))  # fmt: skip
         for name, v in (("dwell_s", dwell_s), ("slew_s", slew_s)):
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive number of seconds; got {v!r}")

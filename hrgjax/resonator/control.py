@@ -31,9 +31,11 @@ import functools
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from .._checks import check_flag, numeric_problem
 from ..units import K_E_NOMINAL
-from .params import TemperatureLaw, as_parameter
+from .params import TemperatureLaw, as_parameter, refuse_unconverted
 from .readout import check_limits, wrap_half_pi
 
 DRIVES = ("force", "parametric")
@@ -56,11 +58,18 @@ them too (`hrgjax._run_checks.LAW_LIMITS`)."""
 
 
 IDEAL_LIMIT = (
-    "Control.rebalance_limit needs Control.ideal=False in mode='ftr': ideal loops hold the "
-    "wave with whatever force it takes and cannot saturate; give rebalance_limit=None, or "
-    "ideal=False (the PI loops, which saturate and let the wave drift)"
+    "Control.rebalance_limit needs Control.ideal=False in mode='ftr' with the averaged model: "
+    "its ideal loops hold the wave with whatever force it takes and cannot saturate; give "
+    "rebalance_limit=None, or ideal=False (the PI loops, which saturate and let the wave "
+    "drift; the full model always runs them)"
 )
 """The one line refusing ideal force-to-rebalance loops with a force limit (`Control`)."""
+
+
+def _plain_bool(x):
+    """A NumPy bool as a Python one (a static field must not hold a NumPy scalar); anything
+    else as it is, for `Control.__check_init__` to refuse unless it is a bool."""
+    return bool(x) if isinstance(x, np.bool_) else x
 
 
 class Control(eqx.Module):
@@ -117,11 +126,11 @@ class Control(eqx.Module):
     pll_bandwidth: jax.Array = eqx.field(converter=as_parameter, default=2.0)
     agc_bandwidth: jax.Array = eqx.field(converter=as_parameter, default=1.0)
     quadrature_bandwidth: jax.Array = eqx.field(converter=as_parameter, default=2.0)
-    ideal: bool = eqx.field(static=True, default=False)
+    ideal: bool = eqx.field(static=True, converter=_plain_bool, default=False)
     forcer_gain_mismatch: jax.Array | TemperatureLaw = eqx.field(
         converter=as_parameter, default=0.0
     )
-    enabled: bool = eqx.field(static=True, default=True)
+    enabled: bool = eqx.field(static=True, converter=_plain_bool, default=True)
     mode: str = eqx.field(static=True, default="wa")
     rebalance_bandwidth: jax.Array = eqx.field(converter=as_parameter, default=2.0)
     rebalance_limit: jax.Array | None = eqx.field(
@@ -138,17 +147,23 @@ class Control(eqx.Module):
         return cls(amplitude=amplitude, enabled=False)
 
     def __check_init__(self):
-        if self.drive not in DRIVES:
-            raise ValueError(f"Control.drive must be one of {DRIVES}; got {self.drive!r}")
-        if self.mode not in MODES:
+        refuse_unconverted(self)
+        for name in ("ideal", "enabled"):
+            check_flag(f"Control.{name}", getattr(self, name))
+        if not isinstance(self.drive, str) or self.drive not in DRIVES:
+            raise ValueError(f"Control.drive must be one of {DRIVES}; got {_shown(self.drive)}")
+        if not isinstance(self.mode, str) or self.mode not in MODES:
             raise ValueError(
                 f"Control.mode must be one of {MODES} (whole-angle or force-to-rebalance); "
-                f"got {self.mode!r}"
+                f"got {_shown(self.mode)}"
             )
+        k_e_problem = numeric_problem(self.k_e_nominal)
+        if k_e_problem is None and np.shape(self.k_e_nominal) != ():
+            k_e_problem = f"{type(self.k_e_nominal).__name__} of shape {np.shape(self.k_e_nominal)}"
+        if k_e_problem is not None:
+            raise TypeError(f"Control.k_e_nominal must be a single real number; got {k_e_problem}")
         if self.mode == "ftr" and not self.enabled:
             raise ValueError("Control.mode='ftr' needs the loops: a free resonator has none")
-        if self.mode == "ftr" and self.ideal and self.rebalance_limit is not None:
-            raise ValueError(IDEAL_LIMIT)
         check_limits("Control", self, LIMITS)
 
     def forcer_matrix(self):
@@ -156,6 +171,15 @@ class Control(eqx.Module):
         force (g_f = `forcer_gain`, g = `forcer_gain_mismatch`)."""
         g, c = self.forcer_gain_mismatch, self.forcer_gain
         return jnp.stack([jnp.stack([1.0 + c + g, 0.0 * g]), jnp.stack([0.0 * g, 1.0 + c - g])])
+
+
+def _shown(x) -> str:
+    """`x` for a one-line error: its repr when short and not an array, else its type (and
+    shape)."""
+    if hasattr(x, "shape"):
+        return f"{type(x).__name__} of shape {tuple(np.shape(x))}"
+    text = repr(x)
+    return text if len(text) <= 60 and "\n" not in text else type(x).__name__
 
 
 class LoopOutputs(eqx.Module):

@@ -2,17 +2,53 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite, check_positive, is_concrete
+from .._checks import check_finite, check_positive, is_concrete, numeric_problem
 from ..units import T_REF_C, k_e_problem
 
 
 def _as_float(x):
     return jnp.asarray(x, dtype=float)
+
+
+PARAMETER_FORM = "a real number, an array of real numbers or a hrgjax.TemperatureLaw"
+"""What a parameter field takes (`refuse_unconverted`'s default `form`)."""
+
+
+class Unconverted:
+    """What a parameter converter leaves in a field it cannot convert (a str, None, a dict,
+    a bool, a complex or ragged value, a PRNG key): the value and why, for the module's
+    `__check_init__` to refuse in one line naming the field (`refuse_unconverted`) — an
+    `eqx.field` converter sees the value only, not the field's name."""
+
+    __slots__ = ("value", "problem")
+
+    def __init__(self, value, problem):
+        self.value, self.problem = value, problem
+
+    def __repr__(self):
+        return f"Unconverted({self.problem})"
+
+
+def _parameter_or_unconverted(x):
+    problem = numeric_problem(x)
+    return _as_float(x) if problem is None else Unconverted(x, problem)
+
+
+def refuse_unconverted(module, form: str = PARAMETER_FORM) -> None:
+    """Refuse, in one line naming `Owner.field`, the expected `form` and what was found, the
+    first field of `module` its converter could not convert (an `Unconverted`): each
+    module with parameter fields calls this first in its `__check_init__`."""
+    for f in dataclasses.fields(module):
+        value = getattr(module, f.name, None)
+        if isinstance(value, Unconverted):
+            raise TypeError(f"{type(module).__name__}.{f.name} must be {form}; got {value.problem}")
 
 
 class TemperatureLaw(eqx.Module):
@@ -31,11 +67,14 @@ class TemperatureLaw(eqx.Module):
     - `t_ref`: reference temperature [°C] (20 °C by default).
     """
 
-    p0: jax.Array = eqx.field(converter=_as_float)
-    p1: jax.Array = eqx.field(converter=_as_float, default=0.0)
-    p2: jax.Array = eqx.field(converter=_as_float, default=0.0)
-    lam: jax.Array = eqx.field(converter=_as_float, default=0.0)
-    t_ref: jax.Array = eqx.field(converter=_as_float, default=T_REF_C)
+    p0: jax.Array = eqx.field(converter=_parameter_or_unconverted)
+    p1: jax.Array = eqx.field(converter=_parameter_or_unconverted, default=0.0)
+    p2: jax.Array = eqx.field(converter=_parameter_or_unconverted, default=0.0)
+    lam: jax.Array = eqx.field(converter=_parameter_or_unconverted, default=0.0)
+    t_ref: jax.Array = eqx.field(converter=_parameter_or_unconverted, default=T_REF_C)
+
+    def __check_init__(self):
+        refuse_unconverted(self, "a real number or an array of real numbers")
 
     def __call__(self, temperature_c, xp=jnp):
         """Evaluate the law at `temperature_c` [°C] (with `xp=np`, on the host: concrete
@@ -51,9 +90,12 @@ class TemperatureLaw(eqx.Module):
 
 
 def as_parameter(x):
-    """A parameter field's value: a [`hrgjax.TemperatureLaw`][] as it is, anything
-    else as a float array (the converter of every parameter field that may follow a law)."""
-    return x if isinstance(x, TemperatureLaw) else _as_float(x)
+    """A parameter field's value: a [`hrgjax.TemperatureLaw`][] as it is, real numbers as a
+    float array (the converter of every parameter field that may follow a law); anything
+    else (a str, None, a bool, a dict, a complex or ragged value, a PRNG key) is left as an
+    `Unconverted` for the module's `__check_init__` to refuse naming the field
+    (`refuse_unconverted`). A traced value is judged by its dtype only."""
+    return x if isinstance(x, TemperatureLaw) else _parameter_or_unconverted(x)
 
 
 def concrete_fields(module, names):
@@ -112,6 +154,7 @@ class Resonator(eqx.Module):
     chi: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
+        refuse_unconverted(self)
         for name, value in concrete_fields(self, ("omega", "tau")):
             check_positive(f"Resonator.{name}", value, "[rad/s]" if name == "omega" else "[s]")
         finite = ("k_e", "delta_omega", "theta_omega", "delta_inv_tau", "theta_tau", "chi")

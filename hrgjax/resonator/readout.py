@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import RULES
-from .params import TemperatureLaw, as_parameter, concrete_fields
+from .params import TemperatureLaw, as_parameter, concrete_fields, refuse_unconverted
 
 LIMITS = {  # field: (rule of `hrgjax._checks.RULES`, unit); why: `Readout`'s docstring
     "gain_mismatch": ("in (-0.5, 0.5)", "(a fraction, not percent)"),
@@ -72,6 +72,7 @@ class Readout(eqx.Module):
     misalignment: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
 
     def __check_init__(self):
+        refuse_unconverted(self)
         check_limits("Readout", self, LIMITS)
 
     def matrix(self):
