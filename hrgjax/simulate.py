@@ -411,7 +411,8 @@ def simulate(
       same accuracy 1.9× faster than adaptive stepping with the loops closed and 422× a
       minimal scipy RK45 script on a free resonator, docs/resonator.md) with the step
       chosen from `rtol` and the highest carrier frequency over the profile's temperatures
-      (10 steps per cycle at rtol 1e-8; over −60 … 100 °C when those are traced) — wherever
+      (10 steps per cycle at rtol 1e-8, the count rounded up to a ladder of ratio 2^(1/4):
+      nearby values share a program; over −60 … 100 °C when those are traced) — wherever
       `rtol` ≥ 1e-9, no `solver`, `adjoint` or `max_steps` is given, and the output times,
       the profile's knot times and the resonator are concrete; otherwise, and for the
       averaged model, adaptive steps. `None`: adaptive steps always. A number: this
@@ -469,8 +470,8 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
             "Profile.rebalance switches the rebalance loop on and off: give the gyro "
             "Control(mode='ftr') (gyro.in_mode('ftr')) with its PI loops (ideal=False)"
         )
-    ctl = gyro.control  # as Control refuses it (a control put in with eqx.tree_at skips that)
-    if ctl.mode == "ftr" and ctl.ideal and ctl.rebalance_limit is not None:
+    ctl = gyro.control  # the averaged model's ideal FTR loops cannot saturate (full: PI)
+    if model == "averaged" and ctl.mode == "ftr" and ctl.ideal and ctl.rebalance_limit is not None:
         raise ValueError(IDEAL_LIMIT)
     if not isinstance(profile, Profile):
         raise TypeError(f"profile must be an hrgjax.Profile; got {type(profile).__name__}")

@@ -36,11 +36,13 @@ def test_free_resonator_converges_at_eighth_order():
     adaptive = lambda rtol, atol: hg.simulate(FREE, prof, model="full", ts=ts, fixed_step=None,  # noqa: E731
                                               rtol=jnp.asarray(rtol), atol=jnp.asarray(atol))  # fmt: skip
     ref = adaptive(1e-13, 1e-15)
-    # "auto" at rtol 1e-8 takes 10 steps per cycle
+    # "auto" at rtol 1e-8 takes 10 steps per cycle, 500 an interval, rounded up to the
+    # step ladder: 512 (10.24 a cycle)
     auto = hg.simulate(FREE, prof, model="full", ts=ts, fixed_step="auto")
-    per_cycle = np.array([7.0, 10.0, 13.0])
+    assert hg.resonator.carrier.ladder_steps(500) == 512
+    per_cycle = np.array([7.0, 10.24, 13.0])
     err = [
-        _errors(auto if n == 10 else
+        _errors(auto if n == 10.24 else
                 hg.simulate(FREE, prof, model="full", ts=ts, fixed_step=1 / (F0 * n)), ref)
         for n in per_cycle
     ]  # fmt: skip
@@ -254,8 +256,8 @@ def test_fixed_step_options_are_checked():
 
 def test_the_default_takes_fixed_steps_where_they_meet_rtol():
     """`fixed_step="auto"` (the default) on the full model: the carrier path with the step the
-    rule picks (10 steps per carrier cycle at rtol 1e-8: the same answer as that step given in
-    seconds) where the rule allows it; the adaptive answer (`fixed_step=None`) for rtol below
+    rule picks (10 steps per carrier cycle at rtol 1e-8, rounded up to the step ladder: the
+    same answer as that step given in seconds) where the rule allows it; the adaptive answer (`fixed_step=None`) for rtol below
     the floor, a named step budget, or output times traced inside `jit`."""
     from hrgjax.simulate import AUTO_RTOL_FLOOR
 
@@ -264,9 +266,11 @@ def test_the_default_takes_fixed_steps_where_they_meet_rtol():
     angle = lambda **kw: np.asarray(hg.simulate(FREE, prof, "full", ts=ts, **kw).wave_angle)  # noqa: E731
     per_interval = 0.002 * F0 * hg.resonator.carrier.steps_per_cycle(1e-8)
     assert per_interval == 100.0
+    steps = hg.resonator.carrier.ladder_steps(per_interval)
+    assert steps == 108  # ⌈2^(27/4)⌉
     default, adaptive = angle(), angle(fixed_step=None)
     with CompileCounter() as c:  # the same step in seconds: the same program
-        np.testing.assert_array_equal(default, angle(fixed_step=0.002 / per_interval))
+        np.testing.assert_array_equal(default, angle(fixed_step=0.002 / steps))
     assert c.compiles == 0, c.names
     assert np.all(default != adaptive)
     np.testing.assert_allclose(default, adaptive, rtol=0, atol=1e-10)  # both meet rtol 1e-8
@@ -300,3 +304,28 @@ def test_temperature_laws_follow_a_steep_ramp_at_a_low_carrier():
     exact = th_tau + np.arctan(np.tan(th0 - th_tau) * np.exp(integral))
     # what is left is the full model's own averaging error (Δ(1/τ) reaches 4.4 /s here)
     np.testing.assert_allclose(float(run.true_wave_angle[-1]), exact, rtol=0, atol=1e-4)
+
+
+def test_nearby_carrier_frequencies_share_the_default_program():
+    """The default step count is static in the compiled solve: rounded up to the step ladder
+    (`carrier.ladder_steps`), a resonator 1 % faster (101 steps an interval instead of 100,
+    both run as 108) or another temperature reuses the program; each new count compiled one of
+    its own (7–13 s on the default gyro). A frequency 20 % higher (120 → 128 steps) compiles."""
+    import equinox as eqx
+
+    prof = lambda temp: hg.Profile.constant_rate(20.0, 0.004, temp, wave_angle0_deg=10.0)  # noqa: E731
+    ts = np.array([0.002, 0.004])
+
+    def angle(scale, temp=20.0):
+        gyro = eqx.tree_at(lambda g: g.resonator.omega, FREE, FREE.resonator.omega * scale)
+        return hg.simulate(gyro, prof(temp), "full", ts=ts).wave_angle
+
+    jax.block_until_ready(angle(1.0))
+    with CompileCounter() as c:
+        jax.block_until_ready(angle(1.01, temp=35.0))
+    assert c.compiles == 0, c.names  # the solve's program (jit(run)) among them before
+    ladder = hg.resonator.carrier.ladder_steps
+    assert ladder(100) == ladder(101) == 108 and ladder(120) == 128
+    with CompileCounter() as c:
+        jax.block_until_ready(angle(1.2))
+    assert c.compiles >= 1, c.names  # another step count: the solve compiles

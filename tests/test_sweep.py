@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import CompileCounter
 
 import hrgjax as hg
 
@@ -177,7 +178,6 @@ def test_a_chunked_sweep_compiles_its_chunk_once_and_a_second_sweep_nothing():
     sweep of the same `fn` on grids of the same sizes compiles nothing — also when `fn` is a
     callable equinox Module, which cannot be hashed (it was compiled afresh every sweep)."""
     import equinox as eqx
-    from helpers import CompileCounter
 
     class Scaled(eqx.Module):
         k: jax.Array
@@ -262,7 +262,10 @@ def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
     assert costs is not None  # the probe reached simulate
     order, chunk = _cost.plan(costs, 1, "cpu")
     assert np.all(np.diff(np.abs(np.asarray(ww))[order]) >= 0)  # cheapest (slowest) first
-    assert 1 < chunk < 12  # 0.1 … 400 °/s: more steps wasted in one batch than chunks cost
+    # the chunk size follows the number of members, not their costs (one compiled batch per
+    # grid size): 12 members run as one batch, 256 in chunks of 52
+    assert chunk == _cost.plan(np.ones(12), 1, "cpu")[1] == 12
+    assert _cost.chunk_length(256, 1, "cpu") == 52 and _cost.chunk_length(256, 1, "gpu") == 256
     # the estimate against the solver's accepted steps (10-s runs)
     for w in (0.1, 5.0, 400.0):
         prof = hg.Profile.constant_rate(w, 10.0, 20.0)
@@ -278,10 +281,38 @@ def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
     auto = hg.sweep(f, temperature_c=T, rate_dps=W)  # chunks of its own choosing
     np.testing.assert_allclose(auto, plain, rtol=1e-12, atol=0)
     assert float(auto[1, 0]) == pytest.approx(float(f(60.0, 400.0)), rel=1e-12)
+    # rates of alike cost on a grid of the same sizes: nothing compiles (the estimate picked
+    # the chunk size, and one batch of 12 was a new program after chunks of 4)
+    T2, W2 = np.asarray(T) + 1.0, np.linspace(1.0, 1.5, 6)
+    with CompileCounter() as again:
+        alike = hg.sweep(f, temperature_c=T2, rate_dps=W2)
+    assert again.compiles == 0, again.names
+    assert alike.shape == (2, 6)
     with pytest.raises(ValueError, match="cost must be"):
         hg.sweep(f, cost="fast", temperature_c=T, rate_dps=W)
     with pytest.raises(ValueError, match="one per point"):
         hg.sweep(f, cost=lambda **_: 1.0, temperature_c=T, rate_dps=W)
+
+
+def test_new_costs_on_a_grid_of_the_same_sizes_compile_nothing():
+    """The chunk size of a sweep ordered by cost depends on the grid's size only: grids of the
+    same sizes whose members cost alike, then 10⁴× apart, then in the other order, run
+    through one compiled batch, with no eager program for ordering or slicing the chunks
+    (the estimate picked the chunk size: one batch of 16, then chunks of 4, each compiled,
+    with 11 small eager programs a chunk shape). Results in the grid's order."""
+
+    def f(a, b):
+        return jnp.sin(a) * b
+
+    b = jnp.array([1.0, 2.0])
+    costs = (lambda a, b: 1.0 + 0 * a, lambda a, b: 10.0 ** (4 * a), lambda a, b: -a)
+    hg.sweep(f, cost=costs[0], a=jnp.linspace(0.0, 1.0, 8), b=b)  # compiles its batch
+    for i, cost in enumerate(costs):
+        a = jnp.linspace(0.0, 1.0, 8) + 0.1 * i
+        with CompileCounter() as c:
+            out = hg.sweep(f, cost=cost, a=a, b=b)
+        assert c.compiles == 0, (i, c.names)
+        np.testing.assert_allclose(out, jnp.sin(a)[:, None] * b[None, :], rtol=1e-15)
 
 
 def test_sweep_of_a_gradient_through_simulate_orders_by_the_undifferentiated_estimate():

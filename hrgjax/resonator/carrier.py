@@ -426,7 +426,9 @@ def steps_per_interval(gyro, profile, ts, fixed_step, rtol) -> int:
     """Steps per interval of the fixed-step carrier path (between outputs and the profile's
     knots, `event_grid`): the longest interval over `fixed_step` [s], or with "auto" and
     "held" over 2π / (ω_max · steps_per_cycle(rtol)), ω_max the highest carrier frequency
-    over the profile's temperatures (needs concrete values)."""
+    over the profile's temperatures (needs concrete values), rounded up to the step ladder
+    (`ladder_steps`: the count is static in the compiled program, so nearby frequencies,
+    temperatures and output grids share one)."""
     traced = [n for n, x in (("ts", ts), ("the profile's knot times", profile.t))
               if not is_concrete(x)]  # fmt: skip
     if traced:
@@ -458,16 +460,35 @@ def steps_per_interval(gyro, profile, ts, fixed_step, rtol) -> int:
             omega = np.max(np.abs([np.max(np.asarray(res.at(x).omega)) for x in grid]))
     if isinstance(fixed_step, str):
         h = 2 * np.pi / (omega * steps_per_cycle(float(rtol)))
-    else:
-        h = float(fixed_step)
-        if omega is not None and 2 * np.pi / (omega * h) < MIN_STEPS_PER_CYCLE:
-            raise ValueError(
-                f"fixed_step = {h:g} s is {2 * np.pi / (omega * h):.3g} steps per carrier cycle "
-                f"({omega / (2 * np.pi):g} Hz); the full model needs at least "
-                f"{MIN_STEPS_PER_CYCLE} (fixed_step ≤ {2 * np.pi / (MIN_STEPS_PER_CYCLE * omega):.3g}"
-                ' s; fixed_step="auto" picks the step for rtol)'
-            )
+        return ladder_steps(math.ceil(longest / h - 1e-9))
+    h = float(fixed_step)
+    if omega is not None and 2 * np.pi / (omega * h) < MIN_STEPS_PER_CYCLE:
+        raise ValueError(
+            f"fixed_step = {h:g} s is {2 * np.pi / (omega * h):.3g} steps per carrier cycle "
+            f"({omega / (2 * np.pi):g} Hz); the full model needs at least "
+            f"{MIN_STEPS_PER_CYCLE} (fixed_step ≤ {2 * np.pi / (MIN_STEPS_PER_CYCLE * omega):.3g}"
+            ' s; fixed_step="auto" picks the step for rtol)'
+        )
     return max(1, math.ceil(longest / h - 1e-9))
+
+
+LADDER_PER_OCTAVE = 4
+"""Rungs per doubling of the step ladder of `fixed_step="auto"` and `"held"`
+(`ladder_steps`)."""
+
+
+def ladder_steps(n: int) -> int:
+    """The smallest ⌈2^(k/4)⌉ ≥ `n` (k = 0, 1, …; 4 = `LADDER_PER_OCTAVE`): 1, 2, 3, 4, 5, 6,
+    7, 8, 10, 12, 14, 16, 20, 23, 27, 32, … The step count of the chosen step is static in
+    the compiled program: without the ladder every new carrier frequency or temperature
+    (a loop over temperatures) compiled a program of its own (7–13 s each). At most
+    2^(1/4) − 1 ≈ 19 % more steps than the step asks for, and more steps only reduce the
+    error (8th order: at most 1.19⁻⁸ ≈ 0.25 of the rule's)."""
+    n = max(1, int(n))
+    k = max(0, math.floor(LADDER_PER_OCTAVE * math.log2(n)) - 2)
+    while math.ceil(2 ** (k / LADDER_PER_OCTAVE) - 1e-9) < n:
+        k += 1
+    return math.ceil(2 ** (k / LADDER_PER_OCTAVE) - 1e-9)
 
 
 MIN_STEPS_PER_CYCLE = 6

@@ -1,0 +1,89 @@
+"""Same shapes, new values: what compiles again (the compile audit's two findings).
+
+1. `hg.sweep` with the default `cost="auto"` on four grids of the same sizes (4 rates × 2
+   temperatures, 2-s averaged runs of an ideal-loop gyro) whose rates move from 0.1–3 to
+   0.1–900 °/s: the chunk size used to follow the cost estimates, so new values compiled a
+   new batch (and ≈ 11 small eager programs slicing its chunks).
+2. `simulate(model="full")` with the default `fixed_step="auto"` at carrier frequencies 40,
+   41, 40, 43 Hz (0.2 s) and `presets.tvg3_like()` at 20, 30, 20, 50 °C (0.01 s): the step
+   count, static in the program, used to follow every new frequency or temperature.
+
+Each call prints the XLA compiles it caused (jax.monitoring) and its wall time.
+
+Usage: `.venv/bin/python benchmarks/recompile_values.py [--no-full]`.
+"""
+
+import argparse
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.monitoring  # noqa: E402
+import numpy as np  # noqa: E402
+
+import hrgjax as hg  # noqa: E402
+
+_COUNTS: list = []
+
+
+def _listen(event, duration, **kw):
+    if event == "/jax/core/compile/backend_compile_duration" and _COUNTS:
+        _COUNTS[-1].append(kw.get("fun_name"))
+
+
+def counted(label, run):
+    _COUNTS.append([])
+    t0 = time.perf_counter()
+    jax.block_until_ready(run())
+    dt = time.perf_counter() - t0
+    names = _COUNTS.pop()
+    print(f"{label}: {len(names)} compiles, {dt:.3f} s  {names}", flush=True)
+    return len(names), dt
+
+
+def sweeps():
+    gyro = hg.presets.ideal(hg.Resonator(omega=2 * np.pi * 40.0, tau=50.0, k_e=0.554))
+
+    def fn(rate_dps, temperature_c):
+        p = hg.Profile.constant_rate(rate_dps=rate_dps, duration_s=2.0,
+                                     temperature_c=temperature_c, wave_angle0_deg=10.0)  # fmt: skip
+        return hg.simulate(gyro, p, dt_out=0.5).wave_angle[-1]
+
+    grids = {
+        "A (0.1–3 °/s)": ([0.1, 1.0, 2.0, 3.0], [20.0, 30.0]),
+        "B (0.2–3.5 °/s)": ([0.2, 1.5, 2.5, 3.5], [22.0, 32.0]),
+        "C (0.1–800 °/s)": ([0.1, 5.0, 400.0, 800.0], [21.0, 31.0]),
+        "D (0.1–900 °/s)": ([0.1, 6.0, 300.0, 900.0], [21.0, 31.0]),
+    }
+    for label, (w, t) in grids.items():
+        w, t = np.asarray(w), np.asarray(t)
+        counted(f"sweep grid {label}", lambda w=w, t=t: hg.sweep(fn, rate_dps=w, temperature_c=t))
+    w, t = (np.asarray(x) for x in grids["C (0.1–800 °/s)"])
+    counted("sweep grid C, cost=None", lambda: hg.sweep(fn, cost=None, rate_dps=w, temperature_c=t))
+
+
+def full_runs():
+    prof = hg.Profile.constant_rate(rate_dps=1.0, duration_s=0.2, temperature_c=20.0,
+                                    wave_angle0_deg=10.0)  # fmt: skip
+    for f_hz in (40.0, 41.0, 40.0, 43.0):
+        g = hg.presets.ideal(hg.Resonator(omega=2 * np.pi * f_hz, tau=50.0, k_e=0.554))
+        counted(f"full, {f_hz:g} Hz",
+                lambda g=g: hg.simulate(g, prof, model="full", dt_out=0.05).wave_angle)  # fmt: skip
+    gyro = hg.presets.tvg3_like()
+    key = jax.random.key(0)
+    for temp in (20.0, 30.0, 20.0, 50.0):
+        p = hg.Profile.static(duration_s=0.01, temperature_c=temp, wave_angle0_deg=10.0)
+        counted(f"full, tvg3_like at {temp:g} °C",
+                lambda p=p: hg.simulate(gyro, p, model="full", dt_out=0.005, key=key).wave_angle)  # fmt: skip
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--no-full", action="store_true", help="only the sweeps")
+    a = ap.parse_args()
+    jax.monitoring.register_event_duration_secs_listener(_listen)
+    sweeps()
+    if not a.no_full:
+        full_runs()
