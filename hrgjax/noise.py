@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from ._checks import check_nonnegative, check_positive
+from ._compiled import fused
 from .resonator.params import as_parameter, concrete_fields, refuse_unconverted
 
 
@@ -73,6 +74,7 @@ UNITS = {
 """Units of the `Noise` fields."""
 
 
+@fused  # one program per shape: an eager call compiled its scan every time (≈ 80 ms)
 def gauss_markov(key, ts, sigma, correlation_time):
     r"""Stationary first-order Gauss–Markov samples at times `ts` (exact discretisation).
 
@@ -136,6 +138,7 @@ def gauss_markov_bridge(dts, sigma, correlation_time):
     return correlation_time * jnp.tanh(u), s
 
 
+@fused  # one program per shape (it compiled gauss_markov's scan on every eager call)
 def rate_noise_angle(key, ts, noise: Noise):
     """Integrated equivalent-input-rate noise ∫(ARW + Gauss–Markov) dt at `ts` [rad].
 

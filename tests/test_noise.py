@@ -108,6 +108,21 @@ def test_gauss_markov_variance_and_correlation():
     assert rho == pytest.approx(np.exp(-1.0), abs=0.1)
 
 
+def test_noise_draws_compile_once_per_shape():
+    """Audit: an eager `gauss_markov` or `rate_noise_angle` compiled its `lax.scan` on every
+    call (≈ 80–160 ms each); a second call on new values of the same shapes compiles
+    nothing, and the draw is the plain function's to round-off."""
+    ts, noise = jnp.arange(0.0, 50.0, 0.5), hg.Noise(angle_random_walk=1e-6, bias_instability=1e-6)
+    for k in (0, 1):  # the second round: new values, same shapes
+        with CompileCounter() as c:
+            gm = hg.noise.gauss_markov(jax.random.key(k), ts + k, 2.0 + k, 50.0)
+            angle = hg.noise.rate_noise_angle(jax.random.key(k), ts + k, noise)
+        assert k == 0 or c.compiles == 0, c.names
+    plain = hg.noise.gauss_markov.__wrapped__(jax.random.key(1), ts + 1, 3.0, 50.0)
+    np.testing.assert_allclose(gm, plain, rtol=1e-12, atol=1e-14)  # XLA may round by an ulp
+    assert angle.shape == ts.shape and np.isfinite(angle).all()
+
+
 def test_noise_deterministic_for_key_and_needs_key():
     nz = hg.Noise(angle_white=1e-6, angle_random_walk=1e-6, run_bias=1.0 * DEG_PER_H)
     gyro = hg.Gyro(resonator(), control=hg.Control(ideal=True), noise=nz)
