@@ -295,3 +295,27 @@ def test_runs_of_one_length_but_different_sample_intervals_are_not_stacked():
     # 10-s blocks: every other sample at 5 s, every 20th at 0.5 s
     assert np.diff(np.asarray(groups[(0, 2)].bidx))[0] == 2
     assert np.diff(np.asarray(groups[(1,)].bidx))[0] == 20
+
+
+def test_per_run_consistency_counts_only_the_runs_that_resolve_the_effect():
+    """Audit finding (mixed logs: a readout mismatch named loop_ripple): a static ramp sees a
+    readout mismatch only through its drift of θ (≈ 10⁻⁴ σ), yet its refit's random sign
+    once counted in the agreement and refused the readout. Only runs whose own data put the
+    pooled effect at ≥ 1σ (the turning ones here) count; every run's refit is still listed."""
+    from hrgjax.discovery import NOMINAL
+    from hrgjax.discovery.continuous import ContinuousProblem
+
+    data = _short("readout_gain_mismatch", 5e-5, 1)  # ε₁ = −100 ppm
+    runs = np.unique(data.run)
+    held = runs[2::3]  # as discover: 0, 1, 3, 4 train; 0 and 4 static, 1 and 3 turning
+    problem = ContinuousProblem.from_data(
+        data, held, nominal=NOMINAL, catalogue=["readout_gain_mismatch"], k_e=K_E
+    )
+    fit = problem.fit([*NOMINAL, "readout_gain_mismatch"])
+    pooled = fit.parameters["readout_gain_mismatch"]
+    cons = problem.consistency(fit, "readout_gain_mismatch")
+    assert set(cons["per_run"]) == {0, 1, 3, 4}
+    assert cons["agreement"] == 1.0 and cons["dof"] == 2  # two turning runs × 2 − 2
+    for run in (1, 3):
+        for p in ("eps_1", "eps_2"):
+            assert cons["per_run"][run][p] == pytest.approx(pooled[p]["value"], rel=0.05)

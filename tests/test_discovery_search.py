@@ -76,6 +76,15 @@ def test_hidden_temperature_dependent_damping_is_named():
         "noise_floor",
     }
     assert rep.metric == "rms_run_mean_rate_residual_dph"
+    # every screening row names the first rule it fails (None: it passes them all)
+    from hrgjax.discovery.search import REFUSALS
+
+    for r in rep.screening:
+        assert r["refused_by"] in {None, *REFUSALS}, r
+        if r["p_value"] >= 0.01:  # misses even an uncorrected α: the first rule refuses it
+            assert r["refused_by"] == "p_value", r
+    win = next(r for r in rep.screening if r["effect"] == rep.missing_effect)
+    assert win["refused_by"] is None and win["accepted_in_round"] == 1
 
 
 def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
@@ -101,7 +110,7 @@ def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
     # the readout's temperature law would match the drift on the rotation runs (not at
     # rest): it is refused as outshone by the uncovered shape it only imitates
     row = next(r for r in rep.screening if r["effect"] == "readout_gain_mismatch_temperature")
-    assert row["outshone_by"] == "2θ·ΔT", row
+    assert row["outshone_by"] == "2θ·ΔT" and row["refused_by"] == "outshone_by", row
     # what is left is named: a 2θ harmonic that grows with temperature, in °/h per °C
     left = rep.leftover
     assert left["shape"] == "2θ·ΔT" and left["significant"], left

@@ -70,6 +70,9 @@ TAU_GRID = (30.0, 100.0, 300.0, 1000.0, 3000.0)
 RUN_COVARIATE_ALPHA = 0.01
 """Significance at which a run covariate is taken to explain the run means' scatter
 (`with_run_bias`)."""
+RESOLVES = 1.0
+"""A training run counts in an effect's per-run consistency when its own data put the pooled
+effect at this many σ at least (`consistency`)."""
 
 
 class ContinuousProblem(AbstractProblem):
@@ -292,27 +295,29 @@ class ContinuousProblem(AbstractProblem):
     def consistency(self, fit, name):
         r"""Per-run consistency of an accepted effect (DISCOVERY.md §2.1, "evidence must
         repeat"): its regular parameters refitted on each training run alone (the rest held at
-        the pooled fit), and the χ² of the per-run values about the pooled one,
-        $\sum_i (p_i-\bar p)^\top C_i^{+}(p_i-\bar p)$ on Σ rank C_i − q degrees of freedom
-        (a run that does not excite the effect adds nothing), and the share of exciting runs
-        whose own estimate points the same way as the pooled one ($p_i^\top C_i^{+}\bar p > 0$:
-        the effect repeats, with its sign, run after run). The χ² also rejects a right effect
-        whose catalogue law is only approximately right (a linear law fitted to an exponential
-        one differs between runs covering different temperatures); the sign agreement does not.
+        the pooled fit $\bar p$), over the runs that *resolve* it — whose own information
+        $C_i$ puts the pooled effect at ≥ `RESOLVES` σ ($\bar p^\top C_i\bar p$ ≥ 1): the χ²
+        of their values about the pooled one, $\sum_i (p_i-\bar p)^\top C_i(p_i-\bar p)$ on
+        Σ rank C_i − q degrees of freedom, and the share whose own estimate points the same
+        way ($p_i^\top C_i\bar p > 0$: it repeats, with its sign). Another run's sign is noise
+        (a readout mismatch seen by a static ramp's drift of θ alone, at 10⁻⁴ σ, once outvoted
+        its rotations). The χ² also rejects a right effect whose law is only approximately
+        right (a linear law fitted to an exponential one differs between temperatures).
 
-        **Returns:** `{"p_value", "dof", "agreement", "per_run": {run: {param: value}}}`."""
+        **Returns:** `{"p_value", "dof", "agreement", "per_run": {run: {param: value}}}`
+        (`per_run`: every training run's refit, resolving or not)."""
         basis, idx = self._basis([name])
         stat, dof, per_run, agree, exciting = 0.0, -len(idx), {}, 0, 0
-        names, scale = CATALOGUE[name].regular_names, self.layout.scale[idx]
+        names, scale, pooled = CATALOGUE[name].regular_names, self.layout.scale[idx], fit.z[idx]
         for run, z, info in per_run_fits(self.layout, basis, fit.z, self.train_groups, idx):
-            rank = np.linalg.matrix_rank(info, tol=1e-9 * max(np.trace(info), 1e-300))
-            d = z - fit.z[idx]
-            stat += float(d @ info @ d)
-            dof += int(rank)
-            if rank > 0:
-                exciting += 1
-                agree += float(z @ info @ fit.z[idx]) > 0
             per_run[run] = {n: float(v * sc) for n, v, sc in zip(names, z, scale, strict=True)}
+            if float(pooled @ info @ pooled) < RESOLVES**2:
+                continue
+            d = z - pooled
+            stat += float(d @ info @ d)
+            dof += int(np.linalg.matrix_rank(info, tol=1e-9 * np.trace(info)))
+            exciting += 1
+            agree += float(z @ info @ pooled) > 0
         p = stats.chi2_sf(stat, dof) if dof > 0 else None
         share = agree / exciting if exciting else None
         return {"p_value": p, "dof": max(dof, 0), "agreement": share, "per_run": per_run}
@@ -555,7 +560,7 @@ class ContinuousProblem(AbstractProblem):
                     "delta_bic": float(s - q * math.log(n)),
                     "gap_after": current.gap,
                     "heldout_gain": 0.0,
-                    "params": {} if tau is None else {CATALOGUE[name].params[1].name: tau},
+                    "params": {} if tau is None else {CATALOGUE[name].nonregular_name: tau},
                     "refit": None,
                     "_start": (z, step),
                     "_columns": (

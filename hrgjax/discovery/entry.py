@@ -113,6 +113,11 @@ class Effect:
         """Names of the regular parameters (the fitted ones), in the order of `params`."""
         return tuple(p.name for p in self.params if p.regular)
 
+    @property
+    def nonregular_name(self) -> str | None:
+        """Name of the nonregular parameter (a scanned time constant or bandwidth), or None."""
+        return next((p.name for p in self.params if not p.regular), None)
+
     def rate(self, p, c: Covariates, k_e):
         """Pattern-rate contribution [rad/s] at parameters `p` (shape (q,), order of
         `params`), covariates `c` and angular gain `k_e` (read only by the terms that scale

@@ -94,7 +94,10 @@ class Discovery:
       (the fitted one when the model fits it).
     - `ranking` (first-round candidates by score, with the refit's parameters in model units),
       `screening` (their first-round test statistics, each row with `round` 1 and
-      `accepted_in_round`: the round in which the effect was accepted, or None),
+      `accepted_in_round`: the round in which the effect was accepted, or None;
+      `refused_by`: the first acceptance rule it fails, named as in
+      [`REFUSALS`][hrgjax.discovery.search.REFUSALS], or None; `agreement`: its per-run
+      agreement share where that was computed),
       `consistency` (continuous records: per-run refits), `noise` (the noise model in report units), `split` (training and held-out
       runs), `shape` (`"dwell"` or `"continuous"`).
     - `residuals`: the residuals of the nominal (`"before"`) and the final (`"after"`) fit —

@@ -19,8 +19,9 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    lowers the held-out whitened χ² by more than `min_heldout_gain`, it does not widen the
    held-out gap (dwell grids only), and (continuous records) it repeats run by run: its
    parameters refitted on each training run alone point the same way as the pooled fit in
-   at least `min_agreement` of the runs that excite it (the χ² of their scatter is reported
-   in `consistency`). Repeat for a second or third effect.
+   at least `min_agreement` of the runs whose own data resolve it (the χ² of their scatter
+   is reported in `consistency`). Each screening row names the first rule it fails
+   (`refused_by`, `REFUSALS`). Repeat for a second or third effect.
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
    equivalent-input-rate residual [°/h]; the noise floor is what noise alone gives it.
    Verdicts: `found`; `ambiguous` (a rival passes the same rule with nearly the same ΔBIC);
@@ -112,8 +113,9 @@ def discover(
       `ambiguous` (the winner stays `missing_effect`; rivals in `ambiguous_with`, the
       separating experiments in `discriminate`). Of candidates whose ΔBIC ties within
       `TIE_FRACTION`, the one with the fewest parameters is accepted. `min_agreement`: continuous records
-      only, the smallest share of the training runs that excite an effect in which its
-      parameters, refitted on that run alone, point the same way as the pooled fit.
+      only, the smallest share of the training runs that resolve an effect (put its pooled
+      value at ≥ 1σ) in which its parameters, refitted on that run alone, point the same way
+      as the pooled fit.
     - `shape`: `"auto"` (dwell when every run holds its rate and temperature, mixed when
       some do), `"dwell"`, `"continuous"` or `"mixed"` (the dwell runs as the dwell search's
       window rows, jointly with the other runs simulated as continuous records).
@@ -175,18 +177,27 @@ def discover(
         if "consistency" not in r:
             r["consistency"] = problem.consistency(r["refit"], r["effect"])
         c = r["consistency"]
-        return c is None or c["agreement"] is None or c["agreement"] >= min_agreement
+        r["agreement"] = None if c is None else c["agreement"]
+        return r["agreement"] is None or r["agreement"] >= min_agreement
+
+    def refusal(r, fit):
+        """The first rule of the acceptance rule that `r` fails against `fit` (its
+        `REFUSALS` name), or None; kept in the row as `refused_by`."""
+        checks = (
+            ("p_value", lambda: r["p_value"] < alpha / max(n_cands, 1)),
+            ("delta_bic", lambda: r["delta_bic"] > min_delta_bic),
+            ("aliasing", lambda: r["aliasing"] < max_aliasing),
+            ("refit", lambda: r.get("refit") is not None),
+            ("heldout_gain", lambda: r["heldout_gain"] > min_heldout_gain),
+            ("gap_after", lambda: not problem.gap_guard or r["gap_after"] <= fit.gap),
+            ("consistency", lambda: consistent(r)),
+            ("outshone_by", lambda: not outshone(r)),
+        )
+        r["refused_by"] = next((name for name, ok in checks if not ok()), None)
+        return r["refused_by"]
 
     def passes(r, fit):
-        return (
-            r["p_value"] < alpha / max(n_cands, 1)
-            and r["delta_bic"] > min_delta_bic
-            and r["aliasing"] < max_aliasing
-            and r["heldout_gain"] > min_heldout_gain
-            and (not problem.gap_guard or r["gap_after"] <= fit.gap)
-            and consistent(r)
-            and not outshone(r)
-        )
+        return refusal(r, fit) is None
 
     def outshone(r):
         """The uncovered shape the candidate only imitates (computed when needed)."""
@@ -277,8 +288,21 @@ PROBLEMS: dict[str, type[AbstractProblem]] = {
 as windows)."""
 SCREEN_KEYS = (
     "effect", "score", "p_value", "delta_bic", "aliasing", "heldout_gain", "gap_after",
-    "outshone_by",
+    "outshone_by", "agreement", "refused_by",
 )  # fmt: skip
+REFUSALS = {
+    "p_value": "its score p-value misses Bonferroni at `alpha`",
+    "delta_bic": "its ΔBIC is not above `min_delta_bic`",
+    "aliasing": "the fitted model absorbs its signature (`max_aliasing`)",
+    "refit": "not refitted (outside the short list of the best scores, or its fit failed)",
+    "heldout_gain": "it lowers the held-out χ² by no more than `min_heldout_gain`",
+    "gap_after": "it widens the held-out gap (dwell grids)",
+    "consistency": "its per-run refits agree with the pooled one in under `min_agreement`",
+    "outshone_by": "an uncovered generic shape explains the residual far better",
+}
+"""A screening row's `refused_by`: the first rule of the acceptance rule it fails against the
+nominal model (None: it passes them all — accepted, or beaten by a better or simpler rival);
+`agreement` is its per-run agreement share where that was computed."""
 
 
 TIE_FRACTION = 1e-3
