@@ -34,8 +34,13 @@ predicted accuracy against the achieved one (`benchmarks/design_mc.py`), the All
 deviation's χ² intervals at long τ (`benchmarks/coverage_allan.py`) and the composite noise
 model's intervals and term selection (`benchmarks/noise_identification.py`).
 
+- `discover`, a drift over temperature outside the catalogue (`--temperature-drift cubic|step`):
+  the one-effect grids (seeds 3000…) with 5·10⁻⁶ °/h/°C³·ΔT³ or a 0.3 °/h step above 20 °C
+  added to the wave angle: structure no angle shape fits, which inflates the static
+  windows' noise level ×2–15 (audit 2026-11-30).
+
 Usage: `.venv/bin/python benchmarks/coverage.py [--quick] [--physical] [--only-physical]
-[--physical-runs [--run-bias σ]] [--n N]`.
+[--physical-runs [--run-bias σ]] [--temperature-drift cubic|step] [--n N]`.
 """
 
 import argparse
@@ -73,6 +78,24 @@ def add_four_theta(data: MeasuredData, amp_dph: float, k_e: float) -> MeasuredDa
     return MeasuredData(cols)
 
 
+def add_temperature_drift(data: MeasuredData, kind: str, k_e: float) -> MeasuredData:
+    """`data` with an apparent input rate outside the catalogue that follows temperature
+    only, integrated along each run: `cubic` 5·10⁻⁶ °/h/°C³·ΔT³ or `step` 0.3 °/h above
+    20 °C (the audit's t2.py; the static windows' noise level rises ×2–15)."""
+    cols = dict(data.columns)
+    theta, t, run = np.asarray(cols["wave_angle_deg"], float), cols["time_s"], data.run
+    dT = np.asarray(cols["temperature_c"], float) - 20.0
+    drift = 5e-6 * dT**3 if kind == "cubic" else 0.3 * (dT > 0.0)  # °/h
+    out = theta.copy()
+    for r in np.unique(run):
+        m = np.flatnonzero(run == r)
+        rate = -k_e * drift[m] / 3600.0  # pattern °/s
+        out[m] = theta[m] + np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1])
+                                                            * np.diff(t[m]))])  # fmt: skip
+    cols["wave_angle_deg"] = out
+    return MeasuredData(cols)
+
+
 def summarise(z: dict[str, list]) -> dict:
     """Pooled coverage of standardised errors `{parameter: [z, …]}`."""
     allz = np.concatenate([np.asarray(v, float) for v in z.values()])
@@ -88,7 +111,7 @@ def summarise(z: dict[str, list]) -> dict:
 
 
 def discover_coverage(
-    n: int, four_theta: float = 0.0, seed0: int = 1000
+    n: int, four_theta: float = 0.0, seed0: int = 1000, drift: str | None = None
 ) -> tuple[dict, dict, dict]:
     """(before, after) coverage of discover's b1, b2 and k_e over `n` dwell grids, and how
     often each leftover shape was fitted beside the model."""
@@ -101,6 +124,8 @@ def discover_coverage(
         data = hidden_effect_dataset("bias_temperature", SLOPE, key=jax.random.key(seed0 + s))
         if four_theta:
             data = add_four_theta(data, four_theta, k_e)
+        if drift:
+            data = add_temperature_drift(data, drift, k_e)
         found = discover(data)
         user = found.parameters
         raw = found.fit_parameters
@@ -263,6 +288,9 @@ def main(argv=None) -> int:
                     help="the physical grey box on 36 short runs alone")  # fmt: skip
     ap.add_argument("--run-bias", type=float, default=0.0,
                     help="with --physical-runs: each run's own bias, σ [°/h]")  # fmt: skip
+    ap.add_argument("--temperature-drift", choices=("cubic", "step"), default=None,
+                    help="the discover rows with a drift over temperature outside the "
+                    "catalogue alone (seeds 3000…)")  # fmt: skip
     args = ap.parse_args(argv)
     if args.run_bias and not args.physical_runs or args.run_bias < 0:
         ap.error("--run-bias takes a σ ≥ 0 [°/h] and goes with --physical-runs")
@@ -270,7 +298,13 @@ def main(argv=None) -> int:
     print(f"coverage.py on {machine()}, {n} datasets per workflow")
     t0 = time.perf_counter()
     rows = []
-    if args.physical_runs:
+    if args.temperature_drift:
+        b, a, shapes = discover_coverage(n, seed0=3000, drift=args.temperature_drift)
+        print(f"  shapes fitted beside the model: {shapes}")
+        name = f"discover, + {args.temperature_drift} over temperature"
+        rows += [(f"{name} — before", b), (f"{name} — after", a)]
+        args.only_physical = args.physical = False  # this case alone
+    elif args.physical_runs:
         res = physical_runs_coverage(n, args.run_bias)
         rows += [(f"physical, 36 × 60-s runs, run bias {args.run_bias:g} °/h", res)]
         args.only_physical, args.physical = True, False
@@ -278,7 +312,7 @@ def main(argv=None) -> int:
         args.physical = True
     else:
         rows += discover_rows(n)
-    if not args.only_physical:
+    if not args.only_physical and not args.temperature_drift:
         from coverage_ferraris import summarise as ferraris_summary
         from coverage_ferraris import z_scores
 

@@ -2,7 +2,10 @@ r"""Name the shape of what a model leaves (DISCOVERY.md §2.1 "say I don't know"
 the residual of the final fit tested against generic shapes of the pattern rate — harmonics
 1θ … 4θ of the electrical wave angle (constant, growing with ΔT = T − 20 °C or with ΔT², and in
 proportion to the rate Ω: a scale factor that varies with the wave angle; 2θ also with Ω²: a
-closed loop's lag turns a 2θ ripple's axis with the rate), ΔT, ΔT²,
+closed loop's lag turns a 2θ ripple's axis with the rate), ΔT, ΔT², ΔT³ and ΔT³ with ΔT⁴ (a
+drift over temperature that no polynomial law of the catalogue follows: a cubic, a step, a
+kink; on a five-level dwell grid with bias, ΔT and ΔT² fitted, the pair spans any function
+of temperature),
 dT/dt, the table rate Ω (and Ω·ΔT, Ω³), the specific force a_z and the time since switch-on.
 
 Each shape is a set of pattern-rate columns evaluated at the data's covariates (dwell
@@ -34,6 +37,8 @@ SHAPES = (
     "2θ·Ω²",
     "ΔT",
     "ΔT²",
+    "ΔT³",
+    "ΔT³+ΔT⁴",
     "dT/dt",
     "Ω",
     "Ω·ΔT",
@@ -46,6 +51,12 @@ SHAPES = (
 _SCALAR = {  # shape: (words, user unit, factor from pattern-rate coefficient per input)
     "ΔT": ("a drift that follows temperature", "°/h/°C", 1 / DEG_PER_H),
     "ΔT²": ("a drift curving with temperature", "°/h/°C²", 1 / DEG_PER_H),
+    "ΔT³": ("a drift with the cube of temperature", "°/h/°C³", 1 / DEG_PER_H),
+    "ΔT³+ΔT⁴": (
+        "a drift following temperature beyond ΔT² (ΔT³ and ΔT⁴ terms)",
+        "°/h/°C³",
+        1 / DEG_PER_H,
+    ),
     "dT/dt": ("a drift that follows the temperature rate", "°/h per °C/min", 1 / (60 * DEG_PER_H)),
     "Ω": ("a scale-factor error", "ppm", 1e6),
     "Ω·ΔT": ("a scale factor changing with temperature", "ppm/°C", 1e6),
@@ -79,6 +90,7 @@ def columns(cov: dict, drop: bool = True) -> dict[str, np.ndarray]:
     scalar = {
         "ΔT": dT,
         "ΔT²": dT**2,
+        "ΔT³": dT**3,
         "dT/dt": cov["Tdot"],
         "Ω": rate,
         "Ω·ΔT": rate * dT,
@@ -87,6 +99,8 @@ def columns(cov: dict, drop: bool = True) -> dict[str, np.ndarray]:
         "t_run": cov["t_run"],
     }
     out |= {k: v[:, None] for k, v in scalar.items()}
+    out["ΔT³+ΔT⁴"] = np.stack([dT**3, dT**4], axis=-1)  # on five temperature levels with
+    # bias, ΔT and ΔT² fitted: any function of temperature (a step, a kink)
     return {k: np.asarray(v, float) for k, v in out.items() if np.any(v) or not drop}
 
 
@@ -128,7 +142,10 @@ def _size(shape: str, coef: np.ndarray, cov: np.ndarray, k_e: float) -> dict:
     what, unit, factor = _SCALAR[shape]
     value = float(coef[0]) * factor * f  # Ω terms: Ω_apparent = Ω·(1 − c/k_e), so −c/k_e too
     sigma = float(math.sqrt(max(cov[0, 0], 0.0))) * abs(factor * f)
-    return {"size": value, "sigma": sigma, "unit": unit, "words": f"{what}: {value:.3g} {unit}"}
+    words = f"{what}: {value:.3g} {unit}"
+    if shape == "ΔT³+ΔT⁴":  # the size is the cubic's; the quartic beside it
+        words += f", {float(coef[1]) * factor * f:.3g} °/h/°C⁴"
+    return {"size": value, "sigma": sigma, "unit": unit, "words": words}
 
 
 def distinct(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -221,14 +221,16 @@ def discover(
         cands.remove(best["effect"])
         problem, current = problem.after_accept(best["refit"])
     floor = problem.floor()  # σ_b may have been re-estimated at the final model
-    left = problem.structure_left(current, floor)
+    parameters, uncertainty = trust.honest(current, problem.shape_columns, problem.row_classes())
+    # structure left: the held-out gap above the floor, or a leftover shape the residuals
+    # needed (trust.honest: judged at the noise level left once it is fitted)
+    left = problem.structure_left(current, floor) or bool(uncertainty["structure_left"])
     if accepted:
         verdict = "found"
-    elif problem.structure_left(base, floor):
+    elif left:  # nothing accepted: the current model is the base
         verdict = "unexplained"
     else:
         verdict = "none"
-    parameters, uncertainty = trust.honest(current, problem.shape_columns, problem.row_classes())
     ambiguous = []
     if accepted:
         # first-round rivals that pass the same rule and whose evidence is not decisively

@@ -24,8 +24,14 @@ biased by it. Two corrections, both from the fit's own residual:
 2. **Structure left** (model uncertainty). The generic shapes of
    [`leftover`][hrgjax.discovery.leftover] that are still significant (Bonferroni over the
    shapes tried, p < `alpha`) are fitted beside the model, strongest first, up to
-   `MAX_SHAPES`; each parameter's σ is then the augmented fit's (wider: it no longer borrows
-   what the shapes take) plus its shift $\delta$ when they are fitted:
+   `MAX_SHAPES`. Each shape is judged at the noise level the residual shows once *it* is
+   fitted, with the F(q, ν) tail of a level read from ν degrees of freedom (the classes'
+   own, pooled by where the shape is seen: Satterthwaite): structure inflates the level it
+   would otherwise be judged at (audit 2026-11-30: a ΔT³ drift raised the static windows'
+   level ×5, nothing was significant at ×5, and b1 came out 11σ wrong, unflagged). A class
+   whose level the shapes bring down is named in `info["excess"]`, and
+   `info["structure_left"]` is set. Each parameter's σ is then the augmented fit's (wider:
+   it no longer borrows what the shapes take) plus its shift $\delta$ when they are fitted:
    $\sigma = \sigma_{\rm sandwich} + |\delta_i|$, $A = [J\;G]$. The reported value
    stays the named model's, so its error is the noise's plus the pull: added linearly, the
    ±1σ interval holds the truth at least as often as the noise alone would put it there
@@ -75,18 +81,18 @@ def _leverage(a):
     return np.sum(u[:, :rank] ** 2, axis=1)
 
 
-def _noise_scale(r, a, classes, weights=None):
+def _noise_scale(r, a, classes, weights=None, h=None):
     """Per-row noise scale s (N,) from each class's residual mean square (module docstring):
     `r` the residual of the fit on the whitened columns `a` weighted by 1/`weights` (the
     previous scale; None: 1), each class's degrees of freedom n_g − Σ_g h_ii (the leverage
     its rows carry: static windows fix most of a dwell model's parameters, so an even share
-    p·n_g/n read their scale ≈ 15 % low on a small grid)."""
+    p·n_g/n read their scale ≈ 15 % low on a small grid; `h`: those leverages, when known)."""
     n = r.size
     s = np.ones(n)
     if classes is None:
         classes = np.zeros(n, int)
     w = np.ones(n) if weights is None else np.asarray(weights, float)
-    h = _leverage(a / w[:, None])
+    h = _leverage(a / w[:, None]) if h is None else h
     rss, dof, small = {}, {}, []
     for c in np.unique(classes):
         m = classes == c
@@ -127,21 +133,58 @@ def _sandwich_diag(a, s, p):
     return out
 
 
-def _shapes_left(r, j, cols, alpha):
-    """Significant leftover shapes, strongest first, each chosen given the ones before."""
-    chosen, jj, rr = [], j, r
+def _effective_dof(h, g_t, classes):
+    """Degrees of freedom behind the noise level a shape is judged at: each class's
+    n_g − Σ_g h_ii (`h`: the leverages of the fit with the shape), pooled with the weight the shape's
+    (model-orthogonal, whitened) columns `g_t` put on the class, Satterthwaite's
+    ν = (Σ w_g)² / Σ w_g²/ν_g: a shape seen on the few static windows rests on their ν, one
+    seen on thousands of continuous blocks on theirs."""
+    if classes is None:
+        return max(float(h.size - h.sum()), 1.0)
+    w, nu = [], []
+    for c in np.unique(classes):
+        m = classes == c
+        w.append(float(np.sum(g_t[m] ** 2)))
+        nu.append(max(float(m.sum() - h[m].sum()), 1.0))
+    w = np.asarray(w)
+    if not w.sum() > 0:
+        return 1.0
+    return max(float(w.sum() ** 2 / np.sum(w**2 / np.asarray(nu))), 1.0)
+
+
+def _shapes_left(r, j, cols, classes, s, alpha):
+    """Significant leftover shapes, strongest first, each chosen given the ones before.
+
+    Each shape is judged at the noise level the residual shows *once it is fitted* (its
+    own Birge ratio per class, `_noise_scale`), with the F(q, ν) tail of a level read from ν
+    degrees of freedom (`_effective_dof`): structure that inflates the level it is
+    judged at (a static window's drift over temperature raising its class's ratio ×5) no
+    longer hides itself; Bonferroni over the shapes tried."""
+    chosen, jj = [], j
     cols = leftover.distinct(cols)
     for _ in range(MAX_SHAPES):
-        scores = leftover.scores(rr, jj, {k: v for k, v in cols.items() if k not in chosen})
-        if not scores:
+        best = None
+        for name, g in cols.items():
+            if name in chosen:
+                continue
+            a = np.concatenate([jj, g], axis=1)
+            step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
+            h = _leverage(a / s[:, None])
+            s1 = _noise_scale(r - a @ step, a, classes, s, h)
+            q_j, _ = np.linalg.qr(jj / s1[:, None])
+            g_w = g / s1[:, None]
+            score, alias, _ = stats.score(r / s1, jj / s1[:, None], g_w, q_j)
+            if alias >= 0.999 or score <= 0:
+                continue
+            q = int(g.shape[1])
+            g_t = g_w - q_j @ (q_j.T @ g_w)
+            p = stats.f_sf(score / q, q, int(_effective_dof(h, g_t, classes)))
+            if best is None or (p, -score) < best[:2]:
+                best = (p, -score, name)
+        if best is None or min(1.0, best[0] * len(cols)) >= alpha:
             break
-        name, (s, q) = max(scores.items(), key=lambda kv: kv[1][0])
-        if min(1.0, stats.chi2_sf(s, q) * len(cols)) >= alpha:
-            break
-        chosen.append(name)
-        jj = np.concatenate([jj, cols[name]], axis=1)
-        beta, *_ = np.linalg.lstsq(jj, r, rcond=None)
-        rr = r - jj @ beta
+        chosen.append(best[2])
+        jj = np.concatenate([jj, cols[best[2]]], axis=1)
     return chosen
 
 
@@ -155,21 +198,24 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
 
     **Returns:** `(parameters, info)`: a copy of `fit.parameters` whose `std` are the
     corrected ones (`std_textbook` and `std_model` beside them), and `info` =
-    `{"noise_scale": {class: s}, "shapes": [names], "basis": words}`.
+    `{"noise_scale": {class: s}, "shapes": [names], "structure_left": bool, "basis": words}`
+    (`structure_left`: a shape was fitted beside the model, and with it `"excess"`:
+    `{class: s without the shapes}` for the classes whose level they bring down by more than
+    10 %: a residual far above the noise model that the shapes explain is structure, not noise).
     """
     r, j = np.asarray(fit.r, float), np.asarray(fit.j, float)
     labels = regular_parameters(fit.model)
     params = copy.deepcopy(fit.parameters)
     if j.ndim != 2 or j.shape[1] != len(labels) or r.size <= j.shape[1]:
-        return params, {"noise_scale": {}, "shapes": [], "basis": "textbook (no correction)"}
+        return params, {"noise_scale": {}, "shapes": [], "structure_left": False,
+                        "basis": "textbook (no correction)"}  # fmt: skip
     n, p = j.shape
     if classes is not None and len(classes) != n:
         raise ValueError(f"honest: {len(classes)} row classes for a residual of {n} rows")
     cols = {k: v for k, v in shape_columns.items() if v.shape[0] == n}
-    s = _noise_scale(r, j, classes)
+    s = bare = _noise_scale(r, j, classes)  # `bare`: the level without the shapes
     for _ in range(2):  # the shapes judged at the noise level the data show, and back
-        shapes = _shapes_left(r / s, j / s[:, None], {k: v / s[:, None] for k, v in cols.items()},
-                              alpha)  # fmt: skip
+        shapes = _shapes_left(r, j, cols, classes, s, alpha)
         a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
         step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
         s = _noise_scale(r - a @ step, a, classes, s)  # the noise the shapes leave
@@ -192,16 +238,22 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
         entry["std_textbook"] = std
         entry["std_model"] = model
         entry["std"] = stat + model
-    scale = {}
+    scale, without = {}, {}
     for c in np.unique(classes) if classes is not None else [None]:
         m = classes == c if classes is not None else slice(None)
         scale[CLASS_NAMES.get(c, "all rows")] = float(np.median(s[m]))
+        without[CLASS_NAMES.get(c, "all rows")] = float(np.median(bare[m]))
     words = (
         "noise level from the fit's residual ("
         + ", ".join(f"{k} ×{v:.2g}" for k, v in scale.items())
         + " of the noise model's σ)"
     )
+    info = {"noise_scale": scale, "shapes": shapes, "structure_left": bool(shapes)}
     if shapes:
-        words += "; structure left (" + ", ".join(shapes) + ") fitted beside the model, "
-        words += "each parameter's shift when it is fitted added to its σ"
-    return params, {"noise_scale": scale, "shapes": shapes, "basis": words}
+        info["excess"] = {k: without[k] for k in scale if without[k] > 1.1 * scale[k]}
+        words += "; structure left (" + ", ".join(shapes) + ") fitted beside the model"
+        if info["excess"]:
+            words += " (without it: " + ", ".join(
+                f"{k} ×{v:.2g}" for k, v in info["excess"].items()) + ")"  # fmt: skip
+        words += ", each parameter's shift when it is fitted added to its σ"
+    return params, info | {"basis": words}
