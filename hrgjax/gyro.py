@@ -29,7 +29,10 @@ def _vector3(x):
     if problem is not None:
         raise TypeError(f"Gyro.g_sensitivity must be 3 real numbers [rad/s per g], shape (3,) "
                         f"(or one for every axis); got {problem}")  # fmt: skip
-    x = jnp.asarray(np.asarray(x) if isinstance(x, list | tuple) else x, dtype=float)
+    host_list = isinstance(x, list | tuple) and not any(
+        isinstance(v, jax.Array) for v in jax.tree.leaves(x)
+    )  # a list holding a tracer is stacked by jnp
+    x = jnp.asarray(np.asarray(x) if host_list else x, dtype=float)
     if x.ndim == 0:
         x = jnp.broadcast_to(x, (3,))
     if x.shape[-1:] != (3,):

@@ -22,7 +22,9 @@ from .units import DEG, DEG_PER_S
 
 
 def _f(x):
-    if isinstance(x, jax.Array):  # a jax value or a tracer
+    if isinstance(x, jax.Array) or (  # a jax value or a tracer, or a list holding one
+        isinstance(x, list | tuple) and any(isinstance(v, jax.Array) for v in jax.tree.leaves(x))
+    ):
         return jnp.asarray(x, dtype=float)
     # Host values: a copy, not `jnp.asarray`'s small compiled program per new shape; concrete
     # even inside `jax.jit` (knot times must stay concrete there, see `_eager`).

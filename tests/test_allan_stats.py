@@ -317,6 +317,8 @@ def test_non_uniform_stamps_onto_a_uniform_grid_by_the_angle():
     angles = allan.to_uniform(stamps, 2.0 * stamps, data="phase")
     np.testing.assert_array_equal(np.flatnonzero(np.isnan(angles.y)), np.arange(100, 130))
     np.testing.assert_allclose(allan.to_uniform(np.arange(50.0), Y[:50]).y, Y[1:50], atol=1e-12)
+    for gap in (3, 3.0, np.float32(3.0), np.array(3.0)):  # any real number > 1, 0-d arrays too
+        np.testing.assert_array_equal(allan.to_uniform(stamps, ones, max_gap=gap).y, gapped.y)
     finer = allan.to_uniform(stamps, ones, rate_hz=5.0)  # a finer grid: the same gaps only
     assert finer.gaps == gapped.gaps and np.isnan(finer.y).sum() == 5 * (31 + 1)
     for t0, fs in ((123.456, 7.3), (1.7e9, 10.0)):  # stamps on the grid to round-off, epoch s

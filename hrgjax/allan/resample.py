@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 
 import numpy as np
 
@@ -79,7 +78,7 @@ def to_uniform(
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
         raise ValueError(f"t must increase; t[{i + 1}] = {t[i + 1]!r} follows t[{i}] = {t[i]!r}")
-    if isinstance(max_gap, bool) or not (isinstance(max_gap, numbers.Real) and max_gap > 1):
+    if not (is_finite_real(max_gap) and max_gap > 1):
         raise ValueError(f"max_gap must be > 1 step; got {describe(max_gap)}")
     median = float(np.median(dt))
     if rate_hz is None:
