@@ -319,3 +319,36 @@ def test_per_run_consistency_counts_only_the_runs_that_resolve_the_effect():
     for run in (1, 3):
         for p in ("eps_1", "eps_2"):
             assert cons["per_run"][run][p] == pytest.approx(pooled[p]["value"], rel=0.05)
+
+
+def test_a_fit_that_two_cycles_in_levenberg_marquardt_is_finished_to_the_minimum():
+    """Audit finding (seeds 6008, 6009, 6017, 6018 of `continuous_dataset("bias_temperature",
+    0.02)`): the base model's fit "did not converge". Without the slope the misfit is large
+    (χ²/dof ≫ 1), each Gauss–Newton step about twice too long, and optimistix's trust region
+    (cutoffs 0.01/0.99) never shrinks: a slow two-cycle that outlasts 256 steps. The fit now
+    goes on with the classical cutoffs (`_continuous_fit`) to the minimum that
+    `scipy.optimize.least_squares` finds."""
+    from scipy.optimize import least_squares
+
+    from hrgjax.discovery import NOMINAL
+    from hrgjax.discovery.records import lm, residual_and_jacobian
+
+    data = _short("bias_temperature", 0.04, 7)  # short records, one such seed
+    held = np.unique(data.run)[2::3]  # as discover
+    problem = continuous.ContinuousProblem.from_data(
+        data, held, nominal=NOMINAL, catalogue=ONE, k_e=K_E
+    )  # the compiled programs of the thermal_rate tests
+    idx = [i for n in NOMINAL for i in problem.layout.index(n, which=True)]
+    basis, z0 = np.eye(problem.layout.size)[:, idx], problem.z_null
+    assert not bool(lm(problem.layout, basis, jnp.asarray(z0), problem.train_groups)[1])
+    fit = problem.fit(list(NOMINAL))  # raised RuntimeError before
+
+    def rj(u):
+        r, j = residual_and_jacobian(problem.layout, z0 + basis @ u, basis, problem.train_groups)
+        return np.asarray(r), np.asarray(j)
+
+    ref = least_squares(lambda u: rj(u)[0], np.zeros(len(idx)), jac=lambda u: rj(u)[1],
+                        xtol=1e-12, ftol=1e-12, gtol=1e-12)  # fmt: skip
+    sigma = np.sqrt(np.diag(np.linalg.inv(fit.j.T @ fit.j)))
+    assert np.all(np.abs(fit.z[idx] - (z0[idx] + ref.x)) < 1e-2 * sigma)
+    assert fit.chi2 <= 2 * ref.cost * (1 + 1e-9)

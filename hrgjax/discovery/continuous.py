@@ -24,9 +24,9 @@ whitened by its Cholesky factor. Each run is its own switch-on: its constant bia
 element of Σ, with σ_b estimated from the scatter of the run means at the current model and
 re-estimated after each accepted effect. Sensitivities to every parameter — fitted or still at its
 null — are forward-mode derivatives through the solve (`diffrax.ForwardMode`, `jax.jacfwd`);
-fits are `optimistix.LevenbergMarquardt`. Nonregular time constants (`thermal_lag`'s τ_th,
-`warmup_transient`'s τ_w) are scanned on a grid; the score test then takes the best grid
-point and pays for the grid in its Bonferroni level.
+fits are `optimistix.LevenbergMarquardt` (finished where it stalls: `_continuous_fit`).
+Nonregular time constants (`thermal_lag`'s τ_th, `warmup_transient`'s τ_w) are scanned on a
+grid; the score test then takes the best grid point and pays for the grid in its Bonferroni level.
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ from .._progress import bar
 from ..data import MeasuredData
 from ..units import DEG, DEG_PER_H, T_REF_C
 from . import dwell, leftover, stats
+from ._continuous_fit import converged_lm
 from .effects import CATALOGUE
 from .noise import NoiseModel
 from .problem import AbstractProblem, Fit, candidates_for, covariates_in, dwell_runs
@@ -52,7 +53,6 @@ from .records import (
     Layout,
     Runs,
     Windows,
-    lm,
     per_run_fits,
     raw_residuals,
     residual_and_jacobian,
@@ -234,7 +234,7 @@ class ContinuousProblem(AbstractProblem):
         current model (the screening's refits)."""
         z0 = self.z_null if z0 is None else np.asarray(z0)
         basis, idx = self._basis(model)
-        z, ok = lm(self.layout, basis, jnp.asarray(z0), self.train_groups)
+        z, ok = converged_lm(self.layout, basis, jnp.asarray(z0), self.train_groups)
         if not bool(ok):
             raise RuntimeError(f"continuous discovery: the fit of {model} did not converge")
         z = np.asarray(z)
