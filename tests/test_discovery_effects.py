@@ -245,6 +245,15 @@ def test_leftover_names_a_planted_shape_with_its_size_and_nothing_in_noise():
     assert left["axis_deg"] == pytest.approx(10.0, abs=2.0)
     assert "constant over temperature" in left["words"]
     assert not leftover.describe(noise, j, cols, k_e)["significant"]
+    # a cubic drift over five temperature levels, the model holding bias, ΔT and ΔT²: named
+    # ΔT³, not the ΔT³+ΔT⁴ pair that holds its column and so always scores as high
+    levels = rng.choice([-40.0, -20.0, 0.0, 20.0, 40.0], n)
+    cols_t = {k: g / sigma for k, g in leftover.columns(dict(cov, dT=levels)).items()}
+    j_t = np.stack([np.ones(n), levels, levels**2], axis=1) / sigma
+    cubic = -k_e * 5e-6 * DEG_PER_H * levels**3 / sigma  # 5e-6 °/h/°C³ of input rate
+    left = leftover.describe(noise + cubic, j_t, cols_t, k_e)
+    assert left["shape"] == "ΔT³" and left["significant"], left
+    assert abs(left["size"] - 5e-6) < 4 * left["sigma"] and left["unit"] == "°/h/°C³"
     # a loop's lag: a 2θ scale factor growing with the rate, 2 ppm per °/s at two rates, the
     # model holding the 2θ·Ω ripple and a scale factor — named 2θ·Ω² with its size
     rate = np.deg2rad(rng.choice([-20.0, -5.0, 5.0, 20.0], n))

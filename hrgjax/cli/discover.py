@@ -32,7 +32,9 @@ def cmd_discover(args) -> int:
     if found.accepted[1:]:
         print(f"  also accepted: {', '.join(found.accepted[1:])}")
     if found.structure_left or found.verdict == "unexplained":
-        print("  structure is left above the noise floor that no catalogue effect explains")
+        shapes = found.uncertainty.get("shapes") or []
+        why = f" (a leftover shape: {', '.join(shapes)})" if shapes else ""
+        print(f"  structure is left that no catalogue effect explains{why}")
     print("  fitted model:")
     print("\n".join("    " + line for line in found.equations().splitlines()[1:]))
     print(

@@ -192,6 +192,16 @@ def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3)
     if not rows:
         return None
     rows.sort(key=lambda row: -row[0])
+    if "+" in rows[0][1]:
+        # a shape holding another's columns (ΔT³+ΔT⁴ ⊃ ΔT³) scores at least as high: it is
+        # named only where its extra columns add significantly to the smaller one's
+        inner = next((row for row in rows if row[1] == rows[0][1].split("+")[0]), None)
+        if inner is not None:
+            k = inner[2].shape[1]
+            extra, _, _ = stats.score(r, np.concatenate([j, inner[2]], axis=1), rows[0][2][:, k:])
+            if stats.chi2_sf(extra, rows[0][2].shape[1] - k) >= alpha:
+                rows.remove(inner)
+                rows.insert(0, inner)
     s, name, g, step, p = rows[0]
     g_t = g - q_j @ (q_j.T @ g)
     cov = np.linalg.pinv(g_t.T @ g_t)

@@ -25,7 +25,8 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
    equivalent-input-rate residual [°/h]; the noise floor is what noise alone gives it.
    Verdicts: `found`; `ambiguous` (a rival passes the same rule with nearly the same ΔBIC);
-   `none`; `unexplained` (nothing accepted, yet the held-out residual is above the noise).
+   `none`; `unexplained` (nothing accepted, yet the held-out residual is above the noise, or a
+   leftover shape is significant at the noise level left once it is fitted: `trust.honest`).
 
 Continuous records (some run changes its temperature or rate) go through the same steps
 with the model simulated ([`continuous`][hrgjax.discovery.continuous.ContinuousProblem]).
