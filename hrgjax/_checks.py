@@ -33,10 +33,8 @@ def check_finite(name: str, x):
         arr = np.asarray(x)
         bad = ~np.isfinite(arr)
         if bad.any():
-            idx = np.argwhere(bad)[0]
-            raise ValueError(
-                f"{name} must be finite; found {arr[tuple(idx)]} at index {tuple(idx)}"
-            )
+            idx = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise ValueError(f"{name} must be finite; found {arr[idx]} at index {idx}")
         return x if isinstance(x, jax.Array) else jnp.asarray(x)
     return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{name} must be finite (found NaN or inf)")
 

@@ -150,7 +150,10 @@ def _check_options(o) -> None:
         raise ValueError(f"fixed_step must be a positive number of seconds or None; got {v!r}")
     if is_concrete(v := o["quadrature0"]) and not (np.ndim(v) == 0 and np.isfinite(v)):
         raise ValueError(f"quadrature0 must be a finite number (readout units); got {v!r}")
-    if is_concrete(v := o["run"]):
+    v = o["run"]
+    if hasattr(v, "dtype") and jax.dtypes.issubdtype(v.dtype, jax.dtypes.prng_key):
+        raise ValueError("run must be an integer run id (e.g. 3); got a JAX PRNG key (key=)")
+    if is_concrete(v):
         arr = np.asarray(v)
         if arr.ndim != 0 or arr.dtype.kind not in "iu" or isinstance(v, bool):
             raise ValueError(f"run must be an integer run id (e.g. 3); got {v!r}")

@@ -222,3 +222,13 @@ def test_profile_nan_index_is_a_plain_int():
         ValueError, match=r"^Profile\.rate must be finite; it has nan at index \(1,\)$"
     ):
         P.piecewise([0.0, 1.0, 2.0], [0.0, np.nan, 1.0], 20.0)
+    # and in the parameters' own check (it printed np.int64(0))
+    with pytest.raises(ValueError, match=r"found nan at index \(1,\)$"):
+        hg.Resonator(omega=[1.0, np.nan], tau=500.0)
+
+
+def test_simulate_refuses_a_key_given_as_the_run_id():
+    """`run=jax.random.key(0)` (a key where the integer run id goes) made `record.run` a
+    key array; it is refused naming `run`."""
+    with pytest.raises(ValueError, match=r"^run must be an integer run id .*PRNG key"):
+        hg.simulate(hg.presets.ideal(RES), P.static(1.0), run=jax.random.key(0))
