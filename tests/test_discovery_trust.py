@@ -32,6 +32,17 @@ def grid():
     return g, leftover.columns(cov), (rate == 0).astype(int)
 
 
+def _wls_fit(g, y, sig) -> Fit:
+    """The weighted least-squares fit of the model's columns `g` to `y` (noise `sig`), as
+    a `Fit` that `trust.honest` reads."""
+    beta, r, cov = stats.wls(g, y, sig)
+    params = {}
+    for (name, pname), b, e in zip(regular_parameters(MODEL), beta, np.sqrt(np.diag(cov)),
+                                   strict=True):  # fmt: skip
+        params.setdefault(name, {})[pname] = {"value": b, "std": e}
+    return Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
+
+
 def _draws(grid, sigma_true, sigma_assumed, four_theta, n=200, seed=0):
     """z-scores (textbook, corrected) of the ΔT slope b1 over `n` noisy draws."""
     g, shapes, classes = grid
@@ -46,12 +57,7 @@ def _draws(grid, sigma_true, sigma_assumed, four_theta, n=200, seed=0):
             + four_theta * shapes["4θ"][:, 0]
             + sigma_true * rng.standard_normal(g.shape[0])
         )
-        beta, r, cov = stats.wls(g, y, sig)
-        std = np.sqrt(np.diag(cov))
-        params = {}
-        for (name, pname), b, e in zip(regular_parameters(MODEL), beta, std, strict=True):
-            params.setdefault(name, {})[pname] = {"value": b, "std": e}
-        fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
+        fit = _wls_fit(g, y, sig)
         cols = {k: v / sig[:, None] for k, v in shapes.items()}
         new, info = trust.honest(fit, cols, classes)
         b1 = new["bias_temperature"]["b1"]
@@ -121,20 +127,15 @@ def test_classes_with_different_noise_levels_get_the_sandwich_and_odd_input_is_s
     z = []
     for _ in range(300):
         y = g @ truth + noise * rng.standard_normal(g.shape[0])
-        beta, r, cov = stats.wls(g, y, sig)
-        params = {}
-        for (name, pname), b, e in zip(regular_parameters(MODEL), beta, np.sqrt(np.diag(cov)),
-                                       strict=True):  # fmt: skip
-            params.setdefault(name, {})[pname] = {"value": b, "std": e}
-        fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
+        fit = _wls_fit(g, y, sig)
         new, info = trust.honest(fit, {}, classes)
         z.append([(new[n][p]["value"] - truth[i]) / new[n][p]["std"]
                   for i, (n, p) in enumerate(regular_parameters(MODEL))])  # fmt: skip
     z = np.asarray(z)
     assert np.all(np.abs(np.sqrt(np.mean(z**2, axis=0)) - 1) < 0.2), np.sqrt(np.mean(z**2, 0))
     assert set(info["noise_scale"]) == {"moving windows", "static windows"}
-    r0 = np.where(classes == 1, 0.0, r)  # a class fitted exactly
-    fit0 = Fit(tuple(MODEL), params, r0, g / sig[:, None], float(r0 @ r0), 0.0, 0.0)
+    r0 = np.where(classes == 1, 0.0, fit.r)  # a class fitted exactly
+    fit0 = Fit(tuple(MODEL), fit.parameters, r0, fit.j, float(r0 @ r0), 0.0, 0.0)
     new, info = trust.honest(fit0, {}, classes)
     assert all(np.isfinite(v["std"]) for ps in new.values() for v in ps.values())
     with pytest.raises(ValueError, match="row classes"):
@@ -241,12 +242,7 @@ def test_a_small_class_reads_its_noise_level_with_an_allowance(grid):
         for _ in range(150 if factor == 2.0 else 5):
             noise = np.where(classes == 1, factor, 1.0) * sig
             y = g @ truth + noise * rng.standard_normal(g.shape[0])
-            beta, r, cov = stats.wls(g, y, sig)
-            params = {}
-            for (name, pname), b, e in zip(regular_parameters(MODEL), beta,
-                                           np.sqrt(np.diag(cov)), strict=True):  # fmt: skip
-                params.setdefault(name, {})[pname] = {"value": b, "std": e}
-            fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
+            fit = _wls_fit(g, y, sig)
             new, info = trust.honest(fit, {}, classes)
             scale.setdefault(factor, []).append(info["noise_scale"]["static windows"])
             if factor == 2.0:
@@ -275,12 +271,7 @@ def _drift_draws(grid, drift, n=40, seed=3):
     z_old, z_new = [], []
     for _ in range(n):
         y = g @ truth + extra + sig * rng.standard_normal(g.shape[0])
-        beta, r, cov = stats.wls(g, y, sig)
-        params = {}
-        for (name, pname), b, e in zip(regular_parameters(MODEL), beta, np.sqrt(np.diag(cov)),
-                                       strict=True):  # fmt: skip
-            params.setdefault(name, {})[pname] = {"value": b, "std": e}
-        fit = Fit(tuple(MODEL), params, r, g / sig[:, None], float(r @ r), 0.0, 0.0)
+        fit = _wls_fit(g, y, sig)
         new, info = trust.honest(fit, {k: v / sig[:, None] for k, v in shapes.items()}, classes)
         b1 = new["bias_temperature"]["b1"]
         z_old.append((b1["value"] - truth[-2]) / b1["std_textbook"])
