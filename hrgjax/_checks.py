@@ -316,10 +316,6 @@ def check_1d(name: str, x, what: str = "") -> tuple:
 # --- types of numeric arguments (numbers, arrays of numbers, flags) ----------------------
 
 
-def _type_name(x) -> str:
-    return "jax.Array" if isinstance(x, jax.Array) else type(x).__name__
-
-
 def _numeric_kind(x, bools=False):
     """`(shape, problem)` of `x` as a real number or array of them: `problem` is None for
     one, else the words after "got" (its type, and for an array its dtype and shape — never
@@ -355,7 +351,7 @@ def _numeric_kind(x, bools=False):
             return (), f"complex {x}"
         return (), type(x).__name__
     shape = tuple(shape)
-    what = f"{_type_name(x)} (dtype {dtype}, shape {shape})"
+    what = f"{_kind(x)} (dtype {dtype}, shape {shape})"
     if jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key):
         return shape, f"a JAX PRNG key (dtype {dtype}, shape {shape}), not a number"
     if bools and np.issubdtype(dtype, np.bool_):
@@ -382,7 +378,7 @@ def check_number(name: str, x, unit: str = ""):
     if problem is not None:
         raise TypeError(f"{name} must be {form}; got {problem}")
     if shape != ():
-        raise ValueError(f"{name} must be {form}; got {_type_name(x)} of shape {shape}")
+        raise ValueError(f"{name} must be {form}; got {_kind(x)} of shape {shape}")
     return x
 
 
@@ -397,7 +393,7 @@ def check_numbers(name: str, x, form: str, shape=None, bools: bool = False):
         len(got) != len(shape)
         or any(s is not None and s != g for s, g in zip(shape, got, strict=True))
     ):
-        raise ValueError(f"{name} must be {form}; got {_type_name(x)} of shape {got}")
+        raise ValueError(f"{name} must be {form}; got {_kind(x)} of shape {got}")
     return x
 
 
