@@ -34,7 +34,8 @@ def check_finite(name: str, x):
         bad = ~np.isfinite(arr)
         if bad.any():
             idx = tuple(int(i) for i in np.argwhere(bad)[0])
-            raise ValueError(f"{name} must be finite; found {arr[idx]} at index {idx}")
+            where = f" at index {idx}" if arr.ndim else ""
+            raise ValueError(f"{name} must be finite; found {arr[idx]}{where}")
         return x if isinstance(x, jax.Array) else jnp.asarray(x)
     return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{name} must be finite (found NaN or inf)")
 
@@ -187,7 +188,8 @@ def check_finite_host(name: str, x):
     if v is None or np.isfinite(v).all():
         return
     where = tuple(int(i) for i in np.argwhere(~np.isfinite(v))[0])
-    raise ValueError(f"{name} must be finite; it has {v[where]} at index {where}")
+    at = f" at index {where}" if v.ndim else ""
+    raise ValueError(f"{name} must be finite; it has {v[where]}{at}")
 
 
 def check_covariance(name: str, a, *, definite: bool = False, form: str = "(n, n)",

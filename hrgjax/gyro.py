@@ -157,7 +157,8 @@ class Gyro(eqx.Module):
         refuse_unconverted(self)
 
     def at(self, temperature_c) -> Gyro:
-        """This gyro with every temperature law evaluated at `temperature_c` [°C]."""
+        """This gyro with every temperature law evaluated at `temperature_c` [°C] (real
+        numbers; concrete ones finite and inside `plausible.RANGES`, else a one-line error)."""
         return evaluate_at(self, temperature_c)
 
     def in_mode(self, mode: str) -> Gyro:

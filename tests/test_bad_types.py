@@ -232,3 +232,36 @@ def test_simulate_refuses_a_key_given_as_the_run_id():
     key array; it is refused naming `run`."""
     with pytest.raises(ValueError, match=r"^run must be an integer run id .*PRNG key"):
         hg.simulate(hg.presets.ideal(RES), P.static(1.0), run=jax.random.key(0))
+
+
+GYRO_AT = hg.Gyro(resonator=resonator(tau=hg.TemperatureLaw(600.0, p1=-1.0)))
+
+
+@pytest.mark.parametrize(
+    "value,exc,match",
+    [
+        ("20", TypeError, r"^temperature_c must be a temperature \[°C\]: .*; got str '20'$"),
+        (True, TypeError, r"^temperature_c must be .*; got bool True$"),
+        (None, TypeError, r"^temperature_c must be .*; got None$"),
+        (float("nan"), ValueError, r"^temperature_c must be finite; found nan$"),
+        (293.15, ValueError, r"^temperature_c = 293\.15 is outside .* look like kelvin"),
+        ([20.0, 1e6], ValueError, r"^temperature_c = 1e\+06 at index 1 is outside"),
+    ],
+)  # fmt: skip
+@pytest.mark.parametrize("owner", ["gyro", "resonator"])
+def test_at_refuses_what_is_not_a_temperature(owner, value, exc, match):
+    """`Gyro.at` / `Resonator.at` evaluate temperature laws: a string, a flag, NaN or kelvin
+    was evaluated as a number (`at(1e6)` gave τ = −959 341 s)."""
+    target = GYRO_AT if owner == "gyro" else GYRO_AT.resonator
+    with pytest.raises(exc, match=match):
+        target.at(value)
+
+
+def test_at_still_evaluates_numbers_and_traced_temperatures():
+    law = lambda t: 600.0 - (t - hg.units.T_REF_C)  # noqa: E731 — the law above, by hand
+    assert float(GYRO_AT.at(30).resonator.tau) == pytest.approx(law(30.0))
+    temps = jnp.array([-20.0, 30.0])
+    np.testing.assert_allclose(jax.vmap(GYRO_AT.resonator.at)(temps).tau, law(temps))
+    assert float(jax.jit(lambda t: GYRO_AT.at(t).resonator.tau)(40.0)) == pytest.approx(law(40.0))
+    with hg.plausible.relaxed(temperature_c=(-300.0, 400.0)):
+        assert float(GYRO_AT.at(300.0).resonator.tau) == pytest.approx(law(300.0))

@@ -9,7 +9,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite, check_positive, is_concrete, numeric_problem
+from .. import plausible
+from .._checks import (
+    check_finite,
+    check_numbers,
+    check_positive,
+    is_concrete,
+    numeric_problem,
+)
 from ..units import T_REF_C, k_e_problem
 
 
@@ -109,7 +116,13 @@ def concrete_fields(module, names):
 
 
 def evaluate_at(tree, temperature_c):
-    """Replace every `TemperatureLaw` leaf of a pytree by its value at `temperature_c` [°C]."""
+    """Replace every `TemperatureLaw` leaf of a pytree by its value at `temperature_c` [°C]
+    (real numbers, traced or concrete; concrete ones finite and inside
+    `plausible.RANGES["temperature_c"]`, else a one-line error naming `temperature_c`)."""
+    check_numbers("temperature_c", temperature_c, "a temperature [°C]: a real number or array")
+    if is_concrete(temperature_c):
+        check_finite("temperature_c", temperature_c)
+        plausible.check("temperature_c", temperature_c)
     is_law = lambda x: isinstance(x, TemperatureLaw)
     return jax.tree_util.tree_map(
         lambda x: x(temperature_c) if is_law(x) else x, tree, is_leaf=is_law
