@@ -19,8 +19,22 @@ Targets (issue 46): at the longest τ, 68 ± 8 % within ±1σ.
 `--noise-rule stable32` puts Stable32's rule (B1 on the drift-removed rate down to 2
 averages) in the "after" column instead.
 
+`--fit-noise`: the IEEE 952 line fit `hg.allan.fit_noise` instead — do its coefficients'
+σ and intervals cover the truth? Records of 20 000 s at 1 Hz, oadev on the octave grid:
+white rate noise N = 1 plus a rate random walk K (overtaking N at 300 s), fitted with N and
+K; white rate noise, flicker rate noise B (0.6643·B = 0.15, a sum of first-order
+Gauss–Markov rates with correlation times 2× apart from 0.5 s to 2.6·10⁵ s, equal σ² — an
+Allan variance flat within 2 % from 2 s to 8 192 s, 17 % higher at 1 s where the white
+noise is 44× larger; B read off its mean) and a rate random walk overtaking B at 1 000 s,
+fitted with N, B and K; and N + B fitted
+with N and B. For each coefficient: the share of records whose truth lies within value ± σ
+and within the 95 % interval, and the z-RMS of (value − truth)/σ. "before": the fit as it
+was until issue 58 (EDF weights, the τ points taken as independent, re-computed here);
+"after": `fit_noise` now (GLS under the estimator's covariance at the fit).
+
 Usage: `.venv/bin/python benchmarks/coverage_allan.py [--n 200] [--seed 0]
-[--noise-rule hrgjax|stable32]` (200 records per balance: about 15 s on 2 cores).
+[--noise-rule hrgjax|stable32] [--fit-noise]` (200 records per balance: about 15 s on 2
+cores; `--fit-noise`: about 60 s).
 """
 
 from __future__ import annotations
@@ -100,14 +114,139 @@ def figures(z):
     }
 
 
+FIT_CASES = (
+    ("N + K", ("angle_random_walk", "rate_random_walk"), 0.0, math.sqrt(3.0) / 300.0),
+    ("N + B + K", ("angle_random_walk", "bias_instability", "rate_random_walk"),
+     0.15 / 0.6643, 0.15 * math.sqrt(3.0 / 1000.0)),
+    ("N + B", ("angle_random_walk", "bias_instability"), 0.15 / 0.6643, 0.0),
+)  # fmt: skip
+"""(case, terms fitted, B, K) with N = WHITE."""
+FLICKER_T = 0.5 * 2.0 ** np.arange(20)  # the flicker's Gauss–Markov correlation times [s]
+
+
+def _flicker_unit_level(taus):
+    """σ² of each of the flicker's Gauss–Markov rates giving B = 1: the mean of their exact
+    Allan variance over `taus` (1 Hz samples) equal to 2 ln 2/π."""
+    from hrgjax.allan.octave_covariance import unit_avar
+
+    avar = unit_avar("gauss_markov", taus, 1.0, 1.0 / FLICKER_T).sum(0)
+    return 2 * math.log(2) / math.pi / float(np.exp(np.mean(np.log(avar)))), avar
+
+
+def _flicker(rng, s2):
+    """A sum of first-order Gauss–Markov rates, σ² = s2 each, started stationary."""
+    from scipy.signal import lfilter
+
+    out = np.zeros(LENGTH)
+    for t in FLICKER_T:
+        phi = math.exp(-1.0 / t)
+        e = rng.normal(size=LENGTH) * math.sqrt(s2 * (1 - phi * phi))
+        e[0] = rng.normal() * math.sqrt(s2)
+        out += lfilter([1.0], [1.0, -phi], e)
+    return out
+
+
+def _independent(result, terms):
+    """fit_noise until issue 58: EDF weights, the τ points independent (value, σ, low, high)."""
+    from statistics import NormalDist
+
+    from hrgjax._nnls import nnls
+
+    names = [n for n, *_ in hg.allan.NOISE_TERMS]
+    t, var, edf = result.taus, result.dev**2, result.edf
+    basis = np.stack([f(t) for n, _, _, f in hg.allan.NOISE_TERMS if n in terms], axis=1)
+    model = var.copy()
+    for _ in range(5):
+        w = np.sqrt(edf / 2.0) / model
+        a = basis * w[:, None]
+        scale = np.linalg.norm(a, axis=0)
+        coef = nnls(a / scale, var * w) / scale
+        model = np.maximum(basis @ coef, 1e-300)
+    a = basis * w[:, None] / scale
+    cov = np.linalg.pinv(a.T @ a) / np.outer(scale, scale)
+    z = NormalDist().inv_cdf(0.5 + result.ci / 2)
+    out = {}
+    for i, n in enumerate(n for n in names if n in terms):
+        c, sc = coef[i], math.sqrt(max(cov[i, i], 0.0))
+        out[n] = (math.sqrt(c), sc / (2 * math.sqrt(c)) if c > 0 else math.sqrt(sc),
+                  math.sqrt(max(c - z * sc, 0.0)), math.sqrt(c + z * sc))  # fmt: skip
+    return out
+
+
+def run_fit_noise(n: int, seed: int):
+    """{case: {term: {"before"|"after": (records, 4) of value, σ, low, high}}}, truths, methods."""
+    taus = 2.0 ** np.arange(int(math.log2(LENGTH / 2)) + 1)
+    unit_s2, flat = _flicker_unit_level(taus)
+    ripple = float(np.max(np.abs(flat[1:] * unit_s2 / (2 * math.log(2) / math.pi) - 1)))
+    out, methods = {}, set()
+    for case, terms, b, k in FIT_CASES:
+        rng = np.random.default_rng(seed)
+        truth = {"angle_random_walk": WHITE, "bias_instability": b, "rate_random_walk": k}
+        got = {t: {"before": [], "after": []} for t in terms}
+        for _ in range(n):
+            y = WHITE * rng.normal(size=LENGTH)
+            if k:
+                y += k * np.cumsum(rng.normal(size=LENGTH))
+            if b:
+                y += _flicker(rng, b * b * unit_s2)
+            r = hg.allan.deviation(y, 1.0, kind="oadev", taus="octave", ci=0.95)
+            fit = hg.allan.fit_noise(r, terms=terms)
+            methods.add(fit.method)
+            old = _independent(r, terms)
+            for t in terms:
+                got[t]["before"].append(old[t])
+                got[t]["after"].append((fit.value[t], fit.sigma[t], fit.low[t], fit.high[t]))
+        out[case] = ({t: {w: np.asarray(v) for w, v in d.items()} for t, d in got.items()},
+                     truth)  # fmt: skip
+    return out, methods, ripple
+
+
+def fit_figures(rows, truth):
+    value, sigma, low, high = rows.T
+    z = (value - truth) / np.maximum(sigma, 1e-300)
+    return {"within_1sigma": float(np.mean(np.abs(z) < 1.0)),
+            "within_95": float(np.mean((low <= truth) & (truth <= high))),
+            "z_rms": float(np.sqrt(np.mean(z**2))), "bias": float(np.mean(value) / truth - 1)}  # fmt: skip
+
+
+def main_fit_noise(args):
+    from _common import report
+
+    t0 = time.perf_counter()
+    out, methods, ripple = run_fit_noise(args.n, args.seed)
+    print(f"fit_noise: {args.n} records of {LENGTH} s per case, oadev octaves; flicker's "
+          f"Allan variance flat within {100 * ripple:.1f} % for τ ≥ 2 s; method(s) after: {sorted(methods)}")  # fmt: skip
+    print(f"{'case':>10} {'term':>18} {'±1σ before':>11} {'±1σ after':>10} {'95% before':>11} "
+          f"{'95% after':>10} {'z-RMS before':>13} {'z-RMS after':>12} {'mean/truth−1':>13}")  # fmt: skip
+    for case, (got, truth) in out.items():
+        for t, d in got.items():
+            b, a = fit_figures(d["before"], truth[t]), fit_figures(d["after"], truth[t])
+            print(f"{case:>10} {t:>18} {100 * b['within_1sigma']:10.0f}% "
+                  f"{100 * a['within_1sigma']:9.0f}% {100 * b['within_95']:10.0f}% "
+                  f"{100 * a['within_95']:9.0f}% {b['z_rms']:13.2f} {a['z_rms']:12.2f} "
+                  f"{a['bias']:+13.3f}")  # fmt: skip
+            if t != "angle_random_walk":
+                for when, f in (("before", b), ("after", a)):
+                    report(f"fit_noise {t} z-RMS, {case}, {when}", f["z_rms"], "",
+                           target="1 ± 0.15")  # fmt: skip
+    print(f"\n{time.perf_counter() - t0:.0f} s")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200, help="records per balance (200)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--noise-rule", default="hrgjax", choices=hg.allan.NOISE_RULES,
                     help="deviation's noise_rule for the 'after' column (hrgjax)")  # fmt: skip
+    ap.add_argument("--fit-noise", action="store_true",
+                    help="the IEEE 952 line fit's σ and intervals instead (fit_noise)")  # fmt: skip
     args = ap.parse_args(argv)
     from _common import machine, report
+
+    if args.fit_noise:
+        print(f"coverage_allan.py --fit-noise on {machine()}")
+        main_fit_noise(args)
+        return
 
     print(f"coverage_allan.py on {machine()}: {args.n} records of {LENGTH} s per balance, "
           f"noise_rule={args.noise_rule!r}")  # fmt: skip

@@ -430,8 +430,9 @@ def test_fit_noise_recovers_the_ieee952_terms():
         assert fit.value[name] == pytest.approx(value, rel=1e-8), name
     np.testing.assert_allclose(fit.adev(taus), np.sqrt(var), rtol=1e-10)
 
-    # six records: the intervals treat the τ points as independent (they are not quite), so
-    # count: N in all, K in ≥ 5, no bias instability (interval reaching 0) in ≥ 4
+    # six records (GLS under the estimates' covariance; their coverage is
+    # benchmarks/coverage_allan.py's): N in all, K in ≥ 5, no bias instability (interval
+    # reaching 0) in ≥ 4
     fs, n, arw, rrw = 10.0, 200_000, 0.5, 0.002
     hits = {"angle_random_walk": 0, "rate_random_walk": 0, "bias_instability": 0}
     for seed in range(6):
@@ -649,3 +650,33 @@ def test_a_number_given_an_array_is_named_in_one_line():
             call()
     with pytest.raises(ValueError, match=r"^adev: tau0 must be the sample interval.*got '0.1'$"):
         hg.adev(y, tau0="0.1")
+
+
+def _two_pass_oadev(y, m):
+    """oadev of rate samples (τ0 = 1) summed after their mean is taken out (offset-free)."""
+    x = np.concatenate([[0.0], np.cumsum(y - np.mean(y))])
+    d = x[2 * m :] - 2 * x[m:-m] + x[: -2 * m]
+    return np.sqrt(np.mean(d**2) / (2 * m * m))
+
+
+def test_a_large_constant_rate_does_not_drown_the_noise():
+    """Every deviation ignores a constant rate. Summed as they were, 10⁵ samples of
+    10¹² ± 1 lost every digit (an HRG's PLL frequency, 2π·5 kHz ± 1e-5 rad/s, read oadev
+    +96 % at 10⁷ samples): each path — the curve, the result with its noise types, a record
+    with gaps, non-uniform stamps — now reads the offset-free record's value."""
+    rng = np.random.default_rng(11)
+    y, ms = 1e12 + rng.normal(size=100_000), np.array([1, 4, 32])
+    truth = np.array([_two_pass_oadev(y, int(m)) for m in ms])
+    _, dev = hg.allan_deviation(y, 1.0, ms=ms, kind="oadev")
+    np.testing.assert_allclose(dev, truth, rtol=1e-9)
+    r = allan.deviation(y, 1.0, kind="oadev", taus=ms.astype(float))
+    np.testing.assert_allclose(r.dev, truth, rtol=1e-9)
+    assert list(r.alpha) == [0, 0, 0]  # white rate noise (α = 0)
+    gapped = y.copy()
+    gapped[50_000] = np.nan  # the windows across sample 50 000 are left out
+    np.testing.assert_allclose(
+        allan.deviation(gapped, 1.0, kind="oadev", taus=ms.astype(float)).dev, truth, rtol=2e-3
+    )
+    t = np.arange(2001.0)  # stamps on a 1-s grid: to_uniform returns the rates unchanged
+    u = allan.to_uniform(t, np.concatenate([[np.nan], y[:2000]]), rate_hz=1.0)
+    np.testing.assert_allclose(u.y, y[:2000], rtol=0, atol=1e-3)

@@ -33,7 +33,8 @@ def gapped_curve(kind: str, y: np.ndarray, data: str, ms) -> tuple[np.ndarray, n
         )
     if data == "rate":
         ok = np.isfinite(y)
-        level = np.concatenate([[0.0], np.cumsum(np.where(ok, y, 0.0))])  # angle / τ0
+        centre = np.mean(y[ok]) if ok.any() else 0.0  # a constant rate cancels in d; its sum
+        level = np.concatenate([[0.0], np.cumsum(np.where(ok, y - centre, 0.0))])  # angle / τ0
         holes = np.concatenate([[0], np.cumsum(~ok)])
     else:
         level = y - y[np.flatnonzero(np.isfinite(y))[0]]

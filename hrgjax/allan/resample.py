@@ -94,9 +94,12 @@ def to_uniform(
     if data == "rate":
         # interval k (t_k, t_{k+1}] carries y_{k+1}; a missing rate or a wide interval is a hole
         hole = missing[1:] | wide
-        angle = np.concatenate([[0.0], np.cumsum(np.where(hole, 0.0, y[1:] * dt))])
+        # the angle less the mean rate's (restored after): a large constant rate integrated
+        # as it is drowns the noise's digits
+        centre = float(np.mean(y[1:][~hole])) if (~hole).any() else 0.0
+        angle = np.concatenate([[0.0], np.cumsum(np.where(hole, 0.0, (y[1:] - centre) * dt))])
         at = np.interp(grid, t, angle)
-        out = np.diff(at) / step
+        out = np.diff(at) / step + centre
         # a grid interval touching a hole: NaN (the holes' stamps, spread over the grid)
         lo = np.searchsorted(t, grid[:-1] + tol, side="right") - 1  # each start's interval
         hi = np.searchsorted(t, grid[1:] - tol, side="left") - 1  # ... and each end's

@@ -229,7 +229,8 @@ def deviation(
         rate = np.diff(filled) / tau0
     else:
         rate = filled
-        x = np.concatenate([[0.0], np.cumsum(filled) * tau0])
+        # less the mean rate: a large constant rate summed as it is drowns the noise's digits
+        x = np.concatenate([[0.0], np.cumsum(filled - np.mean(filled)) * tau0])
     n_phase = x.size
     m = _factors(taus, rate_hz, n_phase)
     n_terms = np.asarray([_n_terms(kind, int(k), n_phase) for k in m], dtype=int)

@@ -1,0 +1,96 @@
+"""fit_noise's σ are the overlapping estimator's (issue 58): checked against a covariance
+built here by brute force from the record's Gaussian law, and by a small Monte Carlo with
+known truth."""
+
+import math
+from statistics import NormalDist
+
+import numpy as np
+import pytest
+
+from hrgjax import allan
+
+N_SAMPLES, TAU0 = 300, 0.5
+TERMS = ("angle_random_walk", "rate_random_walk")
+
+
+def _brute_omega(value, ms, n, tau0):
+    """Cov(σ̂²(m_a), σ̂²(m_b)) of the overlapping Allan variance of n rate samples every tau0
+    with white rate noise N²/τ₀ per sample and a rate random walk of steps K²τ₀, as the
+    Gaussian quadratic forms' 2·tr(A Σ B Σ) over the record's phase (X = Σy)."""
+    idx = np.arange(n)
+    sy = np.eye(n) * value["angle_random_walk"] ** 2 / tau0
+    sy += value["rate_random_walk"] ** 2 * tau0 * (np.minimum.outer(idx, idx) + 1)
+    x = np.vstack([np.zeros(n), np.tril(np.ones((n, n)))])  # X_j = Σ_{k<j} y_k
+    sx = x @ sy @ x.T
+    forms = []
+    for m in ms:
+        rows = n + 1 - 2 * m
+        d = np.zeros((rows, n + 1))
+        i = np.arange(rows)
+        d[i, i], d[i, i + m], d[i, i + 2 * m] = 1.0, -2.0, 1.0
+        forms.append(sx @ (d.T @ d) / (2.0 * m * m * rows))  # A Σ with A the quadratic form
+    return np.array([[2 * np.sum(a * b.T) for b in forms] for a in forms])
+
+
+def test_sigma_is_the_gls_covariance_of_the_overlapping_estimates():
+    """On one record the reported σ of N and K equal √((AᵀΩ⁻¹A)⁻¹) (delta method to the
+    coefficients) with Ω the estimates' covariance at the fitted model computed here by
+    brute force, and the fit is GLS's fixed point under that Ω (fit_noise before: σ 27 %
+    too small)."""
+    rng = np.random.default_rng(3)
+    y = 1.0 * rng.normal(size=N_SAMPLES) + 0.02 * np.cumsum(rng.normal(size=N_SAMPLES))
+    res = allan.deviation(y, 1.0 / TAU0, kind="oadev", taus="octave")
+    fit = allan.fit_noise(res, terms=TERMS)
+    ms = np.asarray(res.m, dtype=int)
+    omega = _brute_omega(fit.value, ms, N_SAMPLES, TAU0)
+    basis = np.stack([f(res.taus) for n, _, _, f in allan.NOISE_TERMS if n in TERMS], axis=1)
+    w = np.linalg.inv(omega)
+    cov = np.linalg.inv(basis.T @ w @ basis)
+    c2 = np.array([fit.value[t] ** 2 for t in TERMS])
+    sigma = np.sqrt(np.diag(cov)) / (2 * np.sqrt(c2))
+    np.testing.assert_allclose([fit.sigma[t] for t in TERMS], sigma, rtol=2e-3)
+    gls = cov @ basis.T @ w @ res.dev**2  # both coefficients positive: the unconstrained GLS
+    np.testing.assert_allclose(c2, gls, rtol=2e-3)
+    zq = NormalDist().inv_cdf(0.5 + res.ci / 2)  # the interval: c² ± zσ(c²), its ends' roots
+    for i, t in enumerate(TERMS):
+        sc = math.sqrt(cov[i, i])
+        assert fit.low[t] == pytest.approx(math.sqrt(max(c2[i] - zq * sc, 0.0)), rel=2e-3)
+        assert fit.high[t] == pytest.approx(math.sqrt(c2[i] + zq * sc), rel=2e-3)
+    assert fit.method == "gls"
+
+
+def test_reported_sigma_of_k_matches_its_monte_carlo_spread():
+    """100 records of 4 096 s of white rate noise and a rate random walk with known N and K:
+    the empirical spread of the fitted K is the mean reported σ within 25 % (measured 1.07×;
+    the τ-independent σ fit_noise gave before: 1.77×), and the z-RMS of K is within 0.8–1.3
+    (measured 1.12; before: 1.93)."""
+    rng = np.random.default_rng(0)
+    n, arw, rrw = 4096, 1.0, 0.03
+    ks, sigmas = [], []
+    for _ in range(100):
+        y = arw * rng.normal(size=n) + rrw * np.cumsum(rng.normal(size=n))
+        fit = allan.fit_noise(allan.deviation(y, 1.0, kind="oadev", taus="octave"), terms=TERMS)
+        ks.append(fit.value["rate_random_walk"])
+        sigmas.append(fit.sigma["rate_random_walk"])
+    ks, sigmas = np.asarray(ks), np.asarray(sigmas)
+    ratio = np.std(ks) / np.mean(sigmas)
+    z_rms = float(np.sqrt(np.mean(((ks - rrw) / sigmas) ** 2)))
+    assert 0.8 < ratio < 1.25, (ratio, z_rms)
+    assert 0.8 < z_rms < 1.3, (ratio, z_rms)
+
+
+def test_kinds_without_the_covariance_say_so():
+    """adev, a record with gaps and a hand-made result fall back to independent τ points and
+    name why in `method`; bias instability's flicker is flagged as approximated."""
+    rng = np.random.default_rng(1)
+    y = rng.normal(size=512) + 0.01 * np.cumsum(rng.normal(size=512))
+    fit = allan.fit_noise(allan.deviation(y, 1.0, kind="adev"), terms=TERMS)
+    assert fit.method.startswith("independent: adev")
+    gappy = y.copy()
+    gappy[100:110] = np.nan
+    fit = allan.fit_noise(allan.deviation(gappy, 1.0, kind="oadev"), terms=TERMS)
+    assert fit.method.startswith("independent: a record with gaps")
+    fit = allan.fit_noise(allan.deviation(y, 1.0, kind="oadev"))
+    assert fit.method == "gls, flicker approximated"
+    assert all(fit.low[t] <= fit.value[t] <= fit.high[t] for t in fit.value)
