@@ -3,6 +3,7 @@ exact covariance against Monte Carlo, the terms a record has found (and no other
 intervals holding the truth, and the exports (Kalibr's imu.yaml, hrgjax's Noise) closing the
 loop identify → simulate → identify."""
 
+import dataclasses
 import math
 
 import jax
@@ -176,7 +177,13 @@ def test_exports_kalibr_units_and_noise_closes_the_loop(white_walk, tmp_path):
                                                      truth))) / tau0  # fmt: skip
     first = hg.allan.identify_noise(y, fs, unit="rad/s", gauss_markov=1)
     assert set(first.terms) == {"angle_random_walk", "gauss_markov_1"}, str(first)
-    noise = first.to_noise(k_e=1.0)
+    noise = first.to_noise()  # DESIGN.md's call: no white angle noise, so no k_e needed
+    for field in ("angle_white", "angle_random_walk", "bias_instability", "correlation_time"):
+        assert float(getattr(noise, field)) == float(getattr(first.to_noise(k_e=0.554), field))
+    with_q = dataclasses.replace(first, terms={**first.terms, "quantization": {"value": 1e-3}})
+    with pytest.raises(ValueError, match="^to_noise: the model has white angle noise Q; pass k_e"):
+        with_q.to_noise()
+    assert float(with_q.to_noise(k_e=0.5).angle_white) == pytest.approx(0.5e-3)
     ts = np.arange(n + 1) * tau0
     again = np.diff(np.asarray(hg.noise.rate_noise_angle(jax.random.key(2), ts, noise))) / tau0
     second = hg.allan.identify_noise(again, fs, unit="rad/s", gauss_markov=1)

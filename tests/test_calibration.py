@@ -737,6 +737,24 @@ def test_schuler_channel_matches_closed_form():
     np.testing.assert_allclose(dp[:, 1], 0.0, atol=1e-12)
 
 
+def test_schuler_channels_are_signed_as_the_strapdown_error_model():
+    """Each channel against `hrgjax.ins.strapdown.propagate` (a stationary, level vehicle on
+    a sphere that does not turn): a north gyro error moves the vehicle east, an east gyro
+    error moves it *south* (the north channel read +2195 m for −2195 m)."""
+    from hrgjax.calibration.ins_impact import EARTH_RADIUS, GRAVITY, schuler_errors
+    from hrgjax.ins import constants, strapdown, trajectory
+
+    earth = constants.Earth(radius=EARTH_RADIUS, g=GRAVITY, rate=0.0)
+    traj = trajectory.stationary(10.0, duration_s=3000.0, dt=10.0, earth=earth)
+    eps, t = 1e-7, traj.t
+    zero, full = jnp.zeros(t.shape), jnp.full(t.shape, eps)
+    for axis, drive in ((0, (full, zero)), (1, (zero, full))):  # north, then east gyro error
+        dx = strapdown.propagate(traj, gyro_error=eps * jnp.eye(3)[axis], altitude_aided=True)
+        north_east = np.asarray(strapdown.position_metres(traj, dx))[:, :2]
+        _, dp = schuler_errors(t, *drive)
+        np.testing.assert_allclose(np.asarray(dp)[:, ::-1], north_east, rtol=1e-4, atol=1e-3)
+
+
 def test_physical_compensates_the_apparent_rate_of_a_temperature_ramp():
     """A readout mismatch that changes with temperature moves the measured angle while the
     temperature changes (rate ∝ Ṫ, PHYSICS.md §4.7 with g(T)); knowing the readout, the

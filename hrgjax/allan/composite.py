@@ -219,12 +219,14 @@ class CompositeNoise:
                 fh.write(f"rostopic: {rostopic}\nupdate_rate: {float(self.rate_hz)!r}\n")
         return out
 
-    def to_noise(self, k_e: float):
+    def to_noise(self, k_e: float | None = None):
         """hrgjax's [`Noise`][hrgjax.Noise] for simulating a gyro with this noise (rate unit
         rad/s, °/s or °/h): N → `angle_random_walk`, one Gauss–Markov term → `bias_instability`
-        and `correlation_time`, Q → `angle_white` (× `k_e`: readout noise on the electrical
-        wave angle, per sample at this record's rate). A rate random walk, a drift or a
-        second Gauss–Markov term has no field in `Noise`: `ValueError` naming it. (The
+        and `correlation_time`, Q → `angle_white` (× `k_e`, the gyro's angular gain: readout
+        noise on the electrical wave angle, per sample at this record's rate). `k_e` is
+        needed only when the model has Q (else `ValueError` asking for it). A rate random
+        walk, a drift or a second Gauss–Markov term has no field in `Noise`: `ValueError`
+        naming it. (The
         simulator integrates the Gauss–Markov rate by trapezoids, which lowers its sampled
         variance by (1 + φ)/2: under 1 % for T ≥ 50 samples, 20 % at T = 2 samples.)"""
         from ..noise import Noise
@@ -236,9 +238,17 @@ class CompositeNoise:
                 f"to_noise: {', '.join(extra)} has no field in hrgjax.Noise (it simulates "
                 "white angle and rate noise and one Gauss–Markov rate)"
             )
+        q = self.value("quantization")
+        if q and k_e is None:
+            raise ValueError(
+                "to_noise: the model has white angle noise Q; pass k_e, the gyro's angular "
+                "gain (Q × k_e is the readout noise on the electrical wave angle)"
+            )
+        if k_e is not None and not (is_finite_real(k_e) and np.ndim(k_e) == 0 and k_e > 0):
+            raise ValueError(f"to_noise: k_e must be a positive number; got {describe(k_e)}")
         gm = self.terms.get("gauss_markov_1")
         return Noise(
-            angle_white=k_e * self.value("quantization") * scale,
+            angle_white=(k_e * q if q else 0.0) * scale,
             angle_random_walk=self.value("angle_random_walk") * scale,
             bias_instability=0.0 if gm is None else gm["sigma"]["value"] * scale,
             correlation_time=100.0 if gm is None else gm["correlation_time"]["value"],

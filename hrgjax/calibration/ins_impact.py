@@ -44,7 +44,10 @@ def schuler_errors(t, eps_north, eps_east):
     east axes [rad/s] at `t` (linearly interpolated between samples).
 
     **Returns:** `(velocity_error, position_error)` [m/s], [m], each shape (N, 2) for the
-    (east, north) channels: a north-axis gyro error drives the east channel and vice versa.
+    (east, north) channels, signed as the NED strapdown error model's
+    ([`hrgjax.ins.strapdown.propagate`][]): a north-axis gyro error ε drives the east
+    channel, +Rε(t − sin ω_s t/ω_s); an east-axis one the north channel, with the opposite
+    sign (δv̇_N = +gφ_E, δv̇_E = −gφ_N: a level tilt about east accelerates north).
 
     **Raises:** `RuntimeError` when the solver fails.
     """
@@ -57,7 +60,7 @@ def _schuler(t, eps_north, eps_east):
 
     def field(s, y, args):
         dv, phi, _ = y[0:2], y[2:4], y[4:6]
-        eps = path.evaluate(s)
+        eps = path.evaluate(s) * jnp.array([1.0, -1.0])  # the north channel's drive is −ε_E
         return jnp.concatenate([GRAVITY * phi, -dv / EARTH_RADIUS + eps, dv])
 
     sol = diffrax.diffeqsolve(
