@@ -478,10 +478,13 @@ _extended_kalman_filter = eqx.filter_jit(_ekf)
 
 def sigma_points(g: Gaussian, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
     """Scaled unscented sigma points (Van der Merwe): `(points (2n+1, n), mean weights,
-    covariance weights)`; λ = α²(n + κ) − n, points x ± columns of chol((n + λ)P)."""
+    covariance weights)`; λ = α²(n + κ) − n, points x ± columns of L, LLᵀ = (n + λ)P
+    ([`psd_factor`][hrgjax.kalman.psd_factor]: a P that its update left indefinite by
+    round-off — a measurement 10¹⁶ more precise than the prior — gave a plain Cholesky's
+    NaN, silently, from the first step on)."""
     n = g.x.shape[0]
     lam = alpha**2 * (n + kappa) - n
-    root = cholesky((n + lam) * g.P)
+    root = psd_factor((n + lam) * g.P)
     pts = jnp.concatenate([g.x[None], g.x[None] + root.T, g.x[None] - root.T])
     wm = jnp.full(2 * n + 1, 0.5 / (n + lam)).at[0].set(lam / (n + lam))
     wc = wm.at[0].add(1 - alpha**2 + beta)

@@ -368,3 +368,20 @@ def test_van_loan_names_a_step_that_is_not_a_number():
     # traced steps pass (vmap over steps, as the INS models do)
     phis, _ = jax.vmap(kalman.van_loan, in_axes=(None, None, 0))(PHI, QD, jnp.array([0.1, 0.2]))
     np.testing.assert_allclose(phis[1], kalman.van_loan(PHI, QD, 0.2)[0], rtol=1e-12)
+
+
+def test_ukf_takes_a_measurement_far_more_precise_than_its_prior():
+    """Prior variance 10⁴, measurement variance 10⁻¹²: the update leaves P indefinite by
+    round-off (−6e-28), and a plain Cholesky of it gave NaN from the first step, silently,
+    where the Kalman filter and the EKF answer; the UKF now equals them."""
+    phi, h = jnp.array([[1.0, 1.0], [0.0, 1.0]]), jnp.array([[1.0, 0.0]])
+    qd, r = jnp.diag(jnp.array([1e-4, 1e-6])), jnp.array([[1e-12]])
+    noise = 1e-6 * np.random.default_rng(0).normal(size=50)
+    zs = jnp.asarray((0.02 * np.arange(50) + noise)[:, None])
+    prior = kalman.Gaussian(jnp.zeros(2), 1e4 * jnp.eye(2))
+    xs, _, ll = kalman.kalman_filter(prior, phi, qd, h, r, zs)
+    uxs, _, ull = kalman.unscented_kalman_filter(
+        prior, lambda x, u: phi @ x, qd, lambda x: h @ x, r, zs
+    )
+    assert np.isfinite(np.asarray(uxs)).all() and float(ull) == pytest.approx(float(ll), abs=1e-6)
+    np.testing.assert_allclose(uxs, xs, rtol=1e-6, atol=1e-9)
