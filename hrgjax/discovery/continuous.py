@@ -55,6 +55,7 @@ from .records import (
     Windows,
     per_run_fits,
     raw_residuals,
+    repeats,
     residual_and_jacobian,
     run_covariates,
     stack_runs,
@@ -71,8 +72,9 @@ RUN_COVARIATE_ALPHA = 0.01
 """Significance at which a run covariate is taken to explain the run means' scatter
 (`with_run_bias`)."""
 RESOLVES = 1.0
-"""A training run counts in an effect's per-run consistency when its own data put the pooled
-effect at this many σ at least (`consistency`)."""
+"""A training run (or, where fewer than two runs do, a group of consecutive ones) counts in an
+effect's per-run consistency when its data put the pooled effect at this many σ at least
+(`consistency`)."""
 
 
 class ContinuousProblem(AbstractProblem):
@@ -294,33 +296,29 @@ class ContinuousProblem(AbstractProblem):
 
     def consistency(self, fit, name):
         r"""Per-run consistency of an accepted effect (DISCOVERY.md §2.1, "evidence must
-        repeat"): its regular parameters refitted on each training run alone (the rest held at
-        the pooled fit $\bar p$), over the runs that *resolve* it — whose own information
-        $C_i$ puts the pooled effect at ≥ `RESOLVES` σ ($\bar p^\top C_i\bar p$ ≥ 1): the χ²
-        of their values about the pooled one, $\sum_i (p_i-\bar p)^\top C_i(p_i-\bar p)$ on
-        Σ rank C_i − q degrees of freedom, and the share whose own estimate points the same
-        way ($p_i^\top C_i\bar p > 0$: it repeats, with its sign). Another run's sign is noise
-        (a readout mismatch seen by a static ramp's drift of θ alone, at 10⁻⁴ σ, once outvoted
-        its rotations). The χ² also rejects a right effect whose law is only approximately
-        right (a linear law fitted to an exponential one differs between temperatures).
+        repeat"): its regular parameters refitted on each training run alone (the rest held
+        at the pooled fit $\bar p$), compared by `records.repeats` over the runs that
+        *resolve* it ($\bar p^\top C_i\bar p$ ≥ `RESOLVES`², $C_i$ the run's information)
+        or, when fewer than two do, over consecutive runs pooled until each group does: the
+        χ² of their values about the pooled one and the share pointing the same way. Another
+        run's sign is noise (a readout mismatch seen by a static ramp's drift of θ alone, at
+        10⁻⁴ σ, once outvoted its rotations). A run whose refit did not converge gives no
+        estimate: it neither agrees nor disagrees, and is listed in `unconverged`.
 
-        **Returns:** `{"p_value", "dof", "agreement", "per_run": {run: {param: value}}}`
-        (`per_run`: every training run's refit, resolving or not)."""
+        **Returns:** `{"p_value", "dof", "agreement", "units", "reason", "unconverged",
+        "per_run": {run: {param: value}}}` (`records.repeats`; `per_run`: every converged
+        training run's refit, resolving or not)."""
         basis, idx = self._basis([name])
-        stat, dof, per_run, agree, exciting = 0.0, -len(idx), {}, 0, 0
         names, scale, pooled = CATALOGUE[name].regular_names, self.layout.scale[idx], fit.z[idx]
-        for run, z, info in per_run_fits(self.layout, basis, fit.z, self.train_groups, idx):
-            per_run[run] = {n: float(v * sc) for n, v, sc in zip(names, z, scale, strict=True)}
-            if float(pooled @ info @ pooled) < RESOLVES**2:
-                continue
-            d = z - pooled
-            stat += float(d @ info @ d)
-            dof += int(np.linalg.matrix_rank(info, tol=1e-9 * np.trace(info)))
-            exciting += 1
-            agree += float(z @ info @ pooled) > 0
-        p = stats.chi2_sf(stat, dof) if dof > 0 else None
-        share = agree / exciting if exciting else None
-        return {"p_value": p, "dof": max(dof, 0), "agreement": share, "per_run": per_run}
+        fits, unconverged = per_run_fits(self.layout, basis, fit.z, self.train_groups, idx)
+        out = repeats(fits, pooled, RESOLVES)
+        if out["reason"] is not None and unconverged:
+            out["reason"] += f" ({len(unconverged)} runs' refits did not converge)"
+        per_run = {
+            run: {n: float(v * sc) for n, v, sc in zip(names, z, scale, strict=True)}
+            for run, z, _ in fits
+        }
+        return out | {"unconverged": unconverged, "per_run": per_run}
 
     def start_from(self, parameters, names):
         """Scaled vector at the null with a report's `parameters` of effects `names` put in."""

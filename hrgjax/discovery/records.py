@@ -23,6 +23,7 @@ import numpy as np
 import optimistix as optx
 
 from .._compiled import Unchecked, program
+from . import stats
 from .effects import CATALOGUE, Covariates, pattern_rate, readout_angle, window_rate
 from .noise import NoiseModel
 
@@ -253,16 +254,88 @@ def fit_each_run(layout, basis, z0, group):
 
 def per_run_fits(layout, basis, z, groups, idx):
     """Each training run's own fit of the parameters `basis` picks (indices `idx` of the
-    scaled vector; the rest held at `z`): `(run id, its values (len(idx),), its information
-    JᵀJ in them)` for every run whose fit converged (`fit_each_run`; a dwell run is one grid
-    point: none)."""
-    out = []
+    scaled vector; the rest held at `z`), `fit_each_run`; a dwell run is one grid point:
+    none. **Returns:** `(fits, unconverged)`: `fits`, `(run id, its values (len(idx),), its
+    information JᵀJ in them)` for every run whose fit converged, in run order;
+    `unconverged`, the sorted ids of the runs whose fit did not (not dropped silently:
+    `ContinuousProblem.consistency` reports them)."""
+    out, unconverged = [], []
     for g in groups:
         if not isinstance(g, Windows):
             zs, oks, js = (np.asarray(a) for a in fit_each_run(layout, basis, jnp.asarray(z), g))
-            out += [(int(run), zs[i][idx], js[i].T @ js[i])
-                    for i, run in enumerate(g.run) if bool(oks[i])]  # fmt: skip
-    return out
+            for i, run in enumerate(g.run):
+                if bool(oks[i]):
+                    out.append((int(run), zs[i][idx], js[i].T @ js[i]))
+                else:
+                    unconverged.append(int(run))
+    return sorted(out, key=lambda f: f[0]), sorted(unconverged)
+
+
+def _rank(info):
+    return int(np.linalg.matrix_rank(info, tol=1e-9 * np.trace(info))) if info.any() else 0
+
+
+def _pooled(members):
+    """One unit of the agreement: `(run ids, estimate, information)` of consecutive runs
+    pooled — information summed, estimate their information-weighted combination (the
+    group's own refit to first order)."""
+    if len(members) == 1:
+        run, p, info = members[0]
+        return (run,), p, info
+    info = sum(c for _, _, c in members)
+    p = np.linalg.pinv(info, rcond=1e-9, hermitian=True) @ sum(c @ q for _, q, c in members)
+    return tuple(run for run, _, _ in members), p, info
+
+
+def repeats(fits, pooled, resolves=1.0):
+    r"""Whether an effect's estimates repeat run by run (DISCOVERY.md §2.1, "evidence must
+    repeat"), from `fits` (`per_run_fits`: each run's $p_i$ and information $C_i$, in run
+    order) and the pooled estimate $\bar p$. The units compared are the runs that *resolve*
+    it ($s_i = \bar p^\top C_i\bar p \ge$ `resolves`²) when at least two do; otherwise
+    consecutive runs pooled into groups, each closed as soon as it resolves it ($\sum s_i$,
+    cut greedily: the most groups a split into consecutive parts allows), a last part
+    that falls short joining the group before it; a group's estimate is
+    $C_g^{+}\sum_i C_ip_i$ with $C_g = \sum_i C_i$. Consecutive, not interleaved: an
+    effect that changes sign over the campaign splits into groups that disagree. Over the
+    units: the χ² $\sum_u (p_u-\bar p)^\top C_u(p_u-\bar p)$ on Σ rank C_u − q
+    degrees of freedom, and the share pointing the same way ($p_u^\top C_u\bar p > 0$).
+
+    **Returns:** `{"p_value", "dof", "agreement", "units": [[run, …], …], "reason"}`; with
+    fewer than two units (no split of the runs into two parts each resolving it) the
+    check cannot be made: `agreement` None and `reason` says why (else None)."""
+    need, pooled = resolves**2, np.asarray(pooled)
+    strength = [float(pooled @ c @ pooled) for _, _, c in fits]
+    strong = [f for f, s in zip(fits, strength, strict=True) if s >= need]
+    if len(strong) >= 2:
+        units = [_pooled([f]) for f in strong]
+    else:
+        groups, part, total = [], [], 0.0
+        for f, s in zip(fits, strength, strict=True):
+            part, total = part + [f], total + s
+            if total >= need:
+                groups, part, total = groups + [part], [], 0.0
+        if part and groups:
+            groups[-1] += part
+        units = [_pooled(g) for g in groups]
+    reason = None
+    if len(units) < 2:
+        reason = (
+            "no training run's refit converged" if not fits
+            else f"the training runs together do not resolve it (Σ p̄ᵀC_i p̄ = {sum(strength):.3g})"
+            if sum(strength) < need
+            else "no two parts of the training runs each resolve it: one part carries it"
+        )  # fmt: skip
+        units = []
+    stat = sum(float((p - pooled) @ c @ (p - pooled)) for _, p, c in units)
+    dof = sum(_rank(c) for _, _, c in units) - pooled.size
+    agree = sum(float(p @ c @ pooled) > 0 for _, p, c in units)
+    return {
+        "p_value": stats.chi2_sf(stat, dof) if dof > 0 else None,
+        "dof": max(dof, 0),
+        "agreement": agree / len(units) if units else None,
+        "units": [list(runs) for runs, _, _ in units],
+        "reason": reason,
+    }
 
 
 @program(check=Unchecked())

@@ -19,7 +19,8 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    lowers the held-out whitened χ² by more than `min_heldout_gain`, it does not widen the
    held-out gap (dwell grids only), and (continuous records) it repeats run by run: its
    parameters refitted on each training run alone point the same way as the pooled fit in
-   at least `min_agreement` of the runs whose own data resolve it (the χ² of their scatter
+   at least `min_agreement` of the runs whose own data resolve it — or, when fewer than two
+   do, of groups of consecutive runs pooled until each resolves it (the χ² of their scatter
    is reported in `consistency`). Each screening row names the first rule it fails
    (`refused_by`, `REFUSALS`). Repeat for a second or third effect.
 6. **Report** the DESIGN.md keys: the gap is the RMS over held-out runs of the run-mean
@@ -116,7 +117,8 @@ def discover(
       `TIE_FRACTION`, the one with the fewest parameters is accepted. `min_agreement`: continuous records
       only, the smallest share of the training runs that resolve an effect (put its pooled
       value at ≥ 1σ) in which its parameters, refitted on that run alone, point the same way
-      as the pooled fit.
+      as the pooled fit; when fewer than two runs resolve it, of groups of consecutive runs
+      pooled until each does (`records.repeats`).
     - `shape`: `"auto"` (dwell when every run holds its rate and temperature, mixed when
       some do), `"dwell"`, `"continuous"` or `"mixed"` (the dwell runs as the dwell search's
       window rows, jointly with the other runs simulated as continuous records).
@@ -174,7 +176,12 @@ def discover(
     n_cands = len(cands)
 
     def consistent(r):
-        """Per-run agreement of the candidate's refit (computed once, only when needed)."""
+        """Per-run agreement of the candidate's refit (computed once, only when needed).
+        Passes where the check cannot be made — dwell grids (None), or no split of the
+        training runs into two parts that each resolve the effect (`agreement` None, the
+        consistency's `reason` says why): its evidence then lies in one part of the runs or in
+        a mixed log's dwell windows, and repeating is left to the held-out rule (it must lower
+        the held-out χ² of other runs by `min_heldout_gain`), which comes first."""
         if "consistency" not in r:
             r["consistency"] = problem.consistency(r["refit"], r["effect"])
         c = r["consistency"]
@@ -300,12 +307,15 @@ REFUSALS = {
     "refit": "not refitted (outside the short list of the best scores, or its fit failed)",
     "heldout_gain": "it lowers the held-out χ² by no more than `min_heldout_gain`",
     "gap_after": "it widens the held-out gap (dwell grids)",
-    "consistency": "its per-run refits agree with the pooled one in under `min_agreement`",
+    "consistency": "its per-run refits (or, when fewer than two runs resolve it, groups of "
+    "consecutive runs pooled until each does) agree with the pooled one in under "
+    "`min_agreement`",
     "outshone_by": "an uncovered generic shape explains the residual far better",
 }
 """A screening row's `refused_by`: the first rule of the acceptance rule it fails against the
 nominal model (None: it passes them all — accepted, or beaten by a better or simpler rival);
-`agreement` is its per-run agreement share where that was computed."""
+`agreement` is its per-run agreement share where that was computed (None: not computed, or
+the check could not be made — `Discovery.consistency` gives the `reason`)."""
 
 
 TIE_FRACTION = 1e-3
