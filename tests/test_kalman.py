@@ -385,3 +385,22 @@ def test_ukf_takes_a_measurement_far_more_precise_than_its_prior():
     )
     assert np.isfinite(np.asarray(uxs)).all() and float(ull) == pytest.approx(float(ll), abs=1e-6)
     np.testing.assert_allclose(uxs, xs, rtol=1e-6, atol=1e-9)
+
+
+def test_ukf_with_a_state_its_prior_knows_exactly_has_a_value_and_a_gradient():
+    """P0 = diag(1, 0) or diag(0, 1) (a state known exactly; the KF and EKF take it): the
+    UKF's plain Cholesky gave a NaN gradient of the log-likelihood in R, or a NaN value;
+    now its gradient equals central differences."""
+    f = lambda x, u: jnp.array([x[0] + x[1], x[1]])  # noqa: E731 — position, velocity
+    h = lambda x: jnp.array([x[0] + 0.05 * x[0] ** 3])  # noqa: E731 — a mildly nonlinear sensor
+    truth = 0.3 * jnp.arange(20.0)
+    zs = (truth + 0.05 * truth**3 + 0.3 * jax.random.normal(jax.random.key(0), (20,)))[:, None]
+    qd = jnp.diag(jnp.array([1e-3, 0.0]))
+    for p0 in (jnp.diag(jnp.array([1.0, 0.0])), jnp.diag(jnp.array([0.0, 1.0]))):
+        ll = lambda r, p0=p0: kalman.unscented_kalman_filter(  # noqa: E731
+            kalman.Gaussian(jnp.array([0.0, 0.3]), p0), f, qd, h, jnp.array([[r]]), zs
+        )[2]
+        step = 1e-6
+        fd = (float(ll(0.09 + step)) - float(ll(0.09 - step))) / (2 * step)
+        assert np.isfinite(float(ll(0.09)))
+        assert float(jax.grad(ll)(0.09)) == pytest.approx(fd, rel=1e-6)
