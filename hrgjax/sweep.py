@@ -65,6 +65,9 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
 
     `fn` runs under `jax.jit`: build profiles from Python numbers (their knot times stay
     concrete, so `simulate` can derive its output grid) or pass `ts=` to `simulate`.
+    A sweep differentiates and compiles in the caller's `jax.grad` / `jax.jit` with respect
+    to values `fn` closes over (chunks, cost order and all; the grids themselves are concrete):
+    it then returns traced arrays, not NumPy's.
 
     Under JAX's multi-process runtime (every process has called `jax.distributed.initialize()`
     and then runs the same `sweep` on the same grids), each process evaluates an equal share
@@ -168,7 +171,7 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
             chunk = None if chunk >= per and chunk_size is None else chunk
         pts = {n: v[mine] for n, v in flat.items()}
         out = _local(call, pts, chunk, progress and rank == 0, total)
-        out = jax.tree_util.tree_map(lambda x: np.asarray(x)[:per], out)
+        out = jax.tree_util.tree_map(lambda x: x[:per], out)  # (traced under grad: kept so)
         if n_proc > 1:
             out = jax.tree_util.tree_map(_gather, out)
         real = np.concatenate([np.arange(h.size) + r * per for r, h in enumerate(hands)])
@@ -202,10 +205,11 @@ def member_costs(fn, cost, flat: dict) -> np.ndarray | None:
         return None
     try:
         c = np.asarray(probe(flat), dtype=float)
-    except jax.errors.UnexpectedTracerError:
+    except (jax.errors.UnexpectedTracerError, jax.errors.TracerArrayConversionError):
         # The estimate is a value of a transformation inside `fn` that has no primal to
         # take (`_cost.report`): `fn`'s own jit, a vmap inside `fn`, a scan around
-        # `simulate`. No estimate then: the grid's order, as for a `fn` with no `simulate`.
+        # `simulate` — or the sweep runs under the caller's `jit` (the estimate is traced).
+        # No estimate then: the grid's order, as for a `fn` with no `simulate`.
         state["simulates"] = False
         return None
     if not state["simulates"]:  # this trace found no simulate call
@@ -261,8 +265,17 @@ def _local(call, flat, chunk_size, progress, total):
     parts = []
     for i in _progress(range(n_chunks), progress):  # (every chunk has the first one's shapes)
         part = {k: v[i * chunk : (i + 1) * chunk] for k, v in flat.items()}
-        parts.append(jax.device_get(_batch(call, part, devices, total if i == 0 else None)))
-    return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
+        out = _batch(call, part, devices, total if i == 0 else None)
+        # traced outputs (a sweep under the caller's jax.grad or jit) stay traced: the host
+        # cannot hold them, and the chunks join on the device
+        traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(out))
+        parts.append(out if traced else jax.device_get(out))
+    join = (
+        jnp.concatenate
+        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(parts))
+        else np.concatenate
+    )
+    return jax.tree_util.tree_map(lambda *xs: join(xs), *parts)
 
 
 def _gather(block):

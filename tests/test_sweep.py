@@ -173,6 +173,21 @@ def test_chunked_sweep_equals_one_batch_and_reports_progress(capsys):
         hg.sweep(f, a=a, b=b, chunk_size=0)
 
 
+def test_a_sweep_differentiates_and_compiles_in_the_callers_transformations():
+    """d/dc Σ c·a²·b over the grid is Σ a²·b, whole, chunked (whose chunks went through the
+    host: TracerArrayConversionError) and ordered by a cost, under `jax.grad` and `jax.jit`."""
+    a, b = jnp.linspace(0.0, 1.0, 30), jnp.linspace(1.0, 2.0, 3)
+    exact = float(jnp.sum(a[:, None] ** 2 * b[None]))
+
+    def total(c, **kw):
+        return jnp.sum(hg.sweep(lambda a, b: c * a**2 * b, a=a, b=b, **kw))
+
+    for kw in ({}, {"chunk_size": 7}, {"cost": lambda a, b: -a}):
+        assert float(jax.grad(total)(0.7, **kw)) == pytest.approx(exact, rel=1e-12), kw
+        jitted = jax.jit(lambda c, kw=kw: total(c, **kw))
+        assert float(jitted(0.7)) == pytest.approx(0.7 * exact, rel=1e-12), kw
+
+
 def test_a_chunked_sweep_compiles_its_chunk_once_and_a_second_sweep_nothing():
     """The chunks of one sweep (the last padded) share one compiled program, and a second
     sweep of the same `fn` on grids of the same sizes compiles nothing — also when `fn` is a
