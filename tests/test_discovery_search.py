@@ -81,6 +81,7 @@ def test_hidden_temperature_dependent_damping_is_named():
 
     for r in rep.screening:
         assert r["refused_by"] in {None, *REFUSALS}, r
+        assert r["agreement"] is None and r["agreement_note"] is None  # dwell: no runs to split
         if r["p_value"] >= 0.01:  # misses even an uncorrected α: the first rule refuses it
             assert r["refused_by"] == "p_value", r
     win = next(r for r in rep.screening if r["effect"] == rep.missing_effect)

@@ -97,7 +97,9 @@ class Discovery:
       `accepted_in_round`: the round in which the effect was accepted, or None;
       `refused_by`: the first acceptance rule it fails, named as in
       [`REFUSALS`][hrgjax.discovery.search.REFUSALS], or None; `agreement`: its per-run
-      agreement share where that was computed),
+      agreement share where that was computed; `agreement_note`: why it is None where the
+      check was asked for but could not be made, e.g. no two parts of the training runs each
+      resolve the effect),
       `consistency` (continuous records: per-run refits), `noise` (the noise model in report units), `split` (training and held-out
       runs), `shape` (`"dwell"` or `"continuous"`).
     - `residuals`: the residuals of the nominal (`"before"`) and the final (`"after"`) fit —

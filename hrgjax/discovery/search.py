@@ -186,6 +186,7 @@ def discover(
             r["consistency"] = problem.consistency(r["refit"], r["effect"])
         c = r["consistency"]
         r["agreement"] = None if c is None else c["agreement"]
+        r["agreement_note"] = None if c is None else c.get("reason")
         return r["agreement"] is None or r["agreement"] >= min_agreement
 
     def refusal(r, fit):
@@ -298,7 +299,7 @@ PROBLEMS: dict[str, type[AbstractProblem]] = {
 as windows)."""
 SCREEN_KEYS = (
     "effect", "score", "p_value", "delta_bic", "aliasing", "heldout_gain", "gap_after",
-    "outshone_by", "agreement", "refused_by",
+    "outshone_by", "agreement", "agreement_note", "refused_by",
 )  # fmt: skip
 REFUSALS = {
     "p_value": "its score p-value misses Bonferroni at `alpha`",
