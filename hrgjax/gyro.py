@@ -16,6 +16,7 @@ from .resonator.params import (
     Resonator,
     TemperatureLaw,
     as_parameter,
+    checked_temperature,
     concrete_fields,
     evaluate_at,
     refuse_unconverted,
@@ -159,7 +160,7 @@ class Gyro(eqx.Module):
     def at(self, temperature_c) -> Gyro:
         """This gyro with every temperature law evaluated at `temperature_c` [°C] (real
         numbers; concrete ones finite and inside `plausible.RANGES`, else a one-line error)."""
-        return evaluate_at(self, temperature_c)
+        return evaluate_at(self, checked_temperature(temperature_c))
 
     def in_mode(self, mode: str) -> Gyro:
         """The same gyro run in another operating mode: `"wa"` (whole-angle) or `"ftr"`

@@ -205,11 +205,14 @@ def member_costs(fn, cost, flat: dict) -> np.ndarray | None:
         return None
     try:
         c = np.asarray(probe(flat), dtype=float)
-    except (jax.errors.UnexpectedTracerError, jax.errors.TracerArrayConversionError):
+    except jax.errors.TracerArrayConversionError:
+        # this sweep runs under the caller's `jit` (the estimate is traced): the grid's
+        # order this time; `fn` itself keeps its estimate for eager sweeps
+        return None
+    except jax.errors.UnexpectedTracerError:
         # The estimate is a value of a transformation inside `fn` that has no primal to
         # take (`_cost.report`): `fn`'s own jit, a vmap inside `fn`, a scan around
-        # `simulate` — or the sweep runs under the caller's `jit` (the estimate is traced).
-        # No estimate then: the grid's order, as for a `fn` with no `simulate`.
+        # `simulate`. No estimate then: the grid's order, as for a `fn` with no `simulate`.
         state["simulates"] = False
         return None
     if not state["simulates"]:  # this trace found no simulate call

@@ -184,6 +184,8 @@ def test_exports_kalibr_units_and_noise_closes_the_loop(white_walk, tmp_path):
     with pytest.raises(ValueError, match="^to_noise: the model has white angle noise Q; pass k_e"):
         with_q.to_noise()
     assert float(with_q.to_noise(k_e=0.5).angle_white) == pytest.approx(0.5e-3)
+    grad = jax.grad(lambda k: with_q.to_noise(k_e=k).angle_white)(0.5)  # a traced k_e
+    assert float(grad) == pytest.approx(1e-3)
     ts = np.arange(n + 1) * tau0
     again = np.diff(np.asarray(hg.noise.rate_noise_angle(jax.random.key(2), ts, noise))) / tau0
     second = hg.allan.identify_noise(again, fs, unit="rad/s", gauss_markov=1)

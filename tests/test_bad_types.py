@@ -265,3 +265,17 @@ def test_at_still_evaluates_numbers_and_traced_temperatures():
     assert float(jax.jit(lambda t: GYRO_AT.at(t).resonator.tau)(40.0)) == pytest.approx(law(40.0))
     with hg.plausible.relaxed(temperature_c=(-300.0, 400.0)):
         assert float(GYRO_AT.at(300.0).resonator.tau) == pytest.approx(law(300.0))
+
+
+def test_the_carrier_steps_temperature_span_is_not_the_users_temperature():
+    """A traced temperature inside a narrowed `plausible.relaxed` range: the carrier step
+    rule reads the resonator's frequency over its own span (−60 … 100 °C), which `at`'s
+    check refused as if the user had passed −60 °C (a reviewer's finding)."""
+    from hrgjax.resonator.carrier import steps_per_interval
+
+    gyro, ts = hg.presets.tvg3_like(), np.linspace(0.0, 0.01, 3)
+    steps = lambda t: steps_per_interval(gyro, P.constant_rate(1.0, 0.01, t), ts, "auto", 1e-8)  # noqa: E731
+    with hg.plausible.relaxed(temperature_c=(0.0, 50.0)):
+        jax.eval_shape(steps, 20.0)  # traced: the step count from the span, no error
+        with pytest.raises(ValueError, match="^temperature_c = -60 is outside"):
+            gyro.at(-60.0)  # the user's own value is still checked

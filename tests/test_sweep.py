@@ -275,6 +275,11 @@ def test_sweep_orders_members_by_estimated_steps_and_returns_the_grid_order():
 
     costs = member_costs(f, "auto", {"temperature_c": tt, "rate_dps": ww})
     assert costs is not None  # the probe reached simulate
+    # under the caller's jit the estimate is traced: grid order that time, and `f` keeps
+    # its estimate for eager sweeps (it was switched off for good)
+    grid = {"temperature_c": tt, "rate_dps": ww}
+    assert jax.jit(lambda: (member_costs(f, "auto", grid), 0.0)[1])() == 0.0
+    np.testing.assert_array_equal(member_costs(f, "auto", grid), costs)
     order, chunk = _cost.plan(costs, 1, "cpu")
     assert np.all(np.diff(np.abs(np.asarray(ww))[order]) >= 0)  # cheapest (slowest) first
     # the chunk size follows the number of members, not their costs (one compiled batch per

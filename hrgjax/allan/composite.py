@@ -36,7 +36,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from .._checks import check_1d, describe, is_finite_real
+from .._checks import check_1d, check_number, describe, is_concrete, is_finite_real
 from .._io import atomic_write
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
 from .octave_covariance import covariance as covariance
@@ -244,8 +244,10 @@ class CompositeNoise:
                 "to_noise: the model has white angle noise Q; pass k_e, the gyro's angular "
                 "gain (Q × k_e is the readout noise on the electrical wave angle)"
             )
-        if k_e is not None and not (is_finite_real(k_e) and np.ndim(k_e) == 0 and k_e > 0):
-            raise ValueError(f"to_noise: k_e must be a positive number; got {describe(k_e)}")
+        if k_e is not None:  # a traced k_e (a gradient through it) passes: checked when concrete
+            check_number("to_noise: k_e", k_e)
+            if is_concrete(k_e) and not (is_finite_real(k_e) and k_e > 0):
+                raise ValueError(f"to_noise: k_e must be a positive number; got {describe(k_e)}")
         gm = self.terms.get("gauss_markov_1")
         return Noise(
             angle_white=(k_e * q if q else 0.0) * scale,

@@ -57,7 +57,7 @@ from .._checks import is_concrete
 from .._stepped import scan_states, tangent_states
 from .averaged import sampled_input_rate
 from .full import carrier_rhs, full_estimates, held_command, loop_efforts, mechanics
-from .params import TemperatureLaw
+from .params import TemperatureLaw, evaluate_at
 from .readout import wrap_half_pi
 
 _TABLEAU = diffrax.Dopri8.tableau
@@ -457,7 +457,8 @@ def steps_per_interval(gyro, profile, ts, fixed_step, rtol) -> int:
             t = np.asarray(AUTO_STEP_TEMPERATURES_C)
         grid = np.linspace(t.min(), t.max(), 9)
         with jax.ensure_compile_time_eval():  # concrete values, also under jit
-            omega = np.max(np.abs([np.max(np.asarray(res.at(x).omega)) for x in grid]))
+            # unchecked: this span may lie outside a range the user narrowed
+            omega = np.max(np.abs([np.max(np.asarray(evaluate_at(res, x).omega)) for x in grid]))
     if isinstance(fixed_step, str):
         h = 2 * np.pi / (omega * steps_per_cycle(float(rtol)))
         return ladder_steps(math.ceil(longest / h - 1e-9))

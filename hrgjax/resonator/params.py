@@ -115,14 +115,21 @@ def concrete_fields(module, names):
             yield name, value
 
 
-def evaluate_at(tree, temperature_c):
-    """Replace every `TemperatureLaw` leaf of a pytree by its value at `temperature_c` [°C]
-    (real numbers, traced or concrete; concrete ones finite and inside
-    `plausible.RANGES["temperature_c"]`, else a one-line error naming `temperature_c`)."""
+def checked_temperature(temperature_c):
+    """`temperature_c` [°C] if it is real numbers (traced or concrete), concrete ones finite
+    and inside `plausible.RANGES["temperature_c"]`; else a one-line error naming it (what
+    [`Resonator.at`][hrgjax.Resonator.at] and `Gyro.at` take from a user)."""
     check_numbers("temperature_c", temperature_c, "a temperature [°C]: a real number or array")
     if is_concrete(temperature_c):
         check_finite("temperature_c", temperature_c)
         plausible.check("temperature_c", temperature_c)
+    return temperature_c
+
+
+def evaluate_at(tree, temperature_c):
+    """Replace every `TemperatureLaw` leaf of a pytree by its value at `temperature_c` [°C]
+    (unchecked: the library's own grids, e.g. the carrier step's temperature span, may lie
+    outside a range the user narrowed; `Resonator.at` / `Gyro.at` check first)."""
     is_law = lambda x: isinstance(x, TemperatureLaw)
     return jax.tree_util.tree_map(
         lambda x: x(temperature_c) if is_law(x) else x, tree, is_leaf=is_law
@@ -184,7 +191,7 @@ class Resonator(eqx.Module):
 
         Traceable: `jax.vmap(res.at)(temperatures)` gives a batch of resonators.
         """
-        return evaluate_at(self, temperature_c)
+        return evaluate_at(self, checked_temperature(temperature_c))
 
     @property
     def damping_matrix(self):
