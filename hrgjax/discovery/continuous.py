@@ -152,7 +152,8 @@ class ContinuousProblem(AbstractProblem):
                     )
                     run = tuple(np.asarray(w.run)[mask].tolist())
                     groups.append(Windows(y=pick(w.y), sigma=pick(w.sigma), cov=cov,
-                                          arc=pick(w.arc), run=run))  # fmt: skip
+                                          arc=pick(w.arc), run=run,
+                                          session=self.data is not None))  # fmt: skip
         # runs are stacked by length *and* sample interval (`MeasuredData.stacked`): the
         # blocks and solver steps are set in samples from the stack's interval (a 721-sample
         # ramp at 5 s and a 721-sample rotation at 0.1 s must not share them)
@@ -173,7 +174,7 @@ class ContinuousProblem(AbstractProblem):
         is to find (`stats.follows_covariate`)."""
         # the training and held-out runs apart: their residual programs exist already;
         # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
-        # one session, whose bias the shared `bias` parameter takes)
+        # one session, whose own bias is profiled out of their residual: `Windows.session`)
         train = [g for g in self.train_groups if isinstance(g, Runs)]
         held = [g for g in self.held_groups if isinstance(g, Runs)]
         rates = self.run_rates(z, train) | self.run_rates(z, held)
