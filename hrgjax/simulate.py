@@ -28,8 +28,7 @@ from .noise import draw_run_bias, rate_noise_angle
 from .profiles import Profile
 from .record import Record
 from .resonator.averaged import (
-    averaged_initial_state,
-    averaged_vector_field,
+    averaged_problem,
     held_angle,
     input_rate,
     measured_estimates,
@@ -205,8 +204,9 @@ def _solve(
     the readout, the noise and the record. Returns (Record, accepted steps, solver result);
     a failed solve or a NaN record raises after the call (`Check`)."""
     if model == "averaged":
-        y0 = averaged_initial_state(gyro, profile, quadrature0)
-        field, args = averaged_vector_field, (gyro, profile)
+        # a state that only accumulates the turn: its residual (`averaged_problem`)
+        y0, field, states = averaged_problem(gyro, profile, quadrature0)
+        args = (gyro, profile)
     else:
         y0, omega_scale = full_initial_state(gyro, profile, quadrature0)
         field, args = full_vector_field, (gyro, profile, omega_scale)
@@ -240,7 +240,7 @@ def _solve(
     )
     ys = sol.ys
     if model == "averaged":
-        read = _read_averaged(gyro, profile, ts, ys)
+        read = _read_averaged(gyro, profile, ts, states(ts, ys))
     else:
         read = _read_full(gyro, profile, ts, ys, omega_scale)
     rec = _record(gyro, profile, ts, read, key, bias_key, run)

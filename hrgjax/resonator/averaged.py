@@ -199,6 +199,62 @@ def loop_field(g, omega_in, y, command=None, scheduled=False, ln_omega_rate=None
     return jnp.concatenate([jnp.stack([da, dq, dtheta, dphi]), d_int, jnp.reshape(d_hold, (1,))])
 
 
+def turning_index(gyro):
+    """Index of the state that accumulates the turned angle where nothing else bounds the
+    adaptive solver's step: θ of ideal whole-angle loops (0) or of a free resonator (2);
+    `None` with the PI loops (their a, q, φ and integrators hold the step) and for ideal
+    force-to-rebalance loops (no defect term in the held angle's field)."""
+    ctl = gyro.control
+    if ctl.ideal:
+        return None if ctl.mode == "ftr" else 0
+    return None if ctl.enabled else 2
+
+
+def reference_angle(gyro, profile, t):
+    r"""The turn that `simulate` takes out of the turning state (`turning_index`), and its
+    rate: $\theta_{\rm ref}(t) = \theta_{\rm cmd}(t) - k_e(T_0)\,(\int\Omega\,\mathrm dt +
+    b\,(t - t_0))$ [rad], $\dot\theta_{\rm ref}$ [rad/s] (θ_cmd = θ₀ + ∫ρ dt with ideal
+    loops, θ₀ free; k_e and the rate bias b at the profile's first temperature). Exact for
+    the piecewise-linear profile, so the solver integrates $r = \theta - \theta_{\rm ref}$,
+    whose field is the defect terms and what the reference leaves out (other temperatures'
+    k_e, g-sensitivity, drift terms): its tolerance atol + rtol·|r| no longer grows with
+    the turned angle (docs/simulate.md, "Turned angle")."""
+    g0 = gyro.at(profile.temperature[0])
+    k_e, bias = g0.resonator.k_e, g0.rate_bias
+    turn = profile.table_angle_at(t) + bias * (t - profile.t[0])
+    rate = profile.rate_at(t) + bias
+    if gyro.control.ideal:
+        return profile.commanded_angle_at(t) - k_e * turn, profile.precession_at(t) - k_e * rate
+    return profile.wave_angle0 - k_e * turn, -k_e * rate
+
+
+def residual_vector_field(t, z, args):
+    """`averaged_vector_field` of the state with its turning angle less `reference_angle`
+    (`args = (gyro, profile)`; the gyro must have a `turning_index`)."""
+    gyro, profile = args
+    i = turning_index(gyro)
+    ref, ref_rate = reference_angle(gyro, profile, t)
+    return averaged_vector_field(t, z.at[i].add(ref), args).at[i].add(-ref_rate)
+
+
+def averaged_problem(gyro, profile, quadrature0=0.0):
+    """What `simulate` solves for the averaged model: `(z0, field, states)`, the start, the
+    right-hand side and `states(ts, zs)`, the model's states (module docstring) at output
+    times `ts` from the solved ones. Where a state only accumulates the turned angle
+    (`turning_index`) the solver integrates its residual (`reference_angle`); otherwise
+    `averaged_initial_state`, `averaged_vector_field` and the states as solved."""
+    y0 = averaged_initial_state(gyro, profile, quadrature0)
+    i = turning_index(gyro)
+    if i is None:
+        return y0, averaged_vector_field, lambda ts, zs: zs
+
+    def states(ts, zs):
+        return zs.at[:, i].add(jax.vmap(lambda t: reference_angle(gyro, profile, t)[0])(ts))
+
+    z0 = y0.at[i].add(-reference_angle(gyro, profile, profile.t[0])[0])
+    return z0, residual_vector_field, states
+
+
 def held_angle(g, a, theta_cmd, iterations: int = 4):
     """The true wave angle [rad] at which the estimate (through the readout errors) reads
     `theta_cmd`: where force-to-rebalance holds the wave (fixed-point iteration; the readout

@@ -238,7 +238,17 @@ def max_step(control: Control, model: str = "averaged", temperatures_c=None):
     tolerance. At $h\beta = 3$ every loop is stable on its step, and a run with defects,
     whose controller already holds its steps near that limit (1.3 s at β = 2 rad/s at rest),
     takes as many steps or fewer: `benchmarks/max_step.py` prints the steps and gradients
-    with and without."""
+    with and without.
+
+    ∞ for ideal averaged loops and a free resonator is safe because their θ, the state that
+    only accumulates the turn, is solved less the turn the profile gives
+    (`hrgjax.resonator.averaged.reference_angle`): a tolerance of rtol·|θ| after thousands
+    of radians (≈ 1e-4 rad a step) had let the steps grow past the period π/(k_eΩ) of the
+    anisotropy term ½Δ(1/τ)·sin2(θ − θ_τ) (3e-2 rad lost in an hour at 400 °/s). On the
+    residual the steps follow the defect (32 501 for that hour, error 3e-10 rad) and a run
+    with no defect still takes a handful (docs/simulate.md, "Turned angle";
+    `benchmarks/turned_angle.py`). A cap at a fraction of π/(k_eΩ) would cost as many steps
+    with a defect and as many again without one."""
     if not control.enabled or (control.ideal and model == "averaged"):
         return jnp.inf
     rates = [control.pll_bandwidth, control.agc_bandwidth, control.quadrature_bandwidth]
