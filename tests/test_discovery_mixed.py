@@ -77,3 +77,25 @@ def test_the_dwell_sessions_own_bias_is_not_taken_for_a_rate_scale_factor(proble
     # the records' bias is the model's `bias`; the session's offset is not in it
     bias_dph = -base.parameters["bias"]["b"]["value"] / K_E / DEG_PER_H
     assert bias_dph == pytest.approx(np.mean(RECORD_BIAS_DPH), abs=1e-6)
+
+
+def test_a_held_out_dwell_run_off_the_session_is_seen():
+    """Held-out dwell windows take the training windows' session offset, not their own mean:
+    de-meaned by their own, one held-out dwell run 5 °/h (25 σ_b) off the rest of its session
+    read a held-out χ² of 4e-28 and no structure left (a reviewer's finding)."""
+    noise = hg.Noise(angle_white=1.0 / 3600 * DEG, angle_random_walk=0.002 * DEG / 60,
+                     run_bias=0.2 * DEG_PER_H)  # fmt: skip
+    data = _mixed_log()
+    off = np.asarray(data["run"]) == 3  # a static dwell run, held out
+    t = np.asarray(data["time_s"])
+    theta = np.asarray(data["wave_angle_deg"]) - off * K_E * 5.0 * DEG_PER_H / DEG * t
+    shifted = MeasuredData({**data.columns, "wave_angle_deg": theta})
+    for log, off_by in ((data, 0.0), (shifted, 5.0)):
+        p = ContinuousProblem.from_data(
+            log, np.asarray([3]), nominal=NOMINAL, catalogue=["rate_scale_factor"], k_e=K_E,
+            window_s=3.0, noise=noise,
+        )  # fmt: skip
+        fit = p.fit(list(NOMINAL))
+        # the held-out run's windows read its offset against the session: 5 °/h, in the gap
+        assert fit.gap == pytest.approx(off_by, rel=1e-3, abs=1e-6), off_by
+        assert p.structure_left(fit) == (off_by > 0)

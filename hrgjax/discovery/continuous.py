@@ -151,8 +151,9 @@ class ContinuousProblem(AbstractProblem):
                         w.cov,
                     )
                     run = tuple(np.asarray(w.run)[mask].tolist())
+                    ref = self.train_groups[0] if self.train_groups else None  # (held: train's)
                     groups.append(Windows(y=pick(w.y), sigma=pick(w.sigma), cov=cov,
-                                          arc=pick(w.arc), run=run,
+                                          arc=pick(w.arc), run=run, reference=ref,
                                           session=self.data is not None))  # fmt: skip
         # runs are stacked by length *and* sample interval (`MeasuredData.stacked`): the
         # blocks and solver steps are set in samples from the stack's interval (a 721-sample

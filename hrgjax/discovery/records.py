@@ -102,7 +102,9 @@ class Windows(eqx.Module):
     leftover shapes' window gain, as on dwell grids); `run`: each window's run id.
     `session`: the windows are one switch-on of their own beside continuous records, whose
     bias is a draw of the run-to-run spread like each record's, not their common `bias`: it
-    is profiled out of their residual (`_window_residual`)."""
+    is profiled out of their residual (`_window_residual`). `reference`: for held-out windows
+    of that session, the training windows, whose offset they take (not their own mean: that
+    would hide a held-out dwell run that is off)."""
 
     y: jax.Array
     sigma: jax.Array
@@ -110,6 +112,7 @@ class Windows(eqx.Module):
     arc: jax.Array
     run: tuple = eqx.field(static=True)
     session: bool = eqx.field(static=True, default=False)
+    reference: Windows | None = None
 
 
 def _window_rate(layout: Layout, z, c: Covariates):
@@ -128,8 +131,10 @@ def _window_residual(layout: Layout, z, g: Windows):
     the ±5 °/s windows: 2.8 ± 0.44 ppm/(°/s)², 6σ, on a bench log with none)."""
     r = g.y - _window_rate(layout, z, g.cov)
     if g.session:
-        w = 1.0 / g.sigma**2
-        r = r - jnp.sum(w * r) / jnp.sum(w)
+        ref = g if g.reference is None else g.reference
+        rr = r if g.reference is None else ref.y - _window_rate(layout, z, ref.cov)
+        w = 1.0 / ref.sigma**2
+        r = r - jnp.sum(w * rr) / jnp.sum(w)
     return r
 
 
