@@ -88,9 +88,9 @@ UNITS: dict[str, tuple[str, ...]] = {
     "table_angle_deg": ("degree", "deg", "degrees", "°"),
     "wave_angle_deg": ("degree", "deg", "degrees", "°"),
     "angle_corrected_deg": ("degree", "deg", "degrees", "°"),
-    "accel_x_g": ("g", "g0", "standard_gravity"),
-    "accel_y_g": ("g", "g0", "standard_gravity"),
-    "accel_z_g": ("g", "g0", "standard_gravity"),
+    "accel_x_g": ("g", "g0", "standard_gravity", "standard_free_fall", "gravity"),
+    "accel_y_g": ("g", "g0", "standard_gravity", "standard_free_fall", "gravity"),
+    "accel_z_g": ("g", "g0", "standard_gravity", "standard_free_fall", "gravity"),
 }
 """`units` attributes accepted on NetCDF variables (the first is the one written; compared
 without case or spaces): every contract column but those of `ANY_UNIT`."""

@@ -217,7 +217,9 @@ class MeasuredData:
 
     def to_xarray(self):
         """An `xarray.Dataset` with one variable per column along dimension ``sample``, each
-        contract column with its ``units`` attribute (UDUNITS spelling).
+        contract column with its ``units`` attribute (UDUNITS spelling, but for the
+        accelerations' ``g``, hrgjax's own, which UDUNITS reads as the gram; on reading,
+        UDUNITS' ``standard_free_fall`` and ``gravity`` are taken as g too).
 
         **Raises:** `ValueError` for an extra column named ``sample``: it would become the
         dimension's coordinate, read back in another place (or, holding 0, 1, 2, …, not at

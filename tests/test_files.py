@@ -391,6 +391,12 @@ def test_every_contract_column_has_its_netcdf_units(tmp_path):
         ds[col].attrs["units"] = "deg s-1"
         ds.to_netcdf(tmp_path / "d.nc", engine="h5netcdf")
         assert hg.load(tmp_path / "d.nc")[col][0] == 0.01
+    # an acceleration in UDUNITS' name for g (`g` alone is its gram) is read as g
+    ds = xr.Dataset({k: ("sample", v) for k, v in base().items()})
+    for unit in ("standard_free_fall", "gravity", "g"):
+        ds["accel_z_g"] = ("sample", np.ones(N), {"units": unit})
+        ds.to_netcdf(tmp_path / "a.nc", engine="h5netcdf")
+        assert hg.load(tmp_path / "a.nc")["accel_z_g"][0] == 1.0
     # the 0/1 flag takes whatever other tools call its unit
     ds = xr.Dataset({k: ("sample", v) for k, v in base().items()})
     for unit in ("dimensionless", "none", "bool", "1"):
