@@ -12,7 +12,9 @@ Each shape is a set of pattern-rate columns evaluated at the data's covariates (
 windows, or the 10-s blocks of continuous records, where a shape's column is its value times
 the block's length: the angle it adds); its score statistic against the fitted model's
 whitened residual and Jacobian is the same test as the catalogue's screening
-([`score`][hrgjax.discovery.stats.score]): χ²_q when nothing of that shape is left. The
+([`score`][hrgjax.discovery.stats.score]), read at the noise level the residual shows per
+row class once the shape is fitted (F(q, ν):
+[`level_test`][hrgjax.discovery.stats.level_test]), not at the estimated noise model's. The
 strongest shape is reported with its size in user units (the input rate it imitates) and
 its significance in words. The columns use each point's mean covariates; on dwell windows a
 kθ harmonic is seen through the window's sweep, as the catalogue's 2θ terms are.
@@ -173,37 +175,49 @@ def scores(r, j, cols: dict[str, np.ndarray]) -> dict[str, tuple[float, int]]:
     return out
 
 
-def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3) -> dict | None:
+def describe(
+    r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3, classes=None
+) -> dict | None:
     """The strongest shape left in the whitened residual `r` of a fit with whitened Jacobian
-    `j`, given each shape's whitened columns `cols`. **Returns** `{"shape", "words", "size",
-    "sigma", "unit", "score", "dof", "p_value", "sigmas", "significant", "runners_up"}`
-    (`significant`: p below `alpha` after a Bonferroni factor for the shapes tried; a
-    harmonic's `words` also say whether it changes with temperature), or None without
-    shapes."""
+    `j`, given each shape's whitened columns `cols`. Each shape is judged at the noise level
+    the residual shows once it is fitted, per row class (`classes`: an integer per row, e.g.
+    static / moving dwell windows; None: one class), with the F(q, ν) tail
+    ([`level_test`][hrgjax.discovery.stats.level_test]): the whitening comes from an
+    estimated noise model, and where that is off (a 60-s dwell's angle random walk estimated
+    at 0: static windows' residual mean square 2–6) a χ²_q reading called pure noise a
+    5σ harmonic in 15 % of null grids. **Returns** `{"shape", "words", "size", "sigma",
+    "unit", "score", "dof", "p_value", "sigmas", "significant", "runners_up"}` (`score`: at
+    that level; `significant`: p below `alpha` after a Bonferroni factor for the shapes
+    tried; a harmonic's `words` also say whether it changes with temperature), or None
+    without shapes."""
+    test = lambda jj, g: stats.level_test(r, jj, g, classes)
     rows = []
-    q_j, _ = np.linalg.qr(j)
     cols = distinct(cols)
     for name, g in cols.items():
-        s, alias, step = stats.score(r, j, g, q_j)
+        s, alias, step, p, level = test(j, g)
         if alias >= 0.999:
             continue
-        p = min(1.0, stats.chi2_sf(s, g.shape[1]) * len(cols))
-        rows.append((s, name, g, step, p))
+        rows.append((p, -s, name, g, step, level))
     if not rows:
         return None
-    rows.sort(key=lambda row: -row[0])
-    if "+" in rows[0][1]:
-        # a shape holding another's columns (ΔT³+ΔT⁴ ⊃ ΔT³) scores at least as high: it is
+    # the largest score first, as the screening ranks (by p, a shape seen on the many moving
+    # windows — Ω·ΔT — would beat the ΔT drift whose evidence sits on the static ones)
+    rows.sort(key=lambda row: row[1])
+    if "+" in rows[0][2]:
+        # a shape holding another's columns (ΔT³+ΔT⁴ ⊃ ΔT³) fits at least as well: it is
         # named only where its extra columns add significantly to the smaller one's
-        inner = next((row for row in rows if row[1] == rows[0][1].split("+")[0]), None)
+        inner = next((row for row in rows if row[2] == rows[0][2].split("+")[0]), None)
         if inner is not None:
-            k = inner[2].shape[1]
-            extra, _, _ = stats.score(r, np.concatenate([j, inner[2]], axis=1), rows[0][2][:, k:])
-            if stats.chi2_sf(extra, rows[0][2].shape[1] - k) >= alpha:
+            k = inner[3].shape[1]
+            extra = test(np.concatenate([j, inner[3]], axis=1), rows[0][3][:, k:])[3]
+            if extra >= alpha:
                 rows.remove(inner)
                 rows.insert(0, inner)
-    s, name, g, step, p = rows[0]
-    g_t = g - q_j @ (q_j.T @ g)
+    p, s, name, g, step, level = rows[0]
+    s, p = -s, min(1.0, p * len(cols))
+    q_j, _ = np.linalg.qr(j / level[:, None])  # the size's covariance at the shape's level
+    g_s = g / level[:, None]
+    g_t = g_s - q_j @ (q_j.T @ g_s)
     cov = np.linalg.pinv(g_t.T @ g_t)
     out = {"shape": name, **_size(name, step, cov, k_e)}
     z = _sigmas(p, s)
@@ -211,9 +225,7 @@ def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3)
     out["words"] += f", {z:.0f}σ" if significant else f", not significant ({z:.1f}σ)"
     if significant and name.endswith("θ") and f"{name}·ΔT" in cols:
         # does its size change with temperature? the ΔT partner, given the harmonic
-        jj = np.concatenate([j, g], axis=1)
-        s2, _, _ = stats.score(r, jj, cols[f"{name}·ΔT"])
-        changes = stats.chi2_sf(s2, 2) < alpha
+        changes = test(np.concatenate([j, g], axis=1), cols[f"{name}·ΔT"])[3] < alpha
         out["words"] += ", changing with temperature" if changes else ", constant over temperature"
     out |= {
         "score": float(s),
@@ -221,6 +233,6 @@ def describe(r, j, cols: dict[str, np.ndarray], k_e: float, alpha: float = 1e-3)
         "p_value": float(p),
         "sigmas": float(z),
         "significant": bool(significant),
-        "runners_up": [{"shape": n, "score": float(sc)} for sc, n, *_ in rows[1:4]],
+        "runners_up": [{"shape": n, "score": float(-sc)} for _, sc, n, *_ in rows[1:4]],
     }
     return out

@@ -1,6 +1,7 @@
 r"""The statistics every data shape of the search shares: weighted least squares, a covariance
 that survives columns ten orders of magnitude apart, the score test (DISCOVERY.md §2.4 S3)
-and the χ² and F tail probabilities.
+the χ² and F tail probabilities, and the same test judged at the noise level the residual
+shows ([`level_test`][hrgjax.discovery.stats.level_test]).
 
 The score statistic of a candidate with whitened columns $G_c$, given a fit's whitened
 residual $r$ and Jacobian $J$:
@@ -16,6 +17,8 @@ $$S_c = r^\top\tilde G_c(\tilde G_c^\top\tilde G_c)^{-1}\tilde G_c^\top r,\qquad
 """
 
 from __future__ import annotations
+
+import math
 
 import jax.numpy as jnp
 import numpy as np
@@ -58,6 +61,115 @@ def score(r: np.ndarray, j: np.ndarray, g: np.ndarray, q_j: np.ndarray | None = 
         return 0.0, 1.0, np.zeros(g.shape[1])
     step = np.linalg.solve(gram, g_t.T @ r)
     return float(r @ g_t @ step), float(alias), step
+
+
+MIN_ROWS = 30
+"""Fewest rows of a class whose noise level `class_levels` reads from its residual as it is."""
+SMALL_DOF = 4.0
+"""A class below `MIN_ROWS` with at most this many degrees of freedom pools its noise level
+with the other classes' (`class_levels`)."""
+
+
+def leverage(a):
+    """Diagonal of the hat matrix of the columns `a` (N, p): how much of each row's noise the
+    fit takes (their sum is the rank); invariant to the columns' units."""
+    norm = np.linalg.norm(a, axis=0)
+    live = norm > 0
+    if not live.any():
+        return np.zeros(a.shape[0])
+    u, sv, _ = np.linalg.svd(a[:, live] / norm[live], full_matrices=False)
+    rank = int(np.sum(sv > sv[0] * max(a.shape) * np.finfo(float).eps))
+    return np.sum(u[:, :rank] ** 2, axis=1)
+
+
+def class_levels(r, a, classes, weights=None, h=None):
+    """Per-row noise scale s (N,) from each class's residual mean square
+    ([`honest`][hrgjax.discovery.trust.honest]: a class of `MIN_ROWS` or more rows reads its
+    level as it is, a smaller one with the t allowance ν/(ν−2) and never below 1, or pooled
+    with the others at `SMALL_DOF` or fewer):
+    `r` the residual of the fit on the whitened columns `a` weighted by 1/`weights` (the
+    previous scale; None: 1), each class's degrees of freedom n_g − Σ_g h_ii (the leverage
+    its rows carry: static windows fix most of a dwell model's parameters, so an even share
+    p·n_g/n read their scale ≈ 15 % low on a small grid; `h`: those leverages, when known)."""
+    n = r.size
+    s = np.ones(n)
+    if classes is None:
+        classes = np.zeros(n, int)
+    w = np.ones(n) if weights is None else np.asarray(weights, float)
+    h = leverage(a / w[:, None]) if h is None else h
+    rss, dof, small = {}, {}, []
+    for c in np.unique(classes):
+        m = classes == c
+        rss[c], dof[c] = float(r[m] @ r[m]), float(m.sum() - h[m].sum())
+        if not (math.isfinite(rss[c]) and rss[c] > 0 and dof[c] > 0):
+            continue
+        if m.sum() >= MIN_ROWS:
+            s[m] = math.sqrt(rss[c] / dof[c])
+        else:
+            small.append(c)
+    for c in small:  # too few rows to read a level alone: never below the noise model's
+        m = classes == c
+        if dof[c] > SMALL_DOF:  # its own rows, with the t allowance ν/(ν−2) of a level read from ν
+            level = rss[c] / (dof[c] - 2.0)
+        else:  # pooled with the other classes
+            good = [k for k in rss if math.isfinite(rss[k]) and dof[k] > 0]
+            level = sum(rss[k] for k in good) / sum(dof[k] for k in good)
+        s[m] = math.sqrt(max(level, 1.0))
+    return s
+
+
+def effective_dof(h, g_t, classes):
+    """Degrees of freedom behind the noise level a shape is judged at: each class's
+    n_g − Σ_g h_ii (`h`: the leverages of the fit with the shape), pooled with the weight the shape's
+    (model-orthogonal, whitened) columns `g_t` put on the class, Satterthwaite's
+    ν = (Σ w_g)² / Σ w_g²/ν_g: a shape seen on the few static windows rests on their ν, one
+    seen on thousands of continuous blocks on theirs."""
+    if classes is None:
+        return max(float(h.size - h.sum()), 1.0)
+    w, nu = [], []
+    for c in np.unique(classes):
+        m = classes == c
+        w.append(float(np.sum(g_t[m] ** 2)))
+        nu.append(max(float(m.sum() - h[m].sum()), 1.0))
+    w = np.asarray(w)
+    if not w.sum() > 0:
+        return 1.0
+    return max(float(w.sum() ** 2 / np.sum(w**2 / np.asarray(nu))), 1.0)
+
+
+def level_test(r: np.ndarray, j: np.ndarray, g: np.ndarray, classes=None):
+    r"""The score test of the columns `g` against the whitened residual `r` of a fit with
+    whitened Jacobian `j`, judged at the noise level the residual itself shows once `g` is
+    fitted (each row class's own, [`class_levels`][hrgjax.discovery.stats.class_levels];
+    `classes`: an integer per row, None for one class) with the F(q, ν) tail of a level read
+    from ν degrees of freedom ([`effective_dof`][hrgjax.discovery.stats.effective_dof]).
+
+    `score` alone takes the whitening as exact (χ²_q); where the noise model behind it is
+    estimated, the two part ways: on 60-s dwells the angle random walk is often estimated at
+    0 and the static windows' whitened residual has mean square 2–6, so a χ²_q p-value on
+    pure noise fell below 10⁻³ in 15 % of null grids (audit 2026-11-30). Read at the
+    residual's level, the test is exact for a noise model right up to one scale per class,
+    and a level the candidate's own signal would raise is read with it fitted (no effect
+    hides itself).
+
+    **Returns:** `(S, A, step, p, s)`: the score at that level, the aliasing index, the
+    one-step estimate (in `g`'s units), the upper-tail p-value (1 where `g` adds nothing)
+    and the level s per row (the factor on the whitening)."""
+    a = np.concatenate([j, g], axis=1)
+    norm = np.linalg.norm(a, axis=0)
+    a_n = a / np.where(norm > 0, norm, 1.0)  # columns ten orders of magnitude apart
+    coef, *_ = np.linalg.lstsq(a_n, r, rcond=None)
+    h = leverage(a)
+    s = class_levels(r - a_n @ coef, a, classes, None, h)
+    j_s, g_s = j / s[:, None], g / s[:, None]
+    q_j, _ = np.linalg.qr(j_s)
+    sc, alias, step = score(r / s, j_s, g_s, q_j)
+    if alias >= 0.999 or not sc > 0:
+        return float(max(sc, 0.0)), alias, step, 1.0, s
+    q = int(g.shape[1])
+    g_t = g_s - q_j @ (q_j.T @ g_s)
+    nu = effective_dof(h, g_t, classes)
+    return sc, alias, step, f_sf(sc / q, q, max(int(math.floor(nu)), 1)), s
 
 
 def chi2_sf(x: float, dof: int) -> float:

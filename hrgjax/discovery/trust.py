@@ -60,58 +60,13 @@ MAX_SHAPES = 3
 CLASS_NAMES = {0: "moving windows", 1: "static windows", 2: "continuous blocks"}
 """What the row classes of [`row_classes`][hrgjax.discovery.problem.AbstractProblem.row_classes]
 are, for the report."""
-MIN_ROWS = 30
+MIN_ROWS = stats.MIN_ROWS
 """Fewest rows of a class whose noise scale is read from its own residual as it is; a
 smaller class reads it with a small-sample allowance and never below the noise model's
-(module docstring)."""
-SMALL_DOF = 4.0
+(module docstring; [`class_levels`][hrgjax.discovery.stats.class_levels])."""
+SMALL_DOF = stats.SMALL_DOF
 """A class below `MIN_ROWS` with at most this many degrees of freedom pools its noise level
 with the other classes'."""
-
-
-def _leverage(a):
-    """Diagonal of the hat matrix of the columns `a` (N, p): how much of each row's noise the
-    fit takes (their sum is the rank); invariant to the columns' units."""
-    norm = np.linalg.norm(a, axis=0)
-    live = norm > 0
-    if not live.any():
-        return np.zeros(a.shape[0])
-    u, sv, _ = np.linalg.svd(a[:, live] / norm[live], full_matrices=False)
-    rank = int(np.sum(sv > sv[0] * max(a.shape) * np.finfo(float).eps))
-    return np.sum(u[:, :rank] ** 2, axis=1)
-
-
-def _noise_scale(r, a, classes, weights=None, h=None):
-    """Per-row noise scale s (N,) from each class's residual mean square (module docstring):
-    `r` the residual of the fit on the whitened columns `a` weighted by 1/`weights` (the
-    previous scale; None: 1), each class's degrees of freedom n_g − Σ_g h_ii (the leverage
-    its rows carry: static windows fix most of a dwell model's parameters, so an even share
-    p·n_g/n read their scale ≈ 15 % low on a small grid; `h`: those leverages, when known)."""
-    n = r.size
-    s = np.ones(n)
-    if classes is None:
-        classes = np.zeros(n, int)
-    w = np.ones(n) if weights is None else np.asarray(weights, float)
-    h = _leverage(a / w[:, None]) if h is None else h
-    rss, dof, small = {}, {}, []
-    for c in np.unique(classes):
-        m = classes == c
-        rss[c], dof[c] = float(r[m] @ r[m]), float(m.sum() - h[m].sum())
-        if not (math.isfinite(rss[c]) and rss[c] > 0 and dof[c] > 0):
-            continue
-        if m.sum() >= MIN_ROWS:
-            s[m] = math.sqrt(rss[c] / dof[c])
-        else:
-            small.append(c)
-    for c in small:  # too few rows to read a level alone: never below the noise model's
-        m = classes == c
-        if dof[c] > SMALL_DOF:  # its own rows, with the t allowance ν/(ν−2) of a level read from ν
-            level = rss[c] / (dof[c] - 2.0)
-        else:  # pooled with the other classes
-            good = [k for k in rss if math.isfinite(rss[k]) and dof[k] > 0]
-            level = sum(rss[k] for k in good) / sum(dof[k] for k in good)
-        s[m] = math.sqrt(max(level, 1.0))
-    return s
 
 
 def _sandwich_diag(a, s, p):
@@ -133,31 +88,12 @@ def _sandwich_diag(a, s, p):
     return out
 
 
-def _effective_dof(h, g_t, classes):
-    """Degrees of freedom behind the noise level a shape is judged at: each class's
-    n_g − Σ_g h_ii (`h`: the leverages of the fit with the shape), pooled with the weight the shape's
-    (model-orthogonal, whitened) columns `g_t` put on the class, Satterthwaite's
-    ν = (Σ w_g)² / Σ w_g²/ν_g: a shape seen on the few static windows rests on their ν, one
-    seen on thousands of continuous blocks on theirs."""
-    if classes is None:
-        return max(float(h.size - h.sum()), 1.0)
-    w, nu = [], []
-    for c in np.unique(classes):
-        m = classes == c
-        w.append(float(np.sum(g_t[m] ** 2)))
-        nu.append(max(float(m.sum() - h[m].sum()), 1.0))
-    w = np.asarray(w)
-    if not w.sum() > 0:
-        return 1.0
-    return max(float(w.sum() ** 2 / np.sum(w**2 / np.asarray(nu))), 1.0)
-
-
 def _shapes_left(r, j, cols, classes, s, alpha):
     """Significant leftover shapes, strongest first, each chosen given the ones before.
 
     Each shape is judged at the noise level the residual shows *once it is fitted* (its
-    own Birge ratio per class, `_noise_scale`), with the F(q, ν) tail of a level read from ν
-    degrees of freedom (`_effective_dof`): structure that inflates the level it is
+    own Birge ratio per class, `stats.class_levels`), with the F(q, ν) tail of a level read from ν
+    degrees of freedom (`stats.effective_dof`): structure that inflates the level it is
     judged at (a static window's drift over temperature raising its class's ratio ×5) no
     longer hides itself; Bonferroni over the shapes tried."""
     chosen, jj = [], j
@@ -169,8 +105,8 @@ def _shapes_left(r, j, cols, classes, s, alpha):
                 continue
             a = np.concatenate([jj, g], axis=1)
             step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
-            h = _leverage(a / s[:, None])
-            s1 = _noise_scale(r - a @ step, a, classes, s, h)
+            h = stats.leverage(a / s[:, None])
+            s1 = stats.class_levels(r - a @ step, a, classes, s, h)
             q_j, _ = np.linalg.qr(jj / s1[:, None])
             g_w = g / s1[:, None]
             score, alias, _ = stats.score(r / s1, jj / s1[:, None], g_w, q_j)
@@ -178,7 +114,7 @@ def _shapes_left(r, j, cols, classes, s, alpha):
                 continue
             q = int(g.shape[1])
             g_t = g_w - q_j @ (q_j.T @ g_w)
-            p = stats.f_sf(score / q, q, int(_effective_dof(h, g_t, classes)))
+            p = stats.f_sf(score / q, q, int(stats.effective_dof(h, g_t, classes)))
             if best is None or (p, -score) < best[:2]:
                 best = (p, -score, name)
         if best is None or min(1.0, best[0] * len(cols)) >= alpha:
@@ -213,12 +149,12 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
     if classes is not None and len(classes) != n:
         raise ValueError(f"honest: {len(classes)} row classes for a residual of {n} rows")
     cols = {k: v for k, v in shape_columns.items() if v.shape[0] == n}
-    s = bare = _noise_scale(r, j, classes)  # `bare`: the level without the shapes
+    s = bare = stats.class_levels(r, j, classes)  # `bare`: the level without the shapes
     for _ in range(2):  # the shapes judged at the noise level the data show, and back
         shapes = _shapes_left(r, j, cols, classes, s, alpha)
         a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
         step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
-        s = _noise_scale(r - a @ step, a, classes, s)  # the noise the shapes leave
+        s = stats.class_levels(r - a @ step, a, classes, s)  # the noise the shapes leave
     # the reported values are the noise model's weighted fit: the shift and the sandwich
     # variance are that estimator's (with the shapes beside it), at the noise level s
     step, *_ = np.linalg.lstsq(a, r, rcond=None)
