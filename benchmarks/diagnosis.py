@@ -12,7 +12,9 @@ the filter bank's throughput.
 Writes `out/diagnosis.json` and `out/diagnosis_<scenario>.png` (decision traces).
 Usage: `.venv/bin/python benchmarks/diagnosis.py [--quick] [--scenarios a,b]`;
 `--throughput` runs part 2 alone (about a minute). The gain-schedule IMM's agreement with the
-full IMM: `benchmarks/diagnosis_agreement.py`.
+full IMM: `benchmarks/diagnosis_agreement.py`; whether the banks' probabilities are
+calibrated (Monte Carlo with known truth, before/after the calibration fixes):
+`benchmarks/diagnosis_calibration.py`.
 """
 
 import dataclasses

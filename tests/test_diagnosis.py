@@ -134,7 +134,8 @@ def accel_bank():
     from hrgjax.ins.platform import PlatformINS
 
     ins = PlatformINS()
-    return ins, cx.fault_bank(ins, "accel_y", 1.0, switch_prob=1e-4)
+    # compare's bank (its fault walk pinned at the former default; fault_bank's is now 1e-9)
+    return ins, cx.fault_bank(ins, "accel_y", 1.0, switch_prob=1e-4, fault_walk=1e-8)
 
 
 @pytest.fixture(scope="module")

@@ -119,7 +119,7 @@ def fault_bank(
     *,
     n_ins: int = 3,
     fault_sigma: float = 3e-7,
-    fault_walk: float = 1e-8,
+    fault_walk: float = 1e-9,
     meas_sigma: float = 1e-9,
     switch_prob: float = 1e-5,
 ) -> Bank:
@@ -137,10 +137,20 @@ def fault_bank(
 
     **Arguments:** `fault_sigma`: prior standard deviation of a fault's size (sensor units:
     g-units for accelerometers, rad/s for gyros); `fault_walk`: its random-walk step
-    standard deviation per `dt` (lets a fault that appears later be picked up);
-    `meas_sigma`: measurement noise (R/g-scaled units) — the thesis's measurements are
-    noise-free, a small value keeps the innovation covariance regular; `switch_prob`:
-    hypothesis transition probability per step."""
+    standard deviation per `dt`. Keep it below the per-step change of the Markov sensor
+    error it competes with, σ√(2Δt/τ) (2.4e-9 for 1e-7, τ = 3600 s, Δt = 1 s): the former
+    default 1e-8 made a held fault hypothesis lose likelihood on every step the fault did
+    not move, so a fault present from the first sample was reported healthy at p ≈ 1. At 0
+    (a constant fault, the exact model of the simulator's) a fault hypothesis that is
+    already probable (a uniform prior) cannot take up a later onset — the interacting bank
+    restarts the fault state only when it enters a hypothesis of low probability — and
+    `docs/diagnosis.md`'s example stayed undecided after its onset; the default 1e-9 does
+    both (`docs/diagnosis.md`, "Calibration"); `meas_sigma`: measurement noise (R/g-scaled
+    units) — a model parameter, not a harmless regulariser: the probabilities are
+    conditional on it (and on the sensor errors' σ and τ), and measurement noise
+    3× `meas_sigma` made the bank name a fault on most healthy steps at p ≈ 0.99 (check
+    with `run_bank(..., fit_level=…)`); `switch_prob`: hypothesis transition probability
+    per step."""
     param, kind = _channel(sensor)
     if int(n_ins) < 2:
         raise ValueError(f"n_ins must be >= 2; got {n_ins}")

@@ -16,6 +16,14 @@ This is the bank of independent filters with Markov hypothesis transitions; the 
 optimal algorithm (eq. 9) also mixes the filters' estimates across transitions — the
 sub-optimal poly-Gaussian version of it is the interacting multiple model, which
 [`run_bank`][hrgjax.diagnosis.filter_bank.run_bank] gives with `interacting=True`.
+
+**The probabilities are conditional on the bank's model.** Each step also gives every
+filter's normalised innovation squared (NIS) $\nu^\top S^{-1} \nu$, which under a model
+that fits the data is $\chi^2(m)$ and white; [`model_fit`][hrgjax.diagnosis.filter_bank.model_fit]
+sums it over a sliding window and tests it against $\chi^2$. With `fit_level` set (e.g.
+`FIT_LEVEL`), a step whose most probable hypothesis fails that test is not decided:
+decision −2, "the model does not fit" (measurement noise 3× `meas_sigma`, or sensor errors
+2× the model's, made the bank name a fault at p ≈ 0.99; `docs/diagnosis.md`).
 """
 
 from __future__ import annotations
@@ -24,7 +32,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import logsumexp
+from jax.scipy.special import gammaincc, logsumexp
 
 from .._checks import check_covariance, check_finite_host, is_concrete
 from .._linalg import cho_logdet, cho_solve, cholesky
@@ -169,6 +177,14 @@ def _mix(gs: Gaussian, lp_prev, bank: Bank):
     return Gaussian(x, p)
 
 
+FIT_WINDOW = 50
+"""Default window (steps) of the model-fit test of `run_bank` / `run_gains`."""
+FIT_LEVEL = 1e-3
+"""Suggested `fit_level` of `run_bank` / `run_gains` (and `model_fit`'s default): the false
+"does not fit" rate per step when the model is right (measured: `docs/diagnosis.md`,
+`benchmarks/diagnosis_calibration.py`)."""
+
+
 def run_bank(
     bank: Bank,
     zs,
@@ -177,19 +193,89 @@ def run_bank(
     prior=None,
     threshold: float = 0.9,
     interacting: bool = False,
+    fit_window: int = FIT_WINDOW,
+    fit_level: float | None = None,
+    return_fit: bool = False,
 ):
     """Run `bank` over measurements `zs` (K, m).
 
     **Arguments:** `floor`: smallest probability a hypothesis may hold (> 0); `prior` (M,)
     initial probabilities (default uniform); `threshold`: A of eq. (10); `interacting`: mix
-    the estimates across hypotheses each step (IMM) instead of independent filters.
+    the estimates across hypotheses each step (IMM) instead of independent filters;
+    `fit_window`, `fit_level`: the model-fit test of
+    [`model_fit`][hrgjax.diagnosis.filter_bank.model_fit] — a step whose most probable
+    hypothesis fails it is decided −2 (`fit_level=None`, the default: no test, the
+    decisions of eq. (10) alone; `FIT_LEVEL` = 1e-3 is the calibrated setting of
+    `docs/diagnosis.md`); `return_fit`: also return the test's dict (its `fits` all True
+    when `fit_level` is None; `p_value` is computed either way).
 
-    **Returns:** `(probabilities (K, M), decisions (K,) int, −1 = undecided, means (K, M, n))`
-    (the means are each filter's posterior estimate)."""
+    **Returns:** `(probabilities (K, M), decisions (K,) int, means (K, M, n))`, and with
+    `return_fit=True` a fourth item, `model_fit`'s dict plus `nis` (K, M). Decisions: the
+    hypothesis index, −1 = undecided (no probability above `threshold`), −2 = the most
+    probable hypothesis does not fit the data (its probability is not to be trusted). The
+    means are each filter's posterior estimate."""
     lp0, log_floor = _start(bank.size, floor, prior, threshold)
+    _check_fit(fit_window, fit_level)
     _check_bank(bank)
     zs = _check_zs(zs, bank, (2,))
-    return _run(bank, zs, log_floor, lp0, jnp.asarray(threshold), interacting)
+    probs, nis, means = _run(bank, zs, log_floor, lp0, interacting)
+    m = bank.h.shape[1]
+    decisions, fit = _decide_fit(probs, nis, m, threshold, int(fit_window), fit_level, return_fit)
+    return (probs, decisions, means, fit) if return_fit else (probs, decisions, means)
+
+
+def model_fit(nis, m: int, *, window: int = FIT_WINDOW, level: float = FIT_LEVEL):
+    r"""The windowed NIS test of model fit, per step and hypothesis.
+
+    `nis` (K, M): each filter's normalised innovation squared $\nu_k^\top S_k^{-1}\nu_k$
+    for measurements of size `m`. When a filter's model is the one that made the data, its
+    NIS is $\chi^2(m)$ and independent from step to step (exactly for a Kalman filter; for
+    the interacting banks to the extent their mixing is). The statistic at step k is the sum
+    over the last `window` steps (fewer at the start), $\chi^2$ with `dof` = m × (the steps
+    summed) degrees of freedom; `p_value` is its upper tail and `fits` is
+    `p_value > level` — so a model that is right fails on a share `level` of its steps
+    (measured: `docs/diagnosis.md`). Only the upper tail is tested: too little scatter makes
+    the probabilities cautious, not overconfident. After a real change of hypothesis the
+    new leader's window still holds the steps before it: an independent filter that did
+    not expect the change (no reset) fails for up to `window` steps. jit friendly; `vmap`
+    it for a batch.
+
+    **Returns** a dict: `stat` (K, M), `dof` (K,), `p_value` (K, M), `fits` (K, M) bool."""
+    nis = jnp.asarray(nis, float)
+    c = jnp.concatenate([jnp.zeros_like(nis[:1]), jnp.cumsum(nis, axis=0)])  # c[j]: j steps
+    steps = jnp.arange(nis.shape[0])
+    first = jnp.maximum(steps + 1 - window, 0)
+    stat = c[steps + 1] - c[first]
+    dof = m * (steps + 1 - first)
+    with jax.numpy_dtype_promotion("standard"):
+        p_value = gammaincc(0.5 * dof[:, None], 0.5 * jnp.maximum(stat, 0.0))
+    return {"stat": stat, "dof": dof, "p_value": p_value, "fits": p_value > level}
+
+
+def _check_fit(window, level):
+    if isinstance(window, bool) or not float(window).is_integer() or int(window) < 1:
+        raise ValueError(f"fit_window must be an integer >= 1; got {window!r}")
+    if level is not None and not 0.0 < level < 1.0:
+        raise ValueError(f"fit_level must be in (0, 1) or None; got {level}")
+
+
+def _decide_fit(probs, nis, m, threshold, window, level, want_fit):
+    """Decisions from the probabilities and the model-fit test: −2 where the most probable
+    hypothesis fails it, else eq. (10). The test is computed only when asked for."""
+
+    def one(probs, nis):
+        best = jnp.argmax(probs, axis=-1)[:, None]
+        p_best = jnp.take_along_axis(probs, best, axis=-1)[:, 0]
+        dec = jnp.where(p_best > threshold, best[:, 0], -1)
+        if level is None and not want_fit:
+            return dec, None
+        fit = model_fit(nis, m, window=window, level=1.0 if level is None else level)
+        if level is None:
+            fit["fits"] = jnp.ones_like(fit["fits"])
+        fits = jnp.take_along_axis(fit["fits"], best, axis=-1)[:, 0]
+        return jnp.where(fits, dec, -2), {**fit, "nis": nis}
+
+    return one(probs, nis) if probs.ndim == 2 else jax.vmap(one)(probs, nis)
 
 
 def _start(m, floor, prior, threshold):
@@ -250,13 +336,6 @@ def _probabilities(lp, ll, log_trans, log_floor):
     """One step of eq. (9) for the probabilities, in log space, then the floor."""
     lp = logsumexp(lp[:, None] + log_trans, axis=0) + ll
     return _normalise(lp, log_floor)
-
-
-def _decide(lps, threshold):
-    probs = jnp.exp(lps)
-    best = jnp.argmax(probs, axis=-1)
-    decided = jnp.take_along_axis(probs, best[..., None], axis=-1)[..., 0] > threshold
-    return probs, jnp.where(decided, best, -1)
 
 
 class GainBank(eqx.Module):
@@ -412,20 +491,28 @@ def run_gains(
     prior=None,
     threshold: float = 0.9,
     interacting: bool = False,
+    fit_window: int = FIT_WINDOW,
+    fit_level: float | None = None,
+    return_fit: bool = False,
 ):
     """[`run_bank`][hrgjax.diagnosis.filter_bank.run_bank] with the gain schedules of `gb`
     (no covariance recursion; see [`GainBank`][hrgjax.diagnosis.filter_bank.GainBank]).
     `zs` (K, m), or (B, K, m) for a batch of runs. **Returns** `(probabilities,
-    decisions)` with the leading shape of `zs`."""
+    decisions)` with the leading shape of `zs` (and, with `return_fit=True`, the model-fit
+    dict of `run_bank`; the NIS uses each step's scheduled S)."""
     lp0, log_floor = _start(gb.bank.size, floor, prior, threshold)
+    _check_fit(fit_window, fit_level)
     _check_bank(gb.bank)
     zs = _check_zs(zs, gb.bank, (2, 3))
-    fn = lambda z: _run_gains(gb, z, log_floor, lp0, jnp.asarray(threshold), interacting)
-    return fn(zs) if zs.ndim == 2 else jax.vmap(fn)(zs)
+    fn = lambda z: _run_gains(gb, z, log_floor, lp0, interacting)
+    probs, nis = fn(zs) if zs.ndim == 2 else jax.vmap(fn)(zs)
+    m = gb.bank.h.shape[1]
+    decisions, fit = _decide_fit(probs, nis, m, threshold, int(fit_window), fit_level, return_fit)
+    return (probs, decisions, fit) if return_fit else (probs, decisions)
 
 
 @eqx.filter_jit
-def _run_gains(gb, zs, log_floor, lp0, threshold, interacting):
+def _run_gains(gb, zs, log_floor, lp0, interacting):
     b = gb.bank
     m = b.h.shape[1]
     last = gb.gain.shape[1] - 1
@@ -464,33 +551,34 @@ def _run_gains(gb, zs, log_floor, lp0, threshold, interacting):
         x = jnp.einsum("hij,hj->hi", b.phi, x)
         nu = z[None, :] - b.z_offset - jnp.einsum("hij,hj->hi", b.h, x)
         x = x + jnp.einsum("hij,hj->hi", gain, nu)
-        ll = -0.5 * (jnp.einsum("hi,hij,hj->h", nu, s_inv, nu) + logdet + m * LOG_2PI)
+        nis = jnp.einsum("hi,hij,hj->h", nu, s_inv, nu)
+        ll = -0.5 * (nis + logdet + m * LOG_2PI)
         lp = _probabilities(lp, ll, b.log_trans, log_floor)
         lead = jnp.where(hyp == jnp.argmax(lp), lead + 1, 0)
-        return (x, lp, lead), lp
+        return (x, lp, lead), (lp, nis)
 
     steps = jnp.arange(zs.shape[0])
     carry = (b.x0, _normalise(lp0, log_floor), jnp.zeros(b.size, steps.dtype))
-    _, lps = jax.lax.scan(step, carry, (zs, steps))
-    return _decide(lps, threshold)
+    _, (lps, nis) = jax.lax.scan(step, carry, (zs, steps))
+    return jnp.exp(lps), nis
 
 
 @eqx.filter_jit
-def _run(bank, zs, log_floor, lp0, threshold, interacting):
-    step_one = jax.vmap(
-        lambda g, phi, qd, h, r, off, z: update(predict(g, phi, qd), z - off, h, r)[::3],
-        in_axes=(0, 0, 0, 0, 0, 0, None),
-    )
+def _run(bank, zs, log_floor, lp0, interacting):
+    def one(g, phi, qd, h, r, off, z):
+        g, nu, s, ll = update(predict(g, phi, qd), z - off, h, r)
+        return g, ll, nu @ cho_solve(cholesky(s), nu)
+
+    step_one = jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, None))
 
     def step(carry, z):
         gs, lp = carry
         if interacting:
             gs = _mix(gs, lp, bank)
-        gs, ll = step_one(gs, bank.phi, bank.qd, bank.h, bank.r, bank.z_offset, z)
+        gs, ll, nis = step_one(gs, bank.phi, bank.qd, bank.h, bank.r, bank.z_offset, z)
         lp = _probabilities(lp, ll, bank.log_trans, log_floor)
-        return (gs, lp), (lp, gs.x)
+        return (gs, lp), (lp, nis, gs.x)
 
     gs0 = Gaussian(bank.x0, bank.p0)
-    _, (lps, means) = jax.lax.scan(step, (gs0, _normalise(lp0, log_floor)), zs)
-    probs, decisions = _decide(lps, threshold)
-    return probs, decisions, means
+    _, (lps, nis, means) = jax.lax.scan(step, (gs0, _normalise(lp0, log_floor)), zs)
+    return jnp.exp(lps), nis, means
