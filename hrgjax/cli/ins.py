@@ -130,7 +130,9 @@ def cmd_imu_calibrate(args) -> int:
             sections = imu.detect_sections(data)
         else:
             sections = imu.parse_sections(args.sections, len(data))
-        cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg)
+        cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg,
+                           turn_deg_std=args.turn_deg_std, gyro_range_dps=args.gyro_range_dps,
+                           accel_range_g=args.accel_range_g)  # fmt: skip
     span = float(data.time[-1] - data.time[0])
     found = "found in the data" if args.sections is None else f"from {args.sections}"
     print(f"hrgjax imu-calibrate: {args.log} ({len(data)} samples, {span:.0f} s at "
@@ -247,6 +249,18 @@ def _imu_calibrate_parser(sub):
     p.add_argument("--turn-deg", type=float, default=360.0,
                    help="angle of each turn [°], right-handed positive (imucal's clockwise "
                    "hand turns: -360)")  # fmt: skip
+    p.add_argument("--turn-deg-std", type=float, default=0.0,
+                   help="σ of each turn's true angle [°] (0: exact turns; hand turns: about 1, "
+                   "which is 0.28 %% of M_g's diagonal)")  # fmt: skip
+    p.add_argument("--gyro-range-dps", type=POSITIVE_FLOAT, default=None,
+                   help="the gyros' full-scale range [°/s]: a turn sample at it is refused as "
+                   "clipped (without it: flat tops at a channel's extreme are)")  # fmt: skip
+    p.add_argument(
+        "--accel-range-g",
+        type=POSITIVE_FLOAT,
+        default=None,
+        help="the accelerometers' full-scale range [g], checked on the faces",
+    )
     p.add_argument("--json", default=None, help="write the calibration here (JSON, SI units)")
     p.add_argument("--plot", default=None, help="write the session figure here (PNG)")
     p.add_argument("--write-sections", default=None,

@@ -45,7 +45,10 @@ Monte Carlo with known truth (`benchmarks/coverage_ferraris.py`; figures in docs
 checks the coverage with white noise, a random walk and a Gauss–Markov drift of the
 biases, pooled and per parameter. Not covered: the repeats' σ (Student-t with R − 1
 degrees of freedom, and blind to the drift common to all repeats); face tilts (inexact
-flips), which the accelerometers' q absorbs only in part.
+flips), which the accelerometers' q absorbs only in part. The turn angles are exact unless
+`turn_deg_std` says otherwise (then added analytically: M_g's column i scales as 1/φ_i).
+A gyro clipped in a turn, or an accelerometer on a face, is refused
+(`hrgjax.imu.sections.saturation`): its sums are wrong by far more than any σ.
 
 This module is the method: the section statistics and their covariance
 (`session_statistics`), the estimates and `ferraris`. What it returns,
@@ -70,7 +73,7 @@ from ._calibration import check_g, check_turn_deg, flat_parameters
 from ._calibration import load_calibration as load_calibration
 from ._drift import walk_kernel, walk_posterior_mean
 from .data import ImuData
-from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections
+from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections, saturation
 
 G_DATA_TOLERANCE = 0.05
 """How far (relative) the declared `g` may be from the mean |specific force| the static
@@ -228,6 +231,10 @@ def ferraris(
     sections=None,
     g: float = 9.81,
     turn_deg: float | tuple[float, float, float] = 360.0,
+    *,
+    turn_deg_std: float | tuple[float, float, float] = 0.0,
+    gyro_range_dps: float | None = None,
+    accel_range_g: float | None = None,
 ) -> ImuCalibration:
     """Ferraris calibration of a six-axis IMU from one session (see the module notes).
 
@@ -243,6 +250,16 @@ def ferraris(
     - `turn_deg`: the angle of each turn [°], one number or (x, y, z); positive is
       right-handed about the axis (counter-clockwise seen from above with the axis up);
       imucal's default clockwise hand turn is −360.
+    - `turn_deg_std`: the standard deviation [°] of each turn's true angle about `turn_deg`,
+      one number or (x, y, z); 0 (the default) takes the turns as exact. M_g's column i
+      is inversely proportional to turn i's angle, so its variance gains
+      (M_g[:, i] · turn_deg_std_i / turn_deg_i)²: 1° on 360° is 0.28 % of each diagonal
+      element, far above the noise part (~1e-4) of a MEMS session. Hand turns against a
+      mark: about 1°; a turntable: its angle error.
+    - `gyro_range_dps`, `accel_range_g`: the sensors' full-scale ranges [°/s] and [g]
+      (optional): a turn sample of the gyros, or a face sample of the accelerometers,
+      at 99.9 % of its range or beyond is refused as clipped. Without them clipping is
+      still found where a channel sits flat at its extreme (`hrgjax.imu.sections.saturation`).
 
     **Returns:** an [`ImuCalibration`][hrgjax.imu.ImuCalibration] with standard errors.
 
@@ -252,7 +269,9 @@ def ferraris(
     other sign than `turn_deg` or differs from it by more than a quarter turn, or that
     integrates more than `TURN_OFF_AXIS` (10 %) of its angle about the other two axes
     (naming it); for faces whose accelerometer readings do not put the ±g axis where the
-    key says."""
+    key says; for a gyro that saturates in a turn, or an accelerometer on a face (naming
+    the channel and the section: a clipped turn integrates short, M_g reads low with a σ
+    that knows nothing of it); for a negative or non-finite `turn_deg_std` or range."""
     require_x64("hg.imu.ferraris")
     if not isinstance(data, ImuData):
         raise TypeError(
@@ -266,6 +285,8 @@ def ferraris(
         sections = parse_sections(sections, len(data))
     g = check_g(g)
     turns = check_turn_deg(turn_deg, "turn_deg")
+    turn_std = _check_turn_std(turn_deg_std)
+    _check_saturation(data, sections, g, gyro_range_dps, accel_range_g)
     got = _statistics(data, sections)
     stats, cov = got.stats, got.white + got.drift
     _check_faces(stats, g)
@@ -273,12 +294,13 @@ def ferraris(
     jac, params = _estimate_and_jacobian(jnp.asarray(stats), g, jnp.deg2rad(jnp.asarray(turns)))
     jac, params = np.asarray(jac), np.asarray(params)
     _check_turns(params, turns)
-    p_cov = jac @ cov @ jac.T
+    p_cov = jac @ cov @ jac.T + _turn_covariance(params, turns, turn_std)
+    source = got.source + (" and turn angles" if np.any(turn_std > 0) else "")
     p = jnp.asarray(params)
     return ImuCalibration(
         p[:9].reshape(3, 3), p[9:12], p[12:21].reshape(3, 3), p[21:24], p[24:33].reshape(3, 3),
         jnp.asarray((p_cov + p_cov.T) / 2), jnp.asarray(got.noise_std), g=g,
-        turn_deg=tuple(float(t) for t in turns), sigma_source=got.source,
+        turn_deg=tuple(float(t) for t in turns), sigma_source=source,
         bias_walk=jnp.asarray(got.bias_walk),
     )  # fmt: skip
 
@@ -335,4 +357,61 @@ def _check_turns(params: np.ndarray, turns: np.ndarray) -> None:
                 f"x, y, z: {off:.1f}° off its {key[0]} axis, more than {TURN_OFF_AXIS:.0%} of "
                 f"turn_deg ({turns[i]:g}°); a turn section must hold one turn about its own "
                 "axis (check the section's rows)"
+            )
+
+
+def _turn_covariance(params: np.ndarray, turns: np.ndarray, turn_std: np.ndarray) -> np.ndarray:
+    """(33, 33): the turn angles' uncertainty in the parameters. Only M_g depends on the
+    angles, column i as 1/φ_i: ∂M_g[:, i]/∂φ_i = −M_g[:, i]/φ_i, independent turns."""
+    m_g = params[12:21].reshape(3, 3)
+    out = np.zeros((33, 33))
+    for i in range(3):
+        d = np.zeros(33)
+        d[12 + 3 * np.arange(3) + i] = -m_g[:, i] * turn_std[i] / turns[i]
+        out += np.outer(d, d)
+    return out
+
+
+def _check_turn_std(turn_deg_std) -> np.ndarray:
+    form = "a standard deviation [°] ≥ 0, one or three (x, y, z turns), e.g. 1.0 for hand turns"
+    try:
+        raw = np.asarray(turn_deg_std)
+        std = np.array(raw, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"turn_deg_std must be {form}; got {turn_deg_std!r}") from None
+    if raw.dtype.kind not in "iuf" or std.shape not in ((), (3,)):
+        raise ValueError(f"turn_deg_std must be {form}; got {turn_deg_std!r}")
+    std = np.broadcast_to(std, (3,)).copy()
+    if not np.all(np.isfinite(std) & (std >= 0)):
+        raise ValueError(f"turn_deg_std must be {form}; got {turn_deg_std!r}")
+    return std
+
+
+def _check_saturation(data: ImuData, sections: Sections, g: float, gyro_range_dps,
+                      accel_range_g) -> None:  # fmt: skip
+    """Refuse a gyro clipped in a turn or an accelerometer clipped on a face (see
+    `hrgjax.imu.sections.saturation`), naming the channel and the section."""
+    limits = []
+    for name, value, to_si in (("gyro_range_dps", gyro_range_dps, DEG),
+                               ("accel_range_g", accel_range_g, g)):  # fmt: skip
+        ok = value is None or (isinstance(value, int | float | np.number)
+                               and not isinstance(value, bool) and np.isfinite(value) and value > 0)  # fmt: skip
+        if not ok:
+            raise ValueError(f"{name} must be a positive full-scale range or None; got {value!r}")
+        limits.append(None if value is None else float(value) * to_si)
+    for key in TURNS:
+        got = saturation(data, sections[key], sensor="gyro", limit=limits[0])
+        if got:
+            raise ValueError(
+                f"turn {key!r}: {got}: the turn integrates short and M_g would read low; turn "
+                "more slowly (a 360° turn shaped like 1 − cos over T s peaks at 720/T °/s) or "
+                "set the gyro to a wider range"
+            )
+    faces = [r for key in FACES for r in sections[key]]
+    for key in FACES:
+        got = saturation(data, sections[key], sensor="accel", limit=limits[1], noise_ranges=faces)
+        if got:
+            raise ValueError(
+                f"face {key!r}: {got}: the face mean is biased; set the accelerometer to a "
+                "wider range (a face reads 1 g)"
             )

@@ -212,11 +212,64 @@ def detect_sections(
     missing = [k for k in SECTION_KEYS if not found[k]]
     if missing:
         have = {k: len(v) for k, v in found.items() if v}
+        moving = [(e0, s1) for (_, e0), (s1, _) in zip(rest_rows, rest_rows[1:], strict=False)]
+        clipped = saturation(data, moving or [(0, n)])
+        hint = f"; {clipped} (the turns cannot be measured)" if clipped else ""
         raise ValueError(
             f"detect_sections: found no {', '.join(missing)} in {n} samples (found {have}); "
-            "pass the sections by hand, or change min_static_s / motion_threshold_dps"
+            f"pass the sections by hand, or change min_static_s / motion_threshold_dps{hint}"
         )
     return found
+
+
+SATURATION_MIN_S = 0.05
+"""The shortest flat top [s] (and at least `SATURATION_MIN_SAMPLES` samples) that
+[`saturation`][hrgjax.imu.sections.saturation] calls a clipped channel."""
+SATURATION_MIN_SAMPLES = 5
+"""The fewest consecutive samples at a channel's extreme that make a flat top."""
+
+
+def saturation(data, ranges, *, sensor: str = "gyro", limit: float | None = None,
+               noise_ranges=None) -> str | None:  # fmt: skip
+    """The first clipped channel of `sensor` ("gyro" or "accel") within the row `ranges`
+    [(start, end), …], as one line of text, or None.
+
+    A channel is clipped where it sits flat at its extreme: at least `SATURATION_MIN_SAMPLES`
+    consecutive samples, and `SATURATION_MIN_S` [s], equal (to 1e-9 relative: round-off of
+    a unit conversion) to the channel's largest or smallest value in the whole record. A
+    genuine record reaches its extreme once (noise); a saturated one holds it. With `limit`
+    (SI: [rad/s] or [m/s²]), any sample with |value| ≥ 0.999 `limit` is clipped as well.
+    `noise_ranges` [(start, end), …]: look for flat tops only in a channel that varies
+    within one of these ranges (the static faces of noise-free data are flat everywhere,
+    those of noisy data are not)."""
+    x_all = np.asarray(getattr(data, sensor))
+    rate = float(data.rate_hz)
+    min_run = max(SATURATION_MIN_SAMPLES, int(np.ceil(SATURATION_MIN_S * rate)))
+    unit, scale = ("°/s", np.rad2deg(1.0)) if sensor == "gyro" else ("m/s²", 1.0)
+    if noise_ranges is not None:
+        noisy = [c for c in range(3) if any(np.ptp(x_all[s:e, c]) > 0 for s, e in noise_ranges)]
+    else:
+        noisy = [0, 1, 2]
+    for c in range(3):
+        x = x_all[:, c]
+        for s, e in ranges:
+            part = x[s:e]
+            if limit is not None:
+                over = np.flatnonzero(np.abs(part) >= 0.999 * limit)
+                if over.size:
+                    return (f"{sensor} {'xyz'[c]} reads {part[over[0]] * scale:+.4g} {unit} at row "
+                            f"{s + over[0]}, at its range ±{limit * scale:.4g} {unit}")  # fmt: skip
+            if c not in noisy:
+                continue
+            for extreme in (x.max(), x.min()):
+                at = np.isclose(part, extreme, rtol=1e-9, atol=0.0)
+                runs = [(a, b) for a, b in _runs(at) if b - a >= min_run]
+                if runs:
+                    a, b = max(runs, key=lambda r: r[1] - r[0])
+                    return (f"{sensor} {'xyz'[c]} saturates: {b - a} consecutive samples (rows "
+                            f"{s + a}–{s + b - 1}) read its extreme {extreme * scale:+.4g} {unit} "
+                            f"exactly, so it clips at about ±{abs(extreme) * scale:.4g} {unit}")  # fmt: skip
+    return None
 
 
 def _moving_mean(x: np.ndarray, w: int) -> np.ndarray:
