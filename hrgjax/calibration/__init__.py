@@ -26,6 +26,8 @@ from .export import load_json as load_json
 from .export import save_compensator as save_compensator
 from .fourier import FourierCompensator as FourierCompensator
 from .mlp import MLPCompensator as MLPCompensator
+from .paired import PairedDifference as PairedDifference
+from .paired import paired_difference as paired_difference
 from .physical import PhysicalCompensator as PhysicalCompensator
 from .reduce import RateWindows as RateWindows
 from .reduce import reduce as reduce

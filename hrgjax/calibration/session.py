@@ -11,22 +11,26 @@ tabulates what each compensator leaves after it.
 **The offset.** With a compensator, each static run $i$ of the session (table at rest
 throughout, duration $T_i$) gives its mean compensated rate $r_i$ [°/h] (its
 `drift_error_dph`, [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors]). The
-offset is their duration-weighted mean and its σ the standard error from the run-to-run
-scatter,
+offset is their duration-weighted mean, its σ the standard error from the run-to-run
+scatter in the model the weighting assumes (white rate noise: a run's variance $s^2/T_i$),
 
 $$b = \frac{\sum_i T_i r_i}{\sum_i T_i}, \qquad
-\sigma_b^2 = \frac{n}{n-1}\,\frac{\sum_i T_i^2 (r_i - b)^2}{(\sum_i T_i)^2}$$
+\sigma_b^2 = \frac{s^2}{\sum_i T_i}, \qquad s^2 = \frac{\sum_i T_i (r_i - b)^2}{n-1}$$
 
-($s/\sqrt n$ when the runs are equally long; σ is unknown, NaN, with one static run). The
-σ is this session's part only: it treats the runs' residuals as independent (what the
-compensation leaves at a wave angle and temperature is counted as scatter, so σ errs
-large), and it leaves out the error of the constant each compensator brings from its own
-calibration, the same on every test session. Against the simulator's change of switch-on
-bias Δb (`benchmarks/session_offset.py`, 12 quick seed sessions against one calibration,
-Fourier+T²): offset − Δb scattered 0.0026 °/h about its mean against a mean σ of
-0.0034 °/h, and that mean, the calibration's part, was +0.0007 °/h (+0.0041 °/h with another
-calibration session): comparable to σ. What σ does not say is how the offset would scatter
-between switch-ons: that is the bias repeatability, the size of $b$ itself.
+(the runs' standard deviation over $\sqrt n$ for equal runs; NaN with one static run).
+$(b - \text{truth})/\sigma_b$ is Student-t with `Offset.dof` = $n - 1$ degrees of freedom
+(±1σ holds 50 % with 2 runs, 58 % with 3); `Offset.half_width(level)` is the t interval's.
+Where a run's error does not average down with its length (what the compensation leaves at
+its temperature and wave angle) and the runs differ much in length, no σ from the scatter
+sees the longest run's own error: keep the static runs equally long. σ is this session's
+part only: it counts what the compensation leaves at a wave angle and temperature as
+scatter (so with equal runs σ errs large) and leaves out the error of the constant each
+compensator brings from its own calibration, the same on every test session. Against the
+simulator's change of switch-on bias Δb (`benchmarks/session_offset.py`, 12 quick seed
+sessions against one calibration, Fourier+T²): offset − Δb scattered 0.0026 °/h about its
+mean against a mean σ of 0.0034 °/h, and that mean, the calibration's part, was +0.0007 °/h
+(+0.0041 °/h with another calibration session): comparable to σ. σ does not say how the
+offset would scatter between switch-ons: that is the bias repeatability, the size of $b$.
 
 **One offset for the session.** Every compensator sees the same switch-on, so one value is
 taken off all of them: the offset measured with the compensator whose static runs scatter
@@ -53,12 +57,11 @@ table, [`accuracy_table`][hrgjax.calibration.accuracy_table]), per wave angle ov
 temperatures. The **figure of merit** of a compensator is the RMS over every static run
 (°/h) and every rotation run (°) after the offset.
 
-**Agreement with the study.** [`run_study`][hrgjax.calibration.run_study] runs its test grid
-in the calibration's switch-on (one `bias_key`), so its compensators carry that bias and the
-test grid's offset is zero within σ; its `study.table` is this module's `before_offset`
-(the same numbers: `compare(study.compensators, study.test)`). On a second session
-the offset is the change of switch-on bias between the sessions, and the residuals after it
-are what the same-session table shows.
+**Told apart?** An RMS over $n$ runs carries a sampling error of about RMS/√(2n), as large as
+the differences between good compensators: [`Comparison.paired`][hrgjax.calibration.Comparison.paired]
+compares two run by run ([`paired_difference`][hrgjax.calibration.paired_difference]: mean
+of $e_{A,i}^2 - e_{B,i}^2$, Student-t interval, "A better than B at 95 %" or "not told
+apart"); `format()` and `to_json()` give it for every pair.
 """
 
 from __future__ import annotations
@@ -74,6 +77,7 @@ from ..data import MeasuredData
 from ._compensator import AbstractCompensator
 from ._grouping import nearest_multiples, wave_angle_groups
 from .evaluate import SEED_TABLE, corrected_run_errors
+from .paired import PairedDifference, paired_difference
 
 UNIT = {"static_residual_dph": "°/h", "angle_error_deg": "°", "max_angle_error_deg": "°"}
 """The figures [`Comparison`][hrgjax.calibration.Comparison] tabulates and their units:
@@ -91,7 +95,9 @@ _SEED_KEY = {"static_residual_dph": "static_drift_dph", "angle_error_deg": "angl
 class Offset:
     """A session's constant rate (module docstring): `value_dph` [°/h], `sigma_dph` (its 1σ
     standard error [°/h]; NaN with one static run), `n_runs` (static runs used; 0: not
-    estimated, nothing removed), `source` (label of the compensator it was measured with)."""
+    estimated, nothing removed), `source` (label of the compensator it was measured with).
+    (value − truth)/σ is Student-t with `dof` = `n_runs` − 1 degrees of freedom: read
+    intervals with [`half_width`][hrgjax.calibration.Offset.half_width], not ±1.96σ."""
 
     value_dph: float
     sigma_dph: float
@@ -103,15 +109,36 @@ class Offset:
         """Whether the session had static runs to measure it."""
         return self.n_runs > 0
 
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom of σ: `n_runs` − 1 (0: σ unknown)."""
+        return max(self.n_runs - 1, 0)
+
+    def half_width(self, level: float = 0.95) -> float:
+        """Half-width [°/h] of the two-sided `level` interval: Student's t quantile with
+        `dof` degrees of freedom times σ (12.7σ at 95 % with 2 runs, 2.23σ with 11, 2.00σ
+        with 57); NaN when σ is unknown."""
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"level must be in (0, 1); got {level}")
+        if self.dof < 1 or not math.isfinite(self.sigma_dph):
+            return math.nan
+        from scipy import stats
+
+        return float(stats.t.ppf(0.5 + 0.5 * level, self.dof)) * self.sigma_dph
+
     def to_json(self) -> dict:
-        """`{"value", "sigma", "unit", "n_static_runs", "from"}` (σ `null` when unknown)."""
+        """`{"value", "sigma", "unit", "n_static_runs", "from", "dof", "half_width_95"}` (σ
+        and the 95 % t half-width `null` when unknown)."""
         sigma = self.sigma_dph if math.isfinite(self.sigma_dph) else None
+        half = self.half_width(0.95)
         return {
             "value": float(self.value_dph),
             "sigma": None if sigma is None else float(sigma),
             "unit": "°/h",
             "n_static_runs": int(self.n_runs),
             "from": self.source,
+            "dof": int(self.dof),
+            "half_width_95": float(half) if math.isfinite(half) else None,
         }
 
     def __str__(self) -> str:
@@ -120,7 +147,10 @@ class Offset:
         if not math.isfinite(self.sigma_dph):
             return f"{self.value_dph:+.4f} °/h (σ unknown: one static run)"
         runs = "run" if self.n_runs == 1 else "runs"
-        return f"{self.value_dph:+.4f} ± {self.sigma_dph:.4f} °/h (1σ, {self.n_runs} static {runs})"
+        return (
+            f"{self.value_dph:+.4f} ± {self.sigma_dph:.4f} °/h (1σ, {self.n_runs} static {runs}; "
+            f"95 %: ± {self.half_width(0.95):.4f}, t with {self.dof} dof)"
+        )
 
 
 def session_offset(errors: dict, source: str = "") -> Offset:
@@ -147,8 +177,8 @@ def session_offset(errors: dict, source: str = "") -> Offset:
     value = float(np.sum(weight * rate) / total)
     if n == 1:
         return Offset(value, math.nan, 1, source)
-    var = n / (n - 1) * float(np.sum(weight**2 * (rate - value) ** 2)) / total**2
-    return Offset(value, math.sqrt(var), n, source)
+    s2 = float(np.sum(weight * (rate - value) ** 2)) / (n - 1)  # a run's variance: s²/T_i
+    return Offset(value, math.sqrt(s2 / total), n, source)
 
 
 def _rms_groups(keys, values):
@@ -235,6 +265,42 @@ class Comparison:
             "angle_error_deg": _rms(e["angle_error_deg"]),
         }
 
+    def paired(
+        self, a: str, b: str, key: str = "static_residual_dph", level: float = 0.95
+    ) -> PairedDifference:
+        """Is `a`'s residual after the offset smaller than `b`'s, at `level`? The paired t test
+        on the runs they share ([`paired_difference`][hrgjax.calibration.paired_difference]).
+
+        **Arguments:** `a`, `b` (labels), `key` (one of
+        [`UNIT`][hrgjax.calibration.session.UNIT]'s: `static_residual_dph` [°/h] on the static
+        runs, `angle_error_deg` or `max_angle_error_deg` [°] on the rotation runs), `level`
+        (two-sided confidence).
+
+        **Returns:** a [`PairedDifference`][hrgjax.calibration.PairedDifference]: the mean of
+        $e_{a,i}^2 - e_{b,i}^2$, its t interval and `statement()`.
+        """
+        if key not in _ERROR_KEY:
+            raise ValueError(f"key must be one of {tuple(_ERROR_KEY)}; got {key!r}")
+        for lab in (a, b):
+            if lab not in self.labels:
+                raise ValueError(f"{lab!r} is not one of the labels {list(self.labels)}")
+        ea, eb = (self.residuals[lab][_ERROR_KEY[key]] for lab in (a, b))
+        return paired_difference(ea, eb, a=a, b=b, key=key, unit=UNIT[key], level=level)
+
+    def paired_all(self, key: str = "static_residual_dph", level: float = 0.95) -> list:
+        """[`paired`][hrgjax.calibration.Comparison.paired] for every pair of compensators
+        (in label order, a before b): $k(k-1)/2$ tests, each at `level`."""
+        return [
+            self.paired(a, b, key, level)
+            for i, a in enumerate(self.labels)
+            for b in self.labels[i + 1 :]
+        ]
+
+    def _paired_keys(self) -> list:
+        counts = self.counts()
+        return [k for k, kind in (("static_residual_dph", "static"),
+                                  ("angle_error_deg", "rotation")) if counts[kind]]  # fmt: skip
+
     def before_offset(self) -> dict:
         """The seed's accuracy table with the offset kept, in
         [`accuracy_table`][hrgjax.calibration.accuracy_table]'s layout (the same numbers on
@@ -288,7 +354,9 @@ class Comparison:
                               "max_angle_error_deg": {T: …}}}],
          "seed_figures": {"static_residual_dph" | "angle_error_deg":
                           {T: {"fourier", "mlp"}}},
-         "units": {"static_residual_dph": "°/h", "angle_error_deg": "°", …}}
+         "units": {"static_residual_dph": "°/h", "angle_error_deg": "°", …},
+         "paired": [PairedDifference.to_json() for every pair, static residual then
+                    end-of-run angle error, where the session has such runs]}
         ```
 
         `seed_figures` are seed 000's published figures
@@ -326,6 +394,7 @@ class Comparison:
             "compensators": comps,
             "seed_figures": seed,
             "units": dict(UNIT),
+            "paired": [p.to_json() for k in self._paired_keys() for p in self.paired_all(k)],
         }
 
     def write_json(self, path: str | os.PathLike) -> str:
@@ -367,7 +436,8 @@ class Comparison:
         """The comparison as text: the offset, then per temperature (with seed 000's figures
         beside) and, with `by_wave_angle`, per start wave angle, the static residual [°/h]
         and the rotation runs' end-of-run angle error [°] after the offset; tables of kinds of
-        run the session lacks are left out."""
+        run the session lacks are left out; with several compensators, last, the paired
+        comparison of every pair ([`paired`][hrgjax.calibration.Comparison.paired])."""
         counts = self.counts()
         src = f" with {self.offset.source}" if self.offset.source else ""
         lines = [f"session offset{src}: {self.offset}"]
@@ -400,6 +470,11 @@ class Comparison:
                            "over temperatures"))  # fmt: skip
         for key, by, title in tables:
             lines += self._table(key, by, title) + [""]
+        for key in self._paired_keys() if len(self.labels) > 1 else []:
+            what = "static residual" if key == "static_residual_dph" else "end-of-run angle error"
+            lines.append(f"told apart? {what} after the offset, paired on the shared runs "
+                         "(mean of e_A² − e_B², t interval):")  # fmt: skip
+            lines += [f"  {p}" for p in self.paired_all(key)] + [""]
         return "\n".join(lines).rstrip() + "\n"
 
     def __str__(self) -> str:
