@@ -20,8 +20,9 @@ subtracted) against the static model's reference, without forming the samples.
 
 **Compensation.** [`compensate`][hrgjax.fog.compensation.compensate] predicts the body-frame
 error window by window, maps it back to sensor axes by diag(1+k)(I+E) and subtracts it from
-the raw gyro output (held over each window); [`align_record`][hrgjax.fog.compensation.align_record]
-then runs the coarse + fine alignment of [`ins.alignment`][hrgjax.ins.alignment] on the
+the raw gyro output (held over each window), except in windows whose (f, A) lie outside the
+range `fit` recorded, which pass through uncompensated unless `extrapolate=True`;
+[`align_record`][hrgjax.fog.compensation.align_record] then runs the coarse + fine alignment of [`ins.alignment`][hrgjax.ins.alignment] on the
 misalignment-compensated outputs. [`heading_limit_deg`][hrgjax.fog.compensation.heading_limit_deg]
 is the analytic heading error set by the remaining east drift (PHYSICS.md §12).
 """
@@ -71,7 +72,10 @@ class VibrationCompensator(eqx.Module):
     were taken along (set by `fit` from the training set; None until then, and in a
     compensator rebuilt without it, e.g. the skeleton of a file saved before it was
     recorded — `compensate` then falls back to the body axis with the largest AC power).
-    `recurrent_init` ρ starts the context weights at ρ·I.
+    `feature_range` ((f_min, f_max) [Hz], (A_min, A_max) [g]): the range of the vibrating
+    training windows' features (set by `fit`; None until then and in a skeleton rebuilt
+    without it: nothing is checked), which `in_range` tests. `recurrent_init` ρ starts the
+    context weights at ρ·I.
 
     **Raises:** `ValueError` for an unknown `kind`, `x_scale` not two finite numbers > 0 or
     `y_scale` not one (a zero scale gave NaN losses reported as "training diverged")."""
@@ -83,11 +87,13 @@ class VibrationCompensator(eqx.Module):
     warmup: int = eqx.field(static=True)
     window_s: float | None = eqx.field(static=True)
     axis: tuple | None = eqx.field(static=True, default=None)
+    feature_range: tuple | None = eqx.field(static=True, default=None)
 
     def __init__(
         self, kind: str = "elman", *, key: jax.Array, hidden: int = 7, x_scale=(25.0, 1.0),
         y_scale: float = 0.2 * DEG_PER_H, warmup: int = 30,
         recurrent_init: float = 0.5, window_s: float | None = None, axis=None,
+        feature_range=None,
     ):  # fmt: skip
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}; got {kind!r}")
@@ -108,6 +114,24 @@ class VibrationCompensator(eqx.Module):
         self.warmup = int(warmup)
         self.window_s = None if window_s is None else _window(window_s)
         self.axis = None if axis is None else _unit(axis)
+        self.feature_range = None if feature_range is None else _box(feature_range)
+
+    def in_range(self, features, margin: float = 0.01):
+        """Mask (...,) of `features` (..., 2) [Hz, g]: True for a window at rest (A = 0, as
+        [`vibration_features`][hrgjax.fog.spectrum.vibration_features] gives below its
+        threshold: the network is trained on rest) or whose f and A both lie within
+        `feature_range`, each bound widened by `margin` (relative, default 1 %, for the
+        estimates' scatter); all True when no range is recorded. Traceable."""
+        f = jnp.asarray(features)
+        if self.feature_range is None:
+            return jnp.ones(f.shape[:-1], bool)
+        m = float(margin)
+        if not (np.isfinite(m) and m >= 0):
+            raise ValueError(f"margin must be a finite fraction >= 0; got {margin!r}")
+        widen = lambda b, s: b + s * m * abs(b) if np.isfinite(b) else b
+        b = jnp.asarray([(widen(r[0], -1), widen(r[1], 1)) for r in self.feature_range], f.dtype)
+        lo, hi = b.T.reshape((2,) + (1,) * (f.ndim - 1) + (2,))  # bounds (..., 2) [Hz, g]
+        return jnp.all((f >= lo) & (f <= hi), axis=-1) | (f[..., 1] == 0)
 
     def normalised(self, features):
         """Network outputs (K, 3) in units of `y_scale`."""
@@ -324,6 +348,24 @@ def _unit(axis) -> tuple:
     return tuple((u / np.linalg.norm(u)).tolist())
 
 
+def _box(feature_range) -> tuple:
+    """A feature range as ((f_min, f_max), (A_min, A_max)) floats, or a one-line `ValueError`."""
+    r = np.asarray(feature_range, dtype=float)
+    if r.shape != (2, 2) or np.isnan(r).any():
+        raise ValueError(f"feature_range must be ((f_min, f_max) Hz, (A_min, A_max) g); "
+                         f"got {feature_range!r}")  # fmt: skip
+    return tuple(tuple(float(v) for v in row) for row in r)
+
+
+def _trained_box(features) -> tuple:
+    """The range of the vibrating (A > 0) windows of `features` (..., 2); an empty one,
+    (inf, -inf), when none vibrates."""
+    x = np.asarray(features, dtype=float).reshape(-1, 2)
+    x = x[x[:, 1] > 0]
+    lo, hi = (x.min(0), x.max(0)) if len(x) else (np.full(2, np.inf), np.full(2, -np.inf))
+    return tuple(zip(lo.tolist(), hi.tolist(), strict=True))
+
+
 def _same_axis(trained, axis, what: str):
     """`axis` checked against the vibration direction `trained` a compensator was trained on
     (`trained` when None; None when neither is known). A direction and its opposite give the
@@ -358,15 +400,17 @@ def _same_window(comp: VibrationCompensator, window_s, what: str) -> float:
     return w
 
 
-def _with_window(comp: VibrationCompensator, window_s: float, axis=None) -> VibrationCompensator:
-    """A copy of `comp` that records the window (and, when known, the vibration direction)
-    it was trained on (static fields, which `eqx.tree_at` cannot set)."""
+def _with_window(comp: VibrationCompensator, window_s: float, axis=None, box=None):
+    """A copy of `comp` that records the window (and, when known, the vibration direction
+    and feature range) it was trained on (static fields, which `eqx.tree_at` cannot set)."""
     new = object.__new__(type(comp))
     for f in dataclasses.fields(comp):
         object.__setattr__(new, f.name, getattr(comp, f.name))
     object.__setattr__(new, "window_s", _window(window_s))
     if axis is not None:
         object.__setattr__(new, "axis", _unit(axis))
+    if box is not None:
+        object.__setattr__(new, "feature_range", _box(box))
     return new
 
 
@@ -386,7 +430,7 @@ def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
             lambda c: jnp.mean(
                 (jax.vmap(c.normalised)(test.features) - test.samples / c.y_scale) ** 2
             ),
-            lambda c: rmse(c, test),
+            lambda c: rmse(c, test, extrapolate=True),
         ]
     trained, hist = _train(
         comp, loss, n, epochs=epochs, batch_size=batch_size, learning_rate=learning_rate,
@@ -400,23 +444,58 @@ def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
     history = {"train": hist[:, 0]}
     if test is not None:
         history |= {"test": hist[:, 1], "test_rmse": hist[:, 2]}
-    return _with_window(trained, train.window_s, axis), history
+    return _with_window(trained, train.window_s, axis, _trained_box(train.features)), history
 
 
-def rmse(comp: VibrationCompensator | None, data: TrainingSet):
+def rmse(comp: VibrationCompensator | None, data: TrainingSet, *, extrapolate=False, margin=0.01):
     """RMS over sequences, windows and axes of prediction − noise-free error [rad/s];
-    `comp=None` is no compensation (the error itself)."""
-    if comp is not None:
-        _same_window(comp, data.window_s, "rmse")
-        _same_axis(comp.axis, data.axis, "rmse")
-    pred = 0.0 if comp is None else jax.vmap(comp)(data.features)
+    `comp=None` is no compensation (the error itself). The prediction is what
+    [`compensate`][hrgjax.fog.compensation.compensate] applies: zero in windows outside
+    `comp.feature_range` unless `extrapolate`."""
+    if comp is None:
+        return jnp.sqrt(jnp.mean(data.truth**2))
+    _same_window(comp, data.window_s, "rmse")
+    _same_axis(comp.axis, data.axis, "rmse")
+    pred, _ = _predict(comp, data.features, extrapolate, margin)
     return jnp.sqrt(jnp.mean((pred - data.truth) ** 2))
+
+
+def _predict(comp: VibrationCompensator, feats, extrapolate: bool, margin: float):
+    """Prediction on features (K, 2) or (S, K, 2) and the in-range mask: windows out of range
+    are fed to the network as rest (its context never sees them) and predict zero."""
+    call = comp if feats.ndim == 2 else jax.vmap(comp)
+    if extrapolate:
+        return call(feats), jnp.ones(feats.shape[:-1], bool)
+    inside = comp.in_range(feats, margin)[..., None]
+    pred = call(jnp.where(inside, feats, 0.0))
+    return jnp.where(inside, pred, 0.0), inside[..., 0]
+
+
+class Compensated(eqx.Module):
+    """What `compensate` returns; unpacks (and indexes) as the pair `(gyro, prediction)` it
+    returned before. **Fields:** `gyro` (N, 3) [rad/s, sensor axes]; `prediction` (K, 3)
+    [rad/s, body frame], zero out of range; `in_range` (K,) bool: the windows compensated."""
+
+    gyro: jax.Array
+    prediction: jax.Array
+    in_range: jax.Array
+
+    def __iter__(self):  # the pair returned before
+        return iter((self.gyro, self.prediction))
+
+    def __getitem__(self, i):
+        return (self.gyro, self.prediction)[i]
+
+    @property
+    def n_out_of_range(self) -> int:
+        """Windows passed through uncompensated (outside the trained range)."""
+        return int(jnp.sum(~self.in_range))
 
 
 def compensate(
     comp: VibrationCompensator, imu: FogImu, record: VibrationRecord, *, window_s=None,
-    axis=None,
-):  # fmt: skip
+    axis=None, extrapolate: bool = False, margin: float = 0.01,
+) -> Compensated:  # fmt: skip
     """Raw gyro output (N, 3) [rad/s, sensor axes] less the predicted vibration error:
     features from the misalignment-compensated accelerometers over windows of `window_s`
     (default: the window `comp` was trained on; another one is refused) along `axis`
@@ -424,19 +503,27 @@ def compensate(
     refused — the amplitude along (1, 1, 1)/√3 of a vibration along it is √3 times that along
     its largest body axis; a compensator without a recorded axis uses the body axis with the
     largest AC power), the prediction per window mapped to sensor axes and held over its
-    window (the last window's prediction covers a partial tail). **Returns**
+    window (the last window's prediction covers a partial tail).
+
+    **Out of range.** A vibrating window whose f or A lies outside `comp.feature_range`
+    (each bound widened by `margin`, relative: `VibrationCompensator.in_range`) is passed
+    through uncompensated — its prediction is zero and the network is fed rest instead, so
+    its context does not carry the extrapolation on — and counted: outside its training
+    range the network made the error worse than none (docs/fog.md). `extrapolate=True`
+    applies the network everywhere, as before. **Returns** a
+    [`Compensated`][hrgjax.fog.compensation.Compensated], which unpacks as
     `(gyro (N, 3), prediction (K, 3) body frame)`."""
     window_s = _same_window(comp, window_s, "compensate")
     axis = _same_axis(comp.axis, axis, "compensate")
     feats = vibration_features(to_body(imu.accel, record.accel), record.fs, window_s, axis)
-    pred = comp(feats)
+    pred, inside = _predict(comp, feats, extrapolate, margin)
     m = int(round(window_s * record.fs))
     n = record.gyro.shape[0]
     held = jnp.repeat(to_sensor(imu.gyro, pred), m, axis=0)
     tail = n - held.shape[0]
     if tail > 0:
         held = jnp.concatenate([held, jnp.repeat(held[-1:], tail, axis=0)])
-    return record.gyro - held, pred
+    return Compensated(record.gyro - held, pred, inside)
 
 
 def imu_log(imu: FogImu, record: VibrationRecord, gyro=None) -> _al.ImuLog:
@@ -508,5 +595,6 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat):
 
 __all__ = [
     "KINDS", "VibrationCompensator", "TrainingSet", "grid", "training_set", "fit",
-    "fit_end_to_end", "rmse", "compensate", "imu_log", "align_record", "heading_limit_deg",
+    "fit_end_to_end", "rmse", "Compensated", "compensate", "imu_log", "align_record",
+    "heading_limit_deg",
 ]  # fmt: skip
