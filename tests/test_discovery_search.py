@@ -129,9 +129,10 @@ def test_a_sliver_beside_an_unnamed_cubic_is_not_named():
     from hrgjax.discovery.search import candidates_for
 
     # dwarfed: a rate scale factor left out (rates 5 and 100 °/s). Whatever evidence the
-    # readout ripple has on this draw (ΔBIC ≈ 20 once; 2.2 when the code that set it had
-    # changed), Ω³ has far more: the first effect named may not be a sliver beside what no
-    # candidate names — the readout row names the rule that refused it
+    # readout ripple has on this draw (ΔBIC ≈ 20 once, 2.2 at the start of 2026-11-30, −10.7
+    # and refused by its p-value since), Ω³ has far more: the first effect named may not be a
+    # sliver beside what no candidate names — the readout row names the rule that refused it
+    # (the outshone rule itself: the 2θ·ΔT test above)
     data = hidden_effect_dataset("rate_scale_factor", 1e-4, key=jax.random.key(4148),
                                  rates_dps=(5.0, 100.0))  # fmt: skip
     rest = [n for n in candidates_for(set()) if n != "rate_scale_factor"]

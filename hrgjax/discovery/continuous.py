@@ -105,8 +105,7 @@ class ContinuousProblem(AbstractProblem):
         (an [`hrgjax.Noise`][]), the noise model is estimated and then the run-to-run bias
         from the baseline's run means. With `window_s` (a mixed log), the dwell runs join it
         as windows of that length (the dwell search's regression rows,
-        `dwell.rate_windows`) and only the other runs are
-        simulated."""
+        `dwell.rate_windows`) and only the other runs are simulated."""
         have = covariates_in(data)
         cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
         names = list(nominal) + [n for n in cands if n not in nominal]
@@ -412,9 +411,10 @@ class ContinuousProblem(AbstractProblem):
         return {k: v for k, v in cols.items() if np.any(v)}
 
     def leftover(self, fit):
-        """The strongest shape left in `fit`'s training residual
+        """The strongest shape left in `fit`'s training residual, each row class at its level
         ([`describe`][hrgjax.discovery.leftover.describe])."""
-        return leftover.describe(fit.r, fit.j, self.shape_columns, self.k_e)
+        cls = self.row_classes()
+        return leftover.describe(fit.r, fit.j, self.shape_columns, self.k_e, classes=cls)
 
     def raw_residuals(self, z, groups=None):
         """Unwhitened increment residuals [rad], one (R, K) array per group (default: the
