@@ -194,3 +194,17 @@ def batched_lapack(fn, *args) -> set:
 
     closed = eqx.filter_make_jaxpr(fn)(*args)[0]
     return set(walk(closed.jaxpr)) & LAPACK_PRIMITIVES
+
+
+def still_ramps(intervals, n=41):
+    """Runs of `n` samples every `intervals[i]` [s], the wave at 0, the table at rest, the
+    temperature ramping 10 → 30 °C: the smallest continuous records discovery takes."""
+    cols = {"time_s": [], "run": [], "wave_angle_deg": [], "temperature_c": [],
+            "table_rate_dps": []}  # fmt: skip
+    for run, dt in enumerate(intervals):
+        cols["time_s"].append(np.arange(n) * dt)
+        cols["run"].append(np.full(n, run))
+        cols["wave_angle_deg"].append(np.zeros(n))
+        cols["temperature_c"].append(np.linspace(10.0, 30.0, n))
+        cols["table_rate_dps"].append(np.zeros(n))
+    return hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})

@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 import pytest
+from helpers import still_ramps
 
-import hrgjax as hg
 from hrgjax.discovery import NoiseModel, continuous, generate, records
 from hrgjax.discovery.search import discover
 
@@ -22,16 +22,7 @@ MIN_AGREEMENT = inspect.signature(discover).parameters["min_agreement"].default
 
 def _problem(n_runs):
     """A continuous problem of `n_runs` short temperature ramps, every run training."""
-    n = 41
-    cols = {"time_s": [], "run": [], "wave_angle_deg": [], "temperature_c": [],
-            "table_rate_dps": []}  # fmt: skip
-    for run in range(n_runs):
-        cols["time_s"].append(np.arange(n) * 5.0)
-        cols["run"].append(np.full(n, run))
-        cols["wave_angle_deg"].append(np.zeros(n))
-        cols["temperature_c"].append(np.linspace(10.0, 30.0, n))
-        cols["table_rate_dps"].append(np.zeros(n))
-    data = hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
+    data = still_ramps([5.0] * n_runs)
     noise = NoiseModel.from_gyro(generate.base_gyro().noise, K_E)
     return continuous.ContinuousProblem(data, ["bias", "angular_gain", NAME], K_E, [], noise)
 

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import still_ramps
 
 import hrgjax as hg
 from hrgjax.discovery import NoiseModel, continuous, generate
@@ -278,16 +279,7 @@ def test_the_whole_catalogue_names_the_thermal_rate_and_nothing_in_the_null():
 def test_runs_of_one_length_but_different_sample_intervals_are_not_stacked():
     # a 721-sample ramp at 5 s and a 721-sample rotation at 0.1 s (one bench log) once
     # shared one group, whose blocks were set from the first run's interval
-    n = 41
-    cols = {"time_s": [], "run": [], "wave_angle_deg": [], "temperature_c": [],
-            "table_rate_dps": []}  # fmt: skip
-    for run, dt in enumerate((5.0, 0.5, 5.0)):
-        cols["time_s"].append(np.arange(n) * dt)
-        cols["run"].append(np.full(n, run))
-        cols["wave_angle_deg"].append(np.zeros(n))
-        cols["temperature_c"].append(np.linspace(10.0, 30.0, n))
-        cols["table_rate_dps"].append(np.zeros(n))
-    data = hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
+    data = still_ramps((5.0, 0.5, 5.0))
     noise = NoiseModel.from_gyro(generate.base_gyro().noise, K_E)
     problem = continuous.ContinuousProblem(data, ["bias", "angular_gain"], K_E, [], noise)
     groups = {g.run: g for g in problem.train_groups}
