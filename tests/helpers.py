@@ -208,3 +208,26 @@ def still_ramps(intervals, n=41):
         cols["temperature_c"].append(np.linspace(10.0, 30.0, n))
         cols["table_rate_dps"].append(np.zeros(n))
     return hg.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
+
+
+def modelled_imu(grade: str):
+    """A `hrgjax.ins.sensors.preset(grade)`'s biases, bias instabilities and noise with no
+    misalignment and a small rate random walk: what the loosely coupled filter's 15 states
+    model exactly (its NEES/NIS are then honest)."""
+    from hrgjax.ins import sensors
+    from hrgjax.units import DEG_PER_H
+
+    p = sensors.preset(grade)
+    return sensors.ImuModel(
+        gyro_bias=p.gyro_bias,
+        accel_bias=p.accel_bias,
+        arw=p.arw,
+        vrw=p.vrw,
+        gyro_bias_instability=p.gyro_bias_instability,
+        accel_bias_instability=p.accel_bias_instability,
+        gyro_misalignment=np.zeros((3, 3)),
+        accel_misalignment=np.zeros((3, 3)),
+        gyro_rate_random_walk=0.05 * DEG_PER_H / 10.0,
+        gyro_correlation_time=p.gyro_correlation_time,
+        accel_correlation_time=p.accel_correlation_time,
+    )

@@ -9,11 +9,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import CompileCounter, batched_lapack, cli_fails
+from helpers import CompileCounter, batched_lapack, cli_fails, modelled_imu
 
 from hrgjax.ins import ekf, flights, gnss, motion, sensors
 from hrgjax.ins import mechanization as me
-from hrgjax.units import DEG_PER_H, DEG_PER_SQRT_H
+from hrgjax.units import DEG_PER_SQRT_H
 
 Z = (0.0, 0.0, 0.0)
 OUTAGE = ((70.0, 90.0),)
@@ -45,19 +45,7 @@ def _motion():
 # close to the Gauss–Markov bias over 2 min of τ = 600 s), and the same shapes and correlation
 # times, so that the CLI's tactical run below compiles the same program
 TACTICAL = sensors.preset("tactical")
-CONSISTENT = sensors.ImuModel(
-    gyro_bias=TACTICAL.gyro_bias,
-    accel_bias=TACTICAL.accel_bias,
-    arw=TACTICAL.arw,
-    vrw=TACTICAL.vrw,
-    gyro_bias_instability=TACTICAL.gyro_bias_instability,
-    accel_bias_instability=TACTICAL.accel_bias_instability,
-    gyro_misalignment=np.zeros((3, 3)),
-    accel_misalignment=np.zeros((3, 3)),
-    gyro_rate_random_walk=0.05 * DEG_PER_H / 10.0,
-    gyro_correlation_time=TACTICAL.gyro_correlation_time,
-    accel_correlation_time=TACTICAL.accel_correlation_time,
-)
+CONSISTENT = modelled_imu("tactical")
 
 
 @pytest.fixture(scope="module")

@@ -111,7 +111,14 @@ def cmd_navigate(args) -> int:
     if out["nis_mean"] is None:
         print("  NIS mean: none (every GNSS fix fell in an outage)")
     else:
-        print(f"  NIS mean {out['nis_mean']:.2f} (expected {out['innovation_dim']})")
+        c = out["nis_check"]
+        lo, hi = c["band"]
+        print(f"  NIS mean {out['nis_mean']:.2f} (expected {out['innovation_dim']}; "
+              f"{100 * c['level']:g} % band {lo:.3f}–{hi:.3f} for {c['fixes']} fixes): "
+              f"{c['verdict']}; each run's first {c['early']} fixes {c['early_nis_mean']:.2f} "
+              f"(99.9 % point {c['early_bound']:.2f}): {c['early_verdict']}")  # fmt: skip
+        for line in filter(None, c["message"].split("\n")):
+            print(f"  {line}")
     return finish((args.json, out),
                   (args.plot, lambda p: figure("navigation_figure")(truth, result, p)))  # fmt: skip
 

@@ -36,7 +36,13 @@ with density $2\sigma^2/\tau$ (exact over times ≪ τ, conservative beyond: a s
 Gauss–Markov bias keeps its variance σ², so its change from any start has a variance of at
 most 2σ², while the random walk's grows as 2σ²t/τ), misalignments are not estimated. Every sensor state
 needs a prior σ > 0 (a zero makes the covariance singular): the model's values are the sizes
-the filter assumes.
+the filter assumes. Its σ are honest only if that model and P0 bound the real sensor and initial
+error: if not, σ are several times too small ([`nis_check`][hrgjax.ins.ekf.nis_check]).
+
+**Small-angle limit.** The error state (F, H linear in the attitude error φ) holds for
+attitude errors of a few degrees: an initial heading σ of 0.1 rad leaves the attitude σ
+1.25× too small, 0.2 rad 1.3×, 0.5 rad 1.7–2× for a whole straight flight, with the NIS
+unchanged (Monte Carlo); `attitude_sigma` above `MAX_ATTITUDE_SIGMA` is refused.
 """
 
 from __future__ import annotations
@@ -70,6 +76,10 @@ from .mechanization import (
 )
 from .sensors import ImuModel
 from .strapdown import error_matrices_at
+
+MAX_ATTITUDE_SIGMA = 0.2
+"""The largest initial attitude σ [rad] accepted (the small-angle limit, module docstring):
+beyond it align first ([`align`][hrgjax.ins.alignment.align])."""
 
 
 class FilterResult(eqx.Module):
@@ -110,6 +120,11 @@ class FilterResult(eqx.Module):
         )
         return jnp.sqrt(jnp.diagonal(self.P, axis1=-2, axis2=-1)[..., :3]) * d
 
+    def nis_check(self, level: float = 0.99, early: int = 5) -> dict:
+        """[`nis_check`][hrgjax.ins.ekf.nis_check] of this pass's `nis` (host side; a
+        vmapped result's runs are pooled)."""
+        return nis_check(self.nis, self.innovation_dim, level, early)
+
 
 class LooselyCoupled(eqx.Module):
     """Filter settings (module docstring).
@@ -117,7 +132,8 @@ class LooselyCoupled(eqx.Module):
     **Fields:** `imu` the [`ImuModel`][hrgjax.ins.sensors.ImuModel] whose noise densities and
     bias sizes the filter assumes; `gnss` the [`Gnss`][hrgjax.ins.gnss.Gnss] receiver;
     `position_sigma` [m, NED], `velocity_sigma` [m/s], `attitude_sigma` [rad] (3,): initial
-    uncertainty; `scale_factors`: 21 states instead of 15; `earth`."""
+    uncertainty, bounding the real initial error, the attitude's ≤ `MAX_ATTITUDE_SIGMA`
+    (module docstring); `scale_factors`: 21 states instead of 15; `earth`."""
 
     imu: ImuModel
     gnss: Gnss
@@ -135,6 +151,12 @@ class LooselyCoupled(eqx.Module):
             v = np.asarray(v)
             if v.size not in (1, 3) or not np.all(np.isfinite(v) & (v > 0)):
                 raise ValueError(f"LooselyCoupled.{name} must be > 0 (1 or 3 values); got {v}")
+            if name == "attitude_sigma" and np.any(v > MAX_ATTITUDE_SIGMA):
+                raise ValueError(
+                    f"LooselyCoupled.attitude_sigma {v} rad: above {MAX_ATTITUDE_SIGMA} rad the "
+                    "small-angle error model reports σ too small; align first (hg.ins.alignment.align / "
+                    "`hrgjax align`)"
+                )
         imu = self.imu
         sizes = {
             "gyro_bias (or gyro_bias_instability)": imu.gyro_bias**2 + imu.gyro_bias_instability**2,
@@ -511,3 +533,67 @@ def nees_band(n_states: int, n_runs: int, level: float = 0.95):
     a = 0.5 * (1.0 - level)
     dof = n_states * n_runs
     return chi2_ppf(a, dof) / n_runs, chi2_ppf(1.0 - a, dof) / n_runs
+
+
+_DOES_NOT_FIT = (
+    "the filter's model does not fit the data: its σ are not to be trusted (a better IMU grade "
+    "than the sensor, or a P0 that does not bound the initial error)"
+)
+_TOO_LOW = (
+    "the filter's model does not fit the data: its σ are not to be trusted (larger than the "
+    "errors: an IMU model or GNSS σ worse than the real ones)"
+)
+
+
+def nis_check(nis, innovation_dim: int, level=0.99, early: int = 5, tolerance=0.03) -> dict:
+    """The truth-free consistency test of a filter's innovations, on the host: `nis` (..., M)
+    (NaN where no fix; leading axes are runs, pooled) of `innovation_dim` components per fix.
+
+    For a consistent filter the N valid fixes' NIS are independent $\\chi^2_d$, so their mean
+    lies inside $[\\chi^2_{dN}(\\alpha/2), \\chi^2_{dN}(1-\\alpha/2)]/N$ (`band`, two-sided
+    at `level`) but with probability 1 − `level`; the mean NIS of the first `early` valid
+    fixes of each run (k in all) lies below $\\chi^2_{dk}(0.999)/k$ (`early_bound`) but with
+    probability 0.001. A better IMU grade than the sensor's shows in the whole-run mean, a P0
+    that does not bound the initial error mostly in the early fixes. An EKF's linearisation
+    moves the mean by ~1 % (Monte Carlo, matched model), which the band of many pooled runs
+    resolves: a mean off d by less than `tolerance` (relative) is not counted against it.
+
+    **Returns** a JSON-ready dict: `nis_mean`, `fixes` (N), `level`, `band`, `verdict`
+    ("consistent", "does not fit", or "undefined" without a fix), `early`, `early_fixes` (k),
+    `early_nis_mean`, `early_level` (0.999), `early_bound`, `early_verdict`, `runs_outside`
+    (the fraction of runs whose own mean NIS is outside its band: expected 1 − `level`), and
+    `message` (the lines to print: "" when both verdicts are "consistent"), `tolerance`."""
+    from ..allan.uncertainty import chi2_ppf
+
+    if not (0 < level < 1 and isinstance(early, int) and early >= 1 and tolerance >= 0):
+        raise ValueError("nis_check: needs 0 < level < 1, early >= 1, tolerance >= 0")
+    v = np.asarray(nis, float)
+    v = v.reshape(-1, v.shape[-1]) if v.ndim else v.reshape(1, 1)
+    ok, d, a = np.isfinite(v), int(innovation_dim), 0.5 * (1.0 - level)
+    band = lambda k: [chi2_ppf(a, d * k) / k, chi2_ppf(1.0 - a, d * k) / k]  # noqa: E731
+    n = int(ok.sum())
+    out = dict(nis_mean=None, fixes=n, level=level, band=None, verdict="undefined", early=early)
+    out.update(early_fixes=0, early_nis_mean=None, early_level=0.999, early_bound=None)
+    out.update(early_verdict="undefined", runs_outside=None, message="", tolerance=tolerance)
+    if n == 0:
+        return out
+    mean, (lo, hi) = float(v[ok].mean()), band(n)
+    first = np.concatenate([row[m][:early] for row, m in zip(v, ok, strict=True)])
+    k, early_mean = first.size, float(first.mean())
+    bound = chi2_ppf(0.999, d * k) / k
+    rows = [(r[m].mean(), band(m.sum())) for r, m in zip(v, ok, strict=True) if m.any()]
+    fits = lo <= mean <= hi or abs(mean / d - 1.0) <= tolerance
+    early_fits = early_mean <= max(bound, (1.0 + tolerance) * d)
+    lines = [
+        f"NIS mean {mean:.3f} over {n} fixes is outside its {100 * level:g} % band "
+        f"{lo:.3f}–{hi:.3f}: " + (_DOES_NOT_FIT if mean > hi else _TOO_LOW)
+    ] * (not fits) + [
+        f"NIS mean {early_mean:.2f} of each run's first {early} fixes ({k} in all) is beyond "
+        f"its χ² 99.9 % point {bound:.2f}: " + _DOES_NOT_FIT
+    ] * (not early_fits)
+    verdict = lambda ok: "consistent" if ok else "does not fit"  # noqa: E731
+    out.update(nis_mean=mean, band=[lo, hi], verdict=verdict(fits), early_fixes=k)
+    out.update(early_nis_mean=early_mean, early_bound=bound, early_verdict=verdict(early_fits))
+    outside = [not b[0] <= m <= b[1] for m, b in rows]
+    out.update(runs_outside=float(np.mean(outside)), message="\n".join(lines))
+    return out

@@ -29,6 +29,7 @@ from .ekf import (
     feedback,
     loosely_coupled,
     nees_band,
+    nis_check,
     smooth,
     whitened_errors,
 )
@@ -69,7 +70,11 @@ class Flights(eqx.Module):
         in GNSS gaps; the fraction of epochs whose mean NEES lies inside its 95 % band, for
         all states and for the nine navigation states, each with a verdict ("consistent",
         "conservative", "overconfident", "undefined": `verdict`); the mean NIS (its
-        expectation is the innovation dimension; None when every fix fell in an outage)."""
+        expectation is the innovation dimension; None when every fix fell in an outage) and
+        `nis_check`, its truth-free verdict over all runs' fixes
+        ([`nis_check`][hrgjax.ins.ekf.nis_check]: the 99 % χ² band of the mean, the first
+        five fixes of each run against their 99.9 % point, and what to print when the filter's
+        model does not fit the data)."""
         gap = ~np.asarray(self.gnss_valid)
         gap[0] = False
         out = {"runs": self.runs, "epochs": int(self.t.shape[0]), "duration_s": float(self.t[-1])}
@@ -101,6 +106,7 @@ class Flights(eqx.Module):
         nis = np.asarray(self.nis)  # NaN where no fix: None when no epoch had one
         out["nis_mean"] = None if np.isnan(nis).all() else float(np.nanmean(nis))
         out["innovation_dim"] = self.innovation_dim
+        out["nis_check"] = nis_check(self.nis, self.innovation_dim)
         return out
 
 
