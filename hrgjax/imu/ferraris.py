@@ -286,7 +286,7 @@ def ferraris(
     g = check_g(g)
     turns = check_turn_deg(turn_deg, "turn_deg")
     turn_std = _check_turn_std(turn_deg_std)
-    _check_saturation(data, sections, g, gyro_range_dps, accel_range_g)
+    _check_saturation(data, sections, g, gyro_range_dps, accel_range_g, np.broadcast_to(turns, 3))
     got = _statistics(data, sections)
     stats, cov = got.stats, got.white + got.drift
     _check_faces(stats, g)
@@ -387,10 +387,18 @@ def _check_turn_std(turn_deg_std) -> np.ndarray:
     return std
 
 
+CLIPPED_SHORT = 0.02
+"""A gyro's flat top at its extreme counts as clipping (no range given) where the turn's
+integrated rate falls this share short of the declared turn angle."""
+
+
 def _check_saturation(data: ImuData, sections: Sections, g: float, gyro_range_dps,
-                      accel_range_g) -> None:  # fmt: skip
+                      accel_range_g, turns=None) -> None:  # fmt: skip
     """Refuse a gyro clipped in a turn or an accelerometer clipped on a face (see
-    `hrgjax.imu.sections.saturation`), naming the channel and the section."""
+    `hrgjax.imu.sections.saturation`), naming the channel and the section. Without a range,
+    a gyro's flat top counts only where its turn integrates `CLIPPED_SHORT` short of `turns`
+    [°] (a turntable's constant rate is flat and whole; a clipped turn loses angle), an
+    accelerometer's only beyond 1.5 g."""
     limits = []
     for name, value, to_si in (("gyro_range_dps", gyro_range_dps, DEG),
                                ("accel_range_g", accel_range_g, g)):  # fmt: skip
@@ -399,8 +407,12 @@ def _check_saturation(data: ImuData, sections: Sections, g: float, gyro_range_dp
         if not ok:
             raise ValueError(f"{name} must be a positive full-scale range or None; got {value!r}")
         limits.append(None if value is None else float(value) * to_si)
-    for key in TURNS:
+    gyro = np.asarray(data.gyro)
+    for i, key in enumerate(TURNS):
         got = saturation(data, sections[key], sensor="gyro", limit=limits[0])
+        if got and limits[0] is None and turns is not None:
+            turned = abs(sum(gyro[s:e, i].sum() for s, e in sections[key])) / float(data.rate_hz)
+            got = got if turned < (1 - CLIPPED_SHORT) * np.deg2rad(abs(turns[i])) else None
         if got:
             raise ValueError(
                 f"turn {key!r}: {got}: the turn integrates short and M_g would read low; turn "
@@ -409,7 +421,8 @@ def _check_saturation(data: ImuData, sections: Sections, g: float, gyro_range_dp
             )
     faces = [r for key in FACES for r in sections[key]]
     for key in FACES:
-        got = saturation(data, sections[key], sensor="accel", limit=limits[1], noise_ranges=faces)
+        got = saturation(data, sections[key], sensor="accel", limit=limits[1], noise_ranges=faces,
+                         above=1.5 * g)  # fmt: skip
         if got:
             raise ValueError(
                 f"face {key!r}: {got}: the face mean is biased; set the accelerometer to a "

@@ -230,7 +230,7 @@ SATURATION_MIN_SAMPLES = 5
 
 
 def saturation(data, ranges, *, sensor: str = "gyro", limit: float | None = None,
-               noise_ranges=None) -> str | None:  # fmt: skip
+               noise_ranges=None, above: float = 0.0) -> str | None:  # fmt: skip
     """The first clipped channel of `sensor` ("gyro" or "accel") within the row `ranges`
     [(start, end), …], as one line of text, or None.
 
@@ -238,10 +238,12 @@ def saturation(data, ranges, *, sensor: str = "gyro", limit: float | None = None
     consecutive samples, and `SATURATION_MIN_S` [s], equal (to 1e-9 relative: round-off of
     a unit conversion) to the channel's largest or smallest value in the whole record. A
     genuine record reaches its extreme once (noise); a saturated one holds it. With `limit`
-    (SI: [rad/s] or [m/s²]), any sample with |value| ≥ 0.999 `limit` is clipped as well.
-    `noise_ranges` [(start, end), …]: look for flat tops only in a channel that varies
-    within one of these ranges (the static faces of noise-free data are flat everywhere,
-    those of noisy data are not)."""
+    (SI: [rad/s] or [m/s²]), only a sample with |value| ≥ 0.999 `limit` is clipped (the range
+    is known: a flat top below it is genuine — a turntable's constant rate, a quantised
+    face). `noise_ranges` [(start, end), …]: look for flat tops only in a channel that
+    varies within one of these ranges (the static faces of noise-free data are flat
+    everywhere, those of noisy data are not); `above` (SI): only flat tops beyond it (an
+    accelerometer's face reads 1 g, and no part's range is below 2 g)."""
     x_all = np.asarray(getattr(data, sensor))
     rate = float(data.rate_hz)
     min_run = max(SATURATION_MIN_SAMPLES, int(np.ceil(SATURATION_MIN_S * rate)))
@@ -259,9 +261,11 @@ def saturation(data, ranges, *, sensor: str = "gyro", limit: float | None = None
                 if over.size:
                     return (f"{sensor} {'xyz'[c]} reads {part[over[0]] * scale:+.4g} {unit} at row "
                             f"{s + over[0]}, at its range ±{limit * scale:.4g} {unit}")  # fmt: skip
-            if c not in noisy:
+            if c not in noisy or limit is not None:
                 continue
             for extreme in (x.max(), x.min()):
+                if abs(extreme) <= above:
+                    continue
                 at = np.isclose(part, extreme, rtol=1e-9, atol=0.0)
                 runs = [(a, b) for a, b in _runs(at) if b - a >= min_run]
                 if runs:
