@@ -143,3 +143,13 @@ def test_an_initial_attitude_sigma_beyond_the_small_angle_limit_is_refused():
     assert ekf.MAX_ATTITUDE_SIGMA == 0.2
     ekf.LooselyCoupled(TACTICAL, gnss.Gnss(), attitude_sigma=(0.2, 0.2, 0.2))
     ekf.LooselyCoupled(TACTICAL, gnss.Gnss())
+
+
+def test_an_infinite_or_empty_nis_is_refused():
+    """An infinite NIS (a filter that broke) was dropped as a missing fix and the run read
+    "consistent"; an empty one raised numpy's reshape error (a reviewer's finding)."""
+    nis = np.full((2, 10), 6.0)
+    nis[0, 3] = np.inf
+    for bad in (nis, np.zeros((2, 0))):
+        with pytest.raises(ValueError, match="^nis_check: nis must be finite values"):
+            ekf.nis_check(bad, 6)

@@ -121,8 +121,7 @@ class FilterResult(eqx.Module):
         return jnp.sqrt(jnp.diagonal(self.P, axis1=-2, axis2=-1)[..., :3]) * d
 
     def nis_check(self, level: float = 0.99, early: int = 5) -> dict:
-        """[`nis_check`][hrgjax.ins.ekf.nis_check] of this pass's `nis` (host side; a
-        vmapped result's runs are pooled)."""
+        """[`nis_check`][hrgjax.ins.ekf.nis_check] of this pass's `nis` (host; runs pooled)."""
         return nis_check(self.nis, self.innovation_dim, level, early)
 
 
@@ -568,6 +567,8 @@ def nis_check(nis, innovation_dim: int, level=0.99, early: int = 5, tolerance=0.
     if not (0 < level < 1 and isinstance(early, int) and early >= 1 and tolerance >= 0):
         raise ValueError("nis_check: needs 0 < level < 1, early >= 1, tolerance >= 0")
     v = np.asarray(nis, float)
+    if v.size == 0 or np.isinf(v).any():  # an infinite NIS: a filter that broke
+        raise ValueError("nis_check: nis must be finite values (NaN where no fix), not empty")
     v = v.reshape(-1, v.shape[-1]) if v.ndim else v.reshape(1, 1)
     ok, d, a = np.isfinite(v), int(innovation_dim), 0.5 * (1.0 - level)
     band = lambda k: [chi2_ppf(a, d * k) / k, chi2_ppf(1.0 - a, d * k) / k]  # noqa: E731
