@@ -132,3 +132,25 @@ def test_bad_options_are_refused(kw):
     data, sections = _session()
     with pytest.raises(ValueError, match=next(iter(kw))):
         hg.imu.ferraris(data, sections, **kw)
+
+
+def test_a_turntables_constant_rate_is_not_taken_for_clipping():
+    """Turns at a constant rate with short ramps sit flat at the gyro's extreme for
+    hundreds of samples, and were refused as clipped (a reviewer's finding); they integrate
+    the whole turn, so they are not. The same session clipped 10 % below the plateau loses
+    angle and is refused."""
+    data, sections = _session(gyro_noise=0.0, accel_noise=0.0, move_s=6.0)
+    gy = np.array(data.gyro)
+    for ax, key in enumerate(("x_rot", "y_rot", "z_rot")):
+        a, b = sections[key][0]
+        rows = a + np.flatnonzero(np.abs(gy[a:b, ax]) > 1e-6)
+        ramp = np.linspace(0.0, 1.0, 12)[1:-1]
+        prof = np.r_[ramp, np.ones(rows.size - 2 * ramp.size), ramp[::-1]]
+        gy[rows, ax] = prof * gy[rows, ax].sum() / prof.sum()  # the same turn, flat-topped
+    table = ImuData(data.time, gy, data.accel, rate_hz=data.rate_hz)
+    cal = hg.imu.ferraris(table, sections)
+    np.testing.assert_allclose(np.diag(np.asarray(cal.gyro_matrix)), 1.0, atol=1e-9)
+    lim = 0.9 * np.abs(gy).max()
+    with pytest.raises(ValueError, match=r"^turn 'x_rot': gyro x saturates"):
+        hg.imu.ferraris(ImuData(data.time, np.clip(gy, -lim, lim), data.accel,
+                                rate_hz=data.rate_hz), sections)  # fmt: skip
