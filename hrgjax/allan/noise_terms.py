@@ -197,18 +197,19 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
         n, tau0 = rec
         ms = np.asarray(result.m, dtype=int)
         flicker = flicker_as_gauss_markov(ms, tau0) if "bias_instability" in fitted else []
+
+        def whitened(c):  # Ω at the fit c: its inverse Cholesky factor, A whitened, scales
+            omega = _omega(dict(zip(fitted, c, strict=True)), flicker, ms, n, tau0, var)
+            w_inv = np.linalg.inv(np.linalg.cholesky(omega))
+            a = w_inv @ basis
+            return w_inv, a, np.linalg.norm(a, axis=0)
+
         try:
             gls = coef
             for _ in range(_ROUNDS):
-                omega = _omega(dict(zip(fitted, gls, strict=True)), flicker, ms, n, tau0, var)
-                chol_inv = np.linalg.inv(np.linalg.cholesky(omega))
-                a = chol_inv @ basis
-                scale = np.linalg.norm(a, axis=0)
+                chol_inv, a, scale = whitened(gls)
                 gls = _nnls(a / scale, chol_inv @ var) / scale
-            omega = _omega(dict(zip(fitted, gls, strict=True)), flicker, ms, n, tau0, var)
-            chol_inv = np.linalg.inv(np.linalg.cholesky(omega))
-            a = chol_inv @ basis
-            scale = np.linalg.norm(a, axis=0)
+            chol_inv, a, scale = whitened(gls)
             gls_cov = np.linalg.pinv((a / scale).T @ (a / scale)) / np.outer(scale, scale)
         except np.linalg.LinAlgError:
             method = "independent: the covariance at the fit is degenerate"

@@ -386,17 +386,23 @@ def _six_angle(x):
     return jnp.concatenate([angles, jnp.diag(m) - 1.0, x[9:12]])
 
 
+def per_turn(value, name: str, form: str, ok) -> np.ndarray:
+    """`value` (one real number or three: the x, y, z turns) as a (3,) float array whose
+    entries all pass `ok` (a vectorised predicate); else one line naming `name` and `form`."""
+    try:
+        raw = np.asarray(value)
+        out = np.array(raw, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {form}; got {value!r}") from None
+    if raw.dtype.kind not in "iuf" or out.shape not in ((), (3,)):
+        raise ValueError(f"{name} must be {form}; got {value!r}")
+    out = np.broadcast_to(out, (3,)).copy()
+    if not np.all(np.isfinite(out) & ok(out)):
+        raise ValueError(f"{name} must be {form}; got {value!r}")
+    return out
+
+
 def check_turn_deg(turn_deg, name: str) -> np.ndarray:
     """`turn_deg` (one angle or three) as (3,) non-zero finite angles [°]."""
     form = "a non-zero angle [°] or three of them (x, y, z turns), e.g. 360 or -360"
-    try:
-        raw = np.asarray(turn_deg)
-        turns = np.array(raw, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {form}; got {turn_deg!r}") from None
-    if raw.dtype.kind not in "iuf" or turns.shape not in ((), (3,)):
-        raise ValueError(f"{name} must be {form}; got {turn_deg!r}")
-    turns = np.broadcast_to(turns, (3,)).copy()
-    if not np.all(np.isfinite(turns) & (turns != 0)):
-        raise ValueError(f"{name} must be {form}; got {turn_deg!r}")
-    return turns
+    return per_turn(turn_deg, name, form, lambda v: v != 0)

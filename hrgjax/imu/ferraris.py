@@ -69,7 +69,7 @@ from ._calibration import FORMAT as FORMAT
 from ._calibration import G_RANGE_M_S2 as G_RANGE_M_S2
 from ._calibration import PARAMETERS as PARAMETERS
 from ._calibration import ImuCalibration as ImuCalibration
-from ._calibration import check_g, check_turn_deg, flat_parameters
+from ._calibration import check_g, check_turn_deg, flat_parameters, per_turn
 from ._calibration import load_calibration as load_calibration
 from ._drift import walk_kernel, walk_posterior_mean
 from .data import ImuData
@@ -374,17 +374,7 @@ def _turn_covariance(params: np.ndarray, turns: np.ndarray, turn_std: np.ndarray
 
 def _check_turn_std(turn_deg_std) -> np.ndarray:
     form = "a standard deviation [°] ≥ 0, one or three (x, y, z turns), e.g. 1.0 for hand turns"
-    try:
-        raw = np.asarray(turn_deg_std)
-        std = np.array(raw, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"turn_deg_std must be {form}; got {turn_deg_std!r}") from None
-    if raw.dtype.kind not in "iuf" or std.shape not in ((), (3,)):
-        raise ValueError(f"turn_deg_std must be {form}; got {turn_deg_std!r}")
-    std = np.broadcast_to(std, (3,)).copy()
-    if not np.all(np.isfinite(std) & (std >= 0)):
-        raise ValueError(f"turn_deg_std must be {form}; got {turn_deg_std!r}")
-    return std
+    return per_turn(turn_deg_std, "turn_deg_std", form, lambda v: v >= 0)
 
 
 CLIPPED_SHORT = 0.02
