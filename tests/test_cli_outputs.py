@@ -148,3 +148,31 @@ def test_simulate_says_what_it_runs_before_it_runs(tmp_path, monkeypatch, capsys
     argv = ["simulate", "--plan", "rotation", "--duration", "5", "--out", str(tmp_path / "r.csv")]
     assert main(argv) == 0
     assert "simulating 209 runs × 5 s … (compiling the simulator first" in said[0]
+
+
+def test_each_plan_kind_draws_its_own_noise_from_one_seed(tmp_path, monkeypatch):
+    """`--plan static` and `--plan rotation` with one `--seed` are one switch-on (the same
+    run-bias key) but not one noise realisation (they drew the same key, sample for sample);
+    `--plan seed` draws its static and rotation halves from the single plans' keys."""
+    import jax
+
+    from hrgjax import calibration as cal
+
+    keys = []
+
+    def run_plan(gyro, plan, *, key, bias_key, **kw):  # the work, replaced: the keys it got
+        keys.append((plan.size, jax.random.key_data(key), jax.random.key_data(bias_key)))
+        t, run = np.arange(3.0), np.full(3, float(kw.get("first_run", 0)))
+        return hg.MeasuredData({"time_s": t, "run": run, "temperature_c": np.full(3, 20.0),
+                                "table_rate_dps": np.zeros(3), "wave_angle_deg": np.zeros(3)})  # fmt: skip
+
+    monkeypatch.setattr(cal, "run_plan", run_plan)
+    for plan in ("static", "rotation", "seed"):
+        argv = ["simulate", "--plan", plan, "--seed", "3", "--out", str(tmp_path / f"{plan}.csv")]
+        assert main(argv) == 0
+    (_, k_static, b_static), (_, k_rot, b_rot), (_, k_s1, b_s1), (_, k_s2, b_s2) = keys
+    assert not np.array_equal(k_static, k_rot)
+    np.testing.assert_array_equal(b_static, b_rot)
+    np.testing.assert_array_equal(k_s1, k_static)
+    np.testing.assert_array_equal(k_s2, k_rot)
+    np.testing.assert_array_equal(b_s1, b_static)

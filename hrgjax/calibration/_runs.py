@@ -68,7 +68,8 @@ def switch_on_keys(
 ) -> tuple[jax.Array | None, jax.Array | None]:
     """(one noise key per run, the switch-on key) of `size` runs of one switch-on: `key`
     split in two, the first half split again into the runs' keys (so a run's data do not
-    depend on the other runs'), the second the switch-on's unless `bias_key` is given.
+    depend on the other runs' — with JAX's `jax_threefry_partitionable`, on by default since
+    JAX 0.5, `split(k, n)[i]` does not depend on `n`), the second the switch-on's unless `bias_key` is given.
     Without noise: `(None, bias_key)`.
 
     **Raises:** `ValueError` when the gyro has noise and `key` is None."""

@@ -25,8 +25,14 @@ from ._common import (
     usage_errors,
 )
 
+STREAMS = {"static": 10, "rotation": 11, "precession": 12, "reversal": 13}
+"""The noise stream each plan kind draws from ``fold_in(key(seed), stream)``: one `--seed`
+is one switch-on (the run bias from ``fold_in(key, 1)``), and each kind has noise of its own
+— ``--plan static`` and ``--plan rotation`` with one seed are not one noise realisation read
+twice (they were: both drew stream 10); ``--plan seed`` draws 10 and 11 as before."""
 
-def _run_plans(gyro, plans, seed: int):
+
+def _run_plans(gyro, plans, seed: int, first_stream: int = STREAMS["static"]):
     import jax
 
     from ..calibration import run_plan
@@ -39,7 +45,11 @@ def _run_plans(gyro, plans, seed: int):
         _simulating(f"{plan.size} runs × {plan.duration_s:g} s", first=i == 0)
         t0 = time.perf_counter()
         data = run_plan(
-            gyro, plan, key=jax.random.fold_in(key, 10 + i), bias_key=bias_key, first_run=first
+            gyro,
+            plan,
+            key=jax.random.fold_in(key, first_stream + i),
+            bias_key=bias_key,
+            first_run=first,
         )
         print(
             f"  simulated {plan.size} runs × {plan.duration_s:g} s in "
@@ -112,7 +122,7 @@ def cmd_simulate(args) -> int:
         plans = list(seed_plan(quick=args.quick))
     mode = "" if args.mode == "wa" else ", force-to-rebalance"
     print(f"hrgjax simulate: preset {args.preset}{mode}, plan {args.plan}")
-    data = _run_plans(gyro, plans, args.seed)
+    data = _run_plans(gyro, plans, args.seed, STREAMS.get(args.plan, STREAMS["static"]))
     return finish((args.out, _rows(data)))
 
 
@@ -137,7 +147,7 @@ def _self_calibration_plan(args, gyro) -> int:
         print(f"hrgjax simulate: preset {args.preset}, virtual precession at ±{args.precession:g} "
               f"°/s, {len(temps)} temperatures, {plan.size} sweeps × {plan.duration_s:g} s")  # fmt: skip
         _simulating(f"{plan.size} sweeps × {plan.duration_s:g} s")
-        data = sc.run_precession_plan(gyro, plan, key=jax.random.fold_in(key, 10),
+        data = sc.run_precession_plan(gyro, plan, key=jax.random.fold_in(key, STREAMS["precession"]),
                                       bias_key=bias_key)  # fmt: skip
     else:
         if args.mode != "ftr":
@@ -146,7 +156,7 @@ def _self_calibration_plan(args, gyro) -> int:
               f"{len(temps)} temperatures, held {args.duration:g} s at 0° and 90°")  # fmt: skip
         _simulating(f"{len(temps)} runs of two {args.duration:g}-s holds")
         data = sc.run_reversal_plan(gyro, temps, 0.0, args.duration,
-                                    key=jax.random.fold_in(key, 10), bias_key=bias_key)  # fmt: skip
+                                    key=jax.random.fold_in(key, STREAMS["reversal"]), bias_key=bias_key)  # fmt: skip
     print(f"  simulated in {time.perf_counter() - t0:.1f} s", flush=True)
     return finish((args.out, _rows(data)))
 

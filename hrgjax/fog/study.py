@@ -175,7 +175,9 @@ def run(
         "train_s": train_s,
     }
     f, p = psd(acc_b[:, 2] / G0, fs, 1024)
-    rest = simulate(true_imu, VibrationSchedule.constant(0.0, 0.0, 60.0), fs=fs, key=k_rec)
+    # its own noise: k_rec's would make the rest record the scenario's first minute again
+    rest = simulate(true_imu, VibrationSchedule.constant(0.0, 0.0, 60.0), fs=fs,
+                    key=jax.random.fold_in(k_rec, 1))  # fmt: skip
     _, p0 = psd(to_body(est.accel, rest.accel)[:, 2] / G0, fs, 1024)
     test_pred = {k: np.asarray(jax.vmap(c)(test.features)) / DEG_PER_H for k, c in nets.items()}
     out["_figures"] = {
