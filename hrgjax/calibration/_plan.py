@@ -155,7 +155,13 @@ class BenchPlan(eqx.Module):
     @classmethod
     def from_segments(cls, segments: Sequence[Mapping], where: str = "segments") -> BenchPlan:
         """A plan from the plan file's list of segment dicts (keys with units in their
-        names, as in the module docstring). Every error names the segment and the key."""
+        names, as in the module docstring). Every error names the segment and the key.
+
+        The values stay float64 whatever JAX's mode: device arrays with float64 on, NumPy
+        float64 arrays (host values, a pytree's leaves as well) with it off, where a device
+        array would be float32 and round a temperature of −40.123456789012344 °C to
+        −40.123455 without a word. A plan read with float64 off is written back bit for bit;
+        what computes with it in float64 (`design`, `simulate_plan`) asks for the mode."""
         if isinstance(segments, (str, bytes)) or not isinstance(segments, Sequence):
             raise ValueError(f"{where} must be a list of segment objects; got {type(segments)}")
         if not segments:
@@ -194,7 +200,7 @@ class BenchPlan(eqx.Module):
             cols["duration_s"].append(val["duration_s"])
             kinds.append(kind)
         try:
-            return cls(tuple(kinds), **{k: device(np.asarray(v)) for k, v in cols.items()})
+            return cls(tuple(kinds), **{k: _float64_leaf(v) for k, v in cols.items()})
         except ValueError as err:
             raise ValueError(f"{where}: {err}") from None
 
@@ -332,6 +338,13 @@ class BenchModel(eqx.Module):
             "start_temperature_c": float(self.start_temperature_c),
             "settle_scale_c": float(self.settle_scale_c),
         }
+
+
+def _float64_leaf(values) -> jax.Array | np.ndarray:
+    """A plan's per-segment values (host floats) as a leaf that keeps them float64: a device
+    array with JAX's float64 mode on, else the NumPy float64 array (float32 would round)."""
+    x = np.asarray(values, dtype=np.float64)
+    return device(x) if jax.config.read("jax_enable_x64") else x
 
 
 def bench_time_h(plan: BenchPlan, bench: BenchModel | None = None) -> jax.Array:

@@ -114,7 +114,9 @@ def load_plan(path: str | os.PathLike, *, blocks: bool = False):
     (`plan_to_json`) are checked; with `blocks=True` they come back too, as a third item
     (a dict holding those the file has), so `save_plan(plan, new_path, bench, **blocks)`
     writes the same file again. Files without them load as before. Errors name the file,
-    the segment and the key."""
+    the segment and the key. The values stay float64 with JAX's float64 mode off too (NumPy
+    leaves: `BenchPlan.from_segments`), so `save_plan` writes the segments back bit for bit
+    (`bench_time_h`, computed, in JAX's precision)."""
     doc = read_json(path)
     where = f"{os.fspath(path)}"
     if not isinstance(doc, dict) or "segments" not in doc:

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._x64 import require_x64
 from .data import ImuData
 from .triad import ANGLE_AXES, TriadCalibration
 
@@ -45,7 +46,8 @@ class ImuCalibration(eqx.Module):
     "repeats and white noise" or "none": see `hrgjax.imu.ferraris`); `bias_walk` (2,) or None:
     the in-run random walk of the biases the session showed (the posterior mean of its
     intensity from the face contrasts: `hrgjax.imu._drift.walk_posterior_mean`), gyros
-    [rad/s/√s] and accelerometers [m/s²/√s] (None when set by hand).
+    [rad/s/√s] and accelerometers [m/s²/√s] (None when set by hand: saved as `null` and
+    read back as None, never as a zero walk).
 
     Standard errors: `accel_matrix_std`, `accel_bias_std`, `gyro_matrix_std`, `gyro_bias_std`,
     `gyro_g_sensitivity_std`; the six-angle form of
@@ -172,13 +174,19 @@ class ImuCalibration(eqx.Module):
     # ---- files -------------------------------------------------------------------------
     def to_json(self) -> dict:
         """JSON-ready dict: the contract's matrices and biases with units in the key names,
-        their standard errors, the covariance, the six-angle forms (read-only extras)."""
+        their standard errors, the covariance, the six-angle forms (read-only extras);
+        `"bias_walk"` is `null` for a calibration without one (set by hand)."""
 
         def lst(x):
             return np.asarray(x).tolist()
 
         acc, gyr = self.accel_triad(), self.gyro_triad()
-        walk = [0.0, 0.0] if self.bias_walk is None else lst(self.bias_walk)
+        walk = None  # null: none measured (set by hand), not a zero walk
+        if self.bias_walk is not None:
+            walk = {
+                "gyro_rad_s_per_sqrt_s": float(self.bias_walk[0]),
+                "accel_m_s2_per_sqrt_s": float(self.bias_walk[1]),
+            }
         return {
             "format": FORMAT,
             "version": 1,
@@ -203,10 +211,7 @@ class ImuCalibration(eqx.Module):
             "g_m_s2": self.g,
             "turn_deg": list(self.turn_deg),
             "sigma_source": self.sigma_source,
-            "bias_walk": {
-                "gyro_rad_s_per_sqrt_s": walk[0],
-                "accel_m_s2_per_sqrt_s": walk[1],
-            },
+            "bias_walk": walk,
             "six_angle_form": {
                 "angle_order": ["xy", "xz", "yx", "yz", "zx", "zy"],
                 "accel_scale": lst(acc.scale),
@@ -232,10 +237,16 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
     **Raises:** `ValueError` naming the file and the field for a file of another format, a
     field of the wrong shape or holding text or booleans where numbers belong, a singular `accel_matrix` or `gyro_matrix`, a negative
     variance, a `g_m_s2` outside [`G_RANGE_M_S2`][hrgjax.imu.ferraris.G_RANGE_M_S2] or a
-    `turn_deg` that is not three non-zero angles."""
+    `turn_deg` that is not three non-zero angles; `RuntimeError` (one line) when JAX's
+    float64 mode is off: the calibration's arrays are JAX arrays, and float32 would round
+    the saved float64 values (a gyro bias by ~3e-8 of itself) without a word.
+
+    A `"bias_walk"` that is `null` or absent (files written before it existed) reads None;
+    one written as numbers (`[0, 0]` included) reads those numbers, as before."""
     from .._io import read_json
 
     path = os.fspath(path)
+    require_x64(f"hg.imu.load_calibration({path!r})")
     obj = read_json(path)
     if not isinstance(obj, dict) or obj.get("format") != FORMAT:
         raise ValueError(f'{path}: not an hrgjax IMU calibration (no "format": "{FORMAT}")')
@@ -275,8 +286,10 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
         )
     noise_std = _nonnegative(path, "noise_std", obj.get("noise_std", {}),
                              ("gyro_rad_s", "accel_m_s2"), 3)  # fmt: skip
-    bias_walk = _nonnegative(path, "bias_walk", obj.get("bias_walk", {}),
-                             ("gyro_rad_s_per_sqrt_s", "accel_m_s2_per_sqrt_s"), None)  # fmt: skip
+    bias_walk = obj.get("bias_walk")  # null or absent: none measured (set by hand)
+    if bias_walk is not None:
+        bias_walk = _nonnegative(path, "bias_walk", bias_walk,
+                                 ("gyro_rad_s_per_sqrt_s", "accel_m_s2_per_sqrt_s"), None)  # fmt: skip
     g = check_g(obj.get("g_m_s2", 9.81), f"{path}: field 'g_m_s2'")
     turn_deg = check_turn_deg(obj.get("turn_deg", [360.0] * 3), f"{path}: field 'turn_deg'")
     source = obj.get("sigma_source", "none")

@@ -191,14 +191,15 @@ class ImuData:
         """Write the record as CSV in SI units (columns `time_s`, `gyro_x_rad_s` … `gyro_z_rad_s`,
         `accel_x_m_s2` … `accel_z_m_s2`, `temperature_c`), after a comment line
         `# rate_hz = …` holding the nominal sample rate [Hz] exactly, atomically; returns the
-        path. Read it back with `load(path, columns=SI_COLUMNS, units=SI_UNITS)` (which takes
-        the rate from that comment)."""
+        path. Read it back with `load(path, columns=SI_COLUMNS, units=SI_UNITS)`, which takes
+        the rate from that comment and the temperature from the `temperature_c` column where
+        the file has one: the same record, every value bit for bit."""
         from .._io import atomic_write
 
         names = [SI_COLUMNS["time"], *SI_COLUMNS["gyro"], *SI_COLUMNS["accel"]]
         cols = [self.time[:, None], self.gyro, self.accel]
         if self.temperature is not None:
-            names.append("temperature_c")
+            names.append(_SAVED_TEMPERATURE)
             cols.append(self.temperature[:, None])
         table = np.concatenate(cols, axis=1)
         with atomic_write(path, "w", newline="", encoding="utf-8") as fh:
@@ -213,8 +214,11 @@ SI_COLUMNS = {
     "gyro": ["gyro_x_rad_s", "gyro_y_rad_s", "gyro_z_rad_s"],
     "accel": ["accel_x_m_s2", "accel_y_m_s2", "accel_z_m_s2"],
 }
-"""The column map of files written by [`ImuData.save`][hrgjax.imu.ImuData.save] (add
-`"temperature": "temperature_c"` for a record that has a temperature)."""
+"""The column map of files written by [`ImuData.save`][hrgjax.imu.ImuData.save]. `load` with
+these gyro and accelerometer columns also reads the file's `temperature_c` column, where it
+has one, as the record's temperature [°C]; `"temperature": "temperature_c"` makes that
+column required, `"temperature": None` leaves it out."""
+_SAVED_TEMPERATURE = "temperature_c"  # the temperature column [°C] ImuData.save writes
 SI_UNITS = {"gyro": "rad/s", "accel": "m/s^2"}
 """The units of files written by [`ImuData.save`][hrgjax.imu.ImuData.save]."""
 
@@ -233,7 +237,10 @@ def load(
     - `path`: CSV file (UTF-8, a header row, comma-separated; `#` lines are comments).
     - `columns`: `{"gyro": [x, y, z column names], "accel": [x, y, z column names]}`, and
       optionally `"time"` (a column in seconds) and `"temperature"` (°C). Other columns are
-      ignored.
+      ignored, except that with the gyro and accelerometer columns of
+      [`SI_COLUMNS`][hrgjax.imu.data.SI_COLUMNS] (a file `ImuData.save` wrote) and no
+      `"temperature"` key, a `temperature_c` column is read as the temperature, so that a
+      saved record comes back whole; `"temperature": None` leaves it out.
     - `units`: `{"gyro": "deg/s" | "rad/s" | …, "accel": "m/s^2" | "g" | …}`
       ([`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS]).
     - `rate_hz`: sample rate [Hz]; needed when there is no time column, otherwise the
@@ -258,12 +265,19 @@ def load(
         raise FileNotFoundError(f"{path}: no such file")
     names = _column_map(columns)
     _declared(units)
+    saved_layout = (
+        "temperature" not in columns  # an explicit None leaves the saved temperature out
+        and names["gyro"] == SI_COLUMNS["gyro"]
+        and names["accel"] == SI_COLUMNS["accel"]
+    )
     comment = None  # (line, text) of the file's `# rate_hz = …` when the rate comes from it
     if rate_hz is None:
         rate_hz, comment = _saved_rate(path)
     # a plain numeric file: NumPy's C parser, streamed; an integer a float64 would round (a
     # nanosecond time stamp) refused in the columns used, naming the column, row and line
     table, lines = read_csv_table(path, exact_integers=_all_names(names))
+    if saved_layout and _SAVED_TEMPERATURE in table:
+        names["temperature"] = _SAVED_TEMPERATURE  # ImuData.save's: not dropped
     try:
         return _build(path, names, table, lines, units, rate_hz, check_units)
     except ValueError as err:
