@@ -28,18 +28,23 @@ Allan variance flat within 2 % from 2 s to 8 192 s, 17 % higher at 1 s where the
 noise is 44× larger; B read off its mean) and a rate random walk overtaking B at 1 000 s,
 fitted with N, B and K; and N + B fitted
 with N and B. For each coefficient: the share of records whose truth lies within value ± σ
-and within the 95 % interval, and the z-RMS of (value − truth)/σ. "before": the fit as it
-was until issue 58 (EDF weights, the τ points taken as independent, re-computed here);
-"after": `fit_noise` now (GLS under the estimator's covariance at the fit).
+and within the 68.27 % and 95 % intervals (each record fitted at both levels), the z-RMS of
+(value − truth)/σ, the median width of the 95 % interval over the symmetric one's, and
+fit_noise's mean time per call. Intervals: "pre-58" the fit as it was until issue 58 (EDF
+weights, the τ points taken as independent, re-computed here); "sym" the GLS fit's
+symmetric interval on the coefficient², c² ± zσ(c²) (fit_noise's until the skewed one,
+re-computed here from its value and σ); "now" what `fit_noise` reports (the estimate's
+skewed law inverted). Run against an older hrgjax (PYTHONPATH) the "now" column is its own.
 
 Usage: `.venv/bin/python benchmarks/coverage_allan.py [--n 200] [--seed 0]
 [--noise-rule hrgjax|stable32] [--fit-noise]` (200 records per balance: about 15 s on 2
-cores; `--fit-noise`: about 60 s).
+cores; `--fit-noise`: 4–7 min on 2 busy cores, `--n 400` 13 min).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 
@@ -53,6 +58,7 @@ import hrgjax as hg  # noqa: E402
 LENGTH = 20_000  # samples at 1 Hz
 WHITE = 1.0  # N: the white noise σ per 1-s sample [rate unit]
 ANGLE_WHITE = 30.0  # σ_x: white angle (readout) noise per sample [rate unit × s]
+ONE_SIGMA = 0.682689  # the ±1σ level of a normal law
 BALANCES = (("rate", 300.0), ("rate", 2000.0), ("angle", 1000.0))
 """(the white noise, τ [s] where the random walk overtakes it)."""
 
@@ -173,12 +179,21 @@ def _independent(result, terms):
     return out
 
 
+def _symmetric(value, sigma, z):
+    """fit_noise's interval before the skewed one (GLS, from issue 58): c² ± z·σ(c²)
+    (σ(c²) = 2cσ_c), a negative end at 0, the ends' square roots."""
+    sc = 2 * value * sigma
+    return np.sqrt(np.maximum(value**2 - z * sc, 0.0)), np.sqrt(value**2 + z * sc)
+
+
 def run_fit_noise(n: int, seed: int):
-    """{case: {term: {"before"|"after": (records, 4) of value, σ, low, high}}}, truths, methods."""
+    """{case: ({term: {"before"|"after": (records, 6) of value, σ, low, high at 95 % and low,
+    high at 68.27 %}}, truth)}, the methods, the flicker's ripple and fit_noise's mean time
+    per call [s] (the 95 % fit)."""
     taus = 2.0 ** np.arange(int(math.log2(LENGTH / 2)) + 1)
     unit_s2, flat = _flicker_unit_level(taus)
     ripple = float(np.max(np.abs(flat[1:] * unit_s2 / (2 * math.log(2) / math.pi) - 1)))
-    out, methods = {}, set()
+    out, methods, seconds = {}, set(), []
     for case, terms, b, k in FIT_CASES:
         rng = np.random.default_rng(seed)
         truth = {"angle_random_walk": WHITE, "bias_instability": b, "rate_random_walk": k}
@@ -190,22 +205,31 @@ def run_fit_noise(n: int, seed: int):
             if b:
                 y += _flicker(rng, b * b * unit_s2)
             r = hg.allan.deviation(y, 1.0, kind="oadev", taus="octave", ci=0.95)
+            t0 = time.perf_counter()
             fit = hg.allan.fit_noise(r, terms=terms)
+            seconds.append(time.perf_counter() - t0)
+            fit68 = hg.allan.fit_noise(dataclasses.replace(r, ci=ONE_SIGMA), terms=terms)
             methods.add(fit.method)
             old = _independent(r, terms)
             for t in terms:
-                got[t]["before"].append(old[t])
-                got[t]["after"].append((fit.value[t], fit.sigma[t], fit.low[t], fit.high[t]))
+                got[t]["before"].append(old[t] + (math.nan, math.nan))
+                got[t]["after"].append((fit.value[t], fit.sigma[t], fit.low[t], fit.high[t],
+                                        fit68.low[t], fit68.high[t]))  # fmt: skip
         out[case] = ({t: {w: np.asarray(v) for w, v in d.items()} for t, d in got.items()},
                      truth)  # fmt: skip
-    return out, methods, ripple
+    return out, methods, ripple, float(np.mean(seconds))
 
 
 def fit_figures(rows, truth):
-    value, sigma, low, high = rows.T
+    value, sigma, low, high, low68, high68 = rows.T
     z = (value - truth) / np.maximum(sigma, 1e-300)
+    sym_lo, sym_hi = _symmetric(value, sigma, 1.959964)
+    sym68_lo, sym68_hi = _symmetric(value, sigma, 1.0)
+    held = lambda lo, hi: float(np.mean((lo <= truth) & (truth <= hi)))  # noqa: E731
     return {"within_1sigma": float(np.mean(np.abs(z) < 1.0)),
-            "within_95": float(np.mean((low <= truth) & (truth <= high))),
+            "within_95": held(low, high), "within_68": held(low68, high68),
+            "symmetric_95": held(sym_lo, sym_hi), "symmetric_68": held(sym68_lo, sym68_hi),
+            "width_ratio": float(np.median(((high - low) / (sym_hi - sym_lo))[value > 0])),
             "z_rms": float(np.sqrt(np.mean(z**2))), "bias": float(np.mean(value) / truth - 1)}  # fmt: skip
 
 
@@ -213,22 +237,32 @@ def main_fit_noise(args):
     from _common import report
 
     t0 = time.perf_counter()
-    out, methods, ripple = run_fit_noise(args.n, args.seed)
-    print(f"fit_noise: {args.n} records of {LENGTH} s per case, oadev octaves; flicker's "
-          f"Allan variance flat within {100 * ripple:.1f} % for τ ≥ 2 s; method(s) after: {sorted(methods)}")  # fmt: skip
-    print(f"{'case':>10} {'term':>18} {'±1σ before':>11} {'±1σ after':>10} {'95% before':>11} "
-          f"{'95% after':>10} {'z-RMS before':>13} {'z-RMS after':>12} {'mean/truth−1':>13}")  # fmt: skip
+    out, methods, ripple, per_fit = run_fit_noise(args.n, args.seed)
+    print(f"fit_noise: {args.n} records of {LENGTH} s per case (seed {args.seed}), oadev octaves; "
+          f"flicker's Allan variance flat within {100 * ripple:.1f} % for τ ≥ 2 s; method(s) "
+          f"after: {sorted(methods)}; fit_noise {1e3 * per_fit:.0f} ms a call (mean)")  # fmt: skip
+    print("intervals held (truth inside): 'pre-58' EDF weights, τ independent; 'symmetric' "
+          "c² ± zσ(c²) of the GLS fit; 'now' what fit_noise reports (its interval at the "
+          "result's ci, 95 % and 68.27 %); width: median (high − low) now / symmetric at 95 %")  # fmt: skip
+    print(f"{'case':>10} {'term':>18} {'±1σ':>5} {'68% sym':>8} {'68% now':>8} "
+          f"{'95% pre-58':>11} {'95% sym':>8} {'95% now':>8} {'width':>6} {'z-RMS':>6} "
+          f"{'mean/truth−1':>13}")  # fmt: skip
     for case, (got, truth) in out.items():
         for t, d in got.items():
             b, a = fit_figures(d["before"], truth[t]), fit_figures(d["after"], truth[t])
-            print(f"{case:>10} {t:>18} {100 * b['within_1sigma']:10.0f}% "
-                  f"{100 * a['within_1sigma']:9.0f}% {100 * b['within_95']:10.0f}% "
-                  f"{100 * a['within_95']:9.0f}% {b['z_rms']:13.2f} {a['z_rms']:12.2f} "
+            print(f"{case:>10} {t:>18} {100 * a['within_1sigma']:4.0f}% "
+                  f"{100 * a['symmetric_68']:7.1f}% {100 * a['within_68']:7.1f}% "
+                  f"{100 * b['within_95']:10.1f}% {100 * a['symmetric_95']:7.1f}% "
+                  f"{100 * a['within_95']:7.1f}% {a['width_ratio']:6.2f} {a['z_rms']:6.2f} "
                   f"{a['bias']:+13.3f}")  # fmt: skip
             if t != "angle_random_walk":
                 for when, f in (("before", b), ("after", a)):
                     report(f"fit_noise {t} z-RMS, {case}, {when}", f["z_rms"], "",
                            target="1 ± 0.15")  # fmt: skip
+            report(f"fit_noise {t} 95 % interval held, {case}", 100 * a["within_95"], "%",
+                   target="95 ± 2 %")  # fmt: skip
+            report(f"fit_noise {t} 68 % interval held, {case}", 100 * a["within_68"], "%",
+                   target="68 ± 4 %")  # fmt: skip
     print(f"\n{time.perf_counter() - t0:.0f} s")
 
 

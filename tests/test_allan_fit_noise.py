@@ -3,7 +3,6 @@ built here by brute force from the record's Gaussian law, and by a small Monte C
 known truth."""
 
 import math
-from statistics import NormalDist
 
 import numpy as np
 import pytest
@@ -33,11 +32,10 @@ def _brute_omega(value, ms, n, tau0):
     return np.array([[2 * np.sum(a * b.T) for b in forms] for a in forms])
 
 
-def test_sigma_is_the_gls_covariance_of_the_overlapping_estimates():
-    """On one record the reported σ of N and K equal √((AᵀΩ⁻¹A)⁻¹) (delta method to the
-    coefficients) with Ω the estimates' covariance at the fitted model computed here by
-    brute force, and the fit is GLS's fixed point under that Ω (fit_noise before: σ 27 %
-    too small)."""
+@pytest.fixture(scope="module")
+def one_record():
+    """A record of 300 samples with white rate noise and a rate random walk, its oadev on the
+    octave grid, fit_noise's N and K, the basis and the brute-force Ω at the fit."""
     rng = np.random.default_rng(3)
     y = 1.0 * rng.normal(size=N_SAMPLES) + 0.02 * np.cumsum(rng.normal(size=N_SAMPLES))
     res = allan.deviation(y, 1.0 / TAU0, kind="oadev", taus="octave")
@@ -45,6 +43,15 @@ def test_sigma_is_the_gls_covariance_of_the_overlapping_estimates():
     ms = np.asarray(res.m, dtype=int)
     omega = _brute_omega(fit.value, ms, N_SAMPLES, TAU0)
     basis = np.stack([f(res.taus) for n, _, _, f in allan.NOISE_TERMS if n in TERMS], axis=1)
+    return res, fit, ms, basis, omega
+
+
+def test_sigma_is_the_gls_covariance_of_the_overlapping_estimates(one_record):
+    """On one record the reported σ of N and K equal √((AᵀΩ⁻¹A)⁻¹) (delta method to the
+    coefficients) with Ω the estimates' covariance at the fitted model computed here by
+    brute force, and the fit is GLS's fixed point under that Ω (fit_noise before: σ 27 %
+    too small)."""
+    res, fit, _, basis, omega = one_record
     w = np.linalg.inv(omega)
     cov = np.linalg.inv(basis.T @ w @ basis)
     c2 = np.array([fit.value[t] ** 2 for t in TERMS])
@@ -52,12 +59,66 @@ def test_sigma_is_the_gls_covariance_of_the_overlapping_estimates():
     np.testing.assert_allclose([fit.sigma[t] for t in TERMS], sigma, rtol=2e-3)
     gls = cov @ basis.T @ w @ res.dev**2  # both coefficients positive: the unconstrained GLS
     np.testing.assert_allclose(c2, gls, rtol=2e-3)
-    zq = NormalDist().inv_cdf(0.5 + res.ci / 2)  # the interval: c² ± zσ(c²), its ends' roots
-    for i, t in enumerate(TERMS):
-        sc = math.sqrt(cov[i, i])
-        assert fit.low[t] == pytest.approx(math.sqrt(max(c2[i] - zq * sc, 0.0)), rel=2e-3)
-        assert fit.high[t] == pytest.approx(math.sqrt(c2[i] + zq * sc), rel=2e-3)
     assert fit.method == "gls"
+
+
+def test_interval_inverts_the_estimates_skewed_law(one_record):
+    """The interval on each coefficient² is where the estimate's law puts the estimate at
+    its (1 ± ci)/2 quantiles: ĉ² = L·σ̂² (L the GLS rows under the brute-force Ω) has
+    variance own·θ² + rest — own = L Ω₁ Lᵀ with Ω₁ the term's own covariance at unit
+    coefficient², rest the others' share at the fit — and the third cumulant of its own part
+    θχ²_ν/ν (ν = 2/own), as a Pearson III law (a gamma of shape 4/skew², shifted to mean θ):
+    inverted here by bisection with scipy's incomplete gamma. The intervals (at the default
+    68.3 %) are asymmetric: K's upper end 1.7× as far from K as its lower (fit_noise before:
+    c² ± zσ(c²), K's low 0 and its high 25 % lower)."""
+    from scipy.special import gammainc
+
+    res, fit, ms, basis, omega = one_record
+    w = np.linalg.inv(omega)
+    weights = np.linalg.inv(basis.T @ w @ basis) @ basis.T @ w
+    q = (1 + res.ci) / 2
+    for i, t in enumerate(TERMS):
+        alone = {s: float(s == t) for s in TERMS}
+        own = weights[i] @ _brute_omega(alone, ms, N_SAMPLES, TAU0) @ weights[i]
+        c2 = fit.value[t] ** 2
+        rest = weights[i] @ omega @ weights[i] - own * c2**2
+
+        def cdf(theta, own=own, rest=rest, c2=c2):  # Pearson III: P(ĉ² ≤ c2 | θ)
+            sd = math.sqrt(own * theta**2 + rest)
+            skew = 2 * own**2 * theta**3 / sd**3
+            shape, scale = 4 / skew**2, sd * skew / 2
+            return gammainc(shape, max(c2 - theta + shape * scale, 0.0) / scale)
+
+        def solve(p, lo, hi, cdf=cdf):  # the θ where the falling cdf crosses p
+            for _ in range(200):
+                mid = math.sqrt(lo * hi)
+                lo, hi = (mid, hi) if cdf(mid) > p else (lo, mid)
+            return lo
+
+        assert fit.low[t] == pytest.approx(math.sqrt(solve(q, 1e-3 * c2, c2)), rel=1e-6)
+        assert fit.high[t] == pytest.approx(math.sqrt(solve(1 - q, c2, 1e3 * c2)), rel=1e-6)
+    k = "rate_random_walk"
+    assert fit.high[k] - fit.value[k] > 1.5 * (fit.value[k] - fit.low[k])
+
+
+def test_one_tau_interval_is_the_allan_variances_chi2_interval():
+    """Exact truth: N fitted to one τ of a non-overlapping Allan deviation (τ points taken
+    as independent with the estimate's EDF) is N = σ̂√τ, and its interval must be the
+    Allan deviation's own χ² interval (NIST SP 1065 eq. 45: ν σ̂²/χ²_ν((1 ± ci)/2)) times √τ;
+    and so it is for a χ² of 4.6, 16 and 82 EDF, at 95 % and 68.27 % (fit_noise before:
+    c² ± zσ(c²), at 4.6 EDF and 95 % its low 0 and its high 42 % short)."""
+    rng = np.random.default_rng(5)
+    y = rng.normal(size=480)
+    for m in (80, 20, 4):
+        for ci in (0.95, 0.6827):
+            res = allan.deviation(y, 1.0, kind="adev", taus=[m], ci=ci)
+            fit = allan.fit_noise(res, terms=("angle_random_walk",))
+            root_tau = math.sqrt(res.taus[0])
+            assert fit.value["angle_random_walk"] == pytest.approx(res.dev[0] * root_tau)
+            assert fit.low["angle_random_walk"] == pytest.approx(res.dev_low[0] * root_tau,
+                                                                 rel=1e-6)  # fmt: skip
+            assert fit.high["angle_random_walk"] == pytest.approx(res.dev_high[0] * root_tau,
+                                                                  rel=1e-6)  # fmt: skip
 
 
 def test_reported_sigma_of_k_matches_its_monte_carlo_spread():
