@@ -4,6 +4,7 @@ None kept as None, no column dropped, and no silent float32 with JAX's float64 m
 None came back as [0, 0], and `ImuData.save`'s temperature column was not read back)."""
 
 import json
+import pathlib
 
 import jax
 import numpy as np
@@ -102,6 +103,8 @@ def test_plan_round_trip_with_float64_off(tmp_path):
     _same(plan, _plan())
     back, _ = C.load_plan(again)  # float64 on: device arrays, the same values
     _same(back, plan)
+    with pytest.raises(ValueError, match="read-only"):  # as a device array's view: checked
+        np.asarray(plan.duration_s)[0] = -400.0
 
 
 def _record(temperature: bool) -> hg.imu.ImuData:
@@ -134,3 +137,18 @@ def test_imu_data_reload_can_leave_the_temperature_out(tmp_path):
     assert hg.imu.load(path, columns=columns, units=hg.imu.SI_UNITS).temperature is None
     columns = {**hg.imu.SI_COLUMNS, "temperature": "temperature_c"}  # the old, explicit recipe
     assert hg.imu.load(path, columns=columns, units=hg.imu.SI_UNITS).temperature is not None
+
+
+def test_imu_data_other_files_temperature_column_stays_unread(tmp_path):
+    """Only a file `ImuData.save` wrote (its `# rate_hz` line) gives its temperature unasked:
+    another file with the SI column names and a `temperature_c` the caller did not ask for
+    (NaN where the sensor was off) loads as before, without it."""
+    data = _record(True)
+    lines = pathlib.Path(data.save(tmp_path / "log.csv")).read_text(encoding="utf-8").splitlines()
+    header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    rows = [line.rsplit(",", 1)[0] + ",nan" for line in lines[header + 1 :]]
+    other = tmp_path / "other.csv"
+    other.write_text("\n".join([lines[header], *rows]) + "\n")
+    back = hg.imu.load(other, columns=hg.imu.SI_COLUMNS, units=hg.imu.SI_UNITS, rate_hz=100.0)
+    assert back.temperature is None
+    np.testing.assert_array_equal(back.gyro, data.gyro)

@@ -343,8 +343,11 @@ class BenchModel(eqx.Module):
 def _float64_leaf(values) -> jax.Array | np.ndarray:
     """A plan's per-segment values (host floats) as a leaf that keeps them float64: a device
     array with JAX's float64 mode on, else the NumPy float64 array (float32 would round)."""
-    x = np.asarray(values, dtype=np.float64)
-    return device(x) if jax.config.read("jax_enable_x64") else x
+    x = np.array(values, dtype=np.float64)
+    if jax.config.read("jax_enable_x64"):
+        return device(x)
+    x.flags.writeable = False  # as a device array's view is: the plan's checks hold
+    return x
 
 
 def bench_time_h(plan: BenchPlan, bench: BenchModel | None = None) -> jax.Array:

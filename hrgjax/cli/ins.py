@@ -119,8 +119,11 @@ def cmd_imu_calibrate(args) -> int:
 
     from .. import imu
 
-    columns = {"gyro": _three("--gyro-columns", args.gyro_columns),
-               "accel": _three("--accel-columns", args.accel_columns)}  # fmt: skip
+    columns = {
+        "gyro": _three("--gyro-columns", args.gyro_columns),
+        "accel": _three("--accel-columns", args.accel_columns),
+        "temperature": None,
+    }  # fmt: skip  (the calibration reads no temperature)
     if args.time_column:
         columns["time"] = args.time_column
     with usage_errors(errors=(FileNotFoundError, ValueError)):

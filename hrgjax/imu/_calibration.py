@@ -242,7 +242,7 @@ def load_calibration(path: str | os.PathLike) -> ImuCalibration:
     the saved float64 values (a gyro bias by ~3e-8 of itself) without a word.
 
     A `"bias_walk"` that is `null` or absent (files written before it existed) reads None;
-    one written as numbers (`[0, 0]` included) reads those numbers, as before."""
+    one written as numbers (the zeros older files wrote for None included) reads those numbers, as before."""
     from .._io import read_json
 
     path = os.fspath(path)

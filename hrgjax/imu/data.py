@@ -215,8 +215,8 @@ SI_COLUMNS = {
     "accel": ["accel_x_m_s2", "accel_y_m_s2", "accel_z_m_s2"],
 }
 """The column map of files written by [`ImuData.save`][hrgjax.imu.ImuData.save]. `load` with
-these gyro and accelerometer columns also reads the file's `temperature_c` column, where it
-has one, as the record's temperature [°C]; `"temperature": "temperature_c"` makes that
+these gyro and accelerometer columns also reads the `temperature_c` column of a file
+`ImuData.save` wrote (one with its `# rate_hz` comment line), as the record's temperature [°C]; `"temperature": "temperature_c"` makes that
 column required, `"temperature": None` leaves it out."""
 _SAVED_TEMPERATURE = "temperature_c"  # the temperature column [°C] ImuData.save writes
 SI_UNITS = {"gyro": "rad/s", "accel": "m/s^2"}
@@ -238,8 +238,8 @@ def load(
     - `columns`: `{"gyro": [x, y, z column names], "accel": [x, y, z column names]}`, and
       optionally `"time"` (a column in seconds) and `"temperature"` (°C). Other columns are
       ignored, except that with the gyro and accelerometer columns of
-      [`SI_COLUMNS`][hrgjax.imu.data.SI_COLUMNS] (a file `ImuData.save` wrote) and no
-      `"temperature"` key, a `temperature_c` column is read as the temperature, so that a
+      [`SI_COLUMNS`][hrgjax.imu.data.SI_COLUMNS], no `"temperature"` key and a file
+      `ImuData.save` wrote (its `# rate_hz` comment line), a `temperature_c` column is read as the temperature, so that a
       saved record comes back whole; `"temperature": None` leaves it out.
     - `units`: `{"gyro": "deg/s" | "rad/s" | …, "accel": "m/s^2" | "g" | …}`
       ([`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS]).
@@ -273,14 +273,23 @@ def load(
     comment = None  # (line, text) of the file's `# rate_hz = …` when the rate comes from it
     if rate_hz is None:
         rate_hz, comment = _saved_rate(path)
+    # the saved temperature is read unasked only from a file ImuData.save wrote (its comment
+    # line): another file's `temperature_c` (NaN where a sensor was off) stays unread
+    saved_layout = saved_layout and (comment is not None or _saved_rate(path)[1] is not None)
     # a plain numeric file: NumPy's C parser, streamed; an integer a float64 would round (a
     # nanosecond time stamp) refused in the columns used, naming the column, row and line
     table, lines = read_csv_table(path, exact_integers=_all_names(names))
-    if saved_layout and _SAVED_TEMPERATURE in table:
+    unasked = saved_layout and _SAVED_TEMPERATURE in table
+    if unasked:
         names["temperature"] = _SAVED_TEMPERATURE  # ImuData.save's: not dropped
     try:
         return _build(path, names, table, lines, units, rate_hz, check_units)
     except ValueError as err:
+        if unasked and f"'{_SAVED_TEMPERATURE}'" in str(err):
+            raise ValueError(
+                f"{err} (read as the temperature: the file has ImuData.save's layout; "
+                "columns={…, 'temperature': None} leaves it out)"
+            ) from None
         if comment is None or "rate_hz" not in str(err):
             raise
         raise ValueError(
