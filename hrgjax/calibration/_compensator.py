@@ -17,11 +17,22 @@ $s_T = \partial\hat\theta/\partial T$ is the readout's temperature sensitivity a
 angle: when the pickoff errors change with temperature, the measured angle moves while the
 pattern does not (an apparent rate proportional to $\dot T$). Only a model that knows the
 readout can supply it (the physical compensator); the others take $s_T = 0$.
+
+**Temperature domain.** A fitted compensator records the range of temperatures it was
+calibrated over (`temperature_range`, [°C]; `None`: unknown — not fitted, or loaded from a
+file saved before the range was recorded). [`correct`][hrgjax.calibration.AbstractCompensator.correct]
+extrapolates where the model's form bounds what it does beyond the range (the physical
+grey box, whose laws are physics; the Fourier fit, a low-degree polynomial in T; the
+virtual precession, held at its end temperatures) and passes samples outside it (widened
+by `margin_c`) through uncompensated where it does not (the MLP: a network's extrapolation
+has no bound), unless `extrapolate=` says otherwise; the returned
+[`Corrected`][hrgjax.calibration.compensators.Corrected] data count them either way.
 """
 
 from __future__ import annotations
 
 import abc
+import dataclasses
 import enum
 
 import equinox as eqx
@@ -30,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._compiled import bucket_pad, bucket_size, device, program
+from .._x64 import require_x64
 from ..data import MeasuredData
 from ..units import DEG, group_temperatures
 from .reduce import WINDOW_S, RateWindows, check_whole_angle, reduce
@@ -39,6 +51,49 @@ CORRECTED_COLUMNS = {
     "angle_corrected_deg": "case rotation angle since the start of the run [°]",
 }
 """Columns that `correct` adds to the data."""
+
+DOMAIN_MARGIN_C = 1.0
+"""How far beyond its calibrated temperature range [°C] a compensator is still applied by
+`correct` (both ends): a test session's levels scatter by tenths of a degree about the
+bench's, and the recorded range is that of the calibration windows' mean temperatures."""
+
+
+class Corrected(MeasuredData):
+    """What [`correct`][hrgjax.calibration.AbstractCompensator.correct] returns: the
+    [`hrgjax.MeasuredData`][] with `rate_corrected_dps` and `angle_corrected_deg` (the
+    contract's columns, nothing else added), and how the samples stood to the compensator's
+    temperature domain.
+
+    **Attributes:** `in_range` (bool per sample): the sample's temperature lies within the
+    compensator's `temperature_range` widened by `margin_c` (all True when the range is
+    unknown); `temperature_range` ((T_min, T_max) [°C] or `None`: unknown, nothing checked);
+    `margin_c` [°C]; `extrapolated` (bool): whether samples outside were compensated
+    (`True`) or passed through uncompensated (`False`: their intervals' rate is the raw
+    −θ̇/k_e,nom, as [`NoCompensation`][hrgjax.calibration.NoCompensation] gives).
+
+    `save` writes the columns only (the measured-data format): a file of passed-through
+    samples carries no mark of them — keep `in_range` beside it (`hrgjax correct --out`
+    says how many rows of the file are uncompensated)."""
+
+    def __init__(self, columns, *, in_range, temperature_range, margin_c, extrapolated):
+        super().__init__(columns, allow_extra=True)
+        self.in_range = np.asarray(in_range, dtype=bool)
+        self.temperature_range = temperature_range
+        self.margin_c = float(margin_c)
+        self.extrapolated = bool(extrapolated)
+
+    @property
+    def n_out_of_range(self) -> int:
+        """Samples outside the temperature domain (compensated only if `extrapolated`)."""
+        return int(np.sum(~self.in_range))
+
+    def out_of_range_by_temperature(self, bin_c: float = 1.0) -> dict[float, int]:
+        """{temperature [°C], rounded to a multiple of `bin_c`: samples out of range there},
+        only the temperatures that have some."""
+        temp = self["temperature_c"][~self.in_range]
+        keys = np.round(temp / bin_c) * bin_c + 0.0
+        values, counts = np.unique(keys, return_counts=True)
+        return {float(v): int(c) for v, c in zip(values, counts, strict=True)}
 
 
 def _is_number(value) -> bool:
@@ -134,6 +189,32 @@ class AbstractCompensator(eqx.Module):
         the compensator models the readout."""
         return jnp.zeros_like(theta)
 
+    @property
+    def calibrated_range(self) -> tuple[float, float] | None:
+        """(T_min, T_max) [°C] of the calibration (the `temperature_range` field `fit` sets;
+        `None`: unknown, or a compensator without one — nothing is checked)."""
+        return getattr(self, "temperature_range", None)
+
+    @property
+    def extrapolates(self) -> bool:
+        """Whether `correct` applies the compensator beyond its calibrated temperature range
+        by default: `False` unless the model's form bounds its extrapolation — the MLP's
+        error beyond its range went either way (at +60 °C, fitted on 0…40 °C, its rotation
+        error was 3.2× the raw gyro's); the physical grey box, the Fourier fit and the
+        virtual precession say `True`."""
+        return False
+
+    def in_range(self, temperature_c, margin_c: float = DOMAIN_MARGIN_C) -> np.ndarray:
+        """Mask (NumPy bool, the shape of `temperature_c` [°C]): True within
+        `calibrated_range` widened by `margin_c` [°C] at both ends; all True when the range
+        is unknown. **Raises:** `ValueError` for `margin_c` not a finite number ≥ 0."""
+        check_number(type(self).__name__, "margin_c", margin_c, " [°C]", minimum=0.0)
+        temp = np.asarray(temperature_c, dtype=float)
+        span = self.calibrated_range
+        if span is None:
+            return np.ones(temp.shape, bool)
+        return (temp >= span[0] - margin_c) & (temp <= span[1] + margin_c)
+
     def corrected_rate(self, theta, theta_dot, temperature_c, temperature_rate=0.0):
         """Compensated equivalent input rate [rad/s] from the measured wave angle θ [rad],
         its rate θ̇ [rad/s], temperature [°C] and its rate [°C/s] (module docstring)."""
@@ -147,8 +228,11 @@ class AbstractCompensator(eqx.Module):
         """This compensator as the compiled programs of `drift_dph`, `scale_factor_at` and
         `correct` take it: a module with `drift`, `scale_factor` and `corrected_rate`. The
         programs compile once per static part, so a compensator whose fit stores numbers in
-        static fields returns a form without them (the physical one does); here: itself."""
-        return self
+        static fields returns a form without them (the physical one does); here: itself,
+        less its recorded temperature domain (static fields the arithmetic does not use)."""
+        names = {f.name for f in dataclasses.fields(self)}
+        domain = {n: None for n in DOMAIN_FIELDS if n in names and getattr(self, n) is not None}
+        return dataclasses.replace(self, **domain) if domain else self
 
     def drift_dph(self, theta_deg, temperature_c) -> np.ndarray:
         """`drift` in the bench's units: θ [°] in, drift [°/h] out (NumPy)."""
@@ -169,7 +253,10 @@ class AbstractCompensator(eqx.Module):
         out = np.asarray(_pointwise(self._program_form(), which, pad(th), pad(tc)))[:n]
         return out.reshape(th.shape)
 
-    def correct(self, data: MeasuredData) -> MeasuredData:
+    def correct(
+        self, data: MeasuredData, *, extrapolate: bool | None = None,
+        margin_c: float = DOMAIN_MARGIN_C,
+    ) -> Corrected:  # fmt: skip
         """Compensate every run of `data`.
 
         Each sample interval gives θ̇ = Δθ/Δt (and Ṫ = ΔT/Δt) at the mid-interval angle and
@@ -178,15 +265,36 @@ class AbstractCompensator(eqx.Module):
         `angle_corrected_deg`, which starts at 0 in each run. `rate_corrected_dps` at a sample
         is the mean of its neighbouring intervals (one-sided at the ends).
 
-        **Returns:** a new [`hrgjax.MeasuredData`][] with the input columns unchanged plus
-        `rate_corrected_dps` and `angle_corrected_deg`.
+        **Temperature domain.** A sample whose temperature lies outside `calibrated_range`
+        widened by `margin_c` [°C] (default `DOMAIN_MARGIN_C`, 1 °C) is out of range; an
+        interval with an out-of-range sample at either end is passed through uncompensated
+        (the raw −θ̇/k_e,nom, bit for bit what
+        [`NoCompensation`][hrgjax.calibration.NoCompensation] gives) unless `extrapolate`
+        is `True`. `extrapolate=None` (default) takes the compensator's own `extrapolates`
+        (`False` for the MLP; `True` for the physical grey box, the Fourier fit and the
+        virtual-precession drift). The count is in
+        the result either way (`Corrected.n_out_of_range`). A compensator whose range is
+        unknown (a file saved before it was recorded) compensates every sample, as before.
 
-        **Raises:** `ValueError` if the data already have those columns, a run has fewer than
+        **Returns:** a [`Corrected`][hrgjax.calibration.compensators.Corrected] (a
+        [`hrgjax.MeasuredData`][]) with the input columns unchanged plus
+        `rate_corrected_dps` and `angle_corrected_deg`, and the out-of-range count.
+
+        **Raises:** `RuntimeError` (one line) when JAX's float64 mode is off (the correction
+        would run in float32: 5e-3 °/h off on a seed session); `ValueError` for `margin_c`
+        not a finite number ≥ 0 or `extrapolate`
+        neither `None` nor a bool, if the data already have those columns, a run has fewer than
         two samples, or the data are not whole-angle output the case turned: force-to-rebalance
         output or runs with a commanded precession
         ([`check_whole_angle`][hrgjax.calibration.reduce.check_whole_angle], as `calibrate`
         refuses them).
         """
+        require_x64(f"{type(self).__name__}.correct")
+        if extrapolate is not None and not isinstance(extrapolate, bool | np.bool_):
+            raise ValueError(f"extrapolate must be True, False or None (the compensator's "
+                             f"own choice); got {extrapolate!r}")  # fmt: skip
+        inside = self.in_range(data["temperature_c"], margin_c)
+        use_model = self.extrapolates if extrapolate is None else bool(extrapolate)
         check_whole_angle(data)
         for name in CORRECTED_COLUMNS:
             if name in data:
@@ -212,6 +320,10 @@ class AbstractCompensator(eqx.Module):
         n = first.size
         padded = [device(bucket_pad(x, bucket_size(n))) for x in inputs]
         interval = np.asarray(_interval_rates(self._program_form(), *padded))[:n]
+        keep = inside[first] & inside[second]
+        if not use_model and not keep.all():  # out of range: the raw rate, as NoCompensation
+            raw = np.asarray(_interval_rates(_Raw(k_e=self.k_e), *padded))[:n]
+            interval = np.where(keep, interval, raw)
         rate_out = np.empty(len(data))
         angle_out = np.empty(len(data))
         start = 0
@@ -228,7 +340,54 @@ class AbstractCompensator(eqx.Module):
         cols = data.columns
         cols["rate_corrected_dps"] = rate_out
         cols["angle_corrected_deg"] = angle_out
-        return MeasuredData(cols, allow_extra=True)
+        return Corrected(cols, in_range=inside, temperature_range=self.calibrated_range,
+                         margin_c=margin_c, extrapolated=use_model)  # fmt: skip
+
+
+DOMAIN_FIELDS = ("temperature_range", "n_temperature_levels")
+"""The fields a `fit` fills with its calibration's temperature domain (static: saved in a
+file's header, not its payload)."""
+
+
+def as_range(value) -> tuple[float, float] | None:
+    """The `temperature_range` field's converter: `None`, or (T_min, T_max) [°C] as a tuple
+    of two floats (a JSON list loads as one). **Raises:** `ValueError` for anything else."""
+    if value is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        lo = hi = np.nan
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+        raise ValueError(f"temperature_range must be (T_min, T_max) [°C], finite, T_min ≤ T_max, "
+                         f"or None; got {value!r}")  # fmt: skip
+    return (lo, hi)
+
+
+def domain_of(temperature_c) -> dict:
+    """The domain fields a `fit` stores: `temperature_range` (min, max of `temperature_c`
+    [°C]) and `n_temperature_levels` (`temperature_levels`' count)."""
+    temp = np.asarray(temperature_c, dtype=float)
+    return {
+        "temperature_range": (float(np.min(temp)), float(np.max(temp))),
+        "n_temperature_levels": int(temperature_levels(temp).size),
+    }
+
+
+class _Raw(AbstractCompensator):
+    """No compensation (D = 0, SF = 1) for the samples `correct` passes through: the same
+    arithmetic as `NoCompensation` (which lives downstream of this module)."""
+
+    k_e: float = eqx.field(static=True)
+
+    def fit(self, data, *, key=None, raw=None):
+        return self
+
+    def drift(self, theta, temperature_c):
+        return jnp.zeros_like(theta)
+
+    def scale_factor(self, theta, temperature_c):
+        return jnp.ones_like(theta)
 
 
 @program

@@ -21,6 +21,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._io import atomic_write, read_json
+from .._x64 import require_x64
+from ._compensator import DOMAIN_MARGIN_C
 from .evaluate import NoCompensation
 from .fourier import T_SCALE, FourierCompensator
 from .mlp import MLPCompensator
@@ -50,7 +52,8 @@ _HYPER_FIELDS = {
 }  # fmt: skip
 """The fields that `_hyper` saves, in this order, of the compensators whose hyperparameters
 are plain fields (`window_s` [s] and MLP's `mode` were added later: older files without them load
-with the class defaults)."""
+with the class defaults; so were `temperature_range` and `n_temperature_levels`, saved after
+these when recorded: older files load with the range unknown)."""
 
 
 _FITTED_FIELD = {
@@ -77,7 +80,7 @@ def _hyper(comp) -> dict:
             hyper = {name: getattr(comp, name) for name in names}
             if cls is MLPCompensator and comp.st_width:
                 hyper["st_width"] = comp.st_width
-            return hyper
+            return hyper | _domain(comp)
     if isinstance(comp, PhysicalCompensator):
         return {
             "k_e": comp.k_e,
@@ -85,7 +88,7 @@ def _hyper(comp) -> dict:
             "max_steps": comp.max_steps,
             "stats": [list(p) for p in comp.stats],
         } | ({"plant": plant_to_json(comp.plant), "sf_rate": comp.sf_rate}
-             if comp.plant is not None else {})  # fmt: skip
+             if comp.plant is not None else {}) | _domain(comp)  # fmt: skip
     if isinstance(comp, NoCompensation):
         return {"k_e": comp.k_e}
     if isinstance(comp, PrecessionCompensator):
@@ -93,6 +96,18 @@ def _hyper(comp) -> dict:
                 "temperature_bin": comp.temperature_bin, "k_e": comp.k_e,
                 "temperatures_c": list(comp.temperatures_c)}  # fmt: skip
     raise TypeError(f"cannot save a {type(comp).__name__}")
+
+
+def _domain(comp) -> dict:
+    """The fit's temperature domain for the header (`temperature_range` [°C] as a list,
+    `n_temperature_levels`), when recorded: a file saved before it was recorded, or a
+    compensator without one, has neither key and loads with the range unknown (`None`)."""
+    out = {}
+    if getattr(comp, "temperature_range", None) is not None:
+        out["temperature_range"] = list(comp.temperature_range)
+    if getattr(comp, "n_temperature_levels", None) is not None:
+        out["n_temperature_levels"] = comp.n_temperature_levels
+    return out
 
 
 def _skeleton(name: str, hyper: dict):
@@ -152,9 +167,11 @@ def load_compensator(path: str | os.PathLike):
 
     **Raises:** `ValueError` naming the file if it is not an hrgjax compensator, was written by
     a newer hrgjax (format version), is truncated or damaged (length or checksum), or does not
-    match the class its header names.
+    match the class its header names; `RuntimeError` (one line) when JAX's float64 mode is
+    off (the saved float64 coefficients would come back float32, silently).
     """
     path = os.fspath(path)
+    require_x64(f"load_compensator({path!r})")
     with open(path, "rb") as fh:
         first, payload = fh.readline(), fh.read()
     try:
@@ -226,6 +243,14 @@ def to_json_dict(comp) -> dict:
         },
         "correction": "rate = (-dtheta_dt / k_e_nominal - drift(theta, T)) / sf(theta, T)",
     }
+    span = comp.calibrated_range
+    if span is not None:
+        base["temperature_domain"] = {
+            "range_c": list(span),
+            "margin_c": DOMAIN_MARGIN_C,
+            "outside": "extrapolate (the model's own form in T)" if comp.extrapolates else
+            "pass through uncompensated: rate = -dtheta_dt / k_e_nominal",
+        }  # fmt: skip
     if isinstance(comp, FourierCompensator):
         base.update(_series(
             comp, ("drift_coef", "sf_coef"),
@@ -298,8 +323,10 @@ def load_json(path: str | os.PathLike):
     in one line, for a file that is not UTF-8 JSON, a newer or unknown `format`, an unknown
     class, a missing key, numbers that are not finite or arrays of the wrong shape for the
     file's `hyper`, or a top-level copy (`k_e_nominal`, `t_ref`, `harmonics`,
-    `temperatures_c`) that disagrees with `hyper`."""
+    `temperatures_c`) that disagrees with `hyper`; `RuntimeError` (one line) when JAX's
+    float64 mode is off (the coefficients would come back float32, silently)."""
     path = os.fspath(path)
+    require_x64(f"load_json({path!r})")
     d = read_json(path)
     if not isinstance(d, dict):
         raise ValueError(f"{path}: not an hrgjax compensator JSON (expected an object)")

@@ -44,9 +44,12 @@ from ._compensator import (
     LEVEL_TOLERANCE_C,
     AbstractCompensator,
     FromField,
+    as_range,
     check_number,
     check_whole,
+    domain_of,
     fit_windows,
+    require_temperatures,
     setting,
 )
 from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, check_k_e, check_window
@@ -58,6 +61,15 @@ ST_RATE_REF = 1.0 / 60.0
 measured rate by one drift scale: s_T = drift_scale · k_e / ST_RATE_REF · st_net(x)."""
 MIN_RAMP_RATE = 1e-3
 """Smallest |Ṫ| [°C/s] (0.06 °C/min) of a window that counts as a ramp's."""
+MIN_TEMPERATURES = 2
+"""Distinct temperatures (levels within 0.5 °C counted once) `MLPCompensator.fit` needs
+among the static and among the rotation runs. At one level the normalised temperature input
+is the same for every training point, so the first layer's temperature weights keep their
+random initial values: fitted at +20 °C only, the rotation error 1 °C away was 60× the one
+at +20 °C, 10 °C away 110× (docs/calibration.md). Two levels are the least that make the
+networks see T move; how they behave between levels and beyond them is another matter
+(docs/calibration.md: the MLP needs dense levels, and `correct` passes samples outside the
+calibrated range through)."""
 
 
 class MLPCompensator(AbstractCompensator):
@@ -81,6 +93,10 @@ class MLPCompensator(AbstractCompensator):
     - `mode`: how `fit` trains, `"reduced"` or `"end_to_end"` (module docstring).
     - `window_s`: rotation-run window [s] of the reduction when `fit` is given
       `MeasuredData`, and of the end-to-end loss.
+    - `temperature_range` ((T_min, T_max) [°C]) and `n_temperature_levels`: the
+      calibration windows' temperature span and level count, set by `fit` (`None`: unknown;
+      [`correct`][hrgjax.calibration.AbstractCompensator.correct] passes samples outside
+      the range through uncompensated).
 
     **Raises:** `ValueError`, one line naming the field, when built with an unknown
     `encoding` or `mode`, `drift_width`, `sf_width` or `steps` not a whole number ≥ 1,
@@ -109,6 +125,10 @@ class MLPCompensator(AbstractCompensator):
     sf_scale: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
     mode: str = eqx.field(static=True, default="reduced")
     window_s: float | None = eqx.field(static=True, default=WINDOW_S)
+    temperature_range: tuple[float, float] | None = eqx.field(
+        static=True, default=None, converter=as_range
+    )
+    n_temperature_levels: int | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         check_k_e(self.k_e)
@@ -219,7 +239,10 @@ class MLPCompensator(AbstractCompensator):
         **Returns:** a new fitted `MLPCompensator`.
 
         **Raises:** `TypeError` without `key`; `ValueError` for an unknown mode, data
-        without static or rotation runs, or, with `st_width > 0`, data without ramps.
+        without static or rotation runs, fewer than `MIN_TEMPERATURES` (2) distinct
+        temperatures among the static or among the rotation runs (levels within 0.5 °C
+        counted once: the networks learn nothing about T from one level), or, with
+        `st_width > 0`, data without ramps.
         """
         require_x64("MLPCompensator.fit")
         if key is None:
@@ -233,7 +256,13 @@ class MLPCompensator(AbstractCompensator):
         mode, window_s = self.mode, self.window_s
         ramp_window_s = RAMP_WINDOW_S if self.st_width else None
         static, moving = fit_windows(data, self.k_e, window_s, ramp_window_s)
+        for kind, w in (("static", static), ("rotation", moving)):
+            require_temperatures(w.temperature_c, MIN_TEMPERATURES, "MLPCompensator.fit",
+                                 "; the networks learn T only from the levels they see: add "
+                                 "runs at other temperatures (docs/calibration.md)",
+                                 where=f"the calibration data's {kind} runs")  # fmt: skip
         u = _ramp_rates(static) if self.st_width else None
+        self = dataclasses.replace(self, temperature_range=None, n_temperature_levels=None)
         comp = self.init(key)
         temps = np.concatenate([static.temperature_c, moving.temperature_c])
         # Host arithmetic (NumPy) between the compiled training programs: eager jnp would
@@ -288,7 +317,7 @@ class MLPCompensator(AbstractCompensator):
             if not isinstance(samples, MeasuredData):
                 raise ValueError("mode='end_to_end' needs the raw samples: pass raw=MeasuredData")
             comp = train_end_to_end(comp, samples, window_s or WINDOW_S, self.e2e_steps)
-        return comp
+        return dataclasses.replace(comp, **domain_of(temps))
 
 
 def _ramp_rates(static: RateWindows) -> np.ndarray:

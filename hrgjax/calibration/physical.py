@@ -57,6 +57,7 @@ from ._compensator import (
     FROM_FIELD,
     AbstractCompensator,
     FromField,
+    as_range,
     check_number,
     check_whole,
     require_temperatures,
@@ -176,6 +177,12 @@ class PhysicalCompensator(AbstractCompensator):
       [`PARAMETERS`][hrgjax.calibration.physical.PARAMETERS], SI); `None` (default): from
       harmonic fits of the reduced drift and scale factor at each temperature. A fitted
       compensator has `None` here.
+    - `temperature_range` ((T_min, T_max) [°C], of the calibration samples) and
+      `n_temperature_levels` (of its windows): set by `fit` (`None`: unknown). The laws
+      extrapolate (`extrapolates` is `True`: beyond the bench's range its error stayed
+      near its in-range one, as its predicted error says), so
+      [`correct`][hrgjax.calibration.AbstractCompensator.correct] applies it everywhere and
+      counts the samples outside.
     """
 
     k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
@@ -187,6 +194,10 @@ class PhysicalCompensator(AbstractCompensator):
     plant: Gyro | None = eqx.field(default=None, converter=known_plant)
     sf_rate: float = eqx.field(static=True, default=0.0)
     initial: jax.Array | None = None
+    temperature_range: tuple[float, float] | None = eqx.field(
+        static=True, default=None, converter=as_range
+    )
+    n_temperature_levels: int | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         check_k_e(self.k_e)
@@ -206,6 +217,11 @@ class PhysicalCompensator(AbstractCompensator):
     def name(self) -> str:
         """Short label used in tables."""
         return "physical"
+
+    @property
+    def extrapolates(self) -> bool:
+        """`True`: physical laws in T, applied beyond the calibrated range (counted)."""
+        return True
 
     def gyro(self) -> Gyro:
         """The fitted model gyro: fitted laws, with ideal loops (no `plant`) or the plant's
@@ -356,7 +372,10 @@ class PhysicalCompensator(AbstractCompensator):
             stats=tuple(stats.items()),
             plant=plant,
             sf_rate=0.0 if plant is None else _mean_rotation_rate(data),
-        )
+            temperature_range=(float(np.min(data["temperature_c"])),
+                               float(np.max(data["temperature_c"]))),
+            n_temperature_levels=int(temperature_levels(windows.temperature_c).size),
+        )  # fmt: skip
 
 
 def _require_law_temperatures(data: MeasuredData, windows, k_e: float, window_s: float) -> None:

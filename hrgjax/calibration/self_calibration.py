@@ -21,10 +21,13 @@ linear least squares with one offset per run (each interval's integral exact for
 turning uniformly between its two measured angles).
 The compensator's drift is $D = -D_\theta/k_{e,\rm nom}$ (the equivalent input rate at rest,
 as every compensator's) at each calibrated temperature, linear in temperature between them
-(held beyond). **What it cannot know: the scale factor.** The angular gain $k_e$ needs a
-rate (one rotation, or the Earth's), and $S$ is not the whole-angle scale factor: it is the
-readout's $d\hat\theta/d\theta$ times the forcers' gain on the node times the true over the
-estimated amplitude (the AGC holds the *estimate*; with a pickoff gain mismatch g,
+(held beyond: the drift there was 8–25× its in-range error, though below the raw gyro's;
+[`correct`][hrgjax.calibration.AbstractCompensator.correct] counts those samples, and
+`extrapolate=False` passes them through: docs/modes.md).
+**What it cannot know: the scale factor.** The angular gain $k_e$ needs a rate (one
+rotation, or the Earth's), and $S$ is not the whole-angle scale factor: it is the readout's
+$d\hat\theta/d\theta$ times the forcers' gain on the node times the true over the estimated
+amplitude (the AGC holds the *estimate*; with a pickoff gain mismatch g,
 $S = (1 - 2g\cos2\theta)(1 + g\cos2\theta) \approx 1 - g\cos2\theta$), and these do not
 separate at rest. So `scale_factor` is the nominal 1 and $S$ is kept as `gain_coef` for
 inspection; the static drift, which needs no rate, is what the sweeps calibrate.
@@ -161,7 +164,9 @@ def fit_sweeps(t, wave_angle, precession, weight, harmonics: int = 2):
 class PrecessionCompensator(AbstractCompensator):
     """The compensator a virtual-precession self-calibration gives (module docstring):
     the drift as a Fourier series in the measured angle at each calibrated temperature,
-    linear in temperature between them (held beyond the ends); the nominal scale factor.
+    linear in temperature between them (held beyond the ends, where `correct` counts the
+    samples beyond `calibrated_range`, the span of `temperatures_c`; `extrapolate=False`
+    passes them through); the nominal scale factor.
 
     **Arguments:**
 
@@ -196,6 +201,19 @@ class PrecessionCompensator(AbstractCompensator):
     def name(self) -> str:
         """Short label used in tables."""
         return "virtual precession"
+
+    @property
+    def extrapolates(self) -> bool:
+        """`True`: held at its end temperatures (8–25× its in-range error at −40 and +60 °C
+        from sweeps at 0/20/40 °C, below the raw gyro's)."""
+        return True
+
+    @property
+    def calibrated_range(self) -> tuple[float, float] | None:
+        """(T_min, T_max) [°C]: the span of `temperatures_c` (`None` before `fit`)."""
+        if not self.temperatures_c:
+            return None
+        return (float(min(self.temperatures_c)), float(max(self.temperatures_c)))
 
     @fused
     def _at(self, coef, theta, temperature_c):

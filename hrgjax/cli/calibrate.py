@@ -157,6 +157,11 @@ def cmd_calibrate(args) -> int:
     progress("fitted")
     static = windows.select(windows.static & (np.abs(windows.temperature_rate_cps) < MIN_RAMP_RATE))
     resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c)
+    span = comp.calibrated_range
+    if span is not None:
+        beyond = "extrapolates" if comp.extrapolates else "passes samples beyond it through"
+        print(f"  calibrated temperature range {span[0]:+.1f} … {span[1]:+.1f} °C "
+              f"({comp.n_temperature_levels} levels); correct {beyond}")  # fmt: skip
     print("  in-sample drift residual RMS per temperature [°/h]:")
     groups = group_temperatures(static.temperature_c)  # one row per temperature
     for T in np.unique(groups):
@@ -182,6 +187,33 @@ def _load_model(option: str, path: str):
         raise UsageError(f"{option}: {one_line(err)}") from None
 
 
+def _domain_report(label: str, comp, data, bin_c: float) -> None:
+    """Print how `data`'s samples stand to `comp`'s calibrated temperature range: the samples
+    outside it per temperature (rounded to a multiple of `bin_c` [°C]; passed through uncompensated, or extrapolated by a model that
+    extrapolates), or that the range is unknown (a file saved before it was recorded)."""
+    import numpy as np
+
+    from ..calibration.compensators import DOMAIN_MARGIN_C
+
+    span = comp.calibrated_range
+    if span is None:
+        if "temperature_range" in getattr(type(comp), "__dataclass_fields__", {}):
+            print(f"  {label}: calibrated temperature range unknown (a file saved before "
+                  "hrgjax recorded it): every sample compensated, as before")  # fmt: skip
+        return
+    outside = ~comp.in_range(data["temperature_c"])
+    if not outside.any():
+        return
+    temps, counts = np.unique(
+        np.round(data["temperature_c"][outside] / bin_c) * bin_c + 0.0, return_counts=True
+    )
+    where = ", ".join(f"{n} at {t:+g} °C" for t, n in zip(temps, counts, strict=True))
+    how = ("extrapolated (the model's own form in T)" if comp.extrapolates
+           else "passed through uncompensated")  # fmt: skip
+    print(f"  {label}: {int(outside.sum())} samples outside the calibrated temperature range "
+          f"{span[0]:+.1f} … {span[1]:+.1f} °C (± {DOMAIN_MARGIN_C:g} °C): {where} — {how}")  # fmt: skip
+
+
 def _report(result, args, *more) -> int:
     """Print a comparison; write its --json and --plot and any `more` outputs."""
     print(result.format(by_wave_angle=not args.no_angles), end="")
@@ -203,6 +235,7 @@ def cmd_correct(args) -> int:
         out = comp.correct(data)
     e = corrected_run_errors(out)
     print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
+    _domain_report("temperature domain", comp, data, args.temperature_bin)
     if np.any(e["static"]):
         d = e["drift_error_dph"][e["static"]]
         print(f"  static runs: residual rate RMS {np.sqrt(np.mean(d**2)):.4f} °/h (offset kept)")
@@ -217,8 +250,11 @@ def cmd_correct(args) -> int:
         temperature_bin_c=args.temperature_bin, angle_bin_deg=args.angle_bin, data=args.data,
     )  # fmt: skip
     print()
+    passed = 0 if out.extrapolated else out.n_out_of_range  # the file carries no mark of them
     rows = lambda p: (f"{len(out)} rows with rate_corrected_dps, angle_corrected_deg to "
-                      f"{out.save(p)}")  # fmt: skip
+                      f"{out.save(p)}" + (f" ({passed} of them outside the calibrated "
+                      "temperature range, uncompensated: their rate_corrected_dps is the raw "
+                      "rate)" if passed else ""))  # fmt: skip
     return _report(result, args, (args.out, rows))
 
 
@@ -275,6 +311,8 @@ def cmd_compare(args) -> int:
         f"{len(labels)} compensators: "
         + ", ".join(f"{lab} ({p})" for lab, p in zip(labels, args.models, strict=True))
     )
+    for lab, comp in zip(labels, comps, strict=True):
+        _domain_report(lab, comp, data, args.temperature_bin)
     print()
     return _report(result, args)
 

@@ -1,0 +1,233 @@
+"""HRG compensators and their calibrated temperature domain (audit of the compensators beyond
+their calibration): the MLP refuses a bench at one temperature; every fit records its
+temperature range; `correct` passes samples outside it through uncompensated for the MLP
+(bit for bit the raw output) and extrapolates the models whose form bounds it (grey box,
+Fourier in T, virtual precession held), and counts them either way; saved files keep the range and older files load without it."""
+
+import dataclasses
+import json
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import closed_form_session
+
+import hrgjax as hg
+from hrgjax.calibration import (
+    FourierCompensator,
+    MLPCompensator,
+    NoCompensation,
+    PhysicalCompensator,
+    PrecessionCompensator,
+    export_json,
+    load_compensator,
+    load_json,
+    reduce,
+    save_compensator,
+)
+from hrgjax.calibration.compensators import DOMAIN_MARGIN_C, Corrected
+from hrgjax.calibration.physical import initial_values
+
+CAL_TEMPS = (0.0, 20.0, 40.0)
+TEST_TEMPS = (-20.0, 20.0, 60.0)  # −20 and +60 °C lie outside 0 … 40 °C (± 1 °C)
+
+
+@pytest.fixture(scope="module")
+def calibration():
+    return closed_form_session(temps=CAL_TEMPS, duration_s=20.0)
+
+
+@pytest.fixture(scope="module")
+def test_session():
+    return closed_form_session(temps=TEST_TEMPS, duration_s=20.0)
+
+
+@pytest.fixture(scope="module")
+def fitted(calibration):
+    windows = reduce(calibration)
+    return {
+        "fourier": FourierCompensator(temperature_degree=1).fit(windows),
+        "mlp": MLPCompensator(steps=30, drift_width=4, sf_width=3).fit(
+            windows, key=jax.random.key(0)
+        ),
+    }
+
+
+@pytest.fixture(scope="module")
+def raw(test_session):
+    return NoCompensation().correct(test_session)
+
+
+def _outside(data):
+    """Independent truth: the samples whose temperature the session put outside 0 … 40 °C."""
+    return np.isin(data["temperature_c"], [-20.0, 60.0])
+
+
+def test_mlp_at_one_temperature_is_refused():
+    """Audit item 1: at one level the temperature input never moves and its weights keep
+    their random start (1 °C away the rotation error was 60–200× the in-range one)."""
+    one = closed_form_session(temps=(20.0,), duration_s=20.0)
+    with pytest.raises(ValueError, match=r"^MLPCompensator.fit needs at least 2 distinct "
+                       r"temperatures in the calibration data's static runs; got 1 \(\+20\.0 "
+                       r"°C"):  # fmt: skip
+        MLPCompensator(steps=5).fit(one, key=jax.random.key(0))
+    # static runs at two levels, rotations at one: the scale-factor network is refused too
+    two = closed_form_session(temps=(0.0, 20.0), duration_s=20.0)
+    keep = (two["table_rate_dps"] == 0) | (two["temperature_c"] == 20.0)
+    rot_one = hg.MeasuredData({k: v[keep] for k, v in two.columns.items()})
+    with pytest.raises(ValueError, match=r"^MLPCompensator.fit needs at least 2 .* rotation "
+                       r"runs; got 1 "):  # fmt: skip
+        MLPCompensator(steps=5).fit(rot_one, key=jax.random.key(0))
+
+
+def test_fits_record_the_calibrated_temperature_range(fitted):
+    for name, comp in fitted.items():
+        assert comp.temperature_range == (0.0, 40.0)
+        assert comp.n_temperature_levels == 3
+        assert comp.calibrated_range == (0.0, 40.0)
+        assert comp.extrapolates == (name != "mlp")  # a network's extrapolation: no bound
+    assert FourierCompensator().extrapolates  # the seed's base algorithm: constant in T
+    assert PhysicalCompensator().extrapolates
+    assert PrecessionCompensator().extrapolates  # held at its end temperatures
+
+
+@pytest.mark.parametrize("which", ["fourier", "mlp"])
+def test_empirical_models_pass_out_of_range_samples_through(fitted, test_session, raw, which):
+    comp = fitted[which]
+    default = comp.correct(test_session)  # the MLP passes through; the Fourier fit extrapolates
+    assert default.extrapolated == (which == "fourier")
+    out = comp.correct(test_session, extrapolate=None if which == "mlp" else False)
+    outside = _outside(test_session)
+    assert isinstance(out, Corrected) and isinstance(out, hg.MeasuredData)
+    assert set(out.names) == set(test_session.names) | {"rate_corrected_dps",
+                                                         "angle_corrected_deg"}  # fmt: skip
+    assert out.n_out_of_range == int(outside.sum()) == 2 * 2 * 6 * 41
+    np.testing.assert_array_equal(out.in_range, ~outside)
+    assert out.out_of_range_by_temperature() == {-20.0: 492, 60.0: 492}
+    assert out.temperature_range == (0.0, 40.0) and not out.extrapolated
+    for col in ("rate_corrected_dps", "angle_corrected_deg"):
+        np.testing.assert_array_equal(out[col][outside], raw[col][outside])  # bit for bit
+    # extrapolate=True compensates them (as before); inside nothing changes
+    ex = comp.correct(test_session, extrapolate=True)
+    assert ex.extrapolated and ex.n_out_of_range == out.n_out_of_range
+    best = ex if which == "fourier" else out
+    np.testing.assert_array_equal(default["angle_corrected_deg"], best["angle_corrected_deg"])
+    np.testing.assert_array_equal(ex["angle_corrected_deg"][~outside],
+                                  out["angle_corrected_deg"][~outside])  # fmt: skip
+    assert np.all(ex["rate_corrected_dps"][outside] != raw["rate_corrected_dps"][outside])
+    # the margin widens the range: 20 °C of it takes −20 and +60 °C in
+    wide = comp.correct(test_session, margin_c=20.0)
+    assert wide.n_out_of_range == 0
+    np.testing.assert_array_equal(wide["angle_corrected_deg"], ex["angle_corrected_deg"])
+
+
+def test_precession_compensator_holds_beyond_its_temperatures_and_counts(test_session, raw):
+    coef = jnp.zeros((2, 5)).at[:, 0].set(jnp.array([1e-5, 2e-5])).at[:, 1].set(3e-6)
+    comp = eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef),
+                       PrecessionCompensator(temperatures_c=(0.0, 40.0)),
+                       (coef, jnp.ones((2, 5))), is_leaf=lambda x: x is None)  # fmt: skip
+    out = comp.correct(test_session, extrapolate=False)
+    outside = _outside(test_session)
+    assert comp.calibrated_range == (0.0, 40.0) and out.n_out_of_range == int(outside.sum())
+    np.testing.assert_array_equal(out["angle_corrected_deg"][outside],
+                                  raw["angle_corrected_deg"][outside])  # fmt: skip
+    held = comp.correct(test_session)  # the default (and the old behaviour): held beyond
+    assert held.extrapolated and held.n_out_of_range == out.n_out_of_range
+    assert np.all(held["angle_corrected_deg"][outside][1::41] != 0.0)
+    assert np.all(held["rate_corrected_dps"][outside] != raw["rate_corrected_dps"][outside])
+
+
+def test_physical_model_extrapolates_and_counts(calibration, test_session):
+    values = jnp.asarray(initial_values(reduce(calibration, window_s=10.0), 0.554))
+    n = values.shape[0]
+    comp = PhysicalCompensator(values=values, covariance=jnp.eye(n),
+                               temperature_range=(0.0, 40.0), n_temperature_levels=3)  # fmt: skip
+    before = dataclasses.replace(comp, temperature_range=None, n_temperature_levels=None)
+    out, old = comp.correct(test_session), before.correct(test_session)
+    assert out.extrapolated and out.n_out_of_range == int(_outside(test_session).sum())
+    assert old.n_out_of_range == 0 and old.temperature_range is None
+    for col in ("rate_corrected_dps", "angle_corrected_deg"):
+        np.testing.assert_array_equal(out[col], old[col])  # unchanged: it extrapolates
+    passed = comp.correct(test_session, extrapolate=False)
+    np.testing.assert_array_equal(passed["angle_corrected_deg"][_outside(test_session)],
+                                  NoCompensation().correct(test_session)["angle_corrected_deg"][
+                                      _outside(test_session)])  # fmt: skip
+
+
+def test_saved_files_keep_the_range_and_older_files_load_without_it(fitted, tmp_path,
+                                                                     test_session):  # fmt: skip
+    for name, comp in fitted.items():
+        back = load_compensator(save_compensator(comp, tmp_path / f"{name}.eqx"))
+        assert back.temperature_range == (0.0, 40.0) and back.n_temperature_levels == 3
+        again = load_json(export_json(comp, tmp_path / f"{name}.json"))
+        assert again.temperature_range == (0.0, 40.0)
+        doc = json.loads((tmp_path / f"{name}.json").read_text())
+        assert doc["temperature_domain"]["range_c"] == [0.0, 40.0]
+        # a file written before the range was recorded: no key in the header
+        old = dataclasses.replace(comp, temperature_range=None, n_temperature_levels=None)
+        path = save_compensator(old, tmp_path / f"{name}_old.eqx")
+        with open(path, "rb") as fh:
+            header = json.loads(fh.readline())
+        assert "temperature_range" not in header["hyper"]
+        loaded = load_compensator(path)
+        assert loaded.temperature_range is None and loaded.calibrated_range is None
+        out = loaded.correct(test_session)  # behaves as before: every sample compensated
+        assert out.n_out_of_range == 0
+        np.testing.assert_array_equal(
+            out["angle_corrected_deg"],
+            comp.correct(test_session, extrapolate=True)["angle_corrected_deg"],
+        )
+
+
+def test_bad_domain_arguments_are_refused_in_one_line(fitted, test_session):
+    comp = fitted["fourier"]
+    with pytest.raises(ValueError, match=r"^FourierCompensator: margin_c must be a finite "
+                       r"number ≥ 0 \[°C\]; got -1\.0$"):  # fmt: skip
+        comp.correct(test_session, margin_c=-1.0)
+    with pytest.raises(ValueError, match=r"^extrapolate must be True, False or None"):
+        comp.correct(test_session, extrapolate="yes")
+    with pytest.raises(ValueError, match=r"^temperature_range must be \(T_min, T_max\) \[°C\]"):
+        FourierCompensator(temperature_range=(40.0, 0.0))
+
+
+def test_cli_says_how_many_samples_lie_outside(fitted, test_session, tmp_path, capsys):
+    from hrgjax.cli import main
+
+    data = test_session.save(tmp_path / "test.csv")
+    model = save_compensator(fitted["mlp"], tmp_path / "m.eqx")
+    fourier = save_compensator(fitted["fourier"], tmp_path / "f.eqx")
+    old = save_compensator(dataclasses.replace(fitted["mlp"], temperature_range=None,
+                                               n_temperature_levels=None),
+                           tmp_path / "old.eqx")  # fmt: skip
+    capsys.readouterr()
+    argv = ["correct", data, "--model", model, "--out", str(tmp_path / "c.csv"), "--no-angles"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert ("984 samples outside the calibrated temperature range +0.0 … +40.0 °C (± 1 °C): "
+            "492 at -20 °C, 492 at +60 °C — passed through uncompensated") in out  # fmt: skip
+    assert "(984 of them outside the calibrated temperature range, uncompensated" in out
+    assert main(["compare", data, "--models", fourier, old, "--no-angles"]) == 0
+    out = capsys.readouterr().out
+    assert "Fourier+T^1: 984 samples outside" in out and "— extrapolated" in out
+    assert "MLP: calibrated temperature range unknown" in out
+    assert DOMAIN_MARGIN_C == 1.0
+
+
+def test_loaders_and_correct_refuse_float32_mode(fitted, test_session, tmp_path):
+    """With JAX's float64 mode off a saved compensator came back float32 and `correct` ran in
+    float32 (5e-3 °/h off on a seed session), silently: refused in one line."""
+    try:
+        from jax import enable_x64
+    except ImportError:  # older JAX
+        from jax.experimental import enable_x64
+    from hrgjax.calibration import export_json, load_compensator, load_json
+
+    eqx_path = save_compensator(fitted["fourier"], tmp_path / "f.eqx")
+    json_path = export_json(fitted["mlp"], tmp_path / "m.json")
+    with enable_x64(False):
+        for call in (lambda: load_compensator(eqx_path), lambda: load_json(json_path),
+                     lambda: fitted["fourier"].correct(test_session)):  # fmt: skip
+            with pytest.raises(RuntimeError, match=r"needs float64 but JAX is in float32 mode"):
+                call()
