@@ -23,6 +23,18 @@ an ARW estimated at 0 on 60-s dwells leaves the static windows' σ 1.5–2.5× s
 
 Usage: `.venv/bin/python benchmarks/discovery_null.py [--seeds N] [--start S]` (default 20
 seeds from 0; ≈ 4 s a grid on 2 CPUs).
+
+**Continuous nulls** (`--continuous [--seeds N] [--start S] [--duration D]`): six records of
+`continuous_dataset(None, key=PRNGKey(s), duration_s=D)` (default 12 seeds from 1000, 3100 s:
+the audit's instance was seed 1010), the default gyro's own noise — white angle noise 1″,
+angle random walk 0.002 °/√h, Gauss–Markov bias instability 0.003 °/h with T_c = 600 s,
+switch-on bias 0.2 °/h per run — and nothing hidden; the whole `discover` on each. Printed:
+the verdict (anything but `none` is false: a name is a false effect, `unexplained` a false
+"structure left"), the leftover shape, and the noise model's estimated switch-on spread σ_b
+and Gauss–Markov part against the truth. ≈ 15 s a log on 2 busy CPUs after a ≈ 60-s compile.
+Measured 2026-11-30 on seeds 1000–1031 (`--continuous` and `--continuous --start 1012 --seeds
+20`): not `none` 1/32 with σ_b's moment estimate (seed 1010: σ_b 0.04 °/h, `unexplained`),
+0/32 with REML (`hrgjax.discovery.run_bias`; seed 1010: σ_b 0.135 °/h).
 """
 
 import argparse
@@ -116,9 +128,45 @@ def main(n: int, start: int):
            "before", 100 * old["screening p<0.01"], "≈ 1 %")  # fmt: skip
 
 
+def continuous(n: int, start: int, duration_s: float):
+    """False verdicts of `discover` on continuous null records (module docstring)."""
+    from hrgjax.discovery import discover
+    from hrgjax.discovery.generate import continuous_dataset
+
+    print(f"machine: {machine()}")
+    verdicts, times = [], []
+    for seed in range(start, start + n):
+        data = continuous_dataset(None, key=jax.random.PRNGKey(seed), duration_s=duration_s)
+        t0 = time.perf_counter()
+        rep = discover(data)
+        times.append(time.perf_counter() - t0)
+        verdicts.append(rep.verdict)
+        left = rep.leftover["words"] if rep.leftover else "-"
+        nz = rep.noise
+        print(
+            f"seed {seed:5d}: {rep.verdict:>11} {rep.missing_effect or '':>24}  σ_b "
+            f"{nz['run_bias_dph']:.3f} °/h  GM {nz['gauss_markov_dph']:.4f} °/h "
+            f"({nz['gauss_markov_time_s']:g} s)  leftover: {left}  [{times[-1]:.0f} s]",
+            flush=True,
+        )
+    false = sum(v != "none" for v in verdicts)
+    named = sum(v in ("found", "ambiguous") for v in verdicts)
+    print(
+        f"\n{n} continuous null logs ({duration_s:g} s): verdict not 'none' {false}/{n} "
+        f"(a name {named}, 'unexplained' {verdicts.count('unexplained')}); truth σ_b 0.2 °/h, "
+        f"GM 0.003 °/h (600 s); median {np.median(times):.0f} s a log"
+    )
+    report("discovery continuous null: verdict not none", 100 * false / n, "%", target="≤ 5 %")
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--start", type=int, default=0)
+    ap.add_argument("--seeds", type=int, default=None)
+    ap.add_argument("--start", type=int, default=None)
+    ap.add_argument("--continuous", action="store_true")
+    ap.add_argument("--duration", type=float, default=3100.0)
     a = ap.parse_args()
-    main(a.seeds, a.start)
+    if a.continuous:
+        continuous(a.seeds or 12, 1000 if a.start is None else a.start, a.duration)
+    else:
+        main(a.seeds or 20, a.start or 0)

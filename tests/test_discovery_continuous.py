@@ -330,6 +330,11 @@ def test_a_fit_that_two_cycles_in_levenberg_marquardt_is_finished_to_the_minimum
     problem = continuous.ContinuousProblem.from_data(
         data, held, nominal=NOMINAL, catalogue=ONE, k_e=K_E
     )  # the compiled programs of the thermal_rate tests
+    # at the switch-on spread the moment estimate gave (1.84e-6 rad/s): REML's (run_bias.py)
+    # weighs the run means less, and there the plain LM converges on this seed
+    problem = continuous.ContinuousProblem(
+        problem.data, problem.layout.names, K_E, held, problem.noise.replace(run_bias=1.84e-6)
+    )
     idx = [i for n in NOMINAL for i in problem.layout.index(n, which=True)]
     basis, z0 = np.eye(problem.layout.size)[:, idx], problem.z_null
     assert not bool(lm(problem.layout, basis, jnp.asarray(z0), problem.train_groups)[1])

@@ -21,7 +21,7 @@ $C_{\rm GM}(k,k) = 2\sigma^2T_c(\Delta - T_c(1-e^{-\Delta/T_c}))$,
 $C_{\rm GM}(k,l) = \sigma^2T_c^2(1-e^{-\Delta/T_c})^2e^{-(|k-l|-1)\Delta/T_c}$, and the residual is
 whitened by its Cholesky factor. Each run is its own switch-on: its constant bias
 (run-to-run repeatability, spread σ_b) is a random effect, $\sigma_b^2\Delta^2$ added to every
-element of Σ, with σ_b estimated from the scatter of the run means at the current model and
+element of Σ, with σ_b estimated by REML from the run means at the current model (`run_bias`) and
 re-estimated after each accepted effect. Sensitivities to every parameter — fitted or still at its
 null — are forward-mode derivatives through the solve (`diffrax.ForwardMode`, `jax.jacfwd`);
 fits are `optimistix.LevenbergMarquardt` (finished where it stalls: `_continuous_fit`).
@@ -42,7 +42,7 @@ import numpy as np
 from .._progress import bar
 from ..data import MeasuredData
 from ..units import DEG, DEG_PER_H, T_REF_C
-from . import dwell, leftover, stats
+from . import dwell, leftover, run_bias, stats
 from ._continuous_fit import converged_lm
 from .effects import CATALOGUE
 from .noise import NoiseModel
@@ -130,7 +130,7 @@ class ContinuousProblem(AbstractProblem):
             windows = (win, np.isin(w.run, held))
         problem = cls(records, names, k_e, held, nz, block_s, windows, known)
         if not known:
-            problem = problem.with_run_bias(problem.fit(list(nominal)).z)
+            problem = problem.with_run_bias(problem.fit(list(nominal)))
         return problem
 
     # -- data ----------------------------------------------------------------
@@ -163,32 +163,32 @@ class ContinuousProblem(AbstractProblem):
                 if mask.any():
                     groups.append(stack_runs(stack, mask, self.noise, self.block_s))
 
-    def with_run_bias(self, z) -> ContinuousProblem:
-        """A copy of this problem (which is left as it is) whose run-to-run bias spread σ_b
-        [rad/s] is set from the scatter of every run's mean rate residual at the fit `z`,
-        less what the rest of the noise gives it, with the whitening rebuilt. A scatter that
-        follows a run's covariate (its mean dT/dt, table rate or specific force: an effect
-        constant along each ramp, say c·Ṫ) is not a switch-on bias: the covariate that
-        explains the run means significantly (F-test, p < `RUN_COVARIATE_ALPHA`) is
-        regressed out first, so the noise model cannot absorb the effect that the screening
-        is to find (`stats.follows_covariate`)."""
-        # the training and held-out runs apart: their residual programs exist already;
+    def with_run_bias(self, fit) -> ContinuousProblem:
+        """A copy of this problem (left as it is) whose run-to-run bias spread σ_b [rad/s] is
+        the REML estimate at `fit` (a fit of this problem;
+        `run_bias.reml_at_fit`), the whitening rebuilt. A
+        scatter that follows a run's covariate (mean dT/dt, table rate or specific force: an
+        effect constant along each ramp, say c·Ṫ) is not a switch-on bias: the covariate that
+        explains the run means significantly (F-test, p < `RUN_COVARIATE_ALPHA`,
+        `stats.followed_covariates`) is a fixed effect there, so that σ_b cannot absorb it."""
         # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
         # one session, whose own bias is profiled out of their residual: `Windows.session`)
         train = [g for g in self.train_groups if isinstance(g, Runs)]
         held = [g for g in self.held_groups if isinstance(g, Runs)]
-        rates = self.run_rates(z, train) | self.run_rates(z, held)
-        means = np.asarray(list(rates.values()))
+        rates = self.run_rates(fit.z, train) | self.run_rates(fit.z, held)
         new = copy.copy(self)
-        new.noise = self.noise.replace(run_bias=0.0)
-        if means.size >= 2:  # else nothing to estimate it from
-            noise_var = new.floor(every=True, windows=False) ** 2
+        if len(rates) >= 2:  # else nothing to estimate it from
             covs = run_covariates(train + held)
             x = np.asarray([covs[r] for r in rates])
-            resid, k = stats.follows_covariate(means, x, RUN_COVARIATE_ALPHA)
-            spread = float(resid @ resid) / max(means.size - k, 1)
-            sigma_b = math.sqrt(max(spread - noise_var, 0.0)) * DEG_PER_H * self.k_out
-            new.noise = new.noise.replace(run_bias=sigma_b)
+            _, chosen = stats.followed_covariates(
+                np.asarray(list(rates.values())), x, RUN_COVARIATE_ALPHA
+            )
+            held = residual_and_jacobian(  # the fit's parameters move the held-out runs too
+                self.layout, jnp.asarray(fit.z), self._basis(list(fit.model))[0], self.held_groups
+            ) if self.held_groups else None  # fmt: skip
+            sigma_b = run_bias.reml_at_fit(fit, held, self.train_groups, self.held_groups,
+                {r: c[chosen] for r, c in covs.items()}, self.noise.run_bias)  # fmt: skip
+            new.noise = self.noise.replace(run_bias=sigma_b)
         new._build()
         return new
 
@@ -198,7 +198,7 @@ class ContinuousProblem(AbstractProblem):
         self.k_out = dwell.output_gain(fit.parameters, self.k_e)
         if self.noise_known:
             return self, fit
-        new = self.with_run_bias(fit.z)
+        new = self.with_run_bias(fit)
         return new, new.fit(list(fit.model), z0=fit.z)
 
     def structure_left(self, fit, floor=None, alpha=1e-3):

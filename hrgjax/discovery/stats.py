@@ -191,9 +191,17 @@ def follows_covariate(means: np.ndarray, x: np.ndarray, alpha: float) -> tuple[n
     """`means` less their mean and less the covariates (columns of `x`) that explain them
     significantly, chosen one at a time (F-test at `alpha`, Bonferroni over the covariates
     still tried); **returns** `(residual, columns fitted)` (the intercept counts)."""
+    resid, chosen = followed_covariates(means, x, alpha)
+    return resid, 1 + len(chosen)
+
+
+def followed_covariates(means: np.ndarray, x: np.ndarray, alpha: float):
+    """[`follows_covariate`][hrgjax.discovery.stats.follows_covariate] with the chosen
+    columns: **returns** `(residual, indices of the columns of x chosen)`."""
     n = means.size
     cols = [np.ones(n)]
-    cands = [x[:, i] for i in range(x.shape[1]) if np.ptp(x[:, i]) > 0]
+    cands = [i for i in range(x.shape[1]) if np.ptp(x[:, i]) > 0]
+    chosen = []
 
     def rss(a):
         coef, *_ = np.linalg.lstsq(np.stack(a, axis=1), means, rcond=None)
@@ -202,12 +210,13 @@ def follows_covariate(means: np.ndarray, x: np.ndarray, alpha: float) -> tuple[n
 
     base, resid = rss(cols)
     while cands and n - len(cols) - 1 > 1:
-        trials = [(rss(cols + [c]), i) for i, c in enumerate(cands)]
-        (new, r), i = min(trials, key=lambda t: t[0][0])
+        trials = [(rss(cols + [x[:, c]]), k) for k, c in enumerate(cands)]
+        (new, r), k = min(trials, key=lambda t: t[0][0])
         dof = n - len(cols) - 1
         f = (base - new) / max(new / dof, 1e-300)
         if f_sf(f, 1, dof) >= alpha / len(cands):  # the best of them
             break
-        cols.append(cands.pop(i))
+        chosen.append(cands.pop(k))
+        cols.append(x[:, chosen[-1]])
         base, resid = new, r
-    return resid, len(cols)
+    return resid, chosen
