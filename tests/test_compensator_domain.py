@@ -1,8 +1,8 @@
 """HRG compensators and their calibrated temperature domain (audit of the compensators beyond
 their calibration): the MLP refuses a bench at one temperature; every fit records its
-temperature range; `correct` passes samples outside it through uncompensated for the MLP
-(bit for bit the raw output) and extrapolates the models whose form bounds it (grey box,
-Fourier in T, virtual precession held), and counts them either way; saved files keep the range and older files load without it."""
+temperature range; `correct` applies every compensator beyond it by default and counts the
+samples outside, or passes them through uncompensated (bit for bit the raw output) with
+`extrapolate=False`; saved files keep the range and older files load without it."""
 
 import dataclasses
 import json
@@ -87,18 +87,18 @@ def test_fits_record_the_calibrated_temperature_range(fitted):
         assert comp.temperature_range == (0.0, 40.0)
         assert comp.n_temperature_levels == 3
         assert comp.calibrated_range == (0.0, 40.0)
-        assert comp.extrapolates == (name != "mlp")  # a network's extrapolation: no bound
+        assert comp.extrapolates, name  # the default: applied beyond, counted
     assert FourierCompensator().extrapolates  # the seed's base algorithm: constant in T
     assert PhysicalCompensator().extrapolates
     assert PrecessionCompensator().extrapolates  # held at its end temperatures
 
 
 @pytest.mark.parametrize("which", ["fourier", "mlp"])
-def test_empirical_models_pass_out_of_range_samples_through(fitted, test_session, raw, which):
+def test_samples_out_of_range_are_counted_and_can_pass_through(fitted, test_session, raw, which):
     comp = fitted[which]
-    default = comp.correct(test_session)  # the MLP passes through; the Fourier fit extrapolates
-    assert default.extrapolated == (which == "fourier")
-    out = comp.correct(test_session, extrapolate=None if which == "mlp" else False)
+    default = comp.correct(test_session)  # applied beyond its range, and counted
+    assert default.extrapolated and default.n_out_of_range == 2 * 2 * 6 * 41
+    out = comp.correct(test_session, extrapolate=False)
     outside = _outside(test_session)
     assert isinstance(out, Corrected) and isinstance(out, hg.MeasuredData)
     assert set(out.names) == set(test_session.names) | {"rate_corrected_dps",
@@ -112,8 +112,7 @@ def test_empirical_models_pass_out_of_range_samples_through(fitted, test_session
     # extrapolate=True compensates them (as before); inside nothing changes
     ex = comp.correct(test_session, extrapolate=True)
     assert ex.extrapolated and ex.n_out_of_range == out.n_out_of_range
-    best = ex if which == "fourier" else out
-    np.testing.assert_array_equal(default["angle_corrected_deg"], best["angle_corrected_deg"])
+    np.testing.assert_array_equal(default["angle_corrected_deg"], ex["angle_corrected_deg"])
     np.testing.assert_array_equal(ex["angle_corrected_deg"][~outside],
                                   out["angle_corrected_deg"][~outside])  # fmt: skip
     assert np.all(ex["rate_corrected_dps"][outside] != raw["rate_corrected_dps"][outside])
@@ -202,7 +201,8 @@ def test_cli_says_how_many_samples_lie_outside(fitted, test_session, tmp_path, c
                                                n_temperature_levels=None),
                            tmp_path / "old.eqx")  # fmt: skip
     capsys.readouterr()
-    argv = ["correct", data, "--model", model, "--out", str(tmp_path / "c.csv"), "--no-angles"]
+    argv = ["correct", data, "--model", model, "--out", str(tmp_path / "c.csv"), "--no-angles",
+            "--no-extrapolate"]  # fmt: skip
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert ("984 samples outside the calibrated temperature range +0.0 … +40.0 °C (± 1 °C): "

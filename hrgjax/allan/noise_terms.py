@@ -148,7 +148,9 @@ def _pearson3_cdf(x: float, theta: float, own: float, rest: float) -> float:
         return 0.0
     if k > 1e4:  # Wilson–Hilferty: χ²_k is then normal in its cube root to < 1e-6
         s = 2 / (9 * k)
-        return NormalDist().cdf(((u / k) ** (1 / 3) - 1 + s) / math.sqrt(s))
+        # (u/k)^(1/3) − 1 without cancellation: u/k = 1 + r with r tiny when k is large
+        cube = math.expm1(math.log1p((x - theta) / (scale * k)) / 3)
+        return NormalDist().cdf((cube + s) / math.sqrt(s))
     return 1.0 - chi2_sf(u, k)  # P(χ²_k ≤ u)
 
 

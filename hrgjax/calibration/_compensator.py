@@ -21,12 +21,12 @@ readout can supply it (the physical compensator); the others take $s_T = 0$.
 **Temperature domain.** A fitted compensator records the range of temperatures it was
 calibrated over (`temperature_range`, [°C]; `None`: unknown — not fitted, or loaded from a
 file saved before the range was recorded). [`correct`][hrgjax.calibration.AbstractCompensator.correct]
-extrapolates where the model's form bounds what it does beyond the range (the physical
-grey box, whose laws are physics; the Fourier fit, a low-degree polynomial in T; the
-virtual precession, held at its end temperatures) and passes samples outside it (widened
-by `margin_c`) through uncompensated where it does not (the MLP: a network's extrapolation
-has no bound), unless `extrapolate=` says otherwise; the returned
-[`Corrected`][hrgjax.calibration.compensators.Corrected] data count them either way.
+applies every compensator beyond it by default — measured, each did better than none there
+in most cases (docs/calibration.md, "Temperature domain"; the MLP's rotation error at
++60 °C, fitted on 0…40 °C, was the exception: 3.2× the raw gyro's) — and counts the samples
+outside it (widened by `margin_c`) in the returned
+[`Corrected`][hrgjax.calibration.compensators.Corrected] data; `extrapolate=False` passes
+them through uncompensated.
 """
 
 from __future__ import annotations
@@ -198,11 +198,9 @@ class AbstractCompensator(eqx.Module):
     @property
     def extrapolates(self) -> bool:
         """Whether `correct` applies the compensator beyond its calibrated temperature range
-        by default: `False` unless the model's form bounds its extrapolation — the MLP's
-        error beyond its range went either way (at +60 °C, fitted on 0…40 °C, its rotation
-        error was 3.2× the raw gyro's); the physical grey box, the Fourier fit and the
-        virtual precession say `True`."""
-        return False
+        by default (`True` for every compensator here: the count, not a pass-through, is the
+        default; `correct(extrapolate=False)` passes those samples through)."""
+        return True
 
     def in_range(self, temperature_c, margin_c: float = DOMAIN_MARGIN_C) -> np.ndarray:
         """Mask (NumPy bool, the shape of `temperature_c` [°C]): True within
@@ -271,8 +269,10 @@ class AbstractCompensator(eqx.Module):
         (the raw −θ̇/k_e,nom, bit for bit what
         [`NoCompensation`][hrgjax.calibration.NoCompensation] gives) unless `extrapolate`
         is `True`. `extrapolate=None` (default) takes the compensator's own `extrapolates`
-        (`False` for the MLP; `True` for the physical grey box, the Fourier fit and the
-        virtual-precession drift). The count is in
+        (`True` for every compensator here: beyond its range each did better than none in
+        most cases measured, docs/calibration.md; `extrapolate=False` passes through). A
+        sample inside the range beside one outside takes the mean of a compensated and a
+        passed-through interval, and is not counted. The count is in
         the result either way (`Corrected.n_out_of_range`). A compensator whose range is
         unknown (a file saved before it was recorded) compensates every sample, as before.
 

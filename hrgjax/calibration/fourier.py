@@ -71,10 +71,9 @@ class FourierCompensator(AbstractCompensator):
       `MeasuredData` (windows given to `fit` are used as they are).
     - `temperature_range` ((T_min, T_max) [°C]) and `n_temperature_levels`: the fitted
       windows' temperature span and level count, set by `fit` (`None`: unknown).
-      [`correct`][hrgjax.calibration.AbstractCompensator.correct] passes samples outside
-      the range through uncompensated for a polynomial in T (beyond its levels it was 2–4×
-      its in-range error); the base algorithm, constant in T by definition (the seed's,
-      applied at every temperature), `extrapolates`.
+      [`correct`][hrgjax.calibration.AbstractCompensator.correct] applies it beyond the
+      range too (beyond its levels T² was 2–6× its in-range error, 4–160× below raw) and
+      counts those samples; `extrapolate=False` passes them through.
 
     **Raises:** `ValueError`, one line naming the field, when built with `harmonics` not a
     whole number ≥ 1, `temperature_degree` neither `None` nor a whole number ≥ 0,

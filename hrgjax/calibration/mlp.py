@@ -95,8 +95,10 @@ class MLPCompensator(AbstractCompensator):
       `MeasuredData`, and of the end-to-end loss.
     - `temperature_range` ((T_min, T_max) [°C]) and `n_temperature_levels`: the
       calibration windows' temperature span and level count, set by `fit` (`None`: unknown;
-      [`correct`][hrgjax.calibration.AbstractCompensator.correct] passes samples outside
-      the range through uncompensated).
+      [`correct`][hrgjax.calibration.AbstractCompensator.correct] applies the network
+      beyond it and counts those samples — there its error went either way: fitted on
+      0…40 °C, at +60 °C its static drift 5× below raw, its rotation error 3.2× above;
+      `extrapolate=False` passes them through).
 
     **Raises:** `ValueError`, one line naming the field, when built with an unknown
     `encoding` or `mode`, `drift_width`, `sf_width` or `steps` not a whole number ≥ 1,

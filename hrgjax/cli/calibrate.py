@@ -187,10 +187,11 @@ def _load_model(option: str, path: str):
         raise UsageError(f"{option}: {one_line(err)}") from None
 
 
-def _domain_report(label: str, comp, data, bin_c: float) -> None:
+def _domain_report(label: str, comp, data, bin_c: float, extrapolate: bool = True) -> None:
     """Print how `data`'s samples stand to `comp`'s calibrated temperature range: the samples
-    outside it per temperature (rounded to a multiple of `bin_c` [°C]; passed through uncompensated, or extrapolated by a model that
-    extrapolates), or that the range is unknown (a file saved before it was recorded)."""
+    outside it per temperature (rounded to a multiple of `bin_c` [°C]; extrapolated, or
+    passed through uncompensated with `extrapolate=False`), or that the range is unknown (a
+    file saved before it was recorded)."""
     import numpy as np
 
     from ..calibration.compensators import DOMAIN_MARGIN_C
@@ -208,7 +209,7 @@ def _domain_report(label: str, comp, data, bin_c: float) -> None:
         np.round(data["temperature_c"][outside] / bin_c) * bin_c + 0.0, return_counts=True
     )
     where = ", ".join(f"{n} at {t:+g} °C" for t, n in zip(temps, counts, strict=True))
-    how = ("extrapolated (the model's own form in T)" if comp.extrapolates
+    how = ("extrapolated (the model applied beyond its range)" if extrapolate
            else "passed through uncompensated")  # fmt: skip
     print(f"  {label}: {int(outside.sum())} samples outside the calibrated temperature range "
           f"{span[0]:+.1f} … {span[1]:+.1f} °C (± {DOMAIN_MARGIN_C:g} °C): {where} — {how}")  # fmt: skip
@@ -232,10 +233,10 @@ def cmd_correct(args) -> int:
     comp = _load_model("--model", args.model)
     data = load_data(args.data, args.allow_extra)
     with usage_errors(args.data):
-        out = comp.correct(data)
+        out = comp.correct(data, extrapolate=False if args.no_extrapolate else None)
     e = corrected_run_errors(out)
     print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
-    _domain_report("temperature domain", comp, data, args.temperature_bin)
+    _domain_report("temperature domain", comp, data, args.temperature_bin, out.extrapolated)
     if np.any(e["static"]):
         d = e["drift_error_dph"][e["static"]]
         print(f"  static runs: residual rate RMS {np.sqrt(np.mean(d**2)):.4f} °/h (offset kept)")
@@ -391,6 +392,10 @@ def _correct_parser(sub):
     p.add_argument("data", help="data file in the MeasuredData contract")
     p.add_argument("--model", required=True, help="compensator file from `calibrate` (.eqx)")
     p.add_argument("--out", default="out/corrected.csv", help="output CSV or .nc")
+    p.add_argument("--no-extrapolate", action="store_true",
+                   help="pass samples outside the compensator's calibrated temperature range "
+                   "(± 1 °C) through uncompensated instead of applying it there (they are "
+                   "counted either way)")  # fmt: skip
     _evaluation_options(p)
     return p
 
