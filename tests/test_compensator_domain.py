@@ -231,3 +231,32 @@ def test_loaders_and_correct_refuse_float32_mode(fitted, test_session, tmp_path)
                      lambda: fitted["fourier"].correct(test_session)):  # fmt: skip
             with pytest.raises(RuntimeError, match=r"needs float64 but JAX is in float32 mode"):
                 call()
+
+
+def test_an_edited_domain_in_the_json_export_is_refused(fitted, tmp_path):
+    """The embedded code reads the top-level `temperature_domain`; `hyper` rebuilds the
+    compensator: a file where they disagree, or with a level count that is not one, was
+    edited (they loaded as they were)."""
+    from hrgjax.calibration import export_json, load_json
+
+    export_json(fitted["fourier"], tmp_path / "f.json")
+    good = json.loads((tmp_path / "f.json").read_text(encoding="utf-8"))
+    assert load_json(tmp_path / "f.json").temperature_range == (0.0, 40.0)
+    for edit, match in [
+        (lambda d: d["temperature_domain"].update(range_c=[-50.0, 90.0]), "temperature_domain"),
+        (lambda d: d["hyper"].update(n_temperature_levels="three"), "n_temperature_levels"),
+        (lambda d: d["hyper"].update(n_temperature_levels=2.5), "n_temperature_levels"),
+    ]:
+        d = json.loads(json.dumps(good))
+        edit(d)
+        path = tmp_path / "edited.json"
+        path.write_text(json.dumps(d))
+        with pytest.raises(ValueError, match=match):
+            load_json(path)
+
+
+def test_corrected_data_round_trip_through_xarray(fitted, test_session):
+    out = fitted["fourier"].correct(test_session)
+    back = type(out).from_xarray(out.to_xarray())
+    assert type(back) is hg.MeasuredData
+    np.testing.assert_array_equal(back["angle_corrected_deg"], out["angle_corrected_deg"])

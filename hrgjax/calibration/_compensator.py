@@ -82,6 +82,11 @@ class Corrected(MeasuredData):
         self.margin_c = float(margin_c)
         self.extrapolated = bool(extrapolated)
 
+    @classmethod
+    def from_xarray(cls, ds, **kw) -> MeasuredData:
+        """A plain [`hrgjax.MeasuredData`][] from a dataset (the domain is not in the file)."""
+        return MeasuredData.from_xarray(ds, **kw)
+
     @property
     def n_out_of_range(self) -> int:
         """Samples outside the temperature domain (compensated only if `extrapolated`)."""
@@ -362,6 +367,19 @@ def as_range(value) -> tuple[float, float] | None:
         raise ValueError(f"temperature_range must be (T_min, T_max) [°C], finite, T_min ≤ T_max, "
                          f"or None; got {value!r}")  # fmt: skip
     return (lo, hi)
+
+
+def as_levels(value) -> int | None:
+    """The `n_temperature_levels` field's converter: `None`, or a whole number ≥ 1 (a JSON
+    number loads as one). **Raises:** `ValueError` for anything else (text, 2.5, True, 0)."""
+    if value is None:
+        return None
+    whole = isinstance(value, int | np.integer | float | np.floating) and not isinstance(
+        value, bool | np.bool_
+    )
+    if not (whole and float(value).is_integer() and value >= 1):
+        raise ValueError(f"n_temperature_levels must be a whole number ≥ 1 or None; got {value!r}")
+    return int(value)
 
 
 def domain_of(temperature_c) -> dict:

@@ -358,6 +358,19 @@ def load_json(path: str | os.PathLike):
         _same(path, d, "harmonics", comp.harmonics)
     if name == "PrecessionCompensator":
         _same(path, d, "temperatures_c", list(comp.temperatures_c))
+    span = comp.calibrated_range  # the embedded code reads the top-level copy: it must agree
+    if "temperature_domain" in d:
+        top = (
+            d["temperature_domain"].get("range_c")
+            if isinstance(d["temperature_domain"], dict)
+            else None
+        )
+        if span is None or top is None or [float(v) for v in top] != list(span):
+            raise ValueError(
+                f"{path}: 'temperature_domain' range_c = {top!r} disagrees with the value in "
+                f"'hyper' ({None if span is None else list(span)!r}); the file was edited: "
+                "export the compensator again"
+            )
 
     def f64(key, like, value=None):
         value = _key(path, d, key, list) if value is None else value

@@ -27,6 +27,7 @@ from ._compensator import (
     LEVEL_TOLERANCE_C,
     AbstractCompensator,
     FromField,
+    as_levels,
     as_range,
     check_number,
     check_whole,
@@ -92,7 +93,7 @@ class FourierCompensator(AbstractCompensator):
     temperature_range: tuple[float, float] | None = eqx.field(
         static=True, default=None, converter=as_range
     )
-    n_temperature_levels: int | None = eqx.field(static=True, default=None)
+    n_temperature_levels: int | None = eqx.field(static=True, default=None, converter=as_levels)
 
     def __check_init__(self):
         check_k_e(self.k_e)

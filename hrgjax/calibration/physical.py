@@ -57,6 +57,7 @@ from ._compensator import (
     FROM_FIELD,
     AbstractCompensator,
     FromField,
+    as_levels,
     as_range,
     check_number,
     check_whole,
@@ -197,7 +198,7 @@ class PhysicalCompensator(AbstractCompensator):
     temperature_range: tuple[float, float] | None = eqx.field(
         static=True, default=None, converter=as_range
     )
-    n_temperature_levels: int | None = eqx.field(static=True, default=None)
+    n_temperature_levels: int | None = eqx.field(static=True, default=None, converter=as_levels)
 
     def __check_init__(self):
         check_k_e(self.k_e)
