@@ -132,10 +132,11 @@ FLICKER_T = 0.5 * 2.0 ** np.arange(20)  # the flicker's Gauss–Markov correlati
 
 def _flicker_unit_level(taus):
     """σ² of each of the flicker's Gauss–Markov rates giving B = 1: the mean of their exact
-    Allan variance over `taus` (1 Hz samples) equal to 2 ln 2/π."""
+    Allan variance over `taus` (1 Hz samples) equal to 2 ln 2/π — point samples of AR(1)
+    rates, as `_flicker` makes them (`sampling="point"`)."""
     from hrgjax.allan.octave_covariance import unit_avar
 
-    avar = unit_avar("gauss_markov", taus, 1.0, 1.0 / FLICKER_T).sum(0)
+    avar = unit_avar("gauss_markov", taus, 1.0, 1.0 / FLICKER_T, sampling="point").sum(0)
     return 2 * math.log(2) / math.pi / float(np.exp(np.mean(np.log(avar)))), avar
 
 

@@ -18,6 +18,10 @@ report terms that are not there, and what does it cost? Monte Carlo with known t
 - **Speed**: one identification of 10⁶ samples after its first call, against allantools'
   `oadev` on the same octave grid (the peer's cheapest Allan call). Target ≤ 3×.
 
+Every record is point samples of discrete processes (AR(1) Gauss–Markov rates, a random walk
+of steps K²/fs): each is identified with `sampling="point"` (`SAMPLING`), the model they
+follow, so the figures are the point-sample model's (`docs/allan.md`).
+
 Usage: `.venv/bin/python benchmarks/noise_identification.py [--n 100] [--quick]
 [--bounds-only]`
 (quick: 20 records each; the default takes 1–1.5 minutes on 2 cores).
@@ -37,6 +41,7 @@ jax.config.update("jax_enable_x64", True)
 import hrgjax as hg  # noqa: E402
 
 FS = 1.0  # Hz
+SAMPLING = "point"  # the records are point samples of AR(1) rates and a discrete walk
 LENGTH = 1_000_000  # samples: 11.6 days (at 10⁵ the random walk hides in the second
 # Gauss–Markov term's tail: dropping it raises J by 3, within the penalty)
 TRUTH = {"angle_random_walk": 1.0, "rate_random_walk": 0.004,
@@ -104,7 +109,7 @@ def main(argv=None):
     hits = {c: 0 for c in checks}
     chosen = {}
     for _ in range(n):
-        model = hg.allan.identify_noise(record(rng, True), FS)
+        model = hg.allan.identify_noise(record(rng, True), FS, sampling=SAMPLING)
         for c in checks:
             hits[c] += inside(model, *c)
         key = " + ".join(sorted(model.terms))
@@ -119,7 +124,7 @@ def main(argv=None):
     false, b_clear = 0, 0
     for _ in range(n):
         y = record(rng, False)
-        model = hg.allan.identify_noise(y, FS)
+        model = hg.allan.identify_noise(y, FS, sampling=SAMPLING)
         false += bool(set(model.terms) - {"angle_random_walk", "rate_random_walk"})
         fit = hg.allan.fit_noise(hg.allan.deviation(y, FS))
         b_clear += fit.low["bias_instability"] > 0
@@ -148,7 +153,7 @@ def bounds(report, n, seed):
         y = t["N"] * math.sqrt(t["fs"]) * rng.normal(size=t["n"])
         y += np.cumsum(t["K"] / math.sqrt(t["fs"]) * rng.normal(size=t["n"]))
         y += gauss_markov(rng, t["n"], *t["gm"], t["fs"])
-        model = hg.allan.identify_noise(y, t["fs"])
+        model = hg.allan.identify_noise(y, t["fs"], sampling=SAMPLING)
         if "rate_random_walk" in model.terms:
             continue
         left_out += 1
@@ -156,7 +161,8 @@ def bounds(report, n, seed):
         below += bound < t["K"]
         ratio.append(bound / t["K"])
         # before: ĉ² + zσ under the covariance of the model without K
-        col = unit_avar("rate_random_walk", np.round(model.taus * t["fs"]), 1 / t["fs"])
+        col = unit_avar("rate_random_walk", np.round(model.taus * t["fs"]), 1 / t["fs"],
+                        sampling=SAMPLING)  # fmt: skip
         w = np.linalg.inv(np.linalg.cholesky(model.covariance))
         a, r = w @ col, w @ (model.avar - model.model_avar(model.taus))
         before = math.sqrt(max(a @ r / (a @ a) + z / math.sqrt(a @ a), 0.0))
@@ -174,7 +180,7 @@ def speed(report, t0):
     from _common import best_of
 
     y = record(np.random.default_rng(1), True, 1_000_000)
-    identify = lambda: hg.allan.identify_noise(y, FS)  # noqa: E731
+    identify = lambda: hg.allan.identify_noise(y, FS, sampling=SAMPLING)  # noqa: E731
     identify()  # the octaves' layout cached, as a user's second record of this length
     ours = best_of(identify)
     try:

@@ -15,11 +15,15 @@ TERMS = ("angle_random_walk", "rate_random_walk")
 
 def _brute_omega(value, ms, n, tau0):
     """Cov(σ̂²(m_a), σ̂²(m_b)) of the overlapping Allan variance of n rate samples every tau0
-    with white rate noise N²/τ₀ per sample and a rate random walk of steps K²τ₀, as the
-    Gaussian quadratic forms' 2·tr(A Σ B Σ) over the record's phase (X = Σy)."""
+    with white rate noise N²/τ₀ per sample and a rate random walk K, as the Gaussian quadratic
+    forms' 2·tr(A Σ B Σ) over the record's phase (X = Σy). The samples are interval means
+    (fit_noise's records are rates from angle differences): y_i = (1/τ₀)∫ W over
+    [iτ₀, (i + 1)τ₀] of a Brownian rate W with Cov(W(s), W(t)) = K²·min(s, t), so
+    Cov(y_i, y_j) = K²τ₀(min(i, j) + 1/2) for i ≠ j and K²τ₀(i + 1/3) on the diagonal."""
     idx = np.arange(n)
     sy = np.eye(n) * value["angle_random_walk"] ** 2 / tau0
-    sy += value["rate_random_walk"] ** 2 * tau0 * (np.minimum.outer(idx, idx) + 1)
+    walk = np.minimum.outer(idx, idx) + 0.5 - np.eye(n) / 6.0
+    sy += value["rate_random_walk"] ** 2 * tau0 * walk
     x = np.vstack([np.zeros(n), np.tril(np.ones((n, n)))])  # X_j = Σ_{k<j} y_k
     sx = x @ sy @ x.T
     forms = []

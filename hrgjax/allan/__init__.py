@@ -14,7 +14,8 @@ Every name is importable from `hrgjax.allan` (it was one module until issue 45);
 `total` (mtotdev and ttotdev, NumPy),
 `uncertainty` (noise identification, EDF, χ² intervals), `noise_terms` (the IEEE 952
 line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
-exact covariance of the octave estimates) and `composite` (a composite noise model fitted with
+exact covariance of the octave estimates, for rate samples taken as interval means or as
+point samples: an explicit `sampling` argument) and `composite` (a composite noise model fitted with
 that covariance, with model selection: `identify_noise`) and `resample` (non-uniform time
 stamps onto a uniform grid by the angle: `to_uniform`).
 """

@@ -39,8 +39,8 @@ import numpy as np
 from .._checks import check_1d, check_number, describe, is_concrete, is_finite_real
 from .._io import atomic_write
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
+from .octave_covariance import SAMPLINGS, unit_avar
 from .octave_covariance import covariance as covariance
-from .octave_covariance import unit_avar
 from .octave_fits import best_fit, log_fit, model_avar, model_covariance
 from .uncertainty import chi2_sf
 
@@ -97,6 +97,8 @@ class CompositeNoise:
       from a fit with it forced in: the largest value the octaves do not reject at `ci`
       (one-sided (1 − ci)/2), each value tested under the octaves' covariance with the term
       at that value; inf where none is rejected.
+    - `sampling`: what a rate sample was taken as (`"interval"`: the mean over its interval,
+      `"point"`: an instantaneous sample; [`SAMPLINGS`][hrgjax.allan.octave_covariance.SAMPLINGS]).
     """
 
     terms: dict
@@ -112,6 +114,7 @@ class CompositeNoise:
     p_value: float
     selection: tuple = ()
     bounds: dict = dataclasses.field(default_factory=dict)
+    sampling: str = "interval"
 
     def model_avar(self, taus) -> np.ndarray:
         """The model's Allan variance at `taus` [s] (rounded to whole samples). [unit²]"""
@@ -120,10 +123,10 @@ class CompositeNoise:
         out = np.zeros_like(m)
         for name, spec in self.terms.items():
             if name in LINEAR:
-                out = out + spec["value"] ** 2 * unit_avar(name, m, tau0)
+                out = out + spec["value"] ** 2 * unit_avar(name, m, tau0, sampling=self.sampling)
             else:
                 s, t = spec["sigma"]["value"], spec["correlation_time"]["value"]
-                out = out + s**2 * unit_avar("gauss_markov", m, tau0, tau0 / t)
+                out = out + s**2 * unit_avar("gauss_markov", m, tau0, tau0 / t, self.sampling)
         return out
 
     def term_avar(self, name, taus) -> np.ndarray:
@@ -164,7 +167,7 @@ class CompositeNoise:
             "format": "hrgjax.noise_model", "unit": self.unit, "rate_hz": self.rate_hz,
             "n_samples": self.n, "ci": self.ci, "terms": self.terms, "chi2": self.chi2,
             "dof": self.dof, "p_value": self.p_value, "bounds": self.bounds,
-            "taus_s": self.taus.tolist(),
+            "sampling": self.sampling, "taus_s": self.taus.tolist(),
             "avar": self.avar.tolist(),
         }  # fmt: skip
 
@@ -175,31 +178,58 @@ class CompositeNoise:
             json.dump(self.to_dict(), fh, indent=1, ensure_ascii=False)
 
     def to_kalibr(self, path=None, sensor: str = "gyroscope", rostopic: str = "/imu0") -> dict:
-        """Kalibr's IMU noise parameters (`imu.yaml`): `{sensor}_noise_density` = N and
-        `{sensor}_random_walk` = K in SI continuous-time units (gyroscope: rad/s/√Hz and
-        rad/s²/√Hz; accelerometer: m/s²/√Hz and m/s³/√Hz), with `update_rate` [Hz]. A term
-        the record did not need is written as its upper bound (`bounds`; Kalibr refuses a 0),
-        marked so in the file; with no bound either, `ValueError`. The record's `unit` must
-        be one Kalibr's units follow from ([`TO_SI`][hrgjax.allan.composite.TO_SI]). Kalibr
-        reads both sensors' entries from one file: write each sensor's model and merge them.
-        Written to `path` when given, atomically (missing folders are made). **Returns:** the
-        entries."""
+        """Kalibr's IMU noise parameters (`imu.yaml`) in SI continuous-time units (gyroscope:
+        rad/s/√Hz and rad/s²/√Hz; accelerometer: m/s²/√Hz and m/s³/√Hz), with `update_rate`
+        [Hz]. Kalibr models white noise and a random walk only, so the other terms are folded
+        in, each marked so in the file:
+
+        - `{sensor}_noise_density` = √(N² + 2Q²/Δt), Δt = 1/`rate_hz`: Kalibr's per-sample
+          σ_c/√Δt then equals the record's, N²/Δt + 2Q²/Δt² (white angle noise Q differenced
+          into rates). This holds at this record's update rate only: resampled to another Δt
+          the white angle noise scales as 1/Δt, not 1/√Δt, and its samples' negative
+          correlation (an MA(1)) is lost.
+        - `{sensor}_random_walk` = √(K² + Σ 2σᵢ²/Tᵢ): each Gauss–Markov term's rate wanders
+          like a random walk of that strength over times short against Tᵢ (what hrgjax's EKF
+          uses, `hrgjax.ins.ekf`); over longer times Kalibr's walk overstates it.
+
+        A term the record did not need counts 0, except that where an entry would be 0 (N and
+        Q, or K and every Gauss–Markov term, absent) N's or K's upper bound (`bounds`) is
+        written (Kalibr refuses a 0); with no finite bound either, `ValueError`. The record's
+        `unit` must be one Kalibr's units follow from
+        ([`TO_SI`][hrgjax.allan.composite.TO_SI]). Kalibr reads both sensors' entries from
+        one file: write each sensor's model and merge them. Written to `path` when given,
+        atomically (missing folders are made). **Returns:** the entries."""
         if sensor not in ("gyroscope", "accelerometer"):
             raise ValueError(f"sensor must be 'gyroscope' or 'accelerometer'; got {sensor!r}")
         scale = _si_scale(self.unit, sensor)
+        dt = 1.0 / self.rate_hz
+        q = self.value("quantization")
+        gms = [(g["sigma"]["value"], g["correlation_time"]["value"])
+               for name, g in self.terms.items() if name.startswith("gauss_markov")]  # fmt: skip
+        extra = {"noise_density": 2.0 * q * q / dt,
+                 "random_walk": sum(2.0 * s * s / t for s, t in gms)}  # fmt: skip
         values, notes = {}, {}
         for key, name in (
             ("noise_density", "angle_random_walk"),
             ("random_walk", "rate_random_walk"),
         ):
             v = self.value(name)
-            if v <= 0:
+            if v <= 0 and extra[key] <= 0:
                 v = self.bounds.get(name, 0.0)
                 notes[key] = " (not detected: the record's upper bound)"
-            if not 0 < v < math.inf:
-                raise ValueError(f"to_kalibr: {name} was not identified and has no finite "
-                                 "bound; Kalibr needs a positive value")  # fmt: skip
-            values[key] = v * scale
+                if not 0 < v < math.inf:
+                    raise ValueError(f"to_kalibr: {name} was not identified and has no finite "
+                                     "bound; Kalibr needs a positive value")  # fmt: skip
+            values[key] = math.sqrt(v * v + extra[key]) * scale
+        if q > 0:
+            notes["noise_density"] = (
+                f" sqrt(N^2 + 2Q^2/dt), Q = {q:.4g} {self.unit}*s white "
+                "angle noise folded in: valid at this update_rate only"
+            )
+        if gms:
+            notes["random_walk"] = (" sqrt(K^2 + sum 2 sigma^2/T): Gauss-Markov bias "
+                                    f"{', '.join(f'(sigma {s:.4g}, T {t:.4g} s)' for s, t in gms)}"
+                                    " folded in as its short-time random walk")  # fmt: skip
         out = {
             f"{sensor}_noise_density": values["noise_density"],
             f"{sensor}_random_walk": values["random_walk"],
@@ -226,9 +256,11 @@ class CompositeNoise:
         noise on the electrical wave angle, per sample at this record's rate). `k_e` is
         needed only when the model has Q (else `ValueError` asking for it). A rate random
         walk, a drift or a second Gauss–Markov term has no field in `Noise`: `ValueError`
-        naming it. (The
-        simulator integrates the Gauss–Markov rate by trapezoids, which lowers its sampled
-        variance by (1 + φ)/2: under 1 % for T ≥ 50 samples, 20 % at T = 2 samples.)"""
+        naming it. The simulator integrates the Gauss–Markov rate exactly over each interval
+        (`hrgjax.noise.gauss_markov_bridge`): its rate samples are interval means, this
+        module's default `sampling`, so identify → `to_noise` → simulate → identify returns
+        σ and T. (σ and T are the continuous rate's under either `sampling`: a `"point"`
+        model's terms are simulated here as that rate's interval means.)"""
         from ..noise import Noise
 
         scale = _si_scale(self.unit, "gyroscope")
@@ -283,6 +315,7 @@ def identify_noise(
     terms=("quantization", "angle_random_walk", "rate_random_walk"),
     gauss_markov: int = 2,
     ci: float = 0.95,
+    sampling: str = "interval",
 ) -> CompositeNoise:
     """Identify a composite noise model in rate samples `y` [unit] taken at `rate_hz` [Hz]
     (module docstring): the terms the record needs among `terms` (names of
@@ -294,12 +327,19 @@ def identify_noise(
     records took a drift in 25 % (`benchmarks/noise_identification.py`). Remove a known drift
     first (Stable32 does), or ask for it where the sensor has one.
 
+    `sampling`: what a sample of `y` is — `"interval"` (default) the mean rate over its
+    interval, Δθ/Δt of an angle output (a rate-integrating gyro such as an HRG, hrgjax's
+    simulator, an IMU's integrated increments); `"point"` an instantaneous sample of the
+    rate (a sampled-rate sensor). The Gauss–Markov and rate-random-walk terms' Allan
+    variances and covariance differ between the two
+    ([`octave_covariance`][hrgjax.allan.octave_covariance]); a Gauss–Markov record fitted
+    under the wrong one is biased in T and σ and rejected when long.
+
     **Returns:** a [`CompositeNoise`][hrgjax.allan.CompositeNoise].
 
     **Raises:** `ValueError` naming the argument for unknown terms, a `gauss_markov` outside
-    0–2, a bad rate or level, or a record shorter than 64 samples (four octaves)."""
-    from .result import deviation
-
+    0–2, a bad rate, level or `sampling`, or a record shorter than 64 samples (four
+    octaves)."""
     if not (is_finite_real(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {describe(rate_hz)}")
     bad = [t for t in terms if t not in LINEAR]
@@ -311,6 +351,8 @@ def identify_noise(
         raise ValueError(f"gauss_markov must be 0, 1 or 2 terms; got {describe(gauss_markov)}")
     if not (is_finite_real(ci) and 0.0 < ci < 1.0):
         raise ValueError(f"ci must be a confidence level in (0, 1); got {describe(ci)}")
+    if not isinstance(sampling, str) or sampling not in SAMPLINGS:
+        raise ValueError(f"sampling must be one of {list(SAMPLINGS)}; got {describe(sampling)}")
     check_1d("y", y, "one rate sample per interval")
     y = np.asarray(y, dtype=float)
     if y.ndim != 1 or y.size < 64:
@@ -319,27 +361,38 @@ def identify_noise(
         i = int(np.argmin(np.isfinite(y)))
         raise ValueError(f"y has a missing or non-finite value at index {i}; the noise model "
                          "needs a gap-free record: split the record at its gaps")  # fmt: skip
-    n, tau0 = y.size, 1.0 / float(rate_hz)
+    return _identify(y, float(rate_hz), unit, terms, gauss_markov, float(ci), sampling)
+
+
+def _identify(y, rate_hz, unit, terms, gauss_markov, ci, sampling):
+    """[`identify_noise`][hrgjax.allan.identify_noise] on checked arguments (`sampling`
+    passed to every Allan variance and covariance)."""
+    from .result import deviation
+
+    n, tau0 = y.size, 1.0 / rate_hz
     ms = 2 ** np.arange(int(math.log2(n // SCALE_LIMIT)) + 1)
     res = deviation(y, rate_hz, kind="oadev", taus=ms * tau0, unit=unit)
     avar, ms = res.dev**2, res.m
     t_grid = np.geomspace(2 * tau0, ms[-1] * tau0, T_GRID)
-    cols = {t: unit_avar(t, ms, tau0) for t in terms}
-    gm_cols = dict(zip(t_grid, unit_avar("gauss_markov", ms, tau0, tau0 / t_grid), strict=True))
+    cols = {t: unit_avar(t, ms, tau0, sampling=sampling) for t in terms}
+    gm_cols = dict(zip(t_grid, unit_avar("gauss_markov", ms, tau0, tau0 / t_grid, sampling),
+                       strict=True))  # fmt: skip
 
     # round 0: each octave's variance from its EDF (independent; the noise type identified
     # per octave), then the model's own. (A start from white noise's EDF everywhere lands
     # the fullest fit in another optimum more often: the benchmark's coverage fell 86 → 83 %.)
     omega = omega0 = np.diag(2 * avar**2 / np.maximum(res.edf, 1.0))
-    full = best_fit(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
+    full = best_fit(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms,
+                    sampling=sampling)  # fmt: skip
     for _ in range(3):
-        omega = model_covariance(full, ms, n, tau0, avar)
-        full = best_fit(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms)
+        omega = model_covariance(full, ms, n, tau0, avar, sampling=sampling)
+        full = best_fit(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms,
+                    sampling=sampling)  # fmt: skip
     # selection: every subset ranked with the fullest model's covariance; the best few then
     # each with its own, by the Gaussian likelihood of the octaves (J + log det) + penalty —
     # a covariance from too large a model hides misfit at long τ, one from too small a model
     # exaggerates it
-    tried = _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms)
+    tried = _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms, sampling)
 
     def fitted_finalists(give_up):
         out = []
@@ -347,16 +400,17 @@ def identify_noise(
             # each finalist fitted on log σ̂² with its own covariance: J there and the
             # relative covariance's log det score it (in log space the covariance barely
             # moves with the level, so the likelihood cannot trade misfit for a smaller Ω)
-            got = _own_fit(row["fit"], avar, ms, n, tau0, cols, give_up)
+            got = _own_fit(row["fit"], avar, ms, n, tau0, sampling, cols, give_up)
             if got is None or got[3] < FIT_ALPHA:
                 # rejected by its own covariance: the start may be an optimum the fullest
                 # model's covariance made (a wrong fullest fit ranks its own kind first), so
                 # it is fitted again from the subset's fit under the per-τ EDF weights; a fit
                 # its covariance accepts is kept first, then the better likelihood
                 g = row["gauss_markov"]
-                start = best_fit(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms)
-                other = None if start is None else _own_fit(start, avar, ms, n, tau0, cols,
-                                                            give_up)  # fmt: skip
+                start = best_fit(avar, omega0, cols, gm_cols, row["terms"], g, g, tau0, ms,
+                                 sampling=sampling)  # fmt: skip
+                other = None if start is None else _own_fit(start, avar, ms, n, tau0, sampling,
+                                                            cols, give_up)  # fmt: skip
                 rank = lambda f: (f[3] >= FIT_ALPHA, -f[2])  # noqa: E731
                 if other is not None and (got is None or rank(other) > rank(got)):
                     got = other
@@ -376,7 +430,7 @@ def identify_noise(
         raise RuntimeError("identify_noise: no candidate model could be fitted with its own "
                            "covariance (degenerate); try fewer terms or a longer record")  # fmt: skip
     _, _, fit, omega, cov = min(fitting, key=lambda f: f[0])
-    bounds = _bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci)
+    bounds = _bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci, sampling)
     for row in tried:
         row.pop("fit")
     terms_out = _intervals(fit, cov, ci, unit)
@@ -386,25 +440,26 @@ def identify_noise(
     return CompositeNoise(
         terms=terms_out, unit=unit, rate_hz=float(rate_hz), n=n, ci=float(ci),
         taus=ms * tau0, avar=avar, covariance=omega, chi2=chi2, dof=dof, p_value=float(p),
-        selection=tuple(tried), bounds=bounds,
+        selection=tuple(tried), bounds=bounds, sampling=sampling,
     )  # fmt: skip
 
 
-def _own_fit(start, avar, ms, n, tau0, cols=None, give_up=None):
+def _own_fit(start, avar, ms, n, tau0, sampling, cols=None, give_up=None):
     """A finalist refitted from `start` on log σ̂² with its own covariance: `(fit, Ω,
     J + log det of the relative covariance, p-value of J, covariance of p)`, or None where
     its covariance is degenerate."""
     try:
-        fit, om, cov = log_fit(start, avar, ms, n, tau0, cols=cols, give_up=give_up)
+        fit, om, cov = log_fit(start, avar, ms, n, tau0, cols=cols, give_up=give_up,
+                               sampling=sampling)  # fmt: skip
     except np.linalg.LinAlgError:
         return None
-    model = model_avar(fit, ms, tau0)
+    model = model_avar(fit, ms, tau0, sampling=sampling)
     logdet = float(np.linalg.slogdet(om / np.outer(model, model))[1])
     dof = max(int(ms.size - len(fit["names"]) - 2 * len(fit["gm"])), 1)
     return fit, om, fit["J"] + logdet, chi2_sf(fit["J"], dof), cov
 
 
-def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms):
+def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms, sampling):
     """Every subset of the candidates fitted with one covariance, by J + penalty."""
     tried = []
     for k in range(len(terms) + 1):
@@ -412,7 +467,8 @@ def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms):
             for g in range(gauss_markov + 1):
                 if (not subset and g == 0) or len(subset) + 2 * g >= len(ms):
                     continue  # nothing, or no degree of freedom left
-                fit = best_fit(avar, omega, cols, gm_cols, list(subset), g, g, tau0, ms)
+                fit = best_fit(avar, omega, cols, gm_cols, list(subset), g, g, tau0, ms,
+                               sampling=sampling)  # fmt: skip
                 if fit is None:
                     continue
                 score = fit["J"] + PENALTY * len(subset) + GM_PENALTY * g
@@ -421,7 +477,7 @@ def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms):
     return sorted(tried, key=lambda r: r["score"])
 
 
-def _bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci):
+def _bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci, sampling):
     """Upper ends at level `ci` of the candidate linear terms not in `fit`, each forced in
     beside the selected model (its coefficient² free in sign, the others' held): √ of the
     largest b ≥ 0 with b ≤ ĉ² + zσ(b), ĉ² and σ by GLS under the octaves' covariance of the
@@ -430,7 +486,7 @@ def _bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci):
     below a true rate random walk in 16 % of records at 95 %); inf where no b is rejected
     (σ grows as fast as b) [coefficient unit]."""
     z = NormalDist().inv_cdf(0.5 + ci / 2)
-    base = model_avar(fit, ms, tau0)
+    base = model_avar(fit, ms, tau0, sampling=sampling)
     k = len(fit["names"])
     out = {}
     for name in terms:
@@ -445,7 +501,7 @@ def _bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci):
         def excess(b, name=name):  # b − (ĉ² + zσ) under Ω of the model with the term at b
             with_term = dict(fit, names=[*fit["names"], name],
                              c=np.concatenate([fit["c"][:k], [b], fit["c"][k:]]))  # fmt: skip
-            c2, sigma = gls(model_covariance(with_term, ms, n, tau0, avar))
+            c2, sigma = gls(model_covariance(with_term, ms, n, tau0, avar, sampling=sampling))
             return b - (c2 + z * sigma)
 
         c2, sigma = gls(omega)

@@ -3,17 +3,29 @@ overlapping Allan variance at octave scales — the moments
 [`identify_noise`][hrgjax.allan.identify_noise] fits.
 
 The terms, for rate samples $y_k$ every $\tau_0$ (their Allan variances exact for sampled
-data, not the continuous-time approximations):
+data, not the continuous-time approximations). By default (`sampling="interval"`) a sample
+is the mean of the continuous rate over its interval, y_k = (θ(kτ₀) − θ((k−1)τ₀))/τ₀ — what
+a rate-integrating gyro's angle output differenced gives (an HRG's wave angle, any Δθ/Δt),
+what `hrgjax.simulate` and [`Noise`][hrgjax.Noise] produce (the Gauss–Markov rate integrated
+exactly over each interval) and what IEEE 952's continuous-time terms describe.
+`sampling="point"` takes instead instantaneous samples of a discrete rate process (a
+sampled-rate sensor without integration): it changes only the rate random walk and the
+Gauss–Markov terms.
 
 | term | coefficient | Allan variance at τ = mτ₀ |
 |---|---|---|
 | `quantization` | Q [unit·s] (white angle noise, σ per sample) | 3Q²/τ² |
 | `angle_random_walk` | N [unit·√s] (white rate noise, N²/τ₀ per sample) | N²/τ |
-| `rate_random_walk` | K [unit/√s] (rate steps of variance K²τ₀) | K²τ/3 + K²τ₀/(6m) |
+| `rate_random_walk` | K [unit/√s] (a continuous random walk; point: rate steps of variance K²τ₀) | K²τ/3 (point: + K²τ₀/(6m)) |
 | `rate_ramp` | R [unit/s] (a drift y = R·t) | R²τ²/2 |
-| `gauss_markov` (up to two) | σ [unit], T [s] (first order: y_{k+1} = φy_k + …, φ = e^{−τ₀/T}) | (4D(m) − D(2m))/(2τ²) |
+| `gauss_markov` (up to two) | σ [unit], T [s] (a first-order rate of variance σ², ε = τ₀/T; point: y_{k+1} = φy_k + …, φ = e^{−ε}) | (4D(m) − D(2m))/(2m²) |
 
-with D(t) = σ²[t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)²]τ₀² the structure function of the angle.
+with D(t) the structure function of the angle X = Σy [rate unit × samples] at a lag of t
+samples: for interval means D(t) = σ²(2/ε)[t − (1 − e^{−εt})/ε] (the continuous process's,
+so the Allan variance is IEEE 952 Annex C's (2σ²T/τ)[1 − T/(2τ)(3 − 4e^{−τ/T} +
+e^{−2τ/T})]); for point samples D(t) = σ²[t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)²]. For T = 10τ₀
+the point samples' Allan variance is 1.54× the interval means' at τ₀ and 1.14× at 2τ₀: a model
+of the wrong kind biases T and σ and is rejected on long records.
 
 Each octave's estimate σ̂²(m) = Σᵢ aᵢ²/(2m²M) is a quadratic
 form of the second differences aᵢ of the angle; for Gaussian noise
@@ -22,12 +34,12 @@ is the covariance of aᵢ and b_{i+ℓ} (a sum of nine values of each term's gen
 covariance), n_ab(ℓ) the number of pairs at lag ℓ and μ the drift's mean difference. It is
 exact for the model (finite record, overlapping estimates, neighbouring octaves correlated);
 the sum over ℓ runs piecewise (Gauss–Legendre on each smooth piece, the end corrections of
-Euler–Maclaurin; its error ≈ 1e-5 of each entry, below 3e-5 for a Gauss–Markov T of three
+Euler–Maclaurin; its error ≈ 1e-5 of each entry, below 4e-5 for a Gauss–Markov T of three
 samples), so it costs the same for 10³ or 10⁷ samples.
 
 A term enters through its *generalised covariance* G of the angle X = Σy (rate units ×
-samples): white rate −|t|/2, random-walk rate (|t|³ − |t|)/12, a first-order Gauss–Markov rate
-−D(t)/2; c_ab(ℓ) is [`second_difference_cov`][hrgjax.allan.octave_covariance.second_difference_cov].
+samples): white rate −|t|/2, random-walk rate |t|³/12 (point: (|t|³ − |t|)/12), a first-order
+Gauss–Markov rate −D(t)/2; c_ab(ℓ) is [`second_difference_cov`][hrgjax.allan.octave_covariance.second_difference_cov].
 On a piece between kinks the nine arguments of G keep their signs, so c_ab is a cubic plus
 two exponentials per Gauss–Markov term there, and is evaluated so: exact zeros beyond the
 kinks (where the nine cubics, summed pointwise at t ≈ 10⁵, cancel only to round-off).
@@ -46,6 +58,9 @@ SLOW = 1e-6
 the pair's pieces: its closed form's exponential part is ≈ σ²/ε² while c itself is
 ≈ σ²·ε·ma²·mb, so the closed form keeps ≈ 1e-16/(ε³ma²mb) of c (here ≤ 1e-10; for ma ≈ mb
 this is 2ε(ma + mb) ≲ 0.04, the old rule; a pair of very different octaves needs more)."""
+SAMPLINGS = ("interval", "point")
+"""What a rate sample is: `"interval"` the mean of the continuous rate over its interval
+(the default: angle-derived rates), `"point"` an instantaneous sample of a discrete process."""
 _CP = np.array([1.0, -2.0, 1.0])
 _P, _Q = np.divmod(np.arange(9), 3)
 _W = _CP[_P] * _CP[_Q]  # c_p·c_q of the nine values of G in a second-difference covariance
@@ -58,15 +73,38 @@ def _g_white(t):
     return -0.5 * np.abs(t)
 
 
-def _g_walk(t):
+def _g_walk(t, sampling="interval"):
+    """G of a rate random walk with unit steps per sample: |t|³/12 for interval means of a
+    continuous walk, (|t|³ − |t|)/12 for point samples of a discrete one."""
     t = np.abs(t)
-    return (t**3 - t) / 12.0
+    return t**3 / 12.0 if sampling == "interval" else (t**3 - t) / 12.0
 
 
-def _gm_structure(t, eps):
-    """D(t)/σ² of a unit-variance AR(1) rate with φ = e^{−ε}, summed over t samples:
-    t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)², with the bracket's cancellation avoided (a
-    series where εt < 1e-4). `t` and `eps` broadcast (several terms' ε in one call)."""
+def _gm_structure(t, eps, sampling="interval"):
+    """D(t)/σ² of a unit-variance first-order Gauss–Markov rate (ε = τ₀/T) summed over t
+    samples [samples²]: interval means (2/ε)[t − (1 − e^{−εt})/ε] (a series where εt < 0.1),
+    point samples (φ = e^{−ε}) t + 2φ(t(1 − φ) − (1 − φᵗ))/(1 − φ)² (a series where
+    εt < 1e-4). `t` and `eps` broadcast (several terms' ε in one call)."""
+    if sampling == "point":
+        return _gm_structure_point(t, eps)
+    t = np.abs(np.asarray(t, dtype=float))
+    eps = np.asarray(eps, dtype=float)
+    u = eps * t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = 2.0 * (u + np.expm1(-u)) / (eps * eps)  # (2/ε²)(u − 1 + e^{−u})
+    small = u < 0.1
+    if small.any():  # t²·2Σ(−u)ᵏ/(k + 2)!, to u⁹ (its remainder < 1e-17 relative)
+        us = np.broadcast_to(u, out.shape)[small]
+        ts = np.broadcast_to(t, out.shape)[small]
+        acc = np.zeros_like(us)
+        for k in range(9, -1, -1):
+            acc = acc * (-us) + 2.0 / math.factorial(k + 2)
+        out = np.array(out, dtype=float, copy=True)
+        out[small] = ts * ts * acc
+    return out
+
+
+def _gm_structure_point(t, eps):
     t = np.abs(np.asarray(t, dtype=float))
     eps = np.asarray(eps, dtype=float)
     u = eps * t
@@ -82,8 +120,15 @@ def _gm_structure(t, eps):
     return t + 2 * np.exp(-eps) * bracket / one_m_phi**2
 
 
-def _g_gm(t, eps):
-    return -0.5 * _gm_structure(t, eps)
+def _g_gm(t, eps, sampling="interval"):
+    return -0.5 * _gm_structure(t, eps, sampling)
+
+
+def _check_sampling(sampling):
+    """`sampling`, checked to be one of [`SAMPLINGS`][hrgjax.allan.octave_covariance.SAMPLINGS]."""
+    if not isinstance(sampling, str) or sampling not in SAMPLINGS:
+        raise ValueError(f"sampling must be one of {list(SAMPLINGS)}; got {sampling!r}")
+    return sampling
 
 
 def second_difference_cov(gfun, ell, ma, mb):
@@ -98,10 +143,12 @@ def second_difference_cov(gfun, ell, ma, mb):
 # -- the model's Allan variance and the estimator's covariance -----------------------------
 
 
-def unit_avar(term, m, tau0, eps=None):
+def unit_avar(term, m, tau0, eps=None, sampling="interval"):
     """Allan variance at factors `m` of one term with unit coefficient² (Q² = 1 [unit·s]²,
-    …; Gauss–Markov: σ² = 1 [unit²] with φ = e^{−eps}; a 1-D `eps` gives one row per
-    value)."""
+    …; Gauss–Markov: σ² = 1 [unit²] with ε = τ₀/T = `eps`; a 1-D `eps` gives one row per
+    value) [unit²], for rate samples taken as `sampling` (one of
+    [`SAMPLINGS`][hrgjax.allan.octave_covariance.SAMPLINGS])."""
+    sampling = _check_sampling(sampling)
     m = np.asarray(m, dtype=float)
     if term == "rate_ramp":
         return (m * tau0) ** 2 / 2.0
@@ -114,20 +161,22 @@ def unit_avar(term, m, tau0, eps=None):
         eps = np.asarray(eps, dtype=float)
         if eps.ndim == 1:  # a row per value
             eps = eps.reshape((eps.size,) + (1,) * (m.ndim + 1))
-        g = _g_gm(np.stack([m, 2 * m], axis=-1), eps)
+        g = _g_gm(np.stack([m, 2 * m], axis=-1), eps, sampling)
         return (2 * g[..., 1] - 8 * g[..., 0]) / (2 * m**2)
-    g = term_g(term, tau0)
+    g = term_g(term, tau0, sampling=sampling)
     return (2 * g(2 * m) - 8 * g(m)) / (2 * m**2)
 
 
-def term_g(term, tau0, eps=None):
-    """The generalised covariance of X = Σy for one term with unit coefficient²."""
+def term_g(term, tau0, eps=None, sampling="interval"):
+    """The generalised covariance of X = Σy for one term with unit coefficient², rate
+    samples taken as `sampling` (as in [`unit_avar`][hrgjax.allan.octave_covariance.unit_avar])."""
+    sampling = _check_sampling(sampling)
     if term == "angle_random_walk":  # σ² = N²/τ₀ per sample
         return lambda t: _g_white(t) / tau0
     if term == "rate_random_walk":  # steps of variance K²τ₀
-        return lambda t: _g_walk(t) * tau0
+        return lambda t: _g_walk(t, sampling) * tau0
     if term == "gauss_markov":
-        return lambda t: _g_gm(t, eps)
+        return lambda t: _g_gm(t, eps, sampling)
     raise ValueError(term)
 
 
@@ -188,7 +237,7 @@ def _geometry(x, piece, lo, hi, ma, mb):
             "ma": ma, "mb": mb}  # fmt: skip
 
 
-def _on_pieces(geo, x, piece, lin, gms, tau0):
+def _on_pieces(geo, x, piece, lin, gms, tau0, sampling):
     """Σ_terms coefficient²·[`second_difference_cov`][hrgjax.allan.octave_covariance.second_difference_cov]
     at the nodes `x` of pieces [lo, hi] between the kinks (pairs of factors ma, mb): on a
     piece every argument t = ℓ + q·mb − p·ma of G keeps its sign σ, so the white and
@@ -199,10 +248,11 @@ def _on_pieces(geo, x, piece, lin, gms, tau0):
     `SLOW`, its linear and exponential parts cancelling) it is evaluated pointwise."""
     f_abs = -0.5 * max(lin.get("angle_random_walk", 0.0), 0.0) / tau0
     c = f_abs * geo["abs_t"]
-    if lin.get("rate_random_walk", 0.0) > 0:
-        c += (lin["rate_random_walk"] * tau0 / 12.0) * geo["cubic"]
+    if lin.get("rate_random_walk", 0.0) > 0:  # Σ c_p c_q |t|³ for interval means
+        walk = geo["cubic"] + geo["abs_t"] if sampling == "interval" else geo["cubic"]
+        c += (lin["rate_random_walk"] * tau0 / 12.0) * walk
     for s2, eps in gms:
-        a, e = _gm_weights(s2, eps)
+        a, e = _gm_weights(s2, eps, sampling)
         ends = _exp(-eps, geo["dist"])
         pw = e * np.einsum("ij,ij->i", geo["w_plus"], ends)  # per piece
         mw = e * np.einsum("ij,ij->i", geo["w_minus"], ends)
@@ -213,10 +263,10 @@ def _on_pieces(geo, x, piece, lin, gms, tau0):
             slow = np.flatnonzero(geo["cube"] < SLOW / eps**3)  # linear and exponential parts
             args_u, args_i = geo["args"]  # cancel there: the pointwise value instead, G at
             if 9 * slow.size > args_u.size:  # every distinct argument once where that is fewer
-                term[slow] = s2 * (_W @ _g_gm(args_u, eps)[args_i[:, slow]])
+                term[slow] = s2 * (_W @ _g_gm(args_u, eps, sampling)[args_i[:, slow]])
             else:
                 ps = piece[slow]
-                g = term_g("gauss_markov", tau0, eps)
+                g = term_g("gauss_markov", tau0, eps, sampling)
                 term[slow] = s2 * second_difference_cov(g, x[slow], geo["ma"][ps], geo["mb"][ps])
         c += term
     return c
@@ -228,8 +278,12 @@ def _exp(rate, where):
     return np.exp(rate * u)[i]
 
 
-def _gm_weights(s2, eps):
-    """G of a Gauss–Markov term (σ² = s2, φ = e^{−ε}) as a·|t| + e·φ^{|t|} + const: (a, e)."""
+def _gm_weights(s2, eps, sampling):
+    """G of a Gauss–Markov term (σ² = s2, φ = e^{−ε}) as a·|t| + e·φ^{|t|} + const: (a, e) —
+    interval means −(s2/ε)|t| − (s2/ε²)φ^{|t|} + s2/ε², point samples
+    −½s2(1 + 2φ/(1 − φ))|t| − s2·φ/(1 − φ)²·φ^{|t|} + const."""
+    if sampling == "interval":
+        return -s2 / eps, -s2 / eps**2
     r, phi = -math.expm1(-eps), math.exp(-eps)
     return -0.5 * s2 * (1 + 2 * phi / r), -0.5 * s2 * 2 * phi / r**2
 
@@ -292,14 +346,18 @@ def _layout(ms: tuple, n: int) -> dict:
     return lay
 
 
-def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
+def covariance(
+    coef: dict, gm: list, ms, n: int, tau0: float, sampling: str = "interval"
+) -> np.ndarray:
     """Cov(σ̂²(m_a), σ̂²(m_b)) of the overlapping Allan variance at factors `ms` of `n` rate
     samples for the model `coef` ({term: coefficient²} of [`LINEAR`][hrgjax.allan.composite.LINEAR])
-    plus Gauss–Markov terms `gm` [(σ², T [s])] (module docstring). [unit⁴]
+    plus Gauss–Markov terms `gm` [(σ², T [s])] (module docstring), the samples taken as
+    `sampling` (as in [`unit_avar`][hrgjax.allan.octave_covariance.unit_avar]). [unit⁴]
 
     Between the kinks the sum over ℓ runs piecewise by quadrature; beyond them only the
     Gauss–Markov terms' exponentials are left (c = Σ_g K_g φ_g^x, x lags past the last kink,
     the count linear in x), and both tails are summed in closed form."""
+    sampling = _check_sampling(sampling)
     lay = _layout(tuple(int(m) for m in ms), int(n))
     ma, mb, na, nb = lay["ma"], lay["mb"], lay["na"], lay["nb"]
     lin = {t: c for t, c in coef.items() if t in ("angle_random_walk", "rate_random_walk")}
@@ -307,7 +365,7 @@ def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
     q2 = coef.get("quantization", 0.0) / tau0**2  # white angle noise in X units
     mu2 = coef.get("rate_ramp", 0.0) * tau0**2 * ma**2 * mb**2  # μ_a·μ_b of the drift
 
-    c = _on_pieces(lay["geo"], lay["x"], lay["piece"], lin, gms, tau0)
+    c = _on_pieces(lay["geo"], lay["x"], lay["piece"], lin, gms, tau0, sampling)
     terms = 2 * c * c
     if mu2.any():
         terms = terms + 4 * mu2[lay["k"]] * c
@@ -316,7 +374,7 @@ def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
     # K_g = e_g·(1 − φ^{ma})²(1 − φ^{mb})² (the nine exponentials factor)
     if gms:
         eps = np.array([e for _, e in gms])[:, None]  # (G, 1)
-        amp = np.stack([_gm_weights(s2, e)[1] * np.expm1(-e * ma) ** 2 * np.expm1(-e * mb) ** 2
+        amp = np.stack([_gm_weights(s2, e, sampling)[1] * np.expm1(-e * ma) ** 2 * np.expm1(-e * mb) ** 2
                         for s2, e in gms])  # fmt: skip
         ends = np.stack([nb - 1 - 2 * ma, na - 1 - 2 * mb])  # both tails (2, pairs) at once
         if mu2.any():
@@ -329,9 +387,9 @@ def covariance(coef: dict, gm: list, ms, n: int, tau0: float) -> np.ndarray:
         g = np.zeros(tu.size)  # the other terms' G at the distinct |t|, then their c there
         for t, wt in lin.items():
             if wt > 0:
-                g += wt * term_g(t, tau0)(tu)
+                g += wt * term_g(t, tau0, sampling=sampling)(tu)
         for s2, e in gms:
-            g += s2 * _g_gm(tu, e)
+            g += s2 * _g_gm(tu, e, sampling)
         cs = _W @ g[ti]
         total += np.bincount(k, weights=lay["q_count"] * (2 * ((cs + cq) ** 2 - cs**2)
                                                           + 4 * mu2[k] * cq), minlength=ma.size)  # fmt: skip

@@ -11,7 +11,11 @@ r"""Fitting composite noise models to the octaves' Allan variances — the two f
   fit in rounds.
 
 A fit is a dict: `names` (linear terms), `gm` (correlation times [s]), `c` (coefficients²,
-the linear terms' then the Gauss–Markov terms' σ²) and `J` (the whitened misfit).
+the linear terms' then the Gauss–Markov terms' σ²) and `J` (the whitened misfit). Every
+function that evaluates a term takes the rate samples' `sampling` (one of
+[`SAMPLINGS`][hrgjax.allan.octave_covariance.SAMPLINGS]) as a required keyword, passed on
+to [`unit_avar`][hrgjax.allan.octave_covariance.unit_avar] and
+[`covariance`][hrgjax.allan.octave_covariance.covariance].
 """
 
 from __future__ import annotations
@@ -26,22 +30,24 @@ from .octave_covariance import covariance, unit_avar
 from .uncertainty import chi2_sf
 
 
-def model_avar(fit, ms, tau0):
+def model_avar(fit, ms, tau0, *, sampling):
     """The Allan variance [unit²] of a fit at the averaging factors `ms`, samples every
-    `tau0` [s]."""
-    out = sum(c * unit_avar(t, ms, tau0) for t, c in zip(fit["names"], fit["c"], strict=False))
+    `tau0` [s] taken as `sampling`."""
+    out = sum(c * unit_avar(t, ms, tau0, sampling=sampling)
+              for t, c in zip(fit["names"], fit["c"], strict=False))  # fmt: skip
     for c, t in zip(fit["c"][len(fit["names"]) :], fit["gm"], strict=True):
-        out = out + c * unit_avar("gauss_markov", ms, tau0, tau0 / t)
+        out = out + c * unit_avar("gauss_markov", ms, tau0, tau0 / t, sampling)
     return out
 
 
-def model_covariance(fit, ms, n, tau0, avar):
+def model_covariance(fit, ms, n, tau0, avar, *, sampling):
     """Ω [unit⁴]: the covariance of the octave estimates at factors `ms` of `n` samples under
     the fit ([`covariance`][hrgjax.allan.octave_covariance.covariance]), each variance
-    floored at 1e-6 of the estimates' own (`avar` [unit²]) so that Ω stays invertible."""
+    floored at 1e-6 of the estimates' own (`avar` [unit²]) so that Ω stays invertible;
+    samples taken as `sampling`."""
     coef = dict(zip(fit["names"], fit["c"][: len(fit["names"])], strict=True))
     gm = [(s2, tt) for s2, tt in zip(fit["c"][len(fit["names"]) :], fit["gm"], strict=True)]
-    om = covariance(coef, gm, ms, n, tau0)
+    om = covariance(coef, gm, ms, n, tau0, sampling)
     # a floor of 1e-6 of each octave's own variance keeps Ω invertible where the model is 0
     return om + np.diag(1e-6 * np.maximum(np.diag(om), 2 * avar**2 / max(n, 1)))
 
@@ -100,10 +106,11 @@ def combinations(n: int, k: int) -> np.ndarray:
     return out
 
 
-def best_fit(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
+def best_fit(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms, *, sampling):
     """The best fit of the linear terms `names` plus g Gauss–Markov terms (correlation times
     profiled on the grid, then refined by a parabola in log T); with `g_exact` None, every
-    admissible subset of them (NNLS), as the fullest model's fit."""
+    admissible subset of them (NNLS), as the fullest model's fit. `cols` and `gm_cols`
+    (the unit Allan variances) and `sampling` (for the refinement's) must agree."""
     chol_inv = np.linalg.inv(np.linalg.cholesky(omega))
     subsets = [names] if g_exact is not None else [
         list(s) for k in range(len(names) + 1) for s in itertools.combinations(names, k)]  # fmt: skip
@@ -136,11 +143,11 @@ def best_fit(avar, omega, cols, gm_cols, names, g, g_exact, tau0, ms):
     if np.isfinite(j[0]):
         best["c"], best["J"] = c[0], float(j[0])
     if best["gm"]:
-        best = refine(best, avar, chol_inv, cols, tau0, ms, grid)
+        best = refine(best, avar, chol_inv, cols, tau0, ms, grid, sampling=sampling)
     return best
 
 
-def refine(fit, avar, chol_inv, cols, tau0, ms, grid):
+def refine(fit, avar, chol_inv, cols, tau0, ms, grid, *, sampling):
     """Each correlation time moved to the vertex of a parabola in log T through its grid
     neighbours (the others held), when that lowers J."""
     step = math.log(grid[1] / grid[0])
@@ -149,7 +156,7 @@ def refine(fit, avar, chol_inv, cols, tau0, ms, grid):
         def j_at(log_ts, fit=fit, i=i):  # J and (times, c) with T_i at each of `log_ts`
             times = np.repeat(np.asarray(fit["gm"], dtype=float)[None], len(log_ts), axis=0)
             times[:, i] = np.exp(log_ts)
-            gm = unit_avar("gauss_markov", ms, tau0, tau0 / times.ravel())
+            gm = unit_avar("gauss_markov", ms, tau0, tau0 / times.ravel(), sampling)
             gm = gm.reshape(*times.shape, len(ms)).transpose(0, 2, 1)  # (trials, S, k)
             lin = np.stack([cols[t] for t in fit["names"]], 1) if fit["names"] else gm[0, :, :0]
             basis = np.concatenate([np.broadcast_to(lin, (len(log_ts), *lin.shape)), gm], 2)
@@ -169,17 +176,18 @@ def refine(fit, avar, chol_inv, cols, tau0, ms, grid):
     return fit
 
 
-def log_parts(p, lin, k, ms, tau0):
+def log_parts(p, lin, k, ms, tau0, *, sampling):
     """Model Allan variance M, ∂(log M)/∂p, and a function giving ∂²(log M)/∂p² (S, P, P),
     at p = (log c² of the linear terms, whose unit Allan variances at `ms` are the columns
-    of `lin` (S, q), and of the k Gauss–Markov terms, log T of each)."""
+    of `lin` (S, q), and of the k Gauss–Markov terms, log T of each; samples taken as
+    `sampling`)."""
     q = lin.shape[1]
     c = np.exp(p[: q + k])
     h = 1e-4  # ∂/∂ log T by central differences: each T and T·e^{±h} in one evaluation
     if k:
         logt = p[q + k :]
         times = np.exp(np.concatenate([logt, logt + h, logt - h]))
-        gm = unit_avar("gauss_markov", ms, tau0, tau0 / times)
+        gm = unit_avar("gauss_markov", ms, tau0, tau0 / times, sampling)
         amp = np.concatenate([lin, gm[:k].T], axis=1) * c  # ∂M/∂ log c² = c²·f
         slope = c[q:] * (gm[k : 2 * k] - gm[2 * k :]).T / (2 * h)  # ∂M/∂ log T
     else:
@@ -200,12 +208,14 @@ def log_parts(p, lin, k, ms, tau0):
     return model, jac, curvature
 
 
-def log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None, give_up=None):
+def log_fit(
+    fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None, give_up=None, *, sampling
+):
     """The selected model refitted on log σ̂² (Newton on the weighted squares, Gauss–Newton
     where its Hessian is not positive definite, step-halving): the relative covariance
     D⁻¹ΩD⁻¹ (D the model) hardly depends on the fitted level, so the weights do not follow
     the estimate as Ω's do on σ̂² itself, and the long octaves' skewed estimates weigh
-    symmetrically. **Returns:** `(fit, Ω, covariance of p)`, p = (log c², log T)."""
+    symmetrically. Samples taken as `sampling` (`cols`, where given, must agree). **Returns:** `(fit, Ω, covariance of p)`, p = (log c², log T)."""
     c = np.asarray(fit["c"], dtype=float)
     keep = c > 0  # a term at zero is absent: log c² has no place to start from
     q = len(fit["names"])
@@ -214,7 +224,8 @@ def log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None,
     k, c = len(gm), c[keep]
     p = np.concatenate([np.log(c), np.log(np.asarray(gm, dtype=float))])
     target = np.log(avar)
-    lin = (np.stack([unit_avar(t, ms, tau0) if cols is None else cols[t] for t in names], axis=1)
+    lin = (np.stack([unit_avar(t, ms, tau0, sampling=sampling) if cols is None else cols[t]
+                     for t in names], axis=1)
            if names else np.zeros((len(ms), 0)))  # fmt: skip
 
     def fitted(p):
@@ -229,7 +240,7 @@ def log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None,
         return whiten @ (target - np.log(model)), whiten @ jac, curvature, live
 
     def relative(p, model):  # the covariance of log σ̂² at p, D⁻¹ΩD⁻¹, and its inverse factor
-        om = model_covariance(fitted(p), ms, n, tau0, avar)
+        om = model_covariance(fitted(p), ms, n, tau0, avar, sampling=sampling)
         return om, np.linalg.inv(np.linalg.cholesky(om / np.outer(model, model)))
 
     def step_from(r, a, curv, whiten):
@@ -244,7 +255,7 @@ def log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None,
 
     dof = max(len(ms) - p.size, 1)
     for _ in range(rounds):  # Newton with the weights held, then the weights at its end
-        parts = log_parts(p, lin, k, ms, tau0)
+        parts = log_parts(p, lin, k, ms, tau0, sampling=sampling)
         om, chol = relative(p, parts[0])
         r, a, curv, live = whitened(parts, chol)
         cost = float(r @ r)
@@ -252,7 +263,7 @@ def log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None,
             step = step_from(r, a, curv, chol)
             for scale in (1.0, 0.5, 0.25, 0.125):
                 trial = p + scale * np.clip(step, -2.0, 2.0)
-                got = whitened(log_parts(trial, lin, k, ms, tau0), chol)
+                got = whitened(log_parts(trial, lin, k, ms, tau0, sampling=sampling), chol)
                 if float(got[0] @ got[0]) < cost:
                     p, (r, a, curv, live), cost = trial, got, float(got[0] @ got[0])
                     break
@@ -262,7 +273,7 @@ def log_fit(fit, avar, ms, n, tau0, steps: int = 12, rounds: int = 3, cols=None,
                 break
         if give_up is not None and chi2_sf(cost, dof) < give_up:  # rejected, whatever the
             break  # later rounds do
-    parts = log_parts(p, lin, k, ms, tau0)
+    parts = log_parts(p, lin, k, ms, tau0, sampling=sampling)
     om, chol = relative(p, parts[0])
     r, a, *_ = whitened(parts, chol)
     f = fitted(p)
