@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 from .._checks import describe, is_finite_real
+from .._timebase import regular_step
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,7 +58,8 @@ def to_uniform(
     t, y, *, data: str = "rate", rate_hz: float | None = None, max_gap: float = 2.5
 ) -> Uniform:
     """Samples `y` stamped `t` [s] (increasing) onto a uniform grid at `rate_hz` [Hz]
-    (default: 1 / the median step), through the angle they integrate to (module docstring).
+    (default: 1 / the mean regular step, `hrgjax._timebase.regular_step`: the median alone is
+    quantised by stamps at an epoch), through the angle they integrate to (module docstring).
     NaN samples, and intervals longer than `max_gap` steps (module docstring), are gaps.
 
     **Returns:** a [`Uniform`][hrgjax.allan.resample.Uniform].
@@ -82,7 +84,7 @@ def to_uniform(
         raise ValueError(f"max_gap must be > 1 step; got {describe(max_gap)}")
     median = float(np.median(dt))
     if rate_hz is None:
-        rate_hz = 1.0 / median
+        rate_hz = 1.0 / regular_step(t)  # the median alone is quantised by stamps at an epoch
     if not (is_finite_real(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {describe(rate_hz)}")
     step = 1.0 / float(rate_hz)

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from .._timebase import is_uniform, rate_from_stamps, regular_step
 from ._common import (
     PLOT_EXTENSIONS,
     POSITIVE_FLOAT,
@@ -68,10 +69,9 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
         dt = np.diff(t)
         if dt.size == 0 or not np.all(np.isfinite(dt)) or np.any(dt <= 0):
             raise UsageError(f"{path}: the time column {time_column!r} must increase")
-        step = float(np.median(dt))
-        spread = float(np.max(np.abs(dt - step)))
-        found = float(f"{1.0 / step:.12g}")  # the float noise of summed time stamps dropped
-        if spread > 1e-3 * step:  # onto a uniform grid by the angle (hrgjax.allan.resample)
+        step = regular_step(t)  # the mean regular step: a median is quantised at an epoch
+        found = rate_from_stamps(t, step)  # to the digits the stamps resolve
+        if not is_uniform(t, step):  # onto a uniform grid by the angle (hrgjax.allan.resample)
             from ..allan import to_uniform
 
             with usage_errors(prefix=path):

@@ -19,6 +19,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from .. import plausible
+from .._timebase import regular_step
 from ..units import DEG, G0
 
 GYRO_UNITS: dict[str, float] = {
@@ -105,11 +106,11 @@ class ImuData:
                 "time must be strictly increasing"
             )
         rate = self.rate_hz
-        median = float(np.median(step))
+        median = regular_step(time)  # the mean regular step: a median is quantised at an epoch
         step_rate = 1.0 / median if median > 1.0 / np.finfo(float).max else np.inf
         if not (np.isfinite(step_rate) and step_rate > 0):
             raise ValueError(
-                f"time: the median step {median:.6g} s gives no finite sample rate; time must be "
+                f"time: the step {median:.6g} s gives no finite sample rate; time must be "
                 "in seconds"
             )
         if rate is None:
@@ -118,8 +119,8 @@ class ImuData:
             rate = _positive("rate_hz", rate, "number of samples per second")
             if abs(rate / step_rate - 1.0) > RATE_TOLERANCE:
                 raise ValueError(
-                    f"rate_hz = {rate:g} Hz disagrees with the time column, whose median step "
-                    f"{float(np.median(step)):.6g} s is {step_rate:.6g} Hz (more than "
+                    f"rate_hz = {rate:g} Hz disagrees with the time column, whose step "
+                    f"{median:.6g} s is {step_rate:.6g} Hz (more than "
                     f"{RATE_TOLERANCE:.0%} apart); give the time column's rate, or leave rate_hz "
                     "out"
                 )

@@ -1,0 +1,49 @@
+"""The sample step of a record's time stamps, robust to the stamps' own rounding.
+
+A float64 time stamp near an epoch (t ≈ 1.7e9 s) moves in steps of 2.4e-7 s, so a 1e-4-s
+step is stored as 9.990e-5 or 1.0014e-4 s: the median step is one of the two (a 10-kHz
+record read 10 010 Hz) and every step lies 0.1 % from it (a uniform record taken for a
+jittered one from 5 kHz up). The step here is the mean over the record's regular steps,
+and a record is uniform when every stamp lies on the grid t₀ + k·step within 1e-3 of a step
+plus the stamps' own rounding.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+UNIFORM_TOLERANCE = 1e-3
+"""A record is uniform when every stamp lies within this fraction of a step of the grid
+t₀ + k·step (plus the stamps' own float64 rounding)."""
+
+
+def regular_step(t) -> float:
+    """The record's sample step [s] from increasing time stamps `t` [s]: the mean of the
+    steps within half a median step of the median (the median alone is quantised by the
+    stamps' rounding; a gap or an outlier does not move this mean)."""
+    dt = np.diff(np.asarray(t, dtype=float))
+    median = float(np.median(dt))
+    regular = dt[np.abs(dt - median) <= 0.5 * median]
+    return float(np.mean(regular)) if regular.size else median
+
+
+def is_uniform(t, step: float) -> bool:
+    """Whether every stamp of `t` [s] lies on the grid t₀ + k·`step` within
+    `UNIFORM_TOLERANCE` of a step plus twice the stamps' float64 spacing."""
+    t = np.asarray(t, dtype=float)
+    k = np.arange(t.size)
+    grid = t[0] + k * step
+    rounding = 2.0 * float(np.spacing(np.max(np.abs(t))))
+    return bool(np.max(np.abs(t - grid)) <= UNIFORM_TOLERANCE * step + rounding)
+
+
+def rate_from_stamps(t, step: float) -> float:
+    """1/`step` [Hz] rounded to the digits the stamps resolve (the rounding of two stamps
+    over the record's span): 10 000 Hz, not 9 999.99996, from stamps at an epoch."""
+    t = np.asarray(t, dtype=float)
+    span = float(t[-1] - t[0])
+    rel = 2.0 * float(np.spacing(np.max(np.abs(t)))) / span if span > 0 else 1e-12
+    digits = int(min(max(math.floor(-math.log10(max(rel, 1e-15))) - 1, 6), 12))
+    return float(f"{1.0 / step:.{digits}g}")
