@@ -202,9 +202,21 @@ def test_cli_says_how_many_samples_lie_outside(fitted, test_session, tmp_path, c
                            tmp_path / "old.eqx")  # fmt: skip
     capsys.readouterr()
     argv = ["correct", data, "--model", model, "--out", str(tmp_path / "c.csv"), "--no-angles",
-            "--no-extrapolate"]  # fmt: skip
+            "--no-extrapolate", "--json", str(tmp_path / "c.json")]  # fmt: skip
     assert main(argv) == 0
     out = capsys.readouterr().out
+    # the offset and tables are the compensated runs' alone: the runs at +20 °C (in range), as
+    # the API gives them — passed-through runs at −20 and +60 °C would pull the offset raw
+    assert "run(s) with samples outside it are left out of the offset" in out
+    from hrgjax.calibration import compare_corrected
+
+    corrected = fitted["mlp"].correct(test_session)
+    inside = corrected.in_range
+    api = compare_corrected({"MLP": hg.MeasuredData(
+        {k: v[inside] for k, v in corrected.columns.items()}, allow_extra=True)})  # fmt: skip
+    written = json.loads((tmp_path / "c.json").read_text(encoding="utf-8"))["offset_dph"]
+    assert written["value"] == pytest.approx(api.offset.value_dph, rel=1e-12)
+    assert written["n_static_runs"] == api.offset.n_runs
     assert ("984 samples outside the calibrated temperature range +0.0 … +40.0 °C (± 1 °C): "
             "492 at -20 °C, 492 at +60 °C — passed through uncompensated") in out  # fmt: skip
     assert "(984 of them outside the calibrated temperature range, uncompensated" in out

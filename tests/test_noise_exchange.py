@@ -339,3 +339,30 @@ def test_to_kalibr_carries_gauss_markov_terms_as_their_short_time_random_walk(tm
     # nothing to fold: the bounds, as before
     bare = composite({"angle_random_walk": 3e-6}, bounds={"rate_random_walk": 2.3e-7})
     assert bare.to_kalibr()["gyroscope_random_walk"] == pytest.approx(2.3e-7, rel=1e-12)
+
+
+def test_allan_cli_passes_the_sampling_and_refuses_it_without_a_fit(tmp_path, monkeypatch, capsys):
+    """`hrgjax allan --sampling point` reaches `identify_noise` (the CLI had no way to say a
+    sensor samples its rate: N read 3.8× too large on such a record), and is refused, not
+    ignored, without --fit or --kalibr."""
+    from helpers import cli_fails
+
+    from hrgjax import allan
+    from hrgjax.cli import main
+
+    path = tmp_path / "rate.csv"
+    y = np.random.default_rng(0).standard_normal(4096)
+    np.savetxt(path, y[:, None], delimiter=",", header="gyro", comments="")
+    seen = []
+    real = allan.identify_noise
+
+    def spy(*args, **kw):
+        seen.append(kw.get("sampling"))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(allan, "identify_noise", spy)
+    assert main(["allan", str(path), "--rate-hz", "1", "--fit", "--sampling", "point"]) == 0
+    assert main(["allan", str(path), "--rate-hz", "1", "--fit"]) == 0
+    assert seen == ["point", "interval"]
+    cli_fails(["allan", str(path), "--rate-hz", "1", "--sampling", "point"], capsys,
+              "--sampling is for --fit and --kalibr")  # fmt: skip

@@ -133,7 +133,8 @@ def cmd_allan(args) -> int:
         with usage_errors(prefix=args.log):
             gauss_markov = 2 if args.gauss_markov is None else args.gauss_markov
             model = allan.identify_noise(y, rate_hz, unit=unit, gauss_markov=gauss_markov,
-                                         terms=_terms(bool(args.drift)))  # fmt: skip
+                                         terms=_terms(bool(args.drift)),
+                                         sampling=args.sampling or "interval")  # fmt: skip
         print(model)
     kalibr = None
     if args.kalibr:
@@ -168,6 +169,7 @@ def cmd_allan(args) -> int:
 OPTIONS_READ_BY = {
     "--gauss-markov": ("gauss_markov", "--fit and --kalibr", "them"),
     "--drift": ("drift", "--fit and --kalibr", "them"),
+    "--sampling": ("sampling", "--fit and --kalibr", "them"),
     "--sensor": ("sensor", "--kalibr", "it"),
 }
 """The noise model's options (default None: given or not) and the options that read them:
@@ -238,6 +240,10 @@ def _allan_parser(sub):
                    "random walk, Gauss–Markov terms) with intervals")  # fmt: skip
     p.add_argument("--gauss-markov", type=int, default=None, choices=(0, 1, 2),
                    help="Gauss–Markov terms the model may use (2; with --fit or --kalibr)")  # fmt: skip
+    p.add_argument("--sampling", default=None, choices=("interval", "point"),
+                   help="what a sample is: the mean rate over its interval (interval: an angle "
+                   "output's Δθ/Δt, the default) or an instantaneous rate sample (point); with "
+                   "--fit or --kalibr")  # fmt: skip
     p.add_argument("--drift", action="store_const", const=True, default=None,
                    help="also offer a rate ramp (drift) to the model (with --fit or --kalibr)")  # fmt: skip
     p.add_argument("--json", default=None, help="write the deviation and the model here")

@@ -229,14 +229,29 @@ def cmd_correct(args) -> int:
     import numpy as np
 
     from ..calibration import compare_corrected, corrected_run_errors
+    from ..data import MeasuredData
 
     comp = _load_model("--model", args.model)
     data = load_data(args.data, args.allow_extra)
     with usage_errors(args.data):
         out = comp.correct(data, extrapolate=False if args.no_extrapolate else None)
-    e = corrected_run_errors(out)
     print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
     _domain_report("temperature domain", comp, data, args.temperature_bin, out.extrapolated)
+    passed = 0 if out.extrapolated else out.n_out_of_range  # the file carries no mark of them
+    judged = out  # the runs the offset and the tables are about: the compensated ones
+    if passed:
+        keep = np.zeros(len(out), dtype=bool)
+        n_out = 0
+        for i in out.run_indices():
+            keep[i] = out.in_range[i].all()
+            n_out += not keep[i[0]]
+        if not keep.any():
+            raise UsageError(f"{args.data}: every run has samples outside the calibrated "
+                             "temperature range; drop --no-extrapolate to compensate them")  # fmt: skip
+        print(f"  {n_out} run(s) with samples outside it are left out of the offset and the "
+              "tables below (passed through, they would be the raw gyro's)")  # fmt: skip
+        judged = MeasuredData({k: v[keep] for k, v in out.columns.items()}, allow_extra=True)
+    e = corrected_run_errors(judged)
     if np.any(e["static"]):
         d = e["drift_error_dph"][e["static"]]
         print(f"  static runs: residual rate RMS {np.sqrt(np.mean(d**2)):.4f} °/h (offset kept)")
@@ -247,11 +262,10 @@ def cmd_correct(args) -> int:
         )
     label = comp.name
     result = compare_corrected(
-        {label: out}, names={label: label}, files={label: args.model},
+        {label: judged}, names={label: label}, files={label: args.model},
         temperature_bin_c=args.temperature_bin, angle_bin_deg=args.angle_bin, data=args.data,
     )  # fmt: skip
     print()
-    passed = 0 if out.extrapolated else out.n_out_of_range  # the file carries no mark of them
     rows = lambda p: (f"{len(out)} rows with rate_corrected_dps, angle_corrected_deg to "
                       f"{out.save(p)}" + (f" ({passed} of them outside the calibrated "
                       "temperature range, uncompensated: their rate_corrected_dps is the raw "
