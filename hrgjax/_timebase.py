@@ -23,10 +23,13 @@ def regular_step(t) -> float:
     """The record's sample step [s] from increasing time stamps `t` [s]: the mean of the
     steps within half a median step of the median (the median alone is quantised by the
     stamps' rounding; a gap or an outlier does not move this mean)."""
-    dt = np.diff(np.asarray(t, dtype=float))
-    median = float(np.median(dt))
-    regular = dt[np.abs(dt - median) <= 0.5 * median]
-    return float(np.mean(regular)) if regular.size else median
+    with np.errstate(
+        over="ignore", invalid="ignore"
+    ):  # steps beyond 1.8e308 s: inf, the caller refuses
+        dt = np.diff(np.asarray(t, dtype=float))
+        median = float(np.median(dt))
+        regular = dt[np.abs(dt - median) <= 0.5 * median]
+        return float(np.mean(regular)) if regular.size else median
 
 
 def is_uniform(t, step: float) -> bool:
