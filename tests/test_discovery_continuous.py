@@ -218,6 +218,19 @@ def test_continuous_names_a_hidden_thermal_rate(thermal_rate_report):
         assert run["c_Tdot"] == pytest.approx(truth, rel=0.05)
 
 
+def test_the_gap_before_is_read_under_the_final_noise_model(thermal_rate_report):
+    """Regression (σ_b by REML, 2026-11-30): at the nominal fit REML counted the misfit the
+    hidden thermal rate leaves inside the runs as switch-on bias, the run means floated, and
+    the nominal parameters took up the misfit: `gap_before` read 43 °/h. Independent
+    reference: the same nominal model fitted under the true noise (σ_b 0.2 °/h, given),
+    0.18 °/h; the gap before is now read under the final model's σ_b, 0.17 °/h."""
+    rep = thermal_rate_report
+    known = discover(_short("thermal_rate", 0.15, 3), catalogue=ONE,
+                     noise=generate.base_gyro().noise)  # fmt: skip
+    assert known.gap_before / 1.5 < rep.gap_before < 1.5 * known.gap_before
+    assert rep.gap_before < 3 * rep.noise_floor  # the floor: the final noise model's too
+
+
 def test_continuous_null_says_nothing_is_missing():
     data = _short(None, 0.0, 4)
     rep = discover(data, catalogue=ONE)

@@ -69,8 +69,7 @@ REFIT_TOP = 3
 TAU_GRID = (30.0, 100.0, 300.0, 1000.0, 3000.0)
 """Grid of nonregular time constants scanned in screening [s]."""
 RUN_COVARIATE_ALPHA = 0.01
-"""Significance at which a run covariate is taken to explain the run means' scatter
-(`with_run_bias`)."""
+"""Significance at which a run covariate explains the run means' scatter (`with_run_bias`)."""
 RESOLVES = 1.0
 """A training run (or, where fewer than two runs do, a group of consecutive ones) counts in an
 effect's per-run consistency when its data put the pooled effect at this many σ at least
@@ -165,12 +164,11 @@ class ContinuousProblem(AbstractProblem):
 
     def with_run_bias(self, fit) -> ContinuousProblem:
         """A copy of this problem (left as it is) whose run-to-run bias spread σ_b [rad/s] is
-        the REML estimate at `fit` (a fit of this problem;
-        `run_bias.reml_at_fit`), the whitening rebuilt. A
-        scatter that follows a run's covariate (mean dT/dt, table rate or specific force: an
-        effect constant along each ramp, say c·Ṫ) is not a switch-on bias: the covariate that
-        explains the run means significantly (F-test, p < `RUN_COVARIATE_ALPHA`,
-        `stats.followed_covariates`) is a fixed effect there, so that σ_b cannot absorb it."""
+        the REML estimate at `fit` (a fit of this problem; `run_bias.reml_at_fit`), the
+        whitening rebuilt. A scatter that follows a run's covariate (mean dT/dt, table rate or
+        specific force: an effect constant along each ramp, say c·Ṫ) is not a switch-on bias:
+        the covariate that explains the run means significantly (F-test, p <
+        `RUN_COVARIATE_ALPHA`, `stats.followed_covariates`) is a fixed effect there."""
         # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
         # one session, whose own bias is profiled out of their residual: `Windows.session`)
         train = [g for g in self.train_groups if isinstance(g, Runs)]
@@ -200,6 +198,9 @@ class ContinuousProblem(AbstractProblem):
             return self, fit
         new = self.with_run_bias(fit)
         return new, new.fit(list(fit.model), z0=fit.z)
+
+    def baseline(self, model, base):  # under σ_b as last re-estimated: the final model's
+        return base if self.noise_known else self._fit_model(list(model), z0=base.z)
 
     def structure_left(self, fit, floor=None, alpha=1e-3):
         """True when the held-out whitened χ² is too large for its degrees of freedom
@@ -423,8 +424,7 @@ class ContinuousProblem(AbstractProblem):
         return [np.asarray(r) for r in raw_residuals(self.layout, jnp.asarray(z), groups)]
 
     def gap(self, z):
-        """RMS over held-out runs of the run-mean rate residual [°/h] (DESIGN.md); NaN
-        without held-out runs."""
+        """RMS over held-out runs of the run-mean rate residual [°/h] (DESIGN.md; NaN: none)."""
         return self._gap(self.raw_residuals(z, self.held_groups))
 
     def _gap(self, held_raw, k=None):

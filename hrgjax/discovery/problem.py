@@ -96,6 +96,13 @@ class AbstractProblem(abc.ABC):
         model and return a new problem — a problem never changes once built)."""
         return self, fit
 
+    def baseline(self, model, base: Fit) -> Fit:
+        """The model `model` (the nominal one, whose fit on the problem that `discover`
+        started from is `base`) fitted under this problem's noise model: the fit the held-out
+        gap before is read from, so that the gaps before and after are read under one noise
+        model (default: `base`; the continuous records refit it where σ_b was re-estimated)."""
+        return base
+
     @abc.abstractmethod
     def structure_left(self, fit: Fit, floor: float | None = None) -> bool:
         """Whether `fit` leaves significant structure in the held-out runs."""

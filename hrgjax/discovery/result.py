@@ -86,7 +86,8 @@ class Discovery:
       accepted effect or `None`; `accepted`: every accepted effect, in order;
       `ambiguous_with`, `discriminate`: rivals and the experiments that separate them.
     - `gap_before`, `gap_after`, `noise_floor` [°/h]: the held-out gap (DESIGN.md) of the
-      nominal and the final model, and what noise alone gives it; `metric` names it;
+      nominal and the final model, both fitted under the final noise model, and what noise
+      alone gives it; `metric` names it;
       `structure_left`: the final model still leaves significant structure.
     - `fit_parameters`: the final model's parameters in model units
       (`{effect: {param: {"value", "std"}}}`, rad/s of pattern rate, …); `parameters` (a
