@@ -6,6 +6,7 @@ as an [`AllanResult`][hrgjax.allan.AllanResult]."""
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import functools
 import math
@@ -15,9 +16,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_1d, describe, is_finite_real
+from .._progress import bar
 from .._x64 import require_x64
-from .deviations import curve
+from .deviations import CURVE_CHUNK, curve, curve_parts
 from .uncertainty import (
+    ACF_POINTS,
     NOISE_RULES,
     ONE_SIGMA,
     check_rate_has_noise,
@@ -126,6 +129,43 @@ class AllanResult:
                                   else str(int(v)) for v in row) + "\n")  # fmt: skip
 
 
+STEPPED_FROM = 1 << 22
+"""Samples from which [`deviation`][hrgjax.allan.deviation] works in host-side steps behind a
+progress bar (≈ 2 s of work on a 2-core CPU at 4·10⁶ samples, 40 s at 2·10⁷): the noise
+identified one factor at a time and the compiled curve `hrgjax.allan.deviations.CURVE_CHUNK`
+factors a call, with the same results bit for bit."""
+
+
+class _NoProgress(contextlib.nullcontext):
+    """What `deviation` updates below `STEPPED_FROM`: nothing shown."""
+
+    def update(self, n=1):
+        pass
+
+    def __enter__(self):
+        return self
+
+
+def _noise_in_steps(x, m, progress, **options):
+    """[`noise_id`][hrgjax.allan.noise_id]`(x, m, **options)`, one progress step a factor:
+    each factor whose decimated phase keeps `ACF_POINTS` points is read alone (by its lag-1
+    autocorrelation under every rule: a value of its own, never carried; asked with the
+    default rule, which prepares nothing else per call), the rest (the few largest) in one
+    call that starts from the last such factor, so that α carries on as in one call."""
+    m = np.asarray(m, dtype=int)
+    alone = -(-x.size // m) >= ACF_POINTS  # x[::k] keeps ACF_POINTS points
+    read = m.size if alone.all() else int(np.argmin(alone))  # the leading run of those
+    out, dmax = [], options["dmax"]
+    for k in m[:read]:
+        out.append(int(noise_id(x, [k], dmax=dmax)[0]))
+        progress.update()
+    if read < m.size:
+        lead = m[max(read - 1, 0) : read]
+        out.extend(noise_id(x, np.concatenate([lead, m[read:]]), **options)[lead.size :])
+        progress.update(m.size - read)
+    return np.asarray(out, dtype=int)
+
+
 TOTVAR_BIAS = {-1: 0.481, -2: 0.750}
 """NIST SP 1065 §5.2.11: the total variance's bias a by noise type α (flicker and random-walk
 rate noise; none for white rate or angle noise): E[Totvar] = (1 − a·τ/T)·σ²(τ), T the
@@ -180,6 +220,8 @@ def deviation(
 
     One compiled program per kind and data length serves every τ grid (factors are run-time
     values, padded to a power-of-two count), so a new grid compiles nothing.
+    From `hrgjax.allan.result.STEPPED_FROM` samples on, the work goes in host-side steps
+    behind a progress bar (shown at a terminal), with the same results.
 
     **Returns:** an [`AllanResult`][hrgjax.allan.AllanResult].
 
@@ -240,64 +282,81 @@ def deviation(
             f"y: {y.size} samples are too few for {kind} at any of the τ asked "
             f"(taus={describe(taus)})"
         )
-    if data == "rate":
-        check_rate_has_noise(y)
-    base = "mdev" if kind == "tdev" else kind
-    if kind in ("mtotdev", "ttotdev"):  # each run detrended and reflected (hrgjax.allan.total)
-        from .total import mtotdev_curve
+    # long records: work in host-side steps behind a progress bar (bit-identical results)
+    stepped = y.size >= STEPPED_FROM
+    steps = 1 + m.size * (1 + (not gaps and kind not in ("mtotdev", "ttotdev")))
+    with bar(steps, f"allan {kind}") if stepped else _NoProgress() as progress:
+        if data == "rate":
+            check_rate_has_noise(y)
+        progress.update()
+        base = "mdev" if kind == "tdev" else kind
+        if kind in ("mtotdev", "ttotdev"):  # each run detrended and reflected (hrgjax.allan.total)
+            from .total import mtotdev_curve
 
-        if gaps:
-            raise ValueError(f"y has gaps (NaN): {kind} reflects every run of 3m points and "
-                             "has no gap-tolerant form; split the record, or use mdev")  # fmt: skip
-        dev = mtotdev_curve(x, m)[0] / tau0
-        n_eff = np.full(m.size, n_phase)
-    elif gaps:  # windows across a gap left out (hrgjax.allan.gaps), in NumPy
-        dev, n_terms = gapped_curve(kind, y, data, m)
-        dev = dev / tau0 if data == "phase" else dev
-        m, n_terms, dev = m[n_terms > 1], n_terms[n_terms > 1], dev[n_terms > 1]
-        if m.size == 0:
-            raise ValueError(f"y: its gaps leave fewer than 2 {kind} terms at every τ asked")
-        # the EDF of a gap-free record with as many differences as the gaps leave at each τ
-        # (used where no gap-free segment holds a difference: angle data whose differences
-        # step over a missing angle)
-        extra = {"adev": 2, "oadev": 2, "hdev": 3, "ohdev": 3, "mdev": 3, "tdev": 3}[kind]
-        stride = m if kind in ("adev", "hdev") else 1
-        n_eff = np.minimum(stride * n_terms + extra * m - (kind in ("mdev", "tdev")), n_phase)
-        segments = _segments(y, data)
-    else:
-        # one program for every grid of ≤ 32 τ (octave grids up to 2³² samples), powers of
-        # two beyond; JAX runs the curve asynchronously while NumPy identifies the noise
-        pad = max(32, 1 << int(math.ceil(math.log2(m.size))))
-        ms = np.concatenate([m, np.full(pad - m.size, m[-1])])
-        pending = curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base)
-        n_eff = np.full(m.size, n_phase)
-    dmax = 3 if kind in ("hdev", "ohdev") else 2
-    alpha = noise_id(x, m, dmax=dmax, rule=noise_rule, overlapping=kind not in ("adev", "hdev"))
-    edf = np.asarray([_edf(kind, int(a), int(k), int(n))
-                      for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
-    if gaps:  # the gap-free segments' EDFs pooled: their differences are independent for
-        # white angle noise, white rate noise and a rate random walk, not for flicker noise
-        # (odd α: ±1, and −3 for the Hadamard kinds: long-range correlated), which keeps
-        # one record's EDF (conservative)
-        edf = np.asarray([e if int(a) % 2 else  # odd α: flicker (α = ±1, −3), correlated
-                          _gapped_edf(kind, int(a), int(k), int(t), segments, e)
-                          for a, k, t, e in zip(alpha, m, n_terms, edf, strict=True)])  # fmt: skip
-    if not gaps and kind not in ("mtotdev", "ttotdev"):
-        dev = np.asarray(pending)[: m.size]
-    taus_s = m * tau0
-    if kind in ("tdev", "ttotdev"):
-        dev = dev * taus_s / math.sqrt(3.0)
-    factor = np.ones_like(dev)
-    if kind in ("mtotdev", "ttotdev") and bias_correction:
-        from .total import MTOTVAR_BIAS
+            if gaps:
+                raise ValueError(f"y has gaps (NaN): {kind} reflects every run of 3m points "
+                                 "and has no gap-tolerant form; split the record, or use "
+                                 "mdev")  # fmt: skip
+            dev = mtotdev_curve(x, m)[0] / tau0
+            n_eff = np.full(m.size, n_phase)
+        elif gaps:  # windows across a gap left out (hrgjax.allan.gaps), in NumPy
+            dev, n_terms = gapped_curve(kind, y, data, m)
+            dev = dev / tau0 if data == "phase" else dev
+            m, n_terms, dev = m[n_terms > 1], n_terms[n_terms > 1], dev[n_terms > 1]
+            if m.size == 0:
+                raise ValueError(f"y: its gaps leave fewer than 2 {kind} terms at every τ asked")
+            # the EDF of a gap-free record with as many differences as the gaps leave at each τ
+            # (used where no gap-free segment holds a difference: angle data whose differences
+            # step over a missing angle)
+            extra = {"adev": 2, "oadev": 2, "hdev": 3, "ohdev": 3, "mdev": 3, "tdev": 3}[kind]
+            stride = m if kind in ("adev", "hdev") else 1
+            n_eff = np.minimum(stride * n_terms + extra * m - (kind in ("mdev", "tdev")), n_phase)
+            segments = _segments(y, data)
+        else:
+            # one program for every grid of ≤ 32 τ (octave grids up to 2³² samples), powers of
+            # two beyond; JAX runs the curve asynchronously while NumPy identifies the noise
+            if stepped:  # the same values, CURVE_CHUNK factors a program call (progress)
+                parts = curve_parts(jnp.asarray(rate), m, tau0, base)
+            else:
+                pad = max(32, 1 << int(math.ceil(math.log2(m.size))))
+                ms = np.concatenate([m, np.full(pad - m.size, m[-1])])
+                pending = curve(jnp.asarray(rate), jnp.asarray(ms), tau0, base)
+            n_eff = np.full(m.size, n_phase)
+        dmax = 3 if kind in ("hdev", "ohdev") else 2
+        options = dict(dmax=dmax, rule=noise_rule, overlapping=kind not in ("adev", "hdev"))
+        alpha = _noise_in_steps(x, m, progress, **options) if stepped else noise_id(x, m, **options)
+        edf = np.asarray([_edf(kind, int(a), int(k), int(n))
+                          for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
+        if gaps:  # the gap-free segments' EDFs pooled: their differences are independent for
+            # white angle noise, white rate noise and a rate random walk, not for flicker noise
+            # (odd α: ±1, and −3 for the Hadamard kinds: long-range correlated), which keeps
+            # one record's EDF (conservative)
+            edf = np.asarray([e if int(a) % 2 else  # odd α: flicker (α = ±1, −3), correlated
+                              _gapped_edf(kind, int(a), int(k), int(t), segments, e)
+                              for a, k, t, e in zip(alpha, m, n_terms, edf,
+                                                    strict=True)])  # fmt: skip
+        if not gaps and kind not in ("mtotdev", "ttotdev"):
+            if stepped:
+                done = []
+                for part in parts:
+                    done.append(np.asarray(part))
+                    progress.update(min(CURVE_CHUNK, m.size - CURVE_CHUNK * (len(done) - 1)))
+                pending = np.concatenate(done)
+            dev = np.asarray(pending)[: m.size]
+        taus_s = m * tau0
+        if kind in ("tdev", "ttotdev"):
+            dev = dev * taus_s / math.sqrt(3.0)
+        factor = np.ones_like(dev)
+        if kind in ("mtotdev", "ttotdev") and bias_correction:
+            from .total import MTOTVAR_BIAS
 
-        factor = 1.0 / np.sqrt([MTOTVAR_BIAS[int(min(max(a, -2), 2))] for a in alpha])
-        dev = dev * factor
-    if kind == "totdev" and bias_correction:
-        a = np.asarray([TOTVAR_BIAS.get(int(k), 0.0) for k in alpha])
-        factor = 1.0 / np.sqrt(1.0 - a * taus_s / ((n_phase - 1) * tau0))
-        dev = dev * factor
-    low, high = confidence_interval(dev, edf, ci)
+            factor = 1.0 / np.sqrt([MTOTVAR_BIAS[int(min(max(a, -2), 2))] for a in alpha])
+            dev = dev * factor
+        if kind == "totdev" and bias_correction:
+            a = np.asarray([TOTVAR_BIAS.get(int(k), 0.0) for k in alpha])
+            factor = 1.0 / np.sqrt(1.0 - a * taus_s / ((n_phase - 1) * tau0))
+            dev = dev * factor
+        low, high = confidence_interval(dev, edf, ci)
     return AllanResult(
         kind=kind, ci=float(ci), taus=taus_s, m=m, dev=dev, dev_low=low, dev_high=high,
         edf=edf, n_terms=n_terms, alpha=alpha, bias_factor=factor, unit=str(unit),

@@ -30,14 +30,17 @@ the trajectory at round-off. Everything is `jax.lax.scan` (jit / vmap / grad).
 
 from __future__ import annotations
 
+import contextlib
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import plausible
+from .. import _upstream, plausible
 from .._checks import describe, is_concrete
-from .._compiled import Check, fused, program
+from .._compiled import Check, device, fused, program, single_run_device
+from .._progress import bar
 from .._x64 import require_x64
 from .constants import G0, WGS84, Earth
 
@@ -45,6 +48,12 @@ UNROLL = 4
 """Steps per iteration of the compiled loops: the step is a few dozen scalar operations, so the
 loop's own overhead dominates; 4 runs an hour at 100 Hz 2.5× faster than 1, for the same
 compile time (benchmarks/navigation.py)."""
+
+CHUNK_STEPS = 1 << 18
+"""Steps per compiled call of an eager [`mechanize`][hrgjax.ins.mechanization.mechanize] of
+more steps (≈ 1 s on one CPU core; 44 min at 100 Hz): the run goes chunk by chunk behind a
+progress bar, its carry handed on, with the same results bit for bit (one program for the
+chunk's shape, one for the last, shorter one). Under a caller's jit / vmap / grad: one scan."""
 
 # --- rotations ----------------------------------------------------------------------------
 
@@ -409,6 +418,9 @@ def mechanize(
     **Returns:** the [`NavState`][hrgjax.ins.mechanization.NavState] history, N/every + 1
     epochs, the initial state first.
 
+    An eager run of more than [`CHUNK_STEPS`][hrgjax.ins.mechanization.CHUNK_STEPS] steps
+    goes chunk by chunk behind a progress bar (shown at a terminal), with the same results.
+
     **Raises:** `ValueError` for mis-shaped increments or an `initial.lat` beyond ±π/2 (in
     degrees); `RuntimeError` if the solution stops being finite (e.g. increments in degrees,
     or a vertical channel run into the ground)."""
@@ -429,24 +441,65 @@ def mechanize(
                 f"first); got shape {hv.shape[:-1]}"
             )
         xs = xs + (hv,)
-    return _mechanize(initial, xs, jnp.asarray(dt, float), earth, every)
+    dt = jnp.asarray(dt, float)
+    eager = _upstream.trace_state_clean() and not _traced((initial, xs, dt, earth))
+    if n > CHUNK_STEPS and eager:
+        return _mechanize_in_chunks(initial, xs, dt, earth, every)
+    return _mechanize(initial, xs, dt, earth, every)
+
+
+def _traced(tree) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
+
+
+def _mechanize_in_chunks(initial, xs, dt, earth, every):
+    """`_mechanize` as chunks of whole `every`-blocks (and whole `UNROLL` groups) of about
+    `CHUNK_STEPS` steps, each a compiled call handing its scan carry to the next, with a
+    progress bar: the same steps in the same order, so the same history bit for bit."""
+    n = xs[0].shape[0]
+    size = max(CHUNK_STEPS // (every * UNROLL), 1) * every * UNROLL
+    carry, parts = start_carry(initial, xs[0].dtype), []
+    host = [np.asarray(a) for a in xs]  # sliced here: a device array's slice compiles per start
+    with bar(n, "mechanize", unit="step") as progress:
+        for i in range(0, n, size):
+            chunk = tuple(device(a[i : i + size]) for a in host)
+            carry, hist = _mechanize_chunk(carry, chunk, dt, earth, every)
+            parts.append(hist)
+            progress.update(min(size, n - i))
+    place = single_run_device()  # where the program ran (an accelerator's host CPU)
+    with contextlib.nullcontext() if place is None else jax.default_device(place):
+        return _join(initial, tuple(parts))
+
+
+@program(check=Check("ins.mechanize"), single_run=True)
+def _mechanize_chunk(carry, xs, dt, earth, every):
+    return _scan_steps(carry, xs, dt, earth, every)
+
+
+@jax.jit
+def _join(initial, parts):
+    return jax.tree_util.tree_map(lambda a, *b: jnp.concatenate([a[None], *b]), initial, *parts)
 
 
 @program(check=Check("ins.mechanize"), single_run=True)
 def _mechanize(initial, xs, dt, earth, every):
-    body = lambda c, x: step(earth, dt, c, x)
-    start = start_carry(initial, xs[0].dtype)
-    if every == 1:
-        _, hist = jax.lax.scan(body, start, xs, unroll=UNROLL)
-    else:
-        blocks = lambda a: a.reshape((-1, every) + a.shape[1:])
-
-        def block(c, x):
-            c, _ = jax.lax.scan(body, c, x, unroll=UNROLL)
-            return c, c[0]
-
-        _, hist = jax.lax.scan(block, start, tuple(blocks(a) for a in xs))
+    _, hist = _scan_steps(start_carry(initial, xs[0].dtype), xs, dt, earth, every)
     return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), initial, hist)
+
+
+def _scan_steps(start, xs, dt, earth, every):
+    """The scan of `step` over the increments `xs` from the carry `start`: (carry, every
+    `every`-th state)."""
+    body = lambda c, x: step(earth, dt, c, x)
+    if every == 1:
+        return jax.lax.scan(body, start, xs, unroll=UNROLL)
+    blocks = lambda a: a.reshape((-1, every) + a.shape[1:])
+
+    def block(c, x):
+        c, _ = jax.lax.scan(body, c, x, unroll=UNROLL)
+        return c, c[0]
+
+    return jax.lax.scan(block, start, tuple(blocks(a) for a in xs))
 
 
 def _solve_cross(a, b):
