@@ -186,21 +186,16 @@ class FourierCompensator(AbstractCompensator):
         drift = (static.rate_dps - static.table_rate_dps) * DEG
         d_coef = _lstsq(self._basis(th_s, static.temperature_c, np), drift,
                         "drift (static runs)", static, self)  # fmt: skip
-        fitted = eqx.tree_at(
-            lambda c: c.drift_coef,
-            self,
-            device(d_coef.reshape(self._degree + 1, -1)),
-            is_leaf=lambda x: x is None,
-        )
         th_m = moving.wave_angle_deg * DEG
         d_m = self._basis(th_m, moving.temperature_c, np) @ d_coef
         sf = (moving.rate_dps * DEG - d_m) / (moving.table_rate_dps * DEG)
         s_coef = _lstsq(self._basis(th_m, moving.temperature_c, np), sf,
                         "scale factor (rotation runs)", moving, self)  # fmt: skip
+        shape = (self._degree + 1, -1)
         fitted = eqx.tree_at(
-            lambda c: c.sf_coef,
-            fitted,
-            device(s_coef.reshape(self._degree + 1, -1)),
+            lambda c: (c.drift_coef, c.sf_coef),
+            self,
+            (device(d_coef.reshape(shape)), device(s_coef.reshape(shape))),
             is_leaf=lambda x: x is None,
         )
         return dataclasses.replace(fitted, **domain)
