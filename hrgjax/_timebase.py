@@ -22,7 +22,9 @@ t₀ + k·step (plus the stamps' own float64 rounding)."""
 def regular_step(t) -> float:
     """The record's sample step [s] from increasing time stamps `t` [s]: the mean of the
     steps within half a median step of the median (the median alone is quantised by the
-    stamps' rounding; a gap or an outlier does not move this mean)."""
+    stamps' rounding; a gap does not move this mean, a stamp off by less than half a step
+    moves it by that offset over the record's length). A record of two step sizes in equal
+    numbers (1 ms / 3 ms alternating) has no single step: the median picks one by parity."""
     with np.errstate(
         over="ignore", invalid="ignore"
     ):  # steps beyond 1.8e308 s: inf, the caller refuses

@@ -272,3 +272,22 @@ def test_corrected_data_round_trip_through_xarray(fitted, test_session):
     back = type(out).from_xarray(out.to_xarray())
     assert type(back) is hg.MeasuredData
     np.testing.assert_array_equal(back["angle_corrected_deg"], out["angle_corrected_deg"])
+
+
+def test_passing_every_run_through_still_writes_the_data(fitted, test_session, tmp_path, capsys):
+    """`hrgjax correct --no-extrapolate` on a session wholly outside the range: no offset and
+    no tables (no compensated run to judge), but the corrected file is written (it refused
+    the command and wrote nothing)."""
+    from hrgjax.cli import main
+
+    outside = _outside(test_session)
+    data = hg.MeasuredData({k: v[outside] for k, v in test_session.columns.items()})
+    path = data.save(tmp_path / "cold_hot.csv")
+    model = save_compensator(fitted["fourier"], tmp_path / "f.eqx")
+    out_file = tmp_path / "c.csv"
+    argv = ["correct", path, "--model", model, "--out", str(out_file), "--no-extrapolate"]
+    assert main(argv) == 0
+    assert "every run has samples outside it: no offset and no tables" in capsys.readouterr().out
+    back = hg.load(out_file)
+    raw = NoCompensation().correct(data)
+    np.testing.assert_allclose(back["rate_corrected_dps"], raw["rate_corrected_dps"], rtol=1e-15)

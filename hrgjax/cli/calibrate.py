@@ -238,6 +238,10 @@ def cmd_correct(args) -> int:
     print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
     _domain_report("temperature domain", comp, data, args.temperature_bin, out.extrapolated)
     passed = 0 if out.extrapolated else out.n_out_of_range  # the file carries no mark of them
+    rows = lambda p: (f"{len(out)} rows with rate_corrected_dps, angle_corrected_deg to "
+                      f"{out.save(p)}" + (f" ({passed} of them outside the calibrated "
+                      "temperature range, uncompensated: their rate_corrected_dps is the raw "
+                      "rate)" if passed else ""))  # fmt: skip
     judged = out  # the runs the offset and the tables are about: the compensated ones
     if passed:
         keep = np.zeros(len(out), dtype=bool)
@@ -245,9 +249,10 @@ def cmd_correct(args) -> int:
         for i in out.run_indices():
             keep[i] = out.in_range[i].all()
             n_out += not keep[i[0]]
-        if not keep.any():
-            raise UsageError(f"{args.data}: every run has samples outside the calibrated "
-                             "temperature range; drop --no-extrapolate to compensate them")  # fmt: skip
+        if not keep.any():  # nothing compensated to judge: the data still written
+            print("  every run has samples outside it: no offset and no tables (drop "
+                  "--no-extrapolate to compensate them)")  # fmt: skip
+            return finish((args.out, rows))
         print(f"  {n_out} run(s) with samples outside it are left out of the offset and the "
               "tables below (passed through, they would be the raw gyro's)")  # fmt: skip
         judged = MeasuredData({k: v[keep] for k, v in out.columns.items()}, allow_extra=True)
@@ -266,10 +271,6 @@ def cmd_correct(args) -> int:
         temperature_bin_c=args.temperature_bin, angle_bin_deg=args.angle_bin, data=args.data,
     )  # fmt: skip
     print()
-    rows = lambda p: (f"{len(out)} rows with rate_corrected_dps, angle_corrected_deg to "
-                      f"{out.save(p)}" + (f" ({passed} of them outside the calibrated "
-                      "temperature range, uncompensated: their rate_corrected_dps is the raw "
-                      "rate)" if passed else ""))  # fmt: skip
     return _report(result, args, (args.out, rows))
 
 
