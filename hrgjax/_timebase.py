@@ -44,11 +44,17 @@ def is_uniform(t, step: float) -> bool:
     return bool(np.max(np.abs(t - grid)) <= UNIFORM_TOLERANCE * step + rounding)
 
 
-def rate_from_stamps(t, step: float) -> float:
-    """1/`step` [Hz] rounded to the digits the stamps resolve (the rounding of two stamps
-    over the record's span): 10 000 Hz, not 9 999.99996, from stamps at an epoch."""
+def stamp_resolution(t) -> float:
+    """The relative precision a rate read from stamps `t` [s] can have: the rounding of two
+    stamps over the record's span (1e-12 for a span of 0)."""
     t = np.asarray(t, dtype=float)
     span = float(t[-1] - t[0])
-    rel = 2.0 * float(np.spacing(np.max(np.abs(t)))) / span if span > 0 else 1e-12
+    return 2.0 * float(np.spacing(np.max(np.abs(t)))) / span if span > 0 else 1e-12
+
+
+def rate_from_stamps(t, step: float) -> float:
+    """1/`step` [Hz] rounded to the digits the stamps resolve (`stamp_resolution`): 10 000 Hz,
+    not 9 999.99996, from stamps at an epoch."""
+    rel = stamp_resolution(t)
     digits = int(min(max(math.floor(-math.log10(max(rel, 1e-15))) - 1, 6), 12))
     return float(f"{1.0 / step:.{digits}g}")

@@ -231,3 +231,16 @@ def modelled_imu(grade: str):
         gyro_correlation_time=p.gyro_correlation_time,
         accel_correlation_time=p.accel_correlation_time,
     )
+
+
+def octave_pairs(ms, n: int):
+    """Each pair a ≤ b of averaging factors `ms` over `n` samples, for the brute-force
+    covariances of the overlapping Allan variance: `(a, b, m_a, m_b, n_a, n_b, ℓ, h_a, h_b)`
+    — the second differences' counts n + 1 − 2m, the lags ℓ between them, and the filters h
+    (−1 × m, +1 × m) that make them out of the rate samples."""
+    for a, ma in enumerate(ms):
+        for b, mb in enumerate(ms[a:], a):
+            na, nb = n + 1 - 2 * ma, n + 1 - 2 * mb
+            ell = np.arange(-(na - 1), nb)
+            ha, hb = np.r_[-np.ones(ma), np.ones(ma)], np.r_[-np.ones(mb), np.ones(mb)]
+            yield a, b, ma, mb, na, nb, ell, ha, hb

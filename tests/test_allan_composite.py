@@ -9,6 +9,7 @@ import math
 import jax
 import numpy as np
 import pytest
+from helpers import octave_pairs
 
 import hrgjax as hg
 from hrgjax.allan import octave_covariance
@@ -75,38 +76,34 @@ def direct_covariance(coef, gm, ms, n, tau0):
     from scipy.signal import fftconvolve
 
     out = np.zeros((len(ms), len(ms)))
-    for a, ma in enumerate(ms):
-        for b, mb in enumerate(ms[a:], a):
-            na, nb = n + 1 - 2 * ma, n + 1 - 2 * mb
-            ell = np.arange(-(na - 1), nb)
-            ha, hb = np.r_[-np.ones(ma), np.ones(ma)], np.r_[-np.ones(mb), np.ones(mb)]
-            cross = np.convolve(ha[::-1], hb)  # index j: k_b − k_a = j − (2ma − 1)
-            c = np.zeros(ell.size)
-            width = cross.size
-            lag0 = -(na + width)  # the autocovariance from lag0 to past the last ℓ
-            lags = np.arange(lag0, nb + width)
-            rates = [(s2, math.exp(-tau0 / t)) for s2, t in gm]
-            rates += [(coef.get("angle_random_walk", 0.0) / tau0, 0.0)]
-            for var, phi in rates:
-                r = var * phi ** np.abs(lags) if phi > 0 else var * (lags == 0)
-                full = fftconvolve(r, cross[::-1])
-                c += full[ell - lag0 + 2 * mb - 1]
-            ga = np.cumsum(ha[::-1])[::-1]  # steps e_j enter a_i through Σ_{k ≥ j} h(k)
-            gb = np.cumsum(hb[::-1])[::-1]
-            walk = np.convolve(ga[::-1], gb) * coef.get("rate_random_walk", 0.0) * tau0
-            idx = 2 * ma - 1 - ell  # c(ℓ) = Σ_j g_a(j) g_b(j − ℓ): the lag reversed
-            ok = (idx >= 0) & (idx < walk.size)
-            c[ok] += walk[idx[ok]]
-            # white angle noise (Q/τ₀ per sample of X) through the second differences'
-            # own filters d = (1, −2, 1) at 0, m, 2m: c(ℓ) = var·Σ_j d_a(j) d_b(j − ℓ)
-            da, db = np.zeros(2 * ma + 1), np.zeros(2 * mb + 1)
-            da[[0, ma, 2 * ma]] = db[[0, mb, 2 * mb]] = (1.0, -2.0, 1.0)
-            white = np.correlate(da, db, "full") * coef.get("quantization", 0.0) / tau0**2
-            idx = ell + db.size - 1
-            ok = (idx >= 0) & (idx < white.size)
-            c[ok] += white[idx[ok]]
-            count = np.maximum(np.minimum(na, nb - ell) - np.maximum(0, -ell), 0)
-            out[a, b] = out[b, a] = np.sum(count * 2 * c * c) / (4.0 * ma**2 * mb**2 * na * nb)
+    for a, b, ma, mb, na, nb, ell, ha, hb in octave_pairs(ms, n):
+        cross = np.convolve(ha[::-1], hb)  # index j: k_b − k_a = j − (2ma − 1)
+        c = np.zeros(ell.size)
+        width = cross.size
+        lag0 = -(na + width)  # the autocovariance from lag0 to past the last ℓ
+        lags = np.arange(lag0, nb + width)
+        rates = [(s2, math.exp(-tau0 / t)) for s2, t in gm]
+        rates += [(coef.get("angle_random_walk", 0.0) / tau0, 0.0)]
+        for var, phi in rates:
+            r = var * phi ** np.abs(lags) if phi > 0 else var * (lags == 0)
+            full = fftconvolve(r, cross[::-1])
+            c += full[ell - lag0 + 2 * mb - 1]
+        ga = np.cumsum(ha[::-1])[::-1]  # steps e_j enter a_i through Σ_{k ≥ j} h(k)
+        gb = np.cumsum(hb[::-1])[::-1]
+        walk = np.convolve(ga[::-1], gb) * coef.get("rate_random_walk", 0.0) * tau0
+        idx = 2 * ma - 1 - ell  # c(ℓ) = Σ_j g_a(j) g_b(j − ℓ): the lag reversed
+        ok = (idx >= 0) & (idx < walk.size)
+        c[ok] += walk[idx[ok]]
+        # white angle noise (Q/τ₀ per sample of X) through the second differences'
+        # own filters d = (1, −2, 1) at 0, m, 2m: c(ℓ) = var·Σ_j d_a(j) d_b(j − ℓ)
+        da, db = np.zeros(2 * ma + 1), np.zeros(2 * mb + 1)
+        da[[0, ma, 2 * ma]] = db[[0, mb, 2 * mb]] = (1.0, -2.0, 1.0)
+        white = np.correlate(da, db, "full") * coef.get("quantization", 0.0) / tau0**2
+        idx = ell + db.size - 1
+        ok = (idx >= 0) & (idx < white.size)
+        c[ok] += white[idx[ok]]
+        count = np.maximum(np.minimum(na, nb - ell) - np.maximum(0, -ell), 0)
+        out[a, b] = out[b, a] = np.sum(count * 2 * c * c) / (4.0 * ma**2 * mb**2 * na * nb)
     return out
 
 

@@ -11,6 +11,7 @@ from decimal import Decimal, localcontext
 
 import numpy as np
 import pytest
+from helpers import octave_pairs
 
 import hrgjax as hg
 from hrgjax.allan import octave_covariance as oc
@@ -164,30 +165,26 @@ def filter_covariance(n2, k2, gm, ms, n, tau0):
     from scipy.signal import fftconvolve
 
     out = np.zeros((len(ms), len(ms)))
-    for a, ma in enumerate(ms):
-        for b, mb in enumerate(ms[a:], a):
-            na, nb = n + 1 - 2 * ma, n + 1 - 2 * mb
-            ell = np.arange(-(na - 1), nb)
-            ha, hb = np.r_[-np.ones(ma), np.ones(ma)], np.r_[-np.ones(mb), np.ones(mb)]
-            w = np.correlate(hb, ha, "full")  # w[d + 2ma − 1] = Σ_{k − j = d} h_a(j)h_b(k)
-            k = np.arange(-(n + 2 * ma + 2 * mb), n + 2 * ma + 2 * mb + 1)  # the rate's lags
-            r = np.where(k == 0, n2 / tau0, 0.0)
-            for s2, t_c in gm:
-                phi, kk, e = math.exp(-tau0 / t_c), np.abs(k), math.expm1(-tau0 / t_c)
-                r0 = 2 * s2 * t_c**2 * (tau0 / t_c + e) / tau0**2
-                r = r + np.where(kk == 0, r0, s2 * t_c**2 * e * e * phi ** (np.maximum(kk, 1) - 1.0)
-                                 / tau0**2)  # fmt: skip
-            c = fftconvolve(r, w[::-1])[ell - k[0] + 2 * mb - 1]
-            if k2:
-                ga, gb = np.cumsum(ha[::-1])[::-1], np.cumsum(hb[::-1])[::-1]
-                walk = np.convolve(ga[::-1], gb) * k2 * tau0
-                idx = 2 * ma - 1 - ell
-                ok = (idx >= 0) & (idx < walk.size)
-                c[ok] += walk[idx[ok]]
-                ok = (idx >= 0) & (idx < w.size)  # the white rate's c(ℓ) = w(−ℓ)
-                c[ok] -= k2 * tau0 / 6 * w[idx[ok]]
-            count = np.maximum(np.minimum(na, nb - ell) - np.maximum(0, -ell), 0)
-            out[a, b] = out[b, a] = np.sum(count * 2 * c * c) / (4.0 * ma**2 * mb**2 * na * nb)
+    for a, b, ma, mb, na, nb, ell, ha, hb in octave_pairs(ms, n):
+        w = np.correlate(hb, ha, "full")  # w[d + 2ma − 1] = Σ_{k − j = d} h_a(j)h_b(k)
+        k = np.arange(-(n + 2 * ma + 2 * mb), n + 2 * ma + 2 * mb + 1)  # the rate's lags
+        r = np.where(k == 0, n2 / tau0, 0.0)
+        for s2, t_c in gm:
+            phi, kk, e = math.exp(-tau0 / t_c), np.abs(k), math.expm1(-tau0 / t_c)
+            r0 = 2 * s2 * t_c**2 * (tau0 / t_c + e) / tau0**2
+            r = r + np.where(kk == 0, r0, s2 * t_c**2 * e * e * phi ** (np.maximum(kk, 1) - 1.0)
+                             / tau0**2)  # fmt: skip
+        c = fftconvolve(r, w[::-1])[ell - k[0] + 2 * mb - 1]
+        if k2:
+            ga, gb = np.cumsum(ha[::-1])[::-1], np.cumsum(hb[::-1])[::-1]
+            walk = np.convolve(ga[::-1], gb) * k2 * tau0
+            idx = 2 * ma - 1 - ell
+            ok = (idx >= 0) & (idx < walk.size)
+            c[ok] += walk[idx[ok]]
+            ok = (idx >= 0) & (idx < w.size)  # the white rate's c(ℓ) = w(−ℓ)
+            c[ok] -= k2 * tau0 / 6 * w[idx[ok]]
+        count = np.maximum(np.minimum(na, nb - ell) - np.maximum(0, -ell), 0)
+        out[a, b] = out[b, a] = np.sum(count * 2 * c * c) / (4.0 * ma**2 * mb**2 * na * nb)
     return out
 
 

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from .._timebase import is_uniform, rate_from_stamps, regular_step
+from .._timebase import is_uniform, rate_from_stamps, regular_step, stamp_resolution
 from ._common import (
     PLOT_EXTENSIONS,
     POSITIVE_FLOAT,
@@ -83,8 +83,7 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
                   "(docs/allan.md)")  # fmt: skip
             stamp = np.searchsorted(t, u.t0 + np.arange(1, u.y.size + 1) * (1.0 / u.rate_hz))
             return u.y, u.rate_hz, column, np.asarray(lines)[np.minimum(stamp, t.size - 1)]
-        resolved = 2.0 * float(np.spacing(np.max(np.abs(t)))) / float(t[-1] - t[0])
-        if rate_hz is not None and abs(found / rate_hz - 1) > max(1e-3, resolved):
+        if rate_hz is not None and abs(found / rate_hz - 1) > max(1e-3, stamp_resolution(t)):
             raise UsageError(f"{path}: --rate-hz {rate_hz:g} contradicts the time column's "
                              f"{found:g} Hz")  # fmt: skip
         rate_hz = found
