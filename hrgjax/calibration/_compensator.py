@@ -44,7 +44,7 @@ from .._compiled import bucket_pad, bucket_size, device, program
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..units import DEG, group_temperatures
-from .reduce import WINDOW_S, RateWindows, check_whole_angle, reduce
+from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, check_k_e, check_whole_angle, reduce
 
 CORRECTED_COLUMNS = {
     "rate_corrected_dps": "equivalent input rate after compensation [°/s]",
@@ -327,7 +327,7 @@ class AbstractCompensator(eqx.Module):
         interval = np.asarray(_interval_rates(self._program_form(), *padded))[:n]
         keep = inside[first] & inside[second]
         if not use_model and not keep.all():  # out of range: the raw rate, as NoCompensation
-            raw = np.asarray(_interval_rates(_Raw(k_e=self.k_e), *padded))[:n]
+            raw = np.asarray(_interval_rates(NoCompensation(k_e=self.k_e), *padded))[:n]
             interval = np.where(keep, interval, raw)
         rate_out = np.empty(len(data))
         angle_out = np.empty(len(data))
@@ -392,13 +392,21 @@ def domain_of(temperature_c) -> dict:
     }
 
 
-class _Raw(AbstractCompensator):
-    """No compensation (D = 0, SF = 1) for the samples `correct` passes through: the same
-    arithmetic as `NoCompensation` (which lives downstream of this module)."""
+class NoCompensation(AbstractCompensator):
+    """The raw gyro: D = 0, SF = 1 (only the nominal angular gain)."""
 
-    k_e: float = eqx.field(static=True)
+    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
 
-    def fit(self, data, *, key=None, raw=None):
+    def __check_init__(self):
+        check_k_e(self.k_e)
+
+    @property
+    def name(self) -> str:
+        """Short label used in tables."""
+        return "raw"
+
+    def fit(self, data, *, key=None, raw=None) -> NoCompensation:
+        """Nothing to fit: returns `self` (the common interface's arguments are not used)."""
         return self
 
     def drift(self, theta, temperature_c):
@@ -408,7 +416,6 @@ class _Raw(AbstractCompensator):
         return jnp.ones_like(theta)
 
 
-@program
 def _pointwise(comp, which, theta, temperature_c):
     """`comp.<which>` [rad/s or dimensionless] at each θ [rad] and T [°C]."""
     return jax.vmap(getattr(comp, which))(theta, temperature_c)

@@ -24,45 +24,21 @@ after it (`hrgjax.calibration.session`); `offset_dph` below takes a given offset
 
 from __future__ import annotations
 
-import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 
 from ..data import MeasuredData
 from ..pattern_noise import STILL_RATE_DPS
 from ._compensator import AbstractCompensator
+from ._compensator import (
+    NoCompensation as NoCompensation,  # its home until the pass-through needed it
+)
 from ._grouping import nearest_multiples
-from .reduce import K_E_NOMINAL, check_k_e
 
 SEED_TABLE = {
     "static_drift_dph": {-40.0: (1.28, 0.054), 60.0: (0.51, 0.043)},
     "angle_error_deg": {-40.0: (1.4, 0.06), 60.0: (0.7, 0.07)},
 }
 """Seed 000's figures, (Fourier base algorithm, neural network), by temperature [°C]."""
-
-
-class NoCompensation(AbstractCompensator):
-    """The raw gyro: D = 0, SF = 1 (only the nominal angular gain)."""
-
-    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
-
-    def __check_init__(self):
-        check_k_e(self.k_e)
-
-    @property
-    def name(self) -> str:
-        """Short label used in tables."""
-        return "raw"
-
-    def fit(self, data, *, key=None, raw=None) -> NoCompensation:
-        """Nothing to fit: returns `self` (the common interface's arguments are not used)."""
-        return self
-
-    def drift(self, theta, temperature_c):
-        return jnp.zeros_like(theta)
-
-    def scale_factor(self, theta, temperature_c):
-        return jnp.ones_like(theta)
 
 
 def run_errors(comp: AbstractCompensator, data: MeasuredData, *, offset_dph: float = 0.0):
