@@ -158,6 +158,17 @@ def test_discover_writes_the_contract_report(tmp_path, capsys):
     assert "[readout_gain_mismatch]" in out and "ppm" in out  # the fitted model's equations
 
 
+def test_python_dash_m_hrgjax_is_the_command(capsys, monkeypatch):
+    """`python -m hrgjax` runs the `hrgjax` command (it was "No module named hrgjax.__main__")."""
+    import runpy
+
+    monkeypatch.setattr("sys.argv", ["hrgjax", "--help"])
+    with pytest.raises(SystemExit) as exit_:
+        runpy.run_module("hrgjax", run_name="__main__", alter_sys=False)
+    assert exit_.value.code == 0
+    assert "usage: hrgjax" in capsys.readouterr().out
+
+
 def test_every_option_has_help_and_its_default_is_shown():
     """Walk every subcommand's parser (no JAX needed): each option has help text, and the
     formatter prints the defaults."""
