@@ -13,9 +13,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _solve_parts as parts
 from . import plausible
 from ._checks import is_concrete, traceable
-from ._compiled import Check, device, program, single_run_entry
+from ._compiled import Check, Unchecked, device, program, single_run_entry
 from ._cost import MAX_STEPS as MAX_STEPS
 from ._cost import default_max_steps as default_max_steps
 from ._cost import report as report_cost
@@ -203,27 +204,15 @@ def _solve(
     """The whole of `simulate` after its input checks, as one compiled program: the solve,
     the readout, the noise and the record. Returns (Record, accepted steps, solver result);
     a failed solve or a NaN record raises after the call (`Check`)."""
-    if model == "averaged":
-        # a state that only accumulates the turn: its residual (`averaged_problem`)
-        y0, field, states = averaged_problem(gyro, profile, quadrature0)
-        args = (gyro, profile)
-    else:
-        y0, omega_scale = full_initial_state(gyro, profile, quadrature0)
-        field, args = full_vector_field, (gyro, profile, omega_scale)
+    y0, field, args, extra = _problem(model, gyro, profile, quadrature0)
     if carrier is not None:  # the fixed-step carrier path (resonator/carrier.py)
         carrier_steps, held, looped = carrier
-        ys = carrier_solve(gyro, profile, y0, omega_scale, ts, carrier_steps, held, looped)
-        rec = _record(gyro, profile, ts, _read_full(gyro, profile, ts, ys, omega_scale), key,
-                      bias_key, run)  # fmt: skip
+        ys = carrier_solve(gyro, profile, y0, extra, ts, carrier_steps, held, looped)
+        rec = _record(gyro, profile, ts, _read_full(gyro, profile, ts, ys, extra), key, bias_key,
+                      run)  # fmt: skip
         steps = jnp.asarray(carrier_steps * ts.shape[0])
         return rec, steps, diffrax.RESULTS.successful
-    controller = diffrax.ConstantStepSize()
-    if not fixed:  # the loops' time constants bound the step (`max_step`)
-        controller = diffrax.PIDController(
-            rtol=rtol, atol=atol, dtmax=max_step(gyro.control, model, profile.temperature)
-        )
-    if profile.t.shape[0] > 2 and not fixed:
-        controller = diffrax.ClipStepSizeController(controller, jump_ts=profile.t[1:-1])
+    controller = _controller(model, gyro, profile, rtol, atol, fixed)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field),
         solver,
@@ -238,13 +227,65 @@ def _solve(
         adjoint=adjoint,
         throw=False,
     )
-    ys = sol.ys
-    if model == "averaged":
-        read = _read_averaged(gyro, profile, ts, states(ts, ys))
-    else:
-        read = _read_full(gyro, profile, ts, ys, omega_scale)
+    read = _readout(model, gyro, profile, ts, sol.ys, extra)
     rec = _record(gyro, profile, ts, read, key, bias_key, run)
     return rec, sol.stats["num_steps"], sol.result
+
+
+def _controller(model, gyro, profile, rtol, atol, fixed):
+    """The step-size controller of `_solve`'s adaptive (or constant) steps."""
+    controller = diffrax.ConstantStepSize()
+    if not fixed:  # the loops' time constants bound the step (`max_step`)
+        dtmax = max_step(gyro.control, model, profile.temperature)
+        controller = diffrax.PIDController(rtol=rtol, atol=atol, dtmax=dtmax)
+    if profile.t.shape[0] > 2 and not fixed:
+        controller = diffrax.ClipStepSizeController(controller, jump_ts=profile.t[1:-1])
+    return controller
+
+
+def _readout(model, gyro, profile, ts, ys, states_or_scale):
+    """What the electronics read from the solved states `ys` at `ts` (`_record`'s `read`)."""
+    if model == "averaged":
+        return _read_averaged(gyro, profile, ts, states_or_scale(ts, ys))
+    return _read_full(gyro, profile, ts, ys, states_or_scale)
+
+
+@program(check=Unchecked(), single_run=True)
+def _part(model, gyro, profile, solver, rtol, atol, dt0, fixed, quadrature0, adjoint, *part):
+    """One part (window, stop, resume, steps) of `_solve`'s solve (`_solve_parts.solve_part`)."""
+    y0, field, args, _ = _problem(model, gyro, profile, quadrature0)
+    controller = _controller(model, gyro, profile, rtol, atol, fixed)
+    return parts.solve_part(diffrax.ODETerm(field), solver, controller, profile.t[0],
+                            profile.t[-1], dt0, y0, args, adjoint, *part)  # fmt: skip
+
+
+@program(check=Unchecked(), single_run=True)
+def _finish(model, gyro, profile, ts, ys, quadrature0, key, bias_key, run):
+    """`_solve`'s record from the states `ys` at `ts` solved in parts."""
+    read = _readout(model, gyro, profile, ts, ys, _problem(model, gyro, profile, quadrature0)[3])
+    return _record(gyro, profile, ts, read, key, bias_key, run)
+
+
+def _problem(model, gyro, profile, quadrature0):
+    """`_solve`'s y0, field, args, `_readout`'s states map (averaged: a residual) or ω scale."""
+    if model == "averaged":
+        y0, field, states = averaged_problem(gyro, profile, quadrature0)
+        return y0, field, (gyro, profile), states
+    y0, omega_scale = full_initial_state(gyro, profile, quadrature0)
+    return y0, full_vector_field, (gyro, profile, omega_scale), omega_scale
+
+
+def _solve_in_parts(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0, fixed,
+                    quadrature0, adjoint, key, bias_key, run):  # fmt: skip
+    """`_solve` of a long eager run: the same results, its solve in parts behind a bar."""
+    part = (model, gyro, profile, solver, rtol, atol, dt0, fixed, quadrature0, adjoint)
+    rest = (quadrature0, key, bias_key, run)
+    rec, steps, result = parts.run_parts(lambda *a: _part(*part, *a), ts, profile.t, max_steps,
+                                         lambda y: _finish(*part[:3], ts, device(y), *rest))  # fmt: skip
+    out = (rec, device(np.asarray(steps, np.int64)), result)
+    if message := _SimulateCheck("simulate", result_index=2).host(out):
+        raise RuntimeError(message)
+    return out
 
 
 def _record(gyro, profile, ts, read, key, bias_key, run):
@@ -543,6 +584,9 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
     gyro, profile = traceable("gyro", gyro, _LAW_LIMITS), traceable("profile", profile)
     gyro, profile = check_traced(gyro, profile)  # traced values: the eager rules, at run time
+    args = (model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run)
+    if carrier is None and ts.shape[0] >= parts.STEPPED_FROM and parts.eager(args):
+        return _solve_in_parts(*args)  # a long run: progress shown, the same results
     return _solve(
         model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run, carrier
     )
