@@ -25,9 +25,21 @@ constant gyro and accelerometer biases.
 - [`discretise`][hrgjax.ins.strapdown.discretise], [`covariance`][hrgjax.ins.strapdown.covariance],
   [`monte_carlo`][hrgjax.ins.strapdown.monte_carlo] — exact (Van Loan) discretisation of the
   15-state model with white sensor noise; propagated covariance and vmapped Monte Carlo.
+
+**Domain.** The model is the first-order expansion in the error state, so it holds while the
+error state is small. Its horizontal position error, against two runs of the nonlinear
+mechanisation (`benchmarks/ins_linear_domain.py`, docs/ins.md), is off by about half of
+$a = \max_t\max(|\phi_N|, |\phi_E|, |\phi_D|, |\delta\varphi|)$ [rad] — ≈ 10 % at
+$a$ = `MAX_ANGLE` = 0.2 rad, 25 % at 0.5 rad, 60 % at 1 rad (longitude does not enter the
+dynamics: the model is exactly linear in δλ). An initial attitude error, or its σ, above
+`MAX_ANGLE` is refused (the EKF's `MAX_ATTITUDE_SIGMA`); a result whose error state (or its
+σ) grows past it — a gyro bias ε reaches it after ≈ 0.2/ε seconds — comes with a
+`LinearisationWarning` naming when.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import diffrax
 import equinox as eqx
@@ -35,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite, is_concrete
+from .._checks import check_finite, host_value, is_concrete
 from .._compiled import Check, fused, program
 from .._x64 import require_x64
 from ..kalman import psd_factor, van_loan
@@ -46,6 +58,52 @@ STATES = ("dlat", "dlon", "dh", "dv_n", "dv_e", "dv_d", "phi_n", "phi_e", "phi_d
 """Names of the 9 error states, in order."""
 BIAS_STATES = ("bg_x", "bg_y", "bg_z", "ba_x", "ba_y", "ba_z")
 """The 6 bias states of the augmented model (body frame)."""
+MAX_ANGLE = 0.2
+"""The linear model's domain [rad] (module docstring): the largest initial attitude error or
+attitude σ accepted (the EKF's `MAX_ATTITUDE_SIGMA`), and the size of the error state's
+angles (|φ_N|, |φ_E|, |φ_D|, |δφ|, or their σ) past which a result warns; there the
+horizontal position error is off by ≈ 10 % (docs/ins.md)."""
+
+
+class LinearisationWarning(UserWarning):
+    """A linear error-model result whose error state (or its σ) grew past `MAX_ANGLE`: from the
+    time named on, its position error may be off by more than ≈ 10 % (docs/ins.md). Use the
+    nonlinear mechanization ([`hrgjax.ins.mechanization`][hrgjax.ins.mechanization]) there,
+    or silence it with `warnings.simplefilter("ignore", LinearisationWarning)` to study the
+    linear model itself."""
+
+
+_ANGLES = (6, 7, 8, 0)  # φ_N, φ_E, φ_D, δlat: the angles of the domain (module docstring)
+_HOW = "align first, or use the nonlinear mechanization (hg.ins.mechanization); domain: docs/ins.md"
+
+
+def _refuse_attitude(name: str, values, what: str):
+    """Refuse concrete attitude errors (or σ) `values` (3,) [rad] above `MAX_ANGLE`, in one
+    line naming the field `name` and `what` it is."""
+    v = host_value(values)
+    if v is not None and np.any(np.abs(v) > MAX_ANGLE):
+        raise ValueError(
+            f"{name} ({what}, N E D [rad]) must be within ±{MAX_ANGLE} rad on every axis, the "
+            f"linear error model's domain (≈ 10 % position error there); got "
+            f"{np.array2string(v, precision=4)}: {_HOW}"
+        )
+
+
+def _warn_domain(fn: str, angle, where, what: str = ""):
+    """Warn (`LinearisationWarning`) if the concrete per-sample angle size `angle` (N,) [rad]
+    passes `MAX_ANGLE`, naming the first sample by `where(k)`; a traced `angle` passes."""
+    a = host_value(angle)
+    if a is None or not np.any(a > MAX_ANGLE):
+        return
+    k = int(np.argmax(a > MAX_ANGLE))
+    warnings.warn(
+        f"{fn}: the error state's {what}angles (|φ_N|, |φ_E|, |φ_D|, |δlat|) pass the linear "
+        f"model's {MAX_ANGLE}-rad domain at {where(k)} and reach {np.nanmax(a):.3g} rad: "
+        "from there the position error may be off by more than ≈ 10 % (docs/ins.md); use "
+        "the nonlinear mechanization (hg.ins.mechanization)",
+        LinearisationWarning,
+        stacklevel=3,
+    )
 
 
 def error_rate(earth: Earth, lat, h, v, c_bn, f_ned, dx, dgyro, daccel, altitude_aided=False):
@@ -148,17 +206,27 @@ def propagate(
     **Returns:** (N, 9) error states at `traj.t` (names in `STATES`; see
     [`position_metres`][hrgjax.ins.strapdown.position_metres]).
 
-    **Raises:** `ValueError` for wrongly shaped inputs; `RuntimeError` (from the solver) when
-    it runs out of steps."""
+    **Raises:** `ValueError` for wrongly shaped inputs, or an initial attitude error
+    `dx0[6:9]` above `MAX_ANGLE` on any axis; `RuntimeError` (from the solver) when it runs
+    out of steps. **Warns** `LinearisationWarning` when the computed error state leaves the
+    model's domain (module docstring), naming the time."""
     require_x64("ins.strapdown.propagate")
     n = traj.t.shape[0]
     dx0 = jnp.zeros(9) if dx0 is None else jnp.asarray(dx0, float)
     if dx0.shape != (9,):
         raise ValueError(f"dx0 must have shape (9,) (states {STATES}); got {dx0.shape}")
     dx0 = check_finite("dx0", dx0)
+    v0 = host_value(dx0)  # (on the host: no device op, no compilation)
+    if v0 is not None:
+        _refuse_attitude("dx0[6:9]", v0[6:9], "the initial attitude error φ")
     eg = _check_series("gyro_error", gyro_error, n)
     ea = _check_series("accel_error", accel_error, n)
-    return _propagate(traj, dx0, eg, ea, altitude_aided, rtol, atol, max_steps or 64 * n)[0]
+    dx = _propagate(traj, dx0, eg, ea, altitude_aided, rtol, atol, max_steps or 64 * n)[0]
+    v, t = host_value(dx), host_value(traj.t)
+    if v is not None and t is not None:
+        angle = np.abs(v[:, _ANGLES]).max(axis=1)
+        _warn_domain("ins.strapdown.propagate", angle, lambda k: f"t = {t[k] - t[0]:.6g} s")
+    return dx
 
 
 @program(check=Check("ins.strapdown.propagate", result_index=1))
@@ -234,15 +302,48 @@ def discretise(traj: Trajectory, imu: ImuErrors, altitude_aided: bool = False):
 
 
 def initial_covariance(imu: ImuErrors, p0_nav=None):
-    """15×15 initial covariance: `p0_nav` (9×9, default 0) and the bias covariance."""
+    """15×15 initial covariance: `p0_nav` (9×9, default 0) and the bias covariance.
+
+    **Raises:** `ValueError` when `p0_nav`'s attitude σ (√ of its diagonal [6:9]) exceeds
+    `MAX_ANGLE` on any axis (the linear model's domain, module docstring)."""
     p = jnp.zeros((15, 15)).at[9:, 9:].set(imu.bias_covariance())
-    return p if p0_nav is None else p.at[:9, :9].set(jnp.asarray(p0_nav))
+    if p0_nav is None:
+        return p
+    p0_nav = jnp.asarray(p0_nav)
+    if p0_nav.shape != (9, 9):
+        raise ValueError(
+            f"p0_nav must be a (9, 9) covariance (states {STATES}); got {p0_nav.shape}"
+        )
+    _refuse_attitude_sigma("p0_nav", p0_nav)
+    return p.at[:9, :9].set(p0_nav)
+
+
+def _refuse_attitude_sigma(name: str, p0):
+    v = host_value(p0)
+    if v is not None and v.ndim == 2 and v.shape[0] >= 9:
+        sigma = np.sqrt(np.abs(np.diagonal(v)[6:9]))
+        _refuse_attitude(f"√diag({name})[6:9]", sigma, "the initial attitude error's σ")
+
+
+def _angle_sigma(var):
+    """Per-step size of the domain's angle σ from variances `var` (…, n)."""
+    return jnp.sqrt(jnp.max(jnp.abs(var[..., jnp.array(_ANGLES)]), axis=-1))
+
+
+def covariance(phi, qd, p0):
+    """Propagated covariance $P_{k+1} = \\Phi_k P_k \\Phi_k^\\top + Q_{d,k}$; (N, 15, 15).
+
+    **Raises** `ValueError` for an attitude σ in `p0` above `MAX_ANGLE`; **warns**
+    `LinearisationWarning` when an angle σ of the error state grows past it (module
+    docstring), naming the step (concrete inputs; under `jit` neither is checked)."""
+    _refuse_attitude_sigma("p0", p0)
+    ps, angle = _covariance(phi, qd, p0)
+    _warn_domain("ins.strapdown.covariance", angle, lambda k: f"step {k}", "σ of the ")
+    return ps
 
 
 @jax.jit
-def covariance(phi, qd, p0):
-    """Propagated covariance $P_{k+1} = \\Phi_k P_k \\Phi_k^\\top + Q_{d,k}$; (N, 15, 15)."""
-
+def _covariance(phi, qd, p0):
     def step(p, fq):
         f, q = fq
         p = f @ p @ f.T + q
@@ -250,7 +351,10 @@ def covariance(phi, qd, p0):
         return p, p
 
     _, ps = jax.lax.scan(step, p0, (phi, qd))
-    return jnp.concatenate([p0[None], ps])
+    ps = jnp.concatenate([p0[None], ps])
+    big = p0.shape[-1] >= 9
+    angle = _angle_sigma(jnp.diagonal(ps, axis1=-2, axis2=-1)) if big else jnp.zeros(0)
+    return ps, angle
 
 
 def monte_carlo(phi, qd, p0, key, n_runs: int, every: int = 1):
@@ -258,12 +362,19 @@ def monte_carlo(phi, qd, p0, key, n_runs: int, every: int = 1):
     (biases drawn once per run), $x_{k+1} = \Phi_k x_k + L_k w_k$ with $L_kL_k^\top = Q_{d,k}$.
     `every`: keep every `every`-th state (it must divide the number of steps) to bound memory.
 
-    **Returns:** (n_runs, N_steps/every + 1, 15)."""
+    **Returns:** (n_runs, N_steps/every + 1, 15).
+
+    **Raises** `ValueError` for an attitude σ in `p0` above `MAX_ANGLE`; **warns**
+    `LinearisationWarning` when the runs' RMS of an angle of the error state grows past it
+    (module docstring), naming the step (concrete inputs; under `jit` neither is checked)."""
     require_x64("ins.strapdown.monte_carlo")
     steps = phi.shape[0]
     if every < 1 or steps % every:
         raise ValueError(f"every must be a positive divisor of the {steps} steps; got {every}")
-    return _monte_carlo(phi, qd, p0, key, n_runs, every)
+    _refuse_attitude_sigma("p0", p0)
+    xs, angle = _monte_carlo(phi, qd, p0, key, n_runs, every)
+    _warn_domain("ins.strapdown.monte_carlo", angle, lambda k: f"step {k * every}", "RMS ")
+    return xs
 
 
 @eqx.filter_jit
@@ -292,4 +403,6 @@ def _monte_carlo(phi, qd, p0, key, n_runs, every):
         _, xs = jax.lax.scan(block, x0, (shape(phi), shape(ls), shape(w)))
         return jnp.concatenate([x0[None], xs])
 
-    return jax.vmap(one)(jax.random.split(key, n_runs))
+    xs = jax.vmap(one)(jax.random.split(key, n_runs))
+    angle = _angle_sigma(jnp.mean(xs**2, axis=0)) if n >= 9 else jnp.zeros(0)
+    return xs, angle
