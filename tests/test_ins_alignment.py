@@ -80,6 +80,75 @@ def test_heading_sigma_counts_the_east_gyro_bias_once():
         al.fine_align(log, np.eye(3), start_bias_jacobian=np.zeros((3, 3)))
 
 
+def _noisy_log(lat, seed, duration_s=1800.0, arw=0.01 * DEG / 60, vrw=1e-4):
+    """A stationary 1-Hz log at a random attitude with N(0, 0.05 °/h) gyro and N(0, 1e-3 m/s²)
+    accelerometer biases, angle and velocity random walks; and its true body-to-NED matrix."""
+    rng = np.random.default_rng(seed)
+    traj = tr.stationary(lat, heading_deg=rng.uniform(0, 360), pitch_deg=rng.normal(0, 2),
+                         roll_deg=rng.normal(0, 2), duration_s=duration_s, dt=1.0)  # fmt: skip
+    f_b, w_b = traj.imu()
+    size = len(traj.t) - 1
+    eps, nab = rng.normal(0, 0.05 * DEG / 3600, 3), rng.normal(0, 1e-3, 3)
+    dth = np.asarray(w_b[1:]) + eps + arw * rng.standard_normal((size, 3))
+    dv = np.asarray(f_b[1:]) + nab + vrw * rng.standard_normal((size, 3))
+    return al.ImuLog(traj.t[1:], jnp.asarray(dth), jnp.asarray(dv), lat * DEG), traj.c_bn[0]
+
+
+def test_level_sigma_near_the_pole_stays_at_the_accelerometer_floor():
+    """Audit (pole): the level accelerometer biases are unobservable, so pitch and roll σ end
+    at σ_∇/g (1e-3 m/s² → 0.00583°). With body-frame bias states mapped through the current
+    estimate, the heading corrections of the fine stage (the coarse heading is ~8° off at 88°)
+    turned that map, the filter read it as information about the biases: σ 0.0053–0.0056°,
+    z-RMS 1.3–1.4 at 88° (`benchmarks/coverage_alignment.py`). NED-frame bias states: one
+    constant model, no such information."""
+    lat = 88.0
+    floor = np.degrees(1e-3 / float(C.gravity(lat * DEG)))
+    log, _ = _noisy_log(lat, 3)
+    r = al.align(log)
+    assert abs(r.coarse_deg[0] - r.heading_deg) > 10.0  # the fine stage turned the heading
+    for s in (r.pitch_std_deg, r.roll_std_deg):
+        assert floor * 0.999 < s < floor * 1.02  # was 0.00559°, 0.00561°
+
+
+def test_align_warns_where_the_heading_error_is_not_small():
+    """ARW 0.05 °/√h at 88°: the coarse heading's noise is 42° over 60 s, the linearised
+    filter's heading σ does not cover (z-RMS 1.7): `align` says so; a 300-s coarse span (19°)
+    is quiet."""
+    arw = 0.05 * DEG / 60
+    log, _ = _noisy_log(88.0, 3, arw=arw)
+    with pytest.warns(
+        UserWarning, match=r"^align: heading σ 4\d\.\d° at the start, .*\(over 25°\)"
+    ):
+        al.align(log, arw=arw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        al.align(log, arw=arw, coarse_s=300.0)
+
+
+def test_coarse_error_model_matches_the_analytic_limits():
+    """The fine filter's prior for the coarse attitude: A = ∂φ/∂biases taken at the model's
+    means shares the fine limits' bias dependence (PHYSICS.md §12: φ_N = ∇_E/g,
+    φ_E = −∇_N/g, φ_D = ε_E/(ω_ie cos φ) − (∇_E/g) tan φ), not the noisy means' (15 % off at
+    88°: coarse and fine headings then differ by a bias term and the filter learns from it);
+    the white noise of the coarse means leaves a heading σ (arw/√T)/(ω_ie cos φ) for
+    0.01 °/√h over 60 s at 88° (8.45°), beyond the fixed 5° the prior held."""
+    arw, span = 0.01 * DEG / 60, 60.0
+    for lat in (45.0, 88.0):
+        log, c = _noisy_log(lat, 0, duration_s=120.0)
+        turn = np.array([[np.cos(0.1), -np.sin(0.1), 0], [np.sin(0.1), np.cos(0.1), 0], [0, 0, 1]])
+        c = np.asarray(c) @ turn  # a start Ĉ that is not the truth
+        jac, var = al.coarse_error_model(jnp.asarray(c), lat * DEG, 0.0, span, arw, 1e-4)
+        ned = np.asarray(jac) @ np.kron(np.eye(2), c.T)  # ∂φ/∂(NED biases)
+        g, w_h = float(C.gravity(lat * DEG)), C.OMEGA_IE * np.cos(lat * DEG)
+        want = np.zeros((3, 6))
+        want[0, 4], want[1, 3] = 1 / g, -1 / g
+        want[2, 1], want[2, 4] = 1 / w_h, -np.tan(lat * DEG) / g
+        np.testing.assert_allclose(ned, want, atol=1e-6 * np.abs(want).max())
+        heading = arw / np.sqrt(span) / w_h
+        assert np.sqrt(float(var[2])) == pytest.approx(heading, rel=1e-3)
+    assert np.degrees(heading) == pytest.approx(8.45, abs=0.01)
+
+
 def test_coarse_alignment_is_exact_for_ideal_data():
     log, c = _stationary_log(30.0, np.zeros(3), np.zeros(3), duration_s=120.0)
     f_b = jnp.mean(log.dvel, 0)
