@@ -21,8 +21,14 @@ probable hypothesis fails it).
 4. The model-fit test's false "does not fit" rate under the matched model: the exact
    Kalman filter's (independent bank, S0) at levels 1e-2 and 1e-3, and the IMMs' −2 rate.
 
-Usage: `.venv/bin/python benchmarks/diagnosis_calibration.py [--quick]` (about 8 min on 2
-cores; `--quick` a third of the runs).
+5. (`--from-t0` alone) The measured limit of the IMMs (docs/diagnosis.md): a fault present
+   from sample 0 under a uniform prior, at the current settings (`switch_prob` 1e-4,
+   `fault_walk` 1e-9, no fit test): steps after the fifth at max-p > 0.99 and the share of
+   them naming the wrong hypothesis — records from the bank's prior, and a fixed ±2e-7
+   fault in INS (run mod 3).
+
+Usage: `.venv/bin/python benchmarks/diagnosis_calibration.py [--quick | --from-t0]` (about
+8 min on 2 cores; `--quick` a third of the runs; `--from-t0` part 5 alone, about 2 min).
 """
 
 import sys
@@ -38,6 +44,7 @@ from hrgjax.diagnosis import filter_bank as fb
 from hrgjax.ins.platform import FAULTS, Fault, PlatformINS, simulate
 
 QUICK = "--quick" in sys.argv
+FROM_T0 = "--from-t0" in sys.argv
 K = 300
 INS = PlatformINS()
 COL = FAULTS.index("accel_y")
@@ -200,8 +207,43 @@ def part4(n):
               f"{np.mean(d == -2):.4f} of the steps")  # fmt: skip
 
 
+def part5(n):
+    print("\n5. Fault from sample 0, uniform prior, switch_prob 1e-4, fault_walk 1e-9: steps "
+          "after the fifth at max-p > 0.99 and the share of them wrong")  # fmt: skip
+    rng = np.random.default_rng(1)
+    truth = np.arange(n) % 4
+    e, t = np.zeros((n, 3)), np.full((n, 3), np.inf)
+    rows = np.flatnonzero(truth > 0)
+    e[rows, truth[rows] - 1] = rng.normal(0.0, 3e-7, rows.size)
+    t[rows, truth[rows] - 1] = 0.0
+    fi = np.arange(n // 2) % 3
+    e2, t2 = np.zeros((n // 2, 3)), np.full((n // 2, 3), np.inf)
+    e2[np.arange(n // 2), fi] = np.where(np.arange(n // 2) % 2, 2e-7, -2e-7)
+    t2[np.arange(n // 2), fi] = 0.0
+    sets = ((f"{n} records from the bank's prior", jax.random.key(5), e, t, truth),
+            (f"{n // 2} records, ±2e-7 from sample 0", jax.random.key(6), e2, t2, fi + 1))  # fmt: skip
+    exact = cx.fault_bank(INS, "accel_y", 1.0, switch_prob=0.0, fault_walk=0.0)
+    dets = {"exact posterior": jax.jit(jax.vmap(
+        lambda z, p: fb.run_bank(exact, z, prior=p, floor=1e-12)[:2], (0, None)))}  # fmt: skip
+    dets.update(detectors(1e-9, None))
+    for label, key, e_, t_, tr in sets:
+        z = records(INS, jax.random.split(key, e_.shape[0]), e_, t_, 1e-9)
+        print(f"  {label}:")
+        for name, fn in dets.items():
+            p = np.asarray(fn(z, UNIFORM)[0])[:, 5:]
+            sure = p.max(-1) > 0.99
+            wrong = p.argmax(-1) != tr[:, None]
+            share = f"{wrong[sure].mean():.3f}" if sure.any() else "–"
+            print(f"    {name:16s} steps {sure.sum():6d} of {sure.size}, wrong {share}", flush=True)
+
+
 def main():
     print(f"machine: {machine()}")
+    if FROM_T0:
+        t0 = time.perf_counter()
+        part5(96)
+        print(f"\n({time.perf_counter() - t0:.0f} s)")
+        return
     s = 3 if QUICK else 1
     t0 = time.perf_counter()
     part1(120 // s)

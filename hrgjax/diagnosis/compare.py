@@ -22,7 +22,9 @@ and scores it:
   compile time excluded.
 
 The filter banks are built on the scenario's model (specific force included) and start
-with probability 0.97 on S0; `filter_bank_rest` (scenarios with a specific force only) is
+with probability 0.97 on S0 (every run starts healthy; the interacting banks' probabilities
+are not to be trusted on a record whose fault precedes it — `docs/diagnosis.md`, "Measured
+limit"); `filter_bank_rest` (scenarios with a specific force only) is
 the gain-schedule bank built for the object at rest, run on the accelerated data — the
 model mismatch a bank designed for one regime meets in another. Measurements carry white noise of `meas_sigma` (R/g-scaled units, as the filters assume;
 the thesis's are noise-free).

@@ -201,7 +201,10 @@ def run_bank(
 
     **Arguments:** `floor`: smallest probability a hypothesis may hold (> 0); `prior` (M,)
     initial probabilities (default uniform); `threshold`: A of eq. (10); `interacting`: mix
-    the estimates across hypotheses each step (IMM) instead of independent filters;
+    the estimates across hypotheses each step (IMM) instead of independent filters — its
+    probabilities are claims for records that start healthy: with a fault from the first
+    sample under a uniform prior (`switch_prob` 1e-4) ≈ half its steps above 0.99 name the
+    wrong hypothesis (`docs/diagnosis.md`, "Measured limit");
     `fit_window`, `fit_level`: the model-fit test of
     [`model_fit`][hrgjax.diagnosis.filter_bank.model_fit] — a step whose most probable
     hypothesis fails it is decided −2 (`fit_level=None`, the default: no test, the
