@@ -27,9 +27,23 @@ from jax.scipy.special import betainc, gammaincc
 
 def wls(g: np.ndarray, y: np.ndarray, sigma: np.ndarray):
     """Weighted least squares of `y` on the columns `g` with standard errors `sigma`:
-    `(beta, residual (whitened), covariance)`."""
+    `(beta, residual (whitened), covariance)`. The whitened columns are scaled to unit norm
+    before the solve (and β back), as in `covariance`: unscaled, `lstsq`'s cut-off at ε of
+    the largest singular value took a column 1e12 smaller beside a near-parallel one as
+    rank-deficient and set β 89 σ off (tests/test_precision.py). A column the columns before
+    it already span (its part orthogonal to them ≤ n ε of its norm: a candidate aliased with
+    the model, a column of zeros) gets β = 0, the others their fit without it — not the
+    minimum-norm split, which depends on the columns' units (scaled, it halved the angular
+    gain beside a candidate proportional to it)."""
     gw, yw = g / sigma[:, None], y / sigma
-    beta, *_ = np.linalg.lstsq(gw, yw, rcond=None)
+    norm = np.linalg.norm(gw, axis=0)
+    d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
+    gs = gw * d
+    pivots = np.abs(np.diagonal(np.linalg.qr(gs, mode="r")))
+    keep = np.zeros(gs.shape[1], bool)
+    keep[: pivots.size] = pivots > max(gs.shape) * np.finfo(gs.dtype).eps
+    beta = np.zeros(gs.shape[1])
+    beta[keep] = np.linalg.lstsq(gs[:, keep], yw, rcond=None)[0] * d[keep]
     return beta, yw - gw @ beta, covariance(gw)
 
 
