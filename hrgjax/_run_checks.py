@@ -16,7 +16,7 @@ from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
 from .noise import UNITS as NOISE_UNITS
 from .profiles import traced_checks as profile_checks
 from .resonator.control import LIMITS as CONTROL_LIMITS
-from .resonator.params import TemperatureLaw
+from .resonator.params import TemperatureLaw, damping_problem
 from .resonator.readout import LIMITS as READOUT_LIMITS
 
 LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by path
@@ -54,7 +54,8 @@ def _laws(gyro):
 
 def check_laws(gyro, profile) -> None:
     """Every temperature law of `gyro` finite over the profile's temperatures, and decay
-    times, frequencies and noise levels of the right sign there; plain values put in with
+    times, frequencies and noise levels of the right sign there, both axes damped
+    (`resonator.params.damping_problem`); plain values put in with
     `eqx.tree_at` within their limits (concrete values only: `check_traced` holds traced
     ones to the same rules at run time)."""
     temps = np.asarray(profile.temperature, float).ravel() if is_concrete(
@@ -88,6 +89,9 @@ def check_laws(gyro, profile) -> None:
                 f"{grid[i]:.4g} °C, inside the profile's temperatures [{lo:.4g}, {hi:.4g}] °C; "
                 f"it must be {rule} there".replace("  ", " ")
             )
+    # both axes damped over the profile's temperatures (plain values too: eqx.tree_at)
+    if problem := damping_problem(gyro.resonator, grid if grid is not None else temps):
+        raise ValueError(f"gyro.resonator: {problem}")
 
 
 def law_checks(gyro, profile) -> list:

@@ -54,6 +54,15 @@ def tvg3_like(
 
     Loops: PLL 2 rad/s, AGC 1 rad/s, quadrature 2 rad/s (slow-time bandwidths).
 
+    **Tuned range: −40…+60 °C** (the bench figures; the gain mismatch 0…60 °C). Outside it
+    the laws are extrapolated as written, not tuned: the linear gain mismatch crosses zero at
+    67.8 °C and changes sign (−0.79 % at 150 °C; +1.6 % at −100 °C, an SF ripple of 3.2 %),
+    and Δ(1/τ) keeps growing ×5 per 100 °C colder (9.2 °/h peak-to-peak at −100 °C).
+    `simulate` refuses only temperatures outside the plausible −100…150 °C
+    (`hg.plausible.RANGES["temperature_c"]`) and laws that leave their limits there (|g| <
+    0.5, τ > 0); between the tuned and the plausible range it runs the
+    extrapolated laws without a warning.
+
     **Arguments:**
 
     - `temperature_laws`: `False` freezes every law at 20 °C.

@@ -51,7 +51,7 @@ from ..data import MeasuredData
 from ..gyro import Gyro
 from ..profiles import Profile
 from ..resonator.averaged import averaged_vector_field, input_rate
-from ..resonator.slow import reduced_rate
+from ..resonator.slow import reduced_rate, split_problem
 from ..units import DEG, DEG_PER_H, PHYSICAL_WINDOW_S
 from ._compensator import (
     FROM_FIELD,
@@ -207,6 +207,11 @@ class PhysicalCompensator(AbstractCompensator):
         check_whole("PhysicalCompensator", "max_steps", self.max_steps, 1,
                     " (Levenberg–Marquardt steps)")  # fmt: skip
         check_number("PhysicalCompensator", "sf_rate", self.sf_rate, " [rad/s]")
+        if self.plant is not None:  # its split inside the slow manifold's domain
+            temps = None if self.temperature_range is None else np.linspace(
+                *self.temperature_range, 33)  # fmt: skip
+            if problem := split_problem(self.plant, temps, "PhysicalCompensator.plant"):
+                raise ValueError(problem)
 
     @property
     def fit_stats(self) -> dict:
@@ -337,6 +342,9 @@ class PhysicalCompensator(AbstractCompensator):
         groups = fit_groups(data, self.window_s, self.k_e)
         x0 = np.asarray(initial if initial is not None else initial_values(windows, self.k_e))
         plant = self.plant  # normalised by the field's converter (known_plant)
+        if plant is not None and (problem := split_problem(
+                plant, np.asarray(data["temperature_c"]), "PhysicalCompensator.plant")):  # fmt: skip
+            raise ValueError(problem)
         if plant is None:
             values, steps, res, sigma, jac = fit_values(
                 groups, device(x0), self.k_e, self.max_steps
@@ -400,20 +408,25 @@ def _require_law_temperatures(data: MeasuredData, windows, k_e: float, window_s:
 SINGULAR_RCOND = 1e-10
 """Smallest singular value of the fit's scaled Jacobian, relative to its largest, of an
 identified parameter direction: below it JᵀJ (condition number its square, beyond 1/ε of
-float64) is singular in all but rounding, its inverse noise."""
+float64) is singular in all but rounding. The covariance comes from the SVD of J
+(`_covariance`), which does not square the condition: its σ's meet the exact (JᵀJ)⁻¹ of the
+same J (rational arithmetic) to 1e-10 relative at cond(J) = 4e8 and 9e-10 at 4e9, where
+inverting JᵀJ gave 0.94–0.99× and 0.26–0.67× (benchmarks/precision.py); the cut is no longer
+where σ's lose precision, but a direction this weak rests on the Jacobian's own accuracy."""
 
 
 def _covariance(jac: np.ndarray, chi2: float) -> np.ndarray:
     """The parameters' covariance (J^T J)^-1 · χ²/dof in SI (`jac` in the scaled units of
-    `SCALE`); a one-line error naming the parameters the data leave unidentified when
-    J^T J is singular (`SINGULAR_RCOND`)."""
+    `SCALE`), as V diag(1/s²) Vᵀ from the SVD of J with its columns scaled to unit norm
+    (never JᵀJ, whose condition number is J's squared); a one-line error naming the
+    parameters the data leave unidentified when J^T J is singular (`SINGULAR_RCOND`)."""
     finite = np.all(np.isfinite(jac))
     s = np.linalg.svd(jac, compute_uv=False) if finite else np.zeros(1)
     if finite and s.size == jac.shape[1] and s[-1] > SINGULAR_RCOND * s[0]:
-        try:
-            return np.linalg.inv(jac.T @ jac) * chi2 * np.outer(SCALE, SCALE)
-        except np.linalg.LinAlgError:
-            pass
+        norm = np.linalg.norm(jac, axis=0)  # > 0: J has full column rank
+        _, s, vt = np.linalg.svd(jac / norm, full_matrices=False)
+        w = vt.T / (s * norm[:, None])  # (J^T J)^-1 = w w^T
+        return (w @ w.T) * chi2 * np.outer(SCALE, SCALE)
     raise ValueError(_not_identified(jac))
 
 

@@ -185,13 +185,19 @@ class Resonator(eqx.Module):
                 problem = k_e_problem(float(value))
                 if problem:
                     raise ValueError(f"Resonator.k_e must be {problem}")
+        problem = damping_problem(self)
+        if problem:
+            raise ValueError(problem)
 
     def at(self, temperature_c) -> Resonator:
         """This resonator with every temperature law evaluated at `temperature_c` [°C].
 
         Traceable: `jax.vmap(res.at)(temperatures)` gives a batch of resonators.
         """
-        return evaluate_at(self, checked_temperature(temperature_c))
+        problem = damping_problem(self, checked_temperature(temperature_c))
+        if problem:
+            raise ValueError(problem)
+        return evaluate_at(self, temperature_c)
 
     @property
     def damping_matrix(self):
@@ -209,3 +215,50 @@ class Resonator(eqx.Module):
 def _a_matrix(beta):
     c, s = jnp.cos(2 * beta), jnp.sin(2 * beta)
     return jnp.stack([jnp.stack([c, s]), jnp.stack([s, -c])])
+
+
+def damping_problem(resonator, temperature_c=None) -> str | None:
+    r"""One line naming `Resonator.delta_inv_tau` if it gives an axis negative damping:
+    $1/\tau_{1,2} = 1/\tau \pm \Delta(1/\tau)/2$ are both > 0 only while
+    $|\Delta(1/\tau)| < 2/\tau$ (else the less damped axis grows, $e^{+t/|\tau_2|}$, and the
+    averaged, full and slow models integrate an unstable mode). `None` when it holds, or when
+    τ or Δ(1/τ) is traced (judged where the run evaluates it).
+
+    **Arguments:** `resonator`, a [`hrgjax.Resonator`][]; `temperature_c` [°C], where to
+    evaluate its [`TemperatureLaw`][hrgjax.TemperatureLaw]s (`None`: a law is not judged,
+    only plain values)."""
+    values = []
+    for name in ("tau", "delta_inv_tau"):
+        x = getattr(resonator, name)
+        if isinstance(x, TemperatureLaw):
+            leaves = jax.tree_util.tree_leaves(x)
+            if temperature_c is None or not all(is_concrete(v) for v in leaves):
+                return None
+            if any(np.ndim(v) for v in leaves):  # a batch of laws: judged where evaluated
+                return None
+            if not is_concrete(temperature_c):
+                return None
+            with np.errstate(over="ignore", invalid="ignore"):
+                x = x(np.ravel(np.asarray(temperature_c, dtype=float)), xp=np)
+        elif not is_concrete(x):
+            return None
+        values.append(np.asarray(x, dtype=float))
+    tau, dit = np.broadcast_arrays(*values)
+    # a τ ≤ 0 or a non-finite value is `check_positive`'s / `check_finite`'s to refuse
+    bad = np.isfinite(tau) & (tau > 0) & np.isfinite(dit) & ~(np.abs(dit) * tau < 2.0)
+    if not bad.any():
+        return None
+    i = tuple(int(k) for k in np.argwhere(bad)[0])
+    t, d = float(tau[i]), float(dit[i])
+    at = ""
+    if temperature_c is not None and any(
+        isinstance(getattr(resonator, n), TemperatureLaw) for n in ("tau", "delta_inv_tau")
+    ):
+        temps = np.ravel(np.asarray(temperature_c, dtype=float))
+        if tau.ndim and tau.shape[-1] == temps.size:
+            at = f" at {temps[i[-1]]:g} °C"
+    return (
+        f"Resonator.delta_inv_tau = {d:.6g} 1/s with Resonator.tau = {t:.6g} s{at} gives one "
+        f"axis negative damping (1/τ₂ = 1/τ − |Δ(1/τ)|/2 = {1 / t - abs(d) / 2:.3g} 1/s): "
+        f"|Δ(1/τ)| must be < 2/τ = {2 / t:.6g} 1/s"
+    )

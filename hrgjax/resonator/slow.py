@@ -11,15 +11,24 @@ G(\mathbf h, \theta)$$
 ($\mathbf F$, $G$: the averaged model's fast and slow right-hand sides,
 `hrgjax.resonator.averaged`). Write $\mathbf h = \mathbf h_0 + \boldsymbol\delta$ with
 $\mathbf h_0$ the loops at rest, $\mathbf F(\mathbf h_0, \theta) = 0$ (Newton from
-`steady_integrators`; with a perfect readout, the ideal-loop model). The lag δ is small (≈
-1e-4 of a₀), so linearised, $\dot\theta\,\partial_\theta\boldsymbol\delta = J(\theta)\,
-\boldsymbol\delta - \dot\theta\,\partial_\theta\mathbf h_0$, $J = \partial\mathbf F/\partial
-\mathbf x$ at $\mathbf h_0$: a linear equation periodic in θ (period π: every term is a 2θ
-harmonic), solved by harmonic balance on `SAMPLES` angles θ + jπ/N with the spectral
-derivative. That holds the loops' lag to all orders in θ̇/β (β: the loop bandwidths) for a
-wave turning at the instant's rate: at 10 °/s on the default gyro, once the loops' transient
-has passed, its θ̇ equals the PI loops' to within 1 % of what the ideal loops miss (the bound
-`tests/test_loops_plant.py` asserts; the ideal loops miss ≈ 3e-5 of the rate).
+`steady_integrators`; with a perfect readout, the ideal-loop model). Linearised in the lag
+δ, $\dot\theta\,\partial_\theta\boldsymbol\delta = J(\theta)\,\boldsymbol\delta -
+\dot\theta\,\partial_\theta\mathbf h_0$, $J = \partial\mathbf F/\partial\mathbf x$ at
+$\mathbf h_0$: a linear equation periodic in θ (period π: every term is a 2θ harmonic),
+solved by harmonic balance on `SAMPLES` angles θ + jπ/N with the spectral derivative. That
+is the start: `BALANCE_NEWTON` Newton steps then solve the invariance equation itself on
+those angles (the rate G taken on h, not on h₀: the lag's pull on θ̇ feeds back into it).
+The linearised lag alone is wrong as the split grows against the quadrature loop's bandwidth
+β_q, not as the lag q/a grows: at 10 °/s its mean defect drift is off by 0.03 % at Δω/β_q =
+0.0016 (the default gyro), 1.8 % at 0.16, 31 % at 0.63 and 2.4× at 1.6 (the averaged PI-loop
+runs' truth), where at 400 °/s and 0.16 a lag q/a = 0.019 is still right to 2e-5; with the
+Newton steps it is right to ≤ 6e-6 up to Δω/β_q = 0.63. Above `MAX_SPLIT_RATIO` the balance
+no longer converges (4 % off at 3.1, or diverging) and a split there is refused
+(`split_problem`). That holds the loops' lag to all orders in θ̇/β (β: the loop
+bandwidths) for a wave turning at the instant's rate: at 10 °/s on the default gyro, once
+the loops' transient has passed, its θ̇ equals the PI loops' to within 1 % of what the
+ideal loops miss (the bound `tests/test_loops_plant.py` asserts; the ideal loops miss ≈
+3e-5 of the rate).
 
 What the lag is: a loop holds its error at zero only for a constant disturbance.
 While the wave turns, the quadrature the frequency split Δω drives varies as
@@ -55,6 +64,18 @@ of two defects)."""
 
 NEWTON = 2
 """Newton iterations for the loops at rest, from the ideal steady state."""
+
+BALANCE_NEWTON = 3
+"""Newton iterations on the nonlinear collocation equations, from the linearised lag (they
+converge quadratically: at Δω/β_q = 0.63, 10 °/s, the mean drift's error goes 0.31 → 9e-4
+→ 1e-7 → 4e-13 of it)."""
+
+MAX_SPLIT_RATIO = 1.0
+"""Largest frequency split the slow manifold takes, as |Δω|/β_q (β_q: the quadrature loop's
+bandwidth [rad/s]). Measured against a converged balance (15 angles, 12 Newton steps, itself
+within 6e-5 of the averaged PI-loop runs): the mean defect drift is right to ≤ 6e-6 of it
+at |Δω|/β_q ≤ 0.63 (10 and 100 °/s), 1.4e-5…7.8e-3 at 1.57, and 4 % or diverged at 3.1 (the
+balance's 9 angles and the Newton start then fail); `benchmarks/slow_manifold_domain.py`."""
 
 
 def _derivative_matrix(n: int) -> np.ndarray:
@@ -132,6 +153,75 @@ def _closed(g, theta):
                         "closed: a traced Control bandwidth is <= 0 rad/s (an open loop)")  # fmt: skip
 
 
+def split_problem(g, temperature_c=None, name: str = "gyro") -> str | None:
+    """One line naming `{name}.resonator.delta_omega` if the split exceeds
+    `MAX_SPLIT_RATIO` × the quadrature loop's bandwidth — where the slow manifold no longer
+    holds — else `None` (also for traced values: `slow_manifold` holds those when it runs).
+
+    **Arguments:** `g`, a [`hrgjax.Gyro`][]; `temperature_c` [°C], where to evaluate its
+    [`TemperatureLaw`][hrgjax.TemperatureLaw]s (`None`: at their reference temperature);
+    `name`, what the message calls the gyro."""
+    values = []
+    for x in (g.resonator.delta_omega, g.control.quadrature_bandwidth):
+        if isinstance(x, TemperatureLaw):
+            if not all(is_concrete(v) for v in jax.tree_util.tree_leaves(x)):
+                return None
+            temps = x.t_ref if temperature_c is None else temperature_c
+            if not is_concrete(temps):
+                return None
+            x = x(np.ravel(np.asarray(temps, dtype=float)), xp=np)
+        elif not is_concrete(x):
+            return None
+        values.append(np.ravel(np.asarray(x, dtype=float)))
+    split, width = np.broadcast_arrays(*values)
+    ratio = np.abs(split) / np.where(width > 0, width, np.inf)  # open loops: `_closed`'s
+    bad = np.isfinite(ratio) & (ratio > MAX_SPLIT_RATIO)
+    if not bad.any():
+        return None
+    i = int(np.flatnonzero(bad)[0])
+    at = ""
+    if temperature_c is not None and np.size(temperature_c) == split.size > 0:
+        at = f" at {float(np.ravel(np.asarray(temperature_c, dtype=float))[i]):g} °C"
+    return (
+        f"{name}.resonator.delta_omega = {split[i]:.4g} rad/s ({split[i] / (2 * np.pi):.3g} "
+        f"Hz){at} is {ratio[i]:.2f}× the quadrature loop's bandwidth ({name}.control."
+        f"quadrature_bandwidth = {width[i]:.4g} rad/s): the slow manifold holds the loops' "
+        f"lag for |Δω| ≤ {MAX_SPLIT_RATIO:g}× it only; trim the split or widen that loop"
+    )
+
+
+def _in_domain(g, theta):
+    """`theta`, once `g`'s split is inside `MAX_SPLIT_RATIO` (`split_problem`): refused
+    now when concrete, when the program runs when traced."""
+    problem = split_problem(g)
+    if problem:
+        raise ValueError(problem)
+    split, width = g.resonator.delta_omega, g.control.quadrature_bandwidth
+    if is_concrete(split) and is_concrete(width):
+        return theta
+    bad = jnp.any(jnp.abs(split) > MAX_SPLIT_RATIO * width)
+    return eqx.error_if(theta, bad, "the slow manifold holds the loops' lag only for |Δω| <= "
+                        f"{MAX_SPLIT_RATIO:g}x the quadrature loop's bandwidth; a traced "
+                        "gyro.resonator.delta_omega exceeds it")  # fmt: skip
+
+
+def _balanced(g, omega_in, thetas, h):
+    """One Newton step on the collocation equations $\\mathbf F(\\mathbf h_j, \\theta_j) =
+    G(\\mathbf h_j, \\theta_j)\\,(D\\mathbf h)_j$ at the samples `thetas`, from `h` (n, m)."""
+    n, m = h.shape
+    d = jnp.asarray(_D, dtype=h.dtype)
+    both = lambda x, th: _fields(g, omega_in, x, th)
+    (f, rate), (jac_f, jac_g) = jax.vmap(lambda x, th: (both(x, th), jax.jacfwd(both)(x, th)))(
+        h, thetas
+    )
+    dh = d @ h  # ∂h/∂θ at the samples
+    residual = (f - rate[:, None] * dh).reshape(-1)
+    blocks = jac_f - dh[:, :, None] * jac_g[:, None, :]
+    big = jax.scipy.linalg.block_diag(*[blocks[j] for j in range(n)])
+    big = big - jnp.kron(rate[:, None] * d, jnp.eye(m, dtype=h.dtype))
+    return h - solve(big, residual).reshape(n, m)
+
+
 def slow_manifold(g, omega_in, theta):
     """The loops' fast states $\\mathbf h(\\theta) = (a, q, \\varphi, I_\\varphi, I_{\\rm agc},
     I_q)$ on the slow manifold (module docstring).
@@ -140,14 +230,16 @@ def slow_manifold(g, omega_in, theta):
     loops; `omega_in`, the equivalent input rate [rad/s]; `theta`, the electrical wave angle
     [rad].
 
-    **Raises:** `ValueError` for force-to-rebalance mode and for open loops (a free
-    resonator, a bandwidth of 0: no rest point, NaN); a traced bandwidth ≤ 0 raises when
-    the program runs.
+    **Raises:** `ValueError` for force-to-rebalance mode, for open loops (a free
+    resonator, a bandwidth of 0: no rest point, NaN) and for a split |Δω| above
+    `MAX_SPLIT_RATIO` × the quadrature loop's bandwidth (`split_problem`: the balance no
+    longer converges); traced, a bandwidth ≤ 0 or such a split raises when the program runs.
     """
     if g.control.mode == "ftr":
         raise ValueError("the slow manifold is whole-angle mode's (the wave turns freely); "
                          "force-to-rebalance holds it — give a gyro with Control(mode='wa')")  # fmt: skip
     theta = _closed(g, jnp.asarray(theta, dtype=jnp.result_type(float)))
+    theta = _in_domain(g, theta)
     n = SAMPLES
     thetas = theta + (jnp.pi / n) * jnp.arange(n, dtype=jnp.result_type(float))
     h0, jac, rate = jax.vmap(lambda th: _at_rest(g, omega_in, th))(thetas)
@@ -156,7 +248,10 @@ def slow_manifold(g, omega_in, theta):
     big_d = jnp.kron(rate[:, None] * d, jnp.eye(m))  # θ̇_j Σ_k D_jk (per state)
     blocks = jax.scipy.linalg.block_diag(*[jac[j] for j in range(n)])
     delta = solve(big_d - blocks, -big_d @ h0.reshape(-1)).reshape(n, m)
-    return h0[0] + delta[0]
+    h = h0 + delta
+    for _ in range(BALANCE_NEWTON):
+        h = _balanced(g, omega_in, thetas, h)
+    return h[0]
 
 
 def reduced_rate(g, omega_in, theta):
