@@ -65,10 +65,10 @@ def _default_solver(model):
 
 
 def output_times(profile: Profile, dt_out: float):
-    """Output grid t[0], t[0] + dt_out, … up to the end of the profile (inclusive; where
-    `dt_out` does not divide the profile, the grid ends at its last whole multiple: pass
-    `ts=` to have the end). A `dt_out` longer than the profile is refused (its grid would be
-    the start alone)."""
+    """Output grid t[0], t[0] + dt_out, … up to the end of the profile (inclusive, to the knots'
+    float64 resolution; where `dt_out` does not divide the profile, the grid ends at its last
+    whole multiple: pass `ts=` to have the end). A `dt_out` longer than the profile is refused
+    (its grid would be the start alone)."""
     if not is_concrete(profile.t):
         raise ValueError(
             "simulate needs concrete profile knot times to build its output grid from dt_out, "
@@ -86,7 +86,8 @@ def output_times(profile: Profile, dt_out: float):
             f"dt_out = {dt_out:g} s is longer than the profile ({span:g} s): the output would "
             "be its start alone; give dt_out ≤ the profile's length, or ts= (output times)"
         )
-    n = int(np.floor(span / dt_out + 1e-9)) + 1
+    slack = 1e-9 + 2 * np.spacing(np.abs(t[[0, -1]])).sum() / dt_out  # knots' rounding (epoch)
+    n = int(np.floor(span / dt_out + slack)) + 1
     if n > plausible.MAX_OUTPUT_SAMPLES:
         raise ValueError(
             f"dt_out={dt_out:g} s on a {span:g}-s profile gives {n:.3g} output samples, more "
@@ -183,33 +184,17 @@ class _SimulateCheck(Check):
 
 
 @program(check=_SimulateCheck("simulate", result_index=2), single_run=True)
-def _solve(
-    model,
-    gyro,
-    profile,
-    ts,
-    solver,
-    rtol,
-    atol,
-    max_steps,
-    dt0,
-    fixed,
-    quadrature0,
-    adjoint,
-    key=None,
-    bias_key=None,
-    run=0,
-    carrier=None,
-):
-    """The whole of `simulate` after its input checks, as one compiled program: the solve,
-    the readout, the noise and the record. Returns (Record, accepted steps, solver result);
-    a failed solve or a NaN record raises after the call (`Check`)."""
+def _solve(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0, fixed, quadrature0,
+           adjoint, key=None, bias_key=None, run=0, t_out=None, carrier=None):  # fmt: skip
+    """`simulate` after its input checks as one program (times since the profile's start,
+    `_from_start`; `t_out`: the record's): the solve, readout, noise and record. Returns
+    (Record, accepted steps, solver result); a failure or a NaN record raises (`Check`)."""
     y0, field, args, extra = _problem(model, gyro, profile, quadrature0)
     if carrier is not None:  # the fixed-step carrier path (resonator/carrier.py)
         carrier_steps, held, looped = carrier
         ys = carrier_solve(gyro, profile, y0, extra, ts, carrier_steps, held, looped)
-        rec = _record(gyro, profile, ts, _read_full(gyro, profile, ts, ys, extra), key, bias_key,
-                      run)  # fmt: skip
+        read = _read_full(gyro, profile, ts, ys, extra)
+        rec = _record(gyro, profile, ts, read, key, bias_key, run, t_out)
         steps = jnp.asarray(carrier_steps * ts.shape[0])
         return rec, steps, diffrax.RESULTS.successful
     controller = _controller(model, gyro, profile, rtol, atol, fixed)
@@ -228,7 +213,7 @@ def _solve(
         throw=False,
     )
     read = _readout(model, gyro, profile, ts, sol.ys, extra)
-    rec = _record(gyro, profile, ts, read, key, bias_key, run)
+    rec = _record(gyro, profile, ts, read, key, bias_key, run, t_out)
     return rec, sol.stats["num_steps"], sol.result
 
 
@@ -260,10 +245,10 @@ def _part(model, gyro, profile, solver, rtol, atol, dt0, fixed, quadrature0, adj
 
 
 @program(check=Unchecked(), single_run=True)
-def _finish(model, gyro, profile, ts, ys, quadrature0, key, bias_key, run):
+def _finish(model, gyro, profile, ts, ys, quadrature0, key, bias_key, run, t_out):
     """`_solve`'s record from the states `ys` at `ts` solved in parts."""
     read = _readout(model, gyro, profile, ts, ys, _problem(model, gyro, profile, quadrature0)[3])
-    return _record(gyro, profile, ts, read, key, bias_key, run)
+    return _record(gyro, profile, ts, read, key, bias_key, run, t_out)
 
 
 def _problem(model, gyro, profile, quadrature0):
@@ -276,10 +261,10 @@ def _problem(model, gyro, profile, quadrature0):
 
 
 def _solve_in_parts(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0, fixed,
-                    quadrature0, adjoint, key, bias_key, run):  # fmt: skip
+                    quadrature0, adjoint, key, bias_key, run, t_out):  # fmt: skip
     """`_solve` of a long eager run: the same results, its solve in parts behind a bar."""
     part = (model, gyro, profile, solver, rtol, atol, dt0, fixed, quadrature0, adjoint)
-    rest = (quadrature0, key, bias_key, run)
+    rest = (quadrature0, key, bias_key, run, t_out)
     rec, steps, result = parts.run_parts(lambda *a: _part(*part, *a), ts, profile.t, max_steps,
                                          lambda y: _finish(*part[:3], ts, device(y), *rest))  # fmt: skip
     out = (rec, device(np.asarray(steps, np.int64)), result)
@@ -288,8 +273,9 @@ def _solve_in_parts(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0
     return out
 
 
-def _record(gyro, profile, ts, read, key, bias_key, run):
-    """The Record of a solve: readout estimates plus the gyro's noise (when it has any)."""
+def _record(gyro, profile, ts, read, key, bias_key, run, t_out=None):
+    """The Record (times `t_out`, default `ts`) of a solve at `ts` (since the profile's start):
+    readout estimates plus the gyro's noise (when it has any)."""
     est, true_theta, loops, rebalance_rate = read
     theta = est.theta
     amplitude, quadrature = est.amplitude, est.quadrature
@@ -326,7 +312,7 @@ def _record(gyro, profile, ts, read, key, bias_key, run):
         quadrature = quadrature + amp_noise * jax.random.normal(kq, ts.shape)
 
     return Record(
-        t=ts,
+        t=ts if t_out is None else t_out,
         wave_angle=theta,
         amplitude=amplitude,
         quadrature=quadrature,
@@ -530,8 +516,9 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     _check_options(o)
     _check_laws(gyro, profile)
     if ts is None:
-        ts = output_times(profile, dt_out)
+        ts, dt_out = output_times(profile, dt_out), float(dt_out)
     else:
+        dt_out = None
         if isinstance(ts, jax.Array):
             ts = jnp.asarray(ts, dtype=float)
         else:  # host values stay concrete under jit (the fixed-step path counts steps on them)
@@ -584,12 +571,25 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
     gyro, profile = traceable("gyro", gyro, _LAW_LIMITS), traceable("profile", profile)
     gyro, profile = check_traced(gyro, profile)  # traced values: the eager rules, at run time
-    args = (model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run)
+    profile, rel = _from_start(profile, ts, dt_out)  # the clock's origin: no physics
+    args = (model, gyro, profile, rel, *stepping, quadrature0, adjoint, key, bias_key, run, ts)
     if carrier is None and ts.shape[0] >= parts.STEPPED_FROM and parts.eager(args):
         return _solve_in_parts(*args)  # a long run: progress shown, the same results
-    return _solve(
-        model, gyro, profile, ts, *stepping, quadrature0, adjoint, key, bias_key, run, carrier
-    )
+    return _solve(*args, carrier)
+
+
+def _from_start(profile, ts, dt_out):
+    """The profile with its knots at t − t[0] and the output times `ts` [s] since t[0] (from
+    `dt_out` [s]: k·dt_out exactly), traced arithmetic. The solve reads no clock origin: at
+    an epoch (1.7e9 s, where float64 resolves 2.4e-7 s) the carrier path's step times read
+    as a scale-factor error of −4 … −14 ppm; at t[0] = 0 nothing changes (bit for bit)."""
+    start = profile.t[0]
+    shifted = eqx.tree_at(lambda p: p.t, profile, profile.t - start)
+    if dt_out is None:
+        return shifted, ts - start
+    with jax.ensure_compile_time_eval():  # concrete as `output_times` (the carrier path)
+        t = np.asarray(profile.t)
+        return shifted, device(np.minimum(dt_out * np.arange(ts.shape[0]), t[-1] - t[0]))
 
 
 _OPTIONS = {

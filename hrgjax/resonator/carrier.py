@@ -233,7 +233,9 @@ def carrier_solve(gyro, profile, y0, omega_scale, ts, steps: int, held: bool = F
     (the first from the profile's start) in `steps` equal steps (`held`: the loops held over
     each step; `looped`: with the loops closed, the stages in a loop, `looped_stages`).
     Derivatives: from the stored states (`hrgjax._stepped`) for runs of at most
-    `STORE_STEPS` steps, else through the step loop checkpointed by chunks."""
+    `STORE_STEPS` steps, else through the step loop checkpointed by chunks. The step times
+    are built from the knots: `simulate` passes times since the profile's first knot (at an
+    epoch such as 1.7e9 s, float64's 2.4e-7 s read as a scale-factor error of ≈ −1e-5)."""
     if steps * _intervals(profile, ts) <= STORE_STEPS:
         return _stored(steps, held, looped, gyro, profile, y0, omega_scale, ts)
     return _streamed(gyro, profile, y0, omega_scale, ts, steps, held, looped)
