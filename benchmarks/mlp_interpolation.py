@@ -11,8 +11,13 @@ Fourier+T² (`FourierCompensator(temperature_degree=2)`), the MLP without the pr
 ratio of the rotation error between levels (+10, +30 °C) to the largest at the levels, and
 the MLP fit times side by side, warm (compiled; best of 3, interleaved).
 
-Usage: `nice .venv/bin/python benchmarks/mlp_interpolation.py [SEED ...]` (default 0 1;
-≈ 2 min a seed on 2 shared cores, mostly simulating).
+`--beyond`: the same calibration, tested at −40, −20, 0, +20, +40, +60 °C instead (the
+temperature-domain table of docs/calibration.md, beyond the calibrated range; `correct`'s
+default, applied there), with the physical grey box (`PhysicalCompensator`) beside, without
+the fit times (≈ 5 min a seed).
+
+Usage: `nice .venv/bin/python benchmarks/mlp_interpolation.py [--beyond] [SEED ...]`
+(default 0 1; ≈ 2 min a seed on 2 shared cores, mostly simulating).
 """
 
 import sys
@@ -27,6 +32,7 @@ from hrgjax.calibration import (
     FourierCompensator,
     MLPCompensator,
     NoCompensation,
+    PhysicalCompensator,
     accuracy_table,
     reduce,
     rotation_plan,
@@ -36,11 +42,12 @@ from hrgjax.calibration.study import bench_session
 
 LEVELS = (0.0, 20.0, 40.0)
 TEST_T = (0.0, 10.0, 20.0, 30.0, 40.0)
+BEYOND_T = (-40.0, -20.0, 0.0, 20.0, 40.0, 60.0)
 BETWEEN = (10.0, 30.0)
 MLP_KEY = 3
 
 
-def session(seed: int):
+def session(seed: int, test_t=TEST_T):
     gyro = hg.presets.tvg3_like()
     k_cal, k_test, k_bias = jax.random.split(jax.random.key(seed), 3)
     angles, test_angles = tuple(range(-90, 90, 30)), tuple(range(-90, 90, 15))
@@ -50,12 +57,12 @@ def session(seed: int):
     ]  # noqa: E731
     cal = bench_session(gyro, plans(LEVELS, angles), key=k_cal, bias_key=k_bias)
     n_cal = len(np.unique(cal.run))
-    test = bench_session(gyro, plans(TEST_T, test_angles), key=k_test, bias_key=k_bias,
+    test = bench_session(gyro, plans(test_t, test_angles), key=k_test, bias_key=k_bias,
                          first_run=n_cal)  # fmt: skip
     return cal, test
 
 
-def main(seeds):
+def main(seeds, test_t=TEST_T):
     print(f"machine: {machine()}")
     makers = {
         "MLP no prior": lambda: MLPCompensator(drift_t_curvature=0.0, sf_t_curvature=0.0),
@@ -63,21 +70,25 @@ def main(seeds):
     }
     warm = {k: [] for k in makers}
     for seed in seeds:
-        cal, test = session(seed)
+        cal, test = session(seed, test_t)
         windows = reduce(cal)
         comps = {"raw": NoCompensation(),
                  "Fourier+T²": FourierCompensator(temperature_degree=2).fit(windows)}  # fmt: skip
         for label, make in makers.items():
             comps[label] = make().fit(windows, key=jax.random.key(MLP_KEY))
-        table = accuracy_table(comps, test, TEST_T)
+        if test_t != TEST_T:
+            comps["physical"] = PhysicalCompensator().fit(windows, raw=cal)
+        table = accuracy_table(comps, test, test_t)
         print(f"\nseed {seed}: static drift error [°/h] / largest angle error at 5 °/s [°]")
         print("| T [°C] | " + " | ".join(comps) + " |")
         print("|---|" + "---|" * len(comps))
-        for temp in TEST_T:
+        for temp in test_t:
             cells = [f"{table[k]['static_drift_dph'][temp]:.3f} / "
                      f"{table[k]['max_angle_error_deg'][temp]:.4f}" for k in comps]  # fmt: skip
             print(f"| {temp:+.0f}{' (between)' if temp in BETWEEN else ''} | "
                   + " | ".join(cells) + " |")  # fmt: skip
+        if test_t != TEST_T:
+            continue
         for label in makers:
             rot = table[label]["max_angle_error_deg"]
             ratio = max(rot[t] for t in BETWEEN) / max(rot[t] for t in LEVELS)
@@ -88,6 +99,8 @@ def main(seeds):
                 t0 = time.perf_counter()
                 jax.block_until_ready(make().fit(windows, key=jax.random.key(MLP_KEY)))
                 warm[label].append(time.perf_counter() - t0)
+    if test_t != TEST_T:
+        return
     print()
     for label in makers:
         print(f"{label}: fit {min(warm[label]):.2f} s warm (best of {len(warm[label])})")
@@ -96,4 +109,6 @@ def main(seeds):
 
 
 if __name__ == "__main__":
-    main([int(s) for s in sys.argv[1:]] or [0, 1])
+    args = sys.argv[1:]
+    beyond = "--beyond" in args
+    main([int(s) for s in args if s != "--beyond"] or [0, 1], BEYOND_T if beyond else TEST_T)

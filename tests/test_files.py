@@ -109,6 +109,36 @@ def test_eqx_keeps_window_and_mode_and_reads_files_without_them(tmp_path):
     assert (old.window_s, old.mode) == (hg.calibration.MLPCompensator().window_s, "reduced")
 
 
+def test_eqx_and_json_keep_the_mlp_prior_weights_and_old_files_load_without_a_prior(tmp_path):
+    """`drift_t_curvature` / `sf_t_curvature` (the smoothness prior in T) round trip through
+    `.eqx` and JSON (old: a loaded MLP came back with the defaults 10⁻³ / 0.1); a file saved
+    before the prior existed loads with 0.0 / 0.0, how its networks were trained."""
+    mlp = hg.calibration.MLPCompensator(
+        drift_width=3, sf_width=2, drift_t_curvature=0.02, sf_t_curvature=0.0
+    ).init(jax.random.key(0))
+    path = hg.calibration.save_compensator(mlp, tmp_path / "p.eqx")
+    json_path = hg.calibration.export_json(mlp, tmp_path / "p.json")
+    for back in (hg.calibration.load_compensator(path), hg.calibration.load_json(json_path)):
+        assert (back.drift_t_curvature, back.sf_t_curvature) == (0.02, 0.0)
+        assert eqx.tree_equal(back, mlp)
+    with open(path, "rb") as fh:
+        header, payload = json.loads(fh.readline()), fh.read()
+    assert header["hyper"]["drift_t_curvature"] == 0.02
+    for key in ("drift_t_curvature", "sf_t_curvature"):
+        del header["hyper"][key]
+    header["sha256"] = export.checksum(header, payload)
+    with open(tmp_path / "old.eqx", "wb") as fh:
+        fh.write((json.dumps(header) + "\n").encode() + payload)
+    old = hg.calibration.load_compensator(tmp_path / "old.eqx")
+    assert (old.drift_t_curvature, old.sf_t_curvature) == (0.0, 0.0)
+    d = json.loads((tmp_path / "p.json").read_text())
+    for key in ("drift_t_curvature", "sf_t_curvature"):
+        del d["hyper"][key]
+    (tmp_path / "old.json").write_text(json.dumps(d))
+    old = hg.calibration.load_json(tmp_path / "old.json")
+    assert (old.drift_t_curvature, old.sf_t_curvature) == (0.0, 0.0)
+
+
 # --- C4: NetCDF coordinates that are columns -----------------------------------------------
 
 

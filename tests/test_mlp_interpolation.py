@@ -6,12 +6,14 @@ against those laws at +10 and +30 °C, where they had no data. Without the prior
 factor's error there was 15–40× its error at the levels (200–390 ppm against 5–16 ppm).
 """
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from hrgjax.calibration import MLPCompensator, RateWindows
-from hrgjax.calibration.mlp import curvature_points, t_curvature
+from hrgjax.calibration.mlp import curvature_points, t_curvature, train_rprop
 from hrgjax.calibration.reduce import K_E_NOMINAL
 from hrgjax.units import DEG, DEG_PER_H
 
@@ -79,16 +81,45 @@ def test_drift_between_levels_is_bounded(fitted):
 
 
 def test_t_curvature_is_the_second_derivative_in_normalised_temperature():
-    """The closed form against JAX's forward-over-forward derivative along the last input."""
+    """Against the closed form of one tanh hidden layer (weights W, b; output weights v):
+    ∂²net/∂τ² = Σ_j v_j W_jτ² tanh''(z_j), tanh'' = −2 tanh (1 − tanh²)."""
     comp = MLPCompensator(drift_width=7).init(jax.random.key(1))
     th, temp = curvature_points(20.0, 20.0)
     assert th.shape == temp.shape == (64,) and 0.0 <= th.min() and th.max() < np.pi
     assert 0.0 <= temp.min() and temp.max() <= 40.0
     x = comp.features(th, temp, np)
-    e = np.array([0.0, 0.0, 1.0])
-    slope = lambda p: jax.jvp(comp.drift_net, (p,), (e,))[1]
-    second = jax.vmap(lambda p: jax.jvp(slope, (p,), (e,))[1])(x)
+    hidden, out = comp.drift_net.layers
+    h = np.tanh(x @ np.asarray(hidden.weight).T + np.asarray(hidden.bias))
+    second = (-2.0 * h * (1.0 - h**2) * np.asarray(hidden.weight)[:, -1] ** 2) @ out.weight[0]
     np.testing.assert_allclose(t_curvature(comp.drift_net, x), np.mean(second**2), rtol=1e-12)
+
+
+DEEP = eqx.nn.MLP(3, "scalar", 6, 3, jnp.tanh, key=jax.random.key(2))  # three hidden layers
+X = np.random.default_rng(0).uniform(-1.0, 1.0, (40, 3))
+
+
+def test_t_curvature_of_a_deeper_net_matches_finite_differences():
+    """Any depth (before: a net with more than one hidden layer failed to unpack): the
+    central second difference along τ, step 10⁻³ (truncation ~10⁻⁷ relative)."""
+    h, e = 1e-3, np.array([0.0, 0.0, 1.0])
+    net = jax.vmap(DEEP)
+    fd = (net(X + h * e) - 2.0 * net(X) + net(X - h * e)) / h**2
+    np.testing.assert_allclose(t_curvature(DEEP, X), np.mean(fd**2), rtol=1e-5)
+    with pytest.raises(ValueError, match=r"^t_curvature: needs .* to a scalar; got x \(40, 3\), "
+                       r"net output \(2,\)$"):  # fmt: skip
+        t_curvature(eqx.nn.MLP(3, 2, 4, 1, key=jax.random.key(0)), X)
+
+
+def test_train_rprop_without_a_prior_trains_a_deeper_net():
+    """The public `train_rprop` with `prior=None` never evaluates the curvature (before: it
+    did, with weight 0, and a net of more than one hidden layer failed); a prior that is not
+    a pair is refused in one line."""
+    y = np.sin(2.0 * X[:, 2])
+    loss = lambda n: float(np.mean((jax.vmap(n)(X) - y) ** 2))  # noqa: E731
+    trained = train_rprop(DEEP, X, y, 40, desc="test")
+    assert loss(trained) < 0.5 * loss(DEEP), (loss(DEEP), loss(trained))
+    with pytest.raises(ValueError, match=r"^train_rprop: prior must be None or a pair"):
+        train_rprop(DEEP, X, y, 2, prior=X)
 
 
 @pytest.mark.parametrize("field", ["drift_t_curvature", "sf_t_curvature"])

@@ -47,13 +47,17 @@ _HYPER_FIELDS = {
     ),
     MLPCompensator: (
         "drift_width", "sf_width", "encoding", "steps", "learning_rate", "bin_deg", "e2e_steps",
-        "k_e", "mode", "window_s",
+        "k_e", "mode", "window_s", "drift_t_curvature", "sf_t_curvature",
     ),
 }  # fmt: skip
 """The fields that `_hyper` saves, in this order, of the compensators whose hyperparameters
 are plain fields (`window_s` [s] and MLP's `mode` were added later: older files without them load
 with the class defaults; so were `temperature_range` and `n_temperature_levels`, saved after
-these when recorded: older files load with the range unknown)."""
+these when recorded: older files load with the range unknown). MLP's `drift_t_curvature` and
+`sf_t_curvature` (the smoothness prior in T, commit ab7af6e) too, but an older file loads
+with 0.0 (`_MLP_BEFORE_PRIOR`), not the defaults: its networks were trained without the
+prior, and a re-fit of the loaded compensator should train as it was."""
+_MLP_BEFORE_PRIOR = {"drift_t_curvature": 0.0, "sf_t_curvature": 0.0}
 
 
 _FITTED_FIELD = {
@@ -117,7 +121,7 @@ def _skeleton(name: str, hyper: dict):
         shape = (k, 2 * hyper["harmonics"] + 1)
         return cls(**hyper, drift_coef=jnp.zeros(shape), sf_coef=jnp.zeros(shape))
     if cls is MLPCompensator:
-        return cls(**hyper).init(jax.random.key(0))
+        return cls(**_MLP_BEFORE_PRIOR | hyper).init(jax.random.key(0))
     if cls is PhysicalCompensator:
         stats = tuple(tuple(p) for p in hyper.pop("stats"))
         plant = plant_from_json(hyper.pop("plant", None))
