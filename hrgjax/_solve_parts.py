@@ -8,12 +8,16 @@ each resuming exactly where the last stopped, so that a progress bar can move be
   end) and hands on the solver's whole state: the time and state reached, the next step's end,
   the solver's FSAL stage, the step-size controller's state and the jump flag. The step
   sequence, the accepted states and every output value are those of the one solve;
-- a part saves a window of `PART_OUTPUTS` output times; it stops after `PART_STEPS` solver
-  steps, or as soon as the next step would reach past its window (`Resumable` says so through the
-  controller's result), so that no output time is stepped over unsaved;
+- a part saves a window of `PART_OUTPUTS` output times (more where its first step, already
+  fixed, ends past them); it stops after `PART_STEPS` solver steps, or as soon as the next
+  step would reach past its window (`Resumable` says so through the controller's result), so
+  that no output time is stepped over unsaved. The run's first step is known only once taken:
+  should it end past the first window, the first part runs again with a window covering it;
 - `Resumable` wraps the run's step-size controller: it records the next step's end (which
   `diffeqsolve` does not return) and, on resuming, starts from it instead of `t0 + dt0`
-  (which need not round back to it).
+  (which need not round back to it). Wrapping an adaptive controller, it is adaptive too
+  (`AdaptiveResumable`), so that an implicit solver's root finder gets its tolerances;
+- each part's saved outputs are copied to the host (a view would keep its window alive).
 
 Not for traced values (`simulate` under a caller's `jit`/`vmap`/`grad` solves in one program).
 """
@@ -49,14 +53,15 @@ def eager(tree) -> bool:
 class Resumable(diffrax.AbstractStepSizeController):
     """`controller` that keeps the next step's end in its state and stops the solve (result
     `event_occurred`) once that end reaches `stop` [s]; with `tnext` [s] given, the first
-    step ends there (a resumed solve: `diffeqsolve` is then given the controller state)."""
+    step ends there (a resumed solve: `diffeqsolve` is then given the controller state).
+    Build it with `resumable`, which keeps an adaptive controller adaptive."""
 
     controller: diffrax.AbstractStepSizeController
     tnext: jax.Array | None
     stop: jax.Array
 
     def wrap(self, direction):
-        return Resumable(self.controller.wrap(direction), self.tnext, self.stop)
+        return type(self)(self.controller.wrap(direction), self.tnext, self.stop)
 
     def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
         if self.tnext is not None:  # resumed: diffeqsolve keeps the state it was given
@@ -75,6 +80,31 @@ class Resumable(diffrax.AbstractStepSizeController):
         return keep, tprev, tnext, jump, (inner, jnp.asarray(tnext, float), keep), result
 
 
+class AdaptiveResumable(Resumable, diffrax.AbstractAdaptiveStepSizeController):
+    """`Resumable` of an adaptive `controller`: adaptive too, with its `rtol`, `atol` and
+    `norm`, which `diffeqsolve` hands to an implicit solver's root finder (as in the one
+    solve; a plain `Resumable` made Kvaerno5 refuse to run)."""
+
+    @property
+    def rtol(self):
+        return self.controller.rtol
+
+    @property
+    def atol(self):
+        return self.controller.atol
+
+    @property
+    def norm(self):  # pyright: ignore[reportIncompatibleMethodOverride]
+        return self.controller.norm
+
+
+def resumable(controller, tnext, stop) -> Resumable:
+    """`controller` wrapped in a `Resumable` (`AdaptiveResumable` for an adaptive one)."""
+    if isinstance(controller, diffrax.AbstractAdaptiveStepSizeController):
+        return AdaptiveResumable(controller, tnext, stop)
+    return Resumable(controller, tnext, stop)
+
+
 def solve_part(terms, solver, controller, t0, t1, dt0, y0, args, adjoint, window, stop,
                resume, steps: int):  # fmt: skip
     """One part (module docstring): `diffeqsolve` from `t0` (or from `resume`, a previous
@@ -87,9 +117,9 @@ def solve_part(terms, solver, controller, t0, t1, dt0, y0, args, adjoint, window
         t0, y, solver_state, controller_state, made_jump, tnext = resume
         kwargs = dict(dt0=None, y0=y, solver_state=solver_state,
                       controller_state=controller_state, made_jump=made_jump)  # fmt: skip
-        controller = Resumable(controller, tnext, stop)
+        controller = resumable(controller, tnext, stop)
     else:
-        controller = Resumable(controller, None, stop)
+        controller = resumable(controller, None, stop)
     saveat = diffrax.SaveAt(
         subs=[diffrax.SubSaveAt(ts=window), diffrax.SubSaveAt(t1=True)],
         solver_state=True,
@@ -130,11 +160,11 @@ def run_parts(part, ts, knots, max_steps: int, finish, desc: str = "simulate"):
     ts = np.asarray(ts, dtype=float)
     n, done, taken, values, resume, shown = ts.size, 0, 0, [], None, 0
     with bar(int(np.ceil(t1 - t0)), desc, unit="s") as progress:  # simulated whole seconds
+        end = -np.inf  # where the part's first step ends, as far as known
         while True:
-            size = PART_OUTPUTS
-            if resume is not None:  # a window wide enough for the step already proposed
-                while done + size < n and ts[done + size] <= resume[-1]:
-                    size *= 2
+            size = PART_OUTPUTS  # a window wide enough for the part's first step
+            while done + size < n and ts[done + size] <= end:
+                size *= 2
             times = ts[done : done + size]
             times = np.concatenate([times, np.full(size - times.size, float(t1))])
             stop = ts[done + size] if done + size < n else np.inf
@@ -143,8 +173,13 @@ def run_parts(part, ts, knots, max_steps: int, finish, desc: str = "simulate"):
                 resume = (*resume[:-1], device(resume[-1], float))
             out, saved, state, count, result = part(device(times), device(stop, float), resume,
                                                     budget)  # fmt: skip
+            if resume is None and float(state[0]) >= stop:
+                # the first step (never checked against `stop`) passed the first window:
+                # the same first part again, its window wide enough for that step
+                end = float(state[0])
+                continue
             saved = min(int(saved), n - done)
-            values.append(np.asarray(out)[:saved])
+            values.append(np.asarray(out)[:saved].copy())  # not a view pinning the window
             done, taken = done + saved, taken + int(count)
             reached = int(np.ceil(float(state[0]) - t0))
             progress.update(max(reached - shown, 0))
@@ -155,6 +190,7 @@ def run_parts(part, ts, knots, max_steps: int, finish, desc: str = "simulate"):
             if not go_on:  # on to the run's end, past the last output (as the one solve)
                 break
             resume = (*state, next_step_end(state, t1))
+            end = resume[-1]
         out = np.concatenate(values)
         if done < n:  # outputs not reached (a failed solve): inf, as diffrax leaves them
             out = np.concatenate([out, np.full((n - done, *out.shape[1:]), np.inf)])
