@@ -16,7 +16,16 @@ temperature-domain table of docs/calibration.md, beyond the calibrated range; `c
 default, applied there), with the physical grey box (`PhysicalCompensator`) beside, without
 the fit times (≈ 5 min a seed).
 
-Usage: `nice .venv/bin/python benchmarks/mlp_interpolation.py [--beyond] [SEED ...]`
+`--quick`: the prior on the demo's quick plan (`run_study(quick=True)`'s calibration,
+−40/+20/+60 °C, so t_scale 50 °C against 20 °C above; seed 0 is the demo's switch-on and
+network key), tested at its levels and between them (−10, +40 °C), 15° steps, 120-s runs;
+each cell the static drift error [°/h] / the angle error at the end of the 5 °/s runs (the
+demo's figure) / the largest during them [°], RMS over the test angles. Columns: the MLP
+without the prior, with the defaults, with the defaults × (T_REF/t_scale)⁴ (T_REF 20 °C:
+the weights in physical units, °C, measured and not adopted: docs/calibration.md), and the
+default end-to-end MLP (≈ 1.5 min a seed).
+
+Usage: `nice .venv/bin/python benchmarks/mlp_interpolation.py [--beyond | --quick] [SEED ...]`
 (default 0 1; ≈ 2 min a seed on 2 shared cores, mostly simulating).
 """
 
@@ -36,6 +45,7 @@ from hrgjax.calibration import (
     accuracy_table,
     reduce,
     rotation_plan,
+    seed_plan,
     static_plan,
 )
 from hrgjax.calibration.study import bench_session
@@ -45,6 +55,9 @@ TEST_T = (0.0, 10.0, 20.0, 30.0, 40.0)
 BEYOND_T = (-40.0, -20.0, 0.0, 20.0, 40.0, 60.0)
 BETWEEN = (10.0, 30.0)
 MLP_KEY = 3
+QUICK_T = (-40.0, -10.0, 20.0, 40.0, 60.0)
+QUICK_LEVELS = (-40.0, 20.0, 60.0)
+T_REF = 20.0  # [°C] the physical-units variant: weights × (T_REF / t_scale)⁴
 
 
 def session(seed: int, test_t=TEST_T):
@@ -108,7 +121,54 @@ def main(seeds, test_t=TEST_T):
            / min(warm["MLP no prior"]), "×", target="≤ 1.3× (brief)")  # fmt: skip
 
 
+def quick(seeds):
+    """The quick plan's calibration (as `run_study(quick=True, key=key(seed))`), tested at
+    `QUICK_T`: at-level against between-level errors, with and without the prior."""
+    print(f"machine: {machine()}")
+    gyro, angles = hg.presets.tvg3_like(), tuple(range(-90, 91, 15))
+    for seed in seeds:
+        k_cal, k_test, k_bias, k_net = jax.random.split(jax.random.key(seed), 4)
+        cal = bench_session(gyro, seed_plan(True), key=k_cal, bias_key=k_bias)
+        plans = [static_plan(QUICK_T, angles, 120.0, 0.5),
+                 rotation_plan(QUICK_T, angles, 5.0, 120.0, 0.5)]  # fmt: skip
+        test = bench_session(gyro, plans, key=k_test, bias_key=k_bias,
+                             first_run=len(np.unique(cal.run)))  # fmt: skip
+        windows = reduce(cal)
+        t_scale = 0.5 * (max(QUICK_LEVELS) - min(QUICK_LEVELS))
+        f = (T_REF / t_scale) ** 4
+        makers = {
+            "MLP no prior": MLPCompensator(drift_t_curvature=0.0, sf_t_curvature=0.0),
+            "MLP prior": MLPCompensator(),
+            f"MLP prior × {f:.4g}": MLPCompensator(
+                drift_t_curvature=1e-3 * f, sf_t_curvature=0.1 * f
+            ),  # fmt: skip
+            "MLP end-to-end": MLPCompensator(e2e_steps=100, mode="end_to_end"),
+        }
+        comps = {"Fourier+T²": FourierCompensator(temperature_degree=2).fit(windows)}
+        for label, comp in makers.items():
+            comps[label] = comp.fit(windows, key=k_net, raw=cal)
+        table = accuracy_table(comps, test, QUICK_T)
+        print(f"\nseed {seed}: static drift [°/h] / end angle / largest angle error at 5 °/s [°]")
+        print("| T [°C] | " + " | ".join(comps) + " |")
+        print("|---|" + "---|" * len(comps))
+        for temp in QUICK_T:
+            cells = [f"{table[k]['static_drift_dph'][temp]:.3f} / "
+                     f"{table[k]['angle_error_deg'][temp]:.4f} / "
+                     f"{table[k]['max_angle_error_deg'][temp]:.4f}" for k in comps]  # fmt: skip
+            between = "" if temp in QUICK_LEVELS else " (between)"
+            print(f"| {temp:+.0f}{between} | " + " | ".join(cells) + " |")
+        for label in comps:
+            end = table[label]["angle_error_deg"]
+            at = max(end[t] for t in QUICK_LEVELS)
+            mid = max(end[t] for t in QUICK_T if t not in QUICK_LEVELS)
+            print(f"seed {seed} {label}: end angle error, largest at the levels {at:.4f}°, "
+                  f"between {mid:.4f}° ({mid / at:.3g}×)")  # fmt: skip
+
+
 if __name__ == "__main__":
     args = sys.argv[1:]
-    beyond = "--beyond" in args
-    main([int(s) for s in args if s != "--beyond"] or [0, 1], BEYOND_T if beyond else TEST_T)
+    seeds = [int(s) for s in args if not s.startswith("--")]
+    if "--quick" in args:
+        quick(seeds or [0, 1])
+    else:
+        main(seeds or [0, 1], BEYOND_T if "--beyond" in args else TEST_T)

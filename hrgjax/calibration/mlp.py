@@ -63,9 +63,8 @@ measured rate by one drift scale: s_T = drift_scale · k_e / ST_RATE_REF · st_n
 MIN_RAMP_RATE = 1e-3
 """Smallest |Ṫ| [°C/s] (0.06 °C/min) of a window that counts as a ramp's."""
 CURVATURE_POINTS = 64
-"""Points (θ, T) of the smoothness prior in temperature (`MLPCompensator.drift_t_curvature`,
-`sf_t_curvature`; `curvature_points`). Fitted on 0/20/40 °C, with 32 or 48 points the +20 °C
-rotation error rose up to 1.7× or 1.4× (docs/calibration.md)."""
+"""Points (θ, T) of the smoothness prior in T (`curvature_points`). Fitted on 0/20/40 °C,
+with 32 or 48 the +20 °C rotation error rose up to 1.7× or 1.4× (docs/calibration.md)."""
 MIN_TEMPERATURES = 2
 """Distinct temperatures (levels within 0.5 °C counted once) `MLPCompensator.fit` needs
 among the static and among the rotation runs. At one level the normalised temperature input
@@ -99,10 +98,12 @@ class MLPCompensator(AbstractCompensator):
       t_scale, over `CURVATURE_POINTS` points (θ, T) spread over the calibrated range (no
       data needed there). Without it the networks wiggle between sparse levels: fitted on
       0/20/40 °C, the rotation error at +10 and +30 °C was 9.5–19× the largest at the
-      levels; with the defaults (10⁻³, 0.1) 0.84–1.12× (docs/calibration.md). The drift's
-      weight is the smaller: its laws curve in T (an exponential amplitude), and 10⁻²
-      raised its at-level static error up to 2.2×. `mode="end_to_end"` refines without
-      the prior.
+      levels; with the defaults (10⁻³, 0.1) 0.84–1.12×. The drift's weight is the smaller:
+      its laws curve in T (an exponential amplitude), and 10⁻² raised its at-level static
+      error up to 2.2×. In τ a law's own curvature grows with t_scale²: on −40/+20/+60 °C
+      the at-level rotation error rose 1.6–12× (between levels it fell 6–24×; weights in
+      °C, × (20 °C/t_scale)⁴, were worse overall: docs/calibration.md). `mode="end_to_end"`
+      refines without it.
     - `drift_net`, `sf_net`, `st_net`, and the normalisation (`t_centre`, `t_scale` [°C];
       `drift_offset`, `drift_scale` [rad/s]; `sf_offset`, `sf_scale`): set by `fit`.
     - `mode`: how `fit` trains, `"reduced"` or `"end_to_end"` (module docstring).
@@ -249,8 +250,7 @@ class MLPCompensator(AbstractCompensator):
           (for `mode="end_to_end"` the raw samples are needed: pass `MeasuredData`, or the
           windows plus `raw=`).
         - `key`: PRNG key of the initial weights (required).
-        - `raw`: the raw samples behind windows given as `data` (used by
-          `mode="end_to_end"`).
+        - `raw`: the raw samples behind windows given as `data` (used by `mode="end_to_end"`).
         - `mode`, `window_s`: *deprecated*, give `MLPCompensator(mode=…, window_s=…)`; a
           value here overrides the field of that name (and the fitted compensator keeps it).
 
