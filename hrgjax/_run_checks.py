@@ -120,7 +120,24 @@ def law_checks(gyro, profile) -> list:
         checks.append((bad, f"the temperature law of gyro.{name} leaves its range at one or "
                             "more points inside the profile's temperatures; it must be "
                             f"{rule} {unit} there".replace("  ", " ")))  # fmt: skip
+    checks += _damping_check(gyro.resonator, temps, temps_traced)
     return checks
+
+
+def _damping_check(resonator, temps, temps_traced) -> list:
+    """`damping_problem`'s rule (both axes damped: |Δ(1/τ)| < 2/τ) where a value is traced
+    (a sweep over `delta_inv_tau`, say): `[(bad, message)]`, or `[]` when `check_laws`
+    judged it (all concrete) or for a batch of laws."""
+    fields = [getattr(resonator, name) for name in ("tau", "delta_inv_tau")]
+    leaves = jax.tree_util.tree_leaves(fields)
+    if any(np.ndim(x) for x in leaves) or (not temps_traced and all(map(is_concrete, leaves))):
+        return []
+    grid = jnp.concatenate([temps, jnp.linspace(temps.min(), temps.max(), LAW_GRID)])
+    tau, dit = (f(grid) if isinstance(f, TemperatureLaw) else jnp.asarray(f, float) for f in fields)
+    judged = jnp.isfinite(tau) & (tau > 0) & jnp.isfinite(dit) & jnp.all(jnp.isfinite(temps))
+    bad = jnp.any(judged & ~(jnp.abs(dit) * tau < 2.0))
+    return [(bad, "gyro.resonator.delta_inv_tau gives one axis negative damping at one or more "
+                  "points (1/τ₂ = 1/τ − |Δ(1/τ)|/2 ≤ 0): |Δ(1/τ)| must be < 2/τ")]  # fmt: skip
 
 
 def check_traced(gyro, profile):

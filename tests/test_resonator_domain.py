@@ -43,6 +43,13 @@ def test_negative_damping_refused():
     lawful = eqx.tree_at(lambda g: g.resonator.tau, lawful, tau_law)
     with pytest.raises(ValueError, match=r"gyro\.resonator: .*negative damping"):
         hg.simulate(lawful, hg.Profile.static(1.0, 80.0))
+    # and a traced Δ(1/τ) (a sweep over it) at run time (review: it integrated the unstable
+    # mode silently under jit and hg.sweep)
+    run = jax.jit(lambda d: hg.simulate(eqx.tree_at(lambda g: g.resonator.delta_inv_tau, gyro, d),
+                                        hg.Profile.static(1.0, 20.0)).wave_angle)  # fmt: skip
+    run(0.0)
+    with pytest.raises(Exception, match="negative damping"):
+        run(4 / 640.0)
 
 
 def test_slow_manifold_refuses_a_split_beyond_its_domain():

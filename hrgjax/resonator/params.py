@@ -21,7 +21,8 @@ from ..units import T_REF_C, k_e_problem
 
 
 def _as_float(x):
-    return jnp.asarray(x, dtype=float)
+    # `jnp.array` copies: `jnp.asarray` shares a 64-byte-aligned NumPy buffer on CPU.
+    return jnp.array(x, dtype=float)
 
 
 PARAMETER_FORM = "a real number, an array of real numbers or a hrgjax.TemperatureLaw"
@@ -222,7 +223,7 @@ def damping_problem(resonator, temperature_c=None) -> str | None:
     $1/\tau_{1,2} = 1/\tau \pm \Delta(1/\tau)/2$ are both > 0 only while
     $|\Delta(1/\tau)| < 2/\tau$ (else the less damped axis grows, $e^{+t/|\tau_2|}$, and the
     averaged, full and slow models integrate an unstable mode). `None` when it holds, or when
-    τ or Δ(1/τ) is traced (judged where the run evaluates it).
+    τ or Δ(1/τ) is traced (`simulate` judges it at run time: `hrgjax._run_checks`).
 
     **Arguments:** `resonator`, a [`hrgjax.Resonator`][]; `temperature_c` [°C], where to
     evaluate its [`TemperatureLaw`][hrgjax.TemperatureLaw]s (`None`: a law is not judged,
@@ -243,7 +244,10 @@ def damping_problem(resonator, temperature_c=None) -> str | None:
         elif not is_concrete(x):
             return None
         values.append(np.asarray(x, dtype=float))
-    tau, dit = np.broadcast_arrays(*values)
+    try:
+        tau, dit = np.broadcast_arrays(*values)
+    except ValueError:  # batches of τ and Δ(1/τ) of different shapes: judged where evaluated
+        return None
     # a τ ≤ 0 or a non-finite value is `check_positive`'s / `check_finite`'s to refuse
     bad = np.isfinite(tau) & (tau > 0) & np.isfinite(dit) & ~(np.abs(dit) * tau < 2.0)
     if not bad.any():
