@@ -42,7 +42,9 @@ def errors_as_nan():
     """While inside, `eqx.error_if` traces in its NaN form (no host callback: a failed check
     poisons its value), and its compiled checks go to a cache of our own, apart from those
     that raise. Process-wide (held under a lock); does nothing when `CAN_SWITCH_ERRORS` is
-    False.
+    False. A known limit (docs/speed.md, Threads): a user's own `eqx.error_if` traced in
+    another thread while this is held compiles in the NaN form too (returns NaN, no raise);
+    equinox has no per-thread setting to switch instead.
 
     Upstream internal: `equinox._errors.EQX_ON_ERROR` (read at trace time; the public switch
     is the `EQX_ON_ERROR` environment variable, read once at import) and

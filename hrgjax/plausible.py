@@ -18,11 +18,12 @@ with hg.plausible.relaxed(temperature_c=(-200.0, 200.0)):
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+import contextvars
+from collections.abc import Iterator, Mapping
 
 import numpy as np
 
-RANGES: dict[str, tuple[float, float, str]] = {
+_DEFAULTS: dict[str, tuple[float, float, str]] = {
     "temperature_c": (-100.0, 150.0, "°C"),
     "table_rate_dps": (-3600.0, 3600.0, "°/s"),
     "wave_angle_deg": (-1e7, 1e7, "° electrical"),
@@ -34,9 +35,38 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "specific_force_g": (-20.0, 20.0, "g"),
     "precession_dps": (-2e4, 2e4, "°/s electrical"),
 }
-"""(low, high, unit) of each quantity: temperatures an HRG is built and tested for (−100 …
-+150 °C; −40 … +60 °C is the seed's bench), table rates (±10 turns/s), wave angles (±1e7°:
-an angle that has turned 27 000 times is a unit error), the length of one run or segment
+"""The default ranges; [`RANGES`][hrgjax.plausible.RANGES] is what is in force."""
+
+_OVERRIDES: contextvars.ContextVar[dict[str, tuple[float, float, str]] | None] = (
+    contextvars.ContextVar("hrgjax_plausible_overrides", default=None)
+)
+"""The ranges a `relaxed` block set, per thread and per asyncio task: one thread's block
+neither widens another thread's ranges nor outlives its own `with`."""
+
+
+class _Ranges(Mapping):
+    """A read-only view of the ranges in force in the calling thread/task: the defaults with
+    this context's `relaxed` overrides on top (read as a dict: `RANGES[name]`, `.items()`)."""
+
+    def __getitem__(self, name: str) -> tuple[float, float, str]:
+        over = _OVERRIDES.get() or {}
+        return over[name] if name in over else _DEFAULTS[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_DEFAULTS)
+
+    def __len__(self) -> int:
+        return len(_DEFAULTS)
+
+    def __repr__(self) -> str:
+        return repr(dict(self))
+
+
+RANGES: Mapping[str, tuple[float, float, str]] = _Ranges()
+"""(low, high, unit) of each quantity in force in the calling thread (a read-only
+mapping: the defaults with this thread's `relaxed` blocks on top): temperatures an HRG is
+built and tested for (−100 … +150 °C; −40 … +60 °C is the seed's bench), table rates (±10
+turns/s), wave angles (±1e7°: an angle that has turned 27 000 times is a unit error), the length of one run or segment
 (30 days), the wave angle's step between adjacent samples of a run beyond what the table and
 a commanded precession move it (5° plus 100 °/h of drift over the time between them: the
 wave drifts at °/h, Earth's rate included, so a step of degrees between close samples is two
@@ -58,20 +88,21 @@ KELVIN_HINT_C = 200.0
 @contextlib.contextmanager
 def relaxed(**ranges: tuple[float, float]) -> Iterator[None]:
     """Widen (or narrow) ranges of `RANGES` inside a `with` block, e.g.
-    `relaxed(temperature_c=(-200.0, 200.0))` [in the quantity's own unit]."""
-    old = dict(RANGES)
+    `relaxed(temperature_c=(-200.0, 200.0))` [in the quantity's own unit]. The change holds
+    for the calling thread (and asyncio task) only, until the block ends; blocks nest."""
+    new = dict(_OVERRIDES.get() or {})
+    for name, (low, high) in ranges.items():
+        if name not in _DEFAULTS:
+            raise KeyError(f"plausible.relaxed: unknown quantity {name!r}; known: "
+                           f"{sorted(_DEFAULTS)}")  # fmt: skip
+        if not low < high:
+            raise ValueError(f"plausible.relaxed: {name} needs low < high; got {(low, high)}")
+        new[name] = (float(low), float(high), _DEFAULTS[name][2])
+    token = _OVERRIDES.set(new)
     try:
-        for name, (low, high) in ranges.items():
-            if name not in RANGES:
-                raise KeyError(f"plausible.relaxed: unknown quantity {name!r}; known: "
-                               f"{sorted(RANGES)}")  # fmt: skip
-            if not low < high:
-                raise ValueError(f"plausible.relaxed: {name} needs low < high; got {(low, high)}")
-            RANGES[name] = (float(low), float(high), RANGES[name][2])
         yield
     finally:
-        RANGES.clear()
-        RANGES.update(old)
+        _OVERRIDES.reset(token)
 
 
 def _hint(name: str, values: np.ndarray) -> str:

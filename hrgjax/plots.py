@@ -7,31 +7,41 @@ import numpy as np
 from .units import DEG_PER_H, group_temperatures
 
 
-def pyplot():
-    """`matplotlib.pyplot` on the non-interactive Agg backend (figures go to files).
+class _Figures:
+    """`pyplot`'s `subplots`, `get_cmap`, `close` on Agg-drawn `Figure`s pyplot never holds."""
+
+    @staticmethod
+    def subplots(nrows: int = 1, ncols: int = 1, **kw):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        grid = {k: kw.pop(k) for k in ("sharex", "sharey", "squeeze", "gridspec_kw") if k in kw}
+        fig = FigureCanvasAgg(Figure(**kw)).figure
+        return fig, fig.subplots(nrows, ncols, **grid)
+
+    get_cmap = staticmethod(lambda name: __import__("matplotlib").colormaps[name])
+    close = staticmethod(lambda fig=None: None)  # pyplot never held it
+
+
+def pyplot() -> type[_Figures]:
+    """`subplots`, `get_cmap`, `close` as in pyplot, never registered with it: the user's
+    backend (a notebook's), open figures and rcParams stay as they were.
 
     **Raises:** `ImportError` naming the `hrgjax[plot]` extra when matplotlib is absent."""
     try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib  # noqa: F401
     except ImportError as err:  # pragma: no cover
         raise ImportError("plots need matplotlib: pip install hrgjax[plot]") from err
-    return plt
+    return _Figures
 
 
 def save(fig, path, dpi: int) -> str:
     """`fig.savefig(path, dpi=dpi)` under a temporary name, renamed when complete (an
-    interrupted save leaves no partial image); makes the folder and closes `fig`. Returns
-    `path`."""
+    interrupted save leaves no partial image); makes the folder. Returns `path`."""
     from ._io import atomic_path
 
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=dpi)
-    finally:
-        pyplot().close(fig)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
     return path
 
 
@@ -94,8 +104,7 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
     static = windows.select(windows.static)
     labels = [k for k in compensators if k != "raw"]
     n = 1 + len(labels)
-    cols = min(n, 3)
-    rows = -(-n // cols)
+    cols, rows = min(n, 3), -(-n // min(n, 3))
     # a grid, three panels a row: readable at 100 % (one row of six was 2244 × 396 px)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows),
                              constrained_layout=True, sharex=True, squeeze=False)  # fmt: skip

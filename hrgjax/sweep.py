@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import types
 import weakref
 
 import jax
@@ -17,16 +18,21 @@ class _FnCache:
     hashable, else by its identity — a callable equinox Module with array fields cannot be
     hashed, and a fresh `jax.jit` on every sweep compiled its same shapes again each time.
     A value reaches its function only through a weak reference, so the cache never keeps a
-    function (and the arrays it holds) alive: the entry goes when the function goes."""
+    function (and the arrays it holds) alive: the entry goes when the function goes. A bound
+    method (`obj.method`, a new object at each access) is kept by its function and its
+    object, so `sweep(obj.method, …)` reuses the batch while `obj` lives."""
 
     def __init__(self):
         self.by_key: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
         self.by_id: dict = {}
+        self.by_method: dict = {}
 
     def get(self, fn, make):
         """`make(ref)`'s value kept for `fn`, where `ref()` returns `fn` (the value must
         reach `fn` only through it); a `fn` that cannot be weakly referenced (a builtin)
         gets a fresh one each time."""
+        if isinstance(fn, types.MethodType):
+            return self._get_method(fn, make)
         try:
             ref = weakref.ref(fn)
         except TypeError:
@@ -46,6 +52,22 @@ class _FnCache:
             value = self.by_key[fn] = make(ref)
         return value
 
+    def _get_method(self, fn, make):
+        """`get` for a bound method: keyed by (its function, its object's identity)."""
+        try:
+            ref = weakref.WeakMethod(fn)
+        except TypeError:  # an object that cannot be weakly referenced
+            return make(lambda: fn)
+        func, obj = fn.__func__, fn.__self__
+        key = (id(func), id(obj))
+        kept = self.by_method.get(key)
+        if kept is not None and kept[0]() is obj and kept[1] is func:
+            return kept[2]
+        value = make(ref)
+        gone = weakref.ref(obj, lambda _, key=key: self.by_method.pop(key, None))
+        self.by_method[key] = (gone, func, value)
+        return value
+
 
 _BATCHED = _FnCache()
 _PROBES = _FnCache()
@@ -57,9 +79,13 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
     `hg.sweep(fn, temperature_c=jnp.linspace(-40, 60, 11), rate_dps=jnp.array([0.1, 5, 400]))`
     calls `fn(temperature_c=…, rate_dps=…)` for every pair in one `jax.jit(jax.vmap(…))` and
     returns outputs with leading shape `(11, 3)` (keyword order). The compiled batch is kept
-    per `fn`: a second sweep of the same function on grids of the same sizes compiles
-    nothing. When several devices are visible the flattened batch is sharded over them
-    (padded to a multiple of the device count). The batch runs on JAX's default backend — an
+    per `fn` (a bound method `obj.method`: per method and object): a second sweep of the
+    same function on grids of the same sizes compiles nothing. So `fn` must be pure — a
+    function reading a global or closure variable that changes afterwards keeps the value
+    it was compiled with, as under `jax.jit` (pass the value as a grid, or sweep a new
+    function); a bound method's object's arrays are constants of its batch likewise. When
+    several devices are visible the flattened batch is sharded over them (padded to a
+    multiple of the device count). The batch runs on JAX's default backend — an
     accelerator where there is one (measured on an H200: 2.7× its host's 16 cores at 64 members,
     23.5× at 10 000), unlike a single eager `simulate`, which goes to the CPU there.
 
