@@ -57,12 +57,18 @@ def device(x, dtype=None) -> jax.Array:
     """A host value (NumPy array, list, number) as a device array, without an XLA program.
 
     Outside a trace `jnp.asarray` stages the value through a small compiled program, one per
-    new shape (≈ 10 ms each, a persistent-cache read even when warm); `jax.device_put` copies.
+    new shape (≈ 10 ms each, a persistent-cache read even when warm). Always a copy: on CPU
+    `jax.device_put` (even `may_alias=False`) shares a 64-byte-aligned NumPy buffer, and a
+    later edit of the user's array would change the result; such a share is copied here.
     Floats become float64 (x64 on) and are not weakly typed, as `jnp.asarray` of a NumPy
     array."""
     if isinstance(x, jax.Array):
         return x if dtype is None else x.astype(dtype)
-    return jax.device_put(np.asarray(x, dtype=dtype))
+    host = np.asarray(x, dtype=dtype)
+    out = jax.device_put(host)
+    if host.size and out.unsafe_buffer_pointer() == host.ctypes.data:  # shared, not copied
+        out = jax.device_put(host.copy())
+    return out
 
 
 def fused(fn=None, **jit_kwargs):

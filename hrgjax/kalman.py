@@ -113,27 +113,26 @@ def _check_linear(prior, phi, qd, H, R, zs, mask, us):
 
 
 def _floats(a):
-    """`a` with integer or boolean entries (an array, a tracer, a list) as floats (float64
-    under x64), as the filters compute them: `jnp.array([0, 0])` is a valid way to write a
-    zero state, and an integer carry cannot hold the float updates of a `lax.scan`. Float
-    arrays pass as they are (a NumPy array stays on the host), and so does anything else
-    (a Python number, a string, None: the shape checks name it)."""
+    """`a` with integer or boolean entries (a tracer, an array, a list) as floats (float64 under
+    x64; `jnp.array([0, 0])` is a zero state, a scan carry must be float); a NumPy array as a
+    read-only copy (not a view of the caller's buffer); anything else as is (shapes checked)."""
     if isinstance(a, list | tuple):
         try:
             host = np.asarray(a)
         except ValueError:  # ragged: the shape checks name it
             return a
         return np.asarray(host, float) if host.dtype.kind in "biuf" else a
-    if getattr(getattr(a, "dtype", None), "kind", None) in ("b", "i", "u"):
-        if isinstance(a, jax.Array):
-            return a.astype(jax.dtypes.canonicalize_dtype(np.float64))
-        return np.asarray(a, float)
+    if isinstance(a, jax.Array) and a.dtype.kind in "biu":
+        return a.astype(jax.dtypes.canonicalize_dtype(np.float64))
+    if isinstance(a, np.ndarray | np.generic):  # a copy: a later edit of `a` changes nothing here
+        a = np.array(a, float if a.dtype.kind in "biu" else None)
+        a.flags.writeable = False
     return a
 
 
 class Gaussian(eqx.Module):
     """A state estimate: mean `x` (n,) and covariance `P` (n, n). Integer or boolean entries
-    (`jnp.array([0, 0])`, a list) become floats."""
+    (`jnp.array([0, 0])`, a list) become floats; a NumPy array is kept as a read-only copy."""
 
     x: jax.Array = eqx.field(converter=_floats)
     P: jax.Array = eqx.field(converter=_floats)

@@ -82,7 +82,7 @@ class ImuCalibration(eqx.Module):
         }  # fmt: skip
         values = {}
         for name, (x, default) in parts.items():
-            x = default if x is None else jnp.asarray(x, float)
+            x = default if x is None else jnp.array(x, float)  # a copy, not a view of `x`
             if x.shape != default.shape:
                 raise ValueError(f"{name} must have shape {default.shape}; got {x.shape}")
             values[name] = x

@@ -66,11 +66,11 @@ class TriadCalibration(eqx.Module):
     def known(cls, angles, scale=None, bias=None) -> TriadCalibration:
         """A model set by hand (standard errors zero): `angles` (6,) [rad], `scale` (3,)
         and `bias` (3,) (zeros by default)."""
-        angles = jnp.asarray(angles, float)
+        angles = jnp.array(angles, float)  # copies (`jnp.asarray` may view the user's array)
         if angles.shape != (6,):
             raise ValueError(f"angles must have shape (6,) in order {ANGLES}; got {angles.shape}")
-        scale = jnp.zeros(3) if scale is None else jnp.asarray(scale, float)
-        bias = jnp.zeros(3) if bias is None else jnp.asarray(bias, float)
+        scale = jnp.zeros(3) if scale is None else jnp.array(scale, float)
+        bias = jnp.zeros(3) if bias is None else jnp.array(bias, float)
         for name, x in (("scale", scale), ("bias", bias)):
             if x.shape != (3,):
                 raise ValueError(f"{name} must have shape (3,); got {x.shape}")
