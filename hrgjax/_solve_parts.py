@@ -148,6 +148,12 @@ def next_step_end(state, t1: float) -> np.float64:
     return proposal
 
 
+class Unresumable(Exception):
+    """A part stopped past an output time it did not save (its last step ended on a jump
+    knot, just beyond it, with that knot's output outside its window): the caller solves in
+    one program instead (the same results, no bar)."""
+
+
 def run_parts(part, ts, knots, max_steps: int, finish, desc: str = "simulate"):
     """The values at every output time `ts` (increasing, within the `knots` [s] of the run's
     profile) of one solve run in parts (module docstring) behind a progress bar over the
@@ -189,6 +195,8 @@ def run_parts(part, ts, knots, max_steps: int, finish, desc: str = "simulate"):
             )
             if not go_on:  # on to the run's end, past the last output (as the one solve)
                 break
+            if done < n and ts[done] < float(state[0]):  # a part that ended on a jump knot
+                raise Unresumable  # steps past an output unsaved: no later part can save it
             resume = (*state, next_step_end(state, t1))
             end = resume[-1]
         out = np.concatenate(values)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import numbers
 import sys
@@ -65,10 +66,9 @@ def _default_solver(model):
 
 
 def output_times(profile: Profile, dt_out: float):
-    """Output grid t[0], t[0] + dt_out, … up to the end of the profile (inclusive, to the knots'
-    float64 resolution; where `dt_out` does not divide the profile, the grid ends at its last
-    whole multiple: pass `ts=` to have the end). A `dt_out` longer than the profile is refused
-    (its grid would be the start alone)."""
+    """Output grid t[0], t[0] + dt_out, … to the profile's end (inclusive to the knots' float64
+    resolution, else its last whole multiple of `dt_out`: pass `ts=` to have the end). Refused:
+    a `dt_out` longer than the profile, or below twice the knots' resolution."""
     if not is_concrete(profile.t):
         raise ValueError(
             "simulate needs concrete profile knot times to build its output grid from dt_out, "
@@ -86,7 +86,11 @@ def output_times(profile: Profile, dt_out: float):
             f"dt_out = {dt_out:g} s is longer than the profile ({span:g} s): the output would "
             "be its start alone; give dt_out ≤ the profile's length, or ts= (output times)"
         )
-    slack = 1e-9 + 2 * np.spacing(np.abs(t[[0, -1]])).sum() / dt_out  # knots' rounding (epoch)
+    ulp = np.spacing(np.abs(t[[0, -1]]))  # the knots' float64 resolution (an epoch's: 2.4e-7 s)
+    if dt_out < 2 * ulp.max():
+        raise ValueError(f"dt_out = {dt_out:g} s is finer than the profile's times resolve "
+                         f"({ulp.max():.2g} s): shift them to start near 0")  # fmt: skip
+    slack = 1e-9 + min(0.5 * ulp.sum() / dt_out, 0.25)  # the span's own rounding, at most
     n = int(np.floor(span / dt_out + slack)) + 1
     if n > plausible.MAX_OUTPUT_SAMPLES:
         raise ValueError(
@@ -574,15 +578,14 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     profile, rel = _from_start(profile, ts, dt_out)  # the clock's origin: no physics
     args = (model, gyro, profile, rel, *stepping, quadrature0, adjoint, key, bias_key, run, ts)
     if carrier is None and ts.shape[0] >= parts.STEPPED_FROM and parts.eager(args):
-        return _solve_in_parts(*args)  # a long run: progress shown, the same results
+        with contextlib.suppress(parts.Unresumable):  # (rare: then one program, no bar)
+            return _solve_in_parts(*args)  # a long run: progress shown, the same results
     return _solve(*args, carrier)
 
 
 def _from_start(profile, ts, dt_out):
-    """The profile with its knots at t − t[0] and the output times `ts` [s] since t[0] (from
-    `dt_out` [s]: k·dt_out exactly), traced arithmetic. The solve reads no clock origin: at
-    an epoch (1.7e9 s, where float64 resolves 2.4e-7 s) the carrier path's step times read
-    as a scale-factor error of −4 … −14 ppm; at t[0] = 0 nothing changes (bit for bit)."""
+    """The profile's knots at t − t[0], the output times `ts` [s] since t[0] (`dt_out` [s]:
+    k·dt_out exactly): the solve reads no clock origin (an epoch's: docs/simulate.md)."""
     start = profile.t[0]
     shifted = eqx.tree_at(lambda p: p.t, profile, profile.t - start)
     if dt_out is None:
@@ -592,9 +595,6 @@ def _from_start(profile, ts, dt_out):
         return shifted, device(np.minimum(dt_out * np.arange(ts.shape[0]), t[-1] - t[0]))
 
 
-_OPTIONS = {
-    name: p.default
-    for name, p in inspect.signature(simulate).parameters.items()
-    if p.kind is inspect.Parameter.KEYWORD_ONLY
-}
+_OPTIONS = {name: p.default for name, p in inspect.signature(simulate).parameters.items()
+            if p.kind is inspect.Parameter.KEYWORD_ONLY}  # fmt: skip
 """`simulate`'s keyword arguments and their defaults (one source for `simulate_with_stats`)."""

@@ -160,3 +160,15 @@ def test_parts_run_an_implicit_solver(monkeypatch):
     assert steps == int(one.stats["num_steps"]) > 12 and result == diffrax.RESULTS.successful
     np.testing.assert_allclose(values, one.ys, rtol=1e-12)
     np.testing.assert_allclose(values[:, 0], np.exp(-ts), rtol=1e-6)  # rtol 1e-8, interpolated
+
+
+def test_parts_give_way_where_a_part_ends_on_a_jump_knot(monkeypatch):
+    # a part whose last step is the one clipped at a jump knot (1.0 s, an output) ends just
+    # beyond it without saving that output, which no later part can save (review: every
+    # output from the knot on was left inf and simulate raised "NaN or inf"); run_parts says
+    # so and simulate solves in one program instead (the same results, no bar)
+    ts = np.linspace(0.0, 2.0, 41)
+    pid = diffrax.PIDController(rtol=1e-8, atol=1e-10)
+    controller = diffrax.ClipStepSizeController(pid, jump_ts=jnp.array([1.0]))  # as simulate
+    with pytest.raises(parts.Unresumable):
+        _decay_in_parts(diffrax.Tsit5(), controller, 0.01, ts, 1, 4096, monkeypatch)
