@@ -26,14 +26,25 @@ level accelerometer biases (pitch/roll σ below σ_∇/g); and the coarse headin
 5° beyond the biases, where its white-noise part is (arw/√T)/(ω_ie cos φ) (8.45° at 88°, 17°
 at 89°), with a bias jacobian taken at the noisy means.
 
+`--threshold`: where `align`'s `AlignmentWarning` must fire. The bias-limited heading error is
+the gyrocompass solution atan2(ε_E, ω_h + ε_N) (ω_h = ω_ie cos φ; `align`'s estimate follows
+it to 0.1° RMS), heavy-tailed where σ_ε is not ≪ ω_h: z = that/F for F = σ_ε/ω_h, by
+quadrature over the Gaussian bias, against F; then `align` itself, `--n` draws per point
+(300 for the thresholds), along the end σ (80°, low ARW, gyro grade varied) and the start σ
+(88°, 0.05 °/h, ARW and coarse span varied: the coarse heading's tail reaches 140–180°, where
+the fine filter does not recover). Printed: start and end σ, z-RMS, ±1.96σ, the largest |z|
+and how many draws warned.
+
 Usage: `.venv/bin/python benchmarks/coverage_alignment.py [--n 100] [--seed 0]
-[--scenarios matched,bias2x,...]` (100 draws × 11 scenarios: about 10 minutes on 2 shared cores).
+[--scenarios matched,bias2x,...] [--threshold]` (100 draws × 11 scenarios: about 10 minutes on
+2 shared cores; `--threshold --n 300`: 11 points, about 8 minutes).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+import warnings
 
 import jax
 import numpy as np
@@ -45,6 +56,7 @@ import jax.numpy as jnp  # noqa: E402
 from hrgjax._progress import bar  # noqa: E402
 from hrgjax.ins import alignment as al  # noqa: E402
 from hrgjax.ins import trajectory as tr  # noqa: E402
+from hrgjax.ins.constants import OMEGA_IE  # noqa: E402
 
 DEG = np.pi / 180
 DPH = DEG / 3600  # °/h in rad/s
@@ -63,6 +75,13 @@ SCENARIOS = {  # latitude [°], true gyro bias σ [°/h], true ARW [°/√h], as
     "lat88_10min": (88.0, 0.05, 0.01, 0.05, 0.01, 600.0),
     "lat88_grade1": (88.0, 1.0, 0.1, 1.0, 0.1, 1800.0),
 }
+THRESHOLD_POINTS = (  # latitude [°], gyro bias σ [°/h], ARW [°/√h] (true = assumed), coarse_s
+    (80.0, 0.547, 0.001, 60.0), (80.0, 0.684, 0.001, 60.0), (80.0, 0.821, 0.001, 60.0),
+    (80.0, 1.0, 0.001, 60.0),  # end σ 12°, 15°, 18°, 21.9°
+    (88.0, 0.05, 0.015, 60.0), (88.0, 0.05, 0.02, 60.0), (88.0, 0.05, 0.025, 60.0),
+    (88.0, 0.05, 0.03, 60.0), (88.0, 0.05, 0.05, 60.0),  # start σ 14.7°, 18.5°, 22.4°, 26.4°, 43°
+    (88.0, 0.05, 0.05, 300.0), (88.0, 0.05, 0.05, 600.0),  # start σ 20.3°, 15.3°
+)  # fmt: skip
 VRW, ACCEL_BIAS, DT = 1e-4, 1e-3, 1.0
 ANGLES = ("heading", "pitch", "roll")
 
@@ -76,13 +95,15 @@ def _coverage(z):
             "within_2sigma": float(np.mean(abs(z) < 2))}  # fmt: skip
 
 
-def coverage(name: str, n: int, seed: int = 0) -> dict:
-    """Heading, pitch and roll coverage of `align`'s σ over `n` draws of scenario `name`."""
-    lat, bg, arw, bg_assumed, arw_assumed, duration = SCENARIOS[name]
+def _draws(scenario, n, seed, coarse_s=60.0, label=""):
+    """`n` draws of `scenario` (latitude, true and assumed grades, duration): per draw the
+    errors and σ (heading, pitch, roll) [°], the heading σ at the fine stage's start, whether
+    `align` warned."""
+    lat, bg, arw, bg_assumed, arw_assumed, duration = scenario
     rng = np.random.default_rng(seed)
-    kw = dict(gyro_bias_std=bg_assumed * DPH, arw=arw_assumed * RTH)
-    z, sigma = [], []
-    with bar(n, f"alignment {name}", unit="draw") as progress:
+    kw = dict(gyro_bias_std=bg_assumed * DPH, arw=arw_assumed * RTH, coarse_s=coarse_s)
+    d_all, s_all, start, warned = [], [], [], []
+    with bar(n, f"alignment {label}", unit="draw") as progress:
         for _ in range(n):
             traj = tr.stationary(lat, heading_deg=rng.uniform(0, 360),
                                  pitch_deg=rng.normal(0, 2), roll_deg=rng.normal(0, 2),
@@ -98,17 +119,60 @@ def coverage(name: str, n: int, seed: int = 0) -> dict:
             )
             log = al.ImuLog(traj.t[1:], jnp.asarray(dth), jnp.asarray(dv), lat * DEG)
             truth = np.asarray(al.euler_deg(jnp.asarray(traj.c_bn[0])))
-            r = al.align(log, **kw)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", al.AlignmentWarning)
+                r = al.align(log, **kw)
             d = np.array([r.heading_deg, r.pitch_deg, r.roll_deg]) - truth
             d[0] = (d[0] + 180) % 360 - 180
-            s = np.array([r.heading_std_deg, r.pitch_std_deg, r.roll_std_deg])
-            z.append(d / s)
-            sigma.append(s)
+            d_all.append(d)
+            s_all.append([r.heading_std_deg, r.pitch_std_deg, r.roll_std_deg])
+            start.append(float(r.std_history_deg[0, 0]))
+            warned.append(any(issubclass(w.category, al.AlignmentWarning) for w in caught))
             progress.update(1)
-    zz = np.array(z)
+    return np.array(d_all), np.array(s_all), np.array(start), np.array(warned)
+
+
+def coverage(name: str, n: int, seed: int = 0) -> dict:
+    """Heading, pitch and roll coverage of `align`'s σ over `n` draws of scenario `name`."""
+    d, sigma, _, _ = _draws(SCENARIOS[name], n, seed, label=name)
+    zz = d / sigma
     out = {k: _coverage(zz[:, i]) for i, k in enumerate(ANGLES)}
-    out["median_sigma_deg"] = np.median(np.array(sigma), 0).tolist()
+    out["median_sigma_deg"] = np.median(sigma, 0).tolist()
     return out
+
+
+def gyrocompass_tail(f_deg: float, points: int = 801) -> tuple[float, float]:
+    """(z-RMS, fraction within ±1.96σ) of z = atan2(ε_E, ω_h + ε_N)/F for biases N(0, (F ω_h)²)
+    (F [°] the bias-limited σ), by quadrature on ±8σ."""
+    x = np.linspace(-8, 8, points)
+    xx, yy = np.meshgrid(x, x)
+    w = np.exp(-(xx**2 + yy**2) / 2)
+    w /= w.sum()
+    f = np.radians(f_deg)
+    z = np.arctan2(f * xx, 1 + f * yy) / f
+    return float(np.sqrt(np.sum(w * z**2))), float(np.sum(w * (abs(z) < 1.96)))
+
+
+def threshold(n: int, seed: int) -> None:
+    """The study behind `END_HEADING_STD_DEG` and `START_HEADING_STD_DEG` (module docstring)."""
+    print(f"bias-limited heading (gyrocompass solution; END_HEADING_STD_DEG = "
+          f"{al.END_HEADING_STD_DEG:g}°):")  # fmt: skip
+    for f in (5.0, 10.0, 12.0, 14.0, 15.0, 16.0, 18.0, 20.0, 22.0, 25.0, 30.0):
+        rms, cover = gyrocompass_tail(f)
+        print(f"  F {f:4.0f}°: z-RMS {rms:.3f}, within ±1.96σ {100 * cover:.1f} %")
+    print(f"\nalign, {n} draws per point (START_HEADING_STD_DEG = {al.START_HEADING_STD_DEG:g}°):")
+    for lat, bg, arw, coarse_s in THRESHOLD_POINTS:
+        t0 = time.perf_counter()
+        d, sigma, start, warned = _draws((lat, bg, arw, bg, arw, 1800.0), n, seed, coarse_s,
+                                         f"{lat:g}° {bg:g} °/h {arw:g} °/√h {coarse_s:g} s")  # fmt: skip
+        c = _coverage(d[:, 0] / sigma[:, 0])
+        limit = bg * DPH / (OMEGA_IE * np.cos(lat * DEG)) / DEG
+        print(f"  {lat:g}°, {bg:g} °/h, {arw:g} °/√h, coarse {coarse_s:g} s: start σ "
+              f"{np.median(start):.1f}°, end σ {np.median(sigma[:, 0]):.2f}° (grade limit "
+              f"{limit:.2f}°): z-RMS {c['z_rms']:.3f} ± {c['z_rms_mc']:.3f}, "
+              f"{100 * c['within_1.96sigma']:.1f} % within ±1.96σ, max |z| "
+              f"{np.max(abs(d[:, 0] / sigma[:, 0])):.1f}, warned {int(warned.sum())}/{n} "
+              f"[{time.perf_counter() - t0:.0f} s]", flush=True)  # fmt: skip
 
 
 def main():
@@ -118,7 +182,10 @@ def main():
     parser.add_argument("--n", type=int, default=100, help="draws per scenario")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--scenarios", default=",".join(SCENARIOS))
+    parser.add_argument("--threshold", action="store_true", help="the warning's thresholds")
     args = parser.parse_args()
+    if args.threshold:
+        return threshold(args.n, args.seed)
     for name in args.scenarios.split(","):
         if name not in SCENARIOS:
             parser.error(f"--scenarios: unknown {name!r}; expected some of {', '.join(SCENARIOS)}")

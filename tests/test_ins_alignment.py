@@ -2,6 +2,7 @@
 `hrgjax align` CLI and the platform error model of seed 002 with faults."""
 
 import json
+import re
 import warnings
 from pathlib import Path
 
@@ -111,18 +112,75 @@ def test_level_sigma_near_the_pole_stays_at_the_accelerometer_floor():
 
 
 def test_align_warns_where_the_heading_error_is_not_small():
-    """ARW 0.05 °/√h at 88°: the coarse heading's noise is 42° over 60 s, the linearised
-    filter's heading σ does not cover (z-RMS 1.7): `align` says so; a 300-s coarse span (19°)
-    is quiet."""
+    """ARW 0.05 °/√h at 88°: the coarse heading's noise is 42° over 60 s; its tail reaches
+    140–180°, where the fine filter does not recover: `align` warns (`AlignmentWarning`) and
+    names the cure, a longer coarse span; a 600-s span (15°) is quiet."""
     arw = 0.05 * DEG / 60
     log, _ = _noisy_log(88.0, 3, arw=arw)
-    with pytest.warns(
-        UserWarning, match=r"^align: heading σ 4\d\.\d° at the start, .*\(over 25°\)"
-    ):
+    with pytest.warns(al.AlignmentWarning, match=r"^align: heading σ 4\d\.\d° at the fine "
+                      r"stage's start \(over 20°\): .* a longer coarse_s shrinks it"):  # fmt: skip
         al.align(log, arw=arw)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        al.align(log, arw=arw, coarse_s=300.0)
+        al.align(log, arw=arw, coarse_s=600.0)
+
+
+def test_align_warns_where_the_gyro_grade_cannot_find_north():
+    """Review: a bias-limited heading σ σ_ε/(ω_ie cos φ) of 15–25° went unwarned while its
+    error atan2(ε_E, ω_ie cos φ + ε_N) is heavy-tailed (z-RMS 1.08–1.14 for 18.6–24.1° at
+    80°), and past 25° the advice was a longer coarse_s, which does not change it. Now: an
+    end σ beyond 15° warns that the grade cannot find north, whatever the coarse span; the
+    estimate is the nonlinear gyrocompass solution (a bias of 0.8 ω_ie cos φ north, 0.6 east:
+    −atan2(0.6, 0.2) = −71.6°), which the linearised σ does not describe."""
+    lat = 80.0
+    w_h = C.OMEGA_IE * np.cos(lat * DEG)
+    log, c = _stationary_log(lat, np.array([-0.8, 0.6, 0.0]) * w_h, np.zeros(3))
+    grade = 1.0 * DEG / 3600  # σ 21.9° at 80°: unwarned before
+    messages = []
+    for span in (60.0, 600.0):
+        with pytest.warns(al.AlignmentWarning) as rec:
+            r = al.align(log, coarse_s=span, gyro_bias_std=grade, arw=1e-4 * DEG / 60)
+        messages.append(str(rec[0].message))
+        truth = np.asarray(al.euler_deg(jnp.asarray(c)))[0]
+        err = (r.heading_deg - truth + 180) % 360 - 180
+        assert err == pytest.approx(-np.degrees(np.arctan2(0.6, 0.2)), abs=1.0)
+    assert messages[0] == messages[1]
+    assert re.match(r"^align: heading σ 21\.9° at the end: the assumed gyro grade's limit "
+                    r"σ_ε/\(ω_ie cos lat\) is 21\.9° \(over 15°\), a gyro of this grade cannot "
+                    r"find north at 80°", messages[0])  # fmt: skip
+    assert "coarse_s" not in messages[0] and "from outside" in messages[0]
+
+
+def test_end_threshold_keeps_the_sigma_honest():
+    """Where `align` stays quiet the bias-limited σ F covers: the heading error is
+    atan2(ε_E, ω_h + ε_N) (checked above), so z = that / F has RMS ≤ 1.05 and ±1.96σ
+    coverage ≥ 93.5 % for F ≤ END_HEADING_STD_DEG (exact by quadrature), not beyond 20°."""
+    x = np.linspace(-8, 8, 801)  # in units of F
+    xx, yy = np.meshgrid(x, x)
+    w = np.exp(-(xx**2 + yy**2) / 2)
+    w /= w.sum()
+
+    def stats(f_deg):
+        f = np.radians(f_deg)
+        z = np.arctan2(f * xx, 1 + f * yy) / f
+        return np.sqrt(np.sum(w * z**2)), np.sum(w * (abs(z) < 1.96))
+
+    rms, cover = stats(al.END_HEADING_STD_DEG)
+    assert rms <= 1.05 and cover >= 0.935
+    assert stats(20.0)[0] > 1.08
+
+
+def test_fine_stage_uses_the_data_after_the_coarse_span():
+    """The coarse means' white noise is in the fine prior; the fine stage over the same
+    samples counted it twice (ARW 0.05 °/√h at 88°, 300–600 s coarse: z-RMS 1.14–1.20, 89–91 %
+    within ±1.96σ; on the rest: 1.01–1.03, 94–95 %). A log without 2 steps after it is
+    refused, naming the span."""
+    log, _ = _noisy_log(45.0, 0, duration_s=200.0)
+    r = al.align(log, coarse_s=100.0)
+    assert float(r.t[0]) == pytest.approx(float(log.t[0]) + 100.0)  # the coarse: t[0..99]
+    with pytest.raises(ValueError, match=r"^the record .* needs 2 fine steps .* after "
+                       r"coarse_s = 199 s$"):  # fmt: skip
+        al.align(log, coarse_s=199.0)
 
 
 def test_coarse_error_model_matches_the_analytic_limits():
@@ -221,10 +279,32 @@ def test_align_cli_takes_the_gyro_grade_and_says_what_the_heading_sigma_assumes(
     cli_fails(["align", str(path), "--gyro-bias", "0"], capsys, "--gyro-bias")
 
 
-def _psins_file(path, lat=34.0, interval_ms=1000.0, gyro_unit=1.0, yaw="-90.6"):
-    """A 120-s stationary PSINS log at 1 Hz (increments of `tr.stationary`): gyro increments
-    in `gyro_unit` arcsec, accelerometer increments in 1 µg·s; header values as given."""
-    log, _ = _stationary_log(34.0, np.zeros(3), np.zeros(3), duration_s=120.0)
+def test_align_cli_prints_the_alignment_warning_in_one_line(tmp_path, capsys):
+    """Review: the warning was a plain `UserWarning` printed with Python's file and line, it
+    named `coarse_s`, not the CLI's `--coarse`, and advised a longer coarse span for a σ the
+    grade sets. Now one stderr line with the cure that fits: the grade (6 °/h at 34°: 27.6°),
+    `--coarse` for the start (ARW 0.05 °/√h at 88°: 42°), a longer record where the fine
+    stage has not converged (the same on a 2-min record)."""
+    for argv, lat, duration, cure in (
+        (["--gyro-bias", "6"], 34.0, 120.0, r"2\d\.\d° at the end: .* cannot find north at 34"),
+        (["--arw", "0.05"], 88.0, 1800.0, r"4\d\.\d° at the fine stage's start .* longer --coarse "),
+        (["--arw", "0.05"], 88.0, 120.0, r"\d+\.?\d*° at the end .* not converged; a longer "
+         r"record or --coarse shrinks"),
+    ):  # fmt: skip
+        path = _psins_file(tmp_path / f"{duration:g}.imu", lat, duration_s=duration, data_lat=lat)
+        capsys.readouterr()
+        assert main(["align", str(path), *argv]) == 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and re.match(rf"^hrgjax align: heading σ {cure}", err[0]), err
+        assert "coarse_s" not in err[0]
+
+
+def _psins_file(path, lat=34.0, interval_ms=1000.0, gyro_unit=1.0, yaw="-90.6", duration_s=120.0,
+                data_lat=34.0):  # fmt: skip
+    """A stationary PSINS log at 1 Hz (increments of `tr.stationary` at `data_lat`): gyro
+    increments in `gyro_unit` arcsec, accelerometer increments in 1 µg·s; header values as
+    given (`lat` [°] the header's)."""
+    log, _ = _stationary_log(data_lat, np.zeros(3), np.zeros(3), duration_s=duration_s)
     frd_to_rfu = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
     g = 9.780327
     gyro = np.asarray(log.dtheta) @ frd_to_rfu.T / (np.pi / 180 / 3600)

@@ -39,15 +39,24 @@ def cmd_align(args) -> int:
     if args.format != "psins":
         raise UsageError(f"unknown --format {args.format!r}; choose 'psins'")
     start(args, [args.imu_log], json=(".json",), plot=PLOT_EXTENSIONS)
-    from ..ins.alignment import PSINS_FIELDS, align, check_stationary, load_psins
+    import warnings
+
+    from ..ins.alignment import PSINS_FIELDS, AlignmentWarning, align, check_stationary, load_psins
     from ..units import DEG, DEG_PER_H
 
     with usage_errors(missing=f"{args.imu_log}: no such file"):
         log = load_psins(args.imu_log)
         check_stationary(log, args.coarse, fields=PSINS_FIELDS, coarse_name="--coarse",
                          where=f"{args.imu_log}: ")  # fmt: skip
-        result = align(log, coarse_s=args.coarse, step_s=args.step,
-                       gyro_bias_std=args.gyro_bias * DEG_PER_H, arw=args.arw * DEG / 60.0)  # fmt: skip
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", AlignmentWarning)
+            result = align(log, coarse_s=args.coarse, coarse_name="--coarse", step_s=args.step,
+                           gyro_bias_std=args.gyro_bias * DEG_PER_H, arw=args.arw * DEG / 60.0)  # fmt: skip
+    for w in caught:  # the alignment's warning in one line: "hrgjax align: heading σ …"
+        if issubclass(w.category, AlignmentWarning):
+            print(f"hrgjax {' '.join(str(w.message).split())}", file=sys.stderr, flush=True)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     out = result.to_json()
     span = float(log.t[-1] - log.t[0])
     print(f"hrgjax align: {args.imu_log} ({log.t.shape[0]} samples, {span:.0f} s)")

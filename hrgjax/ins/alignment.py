@@ -2,36 +2,30 @@ r"""Stationary initial alignment of a strapdown IMU: coarse (analytic levelling 
 gyrocompassing) then fine (Kalman filter on zero velocity), and the PSINS log loader.
 
 Frames: navigation NED, body FRD (x forward, y right, z down); heading clockwise from north.
-
 **Coarse** ([`coarse_align`][hrgjax.ins.alignment.coarse_align]): the mean specific force
 and angular rate over the first `coarse_s` seconds against their NED values
 $f^n = (0, 0, -g)$, $\omega_{ie}^n = \omega_{ie}(\cos\varphi, 0, -\sin\varphi)$, by TRIAD.
 
-**Fine** ([`fine_align`][hrgjax.ins.alignment.fine_align]): the attitude and velocity are
-integrated from the increments; every `step_s` a 12-state Kalman filter — velocity error,
-attitude error φ, gyro and accelerometer biases, the stationary φ-angle model of
+**Fine** ([`fine_align`][hrgjax.ins.alignment.fine_align]), on the data after the coarse
+span: the attitude and velocity are integrated from the increments; every `step_s` a
+12-state Kalman filter — velocity error, attitude error φ, gyro and accelerometer biases
+(NED-frame: constant at rest, one constant model), the stationary φ-angle model of
 [`strapdown`][hrgjax.ins.strapdown] discretised by Van Loan — takes the computed velocity as
-a measurement of its error (the vehicle is at rest) and its estimate is fed back (attitude,
-velocity, biases) and reset. The bias states are NED-frame (constant at rest): one constant
-model (body-frame states mapped by the current Ĉ turn with each heading correction, which
-the filter read as information on the unobservable level accelerometer biases). East gyro
-bias and level accelerometer biases are unobservable, so the attitude converges to the
-analytic limits of PHYSICS.md §12 ($\phi_E = -\nabla_N/g$, $\phi_N = \nabla_E/g$,
+a measurement of its error (the vehicle is at rest); its estimate is fed back and reset.
+East gyro bias and level accelerometer biases are unobservable, so the attitude converges to
+the analytic limits of PHYSICS.md §12 ($\phi_E = -\nabla_N/g$, $\phi_N = \nabla_E/g$,
 $\phi_D = \varepsilon_E/(\omega_{ie}\cos\varphi) - (\nabla_E/g)\tan\varphi$).
 
 **What the heading σ rests on.** The east gyro bias is not measured, so the heading's 1σ
 ends at $\sigma_\varepsilon/(\omega_{ie}\cos\varphi)$ for the *assumed* gyro-bias σ
 `gyro_bias_std` (0.05 °/h by default): a property of the assumption, not of the data. The
-coarse attitude's error comes from the same biases (its heading error is
-$\varepsilon_E/(\omega_{ie}\cos\varphi)$ too), so `align` starts the filter with that
-correlation in its prior (`start_bias_jacobian`): the information is counted once, and the
-final heading σ is that limit however large the bias σ (an independent 5° heading prior
-counted it twice: $1/\sqrt{1/F^2 + 1/(5°)^2}$ for a limit F, too small when F is not ≪ 5°).
-That prior ([`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]) takes the
-jacobian where the fine model is linearised and adds the coarse means' white noise, whose
-heading part $(\sigma_{ARW}/\sqrt{T})/(\omega_{ie}\cos\varphi)$ grows towards the pole.
-The σ is a linearised one: it covers while the heading error is small
-([`LINEAR_HEADING_STD_DEG`][hrgjax.ins.alignment.LINEAR_HEADING_STD_DEG]; `align` warns).
+coarse heading's error comes from the same bias, so `align`'s prior holds that correlation
+(`start_bias_jacobian`, counted once) and the coarse means' white noise, whose heading part
+$(\sigma_{ARW}/\sqrt{T})/(\omega_{ie}\cos\varphi)$ grows towards the pole
+([`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]); the fine data are
+independent of it (run over the coarse span too, they counted that noise twice: z-RMS
+1.14–1.20 for ARW 0.05 °/√h at 88°). The σ is a linearised one: it covers while the heading
+error is small (`AlignmentWarning`).
 """
 
 from __future__ import annotations
@@ -143,33 +137,29 @@ _LOG_FIELDS = {
 
 EARTH_RATE_RATIO = (0.5, 2.0)
 """Range of |mean angular rate| / ω_ie over the coarse span that `align` accepts. At rest a
-gyro reads the Earth's rate (15.04 °/h) plus its bias: the fine filter's gyro-bias prior is
-0.05 °/h (navigation grade), and gyrocompassing with a bias of half the Earth's rate is
-already tens of degrees off, so a wider spread is no gyro `align` serves; a parked vehicle's
-sway adds apparent rate (the PSINS log reads 12.6–22.5 °/h over its 60-s windows, 0.84–1.50
-ω_ie). Unit errors land far outside: ×10 or ÷10 in an increment unit, ×3600 (°/h for °/s),
-×57.3 (degrees for radians). Read over `RATE_SPAN_S`."""
+gyro reads the Earth's rate (15.04 °/h) plus its bias; gyrocompassing with a bias of half the
+Earth's rate is already tens of degrees off, so a wider spread is no gyro `align` serves; a
+parked vehicle's sway adds apparent rate (the PSINS log: 0.84–1.50 ω_ie over its 60-s
+windows). Unit errors land far outside: ×10 or ÷10 in an increment unit, ×3600 (°/h for
+°/s), ×57.3 (degrees for radians). Read over `RATE_SPAN_S`."""
 
 RATE_SPAN_S = 60.0
 """The span [s] the mean angular rate is read over for `EARTH_RATE_RATIO`: the coarse span
-or this, whichever is longer (the whole record where it is shorter) — a parked vehicle's sway
-is tens of °/h over a few seconds (the PSINS log: 55 °/h over its first 10 s, 0.77–0.86 ω_ie
-over 30–60 s), and a short `coarse_s` still aligns."""
+or this, whichever is longer (the whole record where shorter): a parked vehicle's sway is tens
+of °/h over a few seconds (the PSINS log: 55 °/h over its first 10 s), a short span aligns."""
 
 
 def load_psins(path) -> ImuLog:
     """Read a PSINS-format text IMU log (provenance in `tests/data/README.md`): `%` comments, three
     header lines (attitude [°] and velocity; lat [°], lon [°], h [m], t0 [s], interval [ms],
     g; increment units: gyro [arcsec] ×3, accelerometer [µg·s] ×3), then one line of six
-    integer increments per sample, axes right–forward–up. Returned in FRD with the heading
-    converted from PSINS's counter-clockwise yaw to clockwise from north. The header's
-    attitude is an approximate reference only: where it is not finite (NaN: unknown),
-    `header_attitude_deg` is `None`.
+    integer increments per sample, axes right–forward–up. Returned in FRD, the heading
+    clockwise from north (PSINS's yaw is counter-clockwise). The header's attitude is a
+    reference only: `header_attitude_deg` is `None` where it is not finite.
 
-    **Raises:** `ValueError` naming the file (and the line) for text that is not UTF-8, a
-    malformed header (a field of lines 2–3 that is not finite, a latitude beyond ±90°) or
-    sample row, or an integer beyond 2**53 that a float64 would round (naming its line and
-    field)."""
+    **Raises:** `ValueError` naming the file (and the line, field) for text that is not
+    UTF-8, a malformed header (a field of lines 2–3 not finite, a latitude beyond ±90°) or
+    sample row, or an integer beyond 2**53 that a float64 would round."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no IMU log at {path}")
@@ -199,10 +189,8 @@ def load_psins(path) -> ImuLog:
             raise ValueError(f"{path}: header line {k + 1} must hold 6 numbers; got {len(vals)}")
         head.append(vals)
     names = ("latitude [°]", "longitude [°]", "height [m]", "start time t0 [s]",
-             "sampling interval [ms]", "g [m/s²]", "gyro increment unit [arcsec]",
-             "gyro increment unit [arcsec]", "gyro increment unit [arcsec]",
-             "accelerometer increment unit [µg·s]", "accelerometer increment unit [µg·s]",
-             "accelerometer increment unit [µg·s]")  # fmt: skip
+             "sampling interval [ms]", "g [m/s²]", *3 * ["gyro increment unit [arcsec]"],
+             *3 * ["accelerometer increment unit [µg·s]"])  # fmt: skip
     for k, (name, v) in enumerate(zip(names, head[1] + head[2], strict=True)):
         if not math.isfinite(v):
             raise ValueError(
@@ -316,9 +304,8 @@ def coarse_align(f_b, w_b, lat):
 def coarse_bias_jacobian(f_b, w_b, lat):
     """(3, 6) ∂φ/∂(gyro bias [rad/s], accelerometer bias [m/s²]), body frame, of the attitude
     error φ (C_true = (I + [φ×]) Ĉ) of [`coarse_align`][hrgjax.ins.alignment.coarse_align]'s
-    Ĉ for means `f_b`, `w_b` at latitude `lat` [rad] that hold constant sensor biases: the
-    coarse attitude's error is this times the biases (plus noise and sway) —
-    [`fine_align`][hrgjax.ins.alignment.fine_align]'s `start_bias_jacobian`."""
+    Ĉ for means `f_b`, `w_b` at latitude `lat` [rad] holding constant sensor biases (plus
+    noise and sway): [`fine_align`][hrgjax.ins.alignment.fine_align]'s `start_bias_jacobian`."""
     c = coarse_align(f_b, w_b, lat)
 
     def phi(b):
@@ -340,10 +327,22 @@ def _rotation(v):
     return jnp.eye(3) + s * k + c * (k @ k)
 
 
-LINEAR_HEADING_STD_DEG = 25.0
-"""Heading σ [°] (fine stage's start or end) beyond which `align` warns that its σ understates
-the error, which is then not small (`benchmarks/coverage_alignment.py`: z-RMS 1.0 for 21° at
-the start, 11° at the end; 1.7 for 42° at the start, 1.4 for 44° at the end)."""
+END_HEADING_STD_DEG = 15.0
+"""Heading σ [°] at the fine stage's end beyond which `align` warns (`AlignmentWarning`): the
+bias-limited σ_ε/(ω_ie cos φ), where an east gyro bias as large as ω_ie cos φ is within reach
+and the error atan2(ε_E, ω_ie cos φ + ε_N) heavy-tailed (z-RMS 1.04, 93.9 % within ±1.96σ at
+15°; 1.10, 93.0 % at 20°; 1.17, 91.9 % at 25°: `benchmarks/coverage_alignment.py`)."""
+
+START_HEADING_STD_DEG = 20.0
+"""Heading σ [°] at the fine stage's start beyond which `align` warns (`AlignmentWarning`):
+the coarse heading's tail reaches 140–180°, where the fine filter does not recover (z-RMS 1.15
+at 26°, 1.35 at 43°; 1.02–1.03 at 15–18°, 300 draws at 88°)."""
+
+
+class AlignmentWarning(UserWarning):
+    """`align`'s heading σ understates the error: the heading error is not small (module
+    docstring). `warnings.simplefilter("ignore", AlignmentWarning)` silences it."""
+
 
 _GYRO_BIAS_STD = 0.05 * DEG_PER_H
 """`fine_align`'s default gyro-bias σ [rad/s] (navigation grade)."""
@@ -363,7 +362,7 @@ def coarse_error_model(c0, lat, h, span_s, arw, vrw):
     headings share one bias dependence — and `var` [rad²] the variances of φ (north, east,
     down) that the white noise (`arw` [rad/√s], `vrw` [m/s/√s]) of means over `span_s` [s]
     leaves: the coarse heading's is (arw/√span_s)/(ω_ie cos lat) (8.45° for 0.01 °/√h over
-    60 s at 88°), which a fixed 5° heading σ understated near the pole."""
+    60 s at 88°)."""
     g = jnp.linalg.norm(WGS84.gravity_ned(jnp.asarray(lat), jnp.asarray(h)))
     jac = coarse_bias_jacobian(c0.T @ jnp.array([0.0, 0.0, -g]), c0.T @ earth_rate_ned(lat), lat)
     white = jnp.concatenate([jnp.full(3, arw**2), jnp.full(3, vrw**2)]) / span_s
@@ -380,12 +379,9 @@ class AlignmentResult(eqx.Module):
     final body-to-NED matrix; `gyro_bias_std_deg_h`: the gyro-bias σ [°/h] the filter
     assumed.
 
-    **The heading σ is an assumption's, not a measurement:** stationary alignment cannot
-    measure the east gyro bias, so `heading_std_deg` ends at
-    `gyro_bias_std / (ω_ie cos lat)` for the *assumed* `gyro_bias_std` (0.05 °/h by default:
-    0.28° at 45°). A gyro whose bias is larger has a heading error larger in proportion, the
-    σ does not show it: give [`align`][hrgjax.ins.alignment.align] the gyro's grade
-    (`gyro_bias_std`, `arw`; `hrgjax align --gyro-bias`, `--arw`)."""
+    **The heading σ is an assumption's:** it ends at `gyro_bias_std / (ω_ie cos lat)` for the
+    *assumed* `gyro_bias_std` (0.28° at 45° for 0.05 °/h); a gyro whose bias is larger has a
+    heading error larger in proportion: give [`align`][hrgjax.ins.alignment.align] the grade."""
 
     heading_deg: float
     pitch_deg: float
@@ -455,10 +451,8 @@ def fine_align(
     `start_bias_jacobian` (3, 6), A = ∂φ/∂(gyro, accel bias) of `c0`'s error
     ([`coarse_bias_jacobian`][hrgjax.ins.alignment.coarse_bias_jacobian] for a coarse
     start), the part of it the biases do not explain: the prior is then φ = A b + that, its
-    correlation with the bias states kept (without it, a start whose error comes from the
-    biases counts the same information twice and the σ is too small).
-    [`align`][hrgjax.ins.alignment.align] adds the coarse means' white noise to it
-    ([`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]).
+    correlation with the bias states kept (without it a start whose error comes from the
+    biases counts that information twice). `align` adds the coarse means' white noise to it.
 
     **Returns:** `(t (K,), C_bn (K, 3, 3), P (K, 12, 12), biases (6,))`: P's states are
     velocity error (NED) [m/s], φ [rad], gyro [rad/s] and accelerometer [m/s²] biases in
@@ -500,10 +494,8 @@ def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std, jac):
     w_ie = earth_rate_ned(lat_a)
     z3 = jnp.zeros(3)
 
-    # Biases as NED-frame states (the IMU is at rest: constant there too), so the model is
-    # one constant matrix: with body-frame states mapped by the current estimate Ĉ, the
-    # heading corrections turn the map and the filter reads a turn of the unobservable level
-    # accelerometer biases as information about them (level σ below σ_∇/g, z-RMS 1.3 at 88°).
+    # NED-frame bias states (constant at rest): body-frame ones mapped by the moving Ĉ read
+    # its turns as level accelerometer-bias information (z-RMS 1.3 at 88°)
     f, gg, ga = error_matrices_at(WGS84, False, lat_a, h_a, z3, jnp.eye(3), -g_n)
     fa = augmented(f, gg, ga)[3:, 3:]  # drop the (known) position states
     gw = jnp.concatenate([gg[3:], jnp.zeros((6, 3))])
@@ -511,14 +503,9 @@ def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std, jac):
     phi_k, qd = van_loan(fa, arw**2 * gw @ gw.T + vrw**2 * aw @ aw.T, h_step)
     jac = jac @ jnp.kron(jnp.eye(2), c0.T)  # ∂φ/∂(NED biases): b_body = c0ᵀ b_ned
 
-    p0 = jnp.diag(
-        jnp.concatenate(
-            [jnp.full(3, 0.1) ** 2, att_std**2, jnp.full(3, bg_std**2), jnp.full(3, ba_std**2)]
-        )
-    )
-    cross = (
-        jac * jnp.concatenate([jnp.full(3, bg_std**2), jnp.full(3, ba_std**2)])[None, :]
-    )  # A Σ_b
+    var_b = jnp.concatenate([jnp.full(3, bg_std**2), jnp.full(3, ba_std**2)])
+    p0 = jnp.diag(jnp.concatenate([jnp.full(3, 0.1) ** 2, att_std**2, var_b]))
+    cross = jac * var_b[None, :]  # A Σ_b
     p0 = p0.at[3:6, 6:].set(cross).at[6:, 3:6].set(cross.T)
     p0 = p0.at[3:6, 3:6].add(cross @ jac.T)  # φ = A b + independent part
     hm = jnp.zeros((3, 12)).at[:, :3].set(jnp.eye(3))
@@ -544,29 +531,52 @@ def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std, jac):
     return t, cs, ps, jnp.concatenate([c.T @ bias[:3], c.T @ bias[3:]])  # body frame
 
 
-def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
-    """Coarse alignment on the first `coarse_s` seconds, then fine alignment over the whole
-    log from that start (module docstring; `fine_kw` go to
-    [`fine_align`][hrgjax.ins.alignment.fine_align]: the gyro's grade `gyro_bias_std`
-    [rad/s] and `arw` [rad/√s] among them). The filter's prior holds the coarse attitude's
-    correlation with the sensor biases
-    ([`coarse_bias_jacobian`][hrgjax.ins.alignment.coarse_bias_jacobian]), so the heading σ
-    ends at `gyro_bias_std / (ω_ie cos lat)`: what the assumed grade allows, not a
-    measurement of the bias ([`AlignmentResult`][hrgjax.ins.alignment.AlignmentResult]).
-    The prior's part beyond the biases is `attitude_std_deg` (default (0.5, 0.5, 5)°: sway
-    and the like) plus the coarse means' white noise
-    ([`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]; 8.45° of heading at
-    88° for the default ARW over 60 s).
+def _warn_heading(start: float, end: float, floor: float, lat: float, coarse: str) -> None:
+    """`AlignmentWarning` for heading σ [°] `start`, `end` beyond the thresholds, the advice
+    by the cause: the grade's limit `floor` σ_ε/(ω_ie cos lat) [°], else the coarse span."""
+    if floor > END_HEADING_STD_DEG:
+        why = (f"{end:.3g}° at the end: the assumed gyro grade's limit σ_ε/(ω_ie cos lat) is "
+               f"{floor:.3g}° (over {END_HEADING_STD_DEG:g}°), a gyro of this grade cannot find "
+               f"north at {abs(lat) / DEG:.3g}° (its error is heavy-tailed: z-RMS 1.1–1.2 at "
+               "20–30°); no longer span helps: take the heading from outside or a better gyro")  # fmt: skip
+    elif end > END_HEADING_STD_DEG:
+        why = (f"{end:.3g}° at the end (over {END_HEADING_STD_DEG:g}°; the grade's limit "
+               f"{floor:.3g}°): the fine stage has not converged; a longer record or {coarse} "
+               "shrinks it")  # fmt: skip
+    elif start > START_HEADING_STD_DEG:
+        why = (f"{start:.3g}° at the fine stage's start (over {START_HEADING_STD_DEG:g}°): the "
+               "coarse heading may be 140–180° off, where the fine filter does not recover "
+               f"(z-RMS 1.15–1.35 at 26–43°); a longer {coarse} shrinks it (as 1/√span)")  # fmt: skip
+    else:
+        return
+    warnings.warn(f"align: heading σ {why}", AlignmentWarning, stacklevel=3)
 
-    **Raises:** `ValueError` when the log is shorter than `coarse_s` or not a stationary
-    record ([`check_stationary`][hrgjax.ins.alignment.check_stationary]: specific force far
-    from g, angular rate far from the Earth's), or for a log within 1° of a pole
-    (gyrocompassing finds north from the horizontal Earth rate, which vanishes there)."""
+
+def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
+          **fine_kw) -> AlignmentResult:  # fmt: skip
+    """Coarse alignment on the first `coarse_s` seconds, then fine alignment on the rest from
+    that start (module docstring; `fine_kw` go to `fine_align`: the gyro's grade
+    `gyro_bias_std` [rad/s] and `arw` [rad/√s] among them). The prior holds the coarse
+    attitude's correlation with the sensor biases (`coarse_bias_jacobian`, or the
+    `start_bias_jacobian` given), so the heading σ ends at `gyro_bias_std / (ω_ie cos lat)`:
+    what the assumed grade allows (`AlignmentResult`). Its part beyond the biases is `attitude_std_deg` (default (0.5, 0.5, 5)°: sway and the
+    like) plus the coarse means' white noise
+    ([`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]; 8.45° of heading at 88°
+    for the default ARW over 60 s), added whatever jacobian is given (the start is the coarse
+    one, whose means hold that noise). `coarse_name`: the span's name in messages.
+
+    **Warns:** `AlignmentWarning` where the heading σ is not small (`END_HEADING_STD_DEG`,
+    `START_HEADING_STD_DEG`), naming the cure. **Raises:** `ValueError` for a log not 2 steps
+    longer than `coarse_s`, not a stationary record
+    ([`check_stationary`][hrgjax.ins.alignment.check_stationary]), or within 1° of a pole."""
     require_x64("ins.alignment.align")
     _check_gyrocompass_latitude(log.lat)
-    check_stationary(log, coarse_s)
-    dt = log.dt
+    check_stationary(log, coarse_s, coarse_name=coarse_name)
+    dt, step = log.dt, fine_kw.get("step_s", 1.0)
     n = int(round(coarse_s / dt))
+    if (log.t.shape[0] - n) // max(1, int(round(step / dt))) < 2:
+        raise ValueError(f"the record ({log.t.shape[0] * dt:.4g} s) needs 2 fine steps "
+                         f"({2 * step:g} s) after {coarse_name} = {coarse_s:g} s")  # fmt: skip
     f_b = jnp.sum(log.dvel[:n], 0) / (n * dt)
     w_b = jnp.sum(log.dtheta[:n], 0) / (n * dt)
     c0 = coarse_align(f_b, w_b, log.lat)
@@ -577,22 +587,14 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, **fine_kw) -> AlignmentResult:
     fine_kw.setdefault("start_bias_jacobian", jac)
     std = np.asarray(fine_kw.get("attitude_std_deg", _ATTITUDE_STD_DEG), dtype=float)
     fine_kw["attitude_std_deg"] = tuple(np.sqrt(std**2 + np.asarray(noise_var) / DEG**2))
-    t, cs, ps, bias = fine_align(log, c0, start_s=0.0, **fine_kw)
+    t, cs, ps, bias = fine_align(log, c0, start_s=n * dt, **fine_kw)  # data the coarse left
     hist = jax.vmap(euler_deg)(cs)
     std = jax.vmap(_euler_std)(cs, ps[:, 3:6, 3:6])
     last, s = np.asarray(hist[-1]), np.asarray(std[-1])
-    start = float(np.asarray(std[0])[0])  # the heading σ after the first step: the prior's
-    if max(start, float(s[0])) > LINEAR_HEADING_STD_DEG:
-        warnings.warn(
-            f"align: heading σ {start:.3g}° at the start, {float(s[0]):.3g}° at the end (over "
-            f"{LINEAR_HEADING_STD_DEG:g}°): the heading error is not small, the filter's "
-            "linearisation fails and its σ understates the error (z-RMS 1.4–1.7 measured); a "
-            "longer coarse_s shrinks the start's (its noise part as 1/√coarse_s)",
-            stacklevel=2,
-        )
+    bg = float(fine_kw.get("gyro_bias_std", _GYRO_BIAS_STD))
+    floor = bg / (OMEGA_IE * math.cos(log.lat)) / DEG
+    _warn_heading(float(np.asarray(std[0])[0]), float(s[0]), floor, log.lat, coarse_name)
     return AlignmentResult(
-        float(last[0]), float(last[1]), float(last[2]),
-        float(s[0]), float(s[1]), float(s[2]),
-        t, hist, std, coarse, bias, cs[-1],
-        float(fine_kw.get("gyro_bias_std", _GYRO_BIAS_STD)) / DEG_PER_H,
+        float(last[0]), float(last[1]), float(last[2]), float(s[0]), float(s[1]), float(s[2]),
+        t, hist, std, coarse, bias, cs[-1], bg / DEG_PER_H,
     )  # fmt: skip
