@@ -293,7 +293,8 @@ def test_temperature_laws_follow_a_steep_ramp_at_a_low_carrier():
     (interpolating the laws' values over chunks was off by 0.22 rad)."""
     p0, p1, lam, t_a, t_b, dur, th_tau, th0 = 0.2, 0.01, 0.05, -20.0, 60.0, 1.0, 0.5, 0.8
     law = hg.TemperatureLaw(p0=p0, p1=p1, lam=lam)
-    res = hg.Resonator(omega=2 * np.pi * 40.0, tau=3.0, k_e=0.554, delta_inv_tau=law,
+    # τ = 0.44 s: both axes damped where Δ(1/τ) peaks (4.43 /s < 2/τ = 4.55 /s)
+    res = hg.Resonator(omega=2 * np.pi * 40.0, tau=0.44, k_e=0.554, delta_inv_tau=law,
                        theta_tau=th_tau)  # fmt: skip
     gyro = hg.Gyro(res, control=hg.Control.free(), readout=hg.Readout(), noise=None)
     prof = hg.Profile.piecewise([0.0, dur], 0.0, [t_a, t_b], wave_angle0_deg=np.degrees(th0))

@@ -88,7 +88,8 @@ def test_c3_damping_anisotropy_free_decay_closed_form():
 def test_c4_lock_in_and_adler(rate_over_threshold):
     """Below threshold the pattern locks at sin2(θ*−θτ) = 2k_eΩ/Δ(1/τ); above, Adler's law."""
     d, th_tau = 0.2, 0.1
-    res = resonator(tau=1e3, delta_inv_tau=d, theta_tau=th_tau)
+    # τ = 5 s: both axes damped (|Δ(1/τ)| < 2/τ, PHYSICS.md §2); lock-in needs only Δ(1/τ)
+    res = resonator(tau=5.0, delta_inv_tau=d, theta_tau=th_tau)
     omega_in = rate_over_threshold * 0.5 * d / 0.554
     rec = sim_closed(hg.Gyro(res), np.rad2deg(omega_in), wave_angle0_deg=70.0)
     th = np.asarray(rec.true_wave_angle)
