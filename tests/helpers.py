@@ -244,3 +244,40 @@ def octave_pairs(ms, n: int):
             ell = np.arange(-(na - 1), nb)
             ha, hb = np.r_[-np.ones(ma), np.ones(ma)], np.r_[-np.ones(mb), np.ones(mb)]
             yield a, b, ma, mb, na, nb, ell, ha, hb
+
+
+def mechanise_ned(traj, c0s, hours, dws=None, rtol=1e-12, atol=1e-14, max_steps=200_000):
+    """Nonlinear NED mechanisation with altitude held (aided), driven by the ideal IMU output
+    of a constant-velocity trajectory (constant in the body frame) plus each constant
+    body-frame gyro error of `dws` (K, 3) [rad/s] (None: none), from each initial attitude of
+    `c0s` (K, 3, 3), in one vmapped solve: (ts [s] (61,), states (K, 61, 14): lat, lon [rad],
+    v_ned [m/s], C_bn row-major)."""
+    import diffrax
+    import jax
+    import jax.numpy as jnp
+
+    earth, h = traj.earth, traj.h[0]
+    f_b, w_b = (x[0] for x in traj.imu())
+    dws = jnp.zeros((c0s.shape[0], 3)) if dws is None else dws
+    skew = lambda w: jnp.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])  # noqa: E731
+
+    def field(t, y, dw):
+        lat, v, c = y[0], y[2:5], y[5:14].reshape(3, 3)
+        w_ie, w_en = earth.earth_rate(lat), earth.transport_rate(lat, h, v)
+        dc = c @ skew(w_b + dw) - skew(w_ie + w_en) @ c
+        dv = c @ f_b - jnp.cross(2 * w_ie + w_en, v) + earth.gravity_ned(lat, h)
+        pos = earth.position_rate(lat, h, v)
+        return jnp.concatenate([pos[:2], dv.at[2].set(0.0), dc.reshape(9)])
+
+    ts = jnp.linspace(0.0, hours * 3600.0, 61)
+
+    @jax.vmap
+    def solve(c0, dw):
+        y0 = jnp.concatenate([jnp.stack([traj.lat[0], traj.lon[0]]), traj.v_ned[0], c0.reshape(9)])
+        return diffrax.diffeqsolve(
+            diffrax.ODETerm(field), diffrax.Tsit5(), 0.0, ts[-1], None, y0, args=dw,
+            saveat=diffrax.SaveAt(ts=ts), max_steps=max_steps,
+            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        ).ys  # fmt: skip
+
+    return ts, solve(c0s, dws)

@@ -1,11 +1,11 @@
 """INS: WGS-84 constants, Kalman utilities and the strapdown error model against the oracles
 of PHYSICS.md §12, closed forms and a nonlinear mechanisation."""
 
-import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import mechanise_ned
 
 from hrgjax import kalman
 from hrgjax.ins import constants as C
@@ -143,41 +143,9 @@ def test_moving_east_eigen_periods():
 
 
 def _mechanise(traj, c0s, hours):
-    """Nonlinear NED mechanisation with altitude held (aided), driven by the ideal IMU output
-    of a constant-velocity trajectory (constant in the body frame), from each initial
-    attitude of `c0s` (K, 3, 3) in one vmapped solve."""
-    earth = traj.earth
-    f_b, w_b = (x[0] for x in traj.imu())
-    h = traj.h[0]
-
-    def field(t, y, args):
-        lat, v, c = y[0], y[2:5], y[5:14].reshape(3, 3)
-        w_ie, w_en = earth.earth_rate(lat), earth.transport_rate(lat, h, v)
-        skew = lambda w: jnp.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
-        dc = c @ skew(w_b) - skew(w_ie + w_en) @ c
-        dv = c @ f_b - jnp.cross(2 * w_ie + w_en, v) + earth.gravity_ned(lat, h)
-        dv = dv.at[2].set(0.0)
-        pos = earth.position_rate(lat, h, v)
-        return jnp.concatenate([pos[:2], dv, dc.reshape(9)])
-
-    ts = jnp.linspace(0.0, hours * 3600.0, 61)
-
-    @jax.vmap
-    def solve(c0):
-        y0 = jnp.concatenate([jnp.stack([traj.lat[0], traj.lon[0]]), traj.v_ned[0], c0.reshape(9)])
-        return diffrax.diffeqsolve(
-            diffrax.ODETerm(field),
-            diffrax.Tsit5(),
-            0.0,
-            ts[-1],
-            None,
-            y0,
-            saveat=diffrax.SaveAt(ts=ts),
-            stepsize_controller=diffrax.PIDController(rtol=1e-12, atol=1e-14),
-            max_steps=200_000,
-        ).ys
-
-    return ts, solve(c0s)
+    """Nonlinear NED mechanisation with altitude held (aided) from each initial attitude of
+    `c0s` (K, 3, 3) in one vmapped solve (`helpers.mechanise_ned`)."""
+    return mechanise_ned(traj, c0s, hours)
 
 
 def test_linear_model_matches_the_nonlinear_mechanisation():

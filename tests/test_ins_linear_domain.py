@@ -3,11 +3,11 @@ attitude errors (or σ) beyond `MAX_ANGLE` are refused, results whose error stat
 warn, and inside it the model agrees with the nonlinear mechanisation to the documented
 ≈ a/2 (`benchmarks/ins_linear_domain.py` has the full table)."""
 
-import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import mechanise_ned
 
 from hrgjax.ins import constants as C
 from hrgjax.ins import ekf
@@ -62,32 +62,8 @@ def test_error_state_leaving_the_domain_warns_naming_when(hour):
 def _nonlinear(traj, dws, hours, c0s):
     """Nonlinear NED mechanisation, altitude held, driven by the ideal IMU output plus each
     constant body-frame gyro error of `dws` (K, 3) from each attitude of `c0s` (K, 3, 3)
-    (the ODE of tests/test_ins_errors._mechanise), vmapped; (ts, (K, 61, 14))."""
-    earth, h = traj.earth, traj.h[0]
-    f_b, w_b = (x[0] for x in traj.imu())
-    skew = lambda w: jnp.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
-
-    def field(t, y, dw):
-        lat, v, c = y[0], y[2:5], y[5:14].reshape(3, 3)
-        w_ie, w_en = earth.earth_rate(lat), earth.transport_rate(lat, h, v)
-        dc = c @ skew(w_b + dw) - skew(w_ie + w_en) @ c
-        dv = c @ f_b - jnp.cross(2 * w_ie + w_en, v) + earth.gravity_ned(lat, h)
-        pos = earth.position_rate(lat, h, v)
-        return jnp.concatenate([pos[:2], dv.at[2].set(0.0), dc.reshape(9)])
-
-    ts = jnp.linspace(0.0, hours * 3600.0, 61)
-
-    @jax.vmap
-    def solve(c0, dw):
-        y0 = jnp.concatenate([jnp.stack([traj.lat[0], traj.lon[0]]), traj.v_ned[0], c0.reshape(9)])
-        return diffrax.diffeqsolve(
-            diffrax.ODETerm(field), diffrax.Tsit5(), 0.0, ts[-1], None, y0, args=dw,
-            saveat=diffrax.SaveAt(ts=ts),
-            stepsize_controller=diffrax.PIDController(rtol=1e-10, atol=1e-12),
-            max_steps=100_000,
-        ).ys  # fmt: skip
-
-    return ts, solve(c0s, dws)
+    (`helpers.mechanise_ned`); (ts, (K, 61, 14))."""
+    return mechanise_ned(traj, c0s, hours, dws, rtol=1e-10, atol=1e-12, max_steps=100_000)
 
 
 def test_inside_the_domain_the_linear_model_is_within_half_the_angle(hour):
