@@ -21,9 +21,9 @@ and INS errors, achieved RMS over seeds (and grid / flights), their ratio (targe
 The first seed of each plan compiles its simulators and the physical fit's groups (rare
 segment lengths share padded ones, neighbouring lengths merged: a designed 12-h plan of 44
 lengths ≈ 40 s on 2 cores, `plan_first_calibration.py`; the seed plan ≈ 1 min); later seeds
-take seconds. With the flights, each calibration's end-of-flight
-wave-angle errors (the compensated rate integrated over each flight) are compared with the
-`warmup` criterion, and with the drift as `drift+warmup` (the default design criterion).
+take seconds. With the flights, each calibration's end-of-flight heading (input-angle)
+errors (the compensated rate integrated over each flight) are compared with the `warmup`
+criterion, and with the drift as `drift+warmup` (the default design criterion).
 Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …]
 [--criterion drift|ins|drift+warmup] [--model physical|empirical] [--levels 4 5 6 7] [--no-mlp]
 [--no-ins]`. The predictions printed are the physical grey box's (the `empirical` model's
@@ -60,8 +60,9 @@ criterion's)."""
 
 
 def warmup_angles(comp, rec):
-    """Each level gyro's wave-angle error at the end of a flight [°]: its compensated rate
-    (the true rate is 0) integrated over the flight (trapezoid on the 1-s samples)."""
+    """Each level gyro's heading (input-angle) error at the end of a flight [°]: its
+    compensated rate (the true rate is 0) integrated over the flight (trapezoid on the 1-s
+    samples)."""
     rate = comp.correct(rec)["rate_corrected_dps"]
     t = np.asarray(rec["time_s"])
     return [float(np.trapezoid(rate[i], t[i])) for i in rec.run_indices()[:2]]

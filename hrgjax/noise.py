@@ -79,6 +79,10 @@ def gauss_markov(key, ts, sigma, correlation_time):
     r"""Stationary first-order Gauss–Markov samples at times `ts` (exact discretisation).
 
     $x_{k+1} = e^{-\Delta t/T_c}x_k + \sigma\sqrt{1-e^{-2\Delta t/T_c}}\,w_k$, $x_0\sim N(0,\sigma^2)$.
+
+    `key` a JAX PRNG key; `ts` (N,) increasing sample times [s]; `sigma` the process's
+    stationary standard deviation [any unit: rad/s for a bias-instability rate];
+    `correlation_time` $T_c$ [s] (> 0). **Returns** (N,) samples in `sigma`'s unit.
     """
     dts = jnp.diff(ts)
     k0, k1 = jax.random.split(key)

@@ -516,7 +516,14 @@ def test_export_round_trips(tmp_path, exact_windows):
         back = load_compensator(save_compensator(comp, tmp_path / f"m{i}.eqx"))
         js = export_json(comp, tmp_path / f"m{i}.json")
         with open(js) as fh:
-            assert json.load(fh)["class"] == type(comp).__name__
+            doc = json.load(fh)
+        assert doc["class"] == type(comp).__name__
+        if isinstance(comp, PhysicalCompensator):  # each parameter's unit beside it (added)
+            units = doc["parameter_units"]
+            assert list(units) == list(doc["parameters"]) == list(physical.NAMES)
+            assert (units["k_e0"], units["bias0"], units["bias2"], units["theta_tau1"],
+                    units["delta_inv_tau0"]) == ("1", "rad/s", "rad/s/degC^2", "rad/degC",
+                                                 "1/s")  # fmt: skip
         for other in (back, load_json(js)):
             assert type(other) is type(comp)
             np.testing.assert_array_equal(other.drift_dph(th, -10.0), ref[0])

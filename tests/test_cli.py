@@ -196,6 +196,9 @@ def test_every_option_has_help_and_its_default_is_shown():
 
     assert DIAGNOSIS_METHODS == METHODS
     assert all(m in " ".join(subs.choices["diagnose"].format_help().split()) for m in METHODS)
+    # the design criteria's angle is the input (heading) angle, 1/k_e of the wave angle's
+    design = " ".join(subs.choices["design"].format_help().split())
+    assert "heading (input-angle) error" in design and "wave-angle error" not in design
 
 
 @pytest.fixture(scope="module")
@@ -425,6 +428,71 @@ def test_imu_calibrate_table_labels_fit_their_column(tmp_path, capsys):
     rows = [ln for ln in capsys.readouterr().out.splitlines() if re.search(r" [+-]\d.* ± ", ln)]
     assert any(ln.lstrip().startswith("gyro g-sens [°/s/(m/s²)] ") for ln in rows), rows
     assert len({re.search(r"[+-]\d", ln).start() for ln in rows}) == 1, rows
+
+
+def test_allan_time_unit_and_stamps_that_are_not_seconds(tmp_path, capsys):
+    """Audit: a 100-Hz log stamped in ms (0, 10, 20, …) was read as 0.1 Hz, its ARW √1000
+    too large, without a word. `--time-unit ms` reads it (τ₀ = 0.01 s, the deviation at τ₀
+    that of the samples: √(mean Δy²/2)); stamps that look like ms — a name `t_ms`,
+    whole-number steps above 1, an epoch in ms — are refused in one line naming
+    `--time-unit`, while a real 0.1-Hz or 1-Hz log in seconds still reads."""
+    import json
+    import re
+
+    y = np.random.default_rng(0).normal(size=64)
+    k = np.arange(64)
+
+    def log(name, column, t):
+        path = tmp_path / name
+        rows = (f"{float(a)!r},{v:.9f}\n" for a, v in zip(t, y, strict=True))
+        path.write_text(f"{column},rate\n" + "".join(rows))
+        return str(path)
+
+    ms = log("ms.csv", "time", 10.0 * k)
+    base = ["--column", "rate", "--time-column"]
+    out = tmp_path / "ms.json"
+    assert main(["allan", ms, *base, "time", "--time-unit", "ms", "--json", str(out)]) == 0
+    assert "64 samples at 100 Hz (0.64 s)" in capsys.readouterr().out
+    dev = json.loads(out.read_text())["deviation"]
+    assert dev["tau_s"][0] == pytest.approx(0.01, rel=1e-12)
+    assert dev["dev"][0] == pytest.approx(np.sqrt(np.mean(np.diff(y) ** 2) / 2), rel=1e-9)
+    error = r"^hrgjax allan: error: .*\.csv: "
+    cli_fails(["allan", ms, *base, "time"], capsys,
+              error + r"time column 'time' steps by whole numbers \(10\), 0\.1 Hz if seconds: "
+              r"stamps in ms\? give --time-unit ms; seconds indeed: --time-unit s \(or "
+              r"--rate-hz 0\.1\)$")  # fmt: skip
+    cli_fails(["allan", ms, *base, "time", "--rate-hz", "100"], capsys,
+              error + r"--rate-hz 100 contradicts the time column's 0\.1 Hz \(stamps in ms\? "
+              r"give --time-unit ms\)$")  # fmt: skip
+    named = log("named.csv", "t_ms", 10.0 * k)
+    cli_fails(
+        ["allan", named, *base, "t_ms"],
+        capsys,
+        error + r"the time column 't_ms' is named in ms: give --time-unit ms",
+    )
+    cli_fails(
+        ["allan", named, *base, "t_ms", "--time-unit", "us"],
+        capsys,
+        error + r"--time-unit us contradicts the time column 't_ms', named in ms$",
+    )
+    epoch = log("epoch.csv", "time", 1.7e12 + 2.5 * k)
+    cli_fails(["allan", epoch, *base, "time"], capsys,
+              error + r"time column 'time' reaches 1\.7e\+12, .* stamps in ms\? give "
+              r"--time-unit ms")  # fmt: skip
+    cli_fails(
+        ["allan", ms, "--column", "rate", "--rate-hz", "100", "--time-unit", "ms"],
+        capsys,
+        r"^hrgjax allan: error: --time-unit is the unit of --time-column",
+    )
+    # seconds: said so, or stamps that are not whole steps above 1 (a 0.1-Hz drift log with
+    # its clock's jitter, a 1-Hz log stamped 0, 1, 2)
+    jitter = 10.0 * k + np.random.default_rng(1).uniform(-1e-3, 1e-3, 64)
+    for path, extra, rate in ((ms, ["--time-unit", "s"], 0.1), (ms, ["--rate-hz", "0.1"], 0.1),
+                              (log("drift.csv", "time", jitter), [], 0.1),
+                              (log("one.csv", "time", 1.0 * k), [], 1.0)):  # fmt: skip
+        assert main(["allan", path, *base, "time", *extra]) == 0
+        found = re.search(r"64 samples at (\S+) Hz", capsys.readouterr().out)
+        assert float(found[1]) == pytest.approx(rate, rel=1e-5)
 
 
 def test_allan_refuses_integers_a_float_would_round(tmp_path, capsys):

@@ -231,6 +231,8 @@ def test_navigate_cli_reports_and_refuses_bad_input(tmp_path, capsys, monte_carl
     # another grade and another outage than the fixture's flights: the same program
     assert "jit(_run_batch)" not in c.names, c.names
     assert "navigation states" in text and "NIS mean" in text
+    # its height and vertical velocity are held to the truth (ins.flights), as the plot says
+    assert "free inertial (height held)" in text
     # the tactical preset's misalignments and scale factors are not in the 15 states: the
     # position σ stays trustworthy, the sensor states' σ does not, and the output says so
     assert d["filter"]["nees_navigation_inside_95_band"] > 0.7

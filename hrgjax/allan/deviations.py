@@ -104,7 +104,9 @@ def _per_tau(fn):
 
 @_per_tau
 def adev(y, m: int = 1, tau0: float = 1.0):
-    """Non-overlapping Allan deviation of rate samples `y` at τ = m·τ0."""
+    """Non-overlapping Allan deviation of rate samples `y` at τ = m·τ0. `y` rate samples
+    (1-D, any unit), `m` the averaging factor (int ≥ 1), `tau0` the sample interval τ0 [s].
+    **Returns** the deviation in `y`'s unit."""
     _check(y, m, 2 * m, "adev")
     ybar = _block_means(y, m)
     return jnp.sqrt(0.5 * jnp.mean(jnp.diff(ybar) ** 2))
@@ -112,7 +114,9 @@ def adev(y, m: int = 1, tau0: float = 1.0):
 
 @_per_tau
 def oadev(y, m: int = 1, tau0: float = 1.0):
-    """Overlapping Allan deviation at τ = m·τ0."""
+    """Overlapping Allan deviation at τ = m·τ0. `y` rate samples (1-D, any unit), `m` the
+    averaging factor (int ≥ 1), `tau0` the sample interval τ0 [s]. **Returns** the deviation
+    in `y`'s unit."""
     _check(y, m, 2 * m, "oadev")
     x = _phase(y, tau0)
     d = x[2 * m :] - 2 * x[m:-m] + x[: -2 * m]
@@ -122,7 +126,9 @@ def oadev(y, m: int = 1, tau0: float = 1.0):
 
 @_per_tau
 def mdev(y, m: int = 1, tau0: float = 1.0):
-    """Modified Allan deviation at τ = m·τ0."""
+    """Modified Allan deviation at τ = m·τ0. `y` rate samples (1-D, any unit), `m` the
+    averaging factor (int ≥ 1), `tau0` the sample interval τ0 [s]. **Returns** the deviation
+    in `y`'s unit."""
     _check(y, m, 3 * m - 1, "mdev")
     x = _phase(y, tau0)
     d = x[2 * m :] - 2 * x[m:-m] + x[: -2 * m]
@@ -134,7 +140,9 @@ def mdev(y, m: int = 1, tau0: float = 1.0):
 
 @_per_tau
 def hdev(y, m: int = 1, tau0: float = 1.0):
-    """Non-overlapping Hadamard deviation at τ = m·τ0."""
+    """Non-overlapping Hadamard deviation at τ = m·τ0. `y` rate samples (1-D, any unit), `m` the
+    averaging factor (int ≥ 1), `tau0` the sample interval τ0 [s]. **Returns** the deviation
+    in `y`'s unit."""
     _check(y, m, 3 * m, "hdev")
     ybar = _block_means(y, m)
     d = ybar[2:] - 2 * ybar[1:-1] + ybar[:-2]
@@ -143,7 +151,9 @@ def hdev(y, m: int = 1, tau0: float = 1.0):
 
 @_per_tau
 def ohdev(y, m: int = 1, tau0: float = 1.0):
-    """Overlapping Hadamard deviation at τ = m·τ0."""
+    """Overlapping Hadamard deviation at τ = m·τ0. `y` rate samples (1-D, any unit), `m` the
+    averaging factor (int ≥ 1), `tau0` the sample interval τ0 [s]. **Returns** the deviation
+    in `y`'s unit."""
     _check(y, m, 3 * m, "ohdev")
     x = _phase(y, tau0)
     d = x[3 * m :] - 3 * x[2 * m : -m] + 3 * x[m : -2 * m] - x[: -3 * m]
@@ -153,7 +163,9 @@ def ohdev(y, m: int = 1, tau0: float = 1.0):
 
 @_per_tau
 def totdev(y, m: int = 1, tau0: float = 1.0):
-    """Total deviation at τ = m·τ0 (phase extended by reflection at both ends)."""
+    """Total deviation at τ = m·τ0 (phase extended by reflection at both ends). `y` rate samples (1-D, any unit), `m` the
+    averaging factor (int ≥ 1), `tau0` the sample interval τ0 [s]. **Returns** the deviation
+    in `y`'s unit."""
     _check(y, m, 2, "totdev")
     x = _phase(y, tau0)
     n = x.shape[0]

@@ -126,7 +126,10 @@ def static_plan(
     duration_s: float = 180.0,
     dt_out: float = 1.0,
 ) -> Plan:
-    """Seed 000's drift calibration: static gyro, every (temperature, wave angle) for 3 min."""
+    """Seed 000's drift calibration: static gyro, every (temperature, wave angle) for 3 min.
+
+    `temperatures_c` [°C] × `angles_deg` (initial electrical wave angles [°]), each point
+    held `duration_s` [s] and sampled every `dt_out` [s]. **Returns** the `Plan`."""
     return _grid(temperatures_c, angles_deg, 0.0, duration_s, dt_out)
 
 
@@ -137,7 +140,11 @@ def rotation_plan(
     duration_s: float = 180.0,
     dt_out: float = 0.5,
 ) -> Plan:
-    """Seed 000's scale-factor calibration: rotation at 5 °/s from each grid point."""
+    """Seed 000's scale-factor calibration: rotation at `rate_dps` [°/s] (the seed's 5 °/s)
+    from each grid point.
+
+    `temperatures_c` [°C] × `angles_deg` (initial electrical wave angles [°]), each point
+    turning for `duration_s` [s], sampled every `dt_out` [s]. **Returns** the `Plan`."""
     return _grid(temperatures_c, angles_deg, rate_dps, duration_s, dt_out)
 
 
@@ -164,7 +171,8 @@ TEST_ANGLES = tuple(float(a) for a in range(-90, 91, 5))
 
 
 def test_plan(quick: bool = False, rate_dps: float = 5.0) -> tuple[Plan, Plan]:
-    """The seed's test grid: static and 5 °/s runs at 5° steps, 5 min per point.
+    """The seed's test grid: static and `rate_dps` [°/s] (5 °/s) runs at 5° (electrical)
+    steps, 5 min per point.
 
     `quick` keeps −40, +20, +60 °C, 15° steps and 2-min runs sampled every 0.5 s."""
     if quick:

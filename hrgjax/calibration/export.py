@@ -26,7 +26,7 @@ from ._compensator import DOMAIN_MARGIN_C
 from .evaluate import NoCompensation
 from .fourier import T_SCALE, FourierCompensator
 from .mlp import MLPCompensator
-from .physical import NAMES, PhysicalCompensator, plant_from_json, plant_to_json
+from .physical import NAMES, PARAMETERS, PhysicalCompensator, plant_from_json, plant_to_json
 from .self_calibration import PrecessionCompensator
 
 FORMAT_VERSION = 3
@@ -233,6 +233,14 @@ def _series(comp, coefs, **fields) -> dict:
     )
 
 
+PARAMETER_UNITS = {
+    name: (unit or "1").replace("°C", "degC").replace("²", "^2") for name, unit, _ in PARAMETERS
+}
+"""The unit of each `"parameters"` entry of a `PhysicalCompensator`'s JSON export (its
+`"parameter_units"`, in the export's ASCII spelling: `rad/s/degC^2`, `1` for a pure number;
+`"covariance"` is in the products of these units)."""
+
+
 def to_json_dict(comp) -> dict:
     """Everything a C implementation needs, as plain lists and numbers (SI units)."""
     _require_fitted(comp)
@@ -295,6 +303,7 @@ def to_json_dict(comp) -> dict:
             formula="see hrgjax.calibration.physical: averaged HRG with these laws and "
             + ("ideal loops" if comp.plant is None else "the PI loops of hyper.plant"),
             parameters={n: float(v) for n, v in zip(NAMES, np.asarray(comp.values), strict=True)},
+            parameter_units=PARAMETER_UNITS,
             covariance=np.asarray(comp.covariance).tolist(),
             hyper=_hyper(comp),
         )

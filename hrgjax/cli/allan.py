@@ -5,6 +5,7 @@ needs, exported for Kalibr and for simulation."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -22,11 +23,15 @@ from .ins import ACCEL_UNIT_NAMES, GYRO_UNIT_NAMES
 
 KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "mtotdev", "ttotdev")
 UNIT_CHOICES = (*GYRO_UNIT_NAMES, *ACCEL_UNIT_NAMES)
+TIME_UNITS = {"s": 1.0, "ms": 1e3, "us": 1e6, "ns": 1e9}
+"""`--time-unit` choices: the time column's unit with how many make a second."""
 
 
-def read_column(path: str, column: str | None, time_column: str | None, rate_hz):
+def read_column(path: str, column: str | None, time_column: str | None, rate_hz,
+                time_unit: str | None = None):  # fmt: skip
     """`(samples, rate [Hz], column name, file line of each row)` from a CSV log: the column named (or the only
-    numeric one that is not the time), its rate from `rate_hz` or the time column (stamps
+    numeric one that is not the time), its rate from `rate_hz` or the time column (in
+    `time_unit`, a key of `TIME_UNITS`; None: seconds, checked by `per_second`; stamps
     that are not uniform: resampled onto `rate_hz` or their median step by the angle).
     Bad input raises `UsageError` naming the file, the column and the row (an integer a
     float64 would round, such as a nanosecond time stamp, too, in the columns used)."""
@@ -69,6 +74,8 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
         dt = np.diff(t)
         if dt.size == 0 or not np.all(np.isfinite(dt)) or np.any(dt <= 0):
             raise UsageError(f"{path}: the time column {time_column!r} must increase")
+        t = t / per_second(path, time_column, t, time_unit, rate_hz)
+        dt = np.diff(t)
         step = regular_step(t)  # the mean regular step: a median is quantised at an epoch
         found = rate_from_stamps(t, step)  # to the digits the stamps resolve
         if not is_uniform(t, step):  # onto a uniform grid by the angle (hrgjax.allan.resample)
@@ -84,12 +91,64 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz)
             stamp = np.searchsorted(t, u.t0 + np.arange(1, u.y.size + 1) * (1.0 / u.rate_hz))
             return u.y, u.rate_hz, column, np.asarray(lines)[np.minimum(stamp, t.size - 1)]
         if rate_hz is not None and abs(found / rate_hz - 1) > max(1e-3, stamp_resolution(t)):
+            hint = ""  # stamps in ms, µs or ns read as seconds: 1e3, 1e6 or 1e9 times slow
+            for unit in ("ms", "us", "ns") if time_unit is None else ():
+                if abs(found * TIME_UNITS[unit] / rate_hz - 1) <= 1e-3:
+                    hint = f" (stamps in {unit}? give --time-unit {unit})"
             raise UsageError(f"{path}: --rate-hz {rate_hz:g} contradicts the time column's "
-                             f"{found:g} Hz")  # fmt: skip
+                             f"{found:g} Hz{hint}")  # fmt: skip
         rate_hz = found
     if rate_hz is None:
         raise UsageError(f"{path}: give --rate-hz or --time-column (the sample rate)")
     return y, float(rate_hz), column, lines
+
+
+_NAMED = re.compile(r"(?:^|[^a-z0-9µ])(s|sec|ms|msec|us|usec|µs|ns|nsec)[^a-z0-9µ]*$", re.I)
+_SPELLINGS = {"sec": "s", "msec": "ms", "usec": "us", "µs": "us", "nsec": "ns"}
+
+
+def named_time_unit(name: str) -> str | None:
+    """The unit a time column's name ends in (`t_ms`, `time [us]`, `stamp_nsec`: a key of
+    `TIME_UNITS`), or None."""
+    found = _NAMED.search(name)
+    return None if found is None else _SPELLINGS.get(found[1].lower(), found[1].lower())
+
+
+def per_second(path: str, name: str, t, unit: str | None, rate_hz=None) -> float:
+    """How many units of the increasing stamps `t` of time column `name` make a second [1/s]:
+    of `--time-unit` `unit`, or seconds (1). A name ending in another unit (`t_ms`) than the one
+    given — or than seconds, when none is — is refused; without either, so are stamps that
+    read as seconds would be 3000 years and more (≥ 1e11: an epoch in ms, µs or ns), and,
+    unless `rate_hz` confirms the rate, stamps whose every step is a whole number above 1
+    (below 1 Hz as seconds: a 100-Hz log stamped in ms steps by 10). A 1-Hz record stamped
+    0, 1, 2 is read as seconds. Each refusal is one line naming the way out (`--time-unit`)."""
+    named = named_time_unit(name)
+    if unit is not None:
+        if named is not None and named != unit:
+            raise UsageError(f"{path}: --time-unit {unit} contradicts the time column "
+                             f"{name!r}, named in {named}")  # fmt: skip
+        return TIME_UNITS[unit]
+    if named is not None and named != "s":
+        raise UsageError(f"{path}: the time column {name!r} is named in {named}: give "
+                         f"--time-unit {named} (stamps are read as seconds by "
+                         "default)")  # fmt: skip
+    if named == "s":
+        return 1.0
+    largest = float(np.max(np.abs(t)))
+    if largest >= 1e11:
+        guess = "ms" if largest < 1e14 else "us" if largest < 1e17 else "ns"
+        raise UsageError(f"{path}: time column {name!r} reaches {largest:.4g}, as seconds "
+                         f"{largest / 3.15576e7:.3g} years: stamps in {guess}? give --time-unit "
+                         f"{guess} (or --time-unit s to read them as seconds)")  # fmt: skip
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    if rate_hz is None and step > 1.0 and np.all(dt >= 1.0) and np.all(dt == np.round(dt)):
+        guess = "ms" if step <= 1e3 else "us" if step <= 1e6 else "ns"
+        raise UsageError(f"{path}: time column {name!r} steps by whole numbers ({step:g}), "
+                         f"{1.0 / step:.4g} Hz if seconds: stamps in {guess}? give --time-unit "
+                         f"{guess}; seconds indeed: --time-unit s (or --rate-hz "
+                         f"{1.0 / step:.4g})")  # fmt: skip
+    return 1.0
 
 
 def cmd_allan(args) -> int:
@@ -109,7 +168,10 @@ def cmd_allan(args) -> int:
         if unit not in TO_SI or TO_SI[unit][0] != sensor:
             raise UsageError(f"--kalibr needs --unit of a {sensor}'s rate (one of "
                              f"{', '.join(UNIT_CHOICES)}); got {unit or 'none'}")  # fmt: skip
-    y, rate_hz, column, lines = read_column(args.log, args.column, args.time_column, args.rate_hz)
+    if args.time_unit is not None and args.time_column is None:
+        raise UsageError("--time-unit is the unit of --time-column: it does not apply without it")
+    y, rate_hz, column, lines = read_column(args.log, args.column, args.time_column, args.rate_hz,
+                                            args.time_unit)  # fmt: skip
     gaps = np.flatnonzero(np.isnan(y))
     if gaps.size and (args.fit or args.kalibr):
         raise UsageError(
@@ -225,8 +287,12 @@ def _allan_parser(sub):
                    help="the column's rate unit (labels, JSON; needed for --kalibr)")  # fmt: skip
     p.add_argument("--rate-hz", type=POSITIVE_FLOAT, default=None, help="sample rate [Hz]")
     p.add_argument("--time-column", default=None,
-                   help="a time column [s]; stamps that are not uniform are resampled "
-                   "by the integrated angle (onto --rate-hz, or the median step)")  # fmt: skip
+                   help="a time column (in --time-unit); stamps that are not uniform are "
+                   "resampled by the integrated angle (onto --rate-hz, or the median step)")  # fmt: skip
+    p.add_argument("--time-unit", default=None, choices=tuple(TIME_UNITS),
+                   help="the time column's unit (default s; stamps that look like ms, µs or "
+                   "ns — a name such as t_ms, whole-number steps above 1, an epoch — are "
+                   "refused without it)")  # fmt: skip
     p.add_argument("--kind", default="oadev", choices=KINDS, help="the deviation (oadev)")
     p.add_argument("--taus", default="octave", type=_taus,
                    help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip

@@ -84,7 +84,7 @@ def cmd_navigate(args) -> int:
     for name in ("filter", "smoother", "free"):
         r = out[name]
         gap = r.get("gap_horizontal_max_m", float("nan"))
-        label = {"free": "free inertial (height aided)"}.get(name, name)
+        label = {"free": "free inertial (height held)"}.get(name, name)
         print(f"{label:>32} {r['horizontal_rms_m']:9.2f} {r['horizontal_max_m']:9.2f} "
               f"{gap:9.2f} {r['final_horizontal_median_m']:9.2f}")  # fmt: skip
     lo, hi = out["nees_band_95"]
