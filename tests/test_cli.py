@@ -495,6 +495,23 @@ def test_allan_time_unit_and_stamps_that_are_not_seconds(tmp_path, capsys):
         assert float(found[1]) == pytest.approx(rate, rel=1e-5)
 
 
+def test_allan_names_the_line_of_a_stamp_that_does_not_increase(tmp_path, capsys):
+    """Audit: one duplicated or backward stamp was refused as "the time column 'time_s' must
+    increase", naming neither line nor kind (`hg.load` names both): now the line, both
+    stamps and which it is."""
+    t = [f"{0.01 * i:.2f}" for i in range(40)]
+    for name, i, stamp, what in (("dup.csv", 20, t[19], "a duplicate time stamp"),
+                                 ("back.csv", 30, "0.05", "time goes backwards")):  # fmt: skip
+        rows = list(t)
+        rows[i] = stamp
+        (tmp_path / name).write_text("time_s,gyro\n" + "".join(f"{s},{k % 3}\n" for k, s in
+                                                               enumerate(rows)))  # fmt: skip
+        cli_fails(["allan", str(tmp_path / name), "--column", "gyro", "--time-column", "time_s"],
+                  capsys, rf"^hrgjax allan: error: .*{name}: line {i + 2}: {what} in 'time_s' "
+                  rf"\({float(stamp)!r} after {float(t[i - 1])!r} on line {i + 1}\); the time "
+                  r"column must increase$")  # fmt: skip
+
+
 def test_allan_refuses_integers_a_float_would_round(tmp_path, capsys):
     """Audit: `hrgjax allan` read nanosecond stamps 1700000000000000001, …003 as one time
     ("the time column must increase"; further apart they were rounded silently). The columns

@@ -191,6 +191,13 @@ class CompositeNoise:
         - `{sensor}_random_walk` = √(K² + Σ 2σᵢ²/Tᵢ): each Gauss–Markov term's rate wanders
           like a random walk of that strength over times short against Tᵢ (what hrgjax's EKF
           uses, `hrgjax.ins.ekf`); over longer times Kalibr's walk overstates it.
+        - except a Gauss–Markov term of Tᵢ ≤
+          [`GM_AS_WHITE`][hrgjax.allan.composite.GM_AS_WHITE]·Δt (a digital low-pass, output
+          smoothed over a few samples): white noise, 2σᵢ²Tᵢ added to N² — its rate PSD at
+          low frequency, exact for T ≪ Δt. Its Allan variance 2σ²T/τ bounds the term's own
+          at every τ and is within 15 % of it from τ = 10 T; as a walk, K²τ/3 = 2σ²τ/(3T)
+          would exceed it 200× at 100 Δt (a 100-Hz white log low-passed to T = 1.5 Δt
+          exported N 0.028 for 0.100 °/h·√s, K 6.4 °/h/√s for 0).
 
         A term the record did not need counts 0, except that where an entry would be 0 (N and
         Q, or K and every Gauss–Markov term, absent) N's or K's upper bound (`bounds`) is
@@ -204,9 +211,11 @@ class CompositeNoise:
         scale = _si_scale(self.unit, sensor)
         dt = 1.0 / self.rate_hz
         q = self.value("quantization")
-        gms = [(g["sigma"]["value"], g["correlation_time"]["value"])
-               for name, g in self.terms.items() if name.startswith("gauss_markov")]  # fmt: skip
-        extra = {"noise_density": 2.0 * q * q / dt,
+        terms = [(g["sigma"]["value"], g["correlation_time"]["value"])
+                 for name, g in self.terms.items() if name.startswith("gauss_markov")]  # fmt: skip
+        fast = [(s, t) for s, t in terms if t <= GM_AS_WHITE * dt]  # white at Kalibr's Δt
+        gms = [(s, t) for s, t in terms if t > GM_AS_WHITE * dt]
+        extra = {"noise_density": 2.0 * q * q / dt + sum(2.0 * s * s * t for s, t in fast),
                  "random_walk": sum(2.0 * s * s / t for s, t in gms)}  # fmt: skip
         values, notes = {}, {}
         for key, name in (
@@ -221,11 +230,16 @@ class CompositeNoise:
                     raise ValueError(f"to_kalibr: {name} was not identified and has no finite "
                                      "bound; Kalibr needs a positive value")  # fmt: skip
             values[key] = math.sqrt(v * v + extra[key]) * scale
+        folded = []
         if q > 0:
-            notes["noise_density"] = (
-                f" sqrt(N^2 + 2Q^2/dt), Q = {q:.4g} {self.unit}*s white "
-                "angle noise folded in: valid at this update_rate only"
-            )
+            folded.append(f"2Q^2/dt, Q = {q:.4g} {self.unit}*s white angle noise (valid at "
+                          "this update_rate only)")  # fmt: skip
+        if fast:
+            folded.append(f"2 sigma^2 T, Gauss-Markov rate(s) "
+                          f"{', '.join(f'(sigma {s:.4g}, T {t:.4g} s)' for s, t in fast)} "
+                          f"correlated over <= {GM_AS_WHITE:g} samples")  # fmt: skip
+        if folded:
+            notes["noise_density"] = f" sqrt(N^2 + ...): {'; '.join(folded)} folded in as white"
         if gms:
             notes["random_walk"] = (" sqrt(K^2 + sum 2 sigma^2/T): Gauss-Markov bias "
                                     f"{', '.join(f'(sigma {s:.4g}, T {t:.4g} s)' for s, t in gms)}"
@@ -288,6 +302,11 @@ class CompositeNoise:
             correlation_time=100.0 if gm is None else gm["correlation_time"]["value"],
         )
 
+
+GM_AS_WHITE = 4.0
+"""[`to_kalibr`][hrgjax.allan.CompositeNoise.to_kalibr] writes a Gauss–Markov term whose
+correlation time is at most this many sample steps as white noise (N² += 2σ²T), a longer
+one as a random walk (K² += 2σ²/T) [samples]."""
 
 TO_SI = {
     **{u: ("gyroscope", f) for u, f in GYRO_UNITS.items()},

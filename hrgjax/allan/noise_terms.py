@@ -18,7 +18,7 @@ from statistics import NormalDist
 import numpy as np
 
 from .._nnls import nnls as _nnls
-from .octave_covariance import covariance, unit_avar
+from .octave_covariance import covariance, gapped_covariance, unit_avar
 from .result import AllanResult
 from .uncertainty import chi2_sf
 
@@ -57,8 +57,8 @@ class NoiseFit:
     - `chi2`, `dof`: the misfit of the Allan variance (whitened by the covariance the fit
       used) and its degrees of freedom.
     - `method`: how the σ were obtained — `"gls"`: generalised least squares under the
-      overlapping estimator's exact Gaussian covariance for the record's length, evaluated
-      at the fit; `"gls, flicker approximated"`: the same with the bias instability's
+      overlapping estimator's exact Gaussian covariance for the record's length (with gaps:
+      for its gap-free runs, `AllanResult.segments`), evaluated at the fit; `"gls, flicker approximated"`: the same with the bias instability's
       flicker noise taken as a sum of Gauss–Markov terms; `"independent: <reason>"`: the τ
       points taken as independent with EDF weights (σ too narrow: K's z-RMS ≈ 1.8), and why
       the covariance could not be used.
@@ -101,8 +101,10 @@ def flicker_as_gauss_markov(ms, tau0: float) -> list:
 
 def _record(result: AllanResult):
     """`((n, τ₀), "")`: the gap-free record of n rate samples every τ₀ behind an oadev
-    result, from its factors and counts (oadev averages n + 1 − 2m second differences) — or
-    `(None, why)` where the estimator's covariance does not apply."""
+    result, from its factors and counts (oadev averages n + 1 − 2m second differences), or
+    for a rate record with gaps its runs `segments` ((R, 2): start, length) in place of n,
+    checked against the counts (Σᵣ max(Lᵣ + 1 − 2m, 0)) — or `(None, why)` where the
+    estimator's covariance does not apply."""
     if result.kind != "oadev":
         return None, "adev (non-overlapping estimates: their covariance is not implemented)"
     if result.m is None or result.n_terms is None:
@@ -115,11 +117,26 @@ def _record(result: AllanResult):
     if not np.allclose(tau0, tau0[0], rtol=1e-9, atol=0.0):
         return None, "τ/m differs between τ (not one sampling interval)"
     n = counts + 2 * m - 1
-    if np.any(n != n[0]):
-        return None, "a record with gaps (fewer terms than a gap-free record's)"
+    segments = getattr(result, "segments", None)
+    if segments is not None:
+        segments = np.asarray(segments)
+        ok = segments.ndim == 2 and segments.shape[1] == 2 and segments.shape[0] > 0
+        held = np.maximum(segments[:, 1:2] + 1 - 2 * m[None, :], 0).sum(0) if ok else None
+        if not ok or np.any(segments < 0) or np.any(held != counts):
+            return None, "the result's segments do not hold its counts of terms"
+    elif np.any(n != n[0]):
+        why = "a record with gaps and no runs (angle data): fewer terms than a gap-free one's"
+        return None, why
     if m.size > _MAX_TAUS:
         return None, f"more than {_MAX_TAUS} τ (fit an octave or decade grid)"
-    return (int(n[0]), float(tau0[0])), ""
+    return (segments if segments is not None else int(n[0]), float(tau0[0])), ""
+
+
+def _cov(coef: dict, gm: list, ms, n, tau0: float) -> np.ndarray:
+    """The estimates' covariance for the record `n`: a length, or runs (`_record`)."""
+    if isinstance(n, np.ndarray):
+        return gapped_covariance(coef, gm, ms, n, tau0)
+    return covariance(coef, gm, ms, n, tau0)
 
 
 def _omega(coef2: dict, flicker, ms, n, tau0, var):
@@ -127,8 +144,9 @@ def _omega(coef2: dict, flicker, ms, n, tau0, var):
     variance floored at 1e-6 of its own (or of the estimate's 2σ̂⁴/n) so it stays invertible."""
     lin = {t: c for t, c in coef2.items() if t in _COVARIANCE_TERMS}
     gm = [(coef2.get("bias_instability", 0.0) * s2, t) for s2, t in flicker]
-    om = covariance(lin, gm, ms, n, tau0)
-    return om + np.diag(1e-6 * np.maximum(np.diag(om), 2 * var**2 / max(n, 1)))
+    om = _cov(lin, gm, ms, n, tau0)
+    size = int(n[:, 1].sum()) if isinstance(n, np.ndarray) else n
+    return om + np.diag(1e-6 * np.maximum(np.diag(om), 2 * var**2 / max(size, 1)))
 
 
 def _pearson3_cdf(x: float, theta: float, own: float, rest: float) -> float:
@@ -192,9 +210,14 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
     GLS under the exact Gaussian covariance Ω of the overlapping estimates for the record's
     length ([`covariance`][hrgjax.allan.octave_covariance.covariance]: finite record,
     neighbouring τ 0.5–0.8 correlated) evaluated at the fit, four times, and the
-    coefficients' covariance is (AᵀΩ⁻¹A)⁻¹. The bias instability (flicker rate noise) has no
+    coefficients' covariance is (AᵀΩ⁻¹A)⁻¹. A rate record with gaps gets the same from its
+    gap-free runs (`AllanResult.segments`;
+    [`gapped_covariance`][hrgjax.allan.octave_covariance.gapped_covariance]: the runs'
+    differences correlated only through the flicker's tails): one missing sample in 4 000
+    leaves σ as it was, where the independent τ made σ of N 0.71× too small
+    (`benchmarks/coverage_fit_gaps.py`). The bias instability (flicker rate noise) has no
     closed form there: it enters Ω as a sum of Gauss–Markov terms (`flicker_as_gauss_markov`
-    in this module). Where Ω cannot be had — `adev` (non-overlapping estimates), a record
+    in this module). Where Ω cannot be had — `adev` (non-overlapping estimates), angle data
     with gaps, a result without its factors and counts, more than 64 τ — the τ points are
     taken as independent with EDF weights, intervals too narrow, and `method` says so with
     the reason.
@@ -290,8 +313,8 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
 
             def own_cov(name, n=n):  # Ω of one term alone at unit coefficient²
                 if name == "bias_instability":
-                    return covariance({}, flicker, ms, n, tau0)
-                return covariance({name: 1.0}, [], ms, n, tau0)
+                    return _cov({}, flicker, ms, n, tau0)
+                return _cov({name: 1.0}, [], ms, n, tau0)
 
             method = "gls, flicker approximated" if flicker else "gls"
     z = NormalDist().inv_cdf(0.5 + result.ci / 2)

@@ -358,7 +358,11 @@ def covariance(
     Gauss–Markov terms' exponentials are left (c = Σ_g K_g φ_g^x, x lags past the last kink,
     the count linear in x), and both tails are summed in closed form."""
     sampling = _check_sampling(sampling)
-    lay = _layout(tuple(int(m) for m in ms), int(n))
+    return _covariance(_layout(tuple(int(m) for m in ms), int(n)), coef, gm, ms, tau0, sampling)
+
+
+def _covariance(lay, coef, gm, ms, tau0, sampling):
+    """[`covariance`][hrgjax.allan.octave_covariance.covariance] on the record's layout `lay`."""
     ma, mb, na, nb = lay["ma"], lay["mb"], lay["na"], lay["nb"]
     lin = {t: c for t, c in coef.items() if t in ("angle_random_walk", "rate_random_walk")}
     gms = [(s2, tau0 / tt) for s2, tt in gm if s2 > 0]
@@ -396,4 +400,91 @@ def covariance(
     out = np.zeros((len(ms), len(ms)))
     out[lay["ia"], lay["ib"]] = total / (4.0 * ma**2 * mb**2 * na * nb)
     out[lay["ib"], lay["ia"]] = out[lay["ia"], lay["ib"]]
+    return out
+
+
+def gapped_covariance(
+    coef: dict, gm: list, ms, segments, tau0: float, sampling: str = "interval"
+) -> np.ndarray:
+    """[`covariance`][hrgjax.allan.octave_covariance.covariance] for a rate record with gaps:
+    `segments` the (start, length) of each gap-free run of rate samples, in order [samples]
+    (`AllanResult.segments`); each estimate averages the second differences whose window of
+    2m samples lies in one run (`hrgjax.allan.gaps`), M_a = Σᵣ max(Lᵣ + 1 − 2m_a, 0) of them. [unit⁴]
+
+    Windows in different runs do not overlap, so a pair of them is correlated only through
+    the Gauss–Markov terms' exponential tails: the sum over pairs is, per run, that of a
+    gap-free record of its length (`covariance` × Nₐ⁽ʳ⁾N_b⁽ʳ⁾, once per distinct length),
+    plus across runs r < s the tails' geometric sums Σ φ^x = Σ_{r<s} G(Nₐ⁽ʳ⁾)G(N_b⁽ˢ⁾)φ^{dᵣₛ}
+    (G(N) = Σ_{k<N} φᵏ, dᵣₛ the samples between the runs; both orders of a and b), over
+    MₐM_b. Exact for the model, as `covariance` is; the cost grows with the number of
+    distinct run lengths (a `covariance` call each) and, with Gauss–Markov terms, of runs."""
+    sampling = _check_sampling(sampling)
+    segs = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
+    starts, lengths = segs[:, 0], segs[:, 1]
+    ms = np.asarray(ms, dtype=np.int64)
+    per_run = np.maximum(lengths[:, None] + 1 - 2 * ms[None, :], 0).astype(float)  # (R, S)
+    total = np.zeros((ms.size, ms.size))
+    for length, times in zip(*np.unique(lengths, return_counts=True), strict=True):
+        k = np.flatnonzero(length + 1 - 2 * ms >= 1)
+        if k.size:
+            nk = (length + 1 - 2 * ms[k]).astype(float)
+            key = (tuple(int(m) for m in ms[k]), int(length))
+            lay = _run_layout(*key) if k.size <= 16 else _layout(*key)
+            om = _covariance(lay, coef, gm, ms[k], tau0, sampling)
+            total[np.ix_(k, k)] += times * om * np.outer(nk, nk)
+    gms = [(s2, tau0 / tt) for s2, tt in gm if s2 > 0]
+    if gms and lengths.size > 1:
+        ia, ib = np.triu_indices(ms.size)
+        ma, mb = ms[ia].astype(float), ms[ib].astype(float)
+        eps = np.array([e for _, e in gms])
+        amp = np.stack(
+            [
+                _gm_weights(s2, e, sampling)[1] * np.expm1(-e * ma) ** 2 * np.expm1(-e * mb) ** 2
+                for s2, e in gms
+            ]
+        )  # (G, pairs) fmt: skip
+        mu2 = coef.get("rate_ramp", 0.0) * tau0**2 * ma**2 * mb**2
+        # rates ρ of the sums: φ_gφ_h for c², φ_g for the drift's 4μμc
+        rates = np.concatenate([(eps[:, None] + eps[None, :]).ravel(), eps])  # (C,)
+        weight = np.concatenate(
+            [2 * (amp[:, None] * amp[None, :]).reshape(-1, ia.size), 4 * mu2 * amp]
+        )  # (C, pairs) fmt: skip
+        cross = _cross_runs(rates, per_run[:, ia], per_run[:, ib], starts, lengths)
+        total[ia, ib] += np.sum(weight * cross, axis=0) / (4.0 * ma**2 * mb**2)
+        total[ib, ia] = total[ia, ib]
+    count = per_run.sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return total / np.outer(count, count)
+
+
+_run_layout = functools.lru_cache(maxsize=64)(_layout.__wrapped__)
+"""`_layout` for the runs of gapped records: a fit evaluates the covariance 5–7 times over
+every distinct run length (tens where 1 % of the samples are missing at random); with ≤ 16 τ
+a layout is ≤ 3 MB."""
+
+
+def _cross_runs(rates, na, nb, starts, lengths):
+    """Σ over pairs of differences in different runs of e^{−rate·x}, x the tail's lag (the
+    samples between the two windows): Σ_{r<s} [G(naᵣ)G(nb_s) + G(nbᵣ)G(na_s)]·e^{−rate·dᵣₛ},
+    G(N) = Σ_{k<N} e^{−rate·k}, dᵣₛ = start_s − (startᵣ + Lᵣ); `na`, `nb` (runs, pairs) the
+    differences each run holds at the pair's two factors. Returns (rates, pairs), by one pass
+    over the runs."""
+    r = np.asarray(rates, dtype=float)[:, None]
+    den = -np.expm1(-r)
+
+    def geo(n):  # Σ_{k<n} e^{−r k}
+        return -np.expm1(-r * n) / den
+
+    ca = np.zeros((r.size, na.shape[1]))  # Σ_{earlier runs} G(n)·e^{−r·(distance to here)}
+    cb = np.zeros_like(ca)
+    out = np.zeros_like(ca)
+    for i in range(starts.size):
+        if i:
+            step = np.exp(-r * float(starts[i] - starts[i - 1]))
+            ca *= step
+            cb *= step
+            back = np.exp(-r * float(starts[i] - starts[i - 1] - lengths[i - 1]))
+            ca += geo(na[i - 1]) * back
+            cb += geo(nb[i - 1]) * back
+            out += ca * geo(nb[i]) + cb * geo(na[i])
     return out

@@ -55,6 +55,10 @@ class AllanResult:
       [`noise_id`][hrgjax.allan.noise_id]).
     - `bias_factor`: what `dev` was multiplied by to remove the estimator's bias (totdev:
       1/√(1 − a·τ/T), NIST SP 1065 §5.2.11; 1 elsewhere and where the correction was off).
+    - `segments`: for a rate record with gaps, the (start, length) of each gap-free run of
+      samples [samples], an (R, 2) integer array
+      ([`fit_noise`][hrgjax.allan.fit_noise] builds the estimates' covariance from it);
+      `None` for a gap-free record or angle data.
 
     `print(result)` shows it as a table; `to_dict`, `to_json(path)` and `to_csv(path)` write
     it with its units.
@@ -72,6 +76,7 @@ class AllanResult:
     alpha: np.ndarray
     bias_factor: np.ndarray | None = None
     unit: str = ""
+    segments: np.ndarray | None = None
 
     def _columns(self) -> dict:
         return {
@@ -360,6 +365,7 @@ def deviation(
     return AllanResult(
         kind=kind, ci=float(ci), taus=taus_s, m=m, dev=dev, dev_low=low, dev_high=high,
         edf=edf, n_terms=n_terms, alpha=alpha, bias_factor=factor, unit=str(unit),
+        segments=_runs(y) if gaps and data == "rate" else None,
     )  # fmt: skip
 
 
@@ -418,6 +424,13 @@ def _segments(y: np.ndarray, data: str) -> list[int]:
     edges = np.flatnonzero(np.diff(ok.astype(np.int8)))
     runs = edges[1::2] - edges[::2]
     return [int(r) + (data == "rate") for r in runs]
+
+
+def _runs(y: np.ndarray) -> np.ndarray:
+    """(start, length) of each run of finite samples of `y`, in order [samples]."""
+    ok = np.concatenate([[False], np.isfinite(y), [False]])
+    edges = np.flatnonzero(np.diff(ok.astype(np.int8)))
+    return np.stack([edges[::2], edges[1::2] - edges[::2]], axis=1).astype(np.int64)
 
 
 def _gapped_edf(kind: str, alpha: int, m: int, n_terms: int, segments, fallback) -> float:

@@ -72,8 +72,16 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz,
                              f"{time_column!r} (a row of empty fields?); every sample needs "
                              "its time: fill it in or delete the row")  # fmt: skip
         dt = np.diff(t)
-        if dt.size == 0 or not np.all(np.isfinite(dt)) or np.any(dt <= 0):
-            raise UsageError(f"{path}: the time column {time_column!r} must increase")
+        if dt.size == 0:
+            raise UsageError(f"{path}: the time column {time_column!r} has one sample; a "
+                             "deviation needs a record")  # fmt: skip
+        bad = np.flatnonzero(~(dt > 0))
+        if bad.size:
+            i = int(bad[0])
+            what = "a duplicate time stamp" if dt[i] == 0 else "time goes backwards"
+            raise UsageError(f"{path}: line {int(lines[i + 1])}: {what} in {time_column!r} "
+                             f"({float(t[i + 1])!r} after {float(t[i])!r} on line {int(lines[i])}); the "
+                             "time column must increase")  # fmt: skip
         t = t / per_second(path, time_column, t, time_unit, rate_hz)
         dt = np.diff(t)
         step = regular_step(t)  # the mean regular step: a median is quantised at an epoch
@@ -84,10 +92,17 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz,
             with usage_errors(prefix=path):
                 u = to_uniform(t, y, rate_hz=rate_hz or found)
             gaps = f", {len(u.gaps)} interval(s) over 2.5 steps left as gaps" if u.gaps else ""
-            print(f"hrgjax allan: {path}: time stamps not uniform (steps {dt.min():.6g} to "
-                  f"{dt.max():.6g} s): resampled at {u.rate_hz:g} Hz by the integrated "
-                  f"angle{gaps}; white noise reads low at the shortest τ "
-                  "(docs/allan.md)")  # fmt: skip
+            if u.interpolated == 0 and u.breaks:  # a uniform clock that stalled: no sample read
+                print(f"hrgjax allan: {path}: time stamps uniform at {u.rate_hz:g} Hz but for "
+                      f"{len(u.breaks)} stall(s) of a fraction of a step (the first at "
+                      f"{u.breaks[0][0]:.6g} s): the grid restarts after each, its samples "
+                      f"are NaN, every other sample is the log's own{gaps} "
+                      "(docs/allan.md)")  # fmt: skip
+            else:
+                print(f"hrgjax allan: {path}: time stamps not uniform (steps {dt.min():.6g} "
+                      f"to {dt.max():.6g} s): resampled at {u.rate_hz:g} Hz by the integrated "
+                      f"angle{gaps}; white noise reads low at the shortest τ "
+                      "(docs/allan.md)")  # fmt: skip
             stamp = np.searchsorted(t, u.t0 + np.arange(1, u.y.size + 1) * (1.0 / u.rate_hz))
             return u.y, u.rate_hz, column, np.asarray(lines)[np.minimum(stamp, t.size - 1)]
         if rate_hz is not None and abs(found / rate_hz - 1) > max(1e-3, stamp_resolution(t)):
