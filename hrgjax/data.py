@@ -48,8 +48,10 @@ class MeasuredData:
     file would not keep it), mismatched lengths, values that are not real numbers (text in
     a contract column, booleans, complex numbers, dates or durations), NaN or infinite
     values, integers too large to hold exactly, a run id that is not an exactly representable
-    integer, or time that does not strictly increase within a run (checked run by run, also
-    when the rows of several runs are interleaved).
+    integer, time that does not strictly increase within a run (checked run by run, also
+    when the rows of several runs are interleaved), or values [`hrgjax.plausible`][] refuses
+    (a temperature in kelvin, a specific force in m/s² or mg: `accel_*_g` whose magnitude is
+    ≈ 9.81 on most rows, `check_specific_force`).
     """
 
     def __init__(self, columns: Mapping[str, object], allow_extra: bool = False):
@@ -95,6 +97,13 @@ class MeasuredData:
         check_time(cols["time_s"], self.run)
         for name in ("temperature_c", "table_rate_dps", "wave_angle_deg"):
             plausible.check(f"column {name!r}", cols[name], name)
+        accel = [k for k in ("accel_x_g", "accel_y_g", "accel_z_g") if k in cols]
+        if accel:  # each within ±20 g, and not 1 g in m/s² or mg
+            plausible.check_specific_force(
+                f"column(s) {', '.join(map(repr, accel))}",
+                [f"column {k!r}" for k in accel],
+                np.stack([cols[k] for k in accel], axis=1),
+            )
         turning = cols["table_rate_dps"] != 0.0
         given = "table_angle_deg" in cols
         # the wave turns against the table where it runs free: not where force-to-rebalance

@@ -34,6 +34,16 @@ _DEFAULTS: dict[str, tuple[float, float, str]] = {
     "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
     "specific_force_g": (-20.0, 20.0, "g"),
     "precession_dps": (-2e4, 2e4, "°/s electrical"),
+    "imu_gyro_bias": (-0.1, 0.1, "rad/s"),
+    "imu_accel_bias": (-1.0, 1.0, "m/s²"),
+    "imu_scale": (-0.1, 0.1, "(a fraction: 1e-6 = 1 ppm)"),
+    "imu_misalignment": (-0.1, 0.1, "rad"),
+    "imu_arw": (0.0, 5e-3, "rad/√s"),
+    "imu_vrw": (0.0, 0.05, "m/s/√s"),
+    "imu_gyro_bias_instability": (0.0, 0.01, "rad/s"),
+    "imu_accel_bias_instability": (0.0, 0.1, "m/s²"),
+    "imu_gyro_rate_random_walk": (0.0, 1e-4, "rad/s/√s"),
+    "imu_accel_random_walk": (0.0, 0.01, "m/s²/√s"),
 }
 """The default ranges; [`RANGES`][hrgjax.plausible.RANGES] is what is in force."""
 
@@ -78,7 +88,28 @@ banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s])
 centrifuge test of the g-sensitivity; beyond it the g-sensitivity term is all a simulation
 shows), and a `Profile`'s commanded precession (±2·10⁴ °/s electrical: a trapezoid pulse of
 force-to-rebalance slews at thousands of °/s; the averaging needs the wave slow against the
-carrier's ≈ 10⁶ °/s of phase, and a rate in °/h read as °/s is 3600× too large)."""
+carrier's ≈ 10⁶ °/s of phase, and a rate in °/h read as °/s is 3600× too large), and the
+errors of an `hrgjax.ins.sensors.ImuModel` in SI (`imu_*`; its worst preset, consumer MEMS,
+lies 5–70× inside each): a gyro bias of 0.1 rad/s (≈ 5.7 °/s), an accelerometer bias of
+1 m/s² (≈ 0.1 g), a scale factor of 0.1 (10⁵ ppm), a misalignment of 0.1 rad, an ARW of
+5·10⁻³ rad/√s (≈ 17 °/√h), a VRW of 0.05 m/s/√s (≈ 5 mg/√Hz), bias instabilities of
+0.01 rad/s (≈ 2000 °/h) and 0.1 m/s², rate and acceleration random walks of 10⁻⁴ rad/s/√s
+(≈ 1200 °/h/√h) and 0.01 m/s²/√s — a value beyond is one in the datasheet's unit (°/h, ppm,
+°/√h, µg), named so with the factor that converts it."""
+
+IMU_HINTS = {
+    "imu_gyro_bias": "°/h? multiply by hrgjax.units.DEG_PER_H",
+    "imu_gyro_bias_instability": "°/h? multiply by hrgjax.units.DEG_PER_H",
+    "imu_accel_bias": "µg or mg? multiply by hrgjax.ins.sensors.MICRO_G or 9.80665e-3",
+    "imu_accel_bias_instability": "µg? multiply by hrgjax.ins.sensors.MICRO_G",
+    "imu_scale": "ppm? multiply by 1e-6 (percent: by 1e-2)",
+    "imu_misalignment": "µrad or mrad? multiply by 1e-6 or 1e-3",
+    "imu_arw": "°/√h? multiply by hrgjax.units.DEG_PER_SQRT_H",
+    "imu_vrw": "µg/√Hz? multiply by hrgjax.ins.sensors.MICRO_G (m/s/√h: divide by 60)",
+    "imu_gyro_rate_random_walk": "°/h/√h? multiply by hrgjax.units.DEG_PER_H / 60",
+    "imu_accel_random_walk": "µg/√s? multiply by hrgjax.ins.sensors.MICRO_G",
+}
+"""The unit each `imu_*` range's message names, with its conversion to SI."""
 
 KELVIN_HINT_C = 200.0
 """A temperature column whose every value is ≥ this [°C] looks like kelvin (250–400 K is
@@ -89,7 +120,10 @@ KELVIN_HINT_C = 200.0
 def relaxed(**ranges: tuple[float, float]) -> Iterator[None]:
     """Widen (or narrow) ranges of `RANGES` inside a `with` block, e.g.
     `relaxed(temperature_c=(-200.0, 200.0))` [in the quantity's own unit]. The change holds
-    for the calling thread (and asyncio task) only, until the block ends; blocks nest."""
+    for the calling thread (and asyncio task) only, until the block ends; blocks nest.
+    Naming `specific_force_g` also takes a specific force whose magnitude sits at ≈ 9.81 as
+    g (a centrifuge run), not as m/s²
+    ([`check_specific_force`][hrgjax.plausible.check_specific_force])."""
     new = dict(_OVERRIDES.get() or {})
     for name, (low, high) in ranges.items():
         if name not in _DEFAULTS:
@@ -109,7 +143,7 @@ def _hint(name: str, values: np.ndarray) -> str:
     if name == "temperature_c" and values.size and np.min(values) >= KELVIN_HINT_C:
         return (f" — these look like kelvin ({np.min(values):g} … {np.max(values):g}): "
                 "subtract 273.15")  # fmt: skip
-    return ""
+    return f" — {IMU_HINTS[name]}" if name in IMU_HINTS else ""
 
 
 def check(name: str, values, quantity: str | None = None) -> None:
@@ -117,21 +151,82 @@ def check(name: str, values, quantity: str | None = None) -> None:
     of `quantity` (default: `name`), naming `name`.
 
     **Raises:** `ValueError`: "<name> = <value> at index i is outside the plausible range
-    low … high <unit>" and, for a temperature that looks like kelvin, a hint."""
-    quantity = quantity or name
-    low, high, unit = RANGES[quantity]
+    low … high <unit>" and, for a temperature that looks like kelvin or an IMU error that
+    looks like another unit, a hint."""
     try:
         arr = np.asarray(values, dtype=float)
     except Exception:  # a tracer: checked where it is concrete
         return
+    _check_range(name, arr, quantity or name, None)
+
+
+def _check_range(name: str, arr: np.ndarray, quantity: str, hint: str | None) -> None:
+    """`check` on a concrete array, with `hint` (None: the quantity's own) in its message."""
+    low, high, unit = RANGES[quantity]
     bad = np.flatnonzero(~((arr >= low) & (arr <= high)) & np.isfinite(arr))
     if bad.size:
         i = int(bad[0])
         where = f" at index {i}" if arr.ndim else ""
+        hint = _hint(quantity, arr.ravel()) if hint is None else hint
         raise ValueError(
             f"{name} = {arr.ravel()[i]:g}{where} is outside the plausible range {low:g} … "
-            f"{high:g} {unit}{_hint(quantity, arr.ravel())} (hrgjax.plausible.relaxed widens "
-            "it)"
+            f"{high:g} {unit}{hint} (hrgjax.plausible.relaxed widens it)"
+        )
+
+
+STATIC_G_TOLERANCE = 0.1
+"""Relative half-width of the bands around 9.80665 (1 g in m/s²) and 1000 (1 g in mg) in
+which the magnitude of a specific force given in g reads as written in that other unit
+([`check_specific_force`][hrgjax.plausible.check_specific_force]): a static log's |f| is
+1 g within a fraction of a percent (local gravity varies 0.5 %), a vehicle's ride with
+0.1 g of vibration per axis lies within 10 % on two rows in three; a true 8.8–10.8 g is a
+centrifuge's, and `relaxed(specific_force_g=…)` accepts it."""
+
+
+def _specific_force_unit(norm: np.ndarray) -> str:
+    """' — …: divide by …' where the magnitude `norm` [the columns' unit] (one per row)
+    lies within `STATIC_G_TOLERANCE` of 1 g in m/s² or in mg on at least half the rows that
+    carry a specific force (|f| > 0.5), else ''."""
+    norm = norm[np.isfinite(norm) & (norm > 0.5)]
+    for one_g, unit, fix in ((9.80665, "m/s²", "divide by 9.80665"),
+                             (1000.0, "mg", "divide by 1000")):  # fmt: skip
+        near = int(np.count_nonzero(np.abs(norm - one_g) <= STATIC_G_TOLERANCE * one_g))
+        if norm.size and 2 * near >= norm.size:
+            return (f" — the specific force's magnitude is {one_g:g} ± "
+                    f"{STATIC_G_TOLERANCE:.0%} on {near} of {norm.size} rows, as 1 g written "
+                    f"in {unit} is: {fix} to give g")  # fmt: skip
+    return ""
+
+
+def check_specific_force(what: str, names, accel) -> None:
+    """Refuse a specific force in g (concrete; traced values are not checked) outside
+    `RANGES["specific_force_g"]` along any axis, or written in another unit: where its
+    magnitude |f| over the given axes sits at 9.80665 (± `STATIC_G_TOLERANCE`) on at least
+    half the rows carrying one (|f| > 0.5), it is a static log's 1 g in m/s² (≈ 1000: in
+    mg, beyond the range anyway) — the g-sensitivity drift would be 9.81× too large. A run
+    that truly holds ≈ 9.8 g (a centrifuge) passes inside
+    `relaxed(specific_force_g=…)`; a high-g run at any other level is not refused. Traced
+    values (inside `jit`, `vmap`, `hg.sweep`) get the range check's twin
+    (`traced_violations`), not this one.
+
+    **Arguments:** `what`, the field's name for the unit message; `names`, one name per
+    column of `accel`; `accel` (N, k) [g], k = len(names) axes (1 to 3) on N rows (knots).
+
+    **Raises:** `ValueError`: the range message naming the column (with the unit hint where
+    the magnitude points at one), or "<what> … magnitude is 9.80665 ± 10% on n of N rows, as
+    1 g written in m/s² is: divide by 9.80665 to give g …"."""
+    try:
+        a = np.asarray(accel, dtype=float).reshape(-1, len(names))
+    except Exception:  # a tracer: checked where it is concrete
+        return
+    norm = np.sqrt(np.sum(np.where(np.isfinite(a), a, 0.0) ** 2, axis=1))
+    hint = _specific_force_unit(norm)
+    for j, name in enumerate(names):
+        _check_range(name, a[:, j], "specific_force_g", hint)
+    if hint and "specific_force_g" not in (_OVERRIDES.get() or {}):
+        raise ValueError(
+            f"{what}{hint} (a run that holds ≈ 9.8 g: hrgjax.plausible.relaxed("
+            "specific_force_g=…) takes it)"
         )
 
 

@@ -183,11 +183,12 @@ class Profile(eqx.Module):
         if self.precession is not None and is_concrete(self.precession):
             plausible.check("Profile.precession [°/s, electrical]",
                             np.degrees(np.asarray(self.precession)), "precession_dps")  # fmt: skip
-        if is_concrete(self.accel):
-            accel = np.asarray(self.accel)
-            for j, axis in enumerate("xyz"):
-                plausible.check(f"Profile.accel[:, {j}] (specific force along {axis}) [g]",
-                                accel[:, j], "specific_force_g")  # fmt: skip
+        if is_concrete(self.accel):  # each axis within ±20 g, and not 1 g in m/s² or mg
+            axes = [
+                f"Profile.accel[:, {j}] (specific force along {a}) [g]" for j, a in enumerate("xyz")
+            ]
+            plausible.check_specific_force("Profile.accel (specific force along case x, y, z) "
+                                           "[g]", axes, np.asarray(self.accel))  # fmt: skip
         if is_concrete(self.wave_angle0):
             plausible.check("Profile.wave_angle0 [°]", np.degrees(np.asarray(self.wave_angle0)),
                             "wave_angle_deg")  # fmt: skip

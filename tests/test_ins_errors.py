@@ -35,6 +35,37 @@ def test_wgs84_constants_and_gravity():
     assert C.Earth(radius=jnp.asarray(6.4e6), g=9.8) == C.Earth(radius=6.4e6, g=9.8)
 
 
+def test_a_latitude_in_degrees_is_refused_by_the_earth_model():
+    """`gravity(45.0)` gave 9.8178 m/s² (truth γ(45°) = 9.806197769) and `earth_rate_ned(45.0)`
+    a north rate 26 % low: each function and `Earth` method refuses a concrete |lat| > π/2
+    with the degrees hint; traced values pass (no check in the compiled program, one
+    compile per shape as before)."""
+    hint = r": lat = 45 rad is beyond ±π/2: the latitude is in radians here \(degrees\? "
+    z = np.zeros(3)
+    for name, call in (("gravity", lambda la: C.gravity(la)), ("radii", C.radii),
+                       ("earth_rate_ned", C.earth_rate_ned),
+                       ("transport_rate_ned", lambda la: C.transport_rate_ned(la, 0.0, z)),
+                       ("gravity_ned", lambda la: C.gravity_ned(lat=la)),
+                       ("Earth.gravity", C.WGS84.gravity), ("Earth.radii", C.SPHERE.radii),
+                       ("Earth.earth_rate", C.WGS84.earth_rate),
+                       ("Earth.gravity_ned", lambda la: C.WGS84.gravity_ned(la, 10.0)),
+                       ("Earth.transport_rate", lambda la: C.WGS84.transport_rate(la, 0.0, z)),
+                       ("Earth.position_rate",
+                        lambda la: C.WGS84.position_rate(la, 0.0, z))):  # fmt: skip
+        with pytest.raises(ValueError, match="^" + name + hint):
+            call(np.array([0.1, 45.0]))
+        call(np.radians(45.0))
+    np.testing.assert_allclose(C.gravity(np.radians(45.0)), 9.806197769, rtol=1e-10)
+    w = C.earth_rate_ned(np.radians(45.0))
+    np.testing.assert_allclose(w, C.OMEGA_IE * np.sqrt(0.5) * np.array([1, 0, -1]), rtol=1e-14)
+    f = jax.jit(lambda la: C.gravity(la) + C.WGS84.earth_rate(la)[0])
+    assert np.isfinite(float(f(45.0)))  # traced: not checked
+    want, rad = float(C.gravity(np.radians(45.0))) + float(w[0]), float(np.radians(45.0))
+    assert float(f(rad)) == pytest.approx(want, rel=1e-12)
+    assert f._cache_size() == 1
+    assert "callback" not in str(jax.make_jaxpr(C.gravity_ned)(0.5))
+
+
 def test_van_loan_matches_the_closed_form_and_the_lyapunov_identity():
     dt, q = 10.0, np.diag([1.0, 3.0])
     phi, qd = kalman.van_loan(jnp.array([[0.0, 1.0], [0.0, 0.0]]), jnp.asarray(q), dt)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from helpers import CompileCounter, batched_lapack, cli_fails, modelled_imu
 
+import hrgjax as hg
 from hrgjax.ins import ekf, flights, gnss, motion, sensors
 from hrgjax.ins import mechanization as me
 from hrgjax.units import DEG_PER_SQRT_H
@@ -437,3 +438,28 @@ def test_a_misalignment_that_is_not_finite_is_refused_naming_it():
     ]:
         with pytest.raises(ValueError, match=rf"^ImuModel.{field} must be finite .*" + match):
             sensors.ImuModel(**{field: value})
+
+
+def test_imu_errors_in_datasheet_units_are_refused_naming_the_unit():
+    """`ImuModel(gyro_scale=100 [ppm meant], gyro_bias=1.0 [°/h meant], arw=0.1 [°/√h
+    meant])` was accepted (a 10⁴ % scale factor, a 57 °/s bias): each field has an SI range
+    (`hrgjax.plausible`, `imu_*`) and a value beyond it is named with the unit it looks
+    like and the factor; every preset lies inside; `relaxed` widens one; traced values pass."""
+    for field, value, hint in (
+        ("gyro_scale", 100.0, "ppm\\? multiply by 1e-6"),
+        ("gyro_bias", 1.0, "°/h\\? multiply by hrgjax.units.DEG_PER_H"),
+        ("arw", 0.1, "°/√h\\? multiply by hrgjax.units.DEG_PER_SQRT_H"),
+        ("accel_bias", [0.0, 0.0, 25.0], "µg or mg\\? multiply by hrgjax.ins.sensors.MICRO_G"),
+        ("vrw", 50.0, "µg/√Hz\\? multiply by hrgjax.ins.sensors.MICRO_G"),
+        ("gyro_bias_instability", 0.5, "°/h\\? multiply by hrgjax.units.DEG_PER_H"),
+        ("gyro_misalignment", 5.0, "µrad or mrad\\?"),
+    ):  # fmt: skip
+        with pytest.raises(ValueError, match=rf"^ImuModel.{field} \[.*\] = .* is outside the "
+                           rf"plausible range .* — {hint}"):  # fmt: skip
+            sensors.ImuModel(**{field: value})
+    for imu in sensors.PRESETS.values():  # the fields as given, checked again
+        assert sensors.ImuModel(**{k: getattr(imu, k) for k in imu.__dataclass_fields__}) == imu
+    with hg.plausible.relaxed(imu_gyro_bias=(-2.0, 2.0)):
+        assert float(sensors.ImuModel(gyro_bias=1.0).gyro_bias[0]) == 1.0
+    traced = jax.jit(lambda b: sensors.ImuModel(gyro_bias=b).gyro_bias)
+    assert float(traced(1.0)[0]) == 1.0

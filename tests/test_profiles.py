@@ -81,6 +81,39 @@ def test_held_angles_reach_each_angle_and_hold_it():
     assert float(prof.rebalance_at(mid)) == 1.0  # no schedule: the rebalance loop stays on
 
 
+def test_a_specific_force_in_m_s2_or_mg_is_named_and_high_g_runs_are_not():
+    """A static log's 1 g written in m/s² (|f| = 9.80665 on every row) passed the ±20 g range
+    in `Profile` and was not checked at all in `MeasuredData` / `hg.load`: the g-sensitivity
+    drift came out 9.81× too large. It is refused naming the unit and the fix (mg, beyond the
+    range, gets its hint); a high-g run at another level and a sweep through 9.8 g pass, and
+    `relaxed(specific_force_g=…)` takes a run that truly holds ≈ 9.8 g."""
+    mps2 = (r".*magnitude is 9\.80665 ± 10% on \d+ of \d+ rows, as 1 g written in m/s² is: "
+            r"divide by 9\.80665")  # fmt: skip
+    for accel in ((0.0, 0.0, 9.80665), (0.0, 6.934, -6.934)):
+        with pytest.raises(ValueError, match=r"^Profile.accel \(specific force .* — " + mps2):
+            hg.Profile.static(60.0, accel_g=accel)
+    mg = r"^Profile.accel\[:, 2\] .* = 1000 at index 0 is outside .* 20 g — .* in mg is: divide"
+    with pytest.raises(ValueError, match=mg):
+        hg.Profile.static(60.0, accel_g=(0.0, 0.0, 1000.0))
+    n = 200
+    rng = np.random.default_rng(0)
+    cols = {"time_s": np.arange(n) * 1.0, "temperature_c": np.full(n, 20.0),
+            "table_rate_dps": np.zeros(n), "wave_angle_deg": np.full(n, 10.0)}  # fmt: skip
+    ride = {"accel_x_g": rng.normal(0.0, 0.1, n), "accel_z_g": rng.normal(1.0, 0.1, n)}
+    with pytest.raises(ValueError, match=r"^column\(s\) 'accel_x_g', 'accel_z_g' — " + mps2):
+        hg.MeasuredData(cols | {k: 9.80665 * v for k, v in ride.items()})  # a ride, in m/s²
+    with pytest.raises(ValueError, match=r"^column 'accel_z_g' = 25 at index 100 .* 20 g — "):
+        hg.MeasuredData(cols | {"accel_z_g": np.where(np.arange(n) < 100, 9.81, 25.0)})
+    assert len(hg.MeasuredData(cols | ride)) == n  # the same ride in g
+    hg.Profile.static(60.0, accel_g=(15.0, 0.0, 1.0))  # a centrifuge at 15 g
+    sweep = np.c_[np.arange(21.0), np.zeros(21), np.ones(21)]  # 0 … 20 g through 9.8 g
+    hg.Profile.piecewise(np.arange(21.0), 0.0, 20.0, accel_g=sweep)
+    with pytest.raises(ValueError, match=r"relaxed\(specific_force_g=…\) takes it\)$"):
+        hg.Profile.static(60.0, accel_g=(9.8, 0.0, 0.0))
+    with hg.plausible.relaxed(specific_force_g=(-20.0, 20.0)):
+        assert float(hg.Profile.static(60.0, accel_g=(9.8, 0.0, 0.0)).accel[0, 0]) == 9.8
+
+
 def test_absurd_specific_force_and_precession_are_refused_naming_field_unit_and_limit():
     """A specific force of 1e6 g (or 3 g given in m/s²: 29.4) and a commanded precession
     of 1e9 or 1e5 °/s were built and simulated (the g-sensitivity dominating; the solver

@@ -1,7 +1,9 @@
 r"""WGS-84 constants, normal gravity, radii of curvature and Earth rate (PHYSICS.md §12).
 
 Navigation frame: NED (north, east, down). Latitude `lat` and longitude in radians, height
-`h` in metres above the ellipsoid. Every function is plain `jax.numpy` (jit / vmap / grad).
+`h` in metres above the ellipsoid. Every function is plain `jax.numpy` (jit / vmap / grad);
+a concrete `lat` beyond ±π/2 (degrees given for radians) is refused in one line, a traced
+one is not checked (no cost inside `jit`).
 """
 
 from __future__ import annotations
@@ -10,7 +12,9 @@ import functools
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._compiled import fused
 
@@ -45,47 +49,90 @@ singular at the poles (the longitude rate v_E / (R cos φ) is infinite there, an
 gyrocompassing finds north from the horizontal Earth rate ω_ie cos φ, which vanishes)."""
 
 
+def check_latitude_radians(name: str, lat) -> None:
+    """A one-line `ValueError` naming `name` if a concrete `lat` [rad] (any shape) is beyond
+    ±π/2 anywhere: a latitude in degrees. Traced values are not checked."""
+    if isinstance(lat, jax.core.Tracer):
+        return
+    try:
+        a = np.asarray(lat, float)
+    except Exception:  # a value JAX keeps abstract: checked where it is concrete
+        return
+    bad = np.abs(a) > np.pi / 2
+    if np.any(bad):
+        x = float(a[bad].flat[0])
+        raise ValueError(
+            f"{name} = {x:g} rad is beyond ±π/2: the latitude is in radians here (degrees? "
+            f"np.deg2rad({x:g}) = {np.deg2rad(x):.6g})"
+        )
+
+
+def _lat_checked(fn, at: int = 0):
+    """`fn` (`lat` its positional argument `at`, or `lat=`) with a concrete `lat` checked by
+    `check_latitude_radians` before the call; inside a trace the check is one `isinstance`
+    at trace time, nothing in the compiled program."""
+
+    @functools.wraps(fn)
+    def checked(*args, **kwargs):
+        lat = kwargs.get("lat", args[at] if len(args) > at else None)
+        if lat is not None and not isinstance(lat, jax.core.Tracer):
+            check_latitude_radians(f"{fn.__qualname__}: lat", lat)
+        return fn(*args, **kwargs)
+
+    return checked
+
+
+@_lat_checked
 @fused
 def gravity(lat, h=0.0):
-    r"""Normal gravity magnitude γ(φ, h) [m/s²]: Somigliana's closed form on the ellipsoid,
+    r"""Normal gravity magnitude γ(φ, h) [m/s²] at latitude `lat` = φ [rad] and height `h` [m]:
+    Somigliana's closed form on the ellipsoid,
 
     $$\gamma_0 = \gamma_e\frac{1 + k\sin^2\varphi}{\sqrt{1 - e^2\sin^2\varphi}},$$
 
     with the second-order free-air correction
     $\gamma = \gamma_0\,[1 - \tfrac{2}{a}(1 + f + m - 2f\sin^2\varphi)h + \tfrac{3}{a^2}h^2]$
-    (NIMA TR8350.2 eq. 4-3). γ(45°, 0) = 9.806197769 m/s²."""
+    (NIMA TR8350.2 eq. 4-3). `gravity(np.radians(45.0))` = γ(45°, 0) = 9.806197769 m/s².
+
+    **Raises:** `ValueError` for a concrete `lat` beyond ±π/2 (degrees given for radians)."""
     s2 = jnp.sin(lat) ** 2
     g0 = GAMMA_E * (1.0 + K_SOMIGLIANA * s2) / jnp.sqrt(1.0 - E2 * s2)
     corr = 1.0 - 2.0 / A * (1.0 + FLATTENING + M_GRAVITY - 2.0 * FLATTENING * s2) * h
     return g0 * (corr + 3.0 / A**2 * h**2)
 
 
+@_lat_checked
 @fused
 def radii(lat):
-    r"""Meridian and prime-vertical radii of curvature $(R_M, R_N)$ [m]:
+    r"""Meridian and prime-vertical radii of curvature $(R_M, R_N)$ [m] at latitude `lat` [rad]:
     $R_N = a/\sqrt{1-e^2\sin^2\varphi}$, $R_M = R_N(1-e^2)/(1-e^2\sin^2\varphi)$."""
     w = 1.0 - E2 * jnp.sin(lat) ** 2
     r_n = A / jnp.sqrt(w)
     return r_n * (1.0 - E2) / w, r_n
 
 
+@_lat_checked
 @fused
 def earth_rate_ned(lat):
-    r"""Earth rate in NED, $\omega_{ie}^n = \omega_{ie}(\cos\varphi, 0, -\sin\varphi)$ [rad/s]."""
+    r"""Earth rate in NED, $\omega_{ie}^n = \omega_{ie}(\cos\varphi, 0, -\sin\varphi)$ [rad/s],
+    at latitude `lat` = φ [rad]."""
     return OMEGA_IE * jnp.stack([jnp.cos(lat), jnp.zeros_like(lat), -jnp.sin(lat)], axis=-1)
 
 
+@_lat_checked
 @fused
 def transport_rate_ned(lat, h, v_ned):
     r"""Transport rate $\omega_{en}^n = (v_E/(R_N+h), -v_N/(R_M+h), -v_E\tan\varphi/(R_N+h))$
-    [rad/s] for velocity `v_ned` [m/s] (shape (..., 3)), on WGS-84."""
+    [rad/s] at latitude `lat` = φ [rad] and height `h` [m] for velocity `v_ned` [m/s] (shape
+    (..., 3)), on WGS-84."""
     return WGS84.transport_rate(lat, h, v_ned)
 
 
+@_lat_checked
 @fused
 def gravity_ned(lat, h=0.0):
-    """Normal gravity vector in NED, (0, 0, γ) [m/s²] (plumb-line gravity, centrifugal
-    included)."""
+    """Normal gravity vector in NED, (0, 0, γ) [m/s²] at latitude `lat` [rad] and height `h`
+    [m] (plumb-line gravity, centrifugal included)."""
     return WGS84.gravity_ned(lat, h)
 
 
@@ -128,19 +175,23 @@ class Earth(eqx.Module):
         if not (math.isfinite(self.rate) and self.rate >= 0):
             raise ValueError(f"Earth.rate must be >= 0 rad/s; got {self.rate}")
 
+    @functools.partial(_lat_checked, at=1)
     @fused(static_argnums=0)
     def earth_rate(self, lat):
-        """Earth rate in NED [rad/s] (see [`earth_rate_ned`][hrgjax.ins.constants.earth_rate_ned])."""
+        """Earth rate in NED [rad/s] at latitude `lat` [rad] (see
+        [`earth_rate_ned`][hrgjax.ins.constants.earth_rate_ned])."""
         return earth_rate_ned(lat) * (self.rate / OMEGA_IE)
 
+    @functools.partial(_lat_checked, at=1)
     @fused(static_argnums=0)
     def radii(self, lat):
-        """$(R_M, R_N)$ [m] (equal on the sphere)."""
+        """$(R_M, R_N)$ [m] at latitude `lat` [rad] (equal on the sphere)."""
         if self.radius is None:
             return radii(lat)
         r = jnp.full_like(jnp.asarray(lat, float), self.radius)
         return r, r
 
+    @functools.partial(_lat_checked, at=1)
     @fused(static_argnums=0)
     def gravity(self, lat, h=0.0):
         """Gravity magnitude [m/s²] at latitude `lat` [rad] and height `h` [m]."""
@@ -148,25 +199,30 @@ class Earth(eqx.Module):
             return gravity(lat, h)
         return self.g * (self.radius / (self.radius + h)) ** 2 + 0.0 * lat
 
+    @functools.partial(_lat_checked, at=1)
     @fused(static_argnums=0)
     def gravity_ned(self, lat, h=0.0):
-        """Gravity vector (0, 0, γ) in NED [m/s²]."""
+        """Gravity vector (0, 0, γ) in NED [m/s²] at latitude `lat` [rad] and height `h` [m]."""
         g = self.gravity(lat, h)
         z = jnp.zeros_like(g)
         return jnp.stack([z, z, g], axis=-1)
 
+    @functools.partial(_lat_checked, at=1)
     @fused(static_argnums=0)
     def transport_rate(self, lat, h, v_ned):
-        r"""$\omega_{en}^n$ [rad/s] (see [`transport_rate_ned`][hrgjax.ins.constants.transport_rate_ned])."""
+        r"""$\omega_{en}^n$ [rad/s] at latitude `lat` [rad], height `h` [m], velocity `v_ned`
+        [m/s] (see [`transport_rate_ned`][hrgjax.ins.constants.transport_rate_ned])."""
         r_m, r_n = self.radii(lat)
         v_n, v_e = v_ned[..., 0], v_ned[..., 1]
         return jnp.stack(
             [v_e / (r_n + h), -v_n / (r_m + h), -v_e * jnp.tan(lat) / (r_n + h)], axis=-1
         )
 
+    @functools.partial(_lat_checked, at=1)
     @fused(static_argnums=0)
     def position_rate(self, lat, h, v_ned):
-        r"""$(\dot\varphi, \dot\lambda, \dot h) = (v_N/(R_M+h),\; v_E/((R_N+h)\cos\varphi),\; -v_D)$."""
+        r"""$(\dot\varphi, \dot\lambda, \dot h) = (v_N/(R_M+h),\; v_E/((R_N+h)\cos\varphi),\; -v_D)$
+        [rad/s, rad/s, m/s] at latitude `lat` = φ [rad], height `h` [m], velocity `v_ned` [m/s]."""
         r_m, r_n = self.radii(lat)
         return jnp.stack(
             [

@@ -42,7 +42,7 @@ from .._checks import describe, is_concrete
 from .._compiled import Check, device, fused, program, single_run_device
 from .._progress import bar
 from .._x64 import require_x64
-from .constants import G0, WGS84, Earth
+from .constants import G0, WGS84, Earth, check_latitude_radians
 
 UNROLL = 4
 """Steps per iteration of the compiled loops: the step is a few dozen scalar operations, so the
@@ -197,21 +197,6 @@ def wrap_angle(a):
     1 (jit / vmap / grad). For differences of longitudes, which a trajectory may carry
     continuously past ±180° while a receiver or a truth file writes them in (−180°, 180°]."""
     return jnp.mod(a + jnp.pi, 2.0 * jnp.pi) - jnp.pi
-
-
-def check_latitude_radians(name: str, lat) -> None:
-    """A one-line `ValueError` naming `name` if a concrete `lat` [rad] (any shape) is beyond
-    ±π/2 anywhere: a latitude in degrees. Traced values are not checked."""
-    if not is_concrete(lat):
-        return
-    a = np.asarray(lat, float)
-    bad = np.abs(a) > np.pi / 2
-    if np.any(bad):
-        x = float(a[bad].flat[0])
-        raise ValueError(
-            f"{name} = {x:g} rad is beyond ±π/2: the latitude is in radians here (degrees? "
-            f"np.deg2rad({x:g}) = {np.deg2rad(x):.6g})"
-        )
 
 
 class NavState(eqx.Module):

@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import is_concrete, vec3
 from ..units import DEG_PER_H, DEG_PER_SQRT_H, G0
 
@@ -65,6 +66,13 @@ _UNITS = {
 }
 
 
+_RANGE = {name: "imu_scale" if name.endswith("_scale") else f"imu_{name}"
+          for name in _VECTOR_FIELDS} | {"gyro_misalignment": "imu_misalignment",
+                                         "accel_misalignment": "imu_misalignment"}  # fmt: skip
+"""Each field's range in `hrgjax.plausible.RANGES` (SI; a value beyond is named with the
+datasheet unit it looks like: °/h, ppm, °/√h, µg)."""
+
+
 def _vec3(name):
     return vec3("ImuModel", name, _UNITS[name])
 
@@ -79,7 +87,13 @@ class ImuModel(eqx.Module):
     `arw` [rad/√s], `vrw` [m/s/√s]: white-noise densities; `gyro_bias_instability` [rad/s],
     `accel_bias_instability` [m/s²] with `gyro_correlation_time`, `accel_correlation_time`
     [s]: first-order Gauss–Markov biases (σ, τ); `gyro_rate_random_walk` [rad/s/√s],
-    `accel_random_walk` [m/s²/√s]: bias random walks."""
+    `accel_random_walk` [m/s²/√s]: bias random walks.
+
+    **Raises:** `ValueError` for a concrete field that is not finite, a density or 1σ < 0, or
+    a value outside its `hrgjax.plausible.RANGES` entry (`imu_*`: e.g. |gyro_bias| ≤ 0.1
+    rad/s, |gyro_scale| ≤ 0.1, arw ≤ 5e-3 rad/√s), named with the unit it looks like and
+    the factor that converts it (`gyro_bias=1.0` meant as °/h: "… — °/h? multiply by
+    hrgjax.units.DEG_PER_H"); `hrgjax.plausible.relaxed(imu_gyro_bias=…)` widens one."""
 
     gyro_bias: jax.Array = eqx.field(converter=_vec3("gyro_bias"), default=0.0)
     accel_bias: jax.Array = eqx.field(converter=_vec3("accel_bias"), default=0.0)
@@ -126,6 +140,12 @@ class ImuModel(eqx.Module):
                     f"ImuModel.{name} must be finite (0 or a (3, 3) matrix of small angles "
                     f"[rad]); got {a[at]}{where}"
                 )
+        for name, quantity in _RANGE.items():  # SI, not the datasheet's °/h, ppm, °/√h, µg
+            v = getattr(self, name)
+            if is_concrete(v):
+                v = np.asarray(v) * (1.0 - np.eye(3)) if np.ndim(v) == 2 else np.asarray(v)
+                unit = _UNITS.get(name, "rad")
+                plausible.check(f"ImuModel.{name} [{unit}]", v, quantity)
         for name in ("gyro_correlation_time", "accel_correlation_time"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
