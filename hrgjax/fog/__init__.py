@@ -3,6 +3,7 @@ vibration table and error model, the vibration spectrum, Elman-network compensat
 alignment with raw vs compensated outputs; `study` runs the whole pipeline."""
 
 from . import compensation as compensation
+from . import heading as heading
 from . import misalignment as misalignment
 from . import spectrum as spectrum
 from . import study as study

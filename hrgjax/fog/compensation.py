@@ -21,15 +21,20 @@ subtracted) against the static model's reference, without forming the samples.
 **Compensation.** [`compensate`][hrgjax.fog.compensation.compensate] predicts the body-frame
 error window by window, maps it back to sensor axes by diag(1+k)(I+E) and subtracts it from
 the raw gyro output (held over each window), except in windows whose (f, A) lie outside the
-range `fit` recorded, which pass through uncompensated unless `extrapolate=True`;
-[`align_record`][hrgjax.fog.compensation.align_record] then runs the coarse + fine alignment of [`ins.alignment`][hrgjax.ins.alignment] on the
-misalignment-compensated outputs. [`heading_limit_deg`][hrgjax.fog.compensation.heading_limit_deg]
-is the analytic heading error set by the remaining east drift (PHYSICS.md §12).
+range `fit` recorded, vibrate off the trained axis or hold a tone too near DC or Nyquist to
+measure: those pass through uncompensated (the first two unless `extrapolate=True`).
+
+**Alignment** ([`fog.heading`][hrgjax.fog.heading]; its names are importable from here too):
+[`align_record`][hrgjax.fog.heading.align_record] runs the coarse + fine alignment of
+[`ins.alignment`][hrgjax.ins.alignment] on the misalignment-compensated outputs, and
+[`heading_limit_deg`][hrgjax.fog.heading.heading_limit_deg] is the stationary heading error
+the remaining biases set.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import equinox as eqx
 import jax
@@ -39,12 +44,12 @@ import optax
 
 from .._checks import concrete_value, host_value
 from .._x64 import require_x64
-from ..ins import alignment as _al
-from ..ins.constants import OMEGA_IE, WGS84, earth_rate_ned
+from ..ins.constants import earth_rate_ned
 from ..nn.elman import Elman
 from ..nn.mlp import MLP
-from ..units import DEG, DEG_PER_H
-from .spectrum import vibration_features
+from ..units import DEG_PER_H
+from .heading import align_record, heading_limit_deg, imu_log
+from .spectrum import EdgeToneWarning, vibration_direction, vibration_features
 from .vibration import (
     FogImu,
     VibrationRecord,
@@ -121,10 +126,11 @@ class VibrationCompensator(eqx.Module):
         [`vibration_features`][hrgjax.fog.spectrum.vibration_features] gives below its
         threshold: the network is trained on rest) or whose f and A both lie within
         `feature_range`, each bound widened by `margin` (relative, default 1 %, for the
-        estimates' scatter); all True when no range is recorded. Traceable."""
+        estimates' scatter); all True when no range is recorded, except NaN features (a tone
+        too near DC or Nyquist to measure), which are never in range. Traceable."""
         f = jnp.asarray(features)
         if self.feature_range is None:
-            return jnp.ones(f.shape[:-1], bool)
+            return jnp.all(~jnp.isnan(f), axis=-1)
         m = float(margin)
         if not (np.isfinite(m) and m >= 0):
             raise ValueError(f"margin must be a finite fraction >= 0; got {margin!r}")
@@ -205,7 +211,15 @@ def training_set(
         kw = dict(fs=fs, lat_deg=lat_deg, attitude_deg=attitude_deg)
         vib = simulate(imu, sch, key=keys[2 * i], **kw)
         st = simulate(imu, rest, key=keys[2 * i + 1], **kw)
-        feats.append(vibration_features(to_body(proc.accel, vib.accel), fs, window_s, axis))
+        with warnings.catch_warnings():  # refused below in one line
+            warnings.simplefilter("ignore", EdgeToneWarning)
+            feats.append(vibration_features(to_body(proc.accel, vib.accel), fs, window_s, axis))
+        if np.isnan(np.asarray(feats[-1])).any():
+            raise ValueError(
+                f"conditions: ({f:g} Hz, {a:g} g) peaks within 2 bins of DC or 1 of Nyquist at "
+                f"resolution 1/window_s = {1 / window_s:g} Hz, fs = {fs:g} Hz (features not "
+                "measurable); use a longer window_s or a higher fs"
+            )
         samples.append(error_samples(proc, vib, st, window_s))
         truths.append(to_body(proc.gyro, window_means(vib.gyro_error, fs, window_s)))
         raws.append(window_means(vib.gyro, fs, window_s))
@@ -460,15 +474,27 @@ def rmse(comp: VibrationCompensator | None, data: TrainingSet, *, extrapolate=Fa
     return jnp.sqrt(jnp.mean((pred - data.truth) ** 2))
 
 
-def _predict(comp: VibrationCompensator, feats, extrapolate: bool, margin: float):
+def _predict(comp: VibrationCompensator, feats, extrapolate: bool, margin: float, off=None):
     """Prediction on features (K, 2) or (S, K, 2) and the in-range mask: windows out of range
-    are fed to the network as rest (its context never sees them) and predict zero."""
+    (or `off` the trained axis) are fed to the network as rest (its context never sees them)
+    and predict zero. NaN features (not measurable) are out even with `extrapolate`."""
     call = comp if feats.ndim == 2 else jax.vmap(comp)
+    valid = jnp.all(~jnp.isnan(feats), axis=-1)
+    feats = jnp.where(valid[..., None], feats, 0.0)
     if extrapolate:
-        return call(feats), jnp.ones(feats.shape[:-1], bool)
-    inside = comp.in_range(feats, margin)[..., None]
+        inside = valid[..., None]
+        return jnp.where(inside, call(feats), 0.0), inside[..., 0]
+    inside = comp.in_range(feats, margin) & valid
+    inside = (inside if off is None else inside & ~off)[..., None]
     pred = call(jnp.where(inside, feats, 0.0))
     return jnp.where(inside, pred, 0.0), inside[..., 0]
+
+
+AXIS_TOL_DEG = 8.0
+"""Largest angle [°] between a window's vibration direction and the compensator's trained
+axis that [`compensate`][hrgjax.fog.compensation.compensate] still compensates: the amplitude
+along the axis then understates the vibration's by 1 − cos 8° = 1 %, the default range
+margin."""
 
 
 class Compensated(eqx.Module):
@@ -509,14 +535,37 @@ def compensate(
     (each bound widened by `margin`, relative: `VibrationCompensator.in_range`) is passed
     through uncompensated — its prediction is zero and the network is fed rest instead, so
     its context does not carry the extrapolation on — and counted: outside its training
-    range the network made the error worse than none (docs/fog.md). `extrapolate=True`
-    applies the network everywhere, as before. **Returns** a
+    range the network made the error worse than none (docs/fog.md). So is a vibrating window
+    whose direction ([`vibration_direction`][hrgjax.fog.spectrum.vibration_direction]) lies
+    more than [`AXIS_TOL_DEG`][hrgjax.fog.compensation.AXIS_TOL_DEG] from the axis the
+    features are taken along — along another axis they read rest or a smaller amplitude —
+    with one `UserWarning` naming both directions (checked when the axis is known). So is a
+    window whose features are NaN (a tone too near DC or Nyquist to measure,
+    [`vibration_features`][hrgjax.fog.spectrum.vibration_features]). `extrapolate=True`
+    applies the network everywhere but there. **Returns** a
     [`Compensated`][hrgjax.fog.compensation.Compensated], which unpacks as
     `(gyro (N, 3), prediction (K, 3) body frame)`."""
     window_s = _same_window(comp, window_s, "compensate")
     axis = _same_axis(comp.axis, axis, "compensate")
-    feats = vibration_features(to_body(imu.accel, record.accel), record.fs, window_s, axis)
-    pred, inside = _predict(comp, feats, extrapolate, margin)
+    body = to_body(imu.accel, record.accel)
+    feats = vibration_features(body, record.fs, window_s, axis)
+    off = None
+    if axis is not None:
+        d = vibration_direction(body, record.fs, window_s)
+        cos = jnp.abs(d @ jnp.asarray(axis, d.dtype))
+        off = jnp.any(d != 0, axis=-1) & (cos < np.cos(np.radians(AXIS_TOL_DEG)))
+        bad = concrete_value(off)
+        if bad is not None and bad.any() and not extrapolate:
+            i = int(np.argmax(bad))
+            shown = lambda v: "(" + ", ".join(f"{c:.3g}" for c in v) + ")"  # noqa: E731
+            warnings.warn(
+                f"compensate: {int(bad.sum())} of {bad.size} windows vibrate off the trained "
+                f"axis {shown(axis)} — window {i} along {shown(np.asarray(d[i]))}, "
+                f"{np.degrees(np.arccos(min(float(cos[i]), 1.0))):.3g}° from it; passed "
+                "through uncompensated (n_out_of_range)",
+                stacklevel=2,
+            )
+    pred, inside = _predict(comp, feats, extrapolate, margin, off)
     m = int(round(window_s * record.fs))
     n = record.gyro.shape[0]
     held = jnp.repeat(to_sensor(imu.gyro, pred), m, axis=0)
@@ -526,75 +575,8 @@ def compensate(
     return Compensated(record.gyro - held, pred, inside)
 
 
-def imu_log(imu: FogImu, record: VibrationRecord, gyro=None) -> _al.ImuLog:
-    """The record as an [`ImuLog`][hrgjax.ins.alignment.ImuLog] (body-frame increments):
-    installation misalignment and scale compensated by the triad models' linear part (the
-    patent's step 2); biases stay in (the alignment's business). `gyro` replaces the raw
-    gyro output (e.g. the vibration-compensated one)."""
-    g = record.gyro if gyro is None else jnp.asarray(gyro)
-    dt = 1.0 / record.fs
-    return _al.ImuLog(
-        record.t + dt, to_body(imu.gyro, g) * dt, to_body(imu.accel, record.accel) * dt,
-        record.lat,
-    )  # fmt: skip
-
-
-def align_record(imu: FogImu, record: VibrationRecord, gyro=None, *, coarse_s=60.0, **fine_kw):
-    """Coarse + fine alignment ([`align`][hrgjax.ins.alignment.align]) of the record (raw, or
-    with `gyro` replacing its gyro output). **Returns** `(result, errors)`: the
-    [`AlignmentResult`][hrgjax.ins.alignment.AlignmentResult] and the errors
-    (heading, pitch, roll) [°] against the true attitude, heading wrapped to ±180°."""
-    log = imu_log(imu, record, gyro)
-    fine_kw.setdefault("velocity_noise", 0.05)
-    res = _al.align(log, coarse_s=coarse_s, **fine_kw)
-    truth = np.asarray(_al.euler_deg(record.c_bn))
-    est = np.array([res.heading_deg, res.pitch_deg, res.roll_deg])
-    err = est - truth
-    err[0] = (err[0] + 180.0) % 360.0 - 180.0
-    return res, err
-
-
-def heading_limit_deg(eps_body, nabla_body, c_bn, lat):
-    """Analytic stationary heading error [°] (estimate − truth) set by a constant body-frame
-    gyro drift `eps_body` [rad/s] and accelerometer bias `nabla_body` [m/s²]:
-    $\\delta\\psi = -\\varepsilon_E/(\\omega_{ie}\\cos\\varphi) + (\\nabla_E/g)\\tan\\varphi$
-    (PHYSICS.md §12, $\\delta\\psi = -\\phi_D$).
-
-    **Arguments:** `eps_body` (3,) [rad/s]; `nabla_body` (3,) [m/s²]; `c_bn` (3, 3), the
-    body-to-NED direction cosine matrix; `lat`, the geodetic latitude φ **in radians**
-    (|φ| ≤ π/2; `np.radians(45.0)` for 45°).
-
-    **Raises:** `ValueError` for a latitude beyond ±π/2 (degrees given for radians) or not
-    finite, a drift beyond 1e-3 rad/s (≈ 206 °/h: °/h given for rad/s) or a bias beyond
-    1 m/s² (mg given for m/s²)."""
-    value = concrete_value(lat)
-    if value is not None:
-        if value.dtype.kind not in "iuf":
-            raise TypeError(f"lat must be a number, the latitude [rad]; got {type(lat).__name__}")
-        bad = ~(np.abs(value) <= np.pi / 2)  # NaN too
-        if np.any(bad):
-            v = float(value[bad].ravel()[0]) if value.ndim else float(value)
-            hint = f" (degrees? give np.radians({v:g}))" if np.isfinite(v) else ""
-            raise ValueError(f"lat must be the latitude in radians, |lat| ≤ π/2; got {v:g}{hint}")
-    for name, x, top, unit, hint in (
-        ("eps_body", eps_body, 1e-3, "rad/s", "°/h? multiply by hrgjax.units.DEG_PER_H"),
-        ("nabla_body", nabla_body, 1.0, "m/s²", "mg? multiply by 9.80665e-3"),
-    ):  # fmt: skip
-        v = concrete_value(x)
-        if v is not None and not np.all(np.abs(v) <= top):  # NaN too
-            raise ValueError(
-                f"{name} must be a bias in {unit}, |{name}| <= {top:g} (a stationary "
-                f"alignment's error); got {np.asarray(v).tolist()} ({hint})"
-            )
-    c = jnp.asarray(c_bn)
-    eps_e = (c @ jnp.asarray(eps_body))[1]
-    nab_e = (c @ jnp.asarray(nabla_body))[1]
-    g = WGS84.gravity(jnp.asarray(lat), jnp.asarray(0.0))
-    return float((-eps_e / (OMEGA_IE * jnp.cos(lat)) + nab_e / g * jnp.tan(lat)) / DEG)
-
-
 __all__ = [
     "KINDS", "VibrationCompensator", "TrainingSet", "grid", "training_set", "fit",
-    "fit_end_to_end", "rmse", "Compensated", "compensate", "imu_log", "align_record",
-    "heading_limit_deg",
+    "fit_end_to_end", "rmse", "AXIS_TOL_DEG", "Compensated", "compensate", "imu_log",
+    "align_record", "heading_limit_deg",
 ]  # fmt: skip
