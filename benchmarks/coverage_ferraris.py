@@ -11,6 +11,20 @@ sections) and standardises each of the 33 parameters' errors, z = (value − tru
 - `gauss_markov`: the same drive as a first-order Gauss–Markov bias with τ = 20 s (bias
   instability 6.3e-5 rad/s = 13 °/h and 9.5e-4 m/s² ≈ 0.1 mg).
 
+These sessions have no Earth's rate, and are calibrated with `earth_rate=0` (declared
+absent: the method's σ). Two more kinds turn with the Earth at 45° (`lat_deg=45`, the faces'
+attitudes of `ferraris_session`, each pair reversing the horizontal rate: the worst case
+for G):
+
+- `earth_mems`: white noise as above (the docs' MEMS session);
+- `earth_tactical`: white noise of 1e-5 rad/s and 1e-3 m/s² per sample (σ(G) ≈ 3e-8
+  against the Earth's 5.26e-6 rad/s per m/s²).
+
+Their "before" is the method's σ as it was (`earth_rate=0`: white noise and the bias
+drift), "after" the σ with `lat_deg=45` (the vertical rate removed, the horizontal one in
+the covariance), and "no latitude" the default `ferraris` call (`lat_deg=None`: both in the
+covariance, for a latitude anywhere on the globe).
+
 Pooled over the parameters with a finite, non-zero σ: the fraction within ±1σ and ±2σ
 (targets 68 ± 8 % and ≥ 90 %), the RMS of z (target 0.8–1.25) and the parameter whose mean
 z is furthest from 0 (target |mean z| ≤ 2); and per bias parameter (b_g x, y, z; b_a x, y,
@@ -22,8 +36,8 @@ bias random walk the faces allow, its intensity q's posterior mean).
 `ferraris_coverage(n, noise, seed)` returns the "after" figures for `benchmarks/coverage.py`.
 
 Usage: `.venv/bin/python benchmarks/coverage_ferraris.py [--quick] [--n N] [--seed S]
-[--repeats R]` (quick: 40 datasets per noise, under a minute on 2 cores; default 200,
-about 2 minutes). `--repeats 3`: sessions of three repeats, whose σ come from the repeats'
+[--repeats R] [--earth-only]` (quick: 40 datasets per noise, under a minute on 2 cores;
+default 200, about 3 minutes; `--earth-only`: the two Earth-rate kinds alone). `--repeats 3`: sessions of three repeats, whose σ come from the repeats'
 scatter (Student-t with R − 1 degrees of freedom: wider than ±1σ suggests).
 """
 
@@ -46,6 +60,11 @@ NOISES = {
     "gauss_markov": {"gyro_walk": 2e-5, "accel_walk": 3e-4, "drift_tau_s": 20.0},
 }
 """The sessions' noise beyond white (1e-3 rad/s, 0.01 m/s² per sample), per kind."""
+EARTH = {
+    "earth_mems": {"lat_deg": 45.0},
+    "earth_tactical": {"lat_deg": 45.0, "gyro_noise": 1e-5, "accel_noise": 1e-3},
+}
+"""Sessions on a bench at 45° that turns with the Earth: the docs' MEMS noise, a tactical one."""
 
 
 def _truth(rng: np.random.Generator) -> hg.imu.ImuCalibration:
@@ -62,26 +81,45 @@ def z_scores(n: int, noise: str, seed: int, repeats: int = 1) -> tuple[np.ndarra
     """Standardised errors (n, 33) of `n` simulated sessions: (after, before) — the σ the
     estimator reports, and the σ of white noise alone, on the same datasets. With
     `repeats` > 1 the session runs that many times (3-s faces) and both are the repeats'
-    scatter."""
-    if noise not in NOISES:
-        raise ValueError(f"noise must be one of {', '.join(NOISES)}; got {noise!r}")
+    scatter. For the `EARTH` kinds: (with the latitude, the method's σ as before)."""
+    got = all_z_scores(n, noise, seed, repeats)
+    return got["after"], got["before"]
+
+
+def all_z_scores(n: int, noise: str, seed: int, repeats: int = 1) -> dict[str, np.ndarray]:
+    """`z_scores`' standardised errors by σ: "after", "before" and, for the `EARTH` kinds,
+    "no latitude" (the default call)."""
+    if noise not in NOISES and noise not in EARTH:
+        raise ValueError(f"noise must be one of {', '.join([*NOISES, *EARTH])}; got {noise!r}")
     rng = np.random.default_rng(seed)
     key = jax.random.key(seed)
-    after, before = np.zeros((n, 33)), np.zeros((n, 33))
+    earth = noise in EARTH
+    out = {k: np.zeros((n, 33)) for k in ("after", "before", *(("no latitude",) if earth else ()))}
     for i in range(n):
         truth = _truth(rng)
         layout = {"repeats": repeats, "static_s": 3.0} if repeats > 1 else {}
         data, sections = hg.imu.ferraris_session(
-            truth, jax.random.fold_in(key, i), **layout, **NOISES[noise]
+            truth,
+            jax.random.fold_in(key, i),
+            **layout,
+            **(EARTH[noise] if earth else NOISES[noise]),
         )
-        cal = hg.imu.ferraris(data, sections)
+        if earth:
+            cals = {"after": hg.imu.ferraris(data, sections, lat_deg=EARTH[noise]["lat_deg"]),
+                    "before": hg.imu.ferraris(data, sections, earth_rate=0.0),
+                    "no latitude": hg.imu.ferraris(data, sections)}  # fmt: skip
+            for which, cal in cals.items():
+                err = np.asarray(cal.vector()) - np.asarray(truth.vector())
+                out[which][i] = _standardise(err, np.diag(np.asarray(cal.covariance)))
+            continue
+        cal = hg.imu.ferraris(data, sections, earth_rate=0.0)  # simulated without it
         err = np.asarray(cal.vector()) - np.asarray(truth.vector())
         stats = _statistics(data, sections)
         jac, _ = _estimate_and_jacobian(stats.stats, cal.g, np.deg2rad(np.asarray(cal.turn_deg)))
         white = np.asarray(jac) @ stats.white @ np.asarray(jac).T
-        after[i] = _standardise(err, np.diag(np.asarray(cal.covariance)))
-        before[i] = _standardise(err, np.diag(white))
-    return after, before
+        out["after"][i] = _standardise(err, np.diag(np.asarray(cal.covariance)))
+        out["before"][i] = _standardise(err, np.diag(white))
+    return out
 
 
 def _standardise(err: np.ndarray, var: np.ndarray) -> np.ndarray:
@@ -102,6 +140,8 @@ def summarise(z: np.ndarray) -> dict:
         "within_1sigma": float(np.mean(np.abs(pooled) < 1.0)),
         "within_2sigma": float(np.mean(np.abs(pooled) < 2.0)),
         "z_rms": float(np.sqrt(np.mean(pooled**2))),
+        "g_rms_z": [float(rms[i]) for i in range(24, 33)],
+        "mg_rms_z": [float(rms[i]) for i in range(12, 21)],
         "worst_mean_z": (hg.imu.PARAMETERS[worst], float(mean[worst])),
         "worst_rms_z": (hg.imu.PARAMETERS[worst_rms], float(rms[worst_rms])),
         "bias_rms_z": [float(rms[i]) for i in bias],
@@ -124,7 +164,7 @@ def _row(noise: str, which: str, s: dict) -> str:
     name, mean = s["worst_mean_z"]
     rname, rms = s["worst_rms_z"]
     return (
-        f"{noise:13s} {which:7s} {100 * s['within_1sigma']:6.1f} % {100 * s['within_2sigma']:6.1f} %"
+        f"{noise:14s} {which:11s} {100 * s['within_1sigma']:6.1f} % {100 * s['within_2sigma']:6.1f} %"
         f" {s['z_rms']:6.2f}   {mean:+5.2f} {name:24s} {rms:5.2f} {rname}"
     )
 
@@ -137,6 +177,7 @@ def main():
     parser.add_argument("--n", type=int, default=None, help="datasets per noise (default 200)")
     parser.add_argument("--seed", type=int, default=43)
     parser.add_argument("--repeats", type=int, default=1, help="sessions of R repeats")
+    parser.add_argument("--earth-only", action="store_true", help="the Earth-rate kinds alone")
     args = parser.parse_args()
     n = args.n or (40 if args.quick else 200)
     layout = f", {args.repeats} repeats of 3-s faces" if args.repeats > 1 else ""
@@ -145,18 +186,23 @@ def main():
         f"{'noise':13s} {'σ':7s} {'±1σ':>8s} {'±2σ':>8s} {'z RMS':>6s}   worst mean z"
         f"{'':19s} worst RMS z"
     )
-    for noise in NOISES:
+    kinds = [*([] if args.earth_only else NOISES), *([] if args.repeats > 1 else EARTH)]
+    for noise in kinds:
         t0 = time.perf_counter()
-        after, before = z_scores(n, noise, args.seed, args.repeats)
-        sa, sb = summarise(after), summarise(before)
-        print(_row(noise, "before", sb))
-        print(_row(noise, "after", sa) + f"   ({time.perf_counter() - t0:.0f} s)")
-        for which, s in (("before", sb), ("after", sa)):
-            print(f"{'':13s} {which:7s} biases' RMS z (b_g x y z, b_a x y z): "
+        got = {w: summarise(z) for w, z in all_z_scores(n, noise, args.seed, args.repeats).items()}
+        for which, s in got.items():
+            print(_row(noise, which, s) + (f"   ({time.perf_counter() - t0:.0f} s)"
+                                           if which == "after" else ""))  # fmt: skip
+        for which, s in got.items():
+            print(f"{'':14s} {which:11s} biases' RMS z (b_g x y z, b_a x y z): "
                   + " ".join(f"{r:.2f}" for r in s["bias_rms_z"])
                   + f"; largest |z| {s['bias_max_abs_z']:.1f}")  # fmt: skip
+            if noise in EARTH:
+                for name, key in (("G", "g_rms_z"), ("M_g", "mg_rms_z")):
+                    print(f"{'':14s} {which:11s} {name}'s RMS z (row by row): "
+                          + " ".join(f"{r:.2f}" for r in s[key]))  # fmt: skip
         tag = f"{noise}, {args.repeats} repeats" if args.repeats > 1 else noise
-        for which, s in (("before", sb), ("after", sa)):
+        for which, s in got.items():
             report(f"ferraris {tag} {which}: truths within ±1σ", 100 * s["within_1sigma"], "%",
                    target="68 ± 8 %")  # fmt: skip
             report(f"ferraris {tag} {which}: truths within ±2σ", 100 * s["within_2sigma"], "%",

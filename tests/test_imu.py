@@ -35,7 +35,7 @@ def session(truth):
 @pytest.fixture(scope="module")
 def fitted(session):
     data, sections = session
-    return hg.imu.ferraris(data, sections)
+    return hg.imu.ferraris(data, sections, earth_rate=0.0)  # simulated without the Earth's rate
 
 
 def test_noise_free_session_recovers_the_truth_exactly(truth):
@@ -174,10 +174,10 @@ def test_detection_averages_white_gyro_noise_before_the_threshold(truth):
 def test_repeats_give_standard_errors_like_the_noise(truth):
     data, sections = hg.imu.ferraris_session(truth, jax.random.key(2), repeats=4, static_s=3.0)
     assert all(len(sections[k]) == 4 for k in SECTION_KEYS)
-    cal = hg.imu.ferraris(data, sections)
+    cal = hg.imu.ferraris(data, sections, earth_rate=0.0)
     assert cal.sigma_source == "repeats"
     single = {k: v[:1] for k, v in sections.items()}
-    white = hg.imu.ferraris(data, single)
+    white = hg.imu.ferraris(data, single, earth_rate=0.0)
     # 4 repeats: σ ≈ σ_white(one set) / 2 on average over the parameters
     ratio = np.sqrt(np.diag(cal.covariance) / np.diag(white.covariance))
     assert 0.3 < np.exp(np.mean(np.log(ratio))) < 0.8
@@ -244,7 +244,7 @@ def test_a_range_listed_twice_is_not_a_repeat(session):
         hg.imu.parse_sections(overlap, len(data))
     # separate halves of one rest are a (poor) repeat, and accepted
     halves = {**sections, "y_a": [[s, (s + e) // 2], [(s + e) // 2, e]]}
-    assert hg.imu.ferraris(data, halves).sigma_source == "repeats and white noise"
+    assert hg.imu.ferraris(data, halves, earth_rate=0.0).sigma_source == "repeats and white noise"
 
 
 def test_triad_form_and_model_round_trip(fitted):
@@ -403,6 +403,14 @@ def test_cli_imu_calibrate(session, fitted, tmp_path, capsys):
         main(["imu-calibrate", str(log), "--gyro-columns", "gx,gy", "--json", str(out), "--force"])
     assert err.value.code == 2
     assert "--gyro-columns" in capsys.readouterr().err
+    # the bench's latitude reaches the calibration: its σ hold the Earth's rate
+    common = ["imu-calibrate", str(log), "--sections", str(tmp_path / "s.json"), "--gyro-columns",
+              "gx,gy,gz", "--accel-columns", "ax,ay,az", "--time-column", "t", "--accel-unit", "g"]  # fmt: skip
+    assert main([*common, "--lat-deg", "45"]) == 0
+    assert "and the Earth's rate" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as err:
+        main([*common, "--lat-deg", "95"])
+    assert err.value.code == 2 and "lat_deg" in capsys.readouterr().err
 
 
 # --- issue 44: physically impossible input is refused, never calibrated --------------------
@@ -584,7 +592,7 @@ def test_bias_sigma_holds_the_drift_rate_uncertainty():
     data, sections = hg.imu.ferraris_session(
         truth, jax.random.key(104), gyro_walk=2e-5, accel_walk=3e-4
     )
-    cal = hg.imu.ferraris(data, sections)
+    cal = hg.imu.ferraris(data, sections, earth_rate=0.0)
     z = np.asarray(cal.gyro_bias - truth.gyro_bias) / np.asarray(cal.gyro_bias_std)
     assert np.all(np.abs(z) < 5.0), z
     assert cal.sigma_source == "white noise and bias drift"

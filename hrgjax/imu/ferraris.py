@@ -9,8 +9,8 @@ M_a, M_g (3 × 3) scale and misalignment, b_a [m/s²] and b_g [rad/s] biases, G
 [rad/s per m/s²] the gyros' g-sensitivity.
 
 **Estimates.** With $u^\pm_i$ the mean accelerometer output on face $i_\pm$ (a = ±g e_i) and
-$w^\pm_i$ the gyros' (ω = 0: the Earth's rate, 7.3e-5 rad/s, is neglected as in the
-original method — a tactical or navigation-grade gyro needs a rate table and north):
+$w^\pm_i$ the gyros' (ω = 0 in the original method; on a real bench, the Earth's rate,
+see below):
 
 - $M_a e_i = (u^+_i - u^-_i) / 2g$; each accelerometer's bias from its own ± pair,
   $b_{a,i} = (u^+_{i,i} + u^-_{i,i}) / 2$ (the axis along gravity, insensitive to small
@@ -20,6 +20,15 @@ original method — a tactical or navigation-grade gyro needs a rate table and n
 - a turn of angle φ about axis i (that axis vertical) integrates to
   $\sum_k (\omega_{s,k} - b_g - G\,\hat a_k)\,\Delta t_k = M_g\,\varphi\,e_i$ with
   $\hat a_k = M_a^{-1}(a_{s,k} - b_a)$, which gives M_g column by column.
+
+**The Earth's rate** (Ω = 7.292115e-5 rad/s; `hrgjax.imu._earth`) flips with each face
+pair and so enters G: Ω sin φ / g on the diagonal, up to Ω cos φ / g across it (5.26e-6 rad/s
+per m/s² at 45°, far above a tactical session's σ(G) ≈ 3e-8 and above a MEMS one's 3e-6).
+Its vertical part is along the specific force, a g-sensitivity (Ω sin φ / g) M_g that the
+turns remove with G; with `lat_deg` it is then taken out of G exactly. Its horizontal part
+depends on the faces' headings, which the procedure leaves free: a systematic in the
+statistics' covariance; so is the vertical part where the latitude is not given.
+`earth_rate=0` declares a record without it (a simulation), the method's textbook σ.
 
 Everything is a function of each section's sums, so the standard errors follow by linear
 propagation (`jax.jacfwd` of the estimator) of those sums' covariance, formed as follows
@@ -64,7 +73,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._x64 import require_x64
-from ..units import DEG
+from ..units import DEG, EARTH_RATE
 from ._calibration import FORMAT as FORMAT
 from ._calibration import G_RANGE_M_S2 as G_RANGE_M_S2
 from ._calibration import PARAMETERS as PARAMETERS
@@ -72,6 +81,7 @@ from ._calibration import ImuCalibration as ImuCalibration
 from ._calibration import check_g, check_turn_deg, flat_parameters, per_turn
 from ._calibration import load_calibration as load_calibration
 from ._drift import walk_kernel, walk_posterior_mean
+from ._earth import check_earth_rate, check_lat_deg, earth_parts, horizontal_covariance, turn_spin
 from .data import ImuData
 from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections, saturation
 
@@ -88,12 +98,16 @@ turn (a section spanning two turns, or a turn about the wrong axis, reads far mo
 # mean gyro (3); per turn (x, y, z) Σ gyro·Δt (3), Σ accel·Δt (3) and Σ Δt (1).
 _FACE_AT = {k: 6 * i for i, k in enumerate(FACES)}
 _TURN_AT = {k: 36 + 7 * i for i, k in enumerate(TURNS)}
+_FACE_AT_GYRO = {k: at + 3 for k, at in _FACE_AT.items()}
 N_STATS = 57
 
 
-def _estimate(stats, g, turn_rad):
+def _estimate(stats, g, turn_rad, omega_up=0.0):
     """The Ferraris estimates (33 parameters, `PARAMETERS` order) from the section
-    statistics (57,) — the textbook formulas, linear except for M_a⁻¹ and 1/φ."""
+    statistics (57,) — the textbook formulas, linear except for M_a⁻¹ and 1/φ. `omega_up`
+    [rad/s]: the Earth's rate along the vertical, Ω sin φ, which the face pairs read as a
+    g-sensitivity (Ω sin φ / g) M_g on top of G and the turns remove with it
+    (`hrgjax.imu._earth`); G is that less (Ω sin φ / g) M_g."""
     face = stats[:36].reshape(6, 6)  # rows x_p, x_a, y_p, y_a, z_p, z_a; cols accel, gyro
     u_p, u_n = face[0::2, :3].T, face[1::2, :3].T  # columns: faces x, y, z
     w_p, w_n = face[0::2, 3:].T, face[1::2, 3:].T
@@ -106,12 +120,18 @@ def _estimate(stats, g, turn_rad):
     a_int = jnp.linalg.solve(m_a, (s_a - t[:, None] * b_a[None, :]).T)  # (3 comps, 3 turns)
     w_int = s_g.T - b_g[:, None] * t[None, :] - gsens @ a_int  # (3 comps, 3 turns)
     m_g = w_int / turn_rad[None, :]
-    return flat_parameters(m_a, b_a, m_g, b_g, gsens)
+    return flat_parameters(m_a, b_a, m_g, b_g, gsens - omega_up / g * m_g)
 
 
 # the estimates and their Jacobian in one compiled pass (the estimate is jacfwd's aux output)
 _estimate_and_jacobian = jax.jit(
-    jax.jacfwd(lambda s, g, turn: (_estimate(s, g, turn),) * 2, has_aux=True)
+    jax.jacfwd(lambda s, g, turn, up=0.0: (_estimate(s, g, turn, up),) * 2, has_aux=True)
+)
+# the same with the derivative by the vertical Earth rate too: ((∂/∂stats, ∂/∂Ω_up), estimate)
+_estimate_and_jacobians = jax.jit(
+    jax.jacfwd(
+        lambda s, g, turn, up: (_estimate(s, g, turn, up),) * 2, argnums=(0, 3), has_aux=True
+    )  # fmt: skip
 )
 
 
@@ -145,6 +165,12 @@ class _Statistics(NamedTuple):
 
 
 def _statistics(data: ImuData, sections: Sections) -> _Statistics:
+    return _with_drift(data, sections, *_section_sums(data, sections))
+
+
+def _section_sums(data: ImuData, sections: Sections):
+    """`(stats, white, noise_std, sources)`: the statistics, their repeats' or white-noise
+    covariance, the per-sample noise and the names of the sources used."""
     stats = np.zeros(N_STATS)
     cov = np.zeros((N_STATS, N_STATS))
     # per-sample noise: deviations of every face sample from its own range's mean
@@ -181,6 +207,16 @@ def _statistics(data: ImuData, sections: Sections) -> _Statistics:
                 block[:3, :3], block[3:6, 3:6] = c_g * sum_dt2, c_a * sum_dt2
             sources.add("white noise")
         cov[at : at + width, at : at + width] = block
+    return stats, cov, noise_std, sources
+
+
+def _with_drift(data, sections, stats, cov, noise_std, sources) -> _Statistics:
+    """The statistics with the bias drift's part where every key has one range. The faces'
+    contrasts measure q against the noise alone: where the Earth's horizontal rate is in the
+    pair sums too (flips that do not reverse it), q takes it up as drift, a conservative σ;
+    taken as a systematic there, it left q unconstrained (its posterior mean went from 7e-8
+    to 5e-6 rad/s/√s on a tactical session at 45°, the gyros' σ 10–100× wider)."""
+    sources = set(sources)
     drift, walk = np.zeros((N_STATS, N_STATS)), np.zeros(2)
     if "repeats" not in sources:
         drift, walk = _drift_covariance(data, sections, stats, cov)
@@ -235,6 +271,8 @@ def ferraris(
     turn_deg_std: float | tuple[float, float, float] = 0.0,
     gyro_range_dps: float | None = None,
     accel_range_g: float | None = None,
+    lat_deg: float | None = None,
+    earth_rate: float = EARTH_RATE,
 ) -> ImuCalibration:
     """Ferraris calibration of a six-axis IMU from one session (see the module notes).
 
@@ -260,6 +298,19 @@ def ferraris(
       (optional): a turn sample of the gyros, or a face sample of the accelerometers,
       at 99.9 % of its range or beyond is refused as clipped. Without them clipping is
       still found where a channel sits flat at its extreme (`hrgjax.imu.sections.saturation`).
+    - `lat_deg`: the bench's latitude [°], north positive. The gyros read the Earth's rate
+      on every face, and each face pair's difference takes it into G (Ω sin φ / g on the
+      diagonal, up to Ω cos φ / g across it: 5.26e-6 rad/s per m/s² at 45°, against a σ of
+      ~3e-6 for a MEMS session, 3e-8 for a tactical one). Given, the vertical part is
+      removed from G exactly; the horizontal part, which depends on the faces' headings,
+      enters the covariance as a systematic (σ = Ω cos φ per horizontal component on each
+      face). None (the default): the latitude is unknown, and both parts enter the
+      covariance (a latitude anywhere on the globe: Ω/√3 vertical). See
+      `hrgjax.imu._earth`.
+    - `earth_rate`: the rotation rate [rad/s] of the ground under the bench,
+      [`EARTH_RATE`][hrgjax.units.EARTH_RATE] (the default); 0 declares a record without
+      it — a simulation by [`ferraris_session`][hrgjax.imu.ferraris_session] without
+      `lat_deg` — and gives the method's textbook σ.
 
     **Returns:** an [`ImuCalibration`][hrgjax.imu.ImuCalibration] with standard errors.
 
@@ -271,7 +322,8 @@ def ferraris(
     (naming it); for faces whose accelerometer readings do not put the ±g axis where the
     key says; for a gyro that saturates in a turn, or an accelerometer on a face (naming
     the channel and the section: a clipped turn integrates short, M_g reads low with a σ
-    that knows nothing of it); for a negative or non-finite `turn_deg_std` or range."""
+    that knows nothing of it); for a negative or non-finite `turn_deg_std` or range; for a
+    `lat_deg` outside [−90, 90] or a negative `earth_rate`."""
     require_x64("hg.imu.ferraris")
     if not isinstance(data, ImuData):
         raise TypeError(
@@ -286,16 +338,28 @@ def ferraris(
     g = check_g(g)
     turns = check_turn_deg(turn_deg, "turn_deg")
     turn_std = _check_turn_std(turn_deg_std)
+    lat = None if lat_deg is None else check_lat_deg(lat_deg)
+    omega_up, var_up, var_h = earth_parts(lat, check_earth_rate(earth_rate))
     _check_saturation(data, sections, g, gyro_range_dps, accel_range_g, np.broadcast_to(turns, 3))
-    got = _statistics(data, sections)
-    stats, cov = got.stats, got.white + got.drift
+    sums = _section_sums(data, sections)
+    stats = sums[0]
     _check_faces(stats, g)
     _check_gravity(stats, g)
-    jac, params = _estimate_and_jacobian(jnp.asarray(stats), g, jnp.deg2rad(jnp.asarray(turns)))
-    jac, params = np.asarray(jac), np.asarray(params)
+    (jac, d_up), params = _estimate_and_jacobians(
+        jnp.asarray(stats), g, jnp.deg2rad(jnp.asarray(turns)), omega_up
+    )
+    jac, d_up, params = np.asarray(jac), np.asarray(d_up), np.asarray(params)
     _check_turns(params, turns)
+    earth = np.zeros((N_STATS, N_STATS))
+    if var_h > 0:  # the horizontal rate, heading unknown: a systematic of the statistics
+        earth = horizontal_covariance(params[12:21].reshape(3, 3), var_h,
+                                      turn_spin(data, sections), _FACE_AT_GYRO, _TURN_AT, N_STATS)  # fmt: skip
+    got = _with_drift(data, sections, *sums)
+    cov = got.white + got.drift + earth
     p_cov = jac @ cov @ jac.T + _turn_covariance(params, turns, turn_std)
-    source = got.source + (" and turn angles" if np.any(turn_std > 0) else "")
+    p_cov = p_cov + var_up * np.outer(d_up, d_up)  # an unknown vertical rate, common to all
+    source = got.source + (" and the Earth's rate" if var_h > 0 or var_up > 0 else "")
+    source += " and turn angles" if np.any(turn_std > 0) else ""
     p = jnp.asarray(params)
     return ImuCalibration(
         p[:9].reshape(3, 3), p[9:12], p[12:21].reshape(3, 3), p[21:24], p[24:33].reshape(3, 3),

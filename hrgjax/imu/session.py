@@ -10,7 +10,9 @@ import jax
 import numpy as np
 
 from .._x64 import require_x64
+from ..units import DEG, EARTH_RATE
 from ._calibration import ImuCalibration
+from ._earth import check_lat_deg
 from .data import ImuData
 from .sections import FACES, TURNS, Sections
 
@@ -49,14 +51,16 @@ def _axis_angle(r: np.ndarray) -> tuple[np.ndarray, float]:
 def _turn(c0, axis, angle, n, rate_hz, g):
     """Samples of a smooth turn of `angle` [rad] about the body `axis`, starting at rest in
     attitude `c0` and ending at rest: rate (1 − cos) shaped, so that its n-sample rectangle
-    sum is exactly `angle`. Returns ω (n, 3) [rad/s], a (n, 3) [m/s²], final attitude."""
+    sum is exactly `angle`. Returns ω (n, 3) [rad/s], a (n, 3) [m/s²], final attitude and
+    the attitudes (n, 3, 3)."""
     t = np.arange(n) / rate_hz
     period = n / rate_hz
     phi = angle * (t / period - np.sin(2 * np.pi * t / period) / (2 * np.pi))
     dphi = angle / period * (1 - np.cos(2 * np.pi * t / period))
     omega = dphi[:, None] * axis[None, :]
-    accel = np.stack([(c0 @ _rotation(axis, p)).T @ (g * _UP) for p in phi])
-    return omega, accel, c0 @ _rotation(axis, angle)
+    att = np.stack([c0 @ _rotation(axis, p) for p in phi])
+    accel = np.stack([a.T @ (g * _UP) for a in att])
+    return omega, accel, c0 @ _rotation(axis, angle), att
 
 
 def _bias_drift(key, n: int, rate_hz: float, walk: np.ndarray, tau_s: float | None) -> np.ndarray:
@@ -94,6 +98,7 @@ def ferraris_session(
     gyro_walk: float = 0.0,
     accel_walk: float = 0.0,
     drift_tau_s: float | None = None,
+    lat_deg: float | None = None,
 ) -> tuple[ImuData, Sections]:
     """Simulate a Ferraris session of an IMU whose sensors follow `truth`.
 
@@ -108,26 +113,34 @@ def ferraris_session(
     (steady-state σ = walk·√(τ/2)). The drift is zero at the session's start (the first
     face's first row), so that `truth`'s biases are those at the start of the session.
 
+    `lat_deg` [°] (None, the default: no Earth's rate, as before): the bench turns with the
+    Earth at that latitude, and the gyros sense its rate, 7.292115e-5 rad/s, along every
+    sample's attitude (world frame x east, y north, z up; the faces' attitudes are
+    [`face_attitude`][hrgjax.imu.face_attitude]'s: each face's next axis east, so
+    each ± pair reverses the horizontal rate, the largest it can do to G).
+
     **Returns:** `(data, sections)`: the record (`ImuData`, SI) and its true sections
     (faces: the rests; turns: the turn with half of each neighbouring rest)."""
     require_x64("hg.imu.ferraris_session")
     if repeats < 1:
         raise ValueError(f"repeats must be a positive integer; got {repeats!r}")
     n_static, n_move, n_turn = (max(int(round(s * rate_hz)), 2) for s in (static_s, move_s, turn_s))
-    omega, accel = [], []
+    lat = None if lat_deg is None else check_lat_deg(lat_deg) * DEG
+    omega, accel, attitude = [], [], []
     sections: Sections = {k: [] for k in (*FACES, *TURNS)}
     count = 0
     c = face_attitude("z_p")
 
-    def add(w, a):
+    def add(w, a, att):
         nonlocal count
         omega.append(w)
         accel.append(a)
+        attitude.append(att)
         count += w.shape[0]
 
     def rest(n):
         a = c.T @ (g * _UP)
-        add(np.zeros((n, 3)), np.tile(a, (n, 1)))
+        add(np.zeros((n, 3)), np.tile(a, (n, 1)), np.broadcast_to(c, (n, 3, 3)))
 
     def go_to(face):
         nonlocal c
@@ -135,8 +148,8 @@ def ferraris_session(
         axis, angle = _axis_angle(c.T @ target)
         if angle == 0.0:
             return
-        w, a, _ = _turn(c, axis, angle, n_move, rate_hz, g)
-        add(w, a)
+        w, a, _, att = _turn(c, axis, angle, n_move, rate_hz, g)
+        add(w, a, att)
         c = target
 
     for _ in range(repeats):
@@ -149,12 +162,15 @@ def ferraris_session(
             go_to(f"{'xyz'[i]}_p")
             rest(n_move)
             start = count - n_move // 2
-            w, a, c = _turn(c, np.eye(3)[i], np.deg2rad(turn_deg), n_turn, rate_hz, g)
-            add(w, a)
+            w, a, c, att = _turn(c, np.eye(3)[i], np.deg2rad(turn_deg), n_turn, rate_hz, g)
+            add(w, a, att)
             rest(n_move)
             sections[turn].append((start, count - n_move + n_move // 2))
     w_true = np.concatenate(omega)
     a_true = np.concatenate(accel)
+    if lat is not None:  # the Earth's rate (east, north, up) seen along each sample's attitude
+        earth = EARTH_RATE * np.array([0.0, np.cos(lat), np.sin(lat)])
+        w_true = w_true + np.einsum("nji,j->ni", np.concatenate(attitude), earth)
     w_s, a_s = (np.asarray(x) for x in truth.sensor(w_true, a_true))
     kg, ka, kd = jax.random.split(key, 3)
     w_s = w_s + gyro_noise * np.asarray(jax.random.normal(kg, w_s.shape, dtype=float))

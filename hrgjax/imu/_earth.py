@@ -1,0 +1,107 @@
+"""The Earth's rate in a Ferraris session (`hrgjax.imu.ferraris`).
+
+On a bench at latitude φ the gyros sense the Earth's rate Ω (7.292115e-5 rad/s): Ω sin φ
+along the local vertical and Ω cos φ north. Each face pair's difference (w⁺ − w⁻)/2g, the
+estimate of G, takes it up: the vertical part (the axis flips with the face) as Ω sin φ / g
+on G's diagonal, the horizontal part as up to Ω cos φ / g across it (both 5.26e-6 rad/s per
+m/s² at 45°), against a σ(G) of ~3e-6 for a MEMS session and ~3e-8 for a tactical one.
+
+- **The vertical part** is along the specific force at every sample of a static face and of
+  a turn about the vertical axis: ω_E,up = (Ω sin φ / g) a. It acts as a g-sensitivity
+  (Ω sin φ / g) M_g on top of G, which the face pairs measure and the turns then subtract
+  with it, so that M_g is free of it; `ferraris` removes it from G exactly where the
+  latitude is known (G = G_eff − (Ω sin φ / g) M_g), whatever the faces' headings.
+- **The horizontal part** depends on each face's heading, which the procedure leaves free:
+  it enters the covariance of the section statistics as a systematic. On a face with axis
+  i vertical, each horizontal body component of the rate is taken with σ = Ω cos φ (its
+  largest value), faces independent; a turn section's gyro sums take Ω cos φ |Σ Δt e^{iθ}|,
+  θ the angle turned so far (the rate turns with the body: a whole smooth turn averages
+  it out, the rests at the section's ends do not). The worst placement — each face's
+  partner reached by a flip that reverses the horizontal rate (`ferraris_session`) — then
+  sits at √2 σ on one element of each G column.
+- **An unknown latitude** (`lat_deg=None`): φ is taken as anywhere on the globe (area-
+  uniform, E sin²φ = 1/3): the vertical part is a systematic of σ Ω/√3, common to all
+  faces, and the horizontal one has Ω² cos²φ → 2Ω²/3. At 45° that is 1.22 σ for the worst
+  placement."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..units import DEG, EARTH_RATE
+from .data import ImuData
+from .sections import FACES, TURNS, Sections
+
+
+def check_lat_deg(lat_deg, name: str = "lat_deg") -> float:
+    """The bench's latitude [°] as a float in [−90, 90] (north positive)."""
+    form = "the bench's latitude in degrees, -90 to 90 (north positive), or None"
+    if isinstance(lat_deg, bool | np.bool_ | str):
+        raise ValueError(f"{name} must be {form}; got {lat_deg!r}")
+    try:
+        v = float(lat_deg)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {form}; got {lat_deg!r}") from None
+    if not (np.isfinite(v) and -90.0 <= v <= 90.0):
+        raise ValueError(f"{name} must be {form}; got {lat_deg!r}")
+    return v
+
+
+def check_earth_rate(earth_rate) -> float:
+    """The rotation rate [rad/s] of the ground under the bench, a float ≥ 0."""
+    form = (f"the ground's rotation rate in rad/s >= 0 ({EARTH_RATE:g} on the Earth, 0 for a "
+            "record without it, e.g. ferraris_session without lat_deg)")  # fmt: skip
+    if isinstance(earth_rate, bool | np.bool_ | str):
+        raise ValueError(f"earth_rate must be {form}; got {earth_rate!r}")
+    try:
+        v = float(earth_rate)
+    except (TypeError, ValueError):
+        raise ValueError(f"earth_rate must be {form}; got {earth_rate!r}") from None
+    if not (np.isfinite(v) and v >= 0.0):
+        raise ValueError(f"earth_rate must be {form}; got {earth_rate!r}")
+    return v
+
+
+def earth_parts(lat_deg: float | None, rate: float) -> tuple[float, float, float]:
+    """`(omega_up, var_up, var_h)`: the known vertical rate [rad/s] to remove, the variance
+    [(rad/s)²] of an unknown vertical rate, and the variance of each horizontal body
+    component of the rate on a face (see the module notes)."""
+    if lat_deg is None:
+        return 0.0, rate**2 / 3.0, 2.0 * rate**2 / 3.0
+    lat = lat_deg * DEG
+    return rate * float(np.sin(lat)), 0.0, (rate * float(np.cos(lat))) ** 2
+
+
+def turn_spin(data: ImuData, sections: Sections) -> np.ndarray:
+    """(3,) |Σ_k Δt_k e^{iθ_k}| [s] of the x, y, z turn sections (mean over a key's
+    ranges), θ_k the angle the raw gyro of the turn's own axis has integrated so far: what
+    a horizontal rate fixed in the world integrates to, in the body, per unit rate."""
+    out = np.zeros(3)
+    for i, key in enumerate(TURNS):
+        spins = []
+        for s, e in sections[key]:
+            dt = np.asarray(data.dt[s:e])
+            step = np.asarray(data.gyro[s:e, i]) * dt
+            theta = np.cumsum(step) - step  # turned before each sample
+            spins.append(abs(np.sum(dt * np.exp(1j * theta))))
+        out[i] = np.mean(spins)
+    return out
+
+
+def horizontal_covariance(m_g: np.ndarray, var_h: float, spin: np.ndarray, face_at: dict,
+                          turn_at: dict, n_stats: int) -> np.ndarray:  # fmt: skip
+    """(n_stats, n_stats): the horizontal Earth rate's covariance in the section statistics:
+    on face i± the gyro means take var_h M_g P_i M_gᵀ (P_i the projector across axis i, the
+    vertical one), on turn i the gyro sums var_h spin_i² M_g P_i M_gᵀ; sections independent.
+    `face_at` / `turn_at` give where each key's gyro numbers start in the statistics."""
+    out = np.zeros((n_stats, n_stats))
+    for key in (*FACES, *TURNS):
+        i = "xyz".index(key[0])
+        proj = np.eye(3)
+        proj[i, i] = 0.0
+        block = var_h * m_g @ proj @ m_g.T
+        at = face_at[key] if key in face_at else turn_at[key]
+        if key in turn_at:
+            block = block * spin[i] ** 2
+        out[at : at + 3, at : at + 3] = block
+    return out

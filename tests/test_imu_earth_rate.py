@@ -1,0 +1,91 @@
+"""Ferraris calibration on a bench that turns with the Earth (audit of 2026-11-30): each face
+pair's difference (w⁺ − w⁻)/2g takes the Earth's rate into G — Ω sin φ / g on the diagonal
+and Ω cos φ / g across it, 5.26e-6 rad/s per m/s² at 45° — and a tactical session's σ(G),
+3e-8, missed it by z ≈ 170. `lat_deg` removes the vertical part exactly; the horizontal
+part (the faces' headings) and an unknown latitude enter the covariance."""
+
+import jax
+import numpy as np
+import pytest
+
+import hrgjax as hg
+from hrgjax.imu import ImuCalibration
+from hrgjax.units import EARTH_RATE
+
+G = 9.81
+
+
+@pytest.fixture(scope="module")
+def truth():
+    rng = np.random.default_rng(1)
+    return ImuCalibration.known(
+        accel_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)), accel_bias=[0.1, -0.05, 0.2],
+        gyro_matrix=np.eye(3) + rng.normal(0, 0.01, (3, 3)), gyro_bias=[0.009, -0.005, 0.002],
+        gyro_g_sensitivity=rng.normal(0, 1e-4, (3, 3)),
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("lat_deg", [45.0, -30.0])
+def test_noise_free_g_sensitivity_is_off_by_the_analytic_earth_rate(truth, lat_deg):
+    """Noise-free session (`ferraris_session`'s faces: the next axis east, so axis i + 2
+    points north on i₊ and south on i₋). The pair difference holds M_g (Ω sin φ e_i +
+    Ω cos φ e_{i+2}); with `lat_deg` only the horizontal part is left in G, as predicted
+    (to 1e-10: the old method's error, Ω sin φ / g on the diagonal, is 5.2e-6)."""
+    data, sections = hg.imu.ferraris_session(truth, jax.random.key(0), gyro_noise=0.0,
+                                             accel_noise=0.0, lat_deg=lat_deg)  # fmt: skip
+    lat = np.deg2rad(lat_deg)
+    m_g = np.asarray(truth.gyro_matrix)
+    horizontal = EARTH_RATE * np.cos(lat) * np.roll(np.eye(3), 2, axis=0)  # column i: e_{i+2}
+    vertical = EARTH_RATE * np.sin(lat) * np.eye(3)
+    known = hg.imu.ferraris(data, sections, lat_deg=lat_deg)
+    err = np.asarray(known.gyro_g_sensitivity - truth.gyro_g_sensitivity)
+    # to second order: M_g, which removes Ω sin φ / g M_g, reads the turns' horizontal rate
+    np.testing.assert_allclose(err, m_g @ horizontal / G, rtol=0, atol=2e-10)
+    plain = hg.imu.ferraris(data, sections, earth_rate=0.0)  # the textbook method
+    err = np.asarray(plain.gyro_g_sensitivity - truth.gyro_g_sensitivity)
+    np.testing.assert_allclose(err, m_g @ (vertical + horizontal) / G, rtol=0, atol=1e-13)
+
+
+@pytest.fixture(scope="module")
+def tactical(truth):
+    """A tactical-grade session at 45° (1e-5 rad/s and 1e-3 m/s² per sample)."""
+    return [hg.imu.ferraris_session(truth, jax.random.key(k), gyro_noise=1e-5, accel_noise=1e-3,
+                                    lat_deg=45.0) for k in range(3)]  # fmt: skip
+
+
+def _z(cal, truth):
+    return (np.asarray(cal.vector()) - np.asarray(truth.vector())) / np.sqrt(
+        np.diag(np.asarray(cal.covariance))
+    )
+
+
+def test_tactical_session_sigma_holds_the_earth_rate(truth, tactical):
+    """The method's σ(G) is 3e-8 against a 5.26e-6 bias (z ≈ 170, the audit's 165–168);
+    with the latitude, or without it, every parameter is within 3σ, and G's σ without the
+    latitude holds an Earth's rate anywhere on the globe (Ω/√3 g on the diagonal)."""
+    g_at = slice(24, 33)
+    for data, sections in tactical:
+        plain = hg.imu.ferraris(data, sections, earth_rate=0.0)
+        assert np.max(np.abs(_z(plain, truth)[g_at])) > 100.0
+        assert plain.sigma_source == "white noise and bias drift"
+        for kw in ({"lat_deg": 45.0}, {}):
+            cal = hg.imu.ferraris(data, sections, **kw)
+            z = _z(cal, truth)
+            assert np.all(np.abs(z) < 3.0), (kw, np.round(z, 2))
+            assert cal.sigma_source == "white noise and bias drift and the Earth's rate"
+        # unknown latitude: G's diagonal σ is the vertical rate's, Ω/√3 · M_g,ii / g
+        np.testing.assert_allclose(np.diag(np.asarray(cal.gyro_g_sensitivity_std)),
+                                   EARTH_RATE / np.sqrt(3) / G * np.diag(cal.gyro_matrix),
+                                   rtol=1e-3)  # fmt: skip
+        np.testing.assert_array_equal(cal.gyro_matrix, plain.gyro_matrix)  # only σ change
+
+
+@pytest.mark.parametrize("kw", [{"lat_deg": 91.0}, {"lat_deg": "north"}, {"earth_rate": -1.0},
+                                {"earth_rate": float("nan")}])  # fmt: skip
+def test_bad_latitude_or_rate_is_refused(truth, tactical, kw):
+    data, sections = tactical[0]
+    with pytest.raises(ValueError, match=next(iter(kw))):
+        hg.imu.ferraris(data, sections, **kw)
+    if "lat_deg" in kw:
+        with pytest.raises(ValueError, match="lat_deg"):
+            hg.imu.ferraris_session(truth, jax.random.key(0), **kw)
