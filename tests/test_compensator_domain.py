@@ -30,6 +30,10 @@ from hrgjax.calibration import (
 from hrgjax.calibration.compensators import DOMAIN_MARGIN_C, Corrected
 from hrgjax.calibration.physical import initial_values
 
+pytestmark = pytest.mark.filterwarnings(  # every test here extrapolates on purpose; the
+    "ignore::hrgjax.calibration.TemperatureDomainWarning"  # warning: test_session_constants
+)
+
 CAL_TEMPS = (0.0, 20.0, 40.0)
 TEST_TEMPS = (-20.0, 20.0, 60.0)  # −20 and +60 °C lie outside 0 … 40 °C (± 1 °C)
 

@@ -1,6 +1,7 @@
 """The HRG calibration study of seed 000: plans, reduction, compensators, evaluation."""
 
 from ._compensator import AbstractCompensator as AbstractCompensator
+from ._compensator import TemperatureDomainWarning as TemperatureDomainWarning
 from .design import BenchModel as BenchModel
 from .design import BenchPlan as BenchPlan
 from .design import bench_time_h as bench_time_h
@@ -26,6 +27,7 @@ from .export import load_json as load_json
 from .export import save_compensator as save_compensator
 from .fourier import FourierCompensator as FourierCompensator
 from .mlp import MLPCompensator as MLPCompensator
+from .paired import OffsetDifference as OffsetDifference
 from .paired import PairedDifference as PairedDifference
 from .paired import paired_difference as paired_difference
 from .physical import PhysicalCompensator as PhysicalCompensator

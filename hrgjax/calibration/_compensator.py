@@ -34,6 +34,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import enum
+import warnings
 
 import equinox as eqx
 import jax
@@ -56,6 +57,15 @@ DOMAIN_MARGIN_C = 1.0
 """How far beyond its calibrated temperature range [°C] a compensator is still applied by
 `correct` (both ends): a test session's levels scatter by tenths of a degree about the
 bench's, and the recorded range is that of the calibration windows' mean temperatures."""
+
+
+class TemperatureDomainWarning(UserWarning):
+    """Data compensated outside the compensator's calibrated temperature range (widened by
+    `DOMAIN_MARGIN_C`): [`correct`][hrgjax.calibration.AbstractCompensator.correct] and
+    [`compare`][hrgjax.calibration.compare] name how many samples, where, and whether they
+    were extrapolated or passed through. The result keeps them (`Corrected.in_range`,
+    `Comparison.domains`); `warnings.simplefilter("ignore", TemperatureDomainWarning)`
+    silences it where extrapolating is meant."""
 
 
 class Corrected(MeasuredData):
@@ -278,8 +288,10 @@ class AbstractCompensator(eqx.Module):
         most cases measured, docs/calibration.md; `extrapolate=False` passes through). A
         sample inside the range beside one outside takes the mean of a compensated and a
         passed-through interval, and is not counted. The count is in
-        the result either way (`Corrected.n_out_of_range`). A compensator whose range is
-        unknown (a file saved before it was recorded) compensates every sample, as before.
+        the result either way (`Corrected.n_out_of_range`) and a
+        [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning] says it. A
+        compensator whose range is unknown (a file saved before it was recorded) compensates
+        every sample, as before.
 
         **Returns:** a [`Corrected`][hrgjax.calibration.compensators.Corrected] (a
         [`hrgjax.MeasuredData`][]) with the input columns unchanged plus
@@ -345,8 +357,19 @@ class AbstractCompensator(eqx.Module):
         cols = data.columns
         cols["rate_corrected_dps"] = rate_out
         cols["angle_corrected_deg"] = angle_out
-        return Corrected(cols, in_range=inside, temperature_range=self.calibrated_range,
-                         margin_c=margin_c, extrapolated=use_model)  # fmt: skip
+        out = Corrected(cols, in_range=inside, temperature_range=self.calibrated_range,
+                        margin_c=margin_c, extrapolated=use_model)  # fmt: skip
+        if out.n_out_of_range:
+            span = self.calibrated_range
+            where = ", ".join(
+                f"{n} at {t:+g} °C" for t, n in out.out_of_range_by_temperature().items()
+            )
+            how = "extrapolated" if use_model else "passed through uncompensated"
+            warnings.warn(f"{type(self).__name__}.correct: {out.n_out_of_range} of {len(out)} "
+                          f"samples outside the calibrated temperature range {span[0]:+.1f} … "
+                          f"{span[1]:+.1f} °C (± {margin_c:g} °C): {where} — {how} (their mask: "
+                          "the result's in_range)", TemperatureDomainWarning, stacklevel=2)  # fmt: skip
+        return out
 
 
 DOMAIN_FIELDS = ("temperature_range", "n_temperature_levels")

@@ -176,3 +176,74 @@ def paired_difference(
     else:  # too few runs, or every d_i equal (identical compensators): undefined
         se, low, high, p = math.nan, math.nan, math.nan, math.nan
     return PairedDifference(a, b, key, unit, n, rms_a, rms_b, mean, se, low, high, p, level)
+
+
+@dataclasses.dataclass(frozen=True)
+class OffsetDifference:
+    r"""Do two compensators carry the same constant? Their own offsets on one session
+    ([`Offset`][hrgjax.calibration.Offset]s $b_a \pm \sigma_a$, $b_b \pm \sigma_b$) compared:
+    $\Delta = b_a - b_b$ against $\sigma = \sqrt{\sigma_a^2 + \sigma_b^2}$, Student's t with the
+    Welch–Satterthwaite degrees of freedom.
+
+    A change of switch-on bias is the same for every compensator of a session, so a
+    difference is each one's constant from its own calibration: calibrated on different
+    switch-ons (or one of them with a constant error), and one session cannot say whose is
+    right. (σ treats the two offsets as independent; measured on the same runs they are
+    positively correlated, so σ errs large and the test says "differ" less often than its
+    level: docs/calibration.md.)
+
+    - `a`, `b`: labels; `value_dph` = $\Delta$ [°/h]; `sigma_dph` [°/h] (NaN: a σ unknown);
+      `dof`; `p_value` (two-sided; NaN: untested); `level`.
+    """
+
+    a: str
+    b: str
+    value_dph: float
+    sigma_dph: float
+    dof: float
+    p_value: float
+    level: float = 0.95
+
+    @property
+    def differ(self) -> bool:
+        """Whether the constants differ at `level` (False when untested: a σ unknown)."""
+        return bool(self.p_value < 1.0 - self.level)
+
+    def to_json(self) -> dict:
+        """`{"a", "b", "difference", "sigma", "unit": "°/h", "dof", "p_value", "level",
+        "differ"}` (NaN as `null`)."""
+
+        def num(x):
+            return float(x) if math.isfinite(x) else None
+
+        return {"a": self.a, "b": self.b, "difference": num(self.value_dph),
+                "sigma": num(self.sigma_dph), "unit": "°/h", "dof": num(self.dof),
+                "p_value": num(self.p_value), "level": float(self.level),
+                "differ": self.differ}  # fmt: skip
+
+    def __str__(self) -> str:
+        head = f"{self.a} − {self.b}: {self.value_dph:+.4f}"
+        if not math.isfinite(self.p_value):
+            return f"{head} °/h (not tested: σ unknown)"
+        word = "differ" if self.differ else "agree"
+        return (f"{head} ± {self.sigma_dph:.4f} °/h (1σ, t with {self.dof:.0f} dof, "
+                f"p = {self.p_value:.2g}): {word} at {100 * self.level:g} %")  # fmt: skip
+
+
+def offset_difference(
+    a: str, value_a: float, sigma_a: float, dof_a: int,
+    b: str, value_b: float, sigma_b: float, dof_b: int, *, level: float = 0.95,
+) -> OffsetDifference:  # fmt: skip
+    """Compare two own offsets (values and 1σ [°/h], σ's degrees of freedom): an
+    [`OffsetDifference`][hrgjax.calibration.OffsetDifference]. **Raises:** `ValueError` when
+    `level` is not in (0, 1)."""
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1); got {level}")
+    diff = float(value_a) - float(value_b)
+    var_a, var_b = float(sigma_a) ** 2, float(sigma_b) ** 2
+    if not (math.isfinite(var_a + var_b) and dof_a >= 1 and dof_b >= 1 and var_a + var_b > 0):
+        return OffsetDifference(a, b, diff, math.nan, math.nan, math.nan, level)
+    dof = (var_a + var_b) ** 2 / (var_a**2 / dof_a + var_b**2 / dof_b)
+    sigma = math.sqrt(var_a + var_b)
+    p = float(2 * stats.t.sf(abs(diff) / sigma, dof))
+    return OffsetDifference(a, b, diff, sigma, dof, p, level)

@@ -36,8 +36,24 @@ offset would scatter between switch-ons: that is the bias repeatability, the siz
 taken off all of them: the offset measured with the compensator whose static runs scatter
 least (the smallest $\sigma_b$: it explains the grid best), or with the one named by
 `offset_from`. Each compensator's own $b$ is reported too; its difference from the session's
-is a constant error of that compensator (raw data: the mean drift). Removing one offset from
-all keeps the comparison fair: a compensator that has a constant error keeps it.
+is a constant the compensator brings (raw data: the mean drift). The tables remove the one
+offset from all: a compensator that has a constant error keeps it.
+
+**Different constants.** A compensator's own offset is $b_k = \Delta b + c_k$: the session's
+change of switch-on bias plus the constant $c_k$ it brings from its calibration. One session
+measures $c_a - c_b$ but not whose constant is right: compensators calibrated on different
+switch-ons (or a self-calibration against a turntable's) differ by the change of bias
+between their calibration sessions, which is no fault of either, and one offset for both
+charges all of it to one (two Fourier+T² fits from seeds 1 and 3 on seed 2: own offsets
++0.3194 ± 0.0034 and +0.5143 ± 0.0033 °/h, each leaving 0.0258 and 0.0250 °/h after its own,
+were "f2_s3 better, p = 1e-34", and the other way round with `offset_from` the other).
+[`offset_difference`][hrgjax.calibration.Comparison.offset_difference] tests
+$|b_a - b_b|$ against $\sqrt{\sigma_a^2 + \sigma_b^2}$ (Student t, Welch–Satterthwaite
+dof); a pair that differs at the test's level is told apart after each one's own offset
+(what each leaves beyond a constant, the part one session can attribute) and the reports
+say the compensators carry different constants. A pair that agrees is told apart after the
+one offset as before; there the constants' difference is below what could decide the
+paired test on its own (docs/calibration.md).
 
 **After the offset** ([`corrected_run_errors`][hrgjax.calibration.corrected_run_errors] with
 `offset_dph = b`): a static run's residual is $r_i - b$ [°/h]; a rotation run's end-of-run
@@ -69,26 +85,26 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import warnings
 from typing import Any
 
 import numpy as np
 
 from ..data import MeasuredData
-from ._compensator import AbstractCompensator
+from ._compensator import AbstractCompensator, Corrected, TemperatureDomainWarning
 from ._grouping import nearest_multiples, wave_angle_groups
-from .evaluate import SEED_TABLE, corrected_run_errors
-from .paired import PairedDifference, paired_difference
-
-UNIT = {"static_residual_dph": "°/h", "angle_error_deg": "°", "max_angle_error_deg": "°"}
-"""The figures [`Comparison`][hrgjax.calibration.Comparison] tabulates and their units:
-static residual rate after the offset, end-of-run angle error of rotation runs after it, and
-the largest angle error during a rotation run after it."""
-_ERROR_KEY = {
-    "static_residual_dph": "drift_error_dph",
-    "angle_error_deg": "angle_error_deg",
-    "max_angle_error_deg": "max_angle_error_deg",
-}
-_SEED_KEY = {"static_residual_dph": "static_drift_dph", "angle_error_deg": "angle_error_deg"}
+from ._session_report import (
+    ERROR_KEY,
+    UNIT,
+    comparison_json,
+    comparison_text,
+    domain_line,
+    rms,
+    session_figure,
+    write_json,
+)
+from .evaluate import corrected_run_errors
+from .paired import OffsetDifference, PairedDifference, offset_difference, paired_difference
 
 
 @dataclasses.dataclass(frozen=True)
@@ -184,26 +200,7 @@ def session_offset(errors: dict, source: str = "") -> Offset:
 def _rms_groups(keys, values):
     """{key: RMS of the finite values with that key} over the sorted unique keys (NaN where
     a group has none)."""
-    out = {}
-    for k in np.unique(keys):
-        v = values[(keys == k) & np.isfinite(values)]
-        out[float(k)] = float(np.sqrt(np.mean(v**2))) if v.size else math.nan
-    return out
-
-
-def _rms(values):
-    v = values[np.isfinite(values)]
-    return float(np.sqrt(np.mean(v**2))) if v.size else math.nan
-
-
-def _num(x):
-    """JSON number: NaN and ±inf as null."""
-    return float(x) if math.isfinite(x) else None
-
-
-def _keyed(d: dict) -> dict:
-    """{T or θ: value} → {"-40": value}: JSON keys as the shortest decimal."""
-    return {f"{k:g}": _num(v) for k, v in d.items()}
+    return {float(k): rms(values[keys == k]) for k in np.unique(keys)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,11 +213,17 @@ class Comparison:
       `files` ({label: file or None}).
     - `offset`: the session's [`Offset`][hrgjax.calibration.Offset], removed from every
       compensator; `own_offsets`: {label: the offset measured with that compensator}.
-    - `errors` ({label: per-run errors, offset kept}) and `residuals` ({label: per-run
-      errors after the offset}), as [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors]
-      returns them.
+    - `errors` ({label: per-run errors, offset kept}), `residuals` ({label: per-run errors
+      after the session's offset}) and `own_residuals` ({label: after its own offset}; None:
+      derived from `errors`, the largest angle errors then NaN), as
+      [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors] returns them.
     - `temperature_bin_c` [°C], `angle_bin_deg` [°]: the group widths; `data`: the session's
       name (a file) or None.
+    - `domains`: {label: how the session stood to that compensator's calibrated temperature
+      range, or None (unknown: compensated data without it, e.g. a file)}: a dict with
+      `calibrated_range` ((T_min, T_max) [°C] or None), `margin_c` [°C], `extrapolated`,
+      `n_samples`, `n_out_of_range`, `by_temperature` ({T [°C]: samples outside}) and `runs`
+      (ids of the runs with samples outside).
     """
 
     labels: tuple[str, ...]
@@ -233,6 +236,8 @@ class Comparison:
     temperature_bin_c: float = 1.0
     angle_bin_deg: float = 5.0
     data: str | None = None
+    own_residuals: dict | None = dataclasses.field(default=None, repr=False)
+    domains: dict | None = dataclasses.field(default=None, repr=False)
 
     def _keys(self, label, by):
         e = self.residuals[label]
@@ -251,40 +256,83 @@ class Comparison:
         wave angles at each temperature; `"wave_angle"`: over the temperatures at each start
         angle), `after` (False: the offset kept, as `accuracy_table`).
         """
-        if key not in _ERROR_KEY:
-            raise ValueError(f"key must be one of {tuple(_ERROR_KEY)}; got {key!r}")
+        if key not in ERROR_KEY:
+            raise ValueError(f"key must be one of {tuple(ERROR_KEY)}; got {key!r}")
         e = (self.residuals if after else self.errors)[label]
-        return _rms_groups(self._keys(label, by), e[_ERROR_KEY[key]])
+        return _rms_groups(self._keys(label, by), e[ERROR_KEY[key]])
+
+    def groups_out_of_range(self, label: str, by: str = "temperature") -> set:
+        """The groups (T [°C] or θ [°], as `figure`'s keys) holding a run with samples outside
+        `label`'s calibrated temperature range (empty when none, or the range unknown)."""
+        domain = (self.domains or {}).get(label)
+        keys = self._keys(label, by)
+        if domain is None or not len(domain["runs"]):
+            return set()
+        return {float(k) for k in keys[np.isin(self.residuals[label]["run"], domain["runs"])]}
 
     def figure_of_merit(self, label: str) -> dict:
         """{"static_residual_dph": RMS over every static run [°/h], "angle_error_deg": RMS
         over every rotation run's end-of-run error [°]}, after the offset (NaN: no such runs)."""
         e = self.residuals[label]
         return {
-            "static_residual_dph": _rms(e["drift_error_dph"]),
-            "angle_error_deg": _rms(e["angle_error_deg"]),
+            "static_residual_dph": rms(e["drift_error_dph"]),
+            "angle_error_deg": rms(e["angle_error_deg"]),
         }
 
+    def offset_difference(self, a: str, b: str, level: float = 0.95) -> OffsetDifference | None:
+        """Do `a` and `b` carry the same constant? Their own offsets compared
+        ([`OffsetDifference`][hrgjax.calibration.OffsetDifference]); None when the session has
+        no static runs to measure them."""
+        oa, ob = self.own_offsets[a], self.own_offsets[b]
+        if not (oa.estimated and ob.estimated):
+            return None
+        return offset_difference(a, oa.value_dph, oa.sigma_dph, oa.dof,
+                                 b, ob.value_dph, ob.sigma_dph, ob.dof, level=level)  # fmt: skip
+
+    def offsets_for(self, a: str, b: str, level: float = 0.95) -> str:
+        """Which offsets `paired(a, b)` judges after by default: `"own"` (each its own) when
+        their constants differ at `level` (module docstring), else `"session"` (the one)."""
+        d = self.offset_difference(a, b, level)
+        return "own" if d is not None and d.differ else "session"
+
+    def own_residuals_of(self, label: str) -> dict:
+        """`label`'s per-run errors after its own offset (`own_residuals`' entry; derived
+        from `errors` when None, the largest angle errors then NaN)."""
+        if self.own_residuals is not None:
+            return self.own_residuals[label]
+        e, b = self.errors[label], self.own_offsets[label].value_dph
+        return {**e, "drift_error_dph": e["drift_error_dph"] - b,
+                "angle_error_deg": e["angle_error_deg"] - b * e["duration_s"] / 3600.0,
+                "max_angle_error_deg": np.full(e["run"].shape, np.nan)}  # fmt: skip
+
     def paired(
-        self, a: str, b: str, key: str = "static_residual_dph", level: float = 0.95
-    ) -> PairedDifference:
-        """Is `a`'s residual after the offset smaller than `b`'s, at `level`? The paired t test
-        on the runs they share ([`paired_difference`][hrgjax.calibration.paired_difference]).
+        self, a: str, b: str, key: str = "static_residual_dph", level: float = 0.95,
+        offsets: str = "auto",
+    ) -> PairedDifference:  # fmt: skip
+        """Is `a`'s residual smaller than `b`'s, at `level`? The paired t test on the runs
+        they share ([`paired_difference`][hrgjax.calibration.paired_difference]).
 
         **Arguments:** `a`, `b` (labels), `key` (one of
         [`UNIT`][hrgjax.calibration.session.UNIT]'s: `static_residual_dph` [°/h] on the static
         runs, `angle_error_deg` or `max_angle_error_deg` [°] on the rotation runs), `level`
-        (two-sided confidence).
+        (two-sided confidence), `offsets` (`"session"`: after the one offset; `"own"`: each
+        after its own; `"auto"`: [`offsets_for`][hrgjax.calibration.Comparison.offsets_for],
+        own where the constants differ: the difference cannot be charged to either).
 
         **Returns:** a [`PairedDifference`][hrgjax.calibration.PairedDifference]: the mean of
         $e_{a,i}^2 - e_{b,i}^2$, its t interval and `statement()`.
         """
-        if key not in _ERROR_KEY:
-            raise ValueError(f"key must be one of {tuple(_ERROR_KEY)}; got {key!r}")
+        if key not in ERROR_KEY:
+            raise ValueError(f"key must be one of {tuple(ERROR_KEY)}; got {key!r}")
         for lab in (a, b):
             if lab not in self.labels:
                 raise ValueError(f"{lab!r} is not one of the labels {list(self.labels)}")
-        ea, eb = (self.residuals[lab][_ERROR_KEY[key]] for lab in (a, b))
+        if offsets not in ("auto", "session", "own"):
+            raise ValueError(f"offsets must be 'auto', 'session' or 'own'; got {offsets!r}")
+        if offsets == "auto":
+            offsets = self.offsets_for(a, b, level)
+        res = (lambda lab: self.residuals[lab]) if offsets == "session" else self.own_residuals_of
+        ea, eb = (res(lab)[ERROR_KEY[key]] for lab in (a, b))
         return paired_difference(ea, eb, a=a, b=b, key=key, unit=UNIT[key], level=level)
 
     def paired_all(self, key: str = "static_residual_dph", level: float = 0.95) -> list:
@@ -296,7 +344,9 @@ class Comparison:
             for b in self.labels[i + 1 :]
         ]
 
-    def _paired_keys(self) -> list:
+    def paired_keys(self) -> list:
+        """The figures the reports test pairwise: the static residual where the session has
+        static runs, the end-of-run angle error where it has rotation runs."""
         counts = self.counts()
         return [k for k, kind in (("static_residual_dph", "static"),
                                   ("angle_error_deg", "rotation")) if counts[kind]]  # fmt: skip
@@ -351,143 +401,68 @@ class Comparison:
                               "angle_error_deg": {θ: …}, "max_angle_error_deg": {θ: …}},
             "figure_of_merit": {"static_residual_dph", "angle_error_deg"},
             "before_offset": {"static_drift_dph": {T: …}, "angle_error_deg": {T: …},
-                              "max_angle_error_deg": {T: …}}}],
+                              "max_angle_error_deg": {T: …}},
+            "temperature_domain": {"calibrated_range_c": [T_min, T_max] | null,
+                                   "margin_c", "extrapolated", "n_samples",
+                                   "n_out_of_range", "out_of_range_by_temperature": {T: n},
+                                   "runs_out_of_range": [run]} | null}],
          "seed_figures": {"static_residual_dph" | "angle_error_deg":
                           {T: {"fourier", "mlp"}}},
          "units": {"static_residual_dph": "°/h", "angle_error_deg": "°", …},
-         "paired": [PairedDifference.to_json() for every pair, static residual then
-                    end-of-run angle error, where the session has such runs]}
+         "paired": [PairedDifference.to_json() + {"offsets": "session" | "own"} for every
+                    pair, static residual then end-of-run angle error, where the session has
+                    such runs; with "own", also "with_one_offset": the test after the one],
+         "offset_differences": [OffsetDifference.to_json() for every pair]}
         ```
 
         `seed_figures` are seed 000's published figures
         ([`SEED_TABLE`][hrgjax.calibration.evaluate.SEED_TABLE]: its Fourier base algorithm
-        and its network), to read beside each temperature's figures.
+        and its network), to read beside each temperature's figures. `temperature_domain`
+        null: the compensated data carried no domain (a file).
         """
-        comps = []
-        for lab in self.labels:
-            by_angle = {k: _keyed(self.figure(lab, k, "wave_angle")) for k in UNIT}
-            before = {
-                k: _keyed(v) for k, v in self.before_offset()[lab].items()
-            }  # accuracy_table's keys
-            comps.append(
-                {
-                    "label": lab,
-                    "name": self.names[lab],
-                    "file": self.files.get(lab),
-                    "own_offset_dph": self.own_offsets[lab].to_json(),
-                    **{k: _keyed(self.figure(lab, k)) for k in UNIT},
-                    "by_wave_angle": by_angle,
-                    "figure_of_merit": {k: _num(v) for k, v in self.figure_of_merit(lab).items()},
-                    "before_offset": before,
-                }
-            )
-        seed = {
-            ours: {f"{t:g}": {"fourier": v[0], "mlp": v[1]} for t, v in SEED_TABLE[k].items()}
-            for ours, k in _SEED_KEY.items()
-        }
-        return {
-            "data": self.data,
-            "offset_dph": self.offset.to_json(),
-            "temperature_bin_c": self.temperature_bin_c,
-            "angle_bin_deg": self.angle_bin_deg,
-            "runs": self.counts(),
-            "compensators": comps,
-            "seed_figures": seed,
-            "units": dict(UNIT),
-            "paired": [p.to_json() for k in self._paired_keys() for p in self.paired_all(k)],
-        }
+        return comparison_json(self)
 
     def write_json(self, path: str | os.PathLike) -> str:
         """Write [`to_json`][hrgjax.calibration.Comparison.to_json] to `path` (atomically,
         folders made); returns the path."""
-        import json
-
-        from .._io import atomic_write
-
-        with atomic_write(path, "w", encoding="utf-8") as fh:
-            fh.write(json.dumps(self.to_json(), indent=2, ensure_ascii=False))
-        return os.fspath(path)
-
-    def _table(self, key, by, title):
-        unit = UNIT[key]
-        head = "T [°C]" if by == "temperature" else "θ [°]"
-        seed = SEED_TABLE.get(_SEED_KEY.get(key, ""), {}) if by == "temperature" else {}
-        width = max(12, *(len(lab) + 1 for lab in self.labels))
-        figures = {lab: self.figure(lab, key, by) for lab in self.labels}
-        groups = self.temperatures_c if by == "temperature" else self.wave_angles_deg
-        rows = [f"{title} [{unit}]"]
-        w0 = 16 if by == "temperature" else 7  # room for "all, offset kept"
-        line = f"{head:>{w0}} " + " ".join(f"{lab:>{width}}" for lab in self.labels)
-        rows.append(line + (f" {'seed Fourier':>13} {'seed MLP':>9}" if seed else ""))
-        for g in groups:
-            row = f"{g:>{w0}g} " + " ".join(
-                f"{figures[lab].get(g, math.nan):>{width}.4g}" for lab in self.labels
-            )
-            if g in seed:
-                row += f" {seed[g][0]:>13.3g} {seed[g][1]:>9.3g}"
-            rows.append(row)
-        if by == "temperature":  # every run, after the offset and with it kept
-            for name, e in (("all", self.residuals), ("all, offset kept", self.errors)):
-                cells = (_rms(e[lab][_ERROR_KEY[key]]) for lab in self.labels)
-                rows.append(f"{name:>{w0}} " + " ".join(f"{v:>{width}.4g}" for v in cells))
-        return rows
+        return write_json(self, path)
 
     def format(self, by_wave_angle: bool = True) -> str:
-        """The comparison as text: the offset, then per temperature (with seed 000's figures
-        beside) and, with `by_wave_angle`, per start wave angle, the static residual [°/h]
-        and the rotation runs' end-of-run angle error [°] after the offset; tables of kinds of
-        run the session lacks are left out; with several compensators, last, the paired
-        comparison of every pair ([`paired`][hrgjax.calibration.Comparison.paired])."""
-        counts = self.counts()
-        src = f" with {self.offset.source}" if self.offset.source else ""
-        lines = [f"session offset{src}: {self.offset}"]
-        if self.offset.estimated:
-            lines.append(
-                "  (duration-weighted mean compensated rate of the static runs, taken off every "
-                "compensator below;\n   σ: this session's run-to-run scatter, without the error "
-                "of the constant a compensator brings from its calibration)"
-            )
-        if len(self.labels) > 1:
-            lines.append("  each compensator's own mean rate at rest:")
-            for lab in self.labels:
-                lines.append(f"    {lab:<{max(map(len, self.labels))}}  {self.own_offsets[lab]}")
-        lines.append("")
-        tables = []
-        if counts["static"]:
-            tables.append(("static_residual_dph", "temperature",
-                           "static residual after the offset, RMS over wave angles"))  # fmt: skip
-        if counts["rotation"]:
-            tables.append(("angle_error_deg", "temperature",
-                           "end-of-run angle error of the rotation runs after the offset "
-                           "(offset × duration removed), RMS over wave angles"))  # fmt: skip
-        if by_wave_angle and counts["static"]:
-            tables.append(("static_residual_dph", "wave_angle",
-                           "static residual after the offset by start wave angle, RMS over "
-                           "temperatures"))  # fmt: skip
-        if by_wave_angle and counts["rotation"]:
-            tables.append(("angle_error_deg", "wave_angle",
-                           "end-of-run angle error after the offset by start wave angle, RMS "
-                           "over temperatures"))  # fmt: skip
-        for key, by, title in tables:
-            lines += self._table(key, by, title) + [""]
-        for key in self._paired_keys() if len(self.labels) > 1 else []:
-            what = "static residual" if key == "static_residual_dph" else "end-of-run angle error"
-            lines.append(f"told apart? {what} after the offset, paired on the shared runs "
-                         "(mean of e_A² − e_B², t interval):")  # fmt: skip
-            lines += [f"  {p}" for p in self.paired_all(key)] + [""]
-        return "\n".join(lines).rstrip() + "\n"
+        """The comparison as text: the offset (and, where two compensators' own offsets
+        differ, that they carry different constants), the samples outside each compensator's
+        calibrated temperature range, then per temperature (with seed 000's figures beside)
+        and, with `by_wave_angle`, per start wave angle, the static residual [°/h] and the
+        rotation runs' end-of-run angle error [°] after the offset (`*`: a group with runs
+        outside the range); tables of kinds of run the session lacks are left out; with
+        several compensators, last, the paired comparison of every pair
+        ([`paired`][hrgjax.calibration.Comparison.paired])."""
+        return comparison_text(self, by_wave_angle)
 
     def __str__(self) -> str:
         return self.format()
 
     def plot(self, path: str | os.PathLike, title: str = "") -> str:
         """Figure of the residuals after the offset per temperature and per wave angle, one
-        marker and colour per compensator, the offset in a text box
-        ([`session_figure`][hrgjax.plots.session_figure]); returns the path."""
-        from ..plots import session_figure
-        from .evaluate import SEED_TABLE
+        marker and colour per compensator (hollow: groups with runs outside its calibrated
+        temperature range), seed 000's figures beside, the offset in a text box; returns the
+        path."""
+        return session_figure(self, os.fspath(path), title=title)
 
-        return session_figure(self, os.fspath(path), title=title, seed=SEED_TABLE)
+
+def _domain(corrected: MeasuredData, bin_c: float) -> dict | None:
+    """`Comparison.domains`' entry from `correct`'s output (None: plain data, no domain)."""
+    if not isinstance(corrected, Corrected):
+        return None
+    outside = ~corrected.in_range
+    return {
+        "calibrated_range": corrected.temperature_range,
+        "margin_c": corrected.margin_c,
+        "extrapolated": corrected.extrapolated,
+        "n_samples": len(corrected),
+        "n_out_of_range": corrected.n_out_of_range,
+        "by_temperature": corrected.out_of_range_by_temperature(bin_c),
+        "runs": np.unique(corrected.run[outside]),
+    }
 
 
 def compare_corrected(
@@ -540,6 +515,11 @@ def compare_corrected(
     residuals = {
         lab: corrected_run_errors(corrected[lab], offset_dph=offset.value_dph) for lab in labels
     }
+    own_residuals = {
+        lab: residuals[lab] if own[lab] == offset else
+        corrected_run_errors(corrected[lab], offset_dph=own[lab].value_dph)
+        for lab in labels
+    }  # fmt: skip
     return Comparison(
         labels=labels,
         names={lab: (names or {}).get(lab, lab) for lab in labels},
@@ -551,6 +531,8 @@ def compare_corrected(
         temperature_bin_c=float(temperature_bin_c),
         angle_bin_deg=float(angle_bin_deg),
         data=data,
+        own_residuals=own_residuals,
+        domains={lab: _domain(corrected[lab], temperature_bin_c) for lab in labels},
     )
 
 
@@ -576,12 +558,18 @@ def compare(
       [`compare_corrected`][hrgjax.calibration.compare_corrected].
     - `name`: the session's name (a file), kept for reports.
 
+    **Warns:** [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning], one
+    per compensator the session has samples outside the calibrated temperature range of
+    (the result keeps them: `domains`, `to_json`, `format`, `plot`).
+
     **Returns:** a [`Comparison`][hrgjax.calibration.Comparison]; its
     `before_offset()` equals [`accuracy_table`][hrgjax.calibration.accuracy_table]`(compensators,
     data)` on whole-degree temperatures.
     """
-    corrected = {lab: comp.correct(data) for lab, comp in compensators.items()}
-    return compare_corrected(
+    with warnings.catch_warnings():  # one warning per compensator below, naming its label
+        warnings.simplefilter("ignore", TemperatureDomainWarning)
+        corrected = {lab: comp.correct(data) for lab, comp in compensators.items()}
+    result = compare_corrected(
         corrected,
         names={lab: _name(comp) for lab, comp in compensators.items()},
         files=files,
@@ -590,6 +578,10 @@ def compare(
         angle_bin_deg=angle_bin_deg,
         data=name,
     )
+    for lab in result.labels:
+        if result.domains[lab] and (line := domain_line(lab, result.domains[lab])):
+            warnings.warn(f"compare: {line}", TemperatureDomainWarning, stacklevel=2)
+    return result
 
 
 def _name(comp: Any) -> str:

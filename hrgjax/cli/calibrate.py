@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+import warnings
 from typing import TYPE_CHECKING, NamedTuple
 
 from ..units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
@@ -103,9 +104,9 @@ def _mlp(args) -> Method:
     from ..calibration import MLPCompensator
     from ..calibration.reduce import RAMP_WINDOW_S
 
-    # --window is the reduction's, as it has always been: the end-to-end loss keeps the
-    # class's window_s (WINDOW_S), so the fit is the one earlier versions gave
-    comp = MLPCompensator(k_e=args.k_e, st_width=args.st_width, mode=args.mode)
+    # --window is the class's window_s, as for the others: the reduction's and the end-to-end
+    # loss's, and what the file records (a re-fit of it uses the same window)
+    comp = MLPCompensator(k_e=args.k_e, st_width=args.st_width, mode=args.mode, **_window(args))
     message = f"training the MLP ({args.mode}{', with s_T' if args.st_width else ''})"
     return Method(comp, message, RAMP_WINDOW_S if args.st_width else None)
 
@@ -187,11 +188,13 @@ def _load_model(option: str, path: str):
         raise UsageError(f"{option}: {one_line(err)}") from None
 
 
-def _domain_report(label: str, comp, data, bin_c: float, extrapolate: bool = True) -> None:
+def _domain_report(label: str, comp, data, bin_c: float, extrapolate: bool = True,
+                   outside_too: bool = True) -> None:  # fmt: skip
     """Print how `data`'s samples stand to `comp`'s calibrated temperature range: the samples
     outside it per temperature (rounded to a multiple of `bin_c` [°C]; extrapolated, or
-    passed through uncompensated with `extrapolate=False`), or that the range is unknown (a
-    file saved before it was recorded)."""
+    passed through uncompensated with `extrapolate=False`; not with `outside_too=False`: the
+    comparison's report says it), or that the range is unknown (a file saved before it was
+    recorded)."""
     import numpy as np
 
     from ..calibration.compensators import DOMAIN_MARGIN_C
@@ -203,7 +206,7 @@ def _domain_report(label: str, comp, data, bin_c: float, extrapolate: bool = Tru
                   "hrgjax recorded it): every sample compensated, as before")  # fmt: skip
         return
     outside = ~comp.in_range(data["temperature_c"])
-    if not outside.any():
+    if not outside.any() or not outside_too:
         return
     temps, counts = np.unique(
         np.round(data["temperature_c"][outside] / bin_c) * bin_c + 0.0, return_counts=True
@@ -228,15 +231,18 @@ def cmd_correct(args) -> int:
     start(args, inputs, out=DATA_EXTENSIONS, json=(".json",), plot=PLOT_EXTENSIONS)
     import numpy as np
 
-    from ..calibration import compare_corrected, corrected_run_errors
-    from ..data import MeasuredData
+    from ..calibration import TemperatureDomainWarning, compare_corrected, corrected_run_errors
+    from ..calibration.compensators import Corrected
 
     comp = _load_model("--model", args.model)
     data = load_data(args.data, args.allow_extra)
-    with usage_errors(args.data):
+    with usage_errors(args.data), warnings.catch_warnings():  # said below, in the report
+        warnings.simplefilter("ignore", TemperatureDomainWarning)
         out = comp.correct(data, extrapolate=False if args.no_extrapolate else None)
     print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
-    _domain_report("temperature domain", comp, data, args.temperature_bin, out.extrapolated)
+    # extrapolated, the samples outside are in the comparison's report below
+    _domain_report("temperature domain", comp, data, args.temperature_bin, out.extrapolated,
+                   outside_too=not out.extrapolated)  # fmt: skip
     passed = 0 if out.extrapolated else out.n_out_of_range  # the file carries no mark of them
     rows = lambda p: (f"{len(out)} rows with rate_corrected_dps, angle_corrected_deg to "
                       f"{out.save(p)}" + (f" ({passed} of them outside the calibrated "
@@ -255,7 +261,9 @@ def cmd_correct(args) -> int:
             return finish((args.out, rows))
         print(f"  {n_out} run(s) with samples outside it are left out of the offset and the "
               "tables below (passed through, they would be the raw gyro's)")  # fmt: skip
-        judged = MeasuredData({k: v[keep] for k, v in out.columns.items()}, allow_extra=True)
+        judged = Corrected({k: v[keep] for k, v in out.columns.items()},
+                           in_range=out.in_range[keep], temperature_range=out.temperature_range,
+                           margin_c=out.margin_c, extrapolated=False)  # fmt: skip
     e = corrected_run_errors(judged)
     if np.any(e["static"]):
         d = e["drift_error_dph"][e["static"]]
@@ -292,7 +300,7 @@ def cmd_compare(args) -> int:
     inputs = [args.data, *args.models]
     start(args, inputs, json=(".json",), plot=PLOT_EXTENSIONS)
     from .._io import same_file
-    from ..calibration import compare
+    from ..calibration import TemperatureDomainWarning, compare
 
     for i, a in enumerate(args.models):
         for b in args.models[:i]:
@@ -315,7 +323,8 @@ def cmd_compare(args) -> int:
                 f"({', '.join(labels)})"
             )
     data = load_data(args.data, args.allow_extra)
-    with usage_errors(args.data):
+    with usage_errors(args.data), warnings.catch_warnings():  # in the report below
+        warnings.simplefilter("ignore", TemperatureDomainWarning)
         result = compare(
             dict(zip(labels, comps, strict=True)), data,
             files=dict(zip(labels, args.models, strict=True)), offset_from=offset_from,
@@ -327,8 +336,8 @@ def cmd_compare(args) -> int:
         f"{len(labels)} compensators: "
         + ", ".join(f"{lab} ({p})" for lab, p in zip(labels, args.models, strict=True))
     )
-    for lab, comp in zip(labels, comps, strict=True):
-        _domain_report(lab, comp, data, args.temperature_bin)
+    for lab, comp in zip(labels, comps, strict=True):  # outside the range: in the report
+        _domain_report(lab, comp, data, args.temperature_bin, outside_too=False)
     print()
     return _report(result, args)
 

@@ -1,0 +1,315 @@
+"""A [`Comparison`][hrgjax.calibration.Comparison] as a report: its JSON, its text and its
+figure (the definitions are [`session`][hrgjax.calibration.session]'s module docstring).
+
+Two caveats travel with every form of the report, not only the CLI's stdout:
+
+- **different constants**: a pair whose own offsets differ beyond their errors
+  ([`OffsetDifference`][hrgjax.calibration.OffsetDifference]) is judged after each one's
+  own offset, and the report says so;
+- **the temperature domain**: each compensator's calibrated range and the samples of the
+  session outside it (its `temperature_domain`); the tables mark a group holding such runs
+  with `*`, the figure draws it hollow.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from .evaluate import SEED_TABLE
+
+UNIT = {"static_residual_dph": "°/h", "angle_error_deg": "°", "max_angle_error_deg": "°"}
+"""The figures [`Comparison`][hrgjax.calibration.Comparison] tabulates and their units:
+static residual rate after the offset, end-of-run angle error of rotation runs after it, and
+the largest angle error during a rotation run after it."""
+ERROR_KEY = {
+    "static_residual_dph": "drift_error_dph",
+    "angle_error_deg": "angle_error_deg",
+    "max_angle_error_deg": "max_angle_error_deg",
+}
+"""Figure → its column of [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors]."""
+SEED_KEY = {"static_residual_dph": "static_drift_dph", "angle_error_deg": "angle_error_deg"}
+"""Figure → its row of [`SEED_TABLE`][hrgjax.calibration.evaluate.SEED_TABLE]."""
+CONSTANTS_NOTE = "the compensators carry different constants (calibrated on different switch-ons?)"
+"""What the report says of a pair whose own offsets differ (`OffsetDifference.differ`)."""
+
+
+def rms(values) -> float:
+    """RMS of the finite values (NaN when none)."""
+    v = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(v**2))) if v.size else math.nan
+
+
+def json_number(x):
+    """JSON number: NaN and ±inf as null."""
+    return float(x) if math.isfinite(x) else None
+
+
+def keyed(d: dict) -> dict:
+    """{T or θ: value} → {"-40": value}: JSON keys as the shortest decimal."""
+    return {f"{k:g}": json_number(v) for k, v in d.items()}
+
+
+def domain_json(domain: dict | None) -> dict | None:
+    """A compensator's temperature domain on the session (`Comparison.domains` entry) as
+    JSON: `{"calibrated_range_c": [T_min, T_max] | null (unknown), "margin_c",
+    "extrapolated", "n_samples", "n_out_of_range", "out_of_range_by_temperature": {T: n},
+    "runs_out_of_range": [run ids]}`; None when the data carried no domain (a file)."""
+    if domain is None:
+        return None
+    span = domain["calibrated_range"]
+    return {
+        "calibrated_range_c": None if span is None else [float(span[0]), float(span[1])],
+        "margin_c": float(domain["margin_c"]),
+        "extrapolated": bool(domain["extrapolated"]),
+        "n_samples": int(domain["n_samples"]),
+        "n_out_of_range": int(domain["n_out_of_range"]),
+        "out_of_range_by_temperature": {
+            f"{t:g}": int(n) for t, n in domain["by_temperature"].items()
+        },
+        "runs_out_of_range": [int(r) for r in domain["runs"]],
+    }
+
+
+def domain_line(label: str, domain: dict) -> str | None:
+    """One line on the samples outside the calibrated range (None: none outside, or the
+    range unknown): the CLI's wording."""
+    span = domain["calibrated_range"]
+    if span is None or not domain["n_out_of_range"]:
+        return None
+    where = ", ".join(f"{n} at {t:+g} °C" for t, n in domain["by_temperature"].items())
+    how = ("extrapolated (the model applied beyond its range)" if domain["extrapolated"]
+           else "passed through uncompensated")  # fmt: skip
+    return (f"{label}: {domain['n_out_of_range']} samples outside the calibrated temperature "
+            f"range {span[0]:+.1f} … {span[1]:+.1f} °C (± {domain['margin_c']:g} °C): {where} "
+            f"— {how}")  # fmt: skip
+
+
+def comparison_json(c) -> dict:
+    """[`Comparison.to_json`][hrgjax.calibration.Comparison.to_json]'s body."""
+    comps = []
+    for lab in c.labels:
+        by_angle = {k: keyed(c.figure(lab, k, "wave_angle")) for k in UNIT}
+        before = {k: keyed(v) for k, v in c.before_offset()[lab].items()}
+        comps.append(
+            {
+                "label": lab,
+                "name": c.names[lab],
+                "file": c.files.get(lab),
+                "own_offset_dph": c.own_offsets[lab].to_json(),
+                **{k: keyed(c.figure(lab, k)) for k in UNIT},
+                "by_wave_angle": by_angle,
+                "figure_of_merit": {k: json_number(v) for k, v in c.figure_of_merit(lab).items()},
+                "before_offset": before,
+                "temperature_domain": domain_json((c.domains or {}).get(lab)),
+            }
+        )
+    seed = {
+        ours: {f"{t:g}": {"fourier": v[0], "mlp": v[1]} for t, v in SEED_TABLE[k].items()}
+        for ours, k in SEED_KEY.items()
+    }
+    paired = []
+    for key in c.paired_keys():
+        for i, a in enumerate(c.labels):
+            for b in c.labels[i + 1 :]:
+                entry = {**c.paired(a, b, key).to_json(), "offsets": c.offsets_for(a, b)}
+                if entry["offsets"] == "own":  # the verdict one offset would give, for reference
+                    entry["with_one_offset"] = c.paired(a, b, key, offsets="session").to_json()
+                paired.append(entry)
+    return {
+        "data": c.data,
+        "offset_dph": c.offset.to_json(),
+        "temperature_bin_c": c.temperature_bin_c,
+        "angle_bin_deg": c.angle_bin_deg,
+        "runs": c.counts(),
+        "compensators": comps,
+        "seed_figures": seed,
+        "units": dict(UNIT),
+        "paired": paired,
+        "offset_differences": [d.to_json() for d in offset_differences(c)],
+    }
+
+
+def offset_differences(c, level: float = 0.95) -> list:
+    """Every pair's [`OffsetDifference`][hrgjax.calibration.OffsetDifference] (pairs with
+    no static runs left out)."""
+    return [d for i, a in enumerate(c.labels) for b in c.labels[i + 1 :]
+            if (d := c.offset_difference(a, b, level)) is not None]  # fmt: skip
+
+
+def differ_any(c) -> bool:
+    """Whether some pair's constants differ at 95 %."""
+    return any(d.differ for d in offset_differences(c))
+
+
+def _table(c, key, by, title):
+    unit = UNIT[key]
+    head = "T [°C]" if by == "temperature" else "θ [°]"
+    seed = SEED_TABLE.get(SEED_KEY.get(key, ""), {}) if by == "temperature" else {}
+    width = max(12, *(len(lab) + 1 for lab in c.labels))
+    figures = {lab: c.figure(lab, key, by) for lab in c.labels}
+    marked = {lab: c.groups_out_of_range(lab, by) for lab in c.labels}
+    mark = any(marked.values())  # a column of marks only where a group has one
+
+    def cell(lab, g):
+        v = figures[lab].get(g, math.nan)
+        if not mark:
+            return f"{v:>{width}.4g}"
+        return f"{v:>{width - 1}.4g}" + ("*" if g in marked[lab] else " ")
+
+    groups = c.temperatures_c if by == "temperature" else c.wave_angles_deg
+    rows = [f"{title} [{unit}]" + (" (*: runs outside the calibrated range)" if mark else "")]
+    w0 = 16 if by == "temperature" else 7  # room for "all, offset kept"
+    line = f"{head:>{w0}} " + " ".join(f"{lab:>{width}}" for lab in c.labels)
+    rows.append(line + (f" {'seed Fourier':>13} {'seed MLP':>9}" if seed else ""))
+    for g in groups:
+        row = f"{g:>{w0}g} " + " ".join(cell(lab, g) for lab in c.labels)
+        if g in seed:
+            row += f" {seed[g][0]:>13.3g} {seed[g][1]:>9.3g}"
+        rows.append(row)
+    if by == "temperature":  # every run, after the offset (each its own where constants
+        own = {lab: c.own_residuals_of(lab) for lab in c.labels}  # differ) and with it kept
+        alls = [("all", c.residuals), ("all, own offset", own), ("all, offset kept", c.errors)]
+        for name, e in alls if differ_any(c) else alls[::2]:
+            cells = (rms(e[lab][ERROR_KEY[key]]) for lab in c.labels)
+            rows.append(f"{name:>{w0}} " + " ".join(f"{v:>{width}.4g}" for v in cells))
+    return rows
+
+
+def comparison_text(c, by_wave_angle: bool = True) -> str:
+    """[`Comparison.format`][hrgjax.calibration.Comparison.format]'s body."""
+    counts = c.counts()
+    src = f" with {c.offset.source}" if c.offset.source else ""
+    lines = [f"session offset{src}: {c.offset}"]
+    if c.offset.estimated:
+        lines.append(
+            "  (duration-weighted mean compensated rate of the static runs, taken off every "
+            "compensator below;\n   σ: this session's run-to-run scatter, without the error "
+            "of the constant a compensator brings from its calibration)"
+        )
+    if len(c.labels) > 1:
+        lines.append("  each compensator's own mean rate at rest:")
+        for lab in c.labels:
+            lines.append(f"    {lab:<{max(map(len, c.labels))}}  {c.own_offsets[lab]}")
+    differ = [d for d in offset_differences(c) if d.differ]
+    if differ:
+        lines.append(f"  {CONSTANTS_NOTE}:")
+        lines += [f"    {d}" for d in differ]
+        lines.append("   this session cannot say whose constant is right (a change of switch-on "
+                     "bias looks the same):\n   those pairs are told apart after each one's own "
+                     "offset; the tables keep the one offset (and add 'all, own offset')")  # fmt: skip
+    domain = [s for lab in c.labels if (s := domain_line(lab, (c.domains or {}).get(lab) or
+                                                          {"calibrated_range": None}))]  # fmt: skip
+    if domain:
+        lines.append("  temperature domain:")
+        lines += [f"    {s}" for s in domain]
+    lines.append("")
+    tables = []
+    if counts["static"]:
+        tables.append(("static_residual_dph", "temperature",
+                       "static residual after the offset, RMS over wave angles"))  # fmt: skip
+    if counts["rotation"]:
+        tables.append(("angle_error_deg", "temperature",
+                       "end-of-run angle error of the rotation runs after the offset "
+                       "(offset × duration removed), RMS over wave angles"))  # fmt: skip
+    if by_wave_angle and counts["static"]:
+        tables.append(("static_residual_dph", "wave_angle",
+                       "static residual after the offset by start wave angle, RMS over "
+                       "temperatures"))  # fmt: skip
+    if by_wave_angle and counts["rotation"]:
+        tables.append(("angle_error_deg", "wave_angle",
+                       "end-of-run angle error after the offset by start wave angle, RMS "
+                       "over temperatures"))  # fmt: skip
+    for key, by, title in tables:
+        lines += _table(c, key, by, title) + [""]
+    for key in c.paired_keys() if len(c.labels) > 1 else []:
+        what = "static residual" if key == "static_residual_dph" else "end-of-run angle error"
+        lines.append(f"told apart? {what} after the offset, paired on the shared runs "
+                     "(mean of e_A² − e_B², t interval):")  # fmt: skip
+        for i, a in enumerate(c.labels):
+            for b in c.labels[i + 1 :]:
+                lines.append(f"  {c.paired(a, b, key)}")
+                if c.offsets_for(a, b) == "own":
+                    one = c.paired(a, b, key, offsets="session").statement()
+                    lines.append(f"    (after each one's own offset; with the one offset: "
+                                 f"{one!r}, the constants' difference charged to one)")  # fmt: skip
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def write_json(c, path: str | os.PathLike) -> str:
+    """[`Comparison.write_json`][hrgjax.calibration.Comparison.write_json]'s body."""
+    import json
+
+    from .._io import atomic_write
+
+    with atomic_write(path, "w", encoding="utf-8") as fh:
+        fh.write(json.dumps(c.to_json(), indent=2, ensure_ascii=False))
+    return os.fspath(path)
+
+
+def session_figure(c, path: str, title: str = "") -> str:
+    """Compensators on one session, after its offset: the static residual [°/h] (top row)
+    and the rotation runs' end-of-run angle error [°] (bottom row), RMS per temperature
+    (left; seed 000's figures as black stars and crosses) and per start wave angle (right),
+    one marker and colour per compensator, hollow where the group holds runs outside that
+    compensator's calibrated temperature range; the session's offset ± σ in a text box. A
+    row for a kind of run the session lacks is left out; saves `path`."""
+    from ..plots import pyplot, save
+
+    plt = pyplot()
+    counts = c.counts()
+    rows = [(key, f"{what} after the offset [{UNIT[key]}]", SEED_KEY[key])
+            for key, what, n in (("static_residual_dph", "static residual", counts["static"]),
+                                 ("angle_error_deg", "end-of-run angle error", counts["rotation"]))
+            if n]  # fmt: skip
+    fig, axes = plt.subplots(len(rows), 2, figsize=(11, 3.6 * len(rows) + 0.8),
+                             constrained_layout=True, squeeze=False)  # fmt: skip
+    markers = "osD^vP X<>"
+    colours = plt.get_cmap("tab10")
+    hollow = False
+    for r, (key, ylabel, seed_key) in enumerate(rows):
+        for col, by in enumerate(("temperature", "wave_angle")):
+            ax = axes[r, col]
+            values = []
+            for i, lab in enumerate(c.labels):
+                fig_ = c.figure(lab, key, by)
+                xs = np.array(sorted(fig_))
+                ys = np.array([fig_[x] for x in xs])
+                values.extend(ys[np.isfinite(ys) & (ys > 0)])
+                style = dict(marker=markers[i % len(markers)], ms=5, color=colours(i % 10))
+                ax.plot(xs, ys, ls="-", lw=1, label=lab, **style)
+                out = np.isin(xs, sorted(c.groups_out_of_range(lab, by)))
+                if out.any():  # outside the calibrated range: hollow
+                    hollow = True
+                    ax.plot(xs[out], ys[out], ls="none", mfc="white", **style)
+            if by == "temperature":
+                for j, (name, marker) in enumerate((("seed Fourier", "*"), ("seed MLP", "x"))):
+                    pts = SEED_TABLE[seed_key]
+                    ax.plot(list(pts), [v[j] for v in pts.values()], marker, ms=10, ls="none",
+                            color="k", label=name)  # fmt: skip
+                    values.extend(v[j] for v in pts.values())
+                ax.set_xlabel("temperature [°C]")
+            else:
+                ax.set_xlabel("start wave angle [° electrical]")
+            if values and max(values) > 30 * min(values):
+                ax.set_yscale("log")
+            ax.set_ylabel(ylabel if col == 0 else "")
+            ax.set_title(("RMS over wave angles" if by == "temperature" else
+                          "RMS over temperatures"), fontsize=9)  # fmt: skip
+            ax.grid(alpha=0.3, which="both")
+    handles, names = axes[0, 0].get_legend_handles_labels()  # the same in every panel
+    fig.legend(handles, names, loc="outside lower center", fontsize=8, ncol=min(len(names), 4))
+    off = c.offset
+    head = title or f"{c.data or 'test session'}: what the compensation leaves"
+    text = f"session offset{' (with ' + off.source + ')' if off.source else ''}: {off}"
+    if off.estimated:
+        text += ", taken off every compensator"
+    if hollow:
+        text += "\nhollow: groups with runs outside the compensator's calibrated temperature range"
+    if differ_any(c):
+        text += f"\n{CONSTANTS_NOTE}: see the report"
+    fig.suptitle(f"{head}\n{text}", fontsize=10)
+    return save(fig, path, dpi=110)
