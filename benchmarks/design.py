@@ -2,7 +2,7 @@
 bench-time budgets of 4 h, 12 h (a third of the seed's) and 36 h (the seed's), beside the
 seed's plans, all priced by the default `BenchModel` and judged by the predictions of both
 criteria: the compensated static-drift error (`drift`: ARW and readout angle noise through
-the physical fit's windows, Gauss–Markov rate, ideal-loop grey box), the heading (input-angle)
+the physical fit's windows, Gauss–Markov rate, ideal-loop grey box), the input-angle (tilt)
 error after the 1-h warm-up flights (`warmup`), the two together (`drift+warmup`, `design`'s
 default) and the position error after the flights (`ins`). The plans are designed for
 `--criterion` (here default drift, as the figures of benchmarks/README.md). Prints, side by

@@ -21,7 +21,7 @@ and INS errors, achieved RMS over seeds (and grid / flights), their ratio (targe
 The first seed of each plan compiles its simulators and the physical fit's groups (rare
 segment lengths share padded ones, neighbouring lengths merged: a designed 12-h plan of 44
 lengths ≈ 40 s on 2 cores, `plan_first_calibration.py`; the seed plan ≈ 1 min); later seeds
-take seconds. With the flights, each calibration's end-of-flight heading (input-angle)
+take seconds. With the flights, each calibration's end-of-flight input-angle (tilt)
 errors (the compensated rate integrated over each flight) are compared with the `warmup`
 criterion, and with the drift as `drift+warmup` (the default design criterion).
 Usage: `.venv/bin/python benchmarks/design_mc.py [--seeds N] [--budgets 12 …]
@@ -60,7 +60,7 @@ criterion's)."""
 
 
 def warmup_angles(comp, rec):
-    """Each level gyro's heading (input-angle) error at the end of a flight [°]: its
+    """Each level gyro's input-angle (tilt) error at the end of a flight [°]: its
     compensated rate (the true rate is 0) integrated over the flight (trapezoid on the 1-s
     samples)."""
     rate = comp.correct(rec)["rate_corrected_dps"]

@@ -252,7 +252,10 @@ def with_file_line(message: str, lines: np.ndarray) -> str:
 
 
 def read_csv_table(
-    path: str, empty_as_nan: bool = False, exact_integers: bool | Collection[str] = False
+    path: str,
+    empty_as_nan: bool = False,
+    exact_integers: bool | Collection[str] = False,
+    integer_offsets: Collection[str] = (),
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """A CSV file as `(columns, lines)`: each column parsed (numbers as float, `run` ids as
     exact integers, a column not in `COLUMNS` that is not all numbers as text) and the file's
@@ -268,7 +271,10 @@ def read_csv_table(
     and with `exact_integers` (as [`hrgjax.load`][hrgjax.load] reads) in an extra column too
     (True: every one; a collection of names: those, as `hrgjax.imu.load` and `hrgjax allan`
     read the columns they use); elsewhere an extra column's such integer reads as the
-    nearest float.
+    nearest float. A column in `integer_offsets` whose every field is an integer and one
+    beyond 2**53 reads as each one less the first, exact, then as float (nanosecond epoch
+    stamps, 1.7e18, to the nanosecond: their differences fit a float64; `hrgjax allan
+    --time-unit ns`); below 2**53 it reads as it is.
 
     **Raises:** `ValueError` naming the file and its line for text that is not UTF-8, a
     malformed row, a row of empty fields, an empty, numeric or duplicate header, or a known
@@ -288,7 +294,12 @@ def read_csv_table(
         exact_integers = frozenset([exact_integers] if isinstance(exact_integers, str)
                                    else exact_integers)  # fmt: skip
     fast = _numeric_table(path)
-    if fast is not None and not beyond_exact(_exact_columns(fast[0], exact_integers)):
+    offsets = {h: fast[0][h] for h in integer_offsets if h in fast[0]} if fast else {}
+    if (
+        fast is not None
+        and not beyond_exact(_exact_columns(fast[0], exact_integers))
+        and not beyond_exact(offsets)
+    ):
         return fast  # (else the validating reader names an integer beyond 2**53)
     with open(path, "rb") as fh:
         blob = fh.read()
@@ -334,7 +345,23 @@ def read_csv_table(
     lines_arr = np.asarray(lines, dtype=np.int64)
     if empty_as_nan:
         fields = {h: [f if f.strip() else "nan" for f in v] for h, v in fields.items()}
-    return {h: _parse(path, h, v, lines_arr, exact_integers) for h, v in fields.items()}, lines_arr
+    columns = {h: _offsets(v) if h in integer_offsets else None for h, v in fields.items()}
+    return {
+        h: _parse(path, h, v, lines_arr, exact_integers) if columns[h] is None else columns[h]
+        for h, v in fields.items()
+    }, lines_arr
+
+
+def _offsets(fields: list[str]) -> np.ndarray | None:
+    """Integer fields that reach 2**53 as each one less the first, exact (`read_csv_table`'s
+    `integer_offsets`); None for any other column."""
+    stripped = [f.strip() for f in fields]
+    if not stripped or not all(_INTEGER.fullmatch(f) for f in stripped):
+        return None
+    ints = [int(f) for f in stripped]
+    if max(abs(v) for v in ints) < MAX_EXACT_INTEGER:
+        return None
+    return np.array([float(v - ints[0]) for v in ints], dtype=float)
 
 
 def check_header(path: str, header: list[str], at: int) -> None:

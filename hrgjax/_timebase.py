@@ -19,16 +19,25 @@ UNIFORM_TOLERANCE = 1e-3
 t₀ + k·step (plus the stamps' own float64 rounding)."""
 
 
+STALL_FRACTION = 0.01
+"""At most this fraction of a record's steps may lie off its uniform step for them to be
+taken for stalls or stray stamps (`regular_step`); more are the clock's own pattern."""
+
+
 def regular_step(t) -> float:
     """The record's sample step [s] from increasing time stamps `t` [s]: the mean of the
     steps strictly within half a median step of the median (the median alone is quantised by
     the stamps' rounding; a gap does not move this mean, nor does a 1.5-step stall: half a
-    step off is as near two steps as one). Where most steps lie within `UNIFORM_TOLERANCE`
-    of that mean plus the stamps' rounding (a uniform clock with stalls or stray stamps),
-    the mean of those alone: one 1.4-step interval moved the wider mean by 0.4 steps over the
-    record (1e-5 of the rate at 40 000 samples), so the stamps after it no longer lay on any
-    grid of that step. A record of two step sizes in equal numbers (1 ms / 3 ms alternating)
-    has no single step: the median picks one by parity."""
+    step off is as near two steps as one). Where all but a few of those (at most
+    `STALL_FRACTION` of the steps: stalls, stray stamps) lie within `UNIFORM_TOLERANCE` of that
+    mean plus the stamps' rounding, the mean of those alone: one 1.4-step interval moved the
+    wider mean by 0.4 steps over the record (1e-5 of the rate at 40 000 samples), so the
+    stamps after it lay on no grid of that step. More steps off it are the clock's own
+    pattern, kept: a sample clock counted in crystal ticks (100 Hz from 32 768 Hz) steps 327
+    or 328 ticks, 32 % and 68 % of the steps, and only their mean is the rate (the 328-tick
+    steps alone read 99.902 Hz); a tick clock whose rarer count is under 1 % of the steps
+    reads the common count's step (within 1 % of a tick). A record of two step sizes in equal
+    numbers (1 ms / 3 ms alternating) has no single step: the median picks one by parity."""
     with np.errstate(
         over="ignore", invalid="ignore"
     ):  # steps beyond 1.8e308 s: inf, the caller refuses
@@ -40,8 +49,9 @@ def regular_step(t) -> float:
             return median
         step = float(np.mean(regular))
         rounding = 2.0 * float(np.spacing(np.max(np.abs(t))))
-        close = dt[np.abs(dt - step) <= UNIFORM_TOLERANCE * step + rounding]
-        return float(np.mean(close)) if 2 * close.size > dt.size else step
+        close = regular[np.abs(regular - step) <= UNIFORM_TOLERANCE * step + rounding]
+        few = regular.size - close.size <= STALL_FRACTION * dt.size
+        return float(np.mean(close)) if close.size and few else step
 
 
 def is_uniform(t, step: float) -> bool:

@@ -5,6 +5,8 @@ the truth through 4τ₀); a 1.5-step interval moved the rate to 99.9987 Hz; and
 Gauss–Markov term of T ≈ 1.5 Δt (a digital low-pass) went to Kalibr as a random walk
 2σ²/T (noise density 0.28×, random walk 6.4 °/h/√s for none)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -98,9 +100,37 @@ def test_the_cli_says_a_stalled_clock_kept_its_samples(tmp_path, capsys, white):
     t = np.arange(N) / FS
     t[N // 2 :] += 2.5 / FS
     log = tmp_path / "stall.csv"
-    log.write_text("time_s,gyro\n" + "".join(f"{a:.4f},{b:.6f}\n" for a, b in zip(t, white)))
+    log.write_text("time_s,gyro\n" + "".join(f"{a:.4f},{b:.6f}\n" for a, b in zip(t, white, strict=True)))
     assert main(["allan", str(log), "--column", "gyro", "--time-column", "time_s",
                  "--taus", "0.01"]) == 0  # fmt: skip
     out = capsys.readouterr().out
     assert "uniform at 100 Hz but for 1 stall(s)" in out and "reads low" not in out
     assert "8002 samples at 100 Hz (80.02 s), 4 missing" in out, out  # 7998 own + 4 NaN
+
+
+@pytest.mark.parametrize("steps", [0.25, 1.0, 4.0])
+def test_kalibr_white_level_of_a_short_gauss_markov_follows_the_sampling(steps):
+    """Review of 56065c5: the white level 2σ²T is the interval means'; point samples of a
+    Gauss–Markov rate are an AR(1) of φ = e^{−Δt/T}, whose long-τ level N² is Δt × the sum of
+    its autocovariances, σ²Δt(1 + φ)/(1 − φ) (exported N 0.694× at T = Δt/4 before)."""
+    dt, sigma, big_n = 1.0 / FS, 0.7, 0.1
+    t = steps * dt
+    phi = np.exp(-dt / t)
+    lags = np.arange(-2000, 2001)
+    truth = {"interval": 2 * sigma**2 * t, "point": dt * np.sum(sigma**2 * phi ** np.abs(lags))}
+    unit = {"value": 0.0, "low": 0.0, "high": 0.0, "unit": ""}
+    model = hg.allan.CompositeNoise(
+        terms={"angle_random_walk": {**unit, "value": big_n},
+               "gauss_markov_1": {"sigma": {**unit, "value": sigma},
+                                  "correlation_time": {**unit, "value": t}}},
+        unit="°/h", rate_hz=FS, n=10_000, ci=0.95, taus=np.array([dt]), avar=np.array([1.0]),
+        covariance=np.eye(1), chi2=0.0, dof=1, p_value=1.0,
+        bounds={"rate_random_walk": 1e-3})  # fmt: skip
+    si = np.pi / 180 / 3600
+    for sampling, level in truth.items():
+        out = dataclasses.replace(model, sampling=sampling).to_kalibr()
+        want = np.sqrt(big_n**2 + level) * si
+        assert out["gyroscope_noise_density"] == pytest.approx(want, rel=1e-12), sampling
+    for sampling, level in truth.items():
+        got = hg.allan.composite.gm_white_level(sigma, t, dt, sampling)
+        assert got == pytest.approx(level, rel=1e-12)

@@ -196,9 +196,11 @@ def test_every_option_has_help_and_its_default_is_shown():
 
     assert DIAGNOSIS_METHODS == METHODS
     assert all(m in " ".join(subs.choices["diagnose"].format_help().split()) for m in METHODS)
-    # the design criteria's angle is the input (heading) angle, 1/k_e of the wave angle's
+    # the design criteria's angle is the input angle of the two level gyros (x forward, y
+    # right): a tilt (roll, pitch), not heading (review of cc807d6); 1/k_e of the wave angle's
     design = " ".join(subs.choices["design"].format_help().split())
-    assert "heading (input-angle) error" in design and "wave-angle error" not in design
+    assert "input-angle (tilt) error" in design and "wave-angle error" not in design
+    assert "heading" not in design
 
 
 @pytest.fixture(scope="module")
@@ -433,19 +435,22 @@ def test_imu_calibrate_table_labels_fit_their_column(tmp_path, capsys):
 def test_allan_time_unit_and_stamps_that_are_not_seconds(tmp_path, capsys):
     """Audit: a 100-Hz log stamped in ms (0, 10, 20, …) was read as 0.1 Hz, its ARW √1000
     too large, without a word. `--time-unit ms` reads it (τ₀ = 0.01 s, the deviation at τ₀
-    that of the samples: √(mean Δy²/2)); stamps that look like ms — a name `t_ms`,
-    whole-number steps above 1, an epoch in ms — are refused in one line naming
-    `--time-unit`, while a real 0.1-Hz or 1-Hz log in seconds still reads."""
+    that of the samples: √(mean Δy²/2)); a name in another unit (`t_ms`) and an epoch in ms
+    are refused in one line naming `--time-unit`; whole-number steps above 1 are read as
+    seconds (HRG drift logs at 0.1 Hz in whole seconds, epoch seconds too: review of cc807d6,
+    which refused them) with one note line naming `--time-unit ms`, a name in seconds
+    (`elapsed_secs`) with none; ns epoch stamps (ROS, beyond 2**53) read exactly with
+    `--time-unit ns` (they were refused as rounded integers even with it)."""
     import json
     import re
 
     y = np.random.default_rng(0).normal(size=64)
     k = np.arange(64)
 
-    def log(name, column, t):
+    def log(name, column, t, fmt=lambda a: repr(float(a))):
         path = tmp_path / name
-        rows = (f"{float(a)!r},{v:.9f}\n" for a, v in zip(t, y, strict=True))
-        path.write_text(f"{column},rate\n" + "".join(rows))
+        rows = (f"{fmt(a)},{v:.9f}\n" for a, v in zip(t, y, strict=True))
+        path.write_text(f"{column},rate\n" + "".join(rows), encoding="utf-8")
         return str(path)
 
     ms = log("ms.csv", "time", 10.0 * k)
@@ -457,10 +462,13 @@ def test_allan_time_unit_and_stamps_that_are_not_seconds(tmp_path, capsys):
     assert dev["tau_s"][0] == pytest.approx(0.01, rel=1e-12)
     assert dev["dev"][0] == pytest.approx(np.sqrt(np.mean(np.diff(y) ** 2) / 2), rel=1e-9)
     error = r"^hrgjax allan: error: .*\.csv: "
-    cli_fails(["allan", ms, *base, "time"], capsys,
-              error + r"time column 'time' steps by whole numbers \(10\), 0\.1 Hz if seconds: "
-              r"stamps in ms\? give --time-unit ms; seconds indeed: --time-unit s \(or "
-              r"--rate-hz 0\.1\)$")  # fmt: skip
+    note = ("time column 'time' steps by whole numbers (10): read as seconds, 0.1 Hz; stamps "
+            "in ms? give --time-unit ms")  # fmt: skip
+    for t, fmt in ((10.0 * k, lambda a: f"{a:.0f}"), (10.0 * k, lambda a: f"{a:.3f}"),
+                   (1.7e9 + 10.0 * k, lambda a: f"{a:.0f}")):  # fmt: skip
+        assert main(["allan", log("drift.csv", "time", t, fmt), *base, "time"]) == 0
+        said = capsys.readouterr().out
+        assert note in said and "64 samples at 0.1 Hz (640 s)" in said
     cli_fails(["allan", ms, *base, "time", "--rate-hz", "100"], capsys,
               error + r"--rate-hz 100 contradicts the time column's 0\.1 Hz \(stamps in ms\? "
               r"give --time-unit ms\)$")  # fmt: skip
@@ -484,15 +492,47 @@ def test_allan_time_unit_and_stamps_that_are_not_seconds(tmp_path, capsys):
         capsys,
         r"^hrgjax allan: error: --time-unit is the unit of --time-column",
     )
-    # seconds: said so, or stamps that are not whole steps above 1 (a 0.1-Hz drift log with
-    # its clock's jitter, a 1-Hz log stamped 0, 1, 2)
+    ros = log("ros.csv", "stamp", [1_700_000_000_000_000_007 + 10_000_000 * i for i in k], str)
+    cli_fails(["allan", ros, *base, "stamp"], capsys,
+              error + r"column 'stamp' row 0 .*too large.* give --time-unit ns\)$")  # fmt: skip
+    out = tmp_path / "ros.json"
+    assert main(["allan", ros, *base, "stamp", "--time-unit", "ns", "--json", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "64 samples at 100 Hz (0.64 s)" in said and "resampled" not in said
+    dev = json.loads(out.read_text())["deviation"]
+    assert dev["dev"][0] == pytest.approx(np.sqrt(np.mean(np.diff(y) ** 2) / 2), rel=1e-9)
+    # seconds: said so (no note), or stamps that are not whole steps above 1 (a 0.1-Hz drift
+    # log with its clock's jitter, a 1-Hz log stamped 0, 1, 2)
     jitter = 10.0 * k + np.random.default_rng(1).uniform(-1e-3, 1e-3, 64)
-    for path, extra, rate in ((ms, ["--time-unit", "s"], 0.1), (ms, ["--rate-hz", "0.1"], 0.1),
-                              (log("drift.csv", "time", jitter), [], 0.1),
-                              (log("one.csv", "time", 1.0 * k), [], 1.0)):  # fmt: skip
-        assert main(["allan", path, *base, "time", *extra]) == 0
-        found = re.search(r"64 samples at (\S+) Hz", capsys.readouterr().out)
-        assert float(found[1]) == pytest.approx(rate, rel=1e-5)
+    for path, column, extra, rate in (
+        (ms, "time", ["--time-unit", "s"], 0.1),
+        (ms, "time", ["--rate-hz", "0.1"], 0.1),
+        (log("secs.csv", "elapsed_secs", 10.0 * k), "elapsed_secs", [], 0.1),
+        (log("jitter.csv", "time", jitter), "time", [], 0.1),
+        (log("one.csv", "time", 1.0 * k), "time", [], 1.0),
+    ):
+        assert main(["allan", path, *base, column, *extra]) == 0
+        said = capsys.readouterr().out
+        found = re.search(r"64 samples at (\S+) Hz", said)
+        assert float(found[1]) == pytest.approx(rate, rel=1e-5) and "whole numbers" not in said
+
+
+@pytest.mark.parametrize("name, unit", [
+    ("t_\u03bcs", "us"), ("t_\u00b5s", "us"), ("time [\u00b5s]", "us"), ("elapsed_secs", "s"),
+    ("time_seconds", "s"), ("Seconds", "s"), ("Time (sec)", "s"), ("time_s", "s"),
+    ("t_milliseconds", "ms"), ("TimeMs", "ms"), ("t_millis", "ms"), ("timeUs", "us"),
+    ("t_micros", "us"), ("stamp_nsec", "ns"), ("header.stamp_nanos", "ns"),
+    ("timestamp_ns", "ns"), ("ElapsedNanoseconds", "ns"), ("time", None), ("timestamp", None),
+    ("stamps", None), ("gyro_dps", None),
+])  # fmt: skip
+def test_allan_time_column_names_give_a_time_unit(name, unit):
+    """Review of cc807d6: 't_μs' (Greek mu) matched the micro sign and returned 'μs', no
+    `TIME_UNITS` key (unreadable with or without --time-unit us); elapsed_secs, Seconds,
+    t_milliseconds, TimeMs, timeUs were not read as named."""
+    from hrgjax.cli.allan import TIME_UNITS, named_time_unit
+
+    found = named_time_unit(name)
+    assert found == unit and (found is None or found in TIME_UNITS)
 
 
 def test_allan_names_the_line_of_a_stamp_that_does_not_increase(tmp_path, capsys):
@@ -526,7 +566,12 @@ def test_allan_refuses_integers_a_float_would_round(tmp_path, capsys):
     cli_fails(["allan", str(log), "--column", "rate", "--time-column", "t_ns"], capsys,
               r"^hrgjax allan: error: .*ns.csv: column 't_ns' row 0 \(line 2\): the integer "
               r"1700000000000000001 is too large to hold exactly as a float64; write it in "
-              r"scientific notation if rounding is intended$")  # fmt: skip
+              r"scientific notation if rounding is intended \(time stamps in ns\? give "
+              r"--time-unit ns\)$")  # fmt: skip
+    # with --time-unit ns each stamp less the first, exact: steps of 2 ns (review of cc807d6)
+    assert main(["allan", str(log), "--column", "rate", "--time-column", "t_ns",
+                 "--time-unit", "ns"]) == 0  # fmt: skip
+    assert "64 samples at 5e+08 Hz" in capsys.readouterr().out
     assert main(["allan", str(log), "--column", "rate", "--time-column", "t_s"]) == 0
     assert "64 samples at 0.00390625 Hz" in capsys.readouterr().out
     picked = tmp_path / "count.csv"

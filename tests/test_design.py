@@ -711,7 +711,7 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
     value, drift, warm = (float(v) for v in d.drift_warmup_error(plan, terms=True))
     hours = float(d.bench_time_h(plan, bench))
     assert (f"{'designed':10s} {hours:6.2f} h  drift+warmup {value:.4g} ° "
-            f"(drift {drift:.4g} °/h, warm-up heading {warm:.4g} °)") in text  # fmt: skip
+            f"(drift {drift:.4g} °/h, warm-up tilt {warm:.4g} °)") in text  # fmt: skip
     # both criteria printed and stored: the search's plan and the plan as rounded (this one)
     doc = json.loads(out.read_text(encoding="utf-8"))
     crit = doc["criterion"]

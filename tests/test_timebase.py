@@ -54,3 +54,17 @@ def test_imu_rate_from_epoch_stamps():
     data = hg.imu.ImuData(t, np.zeros((t.size, 3)), np.tile([0.0, 0.0, 9.8], (t.size, 1)))
     resolution = 2 * np.spacing(t[-1]) / (t[-1] - t[0])  # two stamps' rounding over the span
     assert data.rate_hz == pytest.approx(1e4, rel=resolution)  # the median step read 10 010 Hz
+
+
+@pytest.mark.parametrize("rate, tick, t0", [(100.0, 32768.0, 0.0), (100.0, 32768.0, EPOCH),
+                                            (200.0, 32768.0, 0.0), (3000.0, 1e6, 0.0)])  # fmt: skip
+def test_a_clock_counted_in_crystal_ticks_reads_its_mean_rate(rate, tick, t0):
+    """100 Hz from a 32 768-Hz crystal steps 327 or 328 ticks (32 % / 68 %): the rate is the
+    mean step's, the stamps' span over their count (the 328-tick steps alone read
+    99.902 439 Hz, and the CLI resampled white noise at that rate into a Gauss–Markov)."""
+    n = 4000
+    t = t0 + np.floor(np.arange(n) * tick / rate) / tick
+    truth = (n - 1) / (t[-1] - t[0])  # the clock's own mean rate (100.000 024 Hz here)
+    assert len(set(np.round(np.diff(t - t0) * tick))) == 2
+    assert 1.0 / regular_step(t) == pytest.approx(truth, rel=1e-9)
+    assert hg.allan.to_uniform(t, np.zeros(n)).rate_hz == pytest.approx(truth, rel=1e-9)

@@ -193,11 +193,14 @@ class CompositeNoise:
           uses, `hrgjax.ins.ekf`); over longer times Kalibr's walk overstates it.
         - except a Gauss–Markov term of Tᵢ ≤
           [`GM_AS_WHITE`][hrgjax.allan.composite.GM_AS_WHITE]·Δt (a digital low-pass, output
-          smoothed over a few samples): white noise, 2σᵢ²Tᵢ added to N² — its rate PSD at
-          low frequency, exact for T ≪ Δt. Its Allan variance 2σ²T/τ bounds the term's own
-          at every τ and is within 15 % of it from τ = 10 T; as a walk, K²τ/3 = 2σ²τ/(3T)
-          would exceed it 200× at 100 Δt (a 100-Hz white log low-passed to T = 1.5 Δt
-          exported N 0.028 for 0.100 °/h·√s, K 6.4 °/h/√s for 0).
+          smoothed over a few samples): white noise, its level at long τ in the model's own
+          Allan variance added to N² ([`gm_white_level`][hrgjax.allan.composite.gm_white_level]:
+          2σᵢ²Tᵢ for interval means, σᵢ²Δt·coth(Δt/2Tᵢ) for point samples — 2σ²T read them
+          0.694× in N at T = Δt/4). For interval means its Allan variance 2σ²T/τ bounds the
+          term's own at every τ and is within 15 % of it from τ = 10 T; as a walk, K²τ/3 =
+          2σ²τ/(3T) would exceed it 200× at 100 Δt (a 100-Hz white log low-passed to T =
+          1.5 Δt exported N 0.028 for 0.100 °/h·√s, K 6.4 °/h/√s for 0). At T = 4Δt it
+          jumps from N² to K², each right on its side of τ ≈ T and neither across it.
 
         A term the record did not need counts 0, except that where an entry would be 0 (N and
         Q, or K and every Gauss–Markov term, absent) N's or K's upper bound (`bounds`) is
@@ -215,7 +218,8 @@ class CompositeNoise:
                  for name, g in self.terms.items() if name.startswith("gauss_markov")]  # fmt: skip
         fast = [(s, t) for s, t in terms if t <= GM_AS_WHITE * dt]  # white at Kalibr's Δt
         gms = [(s, t) for s, t in terms if t > GM_AS_WHITE * dt]
-        extra = {"noise_density": 2.0 * q * q / dt + sum(2.0 * s * s * t for s, t in fast),
+        white = sum(gm_white_level(s, t, dt, self.sampling) for s, t in fast)
+        extra = {"noise_density": 2.0 * q * q / dt + white,
                  "random_walk": sum(2.0 * s * s / t for s, t in gms)}  # fmt: skip
         values, notes = {}, {}
         for key, name in (
@@ -235,7 +239,8 @@ class CompositeNoise:
             folded.append(f"2Q^2/dt, Q = {q:.4g} {self.unit}*s white angle noise (valid at "
                           "this update_rate only)")  # fmt: skip
         if fast:
-            folded.append(f"2 sigma^2 T, Gauss-Markov rate(s) "
+            level = "2 sigma^2 T" if self.sampling == "interval" else "sigma^2 dt coth(dt/2T)"
+            folded.append(f"{level}, Gauss-Markov rate(s) "
                           f"{', '.join(f'(sigma {s:.4g}, T {t:.4g} s)' for s, t in fast)} "
                           f"correlated over <= {GM_AS_WHITE:g} samples")  # fmt: skip
         if folded:
@@ -303,10 +308,21 @@ class CompositeNoise:
         )
 
 
+def gm_white_level(sigma: float, correlation_time: float, dt: float, sampling: str) -> float:
+    """A first-order Gauss–Markov rate's white-noise level at long τ [unit²·s]: N² with which
+    its Allan variance → N²/τ, for σ [unit], T = `correlation_time` [s] sampled every `dt`
+    [s] as `sampling` — 2σ²T for interval means (the continuous rate's PSD at 0, whatever
+    Δt), σ²Δt·(1 + φ)/(1 − φ) = σ²Δt·coth(Δt/2T) for point samples (φ = e^{−Δt/T}: the AR(1)
+    samples' autocovariances summed, σ²Δt for T ≪ Δt, 2σ²T for T ≫ Δt)."""
+    if sampling == "interval":
+        return 2.0 * sigma * sigma * correlation_time
+    return sigma * sigma * dt / math.tanh(dt / (2.0 * correlation_time))
+
+
 GM_AS_WHITE = 4.0
 """[`to_kalibr`][hrgjax.allan.CompositeNoise.to_kalibr] writes a Gauss–Markov term whose
-correlation time is at most this many sample steps as white noise (N² += 2σ²T), a longer
-one as a random walk (K² += 2σ²/T) [samples]."""
+correlation time is at most this many sample steps as white noise (N² += `gm_white_level`),
+a longer one as a random walk (K² += 2σ²/T) [samples]."""
 
 TO_SI = {
     **{u: ("gyroscope", f) for u, f in GYRO_UNITS.items()},

@@ -132,19 +132,20 @@ def _record(result: AllanResult):
     return (segments if segments is not None else int(n[0]), float(tau0[0])), ""
 
 
-def _cov(coef: dict, gm: list, ms, n, tau0: float) -> np.ndarray:
-    """The estimates' covariance for the record `n`: a length, or runs (`_record`)."""
+def _cov(coef: dict, gm: list, ms, n, tau0: float, layouts=None) -> np.ndarray:
+    """The estimates' covariance for the record `n`: a length, or runs (`_record`; `layouts`
+    the fit's own store of the runs' layouts, `gapped_covariance`)."""
     if isinstance(n, np.ndarray):
-        return gapped_covariance(coef, gm, ms, n, tau0)
+        return gapped_covariance(coef, gm, ms, n, tau0, layouts=layouts)
     return covariance(coef, gm, ms, n, tau0)
 
 
-def _omega(coef2: dict, flicker, ms, n, tau0, var):
+def _omega(coef2: dict, flicker, ms, n, tau0, var, layouts=None):
     """The estimates' covariance [unit⁴] at the fit `coef2` ({term: coefficient²}), each
     variance floored at 1e-6 of its own (or of the estimate's 2σ̂⁴/n) so it stays invertible."""
     lin = {t: c for t, c in coef2.items() if t in _COVARIANCE_TERMS}
     gm = [(coef2.get("bias_instability", 0.0) * s2, t) for s2, t in flicker]
-    om = _cov(lin, gm, ms, n, tau0)
+    om = _cov(lin, gm, ms, n, tau0, layouts)
     size = int(n[:, 1].sum()) if isinstance(n, np.ndarray) else n
     return om + np.diag(1e-6 * np.maximum(np.diag(om), 2 * var**2 / max(size, 1)))
 
@@ -290,9 +291,11 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
         n, tau0 = rec
         ms = np.asarray(result.m, dtype=int)
         flicker = flicker_as_gauss_markov(ms, tau0) if "bias_instability" in fitted else []
+        layouts = {}  # a gapped record's run layouts, each built once for the fit's 6-7 Ω
 
         def whitened(c):  # Ω at the fit c: its inverse Cholesky factor, A whitened, scales
-            omega = _omega(dict(zip(fitted, c, strict=True)), flicker, ms, n, tau0, var)
+            coef2 = dict(zip(fitted, c, strict=True))
+            omega = _omega(coef2, flicker, ms, n, tau0, var, layouts)
             w_inv = np.linalg.inv(np.linalg.cholesky(omega))
             a = w_inv @ basis
             return w_inv, a, np.linalg.norm(a, axis=0)
@@ -313,8 +316,8 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
 
             def own_cov(name, n=n):  # Ω of one term alone at unit coefficient²
                 if name == "bias_instability":
-                    return _cov({}, flicker, ms, n, tau0)
-                return _cov({name: 1.0}, [], ms, n, tau0)
+                    return _cov({}, flicker, ms, n, tau0, layouts)
+                return _cov({name: 1.0}, [], ms, n, tau0, layouts)
 
             method = "gls, flicker approximated" if flicker else "gls"
     z = NormalDist().inv_cdf(0.5 + result.ci / 2)

@@ -404,7 +404,13 @@ def _covariance(lay, coef, gm, ms, tau0, sampling):
 
 
 def gapped_covariance(
-    coef: dict, gm: list, ms, segments, tau0: float, sampling: str = "interval"
+    coef: dict,
+    gm: list,
+    ms,
+    segments,
+    tau0: float,
+    sampling: str = "interval",
+    layouts: dict | None = None,
 ) -> np.ndarray:
     """[`covariance`][hrgjax.allan.octave_covariance.covariance] for a rate record with gaps:
     `segments` the (start, length) of each gap-free run of rate samples, in order [samples]
@@ -417,19 +423,25 @@ def gapped_covariance(
     plus across runs r < s the tails' geometric sums Σ φ^x = Σ_{r<s} G(Nₐ⁽ʳ⁾)G(N_b⁽ˢ⁾)φ^{dᵣₛ}
     (G(N) = Σ_{k<N} φᵏ, dᵣₛ the samples between the runs; both orders of a and b), over
     MₐM_b. Exact for the model, as `covariance` is; the cost grows with the number of
-    distinct run lengths (a `covariance` call each) and, with Gauss–Markov terms, of runs."""
+    distinct run lengths (a `covariance` call each, on a layout built once per length and
+    kept in `layouts`, a dict the caller passes to each call for one record: a fit's 6–7
+    calls then build them once; None: a store for this call alone) and, with Gauss–Markov
+    terms, of runs."""
     sampling = _check_sampling(sampling)
     segs = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
     starts, lengths = segs[:, 0], segs[:, 1]
     ms = np.asarray(ms, dtype=np.int64)
     per_run = np.maximum(lengths[:, None] + 1 - 2 * ms[None, :], 0).astype(float)  # (R, S)
     total = np.zeros((ms.size, ms.size))
+    layouts = {} if layouts is None else layouts
     for length, times in zip(*np.unique(lengths, return_counts=True), strict=True):
         k = np.flatnonzero(length + 1 - 2 * ms >= 1)
         if k.size:
             nk = (length + 1 - 2 * ms[k]).astype(float)
             key = (tuple(int(m) for m in ms[k]), int(length))
-            lay = _run_layout(*key) if k.size <= 16 else _layout(*key)
+            if key not in layouts:
+                layouts[key] = _layout.__wrapped__(*key)
+            lay = layouts[key]
             om = _covariance(lay, coef, gm, ms[k], tau0, sampling)
             total[np.ix_(k, k)] += times * om * np.outer(nk, nk)
     gms = [(s2, tau0 / tt) for s2, tt in gm if s2 > 0]
@@ -455,12 +467,6 @@ def gapped_covariance(
     count = per_run.sum(axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         return total / np.outer(count, count)
-
-
-_run_layout = functools.lru_cache(maxsize=64)(_layout.__wrapped__)
-"""`_layout` for the runs of gapped records: a fit evaluates the covariance 5–7 times over
-every distinct run length (tens where 1 % of the samples are missing at random); with ≤ 16 τ
-a layout is ≤ 3 MB."""
 
 
 def _cross_runs(rates, na, nb, starts, lengths):

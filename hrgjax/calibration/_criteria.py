@@ -1,7 +1,8 @@
-"""Design criteria: what a plan's posterior leaves of the drift, the warm-up's heading
-(input-angle) error and the position error of a flight, one number to minimise. The angle
+"""Design criteria: what a plan's posterior leaves of the drift, the warm-up's input-angle
+(tilt) error and the position error of a flight, one number to minimise. The angle
 errors here are of the input (case) angle, the compensated rate integrated: 1/k_e of the
-electrical wave angle."""
+electrical wave angle. The flights' gyros are the two level ones (x forward, y right,
+`hrgjax.calibration.ins_impact`), so the angle is a tilt (roll, pitch), not heading."""
 
 from __future__ import annotations
 
@@ -20,10 +21,10 @@ from ._plan import BenchPlan
 from .ins_impact import FLIGHTS, Flight
 
 CRITERIA = ("drift+warmup", "drift", "warmup", "ins", "d", "a")
-"""Design criteria: `drift+warmup` (the default: the heading (input-angle) error an hour of
+"""Design criteria: `drift+warmup` (the default: the input-angle (tilt) error an hour of
 operation leaves — the static drift's over the flight's length and the warm-up's own, in
 quadrature [°]), `drift` (RMS of the compensated static drift's standard deviation over the
-operating grid [°/h]), `warmup` (RMS heading (input-angle) error at the end of the warm-up
+operating grid [°/h]), `warmup` (RMS input-angle (tilt) error at the end of the warm-up
 flights [°]), `ins`
 (RMS horizontal position error after the warm-up flights [km]), `d` (log-determinant of the
 scaled posterior covariance), `a` (trace of the scaled posterior covariance)."""
@@ -141,7 +142,7 @@ def ins_sensitivity(values=None, flight=None, nodes: int = NODES, model=None) ->
 @eqx.filter_jit
 def _ins_sensitivity(values, flights, nodes=NODES, model=GREY_BOX, schuler=True):
     """M of `ins_sensitivity` (`schuler`), or of `warmup_sensitivity` (the plain integral of
-    the rate error over each flight: the end-of-flight heading (input-angle) error per unit
+    the rate error over each flight: the end-of-flight input-angle (tilt) error per unit
     error of each parameter [rad per SI unit])."""
     from .ins_impact import EARTH_RADIUS, GRAVITY
 
@@ -179,7 +180,7 @@ def _ins_sensitivity(values, flights, nodes=NODES, model=GREY_BOX, schuler=True)
 
 def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
                  flight=None, gauss_markov=None, angle_white=None, model=None):  # fmt: skip
-    r"""Predicted heading (input-angle) error [°] at the end of `flight` (default
+    r"""Predicted input-angle (tilt) error [°] at the end of `flight` (default
     `INS_FLIGHTS`, the three 1-h warm-up flights; RMS over the flights and their x and y
     gyros) from the calibration's uncertainty after `plan`: the compensated rate error
     ε(t) = h(t)ᵀ δv of [`ins_error`][hrgjax.calibration.design.ins_error] — at the flight's
@@ -198,7 +199,7 @@ def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 10
 
 def warmup_sensitivity(values=None, flight=None, nodes: int = NODES, model=None) -> jax.Array:
     """m of [`warmup_error`][hrgjax.calibration.design.warmup_error] (2F × P for F flights,
-    [rad] per SI unit of each parameter): the end-of-flight heading (input-angle) error of
+    [rad] per SI unit of each parameter): the end-of-flight input-angle (tilt) error of
     each flight's x and y gyros per unit error of each parameter (input-rate units at nominal
     gain)."""
     model = as_model(model)
@@ -217,7 +218,7 @@ def _warmup_error(plan, values, noise, prior_scale, flights, model=GREY_BOX, pan
 def drift_warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
                        flight=None, gauss_markov=None, angle_white=None, model=None,
                        terms: bool = False):  # fmt: skip
-    r"""The default design criterion [°]: the heading (input-angle) error an hour of operation
+    r"""The default design criterion [°]: the input-angle (tilt) error an hour of operation
     leaves, √((σ_drift · L)² + σ_warm-up²) —
     [`drift_error`][hrgjax.calibration.design.drift_error]
     (RMS over the operating grid, °/h) acting for the flights' mean length L [h], and

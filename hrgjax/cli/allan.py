@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import re
+import unicodedata
 
 import numpy as np
 
@@ -42,7 +43,17 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz,
                          "sample per row)")  # fmt: skip
     used = [c for c in (column, time_column) if c is not None]
     with usage_errors(missing=f"{path}: no such file"):
-        table, lines = read_csv_table(path, empty_as_nan=True, exact_integers=used)
+        try:
+            table, lines = read_csv_table(
+                path,
+                empty_as_nan=True,
+                exact_integers=used,
+                integer_offsets=[time_column] if time_unit in ("us", "ns") else (),
+            )
+        except ValueError as err:  # integer stamps beyond 2**53: ns (or µs) are read exactly
+            if time_unit is None and f"column {time_column!r} row" in str(err):
+                raise ValueError(f"{err} (time stamps in ns? give --time-unit ns)") from None
+            raise
     numeric = [k for k, v in table.items() if np.asarray(v).dtype.kind == "f"]
     if column is None:
         choices = [k for k in numeric if k != time_column and k.lower() not in ("t", "time")]
@@ -118,25 +129,38 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz,
     return y, float(rate_hz), column, lines
 
 
-_NAMED = re.compile(r"(?:^|[^a-z0-9µ])(s|sec|ms|msec|us|usec|µs|ns|nsec)[^a-z0-9µ]*$", re.I)
-_SPELLINGS = {"sec": "s", "msec": "ms", "usec": "us", "µs": "us", "nsec": "ns"}
+_NAMED = re.compile(
+    r"(?:^|[^a-z0-9])(s|secs?|seconds?|ms|msecs?|millis|milliseconds?|us|usecs?|micros|"
+    r"microseconds?|ns|nsecs?|nanos|nanoseconds?)[^a-z0-9]*$"
+)
+_SPELLINGS = {"s": "s", "mi": "ms", "ms": "ms", "micro": "us", "u": "us", "n": "ns"}
+"""A spelling's unit by its beginning (the longest that matches)."""
 
 
 def named_time_unit(name: str) -> str | None:
-    """The unit a time column's name ends in (`t_ms`, `time [us]`, `stamp_nsec`: a key of
-    `TIME_UNITS`), or None."""
-    found = _NAMED.search(name)
-    return None if found is None else _SPELLINGS.get(found[1].lower(), found[1].lower())
+    """The unit a time column's name ends in, a key of `TIME_UNITS` (`t_ms`, `time [us]`,
+    `t_μs` or `t_µs`, `stamp_nsec`, `elapsed_secs`, `Seconds`, `t_milliseconds`, `TimeMs`,
+    `timeUs`; Unicode-normalised, any case), or None (`time`, `timestamp`)."""
+    text = unicodedata.normalize("NFKC", str(name)).replace("\u03bc", "u").replace("\u039c", "U")
+    text = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", text).casefold()  # camelCase: Time_Ms
+    found = _NAMED.search(text)
+    if found is None:
+        return None
+    word = found[1]
+    unit = _SPELLINGS[max((k for k in _SPELLINGS if word.startswith(k)), key=len)]
+    assert unit in TIME_UNITS, unit
+    return unit
 
 
 def per_second(path: str, name: str, t, unit: str | None, rate_hz=None) -> float:
     """How many units of the increasing stamps `t` of time column `name` make a second [1/s]:
     of `--time-unit` `unit`, or seconds (1). A name ending in another unit (`t_ms`) than the one
-    given — or than seconds, when none is — is refused; without either, so are stamps that
-    read as seconds would be 3000 years and more (≥ 1e11: an epoch in ms, µs or ns), and,
-    unless `rate_hz` confirms the rate, stamps whose every step is a whole number above 1
-    (below 1 Hz as seconds: a 100-Hz log stamped in ms steps by 10). A 1-Hz record stamped
-    0, 1, 2 is read as seconds. Each refusal is one line naming the way out (`--time-unit`)."""
+    given — or than seconds, when none is — is refused; a name in seconds (`elapsed_secs`) is
+    seconds. Without either, stamps that read as seconds would be 3000 years and more (≥ 1e11:
+    an epoch in ms, µs or ns) are refused; stamps whose every step is a whole number above 1
+    are read as seconds (an HRG drift log at 0.1 Hz stamped in whole seconds) with one note
+    line naming `--time-unit ms`, unless `rate_hz` is given (it checks the rate). Each refusal
+    is one line naming the way out (`--time-unit`)."""
     named = named_time_unit(name)
     if unit is not None:
         if named is not None and named != unit:
@@ -159,10 +183,9 @@ def per_second(path: str, name: str, t, unit: str | None, rate_hz=None) -> float
     step = float(np.median(dt))
     if rate_hz is None and step > 1.0 and np.all(dt >= 1.0) and np.all(dt == np.round(dt)):
         guess = "ms" if step <= 1e3 else "us" if step <= 1e6 else "ns"
-        raise UsageError(f"{path}: time column {name!r} steps by whole numbers ({step:g}), "
-                         f"{1.0 / step:.4g} Hz if seconds: stamps in {guess}? give --time-unit "
-                         f"{guess}; seconds indeed: --time-unit s (or --rate-hz "
-                         f"{1.0 / step:.4g})")  # fmt: skip
+        print(f"hrgjax allan: {path}: time column {name!r} steps by whole numbers ({step:g}): "
+              f"read as seconds, {1.0 / step:.4g} Hz; stamps in {guess}? give --time-unit "
+              f"{guess}")  # fmt: skip
     return 1.0
 
 
@@ -305,9 +328,9 @@ def _allan_parser(sub):
                    help="a time column (in --time-unit); stamps that are not uniform are "
                    "resampled by the integrated angle (onto --rate-hz, or the median step)")  # fmt: skip
     p.add_argument("--time-unit", default=None, choices=tuple(TIME_UNITS),
-                   help="the time column's unit (default s; stamps that look like ms, µs or "
-                   "ns — a name such as t_ms, whole-number steps above 1, an epoch — are "
-                   "refused without it)")  # fmt: skip
+                   help="the time column's unit (default s; a name such as t_ms or an epoch "
+                   "in ms, µs or ns is refused without it; whole-number steps above 1 read as "
+                   "seconds with a note)")  # fmt: skip
     p.add_argument("--kind", default="oadev", choices=KINDS, help="the deviation (oadev)")
     p.add_argument("--taus", default="octave", type=_taus,
                    help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip

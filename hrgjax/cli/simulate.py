@@ -251,7 +251,7 @@ def cmd_design(args) -> int:
         if args.criterion == "drift+warmup":  # and its two terms (one compiled program)
             value, drift, warm = (float(v) for v in d.drift_warmup_error(plan, model=args.model,
                                                                           terms=True))  # fmt: skip
-            parts = f" (drift {drift:.4g} °/h, warm-up heading {warm:.4g} °)"
+            parts = f" (drift {drift:.4g} °/h, warm-up tilt {warm:.4g} °)"
         else:
             value = float(d.criterion(plan, args.criterion, model=args.model))
         print(f"    {name:10s} {float(d.bench_time_h(plan, result.bench)):6.2f} h  "
@@ -393,10 +393,10 @@ def _design_parser(sub):
     p.add_argument(
         "--criterion", default="drift+warmup",
         choices=("drift+warmup", "drift", "warmup", "ins", "d", "a"),
-        help="drift+warmup (default): the heading (input-angle) error of an hour's operation "
+        help="drift+warmup (default): the input-angle (tilt) error of an hour's operation "
         "— the static drift over an hour and the 1-h warm-up's own, in quadrature [°]; "
         "drift: predicted compensated static drift RMS over −40…+60 °C × all wave angles "
-        "[°/h]; warmup: predicted heading (input-angle) error after 1-h warm-up flights "
+        "[°/h]; warmup: predicted input-angle (tilt) error after 1-h warm-up flights "
         "(−40 → +20 °C) [°]; ins: predicted horizontal position error after them [km]; d / a: D- / "
         "A-optimal (log det / trace of the posterior covariance)",
     )  # fmt: skip
