@@ -18,7 +18,11 @@ for G):
 
 - `earth_mems`: white noise as above (the docs' MEMS session);
 - `earth_tactical`: white noise of 1e-5 rad/s and 1e-3 m/s² per sample (σ(G) ≈ 3e-8
-  against the Earth's 5.26e-6 rad/s per m/s²).
+  against the Earth's 5.26e-6 rad/s per m/s²);
+- `earth_tactical_random`: the same with each face at a heading drawn uniformly (the pair
+  sums then hold part of the horizontal rate: b_g reads M_g Σh/6, Ω cos φ √2/6 RMS);
+- `earth_tactical_tumble`: the same tumbled about north (`TUMBLE_NORTH`: two pairs keep the
+  rate, b_g's y takes 2Ω cos φ / 3, the worst case for b_g).
 
 Their "before" is the method's σ as it was (`earth_rate=0`: white noise and the bias
 drift), "after" the σ with `lat_deg=45` (the vertical rate removed, the horizontal one in
@@ -37,7 +41,7 @@ bias random walk the faces allow, its intensity q's posterior mean).
 
 Usage: `.venv/bin/python benchmarks/coverage_ferraris.py [--quick] [--n N] [--seed S]
 [--repeats R] [--earth-only]` (quick: 40 datasets per noise, under a minute on 2 cores;
-default 200, about 3 minutes; `--earth-only`: the two Earth-rate kinds alone). `--repeats 3`: sessions of three repeats, whose σ come from the repeats'
+default 200, about 3 minutes; `--earth-only`: the four Earth-rate kinds alone). `--repeats 3`: sessions of three repeats, whose σ come from the repeats'
 scatter (Student-t with R − 1 degrees of freedom: wider than ±1σ suggests).
 """
 
@@ -60,11 +64,22 @@ NOISES = {
     "gauss_markov": {"gyro_walk": 2e-5, "accel_walk": 3e-4, "drift_tau_s": 20.0},
 }
 """The sessions' noise beyond white (1e-3 rad/s, 0.01 m/s² per sample), per kind."""
+_TACTICAL = {"lat_deg": 45.0, "gyro_noise": 1e-5, "accel_noise": 1e-3}
 EARTH = {
     "earth_mems": {"lat_deg": 45.0},
-    "earth_tactical": {"lat_deg": 45.0, "gyro_noise": 1e-5, "accel_noise": 1e-3},
+    "earth_tactical": _TACTICAL,
+    "earth_tactical_random": _TACTICAL,
+    "earth_tactical_tumble": _TACTICAL,
 }
-"""Sessions on a bench at 45° that turns with the Earth: the docs' MEMS noise, a tactical one."""
+"""Sessions on a bench at 45° that turns with the Earth: the docs' MEMS noise, a tactical one
+(the simulator's faces, every pair reversing the horizontal rate), the tactical one with free
+headings, and the tactical one tumbled about north (`HEADINGS`)."""
+TUMBLE_NORTH = {"x_p": 90.0, "x_a": 90.0, "z_a": 180.0}
+"""`ferraris_session`'s `face_headings_deg` that keeps the y axis north on the x and z faces:
+those pairs keep the horizontal rate, b_g's y takes 2Ω cos φ / 3 (the y pair reverses it)."""
+HEADINGS = {"earth_tactical_random": "random", "earth_tactical_tumble": TUMBLE_NORTH}
+"""The faces' headings per kind (others: the simulator's): "random" draws each face's
+uniformly, independently, per session."""
 
 
 def _truth(rng: np.random.Generator) -> hg.imu.ImuCalibration:
@@ -98,6 +113,10 @@ def all_z_scores(n: int, noise: str, seed: int, repeats: int = 1) -> dict[str, n
     for i in range(n):
         truth = _truth(rng)
         layout = {"repeats": repeats, "static_s": 3.0} if repeats > 1 else {}
+        if HEADINGS.get(noise) == "random":
+            layout["face_headings_deg"] = rng.uniform(0.0, 360.0, 6).tolist()
+        elif noise in HEADINGS:
+            layout["face_headings_deg"] = HEADINGS[noise]
         data, sections = hg.imu.ferraris_session(
             truth,
             jax.random.fold_in(key, i),

@@ -411,6 +411,16 @@ def test_cli_imu_calibrate(session, fitted, tmp_path, capsys):
     with pytest.raises(SystemExit) as err:
         main([*common, "--lat-deg", "95"])
     assert err.value.code == 2 and "lat_deg" in capsys.readouterr().err
+    # a simulated log: --no-earth-rate is ferraris(..., earth_rate=0), the method's σ
+    assert main([*common, "--gyro-unit", "deg/s", "--no-earth-rate", "--json", str(out),
+                 "--force"]) == 0  # fmt: skip
+    assert "and the Earth's rate" not in capsys.readouterr().out
+    back = hg.imu.load_calibration(out)
+    assert back.sigma_source == fitted.sigma_source
+    np.testing.assert_allclose(np.diag(back.covariance), np.diag(fitted.covariance), rtol=1e-6)
+    with pytest.raises(SystemExit) as err:  # a latitude and no Earth's rate: one or the other
+        main([*common, "--lat-deg", "45", "--no-earth-rate"])
+    assert err.value.code == 2 and "--no-earth-rate" in capsys.readouterr().err
 
 
 # --- issue 44: physically impossible input is refused, never calibrated --------------------

@@ -89,3 +89,77 @@ def test_bad_latitude_or_rate_is_refused(truth, tactical, kw):
     if "lat_deg" in kw:
         with pytest.raises(ValueError, match="lat_deg"):
             hg.imu.ferraris_session(truth, jax.random.key(0), **kw)
+
+
+# Free headings (review of 2026-12-01). On face i± the gyros see the Earth's horizontal rate
+# as a body vector h± ⟂ e_i, |h±| = Ω cos φ: the pair difference takes (h⁺ − h⁻)/2 into G,
+# the pair sum (h⁺ + h⁻)/2 into b_g, which therefore reads M_g Σ h / 6 over the six faces.
+# The gyros' bias-drift intensity q read that as drift (bias_walk 1.2e-5 rad/s/√s, ~150× a
+# tactical IMU's, σ(b_g) 10 °/h for a model σ of Ω cos φ / 3 = 3.5 °/h at 45°).
+FACE_KEYS = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
+TUMBLE_NORTH = {"x_p": 90.0, "x_a": 90.0, "z_a": 180.0}  # y north on the x and z faces
+
+
+def _horizontal_in_body(headings_deg, lat_deg):
+    """{face: h (3,)}: the Earth's horizontal rate [rad/s] in the body on each face, from
+    `face_attitude` turned about the vertical (world x east, y north, z up)."""
+    north = EARTH_RATE * np.cos(np.deg2rad(lat_deg)) * np.array([0.0, 1.0, 0.0])
+    out = {}
+    for k in FACE_KEYS:
+        p = np.deg2rad(headings_deg.get(k, 0.0))
+        turn = np.array([[np.cos(p), -np.sin(p), 0.0], [np.sin(p), np.cos(p), 0.0], [0, 0, 1]])
+        out[k] = (turn @ hg.imu.face_attitude(k)).T @ north
+    return out
+
+
+@pytest.mark.parametrize("layout", ["random", "tumble"])
+def test_free_headings_put_the_horizontal_rate_where_the_pairs_take_it(truth, layout):
+    """Noise-free, lat 60°: b_g is off by M_g Σh/6 and G's column i by M_g (h⁺ − h⁻)/2g
+    (to second order, as above), computed from the faces' attitudes; q is 0 (round-off;
+    it read the pair sums' Earth rate as drift: 2e-6 rad/s/√s)."""
+    rng = np.random.default_rng(7)
+    headings = ({k: float(rng.uniform(0, 360)) for k in FACE_KEYS} if layout == "random"
+                else TUMBLE_NORTH)  # fmt: skip
+    data, sections = hg.imu.ferraris_session(truth, jax.random.key(0), gyro_noise=0.0,
+                                             accel_noise=0.0, lat_deg=60.0,
+                                             face_headings_deg=headings)  # fmt: skip
+    h = _horizontal_in_body(headings, 60.0)
+    m_g = np.asarray(truth.gyro_matrix)
+    cal = hg.imu.ferraris(data, sections, lat_deg=60.0)
+    bias_err = np.asarray(cal.gyro_bias - truth.gyro_bias)
+    np.testing.assert_allclose(bias_err, m_g @ sum(h.values()) / 6, rtol=0, atol=1e-12)
+    if layout == "tumble":  # b_g's y takes 2Ω cos φ / 3, the rest nothing
+        np.testing.assert_allclose(bias_err, [0, 2 * EARTH_RATE * 0.5 / 3, 0] @ m_g.T,
+                                   rtol=0, atol=1e-12)  # fmt: skip
+    diff = np.stack([h[f"{a}_p"] - h[f"{a}_a"] for a in "xyz"], axis=1) / 2
+    err = np.asarray(cal.gyro_g_sensitivity - truth.gyro_g_sensitivity)
+    np.testing.assert_allclose(err, m_g @ diff / G, rtol=0, atol=2e-10)
+    assert np.all(np.asarray(cal.bias_walk) < 1e-12), cal.bias_walk  # round-off alone
+
+
+@pytest.fixture(scope="module")
+def tactical_tumble(truth):
+    """A tactical session at 45° tumbled about north (b_g's y takes 2Ω cos φ / 3)."""
+    return hg.imu.ferraris_session(truth, jax.random.key(5), gyro_noise=1e-5, accel_noise=1e-3,
+                                   lat_deg=45.0, face_headings_deg=TUMBLE_NORTH)  # fmt: skip
+
+
+def test_the_earth_rate_in_the_pair_sums_is_not_read_as_bias_drift(truth, tactical_tumble):
+    """The gyros' q from within the faces: a tactical IMU with no drift at all reads a
+    bias_walk below 1e-6 rad/s/√s (1.2e-5 before, its pair sums holding 2Ω cos φ), and
+    σ(b_g) is the Earth's term, Ω cos φ / 3 per axis (3.5 °/h; 10 °/h before), so the
+    tumble's b_g y is at z = 2, its worst case."""
+    data, sections = tactical_tumble
+    cal = hg.imu.ferraris(data, sections, lat_deg=45.0)
+    assert 0.0 < float(cal.bias_walk[0]) < 1e-6, cal.bias_walk
+    earth = EARTH_RATE * np.cos(np.deg2rad(45.0)) / 3
+    sd = np.asarray(cal.gyro_bias_std) / np.linalg.norm(np.asarray(truth.gyro_matrix), axis=1)
+    np.testing.assert_allclose(sd, earth, rtol=0.05)
+    z = _z(cal, truth)[21:24]
+    np.testing.assert_allclose(np.abs(z), [0, 2, 0], atol=0.05)
+
+
+@pytest.mark.parametrize("bad", [{"w_p": 1.0}, [0.0] * 5, "north", [0, 0, 0, 0, 0, float("inf")]])
+def test_bad_face_headings_are_refused(truth, bad):
+    with pytest.raises(ValueError, match="face_headings_deg"):
+        hg.imu.ferraris_session(truth, jax.random.key(0), face_headings_deg=bad)

@@ -127,6 +127,7 @@ def cmd_imu_calibrate(args) -> int:
     import numpy as np
 
     from .. import imu
+    from ..units import EARTH_RATE
 
     columns = {
         "gyro": _three("--gyro-columns", args.gyro_columns),
@@ -144,7 +145,8 @@ def cmd_imu_calibrate(args) -> int:
             sections = imu.parse_sections(args.sections, len(data))
         cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg,
                            turn_deg_std=args.turn_deg_std, gyro_range_dps=args.gyro_range_dps,
-                           accel_range_g=args.accel_range_g, lat_deg=args.lat_deg)  # fmt: skip
+                           accel_range_g=args.accel_range_g, lat_deg=args.lat_deg,
+                           earth_rate=0.0 if args.no_earth_rate else EARTH_RATE)  # fmt: skip
     span = float(data.time[-1] - data.time[0])
     found = "found in the data" if args.sections is None else f"from {args.sections}"
     print(f"hrgjax imu-calibrate: {args.log} ({len(data)} samples, {span:.0f} s at "
@@ -264,9 +266,14 @@ def _imu_calibrate_parser(sub):
     p.add_argument("--turn-deg-std", type=float, default=0.0,
                    help="σ of each turn's true angle [°] (0: exact turns; hand turns: about 1, "
                    "which is 0.28 %% of M_g's diagonal)")  # fmt: skip
-    p.add_argument("--lat-deg", type=float, default=None,
-                   help="the bench's latitude [°], north positive: the Earth's vertical rate is "
-                   "removed from G (without it the Earth's rate, latitude unknown, enters the σ)")  # fmt: skip
+    earth = p.add_mutually_exclusive_group()
+    earth.add_argument("--lat-deg", type=float, default=None,
+                       help="the bench's latitude [°], north positive: the Earth's vertical rate "
+                       "is removed from G (without it the Earth's rate, latitude unknown, "
+                       "enters the σ)")  # fmt: skip
+    earth.add_argument("--no-earth-rate", action="store_true",
+                       help="the log holds no Earth's rate (a simulation): the method's σ, "
+                       "without the Earth's terms (hg.imu.ferraris(..., earth_rate=0))")  # fmt: skip
     p.add_argument("--gyro-range-dps", type=POSITIVE_FLOAT, default=None,
                    help="the gyros' full-scale range [°/s]: a turn sample at it is refused as "
                    "clipped (without it: flat tops at a channel's extreme are)")  # fmt: skip

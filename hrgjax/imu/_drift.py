@@ -23,7 +23,17 @@ $A + q^2 B$ (A from the white noise, B from the kernel above); their restricted 
 its maximum-likelihood value (what the σ used before) is exactly 0 in about 6 % of sessions
 that do drift, and the σ built on it then miss the gyro biases by up to 11σ (audit of
 2026-11-30). The σ therefore use q's posterior mean (`walk_posterior_mean`, Jeffreys
-prior), which holds what the contrasts allow of q and is never 0 on noisy data."""
+prior), which holds what the contrasts allow of q and is never 0 on noisy data.
+
+**The gyros on a bench that turns with the Earth.** A face's gyro mean holds the Earth's
+horizontal rate at that face's heading, which the procedure leaves free: the pair sums
+hold (h⁺ + h⁻)/2 of it, up to Ω cos φ, which q read as drift (the audit of 2026-12-01:
+`bias_walk` 1.2e-5 rad/s/√s, ~150× its truth, on a tactical IMU that did not drift, and
+σ(b_g) 10 °/h). The gyros' q therefore also uses the eighteen within-face contrasts
+(`half_difference`: each face's first-half mean minus its second-half mean, per
+channel), which the Earth's rate cannot reach, and the pair contrasts carry the Earth's
+horizontal rate in their covariance (`hrgjax.imu._earth`): where it dwarfs the noise
+they no longer inform q, and q comes from within the faces."""
 
 from __future__ import annotations
 
@@ -73,6 +83,15 @@ def _pair(tau, s1, e1, w1, s2, e2, w2) -> float:
         t2 = np.where(rows < e2, t2, 0.0)
         total += float(np.sum(step * t1 * t2))
     return float(total)
+
+
+def half_difference(start: int, end: int) -> list[tuple[int, int, np.ndarray, float]]:
+    """`walk_kernel`'s pieces of a face's first-half mean minus its second-half mean over
+    rows [start, end) (at least two): a contrast that nothing constant on the face (its
+    calibration, the Earth's rate at its heading) reaches — white noise and drift only."""
+    mid = start + (end - start) // 2
+    return [(start, mid, np.full(mid - start, 1.0 / (mid - start)), 1.0),
+            (mid, end, np.full(end - mid, 1.0 / (end - mid)), -1.0)]  # fmt: skip
 
 
 WALK_GRID = np.logspace(-6, 6, 1201)

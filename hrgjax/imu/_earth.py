@@ -12,17 +12,30 @@ m/s² at 45°), against a σ(G) of ~3e-6 for a MEMS session and ~3e-8 for a tact
   with it, so that M_g is free of it; `ferraris` removes it from G exactly where the
   latitude is known (G = G_eff − (Ω sin φ / g) M_g), whatever the faces' headings.
 - **The horizontal part** depends on each face's heading, which the procedure leaves free:
-  it enters the covariance of the section statistics as a systematic. On a face with axis
-  i vertical, each horizontal body component of the rate is taken with σ = Ω cos φ (its
-  largest value), faces independent; a turn section's gyro sums take Ω cos φ |Σ Δt e^{iθ}|,
-  θ the angle turned so far (the rate turns with the body: a whole smooth turn averages
-  it out, the rests at the section's ends do not). The worst placement — each face's
-  partner reached by a flip that reverses the horizontal rate (`ferraris_session`) — then
-  sits at √2 σ on one element of each G column.
+  on face i± the gyros read a body vector h± ⟂ e_i, |h±| = Ω cos φ; the pair difference
+  takes (h⁺ − h⁻)/2 into G's column i (over g), the pair sum (h⁺ + h⁻)/2 into b_g, which
+  reads M_g Σh/6 over the six faces; per pair |(h⁺ − h⁻)/2|² + |(h⁺ + h⁻)/2|² = Ω² cos² φ.
+  It enters the covariance of the section statistics as a systematic: on a face with axis
+  i vertical, each horizontal body component of the rate with σ = Ω cos φ, faces
+  independent; a turn section's gyro sums take Ω cos φ |Σ Δt e^{iθ}|, θ the angle turned
+  so far (the rate turns with the body: a whole smooth turn averages it out, the rests at
+  the section's ends do not). That σ is **neither a bound nor an average**: it is the
+  variance of a pair flipped about a horizontal axis at a uniformly random heading (the
+  rate along the axis stays, into b_g, the rest reverses, into G: Ω² cos² φ / 2 each, on
+  average), twice that of faces at independent uniform headings (Ω² cos² φ / 2 per
+  component and face: the σ of G and b_g √2 too wide, RMS z ≈ 0.7), and particular
+  placements exceed it: z = √2 on one element of each G column where every pair
+  reverses the rate (`ferraris_session`'s faces), z = 2 on b_g where two pairs keep it
+  along one axis (a tumble about north: b_g takes 2Ω cos φ / 3; `face_headings_deg`).
+- **The gyros' bias drift** (`hrgjax.imu._drift`): the pair sums, which measure it, hold
+  the horizontal rate too; the gyros' q therefore comes from within the faces as well,
+  and the pair contrasts carry this covariance besides the noise.
 - **An unknown latitude** (`lat_deg=None`): φ is taken as anywhere on the globe (area-
   uniform, E sin²φ = 1/3): the vertical part is a systematic of σ Ω/√3, common to all
-  faces, and the horizontal one has Ω² cos²φ → 2Ω²/3. At 45° that is 1.22 σ for the worst
-  placement."""
+  faces, and the horizontal one has Ω² cos²φ → 2Ω²/3. On a bench at latitude φ the
+  vertical part then sits at z = √3 |sin φ| on G's diagonal — 1.22 at 45°, 1.5 at 60°,
+  1.73 at the poles — in every session at that bench (it is the same rate each time):
+  give `lat_deg` where the σ matter."""
 
 from __future__ import annotations
 

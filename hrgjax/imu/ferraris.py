@@ -27,7 +27,9 @@ per m/s² at 45°, far above a tactical session's σ(G) ≈ 3e-8 and above a MEM
 Its vertical part is along the specific force, a g-sensitivity (Ω sin φ / g) M_g that the
 turns remove with G; with `lat_deg` it is then taken out of G exactly. Its horizontal part
 depends on the faces' headings, which the procedure leaves free: a systematic in the
-statistics' covariance; so is the vertical part where the latitude is not given.
+statistics' covariance (into G through the pair differences, into b_g through the pair
+sums); so is the vertical part where the latitude is not given. The gyros' drift
+intensity q is then measured within the faces too, which the Earth's rate cannot reach.
 `earth_rate=0` declares a record without it (a simulation), the method's textbook σ.
 
 Everything is a function of each section's sums, so the standard errors follow by linear
@@ -42,7 +44,9 @@ propagation (`jax.jacfwd` of the estimator) of those sums' covariance, formed as
   channel's bias from the session's start, q² min(s − t₀, t − t₀), propagated exactly
   into every section sum (`hrgjax.imu._drift`); q (one for the gyros, one for the
   accelerometers, `bias_walk`) is measured by the twelve combinations of face means that
-  vanish for any calibration (each channel's three ± pair sums are equal). Six
+  vanish for any calibration (each channel's three ± pair sums are equal) and, for the
+  gyros, by each face's first-half-minus-second-half means (the pair sums hold the
+  Earth's horizontal rate, the halves of a face do not). Six
   contrasts per sensor pin q down poorly — its maximum-likelihood value is exactly 0 in
   about 6 % of sessions that do drift, and σ built on it missed a gyro bias by 11σ — so
   `bias_walk` is q's posterior mean (Jeffreys prior, `_drift.walk_posterior_mean`),
@@ -80,7 +84,7 @@ from ._calibration import PARAMETERS as PARAMETERS
 from ._calibration import ImuCalibration as ImuCalibration
 from ._calibration import check_g, check_turn_deg, flat_parameters, per_turn
 from ._calibration import load_calibration as load_calibration
-from ._drift import walk_kernel, walk_posterior_mean
+from ._drift import half_difference, walk_kernel, walk_posterior_mean
 from ._earth import check_earth_rate, check_lat_deg, earth_parts, horizontal_covariance, turn_spin
 from .data import ImuData
 from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections, saturation
@@ -150,7 +154,13 @@ def session_statistics(data: ImuData, sections: Sections):
     static faces' per-sample scatter (σ²/n for a face mean, σ²ΣΔt² for a turn's sums) plus,
     where every key has one range, the in-run bias drift that the faces' disagreement allows
     (a random walk of the biases from the record's start, its intensity q's posterior
-    mean, see `hrgjax.imu._drift`)."""
+    mean, see `hrgjax.imu._drift`).
+
+    The covariance is that of a record without the Earth's rate, as `ferraris(...,
+    earth_rate=0)` takes it: neither the Earth's horizontal rate (the faces' headings)
+    nor an unknown vertical one is in it, and the gyros' q reads what the Earth's rate
+    puts in the ± pair sums as drift. `ferraris` adds both where `earth_rate` > 0 and
+    measures the gyros' q within the faces (`hrgjax.imu._earth`)."""
     got = _statistics(data, sections)
     return got.stats, got.white + got.drift, got.noise_std, got.source
 
@@ -210,43 +220,69 @@ def _section_sums(data: ImuData, sections: Sections):
     return stats, cov, noise_std, sources
 
 
-def _with_drift(data, sections, stats, cov, noise_std, sources) -> _Statistics:
-    """The statistics with the bias drift's part where every key has one range. The faces'
-    contrasts measure q against the noise alone: where the Earth's horizontal rate is in the
-    pair sums too (flips that do not reverse it), q takes it up as drift, a conservative σ;
-    taken as a systematic there, it left q unconstrained (its posterior mean went from 7e-8
-    to 5e-6 rad/s/√s on a tactical session at 45°, the gyros' σ 10–100× wider)."""
+def _with_drift(data, sections, stats, cov, noise_std, sources, earth=None) -> _Statistics:
+    """The statistics with the bias drift's part where every key has one range. `earth`
+    (57, 57) or None: the Earth's horizontal rate's covariance in the statistics, which the
+    gyros' pair contrasts carry besides the noise (`_drift_covariance`)."""
     sources = set(sources)
     drift, walk = np.zeros((N_STATS, N_STATS)), np.zeros(2)
     if "repeats" not in sources:
-        drift, walk = _drift_covariance(data, sections, stats, cov)
+        drift, walk = _drift_covariance(data, sections, stats, cov, earth)
         if np.any(walk > 0):
             sources.add("bias drift")
     source = " and ".join(s for s in ("repeats", "white noise", "bias drift") if s in sources)
     return _Statistics(stats, cov, drift, noise_std, walk, source or "none")
 
 
-def _drift_covariance(data: ImuData, sections: Sections, stats: np.ndarray, white: np.ndarray):
+def _drift_covariance(data: ImuData, sections: Sections, stats: np.ndarray, white: np.ndarray,
+                      earth: np.ndarray | None = None):  # fmt: skip
     """The statistics' covariance from a random walk of the biases (one intensity for the
-    gyros, one for the accelerometers) measured by the faces' ± pair sums, and the two
-    intensities q [unit/√s]: q's posterior mean (`walk_posterior_mean`), not its
-    maximum-likelihood value, which six contrasts make 0 in some drifting sessions."""
+    gyros, one for the accelerometers) and the two intensities q [unit/√s]: q's posterior
+    mean (`walk_posterior_mean`), not its maximum-likelihood value, which six contrasts
+    make 0 in some drifting sessions. The accelerometers' q from the faces' ± pair sums;
+    the gyros' from those, with the Earth's horizontal rate (`earth`) in their covariance,
+    and from each face's first-half-minus-second-half means, which the Earth's rate at a
+    fixed heading cannot reach (`hrgjax.imu._drift`)."""
     dt = data.dt
     pieces = [[(s, e, np.full(e - s, 1.0 / (e - s)) if key in FACES else dt[s:e], 1.0)]
               for key in SECTION_KEYS for s, e in sections[key][:1]]  # fmt: skip
+    faces = [(s, e) for key in FACES for s, e in sections[key][:1] if e - s >= 2]
     origin = min(s for ranges in sections.values() for s, _ in ranges)
-    per_key = walk_kernel(data.time, pieces, origin)  # the same for every channel
-    kernels = [np.zeros((N_STATS, N_STATS)) for _ in range(2)]  # gyro, accel
+    per_key = walk_kernel(data.time, pieces + [half_difference(s, e) for s, e in faces], origin)
+    n_aug = N_STATS + 3 * len(faces)  # the statistics, then each face's halves (x, y, z)
+    kernels = [np.zeros((n_aug, n_aug)) for _ in range(2)]  # gyro, accel
     for c in range(3):
+        h_at = [N_STATS + 3 * f + c for f in range(len(faces))]
         for sensor, (face_at, turn_at) in enumerate(((3 + c, c), (c, 3 + c))):
             idx = [_FACE_AT[k] + face_at for k in FACES] + [_TURN_AT[k] + turn_at for k in TURNS]
-            kernels[sensor][np.ix_(idx, idx)] = per_key
+            kernels[sensor][np.ix_(idx + h_at, idx + h_at)] = per_key
+    gyro = np.asarray(data.gyro)
+    split = [(s, s + (e - s) // 2, e) for s, e in faces]
+    halves = np.concatenate([gyro[s:m].mean(0) - gyro[m:e].mean(0) for s, m, e in split])
+    (s0, e0), at = sections[FACES[0]][0], _FACE_AT_GYRO[FACES[0]]
+    c_g = white[at : at + 3, at : at + 3] * (e0 - s0)  # the gyros' per-sample covariance
+    h_white = np.zeros((3 * len(faces),) * 2)
+    for f, (s, m, e) in enumerate(split):
+        h_white[3 * f : 3 * f + 3, 3 * f : 3 * f + 3] = c_g * (1.0 / (m - s) + 1.0 / (e - m))
     walk = np.zeros(2)
-    for sensor, (kernel, offset) in enumerate(zip(kernels, (3, 0), strict=True)):
-        contrasts = _pair_contrasts(offset)
-        walk[sensor] = walk_posterior_mean(contrasts @ stats, contrasts @ white
-                                           @ contrasts.T, contrasts @ kernel @ contrasts.T)  # fmt: skip
-    return walk[0] ** 2 * kernels[0] + walk[1] ** 2 * kernels[1], walk
+    for sensor, offset in enumerate((3, 0)):
+        pair = _pair_contrasts(offset)
+        cov = white + (earth if sensor == 0 and earth is not None else 0.0)
+        if sensor == 0 and faces:  # the gyros: the pair contrasts and the within-face ones
+            contrasts = np.zeros((6 + len(halves), n_aug))
+            contrasts[:6, :N_STATS] = pair
+            contrasts[6:, N_STATS:] = np.eye(len(halves))
+            residual = np.concatenate([pair @ stats, halves])
+            c_white = np.block([[pair @ cov @ pair.T, np.zeros((6, len(halves)))],
+                                [np.zeros((len(halves), 6)), h_white]])  # fmt: skip
+        else:
+            contrasts = np.zeros((6, n_aug))
+            contrasts[:, :N_STATS] = pair
+            residual, c_white = pair @ stats, pair @ cov @ pair.T
+        walk[sensor] = walk_posterior_mean(residual, c_white,
+                                           contrasts @ kernels[sensor] @ contrasts.T)  # fmt: skip
+    k_g, k_a = (k[:N_STATS, :N_STATS] for k in kernels)
+    return walk[0] ** 2 * k_g + walk[1] ** 2 * k_a, walk
 
 
 def _pair_contrasts(offset: int) -> np.ndarray:
@@ -304,9 +340,13 @@ def ferraris(
       ~3e-6 for a MEMS session, 3e-8 for a tactical one). Given, the vertical part is
       removed from G exactly; the horizontal part, which depends on the faces' headings,
       enters the covariance as a systematic (σ = Ω cos φ per horizontal component on each
-      face). None (the default): the latitude is unknown, and both parts enter the
-      covariance (a latitude anywhere on the globe: Ω/√3 vertical). See
-      `hrgjax.imu._earth`.
+      face: neither a bound nor an average — √2 wide for independent random headings,
+      exceeded at z = √2 on G where every pair reverses the rate and z = 2 on b_g where two
+      pairs keep it, a tumble about north), and the gyros' bias drift is measured within
+      the faces, where it cannot reach. None (the default): the latitude is unknown, and
+      both parts enter the covariance (a latitude anywhere on the globe: Ω/√3 vertical,
+      which puts G's diagonal at z = √3 |sin φ| on a bench at φ: 1.22 at 45°, 1.73 at the
+      poles). See `hrgjax.imu._earth`.
     - `earth_rate`: the rotation rate [rad/s] of the ground under the bench,
       [`EARTH_RATE`][hrgjax.units.EARTH_RATE] (the default); 0 declares a record without
       it — a simulation by [`ferraris_session`][hrgjax.imu.ferraris_session] without
@@ -354,7 +394,7 @@ def ferraris(
     if var_h > 0:  # the horizontal rate, heading unknown: a systematic of the statistics
         earth = horizontal_covariance(params[12:21].reshape(3, 3), var_h,
                                       turn_spin(data, sections), _FACE_AT_GYRO, _TURN_AT, N_STATS)  # fmt: skip
-    got = _with_drift(data, sections, *sums)
+    got = _with_drift(data, sections, *sums, earth=earth)
     cov = got.white + got.drift + earth
     p_cov = jac @ cov @ jac.T + _turn_covariance(params, turns, turn_std)
     p_cov = p_cov + var_up * np.outer(d_up, d_up)  # an unknown vertical rate, common to all

@@ -63,6 +63,31 @@ def _turn(c0, axis, angle, n, rate_hz, g):
     return omega, accel, c0 @ _rotation(axis, angle), att
 
 
+def _face_attitudes(headings) -> dict[str, np.ndarray]:
+    """Each face's attitude: `face_attitude`'s, turned about the vertical by the face's
+    heading [°] (`ferraris_session`'s `face_headings_deg`)."""
+    if headings is None:
+        return {k: face_attitude(k) for k in FACES}
+    form = ("None, a mapping of face keys (x_p … z_a) to angles [°] about the vertical, or six "
+            "such angles in the order x_p, x_a, y_p, y_a, z_p, z_a")  # fmt: skip
+    if isinstance(headings, dict):
+        unknown = sorted(set(headings) - set(FACES), key=str)
+        if unknown:
+            raise ValueError(f"face_headings_deg must be {form}; got the keys {unknown!r}")
+        values = [headings.get(k, 0.0) for k in FACES]
+    else:
+        values = headings
+    if isinstance(values, str | bytes) or np.ndim(values) != 1 or len(values) != len(FACES):
+        raise ValueError(f"face_headings_deg must be {form}; got {headings!r}")
+    try:
+        psi = np.array([float(v) for v in values]) * DEG
+    except (TypeError, ValueError):
+        raise ValueError(f"face_headings_deg must be {form}; got {headings!r}") from None
+    if not np.all(np.isfinite(psi)):
+        raise ValueError(f"face_headings_deg must be {form} (finite); got {headings!r}")
+    return {k: _rotation(_UP, p) @ face_attitude(k) for k, p in zip(FACES, psi, strict=True)}
+
+
 def _bias_drift(key, n: int, rate_hz: float, walk: np.ndarray, tau_s: float | None) -> np.ndarray:
     """(n, 6) bias drift, zero on the first sample: a random walk of intensity `walk` (6,)
     [unit/√s] per channel, or a first-order Gauss–Markov process with that driving noise
@@ -99,6 +124,7 @@ def ferraris_session(
     accel_walk: float = 0.0,
     drift_tau_s: float | None = None,
     lat_deg: float | None = None,
+    face_headings_deg=None,
 ) -> tuple[ImuData, Sections]:
     """Simulate a Ferraris session of an IMU whose sensors follow `truth`.
 
@@ -117,7 +143,19 @@ def ferraris_session(
     Earth at that latitude, and the gyros sense its rate, 7.292115e-5 rad/s, along every
     sample's attitude (world frame x east, y north, z up; the faces' attitudes are
     [`face_attitude`][hrgjax.imu.face_attitude]'s: each face's next axis east, so
-    each ± pair reverses the horizontal rate, the largest it can do to G).
+    each ± pair reverses the horizontal rate, the largest it can do to G, and none of it
+    reaches the pair sums, b_g).
+
+    `face_headings_deg` (None, the default: `face_attitude`'s placements): each face's
+    attitude turned about the vertical by ψ [°] (counterclockwise seen from above: east
+    towards north), as a mapping face key → ψ (keys left out: 0) or six angles in the
+    order x_p, x_a, y_p, y_a, z_p, z_a. The faces' headings decide where the Earth's
+    horizontal rate goes: with h± its body vector on face i±, (h⁺ − h⁻)/2 into G's column
+    i and (h⁺ + h⁻)/2 into the pair sum, so that b_g reads M_g Σ h / 6 over the six faces.
+    E.g. `{"x_p": 90, "x_a": 90, "z_a": 180}` keeps the y axis north on the x and z
+    faces (a tumble about north: those pairs keep the rate, b_g's y reads 2Ω cos φ / 3,
+    twice the σ `ferraris` gives it; the y pair still reverses it into G); random angles
+    model a bench whose headings are free.
 
     **Returns:** `(data, sections)`: the record (`ImuData`, SI) and its true sections
     (faces: the rests; turns: the turn with half of each neighbouring rest)."""
@@ -126,10 +164,11 @@ def ferraris_session(
         raise ValueError(f"repeats must be a positive integer; got {repeats!r}")
     n_static, n_move, n_turn = (max(int(round(s * rate_hz)), 2) for s in (static_s, move_s, turn_s))
     lat = None if lat_deg is None else check_lat_deg(lat_deg) * DEG
+    attitudes = _face_attitudes(face_headings_deg)
     omega, accel, attitude = [], [], []
     sections: Sections = {k: [] for k in (*FACES, *TURNS)}
     count = 0
-    c = face_attitude("z_p")
+    c = attitudes["z_p"]
 
     def add(w, a, att):
         nonlocal count
@@ -144,7 +183,7 @@ def ferraris_session(
 
     def go_to(face):
         nonlocal c
-        target = face_attitude(face)
+        target = attitudes[face]
         axis, angle = _axis_angle(c.T @ target)
         if angle == 0.0:
             return
