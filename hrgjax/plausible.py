@@ -34,11 +34,11 @@ _DEFAULTS: dict[str, tuple[float, float, str]] = {
     "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
     "specific_force_g": (-20.0, 20.0, "g"),
     "precession_dps": (-2e4, 2e4, "°/s electrical"),
-    "imu_gyro_bias": (-0.1, 0.1, "rad/s"),
-    "imu_accel_bias": (-1.0, 1.0, "m/s²"),
+    "imu_gyro_bias": (-0.75, 0.75, "rad/s"),
+    "imu_accel_bias": (-3.0, 3.0, "m/s²"),
     "imu_scale": (-0.1, 0.1, "(a fraction: 1e-6 = 1 ppm)"),
     "imu_misalignment": (-0.1, 0.1, "rad"),
-    "imu_arw": (0.0, 5e-3, "rad/√s"),
+    "imu_arw": (0.0, 2.5e-3, "rad/√s"),
     "imu_vrw": (0.0, 0.05, "m/s/√s"),
     "imu_gyro_bias_instability": (0.0, 0.01, "rad/s"),
     "imu_accel_bias_instability": (0.0, 0.1, "m/s²"),
@@ -86,30 +86,45 @@ accelerometer increments (5 g: a navigating vehicle spends most of its time near
 banked turn is 2 g; more means accelerations [m/s²] given for increments [m/s]) and a
 `Profile`'s specific force along each case axis (±20 g: a fighter's 9 g turn, a launch, a
 centrifuge test of the g-sensitivity; beyond it the g-sensitivity term is all a simulation
-shows), and a `Profile`'s commanded precession (±2·10⁴ °/s electrical: a trapezoid pulse of
+shows; a data file's `accel_*_g` columns hold it for their middle half, vibration peaks
+beyond it are taken), and a `Profile`'s commanded precession (±2·10⁴ °/s electrical: a trapezoid pulse of
 force-to-rebalance slews at thousands of °/s; the averaging needs the wave slow against the
 carrier's ≈ 10⁶ °/s of phase, and a rate in °/h read as °/s is 3600× too large), and the
-errors of an `hrgjax.ins.sensors.ImuModel` in SI (`imu_*`; its worst preset, consumer MEMS,
-lies 5–70× inside each): a gyro bias of 0.1 rad/s (≈ 5.7 °/s), an accelerometer bias of
-1 m/s² (≈ 0.1 g), a scale factor of 0.1 (10⁵ ppm), a misalignment of 0.1 rad, an ARW of
-5·10⁻³ rad/√s (≈ 17 °/√h), a VRW of 0.05 m/s/√s (≈ 5 mg/√Hz), bias instabilities of
-0.01 rad/s (≈ 2000 °/h) and 0.1 m/s², rate and acceleration random walks of 10⁻⁴ rad/s/√s
-(≈ 1200 °/h/√h) and 0.01 m/s²/√s — a value beyond is one in the datasheet's unit (°/h, ppm,
-°/√h, µg), named so with the factor that converts it."""
+errors of an `hrgjax.ins.sensors.ImuModel` in SI (`imu_*`): a gyro bias of 0.75 rad/s
+(≈ 43 °/s: a consumer MEMS gyro's zero-rate offset is up to ±20 °/s, and as much again over
+temperature, MPU-6050), an accelerometer bias of 3 m/s² (≈ 0.3 g: ADXL345's offset reaches
+±250 mg), a scale factor of 0.1 (10⁵ ppm), a misalignment of 0.1 rad, an ARW of
+2.5·10⁻³ rad/√s (≈ 0.14 °/s/√Hz, 8.6 °/√h: consumer gyros' 0.003–0.014 °/s/√Hz typed as
+rad/√s lie beyond it, the noisiest MEMS gyros' 0.05–0.1 °/s/√Hz inside), a VRW of
+0.05 m/s/√s (≈ 5 mg/√Hz), bias instabilities of 0.01 rad/s (≈ 2000 °/h) and 0.1 m/s², rate
+and acceleration random walks of 10⁻⁴ rad/s/√s (≈ 1200 °/h/√h) and 0.01 m/s²/√s — a value
+beyond, or on a bound ([`EXCLUSIVE`][hrgjax.plausible.EXCLUSIVE]), is one in a datasheet's
+unit (°/h or °/s, ppm or %, °/√h or °/s/√Hz, µg or mg), named so with the factors that
+convert each."""
 
 IMU_HINTS = {
-    "imu_gyro_bias": "°/h? multiply by hrgjax.units.DEG_PER_H",
-    "imu_gyro_bias_instability": "°/h? multiply by hrgjax.units.DEG_PER_H",
-    "imu_accel_bias": "µg or mg? multiply by hrgjax.ins.sensors.MICRO_G or 9.80665e-3",
-    "imu_accel_bias_instability": "µg? multiply by hrgjax.ins.sensors.MICRO_G",
-    "imu_scale": "ppm? multiply by 1e-6 (percent: by 1e-2)",
-    "imu_misalignment": "µrad or mrad? multiply by 1e-6 or 1e-3",
-    "imu_arw": "°/√h? multiply by hrgjax.units.DEG_PER_SQRT_H",
-    "imu_vrw": "µg/√Hz? multiply by hrgjax.ins.sensors.MICRO_G (m/s/√h: divide by 60)",
-    "imu_gyro_rate_random_walk": "°/h/√h? multiply by hrgjax.units.DEG_PER_H / 60",
-    "imu_accel_random_walk": "µg/√s? multiply by hrgjax.ins.sensors.MICRO_G",
+    "imu_gyro_bias": "°/h → ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG",
+    "imu_gyro_bias_instability": "°/h → ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG",
+    "imu_accel_bias": "µg → ×hrgjax.ins.sensors.MICRO_G; mg → ×9.80665e-3",
+    "imu_accel_bias_instability": "µg → ×hrgjax.ins.sensors.MICRO_G; mg → ×9.80665e-3",
+    "imu_scale": "ppm → ×1e-6; % → ×1e-2",
+    "imu_misalignment": "mrad → ×1e-3; µrad → ×1e-6; ° → ×hrgjax.units.DEG",
+    "imu_arw": "°/√h → ×hrgjax.units.DEG_PER_SQRT_H; °/s/√Hz → ×hrgjax.units.DEG",
+    "imu_vrw": (
+        "µg/√Hz → ×hrgjax.ins.sensors.MICRO_G; mg/√Hz → "
+        "×hrgjax.ins.sensors.MG_PER_SQRT_HZ; m/s/√h → ÷60"
+    ),
+    "imu_gyro_rate_random_walk": (
+        "°/h/√h → ×hrgjax.units.DEG_PER_H / 60; °/h/√s → ×hrgjax.units.DEG_PER_H"
+    ),
+    "imu_accel_random_walk": "µg/√s → ×hrgjax.ins.sensors.MICRO_G; mg/√s → ×9.80665e-3",
 }
-"""The unit each `imu_*` range's message names, with its conversion to SI."""
+"""The datasheet units each `imu_*` range's message names, with the factor from each to SI."""
+
+EXCLUSIVE = frozenset(k for k in _DEFAULTS if k.startswith("imu_"))
+"""Quantities whose nonzero bounds are refused too: each is a round number that a datasheet
+value in the other unit equals (a scale factor of 0.1 %, a misalignment of 0.1° or 0.1 mrad,
+a VRW of 0.05 mg/√Hz, a gyro bias instability of 0.01 °/h, typed as SI)."""
 
 KELVIN_HINT_C = 200.0
 """A temperature column whose every value is ≥ this [°C] looks like kelvin (250–400 K is
@@ -121,7 +136,7 @@ def relaxed(**ranges: tuple[float, float]) -> Iterator[None]:
     """Widen (or narrow) ranges of `RANGES` inside a `with` block, e.g.
     `relaxed(temperature_c=(-200.0, 200.0))` [in the quantity's own unit]. The change holds
     for the calling thread (and asyncio task) only, until the block ends; blocks nest.
-    Naming `specific_force_g` also takes a specific force whose magnitude sits at ≈ 9.81 as
+    Naming `specific_force_g` also takes a specific force whose magnitude holds ≈ 9.8 as
     g (a centrifuge run), not as m/s²
     ([`check_specific_force`][hrgjax.plausible.check_specific_force])."""
     new = dict(_OVERRIDES.get() or {})
@@ -146,6 +161,11 @@ def _hint(name: str, values: np.ndarray) -> str:
     return f" — {IMU_HINTS[name]}" if name in IMU_HINTS else ""
 
 
+def _widens(quantity: str) -> str:
+    """The tail of a range's message: the `relaxed` call that widens it."""
+    return f" (hrgjax.plausible.relaxed({quantity}=…) widens it)"
+
+
 def check(name: str, values, quantity: str | None = None) -> None:
     """Refuse `values` (concrete numbers; traced values are not checked) outside the range
     of `quantity` (default: `name`), naming `name`.
@@ -163,69 +183,123 @@ def check(name: str, values, quantity: str | None = None) -> None:
 def _check_range(name: str, arr: np.ndarray, quantity: str, hint: str | None) -> None:
     """`check` on a concrete array, with `hint` (None: the quantity's own) in its message."""
     low, high, unit = RANGES[quantity]
-    bad = np.flatnonzero(~((arr >= low) & (arr <= high)) & np.isfinite(arr))
+    ok = (arr >= low) & (arr <= high)
+    if quantity in EXCLUSIVE:  # a nonzero bound is a round datasheet value in another unit
+        ok &= ((arr != low) | (low == 0.0)) & ((arr != high) | (high == 0.0))
+    bad = np.flatnonzero(~ok & np.isfinite(arr))
     if bad.size:
         i = int(bad[0])
+        x = arr.ravel()[i]
         where = f" at index {i}" if arr.ndim else ""
         hint = _hint(quantity, arr.ravel()) if hint is None else hint
+        edge = ", its bounds excluded" if x in (low, high) else ""
         raise ValueError(
-            f"{name} = {arr.ravel()[i]:g}{where} is outside the plausible range {low:g} … "
-            f"{high:g} {unit}{hint} (hrgjax.plausible.relaxed widens it)"
+            f"{name} = {x:g}{where} is outside the plausible range {low:g} … {high:g} "
+            f"{unit}{edge}{hint}{_widens(quantity)}"
         )
 
 
-STATIC_G_TOLERANCE = 0.1
+STATIC_G_TOLERANCE = 0.02
 """Relative half-width of the bands around 9.80665 (1 g in m/s²) and 1000 (1 g in mg) in
-which the magnitude of a specific force given in g reads as written in that other unit
-([`check_specific_force`][hrgjax.plausible.check_specific_force]): a static log's |f| is
-1 g within a fraction of a percent (local gravity varies 0.5 %), a vehicle's ride with
-0.1 g of vibration per axis lies within 10 % on two rows in three; a true 8.8–10.8 g is a
-centrifuge's, and `relaxed(specific_force_g=…)` accepts it."""
+which the median magnitude |f| of a specific force given in g reads as written in that
+other unit ([`check_specific_force`][hrgjax.plausible.check_specific_force]): local gravity
+spans 9.780–9.832 m/s² (±0.3 %), a ride with 0.1 g rms of vibration per axis raises the
+median by 1 %. A steady 9.6–10.0 g is refused (a centrifuge holding it passes inside
+`relaxed(specific_force_g=…)`); 9.0, 9.55 or 10.05 g (9 or 10 g radial and 1 g vertical)
+pass."""
+
+STATIC_G_SPREAD = 0.15
+"""…and the middle half of |f| (its 25th and 75th percentiles) must lie within this
+relative distance of the same 1 g: a ride in m/s² with up to 0.14 g rms per axis does, a
+record that rests at 1 g for a quarter of its rows or more and holds ≈ 9.8 g the rest does
+not, nor a random vibration whose |f| has a median of 9.8 g (6.4 g rms per axis)."""
+
+
+def _middle_within(x: np.ndarray, n: int, low: float, high: float, share: float) -> bool:
+    """True where no more than `share` of the `n` values `x` lie below `low` and no more than
+    `share` above `high` (`share` 1/2: the median within; 1/4: the middle half): counts, not
+    a sort — 10⁶ rows cost a few comparisons."""
+    return bool(np.count_nonzero(x < low) <= share * n and np.count_nonzero(x > high) <= share * n)
 
 
 def _specific_force_unit(norm: np.ndarray) -> str:
-    """' — …: divide by …' where the magnitude `norm` [the columns' unit] (one per row)
-    lies within `STATIC_G_TOLERANCE` of 1 g in m/s² or in mg on at least half the rows that
-    carry a specific force (|f| > 0.5), else ''."""
-    norm = norm[np.isfinite(norm) & (norm > 0.5)]
+    """' — …: divide by …' where the magnitude `norm` [the columns' unit] (one per row),
+    over the rows that carry a specific force (|f| > 0.5), has its median within
+    `STATIC_G_TOLERANCE` of 1 g in m/s² or in mg and its middle half within
+    `STATIC_G_SPREAD` of it, else ''."""
+    carry = norm > 0.5  # NaN: left out
+    n = int(np.count_nonzero(carry))
+    if not n:
+        return ""
+    x = np.where(carry, norm, np.nan)  # NaN compares False: counted on neither side
     for one_g, unit, fix in ((9.80665, "m/s²", "divide by 9.80665"),
                              (1000.0, "mg", "divide by 1000")):  # fmt: skip
-        near = int(np.count_nonzero(np.abs(norm - one_g) <= STATIC_G_TOLERANCE * one_g))
-        if norm.size and 2 * near >= norm.size:
-            return (f" — the specific force's magnitude is {one_g:g} ± "
-                    f"{STATIC_G_TOLERANCE:.0%} on {near} of {norm.size} rows, as 1 g written "
-                    f"in {unit} is: {fix} to give g")  # fmt: skip
+        near, spread = STATIC_G_TOLERANCE * one_g, STATIC_G_SPREAD * one_g
+        if (_middle_within(x, n, one_g - near, one_g + near, 0.5)
+                and _middle_within(x, n, one_g - spread, one_g + spread, 0.25)):  # fmt: skip
+            q25, q50, q75 = np.percentile(norm[carry], (25.0, 50.0, 75.0))
+            return (f" — the specific force's magnitude has its median at {q50:.5g} (its "
+                    f"middle half {q25:.5g} … {q75:.5g}), within {STATIC_G_TOLERANCE:.0%} of "
+                    f"{one_g:g}, as 1 g written in {unit} has: {fix} to give g")  # fmt: skip
     return ""
 
 
-def check_specific_force(what: str, names, accel) -> None:
+def _check_middle_half(name: str, column: np.ndarray, hint: str) -> None:
+    """Refuse a data column [g] whose middle half (25th … 75th percentile) leaves
+    `RANGES["specific_force_g"]`: a unit error scales every sample, vibration only peaks."""
+    low, high, unit = RANGES["specific_force_g"]
+    if not _middle_within(column, column.size, low, high, 0.25):
+        q25, q75 = np.percentile(column, (25.0, 75.0))
+        raise ValueError(
+            f"{name} has its middle half (25th … 75th percentile) at {q25:g} … {q75:g}, "
+            f"outside the plausible range {low:g} … {high:g} {unit}{hint} (in a data file the "
+            "range holds for the middle half of the samples, not for vibration peaks; "
+            "hrgjax.plausible.relaxed(specific_force_g=…) widens it)"
+        )
+
+
+def check_specific_force(what: str, names, accel, *, samples: bool = True) -> None:
     """Refuse a specific force in g (concrete; traced values are not checked) outside
-    `RANGES["specific_force_g"]` along any axis, or written in another unit: where its
-    magnitude |f| over the given axes sits at 9.80665 (± `STATIC_G_TOLERANCE`) on at least
-    half the rows carrying one (|f| > 0.5), it is a static log's 1 g in m/s² (≈ 1000: in
-    mg, beyond the range anyway) — the g-sensitivity drift would be 9.81× too large. A run
-    that truly holds ≈ 9.8 g (a centrifuge) passes inside
-    `relaxed(specific_force_g=…)`; a high-g run at any other level is not refused. Traced
-    values (inside `jit`, `vmap`, `hg.sweep`) get the range check's twin
+    `RANGES["specific_force_g"]` along any axis, or written in another unit.
+
+    The unit: where the magnitude |f| over the given axes, on the rows carrying one
+    (|f| > 0.5), has its median within `STATIC_G_TOLERANCE` (2 %) of 9.80665 and its
+    25th and 75th percentiles within `STATIC_G_SPREAD` (15 %) of it, it is a static or
+    riding log's 1 g written in m/s² — the g-sensitivity drift would be 9.81× too large
+    (≈ 1000: in mg, beyond the range anyway). A run that truly holds 9.6–10.0 g (a
+    centrifuge) passes inside `relaxed(specific_force_g=…)`; a high-g run at another level,
+    a sweep through 9.8 g, or a hold that rests at 1 g over more than a quarter of the
+    rows is not refused.
+
+    The range: with `samples` (a `Profile`'s knots) every value along every axis; without
+    (a data file, `MeasuredData`) each column's middle half, its 25th … 75th percentile —
+    the range catches units, and a shaker's 3σ peaks (1 g + 8 g rms) pass beyond it.
+
+    Traced values (inside `jit`, `vmap`, `hg.sweep`) get the range check's twin
     (`traced_violations`), not this one.
 
     **Arguments:** `what`, the field's name for the unit message; `names`, one name per
-    column of `accel`; `accel` (N, k) [g], k = len(names) axes (1 to 3) on N rows (knots).
+    column of `accel`; `accel` (N, k) [g], k = len(names) axes (1 to 3) on N rows (knots);
+    without `samples`, finite values (the data loader's columns are).
 
     **Raises:** `ValueError`: the range message naming the column (with the unit hint where
-    the magnitude points at one), or "<what> … magnitude is 9.80665 ± 10% on n of N rows, as
-    1 g written in m/s² is: divide by 9.80665 to give g …"."""
+    the magnitude points at one), or "<what> — the specific force's magnitude has its
+    median at 9.913 (its middle half 9.85 … 9.98), within 2% of 9.80665, as 1 g written in
+    m/s² has: divide by 9.80665 to give g …"."""
     try:
         a = np.asarray(accel, dtype=float).reshape(-1, len(names))
     except Exception:  # a tracer: checked where it is concrete
         return
-    norm = np.sqrt(np.sum(np.where(np.isfinite(a), a, 0.0) ** 2, axis=1))
+    norm = np.sqrt(np.einsum("ij,ij->i", a, a))  # a row with NaN: NaN, left out
     hint = _specific_force_unit(norm)
     for j, name in enumerate(names):
-        _check_range(name, a[:, j], "specific_force_g", hint)
+        if samples:
+            _check_range(name, a[:, j], "specific_force_g", hint)
+        else:
+            _check_middle_half(name, a[:, j], hint)
     if hint and "specific_force_g" not in (_OVERRIDES.get() or {}):
         raise ValueError(
-            f"{what}{hint} (a run that holds ≈ 9.8 g: hrgjax.plausible.relaxed("
+            f"{what}{hint} (a run that holds 9.6–10.0 g: hrgjax.plausible.relaxed("
             "specific_force_g=…) takes it)"
         )
 
@@ -245,7 +319,7 @@ def traced_violations(name: str, values, quantity: str | None = None) -> list:
     out = jnp.any(jnp.isfinite(v) & ~((v >= low) & (v <= high)))
     where = " at one or more points" if v.ndim else ""
     head = f"{name} is outside the plausible range {low:g} … {high:g} {unit}{where}"
-    tail = " (hrgjax.plausible.relaxed widens it)"
+    tail = _widens(quantity)
     if quantity != "temperature_c":
         return [(out, head + tail)]
     kelvin = jnp.min(v) >= KELVIN_HINT_C

@@ -56,6 +56,12 @@ def test_a_latitude_in_degrees_is_refused_by_the_earth_model():
             call(np.array([0.1, 45.0]))
         call(np.radians(45.0))
     np.testing.assert_allclose(C.gravity(np.radians(45.0)), 9.806197769, rtol=1e-10)
+    # a pole rounded through float32 (1.5707964, 4.4e-8 beyond π/2) is radians: γ_p
+    for pole in (float(np.float32(np.pi / 2)), np.float32(-np.pi / 2), np.pi / 2 + 9e-7):
+        np.testing.assert_allclose(C.gravity(pole), 9.8321849378, rtol=1e-6)  # float32 in
+    for beyond in (np.pi / 2 + 1.1e-6, 1.6, -90.0):
+        with pytest.raises(ValueError, match=r"^gravity: lat = \S+ rad is beyond ±π/2"):
+            C.gravity(beyond)
     w = C.earth_rate_ned(np.radians(45.0))
     np.testing.assert_allclose(w, C.OMEGA_IE * np.sqrt(0.5) * np.array([1, 0, -1]), rtol=1e-14)
     f = jax.jit(lambda la: C.gravity(la) + C.WGS84.earth_rate(la)[0])

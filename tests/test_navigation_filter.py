@@ -14,7 +14,7 @@ from helpers import CompileCounter, batched_lapack, cli_fails, modelled_imu
 import hrgjax as hg
 from hrgjax.ins import ekf, flights, gnss, motion, sensors
 from hrgjax.ins import mechanization as me
-from hrgjax.units import DEG_PER_SQRT_H
+from hrgjax.units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0
 
 Z = (0.0, 0.0, 0.0)
 OUTAGE = ((70.0, 90.0),)
@@ -443,20 +443,63 @@ def test_a_misalignment_that_is_not_finite_is_refused_naming_it():
 def test_imu_errors_in_datasheet_units_are_refused_naming_the_unit():
     """`ImuModel(gyro_scale=100 [ppm meant], gyro_bias=1.0 [°/h meant], arw=0.1 [°/√h
     meant])` was accepted (a 10⁴ % scale factor, a 57 °/s bias): each field has an SI range
-    (`hrgjax.plausible`, `imu_*`) and a value beyond it is named with the unit it looks
-    like and the factor; every preset lies inside; `relaxed` widens one; traced values pass."""
-    for field, value, hint in (
-        ("gyro_scale", 100.0, "ppm\\? multiply by 1e-6"),
-        ("gyro_bias", 1.0, "°/h\\? multiply by hrgjax.units.DEG_PER_H"),
-        ("arw", 0.1, "°/√h\\? multiply by hrgjax.units.DEG_PER_SQRT_H"),
-        ("accel_bias", [0.0, 0.0, 25.0], "µg or mg\\? multiply by hrgjax.ins.sensors.MICRO_G"),
-        ("vrw", 50.0, "µg/√Hz\\? multiply by hrgjax.ins.sensors.MICRO_G"),
-        ("gyro_bias_instability", 0.5, "°/h\\? multiply by hrgjax.units.DEG_PER_H"),
-        ("gyro_misalignment", 5.0, "µrad or mrad\\?"),
+    (`hrgjax.plausible`, `imu_*`) and a value beyond it is named with the datasheet units it
+    may be in, the factor from each and the range to relax; every preset lies inside;
+    `relaxed` widens one; traced values pass. The hints named navigation-grade units only:
+    an ARW in °/s/√Hz (consumer datasheets) was told "°/√h? multiply by DEG_PER_SQRT_H", 60×
+    too small if followed, and 0.005 (MPU-6050) sat on the inclusive bound; a gyro bias of
+    3 °/s was told °/h (3600× too small)."""
+    unit = r"^ImuModel.{} \[.*\] = .* is outside the plausible range .*"
+    # consumer MEMS in SI pass: MPU-6050 zero-rate offset ±20 °/s and as much over
+    # temperature (40 °/s = 0.70 rad/s), ADXL345 offset up to ±250 mg (2.45 m/s²)
+    sensors.ImuModel(gyro_bias=np.array([40.0, -20.0, 8.0]) * DEG, accel_bias=[0, 0, 0.25 * G0])
+    # consumer rate noise densities in °/s/√Hz typed as rad/√s (MPU-6050, ICM-20602,
+    # LSM6DSO, ICM-42688-P, BMI160, BMI088): all refused; the noisiest MEMS gyros' 0.1
+    # °/s/√Hz in rad/√s (1.7e-3) passes
+    for typed in (0.005, 0.004, 0.0038, 0.0028, 0.008, 0.014):
+        with pytest.raises(ValueError, match=unit.format("arw") + "°/s/√Hz → "):
+            sensors.ImuModel(arw=typed)
+    sensors.ImuModel(arw=0.1 * DEG)
+    for field, value, hint, key in (
+        ("gyro_scale", 100.0, r"ppm → ×1e-6; % → ×1e-2", "imu_scale"),
+        ("gyro_scale", 0.1, r"its bounds excluded — ppm → ×1e-6; % → ×1e-2", "imu_scale"),
+        ("gyro_bias", 1.0, r"°/h → ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG ",
+         "imu_gyro_bias"),
+        ("gyro_bias", 3.0, r"°/h → .*; °/s → ×hrgjax.units.DEG ", "imu_gyro_bias"),
+        ("arw", 0.1, r"°/√h → ×hrgjax.units.DEG_PER_SQRT_H; °/s/√Hz → ×hrgjax.units.DEG ",
+         "imu_arw"),
+        ("arw", 0.005, r"°/√h → .*; °/s/√Hz → ×hrgjax.units.DEG ", "imu_arw"),
+        ("accel_bias", [0.0, 0.0, 25.0], r"µg → ×hrgjax.ins.sensors.MICRO_G; mg → ×9.80665e-3",
+         "imu_accel_bias"),
+        ("vrw", 50.0, r"µg/√Hz → ×hrgjax.ins.sensors.MICRO_G; mg/√Hz → ", "imu_vrw"),
+        ("vrw", 0.05, r"its bounds excluded — µg/√Hz → ", "imu_vrw"),
+        ("gyro_bias_instability", 0.5, r"°/h → ×hrgjax.units.DEG_PER_H", "imu_gyro_bias_instability"),
+        ("gyro_misalignment", 5.0, r"mrad → ×1e-3; µrad → ×1e-6; ° → ×hrgjax.units.DEG ",
+         "imu_misalignment"),
+        ("accel_misalignment", 1.0, r"° → ×hrgjax.units.DEG ", "imu_misalignment"),
     ):  # fmt: skip
-        with pytest.raises(ValueError, match=rf"^ImuModel.{field} \[.*\] = .* is outside the "
-                           rf"plausible range .* — {hint}"):  # fmt: skip
+        relax = re.escape(f"(hrgjax.plausible.relaxed({key}=…) widens it)") + "$"
+        with pytest.raises(ValueError, match=unit.format(field) + f"{hint}.*{relax}"):
             sensors.ImuModel(**{field: value})
+    # every preset's bias and ARW written in the datasheet's unit instead of SI: refused
+    # where it is beyond the range; those inside are a navigation grade's, small enough in
+    # either unit to be indistinguishable
+    typed_as_si = {  # field: (datasheet unit [SI per unit], grades whose value is refused)
+        "gyro_bias": (DEG_PER_H, {"tactical", "industrial", "consumer"}),  # °/h
+        "accel_bias": (1e-6 * G0, {"navigation", "tactical", "industrial", "consumer"}),  # µg
+        "arw": (DEG_PER_SQRT_H, {"tactical", "industrial", "consumer"}),  # °/√h
+    }
+    typed_as_si["accel_bias_mg"] = (1e-3 * G0, {"industrial", "consumer"})  # mg
+    typed_as_si["arw_dps_rthz"] = (DEG, {"industrial", "consumer"})  # °/s/√Hz
+    for label, (per_unit, refused) in typed_as_si.items():
+        field = label.removesuffix("_mg").removesuffix("_dps_rthz")
+        for grade, imu in sensors.PRESETS.items():
+            raw = {field: np.asarray(getattr(imu, field)) / per_unit}  # the datasheet number
+            if grade in refused:
+                with pytest.raises(ValueError, match=unit.format(field)):
+                    sensors.ImuModel(**raw)
+            else:
+                sensors.ImuModel(**raw)
     for imu in sensors.PRESETS.values():  # the fields as given, checked again
         assert sensors.ImuModel(**{k: getattr(imu, k) for k in imu.__dataclass_fields__}) == imu
     with hg.plausible.relaxed(imu_gyro_bias=(-2.0, 2.0)):

@@ -49,16 +49,31 @@ singular at the poles (the longitude rate v_E / (R cos φ) is infinite there, an
 gyrocompassing finds north from the horizontal Earth rate ω_ie cos φ, which vanishes)."""
 
 
+LAT_TOLERANCE = 1e-6
+"""Margin [rad] beyond ±π/2 that `check_latitude_radians` takes: a pole rounded through
+float32 (`float(np.float32(np.pi / 2))` = 1.5707964, 4.4e-8 beyond) is a latitude in
+radians. A latitude in degrees is refused from 1.570797° on; below it the two units cannot
+be told apart."""
+
+_LAT_LIMIT = math.pi / 2 + LAT_TOLERANCE
+
+
 def check_latitude_radians(name: str, lat) -> None:
     """A one-line `ValueError` naming `name` if a concrete `lat` [rad] (any shape) is beyond
-    ±π/2 anywhere: a latitude in degrees. Traced values are not checked."""
-    if isinstance(lat, jax.core.Tracer):
+    ±π/2 (+ `LAT_TOLERANCE`) anywhere: a latitude in degrees. Traced values are not
+    checked."""
+    if isinstance(lat, float | int | np.integer | np.floating):  # eager scalars: no array
+        if not abs(lat) > _LAT_LIMIT:
+            return
+        a = np.asarray(float(lat))
+    elif isinstance(lat, jax.core.Tracer):
         return
-    try:
-        a = np.asarray(lat, float)
-    except Exception:  # a value JAX keeps abstract: checked where it is concrete
-        return
-    bad = np.abs(a) > np.pi / 2
+    else:
+        try:
+            a = np.asarray(lat, float)
+        except Exception:  # a value JAX keeps abstract: checked where it is concrete
+            return
+    bad = np.abs(a) > _LAT_LIMIT
     if np.any(bad):
         x = float(a[bad].flat[0])
         raise ValueError(

@@ -70,7 +70,7 @@ _RANGE = {name: "imu_scale" if name.endswith("_scale") else f"imu_{name}"
           for name in _VECTOR_FIELDS} | {"gyro_misalignment": "imu_misalignment",
                                          "accel_misalignment": "imu_misalignment"}  # fmt: skip
 """Each field's range in `hrgjax.plausible.RANGES` (SI; a value beyond is named with the
-datasheet unit it looks like: °/h, ppm, °/√h, µg)."""
+datasheet units it may be in: °/h or °/s, ppm or %, °/√h or °/s/√Hz, µg or mg)."""
 
 
 def _vec3(name):
@@ -90,10 +90,12 @@ class ImuModel(eqx.Module):
     `accel_random_walk` [m/s²/√s]: bias random walks.
 
     **Raises:** `ValueError` for a concrete field that is not finite, a density or 1σ < 0, or
-    a value outside its `hrgjax.plausible.RANGES` entry (`imu_*`: e.g. |gyro_bias| ≤ 0.1
-    rad/s, |gyro_scale| ≤ 0.1, arw ≤ 5e-3 rad/√s), named with the unit it looks like and
-    the factor that converts it (`gyro_bias=1.0` meant as °/h: "… — °/h? multiply by
-    hrgjax.units.DEG_PER_H"); `hrgjax.plausible.relaxed(imu_gyro_bias=…)` widens one."""
+    a value outside its `hrgjax.plausible.RANGES` entry (`imu_*`, bounds excluded: e.g.
+    |gyro_bias| < 0.75 rad/s, |gyro_scale| < 0.1, arw < 2.5e-3 rad/√s), named with the
+    datasheet units it may be in and the factor from each (`gyro_bias=3.0`: "… — °/h →
+    ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG (hrgjax.plausible.relaxed(
+    imu_gyro_bias=…) widens it)"; the scale factors' range is `imu_scale`, the
+    misalignments' `imu_misalignment`)."""
 
     gyro_bias: jax.Array = eqx.field(converter=_vec3("gyro_bias"), default=0.0)
     accel_bias: jax.Array = eqx.field(converter=_vec3("accel_bias"), default=0.0)
