@@ -352,6 +352,39 @@ def test_cli_exit_statuses_and_debug(tmp_path, capsys, monkeypatch):
         cli.main(["simulate", "--debug"])
 
 
+def test_cli_relax_widens_a_plausibility_range_for_the_run(tmp_path, capsys, monkeypatch):
+    """No command could take a file beyond a plausibility range (a steady 9.8 g centrifuge
+    hold, a shaker): `--relax QUANTITY=LOW,HIGH` widens it for that run only, and a 1 g
+    log in m/s² is still refused without it."""
+    import hrgjax.cli as cli
+
+    rows = "".join(f"{i},20.0,0.0,0,0,9.8,0.0\n" for i in range(64))
+    log = tmp_path / "hold.csv"
+    log.write_text("time_s,temperature_c,table_rate_dps,accel_x_g,accel_y_g,accel_z_g,"
+                   "wave_angle_deg\n" + rows)  # fmt: skip
+    seen = []
+
+    def loads(args):
+        seen.append(len(hg.load(str(log))))
+        return 0
+
+    monkeypatch.setattr(cli, "cmd_simulate", loads)
+    cli_fails(["simulate"], capsys, r"as 1 g written in m/s² has: .* \(a run that holds "
+              r"9\.6–10\.0 g: --relax specific_force_g=LOW,HIGH takes it\)$")  # fmt: skip
+    assert cli.main(["simulate", "--relax", "specific_force_g=-40,40"]) == 0
+    assert seen == [64] and hg.plausible.RANGES["specific_force_g"][:2] == (-20.0, 20.0)
+    cli_fails(
+        ["simulate", "--relax", "specific_force=-1,1"],
+        capsys,
+        r"argument --relax: 'specific_force' is not a plausibility range; known: .*",
+    )
+    cli_fails(
+        ["simulate", "--relax", "specific_force_g=40,-40"],
+        capsys,
+        r"argument --relax: 'specific_force_g=40,-40': give QUANTITY=LOW,HIGH",
+    )
+
+
 # --- fuzzing the loaders ----------------------------------------------------------------------
 
 _FIELDS = st.one_of(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 
 from . import allan, calibrate, discover, ins, navigate, simulate
@@ -97,6 +98,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="no progress bars (they are off without a terminal)",
     )
     common.add_argument(
+        "--relax",
+        action="append",
+        type=_relaxation,
+        default=argparse.SUPPRESS,
+        metavar="QUANTITY=LOW,HIGH",
+        help="widen a plausibility range for this run (hrgjax.plausible.RANGES, in the "
+        "quantity's own unit), e.g. --relax specific_force_g=-40,40 for a centrifuge; "
+        "repeatable",
+    )
+    common.add_argument(
         "--debug",
         action="store_true",
         default=argparse.SUPPRESS,
@@ -184,6 +195,25 @@ def _placement(command):
     return jax.default_device(device)
 
 
+def _relaxation(text: str) -> tuple[str, tuple[float, float]]:
+    """`QUANTITY=LOW,HIGH` of `--relax`, checked against `hrgjax.plausible.RANGES`."""
+    from .. import plausible
+
+    name, eq, bounds = text.partition("=")
+    parts = bounds.split(",")
+    try:
+        low, high = (float(v) for v in parts) if len(parts) == 2 else (None, None)
+    except ValueError:
+        low = high = None
+    if not eq or low is None or not low < high:
+        raise argparse.ArgumentTypeError(f"{text!r}: give QUANTITY=LOW,HIGH with LOW < HIGH, "
+                                         "e.g. specific_force_g=-40,40")  # fmt: skip
+    if name not in plausible.RANGES:
+        raise argparse.ArgumentTypeError(f"{name!r} is not a plausibility range; known: "
+                                         f"{', '.join(sorted(plausible.RANGES))}")  # fmt: skip
+    return name, (low, high)
+
+
 def _run(args) -> int:
     """Run the command: a one-line error and exit status 2 for bad input, 1 for a failure
     during the work, 130 on Ctrl-C (files are written atomically, so none is left half
@@ -191,7 +221,9 @@ def _run(args) -> int:
     name, debug = f"hrgjax {args.command}", getattr(args, "debug", False)
     try:
         check_distinct_paths(args)
-        with _placement(args.command):
+        from ..plausible import relaxed
+
+        with _placement(args.command), relaxed(**dict(getattr(args, "relax", ()))):
             return args.func(args)
     except KeyboardInterrupt:
         if debug:
@@ -201,7 +233,10 @@ def _run(args) -> int:
     except (UsageError, ValueError, TypeError, OSError) as err:
         if debug:
             raise
-        print(f"{name}: error: {one_line(err)}", file=sys.stderr)
+        # a plausibility range's way out, as the command line spells it
+        line = re.sub(r"hrgjax\.plausible\.relaxed\((\w+)=…\)", r"--relax \1=LOW,HIGH",
+                      one_line(err))  # fmt: skip
+        print(f"{name}: error: {line}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT) from None
     except Exception as err:
         if debug:
