@@ -10,6 +10,7 @@
 3. `vibration_features` near DC or Nyquist: 0.5 Hz at a 1-s window read 1.12 Hz 0.36 g,
    in range, silently. Now NaN (out of range) with an `EdgeToneWarning`."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -149,3 +150,92 @@ def test_a_tone_at_the_spectrum_edges_is_not_measured_and_is_counted(imu):
     with pytest.raises(ValueError, match=r"^conditions: \(0.5 Hz, 1 g\) peaks within 2 bins"):
         cp.training_set(imu, [(0.5, 1.0)], key=jax.random.key(1), fs=50.0, window_s=1.0,
                         lead_s=2.0, on_s=4.0, off_s=2.0)  # fmt: skip
+
+
+# Review of the commit above (2026-12): five more holes, each test failing on its code.
+
+
+def test_a_weak_low_tone_at_an_edge_reads_not_measurable_not_rest(imu):
+    # 0.13 g at 0.5 Hz in 1-s windows peaks at bin 1, where the lobe without DC read 0.043 g
+    # < min_amp_g 0.05: rest in every window, silently. The lobe with its DC bin (the
+    # window's whole AC power for a tone) reads ≥ 0.414·0.13 = 0.054 g over all phases.
+    from hrgjax.fog.spectrum import EdgeToneWarning, vibration_direction
+
+    a = _tone(0.5, amp_g=0.13)
+    with pytest.warns(EdgeToneWarning, match=r"4 of 4 tone\(s\)") as caught:
+        f = np.asarray(vibration_features(a, 100.0, 1.0, (0, 0, 1.0)))
+    assert np.isnan(f).all(), f
+    assert caught[0].filename == __file__  # the user's line
+    d = np.asarray(vibration_direction(a, 100.0, 1.0))
+    np.testing.assert_allclose(np.abs(d), np.broadcast_to([0, 0, 1.0], d.shape), atol=1e-9)
+    # raised inside compensate it points at the user's call too (it named compensation.py)
+    comp, rec = _comp(1.0, (0.1, 40.0)), _record(imu, 0.5, (0, 0, 1), duration=10.0)
+    with pytest.warns(EdgeToneWarning) as caught:
+        out = cp.compensate(comp, imu, rec)
+    assert [w.filename for w in caught] == [__file__] and out.n_out_of_range == 10
+
+
+def test_broadband_rest_has_no_direction_and_is_not_off_axis(imu):
+    # isotropic noise of 0.08–0.1 g per axis summed over three axes crossed min_amp_g in the
+    # direction test while the features along z read rest: windows counted off the trained
+    # axis, warned, prediction forced to zero. Noise has no direction (λ₁/trace 0.5–0.76);
+    # a tone is rank one (λ₁/trace ≈ 1).
+    from hrgjax.fog.spectrum import vibration_direction
+
+    comp = _comp(2.0)
+    rest = vb.simulate(imu, vb.VibrationSchedule.constant(0.0, 0.0, 20.0), fs=100.0,
+                       key=jax.random.key(6))  # fmt: skip
+    rng = np.random.default_rng(0)
+    for sigma in (0.08, 0.1):
+        noisy = eqx.tree_at(lambda r: r.accel, rest, rest.accel + rng.normal(size=(2000, 3))
+                            * sigma * G0)  # fmt: skip
+        body = vb.to_body(imu.accel, noisy.accel)
+        assert np.all(np.asarray(vibration_direction(body, 100.0, 2.0)) == 0.0), sigma
+        out = cp.compensate(comp, imu, noisy)  # no off-axis warning (an error here)
+        feats = vibration_features(body, 100.0, 2.0, (0, 0, 1.0))
+        assert out.n_out_of_range == int(np.sum(~np.asarray(comp.in_range(feats)))), sigma
+    # a weak tone along x in the same noise floor keeps its direction: off, 90° from z
+    from hrgjax.fog.spectrum import off_axis
+
+    t = np.arange(2000) / 100.0
+    x = rest.accel + rng.normal(size=(2000, 3)) * 0.01 * G0
+    x = x.at[:, 0].add(0.06 * G0 * np.sin(2 * np.pi * 10.0 * t))
+    off, d, angle = off_axis(vb.to_body(imu.accel, x), 100.0, (0, 0, 1.0), 2.0)
+    assert np.asarray(off).all() and np.allclose(np.asarray(angle), 90.0, atol=5.0)
+
+
+def test_windows_too_short_to_measure_anything_are_refused():
+    # 8 or 9 samples leave no bin between the 2 at DC and the 1 at Nyquist: every tone NaN,
+    # the warning "measurable from 31.25 to 31.25 Hz". 10 leave bin 3.
+    from hrgjax.fog.spectrum import EdgeToneWarning, tone
+
+    for m in (8, 9):
+        with pytest.raises(ValueError, match=rf"^window_s·fs must be >= 10 samples \(a shorter "
+                           rf"window leaves no bin .*; got {m} \("):  # fmt: skip
+            vibration_features(_tone(30.0, n=10 * m), 100.0, m / 100.0, (0, 0, 1.0))
+        with pytest.raises(ValueError, match=r"^nperseg must be >= 10 samples"):
+            tone(np.sin(np.arange(4 * m)), 100.0, nperseg=m)
+    f = np.asarray(vibration_features(_tone(30.0, n=100), 100.0, 0.1, (0, 0, 1.0)))
+    np.testing.assert_allclose(f, np.broadcast_to([30.0, 1.0], f.shape), rtol=1e-2)
+    # an odd window has no Nyquist bin: 11 samples measure bins 2.5–3.5 = 22.7–31.8 Hz (it
+    # said up to fs/2 − 1.5 df = 36.4 Hz)
+    with pytest.warns(EdgeToneWarning, match=r"Measurable from about 22.73 to 31.82 Hz"):
+        vibration_features(_tone(45.0, n=110), 100.0, 0.11, (0, 0, 1.0))
+
+
+def test_study_reports_an_unmeasurable_scenario_as_such():
+    # study.run reported NaN features as 0.0 Hz / 0.000 g (PSD peak), which reads as rest
+    from hrgjax.fog import study
+
+    nan, rest = np.full((5, 2), np.nan), np.zeros((5, 2))
+    assert study.scenario_features(nan) == {"freq_hz": None, "amp_g": None,
+                                            "windows_not_measurable": 5}  # fmt: skip
+    assert study.scenario_features(rest) == {"freq_hz": 0.0, "amp_g": 0.0,
+                                             "windows_not_measurable": 0}  # fmt: skip
+    mixed = np.array([[10.0, 1.0], [np.nan, np.nan], [12.0, 0.5], [0.0, 0.0]])
+    assert study.scenario_features(mixed) == {"freq_hz": 11.0, "amp_g": 0.75,
+                                              "windows_not_measurable": 1}  # fmt: skip
+    result = {"scenario": "custom", "features": study.scenario_features(nan), "epochs": 1,
+              "heading_error_deg": {}, "tilt_error_deg": {}, "prediction_rmse": {},
+              "train_s": {}, "heading_limit_deg": {"remaining_drift": 0.0, "raw": 0.0}}  # fmt: skip
+    assert "vibration not measurable" in study.table(result).splitlines()[0]

@@ -43,13 +43,14 @@ import numpy as np
 import optax
 
 from .._checks import concrete_value, host_value
+from .._compiled import fused
 from .._x64 import require_x64
 from ..ins.constants import earth_rate_ned
 from ..nn.elman import Elman
 from ..nn.mlp import MLP
 from ..units import DEG_PER_H
 from .heading import align_record, heading_limit_deg, imu_log
-from .spectrum import EdgeToneWarning, vibration_direction, vibration_features
+from .spectrum import EdgeToneWarning, off_axis, vibration_features
 from .vibration import (
     FogImu,
     VibrationRecord,
@@ -479,15 +480,21 @@ def _predict(comp: VibrationCompensator, feats, extrapolate: bool, margin: float
     (or `off` the trained axis) are fed to the network as rest (its context never sees them)
     and predict zero. NaN features (not measurable) are out even with `extrapolate`."""
     call = comp if feats.ndim == 2 else jax.vmap(comp)
+    inside, x = _gate(comp, feats, off, extrapolate=extrapolate, margin=margin)
+    return jnp.where(inside[..., None], call(x), 0.0), inside
+
+
+@fused(static_argnames=("extrapolate", "margin"))
+def _gate(comp, feats, off, *, extrapolate, margin):
+    """`_predict`'s mask and the features fed to the network (rest outside it), as one
+    compiled program (eagerly a dozen operations compiled one by one on a first call)."""
     valid = jnp.all(~jnp.isnan(feats), axis=-1)
     feats = jnp.where(valid[..., None], feats, 0.0)
     if extrapolate:
-        inside = valid[..., None]
-        return jnp.where(inside, call(feats), 0.0), inside[..., 0]
+        return valid, feats
     inside = comp.in_range(feats, margin) & valid
-    inside = (inside if off is None else inside & ~off)[..., None]
-    pred = call(jnp.where(inside, feats, 0.0))
-    return jnp.where(inside, pred, 0.0), inside[..., 0]
+    inside = inside if off is None else inside & ~off
+    return inside, jnp.where(inside[..., None], feats, 0.0)
 
 
 AXIS_TOL_DEG = 8.0
@@ -514,7 +521,8 @@ class Compensated(eqx.Module):
 
     @property
     def n_out_of_range(self) -> int:
-        """Windows passed through uncompensated (outside the trained range)."""
+        """Windows passed through uncompensated: outside the trained range, vibrating off
+        the trained axis, or not measurable (NaN features: a tone too near DC or Nyquist)."""
         return int(jnp.sum(~self.in_range))
 
 
@@ -536,10 +544,11 @@ def compensate(
     through uncompensated — its prediction is zero and the network is fed rest instead, so
     its context does not carry the extrapolation on — and counted: outside its training
     range the network made the error worse than none (docs/fog.md). So is a vibrating window
-    whose direction ([`vibration_direction`][hrgjax.fog.spectrum.vibration_direction]) lies
-    more than [`AXIS_TOL_DEG`][hrgjax.fog.compensation.AXIS_TOL_DEG] from the axis the
-    features are taken along — along another axis they read rest or a smaller amplitude —
-    with one `UserWarning` naming both directions (checked when the axis is known). So is a
+    whose direction ([`off_axis`][hrgjax.fog.spectrum.off_axis]) lies more than
+    [`AXIS_TOL_DEG`][hrgjax.fog.compensation.AXIS_TOL_DEG] from the axis the features are
+    taken along — along another axis they read rest or a smaller amplitude — with one
+    `UserWarning` naming both directions (checked when the axis is known; a window without
+    one direction, such as broadband noise, is left to the range rule). So is a
     window whose features are NaN (a tone too near DC or Nyquist to measure,
     [`vibration_features`][hrgjax.fog.spectrum.vibration_features]). `extrapolate=True`
     applies the network everywhere but there. **Returns** a
@@ -551,18 +560,16 @@ def compensate(
     feats = vibration_features(body, record.fs, window_s, axis)
     off = None
     if axis is not None:
-        d = vibration_direction(body, record.fs, window_s)
-        cos = jnp.abs(d @ jnp.asarray(axis, d.dtype))
-        off = jnp.any(d != 0, axis=-1) & (cos < np.cos(np.radians(AXIS_TOL_DEG)))
+        off, d, angle = off_axis(body, record.fs, axis, window_s, AXIS_TOL_DEG)
         bad = concrete_value(off)
         if bad is not None and bad.any() and not extrapolate:
             i = int(np.argmax(bad))
             shown = lambda v: "(" + ", ".join(f"{c:.3g}" for c in v) + ")"  # noqa: E731
             warnings.warn(
                 f"compensate: {int(bad.sum())} of {bad.size} windows vibrate off the trained "
-                f"axis {shown(axis)} — window {i} along {shown(np.asarray(d[i]))}, "
-                f"{np.degrees(np.arccos(min(float(cos[i]), 1.0))):.3g}° from it; passed "
-                "through uncompensated (n_out_of_range)",
+                f"axis {shown(axis)} — window {i} along {shown(concrete_value(d)[i])}, "
+                f"{concrete_value(angle)[i]:.3g}° from it; passed through uncompensated "
+                "(n_out_of_range)",
                 stacklevel=2,
             )
     pred, inside = _predict(comp, feats, extrapolate, margin, off)

@@ -16,10 +16,20 @@ accelerometer bias it is exactly
 $\delta\psi = -\operatorname{atan2}(\varepsilon_E,\ \omega_{ie}\cos\varphi + \varepsilon_N)$.
 
 PHYSICS.md §12's $\delta\psi = -\varepsilon_E/(\omega_{ie}\cos\varphi) + (\nabla_E/g)\tan\varphi$
-is the small-angle form of the same equilibrium. Its relative error grows as
-$\approx\delta\psi^2/3$ (0.5 % at 7°). It has no bound: 5 °/h east at 45° gives −26.9°
-against the exact −25.2°, and at 80° −109.7° against −62.4°. Near a pole the horizontal Earth
-rate $\omega_{ie}\cos\varphi$ that north is found from vanishes, so latitudes beyond
+is the small-angle form of the same equilibrium for a **level** IMU, first order in each
+bias alone. Its relative error is $\approx\delta\psi^2/3$ (0.5 % at 7°) only when also
+$\varepsilon_N \ll \omega_{ie}\cos\varphi$: the north drift enters at first order through
+$\operatorname{atan2}(\varepsilon_E,\ \omega_{ie}\cos\varphi + \varepsilon_N)$, a relative
+$-\varepsilon_N/(\omega_{ie}\cos\varphi)$ (0.94 % for 0.1 °/h north at 45°, where δψ²/3 is
+3e-5). At pitch θ the Euler heading error (what this module and
+[`align_record`][hrgjax.fog.heading.align_record] report) also carries the tilt error across
+the heading times tan θ: $-\tan\theta\,\nabla_\perp/g$ with
+$\nabla_\perp = \nabla_E\cos\psi - \nabla_N\sin\psi$ (1 mg north and east, 0.01 °/h east,
+pitch 80°, heading 30°: −0.116° against the formula's +0.0034°). It has no bound: 5 °/h east
+at 45° gives −26.9° against the exact −25.2°, and at 80° −109.7° against −62.4°.
+
+Near a pole the horizontal Earth rate $\omega_{ie}\cos\varphi$ that north is found from
+vanishes, so latitudes beyond
 ±[`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG] are refused, as
 [`align`][hrgjax.ins.alignment.align] refuses them.
 """
@@ -43,10 +53,12 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat) -> float:
     body-frame gyro drift `eps_body` [rad/s] and accelerometer bias `nabla_body` [m/s²]. It
     is the heading of the TRIAD of the biased mean specific force and rate (module
     docstring) minus the true heading: the same Euler-heading difference that
-    [`align_record`][hrgjax.fog.heading.align_record] reports. For small errors it is
-    PHYSICS.md §12's
+    [`align_record`][hrgjax.fog.heading.align_record] reports. For small errors of a level
+    IMU it is PHYSICS.md §12's
     $\\delta\\psi = -\\varepsilon_E/(\\omega_{ie}\\cos\\varphi) + (\\nabla_E/g)\\tan\\varphi$
-    (relative difference ≈ δψ²/3, where δψ is in radians).
+    (NED components), to a relative δψ²/3 (δψ in radians) when ε_N ≪ ω_ie cos φ; ε_N changes
+    it at first order, by −ε_N/(ω_ie cos φ) relative, and at pitch θ the Euler heading adds
+    −tan θ·(∇_E cos ψ − ∇_N sin ψ)/g (module docstring).
 
     **Arguments:** `eps_body` (3,) [rad/s]; `nabla_body` (3,) [m/s²]; `c_bn` (3, 3), the
     body-to-NED direction cosine matrix; `lat`, the geodetic latitude φ **in radians**

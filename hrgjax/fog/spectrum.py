@@ -23,10 +23,26 @@ bin 2.5 to 1.5 bins below Nyquist: 2.5/`window_s` to fs/2 − 1.5/`window_s` [Hz
 (`benchmarks/fog_spectrum_edges.py`: one periodic-Hann segment of 100 samples, tones
 stepped by 0.02 bin, 13 phases each), the amplitude error with the peak at bin 1, 2, 3, 4 is
 up to 86 %, 8.3 %, 1.0 %, 0.12 %; at the Nyquist bin and one, two, three below it up to 91 %,
-90 %, 0.23 %, 0.02 %."""
+90 %, 0.23 %, 0.02 %.
+
+**Rest at the edges.** Whether a window vibrates at all (`min_amp_g`) is decided at an edge
+peak from the lobe's power *with* the DC bin: for a tone that is the window's whole AC power
+(the Hann periodogram's sum over all bins, Parseval), which the lobe cut no longer distorts;
+for broadband noise it is the lobe's share, as mid-band, so rest means the same there. The
+lobe without DC read 0.334–0.577 A for a 0.5-Hz tone in 1-s windows (phases 0–π), so 0.13 g
+read rest; with DC it reads 0.414–0.578 A, and 0.13 g reads NaN. What the window's mean
+removal takes (up to 59 % of A at 0.5 Hz in 1-s windows, more below) no spectral measure
+recovers: a weaker or slower tone can still read rest.
+
+**Shortest window.** A window of m samples has bins 0 … m//2; one whose peak may be
+measured needs a bin above the 2 at DC and below the 1 at Nyquist, so m ≥ 10
+([`MIN_WINDOW`][hrgjax.fog.spectrum.MIN_WINDOW]; 8 or 9 samples measured nothing, 10 or 11
+only bin 3). Shorter windows are refused."""
 
 from __future__ import annotations
 
+import os
+import sys
 import warnings
 
 import jax
@@ -49,12 +65,17 @@ def psd(x, fs: float, nperseg: int | None = None):
         raise ValueError(f"fs must be > 0 Hz; got {fs}")
     if n < 2:
         raise ValueError(f"x must have at least 2 samples along its last axis; got {n}")
+    return _psd(x, fs, nperseg=_segment(n, nperseg))
+
+
+def _segment(n: int, nperseg) -> int:
+    """`psd`'s segment length for `n` samples: `nperseg` checked, or its default."""
     if nperseg is None:
         nperseg = min(n, max(16, 1 << int(max(n // 4, 1)).bit_length() - 1))
     nperseg = int(nperseg)
     if not 2 <= nperseg <= n:
         raise ValueError(f"nperseg must be in [2, {n}] samples; got {nperseg}")
-    return _psd(x, fs, nperseg=nperseg)
+    return nperseg
 
 
 @fused(static_argnames="nperseg")
@@ -83,35 +104,71 @@ EDGE_BINS = (2, 1)
 docstring, **Edges**): (DC side, Nyquist side)."""
 
 
+MIN_WINDOW = 2 * (EDGE_BINS[0] + EDGE_BINS[1] + 2)
+"""Fewest samples (10) in a window, or `tone`'s segment, that leave a bin where a tone is
+measurable: of the bins 1 … m//2, `EDGE_BINS` (2 at DC, 1 at Nyquist) are not, so
+m//2 ≥ 2 + 1 + 2 (module docstring, **Shortest window**)."""
+
+DIRECTIONAL_MIN = 0.9
+"""Least λ₁/trace of a window's 3×3 cross-spectral matrix (over the tone's lobe) for
+[`vibration_direction`][hrgjax.fog.spectrum.vibration_direction] to give it a direction:
+a linear vibration gives 1 (an elliptic one λ₁/(λ₁+λ₂)). In 2-s windows at 100 Hz,
+isotropic white noise gave a mean of 0.64 and ≥ 0.9 in 0.46 % of 20 000 windows; a tone
+of amplitude A along one axis in noise of σ per axis fell below 0.9 in 3 % of windows at
+A = 2σ and in none at 3σ (`benchmarks/fog_rest_and_direction.py`)."""
+
+
 class EdgeToneWarning(UserWarning):
     """A tone peaks within [`EDGE_BINS`][hrgjax.fog.spectrum.EDGE_BINS] of DC or of
     Nyquist, where its frequency and amplitude are not measurable (returned as NaN)."""
 
 
-def _warn_edge(what: str, n: int, total: int, fs: float, df: float, window: str) -> None:
-    top = fs / 2
+def _warn_edge(what: str, n: int, total: int, fs: float, m: int, window: str) -> None:
+    top, df = fs / 2, fs / m
+    low, high = EDGE_BINS
     warnings.warn(
-        f"{what}: {n} of {total} tone(s) peak within {EDGE_BINS[0]} bins (resolution "
-        f"{window} = {df:.4g} Hz) of DC or {EDGE_BINS[1]} of Nyquist ({top:g} Hz), where "
+        f"{what}: {n} of {total} tone(s) peak within {low} bins (resolution "
+        f"{window} = {df:.4g} Hz) of DC or {high} of Nyquist ({top:g} Hz), where "
         f"frequency and amplitude are not measurable: NaN. Measurable from about "
-        f"{2.5 * df:.4g} to {top - 1.5 * df:.4g} Hz; use a longer window or a higher fs",
+        f"{(low + 0.5) * df:.4g} to {(m // 2 - high - 0.5) * df:.4g} Hz; use a longer window "
+        "or a higher fs",
         EdgeToneWarning,
-        stacklevel=3,
+        stacklevel=_user_level(),
     )
+
+
+def _user_level() -> int:
+    """`stacklevel` for a `warnings.warn` in the caller that points at the first frame
+    outside hrgjax — the user's call, however deep the library's own calls go (an
+    `EdgeToneWarning` from `compensate` pointed at compensation.py)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(root):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def tone(x, fs: float, nperseg: int | None = None, lobe: int = 3):
     """Frequency [Hz] and amplitude (units of `x`) of the strongest tone in `x` (N,): the PSD
     peak (DC excluded), the power within ±`lobe` bins of it (the Hann main lobe is ±2).
     Both are NaN, with an [`EdgeToneWarning`][hrgjax.fog.spectrum.EdgeToneWarning], for a
-    peak within 2 bins of DC or 1 of Nyquist (module docstring, **Edges**)."""
+    peak within 2 bins of DC or 1 of Nyquist (module docstring, **Edges**); a segment
+    (`nperseg`, `psd`'s default when None) of fewer than
+    [`MIN_WINDOW`][hrgjax.fog.spectrum.MIN_WINDOW] samples is refused."""
     if jnp.ndim(x) != 1:
         raise ValueError(f"x must have shape (N,); got {jnp.shape(x)}")
-    f, p = psd(x, fs, nperseg)
-    freq, amp, edge = _peak(f, p, _lobe(lobe))
+    m = _segment(jnp.shape(x)[0], nperseg)
+    if m < MIN_WINDOW:
+        raise ValueError(
+            f"nperseg must be >= {MIN_WINDOW} samples (a shorter segment leaves no bin between "
+            f"the {EDGE_BINS[0]} at DC and the {EDGE_BINS[1]} at Nyquist where a tone is "
+            f"measurable); got {m}"
+        )
+    f, p = psd(x, fs, m)
+    freq, amp, edge, _ = _peak(f, p, _lobe(lobe))
     e = concrete_value(edge)
     if e is not None and bool(e):
-        _warn_edge("tone", 1, 1, fs, float(f[1] - f[0]), "fs/nperseg")
+        _warn_edge("tone", 1, 1, fs, m, "fs/nperseg")
     nan = jnp.asarray(jnp.nan, freq.dtype)
     return jnp.where(edge, nan, freq), jnp.where(edge, nan, amp)
 
@@ -124,15 +181,17 @@ def _lobe(lobe) -> int:
 
 def _peak(f, p, lobe):
     """Power-weighted frequency and amplitude √(2·power) of the main lobe around the PSD
-    peak (DC excluded), and whether the peak lies within `EDGE_BINS` of DC or Nyquist."""
+    peak (DC excluded), whether the peak lies within `EDGE_BINS` of DC or Nyquist, and the
+    lobe's amplitude with the DC bin counted (the rest test's at an edge)."""
     low, high = EDGE_BINS
     df = f[1] - f[0]
     k = jnp.argmax(p[1:]) + 1
     bins = jnp.arange(p.shape[-1])
-    near = (jnp.abs(bins - k) <= lobe) & (bins > 0)
-    pw = jnp.where(near, p, 0.0)
+    lobe_dc = jnp.abs(bins - k) <= lobe
+    pw = jnp.where(lobe_dc & (bins > 0), p, 0.0)
     edge = (k <= low) | (k >= p.shape[-1] - 1 - high)
-    return jnp.sum(pw * f) / jnp.sum(pw), jnp.sqrt(2.0 * jnp.sum(pw) * df), edge
+    reach = jnp.sqrt(2.0 * jnp.sum(jnp.where(lobe_dc, p, 0.0)) * df)
+    return jnp.sum(pw * f) / jnp.sum(pw), jnp.sqrt(2.0 * jnp.sum(pw) * df), edge, reach
 
 
 def vibration_features(
@@ -151,7 +210,10 @@ def vibration_features(
     features are (NaN, NaN), which
     [`compensate`][hrgjax.fog.compensation.compensate] counts out of range, with one
     [`EdgeToneWarning`][hrgjax.fog.spectrum.EdgeToneWarning] per call (module docstring,
-    **Edges**). **Returns** (K, 2), K = N // (window_s·fs)."""
+    **Edges**); whether it vibrates is decided there from the lobe's power with its DC bin
+    (**Rest at the edges**). A window of fewer than
+    [`MIN_WINDOW`][hrgjax.fog.spectrum.MIN_WINDOW] = 10 samples is refused.
+    **Returns** (K, 2), K = N // (window_s·fs)."""
     a, m = _windows(accel, fs, window_s)
     if axis is not None:
         axis = jnp.asarray(axis, a.dtype)
@@ -161,7 +223,7 @@ def vibration_features(
     v = concrete_value(out)
     if v is not None and np.isnan(v[:, 0]).any():
         n = int(np.isnan(v[:, 0]).sum())
-        _warn_edge("vibration_features", n, len(v), fs, fs / m, "1/window_s")
+        _warn_edge("vibration_features", n, len(v), fs, m, "1/window_s")
     return out
 
 
@@ -171,12 +233,36 @@ def vibration_direction(accel, fs: float, window_s: float = 1.0, min_amp_g: floa
     [m/s²] (windows as [`vibration_features`][hrgjax.fog.spectrum.vibration_features]'): the
     principal axis of the three axes' cross-spectral matrix summed over ±`lobe` bins around
     the peak of their summed PSD (DC excluded), a unit vector with its largest component
-    positive. It is zero in a window whose tone, all axes together, is below `min_amp_g`
-    [g] (at rest). A linear vibration along u gives ±u whatever the analysis axis, so it
-    tells whether a record vibrates along the direction a compensator was trained on.
-    Carries no gradient."""
+    positive (at an edge peak the lobe takes the DC bin too, as the features' rest test).
+    It is zero in a window whose tone, all axes together, is below `min_amp_g` [g] (at
+    rest), and in one without a direction: the lobe's cross-spectral matrix is not close to
+    rank one, λ₁/trace < [`DIRECTIONAL_MIN`][hrgjax.fog.spectrum.DIRECTIONAL_MIN] = 0.9
+    (broadband noise, or tones along several axes). A linear vibration along u gives ±u
+    whatever the analysis axis, so it tells whether a record vibrates along the direction a
+    compensator was trained on. Carries no gradient."""
     a, m = _windows(accel, fs, window_s)
     return _directions(a, fs, min_amp_g, m=m, lobe=_lobe(lobe))
+
+
+def off_axis(accel, fs: float, axis, window_s: float = 1.0, tol_deg: float = 8.0,
+             min_amp_g: float = 0.05, lobe: int = 3):  # fmt: skip
+    """Windows of `accel` (N, 3) [m/s²] vibrating more than `tol_deg` [°] off `axis` (3,)
+    (body frame; −`axis` is the same): those with a
+    [`vibration_direction`][hrgjax.fog.spectrum.vibration_direction] (arguments as there)
+    at an angle above `tol_deg` from it. A window at rest or without a direction (not
+    close to rank one: broadband noise) is not off: the features' own rest and range rules
+    decide it. [`compensate`][hrgjax.fog.compensation.compensate] counts off windows out of
+    range. **Returns** `(off (K,) bool, direction (K, 3), angle (K,) [°])`, the angle NaN
+    where there is no direction. One compiled program; carries no gradient."""
+    a, m = _windows(accel, fs, window_s)
+    u = np.asarray(axis, dtype=float)
+    if u.shape != (3,) or not np.isfinite(u).all() or not np.linalg.norm(u) > 0:
+        raise ValueError(f"axis must be a non-zero finite 3-vector (body frame); got {axis!r}")
+    tol = float(tol_deg)
+    if not 0.0 <= tol <= 90.0:
+        raise ValueError(f"tol_deg must be an angle in [0, 90] °; got {tol_deg!r}")
+    cos_min = jnp.asarray(np.cos(np.radians(tol)), a.dtype)
+    return _off_axis(a, jnp.asarray(u, a.dtype), cos_min, fs, min_amp_g, m=m, lobe=_lobe(lobe))
 
 
 def _windows(accel, fs, window_s):
@@ -194,10 +280,15 @@ def _windows(accel, fs, window_s):
             f"{norm:.3g}: in g? multiply by {G0}"
         )
     m = int(round(window_s * fs))
-    if m < 8 or a.shape[0] // m < 1:
+    if m < MIN_WINDOW:
         raise ValueError(
-            f"window_s·fs must be >= 8 samples and the record at least one window; got "
-            f"window {m} samples, record {a.shape[0]}"
+            f"window_s·fs must be >= {MIN_WINDOW} samples (a shorter window leaves no bin between "
+            f"the {EDGE_BINS[0]} at DC and the {EDGE_BINS[1]} at Nyquist where a tone is "
+            f"measurable); got {m} ({window_s:g} s at {fs:g} Hz)"
+        )
+    if a.shape[0] < m:
+        raise ValueError(
+            f"accel must hold at least one window of window_s·fs = {m} samples; got {a.shape[0]}"
         )
     return a, m
 
@@ -213,11 +304,12 @@ def _features(a, axis, fs, min_amp_g, *, m, lobe):
     else:
         u = axis / jnp.linalg.norm(axis)
     x = (a[: k * m] @ u).reshape(k, m)
-    f, amp, edge = jax.vmap(lambda w: _peak(*_psd(w, fs, nperseg=m), lobe))(x)
-    amp = amp / G0
-    on = amp >= min_amp_g
+    f, amp, edge, reach = jax.vmap(lambda w: _peak(*_psd(w, fs, nperseg=m), lobe))(x)
+    # at an edge the lobe without DC understates the tone (by up to 86 % at bin 1): rest is
+    # decided there from the lobe with its DC bin, a tone's whole AC power (module docstring)
+    on = jnp.where(edge, reach, amp) / G0 >= min_amp_g
     nan = jnp.asarray(jnp.nan, amp.dtype)
-    f, amp = (jnp.where(on, jnp.where(edge, nan, v), 0.0) for v in (f, amp))
+    f, amp = (jnp.where(on, jnp.where(edge, nan, v), 0.0) for v in (f, amp / G0))
     return jnp.stack([f, amp], axis=-1)
 
 
@@ -229,16 +321,34 @@ def _directions(a, fs, min_amp_g, *, m, lobe):
     x = x - jnp.mean(x, axis=1, keepdims=True)
     w = 0.5 - 0.5 * jnp.cos(2.0 * jnp.pi * jnp.arange(m, dtype=a.dtype) / m)  # periodic Hann
     spec = jnp.fft.rfft(x * w.reshape(1, m, 1), axis=1)  # (K, nf, 3)
+    nf = spec.shape[1]
     power = jnp.sum(jnp.abs(spec) ** 2, axis=-1)  # (K, nf)
     peak = jnp.argmax(power[:, 1:], axis=-1) + 1
-    bins = jnp.arange(power.shape[-1])
-    near = (jnp.abs(bins[None, :] - peak[:, None]) <= lobe) & (bins[None, :] > 0)
-    cross = jnp.einsum(
-        "kn,kni,knj->kij", near.astype(spec.dtype), spec, jnp.conj(spec)
-    ).real  # (K, 3, 3)
+    edge = (peak <= EDGE_BINS[0]) | (peak >= nf - 1 - EDGE_BINS[1])
+    bins = jnp.arange(nf)
+    # the lobe around the peak, its DC bin too at an edge (as `_features`' rest test), each
+    # bin weighted as the one-sided PSD counts it (DC and an even m's Nyquist bin once)
+    near = (jnp.abs(bins[None, :] - peak[:, None]) <= lobe) & ((bins[None, :] > 0) | edge[:, None])
+    once = (bins == 0) | ((bins == nf - 1) & (m % 2 == 0))
+    wt = jnp.where(near, jnp.where(once, 0.5, 1.0), 0.0).astype(a.dtype)
+    cross = jnp.einsum("kn,kni,knj->kij", wt.astype(spec.dtype), spec, jnp.conj(spec)).real
     # amplitude √(2 Σ P Δf) with the one-sided PSD P = 2|X|²/(fs Σw²) and Δf = fs/m
-    amp = jnp.sqrt(4.0 * jnp.trace(cross, axis1=-2, axis2=-1) / (m * jnp.sum(w**2))) / G0
-    vec = jnp.linalg.eigh(cross)[1][..., -1]  # eigenvalues ascending: the principal axis
+    trace = jnp.trace(cross, axis1=-2, axis2=-1)
+    amp = jnp.sqrt(4.0 * trace / (m * jnp.sum(w**2))) / G0
+    lam, vecs = jnp.linalg.eigh(cross)  # ascending: the last is the principal axis
+    vec = vecs[..., -1]
     big = jnp.take_along_axis(vec, jnp.argmax(jnp.abs(vec), -1)[:, None], axis=-1)
     vec = vec * jnp.where(big < 0, -1.0, 1.0)
-    return jnp.where((amp >= min_amp_g)[:, None], vec, 0.0)
+    # one direction only when the lobe's power is close to rank one (a tone, not noise)
+    directional = lam[:, -1] >= DIRECTIONAL_MIN * trace
+    return jnp.where(((amp >= min_amp_g) & directional)[:, None], vec, 0.0)
+
+
+@fused(static_argnames=("m", "lobe"))
+def _off_axis(a, axis, cos_min, fs, min_amp_g, *, m, lobe):
+    """`off_axis` past its checks, as one compiled program."""
+    d = _directions(a, fs, min_amp_g, m=m, lobe=lobe)
+    cos = jnp.abs(d @ (axis / jnp.linalg.norm(axis)))
+    has = jnp.any(d != 0, axis=-1)
+    angle = jnp.where(has, jnp.degrees(jnp.arccos(jnp.minimum(cos, 1.0))), jnp.nan)
+    return has & (cos < cos_min), d, angle

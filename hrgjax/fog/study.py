@@ -91,8 +91,10 @@ def run(
     `prediction_rmse` {elman, mlp, none} [°/h], plus `compensated_mlp`, `perfect` (true
     error removed) and `compensated_end_to_end` headings, `tilt_error_deg`,
     `heading_limit_deg` {remaining_drift, raw}, `prediction_rmse.elman_end_to_end`,
-    `features` (the scenario record's PSD peak), `calibration` (the estimated angles against
-    the truth [arcsec]), `train_s` and, under `"_figures"`, arrays for
+    `features` (the scenario record's PSD peak,
+    [`scenario_features`][hrgjax.fog.study.scenario_features]: None where it vibrates but
+    is not measurable), `calibration` (the estimated angles against the truth [arcsec]),
+    `train_s` and, under `"_figures"`, arrays for
     [`vibration_figure`][hrgjax.plots.vibration_figure]."""
     log = log or (lambda msg: None)
     if isinstance(scenario, str):
@@ -151,7 +153,6 @@ def run(
     }
     acc_b = to_body(est.accel, rec.accel)
     feats = np.asarray(vibration_features(acc_b, fs, window_s))
-    on = feats[:, 1] > 0
     names = {"elman": "compensated", "mlp": "compensated_mlp",
              "elman_end_to_end": "compensated_end_to_end"}  # fmt: skip
     out = {
@@ -161,10 +162,7 @@ def run(
         "heading_limit_deg": limit,
         "prediction_rmse": rmse,
         "prediction_rmse_unit": "deg/h",
-        "features": {
-            "freq_hz": float(np.median(feats[on, 0])) if on.any() else 0.0,
-            "amp_g": float(np.median(feats[on, 1])) if on.any() else 0.0,
-        },
+        "features": scenario_features(feats),
         "calibration": {
             "gyro_angles_error_arcsec": (
                 np.asarray(est.gyro.angles - true_imu.gyro.angles) / DEG * 3600
@@ -195,12 +193,30 @@ def run(
     return out
 
 
+def scenario_features(features) -> dict:
+    """What `run` reports of a record's window features (K, 2) [Hz, g]
+    ([`vibration_features`][hrgjax.fog.spectrum.vibration_features]): `freq_hz` and `amp_g`,
+    the medians over the measured vibrating windows; 0.0 for a record at rest throughout;
+    None when it vibrates but no window is measurable (a tone too near DC or Nyquist: NaN
+    features — 0.0 read as rest); `windows_not_measurable`, their count."""
+    x = np.asarray(features, dtype=float).reshape(-1, 2)
+    nan, on = np.isnan(x).any(axis=1), x[:, 1] > 0
+    stat = lambda v: float(np.median(v[on])) if on.any() else (None if nan.any() else 0.0)  # noqa: E731
+    return {"freq_hz": stat(x[:, 0]), "amp_g": stat(x[:, 1]),
+            "windows_not_measurable": int(nan.sum())}  # fmt: skip
+
+
 def table(result: dict) -> str:
     """A markdown table of the headings, limits and prediction RMSEs."""
     h, r, lim = result["heading_error_deg"], result["prediction_rmse"], result["heading_limit_deg"]
+    ft = result["features"]
+    seen = (
+        f"vibration {ft['freq_hz']:.2f} Hz, {ft['amp_g']:.3f} g (PSD peak)"
+        if ft["freq_hz"] is not None
+        else "vibration not measurable (a tone within 2 bins of DC or 1 of Nyquist)"
+    )
     rows = [
-        f"scenario {result['scenario']}: vibration {result['features']['freq_hz']:.2f} Hz, "
-        f"{result['features']['amp_g']:.3f} g (PSD peak); {result['epochs']} epochs",
+        f"scenario {result['scenario']}: {seen}; {result['epochs']} epochs",
         "",
         "| alignment | heading error [°] | tilt errors [°] |",
         "|---|---|---|",
