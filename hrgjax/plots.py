@@ -462,6 +462,16 @@ def plan_figure(plan, path: str, bench=None, title: str = "") -> str:
     return save(fig, path, dpi=110)
 
 
+def session_figure(comparison, path: str, title: str = "", seed: dict | None = None) -> str:
+    """Compensators on one session, after its offset: the figure of
+    [`Comparison.plot`][hrgjax.calibration.Comparison.plot] (its home since 2026-11-30;
+    this name is kept for scripts that call it). `comparison`: a
+    [`Comparison`][hrgjax.calibration.Comparison]; `seed`: seed 000's table to mark
+    ([`SEED_TABLE`][hrgjax.calibration.evaluate.SEED_TABLE]; None: no marks, as before);
+    saves `path` and returns it."""
+    return comparison.plot(path, title=title, seed=seed)
+
+
 def navigation_figure(truth, flights, path: str, title: str = "") -> str:
     """The motion's ground track with its GNSS gaps, the first run's horizontal position
     errors (free inertial with its height held, filter with its ±3σ, smoother) and the filter's and smoother's

@@ -23,9 +23,13 @@ from hrgjax.calibration import (
     FourierCompensator,
     TemperatureDomainWarning,
     compare,
+    compare_corrected,
     paired_difference,
     reduce,
 )
+from hrgjax.calibration.compensators import Corrected, NoCompensation
+from hrgjax.calibration.evaluate import SEED_TABLE, accuracy_table, format_table, out_of_range
+from hrgjax.calibration.paired import constant_resolution
 from hrgjax.units import K_E_NOMINAL
 
 SWITCH_ON_DPH = (0.0, 0.25, 0.43)
@@ -66,49 +70,147 @@ def compared(switch_ons):
 
 def test_equal_compensators_from_two_switch_ons_are_not_told_apart(compared):
     c = compared
-    # the verdict: equal quality, not told apart (one offset for both said one better, p = 9e-14)
+    # the verdict: equal quality, not told apart beyond the constant whose owner this session
+    # cannot name (one offset for both said one better, p = 9e-14)
     got = c.paired("A", "B")
     assert got.verdict == "none" and got.p_value > 0.2, str(got)
+    assert got.offsets == "own" and got.beyond_constant
+    assert got.statement().startswith("A and B not told apart beyond a constant at 95 % (their "
+                                      "constants differ by +0.2")  # fmt: skip
+    assert got.statement().endswith("°/h; this session cannot assign it)")
     # each after its own offset, recomputed by hand from the per-run errors
     e = {lab: c.errors[lab]["drift_error_dph"] - c.own_offsets[lab].value_dph for lab in "AB"}
     hand = paired_difference(e["A"], e["B"])
     assert got.mean == pytest.approx(hand.mean, rel=1e-9) and got.verdict == hand.verdict
-    # own offsets: the test bias less each calibration's; they differ by b_B − b_A
+    # own offsets: the test bias less each calibration's; they differ by b_B − b_A, far
+    # beyond the size a constant needs to decide the paired test alone
     d = c.offset_difference("A", "B")
     assert d.value_dph == pytest.approx(SWITCH_ON_DPH[1] - SWITCH_ON_DPH[0], abs=0.02)
-    assert d.differ and d.p_value < 1e-10 and c.offsets_for("A", "B") == "own"
+    assert d.differ and abs(d.value_dph) > 5 * d.resolution_dph
+    assert c.offsets_for("A", "B") == "own"
     # one offset for both (the old verdict) charges 0.25 °/h to one of them, confidently
     one = c.paired("A", "B", offsets="session")
     assert one.verdict != "none" and one.p_value < 1e-10
 
 
-def test_the_verdict_does_not_hang_on_offset_from(switch_ons):
-    fa, fb, test = switch_ons
-    verdicts = {compare({"A": fa, "B": fb}, test, offset_from=src).paired("A", "B").statement()
-                for src in ("A", "B")}  # fmt: skip
-    old = {compare({"A": fa, "B": fb}, test, offset_from=src).paired("A", "B", offsets="session")
-           .verdict for src in ("A", "B")}  # fmt: skip
-    assert verdicts == {"A and B not told apart at 95 %"} and old == {"a", "b"}
-
-
 def test_reports_say_the_constants_differ(compared):
     report = json.loads(json.dumps(compared.to_json()))
-    (diff,) = report["offset_differences"]
-    assert diff["differ"] is True and diff["unit"] == "°/h"
+    diffs = report["offset_differences"]
+    assert [d["key"] for d in diffs] == ["static_residual_dph", "angle_error_deg"]
+    for d in diffs:
+        assert d["differ"] is True and d["unit"] == "°/h" and d["resolution"] > 0
+        assert "p_value" not in d and "sigma" not in d  # no sampling test: the noise cancels
     static = [p for p in report["paired"] if p["key"] == "static_residual_dph"]
     assert static[0]["offsets"] == "own" and static[0]["verdict"] == "none"
+    assert static[0]["constants_differ"] is True
     assert static[0]["with_one_offset"]["verdict"] != "none"
     text = compared.format()
     assert (
         "the compensators carry different constants (calibrated on different switch-ons?)" in text
     )
-    assert "A and B not told apart at 95 %" in text and "all, own offset" in text
+    assert "A and B not told apart beyond a constant at 95 %" in text and "all, own offset" in text
+    assert "p = 9e" not in text and "differ at 95 %" not in text
+
+
+def test_a_named_offset_decides_the_verdict(switch_ons):
+    """`offset_from` named: the user says whose constant is right, so the pair is judged
+    after that one offset (the other carries the 0.25 °/h difference: the named one
+    better), and the reports say so."""
+    fa, fb, test = switch_ons
+    verdicts = {}
+    for src in ("A", "B"):
+        c = compare({"A": fa, "B": fb}, test, offset_from=src)
+        got = c.paired("A", "B")
+        one = c.paired("A", "B", offsets="session")
+        assert got.offsets == "session" and got.verdict == one.verdict and got.p_value < 1e-10
+        assert got.constants.differ and not got.beyond_constant
+        report = c.to_json()
+        assert report["offset_from"] == src and report["paired"][0]["constants_differ"] is True
+        assert f"the offset is {src}'s, as named" in c.format()
+        verdicts[src] = got.verdict
+    assert verdicts == {"A": "a", "B": "b"}
+    assert compare({"A": fa, "B": fb}, test).to_json()["offset_from"] is None
+
+
+def _shifted(corrected, c_dph):
+    """`corrected` with a pure constant c [°/h] taken off its compensated rate and angle."""
+    cols = corrected.columns
+    cols["rate_corrected_dps"] = cols["rate_corrected_dps"] - c_dph / 3600.0
+    angle = cols["angle_corrected_deg"].copy()
+    for idx in corrected.run_indices():
+        t = cols["time_s"][idx]
+        angle[idx] -= c_dph / 3600.0 * (t - t[0])
+    cols["angle_corrected_deg"] = angle
+    return Corrected(cols, in_range=corrected.in_range, temperature_range=None, margin_c=1.0,
+                     extrapolated=True)  # fmt: skip
+
+
+def test_a_real_constant_error_is_not_called_equal(switch_ons):
+    """A against A with a constant error of 0.1 °/h (one calibration switch-on): after each
+    one's own offset their residuals are identical, and the headline must not say plainly
+    "not told apart" (5ad5c77 did): it says so beyond a constant, and names the constants'
+    difference, which this session cannot assign."""
+    fa, _, test = switch_ons
+    base = fa.correct(test)
+    c = compare_corrected({"A": base, "Ac": _shifted(base, 0.1)})
+    for key in ("static_residual_dph", "angle_error_deg"):
+        got = c.paired("A", "Ac", key)
+        assert got.beyond_constant and got.constants.value_dph == pytest.approx(0.1, abs=1e-9)
+        assert "not told apart beyond a constant at 95 % (their constants differ by +0.1000 °/h" \
+            in got.statement()  # fmt: skip
+        entry = got.to_json()
+        assert entry["constants_differ"] is True and entry["offsets"] == "own"
+        assert entry["constant_difference_dph"] == pytest.approx(0.1, abs=1e-9)
+    assert c.paired("A", "Ac", offsets="session").verdict != "none"  # one offset: decided
+
+
+def test_the_resolution_is_where_a_constant_alone_decides_the_paired_test():
+    """R = 2 t e / sqrt(n) (static runs, residuals of zero mean): a constant just above it
+    makes scipy's paired t test say "different" at 95 %, just below it not."""
+    from scipy import stats
+
+    rng = np.random.default_rng(5)
+    for n in (10, 57):
+        e = rng.normal(0.0, 0.025, n)
+        e -= e.mean()  # after its own offset (equal runs)
+        r = constant_resolution(e, e + 0.0)
+        assert r == pytest.approx(2 * stats.t.ppf(0.975, n - 1) * e.std(ddof=1) / np.sqrt(n))
+        for factor, decided in ((1.0 + 1e-6, True), (1.0 - 1e-6, False)):
+            p = stats.ttest_rel(e**2, (e + factor * r) ** 2).pvalue
+            assert (p < 0.05) == decided, (n, factor, p)
+        # an angle figure: a constant of 1 °/h shifts run i by T_i/3600 [°]
+        w = rng.uniform(60.0, 300.0, n) / 3600.0
+        ra = constant_resolution(w * e, w * e, w)
+        p_hi = stats.ttest_rel((w * e) ** 2, (w * e + 1.01 * ra * w) ** 2).pvalue
+        p_lo = stats.ttest_rel((w * e) ** 2, (w * e + 0.5 * ra * w) ** 2).pvalue
+        assert p_hi < 0.1 and p_lo > 0.05, (p_hi, p_lo)
+
+
+def test_the_level_states_the_offset_choice(switch_ons):
+    """A constant between the 95 % and the 99 % resolutions decides the 95 % test but not
+    the 99 %: the choice follows the test's level, and the result says which it used."""
+    fa, _, test = switch_ons
+    base = fa.correct(test)
+    e = compare_corrected({"A": base}).own_residuals_of("A")["drift_error_dph"]
+    r95, r99 = (constant_resolution(e, e, level=q) for q in (0.95, 0.99))
+    c = compare_corrected({"A": base, "Ac": _shifted(base, 0.5 * (r95 + r99))})
+    p95, p99 = c.paired("A", "Ac"), c.paired("A", "Ac", level=0.99)
+    assert (p95.offsets, p99.offsets) == ("own", "session")
+    assert p95.constants.level == 0.95 and p99.constants.level == 0.99
+    assert p99.verdict == "none" and "beyond a constant" not in p99.statement()
 
 
 def test_same_constants_keep_the_one_offset(switch_ons):
+    """Two calibrations from one switch-on (independent noise): constants equal within
+    what could decide the paired test, so the one offset; the pair is a real pair."""
     fa, _, test = switch_ons
-    c = compare({"A": fa, "A2": fa}, test)
-    assert not c.offset_difference("A", "A2").differ and c.offsets_for("A", "A2") == "session"
+    fa2 = FourierCompensator(harmonics=1, temperature_degree=2).fit(
+        reduce(_noisy(closed_form_session(SWITCH_ON_DPH[0]), 4))
+    )
+    c = compare({"A": fa, "A2": fa2}, test)
+    d = c.offset_difference("A", "A2")
+    assert 1e-4 < abs(d.value_dph) < d.resolution_dph and not d.differ
+    assert c.offsets_for("A", "A2") == "session" and c.paired("A", "A2").offsets == "session"
     assert "different constants" not in c.format() and "all, own offset" not in c.format()
 
 
@@ -150,3 +252,50 @@ def test_cli_mlp_records_its_window(switch_ons, tmp_path, monkeypatch):
     out = str(tmp_path / "m.eqx")
     assert main(["calibrate", path, "--method", "mlp", "--window", "6", "--out", out]) == 0
     assert cal.load_compensator(out).window_s == 6.0
+
+
+def test_the_warning_points_at_the_callers_line_and_warn_false_silences_it(narrow, switch_ons):
+    import inspect
+    import warnings
+
+    test = switch_ons[2]
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        line = inspect.currentframe().f_lineno + 1
+        narrow.correct(test)
+        compare({"F": narrow}, test)
+    assert [(w.category, w.filename, w.lineno) for w in seen] == [
+        (TemperatureDomainWarning, __file__, line), (TemperatureDomainWarning, __file__, line + 1)]  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # anything said is a failure
+        out = narrow.correct(test, warn=False)
+        c = compare({"F": narrow}, test, warn=False)
+        table = accuracy_table({"F": narrow}, test, warn=False)
+    hot = np.abs(test["temperature_c"] - 60.0) < 1e-9
+    assert out.n_out_of_range == hot.sum() and c.domains["F"]["n_out_of_range"] == hot.sum()
+    assert set(table["F"]["static_drift_dph"]) == {-40.0, 20.0, 60.0}
+    with pytest.raises(ValueError, match=r"^warn must be True or False; got 'no'$"):
+        narrow.correct(test, warn="no")
+
+
+def test_a_study_records_what_it_extrapolates(narrow, switch_ons):
+    """`run_study` applies the +20 °C baseline at −40/+60 °C on purpose: the record
+    (`out_of_range`, printed under `format_table`) counts the session's own samples."""
+    test = switch_ons[2]
+    rec = out_of_range({"F": narrow, "raw": NoCompensation()}, test["temperature_c"])
+    hot = np.abs(test["temperature_c"] - 60.0) < 1e-9
+    assert rec["F"] == {"calibrated_range_c": [-40.0, 20.0], "n_samples": len(test),
+                        "n_out_of_range": int(hot.sum()), "extrapolated": True,
+                        "temperatures_c": [60.0]}  # fmt: skip
+    assert rec["raw"]["calibrated_range_c"] is None and rec["raw"]["n_out_of_range"] == 0
+    text = format_table(accuracy_table({"F": narrow}, test, warn=False), domains=rec)
+    assert (f"F: calibrated -40.0 … +20.0 °C, extrapolated on {hot.sum()} of {len(test)} test "
+            "samples (+60 °C)") in text  # fmt: skip
+
+
+def test_plots_session_figure_is_still_there(compared, tmp_path):
+    from hrgjax.plots import session_figure
+
+    path = str(tmp_path / "s.png")
+    assert session_figure(compared, path, seed=SEED_TABLE) == path
+    assert session_figure(compared, str(tmp_path / "t.png")) == str(tmp_path / "t.png")

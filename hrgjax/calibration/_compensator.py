@@ -42,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._compiled import bucket_pad, bucket_size, device, program
+from .._warn import user_stacklevel
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..units import DEG, group_temperatures
@@ -268,7 +269,7 @@ class AbstractCompensator(eqx.Module):
 
     def correct(
         self, data: MeasuredData, *, extrapolate: bool | None = None,
-        margin_c: float = DOMAIN_MARGIN_C,
+        margin_c: float = DOMAIN_MARGIN_C, warn: bool = True,
     ) -> Corrected:  # fmt: skip
         """Compensate every run of `data`.
 
@@ -289,7 +290,10 @@ class AbstractCompensator(eqx.Module):
         sample inside the range beside one outside takes the mean of a compensated and a
         passed-through interval, and is not counted. The count is in
         the result either way (`Corrected.n_out_of_range`) and a
-        [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning] says it. A
+        [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning] says it,
+        pointing at the caller's line (`warn=False`: no warning, for a caller that
+        extrapolates on purpose and records the count itself, as `run_study` does; thread
+        safe, unlike `warnings.catch_warnings`). A
         compensator whose range is unknown (a file saved before it was recorded) compensates
         every sample, as before.
 
@@ -299,9 +303,8 @@ class AbstractCompensator(eqx.Module):
 
         **Raises:** `RuntimeError` (one line) when JAX's float64 mode is off (the correction
         would run in float32: 5e-3 °/h off on a seed session); `ValueError` for `margin_c`
-        not a finite number ≥ 0 or `extrapolate`
-        neither `None` nor a bool, if the data already have those columns, a run has fewer than
-        two samples, or the data are not whole-angle output the case turned: force-to-rebalance
+        not a finite number ≥ 0, `extrapolate` neither `None` nor a bool or `warn` not a
+        bool, if the data already have those columns, a run has fewer than two samples, or the data are not whole-angle output the case turned: force-to-rebalance
         output or runs with a commanded precession
         ([`check_whole_angle`][hrgjax.calibration.reduce.check_whole_angle], as `calibrate`
         refuses them).
@@ -310,6 +313,8 @@ class AbstractCompensator(eqx.Module):
         if extrapolate is not None and not isinstance(extrapolate, bool | np.bool_):
             raise ValueError(f"extrapolate must be True, False or None (the compensator's "
                              f"own choice); got {extrapolate!r}")  # fmt: skip
+        if not isinstance(warn, bool | np.bool_):
+            raise ValueError(f"warn must be True or False; got {warn!r}")
         inside = self.in_range(data["temperature_c"], margin_c)
         use_model = self.extrapolates if extrapolate is None else bool(extrapolate)
         check_whole_angle(data)
@@ -359,7 +364,7 @@ class AbstractCompensator(eqx.Module):
         cols["angle_corrected_deg"] = angle_out
         out = Corrected(cols, in_range=inside, temperature_range=self.calibrated_range,
                         margin_c=margin_c, extrapolated=use_model)  # fmt: skip
-        if out.n_out_of_range:
+        if warn and out.n_out_of_range:
             span = self.calibrated_range
             where = ", ".join(
                 f"{n} at {t:+g} °C" for t, n in out.out_of_range_by_temperature().items()
@@ -368,7 +373,8 @@ class AbstractCompensator(eqx.Module):
             warnings.warn(f"{type(self).__name__}.correct: {out.n_out_of_range} of {len(out)} "
                           f"samples outside the calibrated temperature range {span[0]:+.1f} … "
                           f"{span[1]:+.1f} °C (± {margin_c:g} °C): {where} — {how} (their mask: "
-                          "the result's in_range)", TemperatureDomainWarning, stacklevel=2)  # fmt: skip
+                          "the result's in_range)", TemperatureDomainWarning,
+                          stacklevel=user_stacklevel())  # fmt: skip
         return out
 
 

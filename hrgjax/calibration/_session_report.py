@@ -3,9 +3,10 @@ figure (the definitions are [`session`][hrgjax.calibration.session]'s module doc
 
 Two caveats travel with every form of the report, not only the CLI's stdout:
 
-- **different constants**: a pair whose own offsets differ beyond their errors
-  ([`OffsetDifference`][hrgjax.calibration.OffsetDifference]) is judged after each one's
-  own offset, and the report says so;
+- **different constants**: a pair whose own offsets differ by more than could decide their
+  paired test alone ([`OffsetDifference`][hrgjax.calibration.OffsetDifference]) is judged
+  after each one's own offset, "beyond a constant" (after the one offset where
+  `offset_from` was named), and the report says so;
 - **the temperature domain**: each compensator's calibrated range and the samples of the
   session outside it (its `temperature_domain`); the tables mark a group holding such runs
   with `*`, the figure draws it hollow.
@@ -33,7 +34,8 @@ ERROR_KEY = {
 SEED_KEY = {"static_residual_dph": "static_drift_dph", "angle_error_deg": "angle_error_deg"}
 """Figure → its row of [`SEED_TABLE`][hrgjax.calibration.evaluate.SEED_TABLE]."""
 CONSTANTS_NOTE = "the compensators carry different constants (calibrated on different switch-ons?)"
-"""What the report says of a pair whose own offsets differ (`OffsetDifference.differ`)."""
+"""What the report says of a pair whose own offsets differ by more than could decide their
+paired test alone (`OffsetDifference.differ`)."""
 
 
 def rms(values) -> float:
@@ -114,7 +116,7 @@ def comparison_json(c) -> dict:
     for key in c.paired_keys():
         for i, a in enumerate(c.labels):
             for b in c.labels[i + 1 :]:
-                entry = {**c.paired(a, b, key).to_json(), "offsets": c.offsets_for(a, b)}
+                entry = c.paired(a, b, key).to_json()
                 if entry["offsets"] == "own":  # the verdict one offset would give, for reference
                     entry["with_one_offset"] = c.paired(a, b, key, offsets="session").to_json()
                 paired.append(entry)
@@ -128,19 +130,22 @@ def comparison_json(c) -> dict:
         "seed_figures": seed,
         "units": dict(UNIT),
         "paired": paired,
+        "offset_from": c.offset_from,
         "offset_differences": [d.to_json() for d in offset_differences(c)],
     }
 
 
 def offset_differences(c, level: float = 0.95) -> list:
-    """Every pair's [`OffsetDifference`][hrgjax.calibration.OffsetDifference] (pairs with
-    no static runs left out)."""
-    return [d for i, a in enumerate(c.labels) for b in c.labels[i + 1 :]
-            if (d := c.offset_difference(a, b, level)) is not None]  # fmt: skip
+    """Every pair's [`OffsetDifference`][hrgjax.calibration.OffsetDifference] on every
+    figure the reports test (`paired_keys`; none without static runs)."""
+    return [d for key in c.paired_keys() for i, a in enumerate(c.labels)
+            for b in c.labels[i + 1 :]
+            if (d := c.offset_difference(a, b, key, level)) is not None]  # fmt: skip
 
 
 def differ_any(c) -> bool:
-    """Whether some pair's constants differ at 95 %."""
+    """Whether some pair's constants differ by more than could decide its paired test at
+    95 %."""
     return any(d.differ for d in offset_differences(c))
 
 
@@ -198,8 +203,13 @@ def comparison_text(c, by_wave_angle: bool = True) -> str:
         lines.append(f"  {CONSTANTS_NOTE}:")
         lines += [f"    {d}" for d in differ]
         lines.append("   this session cannot say whose constant is right (a change of switch-on "
-                     "bias looks the same):\n   those pairs are told apart after each one's own "
-                     "offset; the tables keep the one offset (and add 'all, own offset')")  # fmt: skip
+                     "bias looks the same):")  # fmt: skip
+        if c.offset_from is None:
+            lines.append("   those pairs are told apart beyond a constant, each after its own "
+                         "offset; the tables keep the one offset (and add 'all, own offset')")  # fmt: skip
+        else:
+            lines.append(f"   the offset is {c.offset_from}'s, as named: every pair is judged "
+                         "after it, the constants' difference charged to the other")  # fmt: skip
     domain = [s for lab in c.labels if (s := domain_line(lab, (c.domains or {}).get(lab) or
                                                           {"calibrated_range": None}))]  # fmt: skip
     if domain:
@@ -231,7 +241,7 @@ def comparison_text(c, by_wave_angle: bool = True) -> str:
         for i, a in enumerate(c.labels):
             for b in c.labels[i + 1 :]:
                 lines.append(f"  {c.paired(a, b, key)}")
-                if c.offsets_for(a, b) == "own":
+                if c.offsets_for(a, b, key) == "own":
                     one = c.paired(a, b, key, offsets="session").statement()
                     lines.append(f"    (after each one's own offset; with the one offset: "
                                  f"{one!r}, the constants' difference charged to one)")  # fmt: skip
@@ -250,13 +260,15 @@ def write_json(c, path: str | os.PathLike) -> str:
     return os.fspath(path)
 
 
-def session_figure(c, path: str, title: str = "") -> str:
+def session_figure(c, path: str, title: str = "", seed: dict | None = SEED_TABLE) -> str:
     """Compensators on one session, after its offset: the static residual [°/h] (top row)
     and the rotation runs' end-of-run angle error [°] (bottom row), RMS per temperature
     (left; seed 000's figures as black stars and crosses) and per start wave angle (right),
     one marker and colour per compensator, hollow where the group holds runs outside that
     compensator's calibrated temperature range; the session's offset ± σ in a text box. A
-    row for a kind of run the session lacks is left out; saves `path`."""
+    row for a kind of run the session lacks is left out; saves `path`. `seed`: the table of
+    figures to mark ([`SEED_TABLE`][hrgjax.calibration.evaluate.SEED_TABLE]; None: no
+    marks)."""
     from ..plots import pyplot, save
 
     plt = pyplot()
@@ -287,7 +299,10 @@ def session_figure(c, path: str, title: str = "") -> str:
                     ax.plot(xs[out], ys[out], ls="none", mfc="white", **style)
             if by == "temperature":
                 for j, (name, marker) in enumerate((("seed Fourier", "*"), ("seed MLP", "x"))):
-                    pts = SEED_TABLE[seed_key]
+                    pts = {} if seed is None else seed.get(seed_key, {})
+                    if not pts:
+                        continue
+
                     ax.plot(list(pts), [v[j] for v in pts.values()], marker, ms=10, ls="none",
                             color="k", label=name)  # fmt: skip
                     values.extend(v[j] for v in pts.values())

@@ -41,7 +41,9 @@ SEED_TABLE = {
 """Seed 000's figures, (Fourier base algorithm, neural network), by temperature [°C]."""
 
 
-def run_errors(comp: AbstractCompensator, data: MeasuredData, *, offset_dph: float = 0.0):
+def run_errors(
+    comp: AbstractCompensator, data: MeasuredData, *, offset_dph: float = 0.0, warn: bool = True
+):
     """Per-run errors of a compensator on test data.
 
     **Arguments:**
@@ -51,11 +53,14 @@ def run_errors(comp: AbstractCompensator, data: MeasuredData, *, offset_dph: flo
     - `offset_dph`: a constant rate [°/h] taken off the compensated rate before the errors
       are formed (a session's offset, see
       [`session_offset`][hrgjax.calibration.session_offset]); 0 leaves them as measured.
+    - `warn`: `correct`'s (False: no
+      [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning] for samples
+      outside the calibrated temperature range).
 
     **Returns:** dict of arrays, one entry per run (see
     [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors]).
     """
-    return corrected_run_errors(comp.correct(data), offset_dph=offset_dph)
+    return corrected_run_errors(comp.correct(data, warn=warn), offset_dph=offset_dph)
 
 
 def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
@@ -131,6 +136,8 @@ def accuracy_table(
     compensators: dict[str, AbstractCompensator],
     data: MeasuredData,
     temperatures_c=None,
+    *,
+    warn: bool = True,
 ):
     """The seed's accuracy table for several compensators.
 
@@ -141,11 +148,16 @@ def accuracy_table(
     - `temperatures_c`: temperatures to tabulate [°C] (default: every run's mean
       temperature); runs are grouped by mean temperature rounded to `TEMPERATURE_BIN_C`
       (1 °C), and so are these.
+    - `warn`: False: no
+      [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning] where a
+      compensator is applied outside its calibrated temperature range (as `run_study`, which
+      tests the +20 °C baseline at −40 and +60 °C on purpose and records it:
+      [`out_of_range`][hrgjax.calibration.evaluate.out_of_range]).
 
     **Returns:** {label: {"static_drift_dph": {T: RMS}, "angle_error_deg": {T: RMS},
     "max_angle_error_deg": {T: RMS}}} (module docstring for the definitions).
     """
-    errors = {label: run_errors(comp, data) for label, comp in compensators.items()}
+    errors = {label: run_errors(comp, data, warn=warn) for label, comp in compensators.items()}
     if temperatures_c is None:
         temps = [e["temperature_c"] for e in errors.values()]
         temperatures_c = np.unique(nearest_multiples(np.concatenate(temps), TEMPERATURE_BIN_C))
@@ -169,9 +181,61 @@ def _group(temp) -> float:
     return float(nearest_multiples(temp, TEMPERATURE_BIN_C))
 
 
-def format_table(table, temperatures_c=(-40.0, 20.0, 60.0)) -> str:
+def out_of_range(compensators: dict[str, AbstractCompensator], temperature_c) -> dict:
+    """Where samples lie outside each compensator's calibrated temperature range (widened by
+    `DOMAIN_MARGIN_C`, as [`correct`][hrgjax.calibration.AbstractCompensator.correct] counts
+    them), without compensating anything.
+
+    **Arguments:** `compensators` ({label: fitted compensator}); `temperature_c`: the
+    samples' temperatures [°C] (a data set's `temperature_c` column).
+
+    **Returns:** {label: {"calibrated_range_c": [T_min, T_max] or None (unknown: nothing
+    checked), "n_samples", "n_out_of_range", "extrapolated" (`correct`'s default for them:
+    compensated, or passed through), "temperatures_c": the whole-degree temperatures
+    [°C] of the samples outside, sorted}}: the record a study keeps where it applies a
+    compensator outside its range on purpose (`correct(warn=False)`)."""
+    temp = np.asarray(temperature_c, dtype=float).ravel()
+    out = {}
+    for label, comp in compensators.items():
+        outside = ~comp.in_range(temp)
+        span = comp.calibrated_range
+        groups = np.unique(nearest_multiples(temp[outside], TEMPERATURE_BIN_C))
+        out[label] = {
+            "calibrated_range_c": None if span is None else [float(span[0]), float(span[1])],
+            "n_samples": int(temp.size),
+            "n_out_of_range": int(np.sum(outside)),
+            "extrapolated": bool(comp.extrapolates),
+            "temperatures_c": [float(g) for g in groups],
+        }
+    return out
+
+
+def domain_note(record: dict, what: str) -> str:
+    """Lines naming the compensators of an [`out_of_range`][hrgjax.calibration.evaluate.out_of_range]
+    record that were applied outside their calibrated range on `what` ("" when none)."""
+    lines = []
+    for label, r in record.items():
+        if r["n_out_of_range"]:
+            lo, hi = r["calibrated_range_c"]
+            temps = r["temperatures_c"]
+            where = (", ".join(f"{t:+g}" for t in temps) if len(temps) <= 6
+                     else f"{temps[0]:+g} … {temps[-1]:+g}")  # fmt: skip
+            how = "extrapolated" if r["extrapolated"] else "passed through"
+            lines.append(f"  {label}: calibrated {lo:+.1f} … {hi:+.1f} °C, {how} on "
+                         f"{r['n_out_of_range']} of {r['n_samples']} {what} samples "
+                         f"({where} °C)")  # fmt: skip
+    return (
+        "outside the calibrated temperature range (on purpose):\n" + "\n".join(lines)
+        if lines
+        else ""
+    )
+
+
+def format_table(table, temperatures_c=(-40.0, 20.0, 60.0), domains: dict | None = None) -> str:
     """Text table of [`accuracy_table`][hrgjax.calibration.accuracy_table] with seed 000's
-    figures beside ours."""
+    figures beside ours; with `domains` (an
+    [`out_of_range`][hrgjax.calibration.evaluate.out_of_range] record of the same data), the
+    compensators applied outside their calibrated temperature range named below it."""
     labels = list(table)
     lines = []
     for key, title, unit in (
@@ -194,4 +258,6 @@ def format_table(table, temperatures_c=(-40.0, 20.0, 60.0)) -> str:
                 row += f" {'≈ equal':>13}"
             lines.append(row)
         lines.append("")
+    if note := domain_note(domains or {}, "test"):
+        lines += [note, ""]
     return "\n".join(lines)

@@ -154,15 +154,17 @@ def fly(gyro: Gyro, flight: Flight, *, key: jax.Array, bias_key: jax.Array) -> M
 
 
 def navigation_errors(
-    comp: AbstractCompensator, records: MeasuredData, flight: Flight, trajectory=None
-):
+    comp: AbstractCompensator, records: MeasuredData, flight: Flight, trajectory=None, *,
+    warn: bool = True,
+):  # fmt: skip
     """Horizontal velocity and position error magnitudes [m/s], [m] at the end of `flight`
     when the level gyros' outputs are compensated with `comp` (rates in `records` from
     [`fly`][hrgjax.calibration.ins_impact.fly]); `trajectory`: `flight.trajectory()`, if
-    already built."""
+    already built; `warn`: `correct`'s (False: no warning for samples outside the calibrated
+    temperature range, e.g. the warm-up from −40 °C)."""
     from ..ins.strapdown import propagate
 
-    out = comp.correct(records)
+    out = comp.correct(records, warn=warn)
     idx = records.run_indices()
     eps_x = out["rate_corrected_dps"][idx[0]] * DEG  # true rate is 0: all of it is error
     eps_y = out["rate_corrected_dps"][idx[1]] * DEG
@@ -178,8 +180,9 @@ def navigation_errors(
 
 
 def mechanized_errors(
-    comp: AbstractCompensator, records: MeasuredData, flight: Flight, rate_hz: float = 10.0
-):
+    comp: AbstractCompensator, records: MeasuredData, flight: Flight, rate_hz: float = 10.0, *,
+    warn: bool = True,
+):  # fmt: skip
     """[`navigation_errors`][hrgjax.calibration.ins_impact.navigation_errors] through the
     nonlinear strapdown mechanization instead of the linear error model: the flight as a
     motion ([`hrgjax.ins.motion`][hrgjax.ins.motion]) sampled at `rate_hz` [Hz], its exact
@@ -187,10 +190,10 @@ def mechanized_errors(
     between records, as the linear model does), altitude held.
 
     **Returns** the horizontal velocity and position error magnitudes [m/s], [m] after the
-    flight."""
+    flight; `warn`: `correct`'s."""
     from ..ins import mechanization, motion
 
-    out = comp.correct(records)
+    out = comp.correct(records, warn=warn)
     idx = records.run_indices()
     eps = [np.asarray(out["rate_corrected_dps"][idx[k]]) * DEG for k in (0, 1)]
     t_rec = np.arange(eps[0].shape[0]) * flight.dt_out
@@ -233,10 +236,18 @@ def ins_impact(
     *,
     key: jax.Array,
     bias_key: jax.Array,
+    warn: bool = True,
 ):
     """Navigation errors after each flight for each compensator.
 
-    **Returns:** {label: {"velocity_error_mps": [per flight], "position_error_km": [...]}}.
+    `warn`: `correct`'s (False: no
+    [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning] for the samples
+    of the flights' warm-up outside a compensator's calibrated range; they are counted in
+    the result either way).
+
+    **Returns:** {label: {"velocity_error_mps": [per flight], "position_error_km": [...],
+    "samples_out_of_range": [per flight: samples outside the calibrated temperature range,
+    of "samples" per flight]}}.
     """
     records = [
         fly(gyro, f, key=jax.random.fold_in(key, i), bias_key=bias_key)
@@ -246,13 +257,16 @@ def ins_impact(
     trajs = [f.trajectory() for f in flights]
     for label, comp in compensators.items():
         errs = [
-            navigation_errors(comp, r, f, tr)
+            navigation_errors(comp, r, f, tr, warn=warn)
             for r, f, tr in zip(records, flights, trajs, strict=True)
         ]
         table[label] = {
             "velocity_error_mps": [e[0] for e in errs],
             "position_error_km": [e[1] / 1000 for e in errs],
-        }
+            "samples_out_of_range": [int(np.sum(~comp.in_range(r["temperature_c"])))
+                                     for r in records],
+            "samples": [len(r) for r in records],
+        }  # fmt: skip
     return table
 
 
@@ -275,4 +289,9 @@ def format_ins_table(table) -> str:
     lines.append(
         f"{'seed neural':>16} {sv[1][0]:7.0f}–{sv[1][1]:<7.0f} {sp[1][0]:8.0f}–{sp[1][1]:<7.0f}"
     )
+    outside = [f"  {label}: {sum(row['samples_out_of_range'])} of {sum(row['samples'])} "
+               "samples (extrapolated)" for label, row in table.items()
+               if sum(row.get("samples_out_of_range", ())) > 0]  # fmt: skip
+    if outside:
+        lines += ["outside the calibrated temperature range on the flights (on purpose):", *outside]
     return "\n".join(lines)

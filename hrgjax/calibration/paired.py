@@ -29,6 +29,27 @@ the power on unequal ones.
 
 **Several compensators.** Each pair is one test at `level`: with $k$ compensators,
 $k(k-1)/2$ tests, and on equal compensators each says "different" 5 % of the time at 95 %.
+
+**Different constants.** Each compensator's own offset $b_k$ (its mean rate at rest on the
+session) is the session's change of switch-on bias plus the constant $c_k$ it brings from
+its calibration, so $\Delta = b_a - b_b = (c_a - c_b) + \overline{(g_a - g_b)}$ ($g_k$: what
+each leaves at a run's temperature and wave angle, averaged over the grid). The sensor's
+noise is common to both and cancels: $\Delta$ has no sampling error on this session
+(σ over redrawn test noise 2e-8 °/h; the Welch σ of the two offsets, 0.0085 °/h, described
+nothing). What matters is whether $\Delta$ is large enough to decide the paired test
+alone: a constant $\delta$ added to residuals $e_i$ of zero mean gives
+$d_i = -2\delta w_i e_i - \delta^2 w_i^2$ ($w_i$: what a unit constant [°/h] shifts the figure
+by: 1 for a static run's rate, $T_i/3600$ [°] for a rotation run's angle), mean
+$-\delta^2\,\overline{w^2}$, standard error $2|\delta|\,s_{we}/\sqrt n$; the test
+says "different" once
+
+$$|\delta| > R = \frac{2\,t_{n-1}\,s_{we}}{\sqrt n\;\overline{w^2}}
+\quad(\approx 4\,e/\sqrt n \text{ for static runs of residual scatter } e),$$
+
+exact for static runs of equal length ([`constant_resolution`][hrgjax.calibration.paired.constant_resolution]:
+the smaller of the two compensators' $R$, a constant charged to either).
+[`OffsetDifference`][hrgjax.calibration.OffsetDifference] compares $|\Delta|$ with $R$: a
+resolution, not a sampling test.
 """
 
 from __future__ import annotations
@@ -52,6 +73,12 @@ class PairedDifference:
       `low`, `high`: the two-sided `level` Student-t interval; `p_value`: two-sided, of the
       paired t test of mean 0 (NaN where undefined: under 2 runs, or every $d_i$ equal).
     - `level`: the interval's confidence.
+    - `offsets`: which offsets the residuals are after, when a
+      [`Comparison`][hrgjax.calibration.Comparison] formed them (`"session"`: the one;
+      `"own"`: each its own); None: residuals given as they are.
+    - `constants`: the pair's [`OffsetDifference`][hrgjax.calibration.OffsetDifference]
+      (None: not known); where it `differ`s and `offsets` is `"own"`, the verdict is about
+      what each leaves beyond a constant, and `statement()` says so.
     """
 
     a: str
@@ -67,6 +94,15 @@ class PairedDifference:
     high: float
     p_value: float
     level: float = 0.95
+    offsets: str | None = None
+    constants: OffsetDifference | None = None
+
+    @property
+    def beyond_constant(self) -> bool:
+        """Whether the verdict is about what each leaves beyond a constant: judged after
+        each one's own offset, their constants differing by more than could decide the
+        test alone (which of them is right, this session cannot say)."""
+        return self.offsets == "own" and self.constants is not None and self.constants.differ
 
     @property
     def dof(self) -> int:
@@ -86,17 +122,23 @@ class PairedDifference:
     def statement(self) -> str:
         """The verdict in words: "A better than B at 95 %" or "A and B not told apart at
         95 %"."""
-        pct = f"{100 * self.level:g} %"
+        pct = f"at {100 * self.level:g} %"
+        if self.beyond_constant:
+            pct = (f"beyond a constant {pct} (their constants differ by "
+                   f"{self.constants.value_dph:+.4f} °/h; this session cannot assign it)")  # fmt: skip
         if self.verdict == "a":
-            return f"{self.a} better than {self.b} at {pct}"
+            return f"{self.a} better than {self.b} {pct}"
         if self.verdict == "b":
-            return f"{self.b} better than {self.a} at {pct}"
-        return f"{self.a} and {self.b} not told apart at {pct}"
+            return f"{self.b} better than {self.a} {pct}"
+        return f"{self.a} and {self.b} not told apart {pct}"
 
     def to_json(self) -> dict:
         """`{"a", "b", "key", "unit", "n_runs", "dof", "rms_a", "rms_b",
         "mean_square_difference", "stderr", "low", "high", "level", "p_value", "verdict",
-        "statement"}` (NaN as `null`; the difference in unit²)."""
+        "statement", "offsets", "constants_differ", "constant_difference_dph",
+        "constant_resolution_dph"}` (NaN as `null`; the difference in unit²; `offsets` null
+        and `constants_differ` false for residuals given as they are; the constants' Δ and
+        R [°/h] from `constants`)."""
 
         def num(x):
             return float(x) if math.isfinite(x) else None
@@ -118,7 +160,13 @@ class PairedDifference:
             "p_value": num(self.p_value),
             "verdict": self.verdict,
             "statement": self.statement(),
-        }
+            "offsets": self.offsets,
+            "constants_differ": bool(self.constants is not None and self.constants.differ),
+            "constant_difference_dph": None if self.constants is None
+            else num(self.constants.value_dph),
+            "constant_resolution_dph": None if self.constants is None
+            else num(self.constants.resolution_dph),
+        }  # fmt: skip
 
     def __str__(self) -> str:
         u = f"({self.unit})²"
@@ -180,70 +228,102 @@ def paired_difference(
 
 @dataclasses.dataclass(frozen=True)
 class OffsetDifference:
-    r"""Do two compensators carry the same constant? Their own offsets on one session
-    ([`Offset`][hrgjax.calibration.Offset]s $b_a \pm \sigma_a$, $b_b \pm \sigma_b$) compared:
-    $\Delta = b_a - b_b$ against $\sigma = \sqrt{\sigma_a^2 + \sigma_b^2}$, Student's t with the
-    Welch–Satterthwaite degrees of freedom.
+    r"""Do two compensators carry constants that differ by enough to decide their paired test
+    alone? $\Delta = b_a - b_b$, their own offsets on one session
+    ([`Offset`][hrgjax.calibration.Offset]s), against the resolution $R$ of the paired test
+    on `key` (module docstring: the smallest constant that alone makes it say "different" at
+    `level`). Not a sampling test: the sensor's noise cancels from $\Delta$, which is fixed
+    by the two compensators.
 
     A change of switch-on bias is the same for every compensator of a session, so a
-    difference is each one's constant from its own calibration: calibrated on different
-    switch-ons (or one of them with a constant error), and one session cannot say whose is
-    right. (σ treats the two offsets as independent; measured on the same runs they are
-    positively correlated, so σ errs large and the test says "differ" less often than its
-    level: docs/calibration.md.)
+    difference is each one's constant from its own calibration (plus the grid average of
+    what each leaves): calibrated on different switch-ons, or one of them with a constant
+    error, and one session cannot say whose is right.
 
-    - `a`, `b`: labels; `value_dph` = $\Delta$ [°/h]; `sigma_dph` [°/h] (NaN: a σ unknown);
-      `dof`; `p_value` (two-sided; NaN: untested); `level`.
+    - `a`, `b`: labels; `key`: the paired test's figure; `value_dph` = $\Delta$ [°/h];
+      `resolution_dph` = $R$ [°/h] (NaN: under 2 runs or no scatter); `n_runs`; `level`.
     """
 
     a: str
     b: str
+    key: str
     value_dph: float
-    sigma_dph: float
-    dof: float
-    p_value: float
+    resolution_dph: float
+    n_runs: int
     level: float = 0.95
 
     @property
     def differ(self) -> bool:
-        """Whether the constants differ at `level` (False when untested: a σ unknown)."""
-        return bool(self.p_value < 1.0 - self.level)
+        r"""Whether $|\Delta| > R$: the constants' difference alone would decide the paired
+        test (False when $R$ is unknown)."""
+        return bool(abs(self.value_dph) > self.resolution_dph)
 
     def to_json(self) -> dict:
-        """`{"a", "b", "difference", "sigma", "unit": "°/h", "dof", "p_value", "level",
+        """`{"a", "b", "key", "difference", "resolution", "unit": "°/h", "n_runs", "level",
         "differ"}` (NaN as `null`)."""
 
         def num(x):
             return float(x) if math.isfinite(x) else None
 
-        return {"a": self.a, "b": self.b, "difference": num(self.value_dph),
-                "sigma": num(self.sigma_dph), "unit": "°/h", "dof": num(self.dof),
-                "p_value": num(self.p_value), "level": float(self.level),
+        return {"a": self.a, "b": self.b, "key": self.key, "difference": num(self.value_dph),
+                "resolution": num(self.resolution_dph), "unit": "°/h",
+                "n_runs": int(self.n_runs), "level": float(self.level),
                 "differ": self.differ}  # fmt: skip
 
     def __str__(self) -> str:
-        head = f"{self.a} − {self.b}: {self.value_dph:+.4f}"
-        if not math.isfinite(self.p_value):
-            return f"{head} °/h (not tested: σ unknown)"
-        word = "differ" if self.differ else "agree"
-        return (f"{head} ± {self.sigma_dph:.4f} °/h (1σ, t with {self.dof:.0f} dof, "
-                f"p = {self.p_value:.2g}): {word} at {100 * self.level:g} %")  # fmt: skip
+        what = {"static_residual_dph": "static residual", "angle_error_deg": "end-of-run angle "
+                "error", "max_angle_error_deg": "largest angle error"}.get(self.key, self.key)  # fmt: skip
+        head = f"{self.a} − {self.b}: {self.value_dph:+.4f} °/h"
+        if not math.isfinite(self.resolution_dph):
+            return f"{head} (resolution unknown: {self.n_runs} runs)"
+        word = "beyond" if self.differ else "within"
+        return (f"{head}, {word} the {self.resolution_dph:.4f} °/h that alone decides the "
+                f"paired {what} test ({self.n_runs} runs, {100 * self.level:g} %)")  # fmt: skip
+
+
+def constant_resolution(residual_a, residual_b, weight=None, *, level: float = 0.95) -> float:
+    r"""The smallest constant [°/h] that alone decides the paired test of two compensators'
+    residuals at `level` (module docstring): $R = 2\,t_{n-1}\,s_{we}/(\sqrt n\,\overline{w^2})$
+    for each, the smaller of the two.
+
+    **Arguments:** `residual_a`, `residual_b` (per run, each after its own offset; NaN: left
+    out of both), `weight` (per run, what a constant of 1 °/h shifts the figure by: 1 for a
+    static rate [°/h], $T_i/3600$ for an angle [°]; None: 1), `level` in (0, 1).
+
+    **Returns:** $R$ [°/h]; NaN under 2 runs or with no scatter.
+
+    **Raises:** `ValueError` when the arrays differ in shape or `level` is not in (0, 1).
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1); got {level}")
+    ea = np.asarray(residual_a, dtype=float).ravel()
+    eb = np.asarray(residual_b, dtype=float).ravel()
+    w = np.ones(ea.shape) if weight is None else np.asarray(weight, dtype=float).ravel()
+    if not ea.shape == eb.shape == w.shape:
+        raise ValueError(f"residual_a, residual_b and weight differ in size: {ea.size}, "
+                         f"{eb.size}, {w.size}")  # fmt: skip
+    ok = np.isfinite(ea) & np.isfinite(eb) & np.isfinite(w)
+    n = int(np.sum(ok))
+    if n < 2:
+        return math.nan
+    w = w[ok]
+    q = float(stats.t.ppf(0.5 + 0.5 * level, n - 1))
+    spread = min(float(np.std(w * e[ok], ddof=1)) for e in (ea, eb))
+    if not spread > 0:
+        return math.nan
+    return 2.0 * q * spread / (math.sqrt(n) * float(np.mean(w**2)))
 
 
 def offset_difference(
-    a: str, value_a: float, sigma_a: float, dof_a: int,
-    b: str, value_b: float, sigma_b: float, dof_b: int, *, level: float = 0.95,
+    a: str, value_a: float, b: str, value_b: float, residual_a, residual_b, weight=None, *,
+    key: str = "static_residual_dph", level: float = 0.95,
 ) -> OffsetDifference:  # fmt: skip
-    """Compare two own offsets (values and 1σ [°/h], σ's degrees of freedom): an
-    [`OffsetDifference`][hrgjax.calibration.OffsetDifference]. **Raises:** `ValueError` when
-    `level` is not in (0, 1)."""
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must be in (0, 1); got {level}")
-    diff = float(value_a) - float(value_b)
-    var_a, var_b = float(sigma_a) ** 2, float(sigma_b) ** 2
-    if not (math.isfinite(var_a + var_b) and dof_a >= 1 and dof_b >= 1 and var_a + var_b > 0):
-        return OffsetDifference(a, b, diff, math.nan, math.nan, math.nan, level)
-    dof = (var_a + var_b) ** 2 / (var_a**2 / dof_a + var_b**2 / dof_b)
-    sigma = math.sqrt(var_a + var_b)
-    p = float(2 * stats.t.sf(abs(diff) / sigma, dof))
-    return OffsetDifference(a, b, diff, sigma, dof, p, level)
+    """Compare two own offsets (values [°/h]) with the paired test's resolution on their
+    residuals after them ([`constant_resolution`][hrgjax.calibration.paired.constant_resolution]:
+    `residual_a`, `residual_b`, `weight`, `level`): an
+    [`OffsetDifference`][hrgjax.calibration.OffsetDifference] for `key`. **Raises:**
+    `ValueError` as `constant_resolution`."""
+    resolution = constant_resolution(residual_a, residual_b, weight, level=level)
+    ea, eb = np.asarray(residual_a, dtype=float), np.asarray(residual_b, dtype=float)
+    n = int(np.sum(np.isfinite(ea) & np.isfinite(eb)))
+    return OffsetDifference(a, b, key, float(value_a) - float(value_b), resolution, n, level)

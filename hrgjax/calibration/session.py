@@ -35,7 +35,7 @@ offset would scatter between switch-ons: that is the bias repeatability, the siz
 **One offset for the session.** Every compensator sees the same switch-on, so one value is
 taken off all of them: the offset measured with the compensator whose static runs scatter
 least (the smallest $\sigma_b$: it explains the grid best), or with the one named by
-`offset_from`. Each compensator's own $b$ is reported too; its difference from the session's
+`offset_from` (the user knows whose constant is right: the pairs are then judged after it). Each compensator's own $b$ is reported too; its difference from the session's
 is a constant the compensator brings (raw data: the mean drift). The tables remove the one
 offset from all: a compensator that has a constant error keeps it.
 
@@ -47,13 +47,18 @@ between their calibration sessions, which is no fault of either, and one offset 
 charges all of it to one (two Fourier+T² fits from seeds 1 and 3 on seed 2: own offsets
 +0.3194 ± 0.0034 and +0.5143 ± 0.0033 °/h, each leaving 0.0258 and 0.0250 °/h after its own,
 were "f2_s3 better, p = 1e-34", and the other way round with `offset_from` the other).
-[`offset_difference`][hrgjax.calibration.Comparison.offset_difference] tests
-$|b_a - b_b|$ against $\sqrt{\sigma_a^2 + \sigma_b^2}$ (Student t, Welch–Satterthwaite
-dof); a pair that differs at the test's level is told apart after each one's own offset
-(what each leaves beyond a constant, the part one session can attribute) and the reports
-say the compensators carry different constants. A pair that agrees is told apart after the
-one offset as before; there the constants' difference is below what could decide the
-paired test on its own (docs/calibration.md).
+[`offset_difference`][hrgjax.calibration.Comparison.offset_difference] compares
+$|b_a - b_b|$ with the paired test's resolution $R$, the smallest constant that alone
+decides it (`hrgjax.calibration.paired`'s module docstring; no sampling test: the
+sensor's noise cancels from $b_a - b_b$). Where $|b_a - b_b| > R$ and no `offset_from` was
+named, the pair is judged after each one's own offset and the verdict says "… beyond a
+constant (their constants differ by Δ; this session cannot assign it)": what each leaves
+beyond a constant, the part one session can attribute. With `offset_from` named, every pair
+is judged after that one offset (the constants' difference charged to the other, as the
+user says). Below $R$ the one offset is used: the constant cannot decide the verdict.
+Own offsets remove a change of switch-on bias only to first order: it enters before the
+division by the scale factor, so what is left is $\Delta b\,(1/k(\theta, T) - \overline{1/k})$,
+which a paired test can still resolve (docs/calibration.md).
 
 **After the offset** ([`corrected_run_errors`][hrgjax.calibration.corrected_run_errors] with
 `offset_dph = b`): a static run's residual is $r_i - b$ [°/h]; a rotation run's end-of-run
@@ -90,9 +95,12 @@ from typing import Any
 
 import numpy as np
 
+from .._warn import user_stacklevel
 from ..data import MeasuredData
 from ._compensator import AbstractCompensator, Corrected, TemperatureDomainWarning
 from ._grouping import nearest_multiples, wave_angle_groups
+from ._offset import Offset as Offset
+from ._offset import session_offset as session_offset
 from ._session_report import (
     ERROR_KEY,
     UNIT,
@@ -103,98 +111,8 @@ from ._session_report import (
     session_figure,
     write_json,
 )
-from .evaluate import corrected_run_errors
+from .evaluate import SEED_TABLE, corrected_run_errors
 from .paired import OffsetDifference, PairedDifference, offset_difference, paired_difference
-
-
-@dataclasses.dataclass(frozen=True)
-class Offset:
-    """A session's constant rate (module docstring): `value_dph` [°/h], `sigma_dph` (its 1σ
-    standard error [°/h]; NaN with one static run), `n_runs` (static runs used; 0: not
-    estimated, nothing removed), `source` (label of the compensator it was measured with).
-    (value − truth)/σ is Student-t with `dof` = `n_runs` − 1 degrees of freedom: read
-    intervals with [`half_width`][hrgjax.calibration.Offset.half_width], not ±1.96σ."""
-
-    value_dph: float
-    sigma_dph: float
-    n_runs: int
-    source: str = ""
-
-    @property
-    def estimated(self) -> bool:
-        """Whether the session had static runs to measure it."""
-        return self.n_runs > 0
-
-    @property
-    def dof(self) -> int:
-        """Degrees of freedom of σ: `n_runs` − 1 (0: σ unknown)."""
-        return max(self.n_runs - 1, 0)
-
-    def half_width(self, level: float = 0.95) -> float:
-        """Half-width [°/h] of the two-sided `level` interval: Student's t quantile with
-        `dof` degrees of freedom times σ (12.7σ at 95 % with 2 runs, 2.23σ with 11, 2.00σ
-        with 57); NaN when σ is unknown."""
-        if not 0.0 < level < 1.0:
-            raise ValueError(f"level must be in (0, 1); got {level}")
-        if self.dof < 1 or not math.isfinite(self.sigma_dph):
-            return math.nan
-        from scipy import stats
-
-        return float(stats.t.ppf(0.5 + 0.5 * level, self.dof)) * self.sigma_dph
-
-    def to_json(self) -> dict:
-        """`{"value", "sigma", "unit", "n_static_runs", "from", "dof", "half_width_95"}` (σ
-        and the 95 % t half-width `null` when unknown)."""
-        sigma = self.sigma_dph if math.isfinite(self.sigma_dph) else None
-        half = self.half_width(0.95)
-        return {
-            "value": float(self.value_dph),
-            "sigma": None if sigma is None else float(sigma),
-            "unit": "°/h",
-            "n_static_runs": int(self.n_runs),
-            "from": self.source,
-            "dof": int(self.dof),
-            "half_width_95": float(half) if math.isfinite(half) else None,
-        }
-
-    def __str__(self) -> str:
-        if not self.estimated:
-            return "not estimated (no static runs): the angle errors include it"
-        if not math.isfinite(self.sigma_dph):
-            return f"{self.value_dph:+.4f} °/h (σ unknown: one static run)"
-        runs = "run" if self.n_runs == 1 else "runs"
-        return (
-            f"{self.value_dph:+.4f} ± {self.sigma_dph:.4f} °/h (1σ, {self.n_runs} static {runs}; "
-            f"95 %: ± {self.half_width(0.95):.4f}, t with {self.dof} dof)"
-        )
-
-
-def session_offset(errors: dict, source: str = "") -> Offset:
-    """The session's offset from per-run errors taken with no offset removed.
-
-    **Arguments:**
-
-    - `errors`: [`run_errors`][hrgjax.calibration.run_errors] or
-      [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors] output
-      (`offset_dph=0`).
-    - `source`: label of the compensator, kept in the result.
-
-    **Returns:** an [`Offset`][hrgjax.calibration.Offset]: the duration-weighted mean of the
-    static runs' mean compensated rates [°/h] and its standard error from their scatter
-    (module docstring); value 0 and `n_runs` 0 when there are no static runs.
-    """
-    static = np.asarray(errors["static"], dtype=bool)
-    rate = np.asarray(errors["drift_error_dph"], dtype=float)[static]
-    weight = np.asarray(errors["duration_s"], dtype=float)[static]
-    n = int(rate.size)
-    if n == 0:
-        return Offset(0.0, math.nan, 0, source)
-    total = float(np.sum(weight))
-    value = float(np.sum(weight * rate) / total)
-    if n == 1:
-        return Offset(value, math.nan, 1, source)
-    s2 = float(np.sum(weight * (rate - value) ** 2)) / (n - 1)  # a run's variance: s²/T_i
-    return Offset(value, math.sqrt(s2 / total), n, source)
 
 
 def _rms_groups(keys, values):
@@ -224,6 +142,8 @@ class Comparison:
       `calibrated_range` ((T_min, T_max) [°C] or None), `margin_c` [°C], `extrapolated`,
       `n_samples`, `n_out_of_range`, `by_temperature` ({T [°C]: samples outside}) and `runs`
       (ids of the runs with samples outside).
+    - `offset_from`: the label the user named for the session's offset (None: chosen, the
+      smallest σ); named, every pair is judged after that one offset.
     """
 
     labels: tuple[str, ...]
@@ -238,6 +158,7 @@ class Comparison:
     data: str | None = None
     own_residuals: dict | None = dataclasses.field(default=None, repr=False)
     domains: dict | None = dataclasses.field(default=None, repr=False)
+    offset_from: str | None = None
 
     def _keys(self, label, by):
         e = self.residuals[label]
@@ -279,20 +200,32 @@ class Comparison:
             "angle_error_deg": rms(e["angle_error_deg"]),
         }
 
-    def offset_difference(self, a: str, b: str, level: float = 0.95) -> OffsetDifference | None:
-        """Do `a` and `b` carry the same constant? Their own offsets compared
-        ([`OffsetDifference`][hrgjax.calibration.OffsetDifference]); None when the session has
+    def offset_difference(
+        self, a: str, b: str, key: str = "static_residual_dph", level: float = 0.95
+    ) -> OffsetDifference | None:
+        """`a`'s own offset less `b`'s [°/h] against the resolution of their paired test on
+        `key` at `level` (an [`OffsetDifference`][hrgjax.calibration.OffsetDifference]:
+        whether the constants' difference alone would decide it); None when the session has
         no static runs to measure them."""
+        if key not in ERROR_KEY:
+            raise ValueError(f"key must be one of {tuple(ERROR_KEY)}; got {key!r}")
         oa, ob = self.own_offsets[a], self.own_offsets[b]
         if not (oa.estimated and ob.estimated):
             return None
-        return offset_difference(a, oa.value_dph, oa.sigma_dph, oa.dof,
-                                 b, ob.value_dph, ob.sigma_dph, ob.dof, level=level)  # fmt: skip
+        ea, eb = (self.own_residuals_of(lab) for lab in (a, b))
+        weight = None if key == "static_residual_dph" else ea["duration_s"] / 3600.0
+        return offset_difference(a, oa.value_dph, b, ob.value_dph, ea[ERROR_KEY[key]],
+                                 eb[ERROR_KEY[key]], weight, key=key, level=level)  # fmt: skip
 
-    def offsets_for(self, a: str, b: str, level: float = 0.95) -> str:
-        """Which offsets `paired(a, b)` judges after by default: `"own"` (each its own) when
-        their constants differ at `level` (module docstring), else `"session"` (the one)."""
-        d = self.offset_difference(a, b, level)
+    def offsets_for(
+        self, a: str, b: str, key: str = "static_residual_dph", level: float = 0.95
+    ) -> str:
+        """Which offsets `paired(a, b, key, level)` judges after by default: `"session"` (the
+        one) when `offset_from` was named or the constants' difference is within the paired
+        test's resolution, `"own"` (each its own) when it is beyond (module docstring)."""
+        if self.offset_from is not None:
+            return "session"
+        d = self.offset_difference(a, b, key, level)
         return "own" if d is not None and d.differ else "session"
 
     def own_residuals_of(self, label: str) -> dict:
@@ -316,11 +249,16 @@ class Comparison:
         [`UNIT`][hrgjax.calibration.session.UNIT]'s: `static_residual_dph` [°/h] on the static
         runs, `angle_error_deg` or `max_angle_error_deg` [°] on the rotation runs), `level`
         (two-sided confidence), `offsets` (`"session"`: after the one offset; `"own"`: each
-        after its own; `"auto"`: [`offsets_for`][hrgjax.calibration.Comparison.offsets_for],
-        own where the constants differ: the difference cannot be charged to either).
+        after its own; `"auto"`: [`offsets_for`][hrgjax.calibration.Comparison.offsets_for]:
+        the one offset where `offset_from` was named or the constants' difference is within
+        the test's resolution at `level`, else each its own, the difference charged to
+        neither).
 
         **Returns:** a [`PairedDifference`][hrgjax.calibration.PairedDifference]: the mean of
-        $e_{a,i}^2 - e_{b,i}^2$, its t interval and `statement()`.
+        $e_{a,i}^2 - e_{b,i}^2$, its t interval and `statement()` ("… beyond a constant …"
+        where judged after own offsets whose difference could decide it), with the `offsets`
+        it used and the pair's `constants` (an
+        [`OffsetDifference`][hrgjax.calibration.OffsetDifference] at `level`).
         """
         if key not in ERROR_KEY:
             raise ValueError(f"key must be one of {tuple(ERROR_KEY)}; got {key!r}")
@@ -330,10 +268,12 @@ class Comparison:
         if offsets not in ("auto", "session", "own"):
             raise ValueError(f"offsets must be 'auto', 'session' or 'own'; got {offsets!r}")
         if offsets == "auto":
-            offsets = self.offsets_for(a, b, level)
+            offsets = self.offsets_for(a, b, key, level)
         res = (lambda lab: self.residuals[lab]) if offsets == "session" else self.own_residuals_of
         ea, eb = (res(lab)[ERROR_KEY[key]] for lab in (a, b))
-        return paired_difference(ea, eb, a=a, b=b, key=key, unit=UNIT[key], level=level)
+        test = paired_difference(ea, eb, a=a, b=b, key=key, unit=UNIT[key], level=level)
+        constants = self.offset_difference(a, b, key, level)
+        return dataclasses.replace(test, offsets=offsets, constants=constants)
 
     def paired_all(self, key: str = "static_residual_dph", level: float = 0.95) -> list:
         """[`paired`][hrgjax.calibration.Comparison.paired] for every pair of compensators
@@ -409,10 +349,13 @@ class Comparison:
          "seed_figures": {"static_residual_dph" | "angle_error_deg":
                           {T: {"fourier", "mlp"}}},
          "units": {"static_residual_dph": "°/h", "angle_error_deg": "°", …},
-         "paired": [PairedDifference.to_json() + {"offsets": "session" | "own"} for every
-                    pair, static residual then end-of-run angle error, where the session has
-                    such runs; with "own", also "with_one_offset": the test after the one],
-         "offset_differences": [OffsetDifference.to_json() for every pair]}
+         "paired": [PairedDifference.to_json() (with "offsets": "session" | "own",
+                    "constants_differ", "constant_difference_dph", "constant_resolution_dph")
+                    for every pair, static residual then end-of-run angle error, where the
+                    session has such runs; with "own", also "with_one_offset": the test after
+                    the one],
+         "offset_from": the label named for the offset, or null (chosen),
+         "offset_differences": [OffsetDifference.to_json() for every pair and figure]}
         ```
 
         `seed_figures` are seed 000's published figures
@@ -441,12 +384,13 @@ class Comparison:
     def __str__(self) -> str:
         return self.format()
 
-    def plot(self, path: str | os.PathLike, title: str = "") -> str:
+    def plot(self, path: str | os.PathLike, title: str = "", seed: dict | None = SEED_TABLE) -> str:
         """Figure of the residuals after the offset per temperature and per wave angle, one
         marker and colour per compensator (hollow: groups with runs outside its calibrated
-        temperature range), seed 000's figures beside, the offset in a text box; returns the
-        path."""
-        return session_figure(self, os.fspath(path), title=title)
+        temperature range), `seed`'s figures beside (default seed 000's,
+        [`SEED_TABLE`][hrgjax.calibration.evaluate.SEED_TABLE]; None: none), the offset in a
+        text box; returns the path."""
+        return session_figure(self, os.fspath(path), title=title, seed=seed)
 
 
 def _domain(corrected: MeasuredData, bin_c: float) -> dict | None:
@@ -485,7 +429,8 @@ def compare_corrected(
     - `names`, `files`: {label: compensator name}, {label: its file} (default: the label,
       None).
     - `offset_from`: the label whose offset is the session's (default: the one with the
-      smallest σ; module docstring).
+      smallest σ; module docstring). Named, every pair is judged after it, whatever the
+      constants' difference (`Comparison.offset_from`).
     - `temperature_bin_c` [°C], `angle_bin_deg` [°]: group widths (module docstring).
     - `data`: the session's name, kept for reports.
 
@@ -508,6 +453,7 @@ def compare_corrected(
         if not np.array_equal(errors[lab]["run"], first["run"]):
             raise ValueError(f"{lab!r}: compensated data hold other runs than {labels[0]!r}'s")
     own = {lab: session_offset(errors[lab], lab) for lab in labels}
+    offset_named = offset_from is not None
     if offset_from is None:
         sig = [own[lab].sigma_dph for lab in labels]
         offset_from = labels[int(np.argmin(sig))] if np.any(np.isfinite(sig)) else labels[0]
@@ -520,6 +466,7 @@ def compare_corrected(
         corrected_run_errors(corrected[lab], offset_dph=own[lab].value_dph)
         for lab in labels
     }  # fmt: skip
+    named = offset_from if offset_named else None
     return Comparison(
         labels=labels,
         names={lab: (names or {}).get(lab, lab) for lab in labels},
@@ -533,6 +480,7 @@ def compare_corrected(
         data=data,
         own_residuals=own_residuals,
         domains={lab: _domain(corrected[lab], temperature_bin_c) for lab in labels},
+        offset_from=named,
     )
 
 
@@ -545,6 +493,7 @@ def compare(
     temperature_bin_c: float = 1.0,
     angle_bin_deg: float = 5.0,
     name: str | None = None,
+    warn: bool = True,
 ) -> Comparison:
     """Several compensators on one test session: the session's offset, and per temperature
     and wave angle what each compensator leaves after it (module docstring).
@@ -557,6 +506,8 @@ def compare(
     - `offset_from`, `temperature_bin_c` [°C], `angle_bin_deg` [°]: as in
       [`compare_corrected`][hrgjax.calibration.compare_corrected].
     - `name`: the session's name (a file), kept for reports.
+    - `warn`: False: no warning (a caller that applies compensators outside their range on
+      purpose; the result records it either way).
 
     **Warns:** [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning], one
     per compensator the session has samples outside the calibrated temperature range of
@@ -566,9 +517,8 @@ def compare(
     `before_offset()` equals [`accuracy_table`][hrgjax.calibration.accuracy_table]`(compensators,
     data)` on whole-degree temperatures.
     """
-    with warnings.catch_warnings():  # one warning per compensator below, naming its label
-        warnings.simplefilter("ignore", TemperatureDomainWarning)
-        corrected = {lab: comp.correct(data) for lab, comp in compensators.items()}
+    # one warning per compensator below, naming its label
+    corrected = {lab: comp.correct(data, warn=False) for lab, comp in compensators.items()}
     result = compare_corrected(
         corrected,
         names={lab: _name(comp) for lab, comp in compensators.items()},
@@ -578,9 +528,10 @@ def compare(
         angle_bin_deg=angle_bin_deg,
         data=name,
     )
-    for lab in result.labels:
+    for lab in result.labels if warn else ():
         if result.domains[lab] and (line := domain_line(lab, result.domains[lab])):
-            warnings.warn(f"compare: {line}", TemperatureDomainWarning, stacklevel=2)
+            warnings.warn(f"compare: {line}", TemperatureDomainWarning,
+                          stacklevel=user_stacklevel())  # fmt: skip
     return result
 
 

@@ -12,7 +12,7 @@ from ..data import MeasuredData, concat
 from ..gyro import Gyro
 from ..presets import tvg3_like
 from ._compensator import AbstractCompensator
-from .evaluate import NoCompensation, accuracy_table
+from .evaluate import NoCompensation, accuracy_table, out_of_range
 from .experiment import run_plan, seed_plan, test_plan
 from .fourier import FourierCompensator
 from .ins_impact import FLIGHTS as FLIGHTS
@@ -34,10 +34,16 @@ class Study:
     calibration data), `compensators` ({label: fitted compensator}, "raw" first), `table`
     (see [`accuracy_table`][hrgjax.calibration.accuracy_table]), `ins` (navigation errors per
     compensator, see [`ins_impact`][hrgjax.calibration.ins_impact.ins_impact]; `None` when
-    skipped), `timings` ({step: seconds}).
+    skipped), `timings` ({step: seconds}), `domains` (where the test grid lies outside each
+    compensator's calibrated temperature range, an
+    [`out_of_range`][hrgjax.calibration.evaluate.out_of_range] record: the study applies
+    `Fourier @+20°C`, calibrated at +20 °C only, at −40 and +60 °C on purpose, so it records
+    this instead of warning; the flights' count is in `ins`).
     """
 
-    def __init__(self, calibration, test, windows, compensators, table, timings, ins=None):
+    def __init__(
+        self, calibration, test, windows, compensators, table, timings, ins=None, domains=None
+    ):
         self.calibration: MeasuredData = calibration
         self.test: MeasuredData = test
         self.windows: RateWindows = windows
@@ -45,12 +51,16 @@ class Study:
         self.table: dict[str, Any] = table
         self.timings: dict[str, float] = timings
         self.ins = ins
+        self.domains: dict = {} if domains is None else domains
 
     def compare(self, data: MeasuredData | None = None) -> Comparison:
         """The study's compensators on `data` (default: its test grid, run in the
         calibration's switch-on, so the offset is zero within σ and `before_offset()` is
-        `table`), the session's offset apart: [`compare`][hrgjax.calibration.compare]."""
-        return compare(self.compensators, self.test if data is None else data)
+        `table`), the session's offset apart: [`compare`][hrgjax.calibration.compare] (no
+        [`TemperatureDomainWarning`][hrgjax.calibration.TemperatureDomainWarning] on its own
+        test grid, whose samples outside the calibrated ranges are in `domains`)."""
+        return compare(self.compensators, self.test if data is None else data,
+                       warn=data is not None)  # fmt: skip
 
 
 def bench_session(
@@ -134,7 +144,8 @@ def run_study(
         timings[f"fit {label}"] = time.perf_counter() - t0
     say("evaluating on the test grid")
     t0 = time.perf_counter()
-    table = accuracy_table(comps, test)
+    table = accuracy_table(comps, test, warn=False)  # the baseline at −40/+60 °C on purpose
+    domains = out_of_range(comps, test["temperature_c"])
     timings["evaluate"] = time.perf_counter() - t0
     nav = None
     if ins:
@@ -142,7 +153,12 @@ def run_study(
         t0 = time.perf_counter()
         flights = FLIGHTS[:1] if quick else FLIGHTS
         nav = ins_impact(
-            comps, gyro, list(flights), key=jax.random.fold_in(k_test, 99), bias_key=k_bias
+            comps,
+            gyro,
+            list(flights),
+            key=jax.random.fold_in(k_test, 99),
+            bias_key=k_bias,
+            warn=False,
         )
         timings["INS impact"] = time.perf_counter() - t0
-    return Study(cal, test, windows, comps, table, timings, nav)
+    return Study(cal, test, windows, comps, table, timings, nav, domains)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import os
 import time
-import warnings
 from typing import TYPE_CHECKING, NamedTuple
 
 from ..units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
@@ -231,14 +230,13 @@ def cmd_correct(args) -> int:
     start(args, inputs, out=DATA_EXTENSIONS, json=(".json",), plot=PLOT_EXTENSIONS)
     import numpy as np
 
-    from ..calibration import TemperatureDomainWarning, compare_corrected, corrected_run_errors
+    from ..calibration import compare_corrected, corrected_run_errors
     from ..calibration.compensators import Corrected
 
     comp = _load_model("--model", args.model)
     data = load_data(args.data, args.allow_extra)
-    with usage_errors(args.data), warnings.catch_warnings():  # said below, in the report
-        warnings.simplefilter("ignore", TemperatureDomainWarning)
-        out = comp.correct(data, extrapolate=False if args.no_extrapolate else None)
+    with usage_errors(args.data):  # outside the range: said below, in the report
+        out = comp.correct(data, extrapolate=False if args.no_extrapolate else None, warn=False)
     print(f"hrgjax correct: {args.data} with {args.model} ({type(comp).__name__})")
     # extrapolated, the samples outside are in the comparison's report below
     _domain_report("temperature domain", comp, data, args.temperature_bin, out.extrapolated,
@@ -300,7 +298,7 @@ def cmd_compare(args) -> int:
     inputs = [args.data, *args.models]
     start(args, inputs, json=(".json",), plot=PLOT_EXTENSIONS)
     from .._io import same_file
-    from ..calibration import TemperatureDomainWarning, compare
+    from ..calibration import compare
 
     for i, a in enumerate(args.models):
         for b in args.models[:i]:
@@ -323,12 +321,12 @@ def cmd_compare(args) -> int:
                 f"({', '.join(labels)})"
             )
     data = load_data(args.data, args.allow_extra)
-    with usage_errors(args.data), warnings.catch_warnings():  # in the report below
-        warnings.simplefilter("ignore", TemperatureDomainWarning)
+    with usage_errors(args.data):  # outside the range: in the report below
         result = compare(
             dict(zip(labels, comps, strict=True)), data,
             files=dict(zip(labels, args.models, strict=True)), offset_from=offset_from,
             temperature_bin_c=args.temperature_bin, angle_bin_deg=args.angle_bin, name=args.data,
+            warn=False,
         )  # fmt: skip
     n = result.counts()
     print(
@@ -437,7 +435,8 @@ def _compare_parser(sub):
                    help="compensator files from `calibrate` (.eqx), one or more")  # fmt: skip
     p.add_argument("--offset-from", default=None, metavar="MODEL",
                    help="the compensator (its file or label) whose mean rate at rest is the "
-                   "session's offset (None: the one whose static runs scatter least)")  # fmt: skip
+                   "session's offset (None: the one whose static runs scatter least); named, "
+                   "every pair is judged after it")  # fmt: skip
     _evaluation_options(p)
     return p
 

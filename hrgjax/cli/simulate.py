@@ -281,7 +281,7 @@ def cmd_demo(args) -> int:
     t0 = time.perf_counter()
     study = run_study(key=jax.random.key(args.seed), quick=args.quick, progress=say(t0))
     print()
-    print(format_table(study.table))
+    print(format_table(study.table, domains=study.domains))
     if study.ins is not None:
         from ..calibration.ins_impact import format_ins_table
 
