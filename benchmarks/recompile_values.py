@@ -7,10 +7,15 @@
 2. `simulate(model="full")` with the default `fixed_step="auto"` at carrier frequencies 40,
    41, 40, 43 Hz (0.2 s) and `presets.tvg3_like()` at 20, 30, 20, 50 °C (0.01 s): the step
    count, static in the program, used to follow every new frequency or temperature.
+3. `fog.compensation.compensate` with an Elman and an MLP compensator on three records of
+   the same shape (20 s and 200 s at 100 Hz, 2-s windows, 1 g tones at 10, 12, 10 Hz): the
+   Elman network's scan, called eagerly, traced a fresh closure and compiled again on every
+   call.
 
 Each call prints the XLA compiles it caused (jax.monitoring) and its wall time.
 
-Usage: `.venv/bin/python benchmarks/recompile_values.py [--no-full]`.
+Usage: `.venv/bin/python benchmarks/recompile_values.py [--no-full] [--fog]` (`--fog`: only
+part 3, ≈ 30 s).
 """
 
 import argparse
@@ -79,11 +84,31 @@ def full_runs():
                 lambda p=p: hg.simulate(gyro, p, model="full", dt_out=0.005, key=key).wave_angle)  # fmt: skip
 
 
+def fog_calls():
+    from hrgjax.fog import compensation as cp
+    from hrgjax.fog import vibration as vb
+
+    imu = vb.default_imu()
+    box = ((5.0, 40.0), (0.25, 1.5))  # untrained networks: the calls' cost is the same
+    for kind in cp.KINDS:
+        comp = cp.VibrationCompensator(kind, key=jax.random.key(4), window_s=2.0,
+                                       axis=(0.0, 0.0, 1.0), feature_range=box)  # fmt: skip
+        for dur in (20.0, 200.0):
+            for i, f_hz in enumerate((10.0, 12.0, 10.0)):
+                sch = vb.VibrationSchedule.constant(f_hz, 1.0, dur)
+                rec = vb.simulate(imu, sch, fs=100.0, key=jax.random.key(i))
+                counted(f"compensate, {kind}, {dur:g} s, {f_hz:g} Hz",
+                        lambda c=comp, r=rec: cp.compensate(c, imu, r).gyro)  # fmt: skip
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
-    ap.add_argument("--no-full", action="store_true", help="only the sweeps")
+    ap.add_argument("--no-full", action="store_true", help="only the sweeps (and --fog's)")
+    ap.add_argument("--fog", action="store_true", help="only the FOG compensation calls")
     a = ap.parse_args()
     jax.monitoring.register_event_duration_secs_listener(_listen)
-    sweeps()
-    if not a.no_full:
-        full_runs()
+    if not a.fog:
+        sweeps()
+        if not a.no_full:
+            full_runs()
+    fog_calls()

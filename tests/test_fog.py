@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import cli_fails
+from helpers import CompileCounter, cli_fails
 
 from hrgjax.fog import misalignment as mis
 from hrgjax.nn.elman import Elman
@@ -84,6 +84,28 @@ def test_elman_without_recurrence_is_an_mlp(elman):
     assert not np.allclose(elman(xs), flat(xs))
     with pytest.raises(ValueError, match=r"\(T, in_size\)"):
         elman(jnp.zeros(3))
+
+
+def test_elman_runs_one_compiled_program_per_shape(elman):
+    """Called eagerly, the scan traced a fresh closure over the network on every call and
+    compiled it again (0.5-0.8 s a `compensate` call); now a second call of the
+    same shape, alone or vmapped over stacked networks, compiles and traces nothing, and
+    its output is the same recursion, stepped by hand."""
+    xs, other = jax.random.normal(jax.random.key(5), (2, 30, 2))
+    nets = eqx.filter_vmap(lambda k: Elman(2, 7, 1, key=k))(jax.random.split(jax.random.key(6), 3))
+    per_net = lambda: eqx.filter_vmap(lambda n: n(xs))(nets)  # noqa: E731
+    elman(xs), per_net()
+    with CompileCounter() as c:
+        ys, stacked = elman(other), per_net()
+    assert (c.compiles, c.traces) == (0, 0), c.names
+    h, ref = np.zeros(7), []  # h_t = tanh(W_x x_t + b + W_h h_(t-1)), y_t = W_y h_t + c
+    wx, bx = np.asarray(elman.w_x.weight), np.asarray(elman.w_x.bias)
+    wh, wy, by = (np.asarray(a) for a in (elman.w_h.weight, elman.w_y.weight, elman.w_y.bias))
+    for x in np.asarray(other):
+        h = np.tanh(wx @ x + bx + wh @ h)
+        ref.append(wy @ h + by)
+    np.testing.assert_allclose(ys, ref, rtol=1e-12, atol=1e-15)
+    assert stacked.shape == (3, 30, 1)
 
 
 def test_gradients_through_the_scan_match_finite_differences(elman):

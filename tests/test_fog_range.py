@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import CompileCounter
 
 from hrgjax.fog import compensation as cp
 from hrgjax.fog import vibration as vb
@@ -102,6 +103,20 @@ def test_inside_the_range_compensation_is_unchanged_bit_for_bit(setup):
         np.testing.assert_array_equal(r[0], gyro)
         held = jnp.repeat(vb.to_sensor(imu.gyro, c(feats)), int(W * FS), axis=0)
         np.testing.assert_array_equal(gyro, rec.gyro - held)
+
+
+def test_a_second_record_of_the_same_shape_compiles_nothing(setup):
+    """Compile once: each `compensate` call after the first compiled the Elman network's
+    scan again (0.5 s on a 32-s record; `fog.study.run` paid it three times). A second record
+    of the same shape now runs the programs the first compiled, for either network."""
+    imu, _, nets, rec, _ = setup
+    other = vb.simulate(imu, SCHEDULE, fs=FS, key=jax.random.key(8))
+    for c in nets.values():
+        cp.compensate(c, imu, rec)
+        with CompileCounter() as counter:
+            r = cp.compensate(c, imu, other)
+        assert (counter.compiles, counter.traces) == (0, 0), counter.names
+        assert r.n_out_of_range == 8 and bool(jnp.all(jnp.isfinite(r.gyro)))
 
 
 def test_margin_edges_and_rest(setup):
