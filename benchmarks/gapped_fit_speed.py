@@ -4,10 +4,14 @@ A record of `--n` samples at 100 Hz (white rate noise 1 plus a rate random walk 
 sample), a fraction `--missing` of the samples NaN at random, oadev on the octave grid, the
 default terms (flicker as Gauss–Markov terms). Each fit evaluates the gapped covariance 6–7
 times over every distinct run length (`hrgjax.allan.octave_covariance.gapped_covariance`);
-prints the runs, their distinct lengths, the wall times and the fitted σ (run against an
-older hrgjax through PYTHONPATH for its own figures).
+prints the runs, their distinct lengths, the wall times, the peak memory, the fitted σ and
+the hrgjax it ran.
 
 Usage: `.venv/bin/python benchmarks/gapped_fit_speed.py [--n 100000] [--missing 0.01]`
+(this checkout's hrgjax, installed editable); another tree's:
+`PYTHONPATH=/path/to/tree .venv/bin/python benchmarks/gapped_fit_speed.py …` (the script's
+own folder, first on `sys.path`, holds no `hrgjax`, so PYTHONPATH's comes before the
+installed one; the line `hrgjax from …` says which ran).
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ def main() -> None:
           f"{middle - start:.2f} s, fit_noise {end - middle:.2f} s ({fit.method}); max RSS "
           f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")  # fmt: skip
     print("  σ:", {k: float(f"{v:.6g}") for k, v in fit.sigma.items()})
+    print(f"  hrgjax from {hg.__file__}")
 
 
 if __name__ == "__main__":

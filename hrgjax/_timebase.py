@@ -20,24 +20,40 @@ t₀ + k·step (plus the stamps' own float64 rounding)."""
 
 
 STALL_FRACTION = 0.01
-"""At most this fraction of a record's steps may lie off its uniform step for them to be
-taken for stalls or stray stamps (`regular_step`); more are the clock's own pattern."""
+"""Steps a fraction of a step off the uniform step (stalls, stray stamps) are left out of
+the step (`regular_step`) when they are at most this fraction of a record's steps; more,
+nearer than `STALL_OFF`, are the clock's own pattern and kept."""
+
+STALL_OFF = 0.05
+"""A step more than this fraction of a step longer than the record's typical step is a
+stall, not the clock's own pattern (`regular_step`), unless as many are as far shorter
+(jitter) or the stamps count ticks of more than this (`millis()` at 70 Hz: 14 or 15 ms)."""
 
 
 def regular_step(t) -> float:
-    """The record's sample step [s] from increasing time stamps `t` [s]: the mean of the
-    steps strictly within half a median step of the median (the median alone is quantised by
-    the stamps' rounding; a gap does not move this mean, nor does a 1.5-step stall: half a
-    step off is as near two steps as one). Where all but a few of those (at most
-    `STALL_FRACTION` of the steps: stalls, stray stamps) lie within `UNIFORM_TOLERANCE` of that
-    mean plus the stamps' rounding, the mean of those alone: one 1.4-step interval moved the
-    wider mean by 0.4 steps over the record (1e-5 of the rate at 40 000 samples), so the
-    stamps after it lay on no grid of that step. More steps off it are the clock's own
-    pattern, kept: a sample clock counted in crystal ticks (100 Hz from 32 768 Hz) steps 327
-    or 328 ticks, 32 % and 68 % of the steps, and only their mean is the rate (the 328-tick
-    steps alone read 99.902 Hz); a tick clock whose rarer count is under 1 % of the steps
-    reads the common count's step (within 1 % of a tick). A record of two step sizes in equal
-    numbers (1 ms / 3 ms alternating) has no single step: the median picks one by parity."""
+    """The record's sample step [s] from increasing time stamps `t` [s], from its regular
+    steps (those strictly within half a median step of the median: a gap moves nothing, nor
+    does a 1.5-step stall, as near two steps as one) about their median `c`:
+
+    - a step more than `STALL_OFF` (5 %) of `c` longer is a stall, always left out (the mean
+      of every regular step read 1.8e-3 … 7.7e-3 fast with 0.5–2 % of 1.4-step stalls and the
+      record was interpolated) — unless more than `STALL_FRACTION` of the steps are as far
+      shorter (a stall is never shorter): jitter (stamps ±30 %, a logger loop's ±1 ms),
+      where a stall is a step longer by 5 % more than the shortest is short; or the stamps
+      count ticks of over 5 % of a step and the longer steps are one tick long (`millis()`
+      at 70 Hz: 14 or 15 ms, a one-tick pattern, `_tick_band`);
+    - steps off `c` by more than `UNIFORM_TOLERANCE` plus the stamps' rounding but within
+      that are the clock's own pattern where they exceed `STALL_FRACTION` of the steps, and
+      the step is the mean of every step but the stalls: a clock counted in crystal ticks
+      (100 Hz from 32 768 Hz) steps 327 or 328 ticks, 32 % and 68 %, and only their mean is
+      the rate (the 328-tick steps alone read 99.902 Hz); jittered stamps likewise;
+    - else the step is the mean of the steps within `UNIFORM_TOLERANCE` of `c` (the mean of
+      the few others moved the step: one 1.4-step interval moved it 1e-5 of the rate at
+      40 000 samples, and no stamp after it lay on its grid). A tick clock whose rarer count
+      is under 1 % of the steps reads the common count's step (within 1 % of a tick).
+
+    A record of two step sizes in equal numbers (1 ms / 3 ms alternating) has no single step:
+    the median picks one by parity."""
     with np.errstate(
         over="ignore", invalid="ignore"
     ):  # steps beyond 1.8e308 s: inf, the caller refuses
@@ -47,11 +63,44 @@ def regular_step(t) -> float:
         regular = dt[np.abs(dt - median) < 0.5 * median]
         if not regular.size:
             return median
-        step = float(np.mean(regular))
+        centre = float(np.median(regular))
         rounding = 2.0 * float(np.spacing(np.max(np.abs(t))))
-        close = regular[np.abs(regular - step) <= UNIFORM_TOLERANCE * step + rounding]
-        few = regular.size - close.size <= STALL_FRACTION * dt.size
-        return float(np.mean(close)) if close.size and few else step
+        tol = UNIFORM_TOLERANCE * centre + rounding
+        off = np.abs(regular - centre)
+        near = off <= tol
+        if near.all():
+            return float(np.mean(regular))
+        band = STALL_OFF * centre
+        short = off[regular < centre - band]  # far shorter steps: never stalls
+        tick = float(np.min(off[~near]))  # the nearest other step: a tick, where stamps count them
+        if short.size > STALL_FRACTION * dt.size:  # jitter: a stall is only beyond its reach
+            band = float(np.max(short)) + band
+        elif tick > band:  # coarse ticks (their own pattern, not stalls), or stalls alone?
+            band = _tick_band(dt, centre, tick, tol) or band
+        stall = off > band
+        if np.sum(~near & ~stall) > STALL_FRACTION * dt.size:  # the clock's own pattern
+            return float(np.mean(regular[~stall]))
+        return float(np.mean(regular[near]))
+
+
+def _tick_band(dt, centre: float, tick: float, tol: float) -> float | None:
+    """How far [s] from the typical step `centre` [s] longer steps `dt` [s] are a tick
+    clock's own pattern, or None where they are not one: every regular step a whole number
+    of `tick` [s] (within `tol` [s]), at least 2 ticks a step, and the one-tick steps evenly
+    spread (the grid rounded to ticks: the gaps between them, within runs of such steps,
+    differ by at most one step) — stalls of one size at random are not; nor are stalls of
+    1.4 steps on a 0.01-s grid (no tick)."""
+    off = np.abs(dt - centre)
+    regular = off < 0.5 * centre
+    ticks = dt[regular] / tick
+    if tick > 0.5 * centre or np.max(np.abs(ticks - np.round(ticks))) * tick > tol:
+        return None
+    one = (off > tol) & (off <= tick + tol)
+    where = np.flatnonzero(one)
+    outside = np.concatenate([[0], np.cumsum(off > tick + tol)])
+    span = outside[where[1:]] - outside[where[:-1]] == 0  # no stall or gap between the two
+    gaps = np.diff(where)[span]
+    return tick + tol if gaps.size >= 2 and int(np.ptp(gaps)) <= 1 else None
 
 
 def is_uniform(t, step: float) -> bool:

@@ -106,6 +106,7 @@ class MeasuredData:
                 [f"column {k!r}" for k in accel],
                 np.stack([cols[k] for k in accel]).T,  # (N, k), each column contiguous
                 samples=False,
+                rate_hz=_row_rate(cols["time_s"]),
             )
         turning = cols["table_rate_dps"] != 0.0
         given = "table_angle_deg" in cols
@@ -385,3 +386,11 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
         return MeasuredData(columns, allow_extra=allow_extra)
     except ValueError as err:
         raise ValueError(f"{path}: {with_file_line(str(err), lines)}") from None
+
+
+def _row_rate(time_s) -> float | None:
+    """The rows' sample rate [Hz]: 1 / the median of the increasing steps of `time_s` [s]
+    (runs may restart the clock), or None where none increases."""
+    dt = np.diff(np.asarray(time_s, dtype=float))
+    dt = dt[dt > 0]
+    return 1.0 / float(np.median(dt)) if dt.size else None

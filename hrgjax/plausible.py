@@ -244,6 +244,25 @@ def _specific_force_unit(norm: np.ndarray) -> str:
     return ""
 
 
+SMOOTH_S = 0.5
+"""A data file's specific force is also judged after a mean of each axis over blocks of this
+many seconds ([`check_specific_force`][hrgjax.plausible.check_specific_force]'s `rate_hz`):
+zero-mean vibration averages out, where it raises the magnitude's median in quadrature (a
+ride in m/s² with 0.2 g rms per axis read a median |f| of 1.041 g and passed as g)."""
+
+
+def _block_means(a: np.ndarray, rate_hz) -> np.ndarray | None:
+    """Each axis of `a` (N, k) averaged over blocks of `SMOOTH_S` at `rate_hz` [Hz] (the last
+    partial block left out), or None where a block is one row or longer than the record."""
+    if rate_hz is None or not np.isfinite(rate_hz) or rate_hz <= 0:
+        return None
+    rows = int(round(float(rate_hz) * SMOOTH_S))
+    blocks = a.shape[0] // max(rows, 1)
+    if rows < 2 or blocks < 1:
+        return None
+    return a[: blocks * rows].reshape(blocks, rows, a.shape[1]).mean(axis=1)
+
+
 def _check_middle_half(name: str, column: np.ndarray, hint: str) -> None:
     """Refuse a data column [g] whose middle half (25th … 75th percentile) leaves
     `RANGES["specific_force_g"]`: a unit error scales every sample, vibration only peaks."""
@@ -258,7 +277,9 @@ def _check_middle_half(name: str, column: np.ndarray, hint: str) -> None:
         )
 
 
-def check_specific_force(what: str, names, accel, *, samples: bool = True) -> None:
+def check_specific_force(
+    what: str, names, accel, *, samples: bool = True, rate_hz: float | None = None
+) -> None:
     """Refuse a specific force in g (concrete; traced values are not checked) outside
     `RANGES["specific_force_g"]` along any axis, or written in another unit.
 
@@ -269,7 +290,12 @@ def check_specific_force(what: str, names, accel, *, samples: bool = True) -> No
     (≈ 1000: in mg, beyond the range anyway). A run that truly holds 9.6–10.0 g (a
     centrifuge) passes inside `relaxed(specific_force_g=…)`; a high-g run at another level,
     a sweep through 9.8 g, or a hold that rests at 1 g over more than a quarter of the
-    rows is not refused.
+    rows is not refused. A data file's rows (without `samples`) sampled at `rate_hz` [Hz]
+    are judged twice, as they are and after a mean of each axis over `SMOOTH_S` (0.5 s)
+    blocks, and refused where either reads as m/s²: vibration (zero mean) raises the
+    magnitude's median in quadrature (1.041 g at 0.2 g rms per axis, a ride in m/s² taken as
+    g past ~0.15 g rms) and averages out of the means, and the rows as they are keep a
+    gravity that turns with a rate table within a block.
 
     The range: with `samples` (a `Profile`'s knots) every value along every axis; without
     (a data file, `MeasuredData`) each column's middle half, its 25th … 75th percentile —
@@ -280,7 +306,8 @@ def check_specific_force(what: str, names, accel, *, samples: bool = True) -> No
 
     **Arguments:** `what`, the field's name for the unit message; `names`, one name per
     column of `accel`; `accel` (N, k) [g], k = len(names) axes (1 to 3) on N rows (knots);
-    without `samples`, finite values (the data loader's columns are).
+    without `samples`, finite values (the data loader's columns are); `rate_hz` [Hz], the
+    rows' sample rate (data files; None: the rows as they are only).
 
     **Raises:** `ValueError`: the range message naming the column (with the unit hint where
     the magnitude points at one), or "<what> — the specific force's magnitude has its
@@ -292,6 +319,10 @@ def check_specific_force(what: str, names, accel, *, samples: bool = True) -> No
         return
     norm = np.sqrt(np.einsum("ij,ij->i", a, a))  # a row with NaN: NaN, left out
     hint = _specific_force_unit(norm)
+    means = None if samples or hint else _block_means(a, rate_hz)
+    if means is not None:  # vibration averaged out: its quadrature no longer lifts |f|
+        hint = _specific_force_unit(np.sqrt(np.einsum("ij,ij->i", means, means)))
+        hint = hint.replace("magnitude has", f"magnitude over {SMOOTH_S:g}-s means has")
     for j, name in enumerate(names):
         if samples:
             _check_range(name, a[:, j], "specific_force_g", hint)

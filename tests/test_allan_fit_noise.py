@@ -260,3 +260,16 @@ def test_a_gapped_fit_builds_each_runs_layout_once(monkeypatch):
     alone = oc.gapped_covariance({"angle_random_walk": 2.0}, [(0.3, 5.0)], ms, r.segments, tau0)
     np.testing.assert_array_equal(again, alone)
     assert len(store) == lengths.size and not np.array_equal(first, again)
+    # review of f0f7e34: the store was unbounded (10⁶ samples, 0.1 % missing: 0.8 GB; 10⁷:
+    # ~2.7 GB): it holds at most LAYOUT_STORE_BYTES, the rest built again, the same Ω
+    sizes = sorted(map(oc._nbytes, store.values()))
+    cap = sum(sizes[: lengths.size // 3])
+    monkeypatch.setattr(oc, "LAYOUT_STORE_BYTES", cap)
+    small, built[:] = {}, []
+    for _ in range(2):
+        capped = oc.gapped_covariance({"angle_random_walk": 2.0}, [(0.3, 5.0)], ms, r.segments,
+                                      tau0, layouts=small)  # fmt: skip
+        np.testing.assert_array_equal(capped, alone)
+    held = sum(map(oc._nbytes, small.values()))
+    assert 0 < len(small) < lengths.size and held <= cap
+    assert len(built) == 2 * lengths.size - len(small)  # past the cap: built on each call

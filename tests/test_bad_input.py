@@ -354,8 +354,8 @@ def test_cli_exit_statuses_and_debug(tmp_path, capsys, monkeypatch):
 
 def test_cli_relax_widens_a_plausibility_range_for_the_run(tmp_path, capsys, monkeypatch):
     """No command could take a file beyond a plausibility range (a steady 9.8 g centrifuge
-    hold, a shaker): `--relax QUANTITY=LOW,HIGH` widens it for that run only, and a 1 g
-    log in m/s² is still refused without it."""
+    hold, a shaker): `--relax QUANTITY=LOW,HIGH` widens it for that run only, before or
+    after the command, and a 1 g log in m/s² is still refused without it."""
     import hrgjax.cli as cli
 
     rows = "".join(f"{i},20.0,0.0,0,0,9.8,0.0\n" for i in range(64))
@@ -373,6 +373,12 @@ def test_cli_relax_widens_a_plausibility_range_for_the_run(tmp_path, capsys, mon
               r"9\.6–10\.0 g: --relax specific_force_g=LOW,HIGH takes it\)$")  # fmt: skip
     assert cli.main(["simulate", "--relax", "specific_force_g=-40,40"]) == 0
     assert seen == [64] and hg.plausible.RANGES["specific_force_g"][:2] == (-20.0, 20.0)
+    # before the command too, and both together (review of eebf8fe: the subcommand's list
+    # replaced the one given before it)
+    assert cli.main(["--relax", "specific_force_g=-40,40", "simulate"]) == 0
+    assert cli.main(["--relax", "specific_force_g=-40,40", "simulate", "--relax",
+                     "temperature_c=-200,200"]) == 0  # fmt: skip
+    assert seen == [64, 64, 64] and hg.plausible.RANGES["specific_force_g"][:2] == (-20.0, 20.0)
     cli_fails(
         ["simulate", "--relax", "specific_force=-1,1"],
         capsys,

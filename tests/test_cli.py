@@ -523,12 +523,15 @@ def test_allan_time_unit_and_stamps_that_are_not_seconds(tmp_path, capsys):
     ("t_milliseconds", "ms"), ("TimeMs", "ms"), ("t_millis", "ms"), ("timeUs", "us"),
     ("t_micros", "us"), ("stamp_nsec", "ns"), ("header.stamp_nanos", "ns"),
     ("timestamp_ns", "ns"), ("ElapsedNanoseconds", "ns"), ("time", None), ("timestamp", None),
-    ("stamps", None), ("gyro_dps", None),
+    ("stamps", None), ("gyro_dps", None), ("Time (mS)", "ms"), ("Time_mS", "ms"),
+    ("t_uS", "us"), ("Time(uS)", "us"), ("Time (nS)", "ns"), ("timeS", "s"), ("TimeSec", "s"),
 ])  # fmt: skip
 def test_allan_time_column_names_give_a_time_unit(name, unit):
     """Review of cc807d6: 't_μs' (Greek mu) matched the micro sign and returned 'μs', no
     `TIME_UNITS` key (unreadable with or without --time-unit us); elapsed_secs, Seconds,
-    t_milliseconds, TimeMs, timeUs were not read as named."""
+    t_milliseconds, TimeMs, timeUs were not read as named. Review of f0f7e34: the camelCase
+    split made an Arduino logger's `Time (mS)` `time (m_s)`, seconds (1000x, and
+    --time-unit ms refused as contradicting it): the casefolded name is matched first."""
     from hrgjax.cli.allan import TIME_UNITS, named_time_unit
 
     found = named_time_unit(name)

@@ -426,7 +426,9 @@ def gapped_covariance(
     distinct run lengths (a `covariance` call each, on a layout built once per length and
     kept in `layouts`, a dict the caller passes to each call for one record: a fit's 6–7
     calls then build them once; None: a store for this call alone) and, with Gauss–Markov
-    terms, of runs."""
+    terms, of runs. The store holds at most `LAYOUT_STORE_BYTES` of layouts; the lengths
+    past it are built again on each call (10⁶ samples with 0.1 % missing hold ~0.8 GB of
+    them, 10⁷ with 0.1 % ~2.7 GB: docs/allan.md)."""
     sampling = _check_sampling(sampling)
     segs = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
     starts, lengths = segs[:, 0], segs[:, 1]
@@ -434,14 +436,18 @@ def gapped_covariance(
     per_run = np.maximum(lengths[:, None] + 1 - 2 * ms[None, :], 0).astype(float)  # (R, S)
     total = np.zeros((ms.size, ms.size))
     layouts = {} if layouts is None else layouts
+    held = sum(map(_nbytes, layouts.values()))
     for length, times in zip(*np.unique(lengths, return_counts=True), strict=True):
         k = np.flatnonzero(length + 1 - 2 * ms >= 1)
         if k.size:
             nk = (length + 1 - 2 * ms[k]).astype(float)
             key = (tuple(int(m) for m in ms[k]), int(length))
-            if key not in layouts:
-                layouts[key] = _layout.__wrapped__(*key)
-            lay = layouts[key]
+            lay = layouts.get(key)
+            if lay is None:
+                lay = _layout.__wrapped__(*key)
+                size = _nbytes(lay)
+                if held + size <= LAYOUT_STORE_BYTES:  # past the cap: built again next call
+                    layouts[key], held = lay, held + size
             om = _covariance(lay, coef, gm, ms[k], tau0, sampling)
             total[np.ix_(k, k)] += times * om * np.outer(nk, nk)
     gms = [(s2, tau0 / tt) for s2, tt in gm if s2 > 0]
@@ -467,6 +473,21 @@ def gapped_covariance(
     count = per_run.sum(axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         return total / np.outer(count, count)
+
+
+LAYOUT_STORE_BYTES = 256 * 2**20
+"""The most bytes of run layouts `gapped_covariance` keeps in a fit's store (256 MiB): a
+layout is 0.1–3 MB (its τ count and length), a record of 10⁶ samples with 0.1 % missing at
+random has ~800 distinct run lengths, 10⁷ samples ~2 400."""
+
+
+def _nbytes(lay) -> int:
+    """The bytes of a layout's arrays (nested dicts and tuples included)."""
+    if isinstance(lay, np.ndarray):
+        return lay.nbytes
+    if isinstance(lay, dict):
+        lay = lay.values()
+    return sum(map(_nbytes, lay)) if isinstance(lay, (tuple, list, type({}.values()))) else 0
 
 
 def _cross_runs(rates, na, nb, starts, lengths):

@@ -90,6 +90,34 @@ def main(argv=None) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The `hrgjax` argument parser (every option with its help and default)."""
+
+    class fmt(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+        """Defaults shown; the description and the example kept as written."""
+
+    parser = argparse.ArgumentParser(
+        prog="hrgjax", description=__doc__, parents=[_common(_RELAX_BEFORE)], formatter_class=fmt
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_parser, common = sub.add_parser, _common("relax")
+    sub.add_parser = lambda name, **k: add_parser(
+        name, parents=[common], formatter_class=fmt, epilog=f"example: {EXAMPLES[name]}", **k
+    )
+    here = globals()  # looked up now, so that a replaced cmd_NAME (a test's) is the one run
+    for name in COMMANDS:
+        p = _PARSERS[name](sub)
+        p.set_defaults(func=here["cmd_" + name.replace("-", "_")])
+        if name not in TOOL_NAMED_OUTPUTS:
+            force_option(p)
+    return parser
+
+
+_RELAX_BEFORE = "relax_before_command"
+"""The dest of `--relax` given before the command: argparse's subcommand writes its own
+`relax` list over the parent's, so the two are kept apart and merged in `_run`."""
+
+
+def _common(relax_dest: str) -> argparse.ArgumentParser:
+    """The options taken before or after the command; `--relax` appends to `relax_dest`."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--quiet",
@@ -103,6 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=_relaxation,
         default=argparse.SUPPRESS,
         metavar="QUANTITY=LOW,HIGH",
+        dest=relax_dest,
         help="widen a plausibility range for this run (hrgjax.plausible.RANGES, in the "
         "quantity's own unit), e.g. --relax specific_force_g=-40,40 for a centrifuge; "
         "repeatable",
@@ -113,25 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=argparse.SUPPRESS,
         help="show the full traceback of an error (otherwise one line)",
     )
-
-    class fmt(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-        """Defaults shown; the description and the example kept as written."""
-
-    parser = argparse.ArgumentParser(
-        prog="hrgjax", description=__doc__, parents=[common], formatter_class=fmt
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
-    add_parser = sub.add_parser
-    sub.add_parser = lambda name, **k: add_parser(
-        name, parents=[common], formatter_class=fmt, epilog=f"example: {EXAMPLES[name]}", **k
-    )
-    here = globals()  # looked up now, so that a replaced cmd_NAME (a test's) is the one run
-    for name in COMMANDS:
-        p = _PARSERS[name](sub)
-        p.set_defaults(func=here["cmd_" + name.replace("-", "_")])
-        if name not in TOOL_NAMED_OUTPUTS:
-            force_option(p)
-    return parser
+    return common
 
 
 TOOL_NAMED_OUTPUTS = frozenset({"demo"})
@@ -223,7 +234,8 @@ def _run(args) -> int:
         check_distinct_paths(args)
         from ..plausible import relaxed
 
-        with _placement(args.command), relaxed(**dict(getattr(args, "relax", ()))):
+        given = [*getattr(args, _RELAX_BEFORE, ()), *getattr(args, "relax", ())]  # in order
+        with _placement(args.command), relaxed(**dict(given)):
             return args.func(args)
     except KeyboardInterrupt:
         if debug:

@@ -140,10 +140,13 @@ _SPELLINGS = {"s": "s", "mi": "ms", "ms": "ms", "micro": "us", "u": "us", "n": "
 def named_time_unit(name: str) -> str | None:
     """The unit a time column's name ends in, a key of `TIME_UNITS` (`t_ms`, `time [us]`,
     `t_μs` or `t_µs`, `stamp_nsec`, `elapsed_secs`, `Seconds`, `t_milliseconds`, `TimeMs`,
-    `timeUs`; Unicode-normalised, any case), or None (`time`, `timestamp`)."""
+    `timeUs`; Unicode-normalised, any case: `Time (mS)` is ms), or None (`time`,
+    `timestamp`). The casefolded name is matched first; a camelCase split (`TimeMs` ->
+    `time_ms`) only where that finds no unit (it read `Time (mS)` as `m_s`, seconds)."""
     text = unicodedata.normalize("NFKC", str(name)).replace("\u03bc", "u").replace("\u039c", "U")
-    text = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", text).casefold()  # camelCase: Time_Ms
-    found = _NAMED.search(text)
+    found = _NAMED.search(text.casefold())
+    if found is None:  # camelCase: TimeMs -> time_ms
+        found = _NAMED.search(re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", text).casefold())
     if found is None:
         return None
     word = found[1]
