@@ -11,11 +11,15 @@
    the same shape (20 s and 200 s at 100 Hz, 2-s windows, 1 g tones at 10, 12, 10 Hz): the
    Elman network's scan, called eagerly, traced a fresh closure and compiled again on every
    call.
+4. `fog.compensation.fit` and `fit_end_to_end` (Elman and MLP, 3 epochs on two 16-s
+   sequences at 50 Hz, 2-s windows) on two training sets of the same shape with other keys
+   and learning rates: `fit` jitted a fresh closure over the loss and the data on every
+   call, so each fit compiled its training program again.
 
 Each call prints the XLA compiles it caused (jax.monitoring) and its wall time.
 
 Usage: `.venv/bin/python benchmarks/recompile_values.py [--no-full] [--fog]` (`--fog`: only
-part 3, ≈ 30 s).
+parts 3 and 4, ≈ 60 s).
 """
 
 import argparse
@@ -101,10 +105,30 @@ def fog_calls():
                         lambda c=comp, r=rec: cp.compensate(c, imu, r).gyro)  # fmt: skip
 
 
+def fog_fits():
+    from hrgjax.fog import compensation as cp
+    from hrgjax.fog import vibration as vb
+
+    imu = vb.default_imu()
+    kw = dict(fs=50.0, window_s=2.0, lead_s=2.0, on_s=10.0, off_s=4.0)
+    sets = [cp.training_set(imu, conds, key=jax.random.key(i), **kw)
+            for i, conds in enumerate(([(10.0, 0.5), (20.0, 1.0)], [(12.0, 0.6), (18.0, 0.9)]))]  # fmt: skip
+    for kind in cp.KINDS:
+        for i, data in enumerate(sets):
+            comp = cp.VibrationCompensator(kind, key=jax.random.key(10 + i))
+            fit = dict(key=jax.random.key(20 + i), epochs=3, learning_rate=0.01 * (i + 1))
+            counted(f"fit, {kind}, set {i}", lambda c=comp, d=data, f=fit: cp.fit(c, d, **f)[1])
+        for i, data in enumerate(sets):
+            comp = cp.VibrationCompensator(kind, key=jax.random.key(10 + i))
+            fit = dict(key=jax.random.key(20 + i), epochs=3, learning_rate=0.01 * (i + 1))
+            counted(f"fit_end_to_end, {kind}, set {i}",
+                    lambda c=comp, d=data, f=fit: cp.fit_end_to_end(c, imu, d, **f)[1])  # fmt: skip
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--no-full", action="store_true", help="only the sweeps (and --fog's)")
-    ap.add_argument("--fog", action="store_true", help="only the FOG compensation calls")
+    ap.add_argument("--fog", action="store_true", help="only the FOG compensation and fit calls")
     a = ap.parse_args()
     jax.monitoring.register_event_duration_secs_listener(_listen)
     if not a.fog:
@@ -112,3 +136,4 @@ if __name__ == "__main__":
         if not a.no_full:
             full_runs()
     fog_calls()
+    fog_fits()

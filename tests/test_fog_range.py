@@ -119,6 +119,35 @@ def test_a_second_record_of_the_same_shape_compiles_nothing(setup):
         assert r.n_out_of_range == 8 and bool(jnp.all(jnp.isfinite(r.gyro)))
 
 
+def test_a_second_fit_of_the_same_shapes_compiles_nothing(setup):
+    """Compile once: `fit` and `fit_end_to_end` jitted a fresh closure over the loss and the
+    data on every call, so each fit compiled its training program again (1 compile, 2-4 s).
+    A fit of other data, key or learning rate of the same shapes, or a refit of a trained
+    compensator, now reruns the first fit's program — and trains on the data it is given:
+    its last `train` loss is the loss of the weights it returns, recomputed in NumPy."""
+    imu, data, nets, _, _ = setup
+    other = eqx.tree_at(lambda d: (d.samples, d.raw), data, (-0.5 * data.samples, data.raw[::-1]))
+    fresh = lambda kind: cp.VibrationCompensator(kind, key=jax.random.key(7))  # noqa: E731
+    e2e = dict(key=jax.random.key(3), epochs=1)
+    cp.fit_end_to_end(fresh("mlp"), imu, data, **e2e)
+    for kind in cp.KINDS:
+        with CompileCounter() as counter:
+            c, hist = cp.fit(fresh(kind), other, key=jax.random.key(8), epochs=2,
+                             learning_rate=0.03)  # fmt: skip
+            cp.fit(nets[kind], data, key=jax.random.key(3), epochs=2)
+            cp.fit_end_to_end(fresh("mlp"), imu, other, **e2e, learning_rate=0.02)
+        assert (counter.compiles, counter.traces) == (0, 0), counter.names
+    # the MLP by hand: per axis a, y = W2 tanh(W1 x/x_scale + b1) + b2, in units of y_scale
+    (w1, b1), (w2, b2) = ((np.asarray(lay.weight), np.asarray(lay.bias)) for lay in c.net.layers)
+    x = np.asarray(other.features) / np.asarray(c.x_scale)
+    h = np.tanh(np.einsum("ahi,ski->skah", w1, x) + b1)
+    pred = np.einsum("aoh,skah->skao", w2, h)[..., 0] + b2[:, 0]
+    want = np.mean((pred - np.asarray(other.samples) / float(c.y_scale)) ** 2)
+    np.testing.assert_allclose(hist["train"][-1], want, rtol=1e-12)
+    with pytest.raises(ValueError, match=r"^epochs must be an integer >= 1; got 2.5$"):
+        cp.fit(fresh("mlp"), data, key=jax.random.key(3), epochs=2.5)
+
+
 def test_margin_edges_and_rest(setup):
     c = setup[2]["mlp"]
     (f0, f1), (a0, a1) = c.feature_range

@@ -40,14 +40,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from .._checks import concrete_value, host_value
-from .._compiled import fused
+from .._compiled import device, fused
 from .._x64 import require_x64
 from ..ins.constants import earth_rate_ned
 from ..nn.elman import Elman
 from ..nn.mlp import MLP
+from ..nn.train import adam_epochs
 from ..units import DEG_PER_H
 from .heading import align_record, heading_limit_deg, imu_log
 from .spectrum import EdgeToneWarning, off_axis, vibration_features
@@ -237,60 +237,43 @@ def reference_output(imu: FogImu, rec: VibrationRecord):
     return imu.gyro.sensor(w_b)
 
 
-def _train(comp, loss_fn, n_seq, *, epochs, batch_size, learning_rate, key, eval_fns):
-    """Adam over shuffled mini-batches of sequences; history of each `eval_fns` per epoch."""
-    if epochs < 1 or batch_size < 1:
-        raise ValueError(f"epochs and batch_size must be >= 1; got {epochs}, {batch_size}")
-    batch_size = min(batch_size, n_seq)
-    n_batches = n_seq // batch_size
-    params, static = eqx.partition(comp, eqx.is_inexact_array)
-    # the normalisation constants are not trained
-    params = eqx.tree_at(lambda c: (c.x_scale, c.y_scale), params, replace=(None, None))
-    scales = (comp.x_scale, comp.y_scale)
+def _sample_loss(params, data, idx):
+    """`fit`'s loss on sequences `idx`: mean squared error of the predicted samples, in units
+    of `y_scale`."""
+    c = eqx.combine(params, data["frozen"])
+    pred = jax.vmap(c.normalised)(data["x"][idx])
+    return jnp.mean((pred - data["y"][idx] / c.y_scale) ** 2)
 
-    def rebuild(p):
-        c = eqx.combine(p, static)
-        return eqx.tree_at(
-            lambda c: (c.x_scale, c.y_scale), c, replace=scales, is_leaf=lambda x: x is None
+
+def _output_loss(params, data, idx):
+    """`fit_end_to_end`'s loss on sequences `idx`: the compensated raw output against the
+    static reference, in units of `y_scale`."""
+    c = eqx.combine(params, data["frozen"])
+    pred = jax.vmap(c)(data["x"][idx])
+    resid = data["raw"][idx] - to_sensor(data["gyro"], pred) - data["ref"].reshape(1, 1, 3)
+    return jnp.mean((resid / c.y_scale) ** 2)
+
+
+def _scores(loss, params, data):
+    """Per epoch: the loss over all training sequences and, with a test set, its sample
+    loss and its RMSE against the noise-free error [rad/s]."""
+    out = [loss(params, data, jnp.arange(data["x"].shape[0]))]
+    test = data["test"]
+    if test is not None:
+        c = eqx.combine(params, data["frozen"])
+        out.append(
+            jnp.mean((jax.vmap(c.normalised)(test.features) - test.samples / c.y_scale) ** 2)
         )
+        out.append(rmse(c, test, extrapolate=True))
+    return jnp.stack(out)
 
-    total = epochs * n_batches
-    warm = total // 20 + 1
 
-    def schedule(count):  # linear warm-up, cosine decay to 2 % (dtype-explicit)
-        c = jnp.asarray(count).astype(comp.y_scale.dtype)
-        frac = jnp.clip((c - warm) / max(total - warm, 1), 0.0, 1.0)
-        decay = learning_rate * (0.02 + 0.98 * 0.5 * (1.0 + jnp.cos(jnp.pi * frac)))
-        return jnp.where(c < warm, learning_rate * c / warm, decay)
+def _sample_scores(params, data):
+    return _scores(_sample_loss, params, data)
 
-    opt = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(schedule))
 
-    @jax.jit
-    def run(params, key):
-        def epoch(carry, k):
-            p, state = carry
-            order = jax.random.permutation(k, n_seq)[: n_batches * batch_size]
-
-            def step(carry, idx):
-                p, state = carry
-                g = jax.grad(lambda p: loss_fn(rebuild(p), idx))(p)
-                updates, state = opt.update(g, state, p)
-                return (optax.apply_updates(p, updates), state), None
-
-            (p, state), _ = jax.lax.scan(step, (p, state), order.reshape(n_batches, batch_size))
-            c = rebuild(p)
-            return (p, state), jnp.stack([f(c) for f in eval_fns])
-
-        (p, _), hist = jax.lax.scan(
-            epoch, (params, opt.init(params)), jax.random.split(key, epochs)
-        )
-        return p, hist
-
-    # optax's Adam bias correction mixes int and float: trace it under standard promotion
-    # whatever the caller's setting
-    with jax.numpy_dtype_promotion("standard"):
-        p, hist = run(params, key)
-    return rebuild(p), hist
+def _output_scores(params, data):
+    return _scores(_output_loss, params, data)
 
 
 def fit(
@@ -301,13 +284,9 @@ def fit(
     `y_scale`). **Returns** `(trained, history)`: `history` has the per-epoch `train` loss
     and, with `test`, the `test` loss and RMSE against the noise-free truth [rad/s]."""
     require_x64("fog.compensation.fit")
-    x, y = train.features, train.samples
-
-    def loss(c, idx):
-        pred = jax.vmap(c.normalised)(x[idx])
-        return jnp.mean((pred - y[idx] / c.y_scale) ** 2)
-
-    return _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate)
+    data = dict(x=train.features, y=train.samples)
+    return _fit(comp, _sample_loss, _sample_scores, data, train, test, key, epochs, batch_size,
+                learning_rate)  # fmt: skip
 
 
 def fit_end_to_end(
@@ -320,14 +299,9 @@ def fit_end_to_end(
     against the static model's reference output, in units of `y_scale`. No static record and
     no error samples are formed. **Returns** `(trained, history)` as [`fit`][hrgjax.fog.compensation.fit]."""
     require_x64("fog.compensation.fit_end_to_end")
-    x, raw, ref = train.features, train.raw, train.reference
-
-    def loss(c, idx):
-        pred = jax.vmap(c)(x[idx])
-        resid = raw[idx] - to_sensor(imu.gyro, pred) - ref.reshape(1, 1, 3)
-        return jnp.mean((resid / c.y_scale) ** 2)
-
-    return _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate)
+    data = dict(x=train.features, raw=train.raw, ref=train.reference, gyro=imu.gyro)
+    return _fit(comp, _output_loss, _output_scores, data, train, test, key, epochs, batch_size,
+                learning_rate)  # fmt: skip
 
 
 LEARNING_RATE = {"elman": 1e-2, "mlp": 5e-2}
@@ -415,21 +389,29 @@ def _same_window(comp: VibrationCompensator, window_s, what: str) -> float:
     return w
 
 
-def _with_window(comp: VibrationCompensator, window_s: float, axis=None, box=None):
-    """A copy of `comp` that records the window (and, when known, the vibration direction
-    and feature range) it was trained on (static fields, which `eqx.tree_at` cannot set)."""
+def _replaced(comp: VibrationCompensator, **fields):
+    """A copy of `comp` with `fields` set (static fields, which `eqx.tree_at` cannot set)."""
     new = object.__new__(type(comp))
     for f in dataclasses.fields(comp):
-        object.__setattr__(new, f.name, getattr(comp, f.name))
-    object.__setattr__(new, "window_s", _window(window_s))
-    if axis is not None:
-        object.__setattr__(new, "axis", _unit(axis))
-    if box is not None:
-        object.__setattr__(new, "feature_range", _box(box))
+        object.__setattr__(new, f.name, fields.get(f.name, getattr(comp, f.name)))
     return new
 
 
-def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
+def _with_window(comp: VibrationCompensator, window_s: float, axis=None, box=None):
+    """A copy of `comp` that records the window (and, when known, the vibration direction
+    and feature range) it was trained on."""
+    new = {"window_s": _window(window_s)}
+    if axis is not None:
+        new["axis"] = _unit(axis)
+    if box is not None:
+        new["feature_range"] = _box(box)
+    return _replaced(comp, **new)
+
+
+def _fit(comp, loss, scores, data, train, test, key, epochs, batch_size, learning_rate):
+    """`comp` trained by Adam on `loss` over `data` (`nn.train.adam_epochs`: one compiled
+    program per loss, shapes and settings; the data, weights, key and learning rate are
+    its arguments, so a second fit of the same shapes compiles nothing)."""
     _same_window(comp, train.window_s, "fit")
     axis = _same_axis(comp.axis, train.axis, "fit")
     if test is not None:
@@ -437,28 +419,29 @@ def _fit(comp, loss, train, test, key, epochs, batch_size, learning_rate):
         _same_axis(axis, test.axis, "fit (test set)")
     if learning_rate is None:
         learning_rate = LEARNING_RATE[comp.kind]
-    n = train.features.shape[0]
-    all_idx = jnp.arange(n)
-    evals = [lambda c: loss(c, all_idx)]
-    if test is not None:
-        evals += [
-            lambda c: jnp.mean(
-                (jax.vmap(c.normalised)(test.features) - test.samples / c.y_scale) ** 2
-            ),
-            lambda c: rmse(c, test, extrapolate=True),
-        ]
-    trained, hist = _train(
-        comp, loss, n, epochs=epochs, batch_size=batch_size, learning_rate=learning_rate,
-        key=key, eval_fns=evals,
+    # the static fields the training does not read (a trained compensator's window, axis
+    # and range: set again below) are cleared, so that a refit runs the same program; the
+    # normalisation constants are not trained
+    bare = _replaced(comp, window_s=None, axis=None, feature_range=None)
+    params, frozen = eqx.partition(bare, eqx.is_inexact_array)
+    scales = (comp.x_scale, comp.y_scale)
+    params = eqx.tree_at(lambda c: (c.x_scale, c.y_scale), params, replace=(None, None))
+    frozen = eqx.tree_at(lambda c: (c.x_scale, c.y_scale), frozen, replace=scales,
+                         is_leaf=lambda x: x is None)  # fmt: skip
+    p, hist = adam_epochs(
+        loss, scores, params, data | {"frozen": frozen, "test": test}, train.features.shape[0],
+        key=key, epochs=epochs, batch_size=batch_size, learning_rate=learning_rate,
     )  # fmt: skip
-    if not bool(jnp.all(jnp.isfinite(hist[:, 0]))):
-        bad = int(jnp.argmax(~jnp.isfinite(hist[:, 0])))
+    trained = eqx.combine(p, frozen)
+    hist = np.asarray(hist)  # checked and split on the host: no eager device programs
+    if not np.isfinite(hist[:, 0]).all():
+        bad = int(np.argmax(~np.isfinite(hist[:, 0])))
         raise RuntimeError(
             f"training diverged: the loss is not finite from epoch {bad} (lower learning_rate)"
         )
-    history = {"train": hist[:, 0]}
+    history = {"train": device(hist[:, 0])}
     if test is not None:
-        history |= {"test": hist[:, 1], "test_rmse": hist[:, 2]}
+        history |= {"test": device(hist[:, 1]), "test_rmse": device(hist[:, 2])}
     return _with_window(trained, train.window_s, axis, _trained_box(train.features)), history
 
 

@@ -1,9 +1,11 @@
-"""Full-batch training loops in one `lax.scan` (no Python loop over steps)."""
+"""Training loops in one `lax.scan` (no Python loop over steps): full-batch Rprop, and Adam
+on shuffled mini-batches ([`adam_epochs`][hrgjax.nn.train.adam_epochs])."""
 
 from __future__ import annotations
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import optax
 
@@ -132,3 +134,66 @@ def rprop_with_progress(
             progress.update(length)
             progress.set_postfix_str(f"loss {float(losses[-1][-1]):.4g}")
     return params, device(np.concatenate(losses))
+
+
+def adam_epochs(
+    loss_fn, eval_fn, params, data, n_items: int, *, key: jax.Array, epochs: int,
+    batch_size: int, learning_rate,
+):  # fmt: skip
+    """`epochs` passes of Adam (optax, gradients clipped to global norm 1) over `n_items`
+    items in shuffled mini-batches of `batch_size` (at most `n_items`; each epoch's last
+    partial batch is left out). The learning rate warms up linearly over the first
+    `total // 20 + 1` of the `total` updates, then decays along a cosine to 2 % of the peak
+    `learning_rate` (dimensionless, per update).
+
+    `loss_fn(params, data, idx)` → scalar loss on the items `idx` (batch_size,) int;
+    `eval_fn(params, data)` → (m,) values recorded after each epoch. **Returns**
+    `(params, history)`, `history` (epochs, m).
+
+    **Compiled once:** one program per `loss_fn`, `eval_fn`, the structure and shapes of
+    `params` and `data` (its non-array leaves are static), `n_items`, `epochs` and
+    `batch_size`; `params`, `data`'s arrays, `key` and `learning_rate` are traced, so a later
+    call with other values of the same shapes compiles nothing. `loss_fn` and `eval_fn` must
+    therefore be module-level functions, not fresh closures (each would compile anew).
+
+    **Raises:** `ValueError` for `epochs` or `batch_size` not an integer >= 1."""
+    for name, v in (("epochs", epochs), ("batch_size", batch_size)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
+    batch_size = min(int(batch_size), int(n_items))
+    # optax's Adam bias correction mixes int and float: traced under standard promotion
+    # whatever the caller's setting
+    with jax.numpy_dtype_promotion("standard"):
+        return _adam_program(loss_fn, eval_fn, params, data, key, device(learning_rate, float),
+                             int(n_items), int(epochs), batch_size)  # fmt: skip
+
+
+@eqx.filter_jit
+def _adam_program(loss_fn, eval_fn, params, data, key, learning_rate, n_items, epochs, batch):
+    n_batches = n_items // batch
+    total = epochs * n_batches
+    warm = total // 20 + 1
+
+    def schedule(count):  # linear warm-up, cosine decay to 2 % (dtype-explicit)
+        c = jnp.asarray(count).astype(learning_rate.dtype)
+        frac = jnp.clip((c - warm) / max(total - warm, 1), 0.0, 1.0)
+        decay = learning_rate * (0.02 + 0.98 * 0.5 * (1.0 + jnp.cos(jnp.pi * frac)))
+        return jnp.where(c < warm, learning_rate * c / warm, decay)
+
+    opt = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(schedule))
+
+    def epoch(carry, k):
+        p, state = carry
+        order = jax.random.permutation(k, n_items)[: n_batches * batch]
+
+        def step(carry, idx):
+            p, state = carry
+            g = jax.grad(loss_fn)(p, data, idx)
+            updates, state = opt.update(g, state, p)
+            return (optax.apply_updates(p, updates), state), None
+
+        (p, state), _ = jax.lax.scan(step, (p, state), order.reshape(n_batches, batch))
+        return (p, state), eval_fn(p, data)
+
+    (p, _), hist = jax.lax.scan(epoch, (params, opt.init(params)), jax.random.split(key, epochs))
+    return p, hist
