@@ -21,9 +21,8 @@ probable hypothesis fails it).
 4. The model-fit test's false "does not fit" rate under the matched model: the exact
    Kalman filter's (independent bank, S0) at levels 1e-2 and 1e-3, and the IMMs' −2 rate.
 
-5. (`--from-t0` alone) The former IMMs' measured limit, now the check of the second-order
-   merge (docs/diagnosis.md, "Calibration"): a fault present from sample 0 under a uniform
-   prior, at the current settings (`switch_prob` 1e-4,
+5. (`--from-t0` alone) The measured limit of the IMMs (docs/diagnosis.md): a fault present
+   from sample 0 under a uniform prior, at the current settings (`switch_prob` 1e-4,
    `fault_walk` 1e-9, no fit test): steps after the fifth at max-p > 0.99 and the share of
    them naming the wrong hypothesis — records from the bank's prior, and a fixed ±2e-7
    fault in INS (run mod 3).

@@ -13,9 +13,8 @@ model adaptive estimation, where a hypothesis driven to 0 can never come back. D
 (eq. 10): $i^* = \arg\max_i g^i_k$ when $g^{i^*}_k > A$, else undecided (−1).
 
 This is the bank of independent filters with Markov hypothesis transitions; the thesis's
-optimal algorithm (eq. 9) also mixes the filters' estimates across transitions — its
-poly-Gaussian approximation of second order (GPB2: every transition j → i filtered and
-scored on its own, then merged per hypothesis) is what
+optimal algorithm (eq. 9) also mixes the filters' estimates across transitions — the
+sub-optimal poly-Gaussian version of it is the interacting multiple model, which
 [`run_bank`][hrgjax.diagnosis.filter_bank.run_bank] gives with `interacting=True`.
 
 **The probabilities are conditional on the bank's model.** Each step also gives every
@@ -35,9 +34,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaincc, logsumexp
 
+from .._checks import check_covariance, check_finite_host, is_concrete
 from .._linalg import cho_logdet, cho_solve, cholesky
 from ..kalman import LOG_2PI, Gaussian, predict, update
-from ._bank_checks import check_bank, check_model, check_zs, concrete
 
 
 class Bank(eqx.Module):
@@ -75,7 +74,7 @@ class Bank(eqx.Module):
         if not 0.0 <= switch_prob < 1.0:
             raise ValueError(f"switch_prob must be in [0, 1); got {switch_prob}")
         for i, mod in enumerate(models):
-            check_model(i, mod, models[0])
+            _check_model(i, mod, models[0])
         parts = [jnp.stack([jnp.asarray(mod[k], float) for mod in models]) for k in range(6)]
         if m == 1:
             trans = jnp.ones((1, 1))
@@ -104,42 +103,78 @@ class Bank(eqx.Module):
         return self.phi.shape[0]
 
 
+_FIELDS = ("phi", "qd", "h", "r", "x0", "p0")
+
+
+def _check_model(i, mod, first):
+    """Model `i` of `Bank.build`: a `(phi, qd, h, r, x0, p0)` tuple whose shapes fit each other
+    and the first model's (trace time), with finite values, `qd` and `p0` symmetric positive
+    semi-definite and `r` positive-definite when they are concrete (one line naming the model
+    and the field: a negative variance made every probability NaN, every decision undecided)."""
+    if len(mod) != 6:
+        raise ValueError(f"model {i} must be a (phi, qd, h, r, x0, p0) tuple; got {len(mod)} items")
+    n_shape, h_shape = np.shape(first[0]), np.shape(first[2])
+    n = n_shape[0] if len(n_shape) == 2 and n_shape[0] == n_shape[1] else None
+    m = h_shape[0] if len(h_shape) == 2 else None
+    if n is None or m is None:
+        raise ValueError(
+            f"model 0's phi must be (n, n) and h (m, n); got phi {n_shape}, h {h_shape}"
+        )
+    want = {"phi": (n, n), "qd": (n, n), "h": (m, n), "r": (m, m), "x0": (n,), "p0": (n, n)}
+    form = {"phi": "(n, n)", "qd": "(n, n)", "h": "(m, n)", "r": "(m, m)", "x0": "(n,)",
+            "p0": "(n, n)"}  # fmt: skip
+    for name, a in zip(_FIELDS, mod, strict=True):
+        if np.shape(a) != want[name]:
+            raise ValueError(f"model {i}'s {name} must be {form[name]} = {want[name]} (n = {n} "
+                             f"states, m = {m} measurements); got {np.shape(a)}")  # fmt: skip
+    phi, qd, h, r, x0, p0 = mod
+    for name, a in (("phi", phi), ("h", h), ("x0", x0)):
+        check_finite_host(f"model {i}'s {name}", a)
+    check_covariance(f"model {i}'s qd", qd, form=f"(n, n) = ({n}, {n})")
+    check_covariance(f"model {i}'s r", r, definite=True, form=f"(m, m) = ({m}, {m})")
+    check_covariance(f"model {i}'s p0", p0, form=f"(n, n) = ({n}, {n})")
+
+
+def _check_bank(bank: Bank):
+    """A bank's concrete values (a `Bank` made directly, or changed after `Bank.build`):
+    finite, `qd` and `p0` symmetric positive semi-definite, `r` positive-definite, per
+    hypothesis; traced fields pass (no run-time check)."""
+    for name in ("phi", "h", "x0", "z_offset"):
+        check_finite_host(f"bank.{name}", getattr(bank, name))
+    n, m = bank.phi.shape[-1], bank.h.shape[-2]
+    for name, definite, size in (("qd", False, n), ("r", True, m), ("p0", False, n)):
+        check_covariance(f"bank.{name}", getattr(bank, name), definite=definite,
+                         form=f"({size}, {size})", index="hypothesis")  # fmt: skip
+
+
 def _normalise(lp, log_floor):
     lp = lp - logsumexp(lp)
     lp = jnp.maximum(lp, log_floor)
     return lp - logsumexp(lp)
 
 
-def _transitions(gs: Gaussian, bank: Bank):
-    """The start of every transition (to i, from j): j's posterior, with i's own (`reset`)
-    states at i's prior when i ≠ j — (M_i, M_j, n) means, (M_i, M_j, n, n) covariances."""
-    r = _reset_pairs(bank)
-    xs = jnp.where(r, bank.x0[:, None, :], gs.x[None, :, :])
+def _mix_weights(lp_prev, bank: Bank):
+    """Mixing weights w[j, i] = P(came from j | now in i) and, per (to i, from j), the mask of
+    states that restart at the target's prior."""
+    lw = lp_prev[:, None] + bank.log_trans  # (from j, to i)
+    lw = lw - logsumexp(lw, axis=0, keepdims=True)
+    other = ~jnp.eye(bank.size, dtype=bool)  # (to i, from j)
+    return jnp.exp(lw), bank.reset[:, None, :] & other[:, :, None]
+
+
+def _mix(gs: Gaussian, lp_prev, bank: Bank):
+    """IMM mixing: each filter starts from the mixture of all filters' estimates weighted by
+    the probability of having come from them; a component coming from another hypothesis
+    has the target's own (`reset`) states at the target's prior."""
+    w, r = _mix_weights(lp_prev, bank)  # w columns sum to 1; r (i, j, n)
+    xs = jnp.where(r, bank.x0[:, None, :], gs.x[None, :, :])  # component (i, j)
     rr = r[..., :, None] | r[..., None, :]
     both = r[..., :, None] & r[..., None, :]
     ps = jnp.where(rr, jnp.where(both, bank.p0[:, None], 0.0), gs.P[None, :])
-    return Gaussian(xs, ps)
-
-
-def _reset_pairs(bank: Bank):
-    """(to i, from j, n): the states that restart at i's prior on the transition j → i."""
-    other = ~jnp.eye(bank.size, dtype=bool)
-    return bank.reset[:, None, :] & other[:, :, None]
-
-
-def _merge(g2: Gaussian, ll2, nis2, lp_prev, log_trans, log_floor):
-    """Second-order (GPB2) merge: each transition j → i weighted by p_j p^{ji} and its own
-    likelihood; i's probability is the sum of its transitions', its estimate their moment-
-    matched mixture, its NIS that of its most probable transition."""
-    lw = lp_prev[None, :] + log_trans.T + ll2  # (to i, from j)
-    lp = logsumexp(lw, axis=1)
-    w = jnp.exp(lw - lp[:, None])
-    x = jnp.einsum("ij,ijn->in", w, g2.x)
-    d = g2.x - x[:, None, :]
-    p = jnp.einsum("ij,ijnk->ink", w, g2.P) + jnp.einsum("ij,ijn,ijk->ink", w, d, d)
-    p = 0.5 * (p + p.swapaxes(-1, -2))
-    nis = jnp.take_along_axis(nis2, jnp.argmax(w, axis=1)[:, None], axis=1)[:, 0]
-    return Gaussian(x, p), _normalise(lp, log_floor), nis
+    x = jnp.einsum("ji,ijn->in", w, xs)
+    d = xs - x[:, None, :]
+    p = jnp.einsum("ji,ijnk->ink", w, ps) + jnp.einsum("ji,ijn,ijk->ink", w, d, d)
+    return Gaussian(x, p)
 
 
 FIT_WINDOW = 50
@@ -166,10 +201,10 @@ def run_bank(
 
     **Arguments:** `floor`: smallest probability a hypothesis may hold (> 0); `prior` (M,)
     initial probabilities (default uniform); `threshold`: A of eq. (10); `interacting`: mix
-    the estimates across hypotheses each step (second-order merge: each transition weighted
-    by its own likelihood) instead of independent filters. Mixing before the update (the
-    classic IMM) put a "switched in now" component into each less probable hypothesis and
-    ran the leader to p ≈ 1 right or not (`docs/diagnosis.md`, "Calibration");
+    the estimates across hypotheses each step (IMM) instead of independent filters — its
+    probabilities are claims for records that start healthy: with a fault from the first
+    sample under a uniform prior (`switch_prob` 1e-4) ≈ half its steps above 0.99 name the
+    wrong hypothesis (`docs/diagnosis.md`, "Measured limit");
     `fit_window`, `fit_level`: the model-fit test of
     [`model_fit`][hrgjax.diagnosis.filter_bank.model_fit] — a step whose most probable
     hypothesis fails it is decided −2 (`fit_level=None`, the default: no test, the
@@ -184,8 +219,8 @@ def run_bank(
     means are each filter's posterior estimate."""
     lp0, log_floor = _start(bank.size, floor, prior, threshold)
     _check_fit(fit_window, fit_level)
-    check_bank(bank)
-    zs = check_zs(zs, bank, (2,))
+    _check_bank(bank)
+    zs = _check_zs(zs, bank, (2,))
     probs, nis, means = _run(bank, zs, log_floor, lp0, interacting)
     m = bank.h.shape[1]
     decisions, fit = _decide_fit(probs, nis, m, threshold, int(fit_window), fit_level, return_fit)
@@ -254,7 +289,7 @@ def _start(m, floor, prior, threshold):
     with jax.numpy_dtype_promotion("standard"):
         if prior is None:
             lp0 = jnp.full(m, -jnp.log(float(m)))
-        elif (p := concrete(prior)) is None:  # traced: checked by the caller's trace
+        elif (p := _concrete(prior)) is None:  # traced: checked by the caller's trace
             lp0 = jnp.log(jnp.asarray(prior, float))
         else:
             if p.shape != (m,) or not np.all(np.isfinite(p)) or np.any(p < 0) or p.sum() <= 0:
@@ -264,6 +299,40 @@ def _start(m, floor, prior, threshold):
                 )
             lp0 = jnp.log(jnp.asarray(p / p.sum()))
     return lp0, jnp.log(jnp.asarray(floor))
+
+
+def _concrete(x):
+    """`x` as a float64 NumPy array, or None when it is traced (inside a caller's `jit`)."""
+    return np.asarray(x, dtype=float) if is_concrete(x) else None
+
+
+def _check_zs(zs, bank: Bank, ndims):
+    """`zs` as float64 (…, K, m), refused with a one-line error when its shape does not match
+    the bank's measurement (m columns, one per pair) or when a value is not finite (one NaN
+    would make every later probability NaN)."""
+    m = bank.h.shape[1]
+    shape = " or ".join({2: "(K, m)", 3: "(runs, K, m)"}[d] for d in ndims)
+    z = _concrete(zs)
+    traced = z is None
+    z = jnp.asarray(zs, float) if traced else z
+    if z.ndim not in ndims or z.shape[-1] != m:
+        hint = ""
+        if z.ndim in ndims and z.shape[-2] == m:
+            hint = " (transposed? time runs along the second-to-last axis)"
+        raise ValueError(
+            f"zs must have shape {shape} with m = {m} (one column per measured pair the bank "
+            f"models; fault_bank: pairs (0, j), j = 1 … {m}, in order); got {z.shape}{hint}"
+        )
+    if not traced:
+        bad = ~np.isfinite(z)
+        if bad.any():
+            where = np.argwhere(bad)[0]
+            at = f"step {where[-2]}" + (f" of run {where[0]}" if z.ndim == 3 else "")
+            raise ValueError(
+                f"zs has a non-finite value ({z[tuple(where)]}) at {at}, column {where[-1]}: "
+                "the hypothesis probabilities would be NaN from there on; drop or fill it"
+            )
+    return jnp.asarray(z, float)
 
 
 def _probabilities(lp, ll, log_trans, log_floor):
@@ -282,26 +351,37 @@ class GainBank(eqx.Module):
     matrix–vector products per hypothesis and step. For the independent bank this is
     exact.
 
-    The interacting bank mixes covariances too, which depends on the data. Its gain-schedule
-    form filters every transition j → i with i's step from the covariance j's schedule
-    points at (i's `reset` states, a fault's size, at their prior when i ≠ j) and merges
-    the estimates exactly, as `run_bank`; for the covariances it keeps two components per
-    fault hypothesis: *present from the start* (its plain schedule) and *entered since*
-    (its onset schedule — the recursion from the healthy filter's converged covariance with
-    the reset states at their prior — at the age whose reset-state variance matches the
-    merged entries', their spread included). A switch enters the target's onset component
-    (S0, without reset states, its plain one). One component per hypothesis, its schedule
-    the most probable transition's, missed a 3e-8 fault that the full form names: the
-    plain schedule's fault variance is unobservable-large but correlated with the sensor
-    error, the onset one's is not. The first `warmup` steps use the plain schedules.
+    The interacting bank (IMM) mixes covariances too, which depends on the data. Its
+    gain-schedule form keeps two things of the mixing:
+
+    - a fault hypothesis (one with `reset` states, a fault's size) restarts them at its
+      prior when it is entered, so it has an *onset* schedule too — the recursion started
+      from the healthy filter's converged covariance with its reset states at their prior —
+      indexed by the number of steps it has been the most probable hypothesis (0 while it
+      is not: it is re-entered from the leading one at every step). The first `warmup`
+      steps (the filters' start-up transient) use the plain schedules;
+    - a hypothesis without reset states (S0) steps from its own schedule while its own
+      covariance dominates its mixed one (own mixing weight × m against the other weights
+      × m plus the spread of the mixed estimates through its S), else from the covariance
+      of the hypothesis it is mixed from most (that one's schedule at that step): the
+      leader's after an onset, when the IMM's mixing starts it mostly from the leader's
+      estimate. Kept on its own healthy schedule always, S0 named a fault and then took
+      the decision back within ≈ 35 s while the fault persisted (its healthy gain absorbs
+      the step into its sensor-error state). Stepped from the leader's covariance whenever
+      it did not lead, it lost healthy records under a uniform prior: the hypotheses start
+      level, a fault hypothesis leads for a step, S0's S (determinant ≈ e⁵ larger) cost it
+      ≈ 2.7 nats a step and it never led again — 4 of 5 healthy 400-s records decided a
+      fault on ≈ 92 % of their steps where the full IMM decides S0.
+
+    The estimates are mixed exactly; the covariances are those of the schedules. Agreement
+    with the full IMM: `docs/diagnosis.md`.
 
     **Fields:** `bank`; `gain` (M, L, n, m), `s_inv` (M, L, m, m) and `logdet` (M, L):
     each filter's schedule from `p0` (the independent bank); `from_gain`
     (2, M, M, L, n, m), `from_s_inv` (2, M, M, L, m, m), `from_logdet` (2, M, M, L):
     [schedule (0 plain, 1 onset), source hypothesis j, hypothesis i, step] — i's step from
     j's covariance before step τ of j's schedule, with i's reset states at their prior
-    when i ≠ j (the diagonal is each hypothesis's own schedule); `reset_var` (2, M, L): the
-    reset states' variance summed, before each step of each schedule; `warmup`. Memory grows as
+    when i ≠ j (the diagonal is each hypothesis's own schedule); `warmup`. Memory grows as
     M² L: 4 hypotheses of 21 states over 1000 steps take 12 MB."""
 
     bank: Bank
@@ -311,7 +391,6 @@ class GainBank(eqx.Module):
     from_gain: jax.Array
     from_s_inv: jax.Array
     from_logdet: jax.Array
-    reset_var: jax.Array
     warmup: int = eqx.field(static=True)
 
     @classmethod
@@ -331,7 +410,7 @@ class GainBank(eqx.Module):
         warmup = min(50, n_steps) if warmup is None else warmup
         if isinstance(warmup, bool) or not 0 <= int(warmup) <= n_steps:
             raise ValueError(f"warmup must be an integer in [0, n_steps={n_steps}]; got {warmup!r}")
-        check_bank(bank)
+        _check_bank(bank)
         track = jax.vmap(lambda *a: _track(*a, n_steps))
         k, s, plain = track(bank.phi, bank.qd, bank.h, bank.r, bank.p0)
         p_on = _restart(bank.reset, bank.p0, plain[int(healthy), -1][None])
@@ -344,9 +423,7 @@ class GainBank(eqx.Module):
         cross, s_from = jax.vmap(lambda p: _from_each(bank, p))(src)
         s_inv, logdet = _inv_logdet(s_from)
         gain = jnp.einsum("...nc,...cd->...nd", cross, s_inv)
-        reset_var = jnp.einsum("sild,id->sil", jnp.diagonal(src, axis1=-2, axis2=-1),
-                               bank.reset.astype(src.dtype))  # fmt: skip
-        return cls(bank, k, *_inv_logdet(s), gain, s_inv, logdet, reset_var, int(warmup))
+        return cls(bank, k, *_inv_logdet(s), gain, s_inv, logdet, int(warmup))
 
 
 def _restart(reset, p0, p):
@@ -428,8 +505,8 @@ def run_gains(
     dict of `run_bank`; the NIS uses each step's scheduled S)."""
     lp0, log_floor = _start(gb.bank.size, floor, prior, threshold)
     _check_fit(fit_window, fit_level)
-    check_bank(gb.bank)
-    zs = check_zs(zs, gb.bank, (2, 3))
+    _check_bank(gb.bank)
+    zs = _check_zs(zs, gb.bank, (2, 3))
     fn = lambda z: _run_gains(gb, z, log_floor, lp0, interacting)
     probs, nis = fn(zs) if zs.ndim == 2 else jax.vmap(fn)(zs)
     m = gb.bank.h.shape[1]
@@ -440,78 +517,51 @@ def run_gains(
 @eqx.filter_jit
 def _run_gains(gb, zs, log_floor, lp0, interacting):
     b = gb.bank
-    m, big = b.h.shape[1], b.size
+    m = b.h.shape[1]
     last = gb.gain.shape[1] - 1
-    hyp = jnp.arange(big)
+    hyp = jnp.arange(b.size)
     has_onset = jnp.any(b.reset, axis=1)
-    # components: c < M hypothesis c on its plain schedule (present from the start), c ≥ M
-    # hypothesis c − M entered since (its onset schedule); a switch enters the target's onset
-    # component (its plain one when it has no reset states: S0), never its plain one
-    hc, on = jnp.tile(hyp, 2), jnp.arange(2 * big) >= big
-    ok = ~on | has_onset[hc]
-    same = hc[:, None] == hc[None, :]  # (to d, from c)
-    entry = jnp.where(has_onset[hc], on, ~on)
-    allowed = ok[:, None] & ok[None, :] & (jnp.eye(2 * big, dtype=bool) | (~same & entry[:, None]))
-    log_t = jnp.where(allowed, b.log_trans[hc[None, :], hc[:, None]], -1e4)
-    reset = b.reset[hc][:, None, :] & ~same[:, :, None]
-    rmask = b.reset[hc].astype(zs.dtype)
-    comp = jnp.arange(2 * big)
+    hphi = jnp.einsum("hmi,hin->hmn", b.h, b.phi)  # each hypothesis's predicted z
 
     def step(carry, inp):
-        x, lp, sched, tau = carry
+        x, lp, lead = carry
         z, k = inp
         if interacting:
-            # every allowed transition c → d from c's estimate (d's reset states at their
-            # prior on a switch), d's step from the covariance c's schedule points at
-            xs = jnp.where(reset, b.x0[hc][:, None, :], x[None, :, :])
-            pick = (sched[None, :], hc[None, :], hc[:, None], jnp.minimum(tau, last)[None, :])
+            # a fault hypothesis runs its own schedule (the onset one from its entry). One
+            # without reset states (S0) steps from its own covariance while that dominates its
+            # mixed one, in the units of its own S: own weight × m against the others'
+            # weights × m plus the spread of the mixed estimates (a level start: drawn from
+            # itself, estimates agree); else from the covariance of the hypothesis it is
+            # drawn from most (the leader's after an onset: drawn from it, or spread)
+            w, r = _mix_weights(lp, b)
+            xs = jnp.where(r, b.x0[:, None, :], x[None, :, :])  # component (to i, from j)
+            x = jnp.einsum("ji,ijn->in", w, xs)
+            dev = jnp.einsum("imn,ijn->ijm", hphi, xs - x[:, None, :])
+            own = gb.s_inv[:, jnp.minimum(k, last)]  # each one's own schedule
+            spread = jnp.einsum("ji,ijm,imc,ijc->i", w, dev, own, dev)
+            w_own = jnp.diagonal(w)
+            keep = w_own * m >= (1.0 - w_own) * m + spread
+            other = jnp.argmax(jnp.where(jnp.eye(b.size, dtype=bool), -1.0, w), axis=0)
+            drawn = jnp.where(keep, hyp, other)
+            onset = has_onset & (k >= gb.warmup)
+            src = jnp.where(has_onset, hyp, drawn)
+            tau = jnp.minimum(jnp.where(onset[src], lead[src], k), last)
+            pick = (onset[src].astype(int), src, hyp, tau)
             gain, s_inv, logdet = gb.from_gain[pick], gb.from_s_inv[pick], gb.from_logdet[pick]
-            xp = jnp.einsum("dab,dcb->dca", b.phi[hc], xs)
-            nu = z[None, None, :] - b.z_offset[hc][:, None, :]
-            nu = nu - jnp.einsum("dab,dcb->dca", b.h[hc], xp)
-            xu = xp + jnp.einsum("dcab,dcb->dca", gain, nu)
-            nis2 = jnp.einsum("dca,dcab,dcb->dc", nu, s_inv, nu)
-            lw = lp[None, :] + log_t - 0.5 * (nis2 + logdet + m * LOG_2PI)
-            lpu = logsumexp(lw, axis=1)
-            w = jnp.exp(lw - lpu[:, None])
-            x = jnp.einsum("dc,dcn->dn", w, xu)
-            best = jnp.argmax(w, axis=1)
-            lph = jnp.logaddexp(lpu[:big], lpu[big:])
-            lp_h = _normalise(lph, log_floor)  # the floor, per hypothesis
-            lp = lpu + (lp_h - lph)[hc]
-            c = jnp.where(lpu[big:] > lpu[:big], hyp + big, hyp)  # each one's likelier component
-            nis = nis2[c, best[c]]
-            # an onset component's estimate mixes entries of different ages: it steps on
-            # from the onset schedule whose reset-state variance matches the mixture's (the
-            # spread of the transitions' reset states included); plain schedules, and all of
-            # them in the warm-up, step on
-            own = gb.reset_var[sched, hc, jnp.minimum(tau + 1, last)]
-            v = jnp.where(comp[:, None] == comp[None, :], own[:, None], gb.reset_var[1, hc, 1:2])
-            spread = jnp.einsum("dcn,dn->dc", (xu - x[:, None, :]) ** 2, rmask)
-            v_mix = jnp.einsum("dc,dc->d", w, v + spread)
-            age = jnp.maximum(jnp.sum(gb.reset_var[1, hc, 1:] >= v_mix[:, None], axis=1), 1)
-            age = jnp.where(sched == 1, age, jnp.where(best == comp, tau + 1, 1))
-            onset = on & (k >= gb.warmup)
-            tau = jnp.where(onset, age, tau + 1)
-            sched = jnp.where(onset, 1, sched)
         else:
             i = jnp.minimum(k, last)
             gain, s_inv, logdet = gb.gain[:, i], gb.s_inv[:, i], gb.logdet[:, i]
-            x = jnp.einsum("hij,hj->hi", b.phi, x)
-            nu = z[None, :] - b.z_offset - jnp.einsum("hij,hj->hi", b.h, x)
-            x = x + jnp.einsum("hij,hj->hi", gain, nu)
-            nis = jnp.einsum("hi,hij,hj->h", nu, s_inv, nu)
-            ll = -0.5 * (nis + logdet + m * LOG_2PI)
-            lp = lp_h = _probabilities(lp, ll, b.log_trans, log_floor)
-        return (x, lp, sched, tau), (lp_h, nis)
+        x = jnp.einsum("hij,hj->hi", b.phi, x)
+        nu = z[None, :] - b.z_offset - jnp.einsum("hij,hj->hi", b.h, x)
+        x = x + jnp.einsum("hij,hj->hi", gain, nu)
+        nis = jnp.einsum("hi,hij,hj->h", nu, s_inv, nu)
+        ll = -0.5 * (nis + logdet + m * LOG_2PI)
+        lp = _probabilities(lp, ll, b.log_trans, log_floor)
+        lead = jnp.where(hyp == jnp.argmax(lp), lead + 1, 0)
+        return (x, lp, lead), (lp, nis)
 
     steps = jnp.arange(zs.shape[0])
-    lp = _normalise(lp0, log_floor)
-    n_c = 2 * big if interacting else big
-    if interacting:
-        lp = jnp.concatenate([lp, jnp.full(big, -1e4)])  # all mass on the plain components
-    zero = jnp.zeros(n_c, steps.dtype)
-    carry = (jnp.tile(b.x0, (n_c // big, 1)), lp, zero, zero)
+    carry = (b.x0, _normalise(lp0, log_floor), jnp.zeros(b.size, steps.dtype))
     _, (lps, nis) = jax.lax.scan(step, carry, (zs, steps))
     return jnp.exp(lps), nis
 
@@ -523,19 +573,13 @@ def _run(bank, zs, log_floor, lp0, interacting):
         return g, ll, nu @ cho_solve(cholesky(s), nu)
 
     step_one = jax.vmap(one, in_axes=(0, 0, 0, 0, 0, 0, None))
-    # every transition (to i, from j): model i's filter step from j's posterior
-    step_pairs = jax.vmap(jax.vmap(one, in_axes=(0, None, None, None, None, None, None)),
-                          in_axes=(0, 0, 0, 0, 0, 0, None))  # fmt: skip
 
     def step(carry, z):
         gs, lp = carry
         if interacting:
-            g2, ll2, nis2 = step_pairs(_transitions(gs, bank), bank.phi, bank.qd, bank.h,
-                                       bank.r, bank.z_offset, z)  # fmt: skip
-            gs, lp, nis = _merge(g2, ll2, nis2, lp, bank.log_trans, log_floor)
-        else:
-            gs, ll, nis = step_one(gs, bank.phi, bank.qd, bank.h, bank.r, bank.z_offset, z)
-            lp = _probabilities(lp, ll, bank.log_trans, log_floor)
+            gs = _mix(gs, lp, bank)
+        gs, ll, nis = step_one(gs, bank.phi, bank.qd, bank.h, bank.r, bank.z_offset, z)
+        lp = _probabilities(lp, ll, bank.log_trans, log_floor)
         return (gs, lp), (lp, nis, gs.x)
 
     gs0 = Gaussian(bank.x0, bank.p0)
