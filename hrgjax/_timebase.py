@@ -20,14 +20,15 @@ t₀ + k·step (plus the stamps' own float64 rounding)."""
 
 
 STALL_FRACTION = 0.01
-"""Steps a fraction of a step off the uniform step (stalls, stray stamps) are left out of
-the step (`regular_step`) when they are at most this fraction of a record's steps; more,
-nearer than `STALL_OFF`, are the clock's own pattern and kept."""
+"""Steps off the uniform step are stray stamps, left out of the step (`regular_step`), when
+they are at most this fraction of a record's steps; more are the clock's own pattern, kept.
+The shortest this fraction of the steps is left out of the body stalls are told from."""
 
-STALL_OFF = 0.05
-"""A step more than this fraction of a step longer than the record's typical step is a
-stall, not the clock's own pattern (`regular_step`), unless as many are as far shorter
-(jitter) or the stamps count ticks of more than this (`millis()` at 70 Hz: 14 or 15 ms)."""
+STALL_GAP = 3.0
+"""A longer step is a stall (`regular_step`) only beyond an empty band above the record's
+typical step: a hole in its sorted steps wider than this many standard deviations of the
+steps under the hole (and than 1.5 of the narrowest other hole: a tick level missing,
+where the stamps count ticks)."""
 
 
 def regular_step(t) -> float:
@@ -35,18 +36,20 @@ def regular_step(t) -> float:
     steps (those strictly within half a median step of the median: a gap moves nothing, nor
     does a 1.5-step stall, as near two steps as one) about their median `c`:
 
-    - a step more than `STALL_OFF` (5 %) of `c` longer is a stall, always left out (the mean
-      of every regular step read 1.8e-3 … 7.7e-3 fast with 0.5–2 % of 1.4-step stalls and the
-      record was interpolated) — unless more than `STALL_FRACTION` of the steps are as far
-      shorter (a stall is never shorter): jitter (stamps ±30 %, a logger loop's ±1 ms),
-      where a stall is a step longer by 5 % more than the shortest is short; or the stamps
-      count ticks of over 5 % of a step and the longer steps are one tick long (`millis()`
-      at 70 Hz: 14 or 15 ms, a one-tick pattern, `_tick_band`);
-    - steps off `c` by more than `UNIFORM_TOLERANCE` plus the stamps' rounding but within
-      that are the clock's own pattern where they exceed `STALL_FRACTION` of the steps, and
-      the step is the mean of every step but the stalls: a clock counted in crystal ticks
-      (100 Hz from 32 768 Hz) steps 327 or 328 ticks, 32 % and 68 %, and only their mean is
-      the rate (the 328-tick steps alone read 99.902 Hz); jittered stamps likewise;
+    - longer steps beyond an empty band above `c` are stalls, left out: the first hole in
+      the sorted steps above `c` wider than `STALL_GAP` (3) standard deviations of the steps
+      under it and than 1.5 of the narrowest other hole (1.4-step stalls on a grid, or on a
+      `millis()` clock of 14 or 15 ms at 20 or 21 ms; the mean of every regular step read
+      1.8e-3 … 7.7e-3 fast with 0.5–2 % of them). Steps that fill the band are the clock's
+      own: a `time.sleep(0.01)` or polling loop's overshoot, only ever longer (10 ms + 0.3 ms
+      on average, stamped in µs, or in ms: 10, 11 or 12 ms, a ladder of ticks), jitter. One
+      tick longer, evenly spread (`millis()` at 98 Hz: 10 or 11 ms, `_tick_band`), is the
+      clock's own too; at random it is a stall (1.2-step stalls on a 10-ms grid);
+    - steps off `c` by more than `UNIFORM_TOLERANCE` plus the stamps' rounding but not stalls
+      are the clock's own pattern where they exceed `STALL_FRACTION` of the steps, and the
+      step is the mean of every step but the stalls: a clock counted in crystal ticks (100 Hz
+      from 32 768 Hz) steps 327 or 328 ticks, 32 % and 68 %, and only their mean is the rate
+      (the 328-tick steps alone read 99.902 Hz); a sleep loop's 10.3 ms is its mean step;
     - else the step is the mean of the steps within `UNIFORM_TOLERANCE` of `c` (the mean of
       the few others moved the step: one 1.4-step interval moved it 1e-5 of the rate at
       40 000 samples, and no stamp after it lay on its grid). A tick clock whose rarer count
@@ -70,17 +73,31 @@ def regular_step(t) -> float:
         near = off <= tol
         if near.all():
             return float(np.mean(regular))
-        band = STALL_OFF * centre
-        short = off[regular < centre - band]  # far shorter steps: never stalls
         tick = float(np.min(off[~near]))  # the nearest other step: a tick, where stamps count them
-        if short.size > STALL_FRACTION * dt.size:  # jitter: a stall is only beyond its reach
-            band = float(np.max(short)) + band
-        elif tick > band:  # coarse ticks (their own pattern, not stalls), or stalls alone?
-            band = _tick_band(dt, centre, tick, tol) or band
-        stall = off > band
+        pattern = _tick_band(dt, centre, tick, tol) or tol
+        stall = regular > _body_top(regular, centre, tol, pattern)
         if np.sum(~near & ~stall) > STALL_FRACTION * dt.size:  # the clock's own pattern
             return float(np.mean(regular[~stall]))
         return float(np.mean(regular[near]))
+
+
+def _body_top(regular, centre: float, tol: float, pattern: float) -> float:
+    """The longest step [s] under the first empty band (`STALL_GAP`) of the `regular` steps
+    [s] more than `pattern` [s] above their median `centre` [s], inf where none is: holes
+    narrower than `tol` [s] are none (the stamps' rounding)."""
+    s = np.sort(regular)[int(STALL_FRACTION * regular.size) :]  # stray short steps left out
+    x = s - centre
+    count = np.arange(1, s.size + 1)
+    var = np.cumsum(x * x) / count - (np.cumsum(x) / count) ** 2  # of the steps up to each
+    at = np.flatnonzero(np.diff(s) > tol)
+    hole = s[at + 1] - s[at]
+    low = np.partition(np.r_[hole, np.inf, np.inf], 1)[:2]
+    rung = np.where(hole == low[0], low[1], low[0])  # the narrowest other hole (a tick)
+    rung = np.where(np.isfinite(rung), rung, 0.0)
+    spread = np.sqrt(np.maximum(var[at], 0.0))
+    wide = hole > np.maximum(STALL_GAP * np.maximum(spread, tol), 1.5 * rung)
+    empty = wide & (s[at] >= centre - tol) & (s[at + 1] > centre + pattern)
+    return float(s[at[np.argmax(empty)]]) if empty.any() else math.inf
 
 
 def _tick_band(dt, centre: float, tick: float, tol: float) -> float | None:

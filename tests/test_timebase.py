@@ -70,3 +70,35 @@ def test_a_clock_counted_in_crystal_ticks_reads_its_mean_rate(rate, tick, t0):
     assert len(set(np.round(np.diff(t - t0) * tick))) == 2
     assert 1.0 / regular_step(t) == pytest.approx(truth, rel=1e-9)
     assert hg.allan.to_uniform(t, np.zeros(n)).rate_hz == pytest.approx(truth, rel=1e-9)
+
+
+@pytest.mark.parametrize("stamp", [1e-6, 1e-3])
+def test_a_sleep_loop_reads_its_own_mean_rate(stamp):
+    """Review of 2ad719e: a `time.sleep(0.01)` logger steps 10 ms plus an overshoot, only ever
+    longer (here exponential, 0.3 ms on average: 97.1 Hz); stamped in ms, 10, 11 or 12 ms.
+    Every step longer than 5 % over the median was taken for a stall: the rate read 100 Hz
+    (7e-3 fast in µs stamps, 3e-2 in ms) and `ImuData(..., rate_hz=97.12)` was refused. The
+    longer steps fill the band above the typical step, so they are the clock's own; the
+    rate is its mean, the stamps' span over their count."""
+    n = 6000
+    dt = 0.01 + np.random.default_rng(3).exponential(0.3e-3, n - 1)
+    t = np.round(np.r_[0.0, np.cumsum(dt)] / stamp) * stamp
+    truth = (n - 1) / (t[-1] - t[0])  # 97.12 Hz
+    assert 1.0 / regular_step(t) == pytest.approx(truth, rel=1e-12)
+    gyro, accel = np.zeros((n, 3)), np.tile([0.0, 0.0, 9.8], (n, 1))
+    assert hg.imu.ImuData(t, gyro, accel).rate_hz == pytest.approx(truth, rel=1e-12)
+    assert hg.imu.ImuData(t, gyro, accel, rate_hz=round(truth, 2)).rate_hz == round(truth, 2)
+
+
+def test_stalls_beyond_a_one_tick_pattern_are_left_out():
+    """A stall is told by the empty band under it: on a `millis()` clock at 98 Hz (10 or
+    11 ms, the 11-ms steps evenly spread: the clock's own pattern, not stalls), 2 % of
+    1.4-step stalls (14 or 15 ms) are left out (their mean read 8.8e-3 slow)."""
+    n = 6000
+    ticks = np.floor(np.arange(n) / 98.0 / 1e-3 + 0.5)
+    truth = (n - 1) / (ticks[-1] - ticks[0]) * 1e3  # the clock's own mean rate, 98 Hz
+    assert 1.0 / regular_step(ticks * 1e-3) == pytest.approx(truth, rel=1e-12)
+    dt = np.diff(ticks)
+    dt[np.random.default_rng(4).random(n - 1) < 0.02] += 4.0  # 2 % of 1.4-step stalls
+    stalled = 1.0 / regular_step(np.r_[0.0, np.cumsum(dt)] * 1e-3)
+    assert stalled == pytest.approx(truth, rel=5e-4)  # 5e-5: which steps the stalls hit
