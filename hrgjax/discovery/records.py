@@ -33,6 +33,15 @@ STEP_S = 5.0
 ends; Bosh3's solution weights no stage at the step's end (FSAL), so a corner never leaks
 into the step before it (Tsit5's sixth stage, at the end with weight 2.3, would)."""
 
+GAP_BLOCKS = 3.0
+"""A continuous run with an interval between samples of `GAP_BLOCKS` × its median block Δ
+or longer (a logger stall) is refused (`check_no_stall`): its whitening takes every block
+as the median Δ (the block across a 300-s stall, carrying the run bias × the whole gap, is
+weighted as an ordinary one) and one solver step spans the gap (1.65e-4 rad of solver error
+across a 291-s gap in a turning run, 34× the white σ). A null log with a 300-s stall in a
+held-out run read `unexplained`: held-out χ² 14 386 against 525 under the exact covariance
+of its uneven blocks (audit 2026-11-30, docs/discovery.md)."""
+
 
 class Layout:
     """The superset parameter vector: every parameter of `names` in scaled units
@@ -429,16 +438,37 @@ def block_index(n: int, m: int) -> np.ndarray:
     return idx
 
 
+def check_no_stall(t, bidx, run) -> None:
+    """Refuse a continuous run `run` (times `t` [s], block boundaries `bidx`) with an
+    interval between samples of `GAP_BLOCKS` × its
+    median block Δ or longer (a logger stall): one-line `ValueError` with the gap's start,
+    length and the median block, and what to do."""
+    delta = float(np.median(np.diff(t[bidx])))
+    dt = np.diff(t)
+    j = int(np.argmax(dt))
+    if dt[j] >= GAP_BLOCKS * delta:
+        raise ValueError(
+            f"run {run} has a {dt[j]:.6g}-s interval with no samples from t = {t[j]:.6g} s "
+            f"(its median block is {delta:.6g} s; intervals under {GAP_BLOCKS:g} blocks are taken): "
+            "discovery whitens a continuous record's blocks as equal and solves the model "
+            "across the gap in one step, so the block across it would read as an effect; "
+            "split the run at the gap (give the part after it its own run id)"
+        )
+
+
 def stack_runs(stack, mask, noise: NoiseModel, block_s: float) -> Runs:
     """The runs `mask` of a stack of one length and sample interval
     (`MeasuredData.stacked`) as [`Runs`][hrgjax.discovery.records.Runs]:
     blocks of `block_s` [s] and solver steps of `STEP_S` in samples of the stack's interval,
-    each run's increments whitened under `noise`."""
+    each run's increments whitened under `noise`. **Raises** `ValueError` for a run with a
+    stall (`check_no_stall`)."""
     n = stack.n_samples
     m = max(1, int(round(block_s / stack.dt)))
     bidx = block_index(n, m)
     steps = block_index(n, max(1, int(round(STEP_S / stack.dt))))
     t = stack.t[mask]
+    for ti, run in zip(t, stack.run[mask], strict=True):
+        check_no_stall(ti, bidx, int(run))
     whiten = []
     for ti in t:
         delta = float(np.median(np.diff(ti[bidx])))
