@@ -29,7 +29,7 @@ from hrgjax.calibration import (
 )
 from hrgjax.calibration.compensators import Corrected, NoCompensation
 from hrgjax.calibration.evaluate import SEED_TABLE, accuracy_table, format_table, out_of_range
-from hrgjax.calibration.paired import constant_resolution
+from hrgjax.calibration.paired import constant_resolution, offset_difference
 from hrgjax.units import K_E_NOMINAL
 
 SWITCH_ON_DPH = (0.0, 0.25, 0.43)
@@ -164,9 +164,35 @@ def test_a_real_constant_error_is_not_called_equal(switch_ons):
     assert c.paired("A", "Ac", offsets="session").verdict != "none"  # one offset: decided
 
 
+def _first_change(pair, level=0.95):
+    """Independent truth: the smallest c > 0 at which scipy's paired t test of `pair(c)`
+    (two arrays of squared residuals) gives another verdict than at c = 0 (a grid scan of
+    the verdict, then brentq on the p-value)."""
+    from scipy import optimize, stats
+
+    def verdict(c):
+        r = stats.ttest_rel(*pair(c))
+        return int(np.sign(r.statistic)) if r.pvalue < 1.0 - level else 0
+
+    grid = np.geomspace(1e-7, 10.0, 400)
+    hit = np.flatnonzero([verdict(c) != verdict(0.0) for c in grid])
+    assert hit.size and hit[0] > 0
+    f = lambda c: stats.ttest_rel(*pair(c)).pvalue - (1.0 - level)
+    return optimize.brentq(f, grid[hit[0] - 1], grid[hit[0]], xtol=1e-15, rtol=1e-13)
+
+
+def _charged(ea, eb, w, s):
+    """The truth for a difference of sign `s`: A shifted by +s·c or B by −s·c [°/h]."""
+    return min(_first_change(lambda c: ((ea + s * c * w) ** 2, eb**2)),
+               _first_change(lambda c: (ea**2, (eb - s * c * w) ** 2)))  # fmt: skip
+
+
 def test_the_resolution_is_where_a_constant_alone_decides_the_paired_test():
-    """R = 2 t e / sqrt(n) (static runs, residuals of zero mean): a constant just above it
-    makes scipy's paired t test say "different" at 95 %, just below it not."""
+    """R is the constant at which scipy's paired t test, one compensator shifted by R w,
+    first changes its verdict at 95 %: static runs of zero-mean residual (R = 2 t s / sqrt n),
+    angle residuals that keep a rotation run's mean rate residual (a constant of that sign
+    decides at 1/20 of the other's, 0.0023 against 0.045 °/h; the closed form off the static
+    case said 0.023 for both: 10x the one), and a real pair. `differ` is the test at Δ."""
     from scipy import stats
 
     rng = np.random.default_rng(5)
@@ -175,15 +201,32 @@ def test_the_resolution_is_where_a_constant_alone_decides_the_paired_test():
         e -= e.mean()  # after its own offset (equal runs)
         r = constant_resolution(e, e + 0.0)
         assert r == pytest.approx(2 * stats.t.ppf(0.975, n - 1) * e.std(ddof=1) / np.sqrt(n))
+        assert r == pytest.approx(_charged(e, e, np.ones(n), 1.0), rel=1e-9)
         for factor, decided in ((1.0 + 1e-6, True), (1.0 - 1e-6, False)):
             p = stats.ttest_rel(e**2, (e + factor * r) ** 2).pvalue
             assert (p < 0.05) == decided, (n, factor, p)
-        # an angle figure: a constant of 1 °/h shifts run i by T_i/3600 [°]
-        w = rng.uniform(60.0, 300.0, n) / 3600.0
-        ra = constant_resolution(w * e, w * e, w)
-        p_hi = stats.ttest_rel((w * e) ** 2, (w * e + 1.01 * ra * w) ** 2).pvalue
-        p_lo = stats.ttest_rel((w * e) ** 2, (w * e + 0.5 * ra * w) ** 2).pvalue
-        assert p_hi < 0.1 and p_lo > 0.05, (p_hi, p_lo)
+    # angle residuals [°] after the static-run offset: a mean rate residual of 0.01 °/h kept
+    n = 30
+    w = rng.uniform(60.0, 300.0, n) / 3600.0  # a constant of 1 °/h shifts run i by T_i/3600 [°]
+    x = rng.normal(0.0, 0.025, n)
+    e = w * (x - x.mean() + 0.01)
+    # B = −A: B shifted by −c is A shifted by +c, so only the difference's sign counts
+    truth = {s: _first_change(lambda c, s=s: ((e + s * c * w) ** 2, e**2)) for s in (1.0, -1.0)}
+    assert truth[1.0] < 0.2 * truth[-1.0]  # the sign of the mean residual decides far sooner
+    assert constant_resolution(e, e, w) == pytest.approx(truth[1.0], rel=1e-9)
+    for s in (1.0, -1.0):
+        assert constant_resolution(e, -e, w, difference=s) == pytest.approx(truth[s], rel=1e-9)
+    # a real pair: B scatters more, its own mean rate residual of the other sign
+    y = rng.normal(0.0, 0.04, n)
+    eb = w * (y - y.mean() - 0.005)
+    for s in (1.0, -1.0):
+        want = _charged(e, eb, w, s)
+        assert constant_resolution(e, eb, w, difference=s) == pytest.approx(want, rel=1e-9)
+        # `differ` is the verdict's change at Δ itself: just beyond the threshold, not below
+        for factor in (1.0 + 1e-6, 1.0 - 1e-6):
+            delta = s * factor * want
+            d = offset_difference("A", delta, "B", 0.0, e, eb, w, key="angle_error_deg")
+            assert d.differ == (factor > 1.0), (s, factor, str(d))
 
 
 def test_the_level_states_the_offset_choice(switch_ons):

@@ -37,19 +37,28 @@ each leaves at a run's temperature and wave angle, averaged over the grid). The 
 noise is common to both and cancels: $\Delta$ has no sampling error on this session
 (σ over redrawn test noise 2e-8 °/h; the Welch σ of the two offsets, 0.0085 °/h, described
 nothing). What matters is whether $\Delta$ is large enough to decide the paired test
-alone: a constant $\delta$ added to residuals $e_i$ of zero mean gives
-$d_i = -2\delta w_i e_i - \delta^2 w_i^2$ ($w_i$: what a unit constant [°/h] shifts the figure
-by: 1 for a static run's rate, $T_i/3600$ [°] for a rotation run's angle), mean
-$-\delta^2\,\overline{w^2}$, standard error $2|\delta|\,s_{we}/\sqrt n$; the test
-says "different" once
+alone, charged to one of the two as one offset for both would charge it. With residuals
+$e_{k,i}$ after each one's own offset and $w_i$ what a unit constant [°/h] shifts the figure
+by (1 for a static run's rate, $T_i/3600$ [°] for a rotation run's angle), A shifted by
+$+\delta$ or B by $-\delta$ gives
 
-$$|\delta| > R = \frac{2\,t_{n-1}\,s_{we}}{\sqrt n\;\overline{w^2}}
-\quad(\approx 4\,e/\sqrt n \text{ for static runs of residual scatter } e),$$
+$$d_i(\delta) = d_{0,i} + 2\delta\,w_i e_{k,i} \pm \delta^2 w_i^2$$
 
-exact for static runs of equal length ([`constant_resolution`][hrgjax.calibration.paired.constant_resolution]:
-the smaller of the two compensators' $R$, a constant charged to either).
-[`OffsetDifference`][hrgjax.calibration.OffsetDifference] compares $|\Delta|$ with $R$: a
-resolution, not a sampling test.
+($d_0$: the pair after their own offsets; $k$ the one shifted, $+$ for A, $-$ for B). Its
+verdict changes where $n\,\bar d^2 - t_{n-1}^2 s_d^2$, a quartic in $\delta$, changes sign;
+[`constant_resolution`][hrgjax.calibration.paired.constant_resolution] $R$ is the smallest
+such $|\delta|$ of the sign $\Delta$ charges (exact against `scipy.stats.ttest_rel`). For
+two equal residuals of zero mean on static runs of equal length it is the closed form
+$R = 2\,t_{n-1}\,s_e/\sqrt n \approx 4\,e/\sqrt n$ (residual scatter $e$). Elsewhere the
+first-order term has a mean: angle residuals after a static-run offset keep the rotation
+runs' mean rate residual $m$, and a constant of one sign changes the verdict sooner than
+the other (30 runs, $m$ = 0.005 °/h, scatter 0.025 and 0.04 °/h: 0.011 against 0.029 °/h,
+where that closed form weighted by $w$ said 0.025 for both;
+`benchmarks/constant_resolution.py`). The pair's own
+scatter of $d_0$ enters too: a constant that would tell a compensator from itself (with
+$m$ significant, any constant at all) need not change this pair's verdict.
+[`OffsetDifference`][hrgjax.calibration.OffsetDifference] says whether $\Delta$ itself,
+charged to either, changes it: a resolution, not a sampling test.
 """
 
 from __future__ import annotations
@@ -58,7 +67,7 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
 
 @dataclasses.dataclass(frozen=True)
@@ -231,8 +240,8 @@ class OffsetDifference:
     r"""Do two compensators carry constants that differ by enough to decide their paired test
     alone? $\Delta = b_a - b_b$, their own offsets on one session
     ([`Offset`][hrgjax.calibration.Offset]s), against the resolution $R$ of the paired test
-    on `key` (module docstring: the smallest constant that alone makes it say "different" at
-    `level`). Not a sampling test: the sensor's noise cancels from $\Delta$, which is fixed
+    on `key` (module docstring: the smallest constant that, charged to either, changes its
+    verdict at `level`). Not a sampling test: the sensor's noise cancels from $\Delta$, which is fixed
     by the two compensators.
 
     A change of switch-on bias is the same for every compensator of a session, so a
@@ -241,7 +250,11 @@ class OffsetDifference:
     error, and one session cannot say whose is right.
 
     - `a`, `b`: labels; `key`: the paired test's figure; `value_dph` = $\Delta$ [°/h];
-      `resolution_dph` = $R$ [°/h] (NaN: under 2 runs or no scatter); `n_runs`; `level`.
+      `resolution_dph` = $R$ [°/h], the smallest constant of $\Delta$'s sign (A shifted by
+      it, or B by its opposite) that changes the test's verdict (NaN: under 2 runs or no
+      scatter; inf: none does); `n_runs`; `level`.
+    - `decides`: whether $\Delta$ itself changes it, A shifted by $+\Delta$ or B by
+      $-\Delta$ (None: judged as $|\Delta| > R$).
     """
 
     a: str
@@ -251,11 +264,16 @@ class OffsetDifference:
     resolution_dph: float
     n_runs: int
     level: float = 0.95
+    decides: bool | None = None
 
     @property
     def differ(self) -> bool:
-        r"""Whether $|\Delta| > R$: the constants' difference alone would decide the paired
-        test (False when $R$ is unknown)."""
+        r"""Whether the constants' difference alone would change the paired test's verdict:
+        `decides`, or $|\Delta| > R$ where that is None (False when $R$ is unknown). The
+        two differ only where a band of constants beyond $R$ changes it and larger ones
+        change it back."""
+        if self.decides is not None:
+            return bool(self.decides)
         return bool(abs(self.value_dph) > self.resolution_dph)
 
     def to_json(self) -> dict:
@@ -274,26 +292,81 @@ class OffsetDifference:
         what = {"static_residual_dph": "static residual", "angle_error_deg": "end-of-run angle "
                 "error", "max_angle_error_deg": "largest angle error"}.get(self.key, self.key)  # fmt: skip
         head = f"{self.a} − {self.b}: {self.value_dph:+.4f} °/h"
-        if not math.isfinite(self.resolution_dph):
+        if math.isnan(self.resolution_dph):
             return f"{head} (resolution unknown: {self.n_runs} runs)"
+        tail = f"paired {what} test ({self.n_runs} runs, {100 * self.level:g} %)"
+        if math.isinf(self.resolution_dph):
+            return f"{head}: no constant alone changes the verdict of the {tail}"
+        if not self.differ and abs(self.value_dph) > self.resolution_dph:
+            return f"{head}, not deciding the {tail} alone (from {self.resolution_dph:.4f} °/h)"
         word = "beyond" if self.differ else "within"
-        return (f"{head}, {word} the {self.resolution_dph:.4f} °/h that alone decides the "
-                f"paired {what} test ({self.n_runs} runs, {100 * self.level:g} %)")  # fmt: skip
+        return f"{head}, {word} the {self.resolution_dph:.4f} °/h that alone decides the {tail}"
 
 
-def constant_resolution(residual_a, residual_b, weight=None, *, level: float = 0.95) -> float:
-    r"""The smallest constant [°/h] that alone decides the paired test of two compensators'
-    residuals at `level` (module docstring): $R = 2\,t_{n-1}\,s_{we}/(\sqrt n\,\overline{w^2})$
-    for each, the smaller of the two.
+class _Shifted:
+    """The paired test of one pair with one of them shifted by a constant c [°/h]:
+    $d_i(c) = d_{0,i} + c\\,x_i + c^2 y_i$, its verdict (−1: A better, 0: none, +1: B better)
+    where $n\\bar d^2 - t^2 s_d^2$ (a quartic in c) is positive, and the constants where the
+    verdict changes (module docstring)."""
 
-    **Arguments:** `residual_a`, `residual_b` (per run, each after its own offset; NaN: left
-    out of both), `weight` (per run, what a constant of 1 °/h shifts the figure by: 1 for a
-    static rate [°/h], $T_i/3600$ for an angle [°]; None: 1), `level` in (0, 1).
+    def __init__(self, d0, x, y, q: float):
+        self.n, self.q2 = d0.size, q * q
+        self.m = np.array([np.mean(d0), np.mean(x), np.mean(y)])
+        self.s = np.cov(np.stack([d0, x, y]), ddof=1)
 
-    **Returns:** $R$ [°/h]; NaN under 2 runs or with no scatter.
+    def mean(self, c):
+        return self.m[0] + c * (self.m[1] + c * self.m[2])
 
-    **Raises:** `ValueError` when the arrays differ in shape or `level` is not in (0, 1).
-    """
+    def var(self, c):
+        s = self.s
+        return (s[0, 0] + c * (2 * s[0, 1] + c * (s[1, 1] + 2 * s[0, 2] + c * (2 * s[1, 2]
+                + c * s[2, 2]))))  # fmt: skip
+
+    def verdict(self, c) -> int:
+        m, v = self.mean(c), self.var(c)
+        decided = v > 0.0 and self.n * m * m > self.q2 * v
+        return int(np.sign(m)) if decided else 0
+
+    def quartic(self) -> np.ndarray:
+        """Coefficients of $n\\bar d^2 - t^2 s_d^2$ in c, highest first."""
+        (m0, mx, my), s, n, q2 = self.m, self.s, self.n, self.q2
+        return np.array([
+            n * my * my - q2 * s[2, 2],
+            2 * n * mx * my - 2 * q2 * s[1, 2],
+            n * (mx * mx + 2 * m0 * my) - q2 * (s[1, 1] + 2 * s[0, 2]),
+            2 * n * m0 * mx - 2 * q2 * s[0, 1],
+            n * m0 * m0 - q2 * s[0, 0],
+        ])  # fmt: skip
+
+    def threshold(self, scale: float) -> float:
+        """The smallest c > 0 [°/h] at which the verdict differs from c = 0's (0: at any
+        c > 0; inf: at none). `scale`: a typical constant, to condition the roots."""
+        p = self.quartic() * scale ** np.arange(4, -1, -1)
+        f = lambda c: np.polyval(p, c / scale)
+        if not np.any(p):
+            roots = np.zeros(0)
+        else:
+            r = np.roots(np.trim_zeros(p, "f"))
+            roots = np.sort(r.real[(np.abs(r.imag) <= 1e-7 * np.abs(r)) & (r.real > 1e-9)])
+        edges = [0.0]
+        for k in roots:  # polished on the quartic where it changes sign about k
+            lo, hi = k * (1 - 1e-6), k * (1 + 1e-6)
+            c = optimize.brentq(f, lo * scale, hi * scale, xtol=1e-300, rtol=1e-15) \
+                if f(lo * scale) * f(hi * scale) < 0 else k * scale  # fmt: skip
+            edges.append(max(c, edges[-1]))
+        edges.append(math.inf)
+        start = self.verdict(0.0)
+        for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+            probe = math.sqrt(lo * hi) if lo > 0 and math.isfinite(hi) else (
+                0.5 * hi if lo == 0 and math.isfinite(hi) else 2.0 * lo + scale)  # fmt: skip
+            if self.verdict(probe) != start:
+                return lo
+        return math.inf
+
+
+def _shifts(residual_a, residual_b, weight, level: float, difference) -> tuple:
+    """(n, scale [°/h], [(_Shifted, sign), …]): the pair's paired test with A shifted by
+    +sign·c and B by −sign·c, for the signs `difference` charges (None or 0: both)."""
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must be in (0, 1); got {level}")
     ea = np.asarray(residual_a, dtype=float).ravel()
@@ -305,25 +378,62 @@ def constant_resolution(residual_a, residual_b, weight=None, *, level: float = 0
     ok = np.isfinite(ea) & np.isfinite(eb) & np.isfinite(w)
     n = int(np.sum(ok))
     if n < 2:
-        return math.nan
-    w = w[ok]
+        return n, 1.0, []
+    ea, eb, w = ea[ok], eb[ok], w[ok]
     q = float(stats.t.ppf(0.5 + 0.5 * level, n - 1))
-    spread = min(float(np.std(w * e[ok], ddof=1)) for e in (ea, eb))
-    if not spread > 0:
-        return math.nan
-    return 2.0 * q * spread / (math.sqrt(n) * float(np.mean(w**2)))
+    d0, v = ea**2 - eb**2, w**2
+    signs = (1.0, -1.0) if difference is None or float(difference) == 0.0 else (
+        math.copysign(1.0, float(difference)),)  # fmt: skip
+    tests = []
+    for s in signs:  # A + s·c·w: d0 + 2 s c u_a + c² v; B − s·c·w: d0 + 2 s c u_b − c² v
+        tests.append((_Shifted(d0, 2 * s * w * ea, v, q), s))
+        tests.append((_Shifted(d0, 2 * s * w * eb, -v, q), s))
+    scale = math.sqrt(float(np.mean(ea**2 + eb**2)) / (2 * float(np.mean(v))))
+    return n, scale if scale > 0 else 1.0, tests
+
+
+def _resolution(scale: float, tests: list) -> float:
+    """The smallest threshold over the `tests` defined somewhere (NaN: none is, under 2 runs
+    or with no scatter at any constant)."""
+    return min((t.threshold(scale) for t, _ in tests if np.any(t.s)), default=math.nan)
+
+
+def constant_resolution(
+    residual_a, residual_b, weight=None, *, level: float = 0.95, difference=None
+) -> float:
+    r"""The smallest constant [°/h] that alone changes the paired test's verdict at `level`,
+    charged to either compensator (module docstring: where a quartic in the constant
+    changes sign; exact against the paired t test).
+
+    **Arguments:** `residual_a`, `residual_b` (per run, each after its own offset; NaN: left
+    out of both), `weight` (per run, what a constant of 1 °/h shifts the figure by: 1 for a
+    static rate [°/h], $T_i/3600$ for an angle [°]; None: 1), `level` in (0, 1),
+    `difference` ($\Delta = b_a - b_b$ [°/h]: only the sign it charges, A shifted by
+    $+\Delta$ or B by $-\Delta$; None or 0: either sign).
+
+    **Returns:** $R$ [°/h] (for equal residuals of zero mean on static runs of equal length,
+    $2\,t_{n-1}\,s_e/\sqrt n$); 0 where any constant changes it; inf where none does; NaN
+    under 2 runs or with no scatter.
+
+    **Raises:** `ValueError` when the arrays differ in shape or `level` is not in (0, 1).
+    """
+    _, scale, tests = _shifts(residual_a, residual_b, weight, level, difference)
+    return _resolution(scale, tests)
 
 
 def offset_difference(
     a: str, value_a: float, b: str, value_b: float, residual_a, residual_b, weight=None, *,
     key: str = "static_residual_dph", level: float = 0.95,
 ) -> OffsetDifference:  # fmt: skip
-    """Compare two own offsets (values [°/h]) with the paired test's resolution on their
-    residuals after them ([`constant_resolution`][hrgjax.calibration.paired.constant_resolution]:
-    `residual_a`, `residual_b`, `weight`, `level`): an
-    [`OffsetDifference`][hrgjax.calibration.OffsetDifference] for `key`. **Raises:**
-    `ValueError` as `constant_resolution`."""
-    resolution = constant_resolution(residual_a, residual_b, weight, level=level)
-    ea, eb = np.asarray(residual_a, dtype=float), np.asarray(residual_b, dtype=float)
-    n = int(np.sum(np.isfinite(ea) & np.isfinite(eb)))
-    return OffsetDifference(a, b, key, float(value_a) - float(value_b), resolution, n, level)
+    """Compare two own offsets (values [°/h]) with the paired test on their residuals after
+    them ([`constant_resolution`][hrgjax.calibration.paired.constant_resolution]: `residual_a`,
+    `residual_b`, `weight`, `level`, of the sign the difference charges): an
+    [`OffsetDifference`][hrgjax.calibration.OffsetDifference] for `key`, `decides` whether
+    the difference itself, charged to either, changes the verdict. **Raises:** `ValueError`
+    as `constant_resolution`."""
+    delta = float(value_a) - float(value_b)
+    n, scale, tests = _shifts(residual_a, residual_b, weight, level, delta)
+    resolution = _resolution(scale, tests)
+    live = [t for t, _ in tests if np.any(t.s)]
+    decides = any(t.verdict(abs(delta)) != t.verdict(0.0) for t in live) if live else None
+    return OffsetDifference(a, b, key, delta, resolution, n, level, decides)
