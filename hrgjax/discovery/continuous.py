@@ -42,7 +42,7 @@ import numpy as np
 from .._progress import bar
 from ..data import MeasuredData
 from ..units import DEG, DEG_PER_H, T_REF_C
-from . import dwell, leftover, run_bias, stats
+from . import dwell, leftover, run_bias, stats, thermometer
 from ._continuous_fit import converged_lm
 from .effects import CATALOGUE
 from .noise import NoiseModel
@@ -101,10 +101,10 @@ class ContinuousProblem(AbstractProblem):
         block_s=BLOCK_S,
     ) -> ContinuousProblem:  # fmt: skip
         """The problem over the superset (`nominal` + candidates); without a known `noise`
-        (an [`hrgjax.Noise`][]), the noise model is estimated and then the run-to-run bias
-        from the baseline's run means. With `window_s` (a mixed log), the dwell runs join it
-        as windows of that length (the dwell search's regression rows,
-        `dwell.rate_windows`) and only the other runs are simulated."""
+        (an [`hrgjax.Noise`][]), the noise model is estimated, then σ_b from the run means.
+        With `window_s` (a mixed log), the dwell runs join as windows of that length
+        (`dwell.rate_windows`). A held temperature: `thermometer.unhold_temperature`."""
+        data = thermometer.unhold_temperature(data)  # a forward-filled thermometer: warned
         have = covariates_in(data)
         cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
         names = list(nominal) + [n for n in cands if n not in nominal]
