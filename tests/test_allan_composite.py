@@ -275,9 +275,15 @@ def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, t
     t[100:] += 0.05
     np.savetxt(uneven, np.column_stack([t, y[:200]]), delimiter=",", header="time,rate",
                comments="", fmt="%.17g")  # fmt: skip
-    assert main(["allan", str(uneven), "--time-column", "time"]) == 0  # resampled, said so
+    assert main(["allan", str(uneven), "--time-column", "time"]) == 0  # a stall, said so
     said = capsys.readouterr().out
-    assert "time stamps not uniform (steps 0.1 to 0.15 s): resampled at 10 Hz" in said
+    assert "time stamps uniform at 10 Hz but for 1 stall(s)" in said  # every sample kept
+    jittered = t + np.random.default_rng(1).uniform(-0.03, 0.03, t.size)  # ±30 % of a step
+    np.savetxt(uneven, np.column_stack([jittered, y[:200]]), delimiter=",", header="time,rate",
+               comments="", fmt="%.17g")  # fmt: skip
+    assert main(["allan", str(uneven), "--time-column", "time"]) == 0  # resampled, said so
+    assert "time stamps not uniform (steps " in (said := capsys.readouterr().out), said
+    assert "resampled at " in said and "reads low at the shortest τ" in said
     t_gap = np.r_[t[:100], t[100:] + 1.0]  # a 1.15-s interval: the 12 grid steps it touches
     np.savetxt(uneven, np.column_stack([t_gap, y[:200]]), delimiter=",", header="time,rate",
                comments="", fmt="%.17g")  # fmt: skip
