@@ -281,3 +281,15 @@ def mechanise_ned(traj, c0s, hours, dws=None, rtol=1e-12, atol=1e-14, max_steps=
         ).ys  # fmt: skip
 
     return ts, solve(c0s, dws)
+
+
+# The short continuous dataset's ramps, as `continuous_dataset(ramps=…)` takes them
+# (test_discovery_continuous, test_discovery_held_temperature).
+SHORT_RAMPS = (
+    (-20.0, 40.0, 600.0, 0.0, 0.0),
+    (40.0, -20.0, 600.0, 2.0, 0.0),
+    (-20.0, 40.0, 200.0, 0.0, 45.0),
+    (40.0, -20.0, 200.0, 2.0, 30.0),
+    (0.0, 60.0, 400.0, 0.0, -30.0),
+    (60.0, 0.0, 400.0, 2.0, 60.0),
+)

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import still_ramps
+from helpers import SHORT_RAMPS, still_ramps
 
 import hrgjax as hg
 from hrgjax.discovery import NoiseModel, continuous, generate
@@ -166,16 +166,6 @@ def test_noise_estimate_on_known_noise():
     ramp = dict(runs[0], temperature_c=np.linspace(10.0, 40.0, n))
     with pytest.raises(ValueError, match="still stretch"):
         NoiseModel.estimate(cat([ramp]))
-
-
-SHORT_RAMPS = (
-    (-20.0, 40.0, 600.0, 0.0, 0.0),
-    (40.0, -20.0, 600.0, 2.0, 0.0),
-    (-20.0, 40.0, 200.0, 0.0, 45.0),
-    (40.0, -20.0, 200.0, 2.0, 30.0),
-    (0.0, 60.0, 400.0, 0.0, -30.0),
-    (60.0, 0.0, 400.0, 2.0, 60.0),
-)
 
 
 def _short(effect, size, seed):

@@ -10,6 +10,7 @@ import warnings
 import jax
 import numpy as np
 import pytest
+from helpers import SHORT_RAMPS
 
 import hrgjax as hg
 from hrgjax.discovery import NOMINAL, discover, generate
@@ -109,14 +110,7 @@ def test_a_dwell_is_left_alone():
     assert unhold_temperature(data) is data
 
 
-RAMPS = (  # test_discovery_continuous.SHORT_RAMPS: corners at 600, 800, 1000 and 1200 s
-    (-20.0, 40.0, 600.0, 0.0, 0.0),
-    (40.0, -20.0, 600.0, 2.0, 0.0),
-    (-20.0, 40.0, 200.0, 0.0, 45.0),
-    (40.0, -20.0, 200.0, 2.0, 30.0),
-    (0.0, 60.0, 400.0, 0.0, -30.0),
-    (60.0, 0.0, 400.0, 2.0, 60.0),
-)
+RAMPS = SHORT_RAMPS  # corners at 600, 800, 1000 and 1200 s
 
 
 @pytest.mark.slow(
