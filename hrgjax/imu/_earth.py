@@ -49,29 +49,25 @@ from .sections import FACES, TURNS, Sections
 def check_lat_deg(lat_deg, name: str = "lat_deg") -> float:
     """The bench's latitude [°] as a float in [−90, 90] (north positive)."""
     form = "the bench's latitude in degrees, -90 to 90 (north positive), or None"
-    if isinstance(lat_deg, bool | np.bool_ | str):
-        raise ValueError(f"{name} must be {form}; got {lat_deg!r}")
-    try:
-        v = float(lat_deg)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {form}; got {lat_deg!r}") from None
-    if not (np.isfinite(v) and -90.0 <= v <= 90.0):
-        raise ValueError(f"{name} must be {form}; got {lat_deg!r}")
-    return v
+    return _number(lat_deg, name, form, lambda v: -90.0 <= v <= 90.0)
 
 
 def check_earth_rate(earth_rate) -> float:
     """The rotation rate [rad/s] of the ground under the bench, a float ≥ 0."""
     form = (f"the ground's rotation rate in rad/s >= 0 ({EARTH_RATE:g} on the Earth, 0 for a "
             "record without it, e.g. ferraris_session without lat_deg)")  # fmt: skip
-    if isinstance(earth_rate, bool | np.bool_ | str):
-        raise ValueError(f"earth_rate must be {form}; got {earth_rate!r}")
+    return _number(earth_rate, "earth_rate", form, lambda v: v >= 0.0)
+
+
+def _number(value, name: str, form: str, inside) -> float:
+    """`value` as a finite float for which `inside(v)` holds, else one `ValueError` naming
+    `name` and `form` (a bool or a string is not a number here)."""
     try:
-        v = float(earth_rate)
+        v = None if isinstance(value, bool | np.bool_ | str) else float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"earth_rate must be {form}; got {earth_rate!r}") from None
-    if not (np.isfinite(v) and v >= 0.0):
-        raise ValueError(f"earth_rate must be {form}; got {earth_rate!r}")
+        v = None
+    if v is None or not (np.isfinite(v) and inside(v)):
+        raise ValueError(f"{name} must be {form}; got {value!r}")
     return v
 
 
