@@ -3,6 +3,7 @@ direct sample-by-sample implementation of the textbook formulas, a known truth (
 without noise, within 3σ with noise), and the file formats."""
 
 import json
+import re
 from pathlib import Path
 
 import jax
@@ -633,3 +634,62 @@ def test_gyro_unit_checked_against_the_median_rate(session, tmp_path):
     with pytest.raises(ValueError, match=r"deg_h\.csv: .*units\[\"gyro\"\].*'deg/h'"):
         hg.imu.load(path, cols, si, rate_hz=RATE)
     assert len(hg.imu.load(path, cols, si, rate_hz=RATE, check_units=False)) == len(data)
+
+
+def test_time_column_in_ms_or_ns_is_declared_not_misread(session, fitted, tmp_path, capsys):
+    """Audit: `imu-calibrate` had no `--time-unit`: a log stamped in ms (a 100-Hz log read
+    as 0.1 Hz) could not be calibrated without rewriting the file, and the refusal blamed
+    the sections. `units["time"]` (API) and `--time-unit` (CLI) read ms and ns epoch stamps
+    (the latter exactly, each less the first); a column named in a unit must be declared in
+    it; stamps in ms read as seconds are named in the refusal."""
+    from hrgjax.cli import main
+
+    data, sections = session
+    gyro, accel = np.rad2deg(data.gyro), data.accel / 9.80665
+    ticks = np.round(data.time * 1e3).astype(np.int64)  # whole ms (the grid is 10 ms)
+
+    def write(name, stamps):
+        path = tmp_path / f"{name}.csv"
+        rows = [f"{name},gx,gy,gz,ax,ay,az"]
+        rows += [f"{s}," + ",".join(repr(float(v)) for v in (*g, *a))
+                 for s, g, a in zip(stamps, gyro, accel, strict=True)]  # fmt: skip
+        path.write_text("\n".join(rows) + "\n")
+        return path
+
+    units = {"gyro": "deg/s", "accel": "g"}
+    cols = {"gyro": COLS["gyro"], "accel": COLS["accel"]}
+    ms = write("t_ms", ticks)
+    got = hg.imu.load(ms, columns={**cols, "time": "t_ms"}, units={**units, "time": "ms"})
+    np.testing.assert_allclose(got.time, ticks / 1e3, rtol=0, atol=1e-15)
+    assert got.rate_hz == pytest.approx(RATE, rel=1e-12)
+    with pytest.raises(ValueError, match=r"t_ms.csv: the time column 't_ms' is named in ms: "
+                       r'give units\["time"\] = "ms"'):  # fmt: skip
+        hg.imu.load(ms, columns={**cols, "time": "t_ms"}, units=units)
+    epoch = 1_700_000_000_123_456_789
+    ns = write("stamp", epoch + ticks * 1_000_000)  # beyond 2**53: read exactly, less the first
+    got = hg.imu.load(ns, columns={**cols, "time": "stamp"}, units={**units, "time": "ns"})
+    np.testing.assert_allclose(got.time, (ticks - ticks[0]) / 1e3, rtol=0, atol=1e-15)
+    arrays = hg.imu.ImuData.from_arrays(gyro, accel, units={**units, "time": "ms"}, time=ticks)
+    np.testing.assert_allclose(arrays.time, ticks / 1e3, rtol=0, atol=1e-15)
+
+    secs = tmp_path / "s.json"
+    secs.write_text(json.dumps(hg.imu.sections_to_json(sections)))
+    base = ["imu-calibrate", "--gyro-columns", "gx,gy,gz", "--accel-columns", "ax,ay,az",
+            "--accel-unit", "g", "--no-earth-rate", "--sections", str(secs)]  # fmt: skip
+    out = tmp_path / "cal.json"
+    assert main([*base, str(ms), "--time-column", "t_ms", "--time-unit", "ms", "--json",
+                 str(out)]) == 0  # fmt: skip
+    np.testing.assert_allclose(hg.imu.load_calibration(out).vector(), fitted.vector(),
+                               rtol=1e-9, atol=1e-12)  # fmt: skip
+    capsys.readouterr()
+    for argv, said in (
+        ([str(ms), "--time-column", "t_ms"], r"named in ms: give --time-unit ms \(stamps"),
+        ([str(write("t", ticks)), "--time-column", "t"],
+         r"reads as 0\.1 Hz: time stamps in ms\? give --time-unit ms\)$"),
+        ([str(ns), "--time-column", "stamp"], r"\(time stamps in ns\? give --time-unit ns\)$"),
+        ([str(ms), "--time-unit", "ms"], r"--time-unit is the unit of --time-column"),
+    ):  # fmt: skip
+        with pytest.raises(SystemExit) as err:
+            main([*base, *argv])
+        msg = capsys.readouterr().err.strip()
+        assert err.value.code == 2 and re.search(said, msg) and "\n" not in msg, msg

@@ -5,11 +5,10 @@ needs, exported for Kalibr and for simulation."""
 from __future__ import annotations
 
 import math
-import re
-import unicodedata
 
 import numpy as np
 
+from .._time_units import TIME_UNITS, named_time_unit, stamps_per_second
 from .._timebase import is_uniform, rate_from_stamps, regular_step, stamp_resolution
 from ._common import (
     PLOT_EXTENSIONS,
@@ -24,8 +23,6 @@ from .ins import ACCEL_UNIT_NAMES, GYRO_UNIT_NAMES
 
 KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "mtotdev", "ttotdev")
 UNIT_CHOICES = (*GYRO_UNIT_NAMES, *ACCEL_UNIT_NAMES)
-TIME_UNITS = {"s": 1.0, "ms": 1e3, "us": 1e6, "ns": 1e9}
-"""`--time-unit` choices: the time column's unit with how many make a second."""
 
 
 def read_column(path: str, column: str | None, time_column: str | None, rate_hz,
@@ -129,32 +126,6 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz,
     return y, float(rate_hz), column, lines
 
 
-_NAMED = re.compile(
-    r"(?:^|[^a-z0-9])(s|secs?|seconds?|ms|msecs?|millis|milliseconds?|us|usecs?|micros|"
-    r"microseconds?|ns|nsecs?|nanos|nanoseconds?)[^a-z0-9]*$"
-)
-_SPELLINGS = {"s": "s", "mi": "ms", "ms": "ms", "micro": "us", "u": "us", "n": "ns"}
-"""A spelling's unit by its beginning (the longest that matches)."""
-
-
-def named_time_unit(name: str) -> str | None:
-    """The unit a time column's name ends in, a key of `TIME_UNITS` (`t_ms`, `time [us]`,
-    `t_μs` or `t_µs`, `stamp_nsec`, `elapsed_secs`, `Seconds`, `t_milliseconds`, `TimeMs`,
-    `timeUs`; Unicode-normalised, any case: `Time (mS)` is ms), or None (`time`,
-    `timestamp`). The casefolded name is matched first; a camelCase split (`TimeMs` ->
-    `time_ms`) only where that finds no unit (it read `Time (mS)` as `m_s`, seconds)."""
-    text = unicodedata.normalize("NFKC", str(name)).replace("\u03bc", "u").replace("\u039c", "U")
-    found = _NAMED.search(text.casefold())
-    if found is None:  # camelCase: TimeMs -> time_ms
-        found = _NAMED.search(re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", text).casefold())
-    if found is None:
-        return None
-    word = found[1]
-    unit = _SPELLINGS[max((k for k in _SPELLINGS if word.startswith(k)), key=len)]
-    assert unit in TIME_UNITS, unit
-    return unit
-
-
 def per_second(path: str, name: str, t, unit: str | None, rate_hz=None) -> float:
     """How many units of the increasing stamps `t` of time column `name` make a second [1/s]:
     of `--time-unit` `unit`, or seconds (1). A name ending in another unit (`t_ms`) than the one
@@ -164,24 +135,10 @@ def per_second(path: str, name: str, t, unit: str | None, rate_hz=None) -> float
     are read as seconds (an HRG drift log at 0.1 Hz stamped in whole seconds) with one note
     line naming `--time-unit ms`, unless `rate_hz` is given (it checks the rate). Each refusal
     is one line naming the way out (`--time-unit`)."""
-    named = named_time_unit(name)
-    if unit is not None:
-        if named is not None and named != unit:
-            raise UsageError(f"{path}: --time-unit {unit} contradicts the time column "
-                             f"{name!r}, named in {named}")  # fmt: skip
-        return TIME_UNITS[unit]
-    if named is not None and named != "s":
-        raise UsageError(f"{path}: the time column {name!r} is named in {named}: give "
-                         f"--time-unit {named} (stamps are read as seconds by "
-                         "default)")  # fmt: skip
-    if named == "s":
-        return 1.0
-    largest = float(np.max(np.abs(t)))
-    if largest >= 1e11:
-        guess = "ms" if largest < 1e14 else "us" if largest < 1e17 else "ns"
-        raise UsageError(f"{path}: time column {name!r} reaches {largest:.4g}, as seconds "
-                         f"{largest / 3.15576e7:.3g} years: stamps in {guess}? give --time-unit "
-                         f"{guess} (or --time-unit s to read them as seconds)")  # fmt: skip
+    with usage_errors(prefix=path):
+        scale = stamps_per_second(name, t, unit, lambda u: f"--time-unit {u}")
+    if unit is not None or named_time_unit(name) is not None:
+        return scale
     dt = np.diff(t)
     step = float(np.median(dt))
     if rate_hz is None and step > 1.0 and np.all(dt >= 1.0) and np.all(dt == np.round(dt)):

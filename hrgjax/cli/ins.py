@@ -3,8 +3,10 @@ commands (seeds 001–003 and six-axis IMU calibration)."""
 
 from __future__ import annotations
 
+import re
 import sys
 
+from .._time_units import TIME_UNITS
 from ._common import (
     PLOT_EXTENSIONS,
     POSITIVE_FLOAT,
@@ -134,19 +136,35 @@ def cmd_imu_calibrate(args) -> int:
         "accel": _three("--accel-columns", args.accel_columns),
         "temperature": None,
     }  # fmt: skip  (the calibration reads no temperature)
+    units = {"gyro": args.gyro_unit, "accel": args.accel_unit}
     if args.time_column:
         columns["time"] = args.time_column
+        units["time"] = args.time_unit
+    elif args.time_unit is not None:
+        raise UsageError("--time-unit is the unit of --time-column: give the column too")
     with usage_errors(errors=(FileNotFoundError, ValueError)):
-        data = imu.load(args.log, columns=columns, rate_hz=args.rate_hz,
-                        units={"gyro": args.gyro_unit, "accel": args.accel_unit})  # fmt: skip
-        if args.sections is None:
-            sections = imu.detect_sections(data)
-        else:
-            sections = imu.parse_sections(args.sections, len(data))
-        cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg,
-                           turn_deg_std=args.turn_deg_std, gyro_range_dps=args.gyro_range_dps,
-                           accel_range_g=args.accel_range_g, lat_deg=args.lat_deg,
-                           earth_rate=0.0 if args.no_earth_rate else EARTH_RATE)  # fmt: skip
+        try:
+            data = imu.load(args.log, columns=columns, rate_hz=args.rate_hz, units=units)
+        except ValueError as err:  # the library words the way out for its API
+            msg = re.sub(r'units\["time"\] = "(\w+)"', r"--time-unit \1", str(err))
+            if args.time_unit is None and f"column {args.time_column!r} row" in msg:
+                msg += " (time stamps in ns? give --time-unit ns)"
+            raise ValueError(msg) from None
+    # stamps in ms read as seconds: a 100-Hz log at 0.1 Hz, its turns 1000× too large
+    slow = (f" (the log reads as {data.rate_hz:.3g} Hz: time stamps in ms? give --time-unit ms)"
+            if args.time_column and args.time_unit is None and data.rate_hz < 1.0 else "")  # fmt: skip
+    with usage_errors(errors=(FileNotFoundError, ValueError)):
+        try:
+            if args.sections is None:
+                sections = imu.detect_sections(data)
+            else:
+                sections = imu.parse_sections(args.sections, len(data))
+            cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg,
+                               turn_deg_std=args.turn_deg_std, gyro_range_dps=args.gyro_range_dps,
+                               accel_range_g=args.accel_range_g, lat_deg=args.lat_deg,
+                               earth_rate=0.0 if args.no_earth_rate else EARTH_RATE)  # fmt: skip
+        except ValueError as err:
+            raise ValueError(f"{err}{slow}") from None
     span = float(data.time[-1] - data.time[0])
     found = "found in the data" if args.sections is None else f"from {args.sections}"
     print(f"hrgjax imu-calibrate: {args.log} ({len(data)} samples, {span:.0f} s at "
@@ -251,7 +269,11 @@ def _imu_calibrate_parser(sub):
     )  # fmt: skip
     p.add_argument("--gyro-columns", default="gyr_x,gyr_y,gyr_z", help="gyro x,y,z columns")
     p.add_argument("--accel-columns", default="acc_x,acc_y,acc_z", help="accel x,y,z columns")
-    p.add_argument("--time-column", default=None, help="time column [s] (None: use --rate-hz)")
+    p.add_argument("--time-column", default=None,
+                   help="time column, in --time-unit (None: use --rate-hz)")  # fmt: skip
+    p.add_argument("--time-unit", default=None, choices=tuple(TIME_UNITS),
+                   help="the time column's unit (default s; a column named in a unit, t_ms, "
+                   "needs it)")  # fmt: skip
     p.add_argument("--rate-hz", type=POSITIVE_FLOAT, default=None,
                    help="sample rate [Hz] (needed without --time-column)")  # fmt: skip
     p.add_argument("--gyro-unit", default="deg/s", choices=tuple(GYRO_UNIT_NAMES),

@@ -19,6 +19,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from .. import plausible
+from .._time_units import TIME_UNITS, stamps_per_second
 from .._timebase import regular_step
 from ..units import DEG, G0
 
@@ -150,11 +151,14 @@ class ImuData:
         **Arguments:** `gyro` (N, 3) and `accel` (N, 3) in `units["gyro"]` (one of
         [`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], e.g. "deg/s") and `units["accel"]` (one of
         [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS], e.g. "m/s^2" or "g"); `rate_hz` [Hz]
-        (needed without `time`); `time` (N,) [s]; `temperature` (N,) [°C]; `check_units`:
+        (needed without `time`); `time` (N,) in `units["time"]` (optional: "s" — the
+        default —, "ms", "us" or "ns"); `temperature` (N,) [°C]; `check_units`:
         compare the declared accelerometer unit with the data's median |specific force|,
         and refuse a gyro record whose median |angular rate| exceeds
         [`GYRO_MEDIAN_LIMIT_RAD_S`][hrgjax.imu.data.GYRO_MEDIAN_LIMIT_RAD_S] (10 rad/s)."""
         gyro_unit, accel_unit = _declared(units)
+        if time is not None:
+            time = _real("time", time, "(N,)") / TIME_UNITS[units.get("time") or "s"]
         g = _triad("gyro", gyro)
         a = _triad("accel", accel)
         if time is None:
@@ -237,13 +241,19 @@ def load(
 
     - `path`: CSV file (UTF-8, a header row, comma-separated; `#` lines are comments).
     - `columns`: `{"gyro": [x, y, z column names], "accel": [x, y, z column names]}`, and
-      optionally `"time"` (a column in seconds) and `"temperature"` (°C). Other columns are
+      optionally `"time"` (a column in `units["time"]`, seconds by default) and
+      `"temperature"` (°C). Other columns are
       ignored, except that with the gyro and accelerometer columns of
       [`SI_COLUMNS`][hrgjax.imu.data.SI_COLUMNS], no `"temperature"` key and a file
       `ImuData.save` wrote (its `# rate_hz` comment line), a `temperature_c` column is read as the temperature, so that a
       saved record comes back whole; `"temperature": None` leaves it out.
     - `units`: `{"gyro": "deg/s" | "rad/s" | …, "accel": "m/s^2" | "g" | …}`
-      ([`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS]).
+      ([`GYRO_UNITS`][hrgjax.imu.data.GYRO_UNITS], [`ACCEL_UNITS`][hrgjax.imu.data.ACCEL_UNITS]),
+      and optionally `"time": "s" | "ms" | "us" | "ns"` (the time column's unit; default
+      seconds). A time column named in another unit (`t_ms`, `stamp_nsec`) than the one
+      declared, or stamps that as seconds would reach 3 000 years (an epoch in ms, µs or
+      ns) without a unit declared, are refused; µs and ns stamps beyond 2**53 read exactly
+      as each one less the first.
     - `rate_hz`: sample rate [Hz]; needed when there is no time column, otherwise the
       file's `# rate_hz = …` comment (before the header, as `ImuData.save` writes it) or
       1 / median time step unless given.
@@ -279,7 +289,11 @@ def load(
     saved_layout = saved_layout and (comment is not None or _saved_rate(path)[1] is not None)
     # a plain numeric file: NumPy's C parser, streamed; an integer a float64 would round (a
     # nanosecond time stamp) refused in the columns used, naming the column, row and line
-    table, lines = read_csv_table(path, exact_integers=_all_names(names))
+    table, lines = read_csv_table(
+        path,
+        exact_integers=_all_names(names),
+        integer_offsets=[names["time"]] if units.get("time") in ("us", "ns") else (),
+    )
     unasked = saved_layout and _SAVED_TEMPERATURE in table
     if unasked:
         names["temperature"] = _SAVED_TEMPERATURE  # ImuData.save's: not dropped
@@ -327,6 +341,13 @@ def _build(path, names, table, lines, units, rate_hz, check_units) -> ImuData:
             i = int(bad[0])
             raise ValueError(where(f"{path}: column {c!r} row {i}: {col[i]!r} is not finite"))
         got[c] = col
+    if "time" in names:
+        c = names["time"]
+        way_out = lambda u: f'units["time"] = "{u}"'  # noqa: E731
+        try:
+            stamps_per_second(c, got[c], units.get("time"), way_out)
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
     if "temperature" in names:
         c = names["temperature"]
         try:
@@ -420,11 +441,14 @@ def _all_names(names: dict) -> list[str]:
 
 
 def _declared(units) -> tuple[str, str]:
-    if not isinstance(units, Mapping) or set(units) - {"gyro", "accel"}:
+    if not isinstance(units, Mapping) or set(units) - {"gyro", "accel", "time"}:
         raise ValueError(
-            'units must be a mapping {"gyro": "deg/s" | "rad/s", "accel": "m/s^2" | "g"}; '
+            'units must be a mapping {"gyro": "deg/s" | "rad/s", "accel": "m/s^2" | "g"} '
+            '(and optionally "time": "s" | "ms" | "us" | "ns"); '
             f"got {units!r}"
         )
+    if units.get("time") is not None and units["time"] not in TIME_UNITS:
+        raise ValueError(f'units["time"] must be one of {list(TIME_UNITS)}; got {units["time"]!r}')
     out = []
     for key, table in (("gyro", GYRO_UNITS), ("accel", ACCEL_UNITS)):
         u = units.get(key)
