@@ -53,7 +53,8 @@ def cmd_align(args) -> int:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", AlignmentWarning)
             result = align(log, coarse_s=args.coarse, coarse_name="--coarse", step_s=args.step,
-                           gyro_bias_std=args.gyro_bias * DEG_PER_H, arw=args.arw * DEG / 60.0)  # fmt: skip
+                           gyro_bias_std=args.gyro_bias * DEG_PER_H, arw=args.arw * DEG / 60.0,
+                           velocity_noise=args.velocity_noise)  # fmt: skip
     for w in caught:  # the alignment's warning in one line: "hrgjax align: heading σ …"
         if issubclass(w.category, AlignmentWarning):
             print(f"hrgjax {' '.join(str(w.message).split())}", file=sys.stderr, flush=True)
@@ -63,19 +64,36 @@ def cmd_align(args) -> int:
     span = float(log.t[-1] - log.t[0])
     print(f"hrgjax align: {args.imu_log} ({log.t.shape[0]} samples, {span:.0f} s)")
     c = out["coarse"]
-    print(
-        f"  coarse ({args.coarse:g} s): heading {c['heading_deg']:.3f}°, pitch "
-        f"{c['pitch_deg']:.3f}°, roll {c['roll_deg']:.3f}°"
-    )
+    print(f"  coarse ({args.coarse:g} s): heading {c['heading_deg']:.3f}° ± "
+          f"{c['heading_std_deg']:.3g}° (the span's own scatter {c['scatter_heading_std_deg']:.3g}°),"
+          f" pitch {c['pitch_deg']:.3f}°, roll {c['roll_deg']:.3f}°")  # fmt: skip
     for k in ("heading", "pitch", "roll"):
         why = (f", assuming gyro bias σ {args.gyro_bias:g} °/h: stationary alignment cannot "
                "measure the east gyro bias" if k == "heading" else "")  # fmt: skip
         print(f"  {k:>7}: {out[k + '_deg']:9.4f}° ± {out[k + '_std_deg']:.4f}° (1σ{why})")
+    print(_sway_line(out["sway"]))
     header = log.header_attitude_deg
     if header is not None:
         print(f"  file header heading: {header[2]:.2f}° (clockwise from north)")
     return finish((args.json, out),
                   (args.plot, lambda p: figure("alignment_figure")(result, p, header)))  # fmt: skip
+
+
+def _sway_line(sway: dict) -> str:
+    """`hrgjax align`'s sway indicator ([`AlignmentResult.sway`][hrgjax.ins.alignment.AlignmentResult.sway])
+    in one line, with a note where it says the σ is optimistic."""
+    rms = ", ".join(f"{v * 1e3:.3g}" for v in sway["innovation_rms_m_s"])
+    slow = ", ".join(f"{v:.2g}" for v in sway["slow_ratio"])
+    line = (f"  sway: zero-velocity innovations RMS (N, E, D) {rms} mm/s against the assumed "
+            f"{sway['velocity_noise_m_s'] * 1e3:.3g} mm/s; mean NIS {sway['mean_nis']:.3g} (3 for "
+            f"white noise as assumed); slow part {slow} × the assumed (1)")  # fmt: skip
+    if sway["optimistic"]:
+        worst = max(sway["slow_ratio"][:2])
+        line += (f" — the σ is optimistic: the vehicle sways slower than the white noise the "
+                 f"filter assumes, its heading σ beyond the gyro-bias floor is about "
+                 f"{worst**0.5:.2g}× too small; align a calmer stretch or raise "
+                 "--velocity-noise")  # fmt: skip
+    return line
 
 
 def cmd_diagnose(args) -> int:
@@ -220,6 +238,9 @@ def _align_parser(sub):
     )  # fmt: skip
     p.add_argument("--arw", type=POSITIVE_FLOAT, default=0.01, metavar="DEG_PER_RT_H",
                    help="the gyros' angle random walk [°/√h] the filter assumes")  # fmt: skip
+    p.add_argument("--velocity-noise", type=POSITIVE_FLOAT, default=0.01, metavar="M_PER_S",
+                   help="the zero-velocity measurement's white noise [m/s] the filter assumes "
+                   "(a parked vehicle's sway); the printed sway line says whether it covers")  # fmt: skip
     return p
 
 

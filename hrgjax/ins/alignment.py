@@ -1,5 +1,7 @@
 r"""Stationary initial alignment of a strapdown IMU: coarse (analytic levelling +
-gyrocompassing) then fine (Kalman filter on zero velocity), and the PSINS log loader.
+gyrocompassing) then fine (Kalman filter on zero velocity). The record and the PSINS loader
+are [`imu_log`][hrgjax.ins.imu_log] (`ImuLog`, `load_psins`, `PSINS_FIELDS` import from here
+too).
 
 Frames: navigation NED, body FRD (x forward, y right, z down); heading clockwise from north.
 **Coarse** ([`coarse_align`][hrgjax.ins.alignment.coarse_align]): the mean specific force
@@ -24,15 +26,17 @@ coarse heading's error comes from the same bias, so `align`'s prior holds that c
 $(\sigma_{ARW}/\sqrt{T})/(\omega_{ie}\cos\varphi)$ grows towards the pole
 ([`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]); the fine data are
 independent of it (run over the coarse span too, they counted that noise twice: z-RMS
-1.14–1.20 for ARW 0.05 °/√h at 88°). The σ is a linearised one: it covers while the heading
-error is small (`AlignmentWarning`).
+1.14–1.20 for ARW 0.05 °/√h at 88°). A vehicle that sways makes the coarse means err beyond
+that white noise, so the prior takes the larger of it and the span's own scatter
+([`coarse_scatter`][hrgjax.ins.alignment.coarse_scatter]). The σ is a linearised one: it
+covers while the heading error is small (`AlignmentWarning`), and while the zero-velocity
+innovations are as white as `velocity_noise` assumes (`AlignmentResult.sway`).
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -40,25 +44,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._compiled import fused
-from .._data_files import beyond_exact, rounded_integer, rounded_integer_error
 from .._x64 import require_x64
 from ..kalman import Gaussian, update, van_loan
-from ..units import ARCSEC, DEG, DEG_PER_H
+from ..units import DEG, DEG_PER_H
 from .constants import MAX_LAT_DEG, OMEGA_IE, WGS84, earth_rate_ned
+from .imu_log import PSINS_FIELDS as PSINS_FIELDS
+from .imu_log import ImuLog as ImuLog
+from .imu_log import load_psins as load_psins
+from .imu_log import wrap_heading_deg
 from .mechanization import skew
 from .strapdown import augmented, error_matrices_at
 from .trajectory import dcm_to_euler
-
-
-def _python_float(x):
-    """A number (a NumPy or JAX scalar too) as a Python float, so that the static field holds
-    no array; anything else unchanged (`ImuLog.__check_init__` refuses it)."""
-    if isinstance(x, bool | str):
-        return x
-    try:
-        return float(x) if np.ndim(x) == 0 else x
-    except (TypeError, ValueError):
-        return x
 
 
 def _check_gyrocompass_latitude(lat: float) -> None:
@@ -71,63 +67,6 @@ def _check_gyrocompass_latitude(lat: float) -> None:
             f"which vanishes there; alignment needs |lat| <= {MAX_LAT_DEG:g}°"
         )
 
-
-class ImuLog(eqx.Module):
-    """An IMU record as increments in the body frame (FRD).
-
-    **Fields:** `t` (N,) [s] (end of each increment); `dtheta` (N, 3) [rad]; `dvel` (N, 3)
-    [m/s]; `lat`, `lon` [rad], `h` [m]; `header_attitude_deg`: (pitch, roll, heading) from
-    the file, heading clockwise from north (or `None`)."""
-
-    t: jax.Array
-    dtheta: jax.Array
-    dvel: jax.Array
-    lat: float = eqx.field(static=True, converter=_python_float)
-    lon: float = eqx.field(static=True, default=0.0, converter=_python_float)
-    h: float = eqx.field(static=True, default=0.0, converter=_python_float)
-    header_attitude_deg: tuple | None = eqx.field(static=True, default=None)
-
-    def __check_init__(self):
-        for name, unit in (("lat", "rad"), ("lon", "rad"), ("h", "m")):
-            v = getattr(self, name)
-            if not isinstance(v, float):
-                raise TypeError(f"ImuLog.{name} must be a number [{unit}]; got {type(v).__name__}")
-            if not math.isfinite(v):
-                raise ValueError(f"ImuLog.{name} must be finite [{unit}]; got {v}")
-        if not -math.pi / 2 <= self.lat <= math.pi / 2:
-            raise ValueError(
-                f"ImuLog.lat must be in [-π/2, π/2] rad; got {self.lat} (degrees? "
-                f"np.deg2rad({self.lat:g}) = {math.radians(self.lat):.6g})"
-            )
-        t = np.asarray(self.t)
-        for name in ("dtheta", "dvel"):
-            a = np.asarray(getattr(self, name))
-            if a.shape != (t.size, 3):
-                raise ValueError(f"ImuLog.{name} must have shape ({t.size}, 3); got {a.shape}")
-            if not np.all(np.isfinite(a)):
-                raise ValueError(
-                    f"ImuLog.{name} must be finite (row {np.argwhere(~np.isfinite(a))[0, 0]})"
-                )
-        d = np.diff(t)
-        if np.any(d <= 0):
-            raise ValueError(
-                f"ImuLog.t must be strictly increasing (row {int(np.argmax(d <= 0)) + 1})"
-            )
-
-    @property
-    def dt(self) -> float:
-        """Median sampling interval [s]."""
-        return float(np.median(np.diff(np.asarray(self.t))))
-
-
-PSINS_FIELDS = {
-    "interval": "the header's sampling interval (line 2, field 5) [ms]",
-    "gyro": "the header's gyro increment unit (line 3, fields 1–3) [arcsec]",
-    "accel": "the header's accelerometer increment unit (line 3, fields 4–6) [µg·s] or g "
-    "(line 2, field 6) [m/s²]",
-}
-"""What `check_stationary` names, for a log read by `load_psins`, as the source of each
-quantity a unit error would spoil."""
 
 _LOG_FIELDS = {
     "interval": "the log's time stamps ImuLog.t [s]",
@@ -147,101 +86,6 @@ RATE_SPAN_S = 60.0
 """The span [s] the mean angular rate is read over for `EARTH_RATE_RATIO`: the coarse span
 or this, whichever is longer (the whole record where shorter): a parked vehicle's sway is tens
 of °/h over a few seconds (the PSINS log: 55 °/h over its first 10 s), a short span aligns."""
-
-
-def load_psins(path) -> ImuLog:
-    """Read a PSINS-format text IMU log (provenance in `tests/data/README.md`): `%` comments, three
-    header lines (attitude [°] and velocity; lat [°], lon [°], h [m], t0 [s], interval [ms],
-    g; increment units: gyro [arcsec] ×3, accelerometer [µg·s] ×3), then one line of six
-    integer increments per sample, axes right–forward–up. Returned in FRD, the heading
-    clockwise from north (PSINS's yaw is counter-clockwise). The header's attitude is a
-    reference only: `header_attitude_deg` is `None` where it is not finite.
-
-    **Raises:** `ValueError` naming the file (and the line, field) for text that is not
-    UTF-8, a malformed header (a field of lines 2–3 not finite, a latitude beyond ±90°) or
-    sample row, or an integer beyond 2**53 that a float64 would round."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no IMU log at {path}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as err:
-        at = path.read_bytes()[: err.start].count(b"\n") + 1
-        raise ValueError(
-            f"{path}: line {at}: not UTF-8 text ({err.reason}); a PSINS log is plain text"
-        ) from None
-    numbered = [(i, ln) for i, ln in enumerate(text.splitlines(), 1)
-                if ln.strip() and not ln.lstrip().startswith("%")]  # fmt: skip
-    lines = [ln for _, ln in numbered]
-    if len(lines) < 4:
-        raise ValueError(
-            f"{path}: a PSINS log needs 3 header lines and samples; got {len(lines)} lines"
-        )
-    head = []
-    for k in range(3):
-        fields = lines[k].replace(",", " ").split()
-        _refuse_rounded(path, f"header line {k + 1} (line {numbered[k][0]})", fields)
-        try:
-            vals = [float(x) for x in fields]
-        except ValueError as err:
-            raise ValueError(f"{path}: header line {k + 1} is not numeric: {lines[k]!r}") from err
-        if len(vals) != 6:
-            raise ValueError(f"{path}: header line {k + 1} must hold 6 numbers; got {len(vals)}")
-        head.append(vals)
-    names = ("latitude [°]", "longitude [°]", "height [m]", "start time t0 [s]",
-             "sampling interval [ms]", "g [m/s²]", *3 * ["gyro increment unit [arcsec]"],
-             *3 * ["accelerometer increment unit [µg·s]"])  # fmt: skip
-    for k, (name, v) in enumerate(zip(names, head[1] + head[2], strict=True)):
-        if not math.isfinite(v):
-            raise ValueError(
-                f"{path}: the header's {name} (line {2 + k // 6}, field {1 + k % 6}) must be "
-                f"finite; got {v}"
-            )
-    (pitch, roll, yaw, *_), (lat, lon, h, t0, dt_ms, g), units = head
-    if not -90.0 <= lat <= 90.0:
-        raise ValueError(
-            f"{path}: the header's latitude (line 2, field 1) = {lat:g}° is outside ±90°"
-        )
-    if not dt_ms > 0:
-        raise ValueError(f"{path}: the sampling interval (header line 2, field 5) must be > 0 ms")
-    try:
-        raw = np.loadtxt(lines[3:], dtype=float, ndmin=2)
-    except ValueError as err:
-        raise ValueError(f"{path}: sample rows must hold 6 numbers each ({err})") from err
-    if raw.shape[1] != 6:
-        raise ValueError(f"{path}: sample rows must hold 6 numbers; got {raw.shape[1]}")
-    if beyond_exact({"samples": raw.ravel()}):  # an integer the float may have rounded
-        for i, (at, ln) in enumerate(numbered[3:]):
-            _refuse_rounded(path, f"line {at}, sample row {i}", ln.split(), _PSINS_SAMPLE)
-    gyro_rfu = raw[:, :3] * np.asarray(units[:3]) * ARCSEC
-    acc_rfu = raw[:, 3:] * np.asarray(units[3:]) * 1e-6 * g
-    rfu_to_frd = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-    n = raw.shape[0]
-    t = t0 + dt_ms * 1e-3 * np.arange(1, n + 1)
-    attitude = (pitch, roll, -yaw)
-    return ImuLog(
-        jnp.asarray(t),
-        jnp.asarray(gyro_rfu @ rfu_to_frd.T),
-        jnp.asarray(acc_rfu @ rfu_to_frd.T),
-        lat * DEG,
-        lon * DEG,
-        h,
-        attitude if all(math.isfinite(a) for a in attitude) else None,
-    )
-
-
-_PSINS_SAMPLE = tuple(f"{s} increment {a}" for s in ("gyro", "accelerometer")
-                      for a in ("right", "forward", "up"))  # fmt: skip
-"""The fields of a PSINS sample row, as `load_psins`'s errors name them."""
-
-
-def _refuse_rounded(path, where: str, fields: list[str], names=None) -> None:
-    """Refuse a field of a PSINS line that is an integer a float64 would round (beyond
-    2**53: a corrupted increment, a time in ns), naming the line and the field."""
-    for j, v in enumerate(fields):
-        if rounded_integer(v):
-            name = f" ({names[j]})" if names is not None and j < len(names) else ""
-            raise ValueError(rounded_integer_error(f"{path}: {where}, field {j + 1}{name}", v))
 
 
 def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None = None,
@@ -369,19 +213,62 @@ def coarse_error_model(c0, lat, h, span_s, arw, vrw):
     return jac, jnp.sum(jac**2 * white[None, :], axis=1)
 
 
+COARSE_PARTS = 10
+"""The number of equal parts [`coarse_scatter`][hrgjax.ins.alignment.coarse_scatter] splits
+the coarse span into (9 degrees of freedom: its σ scatters by ±24 % under white noise)."""
+
+
+@fused(static_argnames=("parts",))
+def coarse_scatter(dtheta, dvel, dt, parts: int = COARSE_PARTS):
+    r"""(6, 6) covariance of the coarse means' error (gyro [rad/s], then accelerometer
+    [m/s²]) measured from the coarse span's own increments `dtheta` (n, 3) [rad], `dvel`
+    (n, 3) [m/s] at interval `dt` [s]: the span split into `parts` equal parts (a remainder of
+    n mod parts samples left out), the scatter of their means over `parts` — the variance of
+    the whole span's mean if the parts are independent.
+
+    White noise: unbiased ($\mathrm{arw}^2/T$, the model of
+    [`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]). A sway whose angle is
+    bounded: conservative, at most √(parts + 1) = 3.3× in σ where the angle decorrelates
+    within a part (the span's mean errs by its angle change over T, ∝ 1/T, each part's by
+    parts/T; neighbours share an end). A disturbance slower than the span is a bias to it,
+    not seen here: the assumed grade's (`gyro_bias_std`). On the PSINS log's 60-s windows the
+    heading σ it gives is 1.3× the error (z-RMS 0.75)."""
+    n = (dtheta.shape[0] // parts) * parts
+    x = jnp.concatenate([dtheta[:n], dvel[:n]], axis=1).reshape(parts, n // parts, 6)
+    means = x.sum(1) / ((n // parts) * dt)
+    d = means - means.mean(0, keepdims=True)
+    return d.T @ d / ((parts - 1) * parts)
+
+
+SWAY_BLOCKS = 10
+"""`AlignmentResult.sway`'s `slow_ratio` averages the normalised innovations over this many
+equal blocks of the fine stage."""
+
+SWAY_RATIO = 2.0
+"""`slow_ratio` (north or east) beyond which `AlignmentResult.sway` says the σ is optimistic:
+under the filter's model it is χ²₁₀/10 (mean 1; beyond 2.0 with probability 3 %)."""
+
+
 class AlignmentResult(eqx.Module):
     """Attitude after alignment and its history.
 
-    **Fields:** `heading_deg` (clockwise from north), `pitch_deg`, `roll_deg` and their
-    `*_std_deg` (1σ); `t` (K,) [s] and `history_deg` (K, 3) (heading, pitch, roll),
+    **Fields:** `heading_deg` (clockwise from north, [0, 360)), `pitch_deg`, `roll_deg` and
+    their `*_std_deg` (1σ); `t` (K,) [s] and `history_deg` (K, 3) (heading, pitch, roll),
     `std_history_deg` (K, 3); `coarse_deg` (heading, pitch, roll) of the coarse stage;
     `biases`: estimated gyro [rad/s] and accelerometer [m/s²] biases (6,); `c_bn`: the
     final body-to-NED matrix; `gyro_bias_std_deg_h`: the gyro-bias σ [°/h] the filter
-    assumed.
+    assumed. Diagnostics (`None` where not computed): `bias_std` (6,) the biases' 1σ, body
+    frame, same units (the east gyro bias's stays at the assumed grade: unobservable);
+    `innovations` (K, 3) [m/s]: the zero-velocity innovations (N, E, D), `innovation_std`
+    (K, 3) [m/s] their predicted σ (√diag S), `nis` (K,) their normalised square νᵀS⁻¹ν (χ²₃
+    under the filter's model: mean 3), `velocity_noise` [m/s] the assumed; `coarse_std_deg` (heading, pitch, roll) the coarse attitude's 1σ in the
+    fine stage's prior, `coarse_scatter_heading_deg` the heading σ the coarse span's own
+    scatter gives ([`coarse_scatter`][hrgjax.ins.alignment.coarse_scatter]).
 
     **The heading σ is an assumption's:** it ends at `gyro_bias_std / (ω_ie cos lat)` for the
     *assumed* `gyro_bias_std` (0.28° at 45° for 0.05 °/h); a gyro whose bias is larger has a
-    heading error larger in proportion: give [`align`][hrgjax.ins.alignment.align] the grade."""
+    heading error larger in proportion: give [`align`][hrgjax.ins.alignment.align] the grade.
+    Its part beyond that assumes white zero-velocity noise of `velocity_noise`: `sway()`."""
 
     heading_deg: float
     pitch_deg: float
@@ -396,25 +283,70 @@ class AlignmentResult(eqx.Module):
     biases: jax.Array
     c_bn: jax.Array
     gyro_bias_std_deg_h: float = 0.05
+    bias_std: jax.Array | None = None
+    innovations: jax.Array | None = None
+    innovation_std: jax.Array | None = None
+    nis: jax.Array | None = None
+    velocity_noise: float | None = None
+    coarse_std_deg: tuple | None = None
+    coarse_scatter_heading_deg: float | None = None
+
+    def sway(self) -> dict:
+        """The zero-velocity innovations against the filter's white `velocity_noise`:
+        `innovation_rms_m_s` (N, E, D) [m/s], `velocity_noise_m_s`, `mean_nis` (3 under the
+        model; far less where the noise is smaller than assumed), and `slow_ratio` (N, E, D):
+        the power of the innovations' slow part (each divided by its predicted σ, averaged
+        over [`SWAY_BLOCKS`][hrgjax.ins.alignment.SWAY_BLOCKS] blocks: the mean square of
+        the block means × the block length) over what the model predicts (1). A vehicle
+        swaying slower than a filter step has a slow ratio above 1 however small its NIS,
+        and the heading σ beyond the gyro-bias floor is then optimistic by about √ratio:
+        `optimistic` where north or east exceeds [`SWAY_RATIO`][hrgjax.ins.alignment.SWAY_RATIO].
+        **Raises:** `ValueError` for a result without innovations."""
+        if self.innovations is None or self.innovation_std is None or self.nis is None:
+            raise ValueError("AlignmentResult.innovations is None: sway() needs align's result")
+        nu = np.asarray(self.innovations)
+        white = nu / np.asarray(self.innovation_std)
+        b = max(1, white.shape[0] // SWAY_BLOCKS)
+        m = white.shape[0] // b
+        slow = b * np.mean(white[: m * b].reshape(m, b, 3).mean(1) ** 2, axis=0)
+        return {
+            "innovation_rms_m_s": np.sqrt(np.mean(nu**2, axis=0)).tolist(),
+            "velocity_noise_m_s": self.velocity_noise,
+            "mean_nis": float(np.mean(np.asarray(self.nis))),
+            "slow_ratio": slow.tolist(),
+            "optimistic": bool(max(slow[:2]) > SWAY_RATIO),
+        }
 
     def to_json(self) -> dict:
-        """The DESIGN.md keys (and the coarse result, and `assumed_gyro_bias_std_deg_h`: the
-        gyro-bias σ the heading σ rests on)."""
+        """The DESIGN.md keys (and the coarse result with its σ, `assumed_gyro_bias_std_deg_h`:
+        the gyro-bias σ the heading σ rests on, `bias_std` (gyro [°/h], accelerometer [m/s²])
+        and `sway`, where computed)."""
         keys = ("heading", "pitch", "roll")
         out = {f"{k}_deg": float(getattr(self, f"{k}_deg")) for k in keys}
         out |= {f"{k}_std_deg": float(getattr(self, f"{k}_std_deg")) for k in keys}
         out["coarse"] = dict(
             zip((f"{k}_deg" for k in keys), map(float, self.coarse_deg), strict=True)
         )
+        if self.coarse_std_deg is not None:
+            out["coarse"] |= {f"{k}_std_deg": float(v) for k, v in zip(keys, self.coarse_std_deg,
+                                                                          strict=True)}  # fmt: skip
+            out["coarse"]["scatter_heading_std_deg"] = float(self.coarse_scatter_heading_deg)
         out["assumed_gyro_bias_std_deg_h"] = float(self.gyro_bias_std_deg_h)
+        if self.bias_std is not None:
+            sd = np.asarray(self.bias_std)
+            out["bias_std"] = {"gyro_deg_h": (sd[:3] / DEG_PER_H).tolist(),
+                               "accel_m_s2": sd[3:].tolist()}  # fmt: skip
+        if self.innovations is not None:
+            out["sway"] = self.sway()
         return out
 
 
 @fused
 def euler_deg(c):
-    """(heading [0, 360), pitch, roll) [°] of the body-to-NED matrix `c` (3, 3)."""
+    """(heading [0, 360), pitch, roll) [°] of the body-to-NED matrix `c` (3, 3) (a heading
+    within 1e-9° below 360 is 0: [`wrap_heading_deg`][hrgjax.ins.imu_log.wrap_heading_deg])."""
     roll, pitch, heading = dcm_to_euler(c)
-    return jnp.stack([jnp.mod(heading / DEG, 360.0), pitch / DEG, roll / DEG])
+    return jnp.stack([wrap_heading_deg(heading / DEG), pitch / DEG, roll / DEG])
 
 
 @fused
@@ -459,6 +391,16 @@ def fine_align(
     the NED frame; `biases` in the body frame (mapped by the final Ĉ).
 
     **Raises:** `ValueError` for a log within 1° of a pole (no gyrocompassing there)."""
+    return _fine_run(log, c0, step_s=step_s, start_s=start_s, arw=arw, vrw=vrw,
+                     velocity_noise=velocity_noise, gyro_bias_std=gyro_bias_std,
+                     accel_bias_std=accel_bias_std, attitude_std_deg=attitude_std_deg,
+                     start_bias_jacobian=start_bias_jacobian)[:4]  # fmt: skip
+
+
+def _fine_run(log, c0, *, step_s=1.0, start_s=0.0, arw=_ARW, vrw=_VRW, velocity_noise=0.01,
+              gyro_bias_std=_GYRO_BIAS_STD, accel_bias_std=1e-3,
+              attitude_std_deg=_ATTITUDE_STD_DEG, start_bias_jacobian=None):  # fmt: skip
+    """`fine_align`, and its innovations (K, 3) [m/s], their predicted σ (K, 3) and NIS (K,)."""
     _check_gyrocompass_latitude(log.lat)
     dt = log.dt
     m = max(1, int(round(step_s / dt)))
@@ -520,20 +462,26 @@ def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std, jac):
         c_mid = 0.5 * (c + c_new)
         v = v + c_mid @ dv_k + (g_n - 2.0 * jnp.cross(w_ie, v)) * h_step
         prior = Gaussian(jnp.zeros(12), phi_k @ p @ phi_k.T + qd)
-        post, _, _, _ = update(prior, v, hm, r)
+        post, nu, s, _ = update(prior, v, hm, r)
         x = post.x
         c_new = _rotation(x[3:6]) @ c_new  # C ← (I + [φ×]) Ĉ
         v = v - x[:3]
         bias = bias + x[6:]
-        return (c_new, v, bias, post.P), (c_new, post.P)
+        nis = nu @ jnp.linalg.solve(s, nu)
+        return (c_new, v, bias, post.P), (c_new, post.P, nu, jnp.sqrt(jnp.diag(s)), nis)
 
-    (c, _, bias, _), (cs, ps) = jax.lax.scan(step, (c0, z3, jnp.zeros(6), p0), (dth, dv))
-    return t, cs, ps, jnp.concatenate([c.T @ bias[:3], c.T @ bias[3:]])  # body frame
+    (c, _, bias, _), (cs, ps, nu, nu_std, nis) = jax.lax.scan(
+        step, (c0, z3, jnp.zeros(6), p0), (dth, dv)
+    )
+    body = jnp.concatenate([c.T @ bias[:3], c.T @ bias[3:]])  # body frame
+    return t, cs, ps, body, nu, nu_std, nis
 
 
-def _warn_heading(start: float, end: float, floor: float, lat: float, coarse: str) -> None:
+def _warn_heading(start: float, end: float, floor: float, lat: float, coarse: str,
+                  sway: str = "") -> None:  # fmt: skip
     """`AlignmentWarning` for heading σ [°] `start`, `end` beyond the thresholds, the advice
-    by the cause: the grade's limit `floor` σ_ε/(ω_ie cos lat) [°], else the coarse span."""
+    by the cause: the grade's limit `floor` σ_ε/(ω_ie cos lat) [°], else the coarse span
+    (`sway`: what the span's own scatter adds to the advice, or "")."""
     if floor > END_HEADING_STD_DEG:
         why = (f"{end:.3g}° at the end: the assumed gyro grade's limit σ_ε/(ω_ie cos lat) is "
                f"{floor:.3g}° (over {END_HEADING_STD_DEG:g}°), a gyro of this grade cannot find "
@@ -546,7 +494,7 @@ def _warn_heading(start: float, end: float, floor: float, lat: float, coarse: st
     elif start > START_HEADING_STD_DEG:
         why = (f"{start:.3g}° at the fine stage's start (over {START_HEADING_STD_DEG:g}°): the "
                "coarse heading may be 140–180° off, where the fine filter does not recover "
-               f"(z-RMS 1.15–1.35 at 26–43°); a longer {coarse} shrinks it (as 1/√span)")  # fmt: skip
+               f"(z-RMS 1.15–1.35 at 26–43°); a longer {coarse} shrinks it (as 1/√span){sway}")  # fmt: skip
     else:
         return
     warnings.warn(f"align: heading σ {why}", AlignmentWarning, stacklevel=3)
@@ -559,11 +507,16 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
     `gyro_bias_std` [rad/s] and `arw` [rad/√s] among them). The prior holds the coarse
     attitude's correlation with the sensor biases (`coarse_bias_jacobian`, or the
     `start_bias_jacobian` given), so the heading σ ends at `gyro_bias_std / (ω_ie cos lat)`:
-    what the assumed grade allows (`AlignmentResult`). Its part beyond the biases is `attitude_std_deg` (default (0.5, 0.5, 5)°: sway and the
-    like) plus the coarse means' white noise
+    what the assumed grade allows (`AlignmentResult`). Its part beyond the biases is
+    `attitude_std_deg` (default (0.5, 0.5, 5)°) plus the coarse means' noise, added whatever
+    jacobian is given (the start is the coarse one, whose means hold that noise): per axis the
+    larger of the grade's white noise
     ([`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]; 8.45° of heading at 88°
-    for the default ARW over 60 s), added whatever jacobian is given (the start is the coarse
-    one, whose means hold that noise). `coarse_name`: the span's name in messages.
+    for the default ARW over 60 s) and the span's own scatter
+    ([`coarse_scatter`][hrgjax.ins.alignment.coarse_scatter]: a swaying vehicle's; 5–60° of
+    heading over the PSINS log's 60-s windows, whose coarse headings err by 16.5° RMS).
+    `coarse_name`: the span's name in messages. The result holds the diagnostics
+    (innovations, NIS, bias σ, the coarse σ; `AlignmentResult.sway`).
 
     **Warns:** `AlignmentWarning` where the heading σ is not small (`END_HEADING_STD_DEG`,
     `START_HEADING_STD_DEG`), naming the cure. **Raises:** `ValueError` for a log not 2 steps
@@ -585,16 +538,33 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
         c0, log.lat, log.h, n * dt, fine_kw.get("arw", _ARW), fine_kw.get("vrw", _VRW)
     )
     fine_kw.setdefault("start_bias_jacobian", jac)
+    scatter = np.diag(np.asarray(jac @ coarse_scatter(log.dtheta[:n], log.dvel[:n], dt) @ jac.T))
     std = np.asarray(fine_kw.get("attitude_std_deg", _ATTITUDE_STD_DEG), dtype=float)
-    fine_kw["attitude_std_deg"] = tuple(np.sqrt(std**2 + np.asarray(noise_var) / DEG**2))
-    t, cs, ps, bias = fine_align(log, c0, start_s=n * dt, **fine_kw)  # data the coarse left
+    var = np.maximum(np.asarray(noise_var), scatter)  # white noise, or the span's sway
+    fine_kw["attitude_std_deg"] = tuple(np.sqrt(std**2 + var / DEG**2))
+    bg = float(fine_kw.get("gyro_bias_std", _GYRO_BIAS_STD))
+    ba = float(fine_kw.get("accel_bias_std", 1e-3))
+    a = np.asarray(fine_kw["start_bias_jacobian"], dtype=float)
+    p_start = np.diag(np.square(fine_kw["attitude_std_deg"]) * DEG**2) + (a * np.repeat(
+        [bg**2, ba**2], 3)) @ a.T if a.shape == (3, 6) else None  # fmt: skip
+    t, cs, ps, bias, nu, nu_std, nis = _fine_run(log, c0, start_s=n * dt, **fine_kw)
     hist = jax.vmap(euler_deg)(cs)
     std = jax.vmap(_euler_std)(cs, ps[:, 3:6, 3:6])
     last, s = np.asarray(hist[-1]), np.asarray(std[-1])
-    bg = float(fine_kw.get("gyro_bias_std", _GYRO_BIAS_STD))
     floor = bg / (OMEGA_IE * math.cos(log.lat)) / DEG
-    _warn_heading(float(np.asarray(std[0])[0]), float(s[0]), floor, log.lat, coarse_name)
+    sway_deg = float(_euler_std(c0, jnp.diag(jnp.asarray(scatter)))[0])
+    white_deg = float(_euler_std(c0, jnp.diag(noise_var))[0])
+    sway = (f"; its part beyond the grade is the coarse span's own scatter ({sway_deg:.3g}°, "
+            f"the grade's white noise {white_deg:.2g}°): the IMU sways, a calmer stretch helps"
+            if sway_deg > 2 * white_deg else "")  # fmt: skip
+    _warn_heading(float(np.asarray(std[0])[0]), float(s[0]), floor, log.lat, coarse_name, sway)
+    c_end, p_end = np.asarray(cs[-1]), np.asarray(ps[-1])
+    bias_std = np.sqrt(np.concatenate([np.diag(c_end.T @ p_end[k:k + 3, k:k + 3] @ c_end)
+                                       for k in (6, 9)]))  # fmt: skip
     return AlignmentResult(
         float(last[0]), float(last[1]), float(last[2]), float(s[0]), float(s[1]), float(s[2]),
-        t, hist, std, coarse, bias, cs[-1], bg / DEG_PER_H,
+        t, hist, std, coarse, bias, cs[-1], bg / DEG_PER_H, jnp.asarray(bias_std), nu, nu_std,
+        nis, float(fine_kw.get("velocity_noise", 0.01)),
+        None if p_start is None else tuple(float(x) for x in _euler_std(c0, p_start)),
+        sway_deg,
     )  # fmt: skip

@@ -1,0 +1,205 @@
+"""An IMU record as body-frame increments ([`ImuLog`][hrgjax.ins.imu_log.ImuLog]) and the
+PSINS text log loader ([`load_psins`][hrgjax.ins.imu_log.load_psins]): what
+[`align`][hrgjax.ins.alignment.align] reads. Both are importable from
+`hrgjax.ins.alignment` too, where they were defined before.
+
+**Orderings.** `ImuLog.header_attitude_deg` keeps the file's order, (pitch, roll, heading);
+the alignment's results (`AlignmentResult.coarse_deg`, `history_deg`) are (heading, pitch,
+roll). Headings are clockwise from north in [0, 360) in both.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._data_files import beyond_exact, rounded_integer, rounded_integer_error
+from ..units import ARCSEC, DEG
+
+
+def _python_float(x):
+    """A number (a NumPy or JAX scalar too) as a Python float, so that the static field holds
+    no array; anything else unchanged (`ImuLog.__check_init__` refuses it)."""
+    if isinstance(x, bool | str):
+        return x
+    try:
+        return float(x) if np.ndim(x) == 0 else x
+    except (TypeError, ValueError):
+        return x
+
+
+HEADING_SNAP_DEG = 1e-9
+"""A heading within this of 360° [°] reads 0 (`wrap_heading_deg`, `euler_deg`): the mod of
+−1e-13° is 359.9999999999999, which prints as 360.0000°."""
+
+
+def wrap_heading_deg(x):
+    """The heading `x` [°] (a number or an array, traced too) in [0, 360): mod 360, and a
+    value within [`HEADING_SNAP_DEG`][hrgjax.ins.imu_log.HEADING_SNAP_DEG] below 360 is 0.
+    A Python number stays a Python float."""
+    if isinstance(x, int | float):
+        r = float(x) % 360.0
+        return 0.0 if r >= 360.0 - HEADING_SNAP_DEG else r
+    r = jnp.mod(x, 360.0)
+    return jnp.where(r >= 360.0 - HEADING_SNAP_DEG, 0.0, r)
+
+
+class ImuLog(eqx.Module):
+    """An IMU record as increments in the body frame (FRD).
+
+    **Fields:** `t` (N,) [s] (end of each increment); `dtheta` (N, 3) [rad]; `dvel` (N, 3)
+    [m/s]; `lat`, `lon` [rad], `h` [m]; `header_attitude_deg`: (pitch, roll, heading) [°]
+    from the file, in the file's order — not the (heading, pitch, roll) of
+    `AlignmentResult.coarse_deg` and `history_deg` — the heading clockwise from north in
+    [0, 360) (or `None`)."""
+
+    t: jax.Array
+    dtheta: jax.Array
+    dvel: jax.Array
+    lat: float = eqx.field(static=True, converter=_python_float)
+    lon: float = eqx.field(static=True, default=0.0, converter=_python_float)
+    h: float = eqx.field(static=True, default=0.0, converter=_python_float)
+    header_attitude_deg: tuple | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        for name, unit in (("lat", "rad"), ("lon", "rad"), ("h", "m")):
+            v = getattr(self, name)
+            if not isinstance(v, float):
+                raise TypeError(f"ImuLog.{name} must be a number [{unit}]; got {type(v).__name__}")
+            if not math.isfinite(v):
+                raise ValueError(f"ImuLog.{name} must be finite [{unit}]; got {v}")
+        if not -math.pi / 2 <= self.lat <= math.pi / 2:
+            raise ValueError(
+                f"ImuLog.lat must be in [-π/2, π/2] rad; got {self.lat} (degrees? "
+                f"np.deg2rad({self.lat:g}) = {math.radians(self.lat):.6g})"
+            )
+        t = np.asarray(self.t)
+        for name in ("dtheta", "dvel"):
+            a = np.asarray(getattr(self, name))
+            if a.shape != (t.size, 3):
+                raise ValueError(f"ImuLog.{name} must have shape ({t.size}, 3); got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(
+                    f"ImuLog.{name} must be finite (row {np.argwhere(~np.isfinite(a))[0, 0]})"
+                )
+        d = np.diff(t)
+        if np.any(d <= 0):
+            raise ValueError(
+                f"ImuLog.t must be strictly increasing (row {int(np.argmax(d <= 0)) + 1})"
+            )
+
+    @property
+    def dt(self) -> float:
+        """Median sampling interval [s]."""
+        return float(np.median(np.diff(np.asarray(self.t))))
+
+
+PSINS_FIELDS = {
+    "interval": "the header's sampling interval (line 2, field 5) [ms]",
+    "gyro": "the header's gyro increment unit (line 3, fields 1–3) [arcsec]",
+    "accel": "the header's accelerometer increment unit (line 3, fields 4–6) [µg·s] or g "
+    "(line 2, field 6) [m/s²]",
+}
+"""What `check_stationary` names, for a log read by `load_psins`, as the source of each
+quantity a unit error would spoil."""
+
+
+def load_psins(path) -> ImuLog:
+    """Read a PSINS-format text IMU log (provenance in `tests/data/README.md`): `%` comments, three
+    header lines (attitude [°] and velocity; lat [°], lon [°], h [m], t0 [s], interval [ms],
+    g; increment units: gyro [arcsec] ×3, accelerometer [µg·s] ×3), then one line of six
+    integer increments per sample, axes right–forward–up. Returned in FRD, the heading
+    clockwise from north in [0, 360) (PSINS's yaw is counter-clockwise: a yaw of 150° is a
+    heading of 210°). The header's attitude is a reference only: `header_attitude_deg`
+    (pitch, roll, heading), `None` where it is not finite.
+
+    **Raises:** `ValueError` naming the file (and the line, field) for text that is not
+    UTF-8, a malformed header (a field of lines 2–3 not finite, a latitude beyond ±90°) or
+    sample row, or an integer beyond 2**53 that a float64 would round."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no IMU log at {path}")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        at = path.read_bytes()[: err.start].count(b"\n") + 1
+        raise ValueError(
+            f"{path}: line {at}: not UTF-8 text ({err.reason}); a PSINS log is plain text"
+        ) from None
+    numbered = [(i, ln) for i, ln in enumerate(text.splitlines(), 1)
+                if ln.strip() and not ln.lstrip().startswith("%")]  # fmt: skip
+    lines = [ln for _, ln in numbered]
+    if len(lines) < 4:
+        raise ValueError(
+            f"{path}: a PSINS log needs 3 header lines and samples; got {len(lines)} lines"
+        )
+    head = []
+    for k in range(3):
+        fields = lines[k].replace(",", " ").split()
+        _refuse_rounded(path, f"header line {k + 1} (line {numbered[k][0]})", fields)
+        try:
+            vals = [float(x) for x in fields]
+        except ValueError as err:
+            raise ValueError(f"{path}: header line {k + 1} is not numeric: {lines[k]!r}") from err
+        if len(vals) != 6:
+            raise ValueError(f"{path}: header line {k + 1} must hold 6 numbers; got {len(vals)}")
+        head.append(vals)
+    names = ("latitude [°]", "longitude [°]", "height [m]", "start time t0 [s]",
+             "sampling interval [ms]", "g [m/s²]", *3 * ["gyro increment unit [arcsec]"],
+             *3 * ["accelerometer increment unit [µg·s]"])  # fmt: skip
+    for k, (name, v) in enumerate(zip(names, head[1] + head[2], strict=True)):
+        if not math.isfinite(v):
+            raise ValueError(
+                f"{path}: the header's {name} (line {2 + k // 6}, field {1 + k % 6}) must be "
+                f"finite; got {v}"
+            )
+    (pitch, roll, yaw, *_), (lat, lon, h, t0, dt_ms, g), units = head
+    if not -90.0 <= lat <= 90.0:
+        raise ValueError(
+            f"{path}: the header's latitude (line 2, field 1) = {lat:g}° is outside ±90°"
+        )
+    if not dt_ms > 0:
+        raise ValueError(f"{path}: the sampling interval (header line 2, field 5) must be > 0 ms")
+    try:
+        raw = np.loadtxt(lines[3:], dtype=float, ndmin=2)
+    except ValueError as err:
+        raise ValueError(f"{path}: sample rows must hold 6 numbers each ({err})") from err
+    if raw.shape[1] != 6:
+        raise ValueError(f"{path}: sample rows must hold 6 numbers; got {raw.shape[1]}")
+    if beyond_exact({"samples": raw.ravel()}):  # an integer the float may have rounded
+        for i, (at, ln) in enumerate(numbered[3:]):
+            _refuse_rounded(path, f"line {at}, sample row {i}", ln.split(), _PSINS_SAMPLE)
+    gyro_rfu = raw[:, :3] * np.asarray(units[:3]) * ARCSEC
+    acc_rfu = raw[:, 3:] * np.asarray(units[3:]) * 1e-6 * g
+    rfu_to_frd = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    n = raw.shape[0]
+    t = t0 + dt_ms * 1e-3 * np.arange(1, n + 1)
+    attitude = (pitch, roll, wrap_heading_deg(-yaw))  # PSINS yaw: counter-clockwise
+    return ImuLog(
+        jnp.asarray(t),
+        jnp.asarray(gyro_rfu @ rfu_to_frd.T),
+        jnp.asarray(acc_rfu @ rfu_to_frd.T),
+        lat * DEG,
+        lon * DEG,
+        h,
+        attitude if all(math.isfinite(a) for a in attitude) else None,
+    )
+
+
+_PSINS_SAMPLE = tuple(f"{s} increment {a}" for s in ("gyro", "accelerometer")
+                      for a in ("right", "forward", "up"))  # fmt: skip
+"""The fields of a PSINS sample row, as `load_psins`'s errors name them."""
+
+
+def _refuse_rounded(path, where: str, fields: list[str], names=None) -> None:
+    """Refuse a field of a PSINS line that is an integer a float64 would round (beyond
+    2**53: a corrupted increment, a time in ns), naming the line and the field."""
+    for j, v in enumerate(fields):
+        if rounded_integer(v):
+            name = f" ({names[j]})" if names is not None and j < len(names) else ""
+            raise ValueError(rounded_integer_error(f"{path}: {where}, field {j + 1}{name}", v))
