@@ -16,10 +16,17 @@
    and learning rates: `fit` jitted a fresh closure over the loss and the data on every
    call, so each fit compiled its training program again.
 
+5. `diagnosis.compare` (a 200-s scenario at 1 m/s² east, 3 faulty and 1 healthy runs; the
+   three filter banks and the MLP classifier, 200 training windows) called twice with other
+   keys, then `MLPClassifier.fit` (300 × 8 features, 4 classes, 50 steps) and `nn.train.rprop`
+   (one loss, 30 steps) twice each: the banks' and detectors' runs were fresh
+   `jax.jit(lambda …)`s, the gain schedules and Rprop eager scans over new closures, so a
+   second call of the same shapes compiled them all again.
+
 Each call prints the XLA compiles it caused (jax.monitoring) and its wall time.
 
-Usage: `.venv/bin/python benchmarks/recompile_values.py [--no-full] [--fog]` (`--fog`: only
-parts 3 and 4, ≈ 60 s).
+Usage: `.venv/bin/python benchmarks/recompile_values.py [--no-full] [--fog] [--diagnosis]`
+(`--fog`: only parts 3 and 4, ≈ 60 s; `--diagnosis`: only part 5, ≈ 60–120 s).
 """
 
 import argparse
@@ -125,12 +132,42 @@ def fog_fits():
                     lambda c=comp, d=data, f=fit: cp.fit_end_to_end(c, imu, d, **f)[1])  # fmt: skip
 
 
+def diagnosis_calls():
+    import jax.numpy as jnp
+
+    from hrgjax.diagnosis import compare as cp
+    from hrgjax.diagnosis import neural as nl
+    from hrgjax.nn import train
+
+    sc = cp.Scenario("short", t_fault=150.0, duration=200.0, specific_force=(1.0, 0.0, 0.0))
+    kw = dict(n_faulty=3, n_healthy=1, n_train=2, n_windows=200,
+              methods=("filter_bank", "filter_bank_rest", "filter_bank_full", "mlp_classifier"))  # fmt: skip
+    for i in range(2):
+        counted(
+            f"compare, call {i + 1}", lambda i=i: cp.compare(sc, key=jax.random.key(3 + i), **kw)
+        )
+    k = jax.random.key(0)
+    x = jax.random.normal(k, (300, 8))
+    y = jax.random.randint(jax.random.fold_in(k, 1), (300,), 0, 4)
+    for i in range(2):
+        counted(f"MLPClassifier.fit, call {i + 1}",
+                lambda i=i: nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6 + i), steps=50))  # fmt: skip
+    t = jnp.array([1.0, -2.0, 3.0])
+    loss = lambda p: jnp.sum((p - t) ** 4)
+    for i in range(2):
+        counted(f"rprop, one loss, call {i + 1}", lambda: train.rprop(loss, jnp.zeros(3), 30, 1e-2))
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--no-full", action="store_true", help="only the sweeps (and --fog's)")
     ap.add_argument("--fog", action="store_true", help="only the FOG compensation and fit calls")
+    ap.add_argument("--diagnosis", action="store_true", help="only diagnosis.compare and training")
     a = ap.parse_args()
     jax.monitoring.register_event_duration_secs_listener(_listen)
+    if a.diagnosis:
+        diagnosis_calls()
+        raise SystemExit
     if not a.fog:
         sweeps()
         if not a.no_full:

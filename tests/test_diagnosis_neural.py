@@ -75,8 +75,14 @@ def test_training_is_deterministic_for_a_key_and_differs_across_keys(data):
     np.testing.assert_array_equal(a.som.weights, b.som.weights)
     assert not np.allclose(a.som.weights, c.som.weights)
     m1 = nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6), steps=20)
-    m2 = nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6), steps=20)
+    # a second fit of the same shapes compiles nothing (before: a closure over the data per
+    # network, traced and compiled on every fit)
+    with CompileCounter() as compiles:
+        m2 = nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6), steps=20)
+        m3 = nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(7), steps=20)
+    assert compiles.compiles == 0, compiles.names
     np.testing.assert_array_equal(m1.nets[0].layers[0].weight, m2.nets[0].layers[0].weight)
+    assert not np.allclose(m1.nets[0].layers[0].weight, m3.nets[0].layers[0].weight)
 
 
 def test_predictor_bank_names_the_onset_by_least_residual(data):
@@ -143,6 +149,18 @@ def test_compare_scores_every_method_on_one_short_scenario():
         assert r["false_alarm_rate"] == 0.0 and r["wrong_diagnosis_rate"] < 0.05, r
     assert res["traces"]["filter_bank"].shape == res["traces"]["t_s"].shape
     assert "| filter_bank |" in cp.table(res)
+    # the same scenario and shapes again: nothing traced or compiled (before: the banks' and
+    # detectors' runs were fresh `jax.jit(lambda …)`s, the gain schedules and the classifier's
+    # training eager scans: 7 compiles), and the same key gives the same scores
+    with CompileCounter() as compiles:
+        again = cp.compare(sc, key=jax.random.key(3), n_faulty=3, n_healthy=1, n_train=2,
+                           methods=("filter_bank", "mlp_classifier"), n_windows=600)  # fmt: skip
+    assert compiles.compiles == 0, compiles.names
+    timing = ("step_cost_s", "train_s")
+    for r, s in zip(res["methods"], again["methods"], strict=True):
+        assert {k: v for k, v in r.items() if k not in timing} == {
+            k: v for k, v in s.items() if k not in timing
+        }
     with pytest.raises(ValueError, match="unknown methods"):
         cp.compare(sc, methods=("nope",))
     with pytest.raises(ValueError, match="unknown scenario"):

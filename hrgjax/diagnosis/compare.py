@@ -36,6 +36,7 @@ import dataclasses
 import functools
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -158,6 +159,24 @@ def _bank_run(out):
     """A filter bank's decisions and, per step, whether its probabilities are all finite."""
     probs, dec = out[0], out[1]
     return dec, jnp.all(jnp.isfinite(probs), axis=-1)
+
+
+# The methods' runs over a batch (B, K, m), module-level with the bank or detector as an
+# argument: a later `compare` of the same shapes reuses their programs (a fresh
+# `jax.jit(lambda …)` per call traced and compiled each anew)
+@eqx.filter_jit
+def _gain_bank_decisions(gb, zs, prior):
+    return _bank_run(run_gains(gb, zs, interacting=True, prior=prior))
+
+
+@eqx.filter_jit
+def _full_bank_decisions(bank, zs, prior):
+    return jax.vmap(lambda z: _bank_run(run_bank(bank, z, interacting=True, prior=prior)))(zs)
+
+
+@eqx.filter_jit
+def _stream_classes(det, zs):
+    return jax.vmap(lambda z: nl.stream_classes(det, z))(zs)
 
 
 def _bank_states(name, out):
@@ -318,8 +337,7 @@ def compare(
         t0 = time.perf_counter()
         gb = GainBank.from_bank(bank, min(k_len, 1000))
         gb_s = time.perf_counter() - t0
-        run = jax.jit(lambda z: _bank_run(run_gains(gb, z, interacting=True, prior=prior)))
-        out, cost = _timed(run, zs)
+        out, cost = _timed(_gain_bank_decisions, gb, zs, prior)
         add("filter_bank", _bank_states("filter_bank", out), cost, build_s + gb_s)
     if "filter_bank_rest" in methods and any(f != 0.0 for f in sc.specific_force):
         t0 = time.perf_counter()
@@ -327,14 +345,10 @@ def compare(
                           switch_prob=1e-4, fault_walk=_FAULT_WALK)  # fmt: skip
         gb_rest = GainBank.from_bank(rest, min(k_len, 1000))
         rest_s = time.perf_counter() - t0
-        run = jax.jit(lambda z: _bank_run(run_gains(gb_rest, z, interacting=True, prior=prior)))
-        out, cost = _timed(run, zs)
+        out, cost = _timed(_gain_bank_decisions, gb_rest, zs, prior)
         add("filter_bank_rest", _bank_states("filter_bank_rest", out), cost, rest_s)
     if "filter_bank_full" in methods:
-        run = jax.jit(
-            jax.vmap(lambda z: _bank_run(run_bank(bank, z, interacting=True, prior=prior)))
-        )
-        out, cost = _timed(run, zs)
+        out, cost = _timed(_full_bank_decisions, bank, zs, prior)
         add("filter_bank_full", _bank_states("filter_bank_full", out), cost, build_s)
 
     neural = [m for m in methods if not m.startswith("filter_bank")]
@@ -353,8 +367,7 @@ def compare(
             det = _train(name, x, y, xv, yv, z_tr, tmpl, sc, keys[name], n_predictor,
                          predictor_steps, n_ins)  # fmt: skip
             train_s = time.perf_counter() - t0
-            run = jax.jit(jax.vmap(lambda z, det=det: nl.stream_classes(det, z)))
-            cls, cost = _timed(run, zs)
+            cls, cost = _timed(_stream_classes, det, zs)
             add(name, nl.latch(cls, confirm), cost, train_s)
     rows.sort(key=lambda r: METHODS.index(r["name"]))
     out = {"scenario": sc.name, "sensor": sc.sensor, "thesis": sc.thesis, "methods": rows}

@@ -411,19 +411,26 @@ class GainBank(eqx.Module):
         if isinstance(warmup, bool) or not 0 <= int(warmup) <= n_steps:
             raise ValueError(f"warmup must be an integer in [0, n_steps={n_steps}]; got {warmup!r}")
         _check_bank(bank)
-        track = jax.vmap(lambda *a: _track(*a, n_steps))
-        k, s, plain = track(bank.phi, bank.qd, bank.h, bank.r, bank.p0)
-        p_on = _restart(bank.reset, bank.p0, plain[int(healthy), -1][None])
-        _, _, onset = track(bank.phi, bank.qd, bank.h, bank.r, p_on)
-        # each track's covariance before its step τ: its start, then its posteriors
-        src = jnp.stack([
-            jnp.concatenate([bank.p0[:, None], plain[:, :-1]], axis=1),
-            jnp.concatenate([p_on[:, None], onset[:, :-1]], axis=1),
-        ])  # fmt: skip
-        cross, s_from = jax.vmap(lambda p: _from_each(bank, p))(src)
-        s_inv, logdet = _inv_logdet(s_from)
-        gain = jnp.einsum("...nc,...cd->...nd", cross, s_inv)
-        return cls(bank, k, *_inv_logdet(s), gain, s_inv, logdet, int(warmup))
+        return cls(bank, *_schedules(bank, n_steps, int(healthy)), int(warmup))
+
+
+@eqx.filter_jit
+def _schedules(bank: Bank, n_steps: int, healthy: int):
+    """`GainBank`'s arrays from `bank`: one program per bank shape, `n_steps` and `healthy`
+    (run eagerly, every call traced and compiled its two scans anew)."""
+    track = jax.vmap(lambda *a: _track(*a, n_steps))
+    k, s, plain = track(bank.phi, bank.qd, bank.h, bank.r, bank.p0)
+    p_on = _restart(bank.reset, bank.p0, plain[healthy, -1][None])
+    _, _, onset = track(bank.phi, bank.qd, bank.h, bank.r, p_on)
+    # each track's covariance before its step τ: its start, then its posteriors
+    src = jnp.stack([
+        jnp.concatenate([bank.p0[:, None], plain[:, :-1]], axis=1),
+        jnp.concatenate([p_on[:, None], onset[:, :-1]], axis=1),
+    ])  # fmt: skip
+    cross, s_from = jax.vmap(lambda p: _from_each(bank, p))(src)
+    s_inv, logdet = _inv_logdet(s_from)
+    gain = jnp.einsum("...nc,...cd->...nd", cross, s_inv)
+    return k, *_inv_logdet(s), gain, s_inv, logdet
 
 
 def _restart(reset, p0, p):

@@ -256,12 +256,9 @@ class MLPClassifier(eqx.Module):
         nets = []
         for i, k in zip(range(1, n_classes), jax.random.split(key, n_classes - 1), strict=True):
             net = MLP((x.shape[1], *hidden, 1), key=k)
-            target = (y == i).astype(x.dtype)
-
-            def loss(m, target=target):
-                logit = jax.vmap(m)(x)[:, 0]
-                return jnp.mean(optax.sigmoid_binary_cross_entropy(logit, target))
-
+            # a module-level loss with the data as traced arguments: one compiled training
+            # program for every net and every later fit of the same shapes
+            loss = eqx.Partial(_classifier_loss, x=x, target=(y == i).astype(x.dtype))
             nets.append(train_module(net, loss, steps, learning_rate=0.01, max_step=0.5))
         return cls(nets, threshold)
 
@@ -284,6 +281,13 @@ class MLPClassifier(eqx.Module):
     @fused
     def _classify(self, x):
         return _scores_to_class(self._outputs(x), self.threshold)
+
+
+def _classifier_loss(m, *, x, target):
+    """Mean sigmoid cross-entropy of network `m`'s logits on the rows of `x` against
+    `target` (0/1)."""
+    logit = jax.vmap(m)(x)[:, 0]
+    return jnp.mean(optax.sigmoid_binary_cross_entropy(logit, target))
 
 
 @fused

@@ -10,7 +10,7 @@ import numpy as np
 import optax
 
 from .._checks import host_value
-from .._compiled import Check, device, program
+from .._compiled import Check, Unchecked, device, program
 from .._progress import bar
 
 DIVERGED = (
@@ -48,22 +48,52 @@ def rprop(loss, params, steps: int, learning_rate: float = 1e-3, max_step: float
     step size, `max_step` the largest one (a sigmoid/tanh network saturates, and stops
     learning, when a weight's step grows too large). **Returns** the parameters.
 
+    **Compiled once** per `loss` object, the structure and shapes of `params`, `steps`,
+    `learning_rate` and `max_step`: a later call with the same `loss` compiles nothing. A
+    fresh closure (`lambda p: f(p, x)`) is a new `loss` and compiles anew; pass varying data
+    as the arrays of an `equinox.Partial(f, x)` of a module-level `f` instead (they are
+    traced, not baked in), and do not let `loss` read a global that changes between calls.
+
     **Raises:** `ValueError` for `steps` < 1; `RuntimeError` ("training diverged") when the
     loss or the trained weights are not finite (checked on the host after training; under
     `jit` the traced result passes unchecked)."""
     steps = check_steps(steps)
-    state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
-    scan = _rprop_scan(lambda p, _: loss(p), params, state, None, steps, learning_rate, max_step)
-    check_trained(scan[0], scan[2])
-    return scan[0]
+    trained, losses = _rprop_program(_call_loss, params, loss, steps, learning_rate, max_step)
+    check_trained(trained, losses)
+    return trained
 
 
 def train_module(module, loss, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0):
     """Rprop on the inexact-array leaves of an equinox `module`; `loss(module)` → scalar.
-    Raises as [`rprop`][hrgjax.nn.train.rprop]."""
+    Compiled once and raises as [`rprop`][hrgjax.nn.train.rprop] (the same `loss` and a
+    module of the same structure and shapes: nothing compiles)."""
+    steps = check_steps(steps)
     params, static = eqx.partition(module, eqx.is_inexact_array)
-    trained = rprop(lambda p: loss(eqx.combine(p, static)), params, steps, learning_rate, max_step)
+    trained, losses = _rprop_program(_call_combined, params, (loss, static), steps,
+                                     learning_rate, max_step)  # fmt: skip
+    check_trained(trained, losses)
     return eqx.combine(trained, static)
+
+
+def _call_loss(params, loss):
+    return loss(params)
+
+
+def _call_combined(params, loss_static):
+    loss, static = loss_static
+    return loss(eqx.combine(params, static))
+
+
+def _rprop_run(loss_fn, params, data, length: int, learning_rate, max_step):
+    """`length` Rprop updates from a fresh optimiser state: (params, losses)."""
+    state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
+    params, _, losses = _rprop_scan(loss_fn, params, state, data, length, learning_rate, max_step)
+    return params, losses
+
+
+_rprop_program = program(_rprop_run, check=Unchecked())
+"""`_rprop_run` as one compiled program per loss, data structure and shapes (`rprop` and
+`train_module` check its outputs on the host, naming the first non-finite loss's step)."""
 
 
 def _block_length(steps: int, blocks: int = 20) -> int:
