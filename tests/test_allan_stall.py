@@ -138,7 +138,9 @@ def test_the_cli_says_a_stalled_clock_kept_its_samples(tmp_path, capsys, white):
 def test_kalibr_white_level_of_a_short_gauss_markov_follows_the_sampling(steps):
     """Review of 56065c5: the white level 2σ²T is the interval means'; point samples of a
     Gauss–Markov rate are an AR(1) of φ = e^{−Δt/T}, whose long-τ level N² is Δt × the sum of
-    its autocovariances, σ²Δt(1 + φ)/(1 − φ) (exported N 0.694× at T = Δt/4 before)."""
+    its autocovariances, σ²Δt(1 + φ)/(1 − φ) (exported N 0.694× at T = Δt/4 before). The
+    model's octaves run 0.01–40.96 s (a 2¹⁵-sample fit's): over them each term goes white
+    (`hrgjax.allan.kalibr`; over τ₀ alone a walk would overstate it less)."""
     dt, sigma, big_n = 1.0 / FS, 0.7, 0.1
     t = steps * dt
     phi = np.exp(-dt / t)
@@ -149,8 +151,8 @@ def test_kalibr_white_level_of_a_short_gauss_markov_follows_the_sampling(steps):
         terms={"angle_random_walk": {**unit, "value": big_n},
                "gauss_markov_1": {"sigma": {**unit, "value": sigma},
                                   "correlation_time": {**unit, "value": t}}},
-        unit="°/h", rate_hz=FS, n=10_000, ci=0.95, taus=np.array([dt]), avar=np.array([1.0]),
-        covariance=np.eye(1), chi2=0.0, dof=1, p_value=1.0,
+        unit="°/h", rate_hz=FS, n=2**15, ci=0.95, taus=dt * 2.0 ** np.arange(13),
+        avar=np.ones(13), covariance=np.eye(13), chi2=0.0, dof=8, p_value=1.0,
         bounds={"rate_random_walk": 1e-3})  # fmt: skip
     si = np.pi / 180 / 3600
     for sampling, level in truth.items():

@@ -16,7 +16,8 @@ Every name is importable from `hrgjax.allan` (it was one module until issue 45);
 line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
 exact covariance of the octave estimates, for rate samples taken as interval means or as
 point samples: an explicit `sampling` argument) and `composite` (a composite noise model fitted with
-that covariance, with model selection: `identify_noise`) and `resample` (non-uniform time
+that covariance, with model selection: `identify_noise`), `kalibr` (the model's Gauss–Markov
+terms in Kalibr's white noise and random walk, over the record's octaves) and `resample` (non-uniform time
 stamps onto a uniform grid by the angle: `to_uniform`).
 """
 

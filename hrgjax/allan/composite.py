@@ -39,8 +39,10 @@ import numpy as np
 from .._checks import check_1d, check_number, describe, is_concrete, is_finite_real
 from .._io import atomic_write
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
+from .kalibr import ABSENT_SHARE, entries_ratio, fold_gauss_markov, negligible
 from .octave_covariance import SAMPLINGS, unit_avar
 from .octave_covariance import covariance as covariance
+from .octave_covariance import gm_white_level as gm_white_level
 from .octave_fits import best_fit, log_fit, model_avar, model_covariance
 from .uncertainty import chi2_sf
 
@@ -183,29 +185,30 @@ class CompositeNoise:
         [Hz]. Kalibr models white noise and a random walk only, so the other terms are folded
         in, each marked so in the file:
 
-        - `{sensor}_noise_density` = √(N² + 2Q²/Δt), Δt = 1/`rate_hz`: Kalibr's per-sample
-          σ_c/√Δt then equals the record's, N²/Δt + 2Q²/Δt² (white angle noise Q differenced
-          into rates). This holds at this record's update rate only: resampled to another Δt
-          the white angle noise scales as 1/Δt, not 1/√Δt, and its samples' negative
-          correlation (an MA(1)) is lost.
-        - `{sensor}_random_walk` = √(K² + Σ 2σᵢ²/Tᵢ): each Gauss–Markov term's rate wanders
-          like a random walk of that strength over times short against Tᵢ (what hrgjax's EKF
-          uses, `hrgjax.ins.ekf`); over longer times Kalibr's walk overstates it.
-        - except a Gauss–Markov term of Tᵢ ≤
-          [`GM_AS_WHITE`][hrgjax.allan.composite.GM_AS_WHITE]·Δt (a digital low-pass, output
-          smoothed over a few samples): white noise, its level at long τ in the model's own
-          Allan variance added to N² ([`gm_white_level`][hrgjax.allan.composite.gm_white_level]:
-          2σᵢ²Tᵢ for interval means, σᵢ²Δt·coth(Δt/2Tᵢ) for point samples — 2σ²T read them
-          0.694× in N at T = Δt/4). For interval means its Allan variance 2σ²T/τ bounds the
-          term's own at every τ and is within 15 % of it from τ = 10 T; as a walk, K²τ/3 =
-          2σ²τ/(3T) would exceed it 200× at 100 Δt (a 100-Hz white log low-passed to T =
-          1.5 Δt exported N 0.028 for 0.100 °/h·√s, K 6.4 °/h/√s for 0). At T = 4Δt it
-          jumps from N² to K², each right on its side of τ ≈ T and neither across it.
+        - `{sensor}_noise_density` = √(N² + 2Q²/Δt + white parts), Δt = 1/`rate_hz`:
+          Kalibr's per-sample σ_c/√Δt then equals the record's, N²/Δt + 2Q²/Δt² (white angle
+          noise Q differenced into rates). This holds at this record's update rate only:
+          resampled to another Δt the white angle noise scales as 1/Δt, not 1/√Δt, and its
+          samples' negative correlation (an MA(1)) is lost.
+        - `{sensor}_random_walk` = √(K² + walk parts).
+        - Each Gauss–Markov term (σᵢ, Tᵢ) goes whole into the white part (its long-τ level
+          [`gm_white_level`][hrgjax.allan.composite.gm_white_level], 2σᵢ²Tᵢ for interval
+          means) or the walk part (2σᵢ²/Tᵢ, its short-τ walk), whichever overstates its exact
+          Allan variance less at the worst of the model's octaves `taus` (τ₀ … τ_max, the
+          record's τ range): [`hrgjax.allan.kalibr`][hrgjax.allan.kalibr]. Both bound it
+          from above, so the export does not understate it at any octave; a T of a few
+          samples goes white, a T beyond √(τ₀τ_max) or so a walk. (Until 2026-11-30 every
+          T > 4Δt went into the walk: the PSINS laser-gyro log's 0.08-s vibration term gave
+          K 268 °/h/√s, 1 190× the model's Allan deviation at τ = 164 s; now white: the term
+          14.4× at most, at τ₀, the whole export 6.3×.)
 
+        The file's first comment states the worst: the ratio of the entries' Allan deviation
+        to the model's over its octaves ([`entries_ratio`][hrgjax.allan.kalibr.entries_ratio]).
         A term the record did not need counts 0, except that where an entry would be 0 (N and
-        Q, or K and every Gauss–Markov term, absent) N's or K's upper bound (`bounds`) is
-        written (Kalibr refuses a 0); with no finite bound either, `ValueError`. The record's
-        `unit` must be one Kalibr's units follow from
+        Q, or K and every part, absent) N's or K's upper bound (`bounds`) is written (Kalibr
+        refuses a 0); a bound of 0 (the octaves reject even 0) is written as
+        [`negligible`][hrgjax.allan.kalibr.negligible]; with no finite bound, `ValueError`. The
+        record's `unit` must be one Kalibr's units follow from
         ([`TO_SI`][hrgjax.allan.composite.TO_SI]). Kalibr reads both sensors' entries from
         one file: write each sensor's model and merge them. Written to `path` when given,
         atomically (missing folders are made). **Returns:** the entries."""
@@ -214,41 +217,45 @@ class CompositeNoise:
         scale = _si_scale(self.unit, sensor)
         dt = 1.0 / self.rate_hz
         q = self.value("quantization")
-        terms = [(g["sigma"]["value"], g["correlation_time"]["value"])
+        folds = [(g["sigma"]["value"], g["correlation_time"]["value"])
                  for name, g in self.terms.items() if name.startswith("gauss_markov")]  # fmt: skip
-        fast = [(s, t) for s, t in terms if t <= GM_AS_WHITE * dt]  # white at Kalibr's Δt
-        gms = [(s, t) for s, t in terms if t > GM_AS_WHITE * dt]
-        white = sum(gm_white_level(s, t, dt, self.sampling) for s, t in fast)
-        extra = {"noise_density": 2.0 * q * q / dt + white,
-                 "random_walk": sum(2.0 * s * s / t for s, t in gms)}  # fmt: skip
-        values, notes = {}, {}
+        folds = [(s, t, fold_gauss_markov(s, t, self.taus, dt, self.sampling)) for s, t in folds]
+        extra = {"noise_density": 2.0 * q * q / dt + sum(f["white"] for *_, f in folds),
+                 "random_walk": sum(f["walk"] for *_, f in folds)}  # fmt: skip
+        values, notes, coef = {}, {}, {}
         for key, name in (
             ("noise_density", "angle_random_walk"),
             ("random_walk", "rate_random_walk"),
         ):
             v = self.value(name)
             if v <= 0 and extra[key] <= 0:
-                v = self.bounds.get(name, 0.0)
+                v = self.bounds.get(name, math.inf)
                 notes[key] = " (not detected: the record's upper bound)"
+                if v == 0:
+                    v = negligible(self, name)
+                    notes[key] = (" (not detected, upper bound 0: written at <= "
+                                  f"{100 * ABSENT_SHARE:g} % of the model's Allan variance)")  # fmt: skip
                 if not 0 < v < math.inf:
                     raise ValueError(f"to_kalibr: {name} was not identified and has no finite "
                                      "bound; Kalibr needs a positive value")  # fmt: skip
-            values[key] = math.sqrt(v * v + extra[key]) * scale
+            coef[key] = math.sqrt(v * v + extra[key])
+            values[key] = coef[key] * scale
         folded = []
         if q > 0:
             folded.append(f"2Q^2/dt, Q = {q:.4g} {self.unit}*s white angle noise (valid at "
                           "this update_rate only)")  # fmt: skip
-        if fast:
+        gm = {form: ", ".join(f"(sigma {s:.4g}, T {t:.4g} s: worst {f['worst']:.3g}x at {f['at']:g} s)"
+                              for s, t, f in folds if f["form"] == form)
+              for form in ("white", "walk")}  # fmt: skip
+        if gm["white"]:
             level = "2 sigma^2 T" if self.sampling == "interval" else "sigma^2 dt coth(dt/2T)"
-            folded.append(f"{level}, Gauss-Markov rate(s) "
-                          f"{', '.join(f'(sigma {s:.4g}, T {t:.4g} s)' for s, t in fast)} "
-                          f"correlated over <= {GM_AS_WHITE:g} samples")  # fmt: skip
+            folded.append(f"{level}, Gauss-Markov rate(s) {gm['white']}")
         if folded:
             notes["noise_density"] = f" sqrt(N^2 + ...): {'; '.join(folded)} folded in as white"
-        if gms:
-            notes["random_walk"] = (" sqrt(K^2 + sum 2 sigma^2/T): Gauss-Markov bias "
-                                    f"{', '.join(f'(sigma {s:.4g}, T {t:.4g} s)' for s, t in gms)}"
-                                    " folded in as its short-time random walk")  # fmt: skip
+        if gm["walk"]:
+            notes["random_walk"] = (f" sqrt(K^2 + ...): 2 sigma^2/T, Gauss-Markov rate(s) "
+                                    f"{gm['walk']} folded in as a walk")  # fmt: skip
+        low, high, at = entries_ratio(self, coef["noise_density"], coef["random_walk"])
         out = {
             f"{sensor}_noise_density": values["noise_density"],
             f"{sensor}_random_walk": values["random_walk"],
@@ -260,7 +267,9 @@ class CompositeNoise:
                      "accelerometer": ("m/s^2/sqrt(Hz)", "m/s^3/sqrt(Hz)")}[sensor]  # fmt: skip
             with atomic_write(path, "w", encoding="utf-8") as fh:
                 fh.write(f"# from hrgjax.allan.identify_noise: {self.n} samples at "
-                         f"{self.rate_hz:g} Hz, unit {self.unit}\n")  # fmt: skip
+                         f"{self.rate_hz:g} Hz, unit {self.unit}\n# Allan deviation of these "
+                         f"entries / the model's over its octaves {self.taus[0]:g}-"
+                         f"{self.taus[-1]:g} s: {low:.3g}-{high:.3g} (highest at {at:g} s)\n")  # fmt: skip
                 fh.write(f"{sensor}_noise_density: {out[f'{sensor}_noise_density']:.6g}"
                          f"  # [{units[0]}]{notes.get('noise_density', '')}\n")  # fmt: skip
                 fh.write(f"{sensor}_random_walk: {out[f'{sensor}_random_walk']:.6g}"
@@ -307,22 +316,6 @@ class CompositeNoise:
             correlation_time=100.0 if gm is None else gm["correlation_time"]["value"],
         )
 
-
-def gm_white_level(sigma: float, correlation_time: float, dt: float, sampling: str) -> float:
-    """A first-order Gauss–Markov rate's white-noise level at long τ [unit²·s]: N² with which
-    its Allan variance → N²/τ, for σ [unit], T = `correlation_time` [s] sampled every `dt`
-    [s] as `sampling` — 2σ²T for interval means (the continuous rate's PSD at 0, whatever
-    Δt), σ²Δt·(1 + φ)/(1 − φ) = σ²Δt·coth(Δt/2T) for point samples (φ = e^{−Δt/T}: the AR(1)
-    samples' autocovariances summed, σ²Δt for T ≪ Δt, 2σ²T for T ≫ Δt)."""
-    if sampling == "interval":
-        return 2.0 * sigma * sigma * correlation_time
-    return sigma * sigma * dt / math.tanh(dt / (2.0 * correlation_time))
-
-
-GM_AS_WHITE = 4.0
-"""[`to_kalibr`][hrgjax.allan.CompositeNoise.to_kalibr] writes a Gauss–Markov term whose
-correlation time is at most this many sample steps as white noise (N² += `gm_white_level`),
-a longer one as a random walk (K² += 2σ²/T) [samples]."""
 
 TO_SI = {
     **{u: ("gyroscope", f) for u, f in GYRO_UNITS.items()},

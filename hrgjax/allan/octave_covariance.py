@@ -50,7 +50,10 @@ from __future__ import annotations
 import functools
 import math
 
+import jax.numpy as jnp
 import numpy as np
+
+from .._checks import is_concrete
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
 SLOW = 1e-6
@@ -129,6 +132,23 @@ def _check_sampling(sampling):
     if not isinstance(sampling, str) or sampling not in SAMPLINGS:
         raise ValueError(f"sampling must be one of {list(SAMPLINGS)}; got {sampling!r}")
     return sampling
+
+
+def gm_white_level(sigma, correlation_time, dt, sampling: str):
+    """A first-order Gauss–Markov rate's white-noise level at long τ [unit²·s]: N² with which
+    its Allan variance → N²/τ, for σ [unit], T = `correlation_time` [s] sampled every `dt`
+    [s] as `sampling` — 2σ²T for interval means (the continuous rate's PSD at 0, whatever
+    Δt), σ²Δt·(1 + φ)/(1 − φ) = σ²Δt·coth(Δt/2T) for point samples (φ = e^{−Δt/T}: the AR(1)
+    samples' autocovariances summed, σ²Δt for T ≪ Δt, 2σ²T for T ≫ Δt). Numbers give a
+    NumPy float; traced values (`jit`, `vmap`, `grad` over σ, T or Δt) a JAX array, either
+    sampling. Also importable from `hrgjax.allan.composite`.
+
+    **Raises:** `ValueError` for a `sampling` not in
+    [`SAMPLINGS`][hrgjax.allan.octave_covariance.SAMPLINGS] ("points" is not read as "point")."""
+    if _check_sampling(sampling) == "interval":
+        return 2.0 * sigma * sigma * correlation_time
+    x = dt / (2.0 * correlation_time)
+    return sigma * sigma * dt / (np.tanh(x) if is_concrete(x) else jnp.tanh(x))
 
 
 def second_difference_cov(gfun, ell, ma, mb):

@@ -36,10 +36,12 @@ vanishes, so latitudes beyond
 
 from __future__ import annotations
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import concrete_value
+from .._checks import concrete_value, is_concrete
 from .._compiled import fused
 from ..ins import alignment as _al
 from ..ins.alignment import coarse_align, euler_deg
@@ -48,7 +50,7 @@ from ..units import DEG
 from .vibration import FogImu, VibrationRecord, to_body
 
 
-def heading_limit_deg(eps_body, nabla_body, c_bn, lat) -> float:
+def heading_limit_deg(eps_body, nabla_body, c_bn, lat) -> float | jax.Array:
     """Stationary heading error [°] (estimate − truth, wrapped to ±180°) set by a constant
     body-frame gyro drift `eps_body` [rad/s] and accelerometer bias `nabla_body` [m/s²]. It
     is the heading of the TRIAD of the biased mean specific force and rate (module
@@ -64,9 +66,15 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat) -> float:
     body-to-NED direction cosine matrix; `lat`, the geodetic latitude φ **in radians**
     (`np.radians(45.0)` for 45°), |φ| ≤ [`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG].
 
+    **Returns:** the heading error [°]: for concrete inputs a `np.float64` (a `float`, as
+    before); traced, a 0-d array: `jit`, `vmap` (over latitude, drift, …) and `grad` (the
+    sensitivity ∂δψ/∂ε) run it, compiled once per shape.
+
     **Raises:** `ValueError` for a latitude beyond ±π/2 (degrees given for radians) or not
     finite, one within 1° of a pole (no north to find), a drift beyond 1e-3 rad/s (≈ 206 °/h:
-    °/h given for rad/s) or a bias beyond 1 m/s² (mg given for m/s²)."""
+    °/h given for rad/s) or a bias beyond 1 m/s² (mg given for m/s²). Traced values (inside
+    `jit`, `vmap`, `hg.sweep`) are held to the same rules at run time (`eqx.error_if`: the
+    message without the value)."""
     value = concrete_value(lat)
     if value is not None:
         if value.dtype.kind not in "iuf":
@@ -95,7 +103,39 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat) -> float:
                 f"alignment's error); got {np.asarray(v).tolist()} ({hint})"
             )
     as_f = lambda x: jnp.asarray(x, float)  # noqa: E731
-    return float(_heading_error(as_f(eps_body), as_f(nabla_body), as_f(c_bn), as_f(lat)))
+    eps_body, nabla_body, c_bn, lat = map(as_f, (eps_body, nabla_body, c_bn, lat))
+    out = _traced_checks(_heading_error(eps_body, nabla_body, c_bn, lat), eps_body, nabla_body, lat)
+    return np.float64(out) if is_concrete(out) else out
+
+
+_TRACED_RULES = (
+    "lat must be the latitude in radians, finite and |lat| ≤ π/2 (degrees? give np.radians(…))",
+    f"lat must be within ±{MAX_LAT_DEG:g}° (MAX_LAT_DEG) of the equator: the heading is found "
+    "from the horizontal Earth rate ω_ie·cos(lat), which vanishes at a pole",
+    "eps_body must be a bias in rad/s, finite and |eps_body| <= 0.001 (a stationary alignment's "
+    "error; °/h? multiply by hrgjax.units.DEG_PER_H)",
+    "nabla_body must be a bias in m/s², finite and |nabla_body| <= 1 (a stationary alignment's "
+    "error; mg? multiply by 9.80665e-3)",
+)
+
+
+def _traced_checks(out, eps_b, nab_b, lat):
+    """`out` with the eager checks of the traced inputs (inside `jit`, `vmap`, `hg.sweep`) held
+    at run time by one `eqx.branched_error_if` (the first rule broken raises its one line);
+    concrete inputs were checked eagerly and add nothing."""
+    traced = [concrete_value(x) is None for x in (lat, lat, eps_b, nab_b)]
+    if not any(traced):
+        return out
+    bad = (
+        ~(jnp.abs(lat) <= jnp.pi / 2),  # NaN too
+        jnp.abs(lat) > MAX_LAT_DEG * DEG,
+        ~jnp.all(jnp.abs(eps_b) <= 1e-3),
+        ~jnp.all(jnp.abs(nab_b) <= 1.0),
+    )
+    bad = jnp.stack(
+        [jnp.any(b) if t else jnp.asarray(False) for b, t in zip(bad, traced, strict=True)]
+    )
+    return eqx.branched_error_if(out, jnp.any(bad), jnp.argmax(bad), _TRACED_RULES)
 
 
 @fused

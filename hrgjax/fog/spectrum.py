@@ -45,6 +45,7 @@ import os
 import sys
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -212,7 +213,9 @@ def vibration_features(
     [`EdgeToneWarning`][hrgjax.fog.spectrum.EdgeToneWarning] per call (module docstring,
     **Edges**); whether it vibrates is decided there from the lobe's power with its DC bin
     (**Rest at the edges**). A window of fewer than
-    [`MIN_WINDOW`][hrgjax.fog.spectrum.MIN_WINDOW] = 10 samples is refused.
+    [`MIN_WINDOW`][hrgjax.fog.spectrum.MIN_WINDOW] = 10 samples is refused, and so is a
+    record in g (median |f| within 0.5 … 2 instead of ≈ 9.8 m/s²): eagerly, and at run time
+    inside `jit` or `vmap` (`eqx.error_if`).
     **Returns** (K, 2), K = N // (window_s·fs)."""
     a, m = _windows(accel, fs, window_s)
     if axis is not None:
@@ -273,6 +276,11 @@ def _windows(accel, fs, window_s):
     if not fs > 0:
         raise ValueError(f"fs must be > 0 Hz; got {fs}")
     v = concrete_value(a)
+    if v is None:  # traced (jit, vmap): the same rule at run time, the value left out
+        med = jnp.median(jnp.linalg.norm(a, axis=1))
+        a = eqx.error_if(a, (0.5 < med) & (med < 2.0), "accel must be specific force in m/s² "
+                         f"(|f| ≈ 9.8 at rest); its median |f| is within 0.5 … 2: in g? "
+                         f"multiply by {G0}")  # fmt: skip
     norm = float(np.median(np.linalg.norm(v, axis=1))) if v is not None else np.nan
     if 0.5 < norm < 2.0:
         raise ValueError(

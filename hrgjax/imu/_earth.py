@@ -39,6 +39,7 @@ m/s² at 45°), against a σ(G) of ~3e-6 for a MEMS session and ~3e-8 for a tact
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 
 from ..units import DEG, EARTH_RATE
@@ -61,7 +62,13 @@ def check_earth_rate(earth_rate) -> float:
 
 def _number(value, name: str, form: str, inside) -> float:
     """`value` as a finite float for which `inside(v)` holds, else one `ValueError` naming
-    `name` and `form` (a bool or a string is not a number here)."""
+    `name` and `form` (a bool or a string is not a number here); a value traced by `jit`,
+    `vmap` or `grad` is refused as such: the Ferraris calibration runs on the host (NumPy)."""
+    if isinstance(value, jax.core.Tracer):  # float() would raise, and blame a valid value
+        raise ValueError(
+            f"{name} must be a concrete number: the Ferraris calibration and session run on the "
+            "host (NumPy), not inside jit, vmap or grad; got a traced value"
+        )
     try:
         v = None if isinstance(value, bool | np.bool_ | str) else float(value)
     except (TypeError, ValueError):

@@ -30,7 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import is_concrete, vec3
+from .._checks import concrete_value, is_concrete, vec3
+from .._compiled import tracing_callback_free
 from ..units import DEG_PER_H, DEG_PER_SQRT_H, G0
 
 MICRO_G = 1e-6 * G0
@@ -66,6 +67,8 @@ _UNITS = {
 }
 
 
+_MISALIGNMENTS = ("gyro_misalignment", "accel_misalignment")
+
 _RANGE = {name: "imu_scale" if name.endswith("_scale") else f"imu_{name}"
           for name in _VECTOR_FIELDS} | {"gyro_misalignment": "imu_misalignment",
                                          "accel_misalignment": "imu_misalignment"}  # fmt: skip
@@ -89,13 +92,15 @@ class ImuModel(eqx.Module):
     [s]: first-order Gauss–Markov biases (σ, τ); `gyro_rate_random_walk` [rad/s/√s],
     `accel_random_walk` [m/s²/√s]: bias random walks.
 
-    **Raises:** `ValueError` for a concrete field that is not finite, a density or 1σ < 0, or
-    a value outside its `hrgjax.plausible.RANGES` entry (`imu_*`, bounds excluded: e.g.
-    |gyro_bias| < 0.75 rad/s, |gyro_scale| < 0.1, arw < 2.5e-3 rad/√s), named with the
-    datasheet units it may be in and the factor from each (`gyro_bias=3.0`: "… — °/h →
-    ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG (hrgjax.plausible.relaxed(
-    imu_gyro_bias=…) widens it)"; the scale factors' range is `imu_scale`, the
-    misalignments' `imu_misalignment`)."""
+    **Raises:** `ValueError` for a concrete field (or one under an eager `jax.grad`) that is
+    not finite, a density or 1σ < 0, or a value outside its `hrgjax.plausible.RANGES` entry
+    (`imu_*`, bounds excluded: e.g. |gyro_bias| < 0.75 rad/s, |gyro_scale| < 0.1,
+    arw < 2.5e-3 rad/√s), named with the datasheet units it may be in and the factor from
+    each (`gyro_bias=3.0`: "… — °/h → ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG
+    (hrgjax.plausible.relaxed(imu_gyro_bias=…) widens it)"; the scale factors' range is
+    `imu_scale`, the misalignments' `imu_misalignment`). A field traced inside `jit`, `vmap`
+    or `hg.sweep` is held to the same rules when [`apply`][hrgjax.ins.sensors.ImuModel.apply]
+    runs ([`traced_checks`][hrgjax.ins.sensors.traced_checks])."""
 
     gyro_bias: jax.Array = eqx.field(converter=_vec3("gyro_bias"), default=0.0)
     accel_bias: jax.Array = eqx.field(converter=_vec3("accel_bias"), default=0.0)
@@ -119,13 +124,14 @@ class ImuModel(eqx.Module):
     accel_random_walk: jax.Array = eqx.field(converter=_vec3("accel_random_walk"), default=0.0)
 
     def __check_init__(self):
+        # concrete_value: an eager jax.grad's tracer carries its value, and is checked too
         for name in _VECTOR_FIELDS:
-            v = getattr(self, name)
-            if is_concrete(v) and not np.all(np.isfinite(np.asarray(v))):
+            v = concrete_value(getattr(self, name))
+            if v is not None and not np.all(np.isfinite(v)):
                 raise ValueError(f"ImuModel.{name} must be finite; got {v}")
         for name in _VECTOR_FIELDS[4:]:
-            v = getattr(self, name)
-            if is_concrete(v) and np.any(np.asarray(v) < 0):
+            v = concrete_value(getattr(self, name))
+            if v is not None and np.any(v < 0):
                 raise ValueError(f"ImuModel.{name} is a density or a 1σ: it must be >= 0; got {v}")
         for name in ("gyro_misalignment", "accel_misalignment"):
             v = getattr(self, name)
@@ -134,8 +140,8 @@ class ImuModel(eqx.Module):
                     f"ImuModel.{name} must be 0 or a (3, 3) matrix of small angles [rad]; got "
                     f"shape {jnp.shape(v)}"
                 )
-            if is_concrete(v) and not np.all(np.isfinite(np.asarray(v))):
-                a = np.asarray(v)
+            a = concrete_value(v)
+            if a is not None and not np.all(np.isfinite(a)):
                 at = np.unravel_index(int(np.argmax(~np.isfinite(a))), a.shape)
                 where = f" at {list(map(int, at))}" if a.ndim else ""
                 raise ValueError(
@@ -143,9 +149,9 @@ class ImuModel(eqx.Module):
                     f"[rad]); got {a[at]}{where}"
                 )
         for name, quantity in _RANGE.items():  # SI, not the datasheet's °/h, ppm, °/√h, µg
-            v = getattr(self, name)
-            if is_concrete(v):
-                v = np.asarray(v) * (1.0 - np.eye(3)) if np.ndim(v) == 2 else np.asarray(v)
+            v = concrete_value(getattr(self, name))
+            if v is not None:
+                v = v * (1.0 - np.eye(3)) if v.ndim == 2 else v
                 unit = _UNITS.get(name, "rad")
                 plausible.check(f"ImuModel.{name} [{unit}]", v, quantity)
         for name in ("gyro_correlation_time", "accel_correlation_time"):
@@ -170,7 +176,11 @@ class ImuModel(eqx.Module):
         `(dtheta, dv, gyro_bias (N, 3) [rad/s], accel_bias (N, 3) [m/s²])`.
 
         **Raises:** `ValueError` for a `dt` that is not a finite interval > 0 s, increments
-        not both (N, 3), or a `gyro_rate_error` that is not (N, 3) [rad/s]."""
+        not both (N, 3), or a `gyro_rate_error` that is not (N, 3) [rad/s]. Fields traced
+        inside `jit`, `vmap` or `hg.sweep` are checked here, at run time
+        ([`traced_checks`][hrgjax.ins.sensors.traced_checks]): the first rule broken raises
+        its one line (`hg.sweep`: "sweep: at one or more grid points, ImuModel.gyro_bias
+        [rad/s] is outside the plausible range -0.75 … 0.75 rad/s …")."""
         shape = jnp.shape(dtheta)
         if len(shape) != 2 or shape[-1] != 3 or jnp.shape(dv) != shape:
             raise ValueError(
@@ -196,18 +206,19 @@ class ImuModel(eqx.Module):
                     f"ImuModel.apply: gyro_rate_error must be ({shape[0]}, 3) [rad/s], each "
                     f"interval's mean rate error; got shape {es}"
                 )
+        imu = _with_traced_checks(self)
         n = shape[0]
         kg, ka = jax.random.split(key)
-        g = (self.gyro_bias_instability, self.gyro_correlation_time, self.gyro_rate_random_walk)
-        a = (self.accel_bias_instability, self.accel_correlation_time, self.accel_random_walk)
-        bg, wg = self._bias_path(kg, n, dt, *g, self.arw)
-        ba, wa = self._bias_path(ka, n, dt, *a, self.vrw)
-        bg = bg + self.gyro_bias[None]
+        g = (imu.gyro_bias_instability, imu.gyro_correlation_time, imu.gyro_rate_random_walk)
+        a = (imu.accel_bias_instability, imu.accel_correlation_time, imu.accel_random_walk)
+        bg, wg = imu._bias_path(kg, n, dt, *g, imu.arw)
+        ba, wa = imu._bias_path(ka, n, dt, *a, imu.vrw)
+        bg = bg + imu.gyro_bias[None]
         if gyro_rate_error is not None:
             bg = bg + jnp.asarray(gyro_rate_error, float)
-        ba = ba + self.accel_bias[None]
-        mg = self._matrix(self.gyro_scale, self.gyro_misalignment)
-        ma = self._matrix(self.accel_scale, self.accel_misalignment)
+        ba = ba + imu.accel_bias[None]
+        mg = imu._matrix(imu.gyro_scale, imu.gyro_misalignment)
+        ma = imu._matrix(imu.accel_scale, imu.accel_misalignment)
         th = dtheta @ mg.T + bg * dt + wg
         dv = dv @ ma.T + ba * dt + wa
         return (th, dv, bg, ba) if return_bias else (th, dv)
@@ -229,6 +240,51 @@ class ImuModel(eqx.Module):
 
         _, mean = jax.lax.scan(step, (gm0, jnp.zeros(3)), (w_gm, w_rw))
         return mean, jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None]
+
+
+def traced_checks(imu: ImuModel) -> list:
+    """The run-time twins of `ImuModel`'s own checks for its traced fields (inside `jit`,
+    `vmap` or `hg.sweep` a module's `__check_init__` sees no values): `[(bad, message), …]`,
+    `bad` a traced boolean, `message` the eager one line without the value, in the order
+    `__check_init__` checks them (finite; densities and 1σ >= 0; each field's `imu_*` range,
+    bounds excluded). Concrete fields add nothing: they were checked where the model was
+    built. [`apply`][hrgjax.ins.sensors.ImuModel.apply] raises the first that holds
+    (`eqx.branched_error_if`)."""
+    traced = {name: v for name in (*_VECTOR_FIELDS, *_MISALIGNMENTS)
+              if concrete_value(v := getattr(imu, name)) is None}  # fmt: skip
+    checks = [(~jnp.all(jnp.isfinite(v)), f"ImuModel.{name} must be finite (found NaN or inf)")
+              for name, v in traced.items()]  # fmt: skip
+    checks += [(jnp.any(v < 0), f"ImuModel.{name} is a density or a 1σ: it must be >= 0 "
+                "(found a negative value)")
+               for name, v in traced.items() if name in _VECTOR_FIELDS[4:]]  # fmt: skip
+    for name, quantity in _RANGE.items():  # SI, as eagerly
+        if name in traced:
+            v = traced[name]
+            v = v * (1.0 - jnp.eye(3)) if v.ndim == 2 else v
+            checks += plausible.traced_violations(
+                f"ImuModel.{name} [{_UNITS.get(name, 'rad')}]", v, quantity
+            )
+    return checks
+
+
+def _with_traced_checks(imu: ImuModel) -> ImuModel:
+    """`imu` with `traced_checks` held by one `eqx.branched_error_if` on its traced leaves
+    (what `apply` computes from); unchanged when every field is concrete, or inside one of
+    hrgjax's own callback-free programs (their models were checked where they were built)."""
+    if tracing_callback_free():
+        return imu
+    checks = traced_checks(imu)
+    if not checks:
+        return imu
+    bad = jnp.stack([jnp.asarray(b) for b, _ in checks])
+    flat, tree = jax.tree_util.tree_flatten(imu)
+    traced = [i for i, x in enumerate(flat) if concrete_value(x) is None]
+    checked = eqx.branched_error_if(
+        [flat[i] for i in traced], jnp.any(bad), jnp.argmax(bad), [m for _, m in checks]
+    )
+    for i, x in zip(traced, checked, strict=True):
+        flat[i] = x
+    return jax.tree_util.tree_unflatten(tree, flat)
 
 
 def _grade(gb_dph, arw_dpsh, bi_dph, g_ppm, g_urad, ab_ug, vrw_ug_rthz, abi_ug, a_ppm, a_urad, tau):
