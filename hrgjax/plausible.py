@@ -508,7 +508,14 @@ def check_wave_angle_jumps(wave_angle_deg, table_angle_deg, time_s, run, k_e: fl
 
 
 BYTES_PER_SAMPLE = 100
-"""Host and device memory one output sample of a simulated run takes, all fields [bytes]."""
+"""Host and device memory one output sample of a simulated run holds, all fields [bytes]
+(a finished `Record`: 120; the sweep's byte limit is `MAX_OUTPUT_SAMPLES` × this)."""
+
+PEAK_BYTES_PER_SAMPLE = 400
+"""Peak host memory one `simulate` call takes per output sample while it runs [bytes]:
+120 (the record alone) up to 2²⁰ outputs, 396 beyond, where the run goes in chunks
+(`benchmarks/simulate_memory.py`: 4 h and 8 h at 100 Hz, the slope of the peak RSS). At
+`MAX_OUTPUT_SAMPLES` that is ≈ 19 GiB."""
 
 MAX_OUTPUT_SAMPLES = 50_000_000
 """Largest output grid `simulate` builds from `dt_out` (checked before anything is

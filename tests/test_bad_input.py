@@ -283,7 +283,12 @@ PROFILE = hg.Profile.constant_rate(5.0, 1.0, 20.0)
         (dict(run=1.5), "run must be an integer run id"),
         (dict(max_steps=0), "max_steps must be a positive integer"),
         (dict(fixed_step=-0.1), "fixed_step must be a positive number"),
-        (dict(dt_out=1e-9), "dt_out=1e-09 s on a 1-s profile gives 1e\\+09 output samples"),
+        # the estimate at the run's peak (scale audit: "≈ 100 bytes each" was 4× low; 1e9 × 400 B)
+        (
+            dict(dt_out=1e-9),
+            "dt_out=1e-09 s on a 1-s profile gives 1e\\+09 output samples, .*"
+            "≈ 400 bytes each at the run's peak, ≈ 373 GiB",
+        ),
         (dict(dt_out=0.0), "dt_out must be a positive number"),
     ],
 )
