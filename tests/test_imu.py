@@ -671,6 +671,9 @@ def test_time_column_in_ms_or_ns_is_declared_not_misread(session, fitted, tmp_pa
     np.testing.assert_allclose(got.time, (ticks - ticks[0]) / 1e3, rtol=0, atol=1e-15)
     arrays = hg.imu.ImuData.from_arrays(gyro, accel, units={**units, "time": "ms"}, time=ticks)
     np.testing.assert_allclose(arrays.time, ticks / 1e3, rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match=r't_ms.csv: units\["time"\] = \'ms\' is the time '
+                       "column's unit, but there is no time column"):  # fmt: skip
+        hg.imu.load(ms, columns=cols, units={**units, "time": "ms"}, rate_hz=RATE)  # review
 
     secs = tmp_path / "s.json"
     secs.write_text(json.dumps(hg.imu.sections_to_json(sections)))

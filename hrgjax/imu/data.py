@@ -157,6 +157,11 @@ class ImuData:
         and refuse a gyro record whose median |angular rate| exceeds
         [`GYRO_MEDIAN_LIMIT_RAD_S`][hrgjax.imu.data.GYRO_MEDIAN_LIMIT_RAD_S] (10 rad/s)."""
         gyro_unit, accel_unit = _declared(units)
+        if time is None and units.get("time") is not None:
+            raise ValueError(
+                f'units["time"] = {units["time"]!r} is the time column\'s unit, but there is no '
+                'time column: give time= (or columns["time"]), or leave units["time"] out'
+            )
         if time is not None:
             time = _real("time", time, "(N,)") / TIME_UNITS[units.get("time") or "s"]
         g = _triad("gyro", gyro)
