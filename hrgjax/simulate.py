@@ -93,13 +93,11 @@ def output_times(profile: Profile, dt_out: float):
     slack = 1e-9 + min(0.5 * ulp.sum() / dt_out, 0.25)  # the span's own rounding, at most
     n = int(np.floor(span / dt_out + slack)) + 1
     if n > plausible.MAX_OUTPUT_SAMPLES:
-        raise ValueError(
-            f"dt_out={dt_out:g} s on a {span:g}-s profile gives {n:.3g} output samples, more "
-            f"than the {plausible.MAX_OUTPUT_SAMPLES:.0e} hrgjax allocates at once (≈ "
-            f"{plausible.PEAK_BYTES_PER_SAMPLE} bytes each at the run's peak, ≈ "
-            f"{n * plausible.PEAK_BYTES_PER_SAMPLE / 2**30:.3g} GiB); choose a larger dt_out or "
-            "split the profile into runs"
-        )
+        peak = plausible.PEAK_BYTES_PER_SAMPLE
+        raise ValueError(f"dt_out={dt_out:g} s on a {span:g}-s profile gives {n:.3g} output samples, more "
+                         f"than the {plausible.MAX_OUTPUT_SAMPLES:.0e} hrgjax allocates at once (≈ {peak} "
+                         f"bytes each at the run's peak, ≈ {n * peak / 2**30:.3g} GiB); choose a larger "
+                         "dt_out or split the profile into runs")  # fmt: skip
     with jax.ensure_compile_time_eval():  # concrete under jit too: the fixed-step path counts on it
         return device(np.minimum(t[0] + dt_out * np.arange(n), t[-1]))  # no rounding past the end
 
