@@ -19,9 +19,10 @@
 5. `diagnosis.compare` (a 200-s scenario at 1 m/s² east, 3 faulty and 1 healthy runs; the
    three filter banks and the MLP classifier, 200 training windows) called twice with other
    keys, then `MLPClassifier.fit` (300 × 8 features, 4 classes, 50 steps) and `nn.train.rprop`
-   (one loss, 30 steps) twice each: the banks' and detectors' runs were fresh
-   `jax.jit(lambda …)`s, the gain schedules and Rprop eager scans over new closures, so a
-   second call of the same shapes compiled them all again.
+   (an `eqx.Partial` loss, then a closure, 30 steps) twice each: the banks' and detectors'
+   runs were fresh `jax.jit(lambda …)`s, the gain schedules and Rprop eager scans over new
+   closures, so a second call of the same shapes compiled them all again (a closure loss
+   still does: it is traced afresh on every call, so it trains on what it reads now).
 
 Each call prints the XLA compiles it caused (jax.monitoring) and its wall time.
 
@@ -152,10 +153,20 @@ def diagnosis_calls():
     for i in range(2):
         counted(f"MLPClassifier.fit, call {i + 1}",
                 lambda i=i: nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6 + i), steps=50))  # fmt: skip
+    import equinox as eqx
+
+    # an eqx.Partial of a module-level loss: compiled once; a closure: traced on every call
     t = jnp.array([1.0, -2.0, 3.0])
-    loss = lambda p: jnp.sum((p - t) ** 4)
-    for i in range(2):
-        counted(f"rprop, one loss, call {i + 1}", lambda: train.rprop(loss, jnp.zeros(3), 30, 1e-2))
+    partial = eqx.Partial(_quartic, t=t)
+    closure = lambda p: jnp.sum((p - t) ** 4)
+    for name, loss in (("eqx.Partial", partial), ("closure", closure)):
+        for i in range(2):
+            counted(f"rprop, one {name} loss, call {i + 1}",
+                    lambda loss=loss: train.rprop(loss, jnp.zeros(3), 30, 1e-2))  # fmt: skip
+
+
+def _quartic(p, *, t):
+    return ((p - t) ** 4).sum()
 
 
 if __name__ == "__main__":

@@ -3,14 +3,17 @@ on shuffled mini-batches ([`adam_epochs`][hrgjax.nn.train.adam_epochs])."""
 
 from __future__ import annotations
 
+import types
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .. import _upstream
 from .._checks import host_value
-from .._compiled import Check, Unchecked, device, program
+from .._compiled import Check, device, program, tracing_callback_free
 from .._progress import bar
 
 DIVERGED = (
@@ -48,29 +51,39 @@ def rprop(loss, params, steps: int, learning_rate: float = 1e-3, max_step: float
     step size, `max_step` the largest one (a sigmoid/tanh network saturates, and stops
     learning, when a weight's step grows too large). **Returns** the parameters.
 
-    **Compiled once** per `loss` object, the structure and shapes of `params`, `steps`,
-    `learning_rate` and `max_step`: a later call with the same `loss` compiles nothing. A
-    fresh closure (`lambda p: f(p, x)`) is a new `loss` and compiles anew; pass varying data
-    as the arrays of an `equinox.Partial(f, x)` of a module-level `f` instead (they are
-    traced, not baked in), and do not let `loss` read a global that changes between calls.
+    **Compiled once for an equinox-Module loss:** when `loss` is an `equinox.Module` — an
+    `equinox.Partial(f, x=data)` of a module-level `f`, a module's bound method — and the
+    call is not under the caller's `jit`/`vmap`/`grad`, the training is one program per
+    `loss`'s function and static fields, the structure and shapes of `params` and of
+    `loss`'s arrays, `steps`, `learning_rate` and `max_step`: the arrays are traced
+    arguments, so a later call with new data of the same shapes compiles nothing and trains
+    on the new data. (`f` itself must not read a global that changes between calls: what a
+    function reads outside its arguments is fixed in the program.) **Every other loss** — a
+    plain function, a `lambda` or closure, a bound method of a plain object, a callable
+    holding its data in attributes — is traced afresh on every call, so it always trains on
+    what it reads now, may be unhashable, and is not kept alive by a cache; so is a Module
+    loss whose function closes over arrays or whose data it needs as concrete values
+    (`int(n)`, a Python `if` on it). A user's `eqx.error_if` inside `loss` raises its own
+    message on both paths.
 
     **Raises:** `ValueError` for `steps` < 1; `RuntimeError` ("training diverged") when the
     loss or the trained weights are not finite (checked on the host after training; under
     `jit` the traced result passes unchecked)."""
     steps = check_steps(steps)
-    trained, losses = _rprop_program(_call_loss, params, loss, steps, learning_rate, max_step)
+    trained, losses = _run(_call_loss, params, loss, loss, steps, learning_rate, max_step)
     check_trained(trained, losses)
     return trained
 
 
 def train_module(module, loss, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0):
     """Rprop on the inexact-array leaves of an equinox `module`; `loss(module)` → scalar.
-    Compiled once and raises as [`rprop`][hrgjax.nn.train.rprop] (the same `loss` and a
-    module of the same structure and shapes: nothing compiles)."""
+    Compiled once, as [`rprop`][hrgjax.nn.train.rprop], for an equinox-Module `loss` and a
+    `module` whose other leaves hold no arrays (an integer array stays a concrete constant:
+    such a module trains as before, traced afresh); raises as `rprop`."""
     steps = check_steps(steps)
     params, static = eqx.partition(module, eqx.is_inexact_array)
-    trained, losses = _rprop_program(_call_combined, params, (loss, static), steps,
-                                     learning_rate, max_step)  # fmt: skip
+    trained, losses = _run(_call_combined, params, loss, (loss, static), steps,
+                           learning_rate, max_step)  # fmt: skip
     check_trained(trained, losses)
     return eqx.combine(trained, static)
 
@@ -91,9 +104,71 @@ def _rprop_run(loss_fn, params, data, length: int, learning_rate, max_step):
     return params, losses
 
 
-_rprop_program = program(_rprop_run, check=Unchecked())
-"""`_rprop_run` as one compiled program per loss, data structure and shapes (`rprop` and
-`train_module` check its outputs on the host, naming the first non-finite loss's step)."""
+_rprop_program = eqx.filter_jit(_rprop_run)
+"""`_rprop_run` as one compiled program per loss function, data structure and shapes
+(`rprop` and `train_module` check its outputs on the host, naming the first non-finite
+loss's step). A plain `filter_jit`, not `program`: `program` traces equinox's checks in
+their NaN form (for the persistent cache), which turned a user's `eqx.error_if` inside the
+loss into NaN weights ("training diverged", or NaN silently under the caller's `jit`)."""
+
+# the loss needs a concrete value of a traced array (`int(n)`, `if x > 0`, `np.asarray`)
+_NEEDS_CONCRETE = (
+    jax.errors.ConcretizationTypeError,
+    jax.errors.TracerArrayConversionError,
+    jax.errors.TracerIntegerConversionError,
+)
+
+
+def _run(loss_fn, params, loss, data, steps, learning_rate, max_step):
+    """Train with the cached program where that gives what tracing afresh gives (`rprop`'s
+    docstring), else `_rprop_run` traced afresh, as before caching."""
+    if _cacheable(loss, (params, data)):
+        try:
+            return _rprop_program(loss_fn, params, data, steps, learning_rate, max_step)
+        except _NEEDS_CONCRETE:
+            pass  # the loss reads its data as concrete values: it trains as before
+    return _rprop_run(loss_fn, params, data, steps, learning_rate, max_step)
+
+
+def _cacheable(loss, args) -> bool:
+    """Whether the cached program sees all that `loss` reads as its traced arrays: `loss` is
+    an equinox Module, nothing is being traced, and the program's static part (what it is
+    cached by) is hashable and holds no array: no integer array of `train_module`'s module
+    (traced there, a constant before), no array in a closure or default of a function in it
+    and no method of a plain object (fixed in the program, and kept alive by the cache)."""
+    if not isinstance(loss, eqx.Module) or tracing_callback_free():
+        return False
+    if not _upstream.trace_state_clean():
+        return False
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        return False
+    data = args[1]
+    static = data[1] if isinstance(data, tuple) else None  # train_module's (loss, static)
+    if any(eqx.is_array(x) for x in jax.tree_util.tree_leaves(static)):
+        return False
+    fixed = [x for x in leaves if not eqx.is_array(x)]
+    try:
+        hash((tree, *fixed))
+    except TypeError:
+        return False
+    return not any(_holds_data(x) for x in fixed)
+
+
+def _holds_data(fn) -> bool:
+    """Whether `fn` is a function whose closure cells or defaults hold a JAX or NumPy array
+    (as pytree leaves), or a method bound to a plain object (its attributes may hold data)."""
+    if isinstance(fn, types.MethodType):
+        return True
+    if not isinstance(fn, types.FunctionType):
+        return False
+    held = [fn.__defaults__, fn.__kwdefaults__]
+    for cell in fn.__closure__ or ():
+        try:
+            held.append(cell.cell_contents)
+        except ValueError:  # an empty cell (a name not yet bound)
+            pass
+    return any(eqx.is_array(x) for x in jax.tree_util.tree_leaves(held))
 
 
 def _block_length(steps: int, blocks: int = 20) -> int:
