@@ -114,12 +114,24 @@ def test_level_sigma_near_the_pole_stays_at_the_accelerometer_floor():
 def test_align_warns_where_the_heading_error_is_not_small():
     """ARW 0.05 °/√h at 88°: the coarse heading's noise is 42° over 60 s; its tail reaches
     140–180°, where the fine filter does not recover: `align` warns (`AlignmentWarning`) and
-    names the cure, a longer coarse span; a 600-s span (15°) is quiet."""
+    names the cure, a longer coarse span; a 600-s span (15°) is quiet. Review: a linearised σ
+    over 90° describes nothing: "no heading information" (a 6-s span at 1 Hz, 134°; the
+    span's scatter of 6 one-sample parts, it was NaN: 10 parts of 0 samples)."""
     arw = 0.05 * DEG / 60
-    log, _ = _noisy_log(88.0, 3, arw=arw)
+    log, c = _noisy_log(88.0, 3, arw=arw)
     with pytest.warns(al.AlignmentWarning, match=r"^align: heading σ 4\d\.\d° at the fine "
-                      r"stage's start \(over 20°\): .* a longer coarse_s shrinks it"):  # fmt: skip
+                      r"stage's start \(over 20°\): the coarse heading may be 140–180° off, .* "
+                      r"a longer coarse_s shrinks it"):  # fmt: skip
         al.align(log, arw=arw)
+    with pytest.warns(al.AlignmentWarning, match=r"^align: heading σ 1\d\d° at the fine stage's "
+                      r"start, from the grade's white noise over the coarse span: the coarse "
+                      r"heading holds no heading information"):  # fmt: skip
+        r = al.align(log, arw=arw, coarse_s=6.0)
+    assert r.coarse_scatter_heading_deg == pytest.approx(64.4, abs=0.1)  # ~ 42.9·√10 = 136°
+    err = (r.heading_deg - float(al.euler_deg(jnp.asarray(c))[0]) + 180) % 360 - 180
+    assert abs(err) < 3 * r.heading_std_deg  # the fine stage found north
+    with pytest.raises(ValueError, match=r"^coarse_scatter needs 2 <= parts <= samples"):
+        al.coarse_scatter(log.dtheta[:6], log.dvel[:6], 1.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         al.align(log, arw=arw, coarse_s=600.0)
@@ -240,11 +252,16 @@ def test_alignment_on_the_real_psins_log(psins_log):
     """`../shared/data/README.md`: heading within 2.5° of the header's +90.6° and within three
     of its own standard deviations; the uncertainty shrinks with time; small tilt. Its first
     60 s sway: the coarse heading is 21° off, its σ from the span's scatter 36°, over the
-    start threshold (20°): `align` says so (a 300-s coarse span does not)."""
+    start threshold (20°): `align` says so (a 300-s coarse span does not). Review: it said
+    the heading "may be 140–180° off, where the fine filter does not recover", a white-noise
+    σ's tail; the scatter is a conservative bound and the fine stage recovers (90.556°, as
+    90.553° under the fixed 5°): a sway note."""
     with pytest.warns(al.AlignmentWarning, match=r"^align: heading σ 36\.1° at the fine stage's "
-                      r"start .* the coarse span's own scatter \(35\.8°, the grade's white "
-                      r"noise 0\.36°\): the IMU sways"):  # fmt: skip
+                      r"start \(over 20°\) is the coarse span's own scatter \(35\.8°, the "
+                      r"grade's white noise 0\.36°\): the IMU sways over the span; the scatter "
+                      r"is a conservative bound .* the fine stage usually recovers") as rec:  # fmt: skip
         r = al.align(psins_log)
+    assert "140–180" not in str(rec[0].message)
     assert abs(r.coarse_deg[0] - 90.6) < r.coarse_std_deg[0]
     assert abs(r.heading_deg - 90.6) < 2.5
     assert abs(r.heading_deg - 90.6) < 3 * r.heading_std_deg

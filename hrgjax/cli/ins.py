@@ -80,19 +80,20 @@ def cmd_align(args) -> int:
 
 
 def _sway_line(sway: dict) -> str:
-    """`hrgjax align`'s sway indicator ([`AlignmentResult.sway`][hrgjax.ins.alignment.AlignmentResult.sway])
-    in one line, with a note where it says the σ is optimistic."""
+    """`hrgjax align`'s whiteness test of the zero-velocity innovations
+    ([`AlignmentResult.sway`][hrgjax.ins.alignment.AlignmentResult.sway]) in one line, with a
+    note where they are not white as the filter assumes (not a measure of the heading's σ)."""
     rms = ", ".join(f"{v * 1e3:.3g}" for v in sway["innovation_rms_m_s"])
     slow = ", ".join(f"{v:.2g}" for v in sway["slow_ratio"])
     line = (f"  sway: zero-velocity innovations RMS (N, E, D) {rms} mm/s against the assumed "
             f"{sway['velocity_noise_m_s'] * 1e3:.3g} mm/s; mean NIS {sway['mean_nis']:.3g} (3 for "
-            f"white noise as assumed); slow part {slow} × the assumed (1)")  # fmt: skip
-    if sway["optimistic"]:
-        worst = max(sway["slow_ratio"][:2])
-        line += (f" — the σ is optimistic: the vehicle sways slower than the white noise the "
-                 f"filter assumes, its heading σ beyond the gyro-bias floor is about "
-                 f"{worst**0.5:.2g}× too small; align a calmer stretch or raise "
-                 "--velocity-noise")  # fmt: skip
+            f"white noise as assumed); slow part {slow} × the assumed (1; {sway['blocks']} "
+            "blocks)")  # fmt: skip
+    if sway["not_white"]:
+        line += (f" — not white (chance {min(sway['slow_p'][:2]):.2g} under the model): the "
+                 "vehicle sways slower than a filter step; this does not say whether or by how "
+                 "much the heading σ is off (aligning disjoint windows does); a calmer stretch "
+                 "or a larger --velocity-noise models it")  # fmt: skip
     return line
 
 
@@ -240,7 +241,7 @@ def _align_parser(sub):
                    help="the gyros' angle random walk [°/√h] the filter assumes")  # fmt: skip
     p.add_argument("--velocity-noise", type=POSITIVE_FLOAT, default=0.01, metavar="M_PER_S",
                    help="the zero-velocity measurement's white noise [m/s] the filter assumes "
-                   "(a parked vehicle's sway); the printed sway line says whether it covers")  # fmt: skip
+                   "(a parked vehicle's sway); the printed sway line tests the innovations' whiteness")  # fmt: skip
     return p
 
 

@@ -148,7 +148,7 @@ def _heading_error(eps_b, nab_b, c_bn, lat):
 
 
 def imu_log(imu: FogImu, record: VibrationRecord, gyro=None) -> _al.ImuLog:
-    """The record as an [`ImuLog`][hrgjax.ins.alignment.ImuLog] (body-frame increments):
+    """The record as an [`ImuLog`][hrgjax.ins.imu_log.ImuLog] (body-frame increments):
     installation misalignment and scale compensated by the triad models' linear part (the
     patent's step 2); biases stay in (the alignment's business). `gyro` replaces the raw
     gyro output (e.g. the vibration-compensated one)."""

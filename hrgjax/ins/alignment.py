@@ -29,8 +29,9 @@ independent of it (run over the coarse span too, they counted that noise twice: 
 1.14–1.20 for ARW 0.05 °/√h at 88°). A vehicle that sways makes the coarse means err beyond
 that white noise, so the prior takes the larger of it and the span's own scatter
 ([`coarse_scatter`][hrgjax.ins.alignment.coarse_scatter]). The σ is a linearised one: it
-covers while the heading error is small (`AlignmentWarning`), and while the zero-velocity
-innovations are as white as `velocity_noise` assumes (`AlignmentResult.sway`).
+covers while the heading error is small (`AlignmentWarning`) and the zero-velocity noise is
+white as `velocity_noise` assumes (`AlignmentResult.sway` tests the innovations' whiteness,
+not the heading; disjoint windows' spread tests that).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.scipy.special import gammaincc
 
 from .._compiled import fused
 from .._x64 import require_x64
@@ -178,14 +180,20 @@ and the error atan2(ε_E, ω_ie cos φ + ε_N) heavy-tailed (z-RMS 1.04, 93.9 % 
 15°; 1.10, 93.0 % at 20°; 1.17, 91.9 % at 25°: `benchmarks/coverage_alignment.py`)."""
 
 START_HEADING_STD_DEG = 20.0
-"""Heading σ [°] at the fine stage's start beyond which `align` warns (`AlignmentWarning`):
-the coarse heading's tail reaches 140–180°, where the fine filter does not recover (z-RMS 1.15
-at 26°, 1.35 at 43°; 1.02–1.03 at 15–18°, 300 draws at 88°)."""
+"""Heading σ [°] at the fine stage's start beyond which `align` warns (`AlignmentWarning`).
+The grade's white noise's: the coarse heading's tail reaches 140–180°, where the fine filter
+does not recover (z-RMS 1.15 at 26°, 1.35 at 43°; 1.02–1.03 at 15–18°, 300 draws at 88°).
+The span's own scatter's (over twice that), a conservative bound: a sway note."""
+
+NO_HEADING_STD_DEG = 90.0
+"""Start heading σ [°] from which `align`'s warning says the coarse span holds no heading
+information: a linearised σ this large describes nothing (|error| ≤ 180°)."""
 
 
 class AlignmentWarning(UserWarning):
-    """`align`'s heading σ understates the error: the heading error is not small (module
-    docstring). `warnings.simplefilter("ignore", AlignmentWarning)` silences it."""
+    """`align`'s heading σ is not small, so the linearised σ may understate the error (module
+    docstring), or (a sway note) the coarse span sways and its σ is its own scatter's bound.
+    `warnings.simplefilter("ignore", AlignmentWarning)` silences it."""
 
 
 _GYRO_BIAS_STD = 0.05 * DEG_PER_H
@@ -221,18 +229,22 @@ the coarse span into (9 degrees of freedom: its σ scatters by ±24 % under whit
 @fused(static_argnames=("parts",))
 def coarse_scatter(dtheta, dvel, dt, parts: int = COARSE_PARTS):
     r"""(6, 6) covariance of the coarse means' error (gyro [rad/s], then accelerometer
-    [m/s²]) measured from the coarse span's own increments `dtheta` (n, 3) [rad], `dvel`
-    (n, 3) [m/s] at interval `dt` [s]: the span split into `parts` equal parts (a remainder of
-    n mod parts samples left out), the scatter of their means over `parts` — the variance of
-    the whole span's mean if the parts are independent.
+    [m/s²]) from the span's own increments `dtheta`, `dvel` (n, 3) [rad, m/s] at interval `dt`
+    [s]: the scatter over `parts` of the means of `parts` equal parts (n mod parts samples left
+    out; `ValueError` unless 2 ≤ parts ≤ n): the span's mean's variance for independent parts.
 
     White noise: unbiased ($\mathrm{arw}^2/T$, the model of
     [`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]). A sway whose angle is
-    bounded: conservative, at most √(parts + 1) = 3.3× in σ where the angle decorrelates
-    within a part (the span's mean errs by its angle change over T, ∝ 1/T, each part's by
-    parts/T; neighbours share an end). A disturbance slower than the span is a bias to it,
-    not seen here: the assumed grade's (`gyro_bias_std`). On the PSINS log's 60-s windows the
-    heading σ it gives is 1.3× the error (z-RMS 0.75)."""
+    bounded errs the span's mean by its angle change over T, each part's by parts/T (and
+    neighbours share an end): ≈ √(parts + 1) = 3.3× in σ where the angle decorrelates within
+    a part; more for sway periodic near the span (6.6× at 0.95 or 1.05 spans; at whole or
+    half spans the span's error is 0); under-covers periods beyond about 1.5 spans (0.73× at
+    1.5, 0.40× at 2, 0.23× at 3), and a disturbance slower still is a bias to it: the
+    assumed grade's (`gyro_bias_std`). On the PSINS log's 60-s windows the heading σ it
+    gives is 1.3× the error (z-RMS 0.75)."""
+    if not 2 <= parts <= dtheta.shape[0]:
+        raise ValueError(f"coarse_scatter needs 2 <= parts <= samples; got parts={parts} for "
+                         f"{dtheta.shape[0]} samples")  # fmt: skip
     n = (dtheta.shape[0] // parts) * parts
     x = jnp.concatenate([dtheta[:n], dvel[:n]], axis=1).reshape(parts, n // parts, 6)
     means = x.sum(1) / ((n // parts) * dt)
@@ -241,12 +253,12 @@ def coarse_scatter(dtheta, dvel, dt, parts: int = COARSE_PARTS):
 
 
 SWAY_BLOCKS = 10
-"""`AlignmentResult.sway`'s `slow_ratio` averages the normalised innovations over this many
-equal blocks of the fine stage."""
+"""`AlignmentResult.sway`'s `slow_ratio` averages the normalised innovations over blocks of
+K // this many of the K fine steps: m = 10 blocks for K ≥ 100, 10–14 below, K for K < 20."""
 
-SWAY_RATIO = 2.0
-"""`slow_ratio` (north or east) beyond which `AlignmentResult.sway` says the σ is optimistic:
-under the filter's model it is χ²₁₀/10 (mean 1; beyond 2.0 with probability 3 %)."""
+SWAY_FALSE_ALARM = 0.05
+"""`AlignmentResult.sway`'s `not_white` rate under the filter's own model: north or east
+beyond its χ²_m/m quantile at 1 − √0.95 = 2.53 % each (m blocks; 2.05 for m = 10)."""
 
 
 class AlignmentResult(eqx.Module):
@@ -260,15 +272,16 @@ class AlignmentResult(eqx.Module):
     assumed. Diagnostics (`None` where not computed): `bias_std` (6,) the biases' 1σ, body
     frame, same units (the east gyro bias's stays at the assumed grade: unobservable);
     `innovations` (K, 3) [m/s]: the zero-velocity innovations (N, E, D), `innovation_std`
-    (K, 3) [m/s] their predicted σ (√diag S), `nis` (K,) their normalised square νᵀS⁻¹ν (χ²₃
-    under the filter's model: mean 3), `velocity_noise` [m/s] the assumed; `coarse_std_deg` (heading, pitch, roll) the coarse attitude's 1σ in the
-    fine stage's prior, `coarse_scatter_heading_deg` the heading σ the coarse span's own
+    (K, 3) [m/s] their predicted σ (√diag S), `nis` (K,) νᵀS⁻¹ν (χ²₃ under the model),
+    `velocity_noise` [m/s] the assumed; `coarse_std_deg` (heading, pitch, roll) the coarse
+    attitude's 1σ in the fine stage's prior, `coarse_scatter_heading_deg` the heading σ the coarse span's own
     scatter gives ([`coarse_scatter`][hrgjax.ins.alignment.coarse_scatter]).
 
     **The heading σ is an assumption's:** it ends at `gyro_bias_std / (ω_ie cos lat)` for the
     *assumed* `gyro_bias_std` (0.28° at 45° for 0.05 °/h); a gyro whose bias is larger has a
     heading error larger in proportion: give [`align`][hrgjax.ins.alignment.align] the grade.
-    Its part beyond that assumes white zero-velocity noise of `velocity_noise`: `sway()`."""
+    Its part beyond that assumes white zero-velocity noise of `velocity_noise` (`sway()`
+    tests the innovations' whiteness, not the heading)."""
 
     heading_deg: float
     pitch_deg: float
@@ -292,16 +305,21 @@ class AlignmentResult(eqx.Module):
     coarse_scatter_heading_deg: float | None = None
 
     def sway(self) -> dict:
-        """The zero-velocity innovations against the filter's white `velocity_noise`:
-        `innovation_rms_m_s` (N, E, D) [m/s], `velocity_noise_m_s`, `mean_nis` (3 under the
-        model; far less where the noise is smaller than assumed), and `slow_ratio` (N, E, D):
-        the power of the innovations' slow part (each divided by its predicted σ, averaged
-        over [`SWAY_BLOCKS`][hrgjax.ins.alignment.SWAY_BLOCKS] blocks: the mean square of
-        the block means × the block length) over what the model predicts (1). A vehicle
-        swaying slower than a filter step has a slow ratio above 1 however small its NIS,
-        and the heading σ beyond the gyro-bias floor is then optimistic by about √ratio:
-        `optimistic` where north or east exceeds [`SWAY_RATIO`][hrgjax.ins.alignment.SWAY_RATIO].
-        **Raises:** `ValueError` for a result without innovations."""
+        """A whiteness test of the zero-velocity innovations against the filter's white
+        `velocity_noise`: `innovation_rms_m_s` (N, E, D) [m/s], `velocity_noise_m_s`,
+        `mean_nis` (3 under the model; far less where the noise is smaller than assumed),
+        `slow_ratio` (N, E, D): the power of the normalised innovations' block means (m =
+        `blocks`, [`SWAY_BLOCKS`][hrgjax.ins.alignment.SWAY_BLOCKS]) × the block length over
+        the model's (1; χ²_m/m under it), `slow_p` its chance under the model, `not_white`:
+        north or east beyond [`SWAY_FALSE_ALARM`][hrgjax.ins.alignment.SWAY_FALSE_ALARM]. A
+        vehicle swaying slower than a filter step has a slow ratio above 1 however small its
+        NIS: the innovations are not white as the filter assumes.
+
+        **Not whether the heading σ is too small, or by how much:** sway much faster than the
+        fine stage averages out of the heading (a 120-s, 5-cm/s sway in a 1200-s stage:
+        flagged every time, heading error as the σ); sway near the stage's length looks like a
+        heading error (the PSINS log's first 150-s window, 4.5σ off: not flagged). Disjoint
+        windows' spread checks the heading. **Raises:** `ValueError` without innovations."""
         if self.innovations is None or self.innovation_std is None or self.nis is None:
             raise ValueError("AlignmentResult.innovations is None: sway() needs align's result")
         nu = np.asarray(self.innovations)
@@ -309,12 +327,15 @@ class AlignmentResult(eqx.Module):
         b = max(1, white.shape[0] // SWAY_BLOCKS)
         m = white.shape[0] // b
         slow = b * np.mean(white[: m * b].reshape(m, b, 3).mean(1) ** 2, axis=0)
+        p = np.asarray(gammaincc(m / 2.0, jnp.asarray(m * slow / 2.0)))  # P(χ²_m > m·slow)
         return {
             "innovation_rms_m_s": np.sqrt(np.mean(nu**2, axis=0)).tolist(),
             "velocity_noise_m_s": self.velocity_noise,
             "mean_nis": float(np.mean(np.asarray(self.nis))),
             "slow_ratio": slow.tolist(),
-            "optimistic": bool(max(slow[:2]) > SWAY_RATIO),
+            "blocks": int(m),
+            "slow_p": p.tolist(),
+            "not_white": bool(min(p[:2]) < 1.0 - math.sqrt(1.0 - SWAY_FALSE_ALARM)),
         }
 
     def to_json(self) -> dict:
@@ -478,10 +499,13 @@ def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std, jac):
 
 
 def _warn_heading(start: float, end: float, floor: float, lat: float, coarse: str,
-                  sway: str = "") -> None:  # fmt: skip
-    """`AlignmentWarning` for heading σ [°] `start`, `end` beyond the thresholds, the advice
-    by the cause: the grade's limit `floor` σ_ε/(ω_ie cos lat) [°], else the coarse span
-    (`sway`: what the span's own scatter adds to the advice, or "")."""
+                  sway: float = 0.0, white: float = 0.0) -> None:  # fmt: skip
+    """`AlignmentWarning` for heading σ [°] `start`, `end` beyond the thresholds, by the cause:
+    the grade's limit `floor` [°], the span's scatter `sway` [°] (over 2 × `white`), its noise."""
+    span, by_sway = f"a longer {coarse} shrinks it (as 1/√span)", sway > 2 * white
+    src = (f"the coarse span's own scatter ({sway:.3g}°, the grade's white noise {white:.2g}°)"
+           if by_sway else "the grade's white noise over the coarse span")  # fmt: skip
+    at = f"{start:.3g}° at the fine stage's start"
     if floor > END_HEADING_STD_DEG:
         why = (f"{end:.3g}° at the end: the assumed gyro grade's limit σ_ε/(ω_ie cos lat) is "
                f"{floor:.3g}° (over {END_HEADING_STD_DEG:g}°), a gyro of this grade cannot find "
@@ -491,10 +515,18 @@ def _warn_heading(start: float, end: float, floor: float, lat: float, coarse: st
         why = (f"{end:.3g}° at the end (over {END_HEADING_STD_DEG:g}°; the grade's limit "
                f"{floor:.3g}°): the fine stage has not converged; a longer record or {coarse} "
                "shrinks it")  # fmt: skip
+    elif start >= NO_HEADING_STD_DEG:
+        why = (f"{at}, from {src}: the coarse heading holds no heading information (a "
+               f"linearised σ over {NO_HEADING_STD_DEG:g}° describes nothing); the fine filter "
+               f"starts anywhere and may not recover; {span}")  # fmt: skip
     elif start > START_HEADING_STD_DEG:
-        why = (f"{start:.3g}° at the fine stage's start (over {START_HEADING_STD_DEG:g}°): the "
-               "coarse heading may be 140–180° off, where the fine filter does not recover "
-               f"(z-RMS 1.15–1.35 at 26–43°); a longer {coarse} shrinks it (as 1/√span){sway}")  # fmt: skip
+        why = (f"{at} (over {START_HEADING_STD_DEG:g}°) is {src}: the IMU sways over the span; "
+               "the scatter is a conservative bound (about √11× for sway decorrelating within a "
+               "tenth of it: the PSINS log's 36° for a 21° error), the fine stage usually "
+               f"recovers; check the sway line, or use a calmer stretch or a longer {coarse}"
+               if by_sway else f"{at} (over {START_HEADING_STD_DEG:g}°): the coarse heading may be 140–180° "
+               "off, where the fine filter does not recover (z-RMS 1.15–1.35 at 26–43°); "
+               + span)  # fmt: skip
     else:
         return
     warnings.warn(f"align: heading σ {why}", AlignmentWarning, stacklevel=3)
@@ -508,13 +540,11 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
     attitude's correlation with the sensor biases (`coarse_bias_jacobian`, or the
     `start_bias_jacobian` given), so the heading σ ends at `gyro_bias_std / (ω_ie cos lat)`:
     what the assumed grade allows (`AlignmentResult`). Its part beyond the biases is
-    `attitude_std_deg` (default (0.5, 0.5, 5)°) plus the coarse means' noise, added whatever
-    jacobian is given (the start is the coarse one, whose means hold that noise): per axis the
-    larger of the grade's white noise
+    `attitude_std_deg` (default (0.5, 0.5, 5)°) plus the coarse means' noise, whatever
+    jacobian is given: per axis the larger of the grade's white noise
     ([`coarse_error_model`][hrgjax.ins.alignment.coarse_error_model]; 8.45° of heading at 88°
-    for the default ARW over 60 s) and the span's own scatter
-    ([`coarse_scatter`][hrgjax.ins.alignment.coarse_scatter]: a swaying vehicle's; 5–60° of
-    heading over the PSINS log's 60-s windows, whose coarse headings err by 16.5° RMS).
+    for the default ARW over 60 s) and the span's own scatter (`coarse_scatter`: 5–60° of
+    heading over the PSINS log's 60-s windows, whose coarse headings err 16.5° RMS).
     `coarse_name`: the span's name in messages. The result holds the diagnostics
     (innovations, NIS, bias σ, the coarse σ; `AlignmentResult.sway`).
 
@@ -538,7 +568,9 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
         c0, log.lat, log.h, n * dt, fine_kw.get("arw", _ARW), fine_kw.get("vrw", _VRW)
     )
     fine_kw.setdefault("start_bias_jacobian", jac)
-    scatter = np.diag(np.asarray(jac @ coarse_scatter(log.dtheta[:n], log.dvel[:n], dt) @ jac.T))
+    parts = min(COARSE_PARTS, n)  # a span of fewer samples: one a part; of one: no scatter
+    scatter = np.zeros(3) if n < 2 else np.diag(np.asarray(jac @ coarse_scatter(
+        log.dtheta[:n], log.dvel[:n], dt, parts=parts) @ jac.T))  # fmt: skip
     std = np.asarray(fine_kw.get("attitude_std_deg", _ATTITUDE_STD_DEG), dtype=float)
     var = np.maximum(np.asarray(noise_var), scatter)  # white noise, or the span's sway
     fine_kw["attitude_std_deg"] = tuple(np.sqrt(std**2 + var / DEG**2))
@@ -554,10 +586,8 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
     floor = bg / (OMEGA_IE * math.cos(log.lat)) / DEG
     sway_deg = float(_euler_std(c0, jnp.diag(jnp.asarray(scatter)))[0])
     white_deg = float(_euler_std(c0, jnp.diag(noise_var))[0])
-    sway = (f"; its part beyond the grade is the coarse span's own scatter ({sway_deg:.3g}°, "
-            f"the grade's white noise {white_deg:.2g}°): the IMU sways, a calmer stretch helps"
-            if sway_deg > 2 * white_deg else "")  # fmt: skip
-    _warn_heading(float(np.asarray(std[0])[0]), float(s[0]), floor, log.lat, coarse_name, sway)
+    _warn_heading(float(np.asarray(std[0])[0]), float(s[0]), floor, log.lat, coarse_name,
+                  sway_deg, white_deg)  # fmt: skip
     c_end, p_end = np.asarray(cs[-1]), np.asarray(ps[-1])
     bias_std = np.sqrt(np.concatenate([np.diag(c_end.T @ p_end[k:k + 3, k:k + 3] @ c_end)
                                        for k in (6, 9)]))  # fmt: skip
