@@ -339,23 +339,24 @@ def traced_violations(name: str, values, quantity: str | None = None) -> list:
     """The run-time twin of [`check`][hrgjax.plausible.check] for traced `values` (inside
     `jit`, `vmap` or `hg.sweep`): `[(bad, message), …]`, `bad` a traced boolean that is true
     where a finite value lies outside the range of `quantity` (default: `name`), `message`
-    `check`'s one line without the value (a temperature that looks like kelvin: its own
-    entry, with the hint; an `EXCLUSIVE` quantity's nonzero bounds are outside, as eagerly,
-    and its message names the datasheet units, as `check`'s does). The range is read when
-    traced. NaN and inf are not flagged here (they are the finite check's)."""
+    `check`'s one line without the value, its index read " at one or more points" after the
+    range (a temperature that looks like kelvin: its own entry, with the hint; an
+    `EXCLUSIVE` quantity's nonzero bounds are outside, as eagerly: a value on one, none
+    beyond, is its own entry, with `check`'s ", its bounds excluded"; the datasheet units
+    are named, as `check` names them). The range is read when traced. NaN and inf are not
+    flagged here (they are the finite check's)."""
     import jax.numpy as jnp
 
     quantity = quantity or name
     low, high, unit = RANGES[quantity]
     v = jnp.asarray(values, dtype=float)
-    ok = (v >= low) & (v <= high)
-    if quantity in EXCLUSIVE:
-        ok &= ((v != low) | (low == 0.0)) & ((v != high) | (high == 0.0))
-    out = jnp.any(jnp.isfinite(v) & ~ok)
+    out = jnp.any(jnp.isfinite(v) & ~((v >= low) & (v <= high)))
     where = " at one or more points" if v.ndim else ""
-    edge = " (bounds excluded)" if quantity in EXCLUSIVE else ""
-    head = f"{name} is outside the plausible range {low:g} … {high:g} {unit}{edge}{where}"
+    head = f"{name} is outside the plausible range {low:g} … {high:g} {unit}{where}"
     tail = (f" — {IMU_HINTS[quantity]}" if quantity in IMU_HINTS else "") + _widens(quantity)
+    if quantity in EXCLUSIVE:  # a nonzero bound is a round datasheet value in another unit
+        edge = jnp.any(((v == low) & (low != 0.0)) | ((v == high) & (high != 0.0)))
+        return [(out, head + tail), (edge, f"{head}, its bounds excluded{tail}")]
     if quantity != "temperature_c":
         return [(out, head + tail)]
     kelvin = jnp.min(v) >= KELVIN_HINT_C

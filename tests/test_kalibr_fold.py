@@ -124,3 +124,31 @@ def test_the_psins_laser_gyro_exports_a_walk_near_its_record():
     assert export[-1] / record[-1] < 20.0, (export[-1], record[-1])
     sensors.ImuModel(arw=out["gyroscope_noise_density"],
                      gyro_rate_random_walk=out["gyroscope_random_walk"])  # fmt: skip
+
+
+@pytest.mark.parametrize("gm", [None, (1e-4, 100.0)])
+def test_white_angle_noise_is_exported_at_0816_at_dt_and_bounded_from_2dt(tmp_path, gm):
+    """Q goes into the noise density as 2Q²/Δt (each sample's σ the record's): Allan
+    variance 2Q²/(Δt·τ) against Q's own 3Q²/τ² (the angle's second difference, 6Q², over
+    2τ²) — √(2/3) = 0.816× in deviation at τ = Δt, ≥ 1 from 2Δt; a Gauss–Markov term beside
+    it does not lift τ₀ (review rev3 #3: "never understates" holds for those terms only)."""
+    q = 1e-4
+    terms = {"quantization": spec(q, "rad")}
+    if gm:
+        terms["gauss_markov_1"] = {"sigma": spec(gm[0], "rad/s"),
+                                   "correlation_time": spec(gm[1], "s")}  # fmt: skip
+    model = hg.allan.CompositeNoise(
+        terms=terms, unit="rad/s", rate_hz=FS, n=2**15, ci=0.95, taus=TAUS,
+        avar=np.ones(TAUS.size), covariance=np.eye(TAUS.size), chi2=1.0, dof=8, p_value=0.5,
+        sampling="interval", bounds={"angle_random_walk": 1e-9, "rate_random_walk": 1e-9})  # fmt: skip
+    out = model.to_kalibr(tmp_path / "imu.yaml")
+    n, k = out["gyroscope_noise_density"], out["gyroscope_random_walk"]
+    truth = 3 * q * q / TAUS**2
+    if gm:
+        truth = truth + np.array([gm_avar(*gm, m, "interval") for m in TAUS / DT])
+    ratio = np.sqrt((n * n / TAUS + k * k * TAUS / 3) / truth)
+    assert ratio[0] == pytest.approx(math.sqrt(2 / 3), rel=1e-6)
+    assert ratio.argmin() == 0 and (ratio[1:] >= 1.0).all()
+    lowest = hg.allan.kalibr.entries_ratio(model, n, k)[0]
+    assert lowest == pytest.approx(math.sqrt(2 / 3), rel=1e-6)
+    assert "0.816-" in (tmp_path / "imu.yaml").read_text().splitlines()[1]

@@ -11,6 +11,10 @@
 4. `imu.ferraris` blamed a traced (valid) latitude as out of its domain.
 5. `allan.composite.gm_white_level` read any sampling but "interval" as "point", and its
    point branch (math.tanh) could not be traced.
+
+Review of 4216a16: a unit drawn by `random_unit` inside jit/vmap (`ins.fly`'s runs) was held
+to the `imu_*` ranges, so a valid grade failed at random (a Gaussian draw past a bound);
+the jitted g-rule sorted the record (`jnp.median`: 10× slower), now counts.
 """
 
 import jax
@@ -23,7 +27,7 @@ import hrgjax as hg
 from hrgjax.allan.composite import gm_white_level
 from hrgjax.fog import compensation as cp
 from hrgjax.fog import spectrum as sp
-from hrgjax.ins.sensors import ImuModel
+from hrgjax.ins.sensors import ImuModel, random_unit
 from hrgjax.units import DEG_PER_H
 
 OMEGA = 7.292115e-5  # WGS84's Earth rate [rad/s]
@@ -97,7 +101,8 @@ def _kw(**over):
 @pytest.mark.parametrize("field, value, match", [
     ("gyro_bias", 10.0, r"ImuModel.gyro_bias \[rad/s\] is outside the plausible range -0.75 … "
                         r"0.75 rad/s.*°/h → ×hrgjax.units.DEG_PER_H"),
-    ("gyro_bias", 0.75, r"ImuModel.gyro_bias .* \(bounds excluded\)"),
+    ("gyro_bias", 0.75, r"ImuModel.gyro_bias \[rad/s\] is outside the plausible range -0.75 … "
+                        r"0.75 rad/s at one or more points, its bounds excluded — °/h → "),
     ("gyro_scale", 50.0, r"ImuModel.gyro_scale .*plausible range -0.1 … 0.1.*ppm → ×1e-6"),
     ("arw", -1e-3, r"ImuModel.arw is a density or a 1σ: it must be >= 0"),
     ("gyro_bias", np.nan, r"ImuModel.gyro_bias must be finite"),
@@ -106,6 +111,18 @@ def _kw(**over):
 def test_imu_model_traced_fields_are_checked_in_apply(imu_fn, field, value, match):
     with pytest.raises(Exception, match=match):
         jax.block_until_ready(imu_fn(_kw(**{field: value})))
+
+
+@pytest.mark.parametrize("value", [10.0, -0.75])
+def test_imu_model_traced_message_is_the_eager_one_without_the_value(imu_fn, value):
+    with pytest.raises(ValueError) as eager:
+        ImuModel(gyro_bias=value)
+    with pytest.raises(Exception) as traced:
+        jax.block_until_ready(imu_fn(_kw(gyro_bias=value)))
+    want = str(eager.value).replace(f" = {value:g} at index 0", "")
+    want = want.replace("0.75 rad/s", "0.75 rad/s at one or more points")
+    assert ("its bounds excluded" in want) is (value == -0.75)  # on a bound only, both ways
+    assert want in str(traced.value)
 
 
 def test_imu_model_checks_compile_once(imu_fn):
@@ -135,6 +152,34 @@ def test_imu_model_checks_hold_under_sweep_and_eager_grad():
     assert float(jax.grad(rate)(1e-5)) == pytest.approx(1.0, rel=1e-12)
 
 
+def test_drawn_units_are_not_range_checked_but_their_grade_is():
+    th, dv = jnp.full((N, 3), 1e-3), jnp.zeros((N, 3))
+    keys = jax.random.split(jax.random.key(0), 16)
+
+    @jax.jit
+    def units(scale):  # a user's Monte Carlo: the grade traced, each unit drawn and applied
+        grade = ImuModel(gyro_scale=scale)
+
+        def one(k):
+            unit = random_unit(grade, k)
+            return unit.gyro_scale, unit.apply(jax.random.key(1), th, dv, DT)[0].sum(axis=0)
+
+        return jax.vmap(one)(keys)
+
+    drawn, got = units(0.06)  # σ 0.06: P(|draw| ≥ 0.1) = 2Φ(−5/3) = 9.6 % per axis
+    assert np.sum(np.any(np.abs(drawn) >= 0.1, axis=1)) >= 2  # were refused: 4216a16
+    np.testing.assert_allclose(got, N * 1e-3 * (1.0 + drawn), rtol=1e-12)  # Σ Δθ, exactly
+    # the grade's own values are held, traced (here, at run time) and eager (where built)
+    with pytest.raises(Exception, match=r"ImuModel.gyro_scale .*plausible range -0.1 … 0.1"):
+        jax.block_until_ready(units(0.5))
+    with pytest.raises(ValueError, match=r"ImuModel.gyro_scale \[-\] = 0.5 at index 0"):
+        ImuModel(gyro_scale=0.5)
+    eager = random_unit(ImuModel(gyro_scale=0.06), keys[int(np.argmax(np.abs(drawn).max(1)))])
+    assert eager.drawn and np.max(np.abs(eager.gyro_scale)) >= 0.1
+    np.testing.assert_allclose(eager.apply(jax.random.key(1), th, dv, DT)[0].sum(axis=0),
+                               N * 1e-3 * (1.0 + eager.gyro_scale), rtol=1e-12)  # fmt: skip
+
+
 # 3. vibration features of a record in g
 
 
@@ -160,6 +205,38 @@ def test_vibration_features_refuse_g_under_jit_and_vmap():
         jax.block_until_ready(features(in_g))
     with pytest.raises(Exception, match=match):
         jax.vmap(lambda a: sp.vibration_features(a, FS))(jnp.stack([in_ms2, in_g]))
+    # even N, the two middle |f| straddling 0.5: NumPy's median (their mean) decides
+    for low, refused in ((0.4, True), (0.2, False)):  # median 0.55: in g; 0.45: not
+        a = np.zeros_like(in_g)
+        a[:, 2] = np.where(np.arange(a.shape[0]) % 2, low, 0.7)
+        assert bool(0.5 < np.median(np.abs(a[:, 2])) < 2.0) is refused
+        if refused:
+            with pytest.raises(Exception, match=match):
+                jax.block_until_ready(features(a))
+        else:
+            assert np.isfinite(np.asarray(features(a))).all()
+
+
+def test_vibration_g_rule_traced_decides_as_numpys_median():
+    """The traced twin counts (no sort: `jnp.median` made jitted features 10× slower) and
+    decides as `0.5 < np.median(|f|) < 2` does, odd and even N, ties and straddles too."""
+    rng = np.random.default_rng(0)
+    levels = np.array([0.0, 0.3, 0.5, 0.6, 1.0, 1.4, 1.9, 2.0, 2.6, 9.8])
+    straddles = 0
+    for n in (40, 41):  # one program each
+        within = jax.jit(jax.vmap(lambda r: sp._median_within(r, 0.5, 2.0)))
+        # half the values on each side of a bound (levels on it too), then any mix
+        halves = [np.concatenate([rng.choice(levels[i:j], (200, n // 2)),
+                                  rng.choice(levels[j:k], (200, n - n // 2))], axis=1)
+                  for i, j, k in ((0, 3, 6), (4, 7, 10))]  # fmt: skip
+        r = np.concatenate([*halves, rng.choice(levels, (400, n)), rng.uniform(0, 3, (400, n))])
+        want = np.array([0.5 < np.median(x) < 2.0 for x in r])
+        np.testing.assert_array_equal(np.asarray(within(r)), want)
+        srt = np.sort(r, axis=1)[:, (n - 1) // 2 : n // 2 + 1]
+        straddles += np.sum((srt[:, 0] <= 0.5) & (srt[:, -1] > 0.5) | (srt[:, 0] < 2.0)
+                            & (srt[:, -1] >= 2.0))  # fmt: skip
+        assert want.any() and not want.all()
+    assert straddles >= 200  # even N's middle pair on both sides of a bound: covered
 
 
 # 4. ferraris with a traced latitude or Earth rate

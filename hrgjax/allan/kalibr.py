@@ -13,9 +13,11 @@ octaves the model was fitted on (τ₀ … τ_max, the record's own τ range), e
 whole into the white noise (N² += [`gm_white_level`][hrgjax.allan.composite.gm_white_level],
 2σ²T for interval means) or into the walk (K² += 2σ²/T), whichever overstates the term's
 exact Allan variance (for the model's `sampling`) less at its worst octave. The export
-then never understates the model at an octave: a filter tuned with it is not
-overconfident at any averaging time the record resolved. Its overstatement is at most the
-stated factor: the white form's worst is at τ₀ (≈ √3·T/τ₀ in deviation for T ≫ τ₀), the
+then never understates a Gauss–Markov term at an octave: a filter tuned with it is not
+overconfident about that term at any averaging time the record resolved. (White angle
+noise Q is the exception, below: at τ = Δt its fold gives √(2/3) = 0.816× Q's own Allan
+deviation, so a model with Q is exported at ≥ 0.816× at τ₀ = Δt, ≥ 1× from 2Δt on.) A
+term's overstatement is at most the stated factor: the white form's worst is at τ₀ (≈ √3·T/τ₀ in deviation for T ≫ τ₀), the
 walk's at τ_max (≈ τ_max/(√3·T)), so the choice switches near T ≈ √(τ₀·τ_max). The worst
 ratio in Allan deviation over 15 octaves at 100 Hz (τ₀ = Δt, τ_max = 2¹⁴Δt; interval
 means; `benchmarks/kalibr_fold.py`): T = Δt/4 1.26, Δt 2.44, 4Δt 7.6, 8Δt 14.5, 64Δt 111
@@ -29,8 +31,12 @@ rule by at most 2.2× (52 against 111 at T = 64Δt), only within a decade of the
 buys it by raising the other entry until it too reaches the worst ratio at the far end of
 the octaves (at T = 8Δt a walk 14× the term's deviation at τ_max, for 5 % at τ₀).
 
-Other terms: white angle noise Q is written as white at the record's rate
-(`to_kalibr`); a term the record did not need and whose upper bound is 0 (the octaves
+Other terms: white angle noise Q is written as white at the record's rate (`to_kalibr`:
+N² += 2Q²/Δt, so that the per-sample σ is the record's, 2Q²/Δt² on each rate sample). Its
+Allan variance is then 2Q²/(Δt·τ) against Q's own 3Q²/τ² (either sampling): 0.816× in
+deviation at τ = Δt (the MA(1) rates' negative correlation, which white noise lacks, adds
+half again there), 1.15× at 2Δt, √(2τ/3Δt) beyond. Folded as 3Q²/Δt it would bound Q at
+every τ but overstate each sample's σ by √(3/2); a term the record did not need and whose upper bound is 0 (the octaves
 reject even a zero one: the model already lies above them) is written at
 [`ABSENT_SHARE`][hrgjax.allan.kalibr.ABSENT_SHARE] of the model's Allan variance
 ([`negligible`][hrgjax.allan.kalibr.negligible]), since Kalibr refuses a 0.

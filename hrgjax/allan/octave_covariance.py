@@ -139,9 +139,10 @@ def gm_white_level(sigma, correlation_time, dt, sampling: str):
     its Allan variance → N²/τ, for σ [unit], T = `correlation_time` [s] sampled every `dt`
     [s] as `sampling` — 2σ²T for interval means (the continuous rate's PSD at 0, whatever
     Δt), σ²Δt·(1 + φ)/(1 − φ) = σ²Δt·coth(Δt/2T) for point samples (φ = e^{−Δt/T}: the AR(1)
-    samples' autocovariances summed, σ²Δt for T ≪ Δt, 2σ²T for T ≫ Δt). Numbers give a
-    NumPy float; traced values (`jit`, `vmap`, `grad` over σ, T or Δt) a JAX array, either
-    sampling. Also importable from `hrgjax.allan.composite`.
+    samples' autocovariances summed, σ²Δt for T ≪ Δt, 2σ²T for T ≫ Δt). Python numbers
+    give a `float` (Python's for interval means, NumPy's float64 — a `float` subclass — for
+    point samples), NumPy arrays an array; traced values (`jit`, `vmap`, `grad` over σ, T or
+    Δt) a JAX array, either sampling. Also importable from `hrgjax.allan.composite`.
 
     **Raises:** `ValueError` for a `sampling` not in
     [`SAMPLINGS`][hrgjax.allan.octave_covariance.SAMPLINGS] ("points" is not read as "point")."""

@@ -189,7 +189,10 @@ def fly(
 
     **Raises:** `RuntimeError`, one line, when a run's filter or free-inertial solution stops
     being finite (the message of [`loosely_coupled`][hrgjax.ins.ekf.loosely_coupled] or
-    [`mechanize`][hrgjax.ins.mechanization.mechanize])."""
+    [`mechanize`][hrgjax.ins.mechanization.mechanize]). `imu`'s values are held to
+    `ImuModel`'s rules (finite, densities ≥ 0, the `imu_*` ranges) where it was built; each
+    run's drawn unit only to be finite: a draw past a range's bound is a Gaussian tail, not
+    a unit typo, and flies (σ 0.06 against |gyro_scale| < 0.1: 6 units of 16)."""
     require_x64("ins.fly")
     if not (isinstance(runs, int) and runs >= 1):
         raise ValueError(f"runs must be a whole number >= 1; got {runs}")
