@@ -155,14 +155,16 @@ def diagnosis_calls():
                 lambda i=i: nl.MLPClassifier.fit(x, y, 4, key=jax.random.key(6 + i), steps=50))  # fmt: skip
     import equinox as eqx
 
-    # an eqx.Partial of a module-level loss: compiled once; a closure: traced on every call
+    # an eqx.Partial of a module-level loss with compile_once=True: compiled once; a
+    # closure (the default path): traced on every call
     t = jnp.array([1.0, -2.0, 3.0])
     partial = eqx.Partial(_quartic, t=t)
     closure = lambda p: jnp.sum((p - t) ** 4)
-    for name, loss in (("eqx.Partial", partial), ("closure", closure)):
+    for name, loss, once in (("eqx.Partial", partial, True), ("closure", closure, False)):
         for i in range(2):
-            counted(f"rprop, one {name} loss, call {i + 1}",
-                    lambda loss=loss: train.rprop(loss, jnp.zeros(3), 30, 1e-2))  # fmt: skip
+            counted(f"rprop, one {name} loss (compile_once={once}), call {i + 1}",
+                    lambda loss=loss, once=once: train.rprop(loss, jnp.zeros(3), 30, 1e-2,
+                                                             compile_once=once))  # fmt: skip
 
 
 def _quartic(p, *, t):

@@ -56,23 +56,28 @@ def _quadratic(p, *, target):
 
 
 def test_rprop_and_train_module_compile_once_with_the_data_traced():
-    """A second `rprop`/`train_module` of the same loss and shapes compiles nothing (before:
-    a fresh closure and an eager `lax.scan` per call, one compile each time); data passed as
-    an `eqx.Partial`'s arrays is traced, not baked in: each call reaches its own minimiser
-    of sum((w - target)²), w = target."""
+    """With `compile_once=True` a second `rprop`/`train_module` of the same loss and shapes
+    compiles nothing (by default each call traces afresh, one compile each time); data passed
+    as an `eqx.Partial`'s arrays is traced, not baked in: each call reaches its own
+    minimiser of sum((w - target)²), w = target. A loss that is not a Module is refused for
+    it (a closure's data would be fixed in the program)."""
     from helpers import CompileCounter
 
     targets = [jnp.array([1.0, -2.0, 3.0]), jnp.array([0.5, 4.0, -1.0])]
     loss = lambda t: eqx.Partial(_quadratic, target=t)
-    train.rprop(loss(targets[0]), {"w": jnp.zeros(3)}, 200, 1e-2)  # compiles
-    train.train_module({"w": jnp.zeros(3)}, loss(targets[0]), 200, 1e-2)
+    once = {"compile_once": True}
+    train.rprop(loss(targets[0]), {"w": jnp.zeros(3)}, 200, 1e-2, **once)  # compiles
+    train.train_module({"w": jnp.zeros(3)}, loss(targets[0]), 200, 1e-2, **once)
     for t in targets:
         with CompileCounter() as c:
-            p = train.rprop(loss(t), {"w": jnp.zeros(3)}, 200, 1e-2)
-            m = train.train_module({"w": jnp.zeros(3)}, loss(t), 200, 1e-2)
+            p = train.rprop(loss(t), {"w": jnp.zeros(3)}, 200, 1e-2, **once)
+            m = train.train_module({"w": jnp.zeros(3)}, loss(t), 200, 1e-2, **once)
         assert c.compiles == 0 and c.traces == 0, c.names
         np.testing.assert_allclose(p["w"], t, atol=1e-6)
         np.testing.assert_allclose(m["w"], t, atol=1e-6)
+    with pytest.raises(ValueError, match="compile_once=True needs an equinox.Module loss"):
+        train.rprop(lambda p: _quadratic(p, target=targets[0]), {"w": jnp.zeros(3)}, 5,
+                    compile_once=True)  # fmt: skip
 
 
 class _Fitter:  # a plain object holding its data; its bound method is the loss
@@ -92,8 +97,10 @@ def test_rprop_trains_on_the_data_the_loss_reads_now():
     closure = lambda p: jnp.sum((p - data["t"]) ** 2)
     fitter = _Fitter(first)
     module_loss = lambda m: closure(m["w"])
+    wrapped = eqx.Partial(lambda p, *, scale: scale * closure(p), scale=1.0)  # a Module too
     for t in (first, second):
         data["t"], fitter.t = t, t
+        np.testing.assert_allclose(train.rprop(wrapped, jnp.zeros(3), 300, 1e-2), t, atol=1e-6)
         np.testing.assert_allclose(train.rprop(closure, jnp.zeros(3), 300, 1e-2), t, atol=1e-6)
         np.testing.assert_allclose(train.rprop(fitter.loss, jnp.zeros(3), 300, 1e-2), t,
                                    atol=1e-6)  # fmt: skip
@@ -118,6 +125,7 @@ def test_a_users_error_if_inside_the_loss_raises_its_message():
         lambda: train.rprop(plain, p0, 50, 0.1),
         lambda: jax.jit(lambda p: train.rprop(plain, p, 50, 0.1))(p0),
         lambda: train.rprop(bad, p0, 50, 0.1),
+        lambda: train.rprop(bad, p0, 50, 0.1, compile_once=True),
         lambda: train.train_module({"w": p0}, lambda m: bad(m["w"]), 50, 0.1)["w"],
     ):
         with pytest.raises(Exception, match="variance went negative"):
@@ -153,8 +161,8 @@ def test_unhashable_losses_and_concrete_integer_leaves_train():
     np.testing.assert_allclose(m.w, [1.0, 1.0, 0.0, 0.0], atol=1e-6)
     # an eqx.Partial holding the count: compiled-once path tried, trained as before
     count = eqx.Partial(lambda p, *, n: _first_n_ones(_IntLeaf(p, n)), n=jnp.array(3))
-    np.testing.assert_allclose(train.rprop(count, jnp.zeros(4), 200, 1e-2), [1, 1, 1, 0],
-                               atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(train.rprop(count, jnp.zeros(4), 200, 1e-2, compile_once=True),
+                               [1, 1, 1, 0], atol=1e-6)  # fmt: skip
 
 
 def test_a_fitted_closure_is_not_kept_alive():

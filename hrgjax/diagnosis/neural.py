@@ -259,7 +259,9 @@ class MLPClassifier(eqx.Module):
             # a module-level loss with the data as traced arguments: one compiled training
             # program for every net and every later fit of the same shapes
             loss = eqx.Partial(_classifier_loss, x=x, target=(y == i).astype(x.dtype))
-            nets.append(train_module(net, loss, steps, learning_rate=0.01, max_step=0.5))
+            nets.append(
+                train_module(net, loss, steps, learning_rate=0.01, max_step=0.5, compile_once=True)
+            )
         return cls(nets, threshold)
 
     def outputs(self, x):

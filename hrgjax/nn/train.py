@@ -3,8 +3,6 @@ on shuffled mini-batches ([`adam_epochs`][hrgjax.nn.train.adam_epochs])."""
 
 from __future__ import annotations
 
-import types
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -45,45 +43,47 @@ def check_trained(params, losses=None) -> None:
             raise RuntimeError(DIVERGED)
 
 
-def rprop(loss, params, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0):
+def rprop(loss, params, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0,
+          *, compile_once: bool = False):  # fmt: skip
     """`steps` full-batch resilient-backpropagation updates (`optax.rprop`) of the pytree
     `params` on the scalar `loss(params)`, in one `lax.scan`; `learning_rate` is the initial
     step size, `max_step` the largest one (a sigmoid/tanh network saturates, and stops
     learning, when a weight's step grows too large). **Returns** the parameters.
 
-    **Compiled once for an equinox-Module loss:** when `loss` is an `equinox.Module` — an
-    `equinox.Partial(f, x=data)` of a module-level `f`, a module's bound method — and the
-    call is not under the caller's `jit`/`vmap`/`grad`, the training is one program per
-    `loss`'s function and static fields, the structure and shapes of `params` and of
-    `loss`'s arrays, `steps`, `learning_rate` and `max_step`: the arrays are traced
-    arguments, so a later call with new data of the same shapes compiles nothing and trains
-    on the new data. (`f` itself must not read a global that changes between calls: what a
-    function reads outside its arguments is fixed in the program.) **Every other loss** — a
-    plain function, a `lambda` or closure, a bound method of a plain object, a callable
-    holding its data in attributes — is traced afresh on every call, so it always trains on
-    what it reads now, may be unhashable, and is not kept alive by a cache; so is a Module
-    loss whose function closes over arrays or whose data it needs as concrete values
-    (`int(n)`, a Python `if` on it). A user's `eqx.error_if` inside `loss` raises its own
-    message on both paths.
+    By default the training is traced afresh on every call, so it trains on what `loss`
+    reads now, whatever `loss` is (a closure, a bound method, a callable object).
+    **`compile_once=True`** (an opt-in: it is a promise about `loss`) keeps one compiled
+    program per `loss`'s function and static fields, the structure and shapes of `params`
+    and of `loss`'s arrays, `steps`, `learning_rate` and `max_step`: `loss` must be an
+    `equinox.Module` — e.g. `equinox.Partial(f, x=data)` of a module-level `f` — whose data
+    are all array leaves (traced arguments, so a later call with new data of the same shapes
+    compiles nothing and trains on the new data), and whose function reads nothing else that
+    changes between calls (a global, an object in a closure, a static field: fixed in the
+    program, and kept alive by its cache). Under the caller's `jit`/`vmap`/`grad`, or where
+    the loss needs a traced value as a concrete one (`int(n)`, a shape), it trains as by
+    default. A user's `eqx.error_if` inside `loss` raises its own message either way.
 
-    **Raises:** `ValueError` for `steps` < 1; `RuntimeError` ("training diverged") when the
-    loss or the trained weights are not finite (checked on the host after training; under
-    `jit` the traced result passes unchecked)."""
+    **Raises:** `ValueError` for `steps` < 1, or `compile_once` with a loss that is not an
+    `equinox.Module`; `RuntimeError` ("training diverged") when the loss or the trained
+    weights are not finite (checked on the host after training; under `jit` the traced
+    result passes unchecked)."""
     steps = check_steps(steps)
-    trained, losses = _run(_call_loss, params, loss, loss, steps, learning_rate, max_step)
+    trained, losses = _run(_call_loss, params, loss, loss, steps, learning_rate, max_step,
+                           compile_once)  # fmt: skip
     check_trained(trained, losses)
     return trained
 
 
-def train_module(module, loss, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0):
+def train_module(module, loss, steps: int, learning_rate: float = 1e-3, max_step: float = 50.0,
+                 *, compile_once: bool = False):  # fmt: skip
     """Rprop on the inexact-array leaves of an equinox `module`; `loss(module)` → scalar.
-    Compiled once, as [`rprop`][hrgjax.nn.train.rprop], for an equinox-Module `loss` and a
-    `module` whose other leaves hold no arrays (an integer array stays a concrete constant:
-    such a module trains as before, traced afresh); raises as `rprop`."""
+    `compile_once` as in [`rprop`][hrgjax.nn.train.rprop] (its promise covers `module`'s
+    other leaves too: a module holding an integer array trains as by default, its integer
+    read as a constant); raises as `rprop`."""
     steps = check_steps(steps)
     params, static = eqx.partition(module, eqx.is_inexact_array)
     trained, losses = _run(_call_combined, params, loss, (loss, static), steps,
-                           learning_rate, max_step)  # fmt: skip
+                           learning_rate, max_step, compile_once)  # fmt: skip
     check_trained(trained, losses)
     return eqx.combine(trained, static)
 
@@ -106,69 +106,39 @@ def _rprop_run(loss_fn, params, data, length: int, learning_rate, max_step):
 
 _rprop_program = eqx.filter_jit(_rprop_run)
 """`_rprop_run` as one compiled program per loss function, data structure and shapes
-(`rprop` and `train_module` check its outputs on the host, naming the first non-finite
-loss's step). A plain `filter_jit`, not `program`: `program` traces equinox's checks in
-their NaN form (for the persistent cache), which turned a user's `eqx.error_if` inside the
-loss into NaN weights ("training diverged", or NaN silently under the caller's `jit`)."""
+(`compile_once=True`; `rprop` and `train_module` check its outputs on the host, naming the
+first non-finite loss's step). A plain `filter_jit`, not `program`: `program` traces
+equinox's checks in their NaN form (for the persistent cache), which turned a user's
+`eqx.error_if` inside the loss into NaN weights."""
 
-# the loss needs a concrete value of a traced array (`int(n)`, `if x > 0`, `np.asarray`)
+# the loss needs a concrete value of a traced array (`int(n)`, `if x > 0`, `np.asarray`, a
+# shape: "Shapes must be 1D sequences of concrete values")
 _NEEDS_CONCRETE = (
     jax.errors.ConcretizationTypeError,
     jax.errors.TracerArrayConversionError,
     jax.errors.TracerIntegerConversionError,
+    TypeError,
 )
 
 
-def _run(loss_fn, params, loss, data, steps, learning_rate, max_step):
-    """Train with the cached program where that gives what tracing afresh gives (`rprop`'s
-    docstring), else `_rprop_run` traced afresh, as before caching."""
-    if _cacheable(loss, (params, data)):
-        try:
-            return _rprop_program(loss_fn, params, data, steps, learning_rate, max_step)
-        except _NEEDS_CONCRETE:
-            pass  # the loss reads its data as concrete values: it trains as before
+def _run(loss_fn, params, loss, data, steps, learning_rate, max_step, compile_once):
+    """Train traced afresh (`_rprop_run`, the default), or with the cached program where
+    `compile_once` promises it sees all that `loss` reads (`rprop`'s docstring)."""
+    if compile_once is not True and compile_once is not False:
+        raise ValueError(f"compile_once must be True or False; got {compile_once!r}")
+    if compile_once:
+        if not isinstance(loss, eqx.Module):
+            raise ValueError(
+                "compile_once=True needs an equinox.Module loss whose data are its array "
+                f"leaves (e.g. equinox.Partial(f, x=data)); got {type(loss).__name__}"
+            )
+        traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(data))
+        if not (traced or tracing_callback_free() or not _upstream.trace_state_clean()):
+            try:
+                return _rprop_program(loss_fn, params, data, steps, learning_rate, max_step)
+            except _NEEDS_CONCRETE:
+                pass  # the loss reads its data as concrete values: it trains as by default
     return _rprop_run(loss_fn, params, data, steps, learning_rate, max_step)
-
-
-def _cacheable(loss, args) -> bool:
-    """Whether the cached program sees all that `loss` reads as its traced arrays: `loss` is
-    an equinox Module, nothing is being traced, and the program's static part (what it is
-    cached by) is hashable and holds no array: no integer array of `train_module`'s module
-    (traced there, a constant before), no array in a closure or default of a function in it
-    and no method of a plain object (fixed in the program, and kept alive by the cache)."""
-    if not isinstance(loss, eqx.Module) or tracing_callback_free():
-        return False
-    if not _upstream.trace_state_clean():
-        return False
-    leaves, tree = jax.tree_util.tree_flatten(args)
-    if any(isinstance(x, jax.core.Tracer) for x in leaves):
-        return False
-    data = args[1]
-    static = data[1] if isinstance(data, tuple) else None  # train_module's (loss, static)
-    if any(eqx.is_array(x) for x in jax.tree_util.tree_leaves(static)):
-        return False
-    fixed = [x for x in leaves if not eqx.is_array(x)]
-    try:
-        hash((tree, *fixed))
-    except TypeError:
-        return False
-    return not any(_holds_data(x) for x in fixed)
-
-
-def _holds_data(fn) -> bool:
-    """Whether `fn` is a function whose closure cells or defaults hold a JAX or NumPy array
-    (as pytree leaves), or a method bound to a plain object (its attributes may hold data)."""
-    if isinstance(fn, types.MethodType):
-        return True
-    if not isinstance(fn, types.FunctionType):
-        return False
-    held = [fn.__defaults__, fn.__kwdefaults__]
-    for cell in fn.__closure__ or ():
-        try:
-            held.append(cell.cell_contents)
-        except ValueError:  # an empty cell (a name not yet bound)
-            pass
-    return any(eqx.is_array(x) for x in jax.tree_util.tree_leaves(held))
 
 
 def _block_length(steps: int, blocks: int = 20) -> int:
