@@ -145,9 +145,12 @@ def cmd_imu_calibrate(args) -> int:
     """`hrgjax imu-calibrate LOG`: Ferraris calibration of a six-axis IMU session."""
     start(args, [args.log, args.sections], json=(".json",), plot=PLOT_EXTENSIONS,
           write_sections=(".json",))  # fmt: skip
+    import warnings
+
     import numpy as np
 
     from .. import imu
+    from ..imu.sections import TurnCutWarning
     from ..units import EARTH_RATE
 
     columns = {
@@ -178,12 +181,21 @@ def cmd_imu_calibrate(args) -> int:
                 sections = imu.detect_sections(data)
             else:
                 sections = imu.parse_sections(args.sections, len(data))
-            cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg,
-                               turn_deg_std=args.turn_deg_std, gyro_range_dps=args.gyro_range_dps,
-                               accel_range_g=args.accel_range_g, lat_deg=args.lat_deg,
-                               earth_rate=0.0 if args.no_earth_rate else EARTH_RATE)  # fmt: skip
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", TurnCutWarning)
+                cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg,
+                                   turn_deg_std=args.turn_deg_std,
+                                   gyro_range_dps=args.gyro_range_dps,
+                                   accel_range_g=args.accel_range_g, lat_deg=args.lat_deg,
+                                   earth_rate=0.0 if args.no_earth_rate else EARTH_RATE)  # fmt: skip
         except ValueError as err:
             raise ValueError(f"{err}{slow}") from None
+    for w in caught:  # a turn cut short, in one line: "hrgjax imu-calibrate: turn 'x_rot' …"
+        if issubclass(w.category, TurnCutWarning):
+            text = str(w.message).removeprefix("hrgjax.imu.ferraris: ")
+            print(f"hrgjax imu-calibrate: {' '.join(text.split())}", file=sys.stderr, flush=True)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     span = float(data.time[-1] - data.time[0])
     found = "found in the data" if args.sections is None else f"from {args.sections}"
     print(f"hrgjax imu-calibrate: {args.log} ({len(data)} samples, {span:.0f} s at "

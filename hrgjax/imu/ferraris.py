@@ -70,12 +70,14 @@ This module is the method: the section statistics and their covariance
 
 from __future__ import annotations
 
+import warnings
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._warn import user_stacklevel
 from .._x64 import require_x64
 from ..units import DEG, EARTH_RATE
 from ._calibration import FORMAT as FORMAT
@@ -87,7 +89,16 @@ from ._calibration import load_calibration as load_calibration
 from ._drift import half_difference, walk_kernel, walk_posterior_mean
 from ._earth import check_earth_rate, check_lat_deg, earth_parts, horizontal_covariance, turn_spin
 from .data import ImuData
-from .sections import FACES, SECTION_KEYS, TURNS, Sections, parse_sections, saturation
+from .sections import (
+    FACES,
+    SECTION_KEYS,
+    TURNS,
+    Sections,
+    TurnCutWarning,
+    cut_turn,
+    parse_sections,
+    saturation,
+)
 
 G_DATA_TOLERANCE = 0.05
 """How far (relative) the declared `g` may be from the mean |specific force| the static
@@ -363,7 +374,12 @@ def ferraris(
     key says; for a gyro that saturates in a turn, or an accelerometer on a face (naming
     the channel and the section: a clipped turn integrates short, M_g reads low with a σ
     that knows nothing of it); for a negative or non-finite `turn_deg_std` or range; for a
-    `lat_deg` outside [−90, 90] or a negative `earth_rate`."""
+    `lat_deg` outside [−90, 90] or a negative `earth_rate`.
+
+    **Warns:** [`TurnCutWarning`][hrgjax.imu.sections.TurnCutWarning] where the gyro still
+    turns just outside a turn section ([`cut_turn`][hrgjax.imu.sections.cut_turn], with
+    the gyros' measured drift): the section leaves out motion and M_g is off by more than
+    its σ."""
     require_x64("hg.imu.ferraris")
     if not isinstance(data, ImuData):
         raise TypeError(
@@ -395,6 +411,9 @@ def ferraris(
         earth = horizontal_covariance(params[12:21].reshape(3, 3), var_h,
                                       turn_spin(data, sections), _FACE_AT_GYRO, _TURN_AT, N_STATS)  # fmt: skip
     got = _with_drift(data, sections, *sums, earth=earth)
+    cut = cut_turn(data, sections, walk=float(got.bias_walk[0]))
+    if cut:
+        warnings.warn(f"hrgjax.imu.ferraris: {cut}", TurnCutWarning, stacklevel=user_stacklevel())
     cov = got.white + got.drift + earth
     p_cov = jac @ cov @ jac.T + _turn_covariance(params, turns, turn_std)
     p_cov = p_cov + var_up * np.outer(d_up, d_up)  # an unknown vertical rate, common to all

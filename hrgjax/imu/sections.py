@@ -157,16 +157,24 @@ def detect_sections(
 ) -> Sections:
     """Find the Ferraris sections of a session in its data.
 
-    Rest is where the magnitude of the gyro's rate vector (median over the record removed,
-    moving mean over `window_s` of each axis, so that white noise averages down) stays below
-    `motion_threshold_dps` [°/s] for at least `min_static_s` [s];
-    each rest, less `trim_s` [s] at both ends, is the face whose accelerometer axis carries
-    most of the specific force (at least 80 %, by sign `p` or `a`). Each stretch of motion
-    between two rests whose bias-corrected gyro integrates to a full turn (360° within
-    `turn_tolerance_deg`, at least 90 % of it about one axis) is that axis's `*_rot`, from
-    the end of the rest before to the start of the rest after; the rests on either side of
-    a turn count as a face only where no other rest holds that face. A face or a turn found
-    more than once is a repeat.
+    Candidate rests are where the magnitude of the gyro's rate vector (median over the record
+    removed, moving mean over `window_s` of each axis, so that white noise averages down)
+    stays below `motion_threshold_dps` [°/s] for at least `min_static_s` [s]. Each is then
+    measured against its own noise: its level is the mode of its window means (where the
+    rate dwells), and it is still only as far as every axis's window mean stays within
+    `REST_NOISE_K` (5) σ of that level, σ the window mean's noise measured in the rests — a
+    slow end of a turn (a soft start, a hand turn, the simulator's 1 − cos ramp), under
+    `motion_threshold_dps` for seconds, is motion, not rest. Each motion between two rests
+    reaches out into both by `trim_s` [s] + `window_s` / 2, and by as long again as its rate
+    took to rise from the rest noise to `RAMP_FACTOR` (10) times it (for a ramp ∝ t², the
+    part under the noise and more), at most to each rest's middle; what is left of a rest
+    is the face whose accelerometer axis carries most of the specific force (at least 80 %,
+    by sign `p` or `a`). A motion whose gyro, less the rests' level, integrates to a full
+    turn (360° within `turn_tolerance_deg`, at least 90 % of it about one axis) is that
+    axis's `*_rot`: the whole turn, with a little rest at both ends (the Ferraris sums take
+    the bias × duration off, so rest inside a turn section costs only noise; a turn cut
+    short reads M_g low). The rests on either side of a turn count as a face only where
+    no other rest holds that face. A face or a turn found more than once is a repeat.
 
     **Returns:** `{key: [(start, end), …]}` for every key of
     [`SECTION_KEYS`][hrgjax.imu.sections.SECTION_KEYS].
@@ -181,26 +189,31 @@ def detect_sections(
     rel = gyro - np.median(gyro, axis=0)
     # the rate vector averaged, then its norm: white noise averages down (the mean of |noise|
     # would not: ≈ 1.6 σ per sample, splitting a noisy face into fake repeats)
-    speed = np.linalg.norm(np.stack([_moving_mean(rel[:, i], w) for i in range(3)], 1), axis=1)
-    still = speed < np.deg2rad(motion_threshold_dps)
-    rests = [(s, e) for s, e in _runs(still) if e - s >= min_static_s * rate]
-    trim = int(round(trim_s * rate)) + w // 2
+    smooth = np.stack([_moving_mean(rel[:, i], w) for i in range(3)], 1)
+    still = np.linalg.norm(smooth, axis=1) < np.deg2rad(motion_threshold_dps)
+    coarse = [(s, e) for s, e in _runs(still) if e - s >= min_static_s * rate]
+    rests, sigma = _still_rests(rel, smooth, coarse, w)
+    pad = int(round(trim_s * rate)) + w // 2
+    moves = [_motion(smooth, sigma, r0, r1, pad) for r0, r1 in zip(rests, rests[1:], strict=False)]
     found: dict[str, list[tuple[int, int]]] = {k: [] for k in SECTION_KEYS}
-    rest_rows = [(s + trim, e - trim) for s, e in rests if e - s - 2 * trim >= 2]
     beside_turn = set()
-    if rest_rows:
-        bias = np.median(np.concatenate([gyro[s:e] for s, e in rest_rows]), axis=0)
-        dt = data.dt
-        for j in range(len(rest_rows) - 1):
-            e0, s1 = rest_rows[j][1], rest_rows[j + 1][0]
-            turn = np.rad2deg(((gyro[e0:s1] - bias) * dt[e0:s1, None]).sum(axis=0))
-            i = int(np.argmax(np.abs(turn)))
-            full = abs(abs(turn[i]) - 360.0) <= turn_tolerance_deg
-            if full and abs(turn[i]) >= 0.9 * np.linalg.norm(turn):
-                found[f"{'xyz'[i]}_rot"].append((e0, s1))
-                beside_turn |= {j, j + 1}
+    dt = data.dt
+    for j, (a, b) in enumerate(moves):
+        level = (rests[j][2] + rests[j + 1][2]) / 2.0
+        turn = np.rad2deg(((rel[a:b] - level) * dt[a:b, None]).sum(axis=0))
+        i = int(np.argmax(np.abs(turn)))
+        full = abs(abs(turn[i]) - 360.0) <= turn_tolerance_deg
+        if full and abs(turn[i]) >= 0.9 * np.linalg.norm(turn):
+            found[f"{'xyz'[i]}_rot"].append((a, b))
+            beside_turn |= {j, j + 1}
     faces: dict[str, list[tuple[int, bool]]] = {k: [] for k in FACES}
-    for j, (s, e) in enumerate(rest_rows):
+    rest_rows = []
+    for j, (s, e, _) in enumerate(rests):
+        s = moves[j - 1][1] if j > 0 else s + pad
+        e = moves[j][0] if j < len(moves) else e - pad
+        rest_rows.append((s, e))
+        if e - s < 2:
+            continue
         f = accel[s:e].mean(axis=0)
         i = int(np.argmax(np.abs(f)))
         if abs(f[i]) >= 0.8 * np.linalg.norm(f):
@@ -212,14 +225,138 @@ def detect_sections(
     missing = [k for k in SECTION_KEYS if not found[k]]
     if missing:
         have = {k: len(v) for k, v in found.items() if v}
-        moving = [(e0, s1) for (_, e0), (s1, _) in zip(rest_rows, rest_rows[1:], strict=False)]
-        clipped = saturation(data, moving or [(0, n)])
+        clipped = saturation(data, moves or [(0, n)])
         hint = f"; {clipped} (the turns cannot be measured)" if clipped else ""
         raise ValueError(
             f"detect_sections: found no {', '.join(missing)} in {n} samples (found {have}); "
             f"pass the sections by hand, or change min_static_s / motion_threshold_dps{hint}"
         )
     return found
+
+
+REST_NOISE_K = 5.0
+"""A rest ends where one axis's rate, averaged over `window_s`, leaves the rest's level by
+this many standard deviations of that average (measured in the rests): `detect_sections`."""
+RAMP_FACTOR = 10.0
+"""`detect_sections` widens a motion into each rest by as long as its rate took to rise from
+`REST_NOISE_K` σ to this many times that: for a ramp ∝ t² (a smooth start) √10 − 1 = 2.2
+times as long as it spent under the noise, for a ramp ∝ t 9 times, for a step nothing."""
+_SIGMA_FLOOR = 1e-9
+"""[rad/s]: the least window-mean noise taken (noise-free records: round-off is not motion)."""
+
+
+def _still_rests(rel, smooth, coarse, w):
+    """The still part of each candidate rest, `[(start, end, level (3,))]`, and the window
+    mean's noise σ (3,) [rad/s]: from the rests' window means `w` samples apart (their
+    difference is √2 σ, a slow ramp barely moves it), median absolute value (a ramp's part
+    does not pull it), at least half the data's resolution (a quantised record's flat rest)
+    and `_SIGMA_FLOOR`. A rest's level is the mode of its window means (`_mode`: where the
+    rate dwells; a ramp's slow end inside the candidate passes through), its still part the
+    longest run within `REST_NOISE_K` σ of it on every axis."""
+    if not coarse:
+        return [], np.full(3, _SIGMA_FLOOR)
+    lag = w if all(e - s > w for s, e in coarse) else 1
+    diffs = np.concatenate([smooth[s + lag : e] - smooth[s : e - lag] for s, e in coarse])
+    steps = np.abs(np.concatenate([np.diff(rel[s:e], axis=0) for s, e in coarse]))
+    resolution = np.array([np.min(c[c > 0], initial=np.inf) for c in steps.T])
+    resolution[~np.isfinite(resolution)] = 0.0
+    sigma = np.maximum(np.median(np.abs(diffs), axis=0) * (1.4826 / np.sqrt(2.0)), resolution / 2)
+    sigma = np.maximum(sigma, _SIGMA_FLOOR)
+    out = []
+    for s, e in coarse:
+        level = np.array([_mode(smooth[s:e, i]) for i in range(3)])
+        ok = np.all(np.abs(smooth[s:e] - level) < REST_NOISE_K * sigma, axis=1)
+        runs = _runs(ok)
+        if runs:
+            a, b = max(runs, key=lambda r: r[1] - r[0])
+            if b - a >= 2:
+                out.append((s + a, s + b, level))
+    return out, sigma
+
+
+def _mode(x: np.ndarray) -> float:
+    """The half-sample mode (Bickel & Frühwirth 2006): the shortest interval holding half
+    the values, again within it, down to three."""
+    x = np.sort(x)
+    while x.size > 3:
+        h = (x.size + 1) // 2
+        i = int(np.argmin(x[h - 1 :] - x[: x.size - h + 1]))
+        x = x[i : i + h]
+    return float(x.mean())
+
+
+def _motion(smooth, sigma, before, after, pad) -> tuple[int, int]:
+    """The rows `[start, end)` of the motion between two still rests `(start, end, level)`,
+    widened into each by `pad` and by the time its rate took from the rest's noise to
+    `RAMP_FACTOR` times it, at most to the rest's middle."""
+    (s0, e0, level0), (s1, e1, level1) = before, after
+    if s1 <= e0:
+        return e0, e0
+    z0 = np.max(np.abs(smooth[e0:s1] - level0) / sigma, axis=1)
+    z1 = np.max(np.abs(smooth[e0:s1] - level1) / sigma, axis=1)
+    high = RAMP_FACTOR * REST_NOISE_K
+    up = np.flatnonzero(z0 >= high)
+    down = np.flatnonzero(z1 >= high)
+    rise = int(up[0]) if up.size else int(np.argmax(z0))
+    fall = (s1 - e0 - 1 - int(down[-1])) if down.size else (s1 - e0 - 1 - int(np.argmax(z1)))
+    return max(e0 - rise - pad, (s0 + e0) // 2), min(s1 + fall + pad, (s1 + e1) // 2)
+
+
+class TurnCutWarning(UserWarning):
+    """A turn section starts or ends while the IMU still turns
+    ([`cut_turn`][hrgjax.imu.sections.cut_turn]): the section leaves out motion, and M_g is
+    off by more than its σ holds (low for a turn cut short).
+    `warnings.simplefilter("ignore", TurnCutWarning)` silences it."""
+
+
+def cut_turn(data, sections, *, window_s: float = 0.25, walk: float = 0.0) -> str | None:
+    """The first turn section that the gyro still turns beyond, as one line of text, or None.
+
+    Over `window_s` [s] just before a turn section and just after it, the rate about the
+    turn's axis should be the rest's: the gyro mean of the face that holds that axis
+    vertical the same way (`x_p` or `x_a`, … by the accelerometer's sign in the turn; its
+    range nearest in time), which reads the same bias, g-sensitivity and vertical Earth
+    rate. A window mean more than `REST_NOISE_K` (5) σ from it is motion the section leaves
+    out: a turn cut short (M_g reads low) or a settling back (high). σ: the faces' own
+    `window_s` means about each face's mean (the noise as measured, coloured or white), that
+    of the face mean, and a bias random walk of intensity `walk` [rad/s/√s] over the time
+    between the two.
+
+    **Arguments:** `data`: the session ([`ImuData`][hrgjax.imu.ImuData]); `sections`: as
+    [`parse_sections`][hrgjax.imu.sections.parse_sections] takes them."""
+    sections = parse_sections(sections, len(data))
+    gyro, time, n = np.asarray(data.gyro), np.asarray(data.time), len(data)
+    w = max(int(round(window_s * data.rate_hz)), 1)
+    devs, dof = [], 0
+    for s, e in (r for key in FACES for r in sections[key] if r[1] - r[0] >= w):
+        blocks = gyro[s : s + (e - s) // w * w].reshape(-1, w, 3).mean(axis=1)
+        devs.append(blocks - blocks.mean(axis=0))
+        dof += max(len(blocks) - 1, 0)
+    var = np.maximum(sum((d**2).sum(axis=0) for d in devs) / max(dof, 1), _SIGMA_FLOOR**2)
+    for i, key in enumerate(TURNS):
+        for s, e in sections[key]:
+            face = f"{'xyz'[i]}_{'p' if np.asarray(data.accel)[s:e, i].mean() > 0 else 'a'}"
+            for side, (a, b) in (("before", (max(s - w, 0), s)), ("after", (e, min(e + w, n)))):
+                if b <= a:
+                    continue
+                mid = time[(a + b - 1) // 2]
+                fs, fe = min(sections[face], key=lambda r: abs(time[(r[0] + r[1] - 1) // 2] - mid))
+                gap = abs(time[(fs + fe - 1) // 2] - mid)
+                level = gyro[fs:fe, i].mean()
+                rate = gyro[a:b, i].mean() - level
+                sd = np.sqrt(var[i] * (w / (b - a) + w / (fe - fs)) + walk**2 * gap)
+                if abs(rate) > REST_NOISE_K * sd:
+                    along = rate * (gyro[s:e, i] - level).sum() > 0  # the turn's own sense
+                    span = (b - a) / data.rate_hz
+                    return (
+                        f"turn {key!r} rows [{s}, {e}): the gyro still turns {side} it "
+                        f"({np.rad2deg(rate):+.3g} °/s about {'xyz'[i]} over {span:.3g} s, "
+                        f"{abs(rate) / sd:.0f}σ of the rest noise off the {face!r} rest): the "
+                        "section leaves out motion "
+                        f"{'with the turn (M_g reads low)' if along else 'back (M_g reads high)'}"
+                        "; widen it into the rests on either side"
+                    )
+    return None
 
 
 SATURATION_MIN_S = 0.05
