@@ -5,19 +5,19 @@ variable's `units` checked against the contract's (`UNITS`, `dataset_columns`,
 
 from __future__ import annotations
 
-import array
 import contextlib
 import csv
 import io
 import math
 import os
 import re
-import warnings
 from collections.abc import Collection
 
 import numpy as np
 
+from ._csv_numeric import PROGRESS_LINES, numeric_rows
 from ._data_columns import COLUMNS, MAX_EXACT_INTEGER, is_number, unit_hint
+from ._progress import bar
 
 _INTEGER = re.compile(r"[+-]?\d+")
 
@@ -276,15 +276,24 @@ def read_csv_table(
     stamps, 1.7e18, to the nanosecond: their differences fit a float64; `hrgjax allan
     --time-unit ns`); below 2**53 it reads as it is.
 
+    A plain numeric file — numbers, `nan`/`inf` and, with `empty_as_nan`, empty fields (a log
+    with gaps) — is streamed through NumPy's C parser in chunks (`hrgjax._csv_numeric`: ≈ 140
+    MB and 1–2 s for 10⁶ rows × 7 columns); any other (quotes, text, an integer to check
+    exactly, a field to refuse) is read by Python's csv module, one string per field (≈ 750
+    bytes a row), which names what is wrong. Both give the same columns and lines. A read of
+    more than 10⁶ lines shows a progress bar (stderr, at a terminal; `HRGJAX_QUIET`).
+
     **Raises:** `ValueError` naming the file and its line for text that is not UTF-8, a
     malformed row, a row of empty fields, an empty, numeric or duplicate header, or a known
     column with text in it."""
     line = [0]
     at_start = [True]  # the CSV reader asks for a line that begins a record (not one inside quotes)
 
-    def source(fh):
+    def source(fh, progress):
         for i, text in enumerate(fh, 1):
             line[0] = i
+            if progress is not None and not i & 0xFFFF:
+                progress.update(0x10000)
             if at_start[0] and text.lstrip().startswith("#"):
                 continue
             at_start[0] = False
@@ -293,7 +302,8 @@ def read_csv_table(
     if not isinstance(exact_integers, bool):
         exact_integers = frozenset([exact_integers] if isinstance(exact_integers, str)
                                    else exact_integers)  # fmt: skip
-    fast = _numeric_table(path)
+    # (called with one argument where it can: tests and benchmarks replace it by `lambda p:`)
+    fast = _numeric_table(path, empty_as_nan) if empty_as_nan else _numeric_table(path)
     offsets = {h: fast[0][h] for h in integer_offsets if h in fast[0]} if fast else {}
     if (
         fast is not None
@@ -301,30 +311,42 @@ def read_csv_table(
         and not beyond_exact(offsets)
     ):
         return fast  # (else the validating reader names an integer beyond 2**53)
+    del fast, offsets
     with open(path, "rb") as fh:
         blob = fh.read()
     try:
-        text = blob.decode("utf-8-sig")
+        blob.decode("utf-8-sig")  # (checked whole; read below a part at a time)
     except UnicodeDecodeError as err:
         at = blob[: err.start].count(b"\n") + 1
         raise ValueError(
             f"{path}: line {at}: not UTF-8 text ({err.reason}); save the file as UTF-8 CSV"
         ) from None
-    del blob
+    # lines as a StringIO(text, newline="") gives them, without its 4 bytes a character
+    text = io.TextIOWrapper(io.BytesIO(blob), encoding="utf-8-sig", newline="")
     header, rows, lines = None, [], []
+    total = blob.count(b"\n")
+    shown = (
+        bar(total, f"reading {os.path.basename(path)}", unit="line")
+        if total > PROGRESS_LINES
+        else contextlib.nullcontext()
+    )
     try:
-        for row in csv.reader(source(io.StringIO(text, newline=""))):
-            at_start[0] = True
-            if not row or (len(row) == 1 and not row[0].strip()):
-                continue  # a blank line
-            if header is None:
-                header = [h.strip() for h in row]
-                header_line = line[0]
-                continue
-            rows.append(row)
-            lines.append(line[0])
+        with shown as progress:
+            for row in csv.reader(source(text, progress)):
+                at_start[0] = True
+                if not row or (len(row) == 1 and not row[0].strip()):
+                    continue  # a blank line
+                if header is None:
+                    header = [h.strip() for h in row]
+                    header_line = line[0]
+                    continue
+                rows.append(row)
+                lines.append(line[0])
+            if progress is not None:
+                progress.update(progress.total - (line[0] & ~0xFFFF))
     except csv.Error as err:
         raise ValueError(f"{path}: line {line[0]}: not a readable CSV row ({err})") from None
+    del text, blob  # (each field is its own string now)
     empty = [all(not f.strip() for f in row) for row in rows]
     while rows and empty[-1]:  # a spreadsheet's trailing rows of empty fields hold no sample
         rows.pop(), lines.pop(), empty.pop()
@@ -340,16 +362,28 @@ def read_csv_table(
     for r, ln in zip(rows, lines, strict=True):
         if len(r) != len(header):
             raise ValueError(f"{path}: line {ln} has {len(r)} fields, the header has {len(header)}")
-    fields = {h: [r[j] for r in rows] for j, h in enumerate(header)}
-    del rows
     lines_arr = np.asarray(lines, dtype=np.int64)
-    if empty_as_nan:
-        fields = {h: [f if f.strip() else "nan" for f in v] for h, v in fields.items()}
-    columns = {h: _offsets(v) if h in integer_offsets else None for h, v in fields.items()}
-    return {
-        h: _parse(path, h, v, lines_arr, exact_integers) if columns[h] is None else columns[h]
-        for h, v in fields.items()
-    }, lines_arr
+
+    def fields(j: int) -> list[str]:  # (one column's strings at a time, not every one's)
+        v = [r[j] for r in rows]
+        return [f if f.strip() else "nan" for f in v] if empty_as_nan else v
+
+    offsets = {h: _offsets(fields(j)) for j, h in enumerate(header) if h in integer_offsets}
+    columns = {}
+    shown = (
+        bar(len(header), f"parsing {os.path.basename(path)}", unit="column")
+        if total > PROGRESS_LINES  # (as the reading's bar)
+        else contextlib.nullcontext()
+    )
+    with shown as progress:
+        for j, h in enumerate(header):
+            exact = offsets.get(h)
+            columns[h] = (
+                _parse(path, h, fields(j), lines_arr, exact_integers) if exact is None else exact
+            )
+            if progress is not None:
+                progress.update(1)
+    return columns, lines_arr
 
 
 def _offsets(fields: list[str]) -> np.ndarray | None:
@@ -474,75 +508,39 @@ def _parse(
     return out
 
 
-_FIELD_LIMIT = 131072  # the csv module's field limit, which the slow path reports
-_NUMERIC = str.maketrans("", "", "0123456789.eE+-, \t\r\n")
-"""Deletes every character a plain numeric data line may hold."""
-
-
-def _numeric_table(path: str):
-    """`read_csv_table`'s result for a plain numeric file, streamed through NumPy's C parser
-    in a fraction of the memory (no Python string per field, no copy of the whole text);
-    None for anything else — text that is not UTF-8, quotes, a lone carriage return, any
-    character but digits, `.eE+-`, commas and blanks in a data line (`nan` included), a row
-    with another number of fields, an integer the slow path must check exactly (in a
-    contract column; `read_csv_table` checks the extra ones where asked) — which the
-    validating reader then reads and names. Over that alphabet NumPy accepts exactly the
-    fields `is_number` accepts (tests/test_files.py), so both paths give the same columns."""
-    header, at = None, 0
-    lines = array.array("q")
-    bad = [False]
-
-    def data_lines(fh):  # (an empty field never parses: NumPy refuses it, and this path too)
-        nonlocal header, at
-        for i, ln in enumerate(fh, 1):
-            if '"' in ln or len(ln) > _FIELD_LIMIT or ln.endswith("\r"):
-                bad[0] = True
-                return
-            stripped = ln.strip(" \t\r\n")
-            if not stripped or stripped.startswith("#"):
-                continue
-            if header is None:
-                header, at = [h.strip() for h in ln.rstrip("\r\n").split(",")], i
-                continue
-            if ln.translate(_NUMERIC):
-                bad[0] = True
-                return
-            lines.append(i)
-            yield ln
-
-    try:
-        with (
-            open(path, encoding="utf-8-sig", newline="") as fh,
-            warnings.catch_warnings(),  # "input contained no data": read again, named there
-        ):
-            warnings.simplefilter("ignore", UserWarning)
-            values = np.loadtxt(data_lines(fh), delimiter=",", dtype=float, ndmin=2,
-                                comments=None)  # fmt: skip
-    except (ValueError, UnicodeDecodeError):
+def _numeric_table(path: str, empty_as_nan: bool = False):
+    """`read_csv_table`'s result for a plain numeric file (numbers, `nan`/`inf`, and with
+    `empty_as_nan` empty fields), streamed through NumPy's C parser in chunks of lines
+    (`hrgjax._csv_numeric`: no Python string per field, no copy of the whole text); None for
+    anything else — text that is not UTF-8, quotes, a lone carriage return, any character
+    but those of numbers, commas and blanks in a data line, a row with another number of
+    fields, an empty field without `empty_as_nan`, an integer the slow path must check
+    exactly (in a contract column; `read_csv_table` checks the extra ones where asked) —
+    which the validating reader then reads and names. Over that alphabet NumPy accepts
+    exactly the fields `is_number` accepts (tests/test_files.py), so both paths give the
+    same columns."""
+    got = numeric_rows(path, empty_as_nan)
+    if got is None:
         return None
-    if bad[0] or header is None or not lines or values.shape != (len(lines), len(header)):
-        return None
+    header, at, values, lines = got
     check_header(path, header, at)
     columns = {}
     for j, name in enumerate(header):
         col = np.ascontiguousarray(values[:, j])
         if name == "run":
-            big = np.abs(col) >= MAX_EXACT_INTEGER  # (rounded: 2**53 + 1 reads 2**53)
-            if big.any() or not np.all(col == np.round(col)):
+            if np.any(np.abs(col) >= MAX_EXACT_INTEGER):  # (rounded: 2**53 + 1 reads 2**53)
                 return None
-            col = col.astype(np.int64)
+            if np.all(col == np.round(col)):  # (else floats, as the validating reader's)
+                col = col.astype(np.int64)
         elif name in COLUMNS and beyond_exact({name: col}):
             return None
         columns[name] = col
-    return columns, np.frombuffer(lines, dtype=np.int64).copy()
+    return columns, lines
 
 
 def beyond_exact(columns: dict[str, np.ndarray]) -> bool:
     """Whether a float column holds a value of magnitude 2**53 or more: there the text may
     have been an integer that the float rounded (2**53 + 1 reads 2**53), which the validating
-    reader checks exactly (`read_csv_table` with `exact_integers`)."""
+    reader checks exactly (`read_csv_table` with `exact_integers`); NaN (a gap) is not."""
     top = MAX_EXACT_INTEGER
-    return any(
-        c.dtype.kind == "f" and c.size and (c.max() >= top or c.min() <= -top)
-        for c in columns.values()
-    )
+    return any(c.dtype.kind == "f" and bool(np.any(np.abs(c) >= top)) for c in columns.values())

@@ -312,7 +312,8 @@ def test_psins_log_that_is_not_utf8_is_one_line(tmp_path):
 def test_fast_path_gives_the_validating_readers_columns(tmp_path, monkeypatch):
     """A plain numeric file (comments, blank lines, CRLF, odd but valid number forms, run
     ids) takes the fast path and returns the same columns, dtypes and lines as the
-    validating reader; a file with `nan` or a quote goes to the validating reader."""
+    validating reader; so does one with `nan` (a gap: tests/test_csv_gaps.py), while a file
+    with a quote goes to the validating reader."""
     from hrgjax import _data_files
 
     text = (
@@ -335,32 +336,40 @@ def test_fast_path_gives_the_validating_readers_columns(tmp_path, monkeypatch):
         np.testing.assert_array_equal(fast_cols[k], slow_cols[k])
     assert np.signbit(fast_cols["wave_angle_deg"][0])
     monkeypatch.setattr(_data_files, "_numeric_table", lambda p: taken.append(real(p)) or taken[-1])
-    for other in (text.replace("-0.0", "nan"), text.replace(" 1.", '"1"')):
-        read_csv_table(str(write(tmp_path / "o.csv", other)))
-        assert taken[-1] is None
+    read_csv_table(str(write(tmp_path / "o.csv", text.replace("-0.0", "nan"))))
+    assert taken[-1] is not None and np.isnan(taken[-1][0]["wave_angle_deg"][0])
+    read_csv_table(str(write(tmp_path / "o.csv", text.replace(" 1.", '"1"'))))
+    assert taken[-1] is None
 
 
 def test_numpy_accepts_exactly_the_readers_numbers_over_the_fast_alphabet():
-    """Every field of up to 4 characters from digits, `.eE+-` and a blank that NumPy's parser
-    takes as a float is a number to `is_number`, so the fast path accepts nothing the
-    validating reader refuses."""
+    """Every field of up to 4 characters from digits, `.eE+-`, the letters of `nan`, `inf`
+    and `infinity` and a blank (and every case of `nan`, `inf`, `infinity` with a sign) that
+    NumPy's parser takes as a float is a number to `is_number`, so the fast path accepts
+    nothing the validating reader refuses."""
     import io
     import itertools
     import warnings
 
     from hrgjax.data import is_number
 
+    words = ["".join(c) for w in ("nan", "inf", "infinity", "infinit", "nana")
+             for c in itertools.product(*((x, x.upper()) for x in w))]  # fmt: skip
+    fields = [s + w for w in words for s in ("", "+", "-", " ")]
     for n in range(1, 5):
-        for chars in itertools.product("1.eE+- ", repeat=n):
-            field = "".join(chars)
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    np.loadtxt(io.StringIO(field + ",1\n"), delimiter=",", dtype=float,
-                               comments=None)  # fmt: skip
-            except ValueError:
-                continue
-            assert is_number(field), field
+        fields += ["".join(c) for c in itertools.product("1.eE+- ", repeat=n)]
+    for n in range(1, 4):
+        fields += ["".join(c) for c in itertools.product("1.e+- naifty", repeat=n)]
+        fields += ["".join(c) for c in itertools.product("1.E-NAIFTY", repeat=n)]
+    for field in fields:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                np.loadtxt(io.StringIO(field + ",1\n"), delimiter=",", dtype=float,
+                           comments=None)  # fmt: skip
+        except ValueError:
+            continue
+        assert is_number(field), field
 
 
 def test_load_refuses_integers_a_float_would_round_in_extra_columns_too(tmp_path, monkeypatch):
@@ -481,7 +490,9 @@ def test_imu_load_refuses_integers_a_float_would_round_in_the_columns_it_reads(
             monkeypatch.setattr(_data_files, "_numeric_table", lambda p: None)
         with pytest.raises(ValueError, match=want):
             hg.imu.load(path, cols | {"time": "t_ns"}, units, check_units=False)
-        data = hg.imu.load(path, cols | {"time": "t_exact"}, units, check_units=False)
+        # 2**60 s as seconds is an epoch in ns read as s, refused unless declared (2ec03ab)
+        data = hg.imu.load(path, cols | {"time": "t_exact"}, units | {"time": "s"},
+                           check_units=False)  # fmt: skip
         assert list(data.time) == [2.0**60 + 256 * i for i in range(4)]
     # a rounded integer in a gyro column is named the same way
     write(path, "t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,9.81\n1,1,2,-9007199254740993,0,0,9.81\n")
