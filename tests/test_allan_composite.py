@@ -153,6 +153,50 @@ def test_white_and_walk_are_found_and_nothing_else(white_walk):
     assert fit.value["angle_random_walk"] == pytest.approx(0.5, rel=0.02)
 
 
+def test_the_printed_deviation_is_passed_through_not_computed_again(white_walk, monkeypatch):
+    """Scale audit: `hrgjax allan --fit` computed the oadev twice (the CLI's, then
+    identify_noise's own: 4–7 s of a 5–8 s fit at 4·10⁶ samples). Given it (`oadev`), the
+    model is the same to the bit and no deviation is computed; the fit's bar counts its
+    steps to its total. Another record's or kind's deviation is refused."""
+    from hrgjax.allan import composite
+    from hrgjax.allan import result as allan_result
+
+    y, fs = white_walk
+    own = hg.allan.identify_noise(y, fs, unit="°/h")
+    printed = hg.allan.deviation(y, fs, unit="°/h")  # the CLI's: every octave up to n/2
+    made = []
+
+    class Bar:
+        def __init__(self, total, desc, unit="step", **_):
+            self.total, self.n = total, 0
+            made.append(self)
+
+        def update(self, n=1):
+            self.n += n
+
+        def refresh(self):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            pass
+
+    def no_deviation(*_args, **_kwargs):
+        raise AssertionError("the deviation was computed again")
+
+    monkeypatch.setattr(composite, "bar", Bar)
+    monkeypatch.setattr(allan_result, "deviation", no_deviation)
+    passed = hg.allan.identify_noise(y, fs, unit="°/h", oadev=printed)
+    assert passed.to_dict() == own.to_dict()
+    (b,) = made
+    assert b.n == b.total == 4 + 1 + min(composite.FINALISTS, len(passed.selection)) + 1
+    for other in (printed, dataclasses.replace(printed, kind="adev")):
+        with pytest.raises(ValueError, match="^oadev must be the AllanResult of deviation"):
+            hg.allan.identify_noise(2 * y if other is printed else y, fs, oadev=other)
+
+
 def test_exports_kalibr_units_and_noise_closes_the_loop(white_walk, tmp_path):
     """Kalibr's entries are N and K in rad/s/√Hz and rad/s²/√Hz; `to_noise` gives the
     simulator's Noise, whose samples (hrgjax.noise.rate_noise_angle) identify back to the

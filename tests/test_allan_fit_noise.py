@@ -273,3 +273,51 @@ def test_a_gapped_fit_builds_each_runs_layout_once(monkeypatch):
     held = sum(map(oc._nbytes, small.values()))
     assert 0 < len(small) < lengths.size and held <= cap
     assert len(built) == 2 * lengths.size - len(small)  # past the cap: built on each call
+
+
+class _Bar:
+    """A stand-in for `hrgjax._progress.bar` that records what a bar was told."""
+
+    made: list = []
+
+    def __init__(self, total, desc, unit="step", **_):
+        self.total, self.n, self.desc = total, 0, desc
+        _Bar.made.append(self)
+
+    def update(self, n=1):
+        self.n += n
+
+    def refresh(self):
+        pass
+
+    def set_postfix_str(self, *_):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        pass
+
+
+def test_a_gapped_fit_counts_its_covariance_work_on_a_bar(monkeypatch):
+    """Scale audit: fit_noise on 3·10⁵–3·10⁶ gapped samples sat silent 11–84 s in the
+    exact gapped covariance. Its bar counts each distinct run length of each Ω evaluation
+    (4 rounds + 1 at the fit + 1 per term above 0), and ends at its total."""
+    from hrgjax.allan import noise_terms
+
+    monkeypatch.setattr(noise_terms, "bar", _Bar)
+    _Bar.made = []
+    lengths = np.repeat(np.arange(40, 70), 2)  # 30 distinct lengths, each twice
+    y = np.random.default_rng(5).normal(size=int(lengths.sum() + lengths.size))
+    y[np.cumsum(lengths + 1) - 1] = np.nan
+    r = allan.deviation(y, 1.0, taus="octave")
+    terms = ("angle_random_walk", "rate_random_walk")
+    fit = allan.fit_noise(r, terms=terms)
+    assert fit.method == "gls"
+    (b,) = _Bar.made
+    positive = sum(fit.value[t] > 0 for t in terms)
+    assert b.n == b.total == (noise_terms._ROUNDS + 1 + positive) * 30
+    _Bar.made = []
+    allan.fit_noise(allan.deviation(y[np.isfinite(y)], 1.0, taus="octave"), terms=terms)
+    assert _Bar.made == []  # a gap-free record's Ω is one closed form: no bar

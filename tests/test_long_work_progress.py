@@ -96,3 +96,29 @@ def test_mechanize_in_chunks_is_bit_identical(monkeypatch):
                                (jax.grad(run), dth, 2)):  # fmt: skip
         assert str(jax.make_jaxpr(traced)(arg)).count("scan[") == scans  # one, not chunks
     assert _Recorder.calls == []
+
+
+def test_a_ticking_bar_redraws_until_closed(monkeypatch):
+    """A bar over units of many seconds (one compiled call: discovery's fits, a vmapped
+    batch of flights) ticks: redrawn by a daemon thread every `TICK_S` s, so a terminal is
+    never silent while its count cannot move; closing it stops the thread."""
+    import threading
+    import time
+
+    from hrgjax import _progress
+
+    monkeypatch.delenv("HRGJAX_QUIET", raising=False)
+    monkeypatch.setattr(_progress, "_stderr_is_terminal", lambda: True)
+    monkeypatch.setattr(_progress, "TICK_S", 0.02)
+    with _progress.bar(1, "one long unit", tick=True) as progress:
+        drawn = []
+        refresh = progress.refresh
+        progress.refresh = lambda *a, **k: (drawn.append(time.monotonic()), refresh(*a, **k))
+        time.sleep(0.3)
+        progress.update(1)
+    assert len(drawn) >= 3  # ~15 redraws in 0.3 s; a loaded machine still gives a few
+    time.sleep(0.1)
+    assert not any(t.name == "hrgjax-progress-tick" for t in threading.enumerate())
+    with _progress.bar(1, "plain") as plain:  # without tick: no thread
+        assert not any(t.name == "hrgjax-progress-tick" for t in threading.enumerate())
+        plain.update(1)

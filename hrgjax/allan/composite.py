@@ -38,12 +38,13 @@ import numpy as np
 
 from .._checks import check_1d, check_number, describe, is_concrete, is_finite_real
 from .._io import atomic_write
+from .._progress import bar
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
 from .kalibr import ABSENT_SHARE, entries_ratio, fold_gauss_markov, negligible
 from .octave_covariance import SAMPLINGS, unit_avar
 from .octave_covariance import covariance as covariance
 from .octave_covariance import gm_white_level as gm_white_level
-from .octave_fits import best_fit, log_fit, model_avar, model_covariance
+from .octave_fits import best_fit, log_fit, model_avar, model_covariance, upper_bounds
 from .uncertainty import chi2_sf
 
 LINEAR = ("quantization", "angle_random_walk", "rate_random_walk", "rate_ramp")
@@ -344,6 +345,7 @@ def identify_noise(
     gauss_markov: int = 2,
     ci: float = 0.95,
     sampling: str = "interval",
+    oadev=None,
 ) -> CompositeNoise:
     """Identify a composite noise model in rate samples `y` [unit] taken at `rate_hz` [Hz]
     (module docstring): the terms the record needs among `terms` (names of
@@ -366,11 +368,16 @@ def identify_noise(
     fitted as interval means is accepted with its white noise N inflated — N² gains
     σ²τ₀²/(3T) (N 0.05 read 0.188 at σ = 1, T = 10 s, 1 Hz) — so say which the sensor is.
 
+    `oadev`: the record's overlapping Allan deviation where the caller has it already
+    ([`deviation`][hrgjax.allan.deviation]`(y, rate_hz)`, octave τ and the default noise rule,
+    as the CLI prints it): its octaves up to n/`SCALE_LIMIT` samples are used instead of
+    computing them again (at 4·10⁶ samples the deviation is 4–7 s of the 5–8 s).
+
     **Returns:** a [`CompositeNoise`][hrgjax.allan.CompositeNoise].
 
     **Raises:** `ValueError` naming the argument for unknown terms, a `gauss_markov` outside
-    0–2, a bad rate, level or `sampling`, or a record shorter than 64 samples (four
-    octaves)."""
+    0–2, a bad rate, level or `sampling`, a record shorter than 64 samples (four octaves),
+    or an `oadev` that is not the oadev of `y` at `rate_hz` on a grid holding the octaves."""
     if not (is_finite_real(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {describe(rate_hz)}")
     bad = [t for t in terms if t not in LINEAR]
@@ -392,17 +399,60 @@ def identify_noise(
         i = int(np.argmin(np.isfinite(y)))
         raise ValueError(f"y has a missing or non-finite value at index {i}; the noise model "
                          "needs a gap-free record: split the record at its gaps")  # fmt: skip
-    return _identify(y, float(rate_hz), unit, terms, gauss_markov, float(ci), sampling)
+    rate_hz = float(rate_hz)
+    octaves = 2 ** np.arange(int(math.log2(y.size // SCALE_LIMIT)) + 1)
+    res = None if oadev is None else _octaves_of(oadev, y, rate_hz, octaves)
+    return _identify(y, rate_hz, unit, terms, gauss_markov, float(ci), sampling, res)
 
 
-def _identify(y, rate_hz, unit, terms, gauss_markov, ci, sampling):
+def _octaves_of(result, y, rate_hz: float, octaves):
+    """The rows of `result` (an oadev of `y` at `rate_hz`) at the factors `octaves`, checked:
+    an AllanResult of kind oadev without gaps, its factors holding every octave, its counts
+    those of `y`'s length, its first τ₀ `1/rate_hz` and its m = 1 value `y`'s."""
+    from .result import AllanResult
+
+    m = None if not isinstance(result, AllanResult) or result.m is None else np.asarray(result.m)
+    pick = None if m is None else np.flatnonzero(np.isin(m, octaves))
+    if (
+        m is None
+        or result.kind != "oadev"
+        or getattr(result, "segments", None) is not None
+        or pick.size != octaves.size
+        or not np.array_equal(np.asarray(result.n_terms)[pick], y.size + 1 - 2 * octaves)
+        or not np.allclose(result.taus[pick], octaves / rate_hz, rtol=1e-9, atol=0.0)
+        or not math.isclose(
+            result.dev[pick[0]], math.sqrt(0.5 * np.mean(np.diff(y) ** 2)), rel_tol=1e-6
+        )  # fmt: skip
+    ):
+        raise ValueError("oadev must be the AllanResult of deviation(y, rate_hz) (kind 'oadev', "
+                         "octave τ) for this y; or None to compute it")  # fmt: skip
+    return dataclasses.replace(
+        result, taus=result.taus[pick], m=m[pick], dev=result.dev[pick],
+        dev_low=result.dev_low[pick], dev_high=result.dev_high[pick], edf=result.edf[pick],
+        n_terms=np.asarray(result.n_terms)[pick], alpha=np.asarray(result.alpha)[pick],
+        bias_factor=None if result.bias_factor is None else np.asarray(result.bias_factor)[pick],
+    )  # fmt: skip
+
+
+def _identify(y, rate_hz, unit, terms, gauss_markov, ci, sampling, res=None):
     """[`identify_noise`][hrgjax.allan.identify_noise] on checked arguments (`sampling`
-    passed to every Allan variance and covariance)."""
+    passed to every Allan variance and covariance; `res` the octaves' oadev, when had),
+    behind a bar over its steps: the deviation, 4 rounds of the fullest fit, the
+    selection, each finalist's own fit, the bounds."""
+    steps = (res is None) + 4 + 1 + FINALISTS + 1  # the finalists' count is set once known
+    with bar(steps, "noise model", unit="step") as progress:
+        return _identify_steps(y, rate_hz, unit, terms, gauss_markov, ci, sampling, res, progress)
+
+
+def _identify_steps(y, rate_hz, unit, terms, gauss_markov, ci, sampling, res, progress):
+    """`_identify`'s work, each step counted on `progress`."""
     from .result import deviation
 
     n, tau0 = y.size, 1.0 / rate_hz
     ms = 2 ** np.arange(int(math.log2(n // SCALE_LIMIT)) + 1)
-    res = deviation(y, rate_hz, kind="oadev", taus=ms * tau0, unit=unit)
+    if res is None:
+        res = deviation(y, rate_hz, kind="oadev", taus=ms * tau0, unit=unit)
+        progress.update(1)
     avar, ms = res.dev**2, res.m
     t_grid = np.geomspace(2 * tau0, ms[-1] * tau0, T_GRID)
     cols = {t: unit_avar(t, ms, tau0, sampling=sampling) for t in terms}
@@ -415,17 +465,22 @@ def _identify(y, rate_hz, unit, terms, gauss_markov, ci, sampling):
     omega = omega0 = np.diag(2 * avar**2 / np.maximum(res.edf, 1.0))
     full = best_fit(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms,
                     sampling=sampling)  # fmt: skip
+    progress.update(1)
     for _ in range(3):
         omega = model_covariance(full, ms, n, tau0, avar, sampling=sampling)
         full = best_fit(avar, omega, cols, gm_cols, list(terms), gauss_markov, None, tau0, ms,
                     sampling=sampling)  # fmt: skip
+        progress.update(1)
     # selection: every subset ranked with the fullest model's covariance; the best few then
     # each with its own, by the Gaussian likelihood of the octaves (J + log det) + penalty —
     # a covariance from too large a model hides misfit at long τ, one from too small a model
     # exaggerates it
     tried = _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms, sampling)
+    progress.update(1)
 
     def fitted_finalists(give_up):
+        progress.total = progress.n + len(tried[:FINALISTS]) + 1  # these, then the bounds
+        progress.refresh()
         out = []
         for row in tried[:FINALISTS]:
             # each finalist fitted on log σ̂² with its own covariance: J there and the
@@ -445,6 +500,7 @@ def _identify(y, rate_hz, unit, terms, gauss_markov, ci, sampling):
                 rank = lambda f: (f[3] >= FIT_ALPHA, -f[2])  # noqa: E731
                 if other is not None and (got is None or rank(other) > rank(got)):
                     got = other
+            progress.update(1)
             if got is None:  # its covariance degenerate at the fit: not a model
                 continue
             fit, om, likelihood, row["p_value"], cov = got
@@ -461,7 +517,8 @@ def _identify(y, rate_hz, unit, terms, gauss_markov, ci, sampling):
         raise RuntimeError("identify_noise: no candidate model could be fitted with its own "
                            "covariance (degenerate); try fewer terms or a longer record")  # fmt: skip
     _, _, fit, omega, cov = min(fitting, key=lambda f: f[0])
-    bounds = _bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci, sampling)
+    bounds = upper_bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci, sampling)
+    progress.update(1)
     for row in tried:
         row.pop("fit")
     terms_out = _intervals(fit, cov, ci, unit)
@@ -506,57 +563,6 @@ def _select(avar, omega, cols, gm_cols, terms, gauss_markov, tau0, ms, sampling)
                 tried.append({"terms": list(subset), "gauss_markov": g, "J": fit["J"],
                               "score": score, "fit": fit})  # fmt: skip
     return sorted(tried, key=lambda r: r["score"])
-
-
-def _bounds(fit, avar, omega, cols, ms, n, tau0, terms, ci, sampling):
-    """Upper ends at level `ci` of the candidate linear terms not in `fit`, each forced in
-    beside the selected model (its coefficient² free in sign, the others' held): √ of the
-    largest b ≥ 0 with b ≤ ĉ² + zσ(b), ĉ² and σ by GLS under the octaves' covariance of the
-    model with the term at b — the test of c² = b inverted (`_largest_accepted`). Ω of the
-    model without the term is too small at the octaves the term would lift (the bound fell
-    below a true rate random walk in 16 % of records at 95 %); inf where no b is rejected
-    (σ grows as fast as b) [coefficient unit]."""
-    z = NormalDist().inv_cdf(0.5 + ci / 2)
-    base = model_avar(fit, ms, tau0, sampling=sampling)
-    k = len(fit["names"])
-    out = {}
-    for name in terms:
-        if name in fit["names"]:
-            continue
-
-        def gls(om, name=name):  # ĉ² and its σ under Ω
-            chol_inv = np.linalg.inv(np.linalg.cholesky(om))
-            a = chol_inv @ cols[name]
-            return float(a @ (chol_inv @ (avar - base)) / (a @ a)), 1 / math.sqrt(float(a @ a))
-
-        def excess(b, name=name):  # b − (ĉ² + zσ) under Ω of the model with the term at b
-            with_term = dict(fit, names=[*fit["names"], name],
-                             c=np.concatenate([fit["c"][:k], [b], fit["c"][k:]]))  # fmt: skip
-            c2, sigma = gls(model_covariance(with_term, ms, n, tau0, avar, sampling=sampling))
-            return b - (c2 + z * sigma)
-
-        c2, sigma = gls(omega)
-        out[name] = math.sqrt(_largest_accepted(excess, max(c2 + z * sigma, 0.0), z * sigma))
-    return out
-
-
-def _largest_accepted(excess, start: float, scale: float) -> float:
-    """The b ≥ 0 where `excess(b)` (≤ 0 at b = 0: accepted) turns positive for good, from
-    `start` (the guess; `scale` > 0 where it is 0): bracketed by doubling, then Brent's root
-    to 1e-6 relative; inf where it stays ≤ 0 up to 2⁶⁰ × the guess."""
-    from scipy.optimize import brentq
-
-    lo, hi = 0.0, start if start > 0 else scale
-    if excess(hi) <= 0:
-        for _ in range(60):
-            lo, hi = hi, 2.0 * hi
-            if excess(hi) > 0:
-                break
-        else:
-            return math.inf
-    if excess(lo) > 0:  # accepted at 0 by construction unless ĉ² < 0 there: then 0
-        return 0.0
-    return float(brentq(excess, lo, hi, xtol=1e-300, rtol=1e-6))
 
 
 def _exp(v: float) -> float:

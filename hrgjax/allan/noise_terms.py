@@ -11,6 +11,7 @@ the overlapping estimator's own covariance
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 from statistics import NormalDist
@@ -18,6 +19,7 @@ from statistics import NormalDist
 import numpy as np
 
 from .._nnls import nnls as _nnls
+from .._progress import bar
 from .octave_covariance import covariance, gapped_covariance, unit_avar
 from .result import AllanResult
 from .uncertainty import chi2_sf
@@ -132,20 +134,20 @@ def _record(result: AllanResult):
     return (segments if segments is not None else int(n[0]), float(tau0[0])), ""
 
 
-def _cov(coef: dict, gm: list, ms, n, tau0: float, layouts=None) -> np.ndarray:
+def _cov(coef: dict, gm: list, ms, n, tau0: float, layouts=None, progress=None) -> np.ndarray:
     """The estimates' covariance for the record `n`: a length, or runs (`_record`; `layouts`
-    the fit's own store of the runs' layouts, `gapped_covariance`)."""
+    the fit's own store of the runs' layouts, `progress` its bar: `gapped_covariance`)."""
     if isinstance(n, np.ndarray):
-        return gapped_covariance(coef, gm, ms, n, tau0, layouts=layouts)
+        return gapped_covariance(coef, gm, ms, n, tau0, layouts=layouts, progress=progress)
     return covariance(coef, gm, ms, n, tau0)
 
 
-def _omega(coef2: dict, flicker, ms, n, tau0, var, layouts=None):
+def _omega(coef2: dict, flicker, ms, n, tau0, var, layouts=None, progress=None):
     """The estimates' covariance [unit⁴] at the fit `coef2` ({term: coefficient²}), each
     variance floored at 1e-6 of its own (or of the estimate's 2σ̂⁴/n) so it stays invertible."""
     lin = {t: c for t, c in coef2.items() if t in _COVARIANCE_TERMS}
     gm = [(coef2.get("bias_instability", 0.0) * s2, t) for s2, t in flicker]
-    om = _cov(lin, gm, ms, n, tau0, layouts)
+    om = _cov(lin, gm, ms, n, tau0, layouts, progress)
     size = int(n[:, 1].sum()) if isinstance(n, np.ndarray) else n
     return om + np.diag(1e-6 * np.maximum(np.diag(om), 2 * var**2 / max(size, 1)))
 
@@ -286,55 +288,66 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
         return np.diag(2 * unit[name] ** 2 / edf)
 
     rec, why = _record(result)
-    method = f"independent: {why}"
-    if rec is not None:
-        n, tau0 = rec
-        ms = np.asarray(result.m, dtype=int)
-        flicker = flicker_as_gauss_markov(ms, tau0) if "bias_instability" in fitted else []
-        layouts = {}  # a gapped record's run layouts, each built once for the fit's 6-7 Ω
+    segments = rec[0] if rec is not None and isinstance(rec[0], np.ndarray) else None
+    lengths = 0 if segments is None else int(np.unique(segments[:, 1]).size)
+    # a gapped record's Ω loops over its distinct run lengths, 6–10 times: seconds to minutes
+    # at 10⁵–10⁶ samples (benchmarks/gapped_fit_speed.py), so it goes behind a bar
+    steps = (_ROUNDS + 1 + len(fitted)) * lengths
+    desc = "noise fit: covariance of the gapped runs"
+    with bar(steps, desc, unit="length") if lengths else contextlib.nullcontext() as progress:
+        method = f"independent: {why}"
+        if rec is not None:
+            n, tau0 = rec
+            ms = np.asarray(result.m, dtype=int)
+            flicker = flicker_as_gauss_markov(ms, tau0) if "bias_instability" in fitted else []
+            layouts = {}  # a gapped record's run layouts, each built once for the fit's 6-7 Ω
 
-        def whitened(c):  # Ω at the fit c: its inverse Cholesky factor, A whitened, scales
-            coef2 = dict(zip(fitted, c, strict=True))
-            omega = _omega(coef2, flicker, ms, n, tau0, var, layouts)
-            w_inv = np.linalg.inv(np.linalg.cholesky(omega))
-            a = w_inv @ basis
-            return w_inv, a, np.linalg.norm(a, axis=0)
+            def whitened(c):  # Ω at the fit c: its inverse Cholesky factor, A whitened, scales
+                coef2 = dict(zip(fitted, c, strict=True))
+                omega = _omega(coef2, flicker, ms, n, tau0, var, layouts, progress)
+                w_inv = np.linalg.inv(np.linalg.cholesky(omega))
+                a = w_inv @ basis
+                return w_inv, a, np.linalg.norm(a, axis=0)
 
-        try:
-            gls = coef
-            for _ in range(_ROUNDS):
+            try:
+                gls = coef
+                for _ in range(_ROUNDS):
+                    chol_inv, a, scale = whitened(gls)
+                    gls = _nnls(a / scale, chol_inv @ var) / scale
                 chol_inv, a, scale = whitened(gls)
-                gls = _nnls(a / scale, chol_inv @ var) / scale
-            chol_inv, a, scale = whitened(gls)
-            gls_cov = np.linalg.pinv((a / scale).T @ (a / scale)) / np.outer(scale, scale)
-        except np.linalg.LinAlgError:
-            method = "independent: the covariance at the fit is degenerate"
-        else:
-            coef, cov = gls, gls_cov
-            chi2 = float(np.sum((chol_inv @ (basis @ coef - var)) ** 2))
-            weights = cov @ a.T @ chol_inv
+                gls_cov = np.linalg.pinv((a / scale).T @ (a / scale)) / np.outer(scale, scale)
+            except np.linalg.LinAlgError:
+                method = "independent: the covariance at the fit is degenerate"
+            else:
+                coef, cov = gls, gls_cov
+                chi2 = float(np.sum((chol_inv @ (basis @ coef - var)) ** 2))
+                weights = cov @ a.T @ chol_inv
 
-            def own_cov(name, n=n):  # Ω of one term alone at unit coefficient²
-                if name == "bias_instability":
-                    return _cov({}, flicker, ms, n, tau0, layouts)
-                return _cov({name: 1.0}, [], ms, n, tau0, layouts)
+                def own_cov(name, n=n):  # Ω of one term alone at unit coefficient²
+                    if name == "bias_instability":
+                        return _cov({}, flicker, ms, n, tau0, layouts, progress)
+                    return _cov({name: 1.0}, [], ms, n, tau0, layouts, progress)
 
-            method = "gls, flicker approximated" if flicker else "gls"
-    z = NormalDist().inv_cdf(0.5 + result.ci / 2)
-    value, sigma, low, high = {}, {}, {}, {}
-    it = iter(range(len(terms)))
-    for n in names:
-        if n not in terms:
-            value[n] = sigma[n] = low[n] = high[n] = 0.0
-            continue
-        i = next(it)
-        c, sc = coef[i], math.sqrt(max(cov[i, i], 0.0))
-        value[n] = math.sqrt(c)
-        sigma[n] = sc / (2 * math.sqrt(c)) if c > 0 else math.sqrt(sc)
-        if c > 0:
-            own = float(weights[i] @ own_cov(n) @ weights[i])  # Var of c²'s own part per c⁴
-            lo, hi = _skewed_interval(c, own, max(cov[i, i] - own * c * c, 0.0), result.ci)
-            low[n], high[n] = math.sqrt(lo), math.sqrt(hi)
-        else:  # at the bound: an upper limit only, from the fit's σ of the coefficient²
-            low[n], high[n] = 0.0, math.sqrt(z * sc)
+                method = "gls, flicker approximated" if flicker else "gls"
+        if progress is not None:  # the rest: Ω of each term at a value, one per term above 0
+            more = int(np.count_nonzero(coef > 0)) if method.startswith("gls") else 0
+            progress.total = progress.n + more * lengths
+            progress.refresh()
+        z = NormalDist().inv_cdf(0.5 + result.ci / 2)
+        value, sigma, low, high = {}, {}, {}, {}
+        it = iter(range(len(terms)))
+        for n in names:
+            if n not in terms:
+                value[n] = sigma[n] = low[n] = high[n] = 0.0
+                continue
+            i = next(it)
+            c, sc = coef[i], math.sqrt(max(cov[i, i], 0.0))
+            value[n] = math.sqrt(c)
+            sigma[n] = sc / (2 * math.sqrt(c)) if c > 0 else math.sqrt(sc)
+            if c > 0:
+                own = float(weights[i] @ own_cov(n) @ weights[i])  # Var of c²'s own part per c⁴
+                lo, hi = _skewed_interval(c, own, max(cov[i, i] - own * c * c, 0.0), result.ci)
+                low[n], high[n] = math.sqrt(lo), math.sqrt(hi)
+            else:  # at the bound: an upper limit only, from the fit's σ of the coefficient²
+                low[n], high[n] = 0.0, math.sqrt(z * sc)
     return NoiseFit(value, sigma, low, high, chi2, int(t.size - np.count_nonzero(coef)), method)

@@ -432,6 +432,7 @@ def gapped_covariance(
     tau0: float,
     sampling: str = "interval",
     layouts: dict | None = None,
+    progress=None,
 ) -> np.ndarray:
     """[`covariance`][hrgjax.allan.octave_covariance.covariance] for a rate record with gaps:
     `segments` the (start, length) of each gap-free run of rate samples, in order [samples]
@@ -449,7 +450,9 @@ def gapped_covariance(
     calls then build them once; None: a store for this call alone) and, with Gauss–Markov
     terms, of runs. The store holds at most `LAYOUT_STORE_BYTES` of layouts; the lengths
     past it are built again on each call (10⁶ samples with 0.1 % missing hold ~0.8 GB of
-    them, 10⁷ with 0.1 % ~2.7 GB: docs/allan.md)."""
+    them, 10⁷ with 0.1 % ~2.7 GB: docs/allan.md). `progress`: a bar (anything with
+    `update(n)`) advanced by one per distinct run length done (`fit_noise` draws one over
+    its calls)."""
     sampling = _check_sampling(sampling)
     segs = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
     starts, lengths = segs[:, 0], segs[:, 1]
@@ -471,6 +474,8 @@ def gapped_covariance(
                     layouts[key], held = lay, held + size
             om = _covariance(lay, coef, gm, ms[k], tau0, sampling)
             total[np.ix_(k, k)] += times * om * np.outer(nk, nk)
+        if progress is not None:
+            progress.update(1)
     gms = [(s2, tau0 / tt) for s2, tt in gm if s2 > 0]
     if gms and lengths.size > 1:
         ia, ib = np.triu_indices(ms.size)

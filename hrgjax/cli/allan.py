@@ -192,9 +192,13 @@ def cmd_allan(args) -> int:
             print("  (the noise model is fitted to the overlapping Allan variance)")
         with usage_errors(prefix=args.log):
             gauss_markov = 2 if args.gauss_markov is None else args.gauss_markov
+            # the octaves the model fits are the printed deviation's: not computed twice
+            same = (args.kind, args.noise_rule) == ("oadev", "hrgjax") and isinstance(
+                args.taus, str) and args.taus in ("octave", "all")  # fmt: skip
             model = allan.identify_noise(y, rate_hz, unit=unit, gauss_markov=gauss_markov,
                                          terms=_terms(bool(args.drift)),
-                                         sampling=args.sampling or "interval")  # fmt: skip
+                                         sampling=args.sampling or "interval",
+                                         oadev=result if same else None)  # fmt: skip
         print(model)
     kalibr = None
     if args.kalibr:

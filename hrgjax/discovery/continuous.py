@@ -41,7 +41,7 @@ import numpy as np
 
 from .._progress import bar
 from ..data import MeasuredData
-from ..units import DEG, DEG_PER_H, T_REF_C
+from ..units import DEG, DEG_PER_H
 from . import dwell, leftover, run_bias, stats, thermometer
 from ._continuous_fit import converged_lm
 from .effects import CATALOGUE
@@ -173,21 +173,30 @@ class ContinuousProblem(AbstractProblem):
         # one session, whose own bias is profiled out of their residual: `Windows.session`)
         train = [g for g in self.train_groups if isinstance(g, Runs)]
         held = [g for g in self.held_groups if isinstance(g, Runs)]
-        rates = self.run_rates(fit.z, train) | self.run_rates(fit.z, held)
-        new = copy.copy(self)
-        if len(rates) >= 2:  # else nothing to estimate it from
-            covs = run_covariates(train + held)
-            x = np.asarray([covs[r] for r in rates])
-            _, chosen = stats.followed_covariates(
-                np.asarray(list(rates.values())), x, RUN_COVARIATE_ALPHA
-            )
-            held = residual_and_jacobian(  # the fit's parameters move the held-out runs too
-                self.layout, jnp.asarray(fit.z), self._basis(list(fit.model))[0], self.held_groups
-            ) if self.held_groups else None  # fmt: skip
-            sigma_b = run_bias.reml_at_fit(fit, held, self.train_groups, self.held_groups,
-                {r: c[chosen] for r, c in covs.items()}, self.noise.run_bias)  # fmt: skip
-            new.noise = self.noise.replace(run_bias=sigma_b)
-        new._build()
+        # run means, held-out Jacobian, REML, whitening rebuilt (each compiles once per shape)
+        with bar(4, "run-to-run bias (REML)", tick=True) as progress:
+            rates = self.run_rates(fit.z, train) | self.run_rates(fit.z, held)
+            progress.update(1)
+            new = copy.copy(self)
+            if len(rates) >= 2:  # else nothing to estimate it from
+                covs = run_covariates(train + held)
+                x = np.asarray([covs[r] for r in rates])
+                _, chosen = stats.followed_covariates(
+                    np.asarray(list(rates.values())), x, RUN_COVARIATE_ALPHA
+                )
+                held = residual_and_jacobian(  # the fit's parameters move the held-out runs
+                    self.layout, jnp.asarray(fit.z), self._basis(list(fit.model))[0],
+                    self.held_groups,
+                ) if self.held_groups else None  # fmt: skip
+                progress.update(1)
+                sigma_b = run_bias.reml_at_fit(fit, held, self.train_groups, self.held_groups,
+                    {r: c[chosen] for r, c in covs.items()}, self.noise.run_bias)  # fmt: skip
+                new.noise = self.noise.replace(run_bias=sigma_b)
+                progress.update(1)
+            else:
+                progress.update(2)
+            new._build()
+            progress.update(1)
         return new
 
     def after_accept(self, fit):
@@ -229,7 +238,9 @@ class ContinuousProblem(AbstractProblem):
         `z0`; the rest of the superset stays where it is (at its null by default). The fit
         becomes the current model: its angular gain converts the floor (`k_out`).
         **Returns:** a [`Fit`][hrgjax.discovery.problem.Fit]."""
-        fit = self._fit_model(model, z0)
+        with bar(1, f"fitting the model of {len(model)} effects", unit="fit", tick=True) as b:
+            fit = self._fit_model(model, z0)  # one compiled solve: the bar's clock ticks
+            b.update(1)
         self.k_out = dwell.output_gain(fit.parameters, self.k_e)
         return fit
 
@@ -312,7 +323,9 @@ class ContinuousProblem(AbstractProblem):
         training run's refit, resolving or not)."""
         basis, idx = self._basis([name])
         names, scale, pooled = CATALOGUE[name].regular_names, self.layout.scale[idx], fit.z[idx]
-        fits, unconverged = per_run_fits(self.layout, basis, fit.z, self.train_groups, idx)
+        with bar(1, f"per-run refits of {name}", unit="refit", tick=True) as progress:
+            fits, unconverged = per_run_fits(self.layout, basis, fit.z, self.train_groups, idx)
+            progress.update(1)
         out = repeats(fits, pooled, RESOLVES)
         if out["reason"] is not None and unconverged:
             out["reason"] += f" ({len(unconverged)} runs' refits did not converge)"
@@ -373,43 +386,9 @@ class ContinuousProblem(AbstractProblem):
 
     @functools.cached_property
     def shape_columns(self) -> dict:
-        """Whitened columns of the generic shapes ([`leftover.columns`][hrgjax.discovery.leftover.columns]):
-        each shape's pattern rate at a block's mean covariates times the block's length,
-        whitened as the residual is (dwell windows: divided by their σ)."""
-        parts: dict[str, list] = {}
-        for g in self.train_groups:
-            if isinstance(g, Windows):
-                c, n = g.cov, len(g.run)
-                full = lambda v, n=n: np.broadcast_to(np.asarray(v, float), (n,))
-                cov = {"theta": full(c.theta), "dT": full(c.temperature) - T_REF_C,
-                       "Tdot": np.zeros(n), "rate": full(c.rate), "accel_z": full(c.accel_z),
-                       "t_run": full(c.t_run), "arc": np.asarray(g.arc)}  # fmt: skip
-                sigma = np.asarray(g.sigma)[:, None]
-                for name, col in leftover.columns(cov, drop=False).items():
-                    parts.setdefault(name, []).append(col / sigma)
-                continue
-            b = np.asarray(g.bidx)
-            t, temp = np.asarray(g.t), np.asarray(g.temp)
-            for i in range(len(g.run)):
-                span = np.diff(t[i, b])
-
-                def mean(v, i=i, b=b):  # over each block's samples b[k] … b[k+1] − 1
-                    cs = np.concatenate([[0.0], np.cumsum(np.asarray(v)[i])])
-                    return (cs[b[1:]] - cs[b[:-1]]) / np.diff(b)
-
-                cov = {
-                    "theta": mean(g.theta),
-                    "dT": mean(g.temp) - T_REF_C,
-                    "Tdot": np.diff(temp[i, b]) / span,
-                    "rate": mean(g.rate),
-                    "accel_z": mean(g.accel),
-                    "t_run": 0.5 * (t[i, b[1:]] + t[i, b[:-1]]) - t[i, 0],
-                }
-                w = np.asarray(g.whiten[i])
-                for name, col in leftover.columns(cov, drop=False).items():
-                    parts.setdefault(name, []).append(w @ (col * span[:, None]))
-        cols = {k: np.concatenate(v) for k, v in parts.items()}
-        return {k: v for k, v in cols.items() if np.any(v)}
+        """Whitened columns of the generic shapes on the training rows
+        ([`leftover.group_columns`][hrgjax.discovery.leftover.group_columns])."""
+        return leftover.group_columns(self.train_groups)
 
     def leftover(self, fit):
         """The strongest shape left in `fit`'s training residual, each row class at its level
@@ -488,25 +467,32 @@ class ContinuousProblem(AbstractProblem):
         _, jac = residual_and_jacobian(self.layout, jnp.asarray(z), basis, self.train_groups)
         return -np.asarray(jac), z
 
-    def _shared_columns(self, current, names):
-        """`_columns` of every effect of `names` (no nonregular parameters) from one
-        Jacobian at the current fit: {name: (columns, z)}."""
-        out, chunk = {}, []
-        for name in [*names, None]:  # in chunks of ≤ 8 columns: the refits' program width
+    def _chunks(self, names) -> list:
+        """`names` in consecutive chunks of ≤ 8 regular parameters (the refits' program
+        width), one Jacobian each in `_shared_columns`."""
+        chunks, chunk = [], []
+        for name in names:
             width = sum(len(self.layout.index(n, which=True)) for n in chunk)
-            more = 0 if name is None else len(self.layout.index(name, which=True))
-            if chunk and (name is None or width + more > 8):
-                basis, idx = self._basis(chunk)
-                _, jac = residual_and_jacobian(
-                    self.layout, jnp.asarray(current.z), basis, self.train_groups
-                )
-                jac, pos = -np.asarray(jac), {i: k for k, i in enumerate(idx)}
-                for n in chunk:
-                    cols = [pos[i] for i in self.layout.index(n, which=True)]
-                    out[n] = (jac[:, cols], current.z.copy())
-                chunk = []
-            if name is not None:
-                chunk.append(name)
+            if chunk and width + len(self.layout.index(name, which=True)) > 8:
+                chunks, chunk = [*chunks, chunk], []
+            chunk.append(name)
+        return [*chunks, chunk] if chunk else chunks
+
+    def _shared_columns(self, current, names, progress):
+        """`_columns` of every effect of `names` (no nonregular parameters) from one
+        Jacobian per `_chunks` chunk at the current fit, each counted on `progress`:
+        {name: (columns, z)}."""
+        out = {}
+        for chunk in self._chunks(names):
+            basis, idx = self._basis(chunk)
+            _, jac = residual_and_jacobian(
+                self.layout, jnp.asarray(current.z), basis, self.train_groups
+            )
+            jac, pos = -np.asarray(jac), {i: k for k, i in enumerate(idx)}
+            for n in chunk:
+                cols = [pos[i] for i in self.layout.index(n, which=True)]
+                out[n] = (jac[:, cols], current.z.copy())
+            progress.update(1)
         return out
 
     def _refine_tau(self, current, name, tried, best):
@@ -533,17 +519,21 @@ class ContinuousProblem(AbstractProblem):
         rows = []
         # the candidates without a nonregular parameter share one Jacobian at the current fit
         regular = [c for c in cands if not self.layout.index(c, which=False)]
-        shared = self._shared_columns(current, regular)
-        progress = bar(len(cands), f"screening {len(cands)} candidates", unit="effect")
+        # the shared Jacobians (one compiled call each), then each candidate's score test
+        steps = len(self._chunks(regular)) + len(cands)
+        desc = f"screening {len(cands)} candidates"
+        progress = bar(steps, desc, unit="step", tick=True)
+        progress.set_postfix_str("their shared Jacobian")
+        shared = self._shared_columns(current, regular, progress)
         for name in cands:
             progress.set_postfix_str(name)
-            progress.update(1)
             grid = TAU_GRID if self.layout.index(name, which=False) else (None,)
             tried = []
             for tau in grid:
                 g, z = shared[name] if name in shared else self._columns(current, name, tau)
                 if np.any(g):
                     tried.append((*stats.score(current.r, current.j, g), z, tau))
+            progress.update(1)  # its score tested (on the τ grid when it has one)
             if not tried:
                 continue
             best = max(tried, key=lambda b: b[0])

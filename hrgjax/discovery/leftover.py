@@ -27,7 +27,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ..units import DEG, DEG_PER_H, HOUR
+from ..units import DEG, DEG_PER_H, HOUR, T_REF_C
 from . import stats
 from .effects import window_gain
 
@@ -236,3 +236,47 @@ def describe(
         "runners_up": [{"shape": n, "score": float(-sc)} for _, sc, n, *_ in rows[1:4]],
     }
     return out
+
+
+def group_columns(groups) -> dict:
+    """Whitened columns of the generic shapes (`columns`) on the rows of a continuous
+    problem's `groups` (records' `Runs` and a mixed log's dwell `Windows`): each shape's
+    pattern rate at a block's mean covariates times the block's length, whitened as the
+    residual is (dwell windows: divided by their σ). `{shape: column}`, all-zero ones left
+    out."""
+    from .records import Windows
+
+    parts: dict[str, list] = {}
+    for g in groups:
+        if isinstance(g, Windows):
+            c, n = g.cov, len(g.run)
+            full = lambda v, n=n: np.broadcast_to(np.asarray(v, float), (n,))
+            cov = {"theta": full(c.theta), "dT": full(c.temperature) - T_REF_C,
+                   "Tdot": np.zeros(n), "rate": full(c.rate), "accel_z": full(c.accel_z),
+                   "t_run": full(c.t_run), "arc": np.asarray(g.arc)}  # fmt: skip
+            sigma = np.asarray(g.sigma)[:, None]
+            for name, col in columns(cov, drop=False).items():
+                parts.setdefault(name, []).append(col / sigma)
+            continue
+        b = np.asarray(g.bidx)
+        t, temp = np.asarray(g.t), np.asarray(g.temp)
+        for i in range(len(g.run)):
+            span = np.diff(t[i, b])
+
+            def mean(v, i=i, b=b):  # over each block's samples b[k] … b[k+1] − 1
+                cs = np.concatenate([[0.0], np.cumsum(np.asarray(v)[i])])
+                return (cs[b[1:]] - cs[b[:-1]]) / np.diff(b)
+
+            cov = {
+                "theta": mean(g.theta),
+                "dT": mean(g.temp) - T_REF_C,
+                "Tdot": np.diff(temp[i, b]) / span,
+                "rate": mean(g.rate),
+                "accel_z": mean(g.accel),
+                "t_run": 0.5 * (t[i, b[1:]] + t[i, b[:-1]]) - t[i, 0],
+            }
+            w = np.asarray(g.whiten[i])
+            for name, col in columns(cov, drop=False).items():
+                parts.setdefault(name, []).append(w @ (col * span[:, None]))
+    cols = {k: np.concatenate(v) for k, v in parts.items()}
+    return {k: v for k, v in cols.items() if np.any(v)}
