@@ -183,6 +183,12 @@ def test_the_printed_deviation_is_passed_through_not_computed_again(white_walk, 
         def __exit__(self, *exc):
             pass
 
+    # the raw log's deviation beside its detrended record (review of cb1d956): equal at m = 1
+    # to 1e-10, 30× apart at long τ
+    ramp = 1e-5 * np.std(np.diff(y)) * np.arange(y.size)
+    raw = hg.allan.deviation(y + ramp, fs, unit="°/h")
+    assert abs(raw.dev[0] / printed.dev[0] - 1) < 1e-9 and raw.dev[-1] > 1.5 * printed.dev[-1]
+
     def no_deviation(*_args, **_kwargs):
         raise AssertionError("the deviation was computed again")
 
@@ -192,7 +198,7 @@ def test_the_printed_deviation_is_passed_through_not_computed_again(white_walk, 
     assert passed.to_dict() == own.to_dict()
     (b,) = made
     assert b.n == b.total == 4 + 1 + min(composite.FINALISTS, len(passed.selection)) + 1
-    for other in (printed, dataclasses.replace(printed, kind="adev")):
+    for other in (printed, dataclasses.replace(printed, kind="adev"), raw):
         with pytest.raises(ValueError, match="^oadev must be the AllanResult of deviation"):
             hg.allan.identify_noise(2 * y if other is printed else y, fs, oadev=other)
 

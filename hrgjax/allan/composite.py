@@ -44,7 +44,14 @@ from .kalibr import ABSENT_SHARE, entries_ratio, fold_gauss_markov, negligible
 from .octave_covariance import SAMPLINGS, unit_avar
 from .octave_covariance import covariance as covariance
 from .octave_covariance import gm_white_level as gm_white_level
-from .octave_fits import best_fit, log_fit, model_avar, model_covariance, upper_bounds
+from .octave_fits import (
+    best_fit,
+    log_fit,
+    model_avar,
+    model_covariance,
+    octave_rows,
+    upper_bounds,
+)
 from .uncertainty import chi2_sf
 
 LINEAR = ("quantization", "angle_random_walk", "rate_random_walk", "rate_ramp")
@@ -401,37 +408,8 @@ def identify_noise(
                          "needs a gap-free record: split the record at its gaps")  # fmt: skip
     rate_hz = float(rate_hz)
     octaves = 2 ** np.arange(int(math.log2(y.size // SCALE_LIMIT)) + 1)
-    res = None if oadev is None else _octaves_of(oadev, y, rate_hz, octaves)
+    res = None if oadev is None else octave_rows(oadev, y, rate_hz, octaves)
     return _identify(y, rate_hz, unit, terms, gauss_markov, float(ci), sampling, res)
-
-
-def _octaves_of(result, y, rate_hz: float, octaves):
-    """The rows of `result` (an oadev of `y` at `rate_hz`) at the factors `octaves`, checked:
-    an AllanResult of kind oadev without gaps, its factors holding every octave, its counts
-    those of `y`'s length, its first τ₀ `1/rate_hz` and its m = 1 value `y`'s."""
-    from .result import AllanResult
-
-    m = None if not isinstance(result, AllanResult) or result.m is None else np.asarray(result.m)
-    pick = None if m is None else np.flatnonzero(np.isin(m, octaves))
-    if (
-        m is None
-        or result.kind != "oadev"
-        or getattr(result, "segments", None) is not None
-        or pick.size != octaves.size
-        or not np.array_equal(np.asarray(result.n_terms)[pick], y.size + 1 - 2 * octaves)
-        or not np.allclose(result.taus[pick], octaves / rate_hz, rtol=1e-9, atol=0.0)
-        or not math.isclose(
-            result.dev[pick[0]], math.sqrt(0.5 * np.mean(np.diff(y) ** 2)), rel_tol=1e-6
-        )  # fmt: skip
-    ):
-        raise ValueError("oadev must be the AllanResult of deviation(y, rate_hz) (kind 'oadev', "
-                         "octave τ) for this y; or None to compute it")  # fmt: skip
-    return dataclasses.replace(
-        result, taus=result.taus[pick], m=m[pick], dev=result.dev[pick],
-        dev_low=result.dev_low[pick], dev_high=result.dev_high[pick], edf=result.edf[pick],
-        n_terms=np.asarray(result.n_terms)[pick], alpha=np.asarray(result.alpha)[pick],
-        bias_factor=None if result.bias_factor is None else np.asarray(result.bias_factor)[pick],
-    )  # fmt: skip
 
 
 def _identify(y, rate_hz, unit, terms, gauss_markov, ci, sampling, res=None):

@@ -16,7 +16,8 @@ function that evaluates a term takes the rate samples' `sampling` (one of
 [`SAMPLINGS`][hrgjax.allan.octave_covariance.SAMPLINGS]) as a required keyword, passed on
 to [`unit_avar`][hrgjax.allan.octave_covariance.unit_avar] and
 [`covariance`][hrgjax.allan.octave_covariance.covariance]. `upper_bounds`: the bounds on the
-candidate terms a selected model left out.
+candidate terms a selected model left out; `octave_rows`: the octaves of a deviation the
+caller has already, checked to be the record's.
 """
 
 from __future__ import annotations
@@ -333,3 +334,47 @@ def largest_accepted(excess, start: float, scale: float) -> float:
     if excess(lo) > 0:  # accepted at 0 by construction unless ĉ² < 0 there: then 0
         return 0.0
     return float(brentq(excess, lo, hi, xtol=1e-300, rtol=1e-6))
+
+
+def octave_rows(result, y, rate_hz: float, octaves):
+    """The rows of `result` (the overlapping Allan deviation of `y` at `rate_hz`, default
+    noise rule) at the factors `octaves`, checked to be that: an `AllanResult` of kind oadev
+    without gaps, its factors holding every octave, its counts those of `y`'s length, its τ
+    `octaves / rate_hz`, and its value at the first, a middle and the last octave `y`'s own
+    (recomputed here in NumPy from the phase, to 1e-8: a deviation of another record that
+    agrees at m = 1 — the raw log's beside its detrended one — differs at long τ). Used by
+    [`identify_noise`][hrgjax.allan.identify_noise]`(oadev=)`.
+
+    **Raises:** `ValueError` naming `oadev` where any check fails."""
+    import dataclasses
+
+    from .result import AllanResult
+
+    octaves = np.asarray(octaves)
+    m = None if not isinstance(result, AllanResult) or result.m is None else np.asarray(result.m)
+    pick = None if m is None else np.flatnonzero(np.isin(m, octaves))
+    ok = (
+        m is not None
+        and result.kind == "oadev"
+        and getattr(result, "segments", None) is None
+        and pick.size == octaves.size
+        and np.array_equal(np.asarray(result.n_terms)[pick], y.size + 1 - 2 * octaves)
+        and np.allclose(result.taus[pick], octaves / rate_hz, rtol=1e-9, atol=0.0)
+    )
+    if ok:
+        x = np.concatenate([[0.0], np.cumsum(y)])  # phase in units of the samples' τ₀
+        for i in sorted({0, pick.size // 2, pick.size - 1}):
+            k = int(octaves[i])
+            d2 = x[2 * k :] - 2.0 * x[k:-k] + x[: -2 * k]
+            own = math.sqrt(0.5 * np.mean(d2 * d2)) / k
+            ok = ok and math.isclose(result.dev[pick[i]], own, rel_tol=1e-8, abs_tol=0.0)
+    if not ok:
+        raise ValueError("oadev must be the AllanResult of deviation(y, rate_hz) (kind 'oadev', "
+                         "octave τ, the default noise rule) for this y; or None to compute "
+                         "it")  # fmt: skip
+    return dataclasses.replace(
+        result, taus=result.taus[pick], m=m[pick], dev=result.dev[pick],
+        dev_low=result.dev_low[pick], dev_high=result.dev_high[pick], edf=result.edf[pick],
+        n_terms=np.asarray(result.n_terms)[pick], alpha=np.asarray(result.alpha)[pick],
+        bias_factor=None if result.bias_factor is None else np.asarray(result.bias_factor)[pick],
+    )  # fmt: skip

@@ -522,69 +522,67 @@ class ContinuousProblem(AbstractProblem):
         # the shared Jacobians (one compiled call each), then each candidate's score test
         steps = len(self._chunks(regular)) + len(cands)
         desc = f"screening {len(cands)} candidates"
-        progress = bar(steps, desc, unit="step", tick=True)
-        progress.set_postfix_str("their shared Jacobian")
-        shared = self._shared_columns(current, regular, progress)
-        for name in cands:
-            progress.set_postfix_str(name)
-            grid = TAU_GRID if self.layout.index(name, which=False) else (None,)
-            tried = []
-            for tau in grid:
-                g, z = shared[name] if name in shared else self._columns(current, name, tau)
-                if np.any(g):
-                    tried.append((*stats.score(current.r, current.j, g), z, tau))
-            progress.update(1)  # its score tested (on the τ grid when it has one)
-            if not tried:
-                continue
-            best = max(tried, key=lambda b: b[0])
-            if best[4] is not None:
-                best = self._refine_tau(current, name, tried, best)
-            s, alias, step, z, tau = best
-            q = len(self.layout.index(name, which=True)) + (tau is not None)
-            rows.append(
-                {
-                    "effect": name,
-                    "score": float(s),
-                    "p_value": min(1.0, stats.chi2_sf(s, q - (tau is not None)) * len(grid)),
-                    "aliasing": alias,
-                    "delta_bic": float(s - q * math.log(n)),
-                    "gap_after": current.gap,
-                    "heldout_gain": 0.0,
-                    "params": {} if tau is None else {CATALOGUE[name].nonregular_name: tau},
-                    "refit": None,
-                    "_start": (z, step),
-                    "_columns": (
-                        (lambda g=g: g)
-                        if tau is None
-                        else (lambda name=name, tau=tau: self._columns(current, name, tau)[0])
-                    ),  # fmt: skip
-                }
-            )
-        progress.close()
+        with bar(steps, desc, unit="step", tick=True) as progress:
+            progress.set_postfix_str("their shared Jacobian")
+            shared = self._shared_columns(current, regular, progress)
+            for name in cands:
+                progress.set_postfix_str(name)
+                grid = TAU_GRID if self.layout.index(name, which=False) else (None,)
+                tried = []
+                for tau in grid:
+                    g, z = shared[name] if name in shared else self._columns(current, name, tau)
+                    if np.any(g):
+                        tried.append((*stats.score(current.r, current.j, g), z, tau))
+                progress.update(1)  # its score tested (on the τ grid when it has one)
+                if not tried:
+                    continue
+                best = max(tried, key=lambda b: b[0])
+                if best[4] is not None:
+                    best = self._refine_tau(current, name, tried, best)
+                s, alias, step, z, tau = best
+                q = len(self.layout.index(name, which=True)) + (tau is not None)
+                rows.append(
+                    {
+                        "effect": name,
+                        "score": float(s),
+                        "p_value": min(1.0, stats.chi2_sf(s, q - (tau is not None)) * len(grid)),
+                        "aliasing": alias,
+                        "delta_bic": float(s - q * math.log(n)),
+                        "gap_after": current.gap,
+                        "heldout_gain": 0.0,
+                        "params": {} if tau is None else {CATALOGUE[name].nonregular_name: tau},
+                        "refit": None,
+                        "_start": (z, step),
+                        "_columns": (
+                            (lambda g=g: g)
+                            if tau is None
+                            else (lambda name=name, tau=tau: self._columns(current, name, tau)[0])
+                        ),  # fmt: skip
+                    }
+                )
         rows.sort(key=lambda r: -r["score"])
         short = [r for r in rows if r["aliasing"] < 0.999 and r["p_value"] < liberal][:top]
-        progress = bar(len(short), f"refitting the {len(short)} best", unit="fit")
-        for row in short:
-            name, (z, step) = row["effect"], row["_start"]
-            progress.set_postfix_str(name)
-            progress.update(1)
-            z_start = z.copy()
-            z_start[self.layout.index(name, which=True)] += step
-            try:
-                refit = self._fit_model(model + [name], z0=z_start)
-            except RuntimeError:
-                continue
-            q = CATALOGUE[name].size
-            row.update(
-                delta_bic=float(current.chi2 - refit.chi2 - q * math.log(n)),
-                gap_after=refit.gap,
-                heldout_gain=current.heldout_chi2 - refit.heldout_chi2,
-                refit=refit,
-            )
-            row["params"] = {
-                k: v["value"] for k, v in refit.parameters.get(name, {}).items()
-            } | row["params"]
-        progress.close()
+        with bar(len(short), f"refitting the {len(short)} best", unit="fit") as progress:
+            for row in short:
+                name, (z, step) = row["effect"], row["_start"]
+                progress.set_postfix_str(name)
+                progress.update(1)
+                z_start = z.copy()
+                z_start[self.layout.index(name, which=True)] += step
+                try:
+                    refit = self._fit_model(model + [name], z0=z_start)
+                except RuntimeError:
+                    continue
+                q = CATALOGUE[name].size
+                row.update(
+                    delta_bic=float(current.chi2 - refit.chi2 - q * math.log(n)),
+                    gap_after=refit.gap,
+                    heldout_gain=current.heldout_chi2 - refit.heldout_chi2,
+                    refit=refit,
+                )
+                row["params"] = {
+                    k: v["value"] for k, v in refit.parameters.get(name, {}).items()
+                } | row["params"]
         for row in rows:
             del row["_start"]
         return rows
