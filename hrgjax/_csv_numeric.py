@@ -6,7 +6,9 @@ A chunk (about `CHUNK_BYTES` of whole lines) is checked at once: only the charac
 numbers (digits, `.eE+-`, `nan`, `inf`, `infinity` in any case), commas and blanks, no
 quote, no lone carriage return, no line longer than the csv module's field limit. A chunk
 that also has no blank line, no comment and no empty field goes to NumPy as it is, its rows
-numbered by a range; any other chunk is read line by line (comments and blank lines
+numbered by a range; so does one whose every line holds a number, with empty fields but
+no blank or tab, once each empty field is made `nan` where asked (the separators side by
+side found by NumPy, the `nan` inserted in one `np.insert`: a log with a gap in every row). Any other chunk is read line by line (comments and blank lines
 skipped, a row of empty fields held until a sample follows it, an empty field read as NaN
 where asked). Whatever this path cannot read as the validating reader would, it leaves to
 that reader (None), which reads the file and names what is wrong."""
@@ -35,10 +37,18 @@ _ALPHABET = b"0123456789.eE+-nNaAiIfFtTyY, \t\r\n"
 `is_number` accepts: tests/test_files.py)."""
 _BLANKS = b" \t\r"
 _BOM = b"\xef\xbb\xbf"
+CLEAN, GAPS, OTHER = 0, 1, 2
+"""A chunk's form (`_Lines._form`): samples as they are; samples with empty fields (no blank
+or tab, no line without a number); anything else (read line by line)."""
 
 
-def _has_blanks(blob: bytes) -> bool:
-    return b" " in blob or b"\t" in blob or b"\r" in blob
+_NAN = np.frombuffer(b"nan", dtype=np.uint8)
+
+
+def _fill(blob: bytes, at: np.ndarray) -> bytes:
+    """`blob` with `nan` inserted at each offset `at` (its empty fields: `_Lines._form`)."""
+    code = np.frombuffer(blob, dtype=np.uint8)
+    return np.insert(code, np.repeat(at, _NAN.size), np.tile(_NAN, at.size)).tobytes()
 
 
 class _Lines:
@@ -49,6 +59,7 @@ class _Lines:
     def __init__(self, fh, size: int, empty_as_nan: bool, desc: str):
         self.fh, self.size, self.empty_as_nan, self.desc = fh, size, empty_as_nan, desc
         self.lines = array.array("q")
+        self.longest = 0  # bytes of the longest data line
         self.header: list[str] | None = None
         self.header_line = 0
         self.bad = False
@@ -80,7 +91,7 @@ class _Lines:
                 text = raw.decode("utf-8")
             except UnicodeDecodeError:
                 return self._refuse()
-            stripped = text.strip(" \t\r\n")
+            stripped = text.strip()  # (all Unicode whitespace, as the validating reader)
             if not stripped or stripped.startswith("#"):
                 continue
             self.header = [h.strip() for h in text.rstrip("\r\n").split(",")]
@@ -107,12 +118,17 @@ class _Lines:
                     self.progress.update(self.progress.total - self.shown_mb)
                 return
             blob = b"".join(chunk)
-            if not self._plain(blob, max(map(len, chunk))):
+            longest = max(map(len, chunk))
+            if not self._plain(blob, longest):
                 return
+            self.longest = max(self.longest, longest)
             first = self.at + 1
             self.at += len(chunk)
             self.done += len(blob)
-            if not blob.translate(None, _ALPHABET) and self._clean(blob):
+            form, empty = (OTHER, None) if blob.translate(None, _ALPHABET) else self._form(blob)
+            if form == GAPS and self.empty_as_nan:
+                blob = _fill(blob, empty)
+            if form == CLEAN or (form == GAPS and self.empty_as_nan):
                 out = self._flush()  # (rows of empty fields that a sample follows)
                 self.lines.frombytes(np.arange(first, self.at + 1, dtype=np.int64).tobytes())
                 out += blob.decode("ascii").splitlines(keepends=True)
@@ -128,19 +144,37 @@ class _Lines:
             self._show()
 
     @staticmethod
-    def _clean(blob: bytes) -> bool:
-        """Whether every line of `blob` (numeric characters only) holds a sample with no empty
-        field: no blank line, no field of blanks (no two separators side by side once the
-        blanks are out; a bytes search for them is slow where commas are frequent)."""
-        tight = blob.translate(None, _BLANKS) if _has_blanks(blob) else blob
+    def _form(blob: bytes) -> tuple[int, np.ndarray | None]:
+        """`CLEAN` where every line of `blob` (numeric characters only) holds a sample with no
+        empty field: no blank line, no field of blanks (no two separators side by side once
+        the blanks are out; a bytes search for them is slow where commas are frequent);
+        `GAPS` where the only fault is empty fields, with no blank or tab in the chunk (so
+        none is a field of blanks) and a number on every line (no blank line, no row of empty
+        fields), with the offset in `blob` of each empty field; else `OTHER`."""
+        spaced = b" " in blob or b"\t" in blob
+        tight = blob.translate(None, _BLANKS) if spaced or b"\r" in blob else blob
         if not tight:
-            return False
+            return OTHER, None
         code = np.frombuffer(tight, dtype=np.uint8)
         sep = (code == ord(",")) | (code == ord("\n"))
         ends = blob.endswith(b"\n")  # (else the last line's end is the file's: no separator)
-        if sep[0] or (not ends and sep[-1]):
-            return False
-        return not np.any(sep[1:] & sep[:-1])
+        side_by_side = sep[1:] & sep[:-1]
+        if not (sep[0] or (not ends and sep[-1]) or np.any(side_by_side)):
+            return CLEAN, None
+        if spaced:
+            return OTHER, None
+        bare = tight.translate(None, b",")  # a line with no number is an empty line here
+        if not bare or bare[:1] == b"\n" or b"\n\n" in bare or (not ends and bare[-1:] == b"\n"):
+            return OTHER, None
+        at = np.flatnonzero(side_by_side) + 1  # (between two separators)
+        if sep[0]:
+            at = np.insert(at, 0, 0)
+        if not ends and sep[-1]:
+            at = np.append(at, code.size)
+        if len(tight) != len(blob):  # (each carriage return before it shifts it by one)
+            cr = np.flatnonzero(np.frombuffer(blob, dtype=np.uint8) == ord("\r"))
+            at += np.searchsorted(cr - np.arange(cr.size), at)  # (a CR's offset in `tight`)
+        return GAPS, at
 
     def _line(self, raw: bytes, i: int, out: list[str]) -> None:
         """One line read on its own, onto `out` as the str line NumPy reads (nothing for a
@@ -199,11 +233,12 @@ class _Lines:
 
 
 def numeric_rows(path: str, empty_as_nan: bool = False):
-    """`(header, header_line, values, lines)` of a plain numeric CSV file (module notes):
-    the header's stripped fields and its line, the samples as an `(n, fields)` float64 array
-    (an empty field NaN with `empty_as_nan`, a row of empty fields before a sample a row of
-    NaN; rows of empty fields after the last sample dropped) and the file's line of each row;
-    None for a file this path leaves to the validating reader."""
+    """`(header, header_line, values, lines, longest)` of a plain numeric CSV file (module
+    notes): the header's stripped fields and its line, the samples as an `(n, fields)`
+    float64 array (an empty field NaN with `empty_as_nan`, a row of empty fields before a
+    sample a row of NaN; rows of empty fields after the last sample dropped), the file's line
+    of each row and the bytes of the longest data line (an integer that a float64 rounds to
+    inf has 309 digits or more); None for a file this path leaves to the validating reader."""
     with open(path, "rb") as fh, warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "input contained no data": read again
         size = os.fstat(fh.fileno()).st_size
@@ -221,4 +256,4 @@ def numeric_rows(path: str, empty_as_nan: bool = False):
     if values.shape != (len(rows.lines), len(rows.header)):
         return None
     lines = np.frombuffer(rows.lines, dtype=np.int64).copy()
-    return rows.header, rows.header_line, values, lines
+    return rows.header, rows.header_line, values, lines, rows.longest

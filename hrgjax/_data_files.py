@@ -277,11 +277,13 @@ def read_csv_table(
     --time-unit ns`); below 2**53 it reads as it is.
 
     A plain numeric file — numbers, `nan`/`inf` and, with `empty_as_nan`, empty fields (a log
-    with gaps) — is streamed through NumPy's C parser in chunks (`hrgjax._csv_numeric`: ≈ 140
-    MB and 1–2 s for 10⁶ rows × 7 columns); any other (quotes, text, an integer to check
-    exactly, a field to refuse) is read by Python's csv module, one string per field (≈ 750
-    bytes a row), which names what is wrong. Both give the same columns and lines. A read of
-    more than 10⁶ lines shows a progress bar (stderr, at a terminal; `HRGJAX_QUIET`).
+    with gaps) — is streamed through NumPy's C parser in chunks (`hrgjax._csv_numeric`: ≈ 145
+    MB and 1–1.5 s for 10⁶ rows × 7 columns, an empty field in every row too; where comments,
+    blank lines, rows of empty fields or blanks in empty fields are frequent, up to ≈ 5 s,
+    read line by line); any other (quotes, text, an integer to check exactly, a field to
+    refuse) is read by Python's csv module, one string per field (≈ 750 bytes a row), which
+    names what is wrong. Both give the same columns and lines. A read of more than 10⁶ lines
+    shows a progress bar (stderr, at a terminal; `HRGJAX_QUIET`).
 
     **Raises:** `ValueError` naming the file and its line for text that is not UTF-8, a
     malformed row, a row of empty fields, an empty, numeric or duplicate header, or a known
@@ -302,16 +304,9 @@ def read_csv_table(
     if not isinstance(exact_integers, bool):
         exact_integers = frozenset([exact_integers] if isinstance(exact_integers, str)
                                    else exact_integers)  # fmt: skip
-    # (called with one argument where it can: tests and benchmarks replace it by `lambda p:`)
-    fast = _numeric_table(path, empty_as_nan) if empty_as_nan else _numeric_table(path)
-    offsets = {h: fast[0][h] for h in integer_offsets if h in fast[0]} if fast else {}
-    if (
-        fast is not None
-        and not beyond_exact(_exact_columns(fast[0], exact_integers))
-        and not beyond_exact(offsets)
-    ):
-        return fast  # (else the validating reader names an integer beyond 2**53)
-    del fast, offsets
+    fast = _numeric_table(path, empty_as_nan, exact_integers, integer_offsets)
+    if fast is not None:
+        return fast
     with open(path, "rb") as fh:
         blob = fh.read()
     try:
@@ -460,12 +455,6 @@ def _wants_exact(name: str, exact_integers: bool | Collection[str]) -> bool:
     return name in exact_integers
 
 
-def _exact_columns(columns: dict[str, np.ndarray], exact_integers) -> dict[str, np.ndarray]:
-    """The columns whose integers `read_csv_table` must check exactly (the fast path has
-    checked the contract's)."""
-    return {k: v for k, v in columns.items() if _wants_exact(k, exact_integers)}
-
-
 def _parse(
     path: str,
     name: str,
@@ -508,39 +497,58 @@ def _parse(
     return out
 
 
-def _numeric_table(path: str, empty_as_nan: bool = False):
+def _numeric_table(
+    path: str,
+    empty_as_nan: bool = False,
+    exact_integers: bool | Collection[str] = False,
+    integer_offsets: Collection[str] = (),
+):
     """`read_csv_table`'s result for a plain numeric file (numbers, `nan`/`inf`, and with
     `empty_as_nan` empty fields), streamed through NumPy's C parser in chunks of lines
     (`hrgjax._csv_numeric`: no Python string per field, no copy of the whole text); None for
     anything else — text that is not UTF-8, quotes, a lone carriage return, any character
     but those of numbers, commas and blanks in a data line, a row with another number of
-    fields, an empty field without `empty_as_nan`, an integer the slow path must check
-    exactly (in a contract column; `read_csv_table` checks the extra ones where asked) —
-    which the validating reader then reads and names. Over that alphabet NumPy accepts
-    exactly the fields `is_number` accepts (tests/test_files.py), so both paths give the
-    same columns."""
+    fields, an empty field without `empty_as_nan`, a value of 2**53 or more that may be an
+    integer the float rounded, in a column whose integers are checked exactly (the
+    contract's, those `exact_integers` names, those of `integer_offsets`) — which the
+    validating reader then reads and names. Over that alphabet NumPy accepts exactly the
+    fields `is_number` accepts (tests/test_files.py), so both paths give the same columns.
+    An inf there is the text `inf` where every line is shorter than `_INF_DIGITS` bytes."""
     got = numeric_rows(path, empty_as_nan)
     if got is None:
         return None
-    header, at, values, lines = got
+    header, at, values, lines, longest = got
     check_header(path, header, at)
+    inf_is_text = longest < _INF_DIGITS
     columns = {}
     for j, name in enumerate(header):
         col = np.ascontiguousarray(values[:, j])
-        if name == "run":
-            if np.any(np.abs(col) >= MAX_EXACT_INTEGER):  # (rounded: 2**53 + 1 reads 2**53)
-                return None
-            if np.all(col == np.round(col)):  # (else floats, as the validating reader's)
-                col = col.astype(np.int64)
-        elif name in COLUMNS and beyond_exact({name: col}):
-            return None
+        checked = name in COLUMNS or _wants_exact(name, exact_integers) or name in integer_offsets
+        if checked and beyond_exact({name: col}, inf_is_text):
+            return None  # (2**53 + 1 reads 2**53: the validating reader checks the text)
+        if (
+            name == "run"
+            and np.all(np.abs(col) < MAX_EXACT_INTEGER)
+            and np.all(col == np.round(col))
+        ):
+            col = col.astype(np.int64)  # (else floats, as the validating reader's)
         columns[name] = col
     return columns, lines
 
 
-def beyond_exact(columns: dict[str, np.ndarray]) -> bool:
+_INF_DIGITS = len(str(2**1024 - 2**970))
+"""309: the fewest digits of an integer that a float64 rounds to inf (2**1024 - 2**970, half
+an ulp above the largest float); a line with no more bytes holds no such integer."""
+
+
+def beyond_exact(columns: dict[str, np.ndarray], inf_is_text: bool = False) -> bool:
     """Whether a float column holds a value of magnitude 2**53 or more: there the text may
     have been an integer that the float rounded (2**53 + 1 reads 2**53), which the validating
-    reader checks exactly (`read_csv_table` with `exact_integers`); NaN (a gap) is not."""
+    reader checks exactly (`read_csv_table` with `exact_integers`); NaN (a gap) is not, nor
+    inf where `inf_is_text` (the text was `inf`: no line long enough for an integer that
+    rounds to inf, `_INF_DIGITS`)."""
     top = MAX_EXACT_INTEGER
-    return any(c.dtype.kind == "f" and bool(np.any(np.abs(c) >= top)) for c in columns.values())
+    return any(
+        c.dtype.kind == "f" and bool(np.any((np.abs(c) >= top) & ~(inf_is_text & np.isinf(c))))
+        for c in columns.values()
+    )

@@ -324,10 +324,12 @@ def test_fast_path_gives_the_validating_readers_columns(tmp_path, monkeypatch):
     path = str(write(tmp_path / "n.csv", text))
     taken = []
     real = _data_files._numeric_table
-    monkeypatch.setattr(_data_files, "_numeric_table", lambda p: taken.append(real(p)) or taken[-1])
+    monkeypatch.setattr(
+        _data_files, "_numeric_table", lambda p, *a: taken.append(real(p, *a)) or taken[-1]
+    )
     fast_cols, fast_lines = read_csv_table(path)
     assert taken[-1] is not None
-    monkeypatch.setattr(_data_files, "_numeric_table", lambda p: None)
+    monkeypatch.setattr(_data_files, "_numeric_table", lambda p, *a: None)
     slow_cols, slow_lines = read_csv_table(path)
     assert fast_lines.tolist() == slow_lines.tolist() == [4, 7, 8]
     assert list(fast_cols) == list(slow_cols)
@@ -335,7 +337,9 @@ def test_fast_path_gives_the_validating_readers_columns(tmp_path, monkeypatch):
         assert fast_cols[k].dtype == slow_cols[k].dtype, k
         np.testing.assert_array_equal(fast_cols[k], slow_cols[k])
     assert np.signbit(fast_cols["wave_angle_deg"][0])
-    monkeypatch.setattr(_data_files, "_numeric_table", lambda p: taken.append(real(p)) or taken[-1])
+    monkeypatch.setattr(
+        _data_files, "_numeric_table", lambda p, *a: taken.append(real(p, *a)) or taken[-1]
+    )
     read_csv_table(str(write(tmp_path / "o.csv", text.replace("-0.0", "nan"))))
     assert taken[-1] is not None and np.isnan(taken[-1][0]["wave_angle_deg"][0])
     read_csv_table(str(write(tmp_path / "o.csv", text.replace(" 1.", '"1"'))))
@@ -390,7 +394,7 @@ def test_load_refuses_integers_a_float_would_round_in_extra_columns_too(tmp_path
             base(2) | {"stamp_ns": np.array([1700000000000000001, 3])}, allow_extra=True
         )
     assert read_csv_table(str(path))[0]["stamp_ns"][0] == 1.7e18  # not asked: nearest float
-    monkeypatch.setattr(_data_files, "_numeric_table", lambda p: None)
+    monkeypatch.setattr(_data_files, "_numeric_table", lambda p, *a: None)
     with pytest.raises(ValueError, match=want):
         hg.load(path, allow_extra=True)
     monkeypatch.undo()
@@ -487,7 +491,7 @@ def test_imu_load_refuses_integers_a_float_would_round_in_the_columns_it_reads(
             r"intended$")  # fmt: skip
     for fast in (True, False):
         if not fast:
-            monkeypatch.setattr(_data_files, "_numeric_table", lambda p: None)
+            monkeypatch.setattr(_data_files, "_numeric_table", lambda p, *a: None)
         with pytest.raises(ValueError, match=want):
             hg.imu.load(path, cols | {"time": "t_ns"}, units, check_units=False)
         # 2**60 s as seconds is an epoch in ns read as s, refused unless declared (2ec03ab)
