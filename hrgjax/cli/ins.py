@@ -181,8 +181,8 @@ def cmd_imu_calibrate(args) -> int:
                 sections = imu.detect_sections(data)
             else:
                 sections = imu.parse_sections(args.sections, len(data))
+            # the warnings filters stay the user's: a TurnCutWarning they ignore is not caught
             with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", TurnCutWarning)
                 cal = imu.ferraris(data, sections, g=args.g, turn_deg=args.turn_deg,
                                    turn_deg_std=args.turn_deg_std,
                                    gyro_range_dps=args.gyro_range_dps,

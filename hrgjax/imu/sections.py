@@ -157,24 +157,27 @@ def detect_sections(
 ) -> Sections:
     """Find the Ferraris sections of a session in its data.
 
-    Candidate rests are where the magnitude of the gyro's rate vector (median over the record
-    removed, moving mean over `window_s` of each axis, so that white noise averages down)
-    stays below `motion_threshold_dps` [°/s] for at least `min_static_s` [s]. Each is then
-    measured against its own noise: its level is the mode of its window means (where the
-    rate dwells), and it is still only as far as every axis's window mean stays within
-    `REST_NOISE_K` (5) σ of that level, σ the window mean's noise measured in the rests — a
-    slow end of a turn (a soft start, a hand turn, the simulator's 1 − cos ramp), under
-    `motion_threshold_dps` for seconds, is motion, not rest. Each motion between two rests
-    reaches out into both by `trim_s` [s] + `window_s` / 2, and by as long again as its rate
-    took to rise from the rest noise to `RAMP_FACTOR` (10) times it (for a ramp ∝ t², the
-    part under the noise and more), at most to each rest's middle; what is left of a rest
-    is the face whose accelerometer axis carries most of the specific force (at least 80 %,
-    by sign `p` or `a`). A motion whose gyro, less the rests' level, integrates to a full
-    turn (360° within `turn_tolerance_deg`, at least 90 % of it about one axis) is that
-    axis's `*_rot`: the whole turn, with a little rest at both ends (the Ferraris sums take
-    the bias × duration off, so rest inside a turn section costs only noise; a turn cut
-    short reads M_g low). The rests on either side of a turn count as a face only where
-    no other rest holds that face. A face or a turn found more than once is a repeat.
+    Rests are where the magnitude of the gyro's rate vector (median over the record removed,
+    moving mean over `window_s` of each axis, so that white noise averages down) stays below
+    `motion_threshold_dps` [°/s] for at least `min_static_s` [s]; each motion between two
+    rests reaches `trim_s` [s] + `window_s` / 2 into both. A motion whose gyro, less the
+    rests' level, integrates to a full turn (360° within `turn_tolerance_deg`, at least 90 %
+    of it about one axis) is that axis's `*_rot`, and reaches further, by its ramp: a slow
+    end of a turn (a soft start, a hand turn, the simulator's 1 − cos ramp) stays under
+    `motion_threshold_dps` for seconds. Beside a turn, the rest's level is a robust line
+    through its `window_s` means over `LEVEL_SPAN_S` (4 s) just before the ramp (so that a
+    bias drifting or swaying in the rest is not motion), σ the scatter of the rests' window
+    means about such lines (white noise, sway and wander together); the ramp starts where
+    the rate leaves that line by `REST_NOISE_K` (5) σ, and the turn section reaches out by as
+    long again as the rate took from there to `RAMP_FACTOR` (10) times that (for a ramp ∝
+    t², the part under the noise and more), at most to the still rest's middle. A motion
+    that is no turn keeps the short reach: a face is the rest less `trim_s` +
+    `window_s` / 2 at a move. What is left of a rest is the face whose accelerometer axis
+    carries most of the specific force (at least 80 %, by sign `p` or `a`). A turn section
+    holds the whole turn with a little rest at both ends (the Ferraris sums take the bias ×
+    duration off, so rest inside a turn section costs only noise; a turn cut short reads
+    M_g low). The rests on either side of a turn count as a face only where no other rest
+    holds that face. A face or a turn found more than once is a repeat.
 
     **Returns:** `{key: [(start, end), …]}` for every key of
     [`SECTION_KEYS`][hrgjax.imu.sections.SECTION_KEYS].
@@ -191,24 +194,63 @@ def detect_sections(
     # would not: ≈ 1.6 σ per sample, splitting a noisy face into fake repeats)
     smooth = np.stack([_moving_mean(rel[:, i], w) for i in range(3)], 1)
     still = np.linalg.norm(smooth, axis=1) < np.deg2rad(motion_threshold_dps)
-    coarse = [(s, e) for s, e in _runs(still) if e - s >= min_static_s * rate]
-    rests, sigma = _still_rests(rel, smooth, coarse, w)
+    rests = [(s, e) for s, e in _runs(still) if e - s >= min_static_s * rate]
     pad = int(round(trim_s * rate)) + w // 2
-    moves = [_motion(smooth, sigma, r0, r1, pad) for r0, r1 in zip(rests, rests[1:], strict=False)]
-    found: dict[str, list[tuple[int, int]]] = {k: [] for k in SECTION_KEYS}
-    beside_turn = set()
+    levels = [np.array([_mode(smooth[s:e, i]) for i in range(3)]) for s, e in rests]
     dt = data.dt
-    for j, (a, b) in enumerate(moves):
-        level = (rests[j][2] + rests[j + 1][2]) / 2.0
+
+    def full_turn(a, b, level):
         turn = np.rad2deg(((rel[a:b] - level) * dt[a:b, None]).sum(axis=0))
         i = int(np.argmax(np.abs(turn)))
-        full = abs(abs(turn[i]) - 360.0) <= turn_tolerance_deg
-        if full and abs(turn[i]) >= 0.9 * np.linalg.norm(turn):
-            found[f"{'xyz'[i]}_rot"].append((a, b))
-            beside_turn |= {j, j + 1}
+        return abs(abs(turn[i]) - 360.0) <= turn_tolerance_deg and abs(turn[i]) >= 0.9 * (
+            np.linalg.norm(turn)
+        )
+
+    pairs = list(zip(rests, rests[1:], strict=False))
+    coarse = [(e0 - pad, s1 + pad) for (_, e0), (s1, _) in pairs]
+    near = [(levels[j] + levels[j + 1]) / 2.0 for j in range(len(pairs))]
+    turning = {j for j, (a, b) in enumerate(coarse) if full_turn(a, b, near[j])}
+    quiet = [r for j, r in enumerate(rests) if not {j - 1, j} & turning] or rests
+    sigma = _rest_sigma(rel, smooth, quiet, w, pad)
+    span = int(round(LEVEL_SPAN_S * rate))
+    # each motion's ramp: the row where it leaves the rest on either side, and its rise [rows]
+    ramps = {}
+    ref = [(s + pad, e - pad) for s, e in rests]  # each rest's still rows, as far as known
+    for _ in range(2):  # the second time, a ramp on the rest's other side is out of its line
+        for j, ((s0, e0), (s1, e1)) in enumerate(pairs):
+            p, rise = _ramp(smooth[s0:s1], e0 - s0, sigma, levels[j], span, w, ref[j][0] - s0)
+            ramps[j, 0] = (s0 + p, rise)
+            back = smooth[e0:e1][::-1]
+            p, rise = _ramp(back, e1 - s1, sigma, levels[j + 1], span, w, e1 - ref[j + 1][1])
+            ramps[j, 1] = (e1 - p, rise)
+        ref = [(max(s + pad, sum(ramps[j - 1, 1])) if j else s + pad,
+                min(e - pad, ramps[j, 0][0] - ramps[j, 0][1]) if j < len(pairs) else e - pad)
+               for j, (s, e) in enumerate(rests)]  # fmt: skip
+
+    def reach(j, turns):
+        """Motion j's rows reaching to its ramps' starts, at most to the middle of the still
+        rest between it and a neighbour in `turns` (which reaches as far from its side)."""
+        (s0, _), (_, e1) = pairs[j]
+        (p0, rise0), (p1, rise1) = ramps[j, 0], ramps[j, 1]
+        lo = ramps[j - 1, 1][0] if j - 1 in turns else s0 + pad
+        hi = ramps[j + 1, 0][0] if j + 1 in turns else e1 - pad
+        a = min(max(p0 - rise0 - pad, (lo + p0) // 2, lo), coarse[j][0])
+        b = max(min(p1 + rise1 + pad, (p1 + hi) // 2, hi), coarse[j][1])
+        level = (_line_at(smooth, s0 + pad, p0 - rise0, span, w, p0 - rise0 - 1)
+                 + _line_at(smooth, p1 + rise1, e1 - pad, span, w, p1 + rise1, head=True)) / 2  # fmt: skip
+        return a, b, level
+
+    # only a turn reaches out by its ramp; the caps from the turns as they then are
+    turning = {j for j in range(len(pairs)) if full_turn(*reach(j, turning))}
+    moves = [reach(j, turning)[:2] if j in turning else r for j, r in enumerate(coarse)]
+    found: dict[str, list[tuple[int, int]]] = {k: [] for k in SECTION_KEYS}
+    for j in sorted(turning):
+        a, b = moves[j]
+        turn = ((rel[a:b] - near[j]) * dt[a:b, None]).sum(axis=0)
+        found[f"{'xyz'[int(np.argmax(np.abs(turn)))]}_rot"].append((a, b))
     faces: dict[str, list[tuple[int, bool]]] = {k: [] for k in FACES}
     rest_rows = []
-    for j, (s, e, _) in enumerate(rests):
+    for j, (s, e) in enumerate(rests):
         s = moves[j - 1][1] if j > 0 else s + pad
         e = moves[j][0] if j < len(moves) else e - pad
         rest_rows.append((s, e))
@@ -217,7 +259,7 @@ def detect_sections(
         f = accel[s:e].mean(axis=0)
         i = int(np.argmax(np.abs(f)))
         if abs(f[i]) >= 0.8 * np.linalg.norm(f):
-            faces[f"{'xyz'[i]}_{'p' if f[i] > 0 else 'a'}"].append((j, j in beside_turn))
+            faces[f"{'xyz'[i]}_{'p' if f[i] > 0 else 'a'}"].append((j, bool({j - 1, j} & turning)))
     for key, rows in faces.items():
         # the rests that hold a turn's axis up count as that face only where no other does
         keep = [j for j, beside in rows if not beside] or [j for j, _ in rows]
@@ -225,7 +267,7 @@ def detect_sections(
     missing = [k for k in SECTION_KEYS if not found[k]]
     if missing:
         have = {k: len(v) for k, v in found.items() if v}
-        clipped = saturation(data, moves or [(0, n)])
+        clipped = saturation(data, [m for m in moves if m[1] > m[0]] or [(0, n)])
         hint = f"; {clipped} (the turns cannot be measured)" if clipped else ""
         raise ValueError(
             f"detect_sections: found no {', '.join(missing)} in {n} samples (found {have}); "
@@ -235,43 +277,88 @@ def detect_sections(
 
 
 REST_NOISE_K = 5.0
-"""A rest ends where one axis's rate, averaged over `window_s`, leaves the rest's level by
-this many standard deviations of that average (measured in the rests): `detect_sections`."""
+"""A turn's ramp leaves the rest where one axis's rate, averaged over `window_s`, is this
+many standard deviations of that average (measured in the rests) off the rest's level
+line: `detect_sections`."""
 RAMP_FACTOR = 10.0
-"""`detect_sections` widens a motion into each rest by as long as its rate took to rise from
+"""`detect_sections` widens a turn into each rest by as long as its rate took to rise from
 `REST_NOISE_K` σ to this many times that: for a ramp ∝ t² (a smooth start) √10 − 1 = 2.2
 times as long as it spent under the noise, for a ramp ∝ t 9 times, for a step nothing."""
+LEVEL_SPAN_S = 4.0
+"""[s]: the stretch of rest just before a turn's ramp through whose window means
+`detect_sections` lays the rest's level line (a drifting bias is followed, a sway of a
+few seconds' period averages out)."""
 _SIGMA_FLOOR = 1e-9
 """[rad/s]: the least window-mean noise taken (noise-free records: round-off is not motion)."""
 
 
-def _still_rests(rel, smooth, coarse, w):
-    """The still part of each candidate rest, `[(start, end, level (3,))]`, and the window
-    mean's noise σ (3,) [rad/s]: from the rests' window means `w` samples apart (their
-    difference is √2 σ, a slow ramp barely moves it), median absolute value (a ramp's part
-    does not pull it), at least half the data's resolution (a quantised record's flat rest)
-    and `_SIGMA_FLOOR`. A rest's level is the mode of its window means (`_mode`: where the
-    rate dwells; a ramp's slow end inside the candidate passes through), its still part the
-    longest run within `REST_NOISE_K` σ of it on every axis."""
-    if not coarse:
-        return [], np.full(3, _SIGMA_FLOOR)
-    lag = w if all(e - s > w for s, e in coarse) else 1
-    diffs = np.concatenate([smooth[s + lag : e] - smooth[s : e - lag] for s, e in coarse])
-    steps = np.abs(np.concatenate([np.diff(rel[s:e], axis=0) for s, e in coarse]))
+def _rest_sigma(rel, smooth, rests, w, pad):
+    """σ (3,) [rad/s] of a rest's window mean about its level: the larger of the white
+    part (window means `w` apart: their difference is √2 σ) and the scatter of the window
+    means about each rest's robust line (`_line_at`: sway, flicker and a wandering bias
+    included), median absolute values pooled over `rests` less `pad` at both ends; at least
+    half the data's resolution (a quantised record's flat rest) and `_SIGMA_FLOOR`."""
+    if not rests:
+        return np.full(3, _SIGMA_FLOOR)
+    inner = [(s + pad, e - pad) if e - s > 2 * pad + 2 * w else (s, e) for s, e in rests]
+    lag = w if all(e - s > w for s, e in inner) else 1
+    diffs = np.concatenate([smooth[s + lag : e] - smooth[s : e - lag] for s, e in inner])
+    white = np.median(np.abs(diffs), axis=0) * (1.4826 / np.sqrt(2.0))
+    resid = np.concatenate([smooth[s:e:w] - _line_at(smooth, s, e, e - s, w, np.arange(s, e, w))
+                            for s, e in inner])  # fmt: skip
+    scatter = np.median(np.abs(resid), axis=0) * 1.4826
+    steps = np.abs(np.concatenate([np.diff(rel[s:e], axis=0) for s, e in rests]))
     resolution = np.array([np.min(c[c > 0], initial=np.inf) for c in steps.T])
     resolution[~np.isfinite(resolution)] = 0.0
-    sigma = np.maximum(np.median(np.abs(diffs), axis=0) * (1.4826 / np.sqrt(2.0)), resolution / 2)
-    sigma = np.maximum(sigma, _SIGMA_FLOOR)
-    out = []
-    for s, e in coarse:
-        level = np.array([_mode(smooth[s:e, i]) for i in range(3)])
-        ok = np.all(np.abs(smooth[s:e] - level) < REST_NOISE_K * sigma, axis=1)
-        runs = _runs(ok)
-        if runs:
-            a, b = max(runs, key=lambda r: r[1] - r[0])
-            if b - a >= 2:
-                out.append((s + a, s + b, level))
-    return out, sigma
+    return np.maximum.reduce([white, scatter, resolution / 2, np.full(3, _SIGMA_FLOOR)])
+
+
+def _line_at(smooth, s, e, span, w, at, head=False):
+    """The rest's level line at rows `at` [rad/s]: Theil–Sen through the window means
+    (every `w`-th row) of the last `span` rows of `[s, e)` (`head`: the first), (3,) per
+    row of `at`; the median of the means where fewer than eight."""
+    a, e = (s, min(e, s + span)) if head else (max(s, e - span), e)
+    rows = np.arange(a, e, max(w, (e - a) // 64))
+    if rows.size == 0:  # no rows left between the motions: the one past the other motion
+        rows = np.array([min(max(e - 1 if head else s, 0), len(smooth) - 1)])
+    y = smooth[rows]
+    if rows.size < 8:  # under 2 s of 0.25-s means: no slope to trust
+        return np.broadcast_to(np.median(y, axis=0), np.shape(at) + (3,)).copy()
+    i, j = np.triu_indices(rows.size, 1)
+    slope = np.median((y[j] - y[i]) / (rows[j] - rows[i])[:, None], axis=0)
+    base = np.median(y - slope * (rows - rows[0])[:, None], axis=0)
+    return base + slope * (np.asarray(at) - rows[0])[..., None]
+
+
+def _ramp(seg, m, sigma, level, span, w, start) -> tuple[int, int]:
+    """`(row, rise)` in `seg` (a rest of `m` rows, then the motion after it): where the
+    motion's rate leaves the rest's level by `REST_NOISE_K` σ (the crossing nearest the
+    motion), and how many rows it took from there to `RAMP_FACTOR` times that. The level:
+    at first the rest's mode `level`, then a line through the `span` rows of rest before the
+    ramp's reach, from row `start` on (past the motion before: `_line_at`, a drifting bias),
+    three times; where a long rest's bias drifted off its mode, so that the rise reaches
+    back beyond its start, first a line through the rows before the band was left."""
+    high = RAMP_FACTOR * REST_NOISE_K
+    idx = np.arange(seg.shape[0])
+    line = np.broadcast_to(level, seg.shape)
+    p5, rise, drifted = m, 0, False
+    for _ in range(4):
+        z = np.max(np.abs(seg - line) / sigma, axis=1)
+        up = np.flatnonzero(z[m:] >= high)
+        p50 = m + int(up[0]) if up.size else m + int(np.argmax(z[m:])) if seg.shape[0] > m else m
+        below = np.flatnonzero(z[:p50] < high)  # back to the start of that run ≥ 50σ …
+        p50 = int(below[-1]) + 1 if below.size else 0
+        quiet = np.flatnonzero(z[:p50] < REST_NOISE_K)  # … and on to the last row under 5σ
+        p5 = int(quiet[-1]) + 1 if quiet.size else 0
+        rise = p50 - p5
+        end = p5 - rise
+        if end - start < 4 * w:  # too little rest before the ramp to lay a line through …
+            if drifted or p5 - start < span:
+                break
+            end, drifted = p5, True  # … unless a long rest drifted off its mode: the rows
+            # before it left the band, a line that follows the drift to the motion
+        line = _line_at(seg, start, end, span, w, idx)
+    return p5, rise
 
 
 def _mode(x: np.ndarray) -> float:
@@ -285,23 +372,6 @@ def _mode(x: np.ndarray) -> float:
     return float(x.mean())
 
 
-def _motion(smooth, sigma, before, after, pad) -> tuple[int, int]:
-    """The rows `[start, end)` of the motion between two still rests `(start, end, level)`,
-    widened into each by `pad` and by the time its rate took from the rest's noise to
-    `RAMP_FACTOR` times it, at most to the rest's middle."""
-    (s0, e0, level0), (s1, e1, level1) = before, after
-    if s1 <= e0:
-        return e0, e0
-    z0 = np.max(np.abs(smooth[e0:s1] - level0) / sigma, axis=1)
-    z1 = np.max(np.abs(smooth[e0:s1] - level1) / sigma, axis=1)
-    high = RAMP_FACTOR * REST_NOISE_K
-    up = np.flatnonzero(z0 >= high)
-    down = np.flatnonzero(z1 >= high)
-    rise = int(up[0]) if up.size else int(np.argmax(z0))
-    fall = (s1 - e0 - 1 - int(down[-1])) if down.size else (s1 - e0 - 1 - int(np.argmax(z1)))
-    return max(e0 - rise - pad, (s0 + e0) // 2), min(s1 + fall + pad, (s1 + e1) // 2)
-
-
 class TurnCutWarning(UserWarning):
     """A turn section starts or ends while the IMU still turns
     ([`cut_turn`][hrgjax.imu.sections.cut_turn]): the section leaves out motion, and M_g is
@@ -310,33 +380,42 @@ class TurnCutWarning(UserWarning):
 
 
 def cut_turn(data, sections, *, window_s: float = 0.25, walk: float = 0.0) -> str | None:
-    """The first turn section that the gyro still turns beyond, as one line of text, or None.
+    """Every turn section that the gyro still turns beyond, named in one line of text, or
+    None.
 
     Over `window_s` [s] just before a turn section and just after it, the rate about the
-    turn's axis should be the rest's: the gyro mean of the face that holds that axis
-    vertical the same way (`x_p` or `x_a`, … by the accelerometer's sign in the turn; its
-    range nearest in time), which reads the same bias, g-sensitivity and vertical Earth
-    rate. A window mean more than `REST_NOISE_K` (5) σ from it is motion the section leaves
-    out: a turn cut short (M_g reads low) or a settling back (high). σ: the faces' own
-    `window_s` means about each face's mean (the noise as measured, coloured or white), that
-    of the face mean, and a bias random walk of intensity `walk` [rad/s/√s] over the time
-    between the two.
+    turn's axis should be the rest's. It is compared with two rests: the gyro mean of the
+    face that holds that axis vertical the same way (`x_p` or `x_a`, … by the
+    accelerometer's sign in the turn; its range nearest in time), which reads the same
+    bias, g-sensitivity and vertical Earth rate, and the `NEXT_REST_S` (1 s) of record just
+    beyond the window (the same bias, however it drifts or sways). A window mean more than
+    `REST_NOISE_K` (5) σ from both is motion the section leaves out: a turn cut short (M_g
+    reads low) or a settling back (high). σ: the faces' own `window_s` means about each
+    face's mean (the noise as measured, coloured or white, sway included), that of the
+    other mean, and a bias random walk of intensity `walk` [rad/s/√s] over the time between
+    the window and the face.
 
     **Arguments:** `data`: the session ([`ImuData`][hrgjax.imu.ImuData]); `sections`: as
     [`parse_sections`][hrgjax.imu.sections.parse_sections] takes them."""
     sections = parse_sections(sections, len(data))
     gyro, time, n = np.asarray(data.gyro), np.asarray(data.time), len(data)
     w = max(int(round(window_s * data.rate_hz)), 1)
+    beyond = max(int(round(NEXT_REST_S * data.rate_hz)), w)
     devs, dof = [], 0
     for s, e in (r for key in FACES for r in sections[key] if r[1] - r[0] >= w):
         blocks = gyro[s : s + (e - s) // w * w].reshape(-1, w, 3).mean(axis=1)
         devs.append(blocks - blocks.mean(axis=0))
         dof += max(len(blocks) - 1, 0)
     var = np.maximum(sum((d**2).sum(axis=0) for d in devs) / max(dof, 1), _SIGMA_FLOOR**2)
+    cut = []
     for i, key in enumerate(TURNS):
         for s, e in sections[key]:
             face = f"{'xyz'[i]}_{'p' if np.asarray(data.accel)[s:e, i].mean() > 0 else 'a'}"
-            for side, (a, b) in (("before", (max(s - w, 0), s)), ("after", (e, min(e + w, n)))):
+            sides, ways = [], []
+            for side, (a, b), (c, d) in (
+                ("before", (max(s - w, 0), s), (max(s - w - beyond, 0), max(s - w, 0))),
+                ("after", (e, min(e + w, n)), (min(e + w, n), min(e + w + beyond, n))),
+            ):
                 if b <= a:
                     continue
                 mid = time[(a + b - 1) // 2]
@@ -345,18 +424,29 @@ def cut_turn(data, sections, *, window_s: float = 0.25, walk: float = 0.0) -> st
                 level = gyro[fs:fe, i].mean()
                 rate = gyro[a:b, i].mean() - level
                 sd = np.sqrt(var[i] * (w / (b - a) + w / (fe - fs)) + walk**2 * gap)
-                if abs(rate) > REST_NOISE_K * sd:
+                z = abs(rate) / sd
+                if d > c:  # the rest just beyond: a drifting bias moves both windows alike
+                    near = gyro[a:b, i].mean() - gyro[c:d, i].mean()
+                    z = min(z, abs(near) / np.sqrt(var[i] * (w / (b - a) + w / (d - c))))
+                if z > REST_NOISE_K:
                     along = rate * (gyro[s:e, i] - level).sum() > 0  # the turn's own sense
-                    span = (b - a) / data.rate_hz
-                    return (
-                        f"turn {key!r} rows [{s}, {e}): the gyro still turns {side} it "
-                        f"({np.rad2deg(rate):+.3g} °/s about {'xyz'[i]} over {span:.3g} s, "
-                        f"{abs(rate) / sd:.0f}σ of the rest noise off the {face!r} rest): the "
-                        "section leaves out motion "
-                        f"{'with the turn (M_g reads low)' if along else 'back (M_g reads high)'}"
-                        "; widen it into the rests on either side"
-                    )
-    return None
+                    sides.append(f"{side} it ({np.rad2deg(rate):+.3g} °/s about {'xyz'[i]} "
+                                 f"over {(b - a) / data.rate_hz:.3g} s, {z:.0f}σ of the rest "
+                                 f"noise off the {face!r} rest and the rest beyond)")  # fmt: skip
+                    way = "with the turn (M_g reads low)" if along else "back (M_g reads high)"
+                    ways += [way] if way not in ways else []
+            if sides:
+                cut.append(f"turn {key!r} rows [{s}, {e}): the gyro still turns "
+                           f"{' and '.join(sides)}: the section leaves out motion "
+                           f"{' and '.join(ways)}")  # fmt: skip
+    if not cut:
+        return None
+    them = "it" if len(cut) == 1 else "them"
+    return f"{'; '.join(cut)}; widen {them} into the rests on either side"
+
+
+NEXT_REST_S = 1.0
+"""[s]: the stretch of record just beyond `cut_turn`'s window that it also compares with."""
 
 
 SATURATION_MIN_S = 0.05
