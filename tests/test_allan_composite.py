@@ -188,6 +188,8 @@ def test_the_printed_deviation_is_passed_through_not_computed_again(white_walk, 
     ramp = 1e-5 * np.std(np.diff(y)) * np.arange(y.size)
     raw = hg.allan.deviation(y + ramp, fs, unit="°/h")
     assert abs(raw.dev[0] / printed.dev[0] - 1) < 1e-9 and raw.dev[-1] > 1.5 * printed.dev[-1]
+    big = y + 1e6 * np.std(y)
+    biased = hg.allan.deviation(big, fs, unit="°/h")
 
     def no_deviation(*_args, **_kwargs):
         raise AssertionError("the deviation was computed again")
@@ -198,6 +200,9 @@ def test_the_printed_deviation_is_passed_through_not_computed_again(white_walk, 
     assert passed.to_dict() == own.to_dict()
     (b,) = made
     assert b.n == b.total == 4 + 1 + min(composite.FINALISTS, len(passed.selection)) + 1
+    # a large constant rate (a rate table, a MEMS bias): its own deviation is accepted (the
+    # check rebuilt the phase without the mean and refused it: review of 28b967a)
+    hg.allan.identify_noise(big, fs, unit="°/h", oadev=biased)
     for other in (printed, dataclasses.replace(printed, kind="adev"), raw):
         with pytest.raises(ValueError, match="^oadev must be the AllanResult of deviation"):
             hg.allan.identify_noise(2 * y if other is printed else y, fs, oadev=other)
