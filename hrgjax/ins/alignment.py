@@ -8,12 +8,9 @@ Frames: navigation NED, body FRD (x forward, y right, z down); heading clockwise
 and angular rate over the first `coarse_s` seconds against their NED values
 $f^n = (0, 0, -g)$, $\omega_{ie}^n = \omega_{ie}(\cos\varphi, 0, -\sin\varphi)$, by TRIAD.
 
-**Fine** ([`fine_align`][hrgjax.ins.alignment.fine_align]), on the data after the coarse
-span: the attitude and velocity are integrated from the increments; every `step_s` a
-12-state Kalman filter — velocity error, attitude error φ, gyro and accelerometer biases
-(NED-frame: constant at rest, one constant model), the stationary φ-angle model of
-[`strapdown`][hrgjax.ins.strapdown] discretised by Van Loan — takes the computed velocity as
-a measurement of its error (the vehicle is at rest); its estimate is fed back and reset.
+**Fine** ([`fine_align`][hrgjax.ins.fine_alignment.fine_align], its own module, importable
+from here too), on the data after the coarse span: a 12-state Kalman filter on zero velocity,
+one compiled program for every record length in a power-of-two bucket.
 East gyro bias and level accelerometer biases are unobservable, so the attitude converges to
 the analytic limits of PHYSICS.md §12 ($\phi_E = -\nabla_N/g$, $\phi_N = \nabla_E/g$,
 $\phi_D = \varepsilon_E/(\omega_{ie}\cos\varphi) - (\nabla_E/g)\tan\varphi$).
@@ -45,30 +42,16 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaincc
 
-from .._compiled import fused
+from .._compiled import device, fused
 from .._x64 import require_x64
-from ..kalman import Gaussian, update, van_loan
 from ..units import DEG, DEG_PER_H
-from .constants import MAX_LAT_DEG, OMEGA_IE, WGS84, earth_rate_ned
+from .constants import OMEGA_IE, WGS84, earth_rate_ned
+from .fine_alignment import FINE_DEFAULTS, check_gyrocompass_latitude, euler_std_deg, fine_run
+from .fine_alignment import euler_deg as euler_deg
+from .fine_alignment import fine_align as fine_align
 from .imu_log import PSINS_FIELDS as PSINS_FIELDS
 from .imu_log import ImuLog as ImuLog
 from .imu_log import load_psins as load_psins
-from .imu_log import wrap_heading_deg
-from .mechanization import skew
-from .strapdown import augmented, error_matrices_at
-from .trajectory import dcm_to_euler
-
-
-def _check_gyrocompass_latitude(lat: float) -> None:
-    """Refuse |lat| beyond [`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG]: gyrocompassing
-    is impossible at the poles."""
-    if abs(lat) > MAX_LAT_DEG * DEG:
-        raise ValueError(
-            f"ImuLog.lat = {lat:.6g} rad ({lat / DEG:.4g}°) is within {90 - MAX_LAT_DEG:g}° of a "
-            f"pole: gyrocompassing finds north from the horizontal Earth rate ω_ie·cos(lat), "
-            f"which vanishes there; alignment needs |lat| <= {MAX_LAT_DEG:g}°"
-        )
-
 
 _LOG_FIELDS = {
     "interval": "the log's time stamps ImuLog.t [s]",
@@ -111,7 +94,7 @@ def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None
             f"{where}the record spans {size * dt:.4g} s ({size} samples at {dt * 1e3:.4g} ms), "
             f"shorter than {coarse_name} = {coarse_s:g} s: check {fields['interval']}"
         )
-    f = float(jnp.linalg.norm(jnp.sum(log.dvel[:n], 0) / (n * dt)))
+    f = float(np.linalg.norm(np.asarray(log.dvel)[:n].sum(0) / (n * dt)))  # host: no program
     g = float(WGS84.gravity(log.lat, log.h))
     if abs(f - g) > 0.05 * g:
         raise ValueError(
@@ -120,7 +103,7 @@ def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None
             "right?"
         )
     m = min(size, max(n, int(round(RATE_SPAN_S / dt))))
-    w = float(jnp.linalg.norm(jnp.sum(log.dtheta[:m], 0) / (m * dt)))
+    w = float(np.linalg.norm(np.asarray(log.dtheta)[:m].sum(0) / (m * dt)))
     low, high = EARTH_RATE_RATIO
     if not low * OMEGA_IE <= w <= high * OMEGA_IE:
         raise ValueError(
@@ -151,7 +134,8 @@ def coarse_bias_jacobian(f_b, w_b, lat):
     """(3, 6) ∂φ/∂(gyro bias [rad/s], accelerometer bias [m/s²]), body frame, of the attitude
     error φ (C_true = (I + [φ×]) Ĉ) of [`coarse_align`][hrgjax.ins.alignment.coarse_align]'s
     Ĉ for means `f_b`, `w_b` at latitude `lat` [rad] holding constant sensor biases (plus
-    noise and sway): [`fine_align`][hrgjax.ins.alignment.fine_align]'s `start_bias_jacobian`."""
+    noise and sway): [`fine_align`][hrgjax.ins.fine_alignment.fine_align]'s
+    `start_bias_jacobian`."""
     c = coarse_align(f_b, w_b, lat)
 
     def phi(b):
@@ -159,18 +143,6 @@ def coarse_bias_jacobian(f_b, w_b, lat):
         return 0.5 * jnp.stack([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
 
     return jax.jacfwd(phi)(jnp.zeros(6))
-
-
-@fused
-def _rotation(v):
-    """exp([v×]) (Rodrigues)."""
-    a2 = v @ v
-    a = jnp.sqrt(a2 + 1e-300)
-    small = a2 < 1e-12
-    s = jnp.where(small, 1.0 - a2 / 6.0, jnp.sin(a) / a)
-    c = jnp.where(small, 0.5 - a2 / 24.0, (1.0 - jnp.cos(a)) / (a2 + 1e-300))
-    k = skew(v)
-    return jnp.eye(3) + s * k + c * (k @ k)
 
 
 END_HEADING_STD_DEG = 15.0
@@ -196,18 +168,10 @@ class AlignmentWarning(UserWarning):
     `warnings.simplefilter("ignore", AlignmentWarning)` silences it."""
 
 
-_GYRO_BIAS_STD = 0.05 * DEG_PER_H
-"""`fine_align`'s default gyro-bias σ [rad/s] (navigation grade)."""
-_ARW, _VRW = 0.01 * DEG / 60.0, 1e-4
-"""`fine_align`'s default angle [rad/√s] and velocity [m/s/√s] random walks."""
-_ATTITUDE_STD_DEG = (0.5, 0.5, 5.0)
-"""`fine_align`'s default start attitude σ (level, level, heading) [°] beyond the biases."""
-
-
 @fused
 def coarse_error_model(c0, lat, h, span_s, arw, vrw):
-    """The coarse attitude `c0`'s error model for [`fine_align`][hrgjax.ins.alignment.fine_align]'s
-    prior: `(A (3, 6), var (3,))`, A = ∂φ/∂(gyro bias [rad/s], accelerometer bias [m/s²])
+    """The coarse attitude `c0`'s error model for
+    [`fine_align`][hrgjax.ins.fine_alignment.fine_align]'s prior: `(A (3, 6), var (3,))`, A = ∂φ/∂(gyro bias [rad/s], accelerometer bias [m/s²])
     (body frame, [`coarse_bias_jacobian`][hrgjax.ins.alignment.coarse_bias_jacobian]) taken
     at the means a stationary IMU with attitude `c0` reads at latitude `lat` [rad], height
     `h` [m] — the point the fine filter's model is linearised at, so the coarse and fine
@@ -362,142 +326,6 @@ class AlignmentResult(eqx.Module):
         return out
 
 
-@fused
-def euler_deg(c):
-    """(heading [0, 360), pitch, roll) [°] of the body-to-NED matrix `c` (3, 3) (a heading
-    within 1e-9° below 360 is 0: [`wrap_heading_deg`][hrgjax.ins.imu_log.wrap_heading_deg])."""
-    roll, pitch, heading = dcm_to_euler(c)
-    return jnp.stack([wrap_heading_deg(heading / DEG), pitch / DEG, roll / DEG])
-
-
-@fused
-def _euler_std(c, p_phi):
-    """1σ of (heading, pitch, roll) [°] for attitude error covariance `p_phi` (φ = rotation
-    of the computed frame, C_true = (I + [φ×]) C)."""
-    jac = jax.jacfwd(lambda phi: jnp.stack(dcm_to_euler(_rotation(phi) @ c)[::-1]))(jnp.zeros(3))
-    cov = jac @ p_phi @ jac.T
-    return jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0)) / DEG
-
-
-def fine_align(
-    log: ImuLog,
-    c0,
-    *,
-    step_s: float = 1.0,
-    start_s: float = 0.0,
-    arw: float = _ARW,
-    vrw: float = _VRW,
-    velocity_noise: float = 0.01,
-    gyro_bias_std: float = _GYRO_BIAS_STD,
-    accel_bias_std: float = 1e-3,
-    attitude_std_deg=_ATTITUDE_STD_DEG,
-    start_bias_jacobian=None,
-):
-    """Kalman fine alignment from the body-to-NED start `c0` (module docstring).
-
-    **Arguments:** `step_s`: filter step [s] (increments summed over it); `start_s`: time
-    from the log's start at which the fine stage begins; `arw` [rad/√s], `vrw` [m/s/√s]:
-    sensor white noise; `velocity_noise` [m/s]: measurement noise of the zero-velocity
-    update (sway of a parked vehicle); `gyro_bias_std` [rad/s], `accel_bias_std` [m/s²]:
-    the assumed sensor grade (the heading σ ends at `gyro_bias_std / (ω_ie cos lat)`);
-    `attitude_std_deg` (level, level, heading) [°]: the start attitude's error σ — with
-    `start_bias_jacobian` (3, 6), A = ∂φ/∂(gyro, accel bias) of `c0`'s error
-    ([`coarse_bias_jacobian`][hrgjax.ins.alignment.coarse_bias_jacobian] for a coarse
-    start), the part of it the biases do not explain: the prior is then φ = A b + that, its
-    correlation with the bias states kept (without it a start whose error comes from the
-    biases counts that information twice). `align` adds the coarse means' white noise to it.
-
-    **Returns:** `(t (K,), C_bn (K, 3, 3), P (K, 12, 12), biases (6,))`: P's states are
-    velocity error (NED) [m/s], φ [rad], gyro [rad/s] and accelerometer [m/s²] biases in
-    the NED frame; `biases` in the body frame (mapped by the final Ĉ).
-
-    **Raises:** `ValueError` for a log within 1° of a pole (no gyrocompassing there)."""
-    return _fine_run(log, c0, step_s=step_s, start_s=start_s, arw=arw, vrw=vrw,
-                     velocity_noise=velocity_noise, gyro_bias_std=gyro_bias_std,
-                     accel_bias_std=accel_bias_std, attitude_std_deg=attitude_std_deg,
-                     start_bias_jacobian=start_bias_jacobian)[:4]  # fmt: skip
-
-
-def _fine_run(log, c0, *, step_s=1.0, start_s=0.0, arw=_ARW, vrw=_VRW, velocity_noise=0.01,
-              gyro_bias_std=_GYRO_BIAS_STD, accel_bias_std=1e-3,
-              attitude_std_deg=_ATTITUDE_STD_DEG, start_bias_jacobian=None):  # fmt: skip
-    """`fine_align`, and its innovations (K, 3) [m/s], their predicted σ (K, 3) and NIS (K,)."""
-    _check_gyrocompass_latitude(log.lat)
-    dt = log.dt
-    m = max(1, int(round(step_s / dt)))
-    i0 = int(round(start_s / dt))
-    n_blocks = (log.t.shape[0] - i0) // m
-    if n_blocks < 2:
-        raise ValueError(f"the log is too short for fine alignment with step_s={step_s}")
-    sl = slice(i0, i0 + n_blocks * m)
-    dth = log.dtheta[sl].reshape(n_blocks, m, 3).sum(1)
-    dv = log.dvel[sl].reshape(n_blocks, m, 3).sum(1)
-    t = log.t[sl].reshape(n_blocks, m)[:, -1]
-    if start_bias_jacobian is None:
-        jac = jnp.zeros((3, 6))
-    else:
-        jac = jnp.asarray(start_bias_jacobian, dtype=float)
-        if jac.shape != (3, 6):
-            raise ValueError(
-                f"fine_align start_bias_jacobian must have shape (3, 6) [rad per (rad/s, "
-                f"m/s²)]; got {jac.shape}"
-            )
-    return _fine(
-        jnp.asarray(c0), dth, dv, t, jnp.asarray(m * dt), jnp.asarray(log.lat), jnp.asarray(log.h),
-        jnp.asarray([arw, vrw, velocity_noise, gyro_bias_std, accel_bias_std]),
-        jnp.asarray(attitude_std_deg) * DEG, jac,
-    )  # fmt: skip
-
-
-@eqx.filter_jit
-def _fine(c0, dth, dv, t, h_step, lat, h, noise, att_std, jac):
-    arw, vrw, vnoise, bg_std, ba_std = (noise[i] for i in range(5))
-    lat_a, h_a = jnp.asarray(lat), jnp.asarray(h)
-    g_n = WGS84.gravity_ned(lat_a, h_a)
-    w_ie = earth_rate_ned(lat_a)
-    z3 = jnp.zeros(3)
-
-    # NED-frame bias states (constant at rest): body-frame ones mapped by the moving Ĉ read
-    # its turns as level accelerometer-bias information (z-RMS 1.3 at 88°)
-    f, gg, ga = error_matrices_at(WGS84, False, lat_a, h_a, z3, jnp.eye(3), -g_n)
-    fa = augmented(f, gg, ga)[3:, 3:]  # drop the (known) position states
-    gw = jnp.concatenate([gg[3:], jnp.zeros((6, 3))])
-    aw = jnp.concatenate([ga[3:], jnp.zeros((6, 3))])
-    phi_k, qd = van_loan(fa, arw**2 * gw @ gw.T + vrw**2 * aw @ aw.T, h_step)
-    jac = jac @ jnp.kron(jnp.eye(2), c0.T)  # ∂φ/∂(NED biases): b_body = c0ᵀ b_ned
-
-    var_b = jnp.concatenate([jnp.full(3, bg_std**2), jnp.full(3, ba_std**2)])
-    p0 = jnp.diag(jnp.concatenate([jnp.full(3, 0.1) ** 2, att_std**2, var_b]))
-    cross = jac * var_b[None, :]  # A Σ_b
-    p0 = p0.at[3:6, 6:].set(cross).at[6:, 3:6].set(cross.T)
-    p0 = p0.at[3:6, 3:6].add(cross @ jac.T)  # φ = A b + independent part
-    hm = jnp.zeros((3, 12)).at[:, :3].set(jnp.eye(3))
-    r = jnp.eye(3) * vnoise**2
-
-    def step(carry, inp):
-        c, v, bias, p = carry  # bias: NED frame
-        dth_k, dv_k = inp
-        dth_k = dth_k - c.T @ bias[:3] * h_step
-        dv_k = dv_k - c.T @ bias[3:] * h_step
-        c_new = _rotation(-w_ie * h_step) @ c @ _rotation(dth_k)
-        c_mid = 0.5 * (c + c_new)
-        v = v + c_mid @ dv_k + (g_n - 2.0 * jnp.cross(w_ie, v)) * h_step
-        prior = Gaussian(jnp.zeros(12), phi_k @ p @ phi_k.T + qd)
-        post, nu, s, _ = update(prior, v, hm, r)
-        x = post.x
-        c_new = _rotation(x[3:6]) @ c_new  # C ← (I + [φ×]) Ĉ
-        v = v - x[:3]
-        bias = bias + x[6:]
-        nis = nu @ jnp.linalg.solve(s, nu)
-        return (c_new, v, bias, post.P), (c_new, post.P, nu, jnp.sqrt(jnp.diag(s)), nis)
-
-    (c, _, bias, _), (cs, ps, nu, nu_std, nis) = jax.lax.scan(
-        step, (c0, z3, jnp.zeros(6), p0), (dth, dv)
-    )
-    body = jnp.concatenate([c.T @ bias[:3], c.T @ bias[3:]])  # body frame
-    return t, cs, ps, body, nu, nu_std, nis
-
-
 def _warn_heading(start: float, end: float, floor: float, lat: float, coarse: str,
                   sway: float = 0.0, white: float = 0.0) -> None:  # fmt: skip
     """`AlignmentWarning` for heading σ [°] `start`, `end` beyond the thresholds, by the cause:
@@ -553,48 +381,48 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
     longer than `coarse_s`, not a stationary record
     ([`check_stationary`][hrgjax.ins.alignment.check_stationary]), or within 1° of a pole."""
     require_x64("ins.alignment.align")
-    _check_gyrocompass_latitude(log.lat)
+    check_gyrocompass_latitude(log.lat)
     check_stationary(log, coarse_s, coarse_name=coarse_name)
     dt, step = log.dt, fine_kw.get("step_s", 1.0)
     n = int(round(coarse_s / dt))
     if (log.t.shape[0] - n) // max(1, int(round(step / dt))) < 2:
         raise ValueError(f"the record ({log.t.shape[0] * dt:.4g} s) needs 2 fine steps "
                          f"({2 * step:g} s) after {coarse_name} = {coarse_s:g} s")  # fmt: skip
-    f_b = jnp.sum(log.dvel[:n], 0) / (n * dt)
-    w_b = jnp.sum(log.dtheta[:n], 0) / (n * dt)
+    # the coarse span cut on the host: slicing the device arrays compiled per record length
+    dth_c, dv_c = device(np.asarray(log.dtheta)[:n]), device(np.asarray(log.dvel)[:n])
+    f_b = jnp.sum(dv_c, 0) / (n * dt)
+    w_b = jnp.sum(dth_c, 0) / (n * dt)
     c0 = coarse_align(f_b, w_b, log.lat)
     coarse = tuple(float(x) for x in euler_deg(c0))
-    jac, noise_var = coarse_error_model(
-        c0, log.lat, log.h, n * dt, fine_kw.get("arw", _ARW), fine_kw.get("vrw", _VRW)
-    )
+    fine_kw = {**FINE_DEFAULTS, **fine_kw}
+    jac, noise_var = coarse_error_model(c0, log.lat, log.h, n * dt, fine_kw["arw"], fine_kw["vrw"])
     fine_kw.setdefault("start_bias_jacobian", jac)
     parts = min(COARSE_PARTS, n)  # a span of fewer samples: one a part; of one: no scatter
     scatter = np.zeros(3) if n < 2 else np.diag(np.asarray(jac @ coarse_scatter(
-        log.dtheta[:n], log.dvel[:n], dt, parts=parts) @ jac.T))  # fmt: skip
-    std = np.asarray(fine_kw.get("attitude_std_deg", _ATTITUDE_STD_DEG), dtype=float)
+        dth_c, dv_c, dt, parts=parts) @ jac.T))  # fmt: skip
+    std = np.asarray(fine_kw["attitude_std_deg"], dtype=float)
     var = np.maximum(np.asarray(noise_var), scatter)  # white noise, or the span's sway
     fine_kw["attitude_std_deg"] = tuple(np.sqrt(std**2 + var / DEG**2))
-    bg = float(fine_kw.get("gyro_bias_std", _GYRO_BIAS_STD))
-    ba = float(fine_kw.get("accel_bias_std", 1e-3))
+    bg, ba = float(fine_kw["gyro_bias_std"]), float(fine_kw["accel_bias_std"])
     a = np.asarray(fine_kw["start_bias_jacobian"], dtype=float)
     p_start = np.diag(np.square(fine_kw["attitude_std_deg"]) * DEG**2) + (a * np.repeat(
         [bg**2, ba**2], 3)) @ a.T if a.shape == (3, 6) else None  # fmt: skip
-    t, cs, ps, bias, nu, nu_std, nis = _fine_run(log, c0, start_s=n * dt, **fine_kw)
-    hist = jax.vmap(euler_deg)(cs)
-    std = jax.vmap(_euler_std)(cs, ps[:, 3:6, 3:6])
-    last, s = np.asarray(hist[-1]), np.asarray(std[-1])
+    run = fine_run(log, c0, start_s=n * dt, **fine_kw)
+    std = np.asarray(run.std_history_deg)
+    last, s = np.asarray(run.history_deg)[-1], std[-1]
     floor = bg / (OMEGA_IE * math.cos(log.lat)) / DEG
-    sway_deg = float(_euler_std(c0, jnp.diag(jnp.asarray(scatter)))[0])
-    white_deg = float(_euler_std(c0, jnp.diag(noise_var))[0])
-    _warn_heading(float(np.asarray(std[0])[0]), float(s[0]), floor, log.lat, coarse_name,
-                  sway_deg, white_deg)  # fmt: skip
-    c_end, p_end = np.asarray(cs[-1]), np.asarray(ps[-1])
+    sway_deg = float(euler_std_deg(c0, jnp.diag(jnp.asarray(scatter)))[0])
+    white_deg = float(euler_std_deg(c0, jnp.diag(noise_var))[0])
+    _warn_heading(float(std[0, 0]), float(s[0]), floor, log.lat, coarse_name, sway_deg,
+                  white_deg)  # fmt: skip
+    c_end, p_end = np.asarray(run.c_bn)[-1], np.asarray(run.p)[-1]
     bias_std = np.sqrt(np.concatenate([np.diag(c_end.T @ p_end[k:k + 3, k:k + 3] @ c_end)
                                        for k in (6, 9)]))  # fmt: skip
     return AlignmentResult(
         float(last[0]), float(last[1]), float(last[2]), float(s[0]), float(s[1]), float(s[2]),
-        t, hist, std, coarse, bias, cs[-1], bg / DEG_PER_H, jnp.asarray(bias_std), nu, nu_std,
-        nis, float(fine_kw.get("velocity_noise", 0.01)),
-        None if p_start is None else tuple(float(x) for x in _euler_std(c0, p_start)),
+        run.t, run.history_deg, run.std_history_deg, coarse, run.biases, device(c_end),
+        bg / DEG_PER_H, device(bias_std), run.innovations, run.innovation_std, run.nis,
+        float(fine_kw["velocity_noise"]),
+        None if p_start is None else tuple(float(x) for x in euler_std_deg(c0, p_start)),
         sway_deg,
     )  # fmt: skip

@@ -11,6 +11,7 @@ roll). Headings are clockwise from north in [0, 360) in both.
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -18,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compiled import device
 from .._data_files import beyond_exact, rounded_integer, rounded_integer_error
 from ..units import ARCSEC, DEG
 
@@ -124,17 +126,63 @@ def load_psins(path) -> ImuLog:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no IMU log at {path}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as err:
-        at = path.read_bytes()[: err.start].count(b"\n") + 1
+    try:  # streamed: the text is never held whole (a 4-h log's was 0.8 GB with its lines)
+        with path.open(encoding="utf-8") as f:
+            numbered, at = _psins_header(f)
+            head = _psins_head(path, numbered)
+            with warnings.catch_warnings():  # no sample rows: refused below, in one line
+                warnings.filterwarnings("ignore", "loadtxt: input contained no data")
+                try:
+                    raw = np.loadtxt(f, dtype=float, comments=("%", "#"), ndmin=2)
+                except ValueError as err:
+                    raise ValueError(
+                        f"{path}: sample rows must hold 6 numbers each ({err})"
+                    ) from err
+    except UnicodeDecodeError:
+        data = path.read_bytes()
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError as err:  # the whole text's offset: the line
+            line = data[: err.start].count(b"\n") + 1
+            raise ValueError(
+                f"{path}: line {line}: not UTF-8 text ({err.reason}); a PSINS log is plain text"
+            ) from None
+        raise
+    if raw.size == 0:
+        raise ValueError(f"{path}: a PSINS log needs 3 header lines and samples; got no samples")
+    (pitch, roll, yaw, *_), (lat, lon, h, t0, dt_ms, g), units = head
+    if not -90.0 <= lat <= 90.0:
         raise ValueError(
-            f"{path}: line {at}: not UTF-8 text ({err.reason}); a PSINS log is plain text"
-        ) from None
-    numbered = [(i, ln) for i, ln in enumerate(text.splitlines(), 1)
-                if ln.strip() and not ln.lstrip().startswith("%")]  # fmt: skip
+            f"{path}: the header's latitude (line 2, field 1) = {lat:g}° is outside ±90°"
+        )
+    if not dt_ms > 0:
+        raise ValueError(f"{path}: the sampling interval (header line 2, field 5) must be > 0 ms")
+    if raw.shape[1] != 6:
+        raise ValueError(f"{path}: sample rows must hold 6 numbers; got {raw.shape[1]}")
+    if beyond_exact({"samples": raw.ravel()}):  # an integer the float may have rounded
+        _refuse_rounded_samples(path, at)
+    gyro_rfu = raw[:, :3] * np.asarray(units[:3]) * ARCSEC
+    acc_rfu = raw[:, 3:] * np.asarray(units[3:]) * 1e-6 * g
+    rfu_to_frd = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    n = raw.shape[0]
+    t = t0 + dt_ms * 1e-3 * np.arange(1, n + 1)
+    attitude = (pitch, roll, wrap_heading_deg(-yaw))  # PSINS yaw: counter-clockwise
+    return ImuLog(
+        device(t),  # no program per length (jnp.asarray compiled one)
+        device(gyro_rfu @ rfu_to_frd.T),
+        device(acc_rfu @ rfu_to_frd.T),
+        lat * DEG,
+        lon * DEG,
+        h,
+        attitude if all(math.isfinite(a) for a in attitude) else None,
+    )
+
+
+def _psins_head(path, numbered) -> list:
+    """The three header lines `numbered` ((line number, text)) of the PSINS file `path` as
+    numbers, checked (`load_psins`'s errors)."""
     lines = [ln for _, ln in numbered]
-    if len(lines) < 4:
+    if len(lines) < 3:
         raise ValueError(
             f"{path}: a PSINS log needs 3 header lines and samples; got {len(lines)} lines"
         )
@@ -158,37 +206,30 @@ def load_psins(path) -> ImuLog:
                 f"{path}: the header's {name} (line {2 + k // 6}, field {1 + k % 6}) must be "
                 f"finite; got {v}"
             )
-    (pitch, roll, yaw, *_), (lat, lon, h, t0, dt_ms, g), units = head
-    if not -90.0 <= lat <= 90.0:
-        raise ValueError(
-            f"{path}: the header's latitude (line 2, field 1) = {lat:g}° is outside ±90°"
-        )
-    if not dt_ms > 0:
-        raise ValueError(f"{path}: the sampling interval (header line 2, field 5) must be > 0 ms")
-    try:
-        raw = np.loadtxt(lines[3:], dtype=float, ndmin=2)
-    except ValueError as err:
-        raise ValueError(f"{path}: sample rows must hold 6 numbers each ({err})") from err
-    if raw.shape[1] != 6:
-        raise ValueError(f"{path}: sample rows must hold 6 numbers; got {raw.shape[1]}")
-    if beyond_exact({"samples": raw.ravel()}):  # an integer the float may have rounded
-        for i, (at, ln) in enumerate(numbered[3:]):
-            _refuse_rounded(path, f"line {at}, sample row {i}", ln.split(), _PSINS_SAMPLE)
-    gyro_rfu = raw[:, :3] * np.asarray(units[:3]) * ARCSEC
-    acc_rfu = raw[:, 3:] * np.asarray(units[3:]) * 1e-6 * g
-    rfu_to_frd = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-    n = raw.shape[0]
-    t = t0 + dt_ms * 1e-3 * np.arange(1, n + 1)
-    attitude = (pitch, roll, wrap_heading_deg(-yaw))  # PSINS yaw: counter-clockwise
-    return ImuLog(
-        jnp.asarray(t),
-        jnp.asarray(gyro_rfu @ rfu_to_frd.T),
-        jnp.asarray(acc_rfu @ rfu_to_frd.T),
-        lat * DEG,
-        lon * DEG,
-        h,
-        attitude if all(math.isfinite(a) for a in attitude) else None,
-    )
+    return head
+
+
+def _psins_header(f) -> tuple[list, int]:
+    """The first three lines of the open PSINS file `f` that are neither blank nor `%`
+    comments, as `(line number, text)`, and the number of lines read."""
+    numbered, at = [], 0
+    while len(numbered) < 3 and (ln := f.readline()):
+        at += 1
+        if ln.strip() and not ln.lstrip().startswith("%"):
+            numbered.append((at, ln.rstrip("\r\n")))
+    return numbered, at
+
+
+def _refuse_rounded_samples(path, at: int) -> None:
+    """`_refuse_rounded` on each sample row of the PSINS file `path` after its line `at` (the
+    header's last), read again line by line."""
+    with Path(path).open(encoding="utf-8") as f:
+        row = 0
+        for i, ln in enumerate(f, 1):
+            if i <= at or not ln.strip() or ln.lstrip().startswith(("%", "#")):
+                continue
+            _refuse_rounded(path, f"line {i}, sample row {row}", ln.split(), _PSINS_SAMPLE)
+            row += 1
 
 
 _PSINS_SAMPLE = tuple(f"{s} increment {a}" for s in ("gyro", "accelerometer")
