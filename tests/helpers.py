@@ -293,3 +293,18 @@ SHORT_RAMPS = (
     (0.0, 60.0, 400.0, 0.0, -30.0),
     (60.0, 0.0, 400.0, 2.0, 60.0),
 )
+
+
+def recording_bar(made: list):
+    """A stand-in for `hrgjax._progress.bar` (monkeypatch it in) that records every bar it
+    makes in `made`, each with its `total` and the count `n` it reached (the library's
+    silent bar, which counts, and nothing drawn)."""
+    from hrgjax._progress import _Silent  # no public name: the silent bar is internal
+
+    class RecordingBar(_Silent):
+        def __init__(self, total=None, desc=None, unit="step", **_):
+            super().__init__(total)
+            self.desc = desc
+            made.append(self)
+
+    return RecordingBar

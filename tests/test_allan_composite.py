@@ -9,7 +9,7 @@ import math
 import jax
 import numpy as np
 import pytest
-from helpers import octave_pairs
+from helpers import octave_pairs, recording_bar
 
 import hrgjax as hg
 from hrgjax.allan import octave_covariance
@@ -166,22 +166,7 @@ def test_the_printed_deviation_is_passed_through_not_computed_again(white_walk, 
     printed = hg.allan.deviation(y, fs, unit="°/h")  # the CLI's: every octave up to n/2
     made = []
 
-    class Bar:
-        def __init__(self, total, desc, unit="step", **_):
-            self.total, self.n = total, 0
-            made.append(self)
-
-        def update(self, n=1):
-            self.n += n
-
-        def refresh(self):
-            pass
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc):
-            pass
+    Bar = recording_bar(made)
 
     # the raw log's deviation beside its detrended record (review of cb1d956): equal at m = 1
     # to 1e-10, 30× apart at long τ

@@ -8,6 +8,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from helpers import recording_bar
 
 import hrgjax as hg
 from hrgjax import _csv_numeric, _data_files
@@ -144,22 +145,7 @@ def test_long_reads_show_progress(tmp_path, monkeypatch):
     paths (the validating reader's second one over its columns), that reaches its total."""
     shown = []
 
-    class Bar:
-        def __init__(self, total, desc, unit):
-            self.total, self.n = total, 0
-            shown.append(self)
-
-        def update(self, n):
-            self.n += n
-
-        def close(self):
-            pass
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc):
-            self.close()
+    Bar = recording_bar(shown)
 
     monkeypatch.setattr(_csv_numeric, "PROGRESS_LINES", 5)
     monkeypatch.setattr(_data_files, "PROGRESS_LINES", 5)
