@@ -103,3 +103,21 @@ def test_streamed_psins_loader_skips_comments_and_blank_lines_among_samples(tmp_
     for name in ("t", "dtheta", "dvel"):
         np.testing.assert_array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name)))
     assert float(a.dtheta[1, 1]) == pytest.approx(7 * np.pi / 180 / 3600)  # right → y (FRD)
+
+
+def test_fine_align_stays_differentiable_and_vmappable():
+    """Review of f38354b: padding on the host made `fine_align` refuse traced inputs
+    (TracerArrayConversionError under grad, vmap, jit). Traced, it pads in JAX (one path for
+    all three): the heading σ's derivative in the assumed ARW equals a central difference."""
+    import jax
+
+    log = _simulated()  # its coarse/fine programs shared with the test above
+    c0 = al.align(log, coarse_s=60.0).c_bn
+
+    def heading_std(arw):
+        _, _, p, _ = al.fine_align(log, c0, start_s=60.0, arw=arw)
+        return jnp.sqrt(p[-1, 5, 5])
+
+    arw, h = 3e-5, 1e-7
+    fd = (heading_std(arw + h) - heading_std(arw - h)) / (2 * h)
+    np.testing.assert_allclose(jax.grad(heading_std)(arw), fd, rtol=1e-5)

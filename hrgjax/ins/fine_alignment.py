@@ -171,10 +171,13 @@ def fine_run(log: ImuLog, c0, *, step_s: float = 1.0, start_s: float = 0.0,
     k = (log.t.shape[0] - i0) // m
     if k < 2:
         raise ValueError(f"the log is too short for fine alignment with step_s={step_s}")
+    noise = [arw, vrw, velocity_noise, gyro_bias_std, accel_bias_std]
+    inputs = (log.dtheta, log.dvel, log.t, c0, noise, attitude_std_deg, start_bias_jacobian)
+    xp = jnp if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(inputs)) else np
     if start_bias_jacobian is None:
         jac = np.zeros((3, 6))
     else:
-        jac = np.asarray(start_bias_jacobian, dtype=float)
+        jac = xp.asarray(start_bias_jacobian, dtype=float)
         if jac.shape != (3, 6):
             raise ValueError(
                 f"fine_align start_bias_jacobian must have shape (3, 6) [rad per (rad/s, "
@@ -182,12 +185,22 @@ def fine_run(log: ImuLog, c0, *, step_s: float = 1.0, start_s: float = 0.0,
             )
     size = bucket_size(k)  # steps, padded: one program serves every K up to it
     sl = slice(i0, i0 + k * m)
+    att_std = xp.asarray(attitude_std_deg, dtype=float) * DEG
+    if xp is jnp:  # traced (grad, vmap, jit over the log, c0 or the noise): jnp throughout
+        pad = jnp.zeros(((size - k) * m, 3))
+        dth, dv = (_step_sums(jnp.concatenate([jnp.asarray(x)[sl], pad]), m)
+                   for x in (log.dtheta, log.dvel))  # fmt: skip
+        t = jnp.asarray(log.t)[sl].reshape(k, m)[:, -1]
+        out = _fine(jnp.asarray(c0, dtype=float), dth, dv, jnp.asarray(k), m * dt, log.lat,
+                    log.h, jnp.stack([jnp.asarray(v, dtype=float) for v in noise]), att_std,
+                    jnp.asarray(jac))  # fmt: skip
+        cs, ps, body, nu, nu_std, nis, hist, std = out
+        return FineRun(t, cs[:k], ps[:k], body, *(x[:k] for x in (nu, nu_std, nis, hist, std)))
+    # concrete: sliced and padded on the host, so no program depends on the log's length
     dth, dv = np.zeros((size * m, 3)), np.zeros((size * m, 3))
     dth[: k * m], dv[: k * m] = np.asarray(log.dtheta)[sl], np.asarray(log.dvel)[sl]
     dth, dv = _step_sums(device(dth), m), _step_sums(device(dv), m)  # a small program per m
     t = np.asarray(log.t)[sl].reshape(k, m)[:, -1]
-    noise = [arw, vrw, velocity_noise, gyro_bias_std, accel_bias_std]
-    att_std = np.asarray(attitude_std_deg, dtype=float) * DEG
     out = _fine(device(c0, float), device(dth), device(dv), device(k), device(m * dt),
                 device(log.lat), device(log.h), device(noise, float), device(att_std),
                 device(jac))  # fmt: skip
