@@ -14,7 +14,7 @@ steps compiled afresh for each K (7–9.5 s for the PSINS log's slices of 160 00
 samples; the disk cache never served a new log). The steps' increments are padded with
 zeros to a power-of-two number of steps (`hrgjax._compiled.bucket_size`, at
 least 64) and the steps past K leave the filter's state as it was (masked), so the K steps'
-results are the unpadded ones (bit for bit on the PSINS log and simulated logs) and a log of
+results are the unpadded ones (bit for bit from 64 steps up; round-off below) and a log of
 any length in a bucket already compiled compiles nothing, whatever its sample rate or
 `step_s` (only the small program summing each step's samples is per samples-a-step):
 `benchmarks/align_compile.py`. The padded steps cost run time only (≤ 2×: 0.06 s for the

@@ -112,7 +112,8 @@ quantity a unit error would spoil."""
 
 
 def load_psins(path) -> ImuLog:
-    """Read a PSINS-format text IMU log (provenance in `tests/data/README.md`): `%` comments, three
+    """Read a PSINS-format text IMU log (provenance in `tests/data/README.md`): `%` comments
+    (whole lines, or after a sample's six fields), three
     header lines (attitude [°] and velocity; lat [°], lon [°], h [m], t0 [s], interval [ms],
     g; increment units: gyro [arcsec] ×3, accelerometer [µg·s] ×3), then one line of six
     integer increments per sample, axes right–forward–up. Returned in FRD, the heading
