@@ -221,13 +221,6 @@ class ContinuousProblem(AbstractProblem):
         return stats.chi2_sf(fit.heldout_chi2, max(dof, 1)) < alpha
 
     # -- fits ----------------------------------------------------------------
-    def _free(self, model):
-        """Regular parameters of `model` are free; nonregular ones stay where they are."""
-        free = np.zeros(self.layout.size, bool)
-        for n in model:
-            free[self.layout.index(n, which=True)] = True
-        return free
-
     def _basis(self, names):
         """(P, m) columns picking the regular parameters of `names`."""
         idx = [i for n in names for i in self.layout.index(n, which=True)]
