@@ -374,9 +374,9 @@ def _kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
 def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     r"""Rauch–Tung–Striebel smoother: the filter of
     [`kalman_filter`][hrgjax.kalman.kalman_filter] forward, then backward
-    $C_k = P_{k|k}\Phi_{k+1}^	op P_{k+1|k}^{-1}$ (a Cholesky solve),
+    $C_k = P_{k|k}\Phi_{k+1}^\top P_{k+1|k}^{-1}$ (a Cholesky solve),
     $x_{k|K} = x_{k|k} + C_k(x_{k+1|K} - x_{k+1|k})$,
-    $P_{k|K} = P_{k|k} + C_k(P_{k+1|K} - P_{k+1|k})C_k^	op$ — the posterior of every state
+    $P_{k|K} = P_{k|k} + C_k(P_{k+1|K} - P_{k+1|k})C_k^\top$ — the posterior of every state
     given all the measurements. Same arguments (and checks) as the filter.
 
     **Returns:** `(smoothed means (K, n), covariances (K, n, n), the filter's total

@@ -25,3 +25,19 @@ def test_no_import_cycle_and_no_private_name_across_modules():
     assert pkg_uses == {}, pkg_uses
     long = {str(p): n for p in files if (n := len(p.read_text().splitlines())) > 600}
     assert not long, long
+
+
+def test_no_control_character_in_the_sources():
+    """A tab or form feed in a source file is a LaTeX escape (`\\top`, `\\theta`, `\\frac`)
+    that a docstring without the `r` prefix turned into a control character: the rendered
+    API page then shows "^ op" for "^⊤"."""
+    root = HOUSE.parents[1]
+    bad = {
+        str(p.relative_to(root)): i
+        for folder in ("hrgjax", "benchmarks", "tests", "docs")
+        for p in sorted((root / folder).rglob("*"))
+        if p.suffix in (".py", ".md")
+        for i, line in enumerate(p.read_text().splitlines(), 1)
+        if any(c in line for c in "\t\x07\x08\x0b\x0c")
+    }
+    assert not bad, bad

@@ -170,7 +170,7 @@ class Empirical(eqx.Module):
     must learn from the bench, with no physics to carry it between points. The drift
     D(θ, T) [rad/s], the scale factor's departure SF − 1 and the readout's temperature
     sensitivity s_T(θ, T) [rad/°C] are each a sum of the products of
-    $1, \cos 2n	heta, \sin 2n	heta$ (n ≤ `harmonics`) and Legendre polynomials of
+    $1, \cos 2n\theta, \sin 2n\theta$ (n ≤ `harmonics`) and Legendre polynomials of
     (T − 10 °C)/50 °C up to `degree`, and the measured pattern rate is
     $-k_e(\mathrm{SF}\,\Omega + D) + s_T\dot T$ (k_e = `k_e`). Its coefficients have a
     Gaussian prior of magnitude `drift_dph` [°/h], `scale_factor` and `st_rad_per_c`
