@@ -497,6 +497,54 @@ def test_totdev_edf_holds_to_the_last_factor_and_is_not_overconfident():
             allan.chi2_ppf(0.5, k)
 
 
+def test_totdev_of_angle_noise_is_bias_corrected_with_its_exact_edf():
+    """Totvar reads the end point twice over (2x₀ − xⱼ) where a difference reaches past the
+    record: for white angle noise E[Totvar] = tr A/(6(N − 2))·σ² (1 + (4/3)τ/T up to T/2,
+    8/3 at τ = T), which SP 1065 leaves uncorrected. `totvar_white_phase`'s closed form
+    equals the dense quadratic form's tr A and EDF (tr A)²/‖A‖²_F; over 4000 records of 64
+    samples the raw Totvar divided by it averages the true 3σₓ²/τ² (the raw one 1.34–2.69×
+    it) with the spread 2/EDF; `deviation` divides α = 2's totdev by it and reports its
+    EDF. Flicker angle noise's correction (its structure function ln(πk) + γ) equals the
+    exact one of a 20-term Gauss–Markov flicker phase within 1 %."""
+    for n, m in ((3, 1), (4, 3), (17, 5), (17, 8), (17, 16), (40, 13), (40, 20), (41, 39)):
+        rows = totvar_rows(n, m)
+        g = rows @ rows.T
+        bias, edf = allan.totvar_white_phase(m, n)
+        assert bias == pytest.approx(np.trace(g) / (6 * (n - 2)), rel=1e-12)
+        assert edf == pytest.approx(quadratic_form_edf(rows), rel=1e-12)
+    n = 65
+    x = np.random.default_rng(4).normal(size=(4000, n))  # white phase, σₓ = 1, τ₀ = 1 s
+    y = jnp.asarray(np.diff(x, axis=1))
+    from hrgjax.allan.deviations import curve  # `deviation`'s estimator, to m = N − 1
+
+    ms = jnp.asarray([16, 32, 64])
+    raws = np.asarray(jax.vmap(lambda r: curve(r, ms, 1.0, "totdev"))(y)) ** 2
+    for j, (m, raw_ratio) in enumerate(((16, 1 + 4 / 3 / 4), (32, 1 + 4 / 3 / 2), (64, 8 / 3))):
+        raw = raws[:, j] / (3.0 / m**2)
+        bias, edf = allan.totvar_white_phase(m, n)
+        assert bias == pytest.approx(raw_ratio, rel=0.01)  # to O(1/n)
+        corrected = raw / bias
+        assert corrected.mean() == pytest.approx(1.0, abs=3 * math.sqrt(2 / edf / 4000))
+        assert np.var(corrected) == pytest.approx(2 / edf, rel=0.15), (m, edf)
+    r = allan.deviation(np.asarray(y[0]), 1.0, kind="totdev", taus=[2, 16, 32, 64])
+    for k, a, factor, e in zip(r.m, r.alpha, r.bias_factor, r.edf, strict=True):
+        assert factor == pytest.approx(1 / math.sqrt(allan.totvar_bias(a, k, n)), rel=1e-12)
+        if a == 2:
+            assert factor < 1 and e == pytest.approx(allan.totvar_white_phase(k, n)[1])
+    assert 2 in r.alpha
+    phi = np.exp(-1.0 / (0.5 * 2.0 ** np.arange(20)))
+    n = 129
+    lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    cov = np.sum(phi[:, None, None] ** lag[None], axis=0)
+    for m in (32, 64, 128):
+        rows = totvar_rows(n, m)
+        avar = (6 * cov[0, 0] - 8 * cov[0, m] + 2 * cov[0, 2 * m]) if 2 * m < n else None
+        if avar is None:  # 2m beyond the record: the stationary covariance at lag 2m
+            avar = 6 * cov[0, 0] - 8 * cov[0, m] + 2 * float(np.sum(phi ** (2 * m)))
+        exact = np.trace(rows @ cov @ rows.T) / (n - 2) / avar
+        assert allan.totvar_bias(1, m, n) == pytest.approx(exact, rel=0.01), m
+
+
 def test_interval_level_below_one_half_is_that_level():
     """NIST SP 1065 eq. 45, p = (1 − ci)/2 for any ci: the ci = 0.3 interval is
     σ·√(edf/χ²(0.65)) … σ·√(edf/χ²(0.35)) (scipy's quantiles), narrower than the 0.7 one;

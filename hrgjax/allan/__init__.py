@@ -11,7 +11,7 @@ rate ramp $R\tau/\sqrt2$.
 Every name is importable from `hrgjax.allan` (it was one module until issue 45); inside:
 `deviations` (the estimators and the compiled curve), `result` (`deviation`: that curve on
 τ grids with its statistics, an `AllanResult`),
-`total` (mtotdev and ttotdev, NumPy),
+`total` (mtotdev and ttotdev, NumPy), `totvar` (totdev's bias and EDF by noise type),
 `uncertainty` (noise identification, EDF, χ² intervals), `noise_terms` (the IEEE 952
 line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
 exact covariance of the octave estimates, for rate samples taken as interval means or as
@@ -35,9 +35,12 @@ from .noise_terms import NoiseFit as NoiseFit
 from .noise_terms import fit_noise as fit_noise
 from .resample import to_uniform as to_uniform
 from .result import KINDS as KINDS
-from .result import TOTVAR_BIAS as TOTVAR_BIAS
 from .result import AllanResult as AllanResult
 from .result import deviation as deviation
+from .totvar import TOTVAR_BIAS as TOTVAR_BIAS
+from .totvar import edf_totdev as edf_totdev
+from .totvar import totvar_bias as totvar_bias
+from .totvar import totvar_white_phase as totvar_white_phase
 from .uncertainty import ACF_POINTS as ACF_POINTS
 from .uncertainty import B1_AVERAGES as B1_AVERAGES
 from .uncertainty import NOISE_RULES as NOISE_RULES
@@ -46,6 +49,5 @@ from .uncertainty import b1_expected as b1_expected
 from .uncertainty import chi2_ppf as chi2_ppf
 from .uncertainty import confidence_interval as confidence_interval
 from .uncertainty import edf_greenhall as edf_greenhall
-from .uncertainty import edf_totdev as edf_totdev
 from .uncertainty import noise_id as noise_id
 from .uncertainty import rn_expected as rn_expected

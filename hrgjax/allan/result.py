@@ -19,6 +19,7 @@ from .._checks import check_1d, describe, is_finite_real
 from .._progress import bar
 from .._x64 import require_x64
 from .deviations import CURVE_CHUNK, curve, curve_parts
+from .totvar import edf_totdev, totvar_bias
 from .uncertainty import (
     ACF_POINTS,
     NOISE_RULES,
@@ -26,7 +27,6 @@ from .uncertainty import (
     check_rate_has_noise,
     confidence_interval,
     edf_greenhall,
-    edf_totdev,
     noise_id,
 )
 
@@ -54,7 +54,9 @@ class AllanResult:
       Riley & Greenhall 2004; the B1 and R(n) ratios where the record is short at that τ:
       [`noise_id`][hrgjax.allan.noise_id]).
     - `bias_factor`: what `dev` was multiplied by to remove the estimator's bias (totdev:
-      1/√(1 − a·τ/T), NIST SP 1065 §5.2.11; 1 elsewhere and where the correction was off).
+      1/√[`totvar_bias`][hrgjax.allan.totvar_bias], 1/√(1 − a·τ/T) for flicker and
+      random-walk rate noise (NIST SP 1065 §5.2.11), computed for white and flicker angle
+      noise; mtotdev, ttotdev: 1/√b(α); 1 elsewhere and where the correction was off).
     - `segments`: for a rate record with gaps, the (start, length) of each gap-free run of
       samples [samples], an (R, 2) integer array
       ([`fit_noise`][hrgjax.allan.fit_noise] builds the estimates' covariance from it);
@@ -171,12 +173,6 @@ def _noise_in_steps(x, m, progress, **options):
     return np.asarray(out, dtype=int)
 
 
-TOTVAR_BIAS = {-1: 0.481, -2: 0.750}
-"""NIST SP 1065 §5.2.11: the total variance's bias a by noise type α (flicker and random-walk
-rate noise; none for white rate or angle noise): E[Totvar] = (1 − a·τ/T)·σ²(τ), T the
-record's length."""
-
-
 def deviation(
     y,
     rate_hz: float,
@@ -203,8 +199,10 @@ def deviation(
       allantools does). Factors whose estimate would average fewer than 2 terms are left
       out (allantools' and Stable32's limit).
     - `ci`: confidence level of the interval (default ±1σ, 0.683).
-    - `bias_correction`: totdev divided by √(1 − a·τ/T) for the identified noise
-      ([`TOTVAR_BIAS`][hrgjax.allan.TOTVAR_BIAS]), mtotdev and ttotdev by
+    - `bias_correction`: totdev divided by √(E[Totvar]/σ²) for the identified noise
+      ([`totvar_bias`][hrgjax.allan.totvar_bias]: 1 − a·τ/T for flicker and random-walk
+      rate noise as SP 1065 and Stable32; for white and flicker angle noise, which SP 1065
+      leaves uncorrected, 1 + (4/3)·τ/T and about ¾ of that excess), mtotdev and ttotdev by
       √[`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS], as Stable32 reports them; `False`
       gives the raw estimators (allantools').
     - `noise_rule`: how the noise type is read where the lag-1 autocorrelation cannot:
@@ -358,8 +356,8 @@ def deviation(
             factor = 1.0 / np.sqrt([MTOTVAR_BIAS[int(min(max(a, -2), 2))] for a in alpha])
             dev = dev * factor
         if kind == "totdev" and bias_correction:
-            a = np.asarray([TOTVAR_BIAS.get(int(k), 0.0) for k in alpha])
-            factor = 1.0 / np.sqrt(1.0 - a * taus_s / ((n_phase - 1) * tau0))
+            factor = 1.0 / np.sqrt([totvar_bias(int(a), int(k), n_phase)
+                                    for a, k in zip(alpha, m, strict=True)])  # fmt: skip
             dev = dev * factor
         low, high = confidence_interval(dev, edf, ci)
     return AllanResult(

@@ -2,7 +2,7 @@
 
 Which power-law noise dominates at each τ ([`noise_id`][hrgjax.allan.noise_id], lag-1
 autocorrelation), the equivalent degrees of freedom of the estimate
-([`edf_greenhall`][hrgjax.allan.edf_greenhall]; [`edf_totdev`][hrgjax.allan.edf_totdev])
+([`edf_greenhall`][hrgjax.allan.edf_greenhall]; totdev's in `hrgjax.allan.totvar`)
 and its χ² confidence interval ([`confidence_interval`][hrgjax.allan.confidence_interval],
 [`chi2_ppf`][hrgjax.allan.chi2_ppf]), as allantools and Stable32 compute them.
 """
@@ -437,60 +437,6 @@ def _edf_greenhall(alpha, d, m, n, overlapping, modified):
         a0 = math.comb(4 * d, 2 * d) / math.comb(2 * d, d) ** 2
         return 1.0 / ((a0 - (d / 2.0) / r) / m_terms)
     return _sz(0, m, 2, d) ** 2 * m_terms / _basic_sum(j, m_terms, s, m, 2, d)
-
-
-def edf_totdev(alpha: int, m: int, n: int) -> float:
-    """EDF of the total deviation at factor `m` over `n` phase points for noise type `alpha`
-    (rate PSD ∝ f^α), for every factor totdev reads (1 ≤ m ≤ n − 1):
-
-    - α = 0, −1, −2: b·N/m − c, N = `n` (NIST SP 1065 Table 7);
-    - α = 1 (flicker angle noise): Stein's (N − 1)-point approximation for the Allan variance
-      (as allantools), exp(√(ln((N − 1)/(2m))·ln((2m + 1)(N − 1)/4))), up to m = N/4; beyond,
-      where it falls to 1 at m = (N − 1)/2 and is undefined past it, never below Table 7's
-      white-rate line 1.5·N/m;
-    - α = 2 (white angle noise): the smaller of Stein's (N + 1)(N − 2m)/(2(N − m)) (for
-      m < (N − 1)/2) and that line: the reflected ends correlate totdev's terms, and Stein's
-      value alone is 1.4–2.7× the Monte Carlo EDF at m = 20–80 of N = 201;
-    - at most the Greenhall EDF of an overlapping Allan deviation averaging as many terms
-      (N − 2, on N + 2m − 2 points): Table 7's line exceeds the number of terms at m = 1–2
-      (3002 at m = 1 over 2001 points, 1999 terms; Monte Carlo 1200–1600, Greenhall 1565), and
-      Stein's flicker value exceeds the Monte Carlo EDF from m ≈ N/60 on;
-    - never below 1.
-
-    Against the exact EDF of totdev's quadratic form (N = 201) it is conservative for white
-    angle noise at every m (3.0 against 11.6 at m = 99) and high for white rate noise by at
-    most 17 % at m = 1 (Greenhall's own excess there) and 26 % at m ≈ 3N/4 (Table 7). On
-    200 simulated records of N = 2001: rate random walk below the Monte Carlo EDF; flicker
-    angle noise up to 1.4× it at m = 128 (Stein's value alone: 1.8×).
-
-    **Raises:** `ValueError` for m outside 1 … n − 1."""
-    alpha, m, n = int(alpha), int(m), int(n)
-    if not 1 <= m <= n - 1:
-        raise ValueError(f"m = {m} is outside totdev's factors 1 … n − 1 = {n - 1}")
-    table7 = {0: (1.50, 0.0), -1: (1.17, 0.22), -2: (0.93, 0.36)}
-    line = 1.5 * n / m
-    if alpha in table7:
-        b, c = table7[alpha]
-        edf = b * n / m - c
-    elif alpha == 2:
-        edf = min(_stein_simple(2, m, n), line) if 2 * m < n - 1 else line
-    elif alpha == 1:
-        edf = _stein_simple(1, m, n) if 2 * m < n - 1 else 0.0
-        if 4 * m > n:
-            edf = max(edf, line)
-    else:
-        edf = float(n - 1)
-    cap = edf_greenhall(min(max(alpha, -2), 2), 2, m, n + 2 * m - 2, overlapping=True,
-                        modified=False)  # fmt: skip
-    return max(min(edf, cap), 1.0)
-
-
-def _stein_simple(alpha: int, m: int, n: int) -> float:
-    """The (N − 1)-point EDF approximations of the Allan variance for white (α = 2) and
-    flicker (α = 1) angle noise (Stein 1985; allantools' `edf_simple`), m < (N − 1)/2."""
-    if alpha == 2:
-        return (n + 1) * (n - 2 * m) / (2 * (n - m))
-    return math.exp(math.sqrt(math.log((n - 1) / (2 * m)) * math.log((2 * m + 1) * (n - 1) / 4)))
 
 
 def confidence_interval(dev, edf, ci: float = ONE_SIGMA):
