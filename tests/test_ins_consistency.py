@@ -113,6 +113,10 @@ def test_bands_are_the_chi2_quantiles_and_hold_their_level():
     for scale, fits in ((1.01, "consistent"), (1.05, "does not fit")):
         c = ekf.nis_check(runs * scale, 6)
         assert c["nis_mean"] > c["band"][1] and c["verdict"] == fits, c
+    # below the band: σ too large, e.g. a short Gauss–Markov τ folded into a random walk
+    low = ekf.nis_check(runs * 0.9, 6)
+    assert low["verdict"] == "does not fit" and "larger than the errors" in low["message"]
+    assert "Gauss–Markov" in low["message"] and "random walk of density 2σ²/τ" in low["message"]
     assert ekf.nis_check(runs, 6)["runs_outside"] == np.mean(
         [x["verdict"] != "consistent" for x in checks]
     )

@@ -31,13 +31,14 @@ $P^s_k = P^+_k + C_k(P^s_{k+1} - P^-_{k+1})C_k^\top$, and applies $s_k$ to the f
 state at k.
 
 Sensor model behind the filter: the fixed biases are random constants with σ the
-`ImuModel`'s `gyro_bias`/`accel_bias`, the bias instability is treated as a random walk
-with density $2\sigma^2/\tau$ (exact over times ≪ τ, conservative beyond: a stationary
-Gauss–Markov bias keeps its variance σ², so its change from any start has a variance of at
-most 2σ², while the random walk's grows as 2σ²t/τ), misalignments are not estimated. Every sensor state
+`ImuModel`'s `gyro_bias`/`accel_bias`; the bias instability, with no Gauss–Markov state, is a
+random walk of density $2\sigma^2/\tau$ (exact over times ≪ τ, conservative beyond: a
+stationary Gauss–Markov bias's change from any start has a variance of at most 2σ², the
+walk's grows as 2σ²t/τ; for τ of three fix intervals or less the attitude and bias σ are
+1.8–3.6× too large: docs/navigation.md); misalignments are not estimated. Every sensor state
 needs a prior σ > 0 (a zero makes the covariance singular): the model's values are the sizes
-the filter assumes. Its σ are honest only if that model and P0 bound the real sensor and initial
-error: if not, σ are several times too small ([`nis_check`][hrgjax.ins.ekf.nis_check]).
+the filter assumes. Its σ are honest only if that model and P0 bound the real sensor and
+initial error: if not, σ are several times too small ([`nis_check`][hrgjax.ins.ekf.nis_check]).
 
 **Small-angle limit.** The error state (F, H linear in the attitude error φ) holds for
 attitude errors of a few degrees: an initial heading σ of 0.1 rad leaves the attitude σ
@@ -210,14 +211,10 @@ class LooselyCoupled(eqx.Module):
         imu = self.imu
         g9 = lambda g: jnp.concatenate([g, jnp.zeros((n - 9, 3))], 0)
         q = g9(gg) @ jnp.diag(imu.arw**2) @ g9(gg).T + g9(ga) @ jnp.diag(imu.vrw**2) @ g9(ga).T
-        rw_g = (
-            imu.gyro_rate_random_walk**2
-            + 2 * imu.gyro_bias_instability**2 / imu.gyro_correlation_time
-        )
-        rw_a = (
-            imu.accel_random_walk**2
-            + 2 * imu.accel_bias_instability**2 / imu.accel_correlation_time
-        )
+        # each Gauss–Markov (σ, τ) folded into a walk of 2σ²/τ: no decay state (module docstring)
+        walk = lambda k, s, tau: k**2 + 2 * s**2 / tau  # noqa: E731
+        rw_g = walk(imu.gyro_rate_random_walk, imu.gyro_bias_instability, imu.gyro_correlation_time)
+        rw_a = walk(imu.accel_random_walk, imu.accel_bias_instability, imu.accel_correlation_time)
         q = q.at[9:12, 9:12].add(jnp.diag(rw_g)).at[12:15, 12:15].add(jnp.diag(rw_a))
         return discretise(big, q, T)
 
@@ -540,7 +537,10 @@ _DOES_NOT_FIT = (
 )
 _TOO_LOW = (
     "the filter's model does not fit the data: its σ are not to be trusted (larger than the "
-    "errors: an IMU model or GNSS σ worse than the real ones)"
+    "errors: an IMU model or GNSS σ worse than the real ones, or a Gauss–Markov bias "
+    "instability with τ short against the fix interval or a few tens of it: the filter has no "
+    "Gauss–Markov state, folds it into a random walk of density 2σ²/τ and is conservative, "
+    "the more so the shorter τ — docs/navigation.md)"
 )
 
 
