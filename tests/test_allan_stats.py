@@ -117,17 +117,36 @@ def test_chi2_quantiles_equal_scipy():
 
 @pytest.mark.parametrize("alpha", [2, 1, 0, -1, -2])
 def test_noise_identification_names_the_five_power_laws(alpha):
-    """Exact where the decimated record is long (m = 1, 4: ≥ 4 096 points); within one of
-    the truth on 256 points, where flicker noise, half-way between integer slopes, is read
-    as its neighbour in some draws (as allantools reads it)."""
+    """The default rule names the truth at m = 1, 4, 16, 64 (16 384 to 256 decimated
+    points). Riley & Greenhall's rule as it stands (`rule="stable32"`, allantools' reading)
+    is exact where the decimated record is long (m = 1, 4) and reads flicker noise as its
+    neighbour in some draws: flicker rate noise as a random walk (the averaged rate's ρ,
+    −0.28, lies by its −¼ boundary), flicker angle noise as white (decimation folds its
+    content above 1/(2mτ₀) into a white floor)."""
     x = kasdin(alpha, 2**14, np.random.default_rng(100 + alpha))
-    got = allan.noise_id(x, [1, 4, 16, 64])
+    assert list(allan.noise_id(x, [1, 4, 16, 64])) == [alpha] * 4
+    got = allan.noise_id(x, [1, 4, 16, 64], rule="stable32")
     assert list(got[:2]) == [alpha, alpha] and np.all(np.abs(got - alpha) <= 1), got
     try:
         import allantools as at
     except ImportError:
         return
     assert list(got) == [at.autocorr_noise_id(x, m, data_type="phase")[0] for m in (1, 4, 16, 64)]
+
+
+def test_angle_noise_is_read_at_long_tau():
+    """White angle noise at 16 and 8 averages (m = 256, 512 of 4 096 samples): B1 (0.71,
+    0.75 expected) lies near white rate noise's 1 and read it in ≈ 30 % of records (and
+    flicker rate noise in 5 %); R(n) = MVAR/AVAR (1/m against ½) reads it in every record,
+    and the α carried to 2 and 4 averages with it. Flicker angle noise at m = 32, 64 (128
+    and 64 decimated points): decimation folds its content above 1/(2mτ₀) into a white
+    floor, and the lag-1 autocorrelation read white in 80–93 % of records; R(n) (0.22,
+    0.20 against 1/m) reads flicker in ≥ 90 %."""
+    white, flicker = (np.asarray([allan.noise_id(kasdin(a, 4097, np.random.default_rng(s)), m)
+                                  for s in range(30)])
+                      for a, m in ((2, [256, 512, 2048]), (1, [32, 64])))  # fmt: skip
+    assert np.all(white == 2), white
+    assert np.mean(flicker == 1) >= 0.9, flicker
 
 
 def test_b1_and_rn_expectations_are_barnes_and_a_monte_carlo():

@@ -156,15 +156,15 @@ class _NoProgress(contextlib.nullcontext):
 def _noise_in_steps(x, m, progress, **options):
     """[`noise_id`][hrgjax.allan.noise_id]`(x, m, **options)`, one progress step a factor:
     each factor whose decimated phase keeps `ACF_POINTS` points is read alone (by its lag-1
-    autocorrelation under every rule: a value of its own, never carried; asked with the
-    default rule, which prepares nothing else per call), the rest (the few largest) in one
-    call that starts from the last such factor, so that α carries on as in one call."""
+    autocorrelation under every rule, and R(n) under the default one: a value of its own,
+    never carried), the rest (the few largest) in one call that starts from the last such
+    factor, so that α carries on as in one call."""
     m = np.asarray(m, dtype=int)
     alone = -(-x.size // m) >= ACF_POINTS  # x[::k] keeps ACF_POINTS points
     read = m.size if alone.all() else int(np.argmin(alone))  # the leading run of those
-    out, dmax = [], options["dmax"]
+    out = []
     for k in m[:read]:
-        out.append(int(noise_id(x, [k], dmax=dmax)[0]))
+        out.append(int(noise_id(x, [k], **options)[0]))
         progress.update()
     if read < m.size:
         lead = m[max(read - 1, 0) : read]

@@ -34,6 +34,16 @@ records with this rule (59–74 % with the α of the last autocorrelation τ car
 with B1 read down to N = 3, before R(n)'s white-rate guard)."""
 
 
+RN_FACTOR = 4
+"""The smallest m from which R(n) = MVAR/AVAR tells white (1/m) from flicker angle noise
+and both from rate noise (½ and above); below, all three lie near ½."""
+RHO_SPLIT = -0.04
+"""The lag-1 ρ = r₁/(1 + r₁) of the twice-differenced decimated phase (m ≥ 2) below which
+the default rule reads flicker rather than random-walk rate noise: the midpoint of their
+values for averaged rates, ρ = 1 − 8 ln 2/(9 ln 3 − 8 ln 2) = −0.277 (r₁ = 9 ln 3/(8 ln 2) − 2) and
+0.2 (r₁ = ¼)."""
+
+
 NOISE_RULES = ("hrgjax", "stable32")
 """The rules [`noise_id`][hrgjax.allan.noise_id] knows beyond the lag-1 autocorrelation's
 reach: `"hrgjax"` (the default) and `"stable32"` (Stable32 1.60's tables)."""
@@ -57,14 +67,27 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
 
     How far B1 is read is the `rule`:
 
-    - `"hrgjax"` (default): B1 on the record as it is, from
-      [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages on; with fewer, the α of the factor
-      before is carried on (for the first factor asked: that of the largest m/2, m/4, … that
-      can be read). Where B1 names phase noise but R(n) lies nearer white rate noise's ½ than
-      flicker phase noise's value, white rate noise (α = 0) is taken (on few averages its B1
-      of 1 falls below the phase-noise boundary). On drift-free white + random-walk records
+    - `"hrgjax"` (default): three departures where the reference rule misreads power-law
+      noise (`benchmarks/noise_id_table.py`: from ≥ 98 % right at every octave but the
+      B1 ones of rate noise, where it was 24–100 %). From m = 4 on
+      (`uncertainty.RN_FACTOR`) R(n) tells angle from rate
+      noise wherever the autocorrelation reads angle noise (on the phase less its quadratic:
+      decimation folds flicker angle noise's content above 1/(2mτ₀) into a white floor, and
+      the autocorrelation read white in 80–93 % of records at 64–128 points) and before B1
+      (B1 of white angle noise on 8–16 averages lies near white rate noise's 1: read as rate
+      noise in 30 % of records); R(n) ≤ its white/flicker-angle boundary names angle noise
+      unless, for flicker, B1 says a random walk (whose R(n) on few averages can fall that
+      low). At d = 2 of a decimated phase (m ≥ 2), flicker rate noise below ρ = −0.04
+      (`uncertainty.RHO_SPLIT`; averaged rates: −0.28 for flicker, 0.2 for a random walk;
+      Riley & Greenhall's −¼ suits their discrete noises' −½ and 0, and read flicker rate
+      noise as a random walk in 11–52 % of records). B1 on the
+      record as it is, from [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages on; with
+      fewer, the α of the factor before is carried on (for the first factor asked: that of
+      the largest m/2, m/4, … that can be read). On drift-free white + random-walk records
       its ±1σ intervals cover the truth at the nominal rate at every τ
-      (`benchmarks/coverage_allan.py`).
+      (`benchmarks/coverage_allan.py`), and on each power-law noise from m = 1 to T
+      (`benchmarks/coverage_totdev.py`) but flicker rate noise at τ ≥ T/2 (B1 on 8
+      averages: 46–62 % right).
     - `"stable32"`: as Stable32 1.60's octave tables of a real OCXO record, which it
       reproduces at all 90 τ of seven kinds (`benchmarks/stable32_ocxo.py`; the rule was read
       off those tables, not from Stable32's code): B1 on the rate with its least-squares line
@@ -91,7 +114,9 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
     check_1d("x", x, "one phase (angle) sample per interval")
     x = np.asarray(x, dtype=float)
     if rule == "hrgjax":
-        read, needs = (lambda k: _identify(x, k, dmax)), f"{B1_AVERAGES} averages"
+        curvature = _curvature(x)  # R(n) on the phase less its quadratic, as the ACF
+        read = lambda k: _identify(x, k, dmax, refine=curvature)  # noqa: E731
+        needs = f"{B1_AVERAGES} averages"
     elif overlapping:  # B1 on the drift-free record down to 2 averages, no R(n) guard
         drift_free = _less_drift(x)
         read = lambda k: _identify(x, k, dmax, b1_x=drift_free, b1_min=2, guard=False)  # noqa: E731
@@ -125,21 +150,34 @@ def _less_drift(x):
     return np.concatenate([[0.0], np.cumsum(y)])
 
 
-def _identify(x, k, dmax, *, b1_x=None, b1_min=B1_AVERAGES, guard=True):
+def _identify(x, k, dmax, *, b1_x=None, b1_min=B1_AVERAGES, guard=True, refine=None):
     """α at factor k by the lag-1 autocorrelation or, from `b1_min` averages on (None: never),
-    B1/R(n) on `b1_x` (default `x`); None where neither reaches."""
+    B1/R(n) on `b1_x` (default `x`); None where neither reaches. `refine` (the default rule:
+    the phase's curvature, `_curvature`): R(n) arbitrates angle against rate noise from
+    `RN_FACTOR` on, and the averaged rate noises' ρ split flicker from random walk."""
     z = x[::k]
     if z.size >= ACF_POINTS:
-        return _acf_alpha(z, dmax)
+        a = _acf_alpha(z, dmax, averaged=refine is not None and k > 1)
+        if refine is not None and a >= 1 and k >= RN_FACTOR:
+            return _rn_class(_rn(x, k, refine), k, a)
+        return a
     if b1_min is not None and (x.size - 1) // k >= b1_min:
+        if refine is not None and k >= RN_FACTOR and x.size > 3 * k:
+            a, mu = _rn_class(_rn(x, k), k, 0), _b1_mu(x, k, dmax)  # the record as it is
+            if a == 2 or (a == 1 and mu < 1):  # R(n) of a random walk on few averages can
+                return a  # fall to flicker angle noise's, never to white's 1/m: B1 says
+            return -max(mu, -1) - 1  # which; rate noise: B1's μ = −2 is white (α = 0)
         return _b1_alpha(x if b1_x is None else b1_x, k, dmax, white_rate_guard=guard)
     return None
 
 
-def _acf_alpha(z, dmax):
+def _acf_alpha(z, dmax, averaged=False):
     """α from the lag-1 autocorrelation r₁ of `z` less its least-squares quadratic,
     differenced d times until ρ = r₁/(1 + r₁) < 0.25 or d = `dmax` (Riley & Greenhall's
-    rule, as Stable32): α = 2 − 2d − round(2ρ)."""
+    rule, as Stable32): α = 2 − 2d − round(2ρ). `averaged` (a decimated phase, m ≥ 2: the
+    rate averaged over m samples): at d = 2, flicker rate noise below `RHO_SPLIT`, the
+    midpoint of the averaged noises' ρ (Riley & Greenhall's −¼ is that of their discrete
+    fractional noises, −½ and 0)."""
     z = np.ascontiguousarray(z, dtype=float)  # an octave's strided view read once
     size, sums, first, last = _detrended_sums(z, dmax)
     d = 0
@@ -162,7 +200,10 @@ def _acf_alpha(z, dmax):
         d += 1
     # a periodic or deterministic component (r₁ → −1: ρ → −∞) reads as no power law at all;
     # the nearest the deviation's differences can take: 2 (white phase) … 2 − 2·dmax
-    return min(2, max(2 - 2 * dmax, int(-round(2 * rho) - 2 * d) + 2))
+    k = round(2 * rho)
+    if averaged and d == 2 and k == 0 and rho < RHO_SPLIT:
+        k = -1  # flicker rate noise (−0.28), not a random walk (0.2)
+    return min(2, max(2 - 2 * dmax, int(-k - 2 * d) + 2))
 
 
 _BLOCK = 1 << 15
@@ -256,12 +297,10 @@ def rn_expected(m: int, alpha: int) -> float:
     )
 
 
-def _b1_alpha(x, m, dmax, white_rate_guard: bool = True):
-    """B1 (and R(n)) identification at factor m from the phase x (`noise_id`); the guard: R(n)
-    nearer white rate noise's than flicker phase noise's takes white rate noise."""
+def _b1_mu(x, m, dmax):
+    """The Allan-variance slope μ that B1 on (x.size − 1)//m ≥ 3 averages of the phase `x`
+    is nearest (geometric means of neighbouring expectations), from −2 to 1 (2 for dmax 3)."""
     n = (x.size - 1) // m
-    if n == 2:  # B1(2, μ) = 1 for every μ: white rate noise's value (Stable32's choice; a
-        return 0  # noise-free record gets no error here: only Stable32's rule reads N = 2)
     ybar = np.diff(x[: n * m + 1 : m])  # τ-averages (×τ: the scale cancels in the ratios)
     avar = 0.5 * np.mean(np.diff(ybar) ** 2)
     if not avar > 0:
@@ -269,20 +308,54 @@ def _b1_alpha(x, m, dmax, white_rate_guard: bool = True):
     b1 = float(np.var(ybar, ddof=1) / avar)
     mus = range(2 if dmax >= 3 else 1, -3, -1)  # μ = 2 (α = −3) only for Hadamard
     expected = {mu: b1_expected(n, mu) for mu in mus}
-    mu = -2
     for hi in mus:
         if hi > -2 and b1 > math.sqrt(expected[hi] * expected[hi - 1]):
-            mu = hi
-            break
+            return hi
+    return -2
+
+
+def _rn(x, m, curvature=0.0):
+    """R(n) = MVAR/AVAR at factor m of the phase `x`, less a quadratic of `curvature`."""
+    d = x[2 * m :] - 2 * x[m:-m] + x[: -2 * m]
+    if curvature:
+        d = d - curvature * m * m
+    avar = np.mean(d**2)
+    if not avar > 0:
+        _no_noise()
+    c = np.concatenate([[0.0], np.cumsum(d)])
+    return float(np.mean((c[m:] - c[:-m]) ** 2) / m**2 / avar)
+
+
+def _rn_class(rn, m, alpha):
+    """White (2) or flicker (1) angle noise by R(n) at factor m, or `alpha` ≤ 0 (rate noise:
+    R(n) above the geometric mean of flicker angle noise's and white rate noise's ½)."""
+    if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 0)):
+        return min(alpha, 0)
+    return 1 if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 2)) else 2
+
+
+def _curvature(x):
+    """The second difference per sample² of the phase's least-squares quadratic."""
+    n = x.size
+    if n < 3:
+        return 0.0
+    t = np.arange(n, dtype=float) - (n - 1) / 2.0
+    t2 = t * t - np.mean(t * t)
+    return 2.0 * float(np.dot(t2, x) / np.dot(t2, t2))
+
+
+def _b1_alpha(x, m, dmax, white_rate_guard: bool = True):
+    """B1 (and R(n)) at factor m of the phase x (the Stable32 rule); the guard: R(n) nearer
+    white rate noise's than flicker phase noise's takes white rate noise."""
+    n = (x.size - 1) // m
+    if n == 2:  # B1(2, μ) = 1 for every μ: white rate noise's value (Stable32's choice; a
+        return 0  # noise-free record gets no error here: only Stable32's rule reads N = 2)
+    mu = _b1_mu(x, m, dmax)
     if mu > -2:
         return -mu - 1
-    if x.size < 3 * m or m < 4:  # R(n) needs a modified variance at m; below m = 4 its
-        return 2  # expectations for white and flicker coincide (both 1 at m = 1): white taken
-    d = x[2 * m :] - 2 * x[m:-m] + x[: -2 * m]
-    avar_o = np.mean(d**2)
-    c = np.concatenate([[0.0], np.cumsum(d)])
-    mvar = np.mean((c[m:] - c[:-m]) ** 2) / m**2
-    rn = float(mvar / avar_o)
+    if x.size < 3 * m or m < RN_FACTOR:  # R(n) needs a modified variance at m; below m = 4
+        return 2  # its expectations for white and flicker coincide (both 1 at m = 1): white
+    rn = _rn(x, m)
     if white_rate_guard and rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 0)):
         return 0  # rate noise after all: few averages put its B1 of 1 below the boundary
     return 1 if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 2)) else 2

@@ -1,0 +1,61 @@
+"""How often `hg.allan.noise_id` names each power-law noise, octave by octave.
+
+Records of N rate samples (N + 1 phase points) of one power-law noise, rate PSD ∝ f^α for
+α = 2 (white angle), 1 (flicker angle), 0 (white rate), −1 (flicker rate), −2 (rate random
+walk), by Kasdin & Walter's (1992) filter (flicker angle noise up to f_h = 1/(2τ₀));
+`noise_id(x, m)` at every octave m up to N: the share of records read right, per α and m
+(`--full`: every α read). The lag-1 autocorrelation reads m ≤ N/29 (≥ 30 decimated points),
+B1/R(n) beyond from 8 averages, the α carried on at 4 and 2. Run against an older hrgjax
+(PYTHONPATH=...) for its figures.
+
+Usage: `.venv/bin/python benchmarks/noise_id_table.py [--n 200] [--samples 4096]
+[--rule hrgjax|stable32] [--dmax 2] [--full]` (≈ 3 s on 2 shared cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import hrgjax as hg
+
+
+def kasdin(alpha, n, rng):
+    """n phase points of power-law noise with rate PSD ∝ f^α (phase exponent α − 2)."""
+    h = np.ones(n)
+    k = np.arange(1, n)
+    h[1:] = np.cumprod((-(alpha - 2) / 2.0 + k - 1) / k)
+    w = np.zeros(2 * n)
+    w[:n] = rng.normal(size=n)
+    return np.fft.irfft(np.fft.rfft(w) * np.fft.rfft(np.r_[h, np.zeros(n)]))[:n]
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--n", type=int, default=200)
+    ap.add_argument("--samples", type=int, default=4096)
+    ap.add_argument("--dmax", type=int, default=2)
+    ap.add_argument("--rule", default="hrgjax")
+    ap.add_argument("--full", action="store_true")
+    a = ap.parse_args()
+    ms = 2 ** np.arange(int(np.log2(a.samples)))
+    t0 = time.time()
+    print(f"{a.n} records of {a.samples} samples, rule {a.rule}, dmax {a.dmax}: % read right")
+    print("α \\ m " + " ".join(f"{m:>5d}" for m in ms))
+    for alpha in (2, 1, 0, -1, -2):
+        rng = np.random.default_rng(500 + alpha)
+        got = np.array([hg.allan.noise_id(kasdin(alpha, a.samples + 1, rng), ms, dmax=a.dmax,
+                                          rule=a.rule) for _ in range(a.n)])  # fmt: skip
+        print(f"{alpha:4d}  " + " ".join(f"{np.mean(got[:, j] == alpha) * 100:5.0f}"
+                                         for j in range(ms.size)))  # fmt: skip
+        if a.full:
+            for j, m in enumerate(ms):
+                kinds, counts = np.unique(got[:, j], return_counts=True)
+                print(f"      m = {m}: {dict(zip(kinds.tolist(), counts.tolist(), strict=True))}")
+    print(f"({time.time() - t0:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
