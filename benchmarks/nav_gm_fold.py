@@ -3,8 +3,10 @@
 
 `ekf.LooselyCoupled` has no Gauss–Markov decay state: it folds each bias instability (σ, τ)
 into a bias random walk of density 2σ²/τ. The walk's spectrum q/ω² lies above the
-Gauss–Markov's q/(ω² + 1/τ²) at every frequency, so the σ it reports are never too small,
-but too large, the more so the shorter τ.
+Gauss–Markov's q/(ω² + 1/τ²) at every frequency, which bounds the bias's changes but, with
+the prior σ², not the bias itself in every direction: whether the σ it reports are too
+small or too large is what this measures (too large in every row, the more so the shorter
+τ).
 
 This flies the tests' 120-s motion (take-off, banked turn, climb, cruise; 10 Hz IMU, 1 Hz
 GNSS position and velocity, an outage at 70–90 s) R times per τ with a Gauss–Markov-only

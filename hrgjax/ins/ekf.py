@@ -34,8 +34,8 @@ Sensor model behind the filter: the fixed biases are random constants with σ th
 `ImuModel`'s `gyro_bias`/`accel_bias`; the bias instability, with no Gauss–Markov state, is a
 random walk of density $2\sigma^2/\tau$ (exact over times ≪ τ, conservative beyond: a
 stationary Gauss–Markov bias's change from any start has a variance of at most 2σ², the
-walk's grows as 2σ²t/τ; for τ of three fix intervals or less the attitude and bias σ are
-1.8–3.6× too large: docs/navigation.md); misalignments are not estimated. Every sensor state
+walk's grows as 2σ²t/τ; on the tests' 120-s flight with 1-s fixes, for τ of three fix
+intervals or less, the attitude and bias σ came out 1.8–3.6× too large: docs/navigation.md); misalignments are not estimated. Every sensor state
 needs a prior σ > 0 (a zero makes the covariance singular): the model's values are the sizes
 the filter assumes. Its σ are honest only if that model and P0 bound the real sensor and
 initial error: if not, σ are several times too small ([`nis_check`][hrgjax.ins.ekf.nis_check]).
@@ -538,7 +538,7 @@ _DOES_NOT_FIT = (
 _TOO_LOW = (
     "the filter's model does not fit the data: its σ are not to be trusted (larger than the "
     "errors: an IMU model or GNSS σ worse than the real ones, or a Gauss–Markov bias "
-    "instability with τ short against the fix interval or a few tens of it: the filter has no "
+    "instability with τ of a few fix intervals or less: the filter has no "
     "Gauss–Markov state, folds it into a random walk of density 2σ²/τ and is conservative, "
     "the more so the shorter τ — docs/navigation.md)"
 )

@@ -178,6 +178,12 @@ class ImuModel(eqx.Module):
                 plausible.check(f"ImuModel.{name} [{unit}]", v, quantity)
         for name in ("gyro_correlation_time", "accel_correlation_time"):
             v = getattr(self, name)
+            if isinstance(v, jax.core.Tracer):
+                raise TypeError(
+                    f"ImuModel.{name} is a static field (the bias path's discrete coefficients are "
+                    "computed from it in Python): it cannot be traced by jit, vmap, "
+                    "grad or hg.sweep; loop over its values in Python"
+                )
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"ImuModel.{name} must be > 0 s; got {v}")
 
@@ -275,7 +281,7 @@ def _gm_interval(r: float):
     interval mean = b·start + l21·z1 + l22·z2 (z1, z2 independent N(0, 1)), the Cholesky
     factor of the pair's joint innovation covariance. Floats; accurate from r = 1e-8 to
     1e8 (expm1, and the series of the mean's variance below r = 1)."""
-    r = float(r)
+    r = min(float(r), 1e300)  # τ below Δt/1e300 is white: no inf/inf
     one_minus_a = -math.expm1(-r)
     v11 = -math.expm1(-2.0 * r)  # 1 - a²
     c12 = one_minus_a**2 / r
@@ -286,7 +292,7 @@ def _gm_interval(r: float):
             f += (-1) ** k * (2.0 - 2.0 ** (k - 1)) * term
     else:
         f = r - 2.0 * one_minus_a + 0.5 * v11
-    v22 = 2.0 * f / (r * r)
+    v22 = 2.0 * (f / r) / r  # r·r underflows below r = 1e-162
     l11 = math.sqrt(v11)
     l21 = c12 / l11 if l11 > 0.0 else 0.0
     return math.exp(-r), one_minus_a / r, l11, l21, math.sqrt(max(v22 - l21 * l21, 0.0))
