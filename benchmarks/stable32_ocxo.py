@@ -23,7 +23,9 @@ Two things in Stable32's numbers, checked here with NumPy:
 - its totdev is bias-corrected (NIST SP 1065 §5.2.11): Totvar/(1 − a·τ/T), T the record
   length, a = 0.481 for flicker FM (α = −1) and 0.750 for random-walk FM (α = −2), with the
   table's α. hrgjax's `deviation` applies it too (`bias_correction=True`, the default), with
-  its own α.
+  its own α: under `noise_rule="stable32"` that alone, as Stable32; under the default rule
+  it also corrects white and flicker angle noise (`hrgjax.allan.totvar_bias`), which
+  Stable32 and SP 1065 leave uncorrected.
 
 Both of `deviation`'s noise rules run side by side; `--noise-rule` (default `stable32`
 here, while the library's default is `hrgjax`) picks the one printed in detail and written.

@@ -499,15 +499,16 @@ def totvar_rows(n, m):
 def test_totdev_edf_holds_to_the_last_factor_and_is_not_overconfident():
     """SP 1065's white/flicker angle-noise EDF (N + 1)(N − 2m)/(2(N − m)) turns negative past
     m = (N − 1)/2 while totdev reads m up to N − 1: every factor now gets an EDF ≥ 1, and for
-    white angle noise (N = 201) at most the exact EDF of totdev's quadratic form (25.5, 11.6,
-    5.3 and 3.0 at m = 50, 99, 150, 199); a quantised-angle record's totdev runs on the
-    default grid; χ²'s quantile refuses an EDF ≤ 0 by name."""
+    white angle noise (N = 201) the exact EDF of totdev's quadratic form, here from the dense
+    rows (25.5, 11.5, 5.3 and 3.0 at m = 50, 100, 150, 199); a quantised-angle record's
+    totdev runs on the default grid; χ²'s quantile refuses an EDF ≤ 0 by name."""
     for alpha in (2, 1, 0, -1, -2):
         edf = [allan.edf_totdev(alpha, m, N_EXACT) for m in range(1, N_EXACT)]
         assert np.all(np.isfinite(edf)) and min(edf) >= 1.0, alpha
-    for m in (50, 99, 150, 199):
+    for m, near in ((50, 25.5), (100, 11.5), (150, 5.3), (199, 3.0)):
         exact = quadratic_form_edf(totvar_rows(N_EXACT, m))
-        assert 1.0 <= allan.edf_totdev(2, m, N_EXACT) <= exact, (m, exact)
+        assert allan.edf_totdev(2, m, N_EXACT) == pytest.approx(exact, rel=1e-12), m
+        assert exact == pytest.approx(near, abs=0.05), m
     quantised = np.diff(np.round(np.random.default_rng(1).normal(scale=3.0, size=1001))) * 100
     r = allan.deviation(quantised, 100.0, kind="totdev")
     assert r.m[-1] == 512 and np.all(r.edf >= 1.0) and np.all(r.dev_low < r.dev)
@@ -518,8 +519,8 @@ def test_totdev_edf_holds_to_the_last_factor_and_is_not_overconfident():
 
 def test_totdev_of_angle_noise_is_bias_corrected_with_its_exact_edf():
     """Totvar reads the end point twice over (2x₀ − xⱼ) where a difference reaches past the
-    record: for white angle noise E[Totvar] = tr A/(6(N − 2))·σ² (1 + (4/3)τ/T up to T/2,
-    8/3 at τ = T), which SP 1065 leaves uncorrected. `totvar_white_phase`'s closed form
+    record: for white angle noise E[Totvar] = tr A/(6(N − 2))·σ² (1 + (4/3)τ/T up to
+    τ = T − τ₀, 8/3 at τ = T), which SP 1065 leaves uncorrected. `totvar_white_phase`'s closed form
     equals the dense quadratic form's tr A and EDF (tr A)²/‖A‖²_F; over 4000 records of 64
     samples the raw Totvar divided by it averages the true 3σₓ²/τ² (the raw one 1.34–2.69×
     it) with the spread 2/EDF; `deviation` divides α = 2's totdev by it and reports its
@@ -562,6 +563,145 @@ def test_totdev_of_angle_noise_is_bias_corrected_with_its_exact_edf():
             avar = 6 * cov[0, 0] - 8 * cov[0, m] + 2 * float(np.sum(phi ** (2 * m)))
         exact = np.trace(rows @ cov @ rows.T) / (n - 2) / avar
         assert allan.totvar_bias(1, m, n) == pytest.approx(exact, rel=0.01), m
+
+
+def flicker_row_sum(n, m):
+    """Flicker angle noise's E[Totvar]/σ² from the dense rows: −½ Σ c_a c_b D(|a − b|) per
+    row over D(k) = ln(πk) + γ (0 at k = 0), against the Allan variance's 4D(m) − D(2m)."""
+    lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    d = np.where(lag > 0, np.log(np.pi * np.maximum(lag, 1)) + np.euler_gamma, 0.0)
+    rows = totvar_rows(n, m)
+    form = -0.5 * float(np.sum((rows @ d) * rows)) / (n - 2)
+    return form / (4 * math.log(np.pi * m) - math.log(2 * np.pi * m) + 3 * np.euler_gamma)
+
+
+def flicker_long_sum(n, m):
+    """`flicker_row_sum` for long records, row by row without the dense matrices: row i's
+    five (index, coefficient) pairs, the reflected ones 2x_end − x_mirror, O(n)."""
+    i = np.arange(1, n - 1)
+    index, coef = [], []
+    for k, c in ((i - m, 1.0), (i, -2.0), (i + m, 1.0)):
+        low, high = k < 0, k > n - 1
+        inside = ~(low | high)
+        index += [np.where(inside, k, np.where(low, -k, 2 * n - 2 - k)), np.where(high, n - 1, 0)]
+        coef += [np.where(inside, c, -c), np.where(low | high, 2 * c, 0.0)]
+    total = 0.0
+    for u in range(5):
+        for v in range(u + 1, 6):
+            lag = np.abs(index[u] - index[v])
+            d = np.where(lag > 0, np.log(np.pi * np.maximum(lag, 1)) + np.euler_gamma, 0.0)
+            total -= float(np.sum(coef[u] * coef[v] * d))
+    return (
+        total / (n - 2) / (4 * math.log(np.pi * m) - math.log(2 * np.pi * m) + 3 * np.euler_gamma)
+    )
+
+
+def test_flicker_angle_bias_is_the_row_sum_in_closed_form_at_o1_per_tau():
+    """Flicker angle noise's correction sums each range of rows of one pattern in closed
+    form (lgamma differences): equal to the dense rows' sum to round-off at every factor of
+    n = 3 … 13, 64 and 65 and at the edges of n = 201, to the row-by-row sum at n = 2¹⁶ + 1,
+    and in range at a 2²⁰-point record (its cost per τ, O(1) against the row-by-row sum's
+    O(n), is measured by benchmarks/totvar_speed.py, not asserted here)."""
+    for n in [*range(3, 14), 64, 65]:
+        for m in range(1, n):
+            assert allan.totvar_bias(1, m, n) == pytest.approx(flicker_row_sum(n, m),
+                                                               rel=1e-12), (n, m)  # fmt: skip
+    for m in (1, 2, 99, 100, 101, 199, 200):
+        assert allan.totvar_bias(1, m, 201) == pytest.approx(flicker_row_sum(201, m), rel=1e-12)
+    n = (1 << 16) + 1
+    for m in (1, 3, 1000, n // 2 - 1, n // 2 + 1, n - 2, n - 1):
+        assert allan.totvar_bias(1, m, n) == pytest.approx(flicker_long_sum(n, m), rel=1e-12)
+    n = (1 << 20) + 1
+    factors = np.random.default_rng(6).choice(np.arange(1, n), size=20, replace=False)
+    bias = np.asarray([allan.totvar_bias(1, int(m), n) for m in factors])
+    assert np.all((bias > 1) & (bias < 8 / 3))
+
+
+def test_stable32_rule_corrects_totdev_for_rate_noises_only():
+    """Stable32 applies SP 1065 §5.2.11's correction 1/√(1 − a·τ/T) to totdev for flicker
+    and random-walk rate noise only. Under `noise_rule="stable32"` white and flicker angle
+    noise keep factor 1 (the default rule divides them by `totvar_bias`); `angle_noise=False`
+    is that rule in `totvar_bias`."""
+    x = np.random.default_rng(2).normal(size=257)  # white angle noise, 256 rate samples
+    rule = allan.deviation(x, 1.0, "totdev", data="phase", noise_rule="stable32")
+    raw = allan.deviation(x, 1.0, "totdev", data="phase", noise_rule="stable32",
+                          bias_correction=False)  # fmt: skip
+    assert 2 in rule.alpha and min(rule.alpha) < 0  # angle and rate noises both read
+    sp1065 = [1 / math.sqrt(1 - allan.TOTVAR_BIAS.get(int(a), 0.0) * m / 256)
+              for a, m in zip(rule.alpha, rule.m, strict=True)]  # fmt: skip
+    np.testing.assert_allclose(rule.bias_factor, sp1065, rtol=1e-12)
+    np.testing.assert_allclose(rule.dev, raw.dev * np.asarray(sp1065), rtol=1e-12)
+    own = allan.deviation(x, 1.0, "totdev", data="phase")
+    assert np.all(own.alpha == 2) and own.bias_factor[-1] < 0.7  # 1/√(8/3)
+    for a in (2, 1, 0):
+        assert allan.totvar_bias(a, 100, 201, angle_noise=False) == 1.0
+    assert allan.totvar_bias(-2, 100, 201, angle_noise=False) == pytest.approx(1 - 0.75 / 2)
+    with pytest.raises(TypeError, match="angle_noise must be True or False"):
+        allan.totvar_bias(2, 100, 201, angle_noise="no")
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (
+            lambda: allan.totvar_bias(2, 1, 2),
+            r"^n must be a whole number of phase points ≥ 3; got 2$",
+        ),
+        (lambda: allan.totvar_bias(1, 1, 2), r"^n must be a whole number"),
+        (lambda: allan.edf_totdev(2, 1, 2), r"^n must be a whole number"),
+        (lambda: allan.totvar_white_phase(1, 10.5), r"^n must be a whole number .* got 10.5$"),
+        (
+            lambda: allan.totvar_white_phase(1.5, 10),
+            r"^m must be a whole averaging factor from 1 "
+            r"to n − 1 = 9; got 1.5$",
+        ),  # fmt: skip
+        (lambda: allan.edf_totdev(0, 10, 10), r"^m must be a whole averaging factor .* got 10$"),
+        (lambda: allan.totvar_bias(0, 0, 10), r"^m must be a whole averaging factor .* got 0$"),
+        (
+            lambda: allan.totvar_bias(1.7, 3, 10),
+            r"^alpha must be a whole noise exponent from "
+            r"−2 to 2 .* got 1.7$",
+        ),  # fmt: skip
+        (lambda: allan.edf_totdev(3, 3, 10), r"^alpha must be a whole noise exponent .* got 3$"),
+        (lambda: allan.edf_totdev(-3, 3, 10), r"^alpha must be .* got -3$"),
+        (lambda: allan.totvar_bias(True, 3, 10), r"^alpha must be .* got True$"),
+    ],
+    ids=[
+        "bias-n2",
+        "flicker-n2",
+        "edf-n2",
+        "n-10.5",
+        "m-1.5",
+        "m-n",
+        "m-0",
+        "alpha-1.7",
+        "alpha-3",
+        "alpha-minus3",
+        "alpha-bool",
+    ],  # fmt: skip
+)
+def test_totvar_functions_refuse_what_they_cannot_read(call, match):
+    """n ≥ 3 phase points, a whole m in 1 … n − 1 and a whole α in −2 … 2, else a one-line
+    ValueError naming the argument (not a ZeroDivisionError at n = 2, nor 1.5 read as 1);
+    whole numbers of any type are taken."""
+    with pytest.raises(ValueError, match=match):
+        call()
+    assert allan.totvar_bias(np.int64(2), 3.0, np.int32(10)) == allan.totvar_bias(2, 3, 10)
+
+
+def test_totdev_reads_tau_up_to_the_records_length():
+    """totdev reflects the phase at both ends, so τ = T (m = N rate samples) has all its
+    N − 1 terms: `allan.totdev` computes it as `deviation` and allantools do, and refuses
+    m = N + 1 by name."""
+    at = pytest.importorskip("allantools")
+    y = Y[:64]
+    for m in (63, 64):
+        ref = at.totdev(y, rate=1.0, data_type="freq", taus=[float(m)])[1][0]
+        assert float(allan.totdev(y, m)) == pytest.approx(ref, rel=1e-10), m
+        r = allan.deviation(y, 1.0, "totdev", taus=[m], bias_correction=False)
+        assert r.dev[0] == pytest.approx(ref, rel=1e-10), m
+    with pytest.raises(ValueError, match=r"^totdev: m = 65 needs m ≤ N = 64 rate samples"):
+        allan.totdev(y, 65)
 
 
 def test_interval_level_below_one_half_is_that_level():

@@ -164,13 +164,14 @@ def ohdev(y, m: int = 1, tau0: float = 1.0):
 @_per_tau
 def totdev(y, m: int = 1, tau0: float = 1.0):
     """Total deviation at τ = m·τ0 (phase extended by reflection at both ends). `y` rate samples (1-D, any unit), `m` the
-    averaging factor (int ≥ 1), `tau0` the sample interval τ0 [s]. **Returns** the deviation
-    in `y`'s unit."""
+    averaging factor (int ≥ 1, at most the N rate samples: τ up to the record's length T,
+    as allantools and [`deviation`][hrgjax.allan.deviation]), `tau0` the sample interval τ0
+    [s]. **Returns** the deviation in `y`'s unit."""
     _check(y, m, 2, "totdev")
     x = _phase(y, tau0)
     n = x.shape[0]
-    if m > n - 2:
-        raise ValueError(f"totdev: m = {m} needs at least {m + 1} samples")
+    if m > n - 1:  # the reflected phase reaches i ± m for every i = 1 … n − 2 up to m = n − 1
+        raise ValueError(f"totdev: m = {m} needs m ≤ N = {n - 1} rate samples (τ ≤ T)")
     j = jnp.arange(1, n - 1)
     left = 2 * x[0] - x[j][::-1]
     right = 2 * x[-1] - x[n - 1 - j]

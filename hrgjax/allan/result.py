@@ -56,7 +56,8 @@ class AllanResult:
     - `bias_factor`: what `dev` was multiplied by to remove the estimator's bias (totdev:
       1/√[`totvar_bias`][hrgjax.allan.totvar_bias], 1/√(1 − a·τ/T) for flicker and
       random-walk rate noise (NIST SP 1065 §5.2.11), computed for white and flicker angle
-      noise; mtotdev, ttotdev: 1/√b(α); 1 elsewhere and where the correction was off).
+      noise (1 there under `noise_rule="stable32"`, as Stable32); mtotdev, ttotdev: 1/√b(α);
+      1 elsewhere and where the correction was off).
     - `segments`: for a rate record with gaps, the (start, length) of each gap-free run of
       samples [samples], an (R, 2) integer array
       ([`fit_noise`][hrgjax.allan.fit_noise] builds the estimates' covariance from it);
@@ -202,7 +203,8 @@ def deviation(
     - `bias_correction`: totdev divided by √(E[Totvar]/σ²) for the identified noise
       ([`totvar_bias`][hrgjax.allan.totvar_bias]: 1 − a·τ/T for flicker and random-walk
       rate noise as SP 1065 and Stable32; for white and flicker angle noise, which SP 1065
-      leaves uncorrected, 1 + (4/3)·τ/T and about ¾ of that excess), mtotdev and ttotdev by
+      leaves uncorrected, 1 + (4/3)·τ/T and about ¾ of that excess — not under
+      `noise_rule="stable32"`, which reports totdev as Stable32 does), mtotdev and ttotdev by
       √[`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS], as Stable32 reports them; `False`
       gives the raw estimators (allantools').
     - `noise_rule`: how the noise type is read where the lag-1 autocorrelation cannot:
@@ -356,7 +358,8 @@ def deviation(
             factor = 1.0 / np.sqrt([MTOTVAR_BIAS[int(min(max(a, -2), 2))] for a in alpha])
             dev = dev * factor
         if kind == "totdev" and bias_correction:
-            factor = 1.0 / np.sqrt([totvar_bias(int(a), int(k), n_phase)
+            angle = noise_rule == "hrgjax"  # Stable32 (SP 1065) corrects rate noises only
+            factor = 1.0 / np.sqrt([totvar_bias(int(a), int(k), n_phase, angle_noise=angle)
                                     for a, k in zip(alpha, m, strict=True)])  # fmt: skip
             dev = dev * factor
         low, high = confidence_interval(dev, edf, ci)
