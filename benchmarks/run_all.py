@@ -26,6 +26,7 @@ OUT = ROOT / "out"
 QUICK_ARGS = {  # scripts with a reduced size, and how to ask for it
     "adjoint_memory": ["--quick"],
     "calibration_study": ["--quick"],
+    "coverage_continuous": ["--n", "10"],
     "design_dwell": ["--seeds", "3"],
     "design_mc": ["--seeds", "3", "--budgets"],  # the seed plan only: no designed plan to compile
     "diagnosis": ["--quick"],

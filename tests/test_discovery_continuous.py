@@ -221,6 +221,26 @@ def test_the_gap_before_is_read_under_the_final_noise_model(thermal_rate_report)
     assert rep.gap_before < 3 * rep.noise_floor  # the floor: the final noise model's too
 
 
+def test_sigma_b_read_low_from_six_runs_no_longer_makes_k_e_confident():
+    """The audit's worst of 100 seeds of this design (2026-11-30, F3 and F4): REML read σ_b
+    at 0.036 °/h from the six run means (truth 0.2; four degrees of freedom), and k_e — which
+    only the turning runs' means against the static ones' pin — was reported at −6.6σ; the
+    still stretches read the angle random walk at 0.0007 °/√h (truth 0.002), and the per-run
+    thermal rates' χ² gave p = 0.0008 for a true, exactly catalogued effect. Independent
+    truth: the injected k_e and c_Tdot. Now σ_b's posterior is integrated into the σ
+    (`run_bias.spread`) and the χ² is judged at the noise level the residual shows at the
+    runs' scale (`records.run_level`, here ×2.7 the noise model's)."""
+    rep = discover(_short("thermal_rate", 0.15, 253), catalogue=ONE)
+    k_e = rep.parameters["angular_gain"]["k_e"]
+    assert abs(k_e["value"] - K_E) / k_e["sigma"] < 5.0  # a t₄ tail now (−4.7); was −6.6
+    assert 3.0 < rep.uncertainty["run_bias"]["dof"] < 5.0
+    assert "σ_b's uncertainty" in rep.equations().splitlines()[-1]
+    c = rep.parameters["thermal_rate"]["c_Tdot"]
+    assert abs(c["value"] - 0.15) < 2 * c["sigma"]  # +0.9σ, as before
+    cons = rep.consistency["thermal_rate"]
+    assert cons["noise_level"][0] > 1.5 and cons["p_value"] > 0.01  # 0.13; was 0.0008
+
+
 def test_continuous_null_says_nothing_is_missing():
     data = _short(None, 0.0, 4)
     rep = discover(data, catalogue=ONE)

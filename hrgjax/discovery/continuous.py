@@ -22,7 +22,7 @@ $C_{\rm GM}(k,l) = \sigma^2T_c^2(1-e^{-\Delta/T_c})^2e^{-(|k-l|-1)\Delta/T_c}$, 
 whitened by its Cholesky factor. Each run is its own switch-on: its constant bias
 (run-to-run repeatability, spread σ_b) is a random effect, $\sigma_b^2\Delta^2$ added to every
 element of Σ, with σ_b estimated by REML from the run means at the current model (`run_bias`) and
-re-estimated after each accepted effect. Sensitivities to every parameter — fitted or still at its
+re-estimated after each accepted effect (its own uncertainty carried into the reported σ). Sensitivities to every parameter — fitted or still at its
 null — are forward-mode derivatives through the solve (`diffrax.ForwardMode`, `jax.jacfwd`);
 fits are `optimistix.LevenbergMarquardt` (finished where it stalls: `_continuous_fit`).
 Nonregular time constants (`thermal_lag`'s τ_th, `warmup_transient`'s τ_w) are scanned on a
@@ -58,6 +58,7 @@ from .records import (
     repeats,
     residual_and_jacobian,
     run_covariates,
+    run_level,
     stack_runs,
     whiten,
 )  # fmt: skip
@@ -169,35 +170,45 @@ class ContinuousProblem(AbstractProblem):
         specific force: an effect constant along each ramp, say c·Ṫ) is not a switch-on bias:
         the covariate that explains the run means significantly (F-test, p <
         `RUN_COVARIATE_ALPHA`, `stats.followed_covariates`) is a fixed effect there."""
+        with bar(3, "run-to-run bias (REML)", tick=True) as progress:
+            inputs = self._reml_inputs(fit, progress)  # each compiles once per shape
+            new = copy.copy(self)
+            if inputs is not None:  # else nothing to estimate it from
+                sigma_b = run_bias.reml_run_bias(*inputs, self.noise.run_bias)
+                new.noise = self.noise.replace(run_bias=sigma_b)
+            progress.update(1)
+            new._build()
+            progress.update(1)
+        return new
+
+    def _reml_inputs(self, fit, progress=None):
+        """`run_bias.reml_inputs` at `fit` (`with_run_bias`); None: under two runs."""
         # continuous runs only: each is its own switch-on (the dwell runs of a mixed log are
         # one session, whose own bias is profiled out of their residual: `Windows.session`)
         train = [g for g in self.train_groups if isinstance(g, Runs)]
         held = [g for g in self.held_groups if isinstance(g, Runs)]
-        # run means, held-out Jacobian, REML, whitening rebuilt (each compiles once per shape)
-        with bar(4, "run-to-run bias (REML)", tick=True) as progress:
-            rates = self.run_rates(fit.z, train) | self.run_rates(fit.z, held)
+        rates = self.run_rates(fit.z, train) | self.run_rates(fit.z, held)
+        if len(rates) < 2:
+            return None
+        covs = run_covariates(train + held)
+        x = np.asarray([covs[r] for r in rates])
+        _, chosen = stats.followed_covariates(np.asarray(list(rates.values())), x,
+                                              RUN_COVARIATE_ALPHA)  # fmt: skip
+        held = residual_and_jacobian(  # the fit's parameters move the held-out runs
+            self.layout, jnp.asarray(fit.z), self._basis(list(fit.model))[0], self.held_groups,
+        ) if self.held_groups else None  # fmt: skip
+        if progress is not None:
             progress.update(1)
-            new = copy.copy(self)
-            if len(rates) >= 2:  # else nothing to estimate it from
-                covs = run_covariates(train + held)
-                x = np.asarray([covs[r] for r in rates])
-                _, chosen = stats.followed_covariates(
-                    np.asarray(list(rates.values())), x, RUN_COVARIATE_ALPHA
-                )
-                held = residual_and_jacobian(  # the fit's parameters move the held-out runs
-                    self.layout, jnp.asarray(fit.z), self._basis(list(fit.model))[0],
-                    self.held_groups,
-                ) if self.held_groups else None  # fmt: skip
-                progress.update(1)
-                sigma_b = run_bias.reml_at_fit(fit, held, self.train_groups, self.held_groups,
-                    {r: c[chosen] for r, c in covs.items()}, self.noise.run_bias)  # fmt: skip
-                new.noise = self.noise.replace(run_bias=sigma_b)
-                progress.update(1)
-            else:
-                progress.update(2)
-            new._build()
-            progress.update(1)
-        return new
+        return run_bias.reml_inputs(fit, held, self.train_groups, self.held_groups,
+                                    {r: c[chosen] for r, c in covs.items()})  # fmt: skip
+
+    def noise_spread(self, fit):
+        """σ_b's uncertainty carried into `fit`'s parameters
+        ([`run_bias.spread`][hrgjax.discovery.run_bias.spread]); None when the noise was given."""
+        inputs = None if self.noise_known else self._reml_inputs(fit)
+        if inputs is None:
+            return None
+        return run_bias.spread(fit, *inputs, self.noise.run_bias, self.k_out * DEG_PER_H)
 
     def after_accept(self, fit):
         """Re-estimate σ_b at the new model (unless the noise was given) and refit: a new
@@ -306,7 +317,8 @@ class ContinuousProblem(AbstractProblem):
         at the pooled fit $\bar p$), compared by `records.repeats` over the runs that
         *resolve* it ($\bar p^\top C_i\bar p$ ≥ `RESOLVES`², $C_i$ the run's information)
         or, when fewer than two do, over consecutive runs pooled until each group does: the
-        χ² of their values about the pooled one and the share pointing the same way. Another
+        χ² of their values about the pooled one (judged at the noise level the residual shows
+        at the runs' scale, `records.run_level`) and the share pointing the same way. Another
         run's sign is noise (a readout mismatch seen by a static ramp's drift of θ alone, at
         10⁻⁴ σ, once outvoted its rotations). A run whose refit did not converge gives no
         estimate: it neither agrees nor disagrees, and is listed in `unconverged`.
@@ -319,7 +331,7 @@ class ContinuousProblem(AbstractProblem):
         with bar(1, f"per-run refits of {name}", unit="refit", tick=True) as progress:
             fits, unconverged = per_run_fits(self.layout, basis, fit.z, self.train_groups, idx)
             progress.update(1)
-        out = repeats(fits, pooled, RESOLVES)
+        out = repeats(fits, pooled, RESOLVES, self.level(fit, idx))
         if out["reason"] is not None and unconverged:
             out["reason"] += f" ({len(unconverged)} runs' refits did not converge)"
         per_run = {
@@ -327,6 +339,11 @@ class ContinuousProblem(AbstractProblem):
             for run, z, _ in fits
         }
         return out | {"unconverged": unconverged, "per_run": per_run}
+
+    def level(self, fit, idx):
+        """`records.run_level` of `fit` with the parameters `idx` refitted run by run."""
+        own = [k for k, i in enumerate(self._basis(list(fit.model))[1]) if i in idx]
+        return run_level(fit.r, fit.j, own, self.train_groups)
 
     def start_from(self, parameters, names):
         """Scaled vector at the null with a report's `parameters` of effects `names` put in."""

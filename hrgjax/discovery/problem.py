@@ -103,6 +103,15 @@ class AbstractProblem(abc.ABC):
         model (default: `base`; the continuous records refit it where σ_b was re-estimated)."""
         return base
 
+    def noise_spread(self, fit: Fit) -> tuple[np.ndarray, dict] | None:
+        """The uncertainty of the noise model's estimated parts in `fit`'s parameters, for
+        [`honest`][hrgjax.discovery.trust.honest]: `(a factor on each regular parameter's
+        variance, info with "basis" in words)`, or None (default: the dwell grids' noise
+        enters through each class's level, read from the residual there). Continuous records:
+        the run-to-run bias σ_b, from a few run means
+        ([`run_bias.spread`][hrgjax.discovery.run_bias.spread])."""
+        return None
+
     @abc.abstractmethod
     def structure_left(self, fit: Fit, floor: float | None = None) -> bool:
         """Whether `fit` leaves significant structure in the held-out runs."""

@@ -28,6 +28,24 @@ parameters at any δ: y − r lies in the span of X, so yᵀPy = rᵀPr). It is 
 runs' whole records (the damping anisotropy by the turning runs' 2θ ripple), not only by
 their means: the same REML on the six run means alone, X their Jacobian, still read 0.03 °/h
 on the audit's log.
+
+**σ_b's own uncertainty.** Six runs less the fixed effects the run means carry leave REML
+about four degrees of freedom for σ_b (n_runs − Σ cos² of X's angles to the runs' span:
+4.4 on `continuous_dataset`'s six ramps), so σ̂_b scatters by ×10 between seeds of one
+design (0.036–0.39 °/h over 100 seeds, truth 0.2). A parameter the run means pin — the
+angular gain, fixed by the turning runs' mean rate against the static ones' — has a σ
+proportional to σ_b, and with σ̂_b plugged in as known its error over σ is Student's t on
+those four degrees of freedom, not a normal: k_e's z-RMS was 1.34 over the 100 seeds
+(audit 2026-11-30; one seed at −6.6σ where σ̂_b read 0.036 °/h), while the thermal rate,
+pinned inside the runs, was unaffected (1.13). [`spread_factors`][hrgjax.discovery.run_bias.spread_factors]
+carries σ_b's uncertainty into every parameter's variance: σ_b is integrated over its
+posterior — the REML likelihood above times the Jeffreys prior of that likelihood,
+$\pi(\sigma_b^2) \propto \sqrt{\tfrac12\operatorname{tr}(U^\top PU)^2}$ (∝ 1/σ_b² where
+σ_b dominates a run mean, flat where the within-run noise does: proper at σ_b = 0) — and
+each parameter's variance becomes $\mathrm E[C_{ii}(\sigma_b) + (\hat\theta_i(\sigma_b) -
+\hat\theta_i)^2]$, the generalised-least-squares covariance and shift of the fit at each
+σ_b (Woodbury again). For a parameter that only the run means pin this is the variance of
+Student's t, ν/(ν − 2) × the plug-in one, whose z has unit variance whatever σ̂_b reads.
 """
 
 from __future__ import annotations
@@ -36,7 +54,10 @@ import math
 
 import numpy as np
 
-from .records import Windows
+from .records import rate_columns
+
+POSTERIOR_POINTS = 121
+"""Values of σ_b the posterior is evaluated at (`posterior`: 20 a decade over six decades)."""
 
 
 def _orthonormal(x: np.ndarray) -> np.ndarray:
@@ -55,23 +76,8 @@ def run_columns(groups) -> tuple[np.ndarray, list[int]]:
     """Whitened columns (rows of `groups` in residual order, runs) of each continuous run's
     constant rate of 1 rad/s: a run bias b adds b times its column to the whitened residual.
     Window rows (a mixed log's dwell runs: their session bias is profiled out) are zero.
-    **Returns** `(U, run ids)`."""
-    rows, blocks, runs = 0, [], []
-    for g in groups:
-        if isinstance(g, Windows):
-            rows += len(g.run)
-            continue
-        bidx, t, w = np.asarray(g.bidx), np.asarray(g.t), np.asarray(g.whiten)
-        for i, run in enumerate(g.run):
-            delta = float(np.median(np.diff(t[i, bidx])))  # as `stack_runs` whitens
-            col = w[i] @ np.full(w.shape[-1], delta)
-            blocks.append((rows, col))
-            runs.append(int(run))
-            rows += col.size
-    u = np.zeros((rows, len(runs)))
-    for k, (at, col) in enumerate(blocks):
-        u[at : at + col.size, k] = col
-    return u, runs
+    **Returns** `(U, run ids)` ([`rate_columns`][hrgjax.discovery.records.rate_columns])."""
+    return rate_columns(groups)
 
 
 def reml_loglik(r: np.ndarray, x: np.ndarray, u: np.ndarray, delta) -> float:
@@ -107,18 +113,23 @@ def _loglik(products, delta) -> float:
     return -0.5 * (logdet_v + logdet_x + quad)
 
 
+def _scaled(r, x, u):
+    """`_products` with the runs' columns in units of a run mean's spread under the
+    whitening (`scale` [rad/s]): `(products, scale)`."""
+    u = np.asarray(u, float)
+    norms = np.linalg.norm(u, axis=0)
+    scale = float(np.median(1.0 / norms[norms > 0]))  # a run mean's spread [rad/s]
+    return _products(np.asarray(r, float), _orthonormal(np.asarray(x, float)), u * scale), scale
+
+
 def reml_run_bias(r, x, u, sigma_now: float) -> float:
     """σ_b [rad/s] that maximises the REML likelihood (module docstring) of the whitened
     residual `r` (whitened with σ_b = `sigma_now` [rad/s]), fixed-effect columns `x` and the
     runs' columns `u` ([`run_columns`][hrgjax.discovery.run_bias.run_columns]). Searched
     over 10⁻² … 10³ × the spread of a run mean under the whitening, and 0."""
-    u = np.asarray(u, float)
-    if u.shape[1] == 0:
+    if np.shape(u)[1] == 0:
         return sigma_now
-    norms = np.linalg.norm(u, axis=0)
-    scale = float(np.median(1.0 / norms[norms > 0]))  # a run mean's spread [rad/s]
-    u = u * scale
-    products = _products(np.asarray(r, float), _orthonormal(np.asarray(x, float)), u)
+    products, scale = _scaled(r, x, u)
 
     def loglik(log_s):  # σ_b = e^log_s [rad/s] (None: 0); δ in units of scale²
         s = math.exp(log_s) if log_s is not None else 0.0
@@ -147,13 +158,102 @@ def reml_run_bias(r, x, u, sigma_now: float) -> float:
     return 0.0 if at_zero > loglik(mid) else math.exp(mid)
 
 
-def reml_at_fit(fit, held, train_groups, held_groups, covariates, sigma_now: float) -> float:
-    """[`reml_run_bias`][hrgjax.discovery.run_bias.reml_run_bias] at a continuous problem's
-    fit: `fit.r`, `fit.j` on the training rows of `train_groups`; `held`, the whitened
-    residual and Jacobian (the fit's parameters) on the rows of `held_groups` (None without
-    them: not fitted, but moved by the parameters the training runs fix); as further fixed
-    effects each run covariate of `covariates` (`{run: values}`, those the run means follow)
-    times the runs' columns. σ_b [rad/s]."""
+def _batched(products, delta):
+    """`_loglik` and the REML Fisher information on σ_b² (½ tr((UᵀPU)²), in the units of
+    `_scaled`) at every δ of the 1-D array `delta` at once (Woodbury, as `_loglik`)."""
+    a, b, ur, xr, rr = products
+    eye = np.eye(a.shape[0])
+    m = eye + delta[:, None, None] * a
+    sign, logdet_v = np.linalg.slogdet(m)
+    g = delta[:, None, None] * np.linalg.inv(m)
+    uvu = a - a @ g @ a  # UᵀV⁻¹U, then (with fixed effects) less its part along X
+    rvr = rr - np.einsum("i,kij,j->k", ur, g, ur)
+    logdet_x = np.zeros(delta.size)
+    if b.shape[0]:
+        xvx = np.eye(b.shape[0]) - b @ g @ b.T
+        xvr = xr - np.einsum("ij,kjl,l->ki", b, g, ur)
+        xvu = b - b @ g @ a
+        sign_x, logdet_x = np.linalg.slogdet(xvx)
+        sign = np.minimum(sign, sign_x)
+        rvr = rvr - np.einsum("ki,ki->k", xvr, np.linalg.solve(xvx, xvr[..., None])[..., 0])
+        uvu = uvu - np.swapaxes(xvu, 1, 2) @ np.linalg.solve(xvx, xvu)
+    loglik = np.where(sign > 0, -0.5 * (logdet_v + logdet_x + rvr), -np.inf)
+    return loglik, 0.5 * np.einsum("kij,kji->k", uvu, uvu)
+
+
+def posterior(r, x, u, sigma_now: float, points: int = POSTERIOR_POINTS):
+    """σ_b's posterior (module docstring: REML likelihood × its Jeffreys prior) from the
+    arguments of [`reml_run_bias`][hrgjax.discovery.run_bias.reml_run_bias], on `points`
+    values of σ_b spaced evenly in log σ_b over 10⁻³ … 10³ × a run mean's spread under the
+    whitening: `(sigma_b [rad/s], weights summing to 1)`."""
+    products, scale = _scaled(r, x, u)
+    sigma = scale * np.logspace(-3.0, 3.0, points)
+    loglik, info = _batched(products, (sigma**2 - sigma_now**2) / scale**2)
+    # prior density in σ_b² times dσ_b²/dlog σ_b = 2σ_b²: the grid is even in log σ_b
+    log_w = loglik + 0.5 * np.log(np.maximum(info, 1e-300)) + 2.0 * np.log(sigma / scale)
+    w = np.exp(log_w - np.max(log_w))
+    return sigma, w / w.sum()
+
+
+def spread_factors(j, r, u, sigma_now: float, sigma, weights) -> np.ndarray:
+    """Each fitted parameter's variance with σ_b integrated over `(sigma, weights)`
+    ([`posterior`][hrgjax.discovery.run_bias.posterior]) over its variance at
+    `sigma_now` [rad/s], the σ_b the fit's whitened Jacobian `j` (N, p) and residual `r` are
+    whitened with; `u` (N, R): the training runs' columns. Per σ_b the generalised least
+    squares covariance C and shift δθ of the fit (one Gauss–Newton step: exact for a model
+    linear near the fit) under the whitened covariance I + (σ_b² − σ_now²)UUᵀ; **returns**
+    E[C_ii + δθ_i²] / C_ii(σ_now), shape (p,) (1 where the runs carry no bias column)."""
+    j, r, u = (np.asarray(a, float) for a in (j, r, u))
+    u = u[:, np.linalg.norm(u, axis=0) > 0]
+    norm = np.linalg.norm(j, axis=0)
+    js = j / np.where(norm > 0, norm, 1.0)  # unit columns: they differ by 10¹⁰
+    if u.shape[1] == 0 or j.shape[1] == 0:
+        return np.ones(j.shape[1])
+    jj, ju, uu, ur, jr = js.T @ js, js.T @ u, u.T @ u, u.T @ r, js.T @ r
+    keep = np.asarray(weights) > 1e-12
+    s = np.r_[sigma_now, np.asarray(sigma, float)[keep]]
+    delta = (s * s - sigma_now**2)[:, None, None]
+    g = delta * np.linalg.inv(np.eye(uu.shape[0]) + delta * uu)
+    c = np.linalg.pinv(jj - ju @ g @ ju.T, hermitian=True)
+    shift = np.einsum("kij,kj->ki", c, jr - np.einsum("ij,kjl,l->ki", ju, g, ur))
+    var = np.diagonal(c, axis1=1, axis2=2)
+    mse = np.asarray(weights)[keep] @ (var[1:] + (shift[1:] - shift[0]) ** 2)
+    return np.where(var[0] > 0, mse / np.where(var[0] > 0, var[0], 1.0), 1.0)
+
+
+def dof(x, u) -> float:
+    """Degrees of freedom the run means leave σ_b: the runs (columns of `u` that are not
+    zero) less Σ cos² of the principal angles between the fixed effects `x` and the runs'
+    span (a fixed effect inside the span spends one; one across it, part of one)."""
+    u = np.asarray(u, float)
+    q = _orthonormal(u[:, np.linalg.norm(u, axis=0) > 0])
+    xo = _orthonormal(np.asarray(x, float))
+    return float(q.shape[1] - np.sum(np.linalg.svd(q.T @ xo, compute_uv=False) ** 2))
+
+
+def spread(fit, r, x, u, sigma_now: float, per_dph: float):
+    """σ_b's uncertainty in a continuous fit's parameters (module docstring): `fit` (its
+    whitened `r`, `j` on the training rows, whitened with σ_b = `sigma_now` [rad/s]), `(r, x,
+    u)` from [`reml_inputs`][hrgjax.discovery.run_bias.reml_inputs] at it, `per_dph` the
+    pattern rate [rad/s] of 1 °/h of input rate. **Returns** `(factors, info)`: each regular
+    parameter's variance factor ([`spread_factors`][hrgjax.discovery.run_bias.spread_factors])
+    and `{"dof": dof(x, u), "sigma_b_dph": [16 %, 50 %, 84 % points of σ_b's posterior],
+    "basis": words}`."""
+    sigma, w = posterior(r, x, u, sigma_now)
+    n = np.asarray(fit.r).size
+    factors = spread_factors(fit.j, fit.r, np.asarray(u)[:n], sigma_now, sigma, w)
+    q = np.interp([0.16, 0.5, 0.84], np.cumsum(w) - 0.5 * w, sigma) / per_dph
+    nu = dof(x, u)
+    words = (f"σ_b's uncertainty carried in (REML on {np.shape(u)[1]} runs, {nu:.1f} "
+             f"degrees of freedom: {q[0]:.2g}–{q[2]:.2g} °/h)")  # fmt: skip
+    return factors, {"dof": nu, "sigma_b_dph": q.tolist(), "basis": words}
+
+
+def reml_inputs(fit, held, train_groups, held_groups, covariates):
+    """What [`reml_run_bias`][hrgjax.discovery.run_bias.reml_run_bias] reads at a continuous
+    problem's fit (arguments of [`reml_at_fit`][hrgjax.discovery.run_bias.reml_at_fit]):
+    `(r, x, u)` on the training rows then the held-out rows, the training runs' columns
+    first."""
     (u_t, ids_t), (u_h, ids_h) = run_columns(train_groups), run_columns(held_groups)
     u = np.zeros((u_t.shape[0] + u_h.shape[0], len(ids_t) + len(ids_h)))
     u[: u_t.shape[0], : len(ids_t)] = u_t
@@ -165,4 +265,15 @@ def reml_at_fit(fit, held, train_groups, held_groups, covariates, sigma_now: flo
     cov = np.asarray([covariates[run] for run in ids_t + ids_h]).reshape(
         len(ids_t) + len(ids_h), -1
     )
-    return reml_run_bias(r, np.concatenate([j, u @ cov], axis=1), u, sigma_now)
+    return r, np.concatenate([j, u @ cov], axis=1), u
+
+
+def reml_at_fit(fit, held, train_groups, held_groups, covariates, sigma_now: float) -> float:
+    """[`reml_run_bias`][hrgjax.discovery.run_bias.reml_run_bias] at a continuous problem's
+    fit: `fit.r`, `fit.j` on the training rows of `train_groups`; `held`, the whitened
+    residual and Jacobian (the fit's parameters) on the rows of `held_groups` (None without
+    them: not fitted, but moved by the parameters the training runs fix); as further fixed
+    effects each run covariate of `covariates` (`{run: values}`, those the run means follow)
+    times the runs' columns. σ_b [rad/s]."""
+    return reml_run_bias(*reml_inputs(fit, held, train_groups, held_groups, covariates),
+                         sigma_now)  # fmt: skip

@@ -238,7 +238,8 @@ def discover(
         before = problem.baseline(nominal, base) if accepted else base
     except RuntimeError:  # that refit did not converge: the nominal fit as it was
         before = base
-    parameters, uncertainty = trust.honest(current, problem.shape_columns, problem.row_classes())
+    parameters, uncertainty = trust.honest(current, problem.shape_columns, problem.row_classes(),
+                                           spread=problem.noise_spread(current))  # fmt: skip
     # structure left: the held-out gap above the floor, or a leftover shape the residuals
     # needed (trust.honest: judged at the noise level left once it is fitted)
     left = problem.structure_left(current, floor) or bool(uncertainty["structure_left"])

@@ -189,6 +189,28 @@ def level_test(r: np.ndarray, j: np.ndarray, g: np.ndarray, classes=None):
     return sc, alias, step, f_sf(sc / q, q, max(int(math.floor(nu)), 1)), s
 
 
+def _span(a: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the span of `a`'s columns, scaled to unit norm first (numerical
+    rank by SVD at 10⁻⁹ of the largest)."""
+    norm = np.linalg.norm(a, axis=0)
+    a = a[:, norm > 0] / norm[norm > 0]
+    if a.shape[1] == 0:
+        return np.zeros((a.shape[0], 0))
+    q, s, _ = np.linalg.svd(a, full_matrices=False)
+    return q[:, s > 1e-9 * s[0]]
+
+
+def level_beyond(r: np.ndarray, a: np.ndarray, s: np.ndarray) -> tuple[float, int]:
+    """The noise level a whitened residual `r` shows along the columns `s` beyond the span
+    of `a` (a Birge ratio in that subspace: 1 when the whitening is right there):
+    `(‖P_[a s] r‖² − ‖P_a r‖²) / ν, ν)`, ν the rank `s` adds to `a` ((1.0, 0) when none)."""
+    qa, qs = _span(a), _span(np.concatenate([a, s], axis=1))
+    nu = qs.shape[1] - qa.shape[1]
+    if nu <= 0:
+        return 1.0, 0
+    return float((np.sum((qs.T @ r) ** 2) - np.sum((qa.T @ r) ** 2)) / nu), int(nu)
+
+
 def chi2_sf(x: float, dof: int) -> float:
     """Upper tail probability of χ²_dof at x."""
     return float(gammaincc(dof / 2.0, jnp.asarray(max(x, 0.0) / 2.0)))

@@ -39,6 +39,10 @@ biased by it. Two corrections, both from the fit's own residual:
    the interval's edge, half the time outside). A parameter the leftover pulls is reported
    with that pull in its σ, never with a confident, wrong one.
 
+Continuous records add a third, from outside the residual level: the run-to-run bias σ_b
+is read from a few run means, and its own uncertainty is carried into every parameter's
+variance (`spread`, [`run_bias.spread`][hrgjax.discovery.run_bias.spread]).
+
 The corrected σ replace `std` in the fit's parameters; the untouched textbook value is kept
 as `std_textbook`, the shift as `std_model`, and the returned `basis` says in words what was
 done (the report's "± are 1σ: …" line). `benchmarks/coverage.py` measures how often the truth falls
@@ -124,18 +128,22 @@ def _shapes_left(r, j, cols, classes, s, alpha):
     return chosen
 
 
-def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
+def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
     """The fit's parameters with error bars that cover the truth (module docstring).
 
     **Arguments:** `fit` (a [`Fit`][hrgjax.discovery.problem.Fit]), `shape_columns` (the
     problem's whitened generic-shape columns on the training rows), `classes` (an integer
     class per training row — static / moving windows — or None for one class), `alpha`
-    (significance of a leftover shape).
+    (significance of a leftover shape), `spread` (None, or `(factors, info)`: a factor per
+    regular parameter on its statistical variance for an estimated part of the noise model's
+    own uncertainty, `info["basis"]` saying which in words — continuous records' σ_b,
+    [`noise_spread`][hrgjax.discovery.problem.AbstractProblem.noise_spread]).
 
     **Returns:** `(parameters, info)`: a copy of `fit.parameters` whose `std` are the
     corrected ones (`std_textbook` and `std_model` beside them), and `info` =
     `{"noise_scale": {class: s}, "shapes": [names], "structure_left": bool, "basis": words}`
-    (`structure_left`: a shape was fitted beside the model, and with it `"excess"`:
+    (with `spread`, `"run_bias"`: its info less the words; `structure_left`: a shape was
+    fitted beside the model, and with it `"excess"`:
     `{class: s without the shapes}` for the classes whose level they bring down by more than
     10 %: a residual far above the noise model that the shapes explain is structure, not noise).
     """
@@ -160,6 +168,8 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
     step, *_ = np.linalg.lstsq(a, r, rcond=None)
     var = _sandwich_diag(a, s, p)
     old = np.sqrt(np.diag(stats.covariance(j)))
+    if spread is not None:  # σ_b's (or another estimated noise part's) own uncertainty
+        var = var * np.asarray(spread[0], float)
     shift = step[:p] if shapes else np.zeros(p)
     for i, (name, pname) in enumerate(labels):
         entry = params[name][pname]
@@ -185,6 +195,9 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3):
         + " of the noise model's σ)"
     )
     info = {"noise_scale": scale, "shapes": shapes, "structure_left": bool(shapes)}
+    if spread is not None:
+        info["run_bias"] = {k: v for k, v in spread[1].items() if k != "basis"}
+        words += "; " + spread[1]["basis"]
     if shapes:
         info["excess"] = {k: without[k] for k in scale if without[k] > 1.1 * scale[k]}
         words += "; structure left (" + ", ".join(shapes) + ") fitted beside the model"

@@ -1,0 +1,90 @@
+"""Do continuous-record discovery's error bars and consistency p-values hold? Monte Carlo with
+known truth (audit 2026-11-30, F3 and F4).
+
+The design of the tests' fast tier (`tests/helpers.SHORT_RAMPS`): six 1500-s records at 2 s
+(three static, three turning at 2 °/s; temperature ramps of 200–600 s), each its own
+switch-on (σ_b 0.2 °/h), a thermal rate of 0.15 °/h per °C/min hidden, searched with the
+catalogue `["thermal_rate"]`. For every seed: z = (value − truth)/σ of the angular gain k_e
+(pinned by the turning runs' mean rate against the static ones': its σ ∝ σ_b, which REML
+reads from six run means, ≈ 4 degrees of freedom) and of c_Tdot (pinned inside the runs),
+with the σ `discover` reports and with the textbook σ (σ̂_b plugged in as known,
+`std_textbook`); and the per-run consistency's p-value, which under a true, exactly
+catalogued effect should be uniform.
+
+Usage: `.venv/bin/python benchmarks/coverage_continuous.py [--n 100] [--seed0 200]`
+(≈ 4 s a seed once compiled; 2-core machine).
+"""
+
+import argparse
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+from _common import machine, report  # noqa: E402
+
+from hrgjax.discovery import discover  # noqa: E402
+from hrgjax.discovery.generate import base_gyro, continuous_dataset  # noqa: E402
+
+SHORT_RAMPS = (  # tests/helpers.py
+    (-20.0, 40.0, 600.0, 0.0, 0.0),
+    (40.0, -20.0, 600.0, 2.0, 0.0),
+    (-20.0, 40.0, 200.0, 0.0, 45.0),
+    (40.0, -20.0, 200.0, 2.0, 30.0),
+    (0.0, 60.0, 400.0, 0.0, -30.0),
+    (60.0, 0.0, 400.0, 2.0, 60.0),
+)
+SIZE = 0.15  # °/h per °C/min
+
+
+def _row(name, z):
+    z = np.asarray(z)
+    one, two = np.mean(np.abs(z) < 1) * 100, np.mean(np.abs(z) < 2) * 100
+    rms = float(np.sqrt(np.mean(z**2)))
+    worst = z[np.argmax(np.abs(z))]
+    print(f"| {name} | {one:.0f} % | {two:.0f} % | {rms:.2f} | {worst:+.2f} |")
+    return rms
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=100, help="seeds")
+    ap.add_argument("--seed0", type=int, default=200, help="first seed (the audit's: 200)")
+    args = ap.parse_args()
+    k_true = float(base_gyro(noise=False).k_e)
+    z = {k: [] for k in ("k_e", "k_e textbook", "c_Tdot", "c_Tdot textbook")}
+    p, dof, missed = [], [], 0
+    t0 = time.time()
+    for seed in range(args.seed0, args.seed0 + args.n):
+        data = continuous_dataset("thermal_rate", SIZE, key=jax.random.key(seed),
+                                  duration_s=1500.0, dt_out=2.0, ramps=SHORT_RAMPS)  # fmt: skip
+        rep = discover(data, catalogue=["thermal_rate"])
+        if "thermal_rate" not in rep.parameters:
+            missed += 1
+            continue
+        for key, effect, param, truth in (("k_e", "angular_gain", "k_e", k_true),
+                                          ("c_Tdot", "thermal_rate", "c_Tdot", SIZE)):  # fmt: skip
+            v = rep.parameters[effect][param]
+            raw = rep.fit_parameters[effect][param]
+            z[key].append((v["value"] - truth) / v["sigma"])
+            # the textbook σ in user units: the reported one scaled by textbook / corrected
+            z[key + " textbook"].append(z[key][-1] * raw["std"] / raw["std_textbook"])
+        p.append(rep.consistency["thermal_rate"]["p_value"])
+        dof.append(rep.uncertainty["run_bias"]["dof"])
+    print(f"{machine()}; {args.n} seeds from {args.seed0} in {time.time() - t0:.0f} s "
+          f"({missed} without the thermal rate found)")  # fmt: skip
+    print("\n| parameter, σ | ±1σ | ±2σ | z-RMS | worst z |\n|---|---|---|---|---|")
+    rms = {k: _row(k, v) for k, v in z.items()}
+    p = np.asarray([q for q in p if q is not None], float)
+    print(f"\nconsistency p: n = {p.size}, < 0.01: {np.mean(p < 0.01) * 100:.0f} %, "
+          f"< 0.05: {np.mean(p < 0.05) * 100:.0f} %, < 0.5: {np.mean(p < 0.5) * 100:.0f} %; "
+          f"σ_b's degrees of freedom {np.median(dof):.2f} (median)")  # fmt: skip
+    report("continuous k_e z-RMS (reported σ)", rms["k_e"], "", target="0.85–1.15")
+    report("continuous c_Tdot z-RMS (reported σ)", rms["c_Tdot"], "", target="0.85–1.15")
+    report("continuous consistency p < 0.01", np.mean(p < 0.01) * 100, "%", target="≈ 1 %")
+
+
+if __name__ == "__main__":
+    main()
