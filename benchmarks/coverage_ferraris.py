@@ -41,7 +41,7 @@ bias random walk the faces allow, its intensity q's posterior mean).
 
 Usage: `.venv/bin/python benchmarks/coverage_ferraris.py [--quick] [--n N] [--seed S]
 [--repeats R] [--earth-only]` (quick: 40 datasets per noise, under a minute on 2 cores;
-default 200, about 3 minutes; `--earth-only`: the four Earth-rate kinds alone). `--repeats 3`: sessions of three repeats, whose σ come from the repeats'
+default 200, about 2 minutes on 2 cores; `--earth-only`: the four Earth-rate kinds alone). `--repeats 3`: sessions of three repeats, whose σ come from the repeats'
 scatter (Student-t with R − 1 degrees of freedom: wider than ±1σ suggests).
 """
 
