@@ -8,7 +8,7 @@ cancels part of the long-τ variance (SP 1065 §5.2.11: E[Totvar] = (1 − a·τ
 0.481 for flicker and 0.750 for random-walk rate noise, none for white rate noise), but for
 phase (angle) noise the end point's own noise enters with weight 2: white angle noise reads
 E[Totvar]/σ² = 1 + (4/3)·τ/T to O(1/N) at every factor m up to N − 2 (τ = T − τ₀: 2.33),
-and 8/3 only at the last, τ = T; flicker angle noise about three-quarters of that excess.
+and 8/3 only at the last, τ = T (for long records: 4 at n = 3); flicker angle noise about three-quarters of that excess.
 SP 1065 gives no bias for phase noises (Howe recommends MDEV or MTOT for them); here both
 are computed, not tabulated:
 
@@ -137,7 +137,7 @@ def totvar_white_phase(m: int, n: int) -> tuple[float, float]:
     """`(bias, edf)` of Totvar at factor `m` over `n` phase points for white angle (phase)
     noise, exact: E[Totvar] = bias·σ²(τ), σ²(τ) = 3σₓ²/τ² its Allan variance, and the EDF
     (tr A)²/tr A² of Totvar = xᵀAx/(2τ²(n − 2)) over the independent phase points x. bias
-    is 1 + (4/3)·τ/T to O(1/n) for every m up to n − 2 and 8/3 only at τ = T (m = n − 1);
+    is 1 + (4/3)·τ/T to O(1/n) for every m up to n − 2 and ≈ 8/3 only at τ = T (m = n − 1; 4 at n = 3);
     the EDF ≈ n/1.94 at small m (as an overlapping Allan variance), 4.0 at τ = T. Equal to
     the dense matrices' tr A, tr A² to round-off for every m of n = 3 … 40
     (tests/test_allan_stats.py).
