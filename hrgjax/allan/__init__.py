@@ -12,7 +12,7 @@ Every name is importable from `hrgjax.allan` (it was one module until issue 45);
 `deviations` (the estimators and the compiled curve), `result` (`deviation`: that curve on
 τ grids with its statistics, an `AllanResult`),
 `total` (mtotdev and ttotdev, NumPy), `totvar` (totdev's bias and EDF by noise type),
-`uncertainty` (noise identification, EDF, χ² intervals), `noise_terms` (the IEEE 952
+`noise_ident` (noise identification), `uncertainty` (EDF, χ² intervals), `noise_terms` (the IEEE 952
 line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
 exact covariance of the octave estimates, for rate samples taken as interval means or as
 point samples: an explicit `sampling` argument) and `composite` (a composite noise model fitted with
@@ -30,6 +30,14 @@ from .deviations import mdev as mdev
 from .deviations import oadev as oadev
 from .deviations import ohdev as ohdev
 from .deviations import totdev as totdev
+from .noise_ident import ACF_POINTS as ACF_POINTS
+from .noise_ident import B1_AVERAGES as B1_AVERAGES
+from .noise_ident import NOISE_RULES as NOISE_RULES
+from .noise_ident import RHO_SPLIT as RHO_SPLIT
+from .noise_ident import RN_FACTOR as RN_FACTOR
+from .noise_ident import b1_expected as b1_expected
+from .noise_ident import noise_id as noise_id
+from .noise_ident import rn_expected as rn_expected
 from .noise_terms import NOISE_TERMS as NOISE_TERMS
 from .noise_terms import NoiseFit as NoiseFit
 from .noise_terms import fit_noise as fit_noise
@@ -41,13 +49,7 @@ from .totvar import TOTVAR_BIAS as TOTVAR_BIAS
 from .totvar import edf_totdev as edf_totdev
 from .totvar import totvar_bias as totvar_bias
 from .totvar import totvar_white_phase as totvar_white_phase
-from .uncertainty import ACF_POINTS as ACF_POINTS
-from .uncertainty import B1_AVERAGES as B1_AVERAGES
-from .uncertainty import NOISE_RULES as NOISE_RULES
 from .uncertainty import ONE_SIGMA as ONE_SIGMA
-from .uncertainty import b1_expected as b1_expected
 from .uncertainty import chi2_ppf as chi2_ppf
 from .uncertainty import confidence_interval as confidence_interval
 from .uncertainty import edf_greenhall as edf_greenhall
-from .uncertainty import noise_id as noise_id
-from .uncertainty import rn_expected as rn_expected

@@ -1,6 +1,7 @@
 r"""A deviation curve with its statistics: [`deviation`][hrgjax.allan.deviation] evaluates the
 compiled curve of `hrgjax.allan.deviations` on allantools' τ grids and attaches the noise
-type, the equivalent degrees of freedom and the χ² interval of `hrgjax.allan.uncertainty`,
+type of `hrgjax.allan.noise_ident`, the equivalent degrees of freedom and the χ² interval of
+`hrgjax.allan.uncertainty`,
 as an [`AllanResult`][hrgjax.allan.AllanResult]."""
 
 from __future__ import annotations
@@ -19,16 +20,9 @@ from .._checks import check_1d, describe, is_finite_real
 from .._progress import bar
 from .._x64 import require_x64
 from .deviations import CURVE_CHUNK, curve, curve_parts
+from .noise_ident import NOISE_RULES, check_rate_has_noise, noise_id, noise_id_each
 from .totvar import edf_totdev, totvar_bias
-from .uncertainty import (
-    ACF_POINTS,
-    NOISE_RULES,
-    ONE_SIGMA,
-    check_rate_has_noise,
-    confidence_interval,
-    edf_greenhall,
-    noise_id,
-)
+from .uncertainty import ONE_SIGMA, confidence_interval, edf_greenhall
 
 KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "mtotdev", "ttotdev")
 """The deviations [`deviation`][hrgjax.allan.deviation] computes (mtotdev and ttotdev in
@@ -155,22 +149,12 @@ class _NoProgress(contextlib.nullcontext):
 
 
 def _noise_in_steps(x, m, progress, **options):
-    """[`noise_id`][hrgjax.allan.noise_id]`(x, m, **options)`, one progress step a factor:
-    each factor whose decimated phase keeps `ACF_POINTS` points is read alone (by its lag-1
-    autocorrelation under every rule, and R(n) under the default one: a value of its own,
-    never carried), the rest (the few largest) in one call that starts from the last such
-    factor, so that α carries on as in one call."""
-    m = np.asarray(m, dtype=int)
-    alone = -(-x.size // m) >= ACF_POINTS  # x[::k] keeps ACF_POINTS points
-    read = m.size if alone.all() else int(np.argmin(alone))  # the leading run of those
+    """[`noise_id`][hrgjax.allan.noise_id]`(x, m, **options)`, one progress step a factor
+    (the whole-record work done once: `noise_id_each`)."""
     out = []
-    for k in m[:read]:
-        out.append(int(noise_id(x, [k], **options)[0]))
+    for a in noise_id_each(x, m, **options):
+        out.append(a)
         progress.update()
-    if read < m.size:
-        lead = m[max(read - 1, 0) : read]
-        out.extend(noise_id(x, np.concatenate([lead, m[read:]]), **options)[lead.size :])
-        progress.update(m.size - read)
     return np.asarray(out, dtype=int)
 
 

@@ -1,0 +1,395 @@
+"""Which power-law noise dominates at each τ: [`noise_id`][hrgjax.allan.noise_id] (the lag-1
+autocorrelation of Riley & Greenhall 2004, the B1 and R(n) ratios beyond its reach) and the
+ratios' expectations ([`b1_expected`][hrgjax.allan.b1_expected],
+[`rn_expected`][hrgjax.allan.rn_expected]), in NumPy (float64, no JAX). The EDF and the χ²
+interval that the α feeds are in `hrgjax.allan.uncertainty`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._checks import check_1d, describe
+
+ACF_POINTS = 30
+"""The fewest decimated phase points the lag-1 autocorrelation identifies noise from (Riley &
+Greenhall 2004; Stable32's and allantools' limit); with fewer, the B1 and R(n) ratios."""
+B1_AVERAGES = 8
+"""The fewest τ-averages the B1 ratio identifies noise from. Below 8 its expectations for
+neighbouring noise types (at N = 4: 2, 1.33, 1 for α = −2, −1, 0) lie within its sampling
+spread, and at N = 2 it is 1 whatever the noise; there the factor before is carried on.
+`benchmarks/coverage_allan.py` (200 records of 20 000 s each, white rate or angle noise plus
+rate random walk): the ±1σ interval at the longest τ (8 192 s) covers the truth in 70–71 % of
+records with this rule (59–74 % with the α of the last autocorrelation τ carried on, 58–60 %
+with B1 read down to N = 3, before R(n)'s white-rate guard)."""
+
+
+RN_FACTOR = 4
+"""The smallest m from which R(n) = MVAR/AVAR tells white (1/m) from flicker angle noise
+and both from rate noise (½ and above); below, all three lie near ½."""
+RHO_SPLIT = -0.04
+"""The lag-1 ρ = r₁/(1 + r₁) of the twice-differenced decimated phase (m ≥ 2) below which
+the default rule reads flicker rather than random-walk rate noise: the midpoint of their
+values for averaged rates, ρ = 1 − 8 ln 2/(9 ln 3 − 8 ln 2) = −0.277 (r₁ = 9 ln 3/(8 ln 2) − 2) and
+0.2 (r₁ = ¼)."""
+
+
+NOISE_RULES = ("hrgjax", "stable32")
+"""The rules [`noise_id`][hrgjax.allan.noise_id] knows beyond the lag-1 autocorrelation's
+reach: `"hrgjax"` (the default) and `"stable32"` (Stable32 1.60's tables)."""
+
+
+def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = True) -> np.ndarray:
+    """The power-law noise α (rate PSD ∝ f^α) at each factor `m` of phase (angle) samples
+    `x`, as Stable32 identifies it (NIST SP 1065 §5.6):
+
+    - where the phase decimated by m keeps at least [`ACF_POINTS`][hrgjax.allan.ACF_POINTS]
+      points, the lag-1 autocorrelation (Riley & Greenhall 2004, as allantools'
+      `autocorr_noise_id` with `dmin=0`): a quadratic removed, differenced until
+      ρ = r₁/(1 + r₁) < 0.25 or `dmax` times; α = 2 − 2d − round(2ρ);
+    - beyond, the B1 ratio (Barnes 1969; Howe, Beard, Greenhall & Riley 2000): the standard
+      variance of the N non-overlapping τ-averages over their Allan variance, against its
+      expectation B1(N, μ) = N(1 − N^μ)/(2(N − 1)(1 − 2^μ)) for Allan-variance slope μ
+      (α = −μ − 1), the boundaries at the geometric means of neighbouring expectations;
+      where it says phase noise (μ = −2), the R(n) ratio MVAR/AVAR (1/m for white, 3.37/(1.04
+      + 3 ln πm) for flicker phase noise, with f_h = 1/(2τ₀)) tells white from flicker from
+      m = 4 on (below, the two expectations coincide: white is taken).
+
+    How far B1 is read is the `rule`:
+
+    - `"hrgjax"` (default): three departures where the reference rule misreads power-law
+      noise (`benchmarks/noise_id_table.py`: from ≥ 98 % right at every octave but the
+      B1 ones of rate noise, where it was 24–100 %). From m = 4 on
+      ([`RN_FACTOR`][hrgjax.allan.RN_FACTOR]) R(n) tells angle from rate
+      noise wherever the autocorrelation reads angle noise (on the phase less its quadratic:
+      decimation folds flicker angle noise's content above 1/(2mτ₀) into a white floor, and
+      the autocorrelation read white in 80–93 % of records at 64–128 points) and before B1
+      (B1 of white angle noise on 8–16 averages lies near white rate noise's 1: read as rate
+      noise in 30 % of records); there R(n) ≤ its white/flicker-angle boundary names white
+      angle noise, and flicker angle noise only where B1 says angle noise too (a random walk
+      on few averages, and white angle + white rate noise near their crossover, the
+      commonest gyro mixture, fall in its band: read flicker angle noise at T/4 their ±1σ
+      held 50–54 %, now 67–71 %; pure flicker angle noise is read right in 66–78 % of
+      records at m ≥ 256, the rest white rate noise: conservative, ±1σ 79–88 %). At d = 2 of a decimated phase (m ≥ 2), flicker rate noise below ρ = −0.04
+      ([`RHO_SPLIT`][hrgjax.allan.RHO_SPLIT]; averaged rates: −0.28 for flicker, 0.2 for a random walk;
+      Riley & Greenhall's −¼ suits their discrete noises' −½ and 0, and read flicker rate
+      noise as a random walk in 11–52 % of records; m = 1 keeps −¼, for discrete noise). B1
+      on the
+      record as it is, from [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages on; with
+      fewer, the α of the factor before is carried on (for the first factor asked: that of
+      the largest m/2, m/4, … that can be read). On drift-free white + random-walk records
+      its ±1σ intervals cover the truth at the nominal rate at every τ
+      (`benchmarks/coverage_allan.py`), and on each pure power-law noise from m = 1 to T
+      (`benchmarks/coverage_totdev.py`) but flicker rate noise at τ ≥ T/2 (B1 on 8
+      averages: 46–62 % right).
+    - `"stable32"`: as Stable32 1.60's octave tables of a real OCXO record, which it
+      reproduces at all 90 τ of seven kinds (`benchmarks/stable32_ocxo.py`; the rule was read
+      off those tables, not from Stable32's code): B1 on the rate with its least-squares line
+      (a frequency drift) removed, down to N = 2 averages, where B1 is 1 whatever the noise
+      and white rate noise (α = 0) is taken; the non-overlapping kinds (`overlapping=False`:
+      adev, hdev) carry the last autocorrelation α on instead. For comparing with Stable32:
+      on drift-free white + random-walk records (`coverage_allan.py --noise-rule stable32`)
+      removing the line biases B1 away from the random walk, and at 4 averages its α
+      scatters over four types: the ±1σ intervals cover the truth in 49–53 % of records
+      there (±2σ: 74–78 %) and in 64–65 % at 2 averages (by default: 66–69 % and 70–71 %).
+      On PHASE.DAT's mtotdev/ttotdev tables it does not reproduce every α either
+      (`benchmarks/stable32_phasedat.py`).
+
+    `dmax` = 3 (Hadamard) lets both methods name flicker walk (α = −3).
+
+    **Returns:** an int array, each α within [2 − 2·`dmax`, 2]: the autocorrelation of a
+    periodic component (no power law: r₁ → −1) is held to the nearest end of that range.
+
+    **Raises:** `ValueError` for an unknown `rule`, or when no factor of the record can be
+    read: fewer than `B1_AVERAGES` + 1 points (default rule), fewer than 3 (`"stable32"`), or
+    fewer than `ACF_POINTS` (`"stable32"`, `overlapping=False`)."""
+    return np.fromiter(noise_id_each(x, m, dmax, rule=rule, overlapping=overlapping), dtype=int)
+
+
+def noise_id_each(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = True):
+    """[`noise_id`][hrgjax.allan.noise_id]`(x, m, dmax, rule=..., overlapping=...)` one factor
+    at a time: a generator of each factor's α (an int, rate PSD ∝ f^α) in the order of `m`,
+    the same values; the whole-record work (the phase's curvature, Stable32's drift-free
+    phase) is done once, before the first. For a progress step per factor
+    (`hrgjax.allan.deviation` on long records).
+
+    **Raises:** as `noise_id`, when the generator is first advanced."""
+    if not isinstance(rule, str) or rule not in NOISE_RULES:
+        raise ValueError(f"rule must be one of {list(NOISE_RULES)}; got {describe(rule)}")
+    check_1d("x", x, "one phase (angle) sample per interval")
+    x = np.asarray(x, dtype=float)
+    if rule == "hrgjax":
+        curvature = _curvature(x)  # R(n) on the phase less its quadratic, as the ACF
+        read = lambda k: _identify(x, k, dmax, refine=curvature)  # noqa: E731
+        needs = f"{B1_AVERAGES} averages"
+    elif overlapping:  # B1 on the drift-free record down to 2 averages, no R(n) guard
+        drift_free = _less_drift(x)
+        read = lambda k: _identify(x, k, dmax, b1_x=drift_free, b1_min=2, guard=False)  # noqa: E731
+        needs = "2 averages"
+    else:  # Stable32's adev and hdev: the autocorrelation, its last α carried beyond
+        read, needs = (lambda k: _identify(x, k, dmax, b1_min=None)), f"{ACF_POINTS} points"
+    last = None
+    for k in np.asarray(m, dtype=int).reshape(-1):
+        a = read(int(k))
+        if a is None and last is None:  # the first factor: from the largest k/2ʲ that can
+            j = int(k) // 2
+            while a is None and j >= 1:
+                a, j = read(j), j // 2
+            if a is None:
+                raise ValueError(
+                    f"x: {x.size} samples leave {x.size - 1} averages at m = 1; noise "
+                    f"identification needs {needs}"
+                )
+        last = last if a is None else a
+        yield int(last)
+
+
+def _less_drift(x):
+    """The phase of the rate diff(x) less its least-squares line (Stable32's drift removal
+    before B1)."""
+    y = np.diff(x)
+    t = np.linspace(-1.0, 1.0, y.size)
+    y = y - y.mean()
+    y = y - t * (np.dot(t, y) / np.dot(t, t))
+    return np.concatenate([[0.0], np.cumsum(y)])
+
+
+def _identify(x, k, dmax, *, b1_x=None, b1_min=B1_AVERAGES, guard=True, refine=None):
+    """α at factor k by the lag-1 autocorrelation or, from `b1_min` averages on (None: never),
+    B1/R(n) on `b1_x` (default `x`); None where neither reaches. `refine` (the default rule:
+    the phase's curvature, `_curvature`): R(n) arbitrates angle against rate noise from
+    `RN_FACTOR` on, and the averaged rate noises' ρ split flicker from random walk."""
+    z = x[::k]
+    if z.size >= ACF_POINTS:
+        a = _acf_alpha(z, dmax, averaged=refine is not None and k > 1)
+        if refine is not None and a >= 1 and k >= RN_FACTOR:
+            return _rn_class(_rn(x, k, refine), k, a)
+        return a
+    if b1_min is not None and (x.size - 1) // k >= b1_min:
+        if refine is not None and k >= RN_FACTOR and x.size > 3 * k:
+            a, mu = _rn_class(_rn(x, k), k, 0), _b1_mu(x, k, dmax)  # the record as it is
+            # R(n) never falls to white angle noise's 1/m unless it is there; flicker angle
+            # noise's band is also that of a rate random walk on few averages and of white
+            # angle + white rate noise near their crossover (≈ (1/m + ½)/2): flicker angle
+            # noise only where B1 says angle noise too (μ = −2), else B1's rate noise
+            if a == 2 or (a == 1 and mu == -2):
+                return a
+            return -max(mu, -1) - 1  # rate noise: B1's μ = −2 is white (α = 0)
+        return _b1_alpha(x if b1_x is None else b1_x, k, dmax, white_rate_guard=guard)
+    return None
+
+
+def _acf_alpha(z, dmax, averaged=False):
+    """α from the lag-1 autocorrelation r₁ of `z` less its least-squares quadratic,
+    differenced d times until ρ = r₁/(1 + r₁) < 0.25 or d = `dmax` (Riley & Greenhall's
+    rule, as Stable32): α = 2 − 2d − round(2ρ). `averaged` (a decimated phase, m ≥ 2: the
+    rate averaged over m samples): at d = 2, flicker rate noise below `RHO_SPLIT`, the
+    midpoint of the averaged noises' ρ (Riley & Greenhall's −¼ is that of their discrete
+    fractional noises, −½ and 0)."""
+    z = np.ascontiguousarray(z, dtype=float)  # an octave's strided view read once
+    size, sums, first, last = _detrended_sums(z, dmax)
+    d = 0
+    while True:
+        count = z.size - d
+        total, square, lag = sums[d]
+        mean = total / count
+        power = square - count * mean * mean  # Σ(v − v̄)²: v̄ ≈ 0 after the quadratic's removal
+        # no noise: the quadratic's residual at the data's round-off (RMS ≤ 1e-14 of their
+        # size; a noise-free quadratic leaves ≤ 1e-15 up to 10⁶ points), or 0 once differenced
+        # (a rate's summation leaves more: `check_rate_has_noise` reads the rate itself)
+        floor = (1e-14 * size) ** 2 * count if d == 0 else 1e-30 * square
+        if not power > max(floor, 1e-300):
+            _no_noise()
+        # Σ(v_i − v̄)(v_{i+1} − v̄) from the raw sums
+        r1 = (lag - mean * (2 * total - first[d] - last[d]) + (count - 1) * mean * mean) / power
+        rho = r1 / (1.0 + r1)
+        if rho < 0.25 or d >= dmax:
+            break
+        d += 1
+    # a periodic or deterministic component (r₁ → −1: ρ → −∞) reads as no power law at all;
+    # the nearest the deviation's differences can take: 2 (white phase) … 2 − 2·dmax
+    k = round(2 * rho)
+    if averaged and d == 2 and k == 0 and rho < RHO_SPLIT:
+        k = -1  # flicker rate noise (−0.28), not a random walk (0.2)
+    return min(2, max(2 - 2 * dmax, int(-k - 2 * d) + 2))
+
+
+_BLOCK = 1 << 15
+"""Points per block of `_detrended_sums` (256 kB a float array: each block's passes stay in
+the cache; on 10⁶ points 2× faster than whole-array passes)."""
+
+
+def _detrended_sums(z, dmax):
+    """For v = z less its least-squares quadratic in the sample index and its differences
+    v⁽ᵈ⁾, d ≤ `dmax`: `(max |z|, sums (dmax + 1, 3) = Σv⁽ᵈ⁾, Σ(v⁽ᵈ⁾)², Σ v⁽ᵈ⁾_i v⁽ᵈ⁾_{i+1},
+    first and last values of each v⁽ᵈ⁾)`, in blocks of `_BLOCK` points (two passes over z,
+    nothing of its size allocated). The quadratic by the orthogonal polynomials 1, t,
+    t² − mean(t²) on the symmetric index t ∈ [−1, 1], their norms in closed form (as
+    `np.polyfit(t, z, 2)`)."""
+    n = z.size
+    step = 2.0 / max(n - 1, 1)
+
+    def index(i0, size):  # t at points i0 … i0 + size − 1
+        t = np.arange(i0, i0 + size, dtype=float)
+        t *= step
+        t -= 1.0
+        return t
+
+    s0 = s1 = s2 = top = bottom = 0.0
+    for i0 in range(0, n, _BLOCK):
+        zb = z[i0 : i0 + _BLOCK]
+        t = index(i0, zb.size)
+        s0 += float(zb.sum())
+        s1 += float(np.dot(t, zb))
+        t *= t
+        s2 += float(np.dot(t, zb))
+        top, bottom = max(top, float(zb.max())), min(bottom, float(zb.min()))
+    if n < 3:  # a mean only
+        b2 = b1 = 0.0
+        c0 = s0 / max(n, 1)
+    else:
+        sum2 = n * (n + 1) / (3.0 * (n - 1))  # Σt², and Σt⁴ below
+        sum4 = n * (n + 1) * (3.0 * n * n - 7) / (15.0 * (n - 1) ** 3)
+        c2 = sum2 / n  # mean(t²)
+        a0 = s0 / n
+        b1 = s1 / sum2
+        b2 = (s2 - c2 * n * a0) / (sum4 - n * c2 * c2)
+        c0 = a0 - b2 * c2
+    sums = np.zeros((dmax + 1, 3))
+    first, last = [0.0] * (dmax + 1), [None] * (dmax + 1)
+    for i0 in range(0, n, _BLOCK):
+        zb = z[i0 : i0 + _BLOCK]
+        t = index(i0, zb.size)
+        fit = b2 * t
+        fit += b1
+        fit *= t
+        fit += c0
+        v = zb - fit
+        before = list(last)  # each sequence's last value in the blocks before
+        for d in range(dmax + 1):
+            if d:  # the difference across the blocks' seam included
+                v = np.diff(v if before[d - 1] is None else np.concatenate([[before[d - 1]], v]))
+            if v.size == 0:
+                break
+            sums[d] += (v.sum(), np.dot(v, v), np.dot(v[:-1], v[1:])
+                        + (0.0 if before[d] is None else before[d] * v[0]))  # fmt: skip
+            if before[d] is None:
+                first[d] = float(v[0])
+            last[d] = float(v[-1])
+    return max(abs(top), abs(bottom)), sums, first, last
+
+
+def b1_expected(n: int, mu: int) -> float:
+    """B1(N, μ): the expected ratio of the N-sample standard variance to the Allan variance
+    for Allan-variance slope μ (σ² ∝ τ^μ; Barnes 1969, no dead time)."""
+    if n < 2:
+        raise ValueError(f"n must be at least 2 averages; got {n}")
+    if mu == 0:  # flicker rate: the limit μ → 0
+        return n * math.log(n) / (2 * (n - 1) * math.log(2))
+    return n * (1 - float(n) ** mu) / (2 * (n - 1) * (1 - 2.0**mu))
+
+
+def rn_expected(m: int, alpha: int) -> float:
+    """R(n) = MVAR/AVAR expected at factor m for white (α = 2) or flicker (α = 1) phase noise,
+    the measurement bandwidth f_h = 1/(2τ₀) (NIST TN 1337, A-6), and for white rate noise
+    (α = 0: ½, its limit for m ≫ 1)."""
+    if alpha == 2:
+        return 1.0 / m
+    if alpha == 1:
+        return 3.37 / (1.04 + 3 * math.log(math.pi * m))
+    if alpha == 0:
+        return 0.5
+    raise ValueError(
+        f"R(n) tells white (2) and flicker (1) phase noise from white rate noise (0); got "
+        f"alpha = {alpha}"
+    )
+
+
+def _b1_mu(x, m, dmax):
+    """The Allan-variance slope μ that B1 on (x.size − 1)//m ≥ 3 averages of the phase `x`
+    is nearest (geometric means of neighbouring expectations), from −2 to 1 (2 for dmax 3)."""
+    n = (x.size - 1) // m
+    ybar = np.diff(x[: n * m + 1 : m])  # τ-averages (×τ: the scale cancels in the ratios)
+    avar = 0.5 * np.mean(np.diff(ybar) ** 2)
+    if not avar > 0:
+        _no_noise()
+    b1 = float(np.var(ybar, ddof=1) / avar)
+    mus = range(2 if dmax >= 3 else 1, -3, -1)  # μ = 2 (α = −3) only for Hadamard
+    expected = {mu: b1_expected(n, mu) for mu in mus}
+    for hi in mus:
+        if hi > -2 and b1 > math.sqrt(expected[hi] * expected[hi - 1]):
+            return hi
+    return -2
+
+
+def _rn(x, m, curvature=0.0):
+    """R(n) = MVAR/AVAR at factor m of the phase `x`, less a quadratic of `curvature`."""
+    d = x[2 * m :] - 2 * x[m:-m] + x[: -2 * m]
+    if curvature:
+        d = d - curvature * m * m
+    avar = np.mean(d**2)
+    if not avar > 0:
+        _no_noise()
+    c = np.concatenate([[0.0], np.cumsum(d)])
+    return float(np.mean((c[m:] - c[:-m]) ** 2) / m**2 / avar)
+
+
+def _rn_class(rn, m, alpha):
+    """White (2) or flicker (1) angle noise by R(n) at factor m, or `alpha` ≤ 0 (rate noise:
+    R(n) above the geometric mean of flicker angle noise's and white rate noise's ½)."""
+    if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 0)):
+        return min(alpha, 0)
+    return 1 if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 2)) else 2
+
+
+def _curvature(x):
+    """The second difference per sample² of the phase's least-squares quadratic."""
+    n = x.size
+    if n < 3:
+        return 0.0
+    t = np.arange(n, dtype=float) - (n - 1) / 2.0
+    t2 = t * t - np.mean(t * t)
+    return 2.0 * float(np.dot(t2, x) / np.dot(t2, t2))
+
+
+def _b1_alpha(x, m, dmax, white_rate_guard: bool = True):
+    """B1 (and R(n)) at factor m of the phase x (the Stable32 rule); the guard: R(n) nearer
+    white rate noise's than flicker phase noise's takes white rate noise."""
+    n = (x.size - 1) // m
+    if n == 2:  # B1(2, μ) = 1 for every μ: white rate noise's value (Stable32's choice; a
+        return 0  # noise-free record gets no error here: only Stable32's rule reads N = 2)
+    mu = _b1_mu(x, m, dmax)
+    if mu > -2:
+        return -mu - 1
+    if x.size < 3 * m or m < RN_FACTOR:  # R(n) needs a modified variance at m; below m = 4
+        return 2  # its expectations for white and flicker coincide (both 1 at m = 1): white
+    rn = _rn(x, m)
+    if white_rate_guard and rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 0)):
+        return 0  # rate noise after all: few averages put its B1 of 1 below the boundary
+    return 1 if rn > math.sqrt(rn_expected(m, 1) * rn_expected(m, 2)) else 2
+
+
+def check_rate_has_noise(rate):
+    """Raise `_no_noise`'s error when the rate samples `rate` (NaN: missing) are a straight
+    line in time to round-off (RMS about their least-squares line ≤ 64 ε of their largest
+    size): a stuck or constant sensor. Read on the rate itself, because summing it into a
+    phase leaves round-off (3e-15 of the phase's size at 10³ constant samples, 6e-14 at
+    2·10⁴, 3e-12 at 10⁶) above the phase test's floor."""
+    rate = np.asarray(rate, dtype=float)
+    present = np.isfinite(rate)
+    if present.sum() < 3:
+        return
+    t, v = np.flatnonzero(present).astype(float), rate[present]
+    size = np.max(np.abs(v))
+    t, v = t - t.mean(), v - v.mean()
+    v = v - t * (np.dot(t, v) / np.dot(t, t))
+    if not np.sqrt(np.mean(v**2)) > 64 * np.finfo(float).eps * size:
+        _no_noise()
+
+
+def _no_noise():
+    raise ValueError(
+        "y has no noise to identify: its angle is a polynomial of degree ≤ 2 (a constant or "
+        "ramping rate) to round-off, and every deviation of it is a deterministic value"
+    )
