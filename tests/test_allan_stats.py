@@ -244,7 +244,7 @@ def test_white_angle_plus_white_rate_noise_is_read_as_rate_noise_at_long_tau():
     (1/m + ½)/2 lies in flicker angle noise's band, but B1 says rate noise; the default rule
     names flicker angle noise only where B1 says angle noise too, and reads rate noise
     (α ≤ 0) in most records (26 of 40; 15 when R(n) alone named flicker angle noise, whose
-    ±1σ interval then held 50 % at T/4: benchmarks/README.md, `noise_id_table.py`)."""
+    ±1σ interval then held 50 % at T/4: benchmarks/noise_id_mixtures.py)."""
     got = []
     for seed in range(40):
         rng = np.random.default_rng(500 + seed)
@@ -905,3 +905,12 @@ def test_a_large_constant_rate_does_not_drown_the_noise():
     t = np.arange(2001.0)  # stamps on a 1-s grid: to_uniform returns the rates unchanged
     u = allan.to_uniform(t, np.concatenate([[np.nan], y[:2000]]), rate_hz=1.0)
     np.testing.assert_allclose(u.y, y[:2000], rtol=0, atol=1e-3)
+
+
+@pytest.mark.parametrize("m", [16, 2.7, [[4, 8]], [0, 4], ["4"]])
+def test_noise_id_refuses_factors_that_are_not_a_list_of_whole_numbers(m):
+    """A scalar, a fraction, a 2-D array, a zero or text is refused in one line (a
+    fraction used to be read at its floor, a 2-D array flattened)."""
+    x = np.cumsum(np.random.default_rng(0).normal(size=1024))
+    with pytest.raises(ValueError, match="m must be a 1-D array of whole averaging factors"):
+        allan.noise_id(x, m)

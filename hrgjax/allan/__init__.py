@@ -37,6 +37,7 @@ from .noise_ident import RHO_SPLIT as RHO_SPLIT
 from .noise_ident import RN_FACTOR as RN_FACTOR
 from .noise_ident import b1_expected as b1_expected
 from .noise_ident import noise_id as noise_id
+from .noise_ident import noise_id_each as noise_id_each
 from .noise_ident import rn_expected as rn_expected
 from .noise_terms import NOISE_TERMS as NOISE_TERMS
 from .noise_terms import NoiseFit as NoiseFit
