@@ -8,7 +8,8 @@ catalogue `["thermal_rate"]`. For every seed: z = (value − truth)/σ of the an
 (pinned by the turning runs' mean rate against the static ones': its σ ∝ σ_b, which REML
 reads from six run means, ≈ 4 degrees of freedom) and of c_Tdot (pinned inside the runs),
 with the σ `discover` reports and with the textbook σ (σ̂_b plugged in as known,
-`std_textbook`); and the per-run consistency's p-value, which under a true, exactly
+`std_textbook`: without `honest`'s residual-level correction, so not the σ reported before
+31987e6 — k_e z-RMS 1.42 here against the recorded before 1.34); and the per-run consistency's p-value, which under a true, exactly
 catalogued effect should be uniform.
 
 Usage: `.venv/bin/python benchmarks/coverage_continuous.py [--n 100] [--seed0 200]`

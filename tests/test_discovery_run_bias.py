@@ -4,6 +4,8 @@ run means, the moment estimate came out 5× small, the whitening pinned each run
 shape with a nonzero run mean (a 2θ·Ω ripple over a run's incomplete turns) took up the
 biases. REML (`hrgjax.discovery.run_bias`) counts what the fit spends."""
 
+import types
+
 import jax
 import numpy as np
 import pytest
@@ -15,6 +17,7 @@ from hrgjax.discovery.run_bias import (
     posterior,
     reml_loglik,
     reml_run_bias,
+    spread,
     spread_factors,
 )
 from hrgjax.discovery.search import discover
@@ -161,6 +164,26 @@ def test_sigma_b_s_uncertainty_carried_in_restores_the_run_means_parameters_cove
     assert np.all(rms(z_plug) > 1.35)  # the failure: σ̂_b plugged in as known (1.48, 1.54)
     assert np.all((0.9 < rms(z_post)) & (rms(z_post) < 1.15))
     assert np.median(trend) == pytest.approx(1.0, abs=0.02)
+
+
+@pytest.mark.parametrize("runs", [3, 4, 6])
+def test_too_few_runs_leave_the_run_means_parameters_without_sigma(runs):
+    """Review of 31987e6: with 3 or 4 runs less the two fixed effects the run means carry
+    (ν = 1, 2) σ_b's posterior has E[σ_b²] = ∞ (density ∝ σ_b^-(ν+2) in its tail), so the
+    σ of the common bias and the run-dependent constant, ∝ σ_b, rested on the prior's tail
+    and the grid's range, finite and unflagged. They now have no σ (∞ factor, named in
+    `not_pinned`, said in the words); the within-run trend keeps its σ, and six runs (ν = 4)
+    are untouched."""
+    r, x, u = _toy(np.random.default_rng(3), 1.0, runs=runs, held=())
+    factors, info = spread(types.SimpleNamespace(j=x, r=r), r, x, u, 0.0, 1.0)
+    assert info["dof"] == pytest.approx(runs - 2.0, abs=1e-6)
+    assert np.isfinite(factors[2]) and factors[2] == pytest.approx(1.0, abs=0.05)
+    if runs <= 4:
+        assert info["not_pinned"] == [0, 1] and np.all(np.isinf(factors[:2]))
+        assert f"σ_b not pinned by {runs} runs" in info["basis"]
+    else:
+        assert info["not_pinned"] == [] and np.all(np.isfinite(factors))
+        assert "not pinned" not in info["basis"]
 
 
 def test_level_beyond_reads_the_noise_scale_of_a_subspace():

@@ -224,6 +224,8 @@ def output_gain(parameters: dict, k_e: float) -> float:
     if p is None or not np.isfinite(p["value"]) or p["value"] <= 0:
         return float(k_e)
     std = p.get("std")
+    if std is None:  # no σ where σ_b is not pinned (`trust.honest`): its σ at σ̂_b decides
+        std = p.get("std_textbook")
     if std is None or not np.isfinite(std) or std > 0.1 * p["value"]:
         return float(k_e)
     return float(p["value"])

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from .effects import CATALOGUE, NOMINAL
+from .trust import NOT_PINNED
 
 DESIGN_KEYS = ("missing_effect", "ranking", "gap_before", "gap_after", "noise_floor", "metric")
 """The keys of DESIGN.md's discovery report, first in the JSON."""
@@ -57,12 +58,16 @@ def to_user_units(parameters: dict, k_e: float) -> dict:
     return out
 
 
-def _number(v: dict, scanned: bool = False) -> str:
-    """'0.301 ± 0.004 °/h' (three significant digits of the value); a `scanned` value
-    without σ says so ('600 s (scanned, no σ)')."""
+def _number(v: dict, why: str | None = None) -> str:
+    """'0.301 ± 0.004 °/h' (three significant digits of the value); a value without σ says
+    why in brief (`why`: its `why_no_sigma`): '600 s (scanned, no σ)', '0.3 °/h (no σ: σ_b
+    not pinned)'."""
     unit = f" {v['unit']}" if v["unit"] else ""
     if v["sigma"] is None:
-        return f"{v['value']:.4g}{unit}" + (" (scanned, no σ)" if scanned else "")
+        note = ""
+        if why:
+            note = " (no σ: σ_b not pinned)" if why.startswith(NOT_PINNED) else " (scanned, no σ)"
+        return f"{v['value']:.4g}{unit}" + note
     return f"({v['value']:.4g} ± {v['sigma']:.2g}){unit}"
 
 
@@ -110,9 +115,12 @@ class Discovery:
       ([`describe`][hrgjax.discovery.leftover.describe]); None when no shape can be tried.
     - `uncertainty`: what the parameters' σ are ([`honest`][hrgjax.discovery.trust.honest]:
       the noise level read from the fit's residual, the structure left fitted beside the
-      model and its pull added): `{"noise_scale", "shapes", "basis"}`; the JSON adds
-      `sigma_model` (`{"effect.param": the pull's share of σ}`, user units) and `no_sigma`
-      (`{"effect.param": why}`, a scanned time constant).
+      model and its pull added): `{"noise_scale", "shapes", "basis"}`, with continuous
+      records `"run_bias"` (σ_b's uncertainty carried in,
+      [`run_bias.spread`][hrgjax.discovery.run_bias.spread]: `{"runs", "dof", "sigma_b_dph",
+      "not_pinned"}`); the JSON adds `sigma_model` (`{"effect.param": the pull's share of
+      σ}`, user units) and `no_sigma` (`{"effect.param": why}`: a scanned time constant; a
+      parameter the run means pin where too few runs leave σ_b unpinned).
     """
 
     verdict: str
@@ -207,7 +215,8 @@ class Discovery:
                 lines.append("angular gain k_e: not identified by these data (no rotation "
                              "runs to turn the wave by it)")  # fmt: skip
             else:
-                lines.append(f"angular gain k_e = {_number(k_e)}")
+                why = self.fit_parameters["angular_gain"]["k_e"].get("why_no_sigma")
+                lines.append(f"angular gain k_e = {_number(k_e, why)}")
         rate, readout = [], []
         nominal = [n for n in NOMINAL if n in user]
         for name in nominal + [n for n in user if n not in nominal]:
@@ -219,7 +228,7 @@ class Discovery:
             fields = {q.name: f"{q.scale:.4g} {q.unit} (held)" for q in effect.params}
             raw = self.fit_parameters.get(name, {})
             fields.update(
-                {k: _number(v, bool(raw.get(k, {}).get("why_no_sigma"))) for k, v in ps.items()}
+                {k: _number(v, raw.get(k, {}).get("why_no_sigma")) for k, v in ps.items()}
             )
             text = tidy_signs(effect.formula.format(**fields))
             (readout if effect.where == "readout" else rate).append(f"{text}    [{name}]")

@@ -45,7 +45,11 @@ $\pi(\sigma_b^2) \propto \sqrt{\tfrac12\operatorname{tr}(U^\top PU)^2}$ (∝ 1/�
 each parameter's variance becomes $\mathrm E[C_{ii}(\sigma_b) + (\hat\theta_i(\sigma_b) -
 \hat\theta_i)^2]$, the generalised-least-squares covariance and shift of the fit at each
 σ_b (Woodbury again). For a parameter that only the run means pin this is the variance of
-Student's t, ν/(ν − 2) × the plug-in one, whose z has unit variance whatever σ̂_b reads.
+Student's t, ν/(ν − 2) × the plug-in one, whose z has unit variance whatever σ̂_b reads —
+where σ_b dominates a run mean's noise. Where it does not, the factor over-covers (toy of
+tests/test_discovery_run_bias.py, six runs, review of 31987e6: z-RMS 0.62 at σ_b = 0, 0.72
+at 0.5×, 0.92 at 3× a run mean's noise). With ν ≤ 2 (3–4 runs) E[σ_b²] is infinite and
+`spread` gives the run means' parameters no σ ("σ_b not pinned by N runs").
 """
 
 from __future__ import annotations
@@ -58,6 +62,10 @@ from .records import rate_columns
 
 POSTERIOR_POINTS = 121
 """Values of σ_b the posterior is evaluated at (`posterior`: 20 a decade over six decades)."""
+EDGE_SHARE = 0.1
+"""Share of a parameter's σ_b-integrated variance from the posterior grid's top decade above
+which `spread` gives it no σ (σ_b not pinned: 0.35–0.6 with ν = 2, 0.9 with ν = 1, ≤ 0.03
+with ν = 4 on the toy of tests/test_discovery_run_bias.py)."""
 
 
 def _orthonormal(x: np.ndarray) -> np.ndarray:
@@ -195,20 +203,15 @@ def posterior(r, x, u, sigma_now: float, points: int = POSTERIOR_POINTS):
     return sigma, w / w.sum()
 
 
-def spread_factors(j, r, u, sigma_now: float, sigma, weights) -> np.ndarray:
-    """Each fitted parameter's variance with σ_b integrated over `(sigma, weights)`
-    ([`posterior`][hrgjax.discovery.run_bias.posterior]) over its variance at
-    `sigma_now` [rad/s], the σ_b the fit's whitened Jacobian `j` (N, p) and residual `r` are
-    whitened with; `u` (N, R): the training runs' columns. Per σ_b the generalised least
-    squares covariance C and shift δθ of the fit (one Gauss–Newton step: exact for a model
-    linear near the fit) under the whitened covariance I + (σ_b² − σ_now²)UUᵀ; **returns**
-    E[C_ii + δθ_i²] / C_ii(σ_now), shape (p,) (1 where the runs carry no bias column)."""
+def _contributions(j, r, u, sigma_now, sigma, weights):
+    """`spread_factors`' sum term by term: `(w_k (C_ii + δθ_i²) at each kept σ_b_k (K, p),
+    those σ_b_k, C_ii(σ_now))`, or None where the runs carry no bias column."""
     j, r, u = (np.asarray(a, float) for a in (j, r, u))
     u = u[:, np.linalg.norm(u, axis=0) > 0]
     norm = np.linalg.norm(j, axis=0)
     js = j / np.where(norm > 0, norm, 1.0)  # unit columns: they differ by 10¹⁰
     if u.shape[1] == 0 or j.shape[1] == 0:
-        return np.ones(j.shape[1])
+        return None
     jj, ju, uu, ur, jr = js.T @ js, js.T @ u, u.T @ u, u.T @ r, js.T @ r
     keep = np.asarray(weights) > 1e-12
     s = np.r_[sigma_now, np.asarray(sigma, float)[keep]]
@@ -217,8 +220,40 @@ def spread_factors(j, r, u, sigma_now: float, sigma, weights) -> np.ndarray:
     c = np.linalg.pinv(jj - ju @ g @ ju.T, hermitian=True)
     shift = np.einsum("kij,kj->ki", c, jr - np.einsum("ij,kjl,l->ki", ju, g, ur))
     var = np.diagonal(c, axis1=1, axis2=2)
-    mse = np.asarray(weights)[keep] @ (var[1:] + (shift[1:] - shift[0]) ** 2)
-    return np.where(var[0] > 0, mse / np.where(var[0] > 0, var[0], 1.0), 1.0)
+    terms = np.asarray(weights)[keep][:, None] * (var[1:] + (shift[1:] - shift[0]) ** 2)
+    return terms, s[1:], var[0]
+
+
+def spread_factors(j, r, u, sigma_now: float, sigma, weights) -> np.ndarray:
+    """Each fitted parameter's variance with σ_b integrated over `(sigma, weights)`
+    ([`posterior`][hrgjax.discovery.run_bias.posterior]) over its variance at
+    `sigma_now` [rad/s], the σ_b the fit's whitened Jacobian `j` (N, p) and residual `r` are
+    whitened with; `u` (N, R): the training runs' columns. Per σ_b the generalised least
+    squares covariance C and shift δθ of the fit (one Gauss–Newton step: exact for a model
+    linear near the fit) under the whitened covariance I + (σ_b² − σ_now²)UUᵀ; **returns**
+    E[C_ii + δθ_i²] / C_ii(σ_now), shape (p,) (1 where the runs carry no bias column)."""
+    out = _contributions(j, r, u, sigma_now, sigma, weights)
+    if out is None:
+        return np.ones(np.shape(j)[1])
+    terms, _, var0 = out
+    mse = terms.sum(axis=0)
+    return np.where(var0 > 0, mse / np.where(var0 > 0, var0, 1.0), 1.0)
+
+
+def edge_share(j, r, u, sigma_now: float, sigma, weights) -> np.ndarray:
+    """Each parameter's share of its σ_b-integrated variance
+    ([`spread_factors`][hrgjax.discovery.run_bias.spread_factors], same arguments) that
+    comes from σ_b in the top decade of `sigma`, shape (p,): near 0 where the variance
+    settles inside the grid, a visible share where it grows with σ_b as fast as σ_b's
+    posterior falls (a parameter only the run means pin, ν ≤ 2: E[σ_b²] diverges and
+    the grid's top sets the value). 0 where the runs carry no bias column."""
+    out = _contributions(j, r, u, sigma_now, sigma, weights)
+    if out is None:
+        return np.zeros(np.shape(j)[1])
+    terms, s, _ = out
+    total = terms.sum(axis=0)
+    top = terms[s >= np.max(np.asarray(sigma, float)) / 10.0].sum(axis=0)
+    return np.where(total > 0, top / np.where(total > 0, total, 1.0), 0.0)
 
 
 def dof(x, u) -> float:
@@ -236,17 +271,35 @@ def spread(fit, r, x, u, sigma_now: float, per_dph: float):
     whitened `r`, `j` on the training rows, whitened with σ_b = `sigma_now` [rad/s]), `(r, x,
     u)` from [`reml_inputs`][hrgjax.discovery.run_bias.reml_inputs] at it, `per_dph` the
     pattern rate [rad/s] of 1 °/h of input rate. **Returns** `(factors, info)`: each regular
-    parameter's variance factor ([`spread_factors`][hrgjax.discovery.run_bias.spread_factors])
-    and `{"dof": dof(x, u), "sigma_b_dph": [16 %, 50 %, 84 % points of σ_b's posterior],
-    "basis": words}`."""
+    parameter's variance factor ([`spread_factors`][hrgjax.discovery.run_bias.spread_factors]),
+    ∞ for a parameter σ_b is not pinned for: with ν ≤ 2 degrees of freedom (3–4 runs;
+    E[σ_b²] is then infinite) every parameter whose variance at the grid's top exceeds twice
+    its variance at σ_now (those the run means pin: the result would rest on the prior's
+    tail and the grid's range), and at any ν one with over `EDGE_SHARE` of its variance from
+    the grid's top decade ([`edge_share`][hrgjax.discovery.run_bias.edge_share]) and over
+    twice that decade's posterior weight; and `{"runs", "dof": dof(x, u),
+    "sigma_b_dph": [16 %, 50 %, 84 % points of σ_b's posterior], "not_pinned": [indices of
+    the ∞ factors], "basis": words}`."""
     sigma, w = posterior(r, x, u, sigma_now)
     n = np.asarray(fit.r).size
-    factors = spread_factors(fit.j, fit.r, np.asarray(u)[:n], sigma_now, sigma, w)
+    args = (fit.j, fit.r, np.asarray(u)[:n], sigma_now, sigma, w)
+    factors = spread_factors(*args)
+    top = float(np.sum(w[sigma >= np.max(sigma) / 10.0]))
+    share = edge_share(*args)
+    nu, runs = dof(x, u), int(np.shape(u)[1])
+    # a parameter the run means pin: its variance at the grid's top over 2× that at σ_now
+    grows = spread_factors(*args[:4], [np.max(sigma)], [1.0]) > 2.0
+    loose = ((share > EDGE_SHARE) & (share > 2.0 * top)) | ((nu <= 2.0 + 1e-6) & grows)
+    factors = np.where(loose, np.inf, factors)
     q = np.interp([0.16, 0.5, 0.84], np.cumsum(w) - 0.5 * w, sigma) / per_dph
-    nu = dof(x, u)
-    words = (f"σ_b's uncertainty carried in (REML on {np.shape(u)[1]} runs, {nu:.1f} "
+    words = (f"σ_b's uncertainty carried in (REML on {runs} runs, {nu:.1f} "
              f"degrees of freedom: {q[0]:.2g}–{q[2]:.2g} °/h)")  # fmt: skip
-    return factors, {"dof": nu, "sigma_b_dph": q.tolist(), "basis": words}
+    if loose.any():
+        words += (f"; σ_b not pinned by {runs} runs: no σ for the parameters the run means "
+                  "pin (no_sigma)")  # fmt: skip
+    info = {"runs": runs, "dof": nu, "sigma_b_dph": q.tolist(),
+            "not_pinned": np.flatnonzero(loose).tolist(), "basis": words}  # fmt: skip
+    return factors, info
 
 
 def reml_inputs(fit, held, train_groups, held_groups, covariates):

@@ -68,6 +68,9 @@ MIN_ROWS = stats.MIN_ROWS
 """Fewest rows of a class whose noise scale is read from its own residual as it is; a
 smaller class reads it with a small-sample allowance and never below the noise model's
 (module docstring; [`class_levels`][hrgjax.discovery.stats.class_levels])."""
+NOT_PINNED = "σ_b not pinned"
+"""How a parameter's `why_no_sigma` begins where σ_b's posterior leaves its σ unbounded
+(too few continuous runs: [`run_bias.spread`][hrgjax.discovery.run_bias.spread])."""
 SMALL_DOF = stats.SMALL_DOF
 """A class below `MIN_ROWS` with at most this many degrees of freedom pools its noise level
 with the other classes'."""
@@ -140,7 +143,8 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
     [`noise_spread`][hrgjax.discovery.problem.AbstractProblem.noise_spread]).
 
     **Returns:** `(parameters, info)`: a copy of `fit.parameters` whose `std` are the
-    corrected ones (`std_textbook` and `std_model` beside them), and `info` =
+    corrected ones (`std_textbook` and `std_model` beside them; `std` None with
+    `why_no_sigma` for a parameter σ_b is not pinned for, `spread`'s `"not_pinned"`), and `info` =
     `{"noise_scale": {class: s}, "shapes": [names], "structure_left": bool, "basis": words}`
     (with `spread`, `"run_bias"`: its info less the words; `structure_left`: a shape was
     fitted beside the model, and with it `"excess"`:
@@ -177,6 +181,14 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
         if std is None or not np.isfinite(std) or not np.isfinite(old[i]) or old[i] == 0:
             continue
         unit = std / old[i]  # Jacobian column → model units
+        if spread is not None and i in spread[1].get("not_pinned", ()):
+            entry["std_textbook"], entry["std"] = std, None
+            entry["why_no_sigma"] = (
+                f"{NOT_PINNED} by {spread[1]['runs']} runs ({spread[1]['dof']:.1f} degrees "
+                "of freedom): this parameter's σ grows with σ_b, and its σ_b-integrated "
+                "value would be set by where the posterior's grid stops"
+            )
+            continue
         if not np.isfinite(var[i]):
             continue
         stat = math.sqrt(var[i]) * unit
