@@ -49,7 +49,10 @@ Student's t, ν/(ν − 2) × the plug-in one, whose z has unit variance whateve
 where σ_b dominates a run mean's noise. Where it does not, the factor over-covers (toy of
 tests/test_discovery_run_bias.py, six runs, review of 31987e6: z-RMS 0.62 at σ_b = 0, 0.72
 at 0.5×, 0.92 at 3× a run mean's noise). With ν ≤ 2 (3–4 runs) E[σ_b²] is infinite and
-`spread` gives the run means' parameters no σ ("σ_b not pinned by N runs").
+`spread` gives no σ ("σ_b not pinned by N runs") to a parameter whose variance keeps growing
+with σ_b (∝ σ_b²: only the run means pin it); one the runs' own records also pin levels off
+and keeps its integrated σ (the 3-run continuous design: k_e ×15, the bias ×14, the damping
+anisotropy ×1.06 — review of 4c90143).
 """
 
 from __future__ import annotations
@@ -273,9 +276,10 @@ def spread(fit, r, x, u, sigma_now: float, per_dph: float):
     pattern rate [rad/s] of 1 °/h of input rate. **Returns** `(factors, info)`: each regular
     parameter's variance factor ([`spread_factors`][hrgjax.discovery.run_bias.spread_factors]),
     ∞ for a parameter σ_b is not pinned for: with ν ≤ 2 degrees of freedom (3–4 runs;
-    E[σ_b²] is then infinite) every parameter whose variance at the grid's top exceeds twice
-    its variance at σ_now (those the run means pin: the result would rest on the prior's
-    tail and the grid's range), and at any ν one with over `EDGE_SHARE` of its variance from
+    E[σ_b²] is then infinite) every parameter whose variance still grows with σ_b at the
+    grid's top (over twice its value a decade below: those only the run means pin, whose
+    result would rest on the prior's tail and the grid's range; one the runs' own records
+    also pin levels off there and keeps its integrated σ), and at any ν one with over `EDGE_SHARE` of its variance from
     the grid's top decade ([`edge_share`][hrgjax.discovery.run_bias.edge_share]) and over
     twice that decade's posterior weight; and `{"runs", "dof": dof(x, u),
     "sigma_b_dph": [16 %, 50 %, 84 % points of σ_b's posterior], "not_pinned": [indices of
@@ -287,8 +291,10 @@ def spread(fit, r, x, u, sigma_now: float, per_dph: float):
     top = float(np.sum(w[sigma >= np.max(sigma) / 10.0]))
     share = edge_share(*args)
     nu, runs = dof(x, u), int(np.shape(u)[1])
-    # a parameter the run means pin: its variance at the grid's top over 2× that at σ_now
-    grows = spread_factors(*args[:4], [np.max(sigma)], [1.0]) > 2.0
+    # a parameter only the run means pin: its variance still growing with σ_b at the grid's
+    # top (∝ σ_b², 100× over the top decade; one the runs pin from inside levels off, ≈ 1×)
+    at_top = spread_factors(*args[:4], [np.max(sigma)], [1.0])
+    grows = at_top > 2.0 * spread_factors(*args[:4], [np.max(sigma) / 10.0], [1.0])
     loose = ((share > EDGE_SHARE) & (share > 2.0 * top)) | ((nu <= 2.0 + 1e-6) & grows)
     factors = np.where(loose, np.inf, factors)
     q = np.interp([0.16, 0.5, 0.84], np.cumsum(w) - 0.5 * w, sigma) / per_dph

@@ -185,8 +185,8 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
             entry["std_textbook"], entry["std"] = std, None
             entry["why_no_sigma"] = (
                 f"{NOT_PINNED} by {spread[1]['runs']} runs ({spread[1]['dof']:.1f} degrees "
-                "of freedom): this parameter's σ grows with σ_b, and its σ_b-integrated "
-                "value would be set by where the posterior's grid stops"
+                "of freedom): this parameter's variance keeps growing with σ_b, so its "
+                "σ_b-integrated value would rest on the prior's tail and the grid's range"
             )
             continue
         if not np.isfinite(var[i]):
