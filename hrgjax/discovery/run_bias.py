@@ -62,6 +62,7 @@ import math
 import numpy as np
 
 from .records import rate_columns
+from .stats import orthonormal_span
 
 POSTERIOR_POINTS = 121
 """Values of σ_b the posterior is evaluated at (`posterior`: 20 a decade over six decades)."""
@@ -69,18 +70,6 @@ EDGE_SHARE = 0.1
 """Share of a parameter's σ_b-integrated variance from the posterior grid's top decade above
 which `spread` gives it no σ (σ_b not pinned: 0.35–0.6 with ν = 2, 0.9 with ν = 1, ≤ 0.03
 with ν = 4 on the toy of tests/test_discovery_run_bias.py)."""
-
-
-def _orthonormal(x: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of the column span of `x` (numerical rank by SVD)."""
-    if x.size == 0 or x.shape[1] == 0:
-        return np.zeros((x.shape[0], 0))
-    norm = np.linalg.norm(x, axis=0)
-    x = x[:, norm > 0] / norm[norm > 0]
-    if x.shape[1] == 0:
-        return np.zeros((x.shape[0], 0))
-    q, s, _ = np.linalg.svd(x, full_matrices=False)
-    return q[:, s > 1e-9 * s[0]]
 
 
 def run_columns(groups) -> tuple[np.ndarray, list[int]]:
@@ -130,7 +119,7 @@ def _scaled(r, x, u):
     u = np.asarray(u, float)
     norms = np.linalg.norm(u, axis=0)
     scale = float(np.median(1.0 / norms[norms > 0]))  # a run mean's spread [rad/s]
-    return _products(np.asarray(r, float), _orthonormal(np.asarray(x, float)), u * scale), scale
+    return _products(np.asarray(r, float), orthonormal_span(np.asarray(x, float)), u * scale), scale
 
 
 def reml_run_bias(r, x, u, sigma_now: float) -> float:
@@ -264,8 +253,8 @@ def dof(x, u) -> float:
     zero) less Σ cos² of the principal angles between the fixed effects `x` and the runs'
     span (a fixed effect inside the span spends one; one across it, part of one)."""
     u = np.asarray(u, float)
-    q = _orthonormal(u[:, np.linalg.norm(u, axis=0) > 0])
-    xo = _orthonormal(np.asarray(x, float))
+    q = orthonormal_span(u[:, np.linalg.norm(u, axis=0) > 0])
+    xo = orthonormal_span(np.asarray(x, float))
     return float(q.shape[1] - np.sum(np.linalg.svd(q.T @ xo, compute_uv=False) ** 2))
 
 

@@ -189,9 +189,13 @@ def level_test(r: np.ndarray, j: np.ndarray, g: np.ndarray, classes=None):
     return sc, alias, step, f_sf(sc / q, q, max(int(math.floor(nu)), 1)), s
 
 
-def _span(a: np.ndarray) -> np.ndarray:
-    """Orthonormal basis of the span of `a`'s columns, scaled to unit norm first (numerical
-    rank by SVD at 10⁻⁹ of the largest)."""
+def orthonormal_span(a: np.ndarray) -> np.ndarray:
+    """Orthonormal basis (N, k) of the span of `a`'s (N, p) columns, each scaled to unit norm
+    first (numerical rank by SVD at 10⁻⁹ of the largest; zero columns dropped; (N, 0) for
+    none). Dimensionless."""
+    a = np.asarray(a, float)
+    if a.size == 0 or a.shape[1] == 0:
+        return np.zeros((a.shape[0], 0))
     norm = np.linalg.norm(a, axis=0)
     a = a[:, norm > 0] / norm[norm > 0]
     if a.shape[1] == 0:
@@ -204,7 +208,7 @@ def level_beyond(r: np.ndarray, a: np.ndarray, s: np.ndarray) -> tuple[float, in
     """The noise level a whitened residual `r` shows along the columns `s` beyond the span
     of `a` (a Birge ratio in that subspace: 1 when the whitening is right there):
     `(‖P_[a s] r‖² − ‖P_a r‖²) / ν, ν)`, ν the rank `s` adds to `a` ((1.0, 0) when none)."""
-    qa, qs = _span(a), _span(np.concatenate([a, s], axis=1))
+    qa, qs = orthonormal_span(a), orthonormal_span(np.concatenate([a, s], axis=1))
     nu = qs.shape[1] - qa.shape[1]
     if nu <= 0:
         return 1.0, 0
