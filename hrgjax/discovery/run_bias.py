@@ -224,9 +224,13 @@ def spread_factors(j, r, u, sigma_now: float, sigma, weights) -> np.ndarray:
     squares covariance C and shift δθ of the fit (one Gauss–Newton step: exact for a model
     linear near the fit) under the whitened covariance I + (σ_b² − σ_now²)UUᵀ; **returns**
     E[C_ii + δθ_i²] / C_ii(σ_now), shape (p,) (1 where the runs carry no bias column)."""
-    out = _contributions(j, r, u, sigma_now, sigma, weights)
+    return _factors(_contributions(j, r, u, sigma_now, sigma, weights), np.shape(j)[1])
+
+
+def _factors(out, p: int) -> np.ndarray:
+    """`spread_factors` from `_contributions`' output."""
     if out is None:
-        return np.ones(np.shape(j)[1])
+        return np.ones(p)
     terms, _, var0 = out
     mse = terms.sum(axis=0)
     return np.where(var0 > 0, mse / np.where(var0 > 0, var0, 1.0), 1.0)
@@ -240,12 +244,17 @@ def edge_share(j, r, u, sigma_now: float, sigma, weights) -> np.ndarray:
     posterior falls (a parameter only the run means pin, ν ≤ 2: E[σ_b²] diverges and
     the grid's top sets the value). 0 where the runs carry no bias column."""
     out = _contributions(j, r, u, sigma_now, sigma, weights)
+    return _share(out, np.shape(j)[1], float(np.max(np.asarray(sigma, float))))
+
+
+def _share(out, p: int, top: float) -> np.ndarray:
+    """`edge_share` from `_contributions`' output, `top` the grid's largest σ_b."""
     if out is None:
-        return np.zeros(np.shape(j)[1])
+        return np.zeros(p)
     terms, s, _ = out
     total = terms.sum(axis=0)
-    top = terms[s >= np.max(np.asarray(sigma, float)) / 10.0].sum(axis=0)
-    return np.where(total > 0, top / np.where(total > 0, total, 1.0), 0.0)
+    upper = terms[s >= top / 10.0].sum(axis=0)
+    return np.where(total > 0, upper / np.where(total > 0, total, 1.0), 0.0)
 
 
 def dof(x, u) -> float:
@@ -276,14 +285,14 @@ def spread(fit, r, x, u, sigma_now: float, per_dph: float):
     sigma, w = posterior(r, x, u, sigma_now)
     n = np.asarray(fit.r).size
     args = (fit.j, fit.r, np.asarray(u)[:n], sigma_now, sigma, w)
-    factors = spread_factors(*args)
+    p, out = np.shape(fit.j)[1], _contributions(*args)  # the grid's solves, once
+    factors, share = _factors(out, p), _share(out, p, float(np.max(sigma)))
     top = float(np.sum(w[sigma >= np.max(sigma) / 10.0]))
-    share = edge_share(*args)
     nu, runs = dof(x, u), int(np.shape(u)[1])
     # a parameter only the run means pin: its variance still growing with σ_b at the grid's
     # top (∝ σ_b², 100× over the top decade; one the runs pin from inside levels off, ≈ 1×)
-    at_top = spread_factors(*args[:4], [np.max(sigma)], [1.0])
-    grows = at_top > 2.0 * spread_factors(*args[:4], [np.max(sigma) / 10.0], [1.0])
+    ends = _contributions(*args[:4], [np.max(sigma) / 10.0, np.max(sigma)], [1.0, 1.0])
+    grows = np.zeros(p, bool) if ends is None else ends[0][1] > 2.0 * ends[0][0]
     loose = ((share > EDGE_SHARE) & (share > 2.0 * top)) | ((nu <= 2.0 + 1e-6) & grows)
     factors = np.where(loose, np.inf, factors)
     q = np.interp([0.16, 0.5, 0.84], np.cumsum(w) - 0.5 * w, sigma) / per_dph
