@@ -6,6 +6,7 @@ gyro's loops must return the gyro's own laws, where the ideal-loop grey box is p
 """
 
 import dataclasses
+import json
 
 import equinox as eqx
 import jax
@@ -17,12 +18,15 @@ from helpers import CompileCounter, batched_lapack
 import hrgjax as hg
 from hrgjax.calibration import (
     PhysicalCompensator,
+    export_json,
     load_compensator,
+    load_json,
     physical,
     run_plan,
     save_compensator,
 )
 from hrgjax.calibration.design import nominal_values
+from hrgjax.calibration.export import checksum
 from hrgjax.resonator.averaged import input_rate
 from hrgjax.resonator.slow import reduced_rate
 
@@ -94,6 +98,22 @@ def test_grey_box_with_the_plant_returns_the_laws(gyro, tmp_path):
     # shares its program too
     back = load_compensator(save_compensator(plant, tmp_path / "p.eqx"))
     np.testing.assert_array_equal(back.scale_factor_at(th, 20.0), sf_p)
+    # a plant fitted before the nonlinear balance (a0eb9e0: no `balance` in its header) is
+    # evaluated with the new balance: it loads (same numbers), but says so
+    first, payload = (tmp_path / "p.eqx").read_bytes().split(b"\n", 1)
+    header = json.loads(first)
+    assert header["hyper"].pop("balance") == "newton"
+    header["sha256"] = checksum(header, payload)
+    (tmp_path / "old.eqx").write_bytes(json.dumps(header).encode() + b"\n" + payload)
+    with pytest.warns(UserWarning, match="linearised slow-manifold balance"):
+        old = load_compensator(tmp_path / "old.eqx")
+    np.testing.assert_array_equal(old.values, plant.values)
+    d = json.loads((tmp_path / export_json(plant, tmp_path / "p.json")).read_text())
+    del d["hyper"]["balance"]
+    (tmp_path / "old.json").write_text(json.dumps(d))
+    with pytest.warns(UserWarning, match="refit it on its data"):
+        load_json(tmp_path / "old.json")
+    load_json(tmp_path / "p.json")  # today's file: no warning (warnings are errors here)
     with CompileCounter() as c:
         other = dataclasses.replace(plant, sf_rate=2 * plant.sf_rate)
         assert np.max(np.abs(other.scale_factor_at(th, 20.0) - sf_p)) > 0
