@@ -5,11 +5,15 @@ Records of N rate samples (N + 1 phase points) of one power-law noise, rate PSD 
 walk), by Kasdin & Walter's (1992) filter (flicker angle noise up to f_h = 1/(2τ₀));
 `noise_id(x, m)` at every octave m up to N: the share of records read right, per α and m
 (`--full`: every α read). The lag-1 autocorrelation reads m ≤ N/29 (≥ 30 decimated points),
-B1/R(n) beyond from 8 averages, the α carried on at 4 and 2. Run against an older hrgjax
+B1/R(n) beyond from 8 averages, the α carried on at 4 and 2. `--average M`: each rate
+sample the mean of M of the filter's (its phase of N·M + 1 points decimated by M), as a gyro
+that outputs angle increments (rate averaged over each sample interval): at m = 1 such data
+carry the decimated noises' lag-1 autocorrelations. Run against an older hrgjax
 (PYTHONPATH=...) for its figures.
 
 Usage: `.venv/bin/python benchmarks/noise_id_table.py [--n 200] [--samples 4096]
-[--rule hrgjax|stable32] [--dmax 2] [--full]` (≈ 3 s on 2 shared cores).
+[--rule hrgjax|stable32] [--dmax 2] [--average 1] [--full]` (≈ 3 s on 2 shared cores; ×M
+with `--average M`).
 """
 
 from __future__ import annotations
@@ -38,16 +42,19 @@ def main():
     ap.add_argument("--samples", type=int, default=4096)
     ap.add_argument("--dmax", type=int, default=2)
     ap.add_argument("--rule", default="hrgjax")
+    ap.add_argument("--average", type=int, default=1)
     ap.add_argument("--full", action="store_true")
     a = ap.parse_args()
     ms = 2 ** np.arange(int(np.log2(a.samples)))
     t0 = time.time()
-    print(f"{a.n} records of {a.samples} samples, rule {a.rule}, dmax {a.dmax}: % read right")
+    print(f"{a.n} records of {a.samples} samples (each the mean of {a.average}), rule {a.rule}, "
+          f"dmax {a.dmax}: % read right")  # fmt: skip
     print("α \\ m " + " ".join(f"{m:>5d}" for m in ms))
     for alpha in (2, 1, 0, -1, -2):
         rng = np.random.default_rng(500 + alpha)
-        got = np.array([hg.allan.noise_id(kasdin(alpha, a.samples + 1, rng), ms, dmax=a.dmax,
-                                          rule=a.rule) for _ in range(a.n)])  # fmt: skip
+        got = np.array([hg.allan.noise_id(kasdin(alpha, a.samples * a.average + 1, rng)
+                                          [:: a.average], ms, dmax=a.dmax, rule=a.rule)
+                        for _ in range(a.n)])  # fmt: skip
         print(f"{alpha:4d}  " + " ".join(f"{np.mean(got[:, j] == alpha) * 100:5.0f}"
                                          for j in range(ms.size)))  # fmt: skip
         if a.full:

@@ -34,6 +34,7 @@ from .noise_ident import ACF_POINTS as ACF_POINTS
 from .noise_ident import B1_AVERAGES as B1_AVERAGES
 from .noise_ident import NOISE_RULES as NOISE_RULES
 from .noise_ident import RHO_SPLIT as RHO_SPLIT
+from .noise_ident import RHO_SPLIT_1 as RHO_SPLIT_1
 from .noise_ident import RN_FACTOR as RN_FACTOR
 from .noise_ident import b1_expected as b1_expected
 from .noise_ident import noise_id as noise_id

@@ -33,6 +33,12 @@ RHO_SPLIT = -0.04
 the default rule reads flicker rather than random-walk rate noise: the midpoint of their
 values for averaged rates, ρ = 1 − 8 ln 2/(9 ln 3 − 8 ln 2) = −0.277 (r₁ = 9 ln 3/(8 ln 2) − 2) and
 0.2 (r₁ = ¼)."""
+RHO_SPLIT_1 = -0.14
+"""The same split at m = 1, where the phase may be point-sampled (discrete) noise, ρ = −½ for
+flicker and 0 for random-walk rate noise (Riley & Greenhall's −¼ is their midpoint), or rate
+data averaged over each sample interval (a counter-gated or rate-integrating gyro's angle
+increments), the decimated values −0.277 and 0.2: the midpoint of averaged flicker's −0.277
+and the discrete random walk's 0, the two that lie nearest (the split that serves both)."""
 
 
 NOISE_RULES = ("hrgjax", "stable32")
@@ -74,15 +80,19 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
       records at m ≥ 256, the rest white rate noise: conservative, ±1σ 79–88 %). At d = 2 of a decimated phase (m ≥ 2), flicker rate noise below ρ = −0.04
       ([`RHO_SPLIT`][hrgjax.allan.RHO_SPLIT]; averaged rates: −0.28 for flicker, 0.2 for a random walk;
       Riley & Greenhall's −¼ suits their discrete noises' −½ and 0, and read flicker rate
-      noise as a random walk in 11–52 % of records; m = 1 keeps −¼, for discrete noise). B1
+      noise as a random walk in 11–52 % of records); at m = 1 below −0.14
+      ([`RHO_SPLIT_1`][hrgjax.allan.RHO_SPLIT_1]), between averaged flicker's −0.28 and a
+      point-sampled random walk's 0 (−¼ read averaged flicker rate noise right in 86–94 % of
+      records of 2 048–4 096 samples, 63 % of 256; now 100 %, 94 %). B1
       on the
       record as it is, from [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages on; with
       fewer, the α of the factor before is carried on (for the first factor asked: that of
       the largest m/2, m/4, … that can be read). On drift-free white + random-walk records
       its ±1σ intervals cover the truth at the nominal rate at every τ
       (`benchmarks/coverage_allan.py`), and on each pure power-law noise from m = 1 to T
-      (`benchmarks/coverage_totdev.py`) but flicker rate noise at τ ≥ T/2 (B1 on 8
-      averages: 46–62 % right) and flicker angle noise at m ≥ 256 (read as white rate
+      (`benchmarks/coverage_totdev.py`) but the rate noises at τ ≥ T/8 (B1 on ≤ 8
+      averages: flicker 46–62 % right, a random walk 56–60 %: `deviation`'s totdev interval
+      there spans the three rate noises') and flicker angle noise at m ≥ 256 (read as white rate
       noise in 22–34 % of records: ±1σ 79–88 %, conservative).
     - `"stable32"`: as Stable32 1.60's octave tables of a real OCXO record, which it
       reproduces at all 90 τ of seven kinds (`benchmarks/stable32_ocxo.py`; the rule was read
@@ -170,7 +180,8 @@ def _identify(x, k, dmax, *, b1_x=None, b1_min=B1_AVERAGES, guard=True, refine=N
     `RN_FACTOR` on, and the averaged rate noises' ρ split flicker from random walk."""
     z = x[::k]
     if z.size >= ACF_POINTS:
-        a = _acf_alpha(z, dmax, averaged=refine is not None and k > 1)
+        split = -0.25 if refine is None else RHO_SPLIT if k > 1 else RHO_SPLIT_1
+        a = _acf_alpha(z, dmax, split)
         if refine is not None and a >= 1 and k >= RN_FACTOR:
             return _rn_class(_rn(x, k, refine), k, a)
         return a
@@ -188,13 +199,13 @@ def _identify(x, k, dmax, *, b1_x=None, b1_min=B1_AVERAGES, guard=True, refine=N
     return None
 
 
-def _acf_alpha(z, dmax, averaged=False):
+def _acf_alpha(z, dmax, split=-0.25):
     """α from the lag-1 autocorrelation r₁ of `z` less its least-squares quadratic,
     differenced d times until ρ = r₁/(1 + r₁) < 0.25 or d = `dmax` (Riley & Greenhall's
-    rule, as Stable32): α = 2 − 2d − round(2ρ). `averaged` (a decimated phase, m ≥ 2: the
-    rate averaged over m samples): at d = 2, flicker rate noise below `RHO_SPLIT`, the
-    midpoint of the averaged noises' ρ (Riley & Greenhall's −¼ is that of their discrete
-    fractional noises, −½ and 0)."""
+    rule, as Stable32): α = 2 − 2d − round(2ρ). At d = 2, flicker rate noise below `split`
+    (≥ −¼): Riley & Greenhall's −¼ is the midpoint of their discrete fractional noises' −½
+    and 0; the default rule takes `RHO_SPLIT` for a decimated phase (m ≥ 2: the rate
+    averaged over m samples) and `RHO_SPLIT_1` at m = 1."""
     z = np.ascontiguousarray(z, dtype=float)  # an octave's strided view read once
     size, sums, first, last = _detrended_sums(z, dmax)
     d = 0
@@ -218,8 +229,8 @@ def _acf_alpha(z, dmax, averaged=False):
     # a periodic or deterministic component (r₁ → −1: ρ → −∞) reads as no power law at all;
     # the nearest the deviation's differences can take: 2 (white phase) … 2 − 2·dmax
     k = round(2 * rho)
-    if averaged and d == 2 and k == 0 and rho < RHO_SPLIT:
-        k = -1  # flicker rate noise (−0.28), not a random walk (0.2)
+    if d == 2 and k == 0 and rho < split:
+        k = -1  # flicker rate noise (averaged: −0.28), not a random walk (0; averaged 0.2)
     return min(2, max(2 - 2 * dmax, int(-k - 2 * d) + 2))
 
 

@@ -20,7 +20,13 @@ from .._checks import check_1d, describe, is_finite_real
 from .._progress import bar
 from .._x64 import require_x64
 from .deviations import CURVE_CHUNK, curve, curve_parts
-from .noise_ident import NOISE_RULES, check_rate_has_noise, noise_id, noise_id_each
+from .noise_ident import (
+    B1_AVERAGES,
+    NOISE_RULES,
+    check_rate_has_noise,
+    noise_id,
+    noise_id_each,
+)
 from .totvar import edf_totdev, totvar_bias
 from .uncertainty import ONE_SIGMA, confidence_interval, edf_greenhall
 
@@ -40,7 +46,9 @@ class AllanResult:
     - `edf`: equivalent degrees of freedom (Greenhall–Riley; totdev: SP 1065 Table 7,
       [`edf_totdev`][hrgjax.allan.edf_totdev]; mtotdev, ttotdev: Table 8,
       [`edf_mtotdev`][hrgjax.allan.total.edf_mtotdev]; with gaps: the gap-free segments'
-      pooled EDF).
+      pooled EDF). totdev where a rate noise is read by B1 on ≤ 8 averages (τ ≥ T/8, default
+      rule): the smallest of the three rate noises' EDFs, and `dev_low`, `dev_high` span
+      their intervals, each with its own bias correction (B1 cannot tell them apart there).
     - `n_terms`: the number of differences each estimate averages.
     - `alpha`: the power-law noise identified at each τ, the exponent α of the rate PSD
       S_y(f) ∝ f^α: 2 white angle (phase) noise, 1 flicker angle, 0 white rate (angle random
@@ -347,6 +355,8 @@ def deviation(
                                     for a, k in zip(alpha, m, strict=True)])  # fmt: skip
             dev = dev * factor
         low, high = confidence_interval(dev, edf, ci)
+        if kind == "totdev" and bias_correction and noise_rule == "hrgjax":
+            edf, low, high = _rate_noise_span(dev / factor, alpha, m, n_phase, edf, low, high, ci)
     return AllanResult(
         kind=kind, ci=float(ci), taus=taus_s, m=m, dev=dev, dev_low=low, dev_high=high,
         edf=edf, n_terms=n_terms, alpha=alpha, bias_factor=factor, unit=str(unit),
@@ -436,6 +446,21 @@ def _gapped_edf(kind: str, alpha: int, m: int, n_terms: int, segments, fallback)
     spread = sum(count * _n_terms(kind, m, s) ** 2 / _edf(kind, alpha, m, s)
                  for s, count in lengths.items())  # fmt: skip
     return max(held * n_terms / spread, 1.0)
+
+
+def _rate_noise_span(raw, alpha, m, n, edf, low, high, ci):
+    """totdev's (EDF, low, high) where its α, a rate noise (≤ 0), is read by B1 on at most
+    `B1_AVERAGES` averages (τ ≥ T/8: its scatter spans all three rate noises there): the
+    interval spanning those of white, flicker and random-walk rate noise, each its own bias
+    correction (1, 1/(1 − 0.48·τ/T), 1/(1 − ¾·τ/T)) and EDF, the smallest EDF reported."""
+    edf, low, high = edf.astype(float), low.copy(), high.copy()
+    for j in np.flatnonzero((alpha <= 0) & ((n - 1) // m <= B1_AVERAGES)):
+        k = int(m[j])
+        for a in (0, -1, -2):
+            e = edf_totdev(a, k, n)
+            lo, hi = confidence_interval(raw[j] / math.sqrt(totvar_bias(a, k, n)), e, ci)
+            edf[j], low[j], high[j] = min(edf[j], e), min(low[j], lo), max(high[j], hi)
+    return edf, low, high
 
 
 @functools.lru_cache(maxsize=65536)  # a gapped record asks for each segment length per τ
