@@ -191,8 +191,9 @@ def test_reverse_gradient_equals_finite_differences():
 
     def final_angle(rate_dps):
         prof = hg.Profile.constant_rate(rate_dps, 0.004, wave_angle0_deg=10.0)
-        # an output at the start: an empty first interval (its steps of h = 0)
-        ts = np.array([0.0, 0.004])
+        # an output at the start: an empty first interval (its steps of h = 0); the output
+        # times of test_vmap_over_rates_equals_single_runs: one program for both
+        ts = np.array([0.0, 0.002, 0.004])
         rec = hg.simulate(FREE, prof, model="full", ts=ts, fixed_step=2e-5)
         return rec.wave_angle[-1]
 
@@ -232,7 +233,7 @@ def test_stored_state_and_checkpointed_gradients_agree(monkeypatch):
 
 
 def test_vmap_over_rates_equals_single_runs():
-    ts = jnp.array([0.002, 0.004])
+    ts = np.array([0.0, 0.002, 0.004])  # the single runs: test_reverse_gradient's program
 
     def run(rate_dps):
         prof = hg.Profile.constant_rate(rate_dps, 0.004, wave_angle0_deg=10.0)

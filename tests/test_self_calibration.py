@@ -336,9 +336,10 @@ def test_mode_reversal_refuses_a_turning_case():
     reductions refuse a case turning faster than STILL_RATE_DPS, naming the rate."""
     from hrgjax.pattern_noise import STILL_RATE_DPS
 
-    turning = hg.Profile.held_angles([0.0, 90.0], dwell_s=60.0, slew_s=10.0, rate_dps=0.01)
+    # the fixture's dwells and slew: the simulation below is its program
+    turning = hg.Profile.held_angles([0.0, 90.0], dwell_s=90.0, slew_s=20.0, rate_dps=0.01)
     with pytest.raises(ValueError, match=r"case at rest .*profile's rate reaches 0\.01 °/s"):
-        sc.mode_reversal(np.arange(131.0), np.zeros(131), turning)
+        sc.mode_reversal(np.arange(201.0), np.zeros(201), turning)
     slow = hg.Profile.held_angles([0.0, 90.0], dwell_s=60.0, slew_s=10.0,
                                   rate_dps=0.5 * STILL_RATE_DPS)  # fmt: skip
     sc.mode_reversal(np.arange(131.0), np.zeros(131), slow)  # readback jitter is rest
