@@ -445,6 +445,7 @@ class NoCompensation(AbstractCompensator):
         return jnp.ones_like(theta)
 
 
+@program
 def _pointwise(comp, which, theta, temperature_c):
     """`comp.<which>` [rad/s or dimensionless] at each θ [rad] and T [°C]."""
     return jax.vmap(getattr(comp, which))(theta, temperature_c)
