@@ -9,7 +9,9 @@ is not that table's: its ends differ by up to ≈ 6 %).
 
 The octave and decade tables are the raw estimator (`bias_correction=False`); Stable32's
 `phase_dat_ttotdev_all.txt` (no intervals) is bias-corrected, the raw value divided by
-√(MTOTVAR_BIAS[α]) (0.73 for white FM): compared with hrgjax's default.
+√(MTOTVAR_BIAS[α]) (0.73 for white FM): hrgjax does so under `--noise-rule stable32`; its
+default divides by the estimator's own bias (`mtotvar_bias`) and uses an EDF fitted to the
+exact one, so there the corrected table and the interval ends differ by design.
 
 Usage: `.venv/bin/python benchmarks/stable32_phasedat.py [--dir out/phasedat]
 [--noise-rule hrgjax|stable32]`. The files

@@ -44,8 +44,9 @@ class AllanResult:
     - `dev`: the deviation [rate unit; tdev: rate unit × s, an angle];
       `dev_low`, `dev_high`: the χ² interval at level `ci` (NIST SP 1065 eq. 45).
     - `edf`: equivalent degrees of freedom (Greenhall–Riley; totdev: SP 1065 Table 7,
-      [`edf_totdev`][hrgjax.allan.edf_totdev]; mtotdev, ttotdev: Table 8,
-      [`edf_mtotdev`][hrgjax.allan.total.edf_mtotdev]; with gaps: the gap-free segments'
+      [`edf_totdev`][hrgjax.allan.edf_totdev]; mtotdev, ttotdev:
+      [`edf_mtotdev`][hrgjax.allan.total.edf_mtotdev] (fitted to the exact EDF; Table 8
+      under `noise_rule="stable32"`); with gaps: the gap-free segments'
       pooled EDF). totdev where a rate noise is read by B1 on ≤ 8 averages (τ ≥ T/8, default
       rule): the smallest of the three rate noises' EDFs, and `dev_low`, `dev_high` span
       their intervals, each with its own bias correction (B1 cannot tell them apart there).
@@ -58,7 +59,8 @@ class AllanResult:
     - `bias_factor`: what `dev` was multiplied by to remove the estimator's bias (totdev:
       1/√[`totvar_bias`][hrgjax.allan.totvar_bias], 1/√(1 − a·τ/T) for flicker and
       random-walk rate noise (NIST SP 1065 §5.2.11), computed for white and flicker angle
-      noise (1 there under `noise_rule="stable32"`, as Stable32); mtotdev, ttotdev: 1/√b(α);
+      noise (1 there under `noise_rule="stable32"`, as Stable32); mtotdev, ttotdev: 1/√b(α, m),
+      [`mtotvar_bias`][hrgjax.allan.total.mtotvar_bias] (Stable32's b(α) under its rule);
       1 elsewhere and where the correction was off).
     - `segments`: for a rate record with gaps, the (start, length) of each gap-free run of
       samples [samples], an (R, 2) integer array
@@ -197,7 +199,9 @@ def deviation(
       rate noise as SP 1065 and Stable32; for white and flicker angle noise, which SP 1065
       leaves uncorrected, 1 + (4/3)·τ/T and about ¾ of that excess — not under
       `noise_rule="stable32"`, which reports totdev as Stable32 does), mtotdev and ttotdev by
-      √[`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS], as Stable32 reports them; `False`
+      √[`mtotvar_bias`][hrgjax.allan.total.mtotvar_bias] (exact for the noise type and m;
+      under `noise_rule="stable32"` by √[`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS],
+      as Stable32 reports them); `False`
       gives the raw estimators (allantools').
     - `noise_rule`: how the noise type is read where the lag-1 autocorrelation cannot:
       `"hrgjax"` (default; intervals checked by Monte Carlo) or `"stable32"` (the rule read
@@ -322,7 +326,7 @@ def deviation(
         dmax = 3 if kind in ("hdev", "ohdev") else 2
         options = dict(dmax=dmax, rule=noise_rule, overlapping=kind not in ("adev", "hdev"))
         alpha = _noise_in_steps(x, m, progress, **options) if stepped else noise_id(x, m, **options)
-        edf = np.asarray([_edf(kind, int(a), int(k), int(n))
+        edf = np.asarray([_edf(kind, int(a), int(k), int(n), noise_rule)
                           for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
         if gaps:  # the gap-free segments' EDFs pooled: their differences are independent for
             # white angle noise, white rate noise and a rate random walk, not for flicker noise
@@ -345,9 +349,13 @@ def deviation(
             dev = dev * taus_s / math.sqrt(3.0)
         factor = np.ones_like(dev)
         if kind in ("mtotdev", "ttotdev") and bias_correction:
-            from .total import MTOTVAR_BIAS
+            from .total import MTOTVAR_BIAS, mtotvar_bias
 
-            factor = 1.0 / np.sqrt([MTOTVAR_BIAS[int(min(max(a, -2), 2))] for a in alpha])
+            if noise_rule == "stable32":  # Stable32's divisors, by α alone (as its tables)
+                bias = [MTOTVAR_BIAS[int(min(max(a, -2), 2))] for a in alpha]
+            else:  # the estimator's own, exact: ½ at m = 1 (mtotdev(τ₀) = mdev(τ₀))
+                bias = [mtotvar_bias(int(a), int(k)) for a, k in zip(alpha, m, strict=True)]
+            factor = 1.0 / np.sqrt(bias)
             dev = dev * factor
         if kind == "totdev" and bias_correction:
             angle = noise_rule == "hrgjax"  # Stable32 (SP 1065) corrects rate noises only
@@ -464,13 +472,13 @@ def _rate_noise_span(raw, alpha, m, n, edf, low, high, ci):
 
 
 @functools.lru_cache(maxsize=65536)  # a gapped record asks for each segment length per τ
-def _edf(kind: str, alpha: int, m: int, n: int) -> float:
+def _edf(kind: str, alpha: int, m: int, n: int, rule: str = "hrgjax") -> float:
     if kind == "totdev":
         return edf_totdev(alpha, m, n)
     if kind in ("mtotdev", "ttotdev"):
         from .total import edf_mtotdev
 
-        return edf_mtotdev(alpha, m, n)
+        return edf_mtotdev(alpha, m, n, rule)
     d = 3 if kind in ("hdev", "ohdev") else 2
     alpha = max(alpha, 2 - 2 * d)  # the variance converges for α > 1 − 2d
     return edf_greenhall(
