@@ -114,6 +114,10 @@ def test_grey_box_with_the_plant_returns_the_laws(gyro, tmp_path):
     with pytest.warns(UserWarning, match="refit it on its data"):
         load_json(tmp_path / "old.json")
     load_json(tmp_path / "p.json")  # today's file: no warning (warnings are errors here)
+    d["hyper"]["balance"] = "secant"  # a balance this hrgjax does not know: refused
+    (tmp_path / "odd.json").write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="hyper.balance 'secant'"):
+        load_json(tmp_path / "odd.json")
     with CompileCounter() as c:
         other = dataclasses.replace(plant, sf_rate=2 * plant.sf_rate)
         assert np.max(np.abs(other.scale_factor_at(th, 20.0) - sf_p)) > 0

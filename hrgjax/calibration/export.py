@@ -122,17 +122,26 @@ def _domain(comp) -> dict:
 
 
 def _warn_linearised_balance(path, name: str, hyper: dict) -> None:
-    """Warn (once per load) where a saved grey box's plant predates the nonlinear balance."""
-    if name == "PhysicalCompensator" and isinstance(hyper, dict) and hyper.get("plant") is not None:
-        if hyper.get("balance") != _PLANT_BALANCE:
-            warnings.warn(
-                f"{path}: this grey box's plant was fitted under the linearised slow-manifold "
-                "balance (hrgjax before commit a0eb9e0); its drift and scale factor are now "
-                "evaluated with the nonlinear balance (≈ 7e-4 of the scale factor apart at a "
-                "50 mHz split): refit it on its data to compensate as fitted",
-                UserWarning,
-                stacklevel=3,
-            )
+    """Warn where a loaded grey box's plant predates the nonlinear balance (no `balance` in
+    its hyperparameters); refuse a `balance` this hrgjax does not know. Called once the file
+    has loaded, so a damaged file reports its damage, not this."""
+    if name != "PhysicalCompensator" or hyper.get("plant") is None:
+        return
+    balance = hyper.get("balance")
+    if balance is None:
+        warnings.warn(
+            f"hrgjax: {path}: this grey box's plant was fitted under the linearised "
+            "slow-manifold balance (files saved before 2026-11-30, commit a0eb9e0); its drift "
+            "and scale factor are now evaluated with the nonlinear balance (≈ 7e-4 of the scale "
+            "factor apart at a 50 mHz split): refit it on its data to compensate as fitted",
+            UserWarning,
+            stacklevel=3,
+        )
+    elif balance != _PLANT_BALANCE:
+        raise ValueError(
+            f"{path}: hyper.balance {balance!r} is not a slow-manifold balance this hrgjax "
+            f"knows ({_PLANT_BALANCE!r}); the file was edited or written by a newer hrgjax"
+        )
 
 
 def _skeleton(name: str, hyper: dict):
@@ -231,14 +240,15 @@ def load_compensator(path: str | os.PathLike):
             raise ValueError(f"{path}: damaged or edited (checksum mismatch over the "
                              f"{'data' if version == 2 else 'header and data'}); save the "
                              "compensator again")  # fmt: skip
-    _warn_linearised_balance(path, name, hyper)
     try:
-        return eqx.tree_deserialise_leaves(io.BytesIO(payload), _skeleton(name, dict(hyper)))
+        comp = eqx.tree_deserialise_leaves(io.BytesIO(payload), _skeleton(name, dict(hyper)))
     except Exception as err:  # a hand-edited header: shapes or fields do not match
         raise ValueError(
             f"{path}: the data do not match a {name} with the header's hyperparameters "
             f"({type(err).__name__}: {err})"
         ) from None
+    _warn_linearised_balance(path, name, hyper)
+    return comp
 
 
 def _mlp_layers(net: eqx.nn.MLP) -> list[dict]:
@@ -380,7 +390,6 @@ def load_json(path: str | os.PathLike):
             f"{path}: unknown compensator class {name!r}; known are {sorted(_CLASSES)}"
         )
     hyper = _key(path, d, "hyper", dict)
-    _warn_linearised_balance(path, name, hyper)
     try:
         comp = _skeleton(name, dict(hyper))
     except Exception as err:  # a hand-edited hyper: unknown or missing fields, wrong types
@@ -457,8 +466,10 @@ def load_json(path: str | os.PathLike):
         if missing:
             raise ValueError(f"{path}: 'parameters' lacks {missing}; it needs {list(NAMES)}")
         values = f64("parameters", comp.values, [params[n] for n in NAMES])
-        return eqx.tree_at(lambda c: (c.values, c.covariance), comp,
+        comp = eqx.tree_at(lambda c: (c.values, c.covariance), comp,
                            (values, f64("covariance", comp.covariance)))  # fmt: skip
+        _warn_linearised_balance(path, name, hyper)
+        return comp
     if name == "PrecessionCompensator":
         coefs = (f64("drift_coef", comp.drift_coef), f64("gain_coef", comp.gain_coef))
         return eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef), comp, coefs)
