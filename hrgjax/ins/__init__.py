@@ -4,6 +4,7 @@ itself: the nonlinear strapdown mechanization, motion definitions with exact inc
 error models, GNSS fixes, the loosely-coupled filter and smoother, Monte Carlo flights."""
 
 from . import alignment as alignment
+from . import consistency as consistency
 from . import constants as constants
 from . import ekf as ekf
 from . import flights as flights

@@ -1,29 +1,37 @@
 r"""Loosely-coupled GNSS/INS: an error-state extended Kalman filter with closed-loop
-correction, a Rauch–Tung–Striebel smoother, and their consistency figures (NEES, NIS).
+correction and a Rauch–Tung–Striebel smoother; their consistency figures (NEES, NIS) are in
+[`hrgjax.ins.consistency`][hrgjax.ins.consistency] (also importable from here).
 
-**States** (15, or 21 with `scale_factors=True`): the strapdown error model's position,
-velocity and attitude errors ([`hrgjax.ins.strapdown.STATES`][hrgjax.ins.strapdown]:
-δφ, δλ [rad], δh [m], δv [m/s, NED], φ [rad]), then the residual gyro and accelerometer
-biases $b - \hat b$ [rad/s, m/s²] (body), then the residual scale factors $s - \hat s$.
-Each is *estimate minus truth* for the navigation states and *truth minus estimate* for the
-sensor states, so that the gyro error left after correction is
-$\delta\omega = \delta b + \mathrm{diag}(\omega)\,\delta s$ as the error model expects.
+**States** (15; + 6 with `scale_factors=True`; + 6 with `gauss_markov=True`): the strapdown
+error model's position, velocity and attitude errors
+([`hrgjax.ins.strapdown.STATES`][hrgjax.ins.strapdown]: δφ, δλ [rad], δh [m], δv [m/s, NED],
+φ [rad]), then the residual gyro and accelerometer biases $b - \hat b$ [rad/s, m/s²] (body),
+then the residual scale factors $s - \hat s$, then the residual gyro and accelerometer
+Gauss–Markov biases $g - \hat g$ [rad/s, m/s²] (body). Each is *estimate minus truth* for
+the navigation states and *truth minus estimate* for the sensor states, so that the gyro
+error left after correction is
+$\delta\omega = \delta b + \delta g + \mathrm{diag}(\omega)\,\delta s$ as the error model
+expects.
 
 **Per GNSS interval** T (a block of IMU steps):
 
 1. the increments, corrected with the current sensor estimates
-   ($\Delta\theta \leftarrow (\Delta\tilde\theta - \hat b_g\Delta t)/(1 + \hat s_g)$, same for
-   Δv), run through [`mechanize`][hrgjax.ins.mechanization]'s step;
+   ($\Delta\theta \leftarrow (\Delta\tilde\theta - (\hat b_g + \bar g_g)\Delta t)/(1 + \hat s_g)$,
+   $\bar g_g$ the Gauss–Markov estimate's mean over the step as it decays, same for Δv),
+   run through [`mechanize`][hrgjax.ins.mechanization]'s step;
 2. the covariance is propagated with $\Phi, Q_d$ of the error model
-   ([`discretise`][hrgjax.ins.ekf.discretise]: the Van Loan integrals by series)
+   ([`discretise`][hrgjax.ins.ekf.discretise]: the Van Loan integrals by series, exact for
+   any T/τ)
    (F at the block's middle state with the block's mean specific force and rate; white gyro and
-   accelerometer noise densities `arw`, `vrw`; bias random walks) — the same exact
+   accelerometer noise densities `arw`, `vrw`; bias random walks; Gauss–Markov decay
+   −1/τ driven by 2σ²/τ) — the same exact
    linearisation as [`hrgjax.ins.strapdown`][hrgjax.ins.strapdown];
 3. at a valid fix the innovation (INS antenna position and velocity minus the fix, the
    longitude difference wrapped to ±π, with the lever arm's attitude sensitivity in H)
    updates the error state (Joseph form, [`hrgjax.kalman.update`][hrgjax.kalman.update]);
 4. the estimate is fed back — position and velocity subtracted, attitude
-   $q \leftarrow q(\hat\phi)\otimes q$, sensor estimates accumulated — and reset to zero.
+   $q \leftarrow q(\hat\phi)\otimes q$, sensor estimates accumulated (the Gauss–Markov ones
+   decayed by $e^{-T/\tau}$ first) — and reset to zero.
 
 The smoother runs the RTS recursion on these reset error states backwards:
 $s_k = C_k\,(\hat x^+_{k+1} + s_{k+1})$, $C_k = P^+_k\Phi_k^\top(P^-_{k+1})^{-1}$,
@@ -31,14 +39,18 @@ $P^s_k = P^+_k + C_k(P^s_{k+1} - P^-_{k+1})C_k^\top$, and applies $s_k$ to the f
 state at k.
 
 Sensor model behind the filter: the fixed biases are random constants with σ the
-`ImuModel`'s `gyro_bias`/`accel_bias`; the bias instability, with no Gauss–Markov state, is a
-random walk of density $2\sigma^2/\tau$ (exact over times ≪ τ, conservative beyond: a
-stationary Gauss–Markov bias's change from any start has a variance of at most 2σ², the
-walk's grows as 2σ²t/τ; on the tests' 120-s flight with 1-s fixes, for τ of three fix
-intervals or less, the attitude and bias σ came out 1.8–3.6× too large: docs/navigation.md); misalignments are not estimated. Every sensor state
-needs a prior σ > 0 (a zero makes the covariance singular): the model's values are the sizes
+`ImuModel`'s `gyro_bias`/`accel_bias`, plus its bias random walks. The bias instability
+(σ, τ): with `gauss_markov=True` a first-order Gauss–Markov state per axis (prior σ, decay
+rate 1/τ, driving density 2σ²/τ: stationary); without, folded into the fixed bias's prior
+(σ² added) and its random walk (density $2\sigma^2/\tau$: exact over times ≪ τ,
+conservative beyond; on the tests' 120-s flight with 1-s fixes the attitude and gyro-bias σ
+came out 2.6× and 3.6× too large at τ = 0.1 s, 2.1×, 2.5× at 1 s, 1.4× at 10 s, 1.1× at
+100 s; with the Gauss–Markov states the errors' RMS over σ is 0.86–1.09 in every state
+group from τ = 0.1 s to 10⁵ s: docs/navigation.md). Misalignments are not estimated. Every
+sensor state needs a prior σ > 0 (a zero makes the covariance singular): the model's values are the sizes
 the filter assumes. Its σ are honest only if that model and P0 bound the real sensor and
-initial error: if not, σ are several times too small ([`nis_check`][hrgjax.ins.ekf.nis_check]).
+initial error: if not, σ are several times too small
+([`nis_check`][hrgjax.ins.consistency.nis_check]).
 
 **Small-angle limit.** The error state (F, H linear in the attitude error φ) holds for
 attitude errors of a few degrees: an initial heading σ of 0.1 rad leaves the attitude σ
@@ -57,9 +69,14 @@ import numpy as np
 
 from .. import kalman
 from .._checks import is_concrete
-from .._compiled import Check, fused, program
+from .._compiled import Check, program
 from .._linalg import cho_solve, cholesky, whiten
 from .._x64 import require_x64
+from .consistency import error_states as error_states
+from .consistency import nees as nees
+from .consistency import nees_band as nees_band
+from .consistency import nis_check
+from .consistency import whitened_errors as whitened_errors
 from .constants import WGS84, Earth
 from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
 from .mechanization import (
@@ -67,7 +84,6 @@ from .mechanization import (
     NavState,
     check_increments,
     check_state,
-    navigation_errors,
     quat_multiply,
     rotvec_to_quat,
     skew,
@@ -88,10 +104,12 @@ class FilterResult(eqx.Module):
 
     **Fields:** `t` (M,) [s]; `nav` the corrected [`NavState`][hrgjax.ins.mechanization.NavState]
     history; `gyro_bias`, `accel_bias` (M, 3) estimates [rad/s, m/s²]; `gyro_scale`,
-    `accel_scale` (M, 3) [-] (zeros without scale-factor states); `P` (M, n, n) error
-    covariance; `nis` (M,) normalised innovation squared (NaN where no fix);
-    `innovation_dim` the number of measured components per fix; `earth` the filter's Earth
-    model."""
+    `accel_scale` (M, 3) [-] (zeros without scale-factor states); `gyro_gm`, `accel_gm`
+    (M, 3) the Gauss–Markov bias estimates [rad/s, m/s²] (zeros without Gauss–Markov states;
+    the total bias estimate is `gyro_bias + gyro_gm`); `P` (M, n, n) error covariance; `nis`
+    (M,) normalised innovation squared (NaN where no fix); `innovation_dim` the number of
+    measured components per fix; `earth` the filter's Earth model; `scale_factors`,
+    `gauss_markov` (static) which sensor states `P` holds."""
 
     t: jax.Array
     nav: NavState
@@ -99,6 +117,8 @@ class FilterResult(eqx.Module):
     accel_bias: jax.Array
     gyro_scale: jax.Array
     accel_scale: jax.Array
+    gyro_gm: jax.Array
+    accel_gm: jax.Array
     P: jax.Array
     nis: jax.Array
     innovation_dim: int = eqx.field(static=True)
@@ -107,6 +127,8 @@ class FilterResult(eqx.Module):
     P_prior: jax.Array
     Phi: jax.Array
     earth: Earth = eqx.field(static=True, default=WGS84)
+    scale_factors: bool = eqx.field(static=True, default=False)
+    gauss_markov: bool = eqx.field(static=True, default=False)
 
     def position_sigma(self):
         """1σ position uncertainty (M, 3) [m, north east down], on the filter's Earth."""
@@ -122,7 +144,7 @@ class FilterResult(eqx.Module):
         return jnp.sqrt(jnp.diagonal(self.P, axis1=-2, axis2=-1)[..., :3]) * d
 
     def nis_check(self, level: float = 0.99, early: int = 5) -> dict:
-        """[`nis_check`][hrgjax.ins.ekf.nis_check] of this pass's `nis` (host; runs pooled)."""
+        """[`nis_check`][hrgjax.ins.consistency.nis_check] of this pass's `nis` (host; runs pooled)."""
         return nis_check(self.nis, self.innovation_dim, level, early)
 
 
@@ -133,7 +155,11 @@ class LooselyCoupled(eqx.Module):
     bias sizes the filter assumes; `gnss` the [`Gnss`][hrgjax.ins.gnss.Gnss] receiver;
     `position_sigma` [m, NED], `velocity_sigma` [m/s], `attitude_sigma` [rad] (3,): initial
     uncertainty, bounding the real initial error, the attitude's ≤ `MAX_ATTITUDE_SIGMA`
-    (module docstring); `scale_factors`: 21 states instead of 15; `earth`."""
+    (module docstring); `scale_factors`: 6 scale-factor states; `gauss_markov`: 6
+    Gauss–Markov bias states for the IMU's bias instability (σ, τ) instead of its fold into
+    the fixed biases' prior and random walk (module docstring; it needs the fixed biases
+    `gyro_bias`, `accel_bias` and the instabilities > 0: each is a state's prior σ);
+    `earth`."""
 
     imu: ImuModel
     gnss: Gnss
@@ -142,6 +168,7 @@ class LooselyCoupled(eqx.Module):
     attitude_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=(1e-3, 1e-3, 5e-3))
     scale_factors: bool = eqx.field(static=True, default=False)
     earth: Earth = eqx.field(static=True, default=WGS84)
+    gauss_markov: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         for name in ("position_sigma", "velocity_sigma", "attitude_sigma"):
@@ -158,11 +185,19 @@ class LooselyCoupled(eqx.Module):
                     "`hrgjax align`)"
                 )
         imu = self.imu
-        sizes = {
-            "gyro_bias (or gyro_bias_instability)": imu.gyro_bias**2 + imu.gyro_bias_instability**2,
-            "accel_bias (or accel_bias_instability)": imu.accel_bias**2
-            + imu.accel_bias_instability**2,
-        }
+        if self.gauss_markov:
+            sizes = {"gyro_bias": imu.gyro_bias**2, "accel_bias": imu.accel_bias**2}
+            sizes.update(
+                gyro_bias_instability=imu.gyro_bias_instability**2,
+                accel_bias_instability=imu.accel_bias_instability**2,
+            )
+        else:
+            sizes = {
+                "gyro_bias (or gyro_bias_instability)": imu.gyro_bias**2
+                + imu.gyro_bias_instability**2,
+                "accel_bias (or accel_bias_instability)": imu.accel_bias**2
+                + imu.accel_bias_instability**2,
+            }
         if self.scale_factors:
             sizes.update(gyro_scale=imu.gyro_scale**2, accel_scale=imu.accel_scale**2)
         for name, v in sizes.items():
@@ -175,8 +210,21 @@ class LooselyCoupled(eqx.Module):
 
     @property
     def n_states(self) -> int:
-        """15, or 21 with scale factors."""
+        """15, + 6 with scale factors, + 6 with Gauss–Markov states."""
+        return 15 + 6 * self.scale_factors + 6 * self.gauss_markov
+
+    @property
+    def _gm_at(self) -> int:
+        """The index of the first Gauss–Markov state."""
         return 21 if self.scale_factors else 15
+
+    def _gm_decay(self, dt: float, m: int):
+        """(m, 2) each IMU step's mean of exp(−t/τ) over a block of m steps of `dt` [s]
+        (gyro τ, then accelerometer τ), and (2,) the decay over the block, exp(−m·dt/τ)."""
+        taus = (self.imu.gyro_correlation_time, self.imu.accel_correlation_time)
+        r = np.array([dt / float(t) for t in taus])
+        mean = np.exp(-np.arange(m)[:, None] * r) * (-np.expm1(-r) / r)
+        return mean, np.exp(-m * r)
 
     def _metres_to_states(self, lat, h):
         r_m, r_n = self.earth.radii(lat)
@@ -184,18 +232,22 @@ class LooselyCoupled(eqx.Module):
 
     def initial_covariance(self, nav: NavState):
         """(n, n) initial covariance at `nav`: the initial sigmas, the sensor biases' sizes
-        (and bias instabilities), the scale factors' sizes."""
+        (and bias instabilities, folded in without Gauss–Markov states), the scale factors'
+        sizes, the bias instabilities (with Gauss–Markov states)."""
         d = self._metres_to_states(nav.lat, nav.h)
         imu = self.imu
+        fold = 0.0 if self.gauss_markov else 1.0
         var = [
             (jnp.broadcast_to(self.position_sigma, (3,)) * d) ** 2,
             jnp.broadcast_to(self.velocity_sigma, (3,)) ** 2,
             jnp.broadcast_to(self.attitude_sigma, (3,)) ** 2,
-            imu.gyro_bias**2 + imu.gyro_bias_instability**2,
-            imu.accel_bias**2 + imu.accel_bias_instability**2,
+            imu.gyro_bias**2 + fold * imu.gyro_bias_instability**2,
+            imu.accel_bias**2 + fold * imu.accel_bias_instability**2,
         ]
         if self.scale_factors:
             var += [imu.gyro_scale**2, imu.accel_scale**2]
+        if self.gauss_markov:
+            var += [imu.gyro_bias_instability**2, imu.accel_bias_instability**2]
         return jnp.diag(jnp.concatenate(var))
 
     def _dynamics(self, nav: NavState, w_b, f_b, T):
@@ -206,17 +258,29 @@ class LooselyCoupled(eqx.Module):
         cols = [f, gg, ga]
         if self.scale_factors:
             cols += [gg * w_b[None], ga * f_b[None]]
+        if self.gauss_markov:
+            cols += [gg, ga]  # a Gauss–Markov bias enters as the fixed one does
         top = jnp.concatenate(cols, -1)
         big = jnp.concatenate([top, jnp.zeros((n - 9, n))], 0)
         imu = self.imu
         g9 = lambda g: jnp.concatenate([g, jnp.zeros((n - 9, 3))], 0)
         q = g9(gg) @ jnp.diag(imu.arw**2) @ g9(gg).T + g9(ga) @ jnp.diag(imu.vrw**2) @ g9(ga).T
-        # each Gauss–Markov (σ, τ) folded into a walk of 2σ²/τ: no decay state (module docstring)
-        walk = lambda k, s, tau: k**2 + 2 * s**2 / tau  # noqa: E731
-        rw_g = walk(imu.gyro_rate_random_walk, imu.gyro_bias_instability, imu.gyro_correlation_time)
-        rw_a = walk(imu.accel_random_walk, imu.accel_bias_instability, imu.accel_correlation_time)
+        tau_g, tau_a = float(imu.gyro_correlation_time), float(imu.accel_correlation_time)
+        # without Gauss–Markov states each (σ, τ) is folded into a walk of 2σ²/τ
+        fold = 0.0 if self.gauss_markov else 1.0
+        walk = lambda k, s, tau: k**2 + fold * 2 * s**2 / tau  # noqa: E731
+        rw_g = walk(imu.gyro_rate_random_walk, imu.gyro_bias_instability, tau_g)
+        rw_a = walk(imu.accel_random_walk, imu.accel_bias_instability, tau_a)
         q = q.at[9:12, 9:12].add(jnp.diag(rw_g)).at[12:15, 12:15].add(jnp.diag(rw_a))
-        return discretise(big, q, T)
+        if not self.gauss_markov:
+            return discretise(big, q, T)
+        i, j = self._gm_at, self._gm_at + 3
+        rate = jnp.concatenate([jnp.full(3, 1.0 / tau_g), jnp.full(3, 1.0 / tau_a)])
+        big = big.at[i : i + 6, i : i + 6].set(-jnp.diag(rate))
+        drive = 2.0 * jnp.concatenate([imu.gyro_bias_instability**2 / tau_g,
+                                       imu.accel_bias_instability**2 / tau_a])  # fmt: skip
+        q = q.at[i : j + 3, i : j + 3].add(jnp.diag(drive))
+        return discretise(big, q, T, fastest=max(1.0 / tau_g, 1.0 / tau_a))
 
     def _measurement(self, nav: NavState, w_eb, fix_pos, fix_vel):
         """Innovation (antenna minus fix, in state units; the longitude difference wrapped to
@@ -261,7 +325,7 @@ def _taylor(powers, s: float):
     return jnp.einsum("k,kij->ij", c, powers)
 
 
-def discretise(F, q, T: float):
+def discretise(F, q, T: float, fastest: float = 0.0):
     r"""$(\Phi, Q_d)$ of $\dot x = Fx + w$, $E[ww^\top] = q\,\delta$, over a GNSS interval
     `T` [s]: $\Phi(s)$ by its Taylor series to eighth order, and
     $Q_d = \int_0^T\Phi(s)\,q\,\Phi(s)^\top ds$ by three-point Gauss–Legendre (exact for the
@@ -273,16 +337,40 @@ def discretise(F, q, T: float):
     (benchmarks/navigation.py). A longer interval is k = ⌈T / 10 s⌉ such steps of h = T/k
     composed ($\Phi = \phi_h^k$, $Q_d$ by $Q \leftarrow \phi_h Q \phi_h^\top + Q_h$; 6e-10 at
     30 s): no matrix exponential, so no LAPACK kernel in a batched flight
-    (hrgjax/_threads.py)."""
+    (hrgjax/_threads.py).
+
+    `fastest` [1/s] (a float, ≥ 0): the largest decay rate in F (1/τ of a Gauss–Markov
+    state). With it, $Q_h$ takes five-point Gauss–Legendre (the Gauss–Markov drive reaches
+    the position through four integrations), and where h·`fastest` > 1/8 each step is the
+    series over $h/2^j$, j the least with $h\cdot$`fastest`$/2^j \le 1/8$, squared j times
+    ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q \phi^\top + Q$): exact for any T/τ
+    (Φ and $Q_d$ within 1e-11 of `van_loan` in units of the states' σ, T/τ from 1e-3 to
+    1e3, T = 1–30 s: tests/test_navigation_gauss_markov.py; the series alone had
+    e^(−T/τ) 0.8 off at T/τ = 3).
+
+    **Raises:** `ValueError` unless `fastest` is a finite float ≥ 0 (a Python number: τ is
+    a static field, `ImuModel` refuses a traced one)."""
+    if not (isinstance(fastest, (int, float)) and math.isfinite(fastest) and fastest >= 0):
+        raise ValueError(f"discretise: fastest must be a decay rate >= 0 [1/s]; got {fastest!r}")
     k = max(1, math.ceil(T / 10.0 - 1e-12))
     h = T / k
-    x, w = np.polynomial.legendre.leggauss(3)
+    squarings = max(0, math.ceil(math.log2(8.0 * h * fastest))) if fastest > 0 else 0
+    h = h / 2**squarings
+    x, w = np.polynomial.legendre.leggauss(5 if fastest > 0 else 3)
     powers = _powers(F)
     qd = 0.0
     for xi, wi in zip(x, w, strict=True):
         p = _taylor(powers, 0.5 * h * (1.0 + xi))
         qd = qd + (0.5 * h * wi) * (p @ q @ p.T)
     phi, qd = _taylor(powers, h), 0.5 * (qd + qd.T)
+    if squarings:
+
+        def square(_, pq):
+            p, qq = pq
+            qq = p @ qq @ p.T + qq
+            return p @ p, 0.5 * (qq + qq.T)
+
+        phi, qd = jax.lax.fori_loop(0, squarings, square, (phi, qd))
     if k == 1:
         return phi, qd
 
@@ -346,14 +434,19 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
     T = m * dt
     p0 = settings.initial_covariance(initial)
     zeros3 = jnp.zeros(3, p0.dtype)
-    sensors0 = (zeros3, zeros3, zeros3, zeros3)
+    sensors0 = (zeros3,) * 6
+    gm_on, i_gm = settings.gauss_markov, settings._gm_at
+    mean, decay = settings._gm_decay(dt, m) if gm_on else (np.zeros((m, 2)), np.ones(2))
 
     def block(carry, inp):
         mech, sens, p = carry
         dth, dv, lat_f, lon_f, h_f, v_f, valid = inp
-        bg, ba, sg, sa = sens
-        dth_c = (dth - (bg * dt)[None]) / (1.0 + sg)[None]
-        dv_c = (dv - (ba * dt)[None]) / (1.0 + sa)[None]
+        bg, ba, sg, sa, gg, ga = sens
+        # the Gauss–Markov estimates decay as the biases' means do: each step's mean of them
+        bg_k = bg[None] + mean[:, :1] * gg[None]
+        ba_k = ba[None] + mean[:, 1:] * ga[None]
+        dth_c = (dth - bg_k * dt) / (1.0 + sg)[None]
+        dv_c = (dv - ba_k * dt) / (1.0 + sa)[None]
         mech, hist = jax.lax.scan(
             lambda c, x: step(settings.earth, dt, c, x), mech, (dth_c, dv_c), unroll=UNROLL
         )
@@ -373,6 +466,8 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
         sens = (bg + x[9:12], ba + x[12:15]) + (
             (sg + x[15:18], sa + x[18:21]) if settings.scale_factors else (sg, sa)
         )
+        gm = x[i_gm : i_gm + 3], x[i_gm + 3 : i_gm + 6]
+        sens += (decay[0] * gg + gm[0], decay[1] * ga + gm[1]) if gm_on else (gg, ga)
         out = (nav, sens, post.P, nis, x, prior.P, phi)
         return ((nav, prev2, mech[2]), sens, post.P), out
 
@@ -396,6 +491,8 @@ def _filter(settings, initial, dth_blocks, dv_blocks, dt, fixes):
         cat(p0, pp),
         cat(jnp.eye(n_s, dtype=p0.dtype), phis),
         settings.earth,
+        settings.scale_factors,
+        gm_on,
     )
 
 
@@ -424,14 +521,18 @@ def _smooth(res):
     s = jnp.concatenate([s, last[0][None]])
     ps = jnp.concatenate([ps, last[1][None]])
     nav = jax.vmap(feedback)(res.nav, s)
-    scale = lambda a, k: a + s[:, k : k + 3] if s.shape[1] > k else a
+    add = lambda a, k, on=True: a + s[:, k : k + 3] if on else a  # noqa: E731
+    sf, gm = res.scale_factors, res.gauss_markov
+    i = 21 if sf else 15
     return FilterResult(
         res.t,
         nav,
-        scale(res.gyro_bias, 9),
-        scale(res.accel_bias, 12),
-        scale(res.gyro_scale, 15),
-        scale(res.accel_scale, 18),
+        add(res.gyro_bias, 9),
+        add(res.accel_bias, 12),
+        add(res.gyro_scale, 15, sf),
+        add(res.accel_scale, 18, sf),
+        add(res.gyro_gm, i, gm),
+        add(res.accel_gm, i + 3, gm),
         ps,
         res.nis,
         res.innovation_dim,
@@ -439,162 +540,6 @@ def _smooth(res):
         res.P_prior,
         res.Phi,
         res.earth,
+        sf,
+        gm,
     )
-
-
-@fused
-def error_states(
-    result: FilterResult,
-    truth_nav: NavState,
-    gyro_bias,
-    accel_bias,
-    earth=WGS84,
-    gyro_scale=None,
-    accel_scale=None,
-):
-    """The true error state of `result` at its epochs, in the filter's state order (module
-    docstring), given the true navigation states there and the true sensor errors
-    (biases (3,) or (M, 3); scale factors for 21 states)."""
-    nav = result.nav
-    _, _, att = navigation_errors(nav, truth_nav, earth)
-    parts = [
-        jnp.stack(
-            [nav.lat - truth_nav.lat, wrap_angle(nav.lon - truth_nav.lon), nav.h - truth_nav.h], -1
-        ),
-        nav.v_ned - truth_nav.v_ned,
-        att,
-        jnp.broadcast_to(gyro_bias, result.gyro_bias.shape) - result.gyro_bias,
-        jnp.broadcast_to(accel_bias, result.accel_bias.shape) - result.accel_bias,
-    ]
-    if result.P.shape[-1] == 21:
-        parts += [
-            jnp.broadcast_to(gyro_scale, result.gyro_scale.shape) - result.gyro_scale,
-            jnp.broadcast_to(accel_scale, result.accel_scale.shape) - result.accel_scale,
-        ]
-    return jnp.concatenate(parts, -1)
-
-
-@fused
-def whitened_errors(errors, P):
-    """The error states in units of their reported covariance, decorrelated: $L^{-1}e$ per
-    epoch (..., M, n), L the Cholesky factor of `P` (..., M, n, n) (symmetric positive
-    definite; its lower triangle is read; NaN or inf where it is not positive definite).
-    `errors` (..., M, n) are the true error states. The sum of their squares is the
-    [`nees`][hrgjax.ins.ekf.nees], and that of the first k the NEES of the first k states
-    alone (L's leading block is their covariance's factor): one factorisation for both."""
-    n = errors.shape[-1] if errors.ndim else 0
-    try:
-        if errors.ndim < 1 or P.shape[-2:] != (n, n):
-            raise ValueError
-        batch = jnp.broadcast_shapes(errors.shape[:-1], P.shape[:-2])
-    except ValueError:
-        raise ValueError(
-            f"errors (..., M, n) and P (..., M, n, n) must match; got errors {errors.shape}, "
-            f"P {P.shape}"
-        ) from None
-    one = lambda p, e: whiten(cholesky(p), e)  # noqa: E731
-    p, e = jnp.broadcast_to(P, batch + (n, n)), jnp.broadcast_to(errors, batch + (n,))
-    return jnp.vectorize(one, signature="(n,n),(n)->(n)")(p, e)
-
-
-@fused
-def nees(errors, P):
-    """Normalised estimation error squared $e^\\top P^{-1}e$ per epoch (..., M), from the
-    true error states `errors` (..., M, n) and the reported covariance `P` (..., M, n, n):
-    symmetric positive definite (its lower triangle is read, by Cholesky; NaN or inf where it
-    is not positive definite).
-    For a consistent filter its mean over R Monte Carlo runs lies inside
-    [`nees_band`][hrgjax.ins.ekf.nees_band] 95 % of the time."""
-    return jnp.sum(whitened_errors(errors, P) ** 2, -1)
-
-
-def nees_band(n_states: int, n_runs: int, level: float = 0.95):
-    """The two-sided `level` interval of the mean NEES over `n_runs` runs of a consistent
-    filter with `n_states` states: $\\chi^2_{Rn}$ quantiles divided by R (Bar-Shalom
-    §5.4).
-
-    **Raises:** `ValueError` naming the argument unless `n_states`, `n_runs` are whole
-    numbers >= 1 and 0 < `level` < 1."""
-    for name, x in (("n_states", n_states), ("n_runs", n_runs)):
-        if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < 1:
-            raise ValueError(f"nees_band: {name} must be a whole number >= 1; got {x!r}")
-    if isinstance(level, bool) or not isinstance(level, (int, float, np.number)):
-        raise TypeError(f"nees_band: level must be a number in (0, 1); got {level!r}")
-    if not 0.0 < level < 1.0:
-        raise ValueError(
-            f"nees_band: level must be a probability in (0, 1), e.g. 0.95; got {level}"
-        )
-    from ..allan.uncertainty import chi2_ppf
-
-    a = 0.5 * (1.0 - level)
-    dof = n_states * n_runs
-    return chi2_ppf(a, dof) / n_runs, chi2_ppf(1.0 - a, dof) / n_runs
-
-
-_DOES_NOT_FIT = (
-    "the filter's model does not fit the data: its σ are not to be trusted (a better IMU grade "
-    "than the sensor, or a P0 that does not bound the initial error)"
-)
-_TOO_LOW = (
-    "the filter's model does not fit the data: its σ are not to be trusted (larger than the "
-    "errors: an IMU model or GNSS σ worse than the real ones, or a Gauss–Markov bias "
-    "instability with τ of a few fix intervals or less: the filter has no "
-    "Gauss–Markov state, folds it into a random walk of density 2σ²/τ and is conservative, "
-    "the more so the shorter τ — docs/navigation.md)"
-)
-
-
-def nis_check(nis, innovation_dim: int, level=0.99, early: int = 5, tolerance=0.03) -> dict:
-    """The truth-free consistency test of a filter's innovations, on the host: `nis` (..., M)
-    (NaN where no fix; leading axes are runs, pooled) of `innovation_dim` components per fix.
-
-    For a consistent filter the N valid fixes' NIS are independent $\\chi^2_d$, so their mean
-    lies inside $[\\chi^2_{dN}(\\alpha/2), \\chi^2_{dN}(1-\\alpha/2)]/N$ (`band`, two-sided
-    at `level`) but with probability 1 − `level`; the mean NIS of the first `early` valid
-    fixes of each run (k in all) lies below $\\chi^2_{dk}(0.999)/k$ (`early_bound`) but with
-    probability 0.001. A better IMU grade than the sensor's shows in the whole-run mean, a P0
-    that does not bound the initial error mostly in the early fixes. An EKF's linearisation
-    moves the mean by ~1 % (Monte Carlo, matched model), which the band of many pooled runs
-    resolves: a mean off d by less than `tolerance` (relative) is not counted against it.
-
-    **Returns** a JSON-ready dict: `nis_mean`, `fixes` (N), `level`, `band`, `verdict`
-    ("consistent", "does not fit", or "undefined" without a fix), `early`, `early_fixes` (k),
-    `early_nis_mean`, `early_level` (0.999), `early_bound`, `early_verdict`, `runs_outside`
-    (the fraction of runs whose own mean NIS is outside its band: expected 1 − `level`), and
-    `message` (the lines to print: "" when both verdicts are "consistent"), `tolerance`."""
-    from ..allan.uncertainty import chi2_ppf
-
-    if not (0 < level < 1 and isinstance(early, int) and early >= 1 and tolerance >= 0):
-        raise ValueError("nis_check: needs 0 < level < 1, early >= 1, tolerance >= 0")
-    v = np.asarray(nis, float)
-    if v.size == 0 or np.isinf(v).any():  # an infinite NIS: a filter that broke
-        raise ValueError("nis_check: nis must be finite values (NaN where no fix), not empty")
-    v = v.reshape(-1, v.shape[-1]) if v.ndim else v.reshape(1, 1)
-    ok, d, a = np.isfinite(v), int(innovation_dim), 0.5 * (1.0 - level)
-    band = lambda k: [chi2_ppf(a, d * k) / k, chi2_ppf(1.0 - a, d * k) / k]  # noqa: E731
-    n = int(ok.sum())
-    out = dict(nis_mean=None, fixes=n, level=level, band=None, verdict="undefined", early=early)
-    out.update(early_fixes=0, early_nis_mean=None, early_level=0.999, early_bound=None)
-    out.update(early_verdict="undefined", runs_outside=None, message="", tolerance=tolerance)
-    if n == 0:
-        return out
-    mean, (lo, hi) = float(v[ok].mean()), band(n)
-    first = np.concatenate([row[m][:early] for row, m in zip(v, ok, strict=True)])
-    k, early_mean = first.size, float(first.mean())
-    bound = chi2_ppf(0.999, d * k) / k
-    rows = [(r[m].mean(), band(m.sum())) for r, m in zip(v, ok, strict=True) if m.any()]
-    fits = lo <= mean <= hi or abs(mean / d - 1.0) <= tolerance
-    early_fits = early_mean <= max(bound, (1.0 + tolerance) * d)
-    lines = [
-        f"NIS mean {mean:.3f} over {n} fixes is outside its {100 * level:g} % band "
-        f"{lo:.3f}–{hi:.3f}: " + (_DOES_NOT_FIT if mean > hi else _TOO_LOW)
-    ] * (not fits) + [
-        f"NIS mean {early_mean:.2f} of each run's first {early} fixes ({k} in all) is beyond "
-        f"its χ² 99.9 % point {bound:.2f}: " + _DOES_NOT_FIT
-    ] * (not early_fits)
-    verdict = lambda ok: "consistent" if ok else "does not fit"  # noqa: E731
-    out.update(nis_mean=mean, band=[lo, hi], verdict=verdict(fits), early_fixes=k)
-    out.update(early_nis_mean=early_mean, early_bound=bound, early_verdict=verdict(early_fits))
-    outside = [not b[0] <= m <= b[1] for m, b in rows]
-    out.update(runs_outside=float(np.mean(outside)), message="\n".join(lines))
-    return out

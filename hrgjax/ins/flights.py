@@ -10,7 +10,9 @@ channel diverges with a 570-s time constant and would swamp everything else).
 
 The NEES compares each epoch's estimate with the truth there: for the sensor states, the
 run's total bias of the interval ending at that epoch (fixed, Gauss–Markov, random walk,
-extra rate error: all but the white noise) and its drawn scale factors.
+extra rate error: all but the white noise) and its drawn scale factors; with Gauss–Markov
+states (`LooselyCoupled(gauss_markov=True)`) the bias's Gauss–Markov part is theirs and the
+rest the fixed-bias states'.
 """
 
 from __future__ import annotations
@@ -23,16 +25,8 @@ import numpy as np
 from .. import _upstream, kalman
 from .._progress import bar
 from .._x64 import require_x64
-from .ekf import (
-    LooselyCoupled,
-    error_states,
-    feedback,
-    loosely_coupled,
-    nees_band,
-    nis_check,
-    smooth,
-    whitened_errors,
-)
+from .consistency import error_states, nees_band, nis_check, whitened_errors
+from .ekf import LooselyCoupled, feedback, loosely_coupled, smooth
 from .gnss import measure
 from .mechanization import mechanize, navigation_errors
 from .motion import Truth
@@ -72,7 +66,7 @@ class Flights(eqx.Module):
         "conservative", "overconfident", "undefined": `verdict`); the mean NIS (its
         expectation is the innovation dimension; None when every fix fell in an outage) and
         `nis_check`, its truth-free verdict over all runs' fixes
-        ([`nis_check`][hrgjax.ins.ekf.nis_check]: the 99 % χ² band of the mean, the first
+        ([`nis_check`][hrgjax.ins.consistency.nis_check]: the 99 % χ² band of the mean, the first
         five fixes of each run against their 99.9 % point, and what to print when the filter's
         model does not fit the data)."""
         gap = ~np.asarray(self.gnss_valid)
@@ -115,7 +109,7 @@ def verdict(mean_nees, lo, hi) -> str:
     (`lo`, `hi`) of that mean: "consistent" when the mean NEES is inside its 95 % band on ≥ 90 % of epochs; else
     "conservative" (σ larger than the errors: the mean below the band more often than above)
     or "overconfident"; "undefined" where the NEES is not finite at some epoch (a covariance
-    that is not positive definite there: [`nees`][hrgjax.ins.ekf.nees])."""
+    that is not positive definite there: [`nees`][hrgjax.ins.consistency.nees])."""
     if not np.all(np.isfinite(mean_nees)):
         return "undefined"
     if np.mean((mean_nees > lo) & (mean_nees < hi)) >= 0.9:
@@ -135,8 +129,9 @@ def _one_run(
 ):
     k_unit, k_imu, k_gnss, k_init = jax.random.split(key, 4)
     sensor = random_unit(imu, k_unit)
-    dth, dv, bias_g, bias_a = sensor.apply(
-        k_imu, truth.dtheta, truth.dv, truth.dt, gyro_rate_error, return_bias=True
+    split = "gauss_markov" if settings.gauss_markov else True
+    dth, dv, bias_g, bias_a, *gm = sensor.apply(
+        k_imu, truth.dtheta, truth.dv, truth.dt, gyro_rate_error, return_bias=split
     )
     fixes = measure(truth, settings.gnss, k_gnss)
     fixes = eqx.tree_at(lambda f: f.valid, fixes, fixes.valid & gnss_mask)
@@ -156,7 +151,8 @@ def _one_run(
         p, v, a = navigation_errors(r.nav if with_cov else r, tn, truth.earth)
         d = {"position": p, "velocity": v, "attitude": a}
         if with_cov:
-            e = error_states(r, tn, bias_g[at], bias_a[at], truth.earth, *scales)
+            gms = [b[at] for b in gm]  # the Gauss–Markov parts, with Gauss–Markov states
+            e = error_states(r, tn, bias_g[at], bias_a[at], truth.earth, *scales, *gms)
             d["sigma"] = _sigmas(r)
             w2 = whitened_errors(e, r.P) ** 2  # one factorisation for both NEES
             d["nees"] = jnp.sum(w2, -1)

@@ -198,17 +198,27 @@ class ImuModel(eqx.Module):
         increments over intervals of `dt` [s]; `gyro_rate_error`: optional extra gyro error
         [rad/s], (N, 3) as each interval's mean rate; `return_bias`: also return each
         interval's total bias — fixed, Gauss–Markov, random walk and the extra rate error, all
-        but the white noise — which is what a filter's bias states estimate.
+        but the white noise — which is what a filter's bias states estimate;
+        `return_bias="gauss_markov"`: also the Gauss–Markov parts of those biases (what
+        `LooselyCoupled(gauss_markov=True)`'s Gauss–Markov states estimate).
 
         **Returns:** `(dtheta, dv)` measured, each (N, 3); with `return_bias`,
-        `(dtheta, dv, gyro_bias (N, 3) [rad/s], accel_bias (N, 3) [m/s²])`.
+        `(dtheta, dv, gyro_bias (N, 3) [rad/s], accel_bias (N, 3) [m/s²])`; with
+        `return_bias="gauss_markov"` these and `gyro_gm (N, 3) [rad/s], accel_gm (N, 3)
+        [m/s²]`, each interval's mean Gauss–Markov bias.
 
         **Raises:** `ValueError` for a `dt` that is not a finite interval > 0 s, increments
-        not both (N, 3), or a `gyro_rate_error` that is not (N, 3) [rad/s]. Fields traced
+        not both (N, 3), a `return_bias` other than those three, or a `gyro_rate_error`
+        that is not (N, 3) [rad/s]. Fields traced
         inside `jit`, `vmap` or `hg.sweep` are checked here, at run time
         ([`traced_checks`][hrgjax.ins.sensors.traced_checks]): the first rule broken raises
         its one line (`hg.sweep`: "sweep: at one or more grid points, ImuModel.gyro_bias
         [rad/s] is outside the plausible range -0.75 … 0.75 rad/s …")."""
+        if not any(return_bias is v for v in (False, True)) and return_bias != "gauss_markov":
+            raise ValueError(
+                f'ImuModel.apply: return_bias must be False, True or "gauss_markov"; got '
+                f"{return_bias!r}"
+            )
         shape = jnp.shape(dtheta)
         if len(shape) != 2 or shape[-1] != 3 or jnp.shape(dv) != shape:
             raise ValueError(
@@ -239,8 +249,8 @@ class ImuModel(eqx.Module):
         kg, ka = jax.random.split(key)
         g = (imu.gyro_bias_instability, imu.gyro_correlation_time, imu.gyro_rate_random_walk)
         a = (imu.accel_bias_instability, imu.accel_correlation_time, imu.accel_random_walk)
-        bg, wg = imu._bias_path(kg, n, dt, *g, imu.arw)
-        ba, wa = imu._bias_path(ka, n, dt, *a, imu.vrw)
+        bg, wg, gm_g = imu._bias_path(kg, n, dt, *g, imu.arw)
+        ba, wa, gm_a = imu._bias_path(ka, n, dt, *a, imu.vrw)
         bg = bg + imu.gyro_bias[None]
         if gyro_rate_error is not None:
             bg = bg + jnp.asarray(gyro_rate_error, float)
@@ -249,12 +259,15 @@ class ImuModel(eqx.Module):
         ma = imu._matrix(imu.accel_scale, imu.accel_misalignment)
         th = dtheta @ mg.T + bg * dt + wg
         dv = dv @ ma.T + ba * dt + wa
+        if return_bias == "gauss_markov":
+            return th, dv, bg, ba, gm_g, gm_a
         return (th, dv, bg, ba) if return_bias else (th, dv)
 
     @staticmethod
     def _bias_path(key, n, dt, sigma, tau, rrw, white):
         """(N, 3) exact interval means of the Gauss–Markov and random-walk biases (module
-        docstring) [per s], and (N, 3) white-noise increments."""
+        docstring) [per s], (N, 3) white-noise increments, and (N, 3) the Gauss–Markov
+        part of the means."""
         k0, k1, k2, k3, k4 = jax.random.split(key, 5)
         a, b, l11, l21, l22 = _gm_interval(dt / tau)
         gm0 = sigma * jax.random.normal(k0, (3,))
@@ -269,10 +282,10 @@ class ImuModel(eqx.Module):
             gm, rw = c
             e1, e2, w_rw, bridge = w
             gm1, rw1 = a * gm + e1, rw + w_rw
-            return (gm1, rw1), b * gm + e2 + 0.5 * (rw + rw1) + bridge
+            return (gm1, rw1), (b * gm + e2 + 0.5 * (rw + rw1) + bridge, b * gm + e2)
 
-        _, mean = jax.lax.scan(step, (gm0, jnp.zeros(3)), (e1, e2, w_rw, bridge))
-        return mean, jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None]
+        _, (mean, gm) = jax.lax.scan(step, (gm0, jnp.zeros(3)), (e1, e2, w_rw, bridge))
+        return mean, jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None], gm
 
 
 def _gm_interval(r: float):
