@@ -71,13 +71,14 @@ def cmd_navigate(args) -> int:
             lever_arm=_lever_arm(args.lever_arm),
             use_velocity=not args.no_gnss_velocity,
         )
-        settings = ekf.LooselyCoupled(imu, receiver, scale_factors=args.states == 21)
+        settings = ekf.LooselyCoupled(imu, receiver, scale_factors=args.states == 21,
+                                      gauss_markov=args.gauss_markov)  # fmt: skip
         result = flights.fly(truth, imu, settings, key=jax.random.key(args.seed), runs=args.runs)
     out = result.summary()
     out.update(motion=args.motion, imu=args.imu, rate_hz=args.rate_hz, gnss_hz=args.gnss_hz,
                outages=[list(o) for o in outages])  # fmt: skip
     print(f"hrgjax navigate: {args.motion} ({mot.duration:g} s at {args.rate_hz:g} Hz), "
-          f"{args.imu} IMU, GNSS {args.gnss_hz:g} Hz, {args.runs} run(s), {args.states} states")  # fmt: skip
+          f"{args.imu} IMU, GNSS {args.gnss_hz:g} Hz, {args.runs} run(s), {settings.n_states} states")  # fmt: skip
     print(
         f"{'horizontal position error [m]':>32} {'RMS':>9} {'max':>9} {'in gaps':>9} {'final':>9}"
     )
@@ -138,6 +139,9 @@ def _navigate_parser(sub):
     p.add_argument("--no-gnss-velocity", action="store_true", help="position fixes only")
     p.add_argument("--states", type=int, default=15, choices=(15, 21),
                    help="filter states: 15, or 21 with gyro and accelerometer scale factors")  # fmt: skip
+    p.add_argument("--gauss-markov", action="store_true",
+                   help="6 more states: the bias instabilities as Gauss–Markov biases (decaying "
+                        "at 1/τ) instead of a walk of density 2σ²/τ (honest σ where τ is short)")  # fmt: skip
     p.add_argument("--runs", type=POSITIVE_INT, default=1, help="Monte Carlo runs")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.add_argument("--json", default=None, help="write the summary here (JSON)")
