@@ -247,6 +247,15 @@ def test_fourier_base_recovers_pure_harmonic_at_fit_temperature(exact_windows):
     np.testing.assert_allclose(comp.scale_factor_at(th, 20.0), true_sf(th * DEG, 20.0), atol=1e-9)
     # No temperature dependence: at −40 °C it still predicts the +20 °C curve.
     np.testing.assert_allclose(comp.drift_dph(th, -40.0), comp.drift_dph(th, 20.0))
+    # a NaN/inf angle or temperature, or non-numbers: one line naming the argument (the
+    # compiled program would otherwise stop on its non-finite output, naming no input)
+    with pytest.raises(ValueError, match=r"FourierCompensator.drift_dph: theta_deg must be "
+                       r"finite; it has nan at index \(1,\)"):  # fmt: skip
+        comp.drift_dph([0.0, np.nan], 20.0)
+    with pytest.raises(ValueError, match="scale_factor_at: temperature_c must be finite"):
+        comp.scale_factor_at(th, np.full(th.shape, np.inf))
+    with pytest.raises(TypeError, match="theta_deg must be real numbers"):
+        comp.drift_dph(["a"], 20.0)
 
 
 def test_fourier_leaves_only_noise_on_periodic_drift():

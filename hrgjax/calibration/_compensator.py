@@ -41,6 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_finite_host, check_numbers
 from .._compiled import bucket_pad, bucket_size, device, program
 from .._warn import user_stacklevel
 from .._x64 import require_x64
@@ -258,9 +259,23 @@ class AbstractCompensator(eqx.Module):
 
     def _pointwise(self, which: str, theta_deg, temperature_c) -> np.ndarray:
         """`which` ("drift" or "scale_factor") at every (θ [°], T [°C]) pair, as NumPy: one
-        compiled program per compensator type and padded size (powers of two)."""
+        compiled program per compensator type and padded size (powers of two). A NaN or inf
+        θ or T, or non-numbers, are refused in one line naming the argument."""
+        method = f"{type(self).__name__}.{'drift_dph' if which == 'drift' else 'scale_factor_at'}"
+        for name, x, unit in (
+            ("theta_deg", theta_deg, "°"),
+            ("temperature_c", temperature_c, "°C"),
+        ):
+            check_numbers(f"{method}: {name}", x, f"real numbers [{unit}]")
+            check_finite_host(f"{method}: {name}", np.asarray(x, dtype=float))
         th = np.asarray(theta_deg, dtype=float) * DEG
-        tc = np.broadcast_to(np.asarray(temperature_c, dtype=float), th.shape)
+        try:
+            tc = np.broadcast_to(np.asarray(temperature_c, dtype=float), th.shape)
+        except ValueError:
+            raise ValueError(
+                f"{method}: temperature_c of shape {np.shape(temperature_c)} does not broadcast "
+                f"to theta_deg's {th.shape}"
+            ) from None
         n = th.size
         size = bucket_size(n)
         pad = lambda x: device(bucket_pad(x.ravel(), size))
