@@ -11,18 +11,22 @@ the true Allan variance σ²(τ) at every octave τ up to T:
 - `ffm`: flicker rate noise (bias instability), the rate such a sum: σ² from the rate's
   autocovariance, Σ (c·y)² over the Allan weights;
 - `rwfm`: rate random walk, K = 0.01: σ² = E[(c·y)²] from the walk's increments;
+- `wfm`: white rate noise (angle random walk), σ_y = 1: σ² = 1/τ (the commonest gyro noise);
+- `wrwM` (e.g. `wrw128`): white rate noise (σ_y = 1) plus a rate random walk whose Allan
+  variance crosses it at m = M (K = √3/M): σ² = 1/τ + the walk's (a gyro's angle random walk
+  and rate random walk);
 - `mixM` (e.g. `mix16`): white rate noise (σ_y = 1) plus white angle noise whose Allan
   variance crosses it at m = M (σ_x = √(M/3)): σ² = 1/τ + M/τ² (a quantised gyro's angle
   noise and its angle random walk).
 
 Per τ: E[σ̂²]/σ² (mean over records), the share of records whose ±1σ interval holds σ, the
-z-RMS of z = Φ⁻¹(χ²_edf(edf·σ̂²/σ²)) (1 when the EDF is right), and the noise types read;
+median width dev_high/dev_low, the z-RMS of z = Φ⁻¹(χ²_edf(edf·σ̂²/σ²)) (1 when the EDF is right), and the noise types read;
 for every noise but `wpm`, also the records read as white angle noise (α = 2, whose exact
 EDF is the largest): their count, ±1σ share and z-RMS.
 Run against an older hrgjax (PYTHONPATH=...) for its figures.
 
 Usage: `.venv/bin/python benchmarks/coverage_totdev.py [--n 400] [--samples 512]
-[--noises wpm,fpm,ffm,rwfm] [--seed 1] [--kind totdev|oadev]` (400 records of 512 samples per noise on 2
+[--noises wpm,fpm,ffm,rwfm,wfm,wrw128] [--seed 1] [--kind totdev|oadev]` (400 records of 512 samples per noise on 2
 shared cores, ≈ 8 s; `--exact` prints `totvar_bias` and the EDF of white angle noise, and
 flicker angle noise's exact bias when its band stops below Nyquist, no Monte Carlo).
 """
@@ -74,6 +78,12 @@ def draw(rng, noise, n):
         return rng.normal(size=n) + np.diff(
             math.sqrt(float(noise[3:]) / 3) * rng.normal(size=n + 1)
         )
+    if noise == "wfm":
+        return rng.normal(size=n)
+    if noise.startswith("wrw"):
+        return rng.normal(size=n) + math.sqrt(3.0) / float(noise[3:]) * np.cumsum(
+            rng.normal(size=n)
+        )
     return K * np.cumsum(rng.normal(size=n))  # rwfm
 
 
@@ -85,10 +95,13 @@ def truth(noise, m):
         return float(6 * r[0] - 8 * r[1] + 2 * r[2]) / (2.0 * m * m)
     if noise.startswith("mix"):
         return 1.0 / m + float(noise[3:]) / m**2
+    if noise == "wfm":
+        return 1.0 / m
     c = np.r_[-np.ones(m), np.ones(m)]
-    if noise == "rwfm":
+    if noise == "rwfm" or noise.startswith("wrw"):
         s = np.cumsum(c[::-1])[::-1]
-        return K**2 * float(np.sum(s**2)) / (2.0 * m * m)
+        k = K if noise == "rwfm" else math.sqrt(3.0) / float(noise[3:])
+        return k**2 * float(np.sum(s**2)) / (2.0 * m * m) + (noise != "rwfm") / m
     a = np.correlate(c, c, "full")
     lag = np.arange(-(c.size - 1), c.size)
     return float(np.sum(_cov(lag) * a)) / (2.0 * m * m)
@@ -159,20 +172,21 @@ def main():
     for noise in a.noises.split(","):
         rng = np.random.default_rng(a.seed)
         t0 = time.time()
-        ratio, hit, zs, alphas, edfs = [], [], [], [], []
+        ratio, hit, zs, alphas, edfs, wide = [], [], [], [], [], []
         for _ in range(a.n):
             r = hg.allan.deviation(draw(rng, noise, a.samples), 1.0, a.kind, "octave")
             s2 = np.asarray([truth(noise, int(k)) for k in r.m])
             ratio.append(r.dev**2 / s2)
             hit.append((r.dev_low**2 <= s2) & (s2 <= r.dev_high**2))
+            wide.append(r.dev_high / r.dev_low)
             p = [1 - chi2_sf(e * d * d / t, e) for e, d, t in zip(r.edf, r.dev, s2, strict=True)]
             zs.append([NormalDist().inv_cdf(min(max(q, 1e-12), 1 - 1e-12)) for q in p])
             alphas.append(r.alpha)
             edfs.append(r.edf)
-        ratio, hit, zs, alphas, edfs = map(np.asarray, (ratio, hit, zs, alphas, edfs))
+        ratio, hit, zs, alphas, edfs, wide = map(np.asarray, (ratio, hit, zs, alphas, edfs, wide))
         print(f"== {noise}, {a.n} records of {a.samples} s ({time.time() - t0:.0f} s)")
         print(
-            "      m   τ/T  E[σ̂²]/σ²  ±1σ holds  z-RMS  median EDF  α read (count)"
+            "      m   τ/T  E[σ̂²]/σ²  ±1σ holds  hi/lo  z-RMS  median EDF  α read (count)"
             + ("" if noise == "wpm" else "  | read α = 2: records, ±1σ, z-RMS")
         )
         for j, m in enumerate(r.m):
@@ -180,7 +194,8 @@ def main():
             read = dict(zip(kinds.astype(int).tolist(), counts.tolist(), strict=True))
             print(
                 f"  {int(m):5d} {m / a.samples:5.3f}  {ratio[:, j].mean():6.3f}   "
-                f"{hit[:, j].mean() * 100:6.1f} %  {np.sqrt(np.mean(zs[:, j] ** 2)):5.2f}  "
+                f"{hit[:, j].mean() * 100:6.1f} %  {np.median(wide[:, j]):5.2f}  "
+                f"{np.sqrt(np.mean(zs[:, j] ** 2)):5.2f}  "
                 f"{np.median(edfs[:, j]):9.1f}   {read}"
                 + _white(noise, alphas[:, j], hit[:, j], zs[:, j])
             )

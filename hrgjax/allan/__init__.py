@@ -51,7 +51,9 @@ from .totvar import TOTVAR_BIAS as TOTVAR_BIAS
 from .totvar import edf_totdev as edf_totdev
 from .totvar import totvar_bias as totvar_bias
 from .totvar import totvar_white_phase as totvar_white_phase
+from .uncertainty import DISCRETE_EDF_M as DISCRETE_EDF_M
 from .uncertainty import ONE_SIGMA as ONE_SIGMA
 from .uncertainty import chi2_ppf as chi2_ppf
 from .uncertainty import confidence_interval as confidence_interval
+from .uncertainty import edf_discrete as edf_discrete
 from .uncertainty import edf_greenhall as edf_greenhall

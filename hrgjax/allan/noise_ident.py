@@ -92,20 +92,23 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
       (`benchmarks/coverage_allan.py`), and on each pure power-law noise from m = 1 to T
       (`benchmarks/coverage_totdev.py`) but the rate noises at τ ≥ T/8 (B1 on ≤ 8
       averages: flicker 46–62 % right, a random walk 56–60 %: `deviation`'s totdev interval
-      there spans the three rate noises') and flicker angle noise at m ≥ 256 (read as white rate
+      there spans the rate noises within one step of the type read) and flicker angle noise at m ≥ 256 (read as white rate
       noise in 22–34 % of records: ±1σ 79–88 %, conservative).
-    - `"stable32"`: as Stable32 1.60's octave tables of a real OCXO record, which it
-      reproduces at all 90 τ of seven kinds (`benchmarks/stable32_ocxo.py`; the rule was read
-      off those tables, not from Stable32's code): B1 on the rate with its least-squares line
-      (a frequency drift) removed, down to N = 2 averages, where B1 is 1 whatever the noise
-      and white rate noise (α = 0) is taken; the non-overlapping kinds (`overlapping=False`:
-      adev, hdev) carry the last autocorrelation α on instead. For comparing with Stable32:
-      on drift-free white + random-walk records (`coverage_allan.py --noise-rule stable32`)
-      removing the line biases B1 away from the random walk, and at 4 averages its α
-      scatters over four types: the ±1σ intervals cover the truth in 49–53 % of records
-      there (±2σ: 74–78 %) and in 64–65 % at 2 averages (by default: 66–69 % and 70–71 %).
-      On PHASE.DAT's mtotdev/ttotdev tables it does not reproduce every α either
-      (`benchmarks/stable32_phasedat.py`).
+    - `"stable32"`: as Stable32 1.60's octave tables of two records, which it reproduces at
+      every τ: a real OCXO's (90/90 over seven kinds, `benchmarks/stable32_ocxo.py`) and
+      PHASE.DAT's (57/57 over seven kinds and 13/13 for mtotdev, octave and decade:
+      `benchmarks/stable32_phasedat.py`; the rule was read off those tables, not from
+      Stable32's code): B1 on the rate with its least-squares line (a frequency drift)
+      removed, from [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages on, and with fewer the
+      α of the factor before carried on, as by default (PHASE.DAT at m = 128, 7 averages:
+      Stable32 carries m = 64's α = 0 on in its octave tables while B1 reads flicker angle
+      noise there — and at m = 125–142 of its all-τ table, where the α before is 1, it
+      reads 1); the non-overlapping kinds (`overlapping=False`: adev, hdev) carry the last
+      autocorrelation α on instead. Stable32's all-τ tables it does not reproduce
+      everywhere: their α scatters between neighbouring τ read by B1 (OCXO 1 338 of 1 924
+      rows, PHASE.DAT 849 of 991, its mtotdev 104 of 158). On drift-free white +
+      random-walk records (`coverage_allan.py --noise-rule stable32`) removing the line
+      biases B1 away from the random walk.
 
     `dmax` = 3 (Hadamard) lets both methods name flicker walk (α = −3).
 
@@ -113,8 +116,8 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
     periodic component (no power law: r₁ → −1) is held to the nearest end of that range.
 
     **Raises:** `ValueError` for an unknown `rule`, or when no factor of the record can be
-    read: fewer than `B1_AVERAGES` + 1 points (default rule), fewer than 3 (`"stable32"`), or
-    fewer than `ACF_POINTS` (`"stable32"`, `overlapping=False`)."""
+    read: fewer than `B1_AVERAGES` + 1 points (fewer than `ACF_POINTS` under `"stable32"`
+    with `overlapping=False`)."""
     return np.fromiter(noise_id_each(x, m, dmax, rule=rule, overlapping=overlapping), dtype=int)
 
 
@@ -134,10 +137,10 @@ def noise_id_each(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: boo
         curvature = _curvature(x)  # R(n) on the phase less its quadratic, as the ACF
         read = lambda k: _identify(x, k, dmax, refine=curvature)  # noqa: E731
         needs = f"{B1_AVERAGES} averages"
-    elif overlapping:  # B1 on the drift-free record down to 2 averages, no R(n) guard
+    elif overlapping:  # B1 on the drift-free record from 8 averages on, no R(n) guard
         drift_free = _less_drift(x)
-        read = lambda k: _identify(x, k, dmax, b1_x=drift_free, b1_min=2, guard=False)  # noqa: E731
-        needs = "2 averages"
+        read = lambda k: _identify(x, k, dmax, b1_x=drift_free, guard=False)  # noqa: E731
+        needs = f"{B1_AVERAGES} averages"
     else:  # Stable32's adev and hdev: the autocorrelation, its last α carried beyond
         read, needs = (lambda k: _identify(x, k, dmax, b1_min=None)), f"{ACF_POINTS} points"
     factors = np.asarray(m)
@@ -375,9 +378,6 @@ def _curvature(x):
 def _b1_alpha(x, m, dmax, white_rate_guard: bool = True):
     """B1 (and R(n)) at factor m of the phase x (the Stable32 rule); the guard: R(n) nearer
     white rate noise's than flicker phase noise's takes white rate noise."""
-    n = (x.size - 1) // m
-    if n == 2:  # B1(2, μ) = 1 for every μ: white rate noise's value (Stable32's choice; a
-        return 0  # noise-free record gets no error here: only Stable32's rule reads N = 2)
     mu = _b1_mu(x, m, dmax)
     if mu > -2:
         return -mu - 1

@@ -27,7 +27,7 @@ from .noise_ident import (
     noise_id,
     noise_id_each,
 )
-from .totvar import edf_totdev, totvar_bias
+from .totvar import TOTVAR_BIAS, edf_totdev, totvar_bias
 from .uncertainty import ONE_SIGMA, confidence_interval, edf_greenhall
 
 KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "mtotdev", "ttotdev")
@@ -48,8 +48,11 @@ class AllanResult:
       [`edf_mtotdev`][hrgjax.allan.total.edf_mtotdev] (fitted to the exact EDF; Table 8
       under `noise_rule="stable32"`); with gaps: the gap-free segments'
       pooled EDF). totdev where a rate noise is read by B1 on ≤ 8 averages (τ ≥ T/8, default
-      rule): the smallest of the three rate noises' EDFs, and `dev_low`, `dev_high` span
-      their intervals, each with its own bias correction (B1 cannot tell them apart there).
+      rule, `bias_correction=True`): the smallest EDF of the rate noises within one step of
+      the α read (`SPAN_REACH`), and `dev_low`, `dev_high` span their intervals, each with
+      its own bias correction (B1 cannot tell neighbouring types apart there). There
+      `confidence_interval(dev, edf, ci)` does not give back (`dev_low`, `dev_high`): for
+      another confidence level pass `ci` to `deviation`, which forms the span at that level.
     - `n_terms`: the number of differences each estimate averages.
     - `alpha`: the power-law noise identified at each τ, the exponent α of the rate PSD
       S_y(f) ∝ f^α: 2 white angle (phase) noise, 1 flicker angle, 0 white rate (angle random
@@ -456,18 +459,53 @@ def _gapped_edf(kind: str, alpha: int, m: int, n_terms: int, segments, fallback)
     return max(held * n_terms / spread, 1.0)
 
 
+SPAN_REACH = 1
+"""How far from the α read (in steps of α) totdev's interval reaches where B1 reads a rate noise
+on ≤ [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages (τ ≥ T/8, default rule, bias
+correction on): the interval spans the intervals of the rate noises α = 0, −1, −2 within one
+step of it (read 0: white and flicker; −1: all three; −2: flicker and random walk). B1 on 8
+averages reads white rate noise as 0/−1/−2 in 68/27/3 % of records, flicker 35/46/19 %, a
+random walk 10/31/59 % (2 048 samples): a type two steps from the one read is rare, and
+spanning it too made white rate noise's interval 1.4× wider at τ = T than one step does
+(±1σ 77–82 % at τ/T = 1/8 … 1; one step 74–81 %, every rate noise and white + walk mixture
+≥ 68 %: `benchmarks/coverage_totdev.py`, docs/allan.md)."""
+
+_SPAN_TYPES = np.array([0, -1, -2])
+_TABLE7 = np.array([[1.50, 0.0], [1.17, 0.22], [0.93, 0.36]])  # SP 1065 Table 7: b, c
+_TOTVAR_A = np.array([0.0, TOTVAR_BIAS[-1], TOTVAR_BIAS[-2]])
+_CAP_FROM = 64  # edf_totdev's Greenhall cap: binds at m ≤ 20 (n ≤ 180), not above (checked)
+
+
 def _rate_noise_span(raw, alpha, m, n, edf, low, high, ci):
     """totdev's (EDF, low, high) where its α, a rate noise (≤ 0), is read by B1 on at most
-    `B1_AVERAGES` averages (τ ≥ T/8: its scatter spans all three rate noises there): the
-    interval spanning those of white, flicker and random-walk rate noise, each its own bias
-    correction (1, 1/(1 − 0.48·τ/T), 1/(1 − ¾·τ/T)) and EDF, the smallest EDF reported."""
+    `B1_AVERAGES` averages (τ ≥ T/8: its scatter spans the rate noises there): the interval
+    spanning those of the rate noises within `SPAN_REACH` of the α read, each its own bias
+    correction (1, 1/(1 − 0.481·τ/T), 1/(1 − ¾·τ/T)) and EDF, the smallest EDF reported.
+
+    The EDFs are SP 1065 Table 7's line max(b·N/m − c, 1) as arrays, which is
+    [`edf_totdev`][hrgjax.allan.edf_totdev] there: its Greenhall cap binds only at m ≤ 20 (every
+    m of every n ≤ 400, sampled to 10⁶ + 1 points; from m = 33 on the cap is ≥ 1.02× the line),
+    so `edf_totdev` itself is asked only at m ≤ 64; one `confidence_interval` call for all τ."""
     edf, low, high = edf.astype(float), low.copy(), high.copy()
-    for j in np.flatnonzero((alpha <= 0) & ((n - 1) // m <= B1_AVERAGES)):
-        k = int(m[j])
-        for a in (0, -1, -2):
-            e = edf_totdev(a, k, n)
-            lo, hi = confidence_interval(raw[j] / math.sqrt(totvar_bias(a, k, n)), e, ci)
-            edf[j], low[j], high[j] = min(edf[j], e), min(low[j], lo), max(high[j], hi)
+    j = np.flatnonzero((alpha <= 0) & ((n - 1) // m <= B1_AVERAGES))
+    if j.size == 0:
+        return edf, low, high
+    k = m[j].astype(float)
+    near = np.abs(_SPAN_TYPES[None, :] - alpha[j, None]) <= SPAN_REACH
+    types = near & (_SPAN_TYPES[None, :] != alpha[j, None])  # (τ, type) spanned, the read one's
+    if not types.any():  # interval already in (low, high)
+        return edf, low, high
+    e = np.maximum(_TABLE7[:, 0] * n / k[:, None] - _TABLE7[:, 1], 1.0)
+    for i in np.flatnonzero(k <= _CAP_FROM):
+        e[i] = [edf_totdev(int(a), int(k[i]), n) for a in _SPAN_TYPES]
+    bias = 1.0 - _TOTVAR_A * k[:, None] / (n - 1)
+    lo, hi = confidence_interval((raw[j, None] / np.sqrt(bias))[types], e[types], ci)
+    row = np.nonzero(types)[0]
+    span_lo, span_hi, span_e = low[j], high[j], edf[j]
+    np.minimum.at(span_lo, row, lo)
+    np.maximum.at(span_hi, row, hi)
+    np.minimum.at(span_e, row, e[types])
+    low[j], high[j], edf[j] = span_lo, span_hi, span_e
     return edf, low, high
 
 
@@ -483,5 +521,5 @@ def _edf(kind: str, alpha: int, m: int, n: int, rule: str = "hrgjax") -> float:
     alpha = max(alpha, 2 - 2 * d)  # the variance converges for α > 1 − 2d
     return edf_greenhall(
         alpha, d, m, n, overlapping=kind in ("oadev", "ohdev", "mdev", "tdev"),
-        modified=kind in ("mdev", "tdev"),
+        modified=kind in ("mdev", "tdev"), discrete=rule != "stable32",
     )  # fmt: skip

@@ -208,7 +208,7 @@ def edf_mtotdev(alpha: int, m: int, n: int, rule: str = "hrgjax") -> float:
     - `rule="stable32"`: Table 8's b·r − c, at m = 1–2 at most mdev's Greenhall EDF
       ([`SMALL_M_EDF_CAP`][hrgjax.allan.total.SMALL_M_EDF_CAP])."""
     alpha, m, n = int(min(max(alpha, -2), 2)), int(m), int(n)
-    greenhall = edf_greenhall(alpha, 2, m, n, overlapping=True, modified=True)
+    greenhall = edf_greenhall(alpha, 2, m, n, True, True, discrete=rule != "stable32")
     if rule == "stable32":
         b, c = EDF_MTOTDEV[alpha]
         edf = b * n / m - c
