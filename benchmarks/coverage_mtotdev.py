@@ -19,6 +19,11 @@ Run against an older hrgjax with PYTHONPATH=... for its figures.
 of its quadratic form A over N phase points (dense, independent of `hrgjax.allan.total`),
 against `mtotvar_bias` and `edf_mtotdev`, at octave m; N ≤ 2 049 (O(N³)).
 
+`--bias-table M`: `mtotvar_bias`'s stored table (`_BIAS_TABLE` in `hrgjax.allan.total`,
+α = 2 … −2, m = 1 … 128) printed as source from `_bias` (O(m² log m) by FFT), its largest
+difference from the stored one, and every entry at m ≤ M against the dense form here
+(`run_form`, `covariance`: O(m³); M = 128 ≈ 1 min).
+
 Usage: `.venv/bin/python benchmarks/coverage_mtotdev.py [--n 200] [--samples 1024]
 [--noises wpm,fpm,wfm,ffm,rwfm,mix] [--seed 1] [--rule hrgjax|stable32] [--kind mtotdev]`
 (200 records of 1 024 samples per noise ≈ 20 s on 2 shared cores; `--exact 1025` ≈ 10 s).
@@ -151,6 +156,32 @@ def exact(n):
         print(f"  {m:5d} {n / m:7.2f}  " + " | ".join(line), flush=True)
 
 
+def bias_table(upto):
+    from hrgjax.allan.total import _BIAS_TABLE, BIAS_EXACT_TO, _bias
+
+    t0 = time.time()
+    table = {a: [_bias(a, m) for m in range(1, BIAS_EXACT_TO + 1)] for a in ALPHA.values()}
+    print(f"# _bias at m = 1 … {BIAS_EXACT_TO}: {time.time() - t0:.1f} s")
+    print("# fmt: off\n_BIAS_TABLE = {")
+    for a, row in table.items():
+        print(f"    {a}: (")
+        for i in range(0, len(row), 7):
+            print("        " + " ".join(f"{v:.9f}," for v in row[i : i + 7]))
+        print("    ),")
+    print("}\n# fmt: on")
+    stored = max(abs(v - w) for a in table for v, w in zip(table[a], _BIAS_TABLE[a], strict=True))
+    print(f"# largest |_bias − stored|: {stored:.1e} (9 decimals: ≤ 5e-10)")
+    worst = 0.0
+    t0 = time.time()
+    for m in range(1, upto + 1):
+        rows = run_form(m)
+        for noise, alpha in ALPHA.items():
+            var = np.sum((rows @ covariance(noise, 3 * m)) * rows, axis=1)
+            worst = max(worst, abs(table[alpha][m - 1] / (np.mean(var) / var[3 * m]) - 1.0))
+    print(f"# largest relative difference from the dense form, m ≤ {upto}: {worst:.1e} "
+          f"({time.time() - t0:.0f} s)")  # fmt: skip
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=200)
@@ -160,7 +191,11 @@ def main():
     ap.add_argument("--rule", default="hrgjax")
     ap.add_argument("--kind", default="mtotdev", help="mtotdev, or mdev for comparison")
     ap.add_argument("--exact", type=int, default=0, metavar="N")
+    ap.add_argument("--bias-table", type=int, default=0, metavar="M")
     a = ap.parse_args()
+    if a.bias_table:
+        bias_table(a.bias_table)
+        return
     if a.exact:
         exact(a.exact)
         return

@@ -4,8 +4,10 @@ record distributed with Stable32) and the octave and decade tables allantools ke
 
 Printed per table: the largest relative difference of the deviation, whether the number of
 terms agrees, the τ where the noise type α differs, and the interval ends' largest relative
-difference (hrgjax's EDF is SP 1065 Table 8's; Stable32's own, read back from its intervals,
-is not that table's: its ends differ by up to ≈ 6 %).
+difference. Under `--noise-rule stable32` hrgjax's EDF is SP 1065 Table 8's; Stable32's own,
+read back from its intervals, is not that table's: the ends differ by up to ≈ 6 % where α
+agrees (decade tables). The default's EDF is fitted to the estimator's exact one, and its
+α is its own: the ends differ by up to ≈ 20 %.
 
 The octave and decade tables are the raw estimator (`bias_correction=False`); Stable32's
 `phase_dat_ttotdev_all.txt` (no intervals) is bias-corrected, the raw value divided by

@@ -104,11 +104,13 @@ def test_mtotdev_bias_is_the_estimators_own_and_its_interval_covers():
     """Mod Totvar at m = 1 is Mod σ²/2 on every record (each 3-point run less its offset is
     [a, b, a]; its reflection gives (Δ²x)²/2), so the corrected mtotdev(τ₀) is mdev(τ₀)
     exactly (Stable32's b(α) made it 0.73–0.85× mdev). `mtotvar_bias` equals E[Mod
-    Totvar]/Mod σ² of white angle and white rate noise computed here from `mtotdev_curve`
-    on one run of 3m points (E = Σ_l q(column l) over the noise's impulse responses) and the
-    modified second difference's weights. White rate noise, m = 2, 40 records of 1 024
-    samples: the ±1σ interval holds the true Mod σ (exact) in ≈ 68 % of them (Stable32's
-    0.73 over-corrected the raw 0.814: 18 %)."""
+    Totvar]/Mod σ² of white angle, white rate and random-walk rate noise computed here from
+    `mtotdev_curve` on one run of 3m points (E = Σ_l q(column l) over the noise's impulse
+    responses) and the modified second difference's weights; it is read from a stored table
+    (building the forms on first use cost 13–22 s for α = 2 … −2 at m ≤ 128), which `_bias`
+    reproduces. White rate noise, m = 2, 40 records of 1 024 samples: the ±1σ interval holds
+    the true Mod σ (exact) in ≈ 68 % of them (Stable32's 0.73 over-corrected the raw 0.814:
+    18 %)."""
     for y in (Y[:300], np.cumsum(Y[:300]), np.diff(Y[:301])):
         md = allan.deviation(y, 1.0, kind="mdev", taus=[1])
         for kind in ("mtotdev", "ttotdev"):
@@ -116,7 +118,7 @@ def test_mtotdev_bias_is_the_estimators_own_and_its_interval_covers():
             td = md.dev * (1.0 if kind == "mtotdev" else 1.0 / math.sqrt(3.0))
             np.testing.assert_allclose(mt.dev, td, rtol=1e-12)
             assert mt.edf == pytest.approx(md.edf, rel=1e-12)
-    from hrgjax.allan.total import mtotdev_curve, mtotvar_bias
+    from hrgjax.allan.total import _bias, mtotdev_curve, mtotvar_bias
 
     for m in (1, 2, 3, 6):
         size = 3 * m
@@ -124,10 +126,21 @@ def test_mtotdev_bias_is_the_estimators_own_and_its_interval_covers():
         for j in range(m):
             d[[j, j + m, j + 2 * m]] += np.array([1.0, -2.0, 1.0]) / m
         walk = np.tril(np.ones((size, size - 1)), -1)  # white rate: x = Σ of the samples
-        for alpha, impulses in ((2, np.eye(size)), (0, walk)):
+        # random-walk rate: the rate a running sum of white increments, x its running sum
+        double = walk @ np.tril(np.ones((size - 1, size - 1)))
+        for alpha, impulses in ((2, np.eye(size)), (0, walk), (-2, double)):
             raw = sum(mtotdev_curve(c, [m])[0][0] ** 2 for c in impulses.T)
             truth = np.sum((d @ impulses) ** 2) / (2.0 * m * m)
-            assert mtotvar_bias(alpha, m) == pytest.approx(raw / truth, rel=1e-10), (alpha, m)
+            assert _bias(alpha, m) == pytest.approx(raw / truth, rel=1e-10), (alpha, m)
+            assert mtotvar_bias(alpha, m) == pytest.approx(raw / truth, abs=6e-10), (alpha, m)
+    # the stored table is `_bias` to 9 decimals; beyond m = 128 the entry of the same parity
+    for alpha in (2, 1, 0, -1, -2):
+        for m in (2, 5, 16, 37, 127, 128):
+            assert mtotvar_bias(alpha, m) == pytest.approx(_bias(alpha, m), abs=5.1e-10)
+        assert mtotvar_bias(alpha, 400) == mtotvar_bias(alpha, 128)
+        assert mtotvar_bias(alpha, 401) == mtotvar_bias(alpha, 127)
+    table = [mtotvar_bias(a, m) for a in range(-2, 3) for m in range(1, 129)]
+    assert min(table) == pytest.approx(0.5) and max(table) < 1.0  # ½ at m = 1, < 1 beyond
     rng = np.random.default_rng(5)
     # Mod σ(2) of white rate noise (σ = 1 per sample): the weights on the samples, d's tail sums
     truth = math.sqrt(np.sum(np.r_[-0.5, -1.0, 0.0, 1.0, 0.5] ** 2) / 8.0)
