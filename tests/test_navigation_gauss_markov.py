@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.integrate import quad
 
 from hrgjax import kalman
 from hrgjax.ins import ekf, gnss, motion, sensors
@@ -22,8 +23,7 @@ SIGMA_G, SIGMA_A = 30 * DEG_PER_H, 500 * sensors.MICRO_G
 def imu(tau, **kw):
     """benchmarks/nav_gm_fold.py's sensor (`--gauss-markov`): Gauss–Markov biases of σ
     30 °/h and 500 µg, fixed biases a tenth of that."""
-    return sensors.ImuModel(
-        **kw,
+    fields = dict(
         gyro_bias=3 * DEG_PER_H,
         accel_bias=50 * sensors.MICRO_G,
         arw=0.01 * DEG_PER_SQRT_H,
@@ -33,6 +33,7 @@ def imu(tau, **kw):
         gyro_correlation_time=tau,
         accel_correlation_time=tau,
     )
+    return sensors.ImuModel(**(fields | kw))
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +96,9 @@ def _z(res, e):
 @pytest.fixture(scope="module")
 def monte_carlo(truth):
     """32 runs at τ = 1 s through both filters on the same draws: z-RMS after the start of
-    attitude and total gyro bias, and the mean NIS / 6 (fold, Gauss–Markov)."""
+    attitude and total gyro bias, and the mean NIS / 6 (fold, Gauss–Markov); the
+    Gauss–Markov filter's gyro and accelerometer Gauss–Markov states' own z-RMS (against the
+    bias at the fix) and its estimates `estimates` (R, M, 6) with the outage's epochs."""
     rx = gnss.Gnss()
     fold = ekf.LooselyCoupled(imu(1.0), rx)
     gm = ekf.LooselyCoupled(imu(1.0), rx, gauss_markov=True)
@@ -122,28 +125,83 @@ def monte_carlo(truth):
             res = ekf.loosely_coupled(s, start, dth, dv, truth.dt, fixes)
             e = ekf.error_states(res, tn, bg[at], ba[at], gyro_gm=gg[at], accel_gm=ga[at])
             out += [_z(res, e), res.nis]
-        return out
+        own = e[:, 15:21] / jnp.sqrt(jnp.diagonal(res.P, axis1=-2, axis2=-1)[:, 15:21])
+        return (*out, own, jnp.concatenate([res.gyro_gm, res.accel_gm], -1))
 
-    zf, nf, zg, ng = jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(0), 32))
+    zf, nf, zg, ng, own, est = jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(0), 32))
     rms = lambda z, s: float(jnp.sqrt(jnp.mean(z[:, 1:, s] ** 2)))  # noqa: E731
-    return {
+    out = {
         name: (rms(z, slice(6, 9)), rms(z, slice(9, 12)), float(jnp.nanmean(n[:, 1:]) / 6))
         for name, z, n in (("fold", zf, nf), ("gm", zg, ng))
     }
+    out["gm_states"] = (rms(own, slice(0, 3)), rms(own, slice(3, 6)))
+    return out | {"estimates": np.asarray(est), "outage": np.flatnonzero(~np.asarray(mask)) + 1}
 
 
 def test_gauss_markov_states_give_honest_sigma_where_the_fold_overstates_them(monte_carlo):
     """τ = 1 s (one fix interval), 32 runs: the fold's attitude and gyro-bias z-RMS 0.44,
     0.39 (σ 2.3×, 2.6× the errors' RMS), mean NIS / 6 0.927; the Gauss–Markov filter's 0.99,
-    0.99, 0.997 (64 runs, benchmarks/nav_gm_fold.py --gauss-markov: 1.06, 0.99 at τ = 1 s,
-    0.86–1.09 in every group at every τ). The bounds hold the Monte Carlo's spread (the
-    64-run rows' 1.01–1.06 and 0.95–1.03 from τ = 0.3 to 100 s, another seed's 32 runs
-    1.10, 0.99) with room; the NIS's 99 % band over ~3 000 fixes is ±0.027."""
+    1.00, 0.997, its Gauss–Markov states' own 1.01 (gyro), 1.00 (accelerometer) against the
+    bias at the fix (64 runs, benchmarks/nav_gm_fold.py --gauss-markov: 1.06, 0.99 at
+    τ = 1 s). The bounds hold the Monte Carlo's spread (the 64-run rows' 1.01–1.06 and
+    0.95–1.03 from τ = 0.3 to 100 s, another seed's 32 runs 1.10, 0.99) with room; the
+    NIS's 99 % band over ~3 000 fixes is ±0.027."""
     att, bg, nis = monte_carlo["gm"]
     assert 0.8 < att < 1.25 and 0.8 < bg < 1.25, monte_carlo
+    assert all(0.85 < z < 1.2 for z in monte_carlo["gm_states"]), monte_carlo
     assert 0.97 < nis < 1.03, monte_carlo  # the fold's 0.925 is below the 99 % band
     att, bg, nis = monte_carlo["fold"]
     assert att < 0.6 and bg < 0.6 and nis < 0.95, monte_carlo
+
+
+def test_feedback_decays_the_gauss_markov_estimate_as_the_process_mean(monte_carlo):
+    """The feedback rule, pinned: in the 20-s outage (no update) the Gauss–Markov estimates
+    are the process's conditional mean, ĝ(t_k) = ĝ(t_k−1)·e^(−T/τ), to rounding (with the
+    decay left out at the fix they stay put: ratio 1, not e^(−1)); and each IMU step is
+    corrected by the mean of e^(−t/τ) over the step (against quadrature: with the estimate
+    at the block's start on every step instead, the Monte Carlo moves by < 1 %, below what
+    32 runs resolve — rev3)."""
+    est, k = monte_carlo["estimates"], monte_carlo["outage"]
+    np.testing.assert_allclose(est[:, k], np.exp(-1.0) * est[:, k - 1], rtol=1e-12, atol=0)
+    size = np.abs(est[:, k[0] - 1]) / np.r_[[SIGMA_G] * 3, [SIGMA_A] * 3]
+    assert np.median(size) > 0.01, np.median(size)  # the outage starts from real estimates
+    settings = ekf.LooselyCoupled(imu(0.7, accel_correlation_time=2.0), gnss.Gnss(),
+                                  gauss_markov=True)  # fmt: skip
+    mean, decay = settings._gm_decay(0.1, 10)
+    t = 0.1 * np.arange(11)
+    for col, tau in enumerate((0.7, 2.0)):
+        want = [quad(lambda x, c: np.exp(-x / c), a, b, args=(tau,))[0] / 0.1
+                for a, b in zip(t[:-1], t[1:], strict=True)]  # fmt: skip
+        np.testing.assert_allclose(mean[:, col], want, rtol=1e-13, atol=0)
+        assert decay[col] == pytest.approx(np.exp(-1.0 / tau), rel=1e-15)
+
+
+def test_apply_returns_the_gauss_markov_bias_at_the_interval_end():
+    """`return_bias="gauss_markov"` at τ = Δt (where the interval mean's variance is 0.74σ²):
+    the Gauss–Markov part is the point process, variance σ² and lag-1 correlation
+    e^(−Δt/τ) (20 000 × 3 samples: ±3 %, ±2 % at 3σ); total − that part is the rest (here
+    the fixed bias) to rounding, and `return_bias=True`'s total is the increments' mean
+    bias. `return_bias` takes bools of any kind and 0 / 1, nothing else."""
+    n, dt, s = 20_000, 0.1, SIGMA_G
+    unit = sensors.ImuModel(gyro_bias=(1e-5, -2e-5, 3e-5), gyro_bias_instability=s,
+                            gyro_correlation_time=dt)  # fmt: skip
+    key, z = jax.random.key(5), jnp.zeros((n, 3))
+    dth, _, bg, _, gg, _ = unit.apply(key, z, z, dt, return_bias="gauss_markov")
+    g = np.asarray(gg) / s
+    assert np.var(g) == pytest.approx(1.0, abs=0.03)  # the interval means': 0.74
+    lag1 = np.mean(g[1:] * g[:-1]) / np.mean(g * g)
+    assert lag1 == pytest.approx(np.exp(-1.0), abs=0.02)
+    np.testing.assert_allclose(bg - gg, np.broadcast_to(unit.gyro_bias, (n, 3)), rtol=0,
+                               atol=1e-12 * s)  # fmt: skip
+    z = z[:4]
+    for flag, size in ((True, 4), (np.bool_(True), 4), (1, 4), (jnp.asarray(False), 2), (0, 2)):
+        out = unit.apply(key, z, z, dt, return_bias=flag)
+        assert len(out) == size, flag
+    np.testing.assert_allclose(out[0] / dt, unit.apply(key, z, z, dt, return_bias=1)[2],
+                               rtol=1e-12, atol=0)  # fmt: skip
+    for bad in (2, "gm", None, (True,)):
+        with pytest.raises(ValueError, match=r"^ImuModel.apply: return_bias must be False, True"):
+            unit.apply(key, z, z, dt, return_bias=bad)
 
 
 def test_long_tau_is_the_fold_with_its_constant_bias_split_in_two(truth):
@@ -179,8 +237,7 @@ def test_long_tau_is_the_fold_with_its_constant_bias_split_in_two(truth):
         np.testing.assert_allclose(y.P[:, :9, :9] / corr, x.P[:, :9, :9] / corr, rtol=0, atol=1e-6)
     with pytest.raises(ValueError, match=r"^error_states: a filter with Gauss–Markov states"):
         ekf.error_states(b, truth.states[::10], unit.gyro_bias, unit.accel_bias)
-    with pytest.raises(ValueError, match=r"^LooselyCoupled: the IMU model's gyro_bias is"):
+    with pytest.raises(ValueError, match=r"^LooselyCoupled: the IMU model's gyro_bias is.*"
+                       r"with gauss_markov=True .* give gyro_bias its own σ > 0"):  # fmt: skip
         ekf.LooselyCoupled(eqx.tree_at(lambda i: i.gyro_bias, imu(1.0), jnp.zeros(3)), rx,
                            gauss_markov=True)  # fmt: skip
-    with pytest.raises(ValueError, match=r"^ImuModel.apply: return_bias must be False, True"):
-        unit.apply(jax.random.key(2), truth.dtheta, truth.dv, truth.dt, return_bias="gm")

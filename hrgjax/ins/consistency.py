@@ -33,8 +33,9 @@ def error_states(
     [`ImuModel.apply`][hrgjax.ins.sensors.ImuModel.apply]`(..., return_bias=True)` gives
     them); the scale factors [-] for a filter with scale-factor states; for one with
     Gauss–Markov states (`LooselyCoupled(gauss_markov=True)`) `gyro_gm`, `accel_gm` the
-    Gauss–Markov parts of those biases (`return_bias="gauss_markov"`): the fixed-bias states'
-    truth is then the rest (fixed bias, random walk, extra rate error).
+    Gauss–Markov biases at the epochs, and the totals with them (both as
+    `ImuModel.apply(..., return_bias="gauss_markov")` gives them): the fixed-bias states'
+    truth is then total − Gauss–Markov part (fixed bias, random walk, extra rate error).
 
     **Raises:** `ValueError` when the filter has Gauss–Markov states and `gyro_gm` or
     `accel_gm` is missing."""

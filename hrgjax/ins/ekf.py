@@ -20,8 +20,8 @@ expects.
    $\bar g_g$ the Gauss–Markov estimate's mean over the step as it decays, same for Δv),
    run through [`mechanize`][hrgjax.ins.mechanization]'s step;
 2. the covariance is propagated with $\Phi, Q_d$ of the error model
-   ([`discretise`][hrgjax.ins.ekf.discretise]: the Van Loan integrals by series, exact for
-   any T/τ)
+   ([`discretise`][hrgjax.ins.ekf.discretise]: the Van Loan integrals by series and
+   squaring, at any T/τ; its rounding grows with T/τ, 1e-10 of the states' σ at 1e5)
    (F at the block's middle state with the block's mean specific force and rate; white gyro and
    accelerometer noise densities `arw`, `vrw`; bias random walks; Gauss–Markov decay
    −1/τ driven by 2σ²/τ) — the same exact
@@ -45,7 +45,7 @@ rate 1/τ, driving density 2σ²/τ: stationary); without, folded into the fixed
 (σ² added) and its random walk (density $2\sigma^2/\tau$: exact over times ≪ τ,
 conservative beyond; on the tests' 120-s flight with 1-s fixes the attitude and gyro-bias σ
 came out 2.6× and 3.6× too large at τ = 0.1 s, 2.1×, 2.5× at 1 s, 1.4× at 10 s, 1.1× at
-100 s; with the Gauss–Markov states the errors' RMS over σ is 0.86–1.09 in every state
+100 s; with the Gauss–Markov states the errors' RMS over σ is 0.96–1.09 in every state
 group from τ = 0.1 s to 10⁵ s: docs/navigation.md). Misalignments are not estimated. Every
 sensor state needs a prior σ > 0 (a zero makes the covariance singular): the model's values are the sizes
 the filter assumes. Its σ are honest only if that model and P0 bound the real sensor and
@@ -202,10 +202,17 @@ class LooselyCoupled(eqx.Module):
             sizes.update(gyro_scale=imu.gyro_scale**2, accel_scale=imu.accel_scale**2)
         for name, v in sizes.items():
             if is_concrete(v) and not np.all(np.asarray(v) > 0):
+                hint = ""
+                if self.gauss_markov and name in ("gyro_bias", "accel_bias"):
+                    hint = (
+                        f"; with gauss_markov=True the fixed-bias states no longer carry the bias "
+                        f"instability: give {name} its own σ > 0 (e.g. 1e-3 × "
+                        f"{name}_instability if the sensor has no fixed bias)"
+                    )
                 raise ValueError(
                     f"LooselyCoupled: the IMU model's {name} is the prior σ of the filter's "
                     f"states and must be > 0 on every axis; got {np.sqrt(np.asarray(v))} (a zero "
-                    "σ makes the covariance singular)"
+                    f"σ makes the covariance singular){hint}"
                 )
 
     @property
@@ -343,10 +350,13 @@ def discretise(F, q, T: float, fastest: float = 0.0):
     state). With it, $Q_h$ takes five-point Gauss–Legendre (the Gauss–Markov drive reaches
     the position through four integrations), and where h·`fastest` > 1/8 each step is the
     series over $h/2^j$, j the least with $h\cdot$`fastest`$/2^j \le 1/8$, squared j times
-    ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q \phi^\top + Q$): exact for any T/τ
-    (Φ and $Q_d$ within 1e-11 of `van_loan` in units of the states' σ, T/τ from 1e-3 to
-    1e3, T = 1–30 s: tests/test_navigation_gauss_markov.py; the series alone had
-    e^(−T/τ) 0.8 off at T/τ = 3).
+    ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q \phi^\top + Q$): Φ and $Q_d$ within
+    1e-11 of `van_loan` in units of the states' σ, T/τ from 1e-3 to 1e3, T = 1–30 s
+    (tests/test_navigation_gauss_markov.py; the series alone had e^(−T/τ) 0.8 off at
+    T/τ = 3). Not exact at any T/τ: the j squarings' rounding, in Φ's navigation block,
+    grows ∝ T/τ — 1e-11 at T/τ = 1e4 (17 squarings), 1.2e-10 at 1e5, 7.5e-9 at 1e8, 1e-5 at
+    1e12, where `van_loan` itself returns NaN ($Q_d$ within 2e-14); and each squaring costs
+    a few matrix products (2× the batched fold's time at T/τ = 1e4).
 
     **Raises:** `ValueError` unless `fastest` is a finite float ≥ 0 (a Python number: τ is
     a static field, `ImuModel` refuses a traced one)."""

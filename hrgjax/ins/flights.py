@@ -11,8 +11,9 @@ channel diverges with a 570-s time constant and would swamp everything else).
 The NEES compares each epoch's estimate with the truth there: for the sensor states, the
 run's total bias of the interval ending at that epoch (fixed, Gauss–Markov, random walk,
 extra rate error: all but the white noise) and its drawn scale factors; with Gauss–Markov
-states (`LooselyCoupled(gauss_markov=True)`) the bias's Gauss–Markov part is theirs and the
-rest the fixed-bias states'.
+states (`LooselyCoupled(gauss_markov=True)`) the Gauss–Markov bias *at* the epoch is theirs
+(the state is the bias at the fix, not its mean over the last IMU interval) and the rest's
+interval mean the fixed-bias states' (`ImuModel.apply(..., return_bias="gauss_markov")`).
 """
 
 from __future__ import annotations

@@ -198,27 +198,41 @@ class ImuModel(eqx.Module):
         increments over intervals of `dt` [s]; `gyro_rate_error`: optional extra gyro error
         [rad/s], (N, 3) as each interval's mean rate; `return_bias`: also return each
         interval's total bias — fixed, Gauss–Markov, random walk and the extra rate error, all
-        but the white noise — which is what a filter's bias states estimate;
-        `return_bias="gauss_markov"`: also the Gauss–Markov parts of those biases (what
-        `LooselyCoupled(gauss_markov=True)`'s Gauss–Markov states estimate).
+        but the white noise — which is what a filter's bias states estimate (`True`, `False`,
+        NumPy or JAX bools and 0 / 1);
+        `return_bias="gauss_markov"`: the truth of `LooselyCoupled(gauss_markov=True)`'s
+        states at the interval's end, where its fix falls: the Gauss–Markov bias *at that
+        instant* (the filter's Gauss–Markov states are the bias at the fix, not its mean over
+        the last step), and as the total that plus the rest's interval mean (fixed bias,
+        random walk, extra rate error), so that total − Gauss–Markov part is the fixed-bias
+        states' truth.
 
         **Returns:** `(dtheta, dv)` measured, each (N, 3); with `return_bias`,
-        `(dtheta, dv, gyro_bias (N, 3) [rad/s], accel_bias (N, 3) [m/s²])`; with
-        `return_bias="gauss_markov"` these and `gyro_gm (N, 3) [rad/s], accel_gm (N, 3)
-        [m/s²]`, each interval's mean Gauss–Markov bias.
+        `(dtheta, dv, gyro_bias (N, 3) [rad/s], accel_bias (N, 3) [m/s²])`, each interval's
+        mean total bias; with `return_bias="gauss_markov"` `(dtheta, dv, gyro_bias,
+        accel_bias, gyro_gm (N, 3) [rad/s], accel_gm (N, 3) [m/s²])`: the Gauss–Markov bias at
+        each interval's end, and the total with that Gauss–Markov part (the increments are
+        the same draws either way).
 
         **Raises:** `ValueError` for a `dt` that is not a finite interval > 0 s, increments
-        not both (N, 3), a `return_bias` other than those three, or a `gyro_rate_error`
+        not both (N, 3), a `return_bias` other than those, or a `gyro_rate_error`
         that is not (N, 3) [rad/s]. Fields traced
         inside `jit`, `vmap` or `hg.sweep` are checked here, at run time
         ([`traced_checks`][hrgjax.ins.sensors.traced_checks]): the first rule broken raises
         its one line (`hg.sweep`: "sweep: at one or more grid points, ImuModel.gyro_bias
         [rad/s] is outside the plausible range -0.75 … 0.75 rad/s …")."""
-        if not any(return_bias is v for v in (False, True)) and return_bias != "gauss_markov":
-            raise ValueError(
-                f'ImuModel.apply: return_bias must be False, True or "gauss_markov"; got '
-                f"{return_bias!r}"
-            )
+        gauss_markov = isinstance(return_bias, str) and return_bias == "gauss_markov"
+        if not gauss_markov:
+            flag = None  # a bool, NumPy or JAX bool, or 0 / 1, as the truthiness it used to be
+            if not isinstance(return_bias, (str, jax.core.Tracer)):
+                flag = np.asarray(return_bias)
+            ok = flag is not None and flag.shape == () and flag.dtype.kind in "bui"
+            if not (ok and flag.item() in (0, 1)):
+                raise ValueError(
+                    f'ImuModel.apply: return_bias must be False, True (or 0, 1) or "gauss_markov" '
+                    f"(a Python value, not traced); got {return_bias!r}"
+                )
+            return_bias = bool(flag)
         shape = jnp.shape(dtheta)
         if len(shape) != 2 or shape[-1] != 3 or jnp.shape(dv) != shape:
             raise ValueError(
@@ -259,15 +273,16 @@ class ImuModel(eqx.Module):
         ma = imu._matrix(imu.accel_scale, imu.accel_misalignment)
         th = dtheta @ mg.T + bg * dt + wg
         dv = dv @ ma.T + ba * dt + wa
-        if return_bias == "gauss_markov":
-            return th, dv, bg, ba, gm_g, gm_a
+        if gauss_markov:  # the rest at the mean, the Gauss–Markov part at the interval's end
+            bg, ba = bg - gm_g[0] + gm_g[1], ba - gm_a[0] + gm_a[1]
+            return th, dv, bg, ba, gm_g[1], gm_a[1]
         return (th, dv, bg, ba) if return_bias else (th, dv)
 
     @staticmethod
     def _bias_path(key, n, dt, sigma, tau, rrw, white):
         """(N, 3) exact interval means of the Gauss–Markov and random-walk biases (module
-        docstring) [per s], (N, 3) white-noise increments, and (N, 3) the Gauss–Markov
-        part of the means."""
+        docstring) [per s], (N, 3) white-noise increments, and the pair ((N, 3) the
+        Gauss–Markov part of the means, (N, 3) the Gauss–Markov bias at each interval's end)."""
         k0, k1, k2, k3, k4 = jax.random.split(key, 5)
         a, b, l11, l21, l22 = _gm_interval(dt / tau)
         gm0 = sigma * jax.random.normal(k0, (3,))
@@ -282,7 +297,7 @@ class ImuModel(eqx.Module):
             gm, rw = c
             e1, e2, w_rw, bridge = w
             gm1, rw1 = a * gm + e1, rw + w_rw
-            return (gm1, rw1), (b * gm + e2 + 0.5 * (rw + rw1) + bridge, b * gm + e2)
+            return (gm1, rw1), (b * gm + e2 + 0.5 * (rw + rw1) + bridge, (b * gm + e2, gm1))
 
         _, (mean, gm) = jax.lax.scan(step, (gm0, jnp.zeros(3)), (e1, e2, w_rw, bridge))
         return mean, jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None], gm
