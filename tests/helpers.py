@@ -308,3 +308,20 @@ def recording_bar(made: list):
             made.append(self)
 
     return RecordingBar
+
+
+def flight_motion():
+    """The navigation tests' 120-s flight (tests/test_navigation_filter.py,
+    test_ins_consistency.py, test_navigation_gauss_markov.py): a take-off run, a banked right
+    turn, a climb, level flight; 40° N, 10° E, 200 m, 20 m/s north."""
+    from hrgjax.ins import motion
+
+    s, z = motion.Segment, (0.0, 0.0, 0.0)
+    segs = (
+        s(1, z, (2.0, 0.0, 0.0), 30.0),
+        s(3, (0.0, 0.0, 20.0), z, 5.0),
+        s(1, (3.0, 0.0, 0.0), z, 25.0),
+        s(3, (0.0, 4.0, -20.0), z, 5.0),
+        s(1, z, z, 55.0),
+    )
+    return motion.Motion(40.0, 10.0, 200.0, (20.0, 0.0, 0.0), 10.0, 0.0, 0.0, segs)

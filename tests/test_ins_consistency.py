@@ -6,13 +6,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import modelled_imu
+from helpers import flight_motion, modelled_imu
 from scipy import stats
 
 from hrgjax import kalman
-from hrgjax.ins import ekf, flights, gnss, motion, sensors
+from hrgjax.ins import ekf, flights, gnss, sensors
 
-Z = (0.0, 0.0, 0.0)
 RUNS = 8
 NOT_FIT = (
     "the filter's model does not fit the data: its σ are not to be trusted (a better IMU grade "
@@ -26,15 +25,7 @@ TACTICAL, INDUSTRIAL = modelled_imu("tactical"), modelled_imu("industrial")
 @pytest.fixture(scope="module")
 def truth():
     """The 120-s flight of tests/test_navigation_filter.py, 10 Hz."""
-    s = motion.Segment
-    segs = (
-        s(1, Z, (2.0, 0.0, 0.0), 30.0),
-        s(3, (0.0, 0.0, 20.0), Z, 5.0),
-        s(1, (3.0, 0.0, 0.0), Z, 25.0),
-        s(3, (0.0, 4.0, -20.0), Z, 5.0),
-        s(1, Z, Z, 55.0),
-    )
-    return motion.Motion(40.0, 10.0, 200.0, (20.0, 0.0, 0.0), 10.0, 0.0, 0.0, segs).truth(10.0)
+    return flight_motion().truth(10.0)
 
 
 @eqx.filter_jit

@@ -9,36 +9,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import CompileCounter, batched_lapack, cli_fails, modelled_imu
+from helpers import CompileCounter, batched_lapack, cli_fails, flight_motion, modelled_imu
 
 import hrgjax as hg
-from hrgjax.ins import ekf, flights, gnss, motion, sensors
+from hrgjax.ins import ekf, flights, gnss, sensors
 from hrgjax.ins import mechanization as me
 from hrgjax.units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0
 
-Z = (0.0, 0.0, 0.0)
 OUTAGE = ((70.0, 90.0),)
 
 
-def _motion():
-    """120 s: a take-off run, a banked right turn, a climb, level flight."""
-    s = motion.Segment
-    return motion.Motion(
-        40.0,
-        10.0,
-        200.0,
-        (20.0, 0.0, 0.0),
-        10.0,
-        0.0,
-        0.0,
-        (
-            s(1, Z, (2.0, 0.0, 0.0), 30.0),
-            s(3, (0.0, 0.0, 20.0), Z, 5.0),
-            s(1, (3.0, 0.0, 0.0), Z, 25.0),
-            s(3, (0.0, 4.0, -20.0), Z, 5.0),
-            s(1, Z, Z, 55.0),
-        ),
-    )
+_motion = flight_motion  # the 120-s flight the navigation tests share
 
 
 # the tactical preset without what a 15-state filter does not model (scale factors,

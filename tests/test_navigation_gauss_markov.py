@@ -8,14 +8,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import flight_motion
 from scipy.integrate import quad
 
 from hrgjax import kalman
-from hrgjax.ins import ekf, gnss, motion, sensors
+from hrgjax.ins import ekf, gnss, sensors
 from hrgjax.ins.strapdown import error_matrices_at
 from hrgjax.units import DEG_PER_H, DEG_PER_SQRT_H
 
-Z = (0.0, 0.0, 0.0)
 OUTAGE = (70.0, 90.0)
 SIGMA_G, SIGMA_A = 30 * DEG_PER_H, 500 * sensors.MICRO_G
 
@@ -39,15 +39,7 @@ def imu(tau, **kw):
 @pytest.fixture(scope="module")
 def truth():
     """tests/test_navigation_filter.py's 120-s flight, 10 Hz."""
-    s = motion.Segment
-    segs = (
-        s(1, Z, (2.0, 0.0, 0.0), 30.0),
-        s(3, (0.0, 0.0, 20.0), Z, 5.0),
-        s(1, (3.0, 0.0, 0.0), Z, 25.0),
-        s(3, (0.0, 4.0, -20.0), Z, 5.0),
-        s(1, Z, Z, 55.0),
-    )
-    return motion.Motion(40.0, 10.0, 200.0, (20.0, 0.0, 0.0), 10.0, 0.0, 0.0, segs).truth(10.0)
+    return flight_motion().truth(10.0)
 
 
 def test_discretisation_is_exact_for_any_interval_over_tau(truth):
