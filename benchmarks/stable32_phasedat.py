@@ -1,6 +1,8 @@
-"""mtotdev and ttotdev against Stable32's own tables: PHASE.DAT (1 001 phase points, the
-record distributed with Stable32) and the octave and decade tables allantools keeps of it
-(`tests/phasedat/`, written by Stable32).
+"""The seven σ kinds (adev, oadev, mdev, tdev, hdev, ohdev, totdev: octave tables), mtotdev
+and ttotdev against Stable32's own tables: PHASE.DAT (1 001 phase points, the record
+distributed with Stable32) and the octave and decade tables allantools keeps of it
+(`tests/phasedat/`, written by Stable32). The last line counts the seven σ octave tables' τ
+where hrgjax's α is Stable32's.
 
 Printed per table: the largest relative difference of the deviation, whether the number of
 terms agrees, the τ where the noise type α differs, and the interval ends' largest relative
@@ -18,7 +20,7 @@ exact one, so there the corrected table and the interval ends differ by design.
 Usage: `.venv/bin/python benchmarks/stable32_phasedat.py [--dir out/phasedat]
 [--noise-rule hrgjax|stable32]`. The files
 are not in this repository: `git clone https://github.com/aewallin/allantools` and copy
-`tests/phasedat/PHASE.DAT` and `tests/phasedat/phase_dat_{mtotdev,ttotdev}_*.txt` into
+`tests/phasedat/PHASE.DAT` and `tests/phasedat/phase_dat_*.txt` into
 `out/phasedat/` (git-ignored).
 """
 
@@ -33,7 +35,8 @@ jax.config.update("jax_enable_x64", True)
 
 import hrgjax as hg  # noqa: E402
 
-TABLES = {
+SIGMA_KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev")
+TABLES = {f"phase_dat_{kind}_octave.txt": kind for kind in SIGMA_KINDS} | {
     "phase_dat_mtotdev_octave.txt": "mtotdev",
     "phase_dat_mtotdev_decade.txt": "mtotdev",
     "phase_dat_ttotdev_octave.txt": "ttotdev",
@@ -64,6 +67,7 @@ def main(argv=None):
     x = np.loadtxt(folder / "PHASE.DAT", comments="#")
     print(f"stable32_phasedat.py: PHASE.DAT, {x.size} phase points, τ0 = 1 s, "
           f"noise_rule={args.noise_rule!r}")  # fmt: skip
+    agree_sigma = total_sigma = 0
     for name, kind in TABLES.items():
         if not (folder / name).exists():
             print(f"  {name}: missing")
@@ -81,11 +85,16 @@ def main(argv=None):
             ends = np.r_[r.dev_low / tab[:, 4] - 1, r.dev_high / tab[:, 6] - 1]
             differs = tab[r.alpha != tab[:, 3], 0].astype(int).tolist()
             line += f", interval ends within {np.max(np.abs(ends)):.1e}, α differs at m = {differs}"
+            if kind in SIGMA_KINDS:
+                agree_sigma += int(np.sum(r.alpha == tab[:, 3]))
+                total_sigma += tab.shape[0]
         else:
             agree = r.alpha == tab[:, 3]
             line += (f" (bias-corrected: within {np.max(np.abs(rel[agree])):.1e} at the "
                      f"{agree.sum()} τ where α agrees; α differs at {(~agree).sum()})")  # fmt: skip
         print(line)
+    if total_sigma:
+        print(f"  seven σ kinds' octave tables: α agrees at {agree_sigma}/{total_sigma} τ")
     return 0
 
 

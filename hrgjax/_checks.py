@@ -1,5 +1,9 @@
 """Shared input checks: trace-time structure errors and run-time value errors."""
 
+import math
+import numbers
+import operator
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -415,3 +419,17 @@ def check_flag(name: str, x) -> bool:
         )
     )
     raise TypeError(f"{name} must be True or False; got {shown}")
+
+
+def whole_number(name: str, value, what: str) -> int:
+    """`value` as an int when it is a whole real number (a NumPy integer or 2.0 too), else a
+    one-line `ValueError` naming `name` (no truncation: 1.5 is refused, not read as 1;
+    `what` completes "… must be {what}")."""
+    if not isinstance(value, bool | np.bool_):
+        try:
+            return operator.index(value)
+        except TypeError:
+            pass
+        if isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
+            return int(value)
+    raise ValueError(f"{name} must be {what}; got {describe(value)}")

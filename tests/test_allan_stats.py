@@ -151,38 +151,58 @@ def test_mtotdev_bias_is_the_estimators_own_and_its_interval_covers():
     assert 0.5 <= hits / 40 <= 0.85, hits
 
 
-def _dense_edf(alpha, d, m, n, overlapping, modified):
-    """(tr AΣ)²/tr (AΣ)² from the definition: Σ the phase's covariance built by summing
-    Kasdin's discrete noise (white, or ARFIMA(0, −½, 0) by its Γ-function recursion), A the
-    estimator's mean of squared filter outputs, as dense n × n matrices."""
-    flicker = alpha % 2 == 1
-    p = (3 - alpha) // 2 if flicker else (2 - alpha) // 2
-    size = n if p == 0 else n - 1
-    g = np.zeros(size)
-    g[0] = math.gamma(2.0) / math.gamma(1.5) ** 2 if flicker else 1.0
-    for k in range(1, size):  # γ(k) = γ(k − 1)(k − 1 + d)/(k − d), d = −½
-        g[k] = g[k - 1] * (k - 1.5) / (k + 0.5) if flicker else 0.0
-    cov = g[np.abs(np.subtract.outer(np.arange(size), np.arange(size)))]
-    if p:
-        total = np.tril(np.ones((n, size)), -1)  # x_i = Σ_{k<i} of the sum below
-        for _ in range(p - 1):
-            total = total @ np.tril(np.ones((size, size)))
-        cov = total @ cov @ total.T
+def _dense_filter_rows(d, m, n, overlapping, modified):
     c = np.zeros(d * m + 1)
     c[::m] = [(-1) ** k * math.comb(d, k) for k in range(d + 1)]
     c = np.convolve(c, np.ones(m)) / m if modified else c
-    rows = [np.r_[np.zeros(i), c, np.zeros(n - i - c.size)]
+    return [np.r_[np.zeros(i), c, np.zeros(n - i - c.size)]
             for i in range(0, n - c.size + 1, 1 if overlapping else m)]  # fmt: skip
-    a = sum(np.outer(r, r) for r in rows)
-    ac = a @ cov
-    return np.trace(ac) ** 2 / np.trace(ac @ ac)
+
+
+def _dense_edf(alpha, d, m, n, overlapping, modified):
+    """(tr AΣ)²/tr (AΣ)² from the definition, dense n × n: A the estimator's mean of squared
+    filter outputs, Σ the phase's covariance — α = 2, 1, 0 Kasdin's discrete noise summed
+    (white, or ARFIMA(0, −½, 0) by its Γ-function recursion); α = −2 the running sum of
+    exact interval means ȳ of a Brownian rate from 0, Cov(ȳᵢ, ȳⱼ) = min(i, j) + ½ − δᵢⱼ/6;
+    α = −1, −3, −4 the generalised autocovariance of continuous noise, ±|t|^(1−α) (× ln|t|
+    for odd α), which the rows annihilate up to its order."""
+    idx = np.abs(np.subtract.outer(np.arange(n), np.arange(n))).astype(float)
+    if alpha in (-1, -3, -4):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cov = idx ** (1 - alpha) * (np.where(idx > 0, np.log(idx), 0.0) if alpha % 2 else 1)
+    elif alpha == -2:
+        i = np.arange(n - 1)
+        rate = np.minimum.outer(i, i) + 0.5 - np.eye(n - 1) / 6
+        total = np.tril(np.ones((n, n - 1)), -1)  # x_i = Σ_{k<i} ȳ_k
+        cov = total @ rate @ total.T
+    else:
+        flicker = alpha % 2 == 1
+        p = (3 - alpha) // 2 if flicker else (2 - alpha) // 2
+        size = n if p == 0 else n - 1
+        g = np.zeros(size)
+        g[0] = math.gamma(2.0) / math.gamma(1.5) ** 2 if flicker else 1.0
+        for k in range(1, size):  # γ(k) = γ(k − 1)(k − 1 + d)/(k − d), d = −½
+            g[k] = g[k - 1] * (k - 1.5) / (k + 0.5) if flicker else 0.0
+        cov = g[np.abs(np.subtract.outer(np.arange(size), np.arange(size)))]
+        if p:
+            total = np.tril(np.ones((n, size)), -1)  # x_i = Σ_{k<i} of the sum below
+            for _ in range(p - 1):
+                total = total @ np.tril(np.ones((size, size)))
+            cov = total @ cov @ total.T
+    rows = np.array(_dense_filter_rows(d, m, n, overlapping, modified))
+    out = rows @ cov @ rows.T  # the terms' covariance: tr AΣ, tr (AΣ)² from it
+    return np.trace(out) ** 2 / np.sum(out * out)
 
 
 def test_edf_discrete_is_the_quadratic_forms_exact_edf():
-    """`edf_greenhall(..., discrete=True)`: the exact EDF of each estimator for point-sampled
-    noise up to m = DISCRETE_EDF_M, against the dense quadratic form at every kind and α, and
-    closed forms at m = 1 (white rate noise: Δ²x = Δu, adev EDF (2M)²/(4M + 2(M − 1)), where
-    Greenhall's is 1.17× it; rate random walk: independent terms, EDF = M)."""
+    """`edf_greenhall(..., discrete=True)`: the exact EDF of each estimator for noise as a
+    gyro samples it up to m = DISCRETE_EDF_M, against the dense quadratic form at every kind
+    and α (a rate random walk from its exact interval means, as `ImuModel` draws it: Kasdin's
+    discrete walk gave oadev 1.125× its EDF at m = 1, hdev 0.85×), out to lags where the
+    flicker kernel is its asymptotic series (n = 161), and closed forms at m = 1 (white rate
+    noise: Δ²x = Δu, adev EDF (2M)²/(4M + 2(M − 1)), where Greenhall's is 1.17× it; rate
+    random walk: increments of the interval means correlated ¼ at lag 1,
+    M²/(M + 2(M − 1)/16))."""
     for d, ov, mod in ((2, False, False), (2, True, False), (2, True, True),
                        (3, False, False), (3, True, False)):  # fmt: skip
         for alpha in range(2, 1 - 2 * d, -1):
@@ -191,16 +211,50 @@ def test_edf_discrete_is_the_quadratic_forms_exact_edf():
                 want = _dense_edf(alpha, d, m, n, ov, mod)
                 got = allan.edf_greenhall(alpha, d, m, n, ov, mod, discrete=True)
                 assert got == pytest.approx(want, rel=1e-9), (alpha, d, m, ov, mod)
+    for alpha, d in ((-1, 2), (-2, 2), (-3, 3)):
+        want = _dense_edf(alpha, d, 2, 161, True, False)
+        assert allan.edf_discrete(alpha, d, 2, 161, True, False) == pytest.approx(want, rel=1e-7)
     n = 1025
     terms = n - 2
     white = allan.edf_greenhall(0, 2, 1, n, True, False, discrete=True)
     assert white == pytest.approx((2 * terms) ** 2 / (4 * terms + 2 * (terms - 1)), rel=1e-12)
     assert allan.edf_greenhall(0, 2, 1, n, True, False) / white == pytest.approx(1.174, abs=1e-3)
-    assert allan.edf_greenhall(-2, 2, 1, n, False, False, discrete=True) == pytest.approx(terms)
+    walk = allan.edf_greenhall(-2, 2, 1, n, False, False, discrete=True)
+    assert walk == pytest.approx(terms**2 / (terms + 2 * (terms - 1) / 16), rel=1e-12)
     big = allan.DISCRETE_EDF_M * 2  # beyond: Greenhall's (within 1 % there)
     assert allan.edf_greenhall(0, 2, big, n, True, False, discrete=True) == (
         allan.edf_greenhall(0, 2, big, n, True, False)
     )
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda f: f(0, 2, 1.5, 100, True, False), r"^m must be a whole averaging factor ≥ 1; got"),
+        (lambda f: f(0.5, 2, 1, 100, True, False), r"^alpha must be a whole noise exponent"),
+        (
+            lambda f: f(0, 2, 0, 100, True, False),
+            r"^m must be a whole averaging factor ≥ 1; got 0$",
+        ),
+        (lambda f: f(0, 2, 1, 100.5, True, False), r"^n must be a whole number of phase points"),
+        (lambda f: f(0, 4, 1, 100, True, False), r"^d must be the difference order 1, 2 or 3"),
+        (lambda f: f(3, 2, 1, 100, True, False), r"^alpha = 3 needs 1 - 2d < alpha <= 2"),
+        (lambda f: f(-3, 2, 1, 100, True, False), r"^alpha = -3 needs 1 - 2d < alpha <= 2"),
+        (lambda f: f(0, 2, 50, 100, True, False), r"^n = 100 phase points are fewer"),
+    ],
+)
+def test_edf_functions_refuse_inexact_arguments_by_name(call, match):
+    """`edf_discrete` and `edf_greenhall` ran m = 1.5 as 1 and α = 0.5 as 0 and raised a
+    NumPy error for m = 0: now one line naming the argument (whole numbers as
+    `edf_totdev`); 2.0 and NumPy integers still count as whole."""
+    for f in (allan.edf_discrete, allan.edf_greenhall):
+        with pytest.raises(ValueError, match=match):
+            call(f)
+    assert allan.edf_discrete(np.int64(0), 2.0, 2, 100, True, False) == (
+        allan.edf_discrete(0, 2, 2, 100, True, False)
+    )
+    with pytest.raises(TypeError, match="overlapping"):
+        allan.edf_greenhall(0, 2, 1, 100, "yes", False)
 
 
 def test_deviation_edf_is_exact_at_tau0_and_greenhall_under_stable32():
@@ -884,8 +938,16 @@ def test_total_edf_at_the_shortest_tau_is_at_most_the_terms_and_the_exact_edf():
 
     exact = quadratic_form_edf(totvar_rows(N_EXACT, 1) @ CUMSUM)
     edf = allan.edf_totdev(0, 1, N_EXACT)
-    assert edf == pytest.approx(allan.edf_greenhall(0, 2, 1, N_EXACT, True, False))
-    assert edf <= N_EXACT - 2 and edf <= 1.2 * exact, (edf, exact)
+    assert edf == pytest.approx(allan.edf_greenhall(0, 2, 1, N_EXACT, True, False, True))
+    assert edf <= N_EXACT - 2 and edf == pytest.approx(exact, rel=0.01), (edf, exact)
+    greenhall = allan.edf_totdev(0, 1, N_EXACT, discrete=False)  # the stable32 rule's cap
+    assert greenhall == pytest.approx(allan.edf_greenhall(0, 2, 1, N_EXACT, True, False))
+    assert greenhall == pytest.approx(1.17 * exact, rel=0.01)
+    y = np.random.default_rng(5).normal(size=N_EXACT - 1)
+    for rule, discrete in (("hrgjax", True), ("stable32", False)):
+        r = allan.deviation(y, 1.0, "totdev", taus=[1.0], noise_rule=rule)
+        assert r.alpha[0] == 0
+        assert r.edf[0] == pytest.approx(allan.edf_totdev(0, 1, N_EXACT, discrete=discrete))
     n = 61
     q = [mtotdev_curve(e, [1])[0][0] ** 2 for e in np.eye(n)]
     form = np.diag(q)
@@ -920,6 +982,24 @@ def test_gapped_edf_pools_the_gap_free_segments():
         r = allan.deviation(y, 1.0, taus=[m])
         assert r.alpha[0] == 0 and r.n_terms[0] == len(windows)
         assert r.edf[0] == pytest.approx(quadratic_form_edf(rows), rel=0.1), m
+
+
+def test_gapped_edf_under_the_stable32_rule_pools_greenhalls_edfs():
+    """With gaps each segment's EDF follows the noise rule: Stable32's pools Greenhall's EDF
+    of each gap-free segment (its EDF on a gap-free record), the default the exact one (the
+    segments' EDFs were always the default's: under the stable32 rule 1289, 1071, 612 at
+    m = 1, 2, 4 where its own segments give 1511, 1017, 542)."""
+    y = np.random.default_rng(3).normal(size=2000)
+    y[::50] = np.nan
+    runs = [len(r) for r in "".join("x" if np.isfinite(v) else " " for v in y).split()]
+    for rule, discrete in (("hrgjax", True), ("stable32", False)):
+        r = allan.deviation(y, 1.0, "oadev", taus=[1, 2, 4], noise_rule=rule)
+        for a, m, e in zip(r.alpha, r.m, r.edf, strict=True):
+            terms = [L + 1 - 2 * int(m) for L in runs if L + 1 - 2 * int(m) > 0]
+            seg = [allan.edf_greenhall(int(a), 2, int(m), t + 2 * int(m), True, False, discrete)
+                   for t in terms]  # fmt: skip
+            want = sum(terms) ** 2 / sum(t * t / g for t, g in zip(terms, seg, strict=True))
+            assert e == pytest.approx(want, rel=1e-12), (rule, m)
 
 
 def test_gapped_flicker_noise_keeps_one_records_edf():

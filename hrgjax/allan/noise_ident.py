@@ -94,10 +94,11 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
       averages: flicker 46–62 % right, a random walk 56–60 %: `deviation`'s totdev interval
       there spans the rate noises within one step of the type read) and flicker angle noise at m ≥ 256 (read as white rate
       noise in 22–34 % of records: ±1σ 79–88 %, conservative).
-    - `"stable32"`: as Stable32 1.60's octave tables of two records, which it reproduces at
-      every τ: a real OCXO's (90/90 over seven kinds, `benchmarks/stable32_ocxo.py`) and
-      PHASE.DAT's (57/57 over seven kinds and 13/13 for mtotdev, octave and decade:
-      `benchmarks/stable32_phasedat.py`; the rule was read off those tables, not from
+    - `"stable32"`: as Stable32 1.60's octave tables of two records, whose α it reproduces
+      at every τ of the seven σ kinds: a real OCXO's (90/90, `benchmarks/stable32_ocxo.py`)
+      and PHASE.DAT's (57/57, `benchmarks/stable32_phasedat.py --noise-rule stable32`,
+      which also prints its mtotdev decade table's 8/8 and the mtotdev and ttotdev octave
+      tables' α differing at m = 128, 256; the rule was read off those tables, not from
       Stable32's code): B1 on the rate with its least-squares line (a frequency drift)
       removed, from [`B1_AVERAGES`][hrgjax.allan.B1_AVERAGES] averages on, and with fewer the
       α of the factor before carried on, as by default (PHASE.DAT at m = 128, 7 averages:

@@ -216,8 +216,8 @@ def deviation(
     **Gaps**: NaN samples are missing data. Every kind but the total ones then averages only
     the differences whose windows avoid every gap, as allantools' `gradev` (NumPy, not the
     compiled curve: [`hrgjax.allan.gaps`][hrgjax.allan.gaps]; the noise type read on the
-    bridged record, an approximation). The EDF pools the gap-free segments' Greenhall EDFs,
-    (Σ nₛ)²/Σ nₛ²/EDFₛ over segments of nₛ terms: fragments are less correlated than one
+    bridged record, an approximation). The EDF pools the gap-free segments' EDFs (each a
+    gap-free record's under the same `noise_rule`), (Σ nₛ)²/Σ nₛ²/EDFₛ over segments of nₛ terms: fragments are less correlated than one
     record with as many terms — except for flicker noise (odd α), whose differences stay
     correlated across a gap: there one record's EDF, a conservative one. `n_terms` counts
     the differences used.
@@ -336,7 +336,7 @@ def deviation(
             # (odd α: ±1, and −3 for the Hadamard kinds: long-range correlated), which keeps
             # one record's EDF (conservative)
             edf = np.asarray([e if int(a) % 2 else  # odd α: flicker (α = ±1, −3), correlated
-                              _gapped_edf(kind, int(a), int(k), int(t), segments, e)
+                              _gapped_edf(kind, int(a), int(k), int(t), segments, e, noise_rule)
                               for a, k, t, e in zip(alpha, m, n_terms, edf,
                                                     strict=True)])  # fmt: skip
         if not gaps and kind not in ("mtotdev", "ttotdev"):
@@ -439,12 +439,13 @@ def _runs(y: np.ndarray) -> np.ndarray:
     return np.stack([edges[::2], edges[1::2] - edges[::2]], axis=1).astype(np.int64)
 
 
-def _gapped_edf(kind: str, alpha: int, m: int, n_terms: int, segments, fallback) -> float:
+def _gapped_edf(kind: str, alpha: int, m: int, n_terms: int, segments, fallback, rule) -> float:
     """EDF at factor m of a record with gaps: that of the pooled gap-free segments' estimates
     (a segment's differences are not correlated with another's), scaled by the differences used
     over those the segments hold (1 on rate data; angle data also keep differences that
     step over a missing angle); `fallback` (one record with as many differences) where no
-    segment holds one. A record cut into fragments has 2–3× the EDF of one gap-free record
+    segment holds one; `rule` the noise rule (each segment's EDF as `_edf` gives it under
+    that rule). A record cut into fragments has 2–3× the EDF of one gap-free record
     with as many differences (oadev, white rate noise, a NaN every 50 samples: Monte Carlo
     241 and 156 at m = 16 and 20, one record's 126 and 57; the exact EDF of the quadratic
     form is met to 1e-6 where Greenhall's is exact)."""
@@ -454,7 +455,7 @@ def _gapped_edf(kind: str, alpha: int, m: int, n_terms: int, segments, fallback)
         return float(fallback)
     # the pooled mean of independent segments' estimates weighted by their terms n_s:
     # EDF = (Σ n_s)² / Σ n_s²/EDF_s (the plain sum of EDFs where the segments are equal)
-    spread = sum(count * _n_terms(kind, m, s) ** 2 / _edf(kind, alpha, m, s)
+    spread = sum(count * _n_terms(kind, m, s) ** 2 / _edf(kind, alpha, m, s, rule)
                  for s, count in lengths.items())  # fmt: skip
     return max(held * n_terms / spread, 1.0)
 
@@ -473,7 +474,7 @@ spanning it too made white rate noise's interval 1.4× wider at τ = T than one 
 _SPAN_TYPES = np.array([0, -1, -2])
 _TABLE7 = np.array([[1.50, 0.0], [1.17, 0.22], [0.93, 0.36]])  # SP 1065 Table 7: b, c
 _TOTVAR_A = np.array([0.0, TOTVAR_BIAS[-1], TOTVAR_BIAS[-2]])
-_CAP_FROM = 64  # edf_totdev's Greenhall cap: binds at m ≤ 20 (n ≤ 180), not above (checked)
+_CAP_FROM = 64  # edf_totdev's cap: binds at m ≤ 6 (Greenhall's, stable32: ≤ 20), not above
 
 
 def _rate_noise_span(raw, alpha, m, n, edf, low, high, ci):
@@ -483,8 +484,9 @@ def _rate_noise_span(raw, alpha, m, n, edf, low, high, ci):
     correction (1, 1/(1 − 0.481·τ/T), 1/(1 − ¾·τ/T)) and EDF, the smallest EDF reported.
 
     The EDFs are SP 1065 Table 7's line max(b·N/m − c, 1) as arrays, which is
-    [`edf_totdev`][hrgjax.allan.edf_totdev] there: its Greenhall cap binds only at m ≤ 20 (every
-    m of every n ≤ 400, sampled to 10⁶ + 1 points; from m = 33 on the cap is ≥ 1.02× the line),
+    [`edf_totdev`][hrgjax.allan.edf_totdev] there: its cap (oadev's exact EDF up to m = 64,
+    Greenhall's beyond) binds only at m ≤ 6 (every n ≤ 9m + 1 of m ≤ 64: from m = 33 on it is
+    ≥ 1.05× the line; Greenhall's, ≥ 1.02× from m = 33 on every n sampled to 10⁶ + 1 points),
     so `edf_totdev` itself is asked only at m ≤ 64; one `confidence_interval` call for all τ."""
     edf, low, high = edf.astype(float), low.copy(), high.copy()
     j = np.flatnonzero((alpha <= 0) & ((n - 1) // m <= B1_AVERAGES))
@@ -512,7 +514,7 @@ def _rate_noise_span(raw, alpha, m, n, edf, low, high, ci):
 @functools.lru_cache(maxsize=65536)  # a gapped record asks for each segment length per τ
 def _edf(kind: str, alpha: int, m: int, n: int, rule: str = "hrgjax") -> float:
     if kind == "totdev":
-        return edf_totdev(alpha, m, n)
+        return edf_totdev(alpha, m, n, discrete=rule != "stable32")
     if kind in ("mtotdev", "ttotdev"):
         from .total import edf_mtotdev
 

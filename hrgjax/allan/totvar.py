@@ -32,10 +32,9 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
-import operator
 
-from .._checks import check_flag, describe
+from .._checks import check_flag
+from .._checks import whole_number as _whole
 from .uncertainty import edf_greenhall
 
 TOTVAR_BIAS = {-1: 0.481, -2: 0.750}
@@ -65,19 +64,6 @@ def totvar_bias(alpha: int, m: int, n: int, *, angle_noise: bool = True) -> floa
     if alpha == 1 and angle_noise:
         return _flicker_phase_bias(m, n)
     return 1.0 - TOTVAR_BIAS.get(alpha, 0.0) * m / (n - 1)
-
-
-def _whole(name: str, value, what: str) -> int:
-    """`value` as an int when it is a whole real number (a NumPy integer or 2.0 too), else a
-    one-line `ValueError` naming `name` (no truncation: 1.5 is refused, not read as 1)."""
-    if not isinstance(value, bool):
-        try:
-            return operator.index(value)
-        except TypeError:
-            pass
-        if isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
-            return int(value)
-    raise ValueError(f"{name} must be {what}; got {describe(value)}")
 
 
 def _check_args(alpha, m, n) -> tuple[int, int, int]:
@@ -223,7 +209,7 @@ def _log_sum(s: int, b: int, lo: int, hi: int) -> tuple[int, float]:
     return count, total
 
 
-def edf_totdev(alpha: int, m: int, n: int) -> float:
+def edf_totdev(alpha: int, m: int, n: int, discrete: bool = True) -> float:
     """EDF of the total deviation at factor `m` over `n` phase points for noise type `alpha`
     (rate PSD ∝ f^α, a whole number from −2 to 2), for every factor totdev reads
     (1 ≤ m ≤ n − 1):
@@ -238,20 +224,26 @@ def edf_totdev(alpha: int, m: int, n: int) -> float:
       (as allantools), exp(√(ln((N − 1)/(2m))·ln((2m + 1)(N − 1)/4))), up to m = N/4; beyond,
       where it falls to 1 at m = (N − 1)/2 and is undefined past it, never below Table 7's
       white-rate line 1.5·N/m;
-    - α ≤ 1: at most the Greenhall EDF of an overlapping Allan deviation averaging as many
-      terms (N − 2, on N + 2m − 2 points): Table 7's line exceeds the number of terms at
-      m = 1–2 (3002 at m = 1 over 2001 points, 1999 terms; Monte Carlo 1200–1600, Greenhall
-      1565), and Stein's flicker value exceeds the Monte Carlo EDF from m ≈ N/60 on;
+    - α ≤ 1: at most the EDF of an overlapping Allan deviation averaging as many terms
+      (N − 2, on N + 2m − 2 points): `discrete=True` (the default, and `deviation`'s under its
+      default rule) its exact EDF for noise as a gyro samples it up to m = 64
+      ([`edf_greenhall`][hrgjax.allan.edf_greenhall]`(..., discrete=True)`), `False`
+      Greenhall's (`noise_rule="stable32"`). Table 7's line exceeds the number of terms at
+      m = 1–2 (3002 at m = 1 over 2001 points, 1999 terms; Monte Carlo 1200–1600, exact
+      oadev EDF 1367, Greenhall's 1604), and Stein's flicker value exceeds the Monte Carlo
+      EDF from m ≈ N/60 on;
     - never below 1.
 
-    Against the exact EDF of totdev's quadratic form (N = 201) white rate noise's is high by at
-    most 17 % at m = 1 (Greenhall's own excess there) and 26 % at m ≈ 3N/4 (Table 7). On
-    200 simulated records of N = 2001: rate random walk below the Monte Carlo EDF; flicker
-    angle noise up to 1.4× it at m = 128 (Stein's value alone: 1.8×).
+    Against the exact EDF of totdev's quadratic form (N = 201) white rate noise's is high by
+    at most 26 % at m ≈ 3N/4 (Table 7); at m = 1 it is within 1 % (Greenhall's cap,
+    `discrete=False`, 17 % high). On 200 simulated records of N = 2001: rate random walk
+    below the Monte Carlo EDF; flicker angle noise up to 1.4× it at m = 128 (Stein's value
+    alone: 1.8×).
 
     **Raises:** `ValueError` naming the argument for n < 3, m not a whole number in
-    1 … n − 1, or α not a whole number in −2 … 2."""
+    1 … n − 1, or α not a whole number in −2 … 2; `TypeError` for `discrete` not a bool."""
     alpha, m, n = _check_args(alpha, m, n)
+    discrete = check_flag("discrete", discrete)
     if alpha == 2:
         return max(_white_phase(m, n)[1], 1.0)
     table7 = {0: (1.50, 0.0), -1: (1.17, 0.22), -2: (0.93, 0.36)}
@@ -263,7 +255,7 @@ def edf_totdev(alpha: int, m: int, n: int) -> float:
         edf = _stein_flicker(m, n) if 2 * m < n - 1 else 0.0
         if 4 * m > n:
             edf = max(edf, line)
-    cap = edf_greenhall(alpha, 2, m, n + 2 * m - 2, overlapping=True, modified=False)
+    cap = edf_greenhall(alpha, 2, m, n + 2 * m - 2, True, False, discrete=discrete)
     return max(min(edf, cap), 1.0)
 
 

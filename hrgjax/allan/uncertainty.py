@@ -10,13 +10,15 @@ names are importable from here too).
 
 from __future__ import annotations
 
+import decimal
+import fractions
 import functools
 import math
 from statistics import NormalDist
 
 import numpy as np
 
-from .._checks import describe, is_finite_real
+from .._checks import check_flag, describe, is_finite_real, whole_number
 from .noise_ident import ACF_POINTS as ACF_POINTS
 from .noise_ident import B1_AVERAGES as B1_AVERAGES
 from .noise_ident import NOISE_RULES as NOISE_RULES
@@ -92,7 +94,7 @@ _TABLE3 = {1: (6.0, 4.0), 2: (15.23, 12.0), 3: (47.8, 40.0)}  # flicker phase, u
 
 DISCRETE_EDF_M = 64
 """Up to this factor m, `edf_greenhall(..., discrete=True)` (the default of
-`hg.allan.deviation`) returns the exact EDF of the estimator for point-sampled noise
+`hg.allan.deviation`) returns the exact EDF of the estimator for noise as a gyro samples it
 ([`edf_discrete`][hrgjax.allan.edf_discrete]); beyond, Greenhall's, within 1 % of
 it for every kind and α but flicker angle noise's oadev and ohdev (Greenhall 0.85–0.88× it)."""
 
@@ -107,20 +109,18 @@ def edf_greenhall(
     and Stable32's numbers.
 
     Greenhall & Riley model the phase averaged over τ₀; a gyro's angle samples are point
-    values (its rate samples exact first differences of them), and at small m their EDF is
-    up to 24 % above the estimator's for rate noises (adev white rate 1.17×, hdev flicker
-    rate 1.24×, oadev white rate 0.88× at m = 4). `discrete=True`: the exact EDF
-    ([`edf_discrete`][hrgjax.allan.edf_discrete]) up to m =
+    values (its rate samples exact interval means of the rate), and at m = 1 their EDF is
+    0.86–1.19× the estimator's for rate noises (adev white rate 1.17×, random walk 0.86×,
+    hdev flicker rate 1.13×; oadev white rate 0.88× at m = 4). `discrete=True`: the exact
+    EDF ([`edf_discrete`][hrgjax.allan.edf_discrete]) up to m =
     [`DISCRETE_EDF_M`][hrgjax.allan.DISCRETE_EDF_M], Greenhall's beyond.
 
-    **Raises:** `ValueError` where the variance does not converge (α + 2d ≤ 1) or the data
-    are shorter than the filter."""
-    args = tuple(v.item() if isinstance(v, np.generic) else v
-                 for v in (alpha, d, m, n, overlapping, modified, discrete))  # fmt: skip
-    try:
-        return _edf_greenhall(*args)
-    except TypeError:  # an unhashable argument (an array): not kept
-        return _edf_greenhall.__wrapped__(*args)
+    **Raises:** `ValueError` naming the argument for α, d, m or n not whole numbers (1.5 is
+    refused, not read as 1), d outside 1 … 3, m < 1, α > 2 or a variance that does not
+    converge (α + 2d ≤ 1), or the data shorter than the filter; `TypeError` for
+    `overlapping`, `modified` or `discrete` not a bool."""
+    args = _check_edf_args(alpha, d, m, n, overlapping, modified)
+    return _edf_greenhall(*args, check_flag("discrete", discrete))
 
 
 def _filter_length(d, m, n, modified):
@@ -134,11 +134,9 @@ def _filter_length(d, m, n, modified):
 @functools.lru_cache(maxsize=4096)
 def _edf_greenhall(alpha, d, m, n, overlapping, modified, discrete=False):
     """`edf_greenhall`, kept: the records of one length share their octaves' EDFs."""
-    if alpha + 2 * d <= 1:
-        raise ValueError(f"alpha = {alpha} needs alpha + 2d > 1 (d = {d})")
     if discrete and m <= DISCRETE_EDF_M and alpha <= 2:
         return edf_discrete(alpha, d, m, n, overlapping, modified)
-    s = int(m) if overlapping else 1
+    s = m if overlapping else 1
     length = _filter_length(d, m, n, modified)
     m_terms = 1 + math.floor(s * (n - length) / m)
     j = min(m_terms, (d + 1) * s)
@@ -186,44 +184,124 @@ FLICKER_LAGS = 64
 """`edf_discrete` sums a flicker noise's term correlations out to this many filter lengths
 (they fall as lag⁻² or faster: the rest changes the EDF by < 2e-7 at 65 537 points)."""
 
+_SERIES_FROM = 32
+"""From this lag on, the continuous flicker kernel is its asymptotic series (below it,
+exact in 60-digit decimals: the 2p-th difference of t^(1−α)·ln t cancels ~lag^(4−α) of
+its terms' size)."""
+
+
+def _flicker_series(n_pow: int, p: int, lags: np.ndarray) -> np.ndarray:
+    """δ^(2p)[tⁿ ln t](j) for j ≫ p, 2p = n + 2: δ^(2p) = D^(2p)·(sinh(D/2)/(D/2))^(2p) =
+    Σ_k s_k D^(2p+2k), and D^(n+2+2k)[tⁿ ln t] = −n!·(2k+1)!/t^(2k+2)."""
+    base = [fractions.Fraction(1, 4**i * math.factorial(2 * i + 1)) for i in range(8)]
+    s = [fractions.Fraction(1)] + [fractions.Fraction(0)] * 7
+    for _ in range(2 * p):  # (Σ a_i x^i)^(2p), x = D², truncated at x^7
+        s = [sum(s[i] * base[k - i] for i in range(k + 1)) for k in range(8)]
+    j2 = 1.0 / (lags * lags)
+    total = np.zeros(lags.shape)
+    for k in reversed(range(8)):  # Horner in 1/j²
+        total = (total + float(s[k]) * math.factorial(2 * k + 1)) * j2
+    return -math.factorial(n_pow) * total
+
+
+@functools.lru_cache(maxsize=32)
+def _increment_kernel(alpha: int, lags: int) -> np.ndarray:
+    """The autocovariance at lags 0 … `lags` − 1 of the p-fold phase increments
+    `edf_discrete` works on, normalised to 1 at lag 0 (module of `edf_discrete`)."""
+    out = np.zeros(lags)
+    if alpha in (2, 0):  # white angle noise; white rate noise (a random-walk phase)
+        out[0] = 1.0
+        return out
+    if alpha == 1:  # Kasdin's ARFIMA(0, −½, 0)
+        k = np.arange(lags, dtype=float)
+        return -1.0 / (4.0 * k * k - 1.0)
+    # continuous rate noise, the phase point-sampled: generalised autocovariance
+    # G(t) = |t|^(1−α) (α even) or |t|^(1−α)·ln|t| (α odd) (Greenhall's sw(t, α + 2));
+    # the p-fold increments' autocovariance is ±δ^(2p)G at whole lags
+    n_pow, p = 1 - alpha, (2 - alpha) // 2 if alpha % 2 == 0 else (3 - alpha) // 2
+    row = [(-1) ** (i + p) * math.comb(2 * p, i + p) for i in range(-p, p + 1)]
+    if alpha % 2 == 0:  # a B-spline: lags 0 … p − 1, exact in integers
+        for j in range(min(p, lags)):
+            out[j] = sum(b * abs(j + i - p) ** n_pow for i, b in enumerate(row))
+        return out / out[0]
+    near = min(lags, _SERIES_FROM)
+    with decimal.localcontext(decimal.Context(prec=60)):  # whatever the caller's context
+        g = [decimal.Decimal(0)] + [decimal.Decimal(t) ** n_pow * decimal.Decimal(t).ln()
+                                    for t in range(1, near + p)]  # fmt: skip
+        for j in range(near):
+            out[j] = float(sum(b * g[abs(j + i - p)] for i, b in enumerate(row)))
+    if lags > near:
+        out[near:] = _flicker_series(n_pow, p, np.arange(near, lags, dtype=float))
+    return out / out[0]
+
 
 def edf_discrete(alpha: int, d: int, m: int, n: int, overlapping: bool, modified: bool):
     """Exact EDF of a d-th difference variance at factor `m` over `n` phase points for
-    discrete power-law noise α: (tr AΣ)²/tr (AΣ)², AΣ the estimator's quadratic form on the
-    noise's covariance, i.e. (M·R₀)² / (M·R₀² + 2 Σₖ (M − k)·R_k²) over the M terms the
-    estimator averages, R_k the covariance of terms k strides apart.
+    power-law noise α as a gyro samples it: (tr AΣ)²/tr (AΣ)², AΣ the estimator's quadratic
+    form on the noise's covariance, i.e. (M·R₀)² / (M·R₀² + 2 Σₖ (M − k)·R_k²) over the M
+    terms the estimator averages, R_k the covariance of terms k strides apart.
 
-    The noise (Kasdin's discrete power laws, as allantools' generators): the phase is white
-    (α = 2) or a p-fold running sum of white noise (α = 0, −2, −4: p = 1, 2, 3) or of
-    ARFIMA(0, −½, 0) noise, autocovariance −1/(4k² − 1) (flicker, α = 1, −1, −3: p = 1, 2,
-    3) — white rate noise is the exact point-sampled continuous one. Cost O(d·m) (white,
-    random walk), O(d²m²) (flicker); d, α, `overlapping`, `modified` as
-    [`edf_greenhall`][hrgjax.allan.edf_greenhall].
+    The noise model, by α (the phase x is the angle, point-sampled every τ₀; the rate
+    samples its first differences, i.e. interval means of the rate):
 
-    **Raises:** `ValueError` where the variance does not converge (α + 2d ≤ 1), for
-    α > 2 or the data shorter than the filter."""
-    alpha, d, m, n = int(alpha), int(d), int(m), int(n)
-    if alpha + 2 * d <= 1 or alpha > 2:
-        raise ValueError(f"alpha = {alpha} needs 1 - 2d < alpha <= 2 (d = {d})")
+    - α = 2 (white angle noise): white phase samples;
+    - α = 1 (flicker angle noise): Kasdin's discrete flicker phase (ARFIMA(0, −½, 0)
+      increments, autocovariance −1/(4k² − 1), as allantools' generator);
+    - α ≤ 0 (white rate noise, flicker rate noise, rate random walk; −3, −4 for the
+      Hadamard kinds): continuous rate noise S_y ∝ f^α with no cut-off, its exact
+      interval means — as a gyro integrates it and as
+      [`ImuModel`][hrgjax.ins.sensors.ImuModel] draws a rate random walk. The phase's
+      generalised autocovariance is Greenhall's sw(t, α + 2) (|t|^(1−α), times ln|t| for
+      odd α); the p-fold phase increments' covariance is its 2p-th difference (white rate
+      noise: white increments, as Kasdin's; a random walk: (1, ¼) at lags 0, 1; flicker
+      rate: ∝ −2/k² at large lags, summed out to `FLICKER_LAGS` = 64 filter lengths).
+      Kasdin's discrete rate random walk and flicker rate noise (this function's model
+      until 2026-12-02) are not a gyro's: at m = 1 their EDF is 1.125× this one for oadev
+      (random walk), 0.85× for hdev, 0.92× for flicker rate adev.
+
+    Cost O(d²m²) (flicker, 64 filter lengths), O(d²m) (the rest); d, α, `overlapping`,
+    `modified` as [`edf_greenhall`][hrgjax.allan.edf_greenhall].
+
+    **Raises:** as [`edf_greenhall`][hrgjax.allan.edf_greenhall]."""
+    alpha, d, m, n, overlapping, modified = _check_edf_args(alpha, d, m, n, overlapping, modified)
     _filter_length(d, m, n, modified)
     c = np.zeros(d * m + 1)
     c[::m] = [(-1) ** k * math.comb(d, k) for k in range(d + 1)]
     c = np.convolve(c, np.ones(m)) / m if modified else c
     stride = 1 if overlapping else m
     terms = 1 + (n - c.size) // stride
-    for _ in range((3 - alpha) // 2 if alpha % 2 else (2 - alpha) // 2):
+    p = (3 - alpha) // 2 if alpha % 2 else (2 - alpha) // 2
+    for _ in range(p):
         c = np.cumsum(c[::-1])[::-1][1:]  # the filter on the increments of one sum fewer
     rc = np.correlate(c, c, mode="full")  # lags −(L − 1) … L − 1
     size = c.size
-    if alpha % 2 == 0:  # white increments: R is the filter's own correlation
-        r = rc[size - 1 : size + min((terms - 1) * stride, size - 1)]
+    if alpha % 2 == 0:  # increments correlated over max(p − 1, 0) lags: R ends there
+        reach = size - 1 + max(p - 1, 0)
     else:
-        top = min((terms - 1) * stride, FLICKER_LAGS * size)
-        k = np.arange(-(size - 1), top + size, dtype=float)
-        r = np.convolve(-1.0 / (4.0 * k * k - 1.0), rc, mode="valid")[: top + 1]
+        reach = FLICKER_LAGS * size
+    top = min((terms - 1) * stride, reach)
+    k = np.abs(np.arange(-(size - 1), top + size))
+    r = np.convolve(_increment_kernel(alpha, 1 << int(k.max()).bit_length())[k], rc,
+                    mode="valid")[: top + 1]  # fmt: skip
     r = r[::stride]
     weight = terms - np.arange(r.size)
     return float((terms * r[0]) ** 2 / (terms * r[0] ** 2 + 2 * np.sum(weight[1:] * r[1:] ** 2)))
+
+
+def _check_edf_args(alpha, d, m, n, overlapping, modified):
+    """The EDF functions' arguments as ints and bools, else a one-line error naming one."""
+    alpha = whole_number("alpha", alpha, "a whole noise exponent (rate PSD ∝ f^α), ≤ 2")
+    d = whole_number("d", d, "the difference order 1, 2 or 3 (3: Hadamard)")
+    if d not in (1, 2, 3):
+        raise ValueError(f"d must be the difference order 1, 2 or 3 (3: Hadamard); got {d}")
+    m = whole_number("m", m, "a whole averaging factor ≥ 1")
+    if m < 1:
+        raise ValueError(f"m must be a whole averaging factor ≥ 1; got {m}")
+    n = whole_number("n", n, "a whole number of phase points")
+    if alpha + 2 * d <= 1 or alpha > 2:
+        raise ValueError(f"alpha = {alpha} needs 1 - 2d < alpha <= 2 (d = {d}: the variance "
+                         "converges, rate PSD ∝ f^α)")  # fmt: skip
+    return alpha, d, m, n, check_flag("overlapping", overlapping), check_flag("modified", modified)
 
 
 def confidence_interval(dev, edf, ci: float = ONE_SIGMA):
