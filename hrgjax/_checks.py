@@ -404,10 +404,14 @@ def check_numbers(name: str, x, form: str, shape=None, bools: bool = False):
 
 
 def check_flag(name: str, x) -> bool:
-    """`x` as a bool when it is one (Python `bool` or `np.bool_`), else a one-line `TypeError`
-    naming `name` (a truthy string such as "no" must not switch a feature on)."""
+    """`x` as a bool when it is one (Python `bool`, `np.bool_`, or a concrete 0-d NumPy/JAX
+    array of dtype bool), else a one-line `TypeError` naming `name` (a truthy string such as
+    "no", or a number, must not switch a feature on)."""
     if isinstance(x, bool | np.bool_):
         return bool(x)
+    v = concrete_value(x) if hasattr(x, "dtype") else None
+    if v is not None and np.ndim(v) == 0 and np.asarray(v).dtype == np.bool_:
+        return bool(v)
     shown = (
         "None"
         if x is None
@@ -430,6 +434,9 @@ def whole_number(name: str, value, what: str) -> int:
             return operator.index(value)
         except TypeError:
             pass
+        if hasattr(value, "dtype") and np.ndim(value) == 0:  # a 0-d NumPy/JAX float: its value
+            v = concrete_value(value)
+            value = float(v) if v is not None and np.asarray(v).dtype.kind == "f" else value
         if isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
             return int(value)
     raise ValueError(f"{name} must be {what}; got {describe(value)}")

@@ -939,7 +939,7 @@ def test_total_edf_at_the_shortest_tau_is_at_most_the_terms_and_the_exact_edf():
     exact = quadratic_form_edf(totvar_rows(N_EXACT, 1) @ CUMSUM)
     edf = allan.edf_totdev(0, 1, N_EXACT)
     assert edf == pytest.approx(allan.edf_greenhall(0, 2, 1, N_EXACT, True, False, True))
-    assert edf <= N_EXACT - 2 and edf == pytest.approx(exact, rel=0.01), (edf, exact)
+    assert edf <= N_EXACT - 2 and edf == pytest.approx(exact, rel=1e-12), (edf, exact)
     greenhall = allan.edf_totdev(0, 1, N_EXACT, discrete=False)  # the stable32 rule's cap
     assert greenhall == pytest.approx(allan.edf_greenhall(0, 2, 1, N_EXACT, True, False))
     assert greenhall == pytest.approx(1.17 * exact, rel=0.01)

@@ -230,7 +230,7 @@ def edf_totdev(alpha: int, m: int, n: int, discrete: bool = True) -> float:
       ([`edf_greenhall`][hrgjax.allan.edf_greenhall]`(..., discrete=True)`), `False`
       Greenhall's (`noise_rule="stable32"`). Table 7's line exceeds the number of terms at
       m = 1–2 (3002 at m = 1 over 2001 points, 1999 terms; Monte Carlo 1200–1600, exact
-      oadev EDF 1367, Greenhall's 1604), and Stein's flicker value exceeds the Monte Carlo
+      oadev EDF 1333, Greenhall's 1565), and Stein's flicker value exceeds the Monte Carlo
       EDF from m ≈ N/60 on;
     - never below 1.
 
