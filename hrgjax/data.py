@@ -201,15 +201,26 @@ class MeasuredData:
         """The runs in SI, stacked: one [`RunStack`][hrgjax.data.RunStack] per (length,
         sample interval), ordered by length then interval, runs in order of first appearance.
 
+        Runs share a sample interval when their median intervals agree within
+        `INTERVAL_RTOL` of it or within either run's own jitter (the robust scatter of its
+        intervals, 1.4826 × their median absolute deviation, counted up to
+        `INTERVAL_JITTER_MAX` of the interval): logged time stamps jitter (µs to ms), and
+        runs apart only by that share one stack — and one compiled program in each
+        consumer — instead of one each (36 runs stamped with 1 µs jitter made 34 stacks).
+        Each run keeps its own time stamps (`RunStack.t`); the stack's `dt` (the interval of
+        every run it pools, across lengths) only sets how many samples a window, block or
+        solver step spans.
+
         The one "group runs, stack, convert" view that calibration (physical fit, end-to-end
         MLP training) and discovery (continuous records) build on; the data are not altered.
         """
-        buckets: dict[tuple[int, float], list[np.ndarray]] = {}
         t_all = self._columns["time_s"]
-        for idx in self.run_indices():
-            dt = float(np.median(np.diff(t_all[idx]))) if idx.size > 1 else 0.0
-            buckets.setdefault((idx.size, float(f"{dt:.9g}")), []).append(idx)
-        return [RunStack._of(self, rows) for _, rows in sorted(buckets.items())]
+        runs = self.run_indices()
+        dts = _interval_classes([np.diff(t_all[idx]) for idx in runs])
+        buckets: dict[tuple[int, float], list[np.ndarray]] = {}
+        for idx, dt in zip(runs, dts, strict=True):
+            buckets.setdefault((idx.size, dt), []).append(idx)
+        return [RunStack._of(self, rows, dt) for (_, dt), rows in sorted(buckets.items())]
 
     def save(self, path: str | os.PathLike) -> str:
         """Write CSV (``.csv``) or NetCDF (``.nc``, with each column's ``units``); returns the
@@ -270,7 +281,9 @@ class RunStack:
     **Fields:**
 
     - `run`: (R,) run ids; `rows`: (R, N) row indices into the dataset.
-    - `t`: (R, N) time [s]; `dt`: the first run's median sample interval [s].
+    - `t`: (R, N) each run's own time stamps [s]; `dt`: the runs' sample interval [s], the
+      median of their median intervals over every run of the dataset that shares it
+      (`MeasuredData.stacked`: equal within `INTERVAL_RTOL` or the runs' jitter).
     - `wave_angle`: (R, N) measured wave angle [rad, electrical].
     - `rate`: (R, N) reference rate [rad/s]; `table_angle`: (R, N) reference angle since the
       start of each run [rad].
@@ -303,10 +316,9 @@ class RunStack:
         return self.rows.shape[1]
 
     @classmethod
-    def _of(cls, data: MeasuredData, rows: list[np.ndarray]) -> RunStack:
+    def _of(cls, data: MeasuredData, rows: list[np.ndarray], dt: float) -> RunStack:
         rows = np.stack(rows)
         cols = data._columns
-        n = rows.shape[1]
 
         def col(name, default):
             return cols[name][rows] if name in cols else np.full(rows.shape, default)
@@ -318,7 +330,7 @@ class RunStack:
             run=data.run[rows[:, 0]],
             rows=rows,
             t=t,
-            dt=float(np.median(np.diff(t[0]))) if n > 1 else 0.0,
+            dt=dt,
             wave_angle=cols["wave_angle_deg"][rows] * DEG,
             rate=rate,
             table_angle=table - table[:, :1],
@@ -386,6 +398,47 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
         return MeasuredData(columns, allow_extra=allow_extra)
     except ValueError as err:
         raise ValueError(f"{path}: {with_file_line(str(err), lines)}") from None
+
+
+INTERVAL_RTOL = 1e-6
+"""Relative difference [-] of two runs' median sample intervals below which they are one
+interval (`MeasuredData.stacked`) even without jitter: far above float64 rounding of time
+stamps (1e-16 relative) and a clock's few-ppm rate error between sessions, far below any
+change of sample rate (a window of 10⁴ samples then moves by 1 % of a sample)."""
+
+INTERVAL_JITTER_MAX = 1e-2
+"""The most [-, relative to the interval] a run's own jitter widens `INTERVAL_RTOL`: runs
+pooled under one interval then differ by under 1 % (a window of a given number of samples
+spans the same time to 1 %), and a run sampled irregularly does not pool different rates."""
+
+
+def _interval_classes(steps: list[np.ndarray]) -> list[float]:
+    """Each run's sample interval [s] from its time steps `steps` (one array per run): runs
+    whose median steps agree within `INTERVAL_RTOL` or within either run's jitter
+    (1.4826 × the median absolute deviation of its steps, at most `INTERVAL_JITTER_MAX` of
+    the interval) get one value, the median of their medians; 0 for a run of one sample. Classes are built in increasing order of the median
+    step, each run compared with its class's first run, so a class spans at most one
+    tolerance (no chaining)."""
+    med = np.array([float(np.median(d)) if d.size else 0.0 for d in steps])
+    jit = np.array([1.4826 * float(np.median(np.abs(d - m))) if d.size else 0.0
+                    for d, m in zip(steps, med, strict=True)])  # fmt: skip
+    out = np.zeros(med.size)
+    order = np.argsort(med, kind="stable")
+    start = 0
+    while start < order.size:
+        first = order[start]
+        end = start + 1
+        scale = abs(med[first])
+        while end < order.size:
+            j = order[end]
+            jitter = min(max(jit[first], jit[j]), INTERVAL_JITTER_MAX * scale)
+            if med[j] - med[first] > max(INTERVAL_RTOL * scale, jitter):
+                break
+            end += 1
+        members = order[start:end]
+        out[members] = float(np.median(med[members]))
+        start = end
+    return out.tolist()
 
 
 def _row_rate(time_s) -> float | None:

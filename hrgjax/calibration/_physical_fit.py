@@ -17,7 +17,7 @@ from .._least_squares import least_squares_with_jacobian
 from .._progress import bar
 from ..profiles import Profile
 from ..simulate import simulate
-from ._physical_groups import Group, masked_slopes, window_weights
+from ._physical_groups import Group, many_groups_note, masked_slopes, window_weights
 from ._physical_model import NAMES, SCALE, model_gyro, true_angle
 
 
@@ -207,6 +207,7 @@ def fit_values(groups, x0, k_e, max_steps):
             at["sigma"] = robust_scatter(at["r"], weights)
         return tuple(device(a) for a in _weigh(at["r"], at["jac"], at["sigma"]))
 
+    note = many_groups_note(groups)  # each group compiles: say so where there are many
     # The problem is scaled so that one unit of x is about one standard error: stopping at
     # 1e-4 of that is far below anything the data can tell. Absolute only: a tolerance
     # relative to x stops a fit that started far (|x| in the hundreds) a fraction of a
@@ -216,7 +217,7 @@ def fit_values(groups, x0, k_e, max_steps):
         optx.LevenbergMarquardt(rtol=0.0, atol=1e-4),
         device(np.zeros(len(NAMES))),
         max_steps=max_steps,
-        desc="physical fit (Levenberg–Marquardt)",
+        desc=f"physical fit (Levenberg–Marquardt{'; ' * bool(note)}{note})",
     )
     message = first_failure(result, optx.RESULTS)
     if message is not None:

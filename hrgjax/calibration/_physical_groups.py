@@ -38,6 +38,24 @@ FIT_COMPILE_S = 6.0
 `benchmarks/fit_group_layouts.py`: a 12-h designed plan's 7, 3 and 2 groups 46.8, 22.4 and
 16.1 s) — what running two groups of run lengths as one saves (`merge_buckets`)."""
 
+MANY_GROUPS = 8
+"""Compiled groups beyond which the fit's progress bar says how many it compiles and why
+(`many_groups_note`): each costs about `FIT_COMPILE_S` of compiling, more than a whole fit's
+evaluations on a plan of one sample interval."""
+
+
+def many_groups_note(groups) -> str:
+    """One line for the fit's progress bar when `groups` are more than `MANY_GROUPS`: how
+    many compile (≈ `FIT_COMPILE_S` s each) and what splits runs into groups; else empty."""
+    n = len(groups or ())  # (None: a test's stand-in for the residuals has no groups)
+    if n <= MANY_GROUPS:
+        return ""
+    return (
+        f"compiling {n} groups (≈ {FIT_COMPILE_S:.0f} s each): the runs differ in "
+        "length or sample interval (intervals within 1e-6 or the runs' jitter count as one)"
+    )
+
+
 FIT_EVALUATIONS = 40.0
 """Residual-and-Jacobian evaluations per compile, as `merge_buckets` weighs them against
 compiling: a fit makes ≈ 12 (its Levenberg–Marquardt steps, the weights, the covariance);
@@ -157,7 +175,7 @@ def fit_groups(data: MeasuredData, window_s: float, k_e: float) -> list[Group]:
         # runs shorter than a moving window keep their length (reduced as one window)
         is_short = n < max(int(round(window_s / stack.dt)), 4)
         length = n if is_short or len(stack) >= SHARED_LENGTH_RUNS else ladder(n)
-        key = (length, round(stack.dt, 9))
+        key = (length, stack.dt)  # one value per interval class (`MeasuredData.stacked`)
         buckets.setdefault(key, []).append(stack)
         if is_short:
             short.add(key)

@@ -167,6 +167,13 @@ def cmd_calibrate(args) -> int:
     for T in np.unique(groups):
         r = resid[groups == T]
         print(f"    {T:+7.1f} °C  {np.sqrt(np.mean(r**2)):.4f}")
+    stats = getattr(comp, "fit_stats", None)  # the grey box: each kind of window's scatter
+    if stats:  # χ²/dof is 1 by construction: the rotation scatter is what flags a bad bench
+        print(f"  fit residual RMS [°/h]: at-rest windows {stats['static_rms_dph']:.4f}, "
+              f"rotation windows {stats['moving_rms_dph']:.4f} (χ²/dof "
+              f"{stats['chi2_per_dof']:.3f} by construction: each kind is weighed by its own "
+              "scatter; a rotation RMS well above a clean session's points at the table or "
+              "the bench, not at noise)")  # fmt: skip
     if hasattr(comp, "equations"):  # a model that prints its fitted laws (the grey box)
         print(comp.equations())
     return finish((args.out, lambda p: save_compensator(comp, p)),
