@@ -202,8 +202,8 @@ class MeasuredData:
         sample interval), ordered by length then interval, runs in order of first appearance.
 
         Runs share a sample interval when their median intervals agree within
-        `INTERVAL_RTOL` of it or within either run's own jitter (the robust scatter of its
-        intervals, 1.4826 × their median absolute deviation, counted up to
+        `INTERVAL_RTOL` of it or within `JITTER_SPREAD` × either run's own jitter (the robust
+        scatter of its intervals, 1.4826 × their median absolute deviation, counted up to
         `INTERVAL_JITTER_MAX` of the interval): logged time stamps jitter (µs to ms), and
         runs apart only by that share one stack — and one compiled program in each
         consumer — instead of one each (36 runs stamped with 1 µs jitter made 34 stacks).
@@ -400,11 +400,17 @@ def load(path: str | os.PathLike, allow_extra: bool = False) -> MeasuredData:
         raise ValueError(f"{path}: {with_file_line(str(err), lines)}") from None
 
 
-INTERVAL_RTOL = 1e-6
+INTERVAL_RTOL = 1e-5
 """Relative difference [-] of two runs' median sample intervals below which they are one
-interval (`MeasuredData.stacked`) even without jitter: far above float64 rounding of time
-stamps (1e-16 relative) and a clock's few-ppm rate error between sessions, far below any
-change of sample rate (a window of 10⁴ samples then moves by 1 % of a sample)."""
+interval (`MeasuredData.stacked`) even without jitter: above a clock's few-ppm rate error
+between sessions (runs stamped by clocks 2–5 ppm apart split at 1e-6) and the rounding of
+Unix-epoch stamps (the median step of a 2-ms grid 4.7e-5 s off, the same in every run), far
+below any real difference in sample rate."""
+
+JITTER_SPREAD = 3.0
+"""How many times a run's own jitter (its steps' robust scatter) two runs' median intervals
+may differ by and be one interval: with few samples a median scatters by about the jitter
+itself (36 jittered runs of 9 samples made up to 2 classes at 1×, always 1 at 3×)."""
 
 INTERVAL_JITTER_MAX = 1e-2
 """The most [-, relative to the interval] a run's own jitter widens `INTERVAL_RTOL`: runs
@@ -414,9 +420,9 @@ spans the same time to 1 %), and a run sampled irregularly does not pool differe
 
 def _interval_classes(steps: list[np.ndarray]) -> list[float]:
     """Each run's sample interval [s] from its time steps `steps` (one array per run): runs
-    whose median steps agree within `INTERVAL_RTOL` or within either run's jitter
-    (1.4826 × the median absolute deviation of its steps, at most `INTERVAL_JITTER_MAX` of
-    the interval) get one value, the median of their medians; 0 for a run of one sample. Classes are built in increasing order of the median
+    whose median steps agree within `INTERVAL_RTOL` or within `JITTER_SPREAD` × either run's
+    jitter (1.4826 × the median absolute deviation of its steps; at most
+    `INTERVAL_JITTER_MAX` of the interval) get one value, the median of their medians; 0 for a run of one sample. Classes are built in increasing order of the median
     step, each run compared with its class's first run, so a class spans at most one
     tolerance (no chaining)."""
     med = np.array([float(np.median(d)) if d.size else 0.0 for d in steps])
@@ -431,7 +437,7 @@ def _interval_classes(steps: list[np.ndarray]) -> list[float]:
         scale = abs(med[first])
         while end < order.size:
             j = order[end]
-            jitter = min(max(jit[first], jit[j]), INTERVAL_JITTER_MAX * scale)
+            jitter = min(JITTER_SPREAD * max(jit[first], jit[j]), INTERVAL_JITTER_MAX * scale)
             if med[j] - med[first] > max(INTERVAL_RTOL * scale, jitter):
                 break
             end += 1

@@ -498,6 +498,11 @@ def test_physical_fit_of_jittered_time_stamps_compiles_one_group_and_fits_as_cle
     fit = PhysicalCompensator().fit(jittered)
     z = (np.asarray(fit.values) - np.asarray(clean.values)) / np.sqrt(np.diag(clean.covariance))
     assert np.max(np.abs(z)) < 0.05, dict(zip(physical.NAMES, z.round(3), strict=True))
+    # the statistics `hrgjax calibrate` prints (test_cli stands a fake fit in): at-rest and
+    # rotation windows' scatter [°/h], χ²/dof 1 by construction
+    stats = fit.fit_stats
+    assert stats["chi2_per_dof"] == pytest.approx(1.0, abs=1e-6)
+    assert 0 < stats["static_rms_dph"] < stats["moving_rms_dph"] < 1.0  # 0.006, 0.14 °/h
 
 
 def test_residual_scatter_counts_each_kinds_degrees_of_freedom():
