@@ -41,3 +41,24 @@ def test_no_control_character_in_the_sources():
         if any(c in line for c in "\t\x07\x08\x0b\x0c")
     }
     assert not bad, bad
+
+
+def test_marks_sit_on_tests():
+    """A `@pytest.mark.…` on a helper is dropped silently by pytest: a slow test whose
+    decorator a refactor left above a new helper ran in the fast tier (20 physical fits,
+    ≈ 40 s of `make test`) while the helper carried the mark."""
+    import ast
+
+    root = HOUSE.parents[1] / "tests"
+    stray = []
+    for p in sorted(root.glob("*.py")):
+        for node in ast.walk(ast.parse(p.read_text())):
+            if not isinstance(node, ast.FunctionDef | ast.ClassDef) or node.name.startswith(
+                ("test_", "Test")
+            ):
+                continue
+            for dec in node.decorator_list:
+                target = dec.func if isinstance(dec, ast.Call) else dec
+                if "mark" in ast.unparse(target).split("."):
+                    stray.append(f"{p.name}:{node.lineno} {node.name}")
+    assert not stray, stray

@@ -431,11 +431,6 @@ def test_end_to_end_gradient_matches_finite_differences(small_runs):
 # --- physical fit: coverage of the reported uncertainties ---------------------------------
 
 
-@pytest.mark.slow(
-    "~40 s: 20 noisy benches fitted; fast tier: the physical fit's values on one bench "
-    "(test_calibration); benchmarks/coverage.py --only-physical measures the σ's coverage "
-    "at scale"
-)
 def _injected_truth() -> dict:
     """Physical parameters injected into the simulated bench sessions (`_injected_session`)."""
     truth = dict(zip(physical.NAMES, np.zeros(len(physical.NAMES)), strict=True))
@@ -464,6 +459,11 @@ def _injected_session(gyro, seed: int):
     return hg.data.concat([d1, d2])
 
 
+@pytest.mark.slow(
+    "~40 s: 20 noisy benches fitted; fast tier: the physical fit's values on one bench "
+    "(test_calibration); benchmarks/coverage.py --only-physical measures the σ's coverage "
+    "at scale"
+)
 def test_physical_fit_recovers_injected_damping_within_uncertainty():
     truth = _injected_truth()
     gyro = noisy_model_gyro(jnp.asarray([truth[n] for n in physical.NAMES]))
