@@ -116,6 +116,23 @@ def closed_form_session(bias_dph=0.0, temps=(-40.0, 20.0, 60.0), angles=SESSION_
     )
 
 
+AMPLITUDE_DPH = 0.186
+"""Ω cos φ sin δ at 45° N and δ = 1° [°/h]: the tilt of the 2026-12-01 bench audit."""
+
+
+def azimuth_session(amplitude_dph=AMPLITUDE_DPH):
+    """The closed-form test session (0.43 °/h switch-on bias) with each run started at table
+    azimuth 90°·(run mod 4) and `amplitude_dph`·cos(azimuth) added to its bias (exact for
+    the static runs, whose table stays at that azimuth)."""
+    n_runs = 36  # 18 static then 18 rotation runs (closed_form_session's grid)
+    az = 90.0 * (np.arange(n_runs) % 4)
+    bias = 0.43 + amplitude_dph * np.cos(np.deg2rad(az))
+    data = closed_form_session(bias)
+    cols = dict(data.columns)
+    cols["table_angle_deg"] = data.table_angle_deg + az[data.run]
+    return hg.MeasuredData(cols)
+
+
 class CompileCounter:
     """Counts JAX traces and XLA compiles (jax.monitoring events) while active:
     `with CompileCounter() as c: …; c.compiles, c.traces`."""

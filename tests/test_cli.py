@@ -612,3 +612,24 @@ def test_allan_refuses_integers_a_float_would_round(tmp_path, capsys):
     cli_fails(["allan", str(picked), "--rate-hz", "10"], capsys,
               r"^hrgjax allan: error: .*count.csv: column 'count' row 0 \(line 2\): the "
               r"integer 9007199254740993 is too large")  # fmt: skip
+
+
+def test_correct_prints_the_residual_by_table_azimuth(two_sessions, tmp_path, capsys):
+    """F3 of the 2026-12-01 bench audit: static runs started at four table azimuths with a
+    tilted gyro axis (A·cos azimuth added, A = 0.186 °/h: 1° at 45° N) showed only as a
+    wave-angle pattern; `correct` now prints the residual by start azimuth and the cos/sin
+    fit, which recovers A."""
+    from helpers import AMPLITUDE_DPH, azimuth_session
+
+    folder, _, fourier, _ = two_sessions
+    data = azimuth_session().save(tmp_path / "az.csv")
+    capsys.readouterr()
+    argv = ["correct", str(data), "--model", str(fourier), "--out", str(tmp_path / "c.csv")]
+    assert main(argv + ["--no-angles"]) == 0
+    text = capsys.readouterr().out
+    assert "static residual after the offset by start table azimuth" in text
+    rows = text[text.index("by start table azimuth") :].splitlines()
+    assert [r.split()[0] for r in rows[2:6]] == ["0", "90", "180", "270"]
+    line = next(r for r in rows if r.strip().startswith("Fourier+T^2: c = "))
+    c, sigma = (float(x) for x in line.split("c = ")[1].split(",")[0].split(" ± "))
+    assert abs(c - AMPLITUDE_DPH) < 3 * sigma and "resolved at 95 %" in line

@@ -1,5 +1,7 @@
 """The HRG calibration study of seed 000: plans, reduction, compensators, evaluation."""
 
+from ._azimuth import AzimuthFit as AzimuthFit
+from ._azimuth import table_azimuth_fit as table_azimuth_fit
 from ._compensator import AbstractCompensator as AbstractCompensator
 from ._compensator import TemperatureDomainWarning as TemperatureDomainWarning
 from .design import BenchModel as BenchModel

@@ -19,6 +19,7 @@ import os
 
 import numpy as np
 
+from ._azimuth import azimuth_groups
 from .evaluate import SEED_TABLE
 
 UNIT = {"static_residual_dph": "°/h", "angle_error_deg": "°", "max_angle_error_deg": "°"}
@@ -106,6 +107,13 @@ def comparison_json(c) -> dict:
                 "figure_of_merit": {k: json_number(v) for k, v in c.figure_of_merit(lab).items()},
                 "before_offset": before,
                 "temperature_domain": domain_json((c.domains or {}).get(lab)),
+                "by_table_azimuth": {
+                    "mean_static_residual_dph": {
+                        f"{a:g}": json_number(m) for a, (m, _) in azimuth_means(c, lab).items()
+                    },
+                    "n_static_runs": {f"{a:g}": n for a, (_, n) in azimuth_means(c, lab).items()},
+                },
+                "table_azimuth_fit": None if (f := c.azimuth_fit(lab)) is None else f.to_json(),
             }
         )
     seed = {
@@ -183,6 +191,52 @@ def _table(c, key, by, title):
     return rows
 
 
+MAX_AZIMUTH_ROWS = 12
+"""More start azimuths than this: the text gives the cos/sin fit without a row each."""
+AZIMUTH_NOTE = ("a resolved term is a rate turning with the table: the gyro's axis tilted "
+                "from the table's (the horizontal Earth rate Ω cos φ sin δ, 0.186 °/h at 1° and "
+                "45° N), or a drift with the lateral specific force on a tilted table")  # fmt: skip
+"""What the text says a resolved cos/sin(azimuth) term names."""
+
+
+def azimuth_means(c, label: str) -> dict:
+    """{start table azimuth [°]: (mean static residual after the offset [°/h], runs)}."""
+    e = c.residuals[label]
+    keys = azimuth_groups(e.get("table_angle0_deg", np.zeros(e["run"].shape)))
+    st = np.asarray(e["static"], bool)
+    d = np.asarray(e["drift_error_dph"])
+    return {float(a): (float(np.mean(d[st & (keys == a)])), int(np.sum(st & (keys == a))))
+            for a in c.table_azimuths_deg}  # fmt: skip
+
+
+def _azimuth_table(c) -> list[str]:
+    """The static residual by start table azimuth (mean, signed) and each compensator's
+    cos/sin(azimuth) fit, where the static runs stand at two azimuths or more."""
+    width = max(12, *(len(lab) + 1 for lab in c.labels))
+    means = {lab: azimuth_means(c, lab) for lab in c.labels}
+    rows = ["static residual after the offset by start table azimuth, mean over the runs [°/h]"]
+    azimuths = c.table_azimuths_deg
+    if len(azimuths) <= MAX_AZIMUTH_ROWS:
+        rows.append(f"{'az [°]':>7} " + " ".join(f"{lab:>{width}}" for lab in c.labels)
+                    + f" {'runs':>5}")  # fmt: skip
+        for a in azimuths:
+            n = means[c.labels[0]][a][1]
+            rows.append(f"{a:>7g} " + " ".join(f"{means[lab][a][0]:>+{width}.4f}"
+                                               for lab in c.labels) + f" {n:>5d}")  # fmt: skip
+    else:
+        rows.append(f"  ({len(azimuths)} start azimuths: the fit only)")
+    fits = {lab: c.azimuth_fit(lab) for lab in c.labels}
+    if all(f is None for f in fits.values()):
+        rows.append("  (a cos/sin fit needs static runs at 3 azimuths or more)")
+        return rows
+    rows.append("cos/sin fit on the start azimuth a, r = m + c·cos a + s·sin a "
+                "(duration-weighted; σ from the runs' scatter):")  # fmt: skip
+    rows += [f"  {lab}: {f}" for lab, f in fits.items() if f is not None]
+    if any(f is not None and f.resolved() for f in fits.values()):
+        rows.append(f"  {AZIMUTH_NOTE}")
+    return rows
+
+
 def comparison_text(c, by_wave_angle: bool = True) -> str:
     """[`Comparison.format`][hrgjax.calibration.Comparison.format]'s body."""
     counts = c.counts()
@@ -234,6 +288,8 @@ def comparison_text(c, by_wave_angle: bool = True) -> str:
                        "over temperatures"))  # fmt: skip
     for key, by, title in tables:
         lines += _table(c, key, by, title) + [""]
+    if len(c.table_azimuths_deg) > 1:
+        lines += _azimuth_table(c) + [""]
     for key in c.paired_keys() if len(c.labels) > 1 else []:
         what = "static residual" if key == "static_residual_dph" else "end-of-run angle error"
         lines.append(f"told apart? {what} after the offset, paired on the shared runs "

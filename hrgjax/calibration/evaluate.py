@@ -81,7 +81,9 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
 
     **Returns:** dict of arrays, one entry per run: `run`, `temperature_c` (the run's mean
     [°C]), `wave_angle0_deg` (measured wave angle at the run's start [° electrical]),
-    `duration_s` [s], `static` (bool), `drift_error_dph` (static runs; NaN otherwise),
+    `table_angle0_deg` (the table angle column at the run's start [°], as given: the table
+    azimuth the run starts at where the bench logs its absolute angle; 0 where the column is
+    absent and integrated from the rate per run), `duration_s` [s], `static` (bool), `drift_error_dph` (static runs; NaN otherwise),
     `angle_error_deg` and `max_angle_error_deg` (moving runs; NaN otherwise).
 
     **Raises:** `ValueError` if `corrected` has no `angle_corrected_deg` column.
@@ -91,7 +93,7 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
             "data have no angle_corrected_deg column; compensate them first (comp.correct(data) "
             "or hrgjax correct)"
         )
-    names = ("run", "temperature_c", "wave_angle0_deg", "duration_s", "static")
+    names = ("run", "temperature_c", "wave_angle0_deg", "table_angle0_deg", "duration_s", "static")
     rows = {k: [] for k in names + ("drift_error_dph", "angle_error_deg", "max_angle_error_deg")}
     table = corrected.table_angle_deg
     offset_dps = float(offset_dph) / 3600.0
@@ -106,6 +108,7 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
         rows["run"].append(int(corrected.run[idx[0]]))
         rows["temperature_c"].append(float(np.mean(corrected["temperature_c"][idx])))
         rows["wave_angle0_deg"].append(float(corrected["wave_angle_deg"][idx[0]]))
+        rows["table_angle0_deg"].append(float(table[idx[0]]))
         rows["duration_s"].append(float(duration))
         rows["static"].append(static)
         rows["drift_error_dph"].append(

@@ -75,7 +75,10 @@ error at a run's start, ≤ 0.6° on `tvg3_like()`, stays inside the bin) and fo
 group, as in `scale_factor_vs_angle` and the MLP). Each figure is the
 RMS over the runs of a group: per temperature over the wave angles (the seed's accuracy
 table, [`accuracy_table`][hrgjax.calibration.accuracy_table]), per wave angle over the
-temperatures. The **figure of merit** of a compensator is the RMS over every static run
+temperatures. Where the static runs start at several table azimuths (the absolute
+`table_angle_deg` at a run's start, rounded to 1°), `format()` adds their mean residual per
+azimuth and [`table_azimuth_fit`][hrgjax.calibration.table_azimuth_fit] (a rate turning with
+the table: a tilted gyro axis). The **figure of merit** of a compensator is the RMS over every static run
 (°/h) and every rotation run (°) after the offset.
 
 **Told apart?** An RMS over $n$ runs carries a sampling error of about RMS/√(2n), as large as
@@ -97,6 +100,7 @@ import numpy as np
 
 from .._warn import user_stacklevel
 from ..data import MeasuredData
+from ._azimuth import AzimuthFit, azimuth_groups, table_azimuth_fit
 from ._compensator import AbstractCompensator, Corrected, TemperatureDomainWarning
 from ._grouping import nearest_multiples, wave_angle_groups
 from ._offset import Offset as Offset
@@ -166,7 +170,9 @@ class Comparison:
             return nearest_multiples(e["temperature_c"], self.temperature_bin_c)
         if by == "wave_angle":
             return wave_angle_groups(e["wave_angle0_deg"], self.angle_bin_deg)
-        raise ValueError(f"by must be 'temperature' or 'wave_angle'; got {by!r}")
+        if by == "table_azimuth":  # errors made without it (by hand): all at one azimuth
+            return azimuth_groups(e.get("table_angle0_deg", np.zeros(e["run"].shape)))
+        raise ValueError(f"by must be 'temperature', 'wave_angle' or 'table_azimuth'; got {by!r}")
 
     def figure(self, label: str, key: str, by: str = "temperature", after: bool = True) -> dict:
         """RMS of one figure per group: {T [°C] or θ [°]: RMS}.
@@ -175,7 +181,8 @@ class Comparison:
         [`UNIT`][hrgjax.calibration.session.UNIT]'s: `static_residual_dph` [°/h],
         `angle_error_deg` [°], `max_angle_error_deg` [°]), `by` (`"temperature"`: RMS over the
         wave angles at each temperature; `"wave_angle"`: over the temperatures at each start
-        angle), `after` (False: the offset kept, as `accuracy_table`).
+        angle; `"table_azimuth"`: over the runs at each start table azimuth, [°] to
+        `AZIMUTH_BIN_DEG`), `after` (False: the offset kept, as `accuracy_table`).
         """
         if key not in ERROR_KEY:
             raise ValueError(f"key must be one of {tuple(ERROR_KEY)}; got {key!r}")
@@ -316,6 +323,22 @@ class Comparison:
         """Start wave-angle groups of the session [° electrical], sorted."""
         keys = np.concatenate([self._keys(lab, "wave_angle") for lab in self.labels])
         return [float(k) for k in np.unique(keys)]
+
+    @property
+    def table_azimuths_deg(self) -> list[float]:
+        """Start table azimuths of the static runs [°, in [0, 360)], sorted: more than one
+        where the bench logs absolute table angles and the static runs stand at several."""
+        e = self.errors[self.labels[0]]
+        return [
+            float(k) for k in np.unique(self._keys(self.labels[0], "table_azimuth")[e["static"]])
+        ]
+
+    def azimuth_fit(self, label: str) -> AzimuthFit | None:
+        """`label`'s static residuals after the offset fitted on 1, cos and sin of the start
+        table azimuth ([`table_azimuth_fit`][hrgjax.calibration.table_azimuth_fit]; None with
+        fewer than 3 azimuths, or errors without `table_angle0_deg`)."""
+        e = self.residuals[label]
+        return table_azimuth_fit(e) if "table_angle0_deg" in e else None
 
     def counts(self) -> dict:
         """{"static": static runs, "rotation": moving runs} of the session."""

@@ -361,8 +361,8 @@ def _evaluation_options(p) -> None:
                    help="runs are grouped by start wave angle rounded to a multiple of "
                    "this [° electrical]")  # fmt: skip
     p.add_argument("--no-angles", action="store_true",
-                   help="print the tables per temperature only (the JSON and the figure "
-                   "keep the wave angles)")  # fmt: skip
+                   help="print no tables per start wave angle (the JSON and the figure "
+                   "keep them; the table per start table azimuth stays)")  # fmt: skip
     allow_extra_option(p)
 
 
