@@ -1,5 +1,6 @@
 """Seed 002's neural detectors and the method comparison, on a small stationary complex."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,19 +15,27 @@ from hrgjax.ins.platform import PlatformINS
 SIZES = (1.5e-7, 3e-7)
 
 
-def _healthy(ins, key, runs, k_len):
-    keys = jax.random.split(key, runs)
+@eqx.filter_jit  # one program (eagerly, each operation under vmap compiled apart)
+def _healthy(ins, sets, k_len):
+    """Healthy complexes' measurements, one (runs, k_len + 1, 2) array per `(key, runs)` of
+    `sets`: each set's runs from `jax.random.split(key, runs)`, all in one batch."""
+    keys = jnp.concatenate([jax.random.split(k, runs) for k, runs in sets])
     sim = lambda k: cx.simulate_complex(ins, dt=1.0, n_steps=k_len + 2, key=k)[1]
-    z = jax.vmap(lambda k: cx.measurements(sim(k), 1.0, "accel_y", ins))(keys)
-    return z + 1e-9 * jax.random.normal(jax.random.fold_in(key, 1), z.shape)
+    z_all = jax.vmap(lambda k: cx.measurements(sim(k), 1.0, "accel_y", ins))(keys)
+    out, start = [], 0
+    for key, runs in sets:
+        z = z_all[start : start + runs]
+        start += runs
+        out.append(z + 1e-9 * jax.random.normal(jax.random.fold_in(key, 1), z.shape))
+    return out
 
 
 @pytest.fixture(scope="module")
 def data():
     ins = PlatformINS()
     tmpl = nl.onset_templates(ins, "accel_y", 1.0)
-    z_tr = _healthy(ins, jax.random.key(1), 3, 400)
-    z_te = _healthy(ins, jax.random.key(2), 2, 400)  # held out: its own keys
+    # 3 training runs and 2 held out, on their own keys
+    z_tr, z_te = _healthy(ins, ((jax.random.key(1), 3), (jax.random.key(2), 2)), 400)
     # 1200 training windows: onsets carry either sign, so each (INS, sign) pattern has half
     # the examples 600 gave when they were positive only (the MLP's held-out accuracy with
     # 600 signed windows was a draw: 0.74 or 0.84 for keys 6 and 7, chance 0.52)
@@ -91,10 +100,10 @@ def test_predictor_bank_names_the_onset_by_least_residual(data):
     tmpl, z_tr, z_te, _, _ = data
     sets, classes = nl.predictor_sets(z_tr, tmpl, jax.random.key(7), 120, sizes=SIZES)
     assert classes == (0, 1, 1, 2, 2, 3, 3)
-    # 20 hidden units, not the default 50: the Levenberg–Marquardt steps' linear algebra
-    # grows as the square of the weights (the seven fits take ≈ 4 s here on 2 CPU cores)
+    # 10 hidden units, not the default 50: each Levenberg–Marquardt step factors a matrix
+    # of the weights' size (392 here, 782 with 20 units: ≈ 8× the work)
     with CompileCounter() as compiles:
-        pred = nl.MLPPredictor.fit(sets, key=jax.random.key(8), hidden=20, max_steps=8,
+        pred = nl.MLPPredictor.fit(sets, key=jax.random.key(8), hidden=10, max_steps=8,
                                    classes=classes)  # fmt: skip
     # one Levenberg–Marquardt program for the seven hypotheses (same shapes)
     assert compiles.names.count("jit(least_squares)") == 1, compiles.names
@@ -102,10 +111,10 @@ def test_predictor_bank_names_the_onset_by_least_residual(data):
                                   onset_within_last=3)  # fmt: skip
     acc = float(jnp.mean(pred.classify_pairs(*nl.predictor_set(w)) == c))
     # held-out accuracy over 12 draws (data keys (1, 2), (11, 12), (21, 22), (31, 32), fit
-    # keys 8–10): 0.935–0.975, chance 0.48, no healthy window named a fault. One predictor
-    # per INS trained on both signs predicts their mean (no jump) at an onset, where the
-    # window says nothing of the sign: 0.63–0.74 over the first 6 draws, 15–25 % of the
-    # healthy windows named a fault
+    # keys 8–10): 0.925–0.9725 (with 20 hidden units 0.935–0.975), chance 0.48, no healthy
+    # window named a fault. One predictor per INS trained on both signs (20 units) predicts
+    # their mean (no jump) at an onset, where the window says nothing of the sign: 0.63–0.74
+    # over the first 6 draws, 15–25 % of the healthy windows named a fault
     assert acc > 0.9, (acc, _chance(c))
     assert nl.MLPPredictor.fit(sets[:2], key=jax.random.key(8), hidden=2, max_steps=1,
                                classes=jnp.array([0, 1])).classes == (0, 1)  # fmt: skip
