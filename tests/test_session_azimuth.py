@@ -103,3 +103,107 @@ def test_compare_reports_the_residual_by_table_azimuth(fourier):
     plain = compare({"F": fourier}, closed_form_session(0.43))
     assert plain.azimuth_fit("F") is None and "table azimuth" not in plain.format()
     assert plain.to_json()["compensators"][0]["table_azimuth_fit"] is None
+
+
+# review of 82f3348 (rev1): a narrow arc of azimuths, null fits' azimuth, NaN runs, 359.7°, docs
+
+
+def _static(az, r, duration=None):
+    """Error dicts of static runs at start azimuths `az` [°] with residuals `r` [°/h]."""
+    n = len(az)
+    return {"run": np.arange(n), "temperature_c": np.full(n, 20.0),
+            "wave_angle0_deg": np.zeros(n), "static": np.ones(n, bool),
+            "duration_s": np.full(n, 60.0) if duration is None else np.asarray(duration, float),
+            "drift_error_dph": np.asarray(r, float), "angle_error_deg": np.full(n, np.nan),
+            "max_angle_error_deg": np.full(n, np.nan), "table_angle0_deg": np.asarray(az, float)}  # fmt: skip
+
+
+def _comparison(e):
+    """A one-compensator Comparison on hand-made errors (no compensator, no JAX)."""
+    from hrgjax.calibration import Comparison, session_offset
+
+    off = session_offset(e, "A")
+    return Comparison(labels=("A",), names={"A": "A"}, files={"A": None}, offset=off,
+                      own_offsets={"A": off}, errors={"A": e}, residuals={"A": e})  # fmt: skip
+
+
+def _spread(az, w):
+    """Smallest eigenvalue of the weighted covariance of (cos a, sin a), written out."""
+    a, w = np.deg2rad(az), np.asarray(w, float) / np.sum(w)
+    cc, ss = np.cos(a) - w @ np.cos(a), np.sin(a) - w @ np.sin(a)
+    vcc, vss, cs = w @ cc**2, w @ ss**2, w @ (cc * ss)
+    return (vcc + vss) / 2 - math.sqrt(((vcc - vss) / 2) ** 2 + cs**2)
+
+
+def test_azimuth_fit_refuses_a_narrow_arc():
+    """Static runs parked at one azimuth whose logged angle creeps (here 0.5° per run over
+    three 5° groups) read an unmodelled temperature curvature as a huge "resolved" c; three
+    equal groups on an arc of half-width h have spread (2/9)(1 − cos h)², 0.5 round the turn."""
+    temps = np.repeat([-40.0, 20.0, 60.0], 6)
+    creep = 0.5 * np.arange(18)
+    e = _static(creep, 0.002 * (temps - 20.0) ** 2 / 40.0, duration=np.linspace(60, 600, 18))
+    assert table_azimuth_fit(e) is None
+    text = _comparison(e).format()
+    assert "too narrow an arc" in text and "Earth rate" not in text and "c = " not in text
+    from hrgjax.calibration._azimuth import AZIMUTH_MIN_SPREAD, azimuth_spread
+
+    assert azimuth_spread(creep, e["duration_s"]) == pytest.approx(
+        _spread(creep, e["duration_s"]), rel=1e-6)  # fmt: skip
+    for h in (30.0, 45.0, 60.0, 90.0, 120.0):
+        az = np.repeat([-h, 0.0, h], 4)
+        lam = 2 / 9 * (1 - math.cos(math.radians(h))) ** 2 if h <= 90 else 0.5
+        assert azimuth_spread(az, np.ones(12)) == pytest.approx(lam, rel=1e-9)
+        fit = table_azimuth_fit(_static(az, np.random.default_rng(1).standard_normal(12)))
+        assert (fit is None) == (lam < AZIMUTH_MIN_SPREAD)
+    # the threshold is an option: 0/45/90° (spread 0.019) fits when asked
+    az = np.repeat([0.0, 45.0, 90.0], 4)
+    e = _static(az, np.random.default_rng(2).standard_normal(12))
+    assert table_azimuth_fit(e) is None
+    assert table_azimuth_fit(e, min_spread=0.01).spread == pytest.approx(_spread(az, np.ones(12)))
+    # a 0.4° scatter about one parking azimuth is one 5° group: no table
+    jitter = _static(np.random.default_rng(5).normal(0.0, 0.4, 18), 0.01 * temps)
+    assert _comparison(jitter).table_azimuths_deg == [0.0]
+
+
+def test_azimuth_is_printed_only_when_resolved():
+    """A null fit's azimuth is noise (the F test's p = 0.28 here): not printed."""
+    az = 90.0 * (np.arange(16) % 4)
+    noise = 0.03 * np.random.default_rng(4).standard_normal(16)
+    null = table_azimuth_fit(_static(az, noise))
+    assert not null.resolved() and "largest at azimuth" not in str(null)
+    assert "azimuth undetermined" in str(null)
+
+
+def test_the_printed_azimuth_is_folded_after_rounding():
+    """A resolved term largest at 359.7°: "0°", not "360°"."""
+    az = 90.0 * (np.arange(16) % 4)
+    noise = 0.03 * np.random.default_rng(4).standard_normal(16)
+    tilt = 0.2 * np.cos(np.deg2rad(az - 359.7)) + 1e-4 * noise
+    fit = table_azimuth_fit(_static(az, tilt))
+    assert fit.resolved() and fit.azimuth_deg == pytest.approx(359.7, abs=0.05)
+    assert "largest at azimuth 0° ± 0°" in str(fit) and "360°" not in str(fit)
+
+
+def test_a_nan_static_run_is_left_out_of_its_azimuth_row():
+    r = 0.01 * np.random.default_rng(0).standard_normal(12)
+    r[3] = np.nan  # a static run too short to give a rate
+    c = _comparison(_static(90.0 * (np.arange(12) % 4), r))
+    f = c.to_json()["compensators"][0]["by_table_azimuth"]
+    assert f["n_static_runs"] == {"0": 3, "90": 3, "180": 3, "270": 2}
+    assert f["mean_static_residual_dph"]["270"] == pytest.approx(np.mean(r[[7, 11]]), rel=1e-12)
+    assert "nan" not in c.format().split("by start table azimuth")[1]
+
+
+def test_the_json_layout_is_documented():
+    """Every compensator key of `Comparison.to_json` is in its docstring and docs/cli.md."""
+    from pathlib import Path
+
+    from hrgjax.calibration import Comparison
+
+    c = _comparison(_static(90.0 * (np.arange(12) % 4), np.zeros(12)))
+    docs = Path(__file__).parents[1] / "docs"
+    cli = (docs / "cli.md").read_text()
+    for key in c.to_json()["compensators"][0]:
+        assert f'"{key}"' in Comparison.to_json.__doc__ and f'"{key}"' in cli, key
+    assert "`_azimuth`" in (docs / "architecture.md").read_text()
+    assert "table azimuth" in cli.split("`--no-angles` ")[1].split(".")[0]

@@ -19,7 +19,7 @@ import os
 
 import numpy as np
 
-from ._azimuth import azimuth_groups
+from ._azimuth import AZIMUTH_MIN_SPREAD, azimuth_groups, azimuth_spread, static_azimuths
 from .evaluate import SEED_TABLE
 
 UNIT = {"static_residual_dph": "°/h", "angle_error_deg": "°", "max_angle_error_deg": "°"}
@@ -200,13 +200,30 @@ AZIMUTH_NOTE = ("a resolved term is a rate turning with the table: the gyro's ax
 
 
 def azimuth_means(c, label: str) -> dict:
-    """{start table azimuth [°]: (mean static residual after the offset [°/h], runs)}."""
+    """{start table azimuth [°]: (mean static residual after the offset [°/h], runs)} over the
+    static runs with a finite residual (NaN and 0 where an azimuth has none for `label`)."""
     e = c.residuals[label]
     keys = azimuth_groups(e.get("table_angle0_deg", np.zeros(e["run"].shape)))
-    st = np.asarray(e["static"], bool)
-    d = np.asarray(e["drift_error_dph"])
-    return {float(a): (float(np.mean(d[st & (keys == a)])), int(np.sum(st & (keys == a))))
-            for a in c.table_azimuths_deg}  # fmt: skip
+    d = np.asarray(e["drift_error_dph"], float)
+    ok = np.asarray(e["static"], bool) & np.isfinite(d)
+    out = {}
+    for a in c.table_azimuths_deg:
+        sel = ok & (keys == a)
+        out[float(a)] = (float(np.mean(d[sel])) if sel.any() else math.nan, int(sel.sum()))
+    return out
+
+
+def _no_fit_reason(c) -> str:
+    """Why no compensator has an azimuth fit: too few azimuths, or too narrow an arc."""
+    e = c.residuals[c.labels[0]]
+    if "table_angle0_deg" in e:
+        az, _, w = static_azimuths(e)
+        spread = azimuth_spread(az, w)
+        if np.unique(azimuth_groups(az)).size >= 3 and spread < AZIMUTH_MIN_SPREAD:
+            return (f"  (no cos/sin fit: the start azimuths span too narrow an arc, spread "
+                    f"{spread:.2g} < {AZIMUTH_MIN_SPREAD:g}; 0.5 spread evenly round the "
+                    "turn)")  # fmt: skip
+    return "  (a cos/sin fit needs static runs at 3 azimuths or more)"
 
 
 def _azimuth_table(c) -> list[str]:
@@ -227,7 +244,7 @@ def _azimuth_table(c) -> list[str]:
         rows.append(f"  ({len(azimuths)} start azimuths: the fit only)")
     fits = {lab: c.azimuth_fit(lab) for lab in c.labels}
     if all(f is None for f in fits.values()):
-        rows.append("  (a cos/sin fit needs static runs at 3 azimuths or more)")
+        rows.append(_no_fit_reason(c))
         return rows
     rows.append("cos/sin fit on the start azimuth a, r = m + c·cos a + s·sin a "
                 "(duration-weighted; σ from the runs' scatter):")  # fmt: skip

@@ -76,7 +76,7 @@ group, as in `scale_factor_vs_angle` and the MLP). Each figure is the
 RMS over the runs of a group: per temperature over the wave angles (the seed's accuracy
 table, [`accuracy_table`][hrgjax.calibration.accuracy_table]), per wave angle over the
 temperatures. Where the static runs start at several table azimuths (the absolute
-`table_angle_deg` at a run's start, rounded to 1°), `format()` adds their mean residual per
+`table_angle_deg` at a run's start, rounded to 5°), `format()` adds their mean residual per
 azimuth and [`table_azimuth_fit`][hrgjax.calibration.table_azimuth_fit] (a rate turning with
 the table: a tilted gyro axis). The **figure of merit** of a compensator is the RMS over every static run
 (°/h) and every rotation run (°) after the offset.
@@ -326,17 +326,18 @@ class Comparison:
 
     @property
     def table_azimuths_deg(self) -> list[float]:
-        """Start table azimuths of the static runs [°, in [0, 360)], sorted: more than one
-        where the bench logs absolute table angles and the static runs stand at several."""
+        """Start table azimuths of the static runs with a finite residual [°, in [0, 360), to
+        `AZIMUTH_BIN_DEG`], sorted: more than one where the bench logs absolute table angles
+        and the static runs stand at several."""
         e = self.errors[self.labels[0]]
-        return [
-            float(k) for k in np.unique(self._keys(self.labels[0], "table_azimuth")[e["static"]])
-        ]
+        ok = np.asarray(e["static"], bool) & np.isfinite(e["drift_error_dph"])
+        return [float(k) for k in np.unique(self._keys(self.labels[0], "table_azimuth")[ok])]
 
     def azimuth_fit(self, label: str) -> AzimuthFit | None:
         """`label`'s static residuals after the offset fitted on 1, cos and sin of the start
         table azimuth ([`table_azimuth_fit`][hrgjax.calibration.table_azimuth_fit]; None with
-        fewer than 3 azimuths, or errors without `table_angle0_deg`)."""
+        fewer than 3 azimuths or too narrow an arc of them, or errors without
+        `table_angle0_deg`)."""
         e = self.residuals[label]
         return table_azimuth_fit(e) if "table_angle0_deg" in e else None
 
@@ -368,7 +369,11 @@ class Comparison:
             "temperature_domain": {"calibrated_range_c": [T_min, T_max] | null,
                                    "margin_c", "extrapolated", "n_samples",
                                    "n_out_of_range", "out_of_range_by_temperature": {T: n},
-                                   "runs_out_of_range": [run]} | null}],
+                                   "runs_out_of_range": [run]} | null,
+            "by_table_azimuth": {"mean_static_residual_dph": {a: mean over the static runs
+                                 at start table azimuth a [°], after the offset},
+                                 "n_static_runs": {a: n}},
+            "table_azimuth_fit": AzimuthFit.to_json() | null}],
          "seed_figures": {"static_residual_dph" | "angle_error_deg":
                           {T: {"fourier", "mlp"}}},
          "units": {"static_residual_dph": "°/h", "angle_error_deg": "°", …},
