@@ -3,6 +3,7 @@ against the simulator's own physics where the simulator has the mechanism."""
 
 import dataclasses
 import re
+from types import SimpleNamespace
 
 import equinox as eqx
 import jax
@@ -362,3 +363,21 @@ def test_equations_print_every_catalogue_effect_with_held_parameters():
         tidy_signs("a − (-0.3 ± 0.1)·x + -2·y + ½·(-4 ± 1)")
         == "a + (0.3 ± 0.1)·x − 2·y − ½·(4 ± 1)"
     )
+
+
+def test_a_thermal_rate_beside_a_bias_law_names_the_thermometer_lag_it_equals():
+    """Audit finding (bench2 F2): a thermometer lagging the gyro by τ = 600 s was named
+    `thermal_rate` at 90σ, c = 0.1976 ± 0.0022 °/h per °C/min beside b₁ = 0.01988 °/h/°C —
+    c = b₁τ exactly (T = T_read + τṪ_read for a first-order lag, so b₁T = b₁T_read +
+    b₁τṪ_read), and the entry named only `thermal_lag`. The entry now names the sensor lag
+    and the experiment that separates it, and the report prints c/b₁ in s."""
+    from hrgjax.discovery.result import Discovery
+
+    entry = CATALOGUE["thermal_rate"]
+    assert "thermometer" in entry.signature and "thermometer" in entry.discriminate
+    b1 = 0.01988 * DEG_PER_H  # rad/s/°C
+    c = 0.1976 * DEG_PER_H * 60.0  # rad/s per °C/s (0.1976 °/h per °C/min)
+    fit = {"bias_temperature": {"b1": {"value": b1}}, "thermal_rate": {"c_Tdot": {"value": c}}}
+    lag = Discovery.sensor_lag_s(SimpleNamespace(fit_parameters=fit))
+    assert lag == pytest.approx(0.1976 / 0.01988 * 60.0, rel=1e-12)  # 596 s: τ = 600 s
+    assert Discovery.sensor_lag_s(SimpleNamespace(fit_parameters={"thermal_rate": {}})) is None

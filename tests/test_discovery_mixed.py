@@ -17,8 +17,9 @@ import pytest
 
 import hrgjax as hg
 from hrgjax.data import MeasuredData, concat
-from hrgjax.discovery import NOMINAL
+from hrgjax.discovery import NOMINAL, records
 from hrgjax.discovery.continuous import ContinuousProblem
+from hrgjax.discovery.problem import held_out_runs
 from hrgjax.units import DEG, DEG_PER_H
 
 K_E = 0.554
@@ -99,3 +100,64 @@ def test_a_held_out_dwell_run_off_the_session_is_seen():
         # the held-out run's windows read its offset against the session: 5 °/h, in the gap
         assert fit.gap == pytest.approx(off_by, rel=1e-3, abs=1e-6), off_by
         assert p.structure_left(fit) == (off_by > 0)
+
+
+def _plan_log():
+    """The layout of a bench plan (audit bench, `tvg3_like`): at −40, 20 and 60 °C a 120-s
+    static and a 72-s 5 °/s rotation at each of the wave angles −60°, 0° and 60° (the
+    readout mismatch moves the held angle by ≈ 0.5° between temperatures), then four ramps
+    (runs 18–21). Noise-free: only the run layout is read."""
+    parts, run = [], 0
+    for temp, shift in ((-40.0, 0.52), (20.0, 0.23), (60.0, 0.04)):
+        for angle in (-60.0, 0.0, 60.0):
+            a = angle + np.sign(angle) * shift
+            parts.append(_run(run, np.arange(121.0), 0.0, temp, a, 0.0))
+            parts.append(_run(run + 1, np.arange(145) * 0.5, 5.0, temp, a, 0.0))
+            run += 2
+    t = np.arange(601.0)
+    for start, slope, angle in ((-40, 1, 30), (60, -1, 30), (-40, 1, -30), (60, -1, -30)):
+        parts.append(_run(run, t, 0.0, start + slope * t / 60.0, angle, 0.0))
+        run += 1
+    return concat(parts)
+
+
+def test_the_split_keeps_every_static_wave_angle_in_training():
+    """Audit finding (F1, bench2): every third run of this plan is every θ = 0 static; with
+    the dwell session's offset profiled out, the statics left (±60°: cos 2θ alike) no longer
+    fixed the damping's cos 2θ, which took the rotations' readout ripple (−186 °/h, the
+    readout mismatch's ΔBIC 1.2·10⁴ instead of 2.9·10⁶) and `discover` said `unexplained`.
+    One θ = 0 static now stays in training, swapped for the next dwell run (a rotation,
+    whose rate the other rotations keep); the ramps' split is the stride's."""
+    data = _plan_log()
+    held = held_out_runs(data, 3)
+    np.testing.assert_array_equal(held, [3, 5, 8, 11, 14, 17, 20])
+    statics = {r: float(data["wave_angle_deg"][data.run == r][0]) for r in range(0, 18, 2)}
+    kept = {round(a / 5) * 5 for r, a in statics.items() if r not in held}
+    assert kept == {-60, 0, 60}
+    # a stride that already keeps every condition is the stride
+    np.testing.assert_array_equal(held_out_runs(data, 4), [3, 7, 11, 15, 19])
+
+
+def _fits(strengths, signs, pooled=1.0):
+    """Per-run refits (`records.per_run_fits`) of a one-parameter effect: run i's estimate
+    points `signs[i]`, its information puts the pooled value at √strengths[i] σ."""
+    return [(i, np.array([s * 3.0 * pooled]), np.array([[k / pooled**2]]))
+            for i, (k, s) in enumerate(zip(strengths, signs, strict=True))]  # fmt: skip
+
+
+def test_the_dwell_windows_evidence_is_not_outvoted_by_three_ramps():
+    """Audit finding (F1, bench2): a readout mismatch the training dwell windows see at
+    p̄ᵀC p̄ ≈ 10⁶ and three ramps at ≈ 2 each (their one-effect refits take what the
+    missing temperature laws leave, signs at random) was refused with agreement 0. The
+    windows are one session, not a run: where they hold more of the information than the
+    runs together, the check is not made (`agreement` None, the reason says so); where the
+    runs hold more, the runs decide as before."""
+    fits = _fits([2.0, 3.0, 2.5], [-1, -1, 1])
+    alone = records.repeats(fits, np.array([1.0]))
+    assert alone["agreement"] == pytest.approx(1 / 3)  # refused at 0.75
+    j_w = np.full((50, 1), np.sqrt(1e6 / 50))  # the windows' whitened rows: p̄ᵀC_w p̄ = 10⁶
+    out = records.repeats(fits, np.array([1.0]), windows=j_w)
+    assert out["agreement"] is None and out["units"] == []
+    assert "dwell windows carry it" in out["reason"]
+    weak = records.repeats(fits, np.array([1.0]), windows=j_w * 1e-3)  # 1 < 7.5: the runs'
+    assert weak["agreement"] == pytest.approx(1 / 3) and weak["reason"] is None

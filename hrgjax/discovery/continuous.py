@@ -320,8 +320,10 @@ class ContinuousProblem(AbstractProblem):
         χ² of their values about the pooled one (judged at the noise level the residual shows
         at the runs' scale, `records.run_level`) and the share pointing the same way. Another
         run's sign is noise (a readout mismatch seen by a static ramp's drift of θ alone, at
-        10⁻⁴ σ, once outvoted its rotations). A run whose refit did not converge gives no
-        estimate: it neither agrees nor disagrees, and is listed in `unconverged`.
+        10⁻⁴ σ, once outvoted its rotations); where a mixed log's training dwell windows hold
+        more of its information than the runs together, the runs' signs do not test it and
+        the check is not made. A run whose refit did not converge gives no estimate: it
+        neither agrees nor disagrees, and is listed in `unconverged`.
 
         **Returns:** `{"p_value", "dof", "agreement", "units", "reason", "unconverged",
         "per_run": {run: {param: value}}}` (`records.repeats`; `per_run`: every converged
@@ -331,7 +333,9 @@ class ContinuousProblem(AbstractProblem):
         with bar(1, f"per-run refits of {name}", unit="refit", tick=True) as progress:
             fits, unconverged = per_run_fits(self.layout, basis, fit.z, self.train_groups, idx)
             progress.update(1)
-        out = repeats(fits, pooled, RESOLVES, self.level(fit, idx))
+        own = lambda: [k for k, i in enumerate(self._basis(list(fit.model))[1]) if i in idx]
+        jw = np.asarray(fit.j)[self.row_classes() < 2][:, own()] if self.windows else None
+        out = repeats(fits, pooled, RESOLVES, self.level(fit, idx), jw)
         if out["reason"] is not None and unconverged:
             out["reason"] += f" ({len(unconverged)} runs' refits did not converge)"
         per_run = {
@@ -379,11 +383,9 @@ class ContinuousProblem(AbstractProblem):
     def _window_residuals(self, fit):
         """A mixed log's dwell windows as the dwell figure draws them: drift residual [°/h]
         (as input rate), wave angle [° el.], temperature [°C], static or not."""
-        parts = []
-        for groups in (self.train_groups, self.held_groups):
-            groups = [g for g in groups if isinstance(g, Windows)]
-            for g, r in zip(groups, self.raw_residuals(fit.z, groups), strict=True):
-                parts.append((g.cov, np.asarray(r)))
+        groups = [g for g in self.train_groups + self.held_groups if isinstance(g, Windows)]
+        raw = self.raw_residuals(fit.z, groups)
+        parts = [(g.cov, np.asarray(r)) for g, r in zip(groups, raw, strict=True)]
         col = lambda f: np.concatenate(
             [np.broadcast_to(np.asarray(f(c), float), r.shape) for c, r in parts]
         )

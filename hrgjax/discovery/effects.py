@@ -251,9 +251,14 @@ CATALOGUE: dict[str, Effect] = {
             "rate",
             [_rate("c_Tdot", "rad/s per °C/s", 10 * _H, "°/h per °C/min", 1 / (60 * _H))],
             ["temperature_rate"],
-            "offset that flips sign with the ramp direction",
+            "offset that flips sign with the ramp direction; beside `bias_temperature` (b₁) it "
+            "is also what a thermometer lagging the gyro by τ gives: T_read = T − τṪ makes "
+            "b₁·T_read + b₁τ·Ṫ, c = b₁τ exactly (c/b₁ a time constant of minutes, printed in "
+            "s by `equations`)",
             ("thermal_lag",),
-            "vary the ramp rate",
+            "vary the ramp rate (against thermal_lag); a temperature sensor lag scales with Ṫ "
+            "too: a second thermometer on the resonator, or the thermometer's own response to "
+            "a temperature step",
             formula="{c_Tdot}·dT/dt",
             term=lambda p, c, k: p[0] * c.temperature_rate,
             on_dwell=False,

@@ -367,7 +367,7 @@ def _pooled(members):
     return tuple(run for run, _, _ in members), p, info
 
 
-def repeats(fits, pooled, resolves=1.0, level=None):
+def repeats(fits, pooled, resolves=1.0, level=None, windows=None):
     r"""Whether an effect's estimates repeat run by run (DISCOVERY.md §2.1, "evidence must
     repeat"), from `fits` (`per_run_fits`: each run's $p_i$ and information $C_i$, in run
     order) and the pooled estimate $\bar p$. The units compared are the runs that *resolve*
@@ -381,7 +381,12 @@ def repeats(fits, pooled, resolves=1.0, level=None):
     degrees of freedom, and the share pointing the same way ($p_u^\top C_u\bar p > 0$).
     With `level` = `(s², ν)` (`run_level`: the noise level the residual shows at the runs'
     scale, read from ν degrees of freedom) the p-value is the F(dof, ν) tail of χ²/dof/s²
-    (the χ² tail without it).
+    (the χ² tail without it). `windows`: the whitened Jacobian rows $J_w$ of a mixed log's
+    training dwell windows in the effect's parameters (one session, not a run, of
+    information $C_w = J_w^\top J_w$); when $\bar p^\top C_w\bar p$ exceeds the runs'
+    $\sum_i s_i$ the evidence lies in the windows and the runs' signs do not test it (a
+    readout mismatch the rotations see at 10⁶ and three ramps at ≈ 1, whose refits took
+    what the missing temperature laws left: agreement 0, refused): the check is not made.
 
     **Returns:** `{"p_value", "dof", "agreement", "units": [[run, …], …], "reason",
     "noise_level": [s², ν] or None}`; with
@@ -390,7 +395,10 @@ def repeats(fits, pooled, resolves=1.0, level=None):
     need, pooled = resolves**2, np.asarray(pooled)
     strength = [float(pooled @ c @ pooled) for _, _, c in fits]
     strong = [f for f, s in zip(fits, strength, strict=True) if s >= need]
-    if len(strong) >= 2:
+    in_windows = 0.0 if windows is None else float(np.sum((np.asarray(windows) @ pooled) ** 2))
+    if in_windows > sum(strength):  # the windows carry it: no unit of the runs is asked
+        units = []
+    elif len(strong) >= 2:
         units = [_pooled([f]) for f in strong]
     else:
         groups, part, total = [], [], 0.0
@@ -404,7 +412,9 @@ def repeats(fits, pooled, resolves=1.0, level=None):
     reason = None
     if len(units) < 2:
         reason = (
-            "no training run's refit converged" if not fits
+            f"the dwell windows carry it (p̄ᵀC p̄ = {in_windows:.3g} against the runs' "
+            f"{sum(strength):.3g}): the runs' refits do not test it" if in_windows > sum(strength)
+            else "no training run's refit converged" if not fits
             else f"the training runs together do not resolve it (Σ p̄ᵀC_i p̄ = {sum(strength):.3g})"
             if sum(strength) < need
             else "no two parts of the training runs each resolve it: one part carries it"

@@ -243,6 +243,13 @@ class Discovery:
         if readout:
             lines.append("readout:")
             lines += ["    " + t for t in readout]
+        lag = self.sensor_lag_s()
+        if lag is not None:
+            lines.append(
+                f"c/b₁ = {lag:.4g} s: a thermometer lagging the gyro by that long gives "
+                "thermal_rate exactly (c = b₁·τ); a second thermometer or its step response "
+                "tells them apart"
+            )
         left = self.leftover
         if left is not None and (
             self.structure_left or self.verdict == "unexplained" or left.get("significant")
@@ -258,6 +265,16 @@ class Discovery:
         if self.uncertainty:
             lines.append("± are 1σ: " + self.uncertainty["basis"])
         return "\n".join(lines)
+
+    def sensor_lag_s(self) -> float | None:
+        """c/b₁ [s] where both `thermal_rate` (c) and `bias_temperature` (b₁) are in the
+        model: the lag τ of a thermometer behind the gyro that would give that c alone
+        (T_read = T − τṪ, so b₁·T = b₁·T_read + b₁τ·Ṫ); None otherwise."""
+        p = self.fit_parameters
+        if "thermal_rate" not in p or "bias_temperature" not in p:
+            return None
+        b1 = p["bias_temperature"]["b1"]["value"]
+        return float(p["thermal_rate"]["c_Tdot"]["value"] / b1) if b1 else None
 
     def _uncertainty_json(self) -> dict | None:
         """`uncertainty` with, in user units, each parameter's share of its σ that the

@@ -2,7 +2,9 @@ r"""`discover`: find, name, add, shrink — on dwell-grid data (DISCOVERY.md §2
 
 Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
 
-1. **Split** by run: every `holdout_every`-th run is held out (never split within a run).
+1. **Split** by run: every `holdout_every`-th run is held out (never split within a run),
+   but no static wave angle or table rate of the dwell runs leaves the training runs
+   altogether ([`held_out_runs`][hrgjax.discovery.problem.held_out_runs]).
 2. **Noise model first**, before any drift model: one
    [`NoiseModel`][hrgjax.pattern_noise.NoiseModel] (white angle noise, angle random walk,
    a Gauss–Markov rate where the data can show it) estimated from every still stretch of the
@@ -55,7 +57,7 @@ from .noise import NoiseModel as NoiseModel
 from .noise import noise_model as noise_model
 from .problem import NEEDS_CONTINUOUS as NEEDS_CONTINUOUS
 from .problem import OPTIONAL as OPTIONAL
-from .problem import AbstractProblem, dwell_runs
+from .problem import AbstractProblem, dwell_runs, held_out_runs
 from .problem import candidates_for as candidates_for
 from .problem import rates_in as rates_in
 from .result import Discovery
@@ -163,7 +165,7 @@ def discover(
             f"discover needs at least {need} runs to hold every {holdout_every}-th out "
             f"(holdout_every >= 2); got {runs.size} runs"
         )
-    held = runs[holdout_every - 1 :: holdout_every]
+    held = held_out_runs(data, holdout_every)  # no dwell condition left out altogether
     problem: AbstractProblem = PROBLEMS[shape].from_data(
         data, held, nominal=nominal, catalogue=catalogue, k_e=k_e, noise=noise,
         block_s=block_s, window_s=None if shape == "continuous" else window_s,
