@@ -45,7 +45,9 @@ def test_deviation_equals_allantools(kind):
         return
     d = 3 if kind in ("hdev", "ohdev") else 2
     ov, mod = kind in ("oadev", "ohdev", "mdev", "tdev"), kind in ("mdev", "tdev")
-    for m, a, edf in zip(r.m, r.alpha, r.edf, strict=True):  # the default: exact to m = 64
+    for m, a, edf, mixed in zip(r.m, r.alpha, r.edf, r.mixture, strict=True):  # the default:
+        if mixed:  # exact to m = 64; oadev: the fitted mixture's (tests/test_allan_mixture.py)
+            continue
         want = allan.edf_greenhall(max(int(a), 2 - 2 * d), d, int(m), X.size, ov, mod, True)
         assert edf == pytest.approx(want, rel=1e-12)
     # Stable32's rule: Greenhall's EDF and interval, allantools' numbers
@@ -265,9 +267,12 @@ def test_deviation_edf_is_exact_at_tau0_and_greenhall_under_stable32():
     own = allan.deviation(y, 1.0, "oadev", taus=[1.0, 2.0])
     s32 = allan.deviation(y, 1.0, "oadev", taus=[1.0, 2.0], noise_rule="stable32")
     assert own.alpha[0] == s32.alpha[0] == 0
-    assert own.edf[0] == pytest.approx(allan.edf_discrete(0, 2, 1, 1025, True, False))
+    # the default's: the fitted noise mixture's exact EDF (hrgjax.allan.mixture; its small
+    # spurious terms move it 0.2 % from white rate noise's own here)
+    assert own.mixture[0] and not s32.mixture[0]
+    assert own.edf[0] == pytest.approx(allan.edf_discrete(0, 2, 1, 1025, True, False), rel=0.01)
     assert s32.edf[0] == pytest.approx(allan.edf_greenhall(0, 2, 1, 1025, True, False))
-    assert s32.edf[0] / own.edf[0] == pytest.approx(1.174, abs=2e-3)
+    assert s32.edf[0] / own.edf[0] == pytest.approx(1.174, abs=0.012)
 
 
 def test_edf_greenhall_every_case_equals_allantools():

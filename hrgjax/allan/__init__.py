@@ -10,7 +10,8 @@ rate ramp $R\tau/\sqrt2$.
 
 Every name is importable from `hrgjax.allan` (it was one module until issue 45); inside:
 `deviations` (the estimators and the compiled curve), `result` (`deviation`: that curve on
-τ grids with its statistics, an `AllanResult`),
+τ grids with its statistics, an `AllanResult` of `curve_result`), `mixture` (mtotdev's bias
+and oadev's EDF under the record's fitted IEEE 952 noise mixture),
 `total` (mtotdev and ttotdev, NumPy), `totvar` (totdev's bias and EDF by noise type),
 `noise_ident` (noise identification), `uncertainty` (EDF, χ² intervals), `noise_terms` (the IEEE 952
 line fit), `octave_covariance` (each noise term's Allan variance for sampled data and the
@@ -23,6 +24,7 @@ stamps onto a uniform grid by the angle: `to_uniform`).
 
 from .composite import CompositeNoise as CompositeNoise
 from .composite import identify_noise as identify_noise
+from .curve_result import AllanResult as AllanResult
 from .deviations import adev as adev
 from .deviations import allan_deviation as allan_deviation
 from .deviations import hdev as hdev
@@ -45,7 +47,6 @@ from .noise_terms import NoiseFit as NoiseFit
 from .noise_terms import fit_noise as fit_noise
 from .resample import to_uniform as to_uniform
 from .result import KINDS as KINDS
-from .result import AllanResult as AllanResult
 from .result import deviation as deviation
 from .totvar import TOTVAR_BIAS as TOTVAR_BIAS
 from .totvar import edf_totdev as edf_totdev

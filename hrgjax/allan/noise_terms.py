@@ -20,8 +20,8 @@ import numpy as np
 
 from .._nnls import nnls as _nnls
 from .._progress import bar
+from .curve_result import AllanResult
 from .octave_covariance import covariance, gapped_covariance, unit_avar
-from .result import AllanResult
 from .uncertainty import chi2_sf
 
 NOISE_TERMS = (

@@ -1,0 +1,234 @@
+r"""The statistics of a deviation under the record's own fitted noise *mixture*: mtotdev's
+bias divisor and oadev's EDF from the IEEE 952 terms (quantisation, angle random walk, bias
+instability, rate random walk) fitted to the record's octave Allan variance, in place of
+those of the one power-law type read at each τ.
+
+A real gyro's rate is a sum of noises, and at the τ where two of them cross, the type read
+there (lag-1 ACF, B1, R(n)) is one of them or a type between, flipping from record to record.
+The estimator's bias and EDF of that one type are then wrong — the mixture's lie between
+the components'. For independent components the mixture's values are exact:
+
+- mtotdev/ttotdev: E[Mod Totvar] = Σᵢ b(αᵢ, m)·Mod σ²ᵢ(m), so
+  b_mix(m) = Σᵢ b(αᵢ, m)·Mod σ²ᵢ(m) / Σᵢ Mod σ²ᵢ(m)
+  ([`mixture_bias`][hrgjax.allan.mixture.mixture_bias]; b of each component
+  [`mtotvar_bias`][hrgjax.allan.total.mtotvar_bias], Mod σ²ᵢ = the term's Allan variance ×
+  [`modvar_ratio`][hrgjax.allan.mixture.modvar_ratio]);
+- oadev: EDF(τ) = 2σ²(τ)²/Var σ̂²(τ), with Var σ̂² the exact Gaussian variance of the
+  overlapping estimate under the model
+  ([`covariance`][hrgjax.allan.octave_covariance.covariance], the bias instability as a
+  sum of Gauss–Markov terms): [`mixture_oadev_edf`][hrgjax.allan.mixture.mixture_oadev_edf].
+
+[`fit_mixture`][hrgjax.allan.mixture.fit_mixture] fits the terms
+([`fit_noise`][hrgjax.allan.fit_noise], generalised least squares under the octave
+estimates' exact covariance) to the record's overlapping Allan variance at octaves,
+computed here in NumPy (no call back into [`deviation`][hrgjax.allan.deviation]), and
+refuses a fit it cannot trust: fewer than [`MIN_OCTAVES`][hrgjax.allan.mixture.MIN_OCTAVES]
+octaves, no exact covariance, or a misfit χ² whose p-value is below
+[`FIT_P_MIN`][hrgjax.allan.mixture.FIT_P_MIN] (a noise outside the IEEE 952 basis — a
+Gauss–Markov bump, a sinusoid, a drift —  that the four terms do not describe).
+[`deviation`][hrgjax.allan.deviation] then keeps the one-type values.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .octave_covariance import covariance
+from .uncertainty import chi2_sf, edf_greenhall
+
+MIXTURE_TERMS = ("quantization", "angle_random_walk", "bias_instability", "rate_random_walk")
+"""The IEEE 952 terms of the fitted mixture (the rate ramp left out: mtotdev's bias for a
+drift is not a power-law one, and a drift shows as a rejected or random-walk fit)."""
+
+TERM_ALPHA = {"quantization": 2, "angle_random_walk": 0, "bias_instability": -1,
+              "rate_random_walk": -2}  # fmt: skip
+"""Each term's power-law exponent α (rate PSD ∝ f^α)."""
+
+MIN_OCTAVES = 5
+"""The fewest octave τ (n_terms > 1) the fit needs (a record of ≥ 64 samples): four terms
+and at least one degree of freedom for the misfit test."""
+
+FIT_P_MIN = 1e-3
+"""A fit whose misfit χ² (whitened by the estimates' exact covariance) has a p-value below
+this is refused: the record holds a noise the four terms do not describe."""
+
+MAX_EDF_TAUS = 64
+"""oadev's mixture EDF is computed for grids of up to this many τ (each τ's variance from
+its own one-τ layout, ≈ 1–3 ms); beyond (`taus="all"`), the one-type EDF is kept."""
+
+RATIO_EXACT_TO = 1024
+"""[`modvar_ratio`][hrgjax.allan.mixture.modvar_ratio] is summed exactly up to this m; beyond
+it the value at this m (within 3e-7 of the limit: ½, 0.674624, 0.825)."""
+
+
+def _g(term: str, t) -> np.ndarray:
+    """Generalised covariance of the phase X = Σy (samples) of a unit term (interval means)."""
+    t = np.abs(np.asarray(t, dtype=float))
+    if term == "angle_random_walk":
+        return -0.5 * t
+    if term == "rate_random_walk":
+        return t**3 / 12.0
+    # flicker rate noise: t² ln|t| (its Allan variance is flat at every integer m)
+    return t * t * np.log(np.where(t > 0, t, 1.0))
+
+
+def _ratio_one(term: str, m: int) -> float:
+    j = np.arange(-(m - 1), m, dtype=float)
+    w = m - np.abs(j)
+
+    def h(t):  # Σ_j (m − |j|) G(t + j): the m-point average's sum
+        return float(np.dot(w, _g(term, t + j)))
+
+    num = 6.0 * h(0.0) - 8.0 * h(float(m)) + 2.0 * h(2.0 * m)
+    den = (2.0 * _g(term, 2.0 * m) - 8.0 * _g(term, float(m))) * m * m
+    return float(num / den)
+
+
+def modvar_ratio(term: str, m) -> np.ndarray:
+    """Mod σ²(m)/σ²(m), the modified over the Allan variance at factors `m` (≥ 1) of one IEEE
+    952 term of [`MIXTURE_TERMS`][hrgjax.allan.mixture.MIXTURE_TERMS] for rate samples that
+    are interval means (exact for sampled data): quantisation 1/m, angle random walk
+    (m² + 1)/(2m²), bias instability (a continuous 1/f rate, whose phase has the generalised
+    covariance t²·ln|t|) 1 at m = 1, 0.738 at 2, → 0.6746; rate random walk 1, 0.859, → 0.825
+    (the second differences of m-point phase averages, summed against the term's generalised
+    covariance). [dimensionless]"""
+    m = np.asarray(m, dtype=int)
+    if term == "quantization":
+        return 1.0 / m.astype(float)
+    if term not in MIXTURE_TERMS:
+        raise ValueError(f"term must be one of {list(MIXTURE_TERMS)}; got {term!r}")
+    capped = np.minimum(m, RATIO_EXACT_TO)
+    values = {int(k): _ratio_one(term, int(k)) for k in np.unique(capped)}
+    return np.asarray([values[int(k)] for k in capped.ravel()]).reshape(m.shape)
+
+
+def _unit_avar(term: str, taus) -> np.ndarray:
+    from .noise_terms import NOISE_TERMS
+
+    return {n: f for n, _, _, f in NOISE_TERMS}[term](np.asarray(taus, dtype=float))
+
+
+def mixture_bias(value: dict, m, tau0: float) -> np.ndarray:
+    """b_mix(m) = Σᵢ b(αᵢ, m)·Mod σ²ᵢ(m)/Σᵢ Mod σ²ᵢ(m): E[Mod Totvar]/Mod σ² of mtotdev's raw
+    estimator at factors `m` for independent IEEE 952 terms of coefficients `value`
+    ({name: coefficient}, as [`NoiseFit.value`][hrgjax.allan.NoiseFit]: Q [unit·s],
+    N [unit·√s], B [unit], K [unit/√s]; other names ignored) sampled every `tau0` [s]; b of
+    each term [`mtotvar_bias`][hrgjax.allan.total.mtotvar_bias] at its α
+    ([`TERM_ALPHA`][hrgjax.allan.mixture.TERM_ALPHA]). NaN where every term is 0.
+    [dimensionless]"""
+    from .total import mtotvar_bias
+
+    m = np.asarray(m, dtype=int)
+    num, den = np.zeros(m.shape), np.zeros(m.shape)
+    for term in MIXTURE_TERMS:
+        c = float(value.get(term, 0.0))
+        if c <= 0:
+            continue
+        modvar = c * c * _unit_avar(term, m * tau0) * modvar_ratio(term, m)
+        b = np.asarray([mtotvar_bias(TERM_ALPHA[term], int(k)) for k in m.ravel()])
+        num += b.reshape(m.shape) * modvar
+        den += modvar
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
+
+
+def mixture_oadev_edf(value: dict, m, n: int, tau0: float) -> np.ndarray:
+    """EDF of the overlapping Allan variance at factors `m` over `n` rate samples every `tau0`
+    [s] under independent IEEE 952 terms of coefficients `value` (as
+    [`mixture_bias`][hrgjax.allan.mixture.mixture_bias]): 2σ²(τ)²/Var σ̂²(τ), the variance
+    the exact Gaussian one of [`covariance`][hrgjax.allan.octave_covariance.covariance] (the
+    bias instability as a sum of Gauss–Markov terms,
+    [`flicker_as_gauss_markov`][hrgjax.allan.noise_terms.flicker_as_gauss_markov], ripple
+    ≤ 3 %, over the record's octaves), each τ on its own one-τ layout. At least 1.
+    [dimensionless]"""
+    from .noise_terms import flicker_as_gauss_markov
+
+    m = np.asarray(m, dtype=int)
+    coef2 = {t: float(value.get(t, 0.0)) ** 2 for t in MIXTURE_TERMS}
+    lin = {t: c for t, c in coef2.items() if t != "bias_instability" and c > 0}
+    b2 = coef2["bias_instability"]
+    # the flicker's terms span the record's octaves (not the grid's: one τ's EDF is then the
+    # same on every grid)
+    octaves = 2 ** np.arange(int(math.floor(math.log2(max(n / 2, 1)))) + 1)
+    gm = [(b2 * s2, t) for s2, t in flicker_as_gauss_markov(octaves, tau0)] if b2 > 0 else []
+    model = sum(c * _unit_avar(t, m * tau0) for t, c in coef2.items())
+    out = np.empty(m.size)
+    for i, k in enumerate(m.ravel()):
+        var = covariance(lin, gm, [int(k)], int(n), tau0)[0, 0]
+        out[i] = 2.0 * model.ravel()[i] ** 2 / var if var > 0 else np.nan
+    return np.maximum(out.reshape(m.shape), 1.0)
+
+
+def octave_oadev(x, tau0: float):
+    """`(m, σ̂², n_terms)`: the overlapping Allan variance of the phase `x` (angle units, its
+    first point 0) at the octave factors with at least 2 terms, in NumPy."""
+    x = np.asarray(x, dtype=float)
+    n_phase = x.size
+    ms = 2 ** np.arange(int(math.floor(math.log2(max(n_phase, 2)))) + 1)
+    ms = ms[n_phase - 2 * ms > 1]
+    var = np.asarray([np.mean((x[2 * k :] - 2 * x[k:-k] + x[: -2 * k]) ** 2) / (2 * (k * tau0) ** 2)
+                      for k in ms])  # fmt: skip
+    return ms, var, n_phase - 2 * ms
+
+
+def fit_mixture(x, tau0: float):
+    """The IEEE 952 mixture ([`MIXTURE_TERMS`][hrgjax.allan.mixture.MIXTURE_TERMS]) fitted to
+    the overlapping Allan variance of the gap-free phase `x` (angle units, x₀ = 0; rate
+    samples every `tau0` [s]) at its octaves: `(NoiseFit, "")`, or `(None, why)` where the
+    fit cannot be trusted (fewer than [`MIN_OCTAVES`][hrgjax.allan.mixture.MIN_OCTAVES]
+    octaves, no exact covariance, every term 0, or a misfit p-value below
+    [`FIT_P_MIN`][hrgjax.allan.mixture.FIT_P_MIN])."""
+    from .curve_result import AllanResult
+    from .noise_terms import fit_noise
+    from .uncertainty import ONE_SIGMA
+
+    ms, var, counts = octave_oadev(x, tau0)
+    if ms.size < MIN_OCTAVES:
+        return None, f"{ms.size} octaves, fewer than {MIN_OCTAVES}"
+    if not np.all(var > 0):
+        return None, "an octave's Allan variance is 0"
+    n_phase = len(x)
+    # EDF weights only start the fit (white rate noise's); it is then refitted by GLS
+    edf = np.asarray([edf_greenhall(0, 2, int(k), n_phase, True, False, discrete=True) for k in ms])
+    dev = np.sqrt(var)
+    result = AllanResult(kind="oadev", ci=ONE_SIGMA, taus=ms * tau0, m=ms, dev=dev,
+                         dev_low=dev, dev_high=dev, edf=edf, n_terms=counts,
+                         alpha=np.zeros(ms.size, dtype=int))  # fmt: skip
+    with np.errstate(all="ignore"):
+        fit = fit_noise(result, terms=list(MIXTURE_TERMS))
+    if not fit.method.startswith("gls"):
+        return None, f"no exact covariance ({fit.method})"
+    if not any(fit.value[t] > 0 for t in MIXTURE_TERMS):
+        return None, "every term fitted 0"
+    p = chi2_sf(fit.chi2, fit.dof) if fit.dof > 0 else 1.0
+    if not p >= FIT_P_MIN:
+        return None, f"misfit p-value {p:.2g} < {FIT_P_MIN:g} (noise outside the IEEE 952 terms)"
+    return fit, ""
+
+
+def mixture_statistics(kind: str, x, tau0: float, m):
+    """`(used, values)` for [`deviation`][hrgjax.allan.deviation] under
+    `noise_rule="hrgjax"`: the mixture fitted to the gap-free phase `x` (angle units,
+    x₀ = 0, samples every `tau0` [s]; [`fit_mixture`][hrgjax.allan.mixture.fit_mixture]) and
+    from it, at factors `m`, mtotdev's and ttotdev's bias b_mix
+    ([`mixture_bias`][hrgjax.allan.mixture.mixture_bias]) or oadev's EDF
+    ([`mixture_oadev_edf`][hrgjax.allan.mixture.mixture_oadev_edf], grids of up to
+    [`MAX_EDF_TAUS`][hrgjax.allan.mixture.MAX_EDF_TAUS] τ); `used` (bool per τ) is False
+    where the fit was refused or the value could not be had, and `values` None where none
+    was."""
+    m = np.asarray(m, dtype=int)
+    none = np.zeros(m.size, dtype=bool), None
+    fit, _ = fit_mixture(x, tau0)
+    if fit is None:
+        return none
+    value = {t: float(fit.value[t]) for t in MIXTURE_TERMS}
+    if kind in ("mtotdev", "ttotdev"):
+        values = mixture_bias(value, m, tau0)
+    elif kind == "oadev" and m.size <= MAX_EDF_TAUS:
+        values = mixture_oadev_edf(value, m, len(x) - 1, tau0)
+    else:
+        return none
+    used = np.isfinite(values) & (values > 0)
+    return used, np.where(used, values, 1.0)
