@@ -113,7 +113,10 @@ class _FittedLaws(eqx.Module):
         """The fitted model gyro (`PhysicalCompensator.gyro`)."""
         return model_gyro(self.values, plant=self.plant)
 
-    def _derivatives(self, theta_meas, temperature_c):
+    def _derivatives(self, theta_meas, temperature_c, gain: bool = True):
+        """(∂θ̂/∂θ, θ̇ at rest [rad/s], the gain −∂θ̇/∂Ω) at the measured angle [rad] and
+        temperature [°C]; `gain=False` (the drift): the gain is not computed (`None` with a
+        plant)."""
         g = self.gyro().at(temperature_c)
         theta = true_angle(g, theta_meas)
         slope = jax.jvp(lambda th: readout_angle(g, th), (theta,), (jnp.ones_like(theta),))[1]
@@ -125,11 +128,14 @@ class _FittedLaws(eqx.Module):
         # the loops' lag (a 2θ ripple ∝ Ω) in it
         rate = lambda w: reduced_rate(g, w, theta)
         w0 = input_rate(g, rest, 0.0)
+        if not gain:
+            return slope, rate(w0), None
         if not self.at_rate:
             theta_dot, d_rate = jax.jvp(rate, (w0,), (jnp.ones_like(w0),))
             return slope, theta_dot, -d_rate
-        theta_dot = rate(w0)
-        return slope, theta_dot, -(rate(w0 + self.sf_rate) - theta_dot) / self.sf_rate
+        # both rates from one traced slow manifold (a batch of two), not two
+        theta_dot, moved = jax.vmap(rate)(jnp.stack([w0, w0 + self.sf_rate]))
+        return slope, theta_dot, -(moved - theta_dot) / self.sf_rate
 
     def readout_temperature_sensitivity(self, theta, temperature_c):
         """∂θ̂/∂T [rad/°C] at the measured angle θ [rad] and temperature [°C]."""
@@ -140,7 +146,7 @@ class _FittedLaws(eqx.Module):
 
     def drift(self, theta, temperature_c):
         """D(θ, T) [rad/s]; θ electrical [rad], T [°C]."""
-        slope, theta_dot, _ = self._derivatives(theta, temperature_c)
+        slope, theta_dot, _ = self._derivatives(theta, temperature_c, gain=False)
         return -slope * theta_dot / self.k_e
 
     def scale_factor(self, theta, temperature_c):
@@ -148,7 +154,13 @@ class _FittedLaws(eqx.Module):
         slope, _, k_e = self._derivatives(theta, temperature_c)
         return slope * k_e / self.k_e
 
-    corrected_rate = AbstractCompensator.corrected_rate
+    def corrected_rate(self, theta, theta_dot, temperature_c, temperature_rate=0.0):
+        """`AbstractCompensator.corrected_rate`, its drift and scale factor from one
+        `_derivatives` (one traced slow manifold with a plant, not one for each)."""
+        s_t = self.readout_temperature_sensitivity(theta, temperature_c)
+        measured = -(theta_dot - s_t * temperature_rate) / self.k_e
+        slope, rest_rate, k_e = self._derivatives(theta, temperature_c)
+        return (measured - (-slope * rest_rate / self.k_e)) / (slope * k_e / self.k_e)
 
 
 class PhysicalCompensator(AbstractCompensator):

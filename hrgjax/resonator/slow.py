@@ -103,15 +103,34 @@ def _fields(g, omega_in, x, theta):
     return _split(dy)
 
 
+def _linearised(g, omega_in, x, theta):
+    """((F, G), (∂F/∂x, ∂G/∂x)) at (x, θ): the rates and their Jacobian, from one trace."""
+
+    def both(x):
+        rates = _fields(g, omega_in, x, theta)
+        return rates, rates  # the second: jacfwd's aux, the primal values
+
+    return jax.jacfwd(both, has_aux=True)(x)[::-1]
+
+
 def _at_rest(g, omega_in, theta):
-    """h₀(θ), J = ∂F/∂x there and G(h₀, θ)."""
+    """h₀(θ), J = ∂F/∂x there and G(h₀, θ): `NEWTON` steps from the ideal steady state, in a
+    `fori_loop` (its body, one Jacobian, traced and compiled once; a fixed trip count, so
+    reverse-differentiable), the last pass only evaluating."""
     a0 = g.control.amplitude
     integ = steady_integrators(g.control, g.resonator, a0, theta)
     x = jnp.concatenate([jnp.stack([a0, 0.0 * a0, 0.0 * a0]), integ])
-    fast = lambda x: _fields(g, omega_in, x, theta)[0]
-    for _ in range(NEWTON):
-        x = x - solve(jax.jacfwd(fast)(x), fast(x))  # no LAPACK call under vmap: _linalg
-    return x, jax.jacfwd(fast)(x), _fields(g, omega_in, x, theta)[1]
+
+    def step(i, carry):
+        x = carry[0]
+        (f, rate), (jac, _) = _linearised(g, omega_in, x, theta)
+        new = x - solve(jac, f)  # no LAPACK call under vmap: _linalg
+        return jnp.where(i < NEWTON, new, x), jac, rate
+
+    # the carried Jacobian and rate are only written: any start value shaped like them, made
+    # from x so that under vmap it is batched as they are (one batching pass over the body)
+    start = (x, jnp.broadcast_to(x[0], (x.size, x.size)), x[0])
+    return jax.lax.fori_loop(0, NEWTON + 1, step, start)
 
 
 LOOPS = ("pll", "agc", "quadrature")
@@ -205,20 +224,21 @@ def _in_domain(g, theta):
                         "gyro.resonator.delta_omega exceeds it")  # fmt: skip
 
 
+def _block_diag(blocks):
+    """(n, m, m) blocks → the (n·m, n·m) block-diagonal matrix."""
+    return jax.scipy.linalg.block_diag(*[blocks[j] for j in range(blocks.shape[0])])
+
+
 def _balanced(g, omega_in, thetas, h):
     """One Newton step on the collocation equations $\\mathbf F(\\mathbf h_j, \\theta_j) =
     G(\\mathbf h_j, \\theta_j)\\,(D\\mathbf h)_j$ at the samples `thetas`, from `h` (n, m)."""
     n, m = h.shape
     d = jnp.asarray(_D, dtype=h.dtype)
-    both = lambda x, th: _fields(g, omega_in, x, th)
-    (f, rate), (jac_f, jac_g) = jax.vmap(lambda x, th: (both(x, th), jax.jacfwd(both)(x, th)))(
-        h, thetas
-    )
+    (f, rate), (jac_f, jac_g) = jax.vmap(lambda x, th: _linearised(g, omega_in, x, th))(h, thetas)
     dh = d @ h  # ∂h/∂θ at the samples
     residual = (f - rate[:, None] * dh).reshape(-1)
     blocks = jac_f - dh[:, :, None] * jac_g[:, None, :]
-    big = jax.scipy.linalg.block_diag(*[blocks[j] for j in range(n)])
-    big = big - jnp.kron(rate[:, None] * d, jnp.eye(m, dtype=h.dtype))
+    big = _block_diag(blocks) - jnp.kron(rate[:, None] * d, jnp.eye(m, dtype=h.dtype))
     return h - solve(big, residual).reshape(n, m)
 
 
@@ -246,12 +266,11 @@ def slow_manifold(g, omega_in, theta):
     m = h0.shape[1]
     d = jnp.asarray(_D, dtype=h0.dtype)
     big_d = jnp.kron(rate[:, None] * d, jnp.eye(m))  # θ̇_j Σ_k D_jk (per state)
-    blocks = jax.scipy.linalg.block_diag(*[jac[j] for j in range(n)])
-    delta = solve(big_d - blocks, -big_d @ h0.reshape(-1)).reshape(n, m)
-    h = h0 + delta
-    for _ in range(BALANCE_NEWTON):
-        h = _balanced(g, omega_in, thetas, h)
-    return h[0]
+    delta = solve(big_d - _block_diag(jac), -big_d @ h0.reshape(-1)).reshape(n, m)
+    # the Newton steps in a fixed-trip `fori_loop`: one step traced and compiled, not
+    # BALANCE_NEWTON of them (reverse-differentiable: it lowers to a scan)
+    step = lambda _, h: _balanced(g, omega_in, thetas, h)
+    return jax.lax.fori_loop(0, BALANCE_NEWTON, step, h0 + delta)[0]
 
 
 def reduced_rate(g, omega_in, theta):
