@@ -141,3 +141,48 @@ def test_a_noise_outside_the_ieee_952_terms_keeps_the_one_type_values():
                                        for a, m in zip(o.alpha, o.m, strict=True)])  # fmt: skip
     np.testing.assert_allclose(r.bias_factor, [1 / math.sqrt(mtotvar_bias(int(a), int(m)))
                                                for a, m in zip(r.alpha, r.m, strict=True)])  # fmt: skip
+
+
+def test_the_fit_runs_only_where_its_result_is_used(records, monkeypatch):
+    """oadev with more than MAX_EDF_TAUS τ (`taus="all"`) and `mixture=False` never fit the
+    mixture (≈ 10–100 ms of CPU a call): `mixture` False everywhere, the one-type values."""
+    from hrgjax.allan import mixture
+
+    y = records[0][:300]
+    want = allan.deviation(y, 1.0, kind="oadev", taus="all")
+    assert want.m.size > mixture.MAX_EDF_TAUS and not np.any(want.mixture)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("fit_mixture called where its result cannot be used")
+
+    monkeypatch.setattr(mixture, "fit_mixture", refuse)
+    r = allan.deviation(y, 1.0, kind="oadev", taus="all")
+    np.testing.assert_array_equal(r.edf, want.edf)
+    off = allan.deviation(records[0], 1.0, kind="oadev", mixture=False)
+    assert not np.any(off.mixture)
+    with pytest.raises(ValueError, match="mixture"):
+        allan.deviation(records[0], 1.0, mixture="no")
+
+
+def test_the_mixture_fit_skips_only_the_intervals(records):
+    """`fit_terms(intervals=False)`, the mixture's fit, gives fit_noise's coefficients, χ²
+    and method exactly, with NaN intervals (their term covariances not built)."""
+    from hrgjax.allan.mixture import MIXTURE_TERMS
+    from hrgjax.allan.noise_terms import fit_terms
+
+    r = allan.deviation(records[1], 1.0, kind="oadev")
+    full = allan.fit_noise(r, terms=list(MIXTURE_TERMS))
+    bare = fit_terms(r, terms=list(MIXTURE_TERMS), intervals=False)
+    assert bare.value == full.value and bare.chi2 == full.chi2 and bare.method == full.method
+    assert all(math.isnan(bare.low[t]) and math.isnan(bare.high[t]) for t in MIXTURE_TERMS)
+
+
+def test_octave_rows_keep_the_mixture_flags_of_their_rows(records):
+    """`octave_rows` (identify_noise's oadev=) subsets every per-τ field, `mixture` too."""
+    from hrgjax.allan.octave_fits import octave_rows
+
+    r = allan.deviation(records[2], 1.0, kind="oadev")
+    octaves = r.m[1:-2]
+    rows = octave_rows(r, records[2], 1.0, octaves)
+    assert rows.mixture.shape == rows.m.shape == octaves.shape
+    np.testing.assert_array_equal(rows.mixture, r.mixture[1:-2])

@@ -87,11 +87,17 @@ class AllanResult:
         cols = (
             f"{'tau [s]':>12} {'m':>8} {'dev':>12} {'low':>12} {'high':>12} {'edf':>9} {'alpha':>6}"
         )
+        mixed = np.zeros(len(self.taus), bool) if self.mixture is None else self.mixture
         rows = [
-            f"{t:12.5g} {int(m):8d} {d:12.5g} {lo:12.5g} {hi:12.5g} {e:9.4g} {int(a):+6d}"
-            for t, m, d, lo, hi, e, a in zip(self.taus, self.m, self.dev, self.dev_low,
-                                             self.dev_high, self.edf, self.alpha, strict=True)
+            f"{t:12.5g} {int(m):8d} {d:12.5g} {lo:12.5g} {hi:12.5g} {e:9.4g}"
+            f"{'*' if x else ' '}{int(a):+6d}"
+            for t, m, d, lo, hi, e, a, x in zip(self.taus, self.m, self.dev, self.dev_low,
+                                                self.dev_high, self.edf, self.alpha, mixed,
+                                                strict=True)
         ]  # fmt: skip
+        if np.any(mixed):
+            what = "edf" if self.kind == "oadev" else "bias divisor"
+            rows.append(f"* {what} from the record's fitted IEEE 952 noise mixture")
         return "\n".join([head, cols, *rows])
 
     def to_dict(self) -> dict:
@@ -118,11 +124,14 @@ class AllanResult:
 
     def to_csv(self, path) -> None:
         """Write one row per τ to `path` (CSV: `tau_s, m, dev, dev_low, dev_high, edf,
-        n_terms, alpha`, the deviation's unit in the header's `dev` column name), atomically
-        (missing folders are made)."""
+        n_terms, alpha` and, where the result has it, `mixture` (1/0), the deviation's unit in
+        the header's `dev` column name), atomically (missing folders are made). The printed
+        table marks the rows whose `mixture` is True with `*` after the EDF."""
         from .._io import atomic_write
 
         cols = self._columns()
+        if self.mixture is not None:  # 1 where the interval or divisor rests on the mixture
+            cols["mixture"] = np.asarray(self.mixture, dtype=int)
         unit = f" [{self.unit}]" if self.unit else ""
         names = [f"{k}{unit}" if k.startswith("dev") else k for k in cols]
         with atomic_write(path, "w", encoding="utf-8") as fh:

@@ -40,7 +40,9 @@ _COVARIANCE_TERMS = ("quantization", "angle_random_walk", "rate_random_walk", "r
 the bias instability's (flicker rate noise) is that of a sum of Gauss–Markov terms
 (`flicker_as_gauss_markov` in this module)."""
 _MAX_TAUS = 64  # Ω's layout grows ≈ as S³ (85 s for 254 τ, 1.5 s for 64): beyond, the EDF fallback
-_ROUNDS = 4  # the covariance re-evaluated at the fit this many times (it settles in 2–3)
+_ROUNDS = 4  # the covariance re-evaluated at the fit this many times: settled in 2–3 for two
+# terms, not for four (four bands, 8192 samples: K 0.01234 after 4, 0.01308 after 32 from
+# the mixture EDF's start; 0.01110 → 0.01308 from the one-type EDF's), which the start moves
 
 
 @dataclasses.dataclass(frozen=True)
@@ -257,6 +259,14 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
     textbook coefficients off a curve; for a noise model with only the terms the record
     needs, use [`identify_noise`][hrgjax.allan.identify_noise].
     """
+    return fit_terms(result, terms)
+
+
+def fit_terms(result: AllanResult, terms=None, *, intervals: bool = True) -> NoiseFit:
+    """[`fit_noise`][hrgjax.allan.fit_noise] (same arguments, same fit); `intervals=False`
+    skips the intervals — `low` and `high` NaN, and none of the terms' own covariances they
+    need (one Ω per fitted term, ≈ 4 of its 9) is built — for callers that use only `value`,
+    `chi2` and `method` ([`fit_mixture`][hrgjax.allan.mixture.fit_mixture])."""
     if not isinstance(result, AllanResult):
         raise TypeError(f"result must be an AllanResult; got {type(result).__name__}")
     if result.kind not in ("adev", "oadev"):
@@ -292,7 +302,7 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
     lengths = 0 if segments is None else int(np.unique(segments[:, 1]).size)
     # a gapped record's Ω loops over its distinct run lengths, 6–10 times: seconds to minutes
     # at 10⁵–10⁶ samples (benchmarks/gapped_fit_speed.py), so it goes behind a bar
-    steps = (_ROUNDS + 1 + len(fitted)) * lengths
+    steps = (_ROUNDS + 1 + len(fitted) * intervals) * lengths
     desc = "noise fit: covariance of the gapped runs"
     with bar(steps, desc, unit="length") if lengths else contextlib.nullcontext() as progress:
         method = f"independent: {why}"
@@ -330,7 +340,7 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
 
                 method = "gls, flicker approximated" if flicker else "gls"
         if progress is not None:  # the rest: Ω of each term at a value, one per term above 0
-            more = int(np.count_nonzero(coef > 0)) if method.startswith("gls") else 0
+            more = int(np.count_nonzero(coef > 0)) if method.startswith("gls") and intervals else 0
             progress.total = progress.n + more * lengths
             progress.refresh()
         z = NormalDist().inv_cdf(0.5 + result.ci / 2)
@@ -344,7 +354,9 @@ def fit_noise(result: AllanResult, terms=None) -> NoiseFit:
             c, sc = coef[i], math.sqrt(max(cov[i, i], 0.0))
             value[n] = math.sqrt(c)
             sigma[n] = sc / (2 * math.sqrt(c)) if c > 0 else math.sqrt(sc)
-            if c > 0:
+            if not intervals:
+                low[n] = high[n] = math.nan
+            elif c > 0:
                 own = float(weights[i] @ own_cov(n) @ weights[i])  # Var of c²'s own part per c⁴
                 lo, hi = _skewed_interval(c, own, max(cov[i, i] - own * c * c, 0.0), result.ci)
                 low[n], high[n] = math.sqrt(lo), math.sqrt(hi)

@@ -379,4 +379,5 @@ def octave_rows(result, y, rate_hz: float, octaves):
         dev_low=result.dev_low[pick], dev_high=result.dev_high[pick], edf=result.edf[pick],
         n_terms=np.asarray(result.n_terms)[pick], alpha=np.asarray(result.alpha)[pick],
         bias_factor=None if result.bias_factor is None else np.asarray(result.bias_factor)[pick],
+        mixture=None if result.mixture is None else np.asarray(result.mixture)[pick],
     )  # fmt: skip

@@ -73,6 +73,7 @@ def deviation(
     bias_correction: bool = True,
     noise_rule: str = "hrgjax",
     unit: str = "",
+    mixture: bool = True,
 ) -> AllanResult:
     r"""An Allan-family deviation with confidence intervals, as allantools and Stable32
     compute it.
@@ -103,6 +104,11 @@ def deviation(
       reproduces at all 90 τ; for comparing with Stable32, its intervals are less well
       calibrated); [`noise_id`][hrgjax.allan.noise_id] says both.
     - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
+    - `mixture`: under `noise_rule="hrgjax"`, take oadev's EDF (grids of up to 64 τ) and
+      mtotdev's and ttotdev's bias divisor from the IEEE 952 mixture fitted to the record
+      ([`hrgjax.allan.mixture`][hrgjax.allan.mixture]; ≈ 10–100 ms of CPU a call on 10³–10⁵
+      samples) where the fit holds (`AllanResult.mixture`); `False` keeps the one type
+      read at each τ and skips the fit (sweeps of many short records).
 
     **Gaps**: NaN samples are missing data. Every kind but the total ones then averages only
     the differences whose windows avoid every gap, as allantools' `gradev` (NumPy, not the
@@ -138,6 +144,8 @@ def deviation(
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {describe(rate_hz)}")
     if not (is_finite_real(ci) and 0.0 < ci < 1.0):
         raise ValueError(f"ci must be a confidence level in (0, 1); got {describe(ci)}")
+    if not isinstance(mixture, bool | np.bool_):
+        raise ValueError(f"mixture must be True or False; got {describe(mixture)}")
     check_1d("y", y, "one sample per interval")
     kind_of = np.asarray(y).dtype.kind
     if kind_of in "cbOUSMm":
@@ -232,7 +240,7 @@ def deviation(
                                                     strict=True)])  # fmt: skip
         # the fitted IEEE 952 mixture's bias (mtotdev, ttotdev) or EDF (oadev) where it holds
         mixed, mix_value = np.zeros(m.size, dtype=bool), None
-        if noise_rule == "hrgjax" and not gaps and (kind == "oadev" or (
+        if mixture and noise_rule == "hrgjax" and not gaps and (kind == "oadev" or (
                 kind in ("mtotdev", "ttotdev") and bias_correction)):  # fmt: skip
             from .mixture import mixture_statistics
 
