@@ -48,7 +48,11 @@ def show(found, seconds):
         keep = ("effect", "delta_bic", "heldout_gain", "agreement", "refused_by")
         print({k: round(r[k], 4) if isinstance(r[k], float) else r[k] for k in keep})
     for name, c in found.consistency.items():
+        if c is None:  # dwell grids: one run is one grid point
+            continue
         print(name, "agreement", c["agreement"], "units", c["units"], "|", c["reason"])
+    if found.uncertainty and found.uncertainty.get("unpinned"):
+        print("dropped (not pinned):", found.uncertainty["unpinned"])
 
 
 if __name__ == "__main__":

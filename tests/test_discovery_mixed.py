@@ -138,6 +138,51 @@ def test_the_split_keeps_every_static_wave_angle_in_training():
     np.testing.assert_array_equal(held_out_runs(data, 4), [3, 7, 11, 15, 19])
 
 
+def _statics(angles, temps=None, rates=None):
+    """Layout-only dwell runs (noise-free, 61 s each) at start wave `angles` [° el.],
+    temperatures `temps` [°C] and table `rates` [°/s]."""
+    temps = [20.0] * len(angles) if temps is None else temps
+    rates = [0.0] * len(angles) if rates is None else rates
+    t = np.arange(61.0)
+    return concat([_run(i, t, w, c, a, 0.0)
+                   for i, (a, c, w) in enumerate(zip(angles, temps, rates, strict=True))])  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "angles, rates, every",
+    [
+        ((0.0, 45.0, 90.0, 135.0), None, 2),  # each static alone at its angle
+        (tuple(22.5 * i for i in range(8)), None, 4),
+        ((0.0,) * 8, tuple(1.0 + i for i in range(8)), 4),  # a scale-factor plan: 8 rates
+        # 20 statics, the wave angles staggered 9° between 5 temperatures: every static
+        # its own 5° bin (review of 7d623b7: split 20/0, NaN gap, bias_temperature refused)
+        (tuple(a + 9.0 * k for k in range(5) for a in (0.0, 45.0, 90.0, 135.0)), None, 4),
+    ],
+)
+def test_the_split_never_holds_out_less_than_the_stride(angles, rates, every):
+    """Review of 7d623b7 (finding 1): a run alone at its 5° wave-angle bin or its table
+    rate was never held out, so these plans held out nothing and no effect could be
+    accepted. The rule is the conditioning of the training statics'
+    [1, cos 2θ, sin 2θ] (neighbouring angles count) and, for a rate, a training run where
+    the stride leaves one: these strides already keep what can be kept, so the split is the
+    stride's."""
+    temps = [20.0 + 25.0 * (k // 4) for k in range(len(angles))]
+    held = held_out_runs(_statics(angles, temps, rates), every)
+    np.testing.assert_array_equal(held, np.arange(len(angles))[every - 1 :: every])
+
+
+def test_the_split_keeps_the_statics_cos_2theta_and_refuses_an_empty_stride():
+    """Statics at 0° and 90° only, the stride holding every 90° one: the training statics
+    would not separate the damping's cos 2θ from the bias, so one 90° static is swapped
+    for the next run (a 0° one, which its peers keep); a stride longer than the plan is a
+    `ValueError`, not an empty held-out set."""
+    data = _statics((0.0, 90.0) * 4)
+    held = held_out_runs(data, 2)
+    assert held.size == 4 and 1 not in held and 2 in held
+    with pytest.raises(ValueError, match="every must be"):
+        held_out_runs(data, 9)
+
+
 def _fits(strengths, signs, pooled=1.0):
     """Per-run refits (`records.per_run_fits`) of a one-parameter effect: run i's estimate
     points `signs[i]`, its information puts the pooled value at √strengths[i] σ."""

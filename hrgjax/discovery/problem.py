@@ -205,49 +205,88 @@ def candidates_for(have: set, nominal=NOMINAL, continuous: bool = False) -> list
     return out
 
 
-ANGLE_BIN_DEG = 5.0
-"""Static dwell runs whose start wave angles [° el., modulo 180°] round to one multiple of
-this are one wave-angle condition (`held_out_runs`: a readout mismatch moves a held angle
-by up to ≈ 0.5° between temperatures)."""
+STATIC_CONDITIONING = 0.25
+r"""The share of the plan's conditioning of the statics' wave-angle design the training
+statics must keep (`held_out_runs`): the smallest eigenvalue of their per-run mean
+$\langle a a^\top\rangle$, $a = [1, \cos 2\theta, \sin 2\theta]$, within the span the
+whole plan's statics resolve, at least this times the whole plan's."""
 
 
-def _dwell_condition(data: MeasuredData, idx) -> tuple:
-    """A dwell run's condition: its table rate [°/s, 10⁻³] and, at rest, its start wave
-    angle in `ANGLE_BIN_DEG` bins modulo 180° (a turning run sweeps the angles)."""
-    rate = round(float(np.median(data["table_rate_dps"][idx])), 3)
-    if rate != 0.0:
-        return (rate, None)
-    angle = float(data["wave_angle_deg"][idx[0]]) % 180.0
-    return (0.0, int(round(angle / ANGLE_BIN_DEG)) % int(round(180.0 / ANGLE_BIN_DEG)))
+def _static_design(angles_deg) -> np.ndarray:
+    r"""Rows $[1, \cos 2\theta, \sin 2\theta]$ of static runs' start wave angles [° el.]:
+    what the damping's bias and its cos 2θ, sin 2θ are read through at rest."""
+    two = 2.0 * np.deg2rad(np.asarray(angles_deg, float))
+    return np.stack([np.ones_like(two), np.cos(two), np.sin(two)], axis=-1).reshape(-1, 3)
+
+
+def _conditioned(design: np.ndarray, train: np.ndarray) -> bool:
+    """Whether the training rows of `design` keep `STATIC_CONDITIONING` of the whole
+    design's conditioning (per-run mean Gram, smallest eigenvalue within the whole's span)."""
+    if not len(design):
+        return True
+    lam, vec = np.linalg.eigh(design.T @ design / len(design))
+    span = vec[:, lam > 1e-9 * lam.max()]
+    rows = design[train] @ span
+    if not len(rows):
+        return False
+    kept = np.linalg.eigvalsh(rows.T @ rows / len(rows)).min()
+    return bool(kept >= STATIC_CONDITIONING * lam[lam > 1e-9 * lam.max()].min())
 
 
 def held_out_runs(data: MeasuredData, every: int) -> np.ndarray:
-    """The runs held out: every `every`-th run (sorted ids), except that no dwell condition
-    (`_dwell_condition`: a static wave angle, a table rate) may leave the training runs
-    altogether — a held-out run that would take its condition's last training run is
-    swapped for the nearest dwell run after it (else before it) whose condition keeps one,
-    or kept in training when there is none. A stride that is a divisor of the plan's period
-    otherwise holds out one condition everywhere: every third run of a plan of statics and
-    rotations at three wave angles is every θ = 0 static, and with the dwell session's own
-    offset profiled out the statics at ±60° (cos 2θ alike) no longer fix the damping's
-    cos 2θ, which then took the rotations' readout ripple (−186 °/h; the readout mismatch,
-    ΔBIC 2.9·10⁶ with the θ = 0 statics in training, fell to 1.2·10⁴). Temperature levels
-    and ramp directions may be held out whole: the laws in T are what they test."""
+    r"""The runs held out [run ids, sorted]: every `every`-th run (sorted ids), with the
+    dwell runs' held-out ones swapped where they would leave the training runs short of a
+    condition the damping and the rate laws are read through:
+
+    - the training statics must still fix the damping's $[1, \cos 2\theta, \sin 2\theta]$
+      at rest (`STATIC_CONDITIONING` of the plan's conditioning, neighbouring angles
+      counting: no bins);
+    - every table rate that has a training run in the stride keeps one.
+
+    A held-out dwell run that breaks a rule its return to training would keep is swapped for
+    the nearest dwell run after it (else before it) whose holding breaks nothing new; where
+    there is none it stays held — the held-out set is never smaller than the stride's (a
+    run alone at its rate, or four statics at four angles, is held out as before).
+    A stride that is a divisor of the plan's period otherwise holds out one condition
+    everywhere: every third run of a plan of statics and rotations at three wave angles is
+    every θ = 0 static, and with the dwell session's own offset profiled out the statics at
+    ±60° (cos 2θ alike) no longer fix the damping's cos 2θ, which then took the rotations'
+    readout ripple (−186 °/h; the readout mismatch, ΔBIC 2.9·10⁶ with the θ = 0 statics in
+    training, fell to 1.2·10⁴). Temperature levels and ramp directions may be held out
+    whole: the laws in T are what they test.
+
+    **Raises:** `ValueError` when `every` < 2 or the stride holds nothing out (fewer than
+    `every` runs)."""
     runs = np.unique(data.run)
+    if int(every) < 2 or runs.size < int(every):
+        raise ValueError(
+            f"every must be an integer >= 2 and at most the number of runs ({runs.size}) "
+            f"for a run to be held out; got {every}"
+        )
     held = set(runs[every - 1 :: every].tolist())
     dwell = dwell_runs(data)
-    cond = {int(data.run[i[0]]): _dwell_condition(data, i)
-            for i in data.run_indices() if int(data.run[i[0]]) in dwell}  # fmt: skip
+    rate, angle = {}, {}
+    for i in data.run_indices():
+        r = int(data.run[i[0]])
+        if r in dwell:
+            rate[r] = round(float(np.median(data["table_rate_dps"][i])), 3)
+            if rate[r] == 0.0:
+                angle[r] = float(data["wave_angle_deg"][i[0]])
+    statics = sorted(angle)
+    design = _static_design([angle[r] for r in statics])
 
-    def kept(c, out):  # a training dwell run of condition `c` when the runs `out` are held
-        return any(k == c for r, k in cond.items() if r not in out)
+    def broken(out) -> set:  # the rules broken when the runs `out` are held
+        bad = {("rate", v) for v in set(rate.values()) - {0.0}}
+        bad -= {("rate", rate[r]) for r in rate if r not in out}
+        train = np.asarray([k for k, r in enumerate(statics) if r not in out], int)
+        return bad if _conditioned(design, train) else bad | {"statics"}
 
-    for r in sorted(r for r in held if r in cond):
-        if kept(cond[r], held):
+    for r in sorted(r for r in held if r in rate):
+        base = broken(held - {r})
+        if broken(held) <= base:
             continue
-        held.discard(r)  # its condition's last training run: it stays in training
-        later = sorted(s for s in cond if s > r) + sorted((s for s in cond if s < r), reverse=True)
-        swap = [s for s in later if s not in held and kept(cond[s], held | {s})]
+        later = sorted(s for s in rate if s > r) + sorted((s for s in rate if s < r), reverse=True)
+        swap = [s for s in later if s not in held and broken((held - {r}) | {s}) <= base]
         if swap:  # a dwell run for a dwell run: the records' split stays as it was
-            held.add(swap[0])
+            held = (held - {r}) | {swap[0]}
     return np.asarray(sorted(held), dtype=runs.dtype)
