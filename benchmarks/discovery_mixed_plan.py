@@ -51,8 +51,6 @@ def show(found, seconds):
         if c is None:  # dwell grids: one run is one grid point
             continue
         print(name, "agreement", c["agreement"], "units", c["units"], "|", c["reason"])
-    if found.uncertainty and found.uncertainty.get("unpinned"):
-        print("dropped (not pinned):", found.uncertainty["unpinned"])
 
 
 if __name__ == "__main__":

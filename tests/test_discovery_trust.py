@@ -310,22 +310,3 @@ def test_a_clean_grid_names_no_temperature_shape(grid):
         _, new, info = _draws(grid, s, s * ratio, 0.0, n=30, seed=5)
         assert info["shapes"] == [] and not info["structure_left"], info
         assert 0.7 < np.sqrt(np.mean(new**2)) < 1.3
-
-
-def test_an_effect_within_three_reported_sigma_is_not_pinned():
-    """Review of 7d623b7 (finding 2): on the designed bench plan a lagging thermometer's
-    c·Ṫ (Ṫ = ±1 °C/min on every ramp: a per-run constant, aliased with the ramps' switch-on
-    biases) was accepted at c = 2.90·10⁻³ ± 6.04·10⁻⁵ (textbook, 48σ) and reported at
-    ± 2.88·10⁻³ (σ_b's uncertainty carried in: 1.0σ). An effect none of whose parameters
-    lies beyond 3 reported σ is not pinned; one pinned parameter pins it, and a parameter
-    with no σ is not judged."""
-    params = {
-        "readout_gain_mismatch": {"eps1": {"value": -9185e-6, "std": 48e-6}},
-        "thermal_rate": {"c_Tdot": {"value": 2.90e-3, "std": 2.88e-3, "std_textbook": 6.04e-5}},
-        "bias_temperature": {"b1": {"value": 2.0, "std": 0.5}, "b2": {"value": 0.2, "std": 0.9}},
-        "loop_ripple": {"tau": {"value": 5.0, "std": None}},
-    }
-    out = trust.unpinned(params, list(params))
-    assert list(out) == ["thermal_rate"]
-    assert out["thermal_rate"] == pytest.approx(2.90 / 2.88)
-    assert trust.unpinned(params, ["bias_temperature"], sigmas=5.0) == {"bias_temperature": 4.0}

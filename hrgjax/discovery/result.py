@@ -120,10 +120,7 @@ class Discovery:
       [`run_bias.spread`][hrgjax.discovery.run_bias.spread]: `{"runs", "dof", "sigma_b_dph",
       "not_pinned"}`); the JSON adds `sigma_model` (`{"effect.param": the pull's share of
       σ}`, user units) and `no_sigma` (`{"effect.param": why}`: a scanned time constant; a
-      parameter the run means pin where too few runs leave σ_b unpinned), and `"unpinned"`
-      (`{effect: max |value|/σ}`: effects the search accepted last and dropped again,
-      because no parameter lay beyond 3 of its reported σ:
-      [`unpinned`][hrgjax.discovery.trust.unpinned]).
+      parameter the run means pin where too few runs leave σ_b unpinned).
     """
 
     verdict: str
@@ -267,10 +264,6 @@ class Discovery:
             lines.append(why)
         if self.uncertainty:
             lines.append("± are 1σ: " + self.uncertainty["basis"])
-        if self.uncertainty and self.uncertainty.get("unpinned"):
-            lines.append("accepted, then dropped (no parameter beyond 3σ of its reported σ): "
-                         + ", ".join(f"{n} ({z:.2g}σ)" for n, z in
-                                     self.uncertainty["unpinned"].items()))  # fmt: skip
         return "\n".join(lines)
 
     def sensor_lag_s(self) -> float | None:

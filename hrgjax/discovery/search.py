@@ -175,7 +175,7 @@ def discover(
 
     model = list(nominal)
     base = problem.fit(model)
-    accepted, ranking, current, states = [], [], base, []
+    accepted, ranking, current = [], [], base
     n_cands = len(cands)
 
     def consistent(r):
@@ -231,18 +231,7 @@ def discover(
         accepted.append(best["effect"])
         model.append(best["effect"])
         cands.remove(best["effect"])
-        states.append((problem, current))
         problem, current = problem.after_accept(best["refit"])
-    honest = lambda: trust.honest(current, problem.shape_columns, problem.row_classes(),
-                                  spread=problem.noise_spread(current))  # fmt: skip
-    parameters, uncertainty = honest()
-    dropped = {}  # the last accepted effects the reported σ do not pin: back to before them
-    while accepted and (z := trust.unpinned(parameters, accepted[-1:])):
-        dropped |= z
-        model.remove(accepted.pop())
-        problem, current = states.pop()
-        parameters, uncertainty = honest()
-    uncertainty["unpinned"] = dropped
     floor = problem.floor()  # σ_b may have been re-estimated at the final model
     # the gap before under that noise model too: at the nominal fit REML counts the misfit a
     # missing effect leaves inside the runs as switch-on bias (σ_b 1.7 °/h for 0.2), the run
@@ -251,6 +240,8 @@ def discover(
         before = problem.baseline(nominal, base) if accepted else base
     except RuntimeError:  # that refit did not converge: the nominal fit as it was
         before = base
+    parameters, uncertainty = trust.honest(current, problem.shape_columns, problem.row_classes(),
+                                           spread=problem.noise_spread(current))  # fmt: skip
     # structure left: the held-out gap above the floor, or a leftover shape the residuals
     # needed (trust.honest: judged at the noise level left once it is fitted)
     left = problem.structure_left(current, floor) or bool(uncertainty["structure_left"])

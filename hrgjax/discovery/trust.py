@@ -218,31 +218,3 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
                 f"{k} ×{v:.2g}" for k, v in info["excess"].items()) + ")"  # fmt: skip
         words += ", each parameter's shift when it is fitted added to its σ"
     return params, info | {"basis": words}
-
-
-PINNED_SIGMA = 3.0
-"""An accepted effect none of whose parameters lies beyond this many of its reported
-(corrected) σ from zero is not pinned by the data (`unpinned`)."""
-
-
-def unpinned(parameters: dict, names, sigmas: float = PINNED_SIGMA) -> dict:
-    """The effects of `names` that the reported error bars do not pin: every parameter of
-    the effect with a finite σ (`honest`'s `std`, model units) has |value| < `sigmas`·σ.
-
-    The acceptance rule reads the textbook σ of a refit under the noise model of its
-    round; the reported σ also carries the corrections of `honest`, σ_b's own uncertainty
-    among them. An effect whose column is a per-run constant on the runs that carry it
-    (a lagging thermometer's c·Ṫ on ramps at ±1 °C/min) is aliased with the runs'
-    switch-on biases: its textbook σ is set by the ramps' noise (48σ on the designed bench
-    plan), its reported one by σ_b from a few run means (1σ) — only the reported one says
-    what the data fix. An effect with no finite σ is not judged here.
-
-    **Returns:** `{name: max |value|/σ}` of the effects not pinned."""
-    out = {}
-    for name in names:
-        z = [abs(float(e["value"])) / float(e["std"])
-             for e in parameters.get(name, {}).values()
-             if e.get("std") is not None and np.isfinite(e["std"]) and e["std"] > 0]  # fmt: skip
-        if z and max(z) < sigmas:
-            out[name] = max(z)
-    return out
