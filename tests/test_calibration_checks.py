@@ -321,3 +321,10 @@ def test_a_rate_tables_readback_jitter_and_a_thermometers_noise_leave_a_static_r
     # the turned table (0.3° over the minute: 5e-3 °/s) is a moving run
     turning = dict(clean, table_rate_dps=np.full(t.size, 5e-3), table_angle_deg=5e-3 * t)
     assert not bool(hg.MeasuredData(turning).stacked()[0].static[0])
+
+
+def test_a_numpy_table_rate_is_stored_as_a_plain_number():
+    """`sf_rate` is a static field: a NumPy scalar there warned "A JAX array is being set as
+    static!" (the suite's warnings are errors) and made `sf_rate != 0` a NumPy bool."""
+    comp = cal.PhysicalCompensator(sf_rate=np.float64(np.deg2rad(10.0)))
+    assert type(comp.sf_rate) is float and comp.sf_rate == pytest.approx(np.deg2rad(10.0))

@@ -163,6 +163,12 @@ class _FittedLaws(eqx.Module):
         return (measured - (-slope * rest_rate / self.k_e)) / (slope * k_e / self.k_e)
 
 
+def _plain_number(v):
+    """A NumPy scalar (np.float64, np.int64) as a Python number: a static field holding a
+    NumPy scalar warns that an array is set as static; anything else is left for the check."""
+    return v.item() if isinstance(v, np.generic) and np.ndim(v) == 0 else v
+
+
 class PhysicalCompensator(AbstractCompensator):
     """Grey-box compensator (module docstring).
 
@@ -205,7 +211,7 @@ class PhysicalCompensator(AbstractCompensator):
     covariance: jax.Array | None = None
     stats: tuple = eqx.field(static=True, default=())
     plant: Gyro | None = eqx.field(default=None, converter=known_plant)
-    sf_rate: float = eqx.field(static=True, default=0.0)
+    sf_rate: float = eqx.field(static=True, default=0.0, converter=_plain_number)
     initial: jax.Array | None = None
     temperature_range: tuple[float, float] | None = eqx.field(
         static=True, default=None, converter=as_range

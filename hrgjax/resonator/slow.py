@@ -124,8 +124,11 @@ def _at_rest(g, omega_in, theta):
     def step(i, carry):
         x = carry[0]
         (f, rate), (jac, _) = _linearised(g, omega_in, x, theta)
-        new = x - solve(jac, f)  # no LAPACK call under vmap: _linalg
-        return jnp.where(i < NEWTON, new, x), jac, rate
+        last = i >= NEWTON  # the last pass only evaluates: its solve is on I, 0 (a singular
+        # Jacobian at the rest point must not put 0·inf into the reverse pass)
+        eye = jnp.eye(x.size, dtype=x.dtype)
+        step_x = solve(jnp.where(last, eye, jac), jnp.where(last, 0.0, f))  # no LAPACK: _linalg
+        return x - step_x, jac, rate
 
     # the carried Jacobian and rate are only written: any start value shaped like them, made
     # from x so that under vmap it is batched as they are (one batching pass over the body)
