@@ -140,7 +140,7 @@ def mixture_oadev_edf(value: dict, m, n: int, tau0: float) -> np.ndarray:
     [`mixture_bias`][hrgjax.allan.mixture.mixture_bias]): 2σ²(τ)²/Var σ̂²(τ), the variance
     the exact Gaussian one of [`covariance`][hrgjax.allan.octave_covariance.covariance] (the
     bias instability as a sum of Gauss–Markov terms,
-    [`flicker_as_gauss_markov`][hrgjax.allan.noise_terms.flicker_as_gauss_markov], ripple
+    `noise_terms.flicker_as_gauss_markov`, ripple
     ≤ 3 %, over the record's octaves), each τ on its own one-τ layout. At least 1.
     [dimensionless]"""
     from .noise_terms import flicker_as_gauss_markov
