@@ -235,9 +235,13 @@ class AbstractCompensator(eqx.Module):
         its rate θ̇ [rad/s], temperature [°C] and its rate [°C/s] (module docstring)."""
         s_t = self.readout_temperature_sensitivity(theta, temperature_c)
         measured = -(theta_dot - s_t * temperature_rate) / self.k_e
-        return (measured - self.drift(theta, temperature_c)) / self.scale_factor(
-            theta, temperature_c
-        )
+        drift, scale_factor = self._drift_and_scale_factor(theta, temperature_c)
+        return (measured - drift) / scale_factor
+
+    def _drift_and_scale_factor(self, theta, temperature_c):
+        """(`drift`, `scale_factor`) at (θ [rad], T [°C]) for `corrected_rate`: a subclass
+        whose two share their work (the grey box's slow manifold) computes them together."""
+        return self.drift(theta, temperature_c), self.scale_factor(theta, temperature_c)
 
     def _program_form(self):
         """This compensator as the compiled programs of `drift_dph`, `scale_factor_at` and

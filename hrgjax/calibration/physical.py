@@ -154,13 +154,13 @@ class _FittedLaws(eqx.Module):
         slope, _, k_e = self._derivatives(theta, temperature_c)
         return slope * k_e / self.k_e
 
-    def corrected_rate(self, theta, theta_dot, temperature_c, temperature_rate=0.0):
-        """`AbstractCompensator.corrected_rate`, its drift and scale factor from one
-        `_derivatives` (one traced slow manifold with a plant, not one for each)."""
-        s_t = self.readout_temperature_sensitivity(theta, temperature_c)
-        measured = -(theta_dot - s_t * temperature_rate) / self.k_e
+    def _drift_and_scale_factor(self, theta, temperature_c):
+        """`corrected_rate`'s drift and scale factor from one `_derivatives` (one traced
+        slow manifold with a plant, not one for each)."""
         slope, rest_rate, k_e = self._derivatives(theta, temperature_c)
-        return (measured - (-slope * rest_rate / self.k_e)) / (slope * k_e / self.k_e)
+        return -slope * rest_rate / self.k_e, slope * k_e / self.k_e
+
+    corrected_rate = AbstractCompensator.corrected_rate  # with the hook above
 
 
 def _plain_number(v):
@@ -285,6 +285,12 @@ class PhysicalCompensator(AbstractCompensator):
 
     def scale_factor(self, theta, temperature_c):
         return self._program_form().scale_factor(theta, temperature_c)
+
+    def _drift_and_scale_factor(self, theta, temperature_c):
+        form = self._program_form()  # a subclass (its own laws) is its own form
+        if form is self:
+            return AbstractCompensator._drift_and_scale_factor(self, theta, temperature_c)
+        return form._drift_and_scale_factor(theta, temperature_c)
 
     def equations(self) -> str:
         """The fitted laws with 1σ uncertainties, as text."""
