@@ -76,6 +76,12 @@ def test_azimuth_fit_needs_three_azimuths_and_the_column():
     assert fit.dof == 0 and math.isnan(fit.sigma_cos_dph) and "σ unknown" in str(fit)
     with pytest.raises(ValueError, match="table_angle0_deg"):
         table_azimuth_fit({k: v for k, v in e.items() if k != "table_angle0_deg"})
+    for bad, name in ((0.0, "width"), (float("nan"), "width"), (-0.1, "min_spread")):
+        kw = {name: bad}
+        with pytest.raises(ValueError, match=f"table_azimuth_fit: {name}"):
+            table_azimuth_fit(e, **kw)
+    with pytest.raises(TypeError, match="table_azimuth_fit: width"):
+        table_azimuth_fit(e, width="5")
 
 
 @pytest.fixture(scope="module")

@@ -60,6 +60,7 @@ import math
 
 import numpy as np
 
+from .._checks import check_number
 from ._grouping import nearest_multiples
 
 AZIMUTH_BIN_DEG = 5.0
@@ -189,8 +190,16 @@ def table_azimuth_fit(
     narrow an arc (spread below `min_spread`: a logged angle creeping or scattering by
     tenths of a degree about one parking azimuth gives ~1e-9).
 
-    **Raises:** `ValueError` when `errors` has no `table_angle0_deg`.
+    **Raises:** `ValueError` when `errors` has no `table_angle0_deg`, `width` is not a finite
+    number > 0 or `min_spread` not a finite number ≥ 0.
     """
+    check_number("table_azimuth_fit: width", width, "°")
+    check_number("table_azimuth_fit: min_spread", min_spread)
+    if not (math.isfinite(width) and width > 0):
+        raise ValueError(f"table_azimuth_fit: width must be a finite number > 0 [°]; got {width!r}")
+    if not (math.isfinite(min_spread) and min_spread >= 0):
+        raise ValueError("table_azimuth_fit: min_spread must be a finite number >= 0 (0 fits any "
+                         f"layout of 3 azimuths); got {min_spread!r}")  # fmt: skip
     if "table_angle0_deg" not in errors:
         raise ValueError("errors have no table_angle0_deg; compute them with "
                          "corrected_run_errors (the table angle at each run's start)")  # fmt: skip
