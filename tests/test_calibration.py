@@ -798,7 +798,9 @@ def test_schuler_channels_are_signed_as_the_strapdown_error_model():
     earth = constants.Earth(radius=EARTH_RADIUS, g=GRAVITY, rate=0.0)
     traj = trajectory.stationary(10.0, duration_s=3000.0, dt=10.0, earth=earth)
     eps, t = 1e-7, traj.t
-    zero, full = jnp.zeros(t.shape), jnp.full(t.shape, eps)
+    # both drives strongly typed: one program for the two channels (a weakly typed `full`
+    # swapped between the arguments compiled the Schuler solve twice)
+    zero, full = jnp.zeros(t.shape), jnp.full(t.shape, eps, dtype=float)
     for axis, drive in ((0, (full, zero)), (1, (zero, full))):  # north, then east gyro error
         dx = strapdown.propagate(traj, gyro_error=eps * jnp.eye(3)[axis], altitude_aided=True)
         north_east = np.asarray(strapdown.position_metres(traj, dx))[:, :2]

@@ -845,6 +845,10 @@ def test_warmup_criterion_is_the_integrated_rate_error_and_the_default_adds_the_
     assert float(d.criterion(more, "warmup", flight=flight)) < warm
 
 
+_RATE_JACOBIAN = jax.jit(jax.vmap(jax.jacfwd(d.measured_rate), in_axes=(None, 0, None, None, None)))
+"""∂(measured rate)/∂values along a path of wave angles: one program for every call below."""
+
+
 def _window_slope_information(rate_dps, angles, duration, n=20, dt=0.5, fine=0.05):
     """Fisher information of rotations at `rate_dps` from `angles` [°] as the physical fit
     sees them, written out: ∂θ̂/∂p integrated along the path (trapezoid, `fine` [s]), the
@@ -857,10 +861,9 @@ def _window_slope_information(rate_dps, angles, duration, n=20, dt=0.5, fine=0.0
     k_e, om = float(values[0]), rate_dps * DEG_PER_S
     var = float(slope_variance(d.pattern_angle_white(), d.pattern_arw(), n, dt))
     t = np.arange(0.0, duration + 1e-9, fine)
-    rate = jax.jit(jax.vmap(jax.jacfwd(d.measured_rate), in_axes=(None, 0, None, None, None)))
     total = np.zeros((values.size, values.size))
     for a0 in angles:
-        g = np.asarray(rate(values, jnp.asarray(a0 * DEG - k_e * om * t), 20.0, om, 0.0))
+        g = np.asarray(_RATE_JACOBIAN(values, jnp.asarray(a0 * DEG - k_e * om * t), 20.0, om, 0.0))
         cum = np.concatenate([np.zeros((1, g.shape[1])),
                               np.cumsum(0.5 * (g[1:] + g[:-1]) * fine, axis=0)])  # fmt: skip
         for w0 in np.arange(0.0, duration - n * dt + 1e-9, n * dt):

@@ -336,11 +336,11 @@ def test_new_costs_on_a_grid_of_the_same_sizes_compile_nothing():
 
 
 def test_sweep_of_a_gradient_through_simulate_orders_by_the_undifferentiated_estimate():
-    """A `fn` that differentiates `simulate` (`jax.grad`) is swept with the default
+    """A `fn` that differentiates `simulate` (`jax.value_and_grad`) is swept with the default
     `cost="auto"`: the probe's estimate is the undifferentiated run's (no tracer of the
-    gradient escapes it), the result equals `cost=None` bit for bit and a central difference;
-    a `fn` whose estimate cannot leave its own transformation (its own `jax.jit`) falls back
-    to the grid's order."""
+    gradient escapes it), the result equals `cost=None` bit for bit and a central difference
+    of the values (the same compiled batch on a grid of the same size); a `fn` whose estimate
+    cannot leave its own transformation (its own `jax.jit`) falls back to the grid's order."""
     from hrgjax.sweep import member_costs
 
     gyro = hg.presets.ideal(hg.presets.tvg3_like().resonator)  # ideal loops: a light compile
@@ -349,8 +349,8 @@ def test_sweep_of_a_gradient_through_simulate_orders_by_the_undifferentiated_est
         prof = hg.Profile.constant_rate(rate_dps, 5.0, 20.0)
         return hg.simulate(gyro, prof, dt_out=5.0).wave_angle[-1]
 
-    def slope(rate_dps):
-        return jax.grad(angle)(rate_dps)
+    def slope(rate_dps):  # the angle and its derivative
+        return jax.value_and_grad(angle)(rate_dps)
 
     W = jnp.array([0.5, 5.0])
     flat = {"rate_dps": W}
@@ -358,8 +358,8 @@ def test_sweep_of_a_gradient_through_simulate_orders_by_the_undifferentiated_est
         member_costs(slope, "auto", flat), member_costs(angle, "auto", flat)
     )
     assert member_costs(lambda rate_dps: jax.jit(slope)(rate_dps), "auto", flat) is None
-    auto = hg.sweep(slope, rate_dps=W)
-    np.testing.assert_array_equal(auto, hg.sweep(slope, rate_dps=W, cost=None))
+    _, auto = hg.sweep(slope, rate_dps=W)
+    np.testing.assert_array_equal(auto, hg.sweep(slope, rate_dps=W, cost=None)[1])
     h = 1e-4
-    lo, hi = hg.sweep(angle, rate_dps=W[1] + jnp.array([-h, h]), cost=None)
+    (lo, hi), _ = hg.sweep(slope, rate_dps=W[1] + jnp.array([-h, h]), cost=None)
     assert float(auto[1]) == pytest.approx(float(hi - lo) / (2 * h), rel=1e-7)
