@@ -8,7 +8,8 @@ then four 6000-s ramps at 1 °C/min (−40 → 60 and back at 30° el., the same
 equations, the first-round screening rows and each accepted effect's consistency, and the
 same dwell runs alone (the dwell search) for comparison. Before the split kept every static
 wave angle in training and the dwell windows' evidence was counted: `unexplained`, gap
-183 °/h, damping cos 2θ −186 ± 16 °/h. Usage: `nice -n 10 .venv/bin/python
+183 °/h, damping cos 2θ −186 ± 16 °/h; and until the acceptance rule read `p_stat` a third
+effect, `thermal_rate` −18 ± 18 °/h per °C/min, was accepted (48σ by the noise model). Usage: `nice -n 10 .venv/bin/python
 benchmarks/discovery_mixed_plan.py` (≈ 6 min on 2 shared cores).
 """
 
@@ -45,7 +46,7 @@ def show(found, seconds):
           f"{seconds:.0f} s")  # fmt: skip
     print(found.equations())
     for r in found.screening[:6]:
-        keep = ("effect", "delta_bic", "heldout_gain", "agreement", "refused_by")
+        keep = ("effect", "delta_bic", "heldout_gain", "p_stat", "agreement", "refused_by")
         print({k: round(r[k], 4) if isinstance(r[k], float) else r[k] for k in keep})
     for name, c in found.consistency.items():
         if c is None:  # dwell grids: one run is one grid point

@@ -201,6 +201,9 @@ def test_continuous_names_a_hidden_thermal_rate(thermal_rate_report):
     assert abs(user["value"] - 0.15) < 4 * user["sigma"]
     assert rep.to_json()["parameters"]["thermal_rate"]["c_Tdot"] == pytest.approx(user)
     assert "[thermal_rate]" in rep.equations()
+    # the acceptance rule's p-value at the reported σ's noise level (less the model pull)
+    row = next(r for r in rep.screening if r["effect"] == "thermal_rate")
+    assert row["refused_by"] is None and row["p_stat"] < 0.01  # Bonferroni: one candidate
     # the evidence repeats: refitted on each training run alone, every run agrees
     cons = rep.consistency["thermal_rate"]
     assert len(cons["per_run"]) == 4 and cons["dof"] >= 2

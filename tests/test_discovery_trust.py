@@ -310,3 +310,42 @@ def test_a_clean_grid_names_no_temperature_shape(grid):
         _, new, info = _draws(grid, s, s * ratio, 0.0, n=30, seed=5)
         assert info["shapes"] == [] and not info["structure_left"], info
         assert 0.7 < np.sqrt(np.mean(new**2)) < 1.3
+
+
+def test_acceptance_p_value_is_read_at_the_noise_level_the_residual_shows(grid):
+    """Audit bench2 (the designed mixed log): `thermal_rate` passed the score test at 48σ of
+    the noise model and was reported at 1.0σ — the static windows' residual 52× the model's,
+    σ_b from four runs. The acceptance rule now also asks for Bonferroni under the
+    covariance of the reported σ less the model pull (`statistical_p_value`). Independent
+    truth: under the null (no temperature law) with the noise 4× the model's, that p-value
+    is uniform — its 1 % tail holds ≈ 1 % of the draws, where the noise model's Wald test
+    holds most of them; and σ_b's spread factors divide the Wald statistic."""
+    from scipy.stats import chi2
+
+    g, _, classes = grid
+    rng = np.random.default_rng(11)
+    s = 0.01 * DEG_PER_H
+    sig = np.full(g.shape[0], s)
+    truth = np.zeros(g.shape[1])
+    truth[1] = K
+    b = [i for i, (n, _) in enumerate(regular_parameters(MODEL)) if n == "bias_temperature"]
+    p_model, p_stat = [], []
+    for _ in range(400):
+        fit = _wls_fit(g, g @ truth + 4 * s * rng.standard_normal(g.shape[0]), sig)
+        theta = np.array([fit.parameters["bias_temperature"][p]["value"] for p in ("b1", "b2")])
+        cov = np.linalg.inv(fit.j.T @ fit.j)[np.ix_(b, b)]
+        p_model.append(chi2.sf(theta @ np.linalg.solve(cov, theta), 2))
+        p_stat.append(trust.statistical_p_value(fit, "bias_temperature", {}, classes))
+    p_model, p_stat = np.asarray(p_model), np.asarray(p_stat)
+    assert np.mean(p_model < 0.01) > 0.5  # the noise model's test: confidently wrong
+    assert np.mean(p_stat < 0.01) < 0.03 and 0.05 < np.mean(p_stat < 0.1) < 0.16
+    # σ_b's spread: factor f on both variances divides the Wald statistic by f; ∞: no evidence
+    ones = np.ones(len(regular_parameters(MODEL)))
+    w = chi2.isf(trust.statistical_p_value(fit, "bias_temperature", {}, classes), 2)
+    spread = trust.statistical_p_value(fit, "bias_temperature", {}, classes,
+                                       spread=(4.0 * ones, {}))  # fmt: skip
+    assert spread == pytest.approx(chi2.sf(w / 4.0, 2), rel=1e-9)
+    unpinned = np.where(np.arange(ones.size) == b[0], np.inf, 1.0)
+    assert trust.statistical_p_value(fit, "bias_temperature", {}, classes,
+                                     spread=(unpinned, {})) == 1.0  # fmt: skip
+    assert trust.statistical_p_value(fit, "thermal_rate", {}, classes) is None

@@ -102,7 +102,9 @@ class Discovery:
       `screening` (their first-round test statistics, each row with `round` 1 and
       `accepted_in_round`: the round in which the effect was accepted, or None;
       `refused_by`: the first acceptance rule it fails, named as in
-      [`REFUSALS`][hrgjax.discovery.search.REFUSALS], or None; `agreement`: its per-run
+      [`REFUSALS`][hrgjax.discovery.search.REFUSALS], or None; `p_stat`: its p-value at
+      the noise level the residual shows, σ_b's uncertainty carried in, where that was
+      computed ([`statistical_p_value`][hrgjax.discovery.trust.statistical_p_value]); `agreement`: its per-run
       agreement share where that was computed; `agreement_note`: why it is None where the
       check was asked for but could not be made, e.g. no two parts of the training runs each
       resolve the effect),

@@ -19,7 +19,11 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    index < `max_aliasing`: what is left of its signature once the model has absorbed what
    it can is still more than 0.1 %, and the score test says that rest is significant), it
    lowers the held-out whitened χ² by more than `min_heldout_gain`, it does not widen the
-   held-out gap (dwell grids only), and (continuous records) it repeats run by run: its
+   held-out gap (dwell grids only), it still passes Bonferroni under the covariance its
+   reported σ is built from, less the model pull (`p_stat`: the noise level the residual
+   shows and, continuous records, σ_b's own uncertainty —
+   [`statistical_p_value`][hrgjax.discovery.trust.statistical_p_value]), and (continuous
+   records) it repeats run by run: its
    parameters refitted on each training run alone point the same way as the pooled fit in
    at least `min_agreement` of the runs whose own data resolve it — or, when fewer than two
    do, of groups of consecutive runs pooled until each resolves it (the χ² of their scatter
@@ -192,6 +196,18 @@ def discover(
         r["agreement_note"] = None if c is None else c.get("reason")
         return r["agreement"] is None or r["agreement"] >= min_agreement
 
+    def significant(r):
+        """Still significant at the noise level the residual shows and with σ_b's own
+        uncertainty (`trust.statistical_p_value`), computed once, only when needed: the
+        score test reads the noise model as given."""
+        if "p_stat" not in r:
+            fit = r["refit"]
+            r["p_stat"] = trust.statistical_p_value(
+                fit, r["effect"], problem.shape_columns, problem.row_classes(),
+                spread=problem.noise_spread(fit),
+            )  # fmt: skip
+        return r["p_stat"] is None or r["p_stat"] < alpha / max(n_cands, 1)
+
     def refusal(r, fit):
         """The first rule of the acceptance rule that `r` fails against `fit` (its
         `REFUSALS` name), or None; kept in the row as `refused_by`."""
@@ -202,6 +218,7 @@ def discover(
             ("refit", lambda: r.get("refit") is not None),
             ("heldout_gain", lambda: r["heldout_gain"] > min_heldout_gain),
             ("gap_after", lambda: not problem.gap_guard or r["gap_after"] <= fit.gap),
+            ("p_stat", lambda: significant(r)),
             ("consistency", lambda: consistent(r)),
             ("outshone_by", lambda: not outshone(r)),
         )
@@ -310,7 +327,7 @@ PROBLEMS: dict[str, type[AbstractProblem]] = {
 as windows)."""
 SCREEN_KEYS = (
     "effect", "score", "p_value", "delta_bic", "aliasing", "heldout_gain", "gap_after",
-    "outshone_by", "agreement", "agreement_note", "refused_by",
+    "p_stat", "outshone_by", "agreement", "agreement_note", "refused_by",
 )  # fmt: skip
 REFUSALS = {
     "p_value": "its score p-value misses Bonferroni at `alpha`",
@@ -319,6 +336,9 @@ REFUSALS = {
     "refit": "not refitted (outside the short list of the best scores, or its fit failed)",
     "heldout_gain": "it lowers the held-out χ² by no more than `min_heldout_gain`",
     "gap_after": "it widens the held-out gap (dwell grids)",
+    "p_stat": "its p-value under the covariance of its reported σ less the model pull "
+    "(`p_stat`: the noise level the residual shows; continuous records: σ_b's own "
+    "uncertainty) misses Bonferroni at `alpha`",
     "consistency": "its per-run refits (or, when fewer than two runs resolve it, groups of "
     "consecutive runs pooled until each does) agree with the pooled one in under "
     "`min_agreement`",

@@ -76,23 +76,44 @@ SMALL_DOF = stats.SMALL_DOF
 with the other classes'."""
 
 
-def _sandwich_diag(a, s, p):
-    """Variances of the first `p` coefficients of the least-squares fit on the whitened
+def _sandwich(a, s, p):
+    """Covariance of the first `p` coefficients of the least-squares fit on the whitened
     columns `a` when row i's whitened noise has standard deviation `s[i]`:
-    diag of (AᵀA)⁻¹ Aᵀ diag(s²) A (AᵀA)⁻¹ (the fit keeps the noise model's weights; only the
-    noise level is read from the residual). Columns the data never excite: ∞."""
-    out = np.full(p, np.inf)
+    (AᵀA)⁻¹ Aᵀ diag(s²) A (AᵀA)⁻¹ (the fit keeps the noise model's weights; only the
+    noise level is read from the residual). Columns the data never excite: ∞ variance."""
+    out = np.zeros((p, p))
+    out[np.diag_indices(p)] = np.inf
     live = np.linalg.norm(a, axis=0) > 0
     if not live.any():
         return out
     al = a[:, live]
     c = stats.covariance(al)
     meat = (al * (s**2)[:, None]).T @ al
-    v = np.diag(c @ meat @ c)
+    v = c @ meat @ c
     where = np.flatnonzero(live)
-    keep = where < p
-    out[where[keep]] = np.maximum(v[keep], 0.0)
+    keep = np.flatnonzero(where < p)
+    rows = where[keep]
+    out[np.ix_(rows, rows)] = v[np.ix_(keep, keep)]
+    out[rows, rows] = np.maximum(np.diag(v)[keep], 0.0)
     return out
+
+
+def _sandwich_diag(a, s, p):
+    """The variances of [`_sandwich`][hrgjax.discovery.trust._sandwich]."""
+    return np.diag(_sandwich(a, s, p)).copy()
+
+
+def _levels(r, j, cols, classes, alpha):
+    """The noise level per row the residual shows once the significant leftover shapes are
+    fitted beside the model (module docstring, 1. and 2.): `(s, a, shapes, bare)` — the
+    levels, the columns `[j, shapes]`, the shapes' names, the levels without them."""
+    s = bare = stats.class_levels(r, j, classes)  # `bare`: the level without the shapes
+    for _ in range(2):  # the shapes judged at the noise level the data show, and back
+        shapes = _shapes_left(r, j, cols, classes, s, alpha)
+        a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
+        step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
+        s = stats.class_levels(r - a @ step, a, classes, s)  # the noise the shapes leave
+    return s, a, shapes, bare
 
 
 def _shapes_left(r, j, cols, classes, s, alpha):
@@ -161,12 +182,7 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
     if classes is not None and len(classes) != n:
         raise ValueError(f"honest: {len(classes)} row classes for a residual of {n} rows")
     cols = {k: v for k, v in shape_columns.items() if v.shape[0] == n}
-    s = bare = stats.class_levels(r, j, classes)  # `bare`: the level without the shapes
-    for _ in range(2):  # the shapes judged at the noise level the data show, and back
-        shapes = _shapes_left(r, j, cols, classes, s, alpha)
-        a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
-        step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
-        s = stats.class_levels(r - a @ step, a, classes, s)  # the noise the shapes leave
+    s, a, shapes, bare = _levels(r, j, cols, classes, alpha)
     # the reported values are the noise model's weighted fit: the shift and the sandwich
     # variance are that estimator's (with the shapes beside it), at the noise level s
     step, *_ = np.linalg.lstsq(a, r, rcond=None)
@@ -218,3 +234,48 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
                 f"{k} ×{v:.2g}" for k, v in info["excess"].items()) + ")"  # fmt: skip
         words += ", each parameter's shift when it is fitted added to its σ"
     return params, info | {"basis": words}
+
+
+def statistical_p_value(fit, name: str, shape_columns, classes=None, alpha: float = 1e-3,
+                        spread=None) -> float | None:  # fmt: skip
+    r"""The Wald p-value of effect `name` in `fit` under the covariance its reported σ is
+    built from, less the model pull: the sandwich at the noise level the residual shows per
+    class once the significant leftover shapes are fitted beside the model, times `spread`'s
+    factors ($\sqrt{f_i f_j}$: continuous records' σ_b posterior) — `honest`'s σ without
+    its `std_model` — $W = \hat\theta^\top C^{-1}\hat\theta$ against $\chi^2_q$.
+
+    The acceptance rule's score p-value and ΔBIC read the noise model as given; where the
+    residual is far above it (a mixed log's static windows ×52 where laws are missing) or a
+    candidate is pinned only by run means that a few runs' σ_b cannot vouch for, an effect
+    can pass them and be reported at 1σ (audit bench2: the designed mixed log's thermal
+    rate, 48σ by the noise model, 1.0σ reported). Arguments as
+    [`honest`][hrgjax.discovery.trust.honest].
+
+    **Returns** the p-value, 1.0 where a variance is infinite (the data do not excite it,
+    or σ_b is not pinned for it), None where `name` has no regular parameter in `fit` or
+    there are too few rows to read a level."""
+    r, j = np.asarray(fit.r, float), np.asarray(fit.j, float)
+    labels = regular_parameters(fit.model)
+    idx = [i for i, (n, _) in enumerate(labels) if n == name]
+    if not idx or j.ndim != 2 or j.shape[1] != len(labels) or r.size <= j.shape[1]:
+        return None
+    if classes is not None and len(classes) != r.size:
+        raise ValueError(f"statistical_p_value: {len(classes)} row classes for {r.size} rows")
+    cols = {k: v for k, v in shape_columns.items() if v.shape[0] == r.size}
+    s, a, _, _ = _levels(r, j, cols, classes, alpha)
+    block = _sandwich(a, s, j.shape[1])[np.ix_(idx, idx)]
+    if spread is not None:
+        f = np.asarray(spread[0], float)[idx]
+        block = block * np.sqrt(np.outer(f, f))
+    if not np.all(np.isfinite(block)):
+        return 1.0
+    old = np.diag(stats.covariance(j))
+    theta = []
+    for i in idx:
+        std = fit.parameters[name][labels[i][1]].get("std")
+        if not (std and np.isfinite(std) and np.isfinite(old[i]) and old[i] > 0):
+            return None
+        theta.append(fit.parameters[name][labels[i][1]]["value"] / std * math.sqrt(old[i]))
+    theta = np.asarray(theta)  # in the Jacobian's (whitened) units
+    wald = float(theta @ np.linalg.solve(block, theta))
+    return stats.chi2_sf(wald, len(idx))
