@@ -444,8 +444,8 @@ class ContinuousProblem(AbstractProblem):
                 var.append(cov.sum() / (self.k_out * span) ** 2)
         return float(np.sqrt(np.mean(var))) / DEG_PER_H if var else float("nan")
 
-    # -- interface shared with the dwell problem ------------------------------
     gap_guard = False  # the run-mean gap is set by the switch-on bias: judge on χ² only
+    descent = -1.0  # `j` is the whitened residual's derivative (records.residual_and_jacobian)
 
     def candidates(self, nominal):
         """Every effect of the superset that is not nominal."""

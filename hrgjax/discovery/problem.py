@@ -54,6 +54,10 @@ class AbstractProblem(abc.ABC):
     the held-out gap (dwell grids, whose held-out runs are as quiet as the training ones)."""
 
     gap_guard: bool = False
+    descent: float = 1.0
+    """The sign that turns `lstsq(fit.j, fit.r)` into a parameter step: +1 where a fit's `j`
+    is the model's derivative (dwell grids: r = y − Jβ), −1 where it is the residual's
+    (continuous records)."""
     k_e: float
 
     @classmethod

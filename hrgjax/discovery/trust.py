@@ -237,23 +237,30 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
 
 
 def statistical_p_value(fit, name: str, shape_columns, classes=None, alpha: float = 1e-3,
-                        spread=None) -> float | None:  # fmt: skip
-    r"""The Wald p-value of effect `name` in `fit` under the covariance its reported σ is
-    built from, less the model pull: the sandwich at the noise level the residual shows per
-    class once the significant leftover shapes are fitted beside the model, times `spread`'s
-    factors ($\sqrt{f_i f_j}$: continuous records' σ_b posterior) — `honest`'s σ without
-    its `std_model` — $W = \hat\theta^\top C^{-1}\hat\theta$ against $\chi^2_q$.
+                        spread=None, descent: float = 1.0) -> float | None:  # fmt: skip
+    r"""The p-value of effect `name` in `fit` in the fit its reported σ comes from: the
+    named model with the significant leftover shapes fitted beside it
+    ([`honest`][hrgjax.discovery.trust.honest]), read at the noise level its residual
+    shows per class of rows and with `spread`'s factors ($\sqrt{f_i f_j}$: continuous
+    records' σ_b posterior). The candidate's estimate in that fit, $\hat\theta + \delta$
+    (δ: its shift when the shapes are fitted), against that fit's sandwich covariance:
+    $W = (\hat\theta+\delta)^\top C^{-1}(\hat\theta+\delta)$ over the parameters σ_b
+    pins, with the F(q, ν) tail of a level read from ν degrees of freedom (the classes' own,
+    pooled by where the candidate is seen: `stats.effective_dof`).
 
-    The acceptance rule's score p-value and ΔBIC read the noise model as given; where the
-    residual is far above it (a mixed log's static windows ×52 where laws are missing) or a
-    candidate is pinned only by run means that a few runs' σ_b cannot vouch for, an effect
-    can pass them and be reported at 1σ (audit bench2: the designed mixed log's thermal
-    rate, 48σ by the noise model, 1.0σ reported). Arguments as
-    [`honest`][hrgjax.discovery.trust.honest].
+    The acceptance rule's score p-value and ΔBIC read the noise model as given and the
+    model as complete; where the residual is far above the noise model (a mixed log's static
+    windows ×52 where laws are missing), a candidate is pinned only by run means that a few
+    runs' σ_b cannot vouch for, or its value is a leftover shape's pull, an effect can pass
+    them and be reported at 1σ (audit bench2: the designed mixed log's thermal rate, 48σ by
+    the noise model, 1.0σ reported). Arguments as [`honest`][hrgjax.discovery.trust.honest];
+    `descent`: the sign that turns `lstsq(fit.j, fit.r)` into a parameter step (+1 where
+    `j` is the model's derivative, as the dwell fits'; −1 where it is the residual's, as the
+    continuous fits': `AbstractProblem.descent`).
 
-    **Returns** the p-value, 1.0 where a variance is infinite (the data do not excite it,
-    or σ_b is not pinned for it), None where `name` has no regular parameter in `fit` or
-    there are too few rows to read a level."""
+    **Returns** the p-value, 1.0 where no parameter of `name` has a finite variance (the
+    data do not excite it, or σ_b pins none of them), None where `name` has no regular
+    parameter in `fit` or there are too few rows to read a level."""
     r, j = np.asarray(fit.r, float), np.asarray(fit.j, float)
     labels = regular_parameters(fit.model)
     idx = [i for i, (n, _) in enumerate(labels) if n == name]
@@ -262,13 +269,6 @@ def statistical_p_value(fit, name: str, shape_columns, classes=None, alpha: floa
     if classes is not None and len(classes) != r.size:
         raise ValueError(f"statistical_p_value: {len(classes)} row classes for {r.size} rows")
     cols = {k: v for k, v in shape_columns.items() if v.shape[0] == r.size}
-    s, a, _, _ = _levels(r, j, cols, classes, alpha)
-    block = _sandwich(a, s, j.shape[1])[np.ix_(idx, idx)]
-    if spread is not None:
-        f = np.asarray(spread[0], float)[idx]
-        block = block * np.sqrt(np.outer(f, f))
-    if not np.all(np.isfinite(block)):
-        return 1.0
     old = np.diag(stats.covariance(j))
     theta = []
     for i in idx:
@@ -276,6 +276,31 @@ def statistical_p_value(fit, name: str, shape_columns, classes=None, alpha: floa
         if not (std and np.isfinite(std) and np.isfinite(old[i]) and old[i] > 0):
             return None
         theta.append(fit.parameters[name][labels[i][1]]["value"] / std * math.sqrt(old[i]))
+    s, a, shapes, _ = _levels(r, j, cols, classes, alpha)
     theta = np.asarray(theta)  # in the Jacobian's (whitened) units
-    wald = float(theta @ np.linalg.solve(block, theta))
-    return stats.chi2_sf(wald, len(idx))
+    if shapes:  # the estimate in the fit with the shapes
+        step, *_ = np.linalg.lstsq(a, r, rcond=None)
+        theta = theta + descent * step[idx]
+    cov = _sandwich(a, s, j.shape[1])[np.ix_(idx, idx)]
+    if spread is not None:
+        f = np.asarray(spread[0], float)[idx]
+        keep = np.isfinite(f)  # the parameters σ_b pins
+        cov = cov[np.ix_(keep, keep)] * np.sqrt(np.outer(f[keep], f[keep]))
+        theta, idx = theta[keep], [i for i, k in zip(idx, keep, strict=True) if k]
+    live = np.isfinite(np.diag(cov)) if idx else np.zeros(0, bool)
+    if not live.any():
+        return 1.0
+    cov, theta = cov[np.ix_(live, live)], theta[live]
+    idx = [i for i, k in zip(idx, live, strict=True) if k]
+    u, sv, vt = np.linalg.svd(cov)
+    rank = int(np.sum(sv > sv[0] * len(sv) * np.finfo(float).eps)) if sv[0] > 0 else 0
+    if rank == 0:
+        return 1.0
+    proj = u[:, :rank].T @ theta
+    wald = float(np.sum(proj**2 / sv[:rank]))  # a pseudo-inverse: collinear columns
+    aw = a / s[:, None]
+    h = stats.leverage(aw)
+    q_o, _ = np.linalg.qr(np.delete(aw, idx, axis=1))  # the candidate beside the rest
+    g = aw[:, idx]
+    nu = stats.effective_dof(h, g - q_o @ (q_o.T @ g), classes)
+    return stats.f_sf(wald / rank, rank, int(nu))
