@@ -24,6 +24,11 @@ against `mtotvar_bias` and `edf_mtotdev`, at octave m; N ≤ 2 049 (O(N³)).
 difference from the stored one, and every entry at m ≤ M against the dense form here
 (`run_form`, `covariance`: O(m³); M = 128 ≈ 1 min).
 
+`--rho N`: `hrgjax.allan.mixture`'s ρᵢⱼ tables (`MTOTDEV_RHO_M`, `MTOTDEV_RHO`: the cross
+terms of Var Mod Totvar between white angle, white rate, flicker rate and random-walk rate
+noise) printed as source from the dense forms over N phase points, and the stored ones'
+largest difference (N = 385 ≈ 15 s).
+
 Usage: `.venv/bin/python benchmarks/coverage_mtotdev.py [--n 200] [--samples 1024]
 [--noises wpm,fpm,wfm,ffm,rwfm,mix] [--seed 1] [--rule hrgjax|stable32] [--kind mtotdev]`
 (200 records of 1 024 samples per noise ≈ 20 s on 2 shared cores; `--exact 1025` ≈ 10 s).
@@ -182,6 +187,52 @@ def bias_table(upto):
           f"({time.time() - t0:.0f} s)")  # fmt: skip
 
 
+RHO_TYPES = ("wpm", "wfm", "ffm", "rwfm")  # the IEEE 952 terms' types (α = 2, 0, −1, −2)
+
+
+def rho_rows(n, ms):
+    """{m: ρ of each pair of RHO_TYPES}: tr(AΣᵢAΣⱼ)/√(tr(AΣᵢ)² tr(AΣⱼ)²) of the raw estimator's
+    dense form A over n phase points, pairs in the order (0, 1), (0, 2), (0, 3), (1, 2), …"""
+    covs = [covariance(noise, n) for noise in RHO_TYPES]
+    out = {}
+    for m in ms:
+        rows = run_form(m)
+        a = rows.T @ rows
+        form = np.zeros((n, n))
+        for i in range(n - 3 * m + 1):
+            form[i : i + 3 * m, i : i + 3 * m] += a
+        fs = [form @ c for c in covs]
+        v = np.array([[np.sum(p * q.T) for q in fs] for p in fs])
+        rho = v / np.sqrt(np.outer(np.diag(v), np.diag(v)))
+        out[m] = rho[np.triu_indices(len(RHO_TYPES), 1)]
+    return out
+
+
+def rho_table(n):
+    """`MTOTDEV_RHO_M` (m = 1, 2, 3) and `MTOTDEV_RHO` (m ≥ 4 by r = n/m) of
+    hrgjax.allan.mixture printed as source, from the dense forms over n phase points
+    (n = 385: ≈ 15 s), and the stored tables' largest difference from them."""
+    from hrgjax.allan import mixture
+
+    rs = mixture.MTOTDEV_RHO_R
+    ms = [1, 2, 3] + [int(round(n / r)) for r in rs]
+    rho = rho_rows(n, ms)
+    print(f"# pairs (α): {RHO_TYPES} = 2, 0, −1, −2; n = {n} phase points")
+    print("MTOTDEV_RHO_M = {")
+    for m in (1, 2, 3):
+        print(f"    {m}: (" + ", ".join(f"{v:.4f}" for v in rho[m]) + "),")
+    print("}\nMTOTDEV_RHO = (")
+    worst = 0.0
+    for r, m in zip(rs, ms[3:], strict=True):
+        print("    (" + ", ".join(f"{v:.4f}" for v in rho[m]) + f"),  # r = {r} (m = {m}, "
+              f"n/m = {n / m:.2f})")  # fmt: skip
+    print(")")
+    for m in ms:
+        stored = mixture.mtotdev_rho(m, n)
+        worst = max(worst, float(np.max(np.abs(stored[np.triu_indices(4, 1)] - rho[m]))))
+    print(f"# largest |stored − dense| at these m: {worst:.1e}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=200)
@@ -192,7 +243,11 @@ def main():
     ap.add_argument("--kind", default="mtotdev", help="mtotdev, or mdev for comparison")
     ap.add_argument("--exact", type=int, default=0, metavar="N")
     ap.add_argument("--bias-table", type=int, default=0, metavar="M")
+    ap.add_argument("--rho", type=int, default=0, metavar="N")
     a = ap.parse_args()
+    if a.rho:
+        rho_table(a.rho)
+        return
     if a.bias_table:
         bias_table(a.bias_table)
         return

@@ -13,6 +13,12 @@ the components'. For independent components the mixture's values are exact:
   ([`mixture_bias`][hrgjax.allan.mixture.mixture_bias]; b of each component
   [`mtotvar_bias`][hrgjax.allan.total.mtotvar_bias], Mod σ²ᵢ = the term's Allan variance ×
   [`modvar_ratio`][hrgjax.allan.mixture.modvar_ratio]);
+  and the raw estimator's EDF from Var Mod Totvar = Σᵢⱼ 2 tr(AΣᵢAΣⱼ): each term's own
+  variance (its one-type EDF) and the cross terms' correlations ρᵢⱼ of the estimator's
+  quadratic form ([`mixture_mtotdev_edf`][hrgjax.allan.mixture.mixture_mtotdev_edf]; not yet
+  used by [`deviation`][hrgjax.allan.deviation]: the bias-corrected estimate's variance
+  also holds the fitted divisor's, anti-correlated with the raw estimate's, and is up to
+  1.2× the raw one's at a crossover, docs/allan.md *Mixtures*);
 - oadev: EDF(τ) = 2σ²(τ)²/Var σ̂²(τ), with Var σ̂² the exact Gaussian variance of the
   overlapping estimate under the model
   ([`covariance`][hrgjax.allan.octave_covariance.covariance], the bias instability as a
@@ -110,6 +116,22 @@ def _unit_avar(term: str, taus) -> np.ndarray:
     return {n: f for n, _, _, f in NOISE_TERMS}[term](np.asarray(taus, dtype=float))
 
 
+def _raw_shares(value: dict, m: np.ndarray, tau0: float) -> dict:
+    """{term: (E[Mod Totvar]ᵢ = b(αᵢ, m)·Mod σ²ᵢ(m), Mod σ²ᵢ(m))} of the terms of `value`
+    with a coefficient > 0, at factors `m` (arrays of m's shape)."""
+    from .total import mtotvar_bias
+
+    out = {}
+    for term in MIXTURE_TERMS:
+        c = float(value.get(term, 0.0))
+        if c <= 0:
+            continue
+        modvar = c * c * _unit_avar(term, m * tau0) * modvar_ratio(term, m)
+        b = np.asarray([mtotvar_bias(TERM_ALPHA[term], int(k)) for k in m.ravel()])
+        out[term] = (b.reshape(m.shape) * modvar, modvar)
+    return out
+
+
 def mixture_bias(value: dict, m, tau0: float) -> np.ndarray:
     """b_mix(m) = Σᵢ b(αᵢ, m)·Mod σ²ᵢ(m)/Σᵢ Mod σ²ᵢ(m): E[Mod Totvar]/Mod σ² of mtotdev's raw
     estimator at factors `m` for independent IEEE 952 terms of coefficients `value`
@@ -118,20 +140,95 @@ def mixture_bias(value: dict, m, tau0: float) -> np.ndarray:
     each term [`mtotvar_bias`][hrgjax.allan.total.mtotvar_bias] at its α
     ([`TERM_ALPHA`][hrgjax.allan.mixture.TERM_ALPHA]). NaN where every term is 0.
     [dimensionless]"""
-    from .total import mtotvar_bias
-
     m = np.asarray(m, dtype=int)
     num, den = np.zeros(m.shape), np.zeros(m.shape)
-    for term in MIXTURE_TERMS:
-        c = float(value.get(term, 0.0))
-        if c <= 0:
-            continue
-        modvar = c * c * _unit_avar(term, m * tau0) * modvar_ratio(term, m)
-        b = np.asarray([mtotvar_bias(TERM_ALPHA[term], int(k)) for k in m.ravel()])
-        num += b.reshape(m.shape) * modvar
+    for raw, modvar in _raw_shares(value, m, tau0).values():
+        num += raw
         den += modvar
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
+
+
+MTOTDEV_RHO_R = (3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 64.0)
+"""The r = n/m (phase points per τ) of [`MTOTDEV_RHO`][hrgjax.allan.mixture.MTOTDEV_RHO]'s rows."""
+
+# fmt: off
+MTOTDEV_RHO_M = {
+    1: (0.9760, 0.9184, 0.7176, 0.9802, 0.8169, 0.9006),
+    2: (0.8837, 0.6936, 0.3600, 0.9341, 0.6132, 0.8114),
+    3: (0.8594, 0.6527, 0.3226, 0.9277, 0.5957, 0.8053),
+}
+MTOTDEV_RHO = (
+    (0.9316, 0.8458, 0.7391, 0.9798, 0.9261, 0.9827),  # r = 3.0 (m = 128, n/m = 3.01)
+    (0.9242, 0.8294, 0.7046, 0.9775, 0.9121, 0.9778),  # r = 3.5 (m = 110, n/m = 3.50)
+    (0.9102, 0.7876, 0.6088, 0.9676, 0.8610, 0.9603),  # r = 4.0 (m = 96, n/m = 4.01)
+    (0.9023, 0.7563, 0.5216, 0.9570, 0.7978, 0.9353),  # r = 4.5 (m = 86, n/m = 4.48)
+    (0.8929, 0.7297, 0.4497, 0.9485, 0.7350, 0.9051),  # r = 5.0 (m = 77, n/m = 5.00)
+    (0.8745, 0.6925, 0.3845, 0.9403, 0.6708, 0.8656),  # r = 6.0 (m = 64, n/m = 6.02)
+    (0.8589, 0.6607, 0.3439, 0.9329, 0.6302, 0.8364),  # r = 8.0 (m = 48, n/m = 8.02)
+    (0.8504, 0.6429, 0.3213, 0.9282, 0.6072, 0.8191),  # r = 12.0 (m = 32, n/m = 12.03)
+    (0.8474, 0.6367, 0.3134, 0.9265, 0.5991, 0.8129),  # r = 16.0 (m = 24, n/m = 16.04)
+    (0.8451, 0.6319, 0.3072, 0.9252, 0.5926, 0.8078),  # r = 24.0 (m = 16, n/m = 24.06)
+    (0.8441, 0.6300, 0.3048, 0.9247, 0.5900, 0.8056),  # r = 32.0 (m = 12, n/m = 32.08)
+    (0.8435, 0.6300, 0.3042, 0.9246, 0.5881, 0.8033),  # r = 64.0 (m = 6, n/m = 64.17)
+)
+# fmt: on
+"""`MTOTDEV_RHO_M` (m = 1, 2, 3) and `MTOTDEV_RHO` (m ≥ 4, by r = n/m:
+[`MTOTDEV_RHO_R`][hrgjax.allan.mixture.MTOTDEV_RHO_R]): ρᵢⱼ = tr(AΣᵢAΣⱼ)/√(tr(AΣᵢ)²·tr(AΣⱼ)²)
+of mtotdev's raw quadratic form A for unit discrete power laws i, j, the pairs (α) (2, 0),
+(2, −1), (2, −2), (0, −1), (0, −2), (−1, −2); from the dense forms over 385 phase points
+(`benchmarks/coverage_mtotdev.py --rho 385`), within 0.004 of those over 97–1 025 points
+at the same m (m ≤ 3) or r (m ≥ 4)."""
+
+
+def mtotdev_rho(m: int, n: int) -> np.ndarray:
+    """ρᵢⱼ (4 × 4, in [`MIXTURE_TERMS`][hrgjax.allan.mixture.MIXTURE_TERMS]' order, 1 on the
+    diagonal) of mtotdev's raw estimator at factor `m` over `n` phase points: the cross term
+    2 tr(AΣᵢAΣⱼ) of Var Mod Totvar over √(Varᵢ·Varⱼ) (tables
+    [`MTOTDEV_RHO`][hrgjax.allan.mixture.MTOTDEV_RHO]; m ≥ 4 interpolated in 1/r, r = n/m,
+    r ≥ 64 the last row). [dimensionless]"""
+    m = int(m)
+    if m in MTOTDEV_RHO_M:
+        pairs = np.asarray(MTOTDEV_RHO_M[m])
+    else:
+        table = np.asarray(MTOTDEV_RHO)
+        inv = 1.0 / np.asarray(MTOTDEV_RHO_R)[::-1]  # increasing
+        at = min(max(m / float(n), inv[0]), inv[-1])
+        pairs = np.asarray([np.interp(at, inv, col[::-1]) for col in table.T])
+    rho = np.eye(len(MIXTURE_TERMS))
+    rho[np.triu_indices(len(MIXTURE_TERMS), 1)] = pairs
+    return np.maximum(rho, rho.T)
+
+
+def mixture_mtotdev_edf(value: dict, m, n: int, tau0: float) -> np.ndarray:
+    """EDF of mtotdev's (and ttotdev's) raw estimator at factors `m` over `n` phase points
+    sampled every `tau0` [s] under independent IEEE 952 terms of coefficients `value` (as
+    [`mixture_bias`][hrgjax.allan.mixture.mixture_bias]). For a quadratic form of a sum of
+    independent Gaussian terms Var Q = Σᵢⱼ 2 tr(AΣᵢAΣⱼ): the diagonal each term's own
+    2Eᵢ²/EDFᵢ (Eᵢ = b(αᵢ, m)·Mod σ²ᵢ, its share of E[Mod Totvar]; EDFᵢ
+    [`edf_mtotdev`][hrgjax.allan.total.edf_mtotdev] at its α), the cross terms
+    ρᵢⱼ·√(Varᵢ·Varⱼ) ([`mtotdev_rho`][hrgjax.allan.mixture.mtotdev_rho]), so
+    EDF = (Σᵢ Eᵢ)²/Σᵢⱼ ρᵢⱼ·(Eᵢ/√EDFᵢ)(Eⱼ/√EDFⱼ), between (ΣEᵢ)²/(ΣEᵢ/√EDFᵢ)² (ρ = 1) and
+    (ΣEᵢ)²/Σ Eᵢ²/EDFᵢ (ρ = 0). Within 4.5 % of the dense form's exact EDF on four gyro
+    mixtures (`benchmarks/coverage_mixture.py`'s, 1 025 points), as the Monte Carlo's raw
+    estimate. Not used by [`deviation`][hrgjax.allan.deviation]: with the divisor b_mix
+    fitted to the same record the corrected estimate's EDF is up to 1.2× lower (module
+    docstring). NaN where every term is 0. [dimensionless]"""
+    from .total import edf_mtotdev
+
+    m = np.asarray(m, dtype=int)
+    shares = _raw_shares(value, m, tau0)
+    index = [MIXTURE_TERMS.index(t) for t in shares]
+    out = np.full(m.size, np.nan)
+    for i, k in enumerate(m.ravel()):
+        e = np.asarray([raw.ravel()[i] for raw, _ in shares.values()])
+        if not e.size or not e.sum() > 0:
+            continue
+        edf = np.asarray([edf_mtotdev(TERM_ALPHA[t], int(k), int(n)) for t in shares])
+        s = e / np.sqrt(edf)
+        rho = mtotdev_rho(int(k), int(n))[np.ix_(index, index)]
+        out[i] = max(e.sum() ** 2 / float(s @ rho @ s), 1.0)
+    return out.reshape(m.shape)
 
 
 def mixture_oadev_edf(value: dict, m, n: int, tau0: float) -> np.ndarray:
