@@ -88,6 +88,24 @@ def test_hidden_temperature_dependent_damping_is_named():
     assert win["refused_by"] is None and win["accepted_in_round"] == 1
 
 
+def test_a_three_by_three_grid_keeps_a_clear_effect_its_seven_statics_carry():
+    """Review of b018dc5: on a 3 × 3 grid the damping law's evidence is in 7 static windows
+    (ν ≈ 2); `p_stat` read their level with the small-class allowance (pooled, floored at
+    the noise model's) yet charged the F tail their own ν: the law at W ≈ 1 800 got
+    p = 1.1e-3 and was refused, where the score test passed it at 2.7e-4. Now the test reads
+    each class's own level, as `stats.level_test` does: found, `p_stat` ≈ the score test's."""
+    from hrgjax.discovery.generate import hidden_effect_dataset
+
+    data = hidden_effect_dataset({"damping_anisotropy_temperature": -0.01},
+                                 key=jax.random.key(5039), temperatures_c=(-20.0, 20.0, 60.0),
+                                 angles_deg=(-60.0, 0.0, 60.0))  # fmt: skip
+    rep = discover(data)
+    assert rep.accepted == ("damping_anisotropy_temperature",), rep.screening[:3]
+    row = rep.screening[0]
+    assert row["effect"] == rep.missing_effect and row["refused_by"] is None
+    assert row["p_stat"] < 2 * row["p_value"] < 1e-3
+
+
 def test_two_hidden_effects_are_both_found_and_a_missing_name_is_not_invented():
     from hrgjax.discovery.generate import hidden_effect_dataset
     from hrgjax.discovery.search import candidates_for

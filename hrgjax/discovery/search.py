@@ -364,7 +364,9 @@ REFUSALS = {
     "outshone_by": "an uncovered generic shape explains the residual far better",
 }
 """A screening row's `refused_by`: the first rule of the acceptance rule it fails against the
-nominal model (None: it passes them all — accepted, or beaten by a better or simpler rival);
+nominal model (None: it passes them all — accepted, or beaten by a better or simpler rival —
+or, with `p_stat` None, all but `p_stat`, which is tested only down to the tie margin of the
+best row that passes it: a row below was beaten before it could matter);
 `agreement` is its per-run agreement share where that was computed (None: not computed, or
 the check could not be made — `Discovery.consistency` gives the `reason`)."""
 

@@ -281,6 +281,15 @@ def statistical_p_value(fit, name: str, shape_columns, classes=None, alpha: floa
     if shapes:  # the estimate in the fit with the shapes
         step, *_ = np.linalg.lstsq(a, r, rcond=None)
         theta = theta + descent * step[idx]
+    # the test's level, as `stats.level_test` reads it: each class's own, without the
+    # small-class allowance — the F tail below carries the level's uncertainty (with the
+    # allowance a 7-row class pooled and floored at 1 was charged its own ν ≈ 2: a 43σ
+    # damping law on a 3 × 3 grid refused, review of b018dc5)
+    h = stats.leverage(a)
+    norm = np.linalg.norm(a, axis=0)
+    a_n = a / np.where(norm > 0, norm, 1.0)
+    coef, *_ = np.linalg.lstsq(a_n, r, rcond=None)
+    s = stats.class_levels(r - a_n @ coef, a, classes, None, h, allowance=False)
     cov = _sandwich(a, s, j.shape[1])[np.ix_(idx, idx)]
     if spread is not None:
         f = np.asarray(spread[0], float)[idx]
@@ -299,8 +308,7 @@ def statistical_p_value(fit, name: str, shape_columns, classes=None, alpha: floa
     proj = u[:, :rank].T @ theta
     wald = float(np.sum(proj**2 / sv[:rank]))  # a pseudo-inverse: collinear columns
     aw = a / s[:, None]
-    h = stats.leverage(aw)
     q_o, _ = np.linalg.qr(np.delete(aw, idx, axis=1))  # the candidate beside the rest
     g = aw[:, idx]
     nu = stats.effective_dof(h, g - q_o @ (q_o.T @ g), classes)
-    return stats.f_sf(wald / rank, rank, int(nu))
+    return stats.f_sf(wald / rank, rank, max(int(math.floor(nu)), 1))
