@@ -144,11 +144,7 @@ def exact(n):
     print(f"N = {n} phase points: m, N/m, exact E[Mod Totvar]/Mod σ² (mtotvar_bias), "
           "exact EDF (edf_mtotdev; Table 8 under stable32)")  # fmt: skip
     for m in ms:
-        rows = run_form(m)
-        a = rows.T @ rows
-        form = np.zeros((n, n))
-        for i in range(n - 3 * m + 1):
-            form[i : i + 3 * m, i : i + 3 * m] += a
+        rows, form = dense_form(m, n)
         line = []
         for noise, alpha in ALPHA.items():
             run = covariance(noise, 3 * m)
@@ -190,17 +186,24 @@ def bias_table(upto):
 RHO_TYPES = ("wpm", "wfm", "ffm", "rwfm")  # the IEEE 952 terms' types (α = 2, 0, −1, −2)
 
 
+def dense_form(m, n):
+    """`(rows, A)`: one 3m-point run's form (`run_form`) and the raw Mod Totvar's dense
+    quadratic form over n phase points, the run's summed at every start."""
+    rows = run_form(m)
+    a = rows.T @ rows
+    form = np.zeros((n, n))
+    for i in range(n - 3 * m + 1):
+        form[i : i + 3 * m, i : i + 3 * m] += a
+    return rows, form
+
+
 def rho_rows(n, ms):
     """{m: ρ of each pair of RHO_TYPES}: tr(AΣᵢAΣⱼ)/√(tr(AΣᵢ)² tr(AΣⱼ)²) of the raw estimator's
     dense form A over n phase points, pairs in the order (0, 1), (0, 2), (0, 3), (1, 2), …"""
     covs = [covariance(noise, n) for noise in RHO_TYPES]
     out = {}
     for m in ms:
-        rows = run_form(m)
-        a = rows.T @ rows
-        form = np.zeros((n, n))
-        for i in range(n - 3 * m + 1):
-            form[i : i + 3 * m, i : i + 3 * m] += a
+        _, form = dense_form(m, n)
         fs = [form @ c for c in covs]
         v = np.array([[np.sum(p * q.T) for q in fs] for p in fs])
         rho = v / np.sqrt(np.outer(np.diag(v), np.diag(v)))
