@@ -344,7 +344,7 @@ def test_acceptance_p_value_is_read_in_the_fit_the_reported_sigma_comes_from(gri
     for _ in range(300):  # (a)
         fit = _wls_fit(g, g @ truth + 4 * s * rng.standard_normal(g.shape[0]), sig)
         p_model.append(model_wald(fit))
-        p_stat.append(trust.statistical_p_value(fit, "bias_temperature", cols, classes))
+        p_stat.append(trust.statistical_p_value(fit, "bias_temperature", {}, classes))
     p_model, p_stat = np.asarray(p_model), np.asarray(p_stat)
     assert np.mean(p_model < 0.01) > 0.5  # the noise model's test: confidently wrong
     assert np.mean(p_stat < 0.01) < 0.03 and 0.04 < np.mean(p_stat < 0.1) < 0.17
