@@ -789,6 +789,12 @@ def test_ins_criterion_is_the_schuler_response_to_the_posterior_integrated_by_di
     per = [np.trace(m_all[i : i + 2] @ cov @ m_all[i : i + 2].T) for i in (0, 2, 4)]
     default = float(d.criterion(plan, "ins"))
     assert default == pytest.approx(np.sqrt(np.mean(per)) / 1000.0, rel=1e-4)
+    # a flight is data, not structure: another heading, pair of angles and warm-up (one
+    # flight, as above) is the third flight's rows and compiles nothing new
+    with CompileCounter() as c:
+        third = float(d.criterion(plan, "ins", flight=d.INS_FLIGHTS[2]))
+    assert third == pytest.approx(np.sqrt(per[2]) / 1000.0, rel=1e-4)
+    assert not {"jit(evaluate_criterion)", "jit(_ins_sensitivity)"} & set(c.names), c.names
 
     ramp = {"kind": "ramp", "temperature_start_c": -40.0, "temperature_end_c": 60.0,
             "wave_angle_deg": 30.0, "duration_s": 6000.0}  # fmt: skip

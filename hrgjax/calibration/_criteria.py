@@ -102,6 +102,56 @@ def as_flights(flight) -> tuple[Flight, ...]:
     return flights
 
 
+class FlightNodes(eqx.Module):
+    """Flights as the criteria read them: row 2f is flight f's x gyro, row 2f + 1 its y gyro,
+    each at the Gauss–Legendre nodes of the flight's length (R × N): `theta` its wave angle
+    [rad], `temperature` [°C] and `temperature_rate` [°C/s] there, the weights of the plain
+    integral over the flight `weight` [s] and of the Schuler response at its end
+    `schuler_weight` [m·s]; `hours` the flights' mean length [h]. Arrays, not static fields,
+    so flights that differ only in heading, angles, temperatures or length share one compiled
+    criterion (a sweep over flights compiles once)."""
+
+    theta: np.ndarray
+    temperature: np.ndarray
+    temperature_rate: np.ndarray
+    weight: np.ndarray
+    schuler_weight: np.ndarray
+    hours: np.ndarray
+
+    @property
+    def count(self) -> int:
+        """The number of flights F."""
+        return self.theta.shape[0] // 2
+
+
+def flight_nodes(flight, nodes: int = NODES) -> FlightNodes:
+    """`flight` (None: `INS_FLIGHTS`, one `Flight`, a sequence of them, or `FlightNodes`,
+    returned as it is) at `nodes` Gauss–Legendre nodes each, built on the host."""
+    if isinstance(flight, FlightNodes):
+        return flight
+    from .ins_impact import EARTH_RADIUS, GRAVITY
+
+    flights = as_flights(flight)
+    x, w = np.polynomial.legendre.leggauss(int(nodes))
+    omega_s = math.sqrt(GRAVITY / EARTH_RADIUS)
+    rows = {"theta": [], "temperature": [], "temperature_rate": [], "weight": [],
+            "schuler_weight": []}  # fmt: skip
+    for f in flights:
+        length = float(f.duration_s)
+        s = (x + 1.0) / 2.0 * length
+        wt = w / 2.0 * length
+        for angle in (f.wave_angle_x_deg, f.wave_angle_y_deg):
+            rows["theta"].append(np.full(s.shape, float(angle) * DEG))
+            rows["temperature"].append(np.asarray(f.temperature(s), float))
+            rows["temperature_rate"].append(np.asarray(f.temperature_rate(s), float))
+            rows["weight"].append(wt)
+            rows["schuler_weight"].append(
+                wt * EARTH_RADIUS * (1.0 - np.cos(omega_s * (length - s)))
+            )
+    hours = np.asarray(np.mean([float(f.duration_s) for f in flights]) / 3600.0)
+    return FlightNodes(**{k: np.stack(v) for k, v in rows.items()}, hours=hours)
+
+
 def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
               flight=None, gauss_markov=None, angle_white=None, model=None):  # fmt: skip
     r"""Predicted horizontal position error [km] at the end of `flight` (a
@@ -126,7 +176,9 @@ def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0
     model, values, noise, source, panels = _inputs(
         plan, values, arw, gauss_markov, angle_white, model
     )
-    return _ins_error(source, values, noise, float(prior_scale), as_flights(flight), model, panels)
+    return _ins_error(
+        source, values, noise, float(prior_scale), flight_nodes(flight), model, panels
+    )
 
 
 def ins_sensitivity(values=None, flight=None, nodes: int = NODES, model=None) -> jax.Array:
@@ -136,46 +188,29 @@ def ins_sensitivity(values=None, flight=None, nodes: int = NODES, model=None) ->
     input-rate units at nominal gain; `model` as
     [`information`][hrgjax.calibration.design.information])."""
     model = as_model(model)
-    return _ins_sensitivity(model_values(values, model), as_flights(flight), int(nodes), model)
+    return _ins_sensitivity(model_values(values, model), flight_nodes(flight, nodes), model)
 
 
 @eqx.filter_jit
-def _ins_sensitivity(values, flights, nodes=NODES, model=GREY_BOX, schuler=True):
+def _ins_sensitivity(values, flights: FlightNodes, model=GREY_BOX, schuler=True):
     """M of `ins_sensitivity` (`schuler`), or of `warmup_sensitivity` (the plain integral of
     the rate error over each flight: the end-of-flight input-angle (tilt) error per unit
     error of each parameter [rad per SI unit])."""
-    from .ins_impact import EARTH_RADIUS, GRAVITY
-
-    x, w = np.polynomial.legendre.leggauss(nodes)
-    omega_s = math.sqrt(GRAVITY / EARTH_RADIUS)
 
     def rate(v, theta, t, t_rate):  # input-rate units [rad/s], nominal gain
         return model.rate(v, theta, t, 0.0, t_rate) / model.gain(values)
 
     # Every (flight, gyro, node) point in one vmapped gradient: one copy of the rate's
     # derivative in the compiled program however many flights (unrolled per flight and gyro,
-    # six copies compiled in ~5 s; one in ~1 s), the sums per row in numpy-built weights.
-    temps, temp_rates, thetas, weights = [], [], [], []
-    for flight in flights:
-        length = float(flight.duration_s)
-        s = (x + 1.0) / 2.0 * length
-        wt = w / 2.0 * length
-        if schuler:
-            wt = wt * EARTH_RADIUS * (1.0 - np.cos(omega_s * (length - s)))
-        for angle in (flight.wave_angle_x_deg, flight.wave_angle_y_deg):
-            temps.append(flight.temperature(s))
-            temp_rates.append(flight.temperature_rate(s))
-            thetas.append(np.full(nodes, angle * DEG))
-            weights.append(wt)
+    # six copies compiled in ~5 s; one in ~1 s), the sums per row by the nodes' weights.
+    weight = flights.schuler_weight if schuler else flights.weight
     h = jax.vmap(jax.grad(rate), in_axes=(None, 0, 0, 0))(
         values,
-        jnp.asarray(np.concatenate(thetas), dtype=float),
-        jnp.asarray(np.concatenate(temps), dtype=float),
-        jnp.asarray(np.concatenate(temp_rates), dtype=float),
+        jnp.ravel(flights.theta),
+        jnp.ravel(flights.temperature),
+        jnp.ravel(flights.temperature_rate),
     )  # (rows × nodes, P)
-    return jnp.einsum(
-        "rn,rnp->rp", jnp.asarray(np.stack(weights)), h.reshape(len(weights), nodes, -1)
-    )
+    return jnp.einsum("rn,rnp->rp", weight, h.reshape(*weight.shape, -1))
 
 
 def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
@@ -193,7 +228,7 @@ def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 10
     model, values, noise, source, panels = _inputs(
         plan, values, arw, gauss_markov, angle_white, model
     )
-    flights = as_flights(flight)
+    flights = flight_nodes(flight)
     return _warmup_error(source, values, noise, float(prior_scale), flights, model, panels)
 
 
@@ -203,16 +238,14 @@ def warmup_sensitivity(values=None, flight=None, nodes: int = NODES, model=None)
     each flight's x and y gyros per unit error of each parameter (input-rate units at nominal
     gain)."""
     model = as_model(model)
-    return _ins_sensitivity(
-        model_values(values, model), as_flights(flight), int(nodes), model, False
-    )
+    return _ins_sensitivity(model_values(values, model), flight_nodes(flight, nodes), model, False)
 
 
 def _warmup_error(plan, values, noise, prior_scale, flights, model=GREY_BOX, panels=None):
     factor = precision_factor(plan, values, noise, prior_scale, model, panels)
-    m = _ins_sensitivity(values, flights, NODES, model, False)
+    m = _ins_sensitivity(values, flights, model, False)
     z = scaled_solve(factor, m * model.scale()[None, :])
-    return jnp.sqrt(jnp.sum(z**2) / (2 * len(flights))) / DEG
+    return jnp.sqrt(jnp.sum(z**2) / (2 * flights.count)) / DEG
 
 
 def drift_warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
@@ -230,14 +263,14 @@ def drift_warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: floa
     model, values, noise, source, panels = _inputs(
         plan, values, arw, gauss_markov, angle_white, model
     )
-    flights = as_flights(flight)
+    flights = flight_nodes(flight)
     out = _drift_warmup_terms(source, values, noise, float(prior_scale), flights, model, panels)
     return out if terms else out[0]
 
 
 def _drift_warmup_error(plan, values, noise, prior_scale, flights, model=GREY_BOX,
                         panels=None):  # fmt: skip
-    hours = float(np.mean([f.duration_s for f in flights])) / 3600.0
+    hours = flights.hours
     drift = _drift_error(plan, values, noise, prior_scale, model=model, panels=panels)
     warm = _warmup_error(plan, values, noise, prior_scale, flights, model, panels)
     return jnp.sqrt((drift * hours) ** 2 + warm**2), drift, warm
@@ -248,9 +281,9 @@ _drift_warmup_terms = eqx.filter_jit(_drift_warmup_error)
 
 def _ins_error(plan, values, noise, prior_scale, flights, model=GREY_BOX, panels=None):
     factor = precision_factor(plan, values, noise, prior_scale, model, panels)
-    m = _ins_sensitivity(values, flights, NODES, model)
+    m = _ins_sensitivity(values, flights, model)
     z = scaled_solve(factor, m * model.scale()[None, :])
-    return jnp.sqrt(jnp.sum(z**2) / len(flights)) / 1000.0
+    return jnp.sqrt(jnp.sum(z**2) / flights.count) / 1000.0
 
 
 def criterion(plan: BenchPlan, kind: str = "drift+warmup", values=None, arw=None,
@@ -271,17 +304,19 @@ def criterion(plan: BenchPlan, kind: str = "drift+warmup", values=None, arw=None
     model, values, noise, source, panels = _inputs(
         plan, values, arw, gauss_markov, angle_white, model
     )
-    flights = as_flights(flight)
+    flights = flight_nodes(flight)
     return evaluate_criterion(source, kind, values, noise, float(prior_scale), flights, model,
                               panels)  # fmt: skip
 
 
 @eqx.filter_jit
-def evaluate_criterion(plan, kind, values, noise, prior_scale, flights=INS_FLIGHTS,
+def evaluate_criterion(plan, kind, values, noise, prior_scale, flights=None,
                        model=GREY_BOX, panels=None):  # fmt: skip
-    """`criterion`, compiled once per plan length, kind, model (and flights, for `ins`;
+    """`criterion`, compiled once per plan length, kind, model (and number of flights, for
+    `ins`, `warmup`, `drift+warmup`: `flights` a `FlightNodes`, or what `flight_nodes` takes);
     `panels`: `ramp_panels`, for a plan with ramps that turn); `plan` a plan or its
     information matrix (`information_source`), `noise` a `noise_vector`."""
+    flights = flight_nodes(flights)
     if kind == "drift+warmup":
         return _drift_warmup_error(plan, values, noise, prior_scale, flights, model, panels)[0]
     if kind == "drift":

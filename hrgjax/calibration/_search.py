@@ -16,7 +16,7 @@ from .. import plausible
 from .._compiled import device
 from .._progress import bar
 from .._x64 import require_x64
-from ._criteria import CRITERIA, CRITERION_UNITS, as_flights, evaluate_criterion
+from ._criteria import CRITERIA, CRITERION_UNITS, evaluate_criterion, flight_nodes
 from ._information import information_source
 from ._models import Empirical, as_model, model_values, noise_vector
 from ._plan import BenchModel, BenchPlan
@@ -277,7 +277,7 @@ def design(
     rounding = {name: resolution_step(name, x, unit) for name, (x, unit) in steps_by_key.items()}
     values = model_values(values, model)
     arw_v = noise_vector(arw, gauss_markov, angle_white)
-    flight = as_flights(flight)
+    flight = flight_nodes(flight)
     budget_s = float(budget_h) * 3600.0
     key = jax.random.key(0) if key is None else key
     per = statics + rotations
