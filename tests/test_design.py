@@ -804,6 +804,9 @@ def test_ins_criterion_is_the_schuler_response_to_the_posterior_integrated_by_di
         d.criterion(plan, "ins", flight="1h")
     with pytest.raises(TypeError, match="flight must be an ins_impact.Flight .* got empty"):
         d.criterion(plan, "ins", flight=())
+    for bad in (0, 2.5, True):
+        with pytest.raises(ValueError, match="nodes must be a positive integer"):
+            d.ins_sensitivity(values, flight, nodes=bad)
 
 
 def test_warmup_criterion_is_the_integrated_rate_error_and_the_default_adds_the_drift():

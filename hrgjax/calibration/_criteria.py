@@ -6,6 +6,7 @@ electrical wave angle. The flights' gyros are the two level ones (x forward, y r
 
 from __future__ import annotations
 
+import functools
 import math
 
 import equinox as eqx
@@ -124,15 +125,47 @@ class FlightNodes(eqx.Module):
         return self.theta.shape[0] // 2
 
 
-def flight_nodes(flight, nodes: int = NODES) -> FlightNodes:
+@functools.lru_cache(maxsize=8)
+def _legendre(nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre nodes and weights on [−1, 1] (read-only: shared between calls)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    x.flags.writeable = w.flags.writeable = False
+    return x, w
+
+
+def flight_nodes(flight, nodes: int | None = None) -> FlightNodes:
     """`flight` (None: `INS_FLIGHTS`, one `Flight`, a sequence of them, or `FlightNodes`,
-    returned as it is) at `nodes` Gauss–Legendre nodes each, built on the host."""
+    returned as it is) at `nodes` Gauss–Legendre nodes each (None: `NODES`, or those a
+    `FlightNodes` was built with), built on the host. Pass the result, not the flights, to a
+    program compiled over flights: flights enter it as arrays, so a sweep compiles once."""
     if isinstance(flight, FlightNodes):
+        built = flight.theta.shape[1]
+        if nodes is not None and nodes != built:
+            raise ValueError(
+                f"nodes must match the FlightNodes given ({built} nodes per flight); got {nodes!r}"
+            )
         return flight
+    if nodes is None:
+        nodes = NODES
+    if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 1:
+        raise ValueError(
+            f"nodes must be a positive integer (Gauss–Legendre nodes per flight); got {nodes!r}"
+        )
+    if flight is None and nodes == NODES:
+        return _default_flight_nodes()
+    return _build_flight_nodes(as_flights(flight), int(nodes))
+
+
+@functools.lru_cache(maxsize=1)
+def _default_flight_nodes() -> FlightNodes:
+    """`INS_FLIGHTS` at `NODES` nodes: built once (every default criterion call reads it)."""
+    return _build_flight_nodes(INS_FLIGHTS, NODES)
+
+
+def _build_flight_nodes(flights: tuple[Flight, ...], nodes: int) -> FlightNodes:
     from .ins_impact import EARTH_RADIUS, GRAVITY
 
-    flights = as_flights(flight)
-    x, w = np.polynomial.legendre.leggauss(int(nodes))
+    x, w = _legendre(nodes)
     omega_s = math.sqrt(GRAVITY / EARTH_RADIUS)
     rows = {"theta": [], "temperature": [], "temperature_rate": [], "weight": [],
             "schuler_weight": []}  # fmt: skip
@@ -149,7 +182,10 @@ def flight_nodes(flight, nodes: int = NODES) -> FlightNodes:
                 wt * EARTH_RADIUS * (1.0 - np.cos(omega_s * (length - s)))
             )
     hours = np.asarray(np.mean([float(f.duration_s) for f in flights]) / 3600.0)
-    return FlightNodes(**{k: np.stack(v) for k, v in rows.items()}, hours=hours)
+    arrays = {k: np.stack(v) for k, v in rows.items()} | {"hours": hours}
+    for a in arrays.values():
+        a.flags.writeable = False
+    return FlightNodes(**arrays)
 
 
 def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
@@ -181,12 +217,13 @@ def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0
     )
 
 
-def ins_sensitivity(values=None, flight=None, nodes: int = NODES, model=None) -> jax.Array:
+def ins_sensitivity(values=None, flight=None, nodes: int | None = None,
+                    model=None) -> jax.Array:  # fmt: skip
     """M of [`ins_error`][hrgjax.calibration.design.ins_error] (2F × P for F flights, [m]
     per SI unit of each parameter): the end-of-flight position error of each flight's x and
     y gyros' channels per unit error of each grey-box parameter (classical Schuler response,
-    input-rate units at nominal gain; `model` as
-    [`information`][hrgjax.calibration.design.information])."""
+    input-rate units at nominal gain; `nodes`: Gauss–Legendre nodes per flight, default
+    `NODES` = 64; `model` as [`information`][hrgjax.calibration.design.information])."""
     model = as_model(model)
     return _ins_sensitivity(model_values(values, model), flight_nodes(flight, nodes), model)
 
@@ -232,11 +269,13 @@ def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 10
     return _warmup_error(source, values, noise, float(prior_scale), flights, model, panels)
 
 
-def warmup_sensitivity(values=None, flight=None, nodes: int = NODES, model=None) -> jax.Array:
+def warmup_sensitivity(values=None, flight=None, nodes: int | None = None,
+                       model=None) -> jax.Array:  # fmt: skip
     """m of [`warmup_error`][hrgjax.calibration.design.warmup_error] (2F × P for F flights,
     [rad] per SI unit of each parameter): the end-of-flight input-angle (tilt) error of
     each flight's x and y gyros per unit error of each parameter (input-rate units at nominal
-    gain)."""
+    gain; `nodes` and `model` as
+    [`ins_sensitivity`][hrgjax.calibration.design.ins_sensitivity])."""
     model = as_model(model)
     return _ins_sensitivity(model_values(values, model), flight_nodes(flight, nodes), model, False)
 
@@ -313,7 +352,8 @@ def criterion(plan: BenchPlan, kind: str = "drift+warmup", values=None, arw=None
 def evaluate_criterion(plan, kind, values, noise, prior_scale, flights=None,
                        model=GREY_BOX, panels=None):  # fmt: skip
     """`criterion`, compiled once per plan length, kind, model (and number of flights, for
-    `ins`, `warmup`, `drift+warmup`: `flights` a `FlightNodes`, or what `flight_nodes` takes);
+    `ins`, `warmup`, `drift+warmup`: `flights` a `FlightNodes` — `Flight`s, static here,
+    would compile once per flight; `None` the default flights);
     `panels`: `ramp_panels`, for a plan with ramps that turn); `plan` a plan or its
     information matrix (`information_source`), `noise` a `noise_vector`."""
     flights = flight_nodes(flights)
