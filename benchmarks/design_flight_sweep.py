@@ -10,6 +10,12 @@ one program. The figure: `criterion(plan, "ins", flight=f)` and `warmup_sensitiv
 flights of different headings, angles and warm-ups, against 8 calls with the first flight
 (after one call of each to compile); the ratio is 1 when nothing compiles again.
 
+The second figure, the same for the prior's scale: `criterion(plan, prior_scale=s)` and the
+four public parts (`drift_warmup_error`, `ins_error`, `warmup_error`, `drift_error`) over 4
+scales against 4 calls at one scale. *Before* (up to 5619d8d) the scale was a static float
+(a new program per value) and the parts ran eagerly, primitive by primitive; *after* it is an
+array argument and each part one compiled program (the criterion's).
+
 Usage: `.venv/bin/python benchmarks/design_flight_sweep.py` (runs at any commit with the
 public API, for the before figure)
 """
@@ -56,6 +62,32 @@ def main():
           f"{len(FLIGHTS)} calls of one")  # fmt: skip
     report(f"{len(FLIGHTS)} calls with one flight (ins criterion + warm-up M)", same, "s")
     report(f"{len(FLIGHTS)} distinct flights", distinct, "s", "distinct / one flight",
+           distinct / same)  # fmt: skip
+    prior_sweep()
+
+
+def _scales(plan, scales):
+    before, t0 = len(COMPILES), time.perf_counter()
+    for s in scales:
+        float(d.criterion(plan, prior_scale=s))
+        d.drift_warmup_error(plan, prior_scale=s, terms=True)
+        float(d.ins_error(plan, prior_scale=s))
+        float(d.warmup_error(plan, prior_scale=s))
+        float(d.drift_error(plan, prior_scale=s))
+    return time.perf_counter() - t0, len(COMPILES) - before
+
+
+def prior_sweep():
+    plan = d.seed_bench_plan(quick=True)
+    scales = (10.0, 30.0, 300.0, 1000.0)
+    first, n_first = _scales(plan, (100.0,))  # compile (and run) at the default scale
+    same, n_same = _scales(plan, (100.0,) * len(scales))
+    distinct, n_distinct = _scales(plan, scales)
+    print(f"compiles: {n_first} at the first call, {n_distinct} over {len(scales)} distinct "
+          f"prior scales, {n_same} over {len(scales)} calls at one")  # fmt: skip
+    report("first call of the criterion and its four parts", first, "s")
+    report(f"{len(scales)} calls at one prior scale", same, "s")
+    report(f"{len(scales)} distinct prior scales", distinct, "s", "distinct / one scale",
            distinct / same)  # fmt: skip
 
 

@@ -666,12 +666,17 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     # the 40 segments leave directions unseen: beyond ≈ 1e6 the prior is below float64's
     # resolution of F (its Cholesky factor was round-off, NaN at 1e8); floored there, the
     # criterion stays finite, grows with the prior, and reads as the floor beyond it
-    widening = [float(d.criterion(part, "a", prior_scale=s)) for s in (1e4, 1e8, 1e12)]
+    # (the prior's scale is an argument of the compiled criterion: a sweep compiles nothing)
+    with CompileCounter() as c:
+        widening = [float(d.criterion(part, "a", prior_scale=s)) for s in (1e4, 1e8, 1e12)]
+    assert "jit(evaluate_criterion)" not in c.names, c.names
     assert np.all(np.isfinite(widening)) and widening[0] < widening[1], widening
     assert widening[2] == pytest.approx(widening[1], rel=1e-6)
-    for bad in (0.0, -1.0, np.inf):
+    for bad in (0.0, -1.0, np.inf, True, [1.0, 2.0]):
         with pytest.raises(ValueError, match=r"^prior_scale must be a finite number > 0"):
             d.criterion(part, "a", prior_scale=bad)
+    with pytest.raises(ValueError, match=r"^temperatures_c must be a non-empty sequence"):
+        d.drift_error(part, temperatures_c=[])
     np.testing.assert_allclose(jax.jit(d.information)(plan), f, rtol=1e-12,
                                atol=1e-12 * np.abs(f).max())  # fmt: skip
     assert two / one == pytest.approx(2**-0.5, rel=1e-6)

@@ -16,7 +16,13 @@ import numpy as np
 
 from .._x64 import require_x64
 from ..units import DEG, DEG_PER_H
-from ._information import NODES, information_source, precision_factor, scaled_solve
+from ._information import (
+    NODES,
+    information_source,
+    precision_factor,
+    prior_scale_array,
+    scaled_solve,
+)
 from ._models import GREY_BOX, as_model, model_values, noise_vector
 from ._plan import BenchPlan
 from .ins_impact import FLIGHTS, Flight
@@ -57,11 +63,13 @@ def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100
     RMS over the operating grid (`temperatures_c` × `angles_deg`): √(mean hᵀ C h) with
     h = ∂(static drift)/∂values and C the posterior covariance (noise arguments and `model`
     as [`information`][hrgjax.calibration.design.information])."""
+    require_x64("hrgjax.calibration.design.drift_error")
+    grid = _grid("temperatures_c", temperatures_c, "°C"), _grid("angles_deg", angles_deg, "°")
+    prior_scale = prior_scale_array(prior_scale)
     model, values, noise, source, panels = _inputs(
         plan, values, arw, gauss_markov, angle_white, model
     )
-    return _drift_error(source, values, noise, prior_scale, temperatures_c, angles_deg, model,
-                        panels)  # fmt: skip
+    return _drift_error_program(source, values, noise, prior_scale, *grid, model, panels)
 
 
 def _drift_error(plan, values, noise, prior_scale, temperatures_c=OPERATING_TEMPERATURES,
@@ -77,6 +85,21 @@ def _drift_error(plan, values, noise, prior_scale, temperatures_c=OPERATING_TEMP
     )
     z = scaled_solve(factor, h * model.scale()[None, :])
     return jnp.sqrt(jnp.mean(jnp.sum(z**2, axis=-1))) / DEG_PER_H
+
+
+_drift_error_program = eqx.filter_jit(_drift_error)  # the grid static: one program per grid
+
+
+def _grid(name: str, values, unit: str) -> tuple[float, ...]:
+    """An operating grid's axis as a tuple of floats (static in the compiled criterion)."""
+    try:
+        axis = np.asarray(values, dtype=float).ravel()
+    except (TypeError, ValueError):
+        axis = np.asarray([np.nan])
+    if axis.size == 0 or not np.isfinite(axis).all():
+        raise ValueError(f"{name} must be a non-empty sequence of finite numbers [{unit}]; "
+                         f"got {values!r}")  # fmt: skip
+    return tuple(float(v) for v in axis)
 
 
 INS_FLIGHTS = FLIGHTS
@@ -212,9 +235,8 @@ def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0
     model, values, noise, source, panels = _inputs(
         plan, values, arw, gauss_markov, angle_white, model
     )
-    return _ins_error(
-        source, values, noise, float(prior_scale), flight_nodes(flight), model, panels
-    )
+    return evaluate_criterion(source, "ins", values, noise, prior_scale_array(prior_scale),
+                              flight_nodes(flight), model, panels)  # fmt: skip
 
 
 def ins_sensitivity(values=None, flight=None, nodes: int | None = None,
@@ -265,8 +287,8 @@ def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 10
     model, values, noise, source, panels = _inputs(
         plan, values, arw, gauss_markov, angle_white, model
     )
-    flights = flight_nodes(flight)
-    return _warmup_error(source, values, noise, float(prior_scale), flights, model, panels)
+    return evaluate_criterion(source, "warmup", values, noise, prior_scale_array(prior_scale),
+                              flight_nodes(flight), model, panels)  # fmt: skip
 
 
 def warmup_sensitivity(values=None, flight=None, nodes: int | None = None,
@@ -303,7 +325,9 @@ def drift_warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: floa
         plan, values, arw, gauss_markov, angle_white, model
     )
     flights = flight_nodes(flight)
-    out = _drift_warmup_terms(source, values, noise, float(prior_scale), flights, model, panels)
+    out = _drift_warmup_terms(
+        source, values, noise, prior_scale_array(prior_scale), flights, model, panels
+    )
     return out if terms else out[0]
 
 
@@ -344,7 +368,7 @@ def criterion(plan: BenchPlan, kind: str = "drift+warmup", values=None, arw=None
         plan, values, arw, gauss_markov, angle_white, model
     )
     flights = flight_nodes(flight)
-    return evaluate_criterion(source, kind, values, noise, float(prior_scale), flights, model,
+    return evaluate_criterion(source, kind, values, noise, prior_scale_array(prior_scale), flights, model,
                               panels)  # fmt: skip
 
 

@@ -483,16 +483,26 @@ the prior is stronger than the floor (the default `prior_scale` = 100 on any pla
 nothing changes, and a parameter the plan does not see at all keeps its prior."""
 
 
+def prior_scale_array(prior_scale):
+    """`prior_scale` as a float64 array — an argument of the criteria's compiled programs,
+    not a constant baked into them, so a sweep over it compiles once — refused in one line
+    when its value is known and is not a finite number > 0."""
+    given = concrete_value(prior_scale)
+    if given is not None and not (
+        given.shape == () and np.isfinite(given) and given > 0 and given.dtype != bool
+    ):
+        raise ValueError(f"prior_scale must be a finite number > 0 (the prior's σ in units of "
+                         f"each parameter's typical uncertainty); got {given}")  # fmt: skip
+    return jnp.asarray(prior_scale, dtype=jnp.float64)
+
+
 def precision_factor(plan, values, noise, prior_scale, model=GREY_BOX, panels=None):
     """Cholesky factor of the posterior precision in units of each parameter's typical
     uncertainty, equilibrated to unit diagonal: `(L, d)` with A = diag(d) L Lᵀ diag(d)
     (forming (F + Λ)⁻¹ explicitly loses ~cond·ε; triangular solves keep the criteria and
     their gradients accurate), the prior floored at float64's resolution (`PRECISION_FLOOR`).
     `plan`: a plan, or its information matrix (`information_source`); `prior_scale` > 0."""
-    given = concrete_value(prior_scale)  # a static float inside the criteria's programs
-    if given is not None and not (np.isfinite(given).all() and (given > 0).all()):
-        raise ValueError(f"prior_scale must be a finite number > 0 (the prior's σ in units of "
-                         f"each parameter's typical uncertainty); got {given}")  # fmt: skip
+    prior_scale = prior_scale_array(prior_scale)
     scale = model.scale()
     if isinstance(plan, BenchPlan):
         a = _information(plan, values, noise, NODES, model, panels)

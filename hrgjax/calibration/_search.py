@@ -17,7 +17,7 @@ from .._compiled import device
 from .._progress import bar
 from .._x64 import require_x64
 from ._criteria import CRITERIA, CRITERION_UNITS, evaluate_criterion, flight_nodes
-from ._information import information_source
+from ._information import information_source, prior_scale_array
 from ._models import Empirical, as_model, model_values, noise_vector
 from ._plan import BenchModel, BenchPlan
 from ._plan_file import plan_to_json, save_plan
@@ -286,7 +286,9 @@ def design(
     def _value(plan):  # the criterion of a concrete plan (its information, chunked)
         source, panels = information_source(plan, values, arw_v, model)
         return float(
-            evaluate_criterion(source, criterion, values, arw_v, 100.0, flight, model, panels)
+            evaluate_criterion(
+                source, criterion, values, arw_v, prior_scale_array(100.0), flight, model, panels
+            )
         )
 
     with bar(len(levels) * steps, f"designing a {budget_h:g}-h plan", unit="step") as progress:
