@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import closed_form_session, noisy_model_gyro
+from helpers import CompileCounter, closed_form_session, noisy_model_gyro
 
 import hrgjax as hg
 from hrgjax.calibration import (
@@ -786,6 +786,19 @@ def test_schuler_channel_matches_closed_form():
         dv[:, 0], EARTH_RADIUS * eps * (1 - np.cos(ws * tn)), rtol=1e-6, atol=1e-9
     )
     np.testing.assert_allclose(dp[:, 1], 0.0, atol=1e-12)
+    # the same solve from NumPy arrays (the drive above was a weakly typed `full`) compiles
+    # nothing new; times that run backwards, a drive of another length or a NaN: one line
+    with CompileCounter() as c:
+        _, again = schuler_errors(tn, np.full(tn.shape, eps), np.zeros(tn.shape))
+    assert "jit(_schuler)" not in c.names, c.names
+    np.testing.assert_allclose(again, dp, rtol=1e-12, atol=1e-9)
+    zero = np.zeros(tn.shape)
+    bad = [((tn[::-1], zero, zero), "^t must be finite times .s., strictly increasing"),
+           ((tn, zero[1:], zero), "^eps_north must be a 1-D array of one gyro error"),
+           ((tn, zero, np.where(tn > 60.0, np.nan, 0.0)), "^eps_east must be finite")]  # fmt: skip
+    for args, match in bad:
+        with pytest.raises(ValueError, match=match):
+            schuler_errors(*args)
 
 
 def test_schuler_channels_are_signed_as_the_strapdown_error_model():
@@ -798,9 +811,7 @@ def test_schuler_channels_are_signed_as_the_strapdown_error_model():
     earth = constants.Earth(radius=EARTH_RADIUS, g=GRAVITY, rate=0.0)
     traj = trajectory.stationary(10.0, duration_s=3000.0, dt=10.0, earth=earth)
     eps, t = 1e-7, traj.t
-    # both drives strongly typed: one program for the two channels (a weakly typed `full`
-    # swapped between the arguments compiled the Schuler solve twice)
-    zero, full = jnp.zeros(t.shape), jnp.full(t.shape, eps, dtype=float)
+    zero, full = jnp.zeros(t.shape), jnp.full(t.shape, eps)
     for axis, drive in ((0, (full, zero)), (1, (zero, full))):  # north, then east gyro error
         dx = strapdown.propagate(traj, gyro_error=eps * jnp.eye(3)[axis], altitude_aided=True)
         north_east = np.asarray(strapdown.position_metres(traj, dx))[:, :2]

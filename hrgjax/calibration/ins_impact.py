@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_1d, check_finite, check_numbers, concrete_value
 from .._compiled import Check, device, program
 from .._x64 import require_x64
 from ..data import MeasuredData, concat
@@ -49,9 +50,25 @@ def schuler_errors(t, eps_north, eps_east):
     channel, +Rε(t − sin ω_s t/ω_s); an east-axis one the north channel, with the opposite
     sign (δv̇_N = +gφ_E, δv̇_E = −gφ_N: a level tilt about east accelerates north).
 
-    **Raises:** `RuntimeError` when the solver fails.
+    **Raises:** `ValueError` in one line for times that are not at least two finite,
+    increasing values or errors that are not finite or not one per time (checked when the
+    values are known; shapes under `jit` too); `RuntimeError` when the solver fails.
     """
-    return _schuler(t, eps_north, eps_east)[:2]
+    require_x64("hrgjax.calibration.ins_impact.schuler_errors")
+    form = "a 1-D array of one gyro error [rad/s] per time in t"
+    n = check_1d("t", check_numbers("t", t, "a 1-D array of times [s]"), "times [s]")[0]
+    if n < 2:
+        raise ValueError(f"t must hold at least 2 times [s]; got {n}")
+    eps = [check_numbers(name, x, form, shape=(n,))
+           for name, x in (("eps_north", eps_north), ("eps_east", eps_east))]  # fmt: skip
+    times = concrete_value(t)
+    if times is not None and not (np.isfinite(times).all() and (np.diff(times) > 0).all()):
+        raise ValueError("t must be finite times [s], strictly increasing")
+    # strongly typed float64: one compiled program whatever array types the caller holds
+    t = jnp.asarray(t, dtype=jnp.float64)
+    eps = [check_finite(name, jnp.asarray(x, dtype=jnp.float64))
+           for name, x in zip(("eps_north", "eps_east"), eps, strict=True)]  # fmt: skip
+    return _schuler(t, *eps)[:2]
 
 
 @program(check=Check("schuler_errors", result_index=2))
