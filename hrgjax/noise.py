@@ -14,14 +14,24 @@ which the bench design and the discovery share.
 
 from __future__ import annotations
 
+import functools
+import inspect
 import math
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from ._checks import check_nonnegative, check_positive
-from ._compiled import fused
+from ._checks import (
+    check_1d,
+    check_nonnegative,
+    check_numbers,
+    check_positive,
+    concrete_value,
+    describe,
+)
+from ._compiled import device, fused
 from .resonator.params import as_parameter, concrete_fields, refuse_unconverted
 
 
@@ -74,7 +84,89 @@ UNITS = {
 """Units of the `Noise` fields."""
 
 
-@fused  # one program per shape: an eager call compiled its scan every time (≈ 80 ms)
+def _check_key(name: str, key) -> None:
+    """One JAX PRNG key (`jax.random.key(seed)`, or a legacy uint32 `PRNGKey`), else a
+    one-line `TypeError` naming `name` (JAX's own read "invalid PRNG key data")."""
+    dtype, shape = getattr(key, "dtype", None), getattr(key, "shape", None)
+    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
+    if not ((typed and shape == ()) or (dtype == np.uint32 and len(shape) == 1)):
+        raise TypeError(f"{name}: key must be one JAX PRNG key (jax.random.key(seed)); got "
+                        f"{describe(key)}")  # fmt: skip
+
+
+def _check_value(name: str, x, ok, form: str) -> None:
+    """Refuse a concrete `x` (numbers) unless every value passes `ok`, naming `name` and the
+    `form` expected; a traced value passes (no run-time check in a caller's program)."""
+    check_numbers(name, x, form)
+    v = concrete_value(x)
+    if v is not None and not np.all(ok(np.asarray(v, dtype=float))):
+        bad = np.asarray(v, dtype=float)[~ok(np.asarray(v, dtype=float))].flat[0]
+        raise ValueError(f"{name} must be {form}; got {bad}")
+
+
+def _check_times(name: str, key, ts):
+    """`ts` as an array (a list too), checked with `key` on the host before any compiled
+    program: `key` one PRNG key, `ts` 1-D finite sample times that do not run backwards (a
+    repeated time is an empty interval)."""
+    _check_key(name, key)
+    check_numbers(f"{name}: ts", ts, "sample times [s], 1-D")
+    check_1d(f"{name}: ts", ts, "sample times [s]")
+    ts = device(ts, float) if isinstance(ts, list | tuple) else ts  # a list failed in jnp.diff
+    v = concrete_value(ts)
+    if v is not None:
+        v = np.asarray(v, dtype=float)
+        if not np.all(np.isfinite(v)):
+            i = int(np.argmin(np.isfinite(v)))
+            raise ValueError(f"{name}: ts must be finite; found {v[i]} at index {i}")
+        if np.any(np.diff(v) < 0):  # an interval < 0: NaN or a wrong draw
+            i = int(np.argmax(np.diff(v) < 0))
+            raise ValueError(f"{name}: ts must not decrease [s]; ts[{i + 1}] = {v[i + 1]} "
+                             f"follows ts[{i}] = {v[i]}")  # fmt: skip
+    return ts
+
+
+def _check_gauss_markov(key, ts, sigma, correlation_time) -> tuple:
+    ts = _check_times("gauss_markov", key, ts)
+    for name, x, ok, form in (
+        ("sigma", sigma, lambda v: np.isfinite(v) & (v >= 0), "one standard deviation >= 0"),
+        ("correlation_time", correlation_time, lambda v: np.isfinite(v) & (v > 0), "one time > 0 [s]"),
+    ):  # fmt: skip
+        check_numbers(f"gauss_markov: {name}", x, form, shape=())  # an array: JAX's broadcast error
+        _check_value(f"gauss_markov: {name}", x, ok, form)
+    return key, ts, sigma, correlation_time
+
+
+def _check_noise(name: str, noise) -> None:
+    """`noise` an `hrgjax.Noise` (an int read as one failed inside the compiled program)."""
+    if not isinstance(noise, Noise):
+        raise TypeError(f"{name}: noise must be an hrgjax.Noise; got {type(noise).__name__}")
+
+
+def _checked(check):
+    """`fused(fn)` behind `check(*args)`, which refuses bad arguments on the host in one
+    line before the compiled program and returns them as it takes them (`__wrapped__` is
+    the plain function). Arguments by keyword are bound to `fn`'s parameters first; the
+    compiled core's `lower`, `trace` and `eval_shape` stay on the wrapper (unchecked)."""
+
+    def wrap(fn):
+        core = fused(fn)
+        signature = inspect.signature(fn)
+
+        @functools.wraps(fn)
+        def call(*args, **kwargs):
+            bound = signature.bind(*args, **kwargs)  # a TypeError names a wrong keyword
+            return core(*check(*bound.args))
+
+        for name in ("lower", "trace", "eval_shape"):
+            if hasattr(core, name):
+                setattr(call, name, getattr(core, name))
+        return call
+
+    return wrap
+
+
+# one program per shape: an eager call compiled its scan every time (≈ 80 ms)
+@_checked(_check_gauss_markov)
 def gauss_markov(key, ts, sigma, correlation_time):
     r"""Stationary first-order Gauss–Markov samples at times `ts` (exact discretisation).
 
@@ -135,6 +227,13 @@ def gauss_markov_bridge(dts, sigma, correlation_time):
 
     **Returns:** (a, s) per interval [s], [rad] (the units of σ × s).
     """
+    _check_value("gauss_markov_bridge: dts", dts, lambda v: np.isfinite(v) & (v >= 0),
+                 "intervals >= 0 [s]")  # fmt: skip
+    dts = device(dts, float) if isinstance(dts, list | tuple) else dts  # failed in `0.5 * dts`
+    _check_value("gauss_markov_bridge: sigma", sigma, lambda v: np.isfinite(v) & (v >= 0),
+                 "a standard deviation >= 0")  # fmt: skip
+    _check_value("gauss_markov_bridge: correlation_time", correlation_time,
+                 lambda v: np.isfinite(v) & (v > 0), "> 0 [s]")  # fmt: skip
     u = 0.5 * dts / correlation_time
     g = _u_minus_tanh(u)
     pos = g > 0.0  # an empty interval (Δt = 0) has no integral and no finite √ slope
@@ -142,7 +241,14 @@ def gauss_markov_bridge(dts, sigma, correlation_time):
     return correlation_time * jnp.tanh(u), s
 
 
-@fused  # one program per shape (it compiled gauss_markov's scan on every eager call)
+def _check_rate_noise(key, ts, noise) -> tuple:
+    ts = _check_times("rate_noise_angle", key, ts)
+    _check_noise("rate_noise_angle", noise)
+    return key, ts, noise
+
+
+# one program per shape (it compiled gauss_markov's scan on every eager call)
+@_checked(_check_rate_noise)
 def rate_noise_angle(key, ts, noise: Noise):
     """Integrated equivalent-input-rate noise ∫(ARW + Gauss–Markov) dt at `ts` [rad].
 
@@ -165,4 +271,6 @@ def rate_noise_angle(key, ts, noise: Noise):
 
 def draw_run_bias(key, noise: Noise):
     """One switch-on bias [rad/s] (equivalent input rate)."""
+    _check_key("draw_run_bias", key)
+    _check_noise("draw_run_bias", noise)
     return noise.run_bias * jax.random.normal(key, ())

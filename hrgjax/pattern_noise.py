@@ -42,6 +42,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_1d, check_numbers, concrete_value, finite_number, whole_number
 from ._nnls import nnls as _nnls
 from .units import DEG, DEG_PER_H
 from .units import STILL_RATE_DPS as STILL_RATE_DPS
@@ -78,7 +79,8 @@ class NoiseModel:
     def __post_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool)  # True read as 1
+            if not (ok and math.isfinite(v) and v >= 0):
                 raise ValueError(f"NoiseModel.{f.name} must be a finite number ≥ 0; got {v!r}")
         if self.gm_time <= 0:
             raise ValueError(f"NoiseModel.gm_time must be > 0 [s]; got {self.gm_time!r}")
@@ -94,6 +96,11 @@ class NoiseModel:
         measured angle; `amplitude_white` is not part of the angle's noise). The one
         conversion: the bench design's noise (`calibration.design.pattern_arw`, …) and the
         discovery's known noise both read it."""
+        from .noise import Noise
+
+        if not isinstance(noise, Noise):  # was an AttributeError
+            raise TypeError(f"noise must be an hrgjax.Noise; got {type(noise).__name__}")
+        k_e = _gain("from_gyro: k_e", k_e)
         return cls(
             angle_white=float(noise.angle_white),
             angle_random_walk=k_e * float(noise.angle_random_walk),
@@ -106,7 +113,7 @@ class NoiseModel:
     def angle_covariance(self, t) -> np.ndarray:
         """Covariance (n, n) [rad²] of the measured angle at times `t` [s] of one stretch
         (white + ARW + Gauss–Markov; the run bias is a constant rate, left to the fits)."""
-        t = np.asarray(t, float)
+        t = _times("angle_covariance: t", t, 1)
         s = t - t[0]
         a, b = s[:, None], s[None, :]
         cov = self.angle_white**2 * np.eye(s.size) + self.angle_random_walk**2 * np.minimum(a, b)
@@ -124,7 +131,7 @@ class NoiseModel:
         (for n equally spaced samples the white and walk parts are
         [`slope_variance`][hrgjax.pattern_noise.slope_variance]; for dense samples σ_w²·12/(nT²)
         and 6N²/5T)."""
-        t = np.asarray(t, float)
+        t = _times("slope_sigma: t", t, 2)
         w = (t - t.mean()) / np.sum((t - t.mean()) ** 2)
         # white and walk in O(n): the walk is a sum of independent increments, each weighted
         # by the slope weights of the samples after it
@@ -141,6 +148,11 @@ class NoiseModel:
         (the whitening of the discovery's continuous records,
         [`ContinuousProblem`][hrgjax.discovery.continuous.ContinuousProblem]), the run bias
         included (each run its own switch-on)."""
+        delta = _arg("increment_covariance: delta", delta, _POSITIVE, "a block length > 0 [s]")
+        k = whole_number("increment_covariance: k", k, "a whole number of increments ≥ 1")
+        if k < 1:  # 1.5 was read as 2, 0 gave an empty matrix
+            raise ValueError(f"increment_covariance: k must be a whole number of increments ≥ 1; "
+                             f"got {k}")  # fmt: skip
         lag = np.abs(np.subtract.outer(np.arange(k), np.arange(k)))
         cov = self.angle_white**2 * np.where(lag == 0, 2.0, np.where(lag == 1, -1.0, 0.0))
         cov = cov + np.where(lag == 0, self.angle_random_walk**2 * delta, 0.0)
@@ -154,6 +166,7 @@ class NoiseModel:
 
     def d2_variance(self, tau):
         """Variance [rad²] of the lag-τ second difference θ(t+τ) − 2θ(t) + θ(t−τ)."""
+        tau = _arg("d2_variance: tau", tau, _NONNEGATIVE, "lags >= 0 [s]")
         return _d2_basis(np.asarray(tau, float), self.gm_time) @ np.array(
             [self.angle_white**2, self.angle_random_walk**2, self.gm_sigma**2]
         )
@@ -166,6 +179,7 @@ class NoiseModel:
 
     def report(self, k_e: float) -> dict:
         """The model in report units (equivalent input rate: divided by `k_e`)."""
+        k_e = _gain("report: k_e", k_e)  # 0: ZeroDivisionError, < 0: negative noise
         return {
             "angle_white_arcsec": self.angle_white / DEG * 3600,
             "angle_random_walk_dph_per_sqrt_h": self.angle_random_walk / k_e / DEG * 60,
@@ -198,8 +212,16 @@ class NoiseModel:
 
         **Returns:** the model (`run_bias` 0: it needs fitted run means).
 
-        **Raises:** `ValueError` when `data` has no still stretch.
+        **Raises:** `ValueError` when `data` has no still stretch or `max_lag_s` is not > 0,
+        `TypeError` when `data` is not a `MeasuredData`.
         """
+        from .data import MeasuredData
+
+        if not isinstance(data, MeasuredData):  # was an AttributeError
+            raise TypeError(f"data must be an hrgjax.MeasuredData; got {type(data).__name__}")
+        max_lag_s = finite_number("max_lag_s", max_lag_s, "s")
+        if max_lag_s <= 0:  # read as "no still stretch"
+            raise ValueError(f"max_lag_s must be > 0 [s]; got {max_lag_s}")
         sums: dict[float, np.ndarray] = {}
         for idx in data.run_indices():
             time = data["time_s"][idx]
@@ -256,6 +278,13 @@ def slope_variance(angle_white, angle_random_walk, samples, dt):
     [`NoiseModel.slope_sigma`][hrgjax.pattern_noise.NoiseModel.slope_sigma]² of such samples
     without the Gauss–Markov part; → 6/5 of a mean rate's N²/(nΔt) for long windows). Arithmetic only: NumPy floats or (traced) JAX arrays, `samples` need not be a
     whole number (the bench design's windows)."""
+    at = "slope_variance: "
+    angle_white = _arg(at + "angle_white", angle_white, _NONNEGATIVE,
+                       "a standard deviation >= 0 [rad]")  # fmt: skip
+    angle_random_walk = _arg(at + "angle_random_walk", angle_random_walk, _NONNEGATIVE,
+                             "a density >= 0 [rad/√s]")  # fmt: skip
+    samples = _arg(at + "samples", samples, lambda v: np.isfinite(v) & (v > 1), "a count > 1")
+    dt = _arg(at + "dt", dt, _POSITIVE, "a sample interval > 0 [s]")  # < 0: a negative variance
     n = samples
     m = n * (n**2 - 1.0)
     walk = 6.0 * (n**2 + 1.0) / (5.0 * m) * angle_random_walk**2 / dt
@@ -268,6 +297,8 @@ def gauss_markov_mean_factor(x):
     a Gauss–Markov rate's mean over a duration D = x T_c in units of 2σ²T_c/D
     ([`gauss_markov_mean_variance`][hrgjax.pattern_noise.gauss_markov_mean_variance]). NumPy
     or (traced) JAX."""
+    x = _arg("gauss_markov_mean_factor: x", x, _NONNEGATIVE,
+             "a duration over a correlation time, >= 0")  # fmt: skip
     xp = jnp if isinstance(x, jax.Array) else np
     return 1.0 + xp.expm1(-x) / x
 
@@ -278,8 +309,57 @@ def gauss_markov_mean_variance(sigma, correlation_time, duration):
     2σ²τ/D · (1 − (τ/D)(1 − e^(−D/τ))) — the Gauss–Markov part of
     [`NoiseModel.angle_covariance`][hrgjax.pattern_noise.NoiseModel.angle_covariance] at (D, D)
     over D². NumPy or (traced) JAX."""
+    at = "gauss_markov_mean_variance: "
+    sigma = _arg(at + "sigma", sigma, _NONNEGATIVE, "a standard deviation >= 0 [rad/s]")
+    correlation_time = _arg(at + "correlation_time", correlation_time, _POSITIVE, "> 0 [s]")
+    duration = _arg(at + "duration", duration, _POSITIVE, "> 0 [s]")  # < 0: wrong, 0: 1/0
     x = duration / correlation_time
     return 2.0 * sigma**2 * correlation_time / duration * gauss_markov_mean_factor(x)
+
+
+def _POSITIVE(v):
+    return np.isfinite(v) & (v > 0)
+
+
+def _NONNEGATIVE(v):
+    return np.isfinite(v) & (v >= 0)
+
+
+def _arg(name: str, x, ok, form: str):
+    """`x` (a number, a NumPy or JAX array; a list as a NumPy array) refused in one line
+    naming `name` and `form` unless real numbers, each passing `ok` where its value is known
+    on the host (a traced value passes: the bench design differentiates through these)."""
+    check_numbers(name, x, form)
+    x = np.asarray(x, dtype=float) if isinstance(x, list | tuple) else x
+    v = concrete_value(x)
+    if v is not None and not np.all(ok(np.asarray(v, dtype=float))):
+        v = np.asarray(v, dtype=float)
+        raise ValueError(f"{name} must be {form}; got {v[~ok(v)].flat[0]}")
+    return x
+
+
+def _gain(name: str, k_e) -> float:
+    """The angular gain k_e as a float > 0, else one line naming `name`."""
+    k_e = finite_number(name, k_e, "-")
+    if k_e <= 0:
+        raise ValueError(f"{name} must be the angular gain, > 0; got {k_e}")
+    return k_e
+
+
+def _times(name: str, t, least: int) -> np.ndarray:
+    """Sample times `t` [s] of one stretch as a float array: 1-D, finite, not decreasing, at
+    least `least` of them (and for `least` 2, two distinct), else one line naming `name`."""
+    check_numbers(name, t, "sample times [s], 1-D")
+    check_1d(name, t, "sample times [s]")
+    t = np.asarray(t, dtype=float)
+    if t.size < least or (least > 1 and np.ptp(t) == 0):  # 1 sample: a NaN slope σ
+        raise ValueError(f"{name} must hold at least {least} distinct sample times; got {t.size}")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):  # backwards: a wrong covariance
+        raise ValueError(
+            f"{name} must be finite sample times [s] that do not decrease; got "
+            f"{t[~np.isfinite(t)][0] if not np.all(np.isfinite(t)) else 'a decrease'}"
+        )
+    return t
 
 
 def _still_stretches(rate_dps, temperature_c):
@@ -361,6 +441,9 @@ def gm_structure(delta, tc):
     x = Δ/T_c — by its series where x < 1e-2, whose leading x²/2 the closed form reaches
     only through cancellation (relative error ε/x: 1e-3 of a second difference's variance
     at τ = 1 ms, T_c = 3000 s). NumPy."""
+    at = "gm_structure: "
+    delta = _arg(at + "delta", delta, _NONNEGATIVE, "a time difference >= 0 [s]")  # Δ < 0: wrong
+    tc = _arg(at + "tc", tc, _POSITIVE, "a correlation time > 0 [s]")  # 0: NaN, < 0: wrong
     x = np.asarray(delta, float) / tc
     series = x**2 * (0.5 - x / 6 + x**2 / 24 - x**3 / 120 + x**4 / 720)
     return 2 * tc**2 * np.where(x < 1e-2, series, x + np.expm1(-x))

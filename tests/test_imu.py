@@ -262,6 +262,14 @@ def test_triad_form_and_model_round_trip(fitted):
     # differentiable: d(corrected ω)/d(gyro) = M_g⁻¹
     jac = jax.jacfwd(lambda g: fitted.correct(g, a[0])[0])(w[0])
     np.testing.assert_allclose(jac, np.linalg.inv(fitted.gyro_matrix), rtol=1e-12)
+    # one accel (3,) or (1, 3) for every rate row broadcasts, as it did before the checks
+    # ((3,) against (5, 3) is a rank promotion, which JAX allows by default; the tests raise)
+    for row in (a[0], a[:1]):
+        for fn in (fitted.sensor, fitted.correct):
+            with jax.numpy_rank_promotion("allow"):
+                (w1, a1), (w2, a2) = fn(w, row), fn(w, np.broadcast_to(row, w.shape))
+            np.testing.assert_allclose(w1, w2, rtol=1e-14, atol=1e-15)
+            np.testing.assert_allclose(np.broadcast_to(a1, w.shape), a2, rtol=1e-14)
 
 
 def test_calibration_file_round_trip(fitted, tmp_path):
@@ -696,3 +704,81 @@ def test_time_column_in_ms_or_ns_is_declared_not_misread(session, fitted, tmp_pa
             main([*base, *argv])
         msg = capsys.readouterr().err.strip()
         assert err.value.code == 2 and re.search(said, msg) and "\n" not in msg, msg
+
+
+def test_imu_arguments_off_the_paved_path_are_named(session, truth):
+    """Audit: a session at rate_hz 0 was a ZeroDivisionError, NaN "cannot convert float NaN
+    to integer", static_s < 0 two samples, gyro_noise < 0 a silent |σ|, g < 0 an upside-down
+    session, an int key JAX's "invalid PRNG key data"; face_attitude("q_p") "substring not
+    found"; known() took NaN, True and a singular matrix (correct() then NaN);
+    sensor/correct broadcast a (1, 3) row or failed in JAX; detect_sections read a
+    threshold ≤ 0 as "found no sections" and window_s ≤ 0 as one sample; parse_sections took
+    n_samples 7800.5; saturation() a bad sensor as an AttributeError and a negative limit as
+    "its range ±-57.3"."""
+    data, sections = session
+    key = jax.random.key(0)
+    for kwargs, match in [
+        ({"rate_hz": 0.0}, r"^rate_hz must be > 0 \[Hz\]"),
+        ({"rate_hz": np.nan}, r"^rate_hz must be finite \[Hz\]"),
+        ({"static_s": -1.0}, r"^static_s must be > 0 \[s\]"),
+        ({"gyro_noise": -1.0}, r"^gyro_noise must be >= 0 \[rad/s\]"),
+        ({"g": -9.81}, r"^g = -9.81: expected the local gravity"),
+        ({"turn_deg": 0.0}, r"^turn_deg must be a non-zero angle"),
+        ({"repeats": 1.5}, r"^repeats must be a positive integer; got 1.5"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            hg.imu.ferraris_session(truth, key, **kwargs)
+    with pytest.raises(TypeError, match=r"^key must be one JAX PRNG key"):
+        hg.imu.ferraris_session(truth, 0)
+    with pytest.raises(TypeError, match=r"^truth must be an hg.imu.ImuCalibration"):
+        hg.imu.ferraris_session(5, key)
+    with pytest.raises(ValueError, match=r"^key must be a face, one of x_p"):
+        hg.imu.face_attitude("q_p")
+    with pytest.raises(ValueError, match=r"^accel_bias must be finite; got nan"):
+        ImuCalibration.known(accel_bias=[np.nan, 0.0, 0.0])
+    with pytest.raises(TypeError, match=r"^accel_bias must be real numbers of shape \(3,\)"):
+        ImuCalibration.known(accel_bias=[True, False, True])
+    with pytest.raises(ValueError, match=r"^gyro_matrix must be an invertible"):
+        ImuCalibration.known(gyro_matrix=np.zeros((3, 3)))
+    with pytest.raises(
+        ValueError, match=r"^correct: gyro and accel must be of shapes \(\.\.\., 3\)"
+    ):
+        truth.correct(np.zeros((4, 3)), np.zeros((2, 3)))
+    with pytest.raises(
+        ValueError, match=r"^sensor: omega and accel must be of shapes \(\.\.\., 3\)"
+    ):
+        truth.sensor(np.zeros((4, 2)), np.zeros((4, 2)))
+    with pytest.raises(ValueError, match=r"^motion_threshold_dps must be > 0"):
+        hg.imu.detect_sections(data, motion_threshold_dps=0.0)
+    with pytest.raises(ValueError, match=r"^window_s must be > 0 \[s\]"):
+        hg.imu.detect_sections(data, window_s=-1.0)
+    with pytest.raises(TypeError, match=r"^detect_sections takes an hg.imu.ImuData"):
+        hg.imu.detect_sections(5)
+    with pytest.raises(TypeError, match=r"^session_statistics takes an hg.imu.ImuData"):
+        hg.imu.session_statistics(5, sections)
+    with pytest.raises(ValueError, match=r"^n_samples must be the record's number of rows"):
+        hg.imu.parse_sections(sections, len(data) + 0.5)
+    with pytest.raises(ValueError, match=r"^sections must be \{key: \[\(start, end\)"):
+        hg.imu.sections_to_json({"x_p": 5})
+    from hrgjax.imu.sections import cut_turn, saturation
+
+    with pytest.raises(ValueError, match=r"^walk must be >= 0"):
+        cut_turn(data, sections, walk=-1.0)
+    with pytest.raises(ValueError, match=r"^sensor must be 'gyro' or 'accel'"):
+        saturation(data, sections["x_rot"], sensor="foo")
+    with pytest.raises(ValueError, match=r"^limit must be > 0"):
+        saturation(data, sections["x_rot"], limit=-1.0)
+    with pytest.raises(ValueError, match=r"^ranges must be row ranges"):
+        saturation(data, [(5, 2)])
+    with pytest.raises(ValueError, match=r"^ranges must be row ranges"):
+        saturation(data, np.zeros((2, 3), int))
+    # integer arrays (k, 2), or (2,) arrays as pairs, are row ranges as before the checks
+    as_json = hg.imu.sections_to_json(sections)
+    assert hg.imu.sections_to_json({k: np.asarray(v) for k, v in sections.items()}) == as_json
+    assert (
+        hg.imu.sections_to_json({k: [np.asarray(p) for p in v] for k, v in sections.items()})
+        == as_json
+    )
+    rows = np.asarray(sections["x_p"])
+    assert saturation(data, rows, noise_ranges=rows) == saturation(data, sections["x_p"])
+    assert saturation(data, list(rows)) == saturation(data, sections["x_p"])

@@ -49,6 +49,21 @@ def test_allan_errors():
             hg.allan_deviation(NBS14, bad)
     with pytest.raises(ValueError, match=r"^mdev: y must be finite; found nan at index 3 "):
         hg.mdev(np.r_[NBS14[:3], np.nan, NBS14[3:]], 1)
+    # audit (paved path): complex or boolean samples were read as their real part or 0/1; a
+    # 2-D, empty, NaN or text ms was flattened or failed inside JAX / int(); a list kind
+    # was "unhashable type"
+    with pytest.raises(TypeError, match=r"^oadev: y must be real rate samples"):
+        hg.oadev(NBS14 + 1j, 1)
+    with pytest.raises(TypeError, match=r"^allan_deviation: y must be real rate samples"):
+        hg.allan_deviation(NBS14 > 800, 1.0)
+    for bad in ([[1, 2], [4, 8]], [], "abc"):
+        with pytest.raises((ValueError, TypeError), match=r"^allan_deviation: ms must be the av"):
+            hg.allan_deviation(NBS14, 1.0, ms=bad)
+    for bad in (np.nan, 2.5):  # named as allan_deviation's ms (was "oadev: m …")
+        with pytest.raises(ValueError, match=rf"^allan_deviation: ms must be the av.*; got {bad}"):
+            hg.allan_deviation(NBS14, 1.0, ms=[bad])
+    with pytest.raises(ValueError, match=r"^kind must be one of"):
+        hg.allan_deviation(NBS14, 1.0, kind=["oadev"])
 
 
 @pytest.mark.parametrize("kind", ["adev", "oadev", "mdev", "hdev", "ohdev", "totdev"])
@@ -120,6 +135,12 @@ def test_noise_draws_compile_once_per_shape():
         assert k == 0 or c.compiles == 0, c.names
     plain = hg.noise.gauss_markov.__wrapped__(jax.random.key(1), ts + 1, 3.0, 50.0)
     np.testing.assert_allclose(gm, plain, rtol=1e-12, atol=1e-14)  # XLA may round by an ulp
+    # keywords are bound as before (the jitted function took them), and `.lower` stays
+    by_name = hg.noise.gauss_markov(jax.random.key(1), ts + 1, sigma=3.0, correlation_time=50.0)
+    assert np.array_equal(by_name, gm)
+    with pytest.raises(TypeError):
+        hg.noise.gauss_markov(jax.random.key(1), ts, sigma=3.0, tau=50.0)
+    assert hg.noise.rate_noise_angle.lower(jax.random.key(1), ts + 1, noise=noise) is not None
     assert angle.shape == ts.shape and np.isfinite(angle).all()
 
 
@@ -261,3 +282,137 @@ def test_gauss_markov_angle_at_a_fine_interval_is_the_trapezoid_and_differentiab
         2.0, jnp.array([0.1, 1.0, 1e3])
     )
     assert np.all(np.isfinite(batched))
+
+
+def test_allan_statistics_refuse_input_off_the_paved_path():
+    """Audit: each of these returned a number or failed in NumPy/Python — a 2-D τ grid
+    flattened, `bias_correction="no"` read as True, NaN phase read as "no noise to identify",
+    dmax 1.5 a TypeError, a negative deviation a negative interval, mismatched `dev`/`edf`
+    broadcast or a NumPy error, B1/R(n) at n = 2.5 or m = 0, a text `terms` split into
+    letters, `gauss_markov=1.0` a range() error, τ ≤ 0 read as τ₀, a complex record's real
+    part resampled and an infinite sample taken as a gap. Every one is refused on the host
+    before any work."""
+    from hrgjax import allan
+
+    y = np.random.default_rng(0).normal(size=64)
+    x = np.cumsum(y)
+    with pytest.raises(ValueError, match=r"^taus must be 'octave', 'decade', 'all' or τ values"):
+        allan.deviation(y, 1.0, taus=[[1, 2], [4, 8]])
+    with pytest.raises(TypeError, match=r"^taus must be 'octave'"):
+        allan.deviation(y, 1.0, taus=["a"])
+    with pytest.raises(TypeError, match=r"^bias_correction must be True or False"):
+        allan.deviation(y, 1.0, "totdev", bias_correction="no")
+    with pytest.raises(ValueError, match=r"^x must be finite; found nan at index 5"):
+        allan.noise_id(np.r_[x[:5], np.nan, x[6:]], [1, 2])
+    with pytest.raises(TypeError, match=r"^x must be real phase"):
+        allan.noise_id(x + 1j, [1])
+    for bad in (1.5, 0, "2"):
+        with pytest.raises(ValueError, match=r"^dmax must be the highest difference order"):
+            allan.noise_id(x, [1], bad)
+    with pytest.raises(TypeError, match=r"^overlapping must be True or False"):
+        allan.noise_id(x, [1], overlapping="no")
+    with pytest.raises(ValueError, match=r"^n must be a whole number of averages"):
+        allan.b1_expected(2.5, 1)
+    with pytest.raises(ValueError, match=r"^m must be a whole averaging factor ≥ 1; got 0"):
+        allan.rn_expected(0, 2)
+    for bad in (-1.0, np.inf):
+        with pytest.raises(
+            ValueError, match=rf"^dev must be deviations >= 0 \(or NaN\); got {bad}"
+        ):
+            allan.confidence_interval(bad, 10.0)
+    with pytest.raises(ValueError, match=r"^dev and edf must have shapes that broadcast"):
+        allan.confidence_interval([1.0, 2.0, 3.0], [10.0, 20.0])
+    # a NaN deviation (no estimate) is a NaN interval, and shapes broadcast, as before
+    low, high = allan.confidence_interval([1.0, np.nan], [2.0, 3.0])
+    assert low[0] == pytest.approx(0.737005, abs=1e-6) and np.isnan(low[1]) and np.isnan(high[1])
+    low, high = allan.confidence_interval(np.ones((3, 1)), [2.0, 3.0, 4.0])
+    assert low.shape == (3, 3) and low[0, 0] == pytest.approx(0.737005, abs=1e-6)
+    assert allan.confidence_interval([], [])[0].size == 0  # was a np.vectorize error
+    with pytest.raises(TypeError, match=r"^chi2_ppf: q must be a single real number"):
+        allan.chi2_ppf("a", 2)
+    with pytest.raises(ValueError, match=r"^terms must be a list of names among"):
+        allan.identify_noise(y, 1.0, terms="angle_random_walk")
+    with pytest.raises(ValueError, match=r"^gauss_markov must be 0, 1 or 2 terms; got 1.0"):
+        allan.identify_noise(y, 1.0, gauss_markov=1.0)
+    with pytest.raises(TypeError, match=r"^y must be real rate samples"):
+        allan.identify_noise(y + 1j, 1.0)
+    arw = {"value": 1.0, "low": 0.9, "high": 1.1, "unit": "rate unit·√s"}
+    model = allan.CompositeNoise(terms={"angle_random_walk": arw}, unit="", rate_hz=1.0, n=64,
+                                 ci=0.95, taus=np.ones(1), avar=np.ones(1),
+                                 covariance=np.ones((1, 1)), chi2=0.0, dof=1, p_value=1.0)  # fmt: skip
+    assert model.adev([4.0])[0] == pytest.approx(0.5)
+    with pytest.raises(ValueError, match=r"^taus must be τ values > 0 \[s\]"):
+        model.model_avar([-1.0])
+    with pytest.raises(ValueError, match=r"^term_avar: name must be one of the model's terms"):
+        model.term_avar("rate_ramp", [1.0])
+    zero = dict.fromkeys([n for n, *_ in allan.NOISE_TERMS], 0.0)
+    fit = allan.NoiseFit(value=zero, sigma=zero, low=zero, high=zero, chi2=0.0, dof=1)
+    with pytest.raises(ValueError, match=r"^taus must be τ values > 0 \[s\]"):
+        fit.adev([-5.0])
+    t = np.arange(10.0)
+    with pytest.raises(ValueError, match=r"^t and y must be 1-D of one length"):
+        allan.to_uniform(np.c_[t, t], np.c_[t, t])
+    with pytest.raises(TypeError, match=r"^y must be real samples"):
+        allan.to_uniform(t, t + 1j)
+    with pytest.raises(ValueError, match=r"^y has an infinite value at index 3"):
+        allan.to_uniform(t, np.r_[t[:3], np.inf, t[4:]])
+
+
+def test_noise_draws_and_pattern_noise_refuse_input_off_the_paved_path():
+    """Audit: times running backwards drew an exploding "Gauss–Markov" process (NaN angles
+    from rate_noise_angle), T_c ≤ 0 and σ < 0 drew silently, an int key or a non-Noise failed
+    inside JAX; the pattern model's covariances took times backwards (a negative walk
+    variance), a negative lag or block length, k = 1.5 as 2, k_e ≤ 0 (ZeroDivisionError, a
+    negative noise), and its closed forms a negative dt (a negative variance) or Δ < 0."""
+    from hrgjax import pattern_noise as pn
+
+    key, ts = jax.random.key(0), jnp.arange(5.0)
+    with pytest.raises(ValueError, match=r"^gauss_markov: ts must not decrease \[s\]; ts\[1\]"):
+        hg.noise.gauss_markov(key, ts[::-1], 1.0, 10.0)
+    with pytest.raises(ValueError, match=r"^gauss_markov: correlation_time must be one time > 0"):
+        hg.noise.gauss_markov(key, ts, 1.0, 0.0)
+    with pytest.raises(ValueError, match=r"^gauss_markov: sigma must be one standard deviation"):
+        hg.noise.gauss_markov(key, ts, -1.0, 10.0)
+    with pytest.raises(TypeError, match=r"^gauss_markov: key must be one JAX PRNG key"):
+        hg.noise.gauss_markov(0, ts, 1.0, 10.0)
+    noise = hg.Noise(angle_random_walk=1e-6)
+    with pytest.raises(ValueError, match=r"^rate_noise_angle: ts must be finite; found nan"):
+        hg.noise.rate_noise_angle(key, jnp.asarray([0.0, 1.0, np.nan]), noise)
+    with pytest.raises(TypeError, match=r"^rate_noise_angle: noise must be an hrgjax.Noise"):
+        hg.noise.rate_noise_angle(key, ts, 5)
+    with pytest.raises(TypeError, match=r"^draw_run_bias: key must be one JAX PRNG key"):
+        hg.noise.draw_run_bias(0, noise)
+    with pytest.raises(ValueError, match=r"^gauss_markov_bridge: dts must be intervals >= 0"):
+        hg.noise.gauss_markov_bridge(-jnp.ones(3), 1.0, 10.0)
+    model = pn.NoiseModel(1e-6, 1e-7, 1e-7, 100.0)
+    with pytest.raises(ValueError, match=r"^NoiseModel.angle_white must be a finite number"):
+        pn.NoiseModel(True)
+    with pytest.raises(ValueError, match=r"^slope_sigma: t must be finite sample times"):
+        model.slope_sigma([3.0, 2.0, 1.0])
+    with pytest.raises(ValueError, match=r"^slope_sigma: t must hold at least 2 distinct"):
+        model.slope_sigma([1.0])
+    with pytest.raises(ValueError, match=r"^angle_covariance: t must be 1-D"):
+        model.angle_covariance([[0.0, 1.0], [2.0, 3.0]])
+    with pytest.raises(ValueError, match=r"^increment_covariance: delta must be a block length"):
+        model.increment_covariance(-1.0, 3)
+    with pytest.raises(ValueError, match=r"^increment_covariance: k must be a whole number"):
+        model.increment_covariance(1.0, 1.5)
+    with pytest.raises(ValueError, match=r"^d2_variance: tau must be lags >= 0"):
+        model.d2_variance(-1.0)
+    assert model.d2_variance(0.0) == pytest.approx(6 * 1e-12, rel=1e-12)  # τ = 0: 6σ_w², as before
+    with pytest.raises(ValueError, match=r"^report: k_e must be the angular gain, > 0"):
+        model.report(0.0)
+    with pytest.raises(ValueError, match=r"^from_gyro: k_e must be the angular gain"):
+        pn.NoiseModel.from_gyro(noise, -1.0)
+    with pytest.raises(TypeError, match=r"^noise must be an hrgjax.Noise"):
+        pn.NoiseModel.from_gyro(5, 1.0)
+    with pytest.raises(TypeError, match=r"^data must be an hrgjax.MeasuredData"):
+        pn.NoiseModel.estimate(5)
+    with pytest.raises(ValueError, match=r"^slope_variance: dt must be a sample interval > 0"):
+        pn.slope_variance(1e-6, 1e-6, 10, -1.0)
+    with pytest.raises(ValueError, match=r"^gauss_markov_mean_variance: duration must be > 0"):
+        pn.gauss_markov_mean_variance(1.0, 10.0, 0.0)
+    with pytest.raises(ValueError, match=r"^gm_structure: tc must be a correlation time > 0"):
+        pn.gm_structure(1.0, -10.0)
+    with pytest.raises(ValueError, match=r"^gm_structure: delta must be a time difference >= 0"):
+        pn.gm_structure(-1.0, 10.0)

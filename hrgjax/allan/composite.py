@@ -36,7 +36,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from .._checks import check_1d, check_number, describe, is_concrete, is_finite_real
+from .._checks import check_1d, check_number, check_numbers, describe, is_concrete, is_finite_real
 from .._io import atomic_write
 from .._progress import bar
 from ..imu.data import ACCEL_UNITS, GYRO_UNITS
@@ -128,7 +128,9 @@ class CompositeNoise:
 
     def model_avar(self, taus) -> np.ndarray:
         """The model's Allan variance at `taus` [s] (rounded to whole samples). [unit²]"""
-        tau0 = 1.0 / self.rate_hz
+        tau0, t = 1.0 / self.rate_hz, check_numbers("taus", taus, "τ values > 0 [s]")
+        if not np.all(np.isfinite(t) & (np.asarray(t, dtype=float) > 0)):  # τ ≤ 0 read as τ₀
+            raise ValueError(f"taus must be τ values > 0 [s] (finite); got {describe(taus)}")
         m = np.maximum(np.round(np.asarray(taus, dtype=float) / tau0), 1.0)
         out = np.zeros_like(m)
         for name, spec in self.terms.items():
@@ -141,6 +143,9 @@ class CompositeNoise:
 
     def term_avar(self, name, taus) -> np.ndarray:
         """One term's Allan variance at `taus` [s]. [unit²]"""
+        if name not in self.terms:  # was a KeyError
+            raise ValueError(f"term_avar: name must be one of the model's terms "
+                             f"{list(self.terms)}; got {describe(name)}")  # fmt: skip
         one = dataclasses.replace(self, terms={name: self.terms[name]})
         return one.model_avar(taus)
 
@@ -387,17 +392,24 @@ def identify_noise(
     or an `oadev` that is not the oadev of `y` at `rate_hz` on a grid holding the octaves."""
     if not (is_finite_real(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be a positive sample rate [Hz]; got {describe(rate_hz)}")
+    if isinstance(terms, str) or not hasattr(terms, "__iter__"):  # a str was read letterwise
+        raise ValueError(f"terms must be a list of names among {list(LINEAR)}; got "
+                         f"{describe(terms)}")  # fmt: skip
     bad = [t for t in terms if t not in LINEAR]
     if bad:
         raise ValueError(f"terms must be among {list(LINEAR)}; got {bad}")
+    gm_ok = isinstance(gauss_markov, int | np.integer) and not isinstance(gauss_markov, bool)
+    if not gm_ok or gauss_markov not in (0, 1, 2):  # 1.0 failed in range()
+        raise ValueError(f"gauss_markov must be 0, 1 or 2 terms; got {describe(gauss_markov)}")
     if not terms and gauss_markov == 0:
         raise ValueError("terms: give at least one candidate (or gauss_markov ≥ 1)")
-    if isinstance(gauss_markov, bool) or gauss_markov not in (0, 1, 2):
-        raise ValueError(f"gauss_markov must be 0, 1 or 2 terms; got {describe(gauss_markov)}")
+    if not isinstance(unit, str):
+        raise TypeError(f"unit must be the record's rate unit as a str; got {describe(unit)}")
     if not (is_finite_real(ci) and 0.0 < ci < 1.0):
         raise ValueError(f"ci must be a confidence level in (0, 1); got {describe(ci)}")
     if not isinstance(sampling, str) or sampling not in SAMPLINGS:
         raise ValueError(f"sampling must be one of {list(SAMPLINGS)}; got {describe(sampling)}")
+    check_numbers("y", y, "real rate samples, 1-D")  # complex: its real part was fitted
     check_1d("y", y, "one rate sample per interval")
     y = np.asarray(y, dtype=float)
     if y.ndim != 1 or y.size < 64:

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_1d, concrete_value, describe
+from .._checks import check_1d, check_numbers, concrete_value, describe
 from .._compiled import device, fused
 from .._progress import bar
 from .._upstream import trace_state_clean
@@ -55,22 +55,25 @@ def _check(y, m, needed, name):
         raise ValueError(f"{name}: m = {m} needs at least {needed} samples; got {n}")
 
 
-def _factor(m, name: str) -> int:
+def _factor(m, name: str, arg: str = "m", form: str = "a positive integer") -> int:
     """The averaging factor as a Python int: any integer, or a whole real number (2.0);
-    anything else is refused naming `m` (the range is `_check`'s)."""
+    anything else is refused naming `name` and its argument `arg` (the range is
+    `_check`'s)."""
     try:
         return operator.index(m)
     except TypeError:
         pass
     if isinstance(m, numbers.Real) and math.isfinite(m) and float(m).is_integer():
         return int(m)
-    raise ValueError(f"{name}: m must be a positive integer; got {describe(m)}")
+    raise ValueError(f"{name}: {arg} must be {form}; got {describe(m)}")
 
 
 def _check_inputs(name, y, tau0, tau_name="tau0"):
     """The sample interval a positive finite number of seconds, and host samples (a list or
     NumPy array; a JAX array is not copied back to be read) finite: NaN samples are gaps only
     to [`hrgjax.allan.deviation`][hrgjax.allan.deviation]. Traced values pass."""
+    # complex or boolean samples were read as their real part or 0/1, a str as shape ()
+    check_numbers(f"{name}: y", y, "real rate samples, 1-D (one per interval)")
     check_1d(f"{name}: y", y, "one rate sample per interval")
     step = concrete_value(tau0)  # None when traced
     if step is not None and not (
@@ -214,13 +217,18 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
     array) that are not finite (gaps: `hg.allan.deviation`).
     """
     require_x64("hrgjax.allan.allan_deviation")
-    if kind not in _KINDS:
-        raise ValueError(f"kind must be one of {list(_KINDS)}; got {kind!r}")
+    if not isinstance(kind, str) or kind not in _KINDS:
+        raise ValueError(f"kind must be one of {list(_KINDS)}; got {describe(kind)}")
     _check_inputs("allan_deviation", rate, dt, "dt")
     n = np.shape(rate)[0]
     if ms is None:
         ms = [2**k for k in range(int(np.log2(max(n // 4, 1))) + 1)]
-    ms = [int(m) if int(m) == m else m for m in np.asarray(ms).ravel().tolist()]
+    # a 2-D ms was flattened, an empty one, NaN or a str failed inside JAX or int()
+    form = "the averaging factors, whole numbers >= 1 in a 1-D list"
+    check_numbers("allan_deviation: ms", ms, form)
+    if np.ndim(ms) > 1 or np.size(ms) == 0:
+        raise ValueError(f"allan_deviation: ms must be {form}; got {describe(ms)}")
+    ms = [_factor(m, "allan_deviation", "ms", form) for m in np.asarray(ms).ravel().tolist()]
     needed = {"adev": 2, "oadev": 2, "mdev": 3, "hdev": 3, "ohdev": 3, "totdev": 0}[kind]
     for m in ms:
         _check(rate, m, max(needed * m - (kind == "mdev"), 2), kind)

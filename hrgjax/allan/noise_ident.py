@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from .._checks import check_1d, describe
+from .._checks import check_1d, check_flag, check_numbers, describe, finite_number, whole_number
 
 ACF_POINTS = 30
 """The fewest decimated phase points the lag-1 autocorrelation identifies noise from (Riley &
@@ -132,8 +132,18 @@ def noise_id_each(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: boo
     **Raises:** as `noise_id`, when the generator is first advanced."""
     if not isinstance(rule, str) or rule not in NOISE_RULES:
         raise ValueError(f"rule must be one of {list(NOISE_RULES)}; got {describe(rule)}")
+    check_numbers("x", x, "real phase (angle) samples, 1-D")  # complex: its real part read
     check_1d("x", x, "one phase (angle) sample per interval")
     x = np.asarray(x, dtype=float)
+    if not np.all(np.isfinite(x)):  # NaN was read as "y has no noise to identify"
+        i = int(np.argmin(np.isfinite(x)))
+        raise ValueError(f"x must be finite; found {x[i]} at index {i} (for records with gaps "
+                         "(NaN): hrgjax.allan.deviation)")  # fmt: skip
+    dmax = whole_number("dmax", dmax, "the highest difference order 1, 2 or 3 (3: Hadamard)")
+    if dmax not in (1, 2, 3):
+        raise ValueError(f"dmax must be the highest difference order 1, 2 or 3 (3: Hadamard); "
+                         f"got {dmax}")  # fmt: skip
+    overlapping = check_flag("overlapping", overlapping)
     if rule == "hrgjax":
         curvature = _curvature(x)  # R(n) on the phase less its quadratic, as the ACF
         read = lambda k: _identify(x, k, dmax, refine=curvature)  # noqa: E731
@@ -306,8 +316,10 @@ def _detrended_sums(z, dmax):
 def b1_expected(n: int, mu: int) -> float:
     """B1(N, μ): the expected ratio of the N-sample standard variance to the Allan variance
     for Allan-variance slope μ (σ² ∝ τ^μ; Barnes 1969, no dead time)."""
+    n = whole_number("n", n, "a whole number of averages ≥ 2")  # 2.5 was read as is
     if n < 2:
         raise ValueError(f"n must be at least 2 averages; got {n}")
+    mu = finite_number("mu", mu, "the Allan-variance slope")
     if mu == 0:  # flicker rate: the limit μ → 0
         return n * math.log(n) / (2 * (n - 1) * math.log(2))
     return n * (1 - float(n) ** mu) / (2 * (n - 1) * (1 - 2.0**mu))
@@ -317,6 +329,9 @@ def rn_expected(m: int, alpha: int) -> float:
     """R(n) = MVAR/AVAR expected at factor m for white (α = 2) or flicker (α = 1) phase noise,
     the measurement bandwidth f_h = 1/(2τ₀) (NIST TN 1337, A-6), and for white rate noise
     (α = 0: ½, its limit for m ≫ 1)."""
+    m = whole_number("m", m, "a whole averaging factor ≥ 1")  # 0: ZeroDivisionError
+    if m < 1:
+        raise ValueError(f"m must be a whole averaging factor ≥ 1; got {m}")
     if alpha == 2:
         return 1.0 / m
     if alpha == 1:

@@ -18,6 +18,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from .._checks import check_numbers, describe
 from .._nnls import nnls as _nnls
 from .._progress import bar
 from .curve_result import AllanResult
@@ -78,7 +79,9 @@ class NoiseFit:
 
     def adev(self, taus) -> np.ndarray:
         """The fitted Allan deviation at `taus` [s]."""
-        t = np.asarray(taus, dtype=float)
+        t = np.asarray(check_numbers("taus", taus, "τ values > 0 [s]"), dtype=float)
+        if not np.all(np.isfinite(t) & (t > 0)):  # τ ≤ 0: NaN or a wrong value
+            raise ValueError(f"taus must be τ values > 0 [s] (finite); got {describe(taus)}")
         return np.sqrt(sum(self.value[n] ** 2 * f(t) for n, _, _, f in NOISE_TERMS))
 
 
@@ -274,10 +277,12 @@ def fit_terms(result: AllanResult, terms=None, *, intervals: bool = True) -> Noi
             f"result.kind must be 'adev' or 'oadev' (Allan variance); got {result.kind!r}"
         )
     names = [n for n, *_ in NOISE_TERMS]
+    if terms is not None and (isinstance(terms, str) or not hasattr(terms, "__iter__")):
+        raise ValueError(f"terms must be a list of names among {names}; got {describe(terms)}")
     terms = names if terms is None else list(terms)
     bad = [t for t in terms if t not in names]
-    if bad:
-        raise ValueError(f"terms must be among {names}; got {bad}")
+    if bad or not terms:  # a str was read letterwise, [] failed in np.stack
+        raise ValueError(f"terms must be among {names} (at least one); got {bad or terms}")
     fitted = [n for n in names if n in terms]
     t, var, edf = result.taus, result.dev**2, result.edf
     basis = np.stack([f(t) for n, _, _, f in NOISE_TERMS if n in terms], axis=1)

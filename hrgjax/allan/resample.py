@@ -51,7 +51,7 @@ import math
 
 import numpy as np
 
-from .._checks import describe, is_finite_real
+from .._checks import check_numbers, describe, is_finite_real
 from .._timebase import UNIFORM_TOLERANCE, regular_step
 
 MIN_RUN = 16
@@ -121,13 +121,18 @@ def to_uniform(
     **Raises:** `ValueError` naming the argument for stamps that do not increase or are not
     finite, shapes that differ, fewer than 3 samples, a bad `rate_hz`, `max_gap` or `data`.
     """
+    check_numbers("t", t, "time stamps [s], 1-D")  # str, None, complex: NumPy's errors
+    check_numbers("y", y, "real samples, 1-D")  # complex: its real part was resampled
     t = np.asarray(t, dtype=float)
     y = np.asarray(y, dtype=float)
-    start = float(t[0]) if t.size else 0.0
     if not isinstance(data, str) or data not in ("rate", "phase"):
         raise ValueError(f"data must be 'rate' or 'phase'; got {describe(data)}")
     if t.ndim != 1 or t.shape != y.shape or t.size < 3:
         raise ValueError(f"t and y must be 1-D of one length ≥ 3; got {t.shape} and {y.shape}")
+    if np.any(np.isinf(y)):  # was taken as a gap, as NaN is
+        raise ValueError(f"y has an infinite value at index {int(np.argmax(np.isinf(y)))}; "
+                         "mark a missing sample NaN")  # fmt: skip
+    start = float(t[0])
     if not np.all(np.isfinite(t)):
         raise ValueError(f"t has a non-finite time stamp at index {int(np.argmin(np.isfinite(t)))}")
     dt = np.diff(t)

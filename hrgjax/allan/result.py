@@ -15,7 +15,7 @@ import numbers
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_1d, describe, is_finite_real
+from .._checks import check_1d, check_flag, check_numbers, describe, is_finite_real
 from .._progress import bar
 from .._x64 import require_x64
 from .curve_result import AllanResult
@@ -146,6 +146,7 @@ def deviation(
         raise ValueError(f"ci must be a confidence level in (0, 1); got {describe(ci)}")
     if not isinstance(mixture, bool | np.bool_):
         raise ValueError(f"mixture must be True or False; got {describe(mixture)}")
+    check_flag("bias_correction", bias_correction)  # "no" corrected the deviation
     check_1d("y", y, "one sample per interval")
     kind_of = np.asarray(y).dtype.kind
     if kind_of in "cbOUSMm":
@@ -304,7 +305,11 @@ def _factors(taus, rate_hz: float, n_phase: int) -> np.ndarray:
                 f"taus must be 'octave', 'decade', 'all' or τ values in seconds; "
                 f"got {describe(taus)}"
             )
-    else:
+    else:  # a 2-D grid was flattened; str, dict, complex items failed in float()
+        form = "'octave', 'decade', 'all' or τ values in seconds (a number or a 1-D list)"
+        check_numbers("taus", taus, form)
+        if np.ndim(taus) > 1:
+            raise ValueError(f"taus must be {form}; got {describe(taus)}")
         t = np.asarray(taus, dtype=float).ravel()
         if t.size == 0 or not np.all(np.isfinite(t)):
             raise ValueError(f"taus must be finite τ values in seconds; got {describe(taus)}")

@@ -18,7 +18,14 @@ from statistics import NormalDist
 
 import numpy as np
 
-from .._checks import check_flag, describe, is_finite_real, whole_number
+from .._checks import (
+    check_flag,
+    check_number,
+    check_numbers,
+    describe,
+    is_finite_real,
+    whole_number,
+)
 from .noise_ident import ACF_POINTS as ACF_POINTS
 from .noise_ident import B1_AVERAGES as B1_AVERAGES
 from .noise_ident import NOISE_RULES as NOISE_RULES
@@ -310,13 +317,25 @@ def confidence_interval(dev, edf, ci: float = ONE_SIGMA):
     degrees of freedom at level `ci`: σ²·edf/χ²(1 − p) … σ²·edf/χ²(p), p = (1 − ci)/2
     (NIST SP 1065 eq. 45), for any ci in (0, 1).
 
-    **Raises:** `ValueError` for a `ci` outside (0, 1) or an EDF ≤ 0."""
+    **Raises:** `ValueError` for a `ci` outside (0, 1), an EDF ≤ 0, a deviation that is
+    negative or infinite (a NaN deviation gives a NaN interval), or `dev` and `edf` of
+    shapes that do not broadcast together."""
     if not (is_finite_real(ci) and 0.0 < ci < 1.0):
         raise ValueError(f"ci must be a confidence level in (0, 1); got {describe(ci)}")
+    check_numbers("dev", dev, "deviations >= 0 (any unit)")
+    check_numbers("edf", edf, "degrees of freedom > 0, one per deviation")
     dev, edf = np.asarray(dev, dtype=float), np.asarray(edf, dtype=float)
+    try:
+        np.broadcast_shapes(dev.shape, edf.shape)
+    except ValueError:  # NumPy's "shape mismatch" after the χ² work
+        raise ValueError(f"dev and edf must have shapes that broadcast together; got shapes "
+                         f"{dev.shape} and {edf.shape}") from None  # fmt: skip
+    bad = (dev < 0) | np.isinf(dev)  # a negative σ gave a negative interval; NaN stays NaN
+    if bad.any():
+        raise ValueError(f"dev must be deviations >= 0 (or NaN); got {dev[bad].flat[0]}")
     p = (1.0 - ci) / 2
-    lo = np.vectorize(lambda k: chi2_ppf(1 - p, k))(edf)
-    hi = np.vectorize(lambda k: chi2_ppf(p, k))(edf)
+    lo = np.vectorize(lambda k: chi2_ppf(1 - p, k), otypes=[float])(edf)
+    hi = np.vectorize(lambda k: chi2_ppf(p, k), otypes=[float])(edf)
     return dev * np.sqrt(edf / lo), dev * np.sqrt(edf / hi)
 
 
@@ -359,9 +378,11 @@ def chi2_sf(x: float, dof: float) -> float:
 def chi2_ppf(q: float, k: float) -> float:
     """The q-quantile of the χ² distribution with k (> 0, real) degrees of freedom.
 
-    **Raises:** `ValueError` for k ≤ 0 (or NaN) or q outside (0, 1)."""
-    q, k = float(q), float(k)
-    if not k > 0:
+    **Raises:** `ValueError` for k ≤ 0 (or NaN, inf) or q outside (0, 1), `TypeError` for
+    a q or k that is not a number."""
+    q = float(check_number("chi2_ppf: q", q, "a probability"))
+    k = float(check_number("chi2_ppf: k", k, "degrees of freedom"))
+    if not 0 < k < math.inf:
         raise ValueError(f"chi2_ppf: the degrees of freedom (EDF) must be > 0; got {k!r}")
     if not 0.0 < q < 1.0:
         raise ValueError(f"chi2_ppf: the quantile q must be in (0, 1); got {q!r}")

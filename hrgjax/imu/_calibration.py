@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_numbers, concrete_value
 from .._x64 import require_x64
 from .data import ImuData
 from .triad import ANGLE_AXES, TriadCalibration
@@ -82,9 +83,19 @@ class ImuCalibration(eqx.Module):
         }  # fmt: skip
         values = {}
         for name, (x, default) in parts.items():
+            if x is not None:  # str, complex: NumPy's errors; True read as 1.0
+                check_numbers(name, x, f"real numbers of shape {default.shape}")
             x = default if x is None else jnp.array(x, float)  # a copy, not a view of `x`
             if x.shape != default.shape:
                 raise ValueError(f"{name} must have shape {default.shape}; got {x.shape}")
+            v = concrete_value(x)  # NaN, or a singular matrix correct() inverts into NaN
+            if v is not None and not np.all(np.isfinite(v)):
+                raise ValueError(f"{name} must be finite; got {v[~np.isfinite(v)][0]}")
+            sv = np.linalg.svd(v, compute_uv=False) if v is not None and v.ndim == 2 else None
+            if name.endswith("matrix") and sv is not None and not sv[-1] > 1e-9 * sv[0]:
+                raise ValueError(f"{name} must be an invertible scale-and-misalignment matrix "
+                                 f"(correct() inverts it); its singular values are "
+                                 f"{np.array2string(sv, precision=3)}")  # fmt: skip
             values[name] = x
         return cls(**values, covariance=jnp.zeros((33, 33)), noise_std=jnp.zeros(6))
 
@@ -92,7 +103,7 @@ class ImuCalibration(eqx.Module):
     def sensor(self, omega, accel):
         """Sensor outputs from true body-frame values: `omega` (..., 3) [rad/s] and `accel`
         (..., 3) [m/s²] → (gyro (..., 3) [rad/s], accel (..., 3) [m/s²]). Differentiable."""
-        omega, accel = jnp.asarray(omega), jnp.asarray(accel)
+        omega, accel = _pair("sensor", "omega", omega, accel)
         a_s = accel @ self.accel_matrix.T + _row(self.accel_bias, accel)
         w_s = omega @ self.gyro_matrix.T + accel @ self.gyro_g_sensitivity.T
         return w_s + _row(self.gyro_bias, omega), a_s
@@ -101,7 +112,7 @@ class ImuCalibration(eqx.Module):
         """Calibrated body-frame values from sensor outputs (the exact inverse of `sensor`):
         `gyro` (..., 3) [rad/s], `accel` (..., 3) [m/s²] → (ω (..., 3) [rad/s], a (..., 3)
         [m/s²]). Pure JAX: `jit`, `vmap` and `grad` through it."""
-        gyro, accel = jnp.asarray(gyro), jnp.asarray(accel)
+        gyro, accel = _pair("correct", "gyro", gyro, accel)
         a = (accel - _row(self.accel_bias, accel)) @ jnp.linalg.inv(self.accel_matrix).T
         rhs = gyro - _row(self.gyro_bias, gyro) - a @ self.gyro_g_sensitivity.T
         return rhs @ jnp.linalg.inv(self.gyro_matrix).T, a
@@ -379,6 +390,23 @@ def _nonnegative(path: str, field: str, value, keys, size) -> jax.Array:
             raise ValueError(f"{path}: field {field!r} must be {form}; got {value!r}")
         out.append(np.atleast_1d(x))
     return jnp.asarray(np.concatenate(out))
+
+
+def _pair(where: str, name: str, rate, accel) -> tuple:
+    """`rate` and `accel` as arrays of shapes (..., 3) that broadcast together (one (3,)
+    accel for every rate row too), else one line naming them (JAX's "incompatible shapes
+    for broadcasting")."""
+    check_numbers(f"{where}: {name}", rate, "real numbers of shape (..., 3)")
+    check_numbers(f"{where}: accel", accel, "real numbers of shape (..., 3)")
+    rate, accel = jnp.asarray(rate), jnp.asarray(accel)
+    if rate.shape[-1:] == accel.shape[-1:] == (3,):
+        try:
+            jnp.broadcast_shapes(rate.shape, accel.shape)
+            return rate, accel
+        except ValueError:
+            pass
+    raise ValueError(f"{where}: {name} and accel must be of shapes (..., 3) that broadcast "
+                     f"together; got {rate.shape} and {accel.shape}")  # fmt: skip
 
 
 def _row(v, like):

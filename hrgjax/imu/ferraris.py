@@ -172,7 +172,9 @@ def session_statistics(data: ImuData, sections: Sections):
     nor an unknown vertical one is in it, and the gyros' q reads what the Earth's rate
     puts in the ± pair sums as drift. `ferraris` adds both where `earth_rate` > 0 and
     measures the gyros' q within the faces (`hrgjax.imu._earth`)."""
-    got = _statistics(data, sections)
+    if not isinstance(data, ImuData):  # was an AttributeError
+        raise TypeError(f"session_statistics takes an hg.imu.ImuData; got {type(data).__name__}")
+    got = _statistics(data, parse_sections(sections, len(data)))
     return got.stats, got.white + got.drift, got.noise_std, got.source
 
 

@@ -19,7 +19,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from .._checks import describe, finite_number, whole_number
 from .._io import read_json
+from .data import ImuData
 
 FACES = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
 """Static faces: sensor axis up (`p`, that accelerometer reads +g) or down (`a`)."""
@@ -43,6 +45,9 @@ def parse_sections(sections, n_samples: int) -> Sections:
     than 2 samples, a key whose ranges repeat or overlap (a repeat must be another
     stretch of the record: the same rows twice would fake a repeat whose scatter is 0), or
     ranges of two keys that share rows."""
+    n_samples = whole_number("n_samples", n_samples, "the record's number of rows, ≥ 1")
+    if n_samples < 1:  # 7800.5 was read as is, -1 named every range instead
+        raise ValueError(f"n_samples must be the record's number of rows, ≥ 1; got {n_samples}")
     where = "sections"
     if isinstance(sections, str | os.PathLike):
         where = os.fspath(sections)
@@ -118,6 +123,24 @@ def _is_pair(value) -> bool:
     return len(value) == 2 and all(isinstance(v, int | np.integer) for v in value)
 
 
+def _pairs(rows) -> list[tuple[int, int]] | None:
+    """`rows` — (start, end) pairs of integers (tuples, lists or (2,) arrays) in a list or
+    tuple, or an integer array (k, 2) — as a list of int pairs; None for anything else."""
+    if isinstance(rows, np.ndarray):
+        ok = rows.ndim == 2 and rows.shape[1] == 2 and np.issubdtype(rows.dtype, np.integer)
+        return [(int(s), int(e)) for s, e in rows] if ok else None
+    if not isinstance(rows, Sequence) or isinstance(rows, str | bytes):
+        return None
+    out = []
+    for r in rows:
+        if isinstance(r, np.ndarray) and r.shape == (2,) and np.issubdtype(r.dtype, np.integer):
+            r = r.tolist()
+        if not (isinstance(r, Sequence) and not isinstance(r, str) and _is_pair(r)):
+            return None
+        out.append((int(r[0]), int(r[1])))
+    return out
+
+
 def _range(where: str, key: str, r, n: int) -> tuple[int, int]:
     form = f'{{"start": i, "end": j}} or [i, j] with 0 <= i < j <= {n} (rows, end excluded)'
     if isinstance(r, Mapping):
@@ -139,8 +162,13 @@ def _range(where: str, key: str, r, n: int) -> tuple[int, int]:
 def sections_to_json(sections: Sections) -> dict:
     """Sections as JSON-ready `{key: {"start", "end"}}`, or a list of those for a key with
     repeats (the form `parse_sections` reads)."""
+    pairs = {k: _pairs(r) for k, r in sections.items()} if isinstance(sections, Mapping) else {}
+    if not isinstance(sections, Mapping) or any(r is None for r in pairs.values()):
+        # was an AttributeError or "'int' object is not iterable"
+        raise ValueError("sections must be {key: [(start, end), …]} as parse_sections and "
+                         f"detect_sections give them; got {describe(sections)}")  # fmt: skip
     out = {}
-    for key, ranges in sections.items():
+    for key, ranges in pairs.items():
         rows = [{"start": int(s), "end": int(e)} for s, e in ranges]
         out[key] = rows[0] if len(rows) == 1 else rows
     return out
@@ -183,7 +211,14 @@ def detect_sections(
     [`SECTION_KEYS`][hrgjax.imu.sections.SECTION_KEYS].
 
     **Raises:** `ValueError` listing the keys not found (with what was found), so that a
-    user can pass them by hand."""
+    user can pass them by hand; naming an argument that is not a positive number (`trim_s`
+    ≥ 0); `TypeError` for `data` not an `ImuData`."""
+    _check_data("detect_sections", data)
+    for name, value, unit in (("min_static_s", min_static_s, "s"), ("window_s", window_s, "s"),
+                              ("motion_threshold_dps", motion_threshold_dps, "°/s"),
+                              ("turn_tolerance_deg", turn_tolerance_deg, "°"),
+                              ("trim_s", trim_s, "s")):  # fmt: skip
+        _at_least(name, value, unit, strict=name != "trim_s")  # ≤ 0: nothing found, or wrong
     n = len(data)
     rate = data.rate_hz
     gyro = np.asarray(data.gyro)
@@ -397,6 +432,9 @@ def cut_turn(data, sections, *, window_s: float = 0.25, walk: float = 0.0) -> st
 
     **Arguments:** `data`: the session ([`ImuData`][hrgjax.imu.ImuData]); `sections`: as
     [`parse_sections`][hrgjax.imu.sections.parse_sections] takes them."""
+    _check_data("cut_turn", data)
+    _at_least("window_s", window_s, "s", strict=True)  # ≤ 0 was read as one sample
+    _at_least("walk", walk, "rad/s/√s", strict=False)
     sections = parse_sections(sections, len(data))
     gyro, time, n = np.asarray(data.gyro), np.asarray(data.time), len(data)
     w = max(int(round(window_s * data.rate_hz)), 1)
@@ -471,6 +509,21 @@ def saturation(data, ranges, *, sensor: str = "gyro", limit: float | None = None
     varies within one of these ranges (the static faces of noise-free data are flat
     everywhere, those of noisy data are not); `above` (SI): only flat tops beyond it (an
     accelerometer's face reads 1 g, and no part's range is below 2 g)."""
+    _check_data("saturation", data)
+    if not isinstance(sensor, str) or sensor not in ("gyro", "accel"):  # was an AttributeError
+        raise ValueError(f"sensor must be 'gyro' or 'accel'; got {describe(sensor)}")
+    if limit is not None:
+        _at_least("limit", limit, "rad/s or m/s²", strict=True)  # < 0: "its range ±-57.3"
+    _at_least("above", above, "rad/s or m/s²", strict=False)
+    checked = []
+    for name, rows in (("ranges", ranges), ("noise_ranges", noise_ranges)):
+        pairs = None if rows is None else _pairs(rows)
+        if rows is not None and (pairs is None or not all(0 <= s < e <= len(data)
+                                                          for s, e in pairs)):  # fmt: skip
+            raise ValueError(f"{name} must be row ranges [(start, end), …] with 0 <= start < "
+                             f"end <= {len(data)}; got {describe(rows)}")  # fmt: skip
+        checked.append(pairs)
+    ranges, noise_ranges = checked
     x_all = np.asarray(getattr(data, sensor))
     rate = float(data.rate_hz)
     min_run = max(SATURATION_MIN_SAMPLES, int(np.ceil(SATURATION_MIN_S * rate)))
@@ -501,6 +554,19 @@ def saturation(data, ranges, *, sensor: str = "gyro", limit: float | None = None
                             f"{s + a}–{s + b - 1}) read its extreme {extreme * scale:+.4g} {unit} "
                             f"exactly, so it clips at about ±{abs(extreme) * scale:.4g} {unit}")  # fmt: skip
     return None
+
+
+def _check_data(where: str, data) -> None:
+    if not isinstance(data, ImuData):
+        raise TypeError(f"{where} takes an hg.imu.ImuData (hg.imu.load); got {type(data).__name__}")
+
+
+def _at_least(name: str, value, unit: str, strict: bool) -> float:
+    """`value` a finite number > 0 (`strict`) or ≥ 0 [`unit`], else one line naming `name`."""
+    v = finite_number(name, value, unit)
+    if v < 0 or (strict and v == 0):
+        raise ValueError(f"{name} must be {'> 0' if strict else '>= 0'} [{unit}]; got {v}")
+    return v
 
 
 def _moving_mean(x: np.ndarray, w: int) -> np.ndarray:

@@ -9,9 +9,10 @@ from __future__ import annotations
 import jax
 import numpy as np
 
+from .._checks import describe, finite_number, whole_number
 from .._x64 import require_x64
 from ..units import DEG, EARTH_RATE
-from ._calibration import ImuCalibration
+from ._calibration import ImuCalibration, check_g
 from ._earth import check_lat_deg
 from .data import ImuData
 from .sections import FACES, TURNS, Sections
@@ -22,12 +23,40 @@ _UP = np.array([0.0, 0.0, 1.0])
 def face_attitude(key: str) -> np.ndarray:
     """Attitude C (3, 3) of face `key` ("x_p" … "z_a"): columns are the sensor axes in a
     world frame with z up (sensor axis i up or down, the next axis east)."""
+    if not isinstance(key, str) or key not in FACES:  # "q_p": "substring not found"
+        raise ValueError(f"key must be a face, one of {', '.join(FACES)}; got {describe(key)}")
     i, sign = "xyz".index(key[0]), 1.0 if key.endswith("_p") else -1.0
     c = np.zeros((3, 3))
     c[:, i] = sign * _UP
     c[:, (i + 1) % 3] = [1.0, 0.0, 0.0]
     c[:, (i + 2) % 3] = np.cross(c[:, i], c[:, (i + 1) % 3])
     return c
+
+
+def _check_session(truth, key, rate_hz, static_s, move_s, turn_s, gyro_noise, accel_noise,
+                   gyro_walk, accel_walk, turn_deg) -> None:  # fmt: skip
+    """`ferraris_session`'s arguments, each refused in one line naming it (a rate of 0 was a
+    ZeroDivisionError, NaN "cannot convert float NaN to integer", a negative duration two
+    samples, a negative σ a silent |σ|)."""
+    if not isinstance(truth, ImuCalibration):
+        raise TypeError(f"truth must be an hg.imu.ImuCalibration; got {type(truth).__name__}")
+    dtype = getattr(key, "dtype", None)
+    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
+    if not ((typed and key.shape == ()) or (dtype == np.uint32 and np.ndim(key) == 1)):
+        raise TypeError(f"key must be one JAX PRNG key (jax.random.key(seed)); got "
+                        f"{describe(key)}")  # fmt: skip
+    for name, value, unit, least in (
+        ("rate_hz", rate_hz, "Hz", 0), ("static_s", static_s, "s", 0), ("move_s", move_s, "s", 0),
+        ("turn_s", turn_s, "s", 0), ("gyro_noise", gyro_noise, "rad/s", None),
+        ("accel_noise", accel_noise, "m/s²", None), ("gyro_walk", gyro_walk, "rad/s/√s", None),
+        ("accel_walk", accel_walk, "m/s²/√s", None),
+    ):  # fmt: skip
+        v = finite_number(name, value, unit)
+        if (least is not None and v <= least) or v < 0:
+            raise ValueError(f"{name} must be {'> 0' if least is not None else '>= 0'} [{unit}]; "
+                             f"got {v}")  # fmt: skip
+    if finite_number("turn_deg", turn_deg, "°") == 0:
+        raise ValueError("turn_deg must be a non-zero angle [°], e.g. 360 or -360; got 0")
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -160,8 +189,12 @@ def ferraris_session(
     **Returns:** `(data, sections)`: the record (`ImuData`, SI) and its true sections
     (faces: the rests; turns: the turn with half of each neighbouring rest)."""
     require_x64("hg.imu.ferraris_session")
+    _check_session(truth, key, rate_hz, static_s, move_s, turn_s, gyro_noise, accel_noise,
+                   gyro_walk, accel_walk, turn_deg)  # fmt: skip
+    repeats = whole_number("repeats", repeats, "a positive integer")  # 1.5, "2": raw errors
     if repeats < 1:
         raise ValueError(f"repeats must be a positive integer; got {repeats!r}")
+    g = check_g(g)  # g ≤ 0 simulated an upside-down session ferraris then refuses
     n_static, n_move, n_turn = (max(int(round(s * rate_hz)), 2) for s in (static_s, move_s, turn_s))
     lat = None if lat_deg is None else check_lat_deg(lat_deg) * DEG
     attitudes = _face_attitudes(face_headings_deg)
