@@ -169,7 +169,7 @@ def vec3(owner: str, name: str, unit: str):
     return convert
 
 
-_ROUND_OFF = 1e-9
+ROUND_OFF = 1e-9
 """Relative tolerance of the covariance checks: asymmetry up to this share of the largest
 entry, and (semi-definite matrices) a smallest eigenvalue down to minus this share of the
 largest variance, are round-off."""
@@ -207,7 +207,7 @@ def check_covariance(name: str, a, *, definite: bool = False, form: str = "(n, n
     they do not depend on the states' units (a position variance of 100 m² beside a bias
     variance of −1e-14 is refused; a valid R whose σ span 12 decades is not): a negative
     variance is refused as such, then asymmetry and a negative eigenvalue beyond round-off
-    (`_ROUND_OFF`) — one batched Cholesky on the host, eigenvalues only to name a bad one."""
+    (`ROUND_OFF`) — one batched Cholesky on the host, eigenvalues only to name a bad one."""
     v = host_value(a)
     if v is None or v.size == 0:
         return
@@ -231,7 +231,7 @@ def check_covariance(name: str, a, *, definite: bool = False, form: str = "(n, n
     c = mats / (d[:, :, None] * d[:, None, :])
     trans = np.swapaxes(c, -1, -2)
     asym = np.abs(c - trans).max(axis=(-2, -1))
-    skew = asym > _ROUND_OFF * np.maximum(np.abs(c).max(axis=(-2, -1)), 1.0)
+    skew = asym > ROUND_OFF * np.maximum(np.abs(c).max(axis=(-2, -1)), 1.0)
     if skew.any():
         i = int(np.argmax(skew))
         raise ValueError(
@@ -239,7 +239,7 @@ def check_covariance(name: str, a, *, definite: bool = False, form: str = "(n, n
             f"{asym[i]:.3g} of the entries' scale √(A_ii A_jj))"
         )
     sym = 0.5 * (c + trans)
-    shift = 0.0 if definite else _ROUND_OFF
+    shift = 0.0 if definite else ROUND_OFF
     try:
         np.linalg.cholesky(sym + shift * np.eye(sym.shape[-1]))
         return

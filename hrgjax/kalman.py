@@ -30,86 +30,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.linalg import expm
 
-from ._checks import check_covariance, check_finite_host, concrete_value, describe, host_value
+from . import _kalman_checks as _kc
 from ._compiled import fused
 from ._linalg import cho_logdet, cho_solve, cholesky, whiten
 from ._x64 import require_x64
 
 LOG_2PI = 1.8378770664093453
-
-
-def _check_measurements(zs, mask):
-    """Refuse a concrete NaN or inf in `zs` (K, m) at a step that has a measurement (`mask`
-    True, or no mask): a missing measurement is a step with mask=False."""
-    z = host_value(zs)
-    if z is None:
-        return
-    if mask is None:
-        on = np.ones(z.shape[0], bool)
-    else:
-        mv = concrete_value(mask)
-        if mv is None:  # traced mask: which steps count is not known here
-            return
-        on = np.broadcast_to(np.asarray(mv, bool), z.shape[:1])
-    bad = ~np.isfinite(z).reshape(z.shape[0], -1).all(axis=1) & on
-    if bad.any():
-        k = int(np.argmax(bad))
-        value = z[k][~np.isfinite(z[k])].ravel()[0]
-        text = "NaN" if np.isnan(value) else str(value)
-        raise ValueError(f"zs has {text} at step {k}: mark a missing measurement with mask=False")
-
-
-def _stack_shape_ok(shape, n, k) -> bool:
-    """`shape` is (n, n) or a per-step (K, n, n) (or (1, n, n), broadcast)."""
-    return len(shape) in (2, 3) and tuple(shape[-2:]) == (n, n) and shape[:-2] in ((), (1,), (k,))
-
-
-def _check_linear(prior, phi, qd, H, R, zs, mask, us):
-    """The arguments of `kalman_filter` / `rts_smoother`: shapes always (trace time, so under
-    `jit` and `vmap` too), values on the host when they are concrete. Raises one line naming
-    the argument and its expected form."""
-    x_shape, p_shape = np.shape(prior.x), np.shape(prior.P)
-    if len(x_shape) != 1:
-        raise ValueError(f"prior.x must be a (n,) mean; got shape {x_shape}")
-    n = x_shape[0]
-    if p_shape != (n, n):
-        raise ValueError(f"prior.P must be (n, n) = ({n}, {n}) (n = len(prior.x)); got {p_shape}")
-    h_shape = np.shape(H)
-    if len(h_shape) != 2 or h_shape[1] != n:
-        raise ValueError(f"H must be (m, n) = (m, {n}) (n = len(prior.x)); got {h_shape}")
-    m = h_shape[0]
-    z_shape = np.shape(zs)
-    if len(z_shape) != 2 or z_shape[1] != m:
-        hint = " (transposed? one row per step)" if len(z_shape) == 2 and z_shape[0] == m else ""
-        raise ValueError(f"zs must be (K, m) = (K, {m}) (one row per step, m = rows of H); "
-                         f"got {z_shape}{hint}")  # fmt: skip
-    k = z_shape[0]
-    for name, a in (("phi", phi), ("qd", qd)):
-        if not _stack_shape_ok(np.shape(a), n, k):
-            raise ValueError(f"{name} must be (n, n) = ({n}, {n}) or per step (K, n, n) = "
-                             f"({k}, {n}, {n}); got {np.shape(a)}")  # fmt: skip
-    if np.shape(R) != (m, m):
-        raise ValueError(f"R must be (m, m) = ({m}, {m}) (m = rows of H); got {np.shape(R)}")
-    if mask is not None and np.shape(mask) != (k,):
-        raise ValueError(f"mask must be (K,) = ({k},) booleans (False: no measurement at that "
-                         f"step); got {np.shape(mask)}")  # fmt: skip
-    if us is not None:
-        try:
-            fits = np.broadcast_shapes(np.shape(us), (k, n)) == (k, n)
-        except ValueError:
-            fits = False
-        if not fits:
-            raise ValueError(f"us must be (K, n) = ({k}, {n}) (or (n,), the same every step); "
-                             f"got {np.shape(us)}")  # fmt: skip
-    check_finite_host("prior.x", prior.x)
-    check_covariance("prior.P", prior.P, form=f"(n, n) = ({n}, {n})")
-    check_finite_host("phi", phi)
-    check_covariance("qd", qd, form=f"(n, n) = ({n}, {n})")
-    check_finite_host("H", H)
-    check_covariance("R", R, definite=True, form=f"(m, m) = ({m}, {m})")
-    if us is not None:
-        check_finite_host("us", us)
-    _check_measurements(zs, mask)
 
 
 def _floats(a):
@@ -138,18 +64,6 @@ class Gaussian(eqx.Module):
     P: jax.Array = eqx.field(converter=_floats)
 
 
-def _dt(name: str, dt):
-    """Refuse a host `dt` that is not one finite real number, in one line naming `name`; a
-    traced one (under `jit` or `vmap`) passes."""
-    if isinstance(dt, jax.core.Tracer):
-        return
-    value = np.asarray(dt) if isinstance(dt, str) else concrete_value(dt)
-    if value is None:
-        return
-    if not (value.ndim == 0 and value.dtype.kind in "iuf" and np.isfinite(value)):
-        raise ValueError(f"{name} must be the step, one finite number [s]; got {describe(dt)}")
-
-
 def van_loan(F, Q, dt):
     r"""Exact discretisation $(\Phi, Q_d)$ of $\dot x = Fx + w$ with white-noise spectral
     density `Q` [state²/s] over a step `dt` [s] (`F` [1/s]): the exponential
@@ -163,9 +77,11 @@ def van_loan(F, Q, dt):
     (benchmarks/precision.py). k is traced (masked doublings): `jit`, `vmap` over `dt` and
     `grad` work, one program serves every `dt`; under `vmap` all doublings run (strapdown's
     1-h flight at 1 s: 0.56 → 0.77 s CPU). $FQ_d + Q_dF^\top + Q - \Phi Q\Phi^\top = 0$
-    (PHYSICS.md §12). A host `dt` that is not one finite number is refused in one line."""
-    _dt("dt", dt)
-    return _van_loan(_floats(F), _floats(Q), dt)
+    (PHYSICS.md §12). Refused in one line: a host `dt` that is not one finite number >= 0,
+    `F` and `Q` not square (n, n); a concrete non-finite `F`, a `Q` not symmetric PSD."""
+    F, Q = _floats(F), _floats(Q)
+    _kc.check_discretise(F, Q, dt)
+    return _van_loan(F, Q, dt)
 
 
 VAN_LOAN_MAX_HALVINGS = 24
@@ -195,10 +111,16 @@ def _van_loan(F, Q, dt):
 def discretise_input(F, B, dt):
     r"""Zero-order-hold input matrix $\Gamma = \int_0^{dt} e^{Fs}ds\,B$ (with $\Phi$), from the
     exponential of $\begin{bmatrix}F & B\\ 0 & 0\end{bmatrix}dt$: an input held constant over
-    the step moves the state by $\Gamma u$ exactly. A host `dt` that is not one finite
-    number is refused in one line."""
-    _dt("dt", dt)
-    return _discretise_input(_floats(F), _floats(B), dt)
+    the step moves the state by $\Gamma u$ exactly. Refused in one line: a host `dt` that
+    is not one finite number >= 0, `F` not (n, n), `B` not (n, m), a concrete NaN or inf."""
+    F, B = _floats(F), _floats(B)
+    _kc.check_dt("dt", dt)
+    n = _kc.square("F", F)
+    if len(np.shape(B)) != 2 or np.shape(B)[0] != n:
+        raise ValueError(f"B must be (n, m) = ({n}, m) (n = rows of F); got {np.shape(B)}")
+    for name, a in (("F", F), ("B", B)):
+        _kc.check_finite_host(name, a)
+    return _discretise_input(F, B, dt)
 
 
 @fused
@@ -212,7 +134,6 @@ def _discretise_input(F, B, dt):
     return e[:n, :n], e[:n, n:]
 
 
-@fused
 def psd_factor(m):
     r"""A lower-triangular factor L with $LL^\top = M$ of a symmetric positive semi-definite M
     that may be singular: what samples $N(0, M) = L\,N(0, I)$ need where a plain Cholesky
@@ -238,7 +159,16 @@ def psd_factor(m):
     through it is taken as 0 (the derivative of $\sqrt{v}$ at $v = 0$ is infinite); near a
     singular M it is large, as the factor's sensitivity is.
 
-    `m`: (n, n) in any units; the result has the units of $\sqrt{M}$."""
+    `m`: (n, n) in any units; the result has the units of $\sqrt{M}$ (a concrete NaN or inf
+    in `m` is refused in one line)."""
+    _kc.square("m", m)
+    _kc.check_finite_host("m", m)
+    return _psd_factor(m)
+
+
+@fused
+def _psd_factor(m):
+    """`psd_factor` without its checks (fused: one compiled program)."""
     m = jnp.asarray(m)
     m = 0.5 * (m + m.T)
     n = m.shape[-1]
@@ -259,9 +189,13 @@ def psd_factor(m):
     return jax.lax.fori_loop(0, n, column, (m, jnp.zeros_like(m)))[1]
 
 
+psd_factor.__wrapped__ = _psd_factor.__wrapped__
+
+
 def predict(g: Gaussian, phi, qd, u=None) -> Gaussian:
     r"""Time update $x \leftarrow \Phi x (+u)$, $P \leftarrow \Phi P \Phi^\top + Q_d$."""
     phi, qd, u = _floats(phi), _floats(qd), _floats(u)
+    _kc.check_predict(g, phi, qd, u)
     x = phi @ g.x if u is None else phi @ g.x + u
     p = phi @ g.P @ phi.T + qd
     return Gaussian(x, 0.5 * (p + p.T))
@@ -280,31 +214,8 @@ def update(g: Gaussian, z, H, R, mask=True):
     where `mask` is True, `R` not positive-definite, `g.P` not positive semi-definite) when
     they are concrete."""
     z, H, R = _floats(z), _floats(H), _floats(R)
-    _check_update(g, z, H, R, mask)
+    _kc.check_update(g, z, H, R, mask)
     return _update_innovation(g, z - H @ g.x, H, R, mask)
-
-
-def _check_update(g, z, H, R, mask):
-    """`update`'s arguments: shapes always (trace time), values when concrete."""
-    x_shape, p_shape, h_shape = np.shape(g.x), np.shape(g.P), np.shape(H)
-    if len(x_shape) != 1 or p_shape != x_shape * 2:
-        raise ValueError(f"g must be a Gaussian with x (n,) and P (n, n); got x {x_shape}, "
-                         f"P {p_shape}")  # fmt: skip
-    n = x_shape[0]
-    if len(h_shape) != 2 or h_shape[1] != n:
-        raise ValueError(f"H must be (m, n) = (m, {n}) (n = len(g.x)); got {h_shape}")
-    m = h_shape[0]
-    if np.shape(z) != (m,):
-        raise ValueError(f"z must be (m,) = ({m},) (m = rows of H); got {np.shape(z)}")
-    if np.shape(R) != (m, m):
-        raise ValueError(f"R must be (m, m) = ({m}, {m}) (m = rows of H); got {np.shape(R)}")
-    check_covariance("g.P", g.P, form=f"(n, n) = ({n}, {n})")
-    check_finite_host("H", H)
-    check_covariance("R", R, definite=True, form=f"(m, m) = ({m}, {m})")
-    zv, on = host_value(z), concrete_value(mask)
-    if zv is not None and on is not None and np.any(on) and not np.isfinite(zv).all():
-        raise ValueError(f"z must be finite where mask is True (a missing measurement is "
-                         f"mask=False); got {zv.tolist()}")  # fmt: skip
 
 
 def _update_innovation(g: Gaussian, nu, H, R, mask=True):
@@ -352,7 +263,7 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
     require_x64("hrgjax.kalman.kalman_filter")
     phi, qd, H, R, zs, us = (_floats(a) for a in (phi, qd, H, R, zs, us))
-    _check_linear(prior, phi, qd, H, R, zs, mask, us)
+    _kc.check_linear(prior, phi, qd, H, R, zs, mask, us)
     return _kalman_filter(prior, phi, qd, H, R, zs, mask, us)
 
 
@@ -383,7 +294,7 @@ def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     log-likelihood)`."""
     require_x64("hrgjax.kalman.rts_smoother")
     phi, qd, H, R, zs, us = (_floats(a) for a in (phi, qd, H, R, zs, us))
-    _check_linear(prior, phi, qd, H, R, zs, mask, us)
+    _kc.check_linear(prior, phi, qd, H, R, zs, mask, us)
     return _rts_smoother(prior, phi, qd, H, R, zs, mask, us)
 
 
@@ -430,13 +341,6 @@ def _nonlinear_steps(prior, qd, zs, mask, us):
     return qds, mask, us
 
 
-def _check_model(f, h):
-    """The model functions of the EKF/UKF: callables (one line naming the one that is not)."""
-    for name, fn, form in (("f", f, "f(x, u) -> x"), ("h", h, "h(x) -> z")):
-        if not callable(fn):
-            raise ValueError(f"{name} must be a function {form}; got {type(fn).__name__}")
-
-
 def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None):
     """Extended Kalman filter: $x_k = f(x_{k-1}, u_k) + w$, $z_k = h(x_k) + v$, with the
     Jacobians of `f` and `h` by `jax.jacfwd` at the current estimate; the update and the
@@ -456,8 +360,8 @@ def extended_kalman_filter(prior: Gaussian, f, qd, h, R, zs, mask=None, us=None)
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
     require_x64("hrgjax.kalman.extended_kalman_filter")
-    _check_model(f, h)
     qd, R, zs, us = (_floats(a) for a in (qd, R, zs, us))
+    _kc.check_nonlinear(prior, f, qd, h, R, zs, mask, us)
     run = _extended_kalman_filter if _kept(f) and _kept(h) else _ekf
     return run(prior, f, qd, h, R, zs, mask, us)
 
@@ -497,7 +401,8 @@ def sigma_points(g: Gaussian, alpha: float = 1.0, beta: float = 2.0, kappa: floa
     ([`psd_factor`][hrgjax.kalman.psd_factor]: a P that its update left indefinite by
     round-off — a measurement 10¹⁶ more precise than the prior — gave a plain Cholesky's
     NaN, silently, from the first step on)."""
-    n = g.x.shape[0]
+    n = _kc.check_prior(g, "g")
+    _kc.check_unscented(n, alpha, beta, kappa)
     lam = alpha**2 * (n + kappa) - n
     root = psd_factor((n + lam) * g.P)
     pts = jnp.concatenate([g.x[None], g.x[None] + root.T, g.x[None] - root.T])
@@ -516,8 +421,9 @@ def unscented_kalman_filter(
     its unscented covariance. Compiled once per shape and model, as the EKF (`alpha`,
     `beta`, `kappa` are inputs: new values compile nothing)."""
     require_x64("hrgjax.kalman.unscented_kalman_filter")
-    _check_model(f, h)
     qd, R, zs, us = (_floats(a) for a in (qd, R, zs, us))
+    _kc.check_nonlinear(prior, f, qd, h, R, zs, mask, us)
+    _kc.check_unscented(np.shape(prior.x)[0], alpha, beta, kappa)
     alpha, beta, kappa = (jnp.asarray(v, float) for v in (alpha, beta, kappa))
     run = _unscented_kalman_filter if _kept(f) and _kept(h) else _ukf
     return run(prior, f, qd, h, R, zs, mask, us, alpha, beta, kappa)
@@ -571,7 +477,8 @@ def steady_state(phi, qd, h, r, p0, n_iter: int = 4000):
     and the innovation log-likelihood uses the fixed $S$.
 
     **Returns:** `(P_prior (n, n), K (n, m), S (m, m))`."""
-    return _steady_state(*(_floats(a) for a in (phi, qd, h, r, p0)), n_iter)
+    phi, qd, h, r, p0 = (_floats(a) for a in (phi, qd, h, r, p0))
+    return _steady_state(phi, qd, h, r, p0, _kc.check_steady(phi, qd, h, r, p0, n_iter))
 
 
 @fused(static_argnames="n_iter")  # one program per shape: an eager call compiled every time

@@ -285,3 +285,151 @@ def test_error_propagation_is_differentiable():
     fd = (east(2e-7) - east(0.0)) / 2e-7
     np.testing.assert_allclose(g, fd, rtol=1e-6)
     assert abs(g) > 1e9  # metres per rad/s: the error is really driven
+
+
+def test_off_path_inputs_of_the_ins_entry_points_are_one_line():
+    """Audit (ins): each of these returned a number or failed deep in JAX — a negative step
+    (ekf.discretise, increments_from_states, coarse_scatter), a NaN (coarse_align, a
+    platform x0, a Fault size, mechanize's initial state: "the solution stops being
+    finite"), mismatched shapes broadcast or truncated (position_metres, navigation_errors,
+    Truth.trajectory(every=7)), a truthy string switching a flag on (altitude_aided="no",
+    Gnss(use_velocity="no")), a negative NIS judged, n_runs = 1.5 or n_steps = 1.5 run as
+    1, a p0 of the wrong size reported as an attitude σ of 1 rad, a qd or p0 not PSD, a
+    NaN p0_nav. Each is refused before anything compiles."""
+    from hrgjax.ins import alignment as al
+    from hrgjax.ins import consistency as cs
+    from hrgjax.ins import ekf, gnss, motion, platform
+    from hrgjax.ins import mechanization as me
+
+    traj = tr.stationary(45.0, duration_s=10.0, dt=1.0)
+    eye15, n = jnp.eye(15) * 1e-8, 10
+    phi, qd = jnp.broadcast_to(jnp.eye(15), (n, 15, 15)), jnp.broadcast_to(eye15, (n, 15, 15))
+    one = me.NavState(jnp.asarray(0.5), jnp.asarray(0.0), jnp.asarray(0.0), jnp.zeros(3),
+                      jnp.array([1.0, 0.0, 0.0, 0.0]))  # fmt: skip
+    many = jax.tree_util.tree_map(lambda a: jnp.stack([a] * 5), one)
+    bad = me.NavState(jnp.asarray(np.nan), one.lon, one.h, one.v_ned, one.q_bn)
+    truth = motion.Truth(many, jnp.zeros((4, 3)), jnp.zeros((4, 3)), jnp.zeros((5, 3)),
+                         jnp.ones(5, bool), 0.1)  # fmt: skip
+    key, f_b, w_b = jax.random.key(0), jnp.array([0.0, 0.0, -9.8]), jnp.array([5e-5, 0, -5e-5])
+    ins = platform.PlatformINS()
+    cases = [
+        (lambda: sd.position_metres(traj, jnp.zeros((11, 2))), r"^dx must be \(…, N, >=3\) .* N = 11"),
+        (lambda: sd.position_metres(traj, jnp.zeros((5, 9))), r"^dx must be \(…, N, >=3\)"),
+        (lambda: sd.position_metres(traj, jnp.zeros(9)), r"^dx must be \(…, N, >=3\)"),
+        (lambda: sd.propagate(traj, altitude_aided="no"), r"^altitude_aided must be True or False"),
+        (lambda: sd.propagate(traj, rtol=-1.0), r"^rtol must be >= 0"),
+        (lambda: sd.propagate(traj, max_steps=0), r"^max_steps must be None or a whole number"),
+        (lambda: sd.initial_covariance(sd.ImuErrors(), jnp.eye(9) * np.nan),
+         r"^p0_nav must be a symmetric positive semi-definite \(9, 9\) covariance; it has nan"),
+        (lambda: sd.covariance(phi, qd, jnp.eye(9)), r"^p0 must be \(n, n\) = \(15, 15\)"),
+        (lambda: sd.covariance(phi, qd[:3], eye15), r"^qd must be \(N, n, n\) = \(10, 15, 15\)"),
+        (lambda: sd.covariance(phi[0], qd[0], eye15), r"^phi must be \(N, n, n\)"),
+        (lambda: sd.covariance(phi.at[0, 0, 0].set(np.nan), qd, eye15), r"^phi must be finite"),
+        (lambda: sd.covariance(phi, -qd, eye15), r"^qd must be a symmetric positive semi-def"),
+        (lambda: sd.monte_carlo(phi, qd, -eye15, key, 3), r"^p0 must be a symmetric positive"),
+        (lambda: sd.monte_carlo(phi, qd, eye15, key, 1.5), r"^n_runs must be a whole number of"),
+        (lambda: sd.monte_carlo(phi, qd, eye15, key, 0), r"^n_runs must be a whole number of"),
+        (lambda: tr.segments(45.0, 0.0, 0.0, "abc"), r"^legs: a non-empty list of finite"),
+        (lambda: me.mechanize(bad, jnp.zeros((4, 3)), jnp.zeros((4, 3)), 0.1),
+         r"^initial.lat must be finite"),
+        (lambda: me.mechanize(one, jnp.zeros((4, 3)), jnp.zeros((4, 3)), 0.1, vertical="x"),
+         r"^vertical must be \(h, v_down\), each \(4,\)"),
+        (lambda: me.increments_from_states(one, jnp.zeros((4, 3)), many.q_bn[:4], -0.1),
+         r"^dt must be the increments' interval in seconds \(> 0\); got -0.1"),
+        (lambda: me.increments_from_states(one, jnp.zeros((4, 3)), many.q_bn[:3], 0.1),
+         r"^v_ned and q_bn must be \(N, 3\) and \(N, 4\)"),
+        (lambda: me.increments_from_states(one, jnp.full((4, 3), np.nan), many.q_bn[:4], 0.1),
+         r"^v_ned must be finite"),
+        (lambda: me.navigation_errors(many, many[:4]), r"^nav and truth must hold the same epochs"),
+        (lambda: truth.trajectory(0), r"^every must be a positive divisor of the 4 intervals"),
+        (lambda: truth.trajectory(3), r"^every must be a positive divisor of the 4 intervals"),
+        (lambda: cs.nis_check(-jnp.ones(20), 3), r"^nis_check: nis must be >= 0"),
+        (lambda: cs.nis_check(jnp.ones(20), 1.5), r"^nis_check: innovation_dim must be a whole"),
+        (lambda: gnss.Gnss(use_velocity="no"), r"^Gnss.use_velocity must be True or False"),
+        (lambda: gnss.Gnss().epochs(40, 0.0), r"^Gnss.epochs needs n_intervals >= 0 and dt > 0"),
+        (lambda: platform.simulate(ins, dt=1.0, n_steps=1.5, key=key), r"^n_steps must be a whole"),
+        (lambda: platform.simulate(ins, dt=1.0, n_steps=5, key=key, x0=jnp.zeros(3)),
+         r"^x0 must be \(17,\) platform states"),
+        (lambda: platform.simulate(ins, dt=1.0, n_steps=5, key=key, x0=jnp.full(17, np.nan)),
+         r"^x0 must be finite"),
+        (lambda: ins.navigation_errors(jnp.zeros(5)), r"^x must be \(\.\.\., 17\) platform"),
+        (lambda: platform.Fault.on("accel_x", np.nan, 5.0), r"^size must be finite"),
+        (lambda: platform.Fault.on("accel_x", 1.0, np.nan), r"^t_fault must be a time"),
+        (lambda: al.coarse_align(f_b * np.nan, w_b, 0.5), r"^f_b must be finite"),
+        (lambda: al.coarse_align(f_b[:2], w_b, 0.5), r"^f_b must be \(3,\)"),
+        (lambda: al.coarse_align(f_b, w_b, 45.0), r"^coarse_align: lat = 45 rad is beyond ±π/2"),
+        (lambda: al.coarse_scatter(jnp.zeros((20, 3)), jnp.zeros((20, 3)), -0.01),
+         r"^dt must be the increments' interval, one number > 0"),
+        (lambda: al.coarse_scatter(jnp.zeros((20, 3)), jnp.zeros((18, 3)), 0.01),
+         r"^dtheta and dvel must both be \(n, 3\)"),
+        (lambda: ekf.discretise(jnp.eye(2), jnp.eye(2), -1.0), r"^discretise: T must be the int"),
+        (lambda: ekf.discretise(jnp.eye(2), jnp.eye(3), 1.0), r"^discretise: F and q must both"),
+        (lambda: ekf.feedback(one, jnp.zeros(5)), r"^x must be \(n,\) error states, n >= 9"),
+    ]  # fmt: skip
+    for call, message in cases:
+        with pytest.raises((ValueError, TypeError), match=message) as err:
+            call()
+        assert "\n" not in str(err.value), message
+
+
+def test_valid_inputs_pass_the_ins_checks_as_before():
+    """What the audit's checks must let through, as before they were added: a traced fault
+    size or time (vmap, grad, jit), a NumPy or JAX integer `every`, a NIS of −1e-18
+    (round-off)."""
+    from hrgjax.ins import consistency as cs
+    from hrgjax.ins import mechanization as me
+    from hrgjax.ins import motion, platform
+
+    state = me.NavState(jnp.asarray(0.5), jnp.asarray(0.0), jnp.asarray(0.0), jnp.zeros(3),
+                        jnp.array([1.0, 0.0, 0.0, 0.0]))  # fmt: skip
+    truth = jax.tree_util.tree_map(lambda a: jnp.stack([a] * 5), state)
+    on = platform.Fault.on
+    e = jax.vmap(lambda s: on("accel_x", s, 10.0).e)(jnp.array([1e-6, 2e-6]))
+    np.testing.assert_array_equal(e[:, 0], [1e-6, 2e-6])
+    assert float(jax.grad(lambda s: on("accel_x", s, 10.0).e.sum())(1e-6)) == 1.0
+    assert float(jax.jit(lambda t: on("accel_x", 1e-6, t).t_fault)(10.0)) == 10.0
+    t = motion.Truth(truth, jnp.zeros((4, 3)), jnp.zeros((4, 3)), jnp.zeros((5, 3)),
+                     jnp.ones(5, bool), 0.1)  # fmt: skip
+    for every in (np.int64(2), jnp.asarray(2)):
+        assert t.trajectory(every).t.shape == (3,)
+    assert cs.nis_check(np.array([1.0, -1e-18, 2.0] * 10), 2)["fixes"] == 30
+
+
+def test_runs_of_states_broadcast_against_one_truth():
+    """Runs of error states (R, N, 9) (`monte_carlo`'s) and of navigation states (R, N)
+    against one trajectory or truth broadcast, as before the shape checks."""
+    from hrgjax.ins import mechanization as me
+
+    traj = tr.stationary(45.0, duration_s=10.0, dt=1.0)
+    dx = jnp.arange(33.0).reshape(11, 3) * 1e-7
+    one = np.asarray(sd.position_metres(traj, dx))
+    with jax.numpy_rank_promotion("allow"):  # runs (R, N, 9): broadcast, as NumPy would (the
+        runs = sd.position_metres(traj, jnp.stack([dx, 2 * dx]))  # tests' config refuses it)
+    np.testing.assert_array_equal(runs, np.stack([one, 2 * one]))
+    state = me.NavState(jnp.asarray(0.5), jnp.asarray(0.0), jnp.asarray(0.0), jnp.zeros(3),
+                        jnp.array([1.0, 0.0, 0.0, 0.0]))  # fmt: skip
+    truth = jax.tree_util.tree_map(lambda a: jnp.stack([a] * 5), state)
+    runs = jax.tree_util.tree_map(lambda a: jnp.stack([a, a]), truth)  # 2 runs: the 2nd north
+    nav = me.NavState(runs.lat.at[1].add(1e-6), runs.lon, runs.h, runs.v_ned, runs.q_bn)
+    with jax.numpy_rank_promotion("allow"):
+        pos = me.navigation_errors(nav, truth)[0]
+        assert me.navigation_errors(truth, state)[0].shape == (5, 3)  # all epochs against one
+    assert pos.shape == (2, 5, 3) and np.all(np.asarray(pos[0]) == 0) and np.all(pos[1, :, 0] > 0)
+
+
+def test_a_valid_qd_stack_is_checked_on_the_device():
+    """`covariance`'s model check of a valid `qd` (N, n, n) is one device reduction: it is
+    never copied to the host (`check_covariance` sees `p0` only); a bad one is named."""
+    n, eye = 15, jnp.eye(15)
+    phi, qd = jnp.broadcast_to(eye, (10, n, n)), jnp.broadcast_to(1e-8 * eye, (10, n, n))
+    seen = []
+    real = sd.check_covariance
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(
+            sd, "check_covariance", lambda name, a, **kw: seen.append(name) or real(name, a, **kw)
+        )
+        ps = sd.covariance(phi, qd, 1e-6 * eye)
+        with pytest.raises(ValueError, match=r"^qd must be a symmetric .* not symmetric at step 3"):
+            sd.covariance(phi, qd.at[3, 0, 1].set(1e-9), 1e-6 * eye)
+    assert seen == ["p0", "qd"]  # the valid stack: p0 only; a bad one: the host check names it
+    np.testing.assert_allclose(np.diagonal(ps[-1]), 1e-6 + 10 * 1e-8, rtol=1e-12)

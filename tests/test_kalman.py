@@ -404,3 +404,62 @@ def test_ukf_with_a_state_its_prior_knows_exactly_has_a_value_and_a_gradient():
         fd = (float(ll(0.09 + step)) - float(ll(0.09 - step))) / (2 * step)
         assert np.isfinite(float(ll(0.09)))
         assert float(jax.grad(ll)(0.09)) == pytest.approx(fd, rel=1e-6)
+
+
+def test_off_path_inputs_of_every_kalman_entry_point_are_one_line():
+    """Audit (ins): a negative step gave a negative-definite Qd (van_loan, discretise_input);
+    a NaN model or measurement ran on to NaN (van_loan, predict, the EKF/UKF, steady_state),
+    psd_factor gave a factor of zeros for a NaN matrix; alpha = 0 a ZeroDivisionError;
+    n_iter = -1 or 1.5 ran 0 or 1 iterations; empty zs a reshape error; wrong shapes a
+    dot_general / concatenate / scan error. Nothing here compiles: each is refused first."""
+    f = lambda x, u: PHI @ x  # noqa: E731
+    h = lambda x: H @ x  # noqa: E731
+    nan = PHI.at[0, 0].set(jnp.nan)
+    cases = [
+        (lambda: kalman.van_loan(PHI, QD, -1.0), r"^dt must be the step, >= 0 \[s\] .*got -1.0$"),
+        (lambda: kalman.discretise_input(PHI, jnp.ones((2, 1)), -0.5), r"^dt must be the step, >= 0"),
+        (lambda: kalman.van_loan(PHI, jnp.eye(3), 1.0), r"^Q must be a square \(n, n\) = \(2, 2\)"),
+        (lambda: kalman.van_loan(nan, QD, 1.0), r"^F must be finite; it has nan"),
+        (lambda: kalman.van_loan(PHI, -QD, 1.0), r"^Q must be a symmetric positive semi-definite"),
+        (lambda: kalman.discretise_input(PHI, jnp.ones(2), 1.0), r"^B must be \(n, m\) = \(2, m\)"),
+        (lambda: kalman.psd_factor(nan), r"^m must be finite; it has nan"),
+        (lambda: kalman.psd_factor(jnp.ones((2, 3))), r"^m must be a square \(n, n\) matrix"),
+        (lambda: kalman.predict(PRIOR, jnp.eye(3), QD), r"^phi must be \(m, n\) = \(m, 2\)"),
+        (lambda: kalman.predict(PRIOR, jnp.ones((3, 2)), QD), r"^qd must be \(m, m\) = \(3, 3\)"),
+        (lambda: kalman.predict(PRIOR, nan, QD), r"^phi must be finite"),
+        (lambda: kalman.predict(PRIOR, PHI, QD, jnp.ones(3)), r"^u must be \(m,\) = \(2,\)"),
+        (lambda: kalman.update(PRIOR, ZS[0], H, R, mask=MASK), r"^mask must be one boolean"),
+        (lambda: kalman.kalman_filter(PRIOR, PHI, QD, H, R, ZS[:0]), r"^zs must have at least one"),
+        (lambda: kalman.sigma_points(PRIOR, alpha=0.0), r"^alpha must be > 0"),
+        (lambda: kalman.sigma_points(PRIOR, kappa=-2.0), r"^kappa must be > -n = -2"),
+        (lambda: kalman.steady_state(nan, QD, H, R, PRIOR.P, 9), r"^phi must be finite"),
+        (lambda: kalman.steady_state(PHI, QD, H, -R, PRIOR.P, 9), r"^r must be a symmetric posit"),
+        (lambda: kalman.steady_state(PHI, QD, H, jnp.eye(2), PRIOR.P, 9), r"^r must be a square"),
+        (lambda: kalman.steady_state(PHI, QD, H, R, PRIOR.P, -1), r"^n_iter must be a whole"),
+        (lambda: kalman.steady_state(PHI, QD, H, R, PRIOR.P, 1.5), r"^n_iter must be a whole"),
+    ]  # fmt: skip
+    bad_z = ZS.at[3, 0].set(jnp.nan)
+    for run in (kalman.extended_kalman_filter, kalman.unscented_kalman_filter):
+        cases += [
+            (lambda run=run: run(PRIOR, f, QD, h, R, bad_z), r"^zs has NaN at step 3: mark a"),
+            (lambda run=run: run(PRIOR, f, QD, h, -R, ZS), r"^R must be a symmetric positive-def"),
+            (lambda run=run: run(PRIOR, f, -QD, h, R, ZS), r"^qd must be a symmetric positive"),
+            (lambda run=run: run(PRIOR, f, QD, h, jnp.eye(2), ZS), r"^R must be \(m, m\) = \(1, 1\)"),
+            (lambda run=run: run(PRIOR, f, QD, lambda x: x, R, ZS), r"^h\(x\) must return shape \(1,\)"),
+            (lambda run=run: run(PRIOR, f, QD, h, R, ZS, mask=MASK[:3]), r"^mask must be \(K,\) = \(7,\)"),
+            (lambda run=run: run(PRIOR, f, QD, h, R, ZS, us=US[:3]), r"^us must be \(K, p\) = \(7, p\)"),
+            (lambda run=run: run(PRIOR, f, QD, h, R, ZS[:, 0]), r"^zs must be \(K, m\)"),
+        ]  # fmt: skip
+    cases.append((lambda: kalman.unscented_kalman_filter(PRIOR, f, QD, h, R, ZS, alpha=0.0),
+                  r"^alpha must be > 0"))  # fmt: skip
+    for call, message in cases:
+        with pytest.raises(ValueError, match=message) as err:
+            call()
+        assert "\n" not in str(err.value)
+    # what the checks let through, as before them: a phi (m, n) mapping the state to a new
+    # size, a scalar input u
+    wide = kalman.predict(PRIOR, jnp.ones((3, 2)), jnp.eye(3))
+    np.testing.assert_allclose(wide.x, np.full(3, 0.1), rtol=1e-12)
+    np.testing.assert_allclose(wide.P, np.full((3, 3), 1.7) + np.eye(3), rtol=1e-12)
+    shifted = kalman.predict(PRIOR, PHI, QD, 1.0)
+    np.testing.assert_allclose(shifted.x, PHI @ PRIOR.x + 1.0, rtol=1e-12)

@@ -42,10 +42,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaincc
 
+from .._checks import check_finite_host, host_value
 from .._compiled import device, fused
 from .._x64 import require_x64
 from ..units import DEG, DEG_PER_H
-from .constants import OMEGA_IE, WGS84, earth_rate_ned
+from .constants import OMEGA_IE, WGS84, check_latitude_radians, earth_rate_ned
 from .fine_alignment import FINE_DEFAULTS, check_gyrocompass_latitude, euler_std_deg, fine_run
 from .fine_alignment import euler_deg as euler_deg
 from .fine_alignment import fine_align as fine_align
@@ -113,10 +114,23 @@ def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None
         )
 
 
-@fused
 def coarse_align(f_b, w_b, lat):
     """Body-to-NED matrix from the mean specific force `f_b` [m/s²] and angular rate `w_b`
-    [rad/s] of a stationary IMU at latitude `lat` [rad] (TRIAD)."""
+    [rad/s] of a stationary IMU at latitude `lat` [rad] (TRIAD). Refused in one line: `f_b`
+    or `w_b` not (3,); a concrete NaN or inf, or a latitude beyond ±π/2 (degrees)."""
+    for name, v in (("f_b", f_b), ("w_b", w_b)):
+        if np.shape(v) != (3,):
+            raise ValueError(f"{name} must be (3,), the body-frame mean [x, y, z]; got shape "
+                             f"{np.shape(v)}")  # fmt: skip
+        check_finite_host(name, v)
+    check_finite_host("lat", lat)
+    check_latitude_radians("coarse_align: lat", lat)
+    return _coarse_align(f_b, w_b, lat)
+
+
+@fused
+def _coarse_align(f_b, w_b, lat):
+    """`coarse_align` without its checks (fused: one compiled program)."""
     f_n = jnp.array([0.0, 0.0, -1.0])
     w_n = earth_rate_ned(lat)
 
@@ -190,7 +204,6 @@ COARSE_PARTS = 10
 the coarse span into (9 degrees of freedom: its σ scatters by ±24 % under white noise)."""
 
 
-@fused(static_argnames=("parts",))
 def coarse_scatter(dtheta, dvel, dt, parts: int = COARSE_PARTS):
     r"""(6, 6) covariance of the coarse means' error (gyro [rad/s], then accelerometer
     [m/s²]) from the span's own increments `dtheta`, `dvel` (n, 3) [rad, m/s] at interval `dt`
@@ -206,9 +219,25 @@ def coarse_scatter(dtheta, dvel, dt, parts: int = COARSE_PARTS):
     1.5, 0.40× at 2, 0.23× at 3), and a disturbance slower still is a bias to it: the
     assumed grade's (`gyro_bias_std`). On the PSINS log's 60-s windows the heading σ it
     gives is 1.3× the error (z-RMS 0.75)."""
+    if (
+        len(np.shape(dtheta)) != 2
+        or np.shape(dtheta)[1:] != (3,)
+        or np.shape(dvel) != np.shape(dtheta)
+    ):
+        raise ValueError(f"dtheta and dvel must both be (n, 3) increments [rad, m/s]; got "
+                         f"{np.shape(dtheta)} and {np.shape(dvel)}")  # fmt: skip
+    v = host_value(dt)
+    if v is not None and not (v.shape == () and np.isfinite(v) and v > 0):
+        raise ValueError(f"dt must be the increments' interval, one number > 0 [s]; got {dt}")
     if not 2 <= parts <= dtheta.shape[0]:
         raise ValueError(f"coarse_scatter needs 2 <= parts <= samples; got parts={parts} for "
                          f"{dtheta.shape[0]} samples")  # fmt: skip
+    return _coarse_scatter(dtheta, dvel, dt, parts)
+
+
+@fused(static_argnames=("parts",))
+def _coarse_scatter(dtheta, dvel, dt, parts):
+    """`coarse_scatter` without its checks (fused: one compiled program)."""
     n = (dtheta.shape[0] // parts) * parts
     x = jnp.concatenate([dtheta[:n], dvel[:n]], axis=1).reshape(parts, n // parts, 6)
     means = x.sum(1) / ((n // parts) * dt)

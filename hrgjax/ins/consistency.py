@@ -8,6 +8,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import whole_number
 from .._compiled import fused
 from .._linalg import cholesky, whiten
 from .constants import WGS84
@@ -164,11 +165,18 @@ def nis_check(nis, innovation_dim: int, level=0.99, early: int = 5, tolerance=0.
 
     if not (0 < level < 1 and isinstance(early, int) and early >= 1 and tolerance >= 0):
         raise ValueError("nis_check: needs 0 < level < 1, early >= 1, tolerance >= 0")
+    d = whole_number("nis_check: innovation_dim", innovation_dim, "a whole number >= 1")
+    if d < 1:
+        raise ValueError(f"nis_check: innovation_dim must be a whole number >= 1; got {d}")
     v = np.asarray(nis, float)
     if v.size == 0 or np.isinf(v).any():  # an infinite NIS: a filter that broke
         raise ValueError("nis_check: nis must be finite values (NaN where no fix), not empty")
+    # a squared norm: a negative one is not an NIS, beyond round-off of the largest
+    floor = -1e-12 * max(float(np.nanmax(np.abs(v))) if np.isfinite(v).any() else 0.0, 1.0)
+    if (v < floor).any():
+        raise ValueError(f"nis_check: nis must be >= 0 (a squared norm); got {v[v < floor][0]}")
     v = v.reshape(-1, v.shape[-1]) if v.ndim else v.reshape(1, 1)
-    ok, d, a = np.isfinite(v), int(innovation_dim), 0.5 * (1.0 - level)
+    ok, a = np.isfinite(v), 0.5 * (1.0 - level)
     band = lambda k: [chi2_ppf(a, d * k) / k, chi2_ppf(1.0 - a, d * k) / k]  # noqa: E731
     n = int(ok.sum())
     out = dict(nis_mean=None, fixes=n, level=level, band=None, verdict="undefined", early=early)

@@ -68,7 +68,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import kalman
-from .._checks import is_concrete
+from .._checks import check_finite_host, finite_number, is_concrete
 from .._compiled import Check, program
 from .._linalg import cho_solve, cholesky, whiten
 from .._x64 import require_x64
@@ -362,6 +362,14 @@ def discretise(F, q, T: float, fastest: float = 0.0):
     a static field, `ImuModel` refuses a traced one)."""
     if not (isinstance(fastest, (int, float)) and math.isfinite(fastest) and fastest >= 0):
         raise ValueError(f"discretise: fastest must be a decay rate >= 0 [1/s]; got {fastest!r}")
+    if not finite_number("discretise: T", T, "s") > 0:
+        raise ValueError(f"discretise: T must be the interval > 0 [s]; got {T!r}")
+    n = np.shape(F)[0] if len(np.shape(F)) == 2 else -1
+    if np.shape(F) != (n, n) or np.shape(q) != (n, n):
+        raise ValueError(f"discretise: F and q must both be square (n, n); got {np.shape(F)} "
+                         f"and {np.shape(q)}")  # fmt: skip
+    check_finite_host("F", F)
+    check_finite_host("q", q)
     k = max(1, math.ceil(T / 10.0 - 1e-12))
     h = T / k
     squarings = max(0, math.ceil(math.log2(8.0 * h * fastest))) if fastest > 0 else 0
@@ -394,7 +402,10 @@ def discretise(F, q, T: float, fastest: float = 0.0):
 
 def feedback(nav: NavState, x):
     """`nav` less the estimated navigation errors `x` (the filter's error state: δlat, δlon
-    [rad], δh [m], δv_ned [m/s], attitude error [rad] first)."""
+    [rad], δh [m], δv_ned [m/s], attitude error [rad] first; (n,), n >= 9)."""
+    if len(np.shape(x)) != 1 or np.shape(x)[0] < 9:
+        raise ValueError(f"x must be (n,) error states, n >= 9 (navigation errors first); got "
+                         f"shape {np.shape(x)}")  # fmt: skip
     q = quat_multiply(rotvec_to_quat(x[6:9]), nav.q_bn)
     return NavState(
         nav.lat - x[0], nav.lon - x[1], nav.h - x[2], nav.v_ned - x[3:6], q / jnp.linalg.norm(q)

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete, vec3
+from .._checks import check_flag, finite_number, is_concrete, vec3, whole_number
 from .._compiled import fused
 from .constants import Earth
 
@@ -94,6 +94,7 @@ class Gnss(eqx.Module):
         v = self.lever_arm
         if is_concrete(v) and not np.all(np.isfinite(np.asarray(v))):
             raise ValueError(f"Gnss.lever_arm must be finite [m, body FRD]; got {v}")
+        check_flag("Gnss.use_velocity", self.use_velocity)  # "no" must not switch it on
 
     def without_outages(self) -> Gnss:
         """The same receiver with no outage windows: what a compiled filter or Monte Carlo
@@ -114,7 +115,12 @@ class Gnss(eqx.Module):
 
     def epochs(self, n_intervals: int, dt: float) -> np.ndarray:
         """IMU epoch indices of the fixes (every 1/`rate_hz` s). **Raises** `ValueError`
-        when the IMU interval does not divide the GNSS interval."""
+        when the IMU interval does not divide the GNSS interval, `dt` is not > 0 or
+        `n_intervals` not a whole number >= 0."""
+        n_intervals = whole_number("n_intervals", n_intervals, "a whole number >= 0")
+        if n_intervals < 0 or finite_number("dt", dt, "s") <= 0:
+            raise ValueError(f"Gnss.epochs needs n_intervals >= 0 and dt > 0 [s] (the IMU "
+                             f"interval); got n_intervals = {n_intervals}, dt = {dt}")  # fmt: skip
         m = 1.0 / (self.rate_hz * dt)
         if abs(m - round(m)) > 1e-6 or round(m) < 1:
             raise ValueError(

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _upstream, plausible
-from .._checks import describe, is_concrete
+from .._checks import check_finite_host, check_numbers, describe, is_concrete
 from .._compiled import Check, device, fused, program, single_run_device
 from .._progress import bar
 from .._x64 import require_x64
@@ -247,7 +247,17 @@ def navigation_errors(nav: NavState, truth: NavState, earth: Earth = WGS84):
     attitude (..., 3) [rad])`, the attitude error φ defined by
     $\hat C_b^n = e^{-[\phi\times]}C_b^n \approx (I - [\phi\times])C_b^n$. The longitude
     difference is wrapped to ±π ([`wrap_angle`][hrgjax.ins.mechanization.wrap_angle]): the
-    same meridian written as +180° and −180° (or 0° and 360°) is no error."""
+    same meridian written as +180° and −180° (or 0° and 360°) is no error. `nav` and `truth`
+    broadcast (runs (R, N) against one truth (N,), or all epochs against one); shapes that
+    do not are refused in one line."""
+    for field in ("lat", "lon", "h", "v_ned", "q_bn"):
+        a, b = jnp.shape(getattr(nav, field)), jnp.shape(getattr(truth, field))
+        try:
+            np.broadcast_shapes(a, b)
+        except ValueError:
+            msg = (f"nav and truth must hold the same epochs (or broadcast); got nav.{field} "
+                   f"of shape {a}, truth.{field} of shape {b}")  # fmt: skip
+            raise ValueError(msg) from None
     r_m, r_n = earth.radii(truth.lat)
     pos = jnp.stack(
         [
@@ -317,6 +327,19 @@ def start_carry(initial: NavState, dtype):
     return (initial, (initial.lat, initial.h, initial.v_ned), (zeros, zeros))
 
 
+def _check_dt(dt):
+    """Refuse a concrete `dt` that is not one finite number > 0 [s] in one line."""
+    if is_concrete(dt):
+        d = np.asarray(dt)
+        if d.shape != () or not np.issubdtype(d.dtype, np.number):
+            raise ValueError(
+                f"dt must be one number, the increments' interval [s]; got {type(dt).__name__} "
+                f"of shape {d.shape}"
+            )
+        if not (np.isfinite(d) and d > 0):
+            raise ValueError(f"dt must be the increments' interval in seconds (> 0); got {d}")
+
+
 def check_increments(dtheta, dv, dt):
     """`dtheta` [rad] and `dv` [m/s] as float arrays of shape (N, 3), and `dt` [s] > 0; a
     `ValueError` naming the field for another shape, NaN or inf, a gyro increment of π or
@@ -329,15 +352,7 @@ def check_increments(dtheta, dv, dt):
             "dtheta and dv must both have shape (N, 3) (one gyro [rad] and one accelerometer "
             f"[m/s] increment per interval); got {dtheta.shape} and {dv.shape}"
         )
-    if is_concrete(dt):
-        d = np.asarray(dt)
-        if d.shape != () or not np.issubdtype(d.dtype, np.number):
-            raise ValueError(
-                f"dt must be one number, the increments' interval [s]; got {type(dt).__name__} "
-                f"of shape {d.shape}"
-            )
-        if not (np.isfinite(d) and d > 0):
-            raise ValueError(f"dt must be the increments' interval in seconds (> 0); got {d}")
+    _check_dt(dt)
     for name, x in (("dtheta", dtheta), ("dv", dv)):
         if is_concrete(x) and not np.all(np.isfinite(np.asarray(x))):
             row = int(np.argmax(~np.all(np.isfinite(np.asarray(x)), axis=1)))
@@ -373,6 +388,8 @@ def check_state(initial):
         raise TypeError(
             f"initial must be a NavState (hrgjax.ins.mechanization); got {type(initial).__name__}"
         )
+    for field in ("lat", "lon", "h", "v_ned", "q_bn"):
+        check_finite_host(f"initial.{field}", getattr(initial, field))
     if jnp.shape(initial.v_ned) != (3,) or jnp.shape(initial.q_bn) != (4,):
         raise ValueError(
             "initial must be one epoch: v_ned (3,) [m/s] and q_bn (4,); got "
@@ -419,7 +436,10 @@ def mechanize(
         )
     xs = (dtheta, dv)
     if vertical is not None:
+        form = f"(h, v_down), each ({n},) [m, m/s] (the epochs after the first)"
+        check_numbers("vertical", vertical, form)
         hv = jnp.stack([jnp.asarray(x, float) for x in vertical], -1)
+        check_finite_host("vertical", hv)
         if hv.shape != (n, 2):
             raise ValueError(
                 f"vertical must be (h, v_down), each ({n},) [m, m/s] (the epochs after the "
@@ -517,7 +537,17 @@ def increments_from_states(initial: NavState, v_ned, q_bn, dt: float, *, earth: 
     velocities, as the integrator computes them) and the (N, 3) increments [rad, m/s]."""
     require_x64("ins.increments_from_states")
     check_state(initial)
-    return _invert(initial, jnp.asarray(v_ned, float), jnp.asarray(q_bn, float), dt, earth)
+    check_numbers("v_ned", v_ned, "(N, 3) velocities [m/s], one row per epoch after the first")
+    check_numbers("q_bn", q_bn, "(N, 4) attitude quaternions, one row per epoch after the first")
+    v_ned, q_bn = jnp.asarray(v_ned, float), jnp.asarray(q_bn, float)
+    n = v_ned.shape[0] if v_ned.ndim == 2 else None
+    if n is None or n == 0 or v_ned.shape != (n, 3) or q_bn.shape != (n, 4):
+        raise ValueError(f"v_ned and q_bn must be (N, 3) and (N, 4), N >= 1 epochs after the "
+                         f"first; got {v_ned.shape} and {q_bn.shape}")  # fmt: skip
+    _check_dt(dt)
+    check_finite_host("v_ned", v_ned)
+    check_finite_host("q_bn", q_bn)
+    return _invert(initial, v_ned, q_bn, dt, earth)
 
 
 @eqx.filter_jit

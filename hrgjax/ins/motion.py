@@ -44,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import finite_number
+from .._checks import describe, finite_number, whole_number
 from .._x64 import require_x64
 from ..units import DEG
 from .constants import WGS84, Earth
@@ -423,7 +423,14 @@ class Truth(eqx.Module):
 
     def trajectory(self, every: int = 1) -> Trajectory:
         """The truth as a [`Trajectory`][hrgjax.ins.trajectory.Trajectory] for the linear
-        error models, every `every`-th epoch."""
+        error models, every `every`-th epoch (`every` must divide the N intervals: the last
+        epoch is kept)."""
+        n = self.dtheta.shape[0]
+        what = f"a positive divisor of the {n} intervals"
+        k = whole_number("every", every, what)  # a NumPy or 0-d JAX integer too
+        if k < 1 or n % k:
+            raise ValueError(f"every must be {what}; got {describe(every)}")
+        every = k
         s = self.states[::every]
         return Trajectory(
             self.t[::every], s.lat, s.lon, s.h, s.v_ned, s.c_bn, self.f_ned[::every], self.earth

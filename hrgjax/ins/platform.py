@@ -49,7 +49,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_positive, is_concrete
+from .._checks import (
+    check_finite_host,
+    check_number,
+    check_positive,
+    concrete_value,
+    describe,
+    finite_number,
+    is_concrete,
+    whole_number,
+)
 from .._x64 import require_x64
 from ..kalman import discretise_input, psd_factor, van_loan
 from .constants import G0, OMEGA_IE, A
@@ -156,6 +165,8 @@ class PlatformINS(eqx.Module):
     def navigation_errors(self, x):
         """Eq. (6): `(..., 3)` latitude error, departure δλ cos φ and heading error [rad]
         from states `x` (..., 17)."""
+        if np.shape(x)[-1:] != (17,):
+            raise ValueError(f"x must be (..., 17) platform states; got shape {np.shape(x)}")
         s, c = jnp.sin(self.lat), jnp.cos(self.lat)
         i = _I
         dy = -x[..., i["d_zeta"]] * s + x[..., i["d_eta"]] * c
@@ -195,6 +206,19 @@ class Fault(eqx.Module):
         """A single fault of `size` in `sensor` (one of `FAULTS`) from `t_fault`."""
         if sensor not in FAULTS:
             raise ValueError(f"unknown sensor {sensor!r}; choose from {FAULTS}")
+        check_number("size", size, "g or rad/s")
+        v = concrete_value(size)  # a traced size (vmap, grad, jit) passes: it has no value
+        if v is not None and not np.isfinite(v):
+            raise ValueError(f"size must be finite [g or rad/s]; got {float(v)}")
+        try:
+            check_number("t_fault", t_fault, "s")
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"t_fault must be a time [s] (inf: never); got {describe(t_fault)}"
+            ) from None
+        v = concrete_value(t_fault)
+        if v is not None and np.isnan(v):
+            raise ValueError(f"t_fault must be a time [s] (inf: never); got {float(v)}")
         return cls(jnp.zeros(6).at[FAULTS.index(sensor)].set(size), t_fault)
 
 
@@ -215,10 +239,14 @@ def simulate(
 
     **Returns:** `(t (n+1,), x (n+1, 17), nav (n+1, 3))`."""
     require_x64("ins.platform.simulate")
-    if not (dt > 0):
+    if not (finite_number("dt", dt, "s") > 0):
         raise ValueError(f"dt must be > 0 s; got {dt}")
-    if int(n_steps) < 1:
+    if whole_number("n_steps", n_steps, "a whole number of steps >= 1") < 1:
         raise ValueError(f"n_steps must be >= 1; got {n_steps}")
+    if x0 is not None:
+        if np.shape(x0) != (17,):
+            raise ValueError(f"x0 must be (17,) platform states; got shape {np.shape(x0)}")
+        check_finite_host("x0", x0)
     fault = Fault() if fault is None else fault
     return _simulate(ins, jnp.asarray(float(dt)), int(n_steps), key, fault, x0)
 

@@ -47,7 +47,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite, host_value, is_concrete
+from .._checks import (
+    ROUND_OFF,
+    check_covariance,
+    check_finite,
+    check_finite_host,
+    check_flag,
+    finite_number,
+    host_value,
+    is_concrete,
+    whole_number,
+)
 from .._compiled import Check, fused, program
 from .._x64 import require_x64
 from ..kalman import psd_factor, van_loan
@@ -156,9 +166,20 @@ def augmented(f, gg, ga):
     return jnp.concatenate([top, bottom], axis=-2)
 
 
-@fused
 def position_metres(traj: Trajectory, dx):
-    """Position errors (north, east, down) [m] from error states `dx` (N, ≥3) on `traj`."""
+    """Position errors (north, east, down) [m] from error states `dx` (…, N, ≥3) on `traj`
+    (N its samples; leading axes are runs, e.g. `monte_carlo`'s; a shape without them is
+    refused in one line)."""
+    n, shape = traj.t.shape[0], np.shape(dx)
+    if len(shape) < 2 or shape[-2] != n or shape[-1] < 3:
+        raise ValueError(f"dx must be (…, N, >=3) error states with N = {n}, one row per "
+                         f"sample of traj (propagate's result); got {shape}")  # fmt: skip
+    return _position_metres(traj, dx)
+
+
+@fused
+def _position_metres(traj: Trajectory, dx):
+    """`position_metres` without its shape check (fused: one compiled program)."""
     r_m, r_n = traj.earth.radii(traj.lat)
     return jnp.stack(
         [
@@ -211,6 +232,16 @@ def propagate(
     out of steps. **Warns** `LinearisationWarning` when the computed error state leaves the
     model's domain (module docstring), naming the time."""
     require_x64("ins.strapdown.propagate")
+    altitude_aided = check_flag("altitude_aided", altitude_aided)
+    for name, tol in (("rtol", rtol), ("atol", atol)):
+        if finite_number(name, tol, "relative" if name == "rtol" else "state units") < 0:
+            raise ValueError(f"{name} must be >= 0 (a solver tolerance); got {tol}")
+    if max_steps is not None:
+        max_steps = whole_number("max_steps", max_steps, "None or a whole number of steps >= 1")
+        if max_steps < 1:
+            raise ValueError(
+                f"max_steps must be None or a whole number of steps >= 1; got {max_steps}"
+            )
     n = traj.t.shape[0]
     dx0 = jnp.zeros(9) if dx0 is None else jnp.asarray(dx0, float)
     if dx0.shape != (9,):
@@ -305,17 +336,18 @@ def initial_covariance(imu: ImuErrors, p0_nav=None):
     """15×15 initial covariance: `p0_nav` (9×9, default 0) and the bias covariance.
 
     **Raises:** `ValueError` when `p0_nav`'s attitude σ (√ of its diagonal [6:9]) exceeds
-    `MAX_ANGLE` on any axis (the linear model's domain, module docstring)."""
+    `MAX_ANGLE` on any axis (the linear model's domain, module docstring), or is not a
+    finite symmetric positive semi-definite (9, 9) matrix."""
+    if p0_nav is not None:
+        p0_nav = jnp.asarray(p0_nav)
+        if p0_nav.shape != (9, 9):
+            raise ValueError(
+                f"p0_nav must be a (9, 9) covariance (states {STATES}); got {p0_nav.shape}"
+            )
+        check_covariance("p0_nav", p0_nav, form="(9, 9)")
+        _refuse_attitude_sigma("p0_nav", p0_nav)
     p = jnp.zeros((15, 15)).at[9:, 9:].set(imu.bias_covariance())
-    if p0_nav is None:
-        return p
-    p0_nav = jnp.asarray(p0_nav)
-    if p0_nav.shape != (9, 9):
-        raise ValueError(
-            f"p0_nav must be a (9, 9) covariance (states {STATES}); got {p0_nav.shape}"
-        )
-    _refuse_attitude_sigma("p0_nav", p0_nav)
-    return p.at[:9, :9].set(p0_nav)
+    return p if p0_nav is None else p.at[:9, :9].set(p0_nav)
 
 
 def _refuse_attitude_sigma(name: str, p0):
@@ -323,6 +355,48 @@ def _refuse_attitude_sigma(name: str, p0):
     if v is not None and v.ndim == 2 and v.shape[0] >= 9:
         sigma = np.sqrt(np.abs(np.diagonal(v)[6:9]))
         _refuse_attitude(f"√diag({name})[6:9]", sigma, "the initial attitude error's σ")
+
+
+def _check_steps(phi, qd, p0):
+    """`covariance` / `monte_carlo`'s model: `phi` and `qd` (N, n, n) alike and `p0` (n, n),
+    or one line naming the argument; concrete values: `phi` finite, `qd` finite, symmetric and
+    with variances >= 0 at each step (cheap: `_steps_ok`), `p0` symmetric positive
+    semi-definite."""
+    shape = np.shape(phi)
+    if len(shape) != 3 or shape[1] != shape[2]:
+        raise ValueError(f"phi must be (N, n, n), one transition per step (discretise's Phi); "
+                         f"got shape {shape}")  # fmt: skip
+    if np.shape(qd) != shape:
+        raise ValueError(f"qd must be (N, n, n) = {shape} as phi (discretise's Qd); got shape "
+                         f"{np.shape(qd)}")  # fmt: skip
+    n = shape[1]
+    if np.shape(p0) != (n, n):
+        raise ValueError(f"p0 must be (n, n) = ({n}, {n}) (n = states of phi, e.g. "
+                         f"initial_covariance's); got shape {np.shape(p0)}")  # fmt: skip
+    form = f"(n, n) = ({n}, {n})"
+    if not any(isinstance(x, jax.core.Tracer) for x in (phi, qd)):
+        ok = np.asarray(_steps_ok(phi, qd))  # two bools back, not (N, n, n) arrays
+        if not ok[0]:
+            check_finite_host("phi", phi)
+        if not ok[1]:  # the host check names the step and what is wrong with it
+            check_covariance("qd", qd, form=form)
+    check_covariance("p0", p0, form=form)
+
+
+@fused
+def _steps_ok(phi, qd):
+    """`[phi finite, qd finite with variances >= 0 and symmetric]`: one device reduction
+    over every step, O(N n²), a sufficient test (`_check_steps` asks the full host check of
+    `check_covariance` only where it fails; a symmetric `qd` with a negative eigenvalue is
+    not looked for: a Cholesky per step cost more than the propagation). Symmetry within
+    `ROUND_OFF` of √(q_ii q_jj) (of 1 where a variance is 0), as `check_covariance` allows."""
+    var = jnp.diagonal(qd, axis1=-2, axis2=-1)
+    d = jnp.where(var > 0, jnp.sqrt(jnp.abs(var)), 1.0)
+    tol = ROUND_OFF * d[..., :, None] * d[..., None, :]
+    sym = jnp.all(jnp.abs(qd - jnp.swapaxes(qd, -1, -2)) <= tol)
+    # the sums are finite when every entry is (an overflow only sends it to the host check)
+    qd_ok = jnp.isfinite(jnp.sum(qd)) & jnp.all(var >= 0) & sym
+    return jnp.stack([jnp.isfinite(jnp.sum(phi)), qd_ok])
 
 
 def _angle_sigma(var):
@@ -335,7 +409,9 @@ def covariance(phi, qd, p0):
 
     **Raises** `ValueError` for an attitude σ in `p0` above `MAX_ANGLE`; **warns**
     `LinearisationWarning` when an angle σ of the error state grows past it (module
-    docstring), naming the step (concrete inputs; under `jit` neither is checked)."""
+    docstring), naming the step (concrete inputs; under `jit` neither is checked); refuses
+    shapes that do not fit, a concrete non-finite `phi`, `qd` or `p0` not PSD, in one line."""
+    _check_steps(phi, qd, p0)
     _refuse_attitude_sigma("p0", p0)
     ps, angle = _covariance(phi, qd, p0)
     _warn_domain("ins.strapdown.covariance", angle, lambda k: f"step {k}", "σ of the ")
@@ -368,7 +444,12 @@ def monte_carlo(phi, qd, p0, key, n_runs: int, every: int = 1):
     `LinearisationWarning` when the runs' RMS of an angle of the error state grows past it
     (module docstring), naming the step (concrete inputs; under `jit` neither is checked)."""
     require_x64("ins.strapdown.monte_carlo")
-    steps = phi.shape[0]
+    _check_steps(phi, qd, p0)
+    n_runs = whole_number("n_runs", n_runs, "a whole number of runs >= 1")
+    if n_runs < 1:
+        raise ValueError(f"n_runs must be a whole number of runs >= 1; got {n_runs}")
+    steps = np.shape(phi)[0]
+    every = whole_number("every", every, f"a positive divisor of the {steps} steps")
     if every < 1 or steps % every:
         raise ValueError(f"every must be a positive divisor of the {steps} steps; got {every}")
     _refuse_attitude_sigma("p0", p0)

@@ -253,7 +253,10 @@ def segments(
     if speed0 < 0:
         raise ValueError(f"speed0 must be >= 0 m/s (along the flight path); got {speed0}")
     heading0_deg = finite_number("heading0_deg", heading0_deg, "°")
-    legs = [tuple(float(x) for x in leg) for leg in legs]
+    try:
+        legs = [tuple(float(x) for x in leg) for leg in legs]
+    except (TypeError, ValueError):  # a string, a number for a leg: the one line below
+        legs = [()]
     if not legs or any(
         len(leg) != 4 or not np.all(np.isfinite(leg)) or leg[0] <= 0 for leg in legs
     ):
