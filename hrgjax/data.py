@@ -352,6 +352,13 @@ def concat(parts: list[MeasuredData]) -> MeasuredData:
 
     **Raises:** `ValueError` if the parts have different columns or share a run id.
     """
+    if isinstance(parts, MeasuredData | Mapping | str | bytes) or not hasattr(parts, "__iter__"):
+        raise TypeError(f"concat: parts must be a list of MeasuredData; got "
+                        f"{type(parts).__name__}")  # fmt: skip
+    parts = list(parts)
+    for i, p in enumerate(parts):
+        if not isinstance(p, MeasuredData):
+            raise TypeError(f"concat: parts[{i}] must be a MeasuredData; got {type(p).__name__}")
     if not parts:
         raise ValueError("concat needs at least one dataset")
     names = parts[0].names

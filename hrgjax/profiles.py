@@ -13,6 +13,9 @@ from ._checks import (
     check_finite_host,
     check_number,
     check_numbers,
+    concrete_value,
+    describe,
+    finite_number,
     is_concrete,
     numeric_problem,
 )
@@ -78,6 +81,14 @@ def _scalars(builder: str, **args) -> None:
     from traced scalars)."""
     for name, x in args.items():
         check_number(f"Profile.{builder}: {name}", x, _UNITS.get(name, ""))
+
+
+def _duration(builder: str, duration_s) -> None:
+    """Refuse a concrete `duration_s` that is not > 0 (a traced one passes: the knot times'
+    own check holds it under `jit`), naming the builder's argument, not the knots it makes."""
+    v = concrete_value(duration_s)
+    if v is not None and not float(v) > 0:
+        raise ValueError(f"Profile.{builder}: duration_s must be > 0 [s]; got {float(v):g}")
 
 
 def _accel(builder: str, accel_g) -> None:
@@ -222,6 +233,7 @@ class Profile(eqx.Module):
         refused in one line naming it); `accel_g` is three."""
         _scalars("constant_rate", rate_dps=rate_dps, duration_s=duration_s,
                  temperature_c=temperature_c, wave_angle0_deg=wave_angle0_deg)  # fmt: skip
+        _duration("constant_rate", duration_s)
         _accel("constant_rate", accel_g)
         args = (rate_dps, duration_s, temperature_c, wave_angle0_deg, accel_g)
         if not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(args)):
@@ -255,6 +267,7 @@ class Profile(eqx.Module):
         """A static run (zero rate); arguments as [`Profile.constant_rate`][hrgjax.Profile.constant_rate]."""
         _scalars("static", duration_s=duration_s, temperature_c=temperature_c,
                  wave_angle0_deg=wave_angle0_deg)  # fmt: skip
+        _duration("static", duration_s)
         _accel("static", accel_g)
         return cls.constant_rate(0.0, duration_s, temperature_c, wave_angle0_deg, accel_g)
 
@@ -331,6 +344,7 @@ class Profile(eqx.Module):
         _scalars("virtual_precession", precession_dps=precession_dps, duration_s=duration_s,
                  temperature_c=temperature_c, wave_angle0_deg=wave_angle0_deg,
                  **{k: v for k, v in case.items() if k == "rate_dps"})  # fmt: skip
+        _duration("virtual_precession", duration_s)
         if "accel_g" in case:
             _accel("virtual_precession", case["accel_g"])
         rate_dps = case.pop("rate_dps", 0.0)
@@ -387,7 +401,10 @@ class Profile(eqx.Module):
     def hold_windows(self, settle_s: float = 0.0) -> list[tuple[float, float]]:
         """(start, end) [s] of each hold — a maximal stretch of knots between which the
         commanded precession is zero (the wave held still) — its start moved on by `settle_s`
-        [s]; holds no longer than `settle_s` are left out."""
+        [s] (a finite number ≥ 0); holds no longer than `settle_s` are left out."""
+        settle_s = finite_number("Profile.hold_windows: settle_s", settle_s, "s")
+        if settle_s < 0:
+            raise ValueError(f"Profile.hold_windows: settle_s must be >= 0 [s]; got {settle_s:g}")
         t = np.asarray(self.t)
         still = (np.zeros(t.size - 1, bool) if self.precession is None else
                  (np.asarray(self.precession)[:-1] != 0) | (np.asarray(self.precession)[1:] != 0))  # fmt: skip
@@ -464,13 +481,21 @@ class Profile(eqx.Module):
         i, _, length = self._segment(t)
         return (self.temperature[i + 1] - self.temperature[i]) / length
 
-    @fused
     def lagged_temperature_at(self, t, tau):
         r"""First-order lagged temperature $T_i(t)$ [°C], $\dot T_i = (T - T_i)/\tau$,
-        starting in equilibrium, $T_i(t_0) = T(t_0)$; `tau` [s] > 0.
+        starting in equilibrium, $T_i(t_0) = T(t_0)$; `tau` [s] > 0 (a concrete `tau` ≤ 0
+        or not finite is refused in one line).
 
         Exact for the piecewise-linear temperature: on a segment of slope s,
         $T_i(t) = T(t) - s\tau + (T_i(t_k) - T(t_k) + s\tau)\,e^{-(t-t_k)/\tau}$."""
+        v = concrete_value(tau)
+        if v is not None and not (np.all(np.isfinite(v)) and np.all(v > 0)):
+            raise ValueError(f"Profile.lagged_temperature_at: tau must be a finite number > 0 "
+                             f"[s]; got {describe(tau)}")  # fmt: skip
+        return self._lagged_temperature_at(t, tau)
+
+    @fused
+    def _lagged_temperature_at(self, t, tau):
         temp = self.temperature
         slope = jnp.diff(temp) / jnp.diff(self.t)
         at_knots = lag_at_knots(self.t, temp, tau)

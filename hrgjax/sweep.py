@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _cost, _upstream, plausible
+from ._checks import check_flag, whole_number
 
 
 class _FnCache:
@@ -136,16 +137,32 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
     before the batch runs; a check that fails inside `fn` (a NaN in a traced parameter, a
     solver out of steps) is raised as one line (`RuntimeError`).
     """
+    if not callable(fn):
+        raise TypeError(f"sweep: fn must be a function of the grids' keywords; got "
+                        f"{type(fn).__name__}")  # fmt: skip
     if not grids:
         raise ValueError(
             "sweep needs at least one grid, e.g. temperature_c=jnp.linspace(-40, 60, 11)"
         )
+    if chunk_size is not None:
+        chunk_size = whole_number("chunk_size", chunk_size, "None or a whole number ≥ 1 of points")
+        if chunk_size < 1:
+            raise ValueError(f"chunk_size must be a positive number of points; got {chunk_size}")
+    if isinstance(progress, int | np.integer) and progress in (0, 1):  # 0/1 as False/True
+        progress = bool(progress)
+    progress = check_flag("sweep: progress", progress)
     names = list(grids)
     arrays = []
     for name in names:
         # on the host (JAX's dtype, NumPy's arrays): the grid, its order and its chunks are
         # NumPy work, not small eager programs compiled for every new chunk shape
-        g = np.asarray(grids[name])
+        try:
+            g = np.asarray(grids[name])
+        except ValueError:  # ragged
+            g = np.empty(0, dtype=object)
+        if g.dtype.kind not in "biufc":
+            raise TypeError(f"sweep grid {name!r} must be a non-empty 1-D array of numbers; got "
+                            f"{type(grids[name]).__name__} of dtype {g.dtype}")  # fmt: skip
         g = g.astype(jax.dtypes.canonicalize_dtype(g.dtype), copy=False)  # as jnp.asarray
         if g.ndim != 1 or g.shape[0] == 0:
             raise ValueError(
@@ -160,8 +177,6 @@ def sweep(fn, *, chunk_size: int | None = None, progress: bool = False, cost="au
     flat = {n: m.reshape(-1) for n, m in zip(names, mesh, strict=True)}
     total = int(np.prod(shape))
     call = _batched(fn)
-    if chunk_size is not None and int(chunk_size) < 1:
-        raise ValueError(f"chunk_size must be a positive number of points; got {chunk_size}")
     if not (cost is None or callable(cost) or (isinstance(cost, str) and cost == "auto")):
         raise ValueError(f'cost must be "auto", None or a callable cost(**point); got {cost!r}')
     n_proc, rank = jax.process_count(), jax.process_index()

@@ -328,3 +328,101 @@ def test_a_numpy_table_rate_is_stored_as_a_plain_number():
     static!" (the suite's warnings are errors) and made `sf_rate != 0` a NumPy bool."""
     comp = cal.PhysicalCompensator(sf_rate=np.float64(np.deg2rad(10.0)))
     assert type(comp.sf_rate) is float and comp.sf_rate == pytest.approx(np.deg2rad(10.0))
+
+
+def _bad(call, match, exc=(ValueError, TypeError)):
+    with pytest.raises(exc, match=match) as err:
+        call()
+    assert "\n" not in str(err.value)
+
+
+def test_reduction_and_evaluation_refuse_what_makes_no_sense_in_one_line():
+    """Audit (calib): a dict for the data, batches=3.5, window_s=inf, bin_deg=0, a 2-D
+    residual table, offset_dph="1", a list of compensators… reached NumPy, Python or JAX
+    (AttributeError, slice indices, OverflowError, ZeroDivisionError) or passed silently
+    (window_s ≤ 0 read as one sample, a 2-D table flattened, None read as no runs, inf
+    residuals dropped, "1" taken as 1 °/h). Each is now one line naming the argument."""
+    d = _moving_run(lambda t: 5 * t, lambda t: 5 + 0 * t)
+    w = _windows([-60.0, -20.0, 0.0, 30.0, 70.0], np.arange(-90.0, 90.0, 20.0))
+    nc = cal.NoCompensation()
+    for call, match in (
+        (lambda: cal.reduce(d.columns), r"^reduce: data must be hrgjax.MeasuredData"),
+        (lambda: cal.reduce(d, batches=3.5), r"^batches must be a whole number ≥ 3"),
+        (lambda: cal.reduce(d, window_s=float("inf")), r"^reduce: window_s must be None or a"),
+        (lambda: cal.reduce(d, window_s="10"), r"^reduce: window_s must be None or a finite"),
+        (lambda: cal.static_drift(d, batches=4.5), r"^batches must be a whole number ≥ 3"),
+        (lambda: cal.scale_factor_vs_angle(d, window_s=-2.0),
+         r"^scale_factor_vs_angle: window_s must be a finite number > 0 \[s\]"),
+        (lambda: cal.scale_factor_vs_angle(d, bin_deg=0.0),
+         r"^scale_factor_vs_angle: bin_deg must be a number in \(0, 180\]"),
+        (lambda: w.select([True]), r"^RateWindows.select: mask must be \d+ bools"),
+        (lambda: cal.RateWindows(**{k: np.zeros(3) for k in ("run", "stop", "t_mid", "duration",
+         "temperature_c", "table_rate_dps", "wave_angle_deg", "rate_dps", "stderr_dps")},
+         start=np.zeros(2), k_e=K), r"^RateWindows.start must have one value per window"),
+        (lambda: window_slopes(jnp.arange(10.0), jnp.arange(12.0), 2),
+         r"^window_slopes: theta must have the shape of t"),
+        (lambda: nc.correct(d.columns), r"^NoCompensation.correct: data must be hrgjax.Measured"),
+        (lambda: cal.run_errors(nc, d, offset_dph="1"), r"^run_errors: offset_dph must be a num"),
+        (lambda: cal.run_errors("fourier", d), r"^run_errors: comp must be a fitted compensator"),
+        (lambda: cal.corrected_run_errors(d.columns), r"^corrected_run_errors: corrected must"),
+        (lambda: cal.accuracy_table([nc], d), r"^accuracy_table: compensators must be a dict"),
+        (lambda: cal.accuracy_table({}, d), r"^accuracy_table: give at least one compensator"),
+        (lambda: cal.accuracy_table({"r": nc}, d, temperatures_c=[[20.0]]),
+         r"^accuracy_table: temperatures_c must be 1-D"),
+        (lambda: cal.compare([nc], d), r"^compare: compensators must be a dict"),
+        (lambda: cal.compare({"a": 3}, d), r"^compare: compensators\['a'\] must be a fitted"),
+        (lambda: cal.compare_corrected([d]), r"^compare_corrected: corrected must be a dict"),
+        (lambda: cal.compare({"a": nc}, d, temperature_bin_c="1"),
+         r"^temperature_bin_c must be a number > 0; got '1'"),
+        (lambda: cal.paired_difference(np.ones((2, 3)), np.zeros((2, 3))),
+         r"^residual_a must be 1-D, one value per run"),
+        (lambda: cal.paired_difference([1.0, np.inf], [0.0, 0.0]), r"^residual_a must be finite"),
+        (lambda: cal.paired_difference(None, None), r"^residual_a must be one value per run"),
+        (lambda: cal.paired_difference([1.0, 2.0], [0.0, 1.0], level="0.9"),
+         r"^level must be in \(0, 1\); got '0.9'"),
+        (lambda: cal.session_offset({"static": [True, True], "drift_error_dph": [np.inf, 1.0],
+                                     "duration_s": [60.0, 60.0]}),
+         r"^session_offset: every static run needs a drift_error_dph that is not infinite"),
+    ):  # fmt: skip
+        _bad(call, match)
+    fitted = cal.FourierCompensator(drift_coef=jnp.zeros((1, 5)), sf_coef=jnp.ones((1, 5)))
+    assert fitted.drift_dph([], 20.0).shape == (0,)  # was NumPy's "can't extend empty axis"
+    _bad(lambda: cal.FourierCompensator(drift_coef=jnp.zeros((1, 3)), sf_coef=jnp.ones((1, 5))),
+         r"^FourierCompensator: drift_coef must have shape .* = \(1, 5\)")  # fmt: skip
+
+
+def test_plans_and_self_calibration_refuse_bad_arguments_before_simulating():
+    """Audit (calib): a 2-D grid of temperatures was flattened, rate_dps="5" or NaN built a
+    plan, dt_out > duration_s made runs of one sample, lists in `Plan` failed with
+    AttributeError, first_run=1.5 was truncated, key=0 reached JAX, quick="no" was read as
+    True, a string of methods was split into letters, and mode reversal took a negative
+    settling time (holds starting inside the slew) or mismatched arrays (JAX's broadcast
+    error). Each is now one line before anything runs."""
+    gyro = hg.presets.tvg3_like()
+    sp = cal.static_plan([20.0], [0.0], duration_s=2.0, dt_out=1.0)
+    prof = hg.Profile.held_angles((0.0, 90.0), 30.0)
+    for call, match in (
+        (lambda: cal.static_plan([[20.0, 30.0]], [0.0]), r"^plan temperatures_c must be 1-D"),
+        (lambda: cal.rotation_plan([20.0], [0.0], rate_dps="5"), r"^plan rate_dps must be a"),
+        (lambda: cal.rotation_plan([20.0], [0.0], rate_dps=np.nan), r"^plan rate_dps must be fin"),
+        (lambda: cal.static_plan([20.0], [0.0], duration_s=10, dt_out=20),
+         r"^Plan.dt_out must be ≤ Plan.duration_s"),
+        (lambda: cal.Plan(temperature_c=[20.0], wave_angle0_deg=[0.0], rate_dps=[0.0],
+                          duration_s=10.0), r"^Plan.temperature_c must be an array"),
+        (lambda: cal.seed_plan(quick="no"), r"^seed_plan: quick must be True or False"),
+        (lambda: cal.run_plan(gyro, sp, first_run=1.5), r"^run_plan: first_run must be a whole"),
+        (lambda: cal.run_plan(gyro, sp, key=0), r"^key must be a JAX PRNG key"),
+        (lambda: cal.run_plan(None, sp), r"^run_plan: gyro must be an hrgjax.Gyro"),
+        (lambda: cal.precession_plan([[20.0, 30.0]]), r"^precession_plan: temperatures_c must"),
+        (lambda: cal.precession_plan(precession_dps="0.5"), r"^precession_plan: precession_dps"),
+        (lambda: cal.mode_reversal(np.arange(10.0), np.zeros(7), prof),
+         r"^mode_reversal: rebalance_rate must have one value per sample of t"),
+        (lambda: cal.mode_reversal(np.arange(80.0), np.zeros(80), prof, settle_s=-5.0),
+         r"^Profile.hold_windows: settle_s must be >= 0"),
+        (lambda: cal.mode_reversal_data(_moving_run(lambda t: 0 * t, lambda t: 0 * t),
+                                        settle_s=-5), r"^mode_reversal_data: settle_s must be >="),
+        (lambda: cal.run_study(key=jax.random.key(0), methods="fourier"),
+         r"^run_study: methods must be a list"),
+        (lambda: cal.run_study(key=jax.random.key(0), quick="no"), r"^run_study: quick must be"),
+    ):  # fmt: skip
+        _bad(call, match)

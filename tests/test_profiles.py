@@ -230,3 +230,37 @@ def test_absurd_specific_force_and_precession_are_refused_naming_field_unit_and_
         assert float(hg.Profile.static(1.0, accel_g=(50.0, 0.0, 0.0)).accel[0, 0]) == 50.0
     traced = jax.jit(lambda r, a: hg.Profile.virtual_precession(r, 10.0, accel_g=a).precession)
     np.testing.assert_allclose(traced(1e9, jnp.array([1e6, 0.0, 0.0])), 1e9 * DEG)
+
+
+def test_builders_sweep_and_concat_refuse_nonsense_in_one_line():
+    """Audit (calib): a duration ≤ 0 was reported as "Profile.t must be strictly
+    increasing", `hold_windows(settle_s=-5)` started a hold 5 s early, a lag time τ ≤ 0 gave
+    a number, `sweep(chunk_size="2")` / 1.5 were read as 2 / 1, a string grid or a number for
+    `fn` reached JAX or Python, and `concat` of a non-list failed with KeyError."""
+    from hrgjax.data import concat
+
+    for call, match in (
+        (lambda: hg.Profile.constant_rate(1.0, -10.0), r"^Profile.constant_rate: duration_s "
+         r"must be > 0 \[s\]; got -10"),
+        (lambda: hg.Profile.static(0.0), r"^Profile.static: duration_s must be > 0"),
+        (lambda: hg.Profile.virtual_precession(1.0, -1.0), r"^Profile.virtual_precession: dur"),
+        (lambda: hg.Profile.held_angles((0, 45), 30.0).hold_windows(settle_s=-5.0),
+         r"^Profile.hold_windows: settle_s must be >= 0 \[s\]"),
+        (lambda: RAMP.lagged_temperature_at(5.0, 0.0),
+         r"^Profile.lagged_temperature_at: tau must be a finite number > 0 \[s\]"),
+        (lambda: hg.sweep(lambda x: x, x=[1.0, 2.0], chunk_size="2"),
+         r"^chunk_size must be None or a whole number ≥ 1"),
+        (lambda: hg.sweep(lambda x: x, x=[1.0, 2.0], chunk_size=1.5), r"^chunk_size must be"),
+        (lambda: hg.sweep(lambda x: x, x=["a", "b"]), r"^sweep grid 'x' must be a non-empty 1-D "
+         r"array of numbers"),
+        (lambda: hg.sweep(3, x=[1.0, 2.0]), r"^sweep: fn must be a function"),
+        (lambda: hg.sweep(lambda x: x, x=[1.0], progress="no"), r"^sweep: progress must be"),
+        (lambda: concat(hg.MeasuredData({"time_s": [0.0, 1.0], "temperature_c": [20.0, 20.0],
+                                         "table_rate_dps": [0.0, 0.0],
+                                         "wave_angle_deg": [0.0, 0.0]})),
+         r"^concat: parts must be a list of MeasuredData"),
+        (lambda: concat([{"time_s": [0.0]}]), r"^concat: parts\[0\] must be a MeasuredData"),
+    ):  # fmt: skip
+        with pytest.raises((ValueError, TypeError), match=match) as err:
+            call()
+        assert "\n" not in str(err.value)

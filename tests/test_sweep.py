@@ -164,13 +164,17 @@ def test_chunked_sweep_equals_one_batch_and_reports_progress(capsys):
     a, b = jnp.linspace(0.0, 3.0, 7), jnp.array([0.5, 1.0, 2.0])
     whole = hg.sweep(f, a=a, b=b)
     for chunk in (1, 4, 21, 50):
-        part = hg.sweep(f, a=a, b=b, chunk_size=chunk, progress=chunk == 4)
+        # progress 0/1 (ints) are False/True, as before the flag check
+        part = hg.sweep(f, a=a, b=b, chunk_size=chunk, progress=int(chunk == 4))
         assert part["x"].shape == (7, 3) and part["y"].shape == (7, 3, 2)
         np.testing.assert_array_equal(part["x"], whole["x"])
         np.testing.assert_array_equal(part["y"], whole["y"])
     assert "sweep" in capsys.readouterr().err
     with pytest.raises(ValueError, match="chunk_size must be a positive"):
         hg.sweep(f, a=a, b=b, chunk_size=0)
+    for bad in ("no", 2, 1.0):
+        with pytest.raises(TypeError, match=r"^sweep: progress must be True or False"):
+            hg.sweep(f, a=a, b=b, progress=bad)
 
 
 def test_a_sweep_differentiates_and_compiles_in_the_callers_transformations():

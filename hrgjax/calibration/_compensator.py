@@ -47,7 +47,15 @@ from .._warn import user_stacklevel
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..units import DEG, group_temperatures
-from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, check_k_e, check_whole_angle, reduce
+from .reduce import (
+    K_E_NOMINAL,
+    WINDOW_S,
+    RateWindows,
+    check_data,
+    check_k_e,
+    check_whole_angle,
+    reduce,
+)
 
 CORRECTED_COLUMNS = {
     "rate_corrected_dps": "equivalent input rate after compensation [°/s]",
@@ -106,7 +114,9 @@ class Corrected(MeasuredData):
 
     def out_of_range_by_temperature(self, bin_c: float = 1.0) -> dict[float, int]:
         """{temperature [°C], rounded to a multiple of `bin_c`: samples out of range there},
-        only the temperatures that have some."""
+        only the temperatures that have some; `bin_c` a finite number > 0."""
+        check_number("Corrected.out_of_range_by_temperature", "bin_c", bin_c, " [°C]",
+                     minimum=0.0, strict=True)  # fmt: skip
         temp = self["temperature_c"][~self.in_range]
         keys = np.round(temp / bin_c) * bin_c + 0.0
         values, counts = np.unique(keys, return_counts=True)
@@ -224,6 +234,8 @@ class AbstractCompensator(eqx.Module):
         `calibrated_range` widened by `margin_c` [°C] at both ends; all True when the range
         is unknown. **Raises:** `ValueError` for `margin_c` not a finite number ≥ 0."""
         check_number(type(self).__name__, "margin_c", margin_c, " [°C]", minimum=0.0)
+        check_numbers(f"{type(self).__name__}.in_range: temperature_c", temperature_c,
+                      "real numbers [°C]")  # fmt: skip
         temp = np.asarray(temperature_c, dtype=float)
         span = self.calibrated_range
         if span is None:
@@ -281,6 +293,8 @@ class AbstractCompensator(eqx.Module):
                 f"to theta_deg's {th.shape}"
             ) from None
         n = th.size
+        if n == 0:  # nothing to evaluate (and no program to compile for it)
+            return np.zeros(th.shape)
         size = bucket_size(n)
         pad = lambda x: device(bucket_pad(x.ravel(), size))
         out = np.asarray(_pointwise(self._program_form(), which, pad(th), pad(tc)))[:n]
@@ -329,6 +343,7 @@ class AbstractCompensator(eqx.Module):
         refuses them).
         """
         require_x64(f"{type(self).__name__}.correct")
+        check_data(f"{type(self).__name__}.correct", data)
         if extrapolate is not None and not isinstance(extrapolate, bool | np.bool_):
             raise ValueError(f"extrapolate must be True, False or None (the compensator's "
                              f"own choice); got {extrapolate!r}")  # fmt: skip

@@ -36,8 +36,10 @@ class Offset:
         """Half-width [°/h] of the two-sided `level` interval: Student's t quantile with
         `dof` degrees of freedom times σ (12.7σ at 95 % with 2 runs, 2.23σ with 11, 2.00σ
         with 57); NaN when σ is unknown."""
-        if not 0.0 < level < 1.0:
-            raise ValueError(f"level must be in (0, 1); got {level}")
+        number = isinstance(level, int | float | np.integer | np.floating) and not isinstance(
+            level, bool | np.bool_)  # fmt: skip
+        if not (number and 0.0 < level < 1.0):
+            raise ValueError(f"level must be in (0, 1); got {level!r}")
         if self.dof < 1 or not math.isfinite(self.sigma_dph):
             return math.nan
         from scipy import stats
@@ -85,9 +87,21 @@ def session_offset(errors: dict, source: str = "") -> Offset:
     static runs' mean compensated rates [°/h] and its standard error from their scatter
     (module docstring); value 0 and `n_runs` 0 when there are no static runs.
     """
+    missing = [k for k in ("static", "drift_error_dph", "duration_s") if k not in errors]
+    if missing:
+        raise ValueError(f"session_offset: errors must be run_errors' output (a dict with "
+                         f"'static', 'drift_error_dph', 'duration_s'); it lacks {missing}")  # fmt: skip
     static = np.asarray(errors["static"], dtype=bool)
+    lengths = {k: np.shape(errors[k]) for k in ("static", "drift_error_dph", "duration_s")}
+    if len(set(lengths.values())) != 1 or len(lengths["static"]) != 1:
+        raise ValueError(f"session_offset: errors' 'static', 'drift_error_dph' and 'duration_s' "
+                         f"must be 1-D, one value per run; got shapes {list(lengths.values())}")  # fmt: skip
     rate = np.asarray(errors["drift_error_dph"], dtype=float)[static]
     weight = np.asarray(errors["duration_s"], dtype=float)[static]
+    # a NaN drift (a run too short to give a rate) stays NaN, as the offset it makes
+    if np.any(np.isinf(rate)) or not (np.all(np.isfinite(weight)) and np.all(weight > 0)):
+        raise ValueError("session_offset: every static run needs a drift_error_dph that is not "
+                         "infinite and a finite duration_s > 0 [s]")  # fmt: skip
     n = int(rate.size)
     if n == 0:
         return Offset(0.0, math.nan, 0, source)

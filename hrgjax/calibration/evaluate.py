@@ -24,8 +24,11 @@ after it (`hrgjax.calibration.session`); `offset_dph` below takes a given offset
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
+from .._checks import check_1d, check_finite_host, check_numbers, finite_number
 from ..data import MeasuredData
 from ..pattern_noise import STILL_RATE_DPS
 from ._compensator import AbstractCompensator
@@ -60,7 +63,27 @@ def run_errors(
     **Returns:** dict of arrays, one entry per run (see
     [`corrected_run_errors`][hrgjax.calibration.corrected_run_errors]).
     """
+    check_compensator("run_errors: comp", comp)
+    finite_number("run_errors: offset_dph", offset_dph, "°/h")
     return corrected_run_errors(comp.correct(data, warn=warn), offset_dph=offset_dph)
+
+
+def check_compensator(name: str, comp) -> None:
+    """Refuse `comp` unless it has a `correct` method (a fitted compensator), in one line."""
+    if not callable(getattr(comp, "correct", None)):
+        raise TypeError(f"{name} must be a fitted compensator (e.g. FourierCompensator().fit("
+                        f"data)); got {type(comp).__name__}")  # fmt: skip
+
+
+def check_compensators(who: str, compensators) -> None:
+    """Refuse `compensators` unless it is a non-empty {label: fitted compensator}."""
+    if not isinstance(compensators, Mapping):
+        raise TypeError(f"{who}: compensators must be a dict {{label: fitted compensator}}; got "
+                        f"{type(compensators).__name__}")  # fmt: skip
+    if not compensators:
+        raise ValueError(f"{who}: give at least one compensator")
+    for label, comp in compensators.items():
+        check_compensator(f"{who}: compensators[{label!r}]", comp)
 
 
 def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
@@ -88,6 +111,10 @@ def corrected_run_errors(corrected: MeasuredData, *, offset_dph: float = 0.0):
 
     **Raises:** `ValueError` if `corrected` has no `angle_corrected_deg` column.
     """
+    if not isinstance(corrected, MeasuredData):
+        raise TypeError(f"corrected_run_errors: corrected must be hrgjax.MeasuredData (what "
+                        f"comp.correct(data) returns); got {type(corrected).__name__}")  # fmt: skip
+    offset_dph = finite_number("corrected_run_errors: offset_dph", offset_dph, "°/h")
     if "angle_corrected_deg" not in corrected:
         raise ValueError(
             "data have no angle_corrected_deg column; compensate them first (comp.correct(data) "
@@ -160,6 +187,11 @@ def accuracy_table(
     **Returns:** {label: {"static_drift_dph": {T: RMS}, "angle_error_deg": {T: RMS},
     "max_angle_error_deg": {T: RMS}}} (module docstring for the definitions).
     """
+    check_compensators("accuracy_table", compensators)
+    if temperatures_c is not None:
+        check_numbers("accuracy_table: temperatures_c", temperatures_c, "real numbers [°C]")
+        check_1d("accuracy_table: temperatures_c", temperatures_c, "temperatures [°C]")
+        check_finite_host("accuracy_table: temperatures_c", temperatures_c)
     errors = {label: run_errors(comp, data, warn=warn) for label, comp in compensators.items()}
     if temperatures_c is None:
         temps = [e["temperature_c"] for e in errors.values()]

@@ -7,7 +7,16 @@ import jax
 import numpy as np
 
 from .. import plausible
-from .._checks import check_finite, is_concrete
+from .._checks import (
+    check_1d,
+    check_finite,
+    check_finite_host,
+    check_flag,
+    check_numbers,
+    finite_number,
+    is_concrete,
+    whole_number,
+)
 from .._compiled import device
 from ..data import MeasuredData
 from ..gyro import Gyro
@@ -45,6 +54,17 @@ class Plan(eqx.Module):
     precession_dps: jax.Array | None = None
 
     def __check_init__(self):
+        for name in ("temperature_c", "wave_angle0_deg", "rate_dps", "precession_dps"):
+            x = getattr(self, name)
+            if x is None and name == "precession_dps":
+                continue
+            check_numbers(f"Plan.{name}", x, "an array of real numbers, shape (P,)")
+            if not hasattr(x, "shape"):
+                raise TypeError(f"Plan.{name} must be an array of real numbers, shape (P,) "
+                                f"(np.asarray(…)); got {type(x).__name__}")  # fmt: skip
+            check_finite_host(f"Plan.{name}", x)
+        for name in ("duration_s", "dt_out"):
+            finite_number(f"Plan.{name}", getattr(self, name), "s")
         shapes = {a.shape for a in (self.temperature_c, self.wave_angle0_deg, self.rate_dps)}
         if len(shapes) != 1 or len(next(iter(shapes))) != 1:
             raise ValueError(
@@ -53,6 +73,10 @@ class Plan(eqx.Module):
             )
         if not self.duration_s > 0 or not self.dt_out > 0:
             raise ValueError("Plan.duration_s and Plan.dt_out must be > 0 [s]")
+        if self.dt_out > self.duration_s:
+            raise ValueError(f"Plan.dt_out must be ≤ Plan.duration_s (at least two samples a "
+                             f"run); got dt_out {self.dt_out:g} s > duration_s "
+                             f"{self.duration_s:g} s")  # fmt: skip
         plausible.check("Plan.duration_s", self.duration_s, "duration_s")
         plausible.check("Plan.temperature_c", self.temperature_c, "temperature_c")
         plausible.check("Plan.wave_angle0_deg", self.wave_angle0_deg, "wave_angle_deg")
@@ -101,7 +125,12 @@ class Plan(eqx.Module):
 
 
 def _grid(temps, angles, rate, duration, dt_out):
+    finite_number("plan rate_dps", rate, "°/s")
+    finite_number("plan duration_s", duration, "s")
+    finite_number("plan dt_out", dt_out, "s")
     for name, values, unit in (("temperatures_c", temps, "°C"), ("angles_deg", angles, "°")):
+        check_numbers(f"plan {name}", values, f"real numbers [{unit}], shape (n,)")
+        check_1d(f"plan {name}", values, f"one value per level [{unit}]")
         arr = np.asarray(values, float).ravel()
         if arr.size == 0:
             raise ValueError(f"plan {name} is empty; give at least one value [{unit}]")
@@ -157,7 +186,7 @@ QUICK_DURATION = 120.0
 def seed_plan(quick: bool = False) -> tuple[Plan, Plan]:
     """The seed's static and 5 °/s plans; `quick` keeps 3 temperatures and 2-min runs,
     sampled every 0.5 s."""
-    if quick:
+    if check_flag("seed_plan: quick", quick):
         temps, dur = QUICK_TEMPERATURES, QUICK_DURATION
         return (
             static_plan(temps, duration_s=dur, dt_out=0.5),
@@ -175,7 +204,7 @@ def test_plan(quick: bool = False, rate_dps: float = 5.0) -> tuple[Plan, Plan]:
     steps, 5 min per point.
 
     `quick` keeps −40, +20, +60 °C, 15° steps and 2-min runs sampled every 0.5 s."""
-    if quick:
+    if check_flag("test_plan: quick", quick):
         temps, angles, dur = QUICK_TEMPERATURES, tuple(range(-90, 91, 15)), QUICK_DURATION
         dt_static = 0.5
     else:
@@ -230,6 +259,14 @@ def run_plan(
     `jax.random.split(k, P)[i]` with `k, k_bias = jax.random.split(key)`, the switch-on's
     `k_bias` unless `bias_key` is given — the runner `simulate_plan` shares.
     """
+    if not isinstance(gyro, Gyro):
+        raise TypeError(f"run_plan: gyro must be an hrgjax.Gyro (e.g. hg.presets.tvg3_like()); "
+                        f"got {type(gyro).__name__}")  # fmt: skip
+    if not isinstance(plan, Plan):
+        raise TypeError(f"run_plan: plan must be a calibration Plan (static_plan(), "
+                        f"rotation_plan(), …); got {type(plan).__name__}")  # fmt: skip
+    first_run = whole_number("run_plan: first_run", first_run, "a whole number (the first run id)")
+    order_by_cost = check_flag("run_plan: order_by_cost", order_by_cost)
     n_out = int(np.floor(plan.duration_s / plan.dt_out + 1e-9)) + 1  # none past the end
     plausible.check_size("run_plan", float(n_out) * plan.size, plan.size)
     fields = (plan.temperature_c, plan.wave_angle0_deg, plan.rate_dps)

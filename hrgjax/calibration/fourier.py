@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_finite_host
 from .._compiled import device
 from .._x64 import require_x64
 from ..data import MeasuredData
@@ -105,6 +106,16 @@ class FourierCompensator(AbstractCompensator):
         check_number(who, "fit_temperature_c", self.fit_temperature_c, " [°C]")
         check_number(who, "tolerance_c", self.tolerance_c, " [°C]", minimum=0.0)
         check_window(who, self.window_s)
+        want = (self._degree + 1, 2 * self.harmonics + 1)
+        for name in ("drift_coef", "sf_coef"):
+            coef = getattr(self, name)
+            if coef is None:
+                continue
+            if tuple(np.shape(coef)) != want:
+                raise ValueError(f"{who}: {name} must have shape (temperature_degree + 1, "
+                                 f"2·harmonics + 1) = {want}, or be None; got shape "
+                                 f"{tuple(np.shape(coef))}")  # fmt: skip
+            check_finite_host(f"{who}: {name}", coef)
 
     @property
     def extrapolates(self) -> bool:

@@ -69,6 +69,8 @@ import math
 import numpy as np
 from scipy import optimize, stats
 
+from .._checks import check_1d, check_numbers, finite_number
+
 
 @dataclasses.dataclass(frozen=True)
 class PairedDifference:
@@ -212,10 +214,9 @@ def paired_difference(
 
     **Raises:** `ValueError` when the residuals differ in shape or `level` is not in (0, 1).
     """
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must be in (0, 1); got {level}")
-    ea = np.asarray(residual_a, dtype=float).ravel()
-    eb = np.asarray(residual_b, dtype=float).ravel()
+    check_level(level)
+    ea = _per_run("residual_a", residual_a)
+    eb = _per_run("residual_b", residual_b)
     if ea.shape != eb.shape:
         raise ValueError(f"residuals of {a!r} and {b!r} differ in size: {ea.size} and {eb.size}")
     ok = np.isfinite(ea) & np.isfinite(eb)
@@ -364,14 +365,34 @@ class _Shifted:
         return math.inf
 
 
+def check_level(level) -> None:
+    """Refuse a confidence `level` that is not a number in (0, 1), in one line."""
+    number = isinstance(level, int | float | np.integer | np.floating) and not isinstance(
+        level, bool | np.bool_)  # fmt: skip
+    if not (number and 0.0 < level < 1.0):
+        raise ValueError(f"level must be in (0, 1); got {level!r}")
+
+
+def _per_run(name: str, x) -> np.ndarray:
+    """`x` (one value per run: real numbers, NaN for none) as a float array, or a one-line
+    error: not numbers, not 1-D (a table of runs is not flattened) or ±inf."""
+    check_numbers(name, x, "one value per run (real numbers; NaN: none)")
+    check_1d(name, x, "one value per run")
+    v = np.asarray(x, dtype=float)
+    if np.isinf(v).any():
+        i = int(np.flatnonzero(np.isinf(v))[0])
+        raise ValueError(f"{name} must be finite or NaN (no figure for that run); got {v[i]} "
+                         f"at index {i}")  # fmt: skip
+    return v
+
+
 def _shifts(residual_a, residual_b, weight, level: float, difference) -> tuple:
     """(n, scale [°/h], [(_Shifted, sign), …]): the pair's paired test with A shifted by
     +sign·c and B by −sign·c, for the signs `difference` charges (None or 0: both)."""
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must be in (0, 1); got {level}")
-    ea = np.asarray(residual_a, dtype=float).ravel()
-    eb = np.asarray(residual_b, dtype=float).ravel()
-    w = np.ones(ea.shape) if weight is None else np.asarray(weight, dtype=float).ravel()
+    check_level(level)
+    ea = _per_run("residual_a", residual_a)
+    eb = _per_run("residual_b", residual_b)
+    w = np.ones(ea.shape) if weight is None else _per_run("weight", weight)
     if not ea.shape == eb.shape == w.shape:
         raise ValueError(f"residual_a, residual_b and weight differ in size: {ea.size}, "
                          f"{eb.size}, {w.size}")  # fmt: skip
@@ -431,7 +452,7 @@ def offset_difference(
     [`OffsetDifference`][hrgjax.calibration.OffsetDifference] for `key`, `decides` whether
     the difference itself, charged to either, changes the verdict. **Raises:** `ValueError`
     as `constant_resolution`."""
-    delta = float(value_a) - float(value_b)
+    delta = finite_number("value_a", value_a, "°/h") - finite_number("value_b", value_b, "°/h")
     n, scale, tests = _shifts(residual_a, residual_b, weight, level, delta)
     resolution = _resolution(scale, tests)
     live = [t for t, _ in tests if np.any(t.s)]

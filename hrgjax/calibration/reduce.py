@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_1d, check_finite_host, concrete_value, describe, whole_number
 from ..data import MeasuredData
 from ..pattern_noise import STILL_RATE_DPS, TEMPERATURE_TOLERANCE_C
 from ..units import K_E_NOMINAL as K_E_NOMINAL
@@ -76,6 +77,15 @@ def window_slopes(t, theta, n_windows: int, batches: int = 0):
     **Returns:** `(slope, t_mid, theta_mean)` each of shape (n_windows,), plus `stderr` when
     `batches ≥ 3`: a Student-t scale with `batches − 2` degrees of freedom (module docstring).
     """
+    check_1d("window_slopes: t", t, "sample times [s]")
+    check_1d("window_slopes: theta", theta, "angles")
+    if t.shape != theta.shape:
+        raise ValueError(f"window_slopes: theta must have the shape of t, {tuple(t.shape)}; got "
+                         f"{tuple(theta.shape)}")  # fmt: skip
+    n_windows = whole_number("window_slopes: n_windows", n_windows, "a whole number ≥ 1")
+    batches = whole_number("window_slopes: batches", batches, "a whole number (≥ 3 for errors)")
+    if n_windows < 1:
+        raise ValueError(f"window_slopes: n_windows must be a whole number ≥ 1; got {n_windows}")
     return _window_stats(jnp, t, theta, n_windows, batches)
 
 
@@ -194,13 +204,68 @@ class RateWindows(eqx.Module):
         """Measured rate minus table rate [°/h] (the drift on static windows)."""
         return (self.rate_dps - self.table_rate_dps) * 3600.0
 
+    def __check_init__(self):
+        check_k_e(self.k_e, "RateWindows.k_e")
+        n = None
+        for name in _WINDOW_FIELDS:
+            x = getattr(self, name)
+            if x is None and name in ("temperature_rate_cps", "dof"):
+                continue
+            shape = check_1d(f"RateWindows.{name}", x, "one value per window")
+            if n is None:
+                n = shape[0]
+            elif shape[0] != n:
+                raise ValueError(f"RateWindows.{name} must have one value per window, shape "
+                                 f"({n},) as RateWindows.run; got shape {shape}")  # fmt: skip
+            check_finite_host(f"RateWindows.{name}", x)
+
     def select(self, mask) -> RateWindows:
-        """The windows where `mask` is true."""
+        """The windows where `mask` (bool, one per window) is true."""
+        shape = np.shape(mask)
+        if shape != (len(self),) or np.asarray(mask).dtype.kind not in "bi":
+            raise ValueError(f"RateWindows.select: mask must be {len(self)} bools, one per "
+                             f"window; got {describe(mask)}")  # fmt: skip
         mask = np.asarray(mask, bool)
         return jax.tree_util.tree_map(lambda x: np.asarray(x)[mask], self)
 
     def __len__(self) -> int:
         return int(np.asarray(self.run).shape[0])
+
+
+_WINDOW_FIELDS = (
+    "run",
+    "start",
+    "stop",
+    "t_mid",
+    "duration",
+    "temperature_c",
+    "table_rate_dps",
+    "wave_angle_deg",
+    "rate_dps",
+    "stderr_dps",
+    "temperature_rate_cps",
+    "dof",
+)
+"""`RateWindows`' per-window fields, checked to one value per window."""
+
+
+def check_data(who: str, data) -> None:
+    """Refuse `data` that is not an [`hrgjax.MeasuredData`][] in one line naming `who`."""
+    if not isinstance(data, MeasuredData):
+        raise TypeError(f"{who}: data must be hrgjax.MeasuredData (hg.MeasuredData(columns) or "
+                        f"hg.load(path)); got {type(data).__name__}")  # fmt: skip
+
+
+def _seconds(who: str, name: str, value, none: bool = True) -> None:
+    """Refuse a window length that is not a finite number of seconds > 0 (or None)."""
+    if value is None and none:
+        return
+    v = concrete_value(value) if hasattr(value, "dtype") else value
+    ok = (isinstance(v, numbers.Real | np.ndarray) and not isinstance(v, bool)
+          and np.ndim(v) == 0 and np.asarray(v).dtype.kind in "iuf" and np.isfinite(v) and v > 0)  # fmt: skip
+    if not ok:
+        form = "None or a finite number > 0" if none else "a finite number > 0"
+        raise ValueError(f"{who}: {name} must be {form} [s]; got {describe(value)}")
 
 
 def check_k_e(k_e, name: str = "k_e") -> float:
@@ -292,13 +357,14 @@ def reduce(
     force-to-rebalance or virtual-precession data
     ([`check_whole_angle`][hrgjax.calibration.reduce.check_whole_angle]).
     """
+    check_data("reduce", data)
     check_k_e(k_e)
     check_whole_angle(data)
+    batches = whole_number("batches", batches, "a whole number ≥ 3 (for a standard error)")
     if batches < 3:
         raise ValueError(f"batches must be ≥ 3 for a standard error; got {batches}")
     for name, value in (("window_s", window_s), ("ramp_window_s", ramp_window_s)):
-        if value is not None and not value > 0:
-            raise ValueError(f"{name} must be a positive number of seconds or None; got {value}")
+        _seconds("reduce", name, value)
     cols: dict[str, list] = {k: [] for k in RateWindows.__dataclass_fields__ if k != "k_e"}
     for r in data.runs():
         t, th = r["time_s"], r["wave_angle_deg"]
@@ -342,6 +408,7 @@ def static_drift(data: MeasuredData, k_e: float = K_E_NOMINAL, batches: int = 5)
     **Returns:** dict of arrays `temperature_c`, `wave_angle_deg`, `drift_dph`,
     `stderr_dph`, `dof`, `run`.
     """
+    check_data("static_drift", data)
     w = reduce(data, k_e, window_s=None, batches=batches)
     w = w.select(w.static)
     return {
@@ -378,7 +445,13 @@ def scale_factor_vs_angle(
     [`group_temperatures`][hrgjax.units.group_temperatures]); NaN in bins no interval's
     mid-angle falls in.
     """
+    check_data("scale_factor_vs_angle", data)
     k_e = check_k_e(k_e)
+    _seconds("scale_factor_vs_angle", "window_s", window_s, none=False)
+    ok = isinstance(bin_deg, numbers.Real) and not isinstance(bin_deg, bool)
+    if not (ok and 0 < bin_deg <= 180):
+        raise ValueError(f"scale_factor_vs_angle: bin_deg must be a number in (0, 180] [° of "
+                         f"wave angle]; got {describe(bin_deg)}")  # fmt: skip
     edges = np.arange(-90.0, 90.0 + bin_deg / 2, bin_deg)
     centres = 0.5 * (edges[1:] + edges[:-1])
     run_temps, run_parts, run_rates = [], [], []

@@ -49,6 +49,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_numbers, finite_number
 from .._compiled import device, fused
 from .._x64 import require_x64
 from ..data import MeasuredData
@@ -78,9 +79,9 @@ def precession_plan(
     and −`precession_dps` from +90° (electrical), each over `turns` × 180° after `settle_s`
     [s] of settling — every angle the drift's 2θ and 4θ terms have, seen in both directions.
     At the default 0.5 °/s a sweep takes 6.5 min."""
-    temps = np.asarray(temperatures_c, dtype=float).ravel()
-    if temps.size == 0 or not np.all(np.isfinite(temps)):
-        raise ValueError(f"temperatures_c must be finite temperatures [°C]; got {temperatures_c!r}")
+    temps = _temperatures("precession_plan", temperatures_c)
+    precession_dps = finite_number("precession_plan: precession_dps", precession_dps, "°/s")
+    settle_s = finite_number("precession_plan: settle_s", settle_s, "s")
     if not (np.isfinite(precession_dps) and precession_dps > 0):
         raise ValueError(f"precession_dps must be a positive rate [°/s]; got {precession_dps!r}")
     if not (isinstance(turns, int) and turns >= 1):
@@ -99,6 +100,17 @@ def precession_plan(
         dt_out=float(dt_out),
         precession_dps=device(rho),
     )
+
+
+def _temperatures(who: str, temperatures_c) -> np.ndarray:
+    """The chamber temperatures as a 1-D float array, or a one-line error (not numbers, not
+    1-D — a table is not flattened —, empty or not finite)."""
+    check_numbers(f"{who}: temperatures_c", temperatures_c, "finite temperatures [°C]")
+    temps = np.atleast_1d(np.asarray(temperatures_c, dtype=float))
+    if temps.ndim != 1 or temps.size == 0 or not np.all(np.isfinite(temps)):
+        raise ValueError(f"{who}: temperatures_c must be finite temperatures [°C], shape (n,); "
+                         f"got {temperatures_c!r}"[:300])  # fmt: skip
+    return temps
 
 
 def run_precession_plan(gyro: Gyro, plan: Plan, **options) -> MeasuredData:
@@ -446,6 +458,15 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
     default gyro); g is not known, so this cannot be corrected.
 
     **Raises:** `ValueError` for a profile without two holds 90° apart, or whose case turns."""
+    if not isinstance(profile, Profile):
+        raise TypeError(f"mode_reversal: profile must be an hrgjax.Profile (Profile.held_angles"
+                        f"(…)); got {type(profile).__name__}")  # fmt: skip
+    check_numbers("mode_reversal: t", t, "the record's sample times [s], shape (…, N)")
+    check_numbers("mode_reversal: rebalance_rate", rebalance_rate, "rates [rad/s], shape (…, N)")
+    t_shape, r_shape = tuple(np.shape(t)), tuple(np.shape(rebalance_rate))
+    if not t_shape or r_shape[-1:] != t_shape[-1:]:
+        raise ValueError(f"mode_reversal: rebalance_rate must have one value per sample of t, "
+                         f"shape (…, N) as t's {t_shape}; got shape {r_shape}")  # fmt: skip
     _check_at_rest(
         float(np.max(np.abs(np.asarray(profile.rate)))) / DEG_PER_S, "the profile's rate"
     )
@@ -504,9 +525,7 @@ def run_reversal_plan(
     if gyro.control.mode != "ftr":
         raise ValueError("mode reversal holds the wave: give a gyro in force-to-rebalance mode "
                          "(gyro.in_mode('ftr'))")  # fmt: skip
-    temps = np.asarray(temperatures_c, dtype=float).ravel()
-    if temps.size == 0 or not np.all(np.isfinite(temps)):
-        raise ValueError(f"temperatures_c must be finite temperatures [°C]; got {temperatures_c!r}")
+    temps = _temperatures("run_reversal_plan", temperatures_c)
     profiles = [
         Profile.held_angles([angle_deg, angle_deg + 90.0], dwell_s, slew_s, t) for t in temps
     ]
@@ -536,6 +555,12 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
     with other than two holds 90° apart, or one whose case turns (`table_rate_dps` beyond
     [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS]: mode reversal needs the case at
     rest, see `mode_reversal`)."""
+    if not isinstance(data, MeasuredData):
+        raise TypeError(f"mode_reversal_data: data must be hrgjax.MeasuredData; got "
+                        f"{type(data).__name__}")  # fmt: skip
+    settle_s = finite_number("mode_reversal_data: settle_s", settle_s, "s")
+    if settle_s < 0:
+        raise ValueError(f"mode_reversal_data: settle_s must be >= 0 [s]; got {settle_s:g}")
     for name in ("rebalance_rate_dps", "precession_dps"):
         if name not in data:
             raise ValueError(f"mode reversal needs force-to-rebalance data with a {name!r} column "

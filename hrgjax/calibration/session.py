@@ -94,6 +94,7 @@ import dataclasses
 import math
 import os
 import warnings
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -115,7 +116,7 @@ from ._session_report import (
     session_figure,
     write_json,
 )
-from .evaluate import SEED_TABLE, corrected_run_errors
+from .evaluate import SEED_TABLE, check_compensators, corrected_run_errors
 from .paired import OffsetDifference, PairedDifference, offset_difference, paired_difference
 
 
@@ -467,12 +468,18 @@ def compare_corrected(
     **Raises:** `ValueError` when `corrected` is empty, `offset_from` is not a label, a bin
     width is not > 0, or the entries do not hold the same runs.
     """
+    if not isinstance(corrected, Mapping):
+        raise TypeError(f"compare_corrected: corrected must be a dict {{label: compensated "
+                        f"data}}; got {type(corrected).__name__}")  # fmt: skip
     labels = tuple(corrected)
     if not labels:
         raise ValueError("give at least one compensator")
     for name, width in (("temperature_bin_c", temperature_bin_c), ("angle_bin_deg", angle_bin_deg)):
-        if not width > 0 or not math.isfinite(width):
-            raise ValueError(f"{name} must be a number > 0; got {width}")
+        number = isinstance(width, int | float | np.integer | np.floating) and not isinstance(
+            width, bool | np.bool_
+        )
+        if not number or not width > 0 or not math.isfinite(width):
+            raise ValueError(f"{name} must be a number > 0; got {width!r}")
     if offset_from is not None and offset_from not in labels:
         raise ValueError(f"offset_from {offset_from!r} is not one of the labels {list(labels)}")
     errors = {lab: corrected_run_errors(corrected[lab]) for lab in labels}
@@ -545,6 +552,7 @@ def compare(
     `before_offset()` equals [`accuracy_table`][hrgjax.calibration.accuracy_table]`(compensators,
     data)` on whole-degree temperatures.
     """
+    check_compensators("compare", compensators)
     # one warning per compensator below, naming its label
     corrected = {lab: comp.correct(data, warn=False) for lab, comp in compensators.items()}
     result = compare_corrected(

@@ -8,6 +8,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from .._checks import check_flag
 from ..data import MeasuredData, concat
 from ..gyro import Gyro
 from ..presets import tvg3_like
@@ -105,6 +106,13 @@ def run_study(
 
     **Returns:** a [`Study`][hrgjax.calibration.Study].
     """
+    if isinstance(methods, str) or not hasattr(methods, "__iter__"):
+        raise TypeError(f"run_study: methods must be a list of method names from {METHODS}; "
+                        f"got {type(methods).__name__} {methods!r}"[:200])  # fmt: skip
+    quick, ins = check_flag("run_study: quick", quick), check_flag("run_study: ins", ins)
+    if progress is not None and not callable(progress):
+        raise TypeError(f"run_study: progress must be None or a callable progress(message); "
+                        f"got {type(progress).__name__}")  # fmt: skip
     unknown = set(methods) - set(METHODS)
     if unknown:
         raise ValueError(f"unknown methods {sorted(unknown)}; choose from {METHODS}")
