@@ -28,6 +28,47 @@ def test_pairwise_measurements_by_hand():
         ms.second_difference_pairs(jnp.zeros(5), 1.0)
     with pytest.raises(ValueError, match="dt must be"):
         ms.first_difference_pairs(z, 0.0)
+    # dt inf gave zeros, text or an array a raw comparison error; n_ins 2.5 a raw TypeError
+    for dt, kind in ((np.inf, ValueError), ("a", TypeError), (np.array([1.0, 2.0]), ValueError)):
+        with pytest.raises(kind, match=r"^dt must be a finite number > 0 s"):
+            ms.second_difference_pairs(z, dt)
+    with pytest.raises(ValueError, match=r"^n_ins must be an integer >= 2"):
+        ms.pairs(2.5)
+
+
+def test_neural_detectors_refuse_bad_settings_in_one_line():
+    """Each was a silent answer or a raw error: a threshold of 2 (no fault ever named), a
+    bank of one class ("Need at least one array to stack"), a label out of range (a
+    detector trained on no fault), a query of the wrong width (raw broadcasting), unit 0
+    (inf features), confirm 1.5 (cut to 1), windows with p_fault 2 or sizes reversed, an
+    empty σ grid (None returned)."""
+    from hrgjax.diagnosis import neural as nn_
+
+    x = np.array([[0.0, 0.0], [0.1, 0.0], [5.0, 5.0], [5.1, 5.0], [-5.0, 5.0], [-5.1, 5.0]])
+    y = np.array([0, 0, 1, 1, 2, 2])
+    with pytest.raises(ValueError, match=r"^threshold must be a number in \[0, 1\)"):
+        nn_.PNNDirect.fit(x, y, 3, 1.0, threshold=2.0)
+    with pytest.raises(ValueError, match=r"^n_classes must be >= 2"):
+        nn_.PNNBank.fit(x, y, 1, 1.0)
+    with pytest.raises(ValueError, match=r"^y must be integer class labels in \[0, 3\)"):
+        nn_.PNNBank.fit(x, y + 3, 3, 1.0)
+    with pytest.raises(ValueError, match=r"^x \(PNNBank query features\) must have shape"):
+        nn_.PNNBank.fit(x, y, 3, 1.0).classify(np.ones((2, 4)))
+    with pytest.raises(ValueError, match=r"^grid must be one or more kernel widths"):
+        nn_.choose_sigma(nn_.PNNDirect, x, y, x, y, 3, grid=())
+    with pytest.raises(ValueError, match=r"^unit must be a finite number > 0"):
+        nn_.features(np.ones((2, 5, 2)), 0.0)
+    with pytest.raises(ValueError, match=r"^confirm must be an integer >= 1"):
+        nn_.latch(np.array([0, 1, 1]), 1.5)
+    np.testing.assert_array_equal(nn_.latch(np.array([0, 1, 1]), 5), [0, 0, 0])
+    zh, tm, key = np.zeros((2, 30, 2)), np.ones((3, 21, 2)), jax.random.key(0)
+    for kw, msg in (({"p_fault": 2.0}, r"^p_fault must be a probability in \[0, 1\]"),
+                    ({"sizes": (2.0, 1.0)}, r"^sizes must be \(low, high\), finite, low <= high"),
+                    ({"onset_within_last": 0}, r"^onset_within_last must be an integer in")):  # fmt: skip
+        with pytest.raises(ValueError, match=msg):
+            nn_.training_windows(zh, tm, key, 4, **{"sizes": (1.0, 2.0), **kw})
+    with pytest.raises(ValueError, match=r"^templates must be \(n_ins, L, m = 2\)"):
+        nn_.training_windows(zh, tm[0], key, 4, sizes=(1.0, 2.0))
 
 
 def _toy(n, q=1e-4, r=0.04, p_level=1.0):

@@ -381,3 +381,36 @@ def test_a_thermal_rate_beside_a_bias_law_names_the_thermometer_lag_it_equals():
     lag = Discovery.sensor_lag_s(SimpleNamespace(fit_parameters=fit))
     assert lag == pytest.approx(0.1976 / 0.01988 * 60.0, rel=1e-12)  # 596 s: τ = 600 s
     assert Discovery.sensor_lag_s(SimpleNamespace(fit_parameters={"thermal_rate": {}})) is None
+
+
+def test_discover_and_noise_model_refuse_bad_settings_in_one_line():
+    """Each was a silent verdict or a raw error: alpha 2 or NaN, a negative ΔBIC bar,
+    max_effects 0 ("none" without a search), max_aliasing 2, a name string read letter by
+    letter ("unknown effect(s) ['a', 'n', …]"), holdout_every 2.5 (a slice error), data
+    that is not a MeasuredData; noise_model's max_lag_s NaN reported as "no still stretch".
+    The checks come before any fit: a tiny log suffices."""
+    from hrgjax.discovery import discover, noise_model
+
+    t = np.arange(4.0)
+    data = hg.MeasuredData({"time_s": t, "temperature_c": 0 * t, "table_rate_dps": 0 * t,
+                            "wave_angle_deg": 0.01 * t, "run": 0 * t})  # fmt: skip
+    for kw, msg in (
+        ({"alpha": 2.0}, r"^alpha must be a significance level in \(0, 1\); got 2"),
+        ({"alpha": np.nan}, r"^alpha must be a significance level in \(0, 1\); got nan"),
+        ({"min_delta_bic": -5.0}, r"^min_delta_bic must be a number >= 0"),
+        ({"max_effects": 0}, r"^max_effects must be an integer >= 1; got 0"),
+        ({"max_aliasing": 2.0}, r"^max_aliasing must be a share in \(0, 1\]"),
+        ({"min_agreement": 1.5}, r"^min_agreement must be a share in \[0, 1\]"),
+        ({"holdout_every": 2.5}, r"^holdout_every must be an integer >= 2"),
+    ):
+        with pytest.raises(ValueError, match=msg):
+            discover(data, **kw)
+    with pytest.raises(TypeError, match=r"^nominal must be a list of effect names; got 'bias'"):
+        discover(data, nominal="bias")
+    with pytest.raises(TypeError, match=r"^k_e must be the electrical angular gain"):
+        discover(data, k_e="0.554")
+    with pytest.raises(TypeError, match=r"^data must be an hrgjax.MeasuredData; got dict"):
+        discover({"time_s": t})
+    for lag in (np.nan, -1.0, 0.0):
+        with pytest.raises(ValueError, match=r"^max_lag_s must be a finite number > 0 \[s\]"):
+            noise_model(data, lag)

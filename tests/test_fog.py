@@ -151,7 +151,7 @@ def test_psd_peak_finds_a_known_tone_and_matches_scipy():
     w = rng.normal(size=2**15) * 0.7
     f, p = spectrum.psd(jnp.asarray(w), fs, nperseg=512)
     assert abs(float(jnp.sum(p) * (f[1] - f[0])) / 0.49 - 1.0) < 0.03
-    with pytest.raises(ValueError, match="fs must be > 0"):
+    with pytest.raises(ValueError, match="fs must be a finite number > 0"):
         spectrum.psd(jnp.asarray(w), 0.0)
     with pytest.raises(ValueError, match="x must be finite"):
         spectrum.psd(jnp.asarray(w).at[3].set(jnp.nan), fs)

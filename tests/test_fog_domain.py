@@ -221,6 +221,32 @@ def test_windows_too_short_to_measure_anything_are_refused():
     # said up to fs/2 − 1.5 df = 36.4 Hz)
     with pytest.warns(EdgeToneWarning, match=r"Measurable from about 22.73 to 31.82 Hz"):
         vibration_features(_tone(45.0, n=110), 100.0, 0.11, (0, 0, 1.0))
+    # a NaN or zero axis, or min_amp_g NaN, read every window (0, 0), at rest; a negative
+    # min_amp_g read noise as vibration; window_s NaN, fs inf or text raised raw errors
+    rec = _tone(30.0, n=100)
+    for axis in ((np.nan, 0.0, 1.0), (0.0, 0.0, 0.0)):
+        with pytest.raises(ValueError, match=r"^axis must be a non-zero finite 3-vector"):
+            vibration_features(rec, 100.0, 0.1, axis)
+    for amp in (np.nan, -0.1):
+        with pytest.raises(ValueError, match=r"^min_amp_g must be a finite number >= 0 \[g\]"):
+            vibration_features(rec, 100.0, 0.1, (0, 0, 1.0), min_amp_g=amp)
+    with pytest.raises(ValueError, match=r"^window_s must be a finite number > 0 s; got nan"):
+        vibration_features(rec, 100.0, np.nan, (0, 0, 1.0))
+    with pytest.raises(ValueError, match=r"^fs must be a finite number > 0 Hz; got inf"):
+        vibration_features(rec, np.inf, 0.1, (0, 0, 1.0))
+    with pytest.raises(TypeError, match=r"^fs must be a finite number > 0 Hz; got 'a'"):
+        tone(np.sin(np.arange(64.0)), "a")
+    # a negative standard error gave a negative half-width
+    from hrgjax.fog.misalignment import half_width
+
+    for bad in (-1.0, np.inf):
+        with pytest.raises(
+            ValueError, match=rf"^std must be standard errors >= 0 \(or NaN\); got {bad}"
+        ):
+            half_width(bad, 7)
+    # a NaN σ (an estimate without one) is a NaN half-width, as before the check
+    hw = half_width(np.array([np.nan, 1.0]), 14)
+    assert np.isnan(hw[0]) and hw[1] == pytest.approx(2.228139, abs=1e-6)
 
 
 def test_study_reports_an_unmeasurable_scenario_as_such():

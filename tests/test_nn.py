@@ -24,6 +24,30 @@ def test_tapped_delay_windows_by_hand():
         tapped_delay.windows(x, 6)
     with pytest.raises(ValueError, match="channels"):
         tapped_delay.windows(jnp.arange(5.0), 2)
+    # a fractional or text tap count raised a raw JAX indexing / comparison error
+    for taps in (2.5, "3", True):
+        with pytest.raises(ValueError, match=r"^taps must be an integer in \[1, 5\]"):
+            tapped_delay.windows(x, taps)
+
+
+def test_elman_and_mlp_refuse_bad_sizes_and_inputs_of_the_wrong_width():
+    """A fractional width (3.5: JAX's "Shapes must be 1D sequences"), an input of the wrong
+    width or a context of the wrong size (raw dot_general errors) are refused in one line."""
+    from hrgjax.nn import elman, mlp
+
+    key = jax.random.key(0)
+    with pytest.raises(ValueError, match=r"^hidden_size must be a positive integer"):
+        elman.Elman(2, 3.5, 1, key=key)
+    with pytest.raises(ValueError, match=r"^sizes must be layer widths, integers >= 1"):
+        mlp.MLP([2, 2.5, 1], key=key)
+    net, m = elman.Elman(2, 3, 1, key=key), mlp.MLP([2, 3, 1], key=key)
+    with pytest.raises(ValueError, match=r"^xs must have shape \(T, in_size\) = \(T, 2\)"):
+        net(jnp.ones((4, 3)))
+    with pytest.raises(ValueError, match=r"^h0 must have shape \(hidden_size,\) = \(3,\)"):
+        net(jnp.ones((4, 2)), h0=jnp.zeros(2))
+    for x in (jnp.ones(3), jnp.ones((4, 2))):
+        with pytest.raises(ValueError, match=r"^x must be one sample of shape \(2,\)"):
+            m(x)
 
 
 def test_pnn_approaches_the_bayes_classifier():
@@ -204,6 +228,16 @@ def test_pnn_refuses_nan_samples_bad_priors_and_labels_out_of_range():
             ValueError, match=rf"^y must be integer class labels in \[0, 2\); got {found}"
         ):
             pnn.PNN.fit(x, np.array(labels), 2, sigma=0.5)
+    # sigma inf (every kernel 1: the prior decides), text, an empty training set (every
+    # query class 0); a query of the wrong width or without its batch axis (raw errors)
+    for sigma, kind in ((np.inf, ValueError), ("a", TypeError), (np.array([1.0, 2.0]), ValueError)):
+        with pytest.raises(kind, match=r"^sigma must be a finite number > 0"):
+            pnn.PNN.fit(x, y, 2, sigma=sigma)
+    with pytest.raises(ValueError, match=r"^x must be \(n, d\) and y \(n,\), n >= 1"):
+        pnn.PNN.fit(np.zeros((0, 2)), np.zeros(0, int), 2, sigma=0.5)
+    for q in (np.ones((3, 3)), np.ones(2)):
+        with pytest.raises(ValueError, match=r"^x \(PNN query samples\) must have shape \(m, 2\)"):
+            model.predict(q)
 
 
 def test_som_refuses_zero_schedule_ends_nan_samples_and_bad_labels():
@@ -230,10 +264,26 @@ def test_som_refuses_zero_schedule_ends_nan_samples_and_bad_labels():
     for labels in ([0, 0, 5, 5], [0, 0, -1, -1], [0.0, 0.0, 0.5, 1.0]):
         with pytest.raises(ValueError, match=r"^y must be integer class labels in \[0, 2\)"):
             m.label(x, np.array(labels), 2)
+    # a malformed grid shape (IndexError, or 2.5 cut to 2), a sample of the wrong width
+    for shape in ((2,), (2.5, 2), 2):
+        with pytest.raises(ValueError, match=r"^shape must be two positive ints"):
+            som.SOM.train(x, shape, key=key, steps=20)
+    with pytest.raises(ValueError, match=r"^x \(SOM query samples\) must have shape \(m, 2\)"):
+        labelled.predict(np.ones((3, 3)))
+    with pytest.raises(ValueError, match=r"^x \(SOM labelling samples\) must have shape"):
+        m.label(np.ones((4, 3)), np.array([0, 0, 1, 1]), 2)
     # a traced schedule (a sweep over the rate, its gradient) is not refused
     trained = lambda r: som.SOM.train(x, (2, 2), key=key, steps=20, rate=(r, 0.01)).weights
     np.testing.assert_allclose(jax.vmap(trained)(jnp.array([0.5]))[0], trained(0.5), rtol=1e-12)
     assert np.isfinite(jax.grad(lambda r: trained(r).sum())(0.5))
+
+
+def _batch_loss(p, d, idx):
+    return jnp.sum((p - d[idx].mean()) ** 2)
+
+
+def _batch_eval(p, d):
+    return jnp.atleast_1d(jnp.sum(p))
 
 
 def test_rprop_refuses_divergence_and_zero_steps_alike_everywhere():
@@ -254,6 +304,22 @@ def test_rprop_refuses_divergence_and_zero_steps_alike_everywhere():
             train.rprop_with_progress(lf, jnp.zeros(2), jnp.ones(2), steps)
         with pytest.raises(ValueError, match=r"^steps must be an integer >= 1"):
             train.rprop(lambda p: lf(p, data), jnp.zeros(2), steps)
+    # a step size of 0 or below returned the start or an un-descended point silently
+    for kw in ({"learning_rate": 0.0}, {"learning_rate": -1e-2}, {"max_step": 0.0}):
+        name = next(iter(kw))
+        with pytest.raises(ValueError, match=rf"^{name} must be a finite number > 0"):
+            train.rprop(lambda p: lf(p, jnp.ones(2)), jnp.zeros(2), 5, **kw)
+        with pytest.raises(ValueError, match=rf"^{name} must be a finite number > 0"):
+            train.rprop_with_progress(lf, jnp.zeros(2), jnp.ones(2), 5, **kw)
+    with pytest.raises(TypeError, match=r"^learning_rate must be a number > 0"):
+        train.train_module({"w": jnp.zeros(2)}, lambda m: lf(m["w"], data), 5, "a")
+    adam = lambda n, lr: train.adam_epochs(_batch_loss, _batch_eval, jnp.zeros(2), jnp.ones(4),
+                                           n, key=jax.random.key(0), epochs=1, batch_size=2,
+                                           learning_rate=lr)  # fmt: skip
+    with pytest.raises(ValueError, match=r"^n_items must be an integer >= 1"):
+        adam(0, 1e-2)  # a ZeroDivisionError
+    with pytest.raises(ValueError, match=r"^learning_rate must be a finite number > 0"):
+        adam(4, -1.0)  # trained uphill, silently
     # under jit the traced result passes unchecked (no host check on tracers)
     out = jax.jit(lambda d: train.rprop(lambda p: lf(p, d), jnp.zeros(2), 5))(jnp.ones(2))
     assert np.isfinite(np.asarray(out)).all()

@@ -18,9 +18,12 @@ import itertools
 
 import jax.numpy as jnp
 
+from .._checks import describe, is_finite_real, numeric_problem, whole_number
+
 
 def pairs(n_ins: int = 3) -> tuple[tuple[int, int], ...]:
     """Index pairs (i, j), i < j, of a complex of `n_ins` INS: (0,1), (0,2), (1,2) for three."""
+    n_ins = whole_number("n_ins", n_ins, "an integer >= 2 (INS in the complex)")
     if n_ins < 2:
         raise ValueError(f"a complex needs at least 2 INS; got {n_ins}")
     return tuple(itertools.combinations(range(n_ins), 2))
@@ -34,8 +37,9 @@ def _check(z, dt, k_min):
         )
     if z.shape[-1] < k_min:
         raise ValueError(f"z needs at least {k_min} time steps; got {z.shape[-1]}")
-    if not dt > 0:
-        raise ValueError(f"dt must be > 0 s; got {dt}")
+    if not (is_finite_real(dt) and dt > 0):
+        kind = TypeError if numeric_problem(dt) is not None else ValueError
+        raise kind(f"dt must be a finite number > 0 s; got {describe(dt)}")
     return z
 
 

@@ -46,12 +46,19 @@ import numpy as np
 import optax
 import optimistix as optx
 
-from .._checks import check_finite_host
+from .._checks import (
+    check_finite_host,
+    concrete_value,
+    describe,
+    is_finite_real,
+    numeric_problem,
+    whole_number,
+)
 from .._compiled import fused
 from .._least_squares import least_squares
 from ..ins.platform import Fault, PlatformINS, simulate
 from ..nn.mlp import MLP
-from ..nn.pnn import PNN
+from ..nn.pnn import PNN, check_labels, check_n_classes, check_samples
 from ..nn.som import SOM
 from ..nn.tapped_delay import windows
 from ..nn.train import train_module
@@ -66,6 +73,9 @@ def features(w, unit: float = 1e-7):
     the window minus their mean (level, trend and curvature removed), over `unit`, flattened
     → (..., (taps − 2)·m)."""
     w = jnp.asarray(w, float)
+    if w.ndim < 2 or w.shape[-2] < 3:
+        raise ValueError(f"w must be windows (..., taps >= 3, m); got shape {w.shape}")
+    _check_unit(unit)
     d = jnp.diff(w, n=2, axis=-2)
     d = (d - jnp.mean(d, axis=-2, keepdims=True)) / unit
     return d.reshape(*d.shape[:-2], -1)
@@ -88,7 +98,6 @@ def onset_templates(
     return jnp.asarray(np.stack(out))
 
 
-@fused(static_argnames=("n", "taps", "onset_within_last", "signed"))
 def training_windows(
     z_healthy,
     templates,
@@ -110,8 +119,36 @@ def training_windows(
     the other sign). **Returns** `(windows (n, taps+1, m), fault class (n,) 0 = none,
     onset position q (n,), 0 where none)`."""
     z = jnp.asarray(z_healthy, float)
+    templates = jnp.asarray(templates, float)
+    n = whole_number("n", n, "an integer >= 0 (windows)")
+    taps = whole_number("taps", taps, "an integer >= 1 (samples)")
+    if n < 0 or taps < 1:
+        raise ValueError(f"n must be >= 0 and taps >= 1; got n={n}, taps={taps}")
     if z.ndim != 3 or z.shape[1] < taps + 1:
         raise ValueError(f"z_healthy must be (runs, K >= {taps + 1}, m); got {z.shape}")
+    if templates.ndim != 3 or templates.shape[0] < 1 or templates.shape[2] != z.shape[2]:
+        raise ValueError(f"templates must be (n_ins, L, m = {z.shape[2]}); got {templates.shape}")
+    check_finite_host("z_healthy", z)
+    check_finite_host("templates", templates)
+    if onset_within_last is not None:
+        last = whole_number("onset_within_last", onset_within_last, f"an integer in [1, {taps}]")
+        if not 1 <= last <= taps:
+            raise ValueError(f"onset_within_last must be an integer in [1, {taps}]; got {last}")
+    if isinstance(sizes, str | bytes) or not hasattr(sizes, "__len__") or len(sizes) != 2:
+        raise ValueError(f"sizes must be (low, high), two fault sizes; got {describe(sizes)}")
+    lo, hi = (concrete_value(v) for v in sizes)
+    if lo is not None and hi is not None and not (np.isfinite([lo, hi]).all() and lo <= hi):
+        raise ValueError(f"sizes must be (low, high), finite, low <= high; got {describe(sizes)}")
+    p = concrete_value(p_fault)
+    if p is not None and not (np.ndim(p) == 0 and 0.0 <= p <= 1.0):
+        raise ValueError(f"p_fault must be a probability in [0, 1]; got {describe(p_fault)}")
+    return _training_windows(z, templates, key, n, sizes=sizes, p_fault=p_fault, taps=taps,
+                             onset_within_last=onset_within_last, signed=signed)  # fmt: skip
+
+
+@fused(static_argnames=("n", "taps", "onset_within_last", "signed"))
+def _training_windows(z, templates, key, n, *, sizes, p_fault, taps, onset_within_last, signed):
+    """`training_windows` past its checks, as one compiled program."""
     runs, k_len, m = z.shape
     n_ins = templates.shape[0]
     kr, kp, kf, kc, kq, ks = jax.random.split(key, 6)
@@ -151,8 +188,12 @@ def latch(classes, confirm: int = 1):
     `confirm` > 1 trades that many steps of detection delay for immunity to isolated
     misclassifications, which a latched decision would otherwise keep for good."""
     c = jnp.asarray(classes)
-    if int(confirm) < 1:
+    if whole_number("confirm", confirm, "an integer >= 1 (steps)") < 1:
         raise ValueError(f"confirm must be >= 1; got {confirm}")
+    if c.ndim < 1:
+        raise ValueError(f"classes must be per-step onset classes (..., K); got shape {c.shape}")
+    if int(confirm) > c.shape[-1]:  # never named on so many steps: S0 throughout
+        return jnp.zeros_like(c)
     ok = c != 0
     for lag in range(1, int(confirm)):
         same = jnp.concatenate([jnp.zeros(c.shape[:-1] + (lag,), bool),
@@ -163,6 +204,34 @@ def latch(classes, confirm: int = 1):
     val = jnp.take_along_axis(c, first[..., None], axis=-1)
     k = jnp.arange(c.shape[-1]).reshape((1,) * (c.ndim - 1) + (-1,))
     return jnp.where(any_[..., None] & (k >= first[..., None]), val, 0)
+
+
+def _check_unit(unit) -> None:
+    """Refuse a concrete `unit` (the features' scale) that is not finite and > 0: 0 gave
+    inf features, a negative one flipped their sign; a traced one passes."""
+    if numeric_problem(unit) is not None:
+        raise TypeError(f"unit must be a number > 0 (sensor units); got {describe(unit)}")
+    if not isinstance(unit, jax.core.Tracer) and not (is_finite_real(unit) and unit > 0):
+        raise ValueError(f"unit must be a finite number > 0 (sensor units); got {describe(unit)}")
+
+
+def _check_threshold(threshold, low: float = 0.0) -> float:
+    """`threshold` (a posterior or sigmoid output a class must exceed) as a float in
+    [`low`, 1), or a one-line error (2 or NaN named no fault ever, silently)."""
+    if not (is_finite_real(threshold) and low <= threshold < 1.0):
+        kind = TypeError if numeric_problem(threshold) is not None else ValueError
+        raise kind(f"threshold must be a number in [{low:g}, 1); got {describe(threshold)}")
+    return float(threshold)
+
+
+def _check_fault_classes(y, n_classes):
+    """`n_classes` >= 2 (none and at least one fault) and `y` integer labels in
+    [0, n_classes), or a one-line error: a bank of no detector raised "Need at least one
+    array to stack", and a label out of range trained a detector on no fault."""
+    n_classes = check_n_classes(n_classes)
+    if n_classes < 2:
+        raise ValueError(f"n_classes must be >= 2 (none and at least one fault); got {n_classes}")
+    return n_classes, check_labels("y", y, n_classes)
 
 
 def _scores_to_class(p_fault, threshold):
@@ -181,10 +250,12 @@ class PNNDirect(eqx.Module):
 
     @classmethod
     def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
-        return cls(PNN.fit(x, y, n_classes, sigma), threshold)
+        n_classes, _ = _check_fault_classes(y, n_classes)
+        return cls(PNN.fit(x, y, n_classes, sigma), _check_threshold(threshold))
 
     def classify(self, x):
         """Onset class of each feature row of `x` (N, d), finite, → (N,) (0 = none)."""
+        x = check_samples("x (PNNDirect query features)", x, self.pnn.centres.shape[1])
         check_finite_host("x (PNNDirect query features)", x)
         return self._classify(x)
 
@@ -204,12 +275,14 @@ class PNNBank(eqx.Module):
 
     @classmethod
     def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
-        y = jnp.asarray(y)
+        n_classes, y = _check_fault_classes(y, n_classes)
+        threshold = _check_threshold(threshold)
         pnns = [PNN.fit(x, (y == i).astype(int), 2, sigma) for i in range(1, n_classes)]
         return cls(pnns, threshold)
 
     def classify(self, x):
         """Onset class of each feature row of `x` (N, d), finite, → (N,) (0 = none)."""
+        x = check_samples("x (PNNBank query features)", x, self.pnns[0].centres.shape[1])
         check_finite_host("x (PNNBank query features)", x)
         return self._classify(x)
 
@@ -253,6 +326,11 @@ class MLPClassifier(eqx.Module):
     def fit(cls, x, y, n_classes: int, *, key, hidden=(20, 10), steps: int = 1000,
             threshold=0.5):  # fmt: skip
         x, y = jnp.asarray(x, float), jnp.asarray(y)
+        if x.ndim != 2 or y.shape != (x.shape[0],) or x.shape[0] < 1:
+            raise ValueError(f"x must be (n, d) and y (n,), n >= 1; got {x.shape}, {y.shape}")
+        n_classes, y = _check_fault_classes(y, n_classes)
+        threshold = _check_threshold(threshold)
+        check_finite_host("x (MLPClassifier training features)", x)
         nets = []
         for i, k in zip(range(1, n_classes), jax.random.split(key, n_classes - 1), strict=True):
             net = MLP((x.shape[1], *hidden, 1), key=k)
@@ -267,6 +345,7 @@ class MLPClassifier(eqx.Module):
     def outputs(self, x):
         """Sigmoid output of every network for the feature rows of `x` (N, d), finite:
         (N, n_faults)."""
+        x = check_samples("x (MLPClassifier query features)", x, self.nets[0].layers[0].in_features)
         check_finite_host("x (MLPClassifier query features)", x)
         return self._outputs(x)
 
@@ -277,6 +356,7 @@ class MLPClassifier(eqx.Module):
 
     def classify(self, x):
         """Onset class of each feature row of `x` (N, d), finite, → (N,) (0 = none)."""
+        x = check_samples("x (MLPClassifier query features)", x, self.nets[0].layers[0].in_features)
         check_finite_host("x (MLPClassifier query features)", x)
         return self._classify(x)
 
@@ -441,6 +521,10 @@ def choose_sigma(cls, x, y, xv, yv, n_classes: int, grid=(0.1, 0.2, 0.5, 1.0, 2.
     keep the one most accurate on the validation set `xv`, `yv`."""
     best, best_acc = None, -1.0
     xv, yv = jnp.asarray(xv, float), jnp.asarray(yv)
+    if isinstance(grid, str | bytes) or not hasattr(grid, "__len__") or len(grid) == 0:
+        raise ValueError(f"grid must be one or more kernel widths; got {describe(grid)}")
+    if xv.ndim != 2 or yv.shape != (xv.shape[0],):
+        raise ValueError(f"xv must be (n, d) and yv (n,); got {xv.shape}, {yv.shape}")
     for s in grid:
         det = cls.fit(x, y, n_classes, s)
         acc = float(_accuracy(det, xv, yv))

@@ -50,9 +50,11 @@ import math
 
 import numpy as np
 
+from .._checks import describe, is_finite_real, numeric_problem, whole_number
 from ..calibration.reduce import K_E_NOMINAL, WINDOW_S
 from ..data import MeasuredData
 from ..noise import Noise
+from ..units import K_E_WANTED
 from . import leftover, stats, trust
 from .continuous import BLOCK_S, ContinuousProblem
 from .dwell import DwellProblem, output_gain
@@ -67,6 +69,55 @@ from .problem import rates_in as rates_in
 from .result import Discovery
 
 METRIC = "rms_run_mean_rate_residual_dph"
+
+
+_RULE = {  # discover's acceptance-rule arguments: (the range in words, the test)
+    "alpha": ("a significance level in (0, 1)", lambda v: 0.0 < v < 1.0),
+    "min_delta_bic": ("a number >= 0 (a BIC drop)", lambda v: v >= 0.0),
+    "min_heldout_gain": ("a number >= 0 (a held-out χ² drop)", lambda v: v >= 0.0),
+    "max_aliasing": ("a share in (0, 1]", lambda v: 0.0 < v <= 1.0),
+    "ambiguity_bic": ("a number >= 0 (a ΔBIC margin)", lambda v: v >= 0.0),
+    "min_agreement": ("a share in [0, 1]", lambda v: 0.0 <= v <= 1.0),
+}
+
+
+def _check_rule(*, max_effects, **rule) -> None:
+    """Refuse an acceptance-rule argument of `discover` that is not a finite number in its
+    range (`_RULE`), or a `max_effects` that is not an integer >= 1, in one line naming it
+    (alpha = 2 or NaN, max_effects = 0, a negative ΔBIC bar: a silent verdict)."""
+    for name, value in rule.items():
+        form, ok = _RULE[name]
+        if not is_finite_real(value):
+            kind = TypeError if numeric_problem(value) else ValueError
+            raise kind(f"{name} must be {form}; got {describe(value)}")
+        if not ok(float(value)):
+            raise ValueError(f"{name} must be {form}; got {float(value):g}")
+    if whole_number("max_effects", max_effects, "an integer >= 1") < 1:
+        raise ValueError(f"max_effects must be an integer >= 1; got {max_effects!r}")
+
+
+def _names(name: str, names) -> None:
+    """Refuse a single string (or a non-iterable) where `name` takes effect names: a string
+    was read letter by letter ("unknown effect(s) ['a', 'n', …]")."""
+    if isinstance(names, str | bytes) or not hasattr(names, "__iter__"):
+        raise TypeError(f"{name} must be a list of effect names; got {describe(names)}")
+
+
+def _check_arguments(data, nominal, catalogue, holdout_every, block_s) -> int | None:
+    """`discover`'s argument types: `data` a `MeasuredData`, `nominal` and `catalogue` lists
+    of names, `holdout_every` a whole number (returned as an int) or None, `block_s` a
+    finite number > 0."""
+    if not isinstance(data, MeasuredData):
+        raise TypeError(f"data must be an hrgjax.MeasuredData; got {type(data).__name__}")
+    _names("nominal", nominal)
+    if catalogue is not None:
+        _names("catalogue", catalogue)
+    if not (is_finite_real(block_s) and block_s > 0):
+        kind = TypeError if numeric_problem(block_s) else ValueError
+        raise kind(f"block_s must be a positive number of seconds; got {describe(block_s)}")
+    if holdout_every is None:
+        return None
+    return whole_number("holdout_every", holdout_every, "an integer >= 2 (runs) or None")
 
 
 def _check_informative(data: MeasuredData) -> None:
@@ -144,6 +195,12 @@ def discover(
     **Raises:** `ValueError` for unknown effect names, a bad `shape`, or too few runs to hold
     any out; `RuntimeError` when a continuous fit does not converge.
     """
+    holdout_every = _check_arguments(data, nominal, catalogue, holdout_every, block_s)
+    if numeric_problem(k_e) is not None:  # its value is checked where it is used
+        raise TypeError(f"k_e must be {K_E_WANTED}; got {describe(k_e)}")
+    _check_rule(alpha=alpha, min_delta_bic=min_delta_bic, min_heldout_gain=min_heldout_gain,
+                max_effects=max_effects, max_aliasing=max_aliasing, ambiguity_bic=ambiguity_bic,
+                min_agreement=min_agreement)  # fmt: skip
     unknown = [n for n in list(nominal) + list(catalogue or []) if n not in CATALOGUE]
     if unknown:
         raise ValueError(f"unknown effect(s) {unknown}; catalogue: {sorted(CATALOGUE)}")
@@ -151,8 +208,6 @@ def discover(
         raise ValueError("the nominal model must contain 'angular_gain'")
     if shape not in SHAPES:
         raise ValueError(f"shape must be one of {SHAPES}; got {shape!r}")
-    if not (np.isfinite(block_s) and block_s > 0):
-        raise ValueError(f"block_s must be a positive number of seconds; got {block_s}")
     if noise is not None and not isinstance(noise, Noise):
         raise TypeError(f"noise must be an hrgjax.Noise or None; got {type(noise).__name__}")
     _check_informative(data)

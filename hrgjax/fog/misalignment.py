@@ -96,6 +96,12 @@ def half_width(std, n_positions: int, level: float = 0.95):
     [`calibrate`][hrgjax.fog.misalignment.calibrate] with standard error `std` from
     `n_positions` positions: Student's t quantile with n − 4 dof times `std`
     (2.23σ at 95 % for 14 positions, 12.7σ for 5)."""
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must be in (0, 1); got {level}")
-    return stats.t.ppf(0.5 + 0.5 * level, dof(n_positions)) * np.asarray(std)
+    if isinstance(level, str | bytes) or not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1); got {level!r}")
+    s = np.asarray(std)
+    if s.dtype.kind not in "iuf":
+        raise ValueError(f"std must be standard errors >= 0 (or NaN); got {std!r}"[:200])
+    bad = (s < 0) | np.isinf(s)  # a NaN σ (an estimate without one) gives a NaN half-width
+    if bad.any():
+        raise ValueError(f"std must be standard errors >= 0 (or NaN); got {s[bad].flat[0]}")
+    return stats.t.ppf(0.5 + 0.5 * level, dof(n_positions)) * s

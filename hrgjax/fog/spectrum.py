@@ -50,7 +50,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite, concrete_value
+from .._checks import check_finite, concrete_value, describe, is_finite_real, numeric_problem
 from .._compiled import fused
 from ..units import G0
 
@@ -61,9 +61,10 @@ def psd(x, fs: float, nperseg: int | None = None):
     N (scipy's default is 256, or N when shorter).
     **Returns** `(f (nperseg//2 + 1,) [Hz], P (..., nperseg//2 + 1) [unit²/Hz])`."""
     x = check_finite("x", x)
-    n = x.shape[-1]
-    if not fs > 0:
-        raise ValueError(f"fs must be > 0 Hz; got {fs}")
+    n = x.shape[-1] if x.ndim else 0
+    if not (is_finite_real(fs) and fs > 0):
+        kind = TypeError if numeric_problem(fs) is not None else ValueError
+        raise kind(f"fs must be a finite number > 0 Hz; got {describe(fs)}")
     if n < 2:
         raise ValueError(f"x must have at least 2 samples along its last axis; got {n}")
     return _psd(x, fs, nperseg=_segment(n, nperseg))
@@ -218,10 +219,16 @@ def vibration_features(
     inside `jit` or `vmap` (`eqx.error_if`).
     **Returns** (K, 2), K = N // (window_s·fs)."""
     a, m = _windows(accel, fs, window_s)
+    _check_min_amp(min_amp_g)
     if axis is not None:
         axis = jnp.asarray(axis, a.dtype)
         if axis.shape != (3,):
             raise ValueError(f"axis must have shape (3,); got {axis.shape}")
+        u = concrete_value(axis)  # NaN or zero: every window read (0, 0), at rest
+        if u is not None and not (np.isfinite(u).all() and np.linalg.norm(u) > 0):
+            raise ValueError(
+                f"axis must be a non-zero finite 3-vector (body frame); got {u.tolist()}"
+            )
     out = _features(a, axis, fs, min_amp_g, m=m, lobe=_lobe(lobe))
     v = concrete_value(out)
     if v is not None and np.isnan(v[:, 0]).any():
@@ -244,6 +251,7 @@ def vibration_direction(accel, fs: float, window_s: float = 1.0, min_amp_g: floa
     whatever the analysis axis, so it tells whether a record vibrates along the direction a
     compensator was trained on. Carries no gradient."""
     a, m = _windows(accel, fs, window_s)
+    _check_min_amp(min_amp_g)
     return _directions(a, fs, min_amp_g, m=m, lobe=_lobe(lobe))
 
 
@@ -258,6 +266,7 @@ def off_axis(accel, fs: float, axis, window_s: float = 1.0, tol_deg: float = 8.0
     range. **Returns** `(off (K,) bool, direction (K, 3), angle (K,) [°])`, the angle NaN
     where there is no direction. One compiled program; carries no gradient."""
     a, m = _windows(accel, fs, window_s)
+    _check_min_amp(min_amp_g)
     u = np.asarray(axis, dtype=float)
     if u.shape != (3,) or not np.isfinite(u).all() or not np.linalg.norm(u) > 0:
         raise ValueError(f"axis must be a non-zero finite 3-vector (body frame); got {axis!r}")
@@ -293,13 +302,25 @@ def _median_within(r, low, high):
     return side(c_low, r <= low, low, 1.0) & side(c_high, r < high, high, -1.0)
 
 
+def _check_min_amp(min_amp_g) -> None:
+    """Refuse a `min_amp_g` that is not a number, or a concrete one not finite and >= 0 [g]:
+    NaN read every window at rest, a negative one read noise peaks as vibration."""
+    if numeric_problem(min_amp_g) is not None or np.ndim(min_amp_g) != 0:
+        raise TypeError(f"min_amp_g must be a number >= 0 [g]; got {describe(min_amp_g)}")
+    v = concrete_value(min_amp_g)
+    if v is not None and not (np.isfinite(v) and v >= 0):
+        raise ValueError(f"min_amp_g must be a finite number >= 0 [g]; got {float(v):g}")
+
+
 def _windows(accel, fs, window_s):
     """`accel` checked (finite, (N, 3), m/s² not g) and the window length `m` [samples]."""
     a = check_finite("accel", accel)
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"accel must have shape (N, 3) [m/s²]; got {a.shape}")
-    if not fs > 0:
-        raise ValueError(f"fs must be > 0 Hz; got {fs}")
+    for name, x, unit in (("fs", fs, "Hz"), ("window_s", window_s, "s")):
+        if not (is_finite_real(x) and x > 0):
+            kind = TypeError if numeric_problem(x) is not None else ValueError
+            raise kind(f"{name} must be a finite number > 0 {unit}; got {describe(x)}")
     v = concrete_value(a)
     if v is None:  # traced (jit, vmap): the same rule at run time, the value left out
         bad = _median_within(jnp.linalg.norm(a, axis=1), 0.5, 2.0)

@@ -12,6 +12,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._checks import whole_number
 from .._compiled import fused
 
 
@@ -30,7 +31,12 @@ class Elman(eqx.Module):
     hidden_size: int = eqx.field(static=True)
 
     def __init__(self, in_size: int, hidden_size: int, out_size: int, *, key: jax.Array):
-        if min(int(in_size), int(hidden_size), int(out_size)) < 1:
+        in_size, hidden_size, out_size = (
+            whole_number(name, v, "a positive integer (units)")
+            for name, v in (("in_size", in_size), ("hidden_size", hidden_size),
+                            ("out_size", out_size))
+        )  # fmt: skip
+        if min(in_size, hidden_size, out_size) < 1:
             raise ValueError(
                 f"sizes must be positive; got in={in_size}, hidden={hidden_size}, out={out_size}"
             )
@@ -47,9 +53,14 @@ class Elman(eqx.Module):
 
     def __call__(self, xs, h0=None):
         xs = jnp.asarray(xs)
-        if xs.ndim != 2:
-            raise ValueError(f"xs must have shape (T, in_size); got {xs.shape}")
+        n_in = self.w_x.in_features
+        if xs.ndim != 2 or xs.shape[1] != n_in:
+            raise ValueError(f"xs must have shape (T, in_size) = (T, {n_in}); got {xs.shape}")
         h0 = jnp.zeros(self.hidden_size, xs.dtype) if h0 is None else jnp.asarray(h0)
+        if h0.shape != (self.hidden_size,):
+            raise ValueError(
+                f"h0 must have shape (hidden_size,) = ({self.hidden_size},); got {h0.shape}"
+            )
         return _run(self, h0, xs)
 
 

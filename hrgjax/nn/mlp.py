@@ -9,6 +9,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._checks import whole_number
+
 
 class MLP(eqx.Module):
     """Fully connected layers `sizes[0] → … → sizes[-1]`, `activation` on every hidden layer,
@@ -27,17 +29,22 @@ class MLP(eqx.Module):
         activation: Callable = jnp.tanh,
         final_activation: Callable = lambda x: x,
     ):
-        if len(sizes) < 2 or any(int(s) < 1 for s in sizes):
-            raise ValueError(f"sizes must be >= 2 positive layer widths; got {tuple(sizes)}")
+        sizes = tuple(whole_number("sizes", s, "layer widths, integers >= 1") for s in sizes)
+        if len(sizes) < 2 or min(sizes) < 1:
+            raise ValueError(f"sizes must be >= 2 positive layer widths; got {sizes}")
         keys = jax.random.split(key, len(sizes) - 1)
         self.layers = [
-            eqx.nn.Linear(int(a), int(b), key=k)
-            for a, b, k in zip(sizes[:-1], sizes[1:], keys, strict=True)
+            eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys, strict=True)
         ]
         self.activation = activation
         self.final_activation = final_activation
 
     def __call__(self, x):
+        n_in = self.layers[0].in_features
+        if jnp.shape(x) != (n_in,):
+            raise ValueError(
+                f"x must be one sample of shape ({n_in},) (vmap for a batch); got {jnp.shape(x)}"
+            )
         for layer in self.layers[:-1]:
             x = self.activation(layer(x))
         return self.final_activation(self.layers[-1](x))

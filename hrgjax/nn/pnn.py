@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import logsumexp
 
-from .._checks import check_finite_host, host_value
+from .._checks import check_finite_host, describe, host_value, is_finite_real, numeric_problem
 from .._compiled import fused
 
 
@@ -31,6 +31,16 @@ def check_labels(name: str, y, n_classes: int):
         raise ValueError(f"{name} must be integer class labels in [0, {n_classes}); "
                          f"got {v[i]:g} at index {i}")  # fmt: skip
     return jnp.asarray(v.astype(int))
+
+
+def check_samples(name: str, x, d: int):
+    """`x` as a float array, refused in one line naming `name` unless it is (m, `d`): a
+    sample of another length, or one sample (d,) without its batch axis, raised a raw
+    broadcasting or indexing error."""
+    x = jnp.asarray(x, float)
+    if x.ndim != 2 or x.shape[1] != d:
+        raise ValueError(f"{name} must have shape (m, {d}) (one sample per row); got {x.shape}")
+    return x
 
 
 def check_n_classes(n_classes) -> int:
@@ -62,12 +72,13 @@ class PNN(eqx.Module):
         integer in [0, n_classes), `sigma` not > 0, or a bad `prior`."""
         n_classes = check_n_classes(n_classes)
         x, y = jnp.asarray(x, float), jnp.asarray(y)
-        if x.ndim != 2 or y.shape != (x.shape[0],):
-            raise ValueError(f"x must be (n, d) and y (n,); got {x.shape}, {y.shape}")
+        if x.ndim != 2 or y.shape != (x.shape[0],) or x.shape[0] < 1:
+            raise ValueError(f"x must be (n, d) and y (n,), n >= 1; got {x.shape}, {y.shape}")
         check_finite_host("x (PNN training samples)", x)
         y = check_labels("y", y, n_classes)
-        if not sigma > 0:
-            raise ValueError(f"sigma must be > 0; got {sigma}")
+        if not (is_finite_real(sigma) and sigma > 0):
+            kind = TypeError if numeric_problem(sigma) else ValueError
+            raise kind(f"sigma must be a finite number > 0 (kernel width); got {describe(sigma)}")
         if prior is None:
             log_prior = jnp.full(n_classes, -jnp.log(float(n_classes)))
         else:
@@ -94,7 +105,7 @@ class PNN(eqx.Module):
     def predict(self, x):
         """Class of each sample of `x` (m, d), finite, → (m,) (a NaN sample was given class
         0, the argmax over NaN scores); a traced `x` passes unchecked."""
-        x = jnp.asarray(x, float)
+        x = check_samples("x (PNN query samples)", x, self.centres.shape[1])
         check_finite_host("x (PNN query samples)", x)
         return self._predict(x)
 

@@ -19,8 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite_host, host_value
-from .pnn import check_labels, check_n_classes
+from .._checks import check_finite_host, describe, host_value, whole_number
+from .pnn import check_labels, check_n_classes, check_samples
 
 
 def _schedule(name: str, ends):
@@ -68,7 +68,9 @@ class SOM(eqx.Module):
         if x.ndim != 2 or x.shape[0] < 1:
             raise ValueError(f"x must have shape (n, d); got {x.shape}")
         check_finite_host("x (SOM training samples)", x)
-        rows, cols = int(shape[0]), int(shape[1])
+        if isinstance(shape, str | bytes) or not hasattr(shape, "__len__") or len(shape) != 2:
+            raise ValueError(f"shape must be two positive ints (rows, cols); got {describe(shape)}")
+        rows, cols = (whole_number("shape", s, "two positive ints (rows, cols)") for s in shape)
         if rows < 1 or cols < 1:
             raise ValueError(f"shape must be two positive ints; got {shape}")
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
@@ -92,7 +94,7 @@ class SOM(eqx.Module):
 
     def winners(self, x):
         """Best-matching unit of each sample of `x` (n, d) → (n,)."""
-        x = jnp.asarray(x, float)
+        x = check_samples("x", x, self.weights.shape[1])
         d2 = jnp.sum((x[:, None, :] - self.weights[None, :, :]) ** 2, axis=-1)
         return jnp.argmin(d2, axis=-1)
 
@@ -101,7 +103,7 @@ class SOM(eqx.Module):
         wins; `y` must be integers in [0, `n_classes`) (`ValueError` otherwise: a label out
         of range was dropped or wrapped round)."""
         n_classes = check_n_classes(n_classes)
-        x = jnp.asarray(x, float)
+        x = check_samples("x (SOM labelling samples)", x, self.weights.shape[1])
         y = jnp.asarray(y)
         if x.ndim != 2 or y.shape != (x.shape[0],):
             raise ValueError(f"x must be (n, d) and y (n,); got {x.shape}, {y.shape}")
@@ -116,7 +118,7 @@ class SOM(eqx.Module):
     def predict(self, x):
         """Class of each sample of `x` (n, d), finite, → (n,): its best-matching unit's label
         (a NaN sample matched unit 0); a traced `x` passes unchecked."""
-        x = jnp.asarray(x, float)
+        x = check_samples("x (SOM query samples)", x, self.weights.shape[1])
         check_finite_host("x (SOM query samples)", x)
         return self.labels[self.winners(x)]
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from .._checks import whole_number
+
 
 def windows(x, taps: int):
     """Sliding windows of `x` (K, c) → (K − taps + 1, taps·c); row k holds samples
@@ -11,6 +13,7 @@ def windows(x, taps: int):
     x = jnp.asarray(x)
     if x.ndim != 2:
         raise ValueError(f"x must have shape (K, channels); got {x.shape}")
+    taps = whole_number("taps", taps, f"an integer in [1, {x.shape[0]}] (samples)")
     if not 1 <= taps <= x.shape[0]:
         raise ValueError(f"taps must be in [1, {x.shape[0]}]; got {taps}")
     idx = jnp.arange(x.shape[0] - taps + 1)[:, None] + jnp.arange(taps)[None, :]

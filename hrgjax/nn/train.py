@@ -10,7 +10,7 @@ import numpy as np
 import optax
 
 from .. import _upstream
-from .._checks import host_value
+from .._checks import describe, host_value, numeric_problem, whole_number
 from .._compiled import Check, device, program, tracing_callback_free
 from .._progress import bar
 
@@ -27,6 +27,19 @@ def check_steps(steps) -> int:
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise ValueError(f"steps must be an integer >= 1 (Rprop updates); got {steps!r}")
     return int(steps)
+
+
+def check_rates(**rates) -> None:
+    """Refuse a step size (`learning_rate`, `max_step`) that is not a number, or a concrete
+    one that is not finite and > 0, in one line naming it (0 left the weights where they
+    started, a negative one or `max_step` <= 0 returned weights that had not descended: no
+    error either way); a traced one passes."""
+    for name, v in rates.items():
+        if numeric_problem(v) is not None or np.ndim(v) != 0:
+            raise TypeError(f"{name} must be a number > 0 (a step size); got {describe(v)}")
+        value = host_value(v)
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number > 0 (a step size); got {value:g}")
 
 
 def check_trained(params, losses=None) -> None:
@@ -68,6 +81,7 @@ def rprop(loss, params, steps: int, learning_rate: float = 1e-3, max_step: float
     weights are not finite (checked on the host after training; under `jit` the traced
     result passes unchecked)."""
     steps = check_steps(steps)
+    check_rates(learning_rate=learning_rate, max_step=max_step)
     trained, losses = _run(_call_loss, params, loss, loss, steps, learning_rate, max_step,
                            compile_once)  # fmt: skip
     check_trained(trained, losses)
@@ -81,6 +95,7 @@ def train_module(module, loss, steps: int, learning_rate: float = 1e-3, max_step
     other leaves too: a module holding an integer array trains as by default, its integer
     read as a constant); raises as `rprop`."""
     steps = check_steps(steps)
+    check_rates(learning_rate=learning_rate, max_step=max_step)
     params, static = eqx.partition(module, eqx.is_inexact_array)
     trained, losses = _run(_call_combined, params, loss, (loss, static), steps,
                            learning_rate, max_step, compile_once)  # fmt: skip
@@ -197,6 +212,7 @@ def rprop_with_progress(
     become non-finite.
     """
     steps = check_steps(steps)
+    check_rates(learning_rate=learning_rate, max_step=max_step)
     state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
     length = _block_length(steps)
     losses = []
@@ -231,16 +247,25 @@ def adam_epochs(
     call with other values of the same shapes compiles nothing. `loss_fn` and `eval_fn` must
     therefore be module-level functions, not fresh closures (each would compile anew).
 
-    **Raises:** `ValueError` for `epochs` or `batch_size` not an integer >= 1."""
+    **Raises:** `ValueError` for `epochs`, `batch_size` or `n_items` not an integer >= 1, or
+    a concrete `learning_rate` not finite and > 0; `RuntimeError` ("training diverged") when
+    the trained weights are not finite (NaN data; checked on the host, concrete results
+    only)."""
     for name, v in (("epochs", epochs), ("batch_size", batch_size)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
+    if whole_number("n_items", n_items, "an integer >= 1 (items)") < 1:
+        raise ValueError(f"n_items must be an integer >= 1 (items); got {n_items!r}")
+    check_rates(learning_rate=learning_rate)
     batch_size = min(int(batch_size), int(n_items))
     # optax's Adam bias correction mixes int and float: traced under standard promotion
     # whatever the caller's setting
     with jax.numpy_dtype_promotion("standard"):
-        return _adam_program(loss_fn, eval_fn, params, data, key, device(learning_rate, float),
-                             int(n_items), int(epochs), batch_size)  # fmt: skip
+        params, history = _adam_program(loss_fn, eval_fn, params, data, key,
+                                        device(learning_rate, float), int(n_items),
+                                        int(epochs), batch_size)  # fmt: skip
+    check_trained(params)
+    return params, history
 
 
 @eqx.filter_jit
