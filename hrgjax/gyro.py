@@ -9,18 +9,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_positive, numeric_problem
+from ._checks import check_finite, check_positive, is_concrete, numeric_problem
 from .noise import Noise
+from .resonator.control import LIMITS as CONTROL_LIMITS
 from .resonator.control import Control
+from .resonator.params import LIMITS as RESONATOR_LIMITS
 from .resonator.params import (
     Resonator,
     TemperatureLaw,
     as_parameter,
+    check_laws_at,
     checked_temperature,
     concrete_fields,
     evaluate_at,
     refuse_unconverted,
 )
+from .resonator.readout import LIMITS as READOUT_LIMITS
 from .resonator.readout import Readout
 from .units import T_REF_C
 
@@ -38,6 +42,8 @@ def _vector3(x):
         x = jnp.broadcast_to(x, (3,))
     if x.shape[-1:] != (3,):
         raise ValueError(f"Gyro.g_sensitivity must have shape (3,) [rad/s per g]; got {x.shape}")
+    if is_concrete(x):  # a NaN ran the solver out of steps
+        check_finite("Gyro.g_sensitivity", x)
     return x
 
 
@@ -74,6 +80,9 @@ class DriftTerms(eqx.Module):
         refuse_unconverted(self)
         for name, value in concrete_fields(self, ("lag_time", "warmup_time")):
             check_positive(f"DriftTerms.{name}", value, "s")
+        for name, value in concrete_fields(self, ("temperature_rate", "lag", "warmup",
+                                                  "rate_cubic")):  # fmt: skip
+            check_finite(f"DriftTerms.{name}", value)
 
     def input_rate(self, profile, t):
         """The added equivalent input rate [rad/s] at time t [s] of `profile`."""
@@ -156,11 +165,19 @@ class Gyro(eqx.Module):
             extra = hint.get(type(value) if value is not cls else type, "")
             raise TypeError(f"Gyro.{name} must be {form}; got {got}{extra}")
         refuse_unconverted(self)
+        for _, value in concrete_fields(self, ("rate_bias",)):
+            check_finite("Gyro.rate_bias", value)
 
     def at(self, temperature_c) -> Gyro:
         """This gyro with every temperature law evaluated at `temperature_c` [°C] (real
         numbers; concrete ones finite and inside `plausible.RANGES`, else a one-line error)."""
-        return evaluate_at(self, checked_temperature(temperature_c))
+        out = evaluate_at(self, checked_temperature(temperature_c))
+        for part, limits in (("resonator", RESONATOR_LIMITS), ("control", CONTROL_LIMITS),
+                             ("readout", READOUT_LIMITS)):  # fmt: skip
+            check_laws_at(f"gyro.{part}", getattr(self, part), getattr(out, part),
+                          temperature_c, limits)  # fmt: skip
+        check_laws_at("gyro", self, out, temperature_c, {})
+        return out
 
     def in_mode(self, mode: str) -> Gyro:
         """The same gyro run in another operating mode: `"wa"` (whole-angle) or `"ftr"`
@@ -175,3 +192,17 @@ class Gyro(eqx.Module):
     def k_e(self):
         """The resonator's angular gain k_e (a temperature law if it has one)."""
         return self.resonator.k_e
+
+
+def check_one(gyro: Gyro, name: str = "gyro") -> None:
+    """Refuse, in one line naming the field, a gyro that holds a batch of values (a leaf
+    of another shape than one value, or 3 for `g_sensitivity`): what `jax.vmap` maps over,
+    never one run's gyro (`simulate` failed deep in its solve with a shape error)."""
+    for path, leaf in jax.tree_util.tree_flatten_with_path(gyro)[0]:
+        where = jax.tree_util.keystr(path)
+        want = (3,) if where == ".g_sensitivity" else ()
+        shape = tuple(np.shape(leaf))
+        if shape != want:
+            form = "3 values, shape (3,)" if want else "one value, shape ()"
+            raise ValueError(f"{name}{where} must be {form}; got shape {shape} (a batch of "
+                             "gyros: jax.vmap over the call, or hrgjax.sweep)")  # fmt: skip

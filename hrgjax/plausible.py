@@ -140,18 +140,31 @@ def relaxed(**ranges: tuple[float, float]) -> Iterator[None]:
     g (a centrifuge run), not as m/s²
     ([`check_specific_force`][hrgjax.plausible.check_specific_force])."""
     new = dict(_OVERRIDES.get() or {})
-    for name, (low, high) in ranges.items():
+    for name, bounds in ranges.items():
         if name not in _DEFAULTS:
             raise KeyError(f"plausible.relaxed: unknown quantity {name!r}; known: "
                            f"{sorted(_DEFAULTS)}")  # fmt: skip
+        low, high = _bounds(name, bounds)
         if not low < high:
             raise ValueError(f"plausible.relaxed: {name} needs low < high; got {(low, high)}")
-        new[name] = (float(low), float(high), _DEFAULTS[name][2])
+        new[name] = (low, high, _DEFAULTS[name][2])
     token = _OVERRIDES.set(new)
     try:
         yield
     finally:
         _OVERRIDES.reset(token)
+
+
+def _bounds(name: str, bounds) -> tuple[float, float]:
+    """`relaxed`'s (low, high) of `name` — any two real numbers: a tuple, a list, a NumPy or
+    JAX array — as two floats, or a one-line `TypeError`."""
+    from ._checks import describe, numeric_problem
+
+    flags = isinstance(bounds, tuple | list) and any(isinstance(b, bool | np.bool_) for b in bounds)
+    if flags or numeric_problem(bounds) is not None or np.shape(bounds) != (2,):
+        raise TypeError(f"plausible.relaxed: {name} must be (low, high) "
+                        f"[{_DEFAULTS[name][2]}]; got {describe(bounds)}")  # fmt: skip
+    return float(bounds[0]), float(bounds[1])
 
 
 def _hint(name: str, values: np.ndarray) -> str:
@@ -173,11 +186,24 @@ def check(name: str, values, quantity: str | None = None) -> None:
     **Raises:** `ValueError`: "<name> = <value> at index i is outside the plausible range
     low … high <unit>" and, for a temperature that looks like kelvin or an IMU error that
     looks like another unit, a hint."""
+    quantity = quantity or name
+    if quantity not in _DEFAULTS:
+        raise KeyError(f"plausible.check: unknown quantity {quantity!r}; known: "
+                       f"{sorted(_DEFAULTS)}")  # fmt: skip
     try:
         arr = np.asarray(values, dtype=float)
     except Exception:  # a tracer: checked where it is concrete
-        return
-    _check_range(name, arr, quantity or name, None)
+        if _is_tracer(values):
+            return
+        raise TypeError(f"{name} must be real numbers [{RANGES[quantity][2]}]; got "
+                        f"{type(values).__name__} {values!r}"[:200]) from None  # fmt: skip
+    _check_range(name, arr, quantity, None)
+
+
+def _is_tracer(x) -> bool:
+    import jax
+
+    return any(isinstance(v, jax.core.Tracer) for v in jax.tree_util.tree_leaves(x))
 
 
 def _check_range(name: str, arr: np.ndarray, quantity: str, hint: str | None) -> None:
@@ -531,6 +557,17 @@ def check_size(what: str, samples: float, runs: int) -> None:
     higher to allow more), with the estimate.
 
     **Raises:** `ValueError`: "<what>: N runs hold S output samples (≈ M GiB) …"."""
+    if hasattr(samples, "dtype") and np.ndim(samples) == 0:  # a 0-d NumPy or JAX array
+        from ._checks import concrete_value
+
+        value = concrete_value(samples)
+        samples = value.item() if value is not None and value.dtype.kind in "iuf" else samples
+    if (
+        isinstance(samples, bool)
+        or not isinstance(samples, int | float | np.number)
+        or not (samples >= 0)
+    ):  # a NaN (or a str) is no count: it passed, and a str failed on ">"
+        raise ValueError(f"{what}: the output samples must be a number ≥ 0; got {samples!r}")
     if samples > MAX_OUTPUT_SAMPLES:
         gib = samples * BYTES_PER_SAMPLE / 2**30
         raise ValueError(

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import inspect
-import numbers
 import sys
 import types
 
@@ -24,8 +23,9 @@ from ._cost import report as report_cost
 from ._run_checks import LAW_LIMITS as _LAW_LIMITS  # its old name here
 from ._run_checks import check_laws as _check_laws
 from ._run_checks import check_traced
+from ._simulate_options import check_options, output_grid
 from ._x64 import require_x64
-from .gyro import Gyro
+from .gyro import Gyro, check_one
 from .noise import draw_run_bias, rate_noise_angle
 from .profiles import Profile
 from .record import Record
@@ -123,45 +123,6 @@ def _is_number(x) -> bool:
     if isinstance(x, bool) or not is_concrete(x) or np.ndim(x) != 0:
         return False
     return np.asarray(x).dtype.kind in "iuf"
-
-
-def _is_key(k) -> bool:
-    """A typed PRNG key (`jax.random.key`) or a legacy uint32 one (`PRNGKey`), traced or not."""
-    dtype = getattr(k, "dtype", None)
-    if dtype is None:
-        return False
-    return jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key) or dtype == jnp.uint32
-
-
-def _check_options(o) -> None:
-    """`simulate`'s numeric settings (concrete ones; a traced value passes unchecked)."""
-    for name in ("rtol", "atol"):
-        v = o[name]
-        if is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v) and float(v) > 0):
-            raise ValueError(f"{name} must be a positive number (a solver tolerance); got {v!r}")
-    v = o["max_steps"]
-    if v is not None and not (
-        isinstance(v, numbers.Integral) and not isinstance(v, bool) and v > 0
-    ):
-        raise ValueError(f"max_steps must be a positive integer or None; got {v!r}")
-    v = o["fixed_step"]
-    if isinstance(v, str):
-        if v not in ("auto", "held"):
-            raise ValueError(
-                f'fixed_step must be "auto", "held", a positive number of seconds or None; '
-                f"got {v!r}"
-            )
-    elif v is not None and is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v) and v > 0):
-        raise ValueError(f"fixed_step must be a positive number of seconds or None; got {v!r}")
-    if is_concrete(v := o["quadrature0"]) and not (np.ndim(v) == 0 and np.isfinite(v)):
-        raise ValueError(f"quadrature0 must be a finite number (readout units); got {v!r}")
-    v = o["run"]
-    if hasattr(v, "dtype") and jax.dtypes.issubdtype(v.dtype, jax.dtypes.prng_key):
-        raise ValueError("run must be an integer run id (e.g. 3); got a JAX PRNG key (key=)")
-    if is_concrete(v):
-        arr = np.asarray(v)
-        if arr.ndim != 0 or arr.dtype.kind not in "iu" or isinstance(v, bool):
-            raise ValueError(f"run must be an integer run id (e.g. 3); got {v!r}")
 
 
 class _SimulateCheck(Check):
@@ -493,10 +454,11 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     rtol, atol, max_steps, solver = o["rtol"], o["atol"], o["max_steps"], o["solver"]
     fixed_step, quadrature0, adjoint = o["fixed_step"], o["quadrature0"], o["adjoint"]
     require_x64("hrgjax.simulate")
-    if model not in MODELS:
+    if not isinstance(model, str) or model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}; got {model!r}")
     if not isinstance(gyro, Gyro):
         raise TypeError(f"gyro must be an hrgjax.Gyro; got {type(gyro).__name__}")
+    check_one(gyro)  # a batch of gyros (without vmap) failed deep in the solve
     if getattr(profile, "rebalance", None) is not None and (
         gyro.control.mode != "ftr" or gyro.control.ideal
     ):
@@ -513,32 +475,12 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
         raise ValueError(
             "this gyro has noise: pass key=jax.random.key(…), or use gyro.without_noise()"
         )
-    for name, k in (("key", key), ("bias_key", bias_key)):
-        if k is not None and not _is_key(k):
-            raise TypeError(f"{name} must be a JAX PRNG key, e.g. jax.random.key(0); got "
-                            f"{type(k).__name__} {k!r}"[:160])  # fmt: skip
-    _check_options(o)
+    check_options(o)
     _check_laws(gyro, profile)
     if ts is None:
         ts, dt_out = output_times(profile, dt_out), float(dt_out)
     else:
-        dt_out = None
-        if isinstance(ts, jax.Array):
-            ts = jnp.asarray(ts, dtype=float)
-        else:  # host values stay concrete under jit (the fixed-step path counts steps on them)
-            with jax.ensure_compile_time_eval():
-                ts = device(np.asarray(ts, dtype=float), float)
-        if ts.ndim != 1 or ts.shape[0] < 1:
-            raise ValueError(f"ts must be a 1-D array of output times [s]; got shape {ts.shape}")
-        if is_concrete(ts) and is_concrete(profile.t):
-            arr, knots = np.asarray(ts), np.asarray(profile.t)
-            if np.any(np.diff(arr) <= 0):
-                raise ValueError("ts must be strictly increasing (unsorted or duplicate time)")
-            if arr[0] < knots[0] or arr[-1] > knots[-1]:
-                raise ValueError(
-                    f"ts must lie within the profile [{knots[0]}, {knots[-1]}] s; "
-                    f"got [{arr[0]}, {arr[-1]}]"
-                )
+        ts, dt_out = output_grid(ts, profile), None
     report_cost(gyro, profile, model)  # only while `sweep` probes what its members cost
     if max_steps is None:
         max_steps = default_max_steps(gyro, profile, model)

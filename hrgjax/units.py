@@ -62,34 +62,55 @@ arc averaging biases nothing there, and 10-s windows carry ≈ 3× less white an
 window than 3-s ones (the fitted parameters' σ are ≈ 3× smaller)."""
 
 
+def _real(name: str, x):
+    """`x` for a conversion: real numbers (a number, an array, a tracer; a list or tuple as
+    an array), else a one-line `TypeError` naming the conversion (a str, None or a bool is
+    no angle or rate)."""
+    from ._checks import numeric_problem
+
+    problem = numeric_problem(x)
+    if problem is not None:
+        raise TypeError(f"units.{name}: x must be a real number or an array of them; got {problem}")
+    if isinstance(x, list | tuple):
+        import numpy as np
+
+        try:
+            return np.asarray(x, dtype=float)
+        except Exception:  # noqa: BLE001 — a list holding a tracer
+            import jax.numpy as jnp
+
+            return jnp.asarray(x, dtype=float)
+    return x
+
+
 def deg(x):
     """Degrees → radians."""
-    return x * DEG
+    return _real("deg", x) * DEG
 
 
 def to_deg(x):
     """Radians → degrees."""
-    return x / DEG
+    return _real("to_deg", x) / DEG
 
 
 def dph(x):
     """Degrees per hour → rad/s."""
-    return x * DEG_PER_H
+    return _real("dph", x) * DEG_PER_H
 
 
 def to_dph(x):
     """rad/s → degrees per hour."""
-    return x / DEG_PER_H
+    return _real("to_dph", x) / DEG_PER_H
 
 
 def dps(x):
     """Degrees per second → rad/s."""
-    return x * DEG_PER_S
+    return _real("dps", x) * DEG_PER_S
 
 
 def to_dps(x):
     """rad/s → degrees per second."""
-    return x / DEG_PER_S
+    return _real("to_dps", x) / DEG_PER_S
 
 
 STILL_RATE_DPS = 1e-3
@@ -121,7 +142,12 @@ def group_temperatures(values, tol: float = TEMPERATURE_TOLERANCE_C):
     """
     import numpy as np
 
-    if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol >= 0):
+    from ._checks import check_numbers
+
+    check_numbers("values", values, "temperatures [°C]: real numbers")
+    if isinstance(tol, bool) or not (
+        isinstance(tol, (int, float)) and math.isfinite(tol) and tol >= 0
+    ):
         raise ValueError(f"tol must be a finite number ≥ 0 [°C]; got {tol!r}")
     x = np.asarray(values, dtype=float)
     flat = x.ravel()

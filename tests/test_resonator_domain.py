@@ -91,3 +91,52 @@ def test_slow_manifold_holds_a_large_split():
     reduced = 1.0 / np.mean(1.0 / slow) - ideal  # mean rate over a period: π / ∫dθ/θ̇
     assert sim > 0.2 * abs(ideal)  # the loops' defect drift is there
     assert abs(reduced - sim) < 1e-3 * sim
+
+
+def test_bad_parts_units_and_ranges_are_refused_in_one_line():
+    """Audit (off the paved path): NaN parameters built silently (a NaN g-sensitivity then
+    ran the solver out of steps), `Resonator.at`/`Gyro.at` returned τ < 0 or k_e = 55 from a
+    law, and the units helpers, `group_temperatures`, `steps_per_cycle` and `plausible`
+    failed on a str or None with raw Python errors (or let it pass: `check`)."""
+    from hrgjax.resonator.carrier import steps_per_cycle
+
+    res = hg.Resonator(omega=2 * np.pi * 5e3, tau=640.0)
+    for build, err, match in [
+        (lambda: hg.Gyro(res, g_sensitivity=[np.nan, 0.0, 0.0]), ValueError,
+         r"^Gyro.g_sensitivity must be finite; found nan at index \(0,\)"),
+        (lambda: hg.Gyro(res, rate_bias=np.inf), ValueError, r"^Gyro.rate_bias must be finite"),
+        (lambda: hg.DriftTerms(warmup=np.nan), ValueError, r"^DriftTerms.warmup must be finite"),
+        (lambda: hg.TemperatureLaw(np.nan), ValueError, r"^TemperatureLaw.p0 must be finite"),
+        (lambda: hg.Resonator(omega=1.0, tau=hg.TemperatureLaw(640.0, -10.0)).at(100.0),
+         ValueError, r"^the temperature law of Resonator.tau gives -160 s at 100 °C; it must"),
+        (lambda: hg.Resonator(omega=1.0, tau=1.0, k_e=hg.TemperatureLaw(0.5, 0.01)).at(
+            jnp.array([20.0, 80.0])), ValueError, r"^the temperature law of Resonator.k_e gives 1.1 .* at 80 °C"),
+        (lambda: hg.Gyro(res, readout=hg.Readout(gain_mismatch=hg.TemperatureLaw(0.0, 0.01))).at(
+            100.0), ValueError, r"^the temperature law of gyro.readout.gain_mismatch gives 0.8"),
+        (lambda: hg.units.deg("10"), TypeError, r"^units.deg: x must be a real number"),
+        (lambda: hg.units.to_dph(None), TypeError, r"^units.to_dph: x must be a real number"),
+        (lambda: hg.units.group_temperatures(["a"]), TypeError, r"^values must be temperatures"),
+        (lambda: hg.units.group_temperatures([1.0], tol=True), ValueError, r"^tol must be a finite"),
+        (lambda: steps_per_cycle(0.0), ValueError, r"^rtol must be a positive number"),
+        (lambda: hg.plausible.check("temperature_c", "hot"), TypeError,
+         r"^temperature_c must be real numbers \[°C\]; got str"),
+        (lambda: hg.plausible.check("x", 1.0, "tempreature_c"), KeyError, "unknown quantity"),
+        (lambda: hg.plausible.relaxed(temperature_c=5).__enter__(), TypeError,
+         r"^plausible.relaxed: temperature_c must be \(low, high\) \[°C\]; got 5"),
+        (lambda: hg.plausible.check_size("run_plan", np.nan, 1), ValueError,
+         r"^run_plan: the output samples must be a number ≥ 0; got nan"),
+    ]:  # fmt: skip
+        with pytest.raises(err, match=match):
+            build()
+    assert np.allclose(hg.units.deg([90.0, 180.0]), [np.pi / 2, np.pi])  # a list: as an array
+    # what the checks let through, as before them: bounds as an array, a 0-d array count
+    for bounds in (np.array([-100.0, 180.0]), jnp.array([-100.0, 180.0]), [-100, 180]):
+        with hg.plausible.relaxed(temperature_c=bounds):
+            hg.plausible.check("temperature_c", 170.0)  # beyond 150 °C: allowed here only
+    with pytest.raises(ValueError, match="outside the plausible range"):
+        hg.plausible.check("temperature_c", 170.0)
+    for count in (np.asarray(10.0), jnp.asarray(10), np.int64(10)):
+        hg.plausible.check_size("run_plan", count, 1)
+    with pytest.raises(ValueError, match=r"^run_plan: 1 runs hold 6e\+07 output samples"):
+        hg.plausible.check_size("run_plan", jnp.asarray(6e7), 1)
+    hg.presets.tvg3_like().at(jnp.array([-100.0, 150.0]))  # its laws hold over the range

@@ -2,6 +2,7 @@
 naming the field; a solver that runs out of steps, a NaN in a traced profile and float32
 mode raise rather than return NaN; temperature laws vmap."""
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -80,6 +81,35 @@ def test_bad_simulate_arguments():
         hg.Control(drive="magic")
     with pytest.raises(ValueError, match="g_sensitivity"):
         hg.Gyro(resonator(), g_sensitivity=[1.0, 2.0])
+    # audit (off the paved path): each was a raw NumPy/JAX/diffrax error, a silent answer
+    # (fixed_step=True: a 1-s step; ts=[False, True]) or a NaN reported as a solver failure
+    for kw, err, match in [
+        (dict(ts=[0.0, np.nan, 0.5]), ValueError, r"^ts must be finite; found nan at index \(1,\)"),
+        (dict(ts=["a"]), TypeError, r"^ts must be a 1-D array of output times \[s\]; got list"),
+        (dict(ts=[False, True]), TypeError, r"^ts must be a 1-D array of output times"),
+        (dict(rtol="1e-8"), TypeError, r"^rtol must be a positive number \(a solver tolerance\)"),
+        (dict(atol=None), TypeError, r"^atol must be a positive number"),
+        (dict(quadrature0=True), TypeError, r"^quadrature0 must be a finite number"),
+        (dict(fixed_step=True), ValueError, r"^fixed_step must be a positive number of seconds"),
+        (dict(solver="Tsit5"), TypeError, r"^solver must be a diffrax solver"),
+        (dict(solver=diffrax.Tsit5), TypeError, r"^solver must be .* the class Tsit5 itself"),
+        (dict(adjoint="x"), TypeError, r"^adjoint must be a diffrax adjoint"),
+        (dict(key=jax.random.split(jax.random.key(0), 3)), ValueError,
+         r"^key must be one JAX PRNG key, e.g. jax.random.key\(0\); got a key array of shape \(3,\)"),
+        (dict(bias_key=jnp.arange(5, dtype=jnp.uint32)), ValueError, r"^bias_key must be one JAX"),
+    ]:  # fmt: skip
+        with pytest.raises(err, match=match):
+            hg.simulate(gyro, prof, **kw)
+    with pytest.raises(ValueError, match=r"^model must be one of"):
+        hg.simulate(gyro, prof, np.array("averaged"))
+    for batch, match in [  # a batch of gyros outside vmap: a shape error deep in the solve
+        (hg.presets.ideal(resonator(omega=[1e4, 2e4])), r"^gyro.resonator.omega must be one value"),
+        (hg.Gyro(resonator(), g_sensitivity=np.zeros((2, 3))),
+         r"^gyro.g_sensitivity must be 3 values, shape \(3,\); got shape \(2, 3\)"),
+        (hg.Gyro(resonator(), rate_bias=hg.TemperatureLaw([0.0, 1e-5])), r"^gyro.rate_bias.p0"),
+    ]:  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            hg.simulate(batch, prof)
 
 
 def test_impossible_profiles_and_grids_are_refused_in_one_line():
@@ -203,7 +233,11 @@ def test_temperature_law_vmap():
     res = resonator(tau=law)
     taus = jax.vmap(lambda T: res.at(T).tau)(jnp.array([10.0, 20.0, 30.0]))
     np.testing.assert_allclose(taus, [1.0, 2.0, 3.0])
-    assert not isinstance(res.at(0.0).tau, hg.TemperatureLaw)
+    assert not isinstance(res.at(10.0).tau, hg.TemperatureLaw)
+    with pytest.raises(
+        ValueError, match=r"^the temperature law of Resonator.tau gives 0 s at 0 °C"
+    ):
+        res.at(0.0)  # τ = 0 there: refused as Resonator(tau=0.0) is (it was returned)
 
 
 def test_loops_at_exact_equilibrium_give_the_right_sensitivities():

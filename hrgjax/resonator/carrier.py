@@ -53,7 +53,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import finite_number, is_concrete
 from .._stepped import scan_states, tangent_states
 from .averaged import sampled_input_rate
 from .full import carrier_rhs, full_estimates, held_command, loop_efforts, mechanics
@@ -99,6 +99,8 @@ STEPS_PER_CYCLE_AT_1E8 = 10.0
 def steps_per_cycle(rtol: float) -> int:
     """Steps per carrier cycle whose error matches adaptive stepping at `rtol`:
     10 × (1e-8 / rtol)^(1/8), at least 6 (8 at rtol 1e-6, 18 at 1e-10)."""
+    if finite_number("rtol", rtol, "a solver tolerance") <= 0:  # 0 divided by zero
+        raise ValueError(f"rtol must be a positive number (a solver tolerance); got {rtol!r}")
     return max(6, math.ceil(STEPS_PER_CYCLE_AT_1E8 * (1e-8 / float(rtol)) ** 0.125 - 1e-9))
 
 

@@ -11,9 +11,11 @@ import numpy as np
 
 from .. import plausible
 from .._checks import (
+    RULES,
     check_finite,
     check_numbers,
     check_positive,
+    concrete_value,
     is_concrete,
     numeric_problem,
 )
@@ -83,6 +85,9 @@ class TemperatureLaw(eqx.Module):
 
     def __check_init__(self):
         refuse_unconverted(self, "a real number or an array of real numbers")
+        for f in dataclasses.fields(self):  # a NaN coefficient made every value NaN
+            if is_concrete(value := getattr(self, f.name)):
+                check_finite(f"TemperatureLaw.{f.name}", value)
 
     def __call__(self, temperature_c, xp=jnp):
         """Evaluate the law at `temperature_c` [°C] (with `xp=np`, on the host: concrete
@@ -125,6 +130,39 @@ def checked_temperature(temperature_c):
         check_finite("temperature_c", temperature_c)
         plausible.check("temperature_c", temperature_c)
     return temperature_c
+
+
+LIMITS = {
+    "omega": ("> 0", "rad/s"),
+    "tau": ("> 0", "s"),
+    "k_e": ("in (0, 1]", "(the electrical angular gain 2K, ≈ 0.554)"),
+}
+"""The range of each `Resonator` field a temperature law must keep (any other: finite)."""
+
+
+def check_laws_at(owner: str, module, evaluated, temperature_c, limits) -> None:
+    """Refuse, in one line naming `owner.field` and the temperature, a value a temperature
+    law of `module` takes at `temperature_c` [°C] (in `evaluated`, `module` there) that is
+    not finite or breaks its rule in `limits` ({field: (rule, unit)}): what `Resonator.at`
+    and `Gyro.at` return must be a valid module (a τ law crossing 0 gave τ < 0). Concrete
+    values only: under `jit` `simulate` holds laws to the same rules at run time."""
+    for f in dataclasses.fields(module):
+        if not isinstance(getattr(module, f.name), TemperatureLaw):
+            continue
+        v = concrete_value(getattr(evaluated, f.name))
+        if v is None:
+            continue
+        rule, unit = limits.get(f.name, ("finite", ""))
+        v = np.asarray(v, dtype=float)
+        bad = ~(np.isfinite(v) & (RULES[rule](v) if rule in RULES else True))
+        if not bad.any():
+            continue
+        i = tuple(int(k) for k in np.argwhere(bad)[0])
+        temps = np.asarray(concrete_value(temperature_c), dtype=float)
+        at = temps[i[v.ndim - temps.ndim :]] if 0 < temps.ndim <= v.ndim else temps.ravel()[0]
+        must = "finite" if rule == "finite" else f"finite and {rule}"
+        raise ValueError(f"the temperature law of {owner}.{f.name} gives {v[i]:g} {unit} at "
+                         f"{at:g} °C; it must be {must} there".replace("  ", " "))  # fmt: skip
 
 
 def evaluate_at(tree, temperature_c):
@@ -198,7 +236,9 @@ class Resonator(eqx.Module):
         problem = damping_problem(self, checked_temperature(temperature_c))
         if problem:
             raise ValueError(problem)
-        return evaluate_at(self, temperature_c)
+        out = evaluate_at(self, temperature_c)
+        check_laws_at("Resonator", self, out, temperature_c, LIMITS)
+        return out
 
     @property
     def damping_matrix(self):

@@ -1,0 +1,112 @@
+"""`simulate`'s arguments besides the gyro and the profile, checked before any work: the
+settings (`check_options`), the keys and the output times (`output_grid`)."""
+
+from __future__ import annotations
+
+import numbers
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import check_finite, check_numbers, describe, is_concrete, numeric_problem
+from ._compiled import device
+
+_TOLERANCE = "a positive number (a solver tolerance)"
+NUMBERS = {"rtol": _TOLERANCE, "atol": _TOLERANCE, "quadrature0": "a finite number (readout units)"}
+"""`simulate`'s settings that are one real number each, and what each must be."""
+
+CLASSES = {
+    "solver": (diffrax.AbstractSolver, "a diffrax solver, e.g. diffrax.Tsit5()"),
+    "adjoint": (
+        diffrax.AbstractAdjoint,
+        "a diffrax adjoint, e.g. diffrax.RecursiveCheckpointAdjoint()",
+    ),
+}
+"""`simulate`'s settings that are diffrax objects: (class, what it must be)."""
+
+
+def check_key(name: str, k) -> None:
+    """Refuse a `key`/`bias_key` that is not one PRNG key: a typed one (`jax.random.key`,
+    shape ()) or a legacy uint32 one (`PRNGKey`, shape (2,)), traced or not; a batch of keys
+    is refused (one run per key: `jax.vmap` over `simulate`)."""
+    dtype = getattr(k, "dtype", None)
+    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
+    if not (typed or dtype == jnp.uint32):
+        raise TypeError(f"{name} must be a JAX PRNG key, e.g. jax.random.key(0); got "
+                        f"{type(k).__name__} {k!r}"[:160])  # fmt: skip
+    one = () if typed else jax.eval_shape(lambda: jax.random.key_data(jax.random.key(0))).shape
+    if np.shape(k) != one:
+        raise ValueError(f"{name} must be one JAX PRNG key, e.g. jax.random.key(0); got a key "
+                         f"array of shape {np.shape(k)} (a batch of runs: jax.vmap over simulate)")  # fmt: skip
+
+
+def check_options(o) -> None:
+    """`simulate`'s keyword arguments `o`: their types always, their values where concrete
+    (a traced value passes unchecked)."""
+    for name in ("key", "bias_key"):
+        if o[name] is not None:
+            check_key(name, o[name])
+    for name, form in NUMBERS.items():
+        v = o[name]
+        if (problem := numeric_problem(v)) is not None:
+            raise TypeError(f"{name} must be {form}; got {problem}")
+        positive = name != "quadrature0"
+        if np.ndim(v) != 0 or (
+            is_concrete(v) and not (np.isfinite(v) and (not positive or float(v) > 0))
+        ):
+            raise ValueError(f"{name} must be {form}; got {describe(v)}")
+    for name, (cls, form) in CLASSES.items():
+        if (v := o[name]) is not None and not isinstance(v, cls):
+            got = f"the class {v.__name__} itself" if isinstance(v, type) else describe(v)
+            raise TypeError(f"{name} must be {form}, or None; got {got}")
+    v = o["max_steps"]
+    if v is not None and not (
+        isinstance(v, numbers.Integral) and not isinstance(v, bool) and v > 0
+    ):
+        raise ValueError(f"max_steps must be a positive integer or None; got {v!r}")
+    v = o["fixed_step"]
+    if isinstance(v, str):
+        if v not in ("auto", "held"):
+            raise ValueError(
+                f'fixed_step must be "auto", "held", a positive number of seconds or None; '
+                f"got {v!r}"
+            )
+    elif v is not None and (
+        numeric_problem(v) is not None  # a bool is no step (True was a 1-s step)
+        or (is_concrete(v) and not (np.ndim(v) == 0 and np.isfinite(v) and v > 0))
+    ):
+        raise ValueError(f"fixed_step must be a positive number of seconds or None; got {v!r}")
+    v = o["run"]
+    if hasattr(v, "dtype") and jax.dtypes.issubdtype(v.dtype, jax.dtypes.prng_key):
+        raise ValueError("run must be an integer run id (e.g. 3); got a JAX PRNG key (key=)")
+    if is_concrete(v):
+        arr = np.asarray(v)
+        if arr.ndim != 0 or arr.dtype.kind not in "iu" or isinstance(v, bool):
+            raise ValueError(f"run must be an integer run id (e.g. 3); got {v!r}")
+
+
+def output_grid(ts, profile) -> jax.Array:
+    """`simulate`'s explicit output times `ts` [s] as a float array: real numbers, 1-D and
+    not empty; concrete ones finite, strictly increasing and within the profile's knots."""
+    check_numbers("ts", ts, "a 1-D array of output times [s]")
+    if isinstance(ts, jax.Array):
+        ts = jnp.asarray(ts, dtype=float)
+    else:  # host values stay concrete under jit (the fixed-step path counts steps on them)
+        with jax.ensure_compile_time_eval():
+            ts = device(np.asarray(ts, dtype=float), float)
+    if ts.ndim != 1 or ts.shape[0] < 1:
+        raise ValueError(f"ts must be a 1-D array of output times [s]; got shape {ts.shape}")
+    if is_concrete(ts):
+        check_finite("ts", ts)  # a NaN passed the order checks and failed the solver
+    if is_concrete(ts) and is_concrete(profile.t):
+        arr, knots = np.asarray(ts), np.asarray(profile.t)
+        if np.any(np.diff(arr) <= 0):
+            raise ValueError("ts must be strictly increasing (unsorted or duplicate time)")
+        if arr[0] < knots[0] or arr[-1] > knots[-1]:
+            raise ValueError(
+                f"ts must lie within the profile [{knots[0]}, {knots[-1]}] s; "
+                f"got [{arr[0]}, {arr[-1]}]"
+            )
+    return ts
