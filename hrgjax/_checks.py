@@ -440,3 +440,19 @@ def whole_number(name: str, value, what: str) -> int:
         if isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
             return int(value)
     raise ValueError(f"{name} must be {what}; got {describe(value)}")
+
+
+def check_key(name: str, key, batch_hint: str = "one call per key, or jax.vmap") -> None:
+    """Refuse `key` unless it is one JAX PRNG key — a typed one (`jax.random.key`, shape ())
+    or a legacy uint32 one (`jax.random.PRNGKey`, shape (2,)), traced or not — in one line
+    naming `name` (JAX's own read "invalid PRNG key data"): `TypeError` for anything else (an
+    int seed, None), `ValueError` for a batch of keys (`batch_hint` says what to do instead)."""
+    dtype = getattr(key, "dtype", None)
+    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
+    if not (typed or dtype == np.uint32):
+        raise TypeError(f"{name} must be one JAX PRNG key, e.g. jax.random.key(0); got "
+                        f"{describe(key)}")  # fmt: skip
+    one = () if typed else (2,)
+    if tuple(np.shape(key)) != one:
+        raise ValueError(f"{name} must be one JAX PRNG key, e.g. jax.random.key(0); got a key "
+                         f"array of shape {tuple(np.shape(key))} ({batch_hint})")  # fmt: skip

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _checks as checks
 from ._checks import check_finite, check_numbers, describe, is_concrete, numeric_problem
 from ._compiled import device
 
@@ -28,18 +29,8 @@ CLASSES = {
 
 
 def check_key(name: str, k) -> None:
-    """Refuse a `key`/`bias_key` that is not one PRNG key: a typed one (`jax.random.key`,
-    shape ()) or a legacy uint32 one (`PRNGKey`, shape (2,)), traced or not; a batch of keys
-    is refused (one run per key: `jax.vmap` over `simulate`)."""
-    dtype = getattr(k, "dtype", None)
-    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
-    if not (typed or dtype == jnp.uint32):
-        raise TypeError(f"{name} must be a JAX PRNG key, e.g. jax.random.key(0); got "
-                        f"{type(k).__name__} {k!r}"[:160])  # fmt: skip
-    one = () if typed else jax.eval_shape(lambda: jax.random.key_data(jax.random.key(0))).shape
-    if np.shape(k) != one:
-        raise ValueError(f"{name} must be one JAX PRNG key, e.g. jax.random.key(0); got a key "
-                         f"array of shape {np.shape(k)} (a batch of runs: jax.vmap over simulate)")  # fmt: skip
+    """`_checks.check_key` for `simulate`'s `key`/`bias_key` (a batch: `jax.vmap` over it)."""
+    checks.check_key(name, k, "a batch of runs: jax.vmap over simulate")
 
 
 def check_options(o) -> None:

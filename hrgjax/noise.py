@@ -25,11 +25,11 @@ import numpy as np
 
 from ._checks import (
     check_1d,
+    check_key,
     check_nonnegative,
     check_numbers,
     check_positive,
     concrete_value,
-    describe,
 )
 from ._compiled import device, fused
 from .resonator.params import as_parameter, concrete_fields, refuse_unconverted
@@ -85,13 +85,8 @@ UNITS = {
 
 
 def _check_key(name: str, key) -> None:
-    """One JAX PRNG key (`jax.random.key(seed)`, or a legacy uint32 `PRNGKey`), else a
-    one-line `TypeError` naming `name` (JAX's own read "invalid PRNG key data")."""
-    dtype, shape = getattr(key, "dtype", None), getattr(key, "shape", None)
-    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
-    if not ((typed and shape == ()) or (dtype == np.uint32 and len(shape) == 1)):
-        raise TypeError(f"{name}: key must be one JAX PRNG key (jax.random.key(seed)); got "
-                        f"{describe(key)}")  # fmt: skip
+    """One JAX PRNG key, else a one-line error naming `name` (`_checks.check_key`)."""
+    check_key(f"{name}: key", key)
 
 
 def _check_value(name: str, x, ok, form: str) -> None:

@@ -329,6 +329,10 @@ def test_off_path_inputs_of_the_ins_entry_points_are_one_line():
         (lambda: sd.monte_carlo(phi, qd, -eye15, key, 3), r"^p0 must be a symmetric positive"),
         (lambda: sd.monte_carlo(phi, qd, eye15, key, 1.5), r"^n_runs must be a whole number of"),
         (lambda: sd.monte_carlo(phi, qd, eye15, key, 0), r"^n_runs must be a whole number of"),
+        (lambda: sd.monte_carlo(phi, qd, eye15, 0, 3),  # an int seed: JAX's "invalid PRNG key"
+         r"^monte_carlo: key must be one JAX PRNG key, e.g. jax.random.key\(0\); got 0$"),
+        (lambda: sd.monte_carlo(phi, qd, eye15, jax.random.split(key, 2), 3),
+         r"^monte_carlo: key must be one JAX PRNG key.* a key array of shape \(2,\)"),
         (lambda: tr.segments(45.0, 0.0, 0.0, "abc"), r"^legs: a non-empty list of finite"),
         (lambda: me.mechanize(bad, jnp.zeros((4, 3)), jnp.zeros((4, 3)), 0.1),
          r"^initial.lat must be finite"),

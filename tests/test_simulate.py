@@ -74,7 +74,7 @@ def test_bad_simulate_arguments():
     with pytest.raises(ValueError, match="key"):
         hg.simulate(hg.presets.tvg3_like(), prof)
     with pytest.raises(
-        TypeError, match=r"^key must be a JAX PRNG key, e.g. jax.random.key\(0\); got int"
+        TypeError, match=r"^key must be one JAX PRNG key, e.g. jax.random.key\(0\); got 0$"
     ):
         hg.simulate(hg.presets.tvg3_like(), prof, key=0)
     with pytest.raises(ValueError, match="drive"):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from .._checks import describe, finite_number, whole_number
+from .._checks import check_key, describe, finite_number, whole_number
 from .._x64 import require_x64
 from ..units import DEG, EARTH_RATE
 from ._calibration import ImuCalibration, check_g
@@ -40,11 +40,7 @@ def _check_session(truth, key, rate_hz, static_s, move_s, turn_s, gyro_noise, ac
     samples, a negative σ a silent |σ|)."""
     if not isinstance(truth, ImuCalibration):
         raise TypeError(f"truth must be an hg.imu.ImuCalibration; got {type(truth).__name__}")
-    dtype = getattr(key, "dtype", None)
-    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
-    if not ((typed and key.shape == ()) or (dtype == np.uint32 and np.ndim(key) == 1)):
-        raise TypeError(f"key must be one JAX PRNG key (jax.random.key(seed)); got "
-                        f"{describe(key)}")  # fmt: skip
+    check_key("key", key)
     for name, value, unit, least in (
         ("rate_hz", rate_hz, "Hz", 0), ("static_s", static_s, "s", 0), ("move_s", move_s, "s", 0),
         ("turn_s", turn_s, "s", 0), ("gyro_noise", gyro_noise, "rad/s", None),

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_flag, finite_number, is_concrete, vec3, whole_number
+from .._checks import check_flag, check_key, finite_number, is_concrete, vec3, whole_number
 from .._compiled import fused
 from .constants import Earth
 
@@ -165,6 +165,7 @@ def body_rate_wrt_earth(earth: Earth, lat, c_bn, dtheta, dt):
 def measure(truth, gnss: Gnss, key) -> GnssData:
     """GNSS fixes along `truth` (a [`Truth`][hrgjax.ins.motion.Truth]) with noise drawn
     from `key` (module docstring)."""
+    check_key("gnss.measure: key", key)
     n = truth.dtheta.shape[0]
     idx = gnss.epochs(n, truth.dt)
     t = np.asarray(idx, float) * truth.dt

@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import concrete_value, is_concrete, vec3
+from .._checks import check_key, concrete_value, is_concrete, vec3
 from .._compiled import tracing_callback_free
 from ..units import DEG_PER_H, DEG_PER_SQRT_H, G0
 
@@ -221,6 +221,7 @@ class ImuModel(eqx.Module):
         ([`traced_checks`][hrgjax.ins.sensors.traced_checks]): the first rule broken raises
         its one line (`hg.sweep`: "sweep: at one or more grid points, ImuModel.gyro_bias
         [rad/s] is outside the plausible range -0.75 … 0.75 rad/s …")."""
+        check_key("ImuModel.apply: key", key)
         gauss_markov = isinstance(return_bias, str) and return_bias == "gauss_markov"
         if not gauss_markov:
             flag = None  # a bool, NumPy or JAX bool, or 0 / 1, as the truthiness it used to be
@@ -421,6 +422,7 @@ def random_unit(imu: ImuModel, key) -> ImuModel:
     σ = bound/3.3, one draw in 1 200: in 23 % of 100-unit studies at least one of the 300
     gyro scale factors); `imu`'s own values are (eagerly where it was built; its traced
     fields here, at run time: [`traced_checks`][hrgjax.ins.sensors.traced_checks])."""
+    check_key("random_unit: key", key)
     imu = _with_traced_checks(imu)
     k = jax.random.split(key, 6)
     draw = lambda kk, x: jnp.abs(x) * jax.random.normal(kk, jnp.shape(x))

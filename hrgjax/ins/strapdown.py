@@ -53,6 +53,7 @@ from .._checks import (
     check_finite,
     check_finite_host,
     check_flag,
+    check_key,
     finite_number,
     host_value,
     is_concrete,
@@ -444,6 +445,7 @@ def monte_carlo(phi, qd, p0, key, n_runs: int, every: int = 1):
     `LinearisationWarning` when the runs' RMS of an angle of the error state grows past it
     (module docstring), naming the step (concrete inputs; under `jit` neither is checked)."""
     require_x64("ins.strapdown.monte_carlo")
+    check_key("monte_carlo: key", key)
     _check_steps(phi, qd, p0)
     n_runs = whole_number("n_runs", n_runs, "a whole number of runs >= 1")
     if n_runs < 1:
