@@ -247,6 +247,24 @@ def test_windows_too_short_to_measure_anything_are_refused():
     # a NaN σ (an estimate without one) is a NaN half-width, as before the check
     hw = half_width(np.array([np.nan, 1.0]), 14)
     assert np.isnan(hw[0]) and hw[1] == pytest.approx(2.228139, abs=1e-6)
+    # a schedule sampled at fs <= 0 gave empty arrays, a NaN lead time was dropped, a
+    # segment length of 10.5 samples was cut to 10, a 1-D record raised an IndexError
+    from hrgjax.fog.spectrum import psd
+
+    sch = vb.VibrationSchedule.constant(30.0, 1.0, 1.0)
+    assert sch.samples(10.0)[0].shape == (10,)
+    for fs in (0.0, -10.0):
+        with pytest.raises(ValueError, match=r"^VibrationSchedule.samples: fs must be > 0"):
+            sch.samples(fs)
+    for lead in (np.nan, -1.0):
+        with pytest.raises(ValueError, match=r"^VibrationSchedule.on_off: lead_s must be"):
+            vb.VibrationSchedule.on_off([(30.0, 1.0)], 1.0, 1.0, lead_s=lead)
+    with pytest.raises(ValueError, match=r"^nperseg must be a whole number of samples"):
+        psd(np.sin(np.arange(64.0)), 100.0, nperseg=10.5)
+    with pytest.raises(ValueError, match=r"^window_means: x must be \(\.\.\., N, c\)"):
+        vb.window_means(np.zeros(100), 100.0, 0.1)
+    with pytest.raises(ValueError, match=r"^window_means: fs and window_s must be > 0"):
+        vb.window_means(np.zeros((100, 3)), 100.0, -0.1)
 
 
 def test_study_reports_an_unmeasurable_scenario_as_such():

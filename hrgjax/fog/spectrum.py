@@ -50,7 +50,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite, concrete_value, describe, is_finite_real, numeric_problem
+from .._checks import (
+    check_finite,
+    concrete_value,
+    describe,
+    is_finite_real,
+    numeric_problem,
+    whole_number,
+)
 from .._compiled import fused
 from ..units import G0
 
@@ -74,7 +81,7 @@ def _segment(n: int, nperseg) -> int:
     """`psd`'s segment length for `n` samples: `nperseg` checked, or its default."""
     if nperseg is None:
         nperseg = min(n, max(16, 1 << int(max(n // 4, 1)).bit_length() - 1))
-    nperseg = int(nperseg)
+    nperseg = whole_number("nperseg", nperseg, f"a whole number of samples in [2, {n}]")
     if not 2 <= nperseg <= n:
         raise ValueError(f"nperseg must be in [2, {n}] samples; got {nperseg}")
     return nperseg

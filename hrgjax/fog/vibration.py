@@ -43,7 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import concrete_value
+from .._checks import concrete_value, finite_number
 from .._compiled import fused
 from .._x64 import require_x64
 from ..ins.constants import WGS84, earth_rate_ned
@@ -108,6 +108,9 @@ class VibrationSchedule(eqx.Module):
         """Rest for `lead_s`, then each `(f [Hz], A [g])` of `conditions` for `on_s`
         followed by `off_s` of rest — the switch-on and switch-off transients are what an
         error model with memory has to get right."""
+        lead_s = finite_number("VibrationSchedule.on_off: lead_s", lead_s, "s")
+        if lead_s < 0:
+            raise ValueError(f"VibrationSchedule.on_off: lead_s must be >= 0 [s]; got {lead_s:g}")
         d, f, a = [], [], []
         if lead_s > 0:
             d, f, a = [lead_s], [0.0], [0.0]
@@ -125,6 +128,9 @@ class VibrationSchedule(eqx.Module):
     def samples(self, fs: float):
         """Per-sample frequency [Hz] and amplitude [g] at `t = k/fs`, k = 0 … N−1, with
         N = round(duration·fs) (numpy)."""
+        fs = finite_number("VibrationSchedule.samples: fs", fs, "Hz")
+        if fs <= 0:
+            raise ValueError(f"VibrationSchedule.samples: fs must be > 0 [Hz]; got {fs:g}")
         n = int(round(self.duration_s * fs))
         t = np.arange(n) / fs
         edges = np.cumsum(self.durations_s)
@@ -317,6 +323,14 @@ def _run(imu, freq, amp, axis, fs, key, lat, c_bn):
 def window_means(x, fs: float, window_s: float):
     """Means of `x` (..., N, c) over consecutive windows of `window_s` [s] → (..., K, c);
     a partial last window is left out (K = N // (window_s·fs))."""
+    fs = finite_number("window_means: fs", fs, "Hz")
+    window_s = finite_number("window_means: window_s", window_s, "s")
+    if fs <= 0 or window_s <= 0:
+        raise ValueError(f"window_means: fs and window_s must be > 0; got fs = {fs:g} Hz, "
+                         f"window_s = {window_s:g} s")  # fmt: skip
+    if np.ndim(x) < 2:
+        raise ValueError(f"window_means: x must be (..., N, c) samples × channels; got shape "
+                         f"{np.shape(x)} (one channel: x[:, None])")  # fmt: skip
     m = int(round(window_s * fs))
     if m < 1:
         raise ValueError(f"window_s·fs must be >= 1 sample; got {window_s}·{fs}")
