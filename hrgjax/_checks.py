@@ -456,3 +456,28 @@ def check_key(name: str, key, batch_hint: str = "one call per key, or jax.vmap")
     if tuple(np.shape(key)) != one:
         raise ValueError(f"{name} must be one JAX PRNG key, e.g. jax.random.key(0); got a key "
                          f"array of shape {tuple(np.shape(key))} ({batch_hint})")  # fmt: skip
+
+
+def FINITE_POSITIVE(v):
+    """Rule for `check_values`: finite and > 0 (host arrays)."""
+    return np.isfinite(v) & (v > 0)
+
+
+def FINITE_NONNEGATIVE(v):
+    """Rule for `check_values`: finite and >= 0 (host arrays)."""
+    return np.isfinite(v) & (v >= 0)
+
+
+def check_values(name: str, x, ok, form: str):
+    """`x` (a number, a NumPy or JAX array; a list or tuple as a NumPy array) refused in one
+    line naming `name` and the `form` expected unless it is real numbers each passing `ok`
+    (e.g. `FINITE_POSITIVE`) where its value is known on the host; a traced value passes (no
+    run-time check in a caller's program, which may differentiate through it)."""
+    check_numbers(name, x, form)
+    x = np.asarray(x, dtype=float) if isinstance(x, list | tuple) else x
+    v = concrete_value(x)
+    if v is not None:
+        v = np.asarray(v, dtype=float)
+        if not np.all(ok(v)):
+            raise ValueError(f"{name} must be {form}; got {v[~ok(v)].flat[0]}")
+    return x

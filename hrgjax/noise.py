@@ -24,11 +24,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import (
+    FINITE_NONNEGATIVE,
+    FINITE_POSITIVE,
     check_1d,
     check_key,
     check_nonnegative,
     check_numbers,
     check_positive,
+    check_values,
     concrete_value,
 )
 from ._compiled import device, fused
@@ -89,16 +92,6 @@ def _check_key(name: str, key) -> None:
     check_key(f"{name}: key", key)
 
 
-def _check_value(name: str, x, ok, form: str) -> None:
-    """Refuse a concrete `x` (numbers) unless every value passes `ok`, naming `name` and the
-    `form` expected; a traced value passes (no run-time check in a caller's program)."""
-    check_numbers(name, x, form)
-    v = concrete_value(x)
-    if v is not None and not np.all(ok(np.asarray(v, dtype=float))):
-        bad = np.asarray(v, dtype=float)[~ok(np.asarray(v, dtype=float))].flat[0]
-        raise ValueError(f"{name} must be {form}; got {bad}")
-
-
 def _check_times(name: str, key, ts):
     """`ts` as an array (a list too), checked with `key` on the host before any compiled
     program: `key` one PRNG key, `ts` 1-D finite sample times that do not run backwards (a
@@ -123,11 +116,11 @@ def _check_times(name: str, key, ts):
 def _check_gauss_markov(key, ts, sigma, correlation_time) -> tuple:
     ts = _check_times("gauss_markov", key, ts)
     for name, x, ok, form in (
-        ("sigma", sigma, lambda v: np.isfinite(v) & (v >= 0), "one standard deviation >= 0"),
-        ("correlation_time", correlation_time, lambda v: np.isfinite(v) & (v > 0), "one time > 0 [s]"),
+        ("sigma", sigma, FINITE_NONNEGATIVE, "one standard deviation >= 0"),
+        ("correlation_time", correlation_time, FINITE_POSITIVE, "one time > 0 [s]"),
     ):  # fmt: skip
         check_numbers(f"gauss_markov: {name}", x, form, shape=())  # an array: JAX's broadcast error
-        _check_value(f"gauss_markov: {name}", x, ok, form)
+        check_values(f"gauss_markov: {name}", x, ok, form)
     return key, ts, sigma, correlation_time
 
 
@@ -222,13 +215,13 @@ def gauss_markov_bridge(dts, sigma, correlation_time):
 
     **Returns:** (a, s) per interval [s], [rad] (the units of σ × s).
     """
-    _check_value("gauss_markov_bridge: dts", dts, lambda v: np.isfinite(v) & (v >= 0),
+    check_values("gauss_markov_bridge: dts", dts, FINITE_NONNEGATIVE,
                  "intervals >= 0 [s]")  # fmt: skip
     dts = device(dts, float) if isinstance(dts, list | tuple) else dts  # failed in `0.5 * dts`
-    _check_value("gauss_markov_bridge: sigma", sigma, lambda v: np.isfinite(v) & (v >= 0),
+    check_values("gauss_markov_bridge: sigma", sigma, FINITE_NONNEGATIVE,
                  "a standard deviation >= 0")  # fmt: skip
-    _check_value("gauss_markov_bridge: correlation_time", correlation_time,
-                 lambda v: np.isfinite(v) & (v > 0), "> 0 [s]")  # fmt: skip
+    check_values("gauss_markov_bridge: correlation_time", correlation_time,
+                 FINITE_POSITIVE, "> 0 [s]")  # fmt: skip
     u = 0.5 * dts / correlation_time
     g = _u_minus_tanh(u)
     pos = g > 0.0  # an empty interval (Δt = 0) has no integral and no finite √ slope

@@ -42,7 +42,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_1d, check_numbers, concrete_value, finite_number, whole_number
+from ._checks import (
+    FINITE_NONNEGATIVE,
+    FINITE_POSITIVE,
+    check_1d,
+    check_numbers,
+    check_values,
+    finite_number,
+    whole_number,
+)
 from ._nnls import nnls as _nnls
 from .units import DEG, DEG_PER_H
 from .units import STILL_RATE_DPS as STILL_RATE_DPS
@@ -148,7 +156,9 @@ class NoiseModel:
         (the whitening of the discovery's continuous records,
         [`ContinuousProblem`][hrgjax.discovery.continuous.ContinuousProblem]), the run bias
         included (each run its own switch-on)."""
-        delta = _arg("increment_covariance: delta", delta, _POSITIVE, "a block length > 0 [s]")
+        delta = check_values(
+            "increment_covariance: delta", delta, FINITE_POSITIVE, "a block length > 0 [s]"
+        )
         k = whole_number("increment_covariance: k", k, "a whole number of increments ≥ 1")
         if k < 1:  # 1.5 was read as 2, 0 gave an empty matrix
             raise ValueError(f"increment_covariance: k must be a whole number of increments ≥ 1; "
@@ -166,7 +176,7 @@ class NoiseModel:
 
     def d2_variance(self, tau):
         """Variance [rad²] of the lag-τ second difference θ(t+τ) − 2θ(t) + θ(t−τ)."""
-        tau = _arg("d2_variance: tau", tau, _NONNEGATIVE, "lags >= 0 [s]")
+        tau = check_values("d2_variance: tau", tau, FINITE_NONNEGATIVE, "lags >= 0 [s]")
         return _d2_basis(np.asarray(tau, float), self.gm_time) @ np.array(
             [self.angle_white**2, self.angle_random_walk**2, self.gm_sigma**2]
         )
@@ -279,12 +289,16 @@ def slope_variance(angle_white, angle_random_walk, samples, dt):
     without the Gauss–Markov part; → 6/5 of a mean rate's N²/(nΔt) for long windows). Arithmetic only: NumPy floats or (traced) JAX arrays, `samples` need not be a
     whole number (the bench design's windows)."""
     at = "slope_variance: "
-    angle_white = _arg(at + "angle_white", angle_white, _NONNEGATIVE,
+    angle_white = check_values(at + "angle_white", angle_white, FINITE_NONNEGATIVE,
                        "a standard deviation >= 0 [rad]")  # fmt: skip
-    angle_random_walk = _arg(at + "angle_random_walk", angle_random_walk, _NONNEGATIVE,
+    angle_random_walk = check_values(at + "angle_random_walk", angle_random_walk, FINITE_NONNEGATIVE,
                              "a density >= 0 [rad/√s]")  # fmt: skip
-    samples = _arg(at + "samples", samples, lambda v: np.isfinite(v) & (v > 1), "a count > 1")
-    dt = _arg(at + "dt", dt, _POSITIVE, "a sample interval > 0 [s]")  # < 0: a negative variance
+    samples = check_values(
+        at + "samples", samples, lambda v: np.isfinite(v) & (v > 1), "a count > 1"
+    )
+    dt = check_values(
+        at + "dt", dt, FINITE_POSITIVE, "a sample interval > 0 [s]"
+    )  # < 0: a negative variance
     n = samples
     m = n * (n**2 - 1.0)
     walk = 6.0 * (n**2 + 1.0) / (5.0 * m) * angle_random_walk**2 / dt
@@ -297,7 +311,7 @@ def gauss_markov_mean_factor(x):
     a Gauss–Markov rate's mean over a duration D = x T_c in units of 2σ²T_c/D
     ([`gauss_markov_mean_variance`][hrgjax.pattern_noise.gauss_markov_mean_variance]). NumPy
     or (traced) JAX."""
-    x = _arg("gauss_markov_mean_factor: x", x, _NONNEGATIVE,
+    x = check_values("gauss_markov_mean_factor: x", x, FINITE_NONNEGATIVE,
              "a duration over a correlation time, >= 0")  # fmt: skip
     xp = jnp if isinstance(x, jax.Array) else np
     return 1.0 + xp.expm1(-x) / x
@@ -310,32 +324,17 @@ def gauss_markov_mean_variance(sigma, correlation_time, duration):
     [`NoiseModel.angle_covariance`][hrgjax.pattern_noise.NoiseModel.angle_covariance] at (D, D)
     over D². NumPy or (traced) JAX."""
     at = "gauss_markov_mean_variance: "
-    sigma = _arg(at + "sigma", sigma, _NONNEGATIVE, "a standard deviation >= 0 [rad/s]")
-    correlation_time = _arg(at + "correlation_time", correlation_time, _POSITIVE, "> 0 [s]")
-    duration = _arg(at + "duration", duration, _POSITIVE, "> 0 [s]")  # < 0: wrong, 0: 1/0
+    sigma = check_values(
+        at + "sigma", sigma, FINITE_NONNEGATIVE, "a standard deviation >= 0 [rad/s]"
+    )
+    correlation_time = check_values(
+        at + "correlation_time", correlation_time, FINITE_POSITIVE, "> 0 [s]"
+    )
+    duration = check_values(
+        at + "duration", duration, FINITE_POSITIVE, "> 0 [s]"
+    )  # < 0: wrong, 0: 1/0
     x = duration / correlation_time
     return 2.0 * sigma**2 * correlation_time / duration * gauss_markov_mean_factor(x)
-
-
-def _POSITIVE(v):
-    return np.isfinite(v) & (v > 0)
-
-
-def _NONNEGATIVE(v):
-    return np.isfinite(v) & (v >= 0)
-
-
-def _arg(name: str, x, ok, form: str):
-    """`x` (a number, a NumPy or JAX array; a list as a NumPy array) refused in one line
-    naming `name` and `form` unless real numbers, each passing `ok` where its value is known
-    on the host (a traced value passes: the bench design differentiates through these)."""
-    check_numbers(name, x, form)
-    x = np.asarray(x, dtype=float) if isinstance(x, list | tuple) else x
-    v = concrete_value(x)
-    if v is not None and not np.all(ok(np.asarray(v, dtype=float))):
-        v = np.asarray(v, dtype=float)
-        raise ValueError(f"{name} must be {form}; got {v[~ok(v)].flat[0]}")
-    return x
 
 
 def _gain(name: str, k_e) -> float:
@@ -442,8 +441,12 @@ def gm_structure(delta, tc):
     only through cancellation (relative error ε/x: 1e-3 of a second difference's variance
     at τ = 1 ms, T_c = 3000 s). NumPy."""
     at = "gm_structure: "
-    delta = _arg(at + "delta", delta, _NONNEGATIVE, "a time difference >= 0 [s]")  # Δ < 0: wrong
-    tc = _arg(at + "tc", tc, _POSITIVE, "a correlation time > 0 [s]")  # 0: NaN, < 0: wrong
+    delta = check_values(
+        at + "delta", delta, FINITE_NONNEGATIVE, "a time difference >= 0 [s]"
+    )  # Δ < 0: wrong
+    tc = check_values(
+        at + "tc", tc, FINITE_POSITIVE, "a correlation time > 0 [s]"
+    )  # 0: NaN, < 0: wrong
     x = np.asarray(delta, float) / tc
     series = x**2 * (0.5 - x / 6 + x**2 / 24 - x**3 / 120 + x**4 / 720)
     return 2 * tc**2 * np.where(x < 1e-2, series, x + np.expm1(-x))
