@@ -125,6 +125,33 @@ def test_host_values_reach_the_device_without_eager_programs():
     assert piece.accel.shape == (41, 3) and float(piece.wave_angle0) == np.deg2rad(7.0)
 
 
+def test_a_weakly_typed_argument_reuses_the_strong_arguments_program():
+    """`jnp.asarray(2.0)` and `jnp.full(n, 2.0)` are weakly typed and a compiled program is
+    kept by its arguments' weak types: a gyro with one such leaf compiled `simulate`'s whole
+    solve again. `program` makes concrete weak floats strong (same values, placement kept),
+    so they meet the program compiled for strong ones; traced arguments pass as they are."""
+    from helpers import CompileCounter
+
+    @program(export=False)
+    def scaled(x, pair):
+        return x * pair[0] + pair[1]
+
+    n = 29  # a length no other test uses
+    strong = (jnp.asarray(np.full(n, 2.0)), (np.float64(3.0), jnp.asarray(np.float64(0.5))))
+    expected = scaled(*strong)
+    weak = (jnp.full(n, 2.0), (jnp.asarray(3.0), jnp.asarray(0.5)))
+    assert all(x.weak_type for x in jax.tree_util.tree_leaves(weak))
+    with CompileCounter() as c:
+        got = scaled(*weak)
+    assert c.compiles == 0, c.names
+    np.testing.assert_array_equal(got, expected)
+    assert all(x.weak_type for x in jax.tree_util.tree_leaves(weak))  # the caller's, untouched
+    ints = jnp.asarray(3)  # weak integers are left alone (a count, not a value)
+    assert scaled(ints, (ints, ints)).dtype == jnp.asarray(3).dtype
+    grad = jax.grad(lambda a: scaled(jnp.full(n, 2.0), (a, 0.5)).sum())(3.0)
+    np.testing.assert_allclose(grad, 2.0 * n, rtol=1e-15)
+
+
 def test_fused_functions_compile_one_program_eagerly_and_inline_under_a_trace():
     """A `fused` function called on concrete arrays compiles one program for a new shape
     (not one per operation: `navigation_errors` is ≈ 50 operations, ≈ 100 eager programs
