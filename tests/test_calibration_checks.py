@@ -394,7 +394,7 @@ def test_reduction_and_evaluation_refuse_what_makes_no_sense_in_one_line():
 def test_plans_and_self_calibration_refuse_bad_arguments_before_simulating():
     """Audit (calib): a 2-D grid of temperatures was flattened, rate_dps="5" or NaN built a
     plan, dt_out > duration_s made runs of one sample, lists in `Plan` failed with
-    AttributeError, first_run=1.5 was truncated, key=0 reached JAX, quick="no" was read as
+    AttributeError, first_run=1.5 was truncated, key=0 reached JAX (run_plan, MLPCompensator), quick="no" was read as
     True, a string of methods was split into letters, and mode reversal took a negative
     settling time (holds starting inside the slew) or mismatched arrays (JAX's broadcast
     error). Each is now one line before anything runs."""
@@ -424,5 +424,8 @@ def test_plans_and_self_calibration_refuse_bad_arguments_before_simulating():
         (lambda: cal.run_study(key=jax.random.key(0), methods="fourier"),
          r"^run_study: methods must be a list"),
         (lambda: cal.run_study(key=jax.random.key(0), quick="no"), r"^run_study: quick must be"),
+        (lambda: cal.MLPCompensator().init(0), r"^MLPCompensator.init: key must be one JAX PRNG"),
+        (lambda: cal.MLPCompensator().fit(None, key=jax.random.split(jax.random.key(0))),
+         r"^MLPCompensator.fit: key .* got a key array of shape \(2,\)"),
     ):  # fmt: skip
         _bad(call, match)

@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_key
 from .._compiled import device, program
 from .._x64 import require_x64
 from ..data import MeasuredData
@@ -92,18 +93,17 @@ class MLPCompensator(AbstractCompensator):
     - `k_e`: nominal angular gain.
     - `st_width`: hidden neurons of the readout temperature-sensitivity network s_T(θ, T)
       (0, the default: none, the seed's MLP; see the module docstring).
-    - `drift_t_curvature`, `sf_t_curvature`: weights of the smoothness prior in temperature
-      (0: none, the seed's training): the drift (and s_T) and the scale-factor losses get
-      weight · mean (∂²y/∂τ²)² added, y the network's normalised output, τ = (T − t_centre)/
-      t_scale, over `CURVATURE_POINTS` points (θ, T) spread over the calibrated range (no
-      data needed there). Without it the networks wiggle between sparse levels: fitted on
-      0/20/40 °C, the rotation error at +10 and +30 °C was 9.5–19× the largest at the
-      levels; with the defaults (10⁻³, 0.1) 0.84–1.12×. The drift's weight is the smaller:
-      its laws curve in T (an exponential amplitude), and 10⁻² raised its at-level static
-      error up to 2.2×. In τ a law's own curvature grows with t_scale²: on −40/+20/+60 °C
-      the at-level rotation error rose 1.6–12× (between levels it fell 6–24×; weights in
-      °C, × (20 °C/t_scale)⁴, were worse overall: docs/calibration.md). `mode="end_to_end"`
-      refines without it.
+    - `drift_t_curvature`, `sf_t_curvature`: weights of the smoothness prior in temperature (0:
+      none, the seed's training): the drift (and s_T) and the scale-factor losses get weight ·
+      mean (∂²y/∂τ²)² added, y the network's normalised output, τ = (T − t_centre)/t_scale, over
+      `CURVATURE_POINTS` points (θ, T) spread over the calibrated range (no data needed there).
+      Without it the networks wiggle between sparse levels: fitted on 0/20/40 °C, the rotation
+      error at +10 and +30 °C was 9.5–19× the largest at the levels; with the defaults (10⁻³,
+      0.1) 0.84–1.12×. The drift's weight is the smaller: its laws curve in T (an exponential
+      amplitude), and 10⁻² raised its at-level static error up to 2.2×. In τ a law's own
+      curvature grows with t_scale²: on −40/+20/+60 °C the at-level rotation error rose 1.6–12×
+      (between levels it fell 6–24×; weights in °C, × (20 °C/t_scale)⁴, were worse overall:
+      docs/calibration.md). `mode="end_to_end"` refines without it.
     - `drift_net`, `sf_net`, `st_net`, and the normalisation (`t_centre`, `t_scale` [°C];
       `drift_offset`, `drift_scale` [rad/s]; `sf_offset`, `sf_scale`): set by `fit`.
     - `mode`: how `fit` trains, `"reduced"` or `"end_to_end"` (module docstring).
@@ -217,6 +217,7 @@ class MLPCompensator(AbstractCompensator):
     def init(self, key: jax.Array) -> MLPCompensator:
         """Fresh untrained networks (weights from `key`; the s_T network's output layer
         starts at zero, so s_T = 0 until ramps teach it otherwise)."""
+        check_key("MLPCompensator.init: key", key)
         kd, ks, kt = jax.random.split(key, 3)
         make = lambda w, k: eqx.nn.MLP(self.in_size, "scalar", w, 1, jnp.tanh, key=k)
         comp = eqx.tree_at(
@@ -261,15 +262,14 @@ class MLPCompensator(AbstractCompensator):
 
         **Returns:** a new fitted `MLPCompensator`.
 
-        **Raises:** `TypeError` without `key`; `ValueError` for an unknown mode, data
+        **Raises:** `TypeError` without one PRNG `key`; `ValueError` for an unknown mode, data
         without static or rotation runs, fewer than `MIN_TEMPERATURES` (2) distinct
         temperatures among the static or among the rotation runs (levels within 0.5 °C
         counted once: the networks learn nothing about T from one level), or, with
         `st_width > 0`, data without ramps.
         """
         require_x64("MLPCompensator.fit")
-        if key is None:
-            raise TypeError("MLPCompensator.fit needs key= (the PRNG key of the initial weights)")
+        check_key("MLPCompensator.fit: key (the PRNG key of the initial weights)", key)
         if mode is not FROM_FIELD and mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
         if mode is not FROM_FIELD or window_s is not FROM_FIELD:
