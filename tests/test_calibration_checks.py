@@ -411,7 +411,7 @@ def test_plans_and_self_calibration_refuse_bad_arguments_before_simulating():
                           duration_s=10.0), r"^Plan.temperature_c must be an array"),
         (lambda: cal.seed_plan(quick="no"), r"^seed_plan: quick must be True or False"),
         (lambda: cal.run_plan(gyro, sp, first_run=1.5), r"^run_plan: first_run must be a whole"),
-        (lambda: cal.run_plan(gyro, sp, key=0), r"^key must be a JAX PRNG key"),
+        (lambda: cal.run_plan(gyro, sp, key=0), r"^key \(or None\) must be one JAX PRNG key"),
         (lambda: cal.run_plan(None, sp), r"^run_plan: gyro must be an hrgjax.Gyro"),
         (lambda: cal.precession_plan([[20.0, 30.0]]), r"^precession_plan: temperatures_c must"),
         (lambda: cal.precession_plan(precession_dps="0.5"), r"^precession_plan: precession_dps"),

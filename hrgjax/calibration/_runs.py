@@ -12,6 +12,7 @@ import jax
 import numpy as np
 
 from .. import _upstream
+from .._checks import check_key
 from .._compiled import Check, device, program
 from .._cost import MAX_STEPS, default_max_steps
 from .._progress import bar
@@ -74,25 +75,14 @@ def switch_on_keys(
 
     **Raises:** `ValueError` when the gyro has noise and `key` is None."""
     for name, k in (("key", key), ("bias_key", bias_key)):
-        if k is not None and not is_key(k):
-            raise TypeError(f"{name} must be a JAX PRNG key (jax.random.key(0)) or None; got "
-                            f"{type(k).__name__}")  # fmt: skip
+        if k is not None:
+            check_key(f"{name} (or None)", k, "one call per switch-on")
     if gyro.noise is None:
         return None, bias_key
     if key is None:
         raise ValueError("this gyro has noise: pass key=jax.random.key(…)")
     k_runs, k_bias = jax.random.split(key)
     return jax.random.split(k_runs, size), (k_bias if bias_key is None else bias_key)
-
-
-def is_key(k) -> bool:
-    """Whether `k` is one JAX PRNG key: a typed key (`jax.random.key`) or a raw uint32 pair
-    (`jax.random.PRNGKey`)."""
-    if not isinstance(k, jax.Array) or k.ndim > 1:
-        return False
-    if jax.dtypes.issubdtype(k.dtype, jax.dtypes.prng_key):
-        return k.ndim == 0
-    return k.dtype == np.uint32 and k.shape == (2,)
 
 
 class RunGroup(NamedTuple):
