@@ -13,6 +13,7 @@ from ._checks import (
     check_finite_host,
     check_number,
     check_numbers,
+    check_values,
     concrete_value,
     describe,
     finite_number,
@@ -454,9 +455,13 @@ class Profile(eqx.Module):
         frac = jnp.clip((t - t0) / length, 0.0, 1.0)
         return values[i] + (values[i + 1] - values[i]) * frac
 
-    @fused
     def rate_at(self, t):
-        """Rate [rad/s] at time t [s]."""
+        """Rate [rad/s] at time t [s] (real numbers, finite where known on the host)."""
+        t = check_values("Profile.rate_at: t", t, np.isfinite, "finite real numbers (times [s])")
+        return self._rate_at(t)
+
+    @fused
+    def _rate_at(self, t):
         return self._interp(t, self.rate)
 
     @fused

@@ -489,3 +489,27 @@ def test_false_alarms_are_scored_from_the_first_measurement_at_warmup_s():
             assert k0 == np.flatnonzero(t >= w - 1e-12)[0], (dt, w, k0, t[k0])
             assert t[k0] >= w - 1e-12 and (k0 == 0 or t[k0 - 1] < w - 1e-12), (dt, w, k0)
     assert cp._first_step_at(0.0, 1.0) == 0 and cp._first_step_at(50.0, 1.0) == 48
+
+
+@pytest.mark.parametrize(
+    ("classes", "confirm", "kind", "match"),
+    [
+        (np.array([0.0, 1.5, 1.0]), 1, ValueError, r"^classes must be per-step onset classes .*"
+         r"whole numbers >= 0 .*; got 1.5 at index \(1,\)"),
+        (np.array([0, -1, 1]), 1, ValueError, r"^classes must be .*; got -1 at index \(1,\)"),
+        (np.array([0.0, np.nan, 1.0]), 1, ValueError, r"^classes must be .*; got nan"),
+        ("abc", 1, TypeError, r"^classes must be per-step onset classes .*; got str 'abc'"),
+        (np.array([0, 1, 1]), 0, ValueError, r"^confirm must be an integer >= 1 \(steps\); got 0"),
+        (np.array([0, 1, 1]), -1, ValueError, r"^confirm must be an integer >= 1 \(steps\); got -1"),
+    ],
+)  # fmt: skip
+def test_latch_refuses_non_class_values_and_bad_confirm(classes, confirm, kind, match):
+    """Audit: float classes (1.5 latched as a class, NaN latched as NaN) and negative ones
+    (−1 latched as a fault) passed; confirm 0 or −1 said only "confirm must be >= 1"; a str
+    raised JAX's abstract-array error. Whole-valued float classes still latch as before."""
+    from hrgjax.diagnosis import neural as nn_
+
+    with pytest.raises(kind, match=match) as err:
+        nn_.latch(classes, confirm)
+    assert "\n" not in str(err.value)
+    np.testing.assert_array_equal(nn_.latch(np.array([0.0, 2.0, 2.0]), 2.0), [0.0, 0.0, 2.0])

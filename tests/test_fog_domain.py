@@ -283,3 +283,30 @@ def test_study_reports_an_unmeasurable_scenario_as_such():
               "heading_error_deg": {}, "tilt_error_deg": {}, "prediction_rmse": {},
               "train_s": {}, "heading_limit_deg": {"remaining_drift": 0.0, "raw": 0.0}}  # fmt: skip
     assert "vibration not measurable" in study.table(result).splitlines()[0]
+
+
+@pytest.mark.parametrize(
+    ("fn", "calib", "x", "kind", "match"),
+    [
+        ("to_body", "gyro", np.ones((4, 2)), ValueError,
+         r"^to_body: s must be sensor-axis values of shape \(\.\.\., 3\); got shape \(4, 2\)"),
+        ("to_body", "accel", np.ones((4, 4)), ValueError, r"^to_body: s must be .*\(4, 4\)"),
+        ("to_sensor", "gyro", np.ones((4, 2)), ValueError,
+         r"^to_sensor: b must be body-frame values of shape \(\.\.\., 3\); got shape \(4, 2\)"),
+        ("to_sensor", "gyro", np.ones(4), ValueError, r"^to_sensor: b must be .*got shape \(4,\)"),
+        ("to_body", "gyro", "abc", TypeError, r"^to_body: s must be .*; got str 'abc'"),
+        ("to_body", "imu", np.ones((4, 3)), TypeError,
+         r"^to_body: calib must be a TriadCalibration \(e\.g\. imu\.gyro or imu\.accel\); "
+         r"got FogImu"),
+        ("to_sensor", None, np.ones(3), TypeError, r"^to_sensor: calib must be a "
+         r"TriadCalibration .*; got NoneType"),
+    ],
+)  # fmt: skip
+def test_triad_transforms_refuse_a_wrong_last_axis_or_calibration(imu, fn, calib, x, kind,
+                                                                   match):  # fmt: skip
+    """Audit: a (n, 2) or (n, 4) array raised JAX's dot_general error, a FogImu in place of
+    its gyro's calibration an AttributeError; now one line naming the function and field."""
+    c = {"gyro": imu.gyro, "accel": imu.accel, "imu": imu, None: None}[calib]
+    with pytest.raises(kind, match=match) as err:
+        getattr(vb, fn)(c, x)
+    assert "\n" not in str(err.value)

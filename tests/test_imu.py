@@ -782,3 +782,40 @@ def test_imu_arguments_off_the_paved_path_are_named(session, truth):
     rows = np.asarray(sections["x_p"])
     assert saturation(data, rows, noise_ranges=rows) == saturation(data, sections["x_p"])
     assert saturation(data, list(rows)) == saturation(data, sections["x_p"])
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "kind", "match"),
+    [
+        ("dtheta", np.nan, ValueError, r"^ImuModel.apply: dtheta must be finite; it has nan at "
+         r"index \(2, 1\)"),
+        ("dv", np.inf, ValueError, r"^ImuModel.apply: dv must be finite; it has inf"),
+        ("gyro_rate_error", np.nan, ValueError, r"^ImuModel.apply: gyro_rate_error must be "
+         r"finite; it has nan"),
+        ("dtheta", "abc", TypeError, r"^ImuModel.apply: dtheta must be real numbers \(N, 3\) "
+         r"\[rad\]; got str 'abc'"),
+        ("dv", 1j, TypeError, r"^ImuModel.apply: dv must be real numbers \(N, 3\) \[m/s\]; got "
+         r"ndarray \(dtype complex128"),
+        ("dtheta", True, TypeError, r"^ImuModel.apply: dtheta must be .*dtype bool"),
+    ],
+)  # fmt: skip
+def test_imu_model_apply_refuses_nan_or_non_real_increments(field, value, kind, match):
+    """Audit: a NaN or inf increment (or extra rate error) came out as NaN measurements after
+    the whole eager noise model ran; complex and bool increments passed. Now one line,
+    before any work (a traced increment passes unchecked)."""
+    from hrgjax.ins.sensors import ImuModel
+
+    args = {"dtheta": np.zeros((5, 3)), "dv": np.zeros((5, 3)), "gyro_rate_error": None}
+    if isinstance(value, str):
+        args[field] = value
+    elif isinstance(value, bool):
+        args[field] = np.zeros((5, 3), bool)
+    elif isinstance(value, complex):
+        args[field] = np.zeros((5, 3)) + value
+    else:
+        args[field] = np.zeros((5, 3))
+        args[field][2, 1] = value
+    with pytest.raises(kind, match=match) as err:
+        ImuModel(gyro_bias=1e-6).apply(jax.random.key(0), args["dtheta"], args["dv"], 0.01,
+                                       args["gyro_rate_error"])  # fmt: skip
+    assert "\n" not in str(err.value)

@@ -264,3 +264,23 @@ def test_builders_sweep_and_concat_refuse_nonsense_in_one_line():
         with pytest.raises((ValueError, TypeError), match=match) as err:
             call()
         assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("t", "kind", "got"),
+    [("a", TypeError, "str 'a'"), (None, TypeError, "None"), (True, TypeError, "bool True"),
+     (1 + 2j, TypeError, r"complex \(1\+2j\)"), (np.nan, ValueError, "nan"),
+     (np.array([1.0, np.inf]), ValueError, "inf")],
+)  # fmt: skip
+def test_rate_at_refuses_a_time_that_is_not_finite_real_numbers(t, kind, got):
+    """Audit: `rate_at("a")` raised JAX's abstract-array error, `rate_at(None)` a NoneType
+    operand error, NaN returned NaN and True was read as t = 1 s; a list of times, which
+    raised, is now read as an array (and a traced t is not checked)."""
+    with pytest.raises(kind, match=rf"^Profile.rate_at: t must be finite real numbers "
+                                   rf"\(times \[s\]\); got {got}") as err:  # fmt: skip
+        RAMP.rate_at(t)
+    assert "\n" not in str(err.value)
+    np.testing.assert_array_equal(
+        RAMP.rate_at([100.0, 300.0]), RAMP.rate_at(np.array([100.0, 300.0]))
+    )
+    assert float(jax.jit(lambda t: RAMP.rate_at(t))(100.0)) == float(RAMP.rate_at(100.0))

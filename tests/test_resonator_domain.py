@@ -140,3 +140,30 @@ def test_bad_parts_units_and_ranges_are_refused_in_one_line():
     with pytest.raises(ValueError, match=r"^run_plan: 1 runs hold 6e\+07 output samples"):
         hg.plausible.check_size("run_plan", jnp.asarray(6e7), 1)
     hg.presets.tvg3_like().at(jnp.array([-100.0, 150.0]))  # its laws hold over the range
+
+
+def test_reduced_rate_and_a_law_refuse_bad_arguments_before_any_work():
+    """Audit: `reduced_rate(g, nan, θ)` returned NaN after seconds of eager work, a str
+    angle raised NumPy's conversion error, a str gyro an AttributeError; a
+    `TemperatureLaw` evaluated at "20" read it as 20 °C. (`TemperatureLaw("20")` was already
+    refused at construction.)"""
+    g = _with_split(0.2).at(20.0)
+    for args, kind, match in (
+        ((g, np.nan, 0.3), ValueError, r"^reduced_rate: omega_in must be finite real numbers "
+         r"\(the input rate \[rad/s\]\); got nan"),
+        ((g, 0.1, np.inf), ValueError, r"^reduced_rate: theta must be finite real numbers "
+         r"\(the electrical wave angle \[rad\]\); got inf"),
+        ((g, "a", 0.3), TypeError, r"^reduced_rate: omega_in must be .*; got str 'a'"),
+        ((g, 0.1, None), TypeError, r"^reduced_rate: theta must be .*; got None"),
+        (("g", 0.1, 0.3), TypeError, r"^reduced_rate: g must be a hrgjax.Gyro at its "
+         r"temperature \(gyro.at\(T\)\); got str"),
+    ):  # fmt: skip
+        with pytest.raises(kind, match=match) as err:
+            reduced_rate(*args)
+        assert "\n" not in str(err.value)
+    law = hg.TemperatureLaw(1.0, 0.1)
+    for temp, got in (("20", "str '20'"), (None, "None"), (True, "bool True")):
+        with pytest.raises(TypeError, match=rf"^TemperatureLaw: temperature_c must be real "
+                                            rf"numbers \[°C\]; got {got}"):  # fmt: skip
+            law(temp)
+    assert float(law(25.0)) == float(law(np.float64(25.0), xp=np)) == 1.5

@@ -43,7 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import concrete_value, finite_number
+from .._checks import concrete_value, finite_number, numeric_problem
 from .._compiled import fused
 from .._x64 import require_x64
 from ..ins.constants import WGS84, earth_rate_ned
@@ -368,14 +368,40 @@ def error_samples(imu: FogImu, vibrating: VibrationRecord, static: VibrationReco
     return to_body(imu.gyro, d)
 
 
-@fused
+def _check_triad(fn: str, calib, name: str, x, frame: str) -> None:
+    """Refuse, in one line naming `fn`, a `calib` that is not a `TriadCalibration` or an `x`
+    that is not real numbers of shape (..., 3) (a (n, 2) or (n, 4) array raised JAX's
+    dot_general error; a FogImu raised an AttributeError)."""
+    if not isinstance(calib, TriadCalibration):
+        raise TypeError(f"{fn}: calib must be a TriadCalibration (e.g. imu.gyro or imu.accel); "
+                        f"got {type(calib).__name__}")  # fmt: skip
+    form = f"{frame} values of shape (..., 3)"
+    problem = numeric_problem(x)
+    if problem is not None:
+        raise TypeError(f"{fn}: {name} must be {form}; got {problem}")
+    shape = tuple(np.shape(x))
+    if len(shape) < 1 or shape[-1] != 3:
+        raise ValueError(f"{fn}: {name} must be {form}; got shape {shape}")
+
+
 def to_body(calib: TriadCalibration, s):
     """Sensor-axis increments `s` (..., 3) → body frame by the linear part of the triad model,
     (diag(1+k)(I+E))⁻¹ (no bias: for differences and errors)."""
-    return jnp.asarray(s) @ jnp.linalg.inv(calib.matrix).T
+    _check_triad("to_body", calib, "s", s, "sensor-axis")
+    return _to_body(calib, s)
 
 
 @fused
+def _to_body(calib, s):
+    return jnp.asarray(s) @ jnp.linalg.inv(calib.matrix).T
+
+
 def to_sensor(calib: TriadCalibration, b):
     """Body-frame errors `b` (..., 3) → sensor axes, diag(1+k)(I+E) b (no bias)."""
+    _check_triad("to_sensor", calib, "b", b, "body-frame")
+    return _to_sensor(calib, b)
+
+
+@fused
+def _to_sensor(calib, b):
     return jnp.asarray(b) @ calib.matrix.T

@@ -40,7 +40,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import check_key, concrete_value, is_concrete, vec3
+from .._checks import (
+    check_finite_host,
+    check_key,
+    check_numbers,
+    concrete_value,
+    is_concrete,
+    vec3,
+)
 from .._compiled import tracing_callback_free
 from ..units import DEG_PER_H, DEG_PER_SQRT_H, G0
 
@@ -215,9 +222,11 @@ class ImuModel(eqx.Module):
         the same draws either way).
 
         **Raises:** `ValueError` for a `dt` that is not a finite interval > 0 s, increments
-        not both (N, 3), a `return_bias` other than those, or a `gyro_rate_error`
-        that is not (N, 3) [rad/s]. Fields traced
-        inside `jit`, `vmap` or `hg.sweep` are checked here, at run time
+        not both (N, 3), a `return_bias` other than those, a `gyro_rate_error` that is not
+        (N, 3) [rad/s], or a NaN or inf in a concrete `dtheta`, `dv` or `gyro_rate_error`
+        (a traced one passes unchecked); `TypeError` for any of them that is not real
+        numbers (a str, a bool or complex array). Fields traced inside `jit`, `vmap` or
+        `hg.sweep` are checked here, at run time
         ([`traced_checks`][hrgjax.ins.sensors.traced_checks]): the first rule broken raises
         its one line (`hg.sweep`: "sweep: at one or more grid points, ImuModel.gyro_bias
         [rad/s] is outside the plausible range -0.75 … 0.75 rad/s …")."""
@@ -234,6 +243,10 @@ class ImuModel(eqx.Module):
                     f"(a Python value, not traced); got {return_bias!r}"
                 )
             return_bias = bool(flag)
+        for name, x, unit in (("dtheta", dtheta, "rad"), ("dv", dv, "m/s"),
+                              ("gyro_rate_error", gyro_rate_error, "rad/s")):  # fmt: skip
+            if x is not None or name != "gyro_rate_error":
+                check_numbers(f"ImuModel.apply: {name}", x, f"real numbers (N, 3) [{unit}]")
         shape = jnp.shape(dtheta)
         if len(shape) != 2 or shape[-1] != 3 or jnp.shape(dv) != shape:
             raise ValueError(
@@ -259,6 +272,9 @@ class ImuModel(eqx.Module):
                     f"ImuModel.apply: gyro_rate_error must be ({shape[0]}, 3) [rad/s], each "
                     f"interval's mean rate error; got shape {es}"
                 )
+        for name, x in (("dtheta", dtheta), ("dv", dv), ("gyro_rate_error", gyro_rate_error)):
+            if x is not None:  # concrete (or an eager grad's) values only: NaN gave NaN out
+                check_finite_host(f"ImuModel.apply: {name}", x)
         imu = _with_traced_checks(self)
         n = shape[0]
         kg, ka = jax.random.split(key)

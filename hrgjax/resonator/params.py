@@ -91,7 +91,12 @@ class TemperatureLaw(eqx.Module):
 
     def __call__(self, temperature_c, xp=jnp):
         """Evaluate the law at `temperature_c` [°C] (with `xp=np`, on the host: concrete
-        coefficients, NumPy arrays out)."""
+        coefficients, NumPy arrays out). A str, None, bool or complex is refused in one line
+        (a str "20" was read as 20 °C); only the type is read (no check of a traced value)."""
+        if (problem := numeric_problem(temperature_c)) is not None:
+            raise TypeError(
+                f"TemperatureLaw: temperature_c must be real numbers [°C]; got {problem}"
+            )
         if xp is jnp:
             dt = jnp.asarray(temperature_c, dtype=float) - self.t_ref
             return (self.p0 + self.p1 * dt + self.p2 * dt**2) * jnp.exp(self.lam * dt)

@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import check_values, is_concrete
 from .._linalg import solve
 from .averaged import loop_field
 from .control import steady_integrators
@@ -277,6 +277,17 @@ def slow_manifold(g, omega_in, theta):
 
 
 def reduced_rate(g, omega_in, theta):
-    """Wave-angle rate θ̇ [rad/s] with the loops on their slow manifold (`slow_manifold`)."""
+    """Wave-angle rate θ̇ [rad/s] with the loops on their slow manifold (`slow_manifold`).
+
+    **Raises:** `TypeError` for a `g` that is not a gyro or an `omega_in` or `theta` that is
+    not real numbers, `ValueError` for one that is not finite where its value is known on the
+    host (a traced one passes: NaN gave NaN after seconds of eager work)."""
+    if not (hasattr(g, "control") and hasattr(g, "resonator")):
+        raise TypeError(f"reduced_rate: g must be a hrgjax.Gyro at its temperature (gyro.at(T)); "
+                        f"got {type(g).__name__}")  # fmt: skip
+    omega_in = check_values("reduced_rate: omega_in", omega_in, np.isfinite,
+                            "finite real numbers (the input rate [rad/s])")  # fmt: skip
+    theta = check_values("reduced_rate: theta", theta, np.isfinite,
+                         "finite real numbers (the electrical wave angle [rad])")  # fmt: skip
     theta = jnp.asarray(theta, dtype=jnp.result_type(float))
     return _fields(g, omega_in, slow_manifold(g, omega_in, theta), theta)[1]
