@@ -437,3 +437,144 @@ def test_a_valid_qd_stack_is_checked_on_the_device():
             sd.covariance(phi, qd.at[3, 0, 1].set(1e-9), 1e-6 * eye)
     assert seen == ["p0", "qd"]  # the valid stack: p0 only; a bad one: the host check names it
     np.testing.assert_allclose(np.diagonal(ps[-1]), 1e-6 + 10 * 1e-8, rtol=1e-12)
+
+
+# -- audit (session 27): alignment, the PSINS loader, trajectories, the filter and flights ---
+
+
+def _still_log(n=200, lat=45.0):
+    """A stationary, level, north-facing record at 1 Hz (no JAX work: increments by hand)."""
+    la = np.radians(lat)
+    w = C.OMEGA_IE * np.array([np.cos(la), 0.0, -np.sin(la)])
+    from hrgjax.ins import alignment as al
+
+    rows = np.ones((n, 1))
+    return al.ImuLog(np.arange(1.0, n + 1), rows * w, rows * [0.0, 0.0, -9.806], la)
+
+
+def _psins(tmp_path, name, header2="34 108 380 0 10 9.8", units="1 1 1 1 1 1", rows=2,
+           row="1 2 3 4 5 6"):  # fmt: skip
+    path = tmp_path / name
+    path.write_text(f"0 0 150 0 0 0\n{header2}\n{units}\n" + f"{row}\n" * rows)
+    return path
+
+
+def test_off_path_inputs_of_alignment_trajectories_filter_and_flights_are_one_line(tmp_path):
+    """Audit (session 27): each of these returned a number (a negative or zero step_s, noise
+    or velocity noise, a non-rotation c0, a NaN time stamp, a 2-D t, a 1-sample log, a PSINS
+    g or unit of 0, a negative speed, a pitch beyond 90°, fixes for another dt or in
+    degrees, runs=True), a NaN attitude (a NaN noise, c0 or jacobian), or failed deep in
+    Python, NumPy or JAX (an infinite coarse_s, a negative start_s, a c0 or attitude σ of
+    another shape, a non-ImuLog, fixes or settings of the wrong type, a bad key). Each is
+    refused in one line before anything compiles."""
+    from hrgjax.ins import alignment as al
+    from hrgjax.ins import ekf, flights, gnss, motion, sensors
+    from hrgjax.ins import mechanization as me
+
+    log, eye, t3 = _still_log(), np.eye(3), np.arange(1.0, 4.0)
+    z3 = np.zeros((3, 3))
+    one = me.NavState(jnp.asarray(0.5), jnp.asarray(0.0), jnp.asarray(0.0), jnp.zeros(3),
+                      jnp.array([1.0, 0.0, 0.0, 0.0]))  # fmt: skip
+    many = jax.tree_util.tree_map(lambda a: jnp.stack([a] * 5), one)
+    truth = motion.Truth(many, jnp.zeros((4, 3)), jnp.zeros((4, 3)), jnp.zeros((5, 3)),
+                         jnp.ones(5, bool), 0.1)  # fmt: skip
+    idx = np.arange(10, 41, 10)
+    fix = dict(t=idx * 0.1, index=idx, lat=np.full(4, 0.5), lon=np.zeros(4), h=np.zeros(4),
+               v_ned=np.zeros((4, 3)), valid=np.ones(4, bool))  # fmt: skip
+    fixes = lambda **kw: gnss.GnssData(**{**fix, **kw})  # noqa: E731
+    imu, rx = sensors.preset("tactical"), gnss.Gnss()
+    settings, z40, key = ekf.LooselyCoupled(imu, rx), np.zeros((40, 3)), jax.random.key(0)
+    lc = lambda f, dt=0.1, s=settings: ekf.loosely_coupled(s, one, z40, z40, dt, f)  # noqa: E731
+    fly = lambda **kw: flights.fly(truth, imu, settings, **{"key": key, **kw})  # noqa: E731
+    rot = r"^fine_align: c0 must be a \(3, 3\) body-to-NED rotation matrix; "
+    cases = [
+        (lambda: al.ImuLog(t3[:, None], z3, z3, 0.5), r"^ImuLog.t must be \(N,\) times .*got shape \(3, 1\)"),
+        (lambda: al.ImuLog(t3[:1], z3[:1], z3[:1], 0.5), r"^ImuLog.t must be \(N,\) times \[s\], N >= 2"),
+        (lambda: al.ImuLog(np.array([1.0, np.nan, 3.0]), z3, z3, 0.5), r"^ImuLog.t must be finite \(row 1\)"),
+        (lambda: al.ImuLog("abc", z3, z3, 0.5), r"^ImuLog.t must be \(N,\) times .*; got str 'abc'"),
+        (lambda: al.ImuLog(t3, [[0, 0, 0], [0, 0], [0, 0, 0]], z3, 0.5), r"^ImuLog.dtheta .*got ragged list"),
+        (lambda: al.ImuLog(t3, z3 + 0j, z3, 0.5), r"^ImuLog.dtheta must be \(N, 3\) .*complex128"),
+        (lambda: al.ImuLog(t3, z3, z3, 0.5, header_attitude_deg=(1.0, 2.0)),
+         r"^ImuLog.header_attitude_deg must be None or \(pitch, roll, heading\)"),
+        (lambda: al.align(log, coarse_s=np.inf), r"^coarse_s must be a finite number > 0 s; got inf"),
+        (lambda: al.align(log, coarse_s="60"), r"^coarse_s must be a single real number \[s\]"),
+        (lambda: al.align(log, coarse_s=1e-5), r"^coarse_s = 1e-05 s is under half the sample int"),
+        (lambda: al.align(log, step_s=-1.0), r"^align: step_s must be a finite number > 0 \[s\]; got -1.0"),
+        (lambda: al.align(log, arw=np.nan), r"^align: arw must be a finite number >= 0 \[rad/√s\]; got nan"),
+        (lambda: al.align(log, velocity_noise=0.0), r"^align: velocity_noise must be a finite number > 0"),
+        (lambda: al.align(log, attitude_std_deg=(1.0, 2.0)), r"^align: attitude_std_deg must be \(level, "),
+        (lambda: al.align(log, start_s=10.0), r"^align: unknown option 'start_s'; fine_kw are step_s"),
+        (lambda: al.align((t3, z3, z3)), r"^align: log must be an ImuLog"),
+        (lambda: al.fine_align(log, np.eye(2)), rot + r"got ndarray of shape \(2, 2\)"),
+        (lambda: al.fine_align(log, 2 * eye), rot + r"\|CᵀC − I\| reaches 3"),
+        (lambda: al.fine_align(log, -eye), rot + r"det C = -1: a reflection"),
+        (lambda: al.fine_align(log, eye * np.nan), r"^fine_align: c0 must be finite"),
+        (lambda: al.fine_align(log, eye, step_s=0.3), r"^fine_align: step_s = 0.3 s is under half"),
+        (lambda: al.fine_align(log, eye, start_s=-50.0), r"^fine_align: start_s must be a finite num"),
+        (lambda: al.fine_align(log, eye, start_s=1e4), r"^fine_align: the log \(200 s\) holds fewer than 2 steps .* start_s = 10000 s"),
+        (lambda: al.fine_align(log, eye, gyro_bias_std=-1e-7), r"^fine_align: gyro_bias_std must be a finite"),
+        (lambda: al.fine_align(log, eye, arw=np.array([1e-6, 2e-6])), r"^fine_align: arw must be a single real number"),
+        (lambda: al.fine_align(log, eye, start_bias_jacobian=np.full((3, 6), np.nan)),
+         r"^fine_align: start_bias_jacobian must be finite"),
+        (lambda: al.load_psins(None), r"^load_psins: path must be a file path"),
+        (lambda: al.load_psins(_psins(tmp_path, "g.imu", header2="34 108 380 0 10 0")),
+         r"g.imu: the header's g \[m/s²\] \(line 2, field 6\) must be > 0; got 0$"),
+        (lambda: al.load_psins(_psins(tmp_path, "u.imu", units="0 1 1 1 1 1")),
+         r"u.imu: the header's gyro increment unit \[arcsec\] \(line 3, field 1\) must be > 0"),
+        (lambda: al.load_psins(_psins(tmp_path, "lon.imu", header2="34 500 380 0 10 9.8")),
+         r"lon.imu: the header's longitude \[°\] \(line 2, field 2\) must be in \[-180, 360\]"),
+        (lambda: al.load_psins(_psins(tmp_path, "one.imu", rows=1)), r"one.imu: a PSINS log needs at least 2 samples; got 1$"),
+        (lambda: al.load_psins(_psins(tmp_path, "nan.imu", row="1 nan 3 4 5 6")),
+         r"nan.imu: sample row 0, field 2 \(gyro increment forward\) must be a finite integer"),
+        (lambda: tr.constant_velocity(45.0, speed=-5.0, duration_s=10.0), r"^constant_velocity: speed must be >= 0 m/s"),
+        (lambda: tr.stationary(45.0, pitch_deg=95.0, duration_s=10.0), r"^stationary: pitch_deg must be in \[-90, 90\] °"),
+        (lambda: tr.stationary(45.0, pitch_deg=-91.0, duration_s=10.0), r"^stationary: pitch_deg must be in \[-90, 90\]"),
+        (lambda: tr.stationary(45.0, duration_s="10"), r"^duration_s must be a single real number \[s\]; got str"),
+        (lambda: tr.stationary(45.0, duration_s=10.0, dt=np.array([1.0, 2.0])), r"^dt must be a single real number"),
+        (lambda: tr.constant_velocity(45.0, duration_s=10.0, earth="wgs84"), r"^earth must be an Earth model"),
+        (lambda: ekf.LooselyCoupled("imu", rx), r"^LooselyCoupled.imu must be of type ImuModel; got 'imu'"),
+        (lambda: ekf.LooselyCoupled(imu, None), r"^LooselyCoupled.gnss must be of type Gnss; got None"),
+        (lambda: ekf.LooselyCoupled(imu, rx, earth="wgs84"), r"^LooselyCoupled.earth must be of type Earth"),
+        (lambda: ekf.LooselyCoupled(imu, rx, gauss_markov="no"), r"^LooselyCoupled.gauss_markov must be True or False"),
+        (lambda: ekf.LooselyCoupled(imu, rx, position_sigma="abc"), r"^LooselyCoupled.position_sigma must be > 0 .*; got str"),
+        (lambda: ekf.LooselyCoupled(imu, rx, position_sigma=np.ones((1, 3))),
+         r"^LooselyCoupled.position_sigma must be > 0 \(1 or 3 values\); got \[\[1.0, 1.0, 1.0\]\]$"),
+        (lambda: lc(fixes(), s="x"), r"^settings must be a LooselyCoupled; got 'x'"),
+        (lambda: lc("fixes"), r"^fixes must be a GnssData \(gnss.measure\); got 'fixes'"),
+        (lambda: lc(fixes(lon=np.zeros(2))), r"^fixes.lon must be \(4,\) for the 4 fixes"),
+        (lambda: lc(fixes(v_ned=np.zeros((4, 2)))), r"^fixes.v_ned must be \(4, 3\) for the 4 fixes"),
+        (lambda: lc(fixes(valid=np.full(4, 0.5))), r"^fixes.valid must be \(4,\) bools for the 4 fixes"),
+        (lambda: lc(fixes(), dt=0.2), r"^fixes.t must be fixes.index × dt = 0.2 s: fixes made for another"),
+        (lambda: lc(fixes(lat=np.array([0.5, np.nan, 0.5, 0.5]))), r"^fixes.lat \(a valid fix\) must be finite"),
+        (lambda: lc(fixes(lat=np.full(4, 40.0))), r"^fixes.lat = 40 rad is beyond ±π/2"),
+        (lambda: flights.fly("truth", imu, settings, key=key), r"^fly: truth must be of type Truth"),
+        (lambda: fly(key=0), r"^fly: key must be one JAX PRNG key, e.g. jax.random.key\(0\); got 0$"),
+        (lambda: fly(runs=True), r"^fly: runs must be a whole number >= 1; got True"),
+        (lambda: fly(gyro_rate_error=np.full((4, 3), np.nan)), r"^fly: gyro_rate_error must be finite"),
+        (lambda: fly(gyro_rate_error="x"), r"^fly: gyro_rate_error must be \(N, 3\) or \(3,\)"),
+    ]  # fmt: skip
+    for call, message in cases:
+        with pytest.raises((ValueError, TypeError), match=message) as err:
+            call()
+        assert "\n" not in str(err.value), message
+
+
+def test_valid_inputs_pass_the_session_27_checks_as_before():
+    """What the new checks must let through: a log built under `jit` (its values unchecked,
+    as a traced log's always were) or from lists, NaN in a fix that is not valid, pitch ±90°,
+    a speed of 0."""
+    from hrgjax.ins import alignment as al
+    from hrgjax.ins import ekf, gnss
+
+    t, z = np.arange(1.0, 4.0), np.zeros((3, 3))
+    total = jax.jit(lambda a: al.ImuLog(t, a, z, 0.5).dtheta.sum())(jnp.ones((3, 3)))
+    assert float(total) == 9.0  # was a TracerArrayConversionError
+    assert al.ImuLog([1.0, 2.0, 3.0], [[0.0, 0.0, 0.0]] * 3, z, 0.5).t.shape == (3,)
+    idx = np.arange(10, 41, 10)
+    lat = np.array([0.5, np.nan, 0.5, 0.5])  # an outage's fix: not used
+    fixes = gnss.GnssData(idx * 0.1, idx, lat, np.zeros(4), np.zeros(4), np.zeros((4, 3)),
+                          np.array([True, False, True, True]))  # fmt: skip
+    ekf.check_fixes(fixes, 0.1)
+    for pitch in (90.0, -90.0):
+        assert tr.stationary(45.0, pitch_deg=pitch, duration_s=10.0).t.shape == (11,)
+    assert tr.constant_velocity(45.0, speed=0.0, duration_s=10.0).t.shape == (11,)

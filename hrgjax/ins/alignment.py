@@ -42,12 +42,20 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaincc
 
-from .._checks import check_finite_host, host_value
+from .._checks import check_finite_host, check_number, host_value
 from .._compiled import device, fused
 from .._x64 import require_x64
 from ..units import DEG, DEG_PER_H
 from .constants import OMEGA_IE, WGS84, check_latitude_radians, earth_rate_ned
-from .fine_alignment import FINE_DEFAULTS, check_gyrocompass_latitude, euler_std_deg, fine_run
+from .fine_alignment import (
+    FINE_DEFAULTS,
+    check_fine_options,
+    check_gyrocompass_latitude,
+    check_log,
+    check_step,
+    euler_std_deg,
+    fine_run,
+)
 from .fine_alignment import euler_deg as euler_deg
 from .fine_alignment import fine_align as fine_align
 from .imu_log import PSINS_FIELDS as PSINS_FIELDS
@@ -86,11 +94,15 @@ def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None
 
     **Raises:** `ValueError`, one line, naming the quantity, its source and what was expected."""
     fields = {**_LOG_FIELDS, **(fields or {})}
-    if not coarse_s > 0:
-        raise ValueError(f"{where}{coarse_name} must be > 0 s; got {coarse_s}")
+    check_number(f"{where}{coarse_name}", coarse_s, "s")
+    if not (math.isfinite(coarse_s) and coarse_s > 0):
+        raise ValueError(f"{where}{coarse_name} must be a finite number > 0 s; got {coarse_s}")
     dt, size = log.dt, int(log.t.shape[0])
     n = int(round(coarse_s / dt))
-    if n > size or n < 1:
+    if n < 1:
+        raise ValueError(f"{where}{coarse_name} = {coarse_s:g} s is under half the sample "
+                         f"interval ({dt:.4g} s): the coarse span needs a sample")  # fmt: skip
+    if n > size:
         raise ValueError(
             f"{where}the record spans {size * dt:.4g} s ({size} samples at {dt * 1e3:.4g} ms), "
             f"shorter than {coarse_name} = {coarse_s:g} s: check {fields['interval']}"
@@ -408,11 +420,21 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
     **Warns:** `AlignmentWarning` where the heading σ is not small (`END_HEADING_STD_DEG`,
     `START_HEADING_STD_DEG`), naming the cure. **Raises:** `ValueError` for a log not 2 steps
     longer than `coarse_s`, not a stationary record
-    ([`check_stationary`][hrgjax.ins.alignment.check_stationary]), or within 1° of a pole."""
+    ([`check_stationary`][hrgjax.ins.alignment.check_stationary]), or within 1° of a pole;
+    `TypeError` for a `fine_kw` that `fine_align` does not take (`start_s` among them: the
+    fine stage starts where `coarse_s` ends); as `fine_align` for the options' values."""
     require_x64("ins.alignment.align")
+    check_log("align", log)
+    unknown = sorted(set(fine_kw) - {*FINE_DEFAULTS, "step_s", "start_bias_jacobian"})
+    if unknown:  # start_s among them: the fine stage starts where the coarse span ends
+        raise TypeError(f"align: unknown option {unknown[0]!r}; fine_kw are step_s, "
+                        f"start_bias_jacobian, {', '.join(FINE_DEFAULTS)} (fine_align's but "
+                        "start_s: the fine stage starts where coarse_s ends)")  # fmt: skip
+    check_fine_options("align", **fine_kw)
     check_gyrocompass_latitude(log.lat)
     check_stationary(log, coarse_s, coarse_name=coarse_name)
     dt, step = log.dt, fine_kw.get("step_s", 1.0)
+    check_step("align", step, dt)
     n = int(round(coarse_s / dt))
     if (log.t.shape[0] - n) // max(1, int(round(step / dt))) < 2:
         raise ValueError(f"the record ({log.t.shape[0] * dt:.4g} s) needs 2 fine steps "

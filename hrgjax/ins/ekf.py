@@ -67,8 +67,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import kalman
-from .._checks import check_finite_host, finite_number, is_concrete
+from .. import _checks, kalman
+from .._checks import check_finite_host, finite_number, host_value, is_concrete
 from .._compiled import Check, program
 from .._linalg import cho_solve, cholesky, whiten
 from .._x64 import require_x64
@@ -77,7 +77,7 @@ from .consistency import nees as nees
 from .consistency import nees_band as nees_band
 from .consistency import nis_check
 from .consistency import whitened_errors as whitened_errors
-from .constants import WGS84, Earth
+from .constants import WGS84, Earth, check_latitude_radians
 from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
 from .mechanization import (
     UNROLL,
@@ -148,6 +148,11 @@ class FilterResult(eqx.Module):
         return nis_check(self.nis, self.innovation_dim, level, early)
 
 
+def _sigma(kind: str):  # LooselyCoupled.{kind}_sigma's converter: non-numbers in one line
+    return lambda x: jnp.asarray(_checks.check_numbers(f"LooselyCoupled.{kind}_sigma", x,
+                                                       "> 0 (1 or 3 values)"))  # fmt: skip
+
+
 class LooselyCoupled(eqx.Module):
     """Filter settings (module docstring).
 
@@ -163,21 +168,27 @@ class LooselyCoupled(eqx.Module):
 
     imu: ImuModel
     gnss: Gnss
-    position_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=(3.0, 3.0, 5.0))
-    velocity_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=(0.1, 0.1, 0.1))
-    attitude_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=(1e-3, 1e-3, 5e-3))
+    position_sigma: jax.Array = eqx.field(converter=_sigma("position"), default=(3.0, 3.0, 5.0))
+    velocity_sigma: jax.Array = eqx.field(converter=_sigma("velocity"), default=(0.1, 0.1, 0.1))
+    attitude_sigma: jax.Array = eqx.field(converter=_sigma("attitude"), default=(1e-3, 1e-3, 5e-3))
     scale_factors: bool = eqx.field(static=True, default=False)
     earth: Earth = eqx.field(static=True, default=WGS84)
     gauss_markov: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
+        for name, kind in (("imu", ImuModel), ("gnss", Gnss), ("earth", Earth)):
+            if not isinstance(v := getattr(self, name), kind):
+                raise TypeError(f"LooselyCoupled.{name} must be of type {kind.__name__}; got "
+                                f"{_checks.describe(v)}")  # fmt: skip
+        for name in ("scale_factors", "gauss_markov"):
+            _checks.check_flag(f"LooselyCoupled.{name}", getattr(self, name))
         for name in ("position_sigma", "velocity_sigma", "attitude_sigma"):
-            v = getattr(self, name)
-            if not is_concrete(v):
+            if (v := host_value(getattr(self, name))) is None:
                 continue
-            v = np.asarray(v)
-            if v.size not in (1, 3) or not np.all(np.isfinite(v) & (v > 0)):
-                raise ValueError(f"LooselyCoupled.{name} must be > 0 (1 or 3 values); got {v}")
+            if v.shape not in ((), (1,), (3,)) or not np.all(np.isfinite(v) & (v > 0)):
+                raise ValueError(
+                    f"LooselyCoupled.{name} must be > 0 (1 or 3 values); got {v.tolist()}"
+                )
             if name == "attitude_sigma" and np.any(v > MAX_ATTITUDE_SIGMA):
                 raise ValueError(
                     f"LooselyCoupled.attitude_sigma {v} rad: above {MAX_ATTITUDE_SIGMA} rad the "
@@ -412,6 +423,26 @@ def feedback(nav: NavState, x):
     )
 
 
+def check_fixes(fixes, dt) -> None:
+    """Refuse in one line `fixes` not a `GnssData` of (M,) fields (`v_ned` (M, 3)) at `dt`."""
+    if not isinstance(fixes, GnssData):
+        raise TypeError(f"fixes must be a GnssData (gnss.measure); got {_checks.describe(fixes)}")
+    m = np.shape(fixes.lat)[0] if np.ndim(fixes.lat) == 1 else "M"
+    for name in ("t", "index", "lat", "lon", "h", "v_ned", "valid"):
+        x, want = getattr(fixes, name), (m, 3) if name == "v_ned" else (m,)
+        if np.shape(x) != want or (name == "valid" and getattr(x, "dtype", None) != np.bool_):
+            raise ValueError(f"fixes.{name} must be {want}{' bools' * (name == 'valid')} for the "
+                             f"{m} fixes; got {_checks.describe(x)}")  # fmt: skip
+    t, i, d, ok = (host_value(x) for x in (fixes.t, fixes.index, dt, fixes.valid))
+    if not (t is None or i is None or d is None or np.allclose(t, i * d, rtol=1e-9, atol=0)):
+        raise ValueError(f"fixes.t must be fixes.index × dt = {float(d):g} s: fixes made for "
+                         "another IMU interval?")  # fmt: skip
+    for name in ("lat", "lon", "h", "v_ned"):
+        if (x := host_value(getattr(fixes, name))) is not None and ok is not None:
+            check_finite_host(f"fixes.{name} (a valid fix)", x[ok.astype(bool)])
+    check_latitude_radians("fixes.lat", fixes.lat)
+
+
 def loosely_coupled(
     settings: LooselyCoupled, initial: NavState, dtheta, dv, dt: float, fixes: GnssData
 ) -> FilterResult:
@@ -421,8 +452,11 @@ def loosely_coupled(
     starting at m). **Returns** a [`FilterResult`][hrgjax.ins.ekf.FilterResult] at the start
     and every fix epoch."""
     require_x64("ins.loosely_coupled")
+    if not isinstance(settings, LooselyCoupled):
+        raise TypeError(f"settings must be a LooselyCoupled; got {_checks.describe(settings)}")
     check_state(initial)
     dtheta, dv = check_increments(dtheta, dv, dt)
+    check_fixes(fixes, dt)
     n, blocks = dtheta.shape[0], fixes.lat.shape[0]
     m = n // blocks if blocks else 0
     index = fixes.index

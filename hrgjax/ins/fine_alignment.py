@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _checks
 from .._compiled import bucket_size, device, fused
 from ..kalman import Gaussian, update, van_loan
 from ..units import DEG, DEG_PER_H
@@ -53,6 +54,13 @@ navigation-grade gyro-bias σ `gyro_bias_std` [rad/s] (0.05 °/h), `accel_bias_s
 and the start attitude σ `attitude_std_deg` (level, level, heading) [°] beyond the biases."""
 
 
+def check_log(where: str, log) -> None:
+    """A one-line `TypeError` naming `where` unless `log` is an `ImuLog`."""
+    if not isinstance(log, ImuLog):
+        raise TypeError(f"{where}: log must be an ImuLog (hrgjax.ins.alignment.ImuLog, or "
+                        f"load_psins(path)); got {_checks.describe(log)}")  # fmt: skip
+
+
 def check_gyrocompass_latitude(lat: float) -> None:
     """Refuse |`lat`| [rad] beyond [`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG]:
     gyrocompassing is impossible at the poles.
@@ -64,6 +72,75 @@ def check_gyrocompass_latitude(lat: float) -> None:
             f"pole: gyrocompassing finds north from the horizontal Earth rate ω_ie·cos(lat), "
             f"which vanishes there; alignment needs |lat| <= {MAX_LAT_DEG:g}°"
         )
+
+
+ROTATION_TOL = 1e-6
+"""The largest |CᵀC − I| entry of a start attitude `c0` that `fine_align` takes as a rotation
+(float32 round-off is 1e-7); beyond it, or with det C < 0 (a reflection), it is refused: the
+filter turns `c0` and never makes it orthonormal again."""
+
+_NOISE = {
+    "arw": ("a finite number >= 0 [rad/√s]", _checks.FINITE_NONNEGATIVE),
+    "vrw": ("a finite number >= 0 [m/s/√s]", _checks.FINITE_NONNEGATIVE),
+    "velocity_noise": ("a finite number > 0 [m/s] (R = its square)", _checks.FINITE_POSITIVE),
+    "gyro_bias_std": ("a finite number >= 0 [rad/s]", _checks.FINITE_NONNEGATIVE),
+    "accel_bias_std": ("a finite number >= 0 [m/s²]", _checks.FINITE_NONNEGATIVE),
+}  # fmt: skip
+"""The forms and rules of `fine_align`'s noise options (`check_fine_options`)."""
+
+
+def check_fine_options(where: str, *, step_s=1.0, start_s=0.0,
+                       attitude_std_deg=FINE_DEFAULTS["attitude_std_deg"],
+                       start_bias_jacobian=None, **noise) -> None:  # fmt: skip
+    """Refuse, in one line naming `where` and the option, a `step_s` [s] not a finite number
+    > 0, a `start_s` [s] not one >= 0, a noise option (`arw`, `vrw`, `velocity_noise`,
+    `gyro_bias_std`, `accel_bias_std`: `FINE_DEFAULTS`) not one real number, or where
+    concrete not finite and >= 0 (`velocity_noise` > 0), an `attitude_std_deg` not 3 such
+    values [°], a `start_bias_jacobian` not numbers or with a NaN. Traced values pass
+    unchecked (`fine_align` is differentiable in them)."""
+    for name, x, ok in (("step_s", step_s, _checks.FINITE_POSITIVE),
+                        ("start_s", start_s, _checks.FINITE_NONNEGATIVE)):  # fmt: skip
+        form = f"a finite number {'> 0' if name == 'step_s' else '>= 0'} [s]"
+        _checks.check_number(f"{where}: {name}", x, "s")
+        _checks.check_values(f"{where}: {name}", x, ok, form)
+    for name, x in noise.items():
+        form, ok = _NOISE[name]
+        _checks.check_number(f"{where}: {name}", x)
+        _checks.check_values(f"{where}: {name}", x, ok, form)
+    form = "(level, level, heading) [°], 3 finite numbers >= 0"
+    _checks.check_numbers(f"{where}: attitude_std_deg", attitude_std_deg, form, shape=(3,))
+    _checks.check_values(f"{where}: attitude_std_deg", attitude_std_deg,
+                         _checks.FINITE_NONNEGATIVE, form)  # fmt: skip
+    if start_bias_jacobian is not None:
+        name = f"{where}: start_bias_jacobian"
+        _checks.check_numbers(name, start_bias_jacobian, "(3, 6) [rad per (rad/s, m/s²)]")
+        _checks.check_finite_host(name, start_bias_jacobian)
+
+
+def check_step(where: str, step_s: float, dt: float) -> None:
+    """A one-line `ValueError` naming `where` for a `step_s` [s] under half the log's sample
+    interval `dt` [s]: a filter step sums whole samples (it ran one sample a step)."""
+    if round(step_s / dt) < 1:
+        raise ValueError(f"{where}: step_s = {step_s:g} s is under half the log's sample "
+                         f"interval ({dt:.4g} s): a filter step sums whole samples")  # fmt: skip
+
+
+def check_start_attitude(where: str, c0) -> None:
+    """Refuse, in one line naming `where`, a start attitude `c0` that is not a (3, 3)
+    body-to-NED rotation matrix: not numbers, another shape, where concrete a NaN, |CᵀC − I|
+    beyond `ROTATION_TOL` or det C < 0."""
+    form = "a (3, 3) body-to-NED rotation matrix"
+    _checks.check_numbers(f"{where}: c0", c0, form, shape=(3, 3))
+    _checks.check_finite_host(f"{where}: c0", c0)
+    c = _checks.host_value(c0)
+    if c is None:
+        return
+    off = float(np.abs(c.T @ c - np.eye(3)).max())
+    if off > ROTATION_TOL or np.linalg.det(c) < 0:
+        why = (f"|CᵀC − I| reaches {off:.3g} (over {ROTATION_TOL:g})" if off > ROTATION_TOL
+               else f"det C = {np.linalg.det(c):.6g}: a reflection")  # fmt: skip
+        raise ValueError(f"{where}: c0 must be {form}; {why} (orthonormalise it: U Vᵀ of its "
+                         "SVD)")  # fmt: skip
 
 
 @fused
@@ -143,7 +220,11 @@ def fine_align(log: ImuLog, c0, *, step_s: float = 1.0, start_s: float = 0.0,
     velocity error (NED) [m/s], φ [rad], gyro [rad/s] and accelerometer [m/s²] biases in
     the NED frame; `biases` in the body frame (mapped by the final Ĉ).
 
-    **Raises:** `ValueError` for a log within 1° of a pole (no gyrocompassing there)."""
+    **Raises:** `ValueError` for a log within 1° of a pole (no gyrocompassing there); one
+    line (`TypeError` for a non-number) for an option out of its range
+    ([`check_fine_options`][hrgjax.ins.fine_alignment.check_fine_options]), a `c0` that is
+    not a rotation ([`check_start_attitude`][hrgjax.ins.fine_alignment.check_start_attitude]),
+    a `step_s` under half a sample, a `start_s` leaving fewer than 2 steps."""
     run = fine_run(log, c0, step_s=step_s, start_s=start_s, arw=arw, vrw=vrw,
                    velocity_noise=velocity_noise, gyro_bias_std=gyro_bias_std,
                    accel_bias_std=accel_bias_std, attitude_std_deg=attitude_std_deg,
@@ -163,14 +244,22 @@ def fine_run(log: ImuLog, c0, *, step_s: float = 1.0, start_s: float = 0.0,
     power-of-two bucket of steps (module docstring).
 
     **Raises:** `ValueError` for a log within 1° of a pole, one shorter than 2 steps after
-    `start_s`, or a `start_bias_jacobian` not (3, 6)."""
+    `start_s`, or a `start_bias_jacobian` not (3, 6); as `fine_align` for the rest."""
+    check_log("fine_align", log)
     check_gyrocompass_latitude(log.lat)
+    check_fine_options("fine_align", step_s=step_s, start_s=start_s, arw=arw, vrw=vrw,
+                       velocity_noise=velocity_noise, gyro_bias_std=gyro_bias_std,
+                       accel_bias_std=accel_bias_std, attitude_std_deg=attitude_std_deg,
+                       start_bias_jacobian=start_bias_jacobian)  # fmt: skip
+    check_start_attitude("fine_align", c0)
     dt = log.dt
+    check_step("fine_align", step_s, dt)
     m = max(1, int(round(step_s / dt)))
     i0 = int(round(start_s / dt))
     k = (log.t.shape[0] - i0) // m
     if k < 2:
-        raise ValueError(f"the log is too short for fine alignment with step_s={step_s}")
+        raise ValueError(f"fine_align: the log ({log.t.shape[0] * dt:.4g} s) holds fewer than 2 "
+                         f"steps of step_s = {step_s:g} s after start_s = {start_s:g} s")  # fmt: skip
     noise = [arw, vrw, velocity_noise, gyro_bias_std, accel_bias_std]
     inputs = (log.dtheta, log.dvel, log.t, c0, noise, attitude_std_deg, start_bias_jacobian)
     xp = jnp if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(inputs)) else np

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _upstream, kalman
+from .. import _checks, _upstream, kalman
 from .._progress import bar
 from .._x64 import require_x64
 from .consistency import error_states, nees_band, nis_check, whitened_errors
@@ -184,17 +184,29 @@ def fly(
 
     **Returns:** [`Flights`][hrgjax.ins.flights.Flights].
 
-    **Raises:** `RuntimeError`, one line, when a run's filter or free-inertial solution stops
+    **Raises:** `TypeError` or `ValueError`, one line, before any work, for a `truth`,
+    `imu`, `settings` or `key` not of its type, `runs` or `chunk` not a whole number >= 1,
+    a `gyro_rate_error` not finite numbers; `RuntimeError`, one line, when a run's filter or free-inertial solution stops
     being finite (the message of [`loosely_coupled`][hrgjax.ins.ekf.loosely_coupled] or
     [`mechanize`][hrgjax.ins.mechanization.mechanize]). `imu`'s values are held to
     `ImuModel`'s rules (finite, densities ≥ 0, the `imu_*` ranges) where it was built; each
     run's drawn unit only to be finite: a draw past a range's bound is a Gaussian tail, not
     a unit typo, and flies (σ 0.06 against |gyro_scale| < 0.1: 6 units of 16)."""
     require_x64("ins.fly")
-    if not (isinstance(runs, int) and runs >= 1):
-        raise ValueError(f"runs must be a whole number >= 1; got {runs}")
-    if not (isinstance(chunk, int) and chunk >= 1):
-        raise ValueError(f"chunk must be a whole number >= 1; got {chunk}")
+    for name, x, kind in (("truth", truth, Truth), ("imu", imu, ImuModel),
+                          ("settings", settings, LooselyCoupled)):  # fmt: skip
+        if not isinstance(x, kind):
+            raise TypeError(
+                f"fly: {name} must be of type {kind.__name__}; got {_checks.describe(x)}"
+            )
+    _checks.check_key("fly: key", key, "one key: fly splits it into the runs' keys")
+    for name, x in (("runs", runs), ("chunk", chunk)):  # 2.0 or np.int64(2) too; not True
+        if _checks.whole_number(f"fly: {name}", x, "a whole number >= 1") < 1:
+            raise ValueError(f"fly: {name} must be a whole number >= 1; got {x}")
+    runs, chunk = int(runs), int(chunk)
+    if gyro_rate_error is not None:  # its shape: ImuModel.apply's check
+        _checks.check_numbers("fly: gyro_rate_error", gyro_rate_error, "(N, 3) or (3,) [rad/s]")
+        _checks.check_finite_host("fly: gyro_rate_error", gyro_rate_error)
     n = truth.dtheta.shape[0]
     idx = settings.gnss.epochs(n, truth.dt)
     if idx.size == 0 or idx[-1] != n:

@@ -11,6 +11,7 @@ roll). Headings are clockwise from north in [0, 360) in both.
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from pathlib import Path
 
@@ -19,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_numbers, describe, host_value, numeric_problem
 from .._compiled import device
 from .._data_files import beyond_exact, rounded_integer, rounded_integer_error
 from ..units import ARCSEC, DEG
@@ -51,6 +53,22 @@ def wrap_heading_deg(x):
     return jnp.where(r >= 360.0 - HEADING_SNAP_DEG, 0.0, r)
 
 
+_ARRAYS = {
+    "t": "(N,) times [s], N >= 2 (their spacing is the interval)",
+    "dtheta": "(N, 3) gyro increments [rad]",
+    "dvel": "(N, 3) velocity increments [m/s]",
+}
+"""`ImuLog`'s arrays and the form its errors name."""
+
+
+def _array(x):
+    """A list or tuple of numbers as a float NumPy array (`ImuLog` reads its `.shape`);
+    anything else unchanged (`ImuLog.__check_init__` refuses what is not numbers)."""
+    if isinstance(x, list | tuple) and numeric_problem(x) is None:
+        return np.asarray(x, dtype=float)
+    return x
+
+
 class ImuLog(eqx.Module):
     """An IMU record as increments in the body frame (FRD).
 
@@ -58,11 +76,13 @@ class ImuLog(eqx.Module):
     [m/s]; `lat`, `lon` [rad], `h` [m]; `header_attitude_deg`: (pitch, roll, heading) [°]
     from the file, in the file's order — not the (heading, pitch, roll) of
     `AlignmentResult.coarse_deg` and `history_deg` — the heading clockwise from north in
-    [0, 360) (or `None`)."""
+    [0, 360) (or `None`). Lists are taken as arrays. Refused in one line: arrays that are not
+    real numbers or of other shapes (N >= 2), and where their values are known (not under
+    `jit`) a NaN or inf, or times that do not increase."""
 
-    t: jax.Array
-    dtheta: jax.Array
-    dvel: jax.Array
+    t: jax.Array = eqx.field(converter=_array)
+    dtheta: jax.Array = eqx.field(converter=_array)
+    dvel: jax.Array = eqx.field(converter=_array)
     lat: float = eqx.field(static=True, converter=_python_float)
     lon: float = eqx.field(static=True, default=0.0, converter=_python_float)
     h: float = eqx.field(static=True, default=0.0, converter=_python_float)
@@ -80,16 +100,29 @@ class ImuLog(eqx.Module):
                 f"ImuLog.lat must be in [-π/2, π/2] rad; got {self.lat} (degrees? "
                 f"np.deg2rad({self.lat:g}) = {math.radians(self.lat):.6g})"
             )
-        t = np.asarray(self.t)
-        for name in ("dtheta", "dvel"):
-            a = np.asarray(getattr(self, name))
-            if a.shape != (t.size, 3):
-                raise ValueError(f"ImuLog.{name} must have shape ({t.size}, 3); got {a.shape}")
-            if not np.all(np.isfinite(a)):
-                raise ValueError(
-                    f"ImuLog.{name} must be finite (row {np.argwhere(~np.isfinite(a))[0, 0]})"
-                )
-        d = np.diff(t)
+        head = self.header_attitude_deg
+        if head is not None and (numeric_problem(head) or np.shape(head) != (3,)
+                                 or not np.all(np.isfinite(head))):  # fmt: skip
+            raise (TypeError if numeric_problem(head) else ValueError)(
+                "ImuLog.header_attitude_deg must be None or (pitch, roll, heading), 3 finite "
+                f"numbers [°]; got {describe(head)}"
+            )
+        for name, form in _ARRAYS.items():  # values where concrete: a traced log passes
+            check_numbers(f"ImuLog.{name}", getattr(self, name), form)
+        shape = np.shape(self.t)
+        if len(shape) != 1 or shape[0] < 2:
+            raise ValueError(f"ImuLog.t must be {_ARRAYS['t']}; got shape {shape}")
+        for name in ("t", "dtheta", "dvel"):
+            a = getattr(self, name)
+            if name != "t" and np.shape(a) != (shape[0], 3):
+                raise ValueError(f"ImuLog.{name} must have shape ({shape[0]}, 3); got "
+                                 f"{np.shape(a)}")  # fmt: skip
+            a = host_value(a)
+            if a is not None and not np.all(np.isfinite(a)):
+                raise ValueError(f"ImuLog.{name} must be finite (row "
+                                 f"{np.argwhere(~np.isfinite(a))[0, 0]})")  # fmt: skip
+        t = host_value(self.t)
+        d = np.diff(t) if t is not None else np.zeros(0)
         if np.any(d <= 0):
             raise ValueError(
                 f"ImuLog.t must be strictly increasing (row {int(np.argmax(d <= 0)) + 1})"
@@ -122,8 +155,13 @@ def load_psins(path) -> ImuLog:
     (pitch, roll, heading), `None` where it is not finite.
 
     **Raises:** `ValueError` naming the file (and the line, field) for text that is not
-    UTF-8, a malformed header (a field of lines 2–3 not finite, a latitude beyond ±90°) or
-    sample row, or an integer beyond 2**53 that a float64 would round."""
+    UTF-8, a malformed header (a field of lines 2–3 not finite, a latitude beyond ±90°, a
+    longitude beyond [−180, 360]°, a height beyond (−1e4, 1e5) m, a g or an increment unit
+    not > 0) or sample row (a NaN or inf among them), fewer than 2 samples, or an integer
+    beyond 2**53 that a float64 would round; `TypeError` for a `path` not a str or path."""
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(f"load_psins: path must be a file path (str or os.PathLike); got "
+                        f"{describe(path)}")  # fmt: skip
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no IMU log at {path}")
@@ -160,6 +198,12 @@ def load_psins(path) -> ImuLog:
         raise ValueError(f"{path}: the sampling interval (header line 2, field 5) must be > 0 ms")
     if raw.shape[1] != 6:
         raise ValueError(f"{path}: sample rows must hold 6 numbers; got {raw.shape[1]}")
+    if raw.shape[0] < 2:
+        raise ValueError(f"{path}: a PSINS log needs at least 2 samples; got {raw.shape[0]}")
+    if not np.all(np.isfinite(raw)):  # "nan", "inf": integer counts cannot be
+        row, j = (int(i) for i in np.argwhere(~np.isfinite(raw))[0])
+        raise ValueError(f"{path}: sample row {row}, field {j + 1} ({_PSINS_SAMPLE[j]}) must "
+                         f"be a finite integer count; got {raw[row, j]}")  # fmt: skip
     if beyond_exact({"samples": raw.ravel()}):  # an integer the float may have rounded
         _refuse_rounded_samples(path, at)
     gyro_rfu = raw[:, :3] * np.asarray(units[:3]) * ARCSEC
@@ -207,6 +251,14 @@ def _psins_head(path, numbered) -> list:
                 f"{path}: the header's {name} (line {2 + k // 6}, field {1 + k % 6}) must be "
                 f"finite; got {v}"
             )
+    lon, h, g = head[1][1], head[1][2], head[1][5]
+    for k, ok, want in ((1, -180.0 <= lon <= 360.0, "in [-180, 360]"),
+                        (2, -1e4 < h < 1e5, "in (-1e4, 1e5)"),
+                        (5, g > 0, "> 0")) + tuple(
+                            (6 + j, u > 0, "> 0") for j, u in enumerate(head[2])):  # fmt: skip
+        if not ok:
+            raise ValueError(f"{path}: the header's {names[k]} (line {2 + k // 6}, field "
+                             f"{1 + k % 6}) must be {want}; got {(head[1] + head[2])[k]:g}")  # fmt: skip
     return head
 
 

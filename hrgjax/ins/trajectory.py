@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import finite_number
+from .._checks import check_number, describe, finite_number
 from .._compiled import fused
 from ..units import DEG
 from .constants import E2, MAX_LAT_DEG, WGS84, A, Earth
@@ -92,6 +92,9 @@ class Trajectory(eqx.Module):
 def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None):
     """Integrate position from speed, heading and flight-path angle (trapezoid on the grid)
     and derive velocity, attitude (coordinated turns) and specific force."""
+    if not isinstance(earth, Earth):
+        raise TypeError(f"earth must be an Earth model (hrgjax.ins.constants: WGS84, SPHERE or "
+                        f"Earth(...)); got {describe(earth)}")  # fmt: skip
     v = np.stack(
         [
             speed * np.cos(gamma) * np.cos(heading),
@@ -148,6 +151,8 @@ def check_latitudes(t, lat, what: str) -> None:
 
 
 def _grid(duration_s, dt):
+    check_number("duration_s", duration_s, "s")
+    check_number("dt", dt, "s")
     if not (np.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be > 0 s; got {duration_s}")
     if not (np.isfinite(dt) and 0 < dt <= duration_s):
@@ -192,9 +197,11 @@ def stationary(
     dt: float = 1.0,
     earth: Earth = WGS84,
 ) -> Trajectory:
-    """A vehicle at rest at (`lat_deg`, `lon_deg`, `h`) with the given attitude [°]."""
+    """A vehicle at rest at (`lat_deg`, `lon_deg`, `h`) with the given attitude [°]: any
+    heading and roll, a pitch within ±90° (beyond, the same attitude is pitch 180° − θ with
+    heading and roll turned by 180°: refused)."""
     return _steady(lat_deg, lon_deg, h, 0.0, (heading_deg, pitch_deg, roll_deg), duration_s, dt,
-                   earth)  # fmt: skip
+                   earth, "stationary")  # fmt: skip
 
 
 def constant_velocity(
@@ -208,18 +215,28 @@ def constant_velocity(
     dt: float = 1.0,
     earth: Earth = WGS84,
 ) -> Trajectory:
-    """Level flight at `speed` [m/s] on a constant heading [°, clockwise from north] (a rhumb
-    line)."""
-    return _steady(lat_deg, lon_deg, h, speed, (heading_deg, 0.0, 0.0), duration_s, dt, earth)
+    """Level flight at `speed` [m/s] (>= 0: the direction is the heading's) on a constant
+    heading [°, clockwise from north] (a rhumb line)."""
+    return _steady(lat_deg, lon_deg, h, speed, (heading_deg, 0.0, 0.0), duration_s, dt, earth,
+                   "constant_velocity")  # fmt: skip
 
 
-def _steady(lat_deg, lon_deg, h, speed, attitude_deg, duration_s, dt, earth) -> Trajectory:
-    """Constant `speed` [m/s] and attitude (heading, pitch = flight-path angle, roll) [°]."""
+def _steady(lat_deg, lon_deg, h, speed, attitude_deg, duration_s, dt, earth,
+            where: str) -> Trajectory:  # fmt: skip
+    """Constant `speed` [m/s] and attitude (heading, pitch = flight-path angle, roll) [°];
+    `where`: the builder, as its errors name it."""
     check_position(lat_deg, lon_deg, h)
     speed = finite_number("speed", speed, "m/s")
-    plausible.check("speed", abs(speed), "speed_mps")
+    if speed < 0:  # it flew backwards, nose on the heading
+        raise ValueError(f"{where}: speed must be >= 0 m/s, the speed along heading_deg (turn "
+                         f"the heading by 180° to fly the other way); got {speed:g}")  # fmt: skip
+    plausible.check("speed", speed, "speed_mps")
     for name, a in zip(("heading_deg", "pitch_deg", "roll_deg"), attitude_deg, strict=True):
         finite_number(name, a, "°")
+    if abs(float(attitude_deg[1])) > 90.0:
+        raise ValueError(f"{where}: pitch_deg must be in [-90, 90] ° (beyond, the attitude is "
+                         f"pitch 180° − θ with heading and roll turned by 180°); got "
+                         f"{float(attitude_deg[1]):g}")  # fmt: skip
     t = _grid(duration_s, dt)
     heading, pitch, roll = (np.full(t.size, float(a) * DEG) for a in attitude_deg)
     speeds = np.full(t.size, float(speed))
