@@ -414,3 +414,140 @@ def test_discover_and_noise_model_refuse_bad_settings_in_one_line():
     for lag in (np.nan, -1.0, 0.0):
         with pytest.raises(ValueError, match=r"^max_lag_s must be a finite number > 0 \[s\]"):
             noise_model(data, lag)
+
+
+# -- bad input to the generator, the error bars and the shared statistics: one line each ---
+
+_GENERATOR_CASES = [  # (call on (generate, a key, the base gyro), error, message)
+    (lambda g, k, b: g.inject(b, "bias_temperature", np.nan), ValueError,
+     r"^inject: size of 'bias_temperature' must be a finite real number"),  # TemperatureLaw.p1
+    (lambda g, k, b: g.inject(b, "loop_ripple", np.nan), ValueError,
+     r"^inject: size of 'loop_ripple' must be a finite"),  # was a gyro with Δω = NaN
+    (lambda g, k, b: g.inject(b, "thermal_rate", "0.1"), TypeError,
+     r"^inject: size of 'thermal_rate' must be a single real number; got str"),
+    (lambda g, k, b: g.inject(b, 3), TypeError,
+     r"^inject: effect must be an effect name, None or a mapping"),  # 'int' not iterable
+    (lambda g, k, b: g.inject("gyro", None), TypeError,
+     r"^inject: gyro must be an hrgjax.Gyro"),  # returned the string
+    (lambda g, k, b: g.hidden_effect_dataset(None, key=0), TypeError,
+     r"^hidden_effect_dataset: key must be one JAX PRNG key"),
+    (lambda g, k, b: g.hidden_effect_dataset(None, key=k, duration_s=-1.0), ValueError,
+     r"^hidden_effect_dataset: duration_s must be a finite number > 0 \[s\]; got -1"),
+    (lambda g, k, b: g.hidden_effect_dataset(None, key=k, rates_dps=5.0), ValueError,
+     r"^hidden_effect_dataset: rates_dps must be table rates"),  # after the statics' run
+    (lambda g, k, b: g.hidden_effect_dataset(None, key=k, rates_dps=(np.nan,)), ValueError,
+     r"^plan rate_dps must be finite"),  # after the statics' run
+    (lambda g, k, b: g.continuous_dataset(None, key=k, dt_out=0.0), ValueError,
+     r"^continuous_dataset: dt_out must be a finite number > 0"),  # ZeroDivisionError
+    (lambda g, k, b: g.continuous_dataset(None, key=k, dt_out=-1.0), ValueError,
+     r"^continuous_dataset: dt_out must be a finite number > 0"),  # simulated no samples
+    (lambda g, k, b: g.continuous_dataset(None, key=k, dt_out=5000.0), ValueError,
+     r"^continuous_dataset: dt_out must be <= duration_s"),  # one sample a run
+    (lambda g, k, b: g.continuous_dataset(None, key=jax.random.split(k)), ValueError,
+     r"^continuous_dataset: key must be one JAX PRNG key.*shape \(2,\)"),
+    (lambda g, k, b: g.continuous_dataset(None, key=k, ramps=()), ValueError,
+     r"^continuous_dataset: ramps must be rows \(start °C"),  # tree_map's missing argument
+    (lambda g, k, b: g.ramp_profiles(3600.0, ((0.0, 10.0, 0.0, 0.0, 0.0),)), ValueError,
+     r"^ramp_profiles: each ramp's length \(column 2\) must be > 0 s; got 0"),
+    (lambda g, k, b: g.ramp_profiles("3600"), TypeError,
+     r"^ramp_profiles: duration_s must be a single real number"),
+    (lambda g, k, b: g.bench_log(key=None), TypeError, r"^bench_log: key must be one JAX PRNG"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", range(len(_GENERATOR_CASES)))
+def test_the_generator_refuses_bad_input_before_simulating(monkeypatch, case):
+    """Each was a raw error from deep inside (JAX's "invalid PRNG key data", a
+    ZeroDivisionError, a gyro law's own NaN check), a silent gyro or dataset, or a refusal
+    that came only after the static runs were simulated: now one line naming the function
+    and the argument, before any simulation (the simulators are stubbed out to show it)."""
+    from hrgjax.discovery import generate
+
+    def simulated(*args, **kwargs):
+        raise AssertionError("simulated before the bad input was refused")
+
+    monkeypatch.setattr(generate, "run_plan", simulated)
+    monkeypatch.setattr(generate, "_simulate_runs", simulated)
+    call, kind, msg = _GENERATOR_CASES[case]
+    with pytest.raises(kind, match=msg):
+        call(generate, jax.random.key(0), generate.base_gyro(noise=False))
+
+
+def _toy_fit(r=None, model=("bias", "angular_gain", "damping_anisotropy")):
+    """A `Fit` of a linear toy (40 rows, the model's regular columns at random)."""
+    from hrgjax.discovery.effects import regular_parameters
+    from hrgjax.discovery.problem import Fit
+
+    rng = np.random.default_rng(0)
+    labels = regular_parameters(model)
+    j, r0 = rng.normal(size=(40, len(labels))), rng.normal(size=40)
+    r = r0 if r is None else r
+    params = {}
+    for name, p in labels:
+        params.setdefault(name, {})[p] = {"value": 1.0, "std": 0.1}
+    return Fit(tuple(model), params, r, j, 0.0, 0.0, 0.0)
+
+
+_NAN_R = np.where(np.arange(40) == 3, np.nan, 1.0)
+_FITS = [(1, np.ones(1), np.eye(1) * 4.0), (2, np.ones(1), np.eye(1) * 4.0)]
+_STATS_CASES = [  # (call on (trust, stats, records, a toy fit), error, message)
+    (lambda t, s, rec, f: t.honest(f, {}, None, alpha=1.5), ValueError,
+     r"^honest: alpha must be a significance level in \(0, 1\); got 1.5"),  # every shape fitted
+    (lambda t, s, rec, f: t.honest(_toy_fit(_NAN_R), {}, None), ValueError,
+     r"^honest: fit.r must be finite; it has nan at index \(3,\)"),  # read as a level of ×1
+    (lambda t, s, rec, f: t.honest(f, {"x": np.ones(40)}, None), ValueError,
+     r"^honest: shape_columns\['x'\] must be whitened columns, shape \(N, k\)"),
+    (lambda t, s, rec, f: t.honest(f, {"x": np.full((40, 1), np.nan)}, None), ValueError,
+     r"^honest: shape_columns\['x'\] must be finite"),  # LAPACK's lines, LinAlgError
+    (lambda t, s, rec, f: t.honest(f, {}, np.arange(40) % 2 + 0.5), ValueError,
+     r"^honest: classes must be whole numbers"),  # one class named "all rows"
+    (lambda t, s, rec, f: t.honest(f, {}, None, spread=(-np.ones(4), {"basis": ""})),
+     ValueError, r"^honest: spread's factors must be a variance factor >= 0"),  # math domain
+    (lambda t, s, rec, f: t.honest(None, {}), TypeError, r"^honest: fit must be a discovery Fit"),
+    (lambda t, s, rec, f: t.statistical_p_value(f, "nope", {}), ValueError,
+     r"^statistical_p_value: name must be an effect name of the catalogue; got 'nope'"),  # None
+    (lambda t, s, rec, f: t.statistical_p_value(f, "bias", {}, descent=0.0), ValueError,
+     r"^statistical_p_value: descent must be \+1 or -1"),
+    (lambda t, s, rec, f: s.level_test(f.r, f.j, f.j[:-1]), ValueError,
+     r"^level_test: g must be whitened columns, shape \(N, k\) with N = 40"),
+    (lambda t, s, rec, f: s.class_levels(f.r, f.j, None, weights=np.zeros(40)), ValueError,
+     r"^class_levels: weights must be one value per row"),  # LinAlgError
+    (lambda t, s, rec, f: s.wls(f.j, f.r, np.zeros(40)), ValueError,
+     r"^wls: sigma must be standard errors > 0; got 0"),  # "Eigenvalues did not converge"
+    (lambda t, s, rec, f: s.chi2_sf(3.0, -1), ValueError,
+     r"^chi2_sf: dof must be a finite number >= 0"),  # NaN
+    (lambda t, s, rec, f: s.f_sf(3.0, 2, 0), ValueError,
+     r"^f_sf: d2 must be a finite number > 0"),  # p = 0: a silent "significant"
+    (lambda t, s, rec, f: s.orthonormal_span(np.full((4, 2), np.nan)), ValueError,
+     r"^orthonormal_span: a must be finite"),  # an empty span
+    (lambda t, s, rec, f: s.level_beyond(f.r, f.j, np.ones(40)), ValueError,
+     r"^level_beyond: s must be whitened columns"),
+    (lambda t, s, rec, f: s.follows_covariate(f.r, f.j, 1.5), ValueError,
+     r"^follows_covariate: alpha must be a significance level in \(0, 1\)"),
+    (lambda t, s, rec, f: rec.repeats(_FITS, [1.0], level=(0.0, 10)), ValueError,
+     r"^repeats: level must be \(s², ν\) with s² > 0"),  # ZeroDivisionError
+    (lambda t, s, rec, f: rec.repeats(_FITS, [1.0], resolves=-1.0), ValueError,
+     r"^repeats: resolves must be a finite number >= 0"),  # read as +1
+    (lambda t, s, rec, f: rec.repeats(_FITS, [1.0, 2.0]), ValueError,
+     r"^repeats: each of fits must be \(run, estimate \(2,\)"),
+    (lambda t, s, rec, f: rec.block_index(10, 0), ValueError,
+     r"^block_index: m must be an integer >= 1; got 0"),  # ZeroDivisionError
+    (lambda t, s, rec, f: rec.rate_columns([], parts=0), ValueError,
+     r"^rate_columns: parts must be an integer >= 1"),
+    (lambda t, s, rec, f: rec.Layout(["bias", "nope"]), ValueError,
+     r"^Layout: names must be a list of effect names; got \['bias', 'nope'\]"),  # KeyError
+    (lambda t, s, rec, f: rec.Layout(["angular_gain"]).null(np.nan), ValueError,
+     r"^Layout.null: k_e must be finite"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", range(len(_STATS_CASES)))
+def test_error_bars_and_statistics_refuse_bad_input_in_one_line(case):
+    """Each was a silent answer (a NaN residual read as the noise model's level, alpha 1.5
+    fitting every leftover shape, an unknown effect's p-value None, F(2, 0)'s tail 0) or a
+    raw NumPy/LAPACK error: now one line naming the function, the argument and its form."""
+    from hrgjax.discovery import records, stats, trust
+
+    call, kind, msg = _STATS_CASES[case]
+    with pytest.raises(kind, match=msg):
+        call(trust, stats, records, _toy_fit())

@@ -41,6 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _checks
 from ..calibration.experiment import rotation_plan, run_plan, static_plan
 from ..data import MeasuredData, concat
 from ..gyro import DriftTerms, Gyro
@@ -76,15 +77,61 @@ def inject(gyro: Gyro, effect, size: float = 0.0) -> Gyro:
 
     `effect` is a name, `None` (the null: `gyro` unchanged) or a mapping `{name: size}` to
     hide several effects at once (a pair, say); `size` is then ignored."""
+    if not isinstance(gyro, Gyro):
+        raise TypeError(f"inject: gyro must be an hrgjax.Gyro (e.g. base_gyro()); got "
+                        f"{type(gyro).__name__}")  # fmt: skip
     if effect is None:
         return gyro
     if not isinstance(effect, str):
-        for name, value in dict(effect).items():
+        try:  # a mapping, or (name, size) pairs
+            effects = None if isinstance(effect, bytes) else dict(effect)
+        except (TypeError, ValueError):
+            effects = None
+        if effects is None:
+            raise TypeError(f"inject: effect must be an effect name, None or a mapping "
+                            f"{{name: size}}; got {_checks.describe(effect)}")  # fmt: skip
+        for name, value in effects.items():
             gyro = inject(gyro, name, value)
         return gyro
     if effect not in GENERATED:
         raise ValueError(f"cannot generate {effect!r} yet; choose from {GENERATED} or None")
+    where = f"inject: size of {effect!r}"  # a NaN failed in the gyro's checks, a str in `*`
+    _checks.check_number(where, size)
+    _checks.check_values(where, size, np.isfinite, "a finite real number (generate.inject)")
     return CATALOGUE[effect].inject(gyro, size)
+
+
+def _settings(owner: str, key, **durations) -> None:
+    """Refuse a generator's `key` (one JAX PRNG key) or `durations` (finite numbers > 0
+    [s]) in one line naming `owner`, before any simulation."""
+    _checks.check_key(f"{owner}: key", key)
+    for name, value in durations.items():
+        _checks.check_number(f"{owner}: {name}", value, "s")
+        _checks.check_values(f"{owner}: {name}", value, _checks.FINITE_POSITIVE,
+                             "a finite number > 0 [s]")  # fmt: skip
+
+
+HOLD_S = 600.0
+"""The hold at each continuous run's start temperature before its ramp [s]."""
+_RAMP_FORM = "rows (start °C, end °C, ramp length s, table rate °/s, initial angle °), shape (R, 5)"
+
+
+def _check_ramps(owner: str, duration_s, ramps) -> None:
+    """Refuse `ramps` that are not rows of five finite numbers with a ramp length > 0, or a
+    `duration_s` [s] that does not hold the hold and the longest ramp, in one line."""
+    _checks.check_numbers(f"{owner}: ramps", ramps, _RAMP_FORM, shape=(None, 5))
+    rows = np.asarray(ramps, float)
+    if rows.shape[0] == 0:
+        raise ValueError(f"{owner}: ramps must be {_RAMP_FORM}; got none")
+    _checks.check_finite_host(f"{owner}: ramps", rows)
+    if not np.all(rows[:, 2] > 0):
+        raise ValueError(f"{owner}: each ramp's length (column 2) must be > 0 s; got "
+                         f"{rows[:, 2][~(rows[:, 2] > 0)][0]:g}")  # fmt: skip
+    _checks.check_number(f"{owner}: duration_s", duration_s, "s")
+    if not HOLD_S + rows[:, 2].max() < duration_s:
+        raise ValueError(f"{owner}: duration_s must exceed {HOLD_S + rows[:, 2].max():g} s "
+                         f"(the {HOLD_S:g}-s hold and the longest ramp); got "
+                         f"{_checks.describe(duration_s)}")  # fmt: skip
 
 
 DRIFT_FIELDS = tuple(f.name for f in dataclasses.fields(DriftTerms))
@@ -104,13 +151,18 @@ def hidden_effect_dataset(
     temperature × angle, one switch-on) of the base gyro with `effect` hidden at `size`
     (`effect` as in [`inject`][hrgjax.discovery.generate.inject]: a name, `None` or a
     mapping `{name: size}`)."""
+    _settings("hidden_effect_dataset", key, duration_s=duration_s)
+    _checks.check_numbers("hidden_effect_dataset: rates_dps", rates_dps,
+                          "table rates [°/s], shape (n,)", shape=(None,))  # fmt: skip
     gyro = inject(base_gyro(), effect, size)
     k_static, k_rot, k_bias = jax.random.split(key, 3)
     static = static_plan(temperatures_c, angles_deg, duration_s=duration_s, dt_out=0.5)
+    rotations = [  # every plan checked before the first simulation
+        rotation_plan(temperatures_c, angles_deg, rate, duration_s=duration_s) for rate in rates_dps
+    ]
     parts = [run_plan(gyro, static, key=k_static, bias_key=k_bias)]
     first = static.size
-    for rate, k in zip(rates_dps, jax.random.split(k_rot, len(rates_dps)), strict=True):
-        rotation = rotation_plan(temperatures_c, angles_deg, rate, duration_s=duration_s)
+    for rotation, k in zip(rotations, jax.random.split(k_rot, len(rates_dps)), strict=True):
         parts.append(run_plan(gyro, rotation, key=k, bias_key=k_bias, first_run=first))
         first += rotation.size
     return concat(parts)
@@ -131,11 +183,10 @@ RAMPS = (
 def ramp_profiles(duration_s: float = 3600.0, ramps=RAMPS) -> Profile:
     """The continuous runs of [`RAMPS`][hrgjax.discovery.generate.RAMPS] as one batched
     [`hrgjax.Profile`][] (leading axis = run)."""
-    hold = 600.0
+    _check_ramps("ramp_profiles", duration_s, ramps)
+    hold = HOLD_S
     profs = []
     for t_a, t_b, ramp, rate, angle in ramps:
-        if hold + ramp >= duration_s:
-            raise ValueError(f"duration_s must exceed {hold + ramp} s for a {ramp}-s ramp")
         t = [0.0, hold, hold + ramp, duration_s]
         profs.append(Profile.piecewise(t, [rate] * 4, [t_a, t_a, t_b, t_b], wave_angle0_deg=angle))
     return jax.tree_util.tree_map(lambda *x: jnp.stack(x), *profs)
@@ -160,6 +211,11 @@ def continuous_dataset(
     """Continuous records of the base gyro with `effect` hidden at `size`: one run per entry
     of `ramps` (temperature ramps up and down at two speeds, static or turning at 2 °/s),
     each its own switch-on. `effect` as in [`inject`][hrgjax.discovery.generate.inject]."""
+    _settings("continuous_dataset", key, duration_s=duration_s, dt_out=dt_out)
+    _check_ramps("continuous_dataset", duration_s, ramps)
+    if dt_out > duration_s:
+        raise ValueError(f"continuous_dataset: dt_out must be <= duration_s (two samples a "
+                         f"run at least); got {dt_out:g} s > {duration_s:g} s")  # fmt: skip
     gyro = inject(base_gyro(), effect, size)
     profiles = ramp_profiles(duration_s, ramps)
     ts = jnp.asarray(np.arange(int(round(duration_s / dt_out)) + 1) * dt_out)
@@ -182,6 +238,7 @@ def bench_log(effect=None, size: float = 0.0, *, key: jax.Array) -> MeasuredData
     7 wave angles of 180-s static dwells at 1 Hz (one switch-on), a +5 °/s and a −5 °/s
     rotation of 72 s (one turn) at 10 Hz at each temperature, and eight 1-h temperature
     ramps at 0.2 Hz, each its own switch-on — dwell runs and continuous records together."""
+    _checks.check_key("bench_log: key", key)
     gyro = inject(base_gyro(), effect, size)
     k_static, k_rot, k_bias, k_ramp = jax.random.split(key, 4)
     temps, angles = BENCH_LOG_TEMPERATURES, BENCH_LOG_ANGLES

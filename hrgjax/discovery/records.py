@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .. import _checks
 from .._compiled import Unchecked, program
 from . import stats
 from .effects import CATALOGUE, Covariates, pattern_rate, readout_angle, window_rate
@@ -48,6 +49,8 @@ class Layout:
     (value / scale), so optimisers see O(1) numbers."""
 
     def __init__(self, names):
+        if isinstance(names, str | None) or any(n not in CATALOGUE for n in names):
+            raise (TypeError if isinstance(names, str | None) else ValueError)(f"Layout: names must be a list of effect names; got {_checks.describe(names)} (catalogue: {sorted(CATALOGUE)})")  # fmt: skip
         self.names = tuple(names)
         self.slices, self.scales, self.regular, start = {}, [], [], 0
         for n in self.names:
@@ -71,6 +74,7 @@ class Layout:
     def null(self, k_e):
         """Scaled vector at the null (nonregular parameters at their typical size), with
         the angular gain at `k_e`."""
+        _checks.finite_number("Layout.null: k_e", k_e, "–, the angular gain")
         z = np.asarray([0.0 if r else 1.0 for r in self.regular])
         if "angular_gain" in self.slices:
             z[self.slices["angular_gain"].start] = k_e / self.scale[self.slices["angular_gain"]][0]
@@ -313,6 +317,7 @@ def rate_columns(groups, parts: int = 1) -> tuple[np.ndarray, list[int]]:
     constant rate of 1 rad/s — with `parts` > 1, over each of that many consecutive parts of
     its blocks (near equal counts), zero elsewhere. Window rows are zero. **Returns** `(U, the
     run id of each column)`."""
+    stats.check_count("rate_columns", "parts", parts)
     rows, blocks, runs = 0, [], []
     for g in groups:
         if isinstance(g, Windows):
@@ -344,9 +349,11 @@ def run_level(r, j, own, groups, parts: int = LEVEL_PARTS) -> tuple[float, int]:
     scattered ×4 between seeds (0.0007–0.0029 °/√h, truth 0.002), and the χ² of a true,
     exactly catalogued thermal rate fell below p = 0.01 in 9 of 100 seeds (audit
     2026-11-30); judged at this level, F-distributed (`repeats`)."""
+    r, j = stats.rows_of("run_level", r, j=j)
     u, _ = rate_columns(groups)
     s, _ = rate_columns(groups, parts)
-    j = np.asarray(j, float)
+    if u.shape[0] != r.size or not all(0 <= c < j.shape[1] for c in own):
+        raise ValueError(f"run_level: r {r.shape}, j {j.shape} and own {list(own)} do not fit groups of {u.shape[0]} rows")  # fmt: skip
     per_run = [j[:, c] * (u[:, i] != 0) for c in own for i in range(u.shape[1])]
     return stats.level_beyond(np.asarray(r, float), np.column_stack([j, u, *per_run]), s)
 
@@ -392,7 +399,15 @@ def repeats(fits, pooled, resolves=1.0, level=None, windows=None):
     "noise_level": [s², ν] or None}`; with
     fewer than two units (no split of the runs into two parts each resolving it) the
     check cannot be made: `agreement` None and `reason` says why (else None)."""
-    need, pooled = resolves**2, np.asarray(pooled)
+    pooled = stats.real_array("repeats", "pooled", pooled, (None,), "the estimate, shape (q,)")
+    _checks.check_number("repeats: resolves", resolves, "σ")
+    _checks.check_values("repeats: resolves", resolves, _checks.FINITE_NONNEGATIVE, "a finite number >= 0 [σ]")  # fmt: skip
+    level = level if level is None else stats.check_level("repeats", level)
+    if any(np.shape(p) != pooled.shape or np.shape(c) != pooled.shape * 2 for _, p, c in fits):
+        raise ValueError(f"repeats: each of fits must be (run, estimate {pooled.shape}, information {pooled.shape * 2}), as pooled")  # fmt: skip
+    if windows is not None:
+        stats.real_array("repeats", "windows", windows, (None, pooled.size), "rows, shape (W, q)")
+    need = resolves**2
     strength = [float(pooled @ c @ pooled) for _, _, c in fits]
     strong = [f for f, s in zip(fits, strength, strict=True) if s >= need]
     in_windows = 0.0 if windows is None else float(np.sum((np.asarray(windows) @ pooled) ** 2))
@@ -498,6 +513,7 @@ def _lm_compiled(layout, basis, z0, groups):
 
 def block_index(n: int, m: int) -> np.ndarray:
     """Sample indices every `m` of `n` samples, the last sample always included."""
+    n, m = stats.check_count("block_index", "n", n), stats.check_count("block_index", "m", m)
     idx = np.arange(0, n, m)
     if idx[-1] != n - 1:
         idx = np.r_[idx, n - 1]

@@ -24,11 +24,79 @@ import jax
 import numpy as np
 from jax.scipy.special import betainc, gammaincc
 
+from .._checks import (
+    check_finite_host,
+    check_flag,
+    check_numbers,
+    describe,
+    is_finite_real,
+    numeric_problem,
+    whole_number,
+)
+
 # The tails as one compiled program each: the search and the error bars ask for thousands of
 # scalar tails, and an eager call dispatches betainc's primitives one at a time (0.44 ms a
 # call against 0.11 ms compiled; `trust.honest` 1.35× faster: benchmarks/discovery_stats.py).
 _betainc = jax.jit(betainc)
 _gammaincc = jax.jit(gammaincc)
+
+
+def real_array(owner: str, name: str, x, shape, form: str) -> np.ndarray:
+    """`x` as a float array, or one line naming `owner: name` and the expected `form`: a
+    `TypeError` for anything but real numbers, a `ValueError` for another `shape` (a tuple,
+    None entries any length) or a NaN or inf."""
+    check_numbers(f"{owner}: {name}", x, form, shape=shape)
+    v = np.asarray(x, float)
+    check_finite_host(f"{owner}: {name}", v)
+    return v
+
+
+def rows_of(owner: str, r, **blocks) -> tuple:
+    """`r` (a whitened residual, (N,)) and each of `blocks` (columns, (N, k)) as float arrays,
+    or one line naming `owner`, the argument and its expected shape (`real_array`)."""
+    r = real_array(owner, "r", r, (None,), "the whitened residual, shape (N,)")
+    n = r.size
+    out = [real_array(owner, k, v, (n, None), f"whitened columns, shape (N, k) with N = {n}")
+           for k, v in blocks.items()]  # fmt: skip
+    return r, *out
+
+
+def check_classes(owner: str, classes, n: int):
+    """`classes` (None, or an integer class per row: (N,)) as an array, or one line naming
+    `owner`: the classes of the wrong type, length or a non-integer class."""
+    if classes is None:
+        return None
+    if numeric_problem(classes) is not None or np.ndim(classes) != 1:
+        raise (TypeError if numeric_problem(classes) else ValueError)(
+            f"{owner}: classes must be None or an integer class per row, shape (N,) = ({n},); "
+            f"got {describe(classes)}"
+        )
+    c = np.asarray(classes)
+    if c.size != n:
+        raise ValueError(f"{owner}: {c.size} row classes for {n} rows (classes: an integer "
+                         "class per row, or None)")  # fmt: skip
+    if not np.all(np.isfinite(c) & (c == np.round(c))):
+        raise ValueError(f"{owner}: classes must be whole numbers (an integer class per row); "
+                         f"got {c[~(np.isfinite(c) & (c == np.round(c)))][0]}")  # fmt: skip
+    return c
+
+
+def check_count(owner: str, name: str, value) -> int:
+    """`value` as an int when it is a whole number >= 1, else one line naming `owner: name`."""
+    n = whole_number(f"{owner}: {name}", value, "an integer >= 1")
+    if n < 1:
+        raise ValueError(f"{owner}: {name} must be an integer >= 1; got {n}")
+    return n
+
+
+def check_level(owner: str, level):
+    """A noise level `(s², ν)` ([`level_beyond`][hrgjax.discovery.stats.level_beyond]): s²
+    finite and > 0, ν a whole number >= 0; else one line naming `owner`."""
+    v = real_array(owner, "level", level, (2,), "(s², ν): a noise level > 0 and its dof >= 0")
+    if not (v[0] > 0 and v[1] >= 0 and v[1] == round(v[1])):
+        raise ValueError(f"{owner}: level must be (s², ν) with s² > 0 and ν a whole number "
+                         f">= 0; got ({v[0]:g}, {v[1]:g})")  # fmt: skip
+    return level
 
 
 def wls(g: np.ndarray, y: np.ndarray, sigma: np.ndarray):
@@ -41,6 +109,12 @@ def wls(g: np.ndarray, y: np.ndarray, sigma: np.ndarray):
     the model, a column of zeros) gets β = 0, the others their fit without it — not the
     minimum-norm split, which depends on the columns' units (scaled, it halved the angular
     gain beside a candidate proportional to it)."""
+    g = real_array("wls", "g", g, (None, None), "the columns, shape (N, p)")
+    n = g.shape[0]
+    y = real_array("wls", "y", y, (n,), f"the data, shape (N,) with N = {n} (g's rows)")
+    sigma = real_array("wls", "sigma", sigma, (n,), f"standard errors > 0, shape ({n},)")
+    if not np.all(sigma > 0):
+        raise ValueError(f"wls: sigma must be standard errors > 0; got {sigma[~(sigma > 0)][0]}")
     gw, yw = g / sigma[:, None], y / sigma
     norm = np.linalg.norm(gw, axis=0)
     d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
@@ -114,7 +188,17 @@ def class_levels(r, a, classes, weights=None, h=None, allowance=True):
     previous scale; None: 1), each class's degrees of freedom n_g − Σ_g h_ii (the leverage
     its rows carry: static windows fix most of a dwell model's parameters, so an even share
     p·n_g/n read their scale ≈ 15 % low on a small grid; `h`: those leverages, when known)."""
+    r, a = rows_of("class_levels", r, a=a)
     n = r.size
+    classes = check_classes("class_levels", classes, n)
+    form = f"one value per row, shape ({n},)"
+    if weights is not None:
+        weights = real_array("class_levels", "weights", weights, (n,), f"{form}, each > 0")
+        if not np.all(weights > 0):
+            raise ValueError(f"class_levels: weights must be {form}, each > 0 (the previous "
+                             f"noise scale); got {weights[~(weights > 0)][0]}")  # fmt: skip
+    h = None if h is None else real_array("class_levels", "h", h, (n,), form)
+    allowance = check_flag("class_levels: allowance", allowance)
     s = np.ones(n)
     if classes is None:
         classes = np.zeros(n, int)
@@ -147,6 +231,10 @@ def effective_dof(h, g_t, classes):
     (model-orthogonal, whitened) columns `g_t` put on the class, Satterthwaite's
     ν = (Σ w_g)² / Σ w_g²/ν_g: a shape seen on the few static windows rests on their ν, one
     seen on thousands of continuous blocks on theirs."""
+    h = real_array("effective_dof", "h", h, (None,), "the leverages, shape (N,)")
+    g_t = real_array("effective_dof", "g_t", g_t, (h.size, None),
+                     f"whitened columns, shape (N, k) with N = {h.size}")  # fmt: skip
+    classes = check_classes("effective_dof", classes, h.size)
     if classes is None:
         return max(float(h.size - h.sum()), 1.0)
     w, nu = [], []
@@ -178,6 +266,8 @@ def level_test(r: np.ndarray, j: np.ndarray, g: np.ndarray, classes=None):
     **Returns:** `(S, A, step, p, s)`: the score at that level, the aliasing index, the
     one-step estimate (in `g`'s units), the upper-tail p-value (1 where `g` adds nothing)
     and the level s per row (the factor on the whitening)."""
+    r, j, g = rows_of("level_test", r, j=j, g=g)
+    classes = check_classes("level_test", classes, r.size)
     a = np.concatenate([j, g], axis=1)
     norm = np.linalg.norm(a, axis=0)
     a_n = a / np.where(norm > 0, norm, 1.0)  # columns ten orders of magnitude apart
@@ -199,7 +289,7 @@ def orthonormal_span(a: np.ndarray) -> np.ndarray:
     """Orthonormal basis (N, k) of the span of `a`'s (N, p) columns, each scaled to unit norm
     first (numerical rank by SVD at 10⁻⁹ of the largest; zero columns dropped; (N, 0) for
     none). Dimensionless."""
-    a = np.asarray(a, float)
+    a = real_array("orthonormal_span", "a", a, (None, None), "columns, shape (N, p)")
     if a.size == 0 or a.shape[1] == 0:
         return np.zeros((a.shape[0], 0))
     norm = np.linalg.norm(a, axis=0)
@@ -214,6 +304,7 @@ def level_beyond(r: np.ndarray, a: np.ndarray, s: np.ndarray) -> tuple[float, in
     """The noise level a whitened residual `r` shows along the columns `s` beyond the span
     of `a` (a Birge ratio in that subspace: 1 when the whitening is right there):
     `(‖P_[a s] r‖² − ‖P_a r‖²) / ν, ν)`, ν the rank `s` adds to `a` ((1.0, 0) when none)."""
+    r, a, s = rows_of("level_beyond", r, a=a, s=s)
     qa, qs = orthonormal_span(a), orthonormal_span(np.concatenate([a, s], axis=1))
     nu = qs.shape[1] - qa.shape[1]
     if nu <= 0:
@@ -223,11 +314,14 @@ def level_beyond(r: np.ndarray, a: np.ndarray, s: np.ndarray) -> tuple[float, in
 
 def chi2_sf(x: float, dof: int) -> float:
     """Upper tail probability of χ²_dof at x."""
+    _tail_args("chi2_sf", x=x, dof=dof)
     return float(_gammaincc(np.float64(dof / 2.0), np.float64(max(x, 0.0) / 2.0)))
 
 
 def f_sf(f: float, d1: int, d2: int) -> float:
-    """Upper tail probability of the F(d1, d2) distribution at `f`."""
+    """Upper tail probability of the F(d1, d2) distribution at `f` (1 where `f` is not
+    > 0, NaN too)."""
+    _tail_args("f_sf", f=f, d1=d1, d2=d2)
     if not f > 0:
         return 1.0
     return float(
@@ -235,10 +329,39 @@ def f_sf(f: float, d1: int, d2: int) -> float:
     )
 
 
+def _tail_args(owner: str, **args) -> None:
+    """Refuse a tail's argument in one line naming `owner`: the statistic (`x`, `f`) not a
+    single real number (χ²'s x not NaN either: its tail would be NaN), a degrees of freedom
+    (`dof` >= 0, `d1`, `d2` > 0) not a finite number in range."""
+    for name, v in args.items():
+        if name in ("x", "f"):
+            ok = numeric_problem(v) is None and np.ndim(v) == 0 and not (name == "x" and v != v)
+            form = "a single real number" + (" (not NaN)" if name == "x" else "")
+        else:
+            ok = is_finite_real(v) and (v >= 0 if name == "dof" else v > 0)
+            form = f"a finite number {'>= 0' if name == 'dof' else '> 0'} (degrees of freedom)"
+        if not ok:
+            kind = TypeError if numeric_problem(v) is not None else ValueError
+            raise kind(f"{owner}: {name} must be {form}; got {describe(v)}")
+
+
+def _covariate_args(owner: str, means, x, alpha):
+    """`follows_covariate`'s arguments as float arrays, or one line naming `owner`."""
+    means = real_array(owner, "means", means, (None,), "the run means, shape (n,)")
+    x = real_array(owner, "x", x, (means.size, None),
+                   f"covariates, shape (n, k) with n = {means.size}")  # fmt: skip
+    if not (is_finite_real(alpha) and 0 < alpha < 1):
+        kind = TypeError if numeric_problem(alpha) is not None else ValueError
+        raise kind(f"{owner}: alpha must be a significance level in (0, 1); got "
+                   f"{describe(alpha)}")  # fmt: skip
+    return means, x
+
+
 def follows_covariate(means: np.ndarray, x: np.ndarray, alpha: float) -> tuple[np.ndarray, int]:
     """`means` less their mean and less the covariates (columns of `x`) that explain them
     significantly, chosen one at a time (F-test at `alpha`, Bonferroni over the covariates
     still tried); **returns** `(residual, columns fitted)` (the intercept counts)."""
+    means, x = _covariate_args("follows_covariate", means, x, alpha)
     resid, chosen = followed_covariates(means, x, alpha)
     return resid, 1 + len(chosen)
 
@@ -246,6 +369,7 @@ def follows_covariate(means: np.ndarray, x: np.ndarray, alpha: float) -> tuple[n
 def followed_covariates(means: np.ndarray, x: np.ndarray, alpha: float):
     """[`follows_covariate`][hrgjax.discovery.stats.follows_covariate] with the chosen
     columns: **returns** `(residual, indices of the columns of x chosen)`."""
+    means, x = _covariate_args("followed_covariates", means, x, alpha)
     n = means.size
     cols = [np.ones(n)]
     cands = [i for i in range(x.shape[1]) if np.ptp(x[:, i]) > 0]

@@ -53,11 +53,13 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
+from .. import _checks
 from . import leftover, stats
-from .effects import regular_parameters
+from .effects import CATALOGUE, regular_parameters
 
 MAX_SHAPES = 3
 """The most leftover shapes fitted beside the model for its model uncertainty."""
@@ -74,6 +76,49 @@ NOT_PINNED = "σ_b not pinned"
 SMALL_DOF = stats.SMALL_DOF
 """A class below `MIN_ROWS` with at most this many degrees of freedom pools its noise level
 with the other classes'."""
+
+
+def _inputs(owner, fit, shape_columns, classes, alpha, spread):
+    """`honest`'s and `statistical_p_value`'s arguments checked, before any fit: `(r, j,
+    labels, the shape columns on r's rows, classes)`, or one line naming `owner` and the
+    argument (a NaN in the residual read as a noise level of ×1, classes 0.5 and 1.5 as
+    "all rows", alpha 1.5 fitting every shape beside the model, a raw LinAlgError…)."""
+    if not all(hasattr(fit, k) for k in ("model", "parameters", "r", "j")):
+        raise TypeError(f"{owner}: fit must be a discovery Fit (its model, parameters, r and "
+                        f"j); got {type(fit).__name__}")  # fmt: skip
+    if isinstance(fit.model, str) or any(n not in CATALOGUE for n in fit.model):
+        raise ValueError(f"{owner}: fit.model must be effect names of the catalogue; got "
+                         f"{_checks.describe(fit.model)}")  # fmt: skip
+    r = stats.real_array(owner, "fit.r", fit.r, (None,), "the whitened residual, shape (N,)")
+    j = stats.real_array(owner, "fit.j", fit.j, None, "the whitened Jacobian, shape (N, p)")
+    if j.ndim == 2 and j.shape[0] != r.size:
+        raise ValueError(f"{owner}: fit.j must be the whitened Jacobian, shape (N, p) with N = "
+                         f"{r.size} (fit.r's rows); got shape {j.shape}")  # fmt: skip
+    labels = regular_parameters(fit.model)
+    classes = stats.check_classes(owner, classes, r.size)
+    _checks.check_number(f"{owner}: alpha", alpha)
+    _checks.check_values(f"{owner}: alpha", alpha, lambda v: (v > 0) & (v < 1),
+                         "a significance level in (0, 1)")  # fmt: skip
+    if spread is not None:
+        if not (isinstance(spread, tuple | list) and len(spread) == 2
+                and isinstance(spread[1], Mapping)):  # fmt: skip
+            raise TypeError(f"{owner}: spread must be None or (factors, info) with info a "
+                            f"dict; got {_checks.describe(spread)}")  # fmt: skip
+        form = f"a variance factor >= 0 (or inf) per regular parameter, shape ({len(labels)},)"
+        _checks.check_numbers(f"{owner}: spread's factors", spread[0], form, (len(labels),))
+        f = np.asarray(spread[0], float)
+        if not np.all(f >= 0):
+            raise ValueError(f"{owner}: spread's factors must be {form}; got {f[~(f >= 0)][0]}")
+    if not isinstance(shape_columns, Mapping):
+        raise TypeError(f"{owner}: shape_columns must be a dict of whitened columns (N, k) by "
+                        f"shape name; got {_checks.describe(shape_columns)}")  # fmt: skip
+    cols = {}
+    for k, v in shape_columns.items():
+        name, form = f"shape_columns[{k!r}]", "whitened columns, shape (N, k)"
+        _checks.check_numbers(f"{owner}: {name}", v, form, (None, None))
+        if np.shape(v)[0] == r.size:  # the training rows' (others are not read)
+            cols[k] = stats.real_array(owner, name, v, (r.size, None), form)
+    return r, j, labels, cols, classes
 
 
 def _sandwich(a, s, p):
@@ -172,16 +217,15 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
     `{class: s without the shapes}` for the classes whose level they bring down by more than
     10 %: a residual far above the noise model that the shapes explain is structure, not noise).
     """
-    r, j = np.asarray(fit.r, float), np.asarray(fit.j, float)
-    labels = regular_parameters(fit.model)
+    r, j, labels, cols, classes = _inputs("honest", fit, shape_columns, classes, alpha, spread)
+    if spread is not None and "basis" not in spread[1]:
+        raise TypeError("honest: spread must be None or (factors, info) with info['basis'] its "
+                        "words for the report; got no 'basis'")  # fmt: skip
     params = copy.deepcopy(fit.parameters)
     if j.ndim != 2 or j.shape[1] != len(labels) or r.size <= j.shape[1]:
         return params, {"noise_scale": {}, "shapes": [], "structure_left": False,
                         "basis": "textbook (no correction)"}  # fmt: skip
     n, p = j.shape
-    if classes is not None and len(classes) != n:
-        raise ValueError(f"honest: {len(classes)} row classes for a residual of {n} rows")
-    cols = {k: v for k, v in shape_columns.items() if v.shape[0] == n}
     s, a, shapes, bare = _levels(r, j, cols, classes, alpha)
     # the reported values are the noise model's weighted fit: the shift and the sandwich
     # variance are that estimator's (with the shapes beside it), at the noise level s
@@ -261,14 +305,20 @@ def statistical_p_value(fit, name: str, shape_columns, classes=None, alpha: floa
     **Returns** the p-value, 1.0 where no parameter of `name` has a finite variance (the
     data do not excite it, or σ_b pins none of them), None where `name` has no regular
     parameter in `fit` or there are too few rows to read a level."""
-    r, j = np.asarray(fit.r, float), np.asarray(fit.j, float)
-    labels = regular_parameters(fit.model)
+    owner = "statistical_p_value"
+    if not isinstance(name, str) or name not in CATALOGUE:
+        raise (ValueError if isinstance(name, str) else TypeError)(
+            f"{owner}: name must be an effect name of the catalogue; got {_checks.describe(name)}"
+        )
+    if not (_checks.is_finite_real(descent) and abs(float(descent)) == 1.0):
+        raise (ValueError if _checks.numeric_problem(descent) is None else TypeError)(
+            f"{owner}: descent must be +1 or -1 (AbstractProblem.descent); got "
+            f"{_checks.describe(descent)}"
+        )
+    r, j, labels, cols, classes = _inputs(owner, fit, shape_columns, classes, alpha, spread)
     idx = [i for i, (n, _) in enumerate(labels) if n == name]
     if not idx or j.ndim != 2 or j.shape[1] != len(labels) or r.size <= j.shape[1]:
         return None
-    if classes is not None and len(classes) != r.size:
-        raise ValueError(f"statistical_p_value: {len(classes)} row classes for {r.size} rows")
-    cols = {k: v for k, v in shape_columns.items() if v.shape[0] == r.size}
     old = np.diag(stats.covariance(j))
     theta = []
     for i in idx:
