@@ -81,12 +81,35 @@ def fused(fn=None, **jit_kwargs):
     first time a script called it on a new length (`benchmarks/eager_ops.py`). Fused, it is
     one compile of ≈ the cost of one such operation.
 
+    NumPy float64, int64 and bool scalars are passed as the Python numbers of the same value
+    (`_as_python`), so a value read from a file meets the program of a literal one.
+
     Not for functions with equinox checks (`eqx.error_if`, `check_finite`) inside: JAX keeps
     the traced function by its argument shapes, and equinox reads its error mode (raise, or
     NaN inside `program`) while tracing, so the first caller's mode would stick."""
     if fn is None:
         return functools.partial(fused, **jit_kwargs)
-    return functools.wraps(fn)(jax.jit(fn, inline=True, **jit_kwargs))
+    compiled = jax.jit(fn, inline=True, **jit_kwargs)
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        return compiled(*map(_as_python, args), **{k: _as_python(v) for k, v in kwargs.items()})
+
+    return call
+
+
+_PYTHON = {np.dtype(np.float64): float, np.dtype(np.int64): int, np.dtype(np.bool_): bool}
+"""The NumPy scalar types `fused` passes as the Python number of the same value and dtype."""
+
+
+def _as_python(x):
+    """`x` as a Python number when it is a NumPy float64, int64 or bool scalar (or 0-d array):
+    JAX types a Python number weakly and a NumPy one strongly, and keeps a compiled program by
+    its arguments' weak types, so `tau0=np.float64(1.0)` after `tau0=1.0` (a value read from a
+    file, `np.diff(t)[0]`) compiled the same program again. Same value, same dtype."""
+    if isinstance(x, np.generic | np.ndarray) and x.ndim == 0 and x.dtype in _PYTHON:
+        return _PYTHON[x.dtype](x)
+    return x
 
 
 def strong_floats(tree):

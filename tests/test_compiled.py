@@ -8,7 +8,7 @@ import optimistix as optx
 import pytest
 
 from hrgjax._checks import check_finite
-from hrgjax._compiled import bucket_pad, bucket_size, program
+from hrgjax._compiled import bucket_pad, bucket_size, fused, program
 from hrgjax._least_squares import least_squares, least_squares_with_jacobian
 
 
@@ -174,6 +174,16 @@ def test_fused_functions_compile_one_program_eagerly_and_inline_under_a_trace():
         me.navigation_errors(nav, truth)
     assert first.names == ["jit(navigation_errors)"], first.names
     assert again.compiles == 0
+
+    # a NumPy scalar (read from a file, `np.diff(t)[0]`) meets the program of a Python one
+    scaled = fused(lambda x, a, flag: jnp.where(flag, a * x, x))
+    xs = jnp.asarray(np.linspace(0.0, 1.0, n))
+    expected = scaled(xs, 2.5, True)
+    with CompileCounter() as numpy_scalars:
+        got = scaled(xs, np.float64(2.5), np.bool_(True))
+        scaled(xs, np.asarray(3.5), np.True_)
+    assert numpy_scalars.compiles == 0, numpy_scalars.names
+    np.testing.assert_array_equal(got, expected)
     r_m, r_n = (np.asarray(r) for r in radii(lat))
     np.testing.assert_allclose(pos[:, 0], 1e-6 * r_m, rtol=1e-9)
     np.testing.assert_allclose(pos[:, 1], -2e-6 * r_n * np.cos(lat), rtol=1e-9)
