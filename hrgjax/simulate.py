@@ -16,7 +16,7 @@ import numpy as np
 from . import _solve_parts as parts
 from . import plausible
 from ._checks import is_concrete, traceable
-from ._compiled import Check, Unchecked, device, program, single_run_entry
+from ._compiled import Check, Unchecked, device, fused, program, single_run_entry
 from ._cost import MAX_STEPS as MAX_STEPS
 from ._cost import default_max_steps as default_max_steps
 from ._cost import report as report_cost
@@ -236,6 +236,12 @@ def _solve_in_parts(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0
     if message := _SimulateCheck("simulate", result_index=2).host(out):
         raise RuntimeError(message)
     return out
+
+
+@fused
+def _switch_on_key(key):
+    """The switch-on bias key `_record` draws from `key` when no `bias_key` is given."""
+    return jax.random.split(key, 4)[3]
 
 
 def _record(gyro, profile, ts, read, key, bias_key, run, t_out=None):
@@ -476,6 +482,9 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
             "this gyro has noise: pass key=jax.random.key(…), or use gyro.without_noise()"
         )
     check_options(o)
+    # one program whether the switch-on key is given or drawn from `key` (as `_record` would)
+    if gyro.noise is None or bias_key is None:
+        bias_key = None if gyro.noise is None else _switch_on_key(key)
     _check_laws(gyro, profile)
     if ts is None:
         ts, dt_out = output_times(profile, dt_out), float(dt_out)

@@ -203,6 +203,26 @@ def test_python_floats_put_in_with_tree_at_compile_nothing_new():
     with CompileCounter() as c:
         hg.simulate(eqx.tree_at(lambda g: g.resonator.tau, gyro, 600), prof, dt_out=0.5)
     assert c.compiles == 0, c.names
+    with CompileCounter() as c:  # a weakly typed JAX number compiled the whole solve again
+        weak = jnp.asarray(650.0)
+        hg.simulate(eqx.tree_at(lambda g: g.resonator.tau, gyro, weak), prof, dt_out=0.5)
+    assert "jit(_solve)" not in c.names, c.names  # (a small eager program may be new)
+
+
+def test_a_given_switch_on_key_runs_the_program_of_a_drawn_one():
+    """`bias_key` given or drawn from `key` is one program (a given one compiled the solve
+    again, ≈ 2.6 s), and a given key sets the switch-on bias alone: two runs with the same
+    `bias_key` and different `key`s share it, so their difference has no bias slope."""
+    noisy = hg.presets.tvg3_like().noise
+    gyro = eqx.tree_at(lambda g: g.noise, hg.presets.ideal(resonator()), noisy,
+                       is_leaf=lambda x: x is None)  # fmt: skip
+    prof = hg.Profile.constant_rate(1.0, 1.0)
+    drawn = hg.simulate(gyro, prof, key=jax.random.key(0), dt_out=0.5).wave_angle
+    with CompileCounter() as c:
+        given = [hg.simulate(gyro, prof, key=jax.random.key(k), bias_key=jax.random.key(7),
+                             dt_out=0.5).wave_angle for k in (0, 1)]  # fmt: skip
+    assert c.compiles == 0, c.names
+    assert np.all(np.isfinite(drawn)) and not np.array_equal(drawn, given[0])
 
 
 def test_float32_mode_raises():
