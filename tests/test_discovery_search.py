@@ -5,13 +5,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import noisy_model_gyro
+from helpers import CompileCounter, noisy_model_gyro
 
 import hrgjax as hg
 from hrgjax.calibration import physical, rotation_plan, run_plan, static_plan
 from hrgjax.discovery import NOMINAL, records, stats
 from hrgjax.discovery.search import discover
-from hrgjax.units import DEG_PER_H
+from hrgjax.units import DEG_PER_H, K_E_NOMINAL
 
 K = 0.554
 
@@ -163,11 +163,17 @@ def test_a_sliver_beside_an_unnamed_cubic_is_not_named():
 
 
 def test_null_dataset_names_nothing():
-    rep = discover(_bench(_truth(), seed=4))
+    data = _bench(_truth(), seed=4)
+    rep = discover(data)
     assert rep.missing_effect is None
     assert rep.verdict == "none"
     assert rep.gap_before < 2.0 * rep.noise_floor
     assert rep.gap_after == rep.gap_before
+    # a NumPy k_e (read from a file) runs the programs of a Python one: it compiled 15 again
+    with CompileCounter() as c:
+        again = discover(data, k_e=np.float64(K_E_NOMINAL))
+    assert c.compiles == 0, c.names
+    assert again.verdict == rep.verdict and again.gap_before == rep.gap_before
 
 
 def test_discover_refuses_bad_input():

@@ -50,7 +50,7 @@ import math
 
 import numpy as np
 
-from .._checks import describe, is_finite_real, numeric_problem, whole_number
+from .._checks import describe, is_concrete, is_finite_real, numeric_problem, whole_number
 from ..calibration.reduce import K_E_NOMINAL, WINDOW_S
 from ..data import MeasuredData
 from ..noise import Noise
@@ -198,6 +198,8 @@ def discover(
     holdout_every = _check_arguments(data, nominal, catalogue, holdout_every, block_s)
     if numeric_problem(k_e) is not None:  # its value is checked where it is used
         raise TypeError(f"k_e must be {K_E_WANTED}; got {describe(k_e)}")
+    if np.ndim(k_e) == 0 and is_concrete(k_e):  # np.float64(0.554) and 0.554: one program
+        k_e = float(k_e)
     _check_rule(alpha=alpha, min_delta_bic=min_delta_bic, min_heldout_gain=min_heldout_gain,
                 max_effects=max_effects, max_aliasing=max_aliasing, ambiguity_bic=ambiguity_bic,
                 min_agreement=min_agreement)  # fmt: skip
