@@ -95,6 +95,7 @@ def fused(fn=None, **jit_kwargs):
     def call(*args, **kwargs):
         return compiled(*map(_as_python, args), **{k: _as_python(v) for k, v in kwargs.items()})
 
+    call.lower, call.trace, call.eval_shape = compiled.lower, compiled.trace, compiled.eval_shape
     return call
 
 

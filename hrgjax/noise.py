@@ -222,6 +222,15 @@ def gauss_markov_bridge(dts, sigma, correlation_time):
                  "a standard deviation >= 0")  # fmt: skip
     check_values("gauss_markov_bridge: correlation_time", correlation_time,
                  FINITE_POSITIVE, "> 0 [s]")  # fmt: skip
+    # a whole number as the float it is (the same program and values as 50.0, not its own)
+    whole = lambda x: float(x) if isinstance(x, int | np.integer) and not isinstance(x, bool) else x
+    return _bridge(dts, whole(sigma), whole(correlation_time))
+
+
+@fused
+def _bridge(dts, sigma, correlation_time):
+    """`gauss_markov_bridge`'s arithmetic, one program per shape and type (eagerly ≈ 13
+    operations, each compiled on a new input shape or type)."""
     u = 0.5 * dts / correlation_time
     g = _u_minus_tanh(u)
     pos = g > 0.0  # an empty interval (Δt = 0) has no integral and no finite √ slope

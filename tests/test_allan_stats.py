@@ -1214,3 +1214,21 @@ def test_totdev_span_reaches_one_rate_noise_either_side_of_the_type_read():
             assert lo == pytest.approx(min(v[0] for v in ends), rel=1e-12), (n, m, a)
             assert hi == pytest.approx(max(v[1] for v in ends), rel=1e-12), (n, m, a)
     assert read == {0, -1, -2}, read
+
+
+def test_allan_deviation_dt_of_any_number_type_compiles_nothing():
+    """Compile once: τ = m·dt was an eager XLA multiply, one program per type of `dt`
+    (float, np.float64, int); it is host arithmetic now, the same values."""
+    y = np.random.default_rng(4).normal(size=41)
+    hg.allan_deviation(y, 0.1)
+    with CompileCounter() as c:
+        out = [hg.allan_deviation(y * k, dt) for k, dt in ((2, np.float64(0.3)), (3, 2), (4, 0.5))]
+    assert c.compiles == 0, c.names
+    np.testing.assert_array_equal(out[1][0], [2.0, 4.0, 8.0, 16.0, 32.0][: out[1][0].size])
+    assert out[0][0].dtype == np.float64 and not out[0][0].weak_type
+    # the single-τ deviations: a tau0 of 1, 1.0 or np.float64(1.0) is one program
+    expected = hg.allan.oadev(y, 2, 1.0)
+    with CompileCounter() as c:
+        same = [hg.allan.oadev(y, 2, tau0) for tau0 in (1, np.int64(1), np.float64(1.0))]
+    assert c.compiles == 0, c.names
+    assert all(float(v) == float(expected) for v in same)

@@ -1016,3 +1016,23 @@ def test_information_counts_the_windows_the_reduction_forms():
         np.testing.assert_array_equal(np.asarray(d.information(plan)), before)
     with pytest.raises(ValueError, match="windows of 5 samples are too short"):
         reduce(hg.MeasuredData({k: v[:5] for k, v in data.columns.items()}))
+
+
+def test_bench_time_is_one_program_per_plan_length():
+    """Compile once: `bench_time_h` ran op by op (18–22 compiles on each new plan length);
+    one program per length now, whatever the order of kinds, and differentiable."""
+    seg = lambda t, kind="static": ({"kind": kind, "temperature_c": t, "wave_angle_deg": 0.0,
+                                     "duration_s": 30.0} | ({"rate_dps": 2.0} if kind ==
+                                                            "rotation" else {}))  # fmt: skip
+    plan = d.BenchPlan.from_segments([seg(5.0 * k) for k in range(7)])
+    with CompileCounter() as c:
+        d.bench_time_h(plan)
+    assert c.compiles <= 1, c.names
+    other = d.BenchPlan.from_segments([seg(3.0 * k, ("rotation", "static")[k % 2])
+                                       for k in range(7)])  # fmt: skip
+    with CompileCounter() as c:
+        h = d.bench_time_h(other, d.BenchModel(settle_s=600.0))
+    assert c.compiles == 0, c.names
+    assert float(h) * 3600 == pytest.approx(float(d.BenchModel(settle_s=600.0).bench_time_s(other)))
+    g = jax.grad(d.bench_time_h)(plan)
+    np.testing.assert_allclose(g.duration_s, 1 / 3600, rtol=1e-15)

@@ -511,3 +511,14 @@ def test_compensate_uses_the_vibration_axis_the_compensator_was_trained_on(imu):
     buf.seek(0)
     new = eqx.tree_deserialise_leaves(buf, rebuilt)
     np.testing.assert_array_equal(cp.compensate(new, imu, rec)[1], pred)
+
+
+def test_vibration_simulate_compiles_nothing_for_a_new_latitude(imu):
+    """Compile once: `lat_deg` reached the compiled record as a Python float (static), so
+    each latitude compiled the whole simulation again (1.7 s); it travels as an array."""
+    rest = vb.VibrationSchedule.constant(0.0, 0.0, 0.26)
+    vb.simulate(imu, rest, fs=50.0, key=jax.random.key(0), lat_deg=45.0)
+    with CompileCounter() as c:
+        rec = vb.simulate(imu, rest, fs=50.0, key=jax.random.key(1), lat_deg=-12)
+    assert c.compiles == 0, c.names
+    assert rec.lat == pytest.approx(-12 * DEG)

@@ -819,3 +819,26 @@ def test_imu_model_apply_refuses_nan_or_non_real_increments(field, value, kind, 
         ImuModel(gyro_bias=1e-6).apply(jax.random.key(0), args["dtheta"], args["dv"], 0.01,
                                        args["gyro_rate_error"])  # fmt: skip
     assert "\n" not in str(err.value)
+
+
+def test_imu_model_apply_compiles_nothing_for_new_values_of_the_same_shapes():
+    """Compile once: the Gauss–Markov scan ran eagerly on a fresh closure, 2 compiles on
+    every call. A second call with new increments, key, interval and error values — a new
+    correlation time too (static, a host float: the scan takes its coefficients) — compiles
+    nothing."""
+    from helpers import CompileCounter
+
+    from hrgjax.ins.sensors import ImuModel
+
+    rng = np.random.default_rng(7)
+
+    def call(tau, dt, seed):
+        imu = ImuModel(gyro_bias_instability=1e-5 * seed, gyro_correlation_time=tau,
+                       accel_random_walk=1e-5, arw=2e-5 * seed)  # fmt: skip
+        th, dv = rng.normal(size=(2, 13, 3)) * 1e-3
+        return jax.block_until_ready(imu.apply(jax.random.key(seed), th, dv, dt, return_bias=True))
+
+    call(30.0, 0.01, 1)
+    with CompileCounter() as c:
+        call(7.0, 0.02, 2)
+    assert c.compiles == 0, c.names

@@ -496,3 +496,18 @@ def test_platform_before_the_fault_equals_no_fault_and_is_deterministic():
         pf.PlatformINS(lat=2.0)
     with pytest.raises(ValueError, match="specific_force must have shape"):
         pf.PlatformINS(specific_force=(0.0, 9.8))
+
+
+def test_platform_fault_time_as_an_int_compiles_nothing_new():
+    """Compile once: `Fault.on(…, t_fault=200)` kept an int leaf (and 200.0 a weak float),
+    so the same fault written as an int compiled `simulate` again; its fields are float64."""
+    from helpers import CompileCounter
+
+    ins = pf.PlatformINS(lat=40 * DEG)
+    run = lambda fault, k: pf.simulate(ins, dt=2.0, n_steps=11, key=jax.random.key(k), fault=fault)
+    run(pf.Fault.on("accel_y", 3e-7, 6.0), 0)
+    with CompileCounter() as c:
+        _, x, _ = run(pf.Fault.on("gyro_xi", 2e-7, 4), 1)
+        run(pf.Fault((0, 0, 1e-7, 0, 0, 0), 8), 2)
+    assert c.compiles == 0, c.names
+    np.testing.assert_array_equal(x, run(pf.Fault.on("gyro_xi", 2e-7, 4.0), 1)[1])

@@ -416,3 +416,19 @@ def test_noise_draws_and_pattern_noise_refuse_input_off_the_paved_path():
         pn.gm_structure(1.0, -10.0)
     with pytest.raises(ValueError, match=r"^gm_structure: delta must be a time difference >= 0"):
         pn.gm_structure(-1.0, 10.0)
+
+
+def test_gauss_markov_bridge_is_one_program():
+    """Compile once: the bridge ran op by op (13 compiles on a new length or input type);
+    one program per length now, and a whole-number correlation time is its float (the same
+    program and values)."""
+    dts, dts2 = jnp.linspace(0.0, 3.0, 17), jnp.linspace(0.5, 900.0, 17)
+    with CompileCounter() as c:
+        hg.noise.gauss_markov_bridge(dts, 1e-6, 100.0)
+    assert c.compiles <= 1, c.names
+    with CompileCounter() as c:
+        a2, s2 = hg.noise.gauss_markov_bridge(dts2, 2e-6, 50)
+    assert c.compiles == 0, c.names
+    b2, t2 = hg.noise.gauss_markov_bridge(dts2, 2e-6, 50.0)
+    np.testing.assert_array_equal(a2, b2)
+    np.testing.assert_array_equal(s2, t2)

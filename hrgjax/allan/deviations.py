@@ -99,6 +99,7 @@ def _per_tau(fn):
     @functools.wraps(fn)
     def call(y, m: int = 1, tau0: float = 1.0):
         _check_inputs(fn.__name__, y, tau0)
+        tau0 = float(tau0) if isinstance(tau0, int | np.integer) else tau0  # 1 and 1.0: one program
         return core(y if isinstance(y, jax.Array) else device(y, float), _factor(m, fn.__name__),
                     tau0)  # fmt: skip
 
@@ -243,7 +244,9 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
         devs = device(np.concatenate(values)[: len(ms)])
     else:
         devs = curve(jnp.asarray(rate, dtype=float), jnp.asarray(ms), float(dt), kind)
-    return jnp.asarray(ms, dtype=float) * dt, devs
+    # τ on the host: eagerly `jnp.asarray(ms) * dt` was an XLA multiply per type of dt
+    taus = np.asarray(ms, dtype=float) * float(dt)
+    return (device(taus) if trace_state_clean() else jnp.asarray(taus)), devs
 
 
 @functools.partial(jax.jit, static_argnames=("kind",))

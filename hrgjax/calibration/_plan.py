@@ -27,7 +27,7 @@ import numpy as np
 
 from .. import plausible
 from .._checks import is_concrete
-from .._compiled import device
+from .._compiled import device, fused
 from .experiment import QUICK_DURATION, QUICK_TEMPERATURES, SEED_ANGLES, SEED_TEMPERATURES
 
 KINDS = ("static", "rotation", "ramp")
@@ -276,35 +276,22 @@ class BenchModel(eqx.Module):
     def transitions_s(self, plan: BenchPlan) -> dict[str, jax.Array]:
         """Per-segment costs before each segment [s], shape (S,) each: `slew`, `settle`,
         `reposition`."""
-        prev_end = jnp.concatenate(
-            [jnp.reshape(jnp.asarray(self.start_temperature_c, float), (1,)),
-             plan.temperature_end_c[:-1]]
-        )  # fmt: skip
-        dt = plan.temperature_c - prev_end
-        delta = 0.05
-        slew = dt * jnp.tanh(dt / delta) / self.slew_c_per_min * 60.0
-        settle = self.settle_s * (1.0 - jnp.exp(-((dt / self.settle_scale_c) ** 2)))
-        repos = jnp.broadcast_to(jnp.asarray(self.reposition_s, dtype=float), dt.shape)
-        return {"slew": slew, "settle": settle, "reposition": repos}
+        return _transitions(self, plan.temperature_c, plan.temperature_end_c)
 
     def ramp_overrun_s(self, plan: BenchPlan) -> jax.Array:
         """Per segment, the time a ramp faster than the chamber takes beyond its duration
         [s], shape (S,): max(0, |T₁ − T₀|_δ/slew − duration) (0 for every other segment and
         every ramp the chamber can run) — a plan does not know its bench, so `bench_time_s`
         charges the chamber's time rather than the plan's (`check` refuses such a plan)."""
-        dtemp = plan.temperature_end_c - plan.temperature_c
-        slowest = dtemp * jnp.tanh(dtemp / 0.05) / self.slew_c_per_min * 60.0
-        ramp = jnp.asarray([k == "ramp" for k in plan.kind])
-        over = slowest - plan.duration_s  # where (not max): 0 with no slope at the limit
-        return jnp.where(ramp & (over > 0.0), over, 0.0)
+        return _overrun(self, plan.temperature_c, plan.temperature_end_c, plan.duration_s,
+                        _ramps(plan))  # fmt: skip
 
     def bench_time_s(self, plan: BenchPlan) -> jax.Array:
         """Bench time of the whole plan [s]: measuring plus every transition, plus the
         chamber's time a ramp too fast for it overruns (`ramp_overrun_s`; differentiable
         with respect to the plan's arrays)."""
-        parts = self.transitions_s(plan)
-        return (plan.measuring_s + sum(jnp.sum(p) for p in parts.values())
-                + jnp.sum(self.ramp_overrun_s(plan)))  # fmt: skip
+        return _bench_time(self, plan.temperature_c, plan.temperature_end_c, plan.duration_s,
+                           _ramps(plan), 1.0)  # fmt: skip
 
     def breakdown_h(self, plan: BenchPlan) -> dict[str, float]:
         """Bench time split into measuring, slewing (a too-fast ramp's `ramp_overrun_s`
@@ -340,6 +327,43 @@ class BenchModel(eqx.Module):
         }
 
 
+def _ramps(plan: BenchPlan) -> np.ndarray:
+    """(S,) whether each segment is a ramp: a host array, an argument of `_bench_time`
+    (from the static `kind` inside it, each order of kinds compiled a program of its own)."""
+    return np.array([k == "ramp" for k in plan.kind], dtype=bool)
+
+
+def _transitions(bench: BenchModel, t0, t1) -> dict[str, jax.Array]:
+    """`BenchModel.transitions_s` from the plan's start and end temperatures (S,) [°C]."""
+    prev_end = jnp.concatenate([jnp.reshape(jnp.asarray(bench.start_temperature_c, float), (1,)),
+                                t1[:-1]])  # fmt: skip
+    dt = t0 - prev_end
+    delta = 0.05
+    slew = dt * jnp.tanh(dt / delta) / bench.slew_c_per_min * 60.0
+    settle = bench.settle_s * (1.0 - jnp.exp(-((dt / bench.settle_scale_c) ** 2)))
+    repos = jnp.broadcast_to(jnp.asarray(bench.reposition_s, dtype=float), dt.shape)
+    return {"slew": slew, "settle": settle, "reposition": repos}
+
+
+def _overrun(bench: BenchModel, t0, t1, duration, ramp) -> jax.Array:
+    """`BenchModel.ramp_overrun_s` from the plan's arrays and its ramp mask (S,)."""
+    dtemp = t1 - t0
+    slowest = dtemp * jnp.tanh(dtemp / 0.05) / bench.slew_c_per_min * 60.0
+    over = slowest - duration  # where (not max): 0 with no slope at the limit
+    return jnp.where(ramp & (over > 0.0), over, 0.0)
+
+
+@fused
+def _bench_time(bench: BenchModel, t0, t1, duration, ramp, unit_s) -> jax.Array:
+    """`BenchModel.bench_time_s` in units of `unit_s` [s] (1: seconds, 3600: hours), one
+    program per plan length (eagerly ≈ 20 operations, each compiled on a new length);
+    inlined under the caller's `jit`, `grad` or `vmap`."""
+    parts = _transitions(bench, t0, t1)
+    total = (jnp.sum(duration) + sum(jnp.sum(p) for p in parts.values())
+             + jnp.sum(_overrun(bench, t0, t1, duration, ramp)))  # fmt: skip
+    return total / unit_s
+
+
 def _float64_leaf(values) -> jax.Array | np.ndarray:
     """A plan's per-segment values (host floats) as a leaf that keeps them float64: a device
     array with JAX's float64 mode on, else the NumPy float64 array (float32 would round)."""
@@ -352,7 +376,9 @@ def _float64_leaf(values) -> jax.Array | np.ndarray:
 
 def bench_time_h(plan: BenchPlan, bench: BenchModel | None = None) -> jax.Array:
     """Bench time of `plan` [h] under `bench` (default `BenchModel()`)."""
-    return (BenchModel() if bench is None else bench).bench_time_s(plan) / 3600.0
+    bench = BenchModel() if bench is None else bench
+    return _bench_time(bench, plan.temperature_c, plan.temperature_end_c, plan.duration_s,
+                       _ramps(plan), 3600.0)  # fmt: skip
 
 
 def seed_bench_plan(

@@ -44,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import concrete_value, finite_number, numeric_problem
-from .._compiled import fused
+from .._compiled import device, fused
 from .._x64 import require_x64
 from ..ins.constants import WGS84, earth_rate_ned
 from ..ins.trajectory import euler_to_dcm
@@ -284,7 +284,7 @@ def simulate(
     c_bn = euler_to_dcm(*(jnp.asarray(x * DEG) for x in att))
     gyro, accel, err = _run(
         imu, jnp.asarray(freq), jnp.asarray(amp), jnp.asarray(schedule.axis), float(fs), key,
-        lat_deg * DEG, c_bn,
+        device(lat_deg * DEG, float), c_bn,  # an array: a new latitude, no new program
     )  # fmt: skip
     return VibrationRecord(
         jnp.asarray(np.arange(freq.size) / fs), gyro, accel, err, jnp.asarray(freq), jnp.asarray(amp),

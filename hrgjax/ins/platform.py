@@ -59,6 +59,7 @@ from .._checks import (
     is_concrete,
     whole_number,
 )
+from .._compiled import device
 from .._x64 import require_x64
 from ..kalman import discretise_input, psd_factor, van_loan
 from .constants import G0, OMEGA_IE, A
@@ -194,12 +195,19 @@ class PlatformINS(eqx.Module):
         return phi, gam, qd
 
 
+def _floats(x) -> jax.Array:
+    """`x` as a float64 array, not weakly typed (a traced one cast in its trace)."""
+    return device(x, float)
+
+
 class Fault(eqx.Module):
     """An information fault: magnitudes `e` (6,) in `FAULTS` order (accelerometers in
     g-units, gyros in rad/s) switched on at `t_fault` [s]."""
 
-    e: jax.Array = eqx.field(converter=jnp.asarray, default=(0.0,) * 6)
-    t_fault: jax.Array = eqx.field(converter=jnp.asarray, default=jnp.inf)
+    # float64, strongly typed, whatever the input: `t_fault=200` (an int leaf) compiled
+    # `simulate` again beside `t_fault=200.0` (a program is kept by its leaves' dtypes)
+    e: jax.Array = eqx.field(converter=_floats, default=(0.0,) * 6)
+    t_fault: jax.Array = eqx.field(converter=_floats, default=jnp.inf)
 
     @classmethod
     def on(cls, sensor: str, size: float, t_fault: float) -> Fault:

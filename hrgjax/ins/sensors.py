@@ -48,7 +48,7 @@ from .._checks import (
     is_concrete,
     vec3,
 )
-from .._compiled import tracing_callback_free
+from .._compiled import fused, tracing_callback_free
 from ..units import DEG_PER_H, DEG_PER_SQRT_H, G0
 
 MICRO_G = 1e-6 * G0
@@ -309,15 +309,26 @@ class ImuModel(eqx.Module):
         e2 = (l21 * z1 + l22 * z2) * sigma[None]  # the mean's, correlated with it
         w_rw = jax.random.normal(k2, (n, 3)) * (rrw * math.sqrt(dt))[None]
         bridge = z3 * (rrw * math.sqrt(dt / 12.0))[None]
-
-        def step(c, w):
-            gm, rw = c
-            e1, e2, w_rw, bridge = w
-            gm1, rw1 = a * gm + e1, rw + w_rw
-            return (gm1, rw1), (b * gm + e2 + 0.5 * (rw + rw1) + bridge, (b * gm + e2, gm1))
-
-        _, (mean, gm) = jax.lax.scan(step, (gm0, jnp.zeros(3)), (e1, e2, w_rw, bridge))
+        mean, gm = _bias_scan(a, b, gm0, e1, e2, w_rw, bridge)
         return mean, jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None], gm
+
+
+@fused
+def _bias_scan(a, b, gm0, e1, e2, w_rw, bridge):
+    """`ImuModel._bias_path`'s recursion, one compiled program per length: `a`, `b` (the
+    Gauss–Markov coefficients, Python floats) are arguments — a scan run eagerly on a fresh
+    closure holding them compiled twice on every call. The draws before it stay separate
+    operations (each compiled once per shape): fused with them, XLA contracts their products
+    and sums into FMAs and the values move in the last bits."""
+
+    def step(c, w):
+        gm, rw = c
+        e1, e2, w_rw, bridge = w
+        gm1, rw1 = a * gm + e1, rw + w_rw
+        return (gm1, rw1), (b * gm + e2 + 0.5 * (rw + rw1) + bridge, (b * gm + e2, gm1))
+
+    _, (mean, gm) = jax.lax.scan(step, (gm0, jnp.zeros(3)), (e1, e2, w_rw, bridge))
+    return mean, gm
 
 
 def _gm_interval(r: float):
