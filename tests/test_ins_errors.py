@@ -266,7 +266,9 @@ def test_monte_carlo_covariance_matches_the_propagated_covariance():
     with pytest.raises(ValueError, match="dt must be"):
         tr.stationary(45.0, duration_s=10.0, dt=-1.0)
     # a grid that would silently end early (9 s of 10); latitudes: tests/test_navigation.py
-    with pytest.raises(ValueError, match=r"^dt = 3.0 s must divide duration_s = 10.0 s"):
+    with pytest.raises(
+        ValueError, match=r"^stationary: dt = 3.0 s must divide duration_s = 10.0 s"
+    ):
         tr.stationary(45.0, duration_s=10.0, dt=3.0)
     with pytest.raises(ValueError, match="arw must be finite"):
         sd.ImuErrors(arw=-1.0)
@@ -496,9 +498,9 @@ def test_off_path_inputs_of_alignment_trajectories_filter_and_flights_are_one_li
         (lambda: al.ImuLog(t3, z3 + 0j, z3, 0.5), r"^ImuLog.dtheta must be \(N, 3\) .*complex128"),
         (lambda: al.ImuLog(t3, z3, z3, 0.5, header_attitude_deg=(1.0, 2.0)),
          r"^ImuLog.header_attitude_deg must be None or \(pitch, roll, heading\)"),
-        (lambda: al.align(log, coarse_s=np.inf), r"^coarse_s must be a finite number > 0 s; got inf"),
-        (lambda: al.align(log, coarse_s="60"), r"^coarse_s must be a single real number \[s\]"),
-        (lambda: al.align(log, coarse_s=1e-5), r"^coarse_s = 1e-05 s is under half the sample int"),
+        (lambda: al.align(log, coarse_s=np.inf), r"^align: coarse_s must be a finite number > 0 s; got inf"),
+        (lambda: al.align(log, coarse_s="60"), r"^align: coarse_s must be a single real number \[s\]"),
+        (lambda: al.align(log, coarse_s=1e-5), r"^align: coarse_s must be over half the sample interval \(1 s\).*; got 1e-05 s$"),
         (lambda: al.align(log, step_s=-1.0), r"^align: step_s must be a finite number > 0 \[s\]; got -1.0"),
         (lambda: al.align(log, arw=np.nan), r"^align: arw must be a finite number >= 0 \[rad/√s\]; got nan"),
         (lambda: al.align(log, velocity_noise=0.0), r"^align: velocity_noise must be a finite number > 0"),
@@ -529,9 +531,9 @@ def test_off_path_inputs_of_alignment_trajectories_filter_and_flights_are_one_li
         (lambda: tr.constant_velocity(45.0, speed=-5.0, duration_s=10.0), r"^constant_velocity: speed must be >= 0 m/s"),
         (lambda: tr.stationary(45.0, pitch_deg=95.0, duration_s=10.0), r"^stationary: pitch_deg must be in \[-90, 90\] °"),
         (lambda: tr.stationary(45.0, pitch_deg=-91.0, duration_s=10.0), r"^stationary: pitch_deg must be in \[-90, 90\]"),
-        (lambda: tr.stationary(45.0, duration_s="10"), r"^duration_s must be a single real number \[s\]; got str"),
-        (lambda: tr.stationary(45.0, duration_s=10.0, dt=np.array([1.0, 2.0])), r"^dt must be a single real number"),
-        (lambda: tr.constant_velocity(45.0, duration_s=10.0, earth="wgs84"), r"^earth must be an Earth model"),
+        (lambda: tr.stationary(45.0, duration_s="10"), r"^stationary: duration_s must be a single real number \[s\]; got str"),
+        (lambda: tr.stationary(45.0, duration_s=10.0, dt=np.array([1.0, 2.0])), r"^stationary: dt must be a single real number"),
+        (lambda: tr.constant_velocity(45.0, duration_s=10.0, earth="wgs84"), r"^constant_velocity: earth must be an Earth model"),
         (lambda: ekf.LooselyCoupled("imu", rx), r"^LooselyCoupled.imu must be of type ImuModel; got 'imu'"),
         (lambda: ekf.LooselyCoupled(imu, None), r"^LooselyCoupled.gnss must be of type Gnss; got None"),
         (lambda: ekf.LooselyCoupled(imu, rx, earth="wgs84"), r"^LooselyCoupled.earth must be of type Earth"),
@@ -539,14 +541,14 @@ def test_off_path_inputs_of_alignment_trajectories_filter_and_flights_are_one_li
         (lambda: ekf.LooselyCoupled(imu, rx, position_sigma="abc"), r"^LooselyCoupled.position_sigma must be > 0 .*; got str"),
         (lambda: ekf.LooselyCoupled(imu, rx, position_sigma=np.ones((1, 3))),
          r"^LooselyCoupled.position_sigma must be > 0 \(1 or 3 values\); got \[\[1.0, 1.0, 1.0\]\]$"),
-        (lambda: lc(fixes(), s="x"), r"^settings must be a LooselyCoupled; got 'x'"),
-        (lambda: lc("fixes"), r"^fixes must be a GnssData \(gnss.measure\); got 'fixes'"),
-        (lambda: lc(fixes(lon=np.zeros(2))), r"^fixes.lon must be \(4,\) for the 4 fixes"),
-        (lambda: lc(fixes(v_ned=np.zeros((4, 2)))), r"^fixes.v_ned must be \(4, 3\) for the 4 fixes"),
-        (lambda: lc(fixes(valid=np.full(4, 0.5))), r"^fixes.valid must be \(4,\) bools for the 4 fixes"),
-        (lambda: lc(fixes(), dt=0.2), r"^fixes.t must be fixes.index × dt = 0.2 s: fixes made for another"),
-        (lambda: lc(fixes(lat=np.array([0.5, np.nan, 0.5, 0.5]))), r"^fixes.lat \(a valid fix\) must be finite"),
-        (lambda: lc(fixes(lat=np.full(4, 40.0))), r"^fixes.lat = 40 rad is beyond ±π/2"),
+        (lambda: lc(fixes(), s="x"), r"^loosely_coupled: settings must be a LooselyCoupled; got 'x'"),
+        (lambda: lc("fixes"), r"^loosely_coupled: fixes must be a GnssData \(gnss.measure\); got 'fixes'"),
+        (lambda: lc(fixes(lon=np.zeros(2))), r"^loosely_coupled: fixes.lon must be \(4,\) for the 4 fixes"),
+        (lambda: lc(fixes(v_ned=np.zeros((4, 2)))), r"^loosely_coupled: fixes.v_ned must be \(4, 3\) for the 4 fixes"),
+        (lambda: lc(fixes(valid=np.full(4, 0.5))), r"^loosely_coupled: fixes.valid must be \(4,\) bools \(or ints 0 and 1\) for the 4 fixes"),
+        (lambda: lc(fixes(), dt=0.2), r"^loosely_coupled: fixes.t must be fixes.index × dt \(dt = 0.2 s\) plus one offset .*spans 3 s: fixes made for another"),
+        (lambda: lc(fixes(lat=np.array([0.5, np.nan, 0.5, 0.5]))), r"^loosely_coupled: fixes.lat \(a valid fix\) must be finite"),
+        (lambda: lc(fixes(lat=np.full(4, 40.0))), r"^loosely_coupled: fixes.lat = 40 rad is beyond ±π/2"),
         (lambda: flights.fly("truth", imu, settings, key=key), r"^fly: truth must be of type Truth"),
         (lambda: fly(key=0), r"^fly: key must be one JAX PRNG key, e.g. jax.random.key\(0\); got 0$"),
         (lambda: fly(runs=True), r"^fly: runs must be a whole number >= 1; got True"),
@@ -578,3 +580,88 @@ def test_valid_inputs_pass_the_session_27_checks_as_before():
     for pitch in (90.0, -90.0):
         assert tr.stationary(45.0, pitch_deg=pitch, duration_s=10.0).t.shape == (11,)
     assert tr.constant_velocity(45.0, speed=0.0, duration_s=10.0).t.shape == (11,)
+
+
+def _review_fixes(**kw):
+    """120 fixes every 3rd IMU epoch at 0.1 s (no JAX work), with fields `kw` replaced."""
+    from hrgjax.ins import gnss
+
+    idx = np.arange(3, 361, 3)
+    fix = dict(t=idx * 0.1, index=idx, lat=np.full(idx.size, 0.5), lon=np.zeros(idx.size),
+               h=np.zeros(idx.size), v_ned=np.zeros((idx.size, 3)),
+               valid=np.ones(idx.size, bool))  # fmt: skip
+    return gnss.GnssData(**{**fix, **kw})
+
+
+def test_fixes_with_gps_time_or_float32_stamps_and_int_masks_are_accepted():
+    """Review (session 27): fixes stamped in GPS time (t + 345600 s) or float32 `t`, and a 0/1
+    int `valid` mask, were refused (`t` had to be index × dt to 1e-9; the filter reads `index`,
+    never `t`). Fixes for another IMU interval, a fix a sample off its epoch, a NaN stamp and
+    a mask holding a 2 are still refused, naming `loosely_coupled`."""
+    from hrgjax.ins import ekf
+
+    idx, dt = np.arange(3, 361, 3), 0.1
+    for t in (idx * dt + 345600.0, (idx * dt).astype(np.float32),
+              (idx * dt + 345600.0).astype(np.float32), idx * dt + 0.04 * np.sin(idx)):  # fmt: skip
+        ekf.check_fixes(_review_fixes(t=t), dt)  # GPS time, float32, both; jitter < dt/2
+    ekf.check_fixes(_review_fixes(valid=np.r_[1, 0, np.ones(idx.size - 2)].astype(int)), dt)
+    ekf.check_fixes(_review_fixes(valid=list(np.ones(idx.size, bool))), dt)
+    head = r"^loosely_coupled: fixes.t must be fixes.index × dt \(dt = 0.1 s\) plus one offset"
+    for t, spread in ((idx * 0.2, "35.7"), (idx * dt + np.r_[0.0, 0.2, np.zeros(118)], "0.2")):
+        with pytest.raises(ValueError, match=head + rf".*spans {spread} s: fixes made for another"):
+            ekf.check_fixes(_review_fixes(t=t), dt)
+    with pytest.raises(ValueError, match=r"^loosely_coupled: fixes.t must be finite; it has nan"):
+        ekf.check_fixes(_review_fixes(t=np.r_[np.nan, idx[1:] * dt]), dt)
+    with pytest.raises(ValueError, match=r"^loosely_coupled: fixes.valid must be \(120,\) bools "
+                       r"\(or ints 0 and 1\) for the 120 fixes; got 2 at fix 1$"):  # fmt: skip
+        ekf.check_fixes(_review_fixes(valid=np.r_[1, 2, np.ones(118)].astype(int)), dt)
+
+
+def test_a_step_of_exactly_half_a_sample_is_accepted():
+    """Review (session 27): `fine_align(log, c0, step_s=log.dt / 2)` ran one sample a step
+    (max(1, round(0.5))) and was refused as "under half" (Python's round(0.5) is 0); a
+    `coarse_s` of half a sample spans no sample (refused, as before), and says so."""
+    from hrgjax.ins import alignment as al
+    from hrgjax.ins import fine_alignment as fa
+
+    log = _still_log(20)
+    for step in (0.5, 0.5 * (1 - 1e-12), log.dt / 2):
+        fa.check_step("fine_align", step, log.dt)
+    with pytest.raises(ValueError, match=r"^fine_align: step_s = 0.49 s is under half the log's"):
+        fa.check_step("fine_align", 0.49, log.dt)
+    with pytest.raises(ValueError, match=r"^check_stationary: coarse_s must be over half the "
+                       r"sample interval \(1 s\): the coarse span needs a sample; got 0.5 s$"):  # fmt: skip
+        al.check_stationary(log, 0.5)
+
+
+def test_review_messages_name_the_function_and_stay_short():
+    """Review (session 27): a (100, 100) σ printed a 50 KB line; align's coarse_s, the
+    trajectories' duration_s and earth, and loosely_coupled's settings named no function; a
+    pitch 1e-12 beyond 90° read "got 90"."""
+    from hrgjax.ins import alignment as al
+    from hrgjax.ins import ekf, gnss, sensors
+    from hrgjax.ins import mechanization as me
+
+    log, imu, rx = _still_log(20), sensors.preset("tactical"), gnss.Gnss()
+    z40 = np.zeros((40, 3))
+    one = me.NavState(jnp.asarray(0.5), jnp.asarray(0.0), jnp.asarray(0.0), jnp.zeros(3),
+                      jnp.array([1.0, 0.0, 0.0, 0.0]))  # fmt: skip
+    cases = [
+        (lambda: ekf.LooselyCoupled(imu, rx, position_sigma=np.ones((100, 100))),
+         r"^LooselyCoupled.position_sigma must be > 0 \(1 or 3 values\); got jax.Array of shape "
+         r"\(100, 100\) and dtype float64$"),
+        (lambda: ekf.LooselyCoupled(imu, rx, velocity_sigma=[1.0, -1.0, 1.0]),
+         r"^LooselyCoupled.velocity_sigma must be > 0 \(1 or 3 values\); got \[1.0, -1.0, 1.0\]$"),
+        (lambda: al.align(log, coarse_s=np.inf), r"^align: coarse_s must be a finite number > 0"),
+        (lambda: al.check_stationary(log, np.inf), r"^check_stationary: coarse_s must be a fini"),
+        (lambda: tr.stationary(45.0, duration_s="10"), r"^stationary: duration_s must be a single"),
+        (lambda: tr.stationary(45.0, duration_s=10.0, earth="wgs84"), r"^stationary: earth must "),
+        (lambda: tr.constant_velocity(45.0, duration_s=-1.0), r"^constant_velocity: duration_s mu"),
+        (lambda: tr.stationary(45.0, pitch_deg=90 + 1e-12, duration_s=10.0),
+         r"^stationary: pitch_deg must be in \[-90, 90\] ° .*; got 90.000000000001$"),
+        (lambda: ekf.loosely_coupled(None, one, z40, z40, 0.1, _review_fixes()),
+         r"^loosely_coupled: settings must be a LooselyCoupled; got None$"),
+    ]  # fmt: skip
+    for call, message in cases:
+        with pytest.raises((ValueError, TypeError), match=message):
+            call()

@@ -82,6 +82,19 @@ or this, whichever is longer (the whole record where shorter): a parked vehicle'
 of °/h over a few seconds (the PSINS log: 55 °/h over its first 10 s), a short span aligns."""
 
 
+def _check_coarse(where: str, coarse_name: str, coarse_s, dt: float) -> None:
+    """Refuse, in one line prefixed by `where`, a `coarse_s` [s] that is not a finite number
+    > 0 or spans no sample: the span is `coarse_s / dt` samples rounded to even, so half a
+    sample interval `dt` [s] is none."""
+    check_number(f"{where}{coarse_name}", coarse_s, "s")
+    if not (math.isfinite(coarse_s) and coarse_s > 0):
+        raise ValueError(f"{where}{coarse_name} must be a finite number > 0 s; got {coarse_s}")
+    if round(coarse_s / dt) < 1:
+        raise ValueError(f"{where}{coarse_name} must be over half the sample interval "
+                         f"({dt:.4g} s): the coarse span needs a sample; got "
+                         f"{coarse_s!r} s")  # fmt: skip
+
+
 def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None = None,
                      coarse_name: str = "coarse_s", where: str = "") -> None:  # fmt: skip
     """Refuse, before any work, a log that cannot be a stationary record of the first
@@ -94,14 +107,9 @@ def check_stationary(log: ImuLog, coarse_s: float = 60.0, *, fields: dict | None
 
     **Raises:** `ValueError`, one line, naming the quantity, its source and what was expected."""
     fields = {**_LOG_FIELDS, **(fields or {})}
-    check_number(f"{where}{coarse_name}", coarse_s, "s")
-    if not (math.isfinite(coarse_s) and coarse_s > 0):
-        raise ValueError(f"{where}{coarse_name} must be a finite number > 0 s; got {coarse_s}")
+    _check_coarse(where or "check_stationary: ", coarse_name, coarse_s, log.dt)
     dt, size = log.dt, int(log.t.shape[0])
     n = int(round(coarse_s / dt))
-    if n < 1:
-        raise ValueError(f"{where}{coarse_name} = {coarse_s:g} s is under half the sample "
-                         f"interval ({dt:.4g} s): the coarse span needs a sample")  # fmt: skip
     if n > size:
         raise ValueError(
             f"{where}the record spans {size * dt:.4g} s ({size} samples at {dt * 1e3:.4g} ms), "
@@ -431,6 +439,7 @@ def align(log: ImuLog, *, coarse_s: float = 60.0, coarse_name: str = "coarse_s",
                         f"start_bias_jacobian, {', '.join(FINE_DEFAULTS)} (fine_align's but "
                         "start_s: the fine stage starts where coarse_s ends)")  # fmt: skip
     check_fine_options("align", **fine_kw)
+    _check_coarse("align: ", coarse_name, coarse_s, log.dt)
     check_gyrocompass_latitude(log.lat)
     check_stationary(log, coarse_s, coarse_name=coarse_name)
     dt, step = log.dt, fine_kw.get("step_s", 1.0)

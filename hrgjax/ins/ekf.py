@@ -72,12 +72,13 @@ from .._checks import check_finite_host, finite_number, host_value, is_concrete
 from .._compiled import Check, program
 from .._linalg import cho_solve, cholesky, whiten
 from .._x64 import require_x64
+from ._fix_checks import check_fixes
 from .consistency import error_states as error_states
 from .consistency import nees as nees
 from .consistency import nees_band as nees_band
 from .consistency import nis_check
 from .consistency import whitened_errors as whitened_errors
-from .constants import WGS84, Earth, check_latitude_radians
+from .constants import WGS84, Earth
 from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
 from .mechanization import (
     UNROLL,
@@ -186,9 +187,8 @@ class LooselyCoupled(eqx.Module):
             if (v := host_value(getattr(self, name))) is None:
                 continue
             if v.shape not in ((), (1,), (3,)) or not np.all(np.isfinite(v) & (v > 0)):
-                raise ValueError(
-                    f"LooselyCoupled.{name} must be > 0 (1 or 3 values); got {v.tolist()}"
-                )
+                got = v.tolist() if v.size <= 3 else _checks.describe(getattr(self, name))
+                raise ValueError(f"LooselyCoupled.{name} must be > 0 (1 or 3 values); got {got}")
             if name == "attitude_sigma" and np.any(v > MAX_ATTITUDE_SIGMA):
                 raise ValueError(
                     f"LooselyCoupled.attitude_sigma {v} rad: above {MAX_ATTITUDE_SIGMA} rad the "
@@ -423,26 +423,6 @@ def feedback(nav: NavState, x):
     )
 
 
-def check_fixes(fixes, dt) -> None:
-    """Refuse in one line `fixes` not a `GnssData` of (M,) fields (`v_ned` (M, 3)) at `dt`."""
-    if not isinstance(fixes, GnssData):
-        raise TypeError(f"fixes must be a GnssData (gnss.measure); got {_checks.describe(fixes)}")
-    m = np.shape(fixes.lat)[0] if np.ndim(fixes.lat) == 1 else "M"
-    for name in ("t", "index", "lat", "lon", "h", "v_ned", "valid"):
-        x, want = getattr(fixes, name), (m, 3) if name == "v_ned" else (m,)
-        if np.shape(x) != want or (name == "valid" and getattr(x, "dtype", None) != np.bool_):
-            raise ValueError(f"fixes.{name} must be {want}{' bools' * (name == 'valid')} for the "
-                             f"{m} fixes; got {_checks.describe(x)}")  # fmt: skip
-    t, i, d, ok = (host_value(x) for x in (fixes.t, fixes.index, dt, fixes.valid))
-    if not (t is None or i is None or d is None or np.allclose(t, i * d, rtol=1e-9, atol=0)):
-        raise ValueError(f"fixes.t must be fixes.index × dt = {float(d):g} s: fixes made for "
-                         "another IMU interval?")  # fmt: skip
-    for name in ("lat", "lon", "h", "v_ned"):
-        if (x := host_value(getattr(fixes, name))) is not None and ok is not None:
-            check_finite_host(f"fixes.{name} (a valid fix)", x[ok.astype(bool)])
-    check_latitude_radians("fixes.lat", fixes.lat)
-
-
 def loosely_coupled(
     settings: LooselyCoupled, initial: NavState, dtheta, dv, dt: float, fixes: GnssData
 ) -> FilterResult:
@@ -453,7 +433,8 @@ def loosely_coupled(
     and every fix epoch."""
     require_x64("ins.loosely_coupled")
     if not isinstance(settings, LooselyCoupled):
-        raise TypeError(f"settings must be a LooselyCoupled; got {_checks.describe(settings)}")
+        raise TypeError(f"loosely_coupled: settings must be a LooselyCoupled; got "
+                        f"{_checks.describe(settings)}")  # fmt: skip
     check_state(initial)
     dtheta, dv = check_increments(dtheta, dv, dt)
     check_fixes(fixes, dt)
@@ -466,8 +447,9 @@ def loosely_coupled(
         or (is_concrete(index) and not np.array_equal(np.asarray(index), np.arange(m, n + 1, m)))
     ):
         raise ValueError(
-            f"fixes: {blocks} fixes for {n} IMU intervals; they must fall every m-th IMU epoch "
-            "from m to the end (as gnss.measure makes them for these increments)"
+            f"loosely_coupled: fixes: {blocks} fixes for {n} IMU intervals; they must fall "
+            "every m-th IMU epoch from m to the end (as gnss.measure makes them for these "
+            "increments)"
         )
     settings = eqx.tree_at(lambda s: s.gnss, settings, settings.gnss.without_outages())
     shape = lambda a: a.reshape((blocks, m) + a.shape[1:])

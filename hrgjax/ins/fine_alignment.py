@@ -119,9 +119,10 @@ def check_fine_options(where: str, *, step_s=1.0, start_s=0.0,
 
 def check_step(where: str, step_s: float, dt: float) -> None:
     """A one-line `ValueError` naming `where` for a `step_s` [s] under half the log's sample
-    interval `dt` [s]: a filter step sums whole samples (it ran one sample a step)."""
-    if round(step_s / dt) < 1:
-        raise ValueError(f"{where}: step_s = {step_s:g} s is under half the log's sample "
+    interval `dt` [s] (to 1e-9 relative): a filter step sums whole samples, at least one
+    (exactly half a sample runs one a step)."""
+    if step_s / dt < 0.5 * (1.0 - 1e-9):
+        raise ValueError(f"{where}: step_s = {float(step_s)!r} s is under half the log's sample "
                          f"interval ({dt:.4g} s): a filter step sums whole samples")  # fmt: skip
 
 

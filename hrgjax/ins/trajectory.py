@@ -89,12 +89,13 @@ class Trajectory(eqx.Module):
         return f_b, jnp.einsum("nij,nj->ni", c_nb, w_in) + jnp.asarray(w_nb)
 
 
-def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None):
+def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None, where=""):
     """Integrate position from speed, heading and flight-path angle (trapezoid on the grid)
-    and derive velocity, attitude (coordinated turns) and specific force."""
+    and derive velocity, attitude (coordinated turns) and specific force; `where` prefixes
+    the errors (the builder: `"stationary: "`)."""
     if not isinstance(earth, Earth):
-        raise TypeError(f"earth must be an Earth model (hrgjax.ins.constants: WGS84, SPHERE or "
-                        f"Earth(...)); got {describe(earth)}")  # fmt: skip
+        raise TypeError(f"{where}earth must be an Earth model (hrgjax.ins.constants: WGS84, "
+                        f"SPHERE or Earth(...)); got {describe(earth)}")  # fmt: skip
     v = np.stack(
         [
             speed * np.cos(gamma) * np.cos(heading),
@@ -150,17 +151,17 @@ def check_latitudes(t, lat, what: str) -> None:
         )
 
 
-def _grid(duration_s, dt):
-    check_number("duration_s", duration_s, "s")
-    check_number("dt", dt, "s")
+def _grid(duration_s, dt, where=""):
+    check_number(f"{where}duration_s", duration_s, "s")
+    check_number(f"{where}dt", dt, "s")
     if not (np.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s must be > 0 s; got {duration_s}")
+        raise ValueError(f"{where}duration_s must be > 0 s; got {duration_s}")
     if not (np.isfinite(dt) and 0 < dt <= duration_s):
-        raise ValueError(f"dt must be in (0, duration_s]; got {dt}")
+        raise ValueError(f"{where}dt must be in (0, duration_s]; got {dt}")
     steps = duration_s / dt
     if abs(steps - round(steps)) > 1e-6:
         raise ValueError(
-            f"dt = {dt} s must divide duration_s = {duration_s} s into whole steps; got "
+            f"{where}dt = {dt} s must divide duration_s = {duration_s} s into whole steps; got "
             f"{steps:.6g} steps"
         )
     return np.arange(int(round(duration_s / dt)) + 1) * dt
@@ -236,12 +237,12 @@ def _steady(lat_deg, lon_deg, h, speed, attitude_deg, duration_s, dt, earth,
     if abs(float(attitude_deg[1])) > 90.0:
         raise ValueError(f"{where}: pitch_deg must be in [-90, 90] ° (beyond, the attitude is "
                          f"pitch 180° − θ with heading and roll turned by 180°); got "
-                         f"{float(attitude_deg[1]):g}")  # fmt: skip
-    t = _grid(duration_s, dt)
+                         f"{float(attitude_deg[1])!r}")  # fmt: skip
+    t = _grid(duration_s, dt, f"{where}: ")
     heading, pitch, roll = (np.full(t.size, float(a) * DEG) for a in attitude_deg)
     speeds = np.full(t.size, float(speed))
     return _from_kinematics(t, lat_deg * DEG, lon_deg * DEG, h, speeds, heading, pitch, earth,
-                            roll=roll)  # fmt: skip
+                            roll=roll, where=f"{where}: ")  # fmt: skip
 
 
 def segments(
