@@ -24,10 +24,20 @@
    closures, so a second call of the same shapes compiled them all again (a closure loss
    still does: it is traced afresh on every call, so it trains on what it reads now).
 
+6. `--types` (the probe of every public entry point, session 27): the same values or shapes
+   given as another number type, or an optional argument given: a weakly typed leaf
+   (`jnp.asarray(650.0)`) in a gyro and a given `bias_key` (each compiled `simulate`'s solve
+   again), `ImuModel.apply` called twice with the same arguments (an eager scan on a fresh
+   closure), `fog.vibration.simulate` at a new latitude, `platform.simulate` with
+   `t_fault=200` after `200.0`, `oadev` with `tau0` 1 / `np.float64`, `allan_deviation` with
+   `dt` as `np.float64`, `gauss_markov_bridge` on a new length, `bench_time_h` of a new plan
+   length.
+
 Each call prints the XLA compiles it caused (jax.monitoring) and its wall time.
 
 Usage: `.venv/bin/python benchmarks/recompile_values.py [--no-full] [--fog] [--diagnosis]`
-(`--fog`: only parts 3 and 4, ≈ 60 s; `--diagnosis`: only part 5, ≈ 60–120 s).
+(`--fog`: only parts 3 and 4, ≈ 60 s; `--diagnosis`: only part 5, ≈ 60–120 s; `--types`: only
+part 6, ≈ 60 s).
 """
 
 import argparse
@@ -167,6 +177,90 @@ def diagnosis_calls():
                                                              compile_once=once))  # fmt: skip
 
 
+def type_calls():
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from hrgjax import calibration as cal
+    from hrgjax.fog import vibration as vb
+    from hrgjax.ins import motion, platform, sensors
+
+    res = hg.Resonator(omega=hg.TemperatureLaw(2 * np.pi * 40.0), tau=hg.TemperatureLaw(600.0))
+    gyro, prof = hg.presets.ideal(res), hg.Profile.constant_rate(1.0, 1.0)
+    counted(
+        "simulate, tau a Python float",
+        lambda: (
+            hg.simulate(
+                eqx.tree_at(lambda g: g.resonator.tau, gyro, 640.0), prof, dt_out=0.5
+            ).wave_angle
+        ),
+    )
+    counted(
+        "simulate, tau jnp.asarray(650.0) (weak)",
+        lambda: (
+            hg.simulate(
+                eqx.tree_at(lambda g: g.resonator.tau, gyro, jnp.asarray(650.0)), prof, dt_out=0.5
+            ).wave_angle
+        ),
+    )
+    noisy = hg.presets.tvg3_like()
+    run = lambda **kw: hg.simulate(noisy, prof, key=jax.random.key(0), dt_out=0.5, **kw)  # noqa: E731
+    counted("simulate with noise, key only", lambda: run().wave_angle)
+    counted(
+        "simulate with noise, bias_key given", lambda: run(bias_key=jax.random.key(3)).wave_angle
+    )
+
+    still = motion.Segment(1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 30.0)
+    truth = motion.Motion(45.0, 30.0, 100.0, (0.0, 0.0, 0.0), 45.0, 0.0, 0.0, (still,))
+    imu, truth = sensors.ImuModel(), truth.truth(rate_hz=20.0)
+    for i in range(2):
+        counted(f"ImuModel.apply, same arguments, call {i + 1}",
+                lambda: imu.apply(jax.random.key(0), truth.dtheta, truth.dv, truth.dt))  # fmt: skip
+
+    schedule = vb.VibrationSchedule.on_off([(10.0, 1.0)], on_s=4.0, off_s=2.0, lead_s=1.0)
+    for lat in (45.0, 40.0):
+        counted(
+            f"fog.vibration.simulate, lat_deg={lat}",
+            lambda lat=lat: (
+                vb.simulate(
+                    vb.default_imu(), schedule, fs=100.0, key=jax.random.key(0), lat_deg=lat
+                ).gyro
+            ),
+        )
+
+    ins = platform.PlatformINS(lat=0.785)
+    for t_fault in (200.0, 200):
+        counted(
+            f"platform.simulate, t_fault={t_fault!r}",
+            lambda t_fault=t_fault: platform.simulate(
+                ins,
+                dt=1.0,
+                n_steps=300,
+                key=jax.random.key(1),
+                fault=platform.Fault.on("accel_y", 2e-7, t_fault),
+            ),
+        )
+
+    y = np.random.default_rng(4).normal(size=333)
+    for tau0 in (1.0, 1, np.float64(1.0)):
+        counted(f"oadev, tau0={tau0!r}", lambda tau0=tau0: hg.allan.oadev(y, 2, tau0))
+    for dt in (0.1, np.float64(0.1)):
+        counted(f"allan_deviation, dt={dt!r}", lambda dt=dt: hg.allan_deviation(y, dt)[1])
+    for n in (37, 38):
+        dts = np.full(n, 0.5)
+        counted(f"gauss_markov_bridge, {n} intervals",
+                lambda dts=dts: hg.noise.gauss_markov_bridge(dts, 1.0, 50.0))  # fmt: skip
+
+    def plan(n):
+        seg = {"kind": "static", "temperature_c": 20.0, "wave_angle_deg": 0.0, "duration_s": 60.0}
+        ramp = {"kind": "ramp", "temperature_start_c": 20.0, "temperature_end_c": 30.0,
+                "wave_angle_deg": 0.0, "duration_s": 900.0}  # fmt: skip
+        return cal.BenchPlan.from_segments([seg] * (n - 1) + [ramp])
+
+    for n in (5, 6):
+        counted(f"bench_time_h, a plan of {n} segments", lambda n=n: cal.bench_time_h(plan(n)))
+
+
 def _quartic(p, *, t):
     return ((p - t) ** 4).sum()
 
@@ -176,8 +270,12 @@ if __name__ == "__main__":
     ap.add_argument("--no-full", action="store_true", help="only the sweeps (and --fog's)")
     ap.add_argument("--fog", action="store_true", help="only the FOG compensation and fit calls")
     ap.add_argument("--diagnosis", action="store_true", help="only diagnosis.compare and training")
+    ap.add_argument("--types", action="store_true", help="only part 6: number types, options")
     a = ap.parse_args()
     jax.monitoring.register_event_duration_secs_listener(_listen)
+    if a.types:
+        type_calls()
+        raise SystemExit
     if a.diagnosis:
         diagnosis_calls()
         raise SystemExit
