@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import threading
+import types
 
 import equinox as eqx
 import jax
@@ -61,9 +62,11 @@ def device(x, dtype=None) -> jax.Array:
     `jax.device_put` (even `may_alias=False`) shares a 64-byte-aligned NumPy buffer, and a
     later edit of the user's array would change the result; such a share is copied here.
     Floats become float64 (x64 on) and are not weakly typed, as `jnp.asarray` of a NumPy
-    array."""
+    array. Inside a trace (`jit`), `jnp.asarray`."""
     if isinstance(x, jax.Array):
         return x if dtype is None else x.astype(dtype)
+    if not _upstream.trace_state_clean():  # inside a trace: a constant of the caller's program
+        return jnp.asarray(x, dtype=dtype)
     host = np.asarray(x, dtype=dtype)
     out = jax.device_put(host)
     if host.size and out.unsafe_buffer_pointer() == host.ctypes.data:  # shared, not copied
@@ -71,7 +74,7 @@ def device(x, dtype=None) -> jax.Array:
     return out
 
 
-def fused(fn=None, **jit_kwargs):
+def fused(fn=None, *, prepare=None, **jit_kwargs):
     """Decorate an array function so that a call outside a trace runs it as *one* compiled
     program, and a call inside the caller's `jit`/`vmap`/`grad` trace inlines it (no nested
     call in the caller's program). `jit_kwargs` go to `jax.jit` (`static_argnames`, …).
@@ -81,6 +84,9 @@ def fused(fn=None, **jit_kwargs):
     first time a script called it on a new length (`benchmarks/eager_ops.py`). Fused, it is
     one compile of ≈ the cost of one such operation.
 
+    `prepare(*args, **kwargs)`, when given, runs first on the host and returns the positional
+    arguments for `fn` (the argument checks of `hg.noise`'s draws).
+
     NumPy float64, int64 and bool scalars are passed as the Python numbers of the same value
     (`_as_python`), so a value read from a file meets the program of a literal one.
 
@@ -88,15 +94,35 @@ def fused(fn=None, **jit_kwargs):
     the traced function by its argument shapes, and equinox reads its error mode (raise, or
     NaN inside `program`) while tracing, so the first caller's mode would stick."""
     if fn is None:
-        return functools.partial(fused, **jit_kwargs)
-    compiled = jax.jit(fn, inline=True, **jit_kwargs)
+        return functools.partial(fused, prepare=prepare, **jit_kwargs)
+    return Fused(fn, jax.jit(fn, inline=True, **jit_kwargs), prepare)
 
-    @functools.wraps(fn)
-    def call(*args, **kwargs):
-        return compiled(*map(_as_python, args), **{k: _as_python(v) for k, v in kwargs.items()})
 
-    call.lower, call.trace, call.eval_shape = compiled.lower, compiled.trace, compiled.eval_shape
-    return call
+class Fused:
+    """A `fused` function: called, the compiled program (NumPy scalars as Python numbers);
+    `lower`, `trace`, `eval_shape`, `clear_cache` and `_cache_size` are the program's. They
+    are properties of the class, not attributes of the object: `jax.vmap` copies a function's
+    attributes onto its own wrapper (`functools.wraps`), so `jax.jit(jax.vmap(f)).lower` was
+    the unbatched program's. As a class attribute it binds as a method (`profile.sample`)."""
+
+    def __init__(self, fn, compiled, prepare=None):
+        functools.update_wrapper(self, fn)
+        self._program, self._prepare = compiled, prepare
+
+    def __call__(self, *args, **kwargs):
+        if self._prepare is not None:
+            args, kwargs = self._prepare(*args, **kwargs), {}
+        return self._program(*map(_as_python, args),
+                             **{k: _as_python(v) for k, v in kwargs.items()})  # fmt: skip
+
+    def __get__(self, obj, objtype=None):
+        return self if obj is None else types.MethodType(self, obj)
+
+    lower = property(lambda self: self._program.lower)
+    trace = property(lambda self: self._program.trace)
+    eval_shape = property(lambda self: self._program.eval_shape)
+    clear_cache = property(lambda self: self._program.clear_cache)
+    _cache_size = property(lambda self: self._program._cache_size)
 
 
 _PYTHON = {np.dtype(np.float64): float, np.dtype(np.int64): int, np.dtype(np.bool_): bool}
@@ -119,13 +145,15 @@ def strong_floats(tree):
     weakly typed, and a compiled program is kept by its arguments' weak types as well as their
     shapes: a gyro with one such leaf recompiled `simulate`'s whole solve (1 compile, ≈ 2 s)
     although its numbers were those of the strong gyro before. Copied through the host, not
-    an XLA program (`device`); traced leaves are the caller's and pass as they are."""
+    an XLA program (`device`); traced leaves are the caller's and pass as they are, and so
+    does every leaf where a float32 or complex64 array is among them (a weak float beside it
+    keeps its precision; strong, it would promote the result to float64)."""
     leaves, treedef = jax.tree_util.tree_flatten(tree)
-    weak = [i for i, x in enumerate(leaves)
-            if isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer)
-            and jnp.issubdtype(x.dtype, jnp.inexact) and x.weak_type]  # fmt: skip
-    if not weak:
-        return tree
+    inexact = [(i, x) for i, x in enumerate(leaves)
+               if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.inexact)]  # fmt: skip
+    weak = [i for i, x in inexact if x.weak_type and not isinstance(x, jax.core.Tracer)]
+    if not weak or any(x.dtype.itemsize < 8 * (1 + jnp.iscomplexobj(x)) for _, x in inexact):
+        return tree  # (beside float32 or complex64 a weak float keeps their precision)
     for i in weak:
         x = leaves[i]
         leaves[i] = jax.device_put(np.asarray(x), x.sharding if x.committed else None)

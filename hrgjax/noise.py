@@ -14,7 +14,6 @@ which the bench design and the discovery share.
 
 from __future__ import annotations
 
-import functools
 import inspect
 import math
 
@@ -137,18 +136,13 @@ def _checked(check):
     compiled core's `lower`, `trace` and `eval_shape` stay on the wrapper (unchecked)."""
 
     def wrap(fn):
-        core = fused(fn)
         signature = inspect.signature(fn)
 
-        @functools.wraps(fn)
-        def call(*args, **kwargs):
+        def prepare(*args, **kwargs):
             bound = signature.bind(*args, **kwargs)  # a TypeError names a wrong keyword
-            return core(*check(*bound.args))
+            return check(*bound.args)
 
-        for name in ("lower", "trace", "eval_shape"):
-            if hasattr(core, name):
-                setattr(call, name, getattr(core, name))
-        return call
+        return fused(fn, prepare=prepare)
 
     return wrap
 

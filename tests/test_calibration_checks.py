@@ -411,7 +411,7 @@ def test_plans_and_self_calibration_refuse_bad_arguments_before_simulating():
                           duration_s=10.0), r"^Plan.temperature_c must be an array"),
         (lambda: cal.seed_plan(quick="no"), r"^seed_plan: quick must be True or False"),
         (lambda: cal.run_plan(gyro, sp, first_run=1.5), r"^run_plan: first_run must be a whole"),
-        (lambda: cal.run_plan(gyro, sp, key=0), r"^key \(or None\) must be one JAX PRNG key"),
+        (lambda: cal.run_plan(gyro, sp, key=0), r"^run_plan: key \(or None\) must be one JAX PRNG key"),
         (lambda: cal.run_plan(None, sp), r"^run_plan: gyro must be an hrgjax.Gyro"),
         (lambda: cal.precession_plan([[20.0, 30.0]]), r"^precession_plan: temperatures_c must"),
         (lambda: cal.precession_plan(precession_dps="0.5"), r"^precession_plan: precession_dps"),
@@ -426,6 +426,6 @@ def test_plans_and_self_calibration_refuse_bad_arguments_before_simulating():
         (lambda: cal.run_study(key=jax.random.key(0), quick="no"), r"^run_study: quick must be"),
         (lambda: cal.MLPCompensator().init(0), r"^MLPCompensator.init: key must be one JAX PRNG"),
         (lambda: cal.MLPCompensator().fit(None, key=jax.random.split(jax.random.key(0))),
-         r"^MLPCompensator.fit: key .* got a key array of shape \(2,\)"),
+         r"^MLPCompensator.fit: key= .* got a key array of shape \(2,\)"),
     ):  # fmt: skip
         _bad(call, match)

@@ -146,6 +146,8 @@ def test_a_weakly_typed_argument_reuses_the_strong_arguments_program():
     assert c.compiles == 0, c.names
     np.testing.assert_array_equal(got, expected)
     assert all(x.weak_type for x in jax.tree_util.tree_leaves(weak))  # the caller's, untouched
+    single = jnp.ones(n, jnp.float32)  # beside float32 a weak float keeps float32 (review)
+    assert scaled(single, (jnp.asarray(3.0), jnp.asarray(0.5))).dtype == jnp.float32
     ints = jnp.asarray(3)  # weak integers are left alone (a count, not a value)
     assert scaled(ints, (ints, ints)).dtype == jnp.asarray(3).dtype
     grad = jax.grad(lambda a: scaled(jnp.full(n, 2.0), (a, 0.5)).sum())(3.0)

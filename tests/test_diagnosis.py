@@ -58,7 +58,7 @@ def test_neural_detectors_refuse_bad_settings_in_one_line():
         nn_.choose_sigma(nn_.PNNDirect, x, y, x, y, 3, grid=())
     with pytest.raises(ValueError, match=r"^unit must be a finite number > 0"):
         nn_.features(np.ones((2, 5, 2)), 0.0)
-    with pytest.raises(ValueError, match=r"^confirm must be an integer >= 1"):
+    with pytest.raises(ValueError, match=r"^latch: confirm must be an integer >= 1"):
         nn_.latch(np.array([0, 1, 1]), 1.5)
     np.testing.assert_array_equal(nn_.latch(np.array([0, 1, 1]), 5), [0, 0, 0])
     zh, tm, key = np.zeros((2, 30, 2)), np.ones((3, 21, 2)), jax.random.key(0)
@@ -494,13 +494,13 @@ def test_false_alarms_are_scored_from_the_first_measurement_at_warmup_s():
 @pytest.mark.parametrize(
     ("classes", "confirm", "kind", "match"),
     [
-        (np.array([0.0, 1.5, 1.0]), 1, ValueError, r"^classes must be per-step onset classes .*"
+        (np.array([0.0, 1.5, 1.0]), 1, ValueError, r"^latch: classes must be per-step onset classes .*"
          r"whole numbers >= 0 .*; got 1.5 at index \(1,\)"),
-        (np.array([0, -1, 1]), 1, ValueError, r"^classes must be .*; got -1 at index \(1,\)"),
-        (np.array([0.0, np.nan, 1.0]), 1, ValueError, r"^classes must be .*; got nan"),
-        ("abc", 1, TypeError, r"^classes must be per-step onset classes .*; got str 'abc'"),
-        (np.array([0, 1, 1]), 0, ValueError, r"^confirm must be an integer >= 1 \(steps\); got 0"),
-        (np.array([0, 1, 1]), -1, ValueError, r"^confirm must be an integer >= 1 \(steps\); got -1"),
+        (np.array([0, -1, 1]), 1, ValueError, r"^latch: classes must be .*; got -1 at index \(1,\)"),
+        (np.array([0.0, np.nan, 1.0]), 1, ValueError, r"^latch: classes must be .*; got nan"),
+        ("abc", 1, TypeError, r"^latch: classes must be per-step onset classes .*; got str 'abc'"),
+        (np.array([0, 1, 1]), 0, ValueError, r"^latch: confirm must be an integer >= 1 \(steps\); got 0"),
+        (np.array([0, 1, 1]), -1, ValueError, r"^latch: confirm must be an integer >= 1 \(steps\); got -1"),
     ],
 )  # fmt: skip
 def test_latch_refuses_non_class_values_and_bad_confirm(classes, confirm, kind, match):

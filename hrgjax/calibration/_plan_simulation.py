@@ -151,7 +151,7 @@ def simulate_plan(
         dts.update({k: float(v) for k, v in dt_out.items()})
         if not all(v > 0 for v in dts.values()):
             raise ValueError(f"dt_out values must be > 0 [s]; got {dts}")
-    keys, bias_key = switch_on_keys(gyro, key, bias_key, plan.size)
+    keys, bias_key = switch_on_keys(gyro, key, bias_key, plan.size, "simulate_plan")
     durations = np.asarray(plan.duration_s, dtype=float)
     n_out = np.zeros(plan.size, dtype=int)
     for i, k in enumerate(plan.kind):

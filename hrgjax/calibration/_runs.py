@@ -65,7 +65,7 @@ def failed_member(message: str) -> tuple[int | None, str]:
 
 
 def switch_on_keys(
-    gyro: Gyro, key: jax.Array | None, bias_key: jax.Array | None, size: int
+    gyro: Gyro, key: jax.Array | None, bias_key: jax.Array | None, size: int, owner: str
 ) -> tuple[jax.Array | None, jax.Array | None]:
     """(one noise key per run, the switch-on key) of `size` runs of one switch-on: `key`
     split in two, the first half split again into the runs' keys (so a run's data do not
@@ -73,10 +73,11 @@ def switch_on_keys(
     JAX 0.5, `split(k, n)[i]` does not depend on `n`), the second the switch-on's unless `bias_key` is given.
     Without noise: `(None, bias_key)`.
 
-    **Raises:** `ValueError` when the gyro has noise and `key` is None."""
+    **Raises:** `ValueError` when the gyro has noise and `key` is None; `TypeError` or
+    `ValueError` for a key that is not one PRNG key (naming `owner`, the public caller)."""
     for name, k in (("key", key), ("bias_key", bias_key)):
         if k is not None:
-            check_key(f"{name} (or None)", k, "one call per switch-on")
+            check_key(f"{owner}: {name} (or None)", k, "one call per switch-on")
     if gyro.noise is None:
         return None, bias_key
     if key is None:

@@ -273,7 +273,7 @@ def run_plan(
     if not all(is_concrete(x) for x in fields):
         raise ValueError("run_plan needs a concrete plan (host values), not a traced one")
     batch = jax.tree_util.tree_map(np.asarray, plan.profiles())  # chunked on the host
-    keys, bias_key = switch_on_keys(gyro, key, bias_key, plan.size)
+    keys, bias_key = switch_on_keys(gyro, key, bias_key, plan.size, "run_plan")
     size = plan.size
     chunk = min(CHUNK, size)
     members = np.arange(size)

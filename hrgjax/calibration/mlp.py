@@ -269,7 +269,7 @@ class MLPCompensator(AbstractCompensator):
         `st_width > 0`, data without ramps.
         """
         require_x64("MLPCompensator.fit")
-        check_key("MLPCompensator.fit: key (the PRNG key of the initial weights)", key)
+        check_key("MLPCompensator.fit: key= (the PRNG key of the initial weights)", key)
         if mode is not FROM_FIELD and mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
         if mode is not FROM_FIELD or window_s is not FROM_FIELD:

@@ -531,7 +531,7 @@ def run_reversal_plan(
     ]
     batch = jax.tree_util.tree_map(lambda *x: np.stack(x), *profiles)
     ts = np.arange(int(np.floor(float(profiles[0].t[-1]) + 1e-9)) + 1, dtype=float)  # 1 s
-    keys, bias_key = switch_on_keys(gyro, key, bias_key, temps.size)
+    keys, bias_key = switch_on_keys(gyro, key, bias_key, temps.size, "run_reversal_plan")
     return simulate_runs(
         gyro,
         [RunGroup(ts, np.arange(temps.size), min(32, temps.size))],

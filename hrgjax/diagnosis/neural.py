@@ -186,18 +186,18 @@ def latch(classes, confirm: int = 1):
     named on `confirm` consecutive steps, that class from then on (faults do not clear).
     `confirm` > 1 trades that many steps of detection delay for immunity to isolated
     misclassifications, which a latched decision would otherwise keep for good."""
-    if whole_number("confirm", confirm, "an integer >= 1 (steps)") < 1:
-        raise ValueError(f"confirm must be an integer >= 1 (steps); got {describe(confirm)}")
+    if whole_number("latch: confirm", confirm, "an integer >= 1 (steps)") < 1:
+        raise ValueError(f"latch: confirm must be an integer >= 1 (steps); got {describe(confirm)}")
     form = "per-step onset classes (..., K), whole numbers >= 0 (0 = no fault)"
     problem = numeric_problem(classes, bools=True)
     if problem is not None:
-        raise TypeError(f"classes must be {form}; got {problem}")
+        raise TypeError(f"latch: classes must be {form}; got {problem}")
     v = concrete_value(classes)  # traced classes pass (no run-time check)
     if v is not None and v.ndim >= 1 and v.dtype.kind in "fi":  # 1.5 latched as a class
         bad = ~(np.isfinite(v) & (v == np.round(v)) & (v >= 0))
         if bad.any():
             i = tuple(int(k) for k in np.argwhere(bad)[0])
-            raise ValueError(f"classes must be {form}; got {v[i]:g} at index {i}")
+            raise ValueError(f"latch: classes must be {form}; got {v[i]:g} at index {i}")
     return _latch(classes, confirm)
 
 
@@ -205,7 +205,8 @@ def latch(classes, confirm: int = 1):
 def _latch(classes, confirm):
     c = jnp.asarray(classes)
     if c.ndim < 1:
-        raise ValueError(f"classes must be per-step onset classes (..., K); got shape {c.shape}")
+        raise ValueError(f"latch: classes must be per-step onset classes (..., K); got shape "
+                         f"{c.shape}")  # fmt: skip
     if int(confirm) > c.shape[-1]:  # never named on so many steps: S0 throughout
         return jnp.zeros_like(c)
     ok = c != 0

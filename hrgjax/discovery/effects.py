@@ -19,6 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._checks import describe
 from ..profiles import lag_at_knots
 from ..resonator.params import TemperatureLaw
 from ..resonator.readout import Readout
@@ -399,6 +400,19 @@ def readout_term(name: str, p, c: Covariates):
     if effect.where != "readout":
         raise ValueError(f"{name!r} is not a readout term")
     return effect.readout(p, c)
+
+
+def check_names(owner: str, names) -> tuple[str, ...]:
+    """`names` (a list, tuple or any iterable of effect names, a generator too) as a tuple,
+    or one line naming `owner`: `TypeError` for a str, None or a non-iterable, `ValueError`
+    for a name not in `CATALOGUE`."""
+    listed = not isinstance(names, str | bytes | None) and hasattr(names, "__iter__")
+    names = tuple(names) if listed else names  # (a generator is read once, here)
+    if not listed or any(not isinstance(n, str) or n not in CATALOGUE for n in names):
+        kind = ValueError if listed else TypeError
+        raise kind(f"{owner}: names must be a list of effect names; got {describe(names)} "
+                   f"(catalogue: {sorted(CATALOGUE)})")  # fmt: skip
+    return names
 
 
 def _effect(name: str) -> Effect:

@@ -25,7 +25,7 @@ import optimistix as optx
 from .. import _checks
 from .._compiled import Unchecked, program
 from . import stats
-from .effects import CATALOGUE, Covariates, pattern_rate, readout_angle, window_rate
+from .effects import CATALOGUE, Covariates, check_names, pattern_rate, readout_angle, window_rate
 from .noise import NoiseModel
 
 STEP_S = 5.0
@@ -49,9 +49,7 @@ class Layout:
     (value / scale), so optimisers see O(1) numbers."""
 
     def __init__(self, names):
-        if isinstance(names, str | None) or any(n not in CATALOGUE for n in names):
-            raise (TypeError if isinstance(names, str | None) else ValueError)(f"Layout: names must be a list of effect names; got {_checks.describe(names)} (catalogue: {sorted(CATALOGUE)})")  # fmt: skip
-        self.names = tuple(names)
+        self.names = check_names("Layout", names)
         self.slices, self.scales, self.regular, start = {}, [], [], 0
         for n in self.names:
             effect = CATALOGUE[n]
@@ -439,8 +437,8 @@ def repeats(fits, pooled, resolves=1.0, level=None, windows=None):
     dof = sum(_rank(c) for _, _, c in units) - pooled.size
     agree = sum(float(p @ c @ pooled) > 0 for _, p, c in units)
     p = stats.chi2_sf(stat, dof) if dof > 0 else None
-    if p is not None and level is not None and level[1] > 0:
-        p = stats.f_sf(stat / dof / level[0], dof, int(level[1]))
+    if p is not None and level is not None and level[1] > 0:  # s² ≤ 0 (round-off): no test
+        p = stats.f_sf(stat / dof / level[0], dof, int(level[1])) if level[0] > 0 else 1.0
     return {
         "p_value": p,
         "noise_level": None if level is None else [float(level[0]), int(level[1])],

@@ -25,6 +25,7 @@ import numpy as np
 from jax.scipy.special import betainc, gammaincc
 
 from .._checks import (
+    ROUND_OFF,
     check_finite_host,
     check_flag,
     check_numbers,
@@ -66,12 +67,13 @@ def check_classes(owner: str, classes, n: int):
     `owner`: the classes of the wrong type, length or a non-integer class."""
     if classes is None:
         return None
-    if numeric_problem(classes) is not None or np.ndim(classes) != 1:
-        raise (TypeError if numeric_problem(classes) else ValueError)(
+    if numeric_problem(classes, bools=True) is not None or np.ndim(classes) != 1:
+        raise (TypeError if numeric_problem(classes, bools=True) else ValueError)(
             f"{owner}: classes must be None or an integer class per row, shape (N,) = ({n},); "
             f"got {describe(classes)}"
         )
     c = np.asarray(classes)
+    c = c.astype(int) if c.dtype == bool else c  # two classes given as a mask
     if c.size != n:
         raise ValueError(f"{owner}: {c.size} row classes for {n} rows (classes: an integer "
                          "class per row, or None)")  # fmt: skip
@@ -91,10 +93,11 @@ def check_count(owner: str, name: str, value) -> int:
 
 def check_level(owner: str, level):
     """A noise level `(s², ν)` ([`level_beyond`][hrgjax.discovery.stats.level_beyond]): s²
-    finite and > 0, ν a whole number >= 0; else one line naming `owner`."""
-    v = real_array(owner, "level", level, (2,), "(s², ν): a noise level > 0 and its dof >= 0")
-    if not (v[0] > 0 and v[1] >= 0 and v[1] == round(v[1])):
-        raise ValueError(f"{owner}: level must be (s², ν) with s² > 0 and ν a whole number "
+    finite and >= 0 to round-off (`level_beyond` returns −1e-19 for a residual inside the
+    columns' span), ν a whole number >= 0; else one line naming `owner`."""
+    v = real_array(owner, "level", level, (2,), "(s², ν): a noise level >= 0 and its dof >= 0")
+    if not (v[0] >= -ROUND_OFF and v[1] >= 0 and v[1] == round(v[1])):
+        raise ValueError(f"{owner}: level must be (s², ν) with s² >= 0 and ν a whole number "
                          f">= 0; got ({v[0]:g}, {v[1]:g})")  # fmt: skip
     return level
 
@@ -331,12 +334,12 @@ def f_sf(f: float, d1: int, d2: int) -> float:
 
 def _tail_args(owner: str, **args) -> None:
     """Refuse a tail's argument in one line naming `owner`: the statistic (`x`, `f`) not a
-    single real number (χ²'s x not NaN either: its tail would be NaN), a degrees of freedom
+    single real number, a degrees of freedom
     (`dof` >= 0, `d1`, `d2` > 0) not a finite number in range."""
     for name, v in args.items():
-        if name in ("x", "f"):
-            ok = numeric_problem(v) is None and np.ndim(v) == 0 and not (name == "x" and v != v)
-            form = "a single real number" + (" (not NaN)" if name == "x" else "")
+        if name in ("x", "f"):  # (NaN passes: its tail is NaN, or 1 for F, not significant)
+            ok = numeric_problem(v) is None and np.ndim(v) == 0
+            form = "a single real number"
         else:
             ok = is_finite_real(v) and (v >= 0 if name == "dof" else v > 0)
             form = f"a finite number {'>= 0' if name == 'dof' else '> 0'} (degrees of freedom)"
@@ -350,9 +353,9 @@ def _covariate_args(owner: str, means, x, alpha):
     means = real_array(owner, "means", means, (None,), "the run means, shape (n,)")
     x = real_array(owner, "x", x, (means.size, None),
                    f"covariates, shape (n, k) with n = {means.size}")  # fmt: skip
-    if not (is_finite_real(alpha) and 0 < alpha < 1):
+    if not (is_finite_real(alpha) and 0 <= alpha <= 1):
         kind = TypeError if numeric_problem(alpha) is not None else ValueError
-        raise kind(f"{owner}: alpha must be a significance level in (0, 1); got "
+        raise kind(f"{owner}: alpha must be a significance level in [0, 1]; got "
                    f"{describe(alpha)}")  # fmt: skip
     return means, x
 

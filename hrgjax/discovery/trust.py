@@ -97,8 +97,8 @@ def _inputs(owner, fit, shape_columns, classes, alpha, spread):
     labels = regular_parameters(fit.model)
     classes = stats.check_classes(owner, classes, r.size)
     _checks.check_number(f"{owner}: alpha", alpha)
-    _checks.check_values(f"{owner}: alpha", alpha, lambda v: (v > 0) & (v < 1),
-                         "a significance level in (0, 1)")  # fmt: skip
+    _checks.check_values(f"{owner}: alpha", alpha, lambda v: (v >= 0) & (v <= 1),
+                         "a significance level in [0, 1]")  # fmt: skip
     if spread is not None:
         if not (isinstance(spread, tuple | list) and len(spread) == 2
                 and isinstance(spread[1], Mapping)):  # fmt: skip
@@ -115,8 +115,8 @@ def _inputs(owner, fit, shape_columns, classes, alpha, spread):
     cols = {}
     for k, v in shape_columns.items():
         name, form = f"shape_columns[{k!r}]", "whitened columns, shape (N, k)"
-        _checks.check_numbers(f"{owner}: {name}", v, form, (None, None))
-        if np.shape(v)[0] == r.size:  # the training rows' (others are not read)
+        _checks.check_numbers(f"{owner}: {name}", v, form)
+        if np.ndim(v) >= 1 and np.shape(v)[0] == r.size:  # the training rows' (others: unread)
             cols[k] = stats.real_array(owner, name, v, (r.size, None), form)
     return r, j, labels, cols, classes
 
