@@ -66,7 +66,10 @@ def device(x, dtype=None) -> jax.Array:
     if isinstance(x, jax.Array):
         return x if dtype is None else x.astype(dtype)
     if not _upstream.trace_state_clean():  # inside a trace: a constant of the caller's program
-        return jnp.asarray(x, dtype=dtype)
+        try:  # (strongly typed, as outside: a Python 2.0 would be weak)
+            return jnp.asarray(np.asarray(x, dtype=dtype))
+        except jax.errors.TracerArrayConversionError:  # a list holding traced values
+            return jnp.asarray(x, dtype=dtype)
     host = np.asarray(x, dtype=dtype)
     out = jax.device_put(host)
     if host.size and out.unsafe_buffer_pointer() == host.ctypes.data:  # shared, not copied
@@ -100,7 +103,8 @@ def fused(fn=None, *, prepare=None, **jit_kwargs):
 
 class Fused:
     """A `fused` function: called, the compiled program (NumPy scalars as Python numbers);
-    `lower`, `trace`, `eval_shape`, `clear_cache` and `_cache_size` are the program's. They
+    `lower`, `trace`, `eval_shape`, `clear_cache` and `_cache_size` are the program's. Beside
+    an array of fewer than 64 bits the NumPy scalars pass as they are (`_narrow`). They
     are properties of the class, not attributes of the object: `jax.vmap` copies a function's
     attributes onto its own wrapper (`functools.wraps`), so `jax.jit(jax.vmap(f)).lower` was
     the unbatched program's. As a class attribute it binds as a method (`profile.sample`)."""
@@ -112,8 +116,11 @@ class Fused:
     def __call__(self, *args, **kwargs):
         if self._prepare is not None:
             args, kwargs = self._prepare(*args, **kwargs), {}
-        return self._program(*map(_as_python, args),
-                             **{k: _as_python(v) for k, v in kwargs.items()})  # fmt: skip
+        values = (*args, *kwargs.values())
+        if any(map(_python_type, values)) and not _narrow(values):
+            args = tuple(map(_as_python, args))
+            kwargs = {k: _as_python(v) for k, v in kwargs.items()}
+        return self._program(*args, **kwargs)
 
     def __get__(self, obj, objtype=None):
         return self if obj is None else types.MethodType(self, obj)
@@ -127,6 +134,22 @@ class Fused:
 
 _PYTHON = {np.dtype(np.float64): float, np.dtype(np.int64): int, np.dtype(np.bool_): bool}
 """The NumPy scalar types `fused` passes as the Python number of the same value and dtype."""
+
+
+def _python_type(x):
+    """The Python type `_as_python` gives `x`, or None when it leaves `x` as it is."""
+    if isinstance(x, np.generic | np.ndarray) and x.ndim == 0:
+        return _PYTHON.get(x.dtype)
+    return None
+
+
+def _narrow(values) -> bool:
+    """Whether an array of fewer than 64 bits (float32, int32, complex64) is among `values`'
+    leaves: beside it a Python number is weak and would take its precision, where the NumPy
+    float64 gave float64 (`fused` then passes the NumPy scalars as they are)."""
+    leaves = jax.tree_util.tree_leaves(values)
+    return any(isinstance(x, np.ndarray | jax.Array) and x.dtype != bool
+               and x.dtype.itemsize * (1 + (x.dtype.kind != "c")) < 16 for x in leaves)  # fmt: skip
 
 
 def _as_python(x):

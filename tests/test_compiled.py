@@ -8,7 +8,7 @@ import optimistix as optx
 import pytest
 
 from hrgjax._checks import check_finite
-from hrgjax._compiled import bucket_pad, bucket_size, fused, program
+from hrgjax._compiled import bucket_pad, bucket_size, device, fused, program
 from hrgjax._least_squares import least_squares, least_squares_with_jacobian
 
 
@@ -186,6 +186,10 @@ def test_fused_functions_compile_one_program_eagerly_and_inline_under_a_trace():
         scaled(xs, np.asarray(3.5), np.True_)
     assert numpy_scalars.compiles == 0, numpy_scalars.names
     np.testing.assert_array_equal(got, expected)
+    with jax.numpy_dtype_promotion("standard"):  # beside float32 the NumPy float64 stays strong
+        single = jnp.ones(n, jnp.float32)
+        assert scaled(single, np.float64(2.5), True).dtype == jnp.float64  # (as jax.jit gives)
+        assert jax.vmap(lambda x: x * device(2.0))(single).dtype == jnp.float64  # (review)
     r_m, r_n = (np.asarray(r) for r in radii(lat))
     np.testing.assert_allclose(pos[:, 0], 1e-6 * r_m, rtol=1e-9)
     np.testing.assert_allclose(pos[:, 1], -2e-6 * r_n * np.cos(lat), rtol=1e-9)
