@@ -9,13 +9,13 @@ import numpy as np
 
 from . import plausible
 from ._checks import (
+    FINITE_POSITIVE,
     check_finite,
     check_finite_host,
     check_number,
     check_numbers,
     check_values,
     concrete_value,
-    describe,
     finite_number,
     is_concrete,
     numeric_problem,
@@ -112,6 +112,19 @@ def lag_at_knots(t, values, tau):
 
     _, rest = jax.lax.scan(step, values[0], jnp.arange(h.shape[0]))
     return jnp.concatenate([values[:1], rest])
+
+
+def _at_times(method: str):
+    """`Profile.<method>(t)`'s check (`fused`'s `prepare`): `t` [s] finite real numbers."""
+    form, name = "finite real numbers (times [s])", f"Profile.{method}: t"
+    return lambda profile, t: (profile, check_values(name, t, np.isfinite, form))
+
+
+def _lagged_args(profile, t, tau):
+    """`Profile.lagged_temperature_at`'s check: `t` as `_at_times`, `tau` [s] finite, > 0."""
+    name, form = "Profile.lagged_temperature_at: tau", "a finite number > 0 [s]"
+    prepared = _at_times("lagged_temperature_at")(profile, t)
+    return (*prepared, check_values(name, tau, FINITE_POSITIVE, form))
 
 
 class Profile(eqx.Module):
@@ -440,7 +453,7 @@ class Profile(eqx.Module):
         t0, t1 = self.t[i], self.t[i + 1]
         return i, t0, t1 - t0
 
-    @fused
+    @fused(prepare=_at_times("sample"))
     def sample(self, t):
         """Rate [rad/s], its derivative [rad/s²], temperature [°C] and specific force [g]
         at time t [s], with one segment look-up (clamped outside the knots)."""
@@ -455,52 +468,40 @@ class Profile(eqx.Module):
         frac = jnp.clip((t - t0) / length, 0.0, 1.0)
         return values[i] + (values[i + 1] - values[i]) * frac
 
+    @fused(prepare=_at_times("rate_at"))
     def rate_at(self, t):
-        """Rate [rad/s] at time t [s] (real numbers, finite where known on the host)."""
-        t = check_values("Profile.rate_at: t", t, np.isfinite, "finite real numbers (times [s])")
-        return self._rate_at(t)
-
-    @fused
-    def _rate_at(self, t):
+        """Rate [rad/s] at time t [s]."""
         return self._interp(t, self.rate)
 
-    @fused
+    @fused(prepare=_at_times("temperature_at"))
     def temperature_at(self, t):
         """Temperature [°C] at time t [s]."""
         return self._interp(t, self.temperature)
 
-    @fused
+    @fused(prepare=_at_times("accel_at"))
     def accel_at(self, t):
         """Specific force [g], shape (3,), at time t [s]."""
         return self._interp(t, self.accel)
 
-    @fused
+    @fused(prepare=_at_times("rate_derivative_at"))
     def rate_derivative_at(self, t):
         """Angular acceleration [rad/s²] at time t [s] (slope of the current segment)."""
         i, _, length = self._segment(t)
         return (self.rate[i + 1] - self.rate[i]) / length
 
-    @fused
+    @fused(prepare=_at_times("temperature_rate_at"))
     def temperature_rate_at(self, t):
         """Temperature rate dT/dt [°C/s] at time t [s] (slope of the current segment)."""
         i, _, length = self._segment(t)
         return (self.temperature[i + 1] - self.temperature[i]) / length
 
+    @fused(prepare=_lagged_args)
     def lagged_temperature_at(self, t, tau):
         r"""First-order lagged temperature $T_i(t)$ [°C], $\dot T_i = (T - T_i)/\tau$,
-        starting in equilibrium, $T_i(t_0) = T(t_0)$; `tau` [s] > 0 (a concrete `tau` ≤ 0
-        or not finite is refused in one line).
+        starting in equilibrium, $T_i(t_0) = T(t_0)$; `tau` [s] > 0 (a concrete one ≤ 0: refused).
 
         Exact for the piecewise-linear temperature: on a segment of slope s,
         $T_i(t) = T(t) - s\tau + (T_i(t_k) - T(t_k) + s\tau)\,e^{-(t-t_k)/\tau}$."""
-        v = concrete_value(tau)
-        if v is not None and not (np.all(np.isfinite(v)) and np.all(v > 0)):
-            raise ValueError(f"Profile.lagged_temperature_at: tau must be a finite number > 0 "
-                             f"[s]; got {describe(tau)}")  # fmt: skip
-        return self._lagged_temperature_at(t, tau)
-
-    @fused
-    def _lagged_temperature_at(self, t, tau):
         temp = self.temperature
         slope = jnp.diff(temp) / jnp.diff(self.t)
         at_knots = lag_at_knots(self.t, temp, tau)
@@ -509,7 +510,7 @@ class Profile(eqx.Module):
         s = slope[i]
         return temp[i] + s * dt - s * tau + (at_knots[i] - temp[i] + s * tau) * jnp.exp(-dt / tau)
 
-    @fused
+    @fused(prepare=_at_times("kinematics_at"))
     def kinematics_at(self, t):
         """Table angle since the first knot [rad], rate [rad/s] and specific force [g] (3,)
         at time t [s], with one segment look-up (what a fixed step needs at its end)."""
@@ -522,14 +523,14 @@ class Profile(eqx.Module):
         accel = self.accel[i] + (self.accel[i + 1] - self.accel[i]) * frac
         return cum[i] + self.rate[i] * dt + 0.5 * slope * dt**2, self.rate[i] + slope * dt, accel
 
-    @fused
+    @fused(prepare=_at_times("precession_at"))
     def precession_at(self, t):
         """Commanded precession rate [rad/s, electrical] at time t [s] (0 without one)."""
         if self.precession is None:
             return 0.0 * t
         return self._interp(t, self.precession)
 
-    @fused
+    @fused(prepare=_at_times("commanded_angle_at"))
     def commanded_angle_at(self, t):
         """Commanded wave angle `wave_angle0` + ∫ρ dt [rad, electrical] at time t [s] (exact for
         the piecewise-linear ρ): the angle force-to-rebalance holds."""
@@ -543,7 +544,7 @@ class Profile(eqx.Module):
         slope = (rho[i + 1] - rho[i]) / length
         return self.wave_angle0 + cum[i] + rho[i] * dt + 0.5 * slope * dt**2
 
-    @fused
+    @fused(prepare=_at_times("rebalance_at"))
     def rebalance_at(self, t):
         """1 where the rebalance loop holds the wave at time t [s], 0 where the gyro runs
         whole-angle (the `rebalance` schedule's value at the segment's start; 1 without one)."""
@@ -552,7 +553,7 @@ class Profile(eqx.Module):
         i, _, _ = self._segment(t)
         return self.rebalance[i]
 
-    @fused
+    @fused(prepare=_at_times("command_at"))
     def command_at(self, t):
         """(commanded angle [rad], commanded precession [rad/s], rebalance on 1 / off 0) at
         time t [s]: what the loops are told ([`hrgjax.resonator.control.loop_outputs`][]; in
@@ -560,7 +561,7 @@ class Profile(eqx.Module):
         captures the wave where it is read)."""
         return self.commanded_angle_at(t), self.precession_at(t), self.rebalance_at(t)
 
-    @fused
+    @fused(prepare=_at_times("table_angle_at"))
     def table_angle_at(self, t):
         """Table angle ∫Ω dt since the first knot [rad] (exact for the piecewise-linear rate)."""
         return self.kinematics_at(t)[0]

@@ -284,3 +284,22 @@ def test_rate_at_refuses_a_time_that_is_not_finite_real_numbers(t, kind, got):
         RAMP.rate_at([100.0, 300.0]), RAMP.rate_at(np.array([100.0, 300.0]))
     )
     assert float(jax.jit(lambda t: RAMP.rate_at(t))(100.0)) == float(RAMP.rate_at(100.0))
+
+
+@pytest.mark.parametrize(
+    "method",
+    ["sample", "temperature_at", "accel_at", "rate_derivative_at", "temperature_rate_at",
+     "kinematics_at", "precession_at", "commanded_angle_at", "rebalance_at", "command_at",
+     "table_angle_at", "lagged_temperature_at"],
+)  # fmt: skip
+def test_every_time_method_refuses_what_rate_at_refuses(method):
+    """`temperature_at("20")` and the other time methods read a str, None or NaN as
+    `rate_at` did before its audit; now each is one line naming the method, and a traced
+    time still passes (`jax.vmap`)."""
+    call = getattr(RAMP, method)
+    extra = (50.0,) if method == "lagged_temperature_at" else ()  # tau [s]
+    for t, kind in (("20", TypeError), (None, TypeError), (np.nan, ValueError)):
+        with pytest.raises(kind, match=rf"^Profile.{method}: t must be finite real numbers"):
+            call(t, *extra)
+    traced = jax.vmap(lambda t: jax.tree_util.tree_leaves(call(t, *extra))[0])(jnp.ones(2))
+    assert traced.shape[0] == 2
