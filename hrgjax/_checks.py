@@ -425,21 +425,29 @@ def check_flag(name: str, x) -> bool:
     raise TypeError(f"{name} must be True or False; got {shown}")
 
 
-def whole_number(name: str, value, what: str) -> int:
-    """`value` as an int when it is a whole real number (a NumPy integer or 2.0 too), else a
-    one-line `ValueError` naming `name` (no truncation: 1.5 is refused, not read as 1;
-    `what` completes "… must be {what}")."""
+def int_as_float(x):
+    """`x` as a Python float when it is an int or NumPy integer (not a bool), else as it is: a
+    whole number written where a value is meant (`tau0=1`, `correlation_time=50`) then meets
+    the compiled program of `1.0` (an int is another input type: another program)."""
+    return float(x) if isinstance(x, int | np.integer) and not isinstance(x, bool) else x
+
+
+def whole_number(name: str, value, what: str, minimum: int | None = None) -> int:
+    """`value` as an int when it is a whole real number (a NumPy integer or 2.0 too) and, with
+    `minimum`, not below it; else a one-line `ValueError` naming `name` (no truncation: 1.5
+    is refused, not read as 1; `what` completes "… must be {what}")."""
+    n = None
     if not isinstance(value, bool | np.bool_):
         try:
-            return operator.index(value)
+            n = operator.index(value)
         except TypeError:
-            pass
-        if hasattr(value, "dtype") and np.ndim(value) == 0:  # a 0-d NumPy/JAX float: its value
-            v = concrete_value(value)
-            value = float(v) if v is not None and np.asarray(v).dtype.kind == "f" else value
-        if isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
-            return int(value)
-    raise ValueError(f"{name} must be {what}; got {describe(value)}")
+            v = concrete_value(value) if hasattr(value, "dtype") and np.ndim(value) == 0 else None
+            real = float(v) if v is not None and np.asarray(v).dtype.kind == "f" else value
+            if isinstance(real, numbers.Real) and math.isfinite(real) and float(real).is_integer():
+                n = int(real)
+    if n is None or (minimum is not None and n < minimum):
+        raise ValueError(f"{name} must be {what}; got {describe(value)}")
+    return n
 
 
 def check_key(name: str, key, batch_hint: str = "one call per key, or jax.vmap") -> None:

@@ -145,8 +145,8 @@ def _python_type(x):
 
 def _narrow(values) -> bool:
     """Whether an array of fewer than 64 bits (float32, int32, complex64) is among `values`'
-    leaves: beside it a Python number is weak and would take its precision, where the NumPy
-    float64 gave float64 (`fused` then passes the NumPy scalars as they are)."""
+    leaves: beside it a weak number takes its precision, where a strong float64 gave float64
+    (`fused` then passes NumPy scalars as they are, `strong_floats` weak floats)."""
     leaves = jax.tree_util.tree_leaves(values)
     return any(isinstance(x, np.ndarray | jax.Array) and x.dtype != bool
                and x.dtype.itemsize * (1 + (x.dtype.kind != "c")) < 16 for x in leaves)  # fmt: skip
@@ -157,26 +157,26 @@ def _as_python(x):
     JAX types a Python number weakly and a NumPy one strongly, and keeps a compiled program by
     its arguments' weak types, so `tau0=np.float64(1.0)` after `tau0=1.0` (a value read from a
     file, `np.diff(t)[0]`) compiled the same program again. Same value, same dtype."""
-    if isinstance(x, np.generic | np.ndarray) and x.ndim == 0 and x.dtype in _PYTHON:
-        return _PYTHON[x.dtype](x)
-    return x
+    python = _python_type(x)
+    return x if python is None else python(x)
 
 
 def strong_floats(tree):
     """`tree` with its concrete, weakly typed floating arrays made strongly typed (same dtype,
-    value and placement, committed or not). `jnp.asarray(2.0)`, `jnp.full(n, 2.0)` and arithmetic on them are
-    weakly typed, and a compiled program is kept by its arguments' weak types as well as their
-    shapes: a gyro with one such leaf recompiled `simulate`'s whole solve (1 compile, ≈ 2 s)
-    although its numbers were those of the strong gyro before. Copied through the host, not
-    an XLA program (`device`); traced leaves are the caller's and pass as they are, and so
-    does every leaf where a float32 or complex64 array is among them (a weak float beside it
-    keeps its precision; strong, it would promote the result to float64)."""
+    value and placement, committed or not). `jnp.asarray(2.0)`, `jnp.full(n, 2.0)` and
+    arithmetic on them are weakly typed, and a compiled program is kept by its arguments'
+    weak types as well as their shapes: a gyro with one such leaf recompiled `simulate`'s
+    whole solve (1 compile, ≈ 2 s) although its numbers were those of the strong gyro
+    before. Copied through the host, not an XLA program (`device`); traced leaves are the
+    caller's and pass as they are, and so does every leaf where an array of fewer than 64
+    bits is among them (`_narrow`: a weak float keeps its precision; strong, it would
+    promote the result to float64)."""
     leaves, treedef = jax.tree_util.tree_flatten(tree)
-    inexact = [(i, x) for i, x in enumerate(leaves)
-               if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.inexact)]  # fmt: skip
-    weak = [i for i, x in inexact if x.weak_type and not isinstance(x, jax.core.Tracer)]
-    if not weak or any(x.dtype.itemsize < 8 * (1 + jnp.iscomplexobj(x)) for _, x in inexact):
-        return tree  # (beside float32 or complex64 a weak float keeps their precision)
+    weak = [i for i, x in enumerate(leaves)
+            if isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer)
+            and jnp.issubdtype(x.dtype, jnp.inexact) and x.weak_type]  # fmt: skip
+    if not weak or _narrow(leaves):
+        return tree
     for i in weak:
         x = leaves[i]
         leaves[i] = jax.device_put(np.asarray(x), x.sharding if x.committed else None)

@@ -32,6 +32,7 @@ from ._checks import (
     check_positive,
     check_values,
     concrete_value,
+    int_as_float,
 )
 from ._compiled import device, fused
 from .resonator.params import as_parameter, concrete_fields, refuse_unconverted
@@ -216,9 +217,7 @@ def gauss_markov_bridge(dts, sigma, correlation_time):
                  "a standard deviation >= 0")  # fmt: skip
     check_values("gauss_markov_bridge: correlation_time", correlation_time,
                  FINITE_POSITIVE, "> 0 [s]")  # fmt: skip
-    # a whole number as the float it is (the same program and values as 50.0, not its own)
-    whole = lambda x: float(x) if isinstance(x, int | np.integer) and not isinstance(x, bool) else x
-    return _bridge(dts, whole(sigma), whole(correlation_time))
+    return _bridge(dts, int_as_float(sigma), int_as_float(correlation_time))
 
 
 @fused

@@ -240,7 +240,8 @@ def _solve_in_parts(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0
 
 @fused
 def _switch_on_key(key):
-    """The switch-on bias key `_record` draws from `key` when no `bias_key` is given."""
+    """The switch-on bias key drawn from `key` when no `bias_key` is given: the fourth of
+    `_record`'s split of `key` (a given `bias_key` replaces it)."""
     return jax.random.split(key, 4)[3]
 
 
@@ -252,10 +253,10 @@ def _record(gyro, profile, ts, read, key, bias_key, run, t_out=None):
     amplitude, quadrature = est.amplitude, est.quadrature
     k_e = jax.vmap(lambda t: gyro.at(profile.temperature_at(t)).resonator.k_e)(ts)
     if gyro.noise is not None:
-        k_rate, k_white, k_amp, k_bias = jax.random.split(key, 4)
-        k_bias = k_bias if bias_key is None else bias_key
+        # the fourth key is the switch-on key, drawn before the solve (`_switch_on_key`)
+        k_rate, k_white, k_amp, _ = jax.random.split(key, 4)
         nz = gyro.noise
-        rate_angle = rate_noise_angle(k_rate, ts, nz) + draw_run_bias(k_bias, nz) * (ts - ts[0])
+        rate_angle = rate_noise_angle(k_rate, ts, nz) + draw_run_bias(bias_key, nz) * (ts - ts[0])
         white = nz.angle_white * jax.random.normal(k_white, ts.shape)
         if rebalance_rate is None:
             theta = theta - k_e * rate_angle + white
@@ -482,9 +483,10 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
             "this gyro has noise: pass key=jax.random.key(…), or use gyro.without_noise()"
         )
     check_options(o)
-    # one program whether the switch-on key is given or drawn from `key` (as `_record` would)
-    if gyro.noise is None or bias_key is None:
-        bias_key = None if gyro.noise is None else _switch_on_key(key)
+    if gyro.noise is None:
+        bias_key = None  # no switch-on bias to draw
+    elif bias_key is None:  # drawn here as `_record` would: one program, given or not
+        bias_key = _switch_on_key(key)
     _check_laws(gyro, profile)
     if ts is None:
         ts, dt_out = output_times(profile, dt_out), float(dt_out)

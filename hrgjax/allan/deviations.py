@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_1d, check_numbers, concrete_value, describe
+from .._checks import check_1d, check_numbers, concrete_value, describe, int_as_float
 from .._compiled import device, fused
 from .._progress import bar
 from .._upstream import trace_state_clean
@@ -99,9 +99,8 @@ def _per_tau(fn):
     @functools.wraps(fn)
     def call(y, m: int = 1, tau0: float = 1.0):
         _check_inputs(fn.__name__, y, tau0)
-        tau0 = float(tau0) if isinstance(tau0, int | np.integer) else tau0  # 1 and 1.0: one program
         return core(y if isinstance(y, jax.Array) else device(y, float), _factor(m, fn.__name__),
-                    tau0)  # fmt: skip
+                    int_as_float(tau0))  # fmt: skip
 
     return call
 

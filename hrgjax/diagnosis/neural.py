@@ -186,8 +186,7 @@ def latch(classes, confirm: int = 1):
     named on `confirm` consecutive steps, that class from then on (faults do not clear).
     `confirm` > 1 trades that many steps of detection delay for immunity to isolated
     misclassifications, which a latched decision would otherwise keep for good."""
-    if whole_number("latch: confirm", confirm, "an integer >= 1 (steps)") < 1:
-        raise ValueError(f"latch: confirm must be an integer >= 1 (steps); got {describe(confirm)}")
+    whole_number("latch: confirm", confirm, "an integer >= 1 (steps)", minimum=1)
     form = "per-step onset classes (..., K), whole numbers >= 0 (0 = no fault)"
     problem = numeric_problem(classes, bools=True)
     if problem is not None:

@@ -92,8 +92,7 @@ def _check_rule(*, max_effects, **rule) -> None:
             raise kind(f"{name} must be {form}; got {describe(value)}")
         if not ok(float(value)):
             raise ValueError(f"{name} must be {form}; got {float(value):g}")
-    if whole_number("max_effects", max_effects, "an integer >= 1") < 1:
-        raise ValueError(f"max_effects must be an integer >= 1; got {max_effects!r}")
+    whole_number("max_effects", max_effects, "an integer >= 1", minimum=1)
 
 
 def _names(name: str, names) -> None:

@@ -85,10 +85,7 @@ def check_classes(owner: str, classes, n: int):
 
 def check_count(owner: str, name: str, value) -> int:
     """`value` as an int when it is a whole number >= 1, else one line naming `owner: name`."""
-    n = whole_number(f"{owner}: {name}", value, "an integer >= 1")
-    if n < 1:
-        raise ValueError(f"{owner}: {name} must be an integer >= 1; got {n}")
-    return n
+    return whole_number(f"{owner}: {name}", value, "an integer >= 1", minimum=1)
 
 
 def check_level(owner: str, level):

@@ -201,8 +201,7 @@ def fly(
             )
     _checks.check_key("fly: key", key, "one key: fly splits it into the runs' keys")
     for name, x in (("runs", runs), ("chunk", chunk)):  # 2.0 or np.int64(2) too; not True
-        if _checks.whole_number(f"fly: {name}", x, "a whole number >= 1") < 1:
-            raise ValueError(f"fly: {name} must be a whole number >= 1; got {x}")
+        _checks.whole_number(f"fly: {name}", x, "a whole number >= 1", minimum=1)
     runs, chunk = int(runs), int(chunk)
     if gyro_rate_error is not None:  # its shape: ImuModel.apply's check
         _checks.check_numbers("fly: gyro_rate_error", gyro_rate_error, "(N, 3) or (3,) [rad/s]")

@@ -254,8 +254,7 @@ def adam_epochs(
     for name, v in (("epochs", epochs), ("batch_size", batch_size)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
-    if whole_number("n_items", n_items, "an integer >= 1 (items)") < 1:
-        raise ValueError(f"n_items must be an integer >= 1 (items); got {n_items!r}")
+    whole_number("n_items", n_items, "an integer >= 1 (items)", minimum=1)
     check_rates(learning_rate=learning_rate)
     batch_size = min(int(batch_size), int(n_items))
     # optax's Adam bias correction mixes int and float: traced under standard promotion
