@@ -40,14 +40,17 @@ def draws():
     biases of a random-walk-only accelerometer."""
     z = jnp.zeros((N, 3))
     keys = jax.random.split(jax.random.key(11), RUNS)
+
+    def biases(k, tau):
+        imu = sensors.ImuModel(
+            gyro_bias_instability=SIGMA, gyro_correlation_time=tau, accel_random_walk=K
+        )
+        return imu.apply(k, z, z, DT, return_bias=True)[2:]
+
+    run = jax.jit(jax.vmap(biases, in_axes=(0, None)))  # τ a value: one program for all six
     out = {}
     for ratio in RATIOS:
-        imu = sensors.ImuModel(
-            gyro_bias_instability=SIGMA, gyro_correlation_time=ratio * DT, accel_random_walk=K
-        )
-        bg, ba = jax.jit(jax.vmap(lambda k, imu=imu: imu.apply(k, z, z, DT, return_bias=True)[2:]))(
-            keys
-        )
+        bg, ba = run(keys, ratio * DT)
         out[ratio] = tuple(np.moveaxis(np.asarray(b), 2, 1).reshape(-1, N) for b in (bg, ba))
     return out
 
@@ -121,15 +124,26 @@ def test_gauss_markov_interval_coefficients_stay_finite_at_extreme_ratios(r):
         assert a == 0.0 and b < 1e-160 and l11 == 1.0 and l22 < 1e-80
 
 
-def test_a_traced_correlation_time_is_refused_in_one_line():
-    """τ is static (the coefficients above are Python floats): a sweep over it must say so,
-    not end in JAX's ConcretizationTypeError."""
-    import warnings
+def test_the_correlation_time_is_a_value_one_program_for_any_tau_and_its_gradient():
+    """τ is a leaf (it was a static field: a sweep over it compiled a program per value, and
+    `vmap` or `grad` over it were refused): one program for every τ, `vmap` over τ equals the
+    loop, the interval means' derivative in τ equals central differences, and a traced τ
+    ≤ 0 is refused when the program runs, naming the field."""
+    z = jnp.zeros((N, 3))
 
-    def tau_of(tau):
-        return sensors.ImuModel(gyro_correlation_time=tau).gyro_correlation_time
+    def means(tau):
+        imu = sensors.ImuModel(gyro_bias_instability=SIGMA, gyro_correlation_time=tau)
+        return imu.apply(jax.random.key(5), z, z, DT, return_bias=True)[2]
 
-    with warnings.catch_warnings():  # equinox warns first that an array is set as static
-        warnings.simplefilter("ignore")
-        with pytest.raises(TypeError, match="static field .* loop over its values"):
-            jax.vmap(tau_of)(jnp.array([1.0, 2.0]))
+    f = jax.jit(means)
+    taus = jnp.array([0.05, 1.0, 300.0])  # r = Δt/τ across the series/closed-form switch
+    loop = np.stack([f(t) for t in taus])
+    assert f._cache_size() == 1
+    np.testing.assert_allclose(jax.vmap(means)(taus), loop, rtol=1e-12, atol=1e-20)
+    for tau in (0.05, 300.0):
+        g = jax.grad(lambda t: jnp.sum(f(t)))(tau)
+        h = 1e-6 * tau
+        fd = (jnp.sum(f(tau + h)) - jnp.sum(f(tau - h))) / (2 * h)
+        assert float(g) == pytest.approx(float(fd), rel=1e-5), tau
+    with pytest.raises(Exception, match="ImuModel.gyro_correlation_time must be a finite time"):
+        f(-1.0)

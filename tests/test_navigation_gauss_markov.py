@@ -55,15 +55,22 @@ def test_discretisation_is_exact_for_any_interval_over_tau(truth):
     noise = jnp.concatenate([jnp.concatenate([gg, ga], -1), jnp.zeros((12, 6))])
     q0 = noise @ jnp.diag(jnp.r_[jnp.full(3, 1e-7), jnp.full(3, 2e-6)] ** 2) @ noise.T
     top = jnp.concatenate([f9, gg, ga, gg, ga], -1)
+
+    def model(tau):
+        big = jnp.concatenate([top, jnp.zeros((12, 21))]).at[15:, 15:].set(-jnp.eye(6) / tau)
+        drive = 2 * jnp.r_[jnp.full(3, SIGMA_G**2), jnp.full(3, SIGMA_A**2)] / tau
+        return big, q0 + jnp.diag(jnp.r_[jnp.zeros(9), jnp.full(6, 1e-16), drive])
+
+    # τ is a value (the squarings' count too): one program per interval T for every τ
+    step = jax.jit(lambda tau, T: ekf.discretise(*model(tau), T, fastest=1.0 / tau),
+                   static_argnums=1)  # fmt: skip
     for T, r in [(1.0, x) for x in (1e-3, 1e-2, 0.1, 1.0, 3.0, 10.0, 100.0, 1e3)] + [
         (10.0, 0.1),
         (30.0, 10.0),
     ]:
         tau = T / r
-        big = jnp.concatenate([top, jnp.zeros((12, 21))]).at[15:, 15:].set(-jnp.eye(6) / tau)
-        drive = 2 * jnp.r_[jnp.full(3, SIGMA_G**2), jnp.full(3, SIGMA_A**2)] / tau
-        q = q0 + jnp.diag(jnp.r_[jnp.zeros(9), jnp.full(6, 1e-16), drive])
-        phi, qd = (np.asarray(a) for a in ekf.discretise(big, q, T, fastest=1.0 / tau))
+        big, q = model(tau)
+        phi, qd = (np.asarray(a) for a in step(tau, T))
         phi_x, qd_x = (np.asarray(a) for a in kalman.van_loan(big, q, T))
         err_phi = np.abs((phi - phi_x) * sig[None] / sig[:, None]).max()
         err_q = np.abs((qd - qd_x) / np.outer(sig, sig)).max()
@@ -71,6 +78,11 @@ def test_discretisation_is_exact_for_any_interval_over_tau(truth):
         gm = np.diag(phi)[15:], np.diag(qd)[15:] / np.r_[[SIGMA_G**2] * 3, [SIGMA_A**2] * 3]
         np.testing.assert_allclose(gm[0], np.exp(-r), rtol=1e-11, atol=0)
         np.testing.assert_allclose(gm[1], -np.expm1(-2 * r), rtol=1e-11, atol=0)
+    assert step._cache_size() == 3
+    # and its derivative reaches τ: d e^(−T/τ)/dτ = e^(−T/τ)·T/τ², on both sides of a squaring
+    for tau in (0.3, 2.0):
+        got = jax.grad(lambda t: step(t, 1.0)[0][15, 15])(tau)
+        assert float(got) == pytest.approx(np.exp(-1.0 / tau) / tau**2, rel=1e-9), tau
 
 
 def _z(res, e):

@@ -20,7 +20,7 @@ expects.
    $\bar g_g$ the Gauss–Markov estimate's mean over the step as it decays, same for Δv),
    run through [`mechanize`][hrgjax.ins.mechanization]'s step;
 2. the covariance is propagated with $\Phi, Q_d$ of the error model
-   ([`discretise`][hrgjax.ins.ekf.discretise]: the Van Loan integrals by series and
+   ([`discretise`][hrgjax.ins.discretisation.discretise]: the Van Loan integrals by series and
    squaring, at any T/τ; its rounding grows with T/τ, 1e-10 of the states' σ at 1e5)
    (F at the block's middle state with the block's mean specific force and rate; white gyro and
    accelerometer noise densities `arw`, `vrw`; bias random walks; Gauss–Markov decay
@@ -60,15 +60,13 @@ unchanged (Monte Carlo); `attitude_sigma` above `MAX_ATTITUDE_SIGMA` is refused.
 
 from __future__ import annotations
 
-import math
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .. import _checks, kalman
-from .._checks import check_finite_host, finite_number, host_value, is_concrete
+from .._checks import host_value, is_concrete
 from .._compiled import Check, program
 from .._linalg import cho_solve, cholesky, whiten
 from .._x64 import require_x64
@@ -79,6 +77,7 @@ from .consistency import nees_band as nees_band
 from .consistency import nis_check
 from .consistency import whitened_errors as whitened_errors
 from .constants import WGS84, Earth
+from .discretisation import discretise as discretise
 from .gnss import Gnss, GnssData, antenna, body_rate_wrt_earth
 from .mechanization import (
     UNROLL,
@@ -239,10 +238,11 @@ class LooselyCoupled(eqx.Module):
     def _gm_decay(self, dt: float, m: int):
         """(m, 2) each IMU step's mean of exp(−t/τ) over a block of m steps of `dt` [s]
         (gyro τ, then accelerometer τ), and (2,) the decay over the block, exp(−m·dt/τ)."""
-        taus = (self.imu.gyro_correlation_time, self.imu.accel_correlation_time)
-        r = np.array([dt / float(t) for t in taus])
-        mean = np.exp(-np.arange(m)[:, None] * r) * (-np.expm1(-r) / r)
-        return mean, np.exp(-m * r)
+        r = dt / jnp.stack([self.imu.gyro_correlation_time, self.imu.accel_correlation_time])
+        mean = (
+            jnp.exp(-jnp.arange(m, dtype=r.dtype)[:, None] * r[None]) * (-jnp.expm1(-r) / r)[None]
+        )
+        return mean, jnp.exp(-m * r)
 
     def _metres_to_states(self, lat, h):
         r_m, r_n = self.earth.radii(lat)
@@ -283,7 +283,7 @@ class LooselyCoupled(eqx.Module):
         imu = self.imu
         g9 = lambda g: jnp.concatenate([g, jnp.zeros((n - 9, 3))], 0)
         q = g9(gg) @ jnp.diag(imu.arw**2) @ g9(gg).T + g9(ga) @ jnp.diag(imu.vrw**2) @ g9(ga).T
-        tau_g, tau_a = float(imu.gyro_correlation_time), float(imu.accel_correlation_time)
+        tau_g, tau_a = imu.gyro_correlation_time, imu.accel_correlation_time
         # without Gauss–Markov states each (σ, τ) is folded into a walk of 2σ²/τ
         fold = 0.0 if self.gauss_markov else 1.0
         walk = lambda k, s, tau: k**2 + fold * 2 * s**2 / tau  # noqa: E731
@@ -298,7 +298,7 @@ class LooselyCoupled(eqx.Module):
         drive = 2.0 * jnp.concatenate([imu.gyro_bias_instability**2 / tau_g,
                                        imu.accel_bias_instability**2 / tau_a])  # fmt: skip
         q = q.at[i : j + 3, i : j + 3].add(jnp.diag(drive))
-        return discretise(big, q, T, fastest=max(1.0 / tau_g, 1.0 / tau_a))
+        return discretise(big, q, T, fastest=jnp.maximum(1.0 / tau_g, 1.0 / tau_a))
 
     def _measurement(self, nav: NavState, w_eb, fix_pos, fix_vel):
         """Innovation (antenna minus fix, in state units; the longitude difference wrapped to
@@ -327,88 +327,6 @@ class LooselyCoupled(eqx.Module):
             jnp.concatenate([h_pos, h_vel]),
             jax.scipy.linalg.block_diag(r, jnp.diag(self.gnss.velocity_sigma**2)),
         )
-
-
-def _powers(F, order=8):
-    """I, F, F², …, F^order stacked: (order + 1, n, n)."""
-    out = [jnp.eye(F.shape[-1], dtype=F.dtype)]
-    for _ in range(order):
-        out.append(out[-1] @ F)
-    return jnp.stack(out)
-
-
-def _taylor(powers, s: float):
-    """Σ_k F^k s^k / k! from the stacked powers of F."""
-    c = np.array([s**k / math.factorial(k) for k in range(powers.shape[0])])
-    return jnp.einsum("k,kij->ij", c, powers)
-
-
-def discretise(F, q, T: float, fastest: float = 0.0):
-    r"""$(\Phi, Q_d)$ of $\dot x = Fx + w$, $E[ww^\top] = q\,\delta$, over a GNSS interval
-    `T` [s]: $\Phi(s)$ by its Taylor series to eighth order, and
-    $Q_d = \int_0^T\Phi(s)\,q\,\Phi(s)^\top ds$ by three-point Gauss–Legendre (exact for the
-    integrand's polynomial of degree ≤ 5). The error model's F is a slow, nearly nilpotent
-    chain (attitude → velocity → position, rates ≲ 1e-3 s⁻¹), so for T ≤ 10 s both agree with
-    the exact Van Loan exponential ([`hrgjax.kalman.van_loan`][hrgjax.kalman.van_loan]):
-    Φ to 1e-14, $Q_d$ in units of the states' σ to 3e-11 at 1 s and 4e-8 at 10 s
-    (tests/test_navigation_filter.py), at a fraction of its cost batched over flights
-    (benchmarks/navigation.py). A longer interval is k = ⌈T / 10 s⌉ such steps of h = T/k
-    composed ($\Phi = \phi_h^k$, $Q_d$ by $Q \leftarrow \phi_h Q \phi_h^\top + Q_h$; 6e-10 at
-    30 s): no matrix exponential, so no LAPACK kernel in a batched flight
-    (hrgjax/_threads.py).
-
-    `fastest` [1/s] (a float, ≥ 0): the largest decay rate in F (1/τ of a Gauss–Markov
-    state). With it, $Q_h$ takes five-point Gauss–Legendre (the Gauss–Markov drive reaches
-    the position through four integrations), and where h·`fastest` > 1/8 each step is the
-    series over $h/2^j$, j the least with $h\cdot$`fastest`$/2^j \le 1/8$, squared j times
-    ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q \phi^\top + Q$): Φ and $Q_d$ within
-    1e-11 of `van_loan` in units of the states' σ, T/τ from 1e-3 to 1e3, T = 1–30 s
-    (tests/test_navigation_gauss_markov.py; the series alone had e^(−T/τ) 0.8 off at
-    T/τ = 3). Not exact at any T/τ: the j squarings' rounding, in Φ's navigation block,
-    grows ∝ T/τ — 1e-11 at T/τ = 1e4 (17 squarings), 1.2e-10 at 1e5, 7.5e-9 at 1e8, 1e-5 at
-    1e12, where `van_loan` itself returns NaN ($Q_d$ within 2e-14); and each squaring costs
-    a few matrix products (2× the batched fold's time at T/τ = 1e4).
-
-    **Raises:** `ValueError` unless `fastest` is a finite float ≥ 0 (a Python number: τ is
-    a static field, `ImuModel` refuses a traced one)."""
-    if not (isinstance(fastest, (int, float)) and math.isfinite(fastest) and fastest >= 0):
-        raise ValueError(f"discretise: fastest must be a decay rate >= 0 [1/s]; got {fastest!r}")
-    if not finite_number("discretise: T", T, "s") > 0:
-        raise ValueError(f"discretise: T must be the interval > 0 [s]; got {T!r}")
-    n = np.shape(F)[0] if len(np.shape(F)) == 2 else -1
-    if np.shape(F) != (n, n) or np.shape(q) != (n, n):
-        raise ValueError(f"discretise: F and q must both be square (n, n); got {np.shape(F)} "
-                         f"and {np.shape(q)}")  # fmt: skip
-    check_finite_host("F", F)
-    check_finite_host("q", q)
-    k = max(1, math.ceil(T / 10.0 - 1e-12))
-    h = T / k
-    squarings = max(0, math.ceil(math.log2(8.0 * h * fastest))) if fastest > 0 else 0
-    h = h / 2**squarings
-    x, w = np.polynomial.legendre.leggauss(5 if fastest > 0 else 3)
-    powers = _powers(F)
-    qd = 0.0
-    for xi, wi in zip(x, w, strict=True):
-        p = _taylor(powers, 0.5 * h * (1.0 + xi))
-        qd = qd + (0.5 * h * wi) * (p @ q @ p.T)
-    phi, qd = _taylor(powers, h), 0.5 * (qd + qd.T)
-    if squarings:
-
-        def square(_, pq):
-            p, qq = pq
-            qq = p @ qq @ p.T + qq
-            return p @ p, 0.5 * (qq + qq.T)
-
-        phi, qd = jax.lax.fori_loop(0, squarings, square, (phi, qd))
-    if k == 1:
-        return phi, qd
-
-    def compose(_, pq):
-        p, qq = pq
-        qq = phi @ qq @ phi.T + qd
-        return phi @ p, 0.5 * (qq + qq.T)
-
-    return jax.lax.fori_loop(1, k, compose, (phi, qd))
 
 
 def feedback(nav: NavState, x):

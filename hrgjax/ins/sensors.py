@@ -86,6 +86,22 @@ _UNITS = {
 
 _MISALIGNMENTS = ("gyro_misalignment", "accel_misalignment")
 
+_TIMES = ("gyro_correlation_time", "accel_correlation_time")
+"""The Gauss–Markov correlation times [s]: scalar leaves, so a sweep over them (a loop, `vmap`,
+`grad`) compiles once."""
+
+
+def _time(name):
+    """The converter of the correlation time `name`: one real number [s], as a float array."""
+
+    def convert(x):
+        check_numbers(f"ImuModel.{name}", x, "one correlation time [s] (a real number > 0)",
+                      shape=())  # fmt: skip
+        return jnp.asarray(x, float)
+
+    return convert
+
+
 _DRAWN = ("gyro_bias", "accel_bias", "gyro_scale", "accel_scale", *_MISALIGNMENTS)
 """The fields [`random_unit`][hrgjax.ins.sensors.random_unit] redraws (a unit's turn-on
 errors): a drawn unit's are not held to their `imu_*` ranges."""
@@ -110,7 +126,8 @@ class ImuModel(eqx.Module):
     `accel_misalignment` (3, 3) [rad]: off-diagonal small angles (row = sensed axis);
     `arw` [rad/√s], `vrw` [m/s/√s]: white-noise densities; `gyro_bias_instability` [rad/s],
     `accel_bias_instability` [m/s²] with `gyro_correlation_time`, `accel_correlation_time`
-    [s]: first-order Gauss–Markov biases (σ, τ); `gyro_rate_random_walk` [rad/s/√s],
+    [s]: first-order Gauss–Markov biases (σ, τ; τ one value > 0 each, a leaf like the others:
+    a sweep over it compiles once); `gyro_rate_random_walk` [rad/s/√s],
     `accel_random_walk` [m/s²/√s]: bias random walks; `drawn` (static): a unit drawn by
     [`random_unit`][hrgjax.ins.sensors.random_unit].
 
@@ -142,8 +159,12 @@ class ImuModel(eqx.Module):
     accel_bias_instability: jax.Array = eqx.field(
         converter=_vec3("accel_bias_instability"), default=0.0
     )
-    gyro_correlation_time: float = eqx.field(static=True, default=3600.0)
-    accel_correlation_time: float = eqx.field(static=True, default=3600.0)
+    gyro_correlation_time: jax.Array = eqx.field(
+        converter=_time("gyro_correlation_time"), default=3600.0
+    )
+    accel_correlation_time: jax.Array = eqx.field(
+        converter=_time("accel_correlation_time"), default=3600.0
+    )
     gyro_rate_random_walk: jax.Array = eqx.field(
         converter=_vec3("gyro_rate_random_walk"), default=0.0
     )
@@ -183,16 +204,10 @@ class ImuModel(eqx.Module):
                 v = v * (1.0 - np.eye(3)) if v.ndim == 2 else v
                 unit = _UNITS.get(name, "rad")
                 plausible.check(f"ImuModel.{name} [{unit}]", v, quantity)
-        for name in ("gyro_correlation_time", "accel_correlation_time"):
-            v = getattr(self, name)
-            if isinstance(v, jax.core.Tracer):
-                raise TypeError(
-                    f"ImuModel.{name} is a static field (the bias path's discrete coefficients are "
-                    "computed from it in Python): it cannot be traced by jit, vmap, "
-                    "grad or hg.sweep; loop over its values in Python"
-                )
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"ImuModel.{name} must be > 0 s; got {v}")
+        for name in _TIMES:
+            v = concrete_value(getattr(self, name))
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise ValueError(f"ImuModel.{name} must be a finite time > 0 s; got {float(v)}")
 
     def _matrix(self, scale, mis):
         mis = jnp.broadcast_to(mis, (3, 3)) * (1.0 - jnp.eye(3))
@@ -316,7 +331,7 @@ class ImuModel(eqx.Module):
 @fused
 def _bias_scan(a, b, gm0, e1, e2, w_rw, bridge):
     """`ImuModel._bias_path`'s recursion, one compiled program per length: `a`, `b` (the
-    Gauss–Markov coefficients, Python floats) are arguments — a scan run eagerly on a fresh
+    Gauss–Markov coefficients, scalars) are arguments — a scan run eagerly on a fresh
     closure holding them compiled twice on every call. The draws before it stay separate
     operations (each compiled once per shape): fused with them, XLA contracts their products
     and sums into FMAs and the values move in the last bits."""
@@ -331,34 +346,35 @@ def _bias_scan(a, b, gm0, e1, e2, w_rw, bridge):
     return mean, gm
 
 
-def _gm_interval(r: float):
+def _gm_interval(r):
     """A unit-σ first-order Gauss–Markov process over one interval of r = Δt/τ correlation
     times (module docstring): `(a, b, l11, l21, l22)` with end value = a·start + l11·z1 and
     interval mean = b·start + l21·z1 + l22·z2 (z1, z2 independent N(0, 1)), the Cholesky
-    factor of the pair's joint innovation covariance. Floats; accurate from r = 1e-8 to
-    1e8 (expm1, and the series of the mean's variance below r = 1)."""
-    r = min(float(r), 1e300)  # τ below Δt/1e300 is white: no inf/inf
-    one_minus_a = -math.expm1(-r)
-    v11 = -math.expm1(-2.0 * r)  # 1 - a²
+    factor of the pair's joint innovation covariance. Scalars (r may be traced); accurate from
+    r = 1e-8 to 1e8 (expm1, and the series of the mean's variance below r = 1)."""
+    r = jnp.minimum(jnp.asarray(r, float), 1e300)  # τ below Δt/1e300 is white: no inf/inf
+    one_minus_a = -jnp.expm1(-r)
+    v11 = -jnp.expm1(-2.0 * r)  # 1 - a²
     c12 = one_minus_a**2 / r
-    if r < 1.0:  # r - 2(1-a) + (1-a²)/2 = Σ_{k≥3} (-1)^k (2 - 2^(k-1)) r^k / k!
-        f, term = 0.0, r * r / 2.0
-        for k in range(3, 40):
-            term *= r / k
-            f += (-1) ** k * (2.0 - 2.0 ** (k - 1)) * term
-    else:
-        f = r - 2.0 * one_minus_a + 0.5 * v11
+    # r - 2(1-a) + (1-a²)/2 = Σ_{k≥3} (-1)^k (2 - 2^(k-1)) r^k / k!, summed at min(r, 1)
+    x = jnp.minimum(r, 1.0)
+    series, term = 0.0, x * x / 2.0
+    for k in range(3, 40):
+        term = term * x / k
+        series = series + (-1) ** k * (2.0 - 2.0 ** (k - 1)) * term
+    f = jnp.where(r < 1.0, series, r - 2.0 * one_minus_a + 0.5 * v11)
     v22 = 2.0 * (f / r) / r  # r·r underflows below r = 1e-162
-    l11 = math.sqrt(v11)
-    l21 = c12 / l11 if l11 > 0.0 else 0.0
-    return math.exp(-r), one_minus_a / r, l11, l21, math.sqrt(max(v22 - l21 * l21, 0.0))
+    l11 = jnp.sqrt(v11)
+    l21 = jnp.where(l11 > 0.0, c12 / jnp.where(l11 > 0.0, l11, 1.0), 0.0)
+    return jnp.exp(-r), one_minus_a / r, l11, l21, jnp.sqrt(jnp.maximum(v22 - l21 * l21, 0.0))
 
 
 def traced_checks(imu: ImuModel) -> list:
     """The run-time twins of `ImuModel`'s own checks for its traced fields (inside `jit`,
     `vmap` or `hg.sweep` a module's `__check_init__` sees no values): `[(bad, message), …]`,
     `bad` a traced boolean, `message` the eager one line without the value, in the order
-    `__check_init__` checks them (finite; densities and 1σ >= 0; each field's `imu_*` range,
+    `__check_init__` checks them (finite; densities and 1σ >= 0; correlation times finite
+    and > 0; each field's `imu_*` range,
     bounds excluded; a `drawn` unit's drawn fields: finite only). Concrete fields add
     nothing: they were checked where the model was built.
     [`apply`][hrgjax.ins.sensors.ImuModel.apply] raises the first that holds
@@ -370,6 +386,8 @@ def traced_checks(imu: ImuModel) -> list:
     checks += [(jnp.any(v < 0), f"ImuModel.{name} is a density or a 1σ: it must be >= 0 "
                 "(found a negative value)")
                for name, v in traced.items() if name in _VECTOR_FIELDS[4:]]  # fmt: skip
+    checks += [(~(jnp.isfinite(v) & (v > 0)), f"ImuModel.{name} must be a finite time > 0 s")
+               for name in _TIMES if concrete_value(v := getattr(imu, name)) is None]  # fmt: skip
     for name, quantity in _RANGE.items():  # SI, as eagerly
         if name in traced and not (imu.drawn and name in _DRAWN):
             v = traced[name]

@@ -1,0 +1,132 @@
+r"""The error model's covariance step: $(\Phi, Q_d)$ of $\dot x = Fx + w$ over one GNSS
+interval by Taylor series and Gauss–Legendre quadrature, squared where a Gauss–Markov state
+decays fast (no matrix exponential: no LAPACK kernel in a batched flight). The
+loosely-coupled filter ([`hrgjax.ins.ekf`][hrgjax.ins.ekf]) calls it once per interval;
+`hrgjax.ins.ekf.discretise` is this function."""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import check_finite_host, check_numbers, concrete_value, finite_number
+
+
+def _powers(F, order=8):
+    """I, F, F², …, F^order stacked: (order + 1, n, n)."""
+    out = [jnp.eye(F.shape[-1], dtype=F.dtype)]
+    for _ in range(order):
+        out.append(out[-1] @ F)
+    return jnp.stack(out)
+
+
+def _taylor(powers, s: float):
+    """Σ_k F^k s^k / k! from the stacked powers of F."""
+    s = jnp.asarray(s, float)
+    c = jnp.stack([s**k / math.factorial(k) for k in range(powers.shape[0])])
+    return jnp.einsum("k,kij->ij", c, powers)
+
+
+MAX_SQUARINGS = 63
+"""The most squarings [`discretise`][hrgjax.ins.discretisation.discretise] takes (6 binary digits):
+enough for T·`fastest` up to 1e18 (τ down to 1e-17 s over a 10-s step); beyond, the
+series' step is longer than 1/(8·`fastest`) and Φ, $Q_d$ lose accuracy."""
+
+
+def _decay_rate(fastest) -> bool:
+    """Whether `fastest` asks for the Gauss–Markov path (> 0, or traced); a one-line error for
+    anything but a finite real number ≥ 0."""
+    check_numbers("discretise: fastest", fastest, "a decay rate >= 0 [1/s]", shape=())
+    value = concrete_value(fastest)
+    if value is None:
+        return True
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"discretise: fastest must be a decay rate >= 0 [1/s]; got {fastest!r}")
+    return bool(value > 0)
+
+
+def _squared(phi, qd, j):
+    r"""(Φ, Q) squared `j` times ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q\phi^\top + Q$),
+    `j` an int array in [0, `MAX_SQUARINGS`]: binary digit b runs 2^b squarings under a
+    `lax.cond` (one fixed-length loop each: reverse-differentiable, one program for any j)."""
+
+    def square(_, pq):
+        p, qq = pq
+        qq = p @ qq @ p.T + qq
+        return p @ p, 0.5 * (qq + qq.T)
+
+    for b in range(MAX_SQUARINGS.bit_length()):
+        run = functools.partial(jax.lax.fori_loop, 0, 2**b, square)
+        phi, qd = jax.lax.cond(((j >> b) & 1) == 1, run, lambda pq: pq, (phi, qd))
+    return phi, qd
+
+
+def discretise(F, q, T: float, fastest=0.0):
+    r"""$(\Phi, Q_d)$ of $\dot x = Fx + w$, $E[ww^\top] = q\,\delta$, over a GNSS interval
+    `T` [s]: $\Phi(s)$ by its Taylor series to eighth order, and
+    $Q_d = \int_0^T\Phi(s)\,q\,\Phi(s)^\top ds$ by three-point Gauss–Legendre (exact for the
+    integrand's polynomial of degree ≤ 5). The error model's F is a slow, nearly nilpotent
+    chain (attitude → velocity → position, rates ≲ 1e-3 s⁻¹), so for T ≤ 10 s both agree with
+    the exact Van Loan exponential ([`hrgjax.kalman.van_loan`][hrgjax.kalman.van_loan]):
+    Φ to 1e-14, $Q_d$ in units of the states' σ to 3e-11 at 1 s and 4e-8 at 10 s
+    (tests/test_navigation_filter.py), at a fraction of its cost batched over flights
+    (benchmarks/navigation.py). A longer interval is k = ⌈T / 10 s⌉ such steps of h = T/k
+    composed ($\Phi = \phi_h^k$, $Q_d$ by $Q \leftarrow \phi_h Q \phi_h^\top + Q_h$; 6e-10 at
+    30 s): no matrix exponential, so no LAPACK kernel in a batched flight
+    (hrgjax/_threads.py).
+
+    `fastest` [1/s] (≥ 0; a number, or a traced scalar): the largest decay rate in F (1/τ of
+    a Gauss–Markov state). Given (> 0, or traced), $Q_h$ takes five-point Gauss–Legendre (the
+    Gauss–Markov drive reaches the position through four integrations), and where
+    h·`fastest` > 1/8 each step is the series over $h/2^j$, j the least with
+    $h\cdot$`fastest`$/2^j \le 1/8$, squared j times
+    ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q \phi^\top + Q$): Φ and $Q_d$ within
+    1e-11 of `van_loan` in units of the states' σ, T/τ from 1e-3 to 1e3, T = 1–30 s
+    (tests/test_navigation_gauss_markov.py; the series alone had e^(−T/τ) 0.8 off at
+    T/τ = 3). Not exact at any T/τ: the j squarings' rounding, in Φ's navigation block,
+    grows ∝ T/τ — 1e-11 at T/τ = 1e4 (17 squarings), 1.2e-10 at 1e5, 7.5e-9 at 1e8, 1e-5 at
+    1e12, where `van_loan` itself returns NaN ($Q_d$ within 2e-14); and each squaring costs
+    a few matrix products (2× the batched fold's time at T/τ = 1e4). j is a value, not a
+    shape: it is taken as its binary digits, each a `lax.cond` over 2^b squarings (up to
+    `MAX_SQUARINGS`), so a new τ compiles nothing, and `grad` reaches τ through the series;
+    where `vmap` batches τ itself each cond runs both branches (all `MAX_SQUARINGS`).
+
+    **Raises:** `ValueError` unless `fastest` is a finite number ≥ 0 (a traced one is held
+    by [`ImuModel`][hrgjax.ins.sensors.ImuModel]'s run-time checks of τ)."""
+    gm = _decay_rate(fastest)
+    if not finite_number("discretise: T", T, "s") > 0:
+        raise ValueError(f"discretise: T must be the interval > 0 [s]; got {T!r}")
+    n = np.shape(F)[0] if len(np.shape(F)) == 2 else -1
+    if np.shape(F) != (n, n) or np.shape(q) != (n, n):
+        raise ValueError(f"discretise: F and q must both be square (n, n); got {np.shape(F)} "
+                         f"and {np.shape(q)}")  # fmt: skip
+    check_finite_host("F", F)
+    check_finite_host("q", q)
+    k = max(1, math.ceil(T / 10.0 - 1e-12))
+    h = T / k
+    if gm:  # j = ⌈log2(8·h·fastest)⌉ ≥ 0, and the series over h/2^j
+        j = jnp.clip(jnp.ceil(jnp.log2(8.0 * h * jnp.maximum(fastest, 1e-300))), 0,
+                     MAX_SQUARINGS).astype(int)  # fmt: skip
+        h = h / jnp.exp2(j.astype(float))
+    x, w = np.polynomial.legendre.leggauss(5 if gm else 3)
+    powers = _powers(F)
+    qd = 0.0
+    for xi, wi in zip(x, w, strict=True):
+        p = _taylor(powers, 0.5 * h * (1.0 + xi))
+        qd = qd + (0.5 * h * wi) * (p @ q @ p.T)
+    phi, qd = _taylor(powers, h), 0.5 * (qd + qd.T)
+    if gm:
+        phi, qd = _squared(phi, qd, j)
+    if k == 1:
+        return phi, qd
+
+    def compose(_, pq):
+        p, qq = pq
+        qq = phi @ qq @ phi.T + qd
+        return phi @ p, 0.5 * (qq + qq.T)
+
+    return jax.lax.fori_loop(1, k, compose, (phi, qd))
