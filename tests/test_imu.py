@@ -824,8 +824,7 @@ def test_imu_model_apply_refuses_nan_or_non_real_increments(field, value, kind, 
 def test_imu_model_apply_compiles_nothing_for_new_values_of_the_same_shapes():
     """Compile once: the Gauss–Markov scan ran eagerly on a fresh closure, 2 compiles on
     every call. A second call with new increments, key, interval and error values — a new
-    correlation time too (static, a host float: the scan takes its coefficients) — compiles
-    nothing."""
+    correlation time too (a value: the scan takes its coefficients) — compiles nothing."""
     from helpers import CompileCounter
 
     from hrgjax.ins.sensors import ImuModel

@@ -110,18 +110,26 @@ def test_gauss_markov_interval_coefficients_equal_80_digit_decimals(r):
     np.testing.assert_allclose(got, [float(w) for w in want], rtol=1e-13, atol=0)
 
 
-@pytest.mark.parametrize("r", [1e-300, 1e-170, 1e170, 1e300, float("inf")])
+_GM_INTERVAL = jax.jit(sensors._gm_interval)
+
+
+@pytest.mark.parametrize("r", [1e-300, 1e-170, 1e-90, 1e170, 1e300, float("inf")])
 def test_gauss_markov_interval_coefficients_stay_finite_at_extreme_ratios(r):
     """Any finite τ > 0 is a valid model: τ ≫ Δt leaves the bias constant over the interval
-    (a = 1, b = 1, no innovation), τ ≪ Δt leaves no memory (a = b = 0, the end value a fresh
-    draw, the mean's variance → 0)."""
-    a, b, l11, l21, l22 = sensors._gm_interval(r)
-    assert all(np.isfinite([a, b, l11, l21, l22]))
-    if r < 1:
-        np.testing.assert_allclose([a, b], 1.0, rtol=1e-12)
-        assert l11 < 1e-80 and l22 < 1e-80
-    else:
-        assert a == 0.0 and b < 1e-160 and l11 == 1.0 and l22 < 1e-80
+    (a = 1, b = 1, no innovation: r is taken ≥ 1e-80, 1e-40 of σ), τ ≪ Δt leaves no memory
+    (a = b = 0, the end value a fresh draw, the mean's variance → 0). Eagerly and compiled
+    (review of fa3b04e: compiled, XLA made c12/l11 one division whose denominator underflowed,
+    0/0 below r ≈ 6e-206), and their derivatives too (NaN below r ≈ 1e-90 without the clip)."""
+    for fn in (sensors._gm_interval, _GM_INTERVAL):
+        a, b, l11, l21, l22 = (float(x) for x in fn(r))
+        assert all(np.isfinite([a, b, l11, l21, l22]))
+        if r < 1:
+            np.testing.assert_allclose([a, b], 1.0, rtol=1e-12)
+            assert l11 < 1e-39 and l22 < 1e-39
+        else:
+            assert a == 0.0 and b < 1e-160 and l11 == 1.0 and l22 < 1e-80
+    jac = jax.jacfwd(_GM_INTERVAL)(r), jax.jacrev(sensors._gm_interval)(r)
+    assert np.all(np.isfinite(np.asarray(jac)))
 
 
 def test_the_correlation_time_is_a_value_one_program_for_any_tau_and_its_gradient():

@@ -104,17 +104,18 @@ def monte_carlo(truth):
     Gauss–Markov filter's gyro and accelerometer Gauss–Markov states' own z-RMS (against the
     bias at the fix) and its estimates `estimates` (R, M, 6) with the outage's epochs."""
     rx = gnss.Gnss()
-    fold = ekf.LooselyCoupled(imu(1.0), rx)
-    gm = ekf.LooselyCoupled(imu(1.0), rx, gauss_markov=True)
+    sensor = imu(1.0)
     t = np.concatenate([[0.0], rx.epochs(truth.dtheta.shape[0], truth.dt) * truth.dt])
     mask = jnp.asarray(~((t[1:] >= OUTAGE[0]) & (t[1:] <= OUTAGE[1])))
     m = 10
     at = jnp.concatenate([jnp.zeros(1, int), jnp.arange(m - 1, truth.dtheta.shape[0], m)])
     tn = truth.states[::m]
 
-    def one(key):
+    def one(key, tau):  # the filters' τ a value (the sensor's is 1 s)
+        fold = ekf.LooselyCoupled(imu(tau), rx)
+        gm = ekf.LooselyCoupled(imu(tau), rx, gauss_markov=True)
         k_unit, k_imu, k_gnss, k_init = jax.random.split(key, 4)
-        unit = sensors.random_unit(fold.imu, k_unit)
+        unit = sensors.random_unit(sensor, k_unit)
         dth, dv, bg, ba, gg, ga = unit.apply(
             k_imu, truth.dtheta, truth.dv, truth.dt, return_bias="gauss_markov"
         )
@@ -132,14 +133,16 @@ def monte_carlo(truth):
         own = e[:, 15:21] / jnp.sqrt(jnp.diagonal(res.P, axis1=-2, axis2=-1)[:, 15:21])
         return (*out, own, jnp.concatenate([res.gyro_gm, res.accel_gm], -1))
 
-    zf, nf, zg, ng, own, est = jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(0), 32))
+    run = jax.jit(jax.vmap(one, in_axes=(0, None)))
+    zf, nf, zg, ng, own, est = run(keys := jax.random.split(jax.random.key(0), 32), 1.0)
     rms = lambda z, s: float(jnp.sqrt(jnp.mean(z[:, 1:, s] ** 2)))  # noqa: E731
     out = {
         name: (rms(z, slice(6, 9)), rms(z, slice(9, 12)), float(jnp.nanmean(n[:, 1:]) / 6))
         for name, z, n in (("fold", zf, nf), ("gm", zg, ng))
     }
     out["gm_states"] = (rms(own, slice(0, 3)), rms(own, slice(3, 6)))
-    return out | {"estimates": np.asarray(est), "outage": np.flatnonzero(~np.asarray(mask)) + 1}
+    return out | {"estimates": np.asarray(est), "outage": np.flatnonzero(~np.asarray(mask)) + 1,
+                  "run": lambda tau: run(keys, tau)}  # fmt: skip
 
 
 def test_gauss_markov_states_give_honest_sigma_where_the_fold_overstates_them(monte_carlo):
@@ -156,6 +159,14 @@ def test_gauss_markov_states_give_honest_sigma_where_the_fold_overstates_them(mo
     assert 0.97 < nis < 1.03, monte_carlo  # the fold's 0.925 is below the 99 % band
     att, bg, nis = monte_carlo["fold"]
     assert att < 0.6 and bg < 0.6 and nis < 0.95, monte_carlo
+
+
+def test_the_filters_correlation_time_is_a_checked_value(monte_carlo):
+    """The filter's τ is a value (the flights' program is the same for any τ) held to
+    `ImuModel`'s rule when the program runs (review of fa3b04e: a traced τ ≤ 0 ran, Φ's decay
+    e^(+T/|τ|)): the filter refuses it, naming the field."""
+    with pytest.raises(Exception, match="ImuModel.gyro_correlation_time must be a finite time"):
+        monte_carlo["run"](-1.0)
 
 
 def test_feedback_decays_the_gauss_markov_estimate_as_the_process_mean(monte_carlo):

@@ -34,7 +34,7 @@ def _taylor(powers, s: float):
 MAX_SQUARINGS = 63
 """The most squarings [`discretise`][hrgjax.ins.discretisation.discretise] takes (6 binary digits):
 enough for T·`fastest` up to 1e18 (τ down to 1e-17 s over a 10-s step); beyond, the
-series' step is longer than 1/(8·`fastest`) and Φ, $Q_d$ lose accuracy."""
+series' step is longer than 1/(8·`fastest`) and Φ, $Q_d$ are wrong, then NaN (from ≈ 4e19)."""
 
 
 def _decay_rate(fastest) -> bool:
@@ -45,7 +45,7 @@ def _decay_rate(fastest) -> bool:
     if value is None:
         return True
     if not (np.isfinite(value) and value >= 0):
-        raise ValueError(f"discretise: fastest must be a decay rate >= 0 [1/s]; got {fastest!r}")
+        raise ValueError(f"discretise: fastest must be a decay rate >= 0 [1/s]; got {float(value)}")
     return bool(value > 0)
 
 
@@ -95,8 +95,11 @@ def discretise(F, q, T: float, fastest=0.0):
     `MAX_SQUARINGS`), so a new τ compiles nothing, and `grad` reaches τ through the series;
     where `vmap` batches τ itself each cond runs both branches (all `MAX_SQUARINGS`).
 
-    **Raises:** `ValueError` unless `fastest` is a finite number ≥ 0 (a traced one is held
-    by [`ImuModel`][hrgjax.ins.sensors.ImuModel]'s run-time checks of τ)."""
+    **Raises:** `TypeError` for a `fastest` that is not one real number, `ValueError` for one
+    that is not finite and ≥ 0 (a traced one is not checked here: the filter holds its
+    model's τ, [`ImuModel.checked`][hrgjax.ins.sensors.ImuModel.checked]; past
+    `MAX_SQUARINGS`, T·`fastest` > 1e18, Φ and $Q_d$ are NaN: the filter takes τ no shorter
+    than T·1e-15, where e^(−T/τ) is 0 either way)."""
     gm = _decay_rate(fastest)
     if not finite_number("discretise: T", T, "s") > 0:
         raise ValueError(f"discretise: T must be the interval > 0 [s]; got {T!r}")

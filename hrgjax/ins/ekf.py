@@ -293,6 +293,9 @@ class LooselyCoupled(eqx.Module):
         if not self.gauss_markov:
             return discretise(big, q, T)
         i, j = self._gm_at, self._gm_at + 3
+        # τ below T·1e-15 decays as at T·1e-15: e^(−T/τ) is 0 and the driven variance σ²
+        # either way, and the squarings stay within discretise's MAX_SQUARINGS
+        tau_g, tau_a = jnp.maximum(tau_g, 1e-15 * T), jnp.maximum(tau_a, 1e-15 * T)
         rate = jnp.concatenate([jnp.full(3, 1.0 / tau_g), jnp.full(3, 1.0 / tau_a)])
         big = big.at[i : i + 6, i : i + 6].set(-jnp.diag(rate))
         drive = 2.0 * jnp.concatenate([imu.gyro_bias_instability**2 / tau_g,
@@ -370,6 +373,7 @@ def loosely_coupled(
             "increments)"
         )
     settings = eqx.tree_at(lambda s: s.gnss, settings, settings.gnss.without_outages())
+    settings = eqx.tree_at(lambda s: s.imu, settings, settings.imu.checked())  # traced fields
     shape = lambda a: a.reshape((blocks, m) + a.shape[1:])
     res = _filter(settings, initial, shape(jnp.asarray(dtheta)), shape(jnp.asarray(dv)), dt, fixes)
     valid = jnp.concatenate([jnp.zeros(1, bool), jnp.asarray(fixes.valid)])

@@ -209,6 +209,13 @@ class ImuModel(eqx.Module):
             if v is not None and not (np.isfinite(v) and v > 0):
                 raise ValueError(f"ImuModel.{name} must be a finite time > 0 s; got {float(v)}")
 
+    def checked(self) -> ImuModel:
+        """This model with its traced fields held to
+        [`traced_checks`][hrgjax.ins.sensors.traced_checks] when the program runs (one
+        `eqx.branched_error_if`); itself when every field is concrete (checked where it was
+        built). `apply` and the filter (`ins.ekf.loosely_coupled`) call it."""
+        return _with_traced_checks(self)
+
     def _matrix(self, scale, mis):
         mis = jnp.broadcast_to(mis, (3, 3)) * (1.0 - jnp.eye(3))
         return jnp.eye(3) + jnp.diag(scale) + mis
@@ -351,8 +358,12 @@ def _gm_interval(r):
     times (module docstring): `(a, b, l11, l21, l22)` with end value = a·start + l11·z1 and
     interval mean = b·start + l21·z1 + l22·z2 (z1, z2 independent N(0, 1)), the Cholesky
     factor of the pair's joint innovation covariance. Scalars (r may be traced); accurate from
-    r = 1e-8 to 1e8 (expm1, and the series of the mean's variance below r = 1)."""
-    r = jnp.minimum(jnp.asarray(r, float), 1e300)  # τ below Δt/1e300 is white: no inf/inf
+    r = 1e-8 to 1e8 (expm1, and the series of the mean's variance below r = 1); r is taken
+    within [1e-80, 1e300]."""
+    # τ below Δt/1e300 is white (no inf/inf); τ beyond 1e80·Δt a constant bias: the
+    # innovations' 1e-40 of σ there are nothing, and below r ≈ 1e-90 the values' and the
+    # derivatives' products underflow to 0/0 (XLA reassociates c12/l11 into one division)
+    r = jnp.clip(jnp.asarray(r, float), 1e-80, 1e300)
     one_minus_a = -jnp.expm1(-r)
     v11 = -jnp.expm1(-2.0 * r)  # 1 - a²
     c12 = one_minus_a**2 / r
