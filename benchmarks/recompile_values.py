@@ -33,11 +33,17 @@
    `dt` as `np.float64`, `gauss_markov_bridge` on a new length, `bench_time_h` of a new plan
    length.
 
+7. `--settings` (session 28): a setting that is a value, not a shape, changed between two
+   calls: `ins.flights.fly` with another Gauss–Markov correlation time (8 runs of a 60-s
+   flight, Gauss–Markov filter states), `MLPCompensator.fit` with another learning rate,
+   `FourierCompensator` with another `tolerance_c`, `nn.train.rprop(compile_once=True)` with
+   another learning rate, `calibration.design` (40 steps) with another learning rate.
+
 Each call prints the XLA compiles it caused (jax.monitoring) and its wall time.
 
 Usage: `.venv/bin/python benchmarks/recompile_values.py [--no-full] [--fog] [--diagnosis]`
 (`--fog`: only parts 3 and 4, ≈ 60 s; `--diagnosis`: only part 5, ≈ 60–120 s; `--types`: only
-part 6, ≈ 60 s).
+part 6, ≈ 60 s; `--settings`: only part 7, ≈ 60 s).
 """
 
 import argparse
@@ -261,6 +267,53 @@ def type_calls():
         counted(f"bench_time_h, a plan of {n} segments", lambda n=n: cal.bench_time_h(plan(n)))
 
 
+def settings_calls():
+    import equinox as eqx
+
+    from hrgjax import calibration as cal
+    from hrgjax.calibration import design
+    from hrgjax.ins import ekf, flights, gnss, motion, sensors
+    from hrgjax.nn import train
+
+    seg = motion.Segment(3, (0.0, 0.0, 20.0), (0.0, 0.0, 0.0), 60.0)
+    truth = motion.Motion(40.0, 10.0, 200.0, (20.0, 0.0, 0.0), 10.0, 0.0, 0.0, (seg,)).truth(10.0)
+    for tau in (600.0, 60.0):
+        imu = sensors.ImuModel(gyro_bias=1e-5, accel_bias=5e-4, arw=3e-6, vrw=1e-4,
+                               gyro_bias_instability=1e-4, accel_bias_instability=5e-3,
+                               gyro_correlation_time=tau, accel_correlation_time=tau)  # fmt: skip
+        settings = ekf.LooselyCoupled(imu, gnss.Gnss(), gauss_markov=True)
+        counted(f"flights.fly, τ = {tau:g} s",
+                lambda imu=imu, s=settings: flights.fly(truth, imu, s, key=jax.random.key(0),
+                                                        runs=8).nis)  # fmt: skip
+    data = hg.presets.tvg3_like(noise=False)
+    plan = cal.static_plan((0.0, 40.0), (-45.0, 0.0, 45.0), duration_s=30.0, dt_out=0.5)
+    rot = cal.rotation_plan((0.0, 40.0), (-45.0, 0.0, 45.0), duration_s=30.0, dt_out=0.5)
+    bench = hg.data.concat([cal.run_plan(data, plan),
+                            cal.run_plan(data, rot, first_run=plan.size)])  # fmt: skip
+    for rate in (1e-3, 3e-3):
+        comp = cal.MLPCompensator(steps=40, learning_rate=rate)
+        counted(
+            f"MLPCompensator.fit, learning_rate {rate:g}",
+            lambda c=comp: c.fit(bench, key=jax.random.key(0)).drift_dph([0.0], 20.0),
+        )
+    for tol in (25.0, 30.0):
+        comp = cal.FourierCompensator(tolerance_c=tol)
+        counted(
+            f"FourierCompensator(tolerance_c={tol:g}).fit, drift_dph",
+            lambda c=comp: c.fit(bench).drift_dph([0.0], 20.0),
+        )
+    loss = eqx.Partial(_quartic, t=jax.numpy.ones(4))
+    for rate in (1e-2, 3e-2):
+        counted(
+            f"rprop(compile_once=True), learning_rate {rate:g}",
+            lambda r=rate: train.rprop(loss, jax.numpy.zeros(4), 30, r, compile_once=True),
+        )
+    for rate in (0.1, 0.05):
+        counted(f"calibration.design, learning_rate {rate:g}",
+                lambda r=rate: design.design(2.5, levels=(2,), statics=2, rotations=1, steps=40,
+                                             learning_rate=r).value)  # fmt: skip
+
+
 def _quartic(p, *, t):
     return ((p - t) ** 4).sum()
 
@@ -271,10 +324,14 @@ if __name__ == "__main__":
     ap.add_argument("--fog", action="store_true", help="only the FOG compensation and fit calls")
     ap.add_argument("--diagnosis", action="store_true", help="only diagnosis.compare and training")
     ap.add_argument("--types", action="store_true", help="only part 6: number types, options")
+    ap.add_argument("--settings", action="store_true", help="only part 7: settings as values")
     a = ap.parse_args()
     jax.monitoring.register_event_duration_secs_listener(_listen)
     if a.types:
         type_calls()
+        raise SystemExit
+    if a.settings:
+        settings_calls()
         raise SystemExit
     if a.diagnosis:
         diagnosis_calls()

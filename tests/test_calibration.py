@@ -280,8 +280,17 @@ def test_mlp_fits_smooth_laws(exact_windows):
 
 
 def test_mlp_periodic_encoding_is_exactly_periodic(exact_windows):
+    """Also compile once: a fit with another learning rate (Rprop's step, a value; a
+    `TRAINING_FIELDS` entry, reset in the evaluating programs) compiles nothing; it was 3
+    programs."""
+    from helpers import CompileCounter
+
     comp = MLPCompensator(steps=50).fit(exact_windows, key=jax.random.key(1))
     np.testing.assert_allclose(comp.drift_dph([-90.0], 0.0), comp.drift_dph([90.0], 0.0))
+    with CompileCounter() as c:
+        other = MLPCompensator(steps=50, learning_rate=3e-3, e2e_steps=100)
+        other.fit(exact_windows, key=jax.random.key(1)).drift_dph([-90.0], 0.0)
+    assert c.compiles == 0, c.names
     seed_style = MLPCompensator(steps=50, encoding="angle").fit(
         exact_windows, key=jax.random.key(1)
     )

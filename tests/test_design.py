@@ -738,6 +738,9 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
         float(d.criterion(result.optimised_plan)), rel=1e-9
     )
     assert abs(result.value / result.optimised_value - 1.0) < 0.01  # the bench's resolution
+    with CompileCounter() as c:  # the learning rate is a value (it compiled the step again)
+        d.design(2.5, levels=(2,), statics=2, rotations=1, steps=40, learning_rate=0.05)
+    assert c.compiles == 0, c.names
     for bad in (dict(learning_rate=-0.1), dict(learning_rate=float("nan")), dict(steps=0)):
         with pytest.raises(ValueError, match=f"^{next(iter(bad))} must be"):
             d.design(2.5, levels=(2,), **bad)

@@ -1,7 +1,6 @@
 """The GNSS/INS filter's truth-free consistency verdict (NIS against its χ² band, the early
 fixes against their 99.9 % point) and the small-angle limit on the initial attitude σ."""
 
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp

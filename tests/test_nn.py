@@ -83,8 +83,10 @@ def test_rprop_and_train_module_compile_once_with_the_data_traced():
     """With `compile_once=True` a second `rprop`/`train_module` of the same loss and shapes
     compiles nothing (by default each call traces afresh, one compile each time); data passed
     as an `eqx.Partial`'s arrays is traced, not baked in: each call reaches its own
-    minimiser of sum((w - target)²), w = target. A loss that is not a Module is refused for
-    it (a closure's data would be fixed in the program)."""
+    minimiser of sum((w - target)²), w = target; a new learning rate and largest step are
+    values too (they were static: each new rate compiled the training again), weakly typed
+    (float32 weights train in float32). A loss that is not a Module is refused for it (a
+    closure's data would be fixed in the program)."""
     from helpers import CompileCounter
 
     targets = [jnp.array([1.0, -2.0, 3.0]), jnp.array([0.5, 4.0, -1.0])]
@@ -92,13 +94,16 @@ def test_rprop_and_train_module_compile_once_with_the_data_traced():
     once = {"compile_once": True}
     train.rprop(loss(targets[0]), {"w": jnp.zeros(3)}, 200, 1e-2, **once)  # compiles
     train.train_module({"w": jnp.zeros(3)}, loss(targets[0]), 200, 1e-2, **once)
-    for t in targets:
+    for t, rate, top in zip(targets, (1e-2, 3e-2), (50.0, 20.0), strict=True):
         with CompileCounter() as c:
-            p = train.rprop(loss(t), {"w": jnp.zeros(3)}, 200, 1e-2, **once)
-            m = train.train_module({"w": jnp.zeros(3)}, loss(t), 200, 1e-2, **once)
+            p = train.rprop(loss(t), {"w": jnp.zeros(3)}, 200, rate, top, **once)
+            m = train.train_module({"w": jnp.zeros(3)}, loss(t), 200, rate, top, **once)
         assert c.compiles == 0 and c.traces == 0, c.names
         np.testing.assert_allclose(p["w"], t, atol=1e-6)
         np.testing.assert_allclose(m["w"], t, atol=1e-6)
+    w32 = train.rprop(loss(targets[0].astype(jnp.float32)), {"w": jnp.zeros(3, jnp.float32)},
+                      200, 1e-2, **once)["w"]  # fmt: skip
+    assert w32.dtype == jnp.float32
     with pytest.raises(ValueError, match="compile_once=True needs an equinox.Module loss"):
         train.rprop(lambda p: _quadratic(p, target=targets[0]), {"w": jnp.zeros(3)}, 5,
                     compile_once=True)  # fmt: skip

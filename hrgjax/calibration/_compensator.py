@@ -35,6 +35,7 @@ import abc
 import dataclasses
 import enum
 import warnings
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -180,6 +181,9 @@ class AbstractCompensator(eqx.Module):
     """
 
     k_e: eqx.AbstractVar[float]
+    TRAINING_FIELDS: ClassVar[tuple[str, ...]] = ()
+    """Static fields only `fit` reads (step counts, learning rates): the programs that
+    evaluate a fitted compensator take them at their defaults, so they compile once."""
 
     @abc.abstractmethod
     def fit(self, data, *, key: jax.Array | None = None, raw: MeasuredData | None = None):
@@ -260,10 +264,14 @@ class AbstractCompensator(eqx.Module):
         `correct` take it: a module with `drift`, `scale_factor` and `corrected_rate`. The
         programs compile once per static part, so a compensator whose fit stores numbers in
         static fields returns a form without them (the physical one does); here: itself,
-        less its recorded temperature domain (static fields the arithmetic does not use)."""
-        names = {f.name for f in dataclasses.fields(self)}
-        domain = {n: None for n in DOMAIN_FIELDS if n in names and getattr(self, n) is not None}
-        return dataclasses.replace(self, **domain) if domain else self
+        less its recorded temperature domain and with its `TRAINING_FIELDS` at their
+        defaults (static fields the arithmetic does not use: a new learning rate compiled
+        `drift_dph` again)."""
+        fields = {f.name: f for f in dataclasses.fields(self)}
+        reset = {n: None for n in DOMAIN_FIELDS if n in fields and getattr(self, n) is not None}
+        reset |= {n: fields[n].default for n in self.TRAINING_FIELDS
+                  if getattr(self, n) != fields[n].default}  # fmt: skip
+        return dataclasses.replace(self, **reset) if reset else self
 
     def drift_dph(self, theta_deg, temperature_c) -> np.ndarray:
         """`drift` in the bench's units: θ [°] in, drift [°/h] out (NumPy)."""

@@ -187,7 +187,8 @@ def _design_loss(z, values, arw, budget_s, args, criterion, flight, model):
 @eqx.filter_jit
 def _design_step(z, state, values, arw, budget_s, args, criterion, flight, model,
                  learning_rate):  # fmt: skip
-    """One Adam step of `design` (compiled once per structure, criterion, model and rate)."""
+    """One Adam step of `design` (compiled once per structure, criterion and model; the
+    learning rate is a traced argument)."""
     import optax
 
     val, g = jax.value_and_grad(_design_loss)(
@@ -315,6 +316,7 @@ def design(
             }
             args = (kinds, n_lev, statics, rotations, ramps, bench)
             opt = optax.adam(learning_rate)
+            rate = jnp.asarray(float(learning_rate))  # a value: a new rate compiles nothing
             history = []
             budget = jnp.asarray(budget_s)
             # optax's Adam bias correction mixes int and float: traced under standard
@@ -323,7 +325,7 @@ def design(
                 state = opt.init(z)
                 for _ in range(steps):
                     z, state, val = _design_step(z, state, values, arw_v, budget, args,
-                                                 criterion, flight, model, learning_rate)  # fmt: skip
+                                                 criterion, flight, model, rate)  # fmt: skip
                     history.append(float(val))
                     progress.update(1)
             try:

@@ -95,6 +95,7 @@ class FourierCompensator(AbstractCompensator):
         static=True, default=None, converter=as_range
     )
     n_temperature_levels: int | None = eqx.field(static=True, default=None, converter=as_levels)
+    TRAINING_FIELDS = ("tolerance_c", "window_s")
 
     def __check_init__(self):
         check_k_e(self.k_e)

@@ -150,6 +150,8 @@ class MLPCompensator(AbstractCompensator):
         static=True, default=None, converter=as_range
     )
     n_temperature_levels: int | None = eqx.field(static=True, default=None, converter=as_levels)
+    TRAINING_FIELDS = ("steps", "learning_rate", "bin_deg", "e2e_steps", "drift_t_curvature",
+                       "sf_t_curvature", "mode", "window_s")  # fmt: skip
 
     def __check_init__(self):
         check_k_e(self.k_e)
@@ -302,15 +304,8 @@ class MLPCompensator(AbstractCompensator):
         d_off, d_scale = float(np.mean(d)), float(max(np.std(d), 1e-12))
         y = device((d - d_off) / d_scale)
         if u is None:
-            net = train_rprop(
-                comp.drift_net,
-                device(x_s),
-                y,
-                self.steps,
-                self.learning_rate,
-                desc="MLP drift",
-                prior=prior(self.drift_t_curvature),
-            )
+            net = train_rprop(comp.drift_net, device(x_s), y, self.steps, self.learning_rate,
+                              desc="MLP drift", prior=prior(self.drift_t_curvature))  # fmt: skip
         else:  # drift and s_T together: measured = D − s_T Ṫ/k_e (module docstring)
             params, static_part = eqx.partition((comp.drift_net, comp.st_net), eqx.is_inexact_array)
             params, _ = rprop_with_progress(

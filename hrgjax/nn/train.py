@@ -112,6 +112,12 @@ def _call_combined(params, loss_static):
     return loss(eqx.combine(params, static))
 
 
+def _rate(x):
+    """A checked step size as a program's traced argument (a new value compiles nothing):
+    a weakly typed array, so float32 weights stay float32; a traced one as it is."""
+    return x if isinstance(x, jax.core.Tracer) else jnp.asarray(float(host_value(x)))
+
+
 def _rprop_run(loss_fn, params, data, length: int, learning_rate, max_step):
     """`length` Rprop updates from a fresh optimiser state: (params, losses)."""
     state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
@@ -150,7 +156,8 @@ def _run(loss_fn, params, loss, data, steps, learning_rate, max_step, compile_on
         traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(data))
         if not (traced or tracing_callback_free() or not _upstream.trace_state_clean()):
             try:
-                return _rprop_program(loss_fn, params, data, steps, learning_rate, max_step)
+                return _rprop_program(loss_fn, params, data, steps, _rate(learning_rate),
+                                      _rate(max_step))  # fmt: skip
             except _NEEDS_CONCRETE:
                 pass  # the loss reads its data as concrete values: it trains as by default
     return _rprop_run(loss_fn, params, data, steps, learning_rate, max_step)
@@ -213,6 +220,7 @@ def rprop_with_progress(
     """
     steps = check_steps(steps)
     check_rates(learning_rate=learning_rate, max_step=max_step)
+    learning_rate, max_step = _rate(learning_rate), _rate(max_step)
     state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
     length = _block_length(steps)
     losses = []
