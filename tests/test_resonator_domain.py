@@ -14,7 +14,7 @@ import pytest
 import hrgjax as hg
 from hrgjax.calibration import PhysicalCompensator
 from hrgjax.resonator.averaged import input_rate
-from hrgjax.resonator.slow import reduced_rate
+from hrgjax.resonator.slow import reduced_rate, slow_manifold
 
 jax.config.update("jax_enable_x64", True)
 
@@ -146,21 +146,26 @@ def test_reduced_rate_and_a_law_refuse_bad_arguments_before_any_work():
     """Audit: `reduced_rate(g, nan, θ)` returned NaN after seconds of eager work, a str
     angle raised NumPy's conversion error, a str gyro an AttributeError; a
     `TemperatureLaw` evaluated at "20" read it as 20 °C. (`TemperatureLaw("20")` was already
-    refused at construction.)"""
+    refused at construction.) `slow_manifold` is held to the same (it gave NaN, an
+    AttributeError, NumPy's index error), and both to one number each: an array of angles met
+    the manifold's own samples in a broadcasting error."""
     g = _with_split(0.2).at(20.0)
-    for args, kind, match in (
-        ((g, np.nan, 0.3), ValueError, r"^reduced_rate: omega_in must be finite real numbers "
-         r"\(the input rate \[rad/s\]\); got nan"),
-        ((g, 0.1, np.inf), ValueError, r"^reduced_rate: theta must be finite real numbers "
-         r"\(the electrical wave angle \[rad\]\); got inf"),
-        ((g, "a", 0.3), TypeError, r"^reduced_rate: omega_in must be .*; got str 'a'"),
-        ((g, 0.1, None), TypeError, r"^reduced_rate: theta must be .*; got None"),
-        (("g", 0.1, 0.3), TypeError, r"^reduced_rate: g must be a hrgjax.Gyro at its "
-         r"temperature \(gyro.at\(T\)\); got str"),
-    ):  # fmt: skip
-        with pytest.raises(kind, match=match) as err:
-            reduced_rate(*args)
-        assert "\n" not in str(err.value)
+    for fn in (reduced_rate, slow_manifold):
+        who = fn.__name__
+        for args, kind, match in (
+            ((g, np.nan, 0.3), ValueError, rf"^{who}: omega_in must be one finite real number "
+             r"\(the input rate \[rad/s\]; jax.vmap it over many\); got nan"),
+            ((g, 0.1, np.inf), ValueError, rf"^{who}: theta must be one finite real number "
+             r"\(the electrical wave angle \[rad\]; jax.vmap it over many\); got inf"),
+            ((g, "a", 0.3), TypeError, rf"^{who}: omega_in must be .*; got str 'a'"),
+            ((g, 0.1, None), TypeError, rf"^{who}: theta must be .*; got None"),
+            ((g, 0.1, [0.3, 0.4]), ValueError, rf"^{who}: theta must be .*; got shape \(2,\)"),
+            (("g", 0.1, 0.3), TypeError, rf"^{who}: g must be a hrgjax.Gyro at its "
+             r"temperature \(gyro.at\(T\)\); got str"),
+        ):  # fmt: skip
+            with pytest.raises(kind, match=match) as err:
+                fn(*args)
+            assert "\n" not in str(err.value)
     law = hg.TemperatureLaw(1.0, 0.1)
     for temp, got in (("20", "str '20'"), (None, "None"), (True, "bool True")):
         with pytest.raises(TypeError, match=rf"^TemperatureLaw: temperature_c must be real "

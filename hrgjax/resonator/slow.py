@@ -253,15 +253,19 @@ def slow_manifold(g, omega_in, theta):
     loops; `omega_in`, the equivalent input rate [rad/s]; `theta`, the electrical wave angle
     [rad].
 
-    **Raises:** `ValueError` for force-to-rebalance mode, for open loops (a free
-    resonator, a bandwidth of 0: no rest point, NaN) and for a split |Δω| above
-    `MAX_SPLIT_RATIO` × the quadrature loop's bandwidth (`split_problem`: the balance no
-    longer converges); traced, a bandwidth ≤ 0 or such a split raises when the program runs.
+    **Raises:** `TypeError` for a `g` that is not a gyro or an `omega_in` or `theta` that is
+    not real numbers; `ValueError` for one that is not one finite number (where its value is
+    known on the host: a traced one passes; `jax.vmap` over many angles), for
+    force-to-rebalance mode, for open loops (a free resonator, a bandwidth of 0: no rest
+    point, NaN) and for a split |Δω| above `MAX_SPLIT_RATIO` × the quadrature loop's
+    bandwidth (`split_problem`: the balance no longer converges); traced, a bandwidth ≤ 0 or
+    such a split raises when the program runs.
     """
+    omega_in, theta = _checked("slow_manifold", g, omega_in, theta)
     if g.control.mode == "ftr":
         raise ValueError("the slow manifold is whole-angle mode's (the wave turns freely); "
                          "force-to-rebalance holds it — give a gyro with Control(mode='wa')")  # fmt: skip
-    theta = _closed(g, jnp.asarray(theta, dtype=jnp.result_type(float)))
+    theta = _closed(g, theta)
     theta = _in_domain(g, theta)
     n = SAMPLES
     thetas = theta + (jnp.pi / n) * jnp.arange(n, dtype=jnp.result_type(float))
@@ -279,15 +283,25 @@ def slow_manifold(g, omega_in, theta):
 def reduced_rate(g, omega_in, theta):
     """Wave-angle rate θ̇ [rad/s] with the loops on their slow manifold (`slow_manifold`).
 
-    **Raises:** `TypeError` for a `g` that is not a gyro or an `omega_in` or `theta` that is
-    not real numbers, `ValueError` for one that is not finite where its value is known on the
-    host (a traced one passes: NaN gave NaN after seconds of eager work)."""
-    if not (hasattr(g, "control") and hasattr(g, "resonator")):
-        raise TypeError(f"reduced_rate: g must be a hrgjax.Gyro at its temperature (gyro.at(T)); "
-                        f"got {type(g).__name__}")  # fmt: skip
-    omega_in = check_values("reduced_rate: omega_in", omega_in, np.isfinite,
-                            "finite real numbers (the input rate [rad/s])")  # fmt: skip
-    theta = check_values("reduced_rate: theta", theta, np.isfinite,
-                         "finite real numbers (the electrical wave angle [rad])")  # fmt: skip
-    theta = jnp.asarray(theta, dtype=jnp.result_type(float))
+    **Raises:** as [`slow_manifold`][hrgjax.resonator.slow.slow_manifold]."""
+    omega_in, theta = _checked("reduced_rate", g, omega_in, theta)
     return _fields(g, omega_in, slow_manifold(g, omega_in, theta), theta)[1]
+
+
+def _checked(owner: str, g, omega_in, theta):
+    """(`omega_in`, `theta` as a float array) once `g` is a gyro and both are one real number
+    each, finite where known on the host (a traced one passes), else a one-line error naming
+    `owner` and the argument (a NaN gave NaN after seconds of eager work; an array of angles
+    met the manifold's own samples in a broadcasting error)."""
+    if not (hasattr(g, "control") and hasattr(g, "resonator")):
+        raise TypeError(f"{owner}: g must be a hrgjax.Gyro at its temperature (gyro.at(T)); "
+                        f"got {type(g).__name__}")  # fmt: skip
+    out = []
+    for name, x, what in (("omega_in", omega_in, "the input rate [rad/s]"),
+                          ("theta", theta, "the electrical wave angle [rad]")):  # fmt: skip
+        form = f"one finite real number ({what}; jax.vmap it over many)"
+        x = check_values(f"{owner}: {name}", x, np.isfinite, form)
+        if np.ndim(x) != 0:
+            raise ValueError(f"{owner}: {name} must be {form}; got shape {np.shape(x)}")
+        out.append(x)
+    return out[0], jnp.asarray(out[1], dtype=jnp.result_type(float))
