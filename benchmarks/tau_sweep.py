@@ -21,40 +21,12 @@ import time
 
 import jax
 from _common import best_of, machine, report
+from nav_gm_fold import gm_imu
 
-from hrgjax.ins import ekf, flights, gnss, motion, sensors
-from hrgjax.units import DEG_PER_H, DEG_PER_SQRT_H
+from hrgjax.ins import ekf, flights, gnss
 
 sys.path.insert(0, "tests")
-from helpers import CompileCounter  # noqa: E402
-
-Z = (0.0, 0.0, 0.0)
-
-
-def flight():
-    """The tests' 120-s motion (tests/test_navigation_filter.py), 10 Hz."""
-    s = motion.Segment
-    segs = (
-        s(1, Z, (2.0, 0.0, 0.0), 30.0),
-        s(3, (0.0, 0.0, 20.0), Z, 5.0),
-        s(1, (3.0, 0.0, 0.0), Z, 25.0),
-        s(3, (0.0, 4.0, -20.0), Z, 5.0),
-        s(1, Z, Z, 55.0),
-    )
-    return motion.Motion(40.0, 10.0, 200.0, (20.0, 0.0, 0.0), 10.0, 0.0, 0.0, segs).truth(10.0)
-
-
-def imu(tau):
-    return sensors.ImuModel(
-        gyro_bias=3 * DEG_PER_H,
-        accel_bias=50 * sensors.MICRO_G,
-        arw=0.01 * DEG_PER_SQRT_H,
-        vrw=10 * sensors.MICRO_G,
-        gyro_bias_instability=30 * DEG_PER_H,
-        accel_bias_instability=500 * sensors.MICRO_G,
-        gyro_correlation_time=tau,
-        accel_correlation_time=tau,
-    )
+from helpers import CompileCounter, flight_motion  # noqa: E402
 
 
 def main():
@@ -63,13 +35,14 @@ def main():
     ap.add_argument("--runs", type=int, default=8, help="runs per τ (one vmapped batch)")
     args = ap.parse_args()
     taus = [float(t) for t in args.taus.split(",")]
-    truth = flight()
+    truth = flight_motion().truth(10.0)  # the tests' 120-s motion, 10 Hz
     key = jax.random.key(0)
     print(machine())
 
     def fly(tau):
-        settings = ekf.LooselyCoupled(imu(tau), gnss.Gnss(), gauss_markov=True)
-        return flights.fly(truth, imu(tau), settings, key=key, runs=args.runs)
+        imu = gm_imu(tau, fixed=True)  # nav_gm_fold's sensor, fixed biases too
+        settings = ekf.LooselyCoupled(imu, gnss.Gnss(), gauss_markov=True)
+        return flights.fly(truth, imu, settings, key=key, runs=args.runs)
 
     total = 0.0
     for tau in taus:
