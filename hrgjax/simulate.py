@@ -525,6 +525,10 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     if carrier is not None:  # it reads none of diffrax's settings: one program per step count
         carrier = (*carrier, looped_stages(gyro, profile, ts, *carrier))
         stepping, adjoint = (_default_solver(model), 0.0, 0.0, 1, 0.0, True), None
+    # rtol, atol and the first (or fixed) step are values in the program (arrays; as Python
+    # floats they were static: a convergence study compiled the solve again per tolerance)
+    stepping = (stepping[0], *(device(x, float) for x in stepping[1:3]), stepping[3],
+                device(stepping[4], float), stepping[5])  # fmt: skip
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
     gyro, profile = traceable("gyro", gyro, _LAW_LIMITS), traceable("profile", profile)
     gyro, profile = check_traced(gyro, profile)  # traced values: the eager rules, at run time

@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import mechanise_ned
+from helpers import CompileCounter, mechanise_ned
 
 from hrgjax import kalman
 from hrgjax.ins import constants as C
@@ -197,6 +197,10 @@ def test_linear_model_matches_the_nonlinear_mechanisation():
     c_true = traj.c_bn[0]
     ts, (y_true, y_err) = _mechanise(traj, jnp.stack([c_true, (jnp.eye(3) - skew) @ c_true]), hours)
     dx = sd.propagate(traj, jnp.zeros(9).at[6:].set(phi), altitude_aided=True)
+    with CompileCounter() as c:  # the tolerances are values (each new one compiled ≈ 1.5 s)
+        again = sd.propagate(traj, jnp.zeros(9).at[6:].set(phi), altitude_aided=True, rtol=1e-9)
+    assert c.compiles == 0, c.names
+    np.testing.assert_allclose(again, dx, rtol=0, atol=1e-6 * float(jnp.max(jnp.abs(dx))))
     idx = np.searchsorted(np.asarray(traj.t), np.asarray(ts))
     lin = np.asarray(dx)[idx]
     d = np.asarray(y_err - y_true)

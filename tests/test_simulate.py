@@ -207,6 +207,16 @@ def test_python_floats_put_in_with_tree_at_compile_nothing_new():
         weak = jnp.asarray(650.0)
         hg.simulate(eqx.tree_at(lambda g: g.resonator.tau, gyro, weak), prof, dt_out=0.5)
     assert "jit(_solve)" not in c.names, c.names  # (a small eager program may be new)
+    # the solver's tolerances and a fixed step are values too (a convergence study compiled
+    # the solve again per tolerance, ≈ 3.6 s each)
+    with CompileCounter() as c:
+        loose = hg.simulate(gyro, prof, dt_out=0.5, rtol=1e-6, atol=1e-8).wave_angle
+    assert c.compiles == 0, c.names
+    np.testing.assert_allclose(loose, base, rtol=0, atol=1e-9)  # a constant rate: exact
+    hg.simulate(gyro, prof, dt_out=0.5, fixed_step=0.01)
+    with CompileCounter() as c:
+        hg.simulate(gyro, prof, dt_out=0.5, fixed_step=0.02)
+    assert c.compiles == 0, c.names
 
 
 def test_a_given_switch_on_key_runs_the_program_of_a_drawn_one():

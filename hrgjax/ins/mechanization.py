@@ -547,7 +547,7 @@ def increments_from_states(initial: NavState, v_ned, q_bn, dt: float, *, earth: 
     _check_dt(dt)
     check_finite_host("v_ned", v_ned)
     check_finite_host("q_bn", q_bn)
-    return _invert(initial, v_ned, q_bn, dt, earth)
+    return _invert(initial, v_ned, q_bn, device(dt, float), earth)  # dt a value, as mechanize's
 
 
 @eqx.filter_jit

@@ -59,7 +59,7 @@ from .._checks import (
     is_concrete,
     whole_number,
 )
-from .._compiled import Check, fused, program
+from .._compiled import Check, device, fused, program
 from .._x64 import require_x64
 from ..kalman import psd_factor, van_loan
 from .constants import Earth
@@ -253,7 +253,8 @@ def propagate(
         _refuse_attitude("dx0[6:9]", v0[6:9], "the initial attitude error φ")
     eg = _check_series("gyro_error", gyro_error, n)
     ea = _check_series("accel_error", accel_error, n)
-    dx = _propagate(traj, dx0, eg, ea, altitude_aided, rtol, atol, max_steps or 64 * n)[0]
+    tol = (device(rtol, float), device(atol, float))  # values: a new tolerance compiles nothing
+    dx = _propagate(traj, dx0, eg, ea, altitude_aided, *tol, max_steps or 64 * n)[0]
     v, t = host_value(dx), host_value(traj.t)
     if v is not None and t is not None:
         angle = np.abs(v[:, _ANGLES]).max(axis=1)
