@@ -1,5 +1,7 @@
 """Seed 002's neural detectors and the method comparison, on a small stationary complex."""
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -170,6 +172,15 @@ def test_compare_scores_every_method_on_one_short_scenario():
         assert {k: v for k, v in r.items() if k not in timing} == {
             k: v for k, v in s.items() if k not in timing
         }
+    # a later onset (another scenario of the same shape) is a value: nothing compiled (the
+    # scenario was a static argument: 4 programs again, ≈ 9 s), the bank as prompt
+    with CompileCounter() as compiles:
+        later = cp.compare(dataclasses.replace(sc, name="later", t_fault=320.0),
+                           key=jax.random.key(3), n_faulty=3, n_healthy=1, n_train=2,
+                           methods=("filter_bank",), n_windows=600)  # fmt: skip
+    assert compiles.compiles == 0, compiles.names
+    bank = later["methods"][0]
+    assert bank["detected"] == 1.0 and bank["detection_time_max_s"] <= 1.0, bank
     with pytest.raises(ValueError, match="unknown methods"):
         cp.compare(sc, methods=("nope",))
     with pytest.raises(ValueError, match="unknown scenario"):

@@ -112,38 +112,44 @@ METHODS = (
 _FAULT_WALK = 1e-8
 
 
-def _run(ins, sc: Scenario, key, meas_sigma, size, fault_ins):
+def _run(ins, shape, key, meas_sigma, size, t_fault, fault_ins):
     """One Monte Carlo run's noisy measurements: healthy (`fault_ins` None) or with a fault
-    of `size` in INS `fault_ins`."""
-    n_steps = int(round(sc.duration / sc.dt))
+    of `size` from `t_fault` [s] in INS `fault_ins`; `shape` = the scenario's (sensor,
+    duration, dt), what sets the program (the rest of a `Scenario` is values or labels)."""
+    sensor, duration, dt = shape
+    n_steps = int(round(duration / dt))
     k_sim, k_noise = jax.random.split(key)
     if fault_ins is None:
-        _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim)
+        _, nav = simulate_complex(ins, dt=dt, n_steps=n_steps, key=k_sim)
     else:
-        f = Fault.on(sc.sensor, 1.0, sc.t_fault)
+        f = Fault.on(sensor, 1.0, t_fault)
         f = Fault(f.e * size, f.t_fault)
-        _, nav = simulate_complex(ins, dt=sc.dt, n_steps=n_steps, key=k_sim,
+        _, nav = simulate_complex(ins, dt=dt, n_steps=n_steps, key=k_sim,
                                   fault_ins=fault_ins, fault=f)  # fmt: skip
-    z = measurements(nav, sc.dt, sc.sensor, ins)
+    z = measurements(nav, dt, sensor, ins)
     return z + meas_sigma * jax.random.normal(k_noise, z.shape)
 
 
-# one program per scenario (and faulty INS, and batch size), kept between calls
-_faulty_run = jax.jit(_run, static_argnames=("sc", "fault_ins"))
+# one program per scenario shape (and faulty INS, and batch size), kept between calls: the
+# onset, fault sizes and labels are values (as a static `Scenario` a new onset compiled
+# the four programs again, ≈ 9 s)
+_faulty_run = jax.jit(_run, static_argnames=("shape", "fault_ins"))
 
 
-@functools.partial(jax.jit, static_argnames="sc")
-def _healthy_runs(ins, sc: Scenario, keys, meas_sigma):
-    return jax.vmap(lambda k: _run(ins, sc, k, meas_sigma, 0.0, None))(keys)
+@functools.partial(jax.jit, static_argnames="shape")
+def _healthy_runs(ins, shape, keys, meas_sigma):
+    return jax.vmap(lambda k: _run(ins, shape, k, meas_sigma, 0.0, 0.0, None))(keys)
 
 
 def _measure(ins, sc: Scenario, keys, meas_sigma, fault_ins=None, sizes=None):
+    shape = (sc.sensor, float(sc.duration), float(sc.dt))
     if fault_ins is None:
-        return _healthy_runs(ins, sc, keys, meas_sigma)
+        return _healthy_runs(ins, shape, keys, meas_sigma)
     outs = []
     with bar(len(keys), "simulating faulty runs", unit="run") as progress:
         for k, i, e in zip(keys, fault_ins, sizes, strict=True):
-            outs.append(_faulty_run(ins, sc, k, meas_sigma, e, fault_ins=int(i)))
+            outs.append(_faulty_run(ins, shape, k, meas_sigma, e, float(sc.t_fault),
+                                    fault_ins=int(i)))  # fmt: skip
             progress.update(1)
     return jnp.stack(outs)
 
