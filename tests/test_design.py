@@ -738,8 +738,10 @@ def test_design_cli_finds_a_plan_within_budget_that_beats_its_start(tmp_path, ca
         float(d.criterion(result.optimised_plan)), rel=1e-9
     )
     assert abs(result.value / result.optimised_value - 1.0) < 0.01  # the bench's resolution
-    with CompileCounter() as c:  # the learning rate is a value (it compiled the step again)
-        d.design(2.5, levels=(2,), statics=2, rotations=1, steps=40, learning_rate=0.05)
+    with CompileCounter() as c:  # the learning rate and the bench's numbers are values (as
+        # Python floats each new one compiled the step again, ≈ 9 s)
+        d.design(2.5, levels=(2,), statics=2, rotations=1, steps=40, learning_rate=0.05,
+                 bench=d.BenchModel(settle_s=1700.0, slew_c_per_min=1.5))  # fmt: skip
     assert c.compiles == 0, c.names
     for bad in (dict(learning_rate=-0.1), dict(learning_rate=float("nan")), dict(steps=0)):
         with pytest.raises(ValueError, match=f"^{next(iter(bad))} must be"):
@@ -1039,3 +1041,9 @@ def test_bench_time_is_one_program_per_plan_length():
     assert float(h) * 3600 == pytest.approx(float(d.BenchModel(settle_s=600.0).bench_time_s(other)))
     g = jax.grad(d.bench_time_h)(plan)
     np.testing.assert_allclose(g.duration_s, 1 / 3600, rtol=1e-15)
+    # a bench's numbers are float64 array leaves: values, not constants, of the programs
+    # eqx.filter_jit compiles (`design`'s step: a Python float there compiled it again);
+    # written as plain floats
+    bench = d.BenchModel(settle_s=1700, slew_c_per_min=1.5)
+    assert all(eqx.is_array(x) and x.dtype == np.float64 for x in jax.tree.leaves(bench))
+    assert bench.to_json()["settle_s"] == 1700.0 and type(bench.to_json()["settle_s"]) is float

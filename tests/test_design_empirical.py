@@ -7,6 +7,7 @@ import equinox as eqx
 import jax
 import numpy as np
 import pytest
+from helpers import CompileCounter
 
 from hrgjax.calibration import design as d
 from hrgjax.units import DEG
@@ -55,6 +56,16 @@ def test_static_information_is_the_basis_outer_product_and_s_t_keeps_its_prior()
     prior = (100.0 * np.asarray(MODEL.scale())) ** 2
     cov = np.asarray(d.posterior_covariance(plan, model=MODEL))
     np.testing.assert_allclose(np.diag(cov)[2 * n :], prior[2 * n :], rtol=1e-9)
+    # the magnitudes and k_e are values of these programs (static, each new one compiled
+    # four again, ≈ 5 s): F scales with k_e², s_T keeps its new prior
+    other = d.Empirical(harmonics=1, degree=2, st_rad_per_c=3e-4, k_e=0.6)
+    with CompileCounter() as c:
+        f_other = np.asarray(d.information(plan, model=other))
+        cov_other = np.asarray(d.posterior_covariance(plan, model=other))
+    assert c.compiles == 0, c.names
+    np.testing.assert_allclose(f_other, f * (0.6 / MODEL.k_e) ** 2, rtol=1e-12,
+                               atol=1e-12 * np.abs(f_other).max())  # fmt: skip
+    np.testing.assert_allclose(np.diag(cov_other)[2 * n :], 9.0 * prior[2 * n :], rtol=1e-9)
 
     # s_T where a ramp looks, and where it does not: with harmonics = 1 the basis at 30° and
     # at −60° are orthogonal (1 + cos 60° cos(−120°) + sin 60° sin(−120°) = 0)

@@ -14,6 +14,7 @@ from ..gyro import Gyro
 from ..pattern_noise import NoiseModel
 from ..profiles import Profile
 from ..units import DEG_PER_H, K_E_NOMINAL
+from ._plan import float64_setting, settings_repr
 
 
 def _coefficients(x):
@@ -178,15 +179,19 @@ class Empirical(eqx.Module):
     does not visit uncertain: a design for this model must cover the temperatures and
     angles the gyro will meet, and ramp at the angles where s_T shows. (`scale()` is 1/100
     of these magnitudes, so that the criteria's default `prior_scale = 100` puts the prior
-    at them.) Linear: the linearisation point does not matter (`nominal()` is zero)."""
+    at them.) Linear: the linearisation point does not matter (`nominal()` is zero).
+    The four magnitudes are float64 0-d arrays (`float()` reads one): values of the
+    criteria's and `design`'s programs, so another magnitude compiles nothing (as static
+    fields each new one compiled four programs again, ≈ 5 s)."""
 
     harmonics: int = eqx.field(static=True, default=2)
     degree: int = eqx.field(static=True, default=5)
-    drift_dph: float = eqx.field(static=True, default=0.5)
-    scale_factor: float = eqx.field(static=True, default=0.01)
-    st_rad_per_c: float = eqx.field(static=True, default=1e-4)
-    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    drift_dph: float = eqx.field(default=0.5, converter=float64_setting)
+    scale_factor: float = eqx.field(default=0.01, converter=float64_setting)
+    st_rad_per_c: float = eqx.field(default=1e-4, converter=float64_setting)
+    k_e: float = eqx.field(default=K_E_NOMINAL, converter=float64_setting)
     name: str = eqx.field(static=True, default="empirical")
+    __repr__ = settings_repr
 
     def __check_init__(self):
         if self.harmonics < 0 or self.degree < 0:

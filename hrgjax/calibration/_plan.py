@@ -17,6 +17,7 @@ smoothly, so that the bench time has a gradient with respect to the plan.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 
@@ -26,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import is_concrete
+from .._checks import is_concrete, numeric_problem
 from .._compiled import device, fused
 from .experiment import QUICK_DURATION, QUICK_TEMPERATURES, SEED_ANGLES, SEED_TEMPERATURES
 
@@ -224,6 +225,31 @@ class BenchPlan(eqx.Module):
         return out
 
 
+def float64_setting(x):
+    """A setting of a bench or a design model (`BenchModel`, `Empirical`) as a read-only
+    NumPy float64 0-d array: a value of the compiled programs it enters, where
+    `eqx.filter_jit` keeps a Python float static (each new value compiled `design`'s step
+    again: 1 compile, ≈ 9 s). On the host it computes as the float did (NumPy float64, no
+    XLA program; `float()` gives the number). A traced value, or one that is not real
+    numbers (refused by the owner's checks, as before), is left as it is."""
+    if isinstance(x, jax.core.Tracer) or numeric_problem(x, bools=True) is not None:
+        return x
+    out = np.array(x, dtype=np.float64)
+    out.flags.writeable = False
+    return out
+
+
+def settings_repr(module) -> str:
+    """`Name(field=value, …)` with `float64_setting` fields shown as the numbers they hold
+    (equinox shows a 0-d array as `f64[](numpy)`)."""
+
+    def shown(v):
+        return repr(float(v)) if isinstance(v, np.ndarray) and v.shape == () else repr(v)
+
+    fields = (f"{f.name}={shown(getattr(module, f.name))}" for f in dataclasses.fields(module))
+    return f"{type(module).__name__}({', '.join(fields)})"
+
+
 class BenchModel(eqx.Module):
     """What a bench session costs besides measuring: the thermal chamber and the rate table.
 
@@ -250,13 +276,18 @@ class BenchModel(eqx.Module):
       check the loops [s] (1 min).
     - `start_temperature_c`: where the chamber starts [°C] (20 °C).
     - `settle_scale_c`: temperature change below which the soak shrinks [°C] (0.5 °C).
+
+    Each is kept as a float64 0-d array (`float()` reads it): a value, not a constant, of
+    the programs a bench enters, so a `design` for another bench compiles nothing.
     """
 
-    slew_c_per_min: float = 1.0
-    settle_s: float = 1800.0
-    reposition_s: float = 60.0
-    start_temperature_c: float = 20.0
-    settle_scale_c: float = 0.5
+    slew_c_per_min: float = eqx.field(default=1.0, converter=float64_setting)
+    settle_s: float = eqx.field(default=1800.0, converter=float64_setting)
+    reposition_s: float = eqx.field(default=60.0, converter=float64_setting)
+    start_temperature_c: float = eqx.field(default=20.0, converter=float64_setting)
+    settle_scale_c: float = eqx.field(default=0.5, converter=float64_setting)
+
+    __repr__ = settings_repr
 
     def __check_init__(self):
         for name in ("slew_c_per_min", "settle_scale_c"):
