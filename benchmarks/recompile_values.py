@@ -37,7 +37,11 @@
    calls: `ins.flights.fly` with another Gauss–Markov correlation time (8 runs of a 60-s
    flight, Gauss–Markov filter states), `MLPCompensator.fit` with another learning rate,
    `FourierCompensator` with another `tolerance_c`, `nn.train.rprop(compile_once=True)` with
-   another learning rate, `calibration.design` (40 steps) with another learning rate.
+   another learning rate, `calibration.design` (40 steps) with another learning rate;
+   `simulate` (an ideal gyro, 20 s) with another `rtol` and another `fixed_step`,
+   `ins.strapdown.propagate` (12 h) with another `rtol`, `diagnosis.compare` (a 400-s
+   scenario, the filter bank) with another fault onset, `calibration.design` with another
+   `BenchModel(settle_s=…)`.
 
 Each call prints the XLA compiles it caused (jax.monitoring) and its wall time.
 
@@ -308,10 +312,38 @@ def settings_calls():
             f"rprop(compile_once=True), learning_rate {rate:g}",
             lambda r=rate: train.rprop(loss, jax.numpy.zeros(4), 30, r, compile_once=True),
         )
+    gyro = hg.presets.ideal(hg.Resonator(omega=2 * np.pi * 40.0, tau=50.0, k_e=0.554))
+    prof = hg.Profile.constant_rate(10.0, 20.0)
+    for kw in (dict(rtol=1e-8), dict(rtol=1e-6), dict(fixed_step=0.01), dict(fixed_step=0.02)):
+        counted(f"simulate, {kw}", lambda kw=kw: hg.simulate(gyro, prof, dt_out=0.5, **kw))
+    from hrgjax.ins import constants, strapdown, trajectory
+
+    traj = trajectory.constant_velocity(30.0, duration_s=12 * 3600.0, dt=60.0,
+                                        earth=constants.SPHERE)  # fmt: skip
+    for rtol in (1e-10, 1e-9):
+        counted(f"strapdown.propagate, rtol {rtol:g}",
+                lambda r=rtol: strapdown.propagate(traj, jax.numpy.zeros(9).at[6].set(1e-4),
+                                                   altitude_aided=True, rtol=r))  # fmt: skip
+    import dataclasses
+
+    from hrgjax.diagnosis import compare
+
+    scenario = compare.Scenario("short", t_fault=300.0, duration=400.0)
+    for onset in (300.0, 320.0):
+        sc = dataclasses.replace(scenario, t_fault=onset)
+        counted(f"diagnosis.compare, t_fault {onset:g} s",
+                lambda sc=sc: compare.compare(sc, key=jax.random.key(3), n_faulty=3, n_healthy=1,
+                                              n_train=2, methods=("filter_bank",),
+                                              n_windows=600)["methods"][0]["detected"])  # fmt: skip
     for rate in (0.1, 0.05):
         counted(f"calibration.design, learning_rate {rate:g}",
                 lambda r=rate: design.design(2.5, levels=(2,), statics=2, rotations=1, steps=40,
                                              learning_rate=r).value)  # fmt: skip
+    for settle in (1800.0, 1700.0):
+        bench_model = design.BenchModel(settle_s=settle)
+        counted(f"calibration.design, BenchModel(settle_s={settle:g})",
+                lambda b=bench_model: design.design(2.5, levels=(2,), statics=2, rotations=1,
+                                                    steps=40, bench=b).value)  # fmt: skip
 
 
 def _quartic(p, *, t):
