@@ -5,6 +5,7 @@ walk, exact integration of a known drift, finite differences, Monte-Carlo covera
 physical fit's covariance.
 """
 
+import dataclasses
 import json
 
 import equinox as eqx
@@ -627,6 +628,10 @@ def test_one_fit_call_for_every_compensator_and_the_old_keywords_still_work():
                                                     window_s=5.0, raw=data)  # fmt: skip
     same(new, old)
     assert (new.mode, new.window_s) == (old.mode, old.window_s) == ("end_to_end", 5.0)
+    with CompileCounter() as c:  # another learning rate, end to end too: nothing compiled
+        faster = dataclasses.replace(mlp, learning_rate=3e-3).fit(windows, key=key, raw=data)
+    assert c.compiles == 0, c.names
+    assert faster.learning_rate == 3e-3 and faster.mode == "end_to_end"
     with pytest.raises(TypeError, match="key="):
         MLPCompensator().fit(windows)
     with pytest.raises(ValueError, match="mode must be one of"):

@@ -1047,3 +1047,10 @@ def test_bench_time_is_one_program_per_plan_length():
     bench = d.BenchModel(settle_s=1700, slew_c_per_min=1.5)
     assert all(eqx.is_array(x) and x.dtype == np.float64 for x in jax.tree.leaves(bench))
     assert bench.to_json()["settle_s"] == 1700.0 and type(bench.to_json()["settle_s"]) is float
+    # and it still hashes and prints as its numbers (review: NumPy leaves are unhashable)
+    assert (
+        hash(bench)
+        == hash(d.BenchModel(settle_s=1700.0, slew_c_per_min=1.5))
+        != hash(d.BenchModel())
+    )
+    assert "settle_s=1700.0" in repr(bench)

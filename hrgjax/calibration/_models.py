@@ -14,7 +14,7 @@ from ..gyro import Gyro
 from ..pattern_noise import NoiseModel
 from ..profiles import Profile
 from ..units import DEG_PER_H, K_E_NOMINAL
-from ._plan import float64_setting, settings_repr
+from ._plan import float64_setting, settings_hash, settings_repr
 
 
 def _coefficients(x):
@@ -192,6 +192,7 @@ class Empirical(eqx.Module):
     k_e: float = eqx.field(default=K_E_NOMINAL, converter=float64_setting)
     name: str = eqx.field(static=True, default="empirical")
     __repr__ = settings_repr
+    __hash__ = settings_hash
 
     def __check_init__(self):
         if self.harmonics < 0 or self.degree < 0:

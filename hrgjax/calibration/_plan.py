@@ -250,6 +250,16 @@ def settings_repr(module) -> str:
     return f"{type(module).__name__}({', '.join(fields)})"
 
 
+def settings_hash(module) -> int:
+    """A hash of the numbers `float64_setting` holds (a NumPy array is unhashable: a bench or
+    a design model as a dict key, in a set or `lru_cache` worked with the floats)."""
+
+    def key(v):
+        return float(v) if isinstance(v, np.ndarray) and v.shape == () else v
+
+    return hash((type(module), *(key(getattr(module, f.name)) for f in dataclasses.fields(module))))
+
+
 class BenchModel(eqx.Module):
     """What a bench session costs besides measuring: the thermal chamber and the rate table.
 
@@ -288,6 +298,7 @@ class BenchModel(eqx.Module):
     settle_scale_c: float = eqx.field(default=0.5, converter=float64_setting)
 
     __repr__ = settings_repr
+    __hash__ = settings_hash
 
     def __check_init__(self):
         for name in ("slew_c_per_min", "settle_scale_c"):

@@ -553,17 +553,13 @@ def train_end_to_end(
     """Rprop on the end-to-end losses of all runs: the static and the moving runs' mean squared
     errors, each normalised by its value at the start, so both kinds weigh alike."""
     groups = run_groups(data, window_s)
-    params, static = eqx.partition(comp, _trainable(comp))
-    scales = _e2e_scales(comp, groups)
-    params, _ = rprop_with_progress(
-        _e2e_loss,
-        params,
-        (static, groups, scales),
-        steps,
-        comp.learning_rate,
-        desc="MLP end-to-end",
-    )
-    return eqx.combine(params, static)
+    form = comp._program_form()  # its fit-only static fields out of the programs' keys
+    params, static = eqx.partition(form, _trainable(form))
+    scales = _e2e_scales(form, groups)
+    params, _ = rprop_with_progress(_e2e_loss, params, (static, groups, scales), steps,
+                                    comp.learning_rate, desc="MLP end-to-end")  # fmt: skip
+    leaves = jax.tree_util.tree_leaves(eqx.combine(params, static))  # the same leaves as comp's
+    return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(comp), leaves)
 
 
 @program
