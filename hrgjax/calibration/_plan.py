@@ -239,25 +239,24 @@ def float64_setting(x):
     return out
 
 
+def _settings(module):
+    """`(name, value)` of each field, a `float64_setting` 0-d array as the number it holds."""
+    for f in dataclasses.fields(module):
+        v = getattr(module, f.name)
+        yield f.name, float(v) if isinstance(v, np.ndarray) and v.shape == () else v
+
+
 def settings_repr(module) -> str:
     """`Name(field=value, …)` with `float64_setting` fields shown as the numbers they hold
     (equinox shows a 0-d array as `f64[](numpy)`)."""
-
-    def shown(v):
-        return repr(float(v)) if isinstance(v, np.ndarray) and v.shape == () else repr(v)
-
-    fields = (f"{f.name}={shown(getattr(module, f.name))}" for f in dataclasses.fields(module))
-    return f"{type(module).__name__}({', '.join(fields)})"
+    fields = ", ".join(f"{name}={v!r}" for name, v in _settings(module))
+    return f"{type(module).__name__}({fields})"
 
 
 def settings_hash(module) -> int:
     """A hash of the numbers `float64_setting` holds (a NumPy array is unhashable: a bench or
     a design model as a dict key, in a set or `lru_cache` worked with the floats)."""
-
-    def key(v):
-        return float(v) if isinstance(v, np.ndarray) and v.shape == () else v
-
-    return hash((type(module), *(key(getattr(module, f.name)) for f in dataclasses.fields(module))))
+    return hash((type(module), *(v for _, v in _settings(module))))
 
 
 class BenchModel(eqx.Module):
