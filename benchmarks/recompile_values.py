@@ -70,7 +70,12 @@ def _listen(event, duration, **kw):
         _COUNTS[-1].append(kw.get("fun_name"))
 
 
+_MATCH: list = []  # --match: only the calls whose label holds one of these
+
+
 def counted(label, run):
+    if _MATCH and not any(m in label for m in _MATCH):
+        return 0, 0.0
     _COUNTS.append([])
     t0 = time.perf_counter()
     jax.block_until_ready(run())
@@ -339,6 +344,25 @@ def settings_calls():
         counted(f"calibration.design, learning_rate {rate:g}",
                 lambda r=rate: design.design(2.5, levels=(2,), statics=2, rotations=1, steps=40,
                                              learning_rate=r).value)  # fmt: skip
+    from hrgjax.ins import platform
+
+    for g in (9.80665, 9.7):
+        ins = platform.PlatformINS(g=g, radius=6.3e6)
+        counted(f"ins.platform.simulate, PlatformINS(g={g:g})",
+                lambda i=ins: platform.simulate(i, dt=1.0, n_steps=600,
+                                                key=jax.random.key(0))[1])  # fmt: skip
+    if not _MATCH or any(m in "PhysicalCompensator" for m in _MATCH):
+        temps, angles = (-40.0, 20.0, 60.0), tuple(range(-90, 90, 30))  # test_calibration's
+        physical_bench = hg.data.concat([
+            cal.run_plan(data, cal.static_plan(temps, angles, duration_s=60.0, dt_out=0.5)),
+            cal.run_plan(data, cal.rotation_plan(temps, angles, duration_s=60.0, dt_out=0.5),
+                         first_run=18),
+        ])  # fmt: skip
+        for k_e in (0.554, 0.56):
+            counted(
+                f"PhysicalCompensator(k_e={k_e:g}).fit",
+                lambda k=k_e: cal.PhysicalCompensator(k_e=k).fit(physical_bench).values,
+            )
     for settle in (1800.0, 1700.0):
         bench_model = design.BenchModel(settle_s=settle)
         counted(f"calibration.design, BenchModel(settle_s={settle:g})",
@@ -357,7 +381,14 @@ if __name__ == "__main__":
     ap.add_argument("--diagnosis", action="store_true", help="only diagnosis.compare and training")
     ap.add_argument("--types", action="store_true", help="only part 6: number types, options")
     ap.add_argument("--settings", action="store_true", help="only part 7: settings as values")
+    ap.add_argument(
+        "--match",
+        action="append",
+        default=[],
+        help="only the calls whose label holds this text (repeatable)",
+    )
     a = ap.parse_args()
+    _MATCH.extend(a.match)
     jax.monitoring.register_event_duration_secs_listener(_listen)
     if a.types:
         type_calls()

@@ -34,6 +34,9 @@ _DEFAULTS: dict[str, tuple[float, float, str]] = {
     "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
     "specific_force_g": (-20.0, 20.0, "g"),
     "precession_dps": (-2e4, 2e4, "°/s electrical"),
+    "gravity_mps2": (9.0, 10.5, "m/s²"),
+    "earth_radius_m": (6.0e6, 6.6e6, "m"),
+    "earth_rate_radps": (0.0, 1e-4, "rad/s"),
     "imu_gyro_bias": (-0.75, 0.75, "rad/s"),
     "imu_accel_bias": (-3.0, 3.0, "m/s²"),
     "imu_scale": (-0.1, 0.1, "(a fraction: 1e-6 = 1 ppm)"),
@@ -100,7 +103,9 @@ rad/√s lie beyond it, the noisiest MEMS gyros' 0.05–0.1 °/s/√Hz inside), 
 and acceleration random walks of 10⁻⁴ rad/s/√s (≈ 1200 °/h/√h) and 0.01 m/s²/√s — a value
 beyond, or on a bound ([`EXCLUSIVE`][hrgjax.plausible.EXCLUSIVE]), is one in a datasheet's
 unit (°/h or °/s, ppm or %, °/√h or °/s/√Hz, µg or mg), named so with the factors that
-convert each."""
+convert each; and an Earth model's gravity (9 … 10.5 m/s²), radius (6.0 … 6.6·10⁶ m) and
+rotation rate (0 … 10⁻⁴ rad/s) in `hrgjax.ins.constants.Earth` and
+`hrgjax.ins.platform.PlatformINS` (`EARTH_HINTS`: 981 is cm/s², 6371 km, 15.04 °/h)."""
 
 IMU_HINTS = {
     "imu_gyro_bias": "°/h → ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG",
@@ -120,6 +125,19 @@ IMU_HINTS = {
     "imu_accel_random_walk": "µg/√s → ×hrgjax.ins.sensors.MICRO_G; mg/√s → ×9.80665e-3",
 }
 """The datasheet units each `imu_*` range's message names, with the factor from each to SI."""
+
+EARTH_HINTS = {
+    "gravity_mps2": "cm/s² (Gal) → ÷100; ft/s² → ×0.3048",
+    "earth_radius_m": "km → ×1000",
+    "earth_rate_radps": "°/h → ×hrgjax.units.DEG_PER_H; rad/h → ÷3600",
+}
+"""The other units an Earth model's gravity, radius and rotation rate are written in (a
+textbook's 981 cm/s², 6371 km, 15.04 °/h), with the factor from each to SI: local gravity
+lies in 9.78–9.83 m/s² and Earth's radius in 6.36–6.38·10⁶ m; the ranges are wide enough
+for a round textbook value (g = 10, R = 6.4·10⁶ m) and a rotation rate of 0 (no Earth
+rate)."""
+
+_HINTS = IMU_HINTS | EARTH_HINTS
 
 EXCLUSIVE = frozenset(k for k in _DEFAULTS if k.startswith("imu_"))
 """Quantities whose nonzero bounds are refused too: each is a round number that a datasheet
@@ -171,7 +189,7 @@ def _hint(name: str, values: np.ndarray) -> str:
     if name == "temperature_c" and values.size and np.min(values) >= KELVIN_HINT_C:
         return (f" — these look like kelvin ({np.min(values):g} … {np.max(values):g}): "
                 "subtract 273.15")  # fmt: skip
-    return f" — {IMU_HINTS[name]}" if name in IMU_HINTS else ""
+    return f" — {_HINTS[name]}" if name in _HINTS else ""
 
 
 def _widens(quantity: str) -> str:
@@ -379,7 +397,7 @@ def traced_violations(name: str, values, quantity: str | None = None) -> list:
     out = jnp.any(jnp.isfinite(v) & ~((v >= low) & (v <= high)))
     where = " at one or more points" if v.ndim else ""
     head = f"{name} is outside the plausible range {low:g} … {high:g} {unit}{where}"
-    tail = (f" — {IMU_HINTS[quantity]}" if quantity in IMU_HINTS else "") + _widens(quantity)
+    tail = (f" — {_HINTS[quantity]}" if quantity in _HINTS else "") + _widens(quantity)
     if quantity in EXCLUSIVE:  # a nonzero bound is a round datasheet value in another unit
         edge = jnp.any(((v == low) & (low != 0.0)) | ((v == high) & (high != 0.0)))
         return [(out, head + tail), (edge, f"{head}, its bounds excluded{tail}")]

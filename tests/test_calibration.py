@@ -513,6 +513,13 @@ def test_physical_fit_of_jittered_time_stamps_compiles_one_group_and_fits_as_cle
     stats = fit.fit_stats
     assert stats["chi2_per_dof"] == pytest.approx(1.0, abs=1e-6)
     assert 0 < stats["static_rms_dph"] < stats["moving_rms_dph"] < 1.0  # 0.006, 0.14 °/h
+    # the nominal gain k_e divides the measured and the simulated rates alike: another value
+    # fits the same parameters, and compiles nothing (it was a constant of the fit's program)
+    with CompileCounter() as c:
+        other = PhysicalCompensator(k_e=1.02 * K).fit(data)
+    assert c.compiles == 0, c.names
+    z = (np.asarray(other.values) - np.asarray(clean.values)) / np.sqrt(np.diag(clean.covariance))
+    assert np.max(np.abs(z)) < 1e-3, dict(zip(physical.NAMES, z.round(5), strict=True))
 
 
 def test_residual_scatter_counts_each_kinds_degrees_of_freedom():

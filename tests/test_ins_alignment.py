@@ -496,6 +496,10 @@ def test_platform_before_the_fault_equals_no_fault_and_is_deterministic():
         pf.PlatformINS(lat=2.0)
     with pytest.raises(ValueError, match="specific_force must have shape"):
         pf.PlatformINS(specific_force=(0.0, 9.8))
+    for kw, unit in ((dict(g=981.0), "cm/s²"), (dict(radius=6371.0), "km"),
+                     (dict(earth_rate=15.04), "°/h")):  # fmt: skip
+        with pytest.raises(ValueError, match=f"PlatformINS.{next(iter(kw))} = .*{unit}"):
+            pf.PlatformINS(**kw)
 
 
 def test_platform_fault_time_as_an_int_compiles_nothing_new():
@@ -511,3 +515,15 @@ def test_platform_fault_time_as_an_int_compiles_nothing_new():
         run(pf.Fault((0, 0, 1e-7, 0, 0, 0), 8), 2)
     assert c.compiles == 0, c.names
     np.testing.assert_array_equal(x, run(pf.Fault.on("gyro_xi", 2e-7, 4.0), 1)[1])
+    # g, R and the Earth rate are values too: another Schuler loop compiles nothing, and its
+    # accelerometer fault e gives δs_N = R e (1 − cos ω_s τ), ω_s = √(g/R) (noise off)
+    g, r, e = 9.7, 6.2e6, 3e-7
+    other = pf.PlatformINS(lat=40 * DEG, g=g, radius=r, earth_rate=0.0, accel_sigma=0.0,
+                           gyro_sigma=0.0)  # fmt: skip
+    with CompileCounter() as c:
+        t, x, _ = pf.simulate(other, dt=2.0, n_steps=11, key=jax.random.key(0),
+                              fault=pf.Fault.on("accel_y", e, 6.0))  # fmt: skip
+    assert c.compiles == 0, c.names
+    tau = np.clip(np.asarray(t) - 6.0, 0.0, None)
+    np.testing.assert_allclose(x[:, 0], r * e * (1 - np.cos(np.sqrt(g / r) * tau)), rtol=1e-9,
+                               atol=1e-20)  # fmt: skip

@@ -33,6 +33,11 @@ def test_wgs84_constants_and_gravity():
         C.Earth(radius="6.4e6 m", g=9.8)
     # a 0-d array is taken as its number (the fields are static: hashed, compared by value)
     assert C.Earth(radius=jnp.asarray(6.4e6), g=9.8) == C.Earth(radius=6.4e6, g=9.8)
+    # a textbook's other units are named (6371 km, 981 cm/s², 15.04 °/h)
+    for kw, unit in ((dict(radius=6371.0, g=9.8), "km"), (dict(radius=C.A, g=981.0), "cm/s²"),
+                     (dict(rate=15.04), "°/h")):  # fmt: skip
+        with pytest.raises(ValueError, match=f"outside the plausible range.*{unit}"):
+            C.Earth(**kw)
 
 
 def test_a_latitude_in_degrees_is_refused_by_the_earth_model():

@@ -194,6 +194,7 @@ def fit_values(groups, x0, k_e, max_steps):
     are then the weighted least squares whose weights and covariance the fit reports."""
     weights = window_weights(groups)
     x0 = np.asarray(x0)
+    k_e = device(k_e, float)  # a value of the program, not a constant: a new k_e compiles nothing
     at = {}  # host copies of the last evaluation: {True/False: residuals}, Jacobians
 
     def evaluate(x):

@@ -376,7 +376,7 @@ class PhysicalCompensator(AbstractCompensator):
         else:
             measured, values = groups, x0
             for _ in range(LOOP_PASSES):
-                pull = loop_pull(measured, device(values), self.k_e, plant)
+                pull = loop_pull(measured, device(values), device(self.k_e, float), plant)
                 groups = less_pull(measured, pull)
                 values, steps, res, sigma, jac = fit_values(groups, device(values), self.k_e,
                                                       self.max_steps)  # fmt: skip

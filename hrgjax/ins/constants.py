@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._compiled import fused
 
 A = 6_378_137.0
@@ -168,7 +169,10 @@ class Earth(eqx.Module):
 
     **Arguments:** `radius` [m] and `g` [m/s²], both `None` for WGS-84 or both set;
     `rate`: rotation rate [rad/s] (default ω_ie; 0 gives the classical single-channel
-    models with Earth-rate coupling removed)."""
+    models with Earth-rate coupling removed). Each is refused outside its range in
+    `hrgjax.plausible.RANGES` (`earth_radius_m`, `gravity_mps2`, `earth_rate_radps`): a
+    radius in km, g in cm/s² or a rate in °/h is named so. They are static (they choose the
+    model), so each new value compiles the navigation programs again."""
 
     radius: float | None = eqx.field(
         static=True, default=None, converter=functools.partial(_number, "radius")
@@ -189,6 +193,10 @@ class Earth(eqx.Module):
                 raise ValueError(f"Earth.{name} must be a positive number; got {v}")
         if not (math.isfinite(self.rate) and self.rate >= 0):
             raise ValueError(f"Earth.rate must be >= 0 rad/s; got {self.rate}")
+        for name, quantity in (("radius", "earth_radius_m"), ("g", "gravity_mps2"),
+                               ("rate", "earth_rate_radps")):  # fmt: skip
+            if getattr(self, name) is not None:
+                plausible.check(f"Earth.{name}", getattr(self, name), quantity)
 
     @functools.partial(_lat_checked, at=1)
     @fused(static_argnums=0)

@@ -49,7 +49,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import (
+    check_finite,
     check_finite_host,
     check_number,
     check_positive,
@@ -78,6 +80,7 @@ NAV = ("dlat", "departure", "heading")
 """Navigation-parameter errors of eq. (6) [rad]."""
 
 _I = {name: i for i, name in enumerate(STATES)}
+_EARTH_FIELDS = {"g": "gravity_mps2", "radius": "earth_radius_m", "earth_rate": "earth_rate_radps"}
 
 
 class PlatformINS(eqx.Module):
@@ -87,7 +90,9 @@ class PlatformINS(eqx.Module):
     and gyro errors; `accel_sigma` [g-units, i.e. rad] and `gyro_sigma` [rad/s]: their
     stationary standard deviations (nominal 1e-7 as in the thesis); `specific_force`
     (3,) [m/s²]: specific force beyond gravity in (E, N, H) (0 for a stationary object);
-    `g`, `radius`, `earth_rate`."""
+    `g` [m/s²], `radius` [m], `earth_rate` [rad/s] (defaults: 9.80665, the WGS-84 semi-major
+    axis, ω_ie; values, like the others: a sweep over them compiles once; each refused
+    outside `hrgjax.plausible.RANGES`' `gravity_mps2`, `earth_radius_m`, `earth_rate_radps`)."""
 
     lat: jax.Array = eqx.field(converter=jnp.asarray, default=0.7853981633974483)
     tau_a: jax.Array = eqx.field(converter=jnp.asarray, default=3600.0)
@@ -95,13 +100,16 @@ class PlatformINS(eqx.Module):
     accel_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=1e-7)
     gyro_sigma: jax.Array = eqx.field(converter=jnp.asarray, default=1e-7)
     specific_force: jax.Array = eqx.field(converter=jnp.asarray, default=(0.0, 0.0, 0.0))
-    g: float = eqx.field(static=True, default=G0)
-    radius: float = eqx.field(static=True, default=A)
-    earth_rate: float = eqx.field(static=True, default=OMEGA_IE)
+    g: jax.Array = eqx.field(converter=jnp.asarray, default=G0)
+    radius: jax.Array = eqx.field(converter=jnp.asarray, default=A)
+    earth_rate: jax.Array = eqx.field(converter=jnp.asarray, default=OMEGA_IE)
 
     def __check_init__(self):
         check_positive("PlatformINS.tau_a", self.tau_a, "s")
         check_positive("PlatformINS.tau_r", self.tau_r, "s")
+        for name, quantity in _EARTH_FIELDS.items():
+            check_finite(f"PlatformINS.{name}", getattr(self, name))
+            plausible.check(f"PlatformINS.{name}", getattr(self, name), quantity)
         for name in ("accel_sigma", "gyro_sigma"):
             v = getattr(self, name)
             if is_concrete(v) and not (np.all(np.isfinite(v)) and np.all(np.asarray(v) >= 0)):
