@@ -520,6 +520,8 @@ def test_physical_fit_of_jittered_time_stamps_compiles_one_group_and_fits_as_cle
     assert c.compiles == 0, c.names
     z = (np.asarray(other.values) - np.asarray(clean.values)) / np.sqrt(np.diag(clean.covariance))
     assert np.max(np.abs(z)) < 1e-3, dict(zip(physical.NAMES, z.round(5), strict=True))
+    with pytest.raises(RuntimeError, match=r"not converge in max_steps = 2 steps; give Phys"):
+        PhysicalCompensator(max_steps=2).fit(data)  # the knob named, not optimistix's words
 
 
 def test_residual_scatter_counts_each_kinds_degrees_of_freedom():

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import flight_motion
+from helpers import CompileCounter, flight_motion
 from scipy.integrate import quad
 
 from hrgjax import kalman
@@ -83,6 +83,24 @@ def test_discretisation_is_exact_for_any_interval_over_tau(truth):
     for tau in (0.3, 2.0):
         got = jax.grad(lambda t: step(t, 1.0)[0][15, 15])(tau)
         assert float(got) == pytest.approx(np.exp(-1.0 / tau) / tau**2, rel=1e-9), tau
+    # called eagerly: one program, which another τ's call does not compile again (the
+    # squarings' conds were traced anew on each call: 6 compiles), equal to the jitted one
+    tau = 0.3
+    big, q = model(tau)
+    ekf.discretise(*model(2.0), 1.0, fastest=0.5)
+    with CompileCounter() as c:
+        phi, qd = ekf.discretise(big, q, 1.0, fastest=1.0 / tau)
+    assert c.compiles == 0, c.names
+    for got, want in zip((phi, qd), step(tau, 1.0), strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-30)
+    # a Gauss–Markov decay the series cannot take over the step without `fastest` (it read
+    # e^(−10) as 1343), and a q that is no spectral density, are refused in one line
+    for fastest in (0.0, 1.0):
+        with pytest.raises(ValueError, match=r"^discretise: F has a decay rate \|F_ii\| = 3.33333"
+                           r" /s, too fast .* pass fastest=3.33333"):  # fmt: skip
+            ekf.discretise(big, q, 1.0, fastest=fastest)
+    with pytest.raises(ValueError, match=r"^discretise: q must be positive semi-definite"):
+        ekf.discretise(big, -q, 1.0, fastest=1.0 / tau)
 
 
 def _z(res, e):

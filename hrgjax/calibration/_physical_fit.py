@@ -221,6 +221,12 @@ def fit_values(groups, x0, k_e, max_steps):
         desc=f"physical fit (Levenberg–Marquardt{'; ' * bool(note)}{note})",
     )
     message = first_failure(result, optx.RESULTS)
+    if message is not None and int(steps) >= max_steps:  # optimistix's words name its own API
+        raise RuntimeError(
+            f"PhysicalCompensator.fit: Levenberg–Marquardt did not converge in max_steps = "
+            f"{max_steps} steps; give PhysicalCompensator(max_steps=…) more (e.g. "
+            f"{4 * max_steps}), or a bench whose runs pin the parameters better"
+        )
     if message is not None:
         raise RuntimeError(f"PhysicalCompensator.fit: Levenberg–Marquardt failed: {message}")
     # `least_squares_with_jacobian` evaluated last at the solution: `at` holds it, unweighted.

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_finite_host, check_numbers, concrete_value, finite_number
+from .._compiled import fused
 
 
 def _powers(F, order=8):
@@ -49,20 +50,62 @@ def _decay_rate(fastest) -> bool:
     return bool(value > 0)
 
 
+def _square(_, pq):
+    r"""One squaring: ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q\phi^\top + Q$)."""
+    p, qq = pq
+    qq = p @ qq @ p.T + qq
+    return p @ p, 0.5 * (qq + qq.T)
+
+
+def _unchanged(pq):
+    return pq
+
+
+_DIGITS = tuple(
+    functools.partial(jax.lax.fori_loop, 0, 2**b, _square)
+    for b in range(MAX_SQUARINGS.bit_length())
+)
+"""Binary digit b's branch: 2^b squarings (module-level, so each `lax.cond` meets the same
+functions on every trace)."""
+
+
 def _squared(phi, qd, j):
     r"""(Φ, Q) squared `j` times ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q\phi^\top + Q$),
     `j` an int array in [0, `MAX_SQUARINGS`]: binary digit b runs 2^b squarings under a
     `lax.cond` (one fixed-length loop each: reverse-differentiable, one program for any j)."""
-
-    def square(_, pq):
-        p, qq = pq
-        qq = p @ qq @ p.T + qq
-        return p @ p, 0.5 * (qq + qq.T)
-
-    for b in range(MAX_SQUARINGS.bit_length()):
-        run = functools.partial(jax.lax.fori_loop, 0, 2**b, square)
-        phi, qd = jax.lax.cond(((j >> b) & 1) == 1, run, lambda pq: pq, (phi, qd))
+    for b, run in enumerate(_DIGITS):
+        phi, qd = jax.lax.cond(((j >> b) & 1) == 1, run, _unchanged, (phi, qd))
     return phi, qd
+
+
+@fused(static_argnames=("k", "gm"))
+def _discretised(F, q, T, fastest, *, k: int, gm: bool):
+    """`discretise`'s arithmetic, its arguments checked: one compiled program called eagerly
+    (each operation its own program otherwise, and the squarings' conds traced anew), inlined
+    in a caller's trace. `k` steps of h = T/k; `gm`: the Gauss–Markov path."""
+    h = T / k
+    if gm:  # j = ⌈log2(8·h·fastest)⌉ ≥ 0, and the series over h/2^j
+        j = jnp.clip(jnp.ceil(jnp.log2(8.0 * h * jnp.maximum(fastest, 1e-300))), 0,
+                     MAX_SQUARINGS).astype(int)  # fmt: skip
+        h = h / jnp.exp2(j.astype(float))
+    x, w = np.polynomial.legendre.leggauss(5 if gm else 3)
+    powers = _powers(F)
+    qd = 0.0
+    for xi, wi in zip(x, w, strict=True):
+        p = _taylor(powers, 0.5 * h * (1.0 + xi))
+        qd = qd + (0.5 * h * wi) * (p @ q @ p.T)
+    phi, qd = _taylor(powers, h), 0.5 * (qd + qd.T)
+    if gm:
+        phi, qd = _squared(phi, qd, j)
+    if k == 1:
+        return phi, qd
+
+    def compose(_, pq):
+        p, qq = pq
+        qq = phi @ qq @ phi.T + qd
+        return phi @ p, 0.5 * (qq + qq.T)
+
+    return jax.lax.fori_loop(1, k, compose, (phi, qd))
 
 
 def discretise(F, q, T: float, fastest=0.0):
@@ -99,7 +142,13 @@ def discretise(F, q, T: float, fastest=0.0):
     that is not finite and ≥ 0 (a traced one is not checked here: the filter holds its
     model's τ, [`ImuModel.checked`][hrgjax.ins.sensors.ImuModel.checked]; past
     `MAX_SQUARINGS`, T·`fastest` > 1e18, Φ and $Q_d$ are NaN: the filter takes τ no shorter
-    than T·1e-15, where e^(−T/τ) is 0 either way)."""
+    than T·1e-15, where e^(−T/τ) is 0 either way); `ValueError` for a concrete F with a
+    decay rate |F_ii| beyond `SERIES_LIMIT`/h that `fastest` does not cover (the series alone
+    read e^(−10) as 1343: the message names the `fastest` to pass), and for a concrete q
+    that is not symmetric positive semi-definite.
+
+    Called outside a trace it runs as one compiled program per (n, k, path): a second call
+    compiles nothing."""
     gm = _decay_rate(fastest)
     if not finite_number("discretise: T", T, "s") > 0:
         raise ValueError(f"discretise: T must be the interval > 0 [s]; got {T!r}")
@@ -107,29 +156,42 @@ def discretise(F, q, T: float, fastest=0.0):
     if np.shape(F) != (n, n) or np.shape(q) != (n, n):
         raise ValueError(f"discretise: F and q must both be square (n, n); got {np.shape(F)} "
                          f"and {np.shape(q)}")  # fmt: skip
-    check_finite_host("F", F)
-    check_finite_host("q", q)
+    check_finite_host("discretise: F", F)
+    check_finite_host("discretise: q", q)
     k = max(1, math.ceil(T / 10.0 - 1e-12))
-    h = T / k
-    if gm:  # j = ⌈log2(8·h·fastest)⌉ ≥ 0, and the series over h/2^j
-        j = jnp.clip(jnp.ceil(jnp.log2(8.0 * h * jnp.maximum(fastest, 1e-300))), 0,
-                     MAX_SQUARINGS).astype(int)  # fmt: skip
-        h = h / jnp.exp2(j.astype(float))
-    x, w = np.polynomial.legendre.leggauss(5 if gm else 3)
-    powers = _powers(F)
-    qd = 0.0
-    for xi, wi in zip(x, w, strict=True):
-        p = _taylor(powers, 0.5 * h * (1.0 + xi))
-        qd = qd + (0.5 * h * wi) * (p @ q @ p.T)
-    phi, qd = _taylor(powers, h), 0.5 * (qd + qd.T)
-    if gm:
-        phi, qd = _squared(phi, qd, j)
-    if k == 1:
-        return phi, qd
+    _check_model(F, q, T / k, fastest, gm)
+    F, q = jnp.asarray(F), jnp.asarray(q)
+    return _discretised(F, q, float(T), fastest if gm else 0.0, k=k, gm=gm)
 
-    def compose(_, pq):
-        p, qq = pq
-        qq = phi @ qq @ phi.T + qd
-        return phi @ p, 0.5 * (qq + qq.T)
 
-    return jax.lax.fori_loop(1, k, compose, (phi, qd))
+SERIES_LIMIT = 0.125
+"""The largest h·|decay rate| the eighth-order series takes in one step of h (1/8: Φ's
+e^(−h/τ) to ≈ 1e-13); `fastest` squares a faster state's steps down to it."""
+
+
+def _check_model(F, q, h: float, fastest, gm: bool) -> None:
+    """Host checks of a concrete (F, q) for `discretise` over steps of `h` [s]: a decay rate
+    |F_ii| the series cannot take over h without a `fastest` that covers it, and a q that is
+    not symmetric positive semi-definite, each a one-line `ValueError`."""
+    f, qv = concrete_value(F), concrete_value(q)
+    given = concrete_value(fastest)
+    if f is not None and (given is not None or not gm):
+        rate = float(np.max(np.abs(np.diag(np.asarray(f, float)))))
+        covered = float(given) if gm else 0.0
+        if h * rate > SERIES_LIMIT and rate > covered * (1 + 1e-9):
+            raise ValueError(
+                f"discretise: F has a decay rate |F_ii| = {rate:g} /s, too fast for the series "
+                f"over h = {h:g} s (h·rate > {SERIES_LIMIT}) with fastest = {covered:g}: "
+                f"pass fastest={rate:g} (the largest 1/τ in F)"
+            )
+    if qv is not None:
+        qv = np.asarray(qv, float)
+        scale = max(float(np.max(np.abs(qv))), np.finfo(float).tiny)
+        if np.max(np.abs(qv - qv.T)) > 1e-9 * scale:
+            raise ValueError("discretise: q must be symmetric (a noise spectral density matrix)")
+        low = float(np.min(np.linalg.eigvalsh(qv)))
+        if low < -1e-9 * scale:
+            raise ValueError(
+                f"discretise: q must be positive semi-definite (a noise spectral density "
+                f"matrix); its smallest eigenvalue is {low:g}"
+            )
