@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import plausible
 from ._checks import (
     FINITE_NONNEGATIVE,
     FINITE_POSITIVE,
@@ -64,6 +65,7 @@ class Noise(eqx.Module):
         refuse_unconverted(self)
         for name, value in concrete_fields(self, NONNEGATIVE):
             check_nonnegative(f"Noise.{name}", value, f"[{UNITS[name]}] (a standard deviation)")
+            plausible.check(f"Noise.{name}", value, PLAUSIBLE[name])
         for name, value in concrete_fields(self, ("correlation_time",)):
             check_positive(f"Noise.{name}", value, "[s]")
 
@@ -85,6 +87,15 @@ UNITS = {
     "amplitude_white": "relative",
 }
 """Units of the `Noise` fields."""
+PLAUSIBLE = {
+    "angle_white": "noise_angle_white",
+    "angle_random_walk": "noise_arw",
+    "bias_instability": "noise_bias_instability",
+    "run_bias": "noise_run_bias",
+    "amplitude_white": "noise_amplitude_white",
+}
+"""Each `Noise` standard deviation's range in [`hrgjax.plausible.RANGES`][hrgjax.plausible.RANGES]
+(a value in a datasheet's unit typed as SI is refused, the unit named)."""
 
 
 def _check_key(name: str, key) -> None:

@@ -23,6 +23,10 @@ from collections.abc import Iterator, Mapping
 
 import numpy as np
 
+from ._unit_hints import EARTH_HINTS as EARTH_HINTS
+from ._unit_hints import IMU_HINTS as IMU_HINTS
+from ._unit_hints import NOISE_HINTS as NOISE_HINTS
+
 _DEFAULTS: dict[str, tuple[float, float, str]] = {
     "temperature_c": (-100.0, 150.0, "°C"),
     "table_rate_dps": (-3600.0, 3600.0, "°/s"),
@@ -37,6 +41,11 @@ _DEFAULTS: dict[str, tuple[float, float, str]] = {
     "gravity_mps2": (9.0, 10.5, "m/s²"),
     "earth_radius_m": (6.0e6, 6.6e6, "m"),
     "earth_rate_radps": (0.0, 1e-4, "rad/s"),
+    "noise_angle_white": (0.0, 0.1, "rad electrical"),
+    "noise_arw": (0.0, 2.5e-3, "rad/√s"),
+    "noise_bias_instability": (0.0, 0.01, "rad/s"),
+    "noise_run_bias": (0.0, 0.75, "rad/s"),
+    "noise_amplitude_white": (0.0, 0.5, "(relative to the amplitude set point)"),
     "imu_gyro_bias": (-0.75, 0.75, "rad/s"),
     "imu_accel_bias": (-3.0, 3.0, "m/s²"),
     "imu_scale": (-0.1, 0.1, "(a fraction: 1e-6 = 1 ppm)"),
@@ -105,39 +114,10 @@ beyond, or on a bound ([`EXCLUSIVE`][hrgjax.plausible.EXCLUSIVE]), is one in a d
 unit (°/h or °/s, ppm or %, °/√h or °/s/√Hz, µg or mg), named so with the factors that
 convert each; and an Earth model's gravity (9 … 10.5 m/s²), radius (6.0 … 6.6·10⁶ m) and
 rotation rate (0 … 10⁻⁴ rad/s) in `hrgjax.ins.constants.Earth` and
-`hrgjax.ins.platform.PlatformINS` (`EARTH_HINTS`: 981 is cm/s², 6371 km, 15.04 °/h)."""
+`hrgjax.ins.platform.PlatformINS` (`EARTH_HINTS`: 981 is cm/s², 6371 km, 15.04 °/h); and
+an [`hrgjax.Noise`][hrgjax.Noise]'s standard deviations (`noise_*`, `NOISE_HINTS`)."""
 
-IMU_HINTS = {
-    "imu_gyro_bias": "°/h → ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG",
-    "imu_gyro_bias_instability": "°/h → ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG",
-    "imu_accel_bias": "µg → ×hrgjax.ins.sensors.MICRO_G; mg → ×9.80665e-3",
-    "imu_accel_bias_instability": "µg → ×hrgjax.ins.sensors.MICRO_G; mg → ×9.80665e-3",
-    "imu_scale": "ppm → ×1e-6; % → ×1e-2",
-    "imu_misalignment": "mrad → ×1e-3; µrad → ×1e-6; ° → ×hrgjax.units.DEG",
-    "imu_arw": "°/√h → ×hrgjax.units.DEG_PER_SQRT_H; °/s/√Hz → ×hrgjax.units.DEG",
-    "imu_vrw": (
-        "µg/√Hz → ×hrgjax.ins.sensors.MICRO_G; mg/√Hz → "
-        "×hrgjax.ins.sensors.MG_PER_SQRT_HZ; m/s/√h → ÷60"
-    ),
-    "imu_gyro_rate_random_walk": (
-        "°/h/√h → ×hrgjax.units.DEG_PER_H / 60; °/h/√s → ×hrgjax.units.DEG_PER_H"
-    ),
-    "imu_accel_random_walk": "µg/√s → ×hrgjax.ins.sensors.MICRO_G; mg/√s → ×9.80665e-3",
-}
-"""The datasheet units each `imu_*` range's message names, with the factor from each to SI."""
-
-EARTH_HINTS = {
-    "gravity_mps2": "cm/s² (Gal) → ÷100; ft/s² → ×0.3048",
-    "earth_radius_m": "km → ×1000",
-    "earth_rate_radps": "°/h → ×hrgjax.units.DEG_PER_H; rad/h → ÷3600",
-}
-"""The other units an Earth model's gravity, radius and rotation rate are written in (a
-textbook's 981 cm/s², 6371 km, 15.04 °/h), with the factor from each to SI: local gravity
-lies in 9.78–9.83 m/s² and Earth's radius in 6.36–6.38·10⁶ m; the ranges are wide enough
-for a round textbook value (g = 10, R = 6.4·10⁶ m) and a rotation rate of 0 (no Earth
-rate)."""
-
-_HINTS = IMU_HINTS | EARTH_HINTS
+_HINTS = IMU_HINTS | EARTH_HINTS | NOISE_HINTS
 
 EXCLUSIVE = frozenset(k for k in _DEFAULTS if k.startswith("imu_"))
 """Quantities whose nonzero bounds are refused too: each is a round number that a datasheet

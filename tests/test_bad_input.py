@@ -260,11 +260,21 @@ def test_a_header_of_another_class_is_named_not_a_traceback(eqx_file, tmp_path):
         (dict(angle_random_walk=-1e-6), "Noise.angle_random_walk must be >= 0"),
         (dict(correlation_time=0.0), "Noise.correlation_time must be > 0"),
         (dict(run_bias=-1.0), "Noise.run_bias must be >= 0"),
+        # a datasheet's unit typed as SI: its unit named (1″ as rad, 34 °/√h, 620 °/h …)
+        (dict(angle_white=1.0), r"Noise.angle_white = 1 is outside .* ″ → ×hrgjax.units.ARC"),
+        (dict(angle_random_walk=0.01), r"angle_random_walk = 0.01 is .* °/√h → ×hrgjax.units"),
+        (dict(bias_instability=0.03), r"Noise.bias_instability = 0.03 is outside .* °/h → "),
+        (dict(run_bias=1.0), r"Noise.run_bias = 1 is outside .* 0 … 0.75 rad/s"),
+        (dict(amplitude_white=2.0), r"Noise.amplitude_white = 2 is outside .* % → ×1e-2"),
     ],
 )
 def test_noise_parameters_are_checked(kw, match):
     with pytest.raises(ValueError, match=match):
         hg.Noise(**kw)
+    quantity = hg.noise.PLAUSIBLE.get(next(iter(kw)))
+    if "outside" in match:  # and `relaxed` takes it
+        with hg.plausible.relaxed(**{quantity: (0.0, 10.0)}):
+            hg.Noise(**kw)
 
 
 @pytest.fixture(scope="module")

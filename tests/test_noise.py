@@ -198,8 +198,9 @@ def test_gauss_markov_integral_over_irregular_intervals_has_the_exact_moments():
     and the whole one have E[I²] = 2σ²T_c[t − T_c(1 − e^{−t/T_c})], and each integral's
     covariance with the rate at its start is σ²T_c(1 − e^{−Δt/T_c}) (the trapezoid gave
     E[I²] 15 % high at 3 T_c and 12× at 47 T_c)."""
-    sigma, tc = 2.0, 1.0
-    nz = hg.Noise(bias_instability=sigma, correlation_time=tc)
+    sigma, tc = 2.0, 1.0  # a unit process (2 rad/s is no gyro's: `relaxed` takes it)
+    with hg.plausible.relaxed(noise_bias_instability=(0.0, 10.0)):
+        nz = hg.Noise(bias_instability=sigma, correlation_time=tc)
     ts = jnp.array([0.0, 0.05, 3.05, 50.05])
     dts = np.diff(np.asarray(ts))
 
@@ -264,8 +265,9 @@ def test_gauss_markov_angle_at_a_fine_interval_is_the_trapezoid_and_differentiab
 
     grid = jnp.array([0.0, 1e-8, 1e-3, 0.5, 2.5, 40.0, 1e4, 1e4 + 3.0])
 
-    def loss(sigma, tc):
-        n = hg.Noise(bias_instability=sigma, correlation_time=tc)
+    def loss(sigma, tc):  # σ = 2 rad/s: a unit process, no gyro's (`relaxed` takes it)
+        with hg.plausible.relaxed(noise_bias_instability=(0.0, 10.0)):
+            n = hg.Noise(bias_instability=sigma, correlation_time=tc)
         return jnp.sum(hg.noise.rate_noise_angle(key, grid, n) ** 2)
 
     grads = jax.jit(jax.grad(loss, argnums=(0, 1)))(2.0, 1.0)
