@@ -1232,3 +1232,29 @@ def test_allan_deviation_dt_of_any_number_type_compiles_nothing():
         same = [hg.allan.oadev(y, 2, tau0) for tau0 in (1, np.int64(1), np.float64(1.0))]
     assert c.compiles == 0, c.names
     assert all(float(v) == float(expected) for v in same)
+
+
+def test_allan_deviation_takes_a_traced_dt():
+    """jit or vmap over the sample interval, as `oadev`'s tau0: `float(dt)` raised a
+    ConcretizationTypeError (audit of session 29); the eager values."""
+    y = np.random.default_rng(4).normal(size=41)
+    eager = [hg.allan_deviation(y, dt) for dt in (0.1, 0.3)]
+    taus, devs = jax.jit(jax.vmap(lambda dt: hg.allan_deviation(y, dt)))(jnp.array([0.1, 0.3]))
+    for i, (t, d) in enumerate(eager):
+        np.testing.assert_array_equal(taus[i], t)
+        np.testing.assert_allclose(devs[i], d, rtol=1e-13)
+
+
+@pytest.mark.parametrize("data, n, passed", [("rate", 5, "5 rate samples y"),
+                                             ("phase", 8, "8 angle samples")])  # fmt: skip
+def test_deviation_of_too_few_samples_names_them_and_the_least(data, n, passed):
+    """`deviation` of 3–8 rate samples named its internal phase ("x: 6 samples leave 5
+    averages"): the line names the y passed (rate or angle), the least of each, and the
+    call that gives the deviation alone (`allan_deviation`, which takes them)."""
+    y = np.random.default_rng(5).normal(size=n)
+    with pytest.raises(ValueError) as err:
+        allan.deviation(y, 1.0, data=data)
+    line = str(err.value)
+    assert "\n" not in line and passed in line and "noise identification needs 8" in line, line
+    assert "8 rate samples or 9 angle samples" in line and "allan_deviation(rate, dt)" in line
+    assert np.all(np.isfinite(hg.allan_deviation(y if data == "rate" else np.diff(y), 1.0)[1]))

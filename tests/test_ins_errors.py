@@ -283,6 +283,15 @@ def test_monte_carlo_covariance_matches_the_propagated_covariance():
         sd.ImuErrors(arw=-1.0)
 
 
+def test_stationary_refuses_a_traced_latitude_in_one_line():
+    """vmap over latitudes raised a ConcretizationTypeError from `float()` in the position
+    checks (audit of session 29). The builders integrate in NumPy (set-up, not traced): one
+    line naming lat_deg and the way out."""
+    with pytest.raises(TypeError, match=r"^lat_deg must be a number \[°\], not a traced value: "
+                       r"trajectories are built once in NumPy .*\(a Python loop\)"):  # fmt: skip
+        jax.vmap(lambda la: tr.stationary(la, duration_s=10.0).lat[0])(jnp.array([30.0, 45.0]))
+
+
 def test_error_propagation_is_differentiable():
     """d(final east error)/d(gyro bias) by reverse mode through diffrax equals a central
     finite difference (the model is linear in the bias, so both are exact up to tolerance)."""

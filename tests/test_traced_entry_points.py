@@ -152,6 +152,22 @@ def test_imu_model_checks_hold_under_sweep_and_eager_grad():
     assert float(jax.grad(rate)(1e-5)) == pytest.approx(1.0, rel=1e-12)
 
 
+def test_imu_model_apply_takes_a_traced_dt():
+    """jit or vmap over the interval: `math.sqrt(dt)` of the white and random-walk noise
+    raised a ConcretizationTypeError (audit of session 29); the eager values."""
+    th, dv = jnp.full((N, 3), 1e-3), jnp.zeros((N, 3))
+    imu = ImuModel(arw=1e-6, vrw=1e-5, gyro_rate_random_walk=1e-8,
+                   gyro_bias_instability=1e-7, gyro_correlation_time=100.0)  # fmt: skip
+
+    def run(dt):
+        return imu.apply(jax.random.key(2), th, dv, dt)
+
+    got = jax.jit(jax.vmap(run))(jnp.asarray([DT, 2 * DT]))
+    for i, dt in enumerate((DT, 2 * DT)):
+        for traced, eager in zip(got, run(dt), strict=True):
+            np.testing.assert_allclose(traced[i], eager, rtol=1e-12, atol=0)
+
+
 def test_drawn_units_are_not_range_checked_but_their_grade_is():
     th, dv = jnp.full((N, 3), 1e-3), jnp.zeros((N, 3))
     keys = jax.random.split(jax.random.key(0), 16)

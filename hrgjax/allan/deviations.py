@@ -209,6 +209,9 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
     - `ms`: averaging factors (positive integers); default: octaves 1, 2, 4, … up to N/4.
     - `kind`: one of `adev`, `oadev`, `mdev`, `hdev`, `ohdev`, `totdev`.
 
+    `dt` may be traced (`jax.jit`, `jax.vmap` or `jax.grad` over the sample interval, as
+    `oadev`'s `tau0`): the same values as the eager call; a traced `dt` is not checked.
+
     **Returns:** `(taus [s], deviations [rate unit])` as arrays.
 
     **Raises:** `ValueError` for an unknown kind, an `m` the data are too short for, a `dt`
@@ -234,17 +237,24 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
         _check(rate, m, max(needed * m - (kind == "mdev"), 2), kind)
         if kind == "totdev" and m > n - 1:
             raise ValueError(f"totdev: m = {m} needs at least {m + 1} samples")
-    if n >= CURVE_STEPPED_FROM and trace_state_clean() and not isinstance(rate, jax.core.Tracer):
+    # a traced dt (jit, vmap or grad over the sample interval) goes into the program as it
+    # is, a float64 (`oadev`'s tau0 too); a concrete one as a Python float (one program)
+    traced = isinstance(dt, jax.core.Tracer)
+    step = dt.astype(float) if traced else float(dt)
+    if (n >= CURVE_STEPPED_FROM and trace_state_clean() and not traced
+            and not isinstance(rate, jax.core.Tracer)):  # fmt: skip
         values = []  # long records: the same values in steps, behind a progress bar
         with bar(len(ms), f"allan_deviation {kind}", unit="τ") as progress:
-            for part in curve_parts(jnp.asarray(rate, dtype=float), ms, float(dt), kind):
+            for part in curve_parts(jnp.asarray(rate, dtype=float), ms, step, kind):
                 values.append(np.asarray(part))
                 progress.update(min(CURVE_CHUNK, len(ms) - CURVE_CHUNK * (len(values) - 1)))
         devs = device(np.concatenate(values)[: len(ms)])
     else:
-        devs = curve(jnp.asarray(rate, dtype=float), jnp.asarray(ms), float(dt), kind)
+        devs = curve(jnp.asarray(rate, dtype=float), jnp.asarray(ms), step, kind)
+    if traced:
+        return jnp.asarray(ms, dtype=float) * step, devs
     # τ on the host: eagerly `jnp.asarray(ms) * dt` was an XLA multiply per type of dt
-    taus = np.asarray(ms, dtype=float) * float(dt)
+    taus = np.asarray(ms, dtype=float) * step
     return (device(taus) if trace_state_clean() else jnp.asarray(taus)), devs
 
 

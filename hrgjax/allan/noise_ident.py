@@ -118,7 +118,8 @@ def noise_id(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: bool = T
 
     **Raises:** `ValueError` for an unknown `rule`, or when no factor of the record can be
     read: fewer than `B1_AVERAGES` + 1 points (fewer than `ACF_POINTS` under `"stable32"`
-    with `overlapping=False`)."""
+    with `overlapping=False`); its line names the rate and angle samples of
+    `hrgjax.allan.deviation` that this is, and the least of each."""
     return np.fromiter(noise_id_each(x, m, dmax, rule=rule, overlapping=overlapping), dtype=int)
 
 
@@ -147,13 +148,14 @@ def noise_id_each(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: boo
     if rule == "hrgjax":
         curvature = _curvature(x)  # R(n) on the phase less its quadratic, as the ACF
         read = lambda k: _identify(x, k, dmax, refine=curvature)  # noqa: E731
-        needs = f"{B1_AVERAGES} averages"
+        needs, least = f"{B1_AVERAGES} averages", B1_AVERAGES + 1
     elif overlapping:  # B1 on the drift-free record from 8 averages on, no R(n) guard
         drift_free = _less_drift(x)
         read = lambda k: _identify(x, k, dmax, b1_x=drift_free, guard=False)  # noqa: E731
-        needs = f"{B1_AVERAGES} averages"
+        needs, least = f"{B1_AVERAGES} averages", B1_AVERAGES + 1
     else:  # Stable32's adev and hdev: the autocorrelation, its last α carried beyond
         read, needs = (lambda k: _identify(x, k, dmax, b1_min=None)), f"{ACF_POINTS} points"
+        least = ACF_POINTS
     factors = np.asarray(m)
     if (factors.ndim != 1 or factors.dtype.kind not in "iuf"
             or not np.all(np.isfinite(factors)) or np.any(factors != np.round(factors))
@@ -168,10 +170,14 @@ def noise_id_each(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: boo
             j = int(k) // 2
             while a is None and j >= 1:
                 a, j = read(j), j // 2
-            if a is None:
+            if a is None:  # x is hrgjax.allan.deviation's phase of its y: both named
                 raise ValueError(
-                    f"x: {x.size} samples leave {x.size - 1} averages at m = 1; noise "
-                    f"identification needs {needs}"
+                    f"x: {x.size} phase points leave {x.size - 1} averages at m = 1 "
+                    f"(hrgjax.allan.deviation: {x.size - 1} rate samples y, or {x.size} angle "
+                    f"samples with data='phase'); noise identification needs {needs}: at "
+                    f"least {least} phase points, {least - 1} rate samples or {least} angle "
+                    "samples (the deviation alone, without its interval: "
+                    "hrgjax.allan_deviation(rate, dt))"
                 )
         last = last if a is None else a
         yield int(last)

@@ -246,7 +246,8 @@ class ImuModel(eqx.Module):
         **Raises:** `ValueError` for a `dt` that is not a finite interval > 0 s, increments
         not both (N, 3), a `return_bias` other than those, a `gyro_rate_error` that is not
         (N, 3) [rad/s], or a NaN or inf in a concrete `dtheta`, `dv` or `gyro_rate_error`
-        (a traced one passes unchecked); `TypeError` for any of them that is not real
+        (a traced one passes unchecked, as does a traced `dt`: `jit`, `vmap` or `grad` over
+        the interval give the eager values); `TypeError` for any of them that is not real
         numbers (a str, a bool or complex array). Fields traced inside `jit`, `vmap` or
         `hg.sweep` are checked here, at run time
         ([`traced_checks`][hrgjax.ins.sensors.traced_checks]): the first rule broken raises
@@ -329,10 +330,11 @@ class ImuModel(eqx.Module):
         z2, z3 = jax.random.normal(k4, (2, n, 3))
         e1 = z1 * (sigma * l11)[None]  # the end value's innovation
         e2 = (l21 * z1 + l22 * z2) * sigma[None]  # the mean's, correlated with it
-        w_rw = jax.random.normal(k2, (n, 3)) * (rrw * math.sqrt(dt))[None]
-        bridge = z3 * (rrw * math.sqrt(dt / 12.0))[None]
+        root = jnp.sqrt if isinstance(dt, jax.core.Tracer) else math.sqrt  # dt may be traced
+        w_rw = jax.random.normal(k2, (n, 3)) * (rrw * root(dt))[None]
+        bridge = z3 * (rrw * root(dt / 12.0))[None]
         mean, gm = _bias_scan(a, b, gm0, e1, e2, w_rw, bridge)
-        return mean, jax.random.normal(k3, (n, 3)) * (white * math.sqrt(dt))[None], gm
+        return mean, jax.random.normal(k3, (n, 3)) * (white * root(dt))[None], gm
 
 
 @fused

@@ -171,7 +171,15 @@ def check_position(lat_deg, lon_deg, h, where: str = "") -> None:
     """A one-line `ValueError` (`TypeError` for a non-number) naming the field unless
     `lat_deg` [°] is within ±[`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG] (the NED frame
     is singular at the poles), `lon_deg` in [−180, 360] ° and `h` a height in (−1e4, 1e5) m;
-    `where` prefixes the field names (e.g. `"Motion."`)."""
+    `where` prefixes the field names (e.g. `"Motion."`). A traced one (`jit`, `vmap`, `grad`)
+    is a `TypeError` in one line: the builders integrate in NumPy, set-up not traced."""
+    for name, x, unit in (("lat_deg", lat_deg, "°"), ("lon_deg", lon_deg, "°"), ("h", h, "m")):
+        if isinstance(x, jax.core.Tracer):  # float() of it was a ConcretizationTypeError
+            raise TypeError(
+                f"{where}{name} must be a number [{unit}], not a traced value: trajectories are "
+                "built once in NumPy (set-up, not traced); build one per value outside "
+                "jit/vmap/grad (a Python loop)"
+            )
     lat = finite_number(f"{where}lat_deg", lat_deg, "°")
     if abs(lat) > MAX_LAT_DEG:
         hint = " (the navigation frame is singular at the poles)" if abs(lat) <= 90.0 else ""
@@ -200,7 +208,8 @@ def stationary(
 ) -> Trajectory:
     """A vehicle at rest at (`lat_deg`, `lon_deg`, `h`) with the given attitude [°]: any
     heading and roll, a pitch within ±90° (beyond, the same attitude is pitch 180° − θ with
-    heading and roll turned by 180°: refused)."""
+    heading and roll turned by 180°: refused). Built in NumPy (set-up): a traced `lat_deg`
+    (`jax.vmap` over latitudes) is refused in one line; one call per latitude."""
     return _steady(lat_deg, lon_deg, h, 0.0, (heading_deg, pitch_deg, roll_deg), duration_s, dt,
                    earth, "stationary")  # fmt: skip
 
