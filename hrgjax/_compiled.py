@@ -313,6 +313,33 @@ def single_run_entry(fn):
     return call
 
 
+def one_line_failures(label: str):
+    """Decorate a public entry point so that a check failing inside it while the caller's
+    eager `jax.vmap` or `jax.grad` runs it (an `eqx.error_if` on a traced value: a kelvin
+    temperature, a NaN parameter) raises `RuntimeError("<label>: <the check's line>")`,
+    not JAX's callback traceback and equinox's banner (`hg.sweep` does the same). Under the
+    caller's `jax.jit` the check fails when the caller's program runs, outside `fn`: that
+    error stays JAX's."""
+
+    def wrap(fn):
+        @functools.wraps(fn)
+        def call(*args, **kwargs):
+            if _upstream.trace_state_clean():
+                return fn(*args, **kwargs)
+            try:
+                with _upstream.quiet_failed_checks():
+                    return fn(*args, **kwargs)
+            except (*_upstream.CHECK_ERRORS, eqx.EquinoxRuntimeError) as err:
+                message = _upstream.failed_check_message(err)
+                if message is None:
+                    raise
+                raise RuntimeError(f"{label}: {message}") from None
+
+        return call
+
+    return wrap
+
+
 def program(
     fn=None, *, check: Check | None = None, error=RuntimeError, export=True, single_run=False
 ):

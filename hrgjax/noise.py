@@ -242,16 +242,27 @@ def _bridge(dts, sigma, correlation_time):
     return correlation_time * jnp.tanh(u), s
 
 
-def _check_rate_noise(key, ts, noise) -> tuple:
+def _check_rate_noise(key, ts, noise, start=None) -> tuple:
     ts = _check_times("rate_noise_angle", key, ts)
     _check_noise("rate_noise_angle", noise)
-    return key, ts, noise
+    if start is None:
+        return key, ts, noise
+    check_numbers("rate_noise_angle: start", start, "one time [s]", shape=())
+    first, v = concrete_value(ts), concrete_value(start)
+    if v is not None and not np.isfinite(v):
+        raise ValueError(f"rate_noise_angle: start must be a finite time [s]; got {float(v)}")
+    if v is not None and first is not None and np.size(first) and float(v) > first[0]:
+        raise ValueError(f"rate_noise_angle: start must be <= ts[0] = {first[0]:g} s (the "
+                         f"integral runs from it); got {float(v):g}")  # fmt: skip
+    return key, ts, noise, int_as_float(start)
 
 
 # one program per shape (it compiled gauss_markov's scan on every eager call)
 @_checked(_check_rate_noise)
-def rate_noise_angle(key, ts, noise: Noise):
-    """Integrated equivalent-input-rate noise ∫(ARW + Gauss–Markov) dt at `ts` [rad].
+def rate_noise_angle(key, ts, noise: Noise, start=None):
+    """Integrated equivalent-input-rate noise ∫(ARW + Gauss–Markov) dt at `ts` [rad], from
+    `ts[0]` (0 there) or, given, from `start` [s] (≤ `ts[0]`: the gyro's switch-on; a window
+    late in a run then carries the noise of the time before it).
 
     Exact at any sample interval: the Gauss–Markov rate's samples are drawn exactly
     ([`gauss_markov`][hrgjax.noise.gauss_markov]) and its integral over each interval from
@@ -259,6 +270,9 @@ def rate_noise_angle(key, ts, noise: Noise):
     with normals from `jax.random.fold_in(key, 1)`, so every other draw is the key's as
     before. (The trapezoid of the samples acted, for Δt ≳ T_c, as white rate noise of
     density σ²Δt instead of 2σ²T_c: an Allan deviation 2.1× too large at Δt = 10 T_c.)
+    The time from `start` to `ts[0]` adds one draw of its integral (normals from
+    `fold_in(key, 2)`; [`noise_before`][hrgjax.noise.noise_before]): 0 where `start` is
+    `ts[0]`, so the draws at `ts` are those without `start`.
     """
     k_arw, k_gm = jax.random.split(key)
     dts = jnp.diff(ts)
@@ -267,7 +281,30 @@ def rate_noise_angle(key, ts, noise: Noise):
     a, s = gauss_markov_bridge(dts, noise.bias_instability, noise.correlation_time)
     bridge = jax.random.normal(jax.random.fold_in(key, 1), dts.shape)
     gm_inc = a * (gm[1:] + gm[:-1]) + s * bridge
-    return jnp.concatenate([jnp.zeros(1), jnp.cumsum(arw + gm_inc)])
+    angle = jnp.concatenate([jnp.zeros(1), jnp.cumsum(arw + gm_inc)])
+    if start is None:
+        return angle
+    span = jnp.maximum(ts[0] - start, 0.0)
+    return angle + noise_before(jax.random.fold_in(key, 2), span, gm[0], noise)
+
+
+def noise_before(key, span, rate0, noise: Noise):
+    r"""One draw of the rate noise's integral [rad] over the `span` [s] (≥ 0) that ends where
+    the Gauss–Markov rate is `rate0` [rad/s]: the ARW's $N\sqrt{T}\,w_1$ and, the stationary
+    process being time-reversible, its rate at the span's start
+    $x_s = \phi x_0 + \sigma\sqrt{1-\phi^2}\,w_2$ ($\phi = e^{-T/T_c}$) and the bridge's
+    integral $a(x_s + x_0) + s\,w_3$ ([`gauss_markov_bridge`][hrgjax.noise.gauss_markov_bridge]).
+    Exactly 0 at `span` = 0. (`rate_noise_angle`'s time before its first sample.)"""
+    w = jax.random.normal(key, (3,))
+    sigma, tc = noise.bias_instability, noise.correlation_time
+    span = jnp.asarray(span, float)
+    arw = noise.angle_random_walk * jnp.sqrt(span) * w[0]
+    phi = jnp.exp(-span / tc)
+    q = 1.0 - phi**2  # 0 at span 0, where √ has no finite slope
+    sd = jnp.where(q > 0.0, jnp.sqrt(jnp.where(q > 0.0, q, 1.0)), 0.0)
+    x_start = phi * rate0 + sigma * sd * w[1]
+    a, s = _bridge(span, sigma, tc)
+    return arw + a * (x_start + rate0) + s * w[2]
 
 
 def draw_run_bias(key, noise: Noise):

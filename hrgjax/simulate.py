@@ -16,7 +16,15 @@ import numpy as np
 from . import _solve_parts as parts
 from . import plausible
 from ._checks import is_concrete, traceable
-from ._compiled import Check, Unchecked, device, fused, program, single_run_entry
+from ._compiled import (
+    Check,
+    Unchecked,
+    device,
+    fused,
+    one_line_failures,
+    program,
+    single_run_entry,
+)
 from ._cost import MAX_STEPS as MAX_STEPS
 from ._cost import default_max_steps as default_max_steps
 from ._cost import report as report_cost
@@ -256,7 +264,11 @@ def _record(gyro, profile, ts, read, key, bias_key, run, t_out=None):
         # the fourth key is the switch-on key, drawn before the solve (`_switch_on_key`)
         k_rate, k_white, k_amp, _ = jax.random.split(key, 4)
         nz = gyro.noise
-        rate_angle = rate_noise_angle(k_rate, ts, nz) + draw_run_bias(bias_key, nz) * (ts - ts[0])
+        # from the switch-on (the profile's start), not the first output: a window late in
+        # a run carries the noise and the bias's angle of the time before it
+        start = profile.t[0]
+        rate_angle = (rate_noise_angle(k_rate, ts, nz, start)
+                      + draw_run_bias(bias_key, nz) * (ts - start))  # fmt: skip
         white = nz.angle_white * jax.random.normal(k_white, ts.shape)
         if rebalance_rate is None:
             theta = theta - k_e * rate_angle + white
@@ -440,12 +452,17 @@ def simulate(
 
     **Raises:** `RuntimeError` without float64; `ValueError` for a bad model name, a missing
     key or a bad output grid; a solver failure (max steps, non-finite state) raises too.
+    Under your eager `jax.vmap` or `jax.grad`, a traced value that breaks a rule (a kelvin
+    temperature, a NaN parameter) raises `RuntimeError("simulate: <the rule>")` in one line;
+    under your `jax.jit` the check fails when your program runs, as JAX's
+    `JaxRuntimeError` with the rule's line inside (`hg.sweep` says it in one line).
     """
     options = {k: v for k, v in locals().items() if k not in ("gyro", "profile", "model")}
     return simulate_with_stats(gyro, profile, model, **options)[0]
 
 
 @single_run_entry
+@one_line_failures("simulate")
 def simulate_with_stats(gyro, profile, model="averaged", **options):
     """[`hrgjax.simulate`][] that also says how the solve went.
 

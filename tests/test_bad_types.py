@@ -98,6 +98,16 @@ def test_control_flags_are_bools(kw, match):
         hg.Control(**kw)
 
 
+def test_a_traced_nominal_gain_is_refused_not_differentiated_as_zero():
+    """`Control.k_e_nominal` is static: traced (grad, vmap) it compiled a program holding the
+    tracer, and its derivative read 0 after an eager call; now one line says what to do."""
+    for transform in (jax.grad, jax.vmap):
+        with pytest.raises(TypeError, match=r"^Control.k_e_nominal is a setting of the elec"):
+            transform(lambda k: hg.Control(mode="ftr", k_e_nominal=k).amplitude)(
+                jnp.asarray(0.554) if transform is jax.grad else jnp.array([0.5, 0.6])
+            )
+
+
 def test_control_mode_array_one_line():
     with pytest.warns(UserWarning, match="static"):  # equinox's own, before the check
         with pytest.raises(ValueError, match=r"^Control\.mode must be one of .*; got ndarray of"):

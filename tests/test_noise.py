@@ -1,5 +1,6 @@
 """Noise and Allan deviations: NBS14 reference values, round trips through simulate."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -152,6 +153,35 @@ def test_noise_deterministic_for_key_and_needs_key():
     b = hg.simulate(gyro, prof, key=jax.random.key(1)).wave_angle
     c = hg.simulate(gyro, prof, key=jax.random.key(2)).wave_angle
     assert np.array_equal(a, b) and not np.array_equal(a, c)
+    # a window late in the run carries the switch-on bias's angle from the profile's start,
+    # not from its first sample (it read b·(t − ts[0])): the full record's angles again
+    biased = eqx.tree_at(lambda g: g.noise, gyro, hg.Noise(run_bias=1.0 * DEG_PER_H))
+    whole = hg.simulate(biased, prof, key=jax.random.key(1), ts=jnp.array([0.0, 5.0, 10.0]))
+    late = hg.simulate(biased, prof, key=jax.random.key(1), ts=jnp.array([5.0, 10.0]))
+    np.testing.assert_allclose(late.wave_angle, whole.wave_angle[1:], rtol=1e-12, atol=1e-18)
+    assert abs(float(late.wave_angle[0])) > 1e-8  # ≈ k_e b · 5 s, not 0
+
+
+def test_rate_noise_from_a_start_before_the_first_sample_has_the_exact_moments():
+    """`rate_noise_angle(…, start=0)` at ts = (50, 60) s: E[θ²] = N²t + 2σ²T_c[t − T_c(1 −
+    e^{−t/T_c})] at each t, and E[θ(50)θ(60)] the same at 50 plus the Gauss–Markov integral's
+    covariance with the next 10 s, σ²T_c²(1 − e^{−50/T_c})(1 − e^{−10/T_c}) (`simulate`'s
+    noise counted from the profile's start; from the first sample, an output window at 50 s
+    read 0 there); `start` = ts[0] is the draw without it, bit for bit."""
+    n, sigma, tc = 1e-5, 1e-5, 30.0
+    nz = hg.Noise(angle_random_walk=n, bias_instability=sigma, correlation_time=tc)
+    ts = jnp.array([50.0, 60.0])
+    draw = jax.jit(jax.vmap(lambda k: hg.noise.rate_noise_angle(k, ts, nz, 0.0)))
+    theta = np.asarray(draw(jax.random.split(jax.random.key(8), 40_000)))
+    want = [n**2 * t + _gm_integral_second_moment(sigma, tc, t) for t in (50.0, 60.0)]
+    np.testing.assert_allclose(np.mean(theta**2, axis=0), want, rtol=0.03)
+    cross = want[0] + sigma**2 * tc**2 * -np.expm1(-50.0 / tc) * -np.expm1(-10.0 / tc)
+    assert np.mean(theta[:, 0] * theta[:, 1]) == pytest.approx(cross, rel=0.03)
+    key = jax.random.key(2)
+    np.testing.assert_array_equal(hg.noise.rate_noise_angle(key, ts, nz, 50.0),
+                                  hg.noise.rate_noise_angle(key, ts, nz))  # fmt: skip
+    with pytest.raises(ValueError, match=r"^rate_noise_angle: start must be <= ts\[0\] = 50 s"):
+        hg.noise.rate_noise_angle(key, ts, nz, 55.0)
 
 
 def test_sweep_shape_and_values():

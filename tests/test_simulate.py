@@ -394,6 +394,10 @@ def test_implausible_traced_values_are_refused_in_a_sweep_as_eagerly():
     assert message.startswith("sweep: at one or more grid points, Profile.temperature is "
                               "outside the plausible range -100 … 150 °C") and "kelvin" in message  # fmt: skip
     assert "\n" not in message
+    # under the user's own eager vmap (or grad): the same rule in one line, not JAX's
+    # callback traceback and equinox's banner (43 lines)
+    with pytest.raises(RuntimeError, match=r"^simulate: Profile.temperature is outside the pl"):
+        jax.vmap(final)(jnp.array([20.0, 1000.0]))
     with hg.plausible.relaxed(temperature_c=(-100.0, 1100.0)):  # the same fn, swept again
         np.testing.assert_allclose(hg.sweep(final, temperature_c=jnp.array([60.0, 1000.0]))[0],
                                    one[1], rtol=1e-12)  # fmt: skip

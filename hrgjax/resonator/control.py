@@ -72,6 +72,18 @@ def _plain_bool(x):
     return bool(x) if isinstance(x, np.bool_) else x
 
 
+def _untraced_gain(value):
+    """`Control.k_e_nominal` as given, or a one-line `TypeError` for a traced one (a static
+    field: JAX warned, and its derivative read 0 after an eager call)."""
+    if isinstance(value, jax.core.Tracer):
+        raise TypeError(
+            "Control.k_e_nominal is a setting of the electronics (static: one compiled "
+            "program per value), not a traced value: give it as a number, outside "
+            "jit/vmap/grad; sweep or differentiate the resonator's k_e instead"
+        )
+    return value
+
+
 class Control(eqx.Module):
     """Whole-angle mode loops.
 
@@ -99,7 +111,9 @@ class Control(eqx.Module):
       cannot saturate, and the pair is refused.
     - `k_e_nominal`: the angular gain the electronics divide the rebalance force by to read
       the rate (FTR output) — the nominal one, as whole-angle data are read with, so a gyro
-      whose k_e differs from it, or varies with temperature, shows it as a scale factor.
+      whose k_e differs from it, or varies with temperature, shows it as a scale factor. A
+      number (static: each value compiles its own program; a traced one is refused — the
+      resonator's `k_e` is the value to sweep or differentiate).
     - `forcer_gain`: common relative gain error of both forcers (1 + `forcer_gain`): it scales
       every force, so the FTR scale factor by 1/(1 + g_f) and a commanded precession by
       (1 + g_f); the loops' own efforts absorb it.
@@ -138,7 +152,7 @@ class Control(eqx.Module):
     )
     forcer_gain: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
     forcer_angle: jax.Array | TemperatureLaw = eqx.field(converter=as_parameter, default=0.0)
-    k_e_nominal: float = eqx.field(static=True, default=K_E_NOMINAL)
+    k_e_nominal: float = eqx.field(static=True, default=K_E_NOMINAL, converter=_untraced_gain)
 
     @classmethod
     def free(cls, amplitude=1.0) -> Control:
