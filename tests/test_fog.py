@@ -323,6 +323,10 @@ def test_vibration_inputs_are_checked(imu):
     with pytest.raises(ValueError, match="Nyquist"):
         vb.simulate(imu, vb.VibrationSchedule.constant(60.0, 1.0, 1.0), fs=100.0,
                     key=jax.random.key(0))  # fmt: skip
+    with pytest.raises(ValueError, match=r"^schedule lasts 0.005 s: 0 sample\(s\) at fs = 100 Hz"):
+        vb.simulate(
+            imu, vb.VibrationSchedule.constant(10.0, 1.0, 0.005), fs=100.0, key=jax.random.key(0)
+        )  # fmt: skip  (it returned (0, 3) arrays)
     with pytest.raises(ValueError, match="tau_s must be > 0"):
         eqx.tree_at(lambda m: m.tau_s, imu.vibration, jnp.asarray(-1.0)).__check_init__()
     with pytest.raises(ValueError, match=r"features must have shape \(K, 2\)"):

@@ -263,8 +263,8 @@ def simulate(
     latitude `lat_deg`, body attitude `attitude_deg` = (roll, pitch, heading) [°] (heading
     clockwise from north; FRD body). `key` drives the sensor noise.
 
-    **Raises:** `ValueError` when a vibration frequency is not below the Nyquist frequency
-    or the arguments are malformed; `RuntimeError` when float64 is off."""
+    **Raises:** `ValueError` when a vibration frequency is not below the Nyquist frequency,
+    the schedule is shorter than two samples at `fs`, or the arguments are malformed; `RuntimeError` when float64 is off."""
     require_x64("fog.vibration.simulate")
     if not fs > 0:
         raise ValueError(f"fs must be > 0 Hz; got {fs}")
@@ -281,6 +281,11 @@ def simulate(
             f"attitude_deg must be (roll, pitch, heading) in degrees; got {attitude_deg}"
         )
     freq, amp = schedule.samples(fs)
+    if freq.size < 2:  # it returned (0, 3) arrays: a record of nothing
+        raise ValueError(
+            f"schedule lasts {schedule.duration_s:g} s: {freq.size} sample(s) at fs = {fs:g} Hz; "
+            "a record needs at least 2 (a longer schedule or a higher fs)"
+        )
     c_bn = euler_to_dcm(*(jnp.asarray(x * DEG) for x in att))
     gyro, accel, err = _run(
         imu, jnp.asarray(freq), jnp.asarray(amp), jnp.asarray(schedule.axis), float(fs), key,
