@@ -50,6 +50,7 @@ RULES = {
     "in (0, 1]": lambda v: (v > 0) & (v <= 1),
     "in (-0.5, 0.5)": lambda v: (v > -0.5) & (v < 0.5),
     "in (-π/4, π/4)": lambda v: (v > -np.pi / 4) & (v < np.pi / 4),
+    "in [-2π, 2π]": lambda v: (v >= -2 * np.pi) & (v <= 2 * np.pi),
     "> -1": lambda v: v > -1.0,
 }
 """The value rules `check_finite_leaves` can apply to traced leaves, by their text."""

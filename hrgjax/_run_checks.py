@@ -16,13 +16,12 @@ from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
 from .noise import UNITS as NOISE_UNITS
 from .profiles import traced_checks as profile_checks
 from .resonator.control import LIMITS as CONTROL_LIMITS
+from .resonator.params import LIMITS as RESONATOR_LIMITS
 from .resonator.params import TemperatureLaw, damping_problem
 from .resonator.readout import LIMITS as READOUT_LIMITS
 
 LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by path
-    "resonator.omega": ("> 0", "rad/s"),
-    "resonator.tau": ("> 0", "s"),
-    "resonator.k_e": ("in (0, 1]", "(the electrical angular gain 2K, ≈ 0.554)"),
+    **{f"resonator.{n}": rule for n, rule in RESONATOR_LIMITS.items()},
     "drift_terms.lag_time": ("> 0", "s"),
     "drift_terms.warmup_time": ("> 0", "s"),
     "noise.correlation_time": ("> 0", "s"),

@@ -1,5 +1,6 @@
 """`simulate`'s arguments besides the gyro and the profile, checked before any work: the
-settings (`check_options`), the keys and the output times (`output_grid`)."""
+settings (`check_options`), the keys, the output times (`output_grid`) and the starting
+quadrature against the gyro's amplitude (`check_quadrature0`)."""
 
 from __future__ import annotations
 
@@ -11,11 +12,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _checks as checks
-from ._checks import check_finite, check_numbers, describe, is_concrete, numeric_problem
+from ._checks import (
+    check_finite,
+    check_numbers,
+    concrete_value,
+    describe,
+    is_concrete,
+    numeric_problem,
+)
 from ._compiled import device
+from .resonator.params import TemperatureLaw
 
 _TOLERANCE = "a positive number (a solver tolerance)"
-NUMBERS = {"rtol": _TOLERANCE, "atol": _TOLERANCE, "quadrature0": "a finite number (readout units)"}
+_QUADRATURE = "a finite number (readout units) of magnitude below the amplitude set point"
+NUMBERS = {"rtol": _TOLERANCE, "atol": _TOLERANCE, "quadrature0": _QUADRATURE}
 """`simulate`'s settings that are one real number each, and what each must be."""
 
 CLASSES = {
@@ -76,6 +86,40 @@ def check_options(o) -> None:
         arr = np.asarray(v)
         if arr.ndim != 0 or arr.dtype.kind not in "iu" or isinstance(v, bool):
             raise ValueError(f"run must be an integer run id (e.g. 3); got {v!r}")
+
+
+def check_quadrature0(quadrature0, gyro, profile) -> None:
+    """Refuse |`quadrature0`| ≥ a₀, the amplitude set point `gyro.control.amplitude` at the
+    profile's first temperature, where the wave starts with amplitude a₀: the quadrature is
+    the minor semi-axis of the wave's ellipse and the amplitude its major one, so |q| < a (at
+    |q| = a the wave is a circle with no angle, and the averaged model's solver ran out of
+    steps; beyond, the axes swap: the full model started the wave 90° off, the averaged one
+    ran on to an amplitude of 138). Values known here only (concrete, or an eager `grad`'s):
+    a traced q₀, set point or start temperature passes unchecked."""
+    q, a = concrete_value(quadrature0), gyro.control.amplitude
+    at = ""
+    if isinstance(a, TemperatureLaw):
+        law = jax.tree_util.tree_map(concrete_value, a)
+        temp = concrete_value(profile.temperature)
+        if temp is None or any(
+            x is None for x in jax.tree_util.tree_leaves(law, is_leaf=lambda x: x is None)
+        ):
+            return
+        temp = np.asarray(temp, dtype=float)[..., 0]
+        a, at = law(temp, xp=np), f" at the start temperature, {np.ravel(temp)[0]:g} °C"
+    else:
+        a = concrete_value(a)
+    if q is None or a is None:
+        return
+    q, a = float(q), np.asarray(a, dtype=float)
+    if np.any(~(abs(q) < a)):
+        a0 = float(np.ravel(a)[np.argmin(np.ravel(a))])
+        raise ValueError(
+            f"quadrature0 must be {_QUADRATURE} a₀ = gyro.control.amplitude = {a0:g}{at}, "
+            "|quadrature0| < a₀: the quadrature is the minor semi-axis of the wave's ellipse, "
+            f"the amplitude its major one (at |q| = a the wave is circular, with no angle); "
+            f"got {q:g}"
+        )
 
 
 def output_grid(ts, profile) -> jax.Array:

@@ -52,12 +52,16 @@ def _schedule(x):
 
 
 def _finite(name, x):
-    """Refuse a NaN or inf in `x`: a concrete one now, in one line with its index as plain
-    ints; a traced one where the transformation runs eagerly (`check_finite`)."""
-    if is_concrete(x):
-        check_finite_host(name, x)
-    else:
+    """Refuse a NaN or inf in `x` in one line: a known one (concrete, or an eager `grad`'s)
+    now, with its index as plain ints; a traced one where the transformation runs eagerly
+    (`check_finite`: an eager `vmap`), its banner dropped; under `jit`, `simulate`'s."""
+    if (value := concrete_value(x)) is not None:
+        check_finite_host(name, value)
+        return
+    try:
         check_finite(name, x)
+    except eqx.EquinoxRuntimeError:  # equinox's banner and JAX's callback trace: one line
+        raise ValueError(f"{name} must be finite (found NaN or inf)") from None
 
 
 def _eager(fn, *args):
@@ -381,36 +385,32 @@ class Profile(eqx.Module):
         in turn for `dwell_s` [s], moved between them by a commanded precession pulse of
         `slew_s` [s] (a trapezoid: ramps of `slew_s`/4), the case at `rate_dps` [°/s] and
         `temperature_c` [°C]. Mode reversal is `angles_deg=(θ, θ + 90)`: the damping
-        anisotropy's drift ½Δ(1/τ)·sin 2(θ − θ_τ) changes sign, the rate does not."""
+        anisotropy's drift ½Δ(1/τ)·sin 2(θ − θ_τ) changes sign, the rate does not. Traced
+        angles, times or temperature (vmap, grad, hg.sweep) give the same knots, with jnp."""
         check_numbers("Profile.held_angles: angles_deg", angles_deg,
                       "one or more finite angles [° electrical]")  # fmt: skip
         _scalars("held_angles", dwell_s=dwell_s, slew_s=slew_s, temperature_c=temperature_c,
                  rate_dps=rate_dps)  # fmt: skip
-        ang = np.atleast_1d(np.asarray(angles_deg, dtype=float))
-        if ang.ndim != 1 or ang.size < 1 or not np.all(np.isfinite(ang)):
+        array = lambda x: (np if is_concrete(x) else jnp).asarray(x, dtype=float)
+        finite = concrete_value(ang := array(angles_deg))  # traced (vmap, grad, jit): jnp
+        if ang.ndim > 1 or ang.size < 1 or (finite is not None and not np.isfinite(finite).all()):
             raise ValueError(f"Profile.held_angles: angles_deg must be one or more finite angles "
-                             f"[° electrical], shape (n,); got shape {np.shape(angles_deg)}"
-                             + ("" if ang.ndim != 1 or not ang.size else " with NaN or inf"))  # fmt: skip
+                             f"[° electrical], shape (n,); got shape {ang.shape}"
+                             + ("" if ang.ndim > 1 or not ang.size else " with NaN or inf"))  # fmt: skip
         for name, v in (("dwell_s", dwell_s), ("slew_s", slew_s)):
-            if not (np.isfinite(v) and v > 0):
+            if (c := concrete_value(v)) is not None and not (np.isfinite(c) and c > 0):
                 raise ValueError(f"{name} must be a positive number of seconds; got {v!r}")
-        ramp = slew_s / 4.0
+        ang, ramp = ang.reshape(-1), slew_s / 4.0
         t, rho = [0.0, dwell_s], [0.0, 0.0]
         for k in range(1, ang.size):
             peak = (ang[k] - ang[k - 1]) / (slew_s - ramp)  # ∫ over the trapezoid = the step
             start = t[-1]
             t += [start + ramp, start + slew_s - ramp, start + slew_s, start + slew_s + dwell_s]
             rho += [peak, peak, 0.0, 0.0]
-        t = np.asarray(t)
-        one = np.ones(t.size)
-        return cls(
-            t=t,
-            rate=one * rate_dps * DEG_PER_S,
-            temperature=one * temperature_c,
-            accel=np.zeros((t.size, 3)),
-            wave_angle0=ang[0] * DEG,
-            precession=np.asarray(rho) * DEG_PER_S,
-        )
+        t, one = array(t), np.ones(len(t))  # knot times stay NumPy (concrete) unless traced
+        return cls(t=t, rate=one * rate_dps * DEG_PER_S, temperature=one * temperature_c,
+                   accel=np.zeros((t.size, 3)), wave_angle0=ang[0] * DEG,
+                   precession=array(rho) * DEG_PER_S)  # fmt: skip
 
     def hold_windows(self, settle_s: float = 0.0) -> list[tuple[float, float]]:
         """(start, end) [s] of each hold — a maximal stretch of knots between which the

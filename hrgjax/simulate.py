@@ -31,7 +31,7 @@ from ._cost import report as report_cost
 from ._run_checks import LAW_LIMITS as _LAW_LIMITS  # its old name here
 from ._run_checks import check_laws as _check_laws
 from ._run_checks import check_traced
-from ._simulate_options import check_options, output_grid
+from ._simulate_options import check_options, check_quadrature0, output_grid
 from ._x64 import require_x64
 from .gyro import Gyro, check_one
 from .noise import draw_run_bias, rate_noise_angle
@@ -500,6 +500,7 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
             "this gyro has noise: pass key=jax.random.key(…), or use gyro.without_noise()"
         )
     check_options(o)
+    check_quadrature0(quadrature0, gyro, profile)  # |q₀| < a₀: the ellipse's minor axis
     if gyro.noise is None:
         bias_key = None  # no switch-on bias to draw
     elif bias_key is None:  # drawn here as `_record` would: one program, given or not

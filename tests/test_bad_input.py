@@ -307,6 +307,30 @@ def test_simulate_refuses_bad_settings_before_any_work(gyro, kw, match):
         hg.simulate(gyro, PROFILE, **kw)
 
 
+def test_a_quadrature_at_or_beyond_the_amplitude_set_point_is_refused(gyro):
+    """Audit: quadrature0 = a₀ ran the averaged solver out of steps ("max_steps"); beyond it
+    the averaged run went on silently to an amplitude of 138 and the full model started the
+    wave 90° off. The quadrature is the ellipse's minor semi-axis, the amplitude its major
+    one: |q₀| < a₀ (a law's set point at the start temperature; a traced one unchecked)."""
+    from hrgjax._simulate_options import check_quadrature0
+
+    check_quadrature0(-0.999, gyro, PROFILE)
+    for q0 in (1.0, -3.0, np.float64(10.0)):
+        with pytest.raises(ValueError, match=r"^quadrature0 must be a finite number \(readout "
+                           r"units\) .* set point a₀ = gyro.control.amplitude = 1, "
+                           r"\|quadrature0\| < a₀: the quadrature is the minor semi-axis .*; got -?\d"):  # fmt: skip
+            check_quadrature0(q0, gyro, PROFILE)
+    law = eqx.tree_at(lambda g: g.control.amplitude, gyro, hg.TemperatureLaw(2.0, 0.1))
+    check_quadrature0(1.5, law, PROFILE)  # a₀ = 2 at 20 °C, 1 at 10 °C
+    with pytest.raises(ValueError, match=r"= 1 at the start temperature, 10 °C, \|quadrature0\|"):
+        check_quadrature0(1.5, law, hg.Profile.piecewise([0.0, 1.0], 0.0, [10.0, 30.0]))
+    with pytest.raises(ValueError, match=r"^quadrature0 must .*; got 2\b"):  # an eager grad
+        jax.grad(lambda q: check_quadrature0(q, gyro, PROFILE) or q)(2.0)
+    for model in ("averaged", "full"):  # `simulate` asks it before any work
+        with pytest.raises(ValueError, match=r"^quadrature0 must .* a₀ = gyro.control.amplitude"):
+            hg.simulate(gyro, PROFILE, model, quadrature0=3.0)
+
+
 def test_temperature_laws_are_checked_over_the_profiles_temperatures(gyro):
     law = hg.TemperatureLaw(640.0, p1=-10.0)  # τ = 0 at 84 °C
     hot = eqx.tree_at(lambda g: g.resonator.tau, gyro, law)

@@ -52,6 +52,25 @@ def test_negative_damping_refused():
         run(4 / 640.0)
 
 
+def test_axis_angles_in_degrees_are_refused():
+    """Audit: `Resonator(theta_tau=30.0)` and `theta_omega=45.0` (degrees typed for radians)
+    were taken silently, while Readout's and Control's angles are range-checked. The axes
+    repeat every π (electrical), so no radian value needs more than ±2π: beyond is refused,
+    as a value, a law where it is evaluated, naming the field, the unit and the degrees hint."""
+    res = lambda **kw: hg.Resonator(omega=2 * np.pi * 5e3, tau=640.0, **kw)  # noqa: E731
+    for kw in (dict(theta_tau=30.0), dict(theta_omega=45.0), dict(theta_omega=[0.1, -7.0])):
+        name = next(iter(kw))
+        with pytest.raises(ValueError, match=rf"^Resonator.{name} must be finite and in \[-2π, 2π\] "
+                           r"rad \(electrical; from degrees: × hrgjax.units.DEG\); got -?\d+$"):  # fmt: skip
+            res(**kw)
+    res(theta_omega=2 * np.pi, theta_tau=-2 * np.pi)  # a turn either way: still radians
+    law = res(theta_tau=hg.TemperatureLaw(0.5, 0.1))  # 6.5 rad at 80 °C
+    law.at(20.0)
+    with pytest.raises(ValueError, match=r"^the temperature law of gyro.resonator.theta_tau "
+                       r"gives 6.5 rad \(electrical; .* at 80 °C; it must be .* \[-2π, 2π\]"):  # fmt: skip
+        hg.Gyro(law).at(jnp.array([20.0, 80.0]))
+
+
 def test_slow_manifold_refuses_a_split_beyond_its_domain():
     """Audit: at Δω = 2π·0.5 Hz (Δω/β_q = 1.57 with the 2 rad/s quadrature loop) the
     linearised manifold's drift was 2.4× the PI loops' (8.2 vs 19.5 rad over 1297 s at

@@ -348,6 +348,43 @@ def test_mode_reversal_refuses_a_turning_case():
         sc.mode_reversal_data(rec.to_data())
 
 
+def test_mode_reversal_sweeps_over_temperature_and_refuses_traced_angles():
+    """Audit: `mode_reversal` under jit or hg.sweep over the temperature raised a 28-line
+    ConcretizationTypeError (the turn between the holds read with float() from the traced
+    program). It reads the knots' concrete values: jit and the sweep equal the eager values,
+    and a second temperature compiles nothing. Traced held angles (the holds are found
+    where the precession is 0) are refused in one line (an eager grad carries their values)."""
+    from helpers import CompileCounter
+
+    t = np.arange(0.0, 221.0)
+    first = t < 110.0  # the first hold (and the slew): 100-s dwells, a 20-s slew
+
+    def reduce(temp):
+        prof = hg.Profile.held_angles([10.0, 100.0], 100.0, 20.0, temp)
+        rate = 1e-5 * (1.0 + temp) + jnp.where(first, 2e-6, -2e-6) * jnp.cos(temp / 30.0)
+        out = sc.mode_reversal(t, rate, prof, settle_s=30.0)
+        return out.bias, out.anisotropy
+
+    temps = (0.0, 40.0)
+    eager = np.array([reduce(temp) for temp in temps])
+    run = jax.jit(reduce)
+    run(temps[0])
+    with CompileCounter() as count:
+        second = run(temps[1])
+    assert count.compiles == 0
+    np.testing.assert_allclose([run(temps[0]), second], eager, rtol=1e-13)
+    swept = hg.sweep(reduce, temp=jnp.array(temps))
+    np.testing.assert_allclose(np.stack(swept, axis=-1), eager, rtol=1e-13)
+
+    def anisotropy(theta):
+        prof = hg.Profile.held_angles(jnp.stack([theta, theta + 90.0]), 100.0, 20.0)
+        return sc.mode_reversal(t, jnp.where(first, theta, -theta), prof, settle_s=30.0).anisotropy
+
+    with pytest.raises(ValueError, match=r"^mode_reversal: profile.wave_angle0 is traced here "
+                       r"\(jit, vmap or hg.sweep .* \(a swept temperature is fine\)"):  # fmt: skip
+        jax.vmap(anisotropy)(jnp.array([0.0, 45.0]))
+
+
 def test_correct_and_compare_refuse_ftr_and_precession_data(
     sweeps, reversal_at_minus_45, tmp_path, capsys
 ):

@@ -49,7 +49,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_numbers, finite_number
+from .._checks import check_numbers, concrete_value, finite_number, is_concrete
 from .._compiled import device, fused
 from .._x64 import require_x64
 from ..data import MeasuredData
@@ -92,14 +92,9 @@ def precession_plan(
     duration = settle_s + 180.0 * turns / precession_dps
     rho = np.tile([precession_dps, -precession_dps], temps.size)
     start = np.tile([-90.0 - margin, -90.0 + 180.0 * turns + margin], temps.size)
-    return Plan(
-        temperature_c=device(np.repeat(temps, 2)),
-        wave_angle0_deg=device(start),
-        rate_dps=device(np.zeros(rho.size)),
-        duration_s=float(duration),
-        dt_out=float(dt_out),
-        precession_dps=device(rho),
-    )
+    return Plan(temperature_c=device(np.repeat(temps, 2)), wave_angle0_deg=device(start),
+                rate_dps=device(np.zeros(rho.size)), duration_s=float(duration),
+                dt_out=float(dt_out), precession_dps=device(rho))  # fmt: skip
 
 
 def _temperatures(who: str, temperatures_c) -> np.ndarray:
@@ -300,18 +295,12 @@ class PrecessionCompensator(AbstractCompensator):
             temps.append(temp)
             drift.append(-np.asarray(d) / self.k_e)
             sf.append(np.asarray(s))
-        return eqx.tree_at(
-            lambda c: (c.drift_coef, c.gain_coef),
-            PrecessionCompensator(
-                harmonics=self.harmonics,
-                settle_s=self.settle_s,
-                temperature_bin=self.temperature_bin,
-                k_e=self.k_e,
-                temperatures_c=tuple(temps),
-            ),  # fmt: skip
-            (jnp.asarray(np.stack(drift)), jnp.asarray(np.stack(sf))),
-            is_leaf=lambda x: x is None,
-        )
+        fitted = PrecessionCompensator(harmonics=self.harmonics, settle_s=self.settle_s,
+                                       temperature_bin=self.temperature_bin, k_e=self.k_e,
+                                       temperatures_c=tuple(temps))  # fmt: skip
+        return eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef), fitted,
+                           (jnp.asarray(np.stack(drift)), jnp.asarray(np.stack(sf))),
+                           is_leaf=lambda x: x is None)  # fmt: skip
 
 
 GAIN_TOLERANCE = 0.2
@@ -467,21 +456,17 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
     if not t_shape or r_shape[-1:] != t_shape[-1:]:
         raise ValueError(f"mode_reversal: rebalance_rate must have one value per sample of t, "
                          f"shape (…, N) as t's {t_shape}; got shape {r_shape}")  # fmt: skip
-    _check_at_rest(
-        float(np.max(np.abs(np.asarray(profile.rate)))) / DEG_PER_S, "the profile's rate"
-    )
-    windows = profile.hold_windows(settle_s)
-    if len(windows) != 2:
-        raise ValueError(
-            f"mode_reversal needs a profile with two holds; this one has {len(windows)}"
-        )
+    profile = _held_values(profile)  # the holds, their angles: the knots' concrete values
+    rate_dps = float(np.max(np.abs(np.asarray(profile.rate)))) / DEG_PER_S
+    _check_at_rest(rate_dps, "the profile's rate")
+    if len(windows := profile.hold_windows(settle_s)) != 2:
+        raise ValueError(f"mode_reversal needs a profile with two holds; it has {len(windows)}")
     theta0 = float(profile.wave_angle0) / DEG
-    turn = float(profile.commanded_angle_at(profile.t[-1])) / DEG - theta0
+    with jax.ensure_compile_time_eval():  # under jit (a sweep over temperature) too
+        turn = float(profile.commanded_angle_at(profile.t[-1])) / DEG - theta0
     if abs(abs(turn) - 90.0) > 1e-6:
         raise ValueError(f"the holds must be 90° apart (electrical); these are {turn:g}° apart")
-    t = jnp.asarray(t)
-    r = jnp.asarray(rebalance_rate)
-    means = []
+    t, r, means = jnp.asarray(t), jnp.asarray(rebalance_rate), []
     for start, end in windows:
         m = ((t >= start) & (t <= end)).astype(r.dtype)
         means.append(jnp.sum(m * r, axis=-1) / jnp.sum(m, axis=-1))
@@ -492,6 +477,22 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
         bias=0.5 * (readings[..., 0] + readings[..., 1]),
         anisotropy=0.5 * (readings[..., 0] - readings[..., 1]),
     )
+
+
+def _held_values(profile: Profile) -> Profile:
+    """`profile` with concrete values only: the knots `mode_reversal` reads (the holds, their
+    angles, the rate) their eager values (`jax.grad` outside `jit` carries them; a traced
+    one refused in one line), the fields it does not read (a swept temperature) zeros."""
+    read, out = ("t", "rate", "wave_angle0", "precession"), {}
+    for name in (*read, "temperature", "accel", "rebalance"):
+        if (x := getattr(profile, name)) is not None and not is_concrete(x):
+            out[name] = concrete_value(x) if name in read else np.zeros(x.shape)
+            if out[name] is None:
+                raise ValueError(f"mode_reversal: profile.{name} is traced here (jit, vmap or "
+                                 "hg.sweep over the held angles, times or rate), but the holds and "
+                                 "their angles are read from its values: build the profile from "
+                                 "concrete ones (a swept temperature is fine)")  # fmt: skip
+    return eqx.tree_at(lambda p: [getattr(p, n) for n in out], profile, list(out.values()))
 
 
 def _check_at_rest(rate_dps: float, what: str) -> None:

@@ -137,12 +137,20 @@ def checked_temperature(temperature_c):
     return temperature_c
 
 
+AXIS_ANGLE = ("in [-2π, 2π]", "rad (electrical; from degrees: × hrgjax.units.DEG)")
+"""The range of the axes' angles θ_ω and θ_τ: they enter as 2θ (the axes repeat every π
+electrical), so no radian value needs more than a turn either way, and 30 typed for 30° is
+refused (a degree value of 6.28 or less cannot be told from radians)."""
+
 LIMITS = {
     "omega": ("> 0", "rad/s"),
     "tau": ("> 0", "s"),
     "k_e": ("in (0, 1]", "(the electrical angular gain 2K, ≈ 0.554)"),
+    "theta_omega": AXIS_ANGLE,
+    "theta_tau": AXIS_ANGLE,
 }
-"""The range of each `Resonator` field a temperature law must keep (any other: finite)."""
+"""The range of each `Resonator` field a temperature law must keep (any other: finite); the
+axes' angles' (`AXIS_ANGLE`) plain values too."""
 
 
 def check_laws_at(owner: str, module, evaluated, temperature_c, limits) -> None:
@@ -202,9 +210,11 @@ class Resonator(eqx.Module):
     - `tau`: mean amplitude decay time τ [s], $2/\tau = 1/\tau_1 + 1/\tau_2$ (> 0).
     - `k_e`: electrical angular gain $k_e = 2K$ (Bryan factor K ≈ 0.277 → 0.554).
     - `delta_omega`: frequency split Δω [rad/s], $\omega_1^2-\omega_2^2 = 2\omega\Delta\omega$.
-    - `theta_omega`: electrical angle of the ω₁ axis [rad].
+    - `theta_omega`: electrical angle of the ω₁ axis [rad], within ±2π (`AXIS_ANGLE`:
+      degrees typed for radians are refused; × `hrgjax.units.DEG` converts them).
     - `delta_inv_tau`: damping anisotropy $\Delta(1/\tau) = 1/\tau_1 - 1/\tau_2$ [1/s].
-    - `theta_tau`: electrical angle of the τ₁ (more damped if Δ(1/τ) > 0) axis [rad].
+    - `theta_tau`: electrical angle of the τ₁ (more damped if Δ(1/τ) > 0) axis [rad],
+      within ±2π as `theta_omega`.
     - `chi`: isotropic cubic stiffness χ [rad²/s² per (readout unit)²].
     """
 
@@ -224,6 +234,12 @@ class Resonator(eqx.Module):
         finite = ("k_e", "delta_omega", "theta_omega", "delta_inv_tau", "theta_tau", "chi")
         for name, value in concrete_fields(self, finite):
             check_finite(f"Resonator.{name}", value)
+        for name, value in concrete_fields(self, ("theta_omega", "theta_tau")):
+            v = np.asarray(value, dtype=float)
+            if (bad := ~RULES[AXIS_ANGLE[0]](v)).any():
+                got = v[tuple(np.argwhere(bad)[0])]
+                raise ValueError(f"Resonator.{name} must be finite and {' '.join(AXIS_ANGLE)}; "
+                                 f"got {got:g}")  # fmt: skip
         for _, k_e in concrete_fields(self, ("k_e",)):
             for value in np.ravel(np.asarray(k_e, dtype=float)):
                 problem = k_e_problem(float(value))
