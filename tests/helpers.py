@@ -181,6 +181,8 @@ def cli_fails(argv, capsys, match, code=2):
     assert status == code, (status, err)
     assert err, "no message on stderr"
     assert re.search(match, err[-1]), err
+    if code == 2:  # bad input: one line, argparse's own errors too (its usage block went first)
+        assert len(err) == 1, err
     return err[-1]
 
 

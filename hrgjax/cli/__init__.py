@@ -88,13 +88,23 @@ def main(argv=None) -> int:
     return _run(args)
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse's parser with its usage errors in one line, as every other error of the
+    command: `hrgjax calibrate: error: argument --window: … (hrgjax calibrate --help: the
+    options)`, exit status 2. argparse printed its usage block (6–10 lines) first. The
+    subcommands' parsers are of this class too (argparse makes them of their parent's)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} ({self.prog} --help: the options)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The `hrgjax` argument parser (every option with its help and default)."""
 
     class fmt(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
         """Defaults shown; the description and the example kept as written."""
 
-    parser = argparse.ArgumentParser(
+    parser = _OneLineParser(
         prog="hrgjax", description=__doc__, parents=[_common(_RELAX_BEFORE)], formatter_class=fmt
     )
     sub = parser.add_subparsers(dest="command", required=True)
