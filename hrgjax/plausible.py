@@ -483,7 +483,8 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
 def check_table_angle(table_angle_deg, integral_deg, run, moving) -> None:
     """Refuse a `table_angle_deg` column that does not turn as the integral of
     `table_rate_dps` over `time_s` (`integral_deg`, per row) over the rotation runs: within
-    10 %, or named as radians (π/180) or a rate in rad/s (180/π). A run counts where either
+    10 %, or named as radians (π/180), a rate in rad/s (180/π) or time stamps in
+    milliseconds (1/1000). A run counts where either
     turns by ≥ 1 (in the file's units: a table angle or a rate in radians turns < 1 over a
     run shorter than 57.3°, the other one does not).
 
@@ -492,7 +493,10 @@ def check_table_angle(table_angle_deg, integral_deg, run, moving) -> None:
     if ratio is None or abs(ratio - 1.0) <= 0.1:
         return
     hint = {np.pi / 180.0: ": it looks like radians (np.degrees)",
-            180.0 / np.pi: ": it looks like 'table_rate_dps' is in rad/s"}  # fmt: skip
+            180.0 / np.pi: ": it looks like 'table_rate_dps' is in rad/s",
+            1e-3: ": it looks like 'time_s' is in milliseconds (÷ 1000)",
+            1e3: ": it looks like 'table_rate_dps' is per millisecond, or 'time_s' in "
+                 "kiloseconds"}  # fmt: skip
     why = next((h for r, h in hint.items() if abs(ratio - r) < 0.3 * r), "")
     raise ValueError(
         f"column 'table_angle_deg' turns {ratio:.4g} × the integral of 'table_rate_dps' over "

@@ -551,6 +551,8 @@ def test_physically_impossible_numbers_are_refused_with_a_hint():
         (dict(table_rate_dps=np.full(t.size, np.radians(5.0)), table_angle_deg=5.0 * t),
          r"^column 'table_angle_deg' turns 57.3 × the integral .* 'table_rate_dps' is in rad/s"),
         (dict(time_s=1000 * t), r"turns -0.000554 × the table .* time stamps in milliseconds"),
+        (dict(time_s=1000 * t, table_angle_deg=5.0 * t), r"^column 'table_angle_deg' turns 0.001 "
+         r"× the integral .*: it looks like 'time_s' is in milliseconds \(÷ 1000\)$"),
         (dict(wave_angle_deg=-5.54 * 5.0 * t), r"turns -5.54 × the table .* check the units"),
         (dict(wave_angle_deg=cols["wave_angle_deg"] + np.where(t > 30, 10.0, 0.0)),
          r"^column 'wave_angle_deg' jumps \+8.615° from row 60 to row 61 of run 0"),
