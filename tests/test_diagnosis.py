@@ -261,10 +261,31 @@ def test_gain_schedule_imm_holds_the_decision_like_the_full_imm(
     assert np.mean(d_g[20:] == d_full[20:]) >= 0.98
 
 
+def test_the_interacting_banks_default_prior_is_a_healthy_start(accel_bank):
+    """Audit: the documented call (`fault_bank` defaults, `run_bank(…, interacting=True)`)
+    under the former uniform default decided a fault before there was one (S0 on none of the
+    steps before a 2e-7 fault at 100 s in INS 2, key 0) and S0 on 96 % of the steps after
+    it. The default is now a healthy start (`HEALTHY_START` on each fault, the rest on S0:
+    `compare`'s prior): S0 before the onset, S2 from a few steps after it to the end."""
+    from hrgjax.diagnosis import complex as cx
+    from hrgjax.ins.platform import Fault
+
+    ins, _ = accel_bank
+    bank = cx.fault_bank(ins, "accel_y", dt=1.0)
+    fault = Fault.on("accel_y", 2e-7, 100.0)
+    _, nav = cx.simulate_complex(ins, dt=1.0, n_steps=400, key=jax.random.key(0), fault_ins=1,
+                                 fault=fault)  # fmt: skip
+    z = cx.measurements(nav, 1.0, "accel_y", ins)  # step k ↔ time k + 2
+    d = np.asarray(fb.run_bank(bank, z, interacting=True)[1])
+    assert np.all(d[20:97] == 0) and np.all(d[105:] == 2), (d[90:110], np.unique(d[105:]))
+    healthy = jnp.array([0.97, 0.01, 0.01, 0.01])
+    np.testing.assert_array_equal(d, fb.run_bank(bank, z, interacting=True, prior=healthy)[1])
+
+
 def test_gain_schedule_imm_keeps_a_healthy_record_healthy_under_a_uniform_prior(
     accel_bank, accel_gains
 ):
-    """With the default (uniform) prior the hypotheses start level and a fault hypothesis
+    """With a uniform prior the hypotheses start level and a fault hypothesis
     can lead S0 for a step. The gain-schedule IMM used to step S0 from the leader's
     covariance whenever S0 did not lead (its S ≈ e^5 times larger in determinant, −2.7 nats
     a step), so S0 never took the lead back: healthy records were decided a fault in some
@@ -278,8 +299,9 @@ def test_gain_schedule_imm_keeps_a_healthy_record_healthy_under_a_uniform_prior(
     for seed in range(3):
         _, nav = cx.simulate_complex(ins, dt=1.0, n_steps=60, key=jax.random.key(seed))
         z = cx.measurements(nav, 1.0, "accel_y", ins)
-        d_g = np.asarray(fb.run_gains(accel_gains, z, interacting=True)[1])
-        d_full = np.asarray(fb.run_bank(bank, z, interacting=True)[1])
+        uniform = jnp.full(4, 0.25)  # no longer the interacting forms' default
+        d_g = np.asarray(fb.run_gains(accel_gains, z, interacting=True, prior=uniform)[1])
+        d_full = np.asarray(fb.run_bank(bank, z, interacting=True, prior=uniform)[1])
         assert np.all(d_g <= 0), (seed, d_g)
         assert np.all(d_g[15:] == 0) and np.array_equal(d_g[15:], d_full[15:]), (seed, d_g)
 

@@ -34,9 +34,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaincc, logsumexp
 
-from .._checks import check_covariance, check_finite_host, is_concrete
 from .._linalg import cho_logdet, cho_solve, cholesky
 from ..kalman import LOG_2PI, Gaussian, predict, update
+from ._bank_inputs import check_bank, check_model, check_zs, concrete
 
 
 class Bank(eqx.Module):
@@ -74,7 +74,7 @@ class Bank(eqx.Module):
         if not 0.0 <= switch_prob < 1.0:
             raise ValueError(f"switch_prob must be in [0, 1); got {switch_prob}")
         for i, mod in enumerate(models):
-            _check_model(i, mod, models[0])
+            check_model(i, mod, models[0])
         parts = [jnp.stack([jnp.asarray(mod[k], float) for mod in models]) for k in range(6)]
         if m == 1:
             trans = jnp.ones((1, 1))
@@ -101,50 +101,6 @@ class Bank(eqx.Module):
     @property
     def size(self) -> int:
         return self.phi.shape[0]
-
-
-_FIELDS = ("phi", "qd", "h", "r", "x0", "p0")
-
-
-def _check_model(i, mod, first):
-    """Model `i` of `Bank.build`: a `(phi, qd, h, r, x0, p0)` tuple whose shapes fit each other
-    and the first model's (trace time), with finite values, `qd` and `p0` symmetric positive
-    semi-definite and `r` positive-definite when they are concrete (one line naming the model
-    and the field: a negative variance made every probability NaN, every decision undecided)."""
-    if len(mod) != 6:
-        raise ValueError(f"model {i} must be a (phi, qd, h, r, x0, p0) tuple; got {len(mod)} items")
-    n_shape, h_shape = np.shape(first[0]), np.shape(first[2])
-    n = n_shape[0] if len(n_shape) == 2 and n_shape[0] == n_shape[1] else None
-    m = h_shape[0] if len(h_shape) == 2 else None
-    if n is None or m is None:
-        raise ValueError(
-            f"model 0's phi must be (n, n) and h (m, n); got phi {n_shape}, h {h_shape}"
-        )
-    want = {"phi": (n, n), "qd": (n, n), "h": (m, n), "r": (m, m), "x0": (n,), "p0": (n, n)}
-    form = {"phi": "(n, n)", "qd": "(n, n)", "h": "(m, n)", "r": "(m, m)", "x0": "(n,)",
-            "p0": "(n, n)"}  # fmt: skip
-    for name, a in zip(_FIELDS, mod, strict=True):
-        if np.shape(a) != want[name]:
-            raise ValueError(f"model {i}'s {name} must be {form[name]} = {want[name]} (n = {n} "
-                             f"states, m = {m} measurements); got {np.shape(a)}")  # fmt: skip
-    phi, qd, h, r, x0, p0 = mod
-    for name, a in (("phi", phi), ("h", h), ("x0", x0)):
-        check_finite_host(f"model {i}'s {name}", a)
-    check_covariance(f"model {i}'s qd", qd, form=f"(n, n) = ({n}, {n})")
-    check_covariance(f"model {i}'s r", r, definite=True, form=f"(m, m) = ({m}, {m})")
-    check_covariance(f"model {i}'s p0", p0, form=f"(n, n) = ({n}, {n})")
-
-
-def _check_bank(bank: Bank):
-    """A bank's concrete values (a `Bank` made directly, or changed after `Bank.build`):
-    finite, `qd` and `p0` symmetric positive semi-definite, `r` positive-definite, per
-    hypothesis; traced fields pass (no run-time check)."""
-    for name in ("phi", "h", "x0", "z_offset"):
-        check_finite_host(f"bank.{name}", getattr(bank, name))
-    n, m = bank.phi.shape[-1], bank.h.shape[-2]
-    for name, definite, size in (("qd", False, n), ("r", True, m), ("p0", False, n)):
-        check_covariance(f"bank.{name}", getattr(bank, name), definite=definite,
-                         form=f"({size}, {size})", index="hypothesis")  # fmt: skip
 
 
 def _normalise(lp, log_floor):
@@ -200,11 +156,13 @@ def run_bank(
     """Run `bank` over measurements `zs` (K, m).
 
     **Arguments:** `floor`: smallest probability a hypothesis may hold (> 0); `prior` (M,)
-    initial probabilities (default uniform); `threshold`: A of eq. (10); `interacting`: mix
-    the estimates across hypotheses each step (IMM) instead of independent filters — its
-    probabilities are claims for records that start healthy: with a fault from the first
-    sample under a uniform prior (`switch_prob` 1e-4) ≈ half its steps above 0.99 name the
-    wrong hypothesis (`docs/diagnosis.md`, "Measured limit");
+    initial probabilities (default: uniform for the independent bank, a healthy start for
+    the interacting one — `HEALTHY_START` on each fault hypothesis, the rest on S0);
+    `threshold`: A of eq. (10); `interacting`: mix the estimates across hypotheses each step
+    (IMM) instead of independent filters — its probabilities are claims for records that
+    start healthy: with a fault from the first sample under a uniform prior (`switch_prob`
+    1e-4) ≈ half its steps above 0.99 name the wrong hypothesis (`docs/diagnosis.md`,
+    "Measured limit");
     `fit_window`, `fit_level`: the model-fit test of
     [`model_fit`][hrgjax.diagnosis.filter_bank.model_fit] — a step whose most probable
     hypothesis fails it is decided −2 (`fit_level=None`, the default: no test, the
@@ -217,10 +175,10 @@ def run_bank(
     hypothesis index, −1 = undecided (no probability above `threshold`), −2 = the most
     probable hypothesis does not fit the data (its probability is not to be trusted). The
     means are each filter's posterior estimate."""
-    lp0, log_floor = _start(bank.size, floor, prior, threshold)
+    lp0, log_floor = _start(bank.size, floor, prior, threshold, interacting)
     _check_fit(fit_window, fit_level)
-    _check_bank(bank)
-    zs = _check_zs(zs, bank, (2,))
+    check_bank(bank)
+    zs = check_zs(zs, bank, (2,))
     probs, nis, means = _run(bank, zs, log_floor, lp0, interacting)
     m = bank.h.shape[1]
     decisions, fit = _decide_fit(probs, nis, m, threshold, int(fit_window), fit_level, return_fit)
@@ -281,15 +239,26 @@ def _decide_fit(probs, nis, m, threshold, window, level, want_fit):
     return one(probs, nis) if probs.ndim == 2 else jax.vmap(one)(probs, nis)
 
 
-def _start(m, floor, prior, threshold):
+HEALTHY_START = 0.01
+"""Each fault hypothesis's prior probability in the interacting banks' default prior (S0, the
+healthy complex, holds the rest: 0.97 with three INS, as `compare` runs them): a record that
+starts healthy, the claim the IMM's probabilities are for (docs/diagnosis.md). Under a
+uniform prior the IMM named a fault before any (pre-onset S0 on 0–20 % of the steps) and
+the wrong INS after an onset on some records (`fault_bank` defaults, 2e-7 at 100 s)."""
+
+
+def _start(m, floor, prior, threshold, interacting=False):
     if not 0.0 < floor < 1.0 / m:
         raise ValueError(f"floor must be in (0, 1/{m}); got {floor}")
     if not 0.0 <= threshold < 1.0:
         raise ValueError(f"threshold must be a probability in [0, 1); got {threshold}")
     with jax.numpy_dtype_promotion("standard"):
-        if prior is None:
+        if prior is None and interacting and m > 1:  # a healthy start (`HEALTHY_START`)
+            faults = min(HEALTHY_START, 0.5 / (m - 1))
+            lp0 = jnp.log(jnp.asarray(np.r_[1.0 - faults * (m - 1), np.full(m - 1, faults)]))
+        elif prior is None:
             lp0 = jnp.full(m, -jnp.log(float(m)))
-        elif (p := _concrete(prior)) is None:  # traced: checked by the caller's trace
+        elif (p := concrete(prior)) is None:  # traced: checked by the caller's trace
             lp0 = jnp.log(jnp.asarray(prior, float))
         else:
             if p.shape != (m,) or not np.all(np.isfinite(p)) or np.any(p < 0) or p.sum() <= 0:
@@ -299,40 +268,6 @@ def _start(m, floor, prior, threshold):
                 )
             lp0 = jnp.log(jnp.asarray(p / p.sum()))
     return lp0, jnp.log(jnp.asarray(floor))
-
-
-def _concrete(x):
-    """`x` as a float64 NumPy array, or None when it is traced (inside a caller's `jit`)."""
-    return np.asarray(x, dtype=float) if is_concrete(x) else None
-
-
-def _check_zs(zs, bank: Bank, ndims):
-    """`zs` as float64 (…, K, m), refused with a one-line error when its shape does not match
-    the bank's measurement (m columns, one per pair) or when a value is not finite (one NaN
-    would make every later probability NaN)."""
-    m = bank.h.shape[1]
-    shape = " or ".join({2: "(K, m)", 3: "(runs, K, m)"}[d] for d in ndims)
-    z = _concrete(zs)
-    traced = z is None
-    z = jnp.asarray(zs, float) if traced else z
-    if z.ndim not in ndims or z.shape[-1] != m:
-        hint = ""
-        if z.ndim in ndims and z.shape[-2] == m:
-            hint = " (transposed? time runs along the second-to-last axis)"
-        raise ValueError(
-            f"zs must have shape {shape} with m = {m} (one column per measured pair the bank "
-            f"models; fault_bank: pairs (0, j), j = 1 … {m}, in order); got {z.shape}{hint}"
-        )
-    if not traced:
-        bad = ~np.isfinite(z)
-        if bad.any():
-            where = np.argwhere(bad)[0]
-            at = f"step {where[-2]}" + (f" of run {where[0]}" if z.ndim == 3 else "")
-            raise ValueError(
-                f"zs has a non-finite value ({z[tuple(where)]}) at {at}, column {where[-1]}: "
-                "the hypothesis probabilities would be NaN from there on; drop or fill it"
-            )
-    return jnp.asarray(z, float)
 
 
 def _probabilities(lp, ll, log_trans, log_floor):
@@ -410,7 +345,7 @@ class GainBank(eqx.Module):
         warmup = min(50, n_steps) if warmup is None else warmup
         if isinstance(warmup, bool) or not 0 <= int(warmup) <= n_steps:
             raise ValueError(f"warmup must be an integer in [0, n_steps={n_steps}]; got {warmup!r}")
-        _check_bank(bank)
+        check_bank(bank)
         return cls(bank, *_schedules(bank, n_steps, int(healthy)), int(warmup))
 
 
@@ -510,10 +445,10 @@ def run_gains(
     `zs` (K, m), or (B, K, m) for a batch of runs. **Returns** `(probabilities,
     decisions)` with the leading shape of `zs` (and, with `return_fit=True`, the model-fit
     dict of `run_bank`; the NIS uses each step's scheduled S)."""
-    lp0, log_floor = _start(gb.bank.size, floor, prior, threshold)
+    lp0, log_floor = _start(gb.bank.size, floor, prior, threshold, interacting)
     _check_fit(fit_window, fit_level)
-    _check_bank(gb.bank)
-    zs = _check_zs(zs, gb.bank, (2, 3))
+    check_bank(gb.bank)
+    zs = check_zs(zs, gb.bank, (2, 3))
     fn = lambda z: _run_gains(gb, z, log_floor, lp0, interacting)
     probs, nis = fn(zs) if zs.ndim == 2 else jax.vmap(fn)(zs)
     m = gb.bank.h.shape[1]
