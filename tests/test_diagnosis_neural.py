@@ -252,6 +252,16 @@ def test_detectors_refuse_a_nan_window_on_the_host_and_pass_a_traced_one():
         assert jit_classify(det, q).shape == (3,)
         assert jax.vmap(det.classify)(q[None]).shape == (1, 3)
         np.testing.assert_array_equal(det.classify(x[:3]), jit_classify(det, x[:3]))
+    # the threshold is a value: another one compiles nothing (each compiled `classify` again)
+    # and classifies as the scores say
+    for name in ("PNNDirect", "PNNBank", "MLPClassifier"):
+        det = eqx.tree_at(lambda d: d.threshold, dets[name], jnp.asarray(0.999, float))
+        with CompileCounter() as compiles:
+            strict = np.asarray(det.classify(x[:3]))
+        assert compiles.compiles == 0, (name, compiles.names)
+        assert np.all((strict == 0) | (strict == np.asarray(dets[name].classify(x[:3])))), name
+    with pytest.raises(ValueError, match=r"^threshold must be a number in \[0, 1\); got 1.5"):
+        nl.PNNBank.fit(x, y, 4, 1.0, threshold=1.5)
     with pytest.raises(ValueError, match=r"^x \(MLPClassifier query features\) must be finite"):
         dets["MLPClassifier"].outputs(q)
     sets = [(x[:20], rng.normal(size=(20, 2))), (x[20:], rng.normal(size=(20, 2)))]

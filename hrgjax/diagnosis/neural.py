@@ -238,6 +238,17 @@ def _check_threshold(threshold, low: float = 0.0) -> float:
     return float(threshold)
 
 
+def _threshold_value(threshold):
+    """A detector's `threshold` field as a float64 0-d array — a value, so a sweep over it
+    compiles nothing (a static float compiled `classify` again per value) — checked by
+    `_check_threshold` where it is known; a traced one passes."""
+    return jnp.asarray(threshold if _is_traced(threshold) else _check_threshold(threshold), float)
+
+
+def _is_traced(x) -> bool:
+    return isinstance(x, jax.core.Tracer)
+
+
 def _check_fault_classes(y, n_classes):
     """`n_classes` >= 2 (none and at least one fault) and `y` integer labels in
     [0, n_classes), or a one-line error: a bank of no detector raised "Need at least one
@@ -260,7 +271,7 @@ class PNNDirect(eqx.Module):
     when its posterior exceeds `threshold`."""
 
     pnn: PNN
-    threshold: float = eqx.field(static=True, default=0.9)
+    threshold: jax.Array = eqx.field(converter=_threshold_value, default=0.9)
 
     @classmethod
     def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
@@ -285,7 +296,7 @@ class PNNBank(eqx.Module):
     posterior is largest, if above `threshold`."""
 
     pnns: list[PNN]
-    threshold: float = eqx.field(static=True, default=0.9)
+    threshold: jax.Array = eqx.field(converter=_threshold_value, default=0.9)
 
     @classmethod
     def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
@@ -334,7 +345,7 @@ class MLPClassifier(eqx.Module):
     sigmoid is applied in [`outputs`][hrgjax.diagnosis.neural.MLPClassifier.outputs].)"""
 
     nets: list[MLP]
-    threshold: float = eqx.field(static=True, default=0.5)
+    threshold: jax.Array = eqx.field(converter=_threshold_value, default=0.5)
 
     @classmethod
     def fit(cls, x, y, n_classes: int, *, key, hidden=(20, 10), steps: int = 1000,
