@@ -466,11 +466,15 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
              (-k_e * 180.0 / np.pi, "as a table angle in radians would", "give "
               "'table_rate_dps' in °/s (and 'table_angle_deg', if given, in degrees)")]  # fmt: skip
     if integrated:
-        looks.append((-k_e / 1000.0, "as a table angle integrated over time stamps in "
-                      "milliseconds would", "give 'time_s' in seconds"))  # fmt: skip
-    for expected, like, fix in looks:
-        if abs(ratio - expected) < 0.3 * abs(expected):
-            raise ValueError(f"{said}, {like} ({expected:.4g}; {degrees}): {fix}")
+        looks += [(-k_e / 1000.0, "as a table angle integrated over time stamps in "
+                   "milliseconds would", "give 'time_s' in seconds"),
+                  (-k_e * 60.0, "as a table angle integrated over time stamps in minutes "
+                   "would", "give 'time_s' in seconds")]  # fmt: skip
+    near = [x for x in looks if abs(ratio - x[0]) < 0.3 * abs(x[0])]  # k_e is only nominal
+    if near:  # 57.3 (radians) and 60 (minutes) lie within k_e's tolerance: both named
+        like = " or ".join(f"{like} ({expected:.4g})" for expected, like, _ in near)
+        fix = " or ".join(dict.fromkeys(f for _, _, f in near))
+        raise ValueError(f"{said}, {like} ({degrees}): {fix}")
     low, high = WAVE_TABLE_RATIO
     if not low <= abs(ratio) <= high:
         raise ValueError(
@@ -495,9 +499,10 @@ def check_table_angle(table_angle_deg, integral_deg, run, moving) -> None:
     hint = {np.pi / 180.0: ": it looks like radians (np.degrees)",
             180.0 / np.pi: ": it looks like 'table_rate_dps' is in rad/s",
             1e-3: ": it looks like 'time_s' is in milliseconds (÷ 1000)",
+            60.0: ": it looks like 'time_s' is in minutes (× 60)",
             1e3: ": it looks like 'table_rate_dps' is per millisecond, or 'time_s' in "
                  "kiloseconds"}  # fmt: skip
-    why = next((h for r, h in hint.items() if abs(ratio - r) < 0.3 * r), "")
+    why = next((h for r, h in hint.items() if abs(ratio - r) < 0.02 * r), "")
     raise ValueError(
         f"column 'table_angle_deg' turns {ratio:.4g} × the integral of 'table_rate_dps' over "
         f"'time_s' over the rotation runs; the two must agree (within 10 %){why}"

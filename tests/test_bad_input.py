@@ -553,6 +553,11 @@ def test_physically_impossible_numbers_are_refused_with_a_hint():
         (dict(time_s=1000 * t), r"turns -0.000554 × the table .* time stamps in milliseconds"),
         (dict(time_s=1000 * t, table_angle_deg=5.0 * t), r"^column 'table_angle_deg' turns 0.001 "
          r"× the integral .*: it looks like 'time_s' is in milliseconds \(÷ 1000\)$"),
+        (dict(time_s=t / 60, table_angle_deg=5.0 * t), r"^column 'table_angle_deg' turns 60 × the"
+         r" integral .*: it looks like 'time_s' is in minutes \(× 60\)$"),  # not rad/s (57.3)
+        (dict(time_s=t / 60), r"turns -33.24 × the table .* table angle in radians would "
+         r"\(-31.74\) or .* in minutes would \(-33.24\) .* give 'table_rate_dps' in °/s .* or "
+         r"give 'time_s' in seconds$"),
         (dict(wave_angle_deg=-5.54 * 5.0 * t), r"turns -5.54 × the table .* check the units"),
         (dict(wave_angle_deg=cols["wave_angle_deg"] + np.where(t > 30, 10.0, 0.0)),
          r"^column 'wave_angle_deg' jumps \+8.615° from row 60 to row 61 of run 0"),
