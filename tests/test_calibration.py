@@ -627,9 +627,9 @@ def test_one_fit_call_for_every_compensator_and_the_old_keywords_still_work():
     th = np.linspace(-90.0, 90.0, 7)
     same = lambda a, b: np.testing.assert_array_equal(a.drift_dph(th, 0.0), b.drift_dph(th, 0.0))
     fourier = FourierCompensator(temperature_degree=2, window_s=5.0)
-    new = fourier.fit(data, key=key, raw=data)
+    new = fourier.fit(windows, key=key, raw=data)  # raw: the windows' session (checked)
     for old in (FourierCompensator(temperature_degree=2).fit(data, window_s=5.0),
-                FourierCompensator(temperature_degree=2).fit(data, 5.0), fourier.fit(windows)):  # fmt: skip
+                FourierCompensator(temperature_degree=2).fit(data, 5.0), fourier.fit(data)):  # fmt: skip
         same(new, old)
     mlp = MLPCompensator(steps=20, e2e_steps=2, mode="end_to_end", window_s=5.0)
     new = mlp.fit(windows, key=key, raw=data)

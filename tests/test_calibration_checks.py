@@ -429,3 +429,97 @@ def test_plans_and_self_calibration_refuse_bad_arguments_before_simulating():
          r"^MLPCompensator.fit: key= .* got a key array of shape \(2,\)"),
     ):  # fmt: skip
         _bad(call, match)
+
+
+def test_raw_must_be_the_windows_session_and_is_given_once():
+    """Audit: `PhysicalCompensator().fit(A, raw=B)` fitted B and dropped A; the end-to-end MLP
+    given windows of A and `raw=B` trained stage one on A and end to end on B. `raw` beside
+    samples is refused (pass them once), and beside windows unless it is their session —
+    by every compensator, before any fit."""
+    data = _moving_run(lambda t: 5 * t, lambda t: 5 + 0 * t)
+    other = _moving_run(lambda t: 5 * t, lambda t: 5 + 0 * t, drift_dph=2.5)  # same times
+    w, key = cal.reduce(data), jax.random.key(0)
+    e2e = cal.MLPCompensator(steps=1, e2e_steps=1, mode="end_to_end")
+    once = r": data are the samples \(MeasuredData\) and raw= gives samples too; pass "
+    for comp in (cal.PhysicalCompensator(), e2e, cal.FourierCompensator(), cal.NoCompensation()):
+        who = f"^{type(comp).__name__}.fit"
+        _bad(lambda c=comp: c.fit(data, key=key, raw=data), who + once + r"the samples once")
+        _bad(lambda c=comp: c.fit(w, key=key, raw=other), who + r": raw is not the session the "
+             r"windows were reduced from \(run 0's window over samples \[0, 30\) has mean wave "
+             r"angle .*, raw's samples there .*\); pass the samples behind them")  # fmt: skip
+        _bad(lambda c=comp: c.fit(w, key=key, raw=data.columns), who + r": raw must be hrgjax")
+    _bad(
+        lambda: cal.PrecessionCompensator().fit(data, raw=data),
+        "^PrecessionCompensator.fit" + once + r"the samples once: fit\(data\)$",
+    )
+    nc = cal.NoCompensation()  # the windows' own session passes, any window length or subset
+    for windows in (w, cal.reduce(data, window_s=None), w.select(np.arange(len(w)) % 2 == 0)):
+        assert nc.fit(windows, raw=data) is nc
+    two = hg.MeasuredData({k: np.r_[v, v] for k, v in data.columns.items()}
+                          | {"run": np.repeat([0, 1], len(data))})  # fmt: skip
+    _bad(lambda: nc.fit(w, raw=two), r"\(raw has run 1, which has no window\)")
+    _bad(lambda: nc.fit(cal.reduce(two), raw=data), r"\(the windows have run 1, which raw has")
+
+
+def test_physical_starting_values_are_checked_when_built():
+    """Audit: `PhysicalCompensator(initial=…)` took 5 values, NaN or a 2-D array, refused (or
+    fitted from NaN) only inside `fit`. One line naming `initial`, the count and the order."""
+    from hrgjax.calibration import design
+
+    x0 = np.asarray(design.nominal_values())
+    form = (r"^PhysicalCompensator: initial must be None or 12 finite real numbers, 1-D, in the "
+            r"order of PARAMETERS \(k_e0, k_e_tc, .*, cross_talk\) \[SI\]; got ")  # fmt: skip
+    for bad, got in ((x0[:5], r"ndarray of shape \(5,\)"), (x0[None], r"ndarray of shape \(1, "),
+                     (np.r_[x0[:3], np.nan, x0[4:]], r"nan at index 3 \(bias1\)"),
+                     ("x0", "str")):  # fmt: skip
+        _bad(lambda b=bad: cal.PhysicalCompensator(initial=b), form + got)
+    _bad(lambda: cal.PhysicalCompensator().fit(_moving_run(np.sin, np.cos), initial=x0[:5]),
+         r"^PhysicalCompensator.fit: initial must be None or 12")  # fmt: skip
+    assert cal.PhysicalCompensator(initial=list(x0)).initial == list(x0)
+
+
+def test_numpy_and_jax_scalars_are_settings_as_the_numbers_they_hold():
+    """Audit: `MLPCompensator(learning_rate=jnp.float64(0.01))` and `FourierCompensator(
+    window_s=jnp.array(10.0))` were refused ("must be a finite number > 0; got Array(0.01)")
+    after equinox's "JAX array is being set as static" warning (an error here), and NumPy
+    scalars were kept as arrays in static fields. They are stored as Python numbers; a
+    traced setting is refused in one line."""
+    cases = (
+        (cal.MLPCompensator, "learning_rate", jnp.float64(0.01), 0.01),
+        (cal.MLPCompensator, "steps", np.int64(7), 7),
+        (cal.FourierCompensator, "window_s", jnp.array(10.0), 10.0),
+        (cal.FourierCompensator, "harmonics", np.array(3), 3),
+        (cal.PhysicalCompensator, "max_steps", jnp.array(8), 8),
+        (cal.PhysicalCompensator, "window_s", np.float32(5.0), 5.0),
+        (cal.PrecessionCompensator, "settle_s", np.float32(12.5), 12.5),
+        (cal.NoCompensation, "k_e", jnp.array(0.5), 0.5),
+    )
+    for cls, name, value, number in cases:
+        got = getattr(cls(**{name: value}), name)
+        assert got == number and type(got) is type(number), (cls, name, got)
+    for cls, name, value, _ in cases:
+        traced = rf"^{cls.__name__}: {name} must be a number fixed when the compensator is built"
+        with pytest.raises(ValueError, match=traced + "; got a traced value") as err:
+            jax.jit(lambda v, c=cls, n=name: getattr(c(**{n: v}), n))(value)
+        assert "\n" not in str(err.value)
+
+
+def test_a_settling_longer_than_the_sweeps_is_named_as_such():
+    """Audit: `self-calibrate --settle` longer than the sweeps said they "turn one way only"
+    (no sample left in either direction); now the samples left after settle_s are named."""
+    with pytest.raises(ValueError, match=r"^at 20 °C a sweep of 180 s keeps 0 samples after "
+                       r"settle_s = 1000 s, fewer than 20: give a settle_s shorter"):  # fmt: skip
+        cal.PrecessionCompensator(settle_s=1000.0).fit(_sweeps(180.0))
+    with pytest.raises(ValueError, match=r"^at 20 °C a sweep of 180 s keeps 11 samples after "):
+        cal.PrecessionCompensator(settle_s=170.0).fit(_sweeps(180.0))
+
+
+def test_evaluation_refuses_a_temperature_in_kelvin():
+    """Audit: `FourierCompensator.drift_dph([0.], 293.15)` extrapolated to 293 °C without a
+    word. `drift_dph` and `scale_factor_at` refuse temperatures beyond the plausible range,
+    kelvin named."""
+    comp = cal.FourierCompensator(drift_coef=jnp.zeros((1, 5)), sf_coef=jnp.ones((1, 5)))
+    for method in ("drift_dph", "scale_factor_at"):
+        _bad(lambda m=method: getattr(comp, m)([0.0, 10.0], [293.15, 300.0]),
+             rf"^FourierCompensator.{method}: temperature_c = 293.15 at index 0 is outside "
+             r"the plausible range -100 … 150 °C — these look like kelvin .*subtract")  # fmt: skip

@@ -1054,3 +1054,46 @@ def test_bench_time_is_one_program_per_plan_length():
         != hash(d.BenchModel())
     )
     assert "settle_s=1700.0" in repr(bench)
+
+
+def test_noise_arguments_are_checked_as_hg_noise_checks_them():
+    """Audit: `criterion(plan, "drift", angle_white=1.0)` (1″ typed as 1 rad) returned 3.55 °/h,
+    `arw=0.01` and `gauss_markov=(0.05, 600)` (datasheet units as SI) too, and a bad τ was
+    reported as "arw must be > 0". Each is refused in one line naming the argument, with
+    `hg.Noise`'s ranges and unit hints; traced values pass (the design differentiates them)."""
+    from hrgjax.calibration._models import noise_vector
+
+    plan = d.BenchPlan.from_segments([SEGMENTS[0]])
+    for kw, match in (
+        ({"angle_white": 1.0}, r"^angle_white = 1 is outside the plausible range 0 … 0.1 rad "
+         r"electrical — ″ → ×hrgjax.units.ARCSEC"),
+        ({"arw": 0.01}, r"^arw = 0.01 is outside the plausible range 0 … 0.0025 rad/√s — °/√h"),
+        ({"gauss_markov": (0.05, 600.0)}, r"^gauss_markov σ = 0.05 is outside the plausible "
+         r"range 0 … 0.01 rad/s — °/h → ×hrgjax.units.DEG_PER_H"),
+        ({"gauss_markov": (1e-7, 0.0)}, r"^gauss_markov τ must be a finite number > 0 \[s\]"),
+        ({"arw": -1e-6}, r"^arw must be a finite number > 0 \[rad/√s\]; got -1e-06"),
+        ({"angle_white": np.nan}, r"^angle_white must be a finite number ≥ 0"),
+        ({"gauss_markov": 1e-7}, r"^gauss_markov must be a pair \(σ \[rad/s\], τ \[s\]\)"),
+        ({"arw": "1e-6"}, r"^arw must be a single real number \[rad/√s\]; got str"),
+    ):  # fmt: skip
+        with pytest.raises((ValueError, TypeError), match=match) as err:
+            d.criterion(plan, "drift", **kw)
+        assert "\n" not in str(err.value)
+    noise = lambda a: noise_vector(a, (a, 600.0), a)  # noqa: E731 — 1.0 of each: implausible
+    assert float(jax.grad(lambda a: noise(a).sum())(1.0)) == 3.0
+    np.testing.assert_array_equal(jax.jit(noise)(1.0), [1.0, 1.0, 600.0, 1.0])
+
+
+def test_plan_segments_take_numpy_and_jax_scalars():
+    """Audit: `from_segments` refused np.int64(60), np.float32 and 0-d arrays ("must be a
+    finite number; got np.int64(60)"): any real scalar is its number; a traced one is named."""
+    base = {"kind": "static", "temperature_c": 20.0, "wave_angle_deg": 0.0, "duration_s": 60.0}
+    for value in (np.int64(60), np.float32(60.0), np.array(60.0), jnp.array(60), np.arange(61)[-1]):
+        plan = d.BenchPlan.from_segments([{**base, "duration_s": value}])
+        assert float(plan.duration_s[0]) == 60.0
+    build = lambda t: d.BenchPlan.from_segments([{**base, "temperature_c": t}])  # noqa: E731
+    with pytest.raises(ValueError, match=r"^segments\[0\] \(static\): 'temperature_c' must be a "
+                       r"finite number \[°C\]; got a traced value"):  # fmt: skip
+        jax.jit(lambda t: build(t).duration_s)(20.0)
+    with pytest.raises(ValueError, match=r"'duration_s' must be a finite number \[s\]; got bool"):
+        d.BenchPlan.from_segments([{**base, "duration_s": np.True_}])

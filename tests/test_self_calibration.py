@@ -232,7 +232,10 @@ def test_self_calibration_inputs_are_named():
                             "table_rate_dps": np.zeros(5), "wave_angle_deg": np.zeros(5)})  # fmt: skip
     with pytest.raises(ValueError, match="needs virtual-precession data"):
         sc.PrecessionCompensator().fit(data)
-    one_way = hg.MeasuredData(data.columns | {"precession_dps": np.full(5, 1.0)})
+    n = 25  # a sweep keeps ≥ 20 samples (checked first), in one direction
+    one_way = hg.MeasuredData({"time_s": np.arange(float(n)), "temperature_c": np.full(n, 20.0),
+                               "table_rate_dps": np.zeros(n), "wave_angle_deg": np.arange(n) * 1.0,
+                               "precession_dps": np.full(n, 1.0)})  # fmt: skip
     with pytest.raises(ValueError, match="one way only"):
         sc.PrecessionCompensator(settle_s=0.0).fit(one_way)
     with pytest.raises(ValueError, match="two holds"):

@@ -42,12 +42,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import check_finite_host, check_numbers
 from .._compiled import bucket_pad, bucket_size, device, program
 from .._warn import user_stacklevel
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..units import DEG, group_temperatures
+from ._raw import check_raw
 from .reduce import (
     K_E_NOMINAL,
     WINDOW_S,
@@ -148,6 +150,30 @@ def check_number(who: str, name: str, value, extra: str, *, minimum=None, strict
         raise ValueError(f"{who}: {name} must be a finite number{bound}{extra}; got {value!r}")
 
 
+def plain_setting(who: str, name: str):
+    """An `eqx.field` converter for the numeric setting `name` of `who` (a static field): a
+    real number given as a NumPy scalar, a 0-d array or a concrete JAX scalar becomes the
+    Python int or float it holds (a static field keeps what it is given: an array there
+    warned, and the checks refused it); a traced one is refused in one line (a setting is
+    fixed when the compensator is built). Anything else is left to the field's check."""
+
+    def convert(value):
+        if isinstance(value, jax.core.Tracer):
+            raise ValueError(f"{who}: {name} must be a number fixed when the compensator is "
+                             "built; got a traced value (jit, vmap or grad)")  # fmt: skip
+        real = getattr(getattr(value, "dtype", None), "kind", None) in ("i", "u", "f")
+        if real and isinstance(value, np.generic | np.ndarray | jax.Array) and value.ndim == 0:
+            return value.item()
+        return value
+
+    return convert
+
+
+def setting_field(who: str, name: str, default):
+    """A static numeric setting of `who` named `name` with its `default` (`plain_setting`)."""
+    return eqx.field(static=True, default=default, converter=plain_setting(who, name))
+
+
 class FromField(enum.Enum):
     """The default of a deprecated `fit` keyword: the compensator's field of that name."""
 
@@ -198,13 +224,15 @@ class AbstractCompensator(eqx.Module):
           weights; required there); the deterministic ones ignore it.
         - `raw`: the raw samples behind `data` when `data` are windows; compensators that
           need samples (the physical grey box, the MLP trained end to end) take them from
-          here, the others ignore it.
+          here, the others do not use them. Every compensator checks them: refused beside
+          `MeasuredData` (pass the samples once) and, beside windows, unless they are the
+          windows' session (runs, and each window's mean time, temperature and wave angle).
 
         **Returns:** a new fitted compensator of the same class (the object is not changed).
 
         **Raises:** `ValueError` for data the method cannot fit (no static or no rotation
-        runs, too few points …); `TypeError` (or `ValueError`) when samples are needed and
-        not given.
+        runs, too few points …) or a `raw` refused as above; `TypeError` (or `ValueError`)
+        when samples are needed and not given.
         """
 
     @abc.abstractmethod
@@ -274,7 +302,8 @@ class AbstractCompensator(eqx.Module):
         return dataclasses.replace(self, **reset) if reset else self
 
     def drift_dph(self, theta_deg, temperature_c) -> np.ndarray:
-        """`drift` in the bench's units: θ [°] in, drift [°/h] out (NumPy)."""
+        """`drift` in the bench's units: θ [°] in, drift [°/h] out (NumPy). A temperature
+        outside `hrgjax.plausible.RANGES` (kelvin for °C) is refused in one line."""
         return self._pointwise("drift", theta_deg, temperature_c) / DEG * 3600.0
 
     def scale_factor_at(self, theta_deg, temperature_c) -> np.ndarray:
@@ -284,7 +313,8 @@ class AbstractCompensator(eqx.Module):
     def _pointwise(self, which: str, theta_deg, temperature_c) -> np.ndarray:
         """`which` ("drift" or "scale_factor") at every (θ [°], T [°C]) pair, as NumPy: one
         compiled program per compensator type and padded size (powers of two). A NaN or inf
-        θ or T, or non-numbers, are refused in one line naming the argument."""
+        θ or T, or non-numbers, are refused in one line naming the argument, as is a T
+        outside `plausible.RANGES["temperature_c"]` (kelvin: the hint says so)."""
         method = f"{type(self).__name__}.{'drift_dph' if which == 'drift' else 'scale_factor_at'}"
         for name, x, unit in (
             ("theta_deg", theta_deg, "°"),
@@ -292,6 +322,7 @@ class AbstractCompensator(eqx.Module):
         ):
             check_numbers(f"{method}: {name}", x, f"real numbers [{unit}]")
             check_finite_host(f"{method}: {name}", np.asarray(x, dtype=float))
+        plausible.check(f"{method}: temperature_c", temperature_c, "temperature_c")
         th = np.asarray(theta_deg, dtype=float) * DEG
         try:
             tc = np.broadcast_to(np.asarray(temperature_c, dtype=float), th.shape)
@@ -466,7 +497,7 @@ def domain_of(temperature_c) -> dict:
 class NoCompensation(AbstractCompensator):
     """The raw gyro: D = 0, SF = 1 (only the nominal angular gain)."""
 
-    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    k_e: float = setting_field("NoCompensation", "k_e", K_E_NOMINAL)
 
     def __check_init__(self):
         check_k_e(self.k_e)
@@ -477,7 +508,9 @@ class NoCompensation(AbstractCompensator):
         return "raw"
 
     def fit(self, data, *, key=None, raw=None) -> NoCompensation:
-        """Nothing to fit: returns `self` (the common interface's arguments are not used)."""
+        """Nothing to fit: returns `self` (the common interface's arguments are not used;
+        `raw` is checked as every compensator's)."""
+        check_raw("NoCompensation.fit", data, raw)
         return self
 
     def drift(self, theta, temperature_c):

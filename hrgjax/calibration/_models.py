@@ -9,7 +9,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import concrete_value, is_concrete
+from .. import plausible
+from .._checks import check_number, concrete_value, describe, is_concrete
 from ..gyro import Gyro
 from ..pattern_noise import NoiseModel
 from ..profiles import Profile
@@ -96,24 +97,53 @@ def noise_vector(arw, gauss_markov, angle_white=None) -> jax.Array:
     """The design's noise vector [N, σ, τ, σ_a]: pattern ARW [rad/√s], Gauss–Markov σ
     [rad/s] and correlation time [s], white angle noise [rad per sample] — the fields of a
     [`NoiseModel`][hrgjax.pattern_noise.NoiseModel] as (possibly traced) numbers (defaults:
-    the default gyro's, `pattern_noise_model()`)."""
+    the default gyro's, `pattern_noise_model()`).
+
+    **Raises:** `ValueError` (`TypeError` for a non-number) in one line naming the field,
+    for a concrete value (traced ones pass: the design differentiates with respect to
+    them) that is not one finite real number, an `arw` or τ ≤ 0, a σ or `angle_white` < 0,
+    or one beyond its range in [`hrgjax.plausible.RANGES`][hrgjax.plausible.RANGES] (the
+    `hrgjax.Noise` ones, `NOISE_FIELDS`: a datasheet's °/√h, °/h or arc-seconds typed as
+    SI), or a `gauss_markov` that is not a pair (σ, τ)."""
     if arw is None or gauss_markov is None or angle_white is None:
         default = pattern_noise_model()
         arw = default.angle_random_walk if arw is None else arw
         if gauss_markov is None:
             gauss_markov = (default.gm_sigma, default.gm_time)
         angle_white = default.angle_white if angle_white is None else angle_white
-    sigma, tau = gauss_markov
-    concrete = all(is_concrete(x) for x in (arw, sigma, tau, angle_white))
-    if concrete and not (
-        float(arw) > 0 and float(sigma) >= 0 and float(tau) > 0 and float(angle_white) >= 0
-    ):
-        raise ValueError(
-            f"arw must be > 0 [rad/√s], gauss_markov (σ ≥ 0 [rad/s], τ > 0 [s]) and "
-            f"angle_white ≥ 0 [rad]; got arw={arw!r}, gauss_markov={(sigma, tau)!r}, "
-            f"angle_white={angle_white!r}"
-        )
+    try:
+        sigma, tau = gauss_markov
+    except (TypeError, ValueError):
+        raise ValueError("gauss_markov must be a pair (σ [rad/s], τ [s]) or None; got "
+                         f"{describe(gauss_markov)}") from None  # fmt: skip
+    for name, x in (("arw", arw), ("gauss_markov σ", sigma), ("gauss_markov τ", tau),
+                    ("angle_white", angle_white)):  # fmt: skip
+        if is_concrete(x):
+            _check_noise_number(name, x)
     return jnp.asarray([arw, sigma, tau, angle_white], dtype=float)
+
+
+NOISE_FIELDS = {
+    "arw": ("> 0", "rad/√s", "noise_arw"),
+    "gauss_markov σ": ("≥ 0", "rad/s", "noise_bias_instability"),
+    "gauss_markov τ": ("> 0", "s", None),
+    "angle_white": ("≥ 0", "rad per sample", "noise_angle_white"),
+}
+"""Each noise argument of the design: its sign, unit and range in
+[`hrgjax.plausible.RANGES`][hrgjax.plausible.RANGES] (`hrgjax.Noise`'s: the pattern's ARW
+and σ are k_e × the gyro's, inside the gyro's range)."""
+
+
+def _check_noise_number(name: str, x) -> None:
+    """Refuse the concrete noise argument `name` (`NOISE_FIELDS`) in one line."""
+    sign, unit, quantity = NOISE_FIELDS[name]
+    check_number(name, x, unit)
+    value = float(np.asarray(x))
+    ok = value > 0 if sign == "> 0" else value >= 0
+    if not (np.isfinite(value) and ok):
+        raise ValueError(f"{name} must be a finite number {sign} [{unit}]; got {value:g}")
+    if quantity is not None:
+        plausible.check(name, value, quantity)
 
 
 def measured_rate(values, theta, temperature_c, rate, temperature_rate):

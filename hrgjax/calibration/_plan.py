@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import is_concrete, numeric_problem
+from .._checks import describe, is_concrete, is_finite_real, numeric_problem
 from .._compiled import device, fused
 from .experiment import QUICK_DURATION, QUICK_TEMPERATURES, SEED_ANGLES, SEED_TEMPERATURES
 
@@ -188,11 +188,7 @@ class BenchPlan(eqx.Module):
             for k in need + optional:
                 if k not in seg:
                     continue
-                x = seg[k]
-                if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-                    raise ValueError(f"{here} ({kind}): {k!r} must be a finite number "
-                                     f"[{SEGMENT_UNITS[k]}]; got {x!r}")  # fmt: skip
-                val[k] = float(x)
+                val[k] = _segment_number(f"{here} ({kind}): {k!r}", seg[k], SEGMENT_UNITS[k])
             t0 = val.get("temperature_c", val.get("temperature_start_c"))
             cols["temperature_c"].append(t0)
             cols["temperature_end_c"].append(val.get("temperature_end_c", t0))
@@ -223,6 +219,19 @@ class BenchPlan(eqx.Module):
             seg["duration_s"] = float(v["duration_s"][i])
             out.append(seg)
         return out
+
+
+def _segment_number(name: str, x, unit: str) -> float:
+    """A segment's value as a float: one finite real number — Python, NumPy (np.int64,
+    np.float32 …) or a 0-d array (NumPy, or JAX with a value) — or a one-line `ValueError`
+    naming `name` and its `unit`; a traced one too (a plan is built from numbers on the
+    host: jit, vmap or grad over a built `BenchPlan`'s leaves instead)."""
+    if isinstance(x, jax.core.Tracer):
+        raise ValueError(f"{name} must be a finite number [{unit}]; got a traced value (a plan "
+                         "is built from numbers: trace the BenchPlan's leaves instead)")  # fmt: skip
+    if not is_finite_real(x):
+        raise ValueError(f"{name} must be a finite number [{unit}]; got {describe(x)}")
+    return float(x)
 
 
 def float64_setting(x):

@@ -36,8 +36,10 @@ from ._compensator import (
     fit_windows,
     require_temperatures,
     setting,
+    setting_field,
     temperature_levels,
 )
+from ._raw import check_raw
 from .reduce import K_E_NOMINAL, WINDOW_S, RateWindows, check_k_e, check_window
 
 T_SCALE = 50.0
@@ -54,6 +56,9 @@ def _angle_basis(theta, harmonics: int, xp=jnp):
 def _temperature_basis(temperature_c, degree: int, t_ref: float, xp=jnp):
     x = (temperature_c - t_ref) / T_SCALE
     return xp.stack([x**k for k in range(degree + 1)], axis=-1)
+
+
+_WHO = "FourierCompensator"
 
 
 class FourierCompensator(AbstractCompensator):
@@ -83,14 +88,14 @@ class FourierCompensator(AbstractCompensator):
     `None` nor finite and > 0, or `k_e` outside (0, 1].
     """
 
-    harmonics: int = eqx.field(static=True, default=2)
-    temperature_degree: int | None = eqx.field(static=True, default=None)
-    fit_temperature_c: float = eqx.field(static=True, default=T_REF_C)
-    tolerance_c: float = eqx.field(static=True, default=1.0)
-    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    harmonics: int = setting_field(_WHO, "harmonics", 2)
+    temperature_degree: int | None = setting_field(_WHO, "temperature_degree", None)
+    fit_temperature_c: float = setting_field(_WHO, "fit_temperature_c", T_REF_C)
+    tolerance_c: float = setting_field(_WHO, "tolerance_c", 1.0)
+    k_e: float = setting_field(_WHO, "k_e", K_E_NOMINAL)
     drift_coef: jax.Array | None = None
     sf_coef: jax.Array | None = None
-    window_s: float | None = eqx.field(static=True, default=WINDOW_S)
+    window_s: float | None = setting_field(_WHO, "window_s", WINDOW_S)
     temperature_range: tuple[float, float] | None = eqx.field(
         static=True, default=None, converter=as_range
     )
@@ -171,7 +176,7 @@ class FourierCompensator(AbstractCompensator):
         - `data`: [`hrgjax.MeasuredData`][] or reduced
           [`RateWindows`][hrgjax.calibration.RateWindows].
         - `key`, `raw`: the common interface's; not used (the fit is linear least squares
-          on the reduced windows).
+          on the reduced windows), `raw` checked as every compensator's.
         - `window_s`: *deprecated*, give `FourierCompensator(window_s=…)`: the rotation-run
           window for the reduction [s] (default: the `window_s` field).
 
@@ -185,6 +190,7 @@ class FourierCompensator(AbstractCompensator):
         coefficients (`CONDITION_LIMIT`; the message says which, and what to add).
         """
         require_x64("FourierCompensator.fit")
+        check_raw("FourierCompensator.fit", data, raw)
         window_s = setting(self, "window_s", window_s)
         static, moving = fit_windows(data, self.k_e, window_s)
         if self.temperature_degree is None:

@@ -53,7 +53,9 @@ from ._compensator import (
     fit_windows,
     require_temperatures,
     setting,
+    setting_field,
 )
+from ._raw import check_raw
 from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, check_k_e, check_window
 
 ENCODINGS = ("periodic", "angle")
@@ -75,6 +77,9 @@ at +20 °C, 10 °C away 110× (docs/calibration.md). Two levels are the least th
 networks see T move; between levels the smoothness prior (`drift_t_curvature`,
 `sf_t_curvature`) keeps them near their at-level error, beyond them is another matter
 (docs/calibration.md: `correct` counts samples outside the calibrated range)."""
+
+
+_WHO = "MLPCompensator"
 
 
 class MLPCompensator(AbstractCompensator):
@@ -124,17 +129,17 @@ class MLPCompensator(AbstractCompensator):
     nor finite and > 0, or `k_e` outside (0, 1].
     """
 
-    drift_width: int = eqx.field(static=True, default=30)
-    sf_width: int = eqx.field(static=True, default=20)
+    drift_width: int = setting_field(_WHO, "drift_width", 30)
+    sf_width: int = setting_field(_WHO, "sf_width", 20)
     encoding: str = eqx.field(static=True, default="periodic")
-    steps: int = eqx.field(static=True, default=3000)
-    learning_rate: float = eqx.field(static=True, default=1e-3)
-    bin_deg: float = eqx.field(static=True, default=5.0)
-    e2e_steps: int = eqx.field(static=True, default=200)
-    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
-    st_width: int = eqx.field(static=True, default=0)
-    drift_t_curvature: float = eqx.field(static=True, default=1e-3)
-    sf_t_curvature: float = eqx.field(static=True, default=0.1)
+    steps: int = setting_field(_WHO, "steps", 3000)
+    learning_rate: float = setting_field(_WHO, "learning_rate", 1e-3)
+    bin_deg: float = setting_field(_WHO, "bin_deg", 5.0)
+    e2e_steps: int = setting_field(_WHO, "e2e_steps", 200)
+    k_e: float = setting_field(_WHO, "k_e", K_E_NOMINAL)
+    st_width: int = setting_field(_WHO, "st_width", 0)
+    drift_t_curvature: float = setting_field(_WHO, "drift_t_curvature", 1e-3)
+    sf_t_curvature: float = setting_field(_WHO, "sf_t_curvature", 0.1)
     drift_net: eqx.nn.MLP | None = None
     sf_net: eqx.nn.MLP | None = None
     st_net: eqx.nn.MLP | None = None
@@ -145,7 +150,7 @@ class MLPCompensator(AbstractCompensator):
     sf_offset: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
     sf_scale: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)
     mode: str = eqx.field(static=True, default="reduced")
-    window_s: float | None = eqx.field(static=True, default=WINDOW_S)
+    window_s: float | None = setting_field(_WHO, "window_s", WINDOW_S)
     temperature_range: tuple[float, float] | None = eqx.field(
         static=True, default=None, converter=as_range
     )
@@ -272,6 +277,7 @@ class MLPCompensator(AbstractCompensator):
         """
         require_x64("MLPCompensator.fit")
         check_key("MLPCompensator.fit: key= (the PRNG key of the initial weights)", key)
+        check_raw("MLPCompensator.fit", data, raw)
         if mode is not FROM_FIELD and mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}; got {mode!r}")
         if mode is not FROM_FIELD or window_s is not FROM_FIELD:

@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_numbers, concrete_value
 from .._compiled import device
 from .._x64 import require_x64
 from ..data import MeasuredData
@@ -63,6 +64,7 @@ from ._compensator import (
     check_whole,
     require_temperatures,
     setting,
+    setting_field,
     split_targets,
     temperature_levels,
 )
@@ -86,6 +88,7 @@ from ._plant import PLANT_RESONATOR as PLANT_RESONATOR
 from ._plant import known_plant
 from ._plant import plant_from_json as plant_from_json
 from ._plant import plant_to_json as plant_to_json
+from ._raw import check_raw
 from .reduce import K_E_NOMINAL, check_k_e, reduce
 from .reduce import RAMP_WINDOW_S as RAMP_WINDOW_S
 
@@ -163,10 +166,22 @@ class _FittedLaws(eqx.Module):
     corrected_rate = AbstractCompensator.corrected_rate  # with the hook above
 
 
-def _plain_number(v):
-    """A NumPy scalar (np.float64, np.int64) as a Python number: a static field holding a
-    NumPy scalar warns that an array is set as static; anything else is left for the check."""
-    return v.item() if isinstance(v, np.generic) and np.ndim(v) == 0 else v
+def _check_initial(who: str, initial) -> None:
+    """Refuse starting values that are not `None` or one finite real number per parameter
+    (1-D, the order of `PARAMETERS`), in one line naming `who`'s `initial` (a traced vector:
+    its shape only)."""
+    if initial is None:
+        return
+    form = (f"None or {len(NAMES)} finite real numbers, 1-D, in the order of PARAMETERS "
+            f"({', '.join(NAMES)}) [SI]")  # fmt: skip
+    check_numbers(f"{who}: initial", initial, form, shape=(len(NAMES),))
+    if (value := concrete_value(initial)) is not None and not np.all(np.isfinite(value)):
+        bad = int(np.flatnonzero(~np.isfinite(value))[0])
+        raise ValueError(f"{who}: initial must be {form}; got {value[bad]} at index {bad} "
+                         f"({NAMES[bad]})")  # fmt: skip
+
+
+_WHO = "PhysicalCompensator"
 
 
 class PhysicalCompensator(AbstractCompensator):
@@ -193,9 +208,9 @@ class PhysicalCompensator(AbstractCompensator):
       ripple turns its phase with the rate (by 2·atan(2k_eΩ/β): 5.5° at 5 °/s with 2 rad/s
       loops), so one SF(θ, T) holds it exactly at one rate; 0: the slow-rate limit.
     - `initial`: optional starting values of `fit` (order of
-      [`PARAMETERS`][hrgjax.calibration.physical.PARAMETERS], SI); `None` (default): from
-      harmonic fits of the reduced drift and scale factor at each temperature. A fitted
-      compensator has `None` here.
+      [`PARAMETERS`][hrgjax.calibration.physical.PARAMETERS], SI; 1-D, one finite number
+      each, checked here); `None` (default): from harmonic fits of the reduced drift and
+      scale factor at each temperature. A fitted compensator has `None` here.
     - `temperature_range` ((T_min, T_max) [°C], of the calibration samples) and
       `n_temperature_levels` (of its windows): set by `fit` (`None`: unknown). The laws
       extrapolate (`extrapolates` is `True`: beyond the bench's range its error stayed
@@ -204,14 +219,14 @@ class PhysicalCompensator(AbstractCompensator):
       counts the samples outside.
     """
 
-    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
-    window_s: float = eqx.field(static=True, default=PHYSICAL_WINDOW_S)
-    max_steps: int = eqx.field(static=True, default=64)
+    k_e: float = setting_field(_WHO, "k_e", K_E_NOMINAL)
+    window_s: float = setting_field(_WHO, "window_s", PHYSICAL_WINDOW_S)
+    max_steps: int = setting_field(_WHO, "max_steps", 64)
     values: jax.Array | None = None
     covariance: jax.Array | None = None
     stats: tuple = eqx.field(static=True, default=())
     plant: Gyro | None = eqx.field(default=None, converter=known_plant)
-    sf_rate: float = eqx.field(static=True, default=0.0, converter=_plain_number)
+    sf_rate: float = setting_field(_WHO, "sf_rate", 0.0)
     initial: jax.Array | None = None
     temperature_range: tuple[float, float] | None = eqx.field(
         static=True, default=None, converter=as_range
@@ -225,6 +240,7 @@ class PhysicalCompensator(AbstractCompensator):
         check_whole("PhysicalCompensator", "max_steps", self.max_steps, 1,
                     " (Levenberg–Marquardt steps)")  # fmt: skip
         check_number("PhysicalCompensator", "sf_rate", self.sf_rate, " [rad/s]")
+        _check_initial("PhysicalCompensator", self.initial)
         if self.plant is not None:  # its split inside the slow manifold's domain
             temps = None if self.temperature_range is None else np.linspace(
                 *self.temperature_range, 33)  # fmt: skip
@@ -337,7 +353,8 @@ class PhysicalCompensator(AbstractCompensator):
           are needed: the simulator reproduces each run), or reduced windows with the
           samples as `raw` (the samples are then reduced again with this compensator's
           `window_s`; the windows themselves are not used).
-        - `raw`: the raw samples, when `data` are windows.
+        - `raw`: the raw samples, when `data` are windows: the session they were reduced
+          from (checked, [`AbstractCompensator.fit`][hrgjax.calibration.AbstractCompensator.fit]).
         - `key`: the common interface's; not used (the fit is deterministic).
         - `initial`: *deprecated*, give `PhysicalCompensator(initial=…)`: starting values
           (order of `PARAMETERS`); default: the `initial` field.
@@ -345,13 +362,15 @@ class PhysicalCompensator(AbstractCompensator):
         **Returns:** a new fitted `PhysicalCompensator` (values, covariance, stats).
 
         **Raises:** `RuntimeError` without float64; `TypeError` without the raw samples;
-        `ValueError` without static or rotation runs, with fewer than 3 distinct temperatures
+        `ValueError` for `raw` beside `MeasuredData` or not the windows' session, without
+        static or rotation runs, with fewer than 3 distinct temperatures
         in the data (levels within 0.5 °C counted once; a ramp's 300-s windows count each) or
         fewer than 2 among the rotation runs — the laws in T need them, checked before the fit
         — or when the data leave parameters unidentified (a singular normal matrix; the
         message names them).
         """
         require_x64("PhysicalCompensator.fit")
+        check_raw("PhysicalCompensator.fit", data, raw)
         if raw is not None:
             data = raw
         if not isinstance(data, MeasuredData):
@@ -360,6 +379,7 @@ class PhysicalCompensator(AbstractCompensator):
                 "data or as raw="
             )
         initial = setting(self, "initial", initial)
+        _check_initial("PhysicalCompensator.fit", initial)
         windows = reduce(data, self.k_e, window_s=self.window_s)
         split_targets(windows)
         _require_law_temperatures(data, windows, self.k_e, self.window_s)

@@ -57,8 +57,11 @@ from ..gyro import Gyro
 from ..pattern_noise import STILL_RATE_DPS
 from ..profiles import Profile
 from ..units import DEG, DEG_PER_S, K_E_NOMINAL
-from ._compensator import AbstractCompensator
+from ._compensator import AbstractCompensator, check_number, check_whole, setting_field
+from ._raw import check_raw
 from ._runs import RunGroup, simulate_runs, switch_on_keys
+from ._sweeps import MIN_COVERAGE_DEG as MIN_COVERAGE_DEG
+from ._sweeps import sweeps_by_temperature
 from .experiment import QUICK_TEMPERATURES, Plan, run_plan
 from .reduce import check_k_e
 
@@ -168,6 +171,9 @@ def fit_sweeps(t, wave_angle, precession, weight, harmonics: int = 2):
     return coef[:j], coef[j : 2 * j]
 
 
+_WHO = "PrecessionCompensator"
+
+
 class PrecessionCompensator(AbstractCompensator):
     """The compensator a virtual-precession self-calibration gives (module docstring):
     the drift as a Fourier series in the measured angle at each calibrated temperature,
@@ -187,22 +193,20 @@ class PrecessionCompensator(AbstractCompensator):
       `fit`. The scale factor is the nominal 1: the sweeps do not calibrate it.
     """
 
-    harmonics: int = eqx.field(static=True, default=2)
-    settle_s: float = eqx.field(static=True, default=SETTLE_S)
-    temperature_bin: float = eqx.field(static=True, default=1.0)
-    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    harmonics: int = setting_field(_WHO, "harmonics", 2)
+    settle_s: float = setting_field(_WHO, "settle_s", SETTLE_S)
+    temperature_bin: float = setting_field(_WHO, "temperature_bin", 1.0)
+    k_e: float = setting_field(_WHO, "k_e", K_E_NOMINAL)
     temperatures_c: tuple[float, ...] = eqx.field(static=True, default=())
     drift_coef: jax.Array | None = None
     gain_coef: jax.Array | None = None
 
     def __check_init__(self):
         check_k_e(self.k_e)
-        if not (isinstance(self.harmonics, int) and self.harmonics >= 1):
-            raise ValueError(f"harmonics must be a whole number ≥ 1; got {self.harmonics!r}")
-        if not (np.isfinite(self.settle_s) and self.settle_s >= 0):
-            raise ValueError(f"settle_s must be ≥ 0 [s]; got {self.settle_s!r}")
-        if not (np.isfinite(self.temperature_bin) and self.temperature_bin > 0):
-            raise ValueError(f"temperature_bin must be > 0 [°C]; got {self.temperature_bin!r}")
+        check_whole(_WHO, "harmonics", self.harmonics, 1, " (number of 2nθ harmonics)")
+        check_number(_WHO, "settle_s", self.settle_s, " [s]", minimum=0.0)
+        check_number(_WHO, "temperature_bin", self.temperature_bin, " [°C]", minimum=0.0,
+                     strict=True)  # fmt: skip
 
     @property
     def name(self) -> str:
@@ -261,15 +265,18 @@ class PrecessionCompensator(AbstractCompensator):
     def fit(self, data, *, key=None, raw=None) -> PrecessionCompensator:
         """Fit to virtual-precession sweeps at rest (`data` with a `precession_dps` column,
         from [`run_precession_plan`][hrgjax.calibration.run_precession_plan]
-        or a gyro's own sweeps); `key` and `raw` are not used.
+        or a gyro's own sweeps); `key` and `raw` are not used (`raw` beside the samples is
+        refused: pass them once).
 
         **Raises:** `ValueError` for data without the column, force-to-rebalance output (a
-        `rebalance_rate_dps` column with `rebalance_on` absent or 1), a temperature without sweeps
-        in both directions, sweeps too short for the harmonics, sweeps in one direction
+        `rebalance_rate_dps` column with `rebalance_on` absent or 1), a sweep left with fewer
+        than 20 samples after `settle_s`, a temperature without sweeps in both directions,
+        sweeps too short for the harmonics, sweeps in one direction
         covering less than `MIN_COVERAGE_DEG` (120°) of the 180° (electrical) period, or a
         fitted constant gain S₀ further than `GAIN_TOLERANCE` from 1 (the column in the
         wrong unit: S₀ ≈ 180/π for rad/s)."""
         require_x64("PrecessionCompensator.fit")
+        check_raw("PrecessionCompensator.fit", data, raw, windows=False)
         if not isinstance(data, MeasuredData):
             raise TypeError("PrecessionCompensator.fit needs MeasuredData (the sweeps' samples)")
         if "precession_dps" not in data:
@@ -286,7 +293,7 @@ class PrecessionCompensator(AbstractCompensator):
                 "follows the commanded precession exactly, so the drift would read 0) — run "
                 "the sweeps in whole-angle mode (Control(mode='wa'), run_precession_plan)"
             )
-        groups = _sweeps_by_temperature(data, self.temperature_bin, self.settle_s)
+        groups = sweeps_by_temperature(data, self.temperature_bin, self.settle_s)
         temps, drift, sf = [], [], []
         for temp, runs in groups:
             t, th, rho, w = _padded(runs)
@@ -325,75 +332,6 @@ def _check_gain(s0: float, temp: float) -> None:
         f"precession_dps: at {temp:g} °C the sweeps' fitted gain S₀ = {s0:.4g}, expected "
         f"1 ± {GAIN_TOLERANCE:g} (the forcers' gain); {hint}"
     )
-
-
-def _sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
-    """[(temperature [°C], [(t, θ, ρ, used) per run])] sorted by temperature, each with runs
-    turning both ways."""
-    by_temp: dict[float, list] = {}
-    for idx in data.run_indices():
-        t = data["time_s"][idx]
-        rho = data["precession_dps"][idx] * DEG_PER_S
-        if np.all(rho == 0):
-            continue  # a static run: nothing to sweep
-        run = int(data["run"][idx[0]])
-        if np.any(data["table_rate_dps"][idx] != 0):
-            raise ValueError(f"run {run}: the table turns; virtual-precession sweeps are taken "
-                             "with the case at rest (table_rate_dps 0)")  # fmt: skip
-        temp = float(np.round(np.mean(data["temperature_c"][idx]) / bin_c) * bin_c)
-        used = t - t[0] >= settle_s
-        if np.any(rho[used] == 0):
-            first = float(t[used][rho[used] == 0][0])
-            raise ValueError(f"run {run}: the sweep pauses (precession_dps 0) at t = {first:g} s "
-                             "after settling; give each sweep its own run")  # fmt: skip
-        by_temp.setdefault(temp, []).append((t, data["wave_angle_deg"][idx] * DEG, rho, used))
-    if not by_temp:
-        raise ValueError("no virtual-precession sweeps in the data (every precession_dps is 0)")
-    out = []
-    for temp in sorted(by_temp):
-        runs = by_temp[temp]
-        signs = {float(np.sign(np.median(r[2][r[3]]))) for r in runs if r[3].sum() > 0}
-        if signs != {1.0, -1.0}:
-            raise ValueError(
-                f"at {temp:g} °C the sweeps turn one way only; the drift and the forcers' gain "
-                "separate only with sweeps in both directions (precession_plan runs ±ρ)"
-            )
-        if min(int(r[3].sum()) for r in runs) < 20:
-            raise ValueError(f"at {temp:g} °C a sweep keeps fewer than 20 samples after settle_s")
-        for sign, way in ((1.0, "+ρ"), (-1.0, "−ρ")):
-            arcs = [r[1][r[3]] / DEG for r in runs if np.median(r[2][r[3]]) * sign > 0]
-            covered = _coverage_deg(arcs)
-            if covered < MIN_COVERAGE_DEG:
-                raise ValueError(
-                    f"at {temp:g} °C the sweeps turning {way} cover {covered:.0f}° of the 180° "
-                    f"(electrical) of wave angle the 2nθ harmonics need (≥ {MIN_COVERAGE_DEG:g}° "
-                    "after settle_s): sweep over a half turn (180° electrical) in each direction "
-                    "(precession_plan does)"
-                )
-        out.append((temp, runs))
-    return out
-
-
-MIN_COVERAGE_DEG = 120.0
-"""Least arc of wave angle (electrical, mod 180°) the sweeps turning each way must cover at
-a temperature after `settle_s` [°]: the 2nθ harmonics are determined only over most of a
-period — the 2θ and 4θ basis has condition number 1 over 180°, 1.3 over 165° (a plan's
-sweeps read with a longer settle_s), 5 over 120°, 20 over 90° and 2900 over 30° (a 30° arc
-put the drift 100× off)."""
-
-
-def _coverage_deg(arcs) -> float:
-    """Degrees of the 180° (electrical) period visited by the wave angles [°] of `arcs` (each
-    a run's samples, the path between them counted), in 1° bins."""
-    seen = np.zeros(180, bool)
-    for a in arcs:
-        lo, hi = float(np.min(a)), float(np.max(a))
-        if hi - lo >= 180.0:
-            return 180.0
-        start = int(np.floor(lo))
-        bins = np.arange(start, start + int(np.ceil(hi - start)))
-        seen[bins % 180] = True
-    return float(seen.sum())
 
 
 def _padded(runs):
