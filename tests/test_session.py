@@ -183,7 +183,7 @@ def test_compensators_are_ordered_after_the_offset(compared):
     assert abs(compared.own_offsets["raw"].value_dph - compared.offset.value_dph) > 0.1
 
 
-def test_json_layout_and_text(compared, tmp_path):
+def test_json_layout_and_text(compared, sessions, tmp_path):
     path = compared.write_json(tmp_path / "c.json")
     with open(path, encoding="utf-8") as fh:
         report = json.load(fh)
@@ -206,6 +206,17 @@ def test_json_layout_and_text(compared, tmp_path):
     text = compared.format()
     assert "session offset with Fourier: +0.4" in text and "seed Fourier" in text
     assert "by start wave angle" in text and "all, offset kept" in text
+    assert "by construction" not in text  # 18 static runs
+    # one static run: the offset's source reads 0 there by construction, and the text says so
+    _, test, fourier = sessions
+    static = [i[0] for i in test.run_indices() if test["table_rate_dps"][i[0]] == 0.0][0]
+    keep = (test.run == test.run[static]) | (test["table_rate_dps"] != 0.0)
+    one = hg.MeasuredData({k: np.asarray(v)[keep] for k, v in test.columns.items()})
+    one_text = compare({"Fourier": fourier, "raw": NoCompensation()}, one).format()
+    assert (
+        "(one static run: the offset is Fourier's mean rate on it, so Fourier's static "
+        "residual is 0 by construction" in one_text
+    )
 
 
 def test_bad_arguments_are_refused(sessions):

@@ -303,8 +303,14 @@ def comparison_text(c, by_wave_angle: bool = True) -> str:
         tables.append(("angle_error_deg", "wave_angle",
                        "end-of-run angle error after the offset by start wave angle, RMS "
                        "over temperatures"))  # fmt: skip
+    one_run = c.offset.estimated and c.offset.n_runs == 1 and c.offset.source
     for key, by, title in tables:
-        lines += _table(c, key, by, title) + [""]
+        lines += _table(c, key, by, title)
+        if one_run and key == "static_residual_dph":  # its 0 read as a win
+            lines.append(f"  (one static run: the offset is {c.offset.source}'s mean rate on it, "
+                         f"so {c.offset.source}'s static residual is 0 by construction; static "
+                         "runs tell compensators apart from two on)")  # fmt: skip
+        lines.append("")
     if len(c.table_azimuths_deg) > 1:
         lines += _azimuth_table(c) + [""]
     for key in c.paired_keys() if len(c.labels) > 1 else []:
