@@ -351,6 +351,30 @@ def test_relevant_states_are_the_ones_that_reach_the_parameter():
     assert names(accelerated, 0) == north | east  # the heading error couples in
 
 
+def test_fault_bank_takes_traced_noise_levels_and_refuses_a_traced_ins():
+    """Audit: `jax.vmap` over `meas_sigma` raised TracerBoolConversionError (the host range
+    checks), `jax.jit` over `switch_prob` a 20-line TracerArrayConversionError
+    (`relevant_states` on traced values). The levels only set the models' values: batched,
+    the banks equal the ones built one by one. Which states are kept is read from `ins`'s
+    values: a traced `ins` is refused in one line."""
+    from hrgjax.diagnosis import complex as cx
+    from hrgjax.ins.platform import PlatformINS
+
+    ins = PlatformINS()
+    sigmas, switches = jnp.array([1e-9, 3e-9]), jnp.array([1e-5, 1e-3])
+
+    def build(s, p):
+        return cx.fault_bank(ins, "accel_y", 1.0, meas_sigma=s, switch_prob=p)
+
+    batched = jax.jit(jax.vmap(build))(sigmas, switches)
+    for i in range(2):
+        one = build(float(sigmas[i]), float(switches[i]))
+        for a, b in zip(jax.tree.leaves(batched), jax.tree.leaves(one), strict=True):
+            np.testing.assert_allclose(a[i], b, rtol=1e-12)
+    with pytest.raises(ValueError, match=r"^fault_bank: ins must be a concrete PlatformINS"):
+        jax.vmap(lambda g: cx.fault_bank(PlatformINS(g=g), "accel_y", 1.0))(jnp.array([9.8, 9.9]))
+
+
 def test_batched_banks_run_no_lapack_kernel():
     """The bank's updates, its gain schedules and their inverses run on plain XLA operations
     when batched over runs (jaxlib's LAPACK kernels can wedge XLA:CPU's pool: test_kalman)."""

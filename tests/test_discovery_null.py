@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 from hrgjax.calibration.reduce import K_E_NOMINAL, WINDOW_S
-from hrgjax.discovery import leftover, stats
-from hrgjax.discovery.dwell import DwellProblem
+from hrgjax.data import MeasuredData
+from hrgjax.discovery import discover, leftover, stats
+from hrgjax.discovery.dwell import DwellProblem, window_sigma
 from hrgjax.discovery.effects import NOMINAL
-from hrgjax.discovery.generate import hidden_effect_dataset
+from hrgjax.discovery.generate import base_gyro, hidden_effect_dataset
+from hrgjax.discovery.noise import NoiseModel
 from hrgjax.units import DEG_PER_H
 
 
@@ -116,3 +118,48 @@ def test_a_small_class_is_judged_at_its_level_not_twice_allowed_for():
         p.append(stats.level_test(y - j @ coef, j, g, classes)[3])
     rate = np.mean(np.asarray(p) < 0.05)
     assert 0.05 - 3 * np.sqrt(0.05 * 0.95 / 1500) < rate < 0.07, rate  # was 0.024
+
+
+def _rows(data, keep):
+    return MeasuredData({k: np.asarray(v)[keep] for k, v in data.columns.items()})
+
+
+@pytest.fixture(scope="module")
+def turning_grid():
+    """The null grid at 5 and 20 °/s, and the same with its static runs cut out."""
+    data = hidden_effect_dataset(None, key=jax.random.PRNGKey(0), rates_dps=(5.0, 20.0))
+    return data, _rows(data, np.asarray(data["table_rate_dps"]) != 0.0)
+
+
+def test_a_grid_without_static_runs_reads_its_noise_from_its_rotations(turning_grid):
+    """Audit: with no still stretch the windows' σ were their own batch-means errors, 1
+    degree of freedom each at 6 samples a window (weights up to 10³× off), and rotation-only
+    two-rate nulls came out `unexplained` at 16σ or `found frequency_split`; a given `noise=`
+    was ignored. Now the rotation runs' angles give the noise model (within 10 % of the
+    still stretches'), the report says so, and a given noise is used."""
+    full, turning = turning_grid
+    runs = np.unique(turning.run)
+    problem = DwellProblem(turning, K_E_NOMINAL, WINDOW_S, runs[3::4])
+    truth = window_sigma(NoiseModel.estimate(full), turning, problem.w)
+    np.testing.assert_allclose(problem.sigma, truth, rtol=0.1)
+    assert problem.noise_report()["source"].startswith("the rotation runs' angles")
+    rep = discover(turning)
+    assert rep.verdict == "none", rep.equations()
+    assert "noise model from the rotation runs' angles" in rep.equations()
+    noise = base_gyro().noise
+    given = DwellProblem(turning, K_E_NOMINAL, WINDOW_S, runs[3::4], noise)
+    known = window_sigma(NoiseModel.from_gyro(noise, K_E_NOMINAL), turning, given.w)
+    np.testing.assert_allclose(given.sigma, known, rtol=1e-12)
+    assert given.noise_report()["source"] == "given (noise=)"
+
+
+def test_one_table_rate_and_no_static_run_is_refused(turning_grid):
+    """Audit: every run at 5 °/s, none static: k_e and the bias shift every window alike;
+    the fit reported k_e = 0 ± 8·10⁻⁷ and the bias 18 000 ± 0.67 °/h, and its equations said
+    "no rotation runs". Refused in one line naming the cure."""
+    _, turning = turning_grid
+    one = _rows(turning, np.asarray(turning["table_rate_dps"]) == 5.0)
+    with pytest.raises(ValueError, match=r"^every run turns the table at the one rate 5 °/s "
+                       r"and none is static: the angular gain k_e and the bias cannot be told "
+                       r"apart .*; add static runs or runs at a second table rate$"):  # fmt: skip
+        discover(one)

@@ -107,3 +107,23 @@ def test_wls_gives_an_aliased_column_nothing_in_any_units():
     for scale in (1.0, 1e-3, 1e6):
         beta, r, _ = stats.wls(np.column_stack([model, scale * t]), y, sigma)
         np.testing.assert_allclose(beta, [*alone, 0.0], rtol=1e-12, atol=1e-15)
+
+
+def test_a_column_the_others_span_has_no_finite_sigma():
+    """Audit: one table rate and no static runs make k_e's column a multiple of the bias's;
+    `wls` gave k_e β = 0, and `covariance`'s pseudo-inverse σ 8·10⁻⁷ (the bias ± 0.67 °/h)
+    — the minimum-norm split's, where neither is determined. Both get σ = ∞ (the report says
+    "not determined"); a column outside the pair keeps the σ of the fit without the twin."""
+    from hrgjax.discovery.result import _number
+
+    rng = np.random.default_rng(3)
+    n = 200
+    t = np.linspace(-1.0, 1.0, n)
+    sigma = np.full(n, 0.1)
+    y = 1.0 + 0.5 * t + sigma * rng.standard_normal(n)
+    _, _, alone = stats.wls(np.stack([np.ones(n), t], 1), y, sigma)
+    beta, _, cov = stats.wls(np.stack([np.ones(n), t, 3.0 * np.ones(n)], 1), y, sigma)
+    assert beta[2] == 0.0 and np.isinf(cov[0, 0]) and np.isinf(cov[2, 2])
+    assert cov[1, 1] == pytest.approx(alone[1, 1], rel=1e-9)
+    shown = _number({"value": beta[0], "sigma": float(np.sqrt(cov[0, 0])), "unit": "°/h"})
+    assert shown.endswith("°/h (not determined by these data)"), shown

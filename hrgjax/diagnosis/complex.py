@@ -18,10 +18,19 @@ r"""A navigation complex of identical platform INS (seed 002) and its fault-diag
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import (
+    FINITE_NONNEGATIVE,
+    FINITE_POSITIVE,
+    check_number,
+    check_values,
+    concrete_value,
+    whole_number,
+)
 from .._compiled import fused
 from .._x64 import require_x64
 from ..ins.platform import FAULTS, NAV, Fault, PlatformINS, simulate
@@ -150,27 +159,56 @@ def fault_bank(
     conditional on it (and on the sensor errors' σ and τ), and measurement noise
     3× `meas_sigma` made the bank name a fault on most healthy steps at p ≈ 0.99 (check
     with `run_bank(..., fit_level=…)`); `switch_prob`: hypothesis transition probability
-    per step."""
+    per step.
+
+    `dt`, `fault_sigma`, `fault_walk`, `meas_sigma` and `switch_prob` only set the models'
+    values and may be traced (`jax.vmap` over a noise level: one bank per value, as built one
+    by one); their ranges are checked where their values are known. `ins` (which states the
+    bank keeps is read from its matrices' values), `sensor` and `n_ins` (the bank's
+    structure) must be concrete; a traced `ins` or `n_ins` is refused in one line."""
     param, kind = _channel(sensor)
-    if int(n_ins) < 2:
-        raise ValueError(f"n_ins must be >= 2; got {n_ins}")
-    if not dt > 0:
-        raise ValueError(f"dt must be > 0 s; got {dt}")
-    for name, v in (("fault_sigma", fault_sigma), ("meas_sigma", meas_sigma)):
-        if not v > 0:
-            raise ValueError(f"{name} must be > 0; got {v}")
-    if not fault_walk >= 0:
-        raise ValueError(f"fault_walk must be >= 0; got {fault_walk}")
+    n_ins = whole_number("n_ins", n_ins, "a concrete integer >= 2 (the INS of the complex: the "
+                         "bank's size)", minimum=2)  # fmt: skip
+    for name, v, ok, form in (
+        ("dt", dt, FINITE_POSITIVE, "> 0 s"),
+        ("fault_sigma", fault_sigma, FINITE_POSITIVE, "> 0"),
+        ("meas_sigma", meas_sigma, FINITE_POSITIVE, "> 0"),
+        ("fault_walk", fault_walk, FINITE_NONNEGATIVE, ">= 0"),
+        ("switch_prob", switch_prob, lambda p: (p >= 0.0) & (p < 1.0), "in [0, 1)"),
+    ):
+        check_number(name, v)
+        check_values(name, v, ok, form)  # where the value is known: a traced one passes
     col = FAULTS.index(sensor)
-    phi1, gam1, qd1 = ins.discretise(dt)
-    c = jax.jacfwd(ins.navigation_errors)(jnp.zeros(17))[NAV.index(param)]  # (17,)
+    with jax.ensure_compile_time_eval():  # the structure, from a concrete `ins`, under jit too
+        c = jax.jacfwd(ins.navigation_errors)(jnp.zeros(17))[NAV.index(param)]  # (17,)
+        f = ins.matrices()[0]
+    if concrete_value(c) is None or concrete_value(f) is None:
+        raise ValueError(
+            "fault_bank: ins must be a concrete PlatformINS, not one traced under jit or vmap: "
+            "which states the bank keeps (relevant_states) is read from its matrices' values; "
+            "build one bank per INS outside the transformation"
+        )
     keep = relevant_states(ins, c)
+    phi1, gam1, qd1 = ins.discretise(dt)
     scaled, reset = _bank_models(
         phi1[keep][:, keep], gam1[keep, col], qd1[keep][:, keep], c[keep],
         ins.stationary_covariance()[keep][:, keep], ins.radius / ins.g / dt**2, fault_sigma,
-        fault_walk, meas_sigma, n_ins=int(n_ins), second=kind == "second",
+        fault_walk, meas_sigma, n_ins=n_ins, second=kind == "second",
     )  # fmt: skip
-    return Bank.build(scaled, switch_prob=switch_prob, reset=reset)
+    if concrete_value(switch_prob) is not None:
+        return Bank.build(scaled, switch_prob=float(switch_prob), reset=reset)
+    # a traced switch_prob: `Bank.build` checks it on the host; its transition matrix here
+    bank = Bank.build(scaled, switch_prob=0.0, reset=reset)
+    return eqx.tree_at(lambda b: b.log_trans, bank, _log_transitions(switch_prob, n_ins + 1))
+
+
+def _log_transitions(switch_prob, m: int):
+    """log of `Bank.build`'s transition matrix for `m` hypotheses: stay with probability
+    1 − `switch_prob`, move to any other one uniformly (traceable)."""
+    p = jnp.asarray(switch_prob, float)
+    off = p / (m - 1)
+    with jax.numpy_dtype_promotion("standard"):
+        return jnp.log(jnp.full((m, m), 1.0) * off + jnp.eye(m) * (1.0 - p - off))
 
 
 @fused(static_argnames=("n_ins", "second"))
@@ -241,9 +279,19 @@ def relevant_states(ins: PlatformINS, c) -> np.ndarray:
     the other level channel when there is no horizontal specific force) never reach the
     measurement; the set's dynamics are autonomous, so dropping the rest is exact, and it
     keeps unobservable unstable states (position, height) out of the filters' Riccati
-    recursion, where their growing variance would cost the covariance its definiteness."""
-    f = np.asarray(ins.matrices()[0]) != 0.0
-    keep = np.asarray(c) != 0.0
+    recursion, where their growing variance would cost the covariance its definiteness.
+
+    `ins` and `c` must be concrete (the set is read from their values): traced ones (under
+    jit or vmap) are refused in one line."""
+    with jax.ensure_compile_time_eval():
+        f, c = concrete_value(ins.matrices()[0]), concrete_value(c)
+    if f is None or c is None:
+        raise ValueError(
+            "relevant_states: ins and c must be concrete, not traced under jit or vmap: the "
+            "states kept are read from the nonzero pattern of their values"
+        )
+    f = f != 0.0
+    keep = c != 0.0
     while True:
         grown = keep | f[keep].any(axis=0)
         if np.array_equal(grown, keep):

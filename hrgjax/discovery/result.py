@@ -63,6 +63,8 @@ def _number(v: dict, why: str | None = None) -> str:
     why in brief (`why`: its `why_no_sigma`): '600 s (scanned, no σ)', '0.3 °/h (no σ: σ_b
     not pinned)'."""
     unit = f" {v['unit']}" if v["unit"] else ""
+    if v["sigma"] is not None and not math.isfinite(v["sigma"]):
+        return f"{v['value']:.4g}{unit} (not determined by these data)"
     if v["sigma"] is None:
         note = ""
         if why:
@@ -213,9 +215,10 @@ class Discovery:
             k_e = user["angular_gain"]["k_e"]
             sigma = k_e["sigma"]
             if sigma is not None and not (math.isfinite(sigma) and sigma < abs(k_e["value"])):
-                # a σ as large as the value or infinite: no rotation run turns the wave
-                lines.append("angular gain k_e: not identified by these data (no rotation "
-                             "runs to turn the wave by it)")  # fmt: skip
+                # a σ as large as the value or infinite: no rotation run turns the wave, or
+                # every one at one rate with no static run (k_e beside the bias)
+                lines.append("angular gain k_e: not identified by these data (it needs "
+                             "rotations beside static runs or at a second table rate)")  # fmt: skip
             else:
                 why = self.fit_parameters["angular_gain"]["k_e"].get("why_no_sigma")
                 lines.append(f"angular gain k_e = {_number(k_e, why)}")
@@ -266,6 +269,9 @@ class Discovery:
             lines.append(why)
         if self.uncertainty:
             lines.append("± are 1σ: " + self.uncertainty["basis"])
+        source = (self.noise or {}).get("source")
+        if source and source.startswith("the rotation runs"):  # no still stretch: say so
+            lines.append(f"noise model from {source}")
         return "\n".join(lines)
 
     def sensor_lag_s(self) -> float | None:
@@ -293,6 +299,11 @@ class Discovery:
                     model[f"{name}.{pname}"] = f * float(v["std_model"])
                 if v.get("why_no_sigma"):
                     none[f"{name}.{pname}"] = v["why_no_sigma"]
+                elif v.get("std") is not None and not math.isfinite(v["std"]):
+                    none[f"{name}.{pname}"] = (
+                        "not determined by these data (its column is a combination of the "
+                        "others', or the data never excite it)"
+                    )
         return {**self.uncertainty, "sigma_model": model, "no_sigma": none}
 
     def gap_note(self) -> str | None:

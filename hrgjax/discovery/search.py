@@ -136,6 +136,22 @@ def _check_informative(data: MeasuredData) -> None:
         )
 
 
+def _check_gain_and_bias(data: MeasuredData, nominal) -> None:
+    """Refuse a log whose every sample turns the table at one and the same rate (no static
+    run, no second rate) while `nominal` fits a `bias`: k_e·Ω and the bias then shift every
+    window's rate alike, and no fit can tell them apart (the fit once reported k_e = 0 ±
+    8·10⁻⁷ beside a bias of 18 000 ± 0.67 °/h)."""
+    if "bias" not in nominal:
+        return
+    rates = np.unique(np.round(np.asarray(data["table_rate_dps"], float), 6))
+    if rates.size == 1 and rates[0] != 0.0:
+        raise ValueError(
+            f"every run turns the table at the one rate {rates[0]:g} °/s and none is static: "
+            "the angular gain k_e and the bias cannot be told apart (each shifts every "
+            "window's rate alike); add static runs or runs at a second table rate"
+        )
+
+
 def discover(
     data: MeasuredData,
     *,
@@ -180,8 +196,10 @@ def discover(
     - `shape`: `"auto"` (dwell when every run holds its rate and temperature, mixed when
       some do), `"dwell"`, `"continuous"` or `"mixed"` (the dwell runs as the dwell search's
       window rows, jointly with the other runs simulated as continuous records).
-    - `noise`: a known [`hrgjax.Noise`][] for continuous records (default: estimated from the
-      data's zero-rate stretches, run-to-run bias from the baseline fit).
+    - `noise`: a known [`hrgjax.Noise`][] (default: estimated from the data's zero-rate
+      stretches — a dwell grid with none, from its rotation runs' angles, said in
+      `noise["source"]` — and, continuous records, the run-to-run bias from the baseline
+      fit).
     - `block_s`: block length of the continuous increments [s].
 
     **Returns:** a [`Discovery`][hrgjax.discovery.result.Discovery]: the verdict, the
@@ -191,8 +209,8 @@ def discover(
     `noise`, `split`, `shape`; `.to_json()` (DESIGN.md's keys first), `.equations()`,
     `.plot(path)`.
 
-    **Raises:** `ValueError` for unknown effect names, a bad `shape`, or too few runs to hold
-    any out; `RuntimeError` when a continuous fit does not converge.
+    **Raises:** `ValueError` for unknown effect names, a bad `shape`, too few runs to hold
+    any out, or every run at one table rate with no static run (k_e and the bias inseparable); `RuntimeError` when a continuous fit does not converge.
     """
     holdout_every = _check_arguments(data, nominal, catalogue, holdout_every, block_s)
     if numeric_problem(k_e) is not None:  # its value is checked where it is used
@@ -212,6 +230,7 @@ def discover(
     if noise is not None and not isinstance(noise, Noise):
         raise TypeError(f"noise must be an hrgjax.Noise or None; got {type(noise).__name__}")
     _check_informative(data)
+    _check_gain_and_bias(data, nominal)
     if shape == "auto":
         n_dwell = len(dwell_runs(data))
         n_runs = np.unique(data.run).size

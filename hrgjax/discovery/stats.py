@@ -127,18 +127,45 @@ def wls(g: np.ndarray, y: np.ndarray, sigma: np.ndarray):
     return beta, yw - gw @ beta, covariance(gw)
 
 
+UNDETERMINED = 1e-10
+"""A column whose unit vector puts more than this share of its weight on directions the
+data leave undetermined (`gram_inverse`) has no finite variance."""
+
+
+def gram_inverse(gw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(GᵀG)⁺ of whitened columns `gw` (the pseudo-inverse, columns scaled to unit norm
+    first) and which columns it determines: a column whose parameter has a share of its
+    unit vector on the directions the pseudo-inverse cuts (eigenvalues of the scaled GᵀG
+    below 10⁻¹⁵ of the largest: a column of zeros, a column the others span) is not
+    determined by the data — the pseudo-inverse's finite variance for it is that of the
+    minimum-norm split, not of the parameter (one table rate and no static runs: k_e and
+    the bias, each 0.67 °/h where neither is determined). **Returns:** `(cov, determined)`,
+    `cov` finite throughout (for products: `trust`'s sandwich)."""
+    norm = np.linalg.norm(gw, axis=0)
+    d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
+    gs = gw * d
+    p = gs.shape[1]
+    if p == 0:
+        return np.zeros((0, 0)), np.zeros(0, bool)
+    val, vec = np.linalg.eigh(gs.T @ gs)
+    cut = val <= 1e-15 * max(float(val[-1]), 0.0)  # numpy's pinv(hermitian=True) rcond
+    live = vec[:, ~cut]
+    cov = d[:, None] * ((live / val[~cut]) @ live.T) * d[None, :]
+    determined = np.sum(vec[:, cut] ** 2, axis=1) <= UNDETERMINED
+    return cov, determined & (norm > 0)
+
+
 def covariance(gw: np.ndarray) -> np.ndarray:
     """(GᵀG)⁻¹ of whitened columns `gw`, with the columns scaled to unit norm first: the
     catalogue's columns differ by ten orders of magnitude (q/a ~ 10⁻⁴ beside Ω), and an
     unscaled pseudo-inverse would cut the small ones' variance to zero. A column the data
-    never excite (k_e on static runs alone) gets an infinite variance."""
-    norm = np.linalg.norm(gw, axis=0)
-    d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
-    gs = gw * d
-    cov = d[:, None] * np.linalg.pinv(gs.T @ gs, hermitian=True) * d[None, :]
+    do not determine ([`gram_inverse`][hrgjax.discovery.stats.gram_inverse]: never excited,
+    as k_e on static runs alone, or spanned by the others, as k_e beside the bias at one
+    table rate) gets an infinite variance."""
+    cov, determined = gram_inverse(gw)
     idx = np.arange(cov.shape[0])
     cov[idx, idx] = np.maximum(cov[idx, idx], 0.0)  # round-off below zero
-    cov[norm == 0, norm == 0] = np.inf  # a column the data never excite: undetermined
+    cov[~determined, ~determined] = np.inf  # undetermined: no finite σ
     return cov
 
 

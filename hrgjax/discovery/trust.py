@@ -125,21 +125,22 @@ def _sandwich(a, s, p):
     """Covariance of the first `p` coefficients of the least-squares fit on the whitened
     columns `a` when row i's whitened noise has standard deviation `s[i]`:
     (AᵀA)⁻¹ Aᵀ diag(s²) A (AᵀA)⁻¹ (the fit keeps the noise model's weights; only the
-    noise level is read from the residual). Columns the data never excite: ∞ variance."""
+    noise level is read from the residual). Columns the data never excite or do not
+    determine (`stats.gram_inverse`): ∞ variance."""
     out = np.zeros((p, p))
     out[np.diag_indices(p)] = np.inf
     live = np.linalg.norm(a, axis=0) > 0
     if not live.any():
         return out
     al = a[:, live]
-    c = stats.covariance(al)
+    c, determined = stats.gram_inverse(al)
     meat = (al * (s**2)[:, None]).T @ al
     v = c @ meat @ c
     where = np.flatnonzero(live)
     keep = np.flatnonzero(where < p)
     rows = where[keep]
     out[np.ix_(rows, rows)] = v[np.ix_(keep, keep)]
-    out[rows, rows] = np.maximum(np.diag(v)[keep], 0.0)
+    out[rows, rows] = np.where(determined[keep], np.maximum(np.diag(v)[keep], 0.0), np.inf)
     return out
 
 
