@@ -18,7 +18,6 @@ r"""A navigation complex of identical platform INS (seed 002) and its fault-diag
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -195,20 +194,7 @@ def fault_bank(
         ins.stationary_covariance()[keep][:, keep], ins.radius / ins.g / dt**2, fault_sigma,
         fault_walk, meas_sigma, n_ins=n_ins, second=kind == "second",
     )  # fmt: skip
-    if concrete_value(switch_prob) is not None:
-        return Bank.build(scaled, switch_prob=float(switch_prob), reset=reset)
-    # a traced switch_prob: `Bank.build` checks it on the host; its transition matrix here
-    bank = Bank.build(scaled, switch_prob=0.0, reset=reset)
-    return eqx.tree_at(lambda b: b.log_trans, bank, _log_transitions(switch_prob, n_ins + 1))
-
-
-def _log_transitions(switch_prob, m: int):
-    """log of `Bank.build`'s transition matrix for `m` hypotheses: stay with probability
-    1 − `switch_prob`, move to any other one uniformly (traceable)."""
-    p = jnp.asarray(switch_prob, float)
-    off = p / (m - 1)
-    with jax.numpy_dtype_promotion("standard"):
-        return jnp.log(jnp.full((m, m), 1.0) * off + jnp.eye(m) * (1.0 - p - off))
+    return Bank.build(scaled, switch_prob=switch_prob, reset=reset)
 
 
 @fused(static_argnames=("n_ins", "second"))

@@ -65,13 +65,14 @@ class Bank(eqx.Module):
         """From a list of `(phi, qd, h, r, x0, p0)` tuples (and optional `z_offsets`, one (m,)
         per model, and `reset` masks, one (n,) per model); hypotheses stay put with
         probability 1 − `switch_prob` per step and otherwise move to any other one
-        uniformly. Each model is refused in one line when its shapes do not fit or (concrete
+        uniformly (`switch_prob` may be traced). Each model is refused in one line when its shapes do not fit or (concrete
         values) a value is not finite, `qd` or `p0` is not symmetric positive
         semi-definite, or `r` is not positive-definite."""
         m = len(models)
         if m < 1:
             raise ValueError("a bank needs at least one model")
-        if not 0.0 <= switch_prob < 1.0:
+        known = concrete(switch_prob)  # a traced one (a sweep over it) is not checked
+        if known is not None and not 0.0 <= float(known) < 1.0:
             raise ValueError(f"switch_prob must be in [0, 1); got {switch_prob}")
         for i, mod in enumerate(models):
             check_model(i, mod, models[0])
