@@ -116,6 +116,11 @@ class AbstractProblem(abc.ABC):
         ([`run_bias.spread`][hrgjax.discovery.run_bias.spread])."""
         return None
 
+    def widens(self, gap: float, gap_after: float) -> bool:
+        """Whether an effect that moves the held-out gap from `gap` to `gap_after` [°/h]
+        widens it (refused where `gap_guard` is on; default: never)."""
+        return False
+
     @abc.abstractmethod
     def structure_left(self, fit: Fit, floor: float | None = None) -> bool:
         """Whether `fit` leaves significant structure in the held-out runs."""

@@ -19,7 +19,7 @@ Steps, all on the windows of [`reduce`][hrgjax.calibration.reduce]:
    index < `max_aliasing`: what is left of its signature once the model has absorbed what
    it can is still more than 0.1 %, and the score test says that rest is significant), it
    lowers the held-out whitened χ² by more than `min_heldout_gain`, it does not widen the
-   held-out gap (dwell grids only), it still passes Bonferroni in the fit its reported σ
+   held-out gap beyond what the noise gives (dwell grids only: `DwellProblem.widens`), it still passes Bonferroni in the fit its reported σ
    comes from (`p_stat`: the leftover shapes fitted beside it, the noise level the residual
    shows and, continuous records, σ_b's own uncertainty —
    [`statistical_p_value`][hrgjax.discovery.trust.statistical_p_value]; tested last), and
@@ -293,7 +293,7 @@ def discover(
             ("aliasing", lambda: r["aliasing"] < max_aliasing),
             ("refit", lambda: r.get("refit") is not None),
             ("heldout_gain", lambda: r["heldout_gain"] > min_heldout_gain),
-            ("gap_after", lambda: not problem.gap_guard or r["gap_after"] <= fit.gap),
+            ("gap_after", lambda: not problem.widens(fit.gap, r["gap_after"])),
             ("consistency", lambda: consistent(r)),
             ("outshone_by", lambda: not outshone(r)),
             ("p_stat", lambda: significant(r)),  # the costliest: last
@@ -428,7 +428,7 @@ REFUSALS = {
     "aliasing": "the fitted model absorbs its signature (`max_aliasing`)",
     "refit": "not refitted (outside the short list of the best scores, or its fit failed)",
     "heldout_gain": "it lowers the held-out χ² by no more than `min_heldout_gain`",
-    "gap_after": "it widens the held-out gap (dwell grids)",
+    "gap_after": "it widens the held-out gap beyond what the noise gives (dwell grids)",
     "p_stat": "its p-value in the fit its reported σ comes from (`p_stat`: the leftover "
     "shapes fitted beside it, the noise level the residual shows, continuous records' σ_b "
     "uncertainty) misses Bonferroni at `alpha` (tested last, and only on rows that could "
