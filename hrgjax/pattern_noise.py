@@ -225,6 +225,29 @@ class NoiseModel:
         **Raises:** `ValueError` when `data` has no still stretch or `max_lag_s` is not > 0,
         `TypeError` when `data` is not a `MeasuredData`.
         """
+        return cls._from_stretches("estimate", data, max_lag_s, TEMPERATURE_TOLERANCE_C)
+
+    @classmethod
+    def estimate_drifting(cls, data: MeasuredData, max_lag_s: float = 256.0) -> NoiseModel:
+        r"""Estimate the model as [`estimate`][hrgjax.pattern_noise.NoiseModel.estimate]
+        does, from every stretch where the table is still **whatever the temperature does**
+        (a chamber that ramps without a hold), for logs with no still stretch. Along a ramp
+        the drift rate moves with the temperature, and a drift rate that changes at R
+        [rad/s²] adds R·a·b to a second difference over spans a, b: a column (a·b)² is
+        fitted beside the noise's and dropped (its R² is the ramp's curvature, not noise).
+        A term whose three samples straddle a turn of the ramp (the temperature's own
+        second difference beyond [`TEMPERATURE_TOLERANCE_C`][hrgjax.pattern_noise.TEMPERATURE_TOLERANCE_C])
+        is left out: no column fits that kink. Lags stop at `max_lag_s` [s] (default 256 s)
+        or where no term is left. Figures: `benchmarks/noise_drifting.py`.
+
+        **Raises:** as `estimate`, `ValueError` when no stretch has the table still."""
+        return cls._from_stretches("estimate_drifting", data, max_lag_s, math.inf)
+
+    @classmethod
+    def _from_stretches(cls, owner, data, max_lag_s, tolerance_c) -> NoiseModel:
+        """The estimate over the stretches with the table still and the temperature within
+        `tolerance_c` [°C] of their first sample (`math.inf`: any, with the rate-ramp column
+        of `estimate_drifting`)."""
         from .data import MeasuredData
 
         if not isinstance(data, MeasuredData):  # was an AttributeError
@@ -232,16 +255,28 @@ class NoiseModel:
         max_lag_s = finite_number("max_lag_s", max_lag_s, "s")
         if max_lag_s <= 0:  # read as "no still stretch"
             raise ValueError(f"max_lag_s must be > 0 [s]; got {max_lag_s}")
+        ramp = math.isinf(tolerance_c)
         sums: dict[float, np.ndarray] = {}
         for idx in data.run_indices():
             time = data["time_s"][idx]
-            for a, b in _still_stretches(data["table_rate_dps"][idx], data["temperature_c"][idx]):
+            rate, temp = data["table_rate_dps"][idx], data["temperature_c"][idx]
+            for a, b in _still_stretches(rate, temp, tolerance_c):
                 th = data["wave_angle_deg"][idx][a:b] * DEG
                 t = time[a:b]
                 dt = float(np.median(np.diff(t)))
                 k = 1
                 while k * dt <= max_lag_s and k <= (b - a) // 4:
                     d2, coef = _d2_terms(t, th, k)
+                    if ramp:  # the drift rate's change along the stretch: R²(a·b)²
+                        spans = (t[k:-k] - t[: -2 * k]) * (t[2 * k :] - t[k:-k])
+                        coef = np.concatenate([coef, spans[:, None] ** 2], axis=1)
+                        # only where the temperature is a straight line across the three
+                        # samples (its own second difference within the tolerance): a
+                        # turn of the ramp inside them is a kink no column fits
+                        bent = np.abs(_d2_terms(t, temp[a:b], k)[0]) > TEMPERATURE_TOLERANCE_C
+                        d2, coef = d2[~bent], coef[~bent]
+                        if not d2.size:
+                            break
                     acc = sums.setdefault(float(f"{k * dt:.9g}"), np.zeros(3 + coef.shape[1]))
                     acc[0] += float(np.sum(d2**2))
                     acc[1] += d2.size
@@ -249,18 +284,20 @@ class NoiseModel:
                     acc[3:] += coef.sum(axis=0)
                     k *= 2
         if not sums:
+            held = f" and the temperature constant within {tolerance_c} °C" if not ramp else ""
             raise ValueError(
-                f"the noise model needs a still stretch of at least {MIN_STRETCH} samples "
-                f"(|table_rate_dps| ≤ {STILL_RATE_DPS} and the temperature constant within "
-                f"{TEMPERATURE_TOLERANCE_C} °C), e.g. a static run; or pass noise=hrgjax.Noise(...)"
+                f"{owner}: the noise model needs a stretch of at least {MIN_STRETCH} samples "
+                f"with the table still (|table_rate_dps| ≤ {STILL_RATE_DPS}{held}), e.g. a "
+                "static run; or pass noise=hrgjax.Noise(...)"
             )
         taus = np.asarray(sorted(sums))
         acc = np.asarray([sums[t] for t in taus])
         var, n_eff = acc[:, 0] / acc[:, 1], acc[:, 2]
         basis = acc[:, 3:] / acc[:, 1:2]  # the terms' mean (σ_w², N², σ_GM²(T_c)…) columns
-        fits = [_fit_d2(basis[:, :2], var, n_eff, None)]
+        extra = [basis.shape[1] - 1] if ramp else []  # the ramp column, fitted and dropped
+        fits = [_fit_d2(basis[:, [0, 1, *extra]], var, n_eff, None)]
         fits += [
-            _fit_d2(basis[:, [0, 1, 2 + i]], var, n_eff, tc)
+            _fit_d2(basis[:, [0, 1, 2 + i, *extra]], var, n_eff, tc)
             for i, tc in enumerate(GM_TIMES)
             if tc <= 4 * taus[-1]
         ]
@@ -361,9 +398,9 @@ def _times(name: str, t, least: int) -> np.ndarray:
     return t
 
 
-def _still_stretches(rate_dps, temperature_c):
+def _still_stretches(rate_dps, temperature_c, tolerance_c=TEMPERATURE_TOLERANCE_C):
     """(start, stop) of every stretch of ≥ MIN_STRETCH samples with the table still
-    (|rate| ≤ STILL_RATE_DPS) and the temperature within TEMPERATURE_TOLERANCE_C of the
+    (|rate| ≤ STILL_RATE_DPS) and the temperature within `tolerance_c` of the
     stretch's first sample (a sample that leaves it starts the next stretch). NumPy over
     the samples: each stretch's end is searched in blocks that double, so a log costs
     O(samples) whatever its stretches."""
@@ -378,7 +415,7 @@ def _still_stretches(rate_dps, temperature_c):
             at = start
             while at < hi:  # the first sample beyond the tolerance of temp[start]
                 seg = temp[at : min(at + block, hi)]
-                away = np.flatnonzero(np.abs(seg - temp[start]) > TEMPERATURE_TOLERANCE_C)
+                away = np.flatnonzero(np.abs(seg - temp[start]) > tolerance_c)
                 if away.size:
                     stop = at + int(away[0])
                     break
@@ -462,6 +499,6 @@ def _fit_d2(basis, var, n_eff, tc):
         model = basis @ coef
         scale = np.where(model > 0, model, var)
     chi2 = float(np.sum(((basis @ coef - var) * w) ** 2))
-    if tc is None:
-        coef = np.r_[coef, 0.0]
+    if tc is None:  # no Gauss–Markov part: its σ² is 0 (a ramp column, if any, after it)
+        coef = np.insert(coef, 2, 0.0)
     return chi2, coef, tc

@@ -360,7 +360,7 @@ def test_a_rise_of_the_held_out_gap_within_the_noise_does_not_refuse_an_effect()
     Monte Carlo of the gap under the noise (each held-out run mean drawn with its variance):
     ≈ 1 % of the drawn gaps are refused. And a hidden `bias_temperature` of −0.0012 °/h/°C
     (ΔBIC ≈ 800) whose refit moves the gap at the floor up by chance is named: refusing every
-    rise left it `unexplained` (benchmarks/discovery_gap_guard.py: 10 of 40 such grids)."""
+    rise left it `unexplained` (benchmarks/discovery_gap_guard.py: 13 of 60 such grids)."""
     from hrgjax.calibration.reduce import WINDOW_S
     from hrgjax.discovery.dwell import DwellProblem
     from hrgjax.discovery.generate import hidden_effect_dataset

@@ -233,3 +233,55 @@ def test_gauss_markov_structure_and_second_difference_are_exact_where_tc_dwarfs_
     model = pn.NoiseModel(0.0, 0.0, gm_sigma=2e-6, gm_time=3000.0)
     cov = model.increment_covariance(0.01, 3)
     np.testing.assert_allclose(np.diag(cov), 4e-12 * float(gm_structure(0.01, 3000.0)), rtol=1e-13)
+
+
+def _ramping_log(seed, sw=5e-6, n_arw=3e-7, n=3001):
+    """Six static runs whose temperature ramps ±30 °C in 1000-s legs without a hold, the
+    drift rate following it (3e-8 rad/s per °C), white angle noise and a walk drawn in."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=float)
+    cols = {k: [] for k in ("time_s", "run", "wave_angle_deg", "table_rate_dps", "temperature_c")}
+    for r in range(6):
+        temp = 20.0 + 30.0 * (1.0 - np.abs((t / 1000.0 + r / 3.0) % 2.0 - 1.0) * 2.0)
+        rate = 1e-6 + 3e-8 * (temp - 20.0)
+        drift = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]))])
+        walk = np.cumsum(rng.normal(0.0, n_arw, n))
+        for k, v in (
+            ("time_s", t),
+            ("run", np.full(n, r)),
+            ("table_rate_dps", np.zeros(n)),
+            ("temperature_c", temp),
+            ("wave_angle_deg", np.rad2deg(drift + walk + rng.normal(0.0, sw, n))),
+        ):
+            cols[k].append(v)  # fmt: skip
+    return hrgjax.MeasuredData({k: np.concatenate(v) for k, v in cols.items()})
+
+
+def test_a_log_that_ramps_without_a_hold_gives_the_noise_beside_its_drift():
+    """Static runs whose temperature never holds have no still stretch: `estimate` refuses
+    them, `estimate_drifting` reads the white angle noise and the walk drawn into them
+    (NumPy) beside the drift rate the temperature moves (1.8e-9 rad/s² along a leg), the
+    ramps' turns left out. Read as still stretches without the ramp's column, that drift
+    was taken for noise. Discovery's `estimated` falls back to it and says so."""
+    sw, n_arw = 5e-6, 3e-7
+    logs = [_ramping_log(seed) for seed in range(4)]
+    with pytest.raises(ValueError, match=r"estimate: .*table still .*temperature constant"):
+        pn.NoiseModel.estimate(logs[0])
+    models = [pn.NoiseModel.estimate_drifting(data) for data in logs]
+    walks = np.array([m.angle_random_walk for m in models]) / n_arw
+    assert np.all(np.abs(walks - 1.0) < 0.35), walks  # each: the walk is 7 % of the variance
+    assert abs(np.mean(walks) - 1.0) < 0.12, walks  # at 64 s, its sampling spread is ≈ 15 %
+    for m in models:
+        assert m.angle_white == pytest.approx(sw, rel=0.05)
+    data = logs[0]
+    flat = hrgjax.MeasuredData(dict(data.columns, temperature_c=np.zeros(len(data))))
+    bare = pn.NoiseModel.estimate(flat, max_lag_s=256.0)  # the same stretches, no ramp column
+    assert max(bare.angle_random_walk, 10 * bare.gm_sigma) > 3 * n_arw, bare
+    model, source = hrgjax.discovery.noise.estimated(data)
+    assert model == models[0] and source == hrgjax.discovery.noise.NOISE_DRIFTING
+    spun = data["wave_angle_deg"] - 0.5 * data["time_s"]  # the pattern turns with the table
+    turning = hrgjax.MeasuredData(
+        dict(data.columns, table_rate_dps=np.ones(len(data)), wave_angle_deg=spun)
+    )
+    with pytest.raises(ValueError, match="table still .* this log has none; pass noise="):
+        hrgjax.discovery.noise.estimated(turning)

@@ -45,7 +45,7 @@ from ..units import DEG, DEG_PER_H
 from . import dwell, leftover, run_bias, stats, thermometer
 from ._continuous_fit import converged_lm
 from .effects import CATALOGUE
-from .noise import NoiseModel
+from .noise import NOISE_GIVEN, NOISE_STILL, NoiseModel, estimated
 from .problem import AbstractProblem, Fit, candidates_for, covariates_in, dwell_runs
 from .problem import is_dwell as is_dwell  # deprecated here (issue 45): see problem
 from .records import STEP_S as STEP_S  # deprecated here (issue 45): see records
@@ -110,7 +110,7 @@ class ContinuousProblem(AbstractProblem):
         cands = list(catalogue) if catalogue is not None else candidates_for(have, nominal, True)
         names = list(nominal) + [n for n in cands if n not in nominal]
         known = noise is not None
-        nz = NoiseModel.from_gyro(noise, k_e) if known else NoiseModel.estimate(data)
+        nz, source = (NoiseModel.from_gyro(noise, k_e), NOISE_GIVEN) if known else estimated(data)
         windows, records = None, data
         dwell_ids = np.asarray(sorted(dwell_runs(data))) if window_s is not None else []
         if len(dwell_ids):
@@ -129,6 +129,7 @@ class ContinuousProblem(AbstractProblem):
             )
             windows = (win, np.isin(w.run, held))
         problem = cls(records, names, k_e, held, nz, block_s, windows, known)
+        problem.noise_source = source  # copied along with the problem
         if not known:
             problem = problem.with_run_bias(problem.fit(list(nominal)))
         return problem
@@ -444,7 +445,8 @@ class ContinuousProblem(AbstractProblem):
                 var.append(cov.sum() / (self.k_out * span) ** 2)
         return float(np.sqrt(np.mean(var))) / DEG_PER_H if var else float("nan")
 
-    gap_guard = False  # the run-mean gap is set by the switch-on bias: judge on χ² only
+    noise_source = NOISE_STILL  # `from_data` sets it (`noise.estimated`); no gap guard:
+    # the run-mean gap is set by the switch-on bias (`widens` never): judge on χ² only
     descent = -1.0  # `j` is the whitened residual's derivative (records.residual_and_jacobian)
 
     def candidates(self, nominal):
@@ -463,9 +465,9 @@ class ContinuousProblem(AbstractProblem):
         return np.concatenate(out) if out else None
 
     def noise_report(self):
-        """The noise model in report units."""
-        # at the fitted gain the parameters use; a noise model the user gave stays as given
-        return self.noise.report(self.k_e if self.noise_known else self.k_out)
+        """The noise model in report units, and its `source` in words."""
+        gain = self.k_e if self.noise_known else self.k_out  # the fit's; a given one as given
+        return self.noise.report(gain) | {"source": self.noise_source}
 
     # -- screening -----------------------------------------------------------
     def _columns(self, current, name, tau=None):
@@ -513,12 +515,10 @@ class ContinuousProblem(AbstractProblem):
         i = [b[4] for b in tried].index(best[4])
         if i == 0 or i == len(tried) - 1:
             return best
-        x = np.log([tried[j][4] for j in (i - 1, i, i + 1)])
-        y = [tried[j][0] for j in (i - 1, i, i + 1)]
-        a, b, _ = np.polyfit(x, y, 2)
-        if a >= 0:
+        near = tried[i - 1 : i + 2]
+        tau = stats.log_parabola_peak([b[4] for b in near], [b[0] for b in near])
+        if tau is None:
             return best
-        tau = float(np.exp(np.clip(-b / (2 * a), x[0], x[2])))
         g, z = self._columns(current, name, tau)
         s, alias, step = stats.score(current.r, current.j, g)
         return (s, alias, step, z, tau) if s > best[0] else best

@@ -34,7 +34,7 @@ from ..data import MeasuredData
 from ..units import DEG, DEG_PER_H, T_REF_C
 from . import leftover
 from .effects import CATALOGUE, Covariates, window_rate
-from .noise import NoiseModel
+from .noise import NOISE_GIVEN, NOISE_STILL, NoiseModel
 from .problem import OPTIONAL, AbstractProblem, Fit, candidates_for, covariates_in
 from .stats import (  # dwell.score, dwell.chi2_sf etc.: deprecated, see stats
     chi2_sf,
@@ -264,8 +264,6 @@ class DwellProblem(AbstractProblem):
     [`hrgjax.Noise`][], or None: estimated from the data).
     """
 
-    gap_guard = True  # an accepted effect must not widen the held-out gap
-
     def __init__(self, data, k_e, window_s, held, noise=None):
         self.k_e, self.held = k_e, held
         self.k_out = float(k_e)  # the current model's output_gain, once one is fitted
@@ -309,7 +307,7 @@ class DwellProblem(AbstractProblem):
         a sum of the held-out runs' χ²₁ weighted by their mean's variance: ν·(gap/floor)²
         against χ²_ν, ν by Satterthwaite). A rise within the noise says nothing against the
         effect: refusing every rise left a `bias_temperature` of −0.0012 °/h/°C (ΔBIC 30 to
-        800) unnamed on 10 of 40 grids (`benchmarks/discovery_gap_guard.py`)."""
+        800) unnamed on 13 of 60 grids (`benchmarks/discovery_gap_guard.py`)."""
         if not gap_after > gap:
             return False
         v = _mean_variances(self.sigma, self.w, self.held)
@@ -389,8 +387,6 @@ def _sigma_dph(sigma, mask, k_e):
     return float(np.median(sigma[mask])) / k_e / DEG_PER_H if np.any(mask) else None
 
 
-NOISE_STILL = "still stretches"
-NOISE_GIVEN = "given (noise=)"
 NOISE_TURNING = (
     "the rotation runs' angles (no still stretch: second differences up to the window's "
     "length, each run's turn removed; noise= gives it instead)"

@@ -1,7 +1,8 @@
 """The discovery's noise model: the pattern-angle [`NoiseModel`][hrgjax.pattern_noise.NoiseModel]
 (defined once, in `hrgjax.pattern_noise`, beside the gyro's
 [`hrgjax.Noise`][]: the bench design reads the same model) and its estimation from a log's
-still stretches, which both data shapes use — the dwell windows' σ
+still stretches (or, where a log has none, its static stretches whatever the temperature
+does: [`estimated`][hrgjax.discovery.noise.estimated]), which both data shapes use — the dwell windows' σ
 ([`slope_sigma`][hrgjax.pattern_noise.NoiseModel.slope_sigma]) and the continuous records'
 whitening ([`increment_covariance`][hrgjax.pattern_noise.NoiseModel.increment_covariance])."""
 
@@ -29,3 +30,33 @@ def noise_model(data: MeasuredData, max_lag_s: float = 1024.0) -> NoiseModel:
         kind = TypeError if numeric_problem(max_lag_s) else ValueError
         raise kind(f"max_lag_s must be a finite number > 0 [s]; got {describe(max_lag_s)}")
     return NoiseModel.estimate(data, max_lag_s)
+
+
+NOISE_STILL = "still stretches"
+NOISE_GIVEN = "given (noise=)"
+NOISE_DRIFTING = (
+    "the static stretches along the temperature ramps (no hold: second differences up to "
+    "256 s beside the ramp's drift; noise= gives it instead)"
+)
+"""Where a problem's noise model comes from (its `noise_report`'s `source`)."""
+
+
+def estimated(data: MeasuredData) -> tuple[NoiseModel, str]:
+    """The noise model of `data` and its source in words: its still stretches
+    ([`NoiseModel.estimate`][hrgjax.pattern_noise.NoiseModel.estimate]); where there are
+    none (a chamber that ramps without a hold), its static stretches whatever the
+    temperature does
+    ([`estimate_drifting`][hrgjax.pattern_noise.NoiseModel.estimate_drifting]).
+
+    **Raises:** `ValueError` in one line when no stretch has the table still."""
+    try:
+        return NoiseModel.estimate(data), NOISE_STILL
+    except ValueError:
+        pass
+    try:
+        return NoiseModel.estimate_drifting(data), NOISE_DRIFTING
+    except ValueError:
+        raise ValueError(
+            f"the noise model needs a stretch of at least {MIN_STRETCH} samples with the table "
+            "still (a static run or a hold), and this log has none; pass noise=hrgjax.Noise(...)"
+        ) from None

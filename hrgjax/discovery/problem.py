@@ -50,10 +50,9 @@ class Fit:
 class AbstractProblem(abc.ABC):
     """What [`discover`][hrgjax.discovery.discover] needs of a data shape: its candidates,
     fits of a model, the screening of candidates against a fit, the gap's noise floor, the
-    leftover shapes, and the report's pieces. `gap_guard`: an accepted effect must not widen
-    the held-out gap (dwell grids, whose held-out runs are as quiet as the training ones)."""
+    leftover shapes, and the report's pieces. `widens`: whether an accepted effect widens the
+    held-out gap (dwell grids, whose held-out runs are as quiet as the training ones)."""
 
-    gap_guard: bool = False
     descent: float = 1.0
     """The sign that turns `lstsq(fit.j, fit.r)` into a parameter step: +1 where a fit's `j`
     is the model's derivative (dwell grids: r = y − Jβ), −1 where it is the residual's
@@ -118,7 +117,7 @@ class AbstractProblem(abc.ABC):
 
     def widens(self, gap: float, gap_after: float) -> bool:
         """Whether an effect that moves the held-out gap from `gap` to `gap_after` [°/h]
-        widens it (refused where `gap_guard` is on; default: never)."""
+        widens it, which refuses the effect (default: never)."""
         return False
 
     @abc.abstractmethod

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from .effects import CATALOGUE, NOMINAL
+from .noise import NOISE_GIVEN, NOISE_STILL
 from .trust import NOT_PINNED
 
 DESIGN_KEYS = ("missing_effect", "ranking", "gap_before", "gap_after", "noise_floor", "metric")
@@ -270,7 +271,7 @@ class Discovery:
         if self.uncertainty:
             lines.append("± are 1σ: " + self.uncertainty["basis"])
         source = (self.noise or {}).get("source")
-        if source and source.startswith("the rotation runs"):  # no still stretch: say so
+        if source and source not in (NOISE_STILL, NOISE_GIVEN):  # no still stretch: say so
             lines.append(f"noise model from {source}")
         return "\n".join(lines)
 

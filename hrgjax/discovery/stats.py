@@ -339,6 +339,14 @@ def level_beyond(r: np.ndarray, a: np.ndarray, s: np.ndarray) -> tuple[float, in
     return float((np.sum((qs.T @ r) ** 2) - np.sum((qa.T @ r) ** 2)) / nu), int(nu)
 
 
+def log_parabola_peak(taus, values) -> float | None:
+    """The peak τ of the parabola through three (log τ, value) points, clipped to their τ
+    range; None where the parabola has no maximum (it opens upward or is flat)."""
+    x = np.log(np.asarray(taus, float))
+    a, b, _ = np.polyfit(x, np.asarray(values, float), 2)
+    return float(np.exp(np.clip(-b / (2 * a), x[0], x[2]))) if a < 0 else None
+
+
 def chi2_sf(x: float, dof: int) -> float:
     """Upper tail probability of χ²_dof at x."""
     _tail_args("chi2_sf", x=x, dof=dof)
