@@ -1,6 +1,7 @@
 """The data contract's columns (`COLUMNS`, `REQUIRED`) and the checks of one given column:
-numbers in the column's unit, no NaN or infinity, exact integers and run ids
-(`checked_column`), and time strictly increasing within a run (`check_time`)."""
+numbers in the column's unit, no NaN or infinity, exact integers and run ids, host data
+(`checked_column`), time strictly increasing within a run (`check_time`) and a table angle
+that is not wrapped to one turn (`check_table_wraps`)."""
 
 from __future__ import annotations
 
@@ -54,8 +55,18 @@ refused rather than rounded."""
 
 def checked_column(name: str, value) -> np.ndarray:
     """One column as a new array: float64 (``run``: int64; an extra column: float64 or text),
-    or a `ValueError` naming the column, the row and the expected form."""
-    arr = np.asarray(value)
+    or a `ValueError` naming the column, the row and the expected form (a `TypeError` for a
+    traced value: inside `jax.jit` or `jax.vmap` there are no numbers to check or keep)."""
+    try:
+        arr = np.asarray(value)
+    except Exception:
+        if _traced(value):
+            raise TypeError(
+                f"MeasuredData holds host data, and column {name!r} is traced (inside jax.jit, "
+                "jax.vmap or jax.grad): build it outside them (from a Record returned by the "
+                "jitted function: record.to_data())"
+            ) from None
+        raise
     if arr.ndim != 1:
         raise ValueError(f"column {name!r} must be 1-D (one value per row); got shape {arr.shape}")
     unit = unit_hint(name)
@@ -182,3 +193,53 @@ def check_time(t: np.ndarray, run: np.ndarray) -> None:
             f"column 'time_s' must strictly increase within a run; row {i} (time {t[i]}, run "
             f"{run[i]}) does not follow row {j} (time {t[j]}), the run's previous row — {what}"
         )
+
+
+def _traced(value) -> bool:
+    """Whether `value` (an array, or a list of them) holds a JAX tracer."""
+    import jax
+
+    return any(isinstance(v, jax.core.Tracer) for v in jax.tree_util.tree_leaves(value))
+
+
+WRAP_TOLERANCE_DEG = 5.0
+"""How far [°] (plus 10 % of the integral's step) a step of `table_angle_deg` between two
+adjacent rows of a run may lie from the integral of `table_rate_dps` over them ± one turn
+and be read as a wrap (`check_table_wraps`): the trapezoid misses a true step by
+|Δrate|·Δt/2 at most (1.25° where a table starts at 5 °/s between samples 0.5 s apart); a
+column in another unit (arc-minutes, a rate in rad/s, time in ms) lands that near a whole
+turn only by chance."""
+
+
+def check_table_wraps(table_angle_deg, integral_deg, run, time_s) -> None:
+    """Refuse a `table_angle_deg` column wrapped to one turn (an encoder's azimuth in
+    [0, 360) or (−180, 180]), in any run, turning or at rest: between two adjacent rows of a
+    run where the integral of `table_rate_dps` (`integral_deg`, per row) moves less than half
+    a turn (a wrap is then unambiguous), it steps one turn (within `WRAP_TOLERANCE_DEG` +
+    10 % of the integral's step) away from that integral — a step the table does not make
+    and its rate does not show. Each run's windows read their table rate from this column,
+    so one wrapped run among many is refused too, naming the run and the rows."""
+    table, integral, t = (np.asarray(x, dtype=float) for x in (table_angle_deg, integral_deg,
+                                                                time_s))  # fmt: skip
+    run = np.asarray(run)
+    order = np.argsort(run, kind="stable")  # rows of a run in time order (`check_time`)
+    same = run[order][1:] == run[order][:-1]
+    step = np.diff(integral[order])
+    off = np.diff(table[order]) - step
+    tol = WRAP_TOLERANCE_DEG + 0.1 * np.abs(step)
+    turn = (np.abs(step) < 180.0) & (np.abs(np.abs(off) - 360.0) <= tol)
+    bad = np.flatnonzero(same & turn)
+    if not bad.size:
+        return
+    i, j = int(order[bad[0]]), int(order[bad[0] + 1])
+    own = table[run == run[i]]
+    lo, hi = own.min(), own.max()
+    form = "[0, 360)" if lo >= 0.0 and hi < 360.0 else ""
+    form = "(−180, 180]" if not form and lo >= -180.0 and hi <= 180.0 else form or "one turn"
+    raise ValueError(
+        f"column 'table_angle_deg' steps {table[j] - table[i]:+.4g}° from row {i} to row {j} of "
+        f"run {run[i]} (times {t[i]:g} → {t[j]:g} s), {off[bad[0]]:+.4g}° off the integral of "
+        f"'table_rate_dps' over them: it looks wrapped to {form} (an encoder's azimuth); the "
+        "table angle must be unwrapped (np.unwrap(a, period=360.0) run by run), or leave the "
+        "column out to take the rate's integral"
+    )

@@ -15,6 +15,7 @@ from ._compiled import tracing_callback_free
 from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
 from .noise import UNITS as NOISE_UNITS
 from .profiles import traced_checks as profile_checks
+from .resonator.control import FTR_LIMITS
 from .resonator.control import LIMITS as CONTROL_LIMITS
 from .resonator.params import LIMITS as RESONATOR_LIMITS
 from .resonator.params import TemperatureLaw, damping_problem
@@ -31,6 +32,15 @@ LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by 
 }
 """(rule of `hrgjax._checks.RULES`, unit) of each gyro field a temperature law (or a value
 put in with `eqx.tree_at`) must keep, by its path in the gyro; "finite" for any other."""
+
+
+def law_limits(gyro) -> dict:
+    """`LAW_LIMITS` with the narrower rules of the gyro's mode: in force-to-rebalance mode
+    the rebalance loop closed (`hrgjax.resonator.control.FTR_LIMITS`)."""
+    if gyro.control.mode != "ftr":
+        return LAW_LIMITS
+    return LAW_LIMITS | {f"control.{n}": rule for n, rule in FTR_LIMITS.items()}
+
 
 LAW_GRID = 257
 """Points between the profile's lowest and highest temperature at which a law is evaluated
@@ -59,12 +69,12 @@ def check_laws(gyro, profile) -> None:
     ones to the same rules at run time)."""
     temps = np.asarray(profile.temperature, float).ravel() if is_concrete(
         profile.temperature) else None  # fmt: skip
-    grid = None
+    grid, limits = None, law_limits(gyro)
     for name, law in _laws(gyro):
         plain = not isinstance(law, TemperatureLaw) and is_concrete(law) and np.ndim(law) == 0
         if plain and np.asarray(law).dtype.kind in "fiu" and not isinstance(law, bool):
             # a plain value, checked here too: eqx.tree_at (as sweeps do) skips __init__
-            value, (rule, unit) = float(np.asarray(law)), LAW_LIMITS.get(name, ("finite", ""))
+            value, (rule, unit) = float(np.asarray(law)), limits.get(name, ("finite", ""))
             if not (np.isfinite(value) and obeys(rule, value)):
                 raise ValueError(f"gyro.{name} = {value:g} {unit}; it must be {rule}".replace(
                     "  ", " "))  # fmt: skip
@@ -79,7 +89,7 @@ def check_laws(gyro, profile) -> None:
             grid = np.unique(np.concatenate([temps, np.linspace(lo, hi, LAW_GRID)]))
         with np.errstate(over="ignore", invalid="ignore"):
             value = law(grid, xp=np)
-        rule, unit = LAW_LIMITS.get(name, ("finite", ""))
+        rule, unit = limits.get(name, ("finite", ""))
         bad = ~np.isfinite(value) | ~obeys(rule, value)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
@@ -100,9 +110,13 @@ def law_checks(gyro, profile) -> list:
     finite (a NaN is the finite check's)."""
     temps = jnp.ravel(jnp.asarray(profile.temperature, dtype=float))
     temps_traced = not is_concrete(profile.temperature)
-    checks, grid = [], None
+    checks, grid, limits = [], None, law_limits(gyro)
     for name, law in _laws(gyro):
         if not isinstance(law, TemperatureLaw):
+            if limits.get(name) != LAW_LIMITS.get(name) and not is_concrete(law):
+                rule, unit = limits[name]  # a mode's rule, beyond `traceable`'s `LAW_LIMITS`
+                checks.append((jnp.any(jnp.isfinite(law) & ~obeys(rule, law, jnp)),
+                               f"gyro.{name} must be {rule} {unit}"))  # fmt: skip
             continue
         leaves = jax.tree_util.tree_leaves(law)
         if any(np.ndim(x) for x in leaves):
@@ -111,7 +125,7 @@ def law_checks(gyro, profile) -> list:
             continue  # `check_laws` did it
         if grid is None:
             grid = jnp.concatenate([temps, jnp.linspace(temps.min(), temps.max(), LAW_GRID)])
-        rule, unit = LAW_LIMITS.get(name, ("finite", ""))
+        rule, unit = limits.get(name, ("finite", ""))
         value = law(grid)
         judged = jnp.all(jnp.isfinite(temps)) & jnp.all(
             jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves]))  # fmt: skip

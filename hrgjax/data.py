@@ -15,7 +15,7 @@ from . import _data_files, plausible
 from ._data_columns import COLUMNS as COLUMNS
 from ._data_columns import MAX_EXACT_INTEGER as MAX_EXACT_INTEGER
 from ._data_columns import REQUIRED as REQUIRED
-from ._data_columns import check_time, checked_column
+from ._data_columns import check_table_wraps, check_time, checked_column
 from ._data_columns import is_number as is_number
 from ._data_files import NETCDF_EXTENSIONS as NETCDF_EXTENSIONS
 from ._data_files import UNITS as UNITS
@@ -117,11 +117,14 @@ class MeasuredData:
         if "rebalance_rate_dps" in cols:  # held wherever rebalance_on is absent or 1
             steered |= cols.get("rebalance_on", np.ones(len(self))) != 0
         free = ~np.isin(self.run, np.unique(self.run[steered]))
-        table = self.table_angle_deg  # the column, or the rate's per-run integral (once)
+        integral = self._rate_integral()  # the rate's per-run integral (once)
+        table = cols["table_angle_deg"] if given else integral
+        if given:  # an encoder's azimuth wrapped to one turn, in any run: named with the run
+            check_table_wraps(table, integral, self.run, cols["time_s"])
         if (turning & free).any():
             moving = np.isin(self.run, np.unique(self.run[turning])) & free
-            if given:
-                plausible.check_table_angle(table, self._rate_integral(), self.run, moving)
+            if given:  # the median over the runs, then each run
+                plausible.check_table_angle(table, integral, self.run, moving)
             plausible.check_wave_angle_units(cols["wave_angle_deg"], table, self.run, moving,
                                              K_E_NOMINAL, integrated=not given,
                                              time_s=cols["time_s"])  # fmt: skip
@@ -193,9 +196,20 @@ class MeasuredData:
         return [np.nonzero(run == run[i])[0] for i in sorted(first)]
 
     def runs(self) -> Iterator[MeasuredData]:
-        """Iterate over runs as separate datasets."""
+        """Iterate over runs as separate datasets (their rows as this one's, checked once:
+        when this dataset was built, e.g. inside a `plausible.relaxed` block that has ended)."""
         for idx in self.run_indices():
-            yield MeasuredData({k: v[idx] for k, v in self._columns.items()}, allow_extra=True)
+            yield MeasuredData._checked({k: v[idx] for k, v in self._columns.items()})
+
+    @classmethod
+    def _checked(cls, columns: dict[str, np.ndarray]) -> MeasuredData:
+        """A dataset of `columns`, rows of an already checked dataset (each a new array), not
+        checked again: its checks held for the whole, whatever ranges are in force now."""
+        out = cls.__new__(cls)
+        for arr in columns.values():
+            arr.setflags(write=False)
+        out._columns = columns
+        return out
 
     def stacked(self) -> list[RunStack]:
         """The runs in SI, stacked: one [`RunStack`][hrgjax.data.RunStack] per (length,

@@ -26,6 +26,8 @@ import numpy as np
 from ._unit_hints import EARTH_HINTS as EARTH_HINTS
 from ._unit_hints import IMU_HINTS as IMU_HINTS
 from ._unit_hints import NOISE_HINTS as NOISE_HINTS
+from ._unit_hints import TABLE_ANGLE_HINTS as TABLE_ANGLE_HINTS
+from ._unit_hints import run_ends, run_turns, wave_ratio_looks
 
 _DEFAULTS: dict[str, tuple[float, float, str]] = {
     "temperature_c": (-100.0, 150.0, "°C"),
@@ -34,6 +36,7 @@ _DEFAULTS: dict[str, tuple[float, float, str]] = {
     "duration_s": (0.0, 30 * 86400.0, "s"),
     "wave_step_deg": (0.0, 5.0, "° electrical"),
     "wave_drift_dph": (0.0, 100.0, "°/h electrical"),
+    "wave_table_ratio": (0.05, 2.0, "(|Δwave/Δtable|: k_e, electrical)"),
     "speed_mps": (0.0, 10_000.0, "m/s"),
     "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
     "specific_force_g": (-20.0, 20.0, "g"),
@@ -88,8 +91,9 @@ RANGES: Mapping[str, tuple[float, float, str]] = _Ranges()
 """(low, high, unit) of each quantity in force in the calling thread (a read-only
 mapping: the defaults with this thread's `relaxed` blocks on top): temperatures an HRG is
 built and tested for (−100 … +150 °C; −40 … +60 °C is the seed's bench), table rates (±10
-turns/s), wave angles (±1e7°: an angle that has turned 27 000 times is a unit error), the length of one run or segment
-(30 days), the wave angle's step between adjacent samples of a run beyond what the table and
+turns/s), wave angles (±1e7°: an angle that has turned 27 000 times is a unit error), the
+wave's turn over the table's on the rotation runs (|Δwave/Δtable| 0.05 … 2, `wave_table_ratio`:
+`check_wave_angle_units`), the length of one run or segment (30 days), the wave angle's step between adjacent samples of a run beyond what the table and
 a commanded precession move it (5° plus 100 °/h of drift over the time between them: the
 wave drifts at °/h, Earth's rate included, so a step of degrees between close samples is two
 runs under one id or a glitch), a vehicle's speed (10 km/s, above low-orbit speed: a speed in
@@ -396,47 +400,40 @@ then the table, not drift, moves the wave, and the ratio read is −k_e within a
 1.5 — far inside `WAVE_TABLE_RATIO` and far from the unit errors' ratios (×57.3, ×1/57.3)."""
 
 
-def _run_ends(run) -> tuple[np.ndarray, np.ndarray]:
-    """Each run's first and last row (rows of a run may be interleaved)."""
-    run = np.asarray(run)
-    _, first = np.unique(run, return_index=True)
-    _, last = np.unique(run[::-1], return_index=True)
-    return first, run.size - 1 - last
+WAVE_TABLE_RATIO = _DEFAULTS["wave_table_ratio"][:2]
+"""The default of `RANGES["wave_table_ratio"]`, the range of |Δwave / Δtable| over the
+rotation runs that `check_wave_angle_units` accepts: an HRG's wave turns k_e (0.554 for a
+hemisphere's electrical angle, 1 for a Foucault pendulum) times the table, either way round
+(the sign is a convention the calibration fits)."""
 
-
-def _turn_ratio(numerator, denominator, run, moving, min_turn: float,
-                min_numerator_turn=np.inf) -> float | None:  # fmt: skip
-    """The median over the `moving` runs of (numerator's change) / (denominator's change)
-    from each run's first row to its last (rows of a run may be interleaved), among runs
-    whose denominator changes by at least `min_turn` or whose numerator changes by at least
-    `min_numerator_turn` (a number, or one per run in the order of `np.unique(run)`); None
-    where none does."""
-    num, den = (np.asarray(x, dtype=float) for x in (numerator, denominator))
-    first, last = _run_ends(run)
-    moving = np.asarray(moving, bool)
-    turn = den[last] - den[first]
-    num_turn = num[last] - num[first]
-    use = moving[first] & ((np.abs(turn) >= min_turn) | (np.abs(num_turn) >= min_numerator_turn))
-    use &= turn != 0.0
-    if not use.any():
-        return None
-    return float(np.median(num_turn[use] / turn[use]))
-
-
-WAVE_TABLE_RATIO = (0.05, 2.0)
-"""Range of |Δwave / Δtable| over the rotation runs that `check_wave_angle_units` accepts:
-an HRG's wave turns k_e (0.554 for a hemisphere's electrical angle, 1 for a Foucault
-pendulum) times the table, either way round (the sign is a convention the calibration fits)."""
+MECHANICAL_TOLERANCE = 0.15
+"""Relative half-width of the band around k_e/2 in which |Δwave/Δtable| over the rotation
+runs reads as a wave angle logged in mechanical degrees (the n = 2 pattern's angle against
+the case, half the electrical one; `check_wave_angle_units`), widened by the ratio's own
+worst-case error e: the most drift `RANGES["wave_drift_dph"]` allows over each run against
+the wave's turn over it (the median run's; 2 % on runs of one turn at 5 °/s, whose ratios
+agree within 0.3 % of each other). The 15 % is the gyro's: thin-shell theory gives
+K = k_e/2 = 0.277, real hemispherical shells ≈ 0.3 (+8 %). It is named only where
+e ≤ 15 %: the band then ends at 0.36, below what a hemisphere within 15 % of k_e = 0.554
+reads in electrical degrees under that error (≥ 0.40); a ring (k_e ≈ 0.8) and a Foucault
+pendulum (1) lie far above. A gyro whose electrical k_e truly lies near 0.28 (not an n = 2
+shell or ring: their Bryan factor K ≈ 0.25–0.4 puts k_e = 2K at 0.5–0.8) passes inside
+`relaxed(wave_table_ratio=…)`. A wave angle logged at twice the electrical angle (2 k_e =
+1.11) is not named: it lies 11 % from a Foucault pendulum's 1 and 40 % from a ring's 0.8,
+the gains the wide `WAVE_TABLE_RATIO` takes."""
 
 
 def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: float,
                            integrated: bool = False, time_s=None) -> None:  # fmt: skip
     """Refuse columns whose units cannot be the contract's: over the rotation runs the
-    measured wave angle turns by ≈ −k_e times the table (both in degrees). Read as a ratio,
-    a wave angle in radians gives −k_e·π/180, a table in radians (a rate in rad/s, or a
-    `table_angle_deg` column in radians) −k_e·180/π, time stamps in milliseconds −k_e/1000
-    (where the table angle is the rate's integral over time, `integrated`); any other
-    |ratio| outside `WAVE_TABLE_RATIO` is refused naming all three columns.
+    measured wave angle turns by ≈ −k_e times the table (both in degrees). Read as a ratio
+    (the median over the runs), a wave angle in radians gives −k_e·π/180, a table in radians
+    (a rate in rad/s, or a `table_angle_deg` column in radians) −k_e·180/π, a table rate in
+    °/min −k_e/60, time stamps in milliseconds −k_e/1000 (where the table angle is the
+    rate's integral over time, `integrated`), a wave angle in mechanical degrees −k_e/2
+    (within [`MECHANICAL_TOLERANCE`][hrgjax.plausible.MECHANICAL_TOLERANCE]; naming
+    `wave_table_ratio` in `relaxed` takes it); any other |ratio| outside
+    `RANGES["wave_table_ratio"]` is refused naming all four columns.
 
     **Arguments:** per-row arrays (`run` ids, `moving`: the row's run turns the table,
     `time_s`: the time stamps, None: not known) and the nominal angular gain `k_e`. A run
@@ -446,7 +443,7 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
     alone cannot pick the runs.
 
     **Raises:** `ValueError` naming the column the ratio points at, and the ratio found."""
-    wave_turn = np.inf
+    wave_turn, drift = np.inf, None
     if time_s is not None:
         t = np.asarray(time_s, dtype=float)
         ids = np.unique(np.asarray(run), return_inverse=True)[1].ravel()
@@ -456,56 +453,72 @@ def check_wave_angle_units(wave_angle_deg, table_angle_deg, run, moving, k_e: fl
         np.minimum.at(low_t, ids, t)
         drift = RANGES["wave_drift_dph"][1] / 3600.0 * (span - low_t)
         wave_turn = np.maximum(1.0, WAVE_TURN_OVER_DRIFT * drift)
-    ratio = _turn_ratio(wave_angle_deg, table_angle_deg, run, moving, 1.0, wave_turn)
-    if ratio is None:
+    num, den, use = run_turns(wave_angle_deg, table_angle_deg, run, moving, 1.0, wave_turn)
+    if not use.any():
         return
+    ratio = float(np.median(num[use] / den[use]))
+    with np.errstate(divide="ignore"):  # the ratio's worst-case error from drift
+        error = 0.0 if drift is None else float(np.median(drift[use] / np.abs(num[use])))
     said = f"column 'wave_angle_deg' turns {ratio:.4g} × the table over the rotation runs"
     degrees = f"in degrees, ≈ −k_e = {-k_e:.4g}"
-    looks = [(-k_e * np.pi / 180.0, "as an angle in radians would", "give the wave angle in "
-              "degrees (np.degrees)"),
-             (-k_e * 180.0 / np.pi, "as a table angle in radians would", "give "
-              "'table_rate_dps' in °/s (and 'table_angle_deg', if given, in degrees)")]  # fmt: skip
-    if integrated:
-        looks += [(-k_e / 1000.0, "as a table angle integrated over time stamps in "
-                   "milliseconds would", "give 'time_s' in seconds"),
-                  (-k_e * 60.0, "as a table angle integrated over time stamps in minutes "
-                   "would", "give 'time_s' in seconds")]  # fmt: skip
-    near = [x for x in looks if abs(ratio - x[0]) < 0.3 * abs(x[0])]  # k_e is only nominal
-    if near:  # 57.3 (radians) and 60 (minutes) lie within k_e's tolerance: both named
+    near = [x for x in wave_ratio_looks(k_e, integrated) if abs(ratio - x[0]) < 0.3 * abs(x[0])]
+    if near:  # 57.3 (radians) and 60 (minutes, °/min) lie within k_e's tolerance: all named
         like = " or ".join(f"{like} ({expected:.4g})" for expected, like, _ in near)
         fix = " or ".join(dict.fromkeys(f for _, _, f in near))
         raise ValueError(f"{said}, {like} ({degrees}): {fix}")
-    low, high = WAVE_TABLE_RATIO
+    half, tol = 0.5 * k_e, MECHANICAL_TOLERANCE + error
+    if (error <= MECHANICAL_TOLERANCE and abs(abs(ratio) - half) <= tol * half
+            and "wave_table_ratio" not in (_OVERRIDES.get() or {})):  # fmt: skip
+        sign = "−" if ratio < 0 else "+"
+        raise ValueError(
+            f"{said}, as a wave angle in mechanical degrees would ({sign}k_e/2 = "
+            f"{np.copysign(half, ratio):.4g}; {degrees}): column 'wave_angle_deg' must be in "
+            "electrical degrees, 2× the mechanical angle of the n = 2 pattern: multiply it by 2 "
+            f"(a gyro whose k_e truly is {abs(ratio):.3g}: hrgjax.plausible.relaxed("
+            "wave_table_ratio=…) takes it)"
+        )
+    low, high, _ = RANGES["wave_table_ratio"]
     if not low <= abs(ratio) <= high:
         raise ValueError(
             f"{said} ({degrees}; hrgjax takes |ratio| in {low:g} … {high:g}): check the units "
             "of 'wave_angle_deg' [° electrical], 'table_rate_dps' [°/s], 'table_angle_deg' [°] "
-            "and 'time_s' [s]"
+            f"and 'time_s' [s]{_widens('wave_table_ratio')}"
         )
 
 
 def check_table_angle(table_angle_deg, integral_deg, run, moving) -> None:
     """Refuse a `table_angle_deg` column that does not turn as the integral of
-    `table_rate_dps` over `time_s` (`integral_deg`, per row) over the rotation runs: within
-    10 %, or named as radians (π/180), a rate in rad/s (180/π) or time stamps in
-    milliseconds (1/1000). A run counts where either
-    turns by ≥ 1 (in the file's units: a table angle or a rate in radians turns < 1 over a
-    run shorter than 57.3°, the other one does not).
+    `table_rate_dps` over `time_s` (`integral_deg`, per row) over the rotation runs: their
+    median within 10 %, or named as radians (π/180), a rate in rad/s (180/π) or in °/min
+    (1/60), time stamps in milliseconds (1/1000) (`TABLE_ANGLE_HINTS`); and then each run
+    within 10 % (a run of another file, in another unit), naming the run and its rows. A
+    run counts where either turns by ≥ 1 (in the file's units: a table angle or a rate in
+    radians turns < 1 over a run shorter than 57.3°, the other one does not).
 
     **Raises:** `ValueError` naming `table_angle_deg` and the ratio found."""
-    ratio = _turn_ratio(table_angle_deg, integral_deg, run, moving, 1.0, 1.0)
-    if ratio is None or abs(ratio - 1.0) <= 0.1:
+    num, den, use = run_turns(table_angle_deg, integral_deg, run, moving, 1.0, 1.0)
+    if not use.any():
         return
-    hint = {np.pi / 180.0: ": it looks like radians (np.degrees)",
-            180.0 / np.pi: ": it looks like 'table_rate_dps' is in rad/s",
-            1e-3: ": it looks like 'time_s' is in milliseconds (÷ 1000)",
-            60.0: ": it looks like 'time_s' is in minutes (× 60)",
-            1e3: ": it looks like 'table_rate_dps' is per millisecond, or 'time_s' in "
-                 "kiloseconds"}  # fmt: skip
-    why = next((h for r, h in hint.items() if abs(ratio - r) < 0.02 * r), "")
+    each = num / np.where(use, den, 1.0)
+    ratio = float(np.median(each[use]))
+    bad = use & (np.abs(each - 1.0) > 0.1)
+    if not bad.any():
+        return
+    first, last = run_ends(run)
+    k = int(np.argmin(np.where(bad, first, np.iinfo(np.int64).max)))  # the first such run
+    whole = abs(ratio - 1.0) > 0.1
+    found = ratio if whole else float(each[k])
+    why = next((h for r, h in TABLE_ANGLE_HINTS.items() if abs(found - r) < 0.02 * r), "")
+    if whole:
+        raise ValueError(
+            f"column 'table_angle_deg' turns {ratio:.4g} × the integral of 'table_rate_dps' "
+            f"over 'time_s' over the rotation runs; the two must agree (within 10 %){why}"
+        )
     raise ValueError(
-        f"column 'table_angle_deg' turns {ratio:.4g} × the integral of 'table_rate_dps' over "
-        f"'time_s' over the rotation runs; the two must agree (within 10 %){why}"
+        f"column 'table_angle_deg' turns {found:.4g} × the integral of 'table_rate_dps' over "
+        f"'time_s' in run {np.asarray(run)[first[k]]} (from row {first[k]} to row {last[k]}), "
+        f"where the rotation runs' median is {ratio:.4g}; the two must agree (within 10 %) "
+        f"in every run{why}"
     )
 
 

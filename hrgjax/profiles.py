@@ -96,6 +96,19 @@ def _duration(builder: str, duration_s) -> None:
         raise ValueError(f"Profile.{builder}: duration_s must be > 0 [s]; got {float(v):g}")
 
 
+def _slew_fits(steps_deg: np.ndarray, slew_s: float) -> None:
+    """`Profile.held_angles`'s `slew_s` [s] refused where its pulse (peak step/(¾·slew_s))
+    would command a precession beyond the plausible range, naming `slew_s` and its least."""
+    low, high, unit = plausible.RANGES["precession_dps"]
+    peak = steps_deg / (0.75 * slew_s)
+    if (bad := (peak < low) | (peak > high)).any():
+        least = float(np.max(steps_deg[bad] / (0.75 * np.where(peak[bad] > 0, high, low))))
+        raise ValueError(f"Profile.held_angles: slew_s = {slew_s:g} s moves the wave "
+                         f"{steps_deg[bad][0]:g}° at a peak of {peak[bad][0]:.6g} {unit}, beyond "
+                         f"the plausible {low:g} … {high:g}: give slew_s ≥ {least:.3g} s (or "
+                         "widen it: hrgjax.plausible.relaxed(precession_dps=…))")  # fmt: skip
+
+
 def _accel(builder: str, accel_g) -> None:
     check_numbers(f"Profile.{builder}: accel_g", accel_g,
                   "3 values (specific force along case x, y, z) [g], shape (3,)", (3,))  # fmt: skip
@@ -168,26 +181,20 @@ class Profile(eqx.Module):
         refuse_unconverted(self, "real numbers (an array; precession and rebalance may be None)")
         n = self.t.shape[-1] if self.t.ndim else 0
         if self.t.ndim != 1 or n < 2:
-            raise ValueError(
-                f"Profile.t must have shape (N,) with N >= 2 knots; got {self.t.shape}"
-            )
+            raise ValueError(f"Profile.t must have shape (N,) with N >= 2 knots; got "
+                             f"{self.t.shape}")  # fmt: skip
         for name in ("rate", "temperature"):
             if getattr(self, name).shape != (n,):
-                raise ValueError(
-                    f"Profile.{name} must have the shape of Profile.t, ({n},); "
-                    f"got {getattr(self, name).shape}"
-                )
+                raise ValueError(f"Profile.{name} must have the shape of Profile.t, ({n},); "
+                                 f"got {getattr(self, name).shape}")  # fmt: skip
         if self.accel.shape != (n, 3):
             raise ValueError(f"Profile.accel must have shape ({n}, 3) [g]; got {self.accel.shape}")
         if self.wave_angle0.shape != ():
-            raise ValueError(
-                f"Profile.wave_angle0 must be a scalar [rad]; got {self.wave_angle0.shape}"
-            )
+            raise ValueError(f"Profile.wave_angle0 must be a scalar [rad]; got "
+                             f"{self.wave_angle0.shape}")  # fmt: skip
         if self.precession is not None and self.precession.shape != (n,):
-            raise ValueError(
-                f"Profile.precession must have the shape of Profile.t, ({n},) [rad/s], or be "
-                f"None; got {self.precession.shape}"
-            )
+            raise ValueError(f"Profile.precession must have the shape of Profile.t, ({n},) "
+                             f"[rad/s], or be None; got {self.precession.shape}")  # fmt: skip
         for name in ("t", "rate", "temperature", "accel", "wave_angle0"):
             _finite(f"Profile.{name}", getattr(self, name))
         if self.precession is not None:
@@ -224,7 +231,6 @@ class Profile(eqx.Module):
         if is_concrete(self.t):
             plausible.check("Profile's length [s]", float(np.ptp(np.asarray(self.t))),
                             "duration_s")  # fmt: skip
-        if is_concrete(self.t):
             t = np.asarray(self.t)
             bad = np.nonzero(np.diff(t) <= 0)[0]
             if bad.size:
@@ -399,7 +405,10 @@ class Profile(eqx.Module):
                              + ("" if ang.ndim > 1 or not ang.size else " with NaN or inf"))  # fmt: skip
         for name, v in (("dwell_s", dwell_s), ("slew_s", slew_s)):
             if (c := concrete_value(v)) is not None and not (np.isfinite(c) and c > 0):
-                raise ValueError(f"{name} must be a positive number of seconds; got {v!r}")
+                raise ValueError(f"Profile.held_angles: {name} must be a positive number of "
+                                 f"seconds; got {v!r}")  # fmt: skip
+        if finite is not None and finite.size > 1 and (slew := concrete_value(slew_s)) is not None:
+            _slew_fits(np.diff(finite.reshape(-1)), float(slew))
         ang, ramp = ang.reshape(-1), slew_s / 4.0
         t, rho = [0.0, dwell_s], [0.0, 0.0]
         for k in range(1, ang.size):
@@ -420,21 +429,11 @@ class Profile(eqx.Module):
         if settle_s < 0:
             raise ValueError(f"Profile.hold_windows: settle_s must be >= 0 [s]; got {settle_s:g}")
         t = np.asarray(self.t)
-        still = (np.zeros(t.size - 1, bool) if self.precession is None else
-                 (np.asarray(self.precession)[:-1] != 0) | (np.asarray(self.precession)[1:] != 0))  # fmt: skip
-        still = ~still
-        out, i = [], 0
-        while i < still.size:
-            if not still[i]:
-                i += 1
-                continue
-            j = i
-            while j + 1 < still.size and still[j + 1]:
-                j += 1
-            if t[j + 1] - t[i] > settle_s:
-                out.append((float(t[i]) + settle_s, float(t[j + 1])))
-            i = j + 1
-        return out
+        rho = np.zeros(t.size) if self.precession is None else np.asarray(self.precession)
+        still = np.concatenate([[0], (rho[:-1] == 0) & (rho[1:] == 0), [0]]).astype(int)
+        edges = np.flatnonzero(np.diff(still))  # runs of still segments a … b − 1: t[a] to t[b]
+        return [(float(t[a]) + settle_s, float(t[b])) for a, b in zip(edges[::2], edges[1::2],
+                strict=True) if t[b] - t[a] > settle_s]  # fmt: skip
 
     @property
     def duration(self):

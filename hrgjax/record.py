@@ -2,12 +2,36 @@
 
 from __future__ import annotations
 
+import warnings
+
 import equinox as eqx
 import jax
 import numpy as np
 
+from ._checks import concrete_value, is_concrete
+from ._warn import user_stacklevel
 from .data import MeasuredData
 from .units import DEG, DEG_PER_S
+
+
+class SaturationWarning(UserWarning):
+    """`simulate`: the force-to-rebalance loop sat at its force limit
+    (`Record.rebalance_saturated`)."""
+
+
+def warn_saturated(record: Record, limit) -> None:
+    """One line (`SaturationWarning`) when an eager run's rebalance force sat at its `limit`
+    (`Control.rebalance_limit`) in any sample; nothing for a traced record."""
+    sat = record.rebalance_saturated
+    if sat is None or (sat := concrete_value(sat)) is None or not sat.any():
+        return
+    shown = f" = {float(limit):g}" if isinstance(limit, jax.Array) and is_concrete(limit) else ""
+    reads = np.median(np.abs(np.asarray(record.rebalance_rate))[sat > 0]) / DEG_PER_S
+    warnings.warn(f"simulate: the FTR loop saturated at Control.rebalance_limit{shown} in "
+                  f"{100 * sat.mean():.3g} % of the samples (Record.rebalance_saturated): the "
+                  f"output there reads the limit, ≈ ±{reads:.4g} °/s, not the rate; raise the "
+                  "limit (2ωa₀k_e per rad/s of rate: ≈ 608 per °/s on the default gyro)",
+                  SaturationWarning, stacklevel=user_stacklevel())  # fmt: skip
 
 
 class Record(eqx.Module):
@@ -50,6 +74,10 @@ class Record(eqx.Module):
     rebalance_on: jax.Array | None = None
     """1 where the rebalance loop held the wave, 0 where the gyro ran whole-angle (a profile's
     `rebalance` schedule); `None` without one."""
+    rebalance_saturated: jax.Array | None = None
+    """1 where the rebalance force sat at `Control.rebalance_limit` (the loop saturated: the
+    wave runs off and the FTR output there reads the limit, not the rate), else 0; `None`
+    without a limit (or in whole-angle mode). `simulate` warns when an eager run has any."""
     precession: jax.Array | None = None
     """Commanded precession rate [rad/s, electrical] (the profile's schedule); `None` when
     the profile commands none."""
@@ -60,7 +88,16 @@ class Record(eqx.Module):
         """The record as [`hrgjax.MeasuredData`][] in the units of the data contract.
 
         A batched record becomes consecutive runs numbered 0, 1, … in row-major order.
-        """
+
+        **Raises:** `TypeError` for a traced record (inside `jax.jit`, `jax.vmap` or
+        `jax.grad`): `MeasuredData` holds host data; call `to_data` on the record the
+        jitted function returns."""
+        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(self)):
+            raise TypeError(
+                "Record.to_data: MeasuredData holds host data, and this record is traced "
+                "(inside jax.jit, jax.vmap or jax.grad): call to_data outside them, on the "
+                "Record the jitted function returns"
+            )
         t = np.asarray(self.t)
         batch = t.shape[:-1]
         n = t.shape[-1]

@@ -36,7 +36,8 @@ from ._x64 import require_x64
 from .gyro import Gyro, check_one
 from .noise import draw_run_bias, rate_noise_angle
 from .profiles import Profile
-from .record import Record
+from .record import Record, warn_saturated
+from .record import SaturationWarning as SaturationWarning
 from .resonator.averaged import (
     averaged_problem,
     held_angle,
@@ -312,9 +313,19 @@ def _record(gyro, profile, ts, read, key, bias_key, run, t_out=None):
         run=run,
         rebalance_rate=rebalance_rate,
         rebalance_on=None if profile.rebalance is None else jax.vmap(profile.rebalance_at)(ts),
+        rebalance_saturated=_saturated(gyro, profile, ts, loops),
         precession=None if profile.precession is None else jax.vmap(profile.precession_at)(ts),
         mode=gyro.control.mode,
     )
+
+
+def _saturated(gyro, profile, ts, loops):
+    """1.0 where the rebalance force sat at `Control.rebalance_limit` (at that sample's
+    temperature; 1e-12 for the law's rounding), else 0.0; `None` without a limit."""
+    if gyro.control.mode != "ftr" or gyro.control.rebalance_limit is None:
+        return None
+    limit = jax.vmap(lambda t: gyro.at(profile.temperature_at(t)).control.rebalance_limit)(ts)
+    return (jnp.abs(loops.rebalance) >= limit * (1.0 - 1e-12)).astype(float)
 
 
 def _read_averaged(gyro, profile, ts, ys):
@@ -442,7 +453,8 @@ def simulate(
       and little is recomputed; diffrax's default for the full model).
     - `run`: integer run id written to the record.
 
-    **Returns:** a [`hrgjax.Record`][].
+    **Returns:** a [`hrgjax.Record`][]. **Warns:** `SaturationWarning` (eager runs) where the
+    force-to-rebalance force sat at `Control.rebalance_limit` (`Record.rebalance_saturated`).
 
     **Where it runs:** called outside any `jit`/`vmap`/`grad`, on a machine whose default JAX
     backend is an accelerator, the run goes to the CPU (one trajectory steps sequentially,
@@ -552,10 +564,13 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     gyro, profile = check_traced(gyro, profile)  # traced values: the eager rules, at run time
     profile, rel = _from_start(profile, ts, dt_out)  # the clock's origin: no physics
     args = (model, gyro, profile, rel, *stepping, quadrature0, adjoint, key, bias_key, run, ts)
+    out = None
     if carrier is None and ts.shape[0] >= parts.STEPPED_FROM and parts.eager(args):
         with contextlib.suppress(parts.Unresumable):  # (rare: then one program, no bar)
-            return _solve_in_parts(*args)  # a long run: progress shown, the same results
-    return _solve(*args, carrier)
+            out = _solve_in_parts(*args)  # a long run: progress shown, the same results
+    out = _solve(*args, carrier) if out is None else out
+    warn_saturated(out[0], ctl.rebalance_limit)  # eager runs only (a traced record: no value)
+    return out
 
 
 def _from_start(profile, ts, dt_out):

@@ -610,6 +610,80 @@ def test_rate_in_rad_per_s_is_refused_on_runs_shorter_than_a_radian():
                                 wave_angle_deg=-k_e * 0.05 * t + 50.0 / 3600.0 * t))  # fmt: skip
 
 
+def test_wave_angle_in_mechanical_degrees_is_named():
+    """Audit (s30): a wave angle logged in mechanical degrees (the n = 2 pattern's angle,
+    half the electrical one) turns −k_e/2 = −0.277 × the table and passed (the drifts then
+    came out half-size). It is named where the ratio lies within 15 % of k_e/2 plus its own
+    drift error; other gyros' gains load, and `relaxed(wave_table_ratio=…)` takes a gyro
+    whose k_e truly is ≈ 0.28."""
+    t = np.arange(0.0, 72.5, 0.5)  # one turn at 5 °/s
+    cols = dict(time_s=t, temperature_c=np.full(t.size, 20.0), table_rate_dps=np.full(t.size, 5.0),
+                wave_angle_deg=-0.554 * 5.0 * t)  # fmt: skip
+    mech = r"^column 'wave_angle_deg' turns -0.277 × the table .* in mechanical degrees would "
+    for gain in (0.277, -0.277, 0.25, 0.315):  # either sign (a convention), K ≈ 0.25–0.3
+        with pytest.raises(ValueError, match=r"in mechanical degrees would \([−+]k_e/2 = -?0.277;"
+                           r" .* must be in electrical degrees, 2× the mechanical angle .*: multiply "
+                           r"it by 2 \(a gyro whose k_e truly is .*relaxed\(wave_table_ratio=…\)"
+                           r" takes it\)$"):  # fmt: skip
+            hg.MeasuredData(cols | dict(wave_angle_deg=-gain * 5.0 * t))
+    for gain in (0.34, 0.4, 0.554, 0.8, 1.0, 1.108):  # micro-shells, a ring, a pendulum, 2·k_e
+        hg.MeasuredData(cols | dict(wave_angle_deg=-gain * 5.0 * t))
+    with hg.plausible.relaxed(wave_table_ratio=(0.05, 2.0)):  # a gyro whose k_e is 0.277
+        data = hg.MeasuredData(cols | dict(wave_angle_deg=-0.277 * 5.0 * t))
+    assert len(list(data.runs())) == 1  # its runs are not checked again outside the block
+    with pytest.raises(ValueError, match=mech):
+        hg.MeasuredData(cols | dict(wave_angle_deg=-0.277 * 5.0 * t))
+    # a table at 0.05 °/s for 10 min: 100 °/h of drift could make the wave turn by twice
+    # what the table does (error 200 %), so the ratio cannot tell mechanical from electrical
+    slow = np.arange(0.0, 600.5, 0.5)
+    hg.MeasuredData(dict(time_s=slow, temperature_c=np.full(slow.size, 20.0),
+                         table_rate_dps=np.full(slow.size, 0.05),
+                         wave_angle_deg=-0.277 * 0.05 * slow))  # fmt: skip
+    with hg.plausible.relaxed(wave_table_ratio=(0.5, 0.6)):  # the range itself is relaxable
+        with pytest.raises(ValueError, match=r"turns -0.8 × .* \|ratio\| in 0.5 … 0.6\): check"
+                           r" .*relaxed\(wave_table_ratio=…\) widens it\)$"):  # fmt: skip
+            hg.MeasuredData(cols | dict(wave_angle_deg=-0.8 * 5.0 * t))
+
+
+def test_table_in_degrees_per_minute_and_wrapped_table_angles_are_named():
+    """Audit (s30): a table rate in °/min (and its angle in arc-minutes) gives −k_e/60 =
+    −0.009233, 4.5 % from a wave angle in radians (−0.009669), and only radians was named;
+    a `table_angle_deg` wrapped to [0, 360) or (−180, 180] was "0 × the integral" with no
+    word of the wrap."""
+    t = np.arange(0.0, 120.0, 0.5)  # 600° at 5 °/s
+    cols = dict(time_s=t, temperature_c=np.full(t.size, 20.0), table_rate_dps=np.full(t.size, 5.0),
+                table_angle_deg=5.0 * t + 100.0, wave_angle_deg=-0.554 * 5.0 * t)  # fmt: skip
+    hg.MeasuredData(cols)
+    both = (r"radians would \(-0.009669\) or as a table rate in °/min \(and a table angle in "
+            r"arc-minutes\) would \(-0.009233\) .*: give the wave angle in degrees \(np.degrees\) "
+            r"or give 'table_rate_dps' in °/s \(÷ 60; 'table_angle_deg' in degrees\)$")  # fmt: skip
+    per_min = dict(table_rate_dps=60.0 * cols["table_rate_dps"],
+                   table_angle_deg=60.0 * cols["table_angle_deg"])  # fmt: skip
+    with pytest.raises(ValueError, match=r"^column 'wave_angle_deg' turns -0.009233 × .*" + both):
+        hg.MeasuredData(cols | per_min)
+    with pytest.raises(ValueError, match=r"^column 'wave_angle_deg' turns -0.009669 × .*" + both):
+        hg.MeasuredData(cols | dict(wave_angle_deg=np.radians(cols["wave_angle_deg"])))
+    with pytest.raises(ValueError, match=r"^column 'table_angle_deg' turns 0.01667 × the integral"
+                       r" .*: it looks like 'table_rate_dps' is in °/min \(÷ 60\)$"):  # fmt: skip
+        hg.MeasuredData(cols | dict(table_rate_dps=per_min["table_rate_dps"]))
+    for wrap, form in ((np.mod(cols["table_angle_deg"], 360.0), r"\[0, 360\)"),
+                       ((cols["table_angle_deg"] + 180.0) % 360.0 - 180.0, r"\(−180, 180\]")):  # fmt: skip
+        with pytest.raises(ValueError, match=r"^column 'table_angle_deg' steps -357.5° from row "
+                           r"\d+ to row \d+ of run 0 \(times .* s\), -360° off the integral of "
+                           rf"'table_rate_dps' over them: it looks wrapped to {form} .* must be "
+                           r"unwrapped \(np.unwrap\(a, period=360.0\) run by run\)"):  # fmt: skip
+            hg.MeasuredData(cols | dict(table_angle_deg=wrap))
+        unwrapped = np.degrees(np.unwrap(np.radians(wrap)))
+        hg.MeasuredData(cols | dict(table_angle_deg=unwrapped))  # the fix the message gives
+    # a table at rest on 0°, its encoder flickering to 359.99: a wrap too (the windows'
+    # table rate would read 360° a sample)
+    rest = cols | dict(table_rate_dps=np.zeros(t.size), wave_angle_deg=np.zeros(t.size),
+                       table_angle_deg=np.where(np.arange(t.size) % 7 == 3, 359.99, 0.0))  # fmt: skip
+    with pytest.raises(ValueError, match=r"steps \+360° from row 2 to row 3 of run 0 .* wrapped "
+                       r"to \[0, 360\)"):  # fmt: skip
+        hg.MeasuredData(rest)
+
+
 def test_impossible_bench_plans_are_refused():
     """Issue 44: a bench starting at NaN °C, a 1e9-h budget, a segment at +300 °C."""
     from hrgjax.calibration import design

@@ -200,3 +200,78 @@ def test_stacked_pools_runs_whose_intervals_differ_by_their_jitter_only():
     assert stacks[1].dt == pytest.approx(0.1, abs=1e-4)
     for s in stacks:
         np.testing.assert_array_equal(s.t, t[s.rows])  # the runs' own stamps
+
+
+def _two_runs(n=41):
+    """A static run 0 and a rotation run 1 at 5 °/s over 20 s, as columns."""
+    t = np.arange(n) * 0.5
+    table = 5.0 * t
+    return {
+        "time_s": np.r_[t, t],
+        "run": np.r_[np.zeros(n, int), np.ones(n, int)],
+        "temperature_c": np.full(2 * n, 20.0),
+        "table_rate_dps": np.r_[np.zeros(n), np.full(n, 5.0)],
+        "table_angle_deg": np.r_[np.zeros(n), table],
+        "wave_angle_deg": np.r_[np.full(n, 10.0), 10.0 - 0.554 * table],
+    }
+
+
+def test_runs_are_checked_once_with_the_dataset():
+    """Audit (s30): `runs()` rebuilt and re-checked every run, so data loaded inside
+    `plausible.relaxed(temperature_c=…)` failed in `reduce` outside the block, naming
+    "index 0" (the row in the run). A dataset is checked once; its runs are its rows."""
+    from hrgjax import calibration as cal
+
+    cols = _two_runs() | {"temperature_c": np.full(82, -150.0)}
+    with hg.plausible.relaxed(temperature_c=(-200.0, 200.0)):
+        d = hg.MeasuredData(cols)
+    runs = list(d.runs())  # outside the block
+    assert [r.run[0] for r in runs] == [0, 1]
+    np.testing.assert_array_equal(runs[1]["table_angle_deg"], cols["table_angle_deg"][41:])
+    with pytest.raises(ValueError, match="read-only"):
+        runs[0]["temperature_c"][0] = 0.0
+    w = cal.reduce(d, window_s=5.0)
+    np.testing.assert_allclose(w.temperature_c, -150.0)
+    with pytest.raises(ValueError, match=r"temperature_c' = -150 at index 0 "):
+        hg.MeasuredData(cols)  # the range is back
+
+
+def test_a_run_whose_table_angle_disagrees_is_named_with_its_dataset_rows():
+    """Audit (s30): one run's azimuth wrapped (or in radians) among good runs passed the
+    load (the median over runs) and failed in `reduce` naming no run. It is refused where
+    the dataset is built, naming the run and the dataset's rows."""
+    good = _two_runs()
+    n = 41
+    spin = {k: v[n:] for k, v in good.items()}
+    cols = {k: np.r_[good[k], spin[k], spin[k]] for k in good}  # rotation runs 1, 2, 3
+    cols["run"] = np.repeat([0, 1, 2, 3], n)
+    hg.MeasuredData(cols)
+    wrapped = cols["table_angle_deg"].copy()
+    wrapped[2 * n : 3 * n] = np.mod(wrapped[2 * n : 3 * n] + 300.0, 360.0)  # run 2 only
+    with pytest.raises(ValueError, match=r"^column 'table_angle_deg' steps -357.5° from row "
+                       r"105 to row 106 of run 2 \(times 11.5 → 12 s\), -360° off .* wrapped to "
+                       r"\[0, 360\)"):  # fmt: skip
+        hg.MeasuredData(cols | {"table_angle_deg": wrapped})
+    rad = cols["table_angle_deg"].copy()
+    rad[3 * n :] = np.radians(rad[3 * n :])  # run 3 only
+    with pytest.raises(ValueError, match=r"^column 'table_angle_deg' turns 0.01745 × the integral"
+                       r" .* in run 3 \(from row 123 to row 163\), where the rotation runs' median "
+                       r"is 1; .* in every run: it looks like radians"):  # fmt: skip
+        hg.MeasuredData(cols | {"table_angle_deg": rad})
+
+
+def test_traced_columns_and_records_are_refused_in_one_line(record):
+    """Audit (s30): `MeasuredData` of traced columns and `Record.to_data()` of a traced
+    record raised JAX's bare TracerArrayConversionError under `jax.jit`."""
+    import jax
+    import jax.numpy as jnp
+
+    cols = {k: jnp.asarray(v) for k, v in table().items()}
+    assert hg.MeasuredData(cols) == hg.MeasuredData(table())  # concrete JAX arrays: fine
+    with pytest.raises(TypeError, match=r"^MeasuredData holds host data, and column "
+                       r"'wave_angle_deg' is traced .*: build it outside them"):  # fmt: skip
+        jax.jit(lambda w: hg.MeasuredData(cols | {"wave_angle_deg": w}).columns)(cols["time_s"])
+    with pytest.raises(TypeError, match=r"^Record.to_data: MeasuredData holds host data, and "
+                       r"this record is traced .* on the Record the jitted function returns"):  # fmt: skip
+        jax.jit(lambda r: r.to_data().columns)(record)
+    assert len(record.to_data()) == record.t.size

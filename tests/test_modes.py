@@ -30,6 +30,7 @@ def test_ftr_on_a_perfect_gyro_reads_the_input_rate():
     rate = np.asarray(rec.rebalance_rate)
     assert np.max(np.abs(rate / (10.0 * DEG_PER_S) - 1.0)) < 1e-6
     assert np.max(np.abs(np.asarray(rec.wave_angle) - 30.0 * DEG)) < 1e-9
+    assert rec.rebalance_saturated is None  # no rebalance_limit
     cols = rec.to_data().columns
     np.testing.assert_allclose(cols["rebalance_rate_dps"], rate / DEG_PER_S)
 
@@ -171,7 +172,7 @@ def test_bad_mode_and_schedule_inputs_name_the_field():
     with pytest.raises(ValueError, match="Profile.precession must have the shape"):
         hg.Profile(t=[0.0, 1.0], rate=[0.0, 0.0], temperature=[20.0, 20.0],
                    accel=np.zeros((2, 3)), precession=[0.0, 0.0, 0.0])  # fmt: skip
-    with pytest.raises(ValueError, match="dwell_s must be a positive"):
+    with pytest.raises(ValueError, match=r"^Profile\.held_angles: dwell_s must be a positive"):
         hg.Profile.held_angles([0.0, 90.0], dwell_s=0.0)
     with pytest.raises(ValueError, match="rebalance_limit"):
         hg.simulate(_ftr(PERFECT, rebalance_limit=-1.0), hg.Profile.static(1.0))
@@ -288,3 +289,74 @@ def test_ideal_ftr_loops_with_a_force_limit_are_refused():
     with pytest.raises(ValueError, match=r"Control.rebalance_limit needs Control.ideal=False"):
         hg.simulate(limited, hg.Profile.static(1.0))
     Control(mode="wa", ideal=True, rebalance_limit=600.0)  # read only in FTR mode
+
+
+def test_held_angles_names_a_slew_too_short_for_its_pulse():
+    """Audit: `held_angles(…, slew_s=1e-3)` was refused as "Profile.precession = 120000 at
+    index 2 …", a field the caller never gave. The trapezoid's peak, step/(¾·slew_s), is
+    checked against the plausible precession where the slew is given, naming `slew_s` and the
+    least that fits (90° at ±2e4 °/s: 6 ms); a relaxed range takes it."""
+    with pytest.raises(
+        ValueError,
+        match=r"^Profile\.held_angles: slew_s = 0\.001 s moves the "
+        r"wave 90° at a peak of 120000 °/s electrical, .* give slew_s ≥ 0\.006 s",
+    ):
+        hg.Profile.held_angles([70.0, 160.0], dwell_s=120.0, slew_s=1e-3)
+    with pytest.raises(ValueError, match=r"^Profile\.held_angles: slew_s = 0\.001 s moves the "
+                       r"wave -90° at a peak of -120000"):  # fmt: skip
+        hg.Profile.held_angles([160.0, 70.0], dwell_s=120.0, slew_s=1e-3)
+    with pytest.raises(ValueError, match=r"^Profile\.held_angles: slew_s must be a positive"):
+        hg.Profile.held_angles([0.0, 90.0], dwell_s=1.0, slew_s=0.0)
+    with hg.plausible.relaxed(precession_dps=(-2e5, 2e5)):
+        p = hg.Profile.held_angles([70.0, 160.0], dwell_s=120.0, slew_s=1e-3)
+    assert float(p.commanded_angle_at(p.t[-1])) == pytest.approx(160.0 * DEG, abs=1e-9)
+
+
+def test_ftr_refuses_an_open_rebalance_loop():
+    """Audit: `rebalance_bandwidth=0` in FTR mode ran with the loop open (the force held at
+    its start, 1 °/s read through a step to 5 °/s while the wave ran off). It is refused in
+    one line naming the field and "> 0 in FTR mode": by `Control`, by `in_mode`, by `simulate`
+    for a gyro built with `eqx.tree_at`, and for a traced value under `vmap`. Whole-angle
+    mode does not read it: 0 stays valid there."""
+    import dataclasses
+
+    rule = r"rebalance_bandwidth must be finite and > 0 rad/s in FTR mode \(at 0 the rebalance"
+    with pytest.raises(ValueError, match=rf"^Control\.{rule}.*; got 0$"):
+        Control(mode="ftr", rebalance_bandwidth=0.0)
+    wa = hg.Gyro(PERFECT, control=Control(rebalance_bandwidth=0.0))  # not read in whole-angle
+    with pytest.raises(ValueError, match=rf"^Control\.{rule}"):
+        wa.in_mode("ftr")
+    ftr = _ftr(PERFECT)
+    opened = eqx.tree_at(lambda g: g.control.rebalance_bandwidth, ftr, 0.0)
+    with pytest.raises(ValueError, match=r"^gyro\.control\.rebalance_bandwidth = 0 rad/s in FTR "
+                       r"mode .*; it must be > 0$"):  # fmt: skip
+        hg.simulate(opened, hg.Profile.static(2.0), dt_out=1.0)
+    run = lambda b: hg.simulate(eqx.tree_at(lambda g: g.control.rebalance_bandwidth, ftr, b),
+                                hg.Profile.static(2.0), dt_out=1.0).rebalance_rate  # fmt: skip
+    with pytest.raises(RuntimeError, match=r"^simulate: gyro\.control\.rebalance_bandwidth must "
+                       r"be > 0 rad/s in FTR mode"):  # fmt: skip
+        jax.vmap(run)(jnp.array([0.0, 2.0]))
+    with pytest.raises(ValueError, match=r"Control\.rebalance_bandwidth must be finite and >= 0"):
+        dataclasses.replace(wa.control, rebalance_bandwidth=-1.0)
+
+
+def test_ftr_saturation_warns_and_is_marked_in_the_record():
+    """Audit: with `rebalance_limit=100` a 1 °/s input read 0.1646 °/s (the limit's reading,
+    100/608) with no sign. The record marks the samples where the force sat at its limit
+    (`rebalance_saturated`), and an eager run says so in one `SaturationWarning` naming the
+    limit, the share of samples and the reading there; the same program with room to spare
+    (6000 ≈ 10 °/s) marks none and does not warn (warnings are errors here)."""
+    from hrgjax.simulate import SaturationWarning
+
+    gyro = _ftr(PERFECT, rebalance_limit=100.0)
+    prof = hg.Profile.constant_rate(1.0, 10.0)
+    with pytest.warns(SaturationWarning, match=r"^simulate: the FTR loop saturated at Control\."
+                      r"rebalance_limit = 100 in 100 % of the samples .* ≈ ±0\.1646 °/s, not the "
+                      r"rate"):  # fmt: skip
+        rec = hg.simulate(gyro, prof, dt_out=1.0)
+    np.testing.assert_array_equal(np.asarray(rec.rebalance_saturated), 1.0)
+    assert abs(float(rec.rebalance_rate[-1]) / DEG_PER_S - 0.1646) < 1e-4
+    roomy = eqx.tree_at(lambda g: g.control.rebalance_limit, gyro, 6000.0)
+    rec = hg.simulate(roomy, prof, dt_out=1.0)  # the same program: no warning
+    np.testing.assert_array_equal(np.asarray(rec.rebalance_saturated), 0.0)
+    assert abs(float(rec.rebalance_rate[-1]) / DEG_PER_S - 1.0) < 1e-6

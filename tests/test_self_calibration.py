@@ -351,6 +351,63 @@ def test_mode_reversal_refuses_a_turning_case():
         sc.mode_reversal_data(rec.to_data())
 
 
+def test_mode_reversal_refuses_a_hold_without_samples():
+    """Audit: a hold with no output time inside [start + settle_s, end] (dt_out = 200 s on
+    120-s dwells, or a record starting late) gave a NaN reading, bias and anisotropy with no
+    word. It is refused in one line naming the hold's angle and window and what to change,
+    for a batch too (any member without samples); a t traced under jit is not judged."""
+    prof = hg.Profile.held_angles([70.0, 160.0], dwell_s=120.0, slew_s=20.0)  # holds 0-120, 140-260
+    hold = r"^mode_reversal: no sample of t in the hold at {} \({} s, after settle_s = 30 s\): "
+    with pytest.raises(ValueError, match=hold.format("70°", "30 … 120") + "give output times"):
+        sc.mode_reversal(np.array([0.0, 200.0]), np.zeros(2), prof, settle_s=30.0)
+    late = np.arange(150.0, 261.0)
+    with pytest.raises(ValueError, match=hold.format("70°", "30 … 120") + ".* a shorter settle_s"):
+        sc.mode_reversal(late, np.zeros(late.size), prof, settle_s=30.0)
+    early = np.stack([np.arange(261.0), np.minimum(np.arange(261.0), 150.0)])  # 2nd: no 2nd hold
+    with pytest.raises(ValueError, match=hold.format("160°", "170 … 260")):
+        sc.mode_reversal(early, np.zeros(early.shape), prof, settle_s=30.0)
+    t = np.arange(261.0)
+    rate = jnp.where(t < 130.0, 2e-6, -2e-6)
+    out = jax.jit(lambda t: sc.mode_reversal(t, rate, prof, settle_s=30.0).anisotropy)(t)
+    assert float(out) == pytest.approx(2e-6, rel=1e-12)
+
+
+def test_mode_reversal_takes_earths_rate_in_the_bias(reversal_at_minus_45):
+    """Audit: a bench on the Earth (Ω_E sin φ = 10.6 °/h at 45°, above STILL_RATE_DPS's 3.6 °/h)
+    was refused. A rate constant over the run and no larger than Earth's passes: it enters
+    the bias reading (+Ω_E sin φ to 1e-4 of it, against the run at rest) and, through the
+    pickoff gain mismatch g, the anisotropy as −g cos 2θ·Ω (none at ±45°; at 0° to 1e-4 of
+    it). Above Earth's rate, or varying, the case turns: refused, as mode_reversal_data."""
+    from hrgjax.units import EARTH_RATE
+
+    earth = EARTH_RATE * np.sin(np.radians(45.0)) / DEG_PER_S  # °/s
+    ftr, g = BASE.in_mode("ftr"), float(BASE.readout.gain_mismatch)
+
+    def reversal(angles, rate_dps):  # the fixture's program
+        prof = hg.Profile.held_angles(angles, dwell_s=90.0, slew_s=20.0, rate_dps=rate_dps)
+        rec = hg.simulate(ftr, prof, dt_out=1.0)
+        return rec, sc.mode_reversal(rec.t, rec.rebalance_rate, prof, settle_s=30.0)
+
+    prof, rest = reversal_at_minus_45
+    at_rest = sc.mode_reversal(rest.t, rest.rebalance_rate, prof, settle_s=30.0)
+    rec, out = reversal([-45.0, 45.0], earth)
+    assert float(out.bias - at_rest.bias) == pytest.approx(earth * DEG_PER_S, rel=1e-4)
+    assert abs(float(out.anisotropy - at_rest.anisotropy)) < 1e-6 * earth * DEG_PER_S
+    row = sc.mode_reversal_data(rec.to_data(), settle_s=30.0)[0]
+    assert row["bias_dph"] * DEG_PER_H == pytest.approx(float(out.bias), rel=1e-3)
+    (_, zero), (_, turned) = reversal([0.0, 90.0], 0.0), reversal([0.0, 90.0], earth)
+    shift = float(turned.anisotropy - zero.anisotropy)
+    assert shift == pytest.approx(-g * earth * DEG_PER_S, rel=1e-4)  # −g cos 2θ·Ω at 0°
+    t, zeros = np.arange(201.0), np.zeros(201)
+    above = hg.Profile.held_angles([0.0, 90.0], 90.0, 20.0, rate_dps=1.01 * EARTH_RATE / DEG_PER_S)
+    with pytest.raises(ValueError, match=r"case at rest .* no larger than Earth's, 0\.004178 °/s\);"
+                       r" the profile's rate reaches 0\.00421985 °/s:"):  # fmt: skip
+        sc.mode_reversal(t, zeros, above)
+    varying = (earth + np.linspace(0.0, 1e-5, prof.t.size)) * DEG_PER_S  # within Earth's
+    with pytest.raises(ValueError, match=r"the profile's rate reaches .* and varies by 1e-05 °/s"):
+        sc.mode_reversal(t, zeros, eqx.tree_at(lambda p: p.rate, prof, varying))
+
+
 def test_mode_reversal_sweeps_over_temperature_and_refuses_traced_angles():
     """Audit: `mode_reversal` under jit or hg.sweep over the temperature raised a 28-line
     ConcretizationTypeError (the turn between the holds read with float() from the traced

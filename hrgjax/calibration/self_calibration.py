@@ -39,7 +39,9 @@ it shows on the output, −½Δ(1/τ)·sin 2(θ − θ_τ)/k_e (the compensators
 equivalent input rate). An input rate does not cancel: the FTR scale factor carries
 a/â ≈ 1 − g cos 2θ (g the pickoff gain mismatch, unknown), so a rate Ω puts −g cos 2θ·Ω into
 the difference; `mode_reversal` and `mode_reversal_data` refuse a case turning faster than
-[`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS].
+[`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS], unless its rate is constant and no larger
+than Earth's (`EARTH_RATE_DPS`: a bench on the Earth, whose vertical rate then enters the
+bias reading and, through g, at most g·Ω_E the anisotropy).
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ from ..data import MeasuredData
 from ..gyro import Gyro
 from ..pattern_noise import STILL_RATE_DPS
 from ..profiles import Profile
-from ..units import DEG, DEG_PER_S, K_E_NOMINAL
+from ..units import DEG, DEG_PER_S, EARTH_RATE, K_E_NOMINAL
 from ._compensator import AbstractCompensator, check_number, check_whole, setting_field
 from ._raw import check_raw
 from ._runs import RunGroup, simulate_runs, switch_on_keys
@@ -382,9 +384,15 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
     [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS]): the FTR scale factor carries
     a/â ≈ 1 − g cos 2θ (g the pickoff gain mismatch), so an input rate Ω reads differently
     at the two holds and puts −g cos 2θ·Ω into the anisotropy (33 % of it at 0° and 36 °/h on the
-    default gyro); g is not known, so this cannot be corrected.
+    default gyro); g is not known, so this cannot be corrected. **Earth's rate** passes: a
+    rate constant over the profile and no larger than `EARTH_RATE_DPS` (Ω_E sin φ on a
+    vertical sensitive axis, `hrgjax.units.EARTH_RATE`). It then enters the `bias` reading
+    (the rate bias plus Ω_E sin φ, times the scale factor), and the `anisotropy` picks up
+    −g cos 2θ·Ω_E sin φ (≤ 0.07 °/h on the default gyro, g = 0.46 %; none at θ = ±45°).
 
-    **Raises:** `ValueError` for a profile without two holds 90° apart, or whose case turns."""
+    **Raises:** `ValueError` for a profile without two holds 90° apart, a case that turns,
+    or a hold with no sample of `t` after its `settle_s` (coarse output times, or a record
+    that starts late)."""
     if not isinstance(profile, Profile):
         raise TypeError(f"mode_reversal: profile must be an hrgjax.Profile (Profile.held_angles"
                         f"(…)); got {type(profile).__name__}")  # fmt: skip
@@ -395,15 +403,23 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
         raise ValueError(f"mode_reversal: rebalance_rate must have one value per sample of t, "
                          f"shape (…, N) as t's {t_shape}; got shape {r_shape}")  # fmt: skip
     profile = _held_values(profile)  # the holds, their angles: the knots' concrete values
-    rate_dps = float(np.max(np.abs(np.asarray(profile.rate)))) / DEG_PER_S
-    _check_at_rest(rate_dps, "the profile's rate")
+    _check_at_rest(np.asarray(profile.rate) / DEG_PER_S, "the profile's rate")
     if len(windows := profile.hold_windows(settle_s)) != 2:
-        raise ValueError(f"mode_reversal needs a profile with two holds; it has {len(windows)}")
+        raise ValueError(f"mode_reversal needs a profile with two holds longer than settle_s = "
+                         f"{float(settle_s):g} s; it has {len(windows)}")  # fmt: skip
     theta0 = float(profile.wave_angle0) / DEG
     with jax.ensure_compile_time_eval():  # under jit (a sweep over temperature) too
         turn = float(profile.commanded_angle_at(profile.t[-1])) / DEG - theta0
     if abs(abs(turn) - 90.0) > 1e-6:
         raise ValueError(f"the holds must be 90° apart (electrical); these are {turn:g}° apart")
+    if (times := concrete_value(t)) is not None:  # a traced t: its windows filled or not
+        for (start, end), angle in zip(windows, (theta0, theta0 + turn), strict=True):
+            if np.any(np.sum((times >= start) & (times <= end), axis=-1) == 0):
+                raise ValueError(
+                    f"mode_reversal: no sample of t in the hold at {angle:g}° ({start:g} … "
+                    f"{end:g} s, after settle_s = {float(settle_s):g} s): give output times inside "
+                    "every hold (a finer dt_out, or ts covering it) or a shorter settle_s"
+                )
     t, r, means = jnp.asarray(t), jnp.asarray(rebalance_rate), []
     for start, end in windows:
         m = ((t >= start) & (t <= end)).astype(r.dtype)
@@ -433,15 +449,31 @@ def _held_values(profile: Profile) -> Profile:
     return eqx.tree_at(lambda p: [getattr(p, n) for n in out], profile, list(out.values()))
 
 
-def _check_at_rest(rate_dps: float, what: str) -> None:
-    """Refuse mode reversal with the case turning (`rate_dps`: its largest |rate| [°/s])."""
-    if not rate_dps <= STILL_RATE_DPS:
-        raise ValueError(
-            f"mode reversal needs the case at rest (|rate| ≤ STILL_RATE_DPS = "
-            f"{STILL_RATE_DPS:g} °/s); {what} reaches {rate_dps:g} °/s: the FTR scale factor "
-            "differs at the two holds by the unknown readout gain mismatch (≈ 1 − g cos 2θ), "
-            "so the rate does not cancel and biases the anisotropy"
-        )
+EARTH_RATE_DPS = EARTH_RATE / DEG_PER_S
+"""Largest constant case rate mode reversal takes [°/s] (0.00418: Earth's rate, the most of
+it a bench's sensitive axis sees; `hrgjax.units.STILL_RATE_DPS`, 1e-3 °/s, is below its
+vertical share Ω_E sin φ above 14° latitude)."""
+CONSTANT_RATE_DPS = 1e-6 * EARTH_RATE_DPS
+"""The most a rate beyond `STILL_RATE_DPS` may vary over a mode-reversal run and count as
+constant [°/s]: half a change between the holds would go into the anisotropy whole."""
+
+
+def _check_at_rest(rate_dps, what: str) -> None:
+    """Refuse mode reversal with the case turning (`rate_dps`: its rates [°/s], the profile's
+    knots or a run's samples): within `STILL_RATE_DPS` (readback jitter), or constant to
+    `CONSTANT_RATE_DPS` and no larger than Earth's (`EARTH_RATE_DPS`), is at rest."""
+    rate_dps = np.asarray(rate_dps, dtype=float)
+    peak, spread = float(np.max(np.abs(rate_dps))), float(np.ptp(rate_dps))
+    if peak <= STILL_RATE_DPS or (peak <= EARTH_RATE_DPS and spread <= CONSTANT_RATE_DPS):
+        return
+    varies = f" and varies by {spread:.3g} °/s" if peak <= EARTH_RATE_DPS else ""
+    raise ValueError(
+        f"mode reversal needs the case at rest (|rate| ≤ STILL_RATE_DPS = {STILL_RATE_DPS:g} "
+        f"°/s, or a constant rate no larger than Earth's, {EARTH_RATE_DPS:.4g} °/s); {what} "
+        f"reaches {peak:g} °/s{varies}: the FTR scale factor differs at the two holds by the "
+        "unknown readout gain mismatch (≈ 1 − g cos 2θ), so the rate does not cancel and "
+        "biases the anisotropy"
+    )
 
 
 def run_reversal_plan(
@@ -492,8 +524,8 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
     [°, °/h]; `anisotropy_dph` as `ModeReversal.anisotropy` (the bias as it shows on the
     output). **Raises:** `ValueError` without the FTR output or the schedule, for a run
     with other than two holds 90° apart, or one whose case turns (`table_rate_dps` beyond
-    [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS]: mode reversal needs the case at
-    rest, see `mode_reversal`)."""
+    [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS], unless constant and within Earth's
+    rate: mode reversal needs the case at rest, see `mode_reversal`)."""
     if not isinstance(data, MeasuredData):
         raise TypeError(f"mode_reversal_data: data must be hrgjax.MeasuredData; got "
                         f"{type(data).__name__}")  # fmt: skip
@@ -516,8 +548,7 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
         holds = [(t[a] + settle_s, t[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)
                  if t[b - 1] - t[a] > settle_s]  # fmt: skip
         run = int(data["run"][idx[0]])
-        _check_at_rest(float(np.max(np.abs(data["table_rate_dps"][idx]))),
-                       f"run {run}'s table_rate_dps")  # fmt: skip
+        _check_at_rest(data["table_rate_dps"][idx], f"run {run}'s table_rate_dps")
         if len(holds) != 2:
             raise ValueError(f"run {run}: mode reversal needs two holds; found {len(holds)}")
         wave = data["wave_angle_deg"][idx]

@@ -55,6 +55,10 @@ LIMITS = {  # field: (rule of `hrgjax._checks.RULES`, unit); why: `Control`'s do
 }
 """The range of each `Control` field; `simulate` holds temperature laws and traced values to
 them too (`hrgjax._run_checks.LAW_LIMITS`)."""
+FTR_LIMITS = {"rebalance_bandwidth": ("> 0", "rad/s in FTR mode (at 0 the rebalance loop is "
+                                      "open: its output is not the rate)")}  # fmt: skip
+"""The fields whose range is narrower in force-to-rebalance mode (`mode="ftr"`), in `LIMITS`'s
+form: its loop must be closed (whole-angle mode does not read it: any bandwidth ≥ 0)."""
 
 
 IDEAL_LIMIT = (
@@ -103,7 +107,9 @@ class Control(eqx.Module):
     - `mode`: `"wa"` (whole-angle: the wave turns with the case, the output is its angle) or
       `"ftr"` (force-to-rebalance: a node force holds the wave at the commanded angle, the
       output is the rate read from that force; [`Record.rebalance_rate`][hrgjax.Record]).
-    - `rebalance_bandwidth`: closed-loop bandwidth of the rebalance loop [rad/s] (`"ftr"`).
+    - `rebalance_bandwidth`: closed-loop bandwidth of the rebalance loop [rad/s] (`"ftr"`;
+      > 0 there: an open rebalance loop holds its start force, and the output is not the
+      rate. Whole-angle mode does not read it).
     - `rebalance_limit`: largest node force the rebalance loop may command (forcer
       saturation) [readout units · rad²/s²]; `None` for none. At the default gyro
       (ω = 2π·5 kHz, a₀ = 1, k_e = 0.554) 1 °/s needs 2ωa₀k_eΩ ≈ 608. While saturated the
@@ -121,7 +127,8 @@ class Control(eqx.Module):
       applied turned by this angle from where it is meant (a node force leaks onto the
       antinode).
 
-    A loop with bandwidth 0 holds its effort at the initial steady-state value (open loop).
+    A loop with bandwidth 0 holds its effort at the initial steady-state value (open loop);
+    not the rebalance loop in FTR mode (`FTR_LIMITS`).
 
     Each field must lie in its range (`LIMITS`), or is refused in one line: the set point
     `amplitude` > 0 (the loops divide by it); bandwidths ≥ 0 (a negative one is an unstable
@@ -178,7 +185,7 @@ class Control(eqx.Module):
             raise TypeError(f"Control.k_e_nominal must be a single real number; got {k_e_problem}")
         if self.mode == "ftr" and not self.enabled:
             raise ValueError("Control.mode='ftr' needs the loops: a free resonator has none")
-        check_limits("Control", self, LIMITS)
+        check_limits("Control", self, LIMITS | FTR_LIMITS if self.mode == "ftr" else LIMITS)
 
     def forcer_matrix(self):
         """Forcer gain matrix diag(1 + g_f + g, 1 + g_f − g) applied to the electrode-frame
