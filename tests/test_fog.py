@@ -526,3 +526,127 @@ def test_vibration_simulate_compiles_nothing_for_a_new_latitude(imu):
         rec = vb.simulate(imu, rest, fs=50.0, key=jax.random.key(1), lat_deg=-12)
     assert c.compiles == 0, c.names
     assert rec.lat == pytest.approx(-12 * DEG)
+
+
+# Audit of the FOG / IMU units (session 30): each test failed on the code before it.
+
+
+def test_psd_takes_integer_samples_as_float_and_refuses_channels_by_time():
+    """ADC counts (int16) cast the frequency axis and the window to int: f = 0, 0, 1, 1, …
+    and a tone of 1000 counts read amplitude 0. An (N, 3) record was analysed along its
+    3-sample last axis without a word."""
+    from scipy.signal import welch
+
+    t = np.arange(2000) / 100.0
+    x = np.round(1000.0 * np.sin(2 * np.pi * 12.3 * t)).astype(np.int16)
+    keep = x.copy()
+    f, p = psd(x, 100.0, 200)
+    fr, pr = welch(x.astype(float), 100.0, nperseg=200)
+    assert f.dtype == np.float64 and p.dtype == np.float64
+    np.testing.assert_allclose(f, fr)  # was [0, 0, 1, 1, 2, …]
+    np.testing.assert_allclose(p, pr, rtol=1e-10, atol=1e-12 * pr.max())
+    for dtype in (np.int16, np.int64):
+        freq, amp = tone(x.astype(dtype), 100.0, 200)
+        want = tone(x.astype(float), 100.0, 200)
+        assert (float(freq), float(amp)) == pytest.approx((float(want[0]), float(want[1])))
+        assert float(amp) == pytest.approx(1000.0, rel=1e-3)  # was 0.0
+    assert x.dtype == np.int16 and np.array_equal(x, keep)  # the caller's array unchanged
+    with pytest.raises(ValueError, match=r"^x must have time along its last axis \(\.\.\., N\); "
+                       r"got shape \(400, 3\), 3 samples there.*pass x\.T"):  # fmt: skip
+        psd(np.zeros((400, 3)), 100.0)
+    f, p = psd(np.random.default_rng(0).normal(size=(400, 3)).T, 100.0)
+    assert p.shape == (3, f.shape[0])
+
+
+def test_vibration_units_are_told_by_gravity_not_by_the_vibration():
+    """The rule was the median |f| within 0.5 … 2: a 3-g vibration in g with gravity on x
+    (median |f| 2.03) passed as m/s² and read 0.306 g; records without gravity (AC-coupled)
+    were refused at 0.1 g in m/s² and passed at 0.5 g in g (reading 0.051 g). The mean over
+    the record (gravity; the vibration averages out) decides now, and a record without
+    gravity needs `ac_coupled=True`."""
+    t = np.arange(400) / 100.0
+    in_g = np.zeros((400, 3))
+    in_g[:, 0] = -1.0
+    in_g[:, 2] = 3.0 * np.sin(2 * np.pi * 10.0 * t)
+    with pytest.raises(ValueError, match=r"^accel must be specific force in m/s²: .*\|mean f\| "
+                       r"= 1 within 0.3 … 3.13, as 1 g written in g has; in g\? multiply by "
+                       r"9.80665"):  # fmt: skip
+        vibration_features(in_g, 100.0, 1.0)
+    f = np.asarray(vibration_features(in_g * G0, 100.0, 1.0))
+    np.testing.assert_allclose(f, np.broadcast_to([10.0, 3.0], f.shape), rtol=1e-9)
+    ac = in_g.copy()
+    ac[:, 0] = 0.0  # AC-coupled: no gravity, in g or in m/s²
+    for unit in (1.0, G0):
+        with pytest.raises(ValueError, match=r"^accel carries no gravity: .* below 0.3 .*an "
+                           r"AC-coupled record whose unit gravity cannot tell; pass "
+                           r"ac_coupled=True to take it as m/s²"):  # fmt: skip
+            vibration_features(ac * unit, 100.0, 1.0)
+    from hrgjax.fog.spectrum import vibration_direction
+
+    with pytest.raises(ValueError, match=r"^accel carries no gravity"):
+        vibration_direction(ac * G0, 100.0, 1.0)
+    f = np.asarray(vibration_features(ac * G0, 100.0, 1.0, ac_coupled=True))
+    np.testing.assert_allclose(f, np.broadcast_to([10.0, 3.0], f.shape), rtol=1e-9)
+    d = np.asarray(vibration_direction(ac * G0, 100.0, 1.0, ac_coupled=True))
+    np.testing.assert_allclose(d, np.broadcast_to([0.0, 0.0, 1.0], d.shape), atol=1e-12)
+    with pytest.raises(ValueError, match=r"in g\? multiply"):  # gravity in g: still refused
+        vibration_features(in_g, 100.0, 1.0, ac_coupled=True)
+    with pytest.raises(ValueError, match=r"beyond 20 g .*in mg\? multiply by 9.80665e-3"):
+        vibration_features(in_g * 1000.0, 100.0, 1.0)
+    with pytest.raises(TypeError, match=r"^ac_coupled must be True or False; got str 'no'"):
+        vibration_features(in_g * G0, 100.0, 1.0, ac_coupled="no")
+
+
+def test_calibrate_refuses_a_unit_ratio_and_traced_inputs():
+    """Inputs in rad/s and outputs in °/s fitted a scale error k = 56.3 (°/h: 2.06e5), with
+    no error; under vmap or jit `calibrate` and `half_width` raised
+    TracerArrayConversionError."""
+    from hrgjax import plausible
+
+    b = _positions() * np.radians(20.0) / 9.80665  # ±20 °/s and tilted, in rad/s
+    truth = mis.TriadCalibration.known(np.full(6, 1e-3), [3e-5, -2e-5, 1e-5])
+    s = np.asarray(truth.sensor(b)) + np.random.default_rng(0).normal(size=b.shape) * 1e-6
+    np.testing.assert_allclose(mis.calibrate(b, s).scale, truth.scale, atol=1e-5)
+    for factor, named in ((180.0 / np.pi, r"s in ° \(°/s\) for b in rad \(rad/s\)\?"),
+                          (3600.0 * 180.0 / np.pi, r"s in °/h for b in rad/s\?"),
+                          (np.pi / 180.0, r"s in rad \(rad/s\) for b in ° \(°/s\)\?"),
+                          (-1.0, r"a reversed axis\?")):  # fmt: skip
+        with pytest.raises(ValueError, match=r"^calibrate: sensor axis x reads .* × its input "
+                           r"\(fitted scale k = .*, outside the plausible -0.1 … 0.1: .*\): "
+                           + named):  # fmt: skip
+            mis.calibrate(b, s * factor)
+    with plausible.relaxed(imu_scale=(-100.0, 100.0)):  # the range is plausible's
+        assert float(mis.calibrate(b, s * 180.0 / np.pi).scale[0]) == pytest.approx(56.3, rel=1e-3)
+    with pytest.raises(ValueError, match=r"^calibrate runs on the host \(NumPy/SciPy\), not "
+                       r"inside jit, vmap or grad: s must be concrete"):  # fmt: skip
+        jax.vmap(lambda x: mis.calibrate(b, x).angles)(jnp.stack([s, s]))
+    got = jax.jit(lambda x: mis.half_width(x, 14))(jnp.array([1.0, 2.0]))  # std may be traced
+    np.testing.assert_allclose(got, mis.half_width(np.array([1.0, 2.0]), 14), rtol=1e-12)
+    with pytest.raises(ValueError, match=r"^half_width runs on the host.*: n_positions must be "
+                       r"concrete"):  # fmt: skip
+        jax.jit(lambda n: mis.half_width(1.0, n))(14)
+
+
+def test_triad_known_refuses_impossible_values():
+    """NaN angles, angles of radians (arc-minutes typed as rad), a scale of −1 or the factor
+    1.00003 for the error 3e-5 were taken silently: NaN or 5× wrong outputs."""
+    from hrgjax import plausible
+
+    z6 = np.zeros(6)
+    for kw, match in (
+        ({"angles": [2.0, -1.5, 1.0, 2.5, -2.0, 1.5]}, r"^angles \[rad\] = 2 at index 0 is "
+         r"outside the plausible range -0.1 … 0.1 rad — .*° → ×hrgjax.units.DEG"),
+        ({"angles": [np.nan, 0, 0, 0, 0, 0]}, r"^angles must be finite; got nan at index 0"),
+        ({"angles": z6, "scale": [1.00003, 0, 0]}, r"^scale must be the scale-factor errors k "
+         r"of diag\(1 \+ k\) .*got 1.00003 at index 0: the factor 1 \+ k\? pass scale − 1 = "
+         r"3e-05"),
+        ({"angles": z6, "scale": [-1.0, 0, 0]}, r"^scale \[-\] = -1 at index 0 is outside the "
+         r"plausible range -0.1 … 0.1 .*ppm → ×1e-6"),
+        ({"angles": z6, "bias": [0.0, np.inf, 0.0]}, r"^bias must be finite; got inf at index 1"),
+    ):  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            mis.TriadCalibration.known(**kw)
+    with plausible.relaxed(imu_misalignment=(-2.0, 2.0)):
+        mis.TriadCalibration.known([1.0, 0, 0, 0, 0, 0])
+    traced = jax.vmap(lambda a: mis.TriadCalibration.known(a).angles)(jnp.full((2, 6), 1e-3))
+    np.testing.assert_array_equal(traced, np.full((2, 6), 1e-3))  # vmap over angles runs

@@ -310,3 +310,39 @@ def test_triad_transforms_refuse_a_wrong_last_axis_or_calibration(imu, fn, calib
     with pytest.raises(kind, match=match) as err:
         getattr(vb, fn)(c, x)
     assert "\n" not in str(err.value)
+
+
+def test_heading_limit_refuses_a_c_bn_that_is_not_a_rotation_and_wrong_shapes():
+    """(Audit of session 30.) 2·C read −0.847° (the truth −1.708°), a sheared C −19.1°, a
+    zero matrix NaN; an eps_body of shape (2,) or c_bn (2, 2) raised JAX broadcasting
+    errors. A rotation in float32 (round-off ~1e-7) and vmap over latitude still run."""
+    c = _dcm(0.0, 0.0, 30.0)
+    eps, nab, lat = np.array([0.0, 0.36, 0.0]) * DEG_PER_H, np.zeros(3), np.radians(45.0)
+    ok = cp.heading_limit_deg(eps, nab, c, lat)
+    assert ok == pytest.approx(-1.70796, abs=1e-4)
+    shear = np.zeros((3, 3))
+    shear[0, 1] = 0.3
+    for bad in (2.0 * c, c + shear, np.zeros((3, 3)), c @ np.diag([1.0, 1.0, -1.0]),
+                np.full((3, 3), np.nan)):  # fmt: skip
+        with pytest.raises(ValueError, match=r"^c_bn must be a rotation matrix, the body-to-NED "
+                           r"direction cosines \(CᵀC = I within 1e-06, det = \+1\); got "
+                           r"max\|CᵀC − I\| = "):  # fmt: skip
+            cp.heading_limit_deg(eps, nab, bad, lat)
+    assert cp.heading_limit_deg(eps, nab, c.astype(np.float32), lat) == pytest.approx(ok, abs=1e-4)
+    for args, match in (
+        ((np.zeros(2), nab, c, lat), r"^eps_body must have shape \(3,\), .*; got \(2,\)"),
+        ((np.zeros((3, 1)), nab, c, lat), r"^eps_body must have shape \(3,\), .*; got \(3, 1\)"),
+        ((eps, np.zeros(4), c, lat), r"^nabla_body must have shape \(3,\)"),
+        ((eps, nab, np.eye(2), lat), r"^c_bn must have shape \(3, 3\), the body-to-NED .*; got "
+         r"\(2, 2\)"),
+        ((eps, nab, c, np.radians([10.0, 45.0])), r"^lat must have shape \(\), one latitude "
+         r"\[rad\] \(several: jax.vmap over them\); got \(2,\)"),
+    ):  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            cp.heading_limit_deg(*args)
+    with pytest.raises(TypeError, match=r"^c_bn must be the body-to-NED direction cosine matrix"):
+        cp.heading_limit_deg(eps, nab, "eye", lat)
+    lats = np.radians([10.0, 45.0])
+    got = jax.vmap(lambda p: cp.heading_limit_deg(eps, nab, c, p))(jnp.asarray(lats))
+    np.testing.assert_allclose(got, [cp.heading_limit_deg(eps, nab, c, p) for p in lats],
+                               rtol=1e-12)  # fmt: skip

@@ -841,3 +841,37 @@ def test_imu_model_apply_compiles_nothing_for_new_values_of_the_same_shapes():
     with CompileCounter() as c:
         call(7.0, 0.02, 2)
     assert c.compiles == 0, c.names
+
+
+def test_known_calibration_refuses_implausible_values(truth):
+    """(Audit of session 30.) `ImuCalibration.known` took the deviation M − I without the
+    identity (a 9.81 m/s² reading came back as 1.1e4), 1000·I, −I and a gyro bias of 30
+    (°/s typed as rad/s) silently. They are held to `hrgjax.plausible`'s `imu_*` ranges now,
+    as `ImuModel` holds its errors, each named with the unit it may be in."""
+    dev = np.random.default_rng(3).normal(0, 0.01, (3, 3))
+    mis = np.eye(3)
+    mis[0, 1] = 1.0
+    for kw, match in (
+        ({"accel_matrix": dev}, r"^accel_matrix must be I plus small scale and misalignment "
+         r"errors \(it maps m/s² to m/s²\); its diagonal is .*: the deviation M − I alone\? "
+         r"pass np.eye\(3\) \+ it"),
+        ({"accel_matrix": 1000.0 * np.eye(3)}, r"^accel_matrix .*its diagonal is "
+         r"\[1000\. 1000\. 1000\.\]: a unit ratio between output and input"),
+        ({"gyro_matrix": -np.eye(3)}, r"^gyro_matrix .*M ≈ −I reverses every axis"),
+        ({"gyro_matrix": mis}, r"^gyro_matrix off the diagonal \(misalignment\) \[rad\] = 1 at "
+         r"index 0 is outside the plausible range -0.1 … 0.1 rad — .*° → ×hrgjax.units.DEG"),
+        ({"accel_matrix": np.diag([1.2, 1.0, 1.0])}, r"^accel_matrix diagonal − 1 \(scale "
+         r"error\) \[-\] = 0.2 at index 0 is outside the plausible range -0.1 … 0.1 .*% → "
+         r"×1e-2"),
+        ({"gyro_bias": [30.0, 0.0, 0.0]}, r"^gyro_bias \[rad/s\] = 30 at index 0 is outside the "
+         r"plausible range -0.75 … 0.75 rad/s — .*°/s → ×hrgjax.units.DEG"),
+        ({"accel_bias": [0.0, 0.0, 50.0]}, r"^accel_bias \[m/s²\] = 50 at index 2 is outside "
+         r"the plausible range -3 … 3 m/s² — .*mg → ×9.80665e-3"),
+    ):  # fmt: skip
+        with pytest.raises(ValueError, match=match) as err:
+            ImuCalibration.known(**kw)
+        assert "\n" not in str(err.value)
+    with hg.plausible.relaxed(imu_gyro_bias=(-50.0, 50.0)):
+        assert float(ImuCalibration.known(gyro_bias=[30.0, 0.0, 0.0]).gyro_bias[0]) == 30.0
+    np.testing.assert_array_equal(ImuCalibration.known(accel_matrix=truth.accel_matrix)
+                                  .accel_matrix, truth.accel_matrix)  # fmt: skip

@@ -91,6 +91,23 @@ def test_bad_latitude_or_rate_is_refused(truth, tactical, kw):
             hg.imu.ferraris_session(truth, jax.random.key(0), **kw)
 
 
+def test_an_earth_rate_in_another_unit_is_refused_naming_it(tactical):
+    """(Audit of session 30.) `earth_rate=15.04` (°/h for rad/s) was taken: G came out as
+    −1.09 on its diagonal with a σ of 3.7 (truth ~1e-4). Rates beyond
+    `hrgjax.plausible.RANGES["earth_rate_radps"]` (0 … 1e-4 rad/s) are refused, naming the
+    unit the value is the Earth's rate in."""
+    data, sections = tactical[0]
+    for rate, unit in ((15.04, r"°/h \(×hrgjax.units.DEG_PER_H\)"),
+                       (15.04 / 3600.0, r"°/s \(×hrgjax.units.DEG\)"),
+                       (EARTH_RATE * 3600.0, r"rad/h \(÷3600\)")):  # fmt: skip
+        with pytest.raises(ValueError, match=r"^earth_rate \[rad/s\] = .* is outside the "
+                           r"plausible range 0 … 0.0001 rad/s — .*widens it\); .* is the "
+                           rf"Earth's rate in {unit}$"):  # fmt: skip
+            hg.imu.ferraris(data, sections, earth_rate=rate)
+    with pytest.raises(ValueError, match=r"= 0.001 is outside the plausible range .*widens it\)$"):
+        hg.imu.ferraris(data, sections, earth_rate=1e-3)  # no unit it matches: no guess
+
+
 # Free headings (review of 2026-12-01). On face i± the gyros see the Earth's horizontal rate
 # as a body vector h± ⟂ e_i, |h±| = Ω cos φ: the pair difference takes (h⁺ − h⁻)/2 into G,
 # the pair sum (h⁺ + h⁻)/2 into b_g, which therefore reads M_g Σ h / 6 over the six faces.

@@ -14,8 +14,11 @@
 
 Review of 4216a16: a unit drawn by `random_unit` inside jit/vmap (`ins.fly`'s runs) was held
 to the `imu_*` ranges, so a valid grade failed at random (a Gaussian draw past a bound);
-the jitted g-rule sorted the record (`jnp.median`: 10× slower), now counts.
+the jitted g-rule sorted the record (`jnp.median`: 10× slower), now counts. Session 30:
+the rule is the record's |mean f| (gravity) instead; `psd` takes a traced fs.
 """
+
+import re
 
 import jax
 import jax.numpy as jnp
@@ -216,43 +219,60 @@ def test_vibration_features_refuse_g_under_jit_and_vmap():
     got = np.asarray(features(in_ms2))
     np.testing.assert_allclose(got[:, 0], 20.0, rtol=1e-9)  # the tone: 20 Hz, 0.5 g
     np.testing.assert_allclose(got[:, 1], 0.5, rtol=1e-6)
-    match = r"accel must be specific force in m/s² \(\|f\| ≈ 9.8 at rest\).*in g\?"
+    match = r"accel must be specific force in m/s²: its mean over the record .*in g\?"
     with pytest.raises(Exception, match=match):  # was 0.051 g: 0.5 g / 9.80665
         jax.block_until_ready(features(in_g))
     with pytest.raises(Exception, match=match):
         jax.vmap(lambda a: sp.vibration_features(a, FS))(jnp.stack([in_ms2, in_g]))
-    # even N, the two middle |f| straddling 0.5: NumPy's median (their mean) decides
-    for low, refused in ((0.4, True), (0.2, False)):  # median 0.55: in g; 0.45: not
-        a = np.zeros_like(in_g)
-        a[:, 2] = np.where(np.arange(a.shape[0]) % 2, low, 0.7)
-        assert bool(0.5 < np.median(np.abs(a[:, 2])) < 2.0) is refused
-        if refused:
-            with pytest.raises(Exception, match=match):
+
+
+def test_vibration_unit_rule_traced_decides_as_eagerly():
+    """(Session 30.) The rule is the record's |mean f| now (gravity; the vibration averages
+    out), not the median |f| (which a 3-g vibration in g lifted past 2: read as m/s²). The
+    run-time twin decides as the eager rule on each side of each bound, with and without
+    `ac_coupled`: m/s² (≥ 3.13), in g (0.3 … 3.13), no gravity (< 0.3), beyond 20 g."""
+    t = np.arange(0.0, 2.0, 1.0 / FS)
+    vib = 3.0 * np.sin(2 * np.pi * 20.0 * t)  # a 3-g-like tone in any unit: averages out
+    cases = {0.0: 1, 0.29: 1, 0.31: 0, 1.0: 0, 3.1: 0, 3.2: None, 9.8: None, 196.0: None,
+             197.0: 2}  # |mean f| → index of the broken rule (None: passes)  # fmt: skip
+    for ac in (False, True):
+        features = jax.jit(lambda a, ac=ac: sp.vibration_features(a, FS, ac_coupled=ac))
+        for mean, rule in cases.items():
+            a = np.zeros((t.size, 3))
+            a[:, 0], a[:, 2] = vib, -mean
+            broken = None if (rule == 1 and ac) else rule
+            if broken is None:
+                assert np.isfinite(np.asarray(features(a))).all(), (ac, mean)
+                assert np.isfinite(np.asarray(sp.vibration_features(a, FS, ac_coupled=ac))).all()
+                continue
+            head = ("accel must be specific force in m/s²: its mean over the record (gravity",
+                    "accel carries no gravity", "accel must be specific force in m/s²: its "
+                    "mean over the record has |mean f| beyond 20 g")[broken]  # fmt: skip
+            with pytest.raises(Exception, match=re.escape(head)):
                 jax.block_until_ready(features(a))
-        else:
-            assert np.isfinite(np.asarray(features(a))).all()
+            with pytest.raises(ValueError, match="^" + re.escape(head.split(":")[0])):
+                sp.vibration_features(a, FS, ac_coupled=ac)
 
 
-def test_vibration_g_rule_traced_decides_as_numpys_median():
-    """The traced twin counts (no sort: `jnp.median` made jitted features 10× slower) and
-    decides as `0.5 < np.median(|f|) < 2` does, odd and even N, ties and straddles too."""
-    rng = np.random.default_rng(0)
-    levels = np.array([0.0, 0.3, 0.5, 0.6, 1.0, 1.4, 1.9, 2.0, 2.6, 9.8])
-    straddles = 0
-    for n in (40, 41):  # one program each
-        within = jax.jit(jax.vmap(lambda r: sp._median_within(r, 0.5, 2.0)))
-        # half the values on each side of a bound (levels on it too), then any mix
-        halves = [np.concatenate([rng.choice(levels[i:j], (200, n // 2)),
-                                  rng.choice(levels[j:k], (200, n - n // 2))], axis=1)
-                  for i, j, k in ((0, 3, 6), (4, 7, 10))]  # fmt: skip
-        r = np.concatenate([*halves, rng.choice(levels, (400, n)), rng.uniform(0, 3, (400, n))])
-        want = np.array([0.5 < np.median(x) < 2.0 for x in r])
-        np.testing.assert_array_equal(np.asarray(within(r)), want)
-        srt = np.sort(r, axis=1)[:, (n - 1) // 2 : n // 2 + 1]
-        straddles += np.sum((srt[:, 0] <= 0.5) & (srt[:, -1] > 0.5) | (srt[:, 0] < 2.0)
-                            & (srt[:, -1] >= 2.0))  # fmt: skip
-        assert want.any() and not want.all()
-    assert straddles >= 200  # even N's middle pair on both sides of a bound: covered
+def test_psd_takes_a_traced_fs_and_the_features_say_theirs_must_be_concrete():
+    """(Session 30.) A traced fs was refused as "fs must be a finite number > 0 Hz; got
+    jax.Array…", blaming a valid value. psd's fs only scales the result: it runs traced.
+    The features' fs and window_s set the window length: refused as traced, saying so."""
+    x = jnp.asarray(np.sin(2 * np.pi * 10.0 * np.arange(2000) / 100.0))
+    peaks = jax.vmap(lambda f: sp.psd(x, f, 200)[1].max())(jnp.array([100.0, 200.0]))
+    np.testing.assert_allclose(peaks, [sp.psd(x, f, 200)[1].max() for f in (100.0, 200.0)],
+                               rtol=1e-12)  # fmt: skip
+    f, _ = jax.jit(lambda fs: sp.psd(x, fs, 200))(100.0)
+    np.testing.assert_allclose(f[:3], [0.0, 0.5, 1.0])
+    with pytest.raises(Exception, match=r"fs must be a finite number > 0 Hz"):
+        jax.block_until_ready(jax.jit(lambda fs: sp.psd(x, fs, 200))(-1.0))
+    a = _record(0.5, 9.80665)
+    for name, call in (("fs", lambda v: sp.vibration_features(a, v, 1.0)),
+                       ("window_s", lambda v: sp.vibration_features(a, FS, v))):  # fmt: skip
+        with pytest.raises(ValueError, match=rf"^{name} must be a concrete number \[.*\] \(not "
+                           r"traced by jit/vmap/grad\): with the other it sets the window "
+                           r"length in samples"):  # fmt: skip
+            jax.jit(call)(1.0)
 
 
 # 4. ferraris with a traced latitude or Earth rate

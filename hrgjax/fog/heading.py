@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import concrete_value, is_concrete
+from .._checks import concrete_value, is_concrete, numeric_problem
 from .._compiled import fused
 from ..ins import alignment as _al
 from ..ins.alignment import coarse_align, euler_deg
@@ -70,11 +70,17 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat) -> float | jax.Array:
     before); traced, a 0-d array: `jit`, `vmap` (over latitude, drift, …) and `grad` (the
     sensitivity ∂δψ/∂ε) run it, compiled once per shape.
 
-    **Raises:** `ValueError` for a latitude beyond ±π/2 (degrees given for radians) or not
-    finite, one within 1° of a pole (no north to find), a drift beyond 1e-3 rad/s (≈ 206 °/h:
-    °/h given for rad/s) or a bias beyond 1 m/s² (mg given for m/s²). Traced values (inside
-    `jit`, `vmap`, `hg.sweep`) are held to the same rules at run time (`eqx.error_if`: the
-    message without the value)."""
+    **Raises:** `ValueError` for a wrong shape (`eps_body`, `nabla_body` (3,), `c_bn`
+    (3, 3), `lat` one number: `jax.vmap` over several), a concrete `c_bn` that is not a
+    rotation (max |CᵀC − I| > [`ROTATION_TOL`][hrgjax.fog.heading.ROTATION_TOL] = 1e-6, or
+    det < 0: a scaled, sheared, reflected or zero matrix gave a wrong heading or NaN), a
+    latitude beyond ±π/2 (degrees given for radians) or not finite, one within 1° of a pole
+    (no north to find), a drift beyond 1e-3 rad/s (≈ 206 °/h: °/h given for rad/s) or a
+    bias beyond 1 m/s² (mg given for m/s²); `TypeError` for an argument that is not real
+    numbers. Traced values (inside `jit`, `vmap`, `hg.sweep`) are held to the latitude,
+    drift and bias rules at run time (`eqx.error_if`: the message without the value); a
+    traced `c_bn` is not checked."""
+    _check_shapes(eps_body, nabla_body, c_bn, lat)
     value = concrete_value(lat)
     if value is not None:
         if value.dtype.kind not in "iuf":
@@ -106,6 +112,44 @@ def heading_limit_deg(eps_body, nabla_body, c_bn, lat) -> float | jax.Array:
     eps_body, nabla_body, c_bn, lat = map(as_f, (eps_body, nabla_body, c_bn, lat))
     out = _traced_checks(_heading_error(eps_body, nabla_body, c_bn, lat), eps_body, nabla_body, lat)
     return np.float64(out) if is_concrete(out) else out
+
+
+ROTATION_TOL = 1e-6
+"""Largest max |CᵀC − I| of a `c_bn` that
+[`heading_limit_deg`][hrgjax.fog.heading.heading_limit_deg] takes as a rotation (float32
+round-off is ~1e-7; a DCM from Euler angles in float64, 1e-16)."""
+
+_SHAPES = (
+    ("eps_body", (3,), "the body-frame gyro drift [rad/s], [x, y, z]"),
+    ("nabla_body", (3,), "the body-frame accelerometer bias [m/s²], [x, y, z]"),
+    ("c_bn", (3, 3), "the body-to-NED direction cosine matrix"),
+    ("lat", (), "one latitude [rad] (several: jax.vmap over them)"),
+)
+
+
+def _check_shapes(eps_body, nabla_body, c_bn, lat) -> None:
+    """One line for an argument of `heading_limit_deg` that is not real numbers or has the
+    wrong shape (they surfaced as JAX broadcasting errors), and for a concrete `c_bn` that
+    is not a rotation."""
+    for (name, shape, form), x in zip(_SHAPES, (eps_body, nabla_body, c_bn, lat), strict=True):
+        problem = numeric_problem(x)
+        if problem is not None:
+            raise TypeError(f"{name} must be {form}; got {problem}")
+        if jnp.shape(x) != shape:
+            raise ValueError(f"{name} must have shape {shape}, {form}; got {jnp.shape(x)}")
+    c = concrete_value(c_bn)
+    if c is None:
+        return
+    c = np.asarray(c, float)
+    with np.errstate(invalid="ignore"):  # NaN: refused below, as not a rotation
+        off = float(np.max(np.abs(c.T @ c - np.eye(3))))
+        det = float(np.linalg.det(c))
+    if not (off <= ROTATION_TOL and det > 0):  # NaN too
+        raise ValueError(
+            f"c_bn must be a rotation matrix, the body-to-NED direction cosines (CᵀC = I within "
+            f"{ROTATION_TOL:g}, det = +1); got max|CᵀC − I| = {off:.3g}, det = {det:.4g} (a "
+            "scaled, sheared or reflected matrix: build it with hrgjax.ins.trajectory.euler_to_dcm)"
+        )
 
 
 _TRACED_RULES = (
@@ -175,4 +219,4 @@ def align_record(imu: FogImu, record: VibrationRecord, gyro=None, *, coarse_s=60
     return res, err
 
 
-__all__ = ["imu_log", "align_record", "heading_limit_deg"]
+__all__ = ["imu_log", "align_record", "heading_limit_deg", "ROTATION_TOL"]

@@ -37,7 +37,23 @@ recovers: a weaker or slower tone can still read rest.
 **Shortest window.** A window of m samples has bins 0 … m//2; one whose peak may be
 measured needs a bin above the 2 at DC and below the 1 at Nyquist, so m ≥ 10
 ([`MIN_WINDOW`][hrgjax.fog.spectrum.MIN_WINDOW]; 8 or 9 samples measured nothing, 10 or 11
-only bin 3). Shorter windows are refused."""
+only bin 3). Shorter windows are refused.
+
+**Units: m/s², told by gravity.** The features take specific force in m/s². Whether a record
+is in m/s² or in g is decided from |mean f| over the whole record, not from |f| sample by
+sample: zero-mean vibration averages out of the mean whatever its amplitude, so a
+**DC-coupled** accelerometer's mean is gravity plus its bias, ≈ 9.8 in m/s² (≥ 6.8 with a
+0.3-g bias) and ≈ 1 in g (≤ 1.3). The split is their geometric middle,
+[`GRAVITY_SPLIT`][hrgjax.fog.spectrum.GRAVITY_SPLIT] = √9.80665 ≈ 3.13: a mean from it up to
+20 g (`hrgjax.plausible.RANGES["specific_force_g"]`; beyond: mg) is m/s², one from
+[`NO_GRAVITY`][hrgjax.fog.spectrum.NO_GRAVITY] = 0.3 up to it is 1 g written in g, refused
+with the factor. (The median |f| decided before: a 3-g vibration in g, gravity on another
+axis, has a median |f| of 2.03 and passed as m/s², reading 0.306 g.) An **AC-coupled**
+accelerometer (or a record whose mean was removed) carries no gravity, |mean f| < 0.3
+in either unit, and nothing in it tells m/s² from g: a tone's amplitude is 0.1–10 g on a
+shaker, 1–100 in m/s², 0.1–10 in g. Such a record is refused unless the call says
+`ac_coupled=True`, which takes it as m/s² (a record in g: multiply by 9.80665 first). The
+rule holds eagerly and, traced (`jit`, `vmap`), at run time (`eqx.branched_error_if`)."""
 
 from __future__ import annotations
 
@@ -52,6 +68,7 @@ import numpy as np
 
 from .._checks import (
     check_finite,
+    check_flag,
     concrete_value,
     describe,
     is_finite_real,
@@ -59,22 +76,58 @@ from .._checks import (
     whole_number,
 )
 from .._compiled import fused
+from ..plausible import RANGES
 from ..units import G0
 
 
 def psd(x, fs: float, nperseg: int | None = None):
     """One-sided power spectral density of `x` (..., N) sampled at `fs` [Hz] (module
-    docstring). `nperseg` defaults to the largest power of two ≤ N/4, at least 16 and at most
-    N (scipy's default is 256, or N when shorter).
-    **Returns** `(f (nperseg//2 + 1,) [Hz], P (..., nperseg//2 + 1) [unit²/Hz])`."""
-    x = check_finite("x", x)
+    docstring): time runs along the **last** axis. `nperseg` defaults to the largest power of
+    two ≤ N/4, at least 16 and at most N (scipy's default is 256, or N when shorter). Integer
+    or bool samples (ADC counts) are taken as float64 (`x` itself is not changed); `fs`
+    only scales the result, so it may be traced (`jit`, `vmap`, `grad` over it; checked at
+    run time).
+    **Returns** `(f (nperseg//2 + 1,) [Hz], P (..., nperseg//2 + 1) [unit²/Hz])`.
+
+    **Raises:** `ValueError` for fewer than 2 samples, an `nperseg` outside [2, N], an `fs`
+    not finite and > 0, or a (…, N) array with N < 16 along its last axis and a longer
+    axis before it — an (N, 3) record of three channels, whose time is not the last axis
+    (pass `x.T`)."""
+    x = _as_float(check_finite("x", x))
     n = x.shape[-1] if x.ndim else 0
-    if not (is_finite_real(fs) and fs > 0):
-        kind = TypeError if numeric_problem(fs) is not None else ValueError
-        raise kind(f"fs must be a finite number > 0 Hz; got {describe(fs)}")
+    if x.ndim >= 2 and n < 16 <= max(x.shape[:-1]):
+        raise ValueError(
+            f"x must have time along its last axis (..., N); got shape {x.shape}, {n} samples "
+            f"there and {max(x.shape[:-1])} along axis {int(np.argmax(x.shape[:-1]))}: "
+            "channels by time, e.g. an (N, 3) record? pass x.T"
+        )
+    fs = _rate(fs)
     if n < 2:
         raise ValueError(f"x must have at least 2 samples along its last axis; got {n}")
     return _psd(x, fs, nperseg=_segment(n, nperseg))
+
+
+def _as_float(x):
+    """`x` (a JAX array) with integer or bool samples as float64 (a new array): in their own
+    dtype the frequency axis and the window were cast to int (f = 0, 0, 1, 1, …)."""
+    return x if jnp.issubdtype(x.dtype, jnp.inexact) else x.astype(jnp.float64)
+
+
+def _rate(fs):
+    """`fs` [Hz] checked: a concrete finite number > 0 (one line naming it otherwise), or a
+    traced 0-d real value (`jit`, `vmap`, `grad`), held to the same rule at run time."""
+    if isinstance(fs, jax.core.Tracer) and numeric_problem(fs) is None and jnp.ndim(fs) == 0:
+        if concrete_value(fs) is None:
+            return eqx.error_if(fs, ~(jnp.isfinite(fs) & (fs > 0)),
+                                "fs must be a finite number > 0 Hz")  # fmt: skip
+        fs_value = float(concrete_value(fs))
+        if np.isfinite(fs_value) and fs_value > 0:
+            return fs  # an eager grad's tracer: its value is known and good
+        raise ValueError(f"fs must be a finite number > 0 Hz; got {fs_value:g}")
+    if not (is_finite_real(fs) and fs > 0):
+        kind = TypeError if numeric_problem(fs) is not None else ValueError
+        raise kind(f"fs must be a finite number > 0 Hz; got {describe(fs)}")
+    return fs
 
 
 def _segment(n: int, nperseg) -> int:
@@ -117,6 +170,17 @@ MIN_WINDOW = 2 * (EDGE_BINS[0] + EDGE_BINS[1] + 2)
 """Fewest samples (10) in a window, or `tone`'s segment, that leave a bin where a tone is
 measurable: of the bins 1 … m//2, `EDGE_BINS` (2 at DC, 1 at Nyquist) are not, so
 m//2 ≥ 2 + 1 + 2 (module docstring, **Shortest window**)."""
+
+GRAVITY_SPLIT = float(np.sqrt(G0))
+"""|mean f| [the record's unit] from which a record is in m/s² (gravity ≈ 9.8) rather than
+in g (≈ 1): √9.80665 ≈ 3.13, the geometric middle, a factor 3.1 from either (module
+docstring, **Units**)."""
+
+NO_GRAVITY = 0.3
+"""|mean f| [the record's unit] below which a record carries no gravity (an AC-coupled
+accelerometer): 1 g in g with a bias of 0.3 g reads ≥ 0.7, an AC-coupled record ≈ 0 (a
+tone's leftover mean over a part cycle: ≤ A/(π f T), 0.016 A for 10 Hz over 2 s). Below it
+the unit cannot be told: refused unless `ac_coupled=True` (module docstring, **Units**)."""
 
 DIRECTIONAL_MIN = 0.9
 """Least λ₁/trace of a window's 3×3 cross-spectral matrix (over the tone's lobe) for
@@ -175,9 +239,9 @@ def tone(x, fs: float, nperseg: int | None = None, lobe: int = 3):
         )
     f, p = psd(x, fs, m)
     freq, amp, edge, _ = _peak(f, p, _lobe(lobe))
-    e = concrete_value(edge)
-    if e is not None and bool(e):
-        _warn_edge("tone", 1, 1, fs, m, "fs/nperseg")
+    e, rate = concrete_value(edge), concrete_value(fs)
+    if e is not None and bool(e) and rate is not None:
+        _warn_edge("tone", 1, 1, float(rate), m, "fs/nperseg")
     nan = jnp.asarray(jnp.nan, freq.dtype)
     return jnp.where(edge, nan, freq), jnp.where(edge, nan, amp)
 
@@ -204,8 +268,9 @@ def _peak(f, p, lobe):
 
 
 def vibration_features(
-    accel, fs: float, window_s: float = 1.0, axis=None, min_amp_g: float = 0.05, lobe: int = 3
-):
+    accel, fs: float, window_s: float = 1.0, axis=None, min_amp_g: float = 0.05, lobe: int = 3,
+    *, ac_coupled: bool = False,
+):  # fmt: skip
     """The patent's vibration features, window by window: frequency [Hz] and amplitude [g] of
     the tone in the misalignment-compensated specific force `accel` (N, 3) [m/s²] along the
     vibration direction, from each window's PSD ([`tone`][hrgjax.fog.spectrum.tone] on one
@@ -221,11 +286,17 @@ def vibration_features(
     [`EdgeToneWarning`][hrgjax.fog.spectrum.EdgeToneWarning] per call (module docstring,
     **Edges**); whether it vibrates is decided there from the lobe's power with its DC bin
     (**Rest at the edges**). A window of fewer than
-    [`MIN_WINDOW`][hrgjax.fog.spectrum.MIN_WINDOW] = 10 samples is refused, and so is a
-    record in g (median |f| within 0.5 … 2 instead of ≈ 9.8 m/s²): eagerly, and at run time
-    inside `jit` or `vmap` (`eqx.error_if`).
+    [`MIN_WINDOW`][hrgjax.fog.spectrum.MIN_WINDOW] = 10 samples is refused. `fs` and
+    `window_s` set the window length in samples: they must be concrete (not traced).
+
+    **Units** (module docstring): the record's mean, gravity, tells m/s² from g whatever the
+    vibration — |mean f| ≥ √9.80665 ≈ 3.13 (up to 20 g) is m/s²; 0.3 … 3.13 is 1 g written
+    in g, refused ("in g? multiply by 9.80665"); below 0.3 the record carries no gravity (an
+    AC-coupled accelerometer), and is refused unless `ac_coupled=True`, which takes it as
+    m/s² — the unit is then the caller's to get right. Eagerly, and at run time inside `jit`
+    or `vmap` (`eqx.branched_error_if`).
     **Returns** (K, 2), K = N // (window_s·fs)."""
-    a, m = _windows(accel, fs, window_s)
+    a, m = _windows(accel, fs, window_s, ac_coupled)
     _check_min_amp(min_amp_g)
     if axis is not None:
         axis = jnp.asarray(axis, a.dtype)
@@ -245,7 +316,7 @@ def vibration_features(
 
 
 def vibration_direction(accel, fs: float, window_s: float = 1.0, min_amp_g: float = 0.05,
-                        lobe: int = 3):  # fmt: skip
+                        lobe: int = 3, *, ac_coupled: bool = False):  # fmt: skip
     """Body-frame direction (K, 3) of the strongest tone in each window of `accel` (N, 3)
     [m/s²] (windows as [`vibration_features`][hrgjax.fog.spectrum.vibration_features]'): the
     principal axis of the three axes' cross-spectral matrix summed over ±`lobe` bins around
@@ -256,14 +327,14 @@ def vibration_direction(accel, fs: float, window_s: float = 1.0, min_amp_g: floa
     rank one, λ₁/trace < [`DIRECTIONAL_MIN`][hrgjax.fog.spectrum.DIRECTIONAL_MIN] = 0.9
     (broadband noise, or tones along several axes). A linear vibration along u gives ±u
     whatever the analysis axis, so it tells whether a record vibrates along the direction a
-    compensator was trained on. Carries no gradient."""
-    a, m = _windows(accel, fs, window_s)
+    compensator was trained on. Carries no gradient. `ac_coupled`: as the features'."""
+    a, m = _windows(accel, fs, window_s, ac_coupled)
     _check_min_amp(min_amp_g)
     return _directions(a, fs, min_amp_g, m=m, lobe=_lobe(lobe))
 
 
 def off_axis(accel, fs: float, axis, window_s: float = 1.0, tol_deg: float = 8.0,
-             min_amp_g: float = 0.05, lobe: int = 3):  # fmt: skip
+             min_amp_g: float = 0.05, lobe: int = 3, *, ac_coupled: bool = False):  # fmt: skip
     """Windows of `accel` (N, 3) [m/s²] vibrating more than `tol_deg` [°] off `axis` (3,)
     (body frame; −`axis` is the same): those with a
     [`vibration_direction`][hrgjax.fog.spectrum.vibration_direction] (arguments as there)
@@ -271,8 +342,9 @@ def off_axis(accel, fs: float, axis, window_s: float = 1.0, tol_deg: float = 8.0
     close to rank one: broadband noise) is not off: the features' own rest and range rules
     decide it. [`compensate`][hrgjax.fog.compensation.compensate] counts off windows out of
     range. **Returns** `(off (K,) bool, direction (K, 3), angle (K,) [°])`, the angle NaN
-    where there is no direction. One compiled program; carries no gradient."""
-    a, m = _windows(accel, fs, window_s)
+    where there is no direction. One compiled program; carries no gradient. `ac_coupled`:
+    as [`vibration_features`][hrgjax.fog.spectrum.vibration_features]'."""
+    a, m = _windows(accel, fs, window_s, ac_coupled)
     _check_min_amp(min_amp_g)
     u = np.asarray(axis, dtype=float)
     if u.shape != (3,) or not np.isfinite(u).all() or not np.linalg.norm(u) > 0:
@@ -282,31 +354,6 @@ def off_axis(accel, fs: float, axis, window_s: float = 1.0, tol_deg: float = 8.0
         raise ValueError(f"tol_deg must be an angle in [0, 90] °; got {tol_deg!r}")
     cos_min = jnp.asarray(np.cos(np.radians(tol)), a.dtype)
     return _off_axis(a, jnp.asarray(u, a.dtype), cos_min, fs, min_amp_g, m=m, lobe=_lobe(lobe))
-
-
-def _median_within(r, low, high):
-    """Whether the median of the N values `r` (NumPy's: the middle one, or the mean of the
-    two middle ones for even N) lies in the open interval (`low`, `high`): traced, in two
-    counting passes, no sort (`jnp.median` sorts: 10× the features' own cost at 2¹⁶
-    samples). With c = #(r ≤ low) the median is > `low` where 2c < N, not where 2c > N;
-    where 2c = N (even N only) the two middle values are the largest r ≤ `low` and the
-    smallest r > `low`, and it is where their sum is > 2·`low` (two more passes, taken only
-    then, under `jit`). Likewise at `high` with #(r < high). The same decision as NumPy's
-    median, odd or even N."""
-    n = r.shape[0]
-
-    def side(c, on, bound, sign):  # median beyond `bound` on the side where c < N/2
-        if n % 2:
-            return 2 * c < n
-
-        def straddle():  # N/2 values `on` the near side: the two middle ones' sum
-            pair = jnp.max(jnp.where(on, r, -jnp.inf)) + jnp.min(jnp.where(on, jnp.inf, r))
-            return sign * (pair - 2.0 * bound) > 0
-
-        return (2 * c < n) | jax.lax.cond(2 * c == n, straddle, lambda: jnp.asarray(False))
-
-    c_low, c_high = jnp.sum(r <= low), jnp.sum(r >= high)
-    return side(c_low, r <= low, low, 1.0) & side(c_high, r < high, high, -1.0)
 
 
 def _check_min_amp(min_amp_g) -> None:
@@ -319,26 +366,36 @@ def _check_min_amp(min_amp_g) -> None:
         raise ValueError(f"min_amp_g must be a finite number >= 0 [g]; got {float(v):g}")
 
 
-def _windows(accel, fs, window_s):
-    """`accel` checked (finite, (N, 3), m/s² not g) and the window length `m` [samples]."""
-    a = check_finite("accel", accel)
+def _windows(accel, fs, window_s, ac_coupled=False):
+    """`accel` checked (finite, (N, 3), m/s² by its mean: module docstring, **Units**; integer
+    samples as float64) and the window length `m` [samples] (`fs`, `window_s` concrete)."""
+    a = _as_float(check_finite("accel", accel))
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"accel must have shape (N, 3) [m/s²]; got {a.shape}")
+    ac_coupled = check_flag("ac_coupled", ac_coupled)
     for name, x, unit in (("fs", fs, "Hz"), ("window_s", window_s, "s")):
+        if isinstance(x, jax.core.Tracer):
+            raise ValueError(
+                f"{name} must be a concrete number [{unit}] (not traced by jit/vmap/grad): "
+                "with the other it sets the window length in samples, window_s·fs"
+            )
         if not (is_finite_real(x) and x > 0):
             kind = TypeError if numeric_problem(x) is not None else ValueError
             raise kind(f"{name} must be a finite number > 0 {unit}; got {describe(x)}")
+    fs, window_s = float(fs), float(window_s)
+    top = RANGES["specific_force_g"][1] * G0
     v = concrete_value(a)
     if v is None:  # traced (jit, vmap): the same rule at run time, the value left out
-        bad = _median_within(jnp.linalg.norm(a, axis=1), 0.5, 2.0)
-        a = eqx.error_if(a, bad, "accel must be specific force in m/s² (|f| ≈ 9.8 at rest); "
-                         f"its median |f| is within 0.5 … 2: in g? multiply by {G0}")  # fmt: skip
-    norm = float(np.median(np.linalg.norm(v, axis=1))) if v is not None else np.nan
-    if 0.5 < norm < 2.0:
-        raise ValueError(
-            f"accel must be specific force in m/s² (|f| ≈ 9.8 at rest); its median |f| is "
-            f"{norm:.3g}: in g? multiply by {G0}"
-        )
+        mean = jnp.linalg.norm(jnp.mean(a, axis=0))
+        bad = jnp.stack(_unit_rule(mean, ac_coupled, top))
+        msgs = [m.format(mean="", top=top / G0) for m in _UNIT_MESSAGES]
+        a = eqx.branched_error_if(a, jnp.any(bad), jnp.argmax(bad), msgs)
+    else:
+        mean = float(np.linalg.norm(v.mean(axis=0)))
+        bad = _unit_rule(mean, ac_coupled, top)
+        if any(bad):
+            shown = f" = {mean:.4g}"
+            raise ValueError(_UNIT_MESSAGES[bad.index(True)].format(mean=shown, top=top / G0))
     m = int(round(window_s * fs))
     if m < MIN_WINDOW:
         raise ValueError(
@@ -351,6 +408,28 @@ def _windows(accel, fs, window_s):
             f"accel must hold at least one window of window_s·fs = {m} samples; got {a.shape[0]}"
         )
     return a, m
+
+
+def _unit_rule(mean, ac_coupled: bool, top: float) -> tuple:
+    """Which of `_UNIT_MESSAGES` the record's |mean f| `mean` breaks (module docstring,
+    **Units**): in g, no gravity (unless `ac_coupled`), beyond `top` [m/s²]. NumPy or JAX."""
+    in_g = (mean >= NO_GRAVITY) & (mean < GRAVITY_SPLIT)
+    return in_g, (mean < NO_GRAVITY) & (not ac_coupled), mean > top
+
+
+_UNIT_MESSAGES = (
+    "accel must be specific force in m/s²: its mean over the record (gravity: ≈ 9.8 m/s² where "
+    "DC-coupled; vibration averages out) has |mean f|{mean} within "
+    f"{NO_GRAVITY:g} … {GRAVITY_SPLIT:.3g}, as 1 g written in g has; in g? multiply by {G0}",
+    "accel carries no gravity: its mean over the record has |mean f|{mean} below "
+    f"{NO_GRAVITY:g} (≈ 9.8 m/s² where DC-coupled), an AC-coupled record whose unit gravity "
+    f"cannot tell; pass ac_coupled=True to take it as m/s² (a record in g: multiply by {G0} "
+    "first)",
+    "accel must be specific force in m/s²: its mean over the record has |mean f|{mean} beyond "
+    "{top:g} g (gravity is ≈ 9.8 m/s²); in mg? multiply by 9.80665e-3 "
+    "(hrgjax.plausible.relaxed(specific_force_g=…) widens it)",
+)
+"""The unit rule's one-line messages, in `_unit_rule`'s order (`{mean}`: the value, eagerly)."""
 
 
 @fused(static_argnames=("m", "lobe"))

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import check_numbers, concrete_value
 from .._x64 import require_x64
 from .data import ImuData
@@ -32,6 +33,40 @@ G_RANGE_M_S2 = (9.76, 9.84)
 surface (9.780 at the equator to 9.832 at the poles at sea level, about −3e-6 m/s² per m of
 height), with a margin. A g outside it is a unit slip (981 in cm/s², 1 in units of g) that
 would scale M_a by that factor without a word."""
+
+
+_KNOWN_RANGES = {
+    "accel_matrix": "m/s² to m/s²", "gyro_matrix": "rad/s to rad/s",
+    "accel_bias": ("imu_accel_bias", "m/s²"), "gyro_bias": ("imu_gyro_bias", "rad/s"),
+}  # fmt: skip
+"""The fields `ImuCalibration.known` holds to `hrgjax.plausible`'s ranges: a matrix's
+mapping, a bias's (range, unit)."""
+
+
+def _check_known(name: str, v: np.ndarray) -> None:
+    """`ImuCalibration.known`'s plausibility of the concrete field `name` = `v`: a matrix is
+    I plus small scale and misalignment errors (`imu_scale`, `imu_misalignment`), a bias
+    within `imu_gyro_bias` / `imu_accel_bias` (one line each, with the likely unit)."""
+    if not name.endswith("matrix"):
+        quantity, unit = _KNOWN_RANGES[name]
+        plausible.check(f"{name} [{unit}]", v, quantity)
+        return
+    d = np.diag(v)
+    shown = np.array2string(d, precision=4)
+    head = (f"{name} must be I plus small scale and misalignment errors (it maps "
+            f"{_KNOWN_RANGES[name]}); its diagonal is {shown}")  # fmt: skip
+    if np.all(np.abs(d) < 0.5):
+        raise ValueError(f"{head}: the deviation M − I alone? pass np.eye(3) + it")
+    if np.all(d < -0.5):
+        raise ValueError(f"{head}: M ≈ −I reverses every axis; flip the signs of the data's "
+                         "axes instead")  # fmt: skip
+    if np.all(np.abs(d) > 2.0):
+        raise ValueError(f"{head}: a unit ratio between output and input (1000: mg; 9.81: "
+                         "m/s² and g; 57.3: ° and rad), not a scale error; give both in one "
+                         "unit")  # fmt: skip
+    plausible.check(f"{name} diagonal − 1 (scale error) [-]", d - 1.0, "imu_scale")
+    plausible.check(f"{name} off the diagonal (misalignment) [rad]", v[~np.eye(3, dtype=bool)],
+                    "imu_misalignment")  # fmt: skip
 
 
 class ImuCalibration(eqx.Module):
@@ -74,7 +109,15 @@ class ImuCalibration(eqx.Module):
     ) -> ImuCalibration:  # fmt: skip
         """A calibration set by hand (identity matrices and zero biases by default; no
         uncertainty): M_a (3, 3), b_a (3,) [m/s²], M_g (3, 3), b_g (3,) [rad/s], G (3, 3)
-        [rad/s per m/s²]."""
+        [rad/s per m/s²].
+
+        **Raises:** `ValueError` for a wrong shape, a NaN or inf, a singular matrix, or
+        (concrete values) one outside `hrgjax.plausible.RANGES`, as
+        [`ImuModel`][hrgjax.ins.sensors.ImuModel] holds its errors: a matrix is I plus small
+        errors, |M_ii − 1| < 0.1 (`imu_scale`) and |M_ij| < 0.1 rad (`imu_misalignment`) —
+        the deviation M − I alone, −I or a unit ratio such as 1000·I are named so —, |b_g| <
+        0.75 rad/s (`imu_gyro_bias`: °/h or °/s typed as rad/s) and |b_a| < 3 m/s²
+        (`imu_accel_bias`: mg or µg), each with the units it may be in."""
         eye, z = jnp.eye(3), jnp.zeros(3)
         parts = {
             "accel_matrix": (accel_matrix, eye), "accel_bias": (accel_bias, z),
@@ -96,6 +139,8 @@ class ImuCalibration(eqx.Module):
                 raise ValueError(f"{name} must be an invertible scale-and-misalignment matrix "
                                  f"(correct() inverts it); its singular values are "
                                  f"{np.array2string(sv, precision=3)}")  # fmt: skip
+            if v is not None and name in _KNOWN_RANGES:
+                _check_known(name, v)
             values[name] = x
         return cls(**values, covariance=jnp.zeros((33, 33)), noise_std=jnp.zeros(6))
 

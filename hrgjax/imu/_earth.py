@@ -42,7 +42,8 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from ..units import DEG, EARTH_RATE
+from .. import plausible
+from ..units import DEG, DEG_PER_H, EARTH_RATE
 from .data import ImuData
 from .sections import FACES, TURNS, Sections
 
@@ -54,10 +55,22 @@ def check_lat_deg(lat_deg, name: str = "lat_deg") -> float:
 
 
 def check_earth_rate(earth_rate) -> float:
-    """The rotation rate [rad/s] of the ground under the bench, a float ≥ 0."""
+    """The rotation rate [rad/s] of the ground under the bench, a float ≥ 0 within
+    `hrgjax.plausible.RANGES["earth_rate_radps"]` (0 … 1e-4 rad/s): the Earth's 15.04 °/h
+    or 4.178e-3 °/s typed as rad/s is refused in one line naming the unit it reads as."""
     form = (f"the ground's rotation rate in rad/s >= 0 ({EARTH_RATE:g} on the Earth, 0 for a "
             "record without it, e.g. ferraris_session without lat_deg)")  # fmt: skip
-    return _number(earth_rate, "earth_rate", form, lambda v: v >= 0.0)
+    v = _number(earth_rate, "earth_rate", form, lambda v: v >= 0.0)
+    try:
+        plausible.check("earth_rate [rad/s]", v, "earth_rate_radps")
+    except ValueError as err:  # the Earth's rate in another unit: say which, and its factor
+        like = next((f"; {v:g} is the Earth's rate in {unit} ({fix})" for unit, rate, fix in
+                     (("°/h", EARTH_RATE / DEG_PER_H, "×hrgjax.units.DEG_PER_H"),
+                      ("°/s", EARTH_RATE / DEG, "×hrgjax.units.DEG"),
+                      ("rad/h", EARTH_RATE * 3600.0, "÷3600"))
+                     if abs(v / rate - 1.0) < 0.01), "")  # fmt: skip
+        raise ValueError(f"{err}{like}") from None
+    return v
 
 
 def _number(value, name: str, form: str, inside) -> float:

@@ -19,6 +19,10 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+
+from .. import plausible
+from .._checks import concrete_value
 
 ANGLES = ("xy", "xz", "yx", "yz", "zx", "zy")
 """Order of the six misalignment angles: sensor axis, then the body axis it leans towards."""
@@ -65,7 +69,14 @@ class TriadCalibration(eqx.Module):
     @classmethod
     def known(cls, angles, scale=None, bias=None) -> TriadCalibration:
         """A model set by hand (standard errors zero): `angles` (6,) [rad], `scale` (3,)
-        and `bias` (3,) (zeros by default)."""
+        [-], the scale-factor errors k of diag(1 + k) (30e-6 = 30 ppm), and `bias` (3,)
+        [sensor units] (zeros by default).
+
+        **Raises:** `ValueError` for a wrong shape, a NaN or inf, or (concrete values) an
+        angle or a scale error outside `hrgjax.plausible.RANGES` (`imu_misalignment`,
+        `imu_scale`: |θ| < 0.1 rad, |k| < 0.1), named with the units it may be in (mrad,
+        µrad or ° for rad; ppm or %); a scale near 1 is named as the factor 1 + k given for
+        k. Traced values (`vmap` over the angles) pass unchecked."""
         angles = jnp.array(angles, float)  # copies (`jnp.asarray` may view the user's array)
         if angles.shape != (6,):
             raise ValueError(f"angles must have shape (6,) in order {ANGLES}; got {angles.shape}")
@@ -74,6 +85,12 @@ class TriadCalibration(eqx.Module):
         for name, x in (("scale", scale), ("bias", bias)):
             if x.shape != (3,):
                 raise ValueError(f"{name} must have shape (3,); got {x.shape}")
+        for name, x in (("angles", angles), ("scale", scale), ("bias", bias)):
+            v = concrete_value(x)
+            if v is not None and not np.all(np.isfinite(v)):
+                raise ValueError(f"{name} must be finite; got {v[~np.isfinite(v)][0]} at index "
+                                 f"{int(np.argmax(~np.isfinite(v)))}")  # fmt: skip
+        _check_triad(concrete_value(angles), concrete_value(scale))
         z3 = jnp.zeros(3)
         return cls(angles, scale, bias, jnp.zeros(6), z3, z3, z3)
 
@@ -95,3 +112,20 @@ class TriadCalibration(eqx.Module):
         s = jnp.asarray(s)
         d = s - self.bias.reshape((1,) * (s.ndim - 1) + (3,))
         return d @ jnp.linalg.inv(m).T
+
+
+def _check_triad(angles, scale) -> None:
+    """`TriadCalibration.known`'s ranges on concrete `angles` [rad] and `scale` [-] (None:
+    traced, not checked): `hrgjax.plausible`'s `imu_misalignment` and `imu_scale`."""
+    if scale is not None:
+        near_one = np.abs(scale - 1.0) < 0.5
+        if np.any(near_one):
+            i = int(np.argmax(near_one))
+            raise ValueError(
+                f"scale must be the scale-factor errors k of diag(1 + k) [-] (30e-6 = 30 ppm); "
+                f"got {scale[i]:.9g} at index {i}: the factor 1 + k? pass scale − 1 = "
+                f"{scale[i] - 1.0:.6g}"
+            )
+        plausible.check("scale [-]", scale, "imu_scale")
+    if angles is not None:
+        plausible.check("angles [rad]", angles, "imu_misalignment")
