@@ -376,7 +376,9 @@ def ferraris(
     key says; for a gyro that saturates in a turn, or an accelerometer on a face (naming
     the channel and the section: a clipped turn integrates short, M_g reads low with a σ
     that knows nothing of it); for a negative or non-finite `turn_deg_std` or range; for a
-    `lat_deg` outside [−90, 90] or a negative `earth_rate`.
+    `lat_deg` outside [−90, 90], or an `earth_rate` that is negative or beyond
+    `hrgjax.plausible.RANGES["earth_rate_radps"]` (1e-4 rad/s: 15.04 °/h or 4.18e-3 °/s
+    typed as rad/s, named so).
 
     **Warns:** [`TurnCutWarning`][hrgjax.imu.sections.TurnCutWarning] where the gyro still
     turns just outside a turn section ([`cut_turn`][hrgjax.imu.sections.cut_turn], with
