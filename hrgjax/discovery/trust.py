@@ -37,7 +37,11 @@ biased by it. Two corrections, both from the fit's own residual:
    ±1σ interval holds the truth at least as often as the noise alone would put it there
    when δ is the pull (added in quadrature, a pull much larger than the noise would sit at
    the interval's edge, half the time outside). A parameter the leftover pulls is reported
-   with that pull in its σ, never with a confident, wrong one.
+   with that pull in its σ, never with a confident, wrong one. A shape too weak to be
+   structure left (Bonferroni p between `alpha` and `alpha_sigma`, 10⁻³ and 0.05) is fitted
+   beside for the σ all the same (`info["suggested"]`): a weak shape can pull a parameter
+   by many of its σ (a 2θ·ΔT² at 2.6σ held b₁ 5.6σ off; `SIGMA_ALPHA`), and where it is
+   noise its pull is small.
 
 Continuous records add a third, from outside the residual level: the run-to-run bias σ_b
 is read from a few run means, and its own uncertainty is carried into every parameter's
@@ -63,6 +67,12 @@ from .effects import CATALOGUE, regular_parameters
 
 MAX_SHAPES = 3
 """The most leftover shapes fitted beside the model for its model uncertainty."""
+SIGMA_ALPHA = 0.05
+"""Significance (Bonferroni over the shapes tried) at which a leftover shape is fitted beside
+the model *for the σ* ([`honest`][hrgjax.discovery.trust.honest]'s `alpha_sigma`), though too
+weak to count as structure left (`alpha`, 10⁻³): a weak shape can pull a parameter by many of
+its σ (a damping law exponential in ΔT, linear in the catalogue: its 2θ·ΔT² at 2.6σ held
+b₁ 5.6σ high on the six-ramp records; `benchmarks/coverage_continuous.py --laws`)."""
 CLASS_NAMES = {0: "moving windows", 1: "static windows", 2: "continuous blocks"}
 """What the row classes of [`row_classes`][hrgjax.discovery.problem.AbstractProblem.row_classes]
 are, for the report."""
@@ -149,21 +159,26 @@ def _sandwich_diag(a, s, p):
     return np.diag(_sandwich(a, s, p)).copy()
 
 
-def _levels(r, j, cols, classes, alpha):
+def _levels(r, j, cols, classes, alpha, ps=None):
     """The noise level per row the residual shows once the significant leftover shapes are
     fitted beside the model (module docstring, 1. and 2.): `(s, a, shapes, bare)` — the
-    levels, the columns `[j, shapes]`, the shapes' names, the levels without them."""
+    levels, the columns `[j, shapes]`, the shapes' names, the levels without them (`ps`, a
+    list: filled with each shape's Bonferroni p-value)."""
     s = bare = stats.class_levels(r, j, classes)  # `bare`: the level without the shapes
     for _ in range(2):  # the shapes judged at the noise level the data show, and back
-        shapes = _shapes_left(r, j, cols, classes, s, alpha)
+        chosen = _shapes_left(r, j, cols, classes, s, alpha)
+        shapes = [name for name, _ in chosen]
         a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
         step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
         s = stats.class_levels(r - a @ step, a, classes, s)  # the noise the shapes leave
+    if ps is not None:
+        ps[:] = [p for _, p in chosen]
     return s, a, shapes, bare
 
 
 def _shapes_left(r, j, cols, classes, s, alpha):
-    """Significant leftover shapes, strongest first, each chosen given the ones before.
+    """Significant leftover shapes, strongest first, each chosen given the ones before, as
+    `(name, Bonferroni p)`.
 
     Each shape is judged at the noise level the residual shows *once it is fitted* (its
     own Birge ratio per class, `stats.class_levels`), with the F(q, ν) tail of a level read from ν
@@ -175,7 +190,7 @@ def _shapes_left(r, j, cols, classes, s, alpha):
     for _ in range(MAX_SHAPES):
         best = None
         for name, g in cols.items():
-            if name in chosen:
+            if name in (c for c, _ in chosen):
                 continue
             a = np.concatenate([jj, g], axis=1)
             step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
@@ -193,18 +208,24 @@ def _shapes_left(r, j, cols, classes, s, alpha):
                 best = (p, -score, name)
         if best is None or min(1.0, best[0] * len(cols)) >= alpha:
             break
-        chosen.append(best[2])
+        chosen.append((best[2], min(1.0, best[0] * len(cols))))
         jj = np.concatenate([jj, cols[best[2]]], axis=1)
     return chosen
 
 
-def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
+def honest(
+    fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None,
+    alpha_sigma: float = SIGMA_ALPHA,
+):  # fmt: skip
     """The fit's parameters with error bars that cover the truth (module docstring).
 
     **Arguments:** `fit` (a [`Fit`][hrgjax.discovery.problem.Fit]), `shape_columns` (the
     problem's whitened generic-shape columns on the training rows), `classes` (an integer
     class per training row — static / moving windows — or None for one class), `alpha`
-    (significance of a leftover shape), `spread` (None, or `(factors, info)`: a factor per
+    (significance of a leftover shape as structure left), `alpha_sigma` (the weaker
+    significance at which a shape is fitted beside for the σ alone: `SIGMA_ALPHA`; a shape
+    that weak is listed in `info["suggested"]`, not as structure left), `spread` (None, or
+    `(factors, info)`: a factor per
     regular parameter on its statistical variance for an estimated part of the noise model's
     own uncertainty, `info["basis"]` saying which in words — continuous records' σ_b,
     [`noise_spread`][hrgjax.discovery.problem.AbstractProblem.noise_spread]).
@@ -212,7 +233,9 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
     **Returns:** `(parameters, info)`: a copy of `fit.parameters` whose `std` are the
     corrected ones (`std_textbook` and `std_model` beside them; `std` None with
     `why_no_sigma` for a parameter σ_b is not pinned for, `spread`'s `"not_pinned"`), and `info` =
-    `{"noise_scale": {class: s}, "shapes": [names], "structure_left": bool, "basis": words}`
+    `{"noise_scale": {class: s}, "shapes": [names], "suggested": [names], "structure_left":
+    bool, "basis": words}` (`shapes`: significant at `alpha`; `suggested`: at `alpha_sigma`
+    only; both fitted beside)
     (with `spread`, `"run_bias"`: its info less the words; `structure_left`: a shape was
     fitted beside the model, and with it `"excess"`:
     `{class: s without the shapes}` for the classes whose level they bring down by more than
@@ -222,12 +245,17 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
     if spread is not None and "basis" not in spread[1]:
         raise TypeError("honest: spread must be None or (factors, info) with info['basis'] its "
                         "words for the report; got no 'basis'")  # fmt: skip
+    _checks.check_values("honest: alpha_sigma", alpha_sigma, lambda v: (v >= alpha) & (v <= 1),
+                         f"a significance in [alpha = {alpha:g}, 1]")  # fmt: skip
     params = copy.deepcopy(fit.parameters)
     if j.ndim != 2 or j.shape[1] != len(labels) or r.size <= j.shape[1]:
-        return params, {"noise_scale": {}, "shapes": [], "structure_left": False,
-                        "basis": "textbook (no correction)"}  # fmt: skip
+        return params, {"noise_scale": {}, "shapes": [], "suggested": [], "structure_left":
+                        False, "basis": "textbook (no correction)"}  # fmt: skip
     n, p = j.shape
-    s, a, shapes, bare = _levels(r, j, cols, classes, alpha)
+    ps: list[float] = []
+    s, a, fitted, bare = _levels(r, j, cols, classes, alpha_sigma, ps)
+    shapes = [name for name, q in zip(fitted, ps, strict=True) if q < alpha]  # a prefix
+    suggested = fitted[len(shapes) :]
     # the reported values are the noise model's weighted fit: the shift and the sandwich
     # variance are that estimator's (with the shapes beside it), at the noise level s
     step, *_ = np.linalg.lstsq(a, r, rcond=None)
@@ -235,7 +263,7 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
     old = np.sqrt(np.diag(stats.covariance(j)))
     if spread is not None:  # σ_b's (or another estimated noise part's) own uncertainty
         var = var * np.asarray(spread[0], float)
-    shift = step[:p] if shapes else np.zeros(p)
+    shift = step[:p] if fitted else np.zeros(p)
     for i, (name, pname) in enumerate(labels):
         entry = params[name][pname]
         std = entry.get("std")
@@ -267,7 +295,8 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
         + ", ".join(f"{k} ×{v:.2g}" for k, v in scale.items())
         + " of the noise model's σ)"
     )
-    info = {"noise_scale": scale, "shapes": shapes, "structure_left": bool(shapes)}
+    info = {"noise_scale": scale, "shapes": shapes, "suggested": suggested,
+            "structure_left": bool(shapes)}  # fmt: skip
     if spread is not None:
         info["run_bias"] = {k: v for k, v in spread[1].items() if k != "basis"}
         words += "; " + spread[1]["basis"]
@@ -277,6 +306,10 @@ def honest(fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None):
         if info["excess"]:
             words += " (without it: " + ", ".join(
                 f"{k} ×{v:.2g}" for k, v in info["excess"].items()) + ")"  # fmt: skip
+    if suggested:
+        words += ("; " + ", ".join(suggested) + f" (weak: p < {alpha_sigma:g}, not structure "
+                  "left) fitted beside the model")  # fmt: skip
+    if fitted:
         words += ", each parameter's shift when it is fitted added to its σ"
     return params, info | {"basis": words}
 
