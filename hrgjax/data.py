@@ -201,6 +201,16 @@ class MeasuredData:
         for idx in self.run_indices():
             yield MeasuredData._checked({k: v[idx] for k, v in self._columns.items()})
 
+    def select(self, rows) -> MeasuredData:
+        """The dataset of `rows` (a boolean mask over the samples, or their indices), each
+        column a new read-only array, not checked again: the checks held for this dataset when
+        it was built (inside a `plausible.relaxed` block that may have ended since)."""
+        rows = np.asarray(rows)
+        if rows.dtype == bool and rows.shape != (len(self),):
+            raise ValueError(f"MeasuredData.select: a mask must have one entry per sample, "
+                             f"shape ({len(self)},); got {rows.shape}")  # fmt: skip
+        return MeasuredData._checked({k: v[rows] for k, v in self._columns.items()})
+
     @classmethod
     def _checked(cls, columns: dict[str, np.ndarray]) -> MeasuredData:
         """A dataset of `columns`, rows of an already checked dataset (each a new array), not

@@ -232,6 +232,11 @@ def test_runs_are_checked_once_with_the_dataset():
         runs[0]["temperature_c"][0] = 0.0
     w = cal.reduce(d, window_s=5.0)
     np.testing.assert_allclose(w.temperature_c, -150.0)
+    second = d.select(d.run == 1)  # a subset, as a mixed log's dwell runs: not re-checked
+    np.testing.assert_array_equal(second["time_s"], cols["time_s"][41:])
+    np.testing.assert_array_equal(d.select(np.arange(3))["run"], [0, 0, 0])
+    with pytest.raises(ValueError, match=r"select: a mask must have one entry per sample"):
+        d.select(np.ones(5, bool))
     with pytest.raises(ValueError, match=r"temperature_c' = -150 at index 0 "):
         hg.MeasuredData(cols)  # the range is back
 

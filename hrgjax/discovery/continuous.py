@@ -40,7 +40,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._progress import bar
-from ..data import MeasuredData
 from ..units import DEG, DEG_PER_H
 from . import dwell, leftover, run_bias, stats, thermometer
 from ._continuous_fit import converged_lm
@@ -115,9 +114,7 @@ class ContinuousProblem(AbstractProblem):
         dwell_ids = np.asarray(sorted(dwell_runs(data))) if window_s is not None else []
         if len(dwell_ids):
             in_dwell = np.isin(data.run, dwell_ids)
-            part = lambda m: (
-                MeasuredData({k: v[m] for k, v in data.columns.items()}) if m.any() else None
-            )
+            part = lambda m: data.select(m) if m.any() else None  # checked with `data`
             sub, records = part(in_dwell), part(~in_dwell)
             w, y, cov, arc = dwell.rate_windows(sub, k_e, window_s)
             win = Windows(
