@@ -303,17 +303,32 @@ def vibration_figure(figures: dict, path: str) -> str:
     return save(fig, path, dpi=110)
 
 
-def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "") -> str:
+def allan_figure(result, path: str, fit=None, unit: str | None = None, title: str = "") -> str:
     """An Allan-family deviation with its confidence interval (error bars) and a fitted noise
     model: a [`NoiseFit`][hrgjax.allan.NoiseFit] (the IEEE 952 line fit; each term's slope:
     quantization −1, ARW −½, bias instability 0, rate random walk +½, rate ramp +1) or a
     [`CompositeNoise`][hrgjax.allan.CompositeNoise] (the identified model and each of its
     terms). Legends give each coefficient with its unit.
 
-    - `result`: an [`AllanResult`][hrgjax.allan.AllanResult]; `unit`: the rate unit of the
-      samples (axis label and coefficients' units). Returns `path`.
+    The model is an Allan deviation: it is drawn over adev, oadev and totdev
+    (`hrgjax.allan.curve_result.ALLAN_VARIANCE_KINDS`); over another
+    kind (mdev, tdev, the Hadamard and modified total kinds, which estimate other
+    variances) it is left out and the legend says so.
+
+    - `result`: an [`AllanResult`][hrgjax.allan.AllanResult]; `unit`: the rate unit the
+      deviation is taken in (coefficients' units; the axis names the kind's unit, for tdev
+      and ttotdev the rate unit times a second); default the result's own
+      (`AllanResult.rate_unit`, "rate unit" where it has none). Returns `path`.
     """
     from .allan import NOISE_TERMS, CompositeNoise
+    from .allan.curve_result import ALLAN_VARIANCE_KINDS, deviation_unit
+
+    if unit is None:
+        unit = getattr(result, "rate_unit", "") or "rate unit"
+    omitted = ""
+    if fit is not None and result.kind not in ALLAN_VARIANCE_KINDS:  # σ(τ), not this kind's
+        omitted = f"noise model not drawn: it gives the Allan deviation, not {result.kind}"
+        fit = None
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
@@ -342,10 +357,12 @@ def allan_figure(result, path: str, fit=None, unit: str = "°/h", title: str = "
                 u = term_unit.replace("rate unit", unit)
                 ax.loglog(grid, fit.value[name] * np.sqrt(f(grid)), "--", color=style, lw=1,
                           label=f"{name.replace('_', ' ')} {sym} = {fit.value[name]:.3g} {u}")  # fmt: skip
+    if omitted:
+        ax.plot([], [], " ", label=omitted)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("averaging time τ [s]")
-    ax.set_ylabel(f"{result.kind} [{unit}]")
+    ax.set_ylabel(f"{result.kind} [{deviation_unit(result.kind, unit)}]")
     ax.set_title(title or f"{result.kind} with confidence intervals")
     ax.grid(which="both", alpha=0.3)
     ax.legend(fontsize=8)

@@ -431,3 +431,28 @@ def test_the_bound_of_a_term_left_out_is_tested_under_its_own_covariance():
         hg.allan.CompositeNoise(**{**model.__dict__, "unit": "rad/s",
                                    "terms": {t: s for t, s in model.terms.items() if "value" in s},
                                    "bounds": {"rate_random_walk": math.inf}}).to_kalibr()  # fmt: skip
+
+
+def test_a_term_showing_only_past_t_over_8_is_bounded_not_fitted():
+    """Audit: ARW 0.1 °/√h + a rate random walk K = 0.05 °/h/√s (crossing at ≈ 210 s), 2 000 s
+    at 100 Hz: identify_noise fits the octaves up to T/8 (`SCALE_LIMIT`), where K barely
+    shows, so it reports N alone and K by its upper bound (0.112, above the truth, as
+    documented), while fit_noise on the whole curve reads K 0.0494 [0.0317, 0.0776]."""
+    import jax.numpy as jnp
+
+    from hrgjax.allan.composite import SCALE_LIMIT
+    from hrgjax.ins import sensors
+
+    dt, n = 0.01, 200_000
+    imu = sensors.ImuModel(arw=0.1 * hg.units.DEG_PER_SQRT_H,
+                           gyro_rate_random_walk=0.05 * hg.units.DEG_PER_H)  # fmt: skip
+    zeros = jnp.zeros((n, 3))
+    dth, _ = imu.apply(jax.random.key(1), zeros, zeros, dt)
+    y = np.asarray(dth[:, 0]) / dt / hg.units.DEG_PER_H
+    model = hg.allan.identify_noise(y, 1 / dt, unit="°/h", gauss_markov=0)
+    assert SCALE_LIMIT == 8 and model.taus[-1] <= n * dt / SCALE_LIMIT
+    assert set(model.terms) == {"angle_random_walk"}
+    assert 0.05 < model.bounds["rate_random_walk"] == pytest.approx(0.112, abs=0.002)
+    fit = hg.allan.fit_noise(hg.allan.deviation(y, 1 / dt),
+                             terms=("angle_random_walk", "rate_random_walk"))  # fmt: skip
+    assert fit.low["rate_random_walk"] < 0.05 < fit.high["rate_random_walk"]

@@ -487,6 +487,33 @@ def test_result_prints_as_a_table_and_saves_with_units(tmp_path):
     assert d["unit"] == "°/h" and d["dev"] == r.dev.tolist() and d["edf"] == r.edf.tolist()
 
 
+def test_units_follow_the_statistic_and_the_data(tmp_path):
+    """Audit: tdev of rates in °/h was labelled °/h in the table, the CSV header and the JSON
+    units (its values are τ·mdev/√3: °/h·s, an angle), oadev of angles in ° was labelled °
+    (its values are °/s). Each now names the deviation's unit (`dev_unit`); the JSON keys are
+    the same, `unit` is still the samples' and `data` says which they are."""
+    y = np.random.default_rng(5).normal(size=512)
+    cases = [(y, "rate", "tdev", "°/h", "°/h·s"), (y, "rate", "ttotdev", "°/s", "°"),
+             (y, "rate", "mdev", "°/h", "°/h"), (y, "rate", "tdev", "m/s²", "m/s"),
+             (np.cumsum(y), "phase", "oadev", "°", "°/s"),
+             (np.cumsum(y), "phase", "tdev", "rad", "rad"), (y, "rate", "tdev", "", "")]  # fmt: skip
+    for samples, data, kind, unit, expected in cases:
+        r = allan.deviation(samples, 1.0, kind=kind, data=data, unit=unit, mixture=False)
+        assert r.dev_unit == expected, (kind, data, unit, r.dev_unit)
+        head = f"{kind} [{expected}]," if expected else f"{kind},"
+        assert str(r).splitlines()[0].startswith(head), str(r).splitlines()[0]
+        d = r.to_dict()
+        assert (d["unit"], d["data"]) == (unit, data)
+        assert d["units"] == {"tau_s": "s", "dev": expected, "dev_low": expected,
+                              "dev_high": expected, "alpha": "S_y ∝ f^alpha"}  # fmt: skip
+        r.to_csv(tmp_path / "r.csv")
+        header = (tmp_path / "r.csv").read_text(encoding="utf-8").splitlines()[0]
+        dev = f"dev [{expected}]" if expected else "dev"
+        assert header.startswith(f"tau_s,m,{dev},dev_low"), header
+    # the rate unit a phase record's deviation is in, which fit_noise's coefficients take
+    assert allan.deviation(np.cumsum(y), 1.0, data="phase", unit="°").rate_unit == "°/s"
+
+
 def test_records_with_gaps_skip_the_windows_across_them():
     """NaN samples are gaps: on angle data oadev equals allantools' gap-resistant gradev; on
     rate data it equals the definition computed window by window; a record whose only gap
@@ -1093,6 +1120,32 @@ def test_a_number_given_an_array_is_named_in_one_line():
             call()
     with pytest.raises(ValueError, match=r"^adev: tau0 must be the sample interval.*got '0.1'$"):
         hg.adev(y, tau0="0.1")
+
+
+def test_a_traced_averaging_factor_is_refused_in_one_line_saying_how_to_sweep():
+    """Audit: `jax.jit(lambda r, ms: allan_deviation(r, 1.0, ms=ms))(y, jnp.array([1, 2, 4]))`
+    raised JAX's multi-line TracerArrayConversionError, and a traced m of `oadev` said "m
+    must be a positive integer; got jax.Array" (it was one, traced). Both now say in one
+    line that the factors must be concrete and how to sweep them; concrete JAX integers
+    still work."""
+    y = jnp.asarray(np.random.default_rng(6).normal(size=256))
+    cases = [
+        (lambda: jax.jit(lambda r, ms: hg.allan_deviation(r, 1.0, ms=ms))(y, jnp.array([1, 2])),
+         r"^allan_deviation: ms must be concrete \(static\).*static_argnums"),
+        (lambda: jax.jit(lambda r, m: hg.allan_deviation(r, 1.0, ms=[1, m]))(y, 2),
+         r"^allan_deviation: ms must be concrete"),
+        (lambda: jax.jit(lambda r, m: hg.allan.oadev(r, m, 1.0))(y, 4),
+         r"^oadev: m must be concrete \(static\), not traced.*ms=\[\.\.\.\]"),
+        (lambda: jax.vmap(lambda m: hg.allan.totdev(y, m, 1.0))(jnp.array([1, 2])),
+         r"^totdev: m must be concrete"),
+    ]  # fmt: skip
+    for call, match in cases:
+        with pytest.raises(ValueError, match=match) as err:
+            call()
+        assert "\n" not in str(err.value), str(err.value)
+    assert float(hg.allan.oadev(y, jnp.array(4), 1.0)) == pytest.approx(float(hg.oadev(y, 4)))
+    static = jax.jit(lambda r, m: hg.allan.oadev(r, m, 1.0), static_argnums=1)(y, 4)
+    assert float(static) == pytest.approx(float(hg.oadev(y, 4)), rel=1e-12)
 
 
 def _two_pass_oadev(y, m):

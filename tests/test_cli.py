@@ -443,6 +443,40 @@ def test_allan_refuses_noise_model_options_without_fit(tmp_path, capsys):
                   rf"{them}$")  # fmt: skip
 
 
+def test_allan_tdev_plot_leaves_the_noise_model_out(tmp_path, capsys, monkeypatch):
+    """Audit: `allan --kind tdev --fit --plot` drew the Allan-deviation model over the tdev
+    points and labelled them °/h (they are °/h·s). The one printed line now says the
+    figure leaves the model out, the figure is asked for without it, and the JSON and CSV
+    name tdev's unit (the JSON keys as before)."""
+    import json
+
+    from hrgjax import plots
+
+    drawn = []
+    monkeypatch.setattr(plots, "allan_figure", lambda result, path, fit=None, **kw: (
+        drawn.append((result.kind, result.dev_unit, fit, kw)), path)[1])  # fmt: skip
+    log = tmp_path / "gyro.csv"
+    rate = np.random.default_rng(0).normal(size=512)
+    log.write_text("rate\n" + "\n".join(f"{v:.6f}" for v in rate) + "\n")
+    js, table = tmp_path / "t.json", tmp_path / "t.csv"
+    argv = ["allan", str(log), "--rate-hz", "10", "--unit", "deg/h", "--kind", "tdev", "--fit",
+            "--gauss-markov", "0", "--plot", str(tmp_path / "t.png"), "--json", str(js),
+            "--csv", str(table)]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert ("  (the noise model is fitted to the overlapping Allan variance; --plot leaves it "
+            "out: it gives the Allan deviation, not tdev)") in out.splitlines()  # fmt: skip
+    assert "tdev [°/h·s]" in out
+    ((kind, unit, fit, kw),) = drawn
+    assert (kind, unit) == ("tdev", "°/h·s") and "unit" not in kw  # the result's own unit
+    dev = json.loads(js.read_text())["deviation"]
+    assert (dev["unit"], dev["units"]["dev"]) == ("°/h", "°/h·s")
+    assert table.read_text(encoding="utf-8").startswith("tau_s,m,dev [°/h·s],")
+    assert main(argv[:-4] + ["--kind", "totdev"]) == 0  # totdev estimates σ(τ): drawn
+    assert ("  (the noise model is fitted to the overlapping Allan variance)"
+            in capsys.readouterr().out.splitlines())  # fmt: skip
+
+
 def test_imu_calibrate_table_labels_fit_their_column(tmp_path, capsys):
     """Audit: the label `gyro g-sens [°/s/(m/s²)]` ran into its numbers; every row's numbers
     now start in one column."""

@@ -1,5 +1,5 @@
 """Long work in host-side steps behind a progress bar gives the same results bit for bit:
-`hg.allan.deviation` above `STEPPED_FROM` samples and `hg.ins.mechanize` above
+`hg.allan.deviation` above `STEPPED_COST` of estimated work and `hg.ins.mechanize` above
 `CHUNK_STEPS` steps, here forced on small cases; under a caller's trace, one scan, no bar."""
 
 import jax
@@ -43,7 +43,7 @@ def test_allan_deviation_in_steps_equals_the_whole(monkeypatch, kind):
     rng = np.random.default_rng(3)
     y = rng.standard_normal(3000) * 0.01 + np.cumsum(rng.standard_normal(3000)) * 1e-3 + 5.0
     whole = hg.allan.deviation(y, 100.0, kind=kind)
-    monkeypatch.setattr(allan_result, "STEPPED_FROM", 1)
+    monkeypatch.setattr(allan_result, "STEPPED_COST", 1)
     monkeypatch.setattr(allan_result, "bar", _Recorder)
     _Recorder.calls.clear()
     stepped = hg.allan.deviation(y, 100.0, kind=kind)
@@ -51,6 +51,34 @@ def test_allan_deviation_in_steps_equals_the_whole(monkeypatch, kind):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=0)  # one arithmetic, two programs
     (progress,) = _Recorder.calls
     assert progress.n == progress.total == 1 + 2 * whole.m.size
+
+
+@pytest.mark.parametrize("kind", ["mtotdev", "ttotdev"])
+def test_modified_total_kinds_step_by_their_cost_not_the_sample_count(monkeypatch, kind):
+    """Audit: mtotdev's cost grows as N² (Σ 9m(N − 3m + 1) points: 3.7 s at 10⁴ samples, 58 s
+    at 4·10⁴) and `deviation` went behind a bar only from 4·10⁶ samples. It now steps by the
+    estimated work: one bar counting the points of each factor, the same values."""
+    rng = np.random.default_rng(5)
+    y = rng.standard_normal(400) + np.cumsum(rng.standard_normal(400)) * 0.05
+    whole = hg.allan.deviation(y, 10.0, kind=kind)
+    work = allan_result.work_estimate(kind, y.size + 1, whole.m)
+    assert work == sum(9 * m * (y.size + 1 - 3 * m + 1) for m in whole.m.tolist())
+    monkeypatch.setattr(allan_result, "bar", _Recorder)
+    _Recorder.calls.clear()
+    hg.allan.deviation(y, 10.0, kind=kind)
+    assert _Recorder.calls == []  # ≈ 3·10⁵ points, a few ms: no bar
+    # the cost, not the count: 10⁴ samples of mtotdev (≈ 5 s) step, 10⁶ of oadev (≈ 0.5 s) not
+    octaves = lambda n: 2 ** np.arange(int(np.log2(n)))  # noqa: E731
+    ms = octaves(10_001)[3 * octaves(10_001) < 10_001]
+    assert allan_result.work_estimate(kind, 10_001, ms) > allan_result.STEPPED_COST
+    ms = octaves(1_000_001)[2 * octaves(1_000_001) < 1_000_001]
+    assert allan_result.work_estimate("oadev", 1_000_001, ms) < allan_result.STEPPED_COST
+    monkeypatch.setattr(allan_result, "STEPPED_COST", work)
+    stepped = hg.allan.deviation(y, 10.0, kind=kind)
+    for a, b in zip(_fields(whole), _fields(stepped), strict=True):
+        np.testing.assert_array_equal(a, b)
+    (progress,) = _Recorder.calls
+    assert progress.n == progress.total == 1 + whole.m.size + work
 
 
 def test_curve_parts_equal_the_curve(monkeypatch):

@@ -139,6 +139,35 @@ def test_allan_figure_reads_at_a_glance(figures):
     assert any("interval" in t for t in labels) and any("angle random walk" in t for t in labels)
 
 
+def test_allan_figure_draws_the_model_only_over_the_allan_deviation_in_its_unit(figures):
+    """Audit: a noise model (it predicts σ(τ)) was drawn over tdev points, 150× below it at
+    long τ on a random walk, and the axis said °/h whatever the result's unit (a rad/s
+    result got a °/h axis and °/h·√s coefficients; tdev's values are °/h·s). The model is
+    now drawn over adev, oadev and totdev only (the legend says where it is left out), and
+    the axis and coefficients follow the result's unit and kind."""
+    from hrgjax import allan
+
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=4000) + 0.01 * np.cumsum(rng.normal(size=4000))
+    oadev = allan.deviation(y, 1.0, unit="°/h")
+    fit = allan.fit_noise(oadev)
+    plots.allan_figure(allan.deviation(y, 1.0, kind="tdev", unit="°/h"), "t.png", fit=fit)
+    plots.allan_figure(oadev, "o.png", fit=fit)
+    rad = allan.deviation(y, 1.0, unit="rad/s")
+    plots.allan_figure(rad, "r.png", fit=allan.fit_noise(rad))
+    plots.allan_figure(allan.deviation(np.cumsum(y), 1.0, data="phase", unit="°"), "p.png")
+    for fig in figures:
+        _check(fig)
+    axes = [fig.axes[0] for fig in figures]
+    labels = [[t.get_text() for t in ax.get_legend().get_texts()] for ax in axes]
+    assert [ax.get_ylabel() for ax in axes] == ["tdev [°/h·s]", "oadev [°/h]",
+                                                 "oadev [rad/s]", "oadev [°/s]"]  # fmt: skip
+    assert "noise model not drawn: it gives the Allan deviation, not tdev" in labels[0]
+    assert not any("IEEE 952" in t or "random walk" in t for t in labels[0])
+    assert "fitted IEEE 952 model" in labels[1] and any("°/h·√s" in t for t in labels[1])
+    assert any("rad/s·√s" in t for t in labels[2]) and not any("°" in t for t in labels[2])
+
+
 def test_imu_session_and_allan_figures_read_at_a_glance(figures):
     import jax
 

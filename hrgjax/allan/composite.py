@@ -65,7 +65,11 @@ PENALTY = 4.0
 ½χ²₀ + ½χ²₁ (a non-negative coefficient), exceeded with probability 2.3 %."""
 SCALE_LIMIT = 8
 """The octaves fitted: m ≤ n/SCALE_LIMIT (each estimate from ≥ 8 τ-averages' worth of
-record)."""
+record): the last octaves of the printed curve (T/8 … T/2) are not fitted, so a term that
+shows only there (a rate random walk crossing the white noise past T/8) is left out and
+reported by its upper bound (`CompositeNoise.bounds`). With 4, the reduced studies of
+`benchmarks/noise_identification.py` came out the same (docs/allan.md); 8 is kept until
+the full studies are rerun."""
 GM_PENALTY = 12.0
 """The misfit a Gauss–Markov term must remove: its correlation time is searched (and
 undefined when σ = 0), so its drop under absence is the largest of many (Davies 1987); 12
@@ -106,7 +110,10 @@ class CompositeNoise:
     - `bounds`: `{name: upper end [coefficient unit]}` of each candidate term not selected,
       from a fit with it forced in: the largest value the octaves do not reject at `ci`
       (one-sided (1 − ci)/2), each value tested under the octaves' covariance with the term
-      at that value; inf where none is rejected.
+      at that value; inf where none is rejected. The octaves end at T/8 (`SCALE_LIMIT`):
+      a term that rises above the others only past T/8 is left out and only bounded here
+      (ARW + a rate random walk crossing at ≈ 210 s, 2 000 s at 100 Hz: K ≤ 0.112 against
+      0.05, docs/allan.md).
     - `sampling`: what a rate sample was taken as (`"interval"`: the mean over its interval,
       `"point"`: an instantaneous sample; [`SAMPLINGS`][hrgjax.allan.octave_covariance.SAMPLINGS]).
     """
@@ -379,6 +386,10 @@ def identify_noise(
     rejected when long (T = 10 s read 13.0 s, J 18 751 on 15 dof); a point-sampled one
     fitted as interval means is accepted with its white noise N inflated — N² gains
     σ²τ₀²/(3T) (N 0.05 read 0.188 at σ = 1, T = 10 s, 1 Hz) — so say which the sensor is.
+
+    The octaves fitted end at n/`SCALE_LIMIT` samples (T/8): a term that shows only beyond
+    them is not selected and is reported by its upper bound in `bounds`; for such a term
+    take a longer record or read [`fit_noise`][hrgjax.allan.fit_noise] on the whole curve.
 
     `oadev`: the record's overlapping Allan deviation where the caller has it already
     ([`deviation`][hrgjax.allan.deviation]`(y, rate_hz)`, octave τ and the default noise rule,

@@ -50,6 +50,12 @@ class AllanResult:
       bias correction, more than 64 τ for oadev) or the fit was refused (too few octaves, a
       misfit: a noise outside the four terms, such as a strong Gauss–Markov bump), where the
       values are the type read's as before. `alpha` is the type read either way.
+    - `unit`: the samples' unit as given to [`deviation`][hrgjax.allan.deviation] (a rate
+      unit for `data="rate"`, an angle unit for `data="phase"`); `data`: which of the two.
+      The deviation's own unit is `dev_unit`: the rate unit (`rate_unit`: an angle unit
+      per second for angle samples, °/s for °) and for tdev and ttotdev that times a
+      second, an angle (°/h·s for rates in °/h, ° for angles in °); the table, the CSV
+      header, the JSON `units` and [`allan_figure`][hrgjax.plots.allan_figure] name it.
     - `segments`: for a rate record with gaps, the (start, length) of each gap-free run of
       samples [samples], an (R, 2) integer array
       ([`fit_noise`][hrgjax.allan.fit_noise] builds the estimates' covariance from it);
@@ -73,6 +79,19 @@ class AllanResult:
     unit: str = ""
     segments: np.ndarray | None = None
     mixture: np.ndarray | None = None
+    data: str = "rate"
+
+    @property
+    def rate_unit(self) -> str:
+        """The rate unit the deviation is taken in: `unit` for rate samples, `unit`/s for
+        angle samples ("" where no unit was given)."""
+        return self.unit if self.data == "rate" else per_second(self.unit)
+
+    @property
+    def dev_unit(self) -> str:
+        """The unit of `dev`, `dev_low` and `dev_high`:
+        `hrgjax.allan.curve_result.deviation_unit` of the kind."""
+        return deviation_unit(self.kind, self.rate_unit)
 
     def _columns(self) -> dict:
         return {
@@ -82,7 +101,7 @@ class AllanResult:
         }  # fmt: skip
 
     def __str__(self) -> str:
-        unit = f" [{self.unit}]" if self.unit else ""
+        unit = f" [{self.dev_unit}]" if self.dev_unit else ""
         head = f"{self.kind}{unit}, ±{self.ci:.3f} χ² interval"
         cols = (
             f"{'tau [s]':>12} {'m':>8} {'dev':>12} {'low':>12} {'high':>12} {'edf':>9} {'alpha':>6}"
@@ -101,10 +120,12 @@ class AllanResult:
         return "\n".join([head, cols, *rows])
 
     def to_dict(self) -> dict:
-        """The curve as plain lists, with its kind, level, unit and column units."""
-        out = {"kind": self.kind, "ci": self.ci, "unit": self.unit,
-               "units": {"tau_s": "s", "dev": self.unit, "dev_low": self.unit,
-                         "dev_high": self.unit, "alpha": "S_y ∝ f^alpha"}}  # fmt: skip
+        """The curve as plain lists, with its kind, level, `unit` (the samples'), `data`
+        (rate or phase) and column `units` (`dev`'s: `dev_unit`)."""
+        dev = self.dev_unit
+        out = {"kind": self.kind, "ci": self.ci, "unit": self.unit, "data": self.data,
+               "units": {"tau_s": "s", "dev": dev, "dev_low": dev, "dev_high": dev,
+                         "alpha": "S_y ∝ f^alpha"}}  # fmt: skip
         cols = self._columns()
         if self.bias_factor is not None:
             cols["bias_factor"] = self.bias_factor
@@ -124,18 +145,51 @@ class AllanResult:
 
     def to_csv(self, path) -> None:
         """Write one row per τ to `path` (CSV: `tau_s, m, dev, dev_low, dev_high, edf,
-        n_terms, alpha` and, where the result has it, `mixture` (1/0), the deviation's unit in
-        the header's `dev` column name), atomically (missing folders are made). The printed
+        n_terms, alpha` and, where the result has it, `mixture` (1/0), the deviation's unit
+        `dev_unit` in the header's `dev` column names), atomically (missing folders are made). The printed
         table marks the rows whose `mixture` is True with `*` after the EDF."""
         from .._io import atomic_write
 
         cols = self._columns()
         if self.mixture is not None:  # 1 where the interval or divisor rests on the mixture
             cols["mixture"] = np.asarray(self.mixture, dtype=int)
-        unit = f" [{self.unit}]" if self.unit else ""
+        unit = f" [{self.dev_unit}]" if self.dev_unit else ""
         names = [f"{k}{unit}" if k.startswith("dev") else k for k in cols]
         with atomic_write(path, "w", encoding="utf-8") as fh:
             fh.write(",".join(names) + "\n")
             for row in zip(*cols.values(), strict=True):
                 fh.write(",".join(repr(float(v)) if isinstance(v, float | np.floating)
                                   else str(int(v)) for v in row) + "\n")  # fmt: skip
+
+
+ALLAN_VARIANCE_KINDS = ("adev", "oadev", "totdev")
+"""The kinds whose value estimates the Allan deviation σ(τ) itself (totdev: with its bias
+correction), on which a noise model's Allan deviation
+([`NoiseFit.adev`][hrgjax.allan.NoiseFit], [`CompositeNoise.adev`][hrgjax.allan.CompositeNoise])
+may be drawn; mdev, tdev, the Hadamard and the modified total kinds estimate other
+variances (tdev is an angle, τ·mdev/√3)."""
+
+
+def per_second(unit: str) -> str:
+    """`unit` per second ("°" → "°/s", "m/s" → "m/s²"; "" stays "")."""
+    if not unit:
+        return ""
+    if unit.endswith("/s"):
+        return unit + "²"
+    return f"({unit})/s" if "/" in unit else unit + "/s"
+
+
+def times_second(unit: str) -> str:
+    """`unit` times a second ("°/s" → "°", "m/s²" → "m/s", "°/h" → "°/h·s"; "" stays "")."""
+    if not unit:
+        return ""
+    for tail, short in (("/s", ""), ("/s²", "/s"), ("/s^2", "/s")):
+        if unit.endswith(tail) and len(unit) > len(tail):
+            return unit[: -len(tail)] + short
+    return unit + "·s"
+
+
+def deviation_unit(kind: str, rate_unit: str) -> str:
+    """The unit of a `kind` deviation of rates in `rate_unit`: the rate unit, and for tdev and
+    ttotdev (τ·mdev/√3, τ·mtotdev/√3: an angle) the rate unit times a second."""
+    return times_second(rate_unit) if kind in ("tdev", "ttotdev") else rate_unit

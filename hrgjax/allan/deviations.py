@@ -55,10 +55,21 @@ def _check(y, m, needed, name):
         raise ValueError(f"{name}: m = {m} needs at least {needed} samples; got {n}")
 
 
+_TRACED_FACTOR = (  # how a traced averaging factor is refused (after "name: arg")
+    "must be concrete (static), not traced by jax.jit/vmap (it sets the program's shapes): "
+    "give a Python int (jax.jit(f, static_argnums=...) for a jitted function's argument), "
+    "or sweep factors with hg.allan_deviation(y, dt, ms=[...]) (one program for every "
+    "list of that length)"
+)
+
+
 def _factor(m, name: str, arg: str = "m", form: str = "a positive integer") -> int:
     """The averaging factor as a Python int: any integer, or a whole real number (2.0);
     anything else is refused naming `name` and its argument `arg` (the range is
-    `_check`'s)."""
+    `_check`'s). A value traced by `jax.jit`/`jax.vmap` is refused in one line saying that
+    the factor must be concrete and how to sweep factors."""
+    if isinstance(m, jax.core.Tracer) and concrete_value(m) is None:
+        raise ValueError(f"{name}: {arg} {_TRACED_FACTOR}")
     try:
         return operator.index(m)
     except TypeError:
@@ -228,6 +239,13 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
         ms = [2**k for k in range(int(np.log2(max(n // 4, 1))) + 1)]
     # a 2-D ms was flattened, an empty one, NaN or a str failed inside JAX or int()
     form = "the averaging factors, whole numbers >= 1 in a 1-D list"
+    if any(isinstance(v, jax.core.Tracer) and concrete_value(v) is None
+           for v in (ms, *(ms if isinstance(ms, list | tuple) else ()))):  # fmt: skip
+        raise ValueError("allan_deviation: ms must be concrete (static) averaging factors: "
+                         "they are traced (jax.jit/vmap); pass them from outside the "
+                         "transformation as a list or NumPy array (one program serves every "
+                         "list of the same length), or as a tuple under jax.jit's "
+                         "static_argnums")  # fmt: skip
     check_numbers("allan_deviation: ms", ms, form)
     if np.ndim(ms) > 1 or np.size(ms) == 0:
         raise ValueError(f"allan_deviation: ms must be {form}; got {describe(ms)}")

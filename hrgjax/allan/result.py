@@ -35,15 +35,30 @@ KINDS = ("adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "mtotdev", 
 NumPy: [`hrgjax.allan.total`][hrgjax.allan.total])."""
 
 
-STEPPED_FROM = 1 << 22
-"""Samples from which [`deviation`][hrgjax.allan.deviation] works in host-side steps behind a
-progress bar (≈ 2 s of work on a 2-core CPU at 4·10⁶ samples, 40 s at 2·10⁷): the noise
-identified one factor at a time and the compiled curve `hrgjax.allan.deviations.CURVE_CHUNK`
-factors a call, with the same results bit for bit."""
+STEPPED_COST = 22 << 22
+"""Estimated work (`work_estimate` in this module, sample passes) from
+which [`deviation`][hrgjax.allan.deviation] works in host-side steps behind a progress bar,
+with the same results bit for bit: ≈ 9·10⁷, ≈ 2 s on a 2-core CPU — an octave oadev of
+4·10⁶ samples (22 factors × 2²²: the sample count that decided it before), an mtotdev of
+≈ 6 500 samples (its cost grows as N²: 10⁴ samples ≈ 5 s, 4·10⁴ ≈ 60 s). The compiled
+kinds then identify the noise one factor at a time and sum the curve
+`hrgjax.allan.deviations.CURVE_CHUNK` factors a call; mtotdev and ttotdev count the points
+of each factor (`hrgjax.allan.total.mtotdev_points`) on the bar."""
+
+
+def work_estimate(kind: str, n_phase: int, m) -> int:
+    """The work of a `kind` deviation over `n_phase` phase points at factors `m`, in sample
+    passes: one O(N) pass per factor for the compiled kinds (N·len(m)); mtotdev and ttotdev
+    every run of 3m points extended to 9m, Σ 9m·(N − 3m + 1) (≈ N² at the long factors)."""
+    if kind in ("mtotdev", "ttotdev"):
+        from .total import mtotdev_points
+
+        return int(sum(mtotdev_points(n_phase, m)))
+    return int(n_phase) * len(m)
 
 
 class _NoProgress(contextlib.nullcontext):
-    """What `deviation` updates below `STEPPED_FROM`: nothing shown."""
+    """What `deviation` updates below `STEPPED_COST`: nothing shown."""
 
     def update(self, n=1):
         pass
@@ -103,7 +118,9 @@ def deviation(
       off Stable32 1.60's octave tables of an OCXO record, whose α, intervals and totdev it
       reproduces at all 90 τ; for comparing with Stable32, its intervals are less well
       calibrated); [`noise_id`][hrgjax.allan.noise_id] says both.
-    - `unit`: the samples' unit, carried into the table, files and plots (e.g. "°/h").
+    - `unit`: the samples' unit (e.g. "°/h"; for `data="phase"` an angle unit, "°"): the
+      table, files and plots name the deviation's, `AllanResult.dev_unit` (rates in °/h:
+      °/h, tdev °/h·s; angles in °: °/s, tdev °).
     - `mixture`: under `noise_rule="hrgjax"`, take oadev's EDF (grids of up to 64 τ) and
       mtotdev's and ttotdev's bias divisor from the IEEE 952 mixture fitted to the record
       ([`hrgjax.allan.mixture`][hrgjax.allan.mixture]; ≈ 10–100 ms of CPU a call on 10³–10⁵
@@ -121,8 +138,9 @@ def deviation(
 
     One compiled program per kind and data length serves every τ grid (factors are run-time
     values, padded to a power-of-two count), so a new grid compiles nothing.
-    From `hrgjax.allan.result.STEPPED_FROM` samples on, the work goes in host-side steps
-    behind a progress bar (shown at a terminal), with the same results.
+    Where the work is estimated at `hrgjax.allan.result.STEPPED_COST` or more (≈ 2 s: an
+    octave oadev of 4·10⁶ samples, an mtotdev of ≈ 6 500, whose cost grows as N²), it goes
+    in host-side steps behind a progress bar (shown at a terminal), with the same results.
 
     **Returns:** an [`AllanResult`][hrgjax.allan.AllanResult].
 
@@ -187,9 +205,12 @@ def deviation(
             f"(taus={describe(taus)})"
         )
     # long records: work in host-side steps behind a progress bar (bit-identical results)
-    stepped = y.size >= STEPPED_FROM
-    steps = 1 + m.size * (1 + (not gaps and kind not in ("mtotdev", "ttotdev")))
-    with bar(steps, f"allan {kind}") if stepped else _NoProgress() as progress:
+    total = kind in ("mtotdev", "ttotdev")  # its curve counted in points on the bar
+    work = work_estimate(kind, n_phase, m)
+    stepped = work >= STEPPED_COST
+    steps = 1 + m.size * (1 + (not gaps and not total)) + (work if total else 0)
+    counted = "pt" if total else "step"
+    with bar(steps, f"allan {kind}", unit=counted) if stepped else _NoProgress() as progress:
         if data == "rate":
             check_rate_has_noise(y)
         progress.update()
@@ -201,7 +222,7 @@ def deviation(
                 raise ValueError(f"y has gaps (NaN): {kind} reflects every run of 3m points "
                                  "and has no gap-tolerant form; split the record, or use "
                                  "mdev")  # fmt: skip
-            dev = mtotdev_curve(x, m)[0] / tau0
+            dev = mtotdev_curve(x, m, progress=progress)[0] / tau0
             n_eff = np.full(m.size, n_phase)
         elif gaps:  # windows across a gap left out (hrgjax.allan.gaps), in NumPy
             dev, n_terms = gapped_curve(kind, y, data, m)
@@ -281,7 +302,7 @@ def deviation(
     return AllanResult(
         kind=kind, ci=float(ci), taus=taus_s, m=m, dev=dev, dev_low=low, dev_high=high,
         edf=edf, n_terms=n_terms, alpha=alpha, bias_factor=factor, unit=str(unit),
-        segments=_runs(y) if gaps and data == "rate" else None, mixture=mixed,
+        segments=_runs(y) if gaps and data == "rate" else None, mixture=mixed, data=data,
     )  # fmt: skip
 
 

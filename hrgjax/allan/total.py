@@ -27,11 +27,16 @@ bias option); under `noise_rule="stable32"` it divides by Stable32's
 [`MTOTVAR_BIAS`][hrgjax.allan.total.MTOTVAR_BIAS] instead. The EDF
 ([`edf_mtotdev`][hrgjax.allan.total.edf_mtotdev]) is fitted to the exact EDF of the
 estimator's quadratic form; SP 1065's Table 8 under `noise_rule="stable32"`. Each factor
-costs O(N·m) (every run is reflected and averaged): a 10⁴-point record's octaves take well
-under a second, 10⁶ points' long τ minutes — choose `taus` accordingly.
+costs O(N·m) (every run is reflected and averaged), ≈ N² over the octaves
+([`mtotdev_points`][hrgjax.allan.total.mtotdev_points]): a 10⁴-point record's octaves take
+≈ 5 s on one core, 4·10⁴ points' ≈ 60 s, 10⁶ points' days — choose `taus` accordingly
+(`deviation` shows a progress bar from ≈ 2 s of work on,
+`hrgjax.allan.result.STEPPED_COST`).
 """
 
 from __future__ import annotations
+
+from contextlib import nullcontext
 
 import numpy as np
 
@@ -72,9 +77,19 @@ table); beyond, its value at 127 or 128 (the same parity), within 3e-4 of the la
 _ELEMENTS = 2_000_000  # extended points held at once (chunks of runs)
 
 
-def mtotdev_curve(x, ms) -> tuple[np.ndarray, np.ndarray]:
+def mtotdev_points(n: int, ms) -> list[int]:
+    """The extended points `mtotdev_curve` computes at each factor of `ms` over `n` phase
+    points: 9m per run of 3m points, (N − 3m + 1)·9m a factor — its cost, ≈ N² in all at
+    the long factors (≈ 4·10⁷ points a second on one core: 10⁴ samples' octaves 2.2·10⁸,
+    ≈ 5 s; 4·10⁴ samples' ≈ 60 s)."""
+    return [max(n - 3 * int(k) + 1, 0) * 9 * int(k) for k in ms]
+
+
+def mtotdev_curve(x, ms, progress=None) -> tuple[np.ndarray, np.ndarray]:
     """`(mtotdev, runs)` at factors `ms` of phase `x` (1-D, angle units, τ₀ = 1: the caller
-    divides by τ₀); `runs` = N − 3m + 1 per factor (0 where 3m > N, with NaN)."""
+    divides by τ₀); `runs` = N − 3m + 1 per factor (0 where 3m > N, with NaN). `progress`:
+    what to `update(n)` with each factor's `mtotdev_points` (the caller's bar, or one that
+    shows nothing); default a bar of its own."""
     check_1d("x", x, "one phase (angle) sample per interval")
     x = np.asarray(x, dtype=float)
     n = x.size
@@ -84,13 +99,15 @@ def mtotdev_curve(x, ms) -> tuple[np.ndarray, np.ndarray]:
     x = x - x[0] - (x[-1] - x[0]) / max(n - 1, 1) * np.arange(n)
     prefix = np.concatenate([[0.0], np.cumsum(x)])
     out, counts = [], []
-    work = [max(n - 3 * int(k) + 1, 0) * 9 * int(k) for k in ms]  # extended points per factor
-    with bar(sum(work), "mtotdev", unit="pt") as progress:
+    work = mtotdev_points(n, ms)  # extended points per factor
+    with (
+        bar(sum(work), "mtotdev", unit="pt") if progress is None else nullcontext(progress) as shown
+    ):
         for m, done in zip((int(k) for k in ms), work, strict=True):
             out_m, runs = _one_factor(x, prefix, m)
             out.append(out_m)
             counts.append(runs)
-            progress.update(done)
+            shown.update(done)
     return np.asarray(out), np.asarray(counts, dtype=int)
 
 

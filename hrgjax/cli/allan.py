@@ -189,7 +189,10 @@ def cmd_allan(args) -> int:
     model = None
     if args.fit or args.kalibr:
         if args.kind not in ("adev", "oadev"):
-            print("  (the noise model is fitted to the overlapping Allan variance)")
+            left_out = args.plot and args.kind not in allan.curve_result.ALLAN_VARIANCE_KINDS
+            note = f"; --plot leaves it out: it gives the Allan deviation, not {args.kind}"
+            print(f"  (the noise model is fitted to the overlapping Allan variance"
+                  f"{note if left_out else ''})")  # fmt: skip
         with usage_errors(prefix=args.log):
             gauss_markov = 2 if args.gauss_markov is None else args.gauss_markov
             # the octaves the model fits are the printed deviation's: not computed twice
@@ -217,8 +220,7 @@ def cmd_allan(args) -> int:
     title = f"{args.log}: {column}"
 
     def plot(path):
-        return figure("allan_figure")(result, path, fit=model, unit=unit or "rate unit",
-                                      title=title)  # fmt: skip
+        return figure("allan_figure")(result, path, fit=model, title=title)  # the unit: result's
 
     def csv(path):
         from .._io import atomic_path
