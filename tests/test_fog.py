@@ -591,7 +591,9 @@ def test_vibration_units_are_told_by_gravity_not_by_the_vibration():
     np.testing.assert_allclose(d, np.broadcast_to([0.0, 0.0, 1.0], d.shape), atol=1e-12)
     with pytest.raises(ValueError, match=r"in g\? multiply"):  # gravity in g: still refused
         vibration_features(in_g, 100.0, 1.0, ac_coupled=True)
-    with pytest.raises(ValueError, match=r"beyond 20 g .*in mg\? multiply by 9.80665e-3"):
+    with pytest.raises(
+        ValueError, match=r"beyond 196.1 m/s² \(20 g; .*in mg\? multiply by 9.80665e-3"
+    ):
         vibration_features(in_g * 1000.0, 100.0, 1.0)
     with pytest.raises(TypeError, match=r"^ac_coupled must be True or False; got str 'no'"):
         vibration_features(in_g * G0, 100.0, 1.0, ac_coupled="no")
@@ -610,6 +612,7 @@ def test_calibrate_refuses_a_unit_ratio_and_traced_inputs():
     for factor, named in ((180.0 / np.pi, r"s in ° \(°/s\) for b in rad \(rad/s\)\?"),
                           (3600.0 * 180.0 / np.pi, r"s in °/h for b in rad/s\?"),
                           (np.pi / 180.0, r"s in rad \(rad/s\) for b in ° \(°/s\)\?"),
+                          (1000.0 / 9.80665, r"s in mg for b in m/s²\?"),  # review: was 1000·g
                           (-1.0, r"a reversed axis\?")):  # fmt: skip
         with pytest.raises(ValueError, match=r"^calibrate: sensor axis x reads .* × its input "
                            r"\(fitted scale k = .*, outside the plausible -0.1 … 0.1: .*\): "

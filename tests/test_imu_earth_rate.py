@@ -100,8 +100,9 @@ def test_an_earth_rate_in_another_unit_is_refused_naming_it(tactical):
     for rate, unit in ((15.04, r"°/h \(×hrgjax.units.DEG_PER_H\)"),
                        (15.04 / 3600.0, r"°/s \(×hrgjax.units.DEG\)"),
                        (EARTH_RATE * 3600.0, r"rad/h \(÷3600\)")):  # fmt: skip
-        with pytest.raises(ValueError, match=r"^earth_rate \[rad/s\] = .* is outside the "
-                           r"plausible range 0 … 0.0001 rad/s — .*widens it\); .* is the "
+        with pytest.raises(ValueError, match=r"^earth_rate \[rad/s\] = [0-9.e-]+ is outside "
+                           r"the plausible range 0 … 0.0001 rad/s \(hrgjax.plausible.relaxed\("
+                           r"earth_rate_radps=…\) widens it\); [0-9.e-]+ is the "
                            rf"Earth's rate in {unit}$"):  # fmt: skip
             hg.imu.ferraris(data, sections, earth_rate=rate)
     with pytest.raises(ValueError, match=r"= 0.001 is outside the plausible range .*widens it\)$"):

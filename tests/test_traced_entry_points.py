@@ -245,12 +245,17 @@ def test_vibration_unit_rule_traced_decides_as_eagerly():
                 assert np.isfinite(np.asarray(features(a))).all(), (ac, mean)
                 assert np.isfinite(np.asarray(sp.vibration_features(a, FS, ac_coupled=ac))).all()
                 continue
-            head = ("accel must be specific force in m/s²: its mean over the record (gravity",
-                    "accel carries no gravity", "accel must be specific force in m/s²: its "
-                    "mean over the record has |mean f| beyond 20 g")[broken]  # fmt: skip
-            with pytest.raises(Exception, match=re.escape(head)):
+            before, after = (  # each rule's message about the value (eager: " = value")
+                ("accel must be specific force in m/s²: its mean over the record (gravity: ≈ "
+                 "9.8 m/s² where DC-coupled; vibration averages out) has |mean f|", " within"),
+                ("accel carries no gravity: its mean over the record has |mean f|", " below"),
+                ("accel must be specific force in m/s²: its mean over the record has |mean f|",
+                 " beyond 196.1 m/s² (20 g;"),
+            )[broken]  # fmt: skip
+            with pytest.raises(Exception, match=re.escape(before + after)):
                 jax.block_until_ready(features(a))
-            with pytest.raises(ValueError, match="^" + re.escape(head.split(":")[0])):
+            eager = "^" + re.escape(before) + r" = [-+0-9.e]+" + re.escape(after)
+            with pytest.raises(ValueError, match=eager):
                 sp.vibration_features(a, FS, ac_coupled=ac)
 
 

@@ -103,7 +103,7 @@ UNIT_RATIOS = {
     3600.0 * 180.0 / np.pi: ("°/h", "rad/s"),
     G0: ("m/s²", "g"),
     1000.0: ("mg", "g"),
-    1000.0 * G0: ("mg", "m/s²"),
+    1000.0 / G0: ("mg", "m/s²"),
 }
 """Output-to-input ratios 1 + k, with (unit of `s`, unit of `b`), that
 [`calibrate`][hrgjax.fog.misalignment.calibrate] names when a fitted 1 + k lies within 2 % of

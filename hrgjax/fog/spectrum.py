@@ -95,7 +95,7 @@ def psd(x, fs: float, nperseg: int | None = None):
     (pass `x.T`)."""
     x = _as_float(check_finite("x", x))
     n = x.shape[-1] if x.ndim else 0
-    if x.ndim >= 2 and n < 16 <= max(x.shape[:-1]):
+    if x.ndim >= 2 and n <= 3 and max(x.shape[:-1]) >= 16:  # an (N, 3) record: axes swapped
         raise ValueError(
             f"x must have time along its last axis (..., N); got shape {x.shape}, {n} samples "
             f"there and {max(x.shape[:-1])} along axis {int(np.argmax(x.shape[:-1]))}: "
@@ -388,14 +388,16 @@ def _windows(accel, fs, window_s, ac_coupled=False):
     if v is None:  # traced (jit, vmap): the same rule at run time, the value left out
         mean = jnp.linalg.norm(jnp.mean(a, axis=0))
         bad = jnp.stack(_unit_rule(mean, ac_coupled, top))
-        msgs = [m.format(mean="", top=top / G0) for m in _UNIT_MESSAGES]
+        msgs = [m.format(mean="", top=top / G0, top_ms2=top) for m in _UNIT_MESSAGES]
         a = eqx.branched_error_if(a, jnp.any(bad), jnp.argmax(bad), msgs)
     else:
         mean = float(np.linalg.norm(v.mean(axis=0)))
         bad = _unit_rule(mean, ac_coupled, top)
         if any(bad):
             shown = f" = {mean:.4g}"
-            raise ValueError(_UNIT_MESSAGES[bad.index(True)].format(mean=shown, top=top / G0))
+            raise ValueError(
+                _UNIT_MESSAGES[bad.index(True)].format(mean=shown, top=top / G0, top_ms2=top)
+            )
     m = int(round(window_s * fs))
     if m < MIN_WINDOW:
         raise ValueError(
@@ -426,7 +428,7 @@ _UNIT_MESSAGES = (
     f"cannot tell; pass ac_coupled=True to take it as m/s² (a record in g: multiply by {G0} "
     "first)",
     "accel must be specific force in m/s²: its mean over the record has |mean f|{mean} beyond "
-    "{top:g} g (gravity is ≈ 9.8 m/s²); in mg? multiply by 9.80665e-3 "
+    "{top_ms2:.4g} m/s² ({top:g} g; gravity is ≈ 9.8 m/s²); in mg? multiply by 9.80665e-3 "
     "(hrgjax.plausible.relaxed(specific_force_g=…) widens it)",
 )
 """The unit rule's one-line messages, in `_unit_rule`'s order (`{mean}`: the value, eagerly)."""

@@ -63,13 +63,18 @@ def check_earth_rate(earth_rate) -> float:
     v = _number(earth_rate, "earth_rate", form, lambda v: v >= 0.0)
     try:
         plausible.check("earth_rate [rad/s]", v, "earth_rate_radps")
-    except ValueError as err:  # the Earth's rate in another unit: say which, and its factor
+    except ValueError:  # the Earth's rate in another unit: say which, and its factor
         like = next((f"; {v:g} is the Earth's rate in {unit} ({fix})" for unit, rate, fix in
                      (("°/h", EARTH_RATE / DEG_PER_H, "×hrgjax.units.DEG_PER_H"),
                       ("°/s", EARTH_RATE / DEG, "×hrgjax.units.DEG"),
                       ("rad/h", EARTH_RATE * 3600.0, "÷3600"))
                      if abs(v / rate - 1.0) < 0.01), "")  # fmt: skip
-        raise ValueError(f"{err}{like}") from None
+        if not like:
+            raise
+        top = plausible.RANGES["earth_rate_radps"][1]
+        raise ValueError(f"earth_rate [rad/s] = {v:g} is outside the plausible range 0 … "
+                         f"{top:g} rad/s (hrgjax.plausible.relaxed(earth_rate_radps=…) widens "
+                         f"it){like}") from None  # fmt: skip
     return v
 
 
