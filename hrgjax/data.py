@@ -202,13 +202,25 @@ class MeasuredData:
             yield MeasuredData._checked({k: v[idx] for k, v in self._columns.items()})
 
     def select(self, rows) -> MeasuredData:
-        """The dataset of `rows` (a boolean mask over the samples, or their indices), each
-        column a new read-only array, not checked again: the checks held for this dataset when
+        """The dataset of `rows` (a boolean mask over the samples, or increasing sample
+        indices; the order within each run kept), each column a new read-only array, not
+        checked again: the checks held for this dataset when
         it was built (inside a `plausible.relaxed` block that may have ended since)."""
-        rows = np.asarray(rows)
-        if rows.dtype == bool and rows.shape != (len(self),):
-            raise ValueError(f"MeasuredData.select: a mask must have one entry per sample, "
-                             f"shape ({len(self)},); got {rows.shape}")  # fmt: skip
+        rows, n = np.asarray(rows), len(self)
+        form = (f"a boolean mask of shape ({n},) or increasing sample indices in 0 … {n - 1}, "
+                "at least one")  # fmt: skip
+        if rows.dtype == bool:
+            if rows.shape != (n,):
+                raise ValueError(f"MeasuredData.select: rows must be {form}; got a mask of "
+                                 f"shape {rows.shape}")  # fmt: skip
+            rows = np.flatnonzero(rows)
+        elif rows.dtype.kind not in "iu" or rows.ndim != 1:
+            raise ValueError(f"MeasuredData.select: rows must be {form}; got {rows.dtype} of "
+                             f"shape {rows.shape}")  # fmt: skip
+        if rows.size == 0 or rows[0] < 0 or rows[-1] >= n or np.any(np.diff(rows) <= 0):
+            raise ValueError(f"MeasuredData.select: rows must be {form}; got "
+                             f"{rows.size} indices" + (f" from {rows[0]} to {rows[-1]}" if rows.size
+                             else ""))  # fmt: skip
         return MeasuredData._checked({k: v[rows] for k, v in self._columns.items()})
 
     @classmethod

@@ -398,6 +398,19 @@ def _times(name: str, t, least: int) -> np.ndarray:
     return t
 
 
+def longest_still_s(data: MeasuredData) -> float:
+    """The longest stretch [s] of `data` that [`NoiseModel.estimate`][hrgjax.pattern_noise.NoiseModel.estimate]
+    reads (table still, temperature held within `TEMPERATURE_TOLERANCE_C`, ≥ `MIN_STRETCH`
+    samples); 0 where there is none. A ramp sampled fast leaves still stretches of a few
+    seconds (0.1 °C at 1 °C/min: 6 s), too short for the lags the walk shows at."""
+    longest = 0.0
+    for idx in data.run_indices():
+        t = data["time_s"][idx]
+        for a, b in _still_stretches(data["table_rate_dps"][idx], data["temperature_c"][idx]):
+            longest = max(longest, float(t[b - 1] - t[a]))
+    return longest
+
+
 def _still_stretches(rate_dps, temperature_c, tolerance_c=TEMPERATURE_TOLERANCE_C):
     """(start, stop) of every stretch of ≥ MIN_STRETCH samples with the table still
     (|rate| ≤ STILL_RATE_DPS) and the temperature within `tolerance_c` of the

@@ -235,8 +235,11 @@ def test_runs_are_checked_once_with_the_dataset():
     second = d.select(d.run == 1)  # a subset, as a mixed log's dwell runs: not re-checked
     np.testing.assert_array_equal(second["time_s"], cols["time_s"][41:])
     np.testing.assert_array_equal(d.select(np.arange(3))["run"], [0, 0, 0])
-    with pytest.raises(ValueError, match=r"select: a mask must have one entry per sample"):
-        d.select(np.ones(5, bool))
+    for bad in (np.ones(5, bool), [5, 0], [3, 3], np.zeros(len(d), bool), [[0, 1], [2, 3]],
+                [0.0, 1.0], [-1], [len(d)]):  # fmt: skip
+        with pytest.raises(ValueError, match=r"^MeasuredData.select: rows must be a boolean "
+                           r"mask of shape \(82,\) or increasing sample indices"):  # fmt: skip
+            d.select(bad)
     with pytest.raises(ValueError, match=r"temperature_c' = -150 at index 0 "):
         hg.MeasuredData(cols)  # the range is back
 

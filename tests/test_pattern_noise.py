@@ -235,17 +235,19 @@ def test_gauss_markov_structure_and_second_difference_are_exact_where_tc_dwarfs_
     np.testing.assert_allclose(np.diag(cov), 4e-12 * float(gm_structure(0.01, 3000.0)), rtol=1e-13)
 
 
-def _ramping_log(seed, sw=5e-6, n_arw=3e-7, n=3001):
-    """Six static runs whose temperature ramps ±30 °C in 1000-s legs without a hold, the
-    drift rate following it (3e-8 rad/s per °C), white angle noise and a walk drawn in."""
+def _ramping_log(seed, sw=5e-6, n_arw=3e-7, dt=1.0, duration=3000.0):
+    """Six static runs of `duration` [s] whose temperature ramps ±30 °C in 1000-s legs without a
+    hold, the drift rate following it (3e-8 rad/s per °C), white angle noise and a walk
+    drawn in, sampled every `dt` [s]."""
     rng = np.random.default_rng(seed)
-    t = np.arange(n, dtype=float)
+    n = int(round(duration / dt)) + 1
+    t = np.arange(n, dtype=float) * dt
     cols = {k: [] for k in ("time_s", "run", "wave_angle_deg", "table_rate_dps", "temperature_c")}
     for r in range(6):
         temp = 20.0 + 30.0 * (1.0 - np.abs((t / 1000.0 + r / 3.0) % 2.0 - 1.0) * 2.0)
         rate = 1e-6 + 3e-8 * (temp - 20.0)
         drift = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]))])
-        walk = np.cumsum(rng.normal(0.0, n_arw, n))
+        walk = np.cumsum(rng.normal(0.0, n_arw * np.sqrt(dt), n))
         for k, v in (
             ("time_s", t),
             ("run", np.full(n, r)),
@@ -279,6 +281,14 @@ def test_a_log_that_ramps_without_a_hold_gives_the_noise_beside_its_drift():
     assert max(bare.angle_random_walk, 10 * bare.gm_sigma) > 3 * n_arw, bare
     model, source = hrgjax.discovery.noise.estimated(data)
     assert model == models[0] and source == hrgjax.discovery.noise.NOISE_DRIFTING
+    # sampled at 10 Hz the ramps leave still stretches of 1.7 s (0.1 °C at 0.06 °C/s): read
+    # alone, their lags showed no walk at all (review); the fallback takes them too
+    dense = _ramping_log(0, dt=0.1, duration=800.0)
+    assert 0.0 < pn.longest_still_s(dense) < hrgjax.discovery.noise.SHORT_STILL_S
+    assert pn.NoiseModel.estimate(dense).angle_random_walk < 0.5 * n_arw
+    model, source = hrgjax.discovery.noise.estimated(dense)
+    assert source == hrgjax.discovery.noise.NOISE_DRIFTING
+    assert model.angle_random_walk == pytest.approx(n_arw, rel=0.35)
     spun = data["wave_angle_deg"] - 0.5 * data["time_s"]  # the pattern turns with the table
     turning = hrgjax.MeasuredData(
         dict(data.columns, table_rate_dps=np.ones(len(data)), wave_angle_deg=spun)

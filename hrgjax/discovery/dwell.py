@@ -308,6 +308,8 @@ class DwellProblem(AbstractProblem):
         against χ²_ν, ν by Satterthwaite). A rise within the noise says nothing against the
         effect: refusing every rise left a `bias_temperature` of −0.0012 °/h/°C (ΔBIC 30 to
         800) unnamed on 13 of 60 grids (`benchmarks/discovery_gap_guard.py`)."""
+        if not np.isfinite(gap_after):  # no gap to judge by: refused, as before
+            return True
         if not gap_after > gap:
             return False
         v = _mean_variances(self.sigma, self.w, self.held)

@@ -14,6 +14,7 @@ from ..pattern_noise import GM_TIMES as GM_TIMES
 from ..pattern_noise import MIN_STRETCH as MIN_STRETCH
 from ..pattern_noise import TEMPERATURE_TOLERANCE_C as TEMPERATURE_TOLERANCE_C
 from ..pattern_noise import NoiseModel as NoiseModel
+from ..pattern_noise import longest_still_s
 
 
 def noise_model(data: MeasuredData, max_lag_s: float = 1024.0) -> NoiseModel:
@@ -32,6 +33,9 @@ def noise_model(data: MeasuredData, max_lag_s: float = 1024.0) -> NoiseModel:
     return NoiseModel.estimate(data, max_lag_s)
 
 
+SHORT_STILL_S = 30.0
+"""A log whose longest still stretch is shorter than this [s] reads its noise model from its
+static stretches whatever the temperature does ([`estimated`][hrgjax.discovery.noise.estimated])."""
 NOISE_STILL = "still stretches"
 NOISE_GIVEN = "given (noise=)"
 NOISE_DRIFTING = (
@@ -48,14 +52,19 @@ def estimated(data: MeasuredData) -> tuple[NoiseModel, str]:
     temperature does
     ([`estimate_drifting`][hrgjax.pattern_noise.NoiseModel.estimate_drifting]).
 
+    A log whose longest still stretch is shorter than `SHORT_STILL_S` (a ramp sampled
+    fast leaves stretches of a few seconds within 0.1 °C: their lags cannot show the angle
+    random walk, read as 0 at 10 Hz) takes the static stretches' model too.
+
     **Raises:** `ValueError` in one line when no stretch has the table still."""
-    try:
+    longest = longest_still_s(data)
+    if longest >= SHORT_STILL_S:
         return NoiseModel.estimate(data), NOISE_STILL
-    except ValueError:
-        pass
     try:
         return NoiseModel.estimate_drifting(data), NOISE_DRIFTING
     except ValueError:
+        if longest > 0.0:
+            return NoiseModel.estimate(data), NOISE_STILL
         raise ValueError(
             f"the noise model needs a stretch of at least {MIN_STRETCH} samples with the table "
             "still (a static run or a hold), and this log has none; pass noise=hrgjax.Noise(...)"

@@ -159,11 +159,10 @@ def _sandwich_diag(a, s, p):
     return np.diag(_sandwich(a, s, p)).copy()
 
 
-def _levels(r, j, cols, classes, alpha, ps=None):
+def _levels(r, j, cols, classes, alpha):
     """The noise level per row the residual shows once the significant leftover shapes are
     fitted beside the model (module docstring, 1. and 2.): `(s, a, shapes, bare)` — the
-    levels, the columns `[j, shapes]`, the shapes' names, the levels without them (`ps`, a
-    list: filled with each shape's Bonferroni p-value)."""
+    levels, the columns `[j, shapes]`, the shapes' names, the levels without them."""
     s = bare = stats.class_levels(r, j, classes)  # `bare`: the level without the shapes
     for _ in range(2):  # the shapes judged at the noise level the data show, and back
         chosen = _shapes_left(r, j, cols, classes, s, alpha)
@@ -171,8 +170,6 @@ def _levels(r, j, cols, classes, alpha, ps=None):
         a = np.concatenate([j, *(cols[k] for k in shapes)], axis=1) if shapes else j
         step, *_ = np.linalg.lstsq(a / s[:, None], r / s, rcond=None)
         s = stats.class_levels(r - a @ step, a, classes, s)  # the noise the shapes leave
-    if ps is not None:
-        ps[:] = [p for _, p in chosen]
     return s, a, shapes, bare
 
 
@@ -215,7 +212,7 @@ def _shapes_left(r, j, cols, classes, s, alpha):
 
 def honest(
     fit, shape_columns, classes=None, alpha: float = 1e-3, spread=None,
-    alpha_sigma: float = SIGMA_ALPHA,
+    alpha_sigma: float | None = None,
 ):  # fmt: skip
     """The fit's parameters with error bars that cover the truth (module docstring).
 
@@ -223,7 +220,8 @@ def honest(
     problem's whitened generic-shape columns on the training rows), `classes` (an integer
     class per training row — static / moving windows — or None for one class), `alpha`
     (significance of a leftover shape as structure left), `alpha_sigma` (the weaker
-    significance at which a shape is fitted beside for the σ alone: `SIGMA_ALPHA`; a shape
+    significance at which a shape is fitted beside for the σ alone; None: the larger of
+    `alpha` and `SIGMA_ALPHA`; a shape
     that weak is listed in `info["suggested"]`, not as structure left), `spread` (None, or
     `(factors, info)`: a factor per
     regular parameter on its statistical variance for an estimated part of the noise model's
@@ -245,6 +243,8 @@ def honest(
     if spread is not None and "basis" not in spread[1]:
         raise TypeError("honest: spread must be None or (factors, info) with info['basis'] its "
                         "words for the report; got no 'basis'")  # fmt: skip
+    if alpha_sigma is None:
+        alpha_sigma = max(alpha, SIGMA_ALPHA)
     _checks.check_values("honest: alpha_sigma", alpha_sigma, lambda v: (v >= alpha) & (v <= 1),
                          f"a significance in [alpha = {alpha:g}, 1]")  # fmt: skip
     params = copy.deepcopy(fit.parameters)
@@ -252,10 +252,11 @@ def honest(
         return params, {"noise_scale": {}, "shapes": [], "suggested": [], "structure_left":
                         False, "basis": "textbook (no correction)"}  # fmt: skip
     n, p = j.shape
-    ps: list[float] = []
-    s, a, fitted, bare = _levels(r, j, cols, classes, alpha_sigma, ps)
-    shapes = [name for name, q in zip(fitted, ps, strict=True) if q < alpha]  # a prefix
-    suggested = fitted[len(shapes) :]
+    s, a, fitted, bare = _levels(r, j, cols, classes, alpha_sigma)
+    # structure left as judged at `alpha` alone (the weaker shapes admitted first could make
+    # a later one look strong given them); the rest of what is fitted is only suggested
+    shapes = _levels(r, j, cols, classes, alpha)[2] if fitted else []
+    suggested = [name for name in fitted if name not in shapes]
     # the reported values are the noise model's weighted fit: the shift and the sandwich
     # variance are that estimator's (with the shapes beside it), at the noise level s
     step, *_ = np.linalg.lstsq(a, r, rcond=None)
