@@ -373,7 +373,10 @@ def test_a_rise_of_the_held_out_gap_within_the_noise_does_not_refuse_an_effect()
     z = np.random.default_rng(0).standard_normal((20000, v.size))
     gaps = np.sqrt(np.mean(v * z**2, axis=1)) / problem.k_out / DEG_PER_H
     assert np.mean(gaps) == pytest.approx(problem.floor(), rel=0.05)
-    refused = np.mean([problem.widens(0.0, g) for g in gaps])
+    lo, hi = 0.0, float(gaps.max())  # the rule's threshold (it is monotone in the gap)
+    for _ in range(40):
+        lo, hi = (lo, (lo + hi) / 2) if problem.widens(0.0, (lo + hi) / 2) else ((lo + hi) / 2, hi)
+    refused = np.mean(gaps > hi)
     assert 0.006 < refused < 0.016, refused
     assert not problem.widens(0.2, 0.1)  # a fall never refuses
     rep = discover(data)
