@@ -58,7 +58,9 @@ def calibrate(b, s) -> TriadCalibration:
     factor error is ppm, a MEMS sensor's a few 0.1 %, so an axis that reads 57.3× its input
     is `s` and `b` in two units — named where 1 + k is a unit ratio (57.3: ° and rad, 3600:
     per hour and per second, 206 265: °/h and rad/s, 9.81: m/s² and g, 1000: milli-units,
-    and their inverses; −1: a reversed axis; ≈ 0: axes in another order)."""
+    and their inverses; −1: a reversed axis; ≈ 0: axes in another order). Raw counts against
+    a rate in °/s (1 + k an LSB scale factor) are such a ratio too: calibrate them inside
+    `hrgjax.plausible.relaxed(imu_scale=(lo, hi))`, or scale the counts first."""
     _host_only("calibrate", b=b, s=s)
     b = np.asarray(b, float)
     s = np.asarray(s, float)
