@@ -312,9 +312,10 @@ class DwellProblem(AbstractProblem):
             return True
         if not gap_after > gap:
             return False
-        v = _mean_variances(self.sigma, self.w, self.held)
+        v = _mean_variances(self.sigma, self.w, self.held)  # the floor's, read once
         nu = float(np.sum(v) ** 2 / np.sum(v**2))
-        return chi2_sf(nu * (gap_after / self.floor()) ** 2, nu) < GAP_LEVEL
+        floor = float(np.sqrt(np.mean(v))) / self.k_out / DEG_PER_H  # = self.floor()
+        return chi2_sf(nu * (gap_after / floor) ** 2, nu) < GAP_LEVEL
 
     def structure_left(self, fit, floor):
         """The held-out gap is more than twice the noise floor."""
