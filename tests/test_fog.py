@@ -495,6 +495,13 @@ def test_compensate_uses_the_vibration_axis_the_compensator_was_trained_on(imu):
     _, pred = cp.compensate(c, imu, rec)
     np.testing.assert_array_equal(pred, c(along))
     np.testing.assert_array_equal(cp.compensate(c, imu, rec, axis=np.negative(u))[1], pred)
+    # the same record from AC-coupled accelerometers (no gravity, no DC): refused as it stands,
+    # compensated as the DC-coupled one with ac_coupled=True (the tone is 20 bins from DC)
+    ac = eqx.tree_at(lambda r: r.accel, rec, rec.accel - jnp.mean(rec.accel, axis=0, keepdims=True))
+    with pytest.raises(ValueError, match=r"pass ac_coupled=True"):
+        cp.compensate(c, imu, ac)
+    np.testing.assert_allclose(cp.compensate(c, imu, ac, ac_coupled=True)[1], pred, rtol=1e-6,
+                               atol=1e-9 * float(jnp.max(jnp.abs(pred))))  # fmt: skip
     with pytest.raises(ValueError, match=r"^compensate: axis=\(0, 0, 1\), but the compensator "
                        r"was trained on features along \(0\.5774, 0\.5774, 0\.5774\)"):  # fmt: skip
         cp.compensate(c, imu, rec, axis=(0.0, 0.0, 1.0))

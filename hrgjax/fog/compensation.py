@@ -511,7 +511,7 @@ class Compensated(eqx.Module):
 
 def compensate(
     comp: VibrationCompensator, imu: FogImu, record: VibrationRecord, *, window_s=None,
-    axis=None, extrapolate: bool = False, margin: float = 0.01,
+    axis=None, extrapolate: bool = False, margin: float = 0.01, ac_coupled: bool = False,
 ) -> Compensated:  # fmt: skip
     """Raw gyro output (N, 3) [rad/s, sensor axes] less the predicted vibration error:
     features from the misalignment-compensated accelerometers over windows of `window_s`
@@ -534,16 +534,19 @@ def compensate(
     one direction, such as broadband noise, is left to the range rule). So is a
     window whose features are NaN (a tone too near DC or Nyquist to measure,
     [`vibration_features`][hrgjax.fog.spectrum.vibration_features]). `extrapolate=True`
-    applies the network everywhere but there. **Returns** a
+    applies the network everywhere but there. `ac_coupled=True`: the record's accelerometers
+    carry no gravity (AC-coupled), taken as m/s² (as
+    [`vibration_features`][hrgjax.fog.spectrum.vibration_features]'). **Returns** a
     [`Compensated`][hrgjax.fog.compensation.Compensated], which unpacks as
     `(gyro (N, 3), prediction (K, 3) body frame)`."""
     window_s = _same_window(comp, window_s, "compensate")
     axis = _same_axis(comp.axis, axis, "compensate")
     body = to_body(imu.accel, record.accel)
-    feats = vibration_features(body, record.fs, window_s, axis)
+    feats = vibration_features(body, record.fs, window_s, axis, ac_coupled=ac_coupled)
     off = None
     if axis is not None:
-        off, d, angle = off_axis(body, record.fs, axis, window_s, AXIS_TOL_DEG)
+        off, d, angle = off_axis(body, record.fs, axis, window_s, AXIS_TOL_DEG,
+                                 ac_coupled=ac_coupled)  # fmt: skip
         bad = concrete_value(off)
         if bad is not None and bad.any() and not extrapolate:
             i = int(np.argmax(bad))
