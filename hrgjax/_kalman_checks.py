@@ -2,6 +2,7 @@
 `vmap` too), values on the host when they are concrete. Each refusal is one line naming the
 argument and its expected form."""
 
+import equinox as eqx
 import jax
 import numpy as np
 
@@ -242,7 +243,7 @@ def check_discretise(F, Q, dt, Q_name="Q"):
 
 
 def check_steady(phi, qd, h, r, p0, n_iter) -> int:
-    """`steady_state`'s arguments; returns `n_iter` as an int (>= 0)."""
+    """`steady_state`'s arguments; returns `n_iter` as an int (>= 1)."""
     n = square("phi", phi)
     square("qd", qd, n, " (n = rows of phi)")
     square("p0", p0, n, " (n = rows of phi)")
@@ -250,12 +251,44 @@ def check_steady(phi, qd, h, r, p0, n_iter) -> int:
     if len(h_shape) != 2 or h_shape[1] != n:
         raise ValueError(f"h must be (m, n) = (m, {n}) (n = rows of phi); got {h_shape}")
     m = square("r", r, h_shape[0], " (m = rows of h)")
-    n_iter = whole_number("n_iter", n_iter, "a whole number of iterations >= 0")
-    if n_iter < 0:
-        raise ValueError(f"n_iter must be a whole number of iterations >= 0; got {n_iter}")
+    n_iter = whole_number("n_iter", n_iter, "a whole number of doublings >= 1")
+    if n_iter < 1:
+        raise ValueError(f"n_iter must be a whole number of doublings >= 1; got {n_iter}")
     for name, a in (("phi", phi), ("h", h)):
         check_finite_host(name, a)
     check_covariance("qd", qd, form=f"(n, n) = ({n}, {n})")
     check_covariance("p0", p0, form=f"(n, n) = ({n}, {n})")
     check_covariance("r", r, definite=True, form=f"(m, m) = ({m}, {m})")
     return n_iter
+
+
+def check_converged(ok, p, n_iter: int):
+    """`p` when `steady_state`'s doubling converged (`ok`); else one line: a `ValueError` when
+    `ok` is concrete, an `eqx.error_if` on `p` when it is traced (the caller's `jit`)."""
+    message = (f"steady_state: the Riccati recursion did not converge in n_iter = {n_iter} "
+               "doublings (2^n_iter steps): no steady state — a state the measurements do not "
+               "see grows without bound, or one without process noise that they see keeps "
+               "an uncertain p0 (its gain falls as 1/k)")  # fmt: skip
+    value = concrete_value(ok)
+    if value is None:
+        return eqx.error_if(p, ~ok, message)
+    if not bool(value):
+        raise ValueError(message)
+    return p
+
+
+def check_run(name: str, xs, ps, ll):
+    """`(xs, ps, ll)` of a filter or smoother pass, or one line (`ValueError`) when their
+    values are concrete and not finite: naming the first step whose mean or covariance is
+    not (an unstable state the measurements do not see overflows: Φ = 1.5 for 2000 steps
+    gave NaN silently). Traced results (the caller's `jit`) pass."""
+    last = [concrete_value(a) for a in (ll, xs[-1], ps[-1])]
+    if any(v is None for v in last) or all(np.isfinite(v).all() for v in last):
+        return xs, ps, ll
+    x, p = concrete_value(xs), concrete_value(ps)  # the primal values under an eager grad
+    bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(p).all(axis=(1, 2)))
+    at = f"from step {int(np.argmax(bad))} of {len(bad)} on" if bad.any() else "in its total"
+    raise ValueError(f"{name}: the estimate is not finite {at} (log-likelihood "
+                     f"{float(last[0])}): a state that grows without bound (an eigenvalue of phi "
+                     "above 1 in size, unseen by H) overflowed; measure or bound it, or shorten "
+                     "the record")  # fmt: skip

@@ -559,3 +559,71 @@ def test_latch_refuses_non_class_values_and_bad_confirm(classes, confirm, kind, 
         nn_.latch(classes, confirm)
     assert "\n" not in str(err.value)
     np.testing.assert_array_equal(nn_.latch(np.array([0.0, 2.0, 2.0]), 2.0), [0.0, 0.0, 2.0])
+
+
+def test_bank_means_are_in_physical_units(accel_bank):
+    """Audit: `run_bank`'s means were the filters' internal states, divided by each state's
+    spread (a 2e-7 fault read 0.659, `fault_sigma` 3e-7 the hidden unit). Now `bank.scale`
+    times them: each independent filter's means equal `kalman.kalman_filter` on that
+    hypothesis's model times the scale, and the interacting bank's S2 fault state ends at
+    the injected 2e-7."""
+    from hrgjax.diagnosis import complex as cx
+    from hrgjax.ins.platform import Fault
+
+    ins, bank = accel_bank
+    fault = Fault.on("accel_y", 2e-7, 100.0)
+    _, nav = cx.simulate_complex(
+        ins, dt=1.0, n_steps=400, key=jax.random.key(11), fault_ins=1, fault=fault
+    )
+    z = cx.measurements(nav, 1.0, "accel_y", ins)
+    _, _, means = fb.run_bank(bank, z, interacting=False)
+    i = 2  # S2: the fault in INS index 1
+    prior = kalman.Gaussian(bank.x0[i], bank.p0[i])
+    xs, _, _ = kalman.kalman_filter(prior, bank.phi[i], bank.qd[i], bank.h[i], bank.r[i], z)
+    scale = np.asarray(bank.scale[i])
+    np.testing.assert_allclose(np.asarray(means[:, i]) / scale, xs, rtol=1e-9, atol=1e-12)
+    fault_state = int(np.flatnonzero(np.asarray(bank.reset[i]))[0])
+    imm = fb.run_bank(bank, z, interacting=True)[2]  # holds the fault (the independent: 2e-8)
+    assert float(imm[-1, i, fault_state]) == pytest.approx(2e-7, rel=0.1)
+    assert float(bank.scale[i, fault_state]) > 1e-7  # the hidden unit it was divided by
+    with pytest.raises(ValueError, match=r"^scale must be finite and > 0 \(the states' units\); got 0.0$"):  # fmt: skip
+        fb.Bank.build(_toy(2), scale=jnp.zeros(1))
+    with pytest.raises(ValueError, match=r"^scale must be \(n,\) = \(1,\) or \(M, n\)"):
+        fb.Bank.build(_toy(2), scale=jnp.ones(3))
+
+
+def test_threshold_and_floor_may_be_traced_for_a_sweep():
+    """Audit: `run_bank`/`run_gains` under `jax.jit`/`vmap` over `threshold` or `floor` (an ROC
+    curve) raised TracerBoolConversionError; concrete values are still checked. A vmap over
+    thresholds and floors equals one call per pair. A record of no steps is refused in one
+    line, as `kalman_filter` does."""
+    bank = fb.Bank.build(_toy(2, q=1e-3, p_level=1e-2), switch_prob=1e-3,
+                         z_offsets=[jnp.zeros(1), jnp.ones(1) * 0.3])  # fmt: skip
+    zs = jnp.asarray(np.r_[np.zeros(20), np.full(20, 0.3)][:, None]
+                     + 0.2 * np.random.default_rng(1).normal(size=(40, 1)))  # fmt: skip
+    gb = fb.GainBank.from_bank(bank, 40)
+    ths, floors = jnp.array([0.5, 0.9, 0.999]), jnp.array([1e-6, 1e-6, 1e-2])
+    for run in (lambda **kw: fb.run_bank(bank, zs, **kw), lambda **kw: fb.run_gains(gb, zs, **kw)):
+        swept = jax.vmap(lambda th, f, run=run: run(threshold=th, floor=f)[:2])(ths, floors)
+        for j in range(3):
+            one = run(threshold=float(ths[j]), floor=float(floors[j]))
+            np.testing.assert_allclose(swept[0][j], one[0], rtol=1e-12)
+            np.testing.assert_array_equal(swept[1][j], one[1])
+        assert len({tuple(np.asarray(d)) for d in swept[1]}) > 1  # the threshold matters here
+        with pytest.raises(ValueError, match=r"^floor must be in \(0, 1/2\); got 0.7$"):
+            run(floor=0.7)
+    with pytest.raises(ValueError, match=r"^zs must have at least one step \(K >= 1\); got shape \(0, 1\)$"):  # fmt: skip
+        fb.run_bank(bank, zs[:0])
+    with pytest.raises(ValueError, match=r"^zs must have at least one step \(K >= 1\)"):
+        fb.run_gains(gb, zs[:0])
+
+
+def test_measurements_need_three_samples_for_every_sensor():
+    """Audit: `measurements` on 2 samples refused `accel_y` (eq. 7) but gave `gyro_eta`
+    (eq. 8) an empty (0, 2) array; both now need K >= 3 (each spans samples k … k + 2)."""
+    from hrgjax.diagnosis import complex as cx
+
+    for sensor in ("accel_y", "gyro_eta"):
+        with pytest.raises(ValueError, match=r"^nav must have at least 3 samples \(K >= 3"):
+            cx.measurements(np.zeros((3, 2, 3)), 1.0, sensor)
+        assert cx.measurements(np.zeros((3, 3, 3)), 1.0, sensor).shape == (1, 2)

@@ -272,3 +272,27 @@ def test_detectors_refuse_a_nan_window_on_the_host_and_pass_a_traced_one():
     with pytest.raises(ValueError, match=r"^y \(MLPPredictor measured next steps\) must be"):
         pred.classify_pairs(x[:3], np.where(np.eye(3, 2) > 0, np.nan, 0.0))
     assert jax.jit(lambda p, a, b: p.classify_pairs(a, b))(pred, q, yq).shape == (3,)
+
+
+def test_detectors_fit_with_a_traced_threshold_and_name_a_short_record():
+    """Audit: `fit(threshold=<traced>)` (a sweep over thresholds under `vmap`: an ROC curve)
+    said "threshold must be a number in [0, 1); got jax.Array of shape ()" — the detectors'
+    fields took traced thresholds, their `fit` did not. A vmap over thresholds now equals one
+    fit per threshold (a concrete 1.5 is still refused). `stream_classes` on a record shorter
+    than a window said "taps must be in [1, 10]; got 20": it now names the record."""
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(40, 6)), np.arange(40) % 4
+    ths = jnp.array([0.3, 0.6, 0.95])
+    for cls in (nl.PNNDirect, nl.PNNBank):
+        swept = jax.vmap(lambda th, cls=cls: cls.fit(x, y, 4, 1.0, threshold=th).classify(x))(ths)
+        for th, got in zip(ths, swept, strict=True):
+            np.testing.assert_array_equal(
+                got, cls.fit(x, y, 4, 1.0, threshold=float(th)).classify(x)
+            )
+        assert len({tuple(np.asarray(c)) for c in swept}) > 1  # the threshold matters here
+        with pytest.raises(ValueError, match=r"^threshold must be a number in \[0, 1\); got 1.5"):
+            cls.fit(x, y, 4, 1.0, threshold=1.5)
+    det = nl.PNNBank.fit(rng.normal(size=(8, 36)), np.arange(8) % 4, 4, 1.0)
+    with pytest.raises(ValueError, match=r"^z must have at least 20 steps \(one full window of "
+                                         r"taps = 20\); got a record of 10$"):  # fmt: skip
+        nl.stream_classes(det, np.zeros((10, 2)))

@@ -463,3 +463,83 @@ def test_off_path_inputs_of_every_kalman_entry_point_are_one_line():
     np.testing.assert_allclose(wide.P, np.full((3, 3), 1.7) + np.eye(3), rtol=1e-12)
     shifted = kalman.predict(PRIOR, PHI, QD, 1.0)
     np.testing.assert_allclose(shifted.x, PHI @ PRIOR.x + 1.0, rtol=1e-12)
+
+
+def _numpy_rts(prior, phi, qd, h, r, zs):
+    """The RTS smoother in plain NumPy, its gain by a pseudo-inverse of the prediction."""
+    x, p = np.asarray(prior.x, float), np.asarray(prior.P, float)
+    xf, pf, xp, pp = [], [], [], []
+    for z in zs:
+        x, p = phi @ x, phi @ p @ phi.T + qd
+        xp.append(x), pp.append(p)
+        gain = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
+        x, p = x + gain @ (z - h @ x), (np.eye(len(x)) - gain @ h) @ p
+        xf.append(x), pf.append(p)
+    xs, ps = np.array(xf), np.array(pf)
+    for k in range(len(zs) - 2, -1, -1):
+        c = pf[k] @ phi.T @ np.linalg.pinv(pp[k + 1])
+        xs[k] = xf[k] + c @ (xs[k + 1] - xp[k + 1])
+        ps[k] = pf[k] + c @ (ps[k + 1] - pp[k + 1]) @ c.T
+    return xs, ps
+
+
+def test_smoother_keeps_a_state_known_exactly():
+    """Audit: a state with P0 = 0 and no process noise (a fault bank's other hypotheses' fault
+    states) made P_pred singular and the smoother's Cholesky NaN on every step but the last.
+    Now: the NumPy RTS (pseudo-inverse) to round-off, the known state at its value on every
+    step, and a finite gradient."""
+    zs = np.asarray(ZS)
+    phi, r = np.eye(2), np.eye(1)
+    cases = [  # (P0, Qd, H): an unmeasured known constant; a measured one beside a walk
+        (np.diag([1.0, 0.0]), np.diag([0.1, 0.0]), np.array([[1.0, 0.0]])),
+        (np.diag([0.0, 1.0]), np.diag([0.0, 0.1]), np.array([[1.0, 1.0]])),
+    ]
+    for p0, qd, h in cases:
+        prior = kalman.Gaussian(np.array([0.0, 0.3]) if p0[1, 1] == 0 else np.array([0.3, 0.0]), p0)
+        xs, ps, _ = kalman.rts_smoother(prior, phi, qd, h, r, zs)
+        want_x, want_p = _numpy_rts(prior, phi, qd, h, r, zs)
+        np.testing.assert_allclose(xs, want_x, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(ps, want_p, rtol=1e-12, atol=1e-14)
+        known = int(np.argmin(np.diag(p0)))
+        np.testing.assert_array_equal(np.asarray(xs)[:, known], 0.3)
+    grad = jax.grad(lambda z: jnp.sum(kalman.rts_smoother(prior, phi, qd, h, r, z)[0]))(ZS)
+    assert np.isfinite(np.asarray(grad)).all() and np.any(np.asarray(grad) != 0)
+
+
+def test_steady_state_is_the_riccati_solution_at_any_noise_ratio():
+    """Audit: `steady_state` iterated 4000 Riccati steps with no convergence test: a random
+    walk at q/r = 1e-12 got K = 2.5e-4 for 1e-6. Now (doubling): the closed form
+    P = (q + √(q² + 4qr))/2, K = P/(P + r) at q/r = 1, 1e-6, 1e-12, from any p0; scipy's
+    `solve_discrete_are` on a 2-state model; a model without a steady state (an unstable
+    state no measurement sees) is refused in one line."""
+    from scipy.linalg import solve_discrete_are
+
+    one = np.eye(1)
+    for q, rtol in ((1.0, 1e-14), (1e-6, 1e-12), (1e-12, 1e-9)):
+        p = (q + np.sqrt(q * q + 4 * q)) / 2
+        for p0 in (None, 1e6 * one):
+            pp, gain, s = kalman.steady_state(one, q * one, one, one, p0)
+            np.testing.assert_allclose([pp[0, 0], gain[0, 0], s[0, 0]], [p, p / (p + 1), p + 1],
+                                       rtol=rtol)  # fmt: skip
+    want = solve_discrete_are(np.asarray(PHI).T, np.asarray(H).T, np.asarray(QD), np.asarray(R))
+    for p0 in (None, PRIOR.P):
+        pp, gain, s = kalman.steady_state(PHI, QD, H, R, p0)
+        np.testing.assert_allclose(pp, want, rtol=1e-12)
+        h, r = np.asarray(H), np.asarray(R)
+        np.testing.assert_allclose(gain, want @ h.T @ np.linalg.inv(h @ want @ h.T + r), rtol=1e-12)
+    unseen = jnp.array([[1.5, 0.0], [0.0, 0.5]])  # state 0 grows, H sees state 1 alone
+    with pytest.raises(ValueError, match=r"^steady_state: the Riccati recursion did not conv") as e:
+        kalman.steady_state(unseen, QD, jnp.array([[0.0, 1.0]]), R)
+    assert "\n" not in str(e.value)
+
+
+def test_an_overflowing_filter_is_refused_in_one_line():
+    """Audit: Φ = 1.5 on a state no measurement sees, 2000 steps: the covariance overflowed
+    and the filter returned NaN with no message. Now one line naming the first step (here
+    Φ = 1e80: inf at step 1, on the module's shapes; the smoother carries it back to 0)."""
+    phi = jnp.array([[1e80, 0.0], [0.0, 0.9]])
+    for run, step in ((kalman.kalman_filter, 1), (kalman.rts_smoother, 0)):
+        with pytest.raises(ValueError, match=rf"^{run.__name__}: the estimate is not finite from "
+                                             rf"step {step} of 7 on") as e:  # fmt: skip
+            run(PRIOR, phi, QD, jnp.array([[0.0, 1.0]]), R, ZS)
+        assert "\n" not in str(e.value)

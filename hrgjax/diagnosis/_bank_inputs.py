@@ -51,6 +51,19 @@ def check_bank(bank):
     for name, definite, size in (("qd", False, n), ("r", True, m), ("p0", False, n)):
         check_covariance(f"bank.{name}", getattr(bank, name), definite=definite,
                          form=f"({size}, {size})", index="hypothesis")  # fmt: skip
+    if bank.scale is not None:
+        check_scale("bank.scale", bank.scale, np.shape(bank.x0))
+
+
+def check_scale(name, scale, shape):
+    """A bank's state units `scale`: shape `shape` (M, n), and (concrete) finite and > 0."""
+    if np.shape(scale) != tuple(shape):
+        raise ValueError(f"{name} must be (M, n) = {tuple(shape)} (the states' units); got "
+                         f"{np.shape(scale)}")  # fmt: skip
+    value = concrete(scale) if is_concrete(scale) else None
+    bad = None if value is None else value[~(np.isfinite(value) & (value > 0))]
+    if bad is not None and bad.size:
+        raise ValueError(f"{name} must be finite and > 0 (the states' units); got {bad[0]}")
 
 
 def concrete(x):
@@ -75,6 +88,8 @@ def check_zs(zs, bank, ndims):
             f"zs must have shape {shape} with m = {m} (one column per measured pair the bank "
             f"models; fault_bank: pairs (0, j), j = 1 … {m}, in order); got {z.shape}{hint}"
         )
+    if z.shape[-2] == 0:
+        raise ValueError(f"zs must have at least one step (K >= 1); got shape {z.shape}")
     if not traced:
         bad = ~np.isfinite(z)
         if bad.any():

@@ -95,6 +95,9 @@ def measurements(nav, dt: float, sensor: str, ins: PlatformINS | None = None, pa
             f"nav must have shape (n_ins >= 2, K, {len(NAV)}) ({', '.join(NAV)}); "
             f"got {jnp.shape(nav)}"
         )
+    if jnp.shape(nav)[-2] < 3:
+        raise ValueError(f"nav must have at least 3 samples (K >= 3: each measurement spans "
+                         f"samples k … k + 2); got K = {jnp.shape(nav)[-2]}")  # fmt: skip
     if pairs is None:
         pairs = tuple(range(n_ins - 1))
     pairs = tuple(pairs)
@@ -160,6 +163,9 @@ def fault_bank(
     with `run_bank(..., fit_level=…)`); `switch_prob`: hypothesis transition probability
     per step.
 
+    The bank's matrices are in units of each state's own spread (x = `scale` · x',
+    `Bank.scale`): `run_bank` returns its means in the physical units.
+
     `dt`, `fault_sigma`, `fault_walk`, `meas_sigma` and `switch_prob` only set the models'
     values and may be traced (`jax.vmap` over a noise level: one bank per value, as built one
     by one); their ranges are checked where their values are known. `ins` (which states the
@@ -189,12 +195,12 @@ def fault_bank(
         )
     keep = relevant_states(ins, c)
     phi1, gam1, qd1 = ins.discretise(dt)
-    scaled, reset = _bank_models(
+    scaled, reset, scale = _bank_models(
         phi1[keep][:, keep], gam1[keep, col], qd1[keep][:, keep], c[keep],
         ins.stationary_covariance()[keep][:, keep], ins.radius / ins.g / dt**2, fault_sigma,
         fault_walk, meas_sigma, n_ins=n_ins, second=kind == "second",
     )  # fmt: skip
-    return Bank.build(scaled, switch_prob=switch_prob, reset=reset)
+    return Bank.build(scaled, switch_prob=switch_prob, reset=reset, scale=scale)
 
 
 @fused(static_argnames=("n_ins", "second"))
@@ -243,7 +249,8 @@ def _bank_models(phi1, gam1, qd1, c, p_ins, scale, fault_sigma, fault_walk, meas
             p = p.at[i_f + i, i_f + i].set(fault_sigma**2)
         models.append((phi, qd, p))
     # the states span m/s to 1e-10 rad: filter in units of each state's own spread (an
-    # exact change of variables x = T x'), so the covariance keeps its definiteness
+    # exact change of variables x = T x', T = `Bank.scale`), so the covariance keeps its
+    # definiteness
     t = _state_scale(base, q, p0 + jnp.diag(jnp.zeros(n).at[i_f:].set(fault_sigma**2)))
     ti = 1.0 / t
     # `p0` is the complex at the first navigation sample (navigation errors zero, sensor
@@ -255,7 +262,7 @@ def _bank_models(phi1, gam1, qd1, c, p_ins, scale, fault_sigma, fault_walk, meas
          jnp.zeros(n), ti[:, None] * pp * ti[None, :])
         for f, qq, pp in models
     ]  # fmt: skip
-    return scaled, reset
+    return scaled, reset, t
 
 
 def relevant_states(ins: PlatformINS, c) -> np.ndarray:

@@ -36,7 +36,7 @@ from jax.scipy.special import gammaincc, logsumexp
 
 from .._linalg import cho_logdet, cho_solve, cholesky
 from ..kalman import LOG_2PI, Gaussian, predict, update
-from ._bank_inputs import check_bank, check_model, check_zs, concrete
+from ._bank_inputs import check_bank, check_model, check_scale, check_zs, concrete
 
 
 class Bank(eqx.Module):
@@ -48,7 +48,10 @@ class Bank(eqx.Module):
     hypothesis, z = H x + offset + v (what a hypothesis predicts beyond its states);
     `reset` (M, n) bool: states that belong to a hypothesis alone (a fault's size) and
     restart from that hypothesis's prior (`x0`, `p0`) when the interacting bank enters it
-    from another one — the fault's onset."""
+    from another one — the fault's onset; `scale` (M, n) (or None: 1): the states' units —
+    the models are written for x' = x / `scale` (fault_bank: each state in units of its own
+    spread, so the covariances keep their definiteness), and `run_bank` returns the
+    physical x = `scale` · x'."""
 
     phi: jax.Array
     qd: jax.Array
@@ -59,11 +62,13 @@ class Bank(eqx.Module):
     log_trans: jax.Array
     z_offset: jax.Array
     reset: jax.Array
+    scale: jax.Array | None = None
 
     @classmethod
-    def build(cls, models, switch_prob: float = 0.0, z_offsets=None, reset=None):
+    def build(cls, models, switch_prob: float = 0.0, z_offsets=None, reset=None, scale=None):
         """From a list of `(phi, qd, h, r, x0, p0)` tuples (and optional `z_offsets`, one (m,)
-        per model, and `reset` masks, one (n,) per model); hypotheses stay put with
+        per model, `reset` masks, one (n,) per model, and `scale`, the states' units, (n,)
+        for all or (M, n), finite and > 0); hypotheses stay put with
         probability 1 − `switch_prob` per step and otherwise move to any other one
         uniformly (`switch_prob` may be traced). Each model is refused in one line when its shapes do not fit or (concrete
         values) a value is not finite, `qd` or `p0` is not symmetric positive
@@ -97,7 +102,13 @@ class Bank(eqx.Module):
             mask = jnp.stack([jnp.asarray(x, bool) for x in reset])
             if mask.shape != (m, n):
                 raise ValueError(f"reset must be {m} masks of length {n}")
-        return cls(*parts, log_trans, offs, mask)
+        if scale is not None:
+            if np.ndim(scale) not in (1, 2) or np.shape(scale)[-1] != n:
+                raise ValueError(f"scale must be (n,) = ({n},) or (M, n) = ({m}, {n}) (the "
+                                 f"states' units); got shape {np.shape(scale)}")  # fmt: skip
+            scale = jnp.broadcast_to(jnp.asarray(scale, float), (m, n))
+            check_scale("scale", scale, (m, n))
+        return cls(*parts, log_trans, offs, mask, scale)
 
     @property
     def size(self) -> int:
@@ -171,16 +182,22 @@ def run_bank(
     `docs/diagnosis.md`); `return_fit`: also return the test's dict (its `fits` all True
     when `fit_level` is None; `p_value` is computed either way).
 
+    `floor` and `threshold` may be traced (a `jax.vmap` over thresholds: an ROC curve);
+    their ranges are checked where their values are known.
+
     **Returns:** `(probabilities (K, M), decisions (K,) int, means (K, M, n))`, and with
     `return_fit=True` a fourth item, `model_fit`'s dict plus `nis` (K, M). Decisions: the
     hypothesis index, −1 = undecided (no probability above `threshold`), −2 = the most
     probable hypothesis does not fit the data (its probability is not to be trusted). The
-    means are each filter's posterior estimate."""
+    means are each filter's posterior estimate in the model's physical units (`bank.scale`
+    times the filter's state: `fault_bank`'s fault states in sensor units — g-units for an
+    accelerometer, rad/s for a gyro)."""
     lp0, log_floor = _start(bank.size, floor, prior, threshold, interacting)
     _check_fit(fit_window, fit_level)
     check_bank(bank)
     zs = check_zs(zs, bank, (2,))
     probs, nis, means = _run(bank, zs, log_floor, lp0, interacting)
+    means = means if bank.scale is None else means * bank.scale[None]
     m = bank.h.shape[1]
     decisions, fit = _decide_fit(probs, nis, m, threshold, int(fit_window), fit_level, return_fit)
     return (probs, decisions, means, fit) if return_fit else (probs, decisions, means)
@@ -249,10 +266,14 @@ the wrong INS after an onset on some records (`fault_bank` defaults, 2e-7 at 100
 
 
 def _start(m, floor, prior, threshold, interacting=False):
-    if not 0.0 < floor < 1.0 / m:
-        raise ValueError(f"floor must be in (0, 1/{m}); got {floor}")
-    if not 0.0 <= threshold < 1.0:
-        raise ValueError(f"threshold must be a probability in [0, 1); got {threshold}")
+    """The start's log probabilities and log floor; `floor` and `threshold` checked where
+    their values are known (a traced one, a sweep under `vmap` or `jit`, passes)."""
+    for name, v, ok, form in (("floor", floor, lambda f: 0.0 < f < 1.0 / m, f"in (0, 1/{m})"),
+                              ("threshold", threshold, lambda a: 0.0 <= a < 1.0,
+                               "a probability in [0, 1)")):  # fmt: skip
+        known = _known_number(v)
+        if known is not None and not (known.shape == () and ok(float(known))):
+            raise ValueError(f"{name} must be {form}; got {v}")
     with jax.numpy_dtype_promotion("standard"):
         if prior is None and interacting and m > 1:  # a healthy start (`HEALTHY_START`)
             faults = min(HEALTHY_START, 0.5 / (m - 1))
@@ -268,7 +289,16 @@ def _start(m, floor, prior, threshold, interacting=False):
                     f"hypothesis S0 … S{m - 1}); got {np.asarray(prior).tolist()}"
                 )
             lp0 = jnp.log(jnp.asarray(p / p.sum()))
-    return lp0, jnp.log(jnp.asarray(floor))
+    return lp0, jnp.log(jnp.asarray(floor, float))
+
+
+def _known_number(v):
+    """`v`'s value as an array where it is known (NaN for one that is not a number), else
+    None (traced)."""
+    try:
+        return concrete(v)
+    except (TypeError, ValueError):
+        return np.array(np.nan)
 
 
 def _probabilities(lp, ll, log_trans, log_floor):

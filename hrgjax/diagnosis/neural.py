@@ -276,7 +276,7 @@ class PNNDirect(eqx.Module):
     @classmethod
     def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
         n_classes, _ = _check_fault_classes(y, n_classes)
-        return cls(PNN.fit(x, y, n_classes, sigma), _check_threshold(threshold))
+        return cls(PNN.fit(x, y, n_classes, sigma), _threshold_value(threshold))
 
     def classify(self, x):
         """Onset class of each feature row of `x` (N, d), finite, → (N,) (0 = none)."""
@@ -301,7 +301,7 @@ class PNNBank(eqx.Module):
     @classmethod
     def fit(cls, x, y, n_classes: int, sigma: float, threshold: float = 0.9):
         n_classes, y = _check_fault_classes(y, n_classes)
-        threshold = _check_threshold(threshold)
+        threshold = _threshold_value(threshold)  # a traced one (a sweep) passes
         pnns = [PNN.fit(x, (y == i).astype(int), 2, sigma) for i in range(1, n_classes)]
         return cls(pnns, threshold)
 
@@ -354,7 +354,7 @@ class MLPClassifier(eqx.Module):
         if x.ndim != 2 or y.shape != (x.shape[0],) or x.shape[0] < 1:
             raise ValueError(f"x must be (n, d) and y (n,), n >= 1; got {x.shape}, {y.shape}")
         n_classes, y = _check_fault_classes(y, n_classes)
-        threshold = _check_threshold(threshold)
+        threshold = _threshold_value(threshold)  # a traced one (a sweep) passes
         check_finite_host("x (MLPClassifier training features)", x)
         nets = []
         for i, k in zip(range(1, n_classes), jax.random.split(key, n_classes - 1), strict=True):
@@ -520,8 +520,13 @@ def _levenberg_marquardt(net, x, y, max_steps):
 
 def stream_classes(detector, z, unit: float = 1e-7, taps: int = TAPS):
     """Per-step onset classes of `detector` over one run's measurements `z` (K, m) → (K,)
-    (0 for the first steps, before a full window)."""
+    (0 for the first steps, before a full window: `z` needs at least `taps` steps, `taps` + 1
+    for an `MLPPredictor`)."""
     z = jnp.asarray(z, float)
+    need = taps + 1 if isinstance(detector, MLPPredictor) else taps
+    if z.ndim == 2 and isinstance(taps, int) and 1 <= taps and z.shape[0] < need:
+        raise ValueError(f"z must have at least {need} steps (one full window of taps = {taps}"
+                         f"{' + 1' if need > taps else ''}); got a record of {z.shape[0]}")  # fmt: skip
     if isinstance(detector, MLPPredictor):
         w = windows(z, taps + 1).reshape(-1, taps + 1, z.shape[1])
         x, y = predictor_set(w, unit)

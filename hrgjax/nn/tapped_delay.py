@@ -15,6 +15,6 @@ def windows(x, taps: int):
         raise ValueError(f"x must have shape (K, channels); got {x.shape}")
     taps = whole_number("taps", taps, f"an integer in [1, {x.shape[0]}] (samples)")
     if not 1 <= taps <= x.shape[0]:
-        raise ValueError(f"taps must be in [1, {x.shape[0]}]; got {taps}")
+        raise ValueError(f"taps must be in [1, K = {x.shape[0]}] (K: the samples of x); got {taps}")
     idx = jnp.arange(x.shape[0] - taps + 1)[:, None] + jnp.arange(taps)[None, :]
     return x[idx].reshape(idx.shape[0], taps * x.shape[1])
