@@ -10,12 +10,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import plausible
 from ._checks import RULES, is_concrete
 from ._compiled import tracing_callback_free
+from ._simulate_options import traced_grid_checks
+from .gyro import DRIFT_PLAUSIBLE
+from .gyro import PLAUSIBLE as GYRO_PLAUSIBLE
 from .noise import NONNEGATIVE as NOISE_NONNEGATIVE
+from .noise import PLAUSIBLE as NOISE_PLAUSIBLE
 from .noise import UNITS as NOISE_UNITS
 from .profiles import traced_checks as profile_checks
-from .resonator.control import FTR_LIMITS
+from .resonator.control import AVERAGED_BANDWIDTH, FTR_LIMITS
 from .resonator.control import LIMITS as CONTROL_LIMITS
 from .resonator.params import LIMITS as RESONATOR_LIMITS
 from .resonator.params import TemperatureLaw, damping_problem
@@ -32,6 +37,28 @@ LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by 
 }
 """(rule of `hrgjax._checks.RULES`, unit) of each gyro field a temperature law (or a value
 put in with `eqx.tree_at`) must keep, by its path in the gyro; "finite" for any other."""
+
+
+RANGED = {
+    **GYRO_PLAUSIBLE,
+    **{f"drift_terms.{n}": q for n, q in DRIFT_PLAUSIBLE.items()},
+    **{f"noise.{n}": q for n, q in NOISE_PLAUSIBLE.items()},
+}
+"""The quantity of `hrgjax.plausible.RANGES` each gyro field must lie in, by its path: what
+its module's `__check_init__` holds it to, held by `simulate` too where that did not run (a
+value put in with `eqx.tree_at`, a traced one, a temperature law's over the run)."""
+
+
+def _first_outside(values, quantity: str) -> int | None:
+    """The index of the first finite value of `values` outside `RANGES[quantity]` (an
+    `EXCLUSIVE` quantity's nonzero bounds outside too), or None."""
+    low, high, _ = plausible.RANGES[quantity]
+    v = np.ravel(np.asarray(values, dtype=float))
+    ok = ~np.isfinite(v) | ((v >= low) & (v <= high))
+    if quantity in plausible.EXCLUSIVE:
+        ok &= ((v != low) | (low == 0.0)) & ((v != high) | (high == 0.0))
+    bad = np.flatnonzero(~ok)
+    return int(bad[0]) if bad.size else None
 
 
 def law_limits(gyro) -> dict:
@@ -65,8 +92,9 @@ def check_laws(gyro, profile) -> None:
     """Every temperature law of `gyro` finite over the profile's temperatures, and decay
     times, frequencies and noise levels of the right sign there, both axes damped
     (`resonator.params.damping_problem`); plain values put in with
-    `eqx.tree_at` within their limits (concrete values only: `check_traced` holds traced
-    ones to the same rules at run time)."""
+    `eqx.tree_at` within their limits, and the fields of `RANGED` (values and laws) within
+    their `plausible.RANGES` (concrete values only: `check_traced` holds traced ones to the
+    same rules at run time)."""
     temps = np.asarray(profile.temperature, float).ravel() if is_concrete(
         profile.temperature) else None  # fmt: skip
     grid, limits = None, law_limits(gyro)
@@ -78,6 +106,9 @@ def check_laws(gyro, profile) -> None:
             if not (np.isfinite(value) and obeys(rule, value)):
                 raise ValueError(f"gyro.{name} = {value:g} {unit}; it must be {rule}".replace(
                     "  ", " "))  # fmt: skip
+        if name in RANGED and not isinstance(law, TemperatureLaw) and is_concrete(law):
+            plausible.check(f"gyro.{name}", law, RANGED[name])  # g_sensitivity: 3 values
+        if plain:
             continue
         if temps is None or not isinstance(law, TemperatureLaw):
             continue
@@ -98,9 +129,51 @@ def check_laws(gyro, profile) -> None:
                 f"{grid[i]:.4g} °C, inside the profile's temperatures [{lo:.4g}, {hi:.4g}] °C; "
                 f"it must be {rule} there".replace("  ", " ")
             )
+        if name in RANGED and (i := _first_outside(value, RANGED[name])) is not None:
+            plausible.check(f"the temperature law of gyro.{name} at {grid[i]:.4g} °C (inside "
+                            f"the profile's temperatures [{lo:.4g}, {hi:.4g}] °C)", value[i],
+                            RANGED[name])  # fmt: skip
     # both axes damped over the profile's temperatures (plain values too: eqx.tree_at)
     if problem := damping_problem(gyro.resonator, grid if grid is not None else temps):
         raise ValueError(f"gyro.resonator: {problem}")
+
+
+def check_bandwidths(gyro, profile, model: str) -> None:
+    """Refuse, for the averaged `model`, a closed loop whose bandwidth reaches
+    `AVERAGED_BANDWIDTH` × the carrier ω at one of the profile's temperatures (`LAW_GRID`
+    points between the lowest and the highest; laws evaluated there): the averaging holds
+    only for loops far slower than the carrier (a 5·10⁴ rad/s PLL on a 3.1·10⁴ rad/s
+    carrier ran without a word). Concrete values only; ideal or absent loops are not read."""
+    ctl = gyro.control
+    if model != "averaged" or not ctl.enabled or ctl.ideal or not is_concrete(profile.temperature):
+        return
+    temps = np.asarray(profile.temperature, float).ravel()
+    grid = np.linspace(temps.min(), temps.max(), LAW_GRID)
+    loops = ("pll", "agc", "quadrature") + (("rebalance",) if ctl.mode == "ftr" else ())
+
+    def at(x):  # a value or a law over the grid; None where traced
+        leaves = jax.tree_util.tree_leaves(x)
+        if not all(is_concrete(v) for v in leaves) or any(np.ndim(v) for v in leaves):
+            return None
+        with np.errstate(over="ignore", invalid="ignore"):
+            return (
+                x(grid, xp=np) if isinstance(x, TemperatureLaw) else np.full(grid.shape, float(x))
+            )
+
+    omega = at(gyro.resonator.omega)
+    if omega is None:
+        return
+    for loop in loops:
+        beta = at(getattr(ctl, f"{loop}_bandwidth"))
+        if beta is None or not np.any(high := beta >= AVERAGED_BANDWIDTH * omega):
+            continue
+        i = int(np.flatnonzero(high)[0])
+        raise ValueError(
+            f"gyro.control.{loop}_bandwidth = {beta[i]:g} rad/s at {grid[i]:.4g} °C is at or "
+            f"above {AVERAGED_BANDWIDTH:g} × the carrier ω = {omega[i]:g} rad/s: the averaged "
+            "model holds for loops far slower than the carrier; lower it, or run "
+            'model="full"'
+        )
 
 
 def law_checks(gyro, profile) -> list:
@@ -117,6 +190,8 @@ def law_checks(gyro, profile) -> list:
                 rule, unit = limits[name]  # a mode's rule, beyond `traceable`'s `LAW_LIMITS`
                 checks.append((jnp.any(jnp.isfinite(law) & ~obeys(rule, law, jnp)),
                                f"gyro.{name} must be {rule} {unit}"))  # fmt: skip
+            if name in RANGED and not is_concrete(law):
+                checks += plausible.traced_violations(f"gyro.{name}", law, RANGED[name])
             continue
         leaves = jax.tree_util.tree_leaves(law)
         if any(np.ndim(x) for x in leaves):
@@ -133,6 +208,9 @@ def law_checks(gyro, profile) -> list:
         checks.append((bad, f"the temperature law of gyro.{name} leaves its range at one or "
                             "more points inside the profile's temperatures; it must be "
                             f"{rule} {unit} there".replace("  ", " ")))  # fmt: skip
+        if name in RANGED:
+            where = f"the temperature law of gyro.{name} over the profile's temperatures"
+            checks += plausible.traced_violations(where, value, RANGED[name])
     checks += _damping_check(gyro.resonator, temps, temps_traced)
     return checks
 
@@ -153,13 +231,16 @@ def _damping_check(resonator, temps, temps_traced) -> list:
                   "points (1/τ₂ = 1/τ − |Δ(1/τ)|/2 ≤ 0): |Δ(1/τ)| must be < 2/τ")]  # fmt: skip
 
 
-def check_traced(gyro, profile):
-    """`(gyro, profile)` with the plausibility rules of their traced values held at run
-    time by one `eqx.branched_error_if` on every traced leaf of both (what the run computes
-    from): `Profile`'s own ranges and knot order (`hrgjax.profiles.traced_checks`), then the
-    temperature laws' (`law_checks`). The first rule broken raises its one line, the eager
-    message without the value (`hg.sweep`: "sweep: at one or more grid points, …").
-    Concrete inputs add nothing: they were checked eagerly.
+def check_traced(gyro, profile, ts, explicit: bool = True):
+    """`(gyro, profile, ts)` with the plausibility rules of their traced values held at run
+    time by one `eqx.branched_error_if` on every traced leaf of them (what the run computes
+    from): `Profile`'s own ranges and knot order (`hrgjax.profiles.traced_checks`), the
+    temperature laws' and the gyro's ranges (`law_checks`), then the order and span of the
+    output times `ts` where they were given (`explicit`; `dt_out`'s lie within by
+    construction: `_simulate_options.traced_grid_checks`). The
+    first rule broken raises its one line, the eager message without the value (`hg.sweep`:
+    "sweep: at one or more grid points, …"). Concrete inputs add nothing: they were checked
+    eagerly.
 
     Nor does a run traced inside one of hrgjax's own compiled programs (`tracing_callback_free`):
     their profiles come from data and plans checked where they were loaded or built, and are
@@ -167,13 +248,14 @@ def check_traced(gyro, profile):
     stack runs of several lengths), and there a failed check could only poison the values
     (equinox's NaN form) into a solver's "NaN or inf"."""
     if tracing_callback_free():
-        return gyro, profile
+        return gyro, profile, ts
     checks = profile_checks(profile) + law_checks(gyro, profile)
+    checks += traced_grid_checks(ts, profile) if explicit else []
     if not checks:
-        return gyro, profile
+        return gyro, profile, ts
     bad = jnp.stack([jnp.asarray(b) for b, _ in checks])
     messages = [m for _, m in checks]
-    flat, tree = jax.tree_util.tree_flatten((gyro, profile))
+    flat, tree = jax.tree_util.tree_flatten((gyro, profile, ts))
     traced = [i for i, x in enumerate(flat)
               if isinstance(x, jax.Array) and not is_concrete(x)]  # fmt: skip
     checked = eqx.branched_error_if(

@@ -4,6 +4,7 @@ quadrature against the gyro's amplitude (`check_quadrature0`)."""
 
 from __future__ import annotations
 
+import contextlib
 import numbers
 
 import diffrax
@@ -145,3 +146,45 @@ def output_grid(ts, profile) -> jax.Array:
                 f"got [{arr[0]}, {arr[-1]}]"
             )
     return ts
+
+
+def traced_grid_checks(ts, profile) -> list:
+    """`output_grid`'s order and span rules for output times `ts` [s] or knot times
+    `profile.t` that are traced (a sweep over `duration_s` with fixed `ts`: an output time
+    past the profile's end made the solver's "NaN or inf"): `[(bad, message), …]`, `bad` a
+    traced boolean, the message the eager one line without the values; `[]` when both are
+    concrete (`output_grid` judged them)."""
+    if is_concrete(ts) and is_concrete(profile.t):
+        return []
+    checks = []
+    if not is_concrete(ts):
+        checks.append((jnp.any(jnp.diff(ts) <= 0),
+                       "ts must be strictly increasing (unsorted or duplicate time)"))  # fmt: skip
+    knots = jnp.asarray(profile.t, dtype=float)
+    outside = (ts[0] < jnp.min(knots)) | (ts[-1] > jnp.max(knots))
+    checks.append((outside, "ts must lie within the profile [its first, its last knot time] s "
+                            "at one or more points: an output time before its start or past "
+                            "its end (a swept duration_s: ts within the shortest)"))  # fmt: skip
+    return checks
+
+
+FORWARD_MODE = (
+    "simulate: forward-mode derivatives (jax.jvp, jax.jacfwd, jax.hessian) need an adjoint "
+    "that supports them: adjoint=diffrax.ForwardMode() for jvp/jacfwd, "
+    "diffrax.DirectAdjoint() for jax.hessian (forward over reverse; slower); the default "
+    "adjoint is reverse-mode only (jax.grad, jax.jacrev)"
+)
+"""The one line `simulate` raises for JAX's "can't apply forward-mode autodiff (jvp) to a
+custom_vjp function": the default adjoint's checkpointed loop is a `custom_vjp`."""
+
+
+@contextlib.contextmanager
+def forward_mode_hint():
+    """Around `simulate`'s solve: JAX's forward-mode `TypeError` on the default adjoint
+    raised as `FORWARD_MODE` (any other error as it was)."""
+    try:
+        yield
+    except TypeError as err:
+        if "forward-mode autodiff" not in str(err):
+            raise
+        raise TypeError(FORWARD_MODE) from None

@@ -47,9 +47,25 @@ NOISE_HINTS = {
 }
 """The other units an [`hrgjax.Noise`][hrgjax.Noise]'s fields are written in (a datasheet's
 arc-seconds of angle noise, °/√h of ARW, °/h of bias instability), with the factor from each
-to SI. The rate ranges are the `imu_*` ones (`ImuModel`'s): an HRG's ARW is 10⁻⁵–10⁻² °/√h,
-its bias instability 10⁻⁴–10⁻¹ °/h, far inside; an angle noise of 0.1 rad (5.7°) per sample
-is far beyond any readout (1″ typed as rad is 1)."""
+to SI. The rate ranges are a gyro's, narrower than the `imu_*` ones (`ImuModel`'s, sized for
+a consumer IMU): an HRG's ARW is 10⁻⁵–10⁻² °/√h (≤ 2.9·10⁻⁶ rad/√s), its bias instability
+10⁻⁴–10⁻¹ °/h, far inside, and a tactical or consumer MEMS gyro's 0.1–1 °/√h and 10–100 °/h
+inside too, while the same HRG figures typed as SI lie beyond (`hrgjax/_plausible_ranges.py`);
+an angle noise of 0.1 rad (5.7°) per sample is far beyond any readout (1″ typed as rad is 1)."""
+
+GYRO_HINTS = {
+    "gyro_rate_bias": IMU_HINTS["imu_gyro_bias"],
+    "gyro_warmup": IMU_HINTS["imu_gyro_bias"],
+    "gyro_g_sensitivity": "°/h per g → ×hrgjax.units.DEG_PER_H; °/s per g → ×hrgjax.units.DEG",
+    "gyro_thermal_lag": "°/h per °C → ×hrgjax.units.DEG_PER_H; °/s per °C → ×hrgjax.units.DEG",
+    "gyro_temperature_rate": (
+        "°/h per °C/s → ×hrgjax.units.DEG_PER_H; °/h per °C/min → ×hrgjax.units.DEG_PER_H × 60"
+    ),
+    "gyro_rate_cubic": "ppm per (rad/s)² → ×1e-6; per (°/s)² → ÷hrgjax.units.DEG**2",
+}
+"""The datasheet units of a [`hrgjax.Gyro`][hrgjax.Gyro]'s rate bias and g-sensitivity and its
+[`DriftTerms`][hrgjax.DriftTerms] (equivalent input rate, SI), with the factor from each to
+SI: an HRG's bias is 0.01–1 °/h, its g-sensitivity 0.005–0.05 °/h per g."""
 
 
 def run_ends(run) -> tuple[np.ndarray, np.ndarray]:

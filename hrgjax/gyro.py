@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import plausible
 from ._checks import check_finite, check_positive, is_concrete, numeric_problem
 from .noise import Noise
 from .resonator.control import LIMITS as CONTROL_LIMITS
@@ -67,6 +68,10 @@ class DriftTerms(eqx.Module):
     - `lag`: $b_L$ [rad/s per °C]; `lag_time`: $\tau_{th}$ [s] (> 0).
     - `warmup`: $b_w$ [rad/s]; `warmup_time`: $\tau_w$ [s] (> 0).
     - `rate_cubic`: $\kappa_\Omega$ [s²] (a rate-dependent scale factor 1 + κ_Ω Ω²).
+
+    The coefficients must lie in their `hrgjax.plausible.RANGES` (`DRIFT_PLAUSIBLE`: the
+    warm-up within ±0.1 rad/s, as `Gyro.rate_bias`), or are refused naming the unit a value
+    looks like (°/h typed as rad/s).
     """
 
     temperature_rate: jax.Array = eqx.field(converter=as_parameter, default=0.0)
@@ -80,9 +85,9 @@ class DriftTerms(eqx.Module):
         refuse_unconverted(self)
         for name, value in concrete_fields(self, ("lag_time", "warmup_time")):
             check_positive(f"DriftTerms.{name}", value, "s")
-        for name, value in concrete_fields(self, ("temperature_rate", "lag", "warmup",
-                                                  "rate_cubic")):  # fmt: skip
+        for name, value in concrete_fields(self, tuple(DRIFT_PLAUSIBLE)):
             check_finite(f"DriftTerms.{name}", value)
+            plausible.check(f"DriftTerms.{name}", value, DRIFT_PLAUSIBLE[name])
 
     def input_rate(self, profile, t):
         """The added equivalent input rate [rad/s] at time t [s] of `profile`."""
@@ -95,6 +100,20 @@ class DriftTerms(eqx.Module):
             + self.warmup * jnp.exp(-(t - profile.t[0]) / self.warmup_time)
             + self.rate_cubic * rate**3
         )
+
+
+DRIFT_PLAUSIBLE = {
+    "temperature_rate": "gyro_temperature_rate",
+    "lag": "gyro_thermal_lag",
+    "warmup": "gyro_warmup",
+    "rate_cubic": "gyro_rate_cubic",
+}
+"""Each `DriftTerms` coefficient's range in [`hrgjax.plausible.RANGES`][hrgjax.plausible.RANGES]
+(a datasheet's °/h typed as rad/s is refused, the unit named)."""
+
+PLAUSIBLE = {"rate_bias": "gyro_rate_bias", "g_sensitivity": "gyro_g_sensitivity"}
+"""`Gyro.rate_bias`'s and `Gyro.g_sensitivity`'s ranges in `hrgjax.plausible.RANGES`; `simulate`
+holds them (with `DRIFT_PLAUSIBLE`'s and `hrgjax.noise.PLAUSIBLE`'s) at run time too."""
 
 
 _NO_NOISE = " (for a noise-free gyro use gyro.without_noise() or noise=None)"
@@ -140,9 +159,14 @@ class Gyro(eqx.Module):
     - `readout`: pickoff errors, [`hrgjax.Readout`][].
     - `noise`: [`hrgjax.Noise`][] or `None` for a noise-free gyro.
     - `rate_bias`: deterministic bias, equivalent input rate [rad/s] (may be a
-      `TemperatureLaw`).
+      `TemperatureLaw`; within ±0.1 rad/s, `plausible.RANGES["gyro_rate_bias"]`: 0.3 °/h is
+      `0.3 * hrgjax.units.DEG_PER_H`).
     - `g_sensitivity`: drift per specific force along case axes x, y, z, equivalent input rate
-      [rad/s per g], shape (3,).
+      [rad/s per g], shape (3,) (within ±4·10⁻³, `RANGES["gyro_g_sensitivity"]`).
+
+    A value beyond its range is refused in one line naming the datasheet units it looks like
+    (`hrgjax.plausible.relaxed(gyro_rate_bias=…)` widens it); `simulate` holds values put in
+    with `eqx.tree_at` or traced (`hg.sweep`) to the same ranges.
     - `drift_terms`: further drift mechanisms ([`hrgjax.DriftTerms`][]: temperature rate,
       thermal lag, warm-up, rate-cubic scale factor), or `None`.
     """
@@ -165,8 +189,9 @@ class Gyro(eqx.Module):
             extra = hint.get(type(value) if value is not cls else type, "")
             raise TypeError(f"Gyro.{name} must be {form}; got {got}{extra}")
         refuse_unconverted(self)
-        for _, value in concrete_fields(self, ("rate_bias",)):
-            check_finite("Gyro.rate_bias", value)
+        for name, value in concrete_fields(self, tuple(PLAUSIBLE)):
+            check_finite(f"Gyro.{name}", value)  # g_sensitivity: by its converter too
+            plausible.check(f"Gyro.{name}", value, PLAUSIBLE[name])
 
     def at(self, temperature_c) -> Gyro:
         """This gyro with every temperature law evaluated at `temperature_c` [°C] (real

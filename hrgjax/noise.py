@@ -52,6 +52,13 @@ class Noise(eqx.Module):
     - `run_bias`: σ of a constant rate bias drawn once per switch-on [rad/s].
     - `amplitude_white`: σ of white readout noise on amplitude and quadrature, per sample,
       relative to the amplitude set point.
+
+    Each standard deviation must lie in its range of `hrgjax.plausible.RANGES` (`PLAUSIBLE`),
+    sized for a gyro, an HRG's to a MEMS gyro's: an ARW up to 10⁻³ rad/√s (3.4 °/√h), a bias
+    instability up to 10⁻³ rad/s (206 °/h), a switch-on bias up to 0.05 rad/s (2.9 °/s), the
+    bounds excluded; beyond, a datasheet's °/√h or °/h typed as SI is refused naming the
+    factor (`0.002 * hrgjax.units.DEG_PER_SQRT_H`; `hrgjax.plausible.relaxed(noise_arw=…)`
+    widens it). `simulate` holds values put in with `eqx.tree_at` or traced to them too.
     """
 
     angle_white: jax.Array = eqx.field(converter=as_parameter, default=0.0)

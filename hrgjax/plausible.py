@@ -23,44 +23,14 @@ from collections.abc import Iterator, Mapping
 
 import numpy as np
 
+from ._plausible_ranges import DEFAULTS as _DEFAULTS
+from ._plausible_ranges import EXCLUSIVE as EXCLUSIVE
 from ._unit_hints import EARTH_HINTS as EARTH_HINTS
+from ._unit_hints import GYRO_HINTS as GYRO_HINTS
 from ._unit_hints import IMU_HINTS as IMU_HINTS
 from ._unit_hints import NOISE_HINTS as NOISE_HINTS
 from ._unit_hints import TABLE_ANGLE_HINTS as TABLE_ANGLE_HINTS
 from ._unit_hints import run_ends, run_turns, wave_ratio_looks
-
-_DEFAULTS: dict[str, tuple[float, float, str]] = {
-    "temperature_c": (-100.0, 150.0, "°C"),
-    "table_rate_dps": (-3600.0, 3600.0, "°/s"),
-    "wave_angle_deg": (-1e7, 1e7, "° electrical"),
-    "duration_s": (0.0, 30 * 86400.0, "s"),
-    "wave_step_deg": (0.0, 5.0, "° electrical"),
-    "wave_drift_dph": (0.0, 100.0, "°/h electrical"),
-    "wave_table_ratio": (0.05, 2.0, "(|Δwave/Δtable|: k_e, electrical)"),
-    "speed_mps": (0.0, 10_000.0, "m/s"),
-    "median_specific_force_mps2": (0.0, 5.0 * 9.80665, "m/s²"),
-    "specific_force_g": (-20.0, 20.0, "g"),
-    "precession_dps": (-2e4, 2e4, "°/s electrical"),
-    "gravity_mps2": (9.0, 10.5, "m/s²"),
-    "earth_radius_m": (6.0e6, 6.6e6, "m"),
-    "earth_rate_radps": (0.0, 1e-4, "rad/s"),
-    "noise_angle_white": (0.0, 0.1, "rad electrical"),
-    "noise_arw": (0.0, 2.5e-3, "rad/√s"),
-    "noise_bias_instability": (0.0, 0.01, "rad/s"),
-    "noise_run_bias": (0.0, 0.75, "rad/s"),
-    "noise_amplitude_white": (0.0, 0.5, "(relative to the amplitude set point)"),
-    "imu_gyro_bias": (-0.75, 0.75, "rad/s"),
-    "imu_accel_bias": (-3.0, 3.0, "m/s²"),
-    "imu_scale": (-0.1, 0.1, "(a fraction: 1e-6 = 1 ppm)"),
-    "imu_misalignment": (-0.1, 0.1, "rad"),
-    "imu_arw": (0.0, 2.5e-3, "rad/√s"),
-    "imu_vrw": (0.0, 0.05, "m/s/√s"),
-    "imu_gyro_bias_instability": (0.0, 0.01, "rad/s"),
-    "imu_accel_bias_instability": (0.0, 0.1, "m/s²"),
-    "imu_gyro_rate_random_walk": (0.0, 1e-4, "rad/s/√s"),
-    "imu_accel_random_walk": (0.0, 0.01, "m/s²/√s"),
-}
-"""The default ranges; [`RANGES`][hrgjax.plausible.RANGES] is what is in force."""
 
 _OVERRIDES: contextvars.ContextVar[dict[str, tuple[float, float, str]] | None] = (
     contextvars.ContextVar("hrgjax_plausible_overrides", default=None)
@@ -119,14 +89,13 @@ unit (°/h or °/s, ppm or %, °/√h or °/s/√Hz, µg or mg), named so with t
 convert each; and an Earth model's gravity (9 … 10.5 m/s²), radius (6.0 … 6.6·10⁶ m) and
 rotation rate (0 … 10⁻⁴ rad/s) in `hrgjax.ins.constants.Earth` and
 `hrgjax.ins.platform.PlatformINS` (`EARTH_HINTS`: 981 is cm/s², 6371 km, 15.04 °/h); and
-an [`hrgjax.Noise`][hrgjax.Noise]'s standard deviations (`noise_*`, `NOISE_HINTS`)."""
+an [`hrgjax.Noise`][hrgjax.Noise]'s standard deviations (`noise_*`, `NOISE_HINTS`: sized for
+a gyro, an HRG's to a MEMS gyro's: an ARW up to 10⁻³ rad/√s, 3.4 °/√h) and a
+[`hrgjax.Gyro`][hrgjax.Gyro]'s rate bias (±0.1 rad/s, 5.7 °/s), g-sensitivity and
+[`DriftTerms`][hrgjax.DriftTerms] (`gyro_*`, `GYRO_HINTS`), in SI: each bound's reason is a
+comment in `hrgjax/_plausible_ranges.py`."""
 
-_HINTS = IMU_HINTS | EARTH_HINTS | NOISE_HINTS
-
-EXCLUSIVE = frozenset(k for k in _DEFAULTS if k.startswith("imu_"))
-"""Quantities whose nonzero bounds are refused too: each is a round number that a datasheet
-value in the other unit equals (a scale factor of 0.1 %, a misalignment of 0.1° or 0.1 mrad,
-a VRW of 0.05 mg/√Hz, a gyro bias instability of 0.01 °/h, typed as SI)."""
+_HINTS = IMU_HINTS | EARTH_HINTS | NOISE_HINTS | GYRO_HINTS
 
 KELVIN_HINT_C = 200.0
 """A temperature column whose every value is ≥ this [°C] looks like kelvin (250–400 K is

@@ -29,9 +29,9 @@ from ._cost import MAX_STEPS as MAX_STEPS
 from ._cost import default_max_steps as default_max_steps
 from ._cost import report as report_cost
 from ._run_checks import LAW_LIMITS as _LAW_LIMITS  # its old name here
+from ._run_checks import check_bandwidths, check_traced
 from ._run_checks import check_laws as _check_laws
-from ._run_checks import check_traced
-from ._simulate_options import check_options, check_quadrature0, output_grid
+from ._simulate_options import check_options, check_quadrature0, forward_mode_hint, output_grid
 from ._x64 import require_x64
 from .gyro import Gyro, check_one
 from .noise import draw_run_bias, rate_noise_angle
@@ -450,7 +450,9 @@ def simulate(
     - `quadrature0`: initial quadrature amplitude q₀ (readout units; a₀ is the AGC set point).
     - `adjoint`: how reverse-mode gradients pass through the solve (default: recursive
       checkpointing with 256 checkpoints for the averaged model, so memory stays bounded
-      and little is recomputed; diffrax's default for the full model).
+      and little is recomputed; diffrax's default for the full model). It is reverse-mode
+      only: `jax.jvp`/`jax.jacfwd` need `adjoint=diffrax.ForwardMode()`, `jax.hessian`
+      `diffrax.DirectAdjoint()` (else a one-line `TypeError` says so; docs/simulate.md).
     - `run`: integer run id written to the record.
 
     **Returns:** a [`hrgjax.Record`][]. **Warns:** `SaturationWarning` (eager runs) where the
@@ -518,6 +520,7 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
     elif bias_key is None:  # drawn here as `_record` would: one program, given or not
         bias_key = _switch_on_key(key)
     _check_laws(gyro, profile)
+    check_bandwidths(gyro, profile, model)  # the averaged model's loops: far below ω
     if ts is None:
         ts, dt_out = output_times(profile, dt_out), float(dt_out)
     else:
@@ -561,14 +564,16 @@ def simulate_with_stats(gyro, profile, model="averaged", **options):
                 device(stepping[4], float), stepping[5])  # fmt: skip
     quadrature0, run = jnp.asarray(quadrature0, dtype=float), jnp.asarray(o["run"])
     gyro, profile = traceable("gyro", gyro, _LAW_LIMITS), traceable("profile", profile)
-    gyro, profile = check_traced(gyro, profile)  # traced values: the eager rules, at run time
+    # traced values: the eager rules, at run time (explicit output times: their span too)
+    gyro, profile, ts = check_traced(gyro, profile, ts, explicit=dt_out is None)
     profile, rel = _from_start(profile, ts, dt_out)  # the clock's origin: no physics
     args = (model, gyro, profile, rel, *stepping, quadrature0, adjoint, key, bias_key, run, ts)
     out = None
     if carrier is None and ts.shape[0] >= parts.STEPPED_FROM and parts.eager(args):
         with contextlib.suppress(parts.Unresumable):  # (rare: then one program, no bar)
             out = _solve_in_parts(*args)  # a long run: progress shown, the same results
-    out = _solve(*args, carrier) if out is None else out
+    with forward_mode_hint():  # jax.jvp on the default adjoint: one line naming the fix
+        out = _solve(*args, carrier) if out is None else out
     warn_saturated(out[0], ctl.rebalance_limit)  # eager runs only (a traced record: no value)
     return out
 

@@ -2,6 +2,7 @@
 altered, or lost (the data contract, simulate's settings, compensator files, the CLI)."""
 
 import os
+import re
 from pathlib import Path
 
 import equinox as eqx
@@ -264,8 +265,14 @@ def test_a_header_of_another_class_is_named_not_a_traceback(eqx_file, tmp_path):
         (dict(angle_white=1.0), r"Noise.angle_white = 1 is outside .* ″ → ×hrgjax.units.ARC"),
         (dict(angle_random_walk=0.01), r"angle_random_walk = 0.01 is .* °/√h → ×hrgjax.units"),
         (dict(bias_instability=0.03), r"Noise.bias_instability = 0.03 is outside .* °/h → "),
-        (dict(run_bias=1.0), r"Noise.run_bias = 1 is outside .* 0 … 0.75 rad/s"),
+        (dict(run_bias=1.0), r"Noise.run_bias = 1 is outside .* 0 … 0.05 rad/s"),
         (dict(amplitude_white=2.0), r"Noise.amplitude_white = 2 is outside .* % → ×1e-2"),
+        # the preset's own figures (0.002 °/√h, 0.003 °/h, 0.2 °/h) typed as SI: a gyro's
+        # ranges, not a consumer IMU's (`imu_*`: these passed)
+        (dict(angle_random_walk=0.002), r"= 0.002 is outside .* 0 … 0.001 rad/√s — °/√h"),
+        (dict(bias_instability=0.003), r"= 0.003 is outside .* 0 … 0.001 rad/s — °/h"),
+        (dict(run_bias=0.2), r"Noise.run_bias = 0.2 is outside .* 0 … 0.05 rad/s — °/h"),
+        (dict(bias_instability=0.001), r"= 0.001 is outside .*, its bounds excluded"),
     ],
 )
 def test_noise_parameters_are_checked(kw, match):
@@ -275,6 +282,66 @@ def test_noise_parameters_are_checked(kw, match):
     if "outside" in match:  # and `relaxed` takes it
         with hg.plausible.relaxed(**{quantity: (0.0, 10.0)}):
             hg.Noise(**kw)
+
+
+def test_noise_ranges_take_every_gyro_from_an_hrg_to_a_mems_one():
+    """An HRG's noise and a tactical or consumer MEMS gyro's pass `Noise`'s ranges: ARW
+    0.1–1 °/√h and 0.015 °/s/√Hz, bias instability 100 °/h, a switch-on bias of 2 °/s."""
+    from hrgjax.units import DEG, DEG_PER_H, DEG_PER_SQRT_H
+
+    for arw in (1e-4 * DEG_PER_SQRT_H, 0.1 * DEG_PER_SQRT_H, 1.0 * DEG_PER_SQRT_H, 0.015 * DEG):
+        hg.Noise(angle_random_walk=arw, bias_instability=100 * DEG_PER_H, run_bias=2.0 * DEG)
+    assert hg.presets.tvg3_like().noise is not None
+
+
+@pytest.mark.parametrize(
+    "build,match",
+    [  # the preset's 0.3 °/h, 0.01 °/h/g, … typed as SI (0.3 rad/s ≈ 62 000 °/h ran silently)
+        (
+            lambda r: hg.Gyro(r, rate_bias=0.3),
+            r"^Gyro.rate_bias = 0.3 is outside the plausible "
+            r"range -0.1 … 0.1 rad/s — °/h → ×hrgjax.units.DEG_PER_H; °/s → ×hrgjax.units.DEG "
+            r"\(hrgjax.plausible.relaxed\(gyro_rate_bias=…\) widens it\)$",
+        ),
+        (lambda r: hg.Gyro(r, rate_bias=-0.1), r"-0.1 is outside .*, its bounds excluded"),
+        (
+            lambda r: hg.Gyro(r, g_sensitivity=[0.005, 0.005, 0.01]),
+            r"^Gyro.g_sensitivity = 0.005 at index 0 is outside .* rad/s per g — °/h per g → ",
+        ),
+        (lambda r: hg.DriftTerms(warmup=0.5), r"^DriftTerms.warmup = 0.5 is outside .* rad/s"),
+        (lambda r: hg.DriftTerms(lag=0.005), r"^DriftTerms.lag = 0.005 .* rad/s per °C — °/h per"),
+        (lambda r: hg.DriftTerms(temperature_rate=0.5), r"rad/s per °C/s — °/h per °C/s → "),
+        (lambda r: hg.DriftTerms(rate_cubic=10.0), r"-1 … 1 s² — ppm per \(rad/s\)² → ×1e-6"),
+    ],
+)
+def test_gyro_rates_in_another_unit_are_refused_and_relaxed_takes_them(build, match):
+    res = hg.Resonator(omega=3e4, tau=500.0)
+    with pytest.raises(ValueError, match=match):
+        build(res)
+    quantity = re.search(r"relaxed\((\w+)=", str(pytest.raises(ValueError, build, res).value))
+    with hg.plausible.relaxed(**{quantity.group(1): (-20.0, 20.0)}):
+        build(res)
+
+
+def test_gyro_ranges_take_real_gyros_and_simulate_holds_them_where_init_did_not_run(gyro):
+    """A broken gyro's 2 °/s bias, a MEMS gyro's 0.2 °/s/g and the preset pass; a value put
+    in with `eqx.tree_at` (no `__check_init__`) or a law that leaves the range over the run's
+    temperatures is refused by `simulate` before any work, naming the field."""
+    from hrgjax.units import DEG
+
+    hg.Gyro(gyro.resonator, rate_bias=2.0 * DEG, g_sensitivity=0.2 * DEG)
+    hg.DriftTerms(temperature_rate=1e-3, lag=1e-4, warmup=1e-3, rate_cubic=1e-3)
+    with pytest.raises(ValueError, match=r"^gyro.rate_bias = 0.3 is outside the plausible"):
+        hg.simulate(eqx.tree_at(lambda g: g.rate_bias, gyro, 0.3), PROFILE)
+    with pytest.raises(ValueError, match=r"^gyro.noise.run_bias = 0.2 is outside .* 0.05 rad/s"):
+        noisy = eqx.tree_at(lambda g: g.noise, gyro, hg.Noise(), is_leaf=lambda x: x is None)
+        hg.simulate(eqx.tree_at(lambda g: g.noise.run_bias, noisy, 0.2), PROFILE,
+                    key=jax.random.key(0))  # fmt: skip
+    law = eqx.tree_at(lambda g: g.rate_bias, gyro, hg.TemperatureLaw(0.0, 2e-3))  # 0.14 at 90
+    ramp = hg.Profile.piecewise([0.0, 1.0], 0.0, [20.0, 90.0])
+    with pytest.raises(ValueError, match=r"^the temperature law of gyro.rate_bias at (6|7|8|9)"
+                       r"\d.* °C \(inside the profile's temperatures \[20, 90\] °C\) = 0.1"):  # fmt: skip
+        hg.simulate(law, ramp)
 
 
 @pytest.fixture(scope="module")

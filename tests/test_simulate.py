@@ -429,3 +429,53 @@ def test_implausible_traced_rates_and_knots_are_refused_under_jit_and_vmap():
         jax.block_until_ready(batch(jnp.array([1.0, 1e6]), jnp.array([1.0, 1.0])))
     with pytest.raises(Exception, match="Profile.t must be strictly increasing"):
         jax.block_until_ready(batch(jnp.array([1.0, 1.0]), jnp.array([1.0, -1.0])))
+    # an output time past the end of a run whose length is traced: the eager rule's line
+    # (the solver's "simulate produced NaN or inf (a solver failed …)" before)
+    with pytest.raises(Exception, match=r"ts must lie within the profile \[its first, its last"):
+        jax.block_until_ready(batch(jnp.array([1.0, 1.0]), jnp.array([1.0, 0.25])))
+
+
+def test_traced_gyro_rates_outside_their_ranges_are_refused_under_vmap():
+    """A rate bias swept to 0.3 (0.3 °/h typed as rad/s) and a switch-on bias σ of 0.2 put in
+    under the caller's eager `jax.vmap` raise their range's line, unit hint included; a
+    plausible batch runs."""
+    gyro = hg.presets.ideal(resonator())
+    prof = hg.Profile.constant_rate(1.0, 1.0)
+
+    def run(bias):
+        return hg.simulate(eqx.tree_at(lambda g: g.rate_bias, gyro, bias), prof,
+                           ts=jnp.array([0.0, 0.5])).wave_angle  # fmt: skip
+
+    assert np.all(np.isfinite(jax.vmap(run)(jnp.array([0.0, 1e-5]))))
+    with pytest.raises(RuntimeError, match=r"^simulate: gyro.rate_bias is outside the plausible "
+                       r"range -0.1 … 0.1 rad/s — °/h → ×hrgjax.units.DEG_PER_H"):  # fmt: skip
+        jax.vmap(run)(jnp.array([0.0, 0.3]))
+
+
+def test_forward_mode_and_loops_above_the_carrier_get_one_line():
+    """`jax.jvp`/`jax.jacfwd` through the default (reverse-mode) adjoint raise one line naming
+    `diffrax.ForwardMode()` (JAX's "can't apply forward-mode autodiff (jvp) to a custom_vjp
+    function" before); a loop bandwidth above the carrier is refused by the averaged model."""
+    from hrgjax._simulate_options import forward_mode_hint
+
+    @jax.custom_vjp
+    def f(x):
+        return x
+
+    f.defvjp(lambda x: (x, None), lambda _, g: (g,))
+    with pytest.raises(TypeError, match=r"^simulate: forward-mode derivatives .* "
+                       r"adjoint=diffrax.ForwardMode\(\) for jvp/jacfwd, diffrax.DirectAdjoint"):  # fmt: skip
+        with forward_mode_hint():
+            jax.jvp(f, (1.0,), (1.0,))
+    with pytest.raises(ValueError, match="^other"), forward_mode_hint():
+        raise ValueError("other")
+    res = resonator(omega=2 * np.pi * 5e3)  # ≈ 3.1e4 rad/s
+    fast = hg.Gyro(res, control=hg.Control(pll_bandwidth=5e4))
+    with pytest.raises(ValueError, match=r"^gyro.control.pll_bandwidth = 50000 rad/s at 20 °C is "
+                       r"at or above 0.1 × the carrier ω = 31415.9 rad/s: .* model=\"full\"$"):  # fmt: skip
+        hg.simulate(fast, hg.Profile.static(0.01), dt_out=0.01)
+    from hrgjax._run_checks import check_bandwidths
+
+    check_bandwidths(fast, hg.Profile.static(0.01), "full")  # the full model resolves ω
+    check_bandwidths(hg.Gyro(res, control=hg.Control(pll_bandwidth=3e3)), hg.Profile.static(0.01),
+                     "averaged")  # fmt: skip

@@ -69,6 +69,13 @@ IDEAL_LIMIT = (
 )
 """The one line refusing ideal force-to-rebalance loops with a force limit (`Control`)."""
 
+AVERAGED_BANDWIDTH = 0.1
+"""The largest loop bandwidth the averaged model takes, as a fraction of the carrier ω: its
+loops act on the slow variables averaged over a carrier cycle, an error of order β/ω (a
+real HRG's loops close at 1–100 Hz on a 5 kHz carrier, β/ω ≤ 0.02); `simulate` refuses a
+bandwidth at or above 0.1 ω at any of the run's temperatures (`model="full"` resolves
+the carrier)."""
+
 
 def _plain_bool(x):
     """A NumPy bool as a Python one (a static field must not hold a NumPy scalar); anything
