@@ -121,7 +121,7 @@ def compensation_residuals(windows, compensators: dict, path: str, title: str = 
             ang = static.wave_angle_deg[m]
             y = static.drift_dph[m]
             if comp is not None:  # at each window's own temperature, not the group's
-                y = y - comp.drift_dph(ang, static.temperature_c[m])
+                y = y - comp.drift_dph(ang, static.temperature_c[m], warn=False)
             order = np.argsort(ang)
             ax.plot(
                 ang[order], y[order], "o-", ms=2, lw=1, color=cmap(norm(T)), label=f"{T:+.0f} °C"

@@ -52,9 +52,13 @@ def k_e_problem(k_e: float) -> str | None:
 
 WINDOW_S = 3.0
 """Default window of moving runs [s]. A window's slope averages the rate over the wave angles
-it spans: at 5 °/s a 10-s window spans 28° of wave angle and shrinks the fitted 2θ
-scale-factor ripple by about 4 % (enough to leave 0.016° after 2 min at −40 °C); 3 s spans
-8° and shrinks it by 0.35 %."""
+it spans, weighted as the least-squares slope weighs them: at 5 °/s a 3-s window spans 8° of
+electrical wave angle and holds 0.998 of a 2θ term's value at its mean angle, a 10-s one 28°
+and 0.977; at 50 °/s 3 s span 83° and hold 0.805, at 100 °/s 0.377 (and the 4θ term
+averages out near 77 °/s). The Fourier and MLP fits model that average
+(`hrgjax.calibration._window_arc`), so it no longer shrinks their fitted ripple (it did: 0.97
+of the truth at 20 °/s, 0.80 at 50 °/s); what it costs is resolution of the higher
+harmonics at high rates (`calibration.fourier.GAIN_FLOOR`)."""
 PHYSICAL_WINDOW_S = 10.0
 """Default window of moving runs for the physical grey box [s] (API, CLI and docs alike). It
 reduces the simulated wave angle with the same windows as the measured one, so a window's

@@ -108,7 +108,7 @@ def _windows(static_angles, moving_angles, temps=(20.0,)):
     n = ts.size + tm.size
     return cal.RateWindows(
         run=np.arange(n), start=np.zeros(n, int), stop=np.full(n, 10),
-        t_mid=np.full(n, 5.0), duration=np.full(n, 10.0),
+        t_mid=np.full(n, 5.0), duration=np.zeros(n),  # point values: no arc to average over
         temperature_c=np.r_[ts, tm], table_rate_dps=np.r_[np.zeros(ts.size), np.full(tm.size, 5.0)],
         wave_angle_deg=np.r_[as_, am], rate_dps=np.r_[drift(as_), sf * 5.0 + drift(am)],
         stderr_dps=np.full(n, 1e-6), k_e=K,

@@ -6,6 +6,7 @@ samples outside, or passes them through uncompensated (bit for bit the raw outpu
 
 import dataclasses
 import json
+import warnings
 
 import equinox as eqx
 import jax
@@ -182,6 +183,38 @@ def test_saved_files_keep_the_range_and_older_files_load_without_it(fitted, tmp_
             out["angle_corrected_deg"],
             comp.correct(test_session, extrapolate=True)["angle_corrected_deg"],
         )
+
+
+@pytest.mark.parametrize("which", ["fourier", "mlp"])
+def test_pointwise_laws_warn_beyond_the_range_as_correct_does(fitted, which):
+    """`drift_dph` and `scale_factor_at` extrapolated silently where `correct` warned: they
+    now warn the same `TemperatureDomainWarning` (count, where, at the caller's line), not
+    within the range ± 1 °C, not with `warn=False`; the values are the same either way."""
+    comp = fitted[which]
+    who = type(comp).__name__
+    theta, temp = np.array([0.0, 30.0, 60.0, -45.0]), np.array([-20.0, 41.0, 60.0, 60.0])
+    for method in ("drift_dph", "scale_factor_at"):
+        law = getattr(comp, method)
+        with pytest.warns(hg.calibration.TemperatureDomainWarning) as caught:
+            values = law(theta, temp)
+        assert len(caught) == 1 and caught[0].filename == __file__
+        assert str(caught[0].message) == (
+            f"{who}.{method}: 3 of 4 points outside the calibrated temperature range "
+            "+0.0 … +40.0 °C (± 1 °C): 1 at -20 °C, 2 at +60 °C — extrapolated "
+            "(warn=False: no warning)"
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            np.testing.assert_array_equal(law(theta, temp, warn=False), values)
+            law(theta, np.array([-1.0, 0.0, 40.0, 41.0]))  # within the margin: no warning
+            law(0.0, 20.0)
+        with pytest.raises(ValueError, match=rf"^{who}\.{method}: warn must be True or False; "
+                           "got 'no'$"):  # fmt: skip
+            law(theta, temp, warn="no")
+    unknown = dataclasses.replace(comp, temperature_range=None)  # a file saved before it
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        unknown.drift_dph(theta, temp)
 
 
 def test_bad_domain_arguments_are_refused_in_one_line(fitted, test_session):

@@ -42,7 +42,7 @@ def level_windows():
     rate = np.r_[true_drift(th, tt), true_sf(th, tt) * 5.0 * DEG + true_drift(th, tt)] / DEG
     return RateWindows(
         run=np.arange(2 * n), start=np.zeros(2 * n, int), stop=np.full(2 * n, 10),
-        t_mid=np.full(2 * n, 5.0), duration=np.full(2 * n, 10.0),
+        t_mid=np.full(2 * n, 5.0), duration=np.zeros(2 * n),  # point values: no arc
         temperature_c=np.tile(tt, 2), table_rate_dps=np.r_[np.zeros(n), np.full(n, 5.0)],
         wave_angle_deg=np.tile(aa, 2), rate_dps=rate, stderr_dps=np.full(2 * n, 1e-6),
         k_e=K_E_NOMINAL,

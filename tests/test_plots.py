@@ -37,7 +37,7 @@ def _unit(label: str) -> bool:
 
 
 class _Flat:
-    def drift_dph(self, angle, temperature):
+    def drift_dph(self, angle, temperature, warn=True):
         return 0.5 * np.sin(np.deg2rad(2 * angle)) + 0.01 * temperature
 
 

@@ -22,7 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_1d, check_finite, check_numbers, concrete_value
+from .. import plausible
+from .._checks import check_1d, check_finite, check_numbers, concrete_value, finite_number
 from .._compiled import Check, device, program
 from .._x64 import require_x64
 from ..data import MeasuredData, concat
@@ -95,6 +96,21 @@ def _schuler(t, eps_north, eps_east):
     return sol.ys[:, 0:2], sol.ys[:, 4:6], sol.result
 
 
+FLIGHT_UNITS = {
+    "duration_s": "s",
+    "heading_deg": "°, clockwise from north",
+    "wave_angle_x_deg": "° electrical",
+    "wave_angle_y_deg": "° electrical",
+    "temperature_start_c": "°C",
+    "temperature_end_c": "°C",
+    "warmup_s": "s",
+    "dt_out": "s",
+    "speed_mps": "m/s",
+    "lat_deg": "°",
+}
+"""The unit of each `Flight` field (named in its errors)."""
+
+
 class Flight(eqx.Module):
     """A level flight for the INS-impact study.
 
@@ -103,6 +119,12 @@ class Flight(eqx.Module):
     `temperature_start_c`, `temperature_end_c` [°C] and `warmup_s` [s]: IMU temperature
     $T(t) = T_{end} + (T_{start} - T_{end})e^{-t/t_w}$; `dt_out` [s]; `speed_mps` [m/s] and
     `lat_deg` [°] (start) of the level flight.
+
+    **Raises** (when built, one line naming the field, its expected form and unit):
+    `TypeError` for a field that is not a number; `ValueError` for one not finite, a
+    `duration_s` ≤ 0, a `dt_out` that is not > 0 or does not divide `duration_s` into whole
+    steps, a `warmup_s` ≤ 0, a temperature outside `hrgjax.plausible.RANGES` (kelvin: the
+    hint says so), a `speed_mps` < 0 or a `lat_deg` beyond ±89°.
     """
 
     duration_s: float = eqx.field(static=True, default=3600.0)
@@ -115,6 +137,30 @@ class Flight(eqx.Module):
     dt_out: float = eqx.field(static=True, default=1.0)
     speed_mps: float = eqx.field(static=True, default=200.0)
     lat_deg: float = eqx.field(static=True, default=45.0)
+
+    def __check_init__(self):
+        from ..ins.trajectory import check_position
+
+        for name, unit in FLIGHT_UNITS.items():
+            finite_number(f"Flight.{name}", getattr(self, name), unit)
+        duration, dt = float(self.duration_s), float(self.dt_out)
+        if duration <= 0:
+            raise ValueError(f"Flight.duration_s must be > 0 s; got {self.duration_s!r}")
+        plausible.check("Flight.duration_s", duration, "duration_s")
+        steps = duration / dt if dt > 0 else np.nan
+        if not (0 < dt <= duration and abs(steps - round(steps)) <= 1e-6):
+            count = f" ({steps:.6g} steps)" if dt > 0 else ""
+            raise ValueError(f"Flight.dt_out must be > 0 s and divide duration_s = {duration:g} s "
+                             f"into whole steps; got {self.dt_out!r}{count}")  # fmt: skip
+        if float(self.warmup_s) <= 0:
+            raise ValueError("Flight.warmup_s must be > 0 s (the time constant t_w of the "
+                             f"warm-up T(t)); got {self.warmup_s!r}")  # fmt: skip
+        for name in ("temperature_start_c", "temperature_end_c"):
+            plausible.check(f"Flight.{name}", getattr(self, name), "temperature_c")
+        for name in ("wave_angle_x_deg", "wave_angle_y_deg"):
+            plausible.check(f"Flight.{name}", getattr(self, name), "wave_angle_deg")
+        plausible.check("Flight.speed_mps", self.speed_mps, "speed_mps")
+        check_position(self.lat_deg, 0.0, 0.0, where="Flight.")
 
     def trajectory(self):
         """The flight as an [`hrgjax.ins.trajectory.Trajectory`][hrgjax.ins.trajectory.Trajectory]."""

@@ -1,13 +1,18 @@
 r"""Reduction of bench data to rates per window: drift and scale factor per point.
 
 Every run is cut into windows (a static run is one window; a rotation run is cut into
-windows of `window_s`). In each window the wave-angle slope is fitted by least squares and
-turned into the **measured equivalent input rate** with the nominal angular gain:
+windows of `window_s`, never across a time gap: `GAP_STEPS`). In each window the wave-angle
+slope is fitted by least squares and turned into the **measured equivalent input rate** with
+the nominal angular gain:
 
 $$\Omega_{\rm meas} = -\frac{1}{k_{e,\rm nom}}\,\frac{d\theta_{\rm meas}}{dt}.$$
 
 Drift is $D = \Omega_{\rm meas} - \Omega_{\rm table}$ on static windows; the scale factor is
 $\mathrm{SF} = (\Omega_{\rm meas} - D(\theta, T))/\Omega_{\rm table}$ on rotation windows.
+A window's rate is not the rate at its mean wave angle but its average, weighted as the
+least-squares slope weighs it, over the arc the wave turns in the window: the Fourier and MLP
+fits model it so (`hrgjax.calibration._window_arc`; a 2θ term counts 0.998 of its value on a
+3-s window at 5 °/s, 0.805 at 50 °/s).
 
 The table rate of a window is the least-squares slope of the table angle over the same
 samples (the measured rate's estimator), so a table rate that changes within a window — a
@@ -161,7 +166,10 @@ class RateWindows(eqx.Module):
     All fields have shape (W,). Angles are electrical [°], rates [°/s], temperatures [°C].
 
     - `run`: run id of the window; `start`, `stop`: sample index range in the run.
-    - `t_mid`: mean time of the window [s]; `duration`: its length [s].
+    - `t_mid`: mean time of the window [s]; `duration`: its length [s]. With `stop − start`
+      they give the fits the arc the wave turns over the window's evenly spaced samples
+      (`hrgjax.calibration._window_arc`); a hand-built window of `duration` 0 is a point
+      value (no arc).
     - `temperature_c`: window mean.
     - `table_rate_dps`: least-squares slope of the table angle over the window [°/s] (the
       column `table_angle_deg`, or the rate's integral), the same estimator as `rate_dps`;
@@ -283,26 +291,43 @@ def check_k_e(k_e, name: str = "k_e") -> float:
     return float(value)
 
 
+GAP_STEPS = 2.5
+"""A step between samples longer than this many of the run's median step is a time gap:
+windows of moving runs and ramps never straddle one (`_window_layout`). A window's rate is
+the average of the rate over the arc the wave turns in it, weighted as its samples are
+(`hrgjax.calibration._window_arc`); a window over a gap weighs its two sides as no evenly
+sampled window would (a 20-s gap in a 5 °/s run at 2 Hz made one 22-s window of six
+samples)."""
+
+
 def _window_layout(
     r: MeasuredData, window_s: float | None, ramp_window_s: float | None = None
-) -> tuple[int, int]:
-    """(number of windows, samples per window) of one run; a static run is one window (a ramp
-    — at rest, temperature moving — windows of `ramp_window_s` when given) and samples past
-    the last whole window are left out of the windows (not of the data)."""
+) -> tuple[np.ndarray, int]:
+    """(first sample of each window, samples per window) of one run; a static run is one
+    window (a ramp — at rest, temperature moving — windows of `ramp_window_s` when given).
+    Windows of moving runs and ramps are laid out in each stretch between time gaps
+    (`GAP_STEPS`) from its start, and samples past a stretch's last whole window are left
+    out of the windows (not of the data); a run with no whole window is one window."""
     t = r["time_s"]
     if len(t) < 4:
         raise ValueError(
             f"run {int(r.run[0])} has {len(t)} samples; reduction needs at least 4 per window"
         )
+    whole = np.zeros(1, dtype=int), len(t)
     if bool(np.all(np.abs(r["table_rate_dps"]) <= STILL_RATE_DPS)):  # at rest (readback jitter)
         if ramp_window_s is None or np.ptp(r["temperature_c"]) <= TEMPERATURE_TOLERANCE_C:
-            return 1, len(t)
+            return whole
         window_s = ramp_window_s
     elif window_s is None:
-        return 1, len(t)
-    n = max(int(round(window_s / float(np.median(np.diff(t))))), 4)
-    n_win = len(t) // n
-    return (1, len(t)) if n_win == 0 else (n_win, n)
+        return whole
+    step = np.diff(t)
+    median = float(np.median(step))
+    n = max(int(round(window_s / median)), 4)
+    cuts = np.flatnonzero(step > GAP_STEPS * median) + 1
+    edges = np.concatenate([[0], cuts, [len(t)]])
+    starts = [a + n * np.arange((b - a) // n) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    starts = np.concatenate(starts).astype(int)
+    return whole if starts.size == 0 else (starts, n)
 
 
 def check_whole_angle(data: MeasuredData) -> None:
@@ -369,26 +394,27 @@ def reduce(
     for r in data.runs():
         t, th = r["time_s"], r["wave_angle_deg"]
         temp, rate = r["temperature_c"], r["table_rate_dps"]
-        n_win, n = _window_layout(r, window_s, ramp_window_s)
+        starts, n = _window_layout(r, window_s, ramp_window_s)
+        n_win = starts.size
         nb = min(batches, n // 2)
         if nb < 3:
             raise ValueError(f"run {int(r.run[0])}: windows of {n} samples are too short")
-        m = n_win * n
-        slope, tm, ym, se = _window_stats(np, t[:m], th[:m], n_win, nb)
-        starts = np.arange(n_win) * n
+        take = (starts[:, None] + np.arange(n)).ravel()  # the windows' samples, in order
+        t, th, temp, rate = t[take], th[take], temp[take], rate[take]
+        slope, tm, ym, se = _window_stats(np, t, th, n_win, nb)
         cols["run"].append(np.full(n_win, int(r.run[0])))
         cols["start"].append(starts)
         cols["stop"].append(starts + n)
         cols["t_mid"].append(tm)
-        cols["duration"].append(t[starts + n - 1] - t[starts])
-        cols["temperature_c"].append(temp[:m].reshape(n_win, n).mean(axis=1))
-        cols["table_rate_dps"].append(_table_rates(t[:m], r.table_angle_deg[:m], rate[:m], n_win))
+        cols["duration"].append(t[n - 1 :: n] - t[::n])
+        cols["temperature_c"].append(temp.reshape(n_win, n).mean(axis=1))
+        cols["table_rate_dps"].append(_table_rates(t, r.table_angle_deg[take], rate, n_win))
         cols["wave_angle_deg"].append(ym)
         cols["rate_dps"].append(-slope / k_e)
         cols["stderr_dps"].append(se / k_e)
         cols["dof"].append(np.full(n_win, nb - 2))
-        cols["temperature_rate_cps"].append(least_squares_slope(np, t[:m].reshape(n_win, n),
-                                                   temp[:m].reshape(n_win, n))[0])  # fmt: skip
+        cols["temperature_rate_cps"].append(least_squares_slope(np, t.reshape(n_win, n),
+                                                   temp.reshape(n_win, n))[0])  # fmt: skip
     arrays = {k: np.concatenate(v) for k, v in cols.items()}
     return RateWindows(**arrays, k_e=float(k_e))
 
