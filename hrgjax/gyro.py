@@ -164,11 +164,12 @@ class Gyro(eqx.Module):
     - `g_sensitivity`: drift per specific force along case axes x, y, z, equivalent input rate
       [rad/s per g], shape (3,) (within ±4·10⁻³, `RANGES["gyro_g_sensitivity"]`).
 
+    - `drift_terms`: further drift mechanisms ([`hrgjax.DriftTerms`][]: temperature rate,
+      thermal lag, warm-up, rate-cubic scale factor), or `None`.
+
     A value beyond its range is refused in one line naming the datasheet units it looks like
     (`hrgjax.plausible.relaxed(gyro_rate_bias=…)` widens it); `simulate` holds values put in
     with `eqx.tree_at` or traced (`hg.sweep`) to the same ranges.
-    - `drift_terms`: further drift mechanisms ([`hrgjax.DriftTerms`][]: temperature rate,
-      thermal lag, warm-up, rate-cubic scale factor), or `None`.
     """
 
     resonator: Resonator

@@ -109,7 +109,10 @@ def relaxed(**ranges: tuple[float, float]) -> Iterator[None]:
     for the calling thread (and asyncio task) only, until the block ends; blocks nest.
     Naming `specific_force_g` also takes a specific force whose magnitude holds ≈ 9.8 as
     g (a centrifuge run), not as m/s²
-    ([`check_specific_force`][hrgjax.plausible.check_specific_force])."""
+    ([`check_specific_force`][hrgjax.plausible.check_specific_force]). Traced values are
+    held to the ranges in force when their program is traced: a function of yours under
+    `jax.jit` keeps the ranges of its first call (`hg.sweep` traces each call anew) — call it
+    first inside the block, or `jax.jit` it again there."""
     new = dict(_OVERRIDES.get() or {})
     for name, bounds in ranges.items():
         if name not in _DEFAULTS:
