@@ -1067,9 +1067,9 @@ def test_noise_arguments_are_checked_as_hg_noise_checks_them():
     for kw, match in (
         ({"angle_white": 1.0}, r"^angle_white = 1 is outside the plausible range 0 … 0.1 rad "
          r"electrical — ″ → ×hrgjax.units.ARCSEC"),
-        ({"arw": 0.01}, r"^arw = 0.01 is outside the plausible range 0 … 0.0025 rad/√s — °/√h"),
+        ({"arw": 0.01}, r"^arw = 0.01 is outside the plausible range 0 … 0.001 rad/√s — °/√h"),
         ({"gauss_markov": (0.05, 600.0)}, r"^gauss_markov σ = 0.05 is outside the plausible "
-         r"range 0 … 0.01 rad/s — °/h → ×hrgjax.units.DEG_PER_H"),
+         r"range 0 … 0.001 rad/s — °/h → ×hrgjax.units.DEG_PER_H"),
         ({"gauss_markov": (1e-7, 0.0)}, r"^gauss_markov τ must be a finite number > 0 \[s\]"),
         ({"arw": -1e-6}, r"^arw must be a finite number > 0 \[rad/√s\]; got -1e-06"),
         ({"angle_white": np.nan}, r"^angle_white must be a finite number ≥ 0"),
