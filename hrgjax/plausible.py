@@ -84,7 +84,7 @@ temperature, MPU-6050), an accelerometer bias of 3 m/s² (≈ 0.3 g: ADXL345's o
 rad/√s lie beyond it, the noisiest MEMS gyros' 0.05–0.1 °/s/√Hz inside), a VRW of
 0.05 m/s/√s (≈ 5 mg/√Hz), bias instabilities of 0.01 rad/s (≈ 2000 °/h) and 0.1 m/s², rate
 and acceleration random walks of 10⁻⁴ rad/s/√s (≈ 1200 °/h/√h) and 0.01 m/s²/√s — a value
-beyond, or on a bound ([`EXCLUSIVE`][hrgjax.plausible.EXCLUSIVE]), is one in a datasheet's
+beyond, or on a bound (`plausible.EXCLUSIVE`), is one in a datasheet's
 unit (°/h or °/s, ppm or %, °/√h or °/s/√Hz, µg or mg), named so with the factors that
 convert each; and an Earth model's gravity (9 … 10.5 m/s²), radius (6.0 … 6.6·10⁶ m) and
 rotation rate (0 … 10⁻⁴ rad/s) in `hrgjax.ins.constants.Earth` and
