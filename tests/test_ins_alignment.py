@@ -437,6 +437,69 @@ def test_imu_log_refuses_bad_input():
         al.align(al.ImuLog(log.t, log.dtheta, log.dvel * 2.0, log.lat))
 
 
+def test_imu_log_refuses_a_rate_change_or_a_gap_and_takes_jitter():
+    """Audit: a log at 2 Hz then 1 Hz (or 1 Hz then 2 Hz, or with a 300-s gap) was read at its
+    median interval and `align` returned a heading 31σ–55σ off. Refused in one line naming
+    `ImuLog.t`, the steps' range and the cure; 100 Hz stamped on the Unix epoch with ±2 ms of
+    jitter and a 5-ppm clock passes (`dt` its 10 ms)."""
+    z = lambda n: np.zeros((n, 3))  # noqa: E731
+    cases = (
+        (np.r_[0.5 * np.arange(1, 2401), 1200.0 + np.arange(1, 601)], "0.5 … 1"),  # 2 → 1 Hz
+        (np.r_[np.arange(1.0, 901), 900.0 + 0.5 * np.arange(1, 1801)], "0.5 … 1"),  # 1 → 2 Hz
+        (np.r_[np.arange(1.0, 601), np.arange(901.0, 1801)], "1 … 301"),  # a 300-s gap
+        (np.delete(0.01 * np.arange(1, 1001), 500), "0.01 … 0.02"),  # one dropped sample
+    )
+    for t, span in cases:
+        with pytest.raises(ValueError, match=rf"^ImuLog.t must be uniformly sampled \(one interval"
+                           rf", up to jitter\); its steps span {span} s .*a rate change or a gap — "
+                           r"resample the log to one rate, or split it$"):  # fmt: skip
+            al.ImuLog(t, z(t.size), z(t.size), 0.5)
+    rng = np.random.default_rng(0)
+    n = 20_000
+    t = 1.7e9 + 0.01 * (1 + 5e-6) * np.arange(n) + rng.uniform(-2e-3, 2e-3, n)
+    log = al.ImuLog(t, z(n), z(n), 0.5)
+    assert log.dt == pytest.approx(0.01, rel=1e-3)
+
+
+def test_align_refuses_noise_options_in_datasheet_units():
+    """Audit: `align(log, arw=0.01)` (°/√h typed as rad/√s) gave a heading σ of 262°,
+    `accel_bias_std=100` (µg) 787°, without an error. The options hold `ImuModel`'s ranges
+    (`imu_arw`, …) with their unit hints, before any work, in `align` and `fine_align`."""
+    log = al.ImuLog(np.arange(1.0, 31.0), np.zeros((30, 3)), np.zeros((30, 3)), 0.5)
+    cases = (
+        (dict(arw=0.01), r"arw \[rad/√s\] = 0.01 is outside the plausible range 0 … 0.0025 "
+         r"rad/√s — °/√h → ×hrgjax.units.DEG_PER_SQRT_H"),
+        (dict(vrw=0.05), r"vrw \[m/s/√s\] = 0.05 is outside .*, its bounds excluded"),
+        (dict(gyro_bias_std=1.0), r"gyro_bias_std \[rad/s\] = 1 is outside .* °/h → ×"),
+        (dict(accel_bias_std=100.0), r"accel_bias_std \[m/s²\] = 100 is outside .* µg → ×"),
+    )  # fmt: skip
+    for kw, message in cases:
+        for where, run in (("align", al.align), ("fine_align", lambda g, **k: al.fine_align(
+                g, np.eye(3), **k))):  # fmt: skip
+            with pytest.raises(ValueError, match=f"^{where}: {message}") as err:
+                run(log, **kw)
+            assert "\n" not in str(err.value)
+
+
+def test_platform_ins_sigmas_and_correlation_times_in_other_units_are_refused():
+    """Audit: `PlatformINS(gyro_sigma=0.01)` (°/h), `accel_sigma=100` (µg), `tau_r=1` (h)
+    ran. The σ hold `ImuModel`'s bias-instability ranges (accel_sigma in g-units), τ ≥ 60 s
+    and within `duration_s`; the defaults and traced values pass."""
+    cases = (
+        (dict(gyro_sigma=0.01), r"^PlatformINS.gyro_sigma \[rad/s\] = 0.01 is outside the "
+         r"plausible range 0 … 0.01 rad/s, its bounds excluded — °/h → ×"),
+        (dict(accel_sigma=100.0), r"^PlatformINS.accel_sigma = 100 is outside the plausible "
+         r"range 0 … 0.0102 g-units .* µg → ×1e-6"),
+        (dict(tau_r=1.0), r"^PlatformINS.tau_r = 1 s is under the 60 s .* h → ×3600"),
+        (dict(tau_a=3.6e9), r"^PlatformINS.tau_a \[s\] = 3.6e\+09 is outside"),
+    )  # fmt: skip
+    for kw, message in cases:
+        with pytest.raises(ValueError, match=message):
+            pf.PlatformINS(**kw)
+    pf.PlatformINS(accel_sigma=2e-7, gyro_sigma=2e-7, tau_a=600.0, tau_r=7200.0)
+    jax.vmap(lambda s: pf.PlatformINS(gyro_sigma=s).gyro_sigma)(jnp.array([0.1, 1.0]))
+
+
 # -- platform INS (seed 002) --------------------------------------------------------------
 
 

@@ -683,3 +683,94 @@ def test_review_messages_name_the_function_and_stay_short():
     for call, message in cases:
         with pytest.raises((ValueError, TypeError), match=message):
             call()
+
+
+# -- audit (session 31): a fast mode off F's diagonal, dt, Euler angles, units ----------------
+
+
+def test_discretise_refuses_or_squares_a_fast_oscillation_off_the_diagonal():
+    """Audit: `discretise([[−0.01, 5], [−5, −0.01]], 0.02·I, 1 s)` bounded only |F_ii|·h and
+    returned a growing Φ (2.6 for expm's 0.28). Concrete F: refused in one line naming the
+    `fastest` to pass, with which Φ is scipy's expm and Q_d `van_loan`'s; traced F (jit): an
+    `eqx.error_if` on the same F, while a slow F passes the same program (and vmap, grad)."""
+    from scipy.linalg import expm
+
+    from hrgjax.ins import ekf
+
+    F, q = np.array([[-0.01, 5.0], [-5.0, -0.01]]), 0.02 * np.eye(2)
+    with pytest.raises(ValueError, match=r"^discretise: F has an eigenvalue \|λ\| = 5.00001 /s, "
+                       r"too fast .* pass fastest=5.00001 \(the largest \|λ\| of F\)$"):  # fmt: skip
+        ekf.discretise(F, q, 1.0)
+    phi, qd = ekf.discretise(F, q, 1.0, fastest=5.00001)  # the printed value is taken
+    np.testing.assert_allclose(phi, expm(F), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(qd, kalman.van_loan(F, q, 1.0)[1], rtol=0, atol=1e-12)
+    step = jax.jit(lambda f: ekf.discretise(f, q, 1.0)[0])
+    with pytest.raises(Exception, match=r"discretise: F \(traced\) has a mode too fast"):
+        jax.block_until_ready(step(F))
+    slow = np.array([[0.0, 1.0], [-0.01, 0.0]])  # 0.1 rad/s: the series over 1 s is exact
+    np.testing.assert_allclose(step(slow), expm(slow), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(jax.vmap(step)(jnp.stack([slow, slow / 2]))[1], expm(slow / 2),
+                               rtol=0, atol=1e-13)  # fmt: skip
+    got = jax.grad(lambda a: step(a * slow)[0, 1])(1.0)  # d expm(aF)/da = F expm(aF) at a = 1
+    assert float(got) == pytest.approx((slow @ expm(slow))[0, 1], rel=1e-10)
+
+
+def test_mechanize_refuses_a_dt_under_which_the_vehicle_falls_freely():
+    """Audit: stationary 100-Hz increments with dt = 1 s ran silently to h = 353 km. A mean
+    specific force under 0.2 g over the record is refused naming `dt` and the dt that gives
+    1 g; free fall stays physical: all-zero increments, half a record in free fall, and
+    traced increments pass."""
+    from hrgjax.ins import mechanization as me
+
+    dv = np.tile([0.0, 0.0, -C.G0 * 0.01], (100, 1))  # at rest, 0.01 s each
+    dth = np.zeros((100, 3))
+    start = me.NavState.from_euler(0.7, 0.0, 0.0, np.zeros(3), 0.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match=r"^dt: the mean specific force \|dv\|/dt is 0.09807 m/s²"
+                       r" \(0.01 g\) with dt = 1 s, under the 0.2 g of a navigating vehicle .*"
+                       r"\(dt = 0.01 s gives 1 g\)$"):  # fmt: skip
+        me.mechanize(start, dth, dv, 1.0)
+    me.check_increments(dth, dv, 0.01)
+    me.check_increments(dth, np.zeros((100, 3)), 1.0)
+    me.check_increments(dth, np.where(np.arange(100)[:, None] < 50, dv, 0.0), 0.01)  # 0.5 g
+    jax.jit(lambda d: me.check_increments(dth, d, 1.0)[1])(dv)
+
+
+def test_euler_angles_in_degrees_are_refused_where_concrete():
+    """Audit: `NavState.from_euler(…, roll=0, pitch=30, heading=1)` (degrees) checked only the
+    latitude and built a state. Pitch beyond ±π/2, roll beyond ±π, heading beyond ±2π are
+    refused with the radians; the bounds themselves and traced angles pass."""
+    from hrgjax.ins import mechanization as me
+
+    make = lambda r, p, h: me.NavState.from_euler(0.7, 0.0, 0.0, np.zeros(3), r, p, h)  # noqa: E731
+    for angles, name, shown in (((0.0, 30.0, 1.0), "pitch", "30"), ((4.0, 0.0, 1.0), "roll", "4"),
+                                ((0.0, 0.0, 90.0), "heading", "90")):  # fmt: skip
+        with pytest.raises(ValueError, match=rf"^NavState.from_euler: {name} = {shown} rad is "
+                           rf"beyond .*degrees\? use np.radians\({shown}\) = "):  # fmt: skip
+            make(*angles)
+    make(-np.pi, np.pi / 2, -2 * np.pi)
+    jax.jit(lambda p: make(0.0, p, 0.0).q_bn)(30.0)
+
+
+def test_imu_errors_and_gnss_sigmas_in_datasheet_units_are_refused():
+    """Audit: `ImuErrors(gyro_bias=1.0)` (°/h typed as rad/s), `accel_bias=25` (µg) and
+    `Gnss(position_sigma=150)` (cm) ran. ImuErrors holds `ImuModel`'s ranges with their unit
+    hints; Gnss σ beyond 100 m, 10 m/s; valid and traced values pass."""
+    from hrgjax.ins import gnss
+
+    cases = [
+        (lambda: sd.ImuErrors(gyro_bias=1.0),
+         r"^ImuErrors.gyro_bias \[rad/s\] = 1 is outside the plausible range .* °/h → ×"),
+        (lambda: sd.ImuErrors(accel_bias=25.0), r"^ImuErrors.accel_bias \[m/s²\] = 25 .* µg → ×"),
+        (lambda: sd.ImuErrors(arw=0.01), r"^ImuErrors.arw \[rad/√s\] = 0.01 .* °/√h → ×"),
+        (lambda: gnss.Gnss(position_sigma=150.0),
+         r"^Gnss.position_sigma = 150 m is beyond the 100 m of a GNSS fix's 1σ — cm → ÷100"),
+        (lambda: gnss.Gnss(velocity_sigma=(0.05, 0.05, 50.0)),
+         r"^Gnss.velocity_sigma = 50 m/s is beyond the 10 m/s .* cm/s → ÷100"),
+    ]  # fmt: skip
+    for call, message in cases:
+        with pytest.raises(ValueError, match=message) as err:
+            call()
+        assert "\n" not in str(err.value), message
+    sd.ImuErrors(1e-7, 1e-4, 1e-6, 1e-5)
+    gnss.Gnss(position_sigma=(1.5, 1.5, 3.0), velocity_sigma=0.05)
+    jax.vmap(lambda g: sd.ImuErrors(gyro_bias=g).gyro_bias)(jnp.array([1.0, 2.0]))

@@ -9,12 +9,13 @@ from __future__ import annotations
 import functools
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_finite_host, check_numbers, concrete_value, finite_number
-from .._compiled import fused
+from .._compiled import fused, tracing_callback_free
 
 
 def _powers(F, order=8):
@@ -78,11 +79,20 @@ def _squared(phi, qd, j):
     return phi, qd
 
 
+def _rate_estimate(powers):
+    """max over k = 5…8 of |tr F^k|^(1/k) [1/s]: F's largest |eigenvalue| to within a factor
+    n^(1/k) either way (units of the states drop out of a trace; four powers, so that one
+    pair's λ^k do not cancel in all), without an eigen-decomposition in a trace."""
+    p = jax.lax.stop_gradient(powers)
+    return jnp.max(jnp.stack([jnp.abs(jnp.trace(p[k])) ** (1.0 / k) for k in range(5, 9)]))
+
+
 @fused(static_argnames=("k", "gm"))
 def _discretised(F, q, T, fastest, *, k: int, gm: bool):
     """`discretise`'s arithmetic, its arguments checked: one compiled program called eagerly
     (each operation its own program otherwise, and the squarings' conds traced anew), inlined
-    in a caller's trace. `k` steps of h = T/k; `gm`: the Gauss–Markov path."""
+    in a caller's trace. `k` steps of h = T/k; `gm`: the Gauss–Markov path. Also returns the
+    series' step × `_rate_estimate` (`discretise` checks it for a traced F)."""
     h = T / k
     if gm:  # j = ⌈log2(8·h·fastest)⌉ ≥ 0, and the series over h/2^j
         j = jnp.clip(jnp.ceil(jnp.log2(8.0 * h * jnp.maximum(fastest, 1e-300))), 0,
@@ -90,6 +100,7 @@ def _discretised(F, q, T, fastest, *, k: int, gm: bool):
         h = h / jnp.exp2(j.astype(float))
     x, w = np.polynomial.legendre.leggauss(5 if gm else 3)
     powers = _powers(F)
+    size = jax.lax.stop_gradient(h) * _rate_estimate(powers)
     qd = 0.0
     for xi, wi in zip(x, w, strict=True):
         p = _taylor(powers, 0.5 * h * (1.0 + xi))
@@ -98,14 +109,14 @@ def _discretised(F, q, T, fastest, *, k: int, gm: bool):
     if gm:
         phi, qd = _squared(phi, qd, j)
     if k == 1:
-        return phi, qd
+        return phi, qd, size
 
     def compose(_, pq):
         p, qq = pq
         qq = phi @ qq @ phi.T + qd
         return phi @ p, 0.5 * (qq + qq.T)
 
-    return jax.lax.fori_loop(1, k, compose, (phi, qd))
+    return (*jax.lax.fori_loop(1, k, compose, (phi, qd)), size)
 
 
 def discretise(F, q, T: float, fastest=0.0):
@@ -123,8 +134,10 @@ def discretise(F, q, T: float, fastest=0.0):
     (hrgjax/_threads.py).
 
     `fastest` [1/s] (≥ 0; a number, or a traced scalar): the largest decay rate in F (1/τ of
-    a Gauss–Markov state). Given (> 0, or traced), $Q_h$ takes five-point Gauss–Legendre (the
-    Gauss–Markov drive reaches the position through four integrations), and where
+    a Gauss–Markov state), or the largest |λ| of F's eigenvalues (a fast oscillation off its
+    diagonal: [[−0.01, 5], [−5, −0.01]] needs `fastest=5` over 1 s). Given (> 0, or traced),
+    $Q_h$ takes five-point Gauss–Legendre (the Gauss–Markov drive reaches the position
+    through four integrations), and where
     h·`fastest` > 1/8 each step is the series over $h/2^j$, j the least with
     $h\cdot$`fastest`$/2^j \le 1/8$, squared j times
     ($\phi \leftarrow \phi^2$, $Q \leftarrow \phi Q \phi^\top + Q$): Φ and $Q_d$ within
@@ -143,9 +156,12 @@ def discretise(F, q, T: float, fastest=0.0):
     model's τ, [`ImuModel.checked`][hrgjax.ins.sensors.ImuModel.checked]; past
     `MAX_SQUARINGS`, T·`fastest` > 1e18, Φ and $Q_d$ are NaN: the filter takes τ no shorter
     than T·1e-15, where e^(−T/τ) is 0 either way); `ValueError` for a concrete F with a
-    decay rate |F_ii| beyond `SERIES_LIMIT`/h that `fastest` does not cover (the series alone
-    read e^(−10) as 1343: the message names the `fastest` to pass), and for a concrete q
-    that is not symmetric positive semi-definite.
+    decay rate |F_ii| or an eigenvalue |λ| beyond `SERIES_LIMIT` over the series' step that
+    `fastest` does not cover (the series alone read e^(−10) as 1343, and the rotation above as
+    a growing Φ: the message names the `fastest` to pass), and for a concrete q that is not
+    symmetric positive semi-definite; for a traced F (or `fastest`), an `eqx.error_if` when
+    the step × |λ| estimated from tr F^k exceeds `TRACED_LIMIT` (gross errors only; not
+    inside hrgjax's own callback-free programs, the filter's, whose F is its INS model).
 
     Called outside a trace it runs as one compiled program per (n, k, path): a second call
     compiles nothing."""
@@ -159,31 +175,58 @@ def discretise(F, q, T: float, fastest=0.0):
     check_finite_host("discretise: F", F)
     check_finite_host("discretise: q", q)
     k = max(1, math.ceil(T / 10.0 - 1e-12))
-    _check_model(F, q, T / k, fastest, gm)
+    checked = _check_model(F, q, T / k, fastest, gm)
     F, q = jnp.asarray(F), jnp.asarray(q)
-    return _discretised(F, q, float(T), fastest if gm else 0.0, k=k, gm=gm)
+    phi, qd, size = _discretised(F, q, float(T), fastest if gm else 0.0, k=k, gm=gm)
+    if checked or tracing_callback_free():  # the filter's own program: F is its INS model
+        return phi, qd
+    # outside the fused program: equinox reads its error mode while tracing (_compiled.fused)
+    return eqx.error_if((phi, qd), size > TRACED_LIMIT, _TRACED_MESSAGE)
 
 
 SERIES_LIMIT = 0.125
-"""The largest h·|decay rate| the eighth-order series takes in one step of h (1/8: Φ's
-e^(−h/τ) to ≈ 1e-13); `fastest` squares a faster state's steps down to it."""
+"""The largest h·|decay rate| (h·|λ|, λ an eigenvalue of F) the eighth-order series takes in
+one step of h (1/8: Φ's e^(−h/τ) to ≈ 1e-13); `fastest` squares a faster mode's steps down
+to it."""
+
+TRACED_LIMIT = 2 * SERIES_LIMIT
+"""The largest series step × `_rate_estimate` `discretise` lets pass for a traced F (an
+`eqx.error_if`): the estimate reads |λ| up to n^(1/5) high (6 Gauss–Markov states at 1/τ:
+1.43×), so a traced check holds only the gross errors (the series alone read
+[[−0.01, 5], [−5, −0.01]] over 1 s as a growing Φ, 2.6 for 0.28)."""
+
+_TRACED_MESSAGE = (
+    f"discretise: F (traced) has a mode too fast for the series over its step (step·|λ| > "
+    f"{TRACED_LIMIT}, |λ| estimated from tr F^k): pass fastest= F's largest |eigenvalue| [1/s]"
+)
 
 
-def _check_model(F, q, h: float, fastest, gm: bool) -> None:
+def _check_model(F, q, h: float, fastest, gm: bool) -> bool:
     """Host checks of a concrete (F, q) for `discretise` over steps of `h` [s]: a decay rate
-    |F_ii| the series cannot take over h without a `fastest` that covers it, and a q that is
-    not symmetric positive semi-definite, each a one-line `ValueError`."""
+    |F_ii|, then an eigenvalue |λ| of F (a fast oscillation or coupling off the diagonal),
+    the series cannot take over its step (h, or h/2^j with `fastest`) without a `fastest`
+    that covers it, and a q that is not symmetric positive semi-definite, each a one-line
+    `ValueError`. Returns whether F's rates were checked here (else `discretise` checks them
+    in the trace)."""
     f, qv = concrete_value(F), concrete_value(q)
     given = concrete_value(fastest)
-    if f is not None and (given is not None or not gm):
-        rate = float(np.max(np.abs(np.diag(np.asarray(f, float)))))
+    checked = f is not None and (given is not None or not gm)
+    if checked:
+        f = np.asarray(f, float)
         covered = float(given) if gm else 0.0
-        if h * rate > SERIES_LIMIT and rate > covered * (1 + 1e-9):
-            raise ValueError(
-                f"discretise: F has a decay rate |F_ii| = {rate:g} /s, too fast for the series "
-                f"over h = {h:g} s (h·rate > {SERIES_LIMIT}) with fastest = {covered:g}: "
-                f"pass fastest={rate:g} (the largest 1/τ in F)"
-            )
+        j = min(max(math.ceil(math.log2(8.0 * h * covered)), 0), MAX_SQUARINGS) if covered else 0
+        step = h / 2.0**j  # the series' step, as _discretised takes it
+        lam = float(np.max(np.abs(np.linalg.eigvals(f)))) if f.size else 0.0
+        for rate, what, which in (
+            (float(np.max(np.abs(np.diag(f)), initial=0.0)), "a decay rate |F_ii|", "1/τ in"),
+            (lam, "an eigenvalue |λ|", "|λ| of"),
+        ):
+            if step * rate > SERIES_LIMIT * (1 + 1e-4):  # 1e-4: a fastest printed to 6 digits
+                raise ValueError(
+                    f"discretise: F has {what} = {rate:g} /s, too fast for the series over "
+                    f"h = {h:g} s (h·rate > {SERIES_LIMIT}) with fastest = {covered:g}: "
+                    f"pass fastest={rate:g} (the largest {which} F)"
+                )
     if qv is not None:
         qv = np.asarray(qv, float)
         scale = max(float(np.max(np.abs(qv))), np.finfo(float).tiny)
@@ -195,3 +238,4 @@ def _check_model(F, q, h: float, fastest, gm: bool) -> None:
                 f"discretise: q must be positive semi-definite (a noise spectral density "
                 f"matrix); its smallest eigenvalue is {low:g}"
             )
+    return checked

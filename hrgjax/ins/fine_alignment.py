@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _checks
+from .. import _checks, plausible
 from .._compiled import bucket_size, device, fused
 from ..kalman import Gaussian, update, van_loan
 from ..units import DEG, DEG_PER_H
@@ -80,13 +80,19 @@ ROTATION_TOL = 1e-6
 filter turns `c0` and never makes it orthonormal again."""
 
 _NOISE = {
-    "arw": ("a finite number >= 0 [rad/√s]", _checks.FINITE_NONNEGATIVE),
-    "vrw": ("a finite number >= 0 [m/s/√s]", _checks.FINITE_NONNEGATIVE),
-    "velocity_noise": ("a finite number > 0 [m/s] (R = its square)", _checks.FINITE_POSITIVE),
-    "gyro_bias_std": ("a finite number >= 0 [rad/s]", _checks.FINITE_NONNEGATIVE),
-    "accel_bias_std": ("a finite number >= 0 [m/s²]", _checks.FINITE_NONNEGATIVE),
+    "arw": ("a finite number >= 0 [rad/√s]", _checks.FINITE_NONNEGATIVE, "imu_arw"),
+    "vrw": ("a finite number >= 0 [m/s/√s]", _checks.FINITE_NONNEGATIVE, "imu_vrw"),
+    "velocity_noise": ("a finite number > 0 [m/s] (R = its square)", _checks.FINITE_POSITIVE,
+                       None),
+    "gyro_bias_std": ("a finite number >= 0 [rad/s]", _checks.FINITE_NONNEGATIVE,
+                      "imu_gyro_bias"),
+    "accel_bias_std": ("a finite number >= 0 [m/s²]", _checks.FINITE_NONNEGATIVE,
+                       "imu_accel_bias"),
 }  # fmt: skip
-"""The forms and rules of `fine_align`'s noise options (`check_fine_options`)."""
+"""The forms and rules of `fine_align`'s noise options (`check_fine_options`), and the
+`hrgjax.plausible.RANGES` entry each is held to where concrete — `ImuModel`'s (bounds
+excluded, the message naming the datasheet units it may be in: `arw=0.01` is °/√h typed as
+rad/√s)."""
 
 
 def check_fine_options(where: str, *, step_s=1.0, start_s=0.0,
@@ -95,7 +101,9 @@ def check_fine_options(where: str, *, step_s=1.0, start_s=0.0,
     """Refuse, in one line naming `where` and the option, a `step_s` [s] not a finite number
     > 0, a `start_s` [s] not one >= 0, a noise option (`arw`, `vrw`, `velocity_noise`,
     `gyro_bias_std`, `accel_bias_std`: `FINE_DEFAULTS`) not one real number, or where
-    concrete not finite and >= 0 (`velocity_noise` > 0), an `attitude_std_deg` not 3 such
+    concrete not finite and >= 0 (`velocity_noise` > 0) or outside its `ImuModel` range
+    (`_NOISE`: `arw` 2.5e-3 rad/√s, `vrw` 0.05 m/s/√s, `gyro_bias_std` 0.75 rad/s,
+    `accel_bias_std` 3 m/s², bounds excluded), an `attitude_std_deg` not 3 such
     values [°], a `start_bias_jacobian` not numbers or with a NaN. Traced values pass
     unchecked (`fine_align` is differentiable in them)."""
     for name, x, ok in (("step_s", step_s, _checks.FINITE_POSITIVE),
@@ -104,9 +112,11 @@ def check_fine_options(where: str, *, step_s=1.0, start_s=0.0,
         _checks.check_number(f"{where}: {name}", x, "s")
         _checks.check_values(f"{where}: {name}", x, ok, form)
     for name, x in noise.items():
-        form, ok = _NOISE[name]
+        form, ok, quantity = _NOISE[name]
         _checks.check_number(f"{where}: {name}", x)
         _checks.check_values(f"{where}: {name}", x, ok, form)
+        if quantity is not None:  # concrete values only: plausible.check passes a tracer
+            plausible.check(f"{where}: {name} [{form.split('[')[1]}", x, quantity)
     form = "(level, level, heading) [°], 3 finite numbers >= 0"
     _checks.check_numbers(f"{where}: attitude_std_deg", attitude_std_deg, form, shape=(3,))
     _checks.check_values(f"{where}: attitude_std_deg", attitude_std_deg,

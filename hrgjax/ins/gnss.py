@@ -34,6 +34,15 @@ def _vec3(name):
     return vec3("Gnss", name, _FIELDS[name])
 
 
+SIGMA_MAX = {
+    "position_sigma": (100.0, "m", "cm → ÷100; mm → ÷1000"),
+    "velocity_sigma": (10.0, "m/s", "cm/s → ÷100; mm/s → ÷1000"),
+}
+"""The largest `Gnss.position_sigma` [m] and `velocity_sigma` [m/s], with the units a value
+beyond is typed in: a standalone fix's σ is 1–10 m and 0.05–0.5 m/s (RTK's cm), so 150
+(1.5 m in cm) read as 150 m would have the filter all but ignore its fixes."""
+
+
 _OUTAGES = "((start_s, end_s), …) with 0 <= start < end, finite, in seconds"
 
 
@@ -71,7 +80,8 @@ class Gnss(eqx.Module):
     **Fields:** `rate_hz` [Hz]; `position_sigma` (3,) [m, north east down];
     `velocity_sigma` (3,) [m/s, NED], or `use_velocity=False` for position fixes only;
     `lever_arm` (3,) [m, body FRD]; `outages`: ((start, end), …) [s] without fixes, each
-    with 0 <= start < end (one window is `((start, end),)`)."""
+    with 0 <= start < end (one window is `((start, end),)`). A concrete σ beyond `SIGMA_MAX`
+    (100 m, 10 m/s: in cm or mm) is refused."""
 
     rate_hz: float = eqx.field(static=True, default=1.0)
     position_sigma: jax.Array = eqx.field(
@@ -91,6 +101,10 @@ class Gnss(eqx.Module):
             v = getattr(self, name)
             if is_concrete(v) and not np.all(np.isfinite(np.asarray(v)) & (np.asarray(v) > 0)):
                 raise ValueError(f"Gnss.{name} must be > 0 (a 1σ per NED axis); got {v}")
+            high, unit, hint = SIGMA_MAX[name]
+            if is_concrete(v) and np.any(np.asarray(v) > high):
+                raise ValueError(f"Gnss.{name} = {float(np.max(v)):g} {unit} is beyond the "
+                                 f"{high:g} {unit} of a GNSS fix's 1σ — {hint}")  # fmt: skip
         v = self.lever_arm
         if is_concrete(v) and not np.all(np.isfinite(np.asarray(v))):
             raise ValueError(f"Gnss.lever_arm must be finite [m, body FRD]; got {v}")

@@ -78,7 +78,8 @@ class ImuLog(eqx.Module):
     `AlignmentResult.coarse_deg` and `history_deg` — the heading clockwise from north in
     [0, 360) (or `None`). Lists are taken as arrays. Refused in one line: arrays that are not
     real numbers or of other shapes (N >= 2), and where their values are known (not under
-    `jit`) a NaN or inf, or times that do not increase."""
+    `jit`) a NaN or inf, times that do not increase, or times not uniformly sampled up to
+    jitter (a rate change, a gap: [`check_uniform`][hrgjax.ins.imu_log.check_uniform])."""
 
     t: jax.Array = eqx.field(converter=_array)
     dtheta: jax.Array = eqx.field(converter=_array)
@@ -127,11 +128,45 @@ class ImuLog(eqx.Module):
             raise ValueError(
                 f"ImuLog.t must be strictly increasing (row {int(np.argmax(d <= 0)) + 1})"
             )
+        if t is not None:
+            check_uniform(t)
 
     @property
     def dt(self) -> float:
         """Median sampling interval [s]."""
         return float(np.median(np.diff(np.asarray(self.t))))
+
+
+UNIFORM_TOL = 0.5
+"""How far, in sample intervals, an `ImuLog`'s time stamps may stray from one uniform grid
+(the least-squares line through them: a clock's ppm rate error is its slope), and each step
+from that interval, before the log is refused as not uniformly sampled (`check_uniform`):
+logged stamps jitter by µs to ms on a 10-ms interval and pass; a rate change (1 Hz, then
+2 Hz) or a gap (a dropped sample: a step of 2 intervals) does not — `align` reads every
+increment as one `ImuLog.dt` (the median step), and read such a log with 31σ–55σ of
+confidence in a wrong heading."""
+
+
+def check_uniform(t) -> None:
+    """Refuse, in one line naming `ImuLog.t`, increasing times `t` (N,) [s] that are not one
+    uniform sampling up to jitter: a stamp off the least-squares grid by more than
+    `UNIFORM_TOL` intervals, or a step beyond (1 ± `UNIFORM_TOL`) intervals."""
+    t = np.asarray(t, dtype=float)
+    if t.size < 3:
+        return
+    i = np.arange(t.size) - 0.5 * (t.size - 1)
+    tc = t - t.mean()
+    step = float(i @ tc / (i @ i))  # the grid's interval, > 0 for increasing times
+    stray = float(np.abs(tc - step * i).max()) / step
+    d = np.diff(t) / step
+    if stray > UNIFORM_TOL or d.min() < 1 - UNIFORM_TOL or d.max() > 1 + UNIFORM_TOL:
+        low, high, med = (float(x) for x in (d.min() * step, d.max() * step, np.median(d) * step))
+        raise ValueError(
+            f"ImuLog.t must be uniformly sampled (one interval, up to jitter); its steps span "
+            f"{low:.4g} … {high:.4g} s (median {med:.4g} s) and its stamps stray "
+            f"{stray:.3g} intervals from a uniform grid: a rate change or a gap — resample the "
+            "log to one rate, or split it"
+        )
 
 
 PSINS_FIELDS = {

@@ -217,9 +217,17 @@ class NavState(eqx.Module):
         """A state from geodetic position [rad, rad, m], NED velocity [m/s] and roll, pitch,
         heading [rad].
 
-        **Raises:** `ValueError` for a concrete `lat` beyond ±π/2 (a latitude in degrees;
-        traced values are not checked)."""
+        **Raises:** `ValueError` for a concrete `lat` or `pitch` beyond ±π/2, `roll` beyond
+        ±π, `heading` beyond ±2π (angles in degrees; traced values are not checked)."""
         check_latitude_radians("NavState.from_euler: lat", lat)
+        for name, x, limit, text in (("roll", roll, np.pi, "±π"), ("pitch", pitch, np.pi / 2,
+                                     "±π/2"), ("heading", heading, 2 * np.pi, "±2π")):  # fmt: skip
+            v = None if isinstance(x, jax.core.Tracer) or not is_concrete(x) else np.asarray(x)
+            if v is not None and np.any(bad := np.abs(v) > limit * (1 + 1e-12)):
+                a = float(np.asarray(v, float)[bad].flat[0])
+                raise ValueError(f"NavState.from_euler: {name} = {a:g} rad is beyond {text}: "
+                                 f"angles are in radians here (degrees? use np.radians({a:g}) "
+                                 f"= {np.radians(a):.6g})")  # fmt: skip
         f = lambda x: jnp.asarray(x, float)
         return cls(f(lat), f(lon), f(h), f(v_ned), euler_to_quat(roll, pitch, heading))
 
@@ -340,12 +348,22 @@ def _check_dt(dt):
             raise ValueError(f"dt must be the increments' interval in seconds (> 0); got {d}")
 
 
+MIN_MEAN_SPECIFIC_FORCE = 0.2 * G0
+"""The least mean specific force |dv|/dt [m/s²] over a record that `check_increments` takes
+(0.2 g): a navigating vehicle spends most of its time near 1 g (a zero-g parabola is 20 s
+between 1.8-g pull-ups), so a record under it is a `dt` too long — 100-Hz increments at
+dt = 1 s read 0.01 g and ended 353 km off in height — as `check_stationary` refuses a mean
+specific force off g for the `ImuLog.t` [s]; free fall itself is physical (no bound per
+sample; all-zero increments pass)."""
+
+
 def check_increments(dtheta, dv, dt):
     """`dtheta` [rad] and `dv` [m/s] as float arrays of shape (N, 3), and `dt` [s] > 0; a
     `ValueError` naming the field for another shape, NaN or inf, a gyro increment of π or
-    more (degrees or rates given for radians), or a median specific force |dv|/dt beyond
+    more (degrees or rates given for radians), a median specific force |dv|/dt beyond
     `hrgjax.plausible.RANGES["median_specific_force_mps2"]` (5 g: accelerations [m/s²] given
-    for increments). Concrete values only: traced ones pass."""
+    for increments) or a mean one under `MIN_MEAN_SPECIFIC_FORCE` (0.2 g: a `dt` too long).
+    Concrete values only: traced ones pass."""
     dtheta, dv = jnp.asarray(dtheta, float), jnp.asarray(dv, float)
     if dtheta.ndim != 2 or dtheta.shape[-1] != 3 or dtheta.shape != dv.shape:
         raise ValueError(
@@ -376,6 +394,14 @@ def check_increments(dtheta, dv, dt):
                 "a navigating vehicle (hrgjax.plausible): accelerometer increments are velocity "
                 "changes [m/s] per interval (specific force × dt), not accelerations [m/s²], "
                 "and dt is their interval"
+            )
+        mean = float(np.mean(np.linalg.norm(np.asarray(dv), axis=1))) / float(dt)
+        if 0 < mean < MIN_MEAN_SPECIFIC_FORCE:  # all zeros: no scale a dt could set
+            raise ValueError(
+                f"dt: the mean specific force |dv|/dt is {mean:.4g} m/s² ({mean / G0:.3g} g) "
+                f"with dt = {float(dt):g} s, under the {MIN_MEAN_SPECIFIC_FORCE / G0:g} g of a "
+                f"navigating vehicle (in free fall throughout?): is dt the increments' interval "
+                f"[s]? (dt = {float(dt) * mean / G0:.4g} s gives 1 g)"
             )
     return dtheta, dv
 

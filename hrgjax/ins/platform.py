@@ -83,6 +83,36 @@ _I = {name: i for i, name in enumerate(STATES)}
 _EARTH_FIELDS = {"g": "gravity_mps2", "radius": "earth_radius_m", "earth_rate": "earth_rate_radps"}
 
 
+TAU_MIN = 60.0
+"""The shortest correlation time `PlatformINS.tau_a`, `tau_r` [s] takes: a platform's
+Markov drift varies over minutes to hours (the thesis's 3600 s); a τ of 1 s is one in hours
+typed as seconds (`PlatformINS` also holds τ to `hrgjax.plausible.RANGES["duration_s"]`: a
+τ in ms)."""
+
+
+def _check_units(ins) -> None:
+    """Refuse, in one line naming the field and its unit, a concrete `gyro_sigma` [rad/s]
+    outside `ImuModel`'s `imu_gyro_bias_instability` range, an `accel_sigma` [g-units] outside
+    `imu_accel_bias_instability` / g, a τ under `TAU_MIN` or beyond `duration_s` (traced
+    values pass)."""
+    plausible.check("PlatformINS.gyro_sigma [rad/s]", ins.gyro_sigma, "imu_gyro_bias_instability")
+    high = plausible.RANGES["imu_accel_bias_instability"][1] / G0  # m/s² as g-units
+    a = concrete_value(ins.accel_sigma)
+    if a is not None and np.any(np.asarray(a) >= high):
+        x = float(np.asarray(a, float)[np.asarray(a) >= high].flat[0])
+        raise ValueError(f"PlatformINS.accel_sigma = {x:g} is outside the plausible range 0 … "
+                         f"{high:.4g} g-units (a 1σ in g), its bounds excluded — µg → ×1e-6; "
+                         "mg → ×1e-3 (hrgjax.plausible.relaxed(imu_accel_bias_instability=…) "
+                         "widens it)")  # fmt: skip
+    for name in ("tau_a", "tau_r"):
+        plausible.check(f"PlatformINS.{name} [s]", getattr(ins, name), "duration_s")
+        t = concrete_value(getattr(ins, name))
+        if t is not None and np.any(np.asarray(t) < TAU_MIN):
+            x = float(np.asarray(t, float)[np.asarray(t) < TAU_MIN].flat[0])
+            raise ValueError(f"PlatformINS.{name} = {x:g} s is under the {TAU_MIN:g} s of a "
+                             "platform's Markov drift (nominal 3600 s) — h → ×3600; min → ×60")  # fmt: skip
+
+
 class PlatformINS(eqx.Module):
     """Parameters of one platform INS (module docstring). All SI; angles in rad.
 
@@ -92,7 +122,9 @@ class PlatformINS(eqx.Module):
     (3,) [m/s²]: specific force beyond gravity in (E, N, H) (0 for a stationary object);
     `g` [m/s²], `radius` [m], `earth_rate` [rad/s] (defaults: 9.80665, the WGS-84 semi-major
     axis, ω_ie; values, like the others: a sweep over them compiles once; each refused
-    outside `hrgjax.plausible.RANGES`' `gravity_mps2`, `earth_radius_m`, `earth_rate_radps`)."""
+    outside `hrgjax.plausible.RANGES`' `gravity_mps2`, `earth_radius_m`, `earth_rate_radps`).
+    A concrete `gyro_sigma`, `accel_sigma`, `tau_a`, `tau_r` in another unit (°/h, µg, h) is
+    refused (`_check_units`: `ImuModel`'s ranges, `TAU_MIN`)."""
 
     lat: jax.Array = eqx.field(converter=jnp.asarray, default=0.7853981633974483)
     tau_a: jax.Array = eqx.field(converter=jnp.asarray, default=3600.0)
@@ -114,6 +146,7 @@ class PlatformINS(eqx.Module):
             v = getattr(self, name)
             if is_concrete(v) and not (np.all(np.isfinite(v)) and np.all(np.asarray(v) >= 0)):
                 raise ValueError(f"PlatformINS.{name} must be finite and >= 0; got {v}")
+        _check_units(self)
         if is_concrete(self.lat) and not np.all(np.abs(np.asarray(self.lat)) < np.pi / 2):
             raise ValueError(f"PlatformINS.lat must be in (-π/2, π/2) rad; got {self.lat}")
         if is_concrete(self.specific_force) and np.shape(self.specific_force) != (3,):

@@ -47,6 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import (
     ROUND_OFF,
     check_covariance,
@@ -291,7 +292,9 @@ class ImuErrors(eqx.Module):
 
     **Arguments:** `gyro_bias` [rad/s] and `accel_bias` [m/s²]: standard deviations of
     random constant biases; `arw` [rad/√s] and `vrw` [m/s/√s]: white-noise spectral
-    densities (angle and velocity random walk)."""
+    densities (angle and velocity random walk). A concrete value outside `ImuModel`'s range
+    (`hrgjax.plausible.RANGES["imu_gyro_bias"]`, …, bounds excluded) is refused, named with
+    the datasheet units it may be in (`gyro_bias=1.0`: °/h typed as rad/s)."""
 
     gyro_bias: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
     accel_bias: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)
@@ -307,6 +310,8 @@ class ImuErrors(eqx.Module):
                 raise ValueError(
                     f"ImuErrors.{name} must be a scalar or 3 values; got shape {np.shape(v)}"
                 )
+            unit = plausible.RANGES[f"imu_{name}"][2]  # ImuModel's range (°/h, µg, °/√h hint)
+            plausible.check(f"ImuErrors.{name} [{unit}]", v, f"imu_{name}")
 
     def bias_covariance(self):
         """6×6 covariance of the bias states."""
