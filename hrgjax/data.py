@@ -223,6 +223,30 @@ class MeasuredData:
                              else ""))  # fmt: skip
         return MeasuredData._checked({k: v[rows] for k, v in self._columns.items()})
 
+    def with_column(self, name: str, values) -> MeasuredData:
+        """This dataset with its column `name` replaced by `values` (as many rows; the
+        other columns shared, read-only), e.g. a temperature filtered or interpolated through
+        its readings. The new column is checked as a column is (numbers, finite). A
+        `temperature_c` (or extra column) whose values stay within the old column's span is
+        not held to the plausible ranges again: the old one passed them when this dataset was
+        built, perhaps inside a `plausible.relaxed` block that has ended. Any other
+        replacement is checked as a new dataset is, against the ranges in force now.
+
+        **Raises:** `KeyError` when there is no such column; `ValueError` in one line when
+        `values` is not a finite numeric column of `len(self)` rows."""
+        if name not in self._columns:
+            raise KeyError(f"MeasuredData.with_column: no column {name!r}; this dataset has "
+                           f"{self.names}")  # fmt: skip
+        arr = checked_column(name, values)
+        if arr.shape != (len(self),):
+            raise ValueError(f"MeasuredData.with_column: {name} must be one value per row "
+                             f"({len(self)} rows); got shape {arr.shape}")  # fmt: skip
+        old, cols = self._columns[name], {**self._columns, name: arr}
+        alone = name == "temperature_c" or name not in COLUMNS  # no check reads it with others
+        if alone and old.min() <= arr.min() and arr.max() <= old.max():
+            return MeasuredData._checked(cols)
+        return MeasuredData(cols, allow_extra=True)
+
     @classmethod
     def _checked(cls, columns: dict[str, np.ndarray]) -> MeasuredData:
         """A dataset of `columns`, rows of an already checked dataset (each a new array), not

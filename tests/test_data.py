@@ -244,6 +244,34 @@ def test_runs_are_checked_once_with_the_dataset():
         hg.MeasuredData(cols)  # the range is back
 
 
+def test_a_column_replaced_within_its_span_is_not_range_checked_again():
+    """`discover` interpolates a held thermometer's readings (`unhold_temperature`); it
+    rebuilt the dataset, so data loaded inside `plausible.relaxed(temperature_c=…)` was
+    refused outside the block ("-120 at index 0 is outside … -100 … 150 °C")."""
+    from hrgjax.discovery.thermometer import unhold_temperature
+
+    t = np.arange(0.0, 60.0, 0.1)
+    cols = {"time_s": t, "temperature_c": -120.0 + np.floor(t / 10.0) * 0.05,
+            "table_rate_dps": np.zeros_like(t), "wave_angle_deg": np.zeros_like(t)}  # fmt: skip
+    with hg.plausible.relaxed(temperature_c=(-200.0, 200.0)):
+        d = hg.MeasuredData(cols)
+    with pytest.warns(hg.discovery.thermometer.HeldTemperatureWarning):
+        out = unhold_temperature(d)  # outside the block
+    temp = out["temperature_c"]
+    assert temp.min() == cols["temperature_c"].min() and temp.max() == temp[-1]
+    assert np.all(np.diff(temp) >= 0) and np.unique(temp).size > 100  # interpolated, not held
+    np.testing.assert_array_equal(d["temperature_c"], cols["temperature_c"])  # d kept
+    with pytest.raises(ValueError, match=r"temperature_c' = -130 at index 0 .*-100 … 150"):
+        d.with_column("temperature_c", cols["temperature_c"] - 10.0)  # beyond its span
+    with pytest.raises(ValueError, match=r"^MeasuredData.with_column: temperature_c must be one "
+                       r"value per row \(600 rows\); got shape \(5,\)"):  # fmt: skip
+        d.with_column("temperature_c", np.zeros(5))
+    with pytest.raises(KeyError, match="no column 'accel_x_g'"):
+        d.with_column("accel_x_g", np.zeros(len(d)))
+    with pytest.raises(ValueError, match=r"wave_angle_deg.*(finite|NaN)"):
+        d.with_column("wave_angle_deg", np.full(len(d), np.nan))
+
+
 def test_a_run_whose_table_angle_disagrees_is_named_with_its_dataset_rows():
     """Audit (s30): one run's azimuth wrapped (or in radians) among good runs passed the
     load (the median over runs) and failed in `reduce` naming no run. It is refused where

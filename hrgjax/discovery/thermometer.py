@@ -103,4 +103,4 @@ def unhold_temperature(data: MeasuredData) -> MeasuredData:
         HeldTemperatureWarning,
         stacklevel=user_stacklevel(),
     )
-    return MeasuredData({**data.columns, "temperature_c": new}, allow_extra=True)
+    return data.with_column("temperature_c", new)  # within its readings: no range re-check
