@@ -270,6 +270,18 @@ def test_a_column_replaced_within_its_span_is_not_range_checked_again():
         d.with_column("accel_x_g", np.zeros(len(d)))
     with pytest.raises(ValueError, match=r"wave_angle_deg.*(finite|NaN)"):
         d.with_column("wave_angle_deg", np.full(len(d), np.nan))
+    # the same for the noise model read from a rotation-only log's angles (it said "runs too
+    # short to read it", quoting the range error)
+    from hrgjax.discovery.dwell import turning_noise_model
+
+    rng, t = np.random.default_rng(0), np.arange(0.0, 60.0, 0.01)
+    runs = [{"time_s": t, "temperature_c": np.full(t.size, -120.0), "run": np.full(t.size, r),
+             "table_rate_dps": np.full(t.size, w), "wave_angle_deg": -0.554 * w * t
+             + 1e-5 * rng.standard_normal(t.size).cumsum()} for r, w in enumerate((10.0, -20.0))]  # fmt: skip
+    with hg.plausible.relaxed(temperature_c=(-200.0, 200.0)):
+        turning = hg.MeasuredData({k: np.concatenate([r[k] for r in runs]) for k in runs[0]})
+    nm = turning_noise_model(turning)  # 1e-5° per √(0.01 s) step: 1e-4 °/√s of random walk
+    np.testing.assert_allclose(nm.angle_random_walk, 1e-4 * hg.units.DEG, rtol=0.1)
 
 
 def test_a_run_whose_table_angle_disagrees_is_named_with_its_dataset_rows():

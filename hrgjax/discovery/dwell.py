@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._progress import bar
 from ..calibration.reduce import RateWindows, reduce
 from ..data import MeasuredData
@@ -436,8 +437,12 @@ def turning_noise_model(data: MeasuredData, window_s=None) -> NoiseModel:
     if "run" in data:
         cols["run"] = np.asarray(data["run"])
     lag = 1024.0 if window_s is None else float(window_s)
+    low, high, _ = plausible.RANGES["temperature_c"]  # data's own passed when it was built
+    temp = cols["temperature_c"]  # (perhaps in a plausible.relaxed block that has ended)
+    with plausible.relaxed(temperature_c=(min(low, temp.min()), max(high, temp.max()))):
+        still = MeasuredData(cols)
     try:
-        return NoiseModel.estimate(MeasuredData(cols), max_lag_s=lag)
+        return NoiseModel.estimate(still, max_lag_s=lag)
     except ValueError as e:
         raise ValueError(
             "the log has no still stretch for the noise model, and its runs are too short to "
