@@ -88,6 +88,16 @@ def check_number(who: str, name: str, value, extra: str, *, minimum=None, strict
         raise ValueError(f"{who}: {name} must be a finite number{bound}{extra}; got {value!r}")
 
 
+def plain_number(value):
+    """A real NumPy scalar, 0-d array or concrete JAX scalar as the Python int or float it
+    holds; anything else (a traced value, a bool array) as it is, for the checks to judge."""
+    real = getattr(getattr(value, "dtype", None), "kind", None) in ("i", "u", "f")
+    if real and isinstance(value, np.generic | np.ndarray | jax.Array) and value.ndim == 0:
+        if not isinstance(value, jax.core.Tracer):
+            return value.item()
+    return value
+
+
 def plain_setting(who: str, name: str):
     """An `eqx.field` converter for the numeric setting `name` of `who` (a static field): a
     real number given as a NumPy scalar, a 0-d array or a concrete JAX scalar becomes the
@@ -99,10 +109,7 @@ def plain_setting(who: str, name: str):
         if isinstance(value, jax.core.Tracer):
             raise ValueError(f"{who}: {name} must be a number fixed when the compensator is "
                              "built; got a traced value (jit, vmap or grad)")  # fmt: skip
-        real = getattr(getattr(value, "dtype", None), "kind", None) in ("i", "u", "f")
-        if real and isinstance(value, np.generic | np.ndarray | jax.Array) and value.ndim == 0:
-            return value.item()
-        return value
+        return plain_number(value)
 
     return convert
 
@@ -202,7 +209,9 @@ class AbstractCompensator(eqx.Module):
     def in_range(self, temperature_c, margin_c: float = DOMAIN_MARGIN_C) -> np.ndarray:
         """Mask (NumPy bool, the shape of `temperature_c` [°C]): True within
         `calibrated_range` widened by `margin_c` [°C] at both ends; all True when the range
-        is unknown. **Raises:** `ValueError` for `margin_c` not a finite number ≥ 0."""
+        is unknown. **Raises:** `ValueError` for `margin_c` not a finite number ≥ 0 (a
+        Python, NumPy or concrete JAX scalar)."""
+        margin_c = plain_number(margin_c)
         check_number(type(self).__name__, "margin_c", margin_c, " [°C]", minimum=0.0)
         check_numbers(f"{type(self).__name__}.in_range: temperature_c", temperature_c,
                       "real numbers [°C]")  # fmt: skip
@@ -328,9 +337,10 @@ class AbstractCompensator(eqx.Module):
 
         **Raises:** `RuntimeError` (one line) when JAX's float64 mode is off (the correction
         would run in float32: 5e-3 °/h off on a seed session); `ValueError` for `margin_c`
-        not a finite number ≥ 0, `extrapolate` neither `None` nor a bool or `warn` not a
-        bool, if the data already have those columns, a run has fewer than two samples, or the data are not whole-angle output the case turned: force-to-rebalance
-        output or runs with a commanded precession
+        not a finite number ≥ 0 (Python, NumPy or a concrete JAX scalar), `extrapolate`
+        neither `None` nor a bool or `warn` not a bool, if the data already have those
+        columns, a run has fewer than two samples, or the data are not whole-angle output the
+        case turned: force-to-rebalance output or runs with a commanded precession
         ([`check_whole_angle`][hrgjax.calibration.reduce.check_whole_angle], as `calibrate`
         refuses them).
         """
@@ -341,6 +351,7 @@ class AbstractCompensator(eqx.Module):
                              f"own choice); got {extrapolate!r}")  # fmt: skip
         if not isinstance(warn, bool | np.bool_):
             raise ValueError(f"warn must be True or False; got {warn!r}")
+        margin_c = plain_number(margin_c)  # a NumPy or concrete JAX scalar: its float
         inside = self.in_range(data["temperature_c"], margin_c)
         use_model = self.extrapolates if extrapolate is None else bool(extrapolate)
         check_whole_angle(data)

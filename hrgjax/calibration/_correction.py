@@ -14,7 +14,8 @@ arc whatever the sample rate: the midpoint rule's error, $\frac{1}{24}\Delta\the
 8.4e-3° at 2 Hz; now 6.8e-6° and 1.7e-6°, what the drift term's uniform motion leaves).
 `NODES` = 4 integrates polynomials of degree 7 exactly; on a piece of
 `ARC_RAD` = 22.5° electrical a 2nθ harmonic is integrated to ≈ 5.6e-10·(2n·ARC_RAD)⁸ of its
-amplitude (n = 1: 8e-11; n = 4: 5e-6).
+amplitude (n = 1: 8e-11; n = 4: 5e-6). `integrate_arcs` is the same rule traced, for the MLP's
+end-to-end training (`mlp.integrate_compensated`: its midpoint sum was 3.4e-2° off above).
 
 **Gaps.** An interval far longer than its run's others (samples lost) is integrated the same
 way, over its arc — the angle is known at both ends, and no warning is given: at a fixed
@@ -137,51 +138,89 @@ class Corrected(MeasuredData):
         return by_temperature(self["temperature_c"][~self.in_range], bin_c)
 
 
-def arc_pieces(theta_a, theta_b, temp_a, temp_b, dt):
-    """Cut each sample interval (NumPy arrays: wave angle [rad] and temperature [°C] at its
-    two ends, duration [s]) into ⌈|Δθ|/`ARC_RAD`⌉ (≥ 1) equal pieces of arc.
+def piece_counts(d_theta, arc_rad: float | None = None, xp=np):
+    """Pieces of arc of each sample interval: ⌈|Δθ|/`arc_rad`⌉, at least 1 (Δθ [rad], NumPy
+    or, with `xp=jnp`, traced; `arc_rad` [rad] `None`: `ARC_RAD`). Float, whole values."""
+    arc_rad = ARC_RAD if arc_rad is None else arc_rad
+    return xp.maximum(xp.ceil(xp.abs(d_theta) / arc_rad), 1.0)
 
-    **Returns:** `(inputs, starts, counts)`: `inputs`, per piece, its mid angle [rad], half
-    arc [rad], angle rate [rad/s], mid temperature [°C], half temperature change [°C] and
-    temperature rate [°C/s] (the interval's rates); `starts`, each interval's first piece;
-    `counts`, its number of pieces (what `interval_rates` sums them back with)."""
+
+def piece_inputs(theta_a, d_theta, temp_a, d_temp, dt, index, count):
+    """Piece `index` (from 0) of `count` equal pieces of arc of a sample interval starting at
+    θ_a [rad], T_a [°C], turning Δθ [rad] and ΔT [°C] in `dt` [s] (arrays that broadcast,
+    NumPy or JAX): its mid angle [rad], half arc [rad], angle rate [rad/s], mid temperature
+    [°C], half temperature change [°C] and temperature rate [°C/s] (the interval's rates)."""
+    frac = (index + 0.5) / count
+    half = 0.5 / count
+    return (theta_a + frac * d_theta, half * d_theta, d_theta / dt,
+            temp_a + frac * d_temp, half * d_temp, d_temp / dt)  # fmt: skip
+
+
+def arc_pieces(theta_a, theta_b, temp_a, temp_b, dt, arc_rad: float | None = None):
+    """Cut each sample interval (NumPy arrays: wave angle [rad] and temperature [°C] at its
+    two ends, duration [s]) into `piece_counts` equal pieces of arc (≤ `arc_rad` [rad] each,
+    default `ARC_RAD`).
+
+    **Returns:** `(inputs, starts, counts)`: `inputs`, per piece, its `piece_inputs`;
+    `starts`, each interval's first piece; `counts`, its number of pieces (what
+    `interval_rates` sums them back with)."""
     d_theta, d_temp = theta_b - theta_a, temp_b - temp_a
-    counts = np.maximum(np.ceil(np.abs(d_theta) / ARC_RAD), 1).astype(np.int64)
+    counts = piece_counts(d_theta, arc_rad).astype(np.int64)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     owner = np.repeat(np.arange(counts.size), counts)
-    frac = (np.arange(owner.size) - starts[owner] + 0.5) / counts[owner]
-    half = 0.5 / counts[owner]
-    inputs = (
-        theta_a[owner] + frac * d_theta[owner],
-        half * d_theta[owner],
-        (d_theta / dt)[owner],
-        temp_a[owner] + frac * d_temp[owner],
-        half * d_temp[owner],
-        (d_temp / dt)[owner],
-    )
+    index = np.arange(owner.size) - starts[owner]
+    inputs = piece_inputs(theta_a[owner], d_theta[owner], temp_a[owner], d_temp[owner],
+                          dt[owner], index, counts[owner])  # fmt: skip
     return inputs, starts, counts
 
 
-def interval_rates(comp, pieces) -> np.ndarray:
+def interval_rates(comp, pieces, nodes: int | None = None) -> np.ndarray:
     """Mean compensated input rate [rad/s] over each sample interval (NumPy): `comp` (a
-    module with `corrected_rate`) integrated over the pieces of `arc_pieces` by
-    Gauss–Legendre quadrature, one compiled call padded to a bucketed length."""
+    module with `corrected_rate`) integrated over the pieces of `arc_pieces` by `nodes`-point
+    (default `NODES`) Gauss–Legendre quadrature, one compiled call padded to a bucketed
+    length (`nodes=1` with one piece an interval: the mid-angle rule before the arc's)."""
     inputs, starts, counts = pieces
     n = inputs[0].size
     padded = [device(bucket_pad(x, bucket_size(n))) for x in inputs]
-    means = np.asarray(_arc_means(comp, *padded))[:n]
+    means = np.asarray(_arc_means(comp, *padded, NODES if nodes is None else nodes))[:n]
     return np.add.reduceat(means, starts) / counts
 
 
-@program
-def _arc_means(comp, theta_mid, half_arc, theta_dot, temp_mid, half_temp, temp_dot):
-    """Mean of `comp.corrected_rate` over each piece of arc [rad/s]: `NODES`-point
-    Gauss–Legendre in θ (and T, linear in θ) about the mid angle [rad] and temperature [°C],
-    at the piece's constant angle rate [rad/s] and temperature rate [°C/s]."""
-    x, w = (jnp.asarray(v) for v in np.polynomial.legendre.leggauss(NODES))
+def piece_means(comp, theta_mid, half_arc, theta_dot, temp_mid, half_temp, temp_dot,
+                nodes: int = NODES):  # fmt: skip
+    """Mean of `comp.corrected_rate` over each piece of arc [rad/s] (1-D arrays of
+    `piece_inputs`): `nodes`-point Gauss–Legendre in θ (and T, linear in θ) about the mid
+    angle [rad] and temperature [°C], at the piece's constant angle rate [rad/s] and
+    temperature rate [°C/s]. Traceable (jit, grad, vmap)."""
+    x, w = (jnp.asarray(v) for v in np.polynomial.legendre.leggauss(nodes))
     theta = theta_mid[:, None] + half_arc[:, None] * x[None, :]
     temp = temp_mid[:, None] + half_temp[:, None] * x[None, :]
     rate = jax.vmap(jax.vmap(comp.corrected_rate, in_axes=(0, None, 0, None)))(
         theta, theta_dot, temp, temp_dot
     )
     return 0.5 * rate @ w
+
+
+@program
+def _arc_means(comp, theta_mid, half_arc, theta_dot, temp_mid, half_temp, temp_dot, nodes):
+    """`piece_means` compiled (`nodes` static: a Python int)."""
+    return piece_means(comp, theta_mid, half_arc, theta_dot, temp_mid, half_temp, temp_dot,
+                       nodes)  # fmt: skip
+
+
+def integrate_arcs(comp, t, theta, temperature_c, pieces: int):
+    """Case angle ψ [rad] at every sample of one run (ψ = 0 at `t[0]`) by `correct`'s rule,
+    traceable (jit, grad, vmap over runs): each interval cut into `piece_counts` pieces and
+    each piece integrated by `piece_means`, from `t` [s], θ [rad] and T [°C] (N,).
+    `pieces` (a Python int ≥ every interval's count) is the static width of the padded
+    (N − 1, `pieces`) grid; pieces past an interval's count are evaluated and dropped."""
+    dt, d_theta, d_temp = jnp.diff(t), jnp.diff(theta), jnp.diff(temperature_c)
+    counts = piece_counts(d_theta, xp=jnp)[:, None]
+    index = jnp.arange(pieces, dtype=dt.dtype)[None, :]
+    col = lambda x: x[:, None]  # noqa: E731
+    inputs = piece_inputs(col(theta[:-1]), col(d_theta), col(temperature_c[:-1]), col(d_temp),
+                          col(dt), index, counts)  # fmt: skip
+    shape = (dt.shape[0], pieces)
+    means = piece_means(comp, *(jnp.broadcast_to(x, shape).ravel() for x in inputs))
+    rate = jnp.sum(jnp.where(index < counts, means.reshape(shape), 0.0), axis=1) / counts[:, 0]
+    return jnp.concatenate([jnp.zeros(1, rate.dtype), jnp.cumsum(rate * dt)])
