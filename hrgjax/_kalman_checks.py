@@ -279,16 +279,27 @@ def check_converged(ok, p, n_iter: int):
 
 def check_run(name: str, xs, ps, ll):
     """`(xs, ps, ll)` of a filter or smoother pass, or one line (`ValueError`) when their
-    values are concrete and not finite: naming the first step whose mean or covariance is
-    not (an unstable state the measurements do not see overflows: Φ = 1.5 for 2000 steps
-    gave NaN silently). Traced results (the caller's `jit`) pass."""
+    values are concrete and not finite, saying which is not — the state estimate, the
+    covariance, the log-likelihood — and from which step (an unstable state the
+    measurements do not see overflows: Φ = 1.5 for 2000 steps gave NaN silently). Traced
+    results (the caller's `jit`) pass."""
     last = [concrete_value(a) for a in (ll, xs[-1], ps[-1])]
     if any(v is None for v in last) or all(np.isfinite(v).all() for v in last):
         return xs, ps, ll
     x, p = concrete_value(xs), concrete_value(ps)  # the primal values under an eager grad
-    bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(p).all(axis=(1, 2)))
-    at = f"from step {int(np.argmax(bad))} of {len(bad)} on" if bad.any() else "in its total"
-    raise ValueError(f"{name}: the estimate is not finite {at} (log-likelihood "
+    bad_x, bad_p = ~np.isfinite(x).all(axis=1), ~np.isfinite(p).all(axis=(1, 2))
+    flags = (("state estimate", bad_x.any()), ("covariance", bad_p.any()),
+             ("log-likelihood", not np.isfinite(last[0])))  # fmt: skip
+    parts = [what for what, bad in flags if bad]
+    what = ", the ".join(parts[:-1]) + " and the " + parts[-1] if len(parts) > 1 else parts[0]
+    bad = bad_x | bad_p
+    if not bad.any():  # the estimates are finite: an innovation overflowed νᵀS⁻¹ν
+        raise ValueError(f"{name}: the log-likelihood is not finite ({float(last[0])}) though "
+                         "the state estimate and covariance are: an innovation beyond the "
+                         "float range of its covariance (zs in other units than the "
+                         "model's?)")  # fmt: skip
+    raise ValueError(f"{name}: the {what} {'are' if len(parts) > 1 else 'is'} not finite from "
+                     f"step {int(np.argmax(bad))} of {len(bad)} on (log-likelihood "
                      f"{float(last[0])}): a state that grows without bound (an eigenvalue of phi "
                      "above 1 in size, unseen by H) overflowed; measure or bound it, or shorten "
                      "the record")  # fmt: skip

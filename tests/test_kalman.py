@@ -533,13 +533,67 @@ def test_steady_state_is_the_riccati_solution_at_any_noise_ratio():
     assert "\n" not in str(e.value)
 
 
+def test_steady_state_balances_states_of_any_scale():
+    """Audit: Φ = [[1, 9.8], [0, 0.9999]], Q_d = diag(1e-6, q₂), H = [1, 0], R = 1e-2: the
+    doubling's Gauss–Jordan pivots, chosen by size in the model's units, left the small
+    state's gain 5e-4 off at q₂ = 1e-24 and 36× at 1e-28. Now (balanced) the gain and P
+    meet the doubling in 80-digit decimals to 1e-11 and scipy's `solve_discrete_are` to
+    its own error (1.3e-9 at 1e-28)."""
+    from scipy.linalg import solve_discrete_are
+
+    phi, h, r = np.array([[1.0, 9.8], [0.0, 0.9999]]), np.array([[1.0, 0.0]]), np.array([[1e-2]])
+    exact = {  # q₂: K, diag P (the doubling in Python's `decimal`, 80 digits, to convergence)
+        1e-24: ([0.009950124999689497, 4.827285354970694e-16],
+                [0.00010050124999699007, 5.000250000733951e-21]),
+        1e-28: ([0.009950124999218806, 4.827285366559858e-20],
+                [0.00010050124999218808, 5.000250012499448e-25]),
+    }  # fmt: skip
+    for q2, (k_exact, p_exact) in exact.items():
+        qd = np.diag([1e-6, q2])
+        pp, gain, _ = kalman.steady_state(phi, qd, h, r)
+        np.testing.assert_allclose(gain[:, 0], k_exact, rtol=1e-11)
+        np.testing.assert_allclose(np.diag(pp), p_exact, rtol=1e-11)
+        want = solve_discrete_are(phi.T, h.T, qd, r)
+        np.testing.assert_allclose(gain, want @ h.T / (h @ want @ h.T + r), rtol=1e-8)
+        np.testing.assert_allclose(pp, want, rtol=1e-8)
+
+
+def test_steady_state_keeps_exactly_known_states_at_zero():
+    """Audit: Φ = [[0.99, 1, 1], [0, 1, 0], [0, 0, 1]], Q_d = diag(1e-2, 1e-6, 0), p0 = 0:
+    state 2 has no noise and no initial uncertainty, so its variance is 0 at every step,
+    but the doubling kept its eigenvalue 1 and amplified round-off through it: refused in
+    100 doublings, state 1's variance 20× too large in 200. Now its rows of P and K are
+    exactly 0 and the rest is scipy's `solve_discrete_are` on the reduced model. The set
+    is found inside the compiled program, on traced values (as under a caller's `jit`)."""
+    from scipy.linalg import solve_discrete_are
+
+    phi = np.array([[0.99, 1.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    qd, h, r = np.diag([1e-2, 1e-6, 0.0]), np.array([[1.0, 0.0, 0.0]]), np.eye(1)
+    want = solve_discrete_are(phi[:2, :2].T, h[:, :2].T, qd[:2, :2], r)
+    want_k = want @ h[:, :2].T / (h[:, :2] @ want @ h[:, :2].T + r)
+    pp, gain, _ = kalman.steady_state(phi, qd, h, r)
+    assert not np.any(np.asarray(pp)[2]) and not np.any(np.asarray(pp)[:, 2])
+    assert float(gain[2, 0]) == 0.0
+    np.testing.assert_allclose(pp[:2, :2], want, rtol=1e-12)
+    np.testing.assert_allclose(gain[:2], want_k, rtol=1e-12)
+
+
 def test_an_overflowing_filter_is_refused_in_one_line():
     """Audit: Φ = 1.5 on a state no measurement sees, 2000 steps: the covariance overflowed
     and the filter returned NaN with no message. Now one line naming the first step (here
-    Φ = 1e80: inf at step 1, on the module's shapes; the smoother carries it back to 0)."""
-    phi = jnp.array([[1e80, 0.0], [0.0, 0.9]])
+    Φ = 1e80: inf at step 1, on the module's shapes; the smoother carries it back to 0) and
+    what is not finite: it said "the estimate" when only the log-likelihood was (a
+    measurement of 1e200, whose νᵀS⁻¹ν overflows, beside a finite estimate)."""
+    phi, h = jnp.array([[1e80, 0.0], [0.0, 0.9]]), jnp.array([[0.0, 1.0]])
+    far = ZS.at[3, 0].set(1e200)
     for run, step in ((kalman.kalman_filter, 1), (kalman.rts_smoother, 0)):
-        with pytest.raises(ValueError, match=rf"^{run.__name__}: the estimate is not finite from "
-                                             rf"step {step} of 7 on") as e:  # fmt: skip
-            run(PRIOR, phi, QD, jnp.array([[0.0, 1.0]]), R, ZS)
+        with pytest.raises(ValueError, match=rf"^{run.__name__}: the state estimate, the "
+                                             rf"covariance and the log-likelihood are not finite "
+                                             rf"from step {step} of 7 on") as e:  # fmt: skip
+            run(PRIOR, phi, QD, h, R, ZS)
+        assert "\n" not in str(e.value)
+        with pytest.raises(ValueError, match=rf"^{run.__name__}: the log-likelihood is not finite "
+                                             r"\(-inf\) though the state estimate and covariance "
+                                             r"are: an innovation beyond") as e:  # fmt: skip
+            run(PRIOR, PHI, QD, h, R, far)
         assert "\n" not in str(e.value)
