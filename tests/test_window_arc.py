@@ -212,3 +212,33 @@ def test_correct_takes_a_numpy_or_jax_scalar_margin(margin):
     assert not comp.in_range(np.array([20.0]), margin / 2).any()
     with pytest.raises(ValueError, match=r"margin_c must be a finite number ≥ 0 \[°C\]; got"):
         comp.correct(data, margin_c=jnp.asarray([2.0]))
+
+
+class _Sqrt(eqx.Module):
+    """A law that is NaN above 40 °C: a piece evaluated past its interval would show it."""
+
+    a: jax.Array
+
+    def corrected_rate(self, theta, theta_dot, temp, temp_dot):
+        return self.a * jnp.sqrt(40.0 - temp) * theta_dot
+
+
+def test_traced_piece_counts_agree_and_padding_never_drops_or_leaves_the_arc():
+    """Review (s32): XLA multiplies by 1/ARC_RAD where NumPy divided, so at 29·22.5°,
+    39·22.5° … the traced count was one more than `run_groups` counted and the training's
+    integral dropped a piece: 39.8° off `correct` after a 652.5° gap; a padded piece was
+    evaluated beyond its interval (T extrapolated past a law's domain: a NaN gradient)."""
+    from hrgjax.calibration._correction import ARC_RAD, integrate_arcs, piece_counts
+
+    k = np.arange(1.0, 80.0)[:, None] * ARC_RAD
+    arcs = (k + np.arange(-8, 9)[None, :] * np.spacing(k)).ravel()
+    traced = jax.jit(lambda v: piece_counts(v, xp=jnp))(arcs)
+    np.testing.assert_array_equal(piece_counts(arcs), traced)
+    t, theta, temp = jnp.array([0.0, 1.0, 2.0]), jnp.array([0.0, 0.1, 3.0]), jnp.array(
+        [39.0, 39.5, 39.99])  # fmt: skip
+    psi = lambda a, pieces: integrate_arcs(_Sqrt(a), t, theta, temp, pieces)[-1]  # noqa: E731
+    full = psi(1.0, 8)  # the second interval needs 8 pieces
+    np.testing.assert_allclose(psi(1.0, 2), full, rtol=1e-3)  # too few: longer pieces
+    gradient = jax.grad(psi)(1.0, 8)
+    assert np.isfinite(gradient)
+    np.testing.assert_allclose(gradient, full, rtol=1e-12)  # ψ is linear in a

@@ -140,9 +140,12 @@ class Corrected(MeasuredData):
 
 def piece_counts(d_theta, arc_rad: float | None = None, xp=np):
     """Pieces of arc of each sample interval: ⌈|Δθ|/`arc_rad`⌉, at least 1 (Δθ [rad], NumPy
-    or, with `xp=jnp`, traced; `arc_rad` [rad] `None`: `ARC_RAD`). Float, whole values."""
-    arc_rad = ARC_RAD if arc_rad is None else arc_rad
-    return xp.maximum(xp.ceil(xp.abs(d_theta) / arc_rad), 1.0)
+    or, with `xp=jnp`, traced; `arc_rad` [rad] `None`: `ARC_RAD`). Float, whole values.
+    Both ways multiply by the reciprocal (XLA turns a division by a constant into that: a
+    NumPy division counted one piece fewer at 29·22.5°, 39·22.5° …, and the traced sum then
+    lost a piece of arc)."""
+    inverse = 1.0 / (ARC_RAD if arc_rad is None else arc_rad)
+    return xp.maximum(xp.ceil(xp.abs(d_theta) * inverse), 1.0)
 
 
 def piece_inputs(theta_a, d_theta, temp_a, d_temp, dt, index, count):
@@ -213,13 +216,15 @@ def integrate_arcs(comp, t, theta, temperature_c, pieces: int):
     traceable (jit, grad, vmap over runs): each interval cut into `piece_counts` pieces and
     each piece integrated by `piece_means`, from `t` [s], θ [rad] and T [°C] (N,).
     `pieces` (a Python int ≥ every interval's count) is the static width of the padded
-    (N − 1, `pieces`) grid; pieces past an interval's count are evaluated and dropped."""
+    (N − 1, `pieces`) grid; pieces past an interval's count repeat its last one (inside its
+    arc: no extrapolated θ or T, so no NaN gradient) and are dropped. An interval that needs
+    more than `pieces` is cut into `pieces` longer ones (no arc is lost)."""
     dt, d_theta, d_temp = jnp.diff(t), jnp.diff(theta), jnp.diff(temperature_c)
-    counts = piece_counts(d_theta, xp=jnp)[:, None]
+    counts = jnp.minimum(piece_counts(d_theta, xp=jnp), pieces)[:, None]
     index = jnp.arange(pieces, dtype=dt.dtype)[None, :]
     col = lambda x: x[:, None]  # noqa: E731
     inputs = piece_inputs(col(theta[:-1]), col(d_theta), col(temperature_c[:-1]), col(d_temp),
-                          col(dt), index, counts)  # fmt: skip
+                          col(dt), jnp.minimum(index, counts - 1.0), counts)  # fmt: skip
     shape = (dt.shape[0], pieces)
     means = piece_means(comp, *(jnp.broadcast_to(x, shape).ravel() for x in inputs))
     rate = jnp.sum(jnp.where(index < counts, means.reshape(shape), 0.0), axis=1) / counts[:, 0]

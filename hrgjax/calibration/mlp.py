@@ -461,7 +461,8 @@ class AngleRuns(eqx.Module):
     `t`, `theta` [rad], `temperature_c`, `table_angle` [rad]: shape (R, N); `checkpoints`:
     sample indices (C,) bounding the windows of moving runs (the last one is N − 1);
     `static`: (R,) true for runs at rest, which count as one window, as in the reduction;
-    `pieces`: the most pieces of arc a sample interval spans (`integrate_compensated`).
+    `pieces`: the most pieces of arc a sample interval spans (`integrate_compensated`;
+    `run_groups` counts it: fewer makes an interval's pieces longer, less accurate).
     """
 
     t: jax.Array
