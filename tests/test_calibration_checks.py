@@ -161,6 +161,24 @@ def test_precession_fit_refuses_sweeps_that_cover_too_little_angle():
         comp.fit(_sweeps(30.0))
 
 
+def test_precession_sweeps_with_table_readback_jitter_are_at_rest():
+    """A rate table's readback jitter (1e-5 °/s) on sweeps taken at rest was refused as "the
+    table turns"; within `STILL_RATE_DPS` it is rest, as everywhere else in the package, and
+    the fit is the jitter-free one. A table that turns is still refused, in one line."""
+    comp = cal.PrecessionCompensator(settle_s=0.0)
+    data = _sweeps(180.0)
+    cols = dict(data.columns)
+    cols["table_rate_dps"] = 1e-5 * np.random.default_rng(1).normal(size=len(data))
+    still = comp.fit(data)
+    jitter = comp.fit(hg.MeasuredData(cols))
+    np.testing.assert_array_equal(np.asarray(jitter.drift_coef), np.asarray(still.drift_coef))
+    cols["table_rate_dps"] = np.full(len(data), 0.01)
+    with pytest.raises(ValueError, match=r"^run 0: the table turns \(\|table_rate_dps\| up to "
+                       r"0\.01 °/s\); virtual-precession sweeps are taken with the case at rest "
+                       r"\(\|table_rate_dps\| ≤ STILL_RATE_DPS = 0\.001 °/s\)$"):  # fmt: skip
+        comp.fit(hg.MeasuredData(cols))
+
+
 @pytest.mark.parametrize(
     ("cls", "settings", "match"),
     [

@@ -236,6 +236,31 @@ def test_bad_arguments_are_refused(sessions):
         compare_corrected({"F": corrected, "G": part})
 
 
+def test_another_sessions_runs_under_the_same_ids_are_refused(sessions):
+    """Compensated data of two sessions numbered alike passed (only the run ids were
+    compared): each run's start and end time, duration, mean temperature and wave angle at
+    its start and end must be the same session's, and the first that differs is named."""
+    cal, test, fourier = sessions
+    corrected = fourier.correct(test)
+    other_temps = fourier.correct(closed_form_session(0.0, temps=(0.0, 20.0, 40.0)), warn=False)
+    with pytest.raises(ValueError, match=r"^'G': run 0 differs from that of 'F': mean "
+                       r"temperature 0 °C against -40 °C \(compensated data of another "
+                       r"session\? every entry must compensate the same session\)$"):  # fmt: skip
+        compare_corrected({"F": corrected, "G": other_temps})
+    # the same plan at another switch-on: only the wave angles tell (run 0 is static)
+    with pytest.raises(ValueError, match=r"^'G': run 0 differs from that of 'F': end wave angle"):
+        compare_corrected({"F": corrected, "G": fourier.correct(cal)})
+    cols = dict(corrected.columns)
+    cols["time_s"] = cols["time_s"] + np.where(corrected.run == 5, 100.0, 0.0)
+    late = hg.MeasuredData(cols, allow_extra=True)
+    with pytest.raises(ValueError, match=r"^'late': run 5 differs from that of 'F': start time "
+                       r"100 s against 0 s"):  # fmt: skip
+        compare_corrected({"F": corrected, "late": late})
+    # the same session's rows pass, whatever each compensator made of them
+    c = compare_corrected({"F": corrected, "raw": NoCompensation().correct(test)})
+    assert c.labels == ("F", "raw")
+
+
 def test_measured_temperatures_and_wave_angles_a_half_turn_apart_group_as_one(sessions):
     """Temperatures that jitter by 0.05 °C make one row per chamber level (not one per
     sample, all NaN: 7180 rows on the auditor's session), in `accuracy_table` as in

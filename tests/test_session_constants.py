@@ -14,12 +14,15 @@ samples counted from the session's own temperatures."""
 import functools
 import json
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from helpers import closed_form_session
 
 import hrgjax as hg
 from hrgjax.calibration import (
+    AbstractCompensator,
     FourierCompensator,
     TemperatureDomainWarning,
     compare,
@@ -30,7 +33,7 @@ from hrgjax.calibration import (
 from hrgjax.calibration.compensators import Corrected, NoCompensation
 from hrgjax.calibration.evaluate import SEED_TABLE, accuracy_table, format_table, out_of_range
 from hrgjax.calibration.paired import constant_resolution, offset_difference
-from hrgjax.units import K_E_NOMINAL
+from hrgjax.units import DEG, DEG_PER_H, K_E_NOMINAL
 
 SWITCH_ON_DPH = (0.0, 0.25, 0.43)
 """Switch-on biases [°/h] of calibration A, calibration B and the test session."""
@@ -255,6 +258,76 @@ def test_same_constants_keep_the_one_offset(switch_ons):
     assert 1e-4 < abs(d.value_dph) < d.resolution_dph and not d.differ
     assert c.offsets_for("A", "A2") == "session" and c.paired("A", "A2").offsets == "session"
     assert "different constants" not in c.format() and "all, own offset" not in c.format()
+
+
+class _Law(AbstractCompensator):
+    """The closed-form session's own laws (tests/helpers.py `session_drift`,
+    `session_scale_factor`, in jnp) with a known error added to the drift [°/h]:
+    `const` + `a`·cos 2θ + `s`·sin 2θ."""
+
+    k_e: float = eqx.field(static=True, default=K_E_NOMINAL)
+    const: float = 0.0
+    a: float = 0.0
+    s: float = 0.0
+
+    def fit(self, data, *, key=None, raw=None):
+        return self
+
+    def drift(self, theta, temperature_c):
+        dt = temperature_c - 20.0
+        amp = 1.5 * DEG_PER_H * jnp.exp(-0.016 * dt)
+        law = (0.3 + 0.005 * dt) * DEG_PER_H - amp * jnp.sin(2 * (theta - (25.0 + 0.16 * dt) * DEG))
+        err = self.const + self.a * jnp.cos(2 * theta) + self.s * jnp.sin(2 * theta)
+        return law + err * DEG_PER_H
+
+    def scale_factor(self, theta, temperature_c):
+        return 1.0 - 2 * (0.0046 - 9.6e-5 * (temperature_c - 20.0)) * jnp.cos(2 * theta)
+
+
+def test_a_third_compensator_does_not_decide_a_pair():
+    """A leaves 0.02 cos 2θ °/h, B more; C leaves nothing but carries +0.2 °/h, so its static
+    runs scatter least and the session's offset is C's. A and B agree on their constant:
+    judged after C's offset (before: both carry C's 0.2 °/h) "A better" (p = 4e-4) read
+    "not told apart" (p = 0.72). Judged after the pair's own offset, the verdict and p-value
+    are those of A and B alone, bit for bit; with `offset_from="C"` named, C's as asked."""
+    test = _noisy(closed_form_session(SWITCH_ON_DPH[2]), 0)
+    comps = {"A": _Law(a=0.02), "B": _Law(a=0.03, s=0.01), "C": _Law(const=0.2)}
+    corrected = {lab: comp.correct(test) for lab, comp in comps.items()}
+    two = compare_corrected({lab: corrected[lab] for lab in "AB"})
+    three = compare_corrected(corrected)
+    assert two.offset.source == "A" and three.offset.source == "C"
+    assert not three.offset_difference("A", "B").differ
+    alone, got = two.paired("A", "B"), three.paired("A", "B")
+    assert alone.verdict == "a" and alone.p_value < 1e-3 and alone.offsets == "session"
+    assert (got.verdict, got.p_value, got.mean, got.rms_a, got.rms_b) == (
+        alone.verdict, alone.p_value, alone.mean, alone.rms_a, alone.rms_b)  # fmt: skip
+    assert three.offsets_for("A", "B") == "pair" and three.pair_offset_from("A", "B") == "A"
+    assert (got.offsets, got.offset_source) == ("pair", "A")
+    # after A's own offset, recomputed by hand from the per-run errors
+    b = three.own_offsets["A"].value_dph
+    e = {lab: three.errors[lab]["drift_error_dph"] - b for lab in "AB"}
+    assert got.mean == pytest.approx(paired_difference(e["A"], e["B"]).mean, rel=1e-9)
+    old = three.paired("A", "B", offsets="session")  # C's offset: the old verdict
+    assert old.verdict == "none" and old.p_value > 0.5 and old.offset_source == "C"
+    named = compare_corrected(corrected, offset_from="C")
+    kept = named.paired("A", "B")
+    assert (kept.offsets, kept.verdict, kept.p_value) == ("session", "none", old.p_value)
+    # the pairs with C keep the session's offset (C's) or their own (constants 0.2 apart)
+    assert {three.offsets_for("A", "C"), three.offsets_for("B", "C")} <= {"session", "own"}
+    # the reports show the residuals the verdict used and name the offset
+    report = json.loads(json.dumps(three.to_json(), allow_nan=False))
+    entry = next(p for p in report["paired"] if (p["a"], p["b"], p["key"]) == (
+        "A", "B", "static_residual_dph"))  # fmt: skip
+    assert (entry["offsets"], entry["offset_source"], entry["verdict"]) == ("pair", "A", "a")
+    assert entry["with_one_offset"]["verdict"] == "none"
+    assert entry["with_one_offset"]["offset_source"] == "C"
+    text = three.format(by_wave_angle=False)
+    row = next(line for line in text.splitlines() if line.strip().startswith("all, A's offset"))
+    cells = [float(x) for x in row.split()[3:]]
+    assert cells[:2] == pytest.approx([got.rms_a, got.rms_b], rel=1e-3)
+    assert "(after A's offset, the pair's: row 'all, A's offset'; with the session's, C's: " \
+        "'A and B not told apart at 95 %'" in text  # fmt: skip
+    assert "all, A's offset" not in named.format(by_wave_angle=False)
 
 
 @pytest.fixture(scope="module")

@@ -10,16 +10,22 @@ Two caveats travel with every form of the report, not only the CLI's stdout:
 - **the temperature domain**: each compensator's calibrated range and the samples of the
   session outside it (its `temperature_domain`); the tables mark a group holding such runs
   with `*`, the figure draws it hollow.
+
+It also holds what `compare_corrected` builds a comparison with: its arguments' checks
+(`check_arguments`, and `check_same_runs`: every entry compensates one session's runs), the least-σ choice of an offset
+(`least_sigma`), residuals after another offset (`after_offset`) and the domains.
 """
 
 from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 
 import numpy as np
 
 from ._azimuth import AZIMUTH_MIN_SPREAD, azimuth_groups, azimuth_spread, static_azimuths
+from ._compensator import Corrected
 from .evaluate import SEED_TABLE
 
 UNIT = {"static_residual_dph": "°/h", "angle_error_deg": "°", "max_angle_error_deg": "°"}
@@ -76,6 +82,94 @@ def domain_json(domain: dict | None) -> dict | None:
     }
 
 
+def check_arguments(corrected, offset_from, temperature_bin_c, angle_bin_deg) -> tuple:
+    """`compare_corrected`'s arguments checked (one-line errors); returns the labels."""
+    if not isinstance(corrected, Mapping):
+        raise TypeError(f"compare_corrected: corrected must be a dict {{label: compensated "
+                        f"data}}; got {type(corrected).__name__}")  # fmt: skip
+    labels = tuple(corrected)
+    if not labels:
+        raise ValueError("give at least one compensator")
+    for name, width in (("temperature_bin_c", temperature_bin_c), ("angle_bin_deg", angle_bin_deg)):
+        number = isinstance(width, int | float | np.integer | np.floating) and not isinstance(
+            width, bool | np.bool_
+        )
+        if not number or not width > 0 or not math.isfinite(width):
+            raise ValueError(f"{name} must be a number > 0; got {width!r}")
+    if offset_from is not None and offset_from not in labels:
+        raise ValueError(f"offset_from {offset_from!r} is not one of the labels {list(labels)}")
+    return labels
+
+
+def least_sigma(labels, own: dict) -> str:
+    """The label among `labels` whose [`Offset`][hrgjax.calibration.Offset] in `own` has the
+    smallest σ (the first on a tie; the first label when no σ is finite)."""
+    sig = np.array([own[lab].sigma_dph for lab in labels], float)
+    return labels[int(np.nanargmin(sig))] if np.any(np.isfinite(sig)) else labels[0]
+
+
+def after_offset(errors: dict, value_dph: float) -> dict:
+    """Per-run errors taken with no offset (`corrected_run_errors`' output) after an offset
+    [°/h], derived: the static rates less it, the end-of-run angles less it times the run's
+    duration; the largest angle errors NaN (they need the samples)."""
+    e = errors
+    return {**e, "drift_error_dph": e["drift_error_dph"] - value_dph,
+            "angle_error_deg": e["angle_error_deg"] - value_dph * e["duration_s"] / 3600.0,
+            "max_angle_error_deg": np.full(e["run"].shape, np.nan)}  # fmt: skip
+
+
+RUN_FIELDS = (("start time", "s"), ("end time", "s"), ("duration", "s"),
+              ("mean temperature", "°C"), ("start wave angle", "°"),
+              ("end wave angle", "°"))  # fmt: skip
+"""What [`compare_corrected`][hrgjax.calibration.compare_corrected] compares run by run: one
+session's rows give every entry the same values."""
+
+
+def check_same_runs(corrected: dict, errors: dict) -> None:
+    """Refuse, in one line, compensated data that are not one session's: other run ids than
+    the first entry's, or a run whose start or end time [s], duration [s], mean temperature
+    [°C] or measured wave angle at its start or end [°] differs from its by more than
+    round-off (the first such run and what differs are named; one session's rows are equal,
+    `correct` keeps them). `errors`: each entry's `corrected_run_errors`."""
+    first = None
+    for lab, data in corrected.items():
+        idx, t, wave = data.run_indices(), data["time_s"], data["wave_angle_deg"]
+        e = errors[lab]
+        values = (np.array([t[i[0]] for i in idx]), np.array([t[i[-1]] for i in idx]),
+                  e["duration_s"], e["temperature_c"], e["wave_angle0_deg"],
+                  np.array([wave[i[-1]] for i in idx]))  # fmt: skip
+        if first is None:
+            first = (lab, e["run"], values)
+            continue
+        if not np.array_equal(e["run"], first[1]):
+            raise ValueError(f"{lab!r}: compensated data hold other runs than {first[0]!r}'s")
+        for (what, unit), ours, theirs in zip(RUN_FIELDS, values, first[2], strict=True):
+            bad = ~np.isclose(ours, theirs, rtol=1e-9, atol=1e-9, equal_nan=True)
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                raise ValueError(
+                    f"{lab!r}: run {int(e['run'][k])} differs from that of {first[0]!r}: {what} "
+                    f"{ours[k]:.10g} {unit} against {theirs[k]:.10g} {unit} (compensated data "
+                    "of another session? every entry must compensate the same session)"
+                )
+
+
+def domain_of(corrected, bin_c: float) -> dict | None:
+    """`Comparison.domains`' entry from `correct`'s output (None: plain data, no domain)."""
+    if not isinstance(corrected, Corrected):
+        return None
+    outside = ~corrected.in_range
+    return {
+        "calibrated_range": corrected.temperature_range,
+        "margin_c": corrected.margin_c,
+        "extrapolated": corrected.extrapolated,
+        "n_samples": len(corrected),
+        "n_out_of_range": corrected.n_out_of_range,
+        "by_temperature": corrected.out_of_range_by_temperature(bin_c),
+        "runs": np.unique(corrected.run[outside]),
+    }
+
+
 def domain_line(label: str, domain: dict) -> str | None:
     """One line on the samples outside the calibrated range (None: none outside, or the
     range unknown): the CLI's wording."""
@@ -125,7 +219,7 @@ def comparison_json(c) -> dict:
         for i, a in enumerate(c.labels):
             for b in c.labels[i + 1 :]:
                 entry = c.paired(a, b, key).to_json()
-                if entry["offsets"] == "own":  # the verdict one offset would give, for reference
+                if entry["offsets"] != "session":  # the session's offset's verdict, for reference
                     entry["with_one_offset"] = c.paired(a, b, key, offsets="session").to_json()
                 paired.append(entry)
     return {
@@ -151,6 +245,14 @@ def offset_differences(c, level: float = 0.95) -> list:
             if (d := c.offset_difference(a, b, key, level)) is not None]  # fmt: skip
 
 
+def pair_sources(c, key: str, level: float = 0.95) -> list:
+    """The labels whose offset some pair is judged after on `key` at `level` where that is not
+    the session's (`offsets` `"pair"`), in label order."""
+    used = {c.pair_offset_from(a, b) for i, a in enumerate(c.labels) for b in c.labels[i + 1 :]
+            if c.offsets_for(a, b, key, level) == "pair"}  # fmt: skip
+    return [lab for lab in c.labels if lab in used]
+
+
 def differ_any(c) -> bool:
     """Whether some pair's constants differ by more than could decide its paired test at
     95 %."""
@@ -174,7 +276,15 @@ def _table(c, key, by, title):
 
     groups = c.temperatures_c if by == "temperature" else c.wave_angles_deg
     rows = [f"{title} [{unit}]" + (" (*: runs outside the calibrated range)" if mark else "")]
-    w0 = 16 if by == "temperature" else 7  # room for "all, offset kept"
+    alls = []  # every run, after the offset (each its own where constants differ; a pair's
+    if by == "temperature":  # where it judged a pair) and with it kept
+        alls = [("all", c.residuals)]
+        if differ_any(c):
+            alls.append(("all, own offset", {lab: c.own_residuals_of(lab) for lab in c.labels}))
+        alls += [(f"all, {src}'s offset", {lab: c.residuals_after(src, lab) for lab in c.labels})
+                 for src in pair_sources(c, key)]  # fmt: skip
+        alls.append(("all, offset kept", c.errors))
+    w0 = max(16, *(len(name) for name, _ in alls)) if alls else 7  # "all, offset kept"
     line = f"{head:>{w0}} " + " ".join(f"{lab:>{width}}" for lab in c.labels)
     rows.append(line + (f" {'seed Fourier':>13} {'seed MLP':>9}" if seed else ""))
     for g in groups:
@@ -182,12 +292,9 @@ def _table(c, key, by, title):
         if g in seed:
             row += f" {seed[g][0]:>13.3g} {seed[g][1]:>9.3g}"
         rows.append(row)
-    if by == "temperature":  # every run, after the offset (each its own where constants
-        own = {lab: c.own_residuals_of(lab) for lab in c.labels}  # differ) and with it kept
-        alls = [("all", c.residuals), ("all, own offset", own), ("all, offset kept", c.errors)]
-        for name, e in alls if differ_any(c) else alls[::2]:
-            cells = (rms(e[lab][ERROR_KEY[key]]) for lab in c.labels)
-            rows.append(f"{name:>{w0}} " + " ".join(f"{v:>{width}.4g}" for v in cells))
+    for name, e in alls:
+        cells = (rms(e[lab][ERROR_KEY[key]]) for lab in c.labels)
+        rows.append(f"{name:>{w0}} " + " ".join(f"{v:>{width}.4g}" for v in cells))
     return rows
 
 
@@ -320,10 +427,17 @@ def comparison_text(c, by_wave_angle: bool = True) -> str:
         for i, a in enumerate(c.labels):
             for b in c.labels[i + 1 :]:
                 lines.append(f"  {c.paired(a, b, key)}")
-                if c.offsets_for(a, b, key) == "own":
-                    one = c.paired(a, b, key, offsets="session").statement()
+                how = c.offsets_for(a, b, key)
+                one = c.paired(a, b, key, offsets="session").statement() if how != "session" \
+                    else ""  # fmt: skip
+                if how == "own":
                     lines.append(f"    (after each one's own offset; with the one offset: "
                                  f"{one!r}, the constants' difference charged to one)")  # fmt: skip
+                elif how == "pair":
+                    src = c.pair_offset_from(a, b)
+                    lines.append(f"    (after {src}'s offset, the pair's: row 'all, {src}'s "
+                                 f"offset'; with the session's, {c.offset.source}'s: {one!r}, "
+                                 f"{c.offset.source}'s constant charged to both)")  # fmt: skip
         lines.append("")
     return "\n".join(lines).rstrip() + "\n"
 

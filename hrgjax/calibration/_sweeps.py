@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..data import MeasuredData
-from ..units import DEG, DEG_PER_S
+from ..units import DEG, DEG_PER_S, STILL_RATE_DPS
 
 MIN_SWEEP_SAMPLES = 20
 """Fewest samples a sweep must keep after `settle_s`."""
@@ -22,10 +22,11 @@ put the drift 100× off)."""
 
 def sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
     """[(temperature [°C], [(t, θ, ρ, used) per run])] sorted by temperature, each with runs
-    turning both ways. **Raises:** `ValueError` for a turning table, a sweep that pauses, no
-    sweeps, a sweep left with fewer than `MIN_SWEEP_SAMPLES` after `settle_s` [s] (checked
-    before the directions: a settling longer than the sweeps leaves none), sweeps in one
-    direction only, or covering less than `MIN_COVERAGE_DEG`."""
+    turning both ways. **Raises:** `ValueError` for a turning table (|`table_rate_dps`| beyond
+    [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS]: within it, readback jitter, is rest), a
+    sweep that pauses, no sweeps, a sweep left with fewer than `MIN_SWEEP_SAMPLES` after
+    `settle_s` [s] (checked before the directions: a settling longer than the sweeps leaves
+    none), sweeps in one direction only, or covering less than `MIN_COVERAGE_DEG`."""
     by_temp: dict[float, list] = {}
     for idx in data.run_indices():
         t = data["time_s"][idx]
@@ -33,9 +34,12 @@ def sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
         if np.all(rho == 0):
             continue  # a static run: nothing to sweep
         run = int(data["run"][idx[0]])
-        if np.any(data["table_rate_dps"][idx] != 0):
-            raise ValueError(f"run {run}: the table turns; virtual-precession sweeps are taken "
-                             "with the case at rest (table_rate_dps 0)")  # fmt: skip
+        table = np.abs(data["table_rate_dps"][idx])
+        if np.any(table > STILL_RATE_DPS):  # within it: a rate table's readback jitter, rest
+            raise ValueError(f"run {run}: the table turns (|table_rate_dps| up to "
+                             f"{float(np.max(table)):.3g} °/s); virtual-precession sweeps are "
+                             f"taken with the case at rest (|table_rate_dps| ≤ STILL_RATE_DPS "
+                             f"= {STILL_RATE_DPS:g} °/s)")  # fmt: skip
         temp = float(np.round(np.mean(data["temperature_c"][idx]) / bin_c) * bin_c)
         used = t - t[0] >= settle_s
         if np.any(rho[used] == 0):

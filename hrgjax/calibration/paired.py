@@ -6,8 +6,9 @@ $\mathrm{RMS}/\sqrt{2n}$ (≈ 0.0024 °/h on 57 runs at 0.025 °/h), as large as
 differences between good compensators. Compared run by run, the shared noise cancels.
 
 **The paired difference.** For compensators A and B with residuals $e_{A,i}$, $e_{B,i}$
-after the session's offset on the $n$ runs where both are finite (static runs' residual
-rate [°/h] or rotation runs' end-of-run angle error [°]),
+after one offset (the session's, or the pair's: `Comparison.offsets_for`) on the $n$ runs
+where both are finite (static runs' residual rate [°/h] or rotation runs' end-of-run angle
+error [°]),
 
 $$d_i = e_{A,i}^2 - e_{B,i}^2, \qquad \bar d = \mathrm{RMS}_A^2 - \mathrm{RMS}_B^2, \qquad
 \mathrm{SE} = s_d/\sqrt n,$$
@@ -85,8 +86,11 @@ class PairedDifference:
       paired t test of mean 0 (NaN where undefined: under 2 runs, or every $d_i$ equal).
     - `level`: the interval's confidence.
     - `offsets`: which offsets the residuals are after, when a
-      [`Comparison`][hrgjax.calibration.Comparison] formed them (`"session"`: the one;
-      `"own"`: each its own); None: residuals given as they are.
+      [`Comparison`][hrgjax.calibration.Comparison] formed them (`"session"`: the session's
+      one; `"pair"`: one, the pair's own, its member's with the smaller σ, where the
+      session's was measured with a third compensator; `"own"`: each its own); None:
+      residuals given as they are. `offset_source`: the label whose offset (`"session"`,
+      `"pair"`; None: `"own"`, or given as they are).
     - `constants`: the pair's [`OffsetDifference`][hrgjax.calibration.OffsetDifference]
       (None: not known); where it `differ`s and `offsets` is `"own"`, the verdict is about
       what each leaves beyond a constant, and `statement()` says so.
@@ -107,6 +111,7 @@ class PairedDifference:
     level: float = 0.95
     offsets: str | None = None
     constants: OffsetDifference | None = None
+    offset_source: str | None = None
 
     @property
     def beyond_constant(self) -> bool:
@@ -146,10 +151,11 @@ class PairedDifference:
     def to_json(self) -> dict:
         """`{"a", "b", "key", "unit", "n_runs", "dof", "rms_a", "rms_b",
         "mean_square_difference", "stderr", "low", "high", "level", "p_value", "verdict",
-        "statement", "offsets", "constants_differ", "constant_difference_dph",
-        "constant_resolution_dph"}` (NaN as `null`; the difference in unit²; `offsets` null
-        and `constants_differ` false for residuals given as they are; the constants' Δ and
-        R [°/h] from `constants`)."""
+        "statement", "offsets", "offset_source", "constants_differ",
+        "constant_difference_dph", "constant_resolution_dph"}` (NaN as `null`; the difference
+        in unit²; `offsets` (`"session"`, `"pair"`, `"own"`), `offset_source` null and
+        `constants_differ` false for residuals given as they are; the constants' Δ and R
+        [°/h] from `constants`)."""
 
         def num(x):
             return float(x) if math.isfinite(x) else None
@@ -172,6 +178,7 @@ class PairedDifference:
             "verdict": self.verdict,
             "statement": self.statement(),
             "offsets": self.offsets,
+            "offset_source": self.offset_source,
             "constants_differ": bool(self.constants is not None and self.constants.differ),
             "constant_difference_dph": None if self.constants is None
             else num(self.constants.value_dph),

@@ -37,7 +37,13 @@ taken off all of them: the offset measured with the compensator whose static run
 least (the smallest $\sigma_b$: it explains the grid best), or with the one named by
 `offset_from` (the user knows whose constant is right: the pairs are then judged after it). Each compensator's own $b$ is reported too; its difference from the session's
 is a constant the compensator brings (raw data: the mean drift). The tables remove the one
-offset from all: a compensator that has a constant error keeps it.
+offset from all: a compensator that has a constant error keeps it. A pair's verdict does
+not depend on the other compensators of the comparison: without `offset_from`, a pair whose
+constants agree is judged after the offset of its own member with the smaller σ (the
+session's when that member gave it; else `offsets` `"pair"`: a third compensator's
+constant, taken off both, could decide the pair — with A and B 0.02 °/h apart in what they
+leave, a third of +0.2 °/h constant turned "A better, p = 0.02" into "not told apart,
+p = 0.7"); the temperature tables then add a row "all, X's offset".
 
 **Different constants.** A compensator's own offset is $b_k = \Delta b + c_k$: the session's
 change of switch-on bias plus the constant $c_k$ it brings from its calibration. One session
@@ -55,7 +61,8 @@ named, the pair is judged after each one's own offset and the verdict says "… 
 constant (their constants differ by Δ; this session cannot assign it)": what each leaves
 beyond a constant, the part one session can attribute. With `offset_from` named, every pair
 is judged after that one offset (the constants' difference charged to the other, as the
-user says). Below $R$ the one offset is used: the constant cannot decide the verdict.
+user says). Below $R$ one offset is used (the pair's, above): the constant cannot decide the
+verdict.
 Own offsets remove a change of switch-on bias only to first order: it enters before the
 division by the scale factor, so what is left is $\Delta b\,(1/k(\theta, T) - \overline{1/k})$,
 which a paired test can still resolve (docs/calibration.md).
@@ -91,10 +98,8 @@ apart"); `format()` and `to_json()` give it for every pair.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import warnings
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -102,16 +107,21 @@ import numpy as np
 from .._warn import user_stacklevel
 from ..data import MeasuredData
 from ._azimuth import AzimuthFit, azimuth_groups, table_azimuth_fit
-from ._compensator import AbstractCompensator, Corrected, TemperatureDomainWarning
+from ._compensator import AbstractCompensator, TemperatureDomainWarning
 from ._grouping import nearest_multiples, wave_angle_groups
 from ._offset import Offset as Offset
 from ._offset import session_offset as session_offset
 from ._session_report import (
     ERROR_KEY,
     UNIT,
+    after_offset,
+    check_arguments,
+    check_same_runs,
     comparison_json,
     comparison_text,
     domain_line,
+    domain_of,
+    least_sigma,
     rms,
     session_figure,
     write_json,
@@ -149,6 +159,9 @@ class Comparison:
       (ids of the runs with samples outside).
     - `offset_from`: the label the user named for the session's offset (None: chosen, the
       smallest σ); named, every pair is judged after that one offset.
+    - `pair_residuals`: {X: {label: per-run errors after X's own offset}} for the pairs
+      judged after X's offset where that is not the session's (`offsets` `"pair"`); None or
+      a missing entry: derived from `errors`, the largest angle errors then NaN.
     """
 
     labels: tuple[str, ...]
@@ -164,6 +177,7 @@ class Comparison:
     own_residuals: dict | None = dataclasses.field(default=None, repr=False)
     domains: dict | None = dataclasses.field(default=None, repr=False)
     offset_from: str | None = None
+    pair_residuals: dict | None = dataclasses.field(default=None, repr=False)
 
     def _keys(self, label, by):
         e = self.residuals[label]
@@ -228,23 +242,46 @@ class Comparison:
     def offsets_for(
         self, a: str, b: str, key: str = "static_residual_dph", level: float = 0.95
     ) -> str:
-        """Which offsets `paired(a, b, key, level)` judges after by default: `"session"` (the
-        one) when `offset_from` was named or the constants' difference is within the paired
-        test's resolution, `"own"` (each its own) when it is beyond (module docstring)."""
+        """Which offsets `paired(a, b, key, level)` judges after by default (module
+        docstring), from `a` and `b` alone: `"session"` (the session's) when `offset_from`
+        was named, or when the constants' difference is within the paired test's resolution
+        and the pair's offset ([`pair_offset_from`][hrgjax.calibration.Comparison.pair_offset_from])
+        is the session's; `"pair"` when within it and the session's offset was measured with
+        a third compensator (the pair's then); `"own"` (each its own) when it is beyond."""
         if self.offset_from is not None:
             return "session"
         d = self.offset_difference(a, b, key, level)
-        return "own" if d is not None and d.differ else "session"
+        if d is not None and d.differ:
+            return "own"
+        source = self.own_offsets[self.pair_offset_from(a, b)]
+        return "session" if source.value_dph == self.offset.value_dph else "pair"
+
+    def pair_offset_from(self, a: str, b: str) -> str:
+        """The label whose offset the pair `a`, `b` is judged after with one offset:
+        `offset_from` where named, else whichever of the two has the smaller σ (the first in
+        `labels` on a tie), whatever other compensators the comparison holds."""
+        if self.offset_from is not None:
+            return self.offset_from
+        return least_sigma([lab for lab in self.labels if lab in (a, b)], self.own_offsets)
 
     def own_residuals_of(self, label: str) -> dict:
         """`label`'s per-run errors after its own offset (`own_residuals`' entry; derived
         from `errors` when None, the largest angle errors then NaN)."""
         if self.own_residuals is not None:
             return self.own_residuals[label]
-        e, b = self.errors[label], self.own_offsets[label].value_dph
-        return {**e, "drift_error_dph": e["drift_error_dph"] - b,
-                "angle_error_deg": e["angle_error_deg"] - b * e["duration_s"] / 3600.0,
-                "max_angle_error_deg": np.full(e["run"].shape, np.nan)}  # fmt: skip
+        return after_offset(self.errors[label], self.own_offsets[label].value_dph)
+
+    def residuals_after(self, source: str, label: str) -> dict:
+        """`label`'s per-run errors after `source`'s own offset: `residuals` where that is
+        the session's, `label`'s own where `source` is `label`, else `pair_residuals`' entry
+        (derived from `errors` when absent, the largest angle errors then NaN)."""
+        value = self.own_offsets[source].value_dph
+        if value == self.offset.value_dph:
+            return self.residuals[label]
+        if label == source:
+            return self.own_residuals_of(label)
+        stored = (self.pair_residuals or {}).get(source, {}).get(label)
+        return stored if stored is not None else after_offset(self.errors[label], value)
 
     def paired(
         self, a: str, b: str, key: str = "static_residual_dph", level: float = 0.95,
@@ -256,32 +293,43 @@ class Comparison:
         **Arguments:** `a`, `b` (labels), `key` (one of
         [`UNIT`][hrgjax.calibration.session.UNIT]'s: `static_residual_dph` [°/h] on the static
         runs, `angle_error_deg` or `max_angle_error_deg` [°] on the rotation runs), `level`
-        (two-sided confidence), `offsets` (`"session"`: after the one offset; `"own"`: each
-        after its own; `"auto"`: [`offsets_for`][hrgjax.calibration.Comparison.offsets_for]:
-        the one offset where `offset_from` was named or the constants' difference is within
-        the test's resolution at `level`, else each its own, the difference charged to
-        neither).
+        (two-sided confidence), `offsets` (`"session"`: after the session's offset;
+        `"pair"`: after the pair's,
+        [`pair_offset_from`][hrgjax.calibration.Comparison.pair_offset_from]'s; `"own"`:
+        each after its own; `"auto"`: [`offsets_for`][hrgjax.calibration.Comparison.offsets_for]:
+        one offset where `offset_from` was named (the session's) or the constants' difference
+        is within the test's resolution at `level` (the pair's), else each its own, the
+        difference charged to neither).
 
         **Returns:** a [`PairedDifference`][hrgjax.calibration.PairedDifference]: the mean of
         $e_{a,i}^2 - e_{b,i}^2$, its t interval and `statement()` ("… beyond a constant …"
         where judged after own offsets whose difference could decide it), with the `offsets`
-        it used and the pair's `constants` (an
-        [`OffsetDifference`][hrgjax.calibration.OffsetDifference] at `level`).
+        it used, their `offset_source` (the label whose offset; None: own) and the pair's
+        `constants` (an [`OffsetDifference`][hrgjax.calibration.OffsetDifference] at
+        `level`).
         """
         if key not in ERROR_KEY:
             raise ValueError(f"key must be one of {tuple(ERROR_KEY)}; got {key!r}")
         for lab in (a, b):
             if lab not in self.labels:
                 raise ValueError(f"{lab!r} is not one of the labels {list(self.labels)}")
-        if offsets not in ("auto", "session", "own"):
-            raise ValueError(f"offsets must be 'auto', 'session' or 'own'; got {offsets!r}")
+        if offsets not in ("auto", "session", "pair", "own"):
+            raise ValueError(f"offsets must be 'auto', 'session', 'pair' or 'own'; got "
+                             f"{offsets!r}")  # fmt: skip
         if offsets == "auto":
             offsets = self.offsets_for(a, b, key, level)
-        res = (lambda lab: self.residuals[lab]) if offsets == "session" else self.own_residuals_of
+        source = {"session": self.offset.source or None, "own": None}.get(offsets)
+        if offsets == "pair":
+            source = self.pair_offset_from(a, b)
+            res = lambda lab: self.residuals_after(source, lab)
+        else:
+            res = (lambda lab: self.residuals[lab]) if offsets == "session" else \
+                self.own_residuals_of  # fmt: skip
         ea, eb = (res(lab)[ERROR_KEY[key]] for lab in (a, b))
         test = paired_difference(ea, eb, a=a, b=b, key=key, unit=UNIT[key], level=level)
         constants = self.offset_difference(a, b, key, level)
-        return dataclasses.replace(test, offsets=offsets, constants=constants)
+        return dataclasses.replace(test, offsets=offsets, constants=constants,
+                                   offset_source=source)  # fmt: skip
 
     def paired_all(self, key: str = "static_residual_dph", level: float = 0.95) -> list:
         """[`paired`][hrgjax.calibration.Comparison.paired] for every pair of compensators
@@ -378,11 +426,11 @@ class Comparison:
          "seed_figures": {"static_residual_dph" | "angle_error_deg":
                           {T: {"fourier", "mlp"}}},
          "units": {"static_residual_dph": "°/h", "angle_error_deg": "°", …},
-         "paired": [PairedDifference.to_json() (with "offsets": "session" | "own",
-                    "constants_differ", "constant_difference_dph", "constant_resolution_dph")
-                    for every pair, static residual then end-of-run angle error, where the
-                    session has such runs; with "own", also "with_one_offset": the test after
-                    the one],
+         "paired": [PairedDifference.to_json() (with "offsets": "session" | "pair" | "own",
+                    "offset_source", "constants_differ", "constant_difference_dph",
+                    "constant_resolution_dph") for every pair, static residual then end-of-run
+                    angle error, where the session has such runs; with "pair" or "own", also
+                    "with_one_offset": the test after the session's],
          "offset_from": the label named for the offset, or null (chosen),
          "offset_differences": [OffsetDifference.to_json() for every pair and figure]}
         ```
@@ -422,22 +470,6 @@ class Comparison:
         return session_figure(self, os.fspath(path), title=title, seed=seed)
 
 
-def _domain(corrected: MeasuredData, bin_c: float) -> dict | None:
-    """`Comparison.domains`' entry from `correct`'s output (None: plain data, no domain)."""
-    if not isinstance(corrected, Corrected):
-        return None
-    outside = ~corrected.in_range
-    return {
-        "calibrated_range": corrected.temperature_range,
-        "margin_c": corrected.margin_c,
-        "extrapolated": corrected.extrapolated,
-        "n_samples": len(corrected),
-        "n_out_of_range": corrected.n_out_of_range,
-        "by_temperature": corrected.out_of_range_by_temperature(bin_c),
-        "runs": np.unique(corrected.run[outside]),
-    }
-
-
 def compare_corrected(
     corrected: dict[str, MeasuredData],
     *,
@@ -466,41 +498,29 @@ def compare_corrected(
     **Returns:** a [`Comparison`][hrgjax.calibration.Comparison].
 
     **Raises:** `ValueError` when `corrected` is empty, `offset_from` is not a label, a bin
-    width is not > 0, or the entries do not hold the same runs.
+    width is not > 0, or the entries do not hold the same runs of one session (run ids, and
+    each run's start and end time, duration, mean temperature and wave angle at its start and
+    end, equal to round-off: the first run that differs is named).
     """
-    if not isinstance(corrected, Mapping):
-        raise TypeError(f"compare_corrected: corrected must be a dict {{label: compensated "
-                        f"data}}; got {type(corrected).__name__}")  # fmt: skip
-    labels = tuple(corrected)
-    if not labels:
-        raise ValueError("give at least one compensator")
-    for name, width in (("temperature_bin_c", temperature_bin_c), ("angle_bin_deg", angle_bin_deg)):
-        number = isinstance(width, int | float | np.integer | np.floating) and not isinstance(
-            width, bool | np.bool_
-        )
-        if not number or not width > 0 or not math.isfinite(width):
-            raise ValueError(f"{name} must be a number > 0; got {width!r}")
-    if offset_from is not None and offset_from not in labels:
-        raise ValueError(f"offset_from {offset_from!r} is not one of the labels {list(labels)}")
+    labels = check_arguments(corrected, offset_from, temperature_bin_c, angle_bin_deg)
     errors = {lab: corrected_run_errors(corrected[lab]) for lab in labels}
-    first = errors[labels[0]]
-    for lab in labels[1:]:
-        if not np.array_equal(errors[lab]["run"], first["run"]):
-            raise ValueError(f"{lab!r}: compensated data hold other runs than {labels[0]!r}'s")
+    check_same_runs(corrected, errors)
     own = {lab: session_offset(errors[lab], lab) for lab in labels}
     offset_named = offset_from is not None
     if offset_from is None:
-        sig = [own[lab].sigma_dph for lab in labels]
-        offset_from = labels[int(np.argmin(sig))] if np.any(np.isfinite(sig)) else labels[0]
+        offset_from = least_sigma(labels, own)
     offset = own[offset_from]
-    residuals = {
-        lab: corrected_run_errors(corrected[lab], offset_dph=offset.value_dph) for lab in labels
-    }
-    own_residuals = {
-        lab: residuals[lab] if own[lab] == offset else
-        corrected_run_errors(corrected[lab], offset_dph=own[lab].value_dph)
-        for lab in labels
-    }  # fmt: skip
+    after = lambda lab, b: corrected_run_errors(corrected[lab], offset_dph=b.value_dph)
+    residuals = {lab: after(lab, offset) for lab in labels}
+    own_residuals = {lab: residuals[lab] if own[lab] == offset else after(lab, own[lab])
+                     for lab in labels}  # fmt: skip
+    pair: dict = {}  # a pair judged after its member's offset, not the session's
+    for i, a in enumerate(labels if not offset_named else ()):
+        for b in labels[i + 1 :]:
+            src = least_sigma((a, b), own)
+            if own[src].value_dph != offset.value_dph:
+                other = b if src == a else a
+                pair.setdefault(src, {})[other] = after(other, own[src])
     named = offset_from if offset_named else None
     return Comparison(
         labels=labels,
@@ -514,8 +534,9 @@ def compare_corrected(
         angle_bin_deg=float(angle_bin_deg),
         data=data,
         own_residuals=own_residuals,
-        domains={lab: _domain(corrected[lab], temperature_bin_c) for lab in labels},
+        domains={lab: domain_of(corrected[lab], temperature_bin_c) for lab in labels},
         offset_from=named,
+        pair_residuals=pair,
     )
 
 
