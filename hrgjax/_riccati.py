@@ -9,6 +9,8 @@ the matrices are concrete or traced.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 
@@ -41,7 +43,9 @@ def reached_states(phi, x0):
 
 def balancing(phi, qd, x0, reach):
     r"""Powers of 2, (n,): each reached state's standard deviation after n − 1 predictions
-    from the first prior `x0` (no measurement: $M \leftarrow \Phi M\Phi^\top + Q_d$), rounded
+    from `x0` (no measurement: $M \leftarrow \Phi M\Phi^\top + Q_d$; `limit` passes $Q_d$:
+    the sizes the noise gives the limit — from a first prior that `p0` dominates they were
+    1e14× off, and a gain 8e-2 off at q₂ = 1e-28 in `steady_state`'s example), rounded
     down to a power of 2 so that scaling by them is exact; 1 for a state not reached, or
     whose prediction is 0 or not finite. Every reached state has a variance > 0 by then
     (the closure takes at most n − 1 steps), including one with no noise of its own that
@@ -60,14 +64,30 @@ def balancing(phi, qd, x0, reach):
     return jax.lax.stop_gradient(jnp.ldexp(jnp.ones_like(d), e - 1))
 
 
+STEIN_DOUBLINGS = 64
+r"""Doublings of the Stein sum $\sum_k \Phi_c^k C\,\Phi_c^{\top k}$ in `limit`'s derivative:
+$2^{64}$ closed-loop steps (a pole 1 − 1e-12 is summed to its end)."""
+
+
 def steady(phi, qd, h, r, p0, n_iter: int):
-    r"""`(P_prior, K, S, converged)` of `steady_state`: the doubling of its docstring on the
-    balanced model $D^{-1}\Phi D$, $D^{-1}Q_dD^{-1}$, $HD$, $D^{-1}p_0D^{-1}$ restricted to the
-    reached states (the rows and columns of the others exactly 0), then $P = D\tilde PD$,
-    $K = D\tilde K$."""
+    r"""`(P_prior, K, S, converged)` of `steady_state`: P by `limit`, then
+    $S = HPH^\top + R$, $K = PH^\top S^{-1}$."""
+    pp, done = limit(phi, qd, h, r, p0, n_iter)
+    s = sym(h @ pp @ h.T + r)
+    return pp, cho_solve(cholesky(s), h @ pp).T, s, done > 0.5
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(5,))
+def limit(phi, qd, h, r, p0, n_iter: int):
+    r"""`(P_prior, converged)`, `converged` 1.0 or 0.0: the doubling of `steady_state`'s
+    docstring on the balanced model $D^{-1}\Phi D$, $D^{-1}Q_dD^{-1}$, $HD$, $D^{-1}p_0D^{-1}$
+    restricted to the reached states (the rows and columns of the others exactly 0), then
+    $P = D\tilde PD$. Its derivative is the implicit one (`_limit_jvp`), not the doubling's:
+    the mask and the scaling are values, and a derivative through them would hold a known
+    state known (0 where a coupling or a noise at 0 makes it uncertain)."""
     sym0 = sym(phi @ p0 @ phi.T + qd)
     keep = reached_states(phi, sym0)
-    d = balancing(phi, qd, sym0, keep)
+    d = balancing(phi, qd, sym(qd), keep)
     both = keep[:, None] & keep[None, :]
     scale = jnp.outer(d, d)
     phi = jnp.where(both, phi * (d[None, :] / d[:, None]), 0.0)
@@ -97,6 +117,33 @@ def steady(phi, qd, h, r, p0, n_iter: int):
     a0 = phi.T
     start = (a0, g0, qd, cover(a0, g0, qd), jnp.asarray(False))
     *_, pp, done = jax.lax.fori_loop(0, n_iter, double, start)
+    return pp * scale, done.astype(pp.dtype)
+
+
+@limit.defjvp
+def _limit_jvp(n_iter, primals, tangents):
+    r"""The derivative of the Riccati equation's fixed point
+    $P = \Phi P^+\Phi^\top + Q_d$, $P^+ = P - KHP$, $K = PH^\top S^{-1}$, by the implicit
+    function theorem: $dP - \Phi_c\,dP\,\Phi_c^\top = C$ with $\Phi_c = \Phi(I - KH)$ and
+    $C = d\Phi P^+\Phi^\top + \Phi P^+ d\Phi^\top + dQ_d
+    + \Phi(K\,dR\,K^\top - P^+dH^\top K^\top - K\,dH\,P^+)\Phi^\top$, summed
+    ($dP = \sum_k \Phi_c^kC\,\Phi_c^{\top k}$) by `STEIN_DOUBLINGS` doublings. It does not
+    depend on $p_0$. A state known exactly whose coupling or noise is at 0 gets the
+    derivative of the model that makes it uncertain (finite where its own Φ is stable;
+    not finite where a noise would make it a random walk: no steady state there)."""
+    phi, qd, h, r, p0 = primals
+    dphi, dqd, dh, dr, _ = tangents
+    pp, done = limit(phi, qd, h, r, p0, n_iter)
+    eye = jnp.eye(phi.shape[0], dtype=phi.dtype)
     s = sym(h @ pp @ h.T + r)
     k = cho_solve(cholesky(s), h @ pp).T
-    return pp * scale, k * d[:, None], s, done
+    post = sym(pp - k @ h @ pp)
+    ab = dphi @ post @ phi.T
+    c = ab + ab.T + dqd + phi @ (k @ dr @ k.T - post @ dh.T @ k.T - k @ dh @ post) @ phi.T
+
+    def double(_, carry):
+        a, x = carry
+        return a @ a, x + a @ x @ a.T
+
+    _, dp = jax.lax.fori_loop(0, STEIN_DOUBLINGS, double, (phi @ (eye - k @ h), sym(c)))
+    return (pp, done), (sym(dp), jnp.zeros_like(done))

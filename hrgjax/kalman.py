@@ -524,18 +524,24 @@ def steady_state(phi, qd, h, r, p0=None, n_iter: int = STEADY_DOUBLINGS):
     the rest (their eigenvalue of Φ, kept, amplified round-off without end: a constant
     with no noise and p0 = 0 driving a measured state was refused, or with n_iter = 200
     made its neighbour's variance 20× too large). The set is a mask of values, found
-    alike under `jit` and `vmap`; `grad` holds it fixed (a derivative with respect to a
-    known state's `qd` is 0).
+    alike under `jit` and `vmap`.
+
+    Derivatives (`grad`, `jvp`) are the implicit ones of the fixed point: $dP$ solves the
+    Stein equation $dP - \Phi_c\,dP\,\Phi_c^\top = C$ on the closed loop $\Phi_c$, so they
+    do not depend on the doubling, the mask or `p0`; a coupling into a known state, or its
+    noise, at 0 gets the derivative of the model it would become (a mask held fixed gave
+    0: a parameter started at 0 never moved under gradient descent).
 
     Balancing: the doubling runs on $D^{-1}\Phi D$, $D^{-1}Q_dD^{-1}$, $HD$, $D^{-1}p_0D^{-1}$,
-    then $P = D\tilde PD$, $K = D\tilde K$, with D each state's standard deviation after n − 1
-    predictions from the first prior (n states: every reached state, one driven without
-    noise of its own included, has a variance by then), rounded to a power of 2. The
+    then $P = D\tilde PD$, with D each state's standard deviation after n − 1 predictions
+    from $Q_d$ (n states: every reached state, one driven without noise of its own
+    included, has a variance by then; not from the first prior, which a large `p0` can
+    dominate), rounded to a power of 2. The
     scaling is then exact and every product covariant: what it changes is the pivot order
     of the Gauss–Jordan solves of $I + G_kH_k$, which partial pivoting picks by size, in
     the model's units. Unbalanced, Φ = [[1, 9.8], [0, 0.9999]], Q_d = diag(1e-6, q₂),
     H = [1, 0], R = 1e-2 gave the small state's gain 5e-4 off at q₂ = 1e-24, 36× at 1e-28;
-    now ≤ 3e-13 off an 80-digit solution from q₂ = 1e-12 to 1e-30 (scipy's
+    now ≤ 3e-13 off an 80-digit solution from q₂ = 1e-12 to 1e-30, whatever `p0` (scipy's
     `solve_discrete_are`: 1.3e-9 at 1e-28). Accuracy otherwise: round-off grows as the
     closed-loop pole nears 1, ≈ ε/(1 − pole): the random walk's gain to 3e-11 at
     q/r = 1e-12, 4e-9 at 1e-16 (a diagonal scaling does not change a scalar model).

@@ -578,6 +578,30 @@ def test_steady_state_keeps_exactly_known_states_at_zero():
     np.testing.assert_allclose(gain[:2], want_k, rtol=1e-12)
 
 
+def test_steady_state_derivatives_are_the_implicit_ones_at_known_states_and_any_p0():
+    """Review (s32): masking the known states gave `grad` 0 for a coupling into one, or its
+    noise, at 0 (a parameter started there never moved); the derivative is now the implicit
+    one of the Riccati fixed point (0.2701 against central differences' 0.2701). The
+    balancing read the states' sizes from a first prior that p0 dominated: the small gain of
+    `test_steady_state_balances_states_of_any_scale` was 8e-2 off with p0 = I."""
+    phi, qd = jnp.array([[0.9, 0.3], [0.0, 0.5]]), jnp.diag(jnp.array([1e-2, 0.0]))
+    h, r = jnp.array([[1.0, 0.0]]), jnp.eye(1)
+
+    def total(phi, qd):
+        return jnp.sum(kalman.steady_state(phi, qd, h, r)[0])
+
+    d_phi, d_qd = jax.grad(total, argnums=(0, 1))(phi, qd)
+    step = 1e-6
+    central = (total(phi.at[1, 0].add(step), qd) - total(phi.at[1, 0].add(-step), qd)) / (2 * step)
+    np.testing.assert_allclose(d_phi[1, 0], central, rtol=1e-7)
+    assert abs(float(central)) > 0.1
+    one_sided = (total(phi, qd.at[1, 1].add(1e-8)) - total(phi, qd)) / 1e-8  # qd ≥ 0
+    np.testing.assert_allclose(d_qd[1, 1], one_sided, rtol=1e-5)
+    big = np.array([[1.0, 9.8], [0.0, 0.9999]])
+    _, gain, _ = kalman.steady_state(big, np.diag([1e-6, 1e-28]), h, np.array([[1e-2]]), np.eye(2))
+    np.testing.assert_allclose(gain[1, 0], 4.827285366559858e-20, rtol=1e-10)
+
+
 def test_an_overflowing_filter_is_refused_in_one_line():
     """Audit: Φ = 1.5 on a state no measurement sees, 2000 steps: the covariance overflowed
     and the filter returned NaN with no message. Now one line naming the first step (here
