@@ -279,6 +279,8 @@ def test_bad_input_is_named(kwargs, match):
 
 
 def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, tmp_path, capsys):
+    import re
+
     from helpers import cli_fails
 
     from hrgjax.cli import main
@@ -316,19 +318,22 @@ def test_allan_command_writes_the_table_the_model_and_kalibrs_file(white_walk, t
     np.savetxt(uneven, np.column_stack([t, y[:200]]), delimiter=",", header="time,rate",
                comments="", fmt="%.17g")  # fmt: skip
     assert main(["allan", str(uneven), "--time-column", "time"]) == 0  # a stall, said so
-    said = capsys.readouterr().out
+    said = capsys.readouterr().err  # a note: on stderr
     assert "time stamps uniform at 10 Hz but for 1 stall(s)" in said  # every sample kept
     jittered = t + np.random.default_rng(1).uniform(-0.03, 0.03, t.size)  # ±30 % of a step
     np.savetxt(uneven, np.column_stack([jittered, y[:200]]), delimiter=",", header="time,rate",
                comments="", fmt="%.17g")  # fmt: skip
     assert main(["allan", str(uneven), "--time-column", "time"]) == 0  # resampled, said so
-    assert "time stamps not uniform (steps " in (said := capsys.readouterr().out), said
+    assert "time stamps not uniform (steps " in (said := capsys.readouterr().err), said
     assert "resampled at " in said and "reads low at the shortest τ" in said
     t_gap = np.r_[t[:100], t[100:] + 1.0]  # a 1.15-s interval: the 12 grid steps it touches
     np.savetxt(uneven, np.column_stack([t_gap, y[:200]]), delimiter=",", header="time,rate",
                comments="", fmt="%.17g")  # fmt: skip
-    cli_fails(["allan", str(uneven), "--time-column", "time", "--fit"], capsys,
-              r"12 missing value.*the first at line 102")  # fmt: skip
+    with pytest.raises(SystemExit) as stop:  # the stall's note (stderr), then the refusal
+        main(["allan", str(uneven), "--time-column", "time", "--fit"])
+    note, error = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2 and "but for 1 stall(s)" in note, note
+    assert re.search(r"^hrgjax allan: error: .*12 missing value.*the first at line 102", error)
     gap = tmp_path / "gap.csv"
     z = y[:200].copy()
     z[50] = np.nan

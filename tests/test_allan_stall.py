@@ -129,9 +129,9 @@ def test_the_cli_says_a_stalled_clock_kept_its_samples(tmp_path, capsys, white):
     )
     assert main(["allan", str(log), "--column", "gyro", "--time-column", "time_s",
                  "--taus", "0.01"]) == 0  # fmt: skip
-    out = capsys.readouterr().out
-    assert "uniform at 100 Hz but for 1 stall(s)" in out and "reads low" not in out
-    assert "8002 samples at 100 Hz (80.02 s), 4 missing" in out, out  # 7998 own + 4 NaN
+    said = capsys.readouterr()  # the note on stderr
+    assert "uniform at 100 Hz but for 1 stall(s)" in said.err and "reads low" not in said.err
+    assert "8002 samples at 100 Hz (80.02 s), 4 missing" in said.out, said  # 7998 own + 4 NaN
 
 
 @pytest.mark.parametrize("steps", [0.25, 1.0, 4.0])

@@ -419,7 +419,7 @@ def test_cli_imu_calibrate(session, fitted, tmp_path, capsys):
     assert "and the Earth's rate" in capsys.readouterr().out
     with pytest.raises(SystemExit) as err:
         main([*common, "--lat-deg", "95"])
-    assert err.value.code == 2 and "lat_deg" in capsys.readouterr().err
+    assert err.value.code == 2 and "--lat-deg must be" in capsys.readouterr().err  # the option
     # a simulated log: --no-earth-rate is ferraris(..., earth_rate=0), the method's σ
     assert main([*common, "--gyro-unit", "deg/s", "--no-earth-rate", "--json", str(out),
                  "--force"]) == 0  # fmt: skip
@@ -458,8 +458,8 @@ def test_g_must_be_earths_and_agree_with_the_data(session, tmp_path, capsys):
     argv = ["imu-calibrate", str(log), "--sections", str(tmp_path / "s.json"), "--gyro-columns",
             "gx,gy,gz", "--accel-columns", "ax,ay,az", "--time-column", "t", "--gyro-unit",
             "deg/s", "--accel-unit", "g"]  # fmt: skip
-    cli_fails([*argv, "--g", "981"], capsys, r"g = 981\.0 \(that is cm/s²\): expected")
-    cli_fails([*argv, "--g", "1e-3"], capsys, r"g = 0\.001: expected .* 9\.76–9\.84")
+    cli_fails([*argv, "--g", "981"], capsys, r"--g 981\.0 \(that is cm/s²\): expected")
+    cli_fails([*argv, "--g", "1e-3"], capsys, r"--g 0\.001: expected .* 9\.76–9\.84")
 
 
 def test_turn_sections_hold_one_turn_about_their_axis(session):

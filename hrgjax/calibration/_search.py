@@ -292,7 +292,8 @@ def design(
             )
         )
 
-    with bar(len(levels) * steps, f"designing a {budget_h:g}-h plan", unit="step") as progress:
+    with bar(len(levels) * steps, f"designing a {budget_h:g}-h plan", unit="step",
+             tick=True) as progress:  # fmt: skip
         for n_lev in levels:
             kinds = _structure(n_lev, statics, rotations, ramps)
             n_meas = n_lev * per

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
+import signal
 import sys
+import threading
 
 from . import allan, calibrate, discover, ins, navigate, simulate
 from ._common import DATA_EXTENSIONS as DATA_EXTENSIONS
@@ -101,24 +104,40 @@ class _OneLineParser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The `hrgjax` argument parser (every option with its help and default)."""
 
-    class fmt(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-        """Defaults shown; the description and the example kept as written."""
-
     parser = _OneLineParser(
-        prog="hrgjax", description=__doc__, parents=[_common(_RELAX_BEFORE)], formatter_class=fmt
+        prog="hrgjax",
+        description=__doc__,
+        parents=[_common(_RELAX_BEFORE)],
+        formatter_class=HelpFormatter,
     )
     sub = parser.add_subparsers(dest="command", required=True)
     add_parser, common = sub.add_parser, _common("relax")
     sub.add_parser = lambda name, **k: add_parser(
-        name, parents=[common], formatter_class=fmt, epilog=f"example: {EXAMPLES[name]}", **k
+        name,
+        parents=[common],
+        formatter_class=HelpFormatter,
+        epilog=f"example: {EXAMPLES[name]}",
+        **k,
     )
     here = globals()  # looked up now, so that a replaced cmd_NAME (a test's) is the one run
     for name in COMMANDS:
         p = _PARSERS[name](sub)
         p.set_defaults(func=here["cmd_" + name.replace("-", "_")])
-        if name not in TOOL_NAMED_OUTPUTS:
-            force_option(p)
+        force_option(p)
     return parser
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Defaults shown, once: argparse's "(default: X)" is left out where the help says its
+    default itself ("(default 0.5) (default: None)" showed two, the second wrong) or there
+    is none to say (None: the option not given); the description and the example kept as
+    written."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if action.default is None or "default" in text.lower():
+            return text
+        return super()._get_help_string(action)
 
 
 _RELAX_BEFORE = "relax_before_command"
@@ -153,12 +172,6 @@ def _common(relax_dest: str) -> argparse.ArgumentParser:
         help="show the full traceback of an error (otherwise one line)",
     )
     return common
-
-
-TOOL_NAMED_OUTPUTS = frozenset({"demo"})
-"""Commands whose every output has a name the tool chooses, in a folder (`demo --out DIR`):
-those files are the tool's own, replaced on a second run; every other command names its
-files after the user's options, refuses one that exists, and takes `--force`."""
 
 
 INPUT_OPTIONS = ("data", "log", "imu_log", "sections", "model", "models", "plan_file",
@@ -245,7 +258,7 @@ def _run(args) -> int:
         from ..plausible import relaxed
 
         given = [*getattr(args, _RELAX_BEFORE, ()), *getattr(args, "relax", ())]  # in order
-        with _placement(args.command), relaxed(**dict(given)):
+        with interruptible(), _placement(args.command), relaxed(**dict(given)):
             return args.func(args)
     except KeyboardInterrupt:
         if debug:
@@ -255,6 +268,10 @@ def _run(args) -> int:
     except (UsageError, ValueError, TypeError, OSError) as err:
         if debug:
             raise
+        if isinstance(err, TypeError) and not raised_by_hrgjax(err):
+            print(f"{name}: internal error: TypeError: {one_line(err)} (a bug: please report "
+                  "it with the command line; --debug shows the traceback)", file=sys.stderr)  # fmt: skip
+            raise SystemExit(EXIT_FAILURE) from None
         # a plausibility range's way out, as the command line spells it
         line = re.sub(r"hrgjax\.plausible\.relaxed\((\w+)=…\)", r"--relax \1=LOW,HIGH",
                       one_line(err))  # fmt: skip
@@ -265,3 +282,85 @@ def _run(args) -> int:
             raise
         print(f"{name}: failed: {one_line(err)} (--debug shows the traceback)", file=sys.stderr)
         raise SystemExit(EXIT_FAILURE) from None
+
+
+def raised_by_hrgjax(err: BaseException) -> bool:
+    """Whether `err` was raised by a `raise` statement in hrgjax's own code (its checks'
+    one-line refusals: bad input), not by Python or a library under it (a `TypeError` such
+    as "unsupported operand type(s)" is a bug, not the user's input)."""
+    import linecache
+    import traceback
+
+    frames = traceback.extract_tb(err.__traceback__)
+    if not frames:
+        return False
+    last = frames[-1]
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    try:
+        if os.path.commonpath([package, os.path.abspath(last.filename)]) != package:
+            return False
+    except ValueError:  # another drive (Windows)
+        return False
+    line = linecache.getline(last.filename, last.lineno).strip()
+    return line.startswith("raise ")
+
+
+SWALLOWING_FRAMES = ("_xla_gc_callback", "__del__")
+"""Names of functions whose exceptions Python prints ("Exception ignored in: …") and drops:
+JAX's garbage-collector callback (run at any allocation) and finalizers. A Ctrl-C raised in
+one was lost: the command went on, wrote its file and exited 0 (2 of 8 tries 5–6 s into
+`simulate --duration 1200`)."""
+REDELIVER_S = 0.01
+"""Seconds after which a Ctrl-C that landed in such a function is delivered again."""
+
+
+def swallows_exceptions(frame) -> bool:
+    """Whether `frame` (or a frame that called it) is one whose exceptions are dropped: a
+    garbage-collector callback (`gc.callbacks`) or a function named in
+    `SWALLOWING_FRAMES`."""
+    import gc
+
+    callbacks = {getattr(c, "__code__", None) for c in gc.callbacks}
+    while frame is not None:
+        if frame.f_code in callbacks or frame.f_code.co_name in SWALLOWING_FRAMES:
+            return True
+        frame = frame.f_back
+    return False
+
+
+class Interrupts:
+    """The command's SIGINT handler: `KeyboardInterrupt` as Python's own raises it, but a
+    Ctrl-C that lands where an exception would be dropped (`swallows_exceptions`) is raised
+    again `REDELIVER_S` later, outside it."""
+
+    def __init__(self):
+        self.timer = None
+
+    def __call__(self, signum, frame):
+        if not swallows_exceptions(frame):
+            raise KeyboardInterrupt
+        if self.timer is None or not self.timer.is_alive():
+            self.timer = threading.Timer(REDELIVER_S, signal.raise_signal, (signal.SIGINT,))
+            self.timer.daemon = True
+            self.timer.start()
+
+
+@contextlib.contextmanager
+def interruptible():
+    """`Interrupts` as the SIGINT handler inside the block, the previous one restored after;
+    nothing changed off the main thread or where Ctrl-C is ignored (SIG_IGN)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if previous in (signal.SIG_IGN, None):
+        yield
+        return
+    handler = Interrupts()
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if handler.timer is not None:
+            handler.timer.cancel()

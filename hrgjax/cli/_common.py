@@ -8,6 +8,7 @@ import argparse
 import contextlib
 import math
 import os
+import tempfile
 import time
 import warnings
 
@@ -94,7 +95,7 @@ def check_output(option: str, path, extensions=(), inputs=()) -> None:
                 f"{option} {path} is the input file {source}; write to another file "
                 "(hrgjax never overwrites its input)"
             )
-    check_folder(option, os.path.dirname(os.path.abspath(path)))
+    check_folder(f"{option} {path}", os.path.dirname(os.path.abspath(path)))
 
 
 def check_folder(option: str, folder: str) -> None:
@@ -108,6 +109,13 @@ def check_folder(option: str, folder: str) -> None:
         raise UsageError(f"{option}: cannot make the folder {folder}: {d} is a file")
     if not os.access(d, os.W_OK | os.X_OK):
         raise UsageError(f"{option}: cannot write in {d} (permission denied)")
+    try:  # a file made and dropped: root passes os.access anywhere, /proc and read-only mounts
+        with tempfile.TemporaryFile(dir=d):  # refuse a file (it failed after the work)
+            pass
+    except OSError as err:
+        raise UsageError(
+            f"{option}: cannot write in {d} ({err.strerror or one_line(err)})"
+        ) from None
 
 
 def one_line(err: BaseException) -> str:
@@ -267,7 +275,10 @@ def finish(*outputs) -> int:
     for path, write in outputs:
         if not path:
             continue
-        done = write_json(write, path) if isinstance(write, dict) else write(path)
+        try:
+            done = write_json(write, path) if isinstance(write, dict) else write(path)
+        except OSError as err:  # it named the temporary file beside `path`, not `path`
+            raise OSError(f"cannot write {path}: {err.strerror or one_line(err)}") from err
         print(f"wrote {done}")
     return 0
 

@@ -5,6 +5,7 @@ needs, exported for Kalibr and for simulation."""
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 
@@ -105,12 +106,12 @@ def read_column(path: str, column: str | None, time_column: str | None, rate_hz,
                       f"{len(u.breaks)} stall(s) of a fraction of a step (the first at "
                       f"{u.breaks[0][0]:.6g} s): the grid restarts after each, its samples "
                       f"are NaN, every other sample is the log's own{gaps} "
-                      "(docs/allan.md)")  # fmt: skip
+                      "(docs/allan.md)", file=sys.stderr, flush=True)  # fmt: skip
             else:
                 print(f"hrgjax allan: {path}: time stamps not uniform (steps {dt.min():.6g} "
                       f"to {dt.max():.6g} s): resampled at {u.rate_hz:g} Hz by the integrated "
                       f"angle{gaps}; white noise reads low at the shortest τ "
-                      "(docs/allan.md)")  # fmt: skip
+                      "(docs/allan.md)", file=sys.stderr, flush=True)  # fmt: skip
             stamp = np.searchsorted(t, u.t0 + np.arange(1, u.y.size + 1) * (1.0 / u.rate_hz))
             return u.y, u.rate_hz, column, np.asarray(lines)[np.minimum(stamp, t.size - 1)]
         if rate_hz is not None and abs(found / rate_hz - 1) > max(1e-3, stamp_resolution(t)):
@@ -131,22 +132,35 @@ def per_second(path: str, name: str, t, unit: str | None, rate_hz=None) -> float
     of `--time-unit` `unit`, or seconds (1). A name ending in another unit (`t_ms`) than the one
     given — or than seconds, when none is — is refused; a name in seconds (`elapsed_secs`) is
     seconds. Without either, stamps that read as seconds would be 3000 years and more (≥ 1e11:
-    an epoch in ms, µs or ns) are refused; stamps whose every step is a whole number above 1
-    are read as seconds (an HRG drift log at 0.1 Hz stamped in whole seconds) with one note
-    line naming `--time-unit ms`, unless `rate_hz` is given (it checks the rate). Each refusal
-    is one line naming the way out (`--time-unit`)."""
+    an epoch in ms, µs or ns) are refused; stamps whose every step is above 1 and a round
+    number of ms (`_round_ms`: 10, 2.5, 1.25) are read as seconds (an HRG drift log at 0.1 Hz
+    stamped in whole seconds) with one note line on stderr naming `--time-unit ms`, unless
+    `rate_hz` is given (it checks the rate). Each refusal is one line naming the way out
+    (`--time-unit`)."""
     with usage_errors(prefix=path):
         scale = stamps_per_second(name, t, unit, lambda u: f"--time-unit {u}")
     if unit is not None or named_time_unit(name) is not None:
         return scale
     dt = np.diff(t)
     step = float(np.median(dt))
-    if rate_hz is None and step > 1.0 and np.all(dt >= 1.0) and np.all(dt == np.round(dt)):
+    if rate_hz is None and step > 1.0 and np.all(dt >= 1.0) and _round_ms(t, dt):
         guess = "ms" if step <= 1e3 else "us" if step <= 1e6 else "ns"
-        print(f"hrgjax allan: {path}: time column {name!r} steps by whole numbers ({step:g}): "
-              f"read as seconds, {1.0 / step:.4g} Hz; stamps in {guess}? give --time-unit "
-              f"{guess}")  # fmt: skip
+        print(f"hrgjax allan: {path}: time column {name!r} steps by {step:g}: read as "
+              f"seconds, {1.0 / step:.4g} Hz; stamps in {guess}? give --time-unit {guess}",
+              file=sys.stderr, flush=True)  # fmt: skip
     return 1.0
+
+
+def _round_ms(t, dt) -> bool:
+    """Whether every step `dt` of the stamps `t` is a whole number of thousandths (to the
+    stamps' float64 rounding): what a logger stamping in ms writes — whole ms, or ms to the µs
+    (a 400-Hz log's 2.5, an 800-Hz log's 1.25, a 600-Hz log's 1.667). A clock stamping in
+    seconds with its own jitter (10.000 37…) does not; one stamping a slow log in whole or
+    round seconds (a 0.1-Hz HRG drift log's 10, a 0.4-Hz log's 2.5) does: `per_second` reads
+    those as seconds, with its note."""
+    thousandths = np.asarray(dt, dtype=float) * 1e3
+    rounding = 4e3 * float(np.spacing(np.max(np.abs(t)))) + 1e-9
+    return bool(np.all(np.abs(thousandths - np.round(thousandths)) <= rounding))
 
 
 def cmd_allan(args) -> int:
@@ -295,8 +309,8 @@ def _allan_parser(sub):
                    "resampled by the integrated angle (onto --rate-hz, or the median step)")  # fmt: skip
     p.add_argument("--time-unit", default=None, choices=tuple(TIME_UNITS),
                    help="the time column's unit (default s; a name such as t_ms or an epoch "
-                   "in ms, µs or ns is refused without it; whole-number steps above 1 read as "
-                   "seconds with a note)")  # fmt: skip
+                   "in ms, µs or ns is refused without it; steps above 1 that are a round "
+                   "number of ms, 10 or 2.5, read as seconds with a note)")  # fmt: skip
     p.add_argument("--kind", default="oadev", choices=KINDS, help="the deviation (oadev)")
     p.add_argument("--taus", default="octave", type=_taus,
                    help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip

@@ -4,11 +4,14 @@ session with it, and weigh several on one test session."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import re
+import sys
 import time
 from typing import TYPE_CHECKING, NamedTuple
 
-from ..units import K_E_NOMINAL, PHYSICAL_WINDOW_S, WINDOW_S
+from ..units import K_E_NOMINAL, K_E_RANGE, PHYSICAL_WINDOW_S, WINDOW_S
 from ._common import (
     DATA_EXTENSIONS,
     K_E,
@@ -152,21 +155,25 @@ def cmd_calibrate(args) -> int:
     )
     if method.message:
         progress(method.message)
-    with usage_errors():
+    with usage_errors(), cli_words(CALIBRATE_WORDS):
         comp = method.compensator.fit(windows, key=jax.random.key(args.seed), raw=data)
     progress("fitted")
     static = windows.select(windows.static & (np.abs(windows.temperature_rate_cps) < MIN_RAMP_RATE))
-    resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c)
+    # every bench temperature on purpose, those beyond the calibrated range too (marked below)
+    resid = static.drift_dph - comp.drift_dph(static.wave_angle_deg, static.temperature_c,
+                                              warn=False)  # fmt: skip
     span = comp.calibrated_range
     if span is not None:
         beyond = "extrapolates" if comp.extrapolates else "passes samples beyond it through"
         print(f"  calibrated temperature range {span[0]:+.1f} … {span[1]:+.1f} °C "
               f"({comp.n_temperature_levels} levels); correct {beyond}")  # fmt: skip
+    _scale_factor_check(comp, args.k_e)
     print("  in-sample drift residual RMS per temperature [°/h]:")
     groups = group_temperatures(static.temperature_c)  # one row per temperature
     for T in np.unique(groups):
         r = resid[groups == T]
-        print(f"    {T:+7.1f} °C  {np.sqrt(np.mean(r**2)):.4f}")
+        out = "" if comp.in_range(np.array([T]))[0] else "  (beyond its range: extrapolated)"
+        print(f"    {T:+7.1f} °C  {np.sqrt(np.mean(r**2)):.4f}{out}")
     stats = getattr(comp, "fit_stats", None)  # the grey box: each kind of window's scatter
     if stats:  # χ²/dof is 1 by construction: the rotation scatter is what flags a bad bench
         print(f"  fit residual RMS [°/h]: at-rest windows {stats['static_rms_dph']:.4f}, "
@@ -178,6 +185,68 @@ def cmd_calibrate(args) -> int:
         print(comp.equations())
     return finish((args.out, lambda p: save_compensator(comp, p)),
                   (args.json, lambda p: export_json(comp, p)))  # fmt: skip
+
+
+SCALE_FACTOR_TOLERANCE = 0.1
+"""`calibrate` warns when the fitted scale factor is further than this from 1: with the data's
+own k_e an HRG's is 1 to well under 1 % (readout gain mismatch, laws in T), so 10 % is a --k-e
+typed wrong (K for 2K: 2.0; 0.5 for 0.554: 1.108) or a table rate in another unit or sign."""
+
+
+def _scale_factor_check(comp, k_e: float) -> None:
+    """Print the fitted scale factor SF (measured over true rate, drift removed; 1 = as
+    `--k-e` reads the rates) at the calibrated temperature nearest +20 °C, its mean over the
+    wave angle: `scale_factor_at` for every `--method` (the Fourier series, the MLP's network,
+    the grey box's fitted k_e(T) over the given one). Beyond `SCALE_FACTOR_TOLERANCE`: one
+    warning line on stderr naming --k-e and the k_e the data imply (SF × --k-e)."""
+    import numpy as np
+
+    from ..units import T_REF_C
+
+    span = comp.calibrated_range
+    t_ref = T_REF_C if span is None else float(np.clip(T_REF_C, *span))
+    angles = np.arange(-90.0, 90.0, 1.0)  # electrical [°]: a whole period of the 2nθ terms
+    sf = float(np.mean(comp.scale_factor_at(angles, np.full(angles.shape, t_ref), warn=False)))
+    print(f"  fitted scale factor at {t_ref:+.1f} °C: {sf:.6f} (mean over the wave angle; 1 = "
+          f"the rates as --k-e {k_e:g} reads them)")  # fmt: skip
+    if abs(sf - 1.0) <= SCALE_FACTOR_TOLERANCE:
+        return
+    implied = sf * k_e  # measured/true = k_e(data) / k_e(given)
+    if K_E_RANGE[0] < implied <= K_E_RANGE[1]:
+        why = (f"the data's k_e ≈ {sf:.4f} × {k_e:g} = {implied:.3g} (k_e = 2K ≈ "
+               f"{K_E_NOMINAL:.3g} for an HRG): calibrate again with --k-e {implied:.3g}, or "
+               "check table_rate_dps (°/s)")  # fmt: skip
+    else:
+        why = ("no k_e in (0, 1] explains it: check table_rate_dps (its unit, °/s, and its sign) "
+               "and --k-e")  # fmt: skip
+    print(f"hrgjax calibrate: --k-e looks wrong: fitted scale factor {sf:.4f}, "
+          f"{abs(sf - 1.0):.0%} from 1 — {why}", file=sys.stderr, flush=True)  # fmt: skip
+
+
+CALIBRATE_WORDS = (
+    (r"\(e\.g\. calibration\.rotation_plan\)", "(runs at a constant non-zero table rate: "
+     "hrgjax simulate --plan rotation simulates them, hrgjax design plans a bench)"),
+    (r"(FourierCompensator\(window_s=…\), )?CLI (--\w+)", r"\2"),
+)  # fmt: skip
+SELF_CALIBRATE_WORDS = (
+    (r"\bsettle_s( =)?", "--settle"),
+    (r"\(?\bprecession_plan (runs ±ρ|does)\)?", r"(hrgjax simulate --plan precession \1)"),
+)  # fmt: skip
+"""`calibrate`'s and `self-calibrate`'s `cli_words`: a library message's Python way out or
+parameter (pattern) as the command line says it (replacement)."""
+
+
+@contextlib.contextmanager
+def cli_words(words):
+    """A `ValueError` raised inside the block comes out with `re.sub(pattern, replacement)`
+    of each pair of `words` applied to its message: the library's names as the CLI's."""
+    try:
+        yield
+    except ValueError as err:
+        text = str(err)
+        for pattern, replacement in words:
+            text = re.sub(pattern, replacement, text)
+        raise ValueError(text) from None
 
 
 def _load_model(option: str, path: str):
@@ -474,7 +543,7 @@ def cmd_self_calibrate(args) -> int:
     from ..calibration import self_calibration as sc
 
     if reversal:
-        with usage_errors(args.data):
+        with usage_errors(args.data), cli_words(SELF_CALIBRATE_WORDS):
             rows = sc.mode_reversal_data(data, settle_s=args.settle)
         print(f"hrgjax self-calibrate: {args.data}: mode reversal in {len(rows)} runs")
         print("    T [°C]   held at [°]     bias [°/h]   anisotropy at the first, as read "
@@ -492,7 +561,7 @@ def cmd_self_calibrate(args) -> int:
             return f"the table to {path}"
 
         return finish((args.json, write)) if args.json else 0
-    with usage_errors(args.data):
+    with usage_errors(args.data), cli_words(SELF_CALIBRATE_WORDS):
         comp = sc.PrecessionCompensator(harmonics=args.harmonics, settle_s=args.settle).fit(data)
     print(f"hrgjax self-calibrate: {args.data}: virtual-precession sweeps at "
           f"{list(comp.temperatures_c)} °C")  # fmt: skip

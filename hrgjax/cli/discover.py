@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 from ..units import K_E_NOMINAL
 from ._common import (
     K_E,
@@ -13,6 +15,8 @@ from ._common import (
     start,
     usage_errors,
 )
+from .calibrate import cli_words
+from .ins import ticker
 
 
 def cmd_discover(args) -> int:
@@ -23,7 +27,9 @@ def cmd_discover(args) -> int:
     from ..discovery import NOMINAL, discover
 
     data = load_data(args.data, args.allow_extra)
-    with usage_errors(args.data):
+    what = ("discovering: the nominal fit, then the catalogue's effects screened round by "
+            "round (a minute or more for a bench session)")  # fmt: skip
+    with usage_errors(args.data), cli_words(DISCOVER_WORDS), contextlib.closing(ticker(what)):
         found = discover(data, nominal=NOMINAL, k_e=args.k_e, shape=args.shape)
     print(f"hrgjax discover: {args.data} ({found.shape} data)")
     print(f"  verdict: {found.verdict}; missing effect: {found.missing_effect}")
@@ -51,6 +57,18 @@ def cmd_discover(args) -> int:
             f"{r['delta_bic']:10.4g} {r['aliasing']:6.2f}{outshone}"
         )
     return finish((args.json, found.write_json), (args.plot, found.plot))
+
+
+DISCOVER_WORDS = (
+    (r"; add static runs or pass noise=hrgjax\.Noise\(\.\.\.\)$",
+     "; add static runs or pass noise="),
+    (r";? or pass noise=hrgjax\.Noise\(\.\.\.\)", ""),
+    (r"; add static runs or pass noise=$",
+     "; add static runs or holds (the command line takes no noise model; in Python, "
+     "hrgjax.discovery.discover(..., noise=hrgjax.Noise(...)) does)"),
+)  # fmt: skip
+"""`discover`'s `cli_words`: the library's way out that the command line has no option for
+(`noise=`), said so."""
 
 
 def _discover_parser(sub):

@@ -3,6 +3,7 @@ commands (seeds 001–003 and six-axis IMU calibration)."""
 
 from __future__ import annotations
 
+import contextlib
 import re
 import sys
 
@@ -19,6 +20,7 @@ from ._common import (
     usage_errors,
     write_json,
 )
+from .calibrate import cli_words
 
 GYRO_UNIT_NAMES = ("deg/s", "rad/s", "deg/h", "mrad/s")
 """`imu-calibrate --gyro-unit` choices (a subset of hrgjax.imu.GYRO_UNITS)."""
@@ -36,6 +38,38 @@ def _log(msg) -> None:
     print(f"  … {msg}", file=sys.stderr, flush=True)
 
 
+def ticker(what: str = ""):
+    """A line whose elapsed time moves (redrawn each second) until closed, "  … [00:12] `what`"
+    (or "    [00:12]" under the last note line): a long step with no progress of its own is
+    not a silence. Only at a terminal (`hrgjax._progress.bar`): not in logs."""
+    from .._progress import bar
+
+    shown = bar(None, what, tick=True)
+    shown.bar_format = "  … [{elapsed}] {desc}" if what else "    [{elapsed}]"
+    shown.refresh()  # its first draw, in tqdm's own format, is overdrawn at once
+    return shown
+
+
+@contextlib.contextmanager
+def steps(first: str = ""):
+    """`log=` for the library's long runs (diagnose, vibration): each step's message a note on
+    stderr, with a `ticker` until the next (the library's own bars nest under it); `first`:
+    a `ticker`'s words for the work before the first message (at a terminal only)."""
+    shown = [ticker(first)] if first else []
+
+    def log(msg):
+        while shown:
+            shown.pop().close()
+        _log(msg)
+        shown.append(ticker())
+
+    try:
+        yield log
+    finally:
+        while shown:
+            shown.pop().close()
+
+
 def cmd_align(args) -> int:
     """`hrgjax align IMU_LOG`: stationary coarse + fine alignment of a strapdown IMU log."""
     if args.format != "psins":
@@ -44,13 +78,19 @@ def cmd_align(args) -> int:
     import warnings
 
     from ..ins.alignment import PSINS_FIELDS, AlignmentWarning, align, check_stationary, load_psins
+    from ..ins.fine_alignment import check_step
     from ..units import DEG, DEG_PER_H
 
-    with usage_errors(missing=f"{args.imu_log}: no such file"):
+    _check_align_options(args)
+    with usage_errors(missing=f"{args.imu_log}: no such file"), cli_words(ALIGN_WORDS):
         log = load_psins(args.imu_log)
         check_stationary(log, args.coarse, fields=PSINS_FIELDS, coarse_name="--coarse",
                          where=f"{args.imu_log}: ")  # fmt: skip
-        with warnings.catch_warnings(record=True) as caught:
+        check_step("align", args.step, log.dt)
+        what = (f"aligning: coarse over the first {args.coarse:g} s, then the Kalman filter in "
+                f"{args.step:g}-s steps over {float(log.t[-1] - log.t[0]) - args.coarse:.0f} s "
+                "(compiled first unless the cache holds it)")  # fmt: skip
+        with warnings.catch_warnings(record=True) as caught, contextlib.closing(ticker(what)):
             warnings.simplefilter("always", AlignmentWarning)
             result = align(log, coarse_s=args.coarse, coarse_name="--coarse", step_s=args.step,
                            gyro_bias_std=args.gyro_bias * DEG_PER_H, arw=args.arw * DEG / 60.0,
@@ -79,6 +119,41 @@ def cmd_align(args) -> int:
                   (args.plot, lambda p: figure("alignment_figure")(result, p, header)))  # fmt: skip
 
 
+VELOCITY_NOISE_MAX = 1.0
+"""`align --velocity-noise` above this [m/s] is refused: the zero-velocity measurement's noise
+of a vehicle at rest is its sway, mm/s to cm/s (the PSINS log's innovations: 2–3 mm/s; a ship
+at its mooring, a vehicle in wind: 0.1 m/s); 1 m/s is walking pace, not standing still, so a
+value beyond it is one in mm/s or cm/s read as m/s."""
+ALIGN_WORDS = ((r"\balign: step_s = (\S+) s", r"--step \1 s"),)
+"""`align`'s `cli_words`: the library's names as the command line's options."""
+
+
+def _check_align_options(args) -> None:
+    """Refuse --arw or --gyro-bias beyond `hrgjax.plausible.RANGES`' `imu_arw` or
+    `imu_gyro_bias` (as `--relax` leaves them) and --velocity-noise beyond
+    `VELOCITY_NOISE_MAX`, in one line naming the option in its CLI unit."""
+    from .. import plausible
+    from ..units import DEG, DEG_PER_H
+
+    for option, value, si, quantity, unit, other in (
+        ("--arw", args.arw, DEG / 60.0, "imu_arw", "°/√h",
+         "°/s/√Hz × 60 or °/h/√Hz ÷ 60 is °/√h"),
+        ("--gyro-bias", args.gyro_bias, DEG_PER_H, "imu_gyro_bias", "°/h",
+         "°/s × 3600 is °/h"),
+    ):  # fmt: skip
+        high = plausible.RANGES[quantity][1]
+        if value * si >= high:
+            raise UsageError(f"{option} {value:g} {unit} is beyond the plausible {high / si:.3g} "
+                             f"{unit} (the option is in {unit}: {other}; --relax "
+                             f"{quantity}=LOW,HIGH, in {plausible.RANGES[quantity][2]}, "
+                             "widens it)")  # fmt: skip
+    if args.velocity_noise > VELOCITY_NOISE_MAX:
+        raise UsageError(f"--velocity-noise {args.velocity_noise:g} m/s is more than a vehicle at "
+                         f"rest sways (≤ {VELOCITY_NOISE_MAX:g} m/s; mm/s to cm/s parked): the "
+                         f"option is in m/s ({args.velocity_noise:g} mm/s is --velocity-noise "
+                         f"{args.velocity_noise / 1e3:g})")  # fmt: skip
+
+
 def _sway_line(sway: dict) -> str:
     """`hrgjax align`'s whiteness test of the zero-velocity innovations
     ([`AlignmentResult.sway`][hrgjax.ins.alignment.AlignmentResult.sway]) in one line, with a
@@ -105,21 +180,39 @@ def cmd_diagnose(args) -> int:
     from ..diagnosis.compare import METHODS, compare, table
 
     methods = METHODS if args.methods is None else tuple(args.methods.split(","))
-    with usage_errors():
+    n_healthy = max(args.runs // 2, 1)
+    first = (f"simulating {args.runs} faulty and {n_healthy} healthy runs of the three INS "
+             "(compiled first unless the cache holds them)")  # fmt: skip
+    with usage_errors(), steps(first) as log:
         result = compare(
             args.scenario, key=jax.random.key(args.seed), n_faulty=args.runs,
-            n_healthy=max(args.runs // 2, 1), methods=methods, traces=bool(args.plot), log=_log,
+            n_healthy=n_healthy, methods=methods, traces=bool(args.plot), log=log,
         )  # fmt: skip
+    # the sizes in the faulty sensor's unit (hrgjax.ins.platform.Fault: accelerometers in g,
+    # gyros in rad/s), on screen and in the JSON
+    unit = "g" if result["sensor"].startswith("accel") else "rad/s"
+    result["setup"] |= {"fault_sizes_unit": unit, "nominal_sensor_error_unit": unit}
     print(f"hrgjax diagnose: scenario {args.scenario}")
-    print(table(result))
+    print(re.sub(r"(sizes \S+)(, nominal sensor error \S+)\)", rf"\1 {unit}\2 {unit})",
+                 table(result), count=1))  # fmt: skip
     traces = result.pop("traces", None)
     title = result["scenario"]
     return finish((args.json, result),
                   (args.plot, lambda p: figure("diagnosis_figure")(traces, p, title=title)))  # fmt: skip
 
 
+EPOCHS, QUICK_EPOCHS = 1000, 300
+"""`vibration`'s training epochs, and the most `--quick` runs (a smoke run): its default, and
+a larger --epochs given with it is capped, with a note."""
+
+
 def cmd_vibration(args) -> int:
     """`hrgjax vibration`: the seed-003 pipeline on one scenario (hrgjax.fog.study)."""
+    epochs = (QUICK_EPOCHS if args.quick else EPOCHS) if args.epochs is None else args.epochs
+    if args.quick and epochs > QUICK_EPOCHS:  # said at once, before JAX is imported
+        _log(f"--quick trains at most {QUICK_EPOCHS} epochs: --epochs {epochs} capped (drop "
+             "--quick for more)")  # fmt: skip
+        epochs = QUICK_EPOCHS
     start(args, json=(".json",), plot=PLOT_EXTENSIONS)
     import jax
 
@@ -127,13 +220,10 @@ def cmd_vibration(args) -> int:
 
     if args.scenario not in SCENARIOS:
         raise UsageError(f"unknown --scenario {args.scenario!r}; known: {tuple(SCENARIOS)}")
-    with usage_errors():
+    with usage_errors(), steps() as log:
         quick = dict(freqs_hz=(5.0, 10.0, 20.0), amps_g=(0.25, 0.75, 1.25, 1.5), fs=100.0)
-        result = run(
-            args.scenario, key=jax.random.key(args.seed),
-            epochs=min(args.epochs, 300) if args.quick else args.epochs, log=_log,
-            **(quick if args.quick else {}),
-        )  # fmt: skip
+        result = run(args.scenario, key=jax.random.key(args.seed), epochs=epochs, log=log,
+                     **(quick if args.quick else {}))  # fmt: skip
     figures = result.pop("_figures")
     print("hrgjax vibration")
     print(table(result))
@@ -168,7 +258,7 @@ def cmd_imu_calibrate(args) -> int:
         try:
             data = imu.load(args.log, columns=columns, rate_hz=args.rate_hz, units=units)
         except ValueError as err:  # the library words the way out for its API
-            msg = re.sub(r'units\["time"\] = "(\w+)"', r"--time-unit \1", str(err))
+            msg = re.sub(r'units\["time"\] = "(\w+)"', r"--time-unit \1", _imu_words(err))
             if args.time_unit is None and f"column {args.time_column!r} row" in msg:
                 msg += " (time stamps in ns? give --time-unit ns)"
             raise ValueError(msg) from None
@@ -189,7 +279,7 @@ def cmd_imu_calibrate(args) -> int:
                                    accel_range_g=args.accel_range_g, lat_deg=args.lat_deg,
                                    earth_rate=0.0 if args.no_earth_rate else EARTH_RATE)  # fmt: skip
         except ValueError as err:
-            raise ValueError(f"{err}{slow}") from None
+            raise ValueError(f"{_imu_words(err)}{slow}") from None
     for w in caught:  # a turn cut short, in one line: "hrgjax imu-calibrate: turn 'x_rot' …"
         if issubclass(w.category, TurnCutWarning):
             text = str(w.message).removeprefix("hrgjax.imu.ferraris: ")
@@ -225,6 +315,35 @@ def cmd_imu_calibrate(args) -> int:
     )
 
 
+IMU_WORDS = (
+    (r"units\[\"(gyro|accel)\"\] = '([^']+)'", r"--\1-unit \2"),
+    (r"declare the file's unit, or pass check_units=False for a (record that is not mostly "
+     r"at rest|spin test)", r"give the file's unit (the command line checks it against the "
+     r"data: a record mostly at rest)"),
+    (r"pass the sections by hand, or change min_static_s / motion_threshold_dps",
+     "give their rows with --sections, or check --gyro-unit and --time-unit (rests and "
+     "turns are told apart by the rate in °/s)"),
+    (r"pass turn_deg=(\S+)", r"give --turn-deg \1"),
+    (r"the time stamps' unit", "--time-unit"),
+    (r"the gyro unit", "--gyro-unit"),
+    (r"^g = ", "--g "),
+    (r"give the local gravity \[m/s²\]", "give the local gravity with --g [m/s²]"),
+    (r"the accelerometer unit", "--accel-unit"),
+    (r"\b(turn_deg_std|turn_deg|lat_deg|gyro_range_dps|accel_range_g)\b",
+     lambda m: "--" + m[1].replace("_", "-")),
+)  # fmt: skip
+"""`imu-calibrate`: a library message's Python names and ways out (pattern), as the command
+line says them (replacement; `re.sub`)."""
+
+
+def _imu_words(err: BaseException) -> str:
+    """`err`'s message with `IMU_WORDS` applied."""
+    text = str(err)
+    for pattern, replacement in IMU_WORDS:
+        text = re.sub(pattern, replacement, text)
+    return text
+
+
 def _three(option: str, text: str) -> list[str]:
     names = [t.strip() for t in text.split(",")]
     if len(names) != 3 or not all(names):
@@ -245,15 +364,17 @@ def _align_parser(sub):
     p.add_argument("--step", type=POSITIVE_SECONDS, default=1.0, help="Kalman filter step [s]")
     p.add_argument(
         "--gyro-bias", type=POSITIVE_FLOAT, default=0.05, metavar="DEG_PER_H",
-        help="the gyros' bias σ [°/h] the filter assumes (navigation grade 0.05; tactical "
-        "≈ 0.5–1): the heading σ ends at it / (ω_ie cos lat), since stationary alignment "
-        "cannot measure the east gyro bias",
+        help="the gyros' bias σ the filter assumes, in °/h — not rad/s: 0.05 °/h is 2.4e-7 "
+        "rad/s (navigation grade 0.05; tactical ≈ 0.5–1): the heading σ ends at it / (ω_ie "
+        "cos lat), since stationary alignment cannot measure the east gyro bias",
     )  # fmt: skip
     p.add_argument("--arw", type=POSITIVE_FLOAT, default=0.01, metavar="DEG_PER_RT_H",
-                   help="the gyros' angle random walk [°/√h] the filter assumes")  # fmt: skip
+                   help="the gyros' angle random walk the filter assumes, in °/√h (°/s/√Hz × "
+                   "60; °/h/√Hz ÷ 60)")  # fmt: skip
     p.add_argument("--velocity-noise", type=POSITIVE_FLOAT, default=0.01, metavar="M_PER_S",
-                   help="the zero-velocity measurement's white noise [m/s] the filter assumes "
-                   "(a parked vehicle's sway); the printed sway line tests the innovations' whiteness")  # fmt: skip
+                   help="the zero-velocity measurement's white noise the filter assumes, in m/s "
+                   f"(10 mm/s is 0.01; at most {VELOCITY_NOISE_MAX:g}): a parked vehicle's "
+                   "sway; the printed sway line tests the innovations' whiteness")  # fmt: skip
     return p
 
 
@@ -280,12 +401,13 @@ def _vibration_parser(sub):
     p.add_argument("--scenario", default="10hz_1g", help="10hz_1g, 10hz_0.5g or on_off")
     p.add_argument("--json", default=None, help="write heading errors and RMSEs here (JSON)")
     p.add_argument("--plot", default=None, help="write the PSD/training/alignment figure (PNG)")
-    p.add_argument("--epochs", type=POSITIVE_INT, default=1000,
-                   help="training epochs (the patent's 120 under-train)")  # fmt: skip
+    p.add_argument("--epochs", type=POSITIVE_INT, default=None,
+                   help=f"training epochs (None: {EPOCHS}, with --quick {QUICK_EPOCHS}, its "
+                   "most; the patent's 120 under-train)")  # fmt: skip
     p.add_argument(
         "--quick",
         action="store_true",
-        help="12-condition grid, 100 Hz, ≤ 300 epochs (a smoke run, < 1 min)",
+        help=f"12-condition grid, 100 Hz, ≤ {QUICK_EPOCHS} epochs (a smoke run, < 1 min)",
     )
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     return p

@@ -44,12 +44,30 @@ def _lever_arm(text: str):
     return v
 
 
+def used_outages(mot, outages) -> list[tuple[float, float]]:
+    """The GNSS outages a flight has [s], sorted and merged: the motion's own (its segments
+    without GNSS: the example's 60 s in cruise) and `--outage`'s."""
+    windows, t = list(outages), 0.0
+    for segment in mot.segments:
+        if not segment.gnss:
+            windows.append((t, t + segment.duration))
+        t += segment.duration
+    merged: list[tuple[float, float]] = []
+    for a, b in sorted(windows):
+        if merged and a <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], b))
+        else:
+            merged.append((a, b))
+    return merged
+
+
 def cmd_navigate(args) -> int:
     """`hrgjax navigate MOTION.csv`: Monte Carlo flights of a motion definition."""
     inputs = [] if args.motion == "example" else [args.motion]
     start(args, inputs, json=(".json",), plot=PLOT_EXTENSIONS)
     import jax
 
+    from .._progress import bar
     from ..ins import ekf, flights, gnss, motion, sensors
 
     outages = tuple(_outage(o) for o in args.outage or ())
@@ -63,7 +81,6 @@ def cmd_navigate(args) -> int:
                 f"(outage windows are seconds from the motion's start)"
             )
     with usage_errors():
-        truth = mot.truth(args.rate_hz)
         imu = sensors.preset(args.imu)
         receiver = gnss.Gnss(
             rate_hz=args.gnss_hz,
@@ -73,21 +90,31 @@ def cmd_navigate(args) -> int:
         )
         settings = ekf.LooselyCoupled(imu, receiver, scale_factors=args.states == 21,
                                       gauss_markov=args.gauss_markov)  # fmt: skip
+    gaps = used_outages(mot, outages)
+    said = ", ".join(f"{a:g}–{b:g} s" for a, b in gaps) or "none"
+    # said before the work: sampling the motion takes seconds, the flights' first call
+    # compiles for a minute (a bar, at a terminal, shows its clock; a log showed nothing)
+    print(f"hrgjax navigate: {args.motion} ({mot.duration:g} s at {args.rate_hz:g} Hz), "
+          f"{args.imu} IMU, GNSS {args.gnss_hz:g} Hz (outages: {said}), {args.runs} run(s), "
+          f"{settings.n_states} states; flying (the first call compiles) …", flush=True)  # fmt: skip
+    with usage_errors():
+        with bar(1, f"sampling the motion at {args.rate_hz:g} Hz", unit="motion", tick=True) as b:
+            truth = mot.truth(args.rate_hz)  # seconds: the clock moves at a terminal
+            b.update(1)
         result = flights.fly(truth, imu, settings, key=jax.random.key(args.seed), runs=args.runs)
     out = result.summary()
     out.update(motion=args.motion, imu=args.imu, rate_hz=args.rate_hz, gnss_hz=args.gnss_hz,
-               outages=[list(o) for o in outages])  # fmt: skip
-    print(f"hrgjax navigate: {args.motion} ({mot.duration:g} s at {args.rate_hz:g} Hz), "
-          f"{args.imu} IMU, GNSS {args.gnss_hz:g} Hz, {args.runs} run(s), {settings.n_states} states")  # fmt: skip
+               outages=[list(o) for o in gaps])  # fmt: skip
     print(
         f"{'horizontal position error [m]':>32} {'RMS':>9} {'max':>9} {'in gaps':>9} {'final':>9}"
     )
     for name in ("filter", "smoother", "free"):
         r = out[name]
-        gap = r.get("gap_horizontal_max_m", float("nan"))
+        gap = r.get("gap_horizontal_max_m")  # absent without a gap in the fixes
+        gap = f"{'—':>9}" if gap is None else f"{gap:9.2f}"
         label = {"free": "free inertial (height held)"}.get(name, name)
         print(f"{label:>32} {r['horizontal_rms_m']:9.2f} {r['horizontal_max_m']:9.2f} "
-              f"{gap:9.2f} {r['final_horizontal_median_m']:9.2f}")  # fmt: skip
+              f"{gap} {r['final_horizontal_median_m']:9.2f}")  # fmt: skip
     lo, hi = out["nees_band_95"]
     lo9, hi9 = out["nees_navigation_band_95"]
     meaning = {

@@ -9,6 +9,7 @@ import time
 
 from ._common import (
     DATA_EXTENSIONS,
+    NONNEGATIVE_INT,
     PLOT_EXTENSIONS,
     POSITIVE_FLOAT,
     POSITIVE_INT,
@@ -18,6 +19,7 @@ from ._common import (
     check_folder,
     figure,
     finish,
+    in_tool_folder,
     preset_gyro,
     say,
     setup,
@@ -144,6 +146,7 @@ def _self_calibration_plan(args, gyro) -> int:
                 "--plan precession sweeps the wave in whole-angle mode: drop --mode ftr"
             )
         plan = sc.precession_plan(temps, args.precession)
+        _check_sweep(plan, args.precession, sc.SETTLE_S)
         print(f"hrgjax simulate: preset {args.preset}, virtual precession at ±{args.precession:g} "
               f"°/s, {len(temps)} temperatures, {plan.size} sweeps × {plan.duration_s:g} s")  # fmt: skip
         _simulating(f"{plan.size} sweeps × {plan.duration_s:g} s")
@@ -159,6 +162,22 @@ def _self_calibration_plan(args, gyro) -> int:
                                     key=jax.random.fold_in(key, STREAMS["reversal"]), bias_key=bias_key)  # fmt: skip
     print(f"  simulated in {time.perf_counter() - t0:.1f} s", flush=True)
     return finish((args.out, _rows(data)))
+
+
+def _check_sweep(plan, rate_dps: float, settle_s: float) -> None:
+    """Refuse, before the work, sweeps that `self-calibrate` would refuse after it: each must
+    keep `MIN_SWEEP_SAMPLES` output samples after the settling (`--precession 500` swept its
+    180° in 0.36 s, at 1 Hz: one sample, and the simulation ran to the end)."""
+    from ..calibration._sweeps import MIN_SWEEP_SAMPLES
+
+    sweep_s = plan.duration_s - settle_s
+    if sweep_s / plan.dt_out < MIN_SWEEP_SAMPLES:
+        fastest = 180.0 / (MIN_SWEEP_SAMPLES * plan.dt_out)
+        raise UsageError(
+            f"--precession {rate_dps:g}: a sweep over 180° (electrical) would last "
+            f"{sweep_s:.3g} s, under {MIN_SWEEP_SAMPLES} samples at {1 / plan.dt_out:g} Hz, "
+            f"fewer than self-calibrate needs; give --precession {fastest:g} °/s or less"
+        )
 
 
 def _simulate_plan_file(args, gyro) -> int:
@@ -210,6 +229,10 @@ def cmd_design(args) -> int:
         f"hrgjax design: {args.budget_h:g} h of bench time, criterion {args.criterion} "
         f"({args.model} model), levels {','.join(map(str, levels))}"
     )
+    # said before the search: each structure's Adam step compiles first (a minute or more of
+    # silence in a log, where no bar shows: 67 s at --steps 3)
+    print(f"  searching {len(levels)} structures × {args.steps} Adam steps … (each structure's "
+          "step compiles first, unless the compile cache holds it)", flush=True)  # fmt: skip
     t0 = time.perf_counter()
     result = d.design(
         args.budget_h, criterion=args.criterion, levels=levels, statics=args.statics,
@@ -263,8 +286,43 @@ def cmd_design(args) -> int:
     )
 
 
+DEMO_FIGURES = ("drift_scale_factor.png", "drift_residuals.png", "error_vs_temperature.png")
+"""The demo's figures, in its `--out` folder (beside `calibration.csv` and the models)."""
+DEMO_MODELS = ("Fourier @+20°C", "Fourier+T", "MLP", "MLP end-to-end", "physical")
+"""The labels of the compensators `run_study` fits (every method): each is written as
+`model_<slug>.eqx` and `.json` (`_model_stem`)."""
+
+
+def _model_stem(label: str) -> str:
+    """`model_fourier_20_c` of "Fourier @+20°C": the label's letters and digits, by `_`."""
+    return "model_" + "_".join("".join(c if c.isalnum() else " " for c in label.lower()).split())
+
+
+def demo_files() -> tuple[str, ...]:
+    """The names of the files `hrgjax demo` writes in its `--out` folder."""
+    models = [_model_stem(label) + ext for label in DEMO_MODELS for ext in (".eqx", ".json")]
+    return ("calibration.csv", *DEMO_FIGURES, *models)
+
+
+def _check_demo_folder(args) -> None:
+    """Before any work: `--out` is a folder (or can be made), and none of the demo's files
+    in it exists outside `out/` unless `--force` (the user's calibration.csv was replaced)."""
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise UsageError(f"--out {args.out} is a file; give a folder for the demo's outputs")
+    check_folder("--out", os.path.abspath(args.out))
+    if args.force:
+        return
+    paths = [os.path.join(args.out, name) for name in demo_files()]
+    there = [os.path.basename(p) for p in paths if os.path.lexists(p) and not in_tool_folder(p)]
+    if there:
+        names = ", ".join(there[:3]) + (f" and {len(there) - 3} more" if len(there) > 3 else "")
+        raise UsageError(f"--out {args.out} holds {names} already (files the demo writes); "
+                         "give another folder, or --force to replace them")  # fmt: skip
+
+
 def cmd_demo(args) -> int:
     """`hrgjax demo`: seed 000's whole calibration study on tvg3_like()."""
+    _check_demo_folder(args)
     setup()
     import jax
 
@@ -272,9 +330,6 @@ def cmd_demo(args) -> int:
     from ..calibration.evaluate import SEED_TABLE
     from ..plots import compensation_residuals, drift_and_scale_factor, error_vs_temperature
 
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        raise UsageError(f"--out {args.out} is a file; give a folder for the demo's outputs")
-    check_folder("--out", os.path.abspath(args.out))
     os.makedirs(args.out, exist_ok=True)
     mode = "quick" if args.quick else "full"
     print(f"hrgjax demo ({mode}): seed 000's calibration study on the built-in TVG-3-like gyro")
@@ -297,7 +352,7 @@ def cmd_demo(args) -> int:
         drift_and_scale_factor(
             static_drift(study.calibration),
             scale_factor_vs_angle(study.calibration),
-            os.path.join(args.out, "drift_scale_factor.png"),
+            os.path.join(args.out, DEMO_FIGURES[0]),
             "hrgjax: tvg3_like() bench data",
         )
     )
@@ -305,20 +360,17 @@ def cmd_demo(args) -> int:
         compensation_residuals(
             study.windows,
             study.compensators,
-            os.path.join(args.out, "drift_residuals.png"),
+            os.path.join(args.out, DEMO_FIGURES[1]),
             "static drift and what each compensator leaves",
         )
     )
     written.append(
-        error_vs_temperature(
-            study.table, os.path.join(args.out, "error_vs_temperature.png"), SEED_TABLE
-        )
+        error_vs_temperature(study.table, os.path.join(args.out, DEMO_FIGURES[2]), SEED_TABLE)
     )
     for label, comp in study.compensators.items():
         if label == "raw":
             continue
-        slug = "_".join("".join(c if c.isalnum() else " " for c in label.lower()).split())
-        stem = os.path.join(args.out, "model_" + slug)
+        stem = os.path.join(args.out, _model_stem(label))
         written.append(save_compensator(comp, stem + ".eqx"))
         written.append(export_json(comp, stem + ".json"))
     print(f"\ntotal {time.perf_counter() - t0:.1f} s; wrote:")
@@ -358,7 +410,8 @@ def _simulate_parser(sub):
     )  # fmt: skip
     p.add_argument(
         "--precession", type=POSITIVE_FLOAT, default=None, metavar="DPS",
-        help="(--plan precession) commanded precession rate [°/s, electrical] (default 0.5)",
+        help="(--plan precession) commanded precession rate [°/s, electrical] (default 0.5; "
+        "at most 9: a 180° sweep keeps 20 samples at 1 Hz, as self-calibrate needs)",
     )  # fmt: skip
     p.add_argument(
         "--plan-file", default=None, metavar="PLAN.json",
@@ -407,8 +460,8 @@ def _design_parser(sub):
     )  # fmt: skip
     p.add_argument("--statics", type=POSITIVE_INT, default=6,
                    help="static segments per temperature level")  # fmt: skip
-    p.add_argument("--rotations", type=int, default=2,
-                   help="rotations at ±5 °/s per temperature level")  # fmt: skip
+    p.add_argument("--rotations", type=NONNEGATIVE_INT, default=2,
+                   help="rotations at ±5 °/s per temperature level (0: none)")  # fmt: skip
     p.add_argument("--no-ramps", action="store_true",
                    help="no measuring ramps between levels (slew and soak instead)")  # fmt: skip
     p.add_argument("--steps", type=POSITIVE_INT, default=300,

@@ -446,7 +446,7 @@ def turning_noise_model(data: MeasuredData, window_s=None) -> NoiseModel:
     except ValueError as e:
         raise ValueError(
             "the log has no still stretch for the noise model, and its runs are too short to "
-            f"read it from their angles ({e}); add static runs or pass noise="
+            f"read it from their angles ({e}); add static runs or pass noise=hrgjax.Noise(...)"
         ) from None
 
 
