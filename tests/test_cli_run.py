@@ -68,6 +68,44 @@ def test_ctrl_c_during_garbage_collection_stops_the_command(monkeypatch, capsys)
     assert signal.getsignal(signal.SIGINT) is before
 
 
+def test_ctrl_c_in_a_weakref_callback_or_at_the_very_end_still_stops(monkeypatch, capsys):
+    """Review (s32): a Ctrl-C in a weakref callback (JAX's caches use them) was dropped as an
+    "Exception ignored" (now `sys.unraisablehook` hands it back); one in a gc callback
+    within `REDELIVER_S` of the command's end was cancelled with its timer: exit 0."""
+    import weakref
+
+    class Thing:
+        pass
+
+    def dropped(_):
+        signal.raise_signal(signal.SIGINT)  # raised in the callback, which Python drops
+
+    def weak(args):
+        ref = weakref.ref(Thing(), dropped)  # noqa: F841  (the object dies at once)
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < 5.0:
+            time.sleep(0.001)
+        return 0
+
+    def at_end(args):
+        def callback(phase, info):
+            if phase == "start":
+                gc.callbacks.remove(callback)
+                signal.raise_signal(signal.SIGINT)
+
+        gc.callbacks.append(callback)
+        gc.collect()
+        return 0  # returns before the re-delivery fires
+
+    hook = sys.unraisablehook  # pytest's own
+    for work in (weak, at_end):
+        monkeypatch.setattr(cli, "cmd_simulate", work)
+        t0 = time.perf_counter()
+        cli_fails(["simulate"], capsys, "interrupted", code=130)
+        assert time.perf_counter() - t0 < 2.0
+    assert sys.unraisablehook is hook
+
+
 def test_a_bug_is_an_internal_error_and_a_refusal_bad_input(monkeypatch, capsys):
     """A `TypeError` Python raises (a bug) said "error:" and exit 2, as bad input; one that
     hrgjax's checks raise (a one-line refusal) still is bad input."""

@@ -330,8 +330,9 @@ def swallows_exceptions(frame) -> bool:
 
 class Interrupts:
     """The command's SIGINT handler: `KeyboardInterrupt` as Python's own raises it, but a
-    Ctrl-C that lands where an exception would be dropped (`swallows_exceptions`) is raised
-    again `REDELIVER_S` later, outside it."""
+    Ctrl-C that lands where an exception would be dropped (`swallows_exceptions`, or any
+    place whose exception reaches `sys.unraisablehook`: a weakref callback, a finalizer) is
+    raised again `REDELIVER_S` later, outside it (`redeliver`)."""
 
     def __init__(self):
         self.timer = None
@@ -339,16 +340,27 @@ class Interrupts:
     def __call__(self, signum, frame):
         if not swallows_exceptions(frame):
             raise KeyboardInterrupt
+        self.redeliver()
+
+    def redeliver(self) -> None:
+        """SIGINT again in `REDELIVER_S` s (once, however many Ctrl-C came meanwhile)."""
         if self.timer is None or not self.timer.is_alive():
             self.timer = threading.Timer(REDELIVER_S, signal.raise_signal, (signal.SIGINT,))
             self.timer.daemon = True
             self.timer.start()
 
+    def pending(self) -> bool:
+        """Whether a Ctrl-C waits to be delivered again."""
+        return self.timer is not None and self.timer.is_alive()
+
 
 @contextlib.contextmanager
 def interruptible():
-    """`Interrupts` as the SIGINT handler inside the block, the previous one restored after;
-    nothing changed off the main thread or where Ctrl-C is ignored (SIG_IGN)."""
+    """`Interrupts` as the SIGINT handler inside the block, and a `sys.unraisablehook` that
+    hands it a `KeyboardInterrupt` Python would print as "Exception ignored" and drop; both
+    restored after. A Ctrl-C still waiting to be delivered when the block ends is raised
+    there (the command must not finish with exit 0). Nothing changed off the main thread or
+    where Ctrl-C is ignored (SIG_IGN)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -356,11 +368,23 @@ def interruptible():
     if previous in (signal.SIG_IGN, None):
         yield
         return
-    handler = Interrupts()
+    handler, hook = Interrupts(), sys.unraisablehook
+
+    def unraisable(info):
+        if isinstance(info.exc_value, KeyboardInterrupt):
+            handler.redeliver()
+        else:
+            hook(info)
+
     signal.signal(signal.SIGINT, handler)
+    sys.unraisablehook = unraisable
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        sys.unraisablehook = hook
+        waiting = handler.pending()
         if handler.timer is not None:
             handler.timer.cancel()
+        if waiting:
+            raise KeyboardInterrupt
