@@ -23,7 +23,7 @@ from .profiles import traced_checks as profile_checks
 from .resonator.control import AVERAGED_BANDWIDTH, FTR_LIMITS
 from .resonator.control import LIMITS as CONTROL_LIMITS
 from .resonator.params import LIMITS as RESONATOR_LIMITS
-from .resonator.params import TemperatureLaw, damping_problem
+from .resonator.params import TemperatureLaw, damping_problem, stiffness_problem
 from .resonator.readout import LIMITS as READOUT_LIMITS
 
 LAW_LIMITS = {  # (rule, unit) of the fields a temperature law must respect, by path
@@ -91,7 +91,7 @@ def _laws(gyro):
 def check_laws(gyro, profile) -> None:
     """Every temperature law of `gyro` finite over the profile's temperatures, and decay
     times, frequencies and noise levels of the right sign there, both axes damped
-    (`resonator.params.damping_problem`); plain values put in with
+    (`resonator.params.damping_problem`) with stiffness (`stiffness_problem`); plain values put in with
     `eqx.tree_at` within their limits, and the fields of `RANGED` (values and laws) within
     their `plausible.RANGES` (concrete values only: `check_traced` holds traced ones to the
     same rules at run time)."""
@@ -133,23 +133,24 @@ def check_laws(gyro, profile) -> None:
             plausible.check(f"the temperature law of gyro.{name} at {grid[i]:.4g} °C (inside "
                             f"the profile's temperatures [{lo:.4g}, {hi:.4g}] °C)", value[i],
                             RANGED[name])  # fmt: skip
-    # both axes damped over the profile's temperatures (plain values too: eqx.tree_at)
-    if problem := damping_problem(gyro.resonator, grid if grid is not None else temps):
+    # both axes damped and stiff over the profile's temperatures (plain values too: eqx.tree_at)
+    at = grid if grid is not None else temps
+    if problem := damping_problem(gyro.resonator, at) or stiffness_problem(gyro.resonator, at):
         raise ValueError(f"gyro.resonator: {problem}")
 
 
 def check_bandwidths(gyro, profile, model: str) -> None:
-    """Refuse, for the averaged `model`, a closed loop whose bandwidth reaches
-    `AVERAGED_BANDWIDTH` × the carrier ω at one of the profile's temperatures (`LAW_GRID`
-    points between the lowest and the highest; laws evaluated there): the averaging holds
-    only for loops far slower than the carrier (a 5·10⁴ rad/s PLL on a 3.1·10⁴ rad/s
-    carrier ran without a word). Concrete values only; ideal or absent loops are not read."""
-    ctl = gyro.control
-    if model != "averaged" or not ctl.enabled or ctl.ideal or not is_concrete(profile.temperature):
+    """Refuse, for the averaged `model`, a rate that reaches `AVERAGED_BANDWIDTH` × the
+    carrier ω at one of the profile's temperatures (`LAW_GRID` points between the lowest and
+    the highest; laws evaluated there): a closed loop's bandwidth (a 5·10⁴ rad/s PLL on a
+    3.1·10⁴ rad/s carrier ran without a word), the damping rate 1/τ or an axis's
+    1/τ ± ½|Δ(1/τ)| (Q = 2.5: θ 0.05 rad off), or the split |Δω| (Δω = 0.2 ω: θ 0.25 rad
+    off): the averaging holds only for rates far slower than the carrier. Concrete values
+    only; ideal or absent loops are not read."""
+    if model != "averaged" or not is_concrete(profile.temperature):
         return
     temps = np.asarray(profile.temperature, float).ravel()
     grid = np.linspace(temps.min(), temps.max(), LAW_GRID)
-    loops = ("pll", "agc", "quadrature") + (("rebalance",) if ctl.mode == "ftr" else ())
 
     def at(x):  # a value or a law over the grid; None where traced
         leaves = jax.tree_util.tree_leaves(x)
@@ -160,18 +161,31 @@ def check_bandwidths(gyro, profile, model: str) -> None:
                 x(grid, xp=np) if isinstance(x, TemperatureLaw) else np.full(grid.shape, float(x))
             )
 
-    omega = at(gyro.resonator.omega)
-    if omega is None:
+    res, ctl = gyro.resonator, gyro.control
+    if (omega := at(res.omega)) is None:
         return
-    for loop in loops:
-        beta = at(getattr(ctl, f"{loop}_bandwidth"))
-        if beta is None or not np.any(high := beta >= AVERAGED_BANDWIDTH * omega):
+    rates = []  # (field, its value over the grid, its unit, the rate it sets, what that is)
+    if (tau := at(res.tau)) is not None:
+        rates.append(("resonator.tau", tau, "s", 1.0 / tau, "the damping rate 1/τ"))
+        if (dit := at(res.delta_inv_tau)) is not None:
+            rates.append(("resonator.delta_inv_tau", dit, "1/s", 1.0 / tau + np.abs(dit) / 2,
+                          "an axis's damping rate 1/τ + ½|Δ(1/τ)|"))  # fmt: skip
+    if (split := at(res.delta_omega)) is not None:
+        rates.append(("resonator.delta_omega", split, "rad/s", np.abs(split), ""))
+    if ctl.enabled and not ctl.ideal:
+        loops = ("pll", "agc", "quadrature") + (("rebalance",) if ctl.mode == "ftr" else ())
+        for loop in loops:
+            if (beta := at(getattr(ctl, f"{loop}_bandwidth"))) is not None:
+                rates.append((f"control.{loop}_bandwidth", beta, "rad/s", beta, ""))
+    for name, value, unit, rate, what in rates:
+        if not np.any(high := rate >= AVERAGED_BANDWIDTH * omega):
             continue
         i = int(np.flatnonzero(high)[0])
+        of = f" ({what} = {rate[i]:g} 1/s)" if what else ""
         raise ValueError(
-            f"gyro.control.{loop}_bandwidth = {beta[i]:g} rad/s at {grid[i]:.4g} °C is at or "
-            f"above {AVERAGED_BANDWIDTH:g} × the carrier ω = {omega[i]:g} rad/s: the averaged "
-            "model holds for loops far slower than the carrier; lower it, or run "
+            f"gyro.{name} = {value[i]:g} {unit} at {grid[i]:.4g} °C{of} is at or above "
+            f"{AVERAGED_BANDWIDTH:g} × the carrier ω = {omega[i]:g} rad/s: the averaged "
+            "model holds for rates far slower than the carrier; lower it, or run "
             'model="full"'
         )
 
@@ -216,19 +230,30 @@ def law_checks(gyro, profile) -> list:
 
 
 def _damping_check(resonator, temps, temps_traced) -> list:
-    """`damping_problem`'s rule (both axes damped: |Δ(1/τ)| < 2/τ) where a value is traced
-    (a sweep over `delta_inv_tau`, say): `[(bad, message)]`, or `[]` when `check_laws`
-    judged it (all concrete) or for a batch of laws."""
-    fields = [getattr(resonator, name) for name in ("tau", "delta_inv_tau")]
-    leaves = jax.tree_util.tree_leaves(fields)
-    if any(np.ndim(x) for x in leaves) or (not temps_traced and all(map(is_concrete, leaves))):
-        return []
-    grid = jnp.concatenate([temps, jnp.linspace(temps.min(), temps.max(), LAW_GRID)])
-    tau, dit = (f(grid) if isinstance(f, TemperatureLaw) else jnp.asarray(f, float) for f in fields)
-    judged = jnp.isfinite(tau) & (tau > 0) & jnp.isfinite(dit) & jnp.all(jnp.isfinite(temps))
-    bad = jnp.any(judged & ~(jnp.abs(dit) * tau < 2.0))
-    return [(bad, "gyro.resonator.delta_inv_tau gives one axis negative damping at one or more "
-                  "points (1/τ₂ = 1/τ − |Δ(1/τ)|/2 ≤ 0): |Δ(1/τ)| must be < 2/τ")]  # fmt: skip
+    """`damping_problem`'s rule (both axes damped: |Δ(1/τ)| < 2/τ) and `stiffness_problem`'s
+    (both axes stiff: |Δω| < ω) where a value is traced (a sweep over `delta_inv_tau`, say):
+    `[(bad, message), …]`, without a rule `check_laws` judged (all concrete) or for a batch
+    of laws."""
+    checks = []
+    for names, message in (
+        (("tau", "delta_inv_tau"), "gyro.resonator.delta_inv_tau gives one axis negative "
+         "damping at one or more points (1/τ₂ = 1/τ − |Δ(1/τ)|/2 ≤ 0): |Δ(1/τ)| must be < 2/τ"),
+        (("omega", "delta_omega"), "gyro.resonator.delta_omega gives one axis negative "
+         "stiffness at one or more points (ω² − ω|Δω| ≤ 0): |Δω| must be < ω"),
+    ):  # fmt: skip
+        fields = [getattr(resonator, name) for name in names]
+        leaves = jax.tree_util.tree_leaves(fields)
+        if any(np.ndim(x) for x in leaves) or (not temps_traced and all(map(is_concrete, leaves))):
+            continue
+        grid = jnp.concatenate([temps, jnp.linspace(temps.min(), temps.max(), LAW_GRID)])
+        scale, x = (
+            f(grid) if isinstance(f, TemperatureLaw) else jnp.asarray(f, float) for f in fields
+        )
+        ok = jnp.abs(x) * scale < 2.0 if names[0] == "tau" else jnp.abs(x) < scale
+        judged = jnp.isfinite(scale) & (scale > 0)
+        judged &= jnp.isfinite(x) & jnp.all(jnp.isfinite(temps))
+        checks.append((jnp.any(judged & ~ok), message))
+    return checks
 
 
 def check_traced(gyro, profile, ts, explicit: bool = True):

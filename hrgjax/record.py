@@ -57,7 +57,9 @@ class Record(eqx.Module):
     accel: jax.Array
     """Specific force along case axes [g], shape (..., n, 3)."""
     true_wave_angle: jax.Array
-    """True pattern angle, no readout error or noise [rad, electrical]."""
+    """True pattern angle, no readout error or noise [rad, electrical]: the antinode's, on
+    the branch |a| ≥ |q| (`hrgjax.resonator.averaged.canonical_angle`) in both models — where
+    an open-loop ellipse passes the circle (a free wave 45° off a split) it turns by π/2."""
     frequency: jax.Array
     """PLL reference frequency ω_r [rad/s]."""
     drive: jax.Array

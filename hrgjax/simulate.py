@@ -40,6 +40,7 @@ from .record import Record, warn_saturated
 from .record import SaturationWarning as SaturationWarning
 from .resonator.averaged import (
     averaged_problem,
+    canonical_angle,
     held_angle,
     input_rate,
     measured_estimates,
@@ -343,7 +344,7 @@ def _read_averaged(gyro, profile, ts, ys):
             loops = loop_outputs(ctl, res.omega, est, integ, command)
         else:
             est = measured_estimates(g, y[0], y[1], y[2], y[3])
-            true_theta = y[2]
+            true_theta = canonical_angle(y[0], y[1], y[2])  # the antinode, as the full model
             if ctl.mode == "ftr":  # the held angle is the state's
                 command = (y[8], command[1], command[2])
             loops = loop_outputs(ctl, res.omega, est, y[4:], command)

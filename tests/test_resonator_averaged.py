@@ -125,6 +125,28 @@ def test_frequency_split_and_nonlinearity_instantaneous_laws():
     np.testing.assert_allclose(rate, expect[1:-1], rtol=1e-3, atol=1e-9)
 
 
+def test_wave_angle_past_a_circular_ellipse():
+    """Audit: a free wave 45° off a 0.5 Hz split turns circular at 0.5 s (q = a); after it
+    the averaged wave_angle flipped by π from sample to sample (the state keeps θ while
+    |q| > |a|). The closed form (PHYSICS.md §4.3, principal-axis frame, u₀ = π/4):
+    θ − θ_ω = ½·atan2(cos Δωt, 0), i.e. +45° before 0.5 s and −45° after (the full model and
+    the auditor's integrator gave −45°); read on the canonical branch |a| ≥ |q|."""
+    from hrgjax.resonator.averaged import canonical_angle
+
+    res = resonator(omega=2 * np.pi * 5e3, tau=640.0, delta_omega=2 * np.pi * 0.5)
+    gyro = hg.Gyro(res, control=hg.Control.free())
+    ts = np.array([0.0, 0.2, 0.4, 0.45, 0.55, 0.6, 0.8, 1.0])
+    rec = hg.simulate(gyro, hg.Profile.static(1.0, 20.0, wave_angle0_deg=45.0), ts=ts)
+    expect = np.where(ts < 0.5, 45.0, -45.0)
+    np.testing.assert_allclose(np.asarray(rec.wave_angle) / DEG, expect, atol=1e-4)
+    np.testing.assert_allclose(np.asarray(rec.true_wave_angle) / DEG, expect, atol=1e-4)
+    half = np.tan(np.pi * ts / 2)  # the state turns at Δω/2 in the (a, q) plane: q/a = tan
+    ratio = np.asarray(rec.quadrature) / np.asarray(rec.amplitude)
+    np.testing.assert_allclose(ratio, np.minimum(half, 1 / np.maximum(half, 1e-300)), atol=1e-6)
+    assert float(canonical_angle(0.6, 0.8, 0.3)) == 0.3 - np.pi / 2
+    assert float(canonical_angle(-0.8, 0.6, 0.3)) == 0.3
+
+
 @pytest.mark.slow(
     "~50 s: the reverse pass, its forward runs and the 4-checkpoint pass compiled; fast "
     "tier: jacfwd = jacrev through simulate (test_forward_mode_sensitivities), reverse = "

@@ -191,3 +191,30 @@ def test_reduced_rate_and_a_law_refuse_bad_arguments_before_any_work():
                                             rf"numbers \[°C\]; got {got}"):  # fmt: skip
             law(temp)
     assert float(law(25.0)) == float(law(np.float64(25.0), xp=np)) == 1.5
+
+
+def test_negative_stiffness_refused():
+    """Audit: `Resonator(delta_omega=1.5·ω)` (axis stiffness ω² − ω|Δω| < 0) was accepted and
+    the full model returned an amplitude of 4·10³⁷ after 0.5 s. |Δω| < ω (PHYSICS.md §2:
+    K = ω²I + ωΔω A(θω), eigenvalues ω² ± ωΔω) is refused for every model, as a value, a
+    law where it is evaluated, and a traced value at run time."""
+    w = 2 * np.pi * 5e3
+    with pytest.raises(ValueError, match=r"^Resonator\.delta_omega = 47123\.9 rad/s .* "
+                       r"negative stiffness .* \|Δω\| must be < ω$"):  # fmt: skip
+        hg.Resonator(omega=w, tau=640.0, delta_omega=1.5 * w)
+    with pytest.raises(ValueError, match="negative stiffness"):
+        hg.Resonator(omega=w, tau=640.0, delta_omega=[0.0, -w])  # |Δω| = ω: zero stiffness
+    hg.Resonator(omega=w, tau=640.0, delta_omega=-0.99 * w)
+    res = hg.Resonator(omega=w, tau=640.0, delta_omega=hg.TemperatureLaw(0.9 * w, 5e-3 * w))
+    res.at(20.0)  # 1.2 ω at 80 °C
+    with pytest.raises(ValueError, match=r"delta_omega .* at 80 °C"):
+        res.at(jnp.array([20.0, 80.0]))
+    gyro = hg.Gyro(hg.Resonator(omega=w, tau=640.0))
+    split = eqx.tree_at(lambda g: g.resonator.delta_omega, gyro, 1.5 * w)
+    for model in ("full", "averaged"):
+        with pytest.raises(ValueError, match=r"^gyro\.resonator: .*negative stiffness"):
+            hg.simulate(split, hg.Profile.static(0.01), dt_out=0.01, model=model)
+    run = jax.jit(lambda d: hg.simulate(eqx.tree_at(lambda g: g.resonator.delta_omega, gyro, d),
+                                        hg.Profile.static(0.01), dt_out=0.01).wave_angle)  # fmt: skip
+    with pytest.raises(Exception, match="negative stiffness"):
+        run(1.5 * w)

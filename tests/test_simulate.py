@@ -479,3 +479,20 @@ def test_forward_mode_and_loops_above_the_carrier_get_one_line():
     check_bandwidths(fast, hg.Profile.static(0.01), "full")  # the full model resolves ω
     check_bandwidths(hg.Gyro(res, control=hg.Control(pll_bandwidth=3e3)), hg.Profile.static(0.01),
                      "averaged")  # fmt: skip
+    # the resonator's own rates too (audit: Q = 2.5 put θ 0.05 rad off, Δω = 0.2 ω 0.25 rad)
+    free, prof = hg.Control.free(), hg.Profile.static(0.01)
+    w = 2 * np.pi * 5e3
+    for kw, match in (
+        (dict(tau=2e-4), r"^gyro.resonator.tau = 0.0002 s at 20 °C \(the damping rate "
+                         r"1/τ = 5000 1/s\) is at or above 0.1 × the carrier ω"),  # Q = 3.1
+        (dict(omega=10.0, tau=1.5, delta_inv_tau=-1.0), r"^gyro.resonator.delta_inv_tau = -1 "
+                                                         r"1/s .*½\|Δ\(1/τ\)\| = 1.16667 1/s"),
+        (dict(omega=10.0, tau=640.0, delta_omega=-1.0), r"^gyro.resonator.delta_omega = -1 rad/s"
+                                                         r" at 20 °C is at or above 0.1 × .* ω = 10"),
+    ):  # fmt: skip
+        gyro = hg.Gyro(resonator(**({"omega": w} | kw)), control=free)
+        with pytest.raises(ValueError, match=match + r".*model=\"full\"$"):
+            check_bandwidths(gyro, prof, "averaged")
+        check_bandwidths(gyro, prof, "full")
+    check_bandwidths(hg.Gyro(resonator(omega=10.0, tau=640.0, delta_omega=0.99), control=free),
+                     prof, "averaged")  # fmt: skip

@@ -84,10 +84,24 @@ def pattern_forces(u, v, phi, theta):
     )
 
 
+def canonical_angle(a, q, theta):
+    r"""The state's wave angle θ [rad] in the canonical form |a| ≥ |q| (PHYSICS.md §3.1):
+    θ where |q| ≤ |a|, else θ − π/2. The pendulum variables are two-valued,
+    $(a, q, \theta, \varphi) \equiv (q, a, \theta \mp \pi/2, \varphi \pm \pi/2)$ give
+    the same x, y, and the averaged equations carry the state through q = a (a free
+    wave 45° off a frequency split turns its ellipse into a circle and on, Δω·t/2 in the
+    (a, q) plane) without the swap: θ stays put while the antinode (the larger of |a|, |q|)
+    is now on the node axis. θ ± π/2 are one standing wave (θ is known modulo π); −π/2 is
+    where a slightly smaller θ − θ_ω ends. The estimates (`measured_estimates`) are read on
+    this branch: on the state's own they flip by π from one sample to the next."""
+    return theta - jnp.where(jnp.abs(q) > jnp.abs(a), 0.5 * jnp.pi, 0.0)
+
+
 def measured_estimates(gyro, a, q, theta, phi):
-    """What the electronics estimate from the pendulum state, through the pickoff errors."""
+    """What the electronics estimate from the pendulum state, through the pickoff errors
+    (the angle on the canonical branch, |a| ≥ |q|: `canonical_angle`)."""
     demod = from_pendulum(a, q, theta, phi).transform(gyro.readout.matrix())
-    return estimate(demod, theta_branch=theta)
+    return estimate(demod, theta_branch=canonical_angle(a, q, theta))
 
 
 def averaged_vector_field(t, y, args):

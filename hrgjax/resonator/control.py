@@ -75,7 +75,8 @@ loops act on the slow variables averaged over a carrier cycle, an error that gro
 (β/ω)² (full − averaged wave angle 0.23″, 1.4″, 8.9″ at β/ω = 0.02, 0.08, 0.2 over 11° of
 travel; a real HRG's loops close at 1–100 Hz on a 5 kHz carrier, β/ω ≤ 0.02); `simulate` refuses a
 bandwidth at or above 0.1 ω at any of the run's temperatures (`model="full"` resolves
-the carrier)."""
+the carrier), and so a damping rate 1/τ (1/τ + ½|Δ(1/τ)| on an axis) or a split |Δω|
+(`hrgjax._run_checks.check_bandwidths`)."""
 
 
 def _plain_bool(x):

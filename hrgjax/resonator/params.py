@@ -245,7 +245,7 @@ class Resonator(eqx.Module):
                 problem = k_e_problem(float(value))
                 if problem:
                     raise ValueError(f"Resonator.k_e must be {problem}")
-        problem = damping_problem(self)
+        problem = damping_problem(self) or stiffness_problem(self)
         if problem:
             raise ValueError(problem)
 
@@ -254,7 +254,8 @@ class Resonator(eqx.Module):
 
         Traceable: `jax.vmap(res.at)(temperatures)` gives a batch of resonators.
         """
-        problem = damping_problem(self, checked_temperature(temperature_c))
+        temperature = checked_temperature(temperature_c)
+        problem = damping_problem(self, temperature) or stiffness_problem(self, temperature)
         if problem:
             raise ValueError(problem)
         out = evaluate_at(self, temperature_c)
@@ -279,18 +280,12 @@ def _a_matrix(beta):
     return jnp.stack([jnp.stack([c, s]), jnp.stack([s, -c])])
 
 
-def damping_problem(resonator, temperature_c=None) -> str | None:
-    r"""One line naming `Resonator.delta_inv_tau` if it gives an axis negative damping:
-    $1/\tau_{1,2} = 1/\tau \pm \Delta(1/\tau)/2$ are both > 0 only while
-    $|\Delta(1/\tau)| < 2/\tau$ (else the less damped axis grows, $e^{+t/|\tau_2|}$, and the
-    averaged, full and slow models integrate an unstable mode). `None` when it holds, or when
-    τ or Δ(1/τ) is traced (`simulate` judges it at run time: `hrgjax._run_checks`).
-
-    **Arguments:** `resonator`, a [`hrgjax.Resonator`][]; `temperature_c` [°C], where to
-    evaluate its [`TemperatureLaw`][hrgjax.TemperatureLaw]s (`None`: a law is not judged,
-    only plain values)."""
+def _pair(resonator, names, temperature_c):
+    """The two fields `names` of `resonator` as broadcast float arrays (laws evaluated at
+    `temperature_c`), or None where one is traced, a law is not judged there (`temperature_c`
+    None or traced, a batch of laws) or the shapes differ (judged where evaluated)."""
     values = []
-    for name in ("tau", "delta_inv_tau"):
+    for name in names:
         x = getattr(resonator, name)
         if isinstance(x, TemperatureLaw):
             leaves = jax.tree_util.tree_leaves(x)
@@ -306,24 +301,70 @@ def damping_problem(resonator, temperature_c=None) -> str | None:
             return None
         values.append(np.asarray(x, dtype=float))
     try:
-        tau, dit = np.broadcast_arrays(*values)
-    except ValueError:  # batches of τ and Δ(1/τ) of different shapes: judged where evaluated
+        return np.broadcast_arrays(*values)
+    except ValueError:  # batches of different shapes: judged where evaluated
         return None
+
+
+def _first_bad(resonator, names, temperature_c, bad):
+    """(index, " at T °C" or "") of the first True of `bad` (over `_pair`'s arrays)."""
+    i = tuple(int(k) for k in np.argwhere(bad)[0])
+    at = ""
+    if temperature_c is not None and any(
+        isinstance(getattr(resonator, n), TemperatureLaw) for n in names
+    ):
+        temps = np.ravel(np.asarray(temperature_c, dtype=float))
+        if bad.ndim and bad.shape[-1] == temps.size:
+            at = f" at {temps[i[-1]]:g} °C"
+    return i, at
+
+
+def damping_problem(resonator, temperature_c=None) -> str | None:
+    r"""One line naming `Resonator.delta_inv_tau` if it gives an axis negative damping:
+    $1/\tau_{1,2} = 1/\tau \pm \Delta(1/\tau)/2$ are both > 0 only while
+    $|\Delta(1/\tau)| < 2/\tau$ (else the less damped axis grows, $e^{+t/|\tau_2|}$, and the
+    averaged, full and slow models integrate an unstable mode). `None` when it holds, or when
+    τ or Δ(1/τ) is traced (`simulate` judges it at run time: `hrgjax._run_checks`).
+
+    **Arguments:** `resonator`, a [`hrgjax.Resonator`][]; `temperature_c` [°C], where to
+    evaluate its [`TemperatureLaw`][hrgjax.TemperatureLaw]s (`None`: a law is not judged,
+    only plain values)."""
+    names = ("tau", "delta_inv_tau")
+    if (pair := _pair(resonator, names, temperature_c)) is None:
+        return None
+    tau, dit = pair
     # a τ ≤ 0 or a non-finite value is `check_positive`'s / `check_finite`'s to refuse
     bad = np.isfinite(tau) & (tau > 0) & np.isfinite(dit) & ~(np.abs(dit) * tau < 2.0)
     if not bad.any():
         return None
-    i = tuple(int(k) for k in np.argwhere(bad)[0])
+    i, at = _first_bad(resonator, names, temperature_c, bad)
     t, d = float(tau[i]), float(dit[i])
-    at = ""
-    if temperature_c is not None and any(
-        isinstance(getattr(resonator, n), TemperatureLaw) for n in ("tau", "delta_inv_tau")
-    ):
-        temps = np.ravel(np.asarray(temperature_c, dtype=float))
-        if tau.ndim and tau.shape[-1] == temps.size:
-            at = f" at {temps[i[-1]]:g} °C"
     return (
         f"Resonator.delta_inv_tau = {d:.6g} 1/s with Resonator.tau = {t:.6g} s{at} gives one "
         f"axis negative damping (1/τ₂ = 1/τ − |Δ(1/τ)|/2 = {1 / t - abs(d) / 2:.3g} 1/s): "
         f"|Δ(1/τ)| must be < 2/τ = {2 / t:.6g} 1/s"
+    )
+
+
+def stiffness_problem(resonator, temperature_c=None) -> str | None:
+    r"""One line naming `Resonator.delta_omega` if it gives an axis no positive stiffness:
+    the axes' stiffnesses $\omega^2 \pm \omega\Delta\omega$ (the eigenvalues of $\mathbf K$,
+    PHYSICS.md §2) are both > 0 only while $|\Delta\omega| < \omega$ (else one axis has no
+    restoring force and the full model's amplitude grows without bound: 4·10³⁷ after 0.5 s
+    at Δω = 1.5 ω). `None` when it holds, or when ω or Δω is traced; laws as
+    `damping_problem`."""
+    names = ("omega", "delta_omega")
+    if (pair := _pair(resonator, names, temperature_c)) is None:
+        return None
+    omega, split = pair
+    # an ω ≤ 0 or a non-finite value is `check_positive`'s / `check_finite`'s to refuse
+    bad = np.isfinite(omega) & (omega > 0) & np.isfinite(split) & ~(np.abs(split) < omega)
+    if not bad.any():
+        return None
+    i, at = _first_bad(resonator, names, temperature_c, bad)
+    w, d = float(omega[i]), float(split[i])
+    return (
+        f"Resonator.delta_omega = {d:.6g} rad/s with Resonator.omega = {w:.6g} rad/s{at} gives "
+        f"one axis negative stiffness (ω² − ω|Δω| = {w * w - w * abs(d):.3g} rad²/s²): "
+        f"|Δω| must be < ω"
     )
