@@ -329,21 +329,29 @@ def damping_problem(resonator, temperature_c=None) -> str | None:
     **Arguments:** `resonator`, a [`hrgjax.Resonator`][]; `temperature_c` [°C], where to
     evaluate its [`TemperatureLaw`][hrgjax.TemperatureLaw]s (`None`: a law is not judged,
     only plain values)."""
-    names = ("tau", "delta_inv_tau")
+    return _axis_problem(
+        resonator, ("tau", "delta_inv_tau"), temperature_c,
+        lambda tau, dit: np.abs(dit) * tau < 2.0,
+        lambda t, d, at: (
+            f"Resonator.delta_inv_tau = {d:.6g} 1/s with Resonator.tau = {t:.6g} s{at} gives "
+            f"one axis negative damping (1/τ₂ = 1/τ − |Δ(1/τ)|/2 = {1 / t - abs(d) / 2:.3g} "
+            f"1/s): |Δ(1/τ)| must be < 2/τ = {2 / t:.6g} 1/s"),
+    )  # fmt: skip
+
+
+def _axis_problem(resonator, names, temperature_c, holds, say) -> str | None:
+    """`say(base, delta, at)` for the first value (or law temperature) where the pair
+    `names` (a positive base, its axes' difference) breaks `holds(base, delta)`; `None`
+    where it holds or is traced. A base ≤ 0 or a non-finite value is `check_positive`'s /
+    `check_finite`'s to refuse."""
     if (pair := _pair(resonator, names, temperature_c)) is None:
         return None
-    tau, dit = pair
-    # a τ ≤ 0 or a non-finite value is `check_positive`'s / `check_finite`'s to refuse
-    bad = np.isfinite(tau) & (tau > 0) & np.isfinite(dit) & ~(np.abs(dit) * tau < 2.0)
+    base, delta = pair
+    bad = np.isfinite(base) & (base > 0) & np.isfinite(delta) & ~holds(base, delta)
     if not bad.any():
         return None
     i, at = _first_bad(resonator, names, temperature_c, bad)
-    t, d = float(tau[i]), float(dit[i])
-    return (
-        f"Resonator.delta_inv_tau = {d:.6g} 1/s with Resonator.tau = {t:.6g} s{at} gives one "
-        f"axis negative damping (1/τ₂ = 1/τ − |Δ(1/τ)|/2 = {1 / t - abs(d) / 2:.3g} 1/s): "
-        f"|Δ(1/τ)| must be < 2/τ = {2 / t:.6g} 1/s"
-    )
+    return say(float(base[i]), float(delta[i]), at)
 
 
 def stiffness_problem(resonator, temperature_c=None) -> str | None:
@@ -353,18 +361,11 @@ def stiffness_problem(resonator, temperature_c=None) -> str | None:
     restoring force and the full model's amplitude grows without bound: 4·10³⁷ after 0.5 s
     at Δω = 1.5 ω). `None` when it holds, or when ω or Δω is traced; laws as
     `damping_problem`."""
-    names = ("omega", "delta_omega")
-    if (pair := _pair(resonator, names, temperature_c)) is None:
-        return None
-    omega, split = pair
-    # an ω ≤ 0 or a non-finite value is `check_positive`'s / `check_finite`'s to refuse
-    bad = np.isfinite(omega) & (omega > 0) & np.isfinite(split) & ~(np.abs(split) < omega)
-    if not bad.any():
-        return None
-    i, at = _first_bad(resonator, names, temperature_c, bad)
-    w, d = float(omega[i]), float(split[i])
-    return (
-        f"Resonator.delta_omega = {d:.6g} rad/s with Resonator.omega = {w:.6g} rad/s{at} gives "
-        f"one axis negative stiffness (ω² − ω|Δω| = {w * w - w * abs(d):.3g} rad²/s²): "
-        f"|Δω| must be < ω"
-    )
+    return _axis_problem(
+        resonator, ("omega", "delta_omega"), temperature_c,
+        lambda omega, split: np.abs(split) < omega,
+        lambda w, d, at: (
+            f"Resonator.delta_omega = {d:.6g} rad/s with Resonator.omega = {w:.6g} rad/s{at} "
+            f"gives one axis negative stiffness (ω² − ω|Δω| = {w * w - w * abs(d):.3g} "
+            f"rad²/s²): |Δω| must be < ω"),
+    )  # fmt: skip
