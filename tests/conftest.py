@@ -2,7 +2,13 @@ import os
 import subprocess
 import sys
 
-from hrgjax._threads import widen_cpu_thread_pool
+# One BLAS thread a process, before NumPy loads OpenBLAS (children inherit it): the tests
+# run one process per core (`-n auto`), and OpenBLAS's second thread, spinning between
+# calls, took a core from XLA's pool: discover's small SVDs took 5 ms a call instead of
+# 0.13 ms, test_discovery_search 40.7 s instead of 17.7 s on a busy 2-core machine.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from hrgjax._threads import widen_cpu_thread_pool  # noqa: E402
 
 # Before the first JAX computation, for this process and every one the tests start: on two
 # cores XLA:CPU's thread pool can wedge on batched LAPACK kernels (hrgjax/_threads.py).
