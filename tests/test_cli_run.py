@@ -6,6 +6,7 @@ import gc
 import os
 import signal
 import sys
+import threading
 import time
 
 import numpy as np
@@ -15,6 +16,17 @@ from helpers import cli_fails
 import hrgjax as hg
 from hrgjax import cli
 from hrgjax.cli import main
+
+
+@pytest.fixture
+def python_sigint():
+    """Python's own SIGINT handler for the test, as a shell gives a command: pytest-xdist's
+    workers ignore SIGINT (SIG_IGN), and the command then leaves it alone, as it should."""
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("signals reach the main thread only")
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
 
 
 def test_ctrl_c_in_a_gc_callback_is_raised_again_outside_it(monkeypatch):
@@ -39,7 +51,7 @@ def test_ctrl_c_in_a_gc_callback_is_raised_again_outside_it(monkeypatch):
     assert sent == [signal.SIGINT]
 
 
-def test_ctrl_c_during_garbage_collection_stops_the_command(monkeypatch, capsys):
+def test_ctrl_c_during_garbage_collection_stops_the_command(monkeypatch, capsys, python_sigint):
     """End to end: a SIGINT that lands in a gc callback (any, not only JAX's) ends the
     command with exit status 130 within the moment; Python's handler is back after."""
     fired = []
@@ -68,7 +80,9 @@ def test_ctrl_c_during_garbage_collection_stops_the_command(monkeypatch, capsys)
     assert signal.getsignal(signal.SIGINT) is before
 
 
-def test_ctrl_c_in_a_weakref_callback_or_at_the_very_end_still_stops(monkeypatch, capsys):
+def test_ctrl_c_in_a_weakref_callback_or_at_the_very_end_still_stops(
+    monkeypatch, capsys, python_sigint
+):
     """Review (s32): a Ctrl-C in a weakref callback (JAX's caches use them) was dropped as an
     "Exception ignored" (now `sys.unraisablehook` hands it back); one in a gc callback
     within `REDELIVER_S` of the command's end was cancelled with its timer: exit 0."""
