@@ -462,7 +462,9 @@ def test_correct_is_the_integral_along_the_record_and_the_midpoint_sum_is_close(
     mean, _ = quad_vec(rate, 0.0, 1.0, epsabs=1e-15 / DEG, epsrel=0.0)
     expected = np.concatenate([[0.0], np.cumsum(mean * dt)])
     assert np.max(np.abs(angle)) > 50.0  # a real signal: 100° of case rotation
-    np.testing.assert_allclose(angle, expected, rtol=1e-12, atol=1e-12)
+    # the rule takes the fewest nodes that meet 4 nodes' bound on a 22.5° piece (5e-6 of a
+    # 4θ harmonic, `node_count`): here 1.1e-11° on 2.5°, 4 nodes gave round-off
+    np.testing.assert_allclose(angle, expected, rtol=1e-10, atol=1e-12)
     psi = mlp_module.integrate_compensated(comp, t, th * DEG, tc, t) / DEG
     np.testing.assert_allclose(psi, angle, rtol=1e-13, atol=1e-12)
 
@@ -494,7 +496,7 @@ def test_integrate_compensated_equals_a_diffrax_solve(small_runs, exact_windows)
     )  # fmt: skip
     psi = mlp_module.integrate_compensated(comp, t, th, tc, ts)
     assert float(jnp.max(jnp.abs(sol.ys))) > 1e-3  # a real signal, not zeros
-    np.testing.assert_allclose(psi, sol.ys, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(psi, sol.ys, rtol=1e-10, atol=1e-15)  # node_count: 4e-12 here
 
 
 def test_end_to_end_gradient_matches_finite_differences(small_runs):

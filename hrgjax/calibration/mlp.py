@@ -25,11 +25,9 @@ compiled `lax.scan` with a progress bar between blocks:
   point values (the seed), the 2θ scale-factor ripple came out 0.97 of the truth at 20 °/s,
   0.80 at 50 °/s; now 0.9995 and 0.988 (0.9987 after 1000 steps). Static windows turn by
   the drift alone (1 °/h: 0.05° in 300 s): their value at the mean angle;
-- `mode="end_to_end"`: starting from the reduced fit, both networks are trained on the
-  **angle error** of every run: the compensated rate is integrated along the recorded wave
-  angle over every sample interval's arc, as `correct` integrates it, and the loss is the
-  error against the table angle at every window edge; gradients flow through the sum (see
-  [`end_to_end_loss`][hrgjax.calibration.mlp.end_to_end_loss]).
+- `mode="end_to_end"`: from the reduced fit, both networks are trained on the **angle
+  error** of every run at every window edge, the compensated rate integrated over every
+  sample interval's arc as `correct` does ([`end_to_end_loss`][hrgjax.calibration.mlp.end_to_end_loss]).
 """
 
 from __future__ import annotations
@@ -61,7 +59,7 @@ from ._compensator import (
     setting,
     setting_field,
 )
-from ._correction import integrate_arcs, piece_counts
+from ._correction import NODES, arc_rule, integrate_arcs
 from ._raw import check_raw
 from ._window_arc import arc_mean, arc_rows, bin_windows, window_arc, window_average
 from .reduce import K_E_NOMINAL, RAMP_WINDOW_S, WINDOW_S, RateWindows, check_k_e, check_window
@@ -461,8 +459,8 @@ class AngleRuns(eqx.Module):
     `t`, `theta` [rad], `temperature_c`, `table_angle` [rad]: shape (R, N); `checkpoints`:
     sample indices (C,) bounding the windows of moving runs (the last one is N − 1);
     `static`: (R,) true for runs at rest, which count as one window, as in the reduction;
-    `pieces`: the most pieces of arc a sample interval spans (`integrate_compensated`;
-    `run_groups` counts it: fewer makes an interval's pieces longer, less accurate).
+    `pieces`, `nodes`: the most pieces of arc a sample interval spans and the quadrature
+    nodes a piece takes (`integrate_compensated`; `run_groups` sets them: `arc_rule`).
     """
 
     t: jax.Array
@@ -472,6 +470,7 @@ class AngleRuns(eqx.Module):
     checkpoints: jax.Array
     static: jax.Array
     pieces: int = eqx.field(static=True, default=1)
+    nodes: int = eqx.field(static=True, default=NODES)
 
 
 def run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
@@ -483,6 +482,7 @@ def run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
         n = stack.n_samples
         step = max(int(round(window_s / stack.dt)), 1)
         cps = np.unique(np.concatenate([np.arange(step, n, step), [n - 1]]))
+        pieces, nodes = arc_rule(np.diff(stack.wave_angle, axis=-1))
         out.append(
             AngleRuns(
                 t=device(stack.t),
@@ -491,36 +491,36 @@ def run_groups(data: MeasuredData, window_s: float) -> list[AngleRuns]:
                 table_angle=device(stack.table_angle),
                 checkpoints=device(cps),
                 static=device(stack.static),
-                pieces=int(piece_counts(np.diff(stack.wave_angle, axis=-1)).max(initial=1)),
+                pieces=pieces,
+                nodes=nodes,
             )
         )
     return out
 
 
-def integrate_compensated(comp: AbstractCompensator, t, theta, temperature_c, ts, pieces=None):
-    r"""Case angle [rad] from the compensated rate, integrated along the record by the rule of
-    [`correct`][hrgjax.calibration.AbstractCompensator.correct] (the same code,
-    `hrgjax.calibration._correction.integrate_arcs`): θ and T move uniformly within each
-    sample interval (θ̇ = Δθ/Δt, Ṫ = ΔT/Δt), and the rate is integrated over the interval's
-    arc, cut into pieces of ≤ `ARC_RAD` (22.5° electrical), 4 Gauss–Legendre nodes each.
-    (The midpoint rule this used before was 3.4e-2° off `correct` after 60 s at 50 °/s logged
-    at 1 Hz, with the exact laws.) Traceable: end-to-end training differentiates it hundreds
-    of times, the runs of a group under `vmap`.
+def integrate_compensated(comp: AbstractCompensator, t, theta, temperature_c, ts, pieces=None,
+                          nodes=None):  # fmt: skip
+    r"""Case angle [rad] from the compensated rate, integrated along the record by the rule and
+    code of [`correct`][hrgjax.calibration.AbstractCompensator.correct]
+    (`hrgjax.calibration._correction.integrate_arcs`; the midpoint rule used before was
+    3.4e-2° off it after 60 s at 50 °/s, 1 Hz). Traceable (jit, grad, vmap over runs).
 
     **Arguments:** `t` [s], `theta` [rad], `temperature_c` [°C] of one run (N,); `ts` [s];
-    `pieces`: the most pieces of arc an interval spans, a Python int (`None`: counted from a
-    concrete `theta`; `run_groups` counts them for training).
+    `pieces`, `nodes`: the most pieces of arc an interval spans and the nodes a piece takes,
+    Python ints (`None`: `arc_rule`'s for a concrete `theta`; traced, `pieces` is needed and
+    `nodes` is `NODES`; `run_groups` sets both for training).
 
     **Returns:** ψ at `ts` [rad] (ψ = 0 at t[0]; between samples, linear).
     """
     value = concrete_value(theta)
-    need = 1 if value is None else int(np.max(piece_counts(np.diff(value)), initial=1))
+    need, fit = (1, NODES) if value is None else arc_rule(np.diff(value))
     pieces = need if pieces is None and value is not None else pieces
     if isinstance(pieces, bool) or not isinstance(pieces, int | np.integer) or pieces < need:
         raise ValueError(f"integrate_compensated: pieces must be a whole number ≥ {need} (the "
                          "most pieces of arc an interval spans; given when theta is traced); "
                          f"got {pieces!r}")  # fmt: skip
-    return jnp.interp(ts, t, integrate_arcs(comp, t, theta, temperature_c, pieces))
+    nodes = fit if nodes is None else nodes
+    return jnp.interp(ts, t, integrate_arcs(comp, t, theta, temperature_c, pieces, nodes))
 
 
 def end_to_end_losses(comp: AbstractCompensator, runs: AngleRuns):
@@ -537,7 +537,7 @@ def end_to_end_losses(comp: AbstractCompensator, runs: AngleRuns):
     cps = jnp.concatenate([jnp.zeros(1, dtype=runs.checkpoints.dtype), runs.checkpoints])
 
     def one(t, th, tc, table, static):
-        psi = integrate_compensated(comp, t, th, tc, t[cps], runs.pieces)
+        psi = integrate_compensated(comp, t, th, tc, t[cps], runs.pieces, runs.nodes)
         err = jnp.diff(psi) - jnp.diff(table[cps])
         return jnp.where(static, jnp.sum(err) ** 2, jnp.mean(err**2))
 
