@@ -74,9 +74,8 @@ def test_ctrl_c_during_garbage_collection_stops_the_command(monkeypatch, capsys,
 
     monkeypatch.setattr(cli, "cmd_simulate", work)
     before = signal.getsignal(signal.SIGINT)
-    t0 = time.perf_counter()
-    cli_fails(["simulate"], capsys, "interrupted", code=130)
-    assert fired and time.perf_counter() - t0 < 2.0
+    cli_fails(["simulate"], capsys, "interrupted", code=130)  # not run to its end (exit 0)
+    assert fired
     assert signal.getsignal(signal.SIGINT) is before
 
 
@@ -114,9 +113,7 @@ def test_ctrl_c_in_a_weakref_callback_or_at_the_very_end_still_stops(
     hook = sys.unraisablehook  # pytest's own
     for work in (weak, at_end):
         monkeypatch.setattr(cli, "cmd_simulate", work)
-        t0 = time.perf_counter()
-        cli_fails(["simulate"], capsys, "interrupted", code=130)
-        assert time.perf_counter() - t0 < 2.0
+        cli_fails(["simulate"], capsys, "interrupted", code=130)  # not exit 0 after the work
     assert sys.unraisablehook is hook
 
 
