@@ -185,12 +185,10 @@ def test_demo_keeps_files_in_a_folder_it_was_given(tmp_path, monkeypatch, capsys
         os.makedirs(folder)
         for name in ("calibration.csv", "drift_residuals.png"):
             (tmp_path / folder / name).write_text("precious\n")
-    t0 = time.perf_counter()
-    cli_fails(["demo", "--quick", "--out", "mydata"], capsys,
+    cli_fails(["demo", "--quick", "--out", "mydata"], capsys,  # not "the study started"
               r"^hrgjax demo: error: --out mydata holds calibration\.csv, drift_residuals\.png "
               r"already \(files the demo writes\); give another folder, or --force to replace "
               r"them$")  # fmt: skip
-    assert time.perf_counter() - t0 < 10.0
     assert (tmp_path / "mydata" / "calibration.csv").read_text() == "precious\n"
     for argv in (["--out", "mydata", "--force"], ["--out", "out/demo"]):
         cli_fails(["demo", "--quick", *argv], capsys, "failed: the study started", code=1)
