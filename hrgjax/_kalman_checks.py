@@ -303,3 +303,80 @@ def check_run(name: str, xs, ps, ll):
                      f"{float(last[0])}): a state that grows without bound (an eigenvalue of phi "
                      "above 1 in size, unseen by H) overflowed; measure or bound it, or shorten "
                      "the record")  # fmt: skip
+
+
+DETECTABLE_RTOL = 1e-10
+"""`check_detectable`'s rank tolerance: a direction is unseen when the balanced observability
+matrix maps it to less than this share of its largest singular value."""
+
+
+def check_detectable(phi, qd, h, p0):
+    r"""One line (`ValueError`) when the concrete model has no steady state because a mode the
+    measurements never see grows: a combination $z = c^\top x$ of states with
+    $c^\top\Phi = \mu c^\top$, $|\mu| \ge 1$, in the unobservable subspace (the null space of
+    $[H; H\Phi; \dots; H\Phi^{n-1}]$, which Φ keeps), that the process noise drives (or,
+    $|\mu| > 1$, the first prior): its variance grows without bound, and the doubling's
+    round-off then stalls at a wrong P or a negative variance (two random walks driving one
+    measured state only through their sum gave P[1,1] = 1677, or −6.9e13, "converged").
+    Only on the states the noise or `p0` reach (`_riccati.reached_states`' closure), balanced
+    by their open-loop standard deviations as `steady_state` balances. An unseen constant
+    that only `p0` makes uncertain keeps its variance: a steady state, passed. Traced values
+    pass (the doubling's own convergence test stays)."""
+    values = [host_value(a) for a in (phi, qd, h, p0)]
+    if any(v is None for v in values):
+        return
+    phi, qd, h, p0 = (np.asarray(v, float) for v in values)
+    n = phi.shape[0]
+    x0 = phi @ p0 @ phi.T + qd
+    reach = np.diagonal(x0) > 0.0
+    for _ in range(n - 1):
+        reach = reach | ((phi != 0.0) & reach[None, :]).any(axis=1)
+    idx = np.flatnonzero(reach)
+    if idx.size == 0:
+        return
+    phi, qd, x0, h = phi[np.ix_(idx, idx)], qd[np.ix_(idx, idx)], x0[np.ix_(idx, idx)], h[:, idx]
+    noise, start = qd.copy(), x0.copy()
+    for _ in range(idx.size - 1):  # open-loop covariance: from the noise alone, from x0
+        noise, start = phi @ noise @ phi.T + qd, phi @ start @ phi.T + qd
+    d = np.sqrt(np.clip(np.diagonal(start), 0.0, None))
+    if not np.isfinite(d).all() or (d <= 0.0).any():
+        return  # overflowing: the doubling's convergence test refuses it
+    phi_b, h_b = phi * (d[None, :] / d[:, None]), h * d[None, :]
+    blocks, row = [], h_b
+    for _ in range(idx.size):
+        blocks.append(row)
+        row = row @ phi_b
+    sv, vt = np.linalg.svd(np.concatenate(blocks), full_matrices=True)[1:]
+    rank = int(np.sum(sv > DETECTABLE_RTOL * sv[0])) if sv.size and sv[0] > 0 else 0
+    unseen = vt[rank:].T  # orthonormal basis of the unobservable subspace (balanced units)
+    if unseen.shape[1] == 0:
+        return
+    mu, w = np.linalg.eig((unseen.T @ phi_b @ unseen).T)  # left eigenvectors within it
+    for k in np.argsort(-np.abs(mu)):
+        c = unseen @ w[:, k]
+        c = c / np.linalg.norm(c)
+        grows = abs(mu[k]) > 1.0 + 1e-12
+        if abs(mu[k]) < 1.0 - 1e-12:
+            break
+        driven = noise if not grows else start
+        size = float(np.real(np.conj(c) @ (driven / np.outer(d, d)) @ c))
+        if size > DETECTABLE_RTOL:  # the mode's own direction (right vector), in the model's units
+            v = unseen @ np.linalg.svd(unseen.T @ phi_b @ unseen - mu[k] * np.eye(len(mu)))[2][-1]
+            raise ValueError(f"steady_state: no steady state: states {_direction(v * d, idx)} "
+                             f"{'grow by ' if grows else 'are a random walk (eigenvalue '}"
+                             f"{abs(mu[k]):.6g}{' a step' if grows else ' of phi)'} that no row of h "
+                             "sees, now or through phi, and the noise drives: their variance "
+                             "grows without bound; measure them, give them a bounded model "
+                             "(|eigenvalue| < 1), or drop them from the state")  # fmt: skip
+
+
+def _direction(v, idx) -> str:
+    """'x[i], x[j] moving as (a, b)': the largest entries of the direction `v` (state indices
+    `idx`), scaled to the largest 1."""
+    v = np.real(v * np.exp(-1j * np.angle(v[np.argmax(np.abs(v))])))
+    v = v / np.max(np.abs(v))
+    keep = sorted(int(j) for j in np.argsort(-np.abs(v))[:4] if abs(v[j]) > 1e-3)
+    names = ", ".join(f"x[{int(idx[j])}]" for j in keep)
+    if len(keep) == 1:
+        return f"{names} alone"
+    return f"{names} moving as ({', '.join(f'{v[j]:.3g}' for j in keep)})"

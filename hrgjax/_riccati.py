@@ -117,6 +117,7 @@ def limit(phi, qd, h, r, p0, n_iter: int):
     a0 = phi.T
     start = (a0, g0, qd, cover(a0, g0, qd), jnp.asarray(False))
     *_, pp, done = jax.lax.fori_loop(0, n_iter, double, start)
+    done = done & jnp.all(jnp.diagonal(pp) >= -STEADY_TOL)  # a negative variance: round-off
     return pp * scale, done.astype(pp.dtype)
 
 

@@ -513,10 +513,14 @@ def steady_state(phi, qd, h, r, p0=None, n_iter: int = STEADY_DOUBLINGS):
     closed-loop pole is 1 − 1e-6, converges in ≈ 25 doublings; 4000 plain Riccati steps
     left its gain 250× too large). It stops when a doubling changes P by less than
     `STEADY_TOL`, within `n_iter` doublings (whole number >= 1). A model without a steady
-    state (a state the measurements do not see that grows without bound) is refused in one
-    line (`ValueError` when the values are concrete; under the caller's `jit` an
-    `eqx.error_if`), as is a state without process noise that the measurements see and
-    `p0` holds uncertain (its variance falls as 1/k for ever: no steady gain).
+    state is refused in one line: on concrete values (a `ValueError`) a mode the
+    measurements never see, now or through Φ, that grows or is a random walk the noise
+    drives (the PBH test on the unobservable subspace: two random walks that a measured
+    state sees only through their sum "converged" to P = 913, or −6.9e13, by round-off),
+    named by its states; on any values (under the caller's `jit` an `eqx.error_if`) a
+    doubling that does not converge or ends on a negative variance, as does a state without
+    process noise that the measurements see and `p0` holds uncertain (its variance falls as
+    1/k for ever: no steady gain). Traced values skip the PBH test: call once eagerly.
 
     Exactly known states: those neither `qd` nor `p0` reaches (the closure of the first
     prior $\Phi p_0\Phi^\top + Q_d$'s support under Φ's nonzero pattern) have variance 0 at
@@ -553,6 +557,7 @@ def steady_state(phi, qd, h, r, p0=None, n_iter: int = STEADY_DOUBLINGS):
     phi, qd, h, r = (_floats(a) for a in (phi, qd, h, r))
     p0 = np.zeros(np.shape(phi)) if p0 is None else _floats(p0)
     n_iter = _kc.check_steady(phi, qd, h, r, p0, n_iter)
+    _kc.check_detectable(phi, qd, h, p0)
     *out, ok = _steady_state(phi, qd, h, r, p0, n_iter)
     return (_kc.check_converged(ok, out[0], n_iter), *out[1:])
 

@@ -528,9 +528,55 @@ def test_steady_state_is_the_riccati_solution_at_any_noise_ratio():
         h, r = np.asarray(H), np.asarray(R)
         np.testing.assert_allclose(gain, want @ h.T @ np.linalg.inv(h @ want @ h.T + r), rtol=1e-12)
     unseen = jnp.array([[1.5, 0.0], [0.0, 0.5]])  # state 0 grows, H sees state 1 alone
-    with pytest.raises(ValueError, match=r"^steady_state: the Riccati recursion did not conv") as e:
+    with pytest.raises(
+        ValueError, match=r"^steady_state: no steady state: states x\[0\] alone"
+    ) as e:
         kalman.steady_state(unseen, QD, jnp.array([[0.0, 1.0]]), R)
-    assert "\n" not in str(e.value)
+    assert "grow by 1.5 a step that no row of h sees" in str(e.value) and "\n" not in str(e.value)
+    with pytest.raises(Exception, match="the Riccati recursion did not converge"):
+        jax.jit(kalman.steady_state)(
+            unseen, QD, jnp.array([[0.0, 1.0]]), R
+        )  # traced: no host check
+
+
+def test_steady_state_refuses_an_unseen_combination_of_random_walks():
+    """Audit (s32): Φ = [[0.99, 1, 1], [0, 1, 0], [0, 0, 1]], H = [1, 0, 0]: two random walks
+    drive the measured state only through their sum, so x₁ − x₂ is a random walk no
+    measurement sees, its variance k·(q₁ + q₂) after k steps (the plain Riccati recursion:
+    1.0e-2 at 2²⁰ steps and growing). The doubling's round-off stalled and it "converged"
+    to P[1,1] = 913 at Q_d = diag(1e-2, 1e-6, 1e-8), to −6.9e13 at diag(1e-2, 1e-2, 1e-2).
+    Now refused in one line naming the two states, at any noise size (PBH: the unobservable
+    subspace's unit eigenvalue, driven by the noise), and a negative variance fails the
+    doubling's own test under `jit`. Not refused: the same model when one walk has no noise
+    and no initial uncertainty (known exactly), an unseen constant that only p0 makes
+    uncertain (its variance stays p0's), and an unseen stable state with noise."""
+    phi = np.array([[0.99, 1.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    h, r = np.array([[1.0, 0.0, 0.0]]), np.array([[1e-2]])
+    plain = np.zeros((3, 3))  # the recursion itself: the walks' variance grows step by step
+    for _ in range(2000):
+        prior = phi @ plain @ phi.T + np.diag([1e-2, 1e-6, 1e-8])
+        plain = prior - prior @ h.T @ h @ prior / (h @ prior @ h.T + r)
+    assert prior[1, 1] > 1.5 * 1000 * (1e-6 * 1e-8) / (1e-6 + 1e-8)  # no limit: still growing
+    for q in ((1e-6, 1e-8), (1e-2, 1e-2), (1e-20, 1e-24)):
+        with pytest.raises(
+            ValueError,
+            match=r"^steady_state: no steady state: states x\[1\], "
+            r"x\[2\] moving as \((-1, 1|1, -1)\) are a random walk",
+        ) as e:
+            kalman.steady_state(phi, np.diag([1e-2, *q]), h, r)
+        assert "\n" not in str(e.value)
+    with pytest.raises(Exception, match="the Riccati recursion did not converge"):
+        jax.jit(kalman.steady_state)(phi, np.diag([1e-2, 1e-2, 1e-2]), h, r)
+    pp, _, _ = kalman.steady_state(phi, np.diag([1e-2, 1e-6, 0.0]), h, r)  # walk 2 known
+    assert np.isfinite(np.asarray(pp)).all() and float(pp[2, 2]) == 0.0
+    constant = np.array([[0.9, 0.0], [0.0, 1.0]])  # state 1: unseen, no noise, p0 = 4
+    pp, _, _ = kalman.steady_state(constant, np.diag([1e-2, 0.0]), np.array([[1.0, 0.0]]),
+                                   np.eye(1), np.diag([0.0, 4.0]))  # fmt: skip
+    b = 1.0 - 0.81 - 0.01  # the seen state: P² + bP − q r = 0 (a = 0.9, q = 0.01, r = 1)
+    np.testing.assert_allclose(np.diag(pp), [(-b + np.sqrt(b * b + 0.04)) / 2, 4.0], rtol=1e-12)
+    stable = np.diag([0.9, 0.5])  # state 1: unseen, noise 1e-2, decays: q / (1 − 0.25)
+    pp, _, _ = kalman.steady_state(stable, np.diag([1e-2, 1e-2]), np.array([[1.0, 0.0]]), np.eye(1))
+    np.testing.assert_allclose(pp[1, 1], 1e-2 / 0.75, rtol=1e-12)
 
 
 def test_steady_state_balances_states_of_any_scale():
