@@ -264,24 +264,39 @@ def kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     a caller's `jit` the values are not checked.
 
     **Returns:** `(means (K, n), covariances (K, n, n), total log-likelihood)`."""
-    require_x64("hrgjax.kalman.kalman_filter")
+    return _checked_linear("kalman_filter", _kalman_filter, prior, phi, qd, H, R, zs, mask, us)
+
+
+def _checked_linear(name: str, run, prior, phi, qd, H, R, zs, mask, us):
+    """The public linear pass `name` (`kalman_filter`, `rts_smoother`): x64 and the arguments
+    checked, then `run` (its fused program), whose estimates are checked finite."""
+    require_x64(f"hrgjax.kalman.{name}")
     phi, qd, H, R, zs, us = (_floats(a) for a in (phi, qd, H, R, zs, us))
     _kc.check_linear(prior, phi, qd, H, R, zs, mask, us)
-    return _kc.check_run("kalman_filter", *_kalman_filter(prior, phi, qd, H, R, zs, mask, us))
+    return _kc.check_run(name, *run(prior, phi, qd, H, R, zs, mask, us))
+
+
+def _forward(prior: Gaussian, phi, qd, H, R, zs, mask, us):
+    """The filter's pass: `(filtered means (K, n), covariances (K, n, n), predicted means,
+    predicted covariances, each step's log-likelihood (K,), Φ per step (K, n, n))`. Compiled,
+    the outputs a caller drops are removed (`_kalman_filter` stores no predictions)."""
+    phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
+
+    def step(g, inp):
+        f, q, z, m, u = inp
+        pred = predict(g, f, q, u)
+        g, _, _, ll = update(pred, z, H, R, m)
+        return g, (g.x, g.P, pred.x, pred.P, ll)
+
+    _, out = jax.lax.scan(step, prior, (phis, qds, zs, mask, us))
+    return (*out, phis)
 
 
 @fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
 def _kalman_filter(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     """`kalman_filter` without the argument checks (fused: one compiled program); the public
     wrapper has checked x64 and the arguments."""
-    phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
-
-    def step(g, inp):
-        f, q, z, m, u = inp
-        g, _, _, ll = update(predict(g, f, q, u), z, H, R, m)
-        return g, (g.x, g.P, ll)
-
-    _, (xs, ps, ll) = jax.lax.scan(step, prior, (phis, qds, zs, mask, us))
+    xs, ps, _, _, ll, _ = _forward(prior, phi, qd, H, R, zs, mask, us)
     return xs, ps, jnp.sum(ll)
 
 
@@ -297,25 +312,14 @@ def rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
 
     **Returns:** `(smoothed means (K, n), covariances (K, n, n), the filter's total
     log-likelihood)`."""
-    require_x64("hrgjax.kalman.rts_smoother")
-    phi, qd, H, R, zs, us = (_floats(a) for a in (phi, qd, H, R, zs, us))
-    _kc.check_linear(prior, phi, qd, H, R, zs, mask, us)
-    return _kc.check_run("rts_smoother", *_rts_smoother(prior, phi, qd, H, R, zs, mask, us))
+    return _checked_linear("rts_smoother", _rts_smoother, prior, phi, qd, H, R, zs, mask, us)
 
 
 @fused  # one program per shape: an eager call compiled its scan every time (≈ 1 s)
 def _rts_smoother(prior: Gaussian, phi, qd, H, R, zs, mask=None, us=None):
     """`rts_smoother` without the argument checks (fused: one compiled program); the public
     wrapper has checked x64 and the arguments."""
-    phis, qds, mask, us = _steps(prior, phi, qd, zs, mask, us)
-
-    def forward(g, inp):
-        f, q, z, m, u = inp
-        pred = predict(g, f, q, u)
-        g, _, _, ll = update(pred, z, H, R, m)
-        return g, (g.x, g.P, pred.x, pred.P, ll)
-
-    _, (xf, pf, xp, pp, ll) = jax.lax.scan(forward, prior, (phis, qds, zs, mask, us))
+    xf, pf, xp, pp, ll, phis = _forward(prior, phi, qd, H, R, zs, mask, us)
 
     def backward(nxt, inp):
         x, p, x_pred, p_pred, f = inp  # filtered at k; predicted and Φ of step k + 1
