@@ -346,3 +346,46 @@ def test_heading_limit_refuses_a_c_bn_that_is_not_a_rotation_and_wrong_shapes():
     got = jax.vmap(lambda p: cp.heading_limit_deg(eps, nab, c, p))(jnp.asarray(lats))
     np.testing.assert_allclose(got, [cp.heading_limit_deg(eps, nab, c, p) for p in lats],
                                rtol=1e-12)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("arw", -1e-7, r"^FogImu\.arw \[rad/√s\] = -1e-07 is outside the plausible range 0 … "),
+        ("arw", np.nan, r"^FogImu\.arw \[rad/√s\] must be finite; got nan"),
+        ("vrw", 1.0, r"^FogImu\.vrw \[m/s/√s\] = 1 is outside .*µg/√Hz"),
+        ("gyro", 30.0, r"^FogImu\.gyro\.bias \[rad/s\] = 30 at index 0 .*°/s → ×hrgjax"),
+        ("accel", 9.81, r"^FogImu\.accel\.bias \[m/s²\] = 9\.81 at index 0 is outside"),
+    ],
+)  # fmt: skip
+def test_fog_imu_refuses_impossible_noise_and_biases(imu, field, value, match):
+    """(Audit of session 33.) A negative or NaN noise density, a gyro bias of 30 rad/s (°/s
+    typed as rad/s) or an accelerometer bias of 1 g built a FogImu that `simulate` ran;
+    now one line with the unit hint, as `ImuModel` refuses them."""
+    parts = {"gyro": imu.gyro, "accel": imu.accel, "vibration": imu.vibration,
+             "arw": imu.arw, "vrw": imu.vrw}  # fmt: skip
+    if field in ("gyro", "accel"):
+        parts[field] = eqx.tree_at(lambda t: t.bias, parts[field], jnp.array([value, 0.0, 0.0]))
+    else:
+        parts[field] = jnp.asarray(value)
+    with pytest.raises(ValueError, match=match) as err:
+        vb.FogImu(**parts)
+    assert "\n" not in str(err.value)
+    vb.FogImu(imu.gyro, imu.accel, imu.vibration, imu.arw, imu.vrw)  # the default builds
+
+
+def test_calibrated_names_a_dwell_or_latitude_it_cannot_use(imu):
+    """(Audit of session 33.) `dwell_s` of 0 or −1 read "b and s must be finite" (its noise
+    1/√dwell_s, with a RuntimeWarning); `lat_deg=4000` read "lat = 69.8132 rad … the
+    latitude is in radians here (degrees? …)", for a latitude given in degrees."""
+    from hrgjax.fog import study
+
+    for kw, match in (
+        ({"dwell_s": 0.0}, r"^dwell_s must be > 0 s \(the time per position\); got 0$"),
+        ({"dwell_s": -1.0}, r"^dwell_s must be > 0 s .*; got -1$"),
+        ({"lat_deg": 4000.0}, r"^lat_deg must be the table's latitude in degrees, -90 … 90; "
+         r"got 4000$"),
+        ({"lat_deg": float("nan")}, r"^lat_deg must be finite \[°\]; got nan$"),
+    ):  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            study.calibrated(imu, jax.random.key(1), **kw)

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import finite_number
 from ..ins.constants import earth_rate_ned
 from ..units import DEG, DEG_PER_H, G0
 from . import compensation as cp
@@ -69,6 +70,16 @@ def calibrated(imu: FogImu, key, dwell_s: float = 100.0, lat_deg: float = 45.0) 
     accelerometers at ±g along the axes and diagonals; gyros on a rate table at ±20 °/s
     about the same directions plus Earth rate (table level, axis x north); `dwell_s` [s]
     per position sets the averaging noise."""
+    dwell_s, lat_deg = (
+        finite_number("dwell_s", dwell_s, "s"),
+        finite_number("lat_deg", lat_deg, "°"),
+    )
+    if not dwell_s > 0.0:  # its noise 1/√dwell_s read "b and s must be finite" at 0 or below
+        raise ValueError(f"dwell_s must be > 0 s (the time per position); got {dwell_s:g}")
+    if not -90.0 <= lat_deg <= 90.0:  # 4000 read "lat = 69.8 rad … is in radians here"
+        raise ValueError(
+            f"lat_deg must be the table's latitude in degrees, -90 … 90; got {lat_deg:g}"
+        )
     ka, kg = jax.random.split(key)
     p = _positions()
     acc = multi_position(imu.accel, p * G0, float(imu.vrw) / np.sqrt(dwell_s), ka)

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import concrete_value, finite_number, numeric_problem
 from .._compiled import device, fused
 from .._x64 import require_x64
@@ -194,6 +195,19 @@ class FogImu(eqx.Module):
     vibration: VibrationError
     arw: jax.Array
     vrw: jax.Array
+
+    def __check_init__(self):
+        # a noise density < 0, NaN or a bias in °/s read as rad/s simulated without a word
+        for name, value, quantity in (
+            ("arw [rad/√s]", self.arw, "imu_arw"), ("vrw [m/s/√s]", self.vrw, "imu_vrw"),
+            ("gyro.bias [rad/s]", self.gyro.bias, "imu_gyro_bias"),
+            ("accel.bias [m/s²]", self.accel.bias, "imu_accel_bias"),
+        ):  # fmt: skip
+            v = concrete_value(value)
+            if v is not None and not np.all(np.isfinite(v)):
+                raise ValueError(f"FogImu.{name} must be finite; got {v}")
+            if v is not None:
+                plausible.check(f"FogImu.{name}", v, quantity)
 
 
 def default_imu() -> FogImu:
