@@ -99,6 +99,22 @@ def test_precession_in_the_wrong_unit_is_refused(sweeps):
             sc.PrecessionCompensator().fit(bad)
 
 
+def test_sweeps_take_earths_rate_as_rest_as_mode_reversal_does(sweeps):
+    """Audit (s33): a bench above 14° latitude reads Earth's vertical rate (10.6 °/h at 45°)
+    beyond `STILL_RATE_DPS`; mode reversal took it, the sweeps refused it ("the table
+    turns"). Now one rule (`_sweeps.at_rest`): a constant rate no larger than Earth's is
+    rest (the sweeps' fit reads the wave, so the same compensator), and a rate that varies
+    or exceeds Earth's is refused."""
+    base = sc.PrecessionCompensator().fit(sweeps)
+    earth = 10.6 / 3600.0 * np.ones_like(sweeps["table_rate_dps"])
+    comp = sc.PrecessionCompensator().fit(sweeps.with_column("table_rate_dps", earth))
+    np.testing.assert_array_equal(comp.drift_coef, base.drift_coef)
+    for rate in (earth + 1e-6 * np.sin(sweeps["time_s"]), 1.2 * sc.EARTH_RATE_DPS + 0 * earth):
+        with pytest.raises(ValueError, match=r"^run \d+: the table turns .* or constant and no "
+                           r"larger than Earth's"):  # fmt: skip
+            sc.PrecessionCompensator().fit(sweeps.with_column("table_rate_dps", rate))
+
+
 def test_sweeps_in_force_to_rebalance_mode_are_refused(sweeps):
     """Audit: an FTR gyro given a precession plan holds the wave where the commanded
     precession puts it, and the fit found S = 1, D = 0 (a confident "no drift" where the
@@ -204,6 +220,31 @@ def test_mode_reversal_reduces_a_held_angle_run():
     row = sc.mode_reversal_data(rec.to_data())[0]
     assert row["angles_deg"] == pytest.approx([40.0, 130.0], abs=1e-6)
     assert abs(row["anisotropy_dph"] * DEG_PER_H - law) < 1e-4 * abs(law)
+
+
+def test_mode_reversal_warns_of_a_settle_shorter_than_the_loops_transient():
+    """Audit: `settle_s = 0` was taken silently, and the rebalance loop's transient after the
+    slew went into the reading. With 2 % forcer gain error a 10-s slew lands 2 % off and the
+    loop pulls the wave back: at settle_s = 0 the anisotropy read 2.4× its law off; both
+    reductions now warn below MIN_SETTLE_S (10 s), where the readings are the FTR law —
+    (rate bias − b)/(1 + g_f), b the anisotropy's bias — to 1e-5 of it (the program of
+    test_mode_reversal_reduces_a_held_angle_run, one compile)."""
+    bias, gf, res = 0.3 * DEG_PER_H, 0.02, BASE.resonator
+    ctl = hg.Control(mode="ftr", drive="force", forcer_gain=gf)
+    gyro = hg.Gyro(resonator=res, control=ctl, rate_bias=bias)
+    prof = hg.Profile.held_angles([40.0, 130.0], dwell_s=60.0, slew_s=10.0)
+    rec = hg.simulate(gyro, prof, dt_out=1.0, rtol=1e-10, atol=1e-12)
+    rate = rec.rebalance_rate * rec.frequency / res.omega
+    law = -0.5 * res.delta_inv_tau * np.sin(2 * (40.0 * DEG - res.theta_tau)) / res.k_e
+    with pytest.warns(sc.ShortSettleWarning, match=r"^mode_reversal: settle_s = 0 s is shorter "
+                      r"than MIN_SETTLE_S = 10 s: the rebalance loop's transient"):  # fmt: skip
+        short = sc.mode_reversal(rec.t, rate, prof, settle_s=0.0)
+    assert abs(float(short.anisotropy) * (1 + gf) - law) > 1.0 * abs(law)
+    out = sc.mode_reversal(rec.t, rate, prof, settle_s=sc.MIN_SETTLE_S)  # no warning
+    assert abs(float(out.bias) * (1 + gf) - bias) < 1e-5 * abs(law)
+    assert abs(float(out.anisotropy) * (1 + gf) - law) < 1e-5 * abs(law)
+    with pytest.warns(sc.ShortSettleWarning, match=r"^mode_reversal_data: settle_s = 3 s"):
+        sc.mode_reversal_data(rec.to_data(), settle_s=3.0)
 
 
 def test_compensator_interpolates_in_temperature_for_any_shapes():

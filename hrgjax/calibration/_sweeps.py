@@ -7,7 +7,27 @@ from __future__ import annotations
 import numpy as np
 
 from ..data import MeasuredData
-from ..units import DEG, DEG_PER_S, STILL_RATE_DPS
+from ..units import DEG, DEG_PER_S, EARTH_RATE, STILL_RATE_DPS
+
+EARTH_RATE_DPS = EARTH_RATE / DEG_PER_S
+"""Largest constant case rate mode reversal and the sweeps take [°/s] (0.00418: Earth's
+rate, the most of it a bench's sensitive axis sees; `hrgjax.units.STILL_RATE_DPS`, 1e-3 °/s,
+is below its vertical share Ω_E sin φ above 14° latitude)."""
+CONSTANT_RATE_DPS = 1e-6 * EARTH_RATE_DPS
+"""The most a rate beyond `STILL_RATE_DPS` may vary over a run (mode reversal, a sweep) and
+count as constant [°/s]: half a change between mode reversal's holds would go into the
+anisotropy whole."""
+
+
+def at_rest(rate_dps) -> bool:
+    """Whether a run's case rates `rate_dps` [°/s] (a profile's knots or a run's samples) are
+    rest: within `STILL_RATE_DPS` (a rate table's readback jitter), or constant to
+    `CONSTANT_RATE_DPS` and no larger than Earth's (`EARTH_RATE_DPS`: a bench on the Earth,
+    whose rate then enters the drift's constant term, as in a static run on that bench)."""
+    rate_dps = np.asarray(rate_dps, dtype=float)
+    peak, spread = float(np.max(np.abs(rate_dps))), float(np.ptp(rate_dps))
+    return peak <= STILL_RATE_DPS or (peak <= EARTH_RATE_DPS and spread <= CONSTANT_RATE_DPS)
+
 
 MIN_SWEEP_SAMPLES = 20
 """Fewest samples a sweep must keep after `settle_s`."""
@@ -22,8 +42,9 @@ put the drift 100× off)."""
 
 def sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
     """[(temperature [°C], [(t, θ, ρ, used) per run])] sorted by temperature, each with runs
-    turning both ways. **Raises:** `ValueError` for a turning table (|`table_rate_dps`| beyond
-    [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS]: within it, readback jitter, is rest), a
+    turning both ways. **Raises:** `ValueError` for a turning table (not `at_rest`: beyond
+    [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS], readback jitter, unless constant and no
+    larger than Earth's rate), a
     sweep that pauses, no sweeps, a sweep left with fewer than `MIN_SWEEP_SAMPLES` after
     `settle_s` [s] (checked before the directions: a settling longer than the sweeps leaves
     none), sweeps in one direction only, or covering less than `MIN_COVERAGE_DEG`."""
@@ -34,12 +55,14 @@ def sweeps_by_temperature(data: MeasuredData, bin_c: float, settle_s: float):
         if np.all(rho == 0):
             continue  # a static run: nothing to sweep
         run = int(data["run"][idx[0]])
-        table = np.abs(data["table_rate_dps"][idx])
-        if np.any(table > STILL_RATE_DPS):  # within it: a rate table's readback jitter, rest
+        table = data["table_rate_dps"][idx]
+        if not at_rest(table):  # jitter within STILL_RATE_DPS, or Earth's constant rate: rest
             raise ValueError(f"run {run}: the table turns (|table_rate_dps| up to "
-                             f"{float(np.max(table)):.3g} °/s); virtual-precession sweeps are "
-                             f"taken with the case at rest (|table_rate_dps| ≤ STILL_RATE_DPS "
-                             f"= {STILL_RATE_DPS:g} °/s)")  # fmt: skip
+                             f"{float(np.max(np.abs(table))):.3g} °/s, varying by "
+                             f"{float(np.ptp(table)):.3g}); virtual-precession sweeps are taken "
+                             f"with the case at rest (|table_rate_dps| ≤ STILL_RATE_DPS = "
+                             f"{STILL_RATE_DPS:g} °/s, or constant and no larger than Earth's "
+                             f"{EARTH_RATE_DPS:.4g} °/s)")  # fmt: skip
         temp = float(np.round(np.mean(data["temperature_c"][idx]) / bin_c) * bin_c)
         used = t - t[0] >= settle_s
         if np.any(rho[used] == 0):

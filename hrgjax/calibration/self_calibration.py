@@ -46,6 +46,8 @@ bias reading and, through g, at most g·Ω_E the anisotropy).
 
 from __future__ import annotations
 
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -53,17 +55,20 @@ import numpy as np
 
 from .._checks import check_numbers, concrete_value, finite_number, is_concrete
 from .._compiled import device, fused
+from .._warn import user_stacklevel
 from .._x64 import require_x64
 from ..data import MeasuredData
 from ..gyro import Gyro
 from ..pattern_noise import STILL_RATE_DPS
 from ..profiles import Profile
-from ..units import DEG, DEG_PER_S, EARTH_RATE, K_E_NOMINAL
+from ..units import DEG, DEG_PER_S, K_E_NOMINAL
 from ._compensator import AbstractCompensator, check_number, check_whole, setting_field
 from ._raw import check_raw
 from ._runs import RunGroup, simulate_runs, switch_on_keys
+from ._sweeps import CONSTANT_RATE_DPS as CONSTANT_RATE_DPS
+from ._sweeps import EARTH_RATE_DPS as EARTH_RATE_DPS
 from ._sweeps import MIN_COVERAGE_DEG as MIN_COVERAGE_DEG
-from ._sweeps import sweeps_by_temperature
+from ._sweeps import at_rest, sweeps_by_temperature
 from .experiment import QUICK_TEMPERATURES, Plan, run_plan
 from .reduce import check_k_e
 
@@ -392,7 +397,7 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
 
     **Raises:** `ValueError` for a profile without two holds 90° apart, a case that turns,
     or a hold with no sample of `t` after its `settle_s` (coarse output times, or a record
-    that starts late)."""
+    that starts late); warns (`ShortSettleWarning`) for `settle_s` < `MIN_SETTLE_S`."""
     if not isinstance(profile, Profile):
         raise TypeError(f"mode_reversal: profile must be an hrgjax.Profile (Profile.held_angles"
                         f"(…)); got {type(profile).__name__}")  # fmt: skip
@@ -407,6 +412,7 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
     if len(windows := profile.hold_windows(settle_s)) != 2:
         raise ValueError(f"mode_reversal needs a profile with two holds longer than settle_s = "
                          f"{float(settle_s):g} s; it has {len(windows)}")  # fmt: skip
+    _check_settle("mode_reversal", float(settle_s))
     theta0 = float(profile.wave_angle0) / DEG
     with jax.ensure_compile_time_eval():  # under jit (a sweep over temperature) too
         turn = float(profile.commanded_angle_at(profile.t[-1])) / DEG - theta0
@@ -449,23 +455,14 @@ def _held_values(profile: Profile) -> Profile:
     return eqx.tree_at(lambda p: [getattr(p, n) for n in out], profile, list(out.values()))
 
 
-EARTH_RATE_DPS = EARTH_RATE / DEG_PER_S
-"""Largest constant case rate mode reversal takes [°/s] (0.00418: Earth's rate, the most of
-it a bench's sensitive axis sees; `hrgjax.units.STILL_RATE_DPS`, 1e-3 °/s, is below its
-vertical share Ω_E sin φ above 14° latitude)."""
-CONSTANT_RATE_DPS = 1e-6 * EARTH_RATE_DPS
-"""The most a rate beyond `STILL_RATE_DPS` may vary over a mode-reversal run and count as
-constant [°/s]: half a change between the holds would go into the anisotropy whole."""
-
-
 def _check_at_rest(rate_dps, what: str) -> None:
     """Refuse mode reversal with the case turning (`rate_dps`: its rates [°/s], the profile's
     knots or a run's samples): within `STILL_RATE_DPS` (readback jitter), or constant to
     `CONSTANT_RATE_DPS` and no larger than Earth's (`EARTH_RATE_DPS`), is at rest."""
     rate_dps = np.asarray(rate_dps, dtype=float)
-    peak, spread = float(np.max(np.abs(rate_dps))), float(np.ptp(rate_dps))
-    if peak <= STILL_RATE_DPS or (peak <= EARTH_RATE_DPS and spread <= CONSTANT_RATE_DPS):
+    if at_rest(rate_dps):
         return
+    peak, spread = float(np.max(np.abs(rate_dps))), float(np.ptp(rate_dps))
     varies = f" and varies by {spread:.3g} °/s" if peak <= EARTH_RATE_DPS else ""
     raise ValueError(
         f"mode reversal needs the case at rest (|rate| ≤ STILL_RATE_DPS = {STILL_RATE_DPS:g} "
@@ -474,6 +471,31 @@ def _check_at_rest(rate_dps, what: str) -> None:
         "unknown readout gain mismatch (≈ 1 − g cos 2θ), so the rate does not cancel and "
         "biases the anisotropy"
     )
+
+
+MIN_SETTLE_S = 10.0
+"""Shortest `settle_s` [s] mode reversal takes without a `ShortSettleWarning` (a faster loop
+may filter it): 20/β at the default rebalance bandwidth β = 2 rad/s. The loop's transient after
+the slew, (1 + βt)e^{−βt}, is in a hold read sooner: the default gyro's bias at ±45° read 0.2877,
+0.2949, 0.29533 °/h at settle_s = 0, 2, 10; with 2 % forcer gain error and a 10-s slew it was
+2.4×, 0.5 %, 1e-6 of the anisotropy off at 0, 5, 10 s (`tests/test_self_calibration.py`)."""
+
+
+class ShortSettleWarning(UserWarning):
+    """`settle_s` below `MIN_SETTLE_S`: the rebalance loop's transient may be in the reading."""
+
+
+def _check_settle(who: str, settle_s: float) -> None:
+    """Warn (`ShortSettleWarning`, at the user's line) for `settle_s` [s] < `MIN_SETTLE_S`."""
+    if settle_s < MIN_SETTLE_S:
+        warnings.warn(
+            f"{who}: settle_s = {settle_s:g} s is shorter than MIN_SETTLE_S = {MIN_SETTLE_S:g} s: "
+            "the rebalance loop's transient after the slew (a few 1/β, 0.5 s at the default "
+            "2 rad/s) is in the hold's mean (2.6 % of the bias at settle_s = 0 on the default "
+            f"gyro); give settle_s ≥ {MIN_SETTLE_S:g} s",
+            ShortSettleWarning,
+            stacklevel=user_stacklevel(),
+        )
 
 
 def run_reversal_plan(
@@ -525,13 +547,14 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
     output). **Raises:** `ValueError` without the FTR output or the schedule, for a run
     with other than two holds 90° apart, or one whose case turns (`table_rate_dps` beyond
     [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS], unless constant and within Earth's
-    rate: mode reversal needs the case at rest, see `mode_reversal`)."""
+    rate: mode reversal needs the case at rest, see `mode_reversal`); warns as it."""
     if not isinstance(data, MeasuredData):
         raise TypeError(f"mode_reversal_data: data must be hrgjax.MeasuredData; got "
                         f"{type(data).__name__}")  # fmt: skip
     settle_s = finite_number("mode_reversal_data: settle_s", settle_s, "s")
     if settle_s < 0:
         raise ValueError(f"mode_reversal_data: settle_s must be >= 0 [s]; got {settle_s:g}")
+    _check_settle("mode_reversal_data", settle_s)
     for name in ("rebalance_rate_dps", "precession_dps"):
         if name not in data:
             raise ValueError(f"mode reversal needs force-to-rebalance data with a {name!r} column "
