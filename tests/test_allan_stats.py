@@ -373,6 +373,9 @@ def test_noise_identification_beyond_the_autocorrelations_reach(alpha):
     # a first factor too long to read takes the α of the largest shorter one that can be
     x = kasdin(-2, 4097, np.random.default_rng(1))
     assert allan.noise_id(x, [2048])[0] == allan.noise_id(x, [256])[0]
+    # a factor beyond the record (τ > T) is refused, not given the α carried on (was α = 0)
+    with pytest.raises(ValueError, match="m must be at most the 4096 intervals"):
+        allan.noise_id(x, [4097])
 
 
 def test_stable32_rule_removes_the_drift_and_carries_below_eight_averages():
@@ -516,8 +519,11 @@ def test_units_follow_the_statistic_and_the_data(tmp_path):
 
 def test_records_with_gaps_skip_the_windows_across_them():
     """NaN samples are gaps: on angle data oadev equals allantools' gap-resistant gradev; on
-    rate data it equals the definition computed window by window; a record whose only gap
-    is its last sample gives the gap-free curve for every kind; totdev refuses gaps."""
+    rate data it equals the definition computed window by window; NaN before the first or
+    after the last sample are a shorter record: the truncated record's τ, curve, EDF and
+    noise type for every kind, rate or angle (before 2026-12-03 five leading NaN cut adev's
+    grid from 98 factors to 75 and moved oadev's EDF up to 3.1× by the noise type read on
+    the mean-filled record); totdev refuses gaps."""
     y = Y.copy()
     y[1200:1230] = np.nan
     y[2500] = np.nan
@@ -534,6 +540,15 @@ def test_records_with_gaps_skip_the_windows_across_them():
         b = allan.deviation(np.r_[Y, np.nan], 1.0, kind=kind, taus=a.taus)
         np.testing.assert_allclose(b.dev, a.dev, rtol=1e-12)
         np.testing.assert_array_equal(b.n_terms, a.n_terms)
+    short = Y[:300]
+    for data, rec in (("rate", short), ("phase", np.cumsum(short))):
+        for kind in ("adev", "oadev", "hdev"):
+            a = allan.deviation(rec, 1.0, kind=kind, taus="all", data=data, mixture=False)
+            b = allan.deviation(np.r_[[np.nan] * 5, rec, np.nan], 1.0, kind=kind, taus="all",
+                                data=data, mixture=False)  # fmt: skip
+            np.testing.assert_array_equal(b.m, a.m)
+            np.testing.assert_array_equal(b.alpha, a.alpha)
+            np.testing.assert_allclose(np.c_[b.dev, b.edf], np.c_[a.dev, a.edf], rtol=1e-12)
     with pytest.raises(ValueError, match="totdev reflects the record"):
         allan.deviation(y, 1.0, kind="totdev")
     at = pytest.importorskip("allantools")
@@ -626,6 +641,8 @@ def test_tdev_phase_input_and_one_program_for_every_grid():
         ({"data": "freq"}, "data must be 'rate' or 'phase'"),
         ({"taus": "weekly"}, "taus must be 'octave'"),
         ({"taus": [np.nan]}, "taus must be finite"),
+        ({"taus": [0.2]}, "taus must lie within oadev's range on 100 samples: τ₀ = 1 s to 49 s"),
+        ({"taus": [60.0, 300.0]}, r"taus must lie within .* \(m = 1 … 49, at least 2 terms"),
         ({"ci": 1.5}, "ci must be a confidence level"),
         ({"rate_hz": 0.0}, "rate_hz must be a positive"),
     ],
@@ -927,17 +944,22 @@ def test_totvar_functions_refuse_what_they_cannot_read(call, match):
 
 def test_totdev_reads_tau_up_to_the_records_length():
     """totdev reflects the phase at both ends, so τ = T (m = N rate samples) has all its
-    N − 1 terms: `allan.totdev` computes it as `deviation` and allantools do, and refuses
-    m = N + 1 by name."""
+    N − 1 terms: `allan.totdev` and `allan_deviation` compute it as `deviation` and
+    allantools do (`allan_deviation` refused m = N until 2026-12-03), and refuse m = N + 1
+    by name."""
     at = pytest.importorskip("allantools")
     y = Y[:64]
-    for m in (63, 64):
+    _, curve = hg.allan_deviation(y, 1.0, ms=[63, 64], kind="totdev")
+    for m, c in zip((63, 64), np.asarray(curve), strict=True):
         ref = at.totdev(y, rate=1.0, data_type="freq", taus=[float(m)])[1][0]
         assert float(allan.totdev(y, m)) == pytest.approx(ref, rel=1e-10), m
+        assert c == pytest.approx(ref, rel=1e-10), m
         r = allan.deviation(y, 1.0, "totdev", taus=[m], bias_correction=False)
         assert r.dev[0] == pytest.approx(ref, rel=1e-10), m
     with pytest.raises(ValueError, match=r"^totdev: m = 65 needs m ≤ N = 64 rate samples"):
         allan.totdev(y, 65)
+    with pytest.raises(ValueError, match=r"^totdev: m = 65 needs m ≤ N = 64 rate samples"):
+        hg.allan_deviation(y, 1.0, ms=[65], kind="totdev")
 
 
 def test_interval_level_below_one_half_is_that_level():
@@ -1018,6 +1040,29 @@ def test_gapped_edf_pools_the_gap_free_segments():
         assert r.edf[0] == pytest.approx(quadratic_form_edf(rows), rel=0.1), m
 
 
+def test_gapped_angle_edf_where_differences_step_over_a_missing_angle():
+    """On angle data a difference may step over a missing angle (x_i, x_i+m, x_i+2m all
+    there), so the segments between missing angles are not independent: where they hold
+    fewer differences than are used, the EDF is one record's with as many differences.
+    White angle noise, 400 angles, 8 missing: oadev's EDF within 3 % of the exact EDF of
+    the quadratic form at m = 8, 16, 32 (189.5, 183.4, 171.8; scaling the segments' few
+    differences up to all used gave 1.06, 1.10 and 1.63× it, an interval too narrow)."""
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=400)
+    x[rng.choice(np.arange(10, 390), size=8, replace=False)] = np.nan
+    r = allan.deviation(x, 1.0, data="phase", taus=[8, 16, 32])
+    assert list(r.alpha) == [2, 2, 2], r.alpha
+    for m, edf in zip(r.m, r.edf, strict=True):
+        rows = []
+        for i in range(400 - 2 * int(m)):
+            idx = [i, i + int(m), i + 2 * int(m)]
+            if np.all(np.isfinite(x[idx])):
+                row = np.zeros(400)
+                row[idx] = (1.0, -2.0, 1.0)
+                rows.append(row)
+        assert edf == pytest.approx(quadratic_form_edf(np.array(rows)), rel=0.03), m
+
+
 def test_gapped_edf_under_the_stable32_rule_pools_greenhalls_edfs():
     """With gaps each segment's EDF follows the noise rule: Stable32's pools Greenhall's EDF
     of each gap-free segment (its EDF on a gap-free record), the default the exact one (the
@@ -1034,6 +1079,26 @@ def test_gapped_edf_under_the_stable32_rule_pools_greenhalls_edfs():
                    for t in terms]  # fmt: skip
             want = sum(terms) ** 2 / sum(t * t / g for t, g in zip(terms, seg, strict=True))
             assert e == pytest.approx(want, rel=1e-12), (rule, m)
+
+
+def test_gapped_rate_random_walk_reads_as_a_random_walk():
+    """The noise type of a rate record with gaps is read with each run of missing rates
+    bridged by the local rate (the present rates either side), not the record's mean rate,
+    whose spikes at every gap made a rate random walk with 2 % missing read as flicker rate
+    noise (α = −1) at τ₀ and 2τ₀ in every record (60 of 60); now −2, as gap-free. Flicker
+    angle noise (rate samples: its phase differenced) keeps its type beside a 300-sample
+    gap."""
+    rng = np.random.default_rng(7)
+    y = np.cumsum(rng.normal(size=2000))
+    y[rng.random(2000) < 0.02] = np.nan
+    r = allan.deviation(y, 1.0, taus=[1, 2, 4], mixture=False)
+    assert list(r.alpha) == [-2, -2, -2], r.alpha
+    w = np.fft.rfft(rng.normal(size=4001))
+    w[1:] /= np.sqrt(np.fft.rfftfreq(4001)[1:])
+    w[0] = 0.0
+    z = np.diff(np.fft.irfft(w, 4001))  # flicker angle noise as rates
+    z[1200:1500] = np.nan
+    assert list(allan.deviation(z, 1.0, taus=[1, 4, 16, 64], mixture=False).alpha) == [1] * 4
 
 
 def test_gapped_flicker_noise_keeps_one_records_edf():

@@ -253,8 +253,8 @@ def allan_deviation(rate, dt: float, ms=None, kind: str = "oadev"):
     needed = {"adev": 2, "oadev": 2, "mdev": 3, "hdev": 3, "ohdev": 3, "totdev": 0}[kind]
     for m in ms:
         _check(rate, m, max(needed * m - (kind == "mdev"), 2), kind)
-        if kind == "totdev" and m > n - 1:
-            raise ValueError(f"totdev: m = {m} needs at least {m + 1} samples")
+        if kind == "totdev" and m > n:  # τ up to T, as `totdev` (m = n was refused)
+            raise ValueError(f"totdev: m = {m} needs m ≤ N = {n} rate samples (τ ≤ T)")
     # a traced dt (jit, vmap or grad over the sample interval) goes into the program as it
     # is, a float64 (`oadev`'s tau0 too); a concrete one as a Python float (one program)
     traced = isinstance(dt, jax.core.Tracer)

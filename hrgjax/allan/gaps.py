@@ -11,8 +11,9 @@ overlapping Allan deviation (equal to it on angle data), for every kind but totd
 
 `totdev` reflects the record at its ends and has no gap-tolerant form: split the record.
 
-The noise type at each τ is read on the record with its gaps bridged (missing rates by the
-mean rate; missing angles by a straight line between their neighbours), an approximation
+The noise type at each τ is read on the record with its gaps bridged (each run of missing
+rates by the mean of the present rates on either side; missing angles by a straight line
+between their neighbours), an approximation
 fair while the gaps are a small part of the record. The EDF at each τ pools the gap-free
 segments' EDFs (`hrgjax.allan.result.deviation`: fragments are less correlated than one
 record with as many differences).
@@ -75,11 +76,34 @@ def _difference(level, holes, m, coef):
     return np.where(valid, d, 0.0), valid
 
 
+BRIDGE_REACH = 16
+"""Present rate samples on each side of a gap whose mean bridges it for noise identification
+([`bridged`][hrgjax.allan.gaps.bridged])."""
+
+
 def bridged(y: np.ndarray, data: str) -> np.ndarray:
-    """`y` with its gaps bridged for noise identification: missing rates by the mean rate,
-    missing angles by a straight line between their neighbours."""
+    """`y` with its gaps bridged for noise identification: each run of missing rates by the
+    mean of the present rates within its length, and at least `BRIDGE_REACH`, before and
+    after it (the local rate), missing angles by a straight line between their neighbours.
+    The reach grows with the run: a run of L rates filled at a mean of fewer than L would
+    add an angle step larger than the noise's own over L (flicker angle noise read as rate
+    noise at T/64 … T/32 past a 300-sample gap with a reach of 16).
+
+    The record's mean rate, used until 2026-12-03, put a spike of (mean − local rate) into a
+    wandering rate at every gap: a rate random walk with 2 % of its samples missing read as
+    flicker rate noise at τ₀ and 2τ₀ in every record (now as the gap-free record: −2 in
+    100 %); white and flicker rate and angle noise read as before."""
     ok = np.isfinite(y)
-    if data == "rate":
-        return np.where(ok, y, y[ok].mean())
     idx = np.arange(y.size)
-    return np.interp(idx, idx[ok], y[ok])
+    if data != "rate":
+        return np.interp(idx, idx[ok], y[ok])
+    centre = y[ok].mean()  # sums of y − centre keep a large constant rate's digits
+    total = np.concatenate([[0.0], np.cumsum(y[ok] - centre)])  # over the present samples
+    before = np.cumsum(ok)[~ok]  # present samples before each missing one (one count a run)
+    _, run, length = np.unique(before, return_inverse=True, return_counts=True)
+    reach = np.maximum(length[run], BRIDGE_REACH)  # a run's length at least: see above
+    lo = np.maximum(before - reach, 0)
+    hi = np.minimum(before + reach, total.size - 1)
+    out = y.copy()
+    out[~ok] = centre + (total[hi] - total[lo]) / (hi - lo)
+    return out

@@ -163,6 +163,9 @@ def noise_id_each(x, m, dmax: int = 2, *, rule: str = "hrgjax", overlapping: boo
         raise ValueError(
             f"m must be a 1-D array of whole averaging factors >= 1; got {describe(m)}"
         )
+    if factors.size and factors.max() > x.size - 1:  # was read as the α carried on
+        raise ValueError(f"m must be at most the {x.size - 1} intervals of x's {x.size} phase "
+                         f"points (τ ≤ T); got {describe(m)}")  # fmt: skip
     last = None
     for k in factors.astype(int):
         a = read(int(k))
