@@ -250,8 +250,7 @@ def _solve_in_parts(model, gyro, profile, ts, solver, rtol, atol, max_steps, dt0
 
 @fused
 def _switch_on_key(key):
-    """The switch-on bias key drawn from `key` when no `bias_key` is given: the fourth of
-    `_record`'s split of `key` (a given `bias_key` replaces it)."""
+    """The switch-on key when no `bias_key` is given: the 4th of `_record`'s split of `key`."""
     return jax.random.split(key, 4)[3]
 
 
@@ -261,10 +260,14 @@ def _record(gyro, profile, ts, read, key, bias_key, run, t_out=None):
     est, true_theta, loops, rebalance_rate = read
     theta = est.theta
     amplitude, quadrature = est.amplitude, est.quadrature
-    k_e = jax.vmap(lambda t: gyro.at(profile.temperature_at(t)).resonator.k_e)(ts)
+
+    def local(t, th):  # k_e; dθ̂/dθ, through which the rate noise's motion of the wave reads
+        g = gyro.at(profile.temperature_at(t))
+        return g.resonator.k_e, g.readout.angle_slope(th)
+
+    k_e, slope = jax.vmap(local)(ts, true_theta)
     if gyro.noise is not None:
-        # the fourth key is the switch-on key, drawn before the solve (`_switch_on_key`)
-        k_rate, k_white, k_amp, _ = jax.random.split(key, 4)
+        k_rate, k_white, k_amp, _ = jax.random.split(key, 4)  # 4th: `_switch_on_key`'s
         nz = gyro.noise
         # from the switch-on (the profile's start), not the first output: a window late in
         # a run carries the noise and the bias's angle of the time before it
@@ -273,7 +276,7 @@ def _record(gyro, profile, ts, read, key, bias_key, run, t_out=None):
                       + draw_run_bias(bias_key, nz) * (ts - start))  # fmt: skip
         white = nz.angle_white * jax.random.normal(k_white, ts.shape)
         if rebalance_rate is None:
-            theta = theta - k_e * rate_angle + white
+            theta = theta - k_e * slope * rate_angle + white
         elif ts.shape[0] > 1:  # FTR: while held, the rate noise is on the rate read out (the
             # mean rate of each output interval; the first sample: the first interval's);
             # where a schedule runs whole-angle it moves the wave, which is caught there.
@@ -289,7 +292,7 @@ def _record(gyro, profile, ts, read, key, bias_key, run, t_out=None):
             )
             held = on[:-1] * inc / jnp.diff(ts)
             rebalance_rate = rebalance_rate + jnp.concatenate([held[:1], held])
-            theta = theta - k_e * free + white
+            theta = theta - k_e * slope * free + white
         else:
             theta = theta + white
         amp_noise = nz.amplitude_white * gyro.control.amplitude
@@ -422,7 +425,8 @@ def simulate(
     - `profile`: the [`hrgjax.Profile`][] of rate, temperature and specific force.
     - `model`: `"averaged"` (slow variables, PHYSICS.md §3; long runs and fits) or `"full"`
       (carrier-resolving, PHYSICS.md §2; short windows).
-    - `key`: PRNG key; required when `gyro.noise` is not `None`. Deterministic for a key.
+    - `key`: PRNG key; required when `gyro.noise` is not `None`. Deterministic for a key. The
+      rate noise moves the wave: its angle reads through `Readout.angle_slope`.
     - `bias_key`: key of the switch-on bias; give the same one to several runs to simulate
       segments of one switch-on (defaults to a split of `key`).
     - `dt_out`: output interval [s], at most the profile's length (the grid ends at the last

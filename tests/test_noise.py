@@ -162,6 +162,33 @@ def test_noise_deterministic_for_key_and_needs_key():
     assert abs(float(late.wave_angle[0])) > 1e-8  # ≈ k_e b · 5 s, not 0
 
 
+def test_a_switch_on_bias_reads_through_the_pickoffs_as_a_rate_bias_does():
+    """Audit (s33): the rate noise's angle was added after the readout map, where a rate
+    bias moves the wave and is read through the pickoffs' errors: a switch-on bias moved
+    the grey box's cross_talk 0.86 σ (11 σ on a plan 4× longer), the same bias as
+    `Gyro.rate_bias` nothing. Now it reads through `Readout.angle_slope` (dθ̂/dθ, exact:
+    autodiff of the pickoffs' direction): a switch-on bias (σ 10 °/h) equals that rate bias on
+    a wave turning 5 °/s through pickoff errors of 1 %, to 1e-9 rad (the old reading was
+    off by the readout ripple on the bias's angle, up to 1.6e-6 rad)."""
+    readout = hg.Readout(gain_mismatch=0.01, cross_talk=0.003, misalignment=0.002)
+    theta = jnp.linspace(-3.0, 3.0, 7)
+    (a, b), (c, d) = readout.matrix()
+    direction = jax.vmap(jax.grad(lambda t: jnp.arctan2(c * jnp.cos(t) + d * jnp.sin(t),
+                                                        a * jnp.cos(t) + b * jnp.sin(t))))  # fmt: skip
+    np.testing.assert_allclose(readout.angle_slope(theta), direction(theta), rtol=1e-14)
+    key, bias_key = jax.random.key(3), jax.random.key(5)
+    base = hg.Gyro(resonator(), control=hg.Control(ideal=True), readout=readout)
+    noise = hg.Noise(run_bias=10.0 * DEG_PER_H)
+    noisy = eqx.tree_at(lambda g: g.noise, base, noise, is_leaf=lambda x: x is None)
+    bias = float(hg.noise.draw_run_bias(bias_key, noise))  # the switch-on [rad/s]
+    law = eqx.tree_at(lambda g: g.rate_bias, base, jnp.asarray(bias))
+    prof = hg.Profile.constant_rate(5.0, 20.0, 20.0, 0.0)
+    got = hg.simulate(noisy, prof, key=key, bias_key=bias_key, dt_out=0.5).wave_angle
+    want = hg.simulate(law, prof, dt_out=0.5).wave_angle
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    assert 0.02 * 0.554 * abs(bias) * 20.0 > 1e-6  # the ripple's scale, 2g·k_e·b·t: 3.7e-6 rad
+
+
 def test_rate_noise_from_a_start_before_the_first_sample_has_the_exact_moments():
     """`rate_noise_angle(…, start=0)` at ts = (50, 60) s: E[θ²] = N²t + 2σ²T_c[t − T_c(1 −
     e^{−t/T_c})] at each t, and E[θ(50)θ(60)] the same at 50 plus the Gauss–Markov integral's

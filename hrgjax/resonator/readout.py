@@ -80,6 +80,19 @@ class Readout(eqx.Module):
         g, c, m = self.gain_mismatch, self.cross_talk, self.misalignment
         return jnp.stack([jnp.stack([1.0 + g, c]), jnp.stack([c - 2.0 * m, 1.0 - g])])
 
+    def angle_slope(self, theta):
+        r"""$d\hat\theta/d\theta$ at the (electrical) wave angle `theta` [rad] of a standing
+        wave (q = 0), exactly: the pickoffs read $(\mathbf I + \mathbf E)(\cos\theta,
+        \sin\theta)$ and $\hat\theta$ is its direction, so a small motion δ of the wave
+        reads as slope·δ: $\det(\mathbf I + \mathbf E)/|(\mathbf I + \mathbf E)(\cos\theta,
+        \sin\theta)|^2$, to first order the class docstring's
+        $\mathrm{SF}(\theta) = 1 - 2g\cos2\theta - 2(c - \varepsilon_m)\sin2\theta$.
+        `simulate` moves its rate noise's angle through it. Evaluate temperature laws first."""
+        (a, b), (c, d) = self.matrix()
+        x, y = jnp.cos(theta), jnp.sin(theta)
+        u, v = a * x + b * y, c * x + d * y  # what the pickoffs read
+        return (a * d - b * c) / (u * u + v * v)  # d atan2(v, u)/dθ
+
 
 class Demodulated(eqx.Module):
     """Demodulated in-phase (C) and quadrature (S) components of the x and y pickoffs."""
