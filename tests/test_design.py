@@ -682,6 +682,27 @@ def test_criteria_are_the_posterior_written_out_and_repeating_a_plan_halves_the_
     assert two / one == pytest.approx(2**-0.5, rel=1e-6)
 
 
+def test_design_refuses_a_bad_argument_in_one_line_before_compiling():
+    """`design`'s arguments are refused in one line naming the argument, before any search:
+    a bool is not a number of hours, steps or a learning rate, and 1.5 static segments or 2.7
+    levels are not read as 1 or 2 (before: `True` ran a 1-h design, 1.5 statics raised
+    "can't multiply sequence by non-int", 2.7 levels ran 2, a bench "x" an AttributeError)."""
+    for bad in (dict(learning_rate=True), dict(steps=True), dict(statics=1.5),
+                dict(statics=True), dict(rotations=0.5), dict(rotations=-1),
+                dict(levels=(2.7,)), dict(levels=()), dict(levels=3)):  # fmt: skip
+        with pytest.raises(ValueError, match=f"^{next(iter(bad))} must be"):
+            d.design(2.5, **{"levels": (2,), **bad})
+    with pytest.raises(ValueError, match="^budget_h must be a positive number of hours; got True"):
+        d.design(True, levels=(2,))
+    with pytest.raises(TypeError, match="^bench must be a calibration.BenchModel"):
+        d.design(2.5, levels=(2,), bench="x")
+    with pytest.raises(TypeError, match="^design: key must be one JAX PRNG key"):
+        d.design(2.5, levels=(2,), key=3)
+    for bad in (True, "180", -1.0):  # the seed's grid with other dwells: a number of seconds
+        with pytest.raises(ValueError, match="^duration_s must be a positive run length"):
+            d.seed_bench_plan(duration_s=bad)
+
+
 @pytest.mark.slow(
     "~60 s: compiling the search's Adam step and 40 steps of it; fast tier: the criteria "
     "and their gradient against finite differences "

@@ -56,6 +56,18 @@ def _inputs(plan, values, arw, gauss_markov, angle_white, model):
     return model, values, noise, source, panels
 
 
+def _flight_criterion(kind, plan, values, arw, prior_scale, flight, gauss_markov, angle_white,
+                      model):  # fmt: skip
+    """`ins_error` or `warmup_error` (`kind`: `ins`, `warmup`) of `plan` after `flight`: one
+    criterion of the flights, its arguments checked as every public criterion's."""
+    require_x64(f"hrgjax.calibration.design.{kind}_error")
+    model, values, noise, source, panels = _inputs(
+        plan, values, arw, gauss_markov, angle_white, model
+    )
+    return evaluate_criterion(source, kind, values, noise, prior_scale_array(prior_scale),
+                              flight_nodes(flight), model, panels)  # fmt: skip
+
+
 def drift_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0,
                 temperatures_c=OPERATING_TEMPERATURES, angles_deg=OPERATING_ANGLES,
                 gauss_markov=None, angle_white=None, model=None):  # fmt: skip
@@ -231,12 +243,8 @@ def ins_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 100.0
     (ARW, Gauss–Markov rate), the Earth-rate coupling of the full strapdown model
     ([`ins_impact`][hrgjax.calibration.ins_impact.ins_impact] keeps both), and model error
     outside the grey box's family."""
-    require_x64("hrgjax.calibration.design.ins_error")
-    model, values, noise, source, panels = _inputs(
-        plan, values, arw, gauss_markov, angle_white, model
-    )
-    return evaluate_criterion(source, "ins", values, noise, prior_scale_array(prior_scale),
-                              flight_nodes(flight), model, panels)  # fmt: skip
+    return _flight_criterion("ins", plan, values, arw, prior_scale, flight, gauss_markov,
+                             angle_white, model)  # fmt: skip
 
 
 def ins_sensitivity(values=None, flight=None, nodes: int | None = None,
@@ -283,12 +291,8 @@ def warmup_error(plan: BenchPlan, values=None, arw=None, prior_scale: float = 10
     the electrical wave angle's error. What a gyro-compass or an attitude reference loses to
     the warm-up, before any Schuler dynamics. Noise arguments and `model` as
     [`information`][hrgjax.calibration.design.information]."""
-    require_x64("hrgjax.calibration.design.warmup_error")
-    model, values, noise, source, panels = _inputs(
-        plan, values, arw, gauss_markov, angle_white, model
-    )
-    return evaluate_criterion(source, "warmup", values, noise, prior_scale_array(prior_scale),
-                              flight_nodes(flight), model, panels)  # fmt: skip
+    return _flight_criterion("warmup", plan, values, arw, prior_scale, flight, gauss_markov,
+                             angle_white, model)  # fmt: skip
 
 
 def warmup_sensitivity(values=None, flight=None, nodes: int | None = None,

@@ -318,7 +318,8 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
     Gauss–Markov rate discounts each segment's information by
     [`gauss_markov_discount`][hrgjax.calibration.design.gauss_markov_discount] (a long dwell
     averages white noise down, not a slow bias); the switch-on bias is left out (it is a
-    constant of the session: the fitted bias absorbs it). Differentiable with respect to the
+    constant of the session: the fitted bias absorbs it; docs/design.md, "The switch-on bias
+    in the simulated sessions"). Differentiable with respect to the
     plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
     require_x64("hrgjax.calibration.design.information")
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 2:

@@ -441,8 +441,10 @@ def seed_bench_plan(
     with shorter or longer dwells)."""
     temps, dur = (QUICK_TEMPERATURES, QUICK_DURATION) if quick else (SEED_TEMPERATURES, 180.0)
     if duration_s is not None:
-        if not (np.isfinite(duration_s) and duration_s > 0):
-            raise ValueError(f"duration_s must be a positive run length [s]; got {duration_s}")
+        if not (is_finite_real(duration_s) and float(duration_s) > 0):
+            raise ValueError(
+                f"duration_s must be a positive run length [s]; got {describe(duration_s)}"
+            )
         dur = float(duration_s)
     segs = []
     for t in temps:

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
+from .._checks import check_key, describe, is_finite_real, whole_number
 from .._compiled import device
 from .._progress import bar
 from .._x64 import require_x64
@@ -109,6 +110,19 @@ class Design(eqx.Module):
         resolution (atomically); returns the path. `load_plan` reads it."""
         return save_plan(self.plan, path, self.bench, criterion=self.criterion_json(),
                          resolution=self.resolution)  # fmt: skip
+
+
+def _levels(levels) -> tuple[int, ...]:
+    """`design`'s `levels` as a non-empty tuple of whole numbers ≥ 1, or a one-line
+    `ValueError` (2.7 levels is refused, not read as 2)."""
+    what = "a non-empty sequence of whole numbers ≥ 1 (temperature levels to try)"
+    try:
+        given = tuple(levels)
+    except TypeError:
+        raise ValueError(f"levels must be {what}; got {describe(levels)}") from None
+    if not given:
+        raise ValueError(f"levels must be {what}; got ()")
+    return tuple(whole_number("levels", k, what, 1) for k in given)
 
 
 def _structure(levels: int, statics: int, rotations: int, ramps: bool) -> tuple[str, ...]:
@@ -258,20 +272,22 @@ def design(
     require_x64("hrgjax.calibration.design.design")
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {CRITERIA}; got {criterion!r}")
-    if not (isinstance(budget_h, (int, float)) and math.isfinite(budget_h) and budget_h > 0):
-        raise ValueError(f"budget_h must be a positive number of hours; got {budget_h!r}")
-    plausible.check("budget_h (as seconds)", float(budget_h) * 3600.0, "duration_s")
+    if not (is_finite_real(budget_h) and float(budget_h) > 0):
+        raise ValueError(f"budget_h must be a positive number of hours; got {describe(budget_h)}")
+    budget_h = float(budget_h)
+    plausible.check("budget_h (as seconds)", budget_h * 3600.0, "duration_s")
     model = as_model(model)
-    levels = tuple(int(k) for k in (DEFAULT_LEVELS[model.name] if levels is None else levels))
-    if not levels or min(levels) < 1:
-        raise ValueError(f"levels must be positive integers; got {levels}")
-    if statics < 1 or rotations < 0:
-        raise ValueError("statics must be ≥ 1 and rotations ≥ 0 per level")
-    if not (isinstance(learning_rate, (int, float)) and 0 < learning_rate < math.inf):
-        raise ValueError(f"learning_rate must be a positive number; got {learning_rate!r}")
-    if not (isinstance(steps, int) and steps >= 1):
-        raise ValueError(f"steps must be a whole number ≥ 1; got {steps!r}")
+    levels = _levels(DEFAULT_LEVELS[model.name] if levels is None else levels)
+    statics = whole_number("statics", statics, "a whole number ≥ 1 (static segments per level)", 1)
+    rotations = whole_number("rotations", rotations, "a whole number ≥ 0 (rotations per level)", 0)
+    if not (is_finite_real(learning_rate) and float(learning_rate) > 0):
+        raise ValueError(f"learning_rate must be a positive number; got {describe(learning_rate)}")
+    steps = whole_number("steps", steps, "a whole number ≥ 1 (Adam steps per structure)", 1)
     bench = BenchModel() if bench is None else bench
+    if not isinstance(bench, BenchModel):
+        raise TypeError(f"bench must be a calibration.BenchModel or None; got {describe(bench)}")
+    if key is not None:
+        check_key("design: key", key)
     steps_by_key = {"temperature_step": (temperature_step, "°C"),
                     "angle_step": (angle_step, "° electrical"), "time_step": (time_step, "s"),
                     "rate_step": (rate_step, "°/s")}  # fmt: skip
