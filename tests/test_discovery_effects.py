@@ -359,6 +359,17 @@ def test_equations_print_every_catalogue_effect_with_held_parameters():
                for n, ps in fitted.items()}  # fmt: skip
     for eq in (text, dataclasses.replace(rep, fit_parameters=flipped).equations()):
         assert not re.search(r"[+−] (½·)?\(?[-−]", eq), eq
+    # a law the runs cannot tell from a session drift, and a null report's upper limits
+    # (disc, session 33): 1σ = 1e-4 °/h/°C of b₁ in model units → |b1| < 1.96e-4 °/h/°C
+    note = dataclasses.replace(rep, run_order_confound={"bias_temperature": 0.98}).equations()
+    assert "bias_temperature is 98 % the same as a bias drifting steadily" in note
+    std = 1e-4 * DEG_PER_H * 0.554  # rad/s/°C of pattern rate
+    limits = {"bias_temperature": {"b1": {"value": 0.0, "std": std, "ci95_upper": 1.96 * std}}}
+    none = dataclasses.replace(rep, verdict="none", upper_limits=limits)
+    assert "bias_temperature: |b1| < 0.0002 °/h/°C" in none.equations()
+    assert none.to_json()["upper_limits"]["bias_temperature"]["b1"]["ci95_upper"] == (
+        pytest.approx(1.96e-4)
+    )
     assert (
         tidy_signs("a − (-0.3 ± 0.1)·x + -2·y + ½·(-4 ± 1)")
         == "a + (0.3 ± 0.1)·x − 2·y − ½·(4 ± 1)"

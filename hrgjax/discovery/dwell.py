@@ -371,6 +371,14 @@ class DwellProblem(AbstractProblem):
         k = output_gain(fit.parameters, self.k_e)
         return leftover.describe(fit.r, fit.j, self.shape_columns, k, classes=self.row_classes())
 
+    def run_order_column(self):
+        """A bias rising linearly from the first training run to the last (runs in id
+        order: a dwell grid shares one switch-on, so a drift through the session is not a
+        run bias), whitened, on the training windows."""
+        run = np.asarray(self.w.run)[self.train]
+        runs = np.unique(run)
+        return np.searchsorted(runs, run) / max(runs.size - 1, 1) / self.sigma[self.train]
+
     def row_classes(self):
         """Static (1) and moving (0) training windows: their σ come from different parts of
         the noise model."""

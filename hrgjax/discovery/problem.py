@@ -115,6 +115,14 @@ class AbstractProblem(abc.ABC):
         ([`run_bias.spread`][hrgjax.discovery.run_bias.spread])."""
         return None
 
+    def run_order_column(self) -> np.ndarray | None:
+        """The whitened column, on a fit's training rows, of a bias drifting linearly with
+        run order (session time, runs in id order), for
+        `trust.run_order_confound`; None where it
+        does not apply (default; continuous records: each run's own switch-on bias takes
+        any drift from run to run)."""
+        return None
+
     def widens(self, gap: float, gap_after: float) -> bool:
         """Whether an effect that moves the held-out gap from `gap` to `gap_after` [°/h]
         widens it, which refuses the effect (default: never)."""

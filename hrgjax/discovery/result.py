@@ -126,6 +126,16 @@ class Discovery:
       "not_pinned"}`); the JSON adds `sigma_model` (`{"effect.param": the pull's share of
       σ}`, user units) and `no_sigma` (`{"effect.param": why}`: a scanned time constant; a
       parameter the run means pin where too few runs leave σ_b unpinned).
+    - `upper_limits`: where nothing was accepted (`none`, `unexplained`; else None), 95 %
+      upper limits on each candidate, from the last round's refits (the model with that
+      effect added; `trust.upper_limits`):
+      `{effect: {param: {"value", "std", "ci95_upper"}}}` in model units; `user_limits`
+      (a property) and the JSON's `upper_limits` give them in user units, and `equations()`
+      prints them where the verdict is `none` or `unexplained`.
+    - `run_order_confound`: `{effect: share}` for each accepted effect that takes more than
+      `trust.CONFOUND_SHARE` of a bias drifting linearly through the session (runs in id
+      order; dwell grids: `trust.run_order_confound`):
+      its value holds any such drift, and `equations()` says so.
     """
 
     verdict: str
@@ -149,12 +159,28 @@ class Discovery:
     residuals: dict = dataclasses.field(repr=False, compare=False)
     leftover: dict | None = None
     uncertainty: dict | None = None
+    upper_limits: dict | None = None
+    run_order_confound: dict | None = None
 
     @property
     def parameters(self) -> dict:
         """The final model's parameters in user units: `{effect: {param: {"value", "sigma",
         "unit"}}}` (a pattern-rate term as the input rate it imitates, °/h; gains in ppm)."""
         return to_user_units(self.fit_parameters, self.k_e)
+
+    @property
+    def user_limits(self) -> dict:
+        """`upper_limits` in user units: `{effect: {param: {"value", "sigma", "ci95_upper",
+        "unit"}}}` (`ci95_upper` bounds the parameter's size |value| at 95 %)."""
+        out = {}
+        for name, ps in (self.upper_limits or {}).items():
+            user = to_user_units({name: ps}, self.k_e)[name]
+            spec = {p.name: p for p in CATALOGUE[name].params}
+            for pname, v in ps.items():
+                f = abs(spec[pname].user_scale(self.k_e))
+                user[pname]["ci95_upper"] = f * float(v["ci95_upper"])
+            out[name] = user
+        return out
 
     def to_json(self) -> dict:
         """The report as a JSON-ready dict: DESIGN.md's keys first (`ranking` parameters and
@@ -185,6 +211,8 @@ class Discovery:
             "model_parameters": self.fit_parameters,
             "angular_gain_k_e": self.k_e,
             "leftover": self.leftover,
+            "upper_limits": self.user_limits,
+            "run_order_confound": dict(self.run_order_confound or {}),
             "uncertainty": self._uncertainty_json(),
             "gap_note": self.gap_note(),
             "screening": list(self.screening),
@@ -261,6 +289,20 @@ class Discovery:
             self.structure_left or self.verdict == "unexplained" or left.get("significant")
         ):  # a significant shape is worth a line even where the gap is at the floor
             lines.append(f"left over: {left['words']}")
+        if self.verdict in ("none", "unexplained") and self.upper_limits:
+            lines.append("95 % upper limits on the effects not taken (|value| + 1.96σ):")
+            for name, ps in self.user_limits.items():
+                lines.append(f"    {name}: " + ", ".join(
+                    f"|{k}| < {v['ci95_upper']:.2g} {v['unit']}".rstrip()
+                    if math.isfinite(v["ci95_upper"]) else f"{k} not determined by these data"
+                    for k, v in ps.items()
+                ))  # fmt: skip
+        for name, share in (self.run_order_confound or {}).items():
+            lines.append(
+                f"note: on these runs {name} is {100 * share:.0f} % the same as a bias "
+                "drifting steadily through the session (runs in id order): its value holds "
+                "any such drift; repeat a condition at the session's end or change the order"
+            )
         lines.append(
             f"held-out gap {self.gap_before:.3g} → {self.gap_after:.3g} °/h "
             f"(noise floor {self.noise_floor:.3g} °/h); ΔT = T − 20 °C, θ electrical"

@@ -327,6 +327,7 @@ def discover(
             r["outshone_by"] = r["_check"](r) if "_columns" in r else None
         return r["outshone_by"] is not None
 
+    rows: list[dict] = []
     for _ in range(max_effects):
         rows = problem.screen(current, cands, model)
         check = Outshone(problem, current, model + cands, min_delta_bic, not accepted)
@@ -352,6 +353,11 @@ def discover(
         before = base
     parameters, uncertainty = trust.honest(current, problem.shape_columns, problem.row_classes(),
                                            spread=problem.noise_spread(current))  # fmt: skip
+    # where nothing is accepted (a null report's main content; ≈ 0.8 s on a 5 × 9 grid, so
+    # not for found effects): the last round's refits, the model with each candidate added
+    limits = None if accepted else trust.upper_limits(
+        {r["effect"]: r.get("refit") for r in rows}, problem.shape_columns,
+        problem.row_classes(), problem.noise_spread)  # fmt: skip
     # structure left: the held-out gap above the floor, or a leftover shape the residuals
     # needed (trust.honest: judged at the noise level left once it is fitted)
     left = problem.structure_left(current, floor) or bool(uncertainty["structure_left"])
@@ -361,6 +367,10 @@ def discover(
         verdict = "unexplained"
     else:
         verdict = "none"
+    # an accepted effect the runs cannot tell from a drift through the session (a grid run
+    # temperature by temperature: a bias law); `trust.run_order_confound`
+    column = problem.run_order_column() if accepted else None
+    confound = {} if column is None else trust.run_order_confound(current, column, accepted)
     ambiguous = []
     if accepted:
         # first-round rivals that pass the same rule and whose evidence is not decisively
@@ -409,6 +419,8 @@ def discover(
         residuals={"before": problem.residuals(before), "after": problem.residuals(current)},
         leftover=problem.leftover(current),
         uncertainty=uncertainty,
+        upper_limits=limits,
+        run_order_confound={n: v for n, v in confound.items() if v > trust.CONFOUND_SHARE},
     )
 
 

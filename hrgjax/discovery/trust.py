@@ -397,3 +397,79 @@ def statistical_p_value(fit, name: str, shape_columns, classes=None, alpha: floa
     g = aw[:, idx]
     nu = stats.effective_dof(h, g - q_o @ (q_o.T @ g), classes)
     return stats.f_sf(wald / rank, rank, max(int(math.floor(nu)), 1))
+
+
+UPPER_Z = 1.959963984540054
+"""Two-sided 95 % normal quantile: an upper limit is |value| + `UPPER_Z`·σ."""
+
+
+def upper_limits(fits: Mapping, shape_columns, classes=None, spread=None) -> dict:
+    """95 % upper limits on the size of each effect the model did not take (DISCOVERY.md
+    §2.6 `upper_limits`, the main content of a `none` verdict): `fits` maps an effect name
+    to the model refitted with it added (a screening row's refit; None is skipped), and each
+    of its regular parameters gets `{"value", "std", "ci95_upper"}` in model units, `std`
+    the corrected σ of [`honest`][hrgjax.discovery.trust.honest] (noise level from that
+    refit's residual, leftover shapes' pull added) and `ci95_upper` = |value| + `UPPER_Z`·σ:
+    |θ| lies below it at least 95 % of the time where |θ − value| ≤ 1.96σ does (infinite
+    where the data do not determine the parameter). `spread`: None or a callable `fit →`
+    `honest`'s `spread` (continuous records' σ_b uncertainty)."""
+    out = {}
+    for name, fit in fits.items():
+        if fit is None or name not in fit.parameters:
+            continue
+        params, _ = honest(fit, shape_columns, classes,
+                           spread=None if spread is None else spread(fit))  # fmt: skip
+        out[name] = {}
+        for pname, v in params[name].items():
+            if pname not in CATALOGUE[name].regular_names:  # a scanned time constant
+                continue
+            std = v.get("std")
+            std = math.inf if std is None or not math.isfinite(std) else float(std)
+            value = float(v["value"])
+            out[name][pname] = {
+                "value": value,
+                "std": std,
+                "ci95_upper": abs(value) + UPPER_Z * std,
+            }
+    return out
+
+
+CONFOUND_SHARE = 0.9
+"""Share of a run-order drift (what the nominal model leaves of it) that an accepted effect
+takes, above which the report says the two cannot be told apart on these runs."""
+
+
+def _left_of(a: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """What the columns `a` leave of the column `c` (least squares, columns scaled to unit
+    norm: a model's columns lie orders of magnitude apart)."""
+    if a.shape[1] == 0:
+        return c
+    norm = np.linalg.norm(a, axis=0)
+    a_n = a[:, norm > 0] / norm[norm > 0]
+    coef, *_ = np.linalg.lstsq(a_n, c, rcond=None)
+    return c - a_n @ coef
+
+
+def run_order_confound(fit, column, names) -> dict:
+    """For each effect of `names` in `fit`'s model, the share of a bias drifting linearly
+    with run order (`column`: that drift's whitened column on `fit`'s rows, runs in id
+    order, i.e. session time) that the effect takes of what the rest of the model leaves of
+    it: 1 − ‖(I − P)c‖² / ‖(I − P₋)c‖² (P the model's projector, P₋ without the effect's
+    columns). Near 1: the runs cannot tell the effect from such a drift (a dwell grid run
+    temperature by temperature reads a session drift of 0.3 °/h as a bias law 10σ off);
+    `{effect: share}`, only for effects with columns."""
+    c = np.asarray(column, float)
+    j = np.asarray(fit.j, float)
+    labels = regular_parameters(fit.model)
+    if j.ndim != 2 or j.shape[0] != c.size or j.shape[1] != len(labels):
+        return {}
+    left = _left_of(j, c)
+    out = {}
+    for name in names:
+        mine = np.asarray([n == name for n, _ in labels])
+        if not mine.any():
+            continue
+        rest = _left_of(j[:, ~mine], c)
+        total = float(rest @ rest)
+        out[name] = 1.0 - float(left @ left) / total if total > 0 else 0.0
+    return out
