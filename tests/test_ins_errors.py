@@ -332,6 +332,8 @@ def test_off_path_inputs_of_the_ins_entry_points_are_one_line():
                          jnp.ones(5, bool), 0.1)  # fmt: skip
     key, f_b, w_b = jax.random.key(0), jnp.array([0.0, 0.0, -9.8]), jnp.array([5e-5, 0, -5e-5])
     ins = platform.PlatformINS()
+    hand = lambda **kw: tr.Trajectory(**{f: kw.get(f, getattr(traj, f)) for f in  # noqa: E731
+                                         ("t", "lat", "lon", "h", "v_ned", "c_bn", "f_ned")})  # fmt: skip
     cases = [
         (lambda: sd.position_metres(traj, jnp.zeros((11, 2))), r"^dx must be \(…, N, >=3\) .* N = 11"),
         (lambda: sd.position_metres(traj, jnp.zeros((5, 9))), r"^dx must be \(…, N, >=3\)"),
@@ -389,6 +391,25 @@ def test_off_path_inputs_of_the_ins_entry_points_are_one_line():
         (lambda: ekf.discretise(jnp.eye(2), jnp.eye(2), -1.0), r"^discretise: T must be the int"),
         (lambda: ekf.discretise(jnp.eye(2), jnp.eye(3), 1.0), r"^discretise: F and q must both"),
         (lambda: ekf.feedback(one, jnp.zeros(5)), r"^x must be \(n,\) error states, n >= 9"),
+        # session 33: a hand-built trajectory with a NaN time reached the integrator ("the
+        # maximum number of solver steps was reached"); a NaN field, a short field and a
+        # height of -7000 km were accepted; mechanize ran from -7000 km (gravity 66.8 m/s²),
+        # 1000 km/s, or a quaternion of norm 3 (0.68 m/s from rest after 60 s)
+        (lambda: hand(t=traj.t.at[3].set(np.nan)), r"^Trajectory.t must be finite; it has nan"),
+        (lambda: hand(f_ned=traj.f_ned.at[2, 0].set(np.inf)), r"^Trajectory.f_ned must be fin"),
+        (lambda: hand(lat=traj.lat[:-1]), r"^Trajectory.lat must be \(11,\) for the 11 times"),
+        (lambda: hand(h=traj.h - 7e6), r"^Trajectory.h must be a height in metres above the "
+         r"ellipsoid in \(-10000, 100000\); got -7e\+06 at index \(0,\)$"),
+        (lambda: me.mechanize(one.__class__(one.lat, one.lon, one.h - 7e6, one.v_ned, one.q_bn),
+                              jnp.zeros((4, 3)), jnp.zeros((4, 3)), 0.1), r"^initial.h must be a"),
+        (lambda: me.mechanize(one.__class__(one.lat, one.lon, one.h, jnp.array([1e6, 0, 0]),
+                                            one.q_bn), jnp.zeros((4, 3)), jnp.zeros((4, 3)), 0.1),
+         r"^initial.v_ned: the speed = 1e\+06 is outside the plausible range 0 … 10000 m/s"),
+        (lambda: me.mechanize(one.__class__(one.lat, one.lon, one.h, one.v_ned, 3 * one.q_bn),
+                              jnp.zeros((4, 3)), jnp.zeros((4, 3)), 0.1),
+         r"^initial.q_bn must be a unit quaternion; got \|q\| = 3 \(normalise it"),
+        (lambda: me.NavState.from_euler(0.7, 0.0, 6.4e6, np.zeros(3), 0.0, 0.0, 0.0),
+         r"^NavState.from_euler: h must be a height in metres"),
     ]  # fmt: skip
     for call, message in cases:
         with pytest.raises((ValueError, TypeError), match=message) as err:
@@ -416,6 +437,12 @@ def test_valid_inputs_pass_the_ins_checks_as_before():
                      jnp.ones(5, bool), 0.1)  # fmt: skip
     for every in (np.int64(2), jnp.asarray(2)):
         assert t.trajectory(every).t.shape == (3,)
+    # session 33's state checks: a unit quaternion rounded through float32, heights just
+    # inside ±(10, 100) km and a speed of 9.9 km/s pass
+    q32 = jnp.asarray(np.asarray(me.euler_to_quat(0.1, 0.2, 0.3), np.float32), float)
+    for h, v in ((-9.9e3, 0.0), (9.99e4, 9.9e3)):
+        me.check_state(me.NavState(state.lat, state.lon, jnp.asarray(h),
+                                   jnp.array([v, 0.0, 0.0]), q32))  # fmt: skip
     assert cs.nis_check(np.array([1.0, -1e-18, 2.0] * 10), 2)["fixes"] == 30
 
 

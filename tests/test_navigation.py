@@ -466,7 +466,8 @@ def test_a_flight_over_a_pole_is_refused_at_the_time_it_passes_the_limit():
     """300 m/s due north from 88.9° (or due south from −88.9°): the meridian arc to ±89°
     (quadrature of the WGS-84 meridian radius) takes 37.23 s, so the 1-s trajectory and the
     motion's truth are refused at t = 38 s, one line naming the time and the limit; short of
-    it they are built."""
+    it they are built. A motion that climbs past 100 km and free inertial navigation whose
+    latitude passes 90° are refused too, naming the time."""
     phi = np.linspace(88.9 * DEG, C.MAX_LAT_DEG * DEG, 20001)
     arc = np.trapezoid(C.A * (1 - C.E2) / (1 - C.E2 * np.sin(phi) ** 2) ** 1.5, phi)
     first = int(np.ceil(arc / 300.0))
@@ -482,6 +483,24 @@ def test_a_flight_over_a_pole_is_refused_at_the_time_it_passes_the_limit():
                       (mo.Segment(1, Z, Z, 60.0),))  # fmt: skip
         with pytest.raises(ValueError, match=match.format("motion")):
             m.truth(1.0)
+    # session 33: only the start's height was checked (a climb at 1 km/s from 99 km reached
+    # 618 km): 60° pitch at 1 km/s climbs 866.03 m/s, past 100 km between t = 1 and 2 s
+    climb = mo.Motion(
+        45.0, 0.0, 99e3, (1e3, 0.0, 0.0), 0.0, 60.0, 0.0, (mo.Segment(1, Z, Z, 10.0),)
+    )
+    with pytest.raises(ValueError, match=r"^the motion leaves the heights \(-10000, 100000\) m at "
+                       r"t = 2 s \(h = 100732 m\)$"):  # fmt: skip
+        climb.truth(1.0)
+    # ... and free inertial navigation that flies over a pole: its latitude ran on past 90°
+    # (finite, unrefused). 300 m/s north from 89.99°: the meridian arc to 90° takes 3.72 s
+    phi = np.linspace(89.99 * DEG, 90.0 * DEG, 2001)
+    arc = np.trapezoid(C.A * (1 - C.E2) / (1 - C.E2 * np.sin(phi) ** 2) ** 1.5, phi)
+    assert int(np.ceil(arc / 300.0 / 0.1)) == 38
+    start = me.NavState.from_euler(89.99 * DEG, 0.0, 0.0, np.array([300.0, 0, 0]), 0, 0, 0)
+    dv = np.tile([0.0, 0.0, -0.1 * float(C.gravity(89.99 * DEG))], (40, 1))
+    with pytest.raises(RuntimeError, match=r"^ins.mechanize: the latitude passes ±90° at epoch "
+                       r"38 \(t = 3.8 s, 90.000\d+°\): the NED navigation frame cannot fly"):  # fmt: skip
+        me.mechanize(start, np.zeros((40, 3)), dv, 0.1)
 
 
 def test_a_latitude_in_degrees_is_refused_by_mechanize_and_trajectory():

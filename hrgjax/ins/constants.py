@@ -50,6 +50,45 @@ singular at the poles (the longitude rate v_E / (R cos φ) is infinite there, an
 gyrocompassing finds north from the horizontal Earth rate ω_ie cos φ, which vanishes)."""
 
 
+HEIGHT_RANGE_M = (-1e4, 1e5)
+"""Heights [m above the ellipsoid] (bounds excluded) that a motion, a trajectory (built or by
+hand) and the initial state of the mechanization and the filter take: a height below −10 km
+is below the deepest ocean floor, and above 100 km normal gravity's free-air series and an
+aircraft's navigation equations no longer hold (−7e6 m, a radius given as a height, ran and
+returned numbers before; gravity there reads 66.8 m/s²)."""
+
+
+def check_heights(name: str, h) -> None:
+    """A one-line `ValueError` naming `name` if a concrete `h` [m] (any shape) lies outside
+    [`HEIGHT_RANGE_M`][hrgjax.ins.constants.HEIGHT_RANGE_M]; a traced one is not checked."""
+    if isinstance(h, jax.core.Tracer):
+        return
+    try:
+        a = np.asarray(h, float)
+    except Exception:  # a value JAX keeps abstract: checked where it is concrete
+        return
+    low, high = HEIGHT_RANGE_M
+    bad = ~((a > low) & (a < high))  # NaN counts as outside
+    if np.any(bad):
+        i = tuple(int(k) for k in np.argwhere(bad)[0])
+        at = f" at index {i}" if a.ndim else ""
+        raise ValueError(f"{name} must be a height in metres above the ellipsoid in "
+                         f"({low:g}, {high:g}); got {a[i]:g}{at}")  # fmt: skip
+
+
+def refuse_over_pole(where: str, lat, step_s: float) -> None:
+    """A one-line `RuntimeError` if a computed latitude history `lat` [rad] (epochs `step_s`
+    [s] apart) passes ±π/2: the NED mechanization cannot fly over a pole (its latitude runs
+    on past 90°: 300 m/s north from 89.99° ended at 90.15°, finite and unrefused)."""
+    a = np.abs(np.asarray(lat, float))
+    if np.any(over := a > np.pi / 2):
+        k = int(np.argmax(over))
+        raise RuntimeError(
+            f"{where}: the latitude passes ±90° at epoch {k} (t = {k * step_s:g} s, "
+            f"{np.degrees(a[k]):.6g}°): the NED navigation frame cannot fly over a pole"
+        )
+
+
 LAT_TOLERANCE = 1e-6
 """Margin [rad] beyond ±π/2 that `check_latitude_radians` takes: a pole rounded through
 float32 (`float(np.float32(np.pi / 2))` = 1.5707964, 4.4e-8 beyond) is a latitude in

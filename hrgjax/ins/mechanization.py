@@ -38,11 +38,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _upstream, plausible
-from .._checks import check_finite_host, check_numbers, describe, is_concrete
+from .._checks import check_finite_host, check_numbers, describe, host_value, is_concrete
 from .._compiled import Check, device, fused, program, single_run_device
 from .._progress import bar
 from .._x64 import require_x64
-from .constants import G0, WGS84, Earth, check_latitude_radians
+from .constants import G0, WGS84, Earth, check_heights, check_latitude_radians, refuse_over_pole
 
 UNROLL = 4
 """Steps per iteration of the compiled loops: the step is a few dozen scalar operations, so the
@@ -218,8 +218,11 @@ class NavState(eqx.Module):
         heading [rad].
 
         **Raises:** `ValueError` for a concrete `lat` or `pitch` beyond ±π/2, `roll` beyond
-        ±π, `heading` beyond ±2π (angles in degrees; traced values are not checked)."""
+        ±π, `heading` beyond ±2π (angles in degrees), an `h` outside
+        [`HEIGHT_RANGE_M`][hrgjax.ins.constants.HEIGHT_RANGE_M] (traced values are not
+        checked)."""
         check_latitude_radians("NavState.from_euler: lat", lat)
+        check_heights("NavState.from_euler: h", h)
         for name, x, limit, text in (("roll", roll, np.pi, "±π"), ("pitch", pitch, np.pi / 2,
                                      "±π/2"), ("heading", heading, 2 * np.pi, "±2π")):  # fmt: skip
             v = None if isinstance(x, jax.core.Tracer) or not is_concrete(x) else np.asarray(x)
@@ -407,9 +410,11 @@ def check_increments(dtheta, dv, dt):
 
 
 def check_state(initial):
-    """A `TypeError` unless `initial` is a `NavState`, a `ValueError` unless it is one epoch
-    with a concrete latitude within ±π/2 rad (one beyond is in degrees; a traced latitude is
-    not checked)."""
+    """A `TypeError` unless `initial` is a `NavState`, a `ValueError` unless it is one finite
+    epoch with a latitude within ±π/2 rad (one beyond is in degrees), a height in
+    [`HEIGHT_RANGE_M`][hrgjax.ins.constants.HEIGHT_RANGE_M], a speed within `hrgjax.plausible`'s
+    `speed_mps` and a unit `q_bn` (|q| within 1e-6 of 1: another's first step is not a
+    rotation). Concrete values only."""
     if not isinstance(initial, NavState):
         raise TypeError(
             f"initial must be a NavState (hrgjax.ins.mechanization); got {type(initial).__name__}"
@@ -422,6 +427,12 @@ def check_state(initial):
             f"{jnp.shape(initial.v_ned)} and {jnp.shape(initial.q_bn)}"
         )
     check_latitude_radians("initial.lat", initial.lat)
+    check_heights("initial.h", initial.h)
+    if (v := host_value(initial.v_ned)) is not None:
+        plausible.check("initial.v_ned: the speed", np.linalg.norm(v), "speed_mps")
+    if (q := host_value(initial.q_bn)) is not None and abs(np.linalg.norm(q) - 1.0) > 1e-6:
+        raise ValueError(f"initial.q_bn must be a unit quaternion; got |q| = "
+                         f"{np.linalg.norm(q):.9g} (normalise it: q / |q|)")  # fmt: skip
 
 
 def mechanize(
@@ -451,7 +462,7 @@ def mechanize(
 
     **Raises:** `ValueError` for mis-shaped increments or an `initial.lat` beyond ±π/2 (in
     degrees); `RuntimeError` if the solution stops being finite (e.g. increments in degrees,
-    or a vertical channel run into the ground)."""
+    or a vertical channel run into the ground) or, eagerly, passes latitude ±90° (over a pole)."""
     require_x64("ins.mechanize")
     check_state(initial)
     dtheta, dv = check_increments(dtheta, dv, dt)
@@ -474,9 +485,11 @@ def mechanize(
         xs = xs + (hv,)
     dt = jnp.asarray(dt, float)
     eager = _upstream.trace_state_clean() and not _traced((initial, xs, dt, earth))
-    if n > CHUNK_STEPS and eager:
-        return _mechanize_in_chunks(initial, xs, dt, earth, every)
-    return _mechanize(initial, xs, dt, earth, every)
+    run = _mechanize_in_chunks if n > CHUNK_STEPS and eager else _mechanize
+    nav = run(initial, xs, dt, earth, every)
+    if eager:  # over a pole the latitude runs on past 90°, finite
+        refuse_over_pole("ins.mechanize", nav.lat, float(dt) * every)
+    return nav
 
 
 def _traced(tree) -> bool:

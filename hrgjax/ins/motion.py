@@ -49,7 +49,7 @@ from .._x64 import require_x64
 from ..units import DEG
 from .constants import WGS84, Earth
 from .mechanization import NavState, euler_to_quat, increments_from_states, quat_to_dcm
-from .trajectory import Trajectory, check_latitudes, check_position
+from .trajectory import Trajectory, check_latitudes, check_path_heights, check_position
 
 _HEAD_INIT = (
     "ini lat (deg),ini lon (deg),ini alt (m),ini vx_body (m/s),ini vy_body (m/s),"
@@ -339,7 +339,9 @@ class Motion:
         docstring). **Raises** `ValueError` when a segment is not a whole number of
         samples long, or when the motion goes beyond latitude
         ±[`MAX_LAT_DEG`][hrgjax.ins.constants.MAX_LAT_DEG] (over or near a pole: the
-        navigation frame is singular there), naming the time it first does."""
+        navigation frame is singular there) or leaves the heights
+        [`HEIGHT_RANGE_M`][hrgjax.ins.constants.HEIGHT_RANGE_M], naming the time it first
+        does."""
         require_x64("ins.Motion.truth")
         if not (math.isfinite(rate_hz) and rate_hz > 0):
             raise ValueError(f"rate_hz must be a sampling rate in Hz (> 0); got {rate_hz}")
@@ -370,6 +372,7 @@ class Motion:
         states, dth, dv = increments_from_states(initial, v_ned[1:], q[1:], dt, earth=earth)
         lat, h = np.asarray(states.lat), np.asarray(states.h)
         check_latitudes(t, lat, "the motion")
+        check_path_heights(t, h, "the motion")
         w_ie, w_en = earth.earth_rate(lat), earth.transport_rate(lat, h, v_ned)
         f_ned = vdot + np.cross(2 * np.asarray(w_ie) + np.asarray(w_en), v_ned)
         f_ned = f_ned - np.asarray(earth.gravity_ned(lat, h))

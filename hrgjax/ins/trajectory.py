@@ -19,10 +19,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plausible
-from .._checks import check_number, describe, finite_number
+from .._checks import check_finite_host, check_number, describe, finite_number, host_value
 from .._compiled import fused
 from ..units import DEG
-from .constants import E2, MAX_LAT_DEG, WGS84, A, Earth
+from .constants import E2, HEIGHT_RANGE_M, MAX_LAT_DEG, WGS84, A, Earth, check_heights
 from .mechanization import check_latitude_radians
 from .mechanization import dcm_to_euler as dcm_to_euler
 
@@ -49,8 +49,11 @@ class Trajectory(eqx.Module):
     **Fields:** `t` (N,) [s]; `lat`, `lon` (N,) [rad]; `h` (N,) [m]; `v_ned` (N, 3) [m/s];
     `c_bn` (N, 3, 3) body-to-NED; `f_ned` (N, 3) specific force [m/s²]; `earth` (static).
 
-    **Raises:** `ValueError` for times that do not increase, or a concrete `lat` beyond ±π/2
-    (a latitude in degrees)."""
+    **Raises:** `ValueError`, one line naming the field, for concrete fields that are not
+    finite, of shapes other than the above for the N times of a 1-d `t`, times that do not
+    increase, a `lat` beyond ±π/2 (a latitude in degrees) or an `h` outside
+    [`HEIGHT_RANGE_M`][hrgjax.ins.constants.HEIGHT_RANGE_M] (a NaN time went to the
+    integrator, which ran out of steps; −7e6 m returned numbers)."""
 
     t: jax.Array
     lat: jax.Array
@@ -62,10 +65,19 @@ class Trajectory(eqx.Module):
     earth: Earth = eqx.field(static=True, default=WGS84)
 
     def __check_init__(self):
-        t = np.asarray(self.t)
-        if t.ndim == 1 and (t.size < 2 or np.any(np.diff(t) <= 0)):
+        names = ("t", "lat", "lon", "h", "v_ned", "c_bn", "f_ned")
+        n = jnp.shape(self.t)[0] if jnp.ndim(self.t) == 1 else None
+        for name, tail in zip(names, ((), (), (), (), (3,), (3, 3), (3,)), strict=True):
+            got = jnp.shape(getattr(self, name))
+            if n is not None and got != (n, *tail):
+                raise ValueError(f"Trajectory.{name} must be {(n, *tail)} for the {n} times of "
+                                 f"t; got shape {got}")  # fmt: skip
+            check_finite_host(f"Trajectory.{name}", getattr(self, name))
+        t = host_value(self.t)
+        if t is not None and t.ndim == 1 and (t.size < 2 or not np.all(np.diff(t) > 0)):
             raise ValueError("Trajectory.t must hold at least 2 strictly increasing times")
         check_latitude_radians("Trajectory.lat", self.lat)
+        check_heights("Trajectory.h", self.h)
 
     @property
     def attitude(self):
@@ -125,6 +137,7 @@ def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None,
         lon[i + 1] = lon[i] + 0.5 * dt * (r0[1] + r1[1])
         h[i + 1] = h[i] + 0.5 * dt * (r0[2] + r1[2])
     check_latitudes(t, lat, "the trajectory")
+    check_path_heights(t, h, "the trajectory")
     vdot = np.gradient(v, t, axis=0)
     w = 2 * np.asarray(earth.earth_rate(lat)) + np.asarray(earth.transport_rate(lat, h, v))
     g = np.asarray(earth.gravity_ned(lat, h))
@@ -134,6 +147,21 @@ def _from_kinematics(t, lat0, lon0, h0, speed, heading, gamma, earth, roll=None,
     c = euler_to_dcm(jnp.asarray(roll), jnp.asarray(gamma), jnp.asarray(heading))
     arr = jnp.asarray
     return Trajectory(arr(t), arr(lat), arr(lon), arr(h), arr(v), c, arr(f), earth)
+
+
+def check_path_heights(t, h, what: str) -> None:
+    """A one-line `ValueError` if the integrated heights `h` [m] at times `t` [s] leave
+    [`HEIGHT_RANGE_M`][hrgjax.ins.constants.HEIGHT_RANGE_M], naming `what` and the time they
+    first do (the start is checked where it is given: a climb at 1 km/s from 99 km reached
+    618 km unrefused)."""
+    h = np.asarray(h, float)
+    out = ~((h > HEIGHT_RANGE_M[0]) & (h < HEIGHT_RANGE_M[1]))  # NaN counts as outside
+    if np.any(out):
+        k = int(np.argmax(out))
+        raise ValueError(
+            f"{what} leaves the heights ({HEIGHT_RANGE_M[0]:g}, {HEIGHT_RANGE_M[1]:g}) m at "
+            f"t = {float(t[k]):g} s (h = {h[k]:.6g} m)"
+        )
 
 
 def check_latitudes(t, lat, what: str) -> None:
@@ -190,7 +218,7 @@ def check_position(lat_deg, lon_deg, h, where: str = "") -> None:
     if not -180.0 <= lon <= 360.0:
         raise ValueError(f"{where}lon_deg must be in [-180, 360] °; got {lon}")
     h = finite_number(f"{where}h", h, "m")
-    if not -1e4 < h < 1e5:
+    if not HEIGHT_RANGE_M[0] < h < HEIGHT_RANGE_M[1]:
         raise ValueError(f"{where}h must be a height in metres in (-1e4, 1e5); got {h}")
 
 
