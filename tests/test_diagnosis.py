@@ -147,6 +147,24 @@ def test_bank_refuses_bad_settings():
         cx.fault_bank(PlatformINS(), "accel_y", -1.0)
     with pytest.raises(ValueError, match="no diagnosis channel"):
         cx.fault_bank(PlatformINS(), "accel_z", 1.0)
+    # audit: the model-fit settings — a text level raised a raw TypeError, an array NumPy's
+    # truth-value error, a text window '5' ran as 5; model_fit's window 0 gave NaN p-values,
+    # level 2 failed every step, a 1-D nis broadcast to (K, K)
+    z3 = jnp.zeros((3, 1))
+    for kw, msg in (({"fit_level": "0.01"}, r"^fit_level must be a number in \(0, 1\) or None"),
+                    ({"fit_level": np.array([0.01, 0.02])}, r"^fit_level must be a number in"),
+                    ({"fit_window": "5"}, r"^fit_window must be an integer >= 1 \(steps\)")):  # fmt: skip
+        with pytest.raises(ValueError, match=msg):
+            fb.run_bank(bank, z3, **kw)
+    for kw, msg in (({"window": 0}, r"^window must be an integer >= 1"),
+                    ({"level": 2.0}, r"^level must be a number in \(0, 1\); got 2.0$"),
+                    ({"level": None}, r"^level must be a number in \(0, 1\); got None$")):  # fmt: skip
+        with pytest.raises(ValueError, match=msg):
+            fb.model_fit(np.ones((5, 2)), 2, **kw)
+    with pytest.raises(ValueError, match=r"^nis must have shape \(K, M\)"):
+        fb.model_fit(np.ones(5), 2)
+    with pytest.raises(ValueError, match=r"^m must be an integer >= 1"):
+        fb.model_fit(np.ones((5, 2)), 0)
 
 
 def test_gain_schedule_bank_equals_the_full_independent_bank():
@@ -225,6 +243,13 @@ def test_three_ins_bank_names_the_faulty_ins_within_seconds(accel_bank, accel_ga
         cx.measurements(nav0, 1.0, "accel_z", ins)
     with pytest.raises(ValueError, match="both fault and fault_ins"):
         cx.simulate_complex(ins, dt=1.0, n_steps=10, key=jax.random.key(0), fault_ins=1)
+    # audit: fault_ins 1.5 raised a raw indexing TypeError, True ran as INS index 1, and a
+    # complex of one INS was simulated (it has no pairs to diagnose)
+    for kw, msg in (({"fault_ins": 1.5}, r"^fault_ins must be an INS index in \[0, 3\)"),
+                    ({"fault_ins": True}, r"^fault_ins must be an INS index in \[0, 3\)"),
+                    ({"fault_ins": 1, "n_ins": 1}, r"^n_ins must be an integer >= 2")):  # fmt: skip
+        with pytest.raises(ValueError, match=msg):
+            cx.simulate_complex(ins, dt=1.0, n_steps=10, key=jax.random.key(0), fault=fault, **kw)
 
 
 @pytest.mark.parametrize(
@@ -622,8 +647,24 @@ def test_measurements_need_three_samples_for_every_sensor():
     """Audit: `measurements` on 2 samples refused `accel_y` (eq. 7) but gave `gyro_eta`
     (eq. 8) an empty (0, 2) array; both now need K >= 3 (each spans samples k … k + 2)."""
     from hrgjax.diagnosis import complex as cx
+    from hrgjax.ins.platform import PlatformINS
 
     for sensor in ("accel_y", "gyro_eta"):
         with pytest.raises(ValueError, match=r"^nav must have at least 3 samples \(K >= 3"):
             cx.measurements(np.zeros((3, 2, 3)), 1.0, sensor)
         assert cx.measurements(np.zeros((3, 3, 3)), 1.0, sensor).shape == (1, 2)
+    # audit: every pair of the complex was formed before the chosen ones were kept, n²/2
+    # differences: a transposed (K, n_ins, 3) nav read as K INS ran for minutes. Only the
+    # chosen pairs are formed now; they equal eqs. (7)–(8) by hand, R/g-scaled
+    nav = np.random.default_rng(3).normal(size=(5, 6, 3))
+    ins, dt = PlatformINS(), 0.5
+    r_g = ins.radius / ins.g
+    got = cx.measurements(nav, dt, "accel_x", ins, pairs=(8, 2))  # pairs (2, 4), (0, 3)
+    d2 = lambda i: (nav[i, 2:, 1] - 2 * nav[i, 1:-1, 1] + nav[i, :-2, 1]) / dt**2
+    np.testing.assert_allclose(got, r_g * np.stack([d2(2) - d2(4), d2(0) - d2(3)], -1))
+    d1 = lambda i: np.diff(nav[i, :, 1])[1:] / dt**2
+    got = cx.measurements(nav, dt, "gyro_eta", ins)  # default: pairs (0, j)
+    np.testing.assert_allclose(got, r_g * np.stack([d1(0) - d1(j) for j in range(1, 5)], -1))
+    assert cx.measurements(np.zeros((200, 3, 3)), 1.0, "accel_y").shape == (1, 199)
+    with pytest.raises(ValueError, match=r"^dt must be a finite number > 0 s; got 0.0"):
+        cx.measurements(nav, 0.0, "accel_y")

@@ -28,6 +28,9 @@ from .._checks import (
     check_number,
     check_values,
     concrete_value,
+    describe,
+    is_finite_real,
+    numeric_problem,
     whole_number,
 )
 from .._compiled import fused
@@ -65,8 +68,12 @@ def simulate_complex(
     require_x64("diagnosis.simulate_complex")
     if (fault is None) != (fault_ins is None):
         raise ValueError("give both fault and fault_ins, or neither")
-    if fault_ins is not None and not 0 <= fault_ins < n_ins:
-        raise ValueError(f"fault_ins must be in [0, {n_ins}); got {fault_ins}")
+    n_ins = whole_number("n_ins", n_ins, "an integer >= 2 (the INS of the complex)", minimum=2)
+    if fault_ins is not None:
+        # 1.5 raised a raw indexing TypeError, True was read as INS 1
+        fault_ins = whole_number("fault_ins", fault_ins, f"an INS index in [0, {n_ins})")
+        if not 0 <= fault_ins < n_ins:
+            raise ValueError(f"fault_ins must be an INS index in [0, {n_ins}); got {fault_ins}")
     fault = Fault() if fault is None else fault
     e = jnp.zeros((n_ins, 6))
     if fault_ins is not None:
@@ -98,6 +105,9 @@ def measurements(nav, dt: float, sensor: str, ins: PlatformINS | None = None, pa
     if jnp.shape(nav)[-2] < 3:
         raise ValueError(f"nav must have at least 3 samples (K >= 3: each measurement spans "
                          f"samples k … k + 2); got K = {jnp.shape(nav)[-2]}")  # fmt: skip
+    if not (is_finite_real(dt) and dt > 0):
+        kind = TypeError if numeric_problem(dt) is not None else ValueError
+        raise kind(f"dt must be a finite number > 0 s; got {describe(dt)}")
     if pairs is None:
         pairs = tuple(range(n_ins - 1))
     pairs = tuple(pairs)
@@ -107,12 +117,15 @@ def measurements(nav, dt: float, sensor: str, ins: PlatformINS | None = None, pa
             f"pairs must be distinct indices into {_pairs(n_ins)} (0 … {n_pairs - 1}); "
             f"got {pairs!r}"
         )
+    # only the chosen pairs: all of a (K, n_ins, 3) array read as a complex of K INS (a
+    # transposed nav) were K²/2 differences, minutes for K = 200
+    chosen = [_pairs(n_ins)[i] for i in pairs]
     z = nav[..., NAV.index(param)]
     if kind == "second":
-        d = second_difference_pairs(z, dt)
+        d = second_difference_pairs(z, dt, chosen)
     else:
-        d = first_difference_pairs(z, dt)[..., 1:]
-    return (d[..., list(pairs), :] * (ins.radius / ins.g)).swapaxes(-1, -2)
+        d = first_difference_pairs(z, dt, chosen)[..., 1:]
+    return (d * (ins.radius / ins.g)).swapaxes(-1, -2)
 
 
 def _channel(sensor):

@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaincc, logsumexp
 
+from .._checks import describe, whole_number
 from .._linalg import cho_logdet, cho_solve, cholesky
 from ..kalman import LOG_2PI, Gaussian, predict, update
 from ._bank_inputs import check_bank, check_model, check_scale, check_zs, concrete
@@ -220,6 +221,15 @@ def model_fit(nis, m: int, *, window: int = FIT_WINDOW, level: float = FIT_LEVEL
     it for a batch.
 
     **Returns** a dict: `stat` (K, M), `dof` (K,), `p_value` (K, M), `fits` (K, M) bool."""
+    _check_fit(window, level, ("window", "level"), allow_none=False)
+    m = whole_number("m", m, "an integer >= 1 (the measurement's size)", minimum=1)
+    if jnp.ndim(nis) != 2:
+        raise ValueError(f"nis must have shape (K, M) (steps, hypotheses); got {jnp.shape(nis)}")
+    return _model_fit(nis, m, int(window), level)
+
+
+def _model_fit(nis, m, window, level):
+    """`model_fit` without its argument checks (`level` 1.0: every step fits)."""
     nis = jnp.asarray(nis, float)
     c = jnp.concatenate([jnp.zeros_like(nis[:1]), jnp.cumsum(nis, axis=0)])  # c[j]: j steps
     steps = jnp.arange(nis.shape[0])
@@ -231,11 +241,17 @@ def model_fit(nis, m: int, *, window: int = FIT_WINDOW, level: float = FIT_LEVEL
     return {"stat": stat, "dof": dof, "p_value": p_value, "fits": p_value > level}
 
 
-def _check_fit(window, level):
-    if isinstance(window, bool) or not float(window).is_integer() or int(window) < 1:
-        raise ValueError(f"fit_window must be an integer >= 1; got {window!r}")
-    if level is not None and not 0.0 < level < 1.0:
-        raise ValueError(f"fit_level must be in (0, 1) or None; got {level}")
+def _check_fit(window, level, names=("fit_window", "fit_level"), allow_none=True):
+    """`window` an integer >= 1 and `level` a number in (0, 1) (or None where allowed), each
+    refused in one line naming it (a text '5' passed as 5, an array raised NumPy's truth-value
+    error, a window of 0 gave NaN p-values, a level of 2 failed every step)."""
+    whole_number(names[0], window, "an integer >= 1 (steps)", minimum=1)
+    if level is None and allow_none:
+        return
+    known = None if isinstance(level, str | bytes | bool) else _known_number(level)
+    if known is None or known.shape != () or not 0.0 < float(known) < 1.0:
+        form = "a number in (0, 1)" + (" or None" if allow_none else "")
+        raise ValueError(f"{names[1]} must be {form}; got {describe(level)}")
 
 
 def _decide_fit(probs, nis, m, threshold, window, level, want_fit):
@@ -248,7 +264,7 @@ def _decide_fit(probs, nis, m, threshold, window, level, want_fit):
         dec = jnp.where(p_best > threshold, best[:, 0], -1)
         if level is None and not want_fit:
             return dec, None
-        fit = model_fit(nis, m, window=window, level=1.0 if level is None else level)
+        fit = _model_fit(nis, m, window, 1.0 if level is None else level)
         if level is None:
             fit["fits"] = jnp.ones_like(fit["fits"])
         fits = jnp.take_along_axis(fit["fits"], best, axis=-1)[:, 0]

@@ -43,18 +43,23 @@ def _check(z, dt, k_min):
     return z
 
 
-def second_difference_pairs(z, dt: float):
+def second_difference_pairs(z, dt: float, which=None):
     """Eq. (7) for every pair: `z` (..., n_ins, K) → (..., n_pairs, K − 2), pairs in the order
-    of [`pairs`][hrgjax.diagnosis.measurements.pairs]; step k of the output is step k + 2 of
-    the input."""
+    of [`pairs`][hrgjax.diagnosis.measurements.pairs] (`which`: only these (i, j), in their
+    order); step k of the output is step k + 2 of the input."""
     z = _check(z, dt, 3)
-    d2 = (z[..., 2:] - 2.0 * z[..., 1:-1] + z[..., :-2]) / dt**2
-    return jnp.stack([d2[..., i, :] - d2[..., j, :] for i, j in pairs(z.shape[-2])], axis=-2)
+    return _differences((z[..., 2:] - 2.0 * z[..., 1:-1] + z[..., :-2]) / dt**2, which)
 
 
-def first_difference_pairs(z, dt: float):
-    """Eq. (8) for every pair: `z` (..., n_ins, K) → (..., n_pairs, K − 1); step k of the
-    output is step k + 1 of the input."""
+def first_difference_pairs(z, dt: float, which=None):
+    """Eq. (8) for every pair (`which`: only these (i, j)): `z` (..., n_ins, K) →
+    (..., n_pairs, K − 1); step k of the output is step k + 1 of the input."""
     z = _check(z, dt, 2)
-    d1 = (z[..., 1:] - z[..., :-1]) / dt**2
-    return jnp.stack([d1[..., i, :] - d1[..., j, :] for i, j in pairs(z.shape[-2])], axis=-2)
+    return _differences((z[..., 1:] - z[..., :-1]) / dt**2, which)
+
+
+def _differences(d, which):
+    """d_i − d_j of the INS axis (second to last) for the pairs `which` (default every pair):
+    only those are formed (a (K, n_ins, 3) nav read as K INS had K²/2 pairs)."""
+    which = pairs(d.shape[-2]) if which is None else which
+    return jnp.stack([d[..., i, :] - d[..., j, :] for i, j in which], axis=-2)
