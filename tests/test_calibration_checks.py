@@ -174,8 +174,9 @@ def test_precession_sweeps_with_table_readback_jitter_are_at_rest():
     np.testing.assert_array_equal(np.asarray(jitter.drift_coef), np.asarray(still.drift_coef))
     cols["table_rate_dps"] = np.full(len(data), 0.01)
     with pytest.raises(ValueError, match=r"^run 0: the table turns \(\|table_rate_dps\| up to "
-                       r"0\.01 °/s\); virtual-precession sweeps are taken with the case at rest "
-                       r"\(\|table_rate_dps\| ≤ STILL_RATE_DPS = 0\.001 °/s\)$"):  # fmt: skip
+                       r"0\.01 °/s, varying by 0\); virtual-precession sweeps are taken with the "
+                       r"case at rest \(\|table_rate_dps\| ≤ STILL_RATE_DPS = 0\.001 °/s, or "
+                       r"constant and no larger than Earth's 0\.004178 °/s\)$"):  # fmt: skip
         comp.fit(hg.MeasuredData(cols))
 
 
