@@ -14,6 +14,7 @@ from ._checks import (
     host_value,
     whole_number,
 )
+from ._riccati import reached_states
 
 
 def check_measurements(zs, mask):
@@ -318,20 +319,19 @@ def check_detectable(phi, qd, h, p0):
     $|\mu| > 1$, the first prior): its variance grows without bound, and the doubling's
     round-off then stalls at a wrong P or a negative variance (two random walks driving one
     measured state only through their sum gave P[1,1] = 1677, or −6.9e13, "converged").
-    Only on the states the noise or `p0` reach (`_riccati.reached_states`' closure), balanced
-    by their open-loop standard deviations as `steady_state` balances. An unseen constant
+    Only on the states the noise or `p0` reach (`_riccati.reached_states`, shared with
+    `steady_state`), balanced by their open-loop standard deviations from the first prior
+    $\Phi p_0\Phi^\top + Q_d$ — not `_riccati.balancing`'s from $Q_d$ alone (powers of 2,
+    1 where the noise leaves a state at 0): the rank test needs every reached state's scale
+    > 0, a constant only `p0` makes uncertain included. An unseen constant
     that only `p0` makes uncertain keeps its variance: a steady state, passed. Traced values
     pass (the doubling's own convergence test stays)."""
     values = [host_value(a) for a in (phi, qd, h, p0)]
     if any(v is None for v in values):
         return
     phi, qd, h, p0 = (np.asarray(v, float) for v in values)
-    n = phi.shape[0]
     x0 = phi @ p0 @ phi.T + qd
-    reach = np.diagonal(x0) > 0.0
-    for _ in range(n - 1):
-        reach = reach | ((phi != 0.0) & reach[None, :]).any(axis=1)
-    idx = np.flatnonzero(reach)
+    idx = np.flatnonzero(reached_states(phi, x0))  # NumPy in, NumPy out: no program
     if idx.size == 0:
         return
     phi, qd, x0, h = phi[np.ix_(idx, idx)], qd[np.ix_(idx, idx)], x0[np.ix_(idx, idx)], h[:, idx]

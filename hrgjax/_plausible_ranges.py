@@ -59,6 +59,11 @@ DEFAULTS: dict[str, tuple[float, float, str]] = {
     "imu_accel_bias_instability": (0.0, 0.1, "m/s²"),
     "imu_gyro_rate_random_walk": (0.0, 1e-4, "rad/s/√s"),
     "imu_accel_random_walk": (0.0, 0.01, "m/s²/√s"),
+    # `hrgjax.ins.gnss.Gnss.lever_arm`, per body axis: the antenna sits on the vehicle that
+    # carries the IMU, and the largest (an A380: 73 m long, 80 m span; a ship's mast and
+    # bridge) keep it within 100 m; a lever arm of 1.5 m typed in cm or mm (150, 1500) is
+    # refused, and 1e6 m (which ran: the fixes sat 1000 km from the vehicle) is.
+    "gnss_lever_arm_m": (-100.0, 100.0, "m, body FRD"),
 }
 """The default ranges; [`RANGES`][hrgjax.plausible.RANGES] is what is in force."""
 

@@ -80,3 +80,39 @@ def stamps_per_second(name: str, t, unit: str | None, way_out: Callable[[str], s
                          f"{way_out(guess)} (or {way_out('s')} to read them as "
                          "seconds)")  # fmt: skip
     return 1.0
+
+
+def round_thousandths(t, dt) -> bool:
+    """Whether every step `dt` of the stamps `t` is a whole number of thousandths (to the
+    stamps' float64 rounding): what a logger stamping in ms writes — whole ms, or ms to the µs
+    (a 400-Hz log's 2.5, an 800-Hz log's 1.25, a 600-Hz log's 1.667). A clock stamping in
+    seconds with its own jitter (10.000 37…) does not."""
+    thousandths = np.asarray(dt, dtype=float) * 1e3
+    rounding = 4e3 * float(np.spacing(np.max(np.abs(t)))) + 1e-9
+    return bool(np.all(np.abs(thousandths - np.round(thousandths)) <= rounding))
+
+
+def seconds_look_like(t) -> str | None:
+    """The unit (a key of `TIME_UNITS`) that increasing stamps `t` (two or more), read as
+    seconds, look like they were written in, or None — for a note, not a refusal (a slow log
+    stamped in seconds looks the same):
+
+    - every step ≥ 1 and a round number of thousandths, the median above 1 (10, 2.5, 1.25: a
+      100-, 400- or 800-Hz log in ms; a 0.1-Hz HRG drift log in whole seconds too): "ms"
+      up to a median of 1000, "us" up to 10⁶, else "ns";
+    - every stamp a whole number, every step ≥ 1 and the median 1 (0, 1, 2, …, a dropped
+      sample's step of 2 kept): a 1-kHz log in whole milliseconds (a 1-Hz log in whole
+      seconds too), "ms".
+
+    Stamps with a median step below 1 or a clock's sub-ms jitter in their steps look like
+    seconds (None)."""
+    t = np.asarray(t, dtype=float)
+    dt = np.diff(t)
+    if dt.size == 0 or not np.all(dt >= 1.0):
+        return None
+    step = float(np.median(dt))
+    if step > 1.0 and round_thousandths(t, dt):
+        return "ms" if step <= 1e3 else "us" if step <= 1e6 else "ns"
+    if step == 1.0 and np.all(t == np.round(t)):
+        return "ms"
+    return None

@@ -53,6 +53,10 @@ a consumer IMU): an HRG's ARW is 10⁻⁵–10⁻² °/√h (≤ 2.9·10⁻⁶ r
 inside too, while the same HRG figures typed as SI lie beyond (`hrgjax/_plausible_ranges.py`);
 an angle noise of 0.1 rad (5.7°) per sample is far beyond any readout (1″ typed as rad is 1)."""
 
+GNSS_HINTS = {"gnss_lever_arm_m": "cm → ÷100; mm → ÷1000"}
+"""The units a [`Gnss`][hrgjax.ins.gnss.Gnss] lever arm beyond a vehicle's size (100 m per
+axis) is most often typed in, with the factor from each to metres."""
+
 GYRO_HINTS = {
     "gyro_rate_bias": IMU_HINTS["imu_gyro_bias"],
     "gyro_warmup": IMU_HINTS["imu_gyro_bias"],

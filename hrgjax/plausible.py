@@ -26,6 +26,7 @@ import numpy as np
 from ._plausible_ranges import DEFAULTS as _DEFAULTS
 from ._plausible_ranges import EXCLUSIVE as EXCLUSIVE
 from ._unit_hints import EARTH_HINTS as EARTH_HINTS
+from ._unit_hints import GNSS_HINTS as GNSS_HINTS
 from ._unit_hints import GYRO_HINTS as GYRO_HINTS
 from ._unit_hints import IMU_HINTS as IMU_HINTS
 from ._unit_hints import NOISE_HINTS as NOISE_HINTS
@@ -92,10 +93,11 @@ rotation rate (0 … 10⁻⁴ rad/s) in `hrgjax.ins.constants.Earth` and
 an [`hrgjax.Noise`][hrgjax.Noise]'s standard deviations (`noise_*`, `NOISE_HINTS`: sized for
 a gyro, an HRG's to a MEMS gyro's: an ARW up to 10⁻³ rad/√s, 3.4 °/√h) and a
 [`hrgjax.Gyro`][hrgjax.Gyro]'s rate bias (±0.1 rad/s, 5.7 °/s), g-sensitivity and
-[`DriftTerms`][hrgjax.DriftTerms] (`gyro_*`, `GYRO_HINTS`), in SI: each bound's reason is a
-comment in `hrgjax/_plausible_ranges.py`."""
+[`DriftTerms`][hrgjax.DriftTerms] (`gyro_*`, `GYRO_HINTS`), in SI; and a GNSS antenna's
+lever arm (±100 m per body axis, `gnss_lever_arm_m`: a vehicle's size; cm or mm beyond):
+each bound's reason is a comment in `hrgjax/_plausible_ranges.py`."""
 
-_HINTS = IMU_HINTS | EARTH_HINTS | NOISE_HINTS | GYRO_HINTS
+_HINTS = IMU_HINTS | EARTH_HINTS | NOISE_HINTS | GYRO_HINTS | GNSS_HINTS
 
 KELVIN_HINT_C = 200.0
 """A temperature column whose every value is ≥ this [°C] looks like kelvin (250–400 K is

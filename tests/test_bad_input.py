@@ -1161,13 +1161,23 @@ def test_json_fields_found_by_fuzzing_are_named(documents, tmp_path, kind, edit,
     assert str(err.value).startswith(str(p)) and "\n" not in str(err.value)
 
 
-def test_gnss_rate_that_is_not_a_number_is_named():
-    """`Gnss(rate_hz=None)` raised `TypeError: must be real number, not NoneType` (no field)."""
+def test_gnss_rate_that_is_not_a_number_and_a_lever_arm_beyond_a_vehicle_are_named():
+    """`Gnss(rate_hz=None)` raised `TypeError: must be real number, not NoneType` (no field);
+    `Gnss(lever_arm=1e6)` passed (fixes 1000 km from the vehicle): a lever arm beyond 100 m
+    on an axis, or 1.5 m typed in cm, is refused naming the axis, the units and `relaxed`."""
     from hrgjax.ins.gnss import Gnss
 
     for bad in (None, "1", True, 0.0, float("nan")):
         with pytest.raises(ValueError, match=r"^Gnss.rate_hz must be a number > 0 \[Hz\]; got "):
             Gnss(rate_hz=bad)
+    tail = r" is outside the plausible range -100 … 100 m, body FRD — cm → ÷100; mm → ÷1000 "
+    for arm, where in ((1e6, "1e\\+06 at index 0"), ((1.5, -0.3, -150.0), "-150 at index 2")):
+        with pytest.raises(ValueError, match=rf"^Gnss.lever_arm = {where}{tail}\(hrgjax.plausible"
+                           r"\.relaxed\(gnss_lever_arm_m=…\) widens it\)$"):  # fmt: skip
+            Gnss(lever_arm=arm)
+    np.testing.assert_array_equal(Gnss(lever_arm=(99.0, -3.0, 0.0)).lever_arm, [99.0, -3.0, 0.0])
+    with hg.plausible.relaxed(gnss_lever_arm_m=(-1e3, 1e3)):  # a lever arm as given
+        np.testing.assert_array_equal(Gnss(lever_arm=(0.0, 0.0, -150.0)).lever_arm, [0, 0, -150])
 
 
 def test_mechanize_every_is_shown_as_given():

@@ -78,9 +78,9 @@ def test_allan_notes_stamps_in_ms_whose_step_is_not_whole(tmp_path, capsys):
     """Audit: a 400-Hz log stamped every 2.5 ms read as "20000 samples at 0.4 Hz" with no note
     (the note fired for whole-number steps only). A step above 1 that is a round number of ms
     now gets it, on stderr (as align's and imu-calibrate's notes); a step with a clock's
-    sub-ms jitter does not."""
+    sub-ms jitter does not. A 1-kHz log in whole ms (steps of 1) got none: it does."""
     y = np.random.default_rng(0).normal(size=64)
-    for step, note in ((2.5, True), (1.25, True), (10.0, True), (2.5004321, False)):
+    for step, note in ((2.5, True), (1.25, True), (10.0, True), (2.5004321, False), (1.0, True)):
         path = tmp_path / "ms.csv"
         t = step * np.arange(64)
         path.write_text(
@@ -92,6 +92,16 @@ def test_allan_notes_stamps_in_ms_whose_step_is_not_whole(tmp_path, capsys):
         expected = (f"time column 'time' steps by {step:g}: read as seconds, {1 / step:.4g} Hz; "
                     "stamps in ms? give --time-unit ms")  # fmt: skip
         assert (expected in said.err) == note, said.err
+    # what the note asks of the stamps: a 1-kHz log in whole ms (0, 1, 2, …; a dropped
+    # sample's step of 2 kept) looks like ms too; stamps off the whole numbers, steps below 1
+    # (seconds at 1 kHz) or a clock's jitter do not
+    from hrgjax._time_units import seconds_look_like
+
+    whole = np.arange(64.0)
+    for stamps, unit in ((whole, "ms"), (np.delete(whole, 30) + 1e6, "ms"), (whole + 0.5, None),
+                         (whole * 1e-3, None), (whole * 2.5, "ms"), (whole * 2.5004321, None),
+                         (whole * 2e4, "us"), (whole * 2e7, "ns")):  # fmt: skip
+        assert seconds_look_like(stamps) == unit, (stamps[:3], unit)
 
 
 @pytest.mark.parametrize("option, match", [

@@ -67,6 +67,23 @@ def test_a_latitude_in_degrees_is_refused_by_the_earth_model():
     for beyond in (np.pi / 2 + 1.1e-6, 1.6, -90.0):
         with pytest.raises(ValueError, match=r"^gravity: lat = \S+ rad is beyond ±π/2"):
             C.gravity(beyond)
+    # a height inside the Earth (a radius given as a height: γ read 66.8 m/s²) or in space is
+    # refused by every function and method taking `h`, naming it; inside the range the
+    # free-air series holds: γ(45°, 1 km) = γ₀(1 − 2h/a(1 + f + m − f) + 3h²/a²)
+    rng = r"h must be a height in metres above the ellipsoid in \(-10000, 100000\); got "
+    for name, call in (("gravity", lambda h: C.gravity(0.5, h)),
+                       ("gravity_ned", lambda h: C.gravity_ned(lat=0.5, h=h)),
+                       ("transport_rate_ned", lambda h: C.transport_rate_ned(0.5, h, z)),
+                       ("Earth.gravity", lambda h: C.SPHERE.gravity(0.5, h)),
+                       ("Earth.position_rate",
+                        lambda h: C.WGS84.position_rate(0.5, h, z))):  # fmt: skip
+        with pytest.raises(ValueError, match=f"^{name}: {rng}-7e\\+06$"):
+            call(-7e6)
+        with pytest.raises(ValueError, match=f"^{name}: {rng}200000 at index \\(1,\\)$"):
+            call(np.array([0.0, 2e5]))
+    g0, k = 9.806197769, 1 + C.FLATTENING + C.M_GRAVITY - C.FLATTENING
+    want = g0 * (1 - 2e3 / C.A * k + 3e6 / C.A**2)
+    np.testing.assert_allclose(C.gravity(np.radians(45.0), 1e3), want, rtol=1e-10)
     w = C.earth_rate_ned(np.radians(45.0))
     np.testing.assert_allclose(w, C.OMEGA_IE * np.sqrt(0.5) * np.array([1, 0, -1]), rtol=1e-14)
     f = jax.jit(lambda la: C.gravity(la) + C.WGS84.earth_rate(la)[0])

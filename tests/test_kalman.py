@@ -622,6 +622,15 @@ def test_steady_state_keeps_exactly_known_states_at_zero():
     assert float(gain[2, 0]) == 0.0
     np.testing.assert_allclose(pp[:2, :2], want, rtol=1e-12)
     np.testing.assert_allclose(gain[:2], want_k, rtol=1e-12)
+    # the closure is one function for the compiled program and `check_detectable`'s host
+    # check: a chain 0 → 1 → … → 4 reached from state 0 in 4 steps, state 5 apart
+    from hrgjax._riccati import reached_states
+
+    chain, x0 = np.eye(6, k=-1), np.diag([1.0, 0, 0, 0, 0, 0])
+    chain[5, 4] = 0.0
+    host = reached_states(chain, x0)
+    assert isinstance(host, np.ndarray) and host.tolist() == [True] * 5 + [False]
+    assert np.asarray(jax.jit(reached_states)(chain, x0)).tolist() == host.tolist()
 
 
 def test_steady_state_derivatives_are_the_implicit_ones_at_known_states_and_any_p0():

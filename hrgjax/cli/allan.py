@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from .._time_units import TIME_UNITS, named_time_unit, stamps_per_second
+from .._time_units import TIME_UNITS, named_time_unit, seconds_look_like, stamps_per_second
 from .._timebase import is_uniform, rate_from_stamps, regular_step, stamp_resolution
 from ._common import (
     PLOT_EXTENSIONS,
@@ -132,35 +132,23 @@ def per_second(path: str, name: str, t, unit: str | None, rate_hz=None) -> float
     of `--time-unit` `unit`, or seconds (1). A name ending in another unit (`t_ms`) than the one
     given — or than seconds, when none is — is refused; a name in seconds (`elapsed_secs`) is
     seconds. Without either, stamps that read as seconds would be 3000 years and more (≥ 1e11:
-    an epoch in ms, µs or ns) are refused; stamps whose every step is above 1 and a round
-    number of ms (`_round_ms`: 10, 2.5, 1.25) are read as seconds (an HRG drift log at 0.1 Hz
-    stamped in whole seconds) with one note line on stderr naming `--time-unit ms`, unless
-    `rate_hz` is given (it checks the rate). Each refusal is one line naming the way out
+    an epoch in ms, µs or ns) are refused; stamps that look like ms (`seconds_look_like`:
+    every step above 1 and a round number of ms — 10, 2.5, 1.25 — or whole-number stamps
+    stepping by 1, a 1-kHz log in whole ms) are read as seconds (an HRG drift log at 0.1 or
+    1 Hz stamped in whole seconds) with one note line on stderr naming `--time-unit ms`,
+    unless `rate_hz` is given (it checks the rate). Each refusal is one line naming the way out
     (`--time-unit`)."""
     with usage_errors(prefix=path):
         scale = stamps_per_second(name, t, unit, lambda u: f"--time-unit {u}")
     if unit is not None or named_time_unit(name) is not None:
         return scale
-    dt = np.diff(t)
-    step = float(np.median(dt))
-    if rate_hz is None and step > 1.0 and np.all(dt >= 1.0) and _round_ms(t, dt):
-        guess = "ms" if step <= 1e3 else "us" if step <= 1e6 else "ns"
+    guess = None if rate_hz is not None else seconds_look_like(t)
+    if guess is not None:
+        step = float(np.median(np.diff(t)))
         print(f"hrgjax allan: {path}: time column {name!r} steps by {step:g}: read as "
               f"seconds, {1.0 / step:.4g} Hz; stamps in {guess}? give --time-unit {guess}",
               file=sys.stderr, flush=True)  # fmt: skip
     return 1.0
-
-
-def _round_ms(t, dt) -> bool:
-    """Whether every step `dt` of the stamps `t` is a whole number of thousandths (to the
-    stamps' float64 rounding): what a logger stamping in ms writes — whole ms, or ms to the µs
-    (a 400-Hz log's 2.5, an 800-Hz log's 1.25, a 600-Hz log's 1.667). A clock stamping in
-    seconds with its own jitter (10.000 37…) does not; one stamping a slow log in whole or
-    round seconds (a 0.1-Hz HRG drift log's 10, a 0.4-Hz log's 2.5) does: `per_second` reads
-    those as seconds, with its note."""
-    thousandths = np.asarray(dt, dtype=float) * 1e3
-    rounding = 4e3 * float(np.spacing(np.max(np.abs(t)))) + 1e-9
-    return bool(np.all(np.abs(thousandths - np.round(thousandths)) <= rounding))
 
 
 def cmd_allan(args) -> int:
@@ -310,7 +298,8 @@ def _allan_parser(sub):
     p.add_argument("--time-unit", default=None, choices=tuple(TIME_UNITS),
                    help="the time column's unit (default s; a name such as t_ms or an epoch "
                    "in ms, µs or ns is refused without it; steps above 1 that are a round "
-                   "number of ms, 10 or 2.5, read as seconds with a note)")  # fmt: skip
+                   "number of ms, 10 or 2.5, or whole stamps stepping by 1, read as seconds "
+                   "with a note)")  # fmt: skip
     p.add_argument("--kind", default="oadev", choices=KINDS, help="the deviation (oadev)")
     p.add_argument("--taus", default="octave", type=_taus,
                    help="octave, decade, all, or τ values in s: 1,10,100")  # fmt: skip

@@ -262,9 +262,10 @@ def cmd_imu_calibrate(args) -> int:
             if args.time_unit is None and f"column {args.time_column!r} row" in msg:
                 msg += " (time stamps in ns? give --time-unit ns)"
             raise ValueError(msg) from None
-    # stamps in ms read as seconds: a 100-Hz log at 0.1 Hz, its turns 1000× too large
+    # stamps in ms read as seconds: a 100-Hz log at 0.1 Hz, a 1-kHz log in whole ms at 1 Hz
+    # (no IMU calibration log is that slow), its turns 1000× too large
     slow = (f" (the log reads as {data.rate_hz:.3g} Hz: time stamps in ms? give --time-unit ms)"
-            if args.time_column and args.time_unit is None and data.rate_hz < 1.0 else "")  # fmt: skip
+            if args.time_column and args.time_unit is None and data.rate_hz <= 1.0 else "")  # fmt: skip
     with usage_errors(errors=(FileNotFoundError, ValueError)):
         try:
             if args.sections is None:

@@ -2,13 +2,16 @@ r"""WGS-84 constants, normal gravity, radii of curvature and Earth rate (PHYSICS
 
 Navigation frame: NED (north, east, down). Latitude `lat` and longitude in radians, height
 `h` in metres above the ellipsoid. Every function is plain `jax.numpy` (jit / vmap / grad);
-a concrete `lat` beyond ±π/2 (degrees given for radians) is refused in one line, a traced
-one is not checked (no cost inside `jit`).
+a concrete `lat` beyond ±π/2 (degrees given for radians) or a concrete height `h` outside
+`HEIGHT_RANGE_M` is refused in one line, a traced one is not checked (no cost inside `jit`:
+the mechanization, the filter and the trajectories check their heights where they are
+concrete).
 """
 
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 
 import equinox as eqx
@@ -55,7 +58,8 @@ HEIGHT_RANGE_M = (-1e4, 1e5)
 hand) and the initial state of the mechanization and the filter take: a height below −10 km
 is below the deepest ocean floor, and above 100 km normal gravity's free-air series and an
 aircraft's navigation equations no longer hold (−7e6 m, a radius given as a height, ran and
-returned numbers before; gravity there reads 66.8 m/s²)."""
+returned numbers before; gravity there reads 66.8 m/s²). The functions and `Earth` methods
+below that take `h` refuse a concrete one outside it too."""
 
 
 def check_heights(name: str, h) -> None:
@@ -122,16 +126,30 @@ def check_latitude_radians(name: str, lat) -> None:
         )
 
 
+def _check_height(name: str, h) -> None:
+    """`check_heights` with a fast path for an eager Python or NumPy scalar (no array)."""
+    if isinstance(h, float | int | np.integer | np.floating):
+        if HEIGHT_RANGE_M[0] < h < HEIGHT_RANGE_M[1]:
+            return
+    check_heights(name, h)
+
+
 def _lat_checked(fn, at: int = 0):
-    """`fn` (`lat` its positional argument `at`, or `lat=`) with a concrete `lat` checked by
-    `check_latitude_radians` before the call; inside a trace the check is one `isinstance`
-    at trace time, nothing in the compiled program."""
+    """`fn` (`lat` its positional argument `at`, or `lat=`; a height `h`, if it takes one,
+    its argument `at + 1` or `h=`) with a concrete `lat` checked by `check_latitude_radians`
+    and a concrete `h` by `check_heights` before the call; inside a trace each check is one
+    `isinstance` at trace time, nothing in the compiled program."""
+    takes_h = "h" in inspect.signature(fn).parameters
 
     @functools.wraps(fn)
     def checked(*args, **kwargs):
         lat = kwargs.get("lat", args[at] if len(args) > at else None)
         if lat is not None and not isinstance(lat, jax.core.Tracer):
             check_latitude_radians(f"{fn.__qualname__}: lat", lat)
+        if takes_h:
+            h = kwargs.get("h", args[at + 1] if len(args) > at + 1 else None)
+            if h is not None and not isinstance(h, jax.core.Tracer):
+                _check_height(f"{fn.__qualname__}: h", h)
         return fn(*args, **kwargs)
 
     return checked
@@ -149,7 +167,9 @@ def gravity(lat, h=0.0):
     $\gamma = \gamma_0\,[1 - \tfrac{2}{a}(1 + f + m - 2f\sin^2\varphi)h + \tfrac{3}{a^2}h^2]$
     (NIMA TR8350.2 eq. 4-3). `gravity(np.radians(45.0))` = γ(45°, 0) = 9.806197769 m/s².
 
-    **Raises:** `ValueError` for a concrete `lat` beyond ±π/2 (degrees given for radians)."""
+    **Raises:** `ValueError` for a concrete `lat` beyond ±π/2 (degrees given for radians) or
+    a concrete `h` outside [`HEIGHT_RANGE_M`][hrgjax.ins.constants.HEIGHT_RANGE_M]
+    (`gravity(0.5, -7e6)`, a radius given as a height, read 66.8 m/s²)."""
     s2 = jnp.sin(lat) ** 2
     g0 = GAMMA_E * (1.0 + K_SOMIGLIANA * s2) / jnp.sqrt(1.0 - E2 * s2)
     corr = 1.0 - 2.0 / A * (1.0 + FLATTENING + M_GRAVITY - 2.0 * FLATTENING * s2) * h

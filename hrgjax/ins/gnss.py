@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import plausible
 from .._checks import check_flag, check_key, finite_number, is_concrete, vec3, whole_number
 from .._compiled import fused
 from .constants import Earth
@@ -81,7 +82,9 @@ class Gnss(eqx.Module):
     `velocity_sigma` (3,) [m/s, NED], or `use_velocity=False` for position fixes only;
     `lever_arm` (3,) [m, body FRD]; `outages`: ((start, end), …) [s] without fixes, each
     with 0 <= start < end (one window is `((start, end),)`). A concrete σ beyond `SIGMA_MAX`
-    (100 m, 10 m/s: in cm or mm) is refused."""
+    (100 m, 10 m/s: in cm or mm) is refused, and a concrete lever arm beyond ±100 m on an
+    axis (`hrgjax.plausible.RANGES["gnss_lever_arm_m"]`: a vehicle's size;
+    `hrgjax.plausible.relaxed(gnss_lever_arm_m=…)` widens it)."""
 
     rate_hz: float = eqx.field(static=True, default=1.0)
     position_sigma: jax.Array = eqx.field(
@@ -108,6 +111,8 @@ class Gnss(eqx.Module):
         v = self.lever_arm
         if is_concrete(v) and not np.all(np.isfinite(np.asarray(v))):
             raise ValueError(f"Gnss.lever_arm must be finite [m, body FRD]; got {v}")
+        if is_concrete(v):  # a vehicle's size: cm or mm typed as m (or 1e6) beyond
+            plausible.check("Gnss.lever_arm", v, "gnss_lever_arm_m")
         check_flag("Gnss.use_velocity", self.use_velocity)  # "no" must not switch it on
 
     def without_outages(self) -> Gnss:
