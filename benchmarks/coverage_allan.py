@@ -37,8 +37,10 @@ re-computed here from its value and σ); "now" what `fit_noise` reports (the est
 skewed law inverted). Run against an older hrgjax (PYTHONPATH) the "now" column is its own.
 
 Usage: `.venv/bin/python benchmarks/coverage_allan.py [--n 200] [--seed 0]
-[--noise-rule hrgjax|stable32] [--fit-noise]` (200 records per balance: about 15 s on 2
-cores; `--fit-noise`: 4–7 min on 2 busy cores, `--n 400` 13 min).
+[--noise-rule hrgjax|stable32] [--fit-noise] [--gaps 0.02]` (200 records per balance:
+about 15 s on 2 cores; `--fit-noise`: 4–7 min on 2 busy cores, `--n 400` 13 min; `--gaps`:
+white angle, white rate and random-walk records with that share of rates missing, the noise
+type read before and after the gap-free R(n) arbitration, ≈ 1 min: `main_gaps`).
 """
 
 from __future__ import annotations
@@ -267,6 +269,64 @@ def main_fit_noise(args):
     print(f"\n{time.perf_counter() - t0:.0f} s")
 
 
+def main_gaps(args):
+    """`--gaps SHARE`: rate records of 4 096 s at 1 Hz with each sample missing (NaN) with
+    probability SHARE, three pure noises of known Allan variance (white angle noise σ_x = 1:
+    3/τ²; white rate noise σ_y = 1: 1/τ; a rate random walk K = 0.01: K²τ/3 + K²/(6m), the
+    discrete walk's), `deviation(..., "oadev", mixture=False)` on the octaves. "before": the
+    noise type read on the bridged record alone (hrgjax until 2026-12-03,
+    `hrgjax.allan.result.gapped_alpha` set to pass the bridged α through); "after": as
+    reported, the bridged α arbitrated by R(n) of the gap-free windows
+    (`hrgjax.allan.noise_ident.gapped_alpha`). Per τ: the noise types read and the ±1σ
+    share. Two more for the type read alone (no ±1σ for flicker angle noise): white angle
+    (σ_x = √(16/3)) + white rate noise (σ_y = 1), crossing at m = 16, and Kasdin's flicker
+    angle noise."""
+    import hrgjax.allan.result as result
+
+    length, arbitrated = 4096, result.gapped_alpha
+    from noise_id_table import kasdin
+
+    truth = {"white angle": lambda m: 3.0 / m**2, "white rate": lambda m: 1.0 / m,
+             "rate random walk": lambda m: 1e-4 * (m / 3.0 + 1.0 / (6.0 * m)),
+             "white angle + white rate (crossing at m = 16)": lambda m: 16.0 / m**2 + 1.0 / m,
+             "flicker angle": None}  # fmt: skip
+    for name, sigma2 in truth.items():
+        rows = {}
+        for label, rule in (("before", lambda a, m, rn: a), ("after", arbitrated)):
+            result.gapped_alpha = rule
+            reads, held = {}, {}
+            for seed in range(args.n):
+                rng = np.random.default_rng(args.seed + seed)
+                if name == "white angle":
+                    y = np.diff(rng.normal(size=length + 1))
+                elif name == "white rate":
+                    y = rng.normal(size=length)
+                elif name == "rate random walk":
+                    y = 0.01 * np.cumsum(rng.normal(size=length))
+                elif name == "flicker angle":  # Kasdin's, to f_h = 1/(2τ₀): type read only
+                    y = np.diff(kasdin(1, length + 1, rng))
+                else:
+                    y = rng.normal(size=length) + np.diff(math.sqrt(16 / 3) * rng.normal(
+                        size=length + 1))  # fmt: skip
+                y[rng.random(length) < args.gaps] = np.nan
+                r = hg.allan.deviation(y, 1.0, "oadev", "octave", mixture=False)
+                for m, a, lo, hi in zip(r.m, r.alpha, r.dev_low, r.dev_high, strict=True):
+                    reads.setdefault(int(m), []).append(int(a))
+                    held.setdefault(int(m), []).append(
+                        np.nan if sigma2 is None else lo**2 <= sigma2(int(m)) <= hi**2
+                    )
+            rows[label] = reads, held
+        result.gapped_alpha = arbitrated
+        print(f"\n{name} noise, {args.n} records of {length} rates, {args.gaps:.1%} missing")
+        print(f"{'m':>5} {'records':>7} {'±1σ before':>11} {'±1σ after':>10}  α before → after")
+        for m in sorted(rows["after"][0]):
+            count = {k: np.unique(rows[k][0][m], return_counts=True) for k in rows}
+            text = {k: ", ".join(f"{v:+d}: {c}" for v, c in zip(*count[k], strict=True))
+                    for k in rows}  # fmt: skip
+            print(f"{m:5d} {len(rows['after'][0][m]):7d} {100 * np.mean(rows['before'][1][m]):10.0f}% "
+                  f"{100 * np.mean(rows['after'][1][m]):9.0f}%  {text['before']} → {text['after']}")  # fmt: skip
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=200, help="records per balance (200)")
@@ -275,8 +335,15 @@ def main(argv=None):
                     help="deviation's noise_rule for the 'after' column (hrgjax)")  # fmt: skip
     ap.add_argument("--fit-noise", action="store_true",
                     help="the IEEE 952 line fit's σ and intervals instead (fit_noise)")  # fmt: skip
+    ap.add_argument("--gaps", type=float, default=0.0,
+                    help="share of missing rates: the gapped-record noise type study")  # fmt: skip
     args = ap.parse_args(argv)
     from _common import machine, report
+
+    if args.gaps:
+        print(f"coverage_allan.py --gaps {args.gaps} on {machine()}")
+        main_gaps(args)
+        return
 
     if args.fit_noise:
         print(f"coverage_allan.py --fit-noise on {machine()}")

@@ -378,6 +378,18 @@ def test_noise_identification_beyond_the_autocorrelations_reach(alpha):
         allan.noise_id(x, [4097])
 
 
+def test_a_record_too_short_for_the_autocorrelation_reads_its_noise_at_tau0():
+    """16 white rate samples (17 phase points < ACF_POINTS: no factor reaches the lag-1
+    autocorrelation): B1 at τ₀ on 16 averages is the record's best read, and every factor
+    carries it. Read again by B1 at m = 2 on 8 averages and carried to T, white rate noise
+    was read right in 41 of 100 records at m = 8 (71 at τ₀); totdev's ±1σ held 56–58 % at
+    T/2 and T (benchmarks/coverage_totdev.py --samples 16, docs/allan.md)."""
+    read = np.asarray([allan.noise_id(np.r_[0.0, np.cumsum(np.random.default_rng(s).normal(
+        size=16))], [1, 2, 4, 8]) for s in range(100)])  # fmt: skip
+    assert (read == read[:, :1]).all()
+    assert np.mean(read[:, 3] == 0) >= 0.65, np.mean(read[:, 3] == 0)  # 0.71; was 0.41
+
+
 def test_stable32_rule_removes_the_drift_and_carries_below_eight_averages():
     """`noise_rule="stable32"` (Stable32 1.60's OCXO and PHASE.DAT octave tables,
     benchmarks/stable32_ocxo.py 90/90, stable32_phasedat.py): on white rate noise under a
@@ -1099,6 +1111,29 @@ def test_gapped_rate_random_walk_reads_as_a_random_walk():
     z = np.diff(np.fft.irfft(w, 4001))  # flicker angle noise as rates
     z[1200:1500] = np.nan
     assert list(allan.deviation(z, 1.0, taus=[1, 4, 16, 64], mixture=False).alpha) == [1] * 4
+
+
+def test_gapped_white_angle_noise_reads_as_angle_noise_at_long_tau():
+    """Rates of white angle noise with 2 % missing: each bridged gap adds an angle step of
+    about the noise's own (the bridge cannot know the angle the missing rates turned
+    through), a random walk that the bridged record read as flicker angle and white rate
+    noise from m ≈ the gaps' spacing on ([2, 1, 0] at m = 4, 16, 32, EDF 237 and 36 at 16
+    and 32). R(n) of the gap-free windows (`gaps.gapped_rn`) has no such step: white angle
+    noise at every τ, with its own pooled EDF (594, 401; ±1σ over 200 records of 4 096
+    rates 90–98 % → 70–71 %: docs/allan.md)."""
+    rng = np.random.default_rng(7)
+    y = np.diff(rng.normal(size=2001))
+    y[rng.random(2000) < 0.02] = np.nan
+    r = allan.deviation(y, 1.0, taus=[4, 16, 32], mixture=False)
+    assert list(r.alpha) == [2, 2, 2], r.alpha
+    assert r.edf[1] > 2 * 237 and r.edf[2] > 5 * 36, r.edf
+    # the R(n) it reads is MVAR/AVAR of the gap-free windows: 1/m for white angle noise
+    from hrgjax.allan.gaps import gapped_rn
+
+    rn = gapped_rn(y, "rate", [4, 16, 32])
+    assert rn == pytest.approx([1 / 4, 1 / 16, 1 / 32], rel=0.25), rn
+    # too few gap-free windows (< RN_WINDOWS·m): NaN, the bridged read stands
+    assert np.isnan(gapped_rn(y, "rate", [256])[0])
 
 
 def test_gapped_flicker_noise_keeps_one_records_edf():

@@ -24,6 +24,7 @@ from .noise_ident import (
     B1_AVERAGES,
     NOISE_RULES,
     check_rate_has_noise,
+    gapped_alpha,
     noise_id,
     noise_id_each,
 )
@@ -130,7 +131,9 @@ def deviation(
     **Gaps**: NaN samples are missing data. Every kind but the total ones then averages only
     the differences whose windows avoid every gap, as allantools' `gradev` (NumPy, not the
     compiled curve: [`hrgjax.allan.gaps`][hrgjax.allan.gaps]; the noise type read on the
-    bridged record, an approximation). The EDF pools the gap-free segments' EDFs (each a
+    bridged record, an approximation, and under the default rule arbitrated from m = 4 on
+    by R(n) of the gap-free windows alone, `hrgjax.allan.noise_ident.gapped_alpha`).
+    The EDF pools the gap-free segments' EDFs (each a
     gap-free record's under the same `noise_rule`), (Σ nₛ)²/Σ nₛ²/EDFₛ over segments of nₛ terms: fragments are less correlated than one
     record with as many terms — except for flicker noise (odd α), whose differences stay
     correlated across a gap: there one record's EDF, a conservative one; and on angle data,
@@ -254,6 +257,11 @@ def deviation(
         dmax = 3 if kind in ("hdev", "ohdev") else 2
         options = dict(dmax=dmax, rule=noise_rule, overlapping=kind not in ("adev", "hdev"))
         alpha = _noise_in_steps(x, m, progress, **options) if stepped else noise_id(x, m, **options)
+        if gaps and noise_rule == "hrgjax":  # R(n) of the gap-free windows arbitrates: the
+            from .gaps import gapped_rn  # bridge's steps read as rate noise (gapped_alpha)
+
+            alpha = np.asarray([gapped_alpha(int(a), int(k), rn) for a, k, rn
+                                in zip(alpha, m, gapped_rn(y, data, m), strict=True)])  # fmt: skip
         edf = np.asarray([_edf(kind, int(a), int(k), int(n), noise_rule)
                           for a, k, n in zip(alpha, m, n_eff, strict=True)])  # fmt: skip
         if gaps:  # the gap-free segments' EDFs pooled: their differences are independent for
