@@ -120,6 +120,16 @@ def test_train_rprop_without_a_prior_trains_a_deeper_net():
     assert loss(trained) < 0.5 * loss(DEEP), (loss(DEEP), loss(trained))
     with pytest.raises(ValueError, match=r"^train_rprop: prior must be None or a pair"):
         train_rprop(DEEP, X, y, 2, prior=X)
+    # a target column (n, 1) broadcast to an (n, n) residual and trained the net to the
+    # mean (MSE 0.50 against 0.002); zero rows gave "training diverged"; a row of the wrong
+    # width or a NaN target raised raw errors or "training diverged": each one line now
+    for xx, yy, found in ((X, y[:, None], r"y must have shape \(40,\).*got \(40, 1\)"),
+                          (X[:0], y[:0], r"x must be \(n, d\).*n >= 1"),
+                          (X[:, :2], y, r"net does not take a row of x, shape \(2,\)"),
+                          (X, np.where(np.arange(40) == 5, np.nan, y),
+                           r"y \(training targets\) must be finite; it has nan at index \(5,\)")):  # fmt: skip
+        with pytest.raises(ValueError, match=rf"^train_rprop: {found}"):
+            train_rprop(DEEP, xx, yy, 2)
 
 
 @pytest.mark.parametrize("field", ["drift_t_curvature", "sf_t_curvature"])

@@ -43,7 +43,7 @@ from .._checks import check_key, concrete_value
 from .._compiled import device, program
 from .._x64 import require_x64
 from ..data import MeasuredData
-from ..nn.train import rprop_with_progress
+from ..nn.train import check_fit_data, rprop_with_progress
 from ..units import DEG
 from ._compensator import (
     FROM_FIELD,
@@ -432,14 +432,14 @@ def train_rprop(
     target's model is `net` averaged over its J rows with these weights (a window's arc,
     `window_average`).
 
-    **Returns:** the trained network.
+    **Returns:** the trained network. **Raises:** `ValueError` (one line) for data `net`
+    cannot be fitted to ([`check_fit_data`][hrgjax.nn.train.check_fit_data]: y (n, 1) trained
+    to the targets' mean) or a malformed `prior`; `RuntimeError` if training diverges.
     """
     if prior is not None and (not isinstance(prior, tuple | list) or len(prior) != 2):
         raise ValueError("train_rprop: prior must be None or a pair (x_c, weight), x_c (n, d); "
                          f"got {type(prior).__name__}")  # fmt: skip
-    if jnp.ndim(x) != (2 if weights is None else 3):
-        raise ValueError(f"train_rprop: x must be (n, d), or (n, J, d) with weights (J,); got x "
-                         f"{jnp.shape(x)}, weights {jnp.shape(weights)}")  # fmt: skip
+    check_fit_data("train_rprop", net, x, y, weights)
     params, static = eqx.partition(net, eqx.is_inexact_array)
     data = (static, x, y, prior, weights)
     params, _ = rprop_with_progress(_mse_loss, params, data, steps, learning_rate, desc=desc)

@@ -12,7 +12,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._checks import whole_number
+from .._checks import check_key, whole_number
 from .._compiled import fused
 
 
@@ -40,6 +40,7 @@ class Elman(eqx.Module):
             raise ValueError(
                 f"sizes must be positive; got in={in_size}, hidden={hidden_size}, out={out_size}"
             )
+        check_key("Elman: key (the PRNG key of the initial weights)", key)
         kx, kh, ky = jax.random.split(key, 3)
         self.w_x = eqx.nn.Linear(in_size, hidden_size, key=kx)
         self.w_h = eqx.nn.Linear(hidden_size, hidden_size, use_bias=False, key=kh)
@@ -56,12 +57,19 @@ class Elman(eqx.Module):
         n_in = self.w_x.in_features
         if xs.ndim != 2 or xs.shape[1] != n_in:
             raise ValueError(f"xs must have shape (T, in_size) = (T, {n_in}); got {xs.shape}")
-        h0 = jnp.zeros(self.hidden_size, xs.dtype) if h0 is None else jnp.asarray(h0)
+        # the context in the dtype the step returns (float32 or integer samples beside float64
+        # weights: the scan's carry changed type, a raw "carry input and carry output" error)
+        with jax.numpy_dtype_promotion("standard"):  # whatever the caller's setting
+            dtype = jnp.result_type(xs, self.w_x.weight, float)
+        h0 = jnp.zeros(self.hidden_size, dtype) if h0 is None else jnp.asarray(h0)
         if h0.shape != (self.hidden_size,):
             raise ValueError(
                 f"h0 must have shape (hidden_size,) = ({self.hidden_size},); got {h0.shape}"
             )
-        return _run(self, h0, xs)
+        with jax.numpy_dtype_promotion("standard"):
+            dtype = jnp.result_type(dtype, h0)
+        cast = lambda a: a if a.dtype == dtype else a.astype(dtype)  # noqa: E731
+        return _run(self, cast(h0), cast(xs))
 
 
 @fused

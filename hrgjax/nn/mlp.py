@@ -9,7 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._checks import whole_number
+from .._checks import check_key, whole_number
 
 
 class MLP(eqx.Module):
@@ -32,6 +32,7 @@ class MLP(eqx.Module):
         sizes = tuple(whole_number("sizes", s, "layer widths, integers >= 1") for s in sizes)
         if len(sizes) < 2 or min(sizes) < 1:
             raise ValueError(f"sizes must be >= 2 positive layer widths; got {sizes}")
+        check_key("MLP: key (the PRNG key of the initial weights)", key)
         keys = jax.random.split(key, len(sizes) - 1)
         self.layers = [
             eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys, strict=True)

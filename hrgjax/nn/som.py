@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite_host, describe, host_value, whole_number
+from .._checks import check_finite_host, check_key, describe, host_value, whole_number
 from .pnn import check_labels, check_n_classes, check_samples
 
 
@@ -83,6 +83,7 @@ class SOM(eqx.Module):
             jnp.meshgrid(jnp.arange(rows, dtype=x.dtype), jnp.arange(cols, dtype=x.dtype),
                          indexing="ij"), axis=-1,
         ).reshape(-1, 2)  # fmt: skip
+        check_key("SOM.train: key (the PRNG key of the start and the sample order)", key)
         k0, k1 = jax.random.split(key)
         w0 = x[jax.random.choice(k0, x.shape[0], (rows * cols,), replace=x.shape[0] < rows * cols)]
         picks = jax.random.randint(k1, (int(steps),), 0, x.shape[0])
@@ -117,7 +118,12 @@ class SOM(eqx.Module):
 
     def predict(self, x):
         """Class of each sample of `x` (n, d), finite, → (n,): its best-matching unit's label
-        (a NaN sample matched unit 0); a traced `x` passes unchecked."""
+        (a NaN sample matched unit 0); a traced `x` passes unchecked. **Raises:**
+        `ValueError` before [`label`][hrgjax.nn.som.SOM.label] (every sample was class −1)."""
+        labels = host_value(self.labels)
+        if labels is not None and (labels < 0).any():
+            raise ValueError("this SOM is not labelled (its units' labels are -1); use "
+                             "som = som.label(x, y, n_classes) before predict")  # fmt: skip
         x = check_samples("x (SOM query samples)", x, self.weights.shape[1])
         check_finite_host("x (SOM query samples)", x)
         return self.labels[self.winners(x)]

@@ -10,7 +10,7 @@ import numpy as np
 import optax
 
 from .. import _upstream
-from .._checks import describe, host_value, numeric_problem, whole_number
+from .._checks import check_finite_host, describe, host_value, numeric_problem, whole_number
 from .._compiled import Check, device, program, tracing_callback_free
 from .._progress import bar
 
@@ -40,6 +40,36 @@ def check_rates(**rates) -> None:
         value = host_value(v)
         if value is not None and not (np.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be a finite number > 0 (a step size); got {value:g}")
+
+
+def check_fit_data(who: str, net, x, y, weights=None) -> None:
+    """Refuse, in one line starting with `who`, data a scalar network `net` cannot be fitted
+    to: `x` (n, d), or (n, J, d) with `weights` (J,) (each target `net` averaged over its J
+    rows), n >= 1; `y` (n,), one target per row; `net` mapping a row (d,) to a scalar. A
+    target column (n, 1) broadcast against the (n,) outputs to an (n, n) residual and trained
+    the network to the targets' mean without a word; zero rows trained on a NaN loss ("training
+    diverged"); a row of the wrong width, or `y` of another length, raised a raw JAX error.
+    A concrete NaN or inf in `x` or `y` is refused, naming its index; traced data pass."""
+    xs, ys = tuple(jnp.shape(x)), tuple(jnp.shape(y))
+    ws = None if weights is None else tuple(jnp.shape(weights))
+    rank = 2 if weights is None else 3
+    if len(xs) != rank or xs[0] < 1 or (ws is not None and ws != (xs[1],)):
+        raise ValueError(f"{who}: x must be (n, d), or (n, J, d) with weights (J,), n >= 1; "
+                         f"got x {xs}, weights {ws}")  # fmt: skip
+    if ys != (xs[0],):
+        raise ValueError(f"{who}: y must have shape ({xs[0]},), one target per row of x; got {ys}")
+    check_finite_host(f"{who}: x (training inputs)", x)
+    check_finite_host(f"{who}: y (training targets)", y)
+    row = jax.ShapeDtypeStruct(xs[-1:], jnp.result_type(x))
+    try:
+        out = jax.eval_shape(net, row)
+    except (TypeError, ValueError) as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise ValueError(f"{who}: net does not take a row of x, shape {xs[-1:]} (x's last axis "
+                         f"must be the net's input width): {first}") from None  # fmt: skip
+    if getattr(out, "shape", None) != ():
+        raise ValueError(f"{who}: net must map a row of x to a scalar; it returns shape "
+                         f"{getattr(out, 'shape', type(out).__name__)}")  # fmt: skip
 
 
 def check_trained(params, losses=None) -> None:
@@ -164,10 +194,14 @@ def _run(loss_fn, params, loss, data, steps, learning_rate, max_step, compile_on
 
 
 def _block_length(steps: int, blocks: int = 20) -> int:
-    """The largest divisor of `steps` that is at most steps/blocks (≥ 1): every block has the
-    same length, so one compiled block serves the whole run."""
+    """The length of a progress block: the largest divisor of `steps` that is at most
+    steps/blocks (≥ 1), so that one compiled block serves the whole run, unless that makes
+    more than 4·`blocks` blocks; then steps // blocks, and `rprop_with_progress` ends with
+    one shorter block (a second program). A prime `steps` had only 1: 997 Rprop steps ran as
+    997 one-step programs, 5.4 s against 0.06 s for 1000 (a 30-unit MLP on 108 points)."""
     target = max(steps // blocks, 1)
-    return max(d for d in range(1, target + 1) if steps % d == 0)
+    divisor = max(d for d in range(1, target + 1) if steps % d == 0)
+    return divisor if steps // divisor <= 4 * blocks else target
 
 
 def _rprop_scan(loss_fn, params, state, data, length: int, learning_rate, max_step):
@@ -205,8 +239,9 @@ def rprop_with_progress(
     *,
     desc: str = "training",
 ):
-    """[`rprop`][hrgjax.nn.train.rprop] run as equal blocks of compiled steps, with a
-    progress bar showing the loss between blocks.
+    """[`rprop`][hrgjax.nn.train.rprop] run as blocks of compiled steps (equal, but for a
+    shorter last one where `steps` has no fitting divisor), with a progress bar showing the
+    loss between blocks.
 
     `loss_fn(params, data)` must be a module-level function (not a fresh closure), so that
     its compiled block is reused by every later call with the same shapes. The updates are
@@ -223,14 +258,15 @@ def rprop_with_progress(
     learning_rate, max_step = _rate(learning_rate), _rate(max_step)
     state = optax.rprop(learning_rate, max_step_size=max_step).init(params)
     length = _block_length(steps)
+    lengths = [length] * (steps // length) + [steps % length] * (steps % length > 0)
     losses = []
     with bar(steps, desc) as progress:
-        for _ in range(steps // length):
+        for n in lengths:
             params, state, chunk = _rprop_block(
-                loss_fn, params, state, data, length, learning_rate, max_step
+                loss_fn, params, state, data, n, learning_rate, max_step
             )
             losses.append(np.asarray(chunk))  # on the host: no eager device programs
-            progress.update(length)
+            progress.update(n)
             progress.set_postfix_str(f"loss {float(losses[-1][-1]):.4g}")
     return params, device(np.concatenate(losses))
 
