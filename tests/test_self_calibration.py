@@ -506,3 +506,50 @@ def test_correct_and_compare_refuse_ftr_and_precession_data(
         path = str(data.save(tmp_path / "d.csv"))
         cli_fails(["correct", path, "--model", str(model)], capsys, match)
         cli_fails(["compare", path, "--models", str(model)], capsys, match)
+
+
+def test_standard_errors_vanish_without_noise_and_match_the_noises_spread(
+    sweeps, reversal_at_minus_45
+):
+    """Audit (s34): neither reduction gave an uncertainty. Noise-free, each σ is ~0; with a
+    known noise added to the same runs it is that noise's spread. Mode reversal's σ, read
+    from the holds' own samples, against the closed form (n q + 2s)/n² per hold of the
+    noise put in (white angle s and white rate q: the default gyro's) and against the
+    spread of 200 draws. The sweeps' drift σ from the noise model against 40 draws; from
+    the data it needs 6 sweeps (3 temperatures) and is NaN from the fixture's one pair."""
+    from hrgjax.pattern_noise import NoiseModel
+
+    prof, rec = reversal_at_minus_45
+    clean = sc.mode_reversal(rec.t, rec.rebalance_rate, prof, settle_s=30.0)
+    assert float(clean.bias_std) < 1e-5 * abs(float(clean.bias))
+    assert float(clean.anisotropy_std) < 1e-5 * abs(float(clean.anisotropy))
+    rng = np.random.default_rng(0)
+    white, rate = 8.75e-6, 1.05e-6  # [rad] σ_w/k_e per sample, [rad/s] per 1-s sample
+    n = rec.t.size
+    noise = -np.diff(white * rng.standard_normal((200, n + 1)), axis=-1)
+    noisy = np.asarray(rec.rebalance_rate)[None] + noise + rate * rng.standard_normal((200, n))
+    out = sc.mode_reversal(rec.t, noisy, prof, settle_s=30.0)
+    kept = np.array([np.sum((rec.t >= a) & (rec.t <= b)) for a, b in prof.hold_windows(30.0)])
+    closed = 0.5 * np.sqrt(np.sum((kept * rate**2 + 2 * white**2) / kept**2))
+    np.testing.assert_allclose(np.std(out.bias - clean.bias), closed, rtol=0.15)
+    np.testing.assert_allclose(np.median(out.bias_std), closed, rtol=0.15)
+    assert np.all((out.anisotropy_std > 0.5 * closed) & (out.anisotropy_std < 2 * closed))
+    row = sc.mode_reversal_data(rec.to_data(), settle_s=30.0)[0]
+    assert row["bias_std_dph"] < 1e-5 * abs(row["bias_dph"])
+
+    t = np.stack([sweeps["time_s"][i] for i in sweeps.run_indices()])
+    theta = np.stack([sweeps["wave_angle_deg"][i] * DEG for i in sweeps.run_indices()])
+    rho = np.stack([sweeps["precession_dps"][i] * DEG_PER_S for i in sweeps.run_indices()])
+    used = (t - t[:, :1] >= 15.0).astype(float)
+    model = NoiseModel(angle_white=4.85e-6, angle_random_walk=3.5e-7)  # pattern angle
+    draws = model.angle_white * rng.standard_normal((40, *t.shape)) + np.cumsum(
+        model.angle_random_walk * rng.standard_normal((40, *t.shape)), axis=-1)  # fmt: skip
+    fits = [sc.fit_sweeps(*map(jnp.asarray, (t, theta + d, rho, used)))[1] for d in draws]
+    ((_, sigma),) = sc.sweep_std([(t, theta, rho, used)], 2, model)
+    np.testing.assert_allclose(sigma, np.std(np.asarray(fits), axis=0), rtol=0.35)
+    comp = sc.PrecessionCompensator(settle_s=15.0).fit(sweeps, noise=model)
+    np.testing.assert_allclose(np.asarray(comp.drift_std[0]), sigma / comp.k_e, rtol=1e-12)
+    assert np.all(np.isnan(sc.PrecessionCompensator(settle_s=15.0).fit(sweeps).drift_std))
+    ((_, still), *_) = sc.sweep_std([(t, theta, rho, used)] * 3, 2)  # noise-free, 6 sweeps
+    drift = sc.fit_sweeps(*map(jnp.asarray, (t, theta, rho, used)))[1]
+    assert np.all(still < 1e-4 * np.max(np.abs(np.asarray(drift))))

@@ -1,9 +1,12 @@
 """Virtual-precession sweeps as `PrecessionCompensator.fit` reads them: grouped by
 temperature, each run's samples after the settling, and the checks that the sweeps at each
-temperature determine the drift (samples left, both directions, the angle covered)."""
+temperature determine the drift (samples left, both directions, the angle covered); the
+least squares' design, and the standard errors of the sweeps' fit and of mode reversal's
+hold means from the data's own noise (`noise_components`)."""
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 
 from ..data import MeasuredData
@@ -114,3 +117,171 @@ def coverage_deg(arcs) -> float:
         bins = np.arange(start, start + int(np.ceil(hi - start)))
         seen[bins % 180] = True
     return float(seen.sum())
+
+
+def sweep_design(t, wave_angle, precession, weight, harmonics: int):
+    """`(a, y, J)`: the weighted design (R·n, 2J + R) and data (R·n,) of `fit_sweeps`' least
+    squares (columns ∫ρb, ∫b over the basis of J functions, one offset per run) from `t` [s],
+    `wave_angle` [rad], `precession` [rad/s] and `weight` (R, n); differentiable (jax)."""
+    # Each interval's mean of b along a wave turning uniformly from θ_i to θ_{i+1} — exact
+    # for that path: cos/sin 2kθ_m · sinc(kΔθ) (a trapezoid would err by (2kΔθ)²/12).
+    mid = 0.5 * (wave_angle[:, 1:] + wave_angle[:, :-1])
+    half = 0.5 * jnp.diff(wave_angle, axis=-1)
+    cols = [jnp.ones_like(mid)]
+    for k in range(1, harmonics + 1):
+        damp = jnp.sinc(2 * k * half / jnp.pi)
+        cols += [jnp.cos(2 * k * mid) * damp, jnp.sin(2 * k * mid) * damp]
+    mean_b = jnp.stack(cols, axis=-1)  # (R, n − 1, J)
+    dt = jnp.diff(t, axis=-1)[..., None]
+    used = (weight[:, :-1] * weight[:, 1:])[..., None]  # intervals between two used samples
+    mean_rho = 0.5 * (precession[:, 1:] + precession[:, :-1])[..., None]
+
+    def cumulative(inc):  # ∫ dt from the run's first used sample
+        inc = inc * dt * used
+        return jnp.concatenate([jnp.zeros_like(inc[:, :1]), jnp.cumsum(inc, axis=1)], axis=1)
+
+    r = t.shape[0]
+    offsets = jnp.broadcast_to(jnp.eye(r)[:, None, :], (r, t.shape[1], r))
+    design = jnp.concatenate([cumulative(mean_rho * mean_b), cumulative(mean_b), offsets], -1)
+    w = weight.reshape(-1)[:, None]
+    return design.reshape(-1, design.shape[-1]) * w, wave_angle.reshape(-1) * w[:, 0], len(cols)
+
+
+MIN_NOISE_BLOCKS = 8
+"""Fewest blocks of `noise_components`' length per series (a hold, a sweep) for a standard
+error: fewer, and the random walk's share is read from too few block means (σ is NaN)."""
+
+
+def noise_components(e, mask, xp=np, moments=None):
+    """`(s, q)`: the variance s of white noise per sample and the increment variance q per
+    sample of a random walk in the series `e` (…, K, N) (angle-like: a residual angle, or the
+    running sum of a rate), read on the samples where `mask` is 1 (one contiguous stretch per
+    series), pooled over the K series, in e's unit squared. Method of moments at two scales
+    (`scales`): lag-1 differences, E = 2s + q, and differences of adjacent means over
+    m samples, E = 2s/m + q(2m² + 1)/(3m), where the random walk outweighs the white noise;
+    `moments` ((2, 2): each scale's E per unit s and q) replaces these for a fit's
+    residuals (`sweep_std`). q ≥ 0 and s ≥ 0. `xp`: numpy, or jax.numpy."""
+    mask = xp.asarray(mask, dtype=float)
+    e = xp.asarray(e) * mask
+    (lag1, ok1), (block, okb), m = scales(mask, xp)
+    d1 = xp.sum(ok1 * lag1(e) ** 2, axis=(-2, -1)) / xp.sum(ok1, axis=(-2, -1))
+    db = xp.sum(okb * block(e) ** 2, axis=(-2, -1)) / xp.sum(okb, axis=(-2, -1))
+    return solve_moments(d1, db, raw_moments(m) if moments is None else moments, xp)
+
+
+def solve_moments(d1, db, moments, xp=np):
+    """`(s, q)` ≥ 0 from the two scales' observed moments and their expectations per unit s
+    and q (`moments`, ((a, b), (c, d))); q < 0 read as 0 (s from the lag-1 moment alone)."""
+    (a, b), (c, d) = moments
+    q = (a * db - c * d1) / (a * d - b * c)
+    s = xp.where(q > 0, (d1 - b * q) / a, d1 / a)
+    return xp.maximum(s, 0.0), xp.maximum(q, 0.0)
+
+
+def scales(mask, xp=np, m: int | None = None):
+    """`((lag1, ok1), (block, okb), m)`: `noise_components`' two difference operators on series
+    (…, N) masked by `mask` (…, K, N), each with where it is valid; m = N_min // 8 samples (the
+    shortest series; N // K when traced) unless given."""
+    if m is None:
+        kept = concrete_count(mask)
+        kept = np.shape(mask)[-1] // np.shape(mask)[-2] if kept is None else kept
+        m = int(max(2, kept // MIN_NOISE_BLOCKS))
+
+    def lag1(x):
+        return x[..., 1:] - x[..., :-1]
+
+    def block(x):  # adjacent means of samples i … i + m − 1 and i + m … i + 2m − 1
+        c = xp.cumsum(x, axis=-1)
+        c = xp.concatenate([xp.zeros_like(c[..., :1]), c], axis=-1)
+        b = (c[..., m:] - c[..., :-m]) / m
+        return b[..., m:] - b[..., :-m]
+
+    ok = mask[..., m - 1 :] * mask[..., : 1 - m]  # a block's first and last samples kept
+    return (lag1, mask[..., 1:] * mask[..., :-1]), (block, ok[..., m:] * ok[..., :-m]), m
+
+
+def concrete_count(mask):
+    """The fewest samples a series of `mask` (…, N) keeps (an int), or None when traced."""
+    try:
+        return int(np.min(np.sum(np.asarray(mask), axis=-1)))
+    except Exception:  # a jax tracer: not concrete
+        return None
+
+
+def raw_moments(m: int):
+    """E of the two scales' moments of a raw series per unit s and q: ((2, 1), (2/m, …))."""
+    return ((2.0, 1.0), (2.0 / m, (2.0 * m * m + 1.0) / (3.0 * m)))
+
+
+MIN_POOLED_SWEEPS = 6
+"""Fewest sweeps (3 temperatures' ±ρ pairs) whose residuals `sweep_std` reads the noise from:
+the fit takes out the slow part of the angle random walk that makes its error, so one pair's
+residuals put q anywhere from 0 to 4.6× the truth (5–95 %, 100 seeds at 1 °/s): NaN below."""
+
+
+def sweep_std(groups, harmonics: int, noise=None):
+    """`[(s_std, d_std)]` per temperature: standard errors of `fit_sweeps`' coefficients
+    (`groups`: its arguments t, wave_angle, precession, weight at each temperature, R runs × n
+    samples; the same units, rad/s), from the fit's residuals: white angle noise s and an
+    angle random walk q per sample, one pair for all the sweeps (one gyro), by moments at two
+    scales (`scales`) whose expectations count what the fit takes out of the residuals
+    (raw minus 2 tr(AHΣ) plus tr(AHΣH), H the fit's hat matrix), carried through the least
+    squares: Var = s·LLᵀ + q·Σ UUᵀ (L the fit's pseudo-inverse, U its sums from each
+    increment to the run's end). NaN where a run keeps fewer than 2·`MIN_NOISE_BLOCKS`
+    samples, or fewer than `MIN_POOLED_SWEEPS` sweeps in all. `noise` (a
+    `hrgjax.pattern_noise.NoiseModel`, pattern angle: σ_w, N) gives s = σ_w², q = N²·dt
+    instead, whatever the number of sweeps. A rate wander slower than the sweeps (a
+    Gauss–Markov bias) reads as drift and is not in σ."""
+    from ..pattern_noise import NoiseModel
+
+    if noise is not None and not isinstance(noise, NoiseModel):  # a Noise's N is input rate
+        raise TypeError(
+            f"noise must be an hrgjax.pattern_noise.NoiseModel (pattern angle: "
+            f"NoiseModel.from_gyro(gyro.noise, k_e)); got {type(noise).__name__}"
+        )
+    ws = [np.asarray(g[3], dtype=float) for g in groups]
+    m = max(2, int(min(np.min(np.sum(w, -1)) for w in ws)) // MIN_NOISE_BLOCKS)
+    obs, exp, covs = np.zeros(2), np.zeros((2, 2)), []
+    for (t, theta, rho, _), w in zip(groups, ws, strict=True):
+        a, y, j = sweep_design(t, theta, rho, w, harmonics)
+        a, y = np.asarray(a), np.asarray(y)
+        scale = np.sqrt(np.sum(a * a, axis=0)) + 1e-300
+        pinv = np.linalg.pinv(a / scale) / scale[:, None]  # (P, R·n)
+        p = pinv.shape[0]
+        lr = pinv.reshape(p, *w.shape) * w  # (P, R, n)
+        tail = np.flip(np.cumsum(np.flip(lr, -1), -1), -1)[..., 1:]  # Σ_{i ≥ k} L_i, k ≥ 1
+        u = tail * (w[:, 1:] * w[:, :-1])[None]  # increments between two used samples
+        walk = np.concatenate([np.zeros_like(u[..., :1]), np.cumsum(u, -1)], -1)  # K Lᵀ
+        cov_s, cov_q = pinv @ pinv.T, np.einsum("prk,qrk->pq", u, u)  # Σ = I, Σ = K
+        covs.append((np.diag(cov_s)[: 2 * j], np.diag(cov_q)[: 2 * j]))
+        x = a.reshape(*w.shape, p).transpose(2, 0, 1)
+        resid = (y - a @ (pinv @ y)).reshape(w.shape)
+        (*ops, _), raw = scales(w, m=m), raw_moments(m)
+        for k, (op, ok) in enumerate(ops):  # E per unit s, q: raw minus the fit's share
+            gx = op(x) * ok
+            proj = np.einsum("prk,qrk->pq", gx, gx)
+            for i, (sig, cov) in enumerate(((lr, cov_s), (walk, cov_q))):
+                exp[k, i] += raw[k][i] * np.sum(ok) - 2 * np.sum(op(sig) * gx) + np.sum(cov * proj)
+            obs[k] += np.sum(ok * op(resid) ** 2)
+    s, q = solve_moments(obs[0], obs[1], exp)
+    short = min(np.min(np.sum(w, -1)) for w in ws) < 2 * MIN_NOISE_BLOCKS
+    if noise is not None:  # the sample interval of the first run's used samples
+        dt = float(np.median(np.diff(np.asarray(groups[0][0])[0][ws[0][0] > 0])))
+        s, q = noise.angle_white**2, noise.angle_random_walk**2 * dt
+    else:
+        short = short or sum(len(w) for w in ws) < MIN_POOLED_SWEEPS
+    out = [np.full(2 * j, np.nan) if short else np.sqrt(s * cs + q * cq) for cs, cq in covs]
+    return [(std[:j], std[j:]) for std in out]
+
+
+def hold_var(r, masks, means, xp):
+    """Variance of each hold's mean rate (…, 2) [r's unit²]: `r` (…, N) the output, `masks`
+    (…, 2, N) the holds' samples, `means` (…, 2) their means. The running sum of r − mean over
+    a hold is an angle: white readout noise s per sample (in a mean of n rates only its two
+    ends are left) and a random walk q per sample (white rate noise), read pooled over both
+    holds (`noise_components`): (n q + 2s)/n². NaN for a hold of fewer than 16 samples."""
+    e = xp.cumsum(masks * (r[..., None, :] - means[..., None]), axis=-1)
+    s, q = noise_components(e, masks, xp)
+    n = xp.sum(masks, axis=-1)
+    var = (n * q[..., None] + 2.0 * s[..., None]) / n**2
+    return xp.where(n >= 2 * MIN_NOISE_BLOCKS, var, xp.nan)

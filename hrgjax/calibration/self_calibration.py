@@ -68,7 +68,7 @@ from ._runs import RunGroup, simulate_runs, switch_on_keys
 from ._sweeps import CONSTANT_RATE_DPS as CONSTANT_RATE_DPS
 from ._sweeps import EARTH_RATE_DPS as EARTH_RATE_DPS
 from ._sweeps import MIN_COVERAGE_DEG as MIN_COVERAGE_DEG
-from ._sweeps import at_rest, sweeps_by_temperature
+from ._sweeps import at_rest, hold_var, sweep_design, sweep_std, sweeps_by_temperature
 from .experiment import QUICK_TEMPERATURES, Plan, run_plan
 from .reduce import check_k_e
 
@@ -147,34 +147,9 @@ def fit_sweeps(t, wave_angle, precession, weight, harmonics: int = 2):
     its first used sample. **Returns** `(s, d)`: the gain S and drift $D_\theta$ [rad/s,
     electrical] coefficients on [`angle_basis`][hrgjax.calibration.self_calibration.angle_basis],
     shape (2·harmonics + 1,) each."""
-    # Each interval's mean of b along a wave turning uniformly from θ_i to θ_{i+1} — exact
-    # for that path: cos/sin 2kθ_m · sinc(kΔθ) (a trapezoid would err by (2kΔθ)²/12).
-    mid = 0.5 * (wave_angle[:, 1:] + wave_angle[:, :-1])
-    half = 0.5 * jnp.diff(wave_angle, axis=-1)
-    cols = [jnp.ones_like(mid)]
-    for k in range(1, harmonics + 1):
-        damp = jnp.sinc(2 * k * half / jnp.pi)
-        cols += [jnp.cos(2 * k * mid) * damp, jnp.sin(2 * k * mid) * damp]
-    mean_b = jnp.stack(cols, axis=-1)  # (R, n − 1, J)
-    dt = jnp.diff(t, axis=-1)[..., None]
-    used = (weight[:, :-1] * weight[:, 1:])[..., None]  # intervals between two used samples
-    mean_rho = 0.5 * (precession[:, 1:] + precession[:, :-1])[..., None]
-
-    def cumulative(inc):  # ∫ dt from the run's first used sample
-        inc = inc * dt * used
-        return jnp.concatenate([jnp.zeros_like(inc[:, :1]), jnp.cumsum(inc, axis=1)], axis=1)
-
-    phi_s = cumulative(mean_rho * mean_b)
-    phi_d = cumulative(mean_b)
-    r = t.shape[0]
-    offsets = jnp.broadcast_to(jnp.eye(r)[:, None, :], (r, t.shape[1], r))
-    design = jnp.concatenate([phi_s, phi_d, offsets], axis=-1)  # (R, n, 2J + R)
-    w = weight.reshape(-1)[:, None]
-    a = design.reshape(-1, design.shape[-1]) * w
-    y = wave_angle.reshape(-1) * w[:, 0]
+    a, y, j = sweep_design(t, wave_angle, precession, weight, harmonics)
     scale = jnp.sqrt(jnp.sum(a * a, axis=0)) + 1e-300  # columns equilibrated
     coef = jnp.linalg.lstsq(a / scale[None, :], y)[0] / scale
-    j = mean_b.shape[-1]
     return coef[:j], coef[j : 2 * j]
 
 
@@ -198,6 +173,11 @@ class PrecessionCompensator(AbstractCompensator):
     - `drift_coef`: (K, 2N + 1) coefficients of the drift (equivalent input rate [rad/s]);
       `gain_coef`: of the commanded precession's gain S (module docstring); `None` before
       `fit`. The scale factor is the nominal 1: the sweeps do not calibrate it.
+    - `drift_std`, `gain_std`: their standard errors, same shapes and units (drift [rad/s],
+      gain [–]), from the fit's own residuals (`_sweeps.sweep_std`: white angle noise and an
+      angle random walk through the least squares, or `fit`'s `noise`; docs/modes.md gives
+      their coverage); NaN from fewer than 6 sweeps (3 temperatures) without `noise`, or a
+      sweep under 16 samples; `None` before `fit` and after `load_compensator` (not saved).
     """
 
     harmonics: int = setting_field(_WHO, "harmonics", 2)
@@ -207,6 +187,8 @@ class PrecessionCompensator(AbstractCompensator):
     temperatures_c: tuple[float, ...] = eqx.field(static=True, default=())
     drift_coef: jax.Array | None = None
     gain_coef: jax.Array | None = None
+    drift_std: jax.Array | None = None
+    gain_std: jax.Array | None = None
 
     def __check_init__(self):
         check_k_e(self.k_e)
@@ -269,11 +251,12 @@ class PrecessionCompensator(AbstractCompensator):
         """The nominal 1: sweeps at rest do not calibrate the scale factor (module docstring)."""
         return jnp.ones_like(theta + temperature_c)
 
-    def fit(self, data, *, key=None, raw=None) -> PrecessionCompensator:
+    def fit(self, data, *, key=None, raw=None, noise=None) -> PrecessionCompensator:
         """Fit to virtual-precession sweeps at rest (`data` with a `precession_dps` column,
         from [`run_precession_plan`][hrgjax.calibration.run_precession_plan]
         or a gyro's own sweeps); `key` and `raw` are not used (`raw` beside the samples is
-        refused: pass them once).
+        refused: pass them once). `noise`: the gyro's known angle noise for `drift_std`
+        (`NoiseModel.from_gyro`, or an Allan analysis); without it σ is read from the data.
 
         **Raises:** `ValueError` for data without the column, force-to-rebalance output (a
         `rebalance_rate_dps` column with `rebalance_on` absent or 1), a sweep left with fewer
@@ -301,7 +284,7 @@ class PrecessionCompensator(AbstractCompensator):
                 "the sweeps in whole-angle mode (Control(mode='wa'), run_precession_plan)"
             )
         groups = sweeps_by_temperature(data, self.temperature_bin, self.settle_s)
-        temps, drift, sf = [], [], []
+        temps, drift, sf, arrays = [], [], [], []
         for temp, runs in groups:
             t, th, rho, w = _padded(runs)
             s, d = fit_sweeps(device(t), device(th), device(rho), device(w), self.harmonics)
@@ -309,11 +292,14 @@ class PrecessionCompensator(AbstractCompensator):
             temps.append(temp)
             drift.append(-np.asarray(d) / self.k_e)
             sf.append(np.asarray(s))
+            arrays.append((t, th, rho, w))
         fitted = PrecessionCompensator(harmonics=self.harmonics, settle_s=self.settle_s,
                                        temperature_bin=self.temperature_bin, k_e=self.k_e,
                                        temperatures_c=tuple(temps))  # fmt: skip
-        return eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef), fitted,
-                           (jnp.asarray(np.stack(drift)), jnp.asarray(np.stack(sf))),
+        std = [(d / self.k_e, s) for s, d in sweep_std(arrays, self.harmonics, noise)]
+        new = [np.stack(drift), np.stack(sf), *(np.stack(x) for x in zip(*std, strict=True))]
+        return eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef, c.drift_std, c.gain_std),
+                           fitted, [jnp.asarray(x) for x in new],
                            is_leaf=lambda x: x is None)  # fmt: skip
 
 
@@ -370,12 +356,20 @@ class ModeReversal(eqx.Module):
       sign convention of the compensators' drift (each reading is SF·(Ω − b) with
       b = ½Δ(1/τ)·sin 2(θ − θ_τ)/k_e the bias in the FTR law of docs/modes.md, so half the
       difference is −b).
+    - `readings_std`, `bias_std`, `anisotropy_std`: their standard errors [rad/s] from each
+      hold's own samples (`_sweeps.hold_var`: the readout's white angle noise, which cancels in a
+      mean of rates but for its ends, and white rate noise; docs/modes.md gives their
+      coverage); NaN for a hold of fewer than 16 samples. A rate wander slower than the hold
+      (a Gauss–Markov bias) is read as bias and is not in them.
     """
 
     angles_deg: tuple[float, float] = eqx.field(static=True)
     readings: jax.Array
     bias: jax.Array
     anisotropy: jax.Array
+    readings_std: jax.Array | None = None
+    bias_std: jax.Array | None = None
+    anisotropy_std: jax.Array | None = None
 
 
 def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -> ModeReversal:
@@ -426,16 +420,19 @@ def mode_reversal(t, rebalance_rate, profile: Profile, settle_s: float = 20.0) -
                     f"{end:g} s, after settle_s = {float(settle_s):g} s): give output times inside "
                     "every hold (a finer dt_out, or ts covering it) or a shorter settle_s"
                 )
-    t, r, means = jnp.asarray(t), jnp.asarray(rebalance_rate), []
-    for start, end in windows:
-        m = ((t >= start) & (t <= end)).astype(r.dtype)
-        means.append(jnp.sum(m * r, axis=-1) / jnp.sum(m, axis=-1))
-    readings = jnp.stack(means, axis=-1)  # (…, 2): a batched record gives a batch
+    t, r = jnp.broadcast_arrays(jnp.asarray(t), jnp.asarray(rebalance_rate))
+    masks = jnp.stack([((t >= a) & (t <= b)).astype(r.dtype) for a, b in windows], axis=-2)
+    readings = jnp.sum(masks * r[..., None, :], -1) / jnp.sum(masks, -1)  # (…, 2): a batch too
+    std = jnp.sqrt(hold_var(r, masks, readings, jnp))
+    pair = 0.5 * jnp.sqrt(jnp.sum(std**2, axis=-1))  # the holds' noise independent
     return ModeReversal(
         angles_deg=(round(theta0, 9), round(theta0 + turn, 9)),
         readings=readings,
         bias=0.5 * (readings[..., 0] + readings[..., 1]),
         anisotropy=0.5 * (readings[..., 0] - readings[..., 1]),
+        readings_std=std,
+        bias_std=pair,
+        anisotropy_std=pair,
     )
 
 
@@ -543,7 +540,9 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
     """[`mode_reversal`][hrgjax.calibration.mode_reversal] on every run of FTR data held at
     two angles (the holds found where `precession_dps` is 0): per run
     `{"run", "temperature_c", "angles_deg", "readings_dph", "bias_dph", "anisotropy_dph"}`
-    [°, °/h]; `anisotropy_dph` as `ModeReversal.anisotropy` (the bias as it shows on the
+    [°, °/h] and their standard errors `readings_std_dph`, `bias_std_dph`,
+    `anisotropy_std_dph` [°/h] (as `ModeReversal`'s; None for a hold under 16 samples);
+    `anisotropy_dph` as `ModeReversal.anisotropy` (the bias as it shows on the
     output). **Raises:** `ValueError` without the FTR output or the schedule, for a run
     with other than two holds 90° apart, or one whose case turns (`table_rate_dps` beyond
     [`STILL_RATE_DPS`][hrgjax.units.STILL_RATE_DPS], unless constant and within Earth's
@@ -580,7 +579,10 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
         if abs(abs(turn) - 90.0) > 0.5:
             raise ValueError(f"run {run}: the holds are {turn:.3g}° apart; mode reversal needs 90°")
         rate = data["rebalance_rate_dps"][idx] * 3600.0
-        readings = [float(np.mean(rate[(t >= a) & (t <= b)])) for a, b in holds]
+        masks = np.stack([(t >= a) & (t <= b) for a, b in holds]).astype(float)
+        readings = [float(np.mean(rate[m > 0])) for m in masks]
+        std = np.sqrt(hold_var(rate, masks, np.asarray(readings), np))
+        pair = None if np.any(np.isnan(std)) else 0.5 * float(np.sqrt(np.sum(std**2)))
         out.append({
             "run": run,
             "temperature_c": float(np.mean(data["temperature_c"][idx])),
@@ -588,5 +590,8 @@ def mode_reversal_data(data: MeasuredData, settle_s: float = 20.0) -> list[dict]
             "readings_dph": readings,
             "bias_dph": 0.5 * (readings[0] + readings[1]),
             "anisotropy_dph": 0.5 * (readings[0] - readings[1]),
+            "readings_std_dph": [None if np.isnan(v) else float(v) for v in std],
+            "bias_std_dph": pair,
+            "anisotropy_std_dph": pair,
         })  # fmt: skip
     return out
