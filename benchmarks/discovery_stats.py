@@ -9,6 +9,10 @@ the same arguments in one run, with scipy's values as the reference; then `trust
 5 × 7 dwell grid's windows with all 18 leftover shapes (tests/test_discovery_trust.py's toy),
 per call, with each tail.
 
+Then eighteen F tails (one round of `trust`'s leftover shapes) by `f_sf` each against one
+`f_sf_many` call (since 2026-12-03 `trust` asks them that way: `trust.honest` 1.4–1.8×
+faster on this toy, test_discovery_trust.py 57 → 39 CPU-s).
+
 Usage: `.venv/bin/python benchmarks/discovery_stats.py`
 """
 
@@ -89,6 +93,16 @@ def main():
         report(f"stats.{name} per call, eager (before)", t_old * 1e6, "µs")
         report(f"stats.{name} per call, compiled", t_new * 1e6, "µs", "eager / compiled",
                t_old / t_new)  # fmt: skip
+
+    # the leftover shapes' tails, one round's eighteen: one call each against one call
+    f18 = np.array([a[0] for a in f_args[:18]])
+    d1, d2 = (np.array([a[k] for a in f_args[:18]]) for k in (1, 2))
+    err = np.max(np.abs(stats.f_sf_many(f18, d1, d2) - ref_f[:18]) / ref_f[:18])
+    t_loop = _per_call(lambda: [stats.f_sf(*a) for a in f_args[:18]], [()] * 20)
+    t_many = _per_call(lambda: stats.f_sf_many(f18, d1, d2), [()] * 20)
+    print(f"f_sf_many: largest relative difference from scipy: {err:.2e}")
+    report("18 F tails, f_sf each (before)", t_loop * 1e6, "µs")
+    report("18 F tails, f_sf_many", t_many * 1e6, "µs", "before / after", t_loop / t_many)
 
     fit, cols, classes = _grid_fit(rng)
     trust.honest(fit, cols, classes)

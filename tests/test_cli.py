@@ -179,10 +179,12 @@ def test_discover_writes_the_contract_report(tmp_path, capsys):
     assert report["missing_effect"] == "readout_gain_mismatch"
     assert report["gap_after"] < report["gap_before"]
     # every parameter in user units, with its σ and unit (the readout mismatch in ppm)
-    for group in [report["parameters"]] + [{r["effect"]: r["params"]} for r in report["ranking"]]:
-        for params in group.values():
-            for p in params.values():
-                assert set(p) == {"value", "sigma", "unit"}, p
+    for params in report["parameters"].values():
+        for p in params.values():
+            assert set(p) == {"value", "sigma", "unit"}, p
+    for r in report["ranking"]:  # a screening refit's σ is textbook, and named so
+        for p in r["params"].values():
+            assert set(p) == {"value", "sigma", "sigma_textbook", "unit", "why_no_sigma"}, p
     eps = report["parameters"]["readout_gain_mismatch"]["eps_1"]
     model = report["model_parameters"]["readout_gain_mismatch"]["eps_1"]
     assert eps["unit"] == "ppm" and eps["value"] == pytest.approx(1e6 * model["value"])

@@ -76,6 +76,22 @@ def test_hidden_temperature_dependent_damping_is_named():
         "noise_floor",
     }
     assert rep.metric == "rms_run_mean_rate_residual_dph"
+    # the JSON ranking gives each candidate's refit with its textbook σ, named as such and
+    # why it is not the σ (they read null with no word): the winner's row is the accepted
+    # model's fit (one effect accepted), its textbook σ that fit's, and `parameters` carries
+    # the error bar (here 2θ·ΔT² is left: the damping law is exponential: 8–35× wider here)
+    from hrgjax.discovery.result import SCREENING_SIGMA
+
+    js = rep.to_json()
+    row = next(r for r in js["ranking"] if r["effect"] == rep.missing_effect)["params"]
+    final, model = js["parameters"][rep.missing_effect], rep.fit_parameters[rep.missing_effect]
+    assert set(row) == set(final) and row
+    for name, p in row.items():
+        assert p["sigma"] is None and p["why_no_sigma"] == SCREENING_SIGMA, (name, p)
+        assert p["value"] == pytest.approx(final[name]["value"], rel=1e-9)
+        textbook = model[name]["std_textbook"] / abs(model[name]["value"])
+        assert p["sigma_textbook"] / abs(p["value"]) == pytest.approx(textbook, rel=1e-9)
+        assert final[name]["sigma"] > 3 * p["sigma_textbook"]
     # every screening row names the first rule it fails (None: it passes them all)
     from hrgjax.discovery.search import REFUSALS
 

@@ -100,6 +100,18 @@ def test_run_bias_does_not_absorb_an_effect_that_follows_a_run_covariate():
     from hrgjax.discovery.stats import f_sf, follows_covariate
 
     assert abs(f_sf(3.0, 1, 10) - stats.f.sf(3.0, 1, 10)) < 1e-9
+    # the leftover shapes' tails in one call: scipy's, f_sf's, and 1 where f is not > 0
+    from hrgjax.discovery.stats import f_sf_many
+
+    f, d1, d2 = np.array([3.0, 0.2, 9.0, 0.0, -1.0]), np.array([1, 2, 3, 2, 1]), 10
+    want = np.where(f > 0, stats.f.sf(f, d1, d2), 1.0)
+    np.testing.assert_allclose(f_sf_many(f, d1, d2), want, rtol=1e-9)
+    assert f_sf_many(f[:1], d1[:1], d2)[0] == pytest.approx(f_sf(3.0, 1, 10), rel=1e-12)
+    assert f_sf_many([], [], []).size == 0
+    with pytest.raises(ValueError, match=r"^f_sf_many: d1 and d2 must be > 0 .*; got 0$"):
+        f_sf_many(f, 0, d2)
+    with pytest.raises(ValueError, match=r"^f_sf_many: f, d1 and d2 must be of one length"):
+        f_sf_many(f, d1[:2], d2)
     rng = np.random.default_rng(0)
     t_dot = np.array([1.0, -1.0, 2.0, -2.0, 0.5, -0.5, 1.0, -1.0]) / 60  # °C/s
     x = np.stack([t_dot, np.zeros(8), rng.normal(size=8)], axis=1)  # Ṫ, Ω (none), a_z

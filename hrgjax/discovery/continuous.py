@@ -590,7 +590,8 @@ class ContinuousProblem(AbstractProblem):
                     refit=refit,
                 )
                 row["params"] = {
-                    k: v["value"] for k, v in refit.parameters.get(name, {}).items()
+                    k: {"value": v["value"], "std": v.get("std")}
+                    for k, v in refit.parameters.get(name, {}).items()
                 } | row["params"]
         for row in rows:
             del row["_start"]

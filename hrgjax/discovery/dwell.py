@@ -544,7 +544,13 @@ def _screen_one(name, current, model, c, sigma, train, y, w, held, k_e, n, class
         "aliasing": alias,
         "gap_after": refit.gap,
         "heldout_gain": current.heldout_chi2 - refit.heldout_chi2,
-        "params": {k: v["value"] for k, v in refit.parameters[name].items() if k in names},
+        # in model units, each {"value", "std"} (the JSON's ranking gives them in user units
+        # with their σ: they were values only, so every σ there read null)
+        "params": {
+            k: {"value": v["value"], "std": v.get("std")}
+            for k, v in refit.parameters[name].items()
+            if k in names
+        },
         "refit": refit,
         "_columns": lambda: gw,
     }

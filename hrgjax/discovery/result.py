@@ -59,6 +59,26 @@ def to_user_units(parameters: dict, k_e: float) -> dict:
     return out
 
 
+SCREENING_SIGMA = (
+    "a first-round refit's textbook sigma (sigma_textbook): it reads the noise model as exact "
+    "and leaves out the structure and noise level the residual shows; an accepted effect's "
+    "error bars are in 'parameters'"
+)
+"""Why the JSON ranking's parameters carry no `sigma` (on a grid whose damping law left a
+2θ·ΔT² shape, the textbook σ was 35× below the reported one)."""
+
+
+def _screening_sigma(params: dict) -> dict:
+    """A ranking row's user-unit parameters with their σ moved to `sigma_textbook`, `sigma`
+    None and `why_no_sigma` saying why (`SCREENING_SIGMA`)."""
+    out = {}
+    for name, v in params.items():
+        out[name] = {"value": v["value"], "sigma": None, "sigma_textbook": v["sigma"],
+                     "unit": v["unit"]}  # fmt: skip
+        out[name]["why_no_sigma"] = SCREENING_SIGMA if v["sigma"] is not None else "scanned"
+    return out
+
+
 def _number(v: dict, why: str | None = None) -> str:
     """'0.301 ± 0.004 °/h' (three significant digits of the value); a value without σ says
     why in brief (`why`: its `why_no_sigma`): '600 s (scanned, no σ)', '0.3 °/h (no σ: σ_b
@@ -101,7 +121,8 @@ class Discovery:
       (`{effect: {param: {"value", "std"}}}`, rad/s of pattern rate, …); `parameters` (a
       property) gives them in user units; `k_e`: the angular gain used for that conversion
       (the fitted one when the model fits it).
-    - `ranking` (first-round candidates by score, with the refit's parameters in model units),
+    - `ranking` (first-round candidates by score, with the refit's parameters in model units,
+      each `{"value", "std"}`; a scanned time constant is a plain value, with no σ),
       `screening` (their first-round test statistics, each row with `round` 1 and
       `accepted_in_round`: the round in which the effect was accepted, or None;
       `refused_by`: the first acceptance rule it fails, named as in
@@ -184,13 +205,17 @@ class Discovery:
 
     def to_json(self) -> dict:
         """The report as a JSON-ready dict: DESIGN.md's keys first (`ranking` parameters and
-        `parameters` in user units, each `{"value", "sigma", "unit"}`), then the rest;
-        `model_parameters` keeps the fit in model units."""
+        `parameters` in user units, each `{"value", "sigma", "unit"}`; a ranking row's
+        `sigma` is None, its screening refit's textbook σ beside it as `sigma_textbook` with
+        `why_no_sigma`, `SCREENING_SIGMA`), then the rest; `model_parameters` keeps the fit in
+        model units."""
         ranking = [
             {
                 "effect": r["effect"],
                 "score": r["score"],
-                "params": to_user_units({r["effect"]: r["params"]}, self.k_e)[r["effect"]],
+                "params": _screening_sigma(
+                    to_user_units({r["effect"]: r["params"]}, self.k_e)[r["effect"]]
+                ),
             }
             for r in self.ranking
         ]

@@ -185,7 +185,7 @@ def _shapes_left(r, j, cols, classes, s, alpha):
     chosen, jj = [], j
     cols = leftover.distinct(cols)
     for _ in range(MAX_SHAPES):
-        best = None
+        tried = []  # (F statistic, q, ν, score, name) of each shape that adds something
         for name, g in cols.items():
             if name in (c for c, _ in chosen):
                 continue
@@ -200,10 +200,14 @@ def _shapes_left(r, j, cols, classes, s, alpha):
                 continue
             q = int(g.shape[1])
             g_t = g_w - q_j @ (q_j.T @ g_w)
-            p = stats.f_sf(score / q, q, int(stats.effective_dof(h, g_t, classes)))
-            if best is None or (p, -score) < best[:2]:
-                best = (p, -score, name)
-        if best is None or min(1.0, best[0] * len(cols)) >= alpha:
+            tried.append((score / q, q, int(stats.effective_dof(h, g_t, classes)), score, name))
+        if not tried:
+            break
+        # the tails in one call; the smallest p wins, the larger score on a tie, then the first
+        p = stats.f_sf_many(*(np.array([t[k] for t in tried]) for k in range(3)))
+        best = min((p[i], -t[3], i, t[4]) for i, t in enumerate(tried))
+        best = (best[0], best[1], best[3])
+        if min(1.0, best[0] * len(cols)) >= alpha:
             break
         chosen.append((best[2], min(1.0, best[0] * len(cols))))
         jj = np.concatenate([jj, cols[best[2]]], axis=1)
