@@ -32,7 +32,10 @@ Workflows:
 Also elsewhere: the test session's offset (`benchmarks/session_offset.py`), the design's
 predicted accuracy against the achieved one (`benchmarks/design_mc.py`), the Allan
 deviation's χ² intervals at long τ (`benchmarks/coverage_allan.py`) and the composite noise
-model's intervals and term selection (`benchmarks/noise_identification.py`).
+model's intervals and term selection (`benchmarks/noise_identification.py`); the physical
+grey box against injected laws on the ideal-loop model gyro — white noise, gaps, jittered
+stamps, a Gauss–Markov rate — with its σ's before and after their Student-t widening
+(`benchmarks/coverage_physical.py`).
 
 - `discover`, a drift over temperature outside the catalogue (`--temperature-drift cubic|step`):
   the one-effect grids (seeds 3000…) with 5·10⁻⁶ °/h/°C³·ΔT³ or a 0.3 °/h step above 20 °C

@@ -592,6 +592,10 @@ def test_physical_fit_of_jittered_time_stamps_compiles_one_group_and_fits_as_cle
     stats = fit.fit_stats
     assert stats["chi2_per_dof"] == pytest.approx(1.0, abs=1e-6)
     assert 0 < stats["static_rms_dph"] < stats["moving_rms_dph"] < 1.0  # 0.006, 0.14 °/h
+    # each kind's σ rests on its windows less their leverages (Σ = 12 parameters): the 18
+    # static runs carry the bias and damping laws (ν ≈ 11), so every σ is widened as a t's
+    assert stats["rest_dof"] + stats["moving_dof"] == pytest.approx(126 - 12, abs=1e-6)
+    assert 9 < stats["rest_dof"] < 13, stats
     # the nominal gain k_e divides the measured and the simulated rates alike: another value
     # fits the same parameters, and compiles nothing (it was a constant of the fit's program)
     with CompileCounter() as c:
@@ -638,6 +642,39 @@ def test_residual_scatter_counts_each_kinds_degrees_of_freedom():
     assert np.mean(est[True]) == pytest.approx(1.0, abs=0.06)  # 400 draws: ±0.03 (1 s.e.)
     assert np.mean(est[False]) == pytest.approx(1.0, abs=0.03)
     assert np.mean(rms) < 0.8  # the plain RMS at rest: (n − p_rest)/n ≈ 0.6 of σ²
+
+
+def test_parameter_sigmas_from_few_windows_are_widened_to_cover_as_normal_ones():
+    """Linear least squares, two kinds of windows each with its σ estimated from its own
+    residuals (18 at-rest rows carrying 8 parameters, ν ≈ 10): a parameter's error over its
+    σ is a Student t, z-RMS √(ν/(ν − 2)) ≈ 1.12, ±2σ covering ≈ 92 %. `t_factors` widens
+    each σ by that factor (Satterthwaite's ν of the kinds it rests on): z-RMS 1, ±2σ ≈ 95 %
+    (the grey box's 3 × 6 static runs covered 93 % before, 95 % after:
+    benchmarks/coverage_physical.py)."""
+    rng = np.random.default_rng(11)
+    n_rest, n_moving, p, draws = 18, 60, 8, 600
+    weights = {True: np.r_[np.ones(n_rest), 0.0, 0.0], False: np.ones(n_moving)}  # 2 padded
+    j = {True: np.r_[rng.standard_normal((n_rest, p)), np.zeros((2, p))],
+         False: 0.3 * rng.standard_normal((n_moving, p))}  # fmt: skip
+    truth_sigma = {True: 1.0, False: 5.0}
+    raw, wide = [], []
+    for _ in range(draws):
+        e = {k: truth_sigma[k] * rng.standard_normal(j[k].shape[0]) * (weights[k] > 0)
+             for k in j}  # fmt: skip
+        w = np.r_[j[True] / truth_sigma[True], j[False] / truth_sigma[False]]
+        x = np.linalg.lstsq(w, np.r_[e[True], e[False] / 5.0], rcond=None)[0]
+        res = {k: e[k] - j[k] @ x * (weights[k] > 0) for k in j}  # truth: x = 0
+        sigma = physical.scatter_per_dof(res, j, weights)
+        jw = np.r_[j[True] / sigma[True], j[False] / sigma[False]]
+        err = np.sqrt(np.diag(np.linalg.inv(jw.T @ jw)))
+        factors, nu = physical.t_factors(jw, weights, sigma)
+        raw.append(x / err)
+        wide.append(x / (err * factors))
+    assert 8 < nu[True] < 12 and nu[False] > 55, nu  # n − leverages of each kind
+    raw, wide = np.asarray(raw), np.asarray(wide)
+    assert 1.07 < np.sqrt(np.mean(raw**2)) < 1.2  # a t with ν ≈ 10 read as a normal
+    assert np.sqrt(np.mean(wide**2)) == pytest.approx(1.0, abs=0.04)
+    assert np.mean(np.abs(raw) < 2) < 0.935 < np.mean(np.abs(wide) < 2)
 
 
 # --- export ---------------------------------------------------------------------------------

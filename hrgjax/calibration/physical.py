@@ -20,7 +20,10 @@ moving) into `RAMP_WINDOW_S` windows, each a drift at its own temperature. Weigh
 residual scatter of each kind of window (at rest, moving), an at-rest window of length L
 weighted by √(L / 60 s) (white rate noise: a long dwell tells more), re-estimated after the
 fit with each kind's own degrees of freedom (`scatter_per_dof`); the parameter covariance
-is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced χ² (≈ 1 with those weights).
+is the Gauss–Newton $(J^\top W J)^{-1}$ scaled by the reduced χ² (≈ 1 with those weights),
+each σ widened by √(ν/(ν − 2)) for the degrees of freedom ν its kinds' σ's rest on
+(`t_factors`: a fit's error over a σ estimated from 18 static windows is a Student t, and
+read as a normal σ it covered 93 % at ±2σ; `fit_stats`' `rest_dof`, `moving_dof`).
 Starting values come from harmonic fits at each temperature held for at least three
 windows (a ramp's windows are not a level).
 
@@ -71,6 +74,7 @@ from ._compensator import (
 from ._physical_fit import LOOP_PASSES as LOOP_PASSES
 from ._physical_fit import fit_values, less_pull, loop_pull
 from ._physical_fit import scatter_per_dof as scatter_per_dof
+from ._physical_fit import t_factors as t_factors
 from ._physical_groups import FIT_COMPILE_S as FIT_COMPILE_S
 from ._physical_groups import FIT_EVALUATIONS as FIT_EVALUATIONS
 from ._physical_groups import FIT_MERGED_STEPS_MAX as FIT_MERGED_STEPS_MAX
@@ -250,7 +254,9 @@ class PhysicalCompensator(AbstractCompensator):
     @property
     def fit_stats(self) -> dict:
         """χ²/dof, residual RMS of at-rest (static and ramp) and moving windows [°/h], LM
-        steps, window count."""
+        steps, window count, and the degrees of freedom of the at-rest and moving windows'
+        σ (`rest_dof`, `moving_dof`: windows less their leverages; fits saved before have
+        none)."""
         return dict(self.stats)
 
     @property
@@ -269,7 +275,9 @@ class PhysicalCompensator(AbstractCompensator):
         return self._program_form().gyro()
 
     def parameters(self) -> dict[str, tuple[float, float]]:
-        """{name: (value, standard error)} in SI units."""
+        """{name: (value, standard error)} in SI units. Without a `plant`, g, cross-talk and
+        (to ppm) k_e are the ideal-loop model's *effective* values, which hold the real
+        loops' lag (`equations` says so): tens of σ from the physical ones on a real gyro."""
         err = np.sqrt(np.diag(np.asarray(self.covariance)))
         return {
             n: (float(v), float(e))
@@ -407,7 +415,9 @@ class PhysicalCompensator(AbstractCompensator):
         r = np.concatenate([res[k] / sigma[k] for k in (True, False)])
         dof = max(r.size - len(NAMES), 1)
         chi2 = float(r @ r) / dof
-        cov = _covariance(jac, chi2)
+        cov = _covariance(jac, chi2)  # raises first where the data leave J rank-deficient
+        factors, nu = t_factors(jac, weights, sigma)  # each σ from few windows: a t, widened
+        cov = cov * np.outer(factors, factors)
         rest = res[True] / weights[True][weights[True] > 0]  # the windows' rates, unweighted
         stats = {
             "chi2_per_dof": chi2,
@@ -415,6 +425,8 @@ class PhysicalCompensator(AbstractCompensator):
             "moving_rms_dph": sigma[False] / DEG * 3600,
             "lm_steps": int(steps),
             "n_windows": int(r.size),
+            "rest_dof": float(nu[True]),
+            "moving_dof": float(nu[False]),
         }
         return PhysicalCompensator(
             k_e=self.k_e,
