@@ -468,7 +468,11 @@ IDEAL_READOUT = d.nominal_values().at[9:].set(0.0)  # gain mismatch and cross-ta
 def test_measured_rate_is_the_ideal_loop_law_and_its_jacobian_is_finite_differences():
     """With a perfect readout the measured rate is −k_e(Ω + b(T)) + ½Δ(1/τ)(T) sin 2(θ−θ_τ(T))
     written out (PHYSICS.md §10), with no Ṫ term; with the preset's readout, jacfwd equals
-    central differences for all twelve parameters."""
+    central differences for all twelve parameters, and a bias reads through k_e(T)·dθ̂/dθ
+    (`Readout.angle_slope` of the preset, 3.5 % peak to peak over θ at −25 °C), as
+    `simulate` reads a switch-on bias: a Monte Carlo's truth adds the session's bias so
+    (`benchmarks/design_mc.py`; added as a constant it read a 4×-long plan's drift 1.50×
+    its prediction for 1.21×, docs/design.md)."""
     v = np.asarray(IDEAL_READOUT)
     theta, temp, omega = 0.7, -25.0, 5.0 * hg.units.DEG_PER_S
     dt = temp - 20.0
@@ -484,6 +488,13 @@ def test_measured_rate_is_the_ideal_loop_law_and_its_jacobian_is_finite_differen
         h = 1e-6 * max(abs(float(values[i])), 1e-3)
         fd = (float(f(values.at[i].add(h))) - float(f(values.at[i].add(-h)))) / (2 * h)
         assert jac[i] == pytest.approx(fd, rel=1e-6, abs=1e-9 * abs(jac).max()), i
+    angles = jnp.linspace(-1.5, 1.5, 7)
+    rate = lambda x, th: d.measured_rate(x, th, jnp.asarray(temp), 0.0, 0.0)  # noqa: E731
+    per_bias = jax.vmap(jax.grad(rate), (None, 0))(d.nominal_values(), angles)[:, 2]
+    gyro = hg.presets.tvg3_like().at(temp)
+    want = -gyro.resonator.k_e * gyro.readout.angle_slope(angles)
+    np.testing.assert_allclose(per_bias, want, rtol=1e-12)
+    assert np.ptp(np.asarray(want)) > 0.03 * gyro.resonator.k_e  # not a constant k_e
 
 
 def ols_slope_variance(n, dt, arw, angle_white):

@@ -318,9 +318,11 @@ def information(plan: BenchPlan, values=None, arw: float | None = None, nodes: i
     Gauss–Markov rate discounts each segment's information by
     [`gauss_markov_discount`][hrgjax.calibration.design.gauss_markov_discount] (a long dwell
     averages white noise down, not a slow bias); the switch-on bias is left out (it is a
-    constant of the session: the fitted bias absorbs it; docs/design.md, "The switch-on bias
-    in the simulated sessions"). Differentiable with respect to the
-    plan's arrays (`jax.grad` of a criterion gives a plan-shaped gradient)."""
+    constant of the session: the fitted bias absorbs it, to 0.00 σ as a rate bias — a
+    simulated `Noise.run_bias`, which does not move the wave, shifts θ_τ0 0.34 σ on 2400-s
+    dwells; docs/design.md, "The switch-on bias in the simulated sessions"). Differentiable
+    with respect to the plan's arrays (`jax.grad` of a criterion gives a plan-shaped
+    gradient)."""
     require_x64("hrgjax.calibration.design.information")
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 2:
         raise ValueError(f"nodes must be a whole number ≥ 2 (quadrature points); got {nodes!r}")
