@@ -572,19 +572,25 @@ def test_allan_time_unit_and_stamps_that_are_not_seconds(tmp_path, capsys):
     dev = json.loads(out.read_text())["deviation"]
     assert dev["dev"][0] == pytest.approx(np.sqrt(np.mean(np.diff(y) ** 2) / 2), rel=1e-9)
     # seconds: said so (no note), or stamps that are not whole steps above 1 (a 0.1-Hz drift
-    # log with its clock's jitter, a 1-Hz log stamped 0, 1, 2)
+    # log with its clock's jitter, a 1-Hz log stamped 0, 1, 2 with --time-unit s)
     jitter = 10.0 * k + np.random.default_rng(1).uniform(-1e-3, 1e-3, 64)
+    one = log("one.csv", "time", 1.0 * k)
     for path, column, extra, rate in (
         (ms, "time", ["--time-unit", "s"], 0.1),
         (ms, "time", ["--rate-hz", "0.1"], 0.1),
         (log("secs.csv", "elapsed_secs", 10.0 * k), "elapsed_secs", [], 0.1),
         (log("jitter.csv", "time", jitter), "time", [], 0.1),
-        (log("one.csv", "time", 1.0 * k), "time", [], 1.0),
+        (one, "time", ["--time-unit", "s"], 1.0),
     ):
         assert main(["allan", path, *base, column, *extra]) == 0
         said = capsys.readouterr()
         found = re.search(r"64 samples at (\S+) Hz", said.out)
         assert float(found[1]) == pytest.approx(rate, rel=1e-5) and "stamps in" not in said.err
+    # whole stamps stepping by 1 are read as seconds (1 Hz), with the note: a 1-kHz log in
+    # whole ms reads the same, and read silently its τ were 1000× too long
+    assert main(["allan", one, *base, "time"]) == 0
+    said = capsys.readouterr()
+    assert "64 samples at 1 Hz" in said.out and "stamps in ms? give --time-unit ms" in said.err
 
 
 @pytest.mark.parametrize("name, unit", [
