@@ -299,7 +299,8 @@ def test_self_calibration_inputs_are_named():
 def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, capsys):
     """`hrgjax self-calibrate` on sweeps writes the compensator the Python fit gives (and
     `correct` reads it, on whole-angle data at rest); on FTR holds (`simulate --mode ftr --plan reversal`) it prints and
-    writes the bias and anisotropy; either with the wrong data is one clear line."""
+    writes the bias and anisotropy; either with the wrong data is one clear line. Each
+    value is printed ± its 1σ (s34), "n/a" from the one ±ρ pair (NaN, saved as NaN)."""
     from hrgjax.calibration import load_compensator
     from hrgjax.cli import main
 
@@ -309,7 +310,11 @@ def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, 
     comp = load_compensator(model)
     direct = sc.PrecessionCompensator(settle_s=15.0).fit(hg.load(path))
     np.testing.assert_allclose(np.asarray(comp.drift_coef), np.asarray(direct.drift_coef))
-    assert "virtual-precession sweeps at [20.0] °C" in capsys.readouterr().out
+    assert comp.drift_std.shape == direct.drift_std.shape and np.all(np.isnan(comp.drift_std))
+    text = capsys.readouterr().out
+    assert "virtual-precession sweeps at [20.0] °C" in text
+    assert f"{float(direct.drift_coef[0, 0]) / DEG_PER_H:+10.4f} ± n/a" in text
+    assert "± n/a (fewer than 6 sweeps: give a noise model" in text
     static = hg.simulate(BASE, hg.Profile.static(30.0, 20.0, 10.0), dt_out=1.0).to_data()
     still = static.save(tmp_path / "static.csv")  # sweeps themselves are refused (below)
     assert main(["correct", str(still), "--model", str(model), "--out",
@@ -319,6 +324,7 @@ def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, 
     back = load_json(tmp_path / "self.json")  # the JSON export round trip
     assert back.temperatures_c == comp.temperatures_c
     np.testing.assert_array_equal(np.asarray(back.gain_coef), np.asarray(comp.gain_coef))
+    np.testing.assert_array_equal(np.asarray(back.gain_std), np.asarray(comp.gain_std))  # null
     theta = np.linspace(-90.0, 90.0, 7)
     np.testing.assert_array_equal(back.drift_dph(theta, 20.0), comp.drift_dph(theta, 20.0))
 
@@ -328,6 +334,9 @@ def test_self_calibrate_command_fits_sweeps_and_reduces_holds(sweeps, tmp_path, 
     capsys.readouterr()
     assert main(["self-calibrate", str(rev), "--json", str(table), "--settle", "20"]) == 0
     row = json.loads(table.read_text())["mode_reversal"][0]
+    text = capsys.readouterr().out
+    for k in ("bias", "anisotropy"):  # noise-free: σ ~0, printed beside the value
+        assert f"{row[k + '_dph']:+10.5f} ± {row[k + '_std_dph']:.5f}" in text
     res = BASE.resonator
     law = -0.5 * res.delta_inv_tau * np.sin(2 * (10.0 * DEG - res.theta_tau)) / res.k_e
     assert abs(row["anisotropy_dph"] * DEG_PER_H - law) < 0.02 * abs(law)  # readout, 0.5 %
@@ -509,14 +518,16 @@ def test_correct_and_compare_refuse_ftr_and_precession_data(
 
 
 def test_standard_errors_vanish_without_noise_and_match_the_noises_spread(
-    sweeps, reversal_at_minus_45
+    sweeps, reversal_at_minus_45, tmp_path
 ):
     """Audit (s34): neither reduction gave an uncertainty. Noise-free, each σ is ~0; with a
     known noise added to the same runs it is that noise's spread. Mode reversal's σ, read
     from the holds' own samples, against the closed form (n q + 2s)/n² per hold of the
     noise put in (white angle s and white rate q: the default gyro's) and against the
     spread of 200 draws. The sweeps' drift σ from the noise model against 40 draws; from
-    the data it needs 6 sweeps (3 temperatures) and is NaN from the fixture's one pair."""
+    the data it needs 6 sweeps (3 temperatures) and is NaN from the fixture's one pair. σ
+    survives `.eqx` and JSON round trips; a file without it (as before s34) loads None."""
+    from hrgjax.calibration import export_json, load_compensator, load_json, save_compensator
     from hrgjax.pattern_noise import NoiseModel
 
     prof, rec = reversal_at_minus_45
@@ -549,6 +560,17 @@ def test_standard_errors_vanish_without_noise_and_match_the_noises_spread(
     np.testing.assert_allclose(sigma, np.std(np.asarray(fits), axis=0), rtol=0.35)
     comp = sc.PrecessionCompensator(settle_s=15.0).fit(sweeps, noise=model)
     np.testing.assert_allclose(np.asarray(comp.drift_std[0]), sigma / comp.k_e, rtol=1e-12)
+    for back in (load_compensator(save_compensator(comp, tmp_path / "vp.eqx")),
+                 load_json(export_json(comp, tmp_path / "vp.json"))):  # fmt: skip
+        for f in ("drift_coef", "gain_coef", "drift_std", "gain_std"):
+            np.testing.assert_array_equal(
+                np.asarray(getattr(back, f)), np.asarray(getattr(comp, f))
+            )
+    bare = eqx.tree_at(lambda c: (c.drift_std, c.gain_std), comp, (None, None))
+    old = save_compensator(bare, tmp_path / "old.eqx")
+    with open(old, "rb") as fh:  # the header as written before s34
+        assert "std" not in json.loads(fh.readline())["hyper"]
+    assert load_compensator(old).drift_std is None and load_compensator(old).gain_std is None
     assert np.all(np.isnan(sc.PrecessionCompensator(settle_s=15.0).fit(sweeps).drift_std))
     ((_, still), *_) = sc.sweep_std([(t, theta, rho, used)] * 3, 2)  # noise-free, 6 sweeps
     drift = sc.fit_sweeps(*map(jnp.asarray, (t, theta, rho, used)))[1]

@@ -74,6 +74,10 @@ _FITTED_FIELD = {
     PrecessionCompensator: "drift_coef",
 }
 """The field each compensator's `fit` fills (None before): what saving and exporting check."""
+_STD_FIELDS = ("drift_std", "gain_std")
+"""`PrecessionCompensator`'s standard errors, saved when set (listed in `hyper["std"]`, the
+`.eqx` payload and the JSON export holding their arrays); a file without the key (written
+before session 34) loads with them `None`."""
 
 
 def _require_fitted(comp) -> None:
@@ -103,9 +107,11 @@ def _hyper(comp) -> dict:
     if isinstance(comp, NoCompensation):
         return {"k_e": comp.k_e}
     if isinstance(comp, PrecessionCompensator):
-        return {"harmonics": comp.harmonics, "settle_s": comp.settle_s,
-                "temperature_bin": comp.temperature_bin, "k_e": comp.k_e,
-                "temperatures_c": list(comp.temperatures_c)}  # fmt: skip
+        std = [f for f in _STD_FIELDS if getattr(comp, f) is not None]
+        hyper = {"harmonics": comp.harmonics, "settle_s": comp.settle_s,
+                 "temperature_bin": comp.temperature_bin, "k_e": comp.k_e,
+                 "temperatures_c": list(comp.temperatures_c)}  # fmt: skip
+        return hyper | ({"std": std} if std else {})
     raise TypeError(f"cannot save a {type(comp).__name__}")
 
 
@@ -160,9 +166,11 @@ def _skeleton(name: str, hyper: dict):
         return cls(**hyper, stats=stats, values=jnp.zeros(n), covariance=jnp.zeros((n, n)),
                    plant=plant)  # fmt: skip
     if cls is PrecessionCompensator:
+        std = hyper.pop("std", [])
         hyper = hyper | {"temperatures_c": tuple(hyper["temperatures_c"])}
         shape = (len(hyper["temperatures_c"]), 2 * hyper["harmonics"] + 1)
-        return cls(**hyper, drift_coef=jnp.zeros(shape), gain_coef=jnp.zeros(shape))
+        return cls(**hyper, drift_coef=jnp.zeros(shape), gain_coef=jnp.zeros(shape),
+                   **{f: jnp.zeros(shape) for f in std})  # fmt: skip
     return cls(**hyper)
 
 
@@ -348,6 +356,12 @@ def to_json_dict(comp) -> dict:
             "sf = 1 (virtual precession does not calibrate the scale factor)",
             temperatures_c=list(comp.temperatures_c),
         ))  # fmt: skip
+        std = [f for f in _STD_FIELDS if getattr(comp, f) is not None]
+        if std:  # JSON has no NaN: null where the data gave no σ (fewer than 6 sweeps)
+            base["standard_errors"] = ("drift_std [rad/s], gain_std [1]: 1 sigma of each "
+                                       "coefficient; null where the data gave none")  # fmt: skip
+            base.update({f: [[None if np.isnan(v) else float(v) for v in row]
+                             for row in np.asarray(getattr(comp, f))] for f in std})  # fmt: skip
     else:
         base["hyper"] = _hyper(comp)
     return base
@@ -368,7 +382,8 @@ def load_json(path: str | os.PathLike):
     **Raises:** `FileNotFoundError` for no file; `ValueError` naming the file and the field,
     in one line, for a file that is not UTF-8 JSON, a newer or unknown `format`, an unknown
     class, a missing key, numbers that are not finite or arrays of the wrong shape for the
-    file's `hyper`, or a top-level copy (`k_e_nominal`, `t_ref`, `harmonics`,
+    file's `hyper` (a `PrecessionCompensator`'s `drift_std`, `gain_std`: numbers ≥ 0 or
+    null, read as NaN), or a top-level copy (`k_e_nominal`, `t_ref`, `harmonics`,
     `temperatures_c`) that disagrees with `hyper`; `RuntimeError` (one line) when JAX's
     float64 mode is off (the coefficients would come back float32, silently)."""
     path = os.fspath(path)
@@ -418,7 +433,7 @@ def load_json(path: str | os.PathLike):
                 "export the compensator again"
             )
 
-    def f64(key, like, value=None):
+    def f64(key, like, value=None, std=False):
         value = _key(path, d, key, list) if value is None else value
         try:
             a = np.asarray(value, dtype=float)
@@ -429,7 +444,10 @@ def load_json(path: str | os.PathLike):
                 f"{path}: {key!r} has shape {a.shape}; the {name} of the file's 'hyper' needs "
                 f"{np.shape(like)}"
             )
-        if not np.all(np.isfinite(a)):
+        if std and not np.all(np.isnan(a) | (np.isfinite(a) & (a >= 0))):  # null read as NaN
+            raise ValueError(f"{path}: {key!r} must hold standard errors: finite numbers >= 0, "
+                             "or null where there is none")  # fmt: skip
+        if not std and not np.all(np.isfinite(a)):
             raise ValueError(f"{path}: {key!r} holds a value that is not finite")
         return jnp.asarray(a)
 
@@ -471,8 +489,9 @@ def load_json(path: str | os.PathLike):
         _warn_linearised_balance(path, name, hyper)
         return comp
     if name == "PrecessionCompensator":
-        coefs = (f64("drift_coef", comp.drift_coef), f64("gain_coef", comp.gain_coef))
-        return eqx.tree_at(lambda c: (c.drift_coef, c.gain_coef), comp, coefs)
+        fields = ["drift_coef", "gain_coef"] + [f for f in _STD_FIELDS if f in hyper.get("std", [])]
+        new = [f64(f, comp.drift_coef, std=f in _STD_FIELDS) for f in fields]
+        return eqx.tree_at(lambda c: [getattr(c, f) for f in fields], comp, new)
     return comp
 
 

@@ -177,7 +177,8 @@ class PrecessionCompensator(AbstractCompensator):
       gain [–]), from the fit's own residuals (`_sweeps.sweep_std`: white angle noise and an
       angle random walk through the least squares, or `fit`'s `noise`; docs/modes.md gives
       their coverage); NaN from fewer than 6 sweeps (3 temperatures) without `noise`, or a
-      sweep under 16 samples; `None` before `fit` and after `load_compensator` (not saved).
+      sweep under 16 samples; `None` before `fit` (and loaded from a file saved before they were
+      kept: `save_compensator` and `export_json` keep them since 2026-12-03).
     """
 
     harmonics: int = setting_field(_WHO, "harmonics", 2)

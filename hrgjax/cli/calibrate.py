@@ -11,7 +11,7 @@ import sys
 import time
 from typing import TYPE_CHECKING, NamedTuple
 
-from ..units import K_E_NOMINAL, K_E_RANGE, PHYSICAL_WINDOW_S, WINDOW_S
+from ..units import DEG_PER_H, K_E_NOMINAL, K_E_RANGE, PHYSICAL_WINDOW_S, WINDOW_S
 from ._common import (
     DATA_EXTENSIONS,
     K_E,
@@ -446,23 +446,17 @@ def _calibrate_parser(sub):
         "--k-e", type=K_E, default=K_E_NOMINAL,
         help="nominal electrical angular gain k_e = 2K of the data, in (0, 1]",
     )  # fmt: skip
-    p.add_argument(
-        "--window",
-        type=POSITIVE_SECONDS,
-        default=None,
-        help=f"rotation-run window [s] (None: {WINDOW_S:g} s for fourier and mlp, "
-        f"{PHYSICAL_WINDOW_S:g} s for physical, as the Python classes)",
-    )
+    p.add_argument("--window", type=POSITIVE_SECONDS, default=None,
+                   help=f"rotation-run window [s] (None: {WINDOW_S:g} s for fourier and mlp, "
+                   f"{PHYSICAL_WINDOW_S:g} s for physical, as the Python classes)")  # fmt: skip
     p.add_argument(
         "--plant", default=None, choices=("tvg3",), action=Given,
         help="physical: the gyro whose loops and resonator constants (ω, τ, Δω, θ_ω, χ) the "
         "grey box models (their lag then leaves g, cross-talk and k_e physical); default: "
         "ideal loops (those are effective values)",
     )  # fmt: skip
-    p.add_argument(
-        "--mode", default="reduced", choices=("reduced", "end_to_end"), action=Given,
-        help="mlp: training mode",
-    )  # fmt: skip
+    p.add_argument("--mode", default="reduced", choices=("reduced", "end_to_end"), action=Given,
+                   help="mlp: training mode")  # fmt: skip
     p.add_argument("--harmonics", type=POSITIVE_INT, default=2, action=Given,
                    help="fourier: harmonics of 2θ")  # fmt: skip
     p.add_argument(
@@ -542,16 +536,20 @@ def cmd_self_calibrate(args) -> int:
     from ..calibration import export_json, save_compensator
     from ..calibration import self_calibration as sc
 
+    pm = lambda std, n: "± n/a" if std is None or np.isnan(std) else f"± {std:.{n}f}"  # 1σ
     if reversal:
         with usage_errors(args.data), cli_words(SELF_CALIBRATE_WORDS):
             rows = sc.mode_reversal_data(data, settle_s=args.settle)
         print(f"hrgjax self-calibrate: {args.data}: mode reversal in {len(rows)} runs")
-        print("    T [°C]   held at [°]     bias [°/h]   anisotropy at the first, as read "
-              "(−½Δ(1/τ)sin2(θ−θτ)/k_e) [°/h]")  # fmt: skip
+        print("    T [°C]   held at [°]     bias ± 1σ [°/h]        anisotropy at the first, as "
+              "read (−½Δ(1/τ)sin2(θ−θτ)/k_e) ± 1σ [°/h]")  # fmt: skip
         for r in rows:
             a0, a1 = (a + 0.0 for a in r["angles_deg"])  # no "-0.0"
-            print(f"    {r['temperature_c']:+6.1f}   {a0:6.1f}, {a1:6.1f}   {r['bias_dph']:+10.5f}"
-                  f"   {r['anisotropy_dph']:+10.5f}")  # fmt: skip
+            print(f"    {r['temperature_c']:+6.1f}   {a0:6.1f}, {a1:6.1f}   {r['bias_dph']:+10.5f} "
+                  f"{pm(r['bias_std_dph'], 5):9}   {r['anisotropy_dph']:+10.5f} "
+                  f"{pm(r['anisotropy_std_dph'], 5)}")  # fmt: skip
+        if any(r["bias_std_dph"] is None for r in rows):
+            print("  ± n/a: a hold of fewer than 16 samples (after --settle) gives no σ")
 
         def write(path):
             from .._io import atomic_write
@@ -565,11 +563,14 @@ def cmd_self_calibrate(args) -> int:
         comp = sc.PrecessionCompensator(harmonics=args.harmonics, settle_s=args.settle).fit(data)
     print(f"hrgjax self-calibrate: {args.data}: virtual-precession sweeps at "
           f"{list(comp.temperatures_c)} °C")  # fmt: skip
-    angles = np.arange(-90.0, 90.0, 1.0)
-    print("    T [°C]   drift mean [°/h]   peak-to-peak [°/h]")
-    for t in comp.temperatures_c:
+    angles = np.arange(-90.0, 90.0, 1.0)  # whole periods: the mean is drift_coef[k, 0]
+    print("    T [°C]   drift mean ± 1σ [°/h]   peak-to-peak [°/h]")
+    for t, std in zip(comp.temperatures_c, np.asarray(comp.drift_std) / DEG_PER_H, strict=True):
         d = comp.drift_dph(angles, t)
-        print(f"    {t:+6.1f}   {np.mean(d):+10.4f}         {np.ptp(d):.4f}")
+        print(f"    {t:+6.1f}   {np.mean(d):+10.4f} {pm(std[0], 4):8}    {np.ptp(d):.4f}")
+    if np.any(np.isnan(np.asarray(comp.drift_std))):
+        print("  ± n/a (fewer than 6 sweeps: give a noise model; in Python, "
+              "PrecessionCompensator.fit(data, noise=NoiseModel.from_gyro(...)), docs/modes.md)")  # fmt: skip
     print("  scale factor: nominal (sweeps at rest do not calibrate it; see docs/modes.md)")
     return finish((args.out, lambda p: save_compensator(comp, p)),
                   (args.json, lambda p: export_json(comp, p)))  # fmt: skip
@@ -577,10 +578,8 @@ def cmd_self_calibrate(args) -> int:
 
 def _self_calibrate_parser(sub):
     """`hrgjax self-calibrate`'s parser."""
-    p = sub.add_parser(
-        "self-calibrate",
-        help="calibrate without a turntable: virtual-precession sweeps or FTR mode reversal",
-    )
+    p = sub.add_parser("self-calibrate", help="calibrate without a turntable: "
+                       "virtual-precession sweeps or FTR mode reversal")  # fmt: skip
     p.add_argument("data", help="runs at rest: virtual-precession sweeps (a precession_dps "
                    "column, whole-angle) or FTR holds (rebalance_rate_dps)")  # fmt: skip
     p.add_argument("--out", default="out/self_cal.eqx", action=Given,
