@@ -313,6 +313,36 @@ def _runner(exported, slots):
     return jax.jit(run)
 
 
+def _placed(values: list) -> list:
+    """`values` committed to the one device `jax.jit` would run them on: that of the
+    committed ones, else the default device. The runner's `jax.jit` keys its compiled form on
+    which arguments are committed (`jax.device_put(x, device)`, or an exported program's own
+    output) and which are not (`jnp.asarray`, NumPy): a simulation given a committed key after
+    an uncommitted one compiled its exported program a second time (8–11 s in a cold cache,
+    0.2–0.7 s read from a warm one). Committed on several devices, or sharded: left to
+    `jax.jit` as they are."""
+    committed = {tuple(v.devices()) for v in values if isinstance(v, jax.Array) and v.committed}
+    if len(committed) > 1 or any(len(d) != 1 for d in committed):
+        return values
+    if committed:
+        target = next(iter(committed))[0]
+    else:
+        default = jax.config.jax_default_device
+        if default is None or isinstance(default, str):
+            target = jax.local_devices(backend=default)[0]
+        else:
+            target = default
+    move = [i for i, v in enumerate(values) if not (isinstance(v, jax.Array) and v.committed)]
+    # a NumPy value is copied: on a CPU `device_put` shares its buffer, which the caller may
+    # change while the program still reads it (`jax.jit` copied it)
+    moved = [values[i] if isinstance(values[i], jax.Array) else np.array(values[i], copy=True)
+             for i in move]  # fmt: skip
+    placed = list(values)
+    for i, v in zip(move, jax.device_put(moved, target), strict=True):
+        placed[i] = v
+    return placed
+
+
 def _write(path: Path, exported, template) -> None:
     tree = pickle.dumps(template)
     body = struct.pack("<Q", len(tree)) + tree + bytes(exported.serialize())
@@ -428,7 +458,7 @@ def call(name: str, fn, args, kwargs):
         leaves[i] if impl is None else jax.random.key_data(leaves[i])
         for i, impl in zip(dynamic, impls, strict=True)
     ]
-    arrays = runner(*values)
+    arrays = runner(*_placed(values))
     out = [arrays[x.index] if isinstance(x, _Slot) else x for x in leaves_t]
     return jax.tree_util.tree_unflatten(tree, out)
 

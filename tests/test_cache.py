@@ -168,6 +168,28 @@ def test_export_keys_spell_out_static_values_and_refuse_unknown_code():
     assert dynamic == (0,) and impls[0] is not None
 
 
+def test_an_exported_program_compiles_once_whatever_its_inputs_placement():
+    """The exported program's runner is a `jax.jit` keyed on which inputs are committed: a
+    committed input (`jax.device_put(x, device)`, or an exported program's own output, always
+    committed) after a NumPy or `jnp.asarray` one compiled it a second time (a simulation:
+    8-11 s in a cold cache). The inputs are placed first: one compile, the same numbers."""
+    from helpers import CompileCounter
+
+    from hrgjax import _export
+
+    if _export.folder() is None:
+        pytest.skip("the compile cache is off: nothing is exported")
+    x = np.linspace(0.0, 1.0, 7)
+    committed = jax.device_put(x, jax.devices()[0])
+    assert committed.committed and not jax.numpy.asarray(x).committed
+    with CompileCounter() as c:
+        outs = [_export.call("placement-test", jax.numpy.sin, (v,), {})
+                for v in (x, jax.numpy.asarray(x), committed, jax.numpy.asarray(x))]  # fmt: skip
+    assert c.names.count("jit(run)") == 1, c.names  # was 2: again for the committed input
+    for out in outs:
+        np.testing.assert_array_equal(out, np.sin(x))
+
+
 def test_single_simulations_run_on_the_cpu_beside_an_accelerator(monkeypatch):
     """Where an accelerator is JAX's default backend, an eager `simulate` (one sequential
     trajectory) runs on the CPU, its program exported for the CPU; under the caller's own

@@ -425,6 +425,10 @@ def test_imu_log_refuses_bad_input():
         ValueError, match=r"^ImuLog.lat must be in \[-π/2, π/2\] rad; got 45.0 \(degrees"
     ):
         al.ImuLog(t, jnp.zeros((3, 3)), jnp.zeros((3, 3)), 45.0)
+    # a height beyond HEIGHT_RANGE_M is refused at construction, naming ImuLog.h (it was
+    # refused only inside the alignment, as "Earth.gravity: h …")
+    with pytest.raises(ValueError, match=r"^ImuLog.h must be a height in metres .* got 200000$"):
+        al.ImuLog(t, jnp.zeros((3, 3)), jnp.zeros((3, 3)), 0.5, 0.0, 2e5)
     # at the pole there is no horizontal Earth rate to find north from: refused before any work
     pole = al.ImuLog(t, jnp.zeros((3, 3)), jnp.zeros((3, 3)), np.pi / 2)
     for run in (al.align, lambda g: al.fine_align(g, np.eye(3))):

@@ -362,6 +362,9 @@ def test_rprop_refuses_divergence_and_zero_steps_alike_everywhere():
                                            learning_rate=lr)  # fmt: skip
     with pytest.raises(ValueError, match=r"^n_items must be an integer >= 1"):
         adam(0, 1e-2)  # a ZeroDivisionError
+    # 5 items of 4 rows: JAX clamped index 4 to row 3 and trained on it twice, silently
+    with pytest.raises(ValueError, match=r"^n_items must be <= 4, the rows .* got 5 \("):
+        adam(5, 1e-2)
     with pytest.raises(ValueError, match=r"^learning_rate must be a finite number > 0"):
         adam(4, -1.0)  # trained uphill, silently
     # under jit the traced result passes unchecked (no host check on tracers)

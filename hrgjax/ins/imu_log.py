@@ -24,6 +24,7 @@ from .._checks import check_numbers, describe, host_value, numeric_problem
 from .._compiled import device
 from .._data_files import beyond_exact, rounded_integer, rounded_integer_error
 from ..units import ARCSEC, DEG
+from .constants import check_heights
 
 
 def _python_float(x):
@@ -77,7 +78,8 @@ class ImuLog(eqx.Module):
     from the file, in the file's order — not the (heading, pitch, roll) of
     `AlignmentResult.coarse_deg` and `history_deg` — the heading clockwise from north in
     [0, 360) (or `None`). Lists are taken as arrays. Refused in one line: arrays that are not
-    real numbers or of other shapes (N >= 2), and where their values are known (not under
+    real numbers or of other shapes (N >= 2), a height `h` outside
+    [`HEIGHT_RANGE_M`][hrgjax.ins.constants.HEIGHT_RANGE_M], and where their values are known (not under
     `jit`) a NaN or inf, times that do not increase, or times not uniformly sampled up to
     jitter (a rate change, a gap: [`check_uniform`][hrgjax.ins.imu_log.check_uniform])."""
 
@@ -101,6 +103,7 @@ class ImuLog(eqx.Module):
                 f"ImuLog.lat must be in [-π/2, π/2] rad; got {self.lat} (degrees? "
                 f"np.deg2rad({self.lat:g}) = {math.radians(self.lat):.6g})"
             )
+        check_heights("ImuLog.h", self.h)  # HEIGHT_RANGE_M, as the alignment's gravity
         head = self.header_attitude_deg
         if head is not None and (numeric_problem(head) or np.shape(head) != (3,)
                                  or not np.all(np.isfinite(head))):  # fmt: skip

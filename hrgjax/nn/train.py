@@ -291,14 +291,22 @@ def adam_epochs(
     call with other values of the same shapes compiles nothing. `loss_fn` and `eval_fn` must
     therefore be module-level functions, not fresh closures (each would compile anew).
 
-    **Raises:** `ValueError` for `epochs`, `batch_size` or `n_items` not an integer >= 1, or
-    a concrete `learning_rate` not finite and > 0; `RuntimeError` ("training diverged") when
+    **Items and rows.** Where all of `data`'s array leaves of rank >= 1 share one leading
+    length (the items' axis), `n_items` above it is refused before any training: JAX clamps
+    an index beyond an array's end, so the extra items silently re-read its last row. Where
+    the leaves' leading lengths differ (items beside other arrays, e.g. a test set or model
+    constants) the check is skipped and `n_items` is trusted; scalar leaves are ignored.
+
+    **Raises:** `ValueError` for `epochs`, `batch_size` or `n_items` not an integer >= 1,
+    `n_items` beyond the rows of `data` (see below), or a concrete `learning_rate` not finite
+    and > 0; `RuntimeError` ("training diverged") when
     the trained weights are not finite (NaN data; checked on the host, concrete results
     only)."""
     for name, v in (("epochs", epochs), ("batch_size", batch_size)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
     whole_number("n_items", n_items, "an integer >= 1 (items)", minimum=1)
+    _check_items(data, int(n_items))
     check_rates(learning_rate=learning_rate)
     batch_size = min(int(batch_size), int(n_items))
     # optax's Adam bias correction mixes int and float: traced under standard promotion
@@ -309,6 +317,16 @@ def adam_epochs(
                                         int(epochs), batch_size)  # fmt: skip
     check_trained(params)
     return params, history
+
+
+def _check_items(data, n_items: int) -> None:
+    """Refuse `n_items` beyond the one leading length of `data`'s array leaves of rank >= 1
+    (their shapes are static, traced ones too); leaves of differing lengths skip it."""
+    lengths = {np.shape(x)[0] for x in jax.tree_util.tree_leaves(data)
+               if eqx.is_array(x) and np.ndim(x) >= 1}  # fmt: skip
+    if len(lengths) == 1 and n_items > (rows := lengths.pop()):
+        raise ValueError(f"n_items must be <= {rows}, the rows (leading axis) of data's arrays; "
+                         f"got {n_items} (an index past the end reads the last row again)")  # fmt: skip
 
 
 @eqx.filter_jit
