@@ -23,6 +23,14 @@ searched with the catalogue `["bias_temperature", "damping_anisotropy_temperatur
 b₁ (truth 0.02) and b₂ (truth 0) with the σ `discover` reports and with the σ of the rule
 before 2026-12-03 (leftover shapes fitted beside only at Bonferroni p < 10⁻³; here the
 same fits' `trust.honest(…, alpha_sigma=1e-3)`), side by side.
+**Other hidden effects and the null** (`--effect bias_temperature|warmup_transient|none
+[--n 40] [--seed0 300]`; audit contcov, 2026-12-03): the fast tier's design
+(`tests/test_discovery_continuous._short`: thermal rate, readout gain mismatch and bias law
+injected at 0 beside the one hidden), a bias law of 0.005 °/h/°C (b₁; b₂ truth 0) or a
+warm-up of 0.5 °/h with τ_w = 600 s hidden, searched with the catalogue of that one effect;
+`none` hides nothing and searches `NULL_CATALOGUE` (how often a false effect is named). Per
+parameter: z with the reported σ and the textbook σ, and how often the effect is found;
+for the warm-up also the scanned τ_w (no σ: held where the scan put it).
 """
 
 import argparse
@@ -137,6 +145,53 @@ def laws(n: int, seed0: int):
            target="0.85–1.15")  # fmt: skip
 
 
+EFFECTS = {  # effect: (size, {parameter: truth in user units})
+    "bias_temperature": (0.005, {"b1": 0.005, "b2": 0.0}),
+    "warmup_transient": (0.5, {"b_w": 0.5}),
+}
+NULL_CATALOGUE = ["thermal_rate", "bias_temperature", "warmup_transient"]
+_ZEROED = ("thermal_rate", "readout_gain_mismatch", "bias_temperature")  # the tests' _short
+
+
+def effect_case(effect: str, n: int, seed0: int):
+    """`--effect` (module docstring): z of the found effect's parameters, or the null's
+    false findings."""
+    size, truths = EFFECTS.get(effect, (0.0, {}))
+    hidden = dict.fromkeys(_ZEROED, 0.0) | ({} if effect == "none" else {effect: size})
+    catalogue = NULL_CATALOGUE if effect == "none" else [effect]
+    z = {k: [] for p in truths for k in (p, p + " textbook")}
+    found, named, taus = 0, [], []
+    t0 = time.time()
+    for seed in range(seed0, seed0 + n):
+        data = continuous_dataset(hidden, key=jax.random.key(seed), duration_s=1500.0,
+                                  dt_out=2.0, ramps=SHORT_RAMPS)  # fmt: skip
+        rep = discover(data, catalogue=catalogue, shape="continuous")
+        named += [rep.verdict] if effect == "none" and rep.verdict != "none" else []
+        if effect == "none" or effect not in rep.parameters:
+            continue
+        found += 1
+        taus += [rep.parameters[effect].get("tau_w", {}).get("value")]
+        for param, truth in truths.items():
+            v, raw = rep.parameters[effect][param], rep.fit_parameters[effect][param]
+            z[param].append((v["value"] - truth) / v["sigma"])
+            z[param + " textbook"].append(z[param][-1] * raw["std"] / raw["std_textbook"])
+    print(f"{machine()}; {effect}, {n} seeds from {seed0} in {time.time() - t0:.0f} s")
+    if effect == "none":
+        print(f"a verdict other than none on {len(named)} of {n} logs: {named}")
+        report("continuous null: false verdicts", len(named) / n * 100, "%", target="≤ 5 %")
+        return
+    print(f"found in {found} of {n}")
+    if taus and taus[0] is not None:
+        print(
+            f"tau_w (truth 600 s): median {np.median(taus):.0f} s, {min(taus):.0f}–{max(taus):.0f}"
+        )
+    print("\n| parameter, σ | ±1σ | ±2σ | z-RMS | worst z |\n|---|---|---|---|---|")
+    for k, v in z.items():
+        if v:
+            _row(k, v)
+    print("mean z: " + ", ".join(f"{k} {np.mean(v):+.2f}" for k, v in z.items()))
+
+
 if __name__ == "__main__":
     import sys
 
@@ -147,5 +202,12 @@ if __name__ == "__main__":
         ap.add_argument("--seed0", type=int, default=100)
         a = ap.parse_args()
         laws(a.n, a.seed0)
+    elif "--effect" in sys.argv:
+        ap = argparse.ArgumentParser()
+        ap.add_argument("--effect", choices=[*EFFECTS, "none"], required=True)
+        ap.add_argument("--n", type=int, default=40)
+        ap.add_argument("--seed0", type=int, default=300)
+        a = ap.parse_args()
+        effect_case(a.effect, a.n, a.seed0)
     else:
         main()
