@@ -251,9 +251,11 @@ def sweep_std(groups, harmonics: int, noise=None):
         lr = pinv.reshape(p, *w.shape) * w  # (P, R, n)
         tail = np.flip(np.cumsum(np.flip(lr, -1), -1), -1)[..., 1:]  # Σ_{i ≥ k} L_i, k ≥ 1
         u = tail * (w[:, 1:] * w[:, :-1])[None]  # increments between two used samples
-        walk = np.concatenate([np.zeros_like(u[..., :1]), np.cumsum(u, -1)], -1)  # K Lᵀ
         cov_s, cov_q = pinv @ pinv.T, np.einsum("prk,qrk->pq", u, u)  # Σ = I, Σ = K
         covs.append((np.diag(cov_s)[: 2 * j], np.diag(cov_q)[: 2 * j]))
+        if noise is not None:  # s and q given: no moments to read
+            continue
+        walk = np.concatenate([np.zeros_like(u[..., :1]), np.cumsum(u, -1)], -1)  # K Lᵀ
         x = a.reshape(*w.shape, p).transpose(2, 0, 1)
         resid = (y - a @ (pinv @ y)).reshape(w.shape)
         (*ops, _), raw = scales(w, m=m), raw_moments(m)
@@ -263,12 +265,12 @@ def sweep_std(groups, harmonics: int, noise=None):
             for i, (sig, cov) in enumerate(((lr, cov_s), (walk, cov_q))):
                 exp[k, i] += raw[k][i] * np.sum(ok) - 2 * np.sum(op(sig) * gx) + np.sum(cov * proj)
             obs[k] += np.sum(ok * op(resid) ** 2)
-    s, q = solve_moments(obs[0], obs[1], exp)
     short = min(np.min(np.sum(w, -1)) for w in ws) < 2 * MIN_NOISE_BLOCKS
     if noise is not None:  # the sample interval of the first run's used samples
         dt = float(np.median(np.diff(np.asarray(groups[0][0])[0][ws[0][0] > 0])))
         s, q = noise.angle_white**2, noise.angle_random_walk**2 * dt
     else:
+        s, q = solve_moments(obs[0], obs[1], exp)
         short = short or sum(len(w) for w in ws) < MIN_POOLED_SWEEPS
     out = [np.full(2 * j, np.nan) if short else np.sqrt(s * cs + q * cq) for cs, cq in covs]
     return [(std[:j], std[j:]) for std in out]

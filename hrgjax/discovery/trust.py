@@ -205,8 +205,8 @@ def _shapes_left(r, j, cols, classes, s, alpha):
             break
         # the tails in one call; the smallest p wins, the larger score on a tie, then the first
         p = stats.f_sf_many(*(np.array([t[k] for t in tried]) for k in range(3)))
-        best = min((p[i], -t[3], i, t[4]) for i, t in enumerate(tried))
-        best = (best[0], best[1], best[3])
+        i = min(range(len(tried)), key=lambda i: (p[i], -tried[i][3], i))
+        best = (p[i], -tried[i][3], tried[i][4])
         if min(1.0, best[0] * len(cols)) >= alpha:
             break
         chosen.append((best[2], min(1.0, best[0] * len(cols))))
