@@ -131,3 +131,21 @@ def test_measurement_noise_three_times_meas_sigma_is_flagged_not_decided_a_fault
         late = d_bad[:, 20:]  # the test needs a few steps of evidence
         assert np.mean(late > 0) < 0.05, (name, np.mean(late > 0))
         assert np.mean(late == -2) > 0.7, (name, np.mean(late == -2))
+
+
+def test_a_fault_between_samples_acts_from_its_onset_and_has_a_gradient():
+    """`Fault.t_fault` between two samples: the step that holds it counts its share after the
+    onset, so a coarse grid (20 s) gives a fine one's (1 s, onset on the grid) navigation
+    error at 600 s (2.5e-4 relative; a 0/1 switch at the next sample: 1.9e-2) and
+    ∂/∂t_fault is the onset's sensitivity (within 1 % of the fine grid's central difference;
+    the 0/1 switch gave 0)."""
+
+    def end(dt, n, t_fault):  # the first navigation error at the end of the run
+        fault = Fault.on("accel_y", 1e-6, t_fault)
+        return simulate(INS, dt=dt, n_steps=n, key=None, fault=fault)[2][-1, 0]
+
+    fine = float(end(1.0, 600, 95.0))
+    assert float(end(20.0, 30, 95.0)) == pytest.approx(fine, rel=1e-3)
+    grad = jax.grad(lambda t: end(20.0, 30, t))(95.0)
+    fd = (float(end(1.0, 600, 96.0)) - float(end(1.0, 600, 94.0))) / 2.0
+    assert fd < 0 and float(grad) == pytest.approx(fd, rel=0.015)

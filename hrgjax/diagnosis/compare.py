@@ -315,8 +315,10 @@ def compare(
     z_h = _measure(ins, sc, jax.random.split(k_healthy, n_healthy), meas_sigma)
     zs = jnp.concatenate([z_f, z_h])
     k_len = zs.shape[1]
-    # measurement k is navigation step k + 2; the fault acts from step ceil(t/dt) + 1
-    onset_k = int(np.ceil(sc.t_fault / sc.dt)) + 1 - 2
+    # measurement k is navigation step k + 2; the fault acts from step floor(t/dt) + 1 (the
+    # first sample after the onset: `platform.simulate` counts the step that holds it by its
+    # share after t_fault)
+    onset_k = int(np.floor(sc.t_fault / sc.dt)) + 1 - 2
     k0 = _first_step_at(warmup_s, sc.dt)
     rows, trace = [], {"t_s": _measurement_times(k_len, sc.dt)}
 

@@ -38,8 +38,10 @@ gravity (the thesis's 3 g and 10 g manoeuvres) adds the cross-coupling $f\times 
 $p = (\alpha_x, \alpha_y, \alpha_z)$ about (E, N, H).
 
 Faults ("information faults"): constant magnitudes e switched on at `t_fault` (u = 1 from
-the first sample at or after it). Stochastic simulation is the exact discretisation of the
-linear SDE (Van Loan), driven by explicit PRNG keys; `vmap` over keys for Monte Carlo.
+the first sample at or after it; the step that holds the onset takes u's mean over the step,
+its share after `t_fault`, so the response is differentiable in `t_fault`). Stochastic
+simulation is the exact discretisation of the linear SDE (Van Loan), driven by explicit PRNG
+keys; `vmap` over keys for Monte Carlo.
 """
 
 from __future__ import annotations
@@ -314,7 +316,11 @@ def _simulate(ins, dt, n_steps, key, fault, x0):
             x0 = psd_factor(ins.stationary_covariance()) @ jax.random.normal(k0, (17,))
         w = jax.random.normal(kw, (n_steps, 17))
         lq = psd_factor(qd)
-    on = (t[:-1] >= fault.t_fault).astype(t.dtype)
+    # the share of each step after the onset: 0 before it, 1 from the first sample at or after
+    # it, the fraction in between within the step that holds it (the step's mean of u); so a
+    # state moves smoothly with `t_fault` and ∂/∂t_fault is the onset's sensitivity (a 0/1
+    # switch read 0 for every t_fault)
+    on = jnp.clip((t[1:] - fault.t_fault) / dt, 0.0, 1.0)
 
     def step(x, inp):
         wk, uk = inp
